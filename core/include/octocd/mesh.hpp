@@ -1,0 +1,58 @@
+#pragma once
+/// \file mesh.hpp
+/// Triangle meshes: loading through assimp, welding, recentring and normalising
+/// (SPEC section 3), and procedural shapes for tests (boxes, icospheres).
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "octocd/math.hpp"
+
+namespace octocd {
+
+/// An indexed triangle mesh in its local frame (metres). Owns its arrays.
+struct Mesh {
+  std::string name;                                  ///< dataset or file name
+  std::vector<Vec3> vertices;                        ///< welded, unique positions
+  std::vector<std::array<std::uint32_t, 3>> triangles;  ///< indices into `vertices`
+};
+
+/// Loads a mesh file (OFF, OBJ, PLY, STL, ... anything assimp reads) and welds it.
+/// Does not recentre or scale (see `normalize_mesh`).
+/// Throws InputError naming `path` when the file is missing, unreadable, empty (no
+/// vertices or no triangles) or holds a non-finite vertex (naming its index).
+/// For OFF files the face count in the header is checked against what was loaded
+/// (assimp's OFF reader drops faces after comment lines): a mismatch is an InputError.
+Mesh load_mesh(const std::string& path);
+
+/// Merges coincident vertices (exactly equal positions) and drops triangles that become
+/// degenerate (two equal indices). Keeps first-occurrence order, so it is deterministic.
+void weld_mesh(Mesh& mesh);
+
+/// SPEC 3: moves the mesh so the centre of its local AABB is the origin, then scales it
+/// uniformly so the longest side of that AABB is 1 m. Throws InputError when the mesh
+/// is empty or flat in all axes (longest side 0).
+void normalize_mesh(Mesh& mesh);
+
+/// Multiplies every vertex by s (> 0).
+void scale_mesh(Mesh& mesh, float s);
+
+/// Local AABB of the vertices (the mesh must not be empty).
+Aabb mesh_bounds(const Mesh& mesh);
+
+/// Mean length of the mesh's unique edges (m): the paper's mesh resolution that sets
+/// theta `auto` (SPEC 6). 0 for a mesh without triangles.
+float mean_edge_length(const Mesh& mesh);
+
+/// A closed box mesh centred on the origin with the given half extents (m): 8 vertices,
+/// 12 triangles, each face split `subdivisions` times 1-to-4 (so faces carry vertices
+/// inside, useful for vertex-proximity tests). subdivisions in [0, 8].
+Mesh make_box_mesh(Vec3 half_extents, int subdivisions = 0);
+
+/// An icosphere of the given radius (m) centred on the origin: an icosahedron split
+/// 1-to-4 `subdivisions` times (12, 42, 162, 642, ... vertices). subdivisions in [0, 7].
+Mesh make_icosphere(float radius, int subdivisions);
+
+}  // namespace octocd

@@ -1,0 +1,96 @@
+#pragma once
+/// \file trace.hpp
+/// HDF5 traces (SPEC section 8; layout in docs/trace-format.md, format "octocd-trace"
+/// version 1). The file is written in SWMR mode and flushed every `flush_every` frames,
+/// so a process killed with SIGKILL leaves a readable file holding every flushed frame.
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "octocd/math.hpp"
+#include "octocd/world.hpp"
+
+namespace octocd {
+
+/// Root attributes of a trace.
+struct TraceMetadata {
+  std::string scene_name;
+  std::string scene_json;     ///< the scene file's text
+  std::string parameters_json;  ///< response parameters, theta, dt, gravity as JSON
+  std::string engine = "cpu"; ///< cpu | cuda | bullet
+  std::string broadphase;     ///< e.g. "octree"
+  std::string midphase;       ///< e.g. "1,2" or "aabb-only"
+  std::string build_id;       ///< octocd version + git id
+  std::string device;         ///< CPU model or GPU name
+  std::string start_time;     ///< ISO 8601 UTC
+  double dt = 0.0;            ///< s
+  int state_every = 10;       ///< k: /states holds every k-th frame
+};
+
+/// Per-body constant data for /bodies.
+struct TraceBodies {
+  std::vector<std::uint32_t> shape_id;
+  std::vector<float> inverse_mass;       ///< 1/kg
+  std::vector<Aabb> local_aabb;          ///< m
+  std::vector<std::string> shape_names;  ///< indexed by shape id
+  std::vector<std::string> group;        ///< per body
+};
+
+/// Writer options.
+struct TraceOptions {
+  int state_every = 10;     ///< record positions/velocities every k-th frame (k >= 1)
+  bool contacts = false;    ///< record /contacts
+  int flush_every = 50;     ///< flush to disk every this many frames (>= 1)
+};
+
+/// Writes one trace file. Creates (truncates) `path`. All writes append; nothing written
+/// is rewritten. Throws RuntimeError naming the path on any HDF5 failure.
+class TraceWriter {
+ public:
+  TraceWriter(const std::string& path, const TraceMetadata& meta, const TraceBodies& bodies,
+              const TraceOptions& options);
+  ~TraceWriter();
+  TraceWriter(const TraceWriter&) = delete;
+  TraceWriter& operator=(const TraceWriter&) = delete;
+
+  /// Appends one row to /frames; writes positions/velocities to /states when
+  /// m.frame % state_every == 0 (and for frame 0, the initial state, via
+  /// `append_state`); flushes every `flush_every` rows.
+  void append_frame(const FrameMetrics& m, const BodyState& state,
+                    const std::vector<ContactRecord>& contacts);
+  /// Appends a state row for `frame` (used for the initial state, frame 0).
+  void append_state(std::int64_t frame, const BodyState& state);
+  /// Flushes everything written so far to disk.
+  void flush();
+  /// Flushes and closes the file (idempotent; the destructor calls it).
+  void close();
+  /// Path of the file.
+  const std::string& path() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Builds the metadata and body tables of a world for a trace.
+TraceMetadata trace_metadata(const World& world, const std::string& engine, int state_every);
+/// Per-body tables of a world for /bodies.
+TraceBodies trace_bodies(const World& world);
+
+/// What a trace holds, read back (for tests and `octocd` tools).
+struct TraceSummary {
+  std::string format;
+  int version = 0;
+  std::int64_t frames = 0;        ///< rows in /frames
+  std::int64_t state_rows = 0;    ///< rows in /states
+  std::int64_t bodies = 0;
+  std::int64_t last_frame = 0;    ///< /frames/frame of the last row (0 when empty)
+};
+
+/// Opens a trace read-only and summarises it. Throws RuntimeError naming the path when
+/// the file is not a readable octocd trace.
+TraceSummary read_trace_summary(const std::string& path);
+
+}  // namespace octocd
