@@ -1,2 +1,270 @@
-// placeholder, replaced by the CLI
-int main() { return 0; }
+// The `octocd` command (SPEC section 9). Exit codes: 0 ok, 1 runtime failure, 2 bad input.
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "octocd/broadphase.hpp"
+#include "octocd/error.hpp"
+#include "octocd/midphase.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/trace.hpp"
+#include "octocd/version.hpp"
+#include "octocd/world.hpp"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr int kStages = static_cast<int>(octocd::Stage::Count);
+
+struct RunOptions {
+  std::string scene;
+  std::string broadphase;
+  std::string midphase;
+  int frames = 0;
+  std::string trace;
+  int state_every = 10;
+  bool contacts = false;
+  bool quiet = false;
+  std::string summary_json;
+};
+
+/// Running sums for the summary table.
+struct Totals {
+  std::int64_t frames = 0;
+  double step_ms = 0.0;
+  std::array<double, kStages> stage_ms{};
+  double pairs = 0.0, contacts = 0.0, box_pairs = 0.0, vertex_tests = 0.0;
+  std::uint64_t max_pairs = 0, max_contacts = 0;
+  double pen_mean_sum = 0.0, pen_max = 0.0;
+  std::int64_t frames_with_contacts = 0;
+
+  void add(const octocd::FrameMetrics& m) {
+    ++frames;
+    step_ms += m.step_ms;
+    for (int s = 0; s < kStages; ++s) stage_ms[s] += m.stage_ms[s];
+    pairs += static_cast<double>(m.aabb_pairs);
+    contacts += static_cast<double>(m.contacts);
+    box_pairs += static_cast<double>(m.box_pairs);
+    vertex_tests += static_cast<double>(m.vertex_tests);
+    max_pairs = std::max(max_pairs, m.aabb_pairs);
+    max_contacts = std::max(max_contacts, m.contacts);
+    if (m.contacts > 0) {
+      ++frames_with_contacts;
+      pen_mean_sum += m.penetration_mean;
+    }
+    pen_max = std::max(pen_max, m.penetration_max);
+  }
+};
+
+/// Progress on a terminal: one line rewritten in place; otherwise a plain line per 10%.
+class Progress {
+ public:
+  Progress(std::int64_t total, bool enabled)
+      : total_(total), enabled_(enabled), tty_(isatty(fileno(stderr)) != 0), start_(Clock::now()) {}
+
+  void update(const octocd::FrameMetrics& m, const Totals& t) {
+    if (!enabled_) return;
+    const auto now = Clock::now();
+    const bool last = m.frame == total_;
+    if (tty_) {
+      if (!last && now - last_draw_ < std::chrono::milliseconds(100)) return;
+      last_draw_ = now;
+      constexpr int kWidth = 30;
+      const int filled = static_cast<int>(kWidth * m.frame / std::max<std::int64_t>(total_, 1));
+      std::fprintf(stderr, "\r[%s%s] frame %lld/%lld  %8.1f steps/s  pairs %llu  contacts %llu ",
+                   std::string(static_cast<std::size_t>(filled), '#').c_str(),
+                   std::string(static_cast<std::size_t>(kWidth - filled), ' ').c_str(),
+                   static_cast<long long>(m.frame), static_cast<long long>(total_),
+                   rate(t), static_cast<unsigned long long>(m.aabb_pairs),
+                   static_cast<unsigned long long>(m.contacts));
+      if (last) std::fprintf(stderr, "\n");
+      std::fflush(stderr);
+    } else {
+      const std::int64_t step = std::max<std::int64_t>(total_ / 10, 1);
+      if (m.frame % step != 0 && !last) return;
+      std::fprintf(stderr, "frame %lld/%lld  %.1f steps/s  pairs %llu  contacts %llu\n",
+                   static_cast<long long>(m.frame), static_cast<long long>(total_), rate(t),
+                   static_cast<unsigned long long>(m.aabb_pairs),
+                   static_cast<unsigned long long>(m.contacts));
+    }
+  }
+
+ private:
+  static double rate(const Totals& t) {
+    return t.step_ms > 0.0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0;
+  }
+  std::int64_t total_;
+  bool enabled_;
+  bool tty_;
+  Clock::time_point start_;
+  Clock::time_point last_draw_{};
+};
+
+std::string utc_now() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+void print_summary(const octocd::World& world, const Totals& t, double wall_s,
+                   const std::string& trace) {
+  const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
+  const octocd::Scene& s = world.scene();
+  fmt::print("\nscene        {} ({} bodies, {} shapes)\n", s.name, world.state().size(),
+             world.shapes().size());
+  fmt::print("pipeline     engine cpu, broadphase {}, midphase {}\n", world.broadphase().name(),
+             s.midphase.to_string());
+  fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
+             static_cast<double>(t.frames) * s.dt, wall_s);
+  fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n\n",
+             t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0,
+             t.step_ms / n);
+  fmt::print("{:<12} {:>10} {:>8}\n", "stage", "mean ms", "share");
+  for (int st = 0; st < kStages; ++st)
+    fmt::print("{:<12} {:>10.4f} {:>7.1f}%\n", octocd::stage_name(static_cast<octocd::Stage>(st)),
+               t.stage_ms[st] / n, t.step_ms > 0 ? 100.0 * t.stage_ms[st] / t.step_ms : 0.0);
+  fmt::print("\n{:<22} {:>12} {:>12}\n", "per frame", "mean", "max");
+  fmt::print("{:<22} {:>12.1f} {:>12}\n", "AABB pairs", t.pairs / n, t.max_pairs);
+  fmt::print("{:<22} {:>12.1f} {:>12}\n", "contacts", t.contacts / n, t.max_contacts);
+  fmt::print("{:<22} {:>12.1f} {:>12}\n", "midphase box pairs", t.box_pairs / n, "");
+  fmt::print("{:<22} {:>12.1f} {:>12}\n", "vertex tests", t.vertex_tests / n, "");
+  const double pen_mean =
+      t.frames_with_contacts > 0 ? t.pen_mean_sum / static_cast<double>(t.frames_with_contacts) : 0.0;
+  fmt::print("{:<22} {:>12.6f} {:>12.6f}\n", "penetration (m)", pen_mean, t.pen_max);
+  fmt::print("{:<22} {:>12.4f}\n", "kinetic energy (J)", world.last_metrics().kinetic_energy);
+  if (!trace.empty()) fmt::print("\ntrace        {}\n", trace);
+}
+
+void write_summary_json(const std::string& path, const octocd::World& world, const Totals& t,
+                        double wall_s) {
+  const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
+  nlohmann::json j;
+  j["scene"] = world.scene().name;
+  j["bodies"] = world.state().size();
+  j["engine"] = "cpu";
+  j["broadphase"] = world.broadphase().name();
+  j["midphase"] = world.scene().midphase.to_string();
+  j["frames"] = t.frames;
+  j["wall_s"] = wall_s;
+  j["steps_per_s"] = t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0;
+  j["mean_step_ms"] = t.step_ms / n;
+  for (int st = 0; st < kStages; ++st)
+    j["stage_ms"][octocd::stage_name(static_cast<octocd::Stage>(st))] = t.stage_ms[st] / n;
+  j["mean_pairs"] = t.pairs / n;
+  j["mean_contacts"] = t.contacts / n;
+  j["mean_box_pairs"] = t.box_pairs / n;
+  j["mean_vertex_tests"] = t.vertex_tests / n;
+  j["penetration_max"] = t.pen_max;
+  j["device"] = octocd::cpu_description();
+  j["build_id"] = octocd::build_id();
+  std::ofstream out(path);
+  if (!out) throw octocd::RuntimeError(fmt::format("cannot write summary '{}'", path));
+  out << j.dump(2) << "\n";
+}
+
+int run_command(const RunOptions& o) {
+  octocd::Scene scene = octocd::load_scene(o.scene);
+  if (!o.broadphase.empty()) scene.broadphase.name = o.broadphase;
+  if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
+  if (o.frames > 0) scene.frames = o.frames;
+
+  octocd::World world(scene);
+  std::unique_ptr<octocd::TraceWriter> trace;
+  if (!o.trace.empty()) {
+    octocd::TraceOptions topt;
+    topt.state_every = o.state_every;
+    topt.contacts = o.contacts;
+    octocd::TraceMetadata meta = octocd::trace_metadata(world, "cpu", o.state_every);
+    meta.start_time = utc_now();
+    trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(world), topt);
+    trace->append_state(0, world.state());
+  }
+
+  Totals totals;
+  Progress progress(scene.frames, !o.quiet);
+  const auto t0 = Clock::now();
+  try {
+    for (int f = 0; f < scene.frames; ++f) {
+      const octocd::FrameMetrics& m = world.step();
+      totals.add(m);
+      if (trace) trace->append_frame(m, world.state(), world.contacts());
+      progress.update(m, totals);
+    }
+  } catch (const octocd::RuntimeError&) {
+    if (trace) trace->close();  // keep every frame written so far readable
+    throw;
+  }
+  if (trace) trace->close();
+  const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  if (!o.quiet) print_summary(world, totals, wall_s, o.trace);
+  if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
+      "Exit codes: 0 ok, 1 runtime failure, 2 bad input."};
+  app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
+  app.require_subcommand(1);
+
+  RunOptions run;
+  CLI::App* run_cmd = app.add_subcommand("run", "Run a scene through the pipeline and print a summary");
+  run_cmd->add_option("scene", run.scene, "Scene file (JSON, see docs/scenes.md)")->required();
+  std::string bp_help = "Broadphase, overrides the scene's broadphase.name: ";
+  for (const auto& name : octocd::broadphase_names()) bp_help += name + " ";
+  run_cmd->add_option("--broadphase", run.broadphase, bp_help);
+  run_cmd->add_option("--midphase", run.midphase,
+                      "Midphase levels, overrides the scene: aabb-only | 2 | 1,2 | 0,1,2 | any "
+                      "ascending list of levels in [0, 10]");
+  run_cmd->add_option("--frames", run.frames, "Number of steps, overrides the scene (>= 1)")
+      ->check(CLI::PositiveNumber);
+  run_cmd->add_option("--trace", run.trace, "Write an HDF5 trace (docs/trace-format.md)");
+  run_cmd->add_option("--state-every", run.state_every,
+                      "Record positions and velocities every K-th frame in the trace (>= 1)")
+      ->check(CLI::PositiveNumber)
+      ->default_val(10);
+  run_cmd->add_flag("--contacts", run.contacts, "Record every contact (/contacts) in the trace");
+  run_cmd->add_flag("--quiet", run.quiet, "No progress and no summary table");
+  run_cmd->add_option("--summary-json", run.summary_json,
+                      "Also write the summary (steps/s, stage ms, counts) as JSON to this file");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? 0 : 2;
+  }
+
+  try {
+    if (*run_cmd) return run_command(run);
+  } catch (const octocd::InputError& e) {
+    std::fprintf(stderr, "octocd: error: %s\n", e.what());
+    return 2;
+  } catch (const octocd::RuntimeError& e) {
+    std::fprintf(stderr, "octocd: runtime failure: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "octocd: runtime failure: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -53,7 +53,13 @@ OCTOCD_HD inline float length(Vec3 a) { return sqrtf(dot(a, a)); }
 /// Squared Euclidean length.
 OCTOCD_HD inline float length2(Vec3 a) { return dot(a, a); }
 /// True when every component is finite (no NaN, no infinity).
-OCTOCD_HD inline bool is_finite(Vec3 a) { return isfinite(a.x) && isfinite(a.y) && isfinite(a.z); }
+OCTOCD_HD inline bool is_finite(Vec3 a) {
+#if defined(__CUDACC__)
+  return isfinite(a.x) && isfinite(a.y) && isfinite(a.z);
+#else
+  return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);
+#endif
+}
 
 /// An axis-aligned bounding box [min, max] (paper Eq. 5), metres. A valid box has
 /// min <= max on every axis.

@@ -10,6 +10,7 @@
 /// and its children.
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "octocd/math.hpp"

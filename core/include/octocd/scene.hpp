@@ -5,6 +5,7 @@
 /// with ranges is in docs/scenes.md. The same scene and seeds give the same bodies on
 /// every engine.
 
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -20,51 +21,64 @@ namespace octocd {
 
 /// The shape of a group's bodies.
 struct ShapeSpec {
+  /// Which of "mesh", "box", "icosphere" the scene gave.
   enum class Kind { Mesh, Box, Icosphere };
-  Kind kind = Kind::Box;
+  Kind kind = Kind::Box;     ///< the shape kind
   std::string mesh;          ///< Mesh: dataset name ("bunny", ...) or a file path
   Vec3 half_extents{0.5f, 0.5f, 0.5f};  ///< Box: half extents (m), each > 0
   float radius = 0.5f;       ///< Icosphere: radius (m), > 0
   int subdivisions = 2;      ///< Icosphere: in [0, 7]
   float scale = 1.0f;        ///< Mesh: longest side after normalisation (m), > 0
+  std::string mesh_path;     ///< Mesh: the file `mesh` resolved to by load_scene/parse_scene
 };
 
 /// How a group's bodies are placed.
 struct LayoutSpec {
+  /// "grid" or "random" (see group_positions).
   enum class Kind { Grid, Random };
-  Kind kind = Kind::Grid;
+  Kind kind = Kind::Grid;    ///< placement rule
   Aabb region;               ///< box the body centres are placed in (m)
   float spacing = 0.0f;      ///< Grid: centre distance (m); 0 = 1.1 x largest extent
   float jitter = 0.0f;       ///< Grid: uniform random offset per axis (m), >= 0
   std::uint64_t seed = 1;    ///< random stream for jitter / random placement
+  /// True when the scene gave no region ("layout" or its "min"/"max" absent): `region`
+  /// then holds the scene's domain and group_positions shrinks it by the body's local
+  /// AABB half extents per axis, so the bodies lie inside the domain (an axis where the
+  /// domain is narrower than the body collapses to the domain's centre).
+  bool region_from_domain = true;
 };
 
 /// Initial velocity of a group's bodies.
 struct VelocitySpec {
+  /// "fixed" or "random" (see group_velocities).
   enum class Kind { Fixed, Random };
-  Kind kind = Kind::Fixed;
+  Kind kind = Kind::Fixed;       ///< velocity rule
   Vec3 value{0.0f, 0.0f, 0.0f};  ///< Fixed: m/s
   float max_speed = 0.0f;        ///< Random: each component uniform in [-max, max] (m/s)
-  std::uint64_t seed = 1;
+  std::uint64_t seed = 1;        ///< Random: stream for the components
 };
 
 /// A group of identical bodies.
 struct GroupSpec {
-  std::string name;          ///< label, unique within the scene
-  ShapeSpec shape;
+  std::string name;          ///< label, unique within the scene (default "group<i>")
+  int index = 0;             ///< position in Scene::groups (names `groups[<index>]` in errors)
+  ShapeSpec shape;           ///< the bodies' shape
   int count = 1;             ///< >= 1
-  float mass = 1.0f;         ///< kg, > 0; 0 makes the group static (inverse mass 0)
-  LayoutSpec layout;
-  VelocitySpec velocity;
+  float mass = 1.0f;         ///< kg, >= 0; 0 makes the group static (inverse mass 0)
+  LayoutSpec layout;         ///< placement when `positions` is empty
+  VelocitySpec velocity;     ///< initial velocities
   std::vector<Vec3> positions;  ///< explicit centres (m), overrides layout when non-empty
 };
 
-/// Static walls generated from the domain box.
+/// Static walls generated from the domain box ("none", "floor", "open-box",
+/// "closed-box"): no walls; a floor whose top is domain.min.y; the floor and the four
+/// side walls; those plus a ceiling. Thickness Scene::wall_thickness, outside the domain.
 enum class Walls { None, Floor, OpenBox, ClosedBox };
 
 /// A parsed, validated scene.
 struct Scene {
-  std::string name;
+  std::string name;          ///< the scene's "name"
+  std::string description;   ///< free text, "" when absent
   std::string path;          ///< the file it came from ("" when built in code)
   std::string json;          ///< the scene file's text, stored in traces
   Aabb domain;               ///< min < max on every axis (m)
@@ -73,14 +87,17 @@ struct Scene {
   int frames = 1000;         ///< >= 1
   Walls walls = Walls::Floor;
   float wall_thickness = 0.1f;  ///< m, > 0; walls lie outside the domain, touching it
-  std::vector<GroupSpec> groups;
+  std::vector<GroupSpec> groups;  ///< non-empty, names unique
   ContactParams response;    ///< Table 1 parameters
   std::optional<float> theta;   ///< m, > 0; empty = `auto` (SPEC 6)
-  BroadPhaseConfig broadphase;
-  MidphaseConfig midphase;
+  BroadPhaseConfig broadphase;  ///< name not validated here (make_broadphase does it)
+  MidphaseConfig midphase;      ///< "midphase.levels"
   int mesh_octree_depth = 2;    ///< D_m in [0, 10]; -1 = `auto`
   std::string data_dir;      ///< where dataset meshes are looked up
 };
+
+/// Total number of bodies over all groups.
+std::size_t body_count(const Scene& scene);
 
 /// Reads and validates a scene file. Mesh names are resolved against `data_dir`
 /// (default: $OCTOCD_DATA_DIR, else datasets/cache next to the scene's folder).
@@ -90,13 +107,70 @@ struct Scene {
 /// and a missing mesh file.
 Scene load_scene(const std::string& path, const std::string& data_dir = "");
 
-/// Same as load_scene from JSON text; `origin` names it in errors.
+/// Same as load_scene from JSON text; `origin` names it in errors and is stored as
+/// Scene::path (relative mesh paths resolve against its folder; "" or a name without a
+/// folder means the current directory). The default data_dir is $OCTOCD_DATA_DIR, else
+/// `<origin folder>/../cache` when origin has a folder, else the source tree's
+/// datasets/cache. Meshes are resolved and checked exactly as in load_scene.
 Scene parse_scene(const std::string& text, const std::string& origin,
                   const std::string& data_dir = "");
 
-/// Resolves a group's mesh name to a file: an existing path (relative to the scene's
-/// folder or absolute), or DATA_DIR/NAME.{off,obj,ply}. Throws InputError naming the key
-/// and the places searched, and saying to run datasets/fetch.sh.
+/// Resolves a group's mesh name to a file: an existing regular file (absolute, or
+/// relative to the folder of Scene::path), else DATA_DIR/NAME.obj, NAME.off, NAME.ply
+/// (first found; DATA_DIR = Scene::data_dir). Throws InputError naming `key`, the places
+/// searched, and saying to run datasets/fetch.sh; also when the file found is empty
+/// (size 0).
 std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const std::string& key);
+
+/// SplitMix64 (Steele, Lea, Flood 2014): the scene's random stream. Integer-only, so it
+/// gives the same numbers on every platform and compiler (no std distributions).
+class SplitMix64 {
+ public:
+  /// Starts the stream at `seed` (the state; the first output mixes seed + golden gamma).
+  explicit SplitMix64(std::uint64_t seed) : state_(seed) {}
+  /// Next 64-bit output: state += 0x9E3779B97F4A7C15, then the SplitMix64 finaliser.
+  std::uint64_t next() {
+    std::uint64_t z = (state_ += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+  }
+  /// Uniform float in [0, 1): (next() >> 40) * 2^-24 (exact: 24 bits fit a float).
+  float unit() { return static_cast<float>(next() >> 40) * (1.0f / 16777216.0f); }
+  /// Uniform in [lo, hi): float(double(lo) + double(unit()) * (double(hi) - double(lo))),
+  /// rounded once to float. Returns lo when hi == lo.
+  float uniform(float lo, float hi) {
+    const double u = static_cast<double>(unit());
+    return static_cast<float>(static_cast<double>(lo) +
+                              u * (static_cast<double>(hi) - static_cast<double>(lo)));
+  }
+
+ private:
+  std::uint64_t state_;
+};
+
+/// The centres (m) of group `g`'s bodies, in body order, deterministic (SplitMix64):
+/// - explicit `positions` when non-empty (returned as is);
+/// - grid: spacing s = layout.spacing, or 1.1 x the largest side of `body_local_aabb`
+///   when 0. Region R = layout.region (shrunk by the body's half extents when
+///   region_from_domain). Slots per axis n_a = floor((R.max_a - R.min_a) / s + 1e-4) + 1;
+///   slot i on axis a is at R.min_a + i s (the lattice starts at R.min, so an axis with
+///   min == max gives one slot). Body k takes slot (ix, iy, iz) with ix = k mod n_x,
+///   iz = (k div n_x) mod n_z, iy = k div (n_x n_z): x fastest, then z, then y, so
+///   stacks fill layer by layer upward from R.min.y. Jitter j > 0 then adds
+///   uniform(-j, j) to x, y, z in that order (one stream seeded with layout.seed, body
+///   order). Throws InputError naming `<origin>: groups[<g.index>].layout` when
+///   count > n_x n_y n_z, saying how many fit;
+/// - random: centres uniform in R (x, y, z drawn in that order from one stream seeded
+///   with layout.seed), rejected while the body's AABB overlaps (Eq. 6, inclusive) one
+///   already placed; at most 1000 tries per body, else InputError (region too small).
+/// `body_local_aabb` is the local AABB of one body (centred on the origin, SPEC 3).
+std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aabb,
+                                  const std::string& origin);
+
+/// The initial velocities (m/s) of group `g`'s bodies, in body order: `value` for all
+/// (fixed), or each component uniform(-max, max) drawn x, y, z per body in body order
+/// from one SplitMix64 stream seeded with velocity.seed (random).
+std::vector<Vec3> group_velocities(const GroupSpec& g);
 
 }  // namespace octocd

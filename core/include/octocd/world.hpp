@@ -121,7 +121,8 @@ class World {
   std::int64_t frame() const { return frame_; }
   /// theta (m) used for a pair of shapes: the scene's value or `auto` (SPEC 6).
   float theta(std::uint32_t shape_a, std::uint32_t shape_b) const;
-  /// Mass-weighted sum of 64-bit hashes of x and v bits: equal states hash equal.
+  /// FNV-1a 64-bit hash of the bits of every x then every v: bit-identical states hash
+  /// equal (determinism checks, SPEC/STYLE: pinned state hash).
   std::uint64_t state_hash() const;
 
  private:
@@ -133,6 +134,7 @@ class World {
   std::unique_ptr<BroadPhase> broadphase_;
   std::vector<Aabb> aabbs_;
   std::vector<Pair> pairs_;
+  std::vector<std::uint8_t> confirmed_;  // per pair: midphase verdict
   std::vector<ContactRecord> contacts_;
   std::vector<float> theta_table_;
   FrameMetrics metrics_;

@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Installs octocd's build, test and report dependencies from Debian 12's packages.
+# Idempotent: apt-get skips what is already installed. Runs apt-get through sudo when
+# not root. `--list` prints the package list and exits.
+set -euo pipefail
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+PACKAGES=(
+  # toolchain
+  cmake ninja-build g++ pkg-config git xz-utils ca-certificates
+  # the field's libraries
+  libbullet-dev libfcl-dev libccd-dev libeigen3-dev libassimp-dev
+  libhdf5-dev hdf5-tools nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev
+  # reports (Debian's /usr/bin/python3) and the dataset split
+  python3 python3-numpy python3-h5py python3-matplotlib
+)
+if [ "${1:-}" = "--list" ]; then echo "${PACKAGES[@]}"; exit 0; fi
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+# datasets/fetch.sh needs npm (for the `bunny` package) and dpkg-deb.
+command -v npm >/dev/null 2>&1 || missing+=(npm)
+if [ "${#missing[@]}" -gt 0 ]; then
+  echo "install-deps: installing ${missing[*]}"
+  $SUDO apt-get update
+  $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
+else
+  echo "install-deps: all packages present"
+fi

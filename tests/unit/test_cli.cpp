@@ -1,0 +1,199 @@
+// The `octocd` command: exit codes, error messages naming the field, traces of killed runs.
+#include <gtest/gtest.h>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <thread>
+
+#include "octocd/trace.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Result {
+  int code = -1;
+  std::string output;
+};
+
+std::string bin() {
+  const char* b = std::getenv("OCTOCD_BIN");
+  return b ? b : "octocd";
+}
+
+/// Runs `octocd ARGS` and returns its exit code and merged stdout/stderr.
+Result octocd(const std::string& args) {
+  Result r;
+  FILE* p = popen((bin() + " " + args + " 2>&1").c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  while (std::fgets(buf, sizeof buf, p)) r.output += buf;
+  const int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("octocd-cli-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  /// Writes a scene file and returns its path.
+  std::string scene(const std::string& name, const std::string& text) {
+    const fs::path p = dir_ / (name + ".json");
+    std::ofstream(p) << text;
+    return p.string();
+  }
+
+  /// A valid box scene with `extra` spliced into the top-level object and `group_extra`
+  /// into the group.
+  std::string box_scene(const std::string& extra, const std::string& group_extra = "",
+                        const std::string& domain = R"({"min": [-1, 0, -1], "max": [1, 2, 1]})") {
+    return R"({"name": "t", "domain": )" + domain + R"(, "frames": 20)" + extra +
+           R"(, "groups": [{"name": "boxes", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 2)" +
+           group_extra + "}]}";
+  }
+
+  fs::path dir_;
+};
+
+}  // namespace
+
+TEST_F(Cli, HelpListsEveryOption) {
+  const Result r = octocd("run --help");
+  EXPECT_EQ(r.code, 0) << r.output;
+  for (const char* opt : {"--broadphase", "--midphase", "--frames", "--trace", "--state-every",
+                          "--quiet", "flat", "octree", "spatial-hash", "aabb-only"})
+    EXPECT_NE(r.output.find(opt), std::string::npos) << opt << " missing from:\n" << r.output;
+  EXPECT_EQ(octocd("--help").code, 0);
+}
+
+TEST_F(Cli, ValidBoxSceneRunsAndPrintsSummary) {
+  const Result r = octocd("run " + scene("ok", box_scene("")) + " --broadphase flat");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("steps/s"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("broadphase"), std::string::npos) << r.output;
+}
+
+TEST_F(Cli, NoArgumentsAndUnknownOptionsAreBadInput) {
+  EXPECT_EQ(octocd("").code, 2);
+  EXPECT_EQ(octocd("run").code, 2);
+  EXPECT_EQ(octocd("run x.json --frobnicate").code, 2);
+  EXPECT_EQ(octocd("run " + scene("ok", box_scene("")) + " --frames 0").code, 2);
+}
+
+struct BadInput {
+  const char* label;
+  const char* extra;        // spliced into the scene's top level
+  const char* group_extra;  // spliced into the group
+  const char* domain;       // replaces the domain ("" keeps the default)
+  const char* cli;          // extra command-line options
+  const char* expect;       // a substring the error must contain (the field)
+};
+
+class CliBadInput : public Cli, public ::testing::WithParamInterface<BadInput> {};
+
+TEST_P(CliBadInput, ExitsTwoAndNamesTheField) {
+  const BadInput& b = GetParam();
+  const std::string text =
+      *b.domain ? box_scene(b.extra, b.group_extra, b.domain) : box_scene(b.extra, b.group_extra);
+  const std::string path = scene(b.label, text);
+  const Result r = octocd("run " + path + " --quiet " + b.cli);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(b.expect), std::string::npos)
+      << "error does not name '" << b.expect << "':\n" << r.output;
+  EXPECT_EQ(r.output.find("steps/s"), std::string::npos) << "ran anyway:\n" << r.output;
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Items, CliBadInput,
+    ::testing::Values(
+        BadInput{"unknown_key", R"(, "gravty": [0, -9.81, 0])", "", "", "", "gravty"},
+        BadInput{"unknown_group_key", "", R"(, "colour": "red")", "", "", "colour"},
+        BadInput{"wrong_type", R"(, "dt": "fast")", "", "", "", "dt"},
+        BadInput{"beta_zero", R"(, "response": {"beta": 0})", "", "", "", "beta"},
+        BadInput{"beta_big", R"(, "response": {"beta": 1.5})", "", "", "", "beta"},
+        BadInput{"alpha_zero", R"(, "response": {"alpha": 0})", "", "", "", "alpha"},
+        BadInput{"alpha_big", R"(, "response": {"alpha": 2})", "", "", "", "alpha"},
+        BadInput{"slop_negative", R"(, "response": {"slop": -0.001})", "", "", "", "slop"},
+        BadInput{"non_finite", R"(, "response": {"max_velocity": 1e400})", "", "", "",
+                 "max_velocity"},
+        BadInput{"count_zero", "", R"(, "count": 0)", "", "", "count"},
+        BadInput{"domain_inverted", "", "", R"({"min": [0, 0, 0], "max": [1, 0, 1]})", "",
+                 "domain"},
+        BadInput{"missing_mesh", "", R"(, "shape": {"mesh": "no-such-mesh"})", "", "",
+                 "no-such-mesh"},
+        BadInput{"bad_broadphase", "", "", "", "--broadphase kd-tree", "kd-tree"},
+        BadInput{"bad_midphase", "", "", "", "--midphase 2,1", "midphase"}),
+    [](const ::testing::TestParamInfo<BadInput>& info) { return std::string(info.param.label); });
+
+TEST_F(Cli, MissingAndInvalidSceneFiles) {
+  Result r = octocd("run " + (dir_ / "absent.json").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("absent.json"), std::string::npos) << r.output;
+  r = octocd("run " + scene("broken", "{\"name\": "));
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("broken.json"), std::string::npos) << r.output;
+}
+
+TEST_F(Cli, EmptyAndNonFiniteMeshFilesAreBadInput) {
+  std::ofstream(dir_ / "empty.obj").flush();
+  Result r = octocd("run " + scene("e", box_scene("", R"(, "shape": {"mesh": "empty.obj"})")) +
+                    " --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("empty.obj"), std::string::npos) << r.output;
+  std::ofstream(dir_ / "nan.obj") << "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n";
+  r = octocd("run " + scene("n", box_scene("", R"(, "shape": {"mesh": "nan.obj"})")) + " --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("nan.obj"), std::string::npos) << r.output;
+}
+
+// A trace written by a process killed with SIGKILL mid-run is readable and holds the
+// frames flushed before the kill.
+TEST_F(Cli, TraceOfKilledRunIsReadable) {
+  const std::string path = scene(
+      "long", box_scene(R"(, "frames": 100000000, "walls": "floor")",
+                        R"(, "layout": {"type": "grid", "min": [-0.5, 0.1, -0.5], "max": [0.5, 1.5, 0.5]})"));
+  const std::string trace = (dir_ / "killed.h5").string();
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const std::string b = bin();
+    execl(b.c_str(), b.c_str(), "run", path.c_str(), "--trace", trace.c_str(), "--quiet",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // Wait until some frames are on disk, then kill without warning.
+  std::int64_t seen = 0;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (seen < 500 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    try {
+      seen = octocd::read_trace_summary(trace).frames;
+    } catch (const std::exception&) {
+    }
+  }
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "the run ended before the kill";
+  ASSERT_GE(seen, 500) << "no frames flushed within 60 s";
+  const octocd::TraceSummary s = octocd::read_trace_summary(trace);
+  EXPECT_EQ(s.format, "octocd-trace");
+  EXPECT_GE(s.frames, seen);
+  EXPECT_EQ(s.last_frame, s.frames);  // rows are frames 1..N with none missing
+  EXPECT_GE(s.state_rows, 1);
+}
