@@ -26,11 +26,11 @@ struct Result {
 
 std::string bin() {
   const char* b = std::getenv("OCTOCD_BIN");
-  return b ? b : "octocd";
+  return b ? b : OCTOCD_TEST_BIN;
 }
 
 /// Runs `octocd ARGS` and returns its exit code and merged stdout/stderr.
-Result octocd(const std::string& args) {
+Result run_octocd(const std::string& args) {
   Result r;
   FILE* p = popen((bin() + " " + args + " 2>&1").c_str(), "r");
   if (!p) return r;
@@ -60,12 +60,16 @@ class Cli : public ::testing::Test {
 
   /// A valid box scene with `extra` spliced into the top-level object and `group_extra`
   /// into the group.
-  std::string box_scene(const std::string& extra, const std::string& group_extra = "",
-                        const std::string& domain = R"({"min": [-1, 0, -1], "max": [1, 2, 1]})") {
-    return R"({"name": "t", "domain": )" + domain + R"(, "frames": 20)" + extra +
-           R"(, "groups": [{"name": "boxes", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 2)" +
+  /// `shape` replaces the group's box shape, `frames` the frame count.
+  static std::string box_scene(const std::string& extra, const std::string& group_extra = "",
+                               const std::string& domain = kDomain,
+                               const std::string& shape = R"({"box": [0.1, 0.1, 0.1]})",
+                               const std::string& frames = "20") {
+    return R"({"name": "t", "domain": )" + domain + R"(, "frames": )" + frames + extra +
+           R"(, "groups": [{"name": "boxes", "shape": )" + shape + R"(, "count": 2)" +
            group_extra + "}]}";
   }
+  static constexpr const char* kDomain = R"({"min": [-1, 0, -1], "max": [1, 2, 1]})";
 
   fs::path dir_;
 };
@@ -73,30 +77,31 @@ class Cli : public ::testing::Test {
 }  // namespace
 
 TEST_F(Cli, HelpListsEveryOption) {
-  const Result r = octocd("run --help");
+  const Result r = run_octocd("run --help");
   EXPECT_EQ(r.code, 0) << r.output;
   for (const char* opt : {"--broadphase", "--midphase", "--frames", "--trace", "--state-every",
                           "--quiet", "flat", "octree", "spatial-hash", "aabb-only"})
     EXPECT_NE(r.output.find(opt), std::string::npos) << opt << " missing from:\n" << r.output;
-  EXPECT_EQ(octocd("--help").code, 0);
+  EXPECT_EQ(run_octocd("--help").code, 0);
 }
 
 TEST_F(Cli, ValidBoxSceneRunsAndPrintsSummary) {
-  const Result r = octocd("run " + scene("ok", box_scene("")) + " --broadphase flat");
+  const Result r = run_octocd("run " + scene("ok", box_scene("")) + " --broadphase flat");
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("steps/s"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("broadphase"), std::string::npos) << r.output;
 }
 
 TEST_F(Cli, NoArgumentsAndUnknownOptionsAreBadInput) {
-  EXPECT_EQ(octocd("").code, 2);
-  EXPECT_EQ(octocd("run").code, 2);
-  EXPECT_EQ(octocd("run x.json --frobnicate").code, 2);
-  EXPECT_EQ(octocd("run " + scene("ok", box_scene("")) + " --frames 0").code, 2);
+  EXPECT_EQ(run_octocd("").code, 2);
+  EXPECT_EQ(run_octocd("run").code, 2);
+  EXPECT_EQ(run_octocd("run x.json --frobnicate").code, 2);
+  EXPECT_EQ(run_octocd("run " + scene("ok", box_scene("")) + " --frames 0").code, 2);
 }
 
 struct BadInput {
   const char* label;
+  const char* shape;        // replaces the group's shape ("" keeps the box)
   const char* extra;        // spliced into the scene's top level
   const char* group_extra;  // spliced into the group
   const char* domain;       // replaces the domain ("" keeps the default)
@@ -108,10 +113,10 @@ class CliBadInput : public Cli, public ::testing::WithParamInterface<BadInput> {
 
 TEST_P(CliBadInput, ExitsTwoAndNamesTheField) {
   const BadInput& b = GetParam();
-  const std::string text =
-      *b.domain ? box_scene(b.extra, b.group_extra, b.domain) : box_scene(b.extra, b.group_extra);
+  const std::string text = box_scene(b.extra, b.group_extra, *b.domain ? b.domain : kDomain,
+                                     *b.shape ? b.shape : R"({"box": [0.1, 0.1, 0.1]})");
   const std::string path = scene(b.label, text);
-  const Result r = octocd("run " + path + " --quiet " + b.cli);
+  const Result r = run_octocd("run " + path + " --quiet " + b.cli);
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find(b.expect), std::string::npos)
       << "error does not name '" << b.expect << "':\n" << r.output;
@@ -121,42 +126,42 @@ TEST_P(CliBadInput, ExitsTwoAndNamesTheField) {
 INSTANTIATE_TEST_SUITE_P(
     Items, CliBadInput,
     ::testing::Values(
-        BadInput{"unknown_key", R"(, "gravty": [0, -9.81, 0])", "", "", "", "gravty"},
-        BadInput{"unknown_group_key", "", R"(, "colour": "red")", "", "", "colour"},
-        BadInput{"wrong_type", R"(, "dt": "fast")", "", "", "", "dt"},
-        BadInput{"beta_zero", R"(, "response": {"beta": 0})", "", "", "", "beta"},
-        BadInput{"beta_big", R"(, "response": {"beta": 1.5})", "", "", "", "beta"},
-        BadInput{"alpha_zero", R"(, "response": {"alpha": 0})", "", "", "", "alpha"},
-        BadInput{"alpha_big", R"(, "response": {"alpha": 2})", "", "", "", "alpha"},
-        BadInput{"slop_negative", R"(, "response": {"slop": -0.001})", "", "", "", "slop"},
-        BadInput{"non_finite", R"(, "response": {"max_velocity": 1e400})", "", "", "",
+        BadInput{"unknown_key", "", R"(, "gravty": [0, -9.81, 0])", "", "", "", "gravty"},
+        BadInput{"unknown_group_key", "", "", R"(, "colour": "red")", "", "", "colour"},
+        BadInput{"wrong_type", "", R"(, "dt": "fast")", "", "", "", "dt"},
+        BadInput{"beta_zero", "", R"(, "response": {"beta": 0})", "", "", "", "beta"},
+        BadInput{"beta_big", "", R"(, "response": {"beta": 1.5})", "", "", "", "beta"},
+        BadInput{"alpha_zero", "", R"(, "response": {"alpha": 0})", "", "", "", "alpha"},
+        BadInput{"alpha_big", "", R"(, "response": {"alpha": 2})", "", "", "", "alpha"},
+        BadInput{"slop_negative", "", R"(, "response": {"slop": -0.001})", "", "", "", "slop"},
+        BadInput{"non_finite", "", R"(, "response": {"max_velocity": 1e400})", "", "", "",
                  "max_velocity"},
-        BadInput{"count_zero", "", R"(, "count": 0)", "", "", "count"},
-        BadInput{"domain_inverted", "", "", R"({"min": [0, 0, 0], "max": [1, 0, 1]})", "",
+        BadInput{"count_zero", "", "", R"(, "count": 0)", "", "", "count"},
+        BadInput{"domain_inverted", "", "", "", R"({"min": [0, 0, 0], "max": [1, 0, 1]})", "",
                  "domain"},
-        BadInput{"missing_mesh", "", R"(, "shape": {"mesh": "no-such-mesh"})", "", "",
+        BadInput{"missing_mesh", R"({"mesh": "no-such-mesh"})", "", "", "", "",
                  "no-such-mesh"},
-        BadInput{"bad_broadphase", "", "", "", "--broadphase kd-tree", "kd-tree"},
-        BadInput{"bad_midphase", "", "", "", "--midphase 2,1", "midphase"}),
-    [](const ::testing::TestParamInfo<BadInput>& info) { return std::string(info.param.label); });
+        BadInput{"bad_broadphase", "", "", "", "", "--broadphase kd-tree", "kd-tree"},
+        BadInput{"bad_midphase", "", "", "", "", "--midphase 2,1", "midphase"}),
+    [](const ::testing::TestParamInfo<BadInput>& p) { return std::string(p.param.label); });
 
 TEST_F(Cli, MissingAndInvalidSceneFiles) {
-  Result r = octocd("run " + (dir_ / "absent.json").string());
+  Result r = run_octocd("run " + (dir_ / "absent.json").string());
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.output.find("absent.json"), std::string::npos) << r.output;
-  r = octocd("run " + scene("broken", "{\"name\": "));
+  r = run_octocd("run " + scene("broken", "{\"name\": "));
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.output.find("broken.json"), std::string::npos) << r.output;
 }
 
 TEST_F(Cli, EmptyAndNonFiniteMeshFilesAreBadInput) {
   std::ofstream(dir_ / "empty.obj").flush();
-  Result r = octocd("run " + scene("e", box_scene("", R"(, "shape": {"mesh": "empty.obj"})")) +
+  Result r = run_octocd("run " + scene("e", box_scene("", "", kDomain, R"({"mesh": "empty.obj"})")) +
                     " --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("empty.obj"), std::string::npos) << r.output;
   std::ofstream(dir_ / "nan.obj") << "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n";
-  r = octocd("run " + scene("n", box_scene("", R"(, "shape": {"mesh": "nan.obj"})")) + " --quiet");
+  r = run_octocd("run " + scene("n", box_scene("", "", kDomain, R"({"mesh": "nan.obj"})")) + " --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("nan.obj"), std::string::npos) << r.output;
 }
@@ -165,8 +170,9 @@ TEST_F(Cli, EmptyAndNonFiniteMeshFilesAreBadInput) {
 // frames flushed before the kill.
 TEST_F(Cli, TraceOfKilledRunIsReadable) {
   const std::string path = scene(
-      "long", box_scene(R"(, "frames": 100000000, "walls": "floor")",
-                        R"(, "layout": {"type": "grid", "min": [-0.5, 0.1, -0.5], "max": [0.5, 1.5, 0.5]})"));
+      "long", box_scene(R"(, "walls": "floor")",
+                        R"(, "layout": {"type": "grid", "min": [-0.5, 0.1, -0.5], "max": [0.5, 1.5, 0.5]})",
+                        kDomain, R"({"box": [0.1, 0.1, 0.1]})", "100000000"));
   const std::string trace = (dir_ / "killed.h5").string();
   const pid_t pid = fork();
   ASSERT_GE(pid, 0);

@@ -20,15 +20,19 @@ struct Mesh {
 };
 
 /// Loads a mesh file (OFF, OBJ, PLY, STL, ... anything assimp reads) and welds it.
+/// All meshes of the file's scene are merged (node transforms are not applied); polygons
+/// are triangulated, points and lines dropped. `name` is the file's stem ("bunny").
 /// Does not recentre or scale (see `normalize_mesh`).
 /// Throws InputError naming `path` when the file is missing, unreadable, empty (no
-/// vertices or no triangles) or holds a non-finite vertex (naming its index).
+/// vertices or no triangles) or holds a non-finite vertex (naming its index in assimp's
+/// load order, which for OFF/OBJ follows the face corners, and its value).
 /// For OFF files the face count in the header is checked against what was loaded
 /// (assimp's OFF reader drops faces after comment lines): a mismatch is an InputError.
 Mesh load_mesh(const std::string& path);
 
-/// Merges coincident vertices (exactly equal positions) and drops triangles that become
-/// degenerate (two equal indices). Keeps first-occurrence order, so it is deterministic.
+/// Merges coincident vertices (exactly equal positions; -0 equals +0) and drops triangles
+/// that become degenerate (two equal indices). Keeps first-occurrence order, so it is
+/// deterministic. Unreferenced vertices are kept.
 void weld_mesh(Mesh& mesh);
 
 /// SPEC 3: moves the mesh so the centre of its local AABB is the origin, then scales it
@@ -36,10 +40,10 @@ void weld_mesh(Mesh& mesh);
 /// is empty or flat in all axes (longest side 0).
 void normalize_mesh(Mesh& mesh);
 
-/// Multiplies every vertex by s (> 0).
+/// Multiplies every vertex by s. Throws InputError unless s is finite and > 0.
 void scale_mesh(Mesh& mesh, float s);
 
-/// Local AABB of the vertices (the mesh must not be empty).
+/// Local AABB of the vertices. Throws InputError for a mesh without vertices.
 Aabb mesh_bounds(const Mesh& mesh);
 
 /// Mean length of the mesh's unique edges (m): the paper's mesh resolution that sets
@@ -48,11 +52,15 @@ float mean_edge_length(const Mesh& mesh);
 
 /// A closed box mesh centred on the origin with the given half extents (m): 8 vertices,
 /// 12 triangles, each face split `subdivisions` times 1-to-4 (so faces carry vertices
-/// inside, useful for vertex-proximity tests). subdivisions in [0, 8].
+/// inside, useful for vertex-proximity tests). Closed, wound counter-clockwise seen from
+/// outside. Throws InputError unless subdivisions is in [0, 8] and every half extent is
+/// finite and > 0.
 Mesh make_box_mesh(Vec3 half_extents, int subdivisions = 0);
 
 /// An icosphere of the given radius (m) centred on the origin: an icosahedron split
-/// 1-to-4 `subdivisions` times (12, 42, 162, 642, ... vertices). subdivisions in [0, 7].
+/// 1-to-4 `subdivisions` times (12, 42, 162, 642, ... vertices; new vertices projected
+/// onto the sphere). Closed, wound counter-clockwise seen from outside. Throws InputError
+/// unless subdivisions is in [0, 7] and radius is finite and > 0.
 Mesh make_icosphere(float radius, int subdivisions);
 
 }  // namespace octocd

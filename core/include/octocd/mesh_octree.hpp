@@ -50,11 +50,15 @@ struct MeshOctree {
 };
 
 /// Builds the octree of `mesh` down to `depth` in [0, 10]; `depth` = -1 picks `auto`
-/// (SPEC 5.2: the deepest level whose occupied leaves hold <= 64 vertices, at most 8).
+/// (SPEC 5.2, see `auto_mesh_octree_depth`).
 /// Throws InputError when the mesh has no vertices or depth is out of range.
 MeshOctree build_mesh_octree(const Mesh& mesh, int depth);
 
-/// The depth `auto` would pick for `mesh`.
+/// The depth `auto` picks for `mesh` (SPEC 5.2: "the deepest level whose occupied leaves
+/// hold <= 64 vertices, at most 8"), read as: subdivide until every occupied leaf holds
+/// <= 64 vertices, i.e. the smallest depth D in [0, 8] whose largest occupied depth-D cell
+/// holds <= 64 vertices; 8 when even depth 8 has a larger cell (many coincident vertices).
+/// Throws InputError when the mesh has no vertices.
 int auto_mesh_octree_depth(const Mesh& mesh);
 
 }  // namespace octocd

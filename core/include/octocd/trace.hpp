@@ -26,7 +26,8 @@ struct TraceMetadata {
   std::string device;         ///< CPU model or GPU name
   std::string start_time;     ///< ISO 8601 UTC
   double dt = 0.0;            ///< s
-  int state_every = 10;       ///< k: /states holds every k-th frame
+  int state_every = 10;       ///< informational: the file's `state_every` attribute is
+                              ///< TraceOptions::state_every, the value actually used
 };
 
 /// Per-body constant data for /bodies.
@@ -83,8 +84,8 @@ TraceBodies trace_bodies(const World& world);
 struct TraceSummary {
   std::string format;
   int version = 0;
-  std::int64_t frames = 0;        ///< rows in /frames
-  std::int64_t state_rows = 0;    ///< rows in /states
+  std::int64_t frames = 0;        ///< complete rows in /frames (its shortest column)
+  std::int64_t state_rows = 0;    ///< complete rows in /states (its shortest dataset)
   std::int64_t bodies = 0;
   std::int64_t last_frame = 0;    ///< /frames/frame of the last row (0 when empty)
 };
@@ -92,5 +93,14 @@ struct TraceSummary {
 /// Opens a trace read-only and summarises it. Throws RuntimeError naming the path when
 /// the file is not a readable octocd trace.
 TraceSummary read_trace_summary(const std::string& path);
+
+/// Writes an XDMF 3 sidecar `<trace_path>.xmf` next to the trace, so that ParaView (Xdmf3
+/// reader) opens the trace as an animation: one Polyvertex grid per /states row (time =
+/// state frame x dt), geometry = that row of /states/position, node attributes velocity,
+/// shape_id and inverse_mass. The sidecar references the trace by file name, so keep them
+/// in one folder. Reads the trace as it is now (a trace still being written gets the rows
+/// flushed so far). Returns the sidecar's path. Throws RuntimeError naming the path when
+/// the trace is unreadable or the sidecar cannot be written.
+std::string write_xdmf_sidecar(const std::string& trace_path);
 
 }  // namespace octocd

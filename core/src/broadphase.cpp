@@ -1,0 +1,125 @@
+/// \file broadphase.cpp
+/// Broadphase factory, `auto` octree depth, the shared pair sort and the `flat` oracle
+/// (SPEC 5.1). `octree` is in broadphase_octree.cpp, `spatial-hash` in
+/// broadphase_spatial_hash.cpp.
+
+#include "octocd/broadphase.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "octocd/error.hpp"
+
+namespace octocd {
+
+namespace detail {
+
+// Defined in broadphase_octree.cpp and broadphase_spatial_hash.cpp.
+std::unique_ptr<BroadPhase> make_octree_broadphase(int depth, const Aabb& domain);
+std::unique_ptr<BroadPhase> make_spatial_hash_broadphase(float cell_size);
+
+/// Sorts `pairs` (each with a < b < n, no duplicates required) ascending by (a, b) with a
+/// two-pass stable counting sort (O(n + pairs)); `tmp` and `count` are scratch buffers
+/// kept by the caller so that nothing is allocated once they have grown.
+void sort_pairs(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
+                std::vector<std::uint32_t>& count) {
+  const std::size_t m = pairs.size();
+  if (m < 2) return;
+  if (m < 64) {
+    std::sort(pairs.begin(), pairs.end());
+    return;
+  }
+  tmp.resize(m);
+  count.assign(n + 1, 0);
+  // Pass 1: by b, pairs -> tmp.
+  for (const Pair& p : pairs) ++count[p.b + 1];
+  for (std::size_t i = 1; i <= n; ++i) count[i] += count[i - 1];
+  for (const Pair& p : pairs) tmp[count[p.b]++] = p;
+  // Pass 2 (stable): by a, tmp -> pairs.
+  std::fill(count.begin(), count.end(), 0u);
+  for (const Pair& p : tmp) ++count[p.a + 1];
+  for (std::size_t i = 1; i <= n; ++i) count[i] += count[i - 1];
+  for (const Pair& p : tmp) pairs[count[p.a]++] = p;
+}
+
+}  // namespace detail
+
+namespace {
+
+/// The oracle: every one of the n(n-1)/2 pairs through Eq. 6. Output is produced in
+/// (a, b) order directly.
+class FlatBroadPhase final : public BroadPhase {
+ public:
+  std::string name() const override { return "flat"; }
+
+  void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
+                  BroadPhaseStats& stats) override {
+    out.clear();
+    const std::size_t n = boxes.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      const Aabb bi = boxes[i];
+      for (std::size_t j = i + 1; j < n; ++j) {
+        if (overlaps(bi, boxes[j])) {
+          out.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j)});
+        }
+      }
+    }
+    stats.cell_candidates = static_cast<std::uint64_t>(n) * (n == 0 ? 0 : n - 1) / 2;
+    stats.pairs = out.size();
+    stats.memory_bytes = 0;  // no structures of its own
+  }
+};
+
+}  // namespace
+
+std::vector<std::string> broadphase_names() { return {"flat", "octree", "spatial-hash"}; }
+
+std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, const Aabb& domain) {
+  if (config.octree_depth < -1 || config.octree_depth > 10) {
+    std::ostringstream msg;
+    msg << "broadphase.depth: " << config.octree_depth
+        << " is out of range (expected -1 = auto, or an integer in [0, 10])";
+    throw InputError(msg.str());
+  }
+  if (!(std::isfinite(config.cell_size) && config.cell_size > 0.0f)) {
+    std::ostringstream msg;
+    msg << "broadphase.cell_size: " << config.cell_size
+        << " is out of range (expected a finite number > 0, in m)";
+    throw InputError(msg.str());
+  }
+  if (config.name == "flat") return std::make_unique<FlatBroadPhase>();
+  if (config.name == "octree") return detail::make_octree_broadphase(config.octree_depth, domain);
+  if (config.name == "spatial-hash") return detail::make_spatial_hash_broadphase(config.cell_size);
+  std::string names;
+  for (const std::string& s : broadphase_names()) names += (names.empty() ? "" : ", ") + s;
+  throw InputError("broadphase.name: unknown broadphase '" + config.name +
+                   "' (expected one of: " + names + ")");
+}
+
+int auto_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain) {
+  // Mean body extent = mean over bodies of the longest side of the AABB (bodies with a
+  // non-finite or negative side are left out of the mean).
+  double sum = 0.0;
+  std::size_t count = 0;
+  for (const Aabb& b : boxes) {
+    const double e = std::max({static_cast<double>(b.max.x) - b.min.x,
+                               static_cast<double>(b.max.y) - b.min.y,
+                               static_cast<double>(b.max.z) - b.min.z});
+    if (std::isfinite(e) && e >= 0.0) {
+      sum += e;
+      ++count;
+    }
+  }
+  if (count == 0) return 2;
+  const double mean = sum / static_cast<double>(count);
+  const double side = std::max({static_cast<double>(domain.max.x) - domain.min.x,
+                                static_cast<double>(domain.max.y) - domain.min.y,
+                                static_cast<double>(domain.max.z) - domain.min.z});
+  for (int level = 8; level >= 1; --level) {
+    if (side / static_cast<double>(1u << level) >= 2.0 * mean) return level;
+  }
+  return 1;
+}
+
+}  // namespace octocd

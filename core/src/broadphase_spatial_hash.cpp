@@ -1,0 +1,182 @@
+/// \file broadphase_spatial_hash.cpp
+/// `spatial-hash`: uniform grid of cell size h, hashed by integer cell coordinates
+/// (paper section 4.2; SPEC 5.1).
+///
+/// The "hash" is a sorted array of (cell key, body) entries, the cell key packing the
+/// three integer cell coordinates (21 bits each), which is deterministic and needs no
+/// hash function. The grid is unbounded. A body goes into every cell its AABB touches,
+/// cells [floor(min/h), floor(max/h)] per axis (a monotone mapping, so touching boxes
+/// share a cell). A body spanning more than kMaxCells cells, or beyond +-2^20 cells, or
+/// with an infinite coordinate, goes to an "oversize" list tested against every body.
+/// Bodies with a NaN coordinate never overlap anything (Eq. 6) and are left out.
+///
+/// De-duplication: a pair sharing several cells is reported only from the cell holding
+/// the min corner of the two boxes' intersection, i.e. the cell (max of the two min
+/// cells) per axis, which both boxes touch when they overlap. The result is then sorted
+/// by (a, b) with a counting sort; it is unique by construction.
+
+#include <algorithm>
+#include <cmath>
+
+#include "octocd/broadphase.hpp"
+
+namespace octocd {
+
+namespace detail {
+void sort_pairs(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
+                std::vector<std::uint32_t>& count);
+}  // namespace detail
+
+namespace {
+
+constexpr std::int64_t kMaxCells = 4096;        // more cells than this: oversize
+constexpr std::int64_t kCoordLimit = 1 << 20;   // |cell coordinate| < 2^20
+
+struct Entry {
+  std::uint64_t key;
+  std::uint32_t body;
+};
+
+enum : std::uint8_t { kGrid = 0, kOversize = 1, kSkip = 2 };
+
+class SpatialHashBroadPhase final : public BroadPhase {
+ public:
+  explicit SpatialHashBroadPhase(float cell_size) : h_(cell_size) {}
+
+  std::string name() const override { return "spatial-hash"; }
+
+  void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
+                  BroadPhaseStats& stats) override {
+    out.clear();
+    const std::size_t n = boxes.size();
+    entries_.clear();
+    oversize_.clear();
+    kind_.assign(n, kGrid);
+    cell0_.resize(3 * n);
+    const double inv_h = 1.0 / static_cast<double>(h_);
+    std::uint64_t valid = 0;
+
+    for (std::size_t i = 0; i < n; ++i) {
+      const Aabb& b = boxes[i];
+      std::int64_t c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0};
+      bool nan = false, over = false;
+      std::int64_t count = 1;
+      for (int a = 0; a < 3; ++a) {
+        if (std::isnan(b.min[a]) || std::isnan(b.max[a])) {
+          nan = true;
+          break;
+        }
+        const double f0 = std::floor(static_cast<double>(b.min[a]) * inv_h);  // monotone
+        const double f1 = std::floor(static_cast<double>(b.max[a]) * inv_h);
+        if (!(f0 > -kCoordLimit && f1 < kCoordLimit && f0 <= f1)) {
+          over = true;
+          continue;
+        }
+        c0[a] = static_cast<std::int64_t>(f0);
+        c1[a] = static_cast<std::int64_t>(f1);
+        if (over) continue;
+        count *= c1[a] - c0[a] + 1;  // each factor < 2^21 and count <= kMaxCells: no overflow
+        if (count > kMaxCells) over = true;
+      }
+      if (nan) {
+        kind_[i] = kSkip;
+        continue;
+      }
+      ++valid;
+      if (over) {
+        kind_[i] = kOversize;
+        oversize_.push_back(static_cast<std::uint32_t>(i));
+        continue;
+      }
+      for (int a = 0; a < 3; ++a) cell0_[3 * i + a] = static_cast<std::int32_t>(c0[a]);
+      for (std::int64_t x = c0[0]; x <= c1[0]; ++x) {
+        for (std::int64_t y = c0[1]; y <= c1[1]; ++y) {
+          for (std::int64_t z = c0[2]; z <= c1[2]; ++z) {
+            entries_.push_back({pack(x, y, z), static_cast<std::uint32_t>(i)});
+          }
+        }
+      }
+    }
+
+    std::sort(entries_.begin(), entries_.end(), [](const Entry& p, const Entry& q) {
+      return p.key != q.key ? p.key < q.key : p.body < q.body;
+    });
+
+    std::uint64_t candidates = 0;
+    const std::size_t m = entries_.size();
+    std::size_t g = 0;
+    while (g < m) {
+      std::size_t e = g + 1;
+      while (e < m && entries_[e].key == entries_[g].key) ++e;
+      const std::uint64_t pop = e - g;
+      candidates += pop * (pop - 1) / 2;
+      if (pop > 1) {
+        const std::uint64_t key = entries_[g].key;
+        for (std::size_t i = g; i < e; ++i) {
+          const std::uint32_t p = entries_[i].body;
+          const std::int32_t* cp = &cell0_[3 * p];
+          for (std::size_t j = i + 1; j < e; ++j) {
+            const std::uint32_t q = entries_[j].body;
+            const std::int32_t* cq = &cell0_[3 * q];
+            // Report only from the cell of the intersection's min corner.
+            if (pack(std::max(cp[0], cq[0]), std::max(cp[1], cq[1]), std::max(cp[2], cq[2])) !=
+                key) {
+              continue;
+            }
+            if (overlaps(boxes[p], boxes[q])) out.push_back({p, q});  // p < q: sorted by body
+          }
+        }
+      }
+      g = e;
+    }
+
+    // Oversize bodies against every other body (oversize pairs once).
+    const std::uint64_t o = oversize_.size();
+    candidates += o * (valid - o) + o * (o == 0 ? 0 : o - 1) / 2;
+    for (const std::uint32_t p : oversize_) {
+      for (std::size_t q = 0; q < n; ++q) {
+        if (q == p || kind_[q] == kSkip || (kind_[q] == kOversize && q < p)) continue;
+        if (overlaps(boxes[p], boxes[q])) {
+          const auto qq = static_cast<std::uint32_t>(q);
+          out.push_back(p < qq ? Pair{p, qq} : Pair{qq, p});
+        }
+      }
+    }
+
+    detail::sort_pairs(out, n, tmp_pairs_, count_);
+    stats.cell_candidates = candidates;
+    stats.pairs = out.size();
+    stats.memory_bytes = entries_.capacity() * sizeof(Entry) +
+                         oversize_.capacity() * sizeof(std::uint32_t) + kind_.capacity() +
+                         cell0_.capacity() * sizeof(std::int32_t) +
+                         tmp_pairs_.capacity() * sizeof(Pair) +
+                         count_.capacity() * sizeof(std::uint32_t);
+  }
+
+ private:
+  static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z) {
+    return (static_cast<std::uint64_t>(x + kCoordLimit) << 42) |
+           (static_cast<std::uint64_t>(y + kCoordLimit) << 21) |
+           static_cast<std::uint64_t>(z + kCoordLimit);
+  }
+
+  float h_;
+  std::vector<Entry> entries_;
+  std::vector<std::uint32_t> oversize_;
+  std::vector<std::uint8_t> kind_;
+  std::vector<std::int32_t> cell0_;
+  std::vector<Pair> tmp_pairs_;
+  std::vector<std::uint32_t> count_;
+};
+
+}  // namespace
+
+namespace detail {
+
+std::unique_ptr<BroadPhase> make_spatial_hash_broadphase(float cell_size) {
+  return std::make_unique<SpatialHashBroadPhase>(cell_size);
+}
+
+}  // namespace detail
+
+}  // namespace octocd

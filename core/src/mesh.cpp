@@ -1,0 +1,369 @@
+/// \file mesh.cpp
+/// Mesh loading (assimp), welding, normalisation (SPEC 3) and procedural shapes.
+
+#include "octocd/mesh.hpp"
+
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <unordered_map>
+#include <utility>
+
+#include "octocd/error.hpp"
+
+namespace octocd {
+namespace {
+
+namespace fs = std::filesystem;
+
+using Tri = std::array<std::uint32_t, 3>;
+
+[[noreturn]] void fail(const std::string& path, const std::string& problem) {
+  throw InputError("mesh file '" + path + "': " + problem);
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+/// The face count in an OFF header (after the keyword, '#' comments skipped).
+std::uint64_t off_header_face_count(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) fail(path, "cannot open (expected a readable file)");
+  std::vector<std::string> tokens;
+  std::string line;
+  while (tokens.size() < 3 && std::getline(in, line)) {
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.erase(hash);
+    std::istringstream ls(line);
+    std::string t;
+    while (tokens.size() < 3 && ls >> t) tokens.push_back(t);
+  }
+  const std::string kw = tokens.empty() ? std::string() : tokens[0];
+  if (kw.size() < 3 || kw.compare(kw.size() - 3, 3, "OFF") != 0) {
+    fail(path, "bad OFF header '" + kw + "' (expected 'OFF' then vertex and face counts)");
+  }
+  if (tokens.size() < 3) fail(path, "truncated OFF header (expected vertex and face counts)");
+  try {
+    std::size_t used = 0;
+    const unsigned long long nf = std::stoull(tokens[2], &used);
+    if (used != tokens[2].size()) throw std::invalid_argument("trailing characters");
+    return nf;
+  } catch (const std::exception&) {
+    fail(path, "bad OFF face count '" + tokens[2] + "' (expected a non-negative integer)");
+  }
+}
+
+std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
+  if (a > b) std::swap(a, b);
+  return (static_cast<std::uint64_t>(a) << 32) | b;
+}
+
+/// Splits every triangle 1-to-4 by its edge midpoints (shared midpoints are shared
+/// vertices), keeping the winding; `place` maps the two endpoints to the new vertex.
+template <class Place>
+void subdivide(Mesh& m, Place place) {
+  std::unordered_map<std::uint64_t, std::uint32_t> mid;
+  mid.reserve(m.triangles.size() * 2);
+  std::vector<Tri> out;
+  out.reserve(m.triangles.size() * 4);
+  auto midpoint = [&](std::uint32_t a, std::uint32_t b) {
+    const auto [it, inserted] =
+        mid.try_emplace(edge_key(a, b), static_cast<std::uint32_t>(m.vertices.size()));
+    if (inserted) m.vertices.push_back(place(m.vertices[a], m.vertices[b]));
+    return it->second;
+  };
+  for (const Tri& t : m.triangles) {
+    const std::uint32_t ab = midpoint(t[0], t[1]);
+    const std::uint32_t bc = midpoint(t[1], t[2]);
+    const std::uint32_t ca = midpoint(t[2], t[0]);
+    out.push_back({t[0], ab, ca});
+    out.push_back({ab, t[1], bc});
+    out.push_back({ca, bc, t[2]});
+    out.push_back({ab, bc, ca});
+  }
+  m.triangles = std::move(out);
+}
+
+/// For a convex shape around the origin: flips any triangle whose normal points inwards.
+void orient_outwards(Mesh& m) {
+  for (Tri& t : m.triangles) {
+    const Vec3 a = m.vertices[t[0]], b = m.vertices[t[1]], c = m.vertices[t[2]];
+    const Vec3 u = b - a, v = c - a;
+    const Vec3 n{u.y * v.z - u.z * v.y, u.z * v.x - u.x * v.z, u.x * v.y - u.y * v.x};
+    if (dot(n, a + b + c) < 0.0f) std::swap(t[1], t[2]);
+  }
+}
+
+Vec3 midpoint_of(Vec3 a, Vec3 b) { return 0.5f * (a + b); }
+
+}  // namespace
+
+Mesh load_mesh(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) fail(path, "not found (expected an existing mesh file)");
+  if (!fs::is_regular_file(path, ec)) fail(path, "not a regular file");
+  if (fs::file_size(path, ec) == 0 || ec) fail(path, "empty file (expected a mesh)");
+  {
+    std::ifstream probe(path, std::ios::binary);
+    if (!probe) fail(path, "cannot open (expected a readable file)");
+  }
+
+  Assimp::Importer importer;
+  // Read without post-processing first, so polygon counts can be compared with the OFF
+  // header, then triangulate and join identical vertices.
+  const aiScene* scene = importer.ReadFile(path, 0);
+  if (scene == nullptr) {
+    fail(path, std::string("assimp cannot read it: ") + importer.GetErrorString());
+  }
+  // Non-finite coordinates are checked before post-processing: joining identical
+  // vertices may silently merge a NaN vertex into another one.
+  std::uint64_t faces = 0, loaded = 0;
+  for (unsigned i = 0; i < scene->mNumMeshes; ++i) {
+    const aiMesh* am = scene->mMeshes[i];
+    faces += am->mNumFaces;
+    for (unsigned v = 0; v < am->mNumVertices; ++v, ++loaded) {
+      const aiVector3D& p = am->mVertices[v];
+      if (!is_finite(Vec3{p.x, p.y, p.z})) {
+        fail(path, "vertex " + std::to_string(loaded) + " (" + std::to_string(p.x) + ", " +
+                       std::to_string(p.y) + ", " + std::to_string(p.z) +
+                       ") is not finite (expected finite coordinates; index in assimp's "
+                       "load order)");
+      }
+    }
+  }
+
+  const std::string ext = lower(fs::path(path).extension().string());
+  if (ext == ".off") {
+    const std::uint64_t expected = off_header_face_count(path);
+    if (faces != expected) {
+      fail(path, "loaded " + std::to_string(faces) + " faces (expected " +
+                     std::to_string(expected) +
+                     " from the OFF header; comment lines inside the face list are not "
+                     "supported)");
+    }
+  }
+
+  scene = importer.ApplyPostProcessing(aiProcess_Triangulate | aiProcess_JoinIdenticalVertices);
+  if (scene == nullptr) {
+    fail(path, std::string("assimp post-processing failed: ") + importer.GetErrorString());
+  }
+
+  Mesh mesh;
+  mesh.name = fs::path(path).stem().string();
+  for (unsigned mi = 0; mi < scene->mNumMeshes; ++mi) {
+    const aiMesh* am = scene->mMeshes[mi];
+    const std::size_t base = mesh.vertices.size();
+    if (base + am->mNumVertices > std::numeric_limits<std::uint32_t>::max()) {
+      fail(path, "too many vertices (expected at most 2^32 - 1)");
+    }
+    for (unsigned v = 0; v < am->mNumVertices; ++v) {
+      const aiVector3D& p = am->mVertices[v];
+      const Vec3 q{p.x, p.y, p.z};
+      if (!is_finite(q)) {
+        fail(path, "vertex " + std::to_string(mesh.vertices.size()) +
+                       " is not finite (expected finite coordinates)");
+      }
+      mesh.vertices.push_back(q);
+    }
+    for (unsigned f = 0; f < am->mNumFaces; ++f) {
+      const aiFace& face = am->mFaces[f];
+      if (face.mNumIndices != 3) continue;  // points and lines carry no surface
+      Tri t{};
+      for (int k = 0; k < 3; ++k) {
+        const unsigned idx = face.mIndices[k];
+        if (idx >= am->mNumVertices) fail(path, "face index out of range");
+        t[static_cast<std::size_t>(k)] = static_cast<std::uint32_t>(base + idx);
+      }
+      mesh.triangles.push_back(t);
+    }
+  }
+  if (mesh.vertices.empty()) fail(path, "no vertices (expected a triangle mesh)");
+  if (mesh.triangles.empty()) fail(path, "no triangles (expected a triangle mesh)");
+  weld_mesh(mesh);
+  if (mesh.triangles.empty()) {
+    fail(path, "every triangle is degenerate after welding (expected a triangle mesh)");
+  }
+  return mesh;
+}
+
+void weld_mesh(Mesh& mesh) {
+  struct Key {
+    std::uint32_t x, y, z;
+    bool operator==(const Key& o) const { return x == o.x && y == o.y && z == o.z; }
+  };
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      std::uint64_t h = 1469598103934665603ull;
+      for (std::uint32_t w : {k.x, k.y, k.z}) h = (h ^ w) * 1099511628211ull;
+      return static_cast<std::size_t>(h ^ (h >> 29));
+    }
+  };
+  auto bits = [](float f) {
+    if (f == 0.0f) f = 0.0f;  // -0 and +0 are equal positions
+    std::uint32_t u;
+    std::memcpy(&u, &f, sizeof u);
+    return u;
+  };
+
+  std::unordered_map<Key, std::uint32_t, KeyHash> first;
+  first.reserve(mesh.vertices.size());
+  std::vector<std::uint32_t> remap(mesh.vertices.size());
+  std::vector<Vec3> unique;
+  unique.reserve(mesh.vertices.size());
+  for (std::size_t i = 0; i < mesh.vertices.size(); ++i) {
+    const Vec3 p = mesh.vertices[i];
+    const auto [it, inserted] = first.try_emplace(Key{bits(p.x), bits(p.y), bits(p.z)},
+                                                  static_cast<std::uint32_t>(unique.size()));
+    if (inserted) unique.push_back(p);
+    remap[i] = it->second;
+  }
+  std::vector<Tri> tris;
+  tris.reserve(mesh.triangles.size());
+  for (const Tri& t : mesh.triangles) {
+    const Tri r{remap[t[0]], remap[t[1]], remap[t[2]]};
+    if (r[0] == r[1] || r[1] == r[2] || r[2] == r[0]) continue;
+    tris.push_back(r);
+  }
+  mesh.vertices = std::move(unique);
+  mesh.triangles = std::move(tris);
+}
+
+void normalize_mesh(Mesh& mesh) {
+  if (mesh.vertices.empty()) {
+    throw InputError("mesh '" + mesh.name + "': no vertices (expected a non-empty mesh)");
+  }
+  const Aabb b = mesh_bounds(mesh);
+  double c[3], longest = 0.0;
+  for (int a = 0; a < 3; ++a) {
+    c[a] = 0.5 * (static_cast<double>(b.min[a]) + static_cast<double>(b.max[a]));
+    longest = std::max(longest, static_cast<double>(b.max[a]) - static_cast<double>(b.min[a]));
+  }
+  if (!(longest > 0.0) || !std::isfinite(longest)) {
+    throw InputError("mesh '" + mesh.name +
+                     "': its bounding box has no extent (expected a longest side > 0)");
+  }
+  const double inv = 1.0 / longest;
+  for (Vec3& v : mesh.vertices) {
+    for (int a = 0; a < 3; ++a) v[a] = static_cast<float>((static_cast<double>(v[a]) - c[a]) * inv);
+  }
+}
+
+void scale_mesh(Mesh& mesh, float s) {
+  if (!(s > 0.0f) || !std::isfinite(s)) {
+    throw InputError("mesh '" + mesh.name + "': scale " + std::to_string(s) +
+                     " (expected a finite scale > 0)");
+  }
+  for (Vec3& v : mesh.vertices) v = s * v;
+}
+
+Aabb mesh_bounds(const Mesh& mesh) {
+  if (mesh.vertices.empty()) {
+    throw InputError("mesh '" + mesh.name + "': no vertices (expected a non-empty mesh)");
+  }
+  Aabb b{mesh.vertices[0], mesh.vertices[0]};
+  for (const Vec3& v : mesh.vertices) {
+    for (int a = 0; a < 3; ++a) {
+      b.min[a] = std::min(b.min[a], v[a]);
+      b.max[a] = std::max(b.max[a], v[a]);
+    }
+  }
+  return b;
+}
+
+float mean_edge_length(const Mesh& mesh) {
+  if (mesh.triangles.empty()) return 0.0f;
+  std::vector<std::uint64_t> edges;
+  edges.reserve(mesh.triangles.size() * 3);
+  for (const Tri& t : mesh.triangles) {
+    edges.push_back(edge_key(t[0], t[1]));
+    edges.push_back(edge_key(t[1], t[2]));
+    edges.push_back(edge_key(t[2], t[0]));
+  }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  double sum = 0.0;
+  for (std::uint64_t e : edges) {
+    const Vec3 a = mesh.vertices[static_cast<std::size_t>(e >> 32)];
+    const Vec3 b = mesh.vertices[static_cast<std::size_t>(e & 0xffffffffu)];
+    const double dx = static_cast<double>(a.x) - b.x, dy = static_cast<double>(a.y) - b.y,
+                 dz = static_cast<double>(a.z) - b.z;
+    sum += std::sqrt(dx * dx + dy * dy + dz * dz);
+  }
+  return static_cast<float>(sum / static_cast<double>(edges.size()));
+}
+
+Mesh make_box_mesh(Vec3 half_extents, int subdivisions) {
+  if (subdivisions < 0 || subdivisions > 8) {
+    throw InputError("make_box_mesh: subdivisions " + std::to_string(subdivisions) +
+                     " (expected 0..8)");
+  }
+  for (int a = 0; a < 3; ++a) {
+    if (!(half_extents[a] > 0.0f) || !std::isfinite(half_extents[a])) {
+      throw InputError("make_box_mesh: half extents must be finite and > 0");
+    }
+  }
+  Mesh m;
+  m.name = "box";
+  for (std::uint32_t i = 0; i < 8; ++i) {  // bit 0: x, bit 1: y, bit 2: z
+    m.vertices.push_back({(i & 1u) ? half_extents.x : -half_extents.x,
+                          (i & 2u) ? half_extents.y : -half_extents.y,
+                          (i & 4u) ? half_extents.z : -half_extents.z});
+  }
+  // Two triangles per face (quad a b c d, counter-clockwise seen from outside).
+  const std::uint32_t quads[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5},   // -x, +x
+                                     {0, 1, 5, 4}, {2, 6, 7, 3},   // -y, +y
+                                     {0, 2, 3, 1}, {4, 5, 7, 6}};  // -z, +z
+  for (const auto& q : quads) {
+    m.triangles.push_back({q[0], q[1], q[2]});
+    m.triangles.push_back({q[0], q[2], q[3]});
+  }
+  orient_outwards(m);  // guards the table above
+  for (int s = 0; s < subdivisions; ++s) subdivide(m, midpoint_of);
+  return m;
+}
+
+Mesh make_icosphere(float radius, int subdivisions) {
+  if (subdivisions < 0 || subdivisions > 7) {
+    throw InputError("make_icosphere: subdivisions " + std::to_string(subdivisions) +
+                     " (expected 0..7)");
+  }
+  if (!(radius > 0.0f) || !std::isfinite(radius)) {
+    throw InputError("make_icosphere: radius must be finite and > 0");
+  }
+  const double t = (1.0 + std::sqrt(5.0)) / 2.0;
+  const double base[12][3] = {{-1, t, 0}, {1, t, 0},   {-1, -t, 0}, {1, -t, 0},
+                              {0, -1, t}, {0, 1, t},   {0, -1, -t}, {0, 1, -t},
+                              {t, 0, -1}, {t, 0, 1},   {-t, 0, -1}, {-t, 0, 1}};
+  auto on_sphere = [radius](double x, double y, double z) {
+    const double s = static_cast<double>(radius) / std::sqrt(x * x + y * y + z * z);
+    return Vec3{static_cast<float>(x * s), static_cast<float>(y * s), static_cast<float>(z * s)};
+  };
+  Mesh m;
+  m.name = "icosphere";
+  for (const auto& p : base) m.vertices.push_back(on_sphere(p[0], p[1], p[2]));
+  m.triangles = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
+                 {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
+                 {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
+                 {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
+  orient_outwards(m);
+  for (int s = 0; s < subdivisions; ++s) {
+    subdivide(m, [&](Vec3 a, Vec3 b) {
+      return on_sphere(static_cast<double>(a.x) + b.x, static_cast<double>(a.y) + b.y,
+                       static_cast<double>(a.z) + b.z);
+    });
+  }
+  return m;
+}
+
+}  // namespace octocd

@@ -1,0 +1,695 @@
+/// \file scene.cpp
+/// Scene files (SPEC section 3): parsing, validation, mesh resolution and the
+/// deterministic body generators. The key list with ranges is in docs/scenes.md.
+
+#include "octocd/scene.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <sstream>
+#include <utility>
+
+#include "octocd/error.hpp"
+
+namespace octocd {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+/// "%.9g" of a number, for messages.
+std::string num(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.9g", v);
+  return buf;
+}
+
+/// Joins a key path and a member name: "" + "dt" = "dt", "response" + "beta" = "response.beta".
+std::string child(const std::string& key, const std::string& name) {
+  return key.empty() ? name : key + "." + name;
+}
+
+/// "groups" + 2 = "groups[2]".
+std::string at(const std::string& key, std::size_t i) { return key + "[" + std::to_string(i) + "]"; }
+
+/// The value's JSON type and a short rendering, for "expected X, got Y" messages.
+std::string describe(const json& j) {
+  std::string text = j.dump();
+  if (text.size() > 40) text = text.substr(0, 37) + "...";
+  return std::string(j.type_name()) + " " + text;
+}
+
+/// Error reporting for one scene: every message is "<origin>: <key>: <problem>; allowed: <range>".
+struct Ctx {
+  std::string origin;
+
+  [[noreturn]] void fail(const std::string& key, const std::string& problem,
+                         const std::string& allowed) const {
+    std::string msg = origin + ": ";
+    if (!key.empty()) msg += key + ": ";
+    msg += problem + "; allowed: " + allowed;
+    throw InputError(msg);
+  }
+
+  /// Fails on any member of object `j` (at `key`) not in `allowed`.
+  void check_keys(const json& j, const std::string& key, const std::vector<std::string>& allowed) const {
+    for (auto it = j.begin(); it != j.end(); ++it) {
+      if (std::find(allowed.begin(), allowed.end(), it.key()) != allowed.end()) continue;
+      std::string list;
+      for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+      fail(child(key, it.key()), "unknown key",
+           (key.empty() ? std::string("top-level keys ") : "keys of " + key + ": ") + list);
+    }
+  }
+
+  void expect_object(const json& j, const std::string& key, const std::string& allowed) const {
+    if (!j.is_object()) fail(key, "expected an object, got " + describe(j), allowed);
+  }
+
+  /// A finite number that stays finite as float32.
+  float number(const json& j, const std::string& key, const std::string& allowed) const {
+    if (!j.is_number()) fail(key, "expected a number, got " + describe(j), allowed);
+    const double v = j.get<double>();
+    if (!std::isfinite(v)) fail(key, "number is not finite (" + num(v) + ")", allowed);
+    const float f = static_cast<float>(v);
+    if (!std::isfinite(f)) fail(key, "number " + num(v) + " overflows float32", allowed);
+    return f;
+  }
+
+  /// A number in the range given by lo/hi (inclusive or not), checked on the float value.
+  float ranged(const json& j, const std::string& key, double lo, bool lo_incl, double hi,
+               bool hi_incl, const std::string& allowed) const {
+    const float f = number(j, key, allowed);
+    const double v = f;
+    const bool ok_lo = lo_incl ? v >= lo : v > lo;
+    const bool ok_hi = hi_incl ? v <= hi : v < hi;
+    if (!ok_lo || !ok_hi) fail(key, "value " + num(v) + " out of range", allowed);
+    return f;
+  }
+
+  /// An integer in [lo, hi].
+  long long integer(const json& j, const std::string& key, long long lo, long long hi,
+                    const std::string& allowed) const {
+    if (!j.is_number_integer()) fail(key, "expected an integer, got " + describe(j), allowed);
+    if (j.is_number_unsigned()) {
+      const auto u = j.get<std::uint64_t>();
+      if (u > static_cast<std::uint64_t>(hi) || (lo > 0 && u < static_cast<std::uint64_t>(lo)))
+        fail(key, "value " + j.dump() + " out of range", allowed);
+      return static_cast<long long>(u);
+    }
+    const auto v = j.get<long long>();
+    if (v < lo || v > hi) fail(key, "value " + std::to_string(v) + " out of range", allowed);
+    return v;
+  }
+
+  /// An unsigned 64-bit integer (seeds).
+  std::uint64_t seed(const json& j, const std::string& key) const {
+    const std::string allowed = "integer in [0, 18446744073709551615]";
+    if (!j.is_number_integer()) fail(key, "expected an integer, got " + describe(j), allowed);
+    if (!j.is_number_unsigned()) {
+      if (j.get<long long>() < 0) fail(key, "value " + j.dump() + " is negative", allowed);
+    }
+    return j.get<std::uint64_t>();
+  }
+
+  std::string string(const json& j, const std::string& key, const std::string& allowed) const {
+    if (!j.is_string()) fail(key, "expected a string, got " + describe(j), allowed);
+    return j.get<std::string>();
+  }
+
+  /// An array of three finite numbers.
+  Vec3 vec3(const json& j, const std::string& key, const std::string& allowed) const {
+    if (!j.is_array() || j.size() != 3)
+      fail(key, "expected an array of 3 numbers, got " + describe(j), allowed);
+    Vec3 v;
+    for (int i = 0; i < 3; ++i) v[i] = number(j[static_cast<std::size_t>(i)], at(key, static_cast<std::size_t>(i)), allowed);
+    return v;
+  }
+
+  /// `auto` (-> -1) or an integer depth in [0, 10].
+  int depth(const json& j, const std::string& key) const {
+    const std::string allowed = "integer in [0, 10] or \"auto\"";
+    if (j.is_string()) {
+      if (j.get<std::string>() == "auto") return -1;
+      fail(key, "unknown value " + j.dump(), allowed);
+    }
+    return static_cast<int>(integer(j, key, 0, 10, allowed));
+  }
+};
+
+const std::string kVecAllowed = "array of 3 finite numbers";
+const std::string kPositive = "finite number > 0";
+const std::string kNonNegative = "finite number >= 0";
+
+/// "domain" or a layout's region from its "min"/"max" members (both required here).
+Aabb parse_box(const Ctx& c, const json& j, const std::string& key, bool strict) {
+  Aabb b;
+  b.min = c.vec3(j.at("min"), child(key, "min"), kVecAllowed);
+  b.max = c.vec3(j.at("max"), child(key, "max"), kVecAllowed);
+  const char* axes = "xyz";
+  for (int i = 0; i < 3; ++i) {
+    const bool bad = strict ? !(b.min[i] < b.max[i]) : !(b.min[i] <= b.max[i]);
+    if (bad)
+      c.fail(key,
+             std::string("min.") + axes[i] + " = " + num(b.min[i]) + (strict ? " >= " : " > ") +
+                 "max." + axes[i] + " = " + num(b.max[i]),
+             strict ? "min < max on every axis" : "min <= max on every axis");
+  }
+  return b;
+}
+
+ShapeSpec parse_shape(const Ctx& c, const json& j, const std::string& key) {
+  const std::string allowed_shape =
+      "an object with exactly one of {\"mesh\": name|path, \"scale\": >0}, {\"box\": [hx,hy,hz]}, "
+      "{\"icosphere\": {\"radius\": >0, \"subdivisions\": 0..7}}";
+  c.expect_object(j, key, allowed_shape);
+  c.check_keys(j, key, {"mesh", "scale", "box", "icosphere"});
+  const int kinds = int(j.contains("mesh")) + int(j.contains("box")) + int(j.contains("icosphere"));
+  if (kinds != 1)
+    c.fail(key, "needs exactly one of mesh, box, icosphere (got " + std::to_string(kinds) + ")",
+           allowed_shape);
+  ShapeSpec s;
+  if (j.contains("mesh")) {
+    s.kind = ShapeSpec::Kind::Mesh;
+    s.mesh = c.string(j["mesh"], child(key, "mesh"), "a dataset name (bunny, armadillo, dragon, asian-dragon) or a mesh file path");
+    if (s.mesh.empty()) c.fail(child(key, "mesh"), "empty mesh name", "a dataset name or a mesh file path");
+    if (j.contains("scale"))
+      s.scale = c.ranged(j["scale"], child(key, "scale"), 0, false, kInf, false, kPositive + " (m)");
+  } else {
+    if (j.contains("scale"))
+      c.fail(child(key, "scale"), "scale applies only to mesh shapes", "scale together with mesh");
+    if (j.contains("box")) {
+      s.kind = ShapeSpec::Kind::Box;
+      const std::string k = child(key, "box");
+      const std::string allowed = "array of 3 half extents, each a finite number > 0 (m)";
+      s.half_extents = c.vec3(j["box"], k, allowed);
+      for (int i = 0; i < 3; ++i)
+        if (!(s.half_extents[i] > 0.0f))
+          c.fail(at(k, static_cast<std::size_t>(i)), "value " + num(s.half_extents[i]) + " out of range", allowed);
+    } else {
+      s.kind = ShapeSpec::Kind::Icosphere;
+      const std::string k = child(key, "icosphere");
+      c.expect_object(j["icosphere"], k, "{\"radius\": >0, \"subdivisions\": 0..7}");
+      const json& ico = j["icosphere"];
+      c.check_keys(ico, k, {"radius", "subdivisions"});
+      if (ico.contains("radius"))
+        s.radius = c.ranged(ico["radius"], child(k, "radius"), 0, false, kInf, false, kPositive + " (m)");
+      if (ico.contains("subdivisions"))
+        s.subdivisions = static_cast<int>(c.integer(ico["subdivisions"], child(k, "subdivisions"), 0, 7, "integer in [0, 7]"));
+    }
+  }
+  return s;
+}
+
+LayoutSpec parse_layout(const Ctx& c, const json& j, const std::string& key, const Aabb& domain) {
+  const std::string allowed_obj = "{\"type\": \"grid\"|\"random\", \"min\", \"max\", \"spacing\", \"jitter\", \"seed\"}";
+  c.expect_object(j, key, allowed_obj);
+  LayoutSpec l;
+  l.region = domain;
+  if (!j.contains("type")) c.fail(child(key, "type"), "missing required key", "\"grid\" or \"random\"");
+  const std::string type = c.string(j["type"], child(key, "type"), "\"grid\" or \"random\"");
+  if (type == "grid") {
+    l.kind = LayoutSpec::Kind::Grid;
+    c.check_keys(j, key, {"type", "min", "max", "spacing", "jitter", "seed"});
+  } else if (type == "random") {
+    l.kind = LayoutSpec::Kind::Random;
+    c.check_keys(j, key, {"type", "min", "max", "seed"});
+  } else {
+    c.fail(child(key, "type"), "unknown layout type " + j["type"].dump(), "\"grid\" or \"random\"");
+  }
+  const bool has_min = j.contains("min");
+  const bool has_max = j.contains("max");
+  if (has_min != has_max)
+    c.fail(child(key, has_min ? "max" : "min"), "missing (min and max go together)",
+           "both min and max (arrays of 3 finite numbers, min <= max), or neither (the domain)");
+  if (has_min) {
+    l.region = parse_box(c, j, key, false);
+    l.region_from_domain = false;
+  }
+  if (j.contains("spacing"))
+    l.spacing = c.ranged(j["spacing"], child(key, "spacing"), 0, true, kInf, false, kNonNegative + " (m; 0 = auto)");
+  if (j.contains("jitter"))
+    l.jitter = c.ranged(j["jitter"], child(key, "jitter"), 0, true, kInf, false, kNonNegative + " (m)");
+  if (j.contains("seed")) l.seed = c.seed(j["seed"], child(key, "seed"));
+  return l;
+}
+
+VelocitySpec parse_velocity(const Ctx& c, const json& j, const std::string& key) {
+  const std::string allowed_obj =
+      "{\"type\": \"fixed\", \"value\": [x,y,z]} or {\"type\": \"random\", \"max\": >=0, \"seed\": uint}";
+  c.expect_object(j, key, allowed_obj);
+  VelocitySpec v;
+  if (!j.contains("type")) c.fail(child(key, "type"), "missing required key", "\"fixed\" or \"random\"");
+  const std::string type = c.string(j["type"], child(key, "type"), "\"fixed\" or \"random\"");
+  if (type == "fixed") {
+    v.kind = VelocitySpec::Kind::Fixed;
+    c.check_keys(j, key, {"type", "value"});
+    if (j.contains("value")) v.value = c.vec3(j["value"], child(key, "value"), kVecAllowed + " (m/s)");
+  } else if (type == "random") {
+    v.kind = VelocitySpec::Kind::Random;
+    c.check_keys(j, key, {"type", "max", "seed"});
+    if (!j.contains("max")) c.fail(child(key, "max"), "missing required key", kNonNegative + " (m/s)");
+    v.max_speed = c.ranged(j["max"], child(key, "max"), 0, true, kInf, false, kNonNegative + " (m/s)");
+    if (j.contains("seed")) v.seed = c.seed(j["seed"], child(key, "seed"));
+  } else {
+    c.fail(child(key, "type"), "unknown velocity type " + j["type"].dump(), "\"fixed\" or \"random\"");
+  }
+  return v;
+}
+
+GroupSpec parse_group(const Ctx& c, const json& j, std::size_t index, const Aabb& domain) {
+  const std::string key = at("groups", index);
+  c.expect_object(j, key, "an object with keys name, shape, count, mass, layout, positions, velocity");
+  c.check_keys(j, key, {"name", "shape", "count", "mass", "layout", "positions", "velocity"});
+  GroupSpec g;
+  g.index = static_cast<int>(index);
+  g.name = "group" + std::to_string(index);
+  if (j.contains("name")) {
+    g.name = c.string(j["name"], child(key, "name"), "a non-empty string, unique among groups");
+    if (g.name.empty()) c.fail(child(key, "name"), "empty name", "a non-empty string, unique among groups");
+  }
+  if (!j.contains("shape")) c.fail(child(key, "shape"), "missing required key", "a shape object (mesh, box or icosphere)");
+  g.shape = parse_shape(c, j["shape"], child(key, "shape"));
+  const std::string count_allowed = "integer in [1, 2147483647]";
+  if (!j.contains("count")) c.fail(child(key, "count"), "missing required key", count_allowed);
+  g.count = static_cast<int>(c.integer(j["count"], child(key, "count"), 1,
+                                       std::numeric_limits<int>::max(), count_allowed));
+  if (j.contains("mass"))
+    g.mass = c.ranged(j["mass"], child(key, "mass"), 0, true, kInf, false, kNonNegative + " (kg; 0 = static)");
+  g.layout.region = domain;
+  if (j.contains("layout")) g.layout = parse_layout(c, j["layout"], child(key, "layout"), domain);
+  if (j.contains("velocity")) g.velocity = parse_velocity(c, j["velocity"], child(key, "velocity"));
+  if (j.contains("positions")) {
+    const std::string k = child(key, "positions");
+    const std::string allowed = "an array of `count` (" + std::to_string(g.count) + ") arrays of 3 finite numbers (m)";
+    const json& p = j["positions"];
+    if (!p.is_array()) c.fail(k, "expected an array, got " + describe(p), allowed);
+    if (p.size() != static_cast<std::size_t>(g.count))
+      c.fail(k, "has " + std::to_string(p.size()) + " entries but count is " + std::to_string(g.count), allowed);
+    g.positions.reserve(p.size());
+    for (std::size_t i = 0; i < p.size(); ++i) g.positions.push_back(c.vec3(p[i], at(k, i), allowed));
+  }
+  return g;
+}
+
+/// A SAX pass over the text before the real parse: it tracks the key path so that
+/// syntax errors, numbers that overflow to infinity (1e400: nlohmann reports error 406)
+/// and duplicated keys (nlohmann keeps the last silently) are reported with their key.
+class PathTracker : public nlohmann::json_sax<json> {
+ public:
+  std::string error_path;   ///< key path at the first parse error
+  std::size_t error_byte = 0;
+  std::string error_what;
+  bool overflow = false;    ///< the error is a number overflow (406)
+  std::string duplicate;    ///< key path of the first duplicated key
+
+  bool null() override { return value(); }
+  bool boolean(bool) override { return value(); }
+  bool number_integer(number_integer_t) override { return value(); }
+  bool number_unsigned(number_unsigned_t) override { return value(); }
+  bool number_float(number_float_t, const string_t&) override { return value(); }
+  bool string(string_t&) override { return value(); }
+  bool binary(binary_t&) override { return value(); }
+  bool start_object(std::size_t) override {
+    frames_.push_back(Frame{false, 0, "", {}});
+    return true;
+  }
+  bool key(string_t& k) override {
+    Frame& f = frames_.back();
+    f.key = k;
+    f.has_key = true;
+    if (!f.keys.insert(k).second && duplicate.empty()) duplicate = path();
+    return true;
+  }
+  bool end_object() override {
+    frames_.pop_back();
+    return value();
+  }
+  bool start_array(std::size_t) override {
+    frames_.push_back(Frame{true, 0, "", {}});
+    return true;
+  }
+  bool end_array() override {
+    frames_.pop_back();
+    return value();
+  }
+  bool parse_error(std::size_t position, const std::string&, const nlohmann::detail::exception& ex) override {
+    error_path = path();
+    error_byte = position;
+    error_what = ex.what();
+    overflow = ex.id == 406;
+    return false;
+  }
+
+  /// "groups[0].shape.mesh" style path of the current position.
+  std::string path() const {
+    std::string p;
+    for (const Frame& f : frames_) {
+      if (f.array) p += "[" + std::to_string(f.index) + "]";
+      else if (f.has_key) p += (p.empty() ? "" : ".") + f.key;
+    }
+    return p;
+  }
+
+ private:
+  struct Frame {
+    bool array;
+    std::size_t index;
+    std::string key;
+    std::set<std::string> keys;
+    bool has_key = false;
+  };
+  bool value() {
+    if (!frames_.empty() && frames_.back().array) ++frames_.back().index;
+    return true;
+  }
+  std::vector<Frame> frames_;
+};
+
+json parse_json(const Ctx& c, const std::string& text) {
+  PathTracker tracker;
+  json::sax_parse(text, &tracker, json::input_format_t::json, true, false);
+  if (!tracker.error_what.empty()) {
+    if (tracker.overflow)
+      c.fail(tracker.error_path, "number at byte " + std::to_string(tracker.error_byte) +
+                                     " overflows to infinity (" + tracker.error_what + ")",
+             "finite numbers");
+    c.fail("", "invalid JSON at byte " + std::to_string(tracker.error_byte) +
+                   (tracker.error_path.empty() ? std::string() : " (near " + tracker.error_path + ")") + ": " +
+                   tracker.error_what,
+           "a JSON object (RFC 8259, no comments)");
+  }
+  if (!tracker.duplicate.empty())
+    c.fail(tracker.duplicate, "duplicate key in one object", "each key at most once per object");
+  try {
+    return json::parse(text, nullptr, true, false);
+  } catch (const json::exception& e) {  // unreachable after the SAX pass; kept for safety
+    c.fail("", std::string("invalid JSON: ") + e.what(), "a JSON object (RFC 8259, no comments)");
+  }
+}
+
+std::string default_data_dir(const std::string& origin) {
+  if (const char* env = std::getenv("OCTOCD_DATA_DIR"); env != nullptr && *env != '\0') return env;
+  const fs::path folder = fs::path(origin).parent_path();
+  if (!origin.empty() && !folder.empty()) return (folder / ".." / "cache").lexically_normal().string();
+#ifdef OCTOCD_SOURCE_DIR
+  return (fs::path(OCTOCD_SOURCE_DIR) / "datasets" / "cache").string();
+#else
+  return (fs::path("datasets") / "cache").string();
+#endif
+}
+
+}  // namespace
+
+std::size_t body_count(const Scene& scene) {
+  std::size_t n = 0;
+  for (const auto& g : scene.groups) n += static_cast<std::size_t>(g.count);
+  return n;
+}
+
+Scene parse_scene(const std::string& text, const std::string& origin, const std::string& data_dir) {
+  const Ctx c{origin.empty() ? std::string("<scene>") : origin};
+  const json j = parse_json(c, text);
+  if (!j.is_object()) c.fail("", "top level is " + describe(j), "a JSON object");
+  c.check_keys(j, "", {"name", "description", "domain", "gravity", "dt", "frames", "walls", "wall_thickness",
+                       "response", "theta", "broadphase", "midphase", "groups"});
+  Scene s;
+  s.path = origin;
+  s.json = text;
+  s.data_dir = data_dir.empty() ? default_data_dir(origin) : data_dir;
+
+  if (!j.contains("name")) c.fail("name", "missing required key", "a non-empty string");
+  s.name = c.string(j["name"], "name", "a non-empty string");
+  if (s.name.empty()) c.fail("name", "empty name", "a non-empty string");
+  if (j.contains("description")) s.description = c.string(j["description"], "description", "a string");
+
+  const std::string domain_allowed = "{\"min\": [x,y,z], \"max\": [x,y,z]}, finite, min < max on every axis (m)";
+  if (!j.contains("domain")) c.fail("domain", "missing required key", domain_allowed);
+  c.expect_object(j["domain"], "domain", domain_allowed);
+  c.check_keys(j["domain"], "domain", {"min", "max"});
+  for (const char* k : {"min", "max"})
+    if (!j["domain"].contains(k)) c.fail(child("domain", k), "missing required key", kVecAllowed);
+  s.domain = parse_box(c, j["domain"], "domain", true);
+
+  if (j.contains("gravity")) s.gravity = c.vec3(j["gravity"], "gravity", kVecAllowed + " (m/s^2)");
+  if (j.contains("dt")) s.dt = c.ranged(j["dt"], "dt", 0, false, 0.1, true, "number in (0, 0.1] (s)");
+  if (j.contains("frames"))
+    s.frames = static_cast<int>(c.integer(j["frames"], "frames", 1, std::numeric_limits<int>::max(), "integer in [1, 2147483647]"));
+  if (j.contains("walls")) {
+    const std::string allowed = "\"none\", \"floor\", \"open-box\", \"closed-box\"";
+    const std::string w = c.string(j["walls"], "walls", allowed);
+    if (w == "none") s.walls = Walls::None;
+    else if (w == "floor") s.walls = Walls::Floor;
+    else if (w == "open-box") s.walls = Walls::OpenBox;
+    else if (w == "closed-box") s.walls = Walls::ClosedBox;
+    else c.fail("walls", "unknown value " + j["walls"].dump(), allowed);
+  }
+  if (j.contains("wall_thickness"))
+    s.wall_thickness = c.ranged(j["wall_thickness"], "wall_thickness", 0, false, kInf, false, kPositive + " (m)");
+
+  if (j.contains("response")) {
+    const json& r = j["response"];
+    c.expect_object(r, "response", "an object of Table 1 parameters");
+    c.check_keys(r, "response", {"slop", "beta", "alpha", "restitution", "restitution_threshold", "impulse_floor",
+                                 "mu_static", "mu_kinetic", "max_velocity", "epsilon"});
+    struct Param {
+      const char* name;
+      float ContactParams::*member;
+      double lo;
+      bool lo_incl;
+      double hi;
+      bool hi_incl;
+      const char* allowed;
+    };
+    const Param params[] = {
+        {"slop", &ContactParams::slop, 0, false, kInf, false, "finite number > 0 (m)"},
+        {"beta", &ContactParams::beta, 0, false, 1, true, "number in (0, 1]"},
+        {"alpha", &ContactParams::alpha, 0, false, 1, true, "number in (0, 1]"},
+        {"restitution", &ContactParams::restitution, 0, true, 1, true, "number in [0, 1]"},
+        {"restitution_threshold", &ContactParams::restitution_threshold, 0, true, kInf, false, "finite number >= 0 (m/s)"},
+        {"impulse_floor", &ContactParams::impulse_floor, 0, true, kInf, false, "finite number >= 0 (kg m/s)"},
+        {"mu_static", &ContactParams::mu_static, 0, true, kInf, false, "finite number >= 0"},
+        {"mu_kinetic", &ContactParams::mu_kinetic, 0, true, kInf, false, "finite number >= 0"},
+        {"max_velocity", &ContactParams::max_velocity, 0, false, kInf, false, "finite number > 0 (m/s)"},
+        {"epsilon", &ContactParams::epsilon, 0, false, kInf, false, "finite number > 0 (m)"},
+    };
+    for (const Param& p : params)
+      if (r.contains(p.name))
+        s.response.*(p.member) = c.ranged(r[p.name], child("response", p.name), p.lo, p.lo_incl, p.hi, p.hi_incl, p.allowed);
+  }
+
+  if (j.contains("theta")) {
+    const std::string allowed = "\"auto\" or a finite number > 0 (m)";
+    if (j["theta"].is_string()) {
+      if (j["theta"].get<std::string>() != "auto") c.fail("theta", "unknown value " + j["theta"].dump(), allowed);
+    } else {
+      s.theta = c.ranged(j["theta"], "theta", 0, false, kInf, false, allowed);
+    }
+  }
+
+  if (j.contains("broadphase")) {
+    const json& b = j["broadphase"];
+    c.expect_object(b, "broadphase", "{\"name\": str, \"depth\": 0..10|\"auto\", \"cell_size\": >0}");
+    c.check_keys(b, "broadphase", {"name", "depth", "cell_size"});
+    if (b.contains("name")) {
+      s.broadphase.name = c.string(b["name"], "broadphase.name", "a broadphase name (flat, octree, spatial-hash, ...)");
+      if (s.broadphase.name.empty()) c.fail("broadphase.name", "empty name", "a broadphase name (flat, octree, spatial-hash, ...)");
+    }
+    if (b.contains("depth")) s.broadphase.octree_depth = c.depth(b["depth"], "broadphase.depth");
+    if (b.contains("cell_size"))
+      s.broadphase.cell_size = c.ranged(b["cell_size"], "broadphase.cell_size", 0, false, kInf, false, kPositive + " (m)");
+  }
+
+  if (j.contains("midphase")) {
+    const json& m = j["midphase"];
+    c.expect_object(m, "midphase", "{\"levels\": \"aabb-only\"|\"1,2\"|[1,2], \"depth\": 0..10|\"auto\"}");
+    c.check_keys(m, "midphase", {"levels", "depth"});
+    if (m.contains("levels")) {
+      const json& lv = m["levels"];
+      const std::string allowed = "\"aabb-only\", or strictly ascending levels in [0, 10] as \"1,2\" or [1, 2]";
+      std::string text_levels;
+      if (lv.is_string()) {
+        text_levels = lv.get<std::string>();
+      } else if (lv.is_array()) {
+        for (std::size_t i = 0; i < lv.size(); ++i) {
+          const long long l = c.integer(lv[i], at("midphase.levels", i), 0, 10, allowed);
+          text_levels += (i ? "," : "") + std::to_string(l);
+        }
+      } else {
+        c.fail("midphase.levels", "expected a string or an array, got " + describe(lv), allowed);
+      }
+      try {
+        s.midphase = MidphaseConfig::parse(text_levels, "midphase.levels");
+      } catch (const InputError& e) {
+        throw InputError(c.origin + ": " + e.what());
+      }
+    }
+    if (m.contains("depth")) s.mesh_octree_depth = c.depth(m["depth"], "midphase.depth");
+  }
+  if (s.mesh_octree_depth >= 0 && !s.midphase.aabb_only && s.mesh_octree_depth < s.midphase.max_level())
+    c.fail("midphase.depth",
+           std::to_string(s.mesh_octree_depth) + " is shallower than the deepest midphase level " +
+               std::to_string(s.midphase.max_level()),
+           "\"auto\" or an integer in [" + std::to_string(s.midphase.max_level()) + ", 10]");
+
+  const std::string groups_allowed = "a non-empty array of group objects";
+  if (!j.contains("groups")) c.fail("groups", "missing required key", groups_allowed);
+  const json& gs = j["groups"];
+  if (!gs.is_array()) c.fail("groups", "expected an array, got " + describe(gs), groups_allowed);
+  if (gs.empty()) c.fail("groups", "no groups", groups_allowed);
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < gs.size(); ++i) {
+    GroupSpec g = parse_group(c, gs[i], i, s.domain);
+    if (!names.insert(g.name).second)
+      c.fail(child(at("groups", i), "name"), "duplicate group name \"" + g.name + "\"",
+             "names unique among groups (default \"group<i>\")");
+    s.groups.push_back(std::move(g));
+  }
+  for (auto& g : s.groups)
+    if (g.shape.kind == ShapeSpec::Kind::Mesh)
+      g.shape.mesh_path = resolve_mesh_path(s, g.shape.mesh, child(at("groups", static_cast<std::size_t>(g.index)), "shape.mesh"));
+  return s;
+}
+
+Scene load_scene(const std::string& path, const std::string& data_dir) {
+  const Ctx c{path};
+  std::error_code ec;
+  if (!fs::exists(path, ec)) c.fail("", "scene file not found", "a readable JSON scene file");
+  if (!fs::is_regular_file(path, ec)) c.fail("", "not a regular file", "a readable JSON scene file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) c.fail("", "cannot open the scene file", "a readable JSON scene file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) c.fail("", "error reading the scene file", "a readable JSON scene file");
+  return parse_scene(ss.str(), path, data_dir);
+}
+
+std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const std::string& key) {
+  const Ctx c{scene.path.empty() ? std::string("<scene>") : scene.path};
+  std::vector<fs::path> searched;
+  const fs::path m(mesh);
+  searched.push_back(m.is_absolute() ? m : fs::path(scene.path).parent_path() / m);
+  if (!scene.data_dir.empty())
+    for (const char* ext : {".obj", ".off", ".ply"}) searched.push_back(fs::path(scene.data_dir) / (mesh + ext));
+  for (const auto& p : searched) {
+    std::error_code ec;
+    if (!fs::is_regular_file(p, ec)) continue;
+    const auto size = fs::file_size(p, ec);
+    if (ec || size == 0)
+      c.fail(key, "mesh file " + p.string() + " is empty (0 bytes)",
+             "a non-empty mesh file (for datasets, run datasets/fetch.sh again)");
+    return p.string();
+  }
+  std::string list;
+  for (const auto& p : searched) list += (list.empty() ? "" : ", ") + p.string();
+  c.fail(key, "mesh \"" + mesh + "\" not found (searched: " + list + "); run datasets/fetch.sh to fetch the datasets",
+         "an existing mesh file (absolute or relative to the scene's folder), or a dataset name with "
+         "NAME.obj|.off|.ply in the data dir (--data-dir, $OCTOCD_DATA_DIR, default datasets/cache)");
+}
+
+std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aabb, const std::string& origin) {
+  if (!g.positions.empty()) return g.positions;
+  const Ctx c{origin.empty() ? std::string("<scene>") : origin};
+  const std::string key = child(at("groups", static_cast<std::size_t>(g.index)), "layout");
+  const Vec3 size = body_local_aabb.max - body_local_aabb.min;
+  const std::size_t count = static_cast<std::size_t>(std::max(g.count, 0));
+
+  Aabb region = g.layout.region;
+  if (g.layout.region_from_domain) {
+    for (int a = 0; a < 3; ++a) {
+      const float lo = region.min[a] + 0.5f * size[a];
+      const float hi = region.max[a] - 0.5f * size[a];
+      if (lo <= hi) {
+        region.min[a] = lo;
+        region.max[a] = hi;
+      } else {
+        region.min[a] = region.max[a] = 0.5f * (region.min[a] + region.max[a]);
+      }
+    }
+  }
+
+  std::vector<Vec3> out;
+  out.reserve(count);
+  SplitMix64 rng(g.layout.seed);
+  if (g.layout.kind == LayoutSpec::Kind::Grid) {
+    const float largest = std::max(size.x, std::max(size.y, size.z));
+    const float s = g.layout.spacing > 0.0f ? g.layout.spacing : 1.1f * largest;
+    if (!(s > 0.0f) || !std::isfinite(s))
+      c.fail(key, "grid spacing is 0 (auto) and the body has zero size", "layout.spacing > 0");
+    double n[3];
+    for (int a = 0; a < 3; ++a) {
+      const double extent = static_cast<double>(region.max[a]) - static_cast<double>(region.min[a]);
+      n[a] = std::min(std::floor(extent / static_cast<double>(s) + 1e-4) + 1.0, 1e9);
+    }
+    const double capacity = n[0] * n[1] * n[2];
+    if (static_cast<double>(count) > capacity)
+      c.fail(key,
+             "the region holds only " + num(capacity) + " bodies (" + num(n[0]) + " x " + num(n[1]) + " x " +
+                 num(n[2]) + " in x, y, z at spacing " + num(s) + " m) but count is " + std::to_string(count),
+             "a region holding count bodies: enlarge layout.min/max or reduce layout.spacing");
+    const auto nx = static_cast<std::size_t>(n[0]);
+    const auto nz = static_cast<std::size_t>(n[2]);
+    const float j = g.layout.jitter;
+    for (std::size_t k = 0; k < count; ++k) {
+      const std::size_t idx[3] = {k % nx, k / (nx * nz), (k / nx) % nz};
+      Vec3 p;
+      for (int a = 0; a < 3; ++a)
+        p[a] = static_cast<float>(static_cast<double>(region.min[a]) +
+                                  static_cast<double>(idx[a]) * static_cast<double>(s));
+      if (j > 0.0f)
+        for (int a = 0; a < 3; ++a) p[a] += rng.uniform(-j, j);
+      out.push_back(p);
+    }
+    return out;
+  }
+
+  // Random: rejection sampling against the bodies already placed.
+  constexpr int kTries = 1000;
+  std::vector<Aabb> placed;
+  placed.reserve(count);
+  for (std::size_t k = 0; k < count; ++k) {
+    bool ok = false;
+    for (int t = 0; t < kTries && !ok; ++t) {
+      Vec3 p;
+      for (int a = 0; a < 3; ++a) p[a] = rng.uniform(region.min[a], region.max[a]);
+      const Aabb box = translated(body_local_aabb, p);
+      ok = std::none_of(placed.begin(), placed.end(), [&](const Aabb& b) { return overlaps(box, b); });
+      if (ok) {
+        placed.push_back(box);
+        out.push_back(p);
+      }
+    }
+    if (!ok)
+      c.fail(key,
+             "region too small: placed " + std::to_string(k) + " of " + std::to_string(count) +
+                 " bodies without overlap, then " + std::to_string(kTries) + " tries failed for body " +
+                 std::to_string(k),
+             "a region where count bodies fit apart: enlarge layout.min/max, reduce count, or use a grid");
+  }
+  return out;
+}
+
+std::vector<Vec3> group_velocities(const GroupSpec& g) {
+  const std::size_t count = static_cast<std::size_t>(std::max(g.count, 0));
+  if (g.velocity.kind == VelocitySpec::Kind::Fixed) return std::vector<Vec3>(count, g.velocity.value);
+  std::vector<Vec3> out;
+  out.reserve(count);
+  SplitMix64 rng(g.velocity.seed);
+  const float m = g.velocity.max_speed;
+  for (std::size_t k = 0; k < count; ++k) {
+    Vec3 v;
+    for (int a = 0; a < 3; ++a) v[a] = rng.uniform(-m, m);
+    out.push_back(v);
+  }
+  return out;
+}
+
+}  // namespace octocd

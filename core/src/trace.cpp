@@ -1,0 +1,772 @@
+// HDF5 traces (SPEC section 8). Layout: docs/trace-format.md.
+//
+// The file is created with the latest format, every group, dataset and attribute is
+// created up front, then SWMR writing starts. Rows are buffered in memory and written in
+// batches at each flush (every `flush_every` frames), followed by H5Fflush: a process
+// killed between flushes leaves a file that SWMR readers open, holding every flushed row.
+
+
+#include "octocd/trace.hpp"
+
+#include <hdf5.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "octocd/error.hpp"
+#include "octocd/version.hpp"
+
+namespace octocd {
+
+namespace {
+
+constexpr const char* kFormat = "octocd-trace";
+constexpr int kVersion = 1;
+constexpr int kStageCount = static_cast<int>(Stage::Count);
+
+// Silences HDF5's automatic error printing for the lifetime of the guard (restoring the
+// previous handler afterwards) so that failures reach the caller only as exceptions.
+class QuietHdf5 {
+ public:
+  QuietHdf5() {
+    H5Eget_auto2(H5E_DEFAULT, &func_, &data_);
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+  }
+  ~QuietHdf5() { H5Eset_auto2(H5E_DEFAULT, func_, data_); }
+  QuietHdf5(const QuietHdf5&) = delete;
+  QuietHdf5& operator=(const QuietHdf5&) = delete;
+
+ private:
+  H5E_auto2_t func_ = nullptr;
+  void* data_ = nullptr;
+};
+
+// The innermost (most specific) and outermost messages of HDF5's current error stack.
+std::string hdf5_message() {
+  std::vector<std::string> msgs;
+  H5Ewalk2(
+      H5E_DEFAULT, H5E_WALK_DOWNWARD,
+      [](unsigned, const H5E_error2_t* e, void* data) -> herr_t {
+        auto* out = static_cast<std::vector<std::string>*>(data);
+        std::string s = e->desc ? e->desc : "";
+        if (e->func_name) s += std::string(" (") + e->func_name + ")";
+        out->push_back(s);
+        return 0;
+      },
+      &msgs);
+  H5Eclear2(H5E_DEFAULT);
+  if (msgs.empty()) return "unknown HDF5 error";
+  if (msgs.size() == 1) return msgs.front();
+  return msgs.front() + ": " + msgs.back();
+}
+
+[[noreturn]] void fail(const std::string& path, const std::string& op) {
+  throw RuntimeError("trace '" + path + "': " + op + " failed: " + hdf5_message());
+}
+
+template <class T>
+T check(T ret, const std::string& path, const std::string& op) {
+  if (ret < 0) fail(path, op);
+  return ret;
+}
+
+// Closes an HDF5 identifier of any kind when it goes out of scope.
+class Handle {
+ public:
+  Handle() = default;
+  explicit Handle(hid_t id) : id_(id) {}
+  ~Handle() { reset(); }
+  Handle(const Handle&) = delete;
+  Handle& operator=(const Handle&) = delete;
+  Handle(Handle&& o) noexcept : id_(o.id_) { o.id_ = -1; }
+  Handle& operator=(Handle&& o) noexcept {
+    if (this != &o) {
+      reset();
+      id_ = o.id_;
+      o.id_ = -1;
+    }
+    return *this;
+  }
+  hid_t get() const { return id_; }
+  operator hid_t() const { return id_; }  // NOLINT: used as an hid_t in C calls
+  void reset() {
+    if (id_ >= 0) {
+      switch (H5Iget_type(id_)) {
+        case H5I_FILE: H5Fclose(id_); break;
+        case H5I_GROUP: H5Gclose(id_); break;
+        case H5I_DATATYPE: H5Tclose(id_); break;
+        case H5I_DATASPACE: H5Sclose(id_); break;
+        case H5I_DATASET: H5Dclose(id_); break;
+        case H5I_ATTR: H5Aclose(id_); break;
+        case H5I_GENPROP_LST: H5Pclose(id_); break;
+        default: break;
+      }
+    }
+    id_ = -1;
+  }
+
+ private:
+  hid_t id_ = -1;
+};
+
+Handle vlen_string_type(const std::string& path) {
+  Handle t(check(H5Tcopy(H5T_C_S1), path, "H5Tcopy"));
+  check(H5Tset_size(t, H5T_VARIABLE), path, "H5Tset_size");
+  check(H5Tset_cset(t, H5T_CSET_UTF8), path, "H5Tset_cset");
+  return t;
+}
+
+void attr_string(hid_t obj, const char* name, const std::string& value, const std::string& path) {
+  Handle type = vlen_string_type(path);
+  Handle space(check(H5Screate(H5S_SCALAR), path, "H5Screate"));
+  Handle a(check(H5Acreate2(obj, name, type, space, H5P_DEFAULT, H5P_DEFAULT), path,
+                 std::string("create attribute ") + name));
+  const char* p = value.c_str();
+  check(H5Awrite(a, type, &p), path, std::string("write attribute ") + name);
+}
+
+void attr_strings(hid_t obj, const char* name, const std::vector<std::string>& values,
+                  const std::string& path) {
+  Handle type = vlen_string_type(path);
+  const hsize_t n = values.size();
+  Handle space(check(H5Screate_simple(1, &n, nullptr), path, "H5Screate_simple"));
+  Handle a(check(H5Acreate2(obj, name, type, space, H5P_DEFAULT, H5P_DEFAULT), path,
+                 std::string("create attribute ") + name));
+  std::vector<const char*> ptrs;
+  for (const auto& v : values) ptrs.push_back(v.c_str());
+  if (n > 0) check(H5Awrite(a, type, ptrs.data()), path, std::string("write attribute ") + name);
+}
+
+template <class T>
+void attr_scalar(hid_t obj, const char* name, hid_t file_type, hid_t mem_type, T value,
+                 const std::string& path) {
+  Handle space(check(H5Screate(H5S_SCALAR), path, "H5Screate"));
+  Handle a(check(H5Acreate2(obj, name, file_type, space, H5P_DEFAULT, H5P_DEFAULT), path,
+                 std::string("create attribute ") + name));
+  check(H5Awrite(a, mem_type, &value), path, std::string("write attribute ") + name);
+}
+
+// A fixed-size dataset written once, before SWMR starts.
+void fixed_dataset(hid_t group, const char* name, hid_t file_type, hid_t mem_type,
+                   std::vector<hsize_t> dims, const void* data, const std::string& path) {
+  Handle space(check(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr), path,
+                     "H5Screate_simple"));
+  Handle d(check(H5Dcreate2(group, name, file_type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+                 path, std::string("create dataset ") + name));
+  if (dims[0] > 0)
+    check(H5Dwrite(d, mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data), path,
+          std::string("write dataset ") + name);
+}
+
+void string_dataset(hid_t group, const char* name, const std::vector<std::string>& values,
+                    const std::string& path) {
+  Handle type = vlen_string_type(path);
+  std::vector<const char*> ptrs;
+  for (const auto& v : values) ptrs.push_back(v.c_str());
+  fixed_dataset(group, name, type, type, {values.size()}, ptrs.data(), path);
+}
+
+// One extendable dataset whose rows are buffered in memory until the next flush.
+struct Column {
+  std::string name;          // full path in the file, for messages
+  Handle dset;
+  hid_t mem_type = -1;       // a native type (not owned)
+  std::size_t elem = 0;      // bytes per element
+  std::vector<hsize_t> tail; // dimensions after the row dimension
+  std::size_t width = 1;     // elements per row
+  std::vector<unsigned char> buf;
+  hsize_t rows = 0;          // rows on disk
+
+  hsize_t pending() const { return buf.size() / (elem * width); }
+
+  template <class T>
+  void push(const T* p, std::size_t count) {
+    const auto* b = reinterpret_cast<const unsigned char*>(p);
+    buf.insert(buf.end(), b, b + count * sizeof(T));
+  }
+  template <class T>
+  void push1(T v) {
+    push(&v, 1);
+  }
+
+  void write(const std::string& path) {
+    const hsize_t n = pending();
+    if (n == 0) return;
+    std::vector<hsize_t> size{rows + n}, start{rows}, count{n};
+    for (hsize_t t : tail) {
+      size.push_back(t);
+      start.push_back(0);
+      count.push_back(t);
+    }
+    const int rank = static_cast<int>(size.size());
+    check(H5Dset_extent(dset, size.data()), path, "extend " + name);
+    Handle fspace(check(H5Dget_space(dset), path, "H5Dget_space " + name));
+    check(H5Sselect_hyperslab(fspace, H5S_SELECT_SET, start.data(), nullptr, count.data(),
+                              nullptr),
+          path, "select rows of " + name);
+    Handle mspace(check(H5Screate_simple(rank, count.data(), nullptr), path, "H5Screate_simple"));
+    check(H5Dwrite(dset, mem_type, mspace, fspace, H5P_DEFAULT, buf.data()), path,
+          "write rows of " + name);
+    rows += n;
+    buf.clear();
+  }
+};
+
+Column make_column(hid_t group, const std::string& group_name, const char* name, hid_t file_type,
+                   hid_t mem_type, std::vector<hsize_t> tail, hsize_t chunk_rows, int gzip,
+                   const std::string& path) {
+  Column c;
+  c.name = group_name + "/" + name;
+  c.mem_type = mem_type;
+  c.elem = H5Tget_size(mem_type);
+  c.tail = tail;
+  std::vector<hsize_t> dims{0}, maxdims{H5S_UNLIMITED}, chunk{chunk_rows};
+  for (hsize_t t : tail) {
+    c.width *= static_cast<std::size_t>(t);
+    dims.push_back(t);
+    maxdims.push_back(t == 0 ? H5S_UNLIMITED : t);
+    chunk.push_back(std::max<hsize_t>(t, 1));
+  }
+  const int rank = static_cast<int>(dims.size());
+  Handle space(check(H5Screate_simple(rank, dims.data(), maxdims.data()), path,
+                     "H5Screate_simple " + c.name));
+  Handle dcpl(check(H5Pcreate(H5P_DATASET_CREATE), path, "H5Pcreate"));
+  check(H5Pset_chunk(dcpl, rank, chunk.data()), path, "H5Pset_chunk " + c.name);
+  if (gzip > 0 && H5Zfilter_avail(H5Z_FILTER_DEFLATE) > 0) {
+    check(H5Pset_shuffle(dcpl), path, "H5Pset_shuffle " + c.name);
+    check(H5Pset_deflate(dcpl, static_cast<unsigned>(gzip)), path, "H5Pset_deflate " + c.name);
+  }
+  c.dset = Handle(check(H5Dcreate2(group, name, file_type, space, H5P_DEFAULT, dcpl, H5P_DEFAULT),
+                        path, "create dataset " + c.name));
+  return c;
+}
+
+std::string iso_utc_now() {
+  const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+// MidphaseConfig::to_string() without linking the midphase.
+std::string midphase_text(const MidphaseConfig& m) {
+  if (m.aabb_only) return "aabb-only";
+  std::string s;
+  for (std::size_t i = 0; i < m.levels.size(); ++i) {
+    if (i) s += ",";
+    s += std::to_string(m.levels[i]);
+  }
+  return s;
+}
+
+nlohmann::json vec_json(Vec3 v) { return nlohmann::json::array({v.x, v.y, v.z}); }
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+
+struct TraceWriter::Impl {
+  std::string path;
+  TraceOptions opt;
+  std::size_t bodies = 0;
+  Handle file;
+  std::vector<Column> frames;  // "frame" first
+  Column s_frame, s_pos, s_vel;
+  Column c_offsets, c_frame, c_pair, c_normal, c_depth, c_jn, c_jt;
+  std::int64_t contact_total = 0;
+  int since_flush = 0;
+  bool closed = false;
+  std::vector<float> scratch;
+
+  void write_all() {
+    // States before their frame column, contact arrays before offsets, /frames/frame
+    // last: readers clip every group to the shortest column (docs/trace-format.md).
+    s_pos.write(path);
+    s_vel.write(path);
+    s_frame.write(path);
+    if (opt.contacts) {
+      for (Column* c : {&c_pair, &c_normal, &c_depth, &c_jn, &c_jt, &c_frame, &c_offsets})
+        c->write(path);
+    }
+    for (std::size_t i = frames.size(); i-- > 0;) frames[i].write(path);
+  }
+
+  void push_state(std::int64_t frame, const BodyState& st) {
+    if (st.x.size() != bodies || st.v.size() != bodies)
+      throw RuntimeError("trace '" + path + "': state of frame " + std::to_string(frame) +
+                         " has " + std::to_string(st.x.size()) + " positions and " +
+                         std::to_string(st.v.size()) + " velocities, the trace has " +
+                         std::to_string(bodies) + " bodies");
+    s_frame.push1(frame);
+    static_assert(sizeof(Vec3) == 3 * sizeof(float), "Vec3 must be three packed floats");
+    s_pos.push(reinterpret_cast<const float*>(st.x.data()), 3 * bodies);
+    s_vel.push(reinterpret_cast<const float*>(st.v.data()), 3 * bodies);
+  }
+};
+
+TraceWriter::TraceWriter(const std::string& path, const TraceMetadata& meta,
+                         const TraceBodies& bodies, const TraceOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.path = path;
+  m.opt = options;
+  if (m.opt.state_every < 1)
+    throw RuntimeError("trace '" + path + "': state_every must be >= 1, got " +
+                       std::to_string(m.opt.state_every));
+  if (m.opt.flush_every < 1)
+    throw RuntimeError("trace '" + path + "': flush_every must be >= 1, got " +
+                       std::to_string(m.opt.flush_every));
+  const std::size_t n = bodies.shape_id.size();
+  if (bodies.inverse_mass.size() != n || bodies.local_aabb.size() != n || bodies.group.size() != n)
+    throw RuntimeError("trace '" + path + "': body tables differ in length (shape_id " +
+                       std::to_string(n) + ", inverse_mass " +
+                       std::to_string(bodies.inverse_mass.size()) + ", local_aabb " +
+                       std::to_string(bodies.local_aabb.size()) + ", group " +
+                       std::to_string(bodies.group.size()) + ")");
+  m.bodies = n;
+
+  namespace fs = std::filesystem;
+  const fs::path parent = fs::path(path).parent_path();
+  std::error_code ec;
+  if (!parent.empty() && !fs::is_directory(parent, ec))
+    throw RuntimeError("trace '" + path + "': cannot create the file: directory '" +
+                       parent.string() + "' does not exist");
+
+  QuietHdf5 quiet;
+  Handle fapl(check(H5Pcreate(H5P_FILE_ACCESS), path, "H5Pcreate"));
+  check(H5Pset_libver_bounds(fapl, H5F_LIBVER_LATEST, H5F_LIBVER_LATEST), path,
+        "H5Pset_libver_bounds");
+  m.file = Handle(check(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl), path,
+                        "create file"));
+
+  // ---- root attributes
+  const hid_t root = m.file;
+  attr_string(root, "format", kFormat, path);
+  attr_scalar(root, "version", H5T_STD_I32LE, H5T_NATIVE_INT, kVersion, path);
+  attr_string(root, "scene_name", meta.scene_name, path);
+  attr_string(root, "scene", meta.scene_json, path);
+  attr_string(root, "parameters", meta.parameters_json, path);
+  attr_string(root, "engine", meta.engine, path);
+  attr_string(root, "broadphase", meta.broadphase, path);
+  attr_string(root, "midphase", meta.midphase, path);
+  attr_string(root, "build_id", meta.build_id, path);
+  attr_string(root, "device", meta.device, path);
+  attr_string(root, "start_time", meta.start_time, path);
+  attr_scalar(root, "dt", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, meta.dt, path);
+  attr_scalar(root, "state_every", H5T_STD_I32LE, H5T_NATIVE_INT, m.opt.state_every, path);
+  attr_scalar(root, "flush_every", H5T_STD_I32LE, H5T_NATIVE_INT, m.opt.flush_every, path);
+  attr_scalar(root, "body_count", H5T_STD_I64LE, H5T_NATIVE_INT64,
+              static_cast<std::int64_t>(n), path);
+  std::vector<std::string> stages;
+  for (int i = 0; i < kStageCount; ++i) stages.emplace_back(stage_name(static_cast<Stage>(i)));
+  attr_strings(root, "stage_names", stages, path);
+
+  // ---- /bodies (fixed, written now)
+  {
+    Handle g(check(H5Gcreate2(root, "bodies", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), path,
+                   "create group /bodies"));
+    fixed_dataset(g, "shape_id", H5T_STD_U32LE, H5T_NATIVE_UINT32, {n}, bodies.shape_id.data(),
+                  path);
+    fixed_dataset(g, "inverse_mass", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n},
+                  bodies.inverse_mass.data(), path);
+    std::vector<float> lo(3 * n), hi(3 * n);
+    for (std::size_t i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        lo[3 * i + k] = bodies.local_aabb[i].min[k];
+        hi[3 * i + k] = bodies.local_aabb[i].max[k];
+      }
+    fixed_dataset(g, "local_aabb_min", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, lo.data(), path);
+    fixed_dataset(g, "local_aabb_max", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, hi.data(), path);
+    string_dataset(g, "group", bodies.group, path);
+    string_dataset(g, "shape_names", bodies.shape_names, path);
+  }
+
+  // ---- /frames
+  {
+    Handle g(check(H5Gcreate2(root, "frames", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), path,
+                   "create group /frames"));
+    constexpr hsize_t kChunk = 1024;
+    auto add = [&](const std::string& name, hid_t ft, hid_t mt, std::vector<hsize_t> tail = {}) {
+      m.frames.push_back(make_column(g, "/frames", name.c_str(), ft, mt, tail, kChunk, 0, path));
+    };
+    add("frame", H5T_STD_I64LE, H5T_NATIVE_INT64);
+    add("time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE);
+    add("step_ms", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE);
+    for (int s = 0; s < kStageCount; ++s)
+      add(std::string(stage_name(static_cast<Stage>(s))) + "_ms", H5T_IEEE_F64LE,
+          H5T_NATIVE_DOUBLE);
+    for (const char* c : {"cell_candidates", "aabb_pairs", "box_tests", "box_pairs",
+                          "vertex_tests", "contacts"})
+      add(c, H5T_STD_U64LE, H5T_NATIVE_UINT64);
+    for (const char* c : {"penetration_mean", "penetration_max", "penetration_share_above_slop",
+                          "kinetic_energy"})
+      add(c, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE);
+    add("momentum", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, {3});
+    add("memory_bytes", H5T_STD_U64LE, H5T_NATIVE_UINT64);
+  }
+
+  // ---- /states
+  {
+    Handle g(check(H5Gcreate2(root, "states", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), path,
+                   "create group /states"));
+    m.s_frame = make_column(g, "/states", "frame", H5T_STD_I64LE, H5T_NATIVE_INT64, {}, 256, 0, path);
+    m.s_pos = make_column(g, "/states", "position", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, 1, 2,
+                          path);
+    m.s_vel = make_column(g, "/states", "velocity", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, 1, 2,
+                          path);
+  }
+
+  // ---- /contacts (optional)
+  if (m.opt.contacts) {
+    Handle g(check(H5Gcreate2(root, "contacts", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), path,
+                   "create group /contacts"));
+    constexpr hsize_t kChunk = 4096;
+    m.c_offsets = make_column(g, "/contacts", "offsets", H5T_STD_I64LE, H5T_NATIVE_INT64, {}, 1024,
+                              0, path);
+    m.c_frame = make_column(g, "/contacts", "frame", H5T_STD_I64LE, H5T_NATIVE_INT64, {}, 1024, 0,
+                            path);
+    m.c_pair = make_column(g, "/contacts", "pair", H5T_STD_U32LE, H5T_NATIVE_UINT32, {2}, kChunk,
+                           0, path);
+    m.c_normal = make_column(g, "/contacts", "normal", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {3},
+                             kChunk, 0, path);
+    m.c_depth = make_column(g, "/contacts", "depth", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {}, kChunk,
+                            0, path);
+    m.c_jn = make_column(g, "/contacts", "jn", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {}, kChunk, 0,
+                         path);
+    m.c_jt = make_column(g, "/contacts", "jt", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {}, kChunk, 0,
+                         path);
+    m.c_offsets.push1<std::int64_t>(0);
+    m.c_offsets.write(path);
+  }
+
+  check(H5Fstart_swmr_write(m.file), path, "H5Fstart_swmr_write");
+  check(H5Fflush(m.file, H5F_SCOPE_GLOBAL), path, "flush");
+}
+
+TraceWriter::~TraceWriter() {
+  try {
+    close();
+  } catch (...) {
+    // Destructors must not throw; call close() to see errors.
+  }
+}
+
+void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState& state,
+                               const std::vector<ContactRecord>& contacts) {
+  Impl& m = *impl_;
+  if (m.closed) throw RuntimeError("trace '" + m.path + "': append_frame after close");
+  QuietHdf5 quiet;
+  if (fm.frame % m.opt.state_every == 0) m.push_state(fm.frame, state);
+
+  std::size_t i = 0;
+  m.frames[i++].push1(fm.frame);
+  m.frames[i++].push1(fm.time);
+  m.frames[i++].push1(fm.step_ms);
+  for (int s = 0; s < kStageCount; ++s) m.frames[i++].push1(fm.stage_ms[s]);
+  for (std::uint64_t v : {fm.cell_candidates, fm.aabb_pairs, fm.box_tests, fm.box_pairs,
+                          fm.vertex_tests, fm.contacts})
+    m.frames[i++].push1(v);
+  for (double v : {fm.penetration_mean, fm.penetration_max, fm.penetration_share_above_slop,
+                   fm.kinetic_energy})
+    m.frames[i++].push1(v);
+  m.frames[i++].push(fm.momentum.data(), 3);
+  m.frames[i++].push1(fm.memory_bytes);
+
+  if (m.opt.contacts) {
+    for (const ContactRecord& c : contacts) {
+      m.c_pair.push1(c.pair.a);
+      m.c_pair.push1(c.pair.b);
+      m.c_normal.push1(c.normal.x);
+      m.c_normal.push1(c.normal.y);
+      m.c_normal.push1(c.normal.z);
+      m.c_depth.push1(c.depth);
+      m.c_jn.push1(c.jn);
+      m.c_jt.push1(c.jt);
+    }
+    m.contact_total += static_cast<std::int64_t>(contacts.size());
+    m.c_frame.push1(fm.frame);
+    m.c_offsets.push1(m.contact_total);
+  }
+
+  if (++m.since_flush >= m.opt.flush_every) flush();
+}
+
+void TraceWriter::append_state(std::int64_t frame, const BodyState& state) {
+  Impl& m = *impl_;
+  if (m.closed) throw RuntimeError("trace '" + m.path + "': append_state after close");
+  m.push_state(frame, state);
+}
+
+void TraceWriter::flush() {
+  Impl& m = *impl_;
+  if (m.closed) return;
+  QuietHdf5 quiet;
+  m.write_all();
+  check(H5Fflush(m.file, H5F_SCOPE_GLOBAL), m.path, "flush");
+  m.since_flush = 0;
+}
+
+void TraceWriter::close() {
+  Impl& m = *impl_;
+  if (m.closed) return;
+  QuietHdf5 quiet;
+  m.closed = true;  // even when the last write fails: no second attempt from the destructor
+  m.write_all();
+  for (Column* c : {&m.s_frame, &m.s_pos, &m.s_vel, &m.c_offsets, &m.c_frame, &m.c_pair,
+                    &m.c_normal, &m.c_depth, &m.c_jn, &m.c_jt})
+    c->dset.reset();
+  for (Column& c : m.frames) c.dset.reset();
+  const herr_t r = H5Fclose(m.file.get());
+  m.file = Handle();  // released by H5Fclose (or unusable after a failure)
+  check(r, m.path, "close file");
+}
+
+const std::string& TraceWriter::path() const { return impl_->path; }
+
+// ---------------------------------------------------------------------------------------
+
+TraceMetadata trace_metadata(const World& world, const std::string& engine, int state_every) {
+  const Scene& s = world.scene();
+  TraceMetadata meta;
+  meta.scene_name = s.name;
+  meta.scene_json = s.json;
+  nlohmann::json p;
+  const ContactParams& r = s.response;
+  p["response"] = {{"slop", r.slop},
+                   {"beta", r.beta},
+                   {"alpha", r.alpha},
+                   {"restitution", r.restitution},
+                   {"restitution_threshold", r.restitution_threshold},
+                   {"impulse_floor", r.impulse_floor},
+                   {"mu_static", r.mu_static},
+                   {"mu_kinetic", r.mu_kinetic},
+                   {"max_velocity", r.max_velocity},
+                   {"epsilon", r.epsilon}};
+  p["theta"] = s.theta ? nlohmann::json(*s.theta) : nlohmann::json("auto");
+  p["dt"] = s.dt;
+  p["frames"] = s.frames;
+  p["gravity"] = vec_json(s.gravity);
+  p["domain"] = {{"min", vec_json(s.domain.min)}, {"max", vec_json(s.domain.max)}};
+  p["wall_thickness"] = s.wall_thickness;
+  p["broadphase"] = {{"name", s.broadphase.name},
+                     {"octree_depth", s.broadphase.octree_depth},
+                     {"cell_size", s.broadphase.cell_size}};
+  p["midphase"] = midphase_text(s.midphase);
+  p["mesh_octree_depth"] = s.mesh_octree_depth;
+  meta.parameters_json = p.dump();
+  meta.engine = engine;
+  meta.broadphase = s.broadphase.name;
+  meta.midphase = midphase_text(s.midphase);
+  meta.build_id = build_id();
+  meta.device = cpu_description();
+  meta.start_time = iso_utc_now();
+  meta.dt = s.dt;
+  meta.state_every = state_every;
+  return meta;
+}
+
+TraceBodies trace_bodies(const World& world) {
+  TraceBodies tb;
+  const auto& info = world.bodies();
+  const auto& shapes = world.shapes();
+  const BodyState& st = world.state();
+  for (std::size_t i = 0; i < info.size(); ++i) {
+    tb.shape_id.push_back(info[i].shape);
+    tb.inverse_mass.push_back(i < st.w.size() ? st.w[i] : 0.0f);
+    tb.local_aabb.push_back(info[i].shape < shapes.size() ? shapes[info[i].shape].local : Aabb{});
+    tb.group.push_back(info[i].group);
+  }
+  for (const Shape& sh : shapes) tb.shape_names.push_back(sh.name);
+  return tb;
+}
+
+// ---------------------------------------------------------------------------------------
+
+namespace {
+
+// Rows of a dataset (its first dimension).
+hsize_t dataset_rows(hid_t file, const char* name, const std::string& path) {
+  Handle d(check(H5Dopen2(file, name, H5P_DEFAULT), path, std::string("open ") + name));
+  Handle sp(check(H5Dget_space(d), path, std::string("H5Dget_space ") + name));
+  const int rank = check(H5Sget_simple_extent_ndims(sp), path, "H5Sget_simple_extent_ndims");
+  std::vector<hsize_t> dims(static_cast<std::size_t>(std::max(rank, 1)), 0);
+  check(H5Sget_simple_extent_dims(sp, dims.data(), nullptr), path, "H5Sget_simple_extent_dims");
+  return dims[0];
+}
+
+std::string read_string_attr(hid_t obj, const char* name, const std::string& path) {
+  Handle a(check(H5Aopen(obj, name, H5P_DEFAULT), path, std::string("open attribute ") + name));
+  Handle ft(check(H5Aget_type(a), path, "H5Aget_type"));
+  if (H5Tget_class(ft) != H5T_STRING)
+    throw RuntimeError("trace '" + path + "': attribute " + name + " is not a string");
+  if (H5Tis_variable_str(ft) > 0) {
+    Handle mt = vlen_string_type(path);
+    char* p = nullptr;
+    check(H5Aread(a, mt, &p), path, std::string("read attribute ") + name);
+    std::string s = p ? p : "";
+    if (p) H5free_memory(p);
+    return s;
+  }
+  const std::size_t size = H5Tget_size(ft);
+  std::string s(size, '\0');
+  check(H5Aread(a, ft, s.data()), path, std::string("read attribute ") + name);
+  s.resize(std::strlen(s.c_str()));
+  return s;
+}
+
+}  // namespace
+
+TraceSummary read_trace_summary(const std::string& path) {
+  QuietHdf5 quiet;
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw RuntimeError("trace '" + path + "': no such file");
+  if (H5Fis_hdf5(path.c_str()) <= 0)
+    throw RuntimeError("trace '" + path + "': not an HDF5 file, so not an octocd trace");
+  Handle file(check(H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, H5P_DEFAULT), path,
+                    "open file (read-only, SWMR)"));
+  TraceSummary s;
+  if (H5Aexists(file, "format") <= 0)
+    throw RuntimeError("trace '" + path + "': not an octocd trace (no root attribute 'format')");
+  s.format = read_string_attr(file, "format", path);
+  if (s.format != kFormat)
+    throw RuntimeError("trace '" + path + "': not an octocd trace (format '" + s.format + "')");
+  {
+    Handle a(check(H5Aopen(file, "version", H5P_DEFAULT), path, "open attribute version"));
+    check(H5Aread(a, H5T_NATIVE_INT, &s.version), path, "read attribute version");
+  }
+  // Every /frames column; the shortest gives the complete rows (docs/trace-format.md).
+  Handle g(check(H5Gopen2(file, "frames", H5P_DEFAULT), path, "open group /frames"));
+  H5G_info_t info{};
+  check(H5Gget_info(g, &info), path, "H5Gget_info /frames");
+  hsize_t rows = 0;
+  bool first = true;
+  for (hsize_t i = 0; i < info.nlinks; ++i) {
+    char name[256];
+    check(H5Lget_name_by_idx(g, ".", H5_INDEX_NAME, H5_ITER_INC, i, name, sizeof name,
+                             H5P_DEFAULT),
+          path, "list /frames");
+    const hsize_t r = dataset_rows(g, name, path);
+    rows = first ? r : std::min(rows, r);
+    first = false;
+  }
+  s.frames = static_cast<std::int64_t>(rows);
+  s.state_rows = static_cast<std::int64_t>(std::min(
+      {dataset_rows(file, "/states/frame", path), dataset_rows(file, "/states/position", path),
+       dataset_rows(file, "/states/velocity", path)}));
+  s.bodies = static_cast<std::int64_t>(dataset_rows(file, "/bodies/shape_id", path));
+  if (rows > 0) {
+    Handle d(check(H5Dopen2(file, "/frames/frame", H5P_DEFAULT), path, "open /frames/frame"));
+    Handle fs(check(H5Dget_space(d), path, "H5Dget_space"));
+    const hsize_t start = rows - 1, count = 1;
+    check(H5Sselect_hyperslab(fs, H5S_SELECT_SET, &start, nullptr, &count, nullptr), path,
+          "select last row");
+    Handle ms(check(H5Screate_simple(1, &count, nullptr), path, "H5Screate_simple"));
+    check(H5Dread(d, H5T_NATIVE_INT64, ms, fs, H5P_DEFAULT, &s.last_frame), path,
+          "read /frames/frame");
+  }
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------
+
+std::string write_xdmf_sidecar(const std::string& trace_path) {
+  const TraceSummary sum = read_trace_summary(trace_path);  // checks it is a trace
+  QuietHdf5 quiet;
+  const std::string& path = trace_path;
+  Handle file(check(H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, H5P_DEFAULT), path,
+                    "open file (read-only, SWMR)"));
+  double dt = 0.0;
+  {
+    Handle a(check(H5Aopen(file, "dt", H5P_DEFAULT), path, "open attribute dt"));
+    check(H5Aread(a, H5T_NATIVE_DOUBLE, &dt), path, "read attribute dt");
+  }
+  const auto rows = static_cast<std::size_t>(sum.state_rows);
+  std::vector<std::int64_t> frames(rows);
+  if (rows > 0) {
+    Handle d(check(H5Dopen2(file, "/states/frame", H5P_DEFAULT), path, "open /states/frame"));
+    Handle fs(check(H5Dget_space(d), path, "H5Dget_space"));
+    const hsize_t start = 0, count = rows;
+    check(H5Sselect_hyperslab(fs, H5S_SELECT_SET, &start, nullptr, &count, nullptr), path,
+          "select /states/frame");
+    Handle ms(check(H5Screate_simple(1, &count, nullptr), path, "H5Screate_simple"));
+    check(H5Dread(d, H5T_NATIVE_INT64, ms, fs, H5P_DEFAULT, frames.data()), path,
+          "read /states/frame");
+  }
+  const hsize_t disk_rows = dataset_rows(file, "/states/position", path);
+  const std::size_t nb = static_cast<std::size_t>(sum.bodies);
+  std::string name;  // the trace's file name, XML-escaped
+  for (char c : std::filesystem::path(path).filename().string()) {
+    switch (c) {
+      case '&': name += "&amp;"; break;
+      case '<': name += "&lt;"; break;
+      case '>': name += "&gt;"; break;
+      case '"': name += "&quot;"; break;
+      default: name += c;
+    }
+  }
+  const std::string xmf = path + ".xmf";
+
+  std::ostringstream o;
+  o.precision(15);
+  const std::string all = std::to_string(disk_rows) + " " + std::to_string(nb) + " 3";
+  auto slab = [&](std::size_t r, const char* dataset) {
+    o << "          <DataItem ItemType=\"HyperSlab\" Dimensions=\"" << nb << " 3\">\n"
+      << "            <DataItem Dimensions=\"3 3\" Format=\"XML\">" << r << " 0 0 1 1 1 1 " << nb
+      << " 3</DataItem>\n"
+      << "            <DataItem Dimensions=\"" << all
+      << "\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << name << ":" << dataset
+      << "</DataItem>\n"
+      << "          </DataItem>\n";
+  };
+  o << "<?xml version=\"1.0\" ?>\n"
+    << "<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n"
+    << "<!-- octocd trace sidecar: open in ParaView with the Xdmf3 reader -->\n"
+    << "<Xdmf Version=\"3.0\">\n  <Domain>\n"
+    << "    <Grid Name=\"states\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
+  for (std::size_t r = 0; r < rows; ++r) {
+    o << "      <Grid Name=\"frame " << frames[r] << "\" GridType=\"Uniform\">\n"
+      // Shortest text that reads back as the same float32 time (dt is float32 in octocd).
+      << "        <Time Value=\"" << fmt::format("{}", static_cast<float>(static_cast<double>(frames[r]) * dt))
+      << "\"/>\n"
+      << "        <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"" << nb
+      << "\" NodesPerElement=\"1\"/>\n"
+      << "        <Geometry GeometryType=\"XYZ\">\n";
+    slab(r, "/states/position");
+    o << "        </Geometry>\n"
+      << "        <Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">\n";
+    slab(r, "/states/velocity");
+    o << "        </Attribute>\n"
+      << "        <Attribute Name=\"shape_id\" AttributeType=\"Scalar\" Center=\"Node\">\n"
+      << "          <DataItem Dimensions=\"" << nb
+      << "\" NumberType=\"UInt\" Precision=\"4\" Format=\"HDF\">" << name
+      << ":/bodies/shape_id</DataItem>\n"
+      << "        </Attribute>\n"
+      << "        <Attribute Name=\"inverse_mass\" AttributeType=\"Scalar\" Center=\"Node\">\n"
+      << "          <DataItem Dimensions=\"" << nb
+      << "\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << name
+      << ":/bodies/inverse_mass</DataItem>\n"
+      << "        </Attribute>\n"
+      << "      </Grid>\n";
+  }
+  o << "    </Grid>\n  </Domain>\n</Xdmf>\n";
+
+  std::ofstream out(xmf, std::ios::binary | std::ios::trunc);
+  if (!out) throw RuntimeError("trace '" + path + "': cannot write the XDMF sidecar '" + xmf + "'");
+  out << o.str();
+  out.close();
+  if (!out) throw RuntimeError("trace '" + path + "': writing the XDMF sidecar '" + xmf + "' failed");
+  return xmf;
+}
+
+}  // namespace octocd

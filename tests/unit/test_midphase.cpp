@@ -1,0 +1,389 @@
+// Unit tests of the per-mesh octree (SPEC 5.2) and the midphase / narrow phase (SPEC 5.3).
+// Meshes are built by hand (point clouds, Fibonacci spheres): the midphase only uses vertices.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "octocd/error.hpp"
+#include "octocd/midphase.hpp"
+#include "octocd/mesh_octree.hpp"
+
+namespace {
+
+using octocd::Aabb;
+using octocd::Mesh;
+using octocd::MeshOctree;
+using octocd::MidphaseConfig;
+using octocd::MidphaseStats;
+using octocd::PlacedShape;
+using octocd::Vec3;
+
+Mesh random_cloud(std::mt19937& rng, int n, Vec3 half) {
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  Mesh m;
+  m.name = "cloud";
+  for (int i = 0; i < n; ++i) m.vertices.push_back({half.x * u(rng), half.y * u(rng), half.z * u(rng)});
+  return m;
+}
+
+/// Points on a sphere (Fibonacci lattice), optionally jittered.
+Mesh sphere_cloud(float r, int n) {
+  Mesh m;
+  m.name = "sphere";
+  const float golden = 2.399963229728653f;
+  for (int i = 0; i < n; ++i) {
+    const float y = 1.0f - 2.0f * (static_cast<float>(i) + 0.5f) / static_cast<float>(n);
+    const float rr = std::sqrt(1.0f - y * y);
+    const float phi = golden * static_cast<float>(i);
+    m.vertices.push_back({r * rr * std::cos(phi), r * y, r * rr * std::sin(phi)});
+  }
+  return m;
+}
+
+PlacedShape place(const MeshOctree& t, Vec3 p) {
+  PlacedShape s;
+  s.octree = &t;
+  s.position = p;
+  s.box = octocd::translated(t.bounds, p);
+  return s;
+}
+
+PlacedShape place_box(const Aabb& b) {
+  PlacedShape s;
+  s.box = b;
+  return s;
+}
+
+const std::vector<std::string> kConfigs = {"0", "1", "2", "1,2", "0,1,2", "0,2", "3", "0,1,2,3"};
+
+// ---- octree -------------------------------------------------------------------------------
+
+TEST(MeshOctree, ValidOnRandomCloudsAllDepths) {
+  std::mt19937 rng(1);
+  for (int trial = 0; trial < 5; ++trial) {
+    const Mesh m = random_cloud(rng, 200 + 300 * trial, {0.5f, 0.2f * static_cast<float>(trial + 1), 0.3f});
+    for (int d = -1; d <= 6; ++d) {
+      const MeshOctree t = octocd::build_mesh_octree(m, d);
+      EXPECT_EQ(t.validate(), "") << "depth " << d;
+      if (d >= 0) {
+        EXPECT_EQ(t.depth, d);
+      }
+      ASSERT_EQ(t.vertices.size(), m.vertices.size());
+      for (std::size_t i = 0; i < t.vertices.size(); ++i) {
+        ASSERT_TRUE(t.vertices[i] == m.vertices[t.original_index[i]]);
+      }
+      // Every cell's vertex range lies inside its box.
+      for (const auto& c : t.cells) {
+        for (std::uint32_t v = c.first_vertex; v < c.first_vertex + c.vertex_count; ++v) {
+          const Vec3 p = t.vertices[v];
+          ASSERT_TRUE(octocd::contains(c.box, Aabb{p, p}));
+        }
+      }
+    }
+  }
+}
+
+TEST(MeshOctree, DegenerateClouds) {
+  Mesh one;
+  one.vertices = {{1.0f, 2.0f, 3.0f}};
+  for (int d = 0; d <= 10; ++d) EXPECT_EQ(octocd::build_mesh_octree(one, d).validate(), "");
+  Mesh flat;  // all on a plane, plus duplicates
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (int i = 0; i < 300; ++i) flat.vertices.push_back({u(rng), 0.25f, u(rng)});
+  flat.vertices.push_back(flat.vertices[0]);
+  for (int d = 0; d <= 10; ++d) EXPECT_EQ(octocd::build_mesh_octree(flat, d).validate(), "");
+  EXPECT_EQ(octocd::build_mesh_octree(flat, -1).validate(), "");
+}
+
+TEST(MeshOctree, ValidateDetectsCorruption) {
+  std::mt19937 rng(2);
+  const MeshOctree t = octocd::build_mesh_octree(random_cloud(rng, 500, {1, 1, 1}), 3);
+  ASSERT_EQ(t.validate(), "");
+  MeshOctree bad = t;
+  bad.cells.back().box.max.x += 1.0f;
+  EXPECT_NE(bad.validate(), "");
+  bad = t;
+  std::swap(bad.vertices[0], bad.vertices.back());
+  EXPECT_NE(bad.validate(), "");
+  bad = t;
+  bad.cells[1].child_count += 1;
+  EXPECT_NE(bad.validate(), "");
+  bad = t;
+  bad.level_offset[2] += 1;
+  EXPECT_NE(bad.validate(), "");
+}
+
+TEST(MeshOctree, RejectsBadInput) {
+  Mesh empty;
+  EXPECT_THROW(octocd::build_mesh_octree(empty, 2), octocd::InputError);
+  Mesh one;
+  one.vertices = {{0, 0, 0}};
+  EXPECT_THROW(octocd::build_mesh_octree(one, 11), octocd::InputError);
+  EXPECT_THROW(octocd::build_mesh_octree(one, -2), octocd::InputError);
+}
+
+TEST(MeshOctree, AutoDepthRule) {
+  // Cloud in [0,1]^3 (corners pin the bounds): cluster of 65 coincident-ish points in the
+  // first depth-1 octant... Build: 8 grid clusters of 40 points each at depth-1 cell centres
+  // -> depth 0 holds 320 > 64, depth 1 leaves hold 40 (+corner) <= 64 -> auto = 1.
+  Mesh m;
+  for (int c = 0; c < 8; ++c) {
+    const Vec3 centre{(c & 1) ? 0.75f : 0.25f, (c & 2) ? 0.75f : 0.25f, (c & 4) ? 0.75f : 0.25f};
+    for (int i = 0; i < 40; ++i) {
+      const float e = 0.001f * static_cast<float>(i);
+      m.vertices.push_back({centre.x + e, centre.y - e, centre.z + e});
+    }
+  }
+  m.vertices.push_back({0, 0, 0});
+  m.vertices.push_back({1, 1, 1});
+  EXPECT_EQ(octocd::auto_mesh_octree_depth(m), 1);
+  EXPECT_EQ(octocd::build_mesh_octree(m, -1).depth, 1);
+  // Add 30 more points to one cluster: that leaf holds 70 at depth 1, and the cluster
+  // spans 0.07 < 1/8, so it stays whole at depth 2 too; it splits only where cells get
+  // smaller than its spread. Compute the expected depth by brute force.
+  for (int i = 0; i < 30; ++i) {
+    const float e = 0.001f * static_cast<float>(40 + i);
+    m.vertices.push_back({0.25f + e, 0.25f - e, 0.25f + e});
+  }
+  int expected = 8;
+  for (int d = 0; d <= 8; ++d) {
+    const MeshOctree t = octocd::build_mesh_octree(m, d);
+    std::uint32_t largest = 0;
+    for (std::uint32_t c = t.level_begin(d); c < t.level_end(d); ++c) largest = std::max(largest, t.cells[c].vertex_count);
+    if (largest <= 64) {
+      expected = d;
+      break;
+    }
+  }
+  EXPECT_GT(expected, 1);
+  EXPECT_EQ(octocd::auto_mesh_octree_depth(m), expected);
+  // 65 coincident points can never be split: auto stops at 8.
+  Mesh same;
+  for (int i = 0; i < 65; ++i) same.vertices.push_back({0.5f, 0.5f, 0.5f});
+  same.vertices.push_back({0, 0, 0});
+  EXPECT_EQ(octocd::auto_mesh_octree_depth(same), 8);
+  // <= 64 vertices: depth 0.
+  std::mt19937 rng(3);
+  EXPECT_EQ(octocd::auto_mesh_octree_depth(random_cloud(rng, 64, {1, 1, 1})), 0);
+}
+
+// ---- configuration ---------------------------------------------------------------------------
+
+TEST(MidphaseConfig, ParsesAcceptedForms) {
+  EXPECT_TRUE(MidphaseConfig::parse("aabb-only").aabb_only);
+  EXPECT_EQ(MidphaseConfig::parse("aabb-only").to_string(), "aabb-only");
+  EXPECT_EQ(MidphaseConfig::parse("2").levels, (std::vector<int>{2}));
+  EXPECT_EQ(MidphaseConfig::parse("1,2").levels, (std::vector<int>{1, 2}));
+  EXPECT_EQ(MidphaseConfig::parse("0,1,2").levels, (std::vector<int>{0, 1, 2}));
+  EXPECT_EQ(MidphaseConfig::parse("[1, 2]").levels, (std::vector<int>{1, 2}));
+  EXPECT_EQ(MidphaseConfig::parse(" [ 0 , 1 ,2 ] ").levels, (std::vector<int>{0, 1, 2}));
+  EXPECT_EQ(MidphaseConfig::parse("10").levels, (std::vector<int>{10}));
+  EXPECT_EQ(MidphaseConfig::parse("[1, 2]").to_string(), "1,2");
+  EXPECT_FALSE(MidphaseConfig::parse("0,1,2").aabb_only);
+  EXPECT_EQ(MidphaseConfig::parse("0,1,2").max_level(), 2);
+  EXPECT_EQ(MidphaseConfig::parse("aabb-only").max_level(), 0);
+  const MidphaseConfig def;
+  EXPECT_EQ(def.to_string(), "1,2");
+}
+
+TEST(MidphaseConfig, RejectsMalformed) {
+  for (const char* s : {"", " ", "[]", "2,1", "1,1", "11", "-1", "1,,2", "1,2,", "a", "[1,2", "1 2",
+                        "aabb", "1.5", "0x1", "100"}) {
+    EXPECT_THROW(MidphaseConfig::parse(s), octocd::InputError) << "'" << s << "'";
+  }
+  try {
+    MidphaseConfig::parse("2,1", "/solver/midphase");
+    FAIL();
+  } catch (const octocd::InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("/solver/midphase"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("aabb-only"), std::string::npos) << msg;
+  }
+}
+
+// ---- contact: equality with the oracle --------------------------------------------------------
+
+/// Random offsets near contact: direction random, distance around the sum of radii.
+Vec3 near_contact(std::mt19937& rng, float reach, float lo = 0.75f, float hi = 1.05f) {
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  std::uniform_real_distribution<float> u(lo, hi);
+  Vec3 d{g(rng), g(rng), g(rng)};
+  const float len = octocd::length(d);
+  return (reach * u(rng) / len) * d;
+}
+
+void check_pairs(const Mesh& ma, const Mesh& mb, float reach, float lo, float hi, float theta, int placements,
+                 std::uint32_t seed, float spread = 5.0f) {
+  const MeshOctree ta = octocd::build_mesh_octree(ma, 3);
+  const MeshOctree tb = octocd::build_mesh_octree(mb, 3);
+  ASSERT_EQ(ta.validate(), "");
+  ASSERT_EQ(tb.validate(), "");
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> base(-spread, spread);
+  int hits = 0;
+  int misses = 0;
+  for (int p = 0; p < placements; ++p) {
+    const Vec3 pa{base(rng), base(rng), base(rng)};
+    const Vec3 pb = pa + near_contact(rng, reach, lo, hi);
+    const PlacedShape a = place(ta, pa);
+    const PlacedShape b = place(tb, pb);
+    const bool truth = octocd::exhaustive_contact(a, b, theta);
+    ASSERT_EQ(truth, octocd::exhaustive_contact(b, a, theta));
+    (truth ? hits : misses)++;
+    for (const std::string& c : kConfigs) {
+      MidphaseStats st;
+      const MidphaseConfig cfg = MidphaseConfig::parse(c);
+      ASSERT_EQ(octocd::confirm_contact(a, b, theta, cfg, st), truth) << "config " << c << " placement " << p;
+      ASSERT_EQ(octocd::confirm_contact(b, a, theta, cfg, st), truth) << "config " << c << " swapped";
+    }
+    MidphaseStats st;
+    MidphaseConfig aabb;
+    aabb.aabb_only = true;
+    EXPECT_EQ(octocd::confirm_contact(a, b, theta, aabb, st), octocd::overlaps(a.box, b.box));
+  }
+  EXPECT_GT(hits, placements / 20) << "too few contacts: the test would not catch false negatives";
+  EXPECT_GT(misses, placements / 20) << "too few non-contacts";
+}
+
+TEST(Midphase, EqualsExhaustiveOnRandomClouds) {
+  std::mt19937 rng(11);
+  const Mesh a = random_cloud(rng, 400, {0.1f, 0.08f, 0.06f});
+  const Mesh b = random_cloud(rng, 300, {0.05f, 0.1f, 0.07f});
+  // theta ~ mean neighbour spacing of the clouds.
+  check_pairs(a, b, 0.2f, 0.75f, 1.05f, 0.02f, 400, 21);
+}
+
+TEST(Midphase, EqualsExhaustiveOnSpheres) {
+  const Mesh a = sphere_cloud(0.1f, 642);
+  const Mesh b = sphere_cloud(0.07f, 400);
+  // Surfaces only: contacts depend on the precise gap, so both outcomes appear.
+  check_pairs(a, b, 0.17f, 0.95f, 1.1f, 0.01f, 400, 22);
+}
+
+TEST(Midphase, EqualsExhaustiveFarFromOrigin) {
+  // Positions ~1 km from the origin: the float rounding of the translations is about
+  // 6e-5 m, a visible fraction of theta; pruning must stay conservative.
+  std::mt19937 rng(16);
+  const Mesh a = random_cloud(rng, 300, {0.1f, 0.08f, 0.06f});
+  const Mesh b = sphere_cloud(0.07f, 400);
+  check_pairs(a, b, 0.17f, 0.75f, 1.05f, 0.003f, 300, 23, 1000.0f);
+}
+
+TEST(Midphase, EqualsExhaustiveShallowOctree) {
+  // Octree depth 1 < levels 2, 3: levels clamp to the deepest level.
+  std::mt19937 rng(12);
+  const Mesh ma = random_cloud(rng, 150, {0.1f, 0.1f, 0.1f});
+  const MeshOctree ta = octocd::build_mesh_octree(ma, 1);
+  const MeshOctree tb = octocd::build_mesh_octree(ma, 4);
+  int hits = 0;
+  for (int p = 0; p < 200; ++p) {
+    const PlacedShape a = place(ta, {0, 0, 0});
+    const PlacedShape b = place(tb, near_contact(rng, 0.25f, 0.8f, 1.2f));
+    const bool truth = octocd::exhaustive_contact(a, b, 0.02f);
+    hits += truth;
+    for (const std::string& c : kConfigs) {
+      MidphaseStats st;
+      ASSERT_EQ(octocd::confirm_contact(a, b, 0.02f, MidphaseConfig::parse(c), st), truth) << c;
+    }
+  }
+  EXPECT_GT(hits, 10);
+  EXPECT_LT(hits, 190);
+}
+
+TEST(Midphase, MeshBoxEqualsExhaustive) {
+  std::mt19937 rng(13);
+  const Mesh m = sphere_cloud(0.1f, 642);
+  const MeshOctree t = octocd::build_mesh_octree(m, 3);
+  std::uniform_real_distribution<float> u(-0.25f, 0.25f);
+  std::uniform_real_distribution<float> h(0.01f, 0.15f);
+  const float theta = 0.01f;
+  int hits = 0;
+  int misses = 0;
+  for (int p = 0; p < 600; ++p) {
+    const Vec3 pos{2.0f, -1.0f, 0.5f};
+    const Vec3 c = pos + Vec3{u(rng), u(rng), u(rng)};
+    const Vec3 e{h(rng), h(rng), h(rng)};
+    const PlacedShape box = place_box({c - e, c + e});
+    const PlacedShape mesh = place(t, pos);
+    const bool truth = octocd::exhaustive_contact(mesh, box, theta);
+    ASSERT_EQ(truth, octocd::exhaustive_contact(box, mesh, theta));
+    (truth ? hits : misses)++;
+    for (const std::string& s : kConfigs) {
+      MidphaseStats st;
+      const MidphaseConfig cfg = MidphaseConfig::parse(s);
+      ASSERT_EQ(octocd::confirm_contact(mesh, box, theta, cfg, st), truth) << s;
+      ASSERT_EQ(octocd::confirm_contact(box, mesh, theta, cfg, st), truth) << s;
+    }
+  }
+  EXPECT_GT(hits, 30);
+  EXPECT_GT(misses, 30);
+}
+
+TEST(Midphase, BoxBoxIsAabbOverlap) {
+  const PlacedShape a = place_box({{0, 0, 0}, {1, 1, 1}});
+  const PlacedShape touching = place_box({{1, 0, 0}, {2, 1, 1}});
+  const PlacedShape apart = place_box({{1.001f, 0, 0}, {2, 1, 1}});
+  MidphaseStats st;
+  const MidphaseConfig cfg;
+  EXPECT_TRUE(octocd::confirm_contact(a, touching, 0.01f, cfg, st));
+  EXPECT_TRUE(octocd::exhaustive_contact(a, touching, 0.01f));
+  EXPECT_FALSE(octocd::confirm_contact(a, apart, 0.01f, cfg, st));
+  EXPECT_FALSE(octocd::exhaustive_contact(a, apart, 0.01f));
+}
+
+TEST(Midphase, PlantedPairAtTheta) {
+  // Two clouds far apart except one planted pair of vertices along x.
+  std::mt19937 rng(14);
+  Mesh ma = random_cloud(rng, 200, {0.1f, 0.1f, 0.1f});
+  Mesh mb = random_cloud(rng, 200, {0.1f, 0.1f, 0.1f});
+  ma.vertices.push_back({0.25f, 0.0f, 0.0f});   // sticks out on +x
+  mb.vertices.push_back({-0.25f, 0.0f, 0.0f});  // sticks out on -x
+  const MeshOctree ta = octocd::build_mesh_octree(ma, 3);
+  const MeshOctree tb = octocd::build_mesh_octree(mb, 3);
+  const float theta = 0.0625f;  // every number here is exact in binary
+  const float xb = 0.5625f;     // world gap (-0.25 + 0.5625) - 0.25 = 0.0625 = theta exactly
+  const PlacedShape a = place(ta, {0, 0, 0});
+  const PlacedShape b = place(tb, {xb, 0, 0});
+  ASSERT_EQ((-0.25f + xb) - 0.25f, theta);
+  for (const std::string& s : kConfigs) {
+    MidphaseStats st;
+    EXPECT_FALSE(octocd::confirm_contact(a, b, theta, MidphaseConfig::parse(s), st)) << s;
+  }
+  EXPECT_FALSE(octocd::exhaustive_contact(a, b, theta));
+  const float closer = std::nextafter(xb, 0.0f);
+  const PlacedShape b2 = place(tb, {closer, 0, 0});
+  EXPECT_TRUE(octocd::exhaustive_contact(a, b2, theta));
+  for (const std::string& s : kConfigs) {
+    MidphaseStats st;
+    EXPECT_TRUE(octocd::confirm_contact(a, b2, theta, MidphaseConfig::parse(s), st)) << s;
+    EXPECT_GT(st.vertex_tests, 0u);
+    EXPECT_GT(st.box_pairs, 0u);
+    EXPECT_GT(st.box_tests, 0u);
+  }
+  // Mesh-box: the planted vertex exactly theta from the box face -> no contact.
+  const PlacedShape box = place_box({{0.25f + theta, -1, -1}, {1, 1, 1}});
+  EXPECT_FALSE(octocd::exhaustive_contact(a, box, theta));
+  const PlacedShape box2 = place_box({{std::nextafter(0.25f + theta, 0.0f), -1, -1}, {1, 1, 1}});
+  EXPECT_TRUE(octocd::exhaustive_contact(a, box2, theta));
+  for (const std::string& s : kConfigs) {
+    MidphaseStats st;
+    EXPECT_FALSE(octocd::confirm_contact(a, box, theta, MidphaseConfig::parse(s), st)) << s;
+    EXPECT_TRUE(octocd::confirm_contact(a, box2, theta, MidphaseConfig::parse(s), st)) << s;
+  }
+}
+
+TEST(Midphase, FarApartIsRejectedEarly) {
+  std::mt19937 rng(15);
+  const MeshOctree t = octocd::build_mesh_octree(random_cloud(rng, 100, {0.1f, 0.1f, 0.1f}), 2);
+  MidphaseStats st;
+  EXPECT_FALSE(octocd::confirm_contact(place(t, {0, 0, 0}), place(t, {1, 0, 0}), 0.01f, MidphaseConfig{}, st));
+  EXPECT_EQ(st.box_tests, 0u);
+  EXPECT_EQ(st.vertex_tests, 0u);
+}
+
+}  // namespace
