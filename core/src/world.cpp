@@ -198,7 +198,9 @@ const FrameMetrics& World::step() {
   confirmed_.assign(pairs_.size(), 0);
   std::uint64_t box_tests = 0, box_pairs = 0, vertex_tests = 0;
   const std::int64_t np = static_cast<std::int64_t>(pairs_.size());
-#pragma omp parallel for schedule(dynamic, 8) reduction(+ : box_tests, box_pairs, vertex_tests)
+  // Few pairs are cheaper on one thread than waking the team.
+#pragma omp parallel for schedule(dynamic, 8) reduction(+ : box_tests, box_pairs, vertex_tests) \
+    if (np >= 64)
   for (std::int64_t k = 0; k < np; ++k) {
     const Pair p = pairs_[static_cast<std::size_t>(k)];
     if (state_.w[p.a] == 0.0f && state_.w[p.b] == 0.0f) continue;  // static-static
