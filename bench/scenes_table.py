@@ -8,7 +8,9 @@ out = pathlib.Path(sys.argv[1])
 rows = [json.loads(p.read_text()) for p in sorted(out.glob("*.json"))]
 if not rows:
     sys.exit(f"no *.json results in {out}")
-stages = list(rows[0]["stage_ms"].keys())
+# Stage order of the step (core/include/octocd/world.hpp, enum Stage).
+ORDER = ["integrate", "aabbs", "broadphase", "midphase", "response", "metrics"]
+stages = [s for s in ORDER if s in rows[0]["stage_ms"]]
 by_scene = {}
 for r in rows:
     by_scene.setdefault(r["scene"], {})[r["midphase"]] = r
@@ -32,4 +34,4 @@ for scene, runs in by_scene.items():
 print("\nRatio [1,2] / aabb-only in steps/s:\n")
 for scene, runs in by_scene.items():
     if "1,2" in runs and "aabb-only" in runs:
-        print(f"- {scene}: {runs['1,2']['steps_per_s'] / runs['aabb-only']['steps_per_s']:.2f}")
+        print(f"- {scene}: {runs['1,2']['steps_per_s'] / runs['aabb-only']['steps_per_s']:.4f}")
