@@ -5,6 +5,8 @@
 
 #include "octocd/broadphase.hpp"
 
+#include "broadphase_detail.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -15,13 +17,6 @@ namespace octocd {
 
 namespace detail {
 
-// Defined in broadphase_octree.cpp and broadphase_spatial_hash.cpp.
-std::unique_ptr<BroadPhase> make_octree_broadphase(int depth, const Aabb& domain);
-std::unique_ptr<BroadPhase> make_spatial_hash_broadphase(float cell_size);
-
-/// Sorts `pairs` (each with a < b < n, no duplicates required) ascending by (a, b) with a
-/// two-pass stable counting sort (O(n + pairs)); `tmp` and `count` are scratch buffers
-/// kept by the caller so that nothing is allocated once they have grown.
 void sort_pairs(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
                 std::vector<std::uint32_t>& count) {
   const std::size_t m = pairs.size();

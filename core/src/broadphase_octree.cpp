@@ -39,30 +39,15 @@
 
 #include "octocd/broadphase.hpp"
 
+#include "broadphase_detail.hpp"
+
 namespace octocd {
-
-namespace detail {
-
-void sort_pairs(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
-                std::vector<std::uint32_t>& count);
-
-}  // namespace detail
 
 namespace {
 
-/// Spreads the low 10 bits of v so that bit i lands on bit 3i.
-inline std::uint32_t part1by2(std::uint32_t v) {
-  v &= 0x3ffu;
-  v = (v | (v << 16)) & 0x030000ffu;
-  v = (v | (v << 8)) & 0x0300f00fu;
-  v = (v | (v << 4)) & 0x030c30c3u;
-  v = (v | (v << 2)) & 0x09249249u;
-  return v;
-}
-
 /// Morton code of a cell (x, y, z), each < 2^10: x on bit 0, y on bit 1, z on bit 2.
 inline std::uint32_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
-  return part1by2(x) | (part1by2(y) << 1) | (part1by2(z) << 2);
+  return morton_spread3(x) | (morton_spread3(y) << 1) | (morton_spread3(z) << 2);
 }
 
 /// Float to an unsigned key with the same order (-0 sorts just before +0).

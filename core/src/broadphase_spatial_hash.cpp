@@ -20,12 +20,9 @@
 
 #include "octocd/broadphase.hpp"
 
-namespace octocd {
+#include "broadphase_detail.hpp"
 
-namespace detail {
-void sort_pairs(std::vector<Pair>& pairs, std::size_t n, std::vector<Pair>& tmp,
-                std::vector<std::uint32_t>& count);
-}  // namespace detail
+namespace octocd {
 
 namespace {
 

@@ -17,19 +17,9 @@ constexpr int kMaxDepth = 10;       // 10 bits per axis, 30-bit Morton codes
 constexpr int kAutoMaxDepth = 8;    // SPEC 5.2: `auto` goes at most 8 deep
 constexpr std::uint32_t kAutoLeafLimit = 64;
 
-/// Spreads the low 10 bits of x so bit i lands at bit 3i.
-std::uint32_t spread3(std::uint32_t x) {
-  x &= 0x3ffu;
-  x = (x | (x << 16)) & 0x030000ffu;
-  x = (x | (x << 8)) & 0x0300f00fu;
-  x = (x | (x << 4)) & 0x030c30c3u;
-  x = (x | (x << 2)) & 0x09249249u;
-  return x;
-}
-
 /// Morton code of integer cell coordinates: x in the highest bit of each triple.
 std::uint32_t morton3(std::uint32_t ix, std::uint32_t iy, std::uint32_t iz) {
-  return (spread3(ix) << 2) | (spread3(iy) << 1) | spread3(iz);
+  return (morton_spread3(ix) << 2) | (morton_spread3(iy) << 1) | morton_spread3(iz);
 }
 
 Aabb tight_bounds(const std::vector<Vec3>& v) {

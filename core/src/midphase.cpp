@@ -221,7 +221,7 @@ std::string trim(const std::string& s) {
 MidphaseConfig MidphaseConfig::parse(const std::string& text, const std::string& field) {
   auto bad = [&](const std::string& why) {
     return InputError(field + ": invalid midphase '" + text + "' (" + why +
-                      "); accepted: 'aabb-only' or a strictly ascending list of levels in [0, 10], "
+                      "); allowed: 'aabb-only' or a strictly ascending list of levels in [0, 10], "
                       "e.g. '2', '1,2', '0,1,2', '[1, 2]'");
   };
   std::string s = trim(text);

@@ -105,6 +105,17 @@ OCTOCD_HD inline float distance2_point_aabb(Vec3 p, const Aabb& b) {
   return d2;
 }
 
+/// Spreads the low 10 bits of v so that bit i lands on bit 3i: one axis of a 30-bit
+/// Morton code (Algorithm A1; SPEC 5.1-5.2). Bits above 9 are dropped.
+OCTOCD_HD inline std::uint32_t morton_spread3(std::uint32_t v) {
+  v &= 0x3ffu;
+  v = (v | (v << 16)) & 0x030000ffu;
+  v = (v | (v << 8)) & 0x0300f00fu;
+  v = (v | (v << 4)) & 0x030c30c3u;
+  v = (v | (v << 2)) & 0x09249249u;
+  return v;
+}
+
 /// Response parameters, paper Table 1 and section 3.3 (defaults are the paper's).
 /// Constraints (section 3.3.3) are checked by the scene loader, not here.
 struct ContactParams {
