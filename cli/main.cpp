@@ -19,6 +19,7 @@
 #include "octocd/broadphase.hpp"
 #include "octocd/error.hpp"
 #include "octocd/midphase.hpp"
+#include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/version.hpp"
@@ -184,7 +185,7 @@ int run_command(const RunOptions& o) {
   if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
   if (o.frames > 0) scene.frames = o.frames;
 
-  octocd::World world(scene);
+  octocd::World world(scene, octocd::make_any_broadphase(scene.broadphase, scene.domain));
   std::unique_ptr<octocd::TraceWriter> trace;
   if (!o.trace.empty()) {
     octocd::TraceOptions topt;
@@ -230,7 +231,7 @@ int main(int argc, char** argv) {
   CLI::App* run_cmd = app.add_subcommand("run", "Run a scene through the pipeline and print a summary");
   run_cmd->add_option("scene", run.scene, "Scene file (JSON, see docs/scenes.md)")->required();
   std::string bp_help = "Broadphase, overrides the scene's broadphase.name: ";
-  for (const auto& name : octocd::broadphase_names()) bp_help += name + " ";
+  for (const auto& name : octocd::all_broadphase_names()) bp_help += name + " ";
   run_cmd->add_option("--broadphase", run.broadphase, bp_help);
   run_cmd->add_option("--midphase", run.midphase,
                       "Midphase levels, overrides the scene: aabb-only | 2 | 1,2 | 0,1,2 | any "

@@ -74,9 +74,12 @@ const char* stage_name(Stage s) {
   return "unknown";
 }
 
-World::World(const Scene& scene) : scene_(scene) {
+World::World(const Scene& scene) : World(scene, make_broadphase(scene.broadphase, scene.domain)) {}
+
+World::World(const Scene& scene, std::unique_ptr<BroadPhase> broadphase)
+    : scene_(scene), broadphase_(std::move(broadphase)) {
+  if (!broadphase_) throw InputError("World: no broadphase given");
   build_shapes_and_bodies();
-  broadphase_ = make_broadphase(scene_.broadphase, scene_.domain);
   const std::size_t n = state_.size();
   aabbs_.resize(n);
   for (std::size_t i = 0; i < n; ++i) aabbs_[i] = translated(shapes_[info_[i].shape].local, state_.x[i]);
@@ -105,12 +108,13 @@ void World::build_shapes_and_bodies() {
     int depth = depth_setting < 0 ? auto_mesh_octree_depth(mesh) : depth_setting;
     depth = std::max(depth, needed);
     auto octree = std::make_shared<const MeshOctree>(build_mesh_octree(mesh, depth));
-    Shape shape{name, mesh_bounds(mesh), octree, mean_edge_length(mesh)};
-    return shape;
+    const Aabb local = mesh_bounds(mesh);
+    const float edge = mean_edge_length(mesh);
+    return Shape{name, local, octree, std::make_shared<const Mesh>(std::move(mesh)), edge};
   };
 
   for (const WallBox& wall : make_walls(scene_)) {
-    shapes_.push_back({wall.name, {-wall.half, wall.half}, nullptr, 0.0f});
+    shapes_.push_back({wall.name, {-wall.half, wall.half}, nullptr, nullptr, 0.0f});
     add_body(static_cast<std::uint32_t>(shapes_.size() - 1), "walls", wall.center, {}, 0.0f);
   }
 
@@ -124,7 +128,7 @@ void World::build_shapes_and_bodies() {
       case ShapeSpec::Kind::Box:
         shapes_.push_back({fmt::format("box{}x{}x{}", 2 * g.shape.half_extents.x,
                                        2 * g.shape.half_extents.y, 2 * g.shape.half_extents.z),
-                           {-g.shape.half_extents, g.shape.half_extents}, nullptr, 0.0f});
+                           {-g.shape.half_extents, g.shape.half_extents}, nullptr, nullptr, 0.0f});
         shape_id = static_cast<std::uint32_t>(shapes_.size() - 1);
         break;
       case ShapeSpec::Kind::Icosphere:
@@ -240,15 +244,35 @@ const FrameMetrics& World::step() {
     if (pen.depth > params.slop) ++pen_above;
     const float wa = state_.w[p.a], wb = state_.w[p.b];
     const Vec3 c = position_correction(pen, params);
-    dx_sum_[p.a] += correction_share(wa, wa, wb) * c;
-    dx_sum_[p.b] -= correction_share(wb, wa, wb) * c;
+    ContactRecord rec;
+    rec.pair = p;
+    rec.normal = pen.normal;
+    rec.depth = pen.depth;
+    rec.axis = pen.axis;
+    rec.v_a = state_.v[p.a];
+    rec.v_b = state_.v[p.b];
+    // Algorithm 3's weights (SPEC 6); the planted fault swaps them as Eq. 12 does.
+    const bool swap = faults_.eq12_weights;
+    rec.dx_a = correction_share(swap ? wb : wa, wa, wb) * c;
+    rec.dx_b = -(correction_share(swap ? wa : wb, wa, wb) * c);
+    ContactImpulse imp = contact_impulse(rec.v_a, rec.v_b, wa, wb, pen.normal, params);
+    if (faults_.friction_sign) {
+      imp.dv_a -= (2.0f * wa * imp.jt) * imp.tangent;
+      imp.dv_b += (2.0f * wb * imp.jt) * imp.tangent;
+      imp.jt = -imp.jt;
+    }
+    if (faults_.momentum_leak) imp.dv_b = 0.9f * imp.dv_b;
+    rec.jn = imp.jn;
+    rec.jt = imp.jt;
+    rec.dv_a = imp.dv_a;
+    rec.dv_b = imp.dv_b;
+    dx_sum_[p.a] += rec.dx_a;
+    dx_sum_[p.b] += rec.dx_b;
     ++contact_count_[p.a];
     ++contact_count_[p.b];
-    const ContactImpulse imp =
-        contact_impulse(state_.v[p.a], state_.v[p.b], wa, wb, pen.normal, params);
-    dv_sum_[p.a] += imp.dv_a;
-    dv_sum_[p.b] += imp.dv_b;
-    contacts_.push_back({p, pen.normal, pen.depth, imp.jn, imp.jt});
+    dv_sum_[p.a] += rec.dv_a;
+    dv_sum_[p.b] += rec.dv_b;
+    contacts_.push_back(rec);
   }
   for (std::size_t i = 0; i < n; ++i) {
     if (state_.w[i] == 0.0f) continue;

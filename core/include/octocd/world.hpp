@@ -11,6 +11,7 @@
 
 #include "octocd/broadphase.hpp"
 #include "octocd/math.hpp"
+#include "octocd/mesh.hpp"
 #include "octocd/mesh_octree.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/scene.hpp"
@@ -52,13 +53,26 @@ struct FrameMetrics {
   std::uint64_t memory_bytes = 0;  ///< bytes held by the pipeline's buffers
 };
 
-/// One confirmed contact as resolved this step (optional /contacts in traces).
+/// One confirmed contact as resolved this step (optional /contacts in traces; the
+/// validators read the per-contact deltas).
 struct ContactRecord {
   Pair pair;            ///< (a, b), a < b
   Vec3 normal;          ///< from b to a (unit)
   float depth = 0.0f;   ///< AABB d_p (m) before correction
   float jn = 0.0f;      ///< normal impulse (kg m/s)
   float jt = 0.0f;      ///< friction impulse along t (kg m/s)
+  int axis = 1;         ///< axis of the normal (0 = x, 1 = y, 2 = z)
+  Vec3 v_a, v_b;        ///< pre-response velocities (m/s)
+  Vec3 dx_a, dx_b;      ///< this contact's position corrections, before per-body averaging (m)
+  Vec3 dv_a, dv_b;      ///< this contact's velocity changes (m/s)
+};
+
+/// Deliberate faults for validator self-tests (issue 3: "a validator that cannot fail is
+/// a defect"). All off by default; `octocd` never sets them.
+struct PlantedFaults {
+  bool eq12_weights = false;     ///< split corrections with the paper's Eq. 12 (swapped) weights
+  bool friction_sign = false;    ///< apply friction with the wrong sign (speeds sliding up)
+  bool momentum_leak = false;    ///< apply only 90% of each impulse to body B
 };
 
 /// A shape shared by bodies: a box or a mesh with its octree. Local frame centred on the
@@ -67,6 +81,7 @@ struct Shape {
   std::string name;                          ///< e.g. "bunny@0.2" or "box"
   Aabb local;                                ///< local AABB (m)
   std::shared_ptr<const MeshOctree> octree;  ///< nullptr for boxes
+  std::shared_ptr<const Mesh> mesh;          ///< welded, normalised, scaled; nullptr for boxes
   float mean_edge = 0.0f;                    ///< mean edge length (m), 0 for boxes
 };
 
@@ -92,6 +107,13 @@ class World {
   /// max(D_m, deepest midphase level)) and bodies from a validated scene. Walls come
   /// first, then groups in order. Throws InputError for unreadable meshes.
   explicit World(const Scene& scene);
+
+  /// Same, with a broadphase made by the caller (e.g. a Bullet or FCL reference from
+  /// make_any_broadphase). Takes ownership; `broadphase` must not be null.
+  World(const Scene& scene, std::unique_ptr<BroadPhase> broadphase);
+
+  /// Turns planted faults on or off (validator self-tests only).
+  void plant_faults(const PlantedFaults& faults) { faults_ = faults; }
 
   /// Runs one step (SPEC 4) and returns its metrics. Throws RuntimeError naming the body
   /// and frame when a position or velocity becomes non-finite.
@@ -138,6 +160,7 @@ class World {
   std::vector<ContactRecord> contacts_;
   std::vector<float> theta_table_;
   FrameMetrics metrics_;
+  PlantedFaults faults_;
   std::int64_t frame_ = 0;
   // Response scratch (SPEC 6 Jacobi reduction).
   std::vector<Vec3> dx_sum_, dv_sum_;
