@@ -17,11 +17,13 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/broadphase.hpp"
+#include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
+#include "octocd/validation.hpp"
 #include "octocd/version.hpp"
 #include "octocd/world.hpp"
 
@@ -32,6 +34,7 @@ constexpr int kStages = static_cast<int>(octocd::Stage::Count);
 
 struct RunOptions {
   std::string scene;
+  std::string engine = "cpu";
   std::string broadphase;
   std::string midphase;
   int frames = 0;
@@ -123,14 +126,17 @@ std::string utc_now() {
   return buf;
 }
 
-void print_summary(const octocd::World& world, const Totals& t, double wall_s,
-                   const std::string& trace) {
+void print_summary(const octocd::World& world, const std::string& engine, const Totals& t,
+                   double wall_s, const std::string& trace) {
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
   const octocd::Scene& s = world.scene();
   fmt::print("\nscene        {} ({} bodies, {} shapes)\n", s.name, world.state().size(),
              world.shapes().size());
-  fmt::print("pipeline     engine cpu, broadphase {}, midphase {}\n", world.broadphase().name(),
-             s.midphase.to_string());
+  if (engine == "bullet")
+    fmt::print("pipeline     engine bullet (btDiscreteDynamicsWorld, btDbvtBroadphase, box shapes)\n");
+  else
+    fmt::print("pipeline     engine {}, broadphase {}, midphase {}\n", engine, world.broadphase().name(),
+               s.midphase.to_string());
   fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
              static_cast<double>(t.frames) * s.dt, wall_s);
   fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n\n",
@@ -152,13 +158,13 @@ void print_summary(const octocd::World& world, const Totals& t, double wall_s,
   if (!trace.empty()) fmt::print("\ntrace        {}\n", trace);
 }
 
-void write_summary_json(const std::string& path, const octocd::World& world, const Totals& t,
-                        double wall_s) {
+void write_summary_json(const std::string& path, const octocd::World& world,
+                        const std::string& engine, const Totals& t, double wall_s) {
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
   nlohmann::json j;
   j["scene"] = world.scene().name;
   j["bodies"] = world.state().size();
-  j["engine"] = "cpu";
+  j["engine"] = engine;
   j["broadphase"] = world.broadphase().name();
   j["midphase"] = world.scene().midphase.to_string();
   j["frames"] = t.frames;
@@ -186,12 +192,15 @@ int run_command(const RunOptions& o) {
   if (o.frames > 0) scene.frames = o.frames;
 
   octocd::World world(scene, octocd::make_any_broadphase(scene.broadphase, scene.domain));
+  std::unique_ptr<octocd::BulletWorld> bullet;
+  if (o.engine == "bullet") bullet = std::make_unique<octocd::BulletWorld>(world);
   std::unique_ptr<octocd::TraceWriter> trace;
   if (!o.trace.empty()) {
     octocd::TraceOptions topt;
     topt.state_every = o.state_every;
-    topt.contacts = o.contacts;
-    octocd::TraceMetadata meta = octocd::trace_metadata(world, "cpu", o.state_every);
+    topt.contacts = o.contacts && !bullet;
+    octocd::TraceMetadata meta = octocd::trace_metadata(world, o.engine, o.state_every);
+    if (bullet) meta.broadphase = "bullet-dbvt";
     meta.start_time = utc_now();
     trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(world), topt);
     trace->append_state(0, world.state());
@@ -201,10 +210,13 @@ int run_command(const RunOptions& o) {
   Progress progress(scene.frames, !o.quiet);
   const auto t0 = Clock::now();
   try {
+    static const std::vector<octocd::ContactRecord> kNoContacts;
     for (int f = 0; f < scene.frames; ++f) {
-      const octocd::FrameMetrics& m = world.step();
+      const octocd::FrameMetrics& m = bullet ? bullet->step() : world.step();
       totals.add(m);
-      if (trace) trace->append_frame(m, world.state(), world.contacts());
+      if (trace)
+        trace->append_frame(m, bullet ? bullet->state() : world.state(),
+                            bullet ? kNoContacts : world.contacts());
       progress.update(m, totals);
     }
   } catch (const octocd::RuntimeError&) {
@@ -213,9 +225,71 @@ int run_command(const RunOptions& o) {
   }
   if (trace) trace->close();
   const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
-  if (!o.quiet) print_summary(world, totals, wall_s, o.trace);
-  if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s);
+  if (!o.quiet) print_summary(world, o.engine, totals, wall_s, o.trace);
+  if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, o.engine, totals, wall_s);
   return 0;
+}
+
+struct ValidateOptions {
+  std::string scene;
+  std::string against = "bullet,fcl";
+  int frames = 300;
+  int every = 10;
+  std::string trace;
+};
+
+/// `octocd validate`: exit 0 when every validator passes, 3 when any fails.
+int validate_command(const ValidateOptions& o) {
+  octocd::Scene scene = octocd::load_scene(o.scene);
+  octocd::ValidationOptions vo;
+  vo.frames = o.frames;
+  vo.every = o.every;
+  vo.against_bullet = vo.against_fcl = false;
+  std::string rest = o.against;
+  while (!rest.empty()) {
+    const auto comma = rest.find(',');
+    const std::string item = rest.substr(0, comma);
+    rest = comma == std::string::npos ? "" : rest.substr(comma + 1);
+    if (item == "bullet") {
+      vo.against_bullet = true;
+    } else if (item == "fcl") {
+      vo.against_fcl = true;
+    } else if (item != "none" && !item.empty()) {
+      throw octocd::InputError(fmt::format(
+          "--against: unknown reference '{}'; allowed: a comma-separated list of bullet, fcl, or none",
+          item));
+    }
+  }
+  std::unique_ptr<octocd::TraceWriter> trace;
+  if (!o.trace.empty()) {
+    vo.on_step = [&](const octocd::World& w) {
+      if (!trace) {
+        octocd::TraceMetadata meta = octocd::trace_metadata(w, "cpu", 10);
+        meta.start_time = utc_now();
+        trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(w),
+                                                      octocd::TraceOptions{});
+      }
+      trace->append_frame(w.last_metrics(), w.state(), w.contacts());
+    };
+  }
+  std::vector<octocd::ValidationResult> results;
+  try {
+    results = octocd::validate_scene(scene, vo);
+  } catch (const octocd::RuntimeError&) {
+    if (trace) trace->close();
+    throw;
+  }
+  if (trace) {
+    trace->close();
+    octocd::write_validation(o.trace, results);
+  }
+  fmt::print("validate {} ({} frames, checks every {}, against: {})\n\n", scene.name, o.frames, o.every,
+             o.against);
+  fmt::print("{}", octocd::format_results(results));
+  const bool all_pass = std::all_of(results.begin(), results.end(),
+                                    [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
+  fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
+  return all_pass ? 0 : 3;
 }
 
 }  // namespace
@@ -223,13 +297,18 @@ int run_command(const RunOptions& o) {
 int main(int argc, char** argv) {
   CLI::App app{
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
-      "Exit codes: 0 ok, 1 runtime failure, 2 bad input."};
+      "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a validator failed."};
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);
 
   RunOptions run;
   CLI::App* run_cmd = app.add_subcommand("run", "Run a scene through the pipeline and print a summary");
   run_cmd->add_option("scene", run.scene, "Scene file (JSON, see docs/scenes.md)")->required();
+  run_cmd->add_option("--engine", run.engine,
+                      "cpu: octocd's CPU reference pipeline; bullet: the same scene in Bullet's "
+                      "btDiscreteDynamicsWorld (translation-only boxes), same trace layout")
+      ->check(CLI::IsMember({"cpu", "bullet"}))
+      ->default_val("cpu");
   std::string bp_help = "Broadphase, overrides the scene's broadphase.name: ";
   for (const auto& name : octocd::all_broadphase_names()) bp_help += name + " ";
   run_cmd->add_option("--broadphase", run.broadphase, bp_help);
@@ -248,6 +327,24 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--summary-json", run.summary_json,
                       "Also write the summary (steps/s, stage ms, counts) as JSON to this file");
 
+  ValidateOptions val;
+  CLI::App* val_cmd = app.add_subcommand(
+      "validate", "Run the validators of SPEC 7 on a scene; exit 0 all pass, 3 any fails, 2 bad input");
+  val_cmd->add_option("scene", val.scene, "Scene file (JSON, see docs/scenes.md)")->required();
+  val_cmd->add_option("--against", val.against,
+                      "References: comma-separated bullet, fcl (Bullet/FCL broadphases, FCL "
+                      "normals, Bullet dynamics), or none")
+      ->default_val("bullet,fcl");
+  val_cmd->add_option("--frames", val.frames, "Steps to run (>= 1)")
+      ->check(CLI::PositiveNumber)
+      ->default_val(300);
+  val_cmd->add_option("--every", val.every,
+                      "Check candidate sets, midphase and normals every K-th frame (>= 1)")
+      ->check(CLI::PositiveNumber)
+      ->default_val(10);
+  val_cmd->add_option("--trace", val.trace,
+                      "Write the validated run as a trace with the results under /validation");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -257,6 +354,7 @@ int main(int argc, char** argv) {
 
   try {
     if (*run_cmd) return run_command(run);
+    if (*val_cmd) return validate_command(val);
   } catch (const octocd::InputError& e) {
     std::fprintf(stderr, "octocd: error: %s\n", e.what());
     return 2;

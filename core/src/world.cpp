@@ -236,8 +236,9 @@ const FrameMetrics& World::step() {
     if (!confirmed_[k]) continue;
     const Pair p = pairs_[k];
     ++m.contacts;
-    const Penetration pen = penetration(aabbs_[p.a], aabbs_[p.b], params.epsilon);
+    Penetration pen = penetration(aabbs_[p.a], aabbs_[p.b], params.epsilon);
     if (!pen.hit) continue;  // Eq. 9: no overlap on an axis: discard
+    if (faults_.normal_sign) pen.normal = -pen.normal;
     ++pen_count;
     pen_sum += pen.depth;
     pen_max = std::max(pen_max, static_cast<double>(pen.depth));

@@ -73,6 +73,7 @@ struct PlantedFaults {
   bool eq12_weights = false;     ///< split corrections with the paper's Eq. 12 (swapped) weights
   bool friction_sign = false;    ///< apply friction with the wrong sign (speeds sliding up)
   bool momentum_leak = false;    ///< apply only 90% of each impulse to body B
+  bool normal_sign = false;      ///< use the contact normal pointing from A to B
 };
 
 /// A shape shared by bodies: a box or a mesh with its octree. Local frame centred on the

@@ -1,0 +1,95 @@
+#pragma once
+/// \file reference_contact.hpp
+/// Reference contact normals from FCL / libccd for SPEC 7 validator 3 ("Contact normals":
+/// the response normal against a reference normal; distance query nearest points for
+/// separated pairs, libccd GJK/EPA on the convex hulls for penetrating pairs).
+///
+/// Bodies only translate (SPEC 3), so every query uses identity rotations and the
+/// translations x_a, x_b (BodyState::x, the world position of the shape's local frame).
+///
+/// Which path a pair takes is decided on the convex hulls: libccd ccdGJKIntersect on the
+/// hulls (boxes: their 8 corners). Hulls intersect -> penetrating (EPA). Otherwise the
+/// pair is separated and FCL's distance query on the meshes (BVH) / boxes gives the
+/// nearest points. (Non-convex meshes whose hulls intersect while the meshes themselves
+/// do not are reported as penetrating: the reference is defined on the hulls.)
+///
+/// Observed conventions (FCL 0.7.0, libccd 2.x double; pinned by
+/// tests/unit/test_reference_contact.cpp):
+///  - fcl::distance(o1, o2, ...) with enable_nearest_points: DistanceResult::nearest_points[0]
+///    lies on o1 and nearest_points[1] on o2, both in the WORLD frame (FCL >= 0.6; 0.5 gave
+///    them in each object's local frame). We call it with o1 = A, o2 = B, so
+///    normal = normalize(nearest_points[0] - nearest_points[1]) points from B to A.
+///  - libccd ccdGJKPenetration(obj1, obj2) (GJK + EPA): `dir` is unit and points from obj1
+///    towards obj2 (translating obj2 by depth * dir separates them); depth >= 0; pos is the
+///    midpoint of the two witness points, world frame. We pass obj1 = A, obj2 = B and return
+///    normal = -dir (B to A).
+///  - fcl::collide(o1, o2, CollisionRequest(1, true), ...) with GST_LIBCCD: for Convex
+///    shapes FCL 0.7 does NOT run EPA: it runs libccd MPR (ccdMPRPenetration), and
+///    Contact::normal points from o1 to o2 (FCL's documented convention: "normal points
+///    from o1 to o2"); Contact::penetration_depth is >= 0. So B-to-A is -Contact::normal
+///    with o1 = A. Because FCL's path is MPR, not EPA (its depth/normal are a portal
+///    estimate, not the minimum translation), the main path calls libccd's
+///    ccdGJKPenetration directly on the same hull vertices; fcl::collide is exposed as
+///    fcl_collide_normal() for comparison and used as a fallback when EPA fails.
+///  - FCL mesh-mesh (BVH-BVH) contacts are per triangle and are never used.
+
+#include <cstdint>
+#include <memory>
+
+#include "octocd/math.hpp"
+#include "octocd/world.hpp"
+
+namespace octocd {
+
+/// Reference contact geometry of a pair, from FCL / libccd.
+struct ReferenceNormal {
+  bool valid = false;        ///< false when FCL/libccd gave no usable answer (e.g. degenerate)
+  bool penetrating = false;  ///< true: convex hulls intersect (GJK/EPA); false: separated (distance query)
+  Vec3 normal;               ///< unit, pointing from B to A (SPEC 2)
+  double distance = 0;       ///< m, >= 0, separated pairs (mesh-mesh BVH distance)
+  double depth = 0;          ///< m, >= 0, penetrating pairs (EPA depth on the hulls)
+  Vec3 point_a, point_b;     ///< nearest points (separated) or contact point (penetrating; a == b), world frame
+};
+
+/// Per-shape FCL geometry of a World, built once: for meshes fcl::BVHModel<fcl::OBBRSS<double>>
+/// from Shape::mesh and fcl::Convex<double> from the convex hull of the mesh vertices
+/// (Bullet's btConvexHullComputer; hull vertices are the original mesh vertices, exact);
+/// for boxes fcl::Box<double> with the local AABB's sides. Not owned by the World; must
+/// not outlive it (it reads World::shapes() and World::bodies() at construction only, but
+/// body indices passed to normal() must be the World's). Queries are const and build
+/// their FCL objects locally, so concurrent normal() calls are safe.
+class ReferenceGeometry {
+ public:
+  explicit ReferenceGeometry(const World& world);
+  ~ReferenceGeometry();
+  ReferenceGeometry(const ReferenceGeometry&) = delete;
+  ReferenceGeometry& operator=(const ReferenceGeometry&) = delete;
+
+  /// Reference normal for bodies a, b at positions xa, xb (world, m; identity rotation).
+  /// Hulls intersect (libccd GJK): penetrating; normal = -dir of ccdGJKPenetration(A, B)
+  /// (EPA), depth = EPA depth, point_a = point_b = EPA contact position; falls back to
+  /// fcl_collide_normal() if EPA fails. Otherwise separated: fcl::distance(A, B) on the
+  /// BVH models / boxes with enable_nearest_points; distance = min_distance,
+  /// point_a = nearest_points[0], point_b = nearest_points[1],
+  /// normal = normalize(point_a - point_b) (B to A). valid = false when the distance is
+  /// not > 0 or the normal has no direction. Bodies a and b may be given in either order;
+  /// swapping them flips the normal. Throws InputError for a body index out of range.
+  ReferenceNormal normal(std::uint32_t a, std::uint32_t b, Vec3 xa, Vec3 xb) const;
+
+  /// Penetrating-pair normal from fcl::collide on the convex hulls / boxes with
+  /// CollisionRequest(1, enable_contact = true), gjk_solver_type = GST_LIBCCD (FCL 0.7
+  /// runs MPR there for Convex, ODE's box-box for two boxes). Converted to B-to-A
+  /// (-Contact::normal with o1 = A). valid = false when FCL reports no contact.
+  /// For comparison and fallback; normal() is the reference.
+  ReferenceNormal fcl_collide_normal(std::uint32_t a, std::uint32_t b, Vec3 xa, Vec3 xb) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Angle in radians between two unit vectors, in [0, pi] (atan2 of |u x v| and u . v in
+/// double, accurate near 0 and pi; inputs need not be exactly unit).
+double angle_between(Vec3 u, Vec3 v);
+
+}  // namespace octocd

@@ -1,0 +1,182 @@
+/// \file bullet_world.cpp
+/// octocd::BulletWorld: the scene in btDiscreteDynamicsWorld (see bullet_world.hpp for
+/// every setting and why).
+
+#include "octocd/bullet_world.hpp"
+
+#include <btBulletDynamicsCommon.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <vector>
+
+namespace octocd {
+
+namespace {
+
+btVector3 to_bt(const Vec3& v) { return btVector3(v.x, v.y, v.z); }
+Vec3 from_bt(const btVector3& v) {
+  return {static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())};
+}
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+      .count();
+}
+
+}  // namespace
+
+struct BulletWorld::Impl {
+  double dt = 0.001;
+  float slop = 0.001f;
+  std::unique_ptr<btDefaultCollisionConfiguration> config;
+  std::unique_ptr<btCollisionDispatcher> dispatcher;
+  std::unique_ptr<btDbvtBroadphase> broadphase;
+  std::unique_ptr<btSequentialImpulseConstraintSolver> solver;
+  std::unique_ptr<btDiscreteDynamicsWorld> world;
+  std::vector<std::unique_ptr<btBoxShape>> shapes;  // one per octocd shape
+  std::vector<std::unique_ptr<btRigidBody>> bodies;  // index = body id
+  BodyState state;
+  FrameMetrics metrics;
+  std::int64_t frame = 0;
+
+  ~Impl() {
+    if (world) {
+      for (auto& b : bodies) world->removeRigidBody(b.get());
+    }
+    world.reset();  // before the solver, broadphase, dispatcher and config it uses
+  }
+
+  void read_state() {
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      state.x[i] = from_bt(bodies[i]->getWorldTransform().getOrigin());
+      state.v[i] = from_bt(bodies[i]->getLinearVelocity());
+    }
+  }
+};
+
+BulletWorld::BulletWorld(const World& src) : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  const Scene& scene = src.scene();
+  m.dt = scene.dt;
+  m.slop = scene.response.slop;
+  m.config = std::make_unique<btDefaultCollisionConfiguration>();
+  m.dispatcher = std::make_unique<btCollisionDispatcher>(m.config.get());
+  m.broadphase = std::make_unique<btDbvtBroadphase>();
+  m.solver = std::make_unique<btSequentialImpulseConstraintSolver>();
+  m.world = std::make_unique<btDiscreteDynamicsWorld>(m.dispatcher.get(), m.broadphase.get(),
+                                                      m.solver.get(), m.config.get());
+  m.world->setGravity(to_bt(scene.gravity));
+  btContactSolverInfo& info = m.world->getSolverInfo();
+  info.m_restitutionVelocityThreshold = scene.response.restitution_threshold;
+  // Split impulse for every penetrating contact (default threshold -0.04 m would feed
+  // the Baumgarte recovery of shallow penetrations into the velocity): see the header.
+  info.m_splitImpulse = 1;
+  info.m_splitImpulsePenetrationThreshold = 0;
+
+  for (const Shape& s : src.shapes()) {
+    const Vec3 he = 0.5f * (s.local.max - s.local.min);
+    m.shapes.push_back(std::make_unique<btBoxShape>(to_bt(he)));  // default margin 0.04
+  }
+
+  // Product combination in Bullet: sqrt on every body gives mu_k and e for every pair.
+  const btScalar friction = std::sqrt(scene.response.mu_kinetic);
+  const btScalar restitution = std::sqrt(scene.response.restitution);
+
+  const BodyState& s0 = src.state();
+  m.state = s0;
+  const std::size_t n = s0.size();
+  m.bodies.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    btBoxShape* box = m.shapes[src.bodies()[i].shape].get();
+    const float w = s0.w[i];
+    const btScalar mass = w > 0.0f ? btScalar(1.0f / w) : btScalar(0);
+    btTransform t;
+    t.setIdentity();
+    // x is the centre of the world AABB; the box is centred on the local AABB centre.
+    t.setOrigin(to_bt(s0.x[i]));
+    btRigidBody::btRigidBodyConstructionInfo ci(mass, nullptr, box, btVector3(0, 0, 0));
+    ci.m_startWorldTransform = t;
+    ci.m_friction = friction;
+    ci.m_restitution = restitution;
+    ci.m_linearDamping = 0;
+    ci.m_angularDamping = 0;
+    auto body = std::make_unique<btRigidBody>(ci);
+    body->setAngularFactor(btScalar(0));
+    if (mass > 0) {
+      body->setLinearVelocity(to_bt(s0.v[i]));
+      body->setActivationState(DISABLE_DEACTIVATION);
+    }
+    m.world->addRigidBody(body.get());
+    m.bodies.push_back(std::move(body));
+  }
+}
+
+BulletWorld::~BulletWorld() = default;
+
+const FrameMetrics& BulletWorld::step() {
+  Impl& m = *impl_;
+  const auto t0 = std::chrono::steady_clock::now();
+  m.world->stepSimulation(static_cast<btScalar>(m.dt), 0);
+  const double solve_ms = ms_since(t0);
+
+  const auto t1 = std::chrono::steady_clock::now();
+  m.read_state();
+  FrameMetrics fm;
+  fm.frame = ++m.frame;
+  fm.time = static_cast<double>(m.frame) * m.dt;
+  fm.aabb_pairs = static_cast<std::uint64_t>(
+      m.broadphase->getOverlappingPairCache()->getNumOverlappingPairs());
+  fm.cell_candidates = fm.aabb_pairs;
+  std::uint64_t contacts = 0, pen_points = 0, above = 0;
+  double pen_sum = 0.0, pen_max = 0.0;
+  const int nm = m.dispatcher->getNumManifolds();
+  for (int k = 0; k < nm; ++k) {
+    const btPersistentManifold* pm = m.dispatcher->getManifoldByIndexInternal(k);
+    const int np = pm->getNumContacts();
+    if (np > 0) ++contacts;
+    for (int j = 0; j < np; ++j) {
+      const double d = pm->getContactPoint(j).getDistance();
+      if (d < 0.0) {
+        ++pen_points;
+        pen_sum += -d;
+        pen_max = std::max(pen_max, -d);
+        if (-d > static_cast<double>(m.slop)) ++above;
+      }
+    }
+  }
+  fm.contacts = contacts;
+  if (pen_points > 0) {
+    fm.penetration_mean = pen_sum / static_cast<double>(pen_points);
+    fm.penetration_max = pen_max;
+    fm.penetration_share_above_slop =
+        static_cast<double>(above) / static_cast<double>(pen_points);
+  }
+  double ke = 0.0, px = 0.0, py = 0.0, pz = 0.0;
+  for (std::size_t i = 0; i < m.state.size(); ++i) {
+    const float w = m.state.w[i];
+    if (!(w > 0.0f)) continue;
+    const double mass = 1.0 / static_cast<double>(w);
+    const Vec3 v = m.state.v[i];
+    const double vx = v.x, vy = v.y, vz = v.z;
+    ke += 0.5 * mass * (vx * vx + vy * vy + vz * vz);
+    px += mass * vx;
+    py += mass * vy;
+    pz += mass * vz;
+  }
+  fm.kinetic_energy = ke;
+  fm.momentum = {px, py, pz};
+  fm.stage_ms[static_cast<int>(Stage::Response)] = solve_ms;
+  fm.stage_ms[static_cast<int>(Stage::Metrics)] = ms_since(t1);
+  fm.step_ms = ms_since(t0);
+  m.metrics = fm;
+  return m.metrics;
+}
+
+const BodyState& BulletWorld::state() const { return impl_->state; }
+const FrameMetrics& BulletWorld::last_metrics() const { return impl_->metrics; }
+std::int64_t BulletWorld::frame() const { return impl_->frame; }
+
+}  // namespace octocd

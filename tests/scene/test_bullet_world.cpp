@@ -1,0 +1,160 @@
+// octocd::BulletWorld (SPEC 7 item 8): the analytic scenes run in Bullet's
+// btDiscreteDynamicsWorld, against the same closed forms as octocd's own pipeline.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <string>
+
+#include "octocd/bullet_world.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/world.hpp"
+
+using namespace octocd;
+
+namespace {
+
+std::string scene_path(const std::string& name) {
+  const char* root = std::getenv("OCTOCD_SOURCE_DIR");
+  return std::string(root ? root : ".") + "/datasets/scenes/" + name + ".json";
+}
+
+/// Index of the first dynamic body (the scenes here have one dynamic group).
+std::size_t first_dynamic(const BodyState& s) {
+  for (std::size_t i = 0; i < s.size(); ++i)
+    if (s.w[i] > 0.0f) return i;
+  ADD_FAILURE() << "no dynamic body";
+  return 0;
+}
+
+}  // namespace
+
+// Bullet integrates semi-implicit Euler (btRigidBody::integrateVelocities then
+// btTransformUtil::integrateTransform with the new velocity), the same as SPEC 4.1, so
+// the closed form is octocd's: v_n = v0 + n g dt, x_n = x0 + n dt v0 + g dt^2 n (n+1)/2.
+// Tolerances: v within 1e-5 (1 + |v|) (float rounding of n additions); x within
+// 2e-6 n (1 + |x|) (float32 state, error grows like n ulp(|x|)); and, the sharp check,
+// every per-step increment x_n - x_{n-1} equals v_n dt within 2e-6 m (about 2 ulp at
+// |x| = 10 m), whereas explicit Euler (x += v_{n-1} dt) would be off by |g| dt^2 =
+// 9.8e-6 m per step.
+TEST(BulletWorld, FreeFallMatchesSemiImplicitEuler) {
+  const Scene scene = load_scene(scene_path("free-fall"));
+  World world(scene);
+  BulletWorld bw(world);
+  const std::size_t i = first_dynamic(bw.state());
+  const Vec3 x0 = bw.state().x[i], v0 = bw.state().v[i];
+  EXPECT_EQ(x0.y, world.state().x[i].y);
+  const double g = scene.gravity.y, dt = scene.dt;
+  double worst = 0.0;
+  for (int n = 1; n <= scene.frames; ++n) {
+    const double x_prev = bw.state().x[i].y;
+    const FrameMetrics& fm = bw.step();
+    ASSERT_EQ(fm.frame, n);
+    const double v = v0.y + n * g * dt;
+    const double x = x0.y + n * dt * v0.y + g * dt * dt * n * (n + 1) / 2.0;
+    const double xn = bw.state().x[i].y, vn = bw.state().v[i].y;
+    worst = std::max(worst, std::fabs(xn - x));
+    ASSERT_NEAR(vn, v, 1e-5 * (1 + std::fabs(v))) << "frame " << n;
+    ASSERT_NEAR(xn, x, 2e-6 * n * (1 + std::fabs(x))) << "frame " << n;
+    ASSERT_NEAR(xn - x_prev, vn * dt, 2e-6) << "frame " << n << ": not semi-implicit Euler";
+    ASSERT_EQ(bw.state().x[i].x, x0.x);
+    ASSERT_EQ(fm.contacts, 0u);
+  }
+  EXPECT_EQ(bw.frame(), scene.frames);
+  // Energy bookkeeping: 0.5 m v^2 of the single body.
+  const double vy = bw.state().v[i].y, m = 1.0 / bw.state().w[i];
+  EXPECT_NEAR(bw.last_metrics().kinetic_energy, 0.5 * m * vy * vy, 1e-9);
+  EXPECT_NEAR(bw.last_metrics().momentum[1], m * vy, 1e-9);
+  RecordProperty("max_position_error_m", std::to_string(worst));
+}
+
+// The first rebound speed over the impact speed is the restitution e (product of the
+// two bodies' sqrt(e), see bullet_world.hpp) within 0.1 absolute.
+TEST(BulletWorld, BounceReturnsAtRestitution) {
+  const Scene scene = load_scene(scene_path("bounce"));
+  World world(scene);
+  BulletWorld bw(world);
+  const std::size_t i = first_dynamic(bw.state());
+  bool bounced = false;
+  double ratio = 0.0, v_impact = 0.0;
+  for (int n = 0; n < scene.frames && !bounced; ++n) {
+    const float v_prev = bw.state().v[i].y;
+    bw.step();
+    if (bw.state().v[i].y > 0.0f) {
+      bounced = true;
+      v_impact = v_prev + scene.gravity.y * scene.dt;  // after the velocity integration
+      ratio = bw.state().v[i].y / -v_impact;
+    }
+  }
+  ASSERT_TRUE(bounced) << "the body never bounced";
+  EXPECT_GT(-v_impact, scene.response.restitution_threshold);
+  std::printf("bounce: impact %.4f m/s, rebound ratio %.4f (e = %.3f)\n", -v_impact, ratio,
+              scene.response.restitution);
+  RecordProperty("rebound_ratio", std::to_string(ratio));
+  EXPECT_NEAR(ratio, scene.response.restitution, 0.1);
+}
+
+// A block launched along the floor decelerates and stops; its stopping distance is
+// compared with v0^2 / (2 mu_k g) (Bullet: one friction coefficient, combined as the
+// product sqrt(mu_k)^2 = mu_k). Tolerance 10%.
+TEST(BulletWorld, SlideStopsNearCoulombDistance) {
+  const Scene scene = load_scene(scene_path("slide"));
+  World world(scene);
+  BulletWorld bw(world);
+  const std::size_t i = first_dynamic(bw.state());
+  const Vec3 x0 = bw.state().x[i];
+  const double v0 = bw.state().v[i].x;
+  ASSERT_GT(v0, 0.0);
+  int n = 0;
+  float v_prev = bw.state().v[i].x;
+  constexpr float kStopped = 1e-3f;  // m/s
+  while (n < scene.frames && bw.state().v[i].x > kStopped) {
+    bw.step();
+    ++n;
+    ASSERT_LE(bw.state().v[i].x, v_prev + 1e-6f) << "frame " << n << ": sped up";
+    v_prev = bw.state().v[i].x;
+  }
+  ASSERT_LE(bw.state().v[i].x, kStopped) << "still sliding after " << n << " frames";
+  const double expected = v0 * v0 / (2.0 * scene.response.mu_kinetic * -scene.gravity.y);
+  const double travelled = bw.state().x[i].x - x0.x;
+  const double ratio = travelled / expected;
+  std::printf("slide: stopped after %d frames, %.4f m; v0^2/(2 mu g) = %.4f m; ratio %.4f\n",
+              n, travelled, expected, ratio);
+  RecordProperty("stopping_distance_ratio", std::to_string(ratio));
+  EXPECT_NEAR(ratio, 1.0, 0.10);
+  // It stays stopped and on the floor.
+  for (int k = 0; k < 200; ++k) bw.step();
+  EXPECT_NEAR(bw.state().x[i].x - x0.x, travelled, 1e-3);
+  EXPECT_NEAR(bw.state().x[i].y, x0.y, 0.01);
+}
+
+// The four-box column settles: after 2000 frames every box within 1 cm of its initial
+// height and every speed below 0.05 m/s; it must also not have drifted sideways.
+TEST(BulletWorld, BoxStackSettles) {
+  const Scene scene = load_scene(scene_path("box-stack"));
+  World world(scene);
+  BulletWorld bw(world);
+  const BodyState s0 = bw.state();
+  std::uint64_t contacts = 0;
+  for (int n = 1; n <= 2000; ++n) contacts = bw.step().contacts;
+  std::string heights;
+  int dynamic = 0;
+  for (std::size_t i = 0; i < s0.size(); ++i) {
+    if (s0.w[i] == 0.0f) continue;
+    ++dynamic;
+    const Vec3 x = bw.state().x[i], v = bw.state().v[i];
+    heights += std::to_string(x.y) + " ";
+    EXPECT_NEAR(x.y, s0.x[i].y, 0.01) << "body " << i;
+    EXPECT_NEAR(x.x, s0.x[i].x, 0.01) << "body " << i;
+    EXPECT_NEAR(x.z, s0.x[i].z, 0.01) << "body " << i;
+    EXPECT_LT(length(v), 0.05f) << "body " << i;
+  }
+  EXPECT_EQ(dynamic, 4);
+  // Floor-box plus three box-box manifolds.
+  EXPECT_EQ(contacts, 4u);
+  EXPECT_LT(bw.last_metrics().penetration_max, 0.01);
+  std::printf("box-stack settled heights: %s(initial 0.1 0.3 0.5 0.7); pen max %.3g m\n",
+              heights.c_str(), bw.last_metrics().penetration_max);
+  RecordProperty("settled_heights", heights);
+}

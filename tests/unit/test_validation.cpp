@@ -1,0 +1,200 @@
+// Every validator of SPEC 7 passes on the correct pipeline and catches a planted fault
+// (issue 3 item 3: "a validator that cannot fail is a defect").
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <unistd.h>
+
+#include "octocd/reference_broadphase.hpp"
+#include "octocd/trace.hpp"
+#include "octocd/validation.hpp"
+
+using namespace octocd;
+
+namespace {
+
+std::string source_dir() {
+  const char* root = std::getenv("OCTOCD_SOURCE_DIR");
+  return root ? root : ".";
+}
+
+/// Boxes of two masses (1 kg and 4 kg) thrown into an open box: sliding, stacking and
+/// dynamic-dynamic contacts within a few hundred frames; needs no dataset.
+Scene mixed_boxes() {
+  const std::string text = R"({
+    "name": "mixed-boxes", "domain": {"min": [-0.5, 0, -0.5], "max": [0.5, 1.5, 0.5]},
+    "frames": 400, "walls": "open-box",
+    "groups": [
+      {"name": "light", "shape": {"box": [0.06, 0.05, 0.07]}, "count": 12, "mass": 1.0,
+       "layout": {"type": "grid", "min": [-0.35, 0.1, -0.35], "max": [0.35, 0.5, 0.35], "spacing": 0.16, "jitter": 0.01, "seed": 5},
+       "velocity": {"type": "random", "max": 1.5, "seed": 6}},
+      {"name": "heavy", "shape": {"box": [0.08, 0.06, 0.05]}, "count": 12, "mass": 4.0,
+       "layout": {"type": "grid", "min": [-0.35, 0.6, -0.35], "max": [0.35, 1.2, 0.35], "spacing": 0.18, "jitter": 0.01, "seed": 7},
+       "velocity": {"type": "random", "max": 1.5, "seed": 8}}
+    ]})";
+  return parse_scene(text, "mixed-boxes (test)");
+}
+
+ValidationResult find(const std::vector<ValidationResult>& rs, const std::string& name) {
+  for (const auto& r : rs)
+    if (r.name == name) return r;
+  ValidationResult none;
+  ADD_FAILURE() << "no result named " << name;
+  return none;
+}
+
+/// Runs validators 1-6 on `world` for `frames` steps.
+std::vector<ValidationResult> run(World& world, int frames,
+                                  std::vector<std::unique_ptr<BroadPhase>> extra = {},
+                                  FrameValidators::ConfirmFn midphase = nullptr) {
+  ValidationOptions opt;
+  opt.every = 5;
+  FrameValidators v(world, opt, std::move(extra));
+  if (midphase) v.set_midphase(std::move(midphase));
+  for (int f = 1; f <= frames; ++f) {
+    world.step();
+    v.observe(world, f % opt.every == 0);
+  }
+  return v.results();
+}
+
+/// A broadphase that drops the last pair of another.
+class DroppingBroadPhase : public BroadPhase {
+ public:
+  explicit DroppingBroadPhase(std::unique_ptr<BroadPhase> inner) : inner_(std::move(inner)) {}
+  std::string name() const override { return "drops-one-pair"; }
+  void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
+                  BroadPhaseStats& stats) override {
+    inner_->find_pairs(boxes, out, stats);
+    if (!out.empty()) out.pop_back();
+  }
+
+ private:
+  std::unique_ptr<BroadPhase> inner_;
+};
+
+}  // namespace
+
+TEST(Validators, AllPassOnTheCorrectPipeline) {
+  const Scene scene = mixed_boxes();
+  World world(scene);
+  std::vector<std::unique_ptr<BroadPhase>> all;
+  for (const std::string& name : all_broadphase_names()) {
+    BroadPhaseConfig cfg = scene.broadphase;
+    cfg.name = name;
+    all.push_back(make_any_broadphase(cfg, scene.domain));
+  }
+  const auto rs = run(world, 300, std::move(all));
+  for (const auto& r : rs) {
+    EXPECT_TRUE(r.applicable) << r.name << ": " << r.detail;
+    EXPECT_TRUE(r.pass) << r.name << ": " << r.detail;
+  }
+}
+
+TEST(Validators, CandidateSetsCatchADroppedPair) {
+  const Scene scene = mixed_boxes();
+  World world(scene);
+  BroadPhaseConfig cfg = scene.broadphase;
+  std::vector<std::unique_ptr<BroadPhase>> extra;
+  extra.push_back(std::make_unique<DroppingBroadPhase>(make_broadphase(cfg, scene.domain)));
+  const ValidationResult r = find(run(world, 100, std::move(extra)), "candidate-sets");
+  EXPECT_FALSE(r.pass) << r.detail;
+  EXPECT_NE(r.detail.find("drops-one-pair misses pair"), std::string::npos) << r.detail;
+}
+
+TEST(Validators, MidphaseCompletenessCatchesLossyPruning) {
+  if (!std::filesystem::exists(source_dir() + "/datasets/cache/bunny.obj"))
+    GTEST_SKIP() << "datasets not fetched";
+  Scene scene = load_scene(source_dir() + "/datasets/scenes/bunny-stack-50.json");
+  World world(scene);
+  // Halving theta loses contacts whose closest vertices are between theta/2 and theta.
+  auto lossy = [](const PlacedShape& a, const PlacedShape& b, float theta, const MidphaseConfig& c,
+                  MidphaseStats& st) { return confirm_contact(a, b, 0.5f * theta, c, st); };
+  for (int f = 0; f < 600; ++f) world.step();  // let them land
+  const ValidationResult r = find(run(world, 100, {}, lossy), "midphase-completeness");
+  EXPECT_FALSE(r.pass) << r.detail;
+}
+
+TEST(Validators, ContactNormalsCatchAFlippedNormal) {
+  World world(mixed_boxes());
+  PlantedFaults f;
+  f.normal_sign = true;
+  world.plant_faults(f);
+  const ValidationResult r = find(run(world, 60), "contact-normals");
+  EXPECT_TRUE(r.applicable);
+  EXPECT_FALSE(r.pass) << r.detail;
+  EXPECT_LT(r.measured, 0.5);
+}
+
+TEST(Validators, NonPenetrationCatchesBetaOvershoot) {
+  Scene scene = mixed_boxes();
+  scene.response.beta = 1.5f;  // outside (0, 1]: the scene loader would refuse it
+  World world(scene);
+  const ValidationResult r = find(run(world, 300), "non-penetration");
+  EXPECT_FALSE(r.pass) << r.detail;
+}
+
+TEST(Validators, FrictionCatchesTheWrongSign) {
+  World world(mixed_boxes());
+  PlantedFaults f;
+  f.friction_sign = true;
+  world.plant_faults(f);
+  const ValidationResult r = find(run(world, 300), "friction");
+  EXPECT_FALSE(r.pass) << r.detail;
+}
+
+TEST(Validators, ConservationCatchesEq12WeightsAndMomentumLeak) {
+  for (int fault = 0; fault < 2; ++fault) {
+    World world(mixed_boxes());
+    PlantedFaults f;
+    f.eq12_weights = fault == 0;
+    f.momentum_leak = fault == 1;
+    world.plant_faults(f);
+    const ValidationResult r = find(run(world, 300), "conservation");
+    EXPECT_FALSE(r.pass) << "fault " << fault << ": " << r.detail;
+    EXPECT_NE(r.detail.find(fault == 0 ? "centre" : "momentum"), std::string::npos) << r.detail;
+  }
+}
+
+TEST(Validators, AnalyticAndBulletCatchWrongFriction) {
+  const Scene scene = load_scene(source_dir() + "/datasets/scenes/slide.json");
+  const Tolerances tol;
+  {
+    World good(scene);
+    const ValidationResult a = validate_analytic(good, tol);
+    EXPECT_TRUE(a.pass) << a.detail;
+    World good2(scene);
+    const ValidationResult b = validate_against_bullet(good2, scene.frames, tol);
+    EXPECT_TRUE(b.pass) << b.detail;
+  }
+  PlantedFaults f;
+  f.friction_sign = true;
+  World bad(scene);
+  bad.plant_faults(f);
+  const ValidationResult a = validate_analytic(bad, tol);
+  EXPECT_FALSE(a.pass) << a.detail;
+  World bad2(scene);
+  bad2.plant_faults(f);
+  const ValidationResult b = validate_against_bullet(bad2, scene.frames, tol);
+  EXPECT_FALSE(b.pass) << b.detail;
+}
+
+TEST(Validators, ResultsGoToTheTrace) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("octocd-validation-" + std::to_string(::getpid()) + ".h5"))
+          .string();
+  World world(mixed_boxes());
+  {
+    TraceWriter w(path, trace_metadata(world, "cpu", 10), trace_bodies(world), TraceOptions{});
+    w.append_frame(world.step(), world.state(), world.contacts());
+  }
+  const auto rs = run(world, 20);
+  write_validation(path, rs);
+  write_validation(path, rs);  // rewriting replaces the group
+  EXPECT_EQ(read_trace_summary(path).frames, 1);
+  std::filesystem::remove(path);
+}
