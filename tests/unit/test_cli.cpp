@@ -203,3 +203,37 @@ TEST_F(Cli, TraceOfKilledRunIsReadable) {
   EXPECT_EQ(s.last_frame, s.frames);  // rows are frames 1..N with none missing
   EXPECT_GE(s.state_rows, 1);
 }
+
+TEST_F(Cli, ValidatePassesPrintsTableAndStoresResults) {
+  const char* root = std::getenv("OCTOCD_SOURCE_DIR");
+  const std::string scene_file = std::string(root ? root : ".") + "/datasets/scenes/box-stack.json";
+  const std::string trace = (dir_ / "validated.h5").string();
+  const Result r = run_octocd("validate " + scene_file + " --frames 60 --every 20 --trace " + trace);
+  EXPECT_EQ(r.code, 0) << r.output;
+  for (const char* name : {"candidate-sets", "midphase-completeness", "contact-normals",
+                           "non-penetration", "friction", "conservation", "analytic",
+                           "bullet-dynamics", "all validators pass"})
+    EXPECT_NE(r.output.find(name), std::string::npos) << name << " missing:\n" << r.output;
+  EXPECT_EQ(octocd::read_trace_summary(trace).frames, 60);
+  const Result h5 = [&] {
+    Result x;
+    FILE* p = popen(("h5dump -d /validation/pass " + trace + " 2>&1").c_str(), "r");
+    char buf[4096];
+    while (p && std::fgets(buf, sizeof buf, p)) x.output += buf;
+    x.code = p ? WEXITSTATUS(pclose(p)) : -1;
+    return x;
+  }();
+  EXPECT_EQ(h5.code, 0) << h5.output;
+  EXPECT_NE(h5.output.find("(0): 1, 1, 1, 1, 1, 1, 1, 1"), std::string::npos) << h5.output;
+}
+
+TEST_F(Cli, ValidateBadInputExitsTwo) {
+  const std::string path = scene("ok", box_scene(""));
+  Result r = run_octocd("validate " + path + " --against physx");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("--against"), std::string::npos) << r.output;
+  r = run_octocd("validate " + path + " --frames 0");
+  EXPECT_EQ(r.code, 2) << r.output;
+  r = run_octocd("run " + path + " --engine physx");
+  EXPECT_EQ(r.code, 2) << r.output;
+}
