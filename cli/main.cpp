@@ -77,7 +77,7 @@ struct Totals {
 class Progress {
  public:
   Progress(std::int64_t total, bool enabled)
-      : total_(total), enabled_(enabled), tty_(isatty(fileno(stderr)) != 0), start_(Clock::now()) {}
+      : total_(total), enabled_(enabled), tty_(isatty(fileno(stderr)) != 0) {}
 
   void update(const octocd::FrameMetrics& m, const Totals& t) {
     if (!enabled_) return;
@@ -113,7 +113,6 @@ class Progress {
   std::int64_t total_;
   bool enabled_;
   bool tty_;
-  Clock::time_point start_;
   Clock::time_point last_draw_{};
 };
 
