@@ -26,11 +26,24 @@
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
 #include "octocd/world.hpp"
+#include "octocd/cuda_world.hpp"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr int kStages = static_cast<int>(octocd::Stage::Count);
+
+/// The engine `name` (cpu, cuda, bullet) built from `model`. Throws InputError for an
+/// unknown name or a bad broadphase, RuntimeError when the engine cannot start (no CUDA).
+std::unique_ptr<octocd::Engine> make_engine(const std::string& name,
+                                            const std::shared_ptr<const octocd::Model>& model) {
+  const octocd::Scene& scene = model->scene;
+  if (name == "cpu")
+    return std::make_unique<octocd::World>(model, octocd::make_any_broadphase(scene.broadphase, scene.domain));
+  if (name == "bullet") return std::make_unique<octocd::BulletWorld>(model, model->initial);
+  if (name == "cuda") return octocd::make_cuda_engine(model, scene.broadphase.name);
+  throw octocd::InputError(fmt::format("--engine: unknown engine '{}'; allowed: cpu, cuda, bullet", name));
+}
 
 struct RunOptions {
   std::string scene;
@@ -125,17 +138,19 @@ std::string utc_now() {
   return buf;
 }
 
-void print_summary(const octocd::World& world, const std::string& engine, const Totals& t,
-                   double wall_s, const std::string& trace) {
+void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
+                   const std::string& trace) {
+  const std::string engine = world.name();
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
   const octocd::Scene& s = world.scene();
   fmt::print("\nscene        {} ({} bodies, {} shapes)\n", s.name, world.state().size(),
              world.shapes().size());
-  if (engine == "bullet")
-    fmt::print("pipeline     engine bullet (btDiscreteDynamicsWorld, btDbvtBroadphase, box shapes)\n");
+  if (!world.has_stage(octocd::Stage::Midphase))
+    fmt::print("pipeline     engine {} ({}, box shapes), on {}\n", engine, world.broadphase_name(),
+               world.device());
   else
-    fmt::print("pipeline     engine {}, broadphase {}, midphase {}\n", engine, world.broadphase().name(),
-               s.midphase.to_string());
+    fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", engine, world.broadphase_name(),
+               s.midphase.to_string(), world.device());
   fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
              static_cast<double>(t.frames) * s.dt, wall_s);
   fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n\n",
@@ -157,14 +172,15 @@ void print_summary(const octocd::World& world, const std::string& engine, const 
   if (!trace.empty()) fmt::print("\ntrace        {}\n", trace);
 }
 
-void write_summary_json(const std::string& path, const octocd::World& world,
-                        const std::string& engine, const Totals& t, double wall_s) {
+void write_summary_json(const std::string& path, const octocd::Engine& world, const Totals& t,
+                        double wall_s) {
+  const std::string engine = world.name();
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
   nlohmann::json j;
   j["scene"] = world.scene().name;
   j["bodies"] = world.state().size();
   j["engine"] = engine;
-  j["broadphase"] = world.broadphase().name();
+  j["broadphase"] = world.broadphase_name();
   j["midphase"] = world.scene().midphase.to_string();
   j["frames"] = t.frames;
   j["wall_s"] = wall_s;
@@ -177,7 +193,7 @@ void write_summary_json(const std::string& path, const octocd::World& world,
   j["mean_box_pairs"] = t.box_pairs / n;
   j["mean_vertex_tests"] = t.vertex_tests / n;
   j["penetration_max"] = t.pen_max;
-  j["device"] = octocd::cpu_description();
+  j["device"] = world.device();
   j["build_id"] = octocd::build_id();
   std::ofstream out(path);
   if (!out) throw octocd::RuntimeError(fmt::format("cannot write summary '{}'", path));
@@ -190,16 +206,15 @@ int run_command(const RunOptions& o) {
   if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
   if (o.frames > 0) scene.frames = o.frames;
 
-  octocd::World world(scene, octocd::make_any_broadphase(scene.broadphase, scene.domain));
-  std::unique_ptr<octocd::BulletWorld> bullet;
-  if (o.engine == "bullet") bullet = std::make_unique<octocd::BulletWorld>(world);
+  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, octocd::build_model(scene));
+  octocd::Engine& world = *engine;
   std::unique_ptr<octocd::TraceWriter> trace;
   if (!o.trace.empty()) {
     octocd::TraceOptions topt;
     topt.state_every = o.state_every;
-    topt.contacts = o.contacts && !bullet;
-    octocd::TraceMetadata meta = octocd::trace_metadata(world, o.engine, o.state_every);
-    if (bullet) meta.broadphase = "bullet-dbvt";
+    topt.contacts = o.contacts && world.can_record();
+    if (topt.contacts) world.set_recording(true);  // the GPU copies contacts back only then
+    octocd::TraceMetadata meta = octocd::trace_metadata(world, o.state_every);
     meta.start_time = utc_now();
     trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(world), topt);
     trace->append_state(0, world.state());
@@ -209,13 +224,10 @@ int run_command(const RunOptions& o) {
   Progress progress(scene.frames, !o.quiet);
   const auto t0 = Clock::now();
   try {
-    static const std::vector<octocd::ContactRecord> kNoContacts;
     for (int f = 0; f < scene.frames; ++f) {
-      const octocd::FrameMetrics& m = bullet ? bullet->step() : world.step();
+      const octocd::FrameMetrics& m = world.step();
       totals.add(m);
-      if (trace)
-        trace->append_frame(m, bullet ? bullet->state() : world.state(),
-                            bullet ? kNoContacts : world.contacts());
+      if (trace) trace->append_frame(m, world.state(), world.contacts());
       progress.update(m, totals);
     }
   } catch (const octocd::RuntimeError&) {
@@ -224,13 +236,15 @@ int run_command(const RunOptions& o) {
   }
   if (trace) trace->close();
   const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
-  if (!o.quiet) print_summary(world, o.engine, totals, wall_s, o.trace);
-  if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, o.engine, totals, wall_s);
+  if (!o.quiet) print_summary(world, totals, wall_s, o.trace);
+  if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s);
   return 0;
 }
 
 struct ValidateOptions {
   std::string scene;
+  std::string engine = "cpu";
+  std::vector<std::string> tolerances;
   std::string against = "bullet,fcl";
   int frames = 300;
   int every = 10;
@@ -259,11 +273,34 @@ int validate_command(const ValidateOptions& o) {
           item));
     }
   }
+  for (const std::string& item : o.tolerances) {
+    const auto eq = item.find('=');
+    std::string names;
+    for (const auto& e : octocd::tolerance_table()) names += (names.empty() ? "" : ", ") + std::string(e.name);
+    if (eq == std::string::npos || eq == 0)
+      throw octocd::InputError(fmt::format("--tolerance: '{}' is not NAME=VALUE; allowed names: {}", item, names));
+    const std::string name = item.substr(0, eq), text = item.substr(eq + 1);
+    double value = 0.0;
+    std::size_t used = 0;
+    try {
+      value = std::stod(text, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != text.size())
+      throw octocd::InputError(
+          fmt::format("--tolerance: {}: '{}' is not a number; allowed: a finite number >= 0", name, text));
+    octocd::set_tolerance(vo.tol, name, value);
+    vo.overridden.push_back(name);
+  }
+  const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
+  if (o.engine == "bullet")
+    throw octocd::InputError("--engine: bullet cannot be validated (no per-frame record); allowed: cpu, cuda");
   std::unique_ptr<octocd::TraceWriter> trace;
   if (!o.trace.empty()) {
-    vo.on_step = [&](const octocd::World& w) {
+    vo.on_step = [&](const octocd::Engine& w) {
       if (!trace) {
-        octocd::TraceMetadata meta = octocd::trace_metadata(w, "cpu", 10);
+        octocd::TraceMetadata meta = octocd::trace_metadata(w, 10);
         meta.start_time = utc_now();
         trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(w),
                                                       octocd::TraceOptions{});
@@ -273,7 +310,7 @@ int validate_command(const ValidateOptions& o) {
   }
   std::vector<octocd::ValidationResult> results;
   try {
-    results = octocd::validate_scene(scene, vo);
+    results = octocd::validate_engine([&] { return make_engine(o.engine, model); }, vo);
   } catch (const octocd::RuntimeError&) {
     if (trace) trace->close();
     throw;
@@ -282,9 +319,9 @@ int validate_command(const ValidateOptions& o) {
     trace->close();
     octocd::write_validation(o.trace, results);
   }
-  fmt::print("validate {} ({} frames, checks every {}, against: {})\n\n", scene.name, o.frames, o.every,
-             o.against);
-  fmt::print("{}", octocd::format_results(results));
+  fmt::print("validate {} (engine {}, {} frames, checks every {}, against: {})\n\n", scene.name, o.engine,
+             o.frames, o.every, o.against);
+  fmt::print("{}", octocd::format_results(results, vo.overridden));
   const bool all_pass = std::all_of(results.begin(), results.end(),
                                     [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
   fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
@@ -306,7 +343,7 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--engine", run.engine,
                       "cpu: octocd's CPU reference pipeline; bullet: the same scene in Bullet's "
                       "btDiscreteDynamicsWorld (translation-only boxes), same trace layout")
-      ->check(CLI::IsMember({"cpu", "bullet"}))
+      ->check(CLI::IsMember({"cpu", "cuda", "bullet"}))
       ->default_val("cpu");
   std::string bp_help = "Broadphase, overrides the scene's broadphase.name: ";
   for (const auto& name : octocd::all_broadphase_names()) bp_help += name + " ";
@@ -341,6 +378,18 @@ int main(int argc, char** argv) {
                       "Check candidate sets, midphase and normals every K-th frame (>= 1)")
       ->check(CLI::PositiveNumber)
       ->default_val(10);
+  val_cmd->add_option("--engine", val.engine,
+                      "cpu: the CPU reference; cuda: the GPU engine (needs a CUDA build and device)")
+      ->check(CLI::IsMember({"cpu", "cuda"}))
+      ->default_val("cpu");
+  {
+    std::string names;
+    for (const auto& e : octocd::tolerance_table())
+      names += (names.empty() ? "" : ", ") + std::string(e.name) + " (" + e.unit + ")";
+    val_cmd->add_option("--tolerance", val.tolerances,
+                        "Override a validator bound, NAME=VALUE, repeatable; marked '*' in the table. "
+                        "Names: " + names);
+  }
   val_cmd->add_option("--trace", val.trace,
                       "Write the validated run as a trace with the results under /validation");
 

@@ -459,7 +459,8 @@ Scene parse_scene(const std::string& text, const std::string& origin, const std:
     const json& r = j["response"];
     c.expect_object(r, "response", "an object of Table 1 parameters");
     c.check_keys(r, "response", {"slop", "beta", "alpha", "restitution", "restitution_threshold", "impulse_floor",
-                                 "mu_static", "mu_kinetic", "max_velocity", "epsilon"});
+                                 "mu_static", "mu_kinetic", "max_velocity", "epsilon", "overlap",
+                                 "iterations"});
     struct Param {
       const char* name;
       float ContactParams::*member;
@@ -484,6 +485,17 @@ Scene parse_scene(const std::string& text, const std::string& origin, const std:
     for (const Param& p : params)
       if (r.contains(p.name))
         s.response.*(p.member) = c.ranged(r[p.name], child("response", p.name), p.lo, p.lo_incl, p.hi, p.hi_incl, p.allowed);
+    // SPEC 6: the reading of Eq. 9 and the relaxation passes.
+    if (r.contains("overlap")) {
+      const std::string allowed = "\"separating\" (default) or \"paper\"";
+      const std::string o = c.string(r["overlap"], "response.overlap", allowed);
+      if (o == "separating") s.response.overlap = OverlapMode::Separating;
+      else if (o == "paper") s.response.overlap = OverlapMode::Paper;
+      else c.fail("response.overlap", "unknown value " + r["overlap"].dump(), allowed);
+    }
+    if (r.contains("iterations"))
+      s.response.iterations = static_cast<int>(
+          c.integer(r["iterations"], "response.iterations", 1, 1000, "integer in [1, 1000]"));
   }
 
   if (j.contains("theta")) {

@@ -535,8 +535,8 @@ const std::string& TraceWriter::path() const { return impl_->path; }
 
 // ---------------------------------------------------------------------------------------
 
-TraceMetadata trace_metadata(const World& world, const std::string& engine, int state_every) {
-  const Scene& s = world.scene();
+TraceMetadata trace_metadata(const Engine& engine, int state_every) {
+  const Scene& s = engine.scene();
   TraceMetadata meta;
   meta.scene_name = s.name;
   meta.scene_json = s.json;
@@ -551,7 +551,9 @@ TraceMetadata trace_metadata(const World& world, const std::string& engine, int 
                    {"mu_static", r.mu_static},
                    {"mu_kinetic", r.mu_kinetic},
                    {"max_velocity", r.max_velocity},
-                   {"epsilon", r.epsilon}};
+                   {"epsilon", r.epsilon},
+                   {"overlap", r.overlap == OverlapMode::Paper ? "paper" : "separating"},
+                   {"iterations", r.iterations}};
   p["theta"] = s.theta ? nlohmann::json(*s.theta) : nlohmann::json("auto");
   p["dt"] = s.dt;
   p["frames"] = s.frames;
@@ -564,22 +566,22 @@ TraceMetadata trace_metadata(const World& world, const std::string& engine, int 
   p["midphase"] = midphase_text(s.midphase);
   p["mesh_octree_depth"] = s.mesh_octree_depth;
   meta.parameters_json = p.dump();
-  meta.engine = engine;
-  meta.broadphase = s.broadphase.name;
+  meta.engine = engine.name();
+  meta.broadphase = engine.broadphase_name();
   meta.midphase = midphase_text(s.midphase);
   meta.build_id = build_id();
-  meta.device = cpu_description();
+  meta.device = engine.device();
   meta.start_time = iso_utc_now();
   meta.dt = s.dt;
   meta.state_every = state_every;
   return meta;
 }
 
-TraceBodies trace_bodies(const World& world) {
+TraceBodies trace_bodies(const Engine& engine) {
   TraceBodies tb;
-  const auto& info = world.bodies();
-  const auto& shapes = world.shapes();
-  const BodyState& st = world.state();
+  const auto& info = engine.bodies();
+  const auto& shapes = engine.shapes();
+  const BodyState& st = engine.state();
   for (std::size_t i = 0; i < info.size(); ++i) {
     tb.shape_id.push_back(info[i].shape);
     tb.inverse_mass.push_back(i < st.w.size() ? st.w[i] : 0.0f);

@@ -3,6 +3,7 @@
 /// every setting and why).
 
 #include "octocd/bullet_world.hpp"
+#include "octocd/version.hpp"
 
 #include <btBulletDynamicsCommon.h>
 
@@ -57,9 +58,13 @@ struct BulletWorld::Impl {
   }
 };
 
-BulletWorld::BulletWorld(const World& src) : impl_(std::make_unique<Impl>()) {
+BulletWorld::BulletWorld(const World& src) : BulletWorld(src.shared_model(), src.state()) {}
+
+BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& initial)
+    : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
-  const Scene& scene = src.scene();
+  const Model& src = *model_;
+  const Scene& scene = src.scene;
   m.dt = scene.dt;
   m.slop = scene.response.slop;
   m.config = std::make_unique<btDefaultCollisionConfiguration>();
@@ -76,7 +81,7 @@ BulletWorld::BulletWorld(const World& src) : impl_(std::make_unique<Impl>()) {
   info.m_splitImpulse = 1;
   info.m_splitImpulsePenetrationThreshold = 0;
 
-  for (const Shape& s : src.shapes()) {
+  for (const Shape& s : src.shapes) {
     const Vec3 he = 0.5f * (s.local.max - s.local.min);
     m.shapes.push_back(std::make_unique<btBoxShape>(to_bt(he)));  // default margin 0.04
   }
@@ -85,12 +90,12 @@ BulletWorld::BulletWorld(const World& src) : impl_(std::make_unique<Impl>()) {
   const btScalar friction = std::sqrt(scene.response.mu_kinetic);
   const btScalar restitution = std::sqrt(scene.response.restitution);
 
-  const BodyState& s0 = src.state();
+  const BodyState& s0 = initial;
   m.state = s0;
   const std::size_t n = s0.size();
   m.bodies.reserve(n);
   for (std::size_t i = 0; i < n; ++i) {
-    btBoxShape* box = m.shapes[src.bodies()[i].shape].get();
+    btBoxShape* box = m.shapes[src.bodies[i].shape].get();
     const float w = s0.w[i];
     const btScalar mass = w > 0.0f ? btScalar(1.0f / w) : btScalar(0);
     btTransform t;
@@ -178,5 +183,11 @@ const FrameMetrics& BulletWorld::step() {
 const BodyState& BulletWorld::state() const { return impl_->state; }
 const FrameMetrics& BulletWorld::last_metrics() const { return impl_->metrics; }
 std::int64_t BulletWorld::frame() const { return impl_->frame; }
+std::string BulletWorld::device() const { return cpu_description(); }
+bool BulletWorld::has_stage(Stage s) const {
+  // stepSimulation is one call: Bullet's broadphase, narrow phase and solver are timed
+  // together under "response"; the reading back under "metrics".
+  return s == Stage::Response || s == Stage::Metrics;
+}
 
 }  // namespace octocd

@@ -181,7 +181,7 @@ struct ReferenceGeometry::Impl {
   }
 };
 
-ReferenceGeometry::ReferenceGeometry(const World& world) : impl_(std::make_unique<Impl>()) {
+ReferenceGeometry::ReferenceGeometry(const Engine& world) : impl_(std::make_unique<Impl>()) {
   for (const Shape& s : world.shapes()) {
     impl_->shapes.push_back(s.mesh ? build_mesh(s) : build_box(s));
   }

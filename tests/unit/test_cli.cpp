@@ -237,3 +237,38 @@ TEST_F(Cli, ValidateBadInputExitsTwo) {
   r = run_octocd("run " + path + " --engine physx");
   EXPECT_EQ(r.code, 2) << r.output;
 }
+
+// Issue 6: `octocd validate` exits 3 when a validator fails. A small box inside a bigger
+// one with Eq. 9 read as written (`paper`) is never separated: Eq. 14 fails.
+TEST_F(Cli, ValidateFailingSceneExitsThreeAndToleranceOverrides) {
+  const std::string text = R"({
+    "name": "box-in-box", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]},
+    "gravity": [0, 0, 0], "walls": "none", "frames": 20, "response": {"overlap": "paper"},
+    "groups": [
+      {"name": "big", "shape": {"box": [0.5, 0.5, 0.5]}, "count": 1, "mass": 1.0, "positions": [[0, 0, 0]]},
+      {"name": "small", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 1.0, "positions": [[0.05, 0.2, 0.0]]}
+    ]})";
+  const std::string path = scene("box-in-box", text);
+  Result r = run_octocd("validate " + path + " --frames 20 --every 5 --against none");
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("VALIDATION FAILED"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("non-penetration"), std::string::npos) << r.output;
+  // The same bound loosened by the user: passes, and the table marks the bound.
+  r = run_octocd("validate " + path + " --frames 20 --every 5 --against none --tolerance contraction_m=1");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("* bound set with --tolerance"), std::string::npos) << r.output;
+  r = run_octocd("validate " + path + " --tolerance no_such=1");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("allowed: contraction_m"), std::string::npos) << r.output;
+  r = run_octocd("validate " + path + " --tolerance contraction_m=abc");
+  EXPECT_EQ(r.code, 2) << r.output;
+}
+
+// Issue 7: `--engine cuda` without a device (or in a build without CUDA) exits 1 and says
+// which; with a device it runs.
+TEST_F(Cli, CudaEngineWithoutDeviceExitsOne) {
+  const Result r = run_octocd("run " + scene("ok", box_scene("")) + " --engine cuda --quiet");
+  if (r.code == 0) GTEST_SKIP() << "a CUDA device is present: the engine ran";
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("CUDA"), std::string::npos) << r.output;
+}

@@ -244,6 +244,35 @@ TEST(Scene, ResponseRanges) {
   EXPECT_NO_THROW(parse_scene(j.dump(), "ok.json"));
 }
 
+// SPEC 6 revision 2: response.overlap and response.iterations.
+TEST(Scene, OverlapAndIterations) {
+  json j = minimal();
+  j["response"] = {{"overlap", "paper"}, {"iterations", 8}};
+  const Scene s = parse_scene(j.dump(), "ok.json");
+  EXPECT_EQ(s.response.overlap, OverlapMode::Paper);
+  EXPECT_EQ(s.response.iterations, 8);
+  EXPECT_EQ(parse_scene(minimal().dump(), "ok.json").response.overlap, OverlapMode::Separating);
+  EXPECT_EQ(parse_scene(minimal().dump(), "ok.json").response.iterations, 1);
+  j = minimal();
+  j["response"] = {{"overlap", "loose"}};
+  expect_error(j, "response.overlap: unknown value \"loose\"; allowed: \"separating\" (default) or \"paper\"");
+  j["response"] = {{"overlap", 1}};
+  expect_error(j, "response.overlap");
+  for (const json& bad : {json(0), json(1001), json(1.5), json("8"), json(-3)}) {
+    j = minimal();
+    j["response"] = {{"iterations", bad}};
+    expect_error(j, "response.iterations");
+    try {
+      parse_scene(j.dump(), "bad.json");
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("integer in [1, 1000]"), std::string::npos) << e.what();
+    }
+  }
+  j = minimal();
+  j["response"] = {{"iterations", 1000}};
+  EXPECT_NO_THROW(parse_scene(j.dump(), "ok.json"));
+}
+
 TEST(Scene, NonFiniteNumbersAreRejected) {
   // JSON has no NaN or infinity, but 1e400 parses as +inf.
   const std::string text =

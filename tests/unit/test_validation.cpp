@@ -53,6 +53,7 @@ std::vector<ValidationResult> run(World& world, int frames,
                                   FrameValidators::ConfirmFn midphase = nullptr) {
   ValidationOptions opt;
   opt.every = 5;
+  world.set_recording(true);
   FrameValidators v(world, opt, std::move(extra));
   if (midphase) v.set_midphase(std::move(midphase));
   for (int f = 1; f <= frames; ++f) {
@@ -165,7 +166,7 @@ TEST(Validators, AnalyticAndBulletCatchWrongFriction) {
   const Tolerances tol;
   {
     World good(scene);
-    const ValidationResult a = validate_analytic(good, tol);
+    const ValidationResult a = validate_analytic(good, scene.frames, tol);
     EXPECT_TRUE(a.pass) << a.detail;
     World good2(scene);
     const ValidationResult b = validate_against_bullet(good2, scene.frames, tol);
@@ -175,7 +176,7 @@ TEST(Validators, AnalyticAndBulletCatchWrongFriction) {
   f.friction_sign = true;
   World bad(scene);
   bad.plant_faults(f);
-  const ValidationResult a = validate_analytic(bad, tol);
+  const ValidationResult a = validate_analytic(bad, scene.frames, tol);
   EXPECT_FALSE(a.pass) << a.detail;
   World bad2(scene);
   bad2.plant_faults(f);
@@ -189,7 +190,7 @@ TEST(Validators, ResultsGoToTheTrace) {
           .string();
   World world(mixed_boxes());
   {
-    TraceWriter w(path, trace_metadata(world, "cpu", 10), trace_bodies(world), TraceOptions{});
+    TraceWriter w(path, trace_metadata(world, 10), trace_bodies(world), TraceOptions{});
     w.append_frame(world.step(), world.state(), world.contacts());
   }
   const auto rs = run(world, 20);

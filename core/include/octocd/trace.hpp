@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "octocd/math.hpp"
-#include "octocd/world.hpp"
+#include "octocd/engine.hpp"
 
 namespace octocd {
 
@@ -75,10 +75,11 @@ class TraceWriter {
   std::unique_ptr<Impl> impl_;
 };
 
-/// Builds the metadata and body tables of a world for a trace.
-TraceMetadata trace_metadata(const World& world, const std::string& engine, int state_every);
-/// Per-body tables of a world for /bodies.
-TraceBodies trace_bodies(const World& world);
+/// Builds the root metadata of a trace for `engine` (its name, device, broadphase; the
+/// scene and its parameters, including response.overlap and response.iterations).
+TraceMetadata trace_metadata(const Engine& engine, int state_every);
+/// Per-body tables of an engine's model for /bodies.
+TraceBodies trace_bodies(const Engine& engine);
 
 /// What a trace holds, read back (for tests and `octocd` tools).
 struct TraceSummary {

@@ -57,10 +57,12 @@ namespace octocd {
 /// internal step of dt per frame, no sub-stepping and no interpolation. Bullet's
 /// integrator is semi-implicit Euler like SPEC 4.1 (v += dt g, then x += dt v), so free
 /// fall follows the same closed form as octocd.
-class BulletWorld {
+class BulletWorld : public Engine {
  public:
-  /// Copies the scene, shapes, bodies and current state (x, v, w) of `world`.
+  /// The scene, shapes and bodies of `world` (its model, shared) and its current state.
   explicit BulletWorld(const World& world);
+  /// From a model (shared, not copied) and the state to start from (x, v, w per body).
+  BulletWorld(std::shared_ptr<const Model> model, const BodyState& initial);
   ~BulletWorld();
   BulletWorld(const BulletWorld&) = delete;
   BulletWorld& operator=(const BulletWorld&) = delete;
@@ -77,16 +79,30 @@ class BulletWorld {
   ///   -distance; 0 when none); penetration_share_above_slop = share of those points
   ///   whose depth exceeds scene.response.slop.
   /// - kinetic_energy and momentum (double) over dynamic bodies; memory_bytes = 0.
-  const FrameMetrics& step();
+  const FrameMetrics& step() override;
   /// x = centre of each body's AABB (Bullet's centre of mass), v = linear velocity, w as
   /// given. Updated by step().
-  const BodyState& state() const;
+  const BodyState& state() const override;
   /// Metrics of the last step.
-  const FrameMetrics& last_metrics() const;
+  const FrameMetrics& last_metrics() const override;
   /// Steps taken so far.
-  std::int64_t frame() const;
+  std::int64_t frame() const override;
+  /// "bullet".
+  std::string name() const override { return "bullet"; }
+  /// The CPU model.
+  std::string device() const override;
+  /// "bullet-dbvt" (btDbvtBroadphase).
+  std::string broadphase_name() const override { return "bullet-dbvt"; }
+  /// The model it was built from.
+  const Model& model() const override { return *model_; }
+  /// Bullet exposes no octocd contact records: always empty.
+  const std::vector<ContactRecord>& contacts() const override { return no_contacts_; }
+  /// Only `response` (the whole stepSimulation) and `metrics` are timed.
+  bool has_stage(Stage s) const override;
 
  private:
+  std::shared_ptr<const Model> model_;
+  std::vector<ContactRecord> no_contacts_;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -60,7 +60,7 @@ struct ReferenceNormal {
 /// their FCL objects locally, so concurrent normal() calls are safe.
 class ReferenceGeometry {
  public:
-  explicit ReferenceGeometry(const World& world);
+  explicit ReferenceGeometry(const Engine& world);
   ~ReferenceGeometry();
   ReferenceGeometry(const ReferenceGeometry&) = delete;
   ReferenceGeometry& operator=(const ReferenceGeometry&) = delete;

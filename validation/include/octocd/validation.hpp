@@ -6,6 +6,7 @@
 /// pass/fail and a detail line (the first offending frame/pair when it fails). Every
 /// tolerance is defined once, in `Tolerances`, with the reason for its value.
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -15,6 +16,7 @@
 #include "octocd/broadphase.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/engine.hpp"
 #include "octocd/world.hpp"
 
 namespace octocd {
@@ -28,6 +30,9 @@ struct ValidationResult {
   bool pass = true;      ///< measured within bound
   bool applicable = true;  ///< false: this scene has nothing to check (counts as a pass)
   std::string detail;    ///< first offending frame/pair, or a short note
+  /// Names of the Tolerances fields this verdict depends on (comma-separated, "" none);
+  /// format_results marks the row when one of them was overridden.
+  std::string tolerances;
 };
 
 /// Every tolerance of the validators, with the reason for its value (issue 3: "stated in
@@ -50,15 +55,29 @@ struct Tolerances {
   /// FCL's the geometric one; for meshes they can differ by up to 90 degrees on oblique
   /// contacts, but a sign flip means the response pushes bodies into each other.
   double normal_sign_agreement = 0.90;
-  /// Analytic free fall (Eq. 2-3): |x - closed form| <= this x n x (1 + |x|) (float32
-  /// accumulation over n steps).
-  double freefall_rel_per_step = 2e-6;
+  /// Analytic free fall (Eq. 2-3): |x - closed form| <= this x n x (1 + |x|). Measured
+  /// float32 error: 2.5e-8; explicit Euler differs by |g| dt^2 per step (9.8e-6 m at
+  /// dt = 1 ms), i.e. >= 4.7e-7 for |x| < 20 m, so it fails this bound.
+  double freefall_rel_per_step = 1e-7;
   /// Bounce: |v_out - e v_in| <= this x |v_in| (one float32 impulse).
   double bounce_rel = 1e-4;
   /// Slide: stopping distance within this share of v0^2/(2 mu_k g) (issue 2: 2%).
   double slide_rel = 0.02;
-  /// Resting stack: once settled (frame 200), no box moves more than this many slops.
+  /// Resting stack: from frame 200 on, every body stays within this many slops of its
+  /// rest height (its initial height lowered by one slop per contact below it: SPEC 6
+  /// leaves each contact's first delta of penetration uncorrected).
   double stack_slops = 1.0;
+  /// Applied state (SPEC 7.9): engine vs the double re-derivation, per component,
+  /// |diff| <= this x 2^-23 x (iterations + 2) x (the magnitudes that entered the value:
+  /// |x| + the corrections + the largest AABB coordinate of its contacts; |v| + |g dt| +
+  /// the velocity changes + the largest velocity of its contacts' bodies). A few float32
+  /// roundings per operation chain; explicit Euler (|g| dt^2 = 9.8e-6 m per step) and
+  /// summed instead of averaged corrections exceed it.
+  double applied_state_ulps = 4.0;
+  /// Applied-state momentum of an isolated dynamic group: |sum m v' - sum m v| <= this x
+  /// (sum m |dv|) + 1e-9 kg m/s; mass-weighted centre of an isolated pair likewise with
+  /// the position tolerance added.
+  double applied_conservation_rel = 1e-5;
   /// Bullet comparison: settled centre-of-mass heights differ by at most this share of the
   /// mean body height. Bullet uses box shapes equal to the AABBs and its own solver
   /// (sequential impulses, split impulse), octocd a Jacobi AABB response: same physics,
@@ -77,18 +96,49 @@ struct ValidationOptions {
   bool against_bullet = true;  ///< run the Bullet dynamics comparison (scenes it applies to)
   bool against_fcl = true;     ///< include Bullet/FCL broadphases; FCL reference normals
   Tolerances tol;
-  /// Called after every step of the validated world (e.g. to write a trace); may be empty.
-  std::function<void(const World&)> on_step;
+  /// Names of tolerances the user overrode (marked in the table).
+  std::vector<std::string> overridden;
+  /// Called after every step of the validated engine (e.g. to write a trace); may be empty.
+  std::function<void(const Engine&)> on_step;
 };
 
-/// Per-frame validators, fed frame by frame from a World (after World::step()).
-/// Hooks let tests plant faults: extra broadphases (e.g. one that drops a pair) and the
-/// midphase function under test.
+/// One entry of the tolerance table: its name (as in `--tolerance NAME=VALUE`), the
+/// Tolerances member, and the unit or meaning of the value.
+struct ToleranceEntry {
+  const char* name;
+  double Tolerances::*member;
+  const char* unit;
+};
+/// Every tolerance, in declaration order.
+const std::vector<ToleranceEntry>& tolerance_table();
+/// Sets tolerance `name` to `value` (finite, >= 0). Throws InputError naming `--tolerance`,
+/// the name and the allowed names or range.
+void set_tolerance(Tolerances& tol, const std::string& name, double value);
+
+/// The state SPEC 4.1 + SPEC 6 predict for one step, re-derived in double precision from
+/// a FrameRecord's pre-step state and confirmed contacts (SPEC 7.9).
+struct StatePrediction {
+  std::vector<std::array<double, 3>> x_int;  ///< positions after integration (m)
+  std::vector<std::array<double, 3>> x, v;   ///< post-step positions (m), velocities (m/s)
+  std::vector<std::array<double, 3>> x_tol, v_tol;  ///< per-component float32 tolerances
+  std::vector<std::uint8_t> judged;   ///< 0: a decision within float32 rounding of its threshold
+  std::vector<std::uint8_t> clamped;  ///< 1: Eq. 23 clamped a component
+  std::vector<std::uint32_t> contact_count;  ///< first-pass contacts per body
+};
+/// Predicts the post-step state from `rec` (x_pre, v_pre, confirmed) and the model
+/// (scene parameters, local boxes, inverse masses). Written from the SPEC text alone: no
+/// engine code is called. Shapes: every vector has one entry per body.
+StatePrediction predict_step(const Model& model, const FrameRecord& rec, const Tolerances& tol);
+
+/// Per-frame validators, fed frame by frame from an Engine that records (after each
+/// step(), with set_recording(true)): they read only its FrameRecord and model, so they
+/// judge what the engine applied. Hooks let tests plant faults: extra broadphases (e.g.
+/// one that drops a pair) and the midphase function under test.
 class FrameValidators {
  public:
   /// `broadphases` are compared with `flat` (the caller owns them via the vector).
   /// `against_fcl` enables the FCL reference normals (needs meshes' FCL models).
-  FrameValidators(const World& world, const ValidationOptions& options,
+  FrameValidators(const Engine& engine, const ValidationOptions& options,
                   std::vector<std::unique_ptr<BroadPhase>> broadphases);
   ~FrameValidators();
 
@@ -98,11 +148,13 @@ class FrameValidators {
   /// Replaces the midphase under test (planted-fault tests).
   void set_midphase(ConfirmFn fn);
 
-  /// Checks the frame the world just stepped. `checked` selects the costly validators
-  /// (candidate sets, midphase completeness, normals) for this frame.
-  void observe(const World& world, bool checked);
+  /// Checks the frame the engine just stepped. `checked` selects the costly validators
+  /// (candidate sets, midphase completeness, normals) for this frame; the applied-state
+  /// and per-contact checks run every frame. Throws RuntimeError when the engine does
+  /// not record (Engine::can_record false or recording off).
+  void observe(const Engine& engine, bool checked);
 
-  /// Results of validators 1-6 so far.
+  /// Results of validators 1-6 and 9 so far.
   std::vector<ValidationResult> results() const;
 
  private:
@@ -110,23 +162,46 @@ class FrameValidators {
   std::unique_ptr<Impl> impl_;
 };
 
-/// Validator 7 (SPEC 7.7): the analytic scene `scene.name` (free-fall, bounce, slide,
-/// box-stack) run in `world` against its closed form; not applicable to other scenes.
-/// Steps `world` itself (at most scene.frames steps).
-ValidationResult validate_analytic(World& world, const Tolerances& tol);
+/// What a scene is, recognised by its content (SPEC 7.7), never by its name.
+enum class SceneKind {
+  FreeFall,      ///< one dynamic body, gravity, nothing under it: Eq. 2-3 closed form
+  Bounce,        ///< one dynamic body at rest above a static support, impact above v_th
+  Slide,         ///< one dynamic body resting on a static support, launched sideways
+  RestingStack,  ///< several dynamic bodies at rest, each touching what is under it
+  Pile,          ///< several dynamic bodies at rest above a floor, falling (settling)
+  Other,         ///< nothing analytic
+};
+/// Recognises the scene kind from the model and its initial state (gravity along -y).
+SceneKind classify_scene(const Model& model);
+/// "free fall", "bounce", "slide", "resting stack", "pile", "other".
+const char* scene_kind_name(SceneKind kind);
 
-/// Validator 8 (SPEC 7.8): `world` (octocd) against Bullet's btDiscreteDynamicsWorld on
-/// the same scene: settled centre-of-mass height (box-stack, bunny-stack-50) or the
+/// Validator 7 (SPEC 7.7): the analytic scene kinds (classify_scene) run in `engine`
+/// against their closed forms: free fall, bounce, slide, resting stack. Not applicable
+/// (n/a) only to the other kinds. Steps `engine` itself (at most `frames` steps).
+ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances& tol);
+
+/// Validator 8 (SPEC 7.8): `engine` against Bullet's btDiscreteDynamicsWorld built from
+/// the same model: settled centre-of-mass height (resting stacks and piles) or the
 /// centre-of-mass trajectory (bounce, slide) over `frames` steps. Not applicable to other
-/// scenes. Steps `world` itself.
-ValidationResult validate_against_bullet(World& world, int frames, const Tolerances& tol);
+/// kinds. Steps `engine` itself.
+ValidationResult validate_against_bullet(Engine& engine, int frames, const Tolerances& tol);
 
-/// Runs every validator on a scene: validators 1-6 over `options.frames` steps, then 7 and
-/// 8 on fresh worlds. Uses octocd's and (against_fcl) the reference broadphases.
+/// Makes a fresh engine of the kind being validated (each call a new one, from the start).
+using EngineFactory = std::function<std::unique_ptr<Engine>()>;
+
+/// Runs every validator on the engines `make` builds: validators 1-6 and 9 over
+/// `options.frames` steps, then 7 and 8 on fresh engines. Uses octocd's and (against_fcl)
+/// the reference broadphases. The engines must be able to record (FrameRecord).
+std::vector<ValidationResult> validate_engine(const EngineFactory& make, const ValidationOptions& options);
+
+/// validate_engine with the CPU engine (World) on `scene`.
 std::vector<ValidationResult> validate_scene(const Scene& scene, const ValidationOptions& options);
 
-/// Prints results as a table (name, figure, measured, bound, verdict, detail).
-std::string format_results(const std::vector<ValidationResult>& results);
+/// Prints results as a table (name, figure, measured, bound, verdict, detail); a bound
+/// that depends on an overridden tolerance is marked with '*'.
+std::string format_results(const std::vector<ValidationResult>& results,
+                           const std::vector<std::string>& overridden = {});
 
 /// Appends `/validation` to an existing trace (SPEC 8): one row per result with name,
 /// figure, measured, bound, pass, applicable, detail. Throws RuntimeError naming the path.

@@ -1,0 +1,195 @@
+#pragma once
+/// \file engine.hpp
+/// The two seams every engine shares (ARCHITECTURE.md): one `Engine` interface that the
+/// CLI, the trace writer and the validators hold for `cpu`, `cuda` and `bullet` alike, and
+/// one `FrameRecord` per step: what an engine did, in engine-neutral arrays, so the
+/// validators judge the state an engine actually applied.
+///
+/// `Model` is what every engine is built from: the scene, its shapes (meshes with their
+/// per-mesh octrees) and its bodies with their initial state. It is built once on the
+/// host (`build_model`) and shared, so every engine starts from the same bits.
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "octocd/broadphase.hpp"
+#include "octocd/math.hpp"
+#include "octocd/mesh.hpp"
+#include "octocd/mesh_octree.hpp"
+#include "octocd/scene.hpp"
+
+namespace octocd {
+
+/// The named stages of one step, in execution order (like Box2D's profile).
+enum class Stage : int {
+  Integrate = 0,   ///< Eq. 1-3
+  Aabbs,           ///< world AABBs from positions
+  Broadphase,      ///< SPEC 5.1
+  Midphase,        ///< SPEC 5.2-5.3: per-mesh octree levels + vertex proximity
+  Response,        ///< SPEC 6: corrections, impulses, friction, clamp
+  Metrics,         ///< energy, momentum, penetration statistics
+  Count
+};
+
+/// Stage name as used in traces and summaries ("integrate", "aabbs", "broadphase",
+/// "midphase", "response", "metrics").
+const char* stage_name(Stage s);
+
+/// Everything measured in one step (one row of the trace's /frames).
+struct FrameMetrics {
+  std::int64_t frame = 0;          ///< 1-based index of the step just taken
+  double time = 0.0;               ///< simulated time after the step (s)
+  double step_ms = 0.0;            ///< wall time of the whole step (ms)
+  std::array<double, static_cast<int>(Stage::Count)> stage_ms{};  ///< wall ms per stage
+  std::uint64_t cell_candidates = 0;  ///< broadphase pairs before the exact AABB test
+  std::uint64_t aabb_pairs = 0;       ///< broadphase pairs (overlapping world AABBs)
+  std::uint64_t box_tests = 0;        ///< midphase cell-box tests
+  std::uint64_t box_pairs = 0;        ///< midphase surviving deepest-level box pairs
+  std::uint64_t vertex_tests = 0;     ///< narrow-phase vertex tests
+  /// Contacts resolved by the response's first pass: confirmed by the midphase and kept
+  /// by Eq. 9 (all three overlaps > 0); equals the rows of /contacts for the frame.
+  std::uint64_t contacts = 0;
+  double penetration_mean = 0.0;   ///< mean AABB d_p over those contacts (m), Eq. 10
+  double penetration_max = 0.0;    ///< max d_p (m)
+  double penetration_share_above_slop = 0.0;  ///< share of contacts with d_p > delta, [0, 1]
+  double kinetic_energy = 0.0;     ///< sum 0.5 m |v|^2 over dynamic bodies (J)
+  std::array<double, 3> momentum{};  ///< sum m v over dynamic bodies (kg m/s)
+  std::uint64_t memory_bytes = 0;  ///< bytes held by the pipeline's buffers
+};
+
+/// One contact as resolved by the response's first pass (SPEC 6): optional /contacts in
+/// traces; the per-contact validators (contraction, friction) read these terms.
+struct ContactRecord {
+  Pair pair;            ///< (a, b), a < b
+  Vec3 normal;          ///< from b to a (unit)
+  float depth = 0.0f;   ///< AABB d_p (m) before correction (Eq. 10)
+  float jn = 0.0f;      ///< normal impulse (kg m/s)
+  float jt = 0.0f;      ///< friction impulse along t (kg m/s)
+  int axis = 1;         ///< axis of the normal (0 = x, 1 = y, 2 = z)
+  Vec3 v_a, v_b;        ///< pre-response velocities (m/s)
+  Vec3 dx_a, dx_b;      ///< this contact's position corrections, before per-body averaging (m)
+  Vec3 dv_a, dv_b;      ///< this contact's velocity changes (m/s)
+};
+
+/// A shape shared by bodies: a box or a mesh with its octree. Local frame centred on the
+/// local AABB centre, so a body's position is its AABB centre.
+struct Shape {
+  std::string name;                          ///< e.g. "bunny@0.2" or "box"
+  Aabb local;                                ///< local AABB (m)
+  std::shared_ptr<const MeshOctree> octree;  ///< nullptr for boxes
+  std::shared_ptr<const Mesh> mesh;          ///< welded, normalised, scaled; nullptr for boxes
+  float mean_edge = 0.0f;                    ///< mean edge length (m), 0 for boxes
+};
+
+/// Hot body state in structure-of-arrays form (SPEC 3), float32. Index = body id.
+struct BodyState {
+  std::vector<Vec3> x;   ///< positions: centre of the world AABB (m)
+  std::vector<Vec3> v;   ///< velocities (m/s)
+  std::vector<float> w;  ///< inverse masses (1/kg); 0 = static
+  /// Number of bodies.
+  std::size_t size() const { return x.size(); }
+};
+
+/// Cold per-body data, kept apart from the hot state.
+struct BodyInfo {
+  std::uint32_t shape = 0;  ///< index into Model::shapes
+  std::string group;        ///< scene group name ("walls" for generated walls)
+};
+
+/// What every engine is built from (SPEC 3): the scene, its shapes and its bodies with
+/// their initial state. Walls come first, then the groups' bodies in order.
+struct Model {
+  Scene scene;                  ///< the validated scene
+  std::vector<Shape> shapes;    ///< indexed by BodyInfo::shape
+  std::vector<BodyInfo> bodies; ///< per body
+  BodyState initial;            ///< state at frame 0
+  std::vector<float> theta_table;  ///< theta (m) per (shape a, shape b), shapes^2 entries
+
+  /// theta (m) for a pair of shapes: the scene's value or `auto` (SPEC 6).
+  float theta(std::uint32_t shape_a, std::uint32_t shape_b) const {
+    return theta_table[shape_a * shapes.size() + shape_b];
+  }
+  /// Local AABB of body i (m).
+  const Aabb& local_box(std::size_t i) const { return shapes[bodies[i].shape].local; }
+};
+
+/// Builds shapes (loading, welding, normalising and scaling meshes; building their
+/// octrees to max(D_m, deepest midphase level)), walls and bodies from a validated scene.
+/// Throws InputError naming the scene key for unreadable meshes.
+std::shared_ptr<const Model> build_model(const Scene& scene);
+
+/// What an engine did in one step, engine-neutral (ARCHITECTURE.md seam 2). Filled only
+/// while recording is on (Engine::set_recording); the validators read only this.
+struct FrameRecord {
+  std::int64_t frame = 0;           ///< the step this describes (1-based)
+  std::vector<Vec3> x_pre, v_pre;   ///< state before the step (before integration)
+  std::vector<Aabb> aabbs;          ///< world AABBs the broadphase saw (after integration)
+  std::vector<Pair> pairs;          ///< candidate pairs the engine itself used, sorted
+  std::vector<Pair> confirmed;      ///< pairs confirmed by midphase + narrow phase, sorted
+  std::vector<ContactRecord> contacts;  ///< first-pass response terms (Eq. 9 survivors)
+  std::vector<Vec3> x_post, v_post; ///< state after the step (what the engine applied)
+};
+
+/// One simulation engine: `cpu` (World), `cuda` (CudaWorld), `bullet` (BulletWorld).
+/// Holders never branch on the name. Not thread-safe.
+class Engine {
+ public:
+  virtual ~Engine() = default;
+
+  /// "cpu", "cuda" or "bullet".
+  virtual std::string name() const = 0;
+  /// The device it runs on (CPU model or GPU name).
+  virtual std::string device() const = 0;
+  /// The broadphase in use, as in `--broadphase` (e.g. "octree", "bullet-dbvt").
+  virtual std::string broadphase_name() const = 0;
+  /// The model the engine was built from (scene, shapes, bodies).
+  virtual const Model& model() const = 0;
+
+  /// Runs one step (SPEC 4) and returns its metrics. Throws RuntimeError naming the body
+  /// and frame when a position or velocity becomes non-finite.
+  virtual const FrameMetrics& step() = 0;
+  /// Hot state after the last step (host copy; for `cuda`, downloaded on demand).
+  virtual const BodyState& state() const = 0;
+  /// Metrics of the last step.
+  virtual const FrameMetrics& last_metrics() const = 0;
+  /// Steps taken so far.
+  virtual std::int64_t frame() const = 0;
+  /// Contacts resolved in the last step, in (a, b) order (empty for engines without
+  /// per-contact records, and for `cuda` unless recording).
+  virtual const std::vector<ContactRecord>& contacts() const = 0;
+
+  /// Whether this engine can fill FrameRecord (false for `bullet`).
+  virtual bool can_record() const { return false; }
+  /// Turns the per-step FrameRecord on or off (off by default: it costs copies).
+  virtual void set_recording(bool on) { (void)on; }
+  /// The last step's record (empty unless recording).
+  virtual const FrameRecord& record() const {
+    static const FrameRecord kEmpty;
+    return kEmpty;
+  }
+  /// Whether the engine runs stage `s` as octocd defines it (`bullet` has no midphase:
+  /// its stages are not split and are reported as one).
+  virtual bool has_stage(Stage s) const { (void)s; return true; }
+
+  /// The scene.
+  const Scene& scene() const { return model().scene; }
+  /// Shapes, indexed by BodyInfo::shape.
+  const std::vector<Shape>& shapes() const { return model().shapes; }
+  /// Cold per-body data.
+  const std::vector<BodyInfo>& bodies() const { return model().bodies; }
+  /// theta (m) for a pair of shapes (SPEC 6).
+  float theta(std::uint32_t shape_a, std::uint32_t shape_b) const {
+    return model().theta(shape_a, shape_b);
+  }
+  /// FNV-1a 64-bit hash of the bits of every x then every v of state(): bit-identical
+  /// states hash equal (determinism and CPU/GPU equality checks).
+  std::uint64_t state_hash() const;
+};
+
+/// FNV-1a 64-bit hash of the bits of every x then every v.
+std::uint64_t state_hash(const BodyState& state);
+
+}  // namespace octocd
