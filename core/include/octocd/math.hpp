@@ -116,8 +116,29 @@ OCTOCD_HD inline std::uint32_t morton_spread3(std::uint32_t v) {
   return v;
 }
 
-/// Response parameters, paper Table 1 and section 3.3 (defaults are the paper's).
-/// Constraints (section 3.3.3) are checked by the scene loader, not here.
+/// 30-bit Morton code of integer cell coordinates (x, y, z), each in [0, 2^10) (higher
+/// bits are dropped): bit 3i holds bit i of x, bit 3i+1 bit i of y, bit 3i+2 bit i of z
+/// (x in the low bit of each triple). The one bit order of the project: the per-mesh
+/// octree (SPEC 5.2, Algorithm A1) and the world octrees (SPEC 5.1) both use it. The
+/// code of a cell at depth d is the code of any of its depth-(d+k) descendants >> 3k.
+OCTOCD_HD inline std::uint32_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+  return morton_spread3(x) | (morton_spread3(y) << 1) | (morton_spread3(z) << 2);
+}
+
+/// How the per-axis overlap of Eq. 9 is read (SPEC 6, `response.overlap`).
+enum class OverlapMode : int {
+  /// p_i = min(max_A,i - min_B,i, max_B,i - min_A,i): the distance that separates the
+  /// boxes along axis i (default). Equal to `Paper` unless one box contains the other
+  /// along i, where it still separates them and Eq. 14's contraction holds.
+  Separating = 0,
+  /// Eq. 9 as written: p_i = min(max_A,i, max_B,i) - max(min_A,i, min_B,i), the width of
+  /// the overlap interval (the inner box's width when one contains the other).
+  Paper = 1,
+};
+
+/// Response parameters, paper Table 1 and section 3.3 (defaults are the paper's), plus
+/// SPEC 6's `overlap` and `iterations`. Constraints (section 3.3.3) are checked by the
+/// scene loader, not here.
 struct ContactParams {
   float slop = 0.001f;          ///< delta: tolerated penetration (m), > 0.
   float beta = 1.0f;            ///< Baumgarte factor (Eq. 11), in (0, 1].
@@ -129,6 +150,8 @@ struct ContactParams {
   float mu_kinetic = 0.5f;      ///< mu_k, kinetic friction coefficient (Eq. 21), >= 0.
   float max_velocity = 50.0f;   ///< v_max (m/s), per-component clamp (Eq. 23), finite > 0.
   float epsilon = 1e-6f;        ///< centre distance (m) below which n = +y (section 3.3 (3)).
+  OverlapMode overlap = OverlapMode::Separating;  ///< Eq. 9 reading (SPEC 6)
+  int iterations = 1;           ///< relaxation passes per step, in [1, 1000] (SPEC 6)
 };
 
 /// Result of the AABB penetration test (Eq. 9-10).
@@ -139,16 +162,18 @@ struct Penetration {
   Vec3 normal{0.0f, 1.0f, 0.0f};  ///< unit normal along `axis`, pointing from B to A
 };
 
-/// Paper Eq. 9-10 and the "fixed axis" safeguard: overlaps per axis of the world AABBs
-/// of A and B; any overlap <= 0 means no contact (hit = false). The normal is the axis of
-/// least overlap, signed so it points from B's AABB centre to A's; when the centres are
-/// closer than `epsilon` (m) the normal is +y (the paper's "fixed axis") and the depth is
-/// the y overlap.
-OCTOCD_HD inline Penetration penetration(const Aabb& a, const Aabb& b, float epsilon) {
+/// Paper Eq. 9-10 and the "fixed axis" safeguard (SPEC 6): overlaps per axis of the
+/// world AABBs of A and B, read as `mode` says; any overlap <= 0 means no contact (hit =
+/// false). The normal is the axis of least overlap, signed so it points from B's AABB
+/// centre to A's; when the centres are closer than `epsilon` (m) the normal is +y (the
+/// paper's "fixed axis") and the depth is the y overlap.
+OCTOCD_HD inline Penetration penetration(const Aabb& a, const Aabb& b, float epsilon,
+                                         OverlapMode mode = OverlapMode::Separating) {
   Penetration r;
   float p[3];
   for (int i = 0; i < 3; ++i) {
-    p[i] = fminf(a.max[i], b.max[i]) - fmaxf(a.min[i], b.min[i]);
+    p[i] = mode == OverlapMode::Paper ? fminf(a.max[i], b.max[i]) - fmaxf(a.min[i], b.min[i])
+                                      : fminf(a.max[i] - b.min[i], b.max[i] - a.min[i]);
     if (!(p[i] > 0.0f)) return r;
   }
   const Vec3 d = center(a) - center(b);
@@ -242,6 +267,43 @@ OCTOCD_HD inline ContactImpulse contact_impulse(Vec3 v_a, Vec3 v_b, float w_a, f
 OCTOCD_HD inline Vec3 clamp_velocity(Vec3 v, float v_max) {
   return {fminf(fmaxf(v.x, -v_max), v_max), fminf(fmaxf(v.y, -v_max), v_max),
           fminf(fmaxf(v.z, -v_max), v_max)};
+}
+
+/// The response terms of one contact in one pass (SPEC 6): penetration (Eq. 9-10), the
+/// correction split by Algorithm 3's weights (Eq. 11, 13), and the impulses (Eq. 16-22),
+/// all from the current world AABBs and velocities of A and B. `pen.hit` false: Eq. 9
+/// discards the contact and every term is zero.
+struct ContactTerms {
+  Penetration pen;      ///< depth, axis and normal (from B to A)
+  ContactImpulse imp;   ///< J_n, J_t and the velocity changes dv_a, dv_b (m/s)
+  Vec3 dx_a{0.0f, 0.0f, 0.0f};  ///< A's share of the correction, before averaging (m)
+  Vec3 dx_b{0.0f, 0.0f, 0.0f};  ///< B's share of the correction, before averaging (m)
+};
+
+/// Computes ContactTerms for A and B (world AABBs box_a, box_b; velocities v_a, v_b in
+/// m/s; inverse masses w_a, w_b in 1/kg). Both engines call this per contact and pass.
+OCTOCD_HD inline ContactTerms contact_terms(const Aabb& box_a, const Aabb& box_b, Vec3 v_a,
+                                            Vec3 v_b, float w_a, float w_b,
+                                            const ContactParams& p) {
+  ContactTerms t;
+  t.pen = penetration(box_a, box_b, p.epsilon, p.overlap);
+  if (!t.pen.hit) return t;
+  const Vec3 c = position_correction(t.pen, p);
+  t.dx_a = correction_share(w_a, w_a, w_b) * c;
+  t.dx_b = -(correction_share(w_b, w_a, w_b) * c);
+  t.imp = contact_impulse(v_a, v_b, w_a, w_b, t.pen.normal, p);
+  return t;
+}
+
+/// Applies one pass's reduced terms to a dynamic body (SPEC 6 parallel semantics):
+/// x += dx_sum / count (corrections averaged over the body's `count` contacts),
+/// v += dv_sum (velocity changes summed). count = 0: nothing changes. dx_sum and dv_sum
+/// are sums over the body's contacts in (a, b) order, starting from zero.
+OCTOCD_HD inline void apply_contact_sums(Vec3& x, Vec3& v, Vec3 dx_sum, Vec3 dv_sum,
+                                         unsigned count) {
+  if (count == 0) return;
+  x += (1.0f / static_cast<float>(count)) * dx_sum;
+  v += dv_sum;
 }
 
 /// Paper Eq. 2-3 (semi-implicit "explicit" Euler, SPEC 4.1): v += dt (g + w F);
