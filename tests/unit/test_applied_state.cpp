@@ -285,3 +285,26 @@ TEST(Tolerances, OverridesByNameAndRejectsUnknownNames) {
   EXPECT_NE(format_results(rs, {"contraction_m"}).find('*'), std::string::npos);
   EXPECT_EQ(format_results(rs, {}).find('*'), std::string::npos);
 }
+
+// Issue 6 item 6: /frames/contacts counts the contacts the response resolved (after the
+// Eq. 9 discard), so it equals the /contacts rows. Two boxes whose faces touch overlap
+// under Eq. 6 (confirmed) but have zero overlap on one axis (discarded by Eq. 9).
+TEST(FrameContacts, CountAfterTheEq9Discard) {
+  const std::string text = R"({
+    "name": "touching", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]},
+    "gravity": [0, 0, 0], "walls": "none", "frames": 3,
+    "groups": [{"name": "pair", "shape": {"box": [0.25, 0.25, 0.25]}, "count": 2, "mass": 1.0,
+                "positions": [[0, 0, 0], [0.5, 0, 0]]}]})";
+  World world(parse_scene(text, "touching (test)"));
+  world.set_recording(true);
+  const FrameMetrics& m = world.step();
+  EXPECT_EQ(world.record().confirmed.size(), 1u);
+  EXPECT_EQ(m.contacts, 0u);
+  EXPECT_EQ(world.contacts().size(), 0u);
+  World jam(jammed());
+  for (int f = 0; f < 20; ++f) {
+    const FrameMetrics& mj = jam.step();
+    EXPECT_EQ(mj.contacts, jam.contacts().size());
+  }
+  EXPECT_GT(jam.last_metrics().contacts, 0u);
+}
