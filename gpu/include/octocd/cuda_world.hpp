@@ -1,0 +1,129 @@
+#pragma once
+/// \file cuda_world.hpp
+/// The CUDA engine (`cuda`, SPEC 11): the CPU reference step (World::step, SPEC 4) on the
+/// device, stage by stage, bit-identical to the CPU engine (same float32 operations in the
+/// same order, from the same OCTOCD_HD headers: math.hpp, midphase_hd.hpp).
+///
+/// Plain C++: including this header needs no CUDA toolkit. `make_cuda_engine` and
+/// `cuda_device_status` always exist; in a build without CUDA (OCTOCD_CUDA=OFF, then
+/// OCTOCD_HAVE_CUDA is 0) make_cuda_engine throws RuntimeError saying so and the class
+/// CudaWorld is not declared.
+///
+/// Units as everywhere in octocd: metres, seconds, kilograms; state is float32.
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "octocd/engine.hpp"
+
+#ifndef OCTOCD_HAVE_CUDA
+#define OCTOCD_HAVE_CUDA 0
+#endif
+
+namespace octocd {
+
+/// Creates the CUDA engine for `model` with broadphase `broadphase` (as in
+/// `--broadphase`; the device has `flat` so far). The model is shared, not copied.
+/// Throws RuntimeError when this octocd was built without CUDA, when no CUDA device is
+/// usable (naming the CUDA runtime's reason) or when device memory runs out (naming the
+/// buffer and bytes); InputError for a broadphase the device does not have.
+std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, const std::string& broadphase);
+
+/// One line about the CUDA device: its name, compute capability and memory (e.g.
+/// "NVIDIA H100 80GB HBM3 (sm_90, 79.1 GiB)"), or "no CUDA device: <reason from the CUDA
+/// runtime>", or "no CUDA device: this octocd was built without CUDA (OCTOCD_CUDA=OFF)".
+/// Never throws.
+std::string cuda_device_status();
+
+/// True when a CUDA device can be used (cuda_device_status() then names it). Never throws.
+bool cuda_device_available();
+
+#if OCTOCD_HAVE_CUDA
+
+/// The CUDA engine. Owns its device buffers (released by the destructor) and a CUDA
+/// stream on the current device (device 0 unless the caller selected another with
+/// cudaSetDevice); shares the Model it was built from.
+///
+/// Device layout (structure of arrays): per body x, v (Vec3), w (float), local box
+/// (Aabb), world AABB; the per-mesh octrees of all shapes packed once into device arrays
+/// (vertices, cells, level offsets, per-shape offsets) and the theta table.
+///
+/// Step: integrate; world AABBs; broadphase (`flat`: brute force, counting pass +
+/// exclusive scan + fill, giving the sorted unique pairs (a < b)); midphase + narrow phase
+/// per candidate pair through the shared OCTOCD_HD functions; response with
+/// `response.iterations` passes (per-contact terms, then per body a sequential reduction
+/// in (a, b) order over a body-major contact index built by a stable sort: no float
+/// atomics); clamp; metrics. Every variable-size buffer grows to what the counting pass
+/// asks: nothing is ever dropped.
+///
+/// Errors (all thrown from the constructor or step()): RuntimeError when no device is
+/// usable, when a CUDA call fails (naming the call or kernel), when cudaMalloc fails
+/// (naming the buffer and the bytes), and when a dynamic body's position or velocity
+/// becomes non-finite (the same message as World::step: frame, body, group). InputError
+/// for a broadphase the device does not have. With the environment variable
+/// OCTOCD_CUDA_SYNC=1 every launch is followed by a synchronisation and an error check, so
+/// an asynchronous fault names its kernel.
+///
+/// Not thread-safe (like every Engine).
+class CudaWorld : public Engine {
+ public:
+  /// Uploads the model's initial state, shapes and octrees. `broadphase` as in
+  /// `--broadphase` ("flat"). `model` must not be null.
+  CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase);
+  ~CudaWorld() override;
+  CudaWorld(const CudaWorld&) = delete;
+  CudaWorld& operator=(const CudaWorld&) = delete;
+
+  std::string name() const override { return "cuda"; }
+  /// The GPU's name, compute capability and memory.
+  std::string device() const override;
+  std::string broadphase_name() const override;
+  const Model& model() const override { return *model_; }
+  /// Runs one step (SPEC 4) on the device and returns its metrics (stage times from CUDA
+  /// events, ms). Synchronises once per variable-size stage (to size its output) and once
+  /// for the metrics.
+  const FrameMetrics& step() override;
+  /// Hot state after the last step, downloaded on the first call after each step.
+  const BodyState& state() const override;
+  const FrameMetrics& last_metrics() const override { return metrics_; }
+  std::int64_t frame() const override { return frame_; }
+  /// Contacts of the last step's first response pass, in (a, b) order; empty unless
+  /// recording (they stay on the device otherwise).
+  const std::vector<ContactRecord>& contacts() const override;
+  bool can_record() const override { return true; }
+  /// Recording copies x_pre, v_pre, AABBs, pairs, confirmed pairs, contacts, x_post and
+  /// v_post back every step (as World fills them).
+  void set_recording(bool on) override { recording_ = on; }
+  const FrameRecord& record() const override { return record_; }
+
+  /// Replaces the hot state (positions, velocities, inverse masses; sizes must equal the
+  /// body count, else InputError): tests set up states with it, as with
+  /// World::mutable_state.
+  void set_state(const BodyState& state);
+
+  /// Frees every variable-size device buffer (pairs, contacts, sort index, scratch) and
+  /// reallocates it with room for `capacity` elements (>= 1); each grows again when a
+  /// counting pass needs more. Tests call it with 1 to exercise every regrow path.
+  void reset_capacities(std::size_t capacity = 1);
+
+  /// Bytes of device memory held by this engine's buffers.
+  std::uint64_t device_bytes() const;
+
+  struct Impl;  ///< device buffers and kernels (cuda_world.cpp)
+
+ private:
+  std::shared_ptr<const Model> model_;
+  std::unique_ptr<Impl> impl_;
+  FrameMetrics metrics_;
+  std::int64_t frame_ = 0;
+  bool recording_ = false;
+  FrameRecord record_;
+  mutable BodyState state_;
+  mutable std::int64_t state_frame_ = -1;  // frame whose state state_ holds
+};
+
+#endif  // OCTOCD_HAVE_CUDA
+
+}  // namespace octocd

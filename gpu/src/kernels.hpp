@@ -1,0 +1,209 @@
+#pragma once
+/// \file kernels.hpp
+/// The CUDA engine's kernels as seen from the host (cuda_world.cpp): descriptor structs
+/// (what each kernel reads and writes, as raw device pointers), the launch wrappers
+/// (defined in the stage files integrate.cu, broadphase_flat.cu, midphase.cu, response.cu,
+/// metrics.cu, primitives.cu) and the block sizes, kept here in one place.
+///
+/// Plain C++ (compiled by both the host compiler and nvcc): only the CUDA runtime API's
+/// types, no kernel code. Every wrapper launches on `stream` and returns the launch's
+/// cudaError_t (cudaGetLastError); the caller checks it (and synchronises when
+/// OCTOCD_CUDA_SYNC=1).
+///
+/// Every formula a kernel evaluates comes from core/include/octocd/math.hpp or
+/// midphase_hd.hpp (OCTOCD_HD); kernels only index, loop and store.
+
+#include <cstddef>
+#include <cstdint>
+
+#include <cuda_runtime_api.h>
+
+#include "octocd/broadphase.hpp"
+#include "octocd/math.hpp"
+#include "octocd/mesh_octree.hpp"
+#include "octocd/midphase_hd.hpp"
+
+namespace octocd {
+namespace gpu {
+
+/// Threads per block of every per-element kernel (one thread per body, pair or entry).
+constexpr int kBlockSize = 256;
+/// Threads of the single block that reduces the frame's metrics (a power of two).
+constexpr int kMetricsBlockSize = 512;
+
+/// Blocks of kBlockSize threads covering `count` elements (at least 1).
+inline unsigned grid_for(std::size_t count) {
+  const std::size_t g = (count + kBlockSize - 1) / kBlockSize;
+  return static_cast<unsigned>(g == 0 ? 1 : g);
+}
+
+/// Hot body state and per-body constants on the device (structure of arrays, n bodies).
+struct BodiesDesc {
+  Vec3* x = nullptr;                     ///< positions (m)
+  Vec3* v = nullptr;                     ///< velocities (m/s)
+  const float* w = nullptr;              ///< inverse masses (1/kg), 0 = static
+  const Aabb* local = nullptr;           ///< local AABB per body (m)
+  const std::uint32_t* shape = nullptr;  ///< shape index per body
+  Aabb* aabb = nullptr;                  ///< world AABBs (m), written by the Aabbs stage
+  std::uint32_t n = 0;                   ///< number of bodies
+};
+
+/// One shape in the packed device arrays: a box, or a mesh whose octree occupies
+/// vertices[vertex_offset ..], cells[cell_offset ..] and level_offsets[level_offset_offset ..]
+/// (indices inside cells and level offsets stay relative to the shape's own arrays).
+struct DeviceShape {
+  int is_mesh = 0;
+  int depth = 0;
+  Aabb bounds;
+  std::uint32_t vertex_offset = 0;
+  std::uint32_t vertex_count = 0;
+  std::uint32_t cell_offset = 0;
+  std::uint32_t level_offset_offset = 0;
+};
+
+/// All shapes' octrees, packed once at construction, and the theta table.
+struct ShapesDesc {
+  const DeviceShape* shapes = nullptr;
+  const Vec3* vertices = nullptr;
+  const MeshOctreeCell* cells = nullptr;
+  const std::uint32_t* level_offsets = nullptr;
+  const float* theta = nullptr;  ///< count * count entries, theta[sa * count + sb] (m)
+  std::uint32_t count = 0;       ///< number of shapes
+};
+
+/// Midphase + narrow phase over the candidate pairs (one thread per pair).
+struct MidphaseDesc {
+  const Vec3* x = nullptr;
+  const float* w = nullptr;
+  const Aabb* aabb = nullptr;
+  const std::uint32_t* shape = nullptr;
+  ShapesDesc shapes;
+  hd::LevelList levels;
+  const Pair* pairs = nullptr;
+  std::uint32_t pair_count = 0;
+  std::uint8_t* confirmed = nullptr;         ///< out: 1 = contact confirmed
+  unsigned long long* counters = nullptr;   ///< out (added): box tests, box pairs, vertex tests
+};
+
+/// One contact of the first response pass, as the host's ContactRecord wants it.
+struct DeviceContact {
+  std::uint32_t hit = 0;  ///< 1 when kept by Eq. 9; the other fields are valid only then
+  int axis = 1;
+  float depth = 0.0f;
+  float jn = 0.0f;
+  float jt = 0.0f;
+  Vec3 normal;
+  Vec3 v_a, v_b;
+  Vec3 dx_a, dx_b;
+  Vec3 dv_a, dv_b;
+};
+
+/// Per-contact response terms of one pass (one thread per candidate pair; pairs that are
+/// not confirmed get hit = 0).
+struct TermsDesc {
+  const Pair* pairs = nullptr;
+  const std::uint8_t* confirmed = nullptr;
+  std::uint32_t pair_count = 0;
+  const Vec3* x = nullptr;
+  const Vec3* v = nullptr;
+  const float* w = nullptr;
+  const Aabb* local = nullptr;
+  ContactParams params;
+  std::uint8_t* hit = nullptr;  ///< out: 1 when confirmed and kept by Eq. 9
+  Vec3* dx_a = nullptr;         ///< out: terms (valid where hit)
+  Vec3* dx_b = nullptr;
+  Vec3* dv_a = nullptr;
+  Vec3* dv_b = nullptr;
+  float* depth0 = nullptr;          ///< out, first pass only (else null): d_p where hit, else -1
+  DeviceContact* records = nullptr; ///< out, first pass while recording only (else null)
+};
+
+/// Per-body reduction and application of one pass (one thread per body).
+struct ApplyDesc {
+  Vec3* x = nullptr;
+  Vec3* v = nullptr;
+  const float* w = nullptr;
+  std::uint32_t n = 0;
+  const std::uint32_t* body_begin = nullptr;  ///< n + 1 offsets into `entries`
+  const std::uint32_t* entries = nullptr;     ///< body-major: 2 k + side (0 = a, 1 = b)
+  const std::uint8_t* hit = nullptr;
+  const Vec3* dx_a = nullptr;
+  const Vec3* dx_b = nullptr;
+  const Vec3* dv_a = nullptr;
+  const Vec3* dv_b = nullptr;
+};
+
+/// The frame's metrics, reduced on the device by one block in a fixed order.
+struct MetricsResult {
+  double kinetic_energy = 0.0;
+  double momentum[3] = {0.0, 0.0, 0.0};
+  double pen_sum = 0.0;
+  double pen_max = 0.0;
+  unsigned long long contacts = 0;
+  unsigned long long pen_above = 0;
+  std::uint32_t first_non_finite = 0;  ///< smallest dynamic body with a non-finite x or v; n if none
+};
+
+struct MetricsDesc {
+  const Vec3* x = nullptr;
+  const Vec3* v = nullptr;
+  const float* w = nullptr;
+  std::uint32_t n = 0;
+  const float* depth0 = nullptr;  ///< first-pass depths, -1 where not a contact
+  std::uint32_t pair_count = 0;
+  float slop = 0.0f;
+  MetricsResult* out = nullptr;
+};
+
+// ---- integrate.cu --------------------------------------------------------------------
+/// Eq. 1-3 per body (octocd::integrate, no external force).
+cudaError_t launch_integrate(const BodiesDesc& b, Vec3 gravity, float dt, cudaStream_t stream);
+/// World AABBs: translated(local, x) per body.
+cudaError_t launch_aabbs(const BodiesDesc& b, cudaStream_t stream);
+/// Eq. 23 per dynamic body.
+cudaError_t launch_clamp(const BodiesDesc& b, float v_max, cudaStream_t stream);
+
+// ---- broadphase_flat.cu --------------------------------------------------------------
+/// count[i] = number of j > i whose AABB overlaps body i's (Eq. 6); count[n] untouched.
+cudaError_t launch_flat_count(const Aabb* aabb, std::uint32_t n, std::uint32_t* count, cudaStream_t stream);
+/// Writes body i's pairs (i, j), j ascending, at pairs[offset[i] ..]: with offset the
+/// exclusive scan of count, the output is sorted by (a, b).
+cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset, Pair* pairs,
+                             cudaStream_t stream);
+
+// ---- midphase.cu -----------------------------------------------------------------------
+/// confirmed[k] for every candidate pair (static-static pairs: 0), via hd::confirm_contact.
+cudaError_t launch_midphase(const MidphaseDesc& d, cudaStream_t stream);
+
+// ---- response.cu -----------------------------------------------------------------------
+/// Body-major index entries of the confirmed contacts: for pair k, keys[2k] = a and
+/// keys[2k+1] = b (n, sorting last, when not confirmed); vals[e] = e.
+cudaError_t launch_contact_entries(const Pair* pairs, const std::uint8_t* confirmed, std::uint32_t pair_count,
+                                   std::uint32_t n, std::uint32_t* keys, std::uint32_t* vals,
+                                   cudaStream_t stream);
+/// body_begin[i] = first position of key i in the sorted keys (i in [0, n]).
+cudaError_t launch_body_segments(const std::uint32_t* sorted_keys, std::uint32_t entry_count, std::uint32_t n,
+                                 std::uint32_t* body_begin, cudaStream_t stream);
+/// contact_terms per confirmed pair.
+cudaError_t launch_contact_terms(const TermsDesc& d, cudaStream_t stream);
+/// Per dynamic body: sums of its kept contacts' terms in (a, b) order from zero, then
+/// apply_contact_sums.
+cudaError_t launch_apply_sums(const ApplyDesc& d, cudaStream_t stream);
+
+// ---- metrics.cu -------------------------------------------------------------------------
+/// Kinetic energy, momentum, the first non-finite body, and the first pass's contact
+/// statistics into *d.out (one block, fixed order: deterministic run to run).
+cudaError_t launch_metrics(const MetricsDesc& d, cudaStream_t stream);
+
+// ---- primitives.cu (CUB) ------------------------------------------------------------
+/// Exclusive prefix sum of `count` uint32. With temp == nullptr only sets temp_bytes.
+cudaError_t exclusive_scan_u32(void* temp, std::size_t& temp_bytes, const std::uint32_t* in, std::uint32_t* out,
+                               std::uint32_t count, cudaStream_t stream);
+/// Stable radix sort of (key, value) uint32 pairs by the key's bits [0, end_bit). With
+/// temp == nullptr only sets temp_bytes.
+cudaError_t sort_pairs_u32(void* temp, std::size_t& temp_bytes, const std::uint32_t* keys_in,
+                           std::uint32_t* keys_out, const std::uint32_t* vals_in, std::uint32_t* vals_out,
+                           std::uint32_t count, int end_bit, cudaStream_t stream);
+
+}  // namespace gpu
+}  // namespace octocd
