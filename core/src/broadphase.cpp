@@ -1,7 +1,7 @@
 /// \file broadphase.cpp
-/// Broadphase factory, `auto` octree depth, the shared pair sort and the `flat` oracle
-/// (SPEC 5.1). `octree` is in broadphase_octree.cpp, `spatial-hash` in
-/// broadphase_spatial_hash.cpp.
+/// Broadphase factory, `auto` octree depths, the shared pair sort and the `flat` oracle
+/// (SPEC 5.1). `octree` (loose) is in broadphase_octree.cpp, `octree-strict` in
+/// broadphase_octree_strict.cpp, `spatial-hash` in broadphase_spatial_hash.cpp.
 
 #include "octocd/broadphase.hpp"
 
@@ -9,9 +9,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "octocd/error.hpp"
+#include "octocd/loose_octree.hpp"
 
 namespace octocd {
 
@@ -68,7 +70,9 @@ class FlatBroadPhase final : public BroadPhase {
 
 }  // namespace
 
-std::vector<std::string> broadphase_names() { return {"flat", "octree", "spatial-hash"}; }
+std::vector<std::string> broadphase_names() {
+  return {"flat", "octree", "octree-strict", "spatial-hash"};
+}
 
 std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, const Aabb& domain) {
   if (config.octree_depth < -1 || config.octree_depth > 10) {
@@ -85,6 +89,9 @@ std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, cons
   }
   if (config.name == "flat") return std::make_unique<FlatBroadPhase>();
   if (config.name == "octree") return detail::make_octree_broadphase(config.octree_depth, domain);
+  if (config.name == "octree-strict") {
+    return detail::make_strict_octree_broadphase(config.octree_depth, domain);
+  }
   if (config.name == "spatial-hash") return detail::make_spatial_hash_broadphase(config.cell_size);
   std::string names;
   for (const std::string& s : broadphase_names()) names += (names.empty() ? "" : ", ") + s;
@@ -115,6 +122,18 @@ int auto_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain) {
     if (side / static_cast<double>(1u << level) >= 2.0 * mean) return level;
   }
   return 1;
+}
+
+int auto_loose_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain) {
+  const LooseGrid grid = loose_grid(domain);
+  float min_ext = std::numeric_limits<float>::infinity();
+  for (const Aabb& b : boxes) {
+    if (loose_has_nan(b)) continue;
+    float ext = loose_unit_extent(loose_unit(grid, b.min), loose_unit(grid, b.max));
+    if (ext < 0.0f) ext = 0.0f;
+    if (ext < min_ext) min_ext = ext;
+  }
+  return loose_auto_depth(min_ext);
 }
 
 }  // namespace octocd

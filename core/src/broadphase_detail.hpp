@@ -9,8 +9,11 @@
 
 namespace octocd::detail {
 
-/// The world octree broadphase (broadphase_octree.cpp); depth -1 = auto.
+/// `octree`, the loose octree broadphase (broadphase_octree.cpp); depth -1 = auto.
 std::unique_ptr<BroadPhase> make_octree_broadphase(int depth, const Aabb& domain);
+/// `octree-strict`, the paper's octree read literally (broadphase_octree_strict.cpp);
+/// depth -1 = auto.
+std::unique_ptr<BroadPhase> make_strict_octree_broadphase(int depth, const Aabb& domain);
 /// The uniform-grid spatial hash (broadphase_spatial_hash.cpp); cell size in m.
 std::unique_ptr<BroadPhase> make_spatial_hash_broadphase(float cell_size);
 

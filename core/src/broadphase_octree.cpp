@@ -1,43 +1,56 @@
 /// \file broadphase_octree.cpp
-/// `octree`: the world-space octree broadphase (paper section 3.2, Algorithms 1-2;
-/// SPEC 5.1).
+/// `octree` (the default): the loose octree broadphase (SPEC 5.1; Ulrich, "Loose
+/// Octrees", Game Programming Gems 2000, looseness k = 2), the form of the paper's world
+/// octree (section 3.2, Algorithms 1-2) whose cost scales. The literal reading is
+/// `octree-strict` (broadphase_octree_strict.cpp).
 ///
-/// Structure. The root is the bounding cube of the domain (centred on the domain centre,
-/// side = longest domain side), split D_w times. Coordinates are mapped monotonically to
-/// the integer grid of the depth-D_w leaves; a body goes into the deepest node whose cell
-/// holds both its min and max corner cell. Node cells are half-open [lo, hi) in grid
-/// space (closed only on the root's upper faces), so two bodies in unrelated nodes are
-/// strictly separated on some axis and cannot overlap, not even by touching faces. Bodies
-/// not inside the root (or with a non-finite coordinate) stay at the root. Because the
-/// grid mapping is monotone in each coordinate, the argument holds under float rounding.
+/// All cell and level math (unit coordinates, level by size, cell of the centre,
+/// loose-box containment, query ranges, keys) is in octocd/loose_octree.hpp, shared with
+/// the CUDA engine; this file is the CPU driver:
 ///
-/// Keys. A node at level l with Morton code m (of its level-l cell) covers the contiguous
-/// range [m * 8^(D-l), (m+1) * 8^(D-l)) of depth-D leaf Morton codes; its key is
-/// (range lo, level), so sorting by key lists nodes in pre-order and a node's subtree is
-/// a contiguous run of the sorted bodies.
+/// 1. Keys. D_w `auto` is loose_auto_depth of the smallest body extent (in unit
+///    coordinates); loose_place_unit gives each body its (level, cell) key, or the
+///    overflow list, or none (a box with a NaN coordinate overlaps nothing and is left
+///    out); each body's unit box is also kept in the fixed point of loose_q_min/max.
+/// 2. Order. Bodies are sorted by (key, body index): a stable order by key. The order of
+///    the previous call is reused: bodies whose key did not change keep their relative
+///    order (still sorted), the others are sorted apart and merged in (O(n) for coherent
+///    motion); a fresh or very different frame takes a stable LSD radix sort on the key.
+///    Each occupied cell is then a contiguous run of slots; the cells of one level are
+///    contiguous and in Morton order. Boxes are scattered to their slots in body order.
+/// 3. Tables. Levels 0..kDenseLevels (at most 2^18 cells) have a dense table indexed by
+///    x + 2^l y + 4^l z holding the cell's first slot + 1 and its body count, and an
+///    occupancy bit map with one 64-bit word per row of cells (both reset cell by cell,
+///    never cleared in full); deeper levels an open-addressing hash table on the key.
+/// 4. Query, per occupied cell C of level l; its bodies share one query, made with the
+///    union U of their boxes (a superset of each body's own query), with ranges from
+///    loose_query_axis_q (equal to loose_query_axis):
+///    - own level: the <= 3 x 3 x 3 cells whose loose boxes meet U, keeping only bodies
+///      with a larger index, where the index is the body's slot in the sorted order (so:
+///      later bodies of C itself, and every body of a cell with a larger Morton code;
+///      within a cell, slots are in body order);
+///    - every coarser occupied level m < l: the cells whose loose boxes meet U, keeping
+///      every body;
+///    then the exact AABB test (Eq. 6, as octocd::overlaps). Each pair is met exactly
+///    once: if X in C and Y in C' (same level) overlap, C' is in C's query and C in C''s
+///    (both lie in their cell's loose box and the query is exact), and only the smaller
+///    slot keeps the pair; across levels only the finer body queries. On a dense level
+///    the 27 occupancy bits of the block come from 9 row words, and only occupied cells'
+///    table entries are read; the slots found are listed first, then tested with one
+///    rarely taken branch each (no short-circuit in the AABB test: its six comparisons
+///    are unpredictable, the overall result is not).
+///    - overflow bodies are tested against every body (in-tree bodies as structure of
+///      arrays, vectorised; overflow bodies with a larger slot).
+/// 5. The pairs are sorted by (a, b) with detail::sort_pairs.
 ///
-/// Query. Bodies are sorted by (node key, min.x), so each non-empty node is a run of
-/// slots. Pass 1 lists the non-empty nodes in pre-order with their nearest non-empty
-/// ancestor and the union AABB of their subtree's bodies. Pass 2 descends: a node's
-/// candidate list is the set of its ancestors' bodies that overlap its subtree bounds
-/// (filtered from the parent's list plus the parent's own bodies; an ancestor body that
-/// misses the bounds cannot overlap any body below, so this is exact, with no rounding
-/// involved); it is kept sorted by min.x (a merge). Pairs inside a node: sweep and prune
-/// on x; pairs with ancestors: a two-list sweep on x of the own bodies against the
-/// candidate list. Every related pair is met once, then goes
-/// through Eq. 6. `cell_candidates` counts all pairs in related nodes (SPEC 5.1), i.e.
-/// before this culling.
-///
-/// Incremental use: the sorted order of the previous call is kept and re-sorted by
-/// insertion sort (near O(n) for coherent motion; bodies that changed node are sorted
-/// apart and merged in), with a fall-back to std::sort when the order changed a lot. Buffers are kept between calls.
+/// `cell_candidates` counts the pairs that reach the exact AABB test.
 
 #include <algorithm>
-#include <cmath>
 #include <cstring>
 #include <limits>
 
 #include "octocd/broadphase.hpp"
+#include "octocd/loose_octree.hpp"
 
 #include "broadphase_detail.hpp"
 
@@ -45,57 +58,84 @@ namespace octocd {
 
 namespace {
 
-/// Morton code of a cell (x, y, z), each < 2^10: x on bit 0, y on bit 1, z on bit 2.
-inline std::uint32_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
-  return morton_spread3(x) | (morton_spread3(y) << 1) | (morton_spread3(z) << 2);
-}
+/// Levels up to this one use a dense table of 8^l entries (8^6 = 262144: 1 MiB) and an
+/// occupancy bit map (32 KiB at level 6).
+constexpr int kDenseLevels = 6;
+constexpr std::uint32_t kEmpty = 0xffffffffu;
+/// Dense-table entries: (first slot + 1) in the low kSlotBits bits, (bodies - 1) in the
+/// high bits, capped at kCountCap - 1 (then the count is read from Slot::run_end).
+constexpr unsigned kSlotBits = 26;
+constexpr std::uint32_t kSlotMask = (1u << kSlotBits) - 1u;
+constexpr std::uint32_t kCountCap = 1u << (32 - kSlotBits);
 
-/// Float to an unsigned key with the same order (-0 sorts just before +0).
-inline std::uint32_t float_key(float f) {
-  std::uint32_t u;
-  std::memcpy(&u, &f, sizeof u);
-  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
-}
-
-/// One body in the sort: node key (range lo << 4 | level), then min.x.
-struct Item {
-  std::uint64_t node;
-  std::uint32_t minx;  // float_key(min.x)
-  std::uint32_t body;
+/// A box in the fixed-point unit coordinates of loose_q_min / loose_q_max (which lie in
+/// [-2^11, 2^12], so 16 bits hold them).
+struct QBox {
+  std::int16_t lo[3];
+  std::int16_t hi[3];
 };
 
-inline bool item_less(const Item& p, const Item& q) {
-  if (p.node != q.node) return p.node < q.node;
-  if (p.minx != q.minx) return p.minx < q.minx;
-  return p.body < q.body;
-}
-
-/// A non-empty node: its own bodies are the sorted slots [begin, end).
-struct Node {
-  std::uint64_t hi;          // end of its leaf range
-  std::uint32_t begin;
-  std::uint32_t end;
-  std::int32_t parent;       // nearest non-empty proper ancestor, -1 at the top
-  std::uint64_t anc_pop;     // bodies in all proper ancestors (for the candidate count)
-  Aabb bounds;               // union of the AABBs of the bodies of its subtree
-};
-
-/// An ancestor body kept for the current node (it overlaps the node's subtree bounds).
-struct Cand {
+/// One slot of the sorted order: the body's world AABB, its index, and the end of its
+/// cell's run of slots (32 bytes: one load gives all a test needs).
+struct Slot {
   Aabb box;
   std::uint32_t body;
+  std::uint32_t run_end;
 };
 
-/// A node on the descent stack; its ancestor candidates are cands_[cbegin, cend).
-struct Frame {
-  std::int32_t node;
-  std::uint32_t cbegin;
-  std::uint32_t cend;
+/// An occupied cell: slots [begin, end) of the sorted order, its level and the union of
+/// its bodies' fixed-point boxes (its query box).
+struct Cell {
+  std::uint32_t begin;
+  std::uint32_t end;
+  QBox q;
+  std::int32_t level;
 };
 
-class OctreeBroadPhase final : public BroadPhase {
+/// Inverse of morton_spread3: the bits 0, 3, 6, ... of v packed into the low 10 bits.
+inline std::uint32_t morton_compact3(std::uint32_t v) {
+  v &= 0x09249249u;
+  v = (v | (v >> 2)) & 0x030c30c3u;
+  v = (v | (v >> 4)) & 0x0300f00fu;
+  v = (v | (v >> 8)) & 0x030000ffu;
+  v = (v | (v >> 16)) & 0x3ffu;
+  return v;
+}
+
+/// Open-addressing hash slot (key kLooseNoKey = free).
+struct HashSlot {
+  std::uint32_t key;
+  std::uint32_t cell;
+};
+
+inline std::uint64_t item(std::uint32_t key, std::uint32_t body) {
+  return (static_cast<std::uint64_t>(key) << 32) | body;
+}
+
+inline std::uint32_t hash_key(std::uint32_t key) { return key * 0x9E3779B1u; }
+
+/// Eq. 6 without short-circuit: one branch for the caller instead of up to six
+/// unpredictable ones.
+inline bool overlaps_nb(const Aabb& a, const Aabb& b) {
+  return static_cast<bool>(static_cast<unsigned>(a.min.x <= b.max.x) &
+                           static_cast<unsigned>(a.max.x >= b.min.x) &
+                           static_cast<unsigned>(a.min.y <= b.max.y) &
+                           static_cast<unsigned>(a.max.y >= b.min.y) &
+                           static_cast<unsigned>(a.min.z <= b.max.z) &
+                           static_cast<unsigned>(a.max.z >= b.min.z));
+}
+
+class LooseOctreeBroadPhase final : public BroadPhase {
  public:
-  OctreeBroadPhase(int depth, const Aabb& domain) : depth_cfg_(depth), domain_(domain) {}
+  LooseOctreeBroadPhase(int depth, const Aabb& domain)
+      : depth_cfg_(depth), grid_(loose_grid(domain)) {
+    // Offsets of the 27 cells of a 3 x 3 x 3 block, per dense level (bit k = 9z + 3y + x).
+    for (int l = 0; l <= kDenseLevels; ++l) {
+      for (std::uint32_t k = 0; k < 27; ++k) {
+        block_[l][k] = (k / 9u) * (1u << (2 * l)) + ((k / 3u) % 3u) * (1u << l) + k % 3u;
+      }
+    }
+  }
 
   std::string name() const override { return "octree"; }
 
@@ -103,263 +143,453 @@ class OctreeBroadPhase final : public BroadPhase {
                   BroadPhaseStats& stats) override {
     out.clear();
     const std::size_t n = boxes.size();
-    const int depth = depth_cfg_ < 0 ? auto_octree_depth(boxes, domain_) : depth_cfg_;
-    build_keys(boxes, depth);
-    sort_items();
-
-    // Bodies in sorted order (SoA of what the sweep reads).
-    sorted_.resize(items_.size());
-    sminx_.resize(items_.size());
-    for (std::size_t k = 0; k < items_.size(); ++k) {
-      sorted_[k] = boxes[items_[k].body];
-      sminx_[k] = sorted_[k].min.x;
-    }
-
-    // Pass 1: the non-empty nodes in pre-order, their parents and subtree bounds.
-    nodes_.clear();
-    parents_.clear();
-    const std::uint32_t m = static_cast<std::uint32_t>(items_.size());
-    for (std::uint32_t g = 0; g < m;) {
-      const std::uint64_t key = items_[g].node;
-      std::uint32_t e = g + 1;
-      Aabb own = sorted_[g];
-      while (e < m && items_[e].node == key) {
-        own = merged(own, sorted_[e]);
-        ++e;
-      }
-      const int level = static_cast<int>(key & 15u);
-      const std::uint64_t lo = key >> 4;
-      const std::uint64_t hi = lo + (std::uint64_t{1} << (3 * (depth - level)));
-      while (!parents_.empty() && nodes_[parents_.back()].hi <= lo) close_top();
-      Node node;
-      node.hi = hi;
-      node.begin = g;
-      node.end = e;
-      node.parent = parents_.empty() ? -1 : parents_.back();
-      node.anc_pop = 0;
-      if (node.parent >= 0) {
-        const Node& p = nodes_[node.parent];
-        node.anc_pop = p.anc_pop + (p.end - p.begin);
-      }
-      node.bounds = own;
-      parents_.push_back(static_cast<std::int32_t>(nodes_.size()));
-      nodes_.push_back(node);
-      g = e;
-    }
-    while (!parents_.empty()) close_top();
-
-    // Pass 2: descent. A node's candidates are the bodies of its ancestors that overlap
-    // its subtree bounds (the only ones that can overlap a body of its subtree), filtered
-    // from the parent's candidates and the parent's own bodies.
+    compute_keys(boxes);
+    sort_order();
+    build_cells(boxes);
+    build_tables();
     std::uint64_t candidates = 0;
-    frames_.clear();
-    cands_.clear();
-    for (std::size_t k = 0; k < nodes_.size(); ++k) {
-      const Node& node = nodes_[k];
-      while (!frames_.empty() && frames_.back().node != node.parent) {
-        cands_.resize(frames_.back().cbegin);
-        frames_.pop_back();
-      }
-      const std::uint32_t cbegin = static_cast<std::uint32_t>(cands_.size());
-      if (node.parent >= 0) {
-        // Both inputs are sorted by min.x, so the merged list is too.
-        const Frame& pf = frames_.back();
-        const Node& p = nodes_[node.parent];
-        filt_.clear();
-        for (std::uint32_t c = pf.cbegin; c < pf.cend; ++c) {
-          if (overlaps(cands_[c].box, node.bounds)) filt_.push_back(cands_[c]);
-        }
-        std::size_t a = 0;
-        for (std::uint32_t j = p.begin; j < p.end; ++j) {
-          if (!overlaps(sorted_[j], node.bounds)) continue;
-          while (a < filt_.size() && filt_[a].box.min.x <= sorted_[j].min.x) cands_.push_back(filt_[a++]);
-          cands_.push_back({sorted_[j], items_[j].body});
-        }
-        while (a < filt_.size()) cands_.push_back(filt_[a++]);
-      }
-      const std::uint32_t cend = static_cast<std::uint32_t>(cands_.size());
-      frames_.push_back({static_cast<std::int32_t>(k), cbegin, cend});
-
-      const std::uint64_t pop = node.end - node.begin;
-      candidates += pop * (pop - 1) / 2 + pop * node.anc_pop;
-      // Same node: sweep and prune on x (slots sorted by min.x).
-      for (std::uint32_t i = node.begin; i < node.end; ++i) {
-        const Aabb bi = sorted_[i];
-        const std::uint32_t body_i = items_[i].body;
-        for (std::uint32_t j = i + 1; j < node.end && sminx_[j] <= bi.max.x; ++j) {
-          if (overlaps(bi, sorted_[j])) emit(body_i, items_[j].body, out);
-        }
-      }
-      // Own bodies against the ancestor candidates: a two-list sweep on x. A pair is met
-      // from whichever of the two has the smaller min.x (own first on ties).
-      std::uint32_t i = node.begin, c = cbegin;
-      while (i < node.end && c < cend) {
-        if (sminx_[i] <= cands_[c].box.min.x) {
-          const Aabb bi = sorted_[i];
-          for (std::uint32_t q = c; q < cend && cands_[q].box.min.x <= bi.max.x; ++q) {
-            if (overlaps(bi, cands_[q].box)) emit(items_[i].body, cands_[q].body, out);
-          }
-          ++i;
-        } else {
-          const Aabb bc = cands_[c].box;
-          for (std::uint32_t q = i; q < node.end && sminx_[q] <= bc.max.x; ++q) {
-            if (overlaps(sorted_[q], bc)) emit(items_[q].body, cands_[c].body, out);
-          }
-          ++c;
-        }
-      }
-    }
-
+    for (std::uint32_t c = 0; c < cells_.size(); ++c) candidates += query_cell(c, out);
+    candidates += query_overflow(out);
     detail::sort_pairs(out, n, tmp_pairs_, count_);
     stats.cell_candidates = candidates;
     stats.pairs = out.size();
-    stats.memory_bytes = (items_.capacity() + moved_.capacity() + merge_buf_.capacity()) *
-                             sizeof(Item) + sorted_.capacity() * sizeof(Aabb) +
-                         sminx_.capacity() * sizeof(float) + nodes_.capacity() * sizeof(Node) +
-                         parents_.capacity() * sizeof(std::int32_t) +
-                         frames_.capacity() * sizeof(Frame) +
-                         (cands_.capacity() + filt_.capacity()) * sizeof(Cand) +
-                         tmp_pairs_.capacity() * sizeof(Pair) +
-                         count_.capacity() * sizeof(std::uint32_t);
+    stats.memory_bytes =
+        (qbody_.capacity() + qslot_.capacity()) * sizeof(QBox) +
+        (key_.capacity() + slot_of_.capacity() + cell_linear_.capacity() +
+         radix_count_.capacity() + count_.capacity()) *
+            sizeof(std::uint32_t) + flat_.capacity() * sizeof(std::uint32_t) +
+        (order_.capacity() + moved_.capacity() + merge_buf_.capacity()) * sizeof(std::uint64_t) +
+        slots_.capacity() * sizeof(Slot) + cells_.capacity() * sizeof(Cell) +
+        hash_.capacity() * sizeof(HashSlot) + tmp_pairs_.capacity() * sizeof(Pair);
+    for (const auto& t : dense_) stats.memory_bytes += t.capacity() * sizeof(std::uint32_t);
+    for (const auto& b : bits_) stats.memory_bytes += b.capacity() * sizeof(std::uint64_t);
+    for (const auto& a : soa_) stats.memory_bytes += a.capacity() * sizeof(float);
   }
 
  private:
-  static Aabb merged(const Aabb& a, const Aabb& b) {
-    return {{std::min(a.min.x, b.min.x), std::min(a.min.y, b.min.y), std::min(a.min.z, b.min.z)},
-            {std::max(a.max.x, b.max.x), std::max(a.max.y, b.max.y), std::max(a.max.z, b.max.z)}};
+  /// Step 1: D_w, then the key and fixed-point box of every body (in body order).
+  void compute_keys(const std::vector<Aabb>& boxes) {
+    const std::size_t n = boxes.size();
+    qbody_.resize(n);
+    key_.resize(n);
+    depth_ = depth_cfg_;
+    if (depth_ < 0) {
+      float min_ext = std::numeric_limits<float>::infinity();
+      for (std::size_t i = 0; i < n; ++i) {
+        const Aabb& b = boxes[i];
+        float ext = loose_unit_extent(loose_unit(grid_, b.min), loose_unit(grid_, b.max));
+        ext = ext < 0.0f ? 0.0f : ext;
+        min_ext = ext < min_ext ? ext : min_ext;  // NaN extents are left out
+      }
+      depth_ = loose_auto_depth(min_ext);
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      const Aabb& b = boxes[i];
+      if (loose_has_nan(b)) {
+        key_[i] = kLooseNoKey;
+        continue;
+      }
+      const Vec3 lo = loose_unit(grid_, b.min);
+      const Vec3 hi = loose_unit(grid_, b.max);
+      key_[i] = loose_place_key(loose_place_unit(lo, hi, depth_));
+      qbody_[i] = {{static_cast<std::int16_t>(loose_q_min(lo.x)),
+                    static_cast<std::int16_t>(loose_q_min(lo.y)),
+                    static_cast<std::int16_t>(loose_q_min(lo.z))},
+                   {static_cast<std::int16_t>(loose_q_max(hi.x)),
+                    static_cast<std::int16_t>(loose_q_max(hi.y)),
+                    static_cast<std::int16_t>(loose_q_max(hi.z))}};
+    }
   }
 
-  /// Pops the top of the pass-1 stack; its subtree bounds are final: merge into parent.
-  void close_top() {
-    const std::int32_t t = parents_.back();
-    parents_.pop_back();
-    if (!parents_.empty()) {
-      Node& p = nodes_[parents_.back()];
-      p.bounds = merged(p.bounds, nodes_[t].bounds);
+  /// Step 2: order_ = items (key << 32 | body) sorted ascending.
+  void sort_order() {
+    const std::size_t n = key_.size();
+    if (order_.size() == n && n > 0) {
+      // Reuse the previous order: unchanged items stay sorted; changed ones are merged.
+      moved_.clear();
+      std::size_t w = 0;
+      for (std::size_t k = 0; k < n; ++k) {
+        const std::uint32_t body = static_cast<std::uint32_t>(order_[k]);
+        const std::uint64_t it = item(key_[body], body);
+        if (it == order_[k]) {
+          order_[w++] = it;
+        } else {
+          moved_.push_back(it);
+        }
+      }
+      if (moved_.size() <= n / 4) {
+        if (!moved_.empty()) {
+          order_.resize(w);
+          std::sort(moved_.begin(), moved_.end());
+          merge_buf_.resize(n);
+          std::merge(order_.begin(), order_.end(), moved_.begin(), moved_.end(),
+                     merge_buf_.begin());
+          order_.swap(merge_buf_);
+        }
+        return;
+      }
     }
+    // From scratch: stable LSD radix sort of the bodies (in body order) by key.
+    order_.resize(n);
+    merge_buf_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) order_[i] = item(key_[i], static_cast<std::uint32_t>(i));
+    radix_count_.resize(2048);
+    for (int shift = 32; shift < 64; shift += 11) {
+      std::fill(radix_count_.begin(), radix_count_.end(), 0u);
+      for (std::uint64_t it : order_) ++radix_count_[(it >> shift) & 2047u];
+      std::uint32_t sum = 0;
+      for (std::uint32_t& c : radix_count_) {
+        const std::uint32_t k = c;
+        c = sum;
+        sum += k;
+      }
+      for (std::uint64_t it : order_) merge_buf_[radix_count_[(it >> shift) & 2047u]++] = it;
+      order_.swap(merge_buf_);
+    }
+  }
+
+  /// Step 3: the sorted slots, the occupied cells and the overflow run. Bodies are
+  /// scattered to their slots in body order (stores, not dependent loads).
+  void build_cells(const std::vector<Aabb>& boxes) {
+    // Reset the dense-table entries and bits of the previous call's cells.
+    for (std::size_t c = 0; c < cells_.size(); ++c) {
+      const int l = cells_[c].level;
+      if (l > kDenseLevels) continue;
+      const std::uint32_t p = cell_linear_[c];
+      dense_[static_cast<std::size_t>(l)][p] = 0u;
+      bits_[static_cast<std::size_t>(l)][p >> l] = 0u;
+    }
+    cells_.clear();
+    cell_linear_.clear();
+    std::fill(std::begin(level_cells_), std::end(level_cells_), 0u);
+    const std::size_t n = order_.size();
+    std::size_t m = n;  // slots in use: NaN boxes (key kLooseNoKey) sort last, left out
+    while (m > 0 && static_cast<std::uint32_t>(order_[m - 1] >> 32) == kLooseNoKey) --m;
+    slots_.resize(m);
+    qslot_.resize(m);
+    slot_of_.resize(n);
+    for (std::size_t k = 0; k < m; ++k) slot_of_[static_cast<std::uint32_t>(order_[k])] = static_cast<std::uint32_t>(k);
+    for (std::size_t i = 0; i < n; ++i) {
+      if (key_[i] == kLooseNoKey) continue;
+      const std::uint32_t k = slot_of_[i];
+      slots_[k].box = boxes[i];
+      slots_[k].body = static_cast<std::uint32_t>(i);
+      qslot_[k] = qbody_[i];
+    }
+    overflow_begin_ = overflow_end_ = static_cast<std::uint32_t>(m);
+    int level = 0;
+    std::uint32_t next_base = loose_level_base(1);
+    for (std::uint32_t k = 0; k < m;) {
+      const std::uint32_t key = static_cast<std::uint32_t>(order_[k] >> 32);
+      if (key == kLooseOverflowKey) {
+        overflow_begin_ = k;
+        for (; k < m; ++k) slots_[k].run_end = k + 1;
+        break;
+      }
+      while (level < kLooseMaxDepth && key >= next_base) {
+        ++level;
+        next_base = level < kLooseMaxDepth ? loose_level_base(level + 1) : kLooseOverflowKey;
+      }
+      Cell cell;
+      cell.level = level;
+      cell.begin = k;
+      cell.q = qslot_[k];
+      for (++k; k < m && static_cast<std::uint32_t>(order_[k] >> 32) == key; ++k) {
+        const QBox& q = qslot_[k];
+        for (int a = 0; a < 3; ++a) {
+          cell.q.lo[a] = std::min(cell.q.lo[a], q.lo[a]);
+          cell.q.hi[a] = std::max(cell.q.hi[a], q.hi[a]);
+        }
+      }
+      cell.end = k;
+      for (std::uint32_t j = cell.begin; j < k; ++j) slots_[j].run_end = k;
+      const std::uint32_t morton = key - loose_level_base(level);
+      cell_linear_.push_back((morton_compact3(morton >> 2) << (2 * level)) |
+                             (morton_compact3(morton >> 1) << level) | morton_compact3(morton));
+      ++level_cells_[level];
+      cells_.push_back(cell);
+    }
+    if (overflow_end_ > overflow_begin_) {
+      // Structure of arrays of the in-tree slots, for the overflow tests.
+      for (auto& a : soa_) a.resize(overflow_begin_);
+      for (std::uint32_t k = 0; k < overflow_begin_; ++k) {
+        const Aabb& b = slots_[k].box;
+        soa_[0][k] = b.min.x;
+        soa_[1][k] = b.min.y;
+        soa_[2][k] = b.min.z;
+        soa_[3][k] = b.max.x;
+        soa_[4][k] = b.max.y;
+        soa_[5][k] = b.max.z;
+      }
+    }
+    // Occupied levels, coarse to fine.
+    occupied_count_ = 0;
+    for (int l = 0; l <= kLooseMaxDepth; ++l) {
+      if (level_cells_[l] > 0) occupied_[occupied_count_++] = l;
+    }
+  }
+
+  /// Step 4a: lookup structures for the occupied cells. Dense levels: a table of the
+  /// cell's first slot + 1 (0 = empty) and an occupancy bit map, both indexed by
+  /// x + 2^l y + 4^l z; sparse levels: a hash table from key to cell index.
+  void build_tables() {
+    std::size_t sparse = 0;
+    for (int l = kDenseLevels + 1; l <= kLooseMaxDepth; ++l) sparse += level_cells_[l];
+    for (int l = 0; l <= kDenseLevels; ++l) {
+      if (level_cells_[l] > 0 && dense_[static_cast<std::size_t>(l)].empty()) {
+        // Padding: the query reads 3 x 3 x 3 blocks from a range's low corner, up to one
+        // plane, one row and 2 cells past the last cell.
+        const std::size_t side = std::size_t{1} << l;
+        const std::size_t size = side * side * side + side * side + side + 8;
+        dense_[static_cast<std::size_t>(l)].assign(size, 0u);
+        bits_[static_cast<std::size_t>(l)].assign(side * side + side + 4, 0u);  // a word per row
+      }
+    }
+    hash_mask_ = 0;
+    if (sparse > 0) {
+      std::size_t cap = 16;
+      while (cap < 2 * sparse) cap *= 2;
+      hash_.assign(cap, HashSlot{kLooseNoKey, 0});
+      hash_mask_ = static_cast<std::uint32_t>(cap - 1);
+    }
+    if (flat_.size() < 512) flat_.resize(512);
+    for (std::uint32_t c = 0; c < cells_.size(); ++c) {
+      const Cell& cell = cells_[c];
+      const std::uint32_t p = cell_linear_[c];
+      if (cell.level <= kDenseLevels) {
+        std::uint32_t code = std::min(cell.end - cell.begin, kCountCap) - 1u;
+        if (slots_.size() >= kSlotMask) code = kCountCap - 1u;  // huge n: begin only
+        dense_[static_cast<std::size_t>(cell.level)][p] = (cell.begin + 1u) | (code << kSlotBits);
+        bits_[static_cast<std::size_t>(cell.level)][p >> cell.level] |=
+            std::uint64_t{1} << (p & ((1u << cell.level) - 1u));
+      } else {
+        const std::uint32_t x = p & ((1u << cell.level) - 1u);
+        const std::uint32_t y = (p >> cell.level) & ((1u << cell.level) - 1u);
+        const std::uint32_t z = p >> (2 * cell.level);
+        const std::uint32_t key = loose_cell_key(cell.level, x, y, z);
+        std::uint32_t h = hash_key(key) & hash_mask_;
+        while (hash_[h].key != kLooseNoKey) h = (h + 1) & hash_mask_;
+        hash_[h] = {key, c};
+      }
+    }
+  }
+
+  /// Index of the occupied cell (level > kDenseLevels, morton), or kEmpty.
+  std::uint32_t find_sparse_cell(int level, std::uint32_t morton) const {
+    const std::uint32_t key = loose_level_base(level) + morton;
+    for (std::uint32_t h = hash_key(key) & hash_mask_;; h = (h + 1) & hash_mask_) {
+      if (hash_[h].key == key) return hash_[h].cell;
+      if (hash_[h].key == kLooseNoKey) return kEmpty;
+    }
+  }
+
+  /// Appends the slots of a cell given by its dense-table entry `e` to flat_ at `n` when
+  /// its first slot is >= `from` (the common one-body case without a branch on `e`).
+  std::uint32_t append_cell(std::uint32_t e, std::uint32_t from, std::uint32_t n) {
+    const std::uint32_t begin = (e & kSlotMask) - 1u;
+    // keep = first slot >= from, i.e. from < (e & kSlotMask), without a branch (both are
+    // < 2^31, so the difference's sign bit says it).
+    const std::uint32_t keep = (from - (e & kSlotMask)) >> 31;
+    if ((e >> kSlotBits) == 0u) {
+      flat_[n] = begin;
+      return n + keep;
+    }
+    if (!keep) return n;
+    std::uint32_t len = (e >> kSlotBits) + 1u;
+    if (len == kCountCap) len = slots_[begin].run_end - begin;
+    if (flat_.size() < n + len + 64) flat_.resize(2 * (n + len + 64));
+    for (std::uint32_t j = 0; j < len; ++j) flat_[n + j] = begin + j;
+    return n + len;
+  }
+
+  /// Appends to flat_ (from `n`) the slots of the occupied cells of dense level m in the
+  /// ranges whose first slot is >= `from`; returns the new length.
+  std::uint32_t gather_dense(int m, const LooseRange& rx, const LooseRange& ry,
+                             const LooseRange& rz, std::uint32_t from, std::uint32_t n) {
+    const std::uint32_t* table = dense_[static_cast<std::size_t>(m)].data();
+    const std::uint64_t* bm = bits_[static_cast<std::size_t>(m)].data();
+    const std::size_t row = std::size_t{1} << m;
+    const std::size_t plane = std::size_t{1} << (2 * m);
+    const std::size_t p0 = static_cast<std::size_t>(rz.lo) * plane +
+                           static_cast<std::size_t>(ry.lo) * row + static_cast<std::size_t>(rx.lo);
+    if (flat_.size() < n + 128) flat_.resize(2 * (n + 128));
+    if (rx.hi - rx.lo <= 2 && ry.hi - ry.lo <= 2 && rz.hi - rz.lo <= 2) {
+      // The usual case: the occupancy bits of a fixed 3 x 3 x 3 block from the low
+      // corner (one 64-bit word per row: dense levels have rows of <= 64 cells; cells
+      // past the range masked out) make a 27-bit mask (bit 9z + 3y + x); only occupied
+      // cells' table entries are read.
+      const std::uint64_t* w0 = bm + static_cast<std::size_t>(rz.lo) * row + static_cast<std::size_t>(ry.lo);
+      const unsigned sx = static_cast<unsigned>(rx.lo);
+      const auto row3 = [w0, sx](std::size_t r) { return static_cast<std::uint32_t>(w0[r] >> sx) & 7u; };
+      std::uint32_t mask = row3(0) | (row3(1) << 3) | (row3(2) << 6) | (row3(row) << 9) |
+                           (row3(row + 1) << 12) | (row3(row + 2) << 15) | (row3(2 * row) << 18) |
+                           (row3(2 * row + 1) << 21) | (row3(2 * row + 2) << 24);
+      const std::uint32_t wx = static_cast<std::uint32_t>(rx.hi - rx.lo);
+      const std::uint32_t wy = static_cast<std::uint32_t>(ry.hi - ry.lo);
+      const std::uint32_t wz = static_cast<std::uint32_t>(rz.hi - rz.lo);
+      if ((wx & wy & wz) != 2u) {
+        // A range narrower than 3 on some axis (at the grid's border, or a small box).
+        const std::uint32_t xm = (2u << wx) - 1u;                     // 0b001, 0b011, 0b111
+        const std::uint32_t ym = xm * ((wy >= 2u ? 0x49u : wy >= 1u ? 0x9u : 0x1u));  // rows
+        const std::uint32_t zm = ym * (wz >= 2u ? 0x40201u : wz >= 1u ? 0x201u : 0x1u);
+        mask &= zm;
+      }
+      const std::uint32_t* off = block_[m];
+      const std::uint32_t* t0 = table + p0;
+      while (mask != 0) {
+        const int k = __builtin_ctz(mask);
+        mask &= mask - 1u;
+        n = append_cell(t0[off[k]], from, n);
+      }
+      return n;
+    }
+    // Wider ranges (a face touching a loose border exactly: up to 5 cells per axis).
+    for (int z = rz.lo; z <= rz.hi; ++z) {
+      for (int y = ry.lo; y <= ry.hi; ++y) {
+        const std::uint32_t* r = table + static_cast<std::size_t>(z) * plane +
+                                 static_cast<std::size_t>(y) * row;
+        for (int x = rx.lo; x <= rx.hi; ++x) {
+          const std::uint32_t e = r[x];
+          if (e == 0u) continue;
+          if (flat_.size() < n + 64) flat_.resize(2 * (n + 64));
+          n = append_cell(e, from, n);
+        }
+      }
+    }
+    return n;
+  }
+
+  /// Step 4b: the pairs of cell c with its own level (larger slots) and coarser levels.
+  std::uint64_t query_cell(std::uint32_t c, std::vector<Pair>& out) {
+    const Cell cell = cells_[c];
+    std::uint64_t candidates = 0;
+    // Own cell: later slots.
+    for (std::uint32_t i = cell.begin + 1; i < cell.end; ++i) {
+      const Slot si = slots_[i];
+      for (std::uint32_t j = cell.begin; j < i; ++j) {
+        if (overlaps_nb(slots_[j].box, si.box)) emit(slots_[j].body, si.body, out);
+      }
+    }
+    const std::uint64_t pop = cell.end - cell.begin;
+    candidates += pop * (pop - 1) / 2;
+
+    for (int o = 0; o < occupied_count_; ++o) {
+      const int m = occupied_[o];
+      if (m > cell.level) break;
+      const LooseRange rx = loose_query_axis_q(cell.q.lo[0], cell.q.hi[0], m);
+      const LooseRange ry = loose_query_axis_q(cell.q.lo[1], cell.q.hi[1], m);
+      const LooseRange rz = loose_query_axis_q(cell.q.lo[2], cell.q.hi[2], m);
+      if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) continue;
+      const bool own = m == cell.level;
+      // The slots of the occupied cells of the range (at the own level only cells after
+      // this one: first slot >= cell.end), then the tests, one rarely taken branch each.
+      std::uint32_t nflat = 0;
+      if (m <= kDenseLevels) {
+        nflat = gather_dense(m, rx, ry, rz, own ? cell.end : 0u, 0u);
+      } else {
+        for (int z = rz.lo; z <= rz.hi; ++z) {
+          const std::uint32_t mz = morton_spread3(static_cast<std::uint32_t>(z)) << 2;
+          for (int y = ry.lo; y <= ry.hi; ++y) {
+            const std::uint32_t myz = mz | (morton_spread3(static_cast<std::uint32_t>(y)) << 1);
+            for (int x = rx.lo; x <= rx.hi; ++x) {
+              const std::uint32_t d = find_sparse_cell(m, myz | morton_spread3(static_cast<std::uint32_t>(x)));
+              if (d == kEmpty || (own && d <= c)) continue;  // own cell done; smaller: met there
+              const Cell& other = cells_[d];
+              const std::uint32_t len = other.end - other.begin;
+              if (flat_.size() < nflat + len) flat_.resize(2 * (nflat + len));
+              for (std::uint32_t j = 0; j < len; ++j) flat_[nflat + j] = other.begin + j;
+              nflat += len;
+            }
+          }
+        }
+      }
+      candidates += static_cast<std::uint64_t>(nflat) * pop;
+      const std::uint32_t* flat = flat_.data();
+      for (std::uint32_t i = cell.begin; i < cell.end; ++i) {
+        const Slot si = slots_[i];
+        for (std::uint32_t k = 0; k < nflat; ++k) {
+          const Slot& sj = slots_[flat[k]];
+          if (overlaps_nb(si.box, sj.box)) emit(si.body, sj.body, out);
+        }
+      }
+    }
+    return candidates;
+  }
+
+  /// Step 4c: overflow bodies against every in-tree body and later overflow bodies. The
+  /// in-tree part reads the slots' coordinates as structure of arrays, 64 at a time, so
+  /// the compiler vectorises the Eq. 6 test.
+  std::uint64_t query_overflow(std::vector<Pair>& out) const {
+    // Overflow slots come after every cell's slots (their key sorts last).
+    std::uint64_t candidates = 0;
+    const std::uint32_t end = overflow_begin_;
+    const float* minx = soa_[0].data();
+    const float* miny = soa_[1].data();
+    const float* minz = soa_[2].data();
+    const float* maxx = soa_[3].data();
+    const float* maxy = soa_[4].data();
+    const float* maxz = soa_[5].data();
+    for (std::uint32_t o = overflow_begin_; o < overflow_end_; ++o) {
+      const Aabb bo = slots_[o].box;
+      const std::uint32_t body_o = slots_[o].body;
+      for (std::uint32_t j0 = 0; j0 < end; j0 += 64) {
+        const std::uint32_t len = std::min<std::uint32_t>(64u, end - j0);
+        std::uint32_t hit[64];
+        for (std::uint32_t k = 0; k < len; ++k) {
+          const std::uint32_t j = j0 + k;
+          hit[k] = static_cast<std::uint32_t>(minx[j] <= bo.max.x) &
+                   static_cast<std::uint32_t>(maxx[j] >= bo.min.x) &
+                   static_cast<std::uint32_t>(miny[j] <= bo.max.y) &
+                   static_cast<std::uint32_t>(maxy[j] >= bo.min.y) &
+                   static_cast<std::uint32_t>(minz[j] <= bo.max.z) &
+                   static_cast<std::uint32_t>(maxz[j] >= bo.min.z);
+        }
+        std::uint32_t any = 0;
+        for (std::uint32_t k = 0; k < len; ++k) any |= hit[k];
+        if (any == 0) continue;
+        for (std::uint32_t k = 0; k < len; ++k) {
+          if (hit[k]) emit(body_o, slots_[j0 + k].body, out);
+        }
+      }
+      candidates += end;
+      for (std::uint32_t j = o + 1; j < overflow_end_; ++j) {
+        if (overlaps(bo, slots_[j].box)) emit(body_o, slots_[j].body, out);
+      }
+      candidates += overflow_end_ - o - 1;
+    }
+    return candidates;
   }
 
   static void emit(std::uint32_t p, std::uint32_t q, std::vector<Pair>& out) {
     out.push_back(p < q ? Pair{p, q} : Pair{q, p});
   }
 
-  /// Node key of every body with no NaN coordinate (bodies with a NaN never overlap
-  /// anything under Eq. 6 and are left out). Keeps the previous order of items_ when the
-  /// body set is the same, so that sort_items() can insertion-sort.
-  void build_keys(const std::vector<Aabb>& boxes, int depth) {
-    const std::size_t n = boxes.size();
-    if (items_.size() != n || !all_finite_prev_) {
-      items_.resize(n);
-      for (std::size_t i = 0; i < n; ++i) items_[i].body = static_cast<std::uint32_t>(i);
-      coherent_ = false;
-    } else {
-      coherent_ = true;
-    }
-    all_finite_prev_ = true;
-    moved_.clear();
-
-    const Vec3 c = center(domain_);
-    const float side = std::max({domain_.max.x - domain_.min.x, domain_.max.y - domain_.min.y,
-                                 domain_.max.z - domain_.min.z});
-    const Vec3 origin{c.x - 0.5f * side, c.y - 0.5f * side, c.z - 0.5f * side};
-    const bool usable = std::isfinite(side) && side > 0.0f && is_finite(origin) && depth > 0;
-    const float cells = static_cast<float>(1u << depth);
-    const float scale = usable ? cells / side : 0.0f;
-    const std::uint32_t top = (1u << depth) - 1u;
-
-    std::size_t w = 0;
-    for (std::size_t k = 0; k < n; ++k) {
-      const std::uint32_t body = items_[k].body;
-      const Aabb& b = boxes[body];
-      if (std::isnan(b.min.x) || std::isnan(b.min.y) || std::isnan(b.min.z) ||
-          std::isnan(b.max.x) || std::isnan(b.max.y) || std::isnan(b.max.z)) {
-        all_finite_prev_ = false;  // the item set shrinks: rebuild next time
-        continue;
-      }
-      std::uint64_t node = 0;  // root: lo 0, level 0
-      if (usable) {
-        std::uint32_t i0[3], i1[3];
-        bool inside = true;
-        for (int a = 0; a < 3 && inside; ++a) {
-          const float u0 = (b.min[a] - origin[a]) * scale;  // monotone in b.min[a]
-          const float u1 = (b.max[a] - origin[a]) * scale;
-          if (!(u0 >= 0.0f && u1 <= cells && u0 <= u1)) {
-            inside = false;
-            break;
-          }
-          i0[a] = std::min(static_cast<std::uint32_t>(u0), top);
-          i1[a] = std::min(static_cast<std::uint32_t>(u1), top);
-        }
-        if (inside) {
-          const std::uint32_t diff = (i0[0] ^ i1[0]) | (i0[1] ^ i1[1]) | (i0[2] ^ i1[2]);
-          int s = 0;  // levels above the leaves
-          while ((diff >> s) != 0u) ++s;
-          const int level = depth - s;
-          const std::uint64_t lo =
-              static_cast<std::uint64_t>(morton3(i0[0] >> s, i0[1] >> s, i0[2] >> s))
-              << (3 * s);
-          node = (lo << 4) | static_cast<std::uint64_t>(level);
-        }
-      }
-      Item it;
-      it.node = node;
-      it.minx = float_key(b.min.x);
-      it.body = body;
-      // A body that changed node may move far in the order: sort it apart and merge.
-      if (coherent_ && items_[k].node != node) {
-        moved_.push_back(it);
-      } else {
-        items_[w++] = it;
-      }
-    }
-    items_.resize(w);
-  }
-
-  /// Sorts items_ by (node, min.x, body): insertion sort when the previous order is
-  /// available (coherent motion), falling back to std::sort past a budget of moves.
-  void sort_items() {
-    const std::size_t m = items_.size();
-    bool ok = coherent_;
-    if (ok) {
-      std::size_t budget = 8 * m + 64;
-      for (std::size_t i = 1; i < m && ok; ++i) {
-        const Item x = items_[i];
-        std::size_t j = i;
-        while (j > 0 && item_less(x, items_[j - 1])) {
-          items_[j] = items_[j - 1];
-          --j;
-          if (--budget == 0) {
-            ok = false;
-            break;
-          }
-        }
-        items_[j] = x;
-      }
-    }
-    if (!ok) std::sort(items_.begin(), items_.end(), item_less);
-    if (!moved_.empty()) {
-      std::sort(moved_.begin(), moved_.end(), item_less);
-      merge_buf_.resize(m + moved_.size());
-      std::merge(items_.begin(), items_.end(), moved_.begin(), moved_.end(), merge_buf_.begin(),
-                 item_less);
-      items_.swap(merge_buf_);
-    }
-  }
-
   int depth_cfg_;
-  Aabb domain_;
-  bool coherent_ = false;
-  bool all_finite_prev_ = true;
-  std::vector<Item> items_;
-  std::vector<Item> moved_;
-  std::vector<Item> merge_buf_;
-  std::vector<Aabb> sorted_;
-  std::vector<float> sminx_;
-  std::vector<Node> nodes_;
-  std::vector<std::int32_t> parents_;
-  std::vector<Frame> frames_;
-  std::vector<Cand> cands_;
-  std::vector<Cand> filt_;
+  LooseGrid grid_;
+  int depth_ = 0;
+  std::uint32_t block_[kDenseLevels + 1][27];
+  std::vector<QBox> qbody_;               // per body
+  std::vector<std::uint32_t> key_;        // per body
+  std::vector<std::uint64_t> order_;      // sorted (key << 32 | body)
+  std::vector<std::uint64_t> moved_;
+  std::vector<std::uint64_t> merge_buf_;
+  std::vector<std::uint32_t> radix_count_;
+  std::vector<std::uint32_t> slot_of_;    // per body: its slot
+  std::vector<Slot> slots_;               // per slot (NaN boxes excluded)
+  std::vector<QBox> qslot_;               // per slot
+  std::vector<float> soa_[6];             // min x, y, z, max x, y, z of in-tree slots
+  std::vector<Cell> cells_;               // occupied cells in key order
+  std::vector<std::uint32_t> cell_linear_;  // their x + 2^l y + 4^l z
+  std::vector<std::uint32_t> flat_;       // query scratch: the slots of those cells
+  std::uint32_t level_cells_[kLooseMaxDepth + 1] = {};
+  int occupied_[kLooseMaxDepth + 1] = {};
+  int occupied_count_ = 0;
+  std::uint32_t overflow_begin_ = 0;
+  std::uint32_t overflow_end_ = 0;
+  std::vector<std::uint32_t> dense_[kDenseLevels + 1];
+  std::vector<std::uint64_t> bits_[kDenseLevels + 1];
+  std::vector<HashSlot> hash_;
+  std::uint32_t hash_mask_ = 0;
   std::vector<Pair> tmp_pairs_;
   std::vector<std::uint32_t> count_;
 };
@@ -369,7 +599,7 @@ class OctreeBroadPhase final : public BroadPhase {
 namespace detail {
 
 std::unique_ptr<BroadPhase> make_octree_broadphase(int depth, const Aabb& domain) {
-  return std::make_unique<OctreeBroadPhase>(depth, domain);
+  return std::make_unique<LooseOctreeBroadPhase>(depth, domain);
 }
 
 }  // namespace detail

@@ -17,11 +17,6 @@ constexpr int kMaxDepth = 10;       // 10 bits per axis, 30-bit Morton codes
 constexpr int kAutoMaxDepth = 8;    // SPEC 5.2: `auto` goes at most 8 deep
 constexpr std::uint32_t kAutoLeafLimit = 64;
 
-/// Morton code of integer cell coordinates: x in the highest bit of each triple.
-std::uint32_t morton3(std::uint32_t ix, std::uint32_t iy, std::uint32_t iz) {
-  return (morton_spread3(ix) << 2) | (morton_spread3(iy) << 1) | morton_spread3(iz);
-}
-
 Aabb tight_bounds(const std::vector<Vec3>& v) {
   Aabb b{v[0], v[0]};
   for (const Vec3& p : v) {

@@ -14,6 +14,7 @@
 
 #include "octocd/broadphase.hpp"
 #include "octocd/error.hpp"
+#include "octocd/loose_octree.hpp"
 
 namespace octocd {
 namespace {
@@ -139,9 +140,11 @@ void PrintTo(const Variant& v, std::ostream* os) {
   *os << v.name << " depth " << v.depth << " cell " << v.cell;
 }
 
+bool is_octree(const std::string& name) { return name == "octree" || name == "octree-strict"; }
+
 std::string variant_name(const testing::TestParamInfo<Variant>& info) {
   std::string s = info.param.name;
-  if (s == "octree") s += info.param.depth < 0 ? "_auto" : "_d" + std::to_string(info.param.depth);
+  if (is_octree(s)) s += info.param.depth < 0 ? "_auto" : "_d" + std::to_string(info.param.depth);
   if (s == "spatial-hash") s += "_h" + std::to_string(static_cast<int>(info.param.cell * 1000)) + "mm";
   std::replace(s.begin(), s.end(), '-', '_');
   return s;
@@ -150,8 +153,8 @@ std::string variant_name(const testing::TestParamInfo<Variant>& info) {
 std::vector<Variant> all_variants() {
   std::vector<Variant> v;
   for (const std::string& name : broadphase_names()) {
-    if (name == "octree") {
-      for (int d : {0, 1, 2, 4, 7, 10, -1}) v.push_back({name, d, 0.25f});
+    if (is_octree(name)) {
+      for (int d = -1; d <= 10; ++d) v.push_back({name, d, 0.25f});
     } else if (name == "spatial-hash") {
       for (float h : {0.25f, 0.05f, 0.01f, 1.0f}) v.push_back({name, 2, h});
     } else {
@@ -300,13 +303,119 @@ TEST_P(BroadPhaseEquivalence, EmptyAndSingleBody) {
   EXPECT_EQ(st.cell_candidates, 0u);
 }
 
+TEST_P(BroadPhaseEquivalence, HugeBodiesBiggerThanTheDomainMatchFlat) {
+  // Bodies larger than the root cube (side 4): slabs, walls and boxes around everything,
+  // some centred far away, among ordinary bodies.
+  std::vector<Aabb> boxes = random_boxes(400, 21);
+  boxes[3] = {{-10.0f, -10.0f, -10.0f}, {10.0f, 10.0f, 10.0f}};   // contains the domain
+  boxes[50] = {{-3.0f, -0.1f, -3.0f}, {3.0f, 0.0f, 3.0f}};        // floor slab, 6 m wide
+  boxes[51] = {{-3.0f, 1.0f, -3.0f}, {3.0f, 1.1f, 3.0f}};         // ceiling slab
+  boxes[52] = {{-2.1f, -3.0f, -3.0f}, {-2.0f, 3.0f, 3.0f}};       // side wall on x = -2
+  boxes[90] = {{-4.5f, 0.2f, -0.1f}, {4.5f, 0.3f, 0.1f}};         // rod longer than S
+  boxes[91] = {{40.0f, 40.0f, 40.0f}, {50.0f, 50.0f, 50.0f}};     // huge and far away
+  boxes[92] = {{-0.01f, -0.01f, -0.01f}, {4.01f, 4.01f, 4.01f}};  // just above S
+  boxes[93] = {{-2.0f, -1.5f, -2.0f}, {2.0f, 2.5f, 2.0f}};        // exactly the root cube
+  boxes[94] = {{-3.9f, -3.4f, -3.9f}, {0.1f, 0.6f, 0.1f}};        // side S, corner outside
+  const std::vector<Pair> want = brute(boxes);
+  auto bp = make();
+  std::vector<Pair> got;
+  BroadPhaseStats st;
+  bp->find_pairs(boxes, got, st);
+  expect_well_formed(got, boxes.size());
+  EXPECT_TRUE(got == want) << describe_diff(got, want);
+  EXPECT_EQ(st.pairs, want.size());
+}
+
+TEST_P(BroadPhaseEquivalence, OutOfDomainBodiesMatchFlat) {
+  // Many bodies partly or wholly outside the domain and the root cube, in clusters (so
+  // they overlap each other) on every side, some just across the root's loose box.
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f), s(0.05f, 0.6f);
+  std::vector<Aabb> boxes;
+  const Vec3 centres[] = {{-3.1f, 0.5f, 0.0f}, {4.05f, 0.5f, 0.0f}, {0.0f, -2.6f, 0.0f},
+                          {0.0f, 3.6f, 0.0f},  {0.0f, 0.5f, -4.01f}, {0.0f, 0.5f, 3.0f},
+                          {9.0f, 9.0f, 9.0f},  {-2.0f, -1.5f, -2.0f}, {2.0f, 2.5f, 2.0f},
+                          {0.0f, 0.5f, 0.0f}};
+  for (const Vec3& c : centres) {
+    for (int k = 0; k < 60; ++k) {
+      const Vec3 lo{c.x + 0.8f * u(rng), c.y + 0.8f * u(rng), c.z + 0.8f * u(rng)};
+      boxes.push_back({lo, {lo.x + s(rng), lo.y + s(rng), lo.z + s(rng)}});
+    }
+  }
+  const std::vector<Pair> want = brute(boxes);
+  ASSERT_GT(want.size(), boxes.size());
+  auto bp = make();
+  std::vector<Pair> got;
+  BroadPhaseStats st;
+  bp->find_pairs(boxes, got, st);
+  expect_well_formed(got, boxes.size());
+  EXPECT_TRUE(got == want) << describe_diff(got, want);
+}
+
+TEST_P(BroadPhaseEquivalence, AllBodiesInOneCellMatchFlat) {
+  // Everything inside one deepest-level cell (side 4 / 1024 at depth 10) with a common
+  // corner point, plus a dense pile of identical boxes.
+  std::vector<Aabb> boxes;
+  const float q = 4.0f / 1024.0f;
+  const Vec3 o{0.25f + q * 0.25f, 0.75f + q * 0.25f, 0.5f + q * 0.25f};
+  std::mt19937 rng(41);
+  std::uniform_real_distribution<float> u(0.0f, 0.24f * q);
+  for (int i = 0; i < 150; ++i) {
+    boxes.push_back({{o.x - u(rng), o.y - u(rng), o.z - u(rng)},
+                     {o.x + u(rng), o.y + u(rng), o.z + u(rng)}});
+  }
+  // A pile of 100 identical boxes (more than a table entry's body count holds), with
+  // neighbours touching it from the next cell at the same level and from a finer level.
+  for (int i = 0; i < 100; ++i) boxes.push_back({{-1.0f, 0.1f, 0.1f}, {-0.9f, 0.2f, 0.2f}});
+  boxes.push_back({{-0.9f, 0.1f, 0.1f}, {-0.8f, 0.2f, 0.2f}});
+  boxes.push_back({{-0.9f, 0.15f, 0.15f}, {-0.89f, 0.16f, 0.16f}});
+  boxes.push_back({{-1.1f, 0.05f, 0.05f}, {-1.0f, 0.1f, 0.1f}});
+  const std::vector<Pair> want = brute(boxes);
+  ASSERT_EQ(want.size(), 150u * 149u / 2u + 100u * 99u / 2u + 3u * 100u + 1u);
+  auto bp = make();
+  std::vector<Pair> got;
+  BroadPhaseStats st;
+  bp->find_pairs(boxes, got, st);
+  expect_well_formed(got, boxes.size());
+  EXPECT_TRUE(got == want) << describe_diff(got, want);
+}
+
+TEST_P(BroadPhaseEquivalence, MixedSizesAcrossLevelsMatchFlat) {
+  // Sizes spread over every level (4 m down to points), many touching exactly on the
+  // 1/256 grid (cell borders of every level up to 8 and loose-box borders).
+  std::mt19937 rng(51);
+  std::uniform_real_distribution<float> c(-2.2f, 2.2f), e(-11.0f, 1.0f);
+  std::vector<Aabb> boxes;
+  for (int i = 0; i < 1500; ++i) {
+    Vec3 ctr{c(rng), 0.5f + 0.6f * c(rng), 0.6f * c(rng)};
+    const float h = 0.5f * std::exp2(e(rng));
+    if (i % 3 == 0) {
+      const float g = 1.0f / 256.0f;
+      ctr = {snap(ctr.x, g), snap(ctr.y, g), snap(ctr.z, g)};
+      const float hs = std::max(g, snap(h, g));
+      boxes.push_back({{ctr.x - hs, ctr.y - hs, ctr.z - hs}, {ctr.x + hs, ctr.y + hs, ctr.z + hs}});
+    } else {
+      boxes.push_back({{ctr.x - h, ctr.y - 0.5f * h, ctr.z - h}, {ctr.x + h, ctr.y + h, ctr.z + 0.3f * h}});
+    }
+  }
+  const std::vector<Pair> want = brute(boxes);
+  ASSERT_GT(want.size(), boxes.size() / 2);
+  auto bp = make();
+  std::vector<Pair> got;
+  BroadPhaseStats st;
+  bp->find_pairs(boxes, got, st);
+  expect_well_formed(got, boxes.size());
+  EXPECT_TRUE(got == want) << describe_diff(got, want);
+}
+
 INSTANTIATE_TEST_SUITE_P(AllBroadPhases, BroadPhaseEquivalence, testing::ValuesIn(all_variants()),
                          variant_name);
 
 // ---- per-implementation properties ------------------------------------------------
 
 TEST(BroadPhase, NamesAreTheDocumentedOnes) {
-  EXPECT_EQ(broadphase_names(), (std::vector<std::string>{"flat", "octree", "spatial-hash"}));
+  EXPECT_EQ(broadphase_names(),
+            (std::vector<std::string>{"flat", "octree", "octree-strict", "spatial-hash"}));
   for (const std::string& name : broadphase_names()) {
     BroadPhaseConfig cfg;
     cfg.name = name;
@@ -323,7 +432,7 @@ TEST(BroadPhase, UnknownNameThrowsInputError) {
   } catch (const InputError& e) {
     EXPECT_STREQ(e.what(),
                  "broadphase.name: unknown broadphase 'kd-tree' (expected one of: flat, octree, "
-                 "spatial-hash)");
+                 "octree-strict, spatial-hash)");
   }
 }
 
@@ -379,15 +488,206 @@ TEST(BroadPhase, OctreeCullsCandidates) {
     boxes.push_back({lo, {lo.x + us(rng), lo.y + us(rng), lo.z + us(rng)}});
   }
   const std::uint64_t all = 2000ull * 1999ull / 2ull;
+  for (const char* name : {"octree", "octree-strict"}) {
+    SCOPED_TRACE(name);
+    std::vector<Pair> got;
+    BroadPhaseStats d0, d2, d4, d6;
+    make_broadphase({name, 0, 0.25f}, kDomain)->find_pairs(boxes, got, d0);
+    EXPECT_EQ(d0.cell_candidates, all);  // depth 0: everything in the root cell
+    make_broadphase({name, 2, 0.25f}, kDomain)->find_pairs(boxes, got, d2);
+    make_broadphase({name, 4, 0.25f}, kDomain)->find_pairs(boxes, got, d4);
+    make_broadphase({name, 6, 0.25f}, kDomain)->find_pairs(boxes, got, d6);
+    if (std::string(name) == "octree") {
+      // Loose: every body meets the 3 x 3 x 3 cells around its own, so coarse levels
+      // (cells of 1 m at depth 2) cull little; at depth 6 bodies of size <= 0.05 sit in
+      // cells of 0.0625 and meet a few neighbours each.
+      EXPECT_LT(d2.cell_candidates, all);
+      EXPECT_LT(d4.cell_candidates, d2.cell_candidates / 4);
+      EXPECT_LT(d6.cell_candidates, 20u * 2000u);
+      EXPECT_GE(d6.cell_candidates, d6.pairs);
+    } else {
+      EXPECT_LT(d2.cell_candidates, all / 4);
+      EXPECT_LT(d4.cell_candidates, d2.cell_candidates);
+    }
+    EXPECT_GT(d2.memory_bytes, 0u);
+  }
+}
+
+TEST(BroadPhase, LooseOctreeCountsOverflowAgainstEveryBody) {
+  // Two bodies bigger than the root cube (side 4) go to the overflow list and are tested
+  // against every body; the 100 small ones meet only their neighbours.
+  std::vector<Aabb> boxes;
+  for (int i = 0; i < 100; ++i) {
+    const float x = -1.9f + 0.035f * static_cast<float>(i);
+    boxes.push_back({{x, 0.4f, 0.0f}, {x + 0.01f, 0.41f, 0.01f}});
+  }
+  boxes.push_back({{-3.0f, -0.1f, -3.0f}, {3.0f, 0.0f, 3.0f}});
+  boxes.push_back({{-3.0f, 1.0f, -3.0f}, {3.0f, 1.1f, 3.0f}});
   std::vector<Pair> got;
-  BroadPhaseStats d0, d2, d4;
-  make_broadphase({"octree", 0, 0.25f}, kDomain)->find_pairs(boxes, got, d0);
-  EXPECT_EQ(d0.cell_candidates, all);  // depth 0: everything at the root
-  make_broadphase({"octree", 2, 0.25f}, kDomain)->find_pairs(boxes, got, d2);
-  make_broadphase({"octree", 4, 0.25f}, kDomain)->find_pairs(boxes, got, d4);
-  EXPECT_LT(d2.cell_candidates, all / 4);
-  EXPECT_LT(d4.cell_candidates, d2.cell_candidates);
-  EXPECT_GT(d2.memory_bytes, 0u);
+  BroadPhaseStats st;
+  make_broadphase({"octree", -1, 0.25f}, kDomain)->find_pairs(boxes, got, st);
+  EXPECT_TRUE(got.empty());
+  // 2 x 100 + 1 overflow candidates, plus at most a few per small body.
+  EXPECT_GE(st.cell_candidates, 201u);
+  EXPECT_LT(st.cell_candidates, 201u + 3u * 100u);
+}
+
+// ---- the loose octree's cell math (loose_octree.hpp) --------------------------------
+
+TEST(LooseOctree, Morton3PutsXInTheLowBit) {
+  EXPECT_EQ(morton3(1, 0, 0), 1u);
+  EXPECT_EQ(morton3(0, 1, 0), 2u);
+  EXPECT_EQ(morton3(0, 0, 1), 4u);
+  EXPECT_EQ(morton3(2, 0, 0), 8u);
+  EXPECT_EQ(morton3(1023, 1023, 1023), (1u << 30) - 1u);
+  EXPECT_EQ(morton3(5, 3, 6), morton3(10, 6, 12) >> 3);  // prefix property
+}
+
+TEST(LooseOctree, GridIsTheDomainsBoundingCube) {
+  const LooseGrid g = loose_grid(kDomain);
+  EXPECT_EQ(g.side, 4.0f);
+  EXPECT_TRUE((g.origin == Vec3{-2.0f, -1.5f, -2.0f}));
+  EXPECT_EQ(g.inv_side, 0.25f);
+  const Vec3 u = loose_unit(g, {2.0f, 2.5f, 0.0f});
+  EXPECT_TRUE((u == Vec3{1.0f, 1.0f, 0.5f}));
+  EXPECT_EQ(loose_grid(Aabb{{0, 0, 0}, {0, 0, 0}}).inv_side, 0.0f);  // unusable
+}
+
+TEST(LooseOctree, LevelByExtentAndKeys) {
+  EXPECT_EQ(loose_level_for_extent(1.0f, 10), 0);
+  EXPECT_EQ(loose_level_for_extent(1.0001f, 10), -1);  // bigger than S: overflow
+  EXPECT_EQ(loose_level_for_extent(0.5f, 10), 1);
+  EXPECT_EQ(loose_level_for_extent(0.2f, 10), 2);      // 1/4 >= 0.2 > 1/8
+  EXPECT_EQ(loose_level_for_extent(0.0f, 10), 10);
+  EXPECT_EQ(loose_level_for_extent(0.0f, 3), 3);
+  EXPECT_EQ(loose_level_for_extent(std::numeric_limits<float>::quiet_NaN(), 10), -1);
+  EXPECT_EQ(loose_level_base(0), 0u);
+  EXPECT_EQ(loose_level_base(1), 1u);
+  EXPECT_EQ(loose_level_base(2), 9u);
+  EXPECT_EQ(loose_cell_key(10, 1023, 1023, 1023), 1227133512u);
+  for (int l = 0; l <= 10; ++l) {
+    EXPECT_EQ(loose_key_level(loose_cell_key(l, 0, 0, 0)), l);
+    const std::uint32_t last = (1u << l) - 1u;
+    EXPECT_EQ(loose_key_level(loose_cell_key(l, last, last, last)), l);
+    if (l < 10) {
+      EXPECT_EQ(loose_cell_key(l, last, last, last) + 1u, loose_cell_key(l + 1, 0, 0, 0));
+    }
+  }
+  EXPECT_EQ(loose_key_level(kLooseOverflowKey), -1);
+  EXPECT_EQ(loose_cell_index(0.5f, 1), 1u);
+  EXPECT_EQ(loose_cell_index(0.4999f, 1), 0u);
+  EXPECT_EQ(loose_cell_index(1.0f, 3), 7u);   // upper face: clamped
+  EXPECT_EQ(loose_cell_index(-0.1f, 3), 0u);  // outside: clamped
+  EXPECT_EQ(loose_cell_index(0.3f, 7) >> 2, loose_cell_index(0.3f, 5));
+}
+
+TEST(LooseOctree, PlacementKeepsTheBodyInsideItsLooseBox) {
+  const LooseGrid g = loose_grid(kDomain);
+  const std::vector<Aabb> boxes = random_boxes(3000, 61);
+  int placed = 0, overflow = 0;
+  for (int depth = 0; depth <= 10; ++depth) {
+    for (const Aabb& b : boxes) {
+      const LoosePlace p = loose_place(g, b, depth);
+      ASSERT_NE(p.level, kLooseNoLevel);
+      if (p.level == kLooseOverflowLevel) {
+        ++overflow;
+        continue;
+      }
+      ++placed;
+      ASSERT_LE(p.level, depth);
+      const std::uint32_t n = 1u << p.level;
+      ASSERT_LT(p.ix, n);
+      ASSERT_LT(p.iy, n);
+      ASSERT_LT(p.iz, n);
+      // Level by size: a cell side >= the body, and one level deeper would not do
+      // (unless the centre rule made it climb).
+      const float side = g.side / static_cast<float>(n);
+      const float ext = std::max({b.max.x - b.min.x, b.max.y - b.min.y, b.max.z - b.min.z});
+      ASSERT_GE(side * 1.0001f, ext);
+      // Inside the loose box (world coordinates, up to rounding).
+      const Aabb lb = expanded(loose_cell_box(g, p.level, p.ix, p.iy, p.iz), 1e-5f);
+      ASSERT_TRUE(contains(lb, b)) << "level " << p.level;
+      // And exactly in unit coordinates.
+      const Vec3 lo = loose_unit(g, b.min), hi = loose_unit(g, b.max);
+      ASSERT_TRUE(loose_fits_axis(lo.x, hi.x, p.ix, p.level));
+      ASSERT_TRUE(loose_fits_axis(lo.y, hi.y, p.iy, p.level));
+      ASSERT_TRUE(loose_fits_axis(lo.z, hi.z, p.iz, p.level));
+    }
+  }
+  EXPECT_GT(placed, 0);
+  EXPECT_EQ(overflow, 0);  // random_boxes stay inside the root's loose box
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(loose_place(g, Aabb{{nan, 0, 0}, {1, 1, 1}}, 4).level, kLooseNoLevel);
+  const float inf = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(loose_place(g, Aabb{{-inf, 0, 0}, {1, 1, 1}}, 4).level, kLooseOverflowLevel);
+  EXPECT_EQ(loose_place(g, Aabb{{-3, -3, -3}, {3, 3, 3}}, 4).level, kLooseOverflowLevel);
+  EXPECT_EQ(loose_place(g, Aabb{{50, 50, 50}, {50, 50, 50}}, 4).level, kLooseOverflowLevel);
+  // A small body just outside the root cube but inside the root's loose box climbs.
+  const LoosePlace out = loose_place(g, Aabb{{2.5f, 0, 0}, {2.6f, 0.1f, 0.1f}}, 6);
+  EXPECT_GE(out.level, 0);
+  EXPECT_LT(out.level, 2);
+  // An unusable grid puts every finite body in the root cell.
+  const LooseGrid bad = loose_grid(Aabb{{0, 0, 0}, {0, 0, 0}});
+  EXPECT_EQ(loose_place(bad, Aabb{{5, 5, 5}, {6, 6, 6}}, 4).level, 4);
+  EXPECT_EQ(loose_place(bad, Aabb{{-inf, 5, 5}, {6, 6, 6}}, 4).level, kLooseOverflowLevel);
+}
+
+TEST(LooseOctree, QueryRangeIsExactlyTheCellsWhoseLooseBoxesMeet) {
+  std::mt19937 rng(71);
+  std::uniform_real_distribution<float> u(-1.3f, 2.3f), w(0.0f, 0.6f);
+  for (int trial = 0; trial < 40000; ++trial) {
+    const int level = static_cast<int>(rng() % 11);
+    float lo = u(rng), hi = lo + w(rng) / static_cast<float>(1 << (level / 2));
+    if (trial % 4 == 0) {  // exactly on cell or loose borders
+      const float g = 0.5f / static_cast<float>(1 << level);
+      lo = std::round(lo / g) * g;
+      hi = std::round(hi / g) * g;
+    }
+    const LooseRange r = loose_query_axis(lo, hi, level);
+    const float n = static_cast<float>(1 << level);
+    int want_lo = 1 << 20, want_hi = -1;
+    for (int i = 0; i < (1 << level); ++i) {
+      const bool meets = static_cast<float>(i) - 0.5f <= hi * n && static_cast<float>(i) + 1.5f >= lo * n;
+      if (meets) {
+        want_lo = std::min(want_lo, i);
+        want_hi = std::max(want_hi, i);
+      }
+    }
+    if (want_hi < 0) {
+      ASSERT_GT(r.lo, r.hi) << lo << " " << hi << " level " << level;
+    } else {
+      ASSERT_EQ(r.lo, want_lo) << lo << " " << hi << " level " << level;
+      ASSERT_EQ(r.hi, want_hi) << lo << " " << hi << " level " << level;
+    }
+    if (hi - lo <= 1.0f / n && want_hi >= 0) {
+      ASSERT_LE(r.hi - r.lo + 1, 4);
+    }
+    // The fixed-point form gives the same range (both empty, or equal).
+    const LooseRange q = loose_query_axis_q(loose_q_min(lo), loose_q_max(hi), level);
+    if (r.lo > r.hi) {
+      ASSERT_GT(q.lo, q.hi) << lo << " " << hi << " level " << level;
+    } else {
+      ASSERT_EQ(q.lo, r.lo) << lo << " " << hi << " level " << level;
+      ASSERT_EQ(q.hi, r.hi) << lo << " " << hi << " level " << level;
+    }
+  }
+  const float inf = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(loose_query_axis(-inf, inf, 3).lo, 0);
+  EXPECT_EQ(loose_query_axis(-inf, inf, 3).hi, 7);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const LooseRange none = loose_query_axis(nan, 0.5f, 3);
+  EXPECT_GT(none.lo, none.hi);
+  for (int level = 0; level <= 10; ++level) {
+    const LooseRange all = loose_query_axis_q(loose_q_min(-inf), loose_q_max(inf), level);
+    EXPECT_EQ(all.lo, 0);
+    EXPECT_EQ(all.hi, (1 << level) - 1);
+    const LooseRange q1 = loose_query_axis_q(loose_q_min(nan), loose_q_max(0.5f), level);
+    EXPECT_GT(q1.lo, q1.hi);
+    const LooseRange q2 = loose_query_axis_q(loose_q_min(0.5f), loose_q_max(nan), level);
+    EXPECT_GT(q2.lo, q2.hi);
+    const LooseRange far = loose_query_axis_q(loose_q_min(1e30f), loose_q_max(1e30f), level);
+    EXPECT_GT(far.lo, far.hi);
+  }
 }
 
 TEST(BroadPhase, SpatialHashCountsSharedCells) {
@@ -416,6 +716,25 @@ TEST(BroadPhase, AutoOctreeDepth) {
   EXPECT_EQ(auto_octree_depth(points, kDomain), 8);
   std::vector<Aabb> huge(3, Aabb{{-5, -5, -5}, {5, 5, 5}});
   EXPECT_EQ(auto_octree_depth(huge, kDomain), 1);
+}
+
+TEST(BroadPhase, AutoLooseOctreeDepth) {
+  // Root side 4: level l has cells of 4/2^l. The smallest body decides: the deepest
+  // level whose cell side is >= its largest side.
+  EXPECT_EQ(auto_loose_octree_depth({}, kDomain), 0);
+  std::vector<Aabb> small(10, Aabb{{0, 0, 0}, {0.1f, 0.05f, 0.02f}});
+  EXPECT_EQ(auto_loose_octree_depth(small, kDomain), 5);  // 0.125 >= 0.1 > 0.0625
+  small.push_back({{0, 0, 0}, {0.5f, 0.5f, 0.5f}});         // bigger ones change nothing
+  EXPECT_EQ(auto_loose_octree_depth(small, kDomain), 5);
+  small.push_back({{1, 0, 0}, {1.0625f, 0.01f, 0.01f}});    // exactly a level-6 cell
+  EXPECT_EQ(auto_loose_octree_depth(small, kDomain), 6);
+  std::vector<Aabb> points(5, Aabb{{1, 1, 1}, {1, 1, 1}});
+  EXPECT_EQ(auto_loose_octree_depth(points, kDomain), 10);
+  std::vector<Aabb> huge(3, Aabb{{-5, -5, -5}, {5, 5, 5}});
+  EXPECT_EQ(auto_loose_octree_depth(huge, kDomain), 0);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::vector<Aabb> with_nan = {{{nan, 0, 0}, {0, 0, 0}}, {{0, 0, 0}, {1.0f, 1.0f, 1.0f}}};
+  EXPECT_EQ(auto_loose_octree_depth(with_nan, kDomain), 2);
 }
 
 }  // namespace

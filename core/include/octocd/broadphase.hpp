@@ -5,6 +5,21 @@
 /// Every implementation returns the same set: all unordered pairs (a, b), a < b, whose
 /// world AABBs overlap under the inclusive rule of Eq. 6, sorted and unique. They differ
 /// only in cost. `flat` is the oracle that all others are tested against.
+///
+/// octocd's own broadphases (make_broadphase; Bullet's and FCL's are in
+/// octocd/reference_broadphase.hpp):
+/// - `flat`: all n(n-1)/2 pairs through Eq. 6 (broadphase.cpp).
+/// - `octree` (default): the loose octree (SPEC 5.1; Ulrich 2000, looseness 2): each body
+///   in the cell of its AABB centre at the deepest level whose cell side is >= its
+///   largest side, queried against the <= 3x3x3 cells of its own and every coarser level
+///   whose loose boxes (cells grown by half a side) meet it; bodies fitting no loose box
+///   in an overflow list tested against every body (broadphase_octree.cpp; cell math in
+///   octocd/loose_octree.hpp, shared with the CUDA engine).
+/// - `octree-strict`: the paper's octree read literally (SPEC 5.1, paper Algorithms 1-2):
+///   each body in the deepest node fully containing it, pairs in nodes that are equal or
+///   ancestor and descendant (broadphase_octree_strict.cpp).
+/// - `spatial-hash`: uniform grid of cell size h (paper section 4.2;
+///   broadphase_spatial_hash.cpp).
 
 #include <cstdint>
 #include <memory>
@@ -28,8 +43,9 @@ inline bool operator<(Pair p, Pair q) { return p.a < q.a || (p.a == q.a && p.b <
 /// Per-call counts (SPEC 5.1: "report per frame").
 struct BroadPhaseStats {
   /// Cell-level candidates: pairs considered before the exact AABB test (for `flat`,
-  /// n(n-1)/2; for `octree`, pairs in related nodes; for `spatial-hash`, pairs sharing a
-  /// cell, before de-duplication).
+  /// n(n-1)/2; for `octree`, the pairs of bodies in queried cells that reach the exact
+  /// test, overflow pairs included; for `octree-strict`, pairs in related nodes; for
+  /// `spatial-hash`, pairs sharing a cell, before de-duplication).
   std::uint64_t cell_candidates = 0;
   /// Pairs returned (after the exact test and de-duplication).
   std::uint64_t pairs = 0;
@@ -40,8 +56,11 @@ struct BroadPhaseStats {
 /// Configuration of a broadphase, from the scene's "broadphase" object or
 /// `--broadphase NAME`.
 struct BroadPhaseConfig {
-  std::string name = "octree";  ///< flat | octree | spatial-hash (references add more)
-  int octree_depth = 2;         ///< D_w for `octree`, in [0, 10]; -1 = `auto`
+  /// flat | octree | octree-strict | spatial-hash (references add more).
+  std::string name = "octree";
+  /// D_w for `octree` and `octree-strict`, in [0, 10]; -1 = `auto` (auto_loose_octree_depth
+  /// for `octree`, auto_octree_depth for `octree-strict`, computed on every call).
+  int octree_depth = 2;
   float cell_size = 0.25f;      ///< h (m) for `spatial-hash`, > 0 (paper section 4.2)
 };
 
@@ -62,17 +81,31 @@ class BroadPhase {
                           BroadPhaseStats& stats) = 0;
 };
 
-/// Creates a broadphase by `config.name`: "flat", "octree", "spatial-hash".
-/// `domain` is the scene's domain box (the octree's root is its bounding cube).
-/// Throws InputError naming `broadphase.name` and the accepted names when unknown, or
-/// the field when a parameter is out of range.
+/// Creates a broadphase by `config.name`: "flat", "octree", "octree-strict",
+/// "spatial-hash". `domain` is the scene's domain box (m; the octrees' root is its
+/// bounding cube: centred on it, side = its longest side). Throws InputError naming
+/// `broadphase.name` and the accepted names when unknown, or the field
+/// (`broadphase.depth`: -1 or [0, 10]; `broadphase.cell_size`: finite > 0) when a
+/// parameter is out of range (checked for every name).
 std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, const Aabb& domain);
 
-/// Names accepted by make_broadphase, in a stable order.
+/// Names accepted by make_broadphase, in a stable order: flat, octree, octree-strict,
+/// spatial-hash.
 std::vector<std::string> broadphase_names();
 
-/// Depth that `octree` uses for `auto` (SPEC 5.1): the deepest level whose cells are
-/// still at least twice the mean body extent, in [1, 8]. `boxes` may be empty (gives 2).
+/// Depth that `octree-strict` uses for `auto` (SPEC 5.1, "from body count and size"):
+/// the deepest level whose cells (side = longest domain side / 2^level, m) are still at
+/// least twice the mean body extent (mean over bodies of the longest AABB side; bodies
+/// with a non-finite or negative side left out), in [1, 8]. `boxes` (world AABBs, m) may
+/// be empty (gives 2).
 int auto_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain);
+
+/// Depth that `octree` (the loose octree) uses for `auto` (SPEC 5.1): the level whose
+/// cell side is the smallest body extent, i.e. the deepest level l in [0, 10] with
+/// S / 2^l >= the smallest largest-AABB-side over `boxes` (S = the longest domain side;
+/// computed in the unit coordinates of octocd/loose_octree.hpp), so the smallest body
+/// sits at level D_w. Boxes with a NaN coordinate are left out; empty `boxes`, or every
+/// body larger than S, gives 0; zero-size bodies give 10.
+int auto_loose_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain);
 
 }  // namespace octocd

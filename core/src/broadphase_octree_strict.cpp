@@ -1,0 +1,373 @@
+/// \file broadphase_octree_strict.cpp
+/// `octree-strict`: the paper's world-space octree read literally (paper section 3.2,
+/// Algorithms 1-2; SPEC 5.1; called `octree` in SPEC revision 1). The default `octree` is
+/// the loose octree of broadphase_octree.cpp.
+///
+/// Structure. The root is the bounding cube of the domain (centred on the domain centre,
+/// side = longest domain side), split D_w times. Coordinates are mapped monotonically to
+/// the integer grid of the depth-D_w leaves; a body goes into the deepest node whose cell
+/// holds both its min and max corner cell. Node cells are half-open [lo, hi) in grid
+/// space (closed only on the root's upper faces), so two bodies in unrelated nodes are
+/// strictly separated on some axis and cannot overlap, not even by touching faces. Bodies
+/// not inside the root (or with a non-finite coordinate) stay at the root. Because the
+/// grid mapping is monotone in each coordinate, the argument holds under float rounding.
+///
+/// Keys. A node at level l with Morton code m (of its level-l cell) covers the contiguous
+/// range [m * 8^(D-l), (m+1) * 8^(D-l)) of depth-D leaf Morton codes; its key is
+/// (range lo, level), so sorting by key lists nodes in pre-order and a node's subtree is
+/// a contiguous run of the sorted bodies.
+///
+/// Query. Bodies are sorted by (node key, min.x), so each non-empty node is a run of
+/// slots. Pass 1 lists the non-empty nodes in pre-order with their nearest non-empty
+/// ancestor and the union AABB of their subtree's bodies. Pass 2 descends: a node's
+/// candidate list is the set of its ancestors' bodies that overlap its subtree bounds
+/// (filtered from the parent's list plus the parent's own bodies; an ancestor body that
+/// misses the bounds cannot overlap any body below, so this is exact, with no rounding
+/// involved); it is kept sorted by min.x (a merge). Pairs inside a node: sweep and prune
+/// on x; pairs with ancestors: a two-list sweep on x of the own bodies against the
+/// candidate list. Every related pair is met once, then goes
+/// through Eq. 6. `cell_candidates` counts all pairs in related nodes (SPEC 5.1), i.e.
+/// before this culling.
+///
+/// Incremental use: the sorted order of the previous call is kept and re-sorted by
+/// insertion sort (near O(n) for coherent motion; bodies that changed node are sorted
+/// apart and merged in), with a fall-back to std::sort when the order changed a lot. Buffers are kept between calls.
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "octocd/broadphase.hpp"
+
+#include "broadphase_detail.hpp"
+
+namespace octocd {
+
+namespace {
+
+/// Float to an unsigned key with the same order (-0 sorts just before +0).
+inline std::uint32_t float_key(float f) {
+  std::uint32_t u;
+  std::memcpy(&u, &f, sizeof u);
+  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+
+/// One body in the sort: node key (range lo << 4 | level), then min.x.
+struct Item {
+  std::uint64_t node;
+  std::uint32_t minx;  // float_key(min.x)
+  std::uint32_t body;
+};
+
+inline bool item_less(const Item& p, const Item& q) {
+  if (p.node != q.node) return p.node < q.node;
+  if (p.minx != q.minx) return p.minx < q.minx;
+  return p.body < q.body;
+}
+
+/// A non-empty node: its own bodies are the sorted slots [begin, end).
+struct Node {
+  std::uint64_t hi;          // end of its leaf range
+  std::uint32_t begin;
+  std::uint32_t end;
+  std::int32_t parent;       // nearest non-empty proper ancestor, -1 at the top
+  std::uint64_t anc_pop;     // bodies in all proper ancestors (for the candidate count)
+  Aabb bounds;               // union of the AABBs of the bodies of its subtree
+};
+
+/// An ancestor body kept for the current node (it overlaps the node's subtree bounds).
+struct Cand {
+  Aabb box;
+  std::uint32_t body;
+};
+
+/// A node on the descent stack; its ancestor candidates are cands_[cbegin, cend).
+struct Frame {
+  std::int32_t node;
+  std::uint32_t cbegin;
+  std::uint32_t cend;
+};
+
+class StrictOctreeBroadPhase final : public BroadPhase {
+ public:
+  StrictOctreeBroadPhase(int depth, const Aabb& domain) : depth_cfg_(depth), domain_(domain) {}
+
+  std::string name() const override { return "octree-strict"; }
+
+  void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
+                  BroadPhaseStats& stats) override {
+    out.clear();
+    const std::size_t n = boxes.size();
+    const int depth = depth_cfg_ < 0 ? auto_octree_depth(boxes, domain_) : depth_cfg_;
+    build_keys(boxes, depth);
+    sort_items();
+
+    // Bodies in sorted order (SoA of what the sweep reads).
+    sorted_.resize(items_.size());
+    sminx_.resize(items_.size());
+    for (std::size_t k = 0; k < items_.size(); ++k) {
+      sorted_[k] = boxes[items_[k].body];
+      sminx_[k] = sorted_[k].min.x;
+    }
+
+    // Pass 1: the non-empty nodes in pre-order, their parents and subtree bounds.
+    nodes_.clear();
+    parents_.clear();
+    const std::uint32_t m = static_cast<std::uint32_t>(items_.size());
+    for (std::uint32_t g = 0; g < m;) {
+      const std::uint64_t key = items_[g].node;
+      std::uint32_t e = g + 1;
+      Aabb own = sorted_[g];
+      while (e < m && items_[e].node == key) {
+        own = merged(own, sorted_[e]);
+        ++e;
+      }
+      const int level = static_cast<int>(key & 15u);
+      const std::uint64_t lo = key >> 4;
+      const std::uint64_t hi = lo + (std::uint64_t{1} << (3 * (depth - level)));
+      while (!parents_.empty() && nodes_[parents_.back()].hi <= lo) close_top();
+      Node node;
+      node.hi = hi;
+      node.begin = g;
+      node.end = e;
+      node.parent = parents_.empty() ? -1 : parents_.back();
+      node.anc_pop = 0;
+      if (node.parent >= 0) {
+        const Node& p = nodes_[node.parent];
+        node.anc_pop = p.anc_pop + (p.end - p.begin);
+      }
+      node.bounds = own;
+      parents_.push_back(static_cast<std::int32_t>(nodes_.size()));
+      nodes_.push_back(node);
+      g = e;
+    }
+    while (!parents_.empty()) close_top();
+
+    // Pass 2: descent. A node's candidates are the bodies of its ancestors that overlap
+    // its subtree bounds (the only ones that can overlap a body of its subtree), filtered
+    // from the parent's candidates and the parent's own bodies.
+    std::uint64_t candidates = 0;
+    frames_.clear();
+    cands_.clear();
+    for (std::size_t k = 0; k < nodes_.size(); ++k) {
+      const Node& node = nodes_[k];
+      while (!frames_.empty() && frames_.back().node != node.parent) {
+        cands_.resize(frames_.back().cbegin);
+        frames_.pop_back();
+      }
+      const std::uint32_t cbegin = static_cast<std::uint32_t>(cands_.size());
+      if (node.parent >= 0) {
+        // Both inputs are sorted by min.x, so the merged list is too.
+        const Frame& pf = frames_.back();
+        const Node& p = nodes_[node.parent];
+        filt_.clear();
+        for (std::uint32_t c = pf.cbegin; c < pf.cend; ++c) {
+          if (overlaps(cands_[c].box, node.bounds)) filt_.push_back(cands_[c]);
+        }
+        std::size_t a = 0;
+        for (std::uint32_t j = p.begin; j < p.end; ++j) {
+          if (!overlaps(sorted_[j], node.bounds)) continue;
+          while (a < filt_.size() && filt_[a].box.min.x <= sorted_[j].min.x) cands_.push_back(filt_[a++]);
+          cands_.push_back({sorted_[j], items_[j].body});
+        }
+        while (a < filt_.size()) cands_.push_back(filt_[a++]);
+      }
+      const std::uint32_t cend = static_cast<std::uint32_t>(cands_.size());
+      frames_.push_back({static_cast<std::int32_t>(k), cbegin, cend});
+
+      const std::uint64_t pop = node.end - node.begin;
+      candidates += pop * (pop - 1) / 2 + pop * node.anc_pop;
+      // Same node: sweep and prune on x (slots sorted by min.x).
+      for (std::uint32_t i = node.begin; i < node.end; ++i) {
+        const Aabb bi = sorted_[i];
+        const std::uint32_t body_i = items_[i].body;
+        for (std::uint32_t j = i + 1; j < node.end && sminx_[j] <= bi.max.x; ++j) {
+          if (overlaps(bi, sorted_[j])) emit(body_i, items_[j].body, out);
+        }
+      }
+      // Own bodies against the ancestor candidates: a two-list sweep on x. A pair is met
+      // from whichever of the two has the smaller min.x (own first on ties).
+      std::uint32_t i = node.begin, c = cbegin;
+      while (i < node.end && c < cend) {
+        if (sminx_[i] <= cands_[c].box.min.x) {
+          const Aabb bi = sorted_[i];
+          for (std::uint32_t q = c; q < cend && cands_[q].box.min.x <= bi.max.x; ++q) {
+            if (overlaps(bi, cands_[q].box)) emit(items_[i].body, cands_[q].body, out);
+          }
+          ++i;
+        } else {
+          const Aabb bc = cands_[c].box;
+          for (std::uint32_t q = i; q < node.end && sminx_[q] <= bc.max.x; ++q) {
+            if (overlaps(sorted_[q], bc)) emit(items_[q].body, cands_[c].body, out);
+          }
+          ++c;
+        }
+      }
+    }
+
+    detail::sort_pairs(out, n, tmp_pairs_, count_);
+    stats.cell_candidates = candidates;
+    stats.pairs = out.size();
+    stats.memory_bytes = (items_.capacity() + moved_.capacity() + merge_buf_.capacity()) *
+                             sizeof(Item) + sorted_.capacity() * sizeof(Aabb) +
+                         sminx_.capacity() * sizeof(float) + nodes_.capacity() * sizeof(Node) +
+                         parents_.capacity() * sizeof(std::int32_t) +
+                         frames_.capacity() * sizeof(Frame) +
+                         (cands_.capacity() + filt_.capacity()) * sizeof(Cand) +
+                         tmp_pairs_.capacity() * sizeof(Pair) +
+                         count_.capacity() * sizeof(std::uint32_t);
+  }
+
+ private:
+  static Aabb merged(const Aabb& a, const Aabb& b) {
+    return {{std::min(a.min.x, b.min.x), std::min(a.min.y, b.min.y), std::min(a.min.z, b.min.z)},
+            {std::max(a.max.x, b.max.x), std::max(a.max.y, b.max.y), std::max(a.max.z, b.max.z)}};
+  }
+
+  /// Pops the top of the pass-1 stack; its subtree bounds are final: merge into parent.
+  void close_top() {
+    const std::int32_t t = parents_.back();
+    parents_.pop_back();
+    if (!parents_.empty()) {
+      Node& p = nodes_[parents_.back()];
+      p.bounds = merged(p.bounds, nodes_[t].bounds);
+    }
+  }
+
+  static void emit(std::uint32_t p, std::uint32_t q, std::vector<Pair>& out) {
+    out.push_back(p < q ? Pair{p, q} : Pair{q, p});
+  }
+
+  /// Node key of every body with no NaN coordinate (bodies with a NaN never overlap
+  /// anything under Eq. 6 and are left out). Keeps the previous order of items_ when the
+  /// body set is the same, so that sort_items() can insertion-sort.
+  void build_keys(const std::vector<Aabb>& boxes, int depth) {
+    const std::size_t n = boxes.size();
+    if (items_.size() != n || !all_finite_prev_) {
+      items_.resize(n);
+      for (std::size_t i = 0; i < n; ++i) items_[i].body = static_cast<std::uint32_t>(i);
+      coherent_ = false;
+    } else {
+      coherent_ = true;
+    }
+    all_finite_prev_ = true;
+    moved_.clear();
+
+    const Vec3 c = center(domain_);
+    const float side = std::max({domain_.max.x - domain_.min.x, domain_.max.y - domain_.min.y,
+                                 domain_.max.z - domain_.min.z});
+    const Vec3 origin{c.x - 0.5f * side, c.y - 0.5f * side, c.z - 0.5f * side};
+    const bool usable = std::isfinite(side) && side > 0.0f && is_finite(origin) && depth > 0;
+    const float cells = static_cast<float>(1u << depth);
+    const float scale = usable ? cells / side : 0.0f;
+    const std::uint32_t top = (1u << depth) - 1u;
+
+    std::size_t w = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const std::uint32_t body = items_[k].body;
+      const Aabb& b = boxes[body];
+      if (std::isnan(b.min.x) || std::isnan(b.min.y) || std::isnan(b.min.z) ||
+          std::isnan(b.max.x) || std::isnan(b.max.y) || std::isnan(b.max.z)) {
+        all_finite_prev_ = false;  // the item set shrinks: rebuild next time
+        continue;
+      }
+      std::uint64_t node = 0;  // root: lo 0, level 0
+      if (usable) {
+        std::uint32_t i0[3], i1[3];
+        bool inside = true;
+        for (int a = 0; a < 3 && inside; ++a) {
+          const float u0 = (b.min[a] - origin[a]) * scale;  // monotone in b.min[a]
+          const float u1 = (b.max[a] - origin[a]) * scale;
+          if (!(u0 >= 0.0f && u1 <= cells && u0 <= u1)) {
+            inside = false;
+            break;
+          }
+          i0[a] = std::min(static_cast<std::uint32_t>(u0), top);
+          i1[a] = std::min(static_cast<std::uint32_t>(u1), top);
+        }
+        if (inside) {
+          const std::uint32_t diff = (i0[0] ^ i1[0]) | (i0[1] ^ i1[1]) | (i0[2] ^ i1[2]);
+          int s = 0;  // levels above the leaves
+          while ((diff >> s) != 0u) ++s;
+          const int level = depth - s;
+          const std::uint64_t lo =
+              static_cast<std::uint64_t>(morton3(i0[0] >> s, i0[1] >> s, i0[2] >> s))
+              << (3 * s);
+          node = (lo << 4) | static_cast<std::uint64_t>(level);
+        }
+      }
+      Item it;
+      it.node = node;
+      it.minx = float_key(b.min.x);
+      it.body = body;
+      // A body that changed node may move far in the order: sort it apart and merge.
+      if (coherent_ && items_[k].node != node) {
+        moved_.push_back(it);
+      } else {
+        items_[w++] = it;
+      }
+    }
+    items_.resize(w);
+  }
+
+  /// Sorts items_ by (node, min.x, body): insertion sort when the previous order is
+  /// available (coherent motion), falling back to std::sort past a budget of moves.
+  void sort_items() {
+    const std::size_t m = items_.size();
+    bool ok = coherent_;
+    if (ok) {
+      std::size_t budget = 8 * m + 64;
+      for (std::size_t i = 1; i < m && ok; ++i) {
+        const Item x = items_[i];
+        std::size_t j = i;
+        while (j > 0 && item_less(x, items_[j - 1])) {
+          items_[j] = items_[j - 1];
+          --j;
+          if (--budget == 0) {
+            ok = false;
+            break;
+          }
+        }
+        items_[j] = x;
+      }
+    }
+    if (!ok) std::sort(items_.begin(), items_.end(), item_less);
+    if (!moved_.empty()) {
+      std::sort(moved_.begin(), moved_.end(), item_less);
+      merge_buf_.resize(m + moved_.size());
+      std::merge(items_.begin(), items_.end(), moved_.begin(), moved_.end(), merge_buf_.begin(),
+                 item_less);
+      items_.swap(merge_buf_);
+    }
+  }
+
+  int depth_cfg_;
+  Aabb domain_;
+  bool coherent_ = false;
+  bool all_finite_prev_ = true;
+  std::vector<Item> items_;
+  std::vector<Item> moved_;
+  std::vector<Item> merge_buf_;
+  std::vector<Aabb> sorted_;
+  std::vector<float> sminx_;
+  std::vector<Node> nodes_;
+  std::vector<std::int32_t> parents_;
+  std::vector<Frame> frames_;
+  std::vector<Cand> cands_;
+  std::vector<Cand> filt_;
+  std::vector<Pair> tmp_pairs_;
+  std::vector<std::uint32_t> count_;
+};
+
+}  // namespace
+
+namespace detail {
+
+std::unique_ptr<BroadPhase> make_strict_octree_broadphase(int depth, const Aabb& domain) {
+  return std::make_unique<StrictOctreeBroadPhase>(depth, domain);
+}
+
+}  // namespace detail
+
+}  // namespace octocd
