@@ -114,13 +114,15 @@ class DeviceBuffer : public BufferBase {
   T* get() const { return static_cast<T*>(ptr_); }
 };
 
-/// Copies a host vector into a device buffer (allocating it to size).
+/// Copies a host vector into a device buffer on `stream` and waits for it. With
+/// `allocate`, the buffer is first reallocated to the vector's size.
 template <class T>
-void upload(DeviceBuffer<T>& buf, const std::vector<T>& host) {
-  buf.reset(host.size());
-  if (!host.empty())
-    check(cudaMemcpy(buf.get(), host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice),
-          fmt::format("cudaMemcpy to '{}'", buf.name()).c_str());
+void upload(DeviceBuffer<T>& buf, const std::vector<T>& host, cudaStream_t stream, bool allocate = true) {
+  if (allocate) buf.reset(host.size());
+  if (host.empty()) return;
+  check(cudaMemcpyAsync(buf.get(), host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice, stream),
+        fmt::format("cudaMemcpy to '{}'", buf.name()).c_str());
+  check(cudaStreamSynchronize(stream), "cudaStreamSynchronize");
 }
 
 template <class T>
@@ -141,6 +143,9 @@ int key_bits(std::uint32_t n) {
 
 constexpr int kEvents = static_cast<int>(Stage::Count) + 1;
 
+/// Most bytes the per-pair narrow-phase scratch may take.
+constexpr std::size_t kLeafScratchBudget = std::size_t{512} << 20;
+
 }  // namespace
 
 // ---- device state ----------------------------------------------------------------------
@@ -154,6 +159,7 @@ struct CudaWorld::Impl {
   std::uint32_t n = 0;
   std::uint32_t shape_count = 0;
   hd::LevelList levels;
+  std::uint32_t leaf_max = 0;  // most vertices in a narrow-phase cell of any mesh
 
   // Bodies (fixed size n).
   DeviceBuffer<Vec3> x{"body positions"};
@@ -175,6 +181,7 @@ struct CudaWorld::Impl {
   DeviceBuffer<std::uint32_t> bp_offset{"broadphase offsets"};
   DeviceBuffer<Pair> pairs{"candidate pairs"};
   DeviceBuffer<std::uint8_t> confirmed{"confirmed flags"};
+  DeviceBuffer<Vec3> leaf_scratch{"narrow-phase scratch"};
   DeviceBuffer<std::uint8_t> hit{"contact hit flags"};
   DeviceBuffer<Vec3> dx_a{"contact dx_a"};
   DeviceBuffer<Vec3> dx_b{"contact dx_b"};
@@ -199,12 +206,12 @@ struct CudaWorld::Impl {
 
   std::vector<BufferBase*> all_buffers() {
     return {&x, &v, &w, &local, &shape, &aabb, &shapes, &vertices, &cells, &level_offsets, &theta, &counters,
-            &metrics, &bp_count, &bp_offset, &pairs, &confirmed, &hit, &dx_a, &dx_b, &dv_a, &dv_b, &depth0,
+            &metrics, &bp_count, &bp_offset, &pairs, &confirmed, &leaf_scratch, &hit, &dx_a, &dx_b, &dv_a, &dv_b, &depth0,
             &records, &keys_in, &keys_out, &vals_in, &vals_out, &body_begin, &temp};
   }
   std::vector<BufferBase*> scratch_buffers() {
-    return {&bp_count, &bp_offset, &pairs,   &confirmed, &hit,      &dx_a,     &dx_b,       &dv_a, &dv_b,
-            &depth0,   &records,   &keys_in, &keys_out,  &vals_in,  &vals_out, &body_begin, &temp};
+    return {&bp_count, &bp_offset, &pairs,   &confirmed, &leaf_scratch, &hit,     &dx_a,     &dx_b,       &dv_a,
+            &dv_b,     &depth0,    &records, &keys_in,   &keys_out,     &vals_in, &vals_out, &body_begin, &temp};
   }
 
   /// Checks a launch; with OCTOCD_CUDA_SYNC=1 also waits for it and checks its execution.
@@ -335,15 +342,21 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
       vertices.insert(vertices.end(), t.vertices.begin(), t.vertices.end());
       cells.insert(cells.end(), t.cells.begin(), t.cells.end());
       level_offsets.insert(level_offsets.end(), t.level_offset.begin(), t.level_offset.end());
+      // Largest cell at the level the narrow phase runs on (the last level, clamped).
+      if (!mc.aabb_only && !mc.levels.empty()) {
+        const int leaf = std::min(mc.levels.back(), t.depth);
+        for (std::uint32_t c = t.level_begin(leaf); c < t.level_end(leaf); ++c)
+          d.leaf_max = std::max(d.leaf_max, t.cells[c].vertex_count);
+      }
     }
     shapes.push_back(ds);
   }
   d.shape_count = static_cast<std::uint32_t>(shapes.size());
-  upload(d.shapes, shapes);
-  upload(d.vertices, vertices);
-  upload(d.cells, cells);
-  upload(d.level_offsets, level_offsets);
-  upload(d.theta, m.theta_table);
+  upload(d.shapes, shapes, d.stream);
+  upload(d.vertices, vertices, d.stream);
+  upload(d.cells, cells, d.stream);
+  upload(d.level_offsets, level_offsets, d.stream);
+  upload(d.theta, m.theta_table, d.stream);
 
   // Bodies.
   std::vector<Aabb> local(n);
@@ -352,11 +365,11 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     local[i] = m.local_box(i);
     shape[i] = m.bodies[i].shape;
   }
-  upload(d.local, local);
-  upload(d.shape, shape);
-  upload(d.x, m.initial.x);
-  upload(d.v, m.initial.v);
-  upload(d.w, m.initial.w);
+  upload(d.local, local, d.stream);
+  upload(d.shape, shape, d.stream);
+  upload(d.x, m.initial.x, d.stream);
+  upload(d.v, m.initial.v, d.stream);
+  upload(d.w, m.initial.w, d.stream);
   d.aabb.reset(n);
   d.counters.reset(3);
   d.metrics.reset(1);
@@ -389,11 +402,9 @@ void CudaWorld::set_state(const BodyState& s) {
   if (s.x.size() != d.n || s.v.size() != d.n || s.w.size() != d.n)
     throw InputError(fmt::format("CudaWorld::set_state: expected {} bodies, got x {}, v {}, w {}", d.n, s.x.size(),
                                  s.v.size(), s.w.size()));
-  if (d.n) {
-    check(cudaMemcpy(d.x.get(), s.x.data(), d.n * sizeof(Vec3), cudaMemcpyHostToDevice), "cudaMemcpy x");
-    check(cudaMemcpy(d.v.get(), s.v.data(), d.n * sizeof(Vec3), cudaMemcpyHostToDevice), "cudaMemcpy v");
-    check(cudaMemcpy(d.w.get(), s.w.data(), d.n * sizeof(float), cudaMemcpyHostToDevice), "cudaMemcpy w");
-  }
+  upload(d.x, s.x, d.stream, false);
+  upload(d.v, s.v, d.stream, false);
+  upload(d.w, s.w, d.stream, false);
   state_ = s;
   state_frame_ = frame_;
 }
@@ -474,6 +485,14 @@ const FrameMetrics& CudaWorld::step() {
   md.pair_count = np;
   md.confirmed = d.confirmed.get();
   md.counters = d.counters.get();
+  // Per-pair narrow-phase scratch when it fits a modest budget; else the leaf test
+  // recomputes the filtered vertices (identical tests, only slower).
+  const std::size_t scratch_elems = static_cast<std::size_t>(np) * d.leaf_max;
+  if (d.leaf_max > 0 && np > 0 && scratch_elems * sizeof(Vec3) <= kLeafScratchBudget) {
+    d.leaf_scratch.ensure(scratch_elems);
+    md.scratch = d.leaf_scratch.get();
+    md.scratch_per_pair = d.leaf_max;
+  }
   d.launched(gpu::launch_midphase(md, d.stream), "midphase");
   d.record_event(4);
 

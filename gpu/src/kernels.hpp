@@ -83,6 +83,11 @@ struct MidphaseDesc {
   std::uint32_t pair_count = 0;
   std::uint8_t* confirmed = nullptr;         ///< out: 1 = contact confirmed
   unsigned long long* counters = nullptr;   ///< out (added): box tests, box pairs, vertex tests
+  /// Per-pair scratch for the narrow phase's filtered world vertices (see
+  /// hd::mesh_mesh_leaf): pair k owns scratch[k * scratch_per_pair ..]. May be null (then
+  /// the leaf test recomputes them: same tests, same result, more work).
+  Vec3* scratch = nullptr;
+  std::uint32_t scratch_per_pair = 0;
 };
 
 /// One contact of the first response pass, as the host's ContactRecord wants it.

@@ -38,7 +38,9 @@ __global__ void midphase_kernel(MidphaseDesc d) {
   const hd::PlacedView a = place(d.shapes, sa, d.x[p.a], d.aabb[p.a]);
   const hd::PlacedView b = place(d.shapes, sb, d.x[p.b], d.aabb[p.b]);
   hd::MidphaseCounters c;
-  const bool hit = hd::confirm_contact(a, b, d.shapes.theta[sa * d.shapes.count + sb], d.levels, c);
+  Vec3* scratch = d.scratch ? d.scratch + static_cast<std::size_t>(k) * d.scratch_per_pair : nullptr;
+  const bool hit = hd::confirm_contact(a, b, d.shapes.theta[sa * d.shapes.count + sb], d.levels, c, scratch,
+                                       scratch ? d.scratch_per_pair : 0u);
   d.confirmed[k] = hit ? 1 : 0;
   if (c.box_tests) atomicAdd(&d.counters[0], static_cast<unsigned long long>(c.box_tests));
   if (c.box_pairs) atomicAdd(&d.counters[1], static_cast<unsigned long long>(c.box_pairs));

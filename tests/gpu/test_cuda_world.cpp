@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
@@ -271,6 +272,54 @@ TEST(CudaDevice, SetStateIsUsed) {
   }
 }
 
+/// Runs CPU (flat) and CUDA side by side on `model` for `frames` frames, asserting equal
+/// states after every step and equal records every 10th frame.
+void expect_lockstep(const std::shared_ptr<const Model>& model, int frames, const std::string& label) {
+  auto cpu = cpu_flat(model);
+  CudaWorld gpu(model, "flat");
+  std::uint64_t contacts = 0;
+  for (int f = 1; f <= frames; ++f) {
+    const bool rec = f % 10 == 0;
+    cpu->set_recording(rec);
+    gpu.set_recording(rec);
+    const FrameMetrics mc = cpu->step();
+    const FrameMetrics mg = gpu.step();
+    contacts += mc.contacts;
+    const std::string what = fmt::format("{} frame {}", label, f);
+    ASSERT_EQ(cpu->state_hash(), gpu.state_hash()) << what << ": " << first_difference(cpu->state(), gpu.state());
+    expect_same_counts(mc, mg, what);
+    if (rec) expect_same_record(cpu->record(), gpu.record(), what);
+    if (::testing::Test::HasFailure()) return;
+  }
+  EXPECT_GT(contacts, 0u) << label << ": the variant must be exercised by contacts";
+}
+
+TEST(CudaVariants, RelaxationPassesOverlapModesAndLevelLists) {
+  REQUIRE_CUDA_DEVICE();
+  const int frames = 300;  // fixed: enough for contacts in every variant, cheap on the device
+  for (const char* scene : {"box-stack", "bunny-random-400"}) {
+    const auto base = load_model(scene);
+    struct Variant {
+      const char* label;
+      int iterations;
+      OverlapMode overlap;
+      const char* levels;
+    };
+    for (const Variant& v : {Variant{"iterations 4", 4, OverlapMode::Separating, nullptr},
+                             Variant{"overlap paper, iterations 2", 2, OverlapMode::Paper, nullptr},
+                             Variant{"midphase aabb-only", 1, OverlapMode::Separating, "aabb-only"},
+                             Variant{"midphase [2]", 1, OverlapMode::Separating, "2"},
+                             Variant{"midphase [0,1,2]", 1, OverlapMode::Separating, "0,1,2"}}) {
+      auto model = std::make_shared<Model>(*base);
+      model->scene.response.iterations = v.iterations;
+      model->scene.response.overlap = v.overlap;
+      if (v.levels) model->scene.midphase = MidphaseConfig::parse(v.levels);
+      expect_lockstep(model, frames, fmt::format("{} ({})", scene, v.label));
+      if (::testing::Test::HasFailure()) return;
+    }
+  }
+}
+
 TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
   REQUIRE_CUDA_DEVICE();
   const std::string name = GetParam();
@@ -280,6 +329,8 @@ TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
   CudaWorld gpu(model, "flat");
   ASSERT_EQ(cpu->state_hash(), gpu.state_hash()) << name << ": initial states differ";
   std::uint64_t pairs_seen = 0, contacts_seen = 0;
+  double cpu_ms = 0.0, gpu_ms = 0.0;
+  std::array<double, static_cast<std::size_t>(Stage::Count)> gpu_stage_ms{};
   for (int f = 1; f <= frames; ++f) {
     const bool rec = f % 10 == 0;
     cpu->set_recording(rec);
@@ -289,6 +340,11 @@ TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
     const std::string what = fmt::format("{} frame {}", name, f);
     pairs_seen += mc.aabb_pairs;
     contacts_seen += mc.contacts;
+    if (!rec) {  // timings of plain steps only
+      cpu_ms += mc.step_ms;
+      gpu_ms += mg.step_ms;
+      for (std::size_t s = 0; s < gpu_stage_ms.size(); ++s) gpu_stage_ms[s] += mg.stage_ms[s];
+    }
     // Bit-identical after every step; the required checkpoints are named in the message.
     if (cpu->state_hash() != gpu.state_hash()) {
       FAIL() << what << (is_checkpoint(f, frames) ? " (checkpoint)" : "")
@@ -309,8 +365,13 @@ TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
     }
     if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
   }
+  std::string stages;
+  for (std::size_t s = 0; s < gpu_stage_ms.size(); ++s)
+    stages += fmt::format(" {} {:.3f}", stage_name(static_cast<Stage>(s)), gpu_stage_ms[s] / frames);
   std::cout << "[ info ] " << name << ": " << frames << " frames equal bit for bit; " << pairs_seen
-            << " candidate pairs and " << contacts_seen << " contacts in total\n";
+            << " candidate pairs and " << contacts_seen << " contacts in total; mean step ms (not recorded) cpu "
+            << fmt::format("{:.3f}", cpu_ms / frames) << ", cuda " << fmt::format("{:.3f}", gpu_ms / frames)
+            << " (cuda stages ms:" << stages << ")\n";
 }
 
 TEST_P(CudaRerun, RerunAndCapacityOneGiveTheSameBits) {
