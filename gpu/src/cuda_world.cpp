@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
+#include <initializer_list>
 #include <utility>
 
 #include <cuda_runtime_api.h>
@@ -174,7 +175,8 @@ struct CudaWorld::Impl {
   DeviceBuffer<MeshOctreeCell> cells{"octree cells"};
   DeviceBuffer<std::uint32_t> level_offsets{"octree level offsets"};
   DeviceBuffer<float> theta{"theta table"};
-  DeviceBuffer<unsigned long long> counters{"midphase counters"};
+  /// box tests, box pairs, vertex tests (midphase), exact AABB tests (octree broadphase)
+  DeviceBuffer<unsigned long long> counters{"counters"};
   DeviceBuffer<gpu::MetricsResult> metrics{"metrics"};
   // Scratch, grown on demand (reset_capacities shrinks these).
   DeviceBuffer<std::uint32_t> bp_count{"broadphase counts"};
@@ -195,6 +197,18 @@ struct CudaWorld::Impl {
   DeviceBuffer<std::uint32_t> vals_out{"sorted contact index entries"};
   DeviceBuffer<std::uint32_t> body_begin{"body contact segments"};
   DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
+  // Loose octree broadphase (broadphase_octree.cu).
+  DeviceBuffer<float> loose_extent{"octree body extents"};
+  DeviceBuffer<float> loose_min{"octree smallest extent"};
+  DeviceBuffer<std::uint32_t> loose_key{"octree body keys"};
+  DeviceBuffer<std::uint32_t> loose_body{"octree body indices"};
+  DeviceBuffer<gpu::LooseQBox> loose_q{"octree body unit boxes"};
+  DeviceBuffer<std::uint32_t> loose_sorted_key{"octree sorted keys"};
+  DeviceBuffer<std::uint32_t> loose_slot_body{"octree slot bodies"};
+  DeviceBuffer<Aabb> loose_slot_box{"octree slot boxes"};
+  DeviceBuffer<gpu::LooseQBox> loose_slot_q{"octree slot unit boxes"};
+  DeviceBuffer<unsigned long long> pair_keys{"octree pair keys"};
+  DeviceBuffer<unsigned long long> pair_keys_sorted{"octree sorted pair keys"};
 
   std::uint32_t pair_count = 0;  // candidate pairs of the last step
 
@@ -207,11 +221,15 @@ struct CudaWorld::Impl {
   std::vector<BufferBase*> all_buffers() {
     return {&x, &v, &w, &local, &shape, &aabb, &shapes, &vertices, &cells, &level_offsets, &theta, &counters,
             &metrics, &bp_count, &bp_offset, &pairs, &confirmed, &leaf_scratch, &hit, &dx_a, &dx_b, &dv_a, &dv_b, &depth0,
-            &records, &keys_in, &keys_out, &vals_in, &vals_out, &body_begin, &temp};
+            &records, &keys_in, &keys_out, &vals_in, &vals_out, &body_begin, &temp, &loose_extent, &loose_min,
+            &loose_key, &loose_body, &loose_q, &loose_sorted_key, &loose_slot_body, &loose_slot_box,
+            &loose_slot_q, &pair_keys, &pair_keys_sorted};
   }
   std::vector<BufferBase*> scratch_buffers() {
     return {&bp_count, &bp_offset, &pairs,   &confirmed, &leaf_scratch, &hit,     &dx_a,     &dx_b,       &dv_a,
-            &dv_b,     &depth0,    &records, &keys_in,   &keys_out,     &vals_in, &vals_out, &body_begin, &temp};
+            &dv_b,     &depth0,    &records, &keys_in,   &keys_out,     &vals_in, &vals_out, &body_begin, &temp,
+            &loose_extent, &loose_min, &loose_key, &loose_body, &loose_q, &loose_sorted_key, &loose_slot_body,
+            &loose_slot_box, &loose_slot_q, &pair_keys, &pair_keys_sorted};
   }
 
   /// Checks a launch; with OCTOCD_CUDA_SYNC=1 also waits for it and checks its execution.
@@ -260,16 +278,109 @@ struct CudaWorld::Impl {
     launched(gpu::exclusive_scan_u32(temp.get(), bytes, in, out, count, stream), "cub::DeviceScan::ExclusiveSum");
   }
 
-  void sort(std::uint32_t count, int end_bit) {
+  /// Stable radix sort of (key, value) pairs through CUB.
+  void sort(const std::uint32_t* kin, std::uint32_t* kout, const std::uint32_t* vin, std::uint32_t* vout,
+            std::uint32_t count, int end_bit) {
     std::size_t bytes = 0;
-    check(gpu::sort_pairs_u32(nullptr, bytes, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(), count,
-                              end_bit, stream),
+    check(gpu::sort_pairs_u32(nullptr, bytes, kin, kout, vin, vout, count, end_bit, stream),
           "cub::DeviceRadixSort::SortPairs (size)");
     temp.ensure(bytes);
     bytes = temp.capacity();
-    launched(gpu::sort_pairs_u32(temp.get(), bytes, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(),
-                                 count, end_bit, stream),
+    launched(gpu::sort_pairs_u32(temp.get(), bytes, kin, kout, vin, vout, count, end_bit, stream),
              "cub::DeviceRadixSort::SortPairs");
+  }
+
+  void sort_keys(const unsigned long long* kin, unsigned long long* kout, std::uint32_t count, int end_bit) {
+    std::size_t bytes = 0;
+    check(gpu::sort_keys_u64(nullptr, bytes, kin, kout, count, end_bit, stream),
+          "cub::DeviceRadixSort::SortKeys (size)");
+    temp.ensure(bytes);
+    bytes = temp.capacity();
+    launched(gpu::sort_keys_u64(temp.get(), bytes, kin, kout, count, end_bit, stream),
+             "cub::DeviceRadixSort::SortKeys");
+  }
+
+  void min(const float* in, float* out, std::uint32_t count) {
+    std::size_t bytes = 0;
+    check(gpu::min_f32(nullptr, bytes, in, out, count, stream), "cub::DeviceReduce::Min (size)");
+    temp.ensure(bytes);
+    bytes = temp.capacity();
+    launched(gpu::min_f32(temp.get(), bytes, in, out, count, stream), "cub::DeviceReduce::Min");
+  }
+
+  /// Reads the scanned total at offset[count] (one synchronisation) and returns it.
+  std::uint32_t read_total(const std::uint32_t* offset, std::uint32_t count, const char* what) {
+    std::uint32_t total = 0;
+    check(cudaMemcpyAsync(&total, offset + count, sizeof(total), cudaMemcpyDeviceToHost, stream), what);
+    check(cudaStreamSynchronize(stream), what);
+    return total;
+  }
+
+  /// Broadphase `flat` (SPEC 5.1): count, exclusive scan over n + 1 (the last count is 0,
+  /// so offset[n] is the total), size the output, fill. The output is sorted by (a, b).
+  std::uint32_t flat_broadphase() {
+    const std::size_t n1 = static_cast<std::size_t>(n) + 1;
+    bp_count.ensure(n1);
+    bp_offset.ensure(n1);
+    check(cudaMemsetAsync(bp_count.get(), 0, n1 * sizeof(std::uint32_t), stream), "cudaMemset broadphase counts");
+    launched(gpu::launch_flat_count(aabb.get(), n, bp_count.get(), stream), "flat_count");
+    scan(bp_count.get(), bp_offset.get(), n + 1);
+    const std::uint32_t np = read_total(bp_offset.get(), n, "pair count");
+    pairs.ensure(np);
+    launched(gpu::launch_flat_fill(aabb.get(), n, bp_offset.get(), pairs.get(), stream), "flat_fill");
+    return np;
+  }
+
+  /// Broadphase `octree` (SPEC 5.1, loose; broadphase_octree.cu): keys, stable sort by
+  /// key, per-slot query counted, scanned, sized and filled, then the pair keys sorted.
+  std::uint32_t octree_broadphase(const Aabb& domain, int depth) {
+    const std::size_t n1 = static_cast<std::size_t>(n) + 1;
+    for (BufferBase* b : std::initializer_list<BufferBase*>{&loose_extent, &loose_key, &loose_body, &loose_q,
+                                                             &loose_sorted_key, &loose_slot_body, &loose_slot_box,
+                                                             &loose_slot_q})
+      b->ensure(n);
+    loose_min.ensure(1);
+    bp_count.ensure(n1);
+    bp_offset.ensure(n1);
+    gpu::LooseDesc ld;
+    ld.aabb = aabb.get();
+    ld.n = n;
+    ld.grid = loose_grid(domain);
+    ld.depth = depth;
+    ld.extent = loose_extent.get();
+    ld.min_extent = loose_min.get();
+    ld.key = loose_key.get();
+    ld.body = loose_body.get();
+    ld.q = loose_q.get();
+    ld.sorted_key = loose_sorted_key.get();
+    ld.slot_body = loose_slot_body.get();
+    ld.slot_box = loose_slot_box.get();
+    ld.slot_q = loose_slot_q.get();
+    ld.count = bp_count.get();
+    ld.offset = bp_offset.get();
+    ld.candidates = counters.get() + 3;
+    if (n == 0) return 0;
+    if (depth < 0) {
+      launched(gpu::launch_loose_extent(ld, stream), "loose_extent");
+      min(loose_extent.get(), loose_min.get(), n);
+    }
+    launched(gpu::launch_loose_keys(ld, stream), "loose_keys");
+    sort(loose_key.get(), loose_sorted_key.get(), loose_body.get(), loose_slot_body.get(), n, 32);
+    launched(gpu::launch_loose_gather(ld, stream), "loose_gather");
+    check(cudaMemsetAsync(bp_count.get(), 0, n1 * sizeof(std::uint32_t), stream), "cudaMemset broadphase counts");
+    launched(gpu::launch_loose_query(ld, false, stream), "loose_query (count)");
+    scan(bp_count.get(), bp_offset.get(), n + 1);
+    const std::uint32_t np = read_total(bp_offset.get(), n, "pair count");
+    pair_keys.ensure(np);
+    pair_keys_sorted.ensure(np);
+    pairs.ensure(np);
+    ld.pair_keys = pair_keys.get();
+    launched(gpu::launch_loose_query(ld, true, stream), "loose_query (fill)");
+    if (np > 0) {
+      sort_keys(pair_keys.get(), pair_keys_sorted.get(), np, 32 + key_bits(n));
+      launched(gpu::launch_unpack_pairs(pair_keys_sorted.get(), np, pairs.get(), stream), "unpack_pairs");
+    }
+    return np;
   }
 };
 
@@ -296,9 +407,9 @@ std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, con
 CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase)
     : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
   if (!model_) throw InputError("CudaWorld: no model given");
-  if (broadphase != "flat")
+  if (broadphase != "flat" && broadphase != "octree")
     throw InputError(fmt::format("broadphase.name: '{}' is not available on the cuda engine yet (available "
-                                 "there: flat)",
+                                 "there: flat, octree)",
                                  broadphase));
   const std::string reason = no_device_reason();
   if (!reason.empty()) throw RuntimeError("no CUDA device: " + reason + "; the cuda engine needs one");
@@ -371,7 +482,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   upload(d.v, m.initial.v, d.stream);
   upload(d.w, m.initial.w, d.stream);
   d.aabb.reset(n);
-  d.counters.reset(3);
+  d.counters.reset(4);
   d.metrics.reset(1);
   reset_capacities(1);
   d.launched(gpu::launch_aabbs(d.bodies(), d.stream), "aabbs");
@@ -451,29 +562,18 @@ const FrameMetrics& CudaWorld::step() {
   d.launched(gpu::launch_aabbs(bodies, d.stream), "aabbs");
   d.record_event(2);
 
-  // 3. Broadphase `flat` (SPEC 5.1): count, exclusive scan over n + 1 (the last count is
-  // 0, so offset[n] is the total), size the outputs, fill.
-  d.bp_count.ensure(static_cast<std::size_t>(n) + 1);
-  d.bp_offset.ensure(static_cast<std::size_t>(n) + 1);
-  check(cudaMemsetAsync(d.bp_count.get(), 0, (static_cast<std::size_t>(n) + 1) * sizeof(std::uint32_t), d.stream),
-        "cudaMemset broadphase counts");
-  d.launched(gpu::launch_flat_count(d.aabb.get(), n, d.bp_count.get(), d.stream), "flat_count");
-  d.scan(d.bp_count.get(), d.bp_offset.get(), n + 1);
-  std::uint32_t total = 0;
-  check(cudaMemcpyAsync(&total, d.bp_offset.get() + n, sizeof(total), cudaMemcpyDeviceToHost, d.stream),
-        "cudaMemcpy pair count");
-  check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize (pair count)");
-  const std::uint32_t np = total;
+  // 3. Broadphase (SPEC 5.1): the sorted unique pairs with overlapping AABBs.
+  check(cudaMemsetAsync(d.counters.get(), 0, 4 * sizeof(unsigned long long), d.stream), "cudaMemset counters");
+  const bool flat = d.broadphase == "flat";
+  const std::uint32_t np =
+      flat ? d.flat_broadphase() : d.octree_broadphase(scene.domain, scene.broadphase.octree_depth);
   d.pair_count = np;
-  d.pairs.ensure(np);
-  d.launched(gpu::launch_flat_fill(d.aabb.get(), n, d.bp_offset.get(), d.pairs.get(), d.stream), "flat_fill");
-  m.cell_candidates = static_cast<std::uint64_t>(n) * (n == 0 ? 0 : n - 1) / 2;
+  if (flat) m.cell_candidates = static_cast<std::uint64_t>(n) * (n == 0 ? 0 : n - 1) / 2;
   m.aabb_pairs = np;
   d.record_event(3);
 
   // 4. Midphase + narrow phase (SPEC 5.2-5.3), one thread per pair.
   d.confirmed.ensure(np);
-  check(cudaMemsetAsync(d.counters.get(), 0, 3 * sizeof(unsigned long long), d.stream), "cudaMemset counters");
   gpu::MidphaseDesc md;
   md.x = d.x.get();
   md.w = d.w.get();
@@ -516,7 +616,8 @@ const FrameMetrics& CudaWorld::step() {
     d.launched(gpu::launch_contact_entries(d.pairs.get(), d.confirmed.get(), np, n, d.keys_in.get(),
                                            d.vals_in.get(), d.stream),
                "contact_entries");
-    d.sort(static_cast<std::uint32_t>(entries), key_bits(n));
+    d.sort(d.keys_in.get(), d.keys_out.get(), d.vals_in.get(), d.vals_out.get(),
+           static_cast<std::uint32_t>(entries), key_bits(n));
   }
   d.launched(gpu::launch_body_segments(d.keys_out.get(), static_cast<std::uint32_t>(np > 0 ? entries : 0), n,
                                        d.body_begin.get(), d.stream),
@@ -568,7 +669,7 @@ const FrameMetrics& CudaWorld::step() {
   xd.out = d.metrics.get();
   d.launched(gpu::launch_metrics(xd, d.stream), "metrics");
   gpu::MetricsResult r;
-  unsigned long long counters[3] = {0, 0, 0};
+  unsigned long long counters[4] = {0, 0, 0, 0};
   check(cudaMemcpyAsync(&r, d.metrics.get(), sizeof(r), cudaMemcpyDeviceToHost, d.stream), "cudaMemcpy metrics");
   check(cudaMemcpyAsync(counters, d.counters.get(), sizeof(counters), cudaMemcpyDeviceToHost, d.stream),
         "cudaMemcpy counters");
@@ -591,6 +692,7 @@ const FrameMetrics& CudaWorld::step() {
   m.box_tests = counters[0];
   m.box_pairs = counters[1];
   m.vertex_tests = counters[2];
+  if (!flat) m.cell_candidates = counters[3];
   m.contacts = r.contacts;
   if (r.contacts > 0) {
     m.penetration_mean = r.pen_sum / static_cast<double>(r.contacts);

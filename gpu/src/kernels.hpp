@@ -19,6 +19,7 @@
 #include <cuda_runtime_api.h>
 
 #include "octocd/broadphase.hpp"
+#include "octocd/loose_octree.hpp"
 #include "octocd/math.hpp"
 #include "octocd/mesh_octree.hpp"
 #include "octocd/midphase_hd.hpp"
@@ -176,6 +177,49 @@ cudaError_t launch_flat_count(const Aabb* aabb, std::uint32_t n, std::uint32_t* 
 cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset, Pair* pairs,
                              cudaStream_t stream);
 
+// ---- broadphase_octree.cu ------------------------------------------------------------
+/// A body's unit box in the fixed point of loose_q_min / loose_q_max.
+struct LooseQBox {
+  std::int16_t lo[3];
+  std::int16_t hi[3];
+};
+
+/// The loose octree `octree` (SPEC 5.1) on the device; cell math from loose_octree.hpp.
+struct LooseDesc {
+  const Aabb* aabb = nullptr;      ///< world AABBs, per body
+  std::uint32_t n = 0;             ///< bodies
+  LooseGrid grid;                  ///< root cube of the scene's domain
+  int depth = 2;                   ///< D_w in [0, 10]; -1 = auto (from *min_extent)
+  float* extent = nullptr;         ///< scratch per body (auto depth): largest unit side
+  float* min_extent = nullptr;     ///< one float: the smallest extent (auto depth)
+  std::uint32_t* key = nullptr;    ///< per body: cell key (kLooseOverflowKey / kLooseNoKey)
+  std::uint32_t* body = nullptr;   ///< per body: its index (the sort's values)
+  LooseQBox* q = nullptr;          ///< per body: fixed-point unit box
+  const std::uint32_t* sorted_key = nullptr;   ///< per slot: key, ascending
+  const std::uint32_t* slot_body = nullptr;    ///< per slot: body (stable: body order per cell)
+  Aabb* slot_box = nullptr;        ///< per slot: the body's AABB
+  LooseQBox* slot_q = nullptr;     ///< per slot: the body's fixed-point box
+  std::uint32_t* count = nullptr;  ///< per slot: pairs found (count pass)
+  const std::uint32_t* offset = nullptr;  ///< per slot: exclusive scan of count (fill pass)
+  unsigned long long* pair_keys = nullptr;  ///< out (fill): (a << 32) | b, unsorted
+  unsigned long long* candidates = nullptr; ///< out (count pass, added): exact AABB tests
+};
+
+/// Extent per body into d.extent (NaN boxes give +inf: left out of the minimum).
+cudaError_t launch_loose_extent(const LooseDesc& d, cudaStream_t stream);
+/// Keys, fixed-point boxes and identity values per body (depth auto reads *min_extent).
+cudaError_t launch_loose_keys(const LooseDesc& d, cudaStream_t stream);
+/// Scatters each slot's AABB and fixed-point box from its body.
+cudaError_t launch_loose_gather(const LooseDesc& d, cudaStream_t stream);
+/// Query per slot: counts its pairs (and exact tests) into d.count, or with `fill` writes
+/// them at d.pair_keys[d.offset[slot] ..]. Each overlapping pair is found exactly once:
+/// same level by the smaller slot, across levels by the finer body, overflow bodies
+/// against every body.
+cudaError_t launch_loose_query(const LooseDesc& d, bool fill, cudaStream_t stream);
+/// pairs[k] = (keys[k] >> 32, keys[k] & 0xffffffff).
+cudaError_t launch_unpack_pairs(const unsigned long long* keys, std::uint32_t count, Pair* pairs,
+                                cudaStream_t stream);
+
 // ---- midphase.cu -----------------------------------------------------------------------
 /// confirmed[k] for every candidate pair (static-static pairs: 0), via hd::confirm_contact.
 cudaError_t launch_midphase(const MidphaseDesc& d, cudaStream_t stream);
@@ -204,6 +248,13 @@ cudaError_t launch_metrics(const MetricsDesc& d, cudaStream_t stream);
 /// Exclusive prefix sum of `count` uint32. With temp == nullptr only sets temp_bytes.
 cudaError_t exclusive_scan_u32(void* temp, std::size_t& temp_bytes, const std::uint32_t* in, std::uint32_t* out,
                                std::uint32_t count, cudaStream_t stream);
+/// Radix sort of uint64 keys by bits [0, end_bit). With temp == nullptr only sets
+/// temp_bytes.
+cudaError_t sort_keys_u64(void* temp, std::size_t& temp_bytes, const unsigned long long* keys_in,
+                          unsigned long long* keys_out, std::uint32_t count, int end_bit, cudaStream_t stream);
+/// Minimum of `count` floats into *out. With temp == nullptr only sets temp_bytes.
+cudaError_t min_f32(void* temp, std::size_t& temp_bytes, const float* in, float* out, std::uint32_t count,
+                    cudaStream_t stream);
 /// Stable radix sort of (key, value) uint32 pairs by the key's bits [0, end_bit). With
 /// temp == nullptr only sets temp_bytes.
 cudaError_t sort_pairs_u32(void* temp, std::size_t& temp_bytes, const std::uint32_t* keys_in,

@@ -4,7 +4,8 @@
 // 100 and N), with equal pair sets, confirmed-contact sets and contact terms on every
 // 10th frame (through record()). On the GPU alone: a rerun gives the same bits, and an
 // engine whose buffers all start at capacity 1 (and are shrunk again during the run) gives
-// the same results.
+// the same results. The device's `octree` broadphase gives the `flat` pair set on every
+// scene (the large box scenes included) and the CPU `octree` engine's states.
 //
 // Without a usable CUDA device every device test is SKIPPED with the reason
 // ("no CUDA device: ..."); the error paths that need no device run everywhere.
@@ -20,6 +21,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <initializer_list>
 #include <iostream>
 #include <limits>
 #include <memory>
@@ -65,6 +67,17 @@ std::vector<std::string> shipped_scenes() {
     if (name == "boxes-random-10000" || name.rfind("boxes-uniform-", 0) == 0) continue;
     names.push_back(name);
   }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+/// Every shipped scene (the octree tests also run the large box scenes, for fewer frames).
+std::vector<std::string> all_scenes() {
+  std::vector<std::string> names;
+  const std::filesystem::path dir = std::filesystem::path(source_dir()) / "datasets" / "scenes";
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec))
+    if (e.path().extension() == ".json") names.push_back(e.path().stem().string());
   std::sort(names.begin(), names.end());
   return names;
 }
@@ -174,6 +187,7 @@ void expect_same_counts(const FrameMetrics& a, const FrameMetrics& b, const std:
 bool is_checkpoint(int frame, int frames) { return frame == 1 || frame == 10 || frame == 100 || frame == frames; }
 
 class CpuVsCuda : public ::testing::TestWithParam<std::string> {};
+class CudaOctree : public ::testing::TestWithParam<std::string> {};
 class CudaRerun : public ::testing::TestWithParam<std::string> {};
 
 }  // namespace
@@ -198,7 +212,7 @@ TEST(CudaDevice, WithoutADeviceMakeEngineSaysWhy) {
   }
 }
 
-TEST(CudaDevice, UnknownBroadphaseIsAnInputError) {
+TEST(CudaDevice, UnknownBroadphaseIsAnInputError) {  // needs no device: checked first
   const auto model = load_model("free-fall");
   try {
     (void)make_cuda_engine(model, "no-such-broadphase");
@@ -403,6 +417,55 @@ TEST_P(CudaRerun, RerunAndCapacityOneGiveTheSameBits) {
   }
 }
 
+// The device's loose octree (`octree`) finds exactly the `flat` pair set, so the states
+// equal those of the CPU engine with its own `octree` and of the device's `flat`; an
+// octree engine whose buffers start at capacity 1 agrees too.
+TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
+  REQUIRE_CUDA_DEVICE();
+  const std::string name = GetParam();
+  const bool big = name.rfind("boxes-", 0) == 0;
+  const int frames = big ? std::min(test_frames(), 50) : test_frames();
+  const auto model = load_model(name);
+  BroadPhaseConfig cfg = model->scene.broadphase;
+  cfg.name = "octree";
+  World cpu(model, make_broadphase(cfg, model->scene.domain));
+  CudaWorld oct(model, "octree");
+  CudaWorld flat(model, "flat");
+  CudaWorld tiny(model, "octree");
+  tiny.reset_capacities(1);
+  std::uint64_t pairs_seen = 0;
+  for (int f = 1; f <= frames; ++f) {
+    const bool rec = f == 1 || f % 10 == 0;
+    for (Engine* e : std::initializer_list<Engine*>{&cpu, &oct, &flat, &tiny}) e->set_recording(rec);
+    const FrameMetrics mc = cpu.step();
+    const FrameMetrics mo = oct.step();
+    const FrameMetrics mf = flat.step();
+    const FrameMetrics mt = tiny.step();
+    const std::string what = fmt::format("{} frame {}", name, f);
+    pairs_seen += mo.aabb_pairs;
+    ASSERT_EQ(cpu.state_hash(), oct.state_hash()) << what << ": cpu octree vs cuda octree: "
+                                                   << first_difference(cpu.state(), oct.state());
+    ASSERT_EQ(flat.state_hash(), oct.state_hash()) << what << ": cuda flat vs cuda octree: "
+                                                    << first_difference(flat.state(), oct.state());
+    ASSERT_EQ(tiny.state_hash(), oct.state_hash()) << what << ": capacity-1 octree differs";
+    EXPECT_EQ(mo.aabb_pairs, mf.aabb_pairs) << what;
+    EXPECT_EQ(mo.aabb_pairs, mc.aabb_pairs) << what;
+    EXPECT_EQ(mo.cell_candidates, mt.cell_candidates) << what;
+    EXPECT_GE(mo.cell_candidates, mo.aabb_pairs) << what << ": every pair passes an exact test";
+    if (rec) {
+      EXPECT_TRUE(same_pairs(oct.record().pairs, flat.record().pairs)) << what << ": octree pairs != flat pairs";
+      EXPECT_TRUE(same_pairs(oct.record().pairs, cpu.record().pairs)) << what << ": cuda octree != cpu octree";
+      EXPECT_TRUE(same_pairs(oct.record().pairs, tiny.record().pairs)) << what << ": capacity 1 differs";
+      EXPECT_TRUE(same_pairs(oct.record().confirmed, cpu.record().confirmed)) << what;
+    }
+    if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
+  }
+  std::cout << "[ info ] " << name << ": octree = flat on " << frames << " frames (" << pairs_seen
+            << " pairs)\n";
+}
+
+INSTANTIATE_TEST_SUITE_P(Scenes, CudaOctree, ::testing::ValuesIn(all_scenes()), test_name);
+GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(CudaOctree);
 INSTANTIATE_TEST_SUITE_P(Scenes, CpuVsCuda, ::testing::ValuesIn(shipped_scenes()), test_name);
 INSTANTIATE_TEST_SUITE_P(Scenes, CudaRerun, ::testing::ValuesIn(shipped_scenes()), test_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(CpuVsCuda);

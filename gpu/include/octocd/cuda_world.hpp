@@ -25,7 +25,8 @@
 namespace octocd {
 
 /// Creates the CUDA engine for `model` with broadphase `broadphase` (as in
-/// `--broadphase`; the device has `flat` so far). The model is shared, not copied.
+/// `--broadphase`; the device has `flat` and `octree` so far; `octree` takes its depth
+/// from the scene's broadphase.depth). The model is shared, not copied.
 /// Throws RuntimeError when this octocd was built without CUDA, when no CUDA device is
 /// usable (naming the CUDA runtime's reason) or when device memory runs out (naming the
 /// buffer and bytes); InputError for a broadphase the device does not have.
@@ -51,7 +52,9 @@ bool cuda_device_available();
 /// (vertices, cells, level offsets, per-shape offsets) and the theta table.
 ///
 /// Step: integrate; world AABBs; broadphase (`flat`: brute force, counting pass +
-/// exclusive scan + fill, giving the sorted unique pairs (a < b)); midphase + narrow phase
+/// exclusive scan + fill, giving the sorted unique pairs (a < b); `octree`: the loose
+/// octree of SPEC 5.1 with the cell math of loose_octree.hpp, keys sorted by CUB, a
+/// counted and filled query per body, pairs sorted: the same set); midphase + narrow phase
 /// per candidate pair through the shared OCTOCD_HD functions; response with
 /// `response.iterations` passes (per-contact terms, then per body a sequential reduction
 /// in (a, b) order over a body-major contact index built by a stable sort: no float
@@ -70,7 +73,7 @@ bool cuda_device_available();
 class CudaWorld : public Engine {
  public:
   /// Uploads the model's initial state, shapes and octrees. `broadphase` as in
-  /// `--broadphase` ("flat"). `model` must not be null.
+  /// `--broadphase` ("flat" or "octree"). `model` must not be null.
   CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase);
   ~CudaWorld() override;
   CudaWorld(const CudaWorld&) = delete;
