@@ -269,6 +269,30 @@ TEST(CudaDevice, NonFiniteStateGivesTheCpuMessage) {
   EXPECT_EQ(gpu.frame(), 0) << "the failed step is not counted";
 }
 
+TEST(CudaDevice, OutOfMemoryNamesTheBufferAndBytes) {
+  REQUIRE_CUDA_DEVICE();
+  const auto model = load_model("box-stack");
+  CudaWorld gpu(model, "flat");
+  gpu.step();
+  try {
+    gpu.reset_capacities(std::size_t{1} << 42);  // 16 TiB per uint32 buffer
+    FAIL() << "a 16 TiB cudaMalloc succeeded";
+  } catch (const RuntimeError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("cudaMalloc of 17592186044416 bytes"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("buffer '"), std::string::npos) << msg;
+  }
+  // The engine recovers: buffers regrow on demand and the run matches a fresh one.
+  gpu.reset_capacities(1);
+  CudaWorld fresh(model, "flat");
+  fresh.step();
+  for (int f = 2; f <= 20; ++f) {
+    gpu.step();
+    fresh.step();
+    ASSERT_EQ(gpu.state_hash(), fresh.state_hash()) << "frame " << f;
+  }
+}
+
 TEST(CudaDevice, SetStateIsUsed) {
   REQUIRE_CUDA_DEVICE();
   const auto model = load_model("bunny-stack-50");
