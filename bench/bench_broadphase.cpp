@@ -2,13 +2,21 @@
 // `replay` idea, as Broadmark does): a scene is run once with the CPU reference, the world
 // AABBs of `--frames` consecutive frames (after `--warmup` frames) are recorded, and every
 // broadphase (octocd's and the Bullet/FCL references) replays exactly those frames.
-// Each broadphase's first call (proxy creation, tree build) is made before timing, apart
-// ("initial step can be expensive"). Reported: ms per frame (Google Benchmark's real time
+// Each broadphase first replays the recorded frames `--warm-replays` times (default 1)
+// untimed: proxy creation and tree build ("initial step can be expensive"), and time for
+// incremental structures to settle (Bullet's dbvt re-balances a little on every call: its
+// first replay of boxes-uniform-50000 is about 9x slower than the following ones). Reported: ms per frame (Google Benchmark's real time
 // per iteration divided by the frame count) with counters `pairs` and `candidates`.
 //
-// Usage: bench_broadphase SCENE.json [--frames N] [--warmup N] [--only a,b] [benchmark flags]
+// With --benchmark_repetitions=R each broadphase is run R times; the aggregates include
+// the minimum over the repetitions besides Google Benchmark's mean, median and stddev
+// (bench/broadphase_table.py reports the median and the minimum).
+//
+// Usage: bench_broadphase SCENE.json [--frames N] [--warmup N] [--warm-replays N]
+//                         [--only a,b] [benchmark flags]
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -23,6 +31,7 @@ namespace {
 
 struct Recording {
   octocd::Scene scene;
+  int warm_replays = 1;
   std::vector<std::vector<octocd::Aabb>> frames;
 };
 
@@ -32,7 +41,9 @@ void replay(benchmark::State& state, const Recording* rec, std::string name) {
   auto bp = octocd::make_any_broadphase(cfg, rec->scene.domain);
   std::vector<octocd::Pair> pairs;
   octocd::BroadPhaseStats stats;
-  bp->find_pairs(rec->frames.front(), pairs, stats);  // first call, not timed
+  for (int r = 0; r < rec->warm_replays; ++r) {  // not timed
+    for (const auto& boxes : rec->frames) bp->find_pairs(boxes, pairs, stats);
+  }
   double total_pairs = 0, total_candidates = 0;
   for (auto _ : state) {
     total_pairs = total_candidates = 0;
@@ -54,11 +65,13 @@ void replay(benchmark::State& state, const Recording* rec, std::string name) {
 
 int main(int argc, char** argv) {
   if (argc < 2 || argv[1][0] == '-') {
-    std::fprintf(stderr, "usage: %s SCENE.json [--frames N] [--warmup N] [--only a,b] [benchmark flags]\n",
+    std::fprintf(stderr,
+                 "usage: %s SCENE.json [--frames N] [--warmup N] [--warm-replays N] [--only a,b] "
+                 "[benchmark flags]\n",
                  argv[0]);
     return 2;
   }
-  int frames = 20, warmup = 200;
+  int frames = 20, warmup = 200, warm_replays = 1;
   std::string only;
   std::vector<char*> rest{argv[0]};
   for (int i = 2; i < argc; ++i) {
@@ -66,6 +79,8 @@ int main(int argc, char** argv) {
       frames = std::atoi(argv[++i]);
     } else if (!std::strcmp(argv[i], "--warmup") && i + 1 < argc) {
       warmup = std::atoi(argv[++i]);
+    } else if (!std::strcmp(argv[i], "--warm-replays") && i + 1 < argc) {
+      warm_replays = std::atoi(argv[++i]);
     } else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) {
       only = std::string(",") + argv[++i] + ",";
     } else {
@@ -73,6 +88,7 @@ int main(int argc, char** argv) {
     }
   }
   static Recording rec;
+  rec.warm_replays = warm_replays < 0 ? 0 : warm_replays;
   try {
     rec.scene = octocd::load_scene(argv[1]);
     octocd::World world(rec.scene);
@@ -89,14 +105,19 @@ int main(int argc, char** argv) {
     if (!only.empty() && only.find("," + name + ",") == std::string::npos) continue;
     auto* b = benchmark::RegisterBenchmark((rec.scene.name + "/" + name).c_str(), replay, &rec, name);
     b->Unit(benchmark::kMillisecond)->UseRealTime();
-    // O(n^2) ones at 10k bodies take seconds per replay: one repetition is enough.
-    if (name == "flat" || name == "fcl-naive") b->Iterations(1);
+    // On a shared machine the minimum over repetitions is the steadiest figure.
+    b->ComputeStatistics("min", [](const std::vector<double>& v) {
+      return *std::min_element(v.begin(), v.end());
+    });
+    // O(n^2) ones at 10k bodies take seconds per replay: one iteration, one repetition.
+    if (name == "flat" || name == "fcl-naive") b->Iterations(1)->Repetitions(1);
   }
   int bargc = static_cast<int>(rest.size());
   benchmark::Initialize(&bargc, rest.data());
   benchmark::AddCustomContext("scene", rec.scene.name);
   benchmark::AddCustomContext("recorded_frames", std::to_string(rec.frames.size()));
   benchmark::AddCustomContext("warmup_frames", std::to_string(warmup));
+  benchmark::AddCustomContext("warm_replays", std::to_string(rec.warm_replays));
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   return 0;

@@ -38,7 +38,8 @@
 ///    the 27 occupancy bits of the block come from 9 row words, and only occupied cells'
 ///    table entries are read; the slots found are listed first, then tested with one
 ///    rarely taken branch each (no short-circuit in the AABB test: its six comparisons
-///    are unpredictable, the overall result is not).
+///    are unpredictable, the overall result is not; with SSE2 the six comparisons are
+///    two 4-lane ones on the slot's 32 bytes).
 ///    - overflow bodies are tested against every body (in-tree bodies as structure of
 ///      arrays, vectorised; overflow bodies with a larger slot).
 /// 5. The pairs are sorted by (a, b) with detail::sort_pairs.
@@ -48,6 +49,10 @@
 #include <algorithm>
 #include <cstring>
 #include <limits>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "octocd/broadphase.hpp"
 #include "octocd/loose_octree.hpp"
@@ -505,12 +510,28 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       }
       candidates += static_cast<std::uint64_t>(nflat) * pop;
       const std::uint32_t* flat = flat_.data();
+      const Slot* slots = slots_.data();
       for (std::uint32_t i = cell.begin; i < cell.end; ++i) {
-        const Slot si = slots_[i];
+        const Slot si = slots[i];
+#if defined(__SSE2__)
+        // Eq. 6 on four lanes at once: the slot's 32 bytes are (min.x, min.y, min.z,
+        // max.x) and (max.x, max.y, max.z, body); lanes 0-2 of min <= X.max and of
+        // max >= X.min are the six comparisons (same float semantics as overlaps()).
+        const __m128 xmax = _mm_setr_ps(si.box.max.x, si.box.max.y, si.box.max.z, 0.0f);
+        const __m128 xmin = _mm_setr_ps(si.box.min.x, si.box.min.y, si.box.min.z, 0.0f);
         for (std::uint32_t k = 0; k < nflat; ++k) {
-          const Slot& sj = slots_[flat[k]];
+          const float* p = &slots[flat[k]].box.min.x;
+          const __m128 lo = _mm_loadu_ps(p);
+          const __m128 hi = _mm_loadu_ps(p + 3);
+          const int bits = _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(lo, xmax), _mm_cmpge_ps(hi, xmin)));
+          if ((bits & 7) == 7) emit(si.body, slots[flat[k]].body, out);
+        }
+#else
+        for (std::uint32_t k = 0; k < nflat; ++k) {
+          const Slot& sj = slots[flat[k]];
           if (overlaps_nb(si.box, sj.box)) emit(si.body, sj.body, out);
         }
+#endif
       }
     }
     return candidates;
