@@ -257,8 +257,8 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
     if (r.detail.empty()) r.detail = fmt::format("{} frames", total);
   } else {
     return not_applicable(name, "closed form of an analytic scene",
-                          fmt::format("scene content is a {}: not free fall, bounce, slide or a resting "
-                                      "stack",
+                          fmt::format("scene content is of kind '{}': not free fall, bounce, slide or a "
+                                      "resting stack",
                                       scene_kind_name(kind)));
   }
   r.detail = fmt::format("{} (recognised: {})", r.detail, scene_kind_name(kind));
@@ -274,7 +274,7 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
   const bool trajectory = kind == SceneKind::Bounce || kind == SceneKind::Slide;
   if (!settle && !trajectory)
     return not_applicable(name, "comparison with btDiscreteDynamicsWorld",
-                          fmt::format("compared kinds: resting stack, pile, bounce, slide; this scene is a {}",
+                          fmt::format("compared kinds: resting stack, pile, bounce, slide; this scene is of kind '{}'",
                                       scene_kind_name(kind)));
   std::shared_ptr<const Model> shared(&model, [](const Model*) {});  // outlives `bullet`
   BulletWorld bullet(shared, engine.state());
