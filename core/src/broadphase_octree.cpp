@@ -26,15 +26,17 @@
 ///    union U of their boxes (a superset of each body's own query), with ranges from
 ///    loose_query_axis_q (equal to loose_query_axis):
 ///    - own level: the <= 3 x 3 x 3 cells whose loose boxes meet U, keeping only bodies
-///      with a larger index, where the index is the body's slot in the sorted order (so:
-///      later bodies of C itself, and every body of a cell with a larger Morton code;
-///      within a cell, slots are in body order);
+///      with a larger index, where a body's index at its level orders by its cell's
+///      position x + 2^l y + 4^l z first, then by body index (so: later bodies of C
+///      itself, and every body of a cell after C in that order; within a cell, slots are
+///      in body order). On a dense level the cells after C are the block's bits above
+///      C's bit, so they are selected before any table entry is read;
 ///    - every coarser occupied level m < l: the cells whose loose boxes meet U, keeping
 ///      every body;
 ///    then the exact AABB test (Eq. 6, as octocd::overlaps). Each pair is met exactly
 ///    once: if X in C and Y in C' (same level) overlap, C' is in C's query and C in C''s
-///    (both lie in their cell's loose box and the query is exact), and only the smaller
-///    slot keeps the pair; across levels only the finer body queries. On a dense level
+///    (both lie in their cell's loose box and the query is exact), and only the one
+///    first in that order keeps the pair; across levels only the finer body queries. On a dense level
 ///    the 27 occupancy bits of the block come from 9 row words, and only occupied cells'
 ///    table entries are read; the slots found are listed first, then tested with one
 ///    rarely taken branch each (no short-circuit in the AABB test: its six comparisons
@@ -388,18 +390,13 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     }
   }
 
-  /// Appends the slots of a cell given by its dense-table entry `e` to flat_ at `n` when
-  /// its first slot is >= `from` (the common one-body case without a branch on `e`).
-  std::uint32_t append_cell(std::uint32_t e, std::uint32_t from, std::uint32_t n) {
+  /// Appends the slots of a cell given by its dense-table entry `e` to flat_ at `n`.
+  std::uint32_t append_cell(std::uint32_t e, std::uint32_t n) {
     const std::uint32_t begin = (e & kSlotMask) - 1u;
-    // keep = first slot >= from, i.e. from < (e & kSlotMask), without a branch (both are
-    // < 2^31, so the difference's sign bit says it).
-    const std::uint32_t keep = (from - (e & kSlotMask)) >> 31;
-    if ((e >> kSlotBits) == 0u) {
+    if ((e >> kSlotBits) == 0u) {  // one body: the common case
       flat_[n] = begin;
-      return n + keep;
+      return n + 1u;
     }
-    if (!keep) return n;
     std::uint32_t len = (e >> kSlotBits) + 1u;
     if (len == kCountCap) len = slots_[begin].run_end - begin;
     if (flat_.size() < n + len + 64) flat_.resize(2 * (n + len + 64));
@@ -408,9 +405,11 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   }
 
   /// Appends to flat_ (from `n`) the slots of the occupied cells of dense level m in the
-  /// ranges whose first slot is >= `from`; returns the new length.
+  /// ranges; when `own` is not null (the querying cell's own level, cell coordinates
+  /// own[0..2]), only the cells after it in the order x + 2^m y + 4^m z. Returns the new
+  /// length.
   std::uint32_t gather_dense(int m, const LooseRange& rx, const LooseRange& ry,
-                             const LooseRange& rz, std::uint32_t from, std::uint32_t n) {
+                             const LooseRange& rz, const std::uint32_t* own, std::uint32_t n) {
     const std::uint32_t* table = dense_[static_cast<std::size_t>(m)].data();
     const std::uint64_t* bm = bits_[static_cast<std::size_t>(m)].data();
     const std::size_t row = std::size_t{1} << m;
@@ -421,8 +420,9 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     if (rx.hi - rx.lo <= 2 && ry.hi - ry.lo <= 2 && rz.hi - rz.lo <= 2) {
       // The usual case: the occupancy bits of a fixed 3 x 3 x 3 block from the low
       // corner (one 64-bit word per row: dense levels have rows of <= 64 cells; cells
-      // past the range masked out) make a 27-bit mask (bit 9z + 3y + x); only occupied
-      // cells' table entries are read.
+      // past the range masked out) make a 27-bit mask, bit 9z + 3y + x: the same order
+      // as the cells' positions x + 2^m y + 4^m z, so the cells after the own cell are
+      // the bits above its bit. Only occupied cells' table entries are read.
       const std::uint64_t* w0 = bm + static_cast<std::size_t>(rz.lo) * row + static_cast<std::size_t>(ry.lo);
       const unsigned sx = static_cast<unsigned>(rx.lo);
       const auto row3 = [w0, sx](std::size_t r) { return static_cast<std::uint32_t>(w0[r] >> sx) & 7u; };
@@ -434,30 +434,35 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       const std::uint32_t wz = static_cast<std::uint32_t>(rz.hi - rz.lo);
       if ((wx & wy & wz) != 2u) {
         // A range narrower than 3 on some axis (at the grid's border, or a small box).
-        const std::uint32_t xm = (2u << wx) - 1u;                     // 0b001, 0b011, 0b111
-        const std::uint32_t ym = xm * ((wy >= 2u ? 0x49u : wy >= 1u ? 0x9u : 0x1u));  // rows
-        const std::uint32_t zm = ym * (wz >= 2u ? 0x40201u : wz >= 1u ? 0x201u : 0x1u);
-        mask &= zm;
+        const std::uint32_t xm = (2u << wx) - 1u;                                   // x
+        const std::uint32_t ym = xm * (wy >= 2u ? 0x49u : wy >= 1u ? 0x9u : 0x1u);   // rows
+        mask &= ym * (wz >= 2u ? 0x40201u : wz >= 1u ? 0x201u : 0x1u);              // planes
+      }
+      if (own != nullptr) {
+        const std::uint32_t ko = 9u * (own[2] - static_cast<std::uint32_t>(rz.lo)) +
+                                 3u * (own[1] - static_cast<std::uint32_t>(ry.lo)) +
+                                 (own[0] - static_cast<std::uint32_t>(rx.lo));
+        mask &= ~((2u << ko) - 1u);
       }
       const std::uint32_t* off = block_[m];
       const std::uint32_t* t0 = table + p0;
       while (mask != 0) {
         const int k = __builtin_ctz(mask);
         mask &= mask - 1u;
-        n = append_cell(t0[off[k]], from, n);
+        n = append_cell(t0[off[k]], n);
       }
       return n;
     }
     // Wider ranges (a face touching a loose border exactly: up to 5 cells per axis).
+    const std::size_t own_pos = own != nullptr ? own[0] + own[1] * row + own[2] * plane : 0;
     for (int z = rz.lo; z <= rz.hi; ++z) {
       for (int y = ry.lo; y <= ry.hi; ++y) {
-        const std::uint32_t* r = table + static_cast<std::size_t>(z) * plane +
-                                 static_cast<std::size_t>(y) * row;
+        const std::size_t r = static_cast<std::size_t>(z) * plane + static_cast<std::size_t>(y) * row;
         for (int x = rx.lo; x <= rx.hi; ++x) {
-          const std::uint32_t e = r[x];
-          if (e == 0u) continue;
+          const std::uint32_t e = table[r + static_cast<std::size_t>(x)];
+          if (e == 0u || (own != nullptr && r + static_cast<std::size_t>(x) <= own_pos)) continue;
           if (flat_.size() < n + 64) flat_.resize(2 * (n + 64));
-          n = append_cell(e, from, n);
+          n = append_cell(e, n);
         }
       }
     }
@@ -486,11 +491,17 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       const LooseRange rz = loose_query_axis_q(cell.q.lo[2], cell.q.hi[2], m);
       if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) continue;
       const bool own = m == cell.level;
+      // The own cell's coordinates (for the own level's "cells after it" rule).
+      const std::uint32_t pos = cell_linear_[c];
+      const std::uint32_t side_mask = (1u << cell.level) - 1u;
+      const std::uint32_t own_xyz[3] = {pos & side_mask, (pos >> cell.level) & side_mask,
+                                        pos >> (2 * cell.level)};
       // The slots of the occupied cells of the range (at the own level only cells after
-      // this one: first slot >= cell.end), then the tests, one rarely taken branch each.
+      // this one in the order x + 2^m y + 4^m z), then the tests, one rarely taken branch
+      // each.
       std::uint32_t nflat = 0;
       if (m <= kDenseLevels) {
-        nflat = gather_dense(m, rx, ry, rz, own ? cell.end : 0u, 0u);
+        nflat = gather_dense(m, rx, ry, rz, own ? own_xyz : nullptr, 0u);
       } else {
         for (int z = rz.lo; z <= rz.hi; ++z) {
           const std::uint32_t mz = morton_spread3(static_cast<std::uint32_t>(z)) << 2;
@@ -498,7 +509,12 @@ class LooseOctreeBroadPhase final : public BroadPhase {
             const std::uint32_t myz = mz | (morton_spread3(static_cast<std::uint32_t>(y)) << 1);
             for (int x = rx.lo; x <= rx.hi; ++x) {
               const std::uint32_t d = find_sparse_cell(m, myz | morton_spread3(static_cast<std::uint32_t>(x)));
-              if (d == kEmpty || (own && d <= c)) continue;  // own cell done; smaller: met there
+              // At the own level only cells after this one in the order x + 2^m y + 4^m z.
+              if (d == kEmpty ||
+                  (own && (static_cast<std::uint64_t>(z) << (2 * m)) + (static_cast<std::uint64_t>(y) << m) +
+                                  static_cast<std::uint64_t>(x) <= pos)) {
+                continue;
+              }
               const Cell& other = cells_[d];
               const std::uint32_t len = other.end - other.begin;
               if (flat_.size() < nflat + len) flat_.resize(2 * (nflat + len));
