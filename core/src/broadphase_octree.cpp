@@ -99,16 +99,6 @@ struct Cell {
   std::int32_t level;
 };
 
-/// Inverse of morton_spread3: the bits 0, 3, 6, ... of v packed into the low 10 bits.
-inline std::uint32_t morton_compact3(std::uint32_t v) {
-  v &= 0x09249249u;
-  v = (v | (v >> 2)) & 0x030c30c3u;
-  v = (v | (v >> 4)) & 0x0300f00fu;
-  v = (v | (v >> 8)) & 0x030000ffu;
-  v = (v | (v >> 16)) & 0x3ffu;
-  return v;
-}
-
 /// Open-addressing hash slot (key kLooseNoKey = free).
 struct HashSlot {
   std::uint32_t key;
@@ -136,6 +126,8 @@ class LooseOctreeBroadPhase final : public BroadPhase {
  public:
   LooseOctreeBroadPhase(int depth, const Aabb& domain)
       : depth_cfg_(depth), grid_(loose_grid(domain)) {
+    for (std::uint32_t v = 0; v < 1024; ++v) spread_[v] = morton_spread3(v);
+    for (int l = 0; l <= kLooseMaxDepth; ++l) level_base_[l] = loose_level_base(l);
     // Offsets of the 27 cells of a 3 x 3 x 3 block, per dense level (bit k = 9z + 3y + x).
     for (int l = 0; l <= kDenseLevels; ++l) {
       for (std::uint32_t k = 0; k < 27; ++k) {
@@ -162,7 +154,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     stats.pairs = out.size();
     stats.memory_bytes =
         (qbody_.capacity() + qslot_.capacity()) * sizeof(QBox) +
-        (key_.capacity() + slot_of_.capacity() + cell_linear_.capacity() +
+        (key_.capacity() + lin_.capacity() + slot_of_.capacity() + cell_linear_.capacity() +
          radix_count_.capacity() + count_.capacity()) *
             sizeof(std::uint32_t) + flat_.capacity() * sizeof(std::uint32_t) +
         (order_.capacity() + moved_.capacity() + merge_buf_.capacity()) * sizeof(std::uint64_t) +
@@ -179,6 +171,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     const std::size_t n = boxes.size();
     qbody_.resize(n);
     key_.resize(n);
+    lin_.resize(n);
     depth_ = depth_cfg_;
     if (depth_ < 0) {
       float min_ext = std::numeric_limits<float>::infinity();
@@ -198,7 +191,15 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       }
       const Vec3 lo = loose_unit(grid_, b.min);
       const Vec3 hi = loose_unit(grid_, b.max);
-      key_[i] = loose_place_key(loose_place_unit(lo, hi, depth_));
+      const LoosePlace pl = loose_place_unit(lo, hi, depth_);
+      if (pl.level < 0) {
+        key_[i] = kLooseOverflowKey;
+        continue;
+      }
+      // = loose_place_key(pl), with tables for the bit spread and the level bases.
+      const unsigned l = static_cast<unsigned>(pl.level);
+      key_[i] = level_base_[l] + (spread_[pl.ix] | (spread_[pl.iy] << 1) | (spread_[pl.iz] << 2));
+      lin_[i] = pl.ix | (pl.iy << l) | (pl.iz << (2 * l));
       qbody_[i] = {{static_cast<std::int16_t>(loose_q_min(lo.x)),
                     static_cast<std::int16_t>(loose_q_min(lo.y)),
                     static_cast<std::int16_t>(loose_q_min(lo.z))},
@@ -310,9 +311,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       }
       cell.end = k;
       for (std::uint32_t j = cell.begin; j < k; ++j) slots_[j].run_end = k;
-      const std::uint32_t morton = key - loose_level_base(level);
-      cell_linear_.push_back((morton_compact3(morton >> 2) << (2 * level)) |
-                             (morton_compact3(morton >> 1) << level) | morton_compact3(morton));
+      cell_linear_.push_back(lin_[static_cast<std::uint32_t>(order_[cell.begin])]);
       ++level_cells_[level];
       cells_.push_back(cell);
     }
@@ -605,8 +604,11 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   LooseGrid grid_;
   int depth_ = 0;
   std::uint32_t block_[kDenseLevels + 1][27];
+  std::uint32_t spread_[1024];                 // morton_spread3 of every 10-bit value
+  std::uint32_t level_base_[kLooseMaxDepth + 1];  // loose_level_base of every level
   std::vector<QBox> qbody_;               // per body
   std::vector<std::uint32_t> key_;        // per body
+  std::vector<std::uint32_t> lin_;        // per body: its cell's x + 2^l y + 4^l z
   std::vector<std::uint64_t> order_;      // sorted (key << 32 | body)
   std::vector<std::uint64_t> moved_;
   std::vector<std::uint64_t> merge_buf_;
