@@ -10,32 +10,16 @@
 
 #include "octocd/error.hpp"
 #include "octocd/validation.hpp"
+#include "unit/test_scenes.hpp"
 
 using namespace octocd;
+using octocd::test::mixed_boxes;
 
 namespace {
 
 std::string source_dir() {
   const char* root = std::getenv("OCTOCD_SOURCE_DIR");
   return root ? root : ".";
-}
-
-/// Boxes of two masses thrown into an open box (as in test_validation.cpp), with a low
-/// velocity clamp so Eq. 23 acts on every frame.
-Scene boxes(float max_velocity = 50.0f) {
-  const std::string text = R"({
-    "name": "mixed-boxes", "domain": {"min": [-0.5, 0, -0.5], "max": [0.5, 1.5, 0.5]},
-    "frames": 300, "walls": "open-box",
-    "response": {"max_velocity": )" + std::to_string(max_velocity) + R"(},
-    "groups": [
-      {"name": "light", "shape": {"box": [0.06, 0.05, 0.07]}, "count": 12, "mass": 1.0,
-       "layout": {"type": "grid", "min": [-0.35, 0.1, -0.35], "max": [0.35, 0.5, 0.35], "spacing": 0.16, "jitter": 0.01, "seed": 5},
-       "velocity": {"type": "random", "max": 1.5, "seed": 6}},
-      {"name": "heavy", "shape": {"box": [0.08, 0.06, 0.05]}, "count": 12, "mass": 4.0,
-       "layout": {"type": "grid", "min": [-0.35, 0.6, -0.35], "max": [0.35, 1.2, 0.35], "spacing": 0.18, "jitter": 0.01, "seed": 7},
-       "velocity": {"type": "random", "max": 1.5, "seed": 8}}
-    ]})";
-  return parse_scene(text, "mixed-boxes (test)");
 }
 
 /// Boxes that start jammed into each other (grid spacing below their size), no gravity:
@@ -104,7 +88,7 @@ TEST(AppliedState, PredictionMatchesTheCpuEngine) {
     const auto rs = validate_with(scene, PlantedFaults{});
     for (const auto& x : rs) EXPECT_TRUE(x.pass || !x.applicable) << scene.name << " " << x.name << ": " << x.detail;
   }
-  const auto rs = validate_with(boxes(0.8f), PlantedFaults{});
+  const auto rs = validate_with(mixed_boxes(0.8f), PlantedFaults{});
   const ValidationResult r = find(rs, "applied-state");
   EXPECT_TRUE(r.applicable);
   EXPECT_TRUE(r.pass) << r.detail;
@@ -138,7 +122,7 @@ TEST_P(PlantedFault, IsCaught) {
   cases[5] = {"midphase loses a contact", {}, "midphase-completeness"};
   cases[5].faults.midphase_drops_contact = true;
   const FaultCase& fc = cases[static_cast<std::size_t>(GetParam())];
-  const auto rs = validate_with(GetParam() == 1 ? jammed() : boxes(0.8f), fc.faults);
+  const auto rs = validate_with(GetParam() == 1 ? jammed() : mixed_boxes(0.8f), fc.faults);
   const ValidationResult r = find(rs, fc.validator);
   EXPECT_TRUE(r.applicable) << fc.name;
   EXPECT_FALSE(r.pass) << fc.name << ": " << r.detail;
@@ -159,7 +143,7 @@ TEST(AppliedState, WrongBodyImpulseBreaksMomentumOfIsolatedGroups) {
 }
 
 TEST(AppliedState, ValidatorsRefuseAnEngineThatDoesNotRecord) {
-  const Scene scene = boxes();
+  const Scene scene = mixed_boxes();
   World world(scene);
   ValidationOptions opt;
   FrameValidators v(world, opt, {});
@@ -248,7 +232,7 @@ TEST(AnalyticByContent, RenamedScenesKeepTheirCheck) {
     const ValidationResult r = validate_analytic(world, 1000, Tolerances{});
     EXPECT_TRUE(r.applicable) << name << ": " << r.detail;
   }
-  EXPECT_EQ(classify_scene(*build_model(boxes())), SceneKind::Other);
+  EXPECT_EQ(classify_scene(*build_model(mixed_boxes())), SceneKind::Other);
 }
 
 TEST(AnalyticByContent, FreeFallCatchesExplicitEuler) {

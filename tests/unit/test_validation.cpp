@@ -12,31 +12,16 @@
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/validation.hpp"
+#include "unit/test_scenes.hpp"
 
 using namespace octocd;
+using octocd::test::mixed_boxes;
 
 namespace {
 
 std::string source_dir() {
   const char* root = std::getenv("OCTOCD_SOURCE_DIR");
   return root ? root : ".";
-}
-
-/// Boxes of two masses (1 kg and 4 kg) thrown into an open box: sliding, stacking and
-/// dynamic-dynamic contacts within a few hundred frames; needs no dataset.
-Scene mixed_boxes() {
-  const std::string text = R"({
-    "name": "mixed-boxes", "domain": {"min": [-0.5, 0, -0.5], "max": [0.5, 1.5, 0.5]},
-    "frames": 400, "walls": "open-box",
-    "groups": [
-      {"name": "light", "shape": {"box": [0.06, 0.05, 0.07]}, "count": 12, "mass": 1.0,
-       "layout": {"type": "grid", "min": [-0.35, 0.1, -0.35], "max": [0.35, 0.5, 0.35], "spacing": 0.16, "jitter": 0.01, "seed": 5},
-       "velocity": {"type": "random", "max": 1.5, "seed": 6}},
-      {"name": "heavy", "shape": {"box": [0.08, 0.06, 0.05]}, "count": 12, "mass": 4.0,
-       "layout": {"type": "grid", "min": [-0.35, 0.6, -0.35], "max": [0.35, 1.2, 0.35], "spacing": 0.18, "jitter": 0.01, "seed": 7},
-       "velocity": {"type": "random", "max": 1.5, "seed": 8}}
-    ]})";
-  return parse_scene(text, "mixed-boxes (test)");
 }
 
 ValidationResult find(const std::vector<ValidationResult>& rs, const std::string& name) {
