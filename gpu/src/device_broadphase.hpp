@@ -1,0 +1,75 @@
+#pragma once
+/// \file device_broadphase.hpp
+/// The seam between the CUDA engine's step (cuda_world.cpp) and its device broadphases
+/// (SPEC 5.1 on the GPU): `octree` (loose), `octree-strict`, `spatial-hash`; `flat` stays
+/// inside cuda_world.cpp as the device oracle.
+///
+/// Contract of DeviceBroadPhase::find:
+/// - input: n world AABBs on the device (m), the same array the CPU broadphase gets;
+/// - output: every pair (a, b), a < b, whose AABBs overlap (octocd::overlaps, Eq. 6,
+///   inclusive; a box with a NaN coordinate overlaps nothing), each exactly once, as the
+///   key (a << 32) | b, in any order, into out.keys[0 .. min(total, out.capacity));
+///   *out.total (device) receives the total found, which may exceed out.capacity: the
+///   caller then grows the buffer and runs the step again (no pair is ever dropped);
+/// - *out.candidates (device) is incremented by the exact AABB tests made (FrameMetrics::
+///   cell_candidates), with integer atomics (order-free);
+/// - everything is enqueued on `stream`; find() makes no host synchronisation and no
+///   allocation (so the step can be captured in a CUDA graph): scratch is sized by
+///   reserve(), which the caller calls before find() whenever n changes, outside capture.
+///
+/// Plain C++ (compiled by the host compiler and nvcc).
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include <cuda_runtime_api.h>
+
+#include "octocd/broadphase.hpp"
+#include "octocd/math.hpp"
+
+namespace octocd {
+namespace gpu {
+
+/// Where a device broadphase writes its pairs (all device pointers).
+struct PairOutput {
+  unsigned long long* keys = nullptr;        ///< capacity entries: (a << 32) | b, a < b
+  std::uint32_t capacity = 0;                ///< entries keys can hold
+  std::uint32_t* total = nullptr;            ///< out: pairs found (may exceed capacity)
+  unsigned long long* candidates = nullptr;  ///< added: exact AABB tests
+};
+
+/// A broadphase on the device; owns its scratch buffers (released by the destructor).
+class DeviceBroadPhase {
+ public:
+  virtual ~DeviceBroadPhase() = default;
+  /// The `--broadphase` name.
+  virtual std::string name() const = 0;
+  /// Sizes the scratch for n bodies (may allocate; throws RuntimeError naming the buffer
+  /// and bytes when device memory runs out). Called before find() when n changes.
+  virtual void reserve(std::uint32_t n, cudaStream_t stream) = 0;
+  /// Enqueues the broadphase on `stream` (see the file comment for the contract).
+  virtual void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) = 0;
+  /// Device bytes held by the scratch.
+  virtual std::uint64_t device_bytes() const = 0;
+};
+
+/// The device broadphase named config.name over the scene's `domain` (m): `octree`,
+/// `octree-strict` or `spatial-hash`, with the parameters of BroadPhaseConfig (checked as
+/// make_broadphase checks them). Throws InputError for any other name, naming
+/// `broadphase.name` and the names the device has.
+std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain);
+
+/// `octree` (SPEC 5.1, Ulrich's loose octree, cell math of loose_octree.hpp), depth
+/// config.octree_depth (-1 = auto). broadphase_octree.cu.
+std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain);
+/// `octree-strict` (SPEC 5.1, the paper's octree read literally, as
+/// core/src/broadphase_octree_strict.cpp), depth config.octree_depth (-1 = auto).
+/// broadphase_strict.cu.
+std::unique_ptr<DeviceBroadPhase> make_device_strict_octree(const BroadPhaseConfig& config, const Aabb& domain);
+/// `spatial-hash` (paper section 4.2; SPEC 5.1, as core/src/broadphase_spatial_hash.cpp),
+/// cell size config.cell_size. broadphase_hash.cu.
+std::unique_ptr<DeviceBroadPhase> make_device_spatial_hash(const BroadPhaseConfig& config);
+
+}  // namespace gpu
+}  // namespace octocd
