@@ -11,6 +11,7 @@
 #     --jobs N         parallel build jobs (default: 2)
 #     --no-build       pack what the build tree already holds
 #   Result: OUT/octocd-bundle/ and OUT/octocd-bundle.tar.xz (its size is printed).
+#   OCTOCD_BUNDLE_XZ_LEVEL=1 compresses faster (default 9: smallest).
 #
 # On the GPU machine (Ubuntu 24.04 or any glibc >= the build machine's, x86-64, a CUDA 13
 # driver; no Bullet, FCL, assimp or HDF5 needed):
@@ -171,7 +172,7 @@ for f in "$stage"/bin/*; do
 done
 
 # ---- compress -----------------------------------------------------------------------
-tar -C "$out_dir" -cf - "$name" | xz -T0 -9 > "$out_dir/$name.tar.xz"
+tar -C "$out_dir" -cf - "$name" | xz -T0 "-${OCTOCD_BUNDLE_XZ_LEVEL:-9}" > "$out_dir/$name.tar.xz"
 echo "bundle: $out_dir/$name.tar.xz ($(du -h "$out_dir/$name.tar.xz" | cut -f1)," \
      "$(stat -c %s "$out_dir/$name.tar.xz") bytes; ${#binaries[@]} programs, ${#libs[@]} libraries)"
 echo "on the GPU machine: tar xJf $name.tar.xz && cd $name && ./run-gpu-tests.sh"

@@ -1,49 +1,56 @@
 // Broadphase `flat` on the device (SPEC 5.1, the device oracle): every pair (i, j), i < j,
 // tested with the inclusive AABB overlap of Eq. 6 (octocd::overlaps). Counting pass, then
-// (on the host side) an exclusive scan and a fill pass: body i writes its pairs in j order
-// at its scanned offset, so the output is the sorted unique pair set, never truncated.
+// an exclusive scan and a fill pass: body i writes its pair keys in j order at its scanned
+// offset (those that fit the capacity; the total tells the host to regrow and rerun).
 #include "kernels.hpp"
 
 namespace octocd {
 namespace gpu {
 namespace {
 
-__global__ void flat_count_kernel(const Aabb* aabb, std::uint32_t n, std::uint32_t* count) {
-  const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const Aabb bi = aabb[i];
-  std::uint32_t c = 0;
-  for (std::uint32_t j = i + 1; j < n; ++j) c += overlaps(bi, aabb[j]) ? 1u : 0u;
-  count[i] = c;
+constexpr unsigned kFull = 0xffffffffu;
+
+/// One warp per body i (grid-stride); the lanes test j = i + 1 .. n - 1, 32 at a time.
+/// Counting (keys == nullptr) or writing the keys in j order from offset[i].
+__global__ void flat_kernel(const Aabb* aabb, std::uint32_t n, std::uint32_t* count, const std::uint32_t* offset,
+                            unsigned long long* keys, std::uint32_t capacity) {
+  const std::uint32_t lane = threadIdx.x & 31u;
+  const std::uint32_t warps = (gridDim.x * blockDim.x) >> 5;
+  for (std::uint32_t i = (blockIdx.x * blockDim.x + threadIdx.x) >> 5; i < n; i += warps) {
+    const Aabb bi = aabb[i];
+    std::uint32_t found = 0;
+    const std::uint32_t o = keys ? offset[i] : 0u;
+    for (std::uint32_t b = i + 1; b < n; b += 32) {
+      const std::uint32_t j = b + lane;
+      const bool hit = j < n && overlaps(bi, aabb[j]);
+      const unsigned mask = __ballot_sync(kFull, hit);
+      if (keys && hit) {
+        const std::uint32_t idx = o + found + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
+        if (idx < capacity) keys[idx] = (static_cast<unsigned long long>(i) << 32) | j;
+      }
+      found += static_cast<std::uint32_t>(__popc(mask));
+    }
+    if (!keys && lane == 0) count[i] = found;
+  }
 }
 
-__global__ void flat_fill_kernel(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset, Pair* pairs) {
-  const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const Aabb bi = aabb[i];
-  std::uint32_t o = offset[i];
-  for (std::uint32_t j = i + 1; j < n; ++j) {
-    if (overlaps(bi, aabb[j])) {
-      Pair p;
-      p.a = i;
-      p.b = j;
-      pairs[o++] = p;
-    }
-  }
+unsigned warp_blocks(std::uint32_t n) {
+  const std::size_t blocks = (static_cast<std::size_t>(n) * 32 + kBlockSize - 1) / kBlockSize;
+  return static_cast<unsigned>(blocks < 1 ? 1 : (blocks > 65535 ? 65535 : blocks));
 }
 
 }  // namespace
 
 cudaError_t launch_flat_count(const Aabb* aabb, std::uint32_t n, std::uint32_t* count, cudaStream_t stream) {
   if (n == 0) return cudaSuccess;
-  flat_count_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(aabb, n, count);
+  flat_kernel<<<warp_blocks(n), kBlockSize, 0, stream>>>(aabb, n, count, nullptr, nullptr, 0);
   return cudaGetLastError();
 }
 
-cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset, Pair* pairs,
-                             cudaStream_t stream) {
+cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset,
+                             unsigned long long* keys, std::uint32_t capacity, cudaStream_t stream) {
   if (n == 0) return cudaSuccess;
-  flat_fill_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(aabb, n, offset, pairs);
+  flat_kernel<<<warp_blocks(n), kBlockSize, 0, stream>>>(aabb, n, nullptr, offset, keys, capacity);
   return cudaGetLastError();
 }
 

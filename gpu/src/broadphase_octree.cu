@@ -6,23 +6,61 @@
 //    NaN key; its unit box in fixed point (loose_q_min / loose_q_max);
 // 2. a stable radix sort by key: slot order = (key, body), so every occupied cell is a
 //    contiguous run of slots and the levels follow each other in key order;
-// 3. a query per slot, counting then filling at scanned offsets:
+// 3. a level table (first slot of every level, of the overflow list and of the NaN
+//    bodies), then a query per slot, one warp each:
 //    - a body in a cell (level l) looks at every level m <= l that holds bodies: the
 //      cells whose loose boxes meet its own box (loose_query_axis_q: at most 4 per axis),
-//      each found by binary search in the sorted keys; at m = l it keeps only slots after
-//      its own, at m < l every body;
+//      found by binary search in the sorted keys, one cell per lane; at m = l it keeps
+//      only slots after its own, at m < l every body;
 //    - an overflow body tests every in-tree body and the overflow bodies after it;
-//    then the exact AABB test (octocd::overlaps, Eq. 6). Each overlapping pair is met
-//    exactly once (same level: by the smaller slot; across levels: by the finer body;
-//    with the overflow list: by the overflow body), because a body's box lies in its
-//    cell's loose box and the query ranges are exact;
-// 4. the pairs, as keys (a << 32) | b, are radix-sorted: the sorted unique set `flat`
-//    gives.
+//    then the exact AABB test (octocd::overlaps, Eq. 6), 32 candidates at a time. Each
+//    overlapping pair is met exactly once (same level: by the smaller slot; across levels:
+//    by the finer body; with the overflow list: by the overflow body), because a body's
+//    box lies in its cell's loose box and the query ranges are exact;
+// 4. the pairs are appended as keys (a << 32) | b with warp-aggregated atomics (their
+//    order varies; the set does not), then radix-sorted by the caller: the sorted unique
+//    set `flat` gives.
+#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_reduce.cuh>
+#include <cub/device/device_scan.cuh>
+
+#include "device_broadphase.hpp"
+#include "device_buffer.hpp"
 #include "kernels.hpp"
 
 namespace octocd {
 namespace gpu {
 namespace {
+
+/// A body's unit box in the fixed point of loose_q_min / loose_q_max.
+struct LooseQBox {
+  std::int16_t lo[3];
+  std::int16_t hi[3];
+};
+
+/// What the kernels read and write (device pointers).
+struct LooseDesc {
+  const Aabb* aabb = nullptr;      ///< world AABBs, per body
+  std::uint32_t n = 0;             ///< bodies
+  LooseGrid grid;                  ///< root cube of the scene's domain
+  int depth = 2;                   ///< D_w in [0, 10]; -1 = auto (from *min_extent)
+  float* extent = nullptr;         ///< scratch per body (auto depth): largest unit side
+  float* min_extent = nullptr;     ///< one float: the smallest extent (auto depth)
+  std::uint32_t* key = nullptr;    ///< per body: cell key (kLooseOverflowKey / kLooseNoKey)
+  std::uint32_t* body = nullptr;   ///< per body: its index (the sort's values)
+  LooseQBox* q = nullptr;          ///< per body: fixed-point unit box
+  const std::uint32_t* sorted_key = nullptr;   ///< per slot: key, ascending
+  const std::uint32_t* slot_body = nullptr;    ///< per slot: body (stable: body order per cell)
+  Aabb* slot_box = nullptr;        ///< per slot: the body's AABB
+  LooseQBox* slot_q = nullptr;     ///< per slot: the body's fixed-point box
+  /// Per level m in [0, kLooseMaxDepth + 1]: the first slot whose key is >= level m's base
+  /// (entry kLooseMaxDepth + 1: the first overflow slot); then the first NaN slot.
+  std::uint32_t* level_begin = nullptr;
+  unsigned long long* pair_keys = nullptr;  ///< out: (a << 32) | b, appended in any order
+  std::uint32_t capacity = 0;               ///< entries pair_keys holds
+  std::uint32_t* total = nullptr;           ///< out: pairs found (may exceed capacity)
+  unsigned long long* candidates = nullptr; ///< out (added): exact AABB tests
+};
 
 __global__ void loose_extent_kernel(LooseDesc d) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
@@ -58,8 +96,20 @@ __global__ void loose_keys_kernel(LooseDesc d) {
   d.q[i] = q;
 }
 
+/// First slot in [lo, hi) whose key is >= key.
+__device__ std::uint32_t lower_bound(const std::uint32_t* keys, std::uint32_t lo, std::uint32_t hi,
+                                     std::uint32_t key);
+
+constexpr int kLevelTable = kLooseMaxDepth + 3;  // levels 0..10, overflow, NaN
+
 __global__ void loose_gather_kernel(LooseDesc d) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
+  if (s < kLevelTable) {  // the level table (the sorted keys are complete)
+    const std::uint32_t base = s <= static_cast<std::uint32_t>(kLooseMaxDepth)
+                                   ? loose_level_base(static_cast<int>(s))
+                                   : (s == kLooseMaxDepth + 1 ? kLooseOverflowKey : kLooseNoKey);
+    d.level_begin[s] = lower_bound(d.sorted_key, 0, d.n, base);
+  }
   if (s >= d.n) return;
   const std::uint32_t body = d.slot_body[s];
   d.slot_box[s] = d.aabb[body];
@@ -77,81 +127,101 @@ __device__ std::uint32_t lower_bound(const std::uint32_t* keys, std::uint32_t lo
   return lo;
 }
 
-/// Tests slot s against slot t; counts or writes the pair (by body index, a < b).
-struct Emitter {
+constexpr unsigned kFull = 0xffffffffu;
+
+/// One warp's query for slot s: the lanes test the candidate slots of a range 32 at a
+/// time and append the overlapping pairs (by body index, a < b) with one atomic per 32.
+struct WarpEmitter {
   const LooseDesc& d;
-  bool fill;
-  std::uint32_t found = 0;
-  unsigned long long tests = 0;
+  std::uint32_t lane;
+  unsigned long long tests = 0;  // warp-uniform
   std::uint32_t body_s;
   Aabb box_s;
-  unsigned long long* out = nullptr;
 
-  __device__ void test(std::uint32_t t) {
-    ++tests;
-    if (!overlaps(box_s, d.slot_box[t])) return;
-    if (fill) {
-      const std::uint32_t body_t = d.slot_body[t];
-      const std::uint32_t a = body_s < body_t ? body_s : body_t;
-      const std::uint32_t b = body_s < body_t ? body_t : body_s;
-      out[found] = (static_cast<unsigned long long>(a) << 32) | b;
-    }
-    ++found;
-  }
-};
-
-__global__ void loose_query_kernel(LooseDesc d, bool fill) {
-  const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
-  if (s >= d.n) return;
-  const std::uint32_t key = d.sorted_key[s];
-  Emitter e{d, fill};
-  e.body_s = d.slot_body[s];
-  e.box_s = d.slot_box[s];
-  if (fill) e.out = d.pair_keys + d.offset[s];
-  if (key == kLooseNoKey) {  // a NaN box overlaps nothing
-    if (!fill) d.count[s] = 0;
-    return;
-  }
-  const std::uint32_t overflow_begin = lower_bound(d.sorted_key, 0, d.n, kLooseOverflowKey);
-  if (key == kLooseOverflowKey) {
-    const std::uint32_t used = lower_bound(d.sorted_key, overflow_begin, d.n, kLooseNoKey);
-    for (std::uint32_t t = 0; t < overflow_begin; ++t) e.test(t);
-    for (std::uint32_t t = s + 1; t < used; ++t) e.test(t);
-  } else {
-    const int level = loose_key_level(key);
-    const LooseQBox q = d.slot_q[s];
-    for (int m = 0; m <= level; ++m) {
-      // The slots of level m: [first key of m, first key of m + 1).
-      const std::uint32_t lv_begin = lower_bound(d.sorted_key, 0, overflow_begin, loose_level_base(m));
-      const std::uint32_t lv_end = m < kLooseMaxDepth
-                                       ? lower_bound(d.sorted_key, lv_begin, overflow_begin, loose_level_base(m + 1))
-                                       : overflow_begin;
-      if (lv_begin == lv_end) continue;  // no body at this level
-      const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
-      const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
-      const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
-      for (int iz = rz.lo; iz <= rz.hi; ++iz) {
-        for (int iy = ry.lo; iy <= ry.hi; ++iy) {
-          for (int ix = rx.lo; ix <= rx.hi; ++ix) {
-            const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix), static_cast<std::uint32_t>(iy),
-                                                    static_cast<std::uint32_t>(iz));
-            std::uint32_t t = lower_bound(d.sorted_key, lv_begin, lv_end, ck);
-            if (m == level && t <= s) t = s + 1;  // same level: only the slots after s
-            for (; t < lv_end && d.sorted_key[t] == ck; ++t) e.test(t);
-          }
+  /// Tests slots [t0, t1) (warp-uniform bounds).
+  __device__ void range(std::uint32_t t0, std::uint32_t t1) {
+    if (t0 >= t1) return;
+    tests += t1 - t0;
+    for (std::uint32_t b = t0; b < t1; b += 32) {
+      const std::uint32_t t = b + lane;
+      const bool hit = t < t1 && overlaps(box_s, d.slot_box[t]);
+      const unsigned mask = __ballot_sync(kFull, hit);
+      if (mask == 0) continue;
+      std::uint32_t base = 0;
+      if (lane == 0) base = atomicAdd(d.total, static_cast<std::uint32_t>(__popc(mask)));
+      base = __shfl_sync(kFull, base, 0);
+      if (hit) {
+        const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
+        if (idx < d.capacity) {
+          const std::uint32_t body_t = d.slot_body[t];
+          const std::uint32_t a = body_s < body_t ? body_s : body_t;
+          const std::uint32_t bb = body_s < body_t ? body_t : body_s;
+          d.pair_keys[idx] = (static_cast<unsigned long long>(a) << 32) | bb;
         }
       }
     }
   }
-  if (!fill) {
-    d.count[s] = e.found;
-    if (e.tests) atomicAdd(d.candidates, e.tests);
+};
+
+/// One warp per slot (grid-stride): the loose octree query of the file comment. At each
+/// level the lanes look up the (at most 4 x 4 x 4) cells in parallel, then the warp tests
+/// each non-empty cell's slots.
+__global__ void loose_query_kernel(LooseDesc d) {
+  const std::uint32_t lane = threadIdx.x & 31u;
+  const std::uint32_t warps = (gridDim.x * blockDim.x) >> 5;
+  for (std::uint32_t s = (blockIdx.x * blockDim.x + threadIdx.x) >> 5; s < d.n; s += warps) {
+    const std::uint32_t key = d.sorted_key[s];
+    WarpEmitter e{d, lane};
+    e.body_s = d.slot_body[s];
+    e.box_s = d.slot_box[s];
+    if (key != kLooseNoKey) {  // a NaN box overlaps nothing
+      const std::uint32_t overflow_begin = d.level_begin[kLooseMaxDepth + 1];
+      if (key == kLooseOverflowKey) {
+        const std::uint32_t used = d.level_begin[kLooseMaxDepth + 2];
+        e.range(0, overflow_begin);
+        e.range(s + 1, used);
+      } else {
+        const int level = loose_key_level(key);
+        const LooseQBox q = d.slot_q[s];
+        for (int m = 0; m <= level; ++m) {
+          const std::uint32_t lv_begin = d.level_begin[m];
+          const std::uint32_t lv_end = d.level_begin[m + 1];
+          if (lv_begin == lv_end) continue;  // no body at this level
+          const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
+          const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
+          const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
+          const int nx = rx.hi - rx.lo + 1, ny = ry.hi - ry.lo + 1, nz = rz.hi - rz.lo + 1;
+          const int cells = nx * ny * nz;
+          for (int c0 = 0; c0 < cells; c0 += 32) {
+            // Lane c finds cell c0 + c's slot run [t0, t1) (empty: t0 == t1).
+            std::uint32_t t0 = 0, t1 = 0;
+            const int c = c0 + static_cast<int>(lane);
+            if (c < cells) {
+              const int ix = rx.lo + c % nx, iy = ry.lo + (c / nx) % ny, iz = rz.lo + c / (nx * ny);
+              const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix), static_cast<std::uint32_t>(iy),
+                                                      static_cast<std::uint32_t>(iz));
+              t0 = lower_bound(d.sorted_key, lv_begin, lv_end, ck);
+              t1 = (t0 < lv_end && d.sorted_key[t0] == ck) ? lower_bound(d.sorted_key, t0, lv_end, ck + 1) : t0;
+              if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;  // same level: only the slots after s
+            }
+            unsigned busy = __ballot_sync(kFull, t0 < t1);
+            while (busy) {
+              const int src = __ffs(busy) - 1;
+              busy &= busy - 1;
+              e.range(__shfl_sync(kFull, t0, src), __shfl_sync(kFull, t1, src));
+            }
+          }
+        }
+      }
+    }
+    if (lane == 0 && e.tests) atomicAdd(d.candidates, e.tests);
   }
 }
 
-__global__ void unpack_pairs_kernel(const unsigned long long* keys, std::uint32_t count, Pair* pairs) {
+__global__ void unpack_pairs_kernel(const unsigned long long* keys, const std::uint32_t* total,
+                                    std::uint32_t capacity, Pair* pairs) {
   const std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
-  if (k >= count) return;
+  if (k >= capacity || k >= live_count(total, capacity)) return;
   const unsigned long long v = keys[k];
   Pair p;
   p.a = static_cast<std::uint32_t>(v >> 32);
@@ -159,37 +229,138 @@ __global__ void unpack_pairs_kernel(const unsigned long long* keys, std::uint32_
   pairs[k] = p;
 }
 
+/// Blocks for one warp per slot, at most 65535 (the kernel strides).
+unsigned warp_grid(std::uint32_t n) {
+  const std::size_t blocks = (static_cast<std::size_t>(n) * 32 + kBlockSize - 1) / kBlockSize;
+  return static_cast<unsigned>(blocks < 1 ? 1 : (blocks > 65535 ? 65535 : blocks));
+}
+
+/// Launch check: throws RuntimeError naming the kernel.
+void launched(cudaError_t e, const char* what) {
+  if (e != cudaSuccess) {
+    (void)cudaGetLastError();
+    throw RuntimeError(fmt::format("CUDA kernel '{}' failed to launch: {}", what, cuda_text(e)));
+  }
+}
+
+/// `octree` on the device (see the file comment).
+class LooseOctreeDevice final : public DeviceBroadPhase {
+ public:
+  LooseOctreeDevice(int depth, const Aabb& domain) : depth_(depth), grid_(loose_grid(domain)) {}
+
+  std::string name() const override { return "octree"; }
+
+  void reserve(std::uint32_t n, cudaStream_t stream) override {
+    (void)stream;
+    extent_.ensure(n);
+    min_.ensure(1);
+    key_.ensure(n);
+    body_.ensure(n);
+    q_.ensure(n);
+    sorted_key_.ensure(n);
+    slot_body_.ensure(n);
+    slot_box_.ensure(n);
+    slot_q_.ensure(n);
+    level_begin_.ensure(kLevelTable);
+    std::size_t a = 0, c = 0;
+    check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
+                                          static_cast<int>(n), 0, 32),
+          "cub::DeviceRadixSort::SortPairs (size)");
+    check(cub::DeviceReduce::Min(nullptr, c, extent_.get(), min_.get(), static_cast<int>(n)),
+          "cub::DeviceReduce::Min (size)");
+    temp_.ensure(std::max({a, c, std::size_t{1}}));
+    n_ = n;
+  }
+
+  void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
+    if (n != n_) throw RuntimeError("octree (cuda): find() before reserve() for this body count");
+    check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
+    if (n == 0) return;
+    LooseDesc d;
+    d.aabb = aabb;
+    d.n = n;
+    d.grid = grid_;
+    d.depth = depth_;
+    d.extent = extent_.get();
+    d.min_extent = min_.get();
+    d.key = key_.get();
+    d.body = body_.get();
+    d.q = q_.get();
+    d.sorted_key = sorted_key_.get();
+    d.slot_body = slot_body_.get();
+    d.slot_box = slot_box_.get();
+    d.slot_q = slot_q_.get();
+    d.level_begin = level_begin_.get();
+    d.pair_keys = out.keys;
+    d.capacity = out.capacity;
+    d.total = out.total;
+    d.candidates = out.candidates;
+    const unsigned g = grid_for(n);
+    std::size_t bytes = temp_.capacity();
+    if (depth_ < 0) {
+      loose_extent_kernel<<<g, kBlockSize, 0, stream>>>(d);
+      launched(cudaGetLastError(), "loose_extent");
+      launched(cub::DeviceReduce::Min(temp_.get(), bytes, extent_.get(), min_.get(), static_cast<int>(n), stream),
+               "cub::DeviceReduce::Min");
+    }
+    loose_keys_kernel<<<g, kBlockSize, 0, stream>>>(d);
+    launched(cudaGetLastError(), "loose_keys");
+    bytes = temp_.capacity();
+    launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
+                                             slot_body_.get(), static_cast<int>(n), 0, 32, stream),
+             "cub::DeviceRadixSort::SortPairs");
+    loose_gather_kernel<<<grid_for(std::max<std::uint32_t>(n, kLevelTable)), kBlockSize, 0, stream>>>(d);
+    launched(cudaGetLastError(), "loose_gather");
+    loose_query_kernel<<<warp_grid(n), kBlockSize, 0, stream>>>(d);
+    launched(cudaGetLastError(), "loose_query");
+  }
+
+  std::uint64_t device_bytes() const override {
+    std::uint64_t t = 0;
+    for (const BufferBase* b : std::initializer_list<const BufferBase*>{
+             &extent_, &min_, &key_, &body_, &q_, &sorted_key_, &slot_body_, &slot_box_, &slot_q_,
+             &level_begin_, &temp_})
+      t += b->bytes();
+    return t;
+  }
+
+ private:
+  int depth_;
+  LooseGrid grid_;
+  std::uint32_t n_ = 0xffffffffu;
+  DeviceBuffer<float> extent_{"octree body extents"};
+  DeviceBuffer<float> min_{"octree smallest extent"};
+  DeviceBuffer<std::uint32_t> key_{"octree body keys"};
+  DeviceBuffer<std::uint32_t> body_{"octree body indices"};
+  DeviceBuffer<LooseQBox> q_{"octree body unit boxes"};
+  DeviceBuffer<std::uint32_t> sorted_key_{"octree sorted keys"};
+  DeviceBuffer<std::uint32_t> slot_body_{"octree slot bodies"};
+  DeviceBuffer<Aabb> slot_box_{"octree slot boxes"};
+  DeviceBuffer<LooseQBox> slot_q_{"octree slot unit boxes"};
+  DeviceBuffer<std::uint32_t> level_begin_{"octree level table"};
+  DeviceBuffer<unsigned char> temp_{"octree CUB temporary storage"};
+};
+
 }  // namespace
 
-cudaError_t launch_loose_extent(const LooseDesc& d, cudaStream_t stream) {
-  if (d.n == 0) return cudaSuccess;
-  loose_extent_kernel<<<grid_for(d.n), kBlockSize, 0, stream>>>(d);
+cudaError_t launch_unpack_pairs(const unsigned long long* keys, const std::uint32_t* total, std::uint32_t capacity,
+                                Pair* pairs, cudaStream_t stream) {
+  if (capacity == 0) return cudaSuccess;
+  unpack_pairs_kernel<<<grid_for(capacity), kBlockSize, 0, stream>>>(keys, total, capacity, pairs);
   return cudaGetLastError();
 }
 
-cudaError_t launch_loose_keys(const LooseDesc& d, cudaStream_t stream) {
-  if (d.n == 0) return cudaSuccess;
-  loose_keys_kernel<<<grid_for(d.n), kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
+std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain) {
+  return std::make_unique<LooseOctreeDevice>(config.octree_depth, domain);
 }
 
-cudaError_t launch_loose_gather(const LooseDesc& d, cudaStream_t stream) {
-  if (d.n == 0) return cudaSuccess;
-  loose_gather_kernel<<<grid_for(d.n), kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
-}
-
-cudaError_t launch_loose_query(const LooseDesc& d, bool fill, cudaStream_t stream) {
-  if (d.n == 0) return cudaSuccess;
-  loose_query_kernel<<<grid_for(d.n), kBlockSize, 0, stream>>>(d, fill);
-  return cudaGetLastError();
-}
-
-cudaError_t launch_unpack_pairs(const unsigned long long* keys, std::uint32_t count, Pair* pairs,
-                                cudaStream_t stream) {
-  if (count == 0) return cudaSuccess;
-  unpack_pairs_kernel<<<grid_for(count), kBlockSize, 0, stream>>>(keys, count, pairs);
-  return cudaGetLastError();
+std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain) {
+  // The parameter checks of make_broadphase (throws InputError naming the field).
+  (void)make_broadphase(config, domain);
+  if (config.name == "octree") return make_device_loose_octree(config, domain);
+  throw InputError(fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: "
+                               "flat, octree",
+                               config.name));
 }
 
 }  // namespace gpu

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdlib>
+#include <cstddef>
 #include <cstring>
 #include <initializer_list>
 #include <utility>
@@ -14,6 +15,7 @@
 #include <cuda_runtime_api.h>
 #include <fmt/format.h>
 
+#include "device_broadphase.hpp"
 #include "device_buffer.hpp"
 #include "kernels.hpp"
 #include "octocd/error.hpp"
@@ -65,8 +67,18 @@ int key_bits(std::uint32_t n) {
 
 constexpr int kEvents = static_cast<int>(Stage::Count) + 1;
 
-/// Most bytes the per-pair narrow-phase scratch may take.
-constexpr std::size_t kLeafScratchBudget = std::size_t{512} << 20;
+using Readback = gpu::StepStats;
+
+/// The environment variable `name` is "1".
+bool env_is_one(const char* name) {
+  const char* v = std::getenv(name);
+  return v != nullptr && std::strcmp(v, "1") == 0;
+}
+
+/// The capacity to grow to when `needed` entries did not fit into `capacity`.
+std::size_t grown(std::size_t needed, std::size_t capacity) {
+  return std::max(needed + needed / 4 + 64, 2 * capacity);
+}
 
 }  // namespace
 
@@ -76,16 +88,27 @@ struct CudaWorld::Impl {
   cudaStream_t stream = nullptr;
   cudaEvent_t events[kEvents] = {};
   bool sync_each_launch = false;  // OCTOCD_CUDA_SYNC=1
+  bool use_graph = true;          // OCTOCD_CUDA_GRAPH=0 turns the CUDA graph off
+  bool capturing = false;
   std::string device;
   std::string broadphase;
+  std::unique_ptr<gpu::DeviceBroadPhase> bp;  // null for `flat`
   std::uint32_t n = 0;
   std::uint32_t shape_count = 0;
   hd::LevelList levels;
-  std::uint32_t leaf_max = 0;  // most vertices in a narrow-phase cell of any mesh
+  int level_steps = 0;  // midphase steps (0: aabb-only, or no levels)
+  unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
+
+  // Capacities of the variable-size buffers (entries); prepare() sizes the buffers.
+  std::size_t pair_cap = 1;
+  std::size_t list_cap = 1;
+  bool prepared = false;
 
   // Bodies (fixed size n).
   DeviceBuffer<Vec3> x{"body positions"};
   DeviceBuffer<Vec3> v{"body velocities"};
+  DeviceBuffer<Vec3> x_saved{"body positions before the step"};
+  DeviceBuffer<Vec3> v_saved{"body velocities before the step"};
   DeviceBuffer<float> w{"body inverse masses"};
   DeviceBuffer<Aabb> local{"body local boxes"};
   DeviceBuffer<std::uint32_t> shape{"body shapes"};
@@ -96,15 +119,16 @@ struct CudaWorld::Impl {
   DeviceBuffer<MeshOctreeCell> cells{"octree cells"};
   DeviceBuffer<std::uint32_t> level_offsets{"octree level offsets"};
   DeviceBuffer<float> theta{"theta table"};
-  /// box tests, box pairs, vertex tests (midphase), exact AABB tests (octree broadphase)
-  DeviceBuffer<unsigned long long> counters{"counters"};
-  DeviceBuffer<gpu::MetricsResult> metrics{"metrics"};
-  // Scratch, grown on demand (reset_capacities shrinks these).
+  DeviceBuffer<gpu::StepStats> stats{"step statistics"};
+  // Variable size (pair_cap, list_cap), grown on overflow; reset_capacities shrinks them.
   DeviceBuffer<std::uint32_t> bp_count{"broadphase counts"};
   DeviceBuffer<std::uint32_t> bp_offset{"broadphase offsets"};
+  DeviceBuffer<unsigned long long> pair_keys{"pair keys"};
+  DeviceBuffer<unsigned long long> pair_keys_sorted{"sorted pair keys"};
   DeviceBuffer<Pair> pairs{"candidate pairs"};
   DeviceBuffer<std::uint8_t> confirmed{"confirmed flags"};
-  DeviceBuffer<Vec3> leaf_scratch{"narrow-phase scratch"};
+  DeviceBuffer<gpu::MidItem> items_a{"midphase work list A"};
+  DeviceBuffer<gpu::MidItem> items_b{"midphase work list B"};
   DeviceBuffer<std::uint8_t> hit{"contact hit flags"};
   DeviceBuffer<Vec3> dx_a{"contact dx_a"};
   DeviceBuffer<Vec3> dx_b{"contact dx_b"};
@@ -118,39 +142,36 @@ struct CudaWorld::Impl {
   DeviceBuffer<std::uint32_t> vals_out{"sorted contact index entries"};
   DeviceBuffer<std::uint32_t> body_begin{"body contact segments"};
   DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
-  // Loose octree broadphase (broadphase_octree.cu).
-  DeviceBuffer<float> loose_extent{"octree body extents"};
-  DeviceBuffer<float> loose_min{"octree smallest extent"};
-  DeviceBuffer<std::uint32_t> loose_key{"octree body keys"};
-  DeviceBuffer<std::uint32_t> loose_body{"octree body indices"};
-  DeviceBuffer<gpu::LooseQBox> loose_q{"octree body unit boxes"};
-  DeviceBuffer<std::uint32_t> loose_sorted_key{"octree sorted keys"};
-  DeviceBuffer<std::uint32_t> loose_slot_body{"octree slot bodies"};
-  DeviceBuffer<Aabb> loose_slot_box{"octree slot boxes"};
-  DeviceBuffer<gpu::LooseQBox> loose_slot_q{"octree slot unit boxes"};
-  DeviceBuffer<unsigned long long> pair_keys{"octree pair keys"};
-  DeviceBuffer<unsigned long long> pair_keys_sorted{"octree sorted pair keys"};
 
-  std::uint32_t pair_count = 0;  // candidate pairs of the last step
+  Readback* host = nullptr;  // pinned
+  cudaGraph_t graph = nullptr;
+  cudaGraphExec_t graph_exec = nullptr;
 
   ~Impl() {
+    drop_graph();
+    if (host) (void)cudaFreeHost(host);
     for (cudaEvent_t& e : events)
       if (e) (void)cudaEventDestroy(e);
     if (stream) (void)cudaStreamDestroy(stream);
   }
 
+  void drop_graph() {
+    if (graph_exec) (void)cudaGraphExecDestroy(graph_exec);
+    if (graph) (void)cudaGraphDestroy(graph);
+    graph_exec = nullptr;
+    graph = nullptr;
+  }
+
   std::vector<BufferBase*> all_buffers() {
-    return {&x, &v, &w, &local, &shape, &aabb, &shapes, &vertices, &cells, &level_offsets, &theta, &counters,
-            &metrics, &bp_count, &bp_offset, &pairs, &confirmed, &leaf_scratch, &hit, &dx_a, &dx_b, &dv_a, &dv_b, &depth0,
-            &records, &keys_in, &keys_out, &vals_in, &vals_out, &body_begin, &temp, &loose_extent, &loose_min,
-            &loose_key, &loose_body, &loose_q, &loose_sorted_key, &loose_slot_body, &loose_slot_box,
-            &loose_slot_q, &pair_keys, &pair_keys_sorted};
+    std::vector<BufferBase*> all{&x, &v, &x_saved, &v_saved, &w, &local, &shape, &aabb, &shapes, &vertices, &cells,
+                                 &level_offsets, &theta, &stats};
+    for (BufferBase* b : scratch_buffers()) all.push_back(b);
+    return all;
   }
   std::vector<BufferBase*> scratch_buffers() {
-    return {&bp_count, &bp_offset, &pairs,   &confirmed, &leaf_scratch, &hit,     &dx_a,     &dx_b,       &dv_a,
-            &dv_b,     &depth0,    &records, &keys_in,   &keys_out,     &vals_in, &vals_out, &body_begin, &temp,
-            &loose_extent, &loose_min, &loose_key, &loose_body, &loose_q, &loose_sorted_key, &loose_slot_body,
-            &loose_slot_box, &loose_slot_q, &pair_keys, &pair_keys_sorted};
+    return {&bp_count, &bp_offset, &pair_keys, &pair_keys_sorted, &pairs, &confirmed, &items_a, &items_b,
+            &hit,      &dx_a,      &dx_b,      &dv_a,             &dv_b,  &depth0,    &records, &keys_in,
+            &keys_out, &vals_in,   &vals_out,  &body_begin,       &temp};
   }
 
   /// Checks a launch; with OCTOCD_CUDA_SYNC=1 also waits for it and checks its execution.
@@ -159,13 +180,19 @@ struct CudaWorld::Impl {
       (void)cudaGetLastError();
       throw RuntimeError(fmt::format("CUDA kernel '{}' failed to launch: {}", kernel, cuda_text(e)));
     }
-    if (sync_each_launch) {
+    if (sync_each_launch && !capturing) {
       e = cudaStreamSynchronize(stream);
       if (e != cudaSuccess) throw RuntimeError(fmt::format("CUDA kernel '{}' failed: {}", kernel, cuda_text(e)));
     }
   }
 
-  void record_event(int i) { check(cudaEventRecord(events[i], stream), "cudaEventRecord"); }
+  void record_event(int i) {
+    check(cudaEventRecordWithFlags(events[i], stream, capturing ? cudaEventRecordExternal : cudaEventRecordDefault),
+          "cudaEventRecord");
+  }
+
+  unsigned long long* counters() { return stats.get()->counters; }
+  std::uint32_t* counts() { return stats.get()->counts; }
 
   gpu::BodiesDesc bodies() {
     gpu::BodiesDesc b;
@@ -190,118 +217,247 @@ struct CudaWorld::Impl {
     return s;
   }
 
-  /// Exclusive scan through CUB, growing the temporary storage as asked.
-  void scan(const std::uint32_t* in, std::uint32_t* out, std::uint32_t count) {
-    std::size_t bytes = 0;
-    check(gpu::exclusive_scan_u32(nullptr, bytes, in, out, count, stream), "cub::DeviceScan::ExclusiveSum (size)");
-    temp.ensure(bytes);
-    bytes = temp.capacity();
-    launched(gpu::exclusive_scan_u32(temp.get(), bytes, in, out, count, stream), "cub::DeviceScan::ExclusiveSum");
-  }
+  std::uint32_t pcap() const { return static_cast<std::uint32_t>(pair_cap); }
+  std::uint32_t lcap() const { return static_cast<std::uint32_t>(list_cap); }
 
-  /// Stable radix sort of (key, value) pairs through CUB.
-  void sort(const std::uint32_t* kin, std::uint32_t* kout, const std::uint32_t* vin, std::uint32_t* vout,
-            std::uint32_t count, int end_bit) {
-    std::size_t bytes = 0;
-    check(gpu::sort_pairs_u32(nullptr, bytes, kin, kout, vin, vout, count, end_bit, stream),
-          "cub::DeviceRadixSort::SortPairs (size)");
-    temp.ensure(bytes);
-    bytes = temp.capacity();
-    launched(gpu::sort_pairs_u32(temp.get(), bytes, kin, kout, vin, vout, count, end_bit, stream),
-             "cub::DeviceRadixSort::SortPairs");
-  }
-
-  void sort_keys(const unsigned long long* kin, unsigned long long* kout, std::uint32_t count, int end_bit) {
-    std::size_t bytes = 0;
-    check(gpu::sort_keys_u64(nullptr, bytes, kin, kout, count, end_bit, stream),
+  /// Sizes every buffer for the current capacities (outside any capture); a change drops
+  /// the captured graph.
+  void prepare() {
+    if (prepared) return;
+    drop_graph();
+    if (pair_cap > 0x7fffffffu || list_cap > 0x7fffffffu)
+      throw RuntimeError(fmt::format("the step needs more than 2^31 - 1 pairs ({}) or midphase items ({})",
+                                     pair_cap, list_cap));
+    const std::size_t n1 = static_cast<std::size_t>(n) + 1;
+    bp_count.ensure(n1);
+    bp_offset.ensure(n1);
+    for (BufferBase* b : std::initializer_list<BufferBase*>{&pair_keys, &pair_keys_sorted, &pairs, &confirmed, &hit,
+                                                             &dx_a, &dx_b, &dv_a, &dv_b, &depth0, &records})
+      b->ensure(pair_cap);
+    for (BufferBase* b : std::initializer_list<BufferBase*>{&keys_in, &keys_out, &vals_in, &vals_out})
+      b->ensure(2 * pair_cap);
+    items_a.ensure(list_cap);
+    items_b.ensure(list_cap);
+    body_begin.ensure(n1);
+    std::size_t a = 0, b = 0, c = 0;
+    check(gpu::sort_keys_u64(nullptr, a, pair_keys.get(), pair_keys_sorted.get(), pcap(), 32 + key_bits(n), stream),
           "cub::DeviceRadixSort::SortKeys (size)");
-    temp.ensure(bytes);
-    bytes = temp.capacity();
-    launched(gpu::sort_keys_u64(temp.get(), bytes, kin, kout, count, end_bit, stream),
-             "cub::DeviceRadixSort::SortKeys");
-  }
-
-  void min(const float* in, float* out, std::uint32_t count) {
-    std::size_t bytes = 0;
-    check(gpu::min_f32(nullptr, bytes, in, out, count, stream), "cub::DeviceReduce::Min (size)");
-    temp.ensure(bytes);
-    bytes = temp.capacity();
-    launched(gpu::min_f32(temp.get(), bytes, in, out, count, stream), "cub::DeviceReduce::Min");
-  }
-
-  /// Reads the scanned total at offset[count] (one synchronisation) and returns it.
-  std::uint32_t read_total(const std::uint32_t* offset, std::uint32_t count, const char* what) {
-    std::uint32_t total = 0;
-    check(cudaMemcpyAsync(&total, offset + count, sizeof(total), cudaMemcpyDeviceToHost, stream), what);
-    check(cudaStreamSynchronize(stream), what);
-    return total;
+    check(gpu::sort_pairs_u32(nullptr, b, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(), 2 * pcap(),
+                              key_bits(n), stream),
+          "cub::DeviceRadixSort::SortPairs (size)");
+    check(gpu::exclusive_scan_u32(nullptr, c, bp_count.get(), bp_offset.get(), n + 1, stream),
+          "cub::DeviceScan::ExclusiveSum (size)");
+    temp.ensure(std::max({a, b, c, std::size_t{1}}));
+    if (bp) bp->reserve(n, stream);
+    prepared = true;
   }
 
   /// Broadphase `flat` (SPEC 5.1): count, exclusive scan over n + 1 (the last count is 0,
-  /// so offset[n] is the total), size the output, fill. The output is sorted by (a, b).
-  std::uint32_t flat_broadphase() {
+  /// so offset[n] is the total), fill the keys that fit.
+  void flat_broadphase() {
     const std::size_t n1 = static_cast<std::size_t>(n) + 1;
-    bp_count.ensure(n1);
-    bp_offset.ensure(n1);
     check(cudaMemsetAsync(bp_count.get(), 0, n1 * sizeof(std::uint32_t), stream), "cudaMemset broadphase counts");
     launched(gpu::launch_flat_count(aabb.get(), n, bp_count.get(), stream), "flat_count");
-    scan(bp_count.get(), bp_offset.get(), n + 1);
-    const std::uint32_t np = read_total(bp_offset.get(), n, "pair count");
-    pairs.ensure(np);
-    launched(gpu::launch_flat_fill(aabb.get(), n, bp_offset.get(), pairs.get(), stream), "flat_fill");
-    return np;
+    std::size_t bytes = temp.capacity();
+    launched(gpu::exclusive_scan_u32(temp.get(), bytes, bp_count.get(), bp_offset.get(), n + 1, stream),
+             "cub::DeviceScan::ExclusiveSum");
+    check(cudaMemcpyAsync(counts(), bp_offset.get() + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, stream),
+          "cudaMemcpy pair total");
+    launched(gpu::launch_flat_fill(aabb.get(), n, bp_offset.get(), pair_keys.get(), pcap(), stream), "flat_fill");
   }
 
-  /// Broadphase `octree` (SPEC 5.1, loose; broadphase_octree.cu): keys, stable sort by
-  /// key, per-slot query counted, scanned, sized and filled, then the pair keys sorted.
-  std::uint32_t octree_broadphase(const Aabb& domain, int depth) {
-    const std::size_t n1 = static_cast<std::size_t>(n) + 1;
-    for (BufferBase* b : std::initializer_list<BufferBase*>{&loose_extent, &loose_key, &loose_body, &loose_q,
-                                                             &loose_sorted_key, &loose_slot_body, &loose_slot_box,
-                                                             &loose_slot_q})
-      b->ensure(n);
-    loose_min.ensure(1);
-    bp_count.ensure(n1);
-    bp_offset.ensure(n1);
-    gpu::LooseDesc ld;
-    ld.aabb = aabb.get();
-    ld.n = n;
-    ld.grid = loose_grid(domain);
-    ld.depth = depth;
-    ld.extent = loose_extent.get();
-    ld.min_extent = loose_min.get();
-    ld.key = loose_key.get();
-    ld.body = loose_body.get();
-    ld.q = loose_q.get();
-    ld.sorted_key = loose_sorted_key.get();
-    ld.slot_body = loose_slot_body.get();
-    ld.slot_box = loose_slot_box.get();
-    ld.slot_q = loose_slot_q.get();
-    ld.count = bp_count.get();
-    ld.offset = bp_offset.get();
-    ld.candidates = counters.get() + 3;
-    if (n == 0) return 0;
-    if (depth < 0) {
-      launched(gpu::launch_loose_extent(ld, stream), "loose_extent");
-      min(loose_extent.get(), loose_min.get(), n);
+  /// Enqueues one whole step on the stream: no allocation, no host synchronisation (it
+  /// may be captured into a graph). `recording`: the first pass writes contact records.
+  void enqueue_step(const Scene& scene, bool recording) {
+    const ContactParams& params = scene.response;
+    const gpu::BodiesDesc b = bodies();
+    record_event(0);
+    // 1. Integrate (Eq. 1-3), keeping the state before the step for a rerun.
+    gpu::BodiesDesc bi = b;
+    bi.x_saved = x_saved.get();
+    bi.v_saved = v_saved.get();
+    launched(gpu::launch_integrate(bi, scene.gravity, scene.dt, stream), "integrate");
+    record_event(1);
+    // 2. World AABBs.
+    launched(gpu::launch_aabbs(b, stream), "aabbs");
+    record_event(2);
+    // 3. Broadphase (SPEC 5.1): pair keys (padding sorts last), sorted, unpacked.
+    static_assert(offsetof(gpu::StepStats, counts) ==
+                      offsetof(gpu::StepStats, counters) + sizeof(gpu::StepStats::counters),
+                  "counters and counts are contiguous");
+    check(cudaMemsetAsync(counters(), 0, sizeof(gpu::StepStats::counters) + sizeof(gpu::StepStats::counts), stream),
+          "cudaMemset step counts");
+    check(cudaMemsetAsync(pair_keys.get(), 0xff, pair_cap * sizeof(unsigned long long), stream),
+          "cudaMemset pair keys");
+    if (bp) {
+      gpu::PairOutput out;
+      out.keys = pair_keys.get();
+      out.capacity = pcap();
+      out.total = counts();
+      out.candidates = counters() + 3;
+      bp->find(aabb.get(), n, out, stream);
+    } else {
+      flat_broadphase();
     }
-    launched(gpu::launch_loose_keys(ld, stream), "loose_keys");
-    sort(loose_key.get(), loose_sorted_key.get(), loose_body.get(), loose_slot_body.get(), n, 32);
-    launched(gpu::launch_loose_gather(ld, stream), "loose_gather");
-    check(cudaMemsetAsync(bp_count.get(), 0, n1 * sizeof(std::uint32_t), stream), "cudaMemset broadphase counts");
-    launched(gpu::launch_loose_query(ld, false, stream), "loose_query (count)");
-    scan(bp_count.get(), bp_offset.get(), n + 1);
-    const std::uint32_t np = read_total(bp_offset.get(), n, "pair count");
-    pair_keys.ensure(np);
-    pair_keys_sorted.ensure(np);
-    pairs.ensure(np);
-    ld.pair_keys = pair_keys.get();
-    launched(gpu::launch_loose_query(ld, true, stream), "loose_query (fill)");
-    if (np > 0) {
-      sort_keys(pair_keys.get(), pair_keys_sorted.get(), np, 32 + key_bits(n));
-      launched(gpu::launch_unpack_pairs(pair_keys_sorted.get(), np, pairs.get(), stream), "unpack_pairs");
+    std::size_t bytes = temp.capacity();
+    launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(), 32 + key_bits(n),
+                                stream),
+             "cub::DeviceRadixSort::SortKeys");
+    launched(gpu::launch_unpack_pairs(pair_keys_sorted.get(), counts(), pcap(), pairs.get(), stream),
+             "unpack_pairs");
+    record_event(3);
+    // 4. Midphase + narrow phase (SPEC 5.2-5.3) as per-level work lists.
+    gpu::MidListDesc md;
+    md.x = x.get();
+    md.w = w.get();
+    md.aabb = aabb.get();
+    md.shape = shape.get();
+    md.shapes = shapes_desc();
+    md.levels = levels;
+    md.pairs = pairs.get();
+    md.pair_count = counts();
+    md.pair_capacity = pcap();
+    md.confirmed = confirmed.get();
+    md.counters = counters();
+    gpu::MidItem* lists[2] = {items_a.get(), items_b.get()};
+    md.out = lists[0];
+    md.out_count = counts() + 1;
+    md.out_capacity = lcap();
+    launched(gpu::launch_mid_start(md, warp_grid, stream), "mid_start");
+    for (int i = 0; i + 1 < level_steps; ++i) {
+      md.in = lists[i % 2];
+      md.in_count = counts() + 1 + i;
+      md.in_capacity = lcap();
+      md.out = lists[(i + 1) % 2];
+      md.out_count = counts() + 2 + i;
+      launched(gpu::launch_mid_expand(md, i, warp_grid, stream), "mid_expand");
     }
-    return np;
+    if (level_steps > 0) {
+      md.in = lists[(level_steps - 1) % 2];
+      md.in_count = counts() + level_steps;
+      md.in_capacity = lcap();
+      md.out = nullptr;
+      md.out_count = nullptr;
+      md.out_capacity = 0;
+      launched(gpu::launch_mid_leaf(md, warp_grid, stream), "mid_leaf");
+    }
+    record_event(4);
+    // 5. Response (SPEC 6): body-major index of the confirmed contacts (stable sort by
+    // body keeps (a, b) order per body), `iterations` passes, then the clamp (Eq. 23).
+    const std::uint32_t entries = 2 * pcap();
+    launched(gpu::launch_contact_entries(pairs.get(), confirmed.get(), counts(), pcap(), n, keys_in.get(),
+                                         vals_in.get(), stream),
+             "contact_entries");
+    bytes = temp.capacity();
+    launched(gpu::sort_pairs_u32(temp.get(), bytes, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(),
+                                 entries, key_bits(n), stream),
+             "cub::DeviceRadixSort::SortPairs");
+    launched(gpu::launch_body_segments(keys_out.get(), entries, n, body_begin.get(), stream), "body_segments");
+    gpu::TermsDesc td;
+    td.pairs = pairs.get();
+    td.confirmed = confirmed.get();
+    td.pair_count = counts();
+    td.pair_capacity = pcap();
+    td.x = x.get();
+    td.v = v.get();
+    td.w = w.get();
+    td.local = local.get();
+    td.params = params;
+    td.hit = hit.get();
+    td.dx_a = dx_a.get();
+    td.dx_b = dx_b.get();
+    td.dv_a = dv_a.get();
+    td.dv_b = dv_b.get();
+    gpu::ApplyDesc ad;
+    ad.x = x.get();
+    ad.v = v.get();
+    ad.w = w.get();
+    ad.n = n;
+    ad.body_begin = body_begin.get();
+    ad.entries = vals_out.get();
+    ad.hit = hit.get();
+    ad.dx_a = dx_a.get();
+    ad.dx_b = dx_b.get();
+    ad.dv_a = dv_a.get();
+    ad.dv_b = dv_b.get();
+    for (int pass = 0; pass < params.iterations; ++pass) {
+      td.depth0 = pass == 0 ? depth0.get() : nullptr;
+      td.records = pass == 0 && recording ? records.get() : nullptr;
+      launched(gpu::launch_contact_terms(td, stream), "contact_terms");
+      launched(gpu::launch_apply_sums(ad, stream), "apply_sums");
+    }
+    launched(gpu::launch_clamp(b, params.max_velocity, stream), "clamp");
+    record_event(5);
+    // 6. Metrics, and everything the host reads, in one place.
+    gpu::MetricsDesc xd;
+    xd.x = x.get();
+    xd.v = v.get();
+    xd.w = w.get();
+    xd.n = n;
+    xd.depth0 = depth0.get();
+    xd.pair_count = counts();
+    xd.pair_capacity = pcap();
+    xd.slop = params.slop;
+    xd.out = &stats.get()->metrics;
+    launched(gpu::launch_metrics(xd, stream), "metrics");
+    check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
+          "cudaMemcpy step statistics");
+    record_event(6);
+  }
+
+  /// Runs the step: from the captured graph when allowed (not recording, graphs on), else
+  /// launch by launch; then waits for it.
+  void run_step(const Scene& scene, bool recording) {
+    prepare();
+    if (use_graph && !sync_each_launch && !recording) {
+      if (!graph_exec) {
+        capturing = true;
+        check(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal), "cudaStreamBeginCapture");
+        try {
+          enqueue_step(scene, false);
+        } catch (...) {
+          cudaGraph_t g = nullptr;
+          (void)cudaStreamEndCapture(stream, &g);
+          if (g) (void)cudaGraphDestroy(g);
+          capturing = false;
+          throw;
+        }
+        capturing = false;
+        check(cudaStreamEndCapture(stream, &graph), "cudaStreamEndCapture");
+        check(cudaGraphInstantiate(&graph_exec, graph, 0), "cudaGraphInstantiate");
+      }
+      check(cudaGraphLaunch(graph_exec, stream), "cudaGraphLaunch");
+    } else {
+      enqueue_step(scene, recording);
+    }
+    check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+  }
+
+  /// True when a list overflowed its capacity; grows the capacities then (the state must
+  /// be restored and the step run again).
+  bool grow_if_needed() {
+    bool grow = false;
+    const std::size_t pairs_found = host->counts[0];
+    if (pairs_found > pair_cap) {
+      pair_cap = grown(pairs_found, pair_cap);
+      grow = true;
+    }
+    std::size_t items = 0;
+    for (int i = 0; i < level_steps; ++i) items = std::max<std::size_t>(items, host->counts[1 + i]);
+    if (items > list_cap) {
+      list_cap = grown(items, list_cap);
+      grow = true;
+    }
+    if (grow) prepared = false;
+    return grow;
+  }
+
+  void restore_state() {
+    const std::size_t vec_bytes = static_cast<std::size_t>(n) * sizeof(Vec3);
+    if (n == 0) return;
+    check(cudaMemcpyAsync(x.get(), x_saved.get(), vec_bytes, cudaMemcpyDeviceToDevice, stream), "cudaMemcpy restore x");
+    check(cudaMemcpyAsync(v.get(), v_saved.get(), vec_bytes, cudaMemcpyDeviceToDevice, stream), "cudaMemcpy restore v");
+    check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (restore)");
   }
 };
 
@@ -328,18 +484,30 @@ std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, con
 CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase)
     : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
   if (!model_) throw InputError("CudaWorld: no model given");
-  if (broadphase != "flat" && broadphase != "octree")
-    throw InputError(fmt::format("broadphase.name: '{}' is not available on the cuda engine yet (available "
-                                 "there: flat, octree)",
-                                 broadphase));
+  std::unique_ptr<gpu::DeviceBroadPhase> bp;
+  if (broadphase != "flat") {  // checked before the device: an unknown name is an input error anywhere
+    BroadPhaseConfig cfg = model_->scene.broadphase;
+    cfg.name = broadphase;
+    bp = gpu::make_device_broadphase(cfg, model_->scene.domain);
+  }
   const std::string reason = no_device_reason();
   if (!reason.empty()) throw RuntimeError("no CUDA device: " + reason + "; the cuda engine needs one");
 
   Impl& d = *impl_;
   d.broadphase = broadphase;
+  d.bp = std::move(bp);
   d.device = describe_current_device();
-  const char* sync = std::getenv("OCTOCD_CUDA_SYNC");
-  d.sync_each_launch = sync != nullptr && std::strcmp(sync, "1") == 0;
+  d.sync_each_launch = env_is_one("OCTOCD_CUDA_SYNC");
+  const char* graph = std::getenv("OCTOCD_CUDA_GRAPH");
+  d.use_graph = !(graph != nullptr && std::strcmp(graph, "0") == 0);
+  {
+    int dev = 0, sms = 1;
+    check(cudaGetDevice(&dev), "cudaGetDevice");
+    check(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev), "cudaDeviceGetAttribute");
+    d.warp_grid = static_cast<unsigned>(std::max(1, sms) * 4);
+  }
+  check(cudaMallocHost(reinterpret_cast<void**>(&d.host), sizeof(Readback)), "cudaMallocHost (step read-back)");
+  *d.host = Readback{};
   check(cudaStreamCreateWithFlags(&d.stream, cudaStreamNonBlocking), "cudaStreamCreate");
   for (cudaEvent_t& e : d.events) check(cudaEventCreate(&e), "cudaEventCreate");
 
@@ -353,6 +521,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.levels.aabb_only = mc.aabb_only;
   d.levels.count = static_cast<int>(std::min<std::size_t>(mc.levels.size(), hd::kMidphaseMaxLevels));
   for (int i = 0; i < d.levels.count; ++i) d.levels.levels[i] = mc.levels[static_cast<std::size_t>(i)];
+  d.level_steps = d.levels.aabb_only ? 0 : d.levels.count;
 
   // Shapes: every octree packed once.
   std::vector<gpu::DeviceShape> shapes;
@@ -374,12 +543,6 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
       vertices.insert(vertices.end(), t.vertices.begin(), t.vertices.end());
       cells.insert(cells.end(), t.cells.begin(), t.cells.end());
       level_offsets.insert(level_offsets.end(), t.level_offset.begin(), t.level_offset.end());
-      // Largest cell at the level the narrow phase runs on (the last level, clamped).
-      if (!mc.aabb_only && !mc.levels.empty()) {
-        const int leaf = std::min(mc.levels.back(), t.depth);
-        for (std::uint32_t c = t.level_begin(leaf); c < t.level_end(leaf); ++c)
-          d.leaf_max = std::max(d.leaf_max, t.cells[c].vertex_count);
-      }
     }
     shapes.push_back(ds);
   }
@@ -403,9 +566,12 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   upload(d.v, m.initial.v, d.stream);
   upload(d.w, m.initial.w, d.stream);
   d.aabb.reset(n);
-  d.counters.reset(4);
-  d.metrics.reset(1);
-  reset_capacities(1);
+  d.x_saved.reset(n);
+  d.v_saved.reset(n);
+  d.stats.reset(1);
+  // First guesses; a step that needs more grows them and runs again.
+  d.pair_cap = 2 * n + 64;
+  d.list_cap = 4 * n + 256;
   d.launched(gpu::launch_aabbs(d.bodies(), d.stream), "aabbs");
   check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize");
   state_ = m.initial;
@@ -421,12 +587,18 @@ std::string CudaWorld::broadphase_name() const { return impl_->broadphase; }
 std::uint64_t CudaWorld::device_bytes() const {
   std::uint64_t total = 0;
   for (const BufferBase* b : impl_->all_buffers()) total += b->bytes();
+  if (impl_->bp) total += impl_->bp->device_bytes();
   return total;
 }
 
 void CudaWorld::reset_capacities(std::size_t capacity) {
   if (capacity < 1) capacity = 1;
-  for (BufferBase* b : impl_->scratch_buffers()) b->reset(capacity);
+  Impl& d = *impl_;
+  d.drop_graph();
+  for (BufferBase* b : d.scratch_buffers()) b->reset(capacity);
+  d.pair_cap = capacity;
+  d.list_cap = capacity;
+  d.prepared = false;
 }
 
 void CudaWorld::set_state(const BodyState& s) {
@@ -461,7 +633,6 @@ const FrameMetrics& CudaWorld::step() {
   const auto t_step = Clock::now();
   Impl& d = *impl_;
   const Scene& scene = model_->scene;
-  const ContactParams& params = scene.response;
   const std::uint32_t n = d.n;
   FrameMetrics m;
   m.frame = frame_ + 1;
@@ -472,130 +643,18 @@ const FrameMetrics& CudaWorld::step() {
     record_.x_pre = s.x;
     record_.v_pre = s.v;
   }
-  const gpu::BodiesDesc bodies = d.bodies();
-  d.record_event(0);
-
-  // 1. Integrate (Eq. 1-3).
-  d.launched(gpu::launch_integrate(bodies, scene.gravity, scene.dt, d.stream), "integrate");
-  d.record_event(1);
-
-  // 2. World AABBs.
-  d.launched(gpu::launch_aabbs(bodies, d.stream), "aabbs");
-  d.record_event(2);
-
-  // 3. Broadphase (SPEC 5.1): the sorted unique pairs with overlapping AABBs.
-  check(cudaMemsetAsync(d.counters.get(), 0, 4 * sizeof(unsigned long long), d.stream), "cudaMemset counters");
-  const bool flat = d.broadphase == "flat";
-  const std::uint32_t np =
-      flat ? d.flat_broadphase() : d.octree_broadphase(scene.domain, scene.broadphase.octree_depth);
-  d.pair_count = np;
-  if (flat) m.cell_candidates = static_cast<std::uint64_t>(n) * (n == 0 ? 0 : n - 1) / 2;
+  // The step, run again from the saved state with larger buffers while a list overflows.
+  d.run_step(scene, recording_);
+  while (d.grow_if_needed()) {
+    d.restore_state();
+    d.run_step(scene, recording_);
+  }
+  const gpu::MetricsResult r = d.host->metrics;
+  const unsigned long long* counters = d.host->counters;
+  const std::uint32_t np = d.host->counts[0];
+  const bool flat = !d.bp;
   m.aabb_pairs = np;
-  d.record_event(3);
-
-  // 4. Midphase + narrow phase (SPEC 5.2-5.3), one thread per pair.
-  d.confirmed.ensure(np);
-  gpu::MidphaseDesc md;
-  md.x = d.x.get();
-  md.w = d.w.get();
-  md.aabb = d.aabb.get();
-  md.shape = d.shape.get();
-  md.shapes = d.shapes_desc();
-  md.levels = d.levels;
-  md.pairs = d.pairs.get();
-  md.pair_count = np;
-  md.confirmed = d.confirmed.get();
-  md.counters = d.counters.get();
-  // Per-pair narrow-phase scratch when it fits a modest budget; else the leaf test
-  // recomputes the filtered vertices (identical tests, only slower).
-  const std::size_t scratch_elems = static_cast<std::size_t>(np) * d.leaf_max;
-  if (d.leaf_max > 0 && np > 0 && scratch_elems * sizeof(Vec3) <= kLeafScratchBudget) {
-    d.leaf_scratch.ensure(scratch_elems);
-    md.scratch = d.leaf_scratch.get();
-    md.scratch_per_pair = d.leaf_max;
-  }
-  d.launched(gpu::launch_midphase(md, d.stream), "midphase");
-  d.record_event(4);
-
-  // 5. Response (SPEC 6): body-major index of the confirmed contacts (stable sort by
-  // body keeps (a, b) order per body), then `iterations` passes of per-contact terms and
-  // per-body sums, then the clamp (Eq. 23).
-  const std::size_t entries = 2 * static_cast<std::size_t>(np);
-  d.keys_in.ensure(entries);
-  d.keys_out.ensure(entries);
-  d.vals_in.ensure(entries);
-  d.vals_out.ensure(entries);
-  d.hit.ensure(np);
-  d.dx_a.ensure(np);
-  d.dx_b.ensure(np);
-  d.dv_a.ensure(np);
-  d.dv_b.ensure(np);
-  d.depth0.ensure(np);
-  if (recording_) d.records.ensure(np);
-  d.body_begin.ensure(static_cast<std::size_t>(n) + 1);
-  if (np > 0) {
-    d.launched(gpu::launch_contact_entries(d.pairs.get(), d.confirmed.get(), np, n, d.keys_in.get(),
-                                           d.vals_in.get(), d.stream),
-               "contact_entries");
-    d.sort(d.keys_in.get(), d.keys_out.get(), d.vals_in.get(), d.vals_out.get(),
-           static_cast<std::uint32_t>(entries), key_bits(n));
-  }
-  d.launched(gpu::launch_body_segments(d.keys_out.get(), static_cast<std::uint32_t>(np > 0 ? entries : 0), n,
-                                       d.body_begin.get(), d.stream),
-             "body_segments");
-  gpu::TermsDesc td;
-  td.pairs = d.pairs.get();
-  td.confirmed = d.confirmed.get();
-  td.pair_count = np;
-  td.x = d.x.get();
-  td.v = d.v.get();
-  td.w = d.w.get();
-  td.local = d.local.get();
-  td.params = params;
-  td.hit = d.hit.get();
-  td.dx_a = d.dx_a.get();
-  td.dx_b = d.dx_b.get();
-  td.dv_a = d.dv_a.get();
-  td.dv_b = d.dv_b.get();
-  gpu::ApplyDesc ad;
-  ad.x = d.x.get();
-  ad.v = d.v.get();
-  ad.w = d.w.get();
-  ad.n = n;
-  ad.body_begin = d.body_begin.get();
-  ad.entries = d.vals_out.get();
-  ad.hit = d.hit.get();
-  ad.dx_a = d.dx_a.get();
-  ad.dx_b = d.dx_b.get();
-  ad.dv_a = d.dv_a.get();
-  ad.dv_b = d.dv_b.get();
-  for (int pass = 0; pass < params.iterations; ++pass) {
-    td.depth0 = pass == 0 ? d.depth0.get() : nullptr;
-    td.records = pass == 0 && recording_ ? d.records.get() : nullptr;
-    d.launched(gpu::launch_contact_terms(td, d.stream), "contact_terms");
-    d.launched(gpu::launch_apply_sums(ad, d.stream), "apply_sums");
-  }
-  d.launched(gpu::launch_clamp(bodies, params.max_velocity, d.stream), "clamp");
-  d.record_event(5);
-
-  // 6. Metrics and the non-finite guard.
-  gpu::MetricsDesc xd;
-  xd.x = d.x.get();
-  xd.v = d.v.get();
-  xd.w = d.w.get();
-  xd.n = n;
-  xd.depth0 = d.depth0.get();
-  xd.pair_count = np;
-  xd.slop = params.slop;
-  xd.out = d.metrics.get();
-  d.launched(gpu::launch_metrics(xd, d.stream), "metrics");
-  gpu::MetricsResult r;
-  unsigned long long counters[4] = {0, 0, 0, 0};
-  check(cudaMemcpyAsync(&r, d.metrics.get(), sizeof(r), cudaMemcpyDeviceToHost, d.stream), "cudaMemcpy metrics");
-  check(cudaMemcpyAsync(counters, d.counters.get(), sizeof(counters), cudaMemcpyDeviceToHost, d.stream),
-        "cudaMemcpy counters");
-  d.record_event(6);
-  check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize (metrics)");
+  if (flat) m.cell_candidates = static_cast<std::uint64_t>(n) * (n == 0 ? 0 : n - 1) / 2;
 
   // The state on the device is now this frame's; the host copy is stale.
   state_frame_ = -1;
@@ -611,7 +670,7 @@ const FrameMetrics& CudaWorld::step() {
         is_finite(x) ? v.y : x.y, is_finite(x) ? v.z : x.z));
   }
   m.box_tests = counters[0];
-  m.box_pairs = counters[1];
+  m.box_pairs = d.level_steps > 0 ? d.host->counts[d.level_steps] : 0;
   m.vertex_tests = counters[2];
   if (!flat) m.cell_candidates = counters[3];
   m.contacts = r.contacts;

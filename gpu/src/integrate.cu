@@ -11,6 +11,10 @@ __global__ void integrate_kernel(BodiesDesc b, Vec3 gravity, float dt) {
   if (i >= b.n) return;
   Vec3 x = b.x[i];
   Vec3 v = b.v[i];
+  if (b.x_saved) {  // the state before the step, for a rerun after a buffer overflow
+    b.x_saved[i] = x;
+    b.v_saved[i] = v;
+  }
   integrate(x, v, b.w[i], gravity, Vec3{}, dt);
   b.x[i] = x;
   b.v[i] = v;

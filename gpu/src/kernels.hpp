@@ -38,6 +38,15 @@ inline unsigned grid_for(std::size_t count) {
   return static_cast<unsigned>(g == 0 ? 1 : g);
 }
 
+#ifdef __CUDACC__
+/// Entries actually present in a buffer of `capacity` entries whose producer counted
+/// `*total` (more than the capacity when it overflowed: the step is then rerun).
+__device__ inline std::uint32_t live_count(const std::uint32_t* total, std::uint32_t capacity) {
+  const std::uint32_t t = *total;
+  return t < capacity ? t : capacity;
+}
+#endif
+
 /// Hot body state and per-body constants on the device (structure of arrays, n bodies).
 struct BodiesDesc {
   Vec3* x = nullptr;                     ///< positions (m)
@@ -46,6 +55,8 @@ struct BodiesDesc {
   const Aabb* local = nullptr;           ///< local AABB per body (m)
   const std::uint32_t* shape = nullptr;  ///< shape index per body
   Aabb* aabb = nullptr;                  ///< world AABBs (m), written by the Aabbs stage
+  Vec3* x_saved = nullptr;               ///< integrate: copy of x before the step (may be null)
+  Vec3* v_saved = nullptr;               ///< integrate: copy of v before the step (may be null)
   std::uint32_t n = 0;                   ///< number of bodies
 };
 
@@ -72,8 +83,18 @@ struct ShapesDesc {
   std::uint32_t count = 0;       ///< number of shapes
 };
 
-/// Midphase + narrow phase over the candidate pairs (one thread per pair).
-struct MidphaseDesc {
+/// One item of a midphase work list: candidate pair k's cell `ca` of A and cell `cb` of
+/// B (cell indices relative to each shape's own cells; cb unused for mesh-box), A and B
+/// in hd::setup_pair's order.
+struct MidItem {
+  std::uint32_t k = 0;
+  std::uint32_t ca = 0;
+  std::uint32_t cb = 0;
+};
+
+/// One launch of the midphase work lists (midphase.cu): start (pairs -> step 0 items),
+/// expand (step i items -> step i + 1 items) or leaf (last step items -> confirmed).
+struct MidListDesc {
   const Vec3* x = nullptr;
   const float* w = nullptr;
   const Aabb* aabb = nullptr;
@@ -81,14 +102,16 @@ struct MidphaseDesc {
   ShapesDesc shapes;
   hd::LevelList levels;
   const Pair* pairs = nullptr;
-  std::uint32_t pair_count = 0;
-  std::uint8_t* confirmed = nullptr;         ///< out: 1 = contact confirmed
+  const std::uint32_t* pair_count = nullptr;  ///< device: pairs found (live = min with capacity)
+  std::uint32_t pair_capacity = 0;
+  std::uint8_t* confirmed = nullptr;        ///< out: 1 = contact confirmed (start writes every pair)
   unsigned long long* counters = nullptr;   ///< out (added): box tests, box pairs, vertex tests
-  /// Per-pair scratch for the narrow phase's filtered world vertices (see
-  /// hd::mesh_mesh_leaf): pair k owns scratch[k * scratch_per_pair ..]. May be null (then
-  /// the leaf test recomputes them: same tests, same result, more work).
-  Vec3* scratch = nullptr;
-  std::uint32_t scratch_per_pair = 0;
+  const MidItem* in = nullptr;              ///< expand / leaf: this step's items
+  const std::uint32_t* in_count = nullptr;  ///< device: items appended to `in`
+  std::uint32_t in_capacity = 0;
+  MidItem* out = nullptr;                   ///< start / expand: the next step's items
+  std::uint32_t* out_count = nullptr;       ///< device: items appended (may exceed out_capacity)
+  std::uint32_t out_capacity = 0;
 };
 
 /// One contact of the first response pass, as the host's ContactRecord wants it.
@@ -109,7 +132,8 @@ struct DeviceContact {
 struct TermsDesc {
   const Pair* pairs = nullptr;
   const std::uint8_t* confirmed = nullptr;
-  std::uint32_t pair_count = 0;
+  const std::uint32_t* pair_count = nullptr;  ///< device: pairs found
+  std::uint32_t pair_capacity = 0;
   const Vec3* x = nullptr;
   const Vec3* v = nullptr;
   const float* w = nullptr;
@@ -150,13 +174,21 @@ struct MetricsResult {
   std::uint32_t first_non_finite = 0;  ///< smallest dynamic body with a non-finite x or v; n if none
 };
 
+/// Everything the host reads back after a step, in one device struct (one copy).
+struct StepStats {
+  MetricsResult metrics;
+  unsigned long long counters[4];  ///< box tests, (unused), vertex tests, broadphase exact tests
+  std::uint32_t counts[hd::kMidphaseMaxLevels + 1];  ///< [0] pairs found, [1 + i] items of step i
+};
+
 struct MetricsDesc {
   const Vec3* x = nullptr;
   const Vec3* v = nullptr;
   const float* w = nullptr;
   std::uint32_t n = 0;
   const float* depth0 = nullptr;  ///< first-pass depths, -1 where not a contact
-  std::uint32_t pair_count = 0;
+  const std::uint32_t* pair_count = nullptr;  ///< device: pairs found
+  std::uint32_t pair_capacity = 0;
   float slop = 0.0f;
   MetricsResult* out = nullptr;
 };
@@ -172,64 +204,33 @@ cudaError_t launch_clamp(const BodiesDesc& b, float v_max, cudaStream_t stream);
 // ---- broadphase_flat.cu --------------------------------------------------------------
 /// count[i] = number of j > i whose AABB overlaps body i's (Eq. 6); count[n] untouched.
 cudaError_t launch_flat_count(const Aabb* aabb, std::uint32_t n, std::uint32_t* count, cudaStream_t stream);
-/// Writes body i's pairs (i, j), j ascending, at pairs[offset[i] ..]: with offset the
-/// exclusive scan of count, the output is sorted by (a, b).
-cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset, Pair* pairs,
-                             cudaStream_t stream);
+/// Writes body i's pairs (i, j), j ascending, as keys (i << 32) | j at keys[offset[i] ..]
+/// (only below `capacity`): with offset the exclusive scan of count, sorted by (a, b).
+cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset,
+                             unsigned long long* keys, std::uint32_t capacity, cudaStream_t stream);
 
 // ---- broadphase_octree.cu ------------------------------------------------------------
-/// A body's unit box in the fixed point of loose_q_min / loose_q_max.
-struct LooseQBox {
-  std::int16_t lo[3];
-  std::int16_t hi[3];
-};
-
-/// The loose octree `octree` (SPEC 5.1) on the device; cell math from loose_octree.hpp.
-struct LooseDesc {
-  const Aabb* aabb = nullptr;      ///< world AABBs, per body
-  std::uint32_t n = 0;             ///< bodies
-  LooseGrid grid;                  ///< root cube of the scene's domain
-  int depth = 2;                   ///< D_w in [0, 10]; -1 = auto (from *min_extent)
-  float* extent = nullptr;         ///< scratch per body (auto depth): largest unit side
-  float* min_extent = nullptr;     ///< one float: the smallest extent (auto depth)
-  std::uint32_t* key = nullptr;    ///< per body: cell key (kLooseOverflowKey / kLooseNoKey)
-  std::uint32_t* body = nullptr;   ///< per body: its index (the sort's values)
-  LooseQBox* q = nullptr;          ///< per body: fixed-point unit box
-  const std::uint32_t* sorted_key = nullptr;   ///< per slot: key, ascending
-  const std::uint32_t* slot_body = nullptr;    ///< per slot: body (stable: body order per cell)
-  Aabb* slot_box = nullptr;        ///< per slot: the body's AABB
-  LooseQBox* slot_q = nullptr;     ///< per slot: the body's fixed-point box
-  std::uint32_t* count = nullptr;  ///< per slot: pairs found (count pass)
-  const std::uint32_t* offset = nullptr;  ///< per slot: exclusive scan of count (fill pass)
-  unsigned long long* pair_keys = nullptr;  ///< out (fill): (a << 32) | b, unsorted
-  unsigned long long* candidates = nullptr; ///< out (count pass, added): exact AABB tests
-};
-
-/// Extent per body into d.extent (NaN boxes give +inf: left out of the minimum).
-cudaError_t launch_loose_extent(const LooseDesc& d, cudaStream_t stream);
-/// Keys, fixed-point boxes and identity values per body (depth auto reads *min_extent).
-cudaError_t launch_loose_keys(const LooseDesc& d, cudaStream_t stream);
-/// Scatters each slot's AABB and fixed-point box from its body.
-cudaError_t launch_loose_gather(const LooseDesc& d, cudaStream_t stream);
-/// Query per slot: counts its pairs (and exact tests) into d.count, or with `fill` writes
-/// them at d.pair_keys[d.offset[slot] ..]. Each overlapping pair is found exactly once:
-/// same level by the smaller slot, across levels by the finer body, overflow bodies
-/// against every body.
-cudaError_t launch_loose_query(const LooseDesc& d, bool fill, cudaStream_t stream);
-/// pairs[k] = (keys[k] >> 32, keys[k] & 0xffffffff).
-cudaError_t launch_unpack_pairs(const unsigned long long* keys, std::uint32_t count, Pair* pairs,
-                                cudaStream_t stream);
+/// pairs[k] = (keys[k] >> 32, keys[k] & 0xffffffff) for the live keys (k < min(*total,
+/// capacity)).
+cudaError_t launch_unpack_pairs(const unsigned long long* keys, const std::uint32_t* total, std::uint32_t capacity,
+                                Pair* pairs, cudaStream_t stream);
 
 // ---- midphase.cu -----------------------------------------------------------------------
-/// confirmed[k] for every candidate pair (static-static pairs: 0), via hd::confirm_contact.
-cudaError_t launch_midphase(const MidphaseDesc& d, cudaStream_t stream);
+/// Start: per live pair (one warp each) confirmed[k] for decided pairs, the step 0 items
+/// of mesh pairs into d.out. `grid` blocks of kBlockSize threads (grid-stride).
+cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t stream);
+/// Expand: the items of step `step` (d.in) to those of step + 1 (d.out).
+cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cudaStream_t stream);
+/// Leaf: the narrow phase of the last step's items (d.in); sets confirmed[k] = 1 on a hit.
+cudaError_t launch_mid_leaf(const MidListDesc& d, unsigned grid, cudaStream_t stream);
 
 // ---- response.cu -----------------------------------------------------------------------
-/// Body-major index entries of the confirmed contacts: for pair k, keys[2k] = a and
-/// keys[2k+1] = b (n, sorting last, when not confirmed); vals[e] = e.
-cudaError_t launch_contact_entries(const Pair* pairs, const std::uint8_t* confirmed, std::uint32_t pair_count,
-                                   std::uint32_t n, std::uint32_t* keys, std::uint32_t* vals,
-                                   cudaStream_t stream);
+/// Body-major index entries of the confirmed contacts, for every k < pair_capacity:
+/// keys[2k] = a and keys[2k+1] = b (n, sorting last, when not confirmed or not live);
+/// vals[e] = e.
+cudaError_t launch_contact_entries(const Pair* pairs, const std::uint8_t* confirmed, const std::uint32_t* pair_count,
+                                   std::uint32_t pair_capacity, std::uint32_t n, std::uint32_t* keys,
+                                   std::uint32_t* vals, cudaStream_t stream);
 /// body_begin[i] = first position of key i in the sorted keys (i in [0, n]).
 cudaError_t launch_body_segments(const std::uint32_t* sorted_keys, std::uint32_t entry_count, std::uint32_t n,
                                  std::uint32_t* body_begin, cudaStream_t stream);

@@ -48,7 +48,8 @@ __global__ void metrics_kernel(MetricsDesc d) {
     a.py += mass * v.y;
     a.pz += mass * v.z;
   }
-  for (std::uint32_t k = t; k < d.pair_count; k += kMetricsBlockSize) {
+  const std::uint32_t np = d.pair_capacity == 0 ? 0u : live_count(d.pair_count, d.pair_capacity);
+  for (std::uint32_t k = t; k < np; k += kMetricsBlockSize) {
     const float depth = d.depth0[k];
     if (depth < 0.0f) continue;  // not a contact (Eq. 9 discards have no depth)
     a.contacts += 1;

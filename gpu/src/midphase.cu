@@ -1,12 +1,31 @@
-// Midphase + narrow phase on the device (SPEC 5.2-5.3): one thread per candidate pair runs
-// hd::confirm_contact, the function the CPU's confirm_contact runs, on views of the packed
-// octrees, with the same positions, world AABBs and theta. Static-static pairs are skipped
-// as in World::step. Test counts are summed with integer atomics (order-free).
+// Midphase + narrow phase on the device (SPEC 5.2-5.3) as per-level work lists of box
+// pairs, so a pair whose meshes overlap deeply spreads over many warps instead of one
+// thread:
+// - start (one warp per candidate pair): hd::setup_pair, the set-up the CPU's
+//   confirm_contact runs, decides aabb-only, box-box and early rejections (static-static
+//   pairs are skipped as in World::step); for a mesh pair the warp tests every cell pair
+//   of step 0 (levels la[0] x lb[0], or A's cells against the box) and appends the
+//   overlapping ones (pair, cell of A, cell of B) to the first list;
+// - expand (one warp per item of step i): the descendants at step i + 1 of both cells
+//   (hd::descendants), tested with the same boxes (hd::moved_grown), appended to the next
+//   list;
+// - leaf (one warp per item of the last step): the narrow phase of hd::mesh_mesh_leaf /
+//   mesh_box_descend on that cell pair, lanes over B's vertices, A's vertices in order.
+// A pair is confirmed when any of its leaves has a vertex pair within theta: the same
+// vertex tests on the same floats as the CPU's depth-first descent, so the same answer;
+// only the order of the work differs. Lists are appended with warp-aggregated integer
+// atomics (item order varies run to run; results and counts do not). A list that would
+// pass its capacity still counts every item (the host then regrows and reruns the step).
+// Counts: box tests = every cell pair tested, box pairs = leaf items, vertex tests = per
+// leaf (A's filtered vertices) x (B's filtered vertices) or the cell's vertices against a
+// box: the work done here, with no early exit, so each is >= the CPU's count.
 #include "kernels.hpp"
 
 namespace octocd {
 namespace gpu {
 namespace {
+
+constexpr unsigned kFull = 0xffffffffu;
 
 __device__ hd::PlacedView place(const ShapesDesc& s, std::uint32_t shape, Vec3 x, const Aabb& box) {
   hd::PlacedView p;
@@ -25,33 +44,212 @@ __device__ hd::PlacedView place(const ShapesDesc& s, std::uint32_t shape, Vec3 x
   return p;
 }
 
-__global__ void midphase_kernel(MidphaseDesc d) {
-  const std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
-  if (k >= d.pair_count) return;
+/// The two placed shapes of pair k and the test's set-up, A first (after the swap).
+struct PairContext {
+  hd::PlacedView a, b;
+  hd::PairSetup s;
+  float theta = 0.0f;
+  bool static_static = false;
+};
+
+__device__ PairContext context(const MidListDesc& d, std::uint32_t k) {
+  PairContext c;
   const Pair p = d.pairs[k];
-  if (d.w[p.a] == 0.0f && d.w[p.b] == 0.0f) {  // static-static
-    d.confirmed[k] = 0;
-    return;
-  }
+  c.static_static = d.w[p.a] == 0.0f && d.w[p.b] == 0.0f;
   const std::uint32_t sa = d.shape[p.a];
   const std::uint32_t sb = d.shape[p.b];
-  const hd::PlacedView a = place(d.shapes, sa, d.x[p.a], d.aabb[p.a]);
-  const hd::PlacedView b = place(d.shapes, sb, d.x[p.b], d.aabb[p.b]);
-  hd::MidphaseCounters c;
-  Vec3* scratch = d.scratch ? d.scratch + static_cast<std::size_t>(k) * d.scratch_per_pair : nullptr;
-  const bool hit = hd::confirm_contact(a, b, d.shapes.theta[sa * d.shapes.count + sb], d.levels, c, scratch,
-                                       scratch ? d.scratch_per_pair : 0u);
-  d.confirmed[k] = hit ? 1 : 0;
-  if (c.box_tests) atomicAdd(&d.counters[0], static_cast<unsigned long long>(c.box_tests));
-  if (c.box_pairs) atomicAdd(&d.counters[1], static_cast<unsigned long long>(c.box_pairs));
-  if (c.vertex_tests) atomicAdd(&d.counters[2], static_cast<unsigned long long>(c.vertex_tests));
+  const hd::PlacedView va = place(d.shapes, sa, d.x[p.a], d.aabb[p.a]);
+  const hd::PlacedView vb = place(d.shapes, sb, d.x[p.b], d.aabb[p.b]);
+  c.theta = d.shapes.theta[sa * d.shapes.count + sb];
+  c.s = hd::setup_pair(va, vb, c.theta, d.levels);
+  c.a = c.s.swap ? vb : va;
+  c.b = c.s.swap ? va : vb;
+  return c;
+}
+
+__device__ std::uint32_t lane_id() { return threadIdx.x & 31u; }
+__device__ std::uint32_t global_warp() { return (blockIdx.x * blockDim.x + threadIdx.x) >> 5; }
+__device__ std::uint32_t warp_count() { return (gridDim.x * blockDim.x) >> 5; }
+
+/// Warp-aggregated append of this lane's item when `keep` (every lane calls it).
+__device__ void append(const MidListDesc& d, bool keep, const MidItem& item) {
+  const unsigned mask = __ballot_sync(kFull, keep);
+  if (mask == 0) return;
+  std::uint32_t base = 0;
+  if (lane_id() == 0) base = atomicAdd(d.out_count, static_cast<std::uint32_t>(__popc(mask)));
+  base = __shfl_sync(kFull, base, 0);
+  if (keep) {
+    const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane_id()) - 1u)));
+    if (idx < d.out_capacity) d.out[idx] = item;
+  }
+}
+
+/// Tests the cell pairs [a0, a1) x [b0, b1) of pair k (mesh-box: [a0, a1) against the
+/// box; b is unused) with the lanes of the warp and appends the overlapping ones.
+__device__ void test_cells(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t a0,
+                           std::uint32_t a1, std::uint32_t b0, std::uint32_t b1) {
+  const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+  const std::uint32_t nb = mesh_box ? 1u : b1 - b0;
+  const std::uint32_t total = (a1 - a0) * nb;
+  const hd::OctreeView& A = c.a.octree;
+  const hd::OctreeView& B = c.b.octree;
+  for (std::uint32_t c0 = 0; c0 < total; c0 += 32) {
+    const std::uint32_t t = c0 + lane_id();
+    bool keep = false;
+    MidItem item{k, 0, 0};
+    if (t < total) {
+      item.ca = a0 + t / nb;
+      item.cb = mesh_box ? 0u : b0 + t % nb;
+      keep = mesh_box ? overlaps(A.cells[item.ca].box, c.s.box_local)
+                      : overlaps(hd::moved_grown(A.cells[item.ca].box, c.s.d, c.s.margin), B.cells[item.cb].box);
+    }
+    append(d, keep, item);
+  }
+  if (lane_id() == 0 && total > 0) atomicAdd(&d.counters[0], static_cast<unsigned long long>(total));
+}
+
+__global__ void mid_start_kernel(MidListDesc d) {
+  const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
+  for (std::uint32_t k = global_warp(); k < np; k += warp_count()) {
+    const PairContext c = context(d, k);
+    if (c.static_static || c.s.kind == hd::PairKind::Decided || c.s.kind == hd::PairKind::Exhaustive) {
+      if (lane_id() == 0) {
+        bool hit = false;
+        if (!c.static_static)
+          hit = c.s.kind == hd::PairKind::Decided ? c.s.result : hd::exhaustive_contact(c.a, c.b, c.theta);
+        d.confirmed[k] = hit ? 1 : 0;
+      }
+      continue;
+    }
+    if (lane_id() == 0) d.confirmed[k] = 0;
+    const hd::OctreeView& A = c.a.octree;
+    const hd::OctreeView& B = c.b.octree;
+    const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+    test_cells(d, c, k, A.level_begin(c.s.la[0]), A.level_end(c.s.la[0]), mesh_box ? 0u : B.level_begin(c.s.lb[0]),
+               mesh_box ? 1u : B.level_end(c.s.lb[0]));
+  }
+}
+
+__global__ void mid_expand_kernel(MidListDesc d, int step) {
+  const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
+  for (std::uint32_t it = global_warp(); it < count; it += warp_count()) {
+    const MidItem item = d.in[it];
+    const PairContext c = context(d, item.k);
+    const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+    std::uint32_t a0, a1, b0 = 0, b1 = 1;
+    hd::descendants(c.a.octree, item.ca, c.s.la[step], c.s.la[step + 1], a0, a1);
+    if (!mesh_box) hd::descendants(c.b.octree, item.cb, c.s.lb[step], c.s.lb[step + 1], b0, b1);
+    test_cells(d, c, item.k, a0, a1, b0, b1);
+  }
+}
+
+/// Filtered vertices one warp stages in shared memory per tile (each of A and B).
+constexpr std::uint32_t kLeafTile = 128;
+constexpr int kWarpsPerBlock = kBlockSize / 32;
+
+/// Appends to tile[fill ..] the world positions of the vertices v[pos ..] inside `box`
+/// (the lanes test 32 at a time, in order) until the vertices end or a further 32 might
+/// not fit; advances pos and fill (warp-uniform).
+__device__ void stage_tile(const Vec3* v, std::uint32_t count, const Aabb& box, Vec3 position, Vec3* tile,
+                           std::uint32_t& pos, std::uint32_t& fill) {
+  const std::uint32_t lane = lane_id();
+  while (pos < count && fill + 32 <= kLeafTile) {
+    const std::uint32_t j = pos + lane;
+    const bool in = j < count && hd::inside(v[j], box);
+    const unsigned mask = __ballot_sync(kFull, in);
+    if (in) tile[fill + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)))] = hd::world_vertex(v[j], position);
+    fill += static_cast<std::uint32_t>(__popc(mask));
+    pos += 32;
+  }
+  __syncwarp();
+}
+
+__device__ bool pair_confirmed(const MidListDesc& d, std::uint32_t k) {
+  return *(volatile const std::uint8_t*)(d.confirmed + k) != 0;
+}
+
+__global__ void mid_leaf_kernel(MidListDesc d) {
+  __shared__ Vec3 tiles[kWarpsPerBlock][2][kLeafTile];
+  Vec3* tile_b = tiles[threadIdx.x >> 5][0];
+  Vec3* tile_a = tiles[threadIdx.x >> 5][1];
+  const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
+  const std::uint32_t lane = lane_id();
+  for (std::uint32_t it = global_warp(); it < count; it += warp_count()) {
+    const MidItem item = d.in[it];
+    const PairContext c = context(d, item.k);
+    const hd::OctreeView& A = c.a.octree;
+    const MeshOctreeCell ca = A.cells[item.ca];
+    const Vec3* va = A.vertices + ca.first_vertex;
+    const Vec3 pa = c.a.position;
+    if (c.s.kind == hd::PairKind::MeshBox) {  // as mesh_box_descend's last step
+      bool hit = false;
+      for (std::uint32_t j = lane; j < ca.vertex_count; j += 32)
+        hit = hit || hd::vertex_box_close(hd::world_vertex(va[j], pa), c.b.box, c.s.theta2);
+      if (lane == 0 && ca.vertex_count > 0)
+        atomicAdd(&d.counters[2], static_cast<unsigned long long>(ca.vertex_count));
+      if (__any_sync(kFull, hit) && lane == 0) d.confirmed[item.k] = 1;
+      continue;
+    }
+    // As mesh_mesh_leaf: B's vertices inside A's grown cell box (in B's frame) against
+    // A's vertices inside B's grown cell box (in A's frame), vertex_close(wa, wb).
+    const hd::OctreeView& B = c.b.octree;
+    const MeshOctreeCell cb = B.cells[item.cb];
+    const Vec3* vb = B.vertices + cb.first_vertex;
+    const Vec3 pb = c.b.position;
+    const Aabb a_in_b = hd::moved_grown(ca.box, c.s.d, c.s.margin);
+    const Aabb b_in_a = hd::moved_back_grown(cb.box, c.s.d, c.s.margin);
+    std::uint32_t nbf = 0, naf = 0;
+    for (std::uint32_t j0 = 0; j0 < cb.vertex_count; j0 += 32) {
+      const std::uint32_t j = j0 + lane;
+      nbf += static_cast<std::uint32_t>(__popc(__ballot_sync(kFull, j < cb.vertex_count && hd::inside(vb[j], a_in_b))));
+    }
+    if (nbf == 0) continue;  // as mesh_mesh_leaf: no vertex test
+    for (std::uint32_t i0 = 0; i0 < ca.vertex_count; i0 += 32) {
+      const std::uint32_t i = i0 + lane;
+      naf += static_cast<std::uint32_t>(__popc(__ballot_sync(kFull, i < ca.vertex_count && hd::inside(va[i], b_in_a))));
+    }
+    if (lane == 0 && naf > 0)
+      atomicAdd(&d.counters[2], static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf));
+    if (naf == 0) continue;
+    // Tiles of B's filtered world vertices against tiles of A's; another leaf of this
+    // pair may confirm it first (checked between tiles): the answer is the same.
+    bool found = false;
+    std::uint32_t jb = 0;
+    while (!found && jb < cb.vertex_count) {
+      if (__shfl_sync(kFull, lane == 0 ? static_cast<int>(pair_confirmed(d, item.k)) : 0, 0)) break;
+      std::uint32_t nb = 0;
+      stage_tile(vb, cb.vertex_count, a_in_b, pb, tile_b, jb, nb);
+      std::uint32_t ia = 0;
+      while (!found && nb > 0 && ia < ca.vertex_count) {
+        std::uint32_t na = 0;
+        stage_tile(va, ca.vertex_count, b_in_a, pa, tile_a, ia, na);
+        bool hit = false;
+        for (std::uint32_t jj = lane; jj < nb; jj += 32) {
+          const Vec3 wb = tile_b[jj];
+          for (std::uint32_t ii = 0; ii < na; ++ii) hit = hit || hd::vertex_close(tile_a[ii], wb, c.s.theta2);
+        }
+        found = __any_sync(kFull, hit);
+        __syncwarp();
+      }
+    }
+    if (found && lane == 0) d.confirmed[item.k] = 1;
+  }
 }
 
 }  // namespace
 
-cudaError_t launch_midphase(const MidphaseDesc& d, cudaStream_t stream) {
-  if (d.pair_count == 0) return cudaSuccess;
-  midphase_kernel<<<grid_for(d.pair_count), kBlockSize, 0, stream>>>(d);
+cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
+  mid_start_kernel<<<grid, kBlockSize, 0, stream>>>(d);
+  return cudaGetLastError();
+}
+
+cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cudaStream_t stream) {
+  mid_expand_kernel<<<grid, kBlockSize, 0, stream>>>(d, step);
+  return cudaGetLastError();
+}
+
+cudaError_t launch_mid_leaf(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
+  mid_leaf_kernel<<<grid, kBlockSize, 0, stream>>>(d);
   return cudaGetLastError();
 }
 

@@ -13,12 +13,13 @@ namespace octocd {
 namespace gpu {
 namespace {
 
-__global__ void contact_entries_kernel(const Pair* pairs, const std::uint8_t* confirmed, std::uint32_t pair_count,
-                                       std::uint32_t n, std::uint32_t* keys, std::uint32_t* vals) {
+__global__ void contact_entries_kernel(const Pair* pairs, const std::uint8_t* confirmed,
+                                       const std::uint32_t* pair_count, std::uint32_t capacity, std::uint32_t n,
+                                       std::uint32_t* keys, std::uint32_t* vals) {
   const std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
-  if (k >= pair_count) return;
-  const Pair p = pairs[k];
-  const bool c = confirmed[k] != 0;
+  if (k >= capacity) return;
+  const bool c = k < live_count(pair_count, capacity) && confirmed[k] != 0;
+  const Pair p = c ? pairs[k] : Pair{};
   keys[2 * k] = c ? p.a : n;
   keys[2 * k + 1] = c ? p.b : n;
   vals[2 * k] = 2 * k;
@@ -41,7 +42,7 @@ __global__ void body_segments_kernel(const std::uint32_t* keys, std::uint32_t co
 
 __global__ void contact_terms_kernel(TermsDesc d) {
   const std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
-  if (k >= d.pair_count) return;
+  if (k >= d.pair_capacity || k >= live_count(d.pair_count, d.pair_capacity)) return;
   if (!d.confirmed[k]) {
     d.hit[k] = 0;
     if (d.depth0) d.depth0[k] = -1.0f;
@@ -109,12 +110,12 @@ __global__ void apply_sums_kernel(ApplyDesc d) {
 
 }  // namespace
 
-cudaError_t launch_contact_entries(const Pair* pairs, const std::uint8_t* confirmed, std::uint32_t pair_count,
-                                   std::uint32_t n, std::uint32_t* keys, std::uint32_t* vals,
-                                   cudaStream_t stream) {
-  if (pair_count == 0) return cudaSuccess;
-  contact_entries_kernel<<<grid_for(pair_count), kBlockSize, 0, stream>>>(pairs, confirmed, pair_count, n, keys,
-                                                                          vals);
+cudaError_t launch_contact_entries(const Pair* pairs, const std::uint8_t* confirmed, const std::uint32_t* pair_count,
+                                   std::uint32_t pair_capacity, std::uint32_t n, std::uint32_t* keys,
+                                   std::uint32_t* vals, cudaStream_t stream) {
+  if (pair_capacity == 0) return cudaSuccess;
+  contact_entries_kernel<<<grid_for(pair_capacity), kBlockSize, 0, stream>>>(pairs, confirmed, pair_count,
+                                                                             pair_capacity, n, keys, vals);
   return cudaGetLastError();
 }
 
@@ -126,8 +127,8 @@ cudaError_t launch_body_segments(const std::uint32_t* sorted_keys, std::uint32_t
 }
 
 cudaError_t launch_contact_terms(const TermsDesc& d, cudaStream_t stream) {
-  if (d.pair_count == 0) return cudaSuccess;
-  contact_terms_kernel<<<grid_for(d.pair_count), kBlockSize, 0, stream>>>(d);
+  if (d.pair_capacity == 0) return cudaSuccess;
+  contact_terms_kernel<<<grid_for(d.pair_capacity), kBlockSize, 0, stream>>>(d);
   return cudaGetLastError();
 }
 

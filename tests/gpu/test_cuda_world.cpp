@@ -173,7 +173,8 @@ void expect_same_record(const FrameRecord& a, const FrameRecord& b, const std::s
   EXPECT_TRUE(same_vecs(a.v_post, b.v_post)) << what << ": v_post differs";
 }
 
-/// The integer counts of a frame must match exactly (same traversal on both engines).
+/// The integer counts of two runs of the cuda engine must match exactly (run to run, and
+/// whatever the buffer capacities).
 void expect_same_counts(const FrameMetrics& a, const FrameMetrics& b, const std::string& what) {
   EXPECT_EQ(a.frame, b.frame) << what;
   EXPECT_EQ(a.cell_candidates, b.cell_candidates) << what;
@@ -182,6 +183,22 @@ void expect_same_counts(const FrameMetrics& a, const FrameMetrics& b, const std:
   EXPECT_EQ(a.box_pairs, b.box_pairs) << what;
   EXPECT_EQ(a.vertex_tests, b.vertex_tests) << what;
   EXPECT_EQ(a.contacts, b.contacts) << what;
+}
+
+/// The cpu engine against the cuda engine: the broadphase counts and contacts are equal;
+/// the midphase's test counts are the work each engine did: the cpu descends depth first
+/// and stops at the first confirmed vertex pair, the cuda engine's level work lists test
+/// every candidate (no early exit), so each of its counts is at least the cpu's, and both
+/// are zero together.
+void expect_cpu_cuda_counts(const FrameMetrics& cpu, const FrameMetrics& gpu, const std::string& what) {
+  EXPECT_EQ(cpu.frame, gpu.frame) << what;
+  EXPECT_EQ(cpu.cell_candidates, gpu.cell_candidates) << what;
+  EXPECT_EQ(cpu.aabb_pairs, gpu.aabb_pairs) << what;
+  EXPECT_EQ(cpu.contacts, gpu.contacts) << what;
+  EXPECT_GE(gpu.box_tests, cpu.box_tests) << what;
+  EXPECT_GE(gpu.box_pairs, cpu.box_pairs) << what;
+  EXPECT_GE(gpu.vertex_tests, cpu.vertex_tests) << what;
+  EXPECT_EQ(gpu.box_pairs == 0, cpu.box_pairs == 0) << what;
 }
 
 bool is_checkpoint(int frame, int frames) { return frame == 1 || frame == 10 || frame == 100 || frame == frames; }
@@ -325,7 +342,7 @@ void expect_lockstep(const std::shared_ptr<const Model>& model, int frames, cons
     contacts += mc.contacts;
     const std::string what = fmt::format("{} frame {}", label, f);
     ASSERT_EQ(cpu->state_hash(), gpu.state_hash()) << what << ": " << first_difference(cpu->state(), gpu.state());
-    expect_same_counts(mc, mg, what);
+    expect_cpu_cuda_counts(mc, mg, what);
     if (rec) expect_same_record(cpu->record(), gpu.record(), what);
     if (::testing::Test::HasFailure()) return;
   }
@@ -388,7 +405,7 @@ TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
       FAIL() << what << (is_checkpoint(f, frames) ? " (checkpoint)" : "")
              << ": states differ (first at this frame): " << first_difference(cpu->state(), gpu.state());
     }
-    expect_same_counts(mc, mg, what);
+    expect_cpu_cuda_counts(mc, mg, what);
     EXPECT_NEAR(mg.kinetic_energy, mc.kinetic_energy, 1e-9 * (1.0 + std::fabs(mc.kinetic_energy))) << what;
     for (int k = 0; k < 3; ++k)
       EXPECT_NEAR(mg.momentum[static_cast<std::size_t>(k)], mc.momentum[static_cast<std::size_t>(k)],

@@ -113,6 +113,20 @@ OCTOCD_HD inline bool inside(Vec3 p, const Aabb& b) {
          p.z <= b.max.z;
 }
 
+/// A's cell box `c` moved into B's frame by d = pa - pb and grown by `m` on every side
+/// (the box every level test and the narrow-phase filter of B's vertices use).
+OCTOCD_HD inline Aabb moved_grown(const Aabb& c, Vec3 d, float m) {
+  return Aabb{{c.min.x + d.x - m, c.min.y + d.y - m, c.min.z + d.z - m},
+              {c.max.x + d.x + m, c.max.y + d.y + m, c.max.z + d.z + m}};
+}
+
+/// B's cell box `c` moved into A's frame (by -d, d = pa - pb) and grown by `m` (the
+/// narrow-phase filter of A's vertices).
+OCTOCD_HD inline Aabb moved_back_grown(const Aabb& c, Vec3 d, float m) {
+  return Aabb{{c.min.x - d.x - m, c.min.y - d.y - m, c.min.z - d.z - m},
+              {c.max.x - d.x + m, c.max.y - d.y + m, c.max.z - d.z + m}};
+}
+
 /// The cells at level `to` descending from cell c of level `from` (<= to): a contiguous
 /// range [begin, end) of `cells` (children are stored contiguously in Morton order).
 OCTOCD_HD inline void descendants(const OctreeView& t, std::uint32_t c, int from, int to,
@@ -194,8 +208,7 @@ OCTOCD_HD inline bool mesh_mesh_leaf(const OctreeView& A, const OctreeView& B, V
     }
   }
   if (nb == 0) return false;
-  const Aabb b_in_a{{cb.box.min.x - d.x - margin, cb.box.min.y - d.y - margin, cb.box.min.z - d.z - margin},
-                    {cb.box.max.x - d.x + margin, cb.box.max.y - d.y + margin, cb.box.max.z - d.z + margin}};
+  const Aabb b_in_a = moved_back_grown(cb.box, d, margin);
   const Vec3* va = A.vertices + ca.first_vertex;
   for (std::uint32_t i = 0; i < ca.vertex_count; ++i) {
     if (!inside(va[i], b_in_a)) continue;
@@ -232,8 +245,7 @@ OCTOCD_HD inline bool mesh_mesh_descend(const OctreeView& A, const OctreeView& B
   // Starts cell f.a: its grown box, and the box tests against all of B's range.
   auto begin_cell = [&](Frame& f) {
     const MeshOctreeCell& ca = A.cells[f.a];
-    f.e = Aabb{{ca.box.min.x + d.x - margin, ca.box.min.y + d.y - margin, ca.box.min.z + d.z - margin},
-               {ca.box.max.x + d.x + margin, ca.box.max.y + d.y + margin, ca.box.max.z + d.z + margin}};
+    f.e = moved_grown(ca.box, d, margin);
     f.b = f.b_begin;
     n.box_tests += f.b_end - f.b_begin;
   };
@@ -262,10 +274,7 @@ OCTOCD_HD inline bool mesh_mesh_descend(const OctreeView& A, const OctreeView& B
     const std::uint32_t b = f.b++;
     const Aabb& bb = B.cells[b].box;
     const Aabb& e = f.e;
-    if (!(e.min.x <= bb.max.x && e.max.x >= bb.min.x && e.min.y <= bb.max.y && e.max.y >= bb.min.y &&
-          e.min.z <= bb.max.z && e.max.z >= bb.min.z)) {
-      continue;
-    }
+    if (!overlaps(e, bb)) continue;
     if (i + 1 == k) {
       ++n.box_pairs;
       if (mesh_mesh_leaf(A, B, pa, pb, d, margin, theta2, A.cells[f.a], B.cells[b], e, scratch,
@@ -328,6 +337,70 @@ OCTOCD_HD inline bool mesh_box_descend(const OctreeView& A, Vec3 pa, const Aabb&
 
 // ---- the contact test ------------------------------------------------------------------------
 
+/// What a contact test needs before any descent.
+enum class PairKind : int {
+  Decided = 0,     ///< `result` is the answer (aabb-only, box-box, early rejection)
+  MeshBox = 1,     ///< mesh A (after `swap`) against box B: mesh_box_descend
+  MeshMesh = 2,    ///< mesh A against mesh B: mesh_mesh_descend
+  Exhaustive = 3,  ///< no levels to prune with: exhaustive_contact
+};
+
+/// The set-up of one contact test (SPEC 5.3), shared by confirm_contact and the CUDA
+/// engine's level work lists: which test, the order (`swap`: the given pair is (box,
+/// mesh), so A = the second shape), and the frame of the descent.
+struct PairSetup {
+  PairKind kind = PairKind::Decided;
+  bool result = false;  ///< the answer when kind == Decided
+  bool swap = false;    ///< A = b_in, B = a_in
+  float theta2 = 0.0f;  ///< theta^2 (m^2)
+  Vec3 d;               ///< mesh-mesh: pa - pb (m)
+  float margin = 0.0f;  ///< mesh-mesh: theta + tolerance (m)
+  Aabb box_local;       ///< mesh-box: the box in A's frame grown by theta + tolerance (m)
+  int k = 0;            ///< number of level steps
+  int la[kMidphaseMaxLevels] = {};  ///< A's levels per step (clamped to its depth)
+  int lb[kMidphaseMaxLevels] = {};  ///< B's levels per step (mesh-mesh)
+};
+
+/// Classifies a contact test and computes its frame (see PairSetup): aabb-only and
+/// box-box are decided by the AABB overlap; a mesh pair whose bounds (grown by the
+/// margin) miss is rejected early.
+OCTOCD_HD inline PairSetup setup_pair(const PlacedView& a_in, const PlacedView& b_in, float theta,
+                                      const LevelList& config) {
+  PairSetup s;
+  if (config.aabb_only || (!a_in.is_mesh && !b_in.is_mesh)) {
+    s.result = overlaps(a_in.box, b_in.box);
+    return s;
+  }
+  s.swap = !a_in.is_mesh;  // (box, mesh) -> (mesh, box)
+  const PlacedView& a = s.swap ? b_in : a_in;
+  const PlacedView& b = s.swap ? a_in : b_in;
+  s.theta2 = theta * theta;
+  const OctreeView& A = a.octree;
+  if (!b.is_mesh) {
+    const float tol = midphase_tolerance(theta, max_abs(a.position) + max_abs(A.bounds) + max_abs(b.box));
+    const Vec3 lo = b.box.min - a.position;
+    const Vec3 hi = b.box.max - a.position;
+    s.box_local = expanded(Aabb{lo, hi}, theta + tol);
+    // Early rejection: the mesh's bounds against the box, with the margin.
+    if (!overlaps(A.bounds, s.box_local)) return s;
+    s.k = clamp_levels(config, A.depth, s.la);
+    s.kind = s.k == 0 ? PairKind::Exhaustive : PairKind::MeshBox;  // no levels: nothing to prune
+    return s;
+  }
+  const OctreeView& B = b.octree;
+  s.d = a.position - b.position;
+  const float tol = midphase_tolerance(
+      theta, max_abs(a.position) + max_abs(b.position) + max_abs(A.bounds) + max_abs(B.bounds));
+  s.margin = theta + tol;
+  // Early rejection (SPEC 5.3): the two bounds, each grown by theta/2, must overlap.
+  const Aabb e{A.bounds.min + s.d, A.bounds.max + s.d};
+  if (!overlaps_margin(e, B.bounds, s.margin)) return s;
+  s.k = clamp_levels(config, A.depth, s.la);
+  clamp_levels(config, B.depth, s.lb);
+  s.kind = s.k == 0 ? PairKind::Exhaustive : PairKind::MeshMesh;
+  return s;
+}
+
 /// Confirms or rejects contact between two placed shapes (SPEC 5.3):
 /// - mesh-mesh: some vertex of A and some vertex of B closer than theta (Eq. 7), found
 ///   through the level list `config` with cell boxes expanded by theta/2;
@@ -340,49 +413,16 @@ OCTOCD_HD inline bool mesh_box_descend(const OctreeView& A, Vec3 pa, const Aabb&
 OCTOCD_HD inline bool confirm_contact(const PlacedView& a_in, const PlacedView& b_in, float theta,
                                       const LevelList& config, MidphaseCounters& stats,
                                       Vec3* scratch = nullptr, std::uint32_t scratch_capacity = 0) {
-  if (config.aabb_only) return overlaps(a_in.box, b_in.box);
-  if (!a_in.is_mesh && !b_in.is_mesh) return overlaps(a_in.box, b_in.box);
-  const bool swap = !a_in.is_mesh;  // (box, mesh) -> (mesh, box)
-  const PlacedView& a = swap ? b_in : a_in;
-  const PlacedView& b = swap ? a_in : b_in;
-  const float theta2 = theta * theta;
-  const OctreeView& A = a.octree;
-  int la[kMidphaseMaxLevels];
-
-  if (!b.is_mesh) {
-    const float tol = midphase_tolerance(theta, max_abs(a.position) + max_abs(A.bounds) + max_abs(b.box));
-    const Vec3 lo = b.box.min - a.position;
-    const Vec3 hi = b.box.max - a.position;
-    const Aabb box_local = expanded(Aabb{lo, hi}, theta + tol);
-    // Early rejection: the mesh's bounds against the box, with the margin.
-    if (!overlaps(A.bounds, box_local)) return false;
-    const int k = clamp_levels(config, A.depth, la);
-    if (k == 0) return exhaustive_contact(a, b, theta);  // no levels: nothing to prune
-    MidphaseCounters n;
-    const bool hit = mesh_box_descend(A, a.position, b.box, box_local, theta2, la, k, n);
-    stats.box_tests += n.box_tests;
-    stats.box_pairs += n.box_pairs;
-    stats.vertex_tests += n.vertex_tests;
-    return hit;
-  }
-
-  const OctreeView& B = b.octree;
-  const Vec3 d = a.position - b.position;
-  const float tol = midphase_tolerance(
-      theta, max_abs(a.position) + max_abs(b.position) + max_abs(A.bounds) + max_abs(B.bounds));
-  const float margin = theta + tol;
-  // Early rejection (SPEC 5.3): the two bounds, each grown by theta/2, must overlap.
-  {
-    const Aabb e{A.bounds.min + d, A.bounds.max + d};
-    if (!overlaps_margin(e, B.bounds, margin)) return false;
-  }
-  int lb[kMidphaseMaxLevels];
-  const int k = clamp_levels(config, A.depth, la);
-  clamp_levels(config, B.depth, lb);
-  if (k == 0) return exhaustive_contact(a, b, theta);  // no levels: nothing to prune
+  const PairSetup s = setup_pair(a_in, b_in, theta, config);
+  if (s.kind == PairKind::Decided) return s.result;
+  const PlacedView& a = s.swap ? b_in : a_in;
+  const PlacedView& b = s.swap ? a_in : b_in;
+  if (s.kind == PairKind::Exhaustive) return exhaustive_contact(a, b, theta);
   MidphaseCounters n;
-  const bool hit = mesh_mesh_descend(A, B, a.position, b.position, d, margin, theta2, la, lb, k, scratch,
-                                     scratch_capacity, n);
+  const bool hit = s.kind == PairKind::MeshBox
+                       ? mesh_box_descend(a.octree, a.position, b.box, s.box_local, s.theta2, s.la, s.k, n)
+                       : mesh_mesh_descend(a.octree, b.octree, a.position, b.position, s.d, s.margin, s.theta2,
+                                           s.la, s.lb, s.k, scratch, scratch_capacity, n);
   stats.box_tests += n.box_tests;
   stats.box_pairs += n.box_pairs;
   stats.vertex_tests += n.vertex_tests;
