@@ -558,7 +558,7 @@ std::vector<ValidationResult> FrameValidators::results() const {
                                  a.empty() ? 0.0 : a[a.size() * 95 / 100] * deg,
                                  a.empty() ? 0.0 : a.back() * deg,
                                  s.normal_first.empty() ? "" : "; first disagreement " + s.normal_first);
-    if (s.normals >= 4 && 2 * s.normals_agree < s.normals)
+    if (s.normals > 0 && 2 * s.normals_agree < s.normals)
       r.detail += "; most normals point from A to B: the convention is from B to A (SPEC 2)";
     if (s.reference != nullptr) {
       // The AABB-centre normal is weakest where a small body sits in a big body's AABB.

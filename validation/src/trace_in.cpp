@@ -81,6 +81,16 @@ class TraceIn {
       if (!(dt > 0.0) || !(dt < 1e30)) bad("/ (root attribute dt)", fmt::format("{}", dt), "a time step > 0 (s)");
       bodies.dt = static_cast<float>(dt);
     }
+    if (H5Aexists(file_, "gravity") > 0) {
+      Handle a(H5Aopen(file_, "gravity", H5P_DEFAULT));
+      Handle space(H5Aget_space(a));
+      Handle type(H5Aget_type(a));
+      double g[3] = {0, 0, 0};
+      if (H5Tget_class(type) != H5T_FLOAT || H5Sget_simple_extent_npoints(space) != 3 ||
+          H5Aread(a, H5T_NATIVE_DOUBLE, g) < 0 || !std::isfinite(g[0] + g[1] + g[2]))
+        bad("/ (root attribute gravity)", "not 3 finite numbers", "gravity (x, y, z) in m/s^2");
+      bodies.gravity = {static_cast<float>(g[0]), static_cast<float>(g[1]), static_cast<float>(g[2])};
+    }
 
     // Bodies.
     Dataset lmin = open("/bodies/local_aabb_min", H5T_FLOAT, 2, true);
