@@ -289,6 +289,8 @@ int validate_command(const ValidateOptions& o) {
     throw octocd::InputError("validate: give either SCENE.json or --trace-in FILE.h5 (not both)");
   if (o.check_only && o.trace_in.empty())
     throw octocd::InputError("--check-only: needs --trace-in FILE.h5");
+  if (!o.trace_in.empty() && (!o.trace.empty() || o.engine != "cpu"))
+    throw octocd::InputError("--trace-in: judges a trace another engine wrote; allowed without --trace and --engine");
   octocd::ValidationOptions vo;
   vo.frames = o.frames;
   vo.every = o.every;

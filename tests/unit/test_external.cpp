@@ -143,7 +143,15 @@ TEST(External, TheCpuEnginesFramesPassAndAPlantedLossFails) {
     for (int f = 1; f <= 150; ++f) {
       world.step();
       FrameRecord rec = world.record();
-      for (ContactRecord& c : rec.contacts) c = ContactRecord{c.pair, c.normal, c.depth, c.jn, c.jt};
+      for (ContactRecord& c : rec.contacts) {  // keep only what another engine reports
+        ContactRecord reported;
+        reported.pair = c.pair;
+        reported.normal = c.normal;
+        reported.depth = c.depth;
+        reported.jn = c.jn;
+        reported.jt = c.jt;
+        c = reported;
+      }
       v.observe(rec, f % 5 == 0);
     }
     const auto rs = v.results();
