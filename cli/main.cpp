@@ -19,6 +19,7 @@
 #include "octocd/broadphase.hpp"
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/external.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
@@ -249,11 +250,47 @@ struct ValidateOptions {
   int frames = 300;
   int every = 10;
   std::string trace;
+  std::string trace_in;       ///< --trace-in: judge another engine's trace instead of a scene
+  bool check_only = false;    ///< --check-only: only check the --trace-in file's structure
+  bool frames_given = false;  ///< --frames on the command line (--trace-in: else every frame)
+  bool every_given = false;   ///< --every on the command line (--trace-in: else 1)
 };
+
+/// `octocd validate --trace-in FILE.h5`: another engine's trace judged frame by frame
+/// (octocd/external.hpp); exit 0 all pass, 3 any fails, 2 a malformed trace.
+int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions& vo) {
+  if (o.check_only) {
+    const octocd::ExternalTraceInfo info = octocd::check_external_trace(o.trace_in);
+    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames; {}{}{}{}{}\n", o.trace_in, info.engine,
+               info.bodies, info.frames, info.has_states ? "states " : "", info.has_aabbs ? "aabbs " : "",
+               info.has_pairs ? "pairs " : "", info.has_contacts ? "contacts " : "", info.has_scene ? "scene" : "");
+    return 0;
+  }
+  octocd::ExternalOptions eo;
+  eo.against_fcl = vo.against_fcl;
+  eo.tol = vo.tol;
+  eo.overridden = vo.overridden;
+  octocd::ExternalTraceInfo info;
+  const int every = o.every_given ? o.every : 1;
+  const std::vector<octocd::ValidationResult> results =
+      octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
+  fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {})\n\n",
+             o.trace_in, info.engine, info.bodies, info.frames, every, o.against);
+  fmt::print("{}", octocd::format_results(results, vo.overridden));
+  const bool all_pass = std::all_of(results.begin(), results.end(),
+                                    [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
+  fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
+  return all_pass ? 0 : 3;
+}
 
 /// `octocd validate`: exit 0 when every validator passes, 3 when any fails.
 int validate_command(const ValidateOptions& o) {
-  octocd::Scene scene = octocd::load_scene(o.scene);
+  if (o.scene.empty() == o.trace_in.empty())
+    throw octocd::InputError("validate: give either SCENE.json or --trace-in FILE.h5 (not both)");
+  if (o.check_only && o.trace_in.empty())
+    throw octocd::InputError("--check-only: needs --trace-in FILE.h5");
+  if (!o.trace_in.empty() && (!o.trace.empty() || o.engine != "cpu"))
+    throw octocd::InputError("--trace-in: judges a trace another engine wrote; allowed without --trace and --engine");
   octocd::ValidationOptions vo;
   vo.frames = o.frames;
   vo.every = o.every;
@@ -293,6 +330,8 @@ int validate_command(const ValidateOptions& o) {
     octocd::set_tolerance(vo.tol, name, value);
     vo.overridden.push_back(name);
   }
+  if (!o.trace_in.empty()) return validate_trace_in(o, vo);
+  octocd::Scene scene = octocd::load_scene(o.scene);
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   if (o.engine == "bullet")
     throw octocd::InputError("--engine: bullet cannot be validated (no per-frame record); allowed: cpu, cuda");
@@ -366,7 +405,7 @@ int main(int argc, char** argv) {
   ValidateOptions val;
   CLI::App* val_cmd = app.add_subcommand(
       "validate", "Run the validators of SPEC 7 on a scene; exit 0 all pass, 3 any fails, 2 bad input");
-  val_cmd->add_option("scene", val.scene, "Scene file (JSON, see docs/scenes.md)")->required();
+  val_cmd->add_option("scene", val.scene, "Scene file (JSON, see docs/scenes.md); or give --trace-in");
   val_cmd->add_option("--against", val.against,
                       "References: comma-separated bullet, fcl (Bullet/FCL broadphases, FCL "
                       "normals, Bullet dynamics), or none")
@@ -392,6 +431,12 @@ int main(int argc, char** argv) {
   }
   val_cmd->add_option("--trace", val.trace,
                       "Write the validated run as a trace with the results under /validation");
+  val_cmd->add_option(
+      "--trace-in", val.trace_in,
+      "Judge another engine's trace (docs/trace-format.md, External traces) instead of a scene, frame by "
+      "frame; --frames limits the frames (default all), --every defaults to 1");
+  val_cmd->add_flag("--check-only", val.check_only,
+                    "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not)");
 
   try {
     app.parse(argc, argv);
@@ -402,7 +447,11 @@ int main(int argc, char** argv) {
 
   try {
     if (*run_cmd) return run_command(run);
-    if (*val_cmd) return validate_command(val);
+    if (*val_cmd) {
+      val.frames_given = val_cmd->get_option("--frames")->count() > 0;
+      val.every_given = val_cmd->get_option("--every")->count() > 0;
+      return validate_command(val);
+    }
   } catch (const octocd::InputError& e) {
     std::fprintf(stderr, "octocd: error: %s\n", e.what());
     return 2;

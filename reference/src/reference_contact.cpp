@@ -181,11 +181,13 @@ struct ReferenceGeometry::Impl {
   }
 };
 
-ReferenceGeometry::ReferenceGeometry(const Engine& world) : impl_(std::make_unique<Impl>()) {
-  for (const Shape& s : world.shapes()) {
+ReferenceGeometry::ReferenceGeometry(const Engine& world) : ReferenceGeometry(world.model()) {}
+
+ReferenceGeometry::ReferenceGeometry(const Model& model) : impl_(std::make_unique<Impl>()) {
+  for (const Shape& s : model.shapes) {
     impl_->shapes.push_back(s.mesh ? build_mesh(s) : build_box(s));
   }
-  for (const BodyInfo& b : world.bodies()) impl_->body_shape.push_back(b.shape);
+  for (const BodyInfo& b : model.bodies) impl_->body_shape.push_back(b.shape);
 }
 
 ReferenceGeometry::~ReferenceGeometry() = default;

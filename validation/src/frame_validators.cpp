@@ -1,4 +1,5 @@
-// Validators 1-6 of SPEC section 7, fed frame by frame from a World.
+// Validators 1-6 and 9 of SPEC section 7, fed one FrameRecord at a time: from an octocd
+// engine, from another engine through the C++ API (external.cpp) or from an external trace.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -74,6 +75,8 @@ struct Tally {
 }  // namespace
 
 struct FrameValidators::Impl {
+  const Model* model = nullptr;
+  Source source;
   ValidationOptions options;
   ContactParams params;
   std::unique_ptr<BroadPhase> flat;
@@ -90,32 +93,47 @@ struct FrameValidators::Impl {
   // Sign agreement per contact type: 0 mesh-mesh, 1 mesh-box, 2 box-box.
   std::array<std::uint64_t, 3> type_normals{}, type_agree{};
   std::uint64_t applied_bodies = 0, applied_unjudged = 0, groups = 0, pairs_isolated = 0;
+  // Contacts of another engine whose per-contact terms could not be derived (a dynamic
+  // body with several contacts in the frame, or no states given).
+  std::uint64_t contacts_unjudged = 0;
+  // Candidate-set differences of the engine's own pairs: missing pairs all touching only
+  // (an overlap of exactly zero on some axis: the engine's overlap test is not inclusive).
+  std::uint64_t missing_pairs = 0, missing_touching = 0;
   double applied_worst = 0.0;
   std::vector<double> angles;
   std::string normal_first;
   double pen_max = 0.0, share_above_max = 0.0;
 };
 
-FrameValidators::FrameValidators(const Engine& world, const ValidationOptions& options,
+FrameValidators::FrameValidators(const Engine& engine, const ValidationOptions& options,
                                  std::vector<std::unique_ptr<BroadPhase>> broadphases)
+    : FrameValidators(engine.model(), options, std::move(broadphases),
+                      Source{fmt::format("engine {} ({})", engine.name(), engine.broadphase_name()), true,
+                             false}) {}
+
+FrameValidators::FrameValidators(const Model& model, const ValidationOptions& options,
+                                 std::vector<std::unique_ptr<BroadPhase>> broadphases, Source source)
     : impl_(std::make_unique<Impl>()) {
   Impl& s = *impl_;
+  s.model = &model;
+  s.source = std::move(source);
   s.options = options;
-  s.params = world.scene().response;
-  BroadPhaseConfig flat_cfg = world.scene().broadphase;
+  const Scene& scene = model.scene;
+  s.params = scene.response;
+  BroadPhaseConfig flat_cfg = scene.broadphase;
   flat_cfg.name = "flat";
-  s.flat = make_broadphase(flat_cfg, world.scene().domain);
+  s.flat = make_broadphase(flat_cfg, scene.domain);
   s.broadphases = std::move(broadphases);
   // The paper's configurations A, B, C and the scene's own (SPEC 5.2).
   for (const char* text : {"2", "1,2", "0,1,2"}) s.configs.push_back(MidphaseConfig::parse(text));
-  if (!world.scene().midphase.aabb_only &&
+  if (!scene.midphase.aabb_only &&
       std::none_of(s.configs.begin(), s.configs.end(), [&](const MidphaseConfig& c) {
-        return c.levels == world.scene().midphase.levels;
+        return c.levels == scene.midphase.levels;
       }))
-    s.configs.push_back(world.scene().midphase);
+    s.configs.push_back(scene.midphase);
   s.confirm = [](const PlacedShape& a, const PlacedShape& b, float theta, const MidphaseConfig& c,
                  MidphaseStats& st) { return confirm_contact(a, b, theta, c, st); };
-  if (options.against_fcl) s.reference = std::make_unique<ReferenceGeometry>(world);
+  if (options.against_fcl) s.reference = std::make_unique<ReferenceGeometry>(model);
 }
 
 FrameValidators::~FrameValidators() = default;
@@ -123,14 +141,20 @@ FrameValidators::~FrameValidators() = default;
 void FrameValidators::set_midphase(ConfirmFn fn) { impl_->confirm = std::move(fn); }
 
 void FrameValidators::observe(const Engine& world, bool checked) {
-  Impl& s = *impl_;
   const FrameRecord& rec = world.record();
   if (!world.can_record() || rec.frame != world.frame())
     throw RuntimeError(fmt::format("validators: engine '{}' gave no FrameRecord for frame {} "
                                    "(recording off or unsupported)",
                                    world.name(), world.frame()));
-  const Model& model = world.model();
+  observe(rec, checked);
+}
+
+void FrameValidators::observe(const FrameRecord& rec, bool checked) {
+  Impl& s = *impl_;
+  const Model& model = *s.model;
   const std::int64_t frame = rec.frame;
+  const bool has_states = !rec.x_pre.empty();
+  const bool judge_response = s.source.octocd_pipeline || s.source.spec6_response;
   const std::vector<Aabb>& boxes = rec.aabbs;
   const std::vector<float>& w = model.initial.w;
   const ContactParams& p = s.params;
@@ -141,16 +165,39 @@ void FrameValidators::observe(const Engine& world, bool checked) {
     return PlacedShape{shape.octree.get(), pre_position(i), boxes[i]};
   };
 
-  const FrameMetrics& m = world.last_metrics();
-  s.pen_max = std::max(s.pen_max, m.penetration_max);
-  s.share_above_max = std::max(s.share_above_max, m.penetration_share_above_slop);
+  // Penetration statistics of the frame's contacts (AABB d_p, Eq. 10).
+  if (!rec.contacts.empty()) {
+    std::size_t above = 0;
+    for (const ContactRecord& c : rec.contacts) {
+      s.pen_max = std::max(s.pen_max, static_cast<double>(c.depth));
+      if (c.depth > p.slop) ++above;
+    }
+    s.share_above_max = std::max(s.share_above_max,
+                                 static_cast<double>(above) / static_cast<double>(rec.contacts.size()));
+  }
+
+  // Contacts per body in this frame (first pass): which contacts of another engine have
+  // terms that the states give (every dynamic body of the pair has this contact only).
+  std::vector<std::uint32_t> contacts_of;
+  if (!rec.has_contact_terms) {
+    contacts_of.assign(boxes.size(), 0);
+    for (const ContactRecord& c : rec.contacts) {
+      ++contacts_of[c.pair.a];
+      ++contacts_of[c.pair.b];
+    }
+  }
 
   // 9. Applied state (SPEC 7.9): the engine's post-step state against the independent
   // re-derivation, every frame; then momentum and centre on isolated dynamic groups.
-  {
+  if (has_states) {
     const StatePrediction pred = predict_step(model, rec, tol);
     const std::size_t n = rec.x_pre.size();
-    for (std::size_t i = 0; i < n; ++i) {
+    // Position after integration: what the engine's world AABBs say (SPEC 4.2), judged
+    // against SPEC 4.1 below for octocd's response; the re-derived one otherwise.
+    auto x_int = [&](std::size_t i, int k) {
+      return judge_response ? pred.x_int[i][k] : static_cast<double>(pre_position(static_cast<std::uint32_t>(i))[k]);
+    };
+    for (std::size_t i = 0; i < n && judge_response; ++i) {
       if (!pred.judged[i]) {
         ++s.applied_unjudged;
         continue;
@@ -222,9 +269,9 @@ void FrameValidators::observe(const Engine& world, bool checked) {
         gr.p1[k] += mi * rec.v_post[i][k];
         gr.exchange += mi * std::fabs(rec.v_post[i][k] - v_int);
         gr.mtol += mi * pred.v_tol[i][k];
-        gr.c0[k] += mi * pred.x_int[i][k];
+        gr.c0[k] += mi * x_int(i, k);
         gr.c1[k] += mi * rec.x_post[i][k];
-        gr.cexchange += mi * std::fabs(rec.x_post[i][k] - pred.x_int[i][k]);
+        gr.cexchange += mi * std::fabs(rec.x_post[i][k] - x_int(i, k));
         if (gr.ctol >= 0) gr.ctol += mi * pred.x_tol[i][k];
       }
     }
@@ -256,7 +303,7 @@ void FrameValidators::observe(const Engine& world, bool checked) {
     BroadPhaseStats bs;
     s.flat->find_pairs(boxes, s.expected, bs);
     ++s.candidate_frames;
-    auto compare = [&](const std::vector<Pair>& got, const std::string& who) {
+    auto compare = [&](const std::vector<Pair>& got, const std::string& who, bool own) {
       const bool same = got == s.expected;
       std::string what;
       if (!same) {
@@ -269,18 +316,31 @@ void FrameValidators::observe(const Engine& world, bool checked) {
         const Pair q = miss ? missing.front() : (extra.empty() ? Pair{} : extra.front());
         what = fmt::format("frame {}: {} {} pair ({}, {}) ({} missing, {} extra)", frame, who,
                            miss ? "misses" : "adds", q.a, q.b, missing.size(), extra.size());
+        if (own) {
+          // A pair whose boxes only touch (zero overlap on an axis) is a pair under the
+          // inclusive rule of Eq. 6; an engine with a strict test misses exactly those.
+          for (const Pair& m : missing) {
+            ++s.missing_pairs;
+            for (int k = 0; k < 3; ++k)
+              if (overlap_along(boxes[m.a], boxes[m.b], k) == 0.0) {
+                ++s.missing_touching;
+                break;
+              }
+          }
+        }
       }
       s.candidates.check(same, same ? 0.0 : 1.0, what);
     };
     // The pairs the engine itself used this frame (SPEC 7.9), then fresh instances.
-    compare(rec.pairs, fmt::format("engine {} ({})", world.name(), world.broadphase_name()));
+    if (rec.has_pairs) compare(rec.pairs, s.source.label, true);
     for (auto& bp : s.broadphases) {
       bp->find_pairs(boxes, s.got, bs);
-      compare(s.got, bp->name());
+      compare(s.got, bp->name(), false);
     }
 
     // 2. Midphase completeness: every level list equals the exhaustive test (SPEC 7.2).
-    {
+    // octocd's pipeline only: another engine's contacts are not octocd's vertex test.
+    if (s.source.octocd_pipeline) {
       for (const Pair& q : s.expected) {
         if (w[q.a] == 0.0f && w[q.b] == 0.0f) continue;
         const std::uint32_t sa = model.bodies[q.a].shape, sb = model.bodies[q.b].shape;
@@ -291,9 +351,9 @@ void FrameValidators::observe(const Engine& world, bool checked) {
         // The engine's own verdict this frame (its confirmed set).
         const bool engine_says = std::binary_search(rec.confirmed.begin(), rec.confirmed.end(), q);
         s.midphase.check(engine_says == truth, engine_says == truth ? 0.0 : 1.0,
-                         fmt::format("frame {}: engine {} midphase [{}] says {} for pair ({}, {}), "
+                         fmt::format("frame {}: {} midphase [{}] says {} for pair ({}, {}), "
                                      "exhaustive says {}",
-                                     frame, world.name(), model.scene.midphase.to_string(), engine_says,
+                                     frame, s.source.label, model.scene.midphase.to_string(), engine_says,
                                      q.a, q.b, truth));
         for (const MidphaseConfig& c : s.configs) {
           MidphaseStats ms;
@@ -332,8 +392,40 @@ void FrameValidators::observe(const Engine& world, bool checked) {
     }
   }
 
-  for (const ContactRecord& c : rec.contacts) {
-    const float wa = w[c.pair.a], wb = w[c.pair.b];
+  for (const ContactRecord& given : rec.contacts) {
+    const float wa = w[given.pair.a], wb = w[given.pair.b];
+    // 5. Friction cone, |J_t| <= mu_s J_n (section 3.3.2), on the reported impulses.
+    const double cone = std::fabs(given.jt) - static_cast<double>(p.mu_static) * given.jn;
+    const bool cone_ok = cone <= tol.friction_cone_rel * static_cast<double>(p.mu_static) * given.jn + 1e-9;
+    // Another engine reports pair, normal, depth and impulses only. Where every dynamic
+    // body of the pair has this one contact in the frame, its state change is this
+    // contact's own: corrections from the world AABBs (the position after integration)
+    // to x_post, velocity changes from the integrated v_pre (SPEC 4.1) to v_post.
+    ContactRecord c = given;
+    bool terms = rec.has_contact_terms;
+    if (!terms && has_states &&
+        (!(wa > 0.0f) || contacts_of[c.pair.a] == 1) && (!(wb > 0.0f) || contacts_of[c.pair.b] == 1)) {
+      terms = true;
+      const Vec3 n = c.normal;
+      c.axis = std::fabs(n.x) >= std::fabs(n.y) && std::fabs(n.x) >= std::fabs(n.z) ? 0
+               : std::fabs(n.y) >= std::fabs(n.z)                                    ? 1
+                                                                                     : 2;
+      auto derive = [&](std::uint32_t i, Vec3& v, Vec3& dx, Vec3& dv) {
+        v = rec.v_pre[i];
+        if (w[i] > 0.0f) v = v + model.scene.dt * model.scene.gravity;
+        dx = rec.x_post[i] - pre_position(i);
+        dv = rec.v_post[i] - v;
+      };
+      derive(c.pair.a, c.v_a, c.dx_a, c.dv_a);
+      derive(c.pair.b, c.v_b, c.dx_b, c.dv_b);
+    }
+    if (!terms) {
+      ++s.contacts_unjudged;
+      s.friction.check(cone_ok, std::max(cone, 0.0),
+                       fmt::format("frame {}: pair ({}, {}) |J_t| {:.6g} vs mu_s J_n {:.6g}", frame, c.pair.a,
+                                   c.pair.b, std::fabs(c.jt), p.mu_static * c.jn));
+      continue;
+    }
     // 4. Non-penetration contraction (Eq. 14, section 3.3.3), this contact's own
     // correction only: d' - delta <= (1 - alpha beta)(d - delta) and no overshoot past
     // the slop (the sequence is monotone).
@@ -364,9 +456,7 @@ void FrameValidators::observe(const Engine& world, bool checked) {
       const Vec3 before = tangential(c.v_a - c.v_b, c.normal);
       const Vec3 after = tangential((c.v_a + c.dv_a) - (c.v_b + c.dv_b), c.normal);
       const double rise = static_cast<double>(length(after)) - length(before);
-      const double cone = std::fabs(c.jt) - static_cast<double>(p.mu_static) * c.jn;
-      const bool ok = rise <= tol.friction_speed &&
-                      cone <= tol.friction_cone_rel * static_cast<double>(p.mu_static) * c.jn + 1e-9;
+      const bool ok = rise <= tol.friction_speed && cone_ok;
       s.friction.check(ok, std::max(rise, cone),
                        fmt::format("frame {}: pair ({}, {}) |v_t| {:.6g} -> {:.6g} m/s, |J_t| {:.6g} "
                                    "vs mu_s J_n {:.6g}",
@@ -377,18 +467,34 @@ void FrameValidators::observe(const Engine& world, bool checked) {
     if (wa > 0.0f && wb > 0.0f) {
       ++s.dynamic_pairs;
       const double ma = 1.0 / wa, mb = 1.0 / wb;
-      auto check_pair = [&](Tally& t, Vec3 da, Vec3 db, double rel, const char* what) {
+      // Terms derived from another engine's states carry the float32 rounding of the
+      // values they are differences of (positions through the AABBs, velocities): a few
+      // roundings of those magnitudes, as for the applied state.
+      auto inf = [](Vec3 u) { return std::max({std::fabs(u.x), std::fabs(u.y), std::fabs(u.z)}); };
+      const double eps32 = 1.0 / 8388608.0;
+      const double slack_x =
+          rec.has_contact_terms
+              ? 0.0
+              : tol.applied_state_ulps * eps32 * (ma + mb) *
+                    std::max({inf(boxes[c.pair.a].min), inf(boxes[c.pair.a].max), inf(boxes[c.pair.b].min),
+                              inf(boxes[c.pair.b].max)});
+      const double slack_v =
+          rec.has_contact_terms
+              ? 0.0
+              : tol.applied_state_ulps * eps32 * (ma + mb) *
+                    std::max({inf(c.v_a), inf(c.v_b), inf(c.v_a + c.dv_a), inf(c.v_b + c.dv_b)});
+      auto check_pair = [&](Tally& t, Vec3 da, Vec3 db, double rel, double slack, const char* what) {
         const double sx = ma * da.x + mb * db.x, sy = ma * da.y + mb * db.y,
                      sz = ma * da.z + mb * db.z;
         const double scale = ma * length(da) + mb * length(db);
         const double residual = norm(sx, sy, sz);
         const double share = scale > 0 ? residual / scale : 0.0;
-        t.check(residual <= rel * scale + 1e-9, share,
+        t.check(residual <= rel * scale + slack + 1e-9, share,
                 fmt::format("frame {}: pair ({}, {}) {} changes by {:.3g} ({:.3g} of the exchange)",
                             frame, c.pair.a, c.pair.b, what, residual, share));
       };
-      check_pair(s.momentum, c.dv_a, c.dv_b, tol.momentum_rel, "momentum");
-      check_pair(s.centre, c.dx_a, c.dx_b, tol.centre_rel, "mass-weighted centre");
+      check_pair(s.momentum, c.dv_a, c.dv_b, tol.momentum_rel, slack_v, "momentum");
+      check_pair(s.centre, c.dx_a, c.dx_b, tol.centre_rel, slack_x, "mass-weighted centre");
     }
   }
 }
@@ -411,9 +517,21 @@ std::vector<ValidationResult> FrameValidators::results() const {
     std::string names = "flat vs";
     for (const auto& bp : s.broadphases) names += " " + bp->name();
     out.push_back(tally("candidate-sets", "frames x broadphases differing from flat", s.candidates,
-                        fmt::format("{} frames, {}", s.candidate_frames, names)));
+                        fmt::format("{} frames, {}{}", s.candidate_frames, names,
+                                    s.source.octocd_pipeline ? "" : " (and the engine's own pairs where given)")));
+    if (s.missing_pairs > 0 && s.missing_touching == s.missing_pairs)
+      out.back().detail += fmt::format("; all {} missing pairs only touch (zero overlap on an axis): overlap is "
+                                       "inclusive (Eq. 6), min_A <= max_B and max_A >= min_B",
+                                       s.missing_pairs);
   }
-  {
+  if (!s.source.octocd_pipeline) {
+    ValidationResult r;
+    r.name = "midphase-completeness";
+    r.figure = "pair x level lists differing from exhaustive";
+    r.applicable = false;
+    r.detail = "another engine: its contacts are not octocd's vertex-proximity test (SPEC 5.3)";
+    out.push_back(r);
+  } else {
     std::string cfgs;
     for (const auto& c : s.configs) cfgs += (cfgs.empty() ? "" : " ") + std::string("[") + c.to_string() + "]";
     out.push_back(tally("midphase-completeness", "pair x level lists differing from exhaustive",
@@ -440,6 +558,8 @@ std::vector<ValidationResult> FrameValidators::results() const {
                                  a.empty() ? 0.0 : a[a.size() * 95 / 100] * deg,
                                  a.empty() ? 0.0 : a.back() * deg,
                                  s.normal_first.empty() ? "" : "; first disagreement " + s.normal_first);
+    if (s.normals > 0 && 2 * s.normals_agree < s.normals)
+      r.detail += "; most normals point from A to B: the convention is from B to A (SPEC 2)";
     if (s.reference != nullptr) {
       // The AABB-centre normal is weakest where a small body sits in a big body's AABB.
       const char* names[3] = {"mesh-mesh", "mesh-box", "box-box"};
@@ -463,6 +583,15 @@ std::vector<ValidationResult> FrameValidators::results() const {
   out.back().tolerances = "contraction_m";
   out.push_back(tally("friction", "contacts raising |v_t| or leaving the cone", s.friction,
                       fmt::format("worst excess {:.3g}", s.friction.worst)));
+  if (s.contacts_unjudged > 0) {
+    // Another engine's contacts on a dynamic body with several contacts: only the cone.
+    const std::string note = fmt::format("; {} contacts judged on the cone only (a dynamic body with several "
+                                         "contacts, or no states)",
+                                         s.contacts_unjudged);
+    if (out.back().pass) out.back().detail += note;
+    if (out[out.size() - 2].pass) out[out.size() - 2].detail += fmt::format(
+        "; {} contacts not judged (a dynamic body with several contacts, or no states)", s.contacts_unjudged);
+  }
   out.back().tolerances = "friction_speed,friction_cone_rel";
   {
     ValidationResult r = tally("conservation", "contacts and isolated groups breaking momentum or centre",
@@ -485,7 +614,14 @@ std::vector<ValidationResult> FrameValidators::results() const {
     r.tolerances = "momentum_rel,centre_rel,applied_conservation_rel";
     out.push_back(r);
   }
-  {
+  if (!s.source.octocd_pipeline && !s.source.spec6_response) {
+    ValidationResult r;
+    r.name = "applied-state";
+    r.figure = "bodies off the SPEC 6 re-derivation";
+    r.applicable = false;
+    r.detail = "another engine: its response is not judged against SPEC 6 (not requested)";
+    out.push_back(r);
+  } else {
     ValidationResult r = tally("applied-state", "bodies off the SPEC 6 re-derivation", s.applied,
                                fmt::format("{} body-frames judged, worst {:.3g} of the float32 tolerance; "
                                            "{} not judged (a decision within rounding of its threshold)",

@@ -358,6 +358,17 @@ void set_tolerance(Tolerances& tol, const std::string& name, double value) {
   throw InputError(fmt::format("--tolerance: unknown tolerance '{}'; allowed: {}", name, names));
 }
 
+std::vector<std::unique_ptr<BroadPhase>> compared_broadphases(const Scene& scene, bool with_references) {
+  std::vector<std::unique_ptr<BroadPhase>> broadphases;
+  for (const std::string& name : with_references ? all_broadphase_names() : broadphase_names()) {
+    if (name == "flat") continue;
+    BroadPhaseConfig cfg = scene.broadphase;
+    cfg.name = name;
+    broadphases.push_back(make_any_broadphase(cfg, scene.domain));
+  }
+  return broadphases;
+}
+
 std::vector<ValidationResult> validate_engine(const EngineFactory& make, const ValidationOptions& options) {
   std::unique_ptr<Engine> engine = make();
   if (!engine->can_record())
@@ -365,17 +376,7 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
                                  "allowed engines: cpu, cuda",
                                  engine->name()));
   engine->set_recording(true);
-  const Scene& scene = engine->scene();
-  std::vector<std::unique_ptr<BroadPhase>> broadphases;
-  const std::vector<std::string> names =
-      options.against_fcl ? all_broadphase_names() : broadphase_names();
-  for (const std::string& name : names) {
-    if (name == "flat") continue;
-    BroadPhaseConfig cfg = scene.broadphase;
-    cfg.name = name;
-    broadphases.push_back(make_any_broadphase(cfg, scene.domain));
-  }
-  FrameValidators validators(*engine, options, std::move(broadphases));
+  FrameValidators validators(*engine, options, compared_broadphases(engine->scene(), options.against_fcl));
   for (int f = 1; f <= options.frames; ++f) {
     engine->step();
     validators.observe(*engine, f % options.every == 0);

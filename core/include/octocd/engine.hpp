@@ -131,6 +131,12 @@ struct FrameRecord {
   std::vector<Pair> confirmed;      ///< pairs confirmed by midphase + narrow phase, sorted
   std::vector<ContactRecord> contacts;  ///< first-pass response terms (Eq. 9 survivors)
   std::vector<Vec3> x_post, v_post; ///< state after the step (what the engine applied)
+  /// What the record holds. octocd's engines fill everything (both true). A record of
+  /// another engine (octocd/external.hpp, `octocd validate --trace-in`) may have no
+  /// candidate pairs (`pairs` then means nothing) and carries only pair, normal, depth,
+  /// jn, jt per contact; the validators then derive the rest from the states.
+  bool has_pairs = true;          ///< `pairs` is the engine's candidate set for this step
+  bool has_contact_terms = true;  ///< contacts carry axis, v_a/v_b, dx_a/dx_b, dv_a/dv_b
 };
 
 /// One simulation engine: `cpu` (World), `cuda` (CudaWorld), `bullet` (BulletWorld).

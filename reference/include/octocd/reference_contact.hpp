@@ -61,6 +61,9 @@ struct ReferenceNormal {
 class ReferenceGeometry {
  public:
   explicit ReferenceGeometry(const Engine& world);
+  /// The same from a model's shapes and bodies (read at construction only; body indices
+  /// passed to normal() are the model's).
+  explicit ReferenceGeometry(const Model& model);
   ~ReferenceGeometry();
   ReferenceGeometry(const ReferenceGeometry&) = delete;
   ReferenceGeometry& operator=(const ReferenceGeometry&) = delete;

@@ -130,14 +130,35 @@ struct StatePrediction {
 /// engine code is called. Shapes: every vector has one entry per body.
 StatePrediction predict_step(const Model& model, const FrameRecord& rec, const Tolerances& tol);
 
-/// Per-frame validators, fed frame by frame from an Engine that records (after each
-/// step(), with set_recording(true)): they read only its FrameRecord and model, so they
-/// judge what the engine applied. Hooks let tests plant faults: extra broadphases (e.g.
-/// one that drops a pair) and the midphase function under test.
+/// Per-frame validators (SPEC 7 items 1-6 and 9), fed one FrameRecord at a time. They
+/// read only the record and the model, so the same code judges octocd's engines (the
+/// Engine overloads), another engine's frames given through the C++ API
+/// (octocd/external.hpp) and external traces (`octocd validate --trace-in`). Hooks let
+/// tests plant faults: extra broadphases (e.g. one that drops a pair) and the midphase
+/// function under test.
 class FrameValidators {
  public:
-  /// `broadphases` are compared with `flat` (the caller owns them via the vector).
-  /// `against_fcl` enables the FCL reference normals (needs meshes' FCL models).
+  /// Who produced the records being judged.
+  struct Source {
+    /// How messages name it, e.g. "engine cpu (octree)" or "engine 'toy'".
+    std::string label;
+    /// True for octocd's own pipeline: midphase completeness (its confirmed set against
+    /// the exhaustive vertex test) and the applied state (the SPEC 6 re-derivation) are
+    /// judged. False for another engine: both are reported n/a with the reason, unless
+    /// `spec6_response` asks for the applied state.
+    bool octocd_pipeline = true;
+    /// For another engine: judge the applied state against SPEC 6 too (an engine that
+    /// implements octocd's response).
+    bool spec6_response = false;
+  };
+
+  /// Validators for records of bodies described by `model` (scene parameters, shapes,
+  /// local boxes, inverse masses; not owned, must outlive this object). `broadphases` are
+  /// compared with `flat` on every checked frame (owned from here on). `options.against_fcl`
+  /// enables the FCL reference normals (builds FCL geometry for every shape).
+  FrameValidators(const Model& model, const ValidationOptions& options,
+                  std::vector<std::unique_ptr<BroadPhase>> broadphases, Source source);
+  /// The same for `engine`'s model, with source "engine NAME (BROADPHASE)".
   FrameValidators(const Engine& engine, const ValidationOptions& options,
                   std::vector<std::unique_ptr<BroadPhase>> broadphases);
   ~FrameValidators();
@@ -148,10 +169,17 @@ class FrameValidators {
   /// Replaces the midphase under test (planted-fault tests).
   void set_midphase(ConfirmFn fn);
 
-  /// Checks the frame the engine just stepped. `checked` selects the costly validators
-  /// (candidate sets, midphase completeness, normals) for this frame; the applied-state
-  /// and per-contact checks run every frame. Throws RuntimeError when the engine does
-  /// not record (Engine::can_record false or recording off).
+  /// Judges one step. `rec.aabbs` must hold one box per body of the model; `rec.pairs`
+  /// and `rec.confirmed` sorted and unique with a < b < bodies; `rec.contacts` in (a, b)
+  /// order; the four state vectors either all empty (the state validators then skip
+  /// this frame) or one entry per body. `checked` selects the costly validators
+  /// (candidate sets, midphase completeness, normals) for this frame; the per-contact
+  /// and applied-state checks run on every frame. The record is trusted: callers with
+  /// data from outside octocd check it first (check_frame_record, octocd/external.hpp).
+  void observe(const FrameRecord& rec, bool checked);
+
+  /// Checks the frame the engine just stepped (its record()). Throws RuntimeError when
+  /// the engine does not record (Engine::can_record false or recording off).
   void observe(const Engine& engine, bool checked);
 
   /// Results of validators 1-6 and 9 so far.
@@ -161,6 +189,11 @@ class FrameValidators {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// The broadphases `octocd validate` compares with `flat`: octocd's own and, when
+/// `with_references`, Bullet's and FCL's (every name of all_broadphase_names but flat),
+/// configured like `scene.broadphase` on `scene.domain`.
+std::vector<std::unique_ptr<BroadPhase>> compared_broadphases(const Scene& scene, bool with_references);
 
 /// What a scene is, recognised by its content (SPEC 7.7), never by its name.
 enum class SceneKind {

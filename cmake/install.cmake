@@ -1,0 +1,42 @@
+# ---- install: headers, static libraries, the `octocd` command and the CMake package ----
+# (issue 11). `cmake --install build --prefix PREFIX` puts under PREFIX:
+#   include/octocd/*.hpp, lib/liboctocd_{core,reference,validation[,cuda]}.a, bin/octocd,
+#   lib/cmake/octocd/{octocdConfig,octocdConfigVersion,octocdTargets}.cmake
+# with the exported targets octocd::core, octocd::reference, octocd::validation and,
+# when OCTOCD_CUDA is on, octocd::cuda. Included from the top-level CMakeLists.txt.
+include(GNUInstallDirs)
+include(CMakePackageConfigHelpers)
+
+set(_octocd_exported octocd_core octocd_reference octocd_validation)
+set_target_properties(octocd_core PROPERTIES EXPORT_NAME core)
+set_target_properties(octocd_reference PROPERTIES EXPORT_NAME reference)
+set_target_properties(octocd_validation PROPERTIES EXPORT_NAME validation)
+add_library(octocd::core ALIAS octocd_core)
+add_library(octocd::reference ALIAS octocd_reference)
+add_library(octocd::validation ALIAS octocd_validation)
+if(OCTOCD_CUDA_ENABLED)
+  # Without CUDA, octocd_cuda is a stub for the CLI only: not installed, not exported.
+  list(APPEND _octocd_exported octocd_cuda)
+  set_target_properties(octocd_cuda PROPERTIES EXPORT_NAME cuda)
+  add_library(octocd::cuda ALIAS octocd_cuda)
+  install(DIRECTORY ${CMAKE_SOURCE_DIR}/gpu/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+endif()
+
+install(TARGETS ${_octocd_exported} EXPORT octocdTargets
+  ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+  LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
+  INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+install(TARGETS octocd RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+foreach(dir core reference validation)
+  install(DIRECTORY ${CMAKE_SOURCE_DIR}/${dir}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+endforeach()
+
+set(_octocd_cmake_dir ${CMAKE_INSTALL_LIBDIR}/cmake/octocd)
+install(EXPORT octocdTargets NAMESPACE octocd:: DESTINATION ${_octocd_cmake_dir})
+configure_package_config_file(${CMAKE_SOURCE_DIR}/cmake/octocdConfig.cmake.in
+  ${CMAKE_BINARY_DIR}/octocdConfig.cmake INSTALL_DESTINATION ${_octocd_cmake_dir})
+# 0.x: a minor version may break the API, so only the same minor version is compatible.
+write_basic_package_version_file(${CMAKE_BINARY_DIR}/octocdConfigVersion.cmake
+  VERSION ${PROJECT_VERSION} COMPATIBILITY SameMinorVersion)
+install(FILES ${CMAKE_BINARY_DIR}/octocdConfig.cmake ${CMAKE_BINARY_DIR}/octocdConfigVersion.cmake
+  DESTINATION ${_octocd_cmake_dir})

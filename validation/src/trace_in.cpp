@@ -1,0 +1,414 @@
+// External traces (docs/trace-format.md, "External traces"): another engine's run read
+// frame by frame into FrameRecords, checked, and judged by ExternalValidator.
+#include <hdf5.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "octocd/error.hpp"
+#include "octocd/external.hpp"
+
+namespace octocd {
+
+namespace {
+
+/// Closes any HDF5 handle it holds.
+class Handle {
+ public:
+  explicit Handle(hid_t id = -1) : id_(id) {}
+  ~Handle() {
+    if (id_ < 0) return;
+    switch (H5Iget_type(id_)) {
+      case H5I_FILE: H5Fclose(id_); break;
+      case H5I_DATASET: H5Dclose(id_); break;
+      case H5I_DATASPACE: H5Sclose(id_); break;
+      case H5I_DATATYPE: H5Tclose(id_); break;
+      case H5I_ATTR: H5Aclose(id_); break;
+      default: break;
+    }
+  }
+  Handle(Handle&& o) noexcept : id_(o.id_) { o.id_ = -1; }
+  Handle& operator=(Handle&& o) noexcept {
+    std::swap(id_, o.id_);
+    return *this;
+  }
+  Handle(const Handle&) = delete;
+  Handle& operator=(const Handle&) = delete;
+  operator hid_t() const { return id_; }  // NOLINT: used as an hid_t
+
+ private:
+  hid_t id_;
+};
+
+/// One dataset: its handle and dimensions.
+struct Dataset {
+  std::string name;
+  Handle id;
+  std::vector<hsize_t> dims;
+  bool present() const { return id >= 0; }
+};
+
+class TraceIn {
+ public:
+  explicit TraceIn(const std::string& path) : path_(path) {
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+    if (H5Fis_hdf5(path.c_str()) <= 0)
+      throw InputError(fmt::format("{}: not a readable HDF5 file; allowed: an external trace (docs/trace-format.md)",
+                                   path));
+    file_ = Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, H5P_DEFAULT));
+    if (file_ < 0) file_ = Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT));
+    if (file_ < 0) throw RuntimeError(fmt::format("{}: cannot open the HDF5 file", path));
+
+    // Root attributes.
+    const std::string format = string_attr("format");
+    if (format != "octocd-trace")
+      bad("/ (root attribute format)", format.empty() ? "missing" : fmt::format("'{}'", format), "\"octocd-trace\"");
+    const double version = number_attr("version", -1);
+    if (version != 1) bad("/ (root attribute version)", version < 0 ? "missing" : fmt::format("{}", version), "1");
+    const std::string engine = string_attr("engine");
+    if (!engine.empty()) info.engine = engine;
+    bodies.scene_json = string_attr("scene");
+    info.has_scene = !bodies.scene_json.empty();
+    info.spec6_response = string_attr("response_model") == "spec6";
+    const double dt = number_attr("dt", 0.0);
+    if (dt != 0.0) {
+      if (!(dt > 0.0) || !(dt < 1e30)) bad("/ (root attribute dt)", fmt::format("{}", dt), "a time step > 0 (s)");
+      bodies.dt = static_cast<float>(dt);
+    }
+    if (H5Aexists(file_, "gravity") > 0) {
+      Handle a(H5Aopen(file_, "gravity", H5P_DEFAULT));
+      Handle space(H5Aget_space(a));
+      Handle type(H5Aget_type(a));
+      double g[3] = {0, 0, 0};
+      if (H5Tget_class(type) != H5T_FLOAT || H5Sget_simple_extent_npoints(space) != 3 ||
+          H5Aread(a, H5T_NATIVE_DOUBLE, g) < 0 || !std::isfinite(g[0] + g[1] + g[2]))
+        bad("/ (root attribute gravity)", "not 3 finite numbers", "gravity (x, y, z) in m/s^2");
+      bodies.gravity = {static_cast<float>(g[0]), static_cast<float>(g[1]), static_cast<float>(g[2])};
+    }
+
+    // Bodies.
+    Dataset lmin = open("/bodies/local_aabb_min", H5T_FLOAT, 2, true);
+    Dataset lmax = open("/bodies/local_aabb_max", H5T_FLOAT, 2, true);
+    Dataset mass = open("/bodies/inverse_mass", H5T_FLOAT, 1, true);
+    n_ = lmin.dims[0];
+    info.bodies = n_;
+    if (n_ == 0) bad(lmin.name, "0 bodies", "at least one body");
+    expect(lmin, {n_, 3}, "n x 3 with n = the body count");
+    expect(lmax, {n_, 3}, fmt::format("{} x 3, as /bodies/local_aabb_min", n_));
+    expect(mass, {n_}, fmt::format("{} values, one per body (as /bodies/local_aabb_min)", n_));
+    const std::vector<float> lo = read<float>(lmin, 0, n_), hi = read<float>(lmax, 0, n_);
+    bodies.inverse_mass = read<float>(mass, 0, n_);
+    for (hsize_t i = 0; i < n_; ++i) {
+      bodies.local_boxes.push_back({{lo[3 * i], lo[3 * i + 1], lo[3 * i + 2]}, {hi[3 * i], hi[3 * i + 1], hi[3 * i + 2]}});
+      const Aabb& b = bodies.local_boxes.back();
+      if (!std::isfinite(b.min.x + b.min.y + b.min.z + b.max.x + b.max.y + b.max.z))
+        bad(lmin.name, fmt::format("body {}: not finite", i), "finite numbers (m)");
+      if (!(b.min.x <= b.max.x && b.min.y <= b.max.y && b.min.z <= b.max.z))
+        bad(lmax.name, fmt::format("body {}: below /bodies/local_aabb_min", i), "min <= max on every axis");
+      const float w = bodies.inverse_mass[i];
+      if (!std::isfinite(w) || w < 0.0f)
+        bad(mass.name, fmt::format("body {} is {}", i, w), "finite >= 0 (1/kg, 0 = static)");
+    }
+    // With a scene the bodies come from it; the tables above must agree (checked there).
+
+    // Per-frame data: states and/or world AABBs.
+    position_ = open("/states/position", H5T_FLOAT, 3, false);
+    velocity_ = open("/states/velocity", H5T_FLOAT, 3, false);
+    aabb_min_ = open("/aabbs/min", H5T_FLOAT, 3, false);
+    aabb_max_ = open("/aabbs/max", H5T_FLOAT, 3, false);
+    if (position_.present() != velocity_.present())
+      bad(position_.present() ? "/states/velocity" : "/states/position", "missing",
+          "/states/position and /states/velocity together");
+    if (aabb_min_.present() != aabb_max_.present())
+      bad(aabb_min_.present() ? "/aabbs/max" : "/aabbs/min", "missing", "/aabbs/min and /aabbs/max together");
+    info.has_states = position_.present();
+    info.has_aabbs = aabb_min_.present();
+    if (!info.has_states && !info.has_aabbs)
+      bad("/states/position", "missing (and no /aabbs/min)",
+          "per-frame positions (/states/position, /states/velocity) or world AABBs (/aabbs/min, /aabbs/max)");
+    if (info.has_states) {
+      if (position_.dims[0] < 2) bad(position_.name, "fewer than 2 rows", "the initial state (row 0) and one row per frame");
+      frames_ = static_cast<std::int64_t>(position_.dims[0]) - 1;
+      expect(position_, {position_.dims[0], n_, 3}, fmt::format("S x {} x 3 ({} bodies)", n_, n_));
+      expect(velocity_, position_.dims, fmt::format("{} x {} x 3, as /states/position", position_.dims[0], n_));
+      Dataset frame = open("/states/frame", H5T_INTEGER, 1, false);
+      if (frame.present()) {
+        expect(frame, {position_.dims[0]}, fmt::format("{} values, one per state row", position_.dims[0]));
+        const std::vector<std::int64_t> f = read<std::int64_t>(frame, 0, position_.dims[0]);
+        for (std::size_t r = 0; r < f.size(); ++r)
+          if (f[r] != static_cast<std::int64_t>(r))
+            bad(frame.name, fmt::format("row {} is frame {}", r, f[r]),
+                "every frame: 0, 1, 2, ... (write every state, e.g. octocd run --state-every 1)");
+      }
+    }
+    if (info.has_aabbs) {
+      const std::int64_t rows = static_cast<std::int64_t>(aabb_min_.dims[0]);
+      if (info.has_states && rows != frames_)
+        bad(aabb_min_.name, fmt::format("{} rows for {} frames (/states/position has {} rows)", rows, frames_, frames_ + 1),
+            "one row per frame (F rows; /states has F + 1, row 0 the initial state)");
+      frames_ = rows;
+      if (frames_ < 1) bad(aabb_min_.name, "no rows", "one row per frame");
+      expect(aabb_min_, {aabb_min_.dims[0], n_, 3}, fmt::format("F x {} x 3 ({} bodies)", n_, n_));
+      expect(aabb_max_, aabb_min_.dims, "the shape of /aabbs/min");
+    }
+    info.frames = frames_;
+
+    // Optional pairs and contacts (CSR: offsets per frame into flat rows).
+    pair_offsets_ = offsets("/pairs/offsets");
+    if (!pair_offsets_.empty()) {
+      info.has_pairs = true;
+      pairs_ = open("/pairs/pair", H5T_INTEGER, 2, true);
+      expect(pairs_, {pairs_.dims[0], 2}, "P x 2 (body indices a, b)");
+      rows_match(pairs_, pair_offsets_, "/pairs/offsets");
+    }
+    contact_offsets_ = offsets("/contacts/offsets");
+    if (!contact_offsets_.empty()) {
+      info.has_contacts = true;
+      c_pair_ = open("/contacts/pair", H5T_INTEGER, 2, true);
+      c_normal_ = open("/contacts/normal", H5T_FLOAT, 2, true);
+      c_depth_ = open("/contacts/depth", H5T_FLOAT, 1, true);
+      c_jn_ = open("/contacts/jn", H5T_FLOAT, 1, true);
+      c_jt_ = open("/contacts/jt", H5T_FLOAT, 1, true);
+      const hsize_t c = c_pair_.dims[0];
+      expect(c_pair_, {c, 2}, "C x 2 (body indices a, b)");
+      expect(c_normal_, {c, 3}, fmt::format("{} x 3, one row per contact (as /contacts/pair)", c));
+      for (Dataset* d : {&c_depth_, &c_jn_, &c_jt_})
+        expect(*d, {c}, fmt::format("{} values, one per contact (as /contacts/pair)", c));
+      rows_match(c_pair_, contact_offsets_, "/contacts/offsets");
+    }
+  }
+
+  ExternalTraceInfo info;
+  ExternalBodies bodies;
+
+  /// Step f (1 .. frames) as a FrameRecord, its values checked (check_frame_record).
+  FrameRecord frame(std::int64_t f) {
+    FrameRecord rec;
+    rec.frame = f;
+    const hsize_t r = static_cast<hsize_t>(f);
+    if (info.has_aabbs) {
+      const std::vector<float> lo = read<float>(aabb_min_, r - 1, 1), hi = read<float>(aabb_max_, r - 1, 1);
+      rec.aabbs.resize(n_);
+      for (hsize_t i = 0; i < n_; ++i)
+        rec.aabbs[i] = {{lo[3 * i], lo[3 * i + 1], lo[3 * i + 2]}, {hi[3 * i], hi[3 * i + 1], hi[3 * i + 2]}};
+    }
+    if (info.has_states) {
+      rec.x_pre = vectors(read<float>(position_, r - 1, 1));
+      rec.v_pre = vectors(read<float>(velocity_, r - 1, 1));
+      rec.x_post = vectors(read<float>(position_, r, 1));
+      rec.v_post = vectors(read<float>(velocity_, r, 1));
+    }
+    rec.has_pairs = info.has_pairs;
+    if (info.has_pairs) rec.pairs = pairs(pairs_, pair_offsets_, f);
+    if (info.has_contacts) {
+      const std::vector<Pair> cp = pairs(c_pair_, contact_offsets_, f);
+      const hsize_t first = static_cast<hsize_t>(contact_offsets_[r - 1]), count = cp.size();
+      const std::vector<float> nrm = read<float>(c_normal_, first, count), depth = read<float>(c_depth_, first, count),
+                               jn = read<float>(c_jn_, first, count), jt = read<float>(c_jt_, first, count);
+      for (std::size_t k = 0; k < cp.size(); ++k) {
+        ContactRecord c;
+        c.pair = cp[k];
+        c.normal = {nrm[3 * k], nrm[3 * k + 1], nrm[3 * k + 2]};
+        c.depth = depth[k];
+        c.jn = jn[k];
+        c.jt = jt[k];
+        rec.contacts.push_back(c);
+      }
+    }
+    RecordFieldNames names;
+    names.aabbs = "/aabbs/min, /aabbs/max";
+    names.pairs = "/pairs/pair";
+    names.contact_pair = "/contacts/pair";
+    names.contact_normal = "/contacts/normal";
+    names.contact_depth = "/contacts/depth";
+    names.contact_jn = "/contacts/jn";
+    names.contact_jt = "/contacts/jt";
+    names.x_pre = names.x_post = "/states/position";
+    names.v_pre = names.v_post = "/states/velocity";
+    check_frame_record(rec, n_, path_, names);
+    return rec;
+  }
+
+ private:
+  [[noreturn]] void bad(const std::string& dataset, const std::string& problem, const std::string& allowed) const {
+    throw InputError(fmt::format("{}: {}: {}; allowed: {}", path_, dataset, problem, allowed));
+  }
+
+  bool exists(const std::string& name) const {
+    // Each component in turn: H5Lexists fails on a path whose parent is missing.
+    std::size_t pos = 0;
+    while ((pos = name.find('/', pos + 1)) != std::string::npos)
+      if (H5Lexists(file_, name.substr(0, pos).c_str(), H5P_DEFAULT) <= 0) return false;
+    return H5Lexists(file_, name.c_str(), H5P_DEFAULT) > 0;
+  }
+
+  std::string string_attr(const char* name) const {
+    if (H5Aexists(file_, name) <= 0) return "";
+    Handle a(H5Aopen(file_, name, H5P_DEFAULT));
+    Handle type(H5Aget_type(a));
+    if (H5Tget_class(type) != H5T_STRING) bad(fmt::format("/ (root attribute {})", name), "not a string", "a string");
+    std::string out;
+    if (H5Tis_variable_str(type) > 0) {
+      Handle mem(H5Tcopy(H5T_C_S1));
+      H5Tset_size(mem, H5T_VARIABLE);
+      H5Tset_cset(mem, H5Tget_cset(type));
+      char* s = nullptr;
+      if (H5Aread(a, mem, &s) >= 0 && s != nullptr) {
+        out = s;
+        Handle space(H5Aget_space(a));
+        H5Dvlen_reclaim(mem, space, H5P_DEFAULT, &s);
+      }
+    } else {
+      const std::size_t size = H5Tget_size(type);
+      std::string buf(size, '\0');
+      if (H5Aread(a, type, buf.data()) >= 0) out = buf.substr(0, buf.find('\0'));
+    }
+    return out;
+  }
+
+  double number_attr(const char* name, double missing) const {
+    if (H5Aexists(file_, name) <= 0) return missing;
+    Handle a(H5Aopen(file_, name, H5P_DEFAULT));
+    Handle type(H5Aget_type(a));
+    const H5T_class_t cls = H5Tget_class(type);
+    double value = 0.0;
+    if ((cls != H5T_INTEGER && cls != H5T_FLOAT) || H5Aread(a, H5T_NATIVE_DOUBLE, &value) < 0)
+      bad(fmt::format("/ (root attribute {})", name), "not a number", "a number");
+    return value;
+  }
+
+  Dataset open(const std::string& name, H5T_class_t cls, int rank, bool required) const {
+    Dataset d;
+    d.name = name;
+    if (!exists(name)) {
+      if (required) bad(name, "missing", "a dataset (docs/trace-format.md, External traces)");
+      return d;
+    }
+    d.id = Handle(H5Dopen2(file_, name.c_str(), H5P_DEFAULT));
+    if (d.id < 0) bad(name, "not a dataset", "a dataset");
+    Handle type(H5Dget_type(d.id));
+    if (H5Tget_class(type) != cls)
+      bad(name, "wrong type", cls == H5T_FLOAT ? "floating point (float32 or float64)" : "integers");
+    Handle space(H5Dget_space(d.id));
+    const int r = H5Sget_simple_extent_ndims(space);
+    if (r != rank) bad(name, fmt::format("{} dimensions", r), fmt::format("{} dimensions", rank));
+    d.dims.resize(static_cast<std::size_t>(rank));
+    H5Sget_simple_extent_dims(space, d.dims.data(), nullptr);
+    return d;
+  }
+
+  void expect(const Dataset& d, const std::vector<hsize_t>& dims, const std::string& allowed) const {
+    if (d.dims == dims) return;
+    std::string shape;
+    for (hsize_t x : d.dims) shape += (shape.empty() ? "" : " x ") + std::to_string(x);
+    bad(d.name, fmt::format("shape {}", shape), allowed);
+  }
+
+  /// Rows [row, row + count) of `d` (all its trailing dimensions), converted to T.
+  template <typename T>
+  std::vector<T> read(const Dataset& d, hsize_t row, hsize_t count) const {
+    hsize_t per_row = 1;
+    for (std::size_t k = 1; k < d.dims.size(); ++k) per_row *= d.dims[k];
+    std::vector<T> out(static_cast<std::size_t>(count * per_row));
+    if (count == 0) return out;
+    std::vector<hsize_t> start(d.dims.size(), 0), size = d.dims;
+    start[0] = row;
+    size[0] = count;
+    Handle file_space(H5Dget_space(d.id));
+    Handle mem_space(H5Screate_simple(static_cast<int>(size.size()), size.data(), nullptr));
+    hid_t mem_type = H5T_NATIVE_FLOAT;
+    if constexpr (std::is_same_v<T, std::int64_t>) mem_type = H5T_NATIVE_INT64;
+    if (H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start.data(), nullptr, size.data(), nullptr) < 0 ||
+        H5Dread(d.id, mem_type, mem_space, file_space, H5P_DEFAULT, out.data()) < 0)
+      throw RuntimeError(fmt::format("{}: {}: reading rows {}..{} failed", path_, d.name, row, row + count - 1));
+    return out;
+  }
+
+  std::vector<Vec3> vectors(const std::vector<float>& xyz) const {
+    std::vector<Vec3> out(xyz.size() / 3);
+    for (std::size_t i = 0; i < out.size(); ++i) out[i] = {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]};
+    return out;
+  }
+
+  /// A CSR offsets dataset: F + 1 values, 0 first, never decreasing. Empty when absent.
+  std::vector<std::int64_t> offsets(const std::string& name) const {
+    Dataset d = open(name, H5T_INTEGER, 1, false);
+    if (!d.present()) {
+      const std::string group = name.substr(0, name.rfind('/'));
+      if (exists(group)) bad(name, "missing", fmt::format("{} with {} as CSR offsets (F + 1 values)", group, name));
+      return {};
+    }
+    expect(d, {static_cast<hsize_t>(frames_ + 1)},
+           fmt::format("{} values: F + 1 for the {} frames", frames_ + 1, frames_));
+    std::vector<std::int64_t> o = read<std::int64_t>(d, 0, d.dims[0]);
+    if (o[0] != 0) bad(name, fmt::format("row 0 is {}", o[0]), "0 first");
+    for (std::size_t i = 1; i < o.size(); ++i)
+      if (o[i] < o[i - 1])
+        bad(name, fmt::format("frame {}: row {} is {} after {}", i, i, o[i], o[i - 1]),
+            "offsets that never decrease (frame f's rows are offsets[f-1] .. offsets[f]-1)");
+    return o;
+  }
+
+  void rows_match(const Dataset& d, const std::vector<std::int64_t>& o, const std::string& offsets_name) const {
+    if (static_cast<hsize_t>(o.back()) != d.dims[0])
+      bad(offsets_name, fmt::format("last value {} but {} has {} rows", o.back(), d.name, d.dims[0]),
+          fmt::format("the last offset equals the rows of {}", d.name));
+  }
+
+  /// Frame f's rows of a P x 2 pair dataset.
+  std::vector<Pair> pairs(const Dataset& d, const std::vector<std::int64_t>& o, std::int64_t f) const {
+    const hsize_t first = static_cast<hsize_t>(o[static_cast<std::size_t>(f - 1)]);
+    const hsize_t count = static_cast<hsize_t>(o[static_cast<std::size_t>(f)]) - first;
+    const std::vector<std::int64_t> v = read<std::int64_t>(d, first, count);
+    std::vector<Pair> out(count);
+    for (std::size_t k = 0; k < out.size(); ++k) {
+      const std::int64_t a = v[2 * k], b = v[2 * k + 1];
+      if (a < 0 || b < 0 || a >= static_cast<std::int64_t>(n_) || b >= static_cast<std::int64_t>(n_))
+        bad(d.name, fmt::format("frame {}: row {} is ({}, {}): body index out of range", f, k, a, b),
+            fmt::format("body indices in [0, {})", n_));
+      out[k] = {static_cast<std::uint32_t>(a), static_cast<std::uint32_t>(b)};
+    }
+    return out;
+  }
+
+  std::string path_;
+  Handle file_;
+  hsize_t n_ = 0;
+  std::int64_t frames_ = 0;
+  Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_;
+  std::vector<std::int64_t> pair_offsets_, contact_offsets_;
+};
+
+}  // namespace
+
+ExternalTraceInfo check_external_trace(const std::string& path) {
+  TraceIn in(path);
+  for (std::int64_t f = 1; f <= in.info.frames; ++f) in.frame(f);
+  return in.info;
+}
+
+std::vector<ValidationResult> validate_external_trace(const std::string& path, ExternalOptions options, int every,
+                                                      std::int64_t max_frames, ExternalTraceInfo* info) {
+  if (every < 1) throw InputError(fmt::format("--every: {}; allowed: >= 1", every));
+  const ExternalTraceInfo checked = check_external_trace(path);
+  TraceIn in(path);
+  options.engine = in.info.engine;
+  options.spec6_response = in.info.spec6_response;
+  // With a scene, the bodies come from it and the trace's tables must match it.
+  ExternalValidator validator(in.bodies, options);
+  const std::int64_t frames = max_frames > 0 ? std::min(max_frames, in.info.frames) : in.info.frames;
+  for (std::int64_t f = 1; f <= frames; ++f) validator.observe(in.frame(f), f % every == 0);
+  if (info) {
+    *info = checked;
+    info->frames = frames;
+  }
+  return validator.results();
+}
+
+}  // namespace octocd
