@@ -319,6 +319,7 @@ struct CudaWorld::Impl {
     md.pair_capacity = pcap();
     md.confirmed = confirmed.get();
     md.counters = counters();
+    md.steps = level_steps;
     gpu::MidItem* lists[2] = {items_a.get(), items_b.get()};
     md.out = lists[0];
     md.out_count = counts() + 1;
@@ -670,7 +671,7 @@ const FrameMetrics& CudaWorld::step() {
         is_finite(x) ? v.y : x.y, is_finite(x) ? v.z : x.z));
   }
   m.box_tests = counters[0];
-  m.box_pairs = d.level_steps > 0 ? d.host->counts[d.level_steps] : 0;
+  m.box_pairs = counters[1];
   m.vertex_tests = counters[2];
   if (!flat) m.cell_candidates = counters[3];
   m.contacts = r.contacts;

@@ -90,7 +90,12 @@ struct MidItem {
   std::uint32_t k = 0;
   std::uint32_t ca = 0;
   std::uint32_t cb = 0;
+  std::uint32_t chunk = 0;  ///< last step, mesh-mesh: B's vertices [chunk * kLeafChunk, + kLeafChunk)
 };
+
+/// B's vertices per leaf work item of a mesh-mesh cell pair (a large cell pair becomes
+/// several items, so its vertex tests spread over several warps).
+constexpr std::uint32_t kLeafChunk = 256;
 
 /// One launch of the midphase work lists (midphase.cu): start (pairs -> step 0 items),
 /// expand (step i items -> step i + 1 items) or leaf (last step items -> confirmed).
@@ -105,7 +110,8 @@ struct MidListDesc {
   const std::uint32_t* pair_count = nullptr;  ///< device: pairs found (live = min with capacity)
   std::uint32_t pair_capacity = 0;
   std::uint8_t* confirmed = nullptr;        ///< out: 1 = contact confirmed (start writes every pair)
-  unsigned long long* counters = nullptr;   ///< out (added): box tests, box pairs, vertex tests
+  unsigned long long* counters = nullptr;   ///< out (added): box tests, leaf box pairs, vertex tests
+  int steps = 0;                            ///< level steps of the list (the last one: leaves)
   const MidItem* in = nullptr;              ///< expand / leaf: this step's items
   const std::uint32_t* in_count = nullptr;  ///< device: items appended to `in`
   std::uint32_t in_capacity = 0;

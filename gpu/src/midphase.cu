@@ -16,9 +16,12 @@
 // only the order of the work differs. Lists are appended with warp-aggregated integer
 // atomics (item order varies run to run; results and counts do not). A list that would
 // pass its capacity still counts every item (the host then regrows and reruns the step).
-// Counts: box tests = every cell pair tested, box pairs = leaf items, vertex tests = per
-// leaf (A's filtered vertices) x (B's filtered vertices) or the cell's vertices against a
-// box: the work done here, with no early exit, so each is >= the CPU's count.
+// A large leaf cell pair is split into items of kLeafChunk of B's vertices each, so its
+// vertex tests spread over several warps.
+// Counts: box tests = every cell pair tested, box pairs = surviving leaf cell pairs,
+// vertex tests = per leaf (A's filtered vertices) x (B's filtered vertices) or the cell's
+// vertices against a box: the work done here, with no early exit, so each is >= the
+// CPU's count.
 #include "kernels.hpp"
 
 namespace octocd {
@@ -84,10 +87,35 @@ __device__ void append(const MidListDesc& d, bool keep, const MidItem& item) {
   }
 }
 
+/// Warp-aggregated append of `cnt` copies of this lane's item, with chunk = 0 .. cnt - 1
+/// (every lane calls it).
+__device__ void append_chunks(const MidListDesc& d, std::uint32_t cnt, MidItem item) {
+  const std::uint32_t lane = lane_id();
+  std::uint32_t incl = cnt;
+  for (int o = 1; o < 32; o <<= 1) {
+    const std::uint32_t y = __shfl_up_sync(kFull, incl, o);
+    if (lane >= static_cast<std::uint32_t>(o)) incl += y;
+  }
+  const std::uint32_t total = __shfl_sync(kFull, incl, 31);
+  if (total == 0) return;
+  std::uint32_t base = 0;
+  if (lane == 0) base = atomicAdd(d.out_count, total);
+  base = __shfl_sync(kFull, base, 0);
+  const std::uint32_t start = base + incl - cnt;
+  for (std::uint32_t c = 0; c < cnt; ++c) {
+    if (start + c < d.out_capacity) {
+      item.chunk = c;
+      d.out[start + c] = item;
+    }
+  }
+}
+
 /// Tests the cell pairs [a0, a1) x [b0, b1) of pair k (mesh-box: [a0, a1) against the
-/// box; b is unused) with the lanes of the warp and appends the overlapping ones.
+/// box; b is unused) with the lanes of the warp and appends the overlapping ones; at the
+/// last step (`last`) a mesh-mesh cell pair is appended once per kLeafChunk of B's
+/// vertices, and the surviving leaf box pairs are counted.
 __device__ void test_cells(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t a0,
-                           std::uint32_t a1, std::uint32_t b0, std::uint32_t b1) {
+                           std::uint32_t a1, std::uint32_t b0, std::uint32_t b1, bool last) {
   const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
   const std::uint32_t nb = mesh_box ? 1u : b1 - b0;
   const std::uint32_t total = (a1 - a0) * nb;
@@ -103,7 +131,16 @@ __device__ void test_cells(const MidListDesc& d, const PairContext& c, std::uint
       keep = mesh_box ? overlaps(A.cells[item.ca].box, c.s.box_local)
                       : overlaps(hd::moved_grown(A.cells[item.ca].box, c.s.d, c.s.margin), B.cells[item.cb].box);
     }
-    append(d, keep, item);
+    if (last) {
+      const unsigned mask = __ballot_sync(kFull, keep);
+      if (lane_id() == 0 && mask) atomicAdd(&d.counters[1], static_cast<unsigned long long>(__popc(mask)));
+    }
+    if (last && !mesh_box) {
+      const std::uint32_t nv = keep ? B.cells[item.cb].vertex_count : 0u;
+      append_chunks(d, keep ? (nv + kLeafChunk - 1) / kLeafChunk : 0u, item);
+    } else {
+      append(d, keep, item);
+    }
   }
   if (lane_id() == 0 && total > 0) atomicAdd(&d.counters[0], static_cast<unsigned long long>(total));
 }
@@ -126,7 +163,7 @@ __global__ void mid_start_kernel(MidListDesc d) {
     const hd::OctreeView& B = c.b.octree;
     const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
     test_cells(d, c, k, A.level_begin(c.s.la[0]), A.level_end(c.s.la[0]), mesh_box ? 0u : B.level_begin(c.s.lb[0]),
-               mesh_box ? 1u : B.level_end(c.s.lb[0]));
+               mesh_box ? 1u : B.level_end(c.s.lb[0]), d.steps == 1);
   }
 }
 
@@ -139,7 +176,7 @@ __global__ void mid_expand_kernel(MidListDesc d, int step) {
     std::uint32_t a0, a1, b0 = 0, b1 = 1;
     hd::descendants(c.a.octree, item.ca, c.s.la[step], c.s.la[step + 1], a0, a1);
     if (!mesh_box) hd::descendants(c.b.octree, item.cb, c.s.lb[step], c.s.lb[step + 1], b0, b1);
-    test_cells(d, c, item.k, a0, a1, b0, b1);
+    test_cells(d, c, item.k, a0, a1, b0, b1, step + 2 == d.steps);
   }
 }
 
@@ -194,14 +231,18 @@ __global__ void mid_leaf_kernel(MidListDesc d) {
     // A's vertices inside B's grown cell box (in A's frame), vertex_close(wa, wb).
     const hd::OctreeView& B = c.b.octree;
     const MeshOctreeCell cb = B.cells[item.cb];
-    const Vec3* vb = B.vertices + cb.first_vertex;
+    // This item's share of B's vertices: chunk `item.chunk` of the cell's.
+    const std::uint32_t chunk_begin = item.chunk * kLeafChunk;
+    const std::uint32_t rest = cb.vertex_count > chunk_begin ? cb.vertex_count - chunk_begin : 0u;
+    const std::uint32_t nbv = rest < kLeafChunk ? rest : kLeafChunk;
+    const Vec3* vb = B.vertices + cb.first_vertex + chunk_begin;
     const Vec3 pb = c.b.position;
     const Aabb a_in_b = hd::moved_grown(ca.box, c.s.d, c.s.margin);
     const Aabb b_in_a = hd::moved_back_grown(cb.box, c.s.d, c.s.margin);
     std::uint32_t nbf = 0, naf = 0;
-    for (std::uint32_t j0 = 0; j0 < cb.vertex_count; j0 += 32) {
+    for (std::uint32_t j0 = 0; j0 < nbv; j0 += 32) {
       const std::uint32_t j = j0 + lane;
-      nbf += static_cast<std::uint32_t>(__popc(__ballot_sync(kFull, j < cb.vertex_count && hd::inside(vb[j], a_in_b))));
+      nbf += static_cast<std::uint32_t>(__popc(__ballot_sync(kFull, j < nbv && hd::inside(vb[j], a_in_b))));
     }
     if (nbf == 0) continue;  // as mesh_mesh_leaf: no vertex test
     for (std::uint32_t i0 = 0; i0 < ca.vertex_count; i0 += 32) {
@@ -215,10 +256,10 @@ __global__ void mid_leaf_kernel(MidListDesc d) {
     // pair may confirm it first (checked between tiles): the answer is the same.
     bool found = false;
     std::uint32_t jb = 0;
-    while (!found && jb < cb.vertex_count) {
+    while (!found && jb < nbv) {
       if (__shfl_sync(kFull, lane == 0 ? static_cast<int>(pair_confirmed(d, item.k)) : 0, 0)) break;
       std::uint32_t nb = 0;
-      stage_tile(vb, cb.vertex_count, a_in_b, pb, tile_b, jb, nb);
+      stage_tile(vb, nbv, a_in_b, pb, tile_b, jb, nb);
       std::uint32_t ia = 0;
       while (!found && nb > 0 && ia < ca.vertex_count) {
         std::uint32_t na = 0;

@@ -2,10 +2,12 @@
 /// \file midphase_hd.hpp
 /// The per-pair midphase (per-mesh octree levels; SPEC 5.2) and vertex-proximity narrow
 /// phase (paper Eq. 7-8, Algorithm A2; SPEC 5.3) as `OCTOCD_HD` functions: the one copy
-/// both engines run. The CPU's confirm_contact / exhaustive_contact (midphase.cpp) and the
-/// CUDA engine's midphase kernel call these with views of the same octrees, so both
-/// confirm exactly the same contacts with the same float32 expressions and count the same
-/// box and vertex tests.
+/// both engines run. The CPU's confirm_contact / exhaustive_contact (midphase.cpp) runs the
+/// depth-first descent below; the CUDA engine's level work lists (gpu/src/midphase.cu)
+/// run the same set-up (setup_pair), the same cell boxes (moved_grown, moved_back_grown,
+/// descendants) and the same vertex tests breadth first. Both confirm exactly the same
+/// contacts with the same float32 expressions; their test counts differ (the CPU stops at
+/// the first confirmed vertex pair).
 ///
 /// Device-friendly: raw pointers instead of containers, no allocation, no exceptions, no
 /// recursion (the level-list descent keeps an explicit stack of at most
