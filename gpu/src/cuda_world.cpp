@@ -89,6 +89,7 @@ struct CudaWorld::Impl {
   cudaEvent_t events[kEvents] = {};
   bool sync_each_launch = false;  // OCTOCD_CUDA_SYNC=1
   bool use_graph = true;          // OCTOCD_CUDA_GRAPH=0 turns the CUDA graph off
+  bool stage_times = true;        // OCTOCD_CUDA_STAGE_TIMES=0: no events (stage_ms stay 0)
   bool capturing = false;
   std::string device;
   std::string broadphase;
@@ -187,6 +188,7 @@ struct CudaWorld::Impl {
   }
 
   void record_event(int i) {
+    if (!stage_times) return;
     check(cudaEventRecordWithFlags(events[i], stream, capturing ? cudaEventRecordExternal : cudaEventRecordDefault),
           "cudaEventRecord");
   }
@@ -303,9 +305,7 @@ struct CudaWorld::Impl {
     launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(), 32 + key_bits(n),
                                 stream),
              "cub::DeviceRadixSort::SortKeys");
-    launched(gpu::launch_unpack_pairs(pair_keys_sorted.get(), counts(), pcap(), pairs.get(), stream),
-             "unpack_pairs");
-    record_event(3);
+    record_event(3);  // the pairs are unpacked from the sorted keys by mid_start
     // 4. Midphase + narrow phase (SPEC 5.2-5.3) as per-level work lists.
     gpu::MidListDesc md;
     md.x = x.get();
@@ -315,6 +315,7 @@ struct CudaWorld::Impl {
     md.shapes = shapes_desc();
     md.levels = levels;
     md.pairs = pairs.get();
+    md.pair_keys = pair_keys_sorted.get();
     md.pair_count = counts();
     md.pair_capacity = pcap();
     md.confirmed = confirmed.get();
@@ -501,6 +502,8 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.sync_each_launch = env_is_one("OCTOCD_CUDA_SYNC");
   const char* graph = std::getenv("OCTOCD_CUDA_GRAPH");
   d.use_graph = !(graph != nullptr && std::strcmp(graph, "0") == 0);
+  const char* times = std::getenv("OCTOCD_CUDA_STAGE_TIMES");
+  d.stage_times = !(times != nullptr && std::strcmp(times, "0") == 0);
   {
     int dev = 0, sms = 1;
     check(cudaGetDevice(&dev), "cudaGetDevice");
@@ -682,7 +685,7 @@ const FrameMetrics& CudaWorld::step() {
   }
   m.kinetic_energy = r.kinetic_energy;
   m.momentum = {r.momentum[0], r.momentum[1], r.momentum[2]};
-  for (int s = 0; s < static_cast<int>(Stage::Count); ++s) {
+  for (int s = 0; d.stage_times && s < static_cast<int>(Stage::Count); ++s) {
     float ms = 0.0f;
     check(cudaEventElapsedTime(&ms, d.events[s], d.events[s + 1]), "cudaEventElapsedTime");
     m.stage_ms[static_cast<std::size_t>(s)] = static_cast<double>(ms);

@@ -106,7 +106,8 @@ struct MidListDesc {
   const std::uint32_t* shape = nullptr;
   ShapesDesc shapes;
   hd::LevelList levels;
-  const Pair* pairs = nullptr;
+  Pair* pairs = nullptr;  ///< start writes pairs[k] from pair_keys; the others read them
+  const unsigned long long* pair_keys = nullptr;  ///< start: the sorted pair keys
   const std::uint32_t* pair_count = nullptr;  ///< device: pairs found (live = min with capacity)
   std::uint32_t pair_capacity = 0;
   std::uint8_t* confirmed = nullptr;        ///< out: 1 = contact confirmed (start writes every pair)

@@ -55,9 +55,8 @@ struct PairContext {
   bool static_static = false;
 };
 
-__device__ PairContext context(const MidListDesc& d, std::uint32_t k) {
+__device__ PairContext context(const MidListDesc& d, std::uint32_t k, const Pair& p) {
   PairContext c;
-  const Pair p = d.pairs[k];
   c.static_static = d.w[p.a] == 0.0f && d.w[p.b] == 0.0f;
   const std::uint32_t sa = d.shape[p.a];
   const std::uint32_t sb = d.shape[p.b];
@@ -148,7 +147,13 @@ __device__ void test_cells(const MidListDesc& d, const PairContext& c, std::uint
 __global__ void mid_start_kernel(MidListDesc d) {
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
   for (std::uint32_t k = global_warp(); k < np; k += warp_count()) {
-    const PairContext c = context(d, k);
+    // The pair from its sorted key (the broadphase's output), kept for the later stages.
+    const unsigned long long key = d.pair_keys[k];
+    Pair p;
+    p.a = static_cast<std::uint32_t>(key >> 32);
+    p.b = static_cast<std::uint32_t>(key & 0xffffffffull);
+    if (lane_id() == 0) d.pairs[k] = p;
+    const PairContext c = context(d, k, p);
     if (c.static_static || c.s.kind == hd::PairKind::Decided || c.s.kind == hd::PairKind::Exhaustive) {
       if (lane_id() == 0) {
         bool hit = false;
@@ -171,7 +176,7 @@ __global__ void mid_expand_kernel(MidListDesc d, int step) {
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
   for (std::uint32_t it = global_warp(); it < count; it += warp_count()) {
     const MidItem item = d.in[it];
-    const PairContext c = context(d, item.k);
+    const PairContext c = context(d, item.k, d.pairs[item.k]);
     const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
     std::uint32_t a0, a1, b0 = 0, b1 = 1;
     hd::descendants(c.a.octree, item.ca, c.s.la[step], c.s.la[step + 1], a0, a1);
@@ -213,7 +218,7 @@ __global__ void mid_leaf_kernel(MidListDesc d) {
   const std::uint32_t lane = lane_id();
   for (std::uint32_t it = global_warp(); it < count; it += warp_count()) {
     const MidItem item = d.in[it];
-    const PairContext c = context(d, item.k);
+    const PairContext c = context(d, item.k, d.pairs[item.k]);
     const hd::OctreeView& A = c.a.octree;
     const MeshOctreeCell ca = A.cells[item.ca];
     const Vec3* va = A.vertices + ca.first_vertex;
