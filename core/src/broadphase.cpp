@@ -14,6 +14,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/loose_octree.hpp"
+#include "octocd/strict_octree.hpp"
 
 namespace octocd {
 
@@ -102,26 +103,17 @@ std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, cons
 int auto_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain) {
   // Mean body extent = mean over bodies of the longest side of the AABB (bodies with a
   // non-finite or negative side are left out of the mean).
+  // (octocd/strict_octree.hpp: the same terms and decision as the CUDA engine's.)
   double sum = 0.0;
   std::size_t count = 0;
   for (const Aabb& b : boxes) {
-    const double e = std::max({static_cast<double>(b.max.x) - b.min.x,
-                               static_cast<double>(b.max.y) - b.min.y,
-                               static_cast<double>(b.max.z) - b.min.z});
-    if (std::isfinite(e) && e >= 0.0) {
+    const double e = strict_auto_extent(b);
+    if (strict_auto_counts(e)) {
       sum += e;
       ++count;
     }
   }
-  if (count == 0) return 2;
-  const double mean = sum / static_cast<double>(count);
-  const double side = std::max({static_cast<double>(domain.max.x) - domain.min.x,
-                                static_cast<double>(domain.max.y) - domain.min.y,
-                                static_cast<double>(domain.max.z) - domain.min.z});
-  for (int level = 8; level >= 1; --level) {
-    if (side / static_cast<double>(1u << level) >= 2.0 * mean) return level;
-  }
-  return 1;
+  return strict_auto_depth(sum, count, domain);
 }
 
 int auto_loose_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain) {

@@ -3,6 +3,9 @@
 /// Algorithms 1-2; SPEC 5.1; called `octree` in SPEC revision 1). The default `octree` is
 /// the loose octree of broadphase_octree.cpp.
 ///
+/// Node math (grid, node keys, subtree ranges) lives in octocd/strict_octree.hpp, shared
+/// with the CUDA engine's gpu/src/broadphase_strict.cu.
+///
 /// Structure. The root is the bounding cube of the domain (centred on the domain centre,
 /// side = longest domain side), split D_w times. Coordinates are mapped monotonically to
 /// the integer grid of the depth-D_w leaves; a body goes into the deepest node whose cell
@@ -39,6 +42,7 @@
 #include <limits>
 
 #include "octocd/broadphase.hpp"
+#include "octocd/strict_octree.hpp"
 
 #include "broadphase_detail.hpp"
 
@@ -123,9 +127,8 @@ class StrictOctreeBroadPhase final : public BroadPhase {
         own = merged(own, sorted_[e]);
         ++e;
       }
-      const int level = static_cast<int>(key & 15u);
       const std::uint64_t lo = key >> 4;
-      const std::uint64_t hi = lo + (std::uint64_t{1} << (3 * (depth - level)));
+      const std::uint64_t hi = strict_subtree_leaf_end(key, depth);
       while (!parents_.empty() && nodes_[parents_.back()].hi <= lo) close_top();
       Node node;
       node.hi = hi;
@@ -254,14 +257,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
     all_finite_prev_ = true;
     moved_.clear();
 
-    const Vec3 c = center(domain_);
-    const float side = std::max({domain_.max.x - domain_.min.x, domain_.max.y - domain_.min.y,
-                                 domain_.max.z - domain_.min.z});
-    const Vec3 origin{c.x - 0.5f * side, c.y - 0.5f * side, c.z - 0.5f * side};
-    const bool usable = std::isfinite(side) && side > 0.0f && is_finite(origin) && depth > 0;
-    const float cells = static_cast<float>(1u << depth);
-    const float scale = usable ? cells / side : 0.0f;
-    const std::uint32_t top = (1u << depth) - 1u;
+    const StrictGrid grid = strict_grid(domain_, depth);  // shared with the CUDA engine
 
     std::size_t w = 0;
     for (std::size_t k = 0; k < n; ++k) {
@@ -272,31 +268,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
         all_finite_prev_ = false;  // the item set shrinks: rebuild next time
         continue;
       }
-      std::uint64_t node = 0;  // root: lo 0, level 0
-      if (usable) {
-        std::uint32_t i0[3], i1[3];
-        bool inside = true;
-        for (int a = 0; a < 3 && inside; ++a) {
-          const float u0 = (b.min[a] - origin[a]) * scale;  // monotone in b.min[a]
-          const float u1 = (b.max[a] - origin[a]) * scale;
-          if (!(u0 >= 0.0f && u1 <= cells && u0 <= u1)) {
-            inside = false;
-            break;
-          }
-          i0[a] = std::min(static_cast<std::uint32_t>(u0), top);
-          i1[a] = std::min(static_cast<std::uint32_t>(u1), top);
-        }
-        if (inside) {
-          const std::uint32_t diff = (i0[0] ^ i1[0]) | (i0[1] ^ i1[1]) | (i0[2] ^ i1[2]);
-          int s = 0;  // levels above the leaves
-          while ((diff >> s) != 0u) ++s;
-          const int level = depth - s;
-          const std::uint64_t lo =
-              static_cast<std::uint64_t>(morton3(i0[0] >> s, i0[1] >> s, i0[2] >> s))
-              << (3 * s);
-          node = (lo << 4) | static_cast<std::uint64_t>(level);
-        }
-      }
+      const std::uint64_t node = strict_node_key(grid, b);
       Item it;
       it.node = node;
       it.minx = float_key(b.min.x);

@@ -14,11 +14,15 @@
 /// the min corner of the two boxes' intersection, i.e. the cell (max of the two min
 /// cells) per axis, which both boxes touch when they overlap. The result is then sorted
 /// by (a, b) with a counting sort; it is unique by construction.
+///
+/// The cell math (cells of a box, keys, the de-duplication cell, the NaN and range rules)
+/// is octocd/spatial_hash.hpp, shared with the CUDA engine's gpu/src/broadphase_hash.cu.
 
 #include <algorithm>
 #include <cmath>
 
 #include "octocd/broadphase.hpp"
+#include "octocd/spatial_hash.hpp"
 
 #include "broadphase_detail.hpp"
 
@@ -27,7 +31,6 @@ namespace octocd {
 namespace {
 
 constexpr std::int64_t kMaxCells = 4096;        // more cells than this: oversize
-constexpr std::int64_t kCoordLimit = 1 << 20;   // |cell coordinate| < 2^20
 
 struct Entry {
   std::uint64_t key;
@@ -50,46 +53,29 @@ class SpatialHashBroadPhase final : public BroadPhase {
     oversize_.clear();
     kind_.assign(n, kGrid);
     cell0_.resize(3 * n);
-    const double inv_h = 1.0 / static_cast<double>(h_);
+    const double inv_h = hash_inv_cell_size(h_);
     std::uint64_t valid = 0;
 
     for (std::size_t i = 0; i < n; ++i) {
-      const Aabb& b = boxes[i];
-      std::int64_t c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0};
-      bool nan = false, over = false;
-      std::int64_t count = 1;
-      for (int a = 0; a < 3; ++a) {
-        if (std::isnan(b.min[a]) || std::isnan(b.max[a])) {
-          nan = true;
-          break;
-        }
-        const double f0 = std::floor(static_cast<double>(b.min[a]) * inv_h);  // monotone
-        const double f1 = std::floor(static_cast<double>(b.max[a]) * inv_h);
-        if (!(f0 > -kCoordLimit && f1 < kCoordLimit && f0 <= f1)) {
-          over = true;
-          continue;
-        }
-        c0[a] = static_cast<std::int64_t>(f0);
-        c1[a] = static_cast<std::int64_t>(f1);
-        if (over) continue;
-        count *= c1[a] - c0[a] + 1;  // each factor < 2^21 and count <= kMaxCells: no overflow
-        if (count > kMaxCells) over = true;
-      }
-      if (nan) {
+      // Cells, oversize and NaN rules: octocd/spatial_hash.hpp, shared with the CUDA engine.
+      const HashSpan span = hash_span(boxes[i], inv_h, kMaxCells);
+      if (span.kind == kHashSkip) {
         kind_[i] = kSkip;
         continue;
       }
       ++valid;
-      if (over) {
+      if (span.kind == kHashOversize) {
         kind_[i] = kOversize;
         oversize_.push_back(static_cast<std::uint32_t>(i));
         continue;
       }
-      for (int a = 0; a < 3; ++a) cell0_[3 * i + a] = static_cast<std::int32_t>(c0[a]);
+      const std::int32_t* c0 = span.c0;
+      const std::int32_t* c1 = span.c1;
+      for (int a = 0; a < 3; ++a) cell0_[3 * i + a] = c0[a];
       for (std::int64_t x = c0[0]; x <= c1[0]; ++x) {
         for (std::int64_t y = c0[1]; y <= c1[1]; ++y) {
           for (std::int64_t z = c0[2]; z <= c1[2]; ++z) {
-            entries_.push_back({pack(x, y, z), static_cast<std::uint32_t>(i)});
+            entries_.push_back({hash_cell_key(x, y, z), static_cast<std::uint32_t>(i)});
           }
         }
       }
@@ -116,10 +102,7 @@ class SpatialHashBroadPhase final : public BroadPhase {
             const std::uint32_t q = entries_[j].body;
             const std::int32_t* cq = &cell0_[3 * q];
             // Report only from the cell of the intersection's min corner.
-            if (pack(std::max(cp[0], cq[0]), std::max(cp[1], cq[1]), std::max(cp[2], cq[2])) !=
-                key) {
-              continue;
-            }
+            if (hash_pair_cell_key(cp, cq) != key) continue;
             if (overlaps(boxes[p], boxes[q])) out.push_back({p, q});  // p < q: sorted by body
           }
         }
@@ -151,12 +134,6 @@ class SpatialHashBroadPhase final : public BroadPhase {
   }
 
  private:
-  static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z) {
-    return (static_cast<std::uint64_t>(x + kCoordLimit) << 42) |
-           (static_cast<std::uint64_t>(y + kCoordLimit) << 21) |
-           static_cast<std::uint64_t>(z + kCoordLimit);
-  }
-
   float h_;
   std::vector<Entry> entries_;
   std::vector<std::uint32_t> oversize_;

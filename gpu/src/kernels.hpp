@@ -269,5 +269,19 @@ cudaError_t sort_pairs_u32(void* temp, std::size_t& temp_bytes, const std::uint3
                            std::uint32_t* keys_out, const std::uint32_t* vals_in, std::uint32_t* vals_out,
                            std::uint32_t count, int end_bit, cudaStream_t stream);
 
+// ---- primitives.cu (CUB), for the device broadphases (broadphase_strict.cu, -_hash.cu) --
+/// Stable radix sort of (uint64 key, uint32 value) pairs by the key's bits [0, end_bit).
+/// With temp == nullptr only sets temp_bytes.
+cudaError_t sort_pairs_u64_u32(void* temp, std::size_t& temp_bytes, const unsigned long long* keys_in,
+                               unsigned long long* keys_out, const std::uint32_t* vals_in, std::uint32_t* vals_out,
+                               std::uint32_t count, int end_bit, cudaStream_t stream);
+/// Sum of `count` doubles into *out (CUB's fixed reduction tree: the same bits run to run
+/// on one device). With temp == nullptr only sets temp_bytes.
+cudaError_t sum_f64(void* temp, std::size_t& temp_bytes, const double* in, double* out, std::uint32_t count,
+                    cudaStream_t stream);
+/// Sum of `count` uint32 into *out. With temp == nullptr only sets temp_bytes.
+cudaError_t sum_u32(void* temp, std::size_t& temp_bytes, const std::uint32_t* in, std::uint32_t* out,
+                    std::uint32_t count, cudaStream_t stream);
+
 }  // namespace gpu
 }  // namespace octocd

@@ -1,6 +1,7 @@
 // Device-wide primitives from CCCL's CUB (shipped with the CUDA toolkit): the exclusive
 // scan of the counting passes, the stable radix sorts (body-major contact index, loose
-// octree keys, pair keys) and a minimum (the loose octree's auto depth).
+// octree keys, pair keys; strict octree node keys and spatial-hash cell entries), a
+// minimum (the loose octree's auto depth) and sums (the strict octree's auto depth).
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_reduce.cuh>
 #include <cub/device/device_scan.cuh>
@@ -31,6 +32,23 @@ cudaError_t sort_keys_u64(void* temp, std::size_t& temp_bytes, const unsigned lo
 cudaError_t min_f32(void* temp, std::size_t& temp_bytes, const float* in, float* out, std::uint32_t count,
                     cudaStream_t stream) {
   return cub::DeviceReduce::Min(temp, temp_bytes, in, out, static_cast<int>(count), stream);
+}
+
+cudaError_t sort_pairs_u64_u32(void* temp, std::size_t& temp_bytes, const unsigned long long* keys_in,
+                               unsigned long long* keys_out, const std::uint32_t* vals_in, std::uint32_t* vals_out,
+                               std::uint32_t count, int end_bit, cudaStream_t stream) {
+  return cub::DeviceRadixSort::SortPairs(temp, temp_bytes, keys_in, keys_out, vals_in, vals_out,
+                                         static_cast<int>(count), 0, end_bit, stream);
+}
+
+cudaError_t sum_f64(void* temp, std::size_t& temp_bytes, const double* in, double* out, std::uint32_t count,
+                    cudaStream_t stream) {
+  return cub::DeviceReduce::Sum(temp, temp_bytes, in, out, static_cast<int>(count), stream);
+}
+
+cudaError_t sum_u32(void* temp, std::size_t& temp_bytes, const std::uint32_t* in, std::uint32_t* out,
+                    std::uint32_t count, cudaStream_t stream) {
+  return cub::DeviceReduce::Sum(temp, temp_bytes, in, out, static_cast<int>(count), stream);
 }
 
 }  // namespace gpu

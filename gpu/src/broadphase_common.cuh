@@ -1,0 +1,100 @@
+#pragma once
+// Device helpers shared by the device broadphases behind DeviceBroadPhase
+// (broadphase_strict.cu, broadphase_hash.cu): the pair key, a binary search on sorted
+// 64-bit keys, the per-block sum of the exact-test counter, and a warp's ordered writer
+// into PairOutput::keys (count pass: counts only; fill pass: writes where the index is
+// below the capacity). CUDA only (nvcc).
+#include <algorithm>
+#include <cstdint>
+#include <initializer_list>
+#include <string>
+#include <vector>
+
+#include <cub/block/block_reduce.cuh>
+
+#include "device_broadphase.hpp"
+#include "device_buffer.hpp"
+#include "kernels.hpp"
+
+namespace octocd {
+namespace gpu {
+namespace bp {
+
+/// Lanes of a warp; the warp-per-item kernels launch 32 threads per item.
+constexpr unsigned kWarpSize = 32;
+constexpr unsigned kFullMask = 0xffffffffu;
+
+/// The output key of the pair {p, q} (p != q): (min << 32) | max (device_broadphase.hpp).
+__device__ inline unsigned long long pair_key(std::uint32_t p, std::uint32_t q) {
+  const std::uint32_t a = p < q ? p : q;
+  const std::uint32_t b = p < q ? q : p;
+  return (static_cast<unsigned long long>(a) << 32) | b;
+}
+
+/// First index in [lo, hi) of the ascending `keys` whose key is >= key (hi if none).
+__device__ inline std::uint32_t lower_bound_u64(const unsigned long long* keys, std::uint32_t lo, std::uint32_t hi,
+                                                unsigned long long key) {
+  while (lo < hi) {
+    const std::uint32_t mid = lo + (hi - lo) / 2;
+    if (keys[mid] < key) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo;
+}
+
+/// Adds the sum of every thread's `v` to *counter: a block reduction, then one integer
+/// atomicAdd per block (order-free). Every thread of the block (kBlockSize threads) must
+/// call it, once.
+__device__ inline void block_add(unsigned long long* counter, unsigned long long v) {
+  using Reduce = cub::BlockReduce<unsigned long long, kBlockSize>;
+  __shared__ typename Reduce::TempStorage storage;
+  const unsigned long long sum = Reduce(storage).Sum(v);
+  if (threadIdx.x == 0 && sum != 0) atomicAdd(counter, sum);
+}
+
+/// One warp's pairs for one item (a slot or a body), round by round: in each round every
+/// lane offers at most one hit; hits are numbered in lane order after those of earlier
+/// rounds, so the output order is fixed. With keys != nullptr (fill pass) hit k goes to
+/// keys[base + k] when base + k < capacity (PairOutput's contract); `written` counts all.
+/// Every lane of the warp must call round() the same number of times.
+struct WarpWriter {
+  unsigned long long* keys = nullptr;
+  std::uint32_t base = 0;
+  std::uint32_t capacity = 0;
+  std::uint32_t written = 0;
+
+  __device__ void round(bool hit, unsigned long long key) {
+    const unsigned lane = threadIdx.x & (kWarpSize - 1);
+    const unsigned ballot = __ballot_sync(kFullMask, hit);
+    if (hit && keys) {
+      const unsigned long long pos =
+          static_cast<unsigned long long>(base) + written + __popc(ballot & ((1u << lane) - 1u));
+      if (pos < capacity) keys[pos] = key;
+    }
+    written += static_cast<std::uint32_t>(__popc(ballot));
+  }
+};
+
+/// Blocks of kBlockSize threads for one warp per item (at least 1).
+inline unsigned warp_grid_for(std::size_t items) { return grid_for(items * kWarpSize); }
+
+/// Throws RuntimeError naming the kernel when its launch failed.
+inline void launched(cudaError_t e, const char* kernel) {
+  if (e != cudaSuccess) {
+    (void)cudaGetLastError();
+    throw RuntimeError(fmt::format("CUDA kernel '{}' failed to launch: {}", kernel, cuda_text(e)));
+  }
+}
+
+/// Throws RuntimeError (a programming error of the caller) when find() gets a body count
+/// that reserve() did not size the scratch for.
+inline void check_reserved(bool reserved, std::uint32_t reserved_n, std::uint32_t n, const char* name) {
+  if (!reserved || reserved_n != n)
+    throw RuntimeError(fmt::format("device broadphase '{}': find() with {} bodies but reserve() sized it for {}; "
+                                   "call reserve(n) first (outside graph capture)",
+                                   name, n, reserved ? std::to_string(reserved_n) : std::string("none")));
+}
+
+}  // namespace bp
+}  // namespace gpu
+}  // namespace octocd

@@ -1,0 +1,613 @@
+// The device broadphases behind DeviceBroadPhase (gpu/src/device_broadphase.hpp; SPEC 5.1,
+// 11) against the CPU oracle `flat`: `octree-strict` at depths 0..10 and auto,
+// `spatial-hash` at cell sizes from 1e-6 m (every body out of cell range) to 1000 m (one
+// cell), and `octree` (loose) when gpu/src/broadphase_octree.cu has make_device_loose_octree.
+//
+// Oracles and properties, on every AABB set (random 1k and 10k, touching lattices with
+// faces on the octree split planes and on the hash cell faces, boxes outside the domain,
+// huge and infinite boxes, NaN boxes, zero-size boxes, everything in one cell, empty and
+// single-body sets, and the world AABBs of boxes-random-10000 after 100 CPU steps):
+// - the device's keys, unpacked, are pairs a < b < n, with no duplicate, and their set is
+//   the CPU `flat` set;
+// - `octree-strict`: the exact tests counted on the device equal the CPU octree-strict's
+//   cell_candidates (both are the pairs in related nodes, same node math);
+// - `spatial-hash`: the exact tests are at least the pairs;
+// - a rerun on the same instance gives the same total, test count and key sequence.
+// The PairOutput contract: with capacity 0 or 1 the total is still the true count and
+// nothing is written past the capacity; a rerun with capacity = total gives the full set.
+// find() makes no allocation and no host synchronisation: it is captured into a CUDA
+// graph, which then runs on two different sets of boxes (same n) and gives each one's set.
+//
+// Without a usable CUDA device the device tests are SKIPPED with the reason; the error
+// paths and a check of the AABB sets themselves need no device and run everywhere.
+//
+// Environment: OCTOCD_SOURCE_DIR (scenes; default: the source tree this was built from).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <limits>
+#include <map>
+#include <memory>
+#include <ostream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <cuda_runtime_api.h>
+#include <fmt/format.h>
+
+#include "device_broadphase.hpp"
+#include "device_buffer.hpp"
+#include "octocd/broadphase.hpp"
+#include "octocd/cuda_world.hpp"
+#include "octocd/engine.hpp"
+#include "octocd/error.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/world.hpp"
+
+using namespace octocd;
+using gpu::DeviceBroadPhase;
+using gpu::DeviceBuffer;
+
+namespace {
+
+#ifndef OCTOCD_TEST_SOURCE_DIR
+#define OCTOCD_TEST_SOURCE_DIR "."
+#endif
+
+#define REQUIRE_CUDA_DEVICE()                                           \
+  do {                                                                  \
+    if (!cuda_device_available()) GTEST_SKIP() << cuda_device_status(); \
+  } while (0)
+
+std::string source_dir() {
+  const char* root = std::getenv("OCTOCD_SOURCE_DIR");
+  return root ? root : OCTOCD_TEST_SOURCE_DIR;
+}
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// ---- AABB sets ------------------------------------------------------------------------
+
+struct BoxSet {
+  std::string name;
+  Aabb domain;
+  std::vector<Aabb> boxes;
+  std::vector<Pair> flat;  ///< the CPU oracle's pairs
+};
+
+Aabb cube(float lo, float hi) { return {{lo, lo, lo}, {hi, hi, hi}}; }
+
+Aabb box_at(Vec3 c, Vec3 h) { return {{c.x - h.x, c.y - h.y, c.z - h.z}, {c.x + h.x, c.y + h.y, c.z + h.z}}; }
+
+/// n boxes with centres uniform in `region` and half sides uniform in [hmin, hmax].
+std::vector<Aabb> random_boxes(std::size_t n, unsigned seed, const Aabb& region, float hmin, float hmax) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> ux(region.min.x, region.max.x), uy(region.min.y, region.max.y),
+      uz(region.min.z, region.max.z), uh(hmin, hmax);
+  std::vector<Aabb> out;
+  out.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3 c{ux(rng), uy(rng), uz(rng)};
+    const Vec3 h{uh(rng), uh(rng), uh(rng)};
+    out.push_back(box_at(c, h));
+  }
+  return out;
+}
+
+/// Unit cubes [i, i+1] x [j, j+1] x [k, k+1] filling [0, 8]^3 (every face shared, every
+/// face on a split plane of the octree over [0, 8]^3 and on a hash cell face for h = 1,
+/// 0.5, 0.25), plus cubes of side 2 on the even lattice (touching and containing).
+std::vector<Aabb> touching_lattice() {
+  std::vector<Aabb> out;
+  for (int i = 0; i < 8; ++i)
+    for (int j = 0; j < 8; ++j)
+      for (int k = 0; k < 8; ++k)
+        out.push_back({{float(i), float(j), float(k)}, {float(i + 1), float(j + 1), float(k + 1)}});
+  for (int i = 0; i < 8; i += 2)
+    for (int j = 0; j < 8; j += 2)
+      for (int k = 0; k < 8; k += 2)
+        out.push_back({{float(i), float(j), float(k)}, {float(i + 2), float(j + 2), float(k + 2)}});
+  return out;
+}
+
+/// Zero-size boxes (points) and zero-thickness plates on a lattice of multiples of 1/8 in
+/// [-1, 1]: many coincide (and so overlap), all lie on octree split planes and hash cell
+/// faces.
+std::vector<Aabb> degenerate_boxes() {
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> u(0, 16);
+  auto coord = [&] { return static_cast<float>(u(rng)) / 8.0f - 1.0f; };
+  std::vector<Aabb> out;
+  for (int i = 0; i < 800; ++i) {
+    const Vec3 p{coord(), coord(), coord()};
+    out.push_back({p, p});
+  }
+  for (int i = 0; i < 200; ++i) {  // plates: zero thickness on one axis
+    Vec3 a{coord(), coord(), coord()}, b{coord(), coord(), coord()};
+    Aabb box{{std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)},
+             {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)}};
+    const int axis = i % 3;
+    box.max[axis] = box.min[axis];
+    out.push_back(box);
+  }
+  return out;
+}
+
+/// The world AABBs of a shipped scene after `steps` CPU steps (its own broadphase).
+std::vector<Aabb> scene_frame(const std::string& name, int steps, Aabb& domain) {
+  const Scene scene = load_scene(source_dir() + "/datasets/scenes/" + name + ".json");
+  domain = scene.domain;
+  World world(build_model(scene), make_broadphase(scene.broadphase, scene.domain));
+  for (int i = 0; i < steps; ++i) world.step();
+  return world.world_aabbs();
+}
+
+std::vector<Pair> flat_pairs(const std::vector<Aabb>& boxes, const Aabb& domain) {
+  BroadPhaseConfig cfg;
+  cfg.name = "flat";
+  std::vector<Pair> out;
+  BroadPhaseStats stats;
+  make_broadphase(cfg, domain)->find_pairs(boxes, out, stats);
+  return out;
+}
+
+/// The names of the AABB sets, in test order.
+const std::vector<std::string>& box_set_names() {
+  static const std::vector<std::string> names = {
+      "empty",    "single", "uniform-1000", "uniform-10000", "touching-lattice", "outside-domain", "huge-and-infinite",
+      "nan", "degenerate", "one-cell", "boxes-random-10000-frame-100"};
+  return names;
+}
+
+/// The AABB set `name`, with its `flat` pairs (built on first use, then kept).
+BoxSet make_box_set(const std::string& name) {
+  const Aabb unit = cube(-1.0f, 1.0f);
+  BoxSet s{name, unit, {}, {}};
+  if (name == "empty") {
+  } else if (name == "single") {
+    s.boxes = {cube(-0.1f, 0.1f)};
+  } else if (name == "uniform-1000") {
+    s.boxes = random_boxes(1000, 1, unit, 0.005f, 0.06f);
+  } else if (name == "uniform-10000") {
+    s.boxes = random_boxes(10000, 2, unit, 0.002f, 0.03f);
+  } else if (name == "touching-lattice") {
+    s.domain = cube(0.0f, 8.0f);
+    s.boxes = touching_lattice();
+  } else if (name == "outside-domain") {
+    s.boxes = random_boxes(2000, 3, cube(-3.0f, 3.0f), 0.01f, 0.3f);
+  } else if (name == "huge-and-infinite") {
+    s.boxes = random_boxes(1000, 4, unit, 0.005f, 0.06f);
+    s.boxes.insert(s.boxes.begin() + 10, cube(-100.0f, 100.0f));
+    s.boxes.insert(s.boxes.begin() + 500, cube(-kInf, kInf));
+    s.boxes.push_back(unit);                                               // exactly the domain
+    s.boxes.push_back({{0.0f, -0.5f, -0.5f}, {kInf, 0.5f, 0.5f}});         // half-infinite
+    s.boxes.push_back({{-kInf, -kInf, -kInf}, {-2.0f, -2.0f, -2.0f}});     // infinite, outside
+  } else if (name == "nan") {
+    s.boxes = random_boxes(1000, 5, unit, 0.01f, 0.08f);
+    for (std::size_t i = 0; i < s.boxes.size(); i += 10) {
+      const int axis = static_cast<int>(i / 10) % 3;
+      if ((i / 10) % 2 == 0) s.boxes[i].min[axis] = kNaN;
+      else s.boxes[i].max[axis] = kNaN;
+    }
+    s.boxes.push_back({{kNaN, kNaN, kNaN}, {kNaN, kNaN, kNaN}});
+    s.boxes.push_back({{-kInf, -kInf, kNaN}, {kInf, kInf, kInf}});  // infinite with a NaN
+  } else if (name == "degenerate") {
+    s.boxes = degenerate_boxes();
+  } else if (name == "one-cell") {
+    s.boxes = random_boxes(600, 6, cube(0.3f, 0.31f), 0.0f, 0.002f);
+  } else if (name == "boxes-random-10000-frame-100") {
+    s.boxes = scene_frame("boxes-random-10000", 100, s.domain);
+  } else {
+    throw std::runtime_error("no box set " + name);
+  }
+  s.flat = flat_pairs(s.boxes, s.domain);
+  return s;
+}
+
+const BoxSet& box_set(const std::string& name) {
+  static std::map<std::string, BoxSet> cache;
+  auto it = cache.find(name);
+  if (it == cache.end()) it = cache.emplace(name, make_box_set(name)).first;
+  return it->second;
+}
+
+// ---- the broadphases under test ------------------------------------------------------
+
+struct Variant {
+  std::string label;
+  BroadPhaseConfig config;
+};
+
+/// gtest prints a parameter by its label.
+void PrintTo(const Variant& v, std::ostream* os) { *os << v.label; }
+
+std::vector<Variant> variants() {
+  std::vector<Variant> v;
+  for (int depth = -1; depth <= 10; ++depth) {
+    BroadPhaseConfig c;
+    c.name = "octree-strict";
+    c.octree_depth = depth;
+    v.push_back({depth < 0 ? std::string("strict_auto") : fmt::format("strict_depth_{}", depth), c});
+  }
+  const std::vector<std::pair<const char*, float>> sizes = {
+      {"1e_6", 1e-6f}, {"0_002", 0.002f}, {"0_02", 0.02f}, {"0_05", 0.05f},
+      {"0_25", 0.25f}, {"1", 1.0f},       {"1000", 1000.0f}};
+  for (const auto& [label, h] : sizes) {
+    BroadPhaseConfig c;
+    c.name = "spatial-hash";
+    c.cell_size = h;
+    v.push_back({std::string("hash_h_") + label, c});
+  }
+#if defined(OCTOCD_HAVE_DEVICE_LOOSE_OCTREE)
+  for (int depth : {-1, 0, 2, 10}) {
+    BroadPhaseConfig c;
+    c.name = "octree";
+    c.octree_depth = depth;
+    v.push_back({depth < 0 ? std::string("loose_auto") : fmt::format("loose_depth_{}", depth), c});
+  }
+#endif
+  return v;
+}
+
+std::unique_ptr<DeviceBroadPhase> make_device(const BroadPhaseConfig& c, const Aabb& domain) {
+  if (c.name == "octree-strict") return gpu::make_device_strict_octree(c, domain);
+  if (c.name == "spatial-hash") return gpu::make_device_spatial_hash(c);
+#if defined(OCTOCD_HAVE_DEVICE_LOOSE_OCTREE)
+  if (c.name == "octree") return gpu::make_device_loose_octree(c, domain);
+#endif
+  throw std::runtime_error("no device broadphase " + c.name);
+}
+
+// ---- running a device broadphase -----------------------------------------------------
+
+/// A stream owned by a test.
+struct Stream {
+  cudaStream_t s = nullptr;
+  Stream() { gpu::check(cudaStreamCreateWithFlags(&s, cudaStreamNonBlocking), "cudaStreamCreate"); }
+  ~Stream() {
+    if (s) (void)cudaStreamDestroy(s);
+  }
+};
+
+template <class T>
+T read_one(const T* device_ptr, cudaStream_t s) {
+  T v{};
+  gpu::check(cudaMemcpyAsync(&v, device_ptr, sizeof(T), cudaMemcpyDeviceToHost, s), "cudaMemcpy");
+  gpu::check(cudaStreamSynchronize(s), "cudaStreamSynchronize");
+  return v;
+}
+
+constexpr unsigned long long kSentinel = ~0ull;
+
+/// What one find() wrote.
+struct FindResult {
+  std::uint32_t total = 0;
+  unsigned long long candidates = 0;
+  std::vector<unsigned long long> keys;  ///< the first min(total, capacity) keys, as written
+  bool wrote_past_capacity = false;      ///< the slot after `capacity` was overwritten
+};
+
+/// Output buffers of one find(): capacity + 1 key slots filled with the sentinel (the
+/// last one must survive), the total (pre-set to a value find must overwrite) and the
+/// candidate counter (0).
+struct Output {
+  DeviceBuffer<unsigned long long> keys{"test pair keys"};
+  DeviceBuffer<std::uint32_t> total{"test pair total"};
+  DeviceBuffer<unsigned long long> candidates{"test candidates"};
+  std::uint32_t capacity = 0;
+
+  Output(std::uint32_t cap, cudaStream_t s) : capacity(cap) {
+    keys.reset(static_cast<std::size_t>(cap) + 1);
+    total.reset(1);
+    candidates.reset(1);
+    clear(s);
+  }
+  void clear(cudaStream_t s) {
+    gpu::check(cudaMemsetAsync(keys.get(), 0xff, (static_cast<std::size_t>(capacity) + 1) * 8, s), "cudaMemset");
+    gpu::check(cudaMemsetAsync(total.get(), 0xab, 4, s), "cudaMemset");
+    gpu::check(cudaMemsetAsync(candidates.get(), 0, 8, s), "cudaMemset");
+  }
+  gpu::PairOutput pair_output() const {
+    gpu::PairOutput o;
+    o.keys = keys.get();
+    o.capacity = capacity;
+    o.total = total.get();
+    o.candidates = candidates.get();
+    return o;
+  }
+  FindResult read(cudaStream_t s) const {
+    gpu::check(cudaStreamSynchronize(s), "cudaStreamSynchronize (after find)");
+    FindResult r;
+    r.total = read_one(total.get(), s);
+    r.candidates = read_one(candidates.get(), s);
+    std::vector<unsigned long long> all;
+    gpu::download(all, keys, static_cast<std::size_t>(capacity) + 1, s);
+    r.wrote_past_capacity = all[capacity] != kSentinel;
+    all.resize(std::min<std::size_t>(r.total, capacity));
+    r.keys = std::move(all);
+    return r;
+  }
+};
+
+FindResult find_once(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, std::uint32_t n, std::uint32_t capacity,
+                     cudaStream_t s) {
+  Output out(capacity, s);
+  bp.find(boxes.get(), n, out.pair_output(), s);
+  return out.read(s);
+}
+
+/// find() as the engine uses it: a small output first, regrown to the total and rerun
+/// when it overflows.
+FindResult find_all(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, std::uint32_t n, cudaStream_t s) {
+  FindResult r = find_once(bp, boxes, n, 16, s);
+  if (r.total > 16) r = find_once(bp, boxes, n, r.total, s);
+  return r;
+}
+
+/// The keys as pairs, checked (a < b < n, no duplicate) and sorted.
+::testing::AssertionResult to_pairs(const std::vector<unsigned long long>& keys, std::size_t n,
+                                    std::vector<Pair>& pairs) {
+  pairs.clear();
+  for (const unsigned long long k : keys) {
+    const Pair p{static_cast<std::uint32_t>(k >> 32), static_cast<std::uint32_t>(k & 0xffffffffull)};
+    if (!(p.a < p.b && p.b < n))
+      return ::testing::AssertionFailure() << fmt::format("bad key 0x{:016x}: pair ({}, {}) with n = {}", k, p.a, p.b, n);
+    pairs.push_back(p);
+  }
+  std::sort(pairs.begin(), pairs.end());
+  const auto dup = std::adjacent_find(pairs.begin(), pairs.end());
+  if (dup != pairs.end())
+    return ::testing::AssertionFailure() << fmt::format("pair ({}, {}) reported twice", dup->a, dup->b);
+  return ::testing::AssertionSuccess();
+}
+
+std::string describe(const Aabb& b) {
+  return fmt::format("[({}, {}, {}), ({}, {}, {})]", b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z);
+}
+
+/// Equal sorted pair sets, or the first missing and the first extra pair with their boxes.
+::testing::AssertionResult same_pairs(const std::vector<Pair>& device, const std::vector<Pair>& flat,
+                                      const std::vector<Aabb>& boxes) {
+  if (device == flat) return ::testing::AssertionSuccess();
+  std::vector<Pair> missing, extra;
+  std::set_difference(flat.begin(), flat.end(), device.begin(), device.end(), std::back_inserter(missing));
+  std::set_difference(device.begin(), device.end(), flat.begin(), flat.end(), std::back_inserter(extra));
+  auto msg = ::testing::AssertionFailure();
+  msg << fmt::format("device {} pairs, flat {}: {} missing, {} extra", device.size(), flat.size(), missing.size(),
+                     extra.size());
+  if (!missing.empty())
+    msg << fmt::format("; first missing ({}, {}): {} {}", missing[0].a, missing[0].b, describe(boxes[missing[0].a]),
+                       describe(boxes[missing[0].b]));
+  if (!extra.empty())
+    msg << fmt::format("; first extra ({}, {}): {} {}", extra[0].a, extra[0].b, describe(boxes[extra[0].a]),
+                       describe(boxes[extra[0].b]));
+  return msg;
+}
+
+std::uint64_t cpu_candidates(const BroadPhaseConfig& c, const BoxSet& set) {
+  std::vector<Pair> out;
+  BroadPhaseStats stats;
+  make_broadphase(c, set.domain)->find_pairs(set.boxes, out, stats);
+  return stats.cell_candidates;
+}
+
+class DeviceBroadPhaseTest : public ::testing::TestWithParam<Variant> {};
+
+std::string variant_name(const ::testing::TestParamInfo<Variant>& info) { return info.param.label; }
+
+// ---- tests -----------------------------------------------------------------------------
+
+TEST_P(DeviceBroadPhaseTest, PairSetEqualsFlatOnEveryBoxSet) {
+  REQUIRE_CUDA_DEVICE();
+  const Variant& v = GetParam();
+  Stream stream;
+  for (const std::string& name : box_set_names()) {
+    SCOPED_TRACE(name);
+    const BoxSet& set = box_set(name);
+    const auto n = static_cast<std::uint32_t>(set.boxes.size());
+    auto bp = make_device(v.config, set.domain);
+    EXPECT_EQ(bp->name(), v.config.name);
+    DeviceBuffer<Aabb> boxes("test boxes");
+    gpu::upload(boxes, set.boxes, stream.s);
+    bp->reserve(n, stream.s);
+    const FindResult r = find_all(*bp, boxes, n, stream.s);
+    ASSERT_EQ(r.total, set.flat.size());
+    EXPECT_FALSE(r.wrote_past_capacity);
+    std::vector<Pair> pairs;
+    ASSERT_TRUE(to_pairs(r.keys, n, pairs));
+    EXPECT_TRUE(same_pairs(pairs, set.flat, set.boxes));
+    if (v.config.name == "octree-strict") {
+      // Same node math: the related pairs the device tests are the CPU's cell candidates.
+      EXPECT_EQ(r.candidates, cpu_candidates(v.config, set));
+    } else {
+      EXPECT_GE(r.candidates, static_cast<unsigned long long>(r.total));
+    }
+    // Determinism: the same instance again gives the same bits.
+    const FindResult again = find_once(*bp, boxes, n, std::max<std::uint32_t>(r.total, 1), stream.s);
+    EXPECT_EQ(again.total, r.total);
+    EXPECT_EQ(again.candidates, r.candidates);
+    EXPECT_TRUE(again.keys == r.keys) << "the key sequence changed between two runs";
+    EXPECT_GT(bp->device_bytes(), 0u);
+  }
+}
+
+TEST_P(DeviceBroadPhaseTest, CapacityOverflowGivesTheTotalAndRerunGivesTheSet) {
+  REQUIRE_CUDA_DEVICE();
+  const Variant& v = GetParam();
+  const BoxSet& set = box_set("uniform-1000");
+  ASSERT_GT(set.flat.size(), 10u);
+  Stream stream;
+  const auto n = static_cast<std::uint32_t>(set.boxes.size());
+  auto bp = make_device(v.config, set.domain);
+  DeviceBuffer<Aabb> boxes("test boxes");
+  gpu::upload(boxes, set.boxes, stream.s);
+  bp->reserve(n, stream.s);
+
+  const FindResult none = find_once(*bp, boxes, n, 0, stream.s);
+  EXPECT_EQ(none.total, set.flat.size());
+  EXPECT_FALSE(none.wrote_past_capacity) << "capacity 0: a key was written";
+
+  const FindResult one = find_once(*bp, boxes, n, 1, stream.s);
+  EXPECT_EQ(one.total, set.flat.size());
+  EXPECT_FALSE(one.wrote_past_capacity) << "capacity 1: a key was written past it";
+  ASSERT_EQ(one.keys.size(), 1u);
+  std::vector<Pair> first;
+  ASSERT_TRUE(to_pairs(one.keys, n, first));
+  EXPECT_TRUE(std::binary_search(set.flat.begin(), set.flat.end(), first[0]));
+  EXPECT_EQ(one.candidates, none.candidates);
+
+  const FindResult all = find_once(*bp, boxes, n, one.total, stream.s);
+  EXPECT_EQ(all.total, one.total);
+  EXPECT_FALSE(all.wrote_past_capacity);
+  std::vector<Pair> pairs;
+  ASSERT_TRUE(to_pairs(all.keys, n, pairs));
+  EXPECT_TRUE(same_pairs(pairs, set.flat, set.boxes));
+}
+
+TEST_P(DeviceBroadPhaseTest, FindIsCapturedInAGraphAndReplaysOnNewBoxes) {
+  REQUIRE_CUDA_DEVICE();
+  const Variant& v = GetParam();
+  // Two sets of the same size: the graph captured on the first runs on the second.
+  const BoxSet& a = box_set("uniform-1000");
+  std::vector<Aabb> moved = random_boxes(a.boxes.size(), 99, cube(-0.5f, 0.5f), 0.01f, 0.1f);
+  const std::vector<Pair> moved_flat = flat_pairs(moved, a.domain);
+  const auto n = static_cast<std::uint32_t>(a.boxes.size());
+  const auto capacity = static_cast<std::uint32_t>(std::max(a.flat.size(), moved_flat.size()));
+
+  Stream stream;
+  auto bp = make_device(v.config, a.domain);
+  DeviceBuffer<Aabb> boxes("test boxes");
+  gpu::upload(boxes, a.boxes, stream.s);
+  bp->reserve(n, stream.s);
+  Output out(capacity, stream.s);
+  gpu::check(cudaStreamSynchronize(stream.s), "cudaStreamSynchronize");
+
+  cudaGraph_t graph = nullptr;
+  gpu::check(cudaStreamBeginCapture(stream.s, cudaStreamCaptureModeThreadLocal), "cudaStreamBeginCapture");
+  try {
+    bp->find(boxes.get(), n, out.pair_output(), stream.s);
+  } catch (...) {
+    (void)cudaStreamEndCapture(stream.s, &graph);
+    if (graph) (void)cudaGraphDestroy(graph);
+    throw;
+  }
+  const cudaError_t captured = cudaStreamEndCapture(stream.s, &graph);
+  ASSERT_EQ(captured, cudaSuccess) << "find() is not capturable (a synchronisation or an allocation?): "
+                                   << gpu::cuda_text(captured);
+  cudaGraphExec_t exec = nullptr;
+  gpu::check(cudaGraphInstantiate(&exec, graph, 0), "cudaGraphInstantiate");
+
+  for (int round = 0; round < 2; ++round) {
+    SCOPED_TRACE(round == 0 ? "captured boxes" : "new boxes, same graph");
+    const std::vector<Aabb>& host = round == 0 ? a.boxes : moved;
+    const std::vector<Pair>& flat = round == 0 ? a.flat : moved_flat;
+    ASSERT_EQ(boxes.capacity(), host.size());
+    gpu::upload(boxes, host, stream.s, /*allocate=*/false);  // into the captured buffer
+    out.clear(stream.s);
+    gpu::check(cudaGraphLaunch(exec, stream.s), "cudaGraphLaunch");
+    const FindResult r = out.read(stream.s);
+    EXPECT_EQ(r.total, flat.size());
+    std::vector<Pair> pairs;
+    ASSERT_TRUE(to_pairs(r.keys, n, pairs));
+    EXPECT_TRUE(same_pairs(pairs, flat, host));
+  }
+  (void)cudaGraphExecDestroy(exec);
+  (void)cudaGraphDestroy(graph);
+}
+
+INSTANTIATE_TEST_SUITE_P(Device, DeviceBroadPhaseTest, ::testing::ValuesIn(variants()), variant_name);
+
+// ---- needs no device -----------------------------------------------------------------
+
+bool has_nan(const Aabb& b) {
+  for (int a = 0; a < 3; ++a)
+    if (std::isnan(b.min[a]) || std::isnan(b.max[a])) return true;
+  return false;
+}
+
+TEST(DeviceBroadPhaseSets, EverySetHoldsWhatItsNameSays) {  // the fixtures, on the CPU
+  for (const std::string& name : box_set_names()) {
+    SCOPED_TRACE(name);
+    const BoxSet& s = box_set(name);
+    auto any = [&](auto pred) { return std::any_of(s.boxes.begin(), s.boxes.end(), pred); };
+    auto any_pair = [&](auto pred) { return std::any_of(s.flat.begin(), s.flat.end(), pred); };
+    if (name == "empty") {
+      EXPECT_TRUE(s.boxes.empty());
+    } else if (name == "single") {
+      EXPECT_EQ(s.boxes.size(), 1u);
+    } else {
+      EXPECT_FALSE(s.flat.empty());
+    }
+    if (name == "touching-lattice") {  // some pairs only touch (zero-width overlap)
+      EXPECT_TRUE(any_pair([&](Pair p) {
+        const Aabb& a = s.boxes[p.a];
+        const Aabb& b = s.boxes[p.b];
+        return a.max.x == b.min.x || a.max.y == b.min.y || a.max.z == b.min.z;
+      }));
+    }
+    if (name == "outside-domain") {
+      EXPECT_TRUE(any([&](const Aabb& b) { return !contains(s.domain, b); }));
+    }
+    if (name == "huge-and-infinite") {
+      EXPECT_TRUE(any([](const Aabb& b) { return std::isinf(b.min.x); }));
+    }
+    if (name == "nan") {
+      EXPECT_TRUE(any([](const Aabb& b) { return has_nan(b); }));
+      EXPECT_FALSE(any_pair([&](Pair p) { return has_nan(s.boxes[p.a]) || has_nan(s.boxes[p.b]); }));
+    }
+    if (name == "degenerate") {
+      EXPECT_TRUE(any([](const Aabb& b) { return b.min == b.max; }));
+    }
+    if (name == "one-cell") {
+      EXPECT_TRUE(std::all_of(s.boxes.begin(), s.boxes.end(),
+                              [](const Aabb& b) { return contains(cube(0.29f, 0.32f), b); }));
+    }
+    if (name == "boxes-random-10000-frame-100") {
+      EXPECT_GE(s.boxes.size(), 10000u);
+    }
+  }
+}
+
+TEST(DeviceBroadPhaseErrors, ParametersAreCheckedAsOnTheCpu) {
+  BroadPhaseConfig c;
+  c.name = "octree-strict";
+  for (int depth : {-2, 11, 100}) {
+    c.octree_depth = depth;
+    try {
+      (void)gpu::make_device_strict_octree(c, cube(-1.0f, 1.0f));
+      ADD_FAILURE() << "depth " << depth << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("broadphase.depth"), std::string::npos) << e.what();
+    }
+  }
+  c.name = "spatial-hash";
+  c.octree_depth = 2;
+  for (float h : {0.0f, -1.0f, kNaN, kInf}) {
+    c.cell_size = h;
+    try {
+      (void)gpu::make_device_spatial_hash(c);
+      ADD_FAILURE() << "cell size " << h << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("broadphase.cell_size"), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST(DeviceBroadPhaseErrors, FindWithoutReserveIsRefused) {
+  BroadPhaseConfig c;
+  c.name = "octree-strict";
+  auto strict = gpu::make_device_strict_octree(c, cube(-1.0f, 1.0f));
+  c.name = "spatial-hash";
+  auto hash = gpu::make_device_spatial_hash(c);
+  for (DeviceBroadPhase* bp : {strict.get(), hash.get()}) {
+    EXPECT_THROW(bp->find(nullptr, 5, gpu::PairOutput{}, nullptr), RuntimeError) << bp->name();
+  }
+}
+
+}  // namespace
