@@ -358,8 +358,10 @@ std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig&
   // The parameter checks of make_broadphase (throws InputError naming the field).
   (void)make_broadphase(config, domain);
   if (config.name == "octree") return make_device_loose_octree(config, domain);
+  if (config.name == "octree-strict") return make_device_strict_octree(config, domain);
+  if (config.name == "spatial-hash") return make_device_spatial_hash(config);
   throw InputError(fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: "
-                               "flat, octree",
+                               "flat, octree, octree-strict, spatial-hash",
                                config.name));
 }
 

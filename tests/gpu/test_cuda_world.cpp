@@ -474,6 +474,8 @@ TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
   CudaWorld flat(model, "flat");
   CudaWorld tiny(model, "octree");
   tiny.reset_capacities(1);
+  CudaWorld strict(model, "octree-strict");
+  CudaWorld hash(model, "spatial-hash");
   std::uint64_t pairs_seen = 0;
   for (int f = 1; f <= frames; ++f) {
     const bool rec = f == 1 || f % 10 == 0;
@@ -489,6 +491,12 @@ TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
     ASSERT_EQ(flat.state_hash(), oct.state_hash()) << what << ": cuda flat vs cuda octree: "
                                                     << first_difference(flat.state(), oct.state());
     ASSERT_EQ(tiny.state_hash(), oct.state_hash()) << what << ": capacity-1 octree differs";
+    const FrameMetrics ms = strict.step();
+    const FrameMetrics mh = hash.step();
+    ASSERT_EQ(strict.state_hash(), oct.state_hash()) << what << ": cuda octree-strict differs";
+    ASSERT_EQ(hash.state_hash(), oct.state_hash()) << what << ": cuda spatial-hash differs";
+    EXPECT_EQ(ms.aabb_pairs, mo.aabb_pairs) << what;
+    EXPECT_EQ(mh.aabb_pairs, mo.aabb_pairs) << what;
     EXPECT_EQ(mo.aabb_pairs, mf.aabb_pairs) << what;
     EXPECT_EQ(mo.aabb_pairs, mc.aabb_pairs) << what;
     EXPECT_EQ(mo.cell_candidates, mt.cell_candidates) << what;

