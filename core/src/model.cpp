@@ -117,12 +117,8 @@ std::shared_ptr<const Model> build_model(const Scene& scene) {
                w > 0.0f ? vs[static_cast<std::size_t>(i)] : Vec3{}, w);
   }
   // theta per shape pair (SPEC 6): the scene's value, or `auto` = the larger mean edge.
-  const std::size_t ns = shapes.size();
-  model->theta_table.assign(ns * ns, 0.0f);
-  for (std::size_t a = 0; a < ns; ++a)
-    for (std::size_t b = 0; b < ns; ++b)
-      model->theta_table[a * ns + b] =
-          sc.theta ? *sc.theta : std::max(shapes[a].mean_edge, shapes[b].mean_edge);
+  model->theta_shape.resize(shapes.size());
+  for (std::size_t a = 0; a < shapes.size(); ++a) model->theta_shape[a] = sc.theta ? *sc.theta : shapes[a].mean_edge;
   return model;
 }
 

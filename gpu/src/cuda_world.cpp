@@ -119,7 +119,7 @@ struct CudaWorld::Impl {
   DeviceBuffer<Vec3> vertices{"octree vertices"};
   DeviceBuffer<MeshOctreeCell> cells{"octree cells"};
   DeviceBuffer<std::uint32_t> level_offsets{"octree level offsets"};
-  DeviceBuffer<float> theta{"theta table"};
+  DeviceBuffer<float> theta{"per-shape theta"};
   DeviceBuffer<gpu::StepStats> stats{"step statistics"};
   // Variable size (pair_cap, list_cap), grown on overflow; reset_capacities shrinks them.
   DeviceBuffer<std::uint32_t> bp_count{"broadphase counts"};
@@ -555,7 +555,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   upload(d.vertices, vertices, d.stream);
   upload(d.cells, cells, d.stream);
   upload(d.level_offsets, level_offsets, d.stream);
-  upload(d.theta, m.theta_table, d.stream);
+  upload(d.theta, m.theta_shape, d.stream);
 
   // Bodies.
   std::vector<Aabb> local(n);

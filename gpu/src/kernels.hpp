@@ -73,13 +73,13 @@ struct DeviceShape {
   std::uint32_t level_offset_offset = 0;
 };
 
-/// All shapes' octrees, packed once at construction, and the theta table.
+/// All shapes' octrees, packed once at construction, and the per-shape theta.
 struct ShapesDesc {
   const DeviceShape* shapes = nullptr;
   const Vec3* vertices = nullptr;
   const MeshOctreeCell* cells = nullptr;
   const std::uint32_t* level_offsets = nullptr;
-  const float* theta = nullptr;  ///< count * count entries, theta[sa * count + sb] (m)
+  const float* theta = nullptr;  ///< per shape (Model::theta_shape, m); pair: pair_theta
   std::uint32_t count = 0;       ///< number of shapes
 };
 

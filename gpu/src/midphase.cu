@@ -62,7 +62,7 @@ __device__ PairContext context(const MidListDesc& d, std::uint32_t k, const Pair
   const std::uint32_t sb = d.shape[p.b];
   const hd::PlacedView va = place(d.shapes, sa, d.x[p.a], d.aabb[p.a]);
   const hd::PlacedView vb = place(d.shapes, sb, d.x[p.b], d.aabb[p.b]);
-  c.theta = d.shapes.theta[sa * d.shapes.count + sb];
+  c.theta = pair_theta(d.shapes.theta[sa], d.shapes.theta[sb]);
   c.s = hd::setup_pair(va, vb, c.theta, d.levels);
   c.a = c.s.swap ? vb : va;
   c.b = c.s.swap ? va : vb;

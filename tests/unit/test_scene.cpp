@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/error.hpp"
+#include "octocd/engine.hpp"
 #include "octocd/math.hpp"
 #include "octocd/scene.hpp"
 
@@ -712,4 +713,28 @@ TEST(SceneFiles, PaperScenesHaveThePaperSettings) {
     EXPECT_FLOAT_EQ(s.groups[0].shape.scale, 0.2f);
   }
   fs::remove_all(dir);
+}
+
+// theta is per shape (O(shapes) memory, issue 8): a pair's theta is the larger of its two
+// shapes' values, the mean edge with `auto`, the scene's value otherwise.
+TEST(Model, ThetaIsPerShapeAndAPairTakesTheLarger) {
+  json j = minimal();
+  j["domain"] = {{"min", {-50, 0, -50}}, {"max", {50, 10, 50}}};
+  j["walls"] = "none";
+  j["gravity"] = {0, 0, 0};
+  j["groups"] = json::array();
+  const int groups = 3000;  // a shapes^2 table would be 9 million entries
+  for (int g = 0; g < groups; ++g) {
+    const double side = 0.01 + 0.0001 * g;
+    j["groups"].push_back({{"shape", {{"box", {side, side, side}}}}, {"count", 1}});
+  }
+  const auto m = build_model(parse_scene(j.dump(), "theta.json"));
+  ASSERT_EQ(m->theta_shape.size(), m->shapes.size());
+  ASSERT_GE(m->shapes.size(), static_cast<std::size_t>(groups));
+  for (std::uint32_t a = 0; a < m->shapes.size(); a += 97)
+    for (std::uint32_t b = 0; b < m->shapes.size(); b += 89)
+      EXPECT_EQ(m->theta(a, b), std::max(m->shapes[a].mean_edge, m->shapes[b].mean_edge)) << a << " " << b;
+  j["theta"] = 0.002;
+  const auto f = build_model(parse_scene(j.dump(), "theta.json"));
+  EXPECT_EQ(f->theta(0, static_cast<std::uint32_t>(f->shapes.size() - 1)), 0.002f);
 }

@@ -211,11 +211,8 @@ ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const Externa
       model->initial.v.push_back({});
       model->initial.w.push_back(w);
     }
-    const std::size_t ns = model->shapes.size();
-    model->theta_table.assign(ns * ns, 0.0f);
-    for (std::size_t a = 0; a < ns; ++a)
-      for (std::size_t b = 0; b < ns; ++b)
-        model->theta_table[a * ns + b] = std::max(model->shapes[a].mean_edge, model->shapes[b].mean_edge);
+    model->theta_shape.clear();
+    for (const Shape& sh : model->shapes) model->theta_shape.push_back(sh.mean_edge);
     if (bodies.domain) {
       sc.domain = *bodies.domain;
       s.domain_given = true;

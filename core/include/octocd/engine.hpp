@@ -106,11 +106,13 @@ struct Model {
   std::vector<Shape> shapes;    ///< indexed by BodyInfo::shape
   std::vector<BodyInfo> bodies; ///< per body
   BodyState initial;            ///< state at frame 0
-  std::vector<float> theta_table;  ///< theta (m) per (shape a, shape b), shapes^2 entries
+  /// Per shape (m): the scene's theta, or with `auto` the shape's mean edge; a pair's theta
+  /// is the larger of its two shapes' values (pair_theta). O(shapes), not O(shapes^2).
+  std::vector<float> theta_shape;
 
   /// theta (m) for a pair of shapes: the scene's value or `auto` (SPEC 6).
   float theta(std::uint32_t shape_a, std::uint32_t shape_b) const {
-    return theta_table[shape_a * shapes.size() + shape_b];
+    return pair_theta(theta_shape[shape_a], theta_shape[shape_b]);
   }
   /// Local AABB of body i (m).
   const Aabb& local_box(std::size_t i) const { return shapes[bodies[i].shape].local; }

@@ -79,6 +79,10 @@ OCTOCD_HD inline Aabb expanded(const Aabb& b, float m) {
   return {{b.min.x - m, b.min.y - m, b.min.z - m}, {b.max.x + m, b.max.y + m, b.max.z + m}};
 }
 
+/// theta (m) of a shape pair (SPEC 6) from the two shapes' values (`theta_shape`: the
+/// scene's theta, or with `auto` each shape's mean edge): the larger, as std::max gives it.
+OCTOCD_HD inline float pair_theta(float theta_a, float theta_b) { return (theta_a < theta_b) ? theta_b : theta_a; }
+
 /// Paper Eq. 6: inclusive AABB overlap on all three axes (touching faces overlap), the
 /// rule Bullet and FCL use too.
 OCTOCD_HD inline bool overlaps(const Aabb& a, const Aabb& b) {

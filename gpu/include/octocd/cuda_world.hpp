@@ -50,7 +50,7 @@ bool cuda_device_available();
 ///
 /// Device layout (structure of arrays): per body x, v (Vec3), w (float), local box
 /// (Aabb), world AABB; the per-mesh octrees of all shapes packed once into device arrays
-/// (vertices, cells, level offsets, per-shape offsets) and the theta table.
+/// (vertices, cells, level offsets, per-shape offsets) and the per-shape theta.
 ///
 /// Step: integrate; world AABBs; broadphase (`flat`: brute force, the device oracle;
 /// `octree`: the loose octree of SPEC 5.1 with the cell math of loose_octree.hpp;
