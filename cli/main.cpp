@@ -504,7 +504,7 @@ CLI::Validator at_least_one() {
         if (v < 1 || v > INT_MAX) return text + " is out of range; allowed: an integer in [1, 2147483647]";
         return "";
       },
-      "INT in [1, 2147483647]");
+      "");  // the option's own help says ">= 1"
 }
 
 }  // namespace
@@ -525,12 +525,14 @@ int main(int argc, char** argv) {
                       "btDiscreteDynamicsWorld (translation-only boxes), same trace layout")
       ->check(CLI::IsMember({"cpu", "cuda", "bullet"}))
       ->default_val("cpu");
-  std::string bp_help = "Broadphase, overrides the scene's broadphase.name: ";
-  for (const auto& name : octocd::all_broadphase_names()) bp_help += name + " ";
+  std::string bp_help = "Broadphase, overrides the scene's broadphase.name:";
+  for (const auto& name : octocd::all_broadphase_names()) bp_help += " " + name;
+  bp_help += " (with --engine bullet: bullet-dbvt only)";
   run_cmd->add_option("--broadphase", run.broadphase, bp_help);
   run_cmd->add_option("--midphase", run.midphase,
-                      "Midphase levels, overrides the scene: aabb-only | 2 | 1,2 | 0,1,2 | any "
-                      "ascending list of levels in [0, 10]");
+                      "Midphase levels, overrides the scene's midphase.levels: aabb-only | 2 | 1,2 | "
+                      "0,1,2 | any ascending list of levels in [0, midphase.depth] (not with --engine "
+                      "bullet)");
   run_cmd->add_option("--frames", run.frames, "Number of steps, overrides the scene (>= 1)")
       ->check(at_least_one());
   run_cmd->add_option("--trace", run.trace, "Write an HDF5 trace (docs/trace-format.md)");

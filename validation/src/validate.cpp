@@ -216,7 +216,7 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
     // by one slop per contact below it, since SPEC 6 leaves each contact's first delta of
     // penetration uncorrected. From frame 200 on (settling) every body stays within
     // stack_slops slops of it.
-    r.figure = "resting stack: max |y - rest height| after frame 200 / slop";
+    r.figure = "resting stack: max |y - rest height| once settled (200 steps) / slop";
     r.bound = tol.stack_slops;
     r.tolerances = "stack_slops";
     constexpr int kSettle = 200;
@@ -260,7 +260,7 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
     if (r.detail.empty()) r.detail = fmt::format("{} frames", total);
     // Like a bounce or a slide that --frames cuts short, a stack that has not had its
     // settling time fails, saying why.
-    r.detail += from == total ? fmt::format("; judged on frame {} only: settling takes {} frames, run "
+    r.detail += from == total ? fmt::format("; judged on frame {} only: settling takes {} steps, run "
                                             "--frames >= {} to judge the rest heights",
                                             total, kSettle, kSettle + 1)
                               : fmt::format("; frames {}..{} judged", from, total);
