@@ -157,8 +157,8 @@ Mesh load_mesh(const std::string& path) {
   if (ext == ".off") {
     const std::uint64_t expected = off_header_face_count(path);
     if (faces != expected) {
-      fail(path, "loaded " + std::to_string(faces) + " faces, the OFF header says " +
-                     std::to_string(expected),
+      fail(path, "loaded " + std::to_string(faces) + " faces, expected " + std::to_string(expected) +
+                     " from the OFF header",
            "an OFF file whose face list matches its header (comment lines inside the face "
            "list are not supported)");
     }
