@@ -12,6 +12,9 @@
 #include <string>
 #include <vector>
 
+#include <climits>
+#include <filesystem>
+
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -57,6 +60,8 @@ struct RunOptions {
   bool contacts = false;
   bool quiet = false;
   std::string summary_json;
+  std::string data_dir;
+  bool no_xdmf = false;
 };
 
 /// Running sums for the summary table.
@@ -64,26 +69,39 @@ struct Totals {
   std::int64_t frames = 0;
   double step_ms = 0.0;
   std::array<double, kStages> stage_ms{};
-  double pairs = 0.0, contacts = 0.0, box_pairs = 0.0, vertex_tests = 0.0;
-  std::uint64_t max_pairs = 0, max_contacts = 0;
+  double pairs = 0.0, dynamic_pairs = 0.0, candidates = 0.0, contacts = 0.0, box_pairs = 0.0,
+         vertex_tests = 0.0;
+  std::uint64_t max_pairs = 0, max_dynamic_pairs = 0, max_candidates = 0, max_contacts = 0,
+                max_box_pairs = 0, max_vertex_tests = 0;
   double pen_mean_sum = 0.0, pen_max = 0.0;
   std::int64_t frames_with_contacts = 0;
+  double energy_sum = 0.0, energy_max = 0.0;
+  octocd::FrameMetrics last;  ///< the last frame's row (the "last" column)
 
   void add(const octocd::FrameMetrics& m) {
     ++frames;
     step_ms += m.step_ms;
     for (int s = 0; s < kStages; ++s) stage_ms[s] += m.stage_ms[s];
     pairs += static_cast<double>(m.aabb_pairs);
+    dynamic_pairs += static_cast<double>(m.dynamic_pairs);
+    candidates += static_cast<double>(m.cell_candidates);
     contacts += static_cast<double>(m.contacts);
     box_pairs += static_cast<double>(m.box_pairs);
     vertex_tests += static_cast<double>(m.vertex_tests);
     max_pairs = std::max(max_pairs, m.aabb_pairs);
+    max_dynamic_pairs = std::max(max_dynamic_pairs, m.dynamic_pairs);
+    max_candidates = std::max(max_candidates, m.cell_candidates);
     max_contacts = std::max(max_contacts, m.contacts);
+    max_box_pairs = std::max(max_box_pairs, m.box_pairs);
+    max_vertex_tests = std::max(max_vertex_tests, m.vertex_tests);
     if (m.contacts > 0) {
       ++frames_with_contacts;
       pen_mean_sum += m.penetration_mean;
     }
     pen_max = std::max(pen_max, m.penetration_max);
+    energy_sum += m.kinetic_energy;
+    energy_max = frames == 1 ? m.kinetic_energy : std::max(energy_max, m.kinetic_energy);
+    last = m;
   }
 };
 
@@ -140,37 +158,54 @@ std::string utc_now() {
 }
 
 void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
-                   const std::string& trace) {
+                   const std::string& trace, const std::string& xdmf) {
   const std::string engine = world.name();
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
   const octocd::Scene& s = world.scene();
   fmt::print("\nscene        {} ({} bodies, {} shapes)\n", s.name, world.state().size(),
              world.shapes().size());
-  if (!world.has_stage(octocd::Stage::Midphase))
-    fmt::print("pipeline     engine {} ({}, box shapes), on {}\n", engine, world.broadphase_name(),
-               world.device());
-  else
-    fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", engine, world.broadphase_name(),
-               s.midphase.to_string(), world.device());
+  fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", engine, world.broadphase_name(),
+             world.midphase_name(), world.device());
   fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
              static_cast<double>(t.frames) * s.dt, wall_s);
   fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n\n",
              t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0,
              t.step_ms / n);
   fmt::print("{:<12} {:>10} {:>8}\n", "stage", "mean ms", "share");
-  for (int st = 0; st < kStages; ++st)
-    fmt::print("{:<12} {:>10.4f} {:>7.1f}%\n", octocd::stage_name(static_cast<octocd::Stage>(st)),
-               t.stage_ms[st] / n, t.step_ms > 0 ? 100.0 * t.stage_ms[st] / t.step_ms : 0.0);
-  fmt::print("\n{:<22} {:>12} {:>12}\n", "per frame", "mean", "max");
-  fmt::print("{:<22} {:>12.1f} {:>12}\n", "AABB pairs", t.pairs / n, t.max_pairs);
-  fmt::print("{:<22} {:>12.1f} {:>12}\n", "contacts", t.contacts / n, t.max_contacts);
-  fmt::print("{:<22} {:>12.1f} {:>12}\n", "midphase box pairs", t.box_pairs / n, "");
-  fmt::print("{:<22} {:>12.1f} {:>12}\n", "vertex tests", t.vertex_tests / n, "");
+  for (int st = 0; st < kStages; ++st) {
+    const auto stage = static_cast<octocd::Stage>(st);
+    if (!world.has_stage(stage)) {
+      fmt::print("{:<12} {:>10} {:>8}\n", octocd::stage_name(stage), "n/a", "");
+      continue;
+    }
+    fmt::print("{:<12} {:>10.4f} {:>7.1f}%\n", octocd::stage_name(stage), t.stage_ms[st] / n,
+               t.step_ms > 0 ? 100.0 * t.stage_ms[st] / t.step_ms : 0.0);
+  }
+  // Every row: the mean over frames, the largest frame value, the last frame's value.
+  fmt::print("\n{:<24} {:>14} {:>14} {:>14}\n", "per frame", "mean", "max", "last");
+  auto row = [](const char* name, double sum_over_n, std::uint64_t max, std::uint64_t last) {
+    fmt::print("{:<24} {:>14.1f} {:>14} {:>14}\n", name, sum_over_n, max, last);
+  };
+  row("broadphase candidates", t.candidates / n, t.max_candidates, t.last.cell_candidates);
+  row("AABB pairs", t.pairs / n, t.max_pairs, t.last.aabb_pairs);
+  row("  dynamic pairs", t.dynamic_pairs / n, t.max_dynamic_pairs, t.last.dynamic_pairs);
+  row("midphase box pairs", t.box_pairs / n, t.max_box_pairs, t.last.box_pairs);
+  row("vertex tests", t.vertex_tests / n, t.max_vertex_tests, t.last.vertex_tests);
+  row("contacts", t.contacts / n, t.max_contacts, t.last.contacts);
   const double pen_mean =
       t.frames_with_contacts > 0 ? t.pen_mean_sum / static_cast<double>(t.frames_with_contacts) : 0.0;
-  fmt::print("{:<22} {:>12.6f} {:>12.6f}\n", "penetration (m)", pen_mean, t.pen_max);
-  fmt::print("{:<22} {:>12.4f}\n", "kinetic energy (J)", world.last_metrics().kinetic_energy);
+  fmt::print("{:<24} {:>14.6f} {:>14.6f} {:>14.6f}\n", "penetration (m)", pen_mean, t.pen_max,
+             t.last.penetration_max);
+  fmt::print("{:<24} {:>14.4f} {:>14.4f} {:>14.4f}\n", "kinetic energy (J)", t.energy_sum / n, t.energy_max,
+             t.last.kinetic_energy);
+  fmt::print("\n(penetration: mean over frames with contacts of the frame mean; max and last are the "
+             "largest d_p.\n AABB pairs include static-static pairs (walls touching walls); dynamic pairs "
+             "are the ones\n that can produce a contact; broadphase candidates are the pairs tested before "
+             "the exact AABB test.)\n");
+  const std::string notes = world.notes();
+  if (!notes.empty()) fmt::print("\nengine {}: {}\n", engine, notes);
   if (!trace.empty()) fmt::print("\ntrace        {}\n", trace);
+  if (!xdmf.empty()) fmt::print("xdmf         {} (ParaView, Xdmf3 reader)\n", xdmf);
 }
 
 void write_summary_json(const std::string& path, const octocd::Engine& world, const Totals& t,
@@ -182,18 +217,29 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   j["bodies"] = world.state().size();
   j["engine"] = engine;
   j["broadphase"] = world.broadphase_name();
-  j["midphase"] = world.scene().midphase.to_string();
+  j["midphase"] = world.midphase_name();
   j["frames"] = t.frames;
   j["wall_s"] = wall_s;
   j["steps_per_s"] = t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0;
   j["mean_step_ms"] = t.step_ms / n;
-  for (int st = 0; st < kStages; ++st)
-    j["stage_ms"][octocd::stage_name(static_cast<octocd::Stage>(st))] = t.stage_ms[st] / n;
+  for (int st = 0; st < kStages; ++st) {
+    const auto stage = static_cast<octocd::Stage>(st);
+    // null: the engine has no such stage (not 0 ms).
+    j["stage_ms"][octocd::stage_name(stage)] =
+        world.has_stage(stage) ? nlohmann::json(t.stage_ms[st] / n) : nlohmann::json(nullptr);
+  }
+  j["mean_cell_candidates"] = t.candidates / n;
   j["mean_pairs"] = t.pairs / n;
+  j["max_pairs"] = t.max_pairs;
+  j["mean_dynamic_pairs"] = t.dynamic_pairs / n;
+  j["max_dynamic_pairs"] = t.max_dynamic_pairs;
   j["mean_contacts"] = t.contacts / n;
+  j["max_contacts"] = t.max_contacts;
   j["mean_box_pairs"] = t.box_pairs / n;
   j["mean_vertex_tests"] = t.vertex_tests / n;
   j["penetration_max"] = t.pen_max;
+  // Kinetic energy (J, dynamic bodies): mean over frames, largest, last frame's.
+  j["kinetic_energy"] = {{"mean", t.energy_sum / n}, {"max", t.energy_max}, {"last", t.last.kinetic_energy}};
   j["device"] = world.device();
   j["build_id"] = octocd::build_id();
   std::ofstream out(path);
@@ -201,11 +247,71 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   out << j.dump(2) << "\n";
 }
 
+/// Checks what the command line changed against the scene and the engine, as strictly
+/// as the scene file is checked (issue 12): a `--midphase` deeper than the scene's
+/// midphase.depth, an unknown broadphase name (from `--broadphase` or the file), and
+/// `--midphase` / `--broadphase` with an engine that does not use them. Throws InputError
+/// in the form `<where>: <problem>; allowed: <what>`.
+void check_overrides(const octocd::Scene& scene, const std::string& engine, const std::string& broadphase,
+                     const std::string& midphase) {
+  const std::string file = scene.path.empty() ? std::string("<scene>") : scene.path;
+  if (engine == "bullet") {
+    if (!midphase.empty())
+      throw octocd::InputError(fmt::format(
+          "--midphase: engine bullet has no octree midphase (Bullet's box-box narrow phase runs on the "
+          "AABB boxes); allowed: no --midphase with --engine bullet"));
+    if (!broadphase.empty() && broadphase != "bullet-dbvt")
+      throw octocd::InputError(fmt::format(
+          "--broadphase: engine bullet runs btDbvtBroadphase, not '{}'; allowed: bullet-dbvt, or no "
+          "--broadphase with --engine bullet",
+          broadphase));
+    return;  // the scene's broadphase and midphase are not used by Bullet
+  }
+  const std::vector<std::string> names = octocd::all_broadphase_names();
+  if (std::find(names.begin(), names.end(), scene.broadphase.name) == names.end()) {
+    std::string list;
+    for (const auto& nm : names) list += (list.empty() ? "" : ", ") + nm;
+    if (!broadphase.empty())
+      throw octocd::InputError(
+          fmt::format("--broadphase: unknown broadphase '{}'; allowed: {}", scene.broadphase.name, list));
+    throw octocd::InputError(fmt::format("{}: broadphase.name: unknown broadphase '{}'; allowed: {}", file,
+                                         scene.broadphase.name, list));
+  }
+  const int depth = scene.mesh_octree_depth;
+  if (!midphase.empty() && depth >= 0 && !scene.midphase.aabb_only && scene.midphase.max_level() > depth)
+    throw octocd::InputError(fmt::format(
+        "--midphase: level {} is deeper than the scene's midphase.depth {} ({}); allowed: aabb-only or "
+        "ascending levels in [0, {}], or raise midphase.depth in the scene",
+        scene.midphase.max_level(), depth, file, depth));
+}
+
+/// Loads the scene for `run` and `validate`: `--data-dir` (checked to be a folder) or the
+/// default lookup of docs/scenes.md.
+octocd::Scene load_scene_for(const std::string& path, const std::string& data_dir) {
+  if (!data_dir.empty()) {
+    std::error_code ec;
+    if (!std::filesystem::is_directory(data_dir, ec))
+      throw octocd::InputError(fmt::format(
+          "--data-dir: '{}' is not a folder; allowed: a folder holding the dataset meshes (NAME.obj, "
+          "NAME.off or NAME.ply), e.g. datasets/cache",
+          data_dir));
+  }
+  return octocd::load_scene(path, data_dir);
+}
+
+/// Writes the XDMF sidecar of a finished (or stopped) trace unless `--no-xdmf`; returns
+/// its path ("" when not written).
+std::string write_sidecar(const std::string& trace, bool no_xdmf) {
+  if (trace.empty() || no_xdmf) return "";
+  return octocd::write_xdmf_sidecar(trace);
+}
+
 int run_command(const RunOptions& o) {
-  octocd::Scene scene = octocd::load_scene(o.scene);
+  octocd::Scene scene = load_scene_for(o.scene, o.data_dir);
   if (!o.broadphase.empty()) scene.broadphase.name = o.broadphase;
   if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
   if (o.frames > 0) scene.frames = o.frames;
+  check_overrides(scene, o.engine, o.broadphase, o.midphase);
 
   const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, octocd::build_model(scene));
   octocd::Engine& world = *engine;
@@ -232,12 +338,19 @@ int run_command(const RunOptions& o) {
       progress.update(m, totals);
     }
   } catch (const octocd::RuntimeError&) {
-    if (trace) trace->close();  // keep every frame written so far readable
+    if (trace) {
+      trace->close();  // keep every frame written so far readable
+      write_sidecar(o.trace, o.no_xdmf);
+    }
     throw;
   }
-  if (trace) trace->close();
+  std::string xdmf;
+  if (trace) {
+    trace->close();
+    xdmf = write_sidecar(o.trace, o.no_xdmf);
+  }
   const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
-  if (!o.quiet) print_summary(world, totals, wall_s, o.trace);
+  if (!o.quiet) print_summary(world, totals, wall_s, o.trace, xdmf);
   if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s);
   return 0;
 }
@@ -254,6 +367,9 @@ struct ValidateOptions {
   bool check_only = false;    ///< --check-only: only check the --trace-in file's structure
   bool frames_given = false;  ///< --frames on the command line (--trace-in: else every frame)
   bool every_given = false;   ///< --every on the command line (--trace-in: else 1)
+  std::string data_dir;
+  std::string junit;
+  bool no_xdmf = false;
 };
 
 /// `octocd validate --trace-in FILE.h5`: another engine's trace judged frame by frame
@@ -283,7 +399,13 @@ int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions&
   return all_pass ? 0 : 3;
 }
 
-/// `octocd validate`: exit 0 when every validator passes, 3 when any fails.
+
+int validate_scene_command(const ValidateOptions& o, Clock::time_point t0);
+
+/// `octocd validate`: exit 0 when every validator passes, 3 when any fails. With
+/// `--junit`, the report is written in every case that gets past the command line:
+/// results (failures included), or one errored case when the scene is bad input or the
+/// run fails.
 int validate_command(const ValidateOptions& o) {
   if (o.scene.empty() == o.trace_in.empty())
     throw octocd::InputError("validate: give either SCENE.json or --trace-in FILE.h5 (not both)");
@@ -291,6 +413,35 @@ int validate_command(const ValidateOptions& o) {
     throw octocd::InputError("--check-only: needs --trace-in FILE.h5");
   if (!o.trace_in.empty() && (!o.trace.empty() || o.engine != "cpu"))
     throw octocd::InputError("--trace-in: judges a trace another engine wrote; allowed without --trace and --engine");
+  const auto t0 = Clock::now();
+  // The report of a scene that could not be validated; the original error is what the
+  // caller sees (and its exit code), even when the report cannot be written.
+  auto junit_error = [&](const char* kind, const char* message) {
+    if (o.junit.empty()) return;
+    try {
+      octocd::write_junit_error(o.junit, std::filesystem::path(o.trace_in.empty() ? o.scene : o.trace_in).stem().string(),
+                                kind, message);
+    } catch (const std::exception& w) {
+      std::fprintf(stderr, "octocd: warning: %s\n", w.what());
+    }
+  };
+  try {
+    return validate_scene_command(o, t0);
+  } catch (const octocd::InputError& e) {
+    junit_error("bad-input", e.what());
+    throw;
+  } catch (const octocd::RuntimeError& e) {
+    junit_error("runtime-failure", e.what());
+    throw;
+  }
+}
+
+int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
+  octocd::Scene scene;
+  if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
+    scene = load_scene_for(o.scene, o.data_dir);
+    check_overrides(scene, o.engine, "", "");
+  }
   octocd::ValidationOptions vo;
   vo.frames = o.frames;
   vo.every = o.every;
@@ -331,7 +482,6 @@ int validate_command(const ValidateOptions& o) {
     vo.overridden.push_back(name);
   }
   if (!o.trace_in.empty()) return validate_trace_in(o, vo);
-  octocd::Scene scene = octocd::load_scene(o.scene);
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   if (o.engine == "bullet")
     throw octocd::InputError("--engine: bullet cannot be validated (no per-frame record); allowed: cpu, cuda");
@@ -351,13 +501,26 @@ int validate_command(const ValidateOptions& o) {
   try {
     results = octocd::validate_engine([&] { return make_engine(o.engine, model); }, vo);
   } catch (const octocd::RuntimeError&) {
-    if (trace) trace->close();
+    if (trace) {
+      trace->close();
+      write_sidecar(o.trace, o.no_xdmf);
+    }
     throw;
   }
   if (trace) {
     trace->close();
     octocd::write_validation(o.trace, results);
+    write_sidecar(o.trace, o.no_xdmf);
   }
+  if (!o.junit.empty())
+    octocd::write_junit(o.junit, scene.name, results,
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", o.engine},
+                         {"frames", std::to_string(o.frames)},
+                         {"every", std::to_string(o.every)},
+                         {"against", o.against},
+                         {"scene_file", o.scene},
+                         {"build_id", octocd::build_id()}});
   fmt::print("validate {} (engine {}, {} frames, checks every {}, against: {})\n\n", scene.name, o.engine,
              o.frames, o.every, o.against);
   fmt::print("{}", octocd::format_results(results, vo.overridden));
@@ -367,12 +530,34 @@ int validate_command(const ValidateOptions& o) {
   return all_pass ? 0 : 3;
 }
 
+/// An integer option in [1, 2147483647], with the message in the project's form
+/// ("--frames: 0 is out of range; allowed: an integer in [1, 2147483647]") instead of
+/// CLI11's PositiveNumber, which prints the range of a double.
+CLI::Validator at_least_one() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        long long v = 0;
+        std::size_t used = 0;
+        try {
+          v = std::stoll(text, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used == 0 || used != text.size())
+          return "'" + text + "' is not an integer; allowed: an integer in [1, 2147483647]";
+        if (v < 1 || v > INT_MAX) return text + " is out of range; allowed: an integer in [1, 2147483647]";
+        return "";
+      },
+      "");  // the option's own help says ">= 1"
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
-      "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a validator failed."};
+      "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a validator failed.",
+      "octocd"};  // a fixed name: `--help` reads the same whatever path ran it (docs/cli.md)
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);
 
@@ -384,23 +569,32 @@ int main(int argc, char** argv) {
                       "btDiscreteDynamicsWorld (translation-only boxes), same trace layout")
       ->check(CLI::IsMember({"cpu", "cuda", "bullet"}))
       ->default_val("cpu");
-  std::string bp_help = "Broadphase, overrides the scene's broadphase.name: ";
-  for (const auto& name : octocd::all_broadphase_names()) bp_help += name + " ";
+  std::string bp_help = "Broadphase, overrides the scene's broadphase.name:";
+  for (const auto& name : octocd::all_broadphase_names()) bp_help += " " + name;
+  bp_help += " (with --engine bullet: bullet-dbvt only)";
   run_cmd->add_option("--broadphase", run.broadphase, bp_help);
   run_cmd->add_option("--midphase", run.midphase,
-                      "Midphase levels, overrides the scene: aabb-only | 2 | 1,2 | 0,1,2 | any "
-                      "ascending list of levels in [0, 10]");
+                      "Midphase levels, overrides the scene's midphase.levels: aabb-only | 2 | 1,2 | "
+                      "0,1,2 | any ascending list of levels in [0, midphase.depth] (not with --engine "
+                      "bullet)");
   run_cmd->add_option("--frames", run.frames, "Number of steps, overrides the scene (>= 1)")
-      ->check(CLI::PositiveNumber);
+      ->check(at_least_one());
   run_cmd->add_option("--trace", run.trace, "Write an HDF5 trace (docs/trace-format.md)");
   run_cmd->add_option("--state-every", run.state_every,
                       "Record positions and velocities every K-th frame in the trace (>= 1)")
-      ->check(CLI::PositiveNumber)
+      ->check(at_least_one())
       ->default_val(10);
   run_cmd->add_flag("--contacts", run.contacts, "Record every contact (/contacts) in the trace");
   run_cmd->add_flag("--quiet", run.quiet, "No progress and no summary table");
   run_cmd->add_option("--summary-json", run.summary_json,
-                      "Also write the summary (steps/s, stage ms, counts) as JSON to this file");
+                      "Also write the summary (steps/s, stage ms, counts, kinetic energy) as JSON to "
+                      "this file");
+  const std::string data_dir_help =
+      "Folder of the dataset meshes (NAME.obj|.off|.ply); default: $OCTOCD_DATA_DIR, else "
+      "<scene folder>/../cache, else the datasets/cache of the source tree (docs/scenes.md)";
+  run_cmd->add_option("--data-dir", run.data_dir, data_dir_help);
+  run_cmd->add_flag("--no-xdmf", run.no_xdmf,
+                    "With --trace: do not write the XDMF sidecar FILE.h5.xmf (ParaView) beside it");
 
   ValidateOptions val;
   CLI::App* val_cmd = app.add_subcommand(
@@ -410,12 +604,14 @@ int main(int argc, char** argv) {
                       "References: comma-separated bullet, fcl (Bullet/FCL broadphases, FCL "
                       "normals, Bullet dynamics), or none")
       ->default_val("bullet,fcl");
-  val_cmd->add_option("--frames", val.frames, "Steps to run (>= 1)")
-      ->check(CLI::PositiveNumber)
+  val_cmd->add_option("--frames", val.frames,
+                      "Steps to run (>= 1); every validator, the analytic and Bullet ones included, "
+                      "uses this many")
+      ->check(at_least_one())
       ->default_val(300);
   val_cmd->add_option("--every", val.every,
                       "Check candidate sets, midphase and normals every K-th frame (>= 1)")
-      ->check(CLI::PositiveNumber)
+      ->check(at_least_one())
       ->default_val(10);
   val_cmd->add_option("--engine", val.engine,
                       "cpu: the CPU reference; cuda: the GPU engine (needs a CUDA build and device)")
@@ -430,7 +626,13 @@ int main(int argc, char** argv) {
                         "Names: " + names);
   }
   val_cmd->add_option("--trace", val.trace,
-                      "Write the validated run as a trace with the results under /validation");
+                      "Write the validated run as a trace with the results under /validation "
+                      "(and its XDMF sidecar FILE.h5.xmf)");
+  val_cmd->add_flag("--no-xdmf", val.no_xdmf, "With --trace: do not write the XDMF sidecar");
+  val_cmd->add_option("--data-dir", val.data_dir, data_dir_help);
+  val_cmd->add_option("--junit", val.junit,
+                      "Also write a JUnit XML report: one test case per validator (classname = scene "
+                      "name), failures with the detail line; written when validators fail too");
   val_cmd->add_option(
       "--trace-in", val.trace_in,
       "Judge another engine's trace (docs/trace-format.md, External traces) instead of a scene, frame by "

@@ -13,7 +13,7 @@ PACKAGES=(
   libbullet-dev libfcl-dev libccd-dev libeigen3-dev libassimp-dev
   libhdf5-dev hdf5-tools nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
   # tests and benchmarks
-  libgtest-dev libgmock-dev libbenchmark-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libxml2-dev
   # reports (Debian's /usr/bin/python3) and the dataset split
   python3 python3-numpy python3-h5py python3-matplotlib
 )

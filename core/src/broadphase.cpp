@@ -97,7 +97,7 @@ std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, cons
   std::string names;
   for (const std::string& s : broadphase_names()) names += (names.empty() ? "" : ", ") + s;
   throw InputError("broadphase.name: unknown broadphase '" + config.name +
-                   "' (expected one of: " + names + ")");
+                   "'; allowed: " + names);
 }
 
 int auto_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain) {

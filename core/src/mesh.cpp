@@ -27,8 +27,15 @@ namespace fs = std::filesystem;
 
 using Tri = std::array<std::uint32_t, 3>;
 
-[[noreturn]] void fail(const std::string& path, const std::string& problem) {
-  throw InputError("mesh file '" + path + "': " + problem);
+/// The mesh formats octocd loads and tests (assimp reads them); others are rejected up
+/// front rather than failing inside assimp (glTF, for one, loads no usable mesh).
+constexpr const char* kFormats = "a triangle mesh file in OBJ, OFF, PLY or STL format";
+
+/// Throws "mesh file '<path>': <problem>; allowed: <allowed>" (the scene key is added by
+/// build_model).
+[[noreturn]] void fail(const std::string& path, const std::string& problem,
+                       const std::string& allowed = kFormats) {
+  throw InputError("mesh file '" + path + "': " + problem + "; allowed: " + allowed);
 }
 
 std::string lower(std::string s) {
@@ -39,7 +46,7 @@ std::string lower(std::string s) {
 /// The face count in an OFF header (after the keyword, '#' comments skipped).
 std::uint64_t off_header_face_count(const std::string& path) {
   std::ifstream in(path);
-  if (!in) fail(path, "cannot open (expected a readable file)");
+  if (!in) fail(path, "cannot open", "a readable file");
   std::vector<std::string> tokens;
   std::string line;
   while (tokens.size() < 3 && std::getline(in, line)) {
@@ -51,16 +58,16 @@ std::uint64_t off_header_face_count(const std::string& path) {
   }
   const std::string kw = tokens.empty() ? std::string() : tokens[0];
   if (kw.size() < 3 || kw.compare(kw.size() - 3, 3, "OFF") != 0) {
-    fail(path, "bad OFF header '" + kw + "' (expected 'OFF' then vertex and face counts)");
+    fail(path, "bad OFF header '" + kw + "'", "'OFF' then vertex and face counts");
   }
-  if (tokens.size() < 3) fail(path, "truncated OFF header (expected vertex and face counts)");
+  if (tokens.size() < 3) fail(path, "truncated OFF header", "vertex and face counts");
   try {
     std::size_t used = 0;
     const unsigned long long nf = std::stoull(tokens[2], &used);
     if (used != tokens[2].size()) throw std::invalid_argument("trailing characters");
     return nf;
   } catch (const std::exception&) {
-    fail(path, "bad OFF face count '" + tokens[2] + "' (expected a non-negative integer)");
+    fail(path, "bad OFF face count '" + tokens[2] + "'", "a non-negative integer");
   }
 }
 
@@ -111,20 +118,24 @@ Vec3 midpoint_of(Vec3 a, Vec3 b) { return 0.5f * (a + b); }
 
 Mesh load_mesh(const std::string& path) {
   std::error_code ec;
-  if (!fs::exists(path, ec)) fail(path, "not found (expected an existing mesh file)");
+  if (!fs::exists(path, ec)) fail(path, "not found", "an existing mesh file");
   if (!fs::is_regular_file(path, ec)) fail(path, "not a regular file");
-  if (fs::file_size(path, ec) == 0 || ec) fail(path, "empty file (expected a mesh)");
+  if (fs::file_size(path, ec) == 0 || ec) fail(path, "empty file");
   {
     std::ifstream probe(path, std::ios::binary);
-    if (!probe) fail(path, "cannot open (expected a readable file)");
+    if (!probe) fail(path, "cannot open", "a readable file");
   }
+
+  const std::string ext = lower(fs::path(path).extension().string());
+  if (ext != ".obj" && ext != ".off" && ext != ".ply" && ext != ".stl")
+    fail(path, "format '" + (ext.empty() ? std::string("(no extension)") : ext) + "' is not supported");
 
   Assimp::Importer importer;
   // Read without post-processing first, so polygon counts can be compared with the OFF
   // header, then triangulate and join identical vertices.
   const aiScene* scene = importer.ReadFile(path, 0);
   if (scene == nullptr) {
-    fail(path, std::string("assimp cannot read it: ") + importer.GetErrorString());
+    fail(path, std::string("assimp cannot read it: ") + importer.GetErrorString());  // kFormats
   }
   // Non-finite coordinates are checked before post-processing: joining identical
   // vertices may silently merge a NaN vertex into another one.
@@ -137,20 +148,19 @@ Mesh load_mesh(const std::string& path) {
       if (!is_finite(Vec3{p.x, p.y, p.z})) {
         fail(path, "vertex " + std::to_string(loaded) + " (" + std::to_string(p.x) + ", " +
                        std::to_string(p.y) + ", " + std::to_string(p.z) +
-                       ") is not finite (expected finite coordinates; index in assimp's "
-                       "load order)");
+                       ") is not finite (index in assimp's load order)",
+             "finite coordinates");
       }
     }
   }
 
-  const std::string ext = lower(fs::path(path).extension().string());
   if (ext == ".off") {
     const std::uint64_t expected = off_header_face_count(path);
     if (faces != expected) {
-      fail(path, "loaded " + std::to_string(faces) + " faces (expected " +
-                     std::to_string(expected) +
-                     " from the OFF header; comment lines inside the face list are not "
-                     "supported)");
+      fail(path, "loaded " + std::to_string(faces) + " faces, expected " + std::to_string(expected) +
+                     " from the OFF header",
+           "an OFF file whose face list matches its header (comment lines inside the face "
+           "list are not supported)");
     }
   }
 
@@ -165,14 +175,14 @@ Mesh load_mesh(const std::string& path) {
     const aiMesh* am = scene->mMeshes[mi];
     const std::size_t base = mesh.vertices.size();
     if (base + am->mNumVertices > std::numeric_limits<std::uint32_t>::max()) {
-      fail(path, "too many vertices (expected at most 2^32 - 1)");
+      fail(path, "too many vertices", "at most 2^32 - 1");
     }
     for (unsigned v = 0; v < am->mNumVertices; ++v) {
       const aiVector3D& p = am->mVertices[v];
       const Vec3 q{p.x, p.y, p.z};
       if (!is_finite(q)) {
         fail(path, "vertex " + std::to_string(mesh.vertices.size()) +
-                       " is not finite (expected finite coordinates)");
+                       " is not finite", "finite coordinates");
       }
       mesh.vertices.push_back(q);
     }
@@ -188,11 +198,11 @@ Mesh load_mesh(const std::string& path) {
       mesh.triangles.push_back(t);
     }
   }
-  if (mesh.vertices.empty()) fail(path, "no vertices (expected a triangle mesh)");
-  if (mesh.triangles.empty()) fail(path, "no triangles (expected a triangle mesh)");
+  if (mesh.vertices.empty()) fail(path, "no vertices");
+  if (mesh.triangles.empty()) fail(path, "no triangles");
   weld_mesh(mesh);
   if (mesh.triangles.empty()) {
-    fail(path, "every triangle is degenerate after welding (expected a triangle mesh)");
+    fail(path, "every triangle is degenerate after welding");
   }
   return mesh;
 }
@@ -241,7 +251,7 @@ void weld_mesh(Mesh& mesh) {
 
 void normalize_mesh(Mesh& mesh) {
   if (mesh.vertices.empty()) {
-    throw InputError("mesh '" + mesh.name + "': no vertices (expected a non-empty mesh)");
+    throw InputError("mesh '" + mesh.name + "': no vertices; allowed: a non-empty mesh");
   }
   const Aabb b = mesh_bounds(mesh);
   double c[3], longest = 0.0;
@@ -251,7 +261,7 @@ void normalize_mesh(Mesh& mesh) {
   }
   if (!(longest > 0.0) || !std::isfinite(longest)) {
     throw InputError("mesh '" + mesh.name +
-                     "': its bounding box has no extent (expected a longest side > 0)");
+                     "': its bounding box has no extent; allowed: a longest side > 0");
   }
   const double inv = 1.0 / longest;
   for (Vec3& v : mesh.vertices) {
@@ -262,14 +272,14 @@ void normalize_mesh(Mesh& mesh) {
 void scale_mesh(Mesh& mesh, float s) {
   if (!(s > 0.0f) || !std::isfinite(s)) {
     throw InputError("mesh '" + mesh.name + "': scale " + std::to_string(s) +
-                     " (expected a finite scale > 0)");
+                     "; allowed: a finite scale > 0");
   }
   for (Vec3& v : mesh.vertices) v = s * v;
 }
 
 Aabb mesh_bounds(const Mesh& mesh) {
   if (mesh.vertices.empty()) {
-    throw InputError("mesh '" + mesh.name + "': no vertices (expected a non-empty mesh)");
+    throw InputError("mesh '" + mesh.name + "': no vertices; allowed: a non-empty mesh");
   }
   Aabb b{mesh.vertices[0], mesh.vertices[0]};
   for (const Vec3& v : mesh.vertices) {

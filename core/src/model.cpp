@@ -100,9 +100,16 @@ std::shared_ptr<const Model> build_model(const Scene& scene) {
           shape_id = it->second;
           break;
         }
-        Mesh mesh = load_mesh(path);
-        normalize_mesh(mesh);
-        scale_mesh(mesh, g.shape.scale);
+        Mesh mesh;
+        try {
+          mesh = load_mesh(path);
+          normalize_mesh(mesh);
+          scale_mesh(mesh, g.shape.scale);
+        } catch (const InputError& e) {
+          // "<scene file>: groups[i].shape.mesh: mesh file '...': <problem>; allowed: ..."
+          throw InputError(fmt::format("{}: {}.shape.mesh: {}", sc.path.empty() ? "<scene>" : sc.path, key,
+                                       e.what()));
+        }
         shapes.push_back(mesh_shape(std::move(mesh), fmt::format("{}@{}", g.shape.mesh, g.shape.scale)));
         shape_id = static_cast<std::uint32_t>(shapes.size() - 1);
         mesh_cache.emplace(cache_key, shape_id);
@@ -120,6 +127,19 @@ std::shared_ptr<const Model> build_model(const Scene& scene) {
   model->theta_shape.resize(shapes.size());
   for (std::size_t a = 0; a < shapes.size(); ++a) model->theta_shape[a] = sc.theta ? *sc.theta : shapes[a].mean_edge;
   return model;
+}
+
+std::uint64_t static_static_pairs(const Model& model) {
+  // Sweep along x over the static bodies' world AABBs (walls: a handful).
+  std::vector<Aabb> boxes;
+  for (std::size_t i = 0; i < model.initial.size(); ++i)
+    if (model.initial.w[i] == 0.0f) boxes.push_back(translated(model.local_box(i), model.initial.x[i]));
+  std::sort(boxes.begin(), boxes.end(), [](const Aabb& a, const Aabb& b) { return a.min.x < b.min.x; });
+  std::uint64_t n = 0;
+  for (std::size_t i = 0; i < boxes.size(); ++i)
+    for (std::size_t j = i + 1; j < boxes.size() && boxes[j].min.x <= boxes[i].max.x; ++j)
+      if (overlaps(boxes[i], boxes[j])) ++n;
+  return n;
 }
 
 const char* stage_name(Stage s) {

@@ -89,8 +89,12 @@ struct Ctx {
                bool hi_incl, const std::string& allowed) const {
     const float f = number(j, key, allowed);
     const double v = f;
-    const bool ok_lo = lo_incl ? v >= lo : v > lo;
-    const bool ok_hi = hi_incl ? v <= hi : v < hi;
+    // Bounds are rounded to float32 too, so a documented bound is itself accepted
+    // ("dt": 0.1 is float 0.100000001490116, above the double 0.1).
+    const double lo_f = std::isfinite(lo) ? static_cast<double>(static_cast<float>(lo)) : lo;
+    const double hi_f = std::isfinite(hi) ? static_cast<double>(static_cast<float>(hi)) : hi;
+    const bool ok_lo = lo_incl ? v >= lo_f : v > lo_f;
+    const bool ok_hi = hi_incl ? v <= hi_f : v < hi_f;
     if (!ok_lo || !ok_hi) fail(key, "value " + num(v) + " out of range", allowed);
     return f;
   }
@@ -396,15 +400,56 @@ json parse_json(const Ctx& c, const std::string& text) {
   }
 }
 
-std::string default_data_dir(const std::string& origin) {
-  if (const char* env = std::getenv("OCTOCD_DATA_DIR"); env != nullptr && *env != '\0') return env;
-  const fs::path folder = fs::path(origin).parent_path();
-  if (!origin.empty() && !folder.empty()) return (folder / ".." / "cache").lexically_normal().string();
+/// The folder of a scene file as an absolute, normalised path, so `mix.json`,
+/// `./mix.json` and `/abs/dir/mix.json` name the same folder ("" when `origin` is "").
+fs::path scene_folder(const std::string& origin) {
+  if (origin.empty()) return {};
+  std::error_code ec;
+  fs::path p = fs::absolute(fs::path(origin), ec);
+  if (ec) p = fs::path(origin);
+  return p.lexically_normal().parent_path();
+}
+
+bool is_directory(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_directory(p, ec);
+}
+
+}  // namespace
+
+std::vector<std::string> default_data_dirs(const std::string& origin) {
+  if (const char* env = std::getenv("OCTOCD_DATA_DIR"); env != nullptr && *env != '\0') return {env};
+  std::vector<std::string> dirs;
+  const fs::path folder = scene_folder(origin);
+  if (!folder.empty()) dirs.push_back((folder / ".." / "cache").lexically_normal().string());
 #ifdef OCTOCD_SOURCE_DIR
-  return (fs::path(OCTOCD_SOURCE_DIR) / "datasets" / "cache").string();
+  const std::string built = (fs::path(OCTOCD_SOURCE_DIR) / "datasets" / "cache").lexically_normal().string();
 #else
-  return (fs::path("datasets") / "cache").string();
+  const std::string built = (fs::current_path() / "datasets" / "cache").lexically_normal().string();
 #endif
+  if (std::find(dirs.begin(), dirs.end(), built) == dirs.end()) dirs.push_back(built);
+  return dirs;
+}
+
+namespace {
+
+/// The data dir used for `origin` (docs/scenes.md, "Mesh resolution"): `data_dir` when
+/// given; else $OCTOCD_DATA_DIR; else the first of default_data_dirs that exists (the
+/// first one when none does, so the error names it).
+std::string choose_data_dir(const std::string& origin, const std::string& data_dir) {
+  if (!data_dir.empty()) return data_dir;
+  const std::vector<std::string> dirs = default_data_dirs(origin);
+  for (const std::string& d : dirs)
+    if (is_directory(d)) return d;
+  return dirs.front();
+}
+
+const char* const kDatasetNames[] = {"bunny", "armadillo", "dragon", "asian-dragon"};
+
+/// True when `mesh` is spelled as a file (has a folder or an extension), not a dataset name.
+bool looks_like_file(const std::string& mesh) {
+  const fs::path m(mesh);
+  return m.has_parent_path() || m.has_extension();
 }
 
 }  // namespace
@@ -424,7 +469,7 @@ Scene parse_scene(const std::string& text, const std::string& origin, const std:
   Scene s;
   s.path = origin;
   s.json = text;
-  s.data_dir = data_dir.empty() ? default_data_dir(origin) : data_dir;
+  s.data_dir = choose_data_dir(origin, data_dir);
 
   if (!j.contains("name")) c.fail("name", "missing required key", "a non-empty string");
   s.name = c.string(j["name"], "name", "a non-empty string");
@@ -586,10 +631,13 @@ Scene load_scene(const std::string& path, const std::string& data_dir) {
 
 std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const std::string& key) {
   const Ctx c{scene.path.empty() ? std::string("<scene>") : scene.path};
+  const bool file_like = looks_like_file(mesh);
   std::vector<fs::path> searched;
   const fs::path m(mesh);
-  searched.push_back(m.is_absolute() ? m : fs::path(scene.path).parent_path() / m);
-  if (!scene.data_dir.empty())
+  searched.push_back(m.is_absolute() ? m : scene_folder(scene.path) / m);
+  // A dataset name is looked up in the data dir; a file path (with a folder or an
+  // extension) is not: "meshes/bunny.obj" must not become ".../bunny.obj.obj".
+  if (!scene.data_dir.empty() && !file_like)
     for (const char* ext : {".obj", ".off", ".ply"}) searched.push_back(fs::path(scene.data_dir) / (mesh + ext));
   for (const auto& p : searched) {
     std::error_code ec;
@@ -602,9 +650,24 @@ std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const
   }
   std::string list;
   for (const auto& p : searched) list += (list.empty() ? "" : ", ") + p.string();
-  c.fail(key, "mesh \"" + mesh + "\" not found (searched: " + list + "); run datasets/fetch.sh to fetch the datasets",
+  if (file_like)
+    c.fail(key, "mesh file \"" + mesh + "\" not found (searched: " + list + ")",
+           "an existing mesh file, absolute or relative to the scene file's folder; or a dataset "
+           "name without extension (bunny, armadillo, dragon, asian-dragon)");
+  const bool dataset = std::find(std::begin(kDatasetNames), std::end(kDatasetNames), mesh) != std::end(kDatasetNames);
+  std::string advice;
+  if (!is_directory(scene.data_dir))
+    advice = "the data dir " + scene.data_dir + " does not exist: run datasets/fetch.sh, or give " +
+             "--data-dir / $OCTOCD_DATA_DIR";
+  else if (dataset)
+    advice = "the data dir " + scene.data_dir + " lacks it: run datasets/fetch.sh, or give --data-dir / " +
+             "$OCTOCD_DATA_DIR";
+  else
+    advice = "not a shipped dataset (bunny, armadillo, dragon, asian-dragon) and no such file";
+  c.fail(key, "mesh \"" + mesh + "\" not found (searched: " + list + "); " + advice,
          "an existing mesh file (absolute or relative to the scene's folder), or a dataset name with "
-         "NAME.obj|.off|.ply in the data dir (--data-dir, $OCTOCD_DATA_DIR, default datasets/cache)");
+         "NAME.obj|.off|.ply in the data dir (--data-dir, $OCTOCD_DATA_DIR, else <scene folder>/../cache, "
+         "else the datasets/cache of the source tree octocd was built from)");
 }
 
 std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aabb, const std::string& origin) {

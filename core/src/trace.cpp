@@ -23,6 +23,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/version.hpp"
+#include "octocd/xml.hpp"
 
 namespace octocd {
 
@@ -258,17 +259,6 @@ std::string iso_utc_now() {
   return buf;
 }
 
-// MidphaseConfig::to_string() without linking the midphase.
-std::string midphase_text(const MidphaseConfig& m) {
-  if (m.aabb_only) return "aabb-only";
-  std::string s;
-  for (std::size_t i = 0; i < m.levels.size(); ++i) {
-    if (i) s += ",";
-    s += std::to_string(m.levels[i]);
-  }
-  return s;
-}
-
 nlohmann::json vec_json(Vec3 v) { return nlohmann::json::array({v.x, v.y, v.z}); }
 
 }  // namespace
@@ -389,6 +379,20 @@ TraceWriter::TraceWriter(const std::string& path, const TraceMetadata& meta,
     fixed_dataset(g, "local_aabb_max", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, hi.data(), path);
     string_dataset(g, "group", bodies.group, path);
     string_dataset(g, "shape_names", bodies.shape_names, path);
+    // Numeric forms for viewers (the XDMF sidecar): half extents, and the group as an
+    // index into group_names (names in order of first appearance: "walls" first).
+    std::vector<float> half(3 * n);
+    for (std::size_t i = 0; i < 3 * n; ++i) half[i] = 0.5f * (hi[i] - lo[i]);
+    fixed_dataset(g, "half_extents", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, half.data(), path);
+    std::vector<std::string> group_names;
+    std::vector<std::int32_t> group_id(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto it = std::find(group_names.begin(), group_names.end(), bodies.group[i]);
+      group_id[i] = static_cast<std::int32_t>(it - group_names.begin());
+      if (it == group_names.end()) group_names.push_back(bodies.group[i]);
+    }
+    fixed_dataset(g, "group_id", H5T_STD_I32LE, H5T_NATIVE_INT32, {n}, group_id.data(), path);
+    string_dataset(g, "group_names", group_names, path);
   }
 
   // ---- /frames
@@ -405,7 +409,7 @@ TraceWriter::TraceWriter(const std::string& path, const TraceMetadata& meta,
     for (int s = 0; s < kStageCount; ++s)
       add(std::string(stage_name(static_cast<Stage>(s))) + "_ms", H5T_IEEE_F64LE,
           H5T_NATIVE_DOUBLE);
-    for (const char* c : {"cell_candidates", "aabb_pairs", "box_tests", "box_pairs",
+    for (const char* c : {"cell_candidates", "aabb_pairs", "dynamic_pairs", "box_tests", "box_pairs",
                           "vertex_tests", "contacts"})
       add(c, H5T_STD_U64LE, H5T_NATIVE_UINT64);
     for (const char* c : {"penetration_mean", "penetration_max", "penetration_share_above_slop",
@@ -473,7 +477,7 @@ void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState& state,
   m.frames[i++].push1(fm.time);
   m.frames[i++].push1(fm.step_ms);
   for (int s = 0; s < kStageCount; ++s) m.frames[i++].push1(fm.stage_ms[s]);
-  for (std::uint64_t v : {fm.cell_candidates, fm.aabb_pairs, fm.box_tests, fm.box_pairs,
+  for (std::uint64_t v : {fm.cell_candidates, fm.aabb_pairs, fm.dynamic_pairs, fm.box_tests, fm.box_pairs,
                           fm.vertex_tests, fm.contacts})
     m.frames[i++].push1(v);
   for (double v : {fm.penetration_mean, fm.penetration_max, fm.penetration_share_above_slop,
@@ -560,15 +564,15 @@ TraceMetadata trace_metadata(const Engine& engine, int state_every) {
   p["gravity"] = vec_json(s.gravity);
   p["domain"] = {{"min", vec_json(s.domain.min)}, {"max", vec_json(s.domain.max)}};
   p["wall_thickness"] = s.wall_thickness;
-  p["broadphase"] = {{"name", s.broadphase.name},
+  p["broadphase"] = {{"name", engine.broadphase_name()},
                      {"octree_depth", s.broadphase.octree_depth},
                      {"cell_size", s.broadphase.cell_size}};
-  p["midphase"] = midphase_text(s.midphase);
+  p["midphase"] = engine.midphase_name();
   p["mesh_octree_depth"] = s.mesh_octree_depth;
   meta.parameters_json = p.dump();
   meta.engine = engine.name();
   meta.broadphase = engine.broadphase_name();
-  meta.midphase = midphase_text(s.midphase);
+  meta.midphase = engine.midphase_name();
   meta.build_id = build_id();
   meta.device = engine.device();
   meta.start_time = iso_utc_now();
@@ -707,16 +711,12 @@ std::string write_xdmf_sidecar(const std::string& trace_path) {
   }
   const hsize_t disk_rows = dataset_rows(file, "/states/position", path);
   const std::size_t nb = static_cast<std::size_t>(sum.bodies);
-  std::string name;  // the trace's file name, XML-escaped
-  for (char c : std::filesystem::path(path).filename().string()) {
-    switch (c) {
-      case '&': name += "&amp;"; break;
-      case '<': name += "&lt;"; break;
-      case '>': name += "&gt;"; break;
-      case '"': name += "&quot;"; break;
-      default: name += c;
-    }
-  }
+  // The trace's file name, XML-escaped.
+  const std::string name = xml_escape(std::filesystem::path(path).filename().string());
+  // /bodies/half_extents and /bodies/group_id appeared after the first traces: older
+  // files get the sidecar without them.
+  const bool has_half = H5Lexists(file, "/bodies/half_extents", H5P_DEFAULT) > 0;
+  const bool has_group = H5Lexists(file, "/bodies/group_id", H5P_DEFAULT) > 0;
   const std::string xmf = path + ".xmf";
 
   std::ostringstream o;
@@ -758,8 +758,20 @@ std::string write_xdmf_sidecar(const std::string& trace_path) {
       << "          <DataItem Dimensions=\"" << nb
       << "\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << name
       << ":/bodies/inverse_mass</DataItem>\n"
-      << "        </Attribute>\n"
-      << "      </Grid>\n";
+      << "        </Attribute>\n";
+    if (has_half)
+      o << "        <Attribute Name=\"half_extents\" AttributeType=\"Vector\" Center=\"Node\">\n"
+        << "          <DataItem Dimensions=\"" << nb
+        << " 3\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << name
+        << ":/bodies/half_extents</DataItem>\n"
+        << "        </Attribute>\n";
+    if (has_group)
+      o << "        <Attribute Name=\"group_id\" AttributeType=\"Scalar\" Center=\"Node\">\n"
+        << "          <DataItem Dimensions=\"" << nb
+        << "\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">" << name
+        << ":/bodies/group_id</DataItem>\n"
+        << "        </Attribute>\n";
+    o << "      </Grid>\n";
   }
   o << "    </Grid>\n  </Domain>\n</Xdmf>\n";
 

@@ -102,14 +102,15 @@ const FrameMetrics& World::step() {
   // depend on the thread count.
   t0 = Clock::now();
   confirmed_.assign(pairs_.size(), 0);
-  std::uint64_t box_tests = 0, box_pairs = 0, vertex_tests = 0;
+  std::uint64_t box_tests = 0, box_pairs = 0, vertex_tests = 0, dynamic_pairs = 0;
   const std::int64_t np = static_cast<std::int64_t>(pairs_.size());
   // Few pairs are cheaper on one thread than waking the team.
-#pragma omp parallel for schedule(dynamic, 8) reduction(+ : box_tests, box_pairs, vertex_tests) \
-    if (np >= 64)
+#pragma omp parallel for schedule(dynamic, 8) \
+    reduction(+ : box_tests, box_pairs, vertex_tests, dynamic_pairs) if (np >= 64)
   for (std::int64_t k = 0; k < np; ++k) {
     const Pair p = pairs_[static_cast<std::size_t>(k)];
     if (state_.w[p.a] == 0.0f && state_.w[p.b] == 0.0f) continue;  // static-static
+    ++dynamic_pairs;
     const std::uint32_t sa = model_->bodies[p.a].shape, sb = model_->bodies[p.b].shape;
     const PlacedShape a{model_->shapes[sa].octree.get(), state_.x[p.a], aabbs_[p.a]};
     const PlacedShape b{model_->shapes[sb].octree.get(), state_.x[p.b], aabbs_[p.b]};
@@ -124,6 +125,7 @@ const FrameMetrics& World::step() {
     auto it = std::find(confirmed_.begin(), confirmed_.end(), std::uint8_t{1});
     if (it != confirmed_.end()) *it = 0;
   }
+  m.dynamic_pairs = dynamic_pairs;
   m.box_tests = box_tests;
   m.box_pairs = box_pairs;
   m.vertex_tests = vertex_tests;

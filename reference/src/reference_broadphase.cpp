@@ -34,8 +34,7 @@ bool contains(const std::vector<std::string>& names, const std::string& name) {
 [[noreturn]] void throw_unknown(const std::string& name, const std::vector<std::string>& names) {
   std::string list;
   for (const std::string& s : names) list += (list.empty() ? "" : ", ") + s;
-  throw InputError("broadphase.name: unknown broadphase '" + name + "' (expected one of: " +
-                   list + ")");
+  throw InputError("broadphase.name: unknown broadphase '" + name + "'; allowed: " + list);
 }
 
 }  // namespace

@@ -179,6 +179,7 @@ void expect_same_counts(const FrameMetrics& a, const FrameMetrics& b, const std:
   EXPECT_EQ(a.frame, b.frame) << what;
   EXPECT_EQ(a.cell_candidates, b.cell_candidates) << what;
   EXPECT_EQ(a.aabb_pairs, b.aabb_pairs) << what;
+  EXPECT_EQ(a.dynamic_pairs, b.dynamic_pairs) << what;
   EXPECT_EQ(a.box_tests, b.box_tests) << what;
   EXPECT_EQ(a.box_pairs, b.box_pairs) << what;
   EXPECT_EQ(a.vertex_tests, b.vertex_tests) << what;

@@ -431,8 +431,8 @@ TEST(BroadPhase, UnknownNameThrowsInputError) {
     FAIL() << "no exception";
   } catch (const InputError& e) {
     EXPECT_STREQ(e.what(),
-                 "broadphase.name: unknown broadphase 'kd-tree' (expected one of: flat, octree, "
-                 "octree-strict, spatial-hash)");
+                 "broadphase.name: unknown broadphase 'kd-tree'; allowed: flat, octree, "
+                 "octree-strict, spatial-hash");
   }
 }
 

@@ -44,8 +44,15 @@ struct FrameMetrics {
   double time = 0.0;               ///< simulated time after the step (s)
   double step_ms = 0.0;            ///< wall time of the whole step (ms)
   std::array<double, static_cast<int>(Stage::Count)> stage_ms{};  ///< wall ms per stage
-  std::uint64_t cell_candidates = 0;  ///< broadphase pairs before the exact AABB test
-  std::uint64_t aabb_pairs = 0;       ///< broadphase pairs (overlapping world AABBs)
+  /// Broadphase pairs before the exact AABB test: the pairs its cells (octree, hash) or
+  /// tree leaves (Bullet's fattened AABBs) paired up; n(n-1)/2 for `flat`. A cost figure.
+  std::uint64_t cell_candidates = 0;
+  /// Broadphase pairs: every pair with overlapping world AABBs (Eq. 6), static-static
+  /// ones (walls touching walls) included, as `flat` gives them.
+  std::uint64_t aabb_pairs = 0;
+  /// The aabb_pairs with at least one dynamic body (w > 0): the pairs that can produce a
+  /// contact (static-static pairs are skipped by the midphase).
+  std::uint64_t dynamic_pairs = 0;
   std::uint64_t box_tests = 0;        ///< midphase cell-box tests
   std::uint64_t box_pairs = 0;        ///< midphase surviving deepest-level box pairs
   std::uint64_t vertex_tests = 0;     ///< narrow-phase vertex tests
@@ -123,6 +130,11 @@ struct Model {
 /// Throws InputError naming the scene key for unreadable meshes.
 std::shared_ptr<const Model> build_model(const Scene& scene);
 
+/// Pairs of static bodies (w = 0) whose world AABBs overlap (Eq. 6, inclusive) at the
+/// initial state. Constant over a run (static bodies never move), so engines whose
+/// broadphase has no per-pair loop on the host report dynamic_pairs = aabb_pairs - this.
+std::uint64_t static_static_pairs(const Model& model);
+
 /// What an engine did in one step, engine-neutral (ARCHITECTURE.md seam 2). Filled only
 /// while recording is on (Engine::set_recording); the validators read only this.
 struct FrameRecord {
@@ -155,6 +167,11 @@ class Engine {
   virtual std::string broadphase_name() const = 0;
   /// The model the engine was built from (scene, shapes, bodies).
   virtual const Model& model() const = 0;
+  /// The midphase in use, as in `--midphase` ("aabb-only", "1,2", ...): the scene's
+  /// midphase.levels by default; an engine with its own narrow phase names it instead
+  /// (`bullet`: "bullet-box-box"). Traces and summaries record this, never a midphase
+  /// the engine did not run.
+  virtual std::string midphase_name() const { return model().scene.midphase.to_string(); }
 
   /// Runs one step (SPEC 4) and returns its metrics. Throws RuntimeError naming the body
   /// and frame when a position or velocity becomes non-finite.
@@ -169,6 +186,10 @@ class Engine {
   /// per-contact records, and for `cuda` unless recording).
   virtual const std::vector<ContactRecord>& contacts() const = 0;
 
+  /// What a reader must know to compare this engine's metrics with the `cpu` engine's
+  /// (printed under the run summary); "" when they mean exactly what FrameMetrics says.
+  virtual std::string notes() const { return ""; }
+
   /// Whether this engine can fill FrameRecord (false for `bullet`).
   virtual bool can_record() const { return false; }
   /// Turns the per-step FrameRecord on or off (off by default: it costs copies).
@@ -178,8 +199,8 @@ class Engine {
     static const FrameRecord kEmpty;
     return kEmpty;
   }
-  /// Whether the engine runs stage `s` as octocd defines it (`bullet` has no midphase:
-  /// its stages are not split and are reported as one).
+  /// Whether the engine times stage `s`; summaries print "n/a", not 0, for a stage it
+  /// lacks. (`bullet` times every stage; its `midphase` is Bullet's narrow phase.)
   virtual bool has_stage(Stage s) const { (void)s; return true; }
 
   /// The scene.

@@ -19,11 +19,15 @@ struct Mesh {
   std::vector<std::array<std::uint32_t, 3>> triangles;  ///< indices into `vertices`
 };
 
-/// Loads a mesh file (OFF, OBJ, PLY, STL, ... anything assimp reads) and welds it.
+/// Loads a mesh file and welds it. Formats (by extension, case-insensitive): OBJ, OFF,
+/// PLY, STL, read with assimp; any other extension (glTF, FBX, ...) is an InputError
+/// before assimp is asked (docs/scenes.md, "Mesh formats").
 /// All meshes of the file's scene are merged (node transforms are not applied); polygons
 /// are triangulated, points and lines dropped. `name` is the file's stem ("bunny").
 /// Does not recentre or scale (see `normalize_mesh`).
-/// Throws InputError naming `path` when the file is missing, unreadable, empty (no
+/// Messages read "mesh file '<path>': <problem>; allowed: <what>" (build_model prefixes
+/// the scene file and key). Throws InputError naming `path` when the file is missing,
+/// unreadable, of another format, empty (no
 /// vertices or no triangles) or holds a non-finite vertex (naming its index in assimp's
 /// load order, which for OFF/OBJ follows the face corners, and its value).
 /// For OFF files the face count in the header is checked against what was loaded

@@ -100,7 +100,9 @@ struct Scene {
 std::size_t body_count(const Scene& scene);
 
 /// Reads and validates a scene file. Mesh names are resolved against `data_dir`
-/// (default: $OCTOCD_DATA_DIR, else datasets/cache next to the scene's folder).
+/// (`--data-dir`; default: $OCTOCD_DATA_DIR, else the first existing folder of
+/// default_data_dirs(path)). The scene's folder is taken as an absolute path, so the
+/// same scene finds the same meshes however its path is spelled.
 /// Throws InputError naming the file, the JSON key (e.g. `groups[1].count`) and the
 /// allowed range for: unknown keys, wrong types, non-finite numbers, beta/alpha outside
 /// (0, 1], slop <= 0, negative J_min, non-finite v_max, counts of zero, domain min >= max,
@@ -110,16 +112,24 @@ Scene load_scene(const std::string& path, const std::string& data_dir = "");
 /// Same as load_scene from JSON text; `origin` names it in errors and is stored as
 /// Scene::path (relative mesh paths resolve against its folder; "" or a name without a
 /// folder means the current directory). The default data_dir is $OCTOCD_DATA_DIR, else
-/// `<origin folder>/../cache` when origin has a folder, else the source tree's
-/// datasets/cache. Meshes are resolved and checked exactly as in load_scene.
+/// the first existing folder of default_data_dirs(origin). Meshes are resolved and
+/// checked exactly as in load_scene.
 Scene parse_scene(const std::string& text, const std::string& origin,
                   const std::string& data_dir = "");
 
+/// The data dirs tried, in order, when neither `--data-dir` nor $OCTOCD_DATA_DIR is
+/// given (docs/scenes.md, "Mesh resolution"): `<scene folder>/../cache` (the scene's
+/// folder made absolute; omitted when `origin` is "") and the `datasets/cache` of the
+/// source tree octocd was built from. Returns {$OCTOCD_DATA_DIR} when that is set and
+/// non-empty. Paths are absolute when `origin` is.
+std::vector<std::string> default_data_dirs(const std::string& origin);
+
 /// Resolves a group's mesh name to a file: an existing regular file (absolute, or
-/// relative to the folder of Scene::path), else DATA_DIR/NAME.obj, NAME.off, NAME.ply
-/// (first found; DATA_DIR = Scene::data_dir). Throws InputError naming `key`, the places
-/// searched, and saying to run datasets/fetch.sh; also when the file found is empty
-/// (size 0).
+/// relative to the folder of Scene::path), else, when `mesh` has no folder and no
+/// extension (a dataset name), DATA_DIR/NAME.obj, NAME.off, NAME.ply (first found;
+/// DATA_DIR = Scene::data_dir). Throws InputError naming `key` and the places searched,
+/// with advice that fits (run datasets/fetch.sh only for a shipped dataset name or a
+/// missing data dir); also when the file found is empty (size 0).
 std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const std::string& key);
 
 /// SplitMix64 (Steele, Lea, Flood 2014): the scene's random stream. Integer-only, so it

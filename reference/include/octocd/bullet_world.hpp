@@ -67,13 +67,21 @@ class BulletWorld : public Engine {
   BulletWorld(const BulletWorld&) = delete;
   BulletWorld& operator=(const BulletWorld&) = delete;
 
-  /// One fixed step; metrics in octocd's layout:
-  /// - step_ms: wall time of stepSimulation plus the metrics; stage_ms[Response] = the
-  ///   whole stepSimulation (Bullet's broadphase, narrow phase and solver are not split),
-  ///   stage_ms[Metrics] = reading state and metrics back; other stages 0.
-  /// - aabb_pairs = pairs in Bullet's overlapping pair cache (btDbvtBroadphase: fattened
-  ///   AABBs, and no static-static pairs, so not equal to octocd's count);
-  ///   cell_candidates = aabb_pairs; box_tests, box_pairs, vertex_tests = 0.
+  /// One fixed step; metrics in octocd's layout, so a summary compares with `cpu`'s:
+  /// - stage_ms, timed inside stepSimulation (a btDiscreteDynamicsWorld subclass times
+  ///   the base calls): aabbs = updateAabbs (world AABBs and the dbvt leaf updates),
+  ///   broadphase = computeOverlappingPairs, midphase = dispatchAllCollisionPairs (Bullet's
+  ///   narrow phase: box-box manifolds; it has no midphase of its own), response =
+  ///   calculateSimulationIslands + solveConstraints (10 sequential-impulse iterations),
+  ///   integrate = the rest of stepSimulation (prediction, integration, bookkeeping),
+  ///   metrics = reading state and metrics back. step_ms = all of it.
+  /// - cell_candidates = pairs in Bullet's overlapping pair cache: its broadphase output,
+  ///   from AABBs fattened by the contact threshold (0.02 m), the motion over the step and
+  ///   the dbvt margin, kept until they separate, static-static pairs excluded.
+  /// - dynamic_pairs = the cached pairs whose exact AABBs (x +- half extents at the
+  ///   positions the broadphase saw, the pre-step state) overlap (Eq. 6): the count
+  ///   octocd's engines give. aabb_pairs = dynamic_pairs + static_static_pairs(model).
+  /// - box_tests, box_pairs, vertex_tests = 0 (no octree midphase).
   /// - contacts = persistent manifolds with >= 1 point.
   /// - penetration_mean / max over manifold POINTS with negative distance (depth =
   ///   -distance; 0 when none); penetration_share_above_slop = share of those points
@@ -97,8 +105,12 @@ class BulletWorld : public Engine {
   const Model& model() const override { return *model_; }
   /// Bullet exposes no octocd contact records: always empty.
   const std::vector<ContactRecord>& contacts() const override { return no_contacts_; }
-  /// Only `response` (the whole stepSimulation) and `metrics` are timed.
+  /// Every stage is timed (see step(); `midphase` holds Bullet's narrow phase).
   bool has_stage(Stage s) const override;
+  /// How Bullet's figures differ from octocd's (see step()).
+  std::string notes() const override;
+  /// "bullet-box-box": Bullet's btBoxBoxDetector on the AABB boxes, not a level list.
+  std::string midphase_name() const override { return "bullet-box-box"; }
 
  private:
   std::shared_ptr<const Model> model_;

@@ -11,6 +11,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "octocd/broadphase.hpp"
@@ -63,9 +64,10 @@ struct Tolerances {
   double bounce_rel = 1e-4;
   /// Slide: stopping distance within this share of v0^2/(2 mu_k g) (issue 2: 2%).
   double slide_rel = 0.02;
-  /// Resting stack: from frame 200 on, every body stays within this many slops of its
-  /// rest height (its initial height lowered by one slop per contact below it: SPEC 6
-  /// leaves each contact's first delta of penetration uncorrected).
+  /// Resting stack: from frame 200 on (or on the last frame of a shorter run), every body
+  /// stays within this many slops of its rest height (its initial height lowered by one
+  /// slop per contact below it: SPEC 6 leaves each contact's first delta of penetration
+  /// uncorrected).
   double stack_slops = 1.0;
   /// Applied state (SPEC 7.9): engine vs the double re-derivation, per component,
   /// |diff| <= this x 2^-23 x (iterations + 2) x (the magnitudes that entered the value:
@@ -211,13 +213,16 @@ const char* scene_kind_name(SceneKind kind);
 
 /// Validator 7 (SPEC 7.7): the analytic scene kinds (classify_scene) run in `engine`
 /// against their closed forms: free fall, bounce, slide, resting stack. Not applicable
-/// (n/a) only to the other kinds. Steps `engine` itself (at most `frames` steps).
+/// (n/a) only to the other kinds. Steps `engine` itself, exactly `frames` steps at most
+/// (never more): an event the run does not reach fails, saying so (a bounce after the
+/// last frame, a slide still moving, a stack judged before its 200 settling frames end
+/// is judged on its last frame).
 ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances& tol);
 
 /// Validator 8 (SPEC 7.8): `engine` against Bullet's btDiscreteDynamicsWorld built from
 /// the same model: settled centre-of-mass height (resting stacks and piles) or the
 /// centre-of-mass trajectory (bounce, slide) over `frames` steps. Not applicable to other
-/// kinds. Steps `engine` itself.
+/// kinds. Steps `engine` itself, exactly `frames` steps.
 ValidationResult validate_against_bullet(Engine& engine, int frames, const Tolerances& tol);
 
 /// Makes a fresh engine of the kind being validated (each call a new one, from the start).
@@ -235,6 +240,24 @@ std::vector<ValidationResult> validate_scene(const Scene& scene, const Validatio
 /// that depends on an overridden tolerance is marked with '*'.
 std::string format_results(const std::vector<ValidationResult>& results,
                            const std::vector<std::string>& overridden = {});
+
+/// Writes a JUnit XML report to `path` (`octocd validate --junit`): one <testsuite> named
+/// `suite` (the scene's name) inside <testsuites>, one <testcase> per result with
+/// classname = `suite` and name = the validator; a failed result carries
+/// <failure message="detail"> (text: figure, measured, bound, detail), an n/a result
+/// <skipped>, a pass its figures in <system-out>. `seconds` is the suite's time;
+/// `properties` (engine, frames, ...) go to <properties>. Text is XML-escaped. Throws
+/// RuntimeError naming the path when it cannot be written.
+void write_junit(const std::string& path, const std::string& suite,
+                 const std::vector<ValidationResult>& results, double seconds,
+                 const std::vector<std::pair<std::string, std::string>>& properties = {});
+
+/// Writes a JUnit XML report with one errored test case (classname `suite`, name `name`,
+/// e.g. "bad-input" or "runtime-failure", <error message="message">): what `validate
+/// --junit` leaves when the scene cannot be loaded or the run stops, so a CI server sees
+/// the scene as broken rather than missing. Throws RuntimeError naming the path.
+void write_junit_error(const std::string& path, const std::string& suite, const std::string& name,
+                       const std::string& message);
 
 /// Appends `/validation` to an existing trace (SPEC 8): one row per result with name,
 /// figure, measured, bound, pass, applicable, detail. Throws RuntimeError naming the path.

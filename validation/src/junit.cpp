@@ -1,0 +1,84 @@
+/// \file junit.cpp
+/// JUnit XML reports of `octocd validate --junit` (issue 9 item 4): CI servers (Jenkins,
+/// GitLab, GitHub actions' test reporters) read them as one test case per validator.
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "octocd/error.hpp"
+#include "octocd/validation.hpp"
+#include "octocd/xml.hpp"
+
+namespace octocd {
+namespace {
+
+/// "%.9g" of a figure (JUnit text, not for machines).
+std::string num(double v) { return fmt::format("{:.9g}", v); }
+
+void write_file(const std::string& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) throw RuntimeError("--junit: cannot write '" + path + "'");
+  out << text;
+  out.close();
+  if (!out) throw RuntimeError("--junit: writing '" + path + "' failed");
+}
+
+}  // namespace
+
+void write_junit(const std::string& path, const std::string& suite,
+                 const std::vector<ValidationResult>& results, double seconds,
+                 const std::vector<std::pair<std::string, std::string>>& properties) {
+  int failures = 0, skipped = 0;
+  for (const ValidationResult& r : results) {
+    if (!r.applicable) ++skipped;
+    else if (!r.pass) ++failures;
+  }
+  const std::string s = xml_escape(suite);
+  std::ostringstream o;
+  o << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+    << "<testsuites name=\"octocd validate\" tests=\"" << results.size() << "\" failures=\"" << failures
+    << "\" errors=\"0\" skipped=\"" << skipped << "\" time=\"" << fmt::format("{:.3f}", seconds) << "\">\n"
+    << "  <testsuite name=\"" << s << "\" tests=\"" << results.size() << "\" failures=\"" << failures
+    << "\" errors=\"0\" skipped=\"" << skipped << "\" time=\"" << fmt::format("{:.3f}", seconds) << "\">\n";
+  if (!properties.empty()) {
+    o << "    <properties>\n";
+    for (const auto& [k, v] : properties)
+      o << "      <property name=\"" << xml_escape(k) << "\" value=\"" << xml_escape(v) << "\"/>\n";
+    o << "    </properties>\n";
+  }
+  for (const ValidationResult& r : results) {
+    const std::string figures =
+        fmt::format("{}: measured {}, bound {}", r.figure, num(r.measured), num(r.bound));
+    o << "    <testcase classname=\"" << s << "\" name=\"" << xml_escape(r.name) << "\" time=\"0\"";
+    if (!r.applicable) {
+      o << ">\n      <skipped message=\"" << xml_escape("n/a: " + r.detail) << "\"/>\n    </testcase>\n";
+    } else if (!r.pass) {
+      o << ">\n      <failure message=\"" << xml_escape(r.detail) << "\" type=\"ValidatorFailure\">"
+        << xml_escape(figures + "\n" + r.detail) << "</failure>\n    </testcase>\n";
+    } else {
+      o << ">\n      <system-out>" << xml_escape(figures + "\n" + r.detail) << "</system-out>\n    </testcase>\n";
+    }
+  }
+  o << "  </testsuite>\n</testsuites>\n";
+  write_file(path, o.str());
+}
+
+void write_junit_error(const std::string& path, const std::string& suite, const std::string& name,
+                       const std::string& message) {
+  const std::string s = xml_escape(suite);
+  std::ostringstream o;
+  o << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+    << "<testsuites name=\"octocd validate\" tests=\"1\" failures=\"0\" errors=\"1\" skipped=\"0\">\n"
+    << "  <testsuite name=\"" << s << "\" tests=\"1\" failures=\"0\" errors=\"1\" skipped=\"0\">\n"
+    << "    <testcase classname=\"" << s << "\" name=\"" << xml_escape(name) << "\" time=\"0\">\n"
+    << "      <error message=\"" << xml_escape(message) << "\" type=\"" << xml_escape(name) << "\">"
+    << xml_escape(message) << "</error>\n"
+    << "    </testcase>\n  </testsuite>\n</testsuites>\n";
+  write_file(path, o.str());
+}
+
+}  // namespace octocd
