@@ -27,23 +27,14 @@
 #include "octocd/version.hpp"
 #include "octocd/world.hpp"
 #include "octocd/cuda_world.hpp"
+#include "tools.hpp"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr int kStages = static_cast<int>(octocd::Stage::Count);
 
-/// The engine `name` (cpu, cuda, bullet) built from `model`. Throws InputError for an
-/// unknown name or a bad broadphase, RuntimeError when the engine cannot start (no CUDA).
-std::unique_ptr<octocd::Engine> make_engine(const std::string& name,
-                                            const std::shared_ptr<const octocd::Model>& model) {
-  const octocd::Scene& scene = model->scene;
-  if (name == "cpu")
-    return std::make_unique<octocd::World>(model, octocd::make_any_broadphase(scene.broadphase, scene.domain));
-  if (name == "bullet") return std::make_unique<octocd::BulletWorld>(model, model->initial);
-  if (name == "cuda") return octocd::make_cuda_engine(model, scene.broadphase.name);
-  throw octocd::InputError(fmt::format("--engine: unknown engine '{}'; allowed: cpu, cuda, bullet", name));
-}
+using octocd::cli::make_engine;  // cli/tools.cpp
 
 struct RunOptions {
   std::string scene;
@@ -393,6 +384,8 @@ int main(int argc, char** argv) {
   val_cmd->add_option("--trace", val.trace,
                       "Write the validated run as a trace with the results under /validation");
 
+  octocd::cli::ToolCommands tools(app);  // bench, replay, compare, report (cli/tools.hpp)
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -403,6 +396,7 @@ int main(int argc, char** argv) {
   try {
     if (*run_cmd) return run_command(run);
     if (*val_cmd) return validate_command(val);
+    if (tools.selected()) return tools.run();
   } catch (const octocd::InputError& e) {
     std::fprintf(stderr, "octocd: error: %s\n", e.what());
     return 2;

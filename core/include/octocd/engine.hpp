@@ -173,6 +173,12 @@ class Engine {
   /// Whether the engine runs stage `s` as octocd defines it (`bullet` has no midphase:
   /// its stages are not split and are reported as one).
   virtual bool has_stage(Stage s) const { (void)s; return true; }
+  /// Replaces the hot state (positions, velocities, inverse masses; each of size
+  /// state().size()) before the next step: `octocd replay` and the broadphase sweeps feed
+  /// every engine the same recorded positions this way. Throws InputError when the sizes
+  /// differ, or when the engine cannot take a state from outside (the default, e.g.
+  /// `bullet`).
+  virtual void set_state(const BodyState& state);
 
   /// The scene.
   const Scene& scene() const { return model().scene; }
