@@ -72,7 +72,11 @@ class BulletBroadPhase final : public BroadPhase {
       cache->removeOverlappingPair(last.m_pProxy0, last.m_pProxy1, dispatcher_.get());
       if (pairs.size() >= n) break;  // not found by its hash: leave the rest to destroyProxy
     }
-    for (btBroadphaseProxy* p : proxies_) broadphase_->destroyProxy(p, dispatcher_.get());
+    // The sweep and prune owns its handles (freed with it); removing them one by one
+    // re-sorts its edge lists each time (proxies^2). The dbvt's proxies are its own
+    // allocations: destroy them (a tree removal each, now that no pair is left).
+    if (name_ == "bullet-dbvt")
+      for (btBroadphaseProxy* p : proxies_) broadphase_->destroyProxy(p, dispatcher_.get());
   }
 
   std::string name() const override { return name_; }
