@@ -98,7 +98,7 @@ const NamedSweep kNamed[] = {
   "bodies": [1000, 2000, 4000, 8000, 16000, 32000, 64000, 128000, 256000, 512000, 1024000],
   "engines": ["cpu", "cuda"],
   "max_bodies": {"flat": 16000, "fcl-naive": 4000, "fcl-sap": 32000, "fcl-interval-tree": 32000,
-                 "fcl-spatial-hash": 128000, "bullet-sap": 256000, "octree-strict": 512000, "cuda:flat": 256000},
+                 "fcl-spatial-hash": 128000, "bullet-sap": 32000, "octree-strict": 512000, "cuda:flat": 256000},
   "warmup": 10,
   "frames": 5,
   "warm_replays": 1,
