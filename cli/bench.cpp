@@ -937,6 +937,11 @@ int bench_command(const BenchOptions& o) {
     if (old["settings"] != settings)
       throw InputError(fmt::format("{}: settings: {}; allowed: the same engines, repeat and shard as now ({})",
                                    o.output, old["settings"].dump(), settings.dump()));
+    for (const char* k : {"hostname", "cpu", "gpu"})
+      if (old["machine"].value(k, "") != result["machine"].value(k, ""))
+        throw InputError(fmt::format("{}: machine.{}: '{}'; allowed: a result measured on this machine ('{}') to "
+                                     "resume",
+                                     o.output, k, old["machine"].value(k, ""), result["machine"].value(k, "")));
     result["started"] = old.value("started", result["started"].get<std::string>());
     for (const auto& pt : old["points"])
       if (pt.value("status", "") == "ok" || pt.value("status", "") == "skipped") kept[pt.value("id", "")] = pt;
@@ -999,6 +1004,7 @@ int bench_command(const BenchOptions& o) {
   std::sort(result["points"].begin(), result["points"].end(),
             [](const json& a, const json& b) { return a.value("index", 0) < b.value("index", 0); });
   result["complete"] = true;
+  result["machine"]["load_average_end"] = load_average();
   write();
   if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", s.name, o.output);
   return any_failed ? 1 : 0;

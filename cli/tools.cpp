@@ -1,6 +1,7 @@
 // What bench, replay, compare and report share (tools.hpp), and their registration.
 #include "tools.hpp"
 
+#include <omp.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -61,6 +62,12 @@ nlohmann::json spread(const std::vector<double>& values) {
   return j;
 }
 
+nlohmann::json load_average() {
+  double avg[3] = {-1.0, -1.0, -1.0};
+  if (getloadavg(avg, 3) != 3) return nlohmann::json::array();
+  return {avg[0], avg[1], avg[2]};
+}
+
 nlohmann::json machine_description() {
   nlohmann::json m;
   char host[256] = {0};
@@ -68,6 +75,8 @@ nlohmann::json machine_description() {
   m["hostname"] = host;
   m["cpu"] = cpu_description();
   m["threads"] = static_cast<long>(sysconf(_SC_NPROCESSORS_ONLN));
+  m["omp_threads"] = omp_get_max_threads();  // the CPU engine's midphase team
+  m["load_average"] = load_average();
   m["gpu"] = cuda_device_status();
   std::string driver;
   std::ifstream in("/proc/driver/nvidia/version");

@@ -35,10 +35,14 @@ const std::vector<std::string>& engine_names();
 /// An empty `values` gives n = 0 and no other keys.
 nlohmann::json spread(const std::vector<double>& values);
 
-/// Where and on what this runs: {"hostname", "cpu", "threads", "gpu", "driver"} (gpu is
-/// the CUDA engine's device line, e.g. "no CUDA device: ..."; driver from
-/// /proc/driver/nvidia/version, "" when absent).
+/// Where and on what this runs: {"hostname", "cpu", "threads", "omp_threads",
+/// "load_average", "gpu", "driver"} (gpu is the CUDA engine's device line, e.g. "no CUDA
+/// device: ..."; driver from /proc/driver/nvidia/version, "" when absent).
 nlohmann::json machine_description();
+
+/// The 1, 5 and 15 minute load averages now (getloadavg), [] when unknown: how busy a
+/// shared machine was while it measured.
+nlohmann::json load_average();
 
 /// The build: {"build_id", "git_revision"} (git_revision from `git rev-parse` in the source
 /// tree when it is there, else the id compiled in).

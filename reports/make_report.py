@@ -194,7 +194,12 @@ def machine_block(doc, g):
              f"Machine: {m.get('cpu')}, host {m.get('hostname')}; GPU: {m.get('gpu')}"
              + (f"; driver: {m.get('driver')}" if m.get("driver") else ""),
              f"Build {b.get('build_id')}, source revision {b.get('git_revision')}; run {j.get('started')} to "
-             f"{j.get('updated', '?')}",
+             f"{j.get('updated', '?')}"
+             + (f"; load average {', '.join(f'{x:.1f}' for x in m['load_average'])} at the start"
+                if m.get("load_average") else "")
+             + (f", {', '.join(f'{x:.1f}' for x in m['load_average_end'])} at the end"
+                if m.get("load_average_end") else "")
+             + (f"; CPU engine on {m['omp_threads']} OpenMP threads" if m.get("omp_threads") else ""),
              f"Settings: engines {', '.join(s.get('engines', []))}; {s.get('repeat')} repetitions per point; "
              f"{s.get('frames')} frames per run (warm-up {s.get('warmup')})"
              + (f", {s.get('warm_replays')} untimed replay(s) first" if "warm_replays" in s else "")
@@ -535,7 +540,7 @@ def section_scaling(doc, g):
     ax.set_xlabel("bodies")
     ax.set_ylabel("broadphase ms per frame")
     ax.set_title("Broadphase scaling on identical recorded AABBs (solid: cpu, dashed: cuda)")
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     doc.figure(fig, "scaling", "Broadphase scaling, log-log: ms per frame against bodies")
     doc.table(["engine", "broadphase"] + [f"{s:,}" for s in sizes] + ["slope k", "last doubling", "pairs = recorded"],
               rows, "ms per frame, median over repetitions; '-' = not measured (skipped: see below).")
