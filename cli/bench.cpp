@@ -134,6 +134,7 @@ struct Sweep {
   std::vector<Axis> axes;
   json set = json::object();
   int frames = 300, warmup = 30, repeat = 3, series_every = 0, warm_replays = 1;
+  double min_time_ms = 50.0;
   std::vector<Window> windows;
   std::vector<long> bodies;
   std::vector<std::string> broadphases;
@@ -190,7 +191,8 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   static const std::set<std::string> common{"name",  "kind",   "description", "engines", "frames",
                                             "warmup", "repeat", "format",      "version"};
   static const std::set<std::string> steps{"scenes", "axes", "set", "windows", "series_every"};
-  static const std::set<std::string> bp{"bodies", "scenes", "broadphases", "max_bodies", "warm_replays", "set"};
+  static const std::set<std::string> bp{"bodies",       "scenes", "broadphases", "max_bodies",
+                                        "warm_replays", "set",    "min_time_ms"};
   if (!j.contains("name") || !j.at("name").is_string() || j.at("name").get<std::string>().empty())
     bad(origin, "name", "missing or not a non-empty string", "a non-empty string");
   s.name = j.at("name");
@@ -284,6 +286,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     s.frames = get_int(j, "frames", origin, 1, 100000, 5);
     s.warmup = get_int(j, "warmup", origin, 0, 100000, 10);
     s.warm_replays = get_int(j, "warm_replays", origin, 0, 1000, 1);
+    s.min_time_ms = get_int(j, "min_time_ms", origin, 0, 600000, 50);
     const bool has_bodies = j.contains("bodies"), has_scenes = j.contains("scenes");
     if (has_bodies == has_scenes) bad(origin, "bodies", "give exactly one of bodies and scenes", "bodies or scenes");
     if (has_bodies) {
@@ -741,7 +744,7 @@ json run_broadphase_point(const Sweep& s, const Point& p, InputCache& cache, con
   }
   std::size_t ticks = 0;
   const std::size_t total = in.x.size() * static_cast<std::size_t>(s.warm_replays + s.repeat);
-  ReplayRun run = replay_broadphase(in, p.engine, p.broadphase, s.repeat, s.warm_replays, [&] {
+  ReplayRun run = replay_broadphase(in, p.engine, p.broadphase, s.repeat, s.warm_replays, s.min_time_ms, [&] {
     ++ticks;
     progress.detail(fmt::format("replay {}/{}", ticks, total));
   });
@@ -900,7 +903,10 @@ int bench_command(const BenchOptions& o) {
                 {"frames", s.frames},
                 {"warmup", s.warmup},
                 {"shard", {{"index", shard}, {"count", shards}}}};
-  if (s.kind == "broadphase") settings["warm_replays"] = s.warm_replays;
+  if (s.kind == "broadphase") {
+    settings["warm_replays"] = s.warm_replays;
+    settings["min_time_ms"] = s.min_time_ms;
+  }
   json result{{"format", "octocd-bench"},
               {"version", 1},
               {"sweep", {{"name", s.name}, {"kind", s.kind}, {"description", s.description}, {"origin", origin},

@@ -222,7 +222,7 @@ std::string first_set_difference(const ReplayInput& input, const std::vector<std
 }
 
 ReplayRun replay_broadphase(const ReplayInput& input, const std::string& engine, const std::string& broadphase,
-                            int repeat, int warm_replays, const std::function<void()>& tick) {
+                            int repeat, int warm_replays, double min_ms, const std::function<void()>& tick) {
   ReplayRun r;
   r.engine = engine;
   r.broadphase = broadphase;
@@ -254,19 +254,23 @@ ReplayRun replay_broadphase(const ReplayInput& input, const std::string& engine,
   double pairs = 0.0, candidates = 0.0;
   auto pass = [&](bool timed) {
     double ms = 0.0;
-    pairs = candidates = 0.0;
-    for (std::size_t k = 0; k < nf; ++k) {
-      st.x = input.x[k];
-      e->set_state(st);
-      const FrameMetrics& m = e->step();
-      ms += m.stage_ms[static_cast<int>(Stage::Broadphase)];
-      pairs += static_cast<double>(m.aabb_pairs);
-      candidates += static_cast<double>(m.cell_candidates);
-      counts[k] = m.aabb_pairs;
-      if (sets) got[k] = e->record().pairs;
-      if (tick) tick();
-    }
-    if (timed) r.ms.push_back(ms / static_cast<double>(std::max<std::size_t>(nf, 1)));
+    std::size_t replayed = 0;
+    do {  // a timed pass replays the frames until its broadphase time reaches min_ms
+      pairs = candidates = 0.0;
+      for (std::size_t k = 0; k < nf; ++k) {
+        st.x = input.x[k];
+        e->set_state(st);
+        const FrameMetrics& m = e->step();
+        ms += m.stage_ms[static_cast<int>(Stage::Broadphase)];
+        pairs += static_cast<double>(m.aabb_pairs);
+        candidates += static_cast<double>(m.cell_candidates);
+        counts[k] = m.aabb_pairs;
+        if (sets) got[k] = e->record().pairs;
+        if (tick) tick();
+      }
+      replayed += nf;
+    } while (timed && ms < min_ms && nf > 0);
+    if (timed) r.ms.push_back(ms / static_cast<double>(std::max<std::size_t>(replayed, 1)));
   };
   try {
     for (int w = 0; w < warm_replays; ++w) pass(false);
@@ -326,6 +330,10 @@ CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o) {
   c->add_option("--warm-replays", o.warm_replays, "Untimed passes first (>= 0)")
       ->check(CLI::NonNegativeNumber)
       ->default_val(1);
+  c->add_option("--min-time-ms", o.min_ms,
+                "Replay each timed pass again until its broadphase time reaches this (ms; 0 = one replay)")
+      ->check(CLI::NonNegativeNumber)
+      ->default_val(0.0);
   c->add_option("--every", o.every, "Replay every K-th recorded state (>= 1)")->check(CLI::PositiveNumber)->default_val(1);
   c->add_option("--max-frames", o.max_frames, "Replay at most N frames (0 = all)")
       ->check(CLI::NonNegativeNumber)
@@ -353,7 +361,7 @@ int replay_command(const ReplayOptions& o) {
 
   std::vector<ReplayRun> runs;
   for (const auto& b : bps) {
-    ReplayRun r = replay_broadphase(in, o.engine, b, o.repeat, o.warm_replays);
+    ReplayRun r = replay_broadphase(in, o.engine, b, o.repeat, o.warm_replays, o.min_ms);
     if (!r.ok) throw InputError(fmt::format("--broadphase: {} on engine {}: {}", b, o.engine, r.reason));
     runs.push_back(std::move(r));
   }

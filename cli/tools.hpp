@@ -128,11 +128,14 @@ struct ReplayRun {
 
 /// Replays `input` through `broadphase` on `engine` (make_engine on a copy of the model
 /// naming that broadphase): `warm_replays` untimed passes over every frame, then `repeat`
-/// timed ones (the engine's own broadphase-stage time). An InputError or RuntimeError
+/// timed ones (the engine's own broadphase-stage time); a timed repetition replays the
+/// frames again until its broadphase time reaches `min_ms` (so tiny scenes are not timed
+/// at the clock's resolution) and reports ms per frame over all its replays. An InputError or RuntimeError
 /// while building the engine (a broadphase the engine lacks, no CUDA device) gives
 /// ok = false with the reason; a failure while stepping is thrown.
 ReplayRun replay_broadphase(const ReplayInput& input, const std::string& engine, const std::string& broadphase,
-                            int repeat, int warm_replays, const std::function<void()>& tick = {});
+                            int repeat, int warm_replays, double min_ms = 0.0,
+                            const std::function<void()>& tick = {});
 
 /// The first frame (index into input.frames) where `a` and `b` differ, with the first pair
 /// in one set and not the other; "" when equal.
@@ -168,6 +171,7 @@ struct ReplayOptions {
   int repeat = 3;
   int warm_replays = 1;
   int every = 1;                  ///< replay every K-th state row
+  double min_ms = 0.0;            ///< replay each timed repetition until this much time
   int max_frames = 0;             ///< > 0: at most this many frames
   std::string json;               ///< write the result table as JSON
 };

@@ -203,6 +203,7 @@ def machine_block(doc, g):
              f"Settings: engines {', '.join(s.get('engines', []))}; {s.get('repeat')} repetitions per point; "
              f"{s.get('frames')} frames per run (warm-up {s.get('warmup')})"
              + (f", {s.get('warm_replays')} untimed replay(s) first" if "warm_replays" in s else "")
+             + (f", each timed repetition at least {s.get('min_time_ms')} ms" if "min_time_ms" in s else "")
              + f"; files: {', '.join(os.path.basename(f) for f in g['files'])}",
              f"Points: {len(g['points_list'])} of {total} in these files ({n_ok} measured)"
              + ("" if len(g["points_list"]) >= total else " — incomplete: missing shards or an interrupted run")]
@@ -544,6 +545,18 @@ def section_scaling(doc, g):
     doc.figure(fig, "scaling", "Broadphase scaling, log-log: ms per frame against bodies")
     doc.table(["engine", "broadphase"] + [f"{s:,}" for s in sizes] + ["slope k", "last doubling", "pairs = recorded"],
               rows, "ms per frame, median over repetitions; '-' = not measured (skipped: see below).")
+    # Per doubling: log2 of the time ratio between consecutive sizes (1.0 = linear).
+    nominal = lambda p: p["params"].get("bodies", p["bodies"])  # lattice size asked (walls apart)
+    sizes_n = sorted({nominal(p) for p in pts})
+    steps = [(a, b) for a, b in zip(sizes_n, sizes_n[1:]) if b == 2 * a]
+    if steps:
+        rows = []
+        for key, ps in sorted(series.items()):
+            by = {nominal(p): med(p["ms_per_frame"]) for p in ps}
+            rows.append([key[0], key[1]] + [f"{math.log2(by[b] / by[a]):.2f}" if by.get(a) and by.get(b) else "-"
+                                            for a, b in steps])
+        doc.table(["engine", "broadphase"] + [f"{a:,}→{b:,}" for a, b in steps], rows,
+                  "Slope per doubling of the body count: log2(time(2n) / time(n)); 1 = linear, 2 = quadratic.")
     rows = []
     for s in sizes:
         p = next((p for p in pts if p["bodies"] == s), None)
