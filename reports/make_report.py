@@ -138,10 +138,10 @@ class Doc:
         self.md.append(text + "\n")
 
     def table(self, header, rows, note=None):
-        t = ["<table><thead><tr>" + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
+        t = ['<div class="wide"><table><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
         for r in rows:
             t.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>")
-        t.append("</tbody></table>")
+        t.append("</tbody></table></div>")
         self.html.append("".join(t))
         self.md.append("| " + " | ".join(str(x) for x in header) + " |")
         self.md.append("|" + "|".join("---" for _ in header) + "|")
@@ -172,7 +172,7 @@ th,td{border:1px solid #ccc;padding:.25em .55em;text-align:right}th{background:#
 td:first-child,th:first-child{text-align:left}tbody tr:nth-child(even){background:#fafafa}
 figure{margin:1em 0}figure svg{max-width:100%;height:auto}figcaption{font-size:.85em;color:#555}
 .note{font-size:.85em;color:#555}.meta{font-size:.85em;background:#f6f6f6;padding:.5em .8em;border-left:3px solid #4e79a7}
-nav a{margin-right:1em}"""
+nav a{margin-right:1em}.wide{overflow-x:auto;max-width:100%}"""
         page = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
                 f"<title>{html.escape(title)}</title><style>{css}</style></head><body>",
                 f"<h1>{html.escape(title)}</h1>"] + self.html + ["</body></html>"]
@@ -245,9 +245,9 @@ def first_window(p):
     return next(iter(p["windows"].values()))
 
 
-def steps_bars(doc, pts, group_axis, title, name):
-    """steps/s bars per scene and engine (and group_axis value)."""
-    scenes = list(dict.fromkeys(p["params"]["scene"] for p in pts))
+def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"]):
+    """steps/s bars per scene (or xkey) and engine (and group_axis value)."""
+    scenes = list(dict.fromkeys(xkey(p) for p in pts))
     combos = list(dict.fromkeys((axis_label(p, group_axis) if group_axis else "", p["params"]["engine"]) for p in pts))
     if not scenes or not combos:
         return
@@ -257,7 +257,7 @@ def steps_bars(doc, pts, group_axis, title, name):
     for k, (val, eng) in enumerate(combos):
         ys, lo, hi = [], [], []
         for sc in scenes:
-            m = [p for p in pts if p["params"]["scene"] == sc and p["params"]["engine"] == eng
+            m = [p for p in pts if xkey(p) == sc and p["params"]["engine"] == eng
                  and (not group_axis or axis_label(p, group_axis) == val)]
             s = first_window(m[0])["steps_per_s"] if m else None
             ys.append(s["median"] if s else np.nan)
@@ -437,7 +437,8 @@ def section_tableA1(doc, g):
         doc.figure(fig, "tableA1-series", "Table A1 / Fig. 5: steps/s over the 3000 frames, spatial hash (dashed) vs "
                    "octree (solid), per mesh and engine (median over repetitions of each 100-frame block)")
     steps_bars(doc, [dict(p, windows={"late": p["windows"]["late"]}) for p in pts if "late" in p["windows"]],
-               "broadphase", "Table A1, late phase: steps/s per mesh, SH vs O-A, per engine", "tableA1-late")
+               "broadphase", "Table A1, late phase: steps/s per mesh, SH vs O-A, per engine", "tableA1-late",
+               xkey=lambda p: p["params"]["axes"].get("mesh", p["params"]["scene"]))
     rows = []
     for p in pts:
         for ph in ("early", "late"):
@@ -531,7 +532,8 @@ def section_scaling(doc, g):
                     color=cmap(k % 20), linestyle="-" if key[0] == "cpu" else "--")
         good = ys > 0
         sl = slope(xs[good], ys[good]) if good.sum() >= 2 else float("nan")
-        last = math.log2(ys[-1] / ys[-2]) if len(ys) >= 2 and ys[-2] > 0 and xs[-1] == 2 * xs[-2] else float("nan")
+        ns = [p["params"].get("bodies", p["bodies"]) for p in ps]  # lattice sizes asked (walls apart)
+        last = math.log2(ys[-1] / ys[-2]) if len(ys) >= 2 and ys[-2] > 0 and ns[-1] == 2 * ns[-2] else float("nan")
         by = {p["bodies"]: p for p in ps}
         rows.append([key[0], key[1]] + [num(med(by[s]["ms_per_frame"]), 3) if s in by else "-" for s in sizes]
                     + [f"{sl:.2f}" if not math.isnan(sl) else "-", f"{last:.2f}" if not math.isnan(last) else "-",
