@@ -31,23 +31,14 @@
 #include "octocd/version.hpp"
 #include "octocd/world.hpp"
 #include "octocd/cuda_world.hpp"
+#include "tools.hpp"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr int kStages = static_cast<int>(octocd::Stage::Count);
 
-/// The engine `name` (cpu, cuda, bullet) built from `model`. Throws InputError for an
-/// unknown name or a bad broadphase, RuntimeError when the engine cannot start (no CUDA).
-std::unique_ptr<octocd::Engine> make_engine(const std::string& name,
-                                            const std::shared_ptr<const octocd::Model>& model) {
-  const octocd::Scene& scene = model->scene;
-  if (name == "cpu")
-    return std::make_unique<octocd::World>(model, octocd::make_any_broadphase(scene.broadphase, scene.domain));
-  if (name == "bullet") return std::make_unique<octocd::BulletWorld>(model, model->initial);
-  if (name == "cuda") return octocd::make_cuda_engine(model, scene.broadphase.name);
-  throw octocd::InputError(fmt::format("--engine: unknown engine '{}'; allowed: cpu, cuda, bullet", name));
-}
+using octocd::cli::make_engine;  // cli/tools.cpp
 
 struct RunOptions {
   std::string scene;
@@ -556,7 +547,7 @@ CLI::Validator at_least_one() {
 int main(int argc, char** argv) {
   CLI::App app{
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
-      "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a validator failed.",
+      "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a check failed (validate, compare, replay).",
       "octocd"};  // a fixed name: `--help` reads the same whatever path ran it (docs/cli.md)
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);
@@ -640,6 +631,8 @@ int main(int argc, char** argv) {
   val_cmd->add_flag("--check-only", val.check_only,
                     "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not)");
 
+  octocd::cli::ToolCommands tools(app);  // bench, replay, compare, report (cli/tools.hpp)
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -654,6 +647,7 @@ int main(int argc, char** argv) {
       val.every_given = val_cmd->get_option("--every")->count() > 0;
       return validate_command(val);
     }
+    if (tools.selected()) return tools.run();
   } catch (const octocd::InputError& e) {
     std::fprintf(stderr, "octocd: error: %s\n", e.what());
     return 2;

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# Runs the GPU test suite, validation, compute-sanitizer and the steps/s table on a CUDA
+# Runs the GPU test suite, validation, compute-sanitizer and the benchmark sweeps on a CUDA
 # machine from an extracted bundle (scripts/gpu-bundle.sh). Usage, from the repository:
 #   bash scripts/gpu-run.sh BUNDLE_DIR OUTDIR [FRAMES]
 # Writes OUTDIR/{device.txt, test_cuda_world.txt, validate-cuda.txt, sanitizer.txt,
-# steps.md, steps.json}. Exit code 0 even when a step fails: read the files.
+# bench/<sweep>.json}. OCTOCD_SWEEPS picks sweeps, OCTOCD_BENCH_OPTIONS adds bench options
+# (e.g. "--repeat 2"). Exit code 0 even when a step fails: read the files.
 set -u
 here=$(cd "${1:?usage: gpu-run.sh BUNDLE_DIR OUTDIR [FRAMES]}" && pwd)
 out=${2:?usage: gpu-run.sh BUNDLE_DIR OUTDIR [FRAMES]}
@@ -36,5 +37,12 @@ for tool in memcheck racecheck synccheck; do
   echo "exit $?" >> "$out/sanitizer.txt"
 done
 
-# 4. steps/s, cpu (this machine's CPU, same binary) and cuda, Table 5 scenes, [1,2] and aabb-only.
-"$repo/bench/gpu_steps.sh" "$bin/octocd" "$here/datasets/scenes" "$frames" "$out" > "$out/steps.log" 2>&1
+# 4. The benchmark sweeps (docs/bench-format.md): cpu (this machine's CPU, same binary), cuda
+#    and bullet side by side. The report is made where matplotlib is:
+#    octocd report OUTDIR/bench/*.json -o reports/h100/bench
+mkdir -p "$out/bench"
+for s in ${OCTOCD_SWEEPS:-table5 table6 tableA1 figA2 broadphase-scaling}; do
+  timeout 3000 "$bin/octocd" bench "$s" -o "$out/bench/$s.json" --resume --quiet ${OCTOCD_BENCH_OPTIONS:-} \
+    > "$out/bench/$s.log" 2>&1
+  echo "exit $? for $s" >> "$out/bench/$s.log"
+done

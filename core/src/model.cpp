@@ -177,4 +177,8 @@ std::uint64_t state_hash(const BodyState& state) {
 
 std::uint64_t Engine::state_hash() const { return octocd::state_hash(state()); }
 
+void Engine::set_state(const BodyState& /*state*/) {
+  throw InputError("engine '" + name() + "' cannot take a state from outside (set_state); allowed: cpu, cuda");
+}
+
 }  // namespace octocd

@@ -260,4 +260,12 @@ const FrameMetrics& World::step() {
   return metrics_;
 }
 
+void World::set_state(const BodyState& s) {
+  const std::size_t n = state_.size();
+  if (s.x.size() != n || s.v.size() != n || s.w.size() != n)
+    throw InputError(fmt::format("World::set_state: expected {} bodies, got x {}, v {}, w {}", n, s.x.size(),
+                                 s.v.size(), s.w.size()));
+  state_ = s;
+}
+
 }  // namespace octocd

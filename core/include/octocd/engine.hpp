@@ -202,6 +202,12 @@ class Engine {
   /// Whether the engine times stage `s`; summaries print "n/a", not 0, for a stage it
   /// lacks. (`bullet` times every stage; its `midphase` is Bullet's narrow phase.)
   virtual bool has_stage(Stage s) const { (void)s; return true; }
+  /// Replaces the hot state (positions, velocities, inverse masses; each of size
+  /// state().size()) before the next step: `octocd replay` and the broadphase sweeps feed
+  /// every engine the same recorded positions this way. Throws InputError when the sizes
+  /// differ, or when the engine cannot take a state from outside (the default, e.g.
+  /// `bullet`).
+  virtual void set_state(const BodyState& state);
 
   /// The scene.
   const Scene& scene() const { return model().scene; }

@@ -70,6 +70,8 @@ class World : public Engine {
   bool can_record() const override { return true; }
   void set_recording(bool on) override { recording_ = on; }
   const FrameRecord& record() const override { return record_; }
+  /// Replaces the hot state (sizes must equal the body count, else InputError).
+  void set_state(const BodyState& state) override;
 
   /// The shared model (e.g. to build another engine from the same bits).
   std::shared_ptr<const Model> shared_model() const { return model_; }

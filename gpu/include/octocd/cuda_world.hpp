@@ -110,7 +110,7 @@ class CudaWorld : public Engine {
   /// Replaces the hot state (positions, velocities, inverse masses; sizes must equal the
   /// body count, else InputError): tests set up states with it, as with
   /// World::mutable_state.
-  void set_state(const BodyState& state);
+  void set_state(const BodyState& state) override;
 
   /// Frees every variable-size device buffer (pairs, contacts, sort index, scratch) and
   /// reallocates it with room for `capacity` elements (>= 1); each grows again when a

@@ -1,0 +1,1019 @@
+// `octocd bench NAME|SWEEP.json` (SPEC 12): the paper's experiments redone side by side on
+// every engine this octocd has. A sweep expands to points (scene x axis values x engine,
+// or bodies x broadphase x engine); each point is run `repeat` times and every figure is
+// stored with its median and spread. The result file is rewritten (atomically) after every
+// point, so a killed sweep keeps what it finished and `--resume` goes on from there.
+// Result format: docs/bench-format.md.
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "octocd/error.hpp"
+#include "octocd/reference_broadphase.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/trace.hpp"
+#include "tools.hpp"
+
+namespace octocd::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using Clock = std::chrono::steady_clock;
+constexpr int kStages = static_cast<int>(Stage::Count);
+
+// ---- the named sweeps ------------------------------------------------------------------------
+// Each is an ordinary sweep file (docs/bench-format.md); `octocd bench NAME --print` shows it.
+
+struct NamedSweep {
+  const char* name;
+  const char* text;
+};
+
+const NamedSweep kNamed[] = {
+    {"table5", R"({
+  "name": "table5",
+  "kind": "steps",
+  "description": "Paper Table 5: the four Table 5 scenes (paper counts: bunny 400, armadillo 250, dragon 250, asian dragon 60) x midphase A [2], B [1,2], C [0,1,2]: steps/s, per-stage ms, pairs, contacts.",
+  "scenes": ["bunny-random-400", "armadillo-random-250", "dragon-random-250", "asian-dragon-random-60"],
+  "engines": ["cpu", "cuda", "bullet"],
+  "axes": [{"name": "midphase", "values": ["2", "1,2", "0,1,2"], "labels": ["A", "B", "C"]}],
+  "warmup": 30,
+  "frames": 300,
+  "repeat": 3
+})"},
+    {"table6", R"({
+  "name": "table6",
+  "kind": "steps",
+  "description": "Paper Table 6: Level 0 (aabb-only) vs hierarchical C [0,1,2] on the four Table 5 scenes.",
+  "scenes": ["bunny-random-400", "armadillo-random-250", "dragon-random-250", "asian-dragon-random-60"],
+  "engines": ["cpu", "cuda", "bullet"],
+  "axes": [{"name": "midphase", "values": ["aabb-only", "0,1,2"], "labels": ["L0", "C"]}],
+  "warmup": 30,
+  "frames": 300,
+  "repeat": 3
+})"},
+    {"tableA1", R"({
+  "name": "tableA1",
+  "kind": "steps",
+  "description": "Paper Table A1: spatial hash (h = 0.25 m) vs octree broadphase on the 50-instance stacking scene (bunny-stack-50, and the same scene with each of the other meshes), early phase (frames 1-300) and late phase (frames 2701-3000 of 3000).",
+  "scenes": ["bunny-stack-50"],
+  "engines": ["cpu", "cuda", "bullet"],
+  "set": {"/broadphase/cell_size": 0.25},
+  "axes": [{"name": "mesh", "key": "/groups/0/shape/mesh", "values": ["bunny", "armadillo", "dragon", "asian-dragon"]},
+           {"name": "broadphase", "values": ["spatial-hash", "octree"], "labels": ["SH", "O-A"]}],
+  "frames": 3000,
+  "windows": [{"name": "early", "first": 1, "last": 300}, {"name": "late", "first": 2701, "last": 3000}],
+  "series_every": 100,
+  "repeat": 3
+})"},
+    {"figA2", R"({
+  "name": "figA2",
+  "kind": "steps",
+  "description": "Paper Fig. A2: Baumgarte factor beta x slop delta on the stacking scene (bunny-stack-50, dt 0.001, 3000 frames): mean and max AABB penetration and the share of contacts above delta. Bullet is left out: its solver has neither beta nor delta.",
+  "scenes": ["bunny-stack-50"],
+  "engines": ["cpu", "cuda"],
+  "axes": [{"name": "beta", "key": "/response/beta", "values": [0.2, 0.4, 0.6, 0.8, 1.0]},
+           {"name": "delta", "key": "/response/slop", "values": [0.0005, 0.001, 0.002, 0.005]}],
+  "frames": 3000,
+  "warmup": 0,
+  "series_every": 100,
+  "repeat": 1
+})"},
+    {"broadphase-scaling", R"({
+  "name": "broadphase-scaling",
+  "kind": "broadphase",
+  "description": "Every broadphase of every engine (octocd's, Bullet's and FCL's on the CPU; the device's on cuda) on identical recorded AABBs of box lattices (0.1 m boxes, spacing 0.145 m, 2 cm jitter, random velocities up to 1 m/s, closed box, no gravity: the density of boxes-random-10000) of 1,000 to 1,024,000 bodies, doubling; each broadphase skipped above its max_bodies, where one replay would take minutes.",
+  "bodies": [1000, 2000, 4000, 8000, 16000, 32000, 64000, 128000, 256000, 512000, 1024000],
+  "engines": ["cpu", "cuda"],
+  "max_bodies": {"flat": 16000, "fcl-naive": 4000, "fcl-sap": 32000, "fcl-interval-tree": 32000,
+                 "fcl-spatial-hash": 128000, "bullet-sap": 32000, "octree-strict": 512000, "cuda:flat": 256000},
+  "warmup": 10,
+  "frames": 5,
+  "warm_replays": 1,
+  "repeat": 3
+})"},
+};
+
+std::string named_list() {
+  std::string s;
+  for (const auto& n : kNamed) s += (s.empty() ? "" : ", ") + std::string(n.name);
+  return s;
+}
+
+// ---- sweep definition ------------------------------------------------------------------------
+
+struct Axis {
+  std::string name;
+  std::string key;  // JSON pointer into the scene
+  std::vector<json> values;
+  std::vector<std::string> labels;  // same size as values ("" when none)
+};
+
+struct Window {
+  std::string name;
+  int first = 1, last = 1;
+};
+
+struct Sweep {
+  std::string name, kind, description, origin;
+  json definition;
+  std::vector<std::string> scenes;  // resolved files
+  std::vector<std::string> engines;
+  std::vector<Axis> axes;
+  json set = json::object();
+  int frames = 300, warmup = 30, repeat = 3, series_every = 0, warm_replays = 1;
+  double min_time_ms = 50.0;
+  std::vector<Window> windows;
+  std::vector<long> bodies;
+  std::vector<std::string> broadphases;
+  std::map<std::string, long> max_bodies;
+};
+
+[[noreturn]] void bad(const std::string& origin, const std::string& key, const std::string& problem,
+                      const std::string& allowed) {
+  throw InputError(fmt::format("{}: {}: {}; allowed: {}", origin, key, problem, allowed));
+}
+
+int get_int(const json& j, const std::string& key, const std::string& origin, int lo, int hi, int def) {
+  if (!j.contains(key)) return def;
+  const json& v = j.at(key);
+  if (!v.is_number_integer() || v.get<long long>() < lo || v.get<long long>() > hi)
+    bad(origin, key, fmt::format("{} is not an integer in range", v.dump()), fmt::format("an integer in [{}, {}]", lo, hi));
+  return v.get<int>();
+}
+
+std::vector<std::string> string_list(const json& j, const std::string& key, const std::string& origin) {
+  std::vector<std::string> out;
+  if (!j.at(key).is_array() || j.at(key).empty()) bad(origin, key, "not a non-empty array", "an array of strings");
+  for (std::size_t i = 0; i < j.at(key).size(); ++i) {
+    const json& v = j.at(key)[i];
+    if (!v.is_string()) bad(origin, fmt::format("{}[{}]", key, i), v.dump() + " is not a string", "a string");
+    out.push_back(v.get<std::string>());
+  }
+  return out;
+}
+
+/// The scene key a known axis name sets.
+std::string axis_key(const std::string& name) {
+  static const std::map<std::string, std::string> keys{
+      {"midphase", "/midphase/levels"}, {"broadphase", "/broadphase/name"}, {"cell_size", "/broadphase/cell_size"},
+      {"beta", "/response/beta"},       {"delta", "/response/slop"},      {"slop", "/response/slop"},
+      {"alpha", "/response/alpha"},     {"count", "/groups/0/count"},     {"mesh", "/groups/0/shape/mesh"},
+      {"iterations", "/response/iterations"}};
+  const auto it = keys.find(name);
+  return it == keys.end() ? "" : it->second;
+}
+
+std::string resolve_scene(const std::string& entry, const std::string& scene_dir, const std::string& sweep_dir) {
+  const bool bare = entry.find('/') == std::string::npos && fs::path(entry).extension() != ".json";
+  if (bare) return (fs::path(scene_dir) / (entry + ".json")).string();
+  const fs::path p(entry);
+  return p.is_absolute() || sweep_dir.empty() ? entry : (fs::path(sweep_dir) / p).string();
+}
+
+Sweep parse_sweep(const json& j, const std::string& origin, const std::string& scene_dir, const std::string& sweep_dir) {
+  Sweep s;
+  s.origin = origin;
+  s.definition = j;
+  if (!j.is_object()) bad(origin, "(top level)", "not a JSON object", "an object with name, kind, ...");
+  static const std::set<std::string> common{"name",  "kind",   "description", "engines", "frames",
+                                            "warmup", "repeat", "format",      "version"};
+  static const std::set<std::string> steps{"scenes", "axes", "set", "windows", "series_every"};
+  static const std::set<std::string> bp{"bodies",       "scenes", "broadphases", "max_bodies",
+                                        "warm_replays", "set",    "min_time_ms"};
+  if (!j.contains("name") || !j.at("name").is_string() || j.at("name").get<std::string>().empty())
+    bad(origin, "name", "missing or not a non-empty string", "a non-empty string");
+  s.name = j.at("name");
+  s.kind = j.value("kind", "steps");
+  if (s.kind != "steps" && s.kind != "broadphase") bad(origin, "kind", "'" + s.kind + "'", "\"steps\", \"broadphase\"");
+  const auto& extra = s.kind == "steps" ? steps : bp;
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    if (!common.count(it.key()) && !extra.count(it.key())) {
+      std::string keys;
+      for (const auto& k : common) keys += (keys.empty() ? "" : ", ") + k;
+      for (const auto& k : extra) keys += ", " + k;
+      bad(origin, it.key(), "unknown key for kind '" + s.kind + "'", keys);
+    }
+  }
+  if (j.contains("format") && j.at("format") != "octocd-sweep")
+    bad(origin, "format", j.at("format").dump(), "\"octocd-sweep\"");
+  if (j.contains("version") && j.at("version") != 1) bad(origin, "version", j.at("version").dump(), "1");
+  s.description = j.value("description", "");
+  s.engines = j.contains("engines") ? string_list(j, "engines", origin) : engine_names();
+  for (std::size_t i = 0; i < s.engines.size(); ++i)
+    if (std::find(engine_names().begin(), engine_names().end(), s.engines[i]) == engine_names().end())
+      bad(origin, fmt::format("engines[{}]", i), "'" + s.engines[i] + "'", "cpu, cuda, bullet");
+  s.repeat = get_int(j, "repeat", origin, 1, 1000, 3);
+  if (j.contains("set")) {
+    if (!j.at("set").is_object()) bad(origin, "set", "not an object", "an object of JSON pointer -> value");
+    s.set = j.at("set");
+    for (auto it = s.set.begin(); it != s.set.end(); ++it)
+      if (it.key().empty() || it.key()[0] != '/')
+        bad(origin, "set." + it.key(), "not a JSON pointer", "keys like \"/response/beta\"");
+  }
+  if (s.kind == "steps") {
+    s.frames = get_int(j, "frames", origin, 1, 100000000, 300);
+    s.warmup = get_int(j, "warmup", origin, 0, 100000000, 30);
+    s.series_every = get_int(j, "series_every", origin, 0, 100000000, 0);
+    if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
+    for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
+    if (j.contains("axes")) {
+      if (!j.at("axes").is_array()) bad(origin, "axes", "not an array", "an array of {name, key?, values, labels?}");
+      for (std::size_t i = 0; i < j.at("axes").size(); ++i) {
+        const json& a = j.at("axes")[i];
+        const std::string k = fmt::format("axes[{}]", i);
+        if (!a.is_object()) bad(origin, k, "not an object", "{name, key?, values, labels?}");
+        for (auto it = a.begin(); it != a.end(); ++it)
+          if (it.key() != "name" && it.key() != "key" && it.key() != "values" && it.key() != "labels")
+            bad(origin, k + "." + it.key(), "unknown key", "name, key, values, labels");
+        Axis ax;
+        if (!a.contains("name") || !a.at("name").is_string()) bad(origin, k + ".name", "missing", "a string");
+        ax.name = a.at("name");
+        ax.key = a.contains("key") ? a.at("key").get<std::string>() : axis_key(ax.name);
+        if (ax.key.empty() || ax.key[0] != '/')
+          bad(origin, k + ".key", "missing for axis '" + ax.name + "'",
+              "a JSON pointer into the scene, or an axis name among midphase, broadphase, cell_size, beta, delta, "
+              "slop, alpha, iterations, count, mesh");
+        if (!a.contains("values") || !a.at("values").is_array() || a.at("values").empty())
+          bad(origin, k + ".values", "missing or empty", "a non-empty array");
+        for (const auto& v : a.at("values")) ax.values.push_back(v);
+        ax.labels.assign(ax.values.size(), "");
+        if (a.contains("labels")) {
+          const auto labels = string_list(a, "labels", origin + ": " + k);
+          if (labels.size() != ax.values.size())
+            bad(origin, k + ".labels", fmt::format("{} labels for {} values", labels.size(), ax.values.size()),
+                "one label per value");
+          ax.labels = labels;
+        }
+        s.axes.push_back(std::move(ax));
+      }
+    }
+    if (j.contains("windows")) {
+      if (!j.at("windows").is_array() || j.at("windows").empty())
+        bad(origin, "windows", "not a non-empty array", "an array of {name, first, last}");
+      int last = 0;
+      for (std::size_t i = 0; i < j.at("windows").size(); ++i) {
+        const json& w = j.at("windows")[i];
+        const std::string k = fmt::format("windows[{}]", i);
+        if (!w.is_object() || !w.contains("name") || !w.at("name").is_string())
+          bad(origin, k, "not an object with a name", "{name, first, last}");
+        Window win;
+        win.name = w.at("name");
+        win.first = get_int(w, "first", origin + ": " + k, 1, 100000000, 1);
+        win.last = get_int(w, "last", origin + ": " + k, win.first, 100000000, win.first);
+        last = std::max(last, win.last);
+        s.windows.push_back(win);
+      }
+      s.frames = last;
+      s.warmup = 0;
+    } else {
+      s.windows.push_back(Window{"all", s.warmup + 1, s.warmup + s.frames});
+      s.frames = s.warmup + s.frames;  // steps to run
+    }
+  } else {
+    s.frames = get_int(j, "frames", origin, 1, 100000, 5);
+    s.warmup = get_int(j, "warmup", origin, 0, 100000, 10);
+    s.warm_replays = get_int(j, "warm_replays", origin, 0, 1000, 1);
+    s.min_time_ms = get_int(j, "min_time_ms", origin, 0, 600000, 50);
+    const bool has_bodies = j.contains("bodies"), has_scenes = j.contains("scenes");
+    if (has_bodies == has_scenes) bad(origin, "bodies", "give exactly one of bodies and scenes", "bodies or scenes");
+    if (has_bodies) {
+      if (!j.at("bodies").is_array() || j.at("bodies").empty())
+        bad(origin, "bodies", "not a non-empty array", "an array of integers in [2, 16777216]");
+      for (std::size_t i = 0; i < j.at("bodies").size(); ++i) {
+        const json& v = j.at("bodies")[i];
+        if (!v.is_number_integer() || v.get<long>() < 2 || v.get<long>() > 16777216)
+          bad(origin, fmt::format("bodies[{}]", i), v.dump(), "an integer in [2, 16777216]");
+        s.bodies.push_back(v.get<long>());
+      }
+    } else {
+      for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
+    }
+    const auto known = all_broadphase_names();
+    if (j.contains("broadphases")) {
+      s.broadphases = string_list(j, "broadphases", origin);
+      for (std::size_t i = 0; i < s.broadphases.size(); ++i)
+        if (std::find(known.begin(), known.end(), s.broadphases[i]) == known.end()) {
+          std::string names;
+          for (const auto& n : known) names += (names.empty() ? "" : ", ") + n;
+          bad(origin, fmt::format("broadphases[{}]", i), "'" + s.broadphases[i] + "'", names);
+        }
+    } else {
+      s.broadphases = known;
+    }
+    if (j.contains("max_bodies")) {
+      if (!j.at("max_bodies").is_object()) bad(origin, "max_bodies", "not an object", "{\"NAME\" or \"ENGINE:NAME\": N}");
+      for (auto it = j.at("max_bodies").begin(); it != j.at("max_bodies").end(); ++it) {
+        if (!it.value().is_number_integer() || it.value().get<long>() < 0)
+          bad(origin, "max_bodies." + it.key(), it.value().dump(), "an integer >= 0");
+        s.max_bodies[it.key()] = it.value().get<long>();
+      }
+    }
+  }
+  return s;
+}
+
+// ---- points ----------------------------------------------------------------------------------
+
+struct Point {
+  int index = 0;
+  std::string id;
+  std::string engine;
+  std::size_t scene = 0;          // steps: index into Sweep::scenes
+  std::vector<std::size_t> value;  // steps: value index per axis
+  long bodies = 0;                // broadphase: body count (bodies) or -1 (scenes)
+  std::string broadphase;         // broadphase kind
+};
+
+std::string stem(const std::string& path) { return fs::path(path).stem().string(); }
+
+std::string value_text(const json& v) { return v.is_string() ? v.get<std::string>() : v.dump(); }
+
+std::vector<Point> expand(const Sweep& s) {
+  // Point ids name the scene by its file stem: a scene listed twice would give two points
+  // one id (and --resume would take one for the other).
+  std::set<std::string> stems;
+  for (std::size_t i = 0; i < s.scenes.size(); ++i)
+    if (!stems.insert(stem(s.scenes[i])).second)
+      bad(s.origin, fmt::format("scenes[{}]", i), "listed twice ('" + stem(s.scenes[i]) + "')",
+          "each scene (file name) once");
+  std::vector<Point> pts;
+  if (s.kind == "steps") {
+    std::size_t combos = 1;
+    for (const auto& a : s.axes) combos *= a.values.size();
+    for (std::size_t sc = 0; sc < s.scenes.size(); ++sc) {
+      for (std::size_t c = 0; c < combos; ++c) {
+        std::vector<std::size_t> idx(s.axes.size(), 0);
+        std::size_t rest = c;  // last axis fastest
+        for (std::size_t a = s.axes.size(); a-- > 0;) {
+          idx[a] = rest % s.axes[a].values.size();
+          rest /= s.axes[a].values.size();
+        }
+        for (const auto& e : s.engines) {
+          Point p;
+          p.index = static_cast<int>(pts.size());
+          p.engine = e;
+          p.scene = sc;
+          p.value = idx;
+          p.id = stem(s.scenes[sc]);
+          for (std::size_t a = 0; a < s.axes.size(); ++a)
+            p.id += " | " + s.axes[a].name + "=" + value_text(s.axes[a].values[idx[a]]);
+          p.id += " | " + e;
+          pts.push_back(p);
+        }
+      }
+    }
+  } else {
+    const std::size_t sizes = s.bodies.empty() ? s.scenes.size() : s.bodies.size();
+    for (std::size_t k = 0; k < sizes; ++k)
+      for (const auto& bp : s.broadphases)
+        for (const auto& e : s.engines) {
+          Point p;
+          p.index = static_cast<int>(pts.size());
+          p.engine = e;
+          p.broadphase = bp;
+          p.scene = k;
+          p.bodies = s.bodies.empty() ? -1 : s.bodies[k];
+          p.id = (s.bodies.empty() ? stem(s.scenes[k]) : fmt::format("bodies={}", s.bodies[k])) + " | " + bp + " | " + e;
+          pts.push_back(p);
+        }
+  }
+  return pts;
+}
+
+/// The scene text of a steps point: the scene file with the sweep's `set` and the point's
+/// axis values written at their JSON pointers.
+std::string scene_text(const Sweep& s, const Point& p) {
+  const std::string& file = s.scenes[p.scene];
+  std::ifstream in(file);
+  if (!in) bad(s.origin, "scenes", "cannot read scene file '" + file + "'",
+               "a scene name under the scene folder (--scene-dir) or a readable file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  json j;
+  try {
+    j = json::parse(ss.str());
+  } catch (const json::exception& e) {
+    throw InputError(fmt::format("{}: not JSON ({}); allowed: a scene file (docs/scenes.md)", file, e.what()));
+  }
+  auto put = [&](const std::string& key, const json& v, const std::string& what) {
+    try {
+      j[json::json_pointer(key)] = v;
+    } catch (const json::exception& e) {
+      bad(s.origin, what, "cannot set " + key + " in " + file + " (" + e.what() + ")", "a JSON pointer into the scene");
+    }
+  };
+  for (auto it = s.set.begin(); it != s.set.end(); ++it) put(it.key(), it.value(), "set." + it.key());
+  for (std::size_t a = 0; a < s.axes.size(); ++a)
+    put(s.axes[a].key, s.axes[a].values[p.value[a]], fmt::format("axes[{}]", a));
+  return j.dump(2);
+}
+
+/// A box lattice of `n` bodies at the density of boxes-random-10000 (0.1 m boxes,
+/// spacing 0.145 m, 2 cm jitter, random velocities up to 1 m/s, closed box, no gravity).
+std::string lattice_scene(long n) {
+  long k = 1;
+  while (k * k * k < n) ++k;
+  const double half = 0.5 * 0.145 * static_cast<double>(k - 1);
+  json j{{"name", fmt::format("boxes-lattice-{}", n)},
+         {"description", "box lattice for the broadphase-scaling sweep (octocd bench)"},
+         {"domain", {{"min", {-half - 0.1, -half - 0.1, -half - 0.1}}, {"max", {half + 0.1, half + 0.1, half + 0.1}}}},
+         {"gravity", {0.0, 0.0, 0.0}},
+         {"dt", 0.001},
+         {"frames", 1000},
+         {"walls", "closed-box"},
+         {"broadphase", {{"name", "octree"}, {"depth", "auto"}}},
+         {"midphase", {{"levels", "aabb-only"}}},
+         {"groups",
+          {{{"name", "boxes"},
+            {"shape", {{"box", {0.05, 0.05, 0.05}}}},
+            {"count", n},
+            {"mass", 1.0},
+            {"layout",
+             {{"type", "grid"}, {"min", {-half, -half, -half}}, {"max", {half, half, half}}, {"spacing", 0.145},
+              {"jitter", 0.02}, {"seed", 11}}},
+            {"velocity", {{"type", "random"}, {"max", 1.0}, {"seed", 12}}}}}}};
+  return j.dump(2);
+}
+
+// ---- progress --------------------------------------------------------------------------------
+
+class SweepProgress {
+ public:
+  SweepProgress(std::size_t total, bool enabled) : total_(total), enabled_(enabled), tty_(isatty(fileno(stderr)) != 0) {}
+  void start(std::size_t done, const std::string& label) {
+    done_ = done;
+    label_ = label;
+    detail_.clear();
+    draw(true);
+  }
+  void detail(const std::string& d) {
+    detail_ = d;
+    draw(false);
+  }
+  void finish(const std::string& status) {
+    if (!enabled_) return;
+    if (tty_) std::fprintf(stderr, "\r\033[K");
+    std::fprintf(stderr, "[%zu/%zu] %s: %s\n", done_ + 1, total_, label_.c_str(), status.c_str());
+    std::fflush(stderr);
+  }
+
+ private:
+  void draw(bool force) {
+    if (!enabled_ || !tty_) return;
+    const auto now = Clock::now();
+    if (!force && now - last_ < std::chrono::milliseconds(100)) return;
+    last_ = now;
+    constexpr int kWidth = 24;
+    const int filled = static_cast<int>(kWidth * done_ / std::max<std::size_t>(total_, 1));
+    std::fprintf(stderr, "\r\033[K[%s%s] %zu/%zu  %s  %s", std::string(static_cast<std::size_t>(filled), '#').c_str(),
+                 std::string(static_cast<std::size_t>(kWidth - filled), ' ').c_str(), done_, total_, label_.c_str(),
+                 detail_.c_str());
+    std::fflush(stderr);
+  }
+  std::size_t total_, done_ = 0;
+  bool enabled_, tty_;
+  std::string label_, detail_;
+  Clock::time_point last_{};
+};
+
+// ---- running steps points ----------------------------------------------------------------------
+
+/// Sums over the frames of one window of one repetition.
+struct WindowSums {
+  std::int64_t frames = 0;
+  double step_ms = 0.0;
+  std::array<double, kStages> stage_ms{};
+  double pairs = 0, candidates = 0, box_pairs = 0, vertex_tests = 0, contacts = 0, memory = 0;
+  double pen_weighted = 0, share_weighted = 0, pen_max = 0;
+  void add(const FrameMetrics& m) {
+    ++frames;
+    step_ms += m.step_ms;
+    for (int s = 0; s < kStages; ++s) stage_ms[s] += m.stage_ms[s];
+    pairs += static_cast<double>(m.aabb_pairs);
+    candidates += static_cast<double>(m.cell_candidates);
+    box_pairs += static_cast<double>(m.box_pairs);
+    vertex_tests += static_cast<double>(m.vertex_tests);
+    const double c = static_cast<double>(m.contacts);
+    contacts += c;
+    memory += static_cast<double>(m.memory_bytes);
+    pen_weighted += c * m.penetration_mean;
+    share_weighted += c * m.penetration_share_above_slop;
+    pen_max = std::max(pen_max, m.penetration_max);
+  }
+};
+
+struct ModelCache {
+  std::string text;
+  std::shared_ptr<const Model> model;
+  std::shared_ptr<const Model> get(const std::string& t, const std::string& origin, const std::string& data_dir) {
+    if (t != text || !model) {
+      model.reset();
+      model = build_model(parse_scene(t, origin, data_dir));
+      text = t;
+    }
+    return model;
+  }
+};
+
+std::string file_safe(const std::string& id) {
+  std::string out;
+  for (char c : id) out += (std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-') ? c : '_';
+  return out;
+}
+
+json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const BenchOptions& o,
+                     SweepProgress& progress) {
+  json r;
+  json params{{"scene", stem(s.scenes[p.scene])}, {"engine", p.engine}};
+  for (std::size_t a = 0; a < s.axes.size(); ++a) {
+    params["axes"][s.axes[a].name] = s.axes[a].values[p.value[a]];
+    if (!s.axes[a].labels[p.value[a]].empty()) params["labels"][s.axes[a].name] = s.axes[a].labels[p.value[a]];
+  }
+  r["params"] = params;
+  const std::string text = scene_text(s, p);
+  const std::string origin = s.scenes[p.scene];
+  std::shared_ptr<const Model> model;
+  try {
+    model = cache.get(text, origin, o.data_dir);
+  } catch (const InputError& e) {
+    r["status"] = "skipped";
+    r["reason"] = std::string("scene: ") + e.what();
+    return r;
+  }
+  r["bodies"] = model->initial.x.size();
+  std::unique_ptr<Engine> engine;
+  try {
+    engine = make_engine(p.engine, model);
+  } catch (const std::exception& e) {
+    r["status"] = "skipped";
+    r["reason"] = e.what();
+    return r;
+  }
+  // An engine that ignores an axis (its own broadphase, no midphase stage) is measured once,
+  // under the axis's first value.
+  for (std::size_t a = 0; a < s.axes.size(); ++a) {
+    bool ignores = false;
+    std::string why;
+    if (s.axes[a].key == "/broadphase/name" && engine->broadphase_name() != model->scene.broadphase.name) {
+      ignores = true;
+      why = fmt::format("engine {} runs its own broadphase ({})", p.engine, engine->broadphase_name());
+    }
+    if (s.axes[a].key == "/midphase/levels" && engine->midphase_name() != model->scene.midphase.to_string()) {
+      ignores = true;
+      why = fmt::format("engine {} has no midphase level list (it runs {})", p.engine, engine->midphase_name());
+    }
+    if (ignores) {
+      r["ignores"][s.axes[a].name] = why;
+      if (p.value[a] != 0) {
+        r["status"] = "skipped";
+        r["reason"] = why + fmt::format(": measured once, under {}={}", s.axes[a].name, value_text(s.axes[a].values[0]));
+        return r;
+      }
+    }
+  }
+  r["device"] = engine->device();
+  r["engine_broadphase"] = engine->broadphase_name();
+  for (int st = 0; st < kStages; ++st)
+    r["has_stage"][stage_name(static_cast<Stage>(st))] = engine->has_stage(static_cast<Stage>(st));
+
+  const int total = s.frames;
+  std::vector<std::vector<WindowSums>> sums(s.windows.size());  // [window][rep]
+  const int buckets = s.series_every > 0 ? (total + s.series_every - 1) / s.series_every : 0;
+  std::vector<std::vector<WindowSums>> series(static_cast<std::size_t>(buckets));  // [bucket][rep]
+  std::vector<double> energy_series(static_cast<std::size_t>(buckets), 0.0);
+  std::vector<double> wall;
+  for (int rep = 0; rep < s.repeat; ++rep) {
+    if (rep > 0) engine = make_engine(p.engine, model);
+    std::unique_ptr<TraceWriter> trace;
+    if (rep == 0 && !o.trace_dir.empty()) {
+      fs::create_directories(o.trace_dir);
+      TraceMetadata meta = trace_metadata(*engine, 10);
+      meta.start_time = utc_time_now();
+      const std::string path = (fs::path(o.trace_dir) / (file_safe(p.id) + ".h5")).string();
+      trace = std::make_unique<TraceWriter>(path, meta, trace_bodies(*engine), TraceOptions{});
+      trace->append_state(0, engine->state());
+      r["trace"] = path;
+    }
+    for (auto& w : sums) w.emplace_back();
+    for (auto& b : series) b.emplace_back();
+    const auto t0 = Clock::now();
+    for (int f = 1; f <= total; ++f) {
+      const FrameMetrics& m = engine->step();
+      for (std::size_t w = 0; w < s.windows.size(); ++w)
+        if (f >= s.windows[w].first && f <= s.windows[w].last) sums[w].back().add(m);
+      if (buckets > 0) {
+        const auto b = static_cast<std::size_t>((f - 1) / s.series_every);
+        series[b].back().add(m);
+        if (rep == 0) energy_series[b] = m.kinetic_energy;
+      }
+      if (trace) trace->append_frame(m, engine->state(), engine->contacts());
+      if ((f & 15) == 0 || f == total)
+        progress.detail(fmt::format("rep {}/{} frame {}/{}", rep + 1, s.repeat, f, total));
+    }
+    wall.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+    if (trace) trace->close();
+  }
+
+  auto figures = [&](const std::vector<WindowSums>& reps) {
+    json w;
+    std::vector<double> sps, step, pairs, cand, boxes, verts, contacts, mem, pen, share, penmax;
+    std::vector<std::vector<double>> stage(kStages);
+    for (const auto& x : reps) {
+      const double n = static_cast<double>(std::max<std::int64_t>(x.frames, 1));
+      sps.push_back(x.step_ms > 0 ? 1000.0 * static_cast<double>(x.frames) / x.step_ms : 0.0);
+      step.push_back(x.step_ms / n);
+      for (int st = 0; st < kStages; ++st) stage[st].push_back(x.stage_ms[st] / n);
+      pairs.push_back(x.pairs / n);
+      cand.push_back(x.candidates / n);
+      boxes.push_back(x.box_pairs / n);
+      verts.push_back(x.vertex_tests / n);
+      contacts.push_back(x.contacts / n);
+      mem.push_back(x.memory / n);
+      pen.push_back(x.contacts > 0 ? x.pen_weighted / x.contacts : 0.0);
+      share.push_back(x.contacts > 0 ? x.share_weighted / x.contacts : 0.0);
+      penmax.push_back(x.pen_max);
+    }
+    w["frames"] = reps.empty() ? 0 : reps.front().frames;
+    w["steps_per_s"] = spread(sps);
+    w["step_ms"] = spread(step);
+    for (int st = 0; st < kStages; ++st) w["stage_ms"][stage_name(static_cast<Stage>(st))] = spread(stage[st]);
+    w["pairs"] = spread(pairs);
+    w["cell_candidates"] = spread(cand);
+    w["box_pairs"] = spread(boxes);
+    w["vertex_tests"] = spread(verts);
+    w["contacts"] = spread(contacts);
+    w["memory_bytes"] = spread(mem);
+    w["penetration_mean"] = spread(pen);
+    w["penetration_max"] = spread(penmax);
+    w["penetration_share_above_slop"] = spread(share);
+    return w;
+  };
+  for (std::size_t w = 0; w < s.windows.size(); ++w) {
+    json fw = figures(sums[w]);
+    fw["first"] = s.windows[w].first;
+    fw["last"] = s.windows[w].last;
+    r["windows"][s.windows[w].name] = fw;
+  }
+  if (buckets > 0) {
+    json ser;
+    ser["every"] = s.series_every;
+    for (int b = 0; b < buckets; ++b) {
+      const json f = figures(series[static_cast<std::size_t>(b)]);
+      ser["last_frame"].push_back(std::min(total, (b + 1) * s.series_every));
+      ser["steps_per_s"].push_back(f["steps_per_s"]["median"]);
+      ser["contacts"].push_back(f["contacts"]["median"]);
+      ser["pairs"].push_back(f["pairs"]["median"]);
+      ser["penetration_mean"].push_back(f["penetration_mean"]["median"]);
+      ser["penetration_max"].push_back(f["penetration_max"]["median"]);
+      ser["kinetic_energy"].push_back(energy_series[static_cast<std::size_t>(b)]);
+    }
+    r["series"] = ser;
+  }
+  r["wall_s"] = spread(wall);
+  r["status"] = "ok";
+  return r;
+}
+
+// ---- running broadphase points -----------------------------------------------------------------
+
+struct InputCache {
+  std::size_t key = static_cast<std::size_t>(-1);
+  std::unique_ptr<ReplayInput> input;
+  std::string error;
+};
+
+json run_broadphase_point(const Sweep& s, const Point& p, InputCache& cache, const BenchOptions& o,
+                          SweepProgress& progress) {
+  json r;
+  r["params"] = {{"broadphase", p.broadphase}, {"engine", p.engine}};
+  if (p.bodies > 0) r["params"]["bodies"] = p.bodies;
+  else r["params"]["scene"] = stem(s.scenes[p.scene]);
+  long limit = -1;
+  for (const std::string& k : {p.engine + ":" + p.broadphase, p.broadphase}) {
+    const auto it = s.max_bodies.find(k);
+    if (it != s.max_bodies.end()) {
+      limit = it->second;
+      break;
+    }
+  }
+  if (p.bodies > 0 && limit >= 0 && p.bodies > limit) {
+    r["status"] = "skipped";
+    r["reason"] = fmt::format("above max_bodies {} for {} on {} (one replay would take minutes)", limit, p.broadphase,
+                              p.engine);
+    return r;
+  }
+  if (cache.key != p.scene) {
+    cache.input.reset();
+    cache.error.clear();
+    cache.key = p.scene;
+    progress.detail("recording the input frames");
+    try {
+      const Scene scene = p.bodies > 0 ? parse_scene(lattice_scene(p.bodies), "", o.data_dir)
+                                       : load_scene(s.scenes[p.scene], o.data_dir);
+      Scene sc = scene;
+      sc.broadphase.name = "octree";
+      cache.input = std::make_unique<ReplayInput>(replay_input_from_scene(sc, s.warmup, s.frames));
+    } catch (const InputError& e) {
+      cache.error = e.what();
+    }
+  }
+  if (!cache.input) {
+    r["status"] = "skipped";
+    r["reason"] = "scene: " + cache.error;
+    return r;
+  }
+  const ReplayInput& in = *cache.input;
+  r["bodies"] = in.model->initial.x.size();
+  if (p.bodies <= 0 && limit >= 0 && static_cast<long>(in.model->initial.x.size()) > limit) {
+    r["status"] = "skipped";
+    r["reason"] = fmt::format("above max_bodies {} for {} on {}", limit, p.broadphase, p.engine);
+    return r;
+  }
+  std::size_t ticks = 0;
+  const std::size_t total = in.x.size() * static_cast<std::size_t>(s.warm_replays + s.repeat);
+  ReplayRun run = replay_broadphase(in, p.engine, p.broadphase, s.repeat, s.warm_replays, s.min_time_ms, [&] {
+    ++ticks;
+    progress.detail(fmt::format("replay {}/{}", ticks, total));
+  });
+  if (!run.ok) {
+    r["status"] = "skipped";
+    r["reason"] = run.reason;
+    return r;
+  }
+  r["device"] = run.device;
+  r["frames"] = in.frames.size();
+  r["ms_per_frame"] = spread(run.ms);
+  r["pairs"] = run.pairs;
+  r["cell_candidates"] = run.candidates;
+  r["matches_recorded"] = run.matches_recorded;
+  r["recorded"] = run.recorded_detail;
+  r["status"] = run.matches_recorded ? "ok" : "failed";
+  if (!run.matches_recorded) r["reason"] = "pairs differ from the recording run's: " + run.recorded_detail;
+  return r;
+}
+
+// ---- the command -----------------------------------------------------------------------------
+
+std::pair<int, int> parse_shard(const std::string& text) {
+  if (text.empty()) return {0, 1};
+  const auto slash = text.find('/');
+  int i = -1, n = -1;
+  try {
+    if (slash != std::string::npos) {
+      std::size_t u1 = 0, u2 = 0;
+      i = std::stoi(text.substr(0, slash), &u1);
+      n = std::stoi(text.substr(slash + 1), &u2);
+      if (u1 != slash || u2 != text.size() - slash - 1) i = n = -1;
+    }
+  } catch (const std::exception&) {
+    i = n = -1;
+  }
+  if (n < 1 || i < 0 || i >= n)
+    throw InputError(fmt::format("--shard: '{}'; allowed: i/N with N >= 1 and 0 <= i < N (e.g. "
+                                 "$SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT with --array=0-(N-1))",
+                                 text));
+  return {i, n};
+}
+
+std::string default_scene_dir() { return (fs::path(source_dir()) / "datasets" / "scenes").string(); }
+
+}  // namespace
+
+CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
+  CLI::App* c = app.add_subcommand(
+      "bench",
+      "Run a benchmark sweep (the paper's Tables 5, 6, A1, Fig. A2, broadphase scaling) on every engine this octocd "
+      "has, side by side; results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
+  c->add_option("sweep", o.sweep, "A named sweep (" + named_list() + ") or a sweep JSON file");
+  c->add_option("-o,--output", o.output, "Result file (JSON), rewritten after every finished point");
+  c->add_option("--engines", o.engines, "Comma-separated engines, overrides the sweep's: cpu, cuda, bullet");
+  c->add_option("--repeat", o.repeat, "Repetitions of every point, overrides the sweep's (>= 1)")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--frames", o.frames,
+                "Timed frames per run (steps sweeps without windows) or recorded frames (broadphase sweeps), "
+                "overrides the sweep's (>= 1)")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--shard", o.shard,
+                "i/N: run only the points whose index is i modulo N (0 <= i < N), for job arrays; `report` merges "
+                "the shards' result files");
+  c->add_flag("--resume", o.resume,
+              "Continue the result file of an interrupted run of the same sweep: keep its finished points, run the rest");
+  c->add_flag("--list", o.list, "List the named sweeps and exit");
+  c->add_flag("--print", o.print, "Print the sweep's definition (JSON) and exit");
+  c->add_flag("--quiet", o.quiet, "No progress output");
+  c->add_option("--scene-dir", o.scene_dir,
+                "Folder of the scenes named in sweeps (default: datasets/scenes of the source tree, or "
+                "$OCTOCD_SOURCE_DIR/datasets/scenes)");
+  c->add_option("--data-dir", o.data_dir, "Folder of the dataset meshes (default as for `run`)");
+  c->add_option("--trace-dir", o.trace_dir,
+                "Also write the first repetition of every steps point as a trace (.h5) into this folder");
+  return c;
+}
+
+int bench_command(const BenchOptions& o) {
+  if (o.list) {
+    for (const auto& n : kNamed) {
+      const json j = json::parse(n.text);
+      fmt::print("{:<20} {}\n", n.name, j.value("description", ""));
+    }
+    return 0;
+  }
+  if (o.sweep.empty())
+    throw InputError("bench: no sweep given; allowed: a named sweep (" + named_list() + ") or a sweep JSON file");
+  const std::string scene_dir = o.scene_dir.empty() ? default_scene_dir() : o.scene_dir;
+  json def;
+  std::string origin, sweep_dir;
+  const NamedSweep* named = nullptr;
+  for (const auto& n : kNamed)
+    if (o.sweep == n.name) named = &n;
+  if (named) {
+    def = json::parse(named->text);
+    origin = "sweep '" + o.sweep + "'";
+  } else {
+    std::error_code ec;
+    if (!fs::is_regular_file(o.sweep, ec)) {
+      if (fs::path(o.sweep).extension() == ".json")
+        throw InputError(fmt::format("{}: no such file; allowed: a sweep JSON file or a named sweep ({})", o.sweep,
+                                     named_list()));
+      throw InputError(fmt::format("bench: unknown sweep '{}'; allowed: {}, or a sweep JSON file", o.sweep,
+                                   named_list()));
+    }
+    std::ifstream in(o.sweep);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    try {
+      def = json::parse(ss.str());
+    } catch (const json::exception& e) {
+      throw InputError(fmt::format("{}: not JSON ({}); allowed: a sweep file (docs/bench-format.md)", o.sweep, e.what()));
+    }
+    origin = o.sweep;
+    sweep_dir = fs::path(o.sweep).parent_path().string();
+  }
+  Sweep s = parse_sweep(def, origin, scene_dir, sweep_dir);
+  if (o.print) {
+    fmt::print("{}\n", def.dump(2));
+    return 0;
+  }
+  if (o.output.empty()) throw InputError("bench: -o: missing; allowed: the result file to write (RESULT.json)");
+  if (!o.engines.empty()) {
+    s.engines = split_list(o.engines);
+    for (const auto& e : s.engines)
+      if (std::find(engine_names().begin(), engine_names().end(), e) == engine_names().end())
+        throw InputError(fmt::format("--engines: unknown engine '{}'; allowed: cpu, cuda, bullet", e));
+    if (s.engines.empty()) throw InputError("--engines: empty; allowed: a comma-separated list of cpu, cuda, bullet");
+  }
+  if (o.repeat > 0) s.repeat = o.repeat;
+  if (o.frames > 0) {
+    if (s.kind == "broadphase") {
+      s.frames = o.frames;
+    } else if (def.contains("windows")) {
+      throw InputError(fmt::format("--frames: {} has windows (fixed frame ranges); allowed: --frames only for sweeps "
+                                   "without windows",
+                                   origin));
+    } else {
+      s.frames = s.warmup + o.frames;
+      s.windows.front().last = s.frames;
+    }
+  }
+  const auto [shard, shards] = parse_shard(o.shard);
+  for (const auto& sc : s.scenes) {
+    std::error_code ec;
+    if (!fs::is_regular_file(sc, ec))
+      throw InputError(fmt::format("{}: scenes: '{}' not found; allowed: a scene name under {} (--scene-dir) or a "
+                                   "scene file",
+                                   origin, sc, scene_dir));
+  }
+  const std::vector<Point> points = expand(s);
+
+  json settings{{"engines", s.engines},
+                {"repeat", s.repeat},
+                {"frames", s.frames},
+                {"warmup", s.warmup},
+                {"shard", {{"index", shard}, {"count", shards}}}};
+  if (s.kind == "broadphase") {
+    settings["warm_replays"] = s.warm_replays;
+    settings["min_time_ms"] = s.min_time_ms;
+  }
+  json result{{"format", "octocd-bench"},
+              {"version", 1},
+              {"sweep", {{"name", s.name}, {"kind", s.kind}, {"description", s.description}, {"origin", origin},
+                         {"definition", def}}},
+              {"settings", settings},
+              {"machine", machine_description()},
+              {"build", build_description()},
+              {"started", utc_time_now()},
+              {"points_total", points.size()},
+              {"complete", false},
+              {"points", json::array()}};
+  std::map<std::string, json> kept;
+  std::error_code ec;
+  if (fs::exists(o.output, ec)) {
+    if (!o.resume)
+      throw InputError(fmt::format("{}: exists; allowed: a new file, or --resume to continue it (remove it to start "
+                                   "over)",
+                                   o.output));
+    json old;
+    try {
+      std::ifstream in(o.output);
+      old = json::parse(in);
+    } catch (const json::exception& e) {
+      throw InputError(fmt::format("{}: not JSON ({}); allowed: a result file of octocd bench to resume", o.output,
+                                   e.what()));
+    }
+    if (old.value("format", "") != "octocd-bench" || old.value("version", 0) != 1)
+      throw InputError(fmt::format("{}: format: {} version {}; allowed: octocd-bench version 1", o.output,
+                                   old.value("format", "?"), old.value("version", 0)));
+    if (old["sweep"]["definition"] != def)
+      throw InputError(fmt::format("{}: sweep.definition: another sweep ('{}'); allowed: a result of the same sweep "
+                                   "definition to resume",
+                                   o.output, old["sweep"].value("name", "?")));
+    if (old["settings"] != settings)
+      throw InputError(fmt::format("{}: settings: {}; allowed: the same engines, repeat and shard as now ({})",
+                                   o.output, old["settings"].dump(), settings.dump()));
+    for (const char* k : {"hostname", "cpu", "gpu"})
+      if (old["machine"].value(k, "") != result["machine"].value(k, ""))
+        throw InputError(fmt::format("{}: machine.{}: '{}'; allowed: a result measured on this machine ('{}') to "
+                                     "resume",
+                                     o.output, k, old["machine"].value(k, ""), result["machine"].value(k, "")));
+    result["started"] = old.value("started", result["started"].get<std::string>());
+    for (const auto& pt : old["points"])
+      if (pt.value("status", "") == "ok" || pt.value("status", "") == "skipped") kept[pt.value("id", "")] = pt;
+  } else if (o.resume) {
+    // Nothing to resume: start afresh.
+  }
+  const fs::path parent = fs::path(o.output).parent_path();
+  if (!parent.empty()) fs::create_directories(parent, ec);
+
+  std::vector<const Point*> mine;
+  for (const auto& p : points)
+    if (p.index % shards == shard) mine.push_back(&p);
+  SweepProgress progress(mine.size(), !o.quiet);
+  ModelCache models;
+  InputCache inputs;
+  bool any_failed = false;
+  auto write = [&] {
+    result["updated"] = utc_time_now();
+    write_file_atomically(o.output, result.dump(1) + "\n");
+  };
+  if (!o.quiet)
+    fmt::print(stderr, "bench {}: {} points ({} in this shard {}/{}), engines {}, {} repetitions; result {}\n", s.name,
+               points.size(), mine.size(), shard, shards, o.engines.empty() ? json(s.engines).dump() : o.engines,
+               s.repeat, o.output);
+  for (const Point* p : mine) {
+    const auto it = kept.find(p->id);
+    if (it != kept.end()) result["points"].push_back(it->second);  // resumed: kept as they were
+  }
+  for (std::size_t k = 0; k < mine.size(); ++k) {
+    const Point& p = *mine[k];
+    if (kept.count(p.id)) continue;
+    progress.start(k, p.id);
+    json r;
+    try {
+      r = s.kind == "steps" ? run_steps_point(s, p, models, o, progress) : run_broadphase_point(s, p, inputs, o, progress);
+    } catch (const InputError&) {
+      throw;
+    } catch (const std::exception& e) {
+      r["status"] = "failed";
+      r["reason"] = e.what();
+    }
+    r["id"] = p.id;
+    r["index"] = p.index;
+    r["finished"] = utc_time_now();
+    if (r.value("status", "") == "failed") any_failed = true;
+    std::string status = r.value("status", "?");
+    if (status == "ok" && r.contains("windows")) {
+      const json& w = r["windows"].begin().value();
+      status += fmt::format(" ({:.1f} steps/s median)", w["steps_per_s"].value("median", 0.0));
+    } else if (status == "ok" && r.contains("ms_per_frame")) {
+      status += fmt::format(" ({:.4f} ms/frame median)", r["ms_per_frame"].value("median", 0.0));
+    } else if (r.contains("reason")) {
+      status += ": " + r.value("reason", "");
+    }
+    progress.finish(status);
+    result["points"].push_back(r);
+    write();
+  }
+  // Keep the points in sweep order (resumed ones first otherwise).
+  std::sort(result["points"].begin(), result["points"].end(),
+            [](const json& a, const json& b) { return a.value("index", 0) < b.value("index", 0); });
+  result["complete"] = true;
+  result["machine"]["load_average_end"] = load_average();
+  write();
+  if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", s.name, o.output);
+  return any_failed ? 1 : 0;
+}
+
+}  // namespace octocd::cli

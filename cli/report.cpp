@@ -1,0 +1,86 @@
+// `octocd report RESULT.json|TRACE.h5 ... -o DIR` (SPEC 12): runs reports/make_report.py
+// (matplotlib; Debian python3-matplotlib) on bench results and traces, which writes
+// DIR/index.html (self-contained: plots inline as SVG) and DIR/report.md (+ DIR/plots/).
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+
+#include <fmt/format.h>
+
+#include "octocd/error.hpp"
+#include "tools.hpp"
+
+namespace octocd::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string python() {
+  if (const char* p = std::getenv("OCTOCD_PYTHON"); p && *p) return p;
+  std::error_code ec;
+  // Debian's interpreter is the one with python3-matplotlib and python3-h5py.
+  if (fs::exists("/usr/bin/python3", ec)) return "/usr/bin/python3";
+  return "python3";
+}
+
+std::string script() {
+  if (const char* p = std::getenv("OCTOCD_REPORT_SCRIPT"); p && *p) return p;
+  return (fs::path(source_dir()) / "reports" / "make_report.py").string();
+}
+
+}  // namespace
+
+CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
+  CLI::App* c = app.add_subcommand(
+      "report",
+      "Make a report of bench results and traces: DIR/index.html (self-contained, plots inline) and DIR/report.md "
+      "(plots in DIR/plots/): the paper's Tables 5, 6, A1 beside ours per engine, steps/s and stage shares, broadphase "
+      "scaling, the beta-delta heatmap, and per trace energy, contacts and penetration over frames. Shards of one "
+      "sweep are merged. Exit 0 ok, 1 failure (e.g. no matplotlib), 2 bad input");
+  c->add_option("inputs", o.inputs, "Result files of `octocd bench` (.json) and traces (.h5)")->required();
+  c->add_option("-o,--output", o.output, "Output folder (created)")->required();
+  c->add_option("--title", o.title, "Title of the report");
+  return c;
+}
+
+int report_command(const ReportOptions& o) {
+  std::error_code ec;
+  for (const auto& in : o.inputs)
+    if (!fs::is_regular_file(in, ec))
+      throw InputError(fmt::format("{}: no such file; allowed: result files of `octocd bench` (.json) and traces (.h5)",
+                                   in));
+  const std::string py = python(), sc = script();
+  if (!fs::is_regular_file(sc, ec))
+    throw RuntimeError(fmt::format("report script {} not found (set OCTOCD_SOURCE_DIR to the octocd source tree, or "
+                                   "OCTOCD_REPORT_SCRIPT to the script)",
+                                   sc));
+  std::vector<std::string> args{py, sc, "-o", o.output};
+  if (!o.title.empty()) {
+    args.push_back("--title");
+    args.push_back(o.title);
+  }
+  for (const auto& in : o.inputs) args.push_back(in);
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  std::fflush(stdout);
+  std::fflush(stderr);
+  const pid_t pid = fork();
+  if (pid < 0) throw RuntimeError("report: fork failed");
+  if (pid == 0) {
+    execvp(argv[0], argv.data());
+    std::fprintf(stderr, "octocd: runtime failure: report: cannot run %s (install Debian's python3-matplotlib, or set "
+                         "OCTOCD_PYTHON)\n", argv[0]);
+    _exit(1);
+  }
+  int status = 0;
+  if (waitpid(pid, &status, 0) < 0) throw RuntimeError("report: waitpid failed");
+  if (!WIFEXITED(status)) throw RuntimeError(fmt::format("report: {} was killed (signal {})", sc, WTERMSIG(status)));
+  const int rc = WEXITSTATUS(status);
+  return rc == 0 || rc == 2 ? rc : 1;
+}
+
+}  // namespace octocd::cli

@@ -1,0 +1,193 @@
+// What bench, replay, compare and report share (tools.hpp), and their registration.
+#include "tools.hpp"
+
+#include <omp.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+
+#include <fmt/format.h>
+
+#include "octocd/bullet_world.hpp"
+#include "octocd/cuda_world.hpp"
+#include "octocd/error.hpp"
+#include "octocd/reference_broadphase.hpp"
+#include "octocd/version.hpp"
+#include "octocd/world.hpp"
+
+#ifndef OCTOCD_SOURCE_DIR
+#define OCTOCD_SOURCE_DIR "."
+#endif
+
+namespace octocd::cli {
+
+std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model) {
+  const Scene& scene = model->scene;
+  if (name == "cpu") return std::make_unique<World>(model, make_any_broadphase(scene.broadphase, scene.domain));
+  if (name == "bullet") return std::make_unique<BulletWorld>(model, model->initial);
+  if (name == "cuda") return make_cuda_engine(model, scene.broadphase.name);
+  throw InputError(fmt::format("--engine: unknown engine '{}'; allowed: cpu, cuda, bullet", name));
+}
+
+const std::vector<std::string>& engine_names() {
+  static const std::vector<std::string> names{"cpu", "cuda", "bullet"};
+  return names;
+}
+
+nlohmann::json spread(const std::vector<double>& values) {
+  nlohmann::json j;
+  j["n"] = values.size();
+  if (values.empty()) return j;
+  std::vector<double> v = values;
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  const double median = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+  double mean = 0.0;
+  for (double x : v) mean += x;
+  mean /= static_cast<double>(n);
+  double var = 0.0;
+  for (double x : v) var += (x - mean) * (x - mean);
+  j["median"] = median;
+  j["min"] = v.front();
+  j["max"] = v.back();
+  j["mean"] = mean;
+  j["stdev"] = n > 1 ? std::sqrt(var / static_cast<double>(n - 1)) : 0.0;
+  j["values"] = values;
+  return j;
+}
+
+nlohmann::json load_average() {
+  double avg[3] = {-1.0, -1.0, -1.0};
+  if (getloadavg(avg, 3) != 3) return nlohmann::json::array();
+  return {avg[0], avg[1], avg[2]};
+}
+
+nlohmann::json machine_description() {
+  nlohmann::json m;
+  char host[256] = {0};
+  if (gethostname(host, sizeof host - 1) != 0) host[0] = '\0';
+  m["hostname"] = host;
+  m["cpu"] = cpu_description();
+  m["threads"] = static_cast<long>(sysconf(_SC_NPROCESSORS_ONLN));
+  m["omp_threads"] = omp_get_max_threads();  // the CPU engine's midphase team
+  m["load_average"] = load_average();
+  m["gpu"] = cuda_device_status();
+  std::string driver;
+  std::ifstream in("/proc/driver/nvidia/version");
+  if (in) std::getline(in, driver);
+  m["driver"] = driver;
+  return m;
+}
+
+nlohmann::json build_description() {
+  nlohmann::json b;
+  b["build_id"] = build_id();
+  std::string rev;
+  const std::string dir = source_dir();
+  std::error_code ec;
+  if (std::filesystem::exists(std::filesystem::path(dir) / ".git", ec)) {
+    const std::string cmd = "git -C '" + dir + "' describe --always --dirty --tags 2>/dev/null";
+    if (FILE* p = popen(cmd.c_str(), "r")) {
+      char buf[256];
+      if (std::fgets(buf, sizeof buf, p)) rev = buf;
+      pclose(p);
+      while (!rev.empty() && (rev.back() == '\n' || rev.back() == '\r')) rev.pop_back();
+    }
+  }
+  if (rev.empty()) {
+    const std::string id = build_id();
+    const auto plus = id.find('+');
+    rev = plus == std::string::npos ? id : id.substr(plus + 1);
+  }
+  b["git_revision"] = rev;
+  return b;
+}
+
+void write_file_atomically(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw RuntimeError(fmt::format("{}: cannot write (temporary file {})", path, tmp));
+    out << text;
+    out.flush();
+    if (!out) throw RuntimeError(fmt::format("{}: writing {} failed", path, tmp));
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw RuntimeError(fmt::format("{}: cannot replace it with {}", path, tmp));
+  }
+}
+
+std::string source_dir() {
+  const char* env = std::getenv("OCTOCD_SOURCE_DIR");
+  return env && *env ? env : OCTOCD_SOURCE_DIR;
+}
+
+std::vector<std::string> split_list(const std::string& text) {
+  std::vector<std::string> out;
+  std::string item;
+  for (char c : text + ",") {
+    if (c == ',') {
+      if (!item.empty()) out.push_back(item);
+      item.clear();
+    } else if (c != ' ') {
+      item += c;
+    }
+  }
+  return out;
+}
+
+std::string utc_time_now() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+// ---- registration ------------------------------------------------------------------------
+
+struct ToolCommands::Impl {
+  BenchOptions bench;
+  ReplayOptions replay;
+  CompareOptions compare;
+  ReportOptions report;
+  CLI::App* bench_cmd = nullptr;
+  CLI::App* replay_cmd = nullptr;
+  CLI::App* compare_cmd = nullptr;
+  CLI::App* report_cmd = nullptr;
+};
+
+ToolCommands::ToolCommands(CLI::App& app) : impl_(std::make_unique<Impl>()) {
+  impl_->bench_cmd = add_bench_command(app, impl_->bench);
+  impl_->replay_cmd = add_replay_command(app, impl_->replay);
+  impl_->compare_cmd = add_compare_command(app, impl_->compare);
+  impl_->report_cmd = add_report_command(app, impl_->report);
+}
+
+ToolCommands::~ToolCommands() = default;
+
+bool ToolCommands::selected() const {
+  for (CLI::App* s : {impl_->bench_cmd, impl_->replay_cmd, impl_->compare_cmd, impl_->report_cmd})
+    if (s && s->parsed()) return true;
+  return false;
+}
+
+int ToolCommands::run() {
+  if (impl_->bench_cmd && impl_->bench_cmd->parsed()) return bench_command(impl_->bench);
+  if (impl_->replay_cmd && impl_->replay_cmd->parsed()) return replay_command(impl_->replay);
+  if (impl_->compare_cmd && impl_->compare_cmd->parsed()) return compare_command(impl_->compare);
+  if (impl_->report_cmd && impl_->report_cmd->parsed()) return report_command(impl_->report);
+  return 0;
+}
+
+}  // namespace octocd::cli

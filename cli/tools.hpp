@@ -1,0 +1,200 @@
+#pragma once
+/// \file tools.hpp
+/// The `octocd` subcommands of SPEC 12 beside `run` and `validate`: `bench` (sweeps,
+/// cli/bench.cpp), `replay` (recorded AABBs through several broadphases, cli/replay.cpp),
+/// `compare` (two traces, cli/compare.cpp) and `report` (HTML + Markdown with plots,
+/// cli/report.cpp), plus what they share (cli/tools.cpp): the engine factory, statistics
+/// over repetitions, the machine description and atomic file writes.
+///
+/// Exit codes as everywhere in octocd: 0 ok, 1 runtime failure, 2 bad input, 3 a check
+/// failed (compare: the traces differ; replay: a broadphase disagrees).
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "octocd/engine.hpp"
+
+namespace octocd::cli {
+
+/// The engine `name` (cpu, cuda, bullet) built from `model` with the scene's broadphase.
+/// Throws InputError for an unknown name or a broadphase the engine does not have,
+/// RuntimeError when the engine cannot start (no CUDA device, or a build without CUDA).
+std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model);
+
+/// Engine names make_engine accepts, in a stable order: cpu, cuda, bullet.
+const std::vector<std::string>& engine_names();
+
+/// Median, minimum, maximum, mean and sample standard deviation of repeated measurements,
+/// as stored in bench results: {"median", "min", "max", "mean", "stdev", "n", "values"}.
+/// An empty `values` gives n = 0 and no other keys.
+nlohmann::json spread(const std::vector<double>& values);
+
+/// Where and on what this runs: {"hostname", "cpu", "threads", "omp_threads",
+/// "load_average", "gpu", "driver"} (gpu is the CUDA engine's device line, e.g. "no CUDA
+/// device: ..."; driver from /proc/driver/nvidia/version, "" when absent).
+nlohmann::json machine_description();
+
+/// The 1, 5 and 15 minute load averages now (getloadavg), [] when unknown: how busy a
+/// shared machine was while it measured.
+nlohmann::json load_average();
+
+/// The build: {"build_id", "git_revision"} (git_revision from `git rev-parse` in the source
+/// tree when it is there, else the id compiled in).
+nlohmann::json build_description();
+
+/// Writes `text` to `path` atomically (a temporary file in the same folder, then rename),
+/// so a reader or a killed process never sees half a file. Throws RuntimeError naming the
+/// path on failure.
+void write_file_atomically(const std::string& path, const std::string& text);
+
+/// The source tree (for datasets/scenes and reports/): $OCTOCD_SOURCE_DIR, else the tree
+/// this octocd was built from.
+std::string source_dir();
+
+/// Splits "a,b,c" into {"a", "b", "c"} (empty items dropped).
+std::vector<std::string> split_list(const std::string& text);
+
+/// ISO 8601 UTC time now, e.g. 2025-01-01T12:00:00Z.
+std::string utc_time_now();
+
+/// Registers bench, replay, compare and report on `app`; after parsing, `selected()` says
+/// whether one of them was chosen and `run()` runs it (throwing InputError / RuntimeError
+/// like the other commands) and returns its exit code.
+class ToolCommands {
+ public:
+  explicit ToolCommands(CLI::App& app);
+  ~ToolCommands();
+  ToolCommands(const ToolCommands&) = delete;
+  ToolCommands& operator=(const ToolCommands&) = delete;
+  /// Whether bench, replay, compare or report was given on the command line.
+  bool selected() const;
+  /// Runs the selected command; returns its exit code.
+  int run();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// ---- replaying recorded broadphase input (cli/replay.cpp; `replay` and bench sweeps) ----
+
+/// The broadphase input of recorded frames, the same bits for every engine: a model of box
+/// shapes with the recorded local boxes (so no mesh is needed, and an engine's midphase is
+/// the AABB test), gravity 0, and per replayed frame the positions its broadphase saw.
+/// Setting those positions with zero velocity and taking one step leaves them unchanged
+/// (Eq. 2-3 with g = 0, v = 0), so the engine's Aabbs stage rebuilds exactly the recorded
+/// world AABBs (translated(local, x)) and its broadphase stage sees exactly them.
+struct ReplayInput {
+  std::shared_ptr<const Model> model;   ///< box shapes, recorded local boxes, gravity 0
+  std::vector<std::int64_t> frames;     ///< the step each replayed frame reproduces
+  std::vector<std::vector<Vec3>> x;     ///< per frame: positions the broadphase saw (m)
+  std::vector<std::int64_t> recorded_pairs;  ///< per frame: the run's pair count, -1 unknown
+  std::vector<std::vector<Pair>> recorded_sets;  ///< per frame: the run's pairs (may be empty)
+  std::string source;                   ///< the trace or scene it came from
+};
+
+/// From a trace: the state recorded after frame f (/states position and velocity, every
+/// `every`-th row), advanced by Eq. 2-3 exactly as the engine's next step did
+/// (octocd::integrate with the trace's gravity and dt), is step f+1's broadphase input;
+/// /frames/aabb_pairs of frame f+1 is its recorded count. At most `max_frames` (> 0)
+/// frames. Throws InputError naming the file and dataset when the trace lacks /bodies,
+/// /states (position, velocity, frame) or the parameters attribute, or holds no state row
+/// with a following frame.
+ReplayInput replay_input_from_trace(const std::string& path, int every, int max_frames);
+
+/// From a scene: run it on the CPU engine for `warmup` steps, then record `frames` steps'
+/// broadphase input and pair sets.
+ReplayInput replay_input_from_scene(const Scene& scene, int warmup, int frames);
+
+/// One broadphase of one engine replayed over a ReplayInput.
+struct ReplayRun {
+  std::string engine, broadphase;
+  bool ok = false;
+  std::string reason;            ///< why it was skipped (when !ok)
+  std::vector<double> ms;        ///< per timed repetition: broadphase-stage ms per frame
+  double pairs = 0.0;            ///< mean pairs per frame
+  double candidates = 0.0;       ///< mean cell-level candidates per frame
+  std::string device;            ///< the engine's device
+  bool matches_recorded = true;  ///< every frame's pairs equal the recorded set (or count)
+  std::string recorded_detail;   ///< first frame that differs, or what was compared
+  std::vector<std::vector<Pair>> sets;  ///< the pairs of each frame (last repetition)
+};
+
+/// Replays `input` through `broadphase` on `engine` (make_engine on a copy of the model
+/// naming that broadphase): `warm_replays` untimed passes over every frame, then `repeat`
+/// timed ones (the engine's own broadphase-stage time); a timed repetition replays the
+/// frames again until its broadphase time reaches `min_ms` (so tiny scenes are not timed
+/// at the clock's resolution) and reports ms per frame over all its replays. An InputError or RuntimeError
+/// while building the engine (a broadphase the engine lacks, no CUDA device) gives
+/// ok = false with the reason; a failure while stepping is thrown.
+ReplayRun replay_broadphase(const ReplayInput& input, const std::string& engine, const std::string& broadphase,
+                            int repeat, int warm_replays, double min_ms = 0.0,
+                            const std::function<void()>& tick = {});
+
+/// The first frame (index into input.frames) where `a` and `b` differ, with the first pair
+/// in one set and not the other; "" when equal.
+std::string first_set_difference(const ReplayInput& input, const std::vector<std::vector<Pair>>& a,
+                                 const std::vector<std::vector<Pair>>& b);
+
+// ---- the commands (one file each) ------------------------------------------------------
+
+/// `octocd bench` options (cli/bench.cpp).
+struct BenchOptions {
+  std::string sweep;              ///< a named sweep or a sweep JSON file
+  std::string engines;            ///< comma-separated, overrides the sweep's
+  int repeat = 0;                 ///< > 0 overrides the sweep's repetitions
+  int frames = 0;                 ///< > 0 overrides the sweep's timed (or recorded) frames
+  std::string shard;              ///< "i/N"
+  std::string output;             ///< RESULT.json
+  bool resume = false;
+  bool list = false;
+  bool print = false;
+  bool quiet = false;
+  std::string scene_dir;          ///< where named sweeps find their scenes
+  std::string data_dir;           ///< meshes (as load_scene's data_dir)
+  std::string trace_dir;          ///< write one trace per steps point here
+};
+CLI::App* add_bench_command(CLI::App& app, BenchOptions& o);
+int bench_command(const BenchOptions& o);
+
+/// `octocd replay` options (cli/replay.cpp).
+struct ReplayOptions {
+  std::string trace;
+  std::string broadphases;        ///< comma-separated
+  std::string engine = "cpu";
+  int repeat = 3;
+  int warm_replays = 1;
+  int every = 1;                  ///< replay every K-th state row
+  double min_ms = 0.0;            ///< replay each timed repetition until this much time
+  int max_frames = 0;             ///< > 0: at most this many frames
+  std::string json;               ///< write the result table as JSON
+};
+CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o);
+int replay_command(const ReplayOptions& o);
+
+/// `octocd compare` options (cli/compare.cpp).
+struct CompareOptions {
+  std::string a, b;
+  double tolerance = 0.0;
+  std::string quantities = "positions,velocities,contacts,pairs";
+  std::string json;
+};
+CLI::App* add_compare_command(CLI::App& app, CompareOptions& o);
+int compare_command(const CompareOptions& o);
+
+/// `octocd report` options (cli/report.cpp).
+struct ReportOptions {
+  std::vector<std::string> inputs;
+  std::string output;
+  std::string title;
+};
+CLI::App* add_report_command(CLI::App& app, ReportOptions& o);
+int report_command(const ReportOptions& o);
+
+}  // namespace octocd::cli

@@ -1,0 +1,683 @@
+#!/usr/bin/env python3
+"""octocd report: bench results (octocd-bench JSON) and traces (octocd-trace HDF5) into
+OUT/index.html (self-contained: every plot inline as SVG, no network) and OUT/report.md
+(plots as OUT/plots/*.svg). Run by `octocd report` (cli/report.cpp); usable directly:
+
+    /usr/bin/python3 reports/make_report.py -o OUT RESULT.json [TRACE.h5 ...]
+
+Shards of one sweep (same sweep definition and machine) are merged. Exit codes: 0 ok,
+2 bad input (a file of another format or version, duplicate points), 1 anything else.
+Needs Debian's python3-matplotlib and python3-numpy (python3-h5py for traces).
+"""
+import argparse
+import datetime
+import html
+import io
+import json
+import math
+import os
+import sys
+
+PAPER = json.load(open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "paper_tables.json")))
+STAGES = ["integrate", "aabbs", "broadphase", "midphase", "response", "metrics"]
+STAGE_COLORS = ["#4e79a7", "#a0cbe8", "#f28e2b", "#e15759", "#59a14f", "#b6992d"]
+ENGINE_COLORS = {"cpu": "#4e79a7", "cuda": "#59a14f", "bullet": "#e15759"}
+NOISE_NOTE = ("Timings on a shared machine move with its load (other processes, builds): compare figures "
+              "taken in one run; spreads are min-max over the repetitions.")
+
+
+def fail(msg):
+    print(f"octocd report: error: {msg}", file=sys.stderr)
+    sys.exit(2)
+
+
+try:
+    import numpy as np
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+except ImportError as e:  # exit 1: a missing dependency is not bad input
+    print(f"octocd report: runtime failure: {e}; install Debian's python3-matplotlib and python3-numpy",
+          file=sys.stderr)
+    sys.exit(1)
+
+plt.rcParams.update({"svg.fonttype": "none", "font.family": "sans-serif", "font.size": 9,
+                     "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100})
+
+
+# ---- input -----------------------------------------------------------------------------------
+
+def load(path):
+    with open(path, "rb") as f:
+        head = f.read(8)
+    if head == b"\x89HDF\r\n\x1a\n":
+        return ("trace", path)
+    try:
+        with open(path) as f:
+            j = json.load(f)
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        fail(f"{path}: neither an HDF5 trace nor JSON ({e}); allowed: octocd-bench results (.json), "
+             "octocd-trace files (.h5)")
+    fmt, ver = (j.get("format"), j.get("version")) if isinstance(j, dict) else (None, None)
+    if fmt != "octocd-bench" or ver != 1:
+        fail(f"{path}: format: {fmt!r} version {ver!r}; allowed: octocd-bench version 1 (a result of "
+             "`octocd bench`) or an octocd trace")
+    for key in ("sweep", "points", "machine", "build", "settings"):
+        if key not in j:
+            fail(f"{path}: {key}: missing; allowed: a complete octocd-bench result")
+    return ("result", path, j)
+
+
+def merge(results):
+    """Groups result files of one sweep definition on one machine; points by id."""
+    groups = {}
+    for path, j in results:
+        m = j["machine"]
+        key = (j["sweep"]["name"], json.dumps(j["sweep"]["definition"], sort_keys=True),
+               m.get("hostname"), m.get("cpu"), m.get("gpu"))
+        g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}})
+        g["files"].append(path)
+        for p in j["points"]:
+            pid = p.get("id")
+            if pid in g["points"]:
+                fail(f"{path}: points: '{pid}' is also in {g['origin'][pid]}; allowed: each point in one "
+                     "result file (shards of one sweep are disjoint)")
+            g["points"][pid] = p
+            g["origin"][pid] = path
+    out = []
+    for g in groups.values():
+        g["points_list"] = sorted(g["points"].values(), key=lambda p: p.get("index", 0))
+        out.append(g)
+    return out
+
+
+# ---- formatting ------------------------------------------------------------------------------
+
+def num(v, digits=3):
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    a = abs(v)
+    if a >= 1000:
+        return f"{v:,.0f}"
+    if a >= 100:
+        return f"{v:.1f}"
+    if a == 0:
+        return "0"
+    return f"{v:.{max(digits - 1 - int(math.floor(math.log10(a))), 0)}f}"
+
+
+def med(s):
+    return s.get("median") if isinstance(s, dict) else None
+
+
+def spread_text(s, digits=3):
+    if not isinstance(s, dict) or "median" not in s:
+        return "-"
+    if s.get("n", 1) > 1 and s["max"] != s["min"]:
+        return f"{num(s['median'], digits)} ({num(s['min'], digits)}–{num(s['max'], digits)})"
+    return num(s["median"], digits)
+
+
+class Doc:
+    """One report, written both as HTML and as Markdown."""
+
+    def __init__(self, out):
+        self.out = out
+        self.html, self.md = [], []
+        self.nplot = 0
+        os.makedirs(os.path.join(out, "plots"), exist_ok=True)
+
+    def h(self, level, text, anchor=None):
+        a = f' id="{anchor}"' if anchor else ""
+        self.html.append(f"<h{level}{a}>{html.escape(text)}</h{level}>")
+        self.md.append("#" * level + " " + text + "\n")
+
+    def p(self, text, cls=None):
+        c = f' class="{cls}"' if cls else ""
+        self.html.append(f"<p{c}>{html.escape(text)}</p>")
+        self.md.append(text + "\n")
+
+    def table(self, header, rows, note=None):
+        t = ['<div class="wide"><table><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
+        for r in rows:
+            t.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>")
+        t.append("</tbody></table></div>")
+        self.html.append("".join(t))
+        self.md.append("| " + " | ".join(str(x) for x in header) + " |")
+        self.md.append("|" + "|".join("---" for _ in header) + "|")
+        for r in rows:
+            self.md.append("| " + " | ".join(str(x).replace("|", "\\|") for x in r) + " |")
+        self.md.append("")
+        if note:
+            self.p(note, "note")
+
+    def figure(self, fig, name, caption):
+        self.nplot += 1
+        fname = f"{self.nplot:02d}-{name}.svg"
+        buf = io.StringIO()
+        fig.savefig(buf, format="svg", bbox_inches="tight")
+        plt.close(fig)
+        svg = buf.getvalue()
+        with open(os.path.join(self.out, "plots", fname), "w") as f:
+            f.write(svg)
+        body = svg[svg.find("<svg"):]
+        self.html.append(f'<figure>{body}<figcaption>{html.escape(caption)}</figcaption></figure>')
+        self.md.append(f"![{caption}](plots/{fname})\n\n*{caption}*\n")
+
+    def write(self, title):
+        css = """body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1180px;margin:2em auto;
+padding:0 1em;color:#222;line-height:1.45}h1{border-bottom:2px solid #4e79a7;padding-bottom:.2em}
+h2{margin-top:2em;border-bottom:1px solid #ccc}table{border-collapse:collapse;margin:.8em 0;font-size:.86em}
+th,td{border:1px solid #ccc;padding:.25em .55em;text-align:right}th{background:#eef3f8}
+td:first-child,th:first-child{text-align:left}tbody tr:nth-child(even){background:#fafafa}
+figure{margin:1em 0}figure svg{max-width:100%;height:auto}figcaption{font-size:.85em;color:#555}
+.note{font-size:.85em;color:#555}.meta{font-size:.85em;background:#f6f6f6;padding:.5em .8em;border-left:3px solid #4e79a7}
+nav a{margin-right:1em}.wide{overflow-x:auto;max-width:100%}"""
+        page = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
+                f"<title>{html.escape(title)}</title><style>{css}</style></head><body>",
+                f"<h1>{html.escape(title)}</h1>"] + self.html + ["</body></html>"]
+        with open(os.path.join(self.out, "index.html"), "w") as f:
+            f.write("\n".join(page) + "\n")
+        with open(os.path.join(self.out, "report.md"), "w") as f:
+            f.write(f"# {title}\n\n" + "\n".join(self.md) + "\n")
+
+
+# ---- sections ----------------------------------------------------------------------------------
+
+def machine_block(doc, g):
+    j = g["first"]
+    m, b, s = j["machine"], j["build"], j["settings"]
+    sw = j["sweep"]
+    n_ok = sum(1 for p in g["points_list"] if p.get("status") == "ok")
+    total = j.get("points_total", len(g["points_list"]))
+    parts = [f"Sweep `{sw['name']}` ({sw.get('kind')}): {sw.get('description', '')}",
+             f"Machine: {m.get('cpu')}, host {m.get('hostname')}; GPU: {m.get('gpu')}"
+             + (f"; driver: {m.get('driver')}" if m.get("driver") else ""),
+             f"Build {b.get('build_id')}, source revision {b.get('git_revision')}; run {j.get('started')} to "
+             f"{j.get('updated', '?')}"
+             + (f"; load average {', '.join(f'{x:.1f}' for x in m['load_average'])} at the start"
+                if m.get("load_average") else "")
+             + (f", {', '.join(f'{x:.1f}' for x in m['load_average_end'])} at the end"
+                if m.get("load_average_end") else "")
+             + (f"; CPU engine on {m['omp_threads']} OpenMP threads" if m.get("omp_threads") else ""),
+             f"Settings: engines {', '.join(s.get('engines', []))}; {s.get('repeat')} repetitions per point; "
+             f"{s.get('frames')} frames per run (warm-up {s.get('warmup')})"
+             + (f", {s.get('warm_replays')} untimed replay(s) first" if "warm_replays" in s else "")
+             + (f", each timed repetition at least {s.get('min_time_ms')} ms" if "min_time_ms" in s else "")
+             + f"; files: {', '.join(os.path.basename(f) for f in g['files'])}",
+             f"Points: {len(g['points_list'])} of {total} in these files ({n_ok} measured)"
+             + ("" if len(g["points_list"]) >= total else " — incomplete: missing shards or an interrupted run")]
+    doc.html.append('<div class="meta">' + "<br>".join(html.escape(x) for x in parts) + "</div>")
+    doc.md.extend("> " + x.replace("`", "") + "  " for x in parts)
+    doc.md.append("")
+
+
+def skipped_block(doc, g):
+    by_reason = {}
+    for p in g["points_list"]:
+        if p.get("status") in ("skipped", "failed"):
+            key = (p["status"], p.get("params", {}).get("engine", "?"), p.get("reason", ""))
+            by_reason.setdefault(key, []).append(p["id"])
+    if not by_reason:
+        return
+    rows = []
+    for (status, engine, reason), ids in sorted(by_reason.items()):
+        shown = ", ".join(ids[:3]) + (f" and {len(ids) - 3} more" if len(ids) > 3 else "")
+        rows.append([status, engine, len(ids), reason[:300], shown])
+    doc.table(["status", "engine", "points", "reason", "points (ids)"], rows)
+
+
+def steps_points(g):
+    return [p for p in g["points_list"] if p.get("status") == "ok" and "windows" in p]
+
+
+def axis_label(p, axis):
+    lab = p.get("params", {}).get("labels", {}).get(axis)
+    val = p.get("params", {}).get("axes", {}).get(axis)
+    return lab if lab is not None else str(val)
+
+
+def engines_of(g):
+    return g["first"]["settings"].get("engines", [])
+
+
+def first_window(p):
+    return next(iter(p["windows"].values()))
+
+
+def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"]):
+    """steps/s bars per scene (or xkey) and engine (and group_axis value)."""
+    scenes = list(dict.fromkeys(xkey(p) for p in pts))
+    combos = list(dict.fromkeys((axis_label(p, group_axis) if group_axis else "", p["params"]["engine"]) for p in pts))
+    if not scenes or not combos:
+        return
+    fig, ax = plt.subplots(figsize=(max(6, 1.6 * len(scenes) + 0.25 * len(combos) * len(scenes)), 3.6))
+    width = 0.8 / len(combos)
+    cmap = plt.get_cmap("tab20")
+    for k, (val, eng) in enumerate(combos):
+        ys, lo, hi = [], [], []
+        for sc in scenes:
+            m = [p for p in pts if xkey(p) == sc and p["params"]["engine"] == eng
+                 and (not group_axis or axis_label(p, group_axis) == val)]
+            s = first_window(m[0])["steps_per_s"] if m else None
+            ys.append(s["median"] if s else np.nan)
+            lo.append(s["median"] - s["min"] if s else 0)
+            hi.append(s["max"] - s["median"] if s else 0)
+        xs = np.arange(len(scenes)) + (k - (len(combos) - 1) / 2) * width
+        lab = f"{eng} {val}".strip()
+        ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=lab, color=cmap(k % 20),
+               edgecolor=ENGINE_COLORS.get(eng, "#333"), linewidth=0.8)
+    ax.set_xticks(np.arange(len(scenes)))
+    ax.set_xticklabels(scenes, rotation=0)
+    ax.set_yscale("log")
+    ax.set_ylabel("steps/s (median, bars min–max)")
+    ax.set_title(title)
+    ax.legend(fontsize=7, ncol=min(len(combos), 6), loc="upper center", bbox_to_anchor=(0.5, -0.1))
+    doc.figure(fig, name, title)
+
+
+def stage_shares(doc, pts, group_axis, title, name):
+    rows = [p for p in pts if p.get("has_stage", {}).get("midphase", True)]
+    if not rows:
+        return
+    labels, shares = [], []
+    for p in rows:
+        w = first_window(p)
+        st = [med(w["stage_ms"].get(s, {})) or 0.0 for s in STAGES]
+        tot = sum(st) or 1.0
+        shares.append([100.0 * x / tot for x in st])
+        labels.append(f"{p['params']['scene']} {axis_label(p, group_axis) if group_axis else ''} {p['params']['engine']}")
+    fig, ax = plt.subplots(figsize=(8, 0.22 * len(rows) + 1.2))
+    left = np.zeros(len(rows))
+    arr = np.array(shares)
+    for k, s in enumerate(STAGES):
+        ax.barh(np.arange(len(rows)), arr[:, k], left=left, color=STAGE_COLORS[k], label=s)
+        left += arr[:, k]
+    ax.set_yticks(np.arange(len(rows)))
+    ax.set_yticklabels(labels, fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xlim(0, 100)
+    ax.set_xlabel("share of the step (%), median stage ms")
+    ax.set_title(title)
+    ax.legend(fontsize=7, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.12 - 1.0 / max(len(rows), 4)))
+    doc.figure(fig, name, title)
+
+
+def find(pts, **kw):
+    for p in pts:
+        ok = True
+        for k, v in kw.items():
+            if k in ("scene", "engine"):
+                ok &= p["params"].get(k) == v
+            else:
+                ok &= axis_label(p, k) == v or str(p["params"].get("axes", {}).get(k)) == v
+        if ok:
+            return p
+    return None
+
+
+def section_table5(doc, g):
+    pts = steps_points(g)
+    paper = PAPER["table5"]
+    engines = engines_of(g)
+    doc.p("Ours: steps/s of the simulation step alone (median over repetitions, min–max in brackets); the paper's: "
+          "FPS of the whole Unity application on its GPU. Absolute numbers do not compare; the order of A, B and C "
+          "per scene does. " + paper["source"] + ". " + PAPER["hardware"] + ".")
+    rows = []
+    for sc, ref in paper["rows"].items():
+        for cfg in ("A", "B", "C"):
+            r = [f"{sc} ({ref['count']})" if cfg == "A" else "", cfg, f"{ref[cfg][0]} ± {ref[cfg][1]}"]
+            for e in engines:
+                p = find(pts, scene=sc, engine=e, midphase=cfg)
+                if p is None and cfg != "A" and find(pts, scene=sc, engine=e, midphase="A") is not None:
+                    r.append("(= A: no midphase)")
+                else:
+                    r.append(spread_text(first_window(p)["steps_per_s"]) if p else "-")
+            best = []
+            rows.append(r)
+    doc.table(["scene (bodies)", "config", "paper FPS"] + [f"{e} steps/s" for e in engines], rows)
+    # Order check: which configuration is fastest per scene, paper vs ours.
+    rows = []
+    for sc, ref in paper["rows"].items():
+        pb = max(("A", "B", "C"), key=lambda c: ref[c][0])
+        r = [sc, pb]
+        for e in engines:
+            vals = {c: find(pts, scene=sc, engine=e, midphase=c) for c in ("A", "B", "C")}
+            vals = {c: med(first_window(p)["steps_per_s"]) for c, p in vals.items() if p}
+            r.append(max(vals, key=vals.get) + " (" + ", ".join(f"{c} {num(v / vals.get('A', v) if vals.get('A') else 1.0)}x"
+                                                                for c, v in vals.items()) + " of A)"
+                     if len(vals) == 3 else "-")
+        rows.append(r)
+    doc.table(["scene", "paper: fastest"] + [f"{e}: fastest (speed vs A)" for e in engines], rows)
+    steps_bars(doc, pts, "midphase", "Table 5: steps/s per scene, midphase A [2] / B [1,2] / C [0,1,2], per engine",
+               "table5-steps")
+    stage_shares(doc, pts, "midphase", "Table 5: share of each stage in the step", "table5-stages")
+    counts = []
+    for p in pts:
+        w = first_window(p)
+        counts.append([p["params"]["scene"], axis_label(p, "midphase"), p["params"]["engine"], num(med(w["step_ms"]), 4),
+                       num(med(w["pairs"])), num(med(w["box_pairs"])), num(med(w["vertex_tests"])),
+                       num(med(w["contacts"]))])
+    doc.table(["scene", "config", "engine", "step ms", "AABB pairs", "box pairs", "vertex tests", "contacts"], counts,
+              "Per frame, means over the timed frames (median over repetitions).")
+
+
+def section_table6(doc, g):
+    pts = steps_points(g)
+    paper = PAPER["table6"]
+    engines = engines_of(g)
+    doc.p("Relative change ratio RCR = (C - L0) / L0 x 100 % as in the paper. " + paper["source"] + ".")
+    rows = []
+    for sc, ref in paper["rows"].items():
+        r = [f"{sc} ({ref['count']})", f"{ref['L0'][0]} ± {ref['L0'][1]}", f"{ref['C'][0]} ± {ref['C'][1]}",
+             f"{ref['rcr']:+.1f}%"]
+        for e in engines:
+            l0, c = find(pts, scene=sc, engine=e, midphase="L0"), find(pts, scene=sc, engine=e, midphase="C")
+            r.append(spread_text(first_window(l0)["steps_per_s"]) if l0 else "-")
+            r.append(spread_text(first_window(c)["steps_per_s"]) if c else ("(= L0: no midphase)" if l0 else "-"))
+            if l0 and c:
+                a, b = med(first_window(l0)["steps_per_s"]), med(first_window(c)["steps_per_s"])
+                r.append(f"{100.0 * (b - a) / a:+.1f}%")
+            else:
+                r.append("-")
+        rows.append(r)
+    head = ["scene (bodies)", "paper L0 FPS", "paper C FPS", "paper RCR"]
+    for e in engines:
+        head += [f"{e} L0", f"{e} C", f"{e} RCR"]
+    doc.table(head, rows)
+    steps_bars(doc, pts, "midphase", "Table 6: steps/s, Level 0 (aabb-only) vs C [0,1,2], per engine", "table6-steps")
+    stage_shares(doc, pts, "midphase", "Table 6: share of each stage in the step", "table6-stages")
+
+
+def section_tableA1(doc, g):
+    pts = steps_points(g)
+    paper = PAPER["tableA1"]
+    engines = engines_of(g)
+    doc.p("50 bodies fall and stack (bunny-stack-50; the other meshes in the same scene). Our early phase: frames "
+          "1-300; late: 2701-3000 of 3000. RCR = (O-A - SH) / O-A x 100 %, as the paper's printed numbers are "
+          "computed. " + paper["source"] + ".")
+    rows = []
+    for mesh, ref in paper["rows"].items():
+        for ph in ("early", "late"):
+            r = [mesh if ph == "early" else "", ph, num(ref[ph]["SH"]), num(ref[ph]["O-A"]), f"{ref[ph]['rcr']:+.2f}%"]
+            for e in engines:
+                sh, oa = find(pts, engine=e, mesh=mesh, broadphase="SH"), find(pts, engine=e, mesh=mesh, broadphase="O-A")
+                if sh is None and oa is not None:
+                    sh = oa
+                if oa is None and sh is not None and sh.get("ignores"):
+                    oa = sh
+                a = sh["windows"].get(ph, {}).get("steps_per_s") if sh else None
+                b = oa["windows"].get(ph, {}).get("steps_per_s") if oa else None
+                same = sh is not None and sh is oa
+                r += [spread_text(a) if a else "-", "(same engine broadphase)" if same else (spread_text(b) if b else "-")]
+                r.append(f"{100.0 * (b['median'] - a['median']) / b['median']:+.1f}%" if a and b and not same else "-")
+            rows.append(r)
+    head = ["mesh", "phase", "paper SH FPS", "paper O-A FPS", "paper RCR"]
+    for e in engines:
+        head += [f"{e} SH", f"{e} O-A", f"{e} RCR"]
+    doc.table(head, rows, "Ours in steps/s (median, min–max over repetitions).")
+    # Steps/s over frames (the paper's Fig. 5).
+    meshes = list(dict.fromkeys(p["params"]["axes"].get("mesh") for p in pts))
+    if meshes and all("series" in p for p in pts):
+        fig, axes = plt.subplots(1, len(meshes), figsize=(3.1 * len(meshes), 2.8), squeeze=False)
+        for ax, mesh in zip(axes[0], meshes):
+            for p in pts:
+                if p["params"]["axes"].get("mesh") != mesh:
+                    continue
+                s = p["series"]
+                bp = axis_label(p, "broadphase")
+                ax.plot(s["last_frame"], s["steps_per_s"], label=f"{p['params']['engine']} {bp}",
+                        color=ENGINE_COLORS.get(p["params"]["engine"], "#333"),
+                        linestyle="-" if bp == "O-A" else "--")
+            ax.set_title(mesh)
+            ax.set_xlabel("frame")
+            ax.set_yscale("log")
+        axes[0][0].set_ylabel("steps/s per 100 frames")
+        axes[0][-1].legend(fontsize=7)
+        doc.figure(fig, "tableA1-series", "Table A1 / Fig. 5: steps/s over the 3000 frames, spatial hash (dashed) vs "
+                   "octree (solid), per mesh and engine (median over repetitions of each 100-frame block)")
+    steps_bars(doc, [dict(p, windows={"late": p["windows"]["late"]}) for p in pts if "late" in p["windows"]],
+               "broadphase", "Table A1, late phase: steps/s per mesh, SH vs O-A, per engine", "tableA1-late",
+               xkey=lambda p: p["params"]["axes"].get("mesh", p["params"]["scene"]))
+    rows = []
+    for p in pts:
+        for ph in ("early", "late"):
+            w = p["windows"].get(ph)
+            if w:
+                rows.append([p["params"]["axes"].get("mesh"), axis_label(p, "broadphase"), p["params"]["engine"], ph,
+                             num(med(w["stage_ms"]["broadphase"]), 4), num(med(w["pairs"])),
+                             num(med(w["cell_candidates"])), num(med(w["memory_bytes"]) / 1e6 if med(w["memory_bytes"]) else 0)])
+    doc.table(["mesh", "broadphase", "engine", "phase", "broadphase ms", "AABB pairs", "cell candidates", "memory MB"],
+              rows, "Per frame means. Memory: bytes held by the pipeline's buffers (the paper reports the Unity "
+              "process footprint: 23-45 MB).")
+
+
+def section_figA2(doc, g):
+    pts = steps_points(g)
+    doc.p(PAPER["figA2"]["source"] + ". Ours: contact-weighted mean of the per-frame mean AABB penetration d_p over "
+          "all frames, the largest d_p, and the share of contacts with d_p > delta.")
+    engines = [e for e in engines_of(g) if any(p["params"]["engine"] == e for p in pts)]
+    betas = sorted({float(p["params"]["axes"]["beta"]) for p in pts})
+    deltas = sorted({float(p["params"]["axes"]["delta"]) for p in pts})
+    if not betas or not deltas:
+        return
+    figs = [("penetration_mean", "mean d_p (mm)", 1e3), ("penetration_max", "max d_p (mm)", 1e3),
+            ("penetration_share_above_slop", "share of contacts with d_p > delta (%)", 100.0)]
+    for e in engines:
+        fig, axes = plt.subplots(1, 3, figsize=(12, 3.3))
+        for ax, (key, lab, scale) in zip(axes, figs):
+            grid = np.full((len(betas), len(deltas)), np.nan)
+            for p in pts:
+                if p["params"]["engine"] != e:
+                    continue
+                i = betas.index(float(p["params"]["axes"]["beta"]))
+                k = deltas.index(float(p["params"]["axes"]["delta"]))
+                grid[i, k] = med(first_window(p)[key]) * scale
+            im = ax.imshow(grid, cmap="viridis", origin="lower", aspect="auto")
+            for i in range(len(betas)):
+                for k in range(len(deltas)):
+                    if not np.isnan(grid[i, k]):
+                        ax.text(k, i, num(grid[i, k]), ha="center", va="center", fontsize=7,
+                                color="white" if grid[i, k] < np.nanmean(grid) else "black")
+            ax.set_xticks(range(len(deltas)))
+            ax.set_xticklabels([f"{d:g}" for d in deltas])
+            ax.set_yticks(range(len(betas)))
+            ax.set_yticklabels([f"{b:g}" for b in betas])
+            ax.set_xlabel("delta (slop, m)")
+            ax.set_ylabel("beta")
+            ax.set_title(lab)
+            ax.grid(False)
+            fig.colorbar(im, ax=ax, shrink=0.8)
+        doc.figure(fig, f"figA2-{e}", f"Fig. A2 on engine {e}: penetration for beta x delta (darker = less)")
+    rows = []
+    for p in pts:
+        w = first_window(p)
+        rows.append([p["params"]["engine"], p["params"]["axes"]["beta"], p["params"]["axes"]["delta"],
+                     num(med(w["penetration_mean"]) * 1e3), num(med(w["penetration_max"]) * 1e3),
+                     num(100 * med(w["penetration_share_above_slop"])), num(med(w["contacts"])),
+                     spread_text(w["steps_per_s"])])
+    doc.table(["engine", "beta", "delta (m)", "mean d_p (mm)", "max d_p (mm)", "> delta (%)", "contacts/frame",
+               "steps/s"], rows)
+
+
+def slope(xs, ys):
+    """Least-squares slope of log2(time) against log2(bodies): time ~ n^slope, x2 per doubling = 2^slope."""
+    lx, ly = np.log2(xs), np.log2(ys)
+    return float(np.polyfit(lx, ly, 1)[0]) if len(xs) >= 2 else float("nan")
+
+
+def section_scaling(doc, g):
+    pts = [p for p in g["points_list"] if p.get("status") in ("ok", "failed") and "ms_per_frame" in p]
+    doc.p("Every broadphase replays identical recorded frames (positions the recording run's broadphase saw); the "
+          "time is the engine's own broadphase stage per frame (median over repetitions after an untimed replay). "
+          "Slope: least-squares exponent k of time ~ n^k over the sizes measured (1 = linear; each doubling of n "
+          "multiplies the time by 2^k); 'last doubling' is log2 of the time ratio between the two largest sizes.")
+    series = {}
+    for p in pts:
+        key = (p["params"]["engine"], p["params"]["broadphase"])
+        series.setdefault(key, []).append(p)
+    if not series:
+        return
+    fig, ax = plt.subplots(figsize=(8, 5))
+    cmap = plt.get_cmap("tab20")
+    rows = []
+    sizes = sorted({p["bodies"] for p in pts})
+    for k, (key, ps) in enumerate(sorted(series.items())):
+        ps = sorted(ps, key=lambda p: p["bodies"])
+        xs = np.array([p["bodies"] for p in ps], dtype=float)
+        ys = np.array([med(p["ms_per_frame"]) for p in ps], dtype=float)
+        lo = ys - np.array([p["ms_per_frame"]["min"] for p in ps])
+        hi = np.array([p["ms_per_frame"]["max"] for p in ps]) - ys
+        ax.errorbar(xs, ys, yerr=[lo, hi], marker="o", ms=3, capsize=2, label=f"{key[0]} {key[1]}",
+                    color=cmap(k % 20), linestyle="-" if key[0] == "cpu" else "--")
+        good = ys > 0
+        sl = slope(xs[good], ys[good]) if good.sum() >= 2 else float("nan")
+        ns = [p["params"].get("bodies", p["bodies"]) for p in ps]  # lattice sizes asked (walls apart)
+        last = math.log2(ys[-1] / ys[-2]) if len(ys) >= 2 and ys[-2] > 0 and ns[-1] == 2 * ns[-2] else float("nan")
+        by = {p["bodies"]: p for p in ps}
+        rows.append([key[0], key[1]] + [num(med(by[s]["ms_per_frame"]), 3) if s in by else "-" for s in sizes]
+                    + [f"{sl:.2f}" if not math.isnan(sl) else "-", f"{last:.2f}" if not math.isnan(last) else "-",
+                       "yes" if all(p.get("matches_recorded", True) for p in ps) else "NO"])
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("bodies")
+    ax.set_ylabel("broadphase ms per frame")
+    ax.set_title("Broadphase scaling on identical recorded AABBs (solid: cpu, dashed: cuda)")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    doc.figure(fig, "scaling", "Broadphase scaling, log-log: ms per frame against bodies")
+    doc.table(["engine", "broadphase"] + [f"{s:,}" for s in sizes] + ["slope k", "last doubling", "pairs = recorded"],
+              rows, "ms per frame, median over repetitions; '-' = not measured (skipped: see below).")
+    # Per doubling: log2 of the time ratio between consecutive sizes (1.0 = linear).
+    nominal = lambda p: p["params"].get("bodies", p["bodies"])  # lattice size asked (walls apart)
+    sizes_n = sorted({nominal(p) for p in pts})
+    steps = [(a, b) for a, b in zip(sizes_n, sizes_n[1:]) if b == 2 * a]
+    if steps:
+        rows = []
+        for key, ps in sorted(series.items()):
+            by = {nominal(p): med(p["ms_per_frame"]) for p in ps}
+            rows.append([key[0], key[1]] + [f"{math.log2(by[b] / by[a]):.2f}" if by.get(a) and by.get(b) else "-"
+                                            for a, b in steps])
+        doc.table(["engine", "broadphase"] + [f"{a:,}→{b:,}" for a, b in steps], rows,
+                  "Slope per doubling of the body count: log2(time(2n) / time(n)); 1 = linear, 2 = quadratic.")
+    rows = []
+    for s in sizes:
+        p = next((p for p in pts if p["bodies"] == s), None)
+        if p:
+            rows.append([f"{s:,}", num(p.get("pairs", 0)), p.get("frames", "")])
+    doc.table(["bodies", "pairs per frame", "frames replayed"], rows)
+
+
+def section_generic(doc, g):
+    rows = []
+    for p in g["points_list"]:
+        if p.get("status") != "ok":
+            continue
+        if "windows" in p:
+            for wn, w in p["windows"].items():
+                rows.append([p["id"], wn, spread_text(w["steps_per_s"]), num(med(w["step_ms"]), 4), num(med(w["pairs"])),
+                             num(med(w["contacts"])), num(med(w["penetration_mean"]) * 1e3)])
+        elif "ms_per_frame" in p:
+            rows.append([p["id"], "replay", "-", spread_text(p["ms_per_frame"]), num(p.get("pairs")), "-", "-"])
+    doc.table(["point", "window", "steps/s", "step ms", "pairs", "contacts", "mean d_p (mm)"], rows)
+    pts = steps_points(g)
+    if pts:
+        axis = next(iter(pts[0]["params"].get("axes", {})), None)
+        steps_bars(doc, pts, axis, f"{g['first']['sweep']['name']}: steps/s", "sweep-steps")
+        stage_shares(doc, pts, axis, f"{g['first']['sweep']['name']}: stage shares", "sweep-stages")
+
+
+def section_trace(doc, path):
+    try:
+        import h5py
+    except ImportError:
+        print("octocd report: runtime failure: traces need python3-h5py", file=sys.stderr)
+        sys.exit(1)
+    try:
+        f = h5py.File(path, "r", swmr=True)
+    except OSError as e:
+        fail(f"{path}: unreadable HDF5 ({e})")
+    with f:
+        fmt, ver = f.attrs.get("format"), f.attrs.get("version")
+        if fmt != "octocd-trace" or ver != 1:
+            fail(f"{path}: format: {fmt!r} version {ver!r}; allowed: octocd-trace version 1")
+        if "frames" not in f:
+            fail(f"{path}: /frames: missing; allowed: an octocd trace")
+        fr = f["frames"]
+        n = min(d.shape[0] for d in fr.values())
+        get = lambda k: fr[k][:n] if k in fr else np.zeros(n)
+        frame = get("frame")
+        doc.h(2, f"Trace {os.path.basename(path)}")
+        a = f.attrs
+        doc.p(f"Scene {a.get('scene_name')}, engine {a.get('engine')}, broadphase {a.get('broadphase')}, midphase "
+              f"{a.get('midphase')}, {a.get('body_count')} bodies, {n} frames; device {a.get('device')}; build "
+              f"{a.get('build_id')}; started {a.get('start_time')}.")
+        step = get("step_ms")
+        doc.table(["frames", "steps/s", "mean step ms", "mean contacts", "max contacts", "max d_p (mm)",
+                   "final kinetic energy (J)"],
+                  [[n, num(1000.0 * n / step.sum()) if step.sum() > 0 else "-", num(step.mean(), 4) if n else "-",
+                    num(get("contacts").mean()) if n else "-", int(get("contacts").max()) if n else "-",
+                    num(1e3 * get("penetration_max").max()) if n else "-",
+                    num(get("kinetic_energy")[-1]) if n else "-"]])
+        fig, axes = plt.subplots(1, 3, figsize=(12, 3))
+        axes[0].plot(frame, get("kinetic_energy"), color="#4e79a7")
+        axes[0].set_title("kinetic energy (J)")
+        axes[1].plot(frame, get("contacts"), color="#e15759", label="contacts")
+        axes[1].plot(frame, get("aabb_pairs"), color="#bab0ac", label="AABB pairs")
+        axes[1].legend(fontsize=7)
+        axes[1].set_title("contacts and AABB pairs per frame")
+        axes[2].plot(frame, 1e3 * get("penetration_mean"), color="#59a14f", label="mean")
+        axes[2].plot(frame, 1e3 * get("penetration_max"), color="#b6992d", label="max", alpha=0.6)
+        axes[2].legend(fontsize=7)
+        axes[2].set_title("AABB penetration d_p (mm)")
+        for ax in axes:
+            ax.set_xlabel("frame")
+        doc.figure(fig, "trace-" + os.path.splitext(os.path.basename(path))[0],
+                   f"{os.path.basename(path)}: energy, contacts and penetration over frames")
+
+
+SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table5),
+            "table6": ("Table 6: Level 0 (AABB only) vs hierarchical C", section_table6),
+            "tableA1": ("Table A1: spatial hash vs octree, early and late phases", section_tableA1),
+            "figA2": ("Fig. A2: penetration for beta x delta", section_figA2),
+            "broadphase-scaling": ("Broadphase scaling", section_scaling)}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("-o", "--output", required=True)
+    ap.add_argument("--title", default="octocd benchmark report")
+    ap.add_argument("inputs", nargs="+")
+    a = ap.parse_args()
+    loaded = [load(p) for p in a.inputs]
+    results = [(x[1], x[2]) for x in loaded if x[0] == "result"]
+    traces = [x[1] for x in loaded if x[0] == "trace"]
+    groups = merge(results)
+    order = list(SECTIONS)
+    groups.sort(key=lambda g: (order.index(g["first"]["sweep"]["name"]) if g["first"]["sweep"]["name"] in order
+                               else len(order), g["first"]["sweep"]["name"]))
+    os.makedirs(a.output, exist_ok=True)
+    doc = Doc(a.output)
+    doc.p(f"Made by octocd report on {datetime.datetime.utcnow().strftime('%Y-%m-%d %H:%M UTC')} from "
+          f"{len(results)} result file(s) and {len(traces)} trace(s). {NOISE_NOTE}", "note")
+    nav = []
+    for i, g in enumerate(groups):
+        name = g["first"]["sweep"]["name"]
+        title, fn = SECTIONS.get(name, (f"Sweep {name}", section_generic))
+        if g["first"]["sweep"].get("kind") == "broadphase" and name not in SECTIONS:
+            title, fn = (f"Sweep {name}: broadphase replay", section_scaling)
+        nav.append((f"s{i}", title))
+        doc.h(2, title, f"s{i}")
+        machine_block(doc, g)
+        fn(doc, g)
+        skipped_block(doc, g)
+    for t in traces:
+        section_trace(doc, t)
+    if nav:
+        doc.html.insert(1, "<nav>" + "".join(f'<a href="#{k}">{html.escape(t)}</a>' for k, t in nav) + "</nav>")
+    doc.write(a.title)
+    print(f"octocd report: wrote {os.path.join(a.output, 'index.html')} and {os.path.join(a.output, 'report.md')} "
+          f"({doc.nplot} plots)")
+
+
+if __name__ == "__main__":
+    main()

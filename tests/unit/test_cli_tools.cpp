@@ -1,0 +1,540 @@
+// `octocd bench`, `replay`, `compare` and `report` (SPEC 12): exit codes, a tiny sweep end
+// to end (shards, resume after a kill), a planted one-bit difference found at its frame and
+// body, replayed pair counts against the recorded ones, and a report from a committed result.
+#include <gtest/gtest.h>
+
+#include <hdf5.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "octocd/trace_reader.hpp"
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+struct Result {
+  int code = -1;
+  std::string output;
+};
+
+std::string bin() {
+  const char* b = std::getenv("OCTOCD_BIN");
+  return b ? b : OCTOCD_TEST_BIN;
+}
+
+std::string source_dir() {
+  const char* s = std::getenv("OCTOCD_SOURCE_DIR");
+  return s ? s : ".";
+}
+
+Result run_octocd(const std::string& args) {
+  Result r;
+  FILE* p = popen((bin() + " " + args + " 2>&1").c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  while (std::fgets(buf, sizeof buf, p)) r.output += buf;
+  const int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+json read_json(const fs::path& p) {
+  std::ifstream in(p);
+  return json::parse(in);
+}
+
+/// Eight boxes in a 2 x 2 x 2 stack on a floor, nearly touching: pairs and contacts from the start.
+const char* kPile = R"({"name": "pile", "domain": {"min": [-0.5, 0, -0.5], "max": [0.5, 2, 0.5]},
+  "frames": 60, "walls": "floor",
+  "groups": [{"name": "boxes", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 8,
+              "layout": {"type": "grid", "min": [-0.11, 0.1, -0.11], "max": [0.11, 0.6, 0.11], "spacing": 0.21,
+                         "jitter": 0.01, "seed": 3},
+              "velocity": {"type": "random", "max": 0.5, "seed": 4}}]})";
+
+class Tools : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("octocd-tools-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::string write(const std::string& name, const std::string& text) {
+    const fs::path p = dir_ / name;
+    std::ofstream(p) << text;
+    return p.string();
+  }
+  /// A steps sweep over the pile scene: midphase x engines (cpu, cuda, bullet).
+  std::string tiny_sweep(int frames = 20, int scenes = 1) {
+    write("pile.json", kPile);
+    std::string sc = R"("pile.json")";
+    for (int i = 1; i < scenes; ++i) {
+      const std::string name = "pile" + std::to_string(i) + ".json";
+      write(name, kPile);
+      sc += ", \"" + name + "\"";
+    }
+    return write("sweep.json", R"({"name": "tiny", "kind": "steps", "scenes": [)" + sc +
+                                   R"(], "engines": ["cpu", "cuda", "bullet"],
+      "axes": [{"name": "midphase", "values": ["aabb-only", "1,2"], "labels": ["L0", "B"]}],
+      "warmup": 5, "frames": )" + std::to_string(frames) + R"(, "repeat": 2})");
+  }
+  /// A trace of the pile scene with every state recorded.
+  std::string pile_trace(const std::string& name, int frames = 60, const std::string& extra = "") {
+    const std::string scene = write("pile.json", kPile);
+    const std::string t = (dir_ / name).string();
+    const Result r = run_octocd("run " + scene + " --frames " + std::to_string(frames) +
+                                " --state-every 1 --quiet --trace " + t + " " + extra);
+    EXPECT_EQ(r.code, 0) << r.output;
+    return t;
+  }
+  fs::path dir_;
+};
+
+/// Flips the lowest bit of one float of /states/position (row, body, component).
+void flip_position_bit(const std::string& path, hsize_t row, hsize_t body, hsize_t comp) {
+  const hid_t f = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  const hid_t d = H5Dopen2(f, "/states/position", H5P_DEFAULT);
+  const hid_t fs_ = H5Dget_space(d);
+  const hsize_t start[3] = {row, body, comp}, count[3] = {1, 1, 1};
+  H5Sselect_hyperslab(fs_, H5S_SELECT_SET, start, nullptr, count, nullptr);
+  const hid_t ms = H5Screate_simple(3, count, nullptr);
+  float v = 0.0f;
+  ASSERT_GE(H5Dread(d, H5T_NATIVE_FLOAT, ms, fs_, H5P_DEFAULT, &v), 0);
+  std::uint32_t bits = 0;
+  std::memcpy(&bits, &v, 4);
+  bits ^= 1u;
+  std::memcpy(&v, &bits, 4);
+  ASSERT_GE(H5Dwrite(d, H5T_NATIVE_FLOAT, ms, fs_, H5P_DEFAULT, &v), 0);
+  H5Sclose(ms);
+  H5Sclose(fs_);
+  H5Dclose(d);
+  H5Fclose(f);
+}
+
+}  // namespace
+
+// ---- bench ------------------------------------------------------------------------------------
+
+TEST_F(Tools, BenchUnknownSweepListsTheNames) {
+  const Result r = run_octocd("bench no-such-sweep -o " + (dir_ / "r.json").string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  for (const char* n : {"table5", "table6", "tableA1", "figA2", "broadphase-scaling"})
+    EXPECT_NE(r.output.find(n), std::string::npos) << n << "\n" << r.output;
+  EXPECT_FALSE(fs::exists(dir_ / "r.json"));
+  const Result list = run_octocd("bench --list");
+  EXPECT_EQ(list.code, 0);
+  EXPECT_NE(list.output.find("broadphase-scaling"), std::string::npos);
+}
+
+TEST_F(Tools, BenchMalformedSweepNamesFileKeyAndAllowed) {
+  write("pile.json", kPile);
+  const std::string bad_frames =
+      write("bad1.json", R"({"name": "x", "scenes": ["pile.json"], "frames": "ten"})");
+  Result r = run_octocd("bench " + bad_frames + " -o " + (dir_ / "r.json").string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(bad_frames + ": frames:"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("allowed: an integer in [1, "), std::string::npos) << r.output;
+
+  const std::string bad_key = write("bad2.json", R"({"name": "x", "scenes": ["pile.json"], "framez": 3})");
+  r = run_octocd("bench " + bad_key + " -o " + (dir_ / "r.json").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("framez: unknown key"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("allowed:"), std::string::npos) << r.output;
+
+  const std::string bad_axis = write(
+      "bad3.json", R"({"name": "x", "scenes": ["pile.json"], "axes": [{"name": "colour", "values": [1]}]})");
+  r = run_octocd("bench " + bad_axis + " -o " + (dir_ / "r.json").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("axes[0].key"), std::string::npos) << r.output;
+
+  const std::string twice = write("bad6.json", R"({"name": "x", "scenes": ["pile.json", "pile.json"]})");
+  r = run_octocd("bench " + twice + " -o " + (dir_ / "r.json").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("scenes[1]: listed twice"), std::string::npos) << r.output;
+
+  const std::string not_json = write("bad4.json", "{\"name\": ");
+  r = run_octocd("bench " + not_json + " -o " + (dir_ / "r.json").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("not JSON"), std::string::npos) << r.output;
+
+  // A scene value out of range (beta > 1) names the scene key through the scene loader.
+  const std::string bad_beta = write(
+      "bad5.json", R"({"name": "x", "scenes": ["pile.json"], "engines": ["cpu"],
+                       "axes": [{"name": "beta", "values": [1.5]}], "frames": 2, "warmup": 0})");
+  r = run_octocd("bench " + bad_beta + " -o " + (dir_ / "r5.json").string() + " --quiet");
+  EXPECT_EQ(r.code, 0) << r.output;  // the point is skipped with the reason, the sweep goes on
+  const json j = read_json(dir_ / "r5.json");
+  EXPECT_EQ(j["points"][0]["status"], "skipped");
+  EXPECT_NE(j["points"][0]["reason"].get<std::string>().find("response.beta"), std::string::npos)
+      << j["points"][0]["reason"];
+
+  const Result shard = run_octocd("bench " + tiny_sweep() + " --shard 2/2 -o " + (dir_ / "s.json").string());
+  EXPECT_EQ(shard.code, 2);
+  EXPECT_NE(shard.output.find("--shard: '2/2'"), std::string::npos) << shard.output;
+}
+
+TEST_F(Tools, BenchTinySweepEndToEnd) {
+  const fs::path out = dir_ / "res" / "r.json";
+  const Result r = run_octocd("bench " + tiny_sweep() + " -o " + out.string() + " --quiet");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json j = read_json(out);
+  EXPECT_EQ(j["format"], "octocd-bench");
+  EXPECT_EQ(j["version"], 1);
+  EXPECT_TRUE(j["complete"].get<bool>());
+  EXPECT_FALSE(j["machine"]["cpu"].get<std::string>().empty());
+  EXPECT_FALSE(j["build"]["git_revision"].get<std::string>().empty());
+  ASSERT_EQ(j["points"].size(), 6u);  // 2 midphases x 3 engines
+  EXPECT_EQ(j["points_total"], 6);
+  for (const auto& p : j["points"]) {
+    const std::string engine = p["params"]["engine"];
+    const std::string mid = p["params"]["axes"]["midphase"];
+    if (engine == "cpu" || (engine == "bullet" && mid == "aabb-only")) {
+      ASSERT_EQ(p["status"], "ok") << p.dump();
+      const json& w = p["windows"]["all"];
+      EXPECT_EQ(w["frames"], 20);
+      EXPECT_EQ(w["first"], 6);
+      EXPECT_EQ(w["last"], 25);
+      const json& s = w["steps_per_s"];
+      EXPECT_EQ(s["n"], 2);
+      EXPECT_LE(s["min"].get<double>(), s["median"].get<double>());
+      EXPECT_LE(s["median"].get<double>(), s["max"].get<double>());
+      EXPECT_GT(s["min"].get<double>(), 0.0);
+    } else if (engine == "bullet") {
+      EXPECT_EQ(p["status"], "skipped");
+      EXPECT_NE(p["reason"].get<std::string>().find("no midphase"), std::string::npos) << p["reason"];
+    } else {  // cuda: measured where the build and the machine have it, else skipped with the reason
+      if (p["status"] == "skipped") {
+        EXPECT_FALSE(p["reason"].get<std::string>().empty());
+      } else {
+        EXPECT_EQ(p["status"], "ok");
+      }
+    }
+  }
+  // cpu is deterministic: both repetitions give the same contacts.
+  const json& c = j["points"][0]["windows"]["all"]["contacts"];
+  EXPECT_EQ(c["min"], c["max"]);
+
+  // An existing result is not overwritten without --resume.
+  const Result again = run_octocd("bench " + (dir_ / "sweep.json").string() + " -o " + out.string());
+  EXPECT_EQ(again.code, 2);
+  EXPECT_NE(again.output.find("--resume"), std::string::npos) << again.output;
+}
+
+TEST_F(Tools, BenchShardsSplitThePointsAndResumeKeepsFinishedOnes) {
+  const std::string sweep = tiny_sweep(5);
+  std::set<int> seen;
+  for (int i = 0; i < 2; ++i) {
+    const fs::path out = dir_ / ("part-" + std::to_string(i) + ".json");
+    const Result r = run_octocd("bench " + sweep + " --engines cpu,bullet --shard " + std::to_string(i) +
+                                "/2 -o " + out.string() + " --quiet");
+    ASSERT_EQ(r.code, 0) << r.output;
+    const json part = read_json(out);
+    for (const auto& p : part["points"]) {
+      EXPECT_EQ(p["index"].get<int>() % 2, i);
+      EXPECT_TRUE(seen.insert(p["index"].get<int>()).second);
+    }
+  }
+  EXPECT_EQ(seen, (std::set<int>{0, 1, 2, 3}));
+
+  // Drop the last two points of shard 0's file, as if it had been killed; --resume redoes
+  // exactly those and keeps the others untouched.
+  const fs::path out = dir_ / "part-0.json";
+  json j = read_json(out);
+  const json keep = j["points"][0];
+  j["points"] = json::array({keep});
+  j["complete"] = false;
+  std::ofstream(out) << j.dump(1);
+  const Result r = run_octocd("bench " + sweep + " --engines cpu,bullet --shard 0/2 -o " + out.string() +
+                              " --resume --quiet");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json k = read_json(out);
+  ASSERT_EQ(k["points"].size(), 2u);
+  EXPECT_EQ(k["points"][0], keep);
+  EXPECT_TRUE(k["complete"].get<bool>());
+  // Another shard or sweep is not resumed.
+  const Result other = run_octocd("bench " + sweep + " --engines cpu --shard 0/2 -o " + out.string() + " --resume");
+  EXPECT_EQ(other.code, 2);
+  EXPECT_NE(other.output.find("settings"), std::string::npos) << other.output;
+}
+
+TEST_F(Tools, BenchKilledMidwayLeavesItsFinishedPointsAndResumes) {
+  const std::string sweep = tiny_sweep(30000, 2);  // 2 scenes x 2 midphases x (cpu, bullet) = 8 points
+  const fs::path out = dir_ / "killed.json";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const std::string b = bin();
+    const std::string o = out.string();
+    std::freopen("/dev/null", "w", stderr);
+    execl(b.c_str(), b.c_str(), "bench", sweep.c_str(), "--engines", "cpu,bullet", "-o", o.c_str(), "--quiet",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // The result appears after the first finished point; kill the sweep right then.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (!fs::exists(out) && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(fs::exists(out));
+  const json j = read_json(out);  // a complete, valid JSON file (written atomically)
+  EXPECT_FALSE(j["complete"].get<bool>());
+  EXPECT_GE(j["points"].size(), 1u);
+  EXPECT_LT(j["points"].size(), 8u);
+  const Result r = run_octocd("bench " + sweep + " --engines cpu,bullet -o " + out.string() + " --resume --quiet");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json k = read_json(out);
+  EXPECT_TRUE(k["complete"].get<bool>());
+  ASSERT_EQ(k["points"].size(), 8u);
+  for (std::size_t i = 0; i < k["points"].size(); ++i) EXPECT_EQ(k["points"][i]["index"], static_cast<int>(i));
+  EXPECT_EQ(k["points"][0], j["points"][0]);  // the finished point was kept, not rerun
+}
+
+TEST_F(Tools, BenchBroadphaseSweepMatchesTheRecordedPairs) {
+  const std::string sweep = write("bp.json", R"({"name": "bp", "kind": "broadphase", "bodies": [300, 600],
+    "broadphases": ["flat", "octree", "spatial-hash", "bullet-dbvt", "fcl-dynamic-aabb-tree"],
+    "engines": ["cpu", "cuda", "bullet"], "max_bodies": {"flat": 400}, "warmup": 40, "frames": 3, "repeat": 2})");
+  const fs::path out = dir_ / "bp-result.json";
+  const Result r = run_octocd("bench " + sweep + " -o " + out.string() + " --quiet");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json j = read_json(out);
+  ASSERT_EQ(j["points"].size(), 2u * 5u * 3u);
+  int ok = 0;
+  for (const auto& p : j["points"]) {
+    const std::string e = p["params"]["engine"], b = p["params"]["broadphase"];
+    if (e == "cpu" && !(b == "flat" && p["params"]["bodies"] == 600)) {
+      ASSERT_EQ(p["status"], "ok") << p.dump();
+      EXPECT_TRUE(p["matches_recorded"].get<bool>()) << p["recorded"];
+      EXPECT_EQ(p["ms_per_frame"]["n"], 2);
+      EXPECT_EQ(p["frames"], 3);
+      ++ok;
+    }
+    if (b == "flat" && p["params"]["bodies"] == 600) {
+      EXPECT_EQ(p["status"], "skipped");
+      EXPECT_NE(p["reason"].get<std::string>().find("max_bodies 400"), std::string::npos);
+    }
+    if (e == "bullet") {
+      EXPECT_EQ(p["status"], "skipped") << p.dump();
+    }
+  }
+  EXPECT_EQ(ok, 9);
+  // Every broadphase of one size saw the same frames: same mean pair count.
+  for (int n : {300, 600}) {
+    std::set<double> pairs;
+    for (const auto& p : j["points"])
+      if (p["status"] == "ok" && p["params"]["bodies"] == n) pairs.insert(p["pairs"].get<double>());
+    EXPECT_EQ(pairs.size(), 1u) << n;
+  }
+}
+
+// ---- compare ----------------------------------------------------------------------------------
+
+TEST_F(Tools, CompareSameTracesExitZero) {
+  const std::string a = pile_trace("a.h5"), b = pile_trace("b.h5");
+  const Result r = run_octocd("compare " + a + " " + b);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("same"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("61 common states x 9 bodies"), std::string::npos) << r.output;
+}
+
+TEST_F(Tools, CompareFindsAPlantedOneBitDifferenceAtItsFrameAndBody) {
+  const std::string a = pile_trace("a.h5"), b = pile_trace("b.h5");
+  flip_position_bit(b, 37, 5, 1);  // state row 37 = frame 37 (--state-every 1), body 5, y
+  const Result r = run_octocd("compare " + a + " " + b + " --json " + (dir_ / "c.json").string());
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("DIFFERENT: first at frame 37, body 5 (positions)"), std::string::npos) << r.output;
+  const json j = read_json(dir_ / "c.json");
+  EXPECT_EQ(j["first"]["frame"], 37);
+  EXPECT_EQ(j["first"]["body"], 5);
+  EXPECT_GT(j["quantities"][0]["max_abs_difference"].get<double>(), 0.0);
+  EXPECT_LT(j["quantities"][0]["max_abs_difference"].get<double>(), 1e-6);
+  // One bit is far below a tolerance of 1e-6 m; velocities were not touched.
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance 1e-6").code, 0);
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --quantity velocities,pairs,contacts").code, 0);
+}
+
+TEST_F(Tools, CompareIncompatibleOrUnreadableExitTwo) {
+  const std::string a = pile_trace("a.h5");
+  const std::string scene = write("other.json", std::string(kPile).replace(std::string(kPile).find("\"count\": 8"),
+                                                                            10, "\"count\": 6"));
+  const std::string c = (dir_ / "c.h5").string();
+  ASSERT_EQ(run_octocd("run " + scene + " --frames 10 --quiet --trace " + c).code, 0);
+  Result r = run_octocd("compare " + a + " " + c);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("/bodies: 7 bodies, but " + a + " has 9"), std::string::npos) << r.output;
+  const std::string text = write("not-a-trace.h5", "hello");
+  r = run_octocd("compare " + a + " " + text);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find(text + ": not an HDF5 file"), std::string::npos) << r.output;
+  r = run_octocd("compare " + a + " " + (dir_ / "missing.h5").string());
+  EXPECT_EQ(r.code, 2);
+  r = run_octocd("compare " + a + " " + a + " --quantity colour");
+  EXPECT_EQ(r.code, 2);
+}
+
+// ---- replay -----------------------------------------------------------------------------------
+
+TEST_F(Tools, ReplayEqualsTheRecordedPairCounts) {
+  const std::string t = pile_trace("t.h5");
+  const fs::path out = dir_ / "replay.json";
+  const Result r = run_octocd("replay " + t + " --broadphase flat,octree,octree-strict,spatial-hash,bullet-dbvt,"
+                              "fcl-dynamic-aabb-tree --repeat 2 --json " + out.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json j = read_json(out);
+  // The oracle: /frames/aabb_pairs of the run, read here directly.
+  const octocd::TraceReader tr(t);
+  const auto rows = tr.complete_rows("/frames");
+  const auto frame = tr.read_i64("/frames/frame", rows);
+  const auto pairs = tr.read_u64("/frames/aabb_pairs", rows);
+  ASSERT_EQ(j["frames"].size(), 60u);  // states of frames 0..59 are each followed by a step
+  double sum = 0.0;
+  for (std::size_t k = 0; k < j["frames"].size(); ++k) {
+    const std::int64_t f = j["frames"][k];
+    const auto it = std::find(frame.begin(), frame.end(), f);
+    ASSERT_NE(it, frame.end());
+    const auto rec = pairs[static_cast<std::size_t>(it - frame.begin())];
+    EXPECT_EQ(j["recorded_pairs"][k].get<std::uint64_t>(), rec) << "frame " << f;
+    sum += static_cast<double>(rec);
+  }
+  EXPECT_GT(sum, 0.0);  // the pile has contacts
+  for (const auto& run : j["runs"]) {
+    EXPECT_TRUE(run["matches_recorded"].get<bool>()) << run.dump();
+    EXPECT_TRUE(run["same_as_first"].get<bool>()) << run.dump();
+    EXPECT_DOUBLE_EQ(run["pairs"].get<double>(), sum / static_cast<double>(j["frames"].size()));
+    EXPECT_EQ(run["ms_per_frame"]["n"], 2);
+  }
+}
+
+TEST_F(Tools, ReplayCatchesARecordedCountThatDiffers) {
+  const std::string t = pile_trace("t.h5");
+  // Plant a wrong pair count at frame 40 (row 39).
+  const hid_t f = H5Fopen(t.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  const hid_t d = H5Dopen2(f, "/frames/aabb_pairs", H5P_DEFAULT);
+  const hid_t s = H5Dget_space(d);
+  const hsize_t start = 39, count = 1;
+  H5Sselect_hyperslab(s, H5S_SELECT_SET, &start, nullptr, &count, nullptr);
+  const hid_t m = H5Screate_simple(1, &count, nullptr);
+  std::uint64_t v = 0;
+  H5Dread(d, H5T_NATIVE_UINT64, m, s, H5P_DEFAULT, &v);
+  v += 1;
+  H5Dwrite(d, H5T_NATIVE_UINT64, m, s, H5P_DEFAULT, &v);
+  H5Sclose(m);
+  H5Sclose(s);
+  H5Dclose(d);
+  H5Fclose(f);
+  const Result r = run_octocd("replay " + t + " --broadphase flat,octree --repeat 1");
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("frame 40:"), std::string::npos) << r.output;
+}
+
+TEST_F(Tools, ReplayOfATraceWithoutWhatItNeedsExitsTwo) {
+  const std::string t = pile_trace("t.h5");
+  const hid_t f = H5Fopen(t.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  ASSERT_GE(H5Ldelete(f, "/states/velocity", H5P_DEFAULT), 0);
+  H5Fclose(f);
+  Result r = run_octocd("replay " + t + " --broadphase flat,octree");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(t + ": /states/velocity: missing"), std::string::npos) << r.output;
+  // With --state-every above the frame count only the initial state is there: one frame.
+  const std::string scene = write("pile.json", kPile);
+  const std::string t2 = (dir_ / "t2.h5").string();
+  ASSERT_EQ(run_octocd("run " + scene + " --frames 20 --state-every 50 --quiet --trace " + t2).code, 0);
+  r = run_octocd("replay " + t2 + " --broadphase flat");
+  EXPECT_EQ(r.code, 0) << r.output;  // frame 0's state is followed by step 1
+  EXPECT_NE(r.output.find("1 frames, steps 1"), std::string::npos) << r.output;
+  const std::string t3 = (dir_ / "t3.h5").string();
+  ASSERT_EQ(run_octocd("run " + scene + " --frames 20 --state-every 50 --quiet --trace " + t3).code, 0);
+  r = run_octocd("replay " + t3 + " --broadphase no-such");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("unknown broadphase 'no-such'"), std::string::npos) << r.output;
+  r = run_octocd("replay " + t3 + " --broadphase flat --engine cuda");
+  EXPECT_NE(r.code, 0);  // 1 without a CUDA device (the reason named), 0 with one
+  if (r.code != 0) {
+    EXPECT_NE(r.output.find("cuda"), std::string::npos) << r.output;
+  }
+}
+
+// ---- report -----------------------------------------------------------------------------------
+
+TEST_F(Tools, ReportRendersFromTheCommittedSmallResults) {
+  const std::string data = source_dir() + "/tests/data/";
+  const std::string t = pile_trace("t.h5");
+  const fs::path out = dir_ / "report";
+  const Result r = run_octocd("report " + data + "bench-small-table6.json " + data + "bench-small-figA2.json " + data +
+                              "bench-small-scaling.json " + t + " -o " + out.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::ifstream in(out / "index.html");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string page = ss.str();
+  EXPECT_NE(page.find("<svg"), std::string::npos);
+  EXPECT_NE(page.find("Table 6"), std::string::npos);
+  EXPECT_NE(page.find("81.14"), std::string::npos);  // the paper's bunny L0 figure beside ours
+  EXPECT_NE(page.find("Broadphase scaling"), std::string::npos);
+  EXPECT_NE(page.find("Fig. A2"), std::string::npos);
+  EXPECT_NE(page.find("Trace t.h5"), std::string::npos);
+  // Self-contained: nothing loaded from elsewhere.
+  for (const char* s : {"<script src", "<link", "<img src=\"http", "url(http", "@import"})
+    EXPECT_EQ(page.find(s), std::string::npos) << s;
+  std::ifstream md(out / "report.md");
+  std::stringstream ms;
+  ms << md.rdbuf();
+  EXPECT_NE(ms.str().find("| scene (bodies) | paper L0 FPS"), std::string::npos);
+  EXPECT_TRUE(fs::exists(out / "plots"));
+}
+
+TEST_F(Tools, ReportRejectsAResultOfAnotherFormatOrVersion) {
+  const std::string other = write("other.json", R"({"format": "octocd-bench", "version": 7, "points": []})");
+  Result r = run_octocd("report " + other + " -o " + (dir_ / "rep").string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(other + ": format: 'octocd-bench' version 7; allowed: octocd-bench version 1"),
+            std::string::npos)
+      << r.output;
+  const std::string junk = write("junk.json", "[1, 2");
+  r = run_octocd("report " + junk + " -o " + (dir_ / "rep").string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  r = run_octocd("report " + (dir_ / "missing.json").string() + " -o " + (dir_ / "rep").string());
+  EXPECT_EQ(r.code, 2) << r.output;
+  // Resuming a file of another format is refused too.
+  write("pile.json", kPile);
+  const std::string foreign = write("foreign.json", R"({"format": "something-else", "version": 1})");
+  r = run_octocd("bench " + tiny_sweep() + " -o " + foreign + " --resume");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("allowed: octocd-bench version 1"), std::string::npos) << r.output;
+}
+
+TEST_F(Tools, ReportPageRendersInHeadlessChromium) {
+  std::string chromium;
+  for (const char* c : {"/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/bin/google-chrome"})
+    if (fs::exists(c)) chromium = c;
+  if (chromium.empty()) GTEST_SKIP() << "chromium not installed (Debian package chromium): no screenshot taken";
+  const fs::path out = dir_ / "report";
+  ASSERT_EQ(run_octocd("report " + source_dir() + "/tests/data/bench-small-table6.json -o " + out.string()).code, 0);
+  const fs::path png = dir_ / "shot.png";
+  const std::string cmd = "bash " + source_dir() + "/scripts/screenshot-report.sh " + (out / "index.html").string() +
+                          " " + png.string() + " 1280 2000 > /dev/null 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  ASSERT_TRUE(fs::exists(png));
+  EXPECT_GT(fs::file_size(png), 30000u);  // a blank page is a few kB
+}
