@@ -8,6 +8,7 @@
 #include <ctime>
 #include <fstream>
 #include <memory>
+#include <new>
 #include <optional>
 #include <string>
 #include <vector>
@@ -22,6 +23,7 @@
 #include "octocd/midphase.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
@@ -200,7 +202,21 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   out << j.dump(2) << "\n";
 }
 
+/// The line a command stopped by SIGINT/SIGTERM prints on stderr: where it stopped and
+/// what it kept.
+void report_stop(int sig, const char* command, std::int64_t done, std::int64_t total,
+                 const std::string& trace) {
+  std::string kept;
+  if (!trace.empty())
+    kept = done > 0 ? fmt::format("; the trace {} holds frames 1..{}", trace, done)
+                    : fmt::format("; the trace {} holds no frame", trace);
+  std::fprintf(stderr, "octocd %s: stopped by %s after frame %lld of %lld%s\n", command,
+               octocd::stop_signal_name(sig), static_cast<long long>(done),
+               static_cast<long long>(total), kept.c_str());
+}
+
 int run_command(const RunOptions& o) {
+  octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
   octocd::Scene scene = octocd::load_scene(o.scene);
   if (!o.broadphase.empty()) scene.broadphase.name = o.broadphase;
   if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
@@ -224,7 +240,7 @@ int run_command(const RunOptions& o) {
   Progress progress(scene.frames, !o.quiet);
   const auto t0 = Clock::now();
   try {
-    for (int f = 0; f < scene.frames; ++f) {
+    for (int f = 0; f < scene.frames && octocd::stop_signal() == 0; ++f) {
       const octocd::FrameMetrics& m = world.step();
       totals.add(m);
       if (trace) trace->append_frame(m, world.state(), world.contacts());
@@ -238,6 +254,10 @@ int run_command(const RunOptions& o) {
   const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
   if (!o.quiet) print_summary(world, totals, wall_s, o.trace);
   if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s);
+  if (const int sig = octocd::stop_signal()) {
+    report_stop(sig, "run", totals.frames, scene.frames, o.trace);
+    return octocd::stop_exit_code(sig);
+  }
   return 0;
 }
 
@@ -253,6 +273,7 @@ struct ValidateOptions {
 
 /// `octocd validate`: exit 0 when every validator passes, 3 when any fails.
 int validate_command(const ValidateOptions& o) {
+  octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
   octocd::Scene scene = octocd::load_scene(o.scene);
   octocd::ValidationOptions vo;
   vo.frames = o.frames;
@@ -297,8 +318,11 @@ int validate_command(const ValidateOptions& o) {
   if (o.engine == "bullet")
     throw octocd::InputError("--engine: bullet cannot be validated (no per-frame record); allowed: cpu, cuda");
   std::unique_ptr<octocd::TraceWriter> trace;
-  if (!o.trace.empty()) {
-    vo.on_step = [&](const octocd::Engine& w) {
+  std::int64_t done = 0;  // frames of the validated engine
+  vo.stop = [] { return octocd::stop_signal() != 0; };
+  vo.on_step = [&](const octocd::Engine& w) {
+    ++done;
+    if (!o.trace.empty()) {
       if (!trace) {
         octocd::TraceMetadata meta = octocd::trace_metadata(w, 10);
         meta.start_time = utc_now();
@@ -306,8 +330,8 @@ int validate_command(const ValidateOptions& o) {
                                                       octocd::TraceOptions{});
       }
       trace->append_frame(w.last_metrics(), w.state(), w.contacts());
-    };
-  }
+    }
+  };
   std::vector<octocd::ValidationResult> results;
   try {
     results = octocd::validate_engine([&] { return make_engine(o.engine, model); }, vo);
@@ -324,6 +348,12 @@ int validate_command(const ValidateOptions& o) {
   fmt::print("{}", octocd::format_results(results, vo.overridden));
   const bool all_pass = std::all_of(results.begin(), results.end(),
                                     [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
+  if (const int sig = octocd::stop_signal()) {
+    fmt::print("\nSTOPPED: the table covers frames 1..{} of {}\n", done, o.frames);
+    std::fflush(stdout);
+    report_stop(sig, "validate", done, o.frames, o.trace);
+    return octocd::stop_exit_code(sig);
+  }
   fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
   return all_pass ? 0 : 3;
 }
@@ -408,6 +438,10 @@ int main(int argc, char** argv) {
     return 2;
   } catch (const octocd::RuntimeError& e) {
     std::fprintf(stderr, "octocd: runtime failure: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "octocd: runtime failure: out of memory (the scene needs more than this "
+                         "process may allocate)\n");
     return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "octocd: runtime failure: %s\n", e.what());

@@ -36,31 +36,109 @@ std::string lower(std::string s) {
   return s;
 }
 
-/// The face count in an OFF header (after the keyword, '#' comments skipped).
-std::uint64_t off_header_face_count(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) fail(path, "cannot open (expected a readable file)");
-  std::vector<std::string> tokens;
-  std::string line;
-  while (tokens.size() < 3 && std::getline(in, line)) {
-    const auto hash = line.find('#');
-    if (hash != std::string::npos) line.erase(hash);
-    std::istringstream ls(line);
-    std::string t;
-    while (tokens.size() < 3 && ls >> t) tokens.push_back(t);
-  }
-  const std::string kw = tokens.empty() ? std::string() : tokens[0];
-  if (kw.size() < 3 || kw.compare(kw.size() - 3, 3, "OFF") != 0) {
-    fail(path, "bad OFF header '" + kw + "' (expected 'OFF' then vertex and face counts)");
-  }
-  if (tokens.size() < 3) fail(path, "truncated OFF header (expected vertex and face counts)");
+/// A non-negative integer token of an OFF file, or a failure naming `what`.
+std::uint64_t off_count(const std::string& path, const std::string& token, const std::string& what) {
   try {
     std::size_t used = 0;
-    const unsigned long long nf = std::stoull(tokens[2], &used);
-    if (used != tokens[2].size()) throw std::invalid_argument("trailing characters");
-    return nf;
+    if (token.empty() || token[0] == '-') throw std::invalid_argument("negative");
+    const unsigned long long n = std::stoull(token, &used);
+    if (used != token.size()) throw std::invalid_argument("trailing characters");
+    return n;
   } catch (const std::exception&) {
-    fail(path, "bad OFF face count '" + tokens[2] + "' (expected a non-negative integer)");
+    fail(path, "bad OFF " + what + " '" + token + "' (expected a non-negative integer)");
+  }
+}
+
+/// Reads the next line holding data (blank lines and '#' comments skipped) into `tokens`;
+/// false at the end of the file.
+bool off_data_line(std::istream& in, std::string& line, std::vector<std::string>& tokens) {
+  while (std::getline(in, line)) {
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.erase(hash);
+    tokens.clear();
+    std::size_t i = 0;
+    while (i < line.size()) {
+      while (i < line.size() && std::isspace(static_cast<unsigned char>(line[i]))) ++i;
+      std::size_t e = i;
+      while (e < line.size() && !std::isspace(static_cast<unsigned char>(line[e]))) ++e;
+      if (e > i) tokens.emplace_back(line, i, e - i);
+      i = e;
+    }
+    if (!tokens.empty()) return true;
+  }
+  return false;
+}
+
+/// An OFF file's header counts, checked against the limits before assimp parses the
+/// file, and (when `scan_faces`) every face's indices checked against the vertex count:
+/// assimp's OFF reader clamps an index past the vertex count to the last vertex instead
+/// of failing. Returns the header's face count.
+std::uint64_t check_off(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, "cannot open (expected a readable file)");
+  std::vector<std::string> header, tokens;
+  std::string line;
+  while (header.size() < 3 && off_data_line(in, line, tokens))
+    for (const std::string& t : tokens)
+      if (header.size() < 3) header.push_back(t);
+  const std::string kw = header.empty() ? std::string() : header[0];
+  if (kw.size() < 3 || kw.compare(kw.size() - 3, 3, "OFF") != 0) {
+    fail(path, "bad OFF header '" + kw.substr(0, 40) + "' (expected 'OFF' then vertex and face counts)");
+  }
+  if (header.size() < 3) fail(path, "truncated OFF header (expected vertex and face counts)");
+  const std::uint64_t nv = off_count(path, header[1], "vertex count");
+  const std::uint64_t nf = off_count(path, header[2], "face count");
+  if (nv > limits::kMaxMeshVertices)
+    fail(path, "the OFF header declares " + std::to_string(nv) + " vertices (expected at most " +
+                   std::to_string(limits::kMaxMeshVertices) + ")");
+  if (nf > limits::kMaxMeshFaces)
+    fail(path, "the OFF header declares " + std::to_string(nf) + " faces (expected at most " +
+                   std::to_string(limits::kMaxMeshFaces) + ")");
+  // The header line may hold the counts and the edge count; vertices start on the next line.
+  for (std::uint64_t v = 0; v < nv; ++v)
+    if (!off_data_line(in, line, tokens))
+      fail(path, "ends after " + std::to_string(v) + " of " + std::to_string(nv) + " vertices");
+  for (std::uint64_t f = 0; f < nf; ++f) {
+    if (!off_data_line(in, line, tokens)) break;  // too few faces: the count check reports it
+    const std::uint64_t k = off_count(path, tokens[0], "corner count of face " + std::to_string(f));
+    if (k >= tokens.size())
+      fail(path, "face " + std::to_string(f) + " lists " + std::to_string(tokens.size() - 1) + " of its " +
+                     std::to_string(k) + " corners (expected one line per face)");
+    for (std::uint64_t c = 1; c <= k; ++c) {
+      const std::uint64_t idx = off_count(path, tokens[c], "index of face " + std::to_string(f));
+      if (idx >= nv)
+        fail(path, "face " + std::to_string(f) + " uses vertex " + std::to_string(idx) + " but the file has " +
+                       std::to_string(nv) + " vertices (expected indices in [0, " + std::to_string(nv) + "))");
+    }
+  }
+  return nf;
+}
+
+/// A PLY file's vertex and face counts from its header ("element vertex N", "element
+/// face N"), checked against the limits before assimp parses the file. Other files
+/// (OBJ has no header) are checked after parsing.
+void check_ply_header(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, "cannot open (expected a readable file)");
+  std::string line;
+  for (int n = 0; n < 1000 && std::getline(in, line); ++n) {
+    if (line.rfind("end_header", 0) == 0) return;
+    std::istringstream ls(line);
+    std::string kw, element, count;
+    ls >> kw >> element >> count;
+    if (kw != "element") continue;
+    const bool vertex = element == "vertex", face = element == "face";
+    if (!vertex && !face) continue;
+    unsigned long long c = 0;
+    try {
+      c = std::stoull(count);
+    } catch (const std::exception&) {
+      continue;  // assimp reports a malformed header
+    }
+    const std::uint64_t limit = vertex ? limits::kMaxMeshVertices : limits::kMaxMeshFaces;
+    if (c > limit)
+      fail(path, "the PLY header declares " + count + " " + element + "s (expected at most " +
+                     std::to_string(limit) + ")");
   }
 }
 
@@ -113,11 +191,19 @@ Mesh load_mesh(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "not found (expected an existing mesh file)");
   if (!fs::is_regular_file(path, ec)) fail(path, "not a regular file");
-  if (fs::file_size(path, ec) == 0 || ec) fail(path, "empty file (expected a mesh)");
+  const std::uintmax_t bytes = fs::file_size(path, ec);
+  if (bytes == 0 || ec) fail(path, "empty file (expected a mesh)");
+  if (bytes > limits::kMaxMeshFileBytes)
+    fail(path, "file is " + std::to_string(bytes) + " bytes (expected at most " +
+                   std::to_string(limits::kMaxMeshFileBytes) + " bytes, 1 GiB)");
   {
     std::ifstream probe(path, std::ios::binary);
     if (!probe) fail(path, "cannot open (expected a readable file)");
   }
+  const std::string ext = lower(fs::path(path).extension().string());
+  std::uint64_t off_faces = 0;
+  if (ext == ".off") off_faces = check_off(path);
+  if (ext == ".ply") check_ply_header(path);
 
   Assimp::Importer importer;
   // Read without post-processing first, so polygon counts can be compared with the OFF
@@ -128,10 +214,19 @@ Mesh load_mesh(const std::string& path) {
   }
   // Non-finite coordinates are checked before post-processing: joining identical
   // vertices may silently merge a NaN vertex into another one.
-  std::uint64_t faces = 0, loaded = 0;
+  std::uint64_t faces = 0, loaded = 0, vertices = 0;
+  for (unsigned i = 0; i < scene->mNumMeshes; ++i) {
+    faces += scene->mMeshes[i]->mNumFaces;
+    vertices += scene->mMeshes[i]->mNumVertices;
+  }
+  if (vertices > limits::kMaxMeshVertices)
+    fail(path, "holds " + std::to_string(vertices) + " vertices (expected at most " +
+                   std::to_string(limits::kMaxMeshVertices) + ")");
+  if (faces > limits::kMaxMeshFaces)
+    fail(path, "holds " + std::to_string(faces) + " faces (expected at most " +
+                   std::to_string(limits::kMaxMeshFaces) + ")");
   for (unsigned i = 0; i < scene->mNumMeshes; ++i) {
     const aiMesh* am = scene->mMeshes[i];
-    faces += am->mNumFaces;
     for (unsigned v = 0; v < am->mNumVertices; ++v, ++loaded) {
       const aiVector3D& p = am->mVertices[v];
       if (!is_finite(Vec3{p.x, p.y, p.z})) {
@@ -143,9 +238,8 @@ Mesh load_mesh(const std::string& path) {
     }
   }
 
-  const std::string ext = lower(fs::path(path).extension().string());
   if (ext == ".off") {
-    const std::uint64_t expected = off_header_face_count(path);
+    const std::uint64_t expected = off_faces;
     if (faces != expected) {
       fail(path, "loaded " + std::to_string(faces) + " faces (expected " +
                      std::to_string(expected) +

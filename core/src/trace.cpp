@@ -68,8 +68,45 @@ std::string hdf5_message() {
   return msgs.front() + ": " + msgs.back();
 }
 
+// HDF5 closes every open file from an atexit handler. A trace abandoned after a failed
+// write (a full disk) must never be flushed again: that would write metadata that points
+// past the data on disk, or, after a failed H5Fclose, touch a freed file (SIGSEGV), and
+// print "infinite loop closing library". So the handler is turned off before HDF5 starts
+// (it must be, to take effect); TraceWriter closes every file it finishes itself.
+const bool kHdf5NoAtexit = [] {
+  H5dont_atexit();
+  return true;
+}();
+
+// The operating system's reason in an HDF5 I/O error ("... error message = 'No space left
+// on device', ..."), or "" when the message holds none.
+std::string os_reason(const std::string& message) {
+  const std::string tag = "error message = '";
+  const auto b = message.find(tag);
+  if (b == std::string::npos) return "";
+  const auto e = message.find('\'', b + tag.size());
+  return message.substr(b + tag.size(), e == std::string::npos ? std::string::npos : e - b - tag.size());
+}
+
+// An HDF5 call that failed: the message names the trace and the operation; `reason` is
+// the operating system's reason when HDF5 gives one ("No space left on device"), else
+// HDF5's own message, on one line.
+class Hdf5Failure : public RuntimeError {
+ public:
+  Hdf5Failure(const std::string& path, const std::string& op, std::string reason)
+      : RuntimeError("trace '" + path + "': " + op + " failed: " + reason), reason_(std::move(reason)) {}
+  const std::string& reason() const { return reason_; }
+
+ private:
+  std::string reason_;
+};
+
 [[noreturn]] void fail(const std::string& path, const std::string& op) {
-  throw RuntimeError("trace '" + path + "': " + op + " failed: " + hdf5_message());
+  std::string message = hdf5_message();
+  const std::string reason = os_reason(message);
+  if (!reason.empty()) message = reason;
+  std::replace(message.begin(), message.end(), '\n', ' ');
+  throw Hdf5Failure(path, op, message);
 }
 
 template <class T>
@@ -96,6 +133,8 @@ class Handle {
     return *this;
   }
   hid_t get() const { return id_; }
+  /// Forgets the identifier without closing it (a file abandoned after a failed write).
+  void release() { id_ = -1; }
   operator hid_t() const { return id_; }  // NOLINT: used as an hid_t in C calls
   void reset() {
     if (id_ >= 0) {
@@ -286,7 +325,57 @@ struct TraceWriter::Impl {
   std::int64_t contact_total = 0;
   int since_flush = 0;
   bool closed = false;
+  bool failed = false;               // a write failed: the file was abandoned
+  std::int64_t last_appended = 0;    // frame of the last append_frame
+  std::int64_t flushed_rows = 0;     // /frames rows on disk after the last good flush
+  std::int64_t last_flushed = 0;     // frame of the last of them
   std::vector<float> scratch;
+
+  // Every column, for abandon().
+  std::vector<Column*> columns() {
+    std::vector<Column*> all{&s_frame, &s_pos, &s_vel, &c_offsets, &c_frame, &c_pair, &c_normal,
+                             &c_depth, &c_jn, &c_jt};
+    for (Column& c : frames) all.push_back(&c);
+    return all;
+  }
+
+  // After a failed write the file is left exactly as the writes so far made it (as if the
+  // process had been killed there: every flushed frame readable, docs/trace-format.md):
+  // nothing more is written, no identifier is closed (closing flushes), buffers are freed.
+  // HDF5's own structures for the file leak, once per failed trace.
+  void abandon() noexcept {
+    failed = closed = true;
+    for (Column* c : columns()) {
+      c->dset.release();
+      std::vector<unsigned char>().swap(c->buf);
+    }
+    file.release();
+  }
+
+  // The one-line message for a write that failed for `reason`.
+  std::string failure(const std::string& when, const std::string& reason) const {
+    std::string msg = "trace '" + path + "': " + when + " failed (" + reason + "); ";
+    if (flushed_rows == 0)
+      msg += "no frame was flushed before the failure";
+    else
+      msg += "the file keeps the " + std::to_string(flushed_rows) + " frames up to frame " +
+             std::to_string(last_flushed) + ", flushed before the failure";
+    return msg;
+  }
+
+  // Writes the buffered rows and flushes; on failure abandons the file and throws.
+  void write_and_flush(const std::string& when) {
+    try {
+      write_all();
+      check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "flush");
+    } catch (const Hdf5Failure& e) {
+      abandon();
+      throw RuntimeError(failure(when, e.reason()));
+    }
+    since_flush = 0;
+    flushed_rows = frames.empty() ? 0 : static_cast<std::int64_t>(frames[0].rows);
+    last_flushed = last_appended;
+  }
 
   void write_all() {
     // States before their frame column, contact arrays before offsets, /frames/frame
@@ -346,8 +435,21 @@ TraceWriter::TraceWriter(const std::string& path, const TraceMetadata& meta,
   Handle fapl(check(H5Pcreate(H5P_FILE_ACCESS), path, "H5Pcreate"));
   check(H5Pset_libver_bounds(fapl, H5F_LIBVER_LATEST, H5F_LIBVER_LATEST), path,
         "H5Pset_libver_bounds");
-  m.file = Handle(check(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl), path,
-                        "create file"));
+  try {
+    m.file = Handle(check(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl), path,
+                          "create file"));
+    create_layout(meta, bodies);
+  } catch (const Hdf5Failure& e) {
+    m.abandon();
+    throw RuntimeError(m.failure("creating the file", e.reason()));
+  }
+}
+
+void TraceWriter::create_layout(const TraceMetadata& meta, const TraceBodies& bodies) {
+  Impl& m = *impl_;
+  const std::string& path = m.path;
+  const std::size_t n = m.bodies;
+  QuietHdf5 quiet;
 
   // ---- root attributes
   const hid_t root = m.file;
@@ -465,6 +567,7 @@ void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState& state,
                                const std::vector<ContactRecord>& contacts) {
   Impl& m = *impl_;
   if (m.closed) throw RuntimeError("trace '" + m.path + "': append_frame after close");
+  m.last_appended = fm.frame;
   QuietHdf5 quiet;
   if (fm.frame % m.opt.state_every == 0) m.push_state(fm.frame, state);
 
@@ -498,7 +601,9 @@ void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState& state,
     m.c_offsets.push1(m.contact_total);
   }
 
-  if (++m.since_flush >= m.opt.flush_every) flush();
+  if (++m.since_flush >= m.opt.flush_every) {
+    m.write_and_flush("writing frame " + std::to_string(fm.frame));
+  }
 }
 
 void TraceWriter::append_state(std::int64_t frame, const BodyState& state) {
@@ -511,27 +616,36 @@ void TraceWriter::flush() {
   Impl& m = *impl_;
   if (m.closed) return;
   QuietHdf5 quiet;
-  m.write_all();
-  check(H5Fflush(m.file, H5F_SCOPE_GLOBAL), m.path, "flush");
-  m.since_flush = 0;
+  m.write_and_flush("flushing after frame " + std::to_string(m.last_appended));
 }
 
 void TraceWriter::close() {
   Impl& m = *impl_;
   if (m.closed) return;
   QuietHdf5 quiet;
-  m.closed = true;  // even when the last write fails: no second attempt from the destructor
-  m.write_all();
-  for (Column* c : {&m.s_frame, &m.s_pos, &m.s_vel, &m.c_offsets, &m.c_frame, &m.c_pair,
-                    &m.c_normal, &m.c_depth, &m.c_jn, &m.c_jt})
-    c->dset.reset();
-  for (Column& c : m.frames) c.dset.reset();
+  // Everything reaches the disk first: once the flush succeeded, closing the datasets and
+  // the file writes nothing but the superblock's SWMR flags, in place.
+  m.write_and_flush("writing the last frames (up to frame " + std::to_string(m.last_appended) + ")");
+  m.closed = true;
+  for (Column* c : m.columns()) c->dset.reset();
   const herr_t r = H5Fclose(m.file.get());
-  m.file = Handle();  // released by H5Fclose (or unusable after a failure)
-  check(r, m.path, "close file");
+  // Never closed twice: after a failed H5Fclose the identifier may point to freed memory.
+  m.file.release();
+  if (r < 0) {
+    m.failed = true;
+    std::string message = hdf5_message();
+    const std::string reason = os_reason(message);
+    if (!reason.empty()) message = reason;
+    std::replace(message.begin(), message.end(), '\n', ' ');
+    throw RuntimeError(m.failure("closing the file", message));
+  }
 }
 
 const std::string& TraceWriter::path() const { return impl_->path; }
+
+bool TraceWriter::failed() const { return impl_->failed; }
+
+std::int64_t TraceWriter::flushed_frames() const { return impl_->flushed_rows; }
 
 // ---------------------------------------------------------------------------------------
 
