@@ -225,6 +225,21 @@ Mesh load_mesh(const std::string& path) {
   if (faces > limits::kMaxMeshFaces)
     fail(path, "holds " + std::to_string(faces) + " faces (expected at most " +
                    std::to_string(limits::kMaxMeshFaces) + ")");
+  // Faces are checked before assimp's post-processing, which asserts (abort()) on a face
+  // without indices (found by fuzz_mesh: an OFF face line cut by garbage).
+  for (unsigned i = 0, first = 0; i < scene->mNumMeshes; first += scene->mMeshes[i]->mNumFaces, ++i) {
+    const aiMesh* am = scene->mMeshes[i];
+    for (unsigned f = 0; f < am->mNumFaces; ++f) {
+      const aiFace& face = am->mFaces[f];
+      if (face.mNumIndices == 0 || face.mIndices == nullptr)
+        fail(path, "face " + std::to_string(first + f) + " has no vertex indices (expected faces of 3 or "
+                   "more vertices; a malformed face line?)");
+      for (unsigned k = 0; k < face.mNumIndices; ++k)
+        if (face.mIndices[k] >= am->mNumVertices)
+          fail(path, "face " + std::to_string(first + f) + " uses vertex " + std::to_string(face.mIndices[k]) +
+                         " but the file has " + std::to_string(am->mNumVertices) + " vertices");
+    }
+  }
   for (unsigned i = 0; i < scene->mNumMeshes; ++i) {
     const aiMesh* am = scene->mMeshes[i];
     for (unsigned v = 0; v < am->mNumVertices; ++v, ++loaded) {
