@@ -51,8 +51,10 @@ for t in "${targets[@]}"; do
   echo "== fuzz_$t: ${seconds} s"
   dict=()
   [ "$t" = scene ] && dict=(-dict=fuzz/scene.dict)
+  max_len=65536
+  [ "$t" = trace ] && max_len=300000  # a trace is >= 200 KB (full chunks of /frames)
   if ! nice -n 15 ./build-fuzz/fuzz_"$t" "$work/$t/corpus" "${dict[@]}" \
-        -max_total_time="$seconds" -timeout=20 -rss_limit_mb=4096 -max_len=65536 \
+        -max_total_time="$seconds" -timeout=20 -rss_limit_mb=4096 -max_len="$max_len" \
         -artifact_prefix="$work/$t/artifacts/" -print_final_stats=1 2>"$work/$t/log.txt"; then
     status=1
     echo "fuzz_$t found a crash:"; grep -E "ERROR|SUMMARY|Test unit written" "$work/$t/log.txt" | head -5

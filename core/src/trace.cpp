@@ -8,7 +8,11 @@
 
 #include "octocd/trace.hpp"
 
+#include <fcntl.h>
 #include <hdf5.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -31,6 +35,24 @@ namespace {
 constexpr const char* kFormat = "octocd-trace";
 constexpr int kVersion = 1;
 constexpr int kStageCount = static_cast<int>(Stage::Count);
+constexpr const char* kCounterColumns[] = {"cell_candidates", "aabb_pairs", "box_tests",
+                                           "box_pairs", "vertex_tests", "contacts"};
+constexpr const char* kFigureColumns[] = {"penetration_mean", "penetration_max",
+                                          "penetration_share_above_slop", "kinetic_energy"};
+
+// The /frames columns of format version 1, in the writer's order (docs/trace-format.md).
+const std::vector<std::string>& frame_column_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n{"frame", "time", "step_ms"};
+    for (int s = 0; s < kStageCount; ++s) n.push_back(std::string(stage_name(static_cast<Stage>(s))) + "_ms");
+    for (const char* c : kCounterColumns) n.emplace_back(c);
+    for (const char* c : kFigureColumns) n.emplace_back(c);
+    n.emplace_back("momentum");
+    n.emplace_back("memory_bytes");
+    return n;
+  }();
+  return names;
+}
 
 // Silences HDF5's automatic error printing for the lifetime of the guard (restoring the
 // previous handler afterwards) so that failures reach the caller only as exceptions.
@@ -507,20 +529,19 @@ void TraceWriter::create_layout(const TraceMetadata& meta, const TraceBodies& bo
     auto add = [&](const std::string& name, hid_t ft, hid_t mt, std::vector<hsize_t> tail = {}) {
       m.frames.push_back(make_column(g, "/frames", name.c_str(), ft, mt, tail, kChunk, 0, path));
     };
+    // In the order of frame_column_names() (the reader's list).
     add("frame", H5T_STD_I64LE, H5T_NATIVE_INT64);
     add("time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE);
     add("step_ms", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE);
     for (int s = 0; s < kStageCount; ++s)
       add(std::string(stage_name(static_cast<Stage>(s))) + "_ms", H5T_IEEE_F64LE,
           H5T_NATIVE_DOUBLE);
-    for (const char* c : {"cell_candidates", "aabb_pairs", "box_tests", "box_pairs",
-                          "vertex_tests", "contacts"})
-      add(c, H5T_STD_U64LE, H5T_NATIVE_UINT64);
-    for (const char* c : {"penetration_mean", "penetration_max", "penetration_share_above_slop",
-                          "kinetic_energy"})
-      add(c, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE);
+    for (const char* c : kCounterColumns) add(c, H5T_STD_U64LE, H5T_NATIVE_UINT64);
+    for (const char* c : kFigureColumns) add(c, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE);
     add("momentum", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, {3});
     add("memory_bytes", H5T_STD_U64LE, H5T_NATIVE_UINT64);
+    if (m.frames.size() != frame_column_names().size())
+      throw RuntimeError("trace '" + path + "': internal: /frames columns differ from frame_column_names()");
   }
 
   // ---- /states
@@ -750,11 +771,64 @@ std::string read_string_attr(hid_t obj, const char* name, const std::string& pat
 }
 
 
+// libhdf5 1.10 loops forever on a global heap collection ("GCOL": where variable-length
+// strings live, so every trace's root attributes) holding a free-space object of size 0
+// (H5HG__cache_heap_deserialize advances by the object's size; the heap has no checksum),
+// and reads past the collection (SIGSEGV) for an object larger than what is left of it.
+// Found by fuzzing the trace readers with flipped bytes. Before HDF5 opens a file, every collection in
+// it is walked the way HDF5 walks it (HDF5 file format spec, "Global Heap"; 8-byte
+// lengths, as octocd writes), and a zero step is reported as a corrupt file.
+void check_global_heaps(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return;  // H5Fopen reports it
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || st.st_size < 16) {
+    ::close(fd);
+    return;
+  }
+  const auto size = static_cast<std::size_t>(st.st_size);
+  void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
+  ::close(fd);
+  if (map == MAP_FAILED) return;
+  const auto* data = static_cast<const unsigned char*>(map);
+  auto u64 = [&](std::size_t at) {
+    std::uint64_t v = 0;
+    for (int k = 7; k >= 0; --k) v = (v << 8) | data[at + static_cast<std::size_t>(k)];
+    return v;
+  };
+  std::string corrupt;
+  for (std::size_t at = 0; corrupt.empty() && at + 16 <= size;) {
+    const void* hit = ::memmem(data + at, size - at, "GCOL\x01", 5);
+    if (hit == nullptr) break;
+    const std::size_t start = static_cast<std::size_t>(static_cast<const unsigned char*>(hit) - data);
+    at = start + 1;
+    if (start + 16 > size) break;
+    const std::uint64_t claimed = u64(start + 8);
+    const std::size_t end = claimed > size - start ? size : start + static_cast<std::size_t>(claimed);
+    for (std::size_t obj = start + 16; obj < end;) {
+      if (obj + 16 > end) break;  // HDF5: the tail is free space
+      const unsigned idx = static_cast<unsigned>(data[obj]) | (static_cast<unsigned>(data[obj + 1]) << 8);
+      const std::uint64_t len = u64(obj + 8);
+      const std::uint64_t need = idx > 0 ? 16 + ((len + 7) / 8) * 8 : len;
+      if (need == 0 || need > end - obj) {  // HDF5 loops forever, or reads past the heap
+        corrupt = "global heap collection at byte " + std::to_string(start) + " holds an object of " +
+                  std::to_string(len) + " bytes at byte " + std::to_string(obj) + " that does not fit it";
+        break;
+      }
+      obj += static_cast<std::size_t>(need);
+    }
+  }
+  ::munmap(map, size);
+  if (!corrupt.empty())
+    throw RuntimeError("trace '" + path + "': corrupt file (" + corrupt + "); not a readable octocd trace");
+}
+
 // Opens a trace read-only in SWMR mode. A SWMR reader retries a metadata read whose
 // checksum fails (the writer may be half-way through a write), sleeping 1 ns, 2 ns, 4 ns,
 // ... between tries: HDF5's default of 100 tries never ends on a corrupt file (found by
 // fuzz_trace). 24 tries wait about 17 ms in all, ample for a write in progress.
 Handle open_for_reading(const std::string& path) {
+  check_global_heaps(path);
   Handle fapl(check(H5Pcreate(H5P_FILE_ACCESS), path, "H5Pcreate"));
   check(H5Pset_metadata_read_attempts(fapl, 24), path, "H5Pset_metadata_read_attempts");
   return Handle(check(H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, fapl), path,
@@ -781,18 +855,15 @@ TraceSummary read_trace_summary(const std::string& path) {
     Handle a(check(H5Aopen(file, "version", H5P_DEFAULT), path, "open attribute version"));
     check(H5Aread(a, H5T_NATIVE_INT, &s.version), path, "read attribute version");
   }
-  // Every /frames column; the shortest gives the complete rows (docs/trace-format.md).
+  // Every /frames column of format version 1, opened by name; the shortest gives the
+  // complete rows (docs/trace-format.md). Not listed by index: libhdf5 1.10 frees
+  // uninitialised pointers (SIGSEGV) when a corrupt group's link table fails to load
+  // (H5Lget_name_by_idx -> H5G__link_release_table; found by fuzz_trace).
   Handle g(check(H5Gopen2(file, "frames", H5P_DEFAULT), path, "open group /frames"));
-  H5G_info_t info{};
-  check(H5Gget_info(g, &info), path, "H5Gget_info /frames");
   hsize_t rows = 0;
   bool first = true;
-  for (hsize_t i = 0; i < info.nlinks; ++i) {
-    char name[256];
-    check(H5Lget_name_by_idx(g, ".", H5_INDEX_NAME, H5_ITER_INC, i, name, sizeof name,
-                             H5P_DEFAULT),
-          path, "list /frames");
-    const hsize_t r = dataset_rows(g, name, path);
+  for (const std::string& name : frame_column_names()) {
+    const hsize_t r = dataset_rows(g, name.c_str(), path);
     rows = first ? r : std::min(rows, r);
     first = false;
   }
