@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -95,12 +96,25 @@ std::uint64_t check_off(const std::string& path) {
     fail(path, "the OFF header declares " + std::to_string(nf) + " faces (expected at most " +
                    std::to_string(limits::kMaxMeshFaces) + ")");
   // The header line may hold the counts and the edge count; vertices start on the next line.
-  for (std::uint64_t v = 0; v < nv; ++v)
+  // Vertex lines hold x y z (then optional colour or normal); assimp 5.2 reads past a
+  // short line and crashes (found by fuzz_mesh), so each is checked here.
+  for (std::uint64_t v = 0; v < nv; ++v) {
     if (!off_data_line(in, line, tokens))
       fail(path, "ends after " + std::to_string(v) + " of " + std::to_string(nv) + " vertices");
+    bool numbers = tokens.size() >= 3;
+    for (std::size_t c = 0; c < 3 && numbers; ++c) {
+      char* end = nullptr;
+      (void)std::strtod(tokens[c].c_str(), &end);
+      numbers = end != tokens[c].c_str() && *end == '\0';
+    }
+    if (!numbers)
+      fail(path, "vertex " + std::to_string(v) + " is not three numbers x y z (line '" + line.substr(0, 60) + "')");
+  }
   for (std::uint64_t f = 0; f < nf; ++f) {
     if (!off_data_line(in, line, tokens)) break;  // too few faces: the count check reports it
     const std::uint64_t k = off_count(path, tokens[0], "corner count of face " + std::to_string(f));
+    if (k < 3)
+      fail(path, "face " + std::to_string(f) + " has " + std::to_string(k) + " corners (expected at least 3)");
     if (k >= tokens.size())
       fail(path, "face " + std::to_string(f) + " lists " + std::to_string(tokens.size() - 1) + " of its " +
                      std::to_string(k) + " corners (expected one line per face)");
