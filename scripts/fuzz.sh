@@ -55,8 +55,9 @@ for t in "${targets[@]}"; do
   [ "$t" = trace ] && max_len=300000  # a trace is >= 200 KB (full chunks of /frames)
   # assimp 5.2 and libhdf5 1.10.8 leak on some malformed files they reject (upstream; the
   # inputs are in fuzz/upstream/): leaks are not findings for the mesh and trace targets.
-  [ "$t" != scene ] && dict+=(-detect_leaks=0)
-  if ! nice -n 15 ./build-fuzz/fuzz_"$t" "$work/$t/corpus" "${dict[@]}" \
+  leaks=1
+  [ "$t" != scene ] && leaks=0
+  if ! ASAN_OPTIONS="detect_leaks=$leaks" nice -n 15 ./build-fuzz/fuzz_"$t" "$work/$t/corpus" "${dict[@]}" \
         -max_total_time="$seconds" -timeout=20 -rss_limit_mb=4096 -max_len="$max_len" \
         -artifact_prefix="$work/$t/artifacts/" -print_final_stats=1 2>"$work/$t/log.txt"; then
     status=1
