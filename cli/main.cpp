@@ -363,7 +363,8 @@ int validate_command(const ValidateOptions& o) {
 int main(int argc, char** argv) {
   CLI::App app{
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
-      "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a validator failed."};
+      "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a validator failed, 130/143 stopped by\n"
+      "SIGINT/SIGTERM (run and validate stop between frames and close the trace)."};
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);
 
