@@ -8,6 +8,7 @@
 #include <ctime>
 #include <fstream>
 #include <memory>
+#include <new>
 #include <optional>
 #include <string>
 #include <vector>
@@ -26,6 +27,7 @@
 #include "octocd/midphase.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
@@ -238,6 +240,19 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   out << j.dump(2) << "\n";
 }
 
+/// The line a command stopped by SIGINT/SIGTERM prints on stderr: where it stopped and
+/// what it kept.
+void report_stop(int sig, const char* command, std::int64_t done, std::int64_t total,
+                 const std::string& trace) {
+  std::string kept;
+  if (!trace.empty())
+    kept = done > 0 ? fmt::format("; the trace {} holds frames 1..{}", trace, done)
+                    : fmt::format("; the trace {} holds no frame", trace);
+  std::fprintf(stderr, "octocd %s: stopped by %s after frame %lld of %lld%s\n", command,
+               octocd::stop_signal_name(sig), static_cast<long long>(done),
+               static_cast<long long>(total), kept.c_str());
+}
+
 /// Checks what the command line changed against the scene and the engine, as strictly
 /// as the scene file is checked (issue 12): a `--midphase` deeper than the scene's
 /// midphase.depth, an unknown broadphase name (from `--broadphase` or the file), and
@@ -297,7 +312,21 @@ std::string write_sidecar(const std::string& trace, bool no_xdmf) {
   return octocd::write_xdmf_sidecar(trace);
 }
 
+/// After a runtime failure: closes the trace and writes its sidecar as far as the disk
+/// allows. A failure here is dropped on purpose: the original error (e.g. the full disk
+/// that stopped the trace) is the one line the user must see.
+void close_after_failure(std::unique_ptr<octocd::TraceWriter>& trace, const std::string& path, bool no_xdmf) {
+  if (!trace) return;
+  try {
+    const bool failed = trace->failed();  // an abandoned file (full disk): no sidecar, no read-back
+    trace->close();                       // keep every frame written so far readable
+    if (!failed) write_sidecar(path, no_xdmf);
+  } catch (const std::exception&) {
+  }
+}
+
 int run_command(const RunOptions& o) {
+  octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
   octocd::Scene scene = load_scene_for(o.scene, o.data_dir);
   if (!o.broadphase.empty()) scene.broadphase.name = o.broadphase;
   if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
@@ -322,17 +351,14 @@ int run_command(const RunOptions& o) {
   Progress progress(scene.frames, !o.quiet);
   const auto t0 = Clock::now();
   try {
-    for (int f = 0; f < scene.frames; ++f) {
+    for (int f = 0; f < scene.frames && octocd::stop_signal() == 0; ++f) {
       const octocd::FrameMetrics& m = world.step();
       totals.add(m);
       if (trace) trace->append_frame(m, world.state(), world.contacts());
       progress.update(m, totals);
     }
   } catch (const octocd::RuntimeError&) {
-    if (trace) {
-      trace->close();  // keep every frame written so far readable
-      write_sidecar(o.trace, o.no_xdmf);
-    }
+    close_after_failure(trace, o.trace, o.no_xdmf);
     throw;
   }
   std::string xdmf;
@@ -343,6 +369,10 @@ int run_command(const RunOptions& o) {
   const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
   if (!o.quiet) print_summary(world, totals, wall_s, o.trace, xdmf);
   if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s);
+  if (const int sig = octocd::stop_signal()) {
+    report_stop(sig, "run", totals.frames, scene.frames, o.trace);
+    return octocd::stop_exit_code(sig);
+  }
   return 0;
 }
 
@@ -428,6 +458,7 @@ int validate_command(const ValidateOptions& o) {
 }
 
 int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
+  octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
   octocd::Scene scene;
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
     scene = load_scene_for(o.scene, o.data_dir);
@@ -477,8 +508,11 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   if (o.engine == "bullet")
     throw octocd::InputError("--engine: bullet cannot be validated (no per-frame record); allowed: cpu, cuda");
   std::unique_ptr<octocd::TraceWriter> trace;
-  if (!o.trace.empty()) {
-    vo.on_step = [&](const octocd::Engine& w) {
+  std::int64_t done = 0;  // frames of the validated engine
+  vo.stop = [] { return octocd::stop_signal() != 0; };
+  vo.on_step = [&](const octocd::Engine& w) {
+    ++done;
+    if (!o.trace.empty()) {
       if (!trace) {
         octocd::TraceMetadata meta = octocd::trace_metadata(w, 10);
         meta.start_time = utc_now();
@@ -486,16 +520,13 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
                                                       octocd::TraceOptions{});
       }
       trace->append_frame(w.last_metrics(), w.state(), w.contacts());
-    };
-  }
+    }
+  };
   std::vector<octocd::ValidationResult> results;
   try {
     results = octocd::validate_engine([&] { return make_engine(o.engine, model); }, vo);
   } catch (const octocd::RuntimeError&) {
-    if (trace) {
-      trace->close();
-      write_sidecar(o.trace, o.no_xdmf);
-    }
+    close_after_failure(trace, o.trace, o.no_xdmf);
     throw;
   }
   if (trace) {
@@ -517,6 +548,12 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   fmt::print("{}", octocd::format_results(results, vo.overridden));
   const bool all_pass = std::all_of(results.begin(), results.end(),
                                     [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
+  if (const int sig = octocd::stop_signal()) {
+    fmt::print("\nSTOPPED: the table covers frames 1..{} of {}\n", done, o.frames);
+    std::fflush(stdout);
+    report_stop(sig, "validate", done, o.frames, o.trace);
+    return octocd::stop_exit_code(sig);
+  }
   fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
   return all_pass ? 0 : 3;
 }
@@ -547,7 +584,8 @@ CLI::Validator at_least_one() {
 int main(int argc, char** argv) {
   CLI::App app{
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
-      "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a check failed (validate, compare, replay).",
+      "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a check failed (validate, compare, replay),\n"
+      "130/143 stopped by SIGINT/SIGTERM (run and validate stop between frames and close the trace).",
       "octocd"};  // a fixed name: `--help` reads the same whatever path ran it (docs/cli.md)
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);
@@ -653,6 +691,10 @@ int main(int argc, char** argv) {
     return 2;
   } catch (const octocd::RuntimeError& e) {
     std::fprintf(stderr, "octocd: runtime failure: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "octocd: runtime failure: out of memory (the scene needs more than this "
+                         "process may allocate)\n");
     return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "octocd: runtime failure: %s\n", e.what());

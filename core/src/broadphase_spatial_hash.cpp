@@ -1,28 +1,34 @@
 /// \file broadphase_spatial_hash.cpp
 /// `spatial-hash`: uniform grid of cell size h, hashed by integer cell coordinates
-/// (paper section 4.2; SPEC 5.1).
+/// (paper section 4.2; SPEC 5.1), with coarser grids for bodies much larger than h.
 ///
-/// The "hash" is a sorted array of (cell key, body) entries, the cell key packing the
-/// three integer cell coordinates (21 bits each), which is deterministic and needs no
-/// hash function. The grid is unbounded. A body goes into every cell its AABB touches,
-/// cells [floor(min/h), floor(max/h)] per axis (a monotone mapping, so touching boxes
-/// share a cell). A body spanning more than kMaxCells cells, or beyond +-2^20 cells, or
-/// with an infinite coordinate, goes to an "oversize" list tested against every body.
-/// Bodies with a NaN coordinate never overlap anything (Eq. 6) and are left out.
+/// The "hash" is a sorted array of (cell key, body) entries, the cell key packing a grid
+/// level (4 bits) and the three integer cell coordinates (20 bits each), which is
+/// deterministic and needs no hash function. The grids are unbounded. Level 0 is the
+/// paper's grid of cell size h; level k has cells of h 2^k (a hierarchical grid, Ericson,
+/// Real-Time Collision Detection, ch. 7). A body goes to the finest level where its AABB
+/// touches at most kMaxCells cells, cells [floor(min/h_k), floor(max/h_k)] per axis (a
+/// monotone mapping, so touching boxes share a cell), within +-2^19 cells; it is entered
+/// in every cell it touches there. With the paper's h (bodies about h in size) every body
+/// sits at level 0 and this is the plain spatial hash. Before the levels (issue 10), a
+/// body over 4096 cells was tested against every body: a small h made every body
+/// oversize and the broadphase O(n^2) (220 ms/frame on boxes-random-10000).
+/// Only a body with an infinite coordinate, or beyond every level's range, goes to an
+/// "oversize" list tested against every body. Bodies with a NaN coordinate never overlap
+/// anything (Eq. 6) and are left out.
 ///
-/// De-duplication: a pair sharing several cells is reported only from the cell holding
+/// Pairs at one level: bodies sharing a cell there, reported only from the cell holding
 /// the min corner of the two boxes' intersection, i.e. the cell (max of the two min
-/// cells) per axis, which both boxes touch when they overlap. The result is then sorted
-/// by (a, b) with a counting sort; it is unique by construction.
-///
-/// The cell math (cells of a box, keys, the de-duplication cell, the NaN and range rules)
-/// is octocd/spatial_hash.hpp, shared with the CUDA engine's gpu/src/broadphase_hash.cu.
+/// cells) per axis, which both boxes touch when they overlap. Pairs across levels: each
+/// body looks up, at every coarser occupied level, the cells its AABB touches there, and
+/// reports a body of that level only from the same min-corner cell (at that level). So
+/// each overlapping pair is found exactly once; the result is then sorted by (a, b) with
+/// a counting sort.
 
 #include <algorithm>
 #include <cmath>
 
 #include "octocd/broadphase.hpp"
-#include "octocd/spatial_hash.hpp"
 
 #include "broadphase_detail.hpp"
 
@@ -30,7 +36,9 @@ namespace octocd {
 
 namespace {
 
-constexpr std::int64_t kMaxCells = 4096;        // more cells than this: oversize
+constexpr std::int64_t kMaxCells = 64;          // cells per body at its level
+constexpr std::int64_t kCoordLimit = 1 << 19;   // |cell coordinate| < 2^19 (20 bits)
+constexpr int kLevels = 16;                     // levels 0..15 (4 bits)
 
 struct Entry {
   std::uint64_t key;
@@ -52,39 +60,40 @@ class SpatialHashBroadPhase final : public BroadPhase {
     entries_.clear();
     oversize_.clear();
     kind_.assign(n, kGrid);
+    level_.assign(n, 0);
     cell0_.resize(3 * n);
-    const double inv_h = hash_inv_cell_size(h_);
+    std::uint32_t occupied = 0;  // bit k: level k holds a body
     std::uint64_t valid = 0;
 
     for (std::size_t i = 0; i < n; ++i) {
-      // Cells, oversize and NaN rules: octocd/spatial_hash.hpp, shared with the CUDA engine.
-      const HashSpan span = hash_span(boxes[i], inv_h, kMaxCells);
-      if (span.kind == kHashSkip) {
+      const Aabb& b = boxes[i];
+      if (has_nan(b)) {
         kind_[i] = kSkip;
         continue;
       }
       ++valid;
-      if (span.kind == kHashOversize) {
+      std::int64_t c0[3], c1[3];
+      int level = 0;
+      while (level < kLevels && !cells_at(b, level, c0, c1)) ++level;
+      if (level == kLevels) {
         kind_[i] = kOversize;
         oversize_.push_back(static_cast<std::uint32_t>(i));
         continue;
       }
-      const std::int32_t* c0 = span.c0;
-      const std::int32_t* c1 = span.c1;
-      for (int a = 0; a < 3; ++a) cell0_[3 * i + a] = c0[a];
-      for (std::int64_t x = c0[0]; x <= c1[0]; ++x) {
-        for (std::int64_t y = c0[1]; y <= c1[1]; ++y) {
-          for (std::int64_t z = c0[2]; z <= c1[2]; ++z) {
-            entries_.push_back({hash_cell_key(x, y, z), static_cast<std::uint32_t>(i)});
-          }
-        }
-      }
+      level_[i] = static_cast<std::uint8_t>(level);
+      occupied |= 1u << level;
+      for (int a = 0; a < 3; ++a) cell0_[3 * i + a] = static_cast<std::int32_t>(c0[a]);
+      for (std::int64_t x = c0[0]; x <= c1[0]; ++x)
+        for (std::int64_t y = c0[1]; y <= c1[1]; ++y)
+          for (std::int64_t z = c0[2]; z <= c1[2]; ++z)
+            entries_.push_back({pack(level, x, y, z), static_cast<std::uint32_t>(i)});
     }
 
     std::sort(entries_.begin(), entries_.end(), [](const Entry& p, const Entry& q) {
       return p.key != q.key ? p.key < q.key : p.body < q.body;
     });
 
+    // Pairs within one level: bodies sharing a cell.
     std::uint64_t candidates = 0;
     const std::size_t m = entries_.size();
     std::size_t g = 0;
@@ -95,6 +104,7 @@ class SpatialHashBroadPhase final : public BroadPhase {
       candidates += pop * (pop - 1) / 2;
       if (pop > 1) {
         const std::uint64_t key = entries_[g].key;
+        const int level = static_cast<int>(key >> 60);
         for (std::size_t i = g; i < e; ++i) {
           const std::uint32_t p = entries_[i].body;
           const std::int32_t* cp = &cell0_[3 * p];
@@ -102,12 +112,44 @@ class SpatialHashBroadPhase final : public BroadPhase {
             const std::uint32_t q = entries_[j].body;
             const std::int32_t* cq = &cell0_[3 * q];
             // Report only from the cell of the intersection's min corner.
-            if (hash_pair_cell_key(cp, cq) != key) continue;
+            if (pack(level, std::max(cp[0], cq[0]), std::max(cp[1], cq[1]),
+                     std::max(cp[2], cq[2])) != key)
+              continue;
             if (overlaps(boxes[p], boxes[q])) out.push_back({p, q});  // p < q: sorted by body
           }
         }
       }
       g = e;
+    }
+
+    // Pairs across levels: every body against the bodies of each coarser occupied level
+    // in the cells it touches there.
+    if ((occupied & (occupied - 1)) != 0) {
+      for (std::size_t i = 0; i < n; ++i) {
+        if (kind_[i] != kGrid) continue;
+        const std::uint32_t p = static_cast<std::uint32_t>(i);
+        for (int level = level_[i] + 1; level < kLevels; ++level) {
+          if ((occupied & (1u << level)) == 0) continue;
+          std::int64_t c0[3], c1[3];
+          cells_at(boxes[i], level, c0, c1);  // coarser than its own: fits
+          for (std::int64_t x = c0[0]; x <= c1[0]; ++x)
+            for (std::int64_t y = c0[1]; y <= c1[1]; ++y)
+              for (std::int64_t z = c0[2]; z <= c1[2]; ++z) {
+                const std::uint64_t key = pack(level, x, y, z);
+                auto it = std::lower_bound(entries_.begin(), entries_.end(), key,
+                                           [](const Entry& en, std::uint64_t k) { return en.key < k; });
+                for (; it != entries_.end() && it->key == key; ++it) {
+                  const std::uint32_t q = it->body;
+                  ++candidates;
+                  const std::int32_t* cq = &cell0_[3 * q];
+                  if (pack(level, std::max<std::int64_t>(c0[0], cq[0]), std::max<std::int64_t>(c0[1], cq[1]),
+                           std::max<std::int64_t>(c0[2], cq[2])) != key)
+                    continue;
+                  if (overlaps(boxes[p], boxes[q])) out.push_back(p < q ? Pair{p, q} : Pair{q, p});
+                }
+              }
+        }
+      }
     }
 
     // Oversize bodies against every other body (oversize pairs once).
@@ -128,16 +170,47 @@ class SpatialHashBroadPhase final : public BroadPhase {
     stats.pairs = out.size();
     stats.memory_bytes = entries_.capacity() * sizeof(Entry) +
                          oversize_.capacity() * sizeof(std::uint32_t) + kind_.capacity() +
-                         cell0_.capacity() * sizeof(std::int32_t) +
+                         level_.capacity() + cell0_.capacity() * sizeof(std::int32_t) +
                          tmp_pairs_.capacity() * sizeof(Pair) +
                          count_.capacity() * sizeof(std::uint32_t);
   }
 
  private:
+  static bool has_nan(const Aabb& b) {
+    for (int a = 0; a < 3; ++a)
+      if (std::isnan(b.min[a]) || std::isnan(b.max[a])) return true;
+    return false;
+  }
+
+  /// The cell range [c0, c1] of `b` at `level` (cell side h 2^level); false when a
+  /// coordinate is out of range or the box touches more than kMaxCells cells there.
+  bool cells_at(const Aabb& b, int level, std::int64_t c0[3], std::int64_t c1[3]) const {
+    const double inv = 1.0 / (static_cast<double>(h_) * static_cast<double>(std::int64_t{1} << level));
+    std::int64_t count = 1;
+    for (int a = 0; a < 3; ++a) {
+      const double f0 = std::floor(static_cast<double>(b.min[a]) * inv);  // monotone
+      const double f1 = std::floor(static_cast<double>(b.max[a]) * inv);
+      if (!(f0 > -kCoordLimit && f1 < kCoordLimit && f0 <= f1)) return false;  // also inf
+      c0[a] = static_cast<std::int64_t>(f0);
+      c1[a] = static_cast<std::int64_t>(f1);
+      count *= c1[a] - c0[a] + 1;  // each factor < 2^20 and count <= kMaxCells: no overflow
+      if (count > kMaxCells) return false;
+    }
+    return true;
+  }
+
+  static std::uint64_t pack(int level, std::int64_t x, std::int64_t y, std::int64_t z) {
+    return (static_cast<std::uint64_t>(level) << 60) |
+           (static_cast<std::uint64_t>(x + kCoordLimit) << 40) |
+           (static_cast<std::uint64_t>(y + kCoordLimit) << 20) |
+           static_cast<std::uint64_t>(z + kCoordLimit);
+  }
+
   float h_;
   std::vector<Entry> entries_;
   std::vector<std::uint32_t> oversize_;
   std::vector<std::uint8_t> kind_;
+  std::vector<std::uint8_t> level_;
   std::vector<std::int32_t> cell0_;
   std::vector<Pair> tmp_pairs_;
   std::vector<std::uint32_t> count_;

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -43,32 +44,137 @@ std::string lower(std::string s) {
   return s;
 }
 
-/// The face count in an OFF header (after the keyword, '#' comments skipped).
-std::uint64_t off_header_face_count(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) fail(path, "cannot open", "a readable file");
-  std::vector<std::string> tokens;
-  std::string line;
-  while (tokens.size() < 3 && std::getline(in, line)) {
-    const auto hash = line.find('#');
-    if (hash != std::string::npos) line.erase(hash);
-    std::istringstream ls(line);
-    std::string t;
-    while (tokens.size() < 3 && ls >> t) tokens.push_back(t);
-  }
-  const std::string kw = tokens.empty() ? std::string() : tokens[0];
-  if (kw.size() < 3 || kw.compare(kw.size() - 3, 3, "OFF") != 0) {
-    fail(path, "bad OFF header '" + kw + "'", "'OFF' then vertex and face counts");
-  }
-  if (tokens.size() < 3) fail(path, "truncated OFF header", "vertex and face counts");
+/// A non-negative integer token of an OFF file, or a failure naming `what`.
+std::uint64_t off_count(const std::string& path, const std::string& token, const std::string& what) {
   try {
     std::size_t used = 0;
-    const unsigned long long nf = std::stoull(tokens[2], &used);
-    if (used != tokens[2].size()) throw std::invalid_argument("trailing characters");
-    return nf;
+    if (token.empty() || token[0] == '-') throw std::invalid_argument("negative");
+    const unsigned long long n = std::stoull(token, &used);
+    if (used != token.size()) throw std::invalid_argument("trailing characters");
+    return n;
   } catch (const std::exception&) {
-    fail(path, "bad OFF face count '" + tokens[2] + "'", "a non-negative integer");
+    fail(path, "bad OFF " + what + " '" + token + "'", "a non-negative integer");
   }
+}
+
+/// Reads the next line holding data (blank lines and '#' comments skipped) into `tokens`;
+/// false at the end of the file.
+bool off_data_line(std::istream& in, std::string& line, std::vector<std::string>& tokens) {
+  while (std::getline(in, line)) {
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.erase(hash);
+    tokens.clear();
+    std::size_t i = 0;
+    while (i < line.size()) {
+      while (i < line.size() && std::isspace(static_cast<unsigned char>(line[i]))) ++i;
+      std::size_t e = i;
+      while (e < line.size() && !std::isspace(static_cast<unsigned char>(line[e]))) ++e;
+      if (e > i) tokens.emplace_back(line, i, e - i);
+      i = e;
+    }
+    if (!tokens.empty()) return true;
+  }
+  return false;
+}
+
+/// An OFF file's header counts, checked against the limits before assimp parses the
+/// file, and (when `scan_faces`) every face's indices checked against the vertex count:
+/// assimp's OFF reader clamps an index past the vertex count to the last vertex instead
+/// of failing. Returns the header's face count.
+std::uint64_t check_off(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, "cannot open (expected a readable file)");
+  std::vector<std::string> header, tokens;
+  std::string line;
+  while (header.size() < 3 && off_data_line(in, line, tokens))
+    for (const std::string& t : tokens)
+      if (header.size() < 3) header.push_back(t);
+  const std::string kw = header.empty() ? std::string() : header[0];
+  if (kw.size() < 3 || kw.compare(kw.size() - 3, 3, "OFF") != 0) {
+    fail(path, "bad OFF header '" + kw.substr(0, 40) + "' (expected 'OFF' then vertex and face counts)");
+  }
+  if (header.size() < 3) fail(path, "truncated OFF header (expected vertex and face counts)");
+  const std::uint64_t nv = off_count(path, header[1], "vertex count");
+  const std::uint64_t nf = off_count(path, header[2], "face count");
+  if (nv > limits::kMaxMeshVertices)
+    fail(path, "the OFF header declares " + std::to_string(nv) + " vertices (expected at most " +
+                   std::to_string(limits::kMaxMeshVertices) + ")");
+  if (nf > limits::kMaxMeshFaces)
+    fail(path, "the OFF header declares " + std::to_string(nf) + " faces (expected at most " +
+                   std::to_string(limits::kMaxMeshFaces) + ")");
+  // The header line may hold the counts and the edge count; vertices start on the next line.
+  // Vertex lines hold x y z (then optional colour or normal); assimp 5.2 reads past a
+  // short line and crashes (found by fuzz_mesh), so each is checked here.
+  for (std::uint64_t v = 0; v < nv; ++v) {
+    if (!off_data_line(in, line, tokens))
+      fail(path, "ends after " + std::to_string(v) + " of " + std::to_string(nv) + " vertices");
+    bool numbers = tokens.size() >= 3;
+    for (std::size_t c = 0; c < 3 && numbers; ++c) {
+      char* end = nullptr;
+      (void)std::strtod(tokens[c].c_str(), &end);
+      numbers = end != tokens[c].c_str() && *end == '\0';
+    }
+    if (!numbers)
+      fail(path, "vertex " + std::to_string(v) + " is not three numbers x y z (line '" + line.substr(0, 60) + "')");
+  }
+  for (std::uint64_t f = 0; f < nf; ++f) {
+    if (!off_data_line(in, line, tokens)) break;  // too few faces: the count check reports it
+    const std::uint64_t k = off_count(path, tokens[0], "corner count of face " + std::to_string(f));
+    if (k < 3)
+      fail(path, "face " + std::to_string(f) + " has " + std::to_string(k) + " corners (expected at least 3)");
+    if (k >= tokens.size())
+      fail(path, "face " + std::to_string(f) + " lists " + std::to_string(tokens.size() - 1) + " of its " +
+                     std::to_string(k) + " corners (expected one line per face)");
+    for (std::uint64_t c = 1; c <= k; ++c) {
+      const std::uint64_t idx = off_count(path, tokens[c], "index of face " + std::to_string(f));
+      if (idx >= nv)
+        fail(path, "face " + std::to_string(f) + " uses vertex " + std::to_string(idx) + " but the file has " +
+                       std::to_string(nv) + " vertices (expected indices in [0, " + std::to_string(nv) + "))");
+    }
+  }
+  return nf;
+}
+
+/// A PLY file's vertex and face counts from its header ("element vertex N", "element
+/// face N"), checked against the limits before assimp parses the file. Other files
+/// (OBJ has no header) are checked after parsing. A header without `end_header` in its
+/// first 1000 lines is rejected: assimp 5.2's PLY reader never returns on one (found by
+/// fuzz_mesh).
+void check_ply_header(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, "cannot open (expected a readable file)");
+  std::string line;
+  for (int n = 0; n < 1000 && std::getline(in, line); ++n) {
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) line.pop_back();
+    if (line == "end_header") return;
+    std::istringstream ls(line);
+    std::string kw, element, count;
+    ls >> kw >> element >> count;
+    // The header grammar, strictly: assimp 5.2 loops forever on some malformed headers
+    // (found by fuzz_mesh), so anything else is rejected here.
+    const bool known = n == 0 ? line == "ply"
+                              : kw == "format" || kw == "comment" || kw == "obj_info" ||
+                                    kw == "element" || kw == "property";
+    if (!known)
+      fail(path, "PLY header line " + std::to_string(n + 1) + " is not ply, format, comment, obj_info, "
+                     "element, property or end_header (expected a PLY header)");
+    if (kw == "format" && element != "ascii" && element != "binary_little_endian" && element != "binary_big_endian")
+      fail(path, "PLY format '" + element.substr(0, 40) + "' (expected ascii, binary_little_endian or binary_big_endian)");
+    if (kw != "element") continue;
+    const bool vertex = element == "vertex", face = element == "face";
+    if (!vertex && !face) continue;
+    unsigned long long c = 0;
+    try {
+      c = std::stoull(count);
+    } catch (const std::exception&) {
+      continue;  // assimp reports a malformed header
+    }
+    const std::uint64_t limit = vertex ? limits::kMaxMeshVertices : limits::kMaxMeshFaces;
+    if (c > limit)
+      fail(path, "the PLY header declares " + count + " " + element + "s (expected at most " +
+                     std::to_string(limit) + ")");
+  }
+  fail(path, "PLY header without an end_header line in its first 1000 lines (expected a PLY file)");
 }
 
 std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
@@ -120,15 +226,21 @@ Mesh load_mesh(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "not found", "an existing mesh file");
   if (!fs::is_regular_file(path, ec)) fail(path, "not a regular file");
-  if (fs::file_size(path, ec) == 0 || ec) fail(path, "empty file");
+  const std::uintmax_t bytes = fs::file_size(path, ec);
+  if (bytes == 0 || ec) fail(path, "empty file");
+  if (bytes > limits::kMaxMeshFileBytes)
+    fail(path, "file is " + std::to_string(bytes) + " bytes", "at most " + std::to_string(limits::kMaxMeshFileBytes) +
+                                                                 " bytes (1 GiB)");
   {
     std::ifstream probe(path, std::ios::binary);
     if (!probe) fail(path, "cannot open", "a readable file");
   }
-
   const std::string ext = lower(fs::path(path).extension().string());
   if (ext != ".obj" && ext != ".off" && ext != ".ply" && ext != ".stl")
     fail(path, "format '" + (ext.empty() ? std::string("(no extension)") : ext) + "' is not supported");
+  std::uint64_t off_faces = 0;
+  if (ext == ".off") off_faces = check_off(path);
+  if (ext == ".ply") check_ply_header(path);
 
   Assimp::Importer importer;
   // Read without post-processing first, so polygon counts can be compared with the OFF
@@ -139,10 +251,34 @@ Mesh load_mesh(const std::string& path) {
   }
   // Non-finite coordinates are checked before post-processing: joining identical
   // vertices may silently merge a NaN vertex into another one.
-  std::uint64_t faces = 0, loaded = 0;
+  std::uint64_t faces = 0, loaded = 0, vertices = 0;
+  for (unsigned i = 0; i < scene->mNumMeshes; ++i) {
+    faces += scene->mMeshes[i]->mNumFaces;
+    vertices += scene->mMeshes[i]->mNumVertices;
+  }
+  if (vertices > limits::kMaxMeshVertices)
+    fail(path, "holds " + std::to_string(vertices) + " vertices (expected at most " +
+                   std::to_string(limits::kMaxMeshVertices) + ")");
+  if (faces > limits::kMaxMeshFaces)
+    fail(path, "holds " + std::to_string(faces) + " faces (expected at most " +
+                   std::to_string(limits::kMaxMeshFaces) + ")");
+  // Faces are checked before assimp's post-processing, which asserts (abort()) on a face
+  // without indices (found by fuzz_mesh: an OFF face line cut by garbage).
+  for (unsigned i = 0, first = 0; i < scene->mNumMeshes; first += scene->mMeshes[i]->mNumFaces, ++i) {
+    const aiMesh* am = scene->mMeshes[i];
+    for (unsigned f = 0; f < am->mNumFaces; ++f) {
+      const aiFace& face = am->mFaces[f];
+      if (face.mNumIndices == 0 || face.mIndices == nullptr)
+        fail(path, "face " + std::to_string(first + f) + " has no vertex indices (expected faces of 3 or "
+                   "more vertices; a malformed face line?)");
+      for (unsigned k = 0; k < face.mNumIndices; ++k)
+        if (face.mIndices[k] >= am->mNumVertices)
+          fail(path, "face " + std::to_string(first + f) + " uses vertex " + std::to_string(face.mIndices[k]) +
+                         " but the file has " + std::to_string(am->mNumVertices) + " vertices");
+    }
+  }
   for (unsigned i = 0; i < scene->mNumMeshes; ++i) {
     const aiMesh* am = scene->mMeshes[i];
-    faces += am->mNumFaces;
     for (unsigned v = 0; v < am->mNumVertices; ++v, ++loaded) {
       const aiVector3D& p = am->mVertices[v];
       if (!is_finite(Vec3{p.x, p.y, p.z})) {
@@ -155,7 +291,7 @@ Mesh load_mesh(const std::string& path) {
   }
 
   if (ext == ".off") {
-    const std::uint64_t expected = off_header_face_count(path);
+    const std::uint64_t expected = off_faces;
     if (faces != expected) {
       fail(path, "loaded " + std::to_string(faces) + " faces, expected " + std::to_string(expected) +
                      " from the OFF header",

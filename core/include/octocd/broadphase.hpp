@@ -18,8 +18,8 @@
 /// - `octree-strict`: the paper's octree read literally (SPEC 5.1, paper Algorithms 1-2):
 ///   each body in the deepest node fully containing it, pairs in nodes that are equal or
 ///   ancestor and descendant (broadphase_octree_strict.cpp).
-/// - `spatial-hash`: uniform grid of cell size h (paper section 4.2;
-///   broadphase_spatial_hash.cpp).
+/// - `spatial-hash`: uniform grid of cell size h (paper section 4.2), with coarser grids
+///   (2h, 4h, ...) for bodies touching more than 64 cells (broadphase_spatial_hash.cpp).
 
 #include <cstdint>
 #include <memory>

@@ -12,6 +12,19 @@
 
 namespace octocd {
 
+/// Limits checked when a mesh is loaded (docs/scenes.md, "Limits"): larger files or
+/// counts are an InputError (exit code 2), raised before assimp parses the file where the
+/// file says its counts (OFF and PLY headers), after it for OBJ and the rest.
+namespace limits {
+/// Largest mesh file (bytes): 1 GiB; assimp parses about 100 MB/s, so 10 s at most.
+constexpr std::uintmax_t kMaxMeshFileBytes = 1ull << 30;
+/// Most vertices of a mesh file (as stored, before welding): 10^7 (the datasets have at
+/// most 1.6 x 10^5; the paper's largest mesh 3.6 x 10^5).
+constexpr std::uint64_t kMaxMeshVertices = 10000000;
+/// Most faces (polygons) of a mesh file: 2 x 10^7.
+constexpr std::uint64_t kMaxMeshFaces = 20000000;
+}  // namespace limits
+
 /// An indexed triangle mesh in its local frame (metres). Owns its arrays.
 struct Mesh {
   std::string name;                                  ///< dataset or file name
@@ -31,7 +44,10 @@ struct Mesh {
 /// vertices or no triangles) or holds a non-finite vertex (naming its index in assimp's
 /// load order, which for OFF/OBJ follows the face corners, and its value).
 /// For OFF files the face count in the header is checked against what was loaded
-/// (assimp's OFF reader drops faces after comment lines): a mismatch is an InputError.
+/// (assimp's OFF reader drops faces after comment lines): a mismatch is an InputError;
+/// every OFF face index must be below the header's vertex count (assimp clamps it).
+/// Files over limits::kMaxMeshFileBytes, or with more than limits::kMaxMeshVertices
+/// vertices or limits::kMaxMeshFaces faces, are an InputError naming the limit.
 Mesh load_mesh(const std::string& path);
 
 /// Merges coincident vertices (exactly equal positions; -0 equals +0) and drops triangles

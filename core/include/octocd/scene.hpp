@@ -19,6 +19,39 @@
 
 namespace octocd {
 
+/// Limits checked when a scene is loaded (docs/scenes.md, "Limits"); a value outside is an
+/// InputError (exit code 2). They keep float32 arithmetic meaningful: body state is
+/// float32 (SPEC 2), whose spacing at |x| = 1000 m is 2^-14 m = 6.1e-5 m, 1/16 of the
+/// default slop (1 mm); further out, the slop, theta and a step's displacement dt*v drown
+/// in rounding.
+namespace limits {
+/// Largest |coordinate| (m) of the domain, layout regions and explicit positions.
+constexpr double kMaxCoordinate = 1000.0;
+/// Smallest body side (m): box half extents and icosphere radii >= half of it, mesh
+/// `scale` >= it, also the smallest wall thickness and domain side. 16 float32 steps at
+/// kMaxCoordinate.
+constexpr double kMinLength = 1e-3;
+/// Largest body side (m): half extents and radii <= half of it, `scale` <= it; also the
+/// largest wall thickness, theta and spatial-hash cell size.
+constexpr double kMaxLength = 2000.0;
+/// Masses (kg) other than 0 (static) lie in [kMinMass, kMaxMass]: the inverse mass is a
+/// normal float32 and Eq. 19's impulse -(1+e) v_n / (w_A + w_B) stays finite.
+constexpr double kMinMass = 1e-6;
+constexpr double kMaxMass = 1e9;
+/// Largest |velocity component| and response.max_velocity (m/s): a step (dt <= 0.1 s)
+/// moves a body at most 1 km, half the largest domain.
+constexpr double kMaxSpeed = 1e4;
+/// Largest |gravity component| (m/s^2).
+constexpr double kMaxAcceleration = 1e4;
+/// Most bodies in a scene (sum of the groups' counts; walls excluded). Body indices are
+/// 32-bit; the CPU engine takes about 300 B a body (3 GB at 10^7).
+constexpr std::size_t kMaxBodies = 10000000;
+/// Largest scene file (bytes): 64 MiB holds explicit positions for about 10^6 bodies.
+constexpr std::uintmax_t kMaxSceneFileBytes = 64ull << 20;
+/// Deepest JSON nesting (objects and arrays); a scene needs 5.
+constexpr int kMaxJsonDepth = 64;
+}  // namespace limits
+
 /// The shape of a group's bodies.
 struct ShapeSpec {
   /// Which of "mesh", "box", "icosphere" the scene gave.

@@ -48,6 +48,12 @@ struct TraceOptions {
 
 /// Writes one trace file. Creates (truncates) `path`. All writes append; nothing written
 /// is rewritten. Throws RuntimeError naming the path on any HDF5 failure.
+///
+/// A failed write (a full disk, a file size limit, an I/O error) abandons the file: nothing
+/// more is written to it, so it stays as a killed run would leave it, readable with every
+/// frame flushed before the failure; the RuntimeError is one line saying what failed, the
+/// operating system's reason and which frames the file keeps; later calls do nothing
+/// (append_frame and append_state throw "after close").
 class TraceWriter {
  public:
   TraceWriter(const std::string& path, const TraceMetadata& meta, const TraceBodies& bodies,
@@ -69,8 +75,13 @@ class TraceWriter {
   void close();
   /// Path of the file.
   const std::string& path() const;
+  /// True after a write failed and the file was abandoned.
+  bool failed() const;
+  /// Rows of /frames on disk after the last successful flush.
+  std::int64_t flushed_frames() const;
 
  private:
+  void create_layout(const TraceMetadata& meta, const TraceBodies& bodies);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

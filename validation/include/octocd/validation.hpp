@@ -102,6 +102,11 @@ struct ValidationOptions {
   std::vector<std::string> overridden;
   /// Called after every step of the validated engine (e.g. to write a trace); may be empty.
   std::function<void(const Engine&)> on_step;
+  /// Polled before every step of the validated engine; when it returns true validation
+  /// stops there: the results cover the frames run so far, and the validators that rerun
+  /// the scene (analytic, bullet-dynamics) are `n/a` ("not run: stopped after frame N").
+  /// May be empty (never stops). `octocd validate` stops on SIGINT/SIGTERM (stop.hpp).
+  std::function<bool()> stop;
 };
 
 /// One entry of the tolerance table: its name (as in `--tolerance NAME=VALUE`), the

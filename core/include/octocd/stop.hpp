@@ -1,0 +1,39 @@
+#pragma once
+/// \file stop.hpp
+/// Stopping a long run on SIGINT or SIGTERM (issue 10): the handlers only record the
+/// signal (async-signal-safe); the command's loop polls stop_signal() between steps,
+/// flushes its trace or result, says where it stopped and exits with stop_exit_code()
+/// (130 for SIGINT, 143 for SIGTERM, the shells' 128 + signal). A second signal while
+/// the first is being handled ends the process at once (the signal's default action), so
+/// a stuck flush can still be interrupted.
+///
+/// Use (as `octocd run` and `octocd validate` do; `octocd bench` should do the same):
+///
+///     octocd::StopOnSignals stop;              // installs the handlers, restores on exit
+///     for (int f = 0; f < frames && !octocd::stop_signal(); ++f) step();
+///     if (const int sig = octocd::stop_signal()) { flush(); report(sig); return octocd::stop_exit_code(sig); }
+
+namespace octocd {
+
+/// The signal (SIGINT or SIGTERM) received since the handlers were installed, 0 when none.
+/// Safe to call from any thread.
+int stop_signal();
+
+/// 128 + sig: the exit status of a command stopped by `sig` (130 SIGINT, 143 SIGTERM).
+int stop_exit_code(int sig);
+
+/// "SIGINT", "SIGTERM" or "signal N".
+const char* stop_signal_name(int sig);
+
+/// Installs handlers for SIGINT and SIGTERM that record the signal (see stop_signal) and
+/// clears any signal recorded before; the destructor restores the previous handlers.
+/// One at a time per process (not nestable); not thread-safe to construct.
+class StopOnSignals {
+ public:
+  StopOnSignals();
+  ~StopOnSignals();
+  StopOnSignals(const StopOnSignals&) = delete;
+  StopOnSignals& operator=(const StopOnSignals&) = delete;
+};
+
+}  // namespace octocd
