@@ -72,7 +72,7 @@ class SpatialHashBroadPhase final : public BroadPhase {
         continue;
       }
       ++valid;
-      std::int64_t c0[3], c1[3];
+      std::int64_t c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0};
       int level = 0;
       while (level < kLevels && !cells_at(b, level, c0, c1)) ++level;
       if (level == kLevels) {
@@ -130,7 +130,7 @@ class SpatialHashBroadPhase final : public BroadPhase {
         const std::uint32_t p = static_cast<std::uint32_t>(i);
         for (int level = level_[i] + 1; level < kLevels; ++level) {
           if ((occupied & (1u << level)) == 0) continue;
-          std::int64_t c0[3], c1[3];
+          std::int64_t c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0};
           cells_at(boxes[i], level, c0, c1);  // coarser than its own: fits
           for (std::int64_t x = c0[0]; x <= c1[0]; ++x)
             for (std::int64_t y = c0[1]; y <= c1[1]; ++y)

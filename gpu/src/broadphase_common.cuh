@@ -1,6 +1,6 @@
 #pragma once
-// Device helpers shared by the device broadphases behind DeviceBroadPhase
-// (broadphase_strict.cu, broadphase_hash.cu): the pair key, a binary search on sorted
+// Device helpers shared by the device broadphases (broadphase_flat.cu, and behind
+// DeviceBroadPhase broadphase_octree.cu, broadphase_strict.cu, broadphase_hash.cu): the pair key, a binary search on sorted
 // 64-bit keys, the per-block sum of the exact-test counter, and a warp's ordered writer
 // into PairOutput::keys (count pass: counts only; fill pass: writes where the index is
 // below the capacity). CUDA only (nvcc).

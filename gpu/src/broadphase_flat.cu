@@ -2,13 +2,13 @@
 // tested with the inclusive AABB overlap of Eq. 6 (octocd::overlaps). Counting pass, then
 // an exclusive scan and a fill pass: body i writes its pair keys in j order at its scanned
 // offset (those that fit the capacity; the total tells the host to regrow and rerun).
+#include "broadphase_common.cuh"
 #include "kernels.hpp"
 
 namespace octocd {
 namespace gpu {
 namespace {
 
-constexpr unsigned kFull = 0xffffffffu;
 
 /// One warp per body i (grid-stride); the lanes test j = i + 1 .. n - 1, 32 at a time.
 /// Counting (keys == nullptr) or writing the keys in j order from offset[i].
@@ -23,10 +23,10 @@ __global__ void flat_kernel(const Aabb* aabb, std::uint32_t n, std::uint32_t* co
     for (std::uint32_t b = i + 1; b < n; b += 32) {
       const std::uint32_t j = b + lane;
       const bool hit = j < n && overlaps(bi, aabb[j]);
-      const unsigned mask = __ballot_sync(kFull, hit);
+      const unsigned mask = __ballot_sync(bp::kFullMask, hit);
       if (keys && hit) {
         const std::uint32_t idx = o + found + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
-        if (idx < capacity) keys[idx] = (static_cast<unsigned long long>(i) << 32) | j;
+        if (idx < capacity) keys[idx] = bp::pair_key(i, j);
       }
       found += static_cast<std::uint32_t>(__popc(mask));
     }
@@ -34,23 +34,19 @@ __global__ void flat_kernel(const Aabb* aabb, std::uint32_t n, std::uint32_t* co
   }
 }
 
-unsigned warp_blocks(std::uint32_t n) {
-  const std::size_t blocks = (static_cast<std::size_t>(n) * 32 + kBlockSize - 1) / kBlockSize;
-  return static_cast<unsigned>(blocks < 1 ? 1 : (blocks > 65535 ? 65535 : blocks));
-}
 
 }  // namespace
 
 cudaError_t launch_flat_count(const Aabb* aabb, std::uint32_t n, std::uint32_t* count, cudaStream_t stream) {
   if (n == 0) return cudaSuccess;
-  flat_kernel<<<warp_blocks(n), kBlockSize, 0, stream>>>(aabb, n, count, nullptr, nullptr, 0);
+  flat_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(aabb, n, count, nullptr, nullptr, 0);
   return cudaGetLastError();
 }
 
 cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset,
                              unsigned long long* keys, std::uint32_t capacity, cudaStream_t stream) {
   if (n == 0) return cudaSuccess;
-  flat_kernel<<<warp_blocks(n), kBlockSize, 0, stream>>>(aabb, n, nullptr, offset, keys, capacity);
+  flat_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(aabb, n, nullptr, offset, keys, capacity);
   return cudaGetLastError();
 }
 

@@ -24,6 +24,7 @@
 #include <cub/device/device_reduce.cuh>
 #include <cub/device/device_scan.cuh>
 
+#include "broadphase_common.cuh"
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
 #include "kernels.hpp"
@@ -127,7 +128,6 @@ __device__ std::uint32_t lower_bound(const std::uint32_t* keys, std::uint32_t lo
   return lo;
 }
 
-constexpr unsigned kFull = 0xffffffffu;
 
 /// One warp's query for slot s: the lanes test the candidate slots of a range 32 at a
 /// time and append the overlapping pairs (by body index, a < b) with one atomic per 32.
@@ -145,18 +145,15 @@ struct WarpEmitter {
     for (std::uint32_t b = t0; b < t1; b += 32) {
       const std::uint32_t t = b + lane;
       const bool hit = t < t1 && overlaps(box_s, d.slot_box[t]);
-      const unsigned mask = __ballot_sync(kFull, hit);
+      const unsigned mask = __ballot_sync(bp::kFullMask, hit);
       if (mask == 0) continue;
       std::uint32_t base = 0;
       if (lane == 0) base = atomicAdd(d.total, static_cast<std::uint32_t>(__popc(mask)));
-      base = __shfl_sync(kFull, base, 0);
+      base = __shfl_sync(bp::kFullMask, base, 0);
       if (hit) {
         const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
         if (idx < d.capacity) {
-          const std::uint32_t body_t = d.slot_body[t];
-          const std::uint32_t a = body_s < body_t ? body_s : body_t;
-          const std::uint32_t bb = body_s < body_t ? body_t : body_s;
-          d.pair_keys[idx] = (static_cast<unsigned long long>(a) << 32) | bb;
+          d.pair_keys[idx] = bp::pair_key(body_s, d.slot_body[t]);
         }
       }
     }
@@ -204,42 +201,17 @@ __global__ void loose_query_kernel(LooseDesc d) {
               t1 = (t0 < lv_end && d.sorted_key[t0] == ck) ? lower_bound(d.sorted_key, t0, lv_end, ck + 1) : t0;
               if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;  // same level: only the slots after s
             }
-            unsigned busy = __ballot_sync(kFull, t0 < t1);
+            unsigned busy = __ballot_sync(bp::kFullMask, t0 < t1);
             while (busy) {
               const int src = __ffs(busy) - 1;
               busy &= busy - 1;
-              e.range(__shfl_sync(kFull, t0, src), __shfl_sync(kFull, t1, src));
+              e.range(__shfl_sync(bp::kFullMask, t0, src), __shfl_sync(bp::kFullMask, t1, src));
             }
           }
         }
       }
     }
     if (lane == 0 && e.tests) atomicAdd(d.candidates, e.tests);
-  }
-}
-
-__global__ void unpack_pairs_kernel(const unsigned long long* keys, const std::uint32_t* total,
-                                    std::uint32_t capacity, Pair* pairs) {
-  const std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
-  if (k >= capacity || k >= live_count(total, capacity)) return;
-  const unsigned long long v = keys[k];
-  Pair p;
-  p.a = static_cast<std::uint32_t>(v >> 32);
-  p.b = static_cast<std::uint32_t>(v & 0xffffffffull);
-  pairs[k] = p;
-}
-
-/// Blocks for one warp per slot, at most 65535 (the kernel strides).
-unsigned warp_grid(std::uint32_t n) {
-  const std::size_t blocks = (static_cast<std::size_t>(n) * 32 + kBlockSize - 1) / kBlockSize;
-  return static_cast<unsigned>(blocks < 1 ? 1 : (blocks > 65535 ? 65535 : blocks));
-}
-
-/// Launch check: throws RuntimeError naming the kernel.
-void launched(cudaError_t e, const char* what) {
-  if (e != cudaSuccess) {
-    (void)cudaGetLastError();
-    throw RuntimeError(fmt::format("CUDA kernel '{}' failed to launch: {}", what, cuda_text(e)));
   }
 }
 
@@ -273,7 +245,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    if (n != n_) throw RuntimeError("octree (cuda): find() before reserve() for this body count");
+    bp::check_reserved(n_ != kNotReserved, n_, n, "octree");
     check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
     if (n == 0) return;
     LooseDesc d;
@@ -299,20 +271,20 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     std::size_t bytes = temp_.capacity();
     if (depth_ < 0) {
       loose_extent_kernel<<<g, kBlockSize, 0, stream>>>(d);
-      launched(cudaGetLastError(), "loose_extent");
-      launched(cub::DeviceReduce::Min(temp_.get(), bytes, extent_.get(), min_.get(), static_cast<int>(n), stream),
+      bp::launched(cudaGetLastError(), "loose_extent");
+      bp::launched(cub::DeviceReduce::Min(temp_.get(), bytes, extent_.get(), min_.get(), static_cast<int>(n), stream),
                "cub::DeviceReduce::Min");
     }
     loose_keys_kernel<<<g, kBlockSize, 0, stream>>>(d);
-    launched(cudaGetLastError(), "loose_keys");
+    bp::launched(cudaGetLastError(), "loose_keys");
     bytes = temp_.capacity();
-    launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
+    bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
                                              slot_body_.get(), static_cast<int>(n), 0, 32, stream),
              "cub::DeviceRadixSort::SortPairs");
     loose_gather_kernel<<<grid_for(std::max<std::uint32_t>(n, kLevelTable)), kBlockSize, 0, stream>>>(d);
-    launched(cudaGetLastError(), "loose_gather");
-    loose_query_kernel<<<warp_grid(n), kBlockSize, 0, stream>>>(d);
-    launched(cudaGetLastError(), "loose_query");
+    bp::launched(cudaGetLastError(), "loose_gather");
+    loose_query_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(d);
+    bp::launched(cudaGetLastError(), "loose_query");
   }
 
   std::uint64_t device_bytes() const override {
@@ -327,7 +299,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
  private:
   int depth_;
   LooseGrid grid_;
-  std::uint32_t n_ = 0xffffffffu;
+  static constexpr std::uint32_t kNotReserved = 0xffffffffu;
+  std::uint32_t n_ = kNotReserved;
   DeviceBuffer<float> extent_{"octree body extents"};
   DeviceBuffer<float> min_{"octree smallest extent"};
   DeviceBuffer<std::uint32_t> key_{"octree body keys"};
@@ -342,13 +315,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
 };
 
 }  // namespace
-
-cudaError_t launch_unpack_pairs(const unsigned long long* keys, const std::uint32_t* total, std::uint32_t capacity,
-                                Pair* pairs, cudaStream_t stream) {
-  if (capacity == 0) return cudaSuccess;
-  unpack_pairs_kernel<<<grid_for(capacity), kBlockSize, 0, stream>>>(keys, total, capacity, pairs);
-  return cudaGetLastError();
-}
 
 std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain) {
   return std::make_unique<LooseOctreeDevice>(config.octree_depth, domain);

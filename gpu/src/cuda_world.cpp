@@ -67,8 +67,6 @@ int key_bits(std::uint32_t n) {
 
 constexpr int kEvents = static_cast<int>(Stage::Count) + 1;
 
-using Readback = gpu::StepStats;
-
 /// The environment variable `name` is "1".
 bool env_is_one(const char* name) {
   const char* v = std::getenv(name);
@@ -145,7 +143,7 @@ struct CudaWorld::Impl {
   DeviceBuffer<std::uint32_t> body_begin{"body contact segments"};
   DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
 
-  Readback* host = nullptr;  // pinned
+  gpu::StepStats* host = nullptr;  // pinned
   cudaGraph_t graph = nullptr;
   cudaGraphExec_t graph_exec = nullptr;
 
@@ -511,8 +509,8 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     check(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev), "cudaDeviceGetAttribute");
     d.warp_grid = static_cast<unsigned>(std::max(1, sms) * 4);
   }
-  check(cudaMallocHost(reinterpret_cast<void**>(&d.host), sizeof(Readback)), "cudaMallocHost (step read-back)");
-  *d.host = Readback{};
+  check(cudaMallocHost(reinterpret_cast<void**>(&d.host), sizeof(gpu::StepStats)), "cudaMallocHost (step read-back)");
+  *d.host = gpu::StepStats{};
   check(cudaStreamCreateWithFlags(&d.stream, cudaStreamNonBlocking), "cudaStreamCreate");
   for (cudaEvent_t& e : d.events) check(cudaEventCreate(&e), "cudaEventCreate");
 

@@ -217,11 +217,6 @@ cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint3
                              unsigned long long* keys, std::uint32_t capacity, cudaStream_t stream);
 
 // ---- broadphase_octree.cu ------------------------------------------------------------
-/// pairs[k] = (keys[k] >> 32, keys[k] & 0xffffffff) for the live keys (k < min(*total,
-/// capacity)).
-cudaError_t launch_unpack_pairs(const unsigned long long* keys, const std::uint32_t* total, std::uint32_t capacity,
-                                Pair* pairs, cudaStream_t stream);
-
 // ---- midphase.cu -----------------------------------------------------------------------
 /// Start: per live pair (one warp each) confirmed[k] for decided pairs, the step 0 items
 /// of mesh pairs into d.out. `grid` blocks of kBlockSize threads (grid-stride).
