@@ -75,6 +75,7 @@ std::shared_ptr<const Model> build_model(const Scene& scene) {
 
   // Meshes are loaded once per (file, scale) and shared by all their instances.
   std::map<std::pair<std::string, float>, std::uint32_t> mesh_cache;
+  std::vector<Aabb> group_boxes;  // world AABBs of the bodies placed so far (see group_positions)
   for (std::size_t gi = 0; gi < sc.groups.size(); ++gi) {
     const GroupSpec& g = sc.groups[gi];
     const std::string key = fmt::format("groups[{}]", gi);
@@ -116,8 +117,12 @@ std::shared_ptr<const Model> build_model(const Scene& scene) {
         break;
       }
     }
-    const std::vector<Vec3> xs = group_positions(g, shapes[shape_id].local, sc.path);
+    const std::vector<Vec3> xs = group_positions(g, shapes[shape_id].local, sc.path, group_boxes);
     const std::vector<Vec3> vs = group_velocities(g);
+    // Random layouts of later groups keep apart from these bodies (not from the walls).
+    if (std::any_of(sc.groups.begin() + static_cast<std::ptrdiff_t>(gi) + 1, sc.groups.end(),
+                    [](const GroupSpec& later) { return later.layout.kind == LayoutSpec::Kind::Random; }))
+      for (const Vec3& x : xs) group_boxes.push_back(translated(shapes[shape_id].local, x));
     const float w = g.mass > 0.0f ? 1.0f / g.mass : 0.0f;
     for (int i = 0; i < g.count; ++i)
       add_body(shape_id, g.name, xs[static_cast<std::size_t>(i)],

@@ -13,7 +13,6 @@
 #include <limits>
 #include <set>
 #include <sstream>
-#include <unordered_map>
 #include <utility>
 
 #include "octocd/error.hpp"
@@ -739,7 +738,8 @@ std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const
          "else the datasets/cache of the source tree octocd was built from)");
 }
 
-std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aabb, const std::string& origin) {
+std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aabb, const std::string& origin,
+                                  const std::vector<Aabb>& placed_before) {
   if (!g.positions.empty()) return g.positions;
   const Ctx c{origin.empty() ? std::string("<scene>") : origin};
   const std::string key = child(at("groups", static_cast<std::size_t>(g.index)), "layout");
@@ -795,47 +795,85 @@ std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aab
     return out;
   }
 
-  // Random: rejection sampling against the bodies already placed. The placed boxes are
-  // binned in a uniform grid of cells wider than a body (plus rounding), so a drawn box
-  // can only overlap boxes binned in its own and the 26 neighbouring cells: the same
-  // draws and the same result as testing every placed box, in O(count) instead of
-  // O(count^2) (10^6 bodies would otherwise take hours).
+  // Random: rejection sampling against the bodies already placed (this group's and
+  // `placed_before`). The placed boxes are binned by centre in a uniform grid of cells
+  // wider than the largest of them (plus rounding): two overlapping boxes then have
+  // centres less than one cell apart per axis, so a drawn box can only overlap boxes
+  // binned in its own and the 26 neighbouring cells: the same draws and the same result
+  // as testing every placed box, in O(count) instead of O(count^2) (10^6 bodies would
+  // otherwise take hours).
   constexpr int kTries = 1000;
-  out.reserve(std::min<std::size_t>(count, 1u << 20));
+  out.reserve(std::min<std::size_t>(count, std::size_t{1} << 24));
   std::vector<Aabb> placed;
-  const double cell = 1.01 * static_cast<double>(std::max(size.x, std::max(size.y, size.z))) + 1e-3;
-  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> bins;
-  auto cell_of = [&](const Vec3& p, int a) {
-    // Region sides are <= 2 kMaxCoordinate and cell >= 1e-3: indices < 2^22.
-    return static_cast<std::int64_t>(std::floor((static_cast<double>(p[a]) - region.min[a]) / cell));
+  placed.reserve(std::min<std::size_t>(count + placed_before.size(), std::size_t{1} << 24));
+  float largest = std::max(size.x, std::max(size.y, size.z));
+  for (const Aabb& b : placed_before)
+    for (int a = 0; a < 3; ++a) largest = std::max(largest, b.max[a] - b.min[a]);
+  // Bins: a dense grid over the region plus one cell of margin on every side, each cell
+  // the head of a chain of placed boxes (next index per box). A box is binned by its
+  // centre, clamped into the grid: a box of an earlier group centred beyond the margin is
+  // more than one cell from every drawn centre, so it cannot overlap a drawn box and its
+  // clamped cell only adds a candidate. Cells are at least 1.01 x the largest box (plus
+  // rounding), widened until the grid has at most 2^24 cells (a wider cell only adds
+  // candidates, never loses one).
+  double cell = 1.01 * static_cast<double>(largest) + 1e-3;
+  std::int64_t dims[3];
+  for (;;) {
+    double cells = 1.0;
+    for (int a = 0; a < 3; ++a) {
+      const double extent = static_cast<double>(region.max[a]) - static_cast<double>(region.min[a]);
+      dims[a] = static_cast<std::int64_t>(std::floor(extent / cell)) + 3;
+      cells *= static_cast<double>(dims[a]);
+    }
+    if (cells <= static_cast<double>(1 << 24)) break;
+    cell *= 1.25;
+  }
+  constexpr std::uint32_t kNone = 0xffffffffu;
+  std::vector<std::uint32_t> head(static_cast<std::size_t>(dims[0] * dims[1] * dims[2]), kNone);
+  std::vector<std::uint32_t> next;
+  next.reserve(placed.capacity());
+  auto cell_of = [&](double coord, int a) {
+    const double grid_min = static_cast<double>(region.min[a]) - cell;
+    const double k = std::floor((coord - grid_min) / cell);
+    return static_cast<std::int64_t>(std::min(std::max(k, 0.0), static_cast<double>(dims[a] - 1)));
   };
-  auto bin_key = [](std::int64_t x, std::int64_t y, std::int64_t z) {
-    constexpr std::int64_t kOff = 1 << 20;  // neighbours of cell 0 are at -1
-    return (static_cast<std::uint64_t>(x + kOff) << 42) | (static_cast<std::uint64_t>(y + kOff) << 21) |
-           static_cast<std::uint64_t>(z + kOff);
+  auto cell_index = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+    return static_cast<std::size_t>(x + dims[0] * (y + dims[1] * z));
   };
+  auto centre_cell = [&](const Aabb& b) {
+    std::int64_t ci[3];
+    for (int a = 0; a < 3; ++a) ci[a] = cell_of(0.5 * (static_cast<double>(b.min[a]) + b.max[a]), a);
+    return cell_index(ci[0], ci[1], ci[2]);
+  };
+  auto insert = [&](const Aabb& b) {
+    const auto id = static_cast<std::uint32_t>(placed.size());
+    placed.push_back(b);
+    std::uint32_t& h = head[centre_cell(b)];
+    next.push_back(h);
+    h = id;
+  };
+  for (const Aabb& b : placed_before) insert(b);
   for (std::size_t k = 0; k < count; ++k) {
     bool ok = false;
     for (int t = 0; t < kTries && !ok; ++t) {
       Vec3 p;
       for (int a = 0; a < 3; ++a) p[a] = rng.uniform(region.min[a], region.max[a]);
       const Aabb box = translated(body_local_aabb, p);
-      const std::int64_t cx = cell_of(p, 0), cy = cell_of(p, 1), cz = cell_of(p, 2);
+      std::int64_t cc[3];
+      for (int a = 0; a < 3; ++a) cc[a] = cell_of(static_cast<double>(p[a]), a);
       ok = true;
       for (std::int64_t dx = -1; dx <= 1 && ok; ++dx)
         for (std::int64_t dy = -1; dy <= 1 && ok; ++dy)
           for (std::int64_t dz = -1; dz <= 1 && ok; ++dz) {
-            const auto it = bins.find(bin_key(cx + dx, cy + dy, cz + dz));
-            if (it == bins.end()) continue;
-            for (const std::uint32_t b : it->second)
+            // A drawn centre lies in the region: its cell is >= 1 and <= dims - 2.
+            for (std::uint32_t b = head[cell_index(cc[0] + dx, cc[1] + dy, cc[2] + dz)]; b != kNone; b = next[b])
               if (overlaps(box, placed[b])) {
                 ok = false;
                 break;
               }
           }
       if (ok) {
-        bins[bin_key(cx, cy, cz)].push_back(static_cast<std::uint32_t>(placed.size()));
-        placed.push_back(box);
+        insert(box);
         out.push_back(p);
       }
     }

@@ -206,10 +206,15 @@ class SplitMix64 {
 ///   count > n_x n_y n_z, saying how many fit;
 /// - random: centres uniform in R (x, y, z drawn in that order from one stream seeded
 ///   with layout.seed), rejected while the body's AABB overlaps (Eq. 6, inclusive) one
-///   already placed; at most 1000 tries per body, else InputError (region too small).
+///   already placed, by this group or in `placed_before`; at most 1000 tries per body,
+///   else InputError (region too small). Time O(count + placed_before.size()): the
+///   placed boxes are binned in a grid of cells wider than the largest of them.
 /// `body_local_aabb` is the local AABB of one body (centred on the origin, SPEC 3).
+/// `placed_before`: world AABBs (m) a random layout keeps apart from (build_model passes
+/// the bodies of the earlier groups, not the walls); ignored by the grid layout.
 std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aabb,
-                                  const std::string& origin);
+                                  const std::string& origin,
+                                  const std::vector<Aabb>& placed_before = {});
 
 /// The initial velocities (m/s) of group `g`'s bodies, in body order: `value` for all
 /// (fixed), or each component uniform(-max, max) drawn x, y, z per body in body order
