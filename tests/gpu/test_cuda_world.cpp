@@ -200,9 +200,12 @@ void expect_same_counts(const FrameMetrics& a, const FrameMetrics& b, const std:
 /// and stops at the first confirmed vertex pair, the cuda engine's level work lists test
 /// every candidate (no early exit), so each of its counts is at least the cpu's, and both
 /// are zero together.
-void expect_cpu_cuda_counts(const FrameMetrics& cpu, const FrameMetrics& gpu, const std::string& what) {
+/// `same_broadphase_work`: false when the two engines ran different broadphase algorithms
+/// (cpu octree vs device octree), whose candidate counts differ by design.
+void expect_cpu_cuda_counts(const FrameMetrics& cpu, const FrameMetrics& gpu, const std::string& what,
+                            bool same_broadphase_work = true) {
   EXPECT_EQ(cpu.frame, gpu.frame) << what;
-  EXPECT_EQ(cpu.cell_candidates, gpu.cell_candidates) << what;
+  if (same_broadphase_work) EXPECT_EQ(cpu.cell_candidates, gpu.cell_candidates) << what;
   EXPECT_EQ(cpu.aabb_pairs, gpu.aabb_pairs) << what;
   EXPECT_EQ(cpu.contacts, gpu.contacts) << what;
   EXPECT_GE(gpu.box_tests, cpu.box_tests) << what;
@@ -551,7 +554,7 @@ TEST_P(CpuVsCudaScale, StatesPairsAndContactsEqualBitForBit) {
     contacts_seen += mc.contacts;
     vertex_tests += mc.vertex_tests;
     ASSERT_EQ(cpu.state_hash(), gpu.state_hash()) << what << ": " << first_difference(cpu.state(), gpu.state());
-    expect_cpu_cuda_counts(mc, mg, what);
+    expect_cpu_cuda_counts(mc, mg, what, false);
     EXPECT_EQ(mg.penetration_max, mc.penetration_max) << what;
     if (rec) expect_same_record(cpu.record(), gpu.record(), what);
     if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
