@@ -205,7 +205,9 @@ void expect_same_counts(const FrameMetrics& a, const FrameMetrics& b, const std:
 void expect_cpu_cuda_counts(const FrameMetrics& cpu, const FrameMetrics& gpu, const std::string& what,
                             bool same_broadphase_work = true) {
   EXPECT_EQ(cpu.frame, gpu.frame) << what;
-  if (same_broadphase_work) EXPECT_EQ(cpu.cell_candidates, gpu.cell_candidates) << what;
+  if (same_broadphase_work) {
+    EXPECT_EQ(cpu.cell_candidates, gpu.cell_candidates) << what;
+  }
   EXPECT_EQ(cpu.aabb_pairs, gpu.aabb_pairs) << what;
   EXPECT_EQ(cpu.contacts, gpu.contacts) << what;
   EXPECT_GE(gpu.box_tests, cpu.box_tests) << what;
