@@ -7,15 +7,20 @@
 // 2. a stable radix sort by key: slot order = (key, body), so every occupied cell is a
 //    contiguous run of slots and the levels follow each other in key order;
 // 3. a level table (first slot of every level, of the overflow list and of the NaN
-//    bodies), then a query per slot, one warp each:
+//    bodies) and a hash table of the occupied cells (cell key -> its run of slots, open
+//    addressing with linear probing, at most half full), then a query per slot, one
+//    warp each:
 //    - a body in a cell (level l) looks at every level m <= l that holds bodies: the
 //      cells whose loose boxes meet its own box (loose_query_axis_q: at most 4 per axis),
-//      found by binary search in the sorted keys, one cell per lane; at m = l it keeps
-//      only slots after its own, at m < l every body;
-//    - an overflow body tests every in-tree body and the overflow bodies after it;
-//    then the exact AABB test (octocd::overlaps, Eq. 6), 32 candidates at a time. Each
-//    overlapping pair is met exactly once (same level: by the smaller slot; across levels:
-//    by the finer body; with the overflow list: by the overflow body), because a body's
+//      looked up in the cell table, one cell per lane; at m = l it keeps only slots after
+//      its own, at m < l every body; the lanes' slot runs are concatenated (a warp scan)
+//      and tested 32 candidates at a time, whatever the runs' lengths;
+//    - an overflow body tests the overflow bodies after it;
+//    then the exact AABB test (octocd::overlaps, Eq. 6). A second kernel, one thread per
+//    in-tree slot, tests it against every overflow body (walls: a handful, each of which
+//    would otherwise scan all n slots with one warp). Each overlapping pair is met exactly
+//    once (same level: by the smaller slot; across levels: by the finer body; with the
+//    overflow list: by the in-tree body, or the smaller overflow slot), because a body's
 //    box lies in its cell's loose box and the query ranges are exact;
 // 4. the pairs are appended as keys (a << 32) | b with warp-aggregated atomics (their
 //    order varies; the set does not), then radix-sorted by the caller: the sorted unique
@@ -39,6 +44,26 @@ struct LooseQBox {
   std::int16_t hi[3];
 };
 
+/// One entry of the cell table: an occupied cell's key and its run of slots [begin, end).
+/// key == kLooseNoKey: an empty entry (kLooseNoKey is never a cell key).
+struct alignas(16) CellEntry {
+  std::uint32_t key;
+  std::uint32_t begin;
+  std::uint32_t end;
+  std::uint32_t pad;
+};
+
+/// The home entry of a cell key (murmur3's 32-bit finaliser: Morton keys of neighbouring
+/// cells differ in low bits only).
+__device__ inline std::uint32_t cell_hash(std::uint32_t k, std::uint32_t mask) {
+  k ^= k >> 16;
+  k *= 0x85ebca6bu;
+  k ^= k >> 13;
+  k *= 0xc2b2ae35u;
+  k ^= k >> 16;
+  return k & mask;
+}
+
 /// What the kernels read and write (device pointers).
 struct LooseDesc {
   const Aabb* aabb = nullptr;      ///< world AABBs, per body
@@ -57,6 +82,8 @@ struct LooseDesc {
   /// Per level m in [0, kLooseMaxDepth + 1]: the first slot whose key is >= level m's base
   /// (entry kLooseMaxDepth + 1: the first overflow slot); then the first NaN slot.
   std::uint32_t* level_begin = nullptr;
+  CellEntry* cells = nullptr;      ///< the cell table: cell_mask + 1 entries
+  std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 2 n)
   unsigned long long* pair_keys = nullptr;  ///< out: (a << 32) | b, appended in any order
   std::uint32_t capacity = 0;               ///< entries pair_keys holds
   std::uint32_t* total = nullptr;           ///< out: pairs found (may exceed capacity)
@@ -115,6 +142,32 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   const std::uint32_t body = d.slot_body[s];
   d.slot_box[s] = d.aabb[body];
   d.slot_q[s] = d.q[body];
+  // The cell table: the first slot of a run writes its begin, the last its end (both
+  // claim or find the key's entry; the table is at least twice the cell count).
+  const std::uint32_t key = d.sorted_key[s];
+  if (key >= kLooseOverflowKey) return;
+  const bool first = s == 0 || d.sorted_key[s - 1] != key;
+  const bool last = s + 1 == d.n || d.sorted_key[s + 1] != key;
+  if (!first && !last) return;
+  std::uint32_t h = cell_hash(key, d.cell_mask);
+  for (;;) {
+    const std::uint32_t old = atomicCAS(&d.cells[h].key, kLooseNoKey, key);
+    if (old == kLooseNoKey || old == key) break;
+    h = (h + 1) & d.cell_mask;
+  }
+  if (first) d.cells[h].begin = s;
+  if (last) d.cells[h].end = s + 1;
+}
+
+/// The run of slots [begin, end) of cell `key` (empty when the cell holds no body).
+__device__ inline uint2 find_cell(const LooseDesc& d, std::uint32_t key) {
+  std::uint32_t h = cell_hash(key, d.cell_mask);
+  for (;;) {
+    const CellEntry e = d.cells[h];
+    if (e.key == key) return make_uint2(e.begin, e.end);
+    if (e.key == kLooseNoKey) return make_uint2(0, 0);
+    h = (h + 1) & d.cell_mask;
+  }
 }
 
 /// First slot in [lo, hi) whose key is >= key.
@@ -129,8 +182,8 @@ __device__ std::uint32_t lower_bound(const std::uint32_t* keys, std::uint32_t lo
 }
 
 
-/// One warp's query for slot s: the lanes test the candidate slots of a range 32 at a
-/// time and append the overlapping pairs (by body index, a < b) with one atomic per 32.
+/// One warp's query for slot s: the lanes test candidate slots 32 at a time and append
+/// the overlapping pairs (by body index, a < b) with one atomic per round that hits.
 struct WarpEmitter {
   const LooseDesc& d;
   std::uint32_t lane;
@@ -138,13 +191,116 @@ struct WarpEmitter {
   std::uint32_t body_s;
   Aabb box_s;
 
+  /// One round: the lanes with `valid` test slot t (every lane calls it).
+  __device__ void test(bool valid, std::uint32_t t) {
+    const bool hit = valid && overlaps(box_s, d.slot_box[t]);
+    const unsigned mask = __ballot_sync(bp::kFullMask, hit);
+    if (mask == 0) return;
+    std::uint32_t base = 0;
+    if (lane == 0) base = atomicAdd(d.total, static_cast<std::uint32_t>(__popc(mask)));
+    base = __shfl_sync(bp::kFullMask, base, 0);
+    if (hit) {
+      const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
+      if (idx < d.capacity) d.pair_keys[idx] = bp::pair_key(body_s, d.slot_body[t]);
+    }
+  }
+
   /// Tests slots [t0, t1) (warp-uniform bounds).
   __device__ void range(std::uint32_t t0, std::uint32_t t1) {
     if (t0 >= t1) return;
     tests += t1 - t0;
-    for (std::uint32_t b = t0; b < t1; b += 32) {
-      const std::uint32_t t = b + lane;
-      const bool hit = t < t1 && overlaps(box_s, d.slot_box[t]);
+    for (std::uint32_t b = t0; b < t1; b += 32) test(b + lane < t1, b + lane);
+  }
+
+  /// Tests the concatenation of every lane's run [t0, t1) (each lane its own bounds):
+  /// an inclusive warp scan of the run lengths, then candidate j of a round belongs to
+  /// the lane whose run holds it (a 5-step binary search over the lanes' offsets).
+  __device__ void runs(std::uint32_t t0, std::uint32_t t1) {
+    const std::uint32_t len = t1 > t0 ? t1 - t0 : 0u;
+    std::uint32_t incl = len;
+    for (unsigned o = 1; o < 32; o <<= 1) {
+      const std::uint32_t v = __shfl_up_sync(bp::kFullMask, incl, o);
+      if (lane >= o) incl += v;
+    }
+    const std::uint32_t total = __shfl_sync(bp::kFullMask, incl, 31);
+    if (total == 0) return;
+    tests += total;
+    for (std::uint32_t k = 0; k < total; k += 32) {
+      const std::uint32_t j = k + lane;
+      // owner = the first lane whose inclusive offset exceeds j.
+      std::uint32_t lo = 0;
+      for (std::uint32_t step = 16; step > 0; step >>= 1) {
+        const std::uint32_t probe = __shfl_sync(bp::kFullMask, incl, lo + step - 1);
+        if (probe <= j) lo += step;
+      }
+      const std::uint32_t owner_t0 = __shfl_sync(bp::kFullMask, t0, lo);
+      const std::uint32_t owner_incl = __shfl_sync(bp::kFullMask, incl, lo);
+      const std::uint32_t owner_len = __shfl_sync(bp::kFullMask, len, lo);
+      const bool valid = j < total;
+      test(valid, owner_t0 + (j - (owner_incl - owner_len)));
+    }
+  }
+};
+
+/// One warp per slot: the loose octree query of the file comment. At each level the
+/// lanes look up the (at most 4 x 4 x 4) cells in the cell table, then the warp tests the
+/// concatenated runs.
+__global__ void loose_query_kernel(LooseDesc d) {
+  const std::uint32_t lane = threadIdx.x & 31u;
+  const std::uint32_t s = (blockIdx.x * blockDim.x + threadIdx.x) >> 5;
+  WarpEmitter e{d, lane};
+  if (s < d.n) {
+    const std::uint32_t key = d.sorted_key[s];
+    e.body_s = d.slot_body[s];
+    e.box_s = d.slot_box[s];
+    if (key == kLooseOverflowKey) {
+      e.range(s + 1, d.level_begin[kLooseMaxDepth + 2]);  // the overflow bodies after it
+    } else if (key != kLooseNoKey) {                      // a NaN box overlaps nothing
+      const int level = loose_key_level(key);
+      const LooseQBox q = d.slot_q[s];
+      for (int m = 0; m <= level; ++m) {
+        if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
+        const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
+        const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
+        const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
+        const int nx = rx.hi - rx.lo + 1, ny = ry.hi - ry.lo + 1, nz = rz.hi - rz.lo + 1;
+        const int cells = nx * ny * nz;
+        for (int c0 = 0; c0 < cells; c0 += 32) {
+          // Lane c finds cell c0 + c's slot run [t0, t1) (empty: t0 == t1).
+          std::uint32_t t0 = 0, t1 = 0;
+          const int c = c0 + static_cast<int>(lane);
+          if (c < cells) {
+            const int ix = rx.lo + c % nx, iy = ry.lo + (c / nx) % ny, iz = rz.lo + c / (nx * ny);
+            const uint2 run = find_cell(d, loose_cell_key(m, static_cast<std::uint32_t>(ix),
+                                                          static_cast<std::uint32_t>(iy),
+                                                          static_cast<std::uint32_t>(iz)));
+            t0 = run.x;
+            t1 = run.y;
+            if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;  // same level: only the slots after s
+          }
+          e.runs(t0, t1);
+        }
+      }
+    }
+  }
+  bp::block_add(d.candidates, lane == 0 ? e.tests : 0ull);
+}
+
+/// One thread per in-tree slot t: the overflow bodies (slots [overflow_begin, used)) that
+/// overlap it. Every thread of a warp walks the same overflow slots (one ballot per
+/// overflow body that hits any of them).
+__global__ void loose_overflow_kernel(LooseDesc d) {
+  const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
+  const std::uint32_t lane = threadIdx.x & 31u;
+  const std::uint32_t ov_begin = d.level_begin[kLooseMaxDepth + 1];
+  const std::uint32_t ov_end = d.level_begin[kLooseMaxDepth + 2];
+  const bool mine = t < ov_begin;
+  unsigned long long tests = 0;
+  if (ov_begin < ov_end && (blockIdx.x * blockDim.x) < ov_begin) {  // block-uniform
+    const Aabb box = mine ? d.slot_box[t] : Aabb{};
+    const std::uint32_t body = mine ? d.slot_body[t] : 0u;
+    for (std::uint32_t o = ov_begin; o < ov_end; ++o) {
+      const bool hit = mine && overlaps(box, d.slot_box[o]);
       const unsigned mask = __ballot_sync(bp::kFullMask, hit);
       if (mask == 0) continue;
       std::uint32_t base = 0;
@@ -152,67 +308,12 @@ struct WarpEmitter {
       base = __shfl_sync(bp::kFullMask, base, 0);
       if (hit) {
         const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
-        if (idx < d.capacity) {
-          d.pair_keys[idx] = bp::pair_key(body_s, d.slot_body[t]);
-        }
+        if (idx < d.capacity) d.pair_keys[idx] = bp::pair_key(body, d.slot_body[o]);
       }
     }
+    if (mine) tests = ov_end - ov_begin;
   }
-};
-
-/// One warp per slot (grid-stride): the loose octree query of the file comment. At each
-/// level the lanes look up the (at most 4 x 4 x 4) cells in parallel, then the warp tests
-/// each non-empty cell's slots.
-__global__ void loose_query_kernel(LooseDesc d) {
-  const std::uint32_t lane = threadIdx.x & 31u;
-  const std::uint32_t warps = (gridDim.x * blockDim.x) >> 5;
-  for (std::uint32_t s = (blockIdx.x * blockDim.x + threadIdx.x) >> 5; s < d.n; s += warps) {
-    const std::uint32_t key = d.sorted_key[s];
-    WarpEmitter e{d, lane};
-    e.body_s = d.slot_body[s];
-    e.box_s = d.slot_box[s];
-    if (key != kLooseNoKey) {  // a NaN box overlaps nothing
-      const std::uint32_t overflow_begin = d.level_begin[kLooseMaxDepth + 1];
-      if (key == kLooseOverflowKey) {
-        const std::uint32_t used = d.level_begin[kLooseMaxDepth + 2];
-        e.range(0, overflow_begin);
-        e.range(s + 1, used);
-      } else {
-        const int level = loose_key_level(key);
-        const LooseQBox q = d.slot_q[s];
-        for (int m = 0; m <= level; ++m) {
-          const std::uint32_t lv_begin = d.level_begin[m];
-          const std::uint32_t lv_end = d.level_begin[m + 1];
-          if (lv_begin == lv_end) continue;  // no body at this level
-          const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
-          const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
-          const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
-          const int nx = rx.hi - rx.lo + 1, ny = ry.hi - ry.lo + 1, nz = rz.hi - rz.lo + 1;
-          const int cells = nx * ny * nz;
-          for (int c0 = 0; c0 < cells; c0 += 32) {
-            // Lane c finds cell c0 + c's slot run [t0, t1) (empty: t0 == t1).
-            std::uint32_t t0 = 0, t1 = 0;
-            const int c = c0 + static_cast<int>(lane);
-            if (c < cells) {
-              const int ix = rx.lo + c % nx, iy = ry.lo + (c / nx) % ny, iz = rz.lo + c / (nx * ny);
-              const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix), static_cast<std::uint32_t>(iy),
-                                                      static_cast<std::uint32_t>(iz));
-              t0 = lower_bound(d.sorted_key, lv_begin, lv_end, ck);
-              t1 = (t0 < lv_end && d.sorted_key[t0] == ck) ? lower_bound(d.sorted_key, t0, lv_end, ck + 1) : t0;
-              if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;  // same level: only the slots after s
-            }
-            unsigned busy = __ballot_sync(bp::kFullMask, t0 < t1);
-            while (busy) {
-              const int src = __ffs(busy) - 1;
-              busy &= busy - 1;
-              e.range(__shfl_sync(bp::kFullMask, t0, src), __shfl_sync(bp::kFullMask, t1, src));
-            }
-          }
-        }
-      }
-    }
-    if (lane == 0 && e.tests) atomicAdd(d.candidates, e.tests);
-  }
+  bp::block_add(d.candidates, tests);
 }
 
 /// `octree` on the device (see the file comment).
@@ -234,6 +335,10 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     slot_box_.ensure(n);
     slot_q_.ensure(n);
     level_begin_.ensure(kLevelTable);
+    if (n > (1u << 30)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^30", n));
+    cell_mask_ = 1;
+    while (cell_mask_ + 1 < 2ull * std::max<std::uint32_t>(n, 1)) cell_mask_ = (cell_mask_ << 1) | 1u;
+    cells_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
     std::size_t a = 0, c = 0;
     check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
                                           static_cast<int>(n), 0, 32),
@@ -263,6 +368,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.slot_box = slot_box_.get();
     d.slot_q = slot_q_.get();
     d.level_begin = level_begin_.get();
+    d.cells = cells_.get();
+    d.cell_mask = cell_mask_;
     d.pair_keys = out.keys;
     d.capacity = out.capacity;
     d.total = out.total;
@@ -281,17 +388,21 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
                                              slot_body_.get(), static_cast<int>(n), 0, 32, stream),
              "cub::DeviceRadixSort::SortPairs");
+    check(cudaMemsetAsync(cells_.get(), 0xff, (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(CellEntry), stream),
+          "cudaMemset octree cell table");
     loose_gather_kernel<<<grid_for(std::max<std::uint32_t>(n, kLevelTable)), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_gather");
     loose_query_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_query");
+    loose_overflow_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(d);
+    bp::launched(cudaGetLastError(), "loose_overflow");
   }
 
   std::uint64_t device_bytes() const override {
     std::uint64_t t = 0;
     for (const BufferBase* b : std::initializer_list<const BufferBase*>{
              &extent_, &min_, &key_, &body_, &q_, &sorted_key_, &slot_body_, &slot_box_, &slot_q_,
-             &level_begin_, &temp_})
+             &level_begin_, &cells_, &temp_})
       t += b->bytes();
     return t;
   }
@@ -311,6 +422,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   DeviceBuffer<Aabb> slot_box_{"octree slot boxes"};
   DeviceBuffer<LooseQBox> slot_q_{"octree slot unit boxes"};
   DeviceBuffer<std::uint32_t> level_begin_{"octree level table"};
+  std::uint32_t cell_mask_ = 1;
+  DeviceBuffer<CellEntry> cells_{"octree cell table"};
   DeviceBuffer<unsigned char> temp_{"octree CUB temporary storage"};
 };
 

@@ -120,6 +120,7 @@ struct CudaWorld::Impl {
   DeviceBuffer<std::uint32_t> level_offsets{"octree level offsets"};
   DeviceBuffer<float> theta{"per-shape theta"};
   DeviceBuffer<gpu::StepStats> stats{"step statistics"};
+  DeviceBuffer<gpu::MetricsResult> metric_partials{"metrics partial sums"};
   // Variable size (pair_cap, list_cap), grown on overflow; reset_capacities shrinks them.
   DeviceBuffer<std::uint32_t> bp_count{"broadphase counts"};
   DeviceBuffer<std::uint32_t> bp_offset{"broadphase offsets"};
@@ -164,7 +165,7 @@ struct CudaWorld::Impl {
 
   std::vector<BufferBase*> all_buffers() {
     std::vector<BufferBase*> all{&x, &v, &x_saved, &v_saved, &w, &local, &shape, &aabb, &shapes, &vertices, &cells,
-                                 &level_offsets, &theta, &stats};
+                                 &level_offsets, &theta, &stats, &metric_partials};
     for (BufferBase* b : scratch_buffers()) all.push_back(b);
     return all;
   }
@@ -400,6 +401,7 @@ struct CudaWorld::Impl {
     xd.pair_capacity = pcap();
     xd.slop = params.slop;
     xd.out = &stats.get()->metrics;
+    xd.partials = metric_partials.get();
     launched(gpu::launch_metrics(xd, stream), "metrics");
     check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
           "cudaMemcpy step statistics");
@@ -572,6 +574,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.x_saved.reset(n);
   d.v_saved.reset(n);
   d.stats.reset(1);
+  d.metric_partials.reset(gpu::kMetricsBlocks);
   // First guesses; a step that needs more grows them and runs again.
   d.pair_cap = 2 * n + 64;
   d.list_cap = 4 * n + 256;

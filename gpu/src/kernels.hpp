@@ -31,6 +31,10 @@ namespace gpu {
 constexpr int kBlockSize = 256;
 /// Threads of the single block that reduces the frame's metrics (a power of two).
 constexpr int kMetricsBlockSize = 512;
+/// Blocks of the metrics reduction's first pass when the scene has more than
+/// kMetricsOneBlockBodies bodies (a fixed number: the sums' order depends on n only).
+constexpr unsigned kMetricsBlocks = 128;
+constexpr std::uint32_t kMetricsOneBlockBodies = 32768;
 
 /// Blocks of kBlockSize threads covering `count` elements (at least 1).
 inline unsigned grid_for(std::size_t count) {
@@ -198,6 +202,8 @@ struct MetricsDesc {
   std::uint32_t pair_capacity = 0;
   float slop = 0.0f;
   MetricsResult* out = nullptr;
+  /// Scratch of kMetricsBlocks partial results (device), used when n > kMetricsOneBlockBodies.
+  MetricsResult* partials = nullptr;
 };
 
 // ---- integrate.cu --------------------------------------------------------------------
@@ -244,7 +250,9 @@ cudaError_t launch_apply_sums(const ApplyDesc& d, cudaStream_t stream);
 
 // ---- metrics.cu -------------------------------------------------------------------------
 /// Kinetic energy, momentum, the first non-finite body, and the first pass's contact
-/// statistics into *d.out (one block, fixed order: deterministic run to run).
+/// statistics into *d.out: one block for n <= kMetricsOneBlockBodies, else
+/// kMetricsBlocks blocks into d.partials and one block combining them; a fixed order for
+/// a given n, so deterministic run to run.
 cudaError_t launch_metrics(const MetricsDesc& d, cudaStream_t stream);
 
 // ---- primitives.cu (CUB) ------------------------------------------------------------
