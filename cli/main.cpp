@@ -65,7 +65,7 @@ struct Totals {
   double pairs = 0.0, dynamic_pairs = 0.0, candidates = 0.0, contacts = 0.0, box_pairs = 0.0,
          vertex_tests = 0.0;
   std::uint64_t max_pairs = 0, max_dynamic_pairs = 0, max_candidates = 0, max_contacts = 0,
-                max_box_pairs = 0, max_vertex_tests = 0;
+                max_box_pairs = 0, max_vertex_tests = 0, max_memory_bytes = 0;
   double pen_mean_sum = 0.0, pen_max = 0.0;
   std::int64_t frames_with_contacts = 0;
   double energy_sum = 0.0, energy_max = 0.0;
@@ -87,6 +87,7 @@ struct Totals {
     max_contacts = std::max(max_contacts, m.contacts);
     max_box_pairs = std::max(max_box_pairs, m.box_pairs);
     max_vertex_tests = std::max(max_vertex_tests, m.vertex_tests);
+    max_memory_bytes = std::max(max_memory_bytes, m.memory_bytes);
     if (m.contacts > 0) {
       ++frames_with_contacts;
       pen_mean_sum += m.penetration_mean;
@@ -161,9 +162,13 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
              world.midphase_name(), world.device());
   fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
              static_cast<double>(t.frames) * s.dt, wall_s);
-  fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n\n",
+  fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n",
              t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0,
              t.step_ms / n);
+  if (t.max_memory_bytes > 0)  // engines that report it (cuda: device memory)
+    fmt::print("memory       {:.1f} MiB held by the pipeline's buffers (largest over frames{})\n",
+               static_cast<double>(t.max_memory_bytes) / 1048576.0, engine == "cuda" ? ", device memory" : "");
+  fmt::print("\n");
   fmt::print("{:<12} {:>10} {:>8}\n", "stage", "mean ms", "share");
   for (int st = 0; st < kStages; ++st) {
     const auto stage = static_cast<octocd::Stage>(st);
@@ -231,6 +236,8 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   j["mean_box_pairs"] = t.box_pairs / n;
   j["mean_vertex_tests"] = t.vertex_tests / n;
   j["penetration_max"] = t.pen_max;
+  // Bytes held by the pipeline's buffers, largest over frames (cuda: device memory).
+  j["memory_bytes"] = t.max_memory_bytes;
   // Kinetic energy (J, dynamic bodies): mean over frames, largest, last frame's.
   j["kinetic_energy"] = {{"mean", t.energy_sum / n}, {"max", t.energy_max}, {"last", t.last.kinetic_energy}};
   j["device"] = world.device();
