@@ -24,11 +24,12 @@ namespace bp {
 constexpr unsigned kWarpSize = 32;
 constexpr unsigned kFullMask = 0xffffffffu;
 
-/// The output key of the pair {p, q} (p != q): (min << 32) | max (device_broadphase.hpp).
-__device__ inline unsigned long long pair_key(std::uint32_t p, std::uint32_t q) {
+/// The output key of the pair {p, q} (p != q): (min << shift) | max, shift in [1, 32]
+/// with p, q < 2^shift (PairOutput::shift, device_broadphase.hpp).
+__device__ inline unsigned long long pair_key(std::uint32_t p, std::uint32_t q, int shift) {
   const std::uint32_t a = p < q ? p : q;
   const std::uint32_t b = p < q ? q : p;
-  return (static_cast<unsigned long long>(a) << 32) | b;
+  return (static_cast<unsigned long long>(a) << shift) | b;
 }
 
 /// First index in [lo, hi) of the ascending `keys` whose key is >= key (hi if none).

@@ -13,7 +13,7 @@ namespace {
 /// One warp per body i (grid-stride); the lanes test j = i + 1 .. n - 1, 32 at a time.
 /// Counting (keys == nullptr) or writing the keys in j order from offset[i].
 __global__ void flat_kernel(const Aabb* aabb, std::uint32_t n, std::uint32_t* count, const std::uint32_t* offset,
-                            unsigned long long* keys, std::uint32_t capacity) {
+                            unsigned long long* keys, std::uint32_t capacity, int shift) {
   const std::uint32_t lane = threadIdx.x & 31u;
   const std::uint32_t warps = (gridDim.x * blockDim.x) >> 5;
   for (std::uint32_t i = (blockIdx.x * blockDim.x + threadIdx.x) >> 5; i < n; i += warps) {
@@ -26,7 +26,7 @@ __global__ void flat_kernel(const Aabb* aabb, std::uint32_t n, std::uint32_t* co
       const unsigned mask = __ballot_sync(bp::kFullMask, hit);
       if (keys && hit) {
         const std::uint32_t idx = o + found + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
-        if (idx < capacity) keys[idx] = bp::pair_key(i, j);
+        if (idx < capacity) keys[idx] = bp::pair_key(i, j, shift);
       }
       found += static_cast<std::uint32_t>(__popc(mask));
     }
@@ -39,14 +39,14 @@ __global__ void flat_kernel(const Aabb* aabb, std::uint32_t n, std::uint32_t* co
 
 cudaError_t launch_flat_count(const Aabb* aabb, std::uint32_t n, std::uint32_t* count, cudaStream_t stream) {
   if (n == 0) return cudaSuccess;
-  flat_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(aabb, n, count, nullptr, nullptr, 0);
+  flat_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(aabb, n, count, nullptr, nullptr, 0, 32);
   return cudaGetLastError();
 }
 
 cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset,
-                             unsigned long long* keys, std::uint32_t capacity, cudaStream_t stream) {
+                             unsigned long long* keys, std::uint32_t capacity, int shift, cudaStream_t stream) {
   if (n == 0) return cudaSuccess;
-  flat_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(aabb, n, nullptr, offset, keys, capacity);
+  flat_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(aabb, n, nullptr, offset, keys, capacity, shift);
   return cudaGetLastError();
 }
 

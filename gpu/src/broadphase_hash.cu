@@ -144,7 +144,7 @@ __global__ void hash_cell_query_kernel(HashDesc d) {
         if (!overlaps(bp, d.aabb[q])) continue;
         if (kFill) {
           const unsigned long long pos = static_cast<unsigned long long>(base) + found;
-          if (pos < d.out.capacity) d.out.keys[pos] = bp::pair_key(p, q);
+          if (pos < d.out.capacity) d.out.keys[pos] = bp::pair_key(p, q, d.out.shift);
         }
         ++found;
       }
@@ -182,7 +182,7 @@ __global__ void hash_oversize_query_kernel(HashDesc d) {
             hit = overlaps(bp_box, d.aabb[q]);
           }
         }
-        w.round(hit, hit ? bp::pair_key(p, q) : 0ull);
+        w.round(hit, hit ? bp::pair_key(p, q, d.out.shift) : 0ull);
       }
     }
     if (!kFill && lane == 0) d.count[d.entries + p] = w.written;

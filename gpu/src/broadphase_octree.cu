@@ -72,7 +72,13 @@ struct LooseDesc {
   int depth = 2;                   ///< D_w in [0, 10]; -1 = auto (from *min_extent)
   float* extent = nullptr;         ///< scratch per body (auto depth): largest unit side
   float* min_extent = nullptr;     ///< one float: the smallest extent (auto depth)
-  std::uint32_t* key = nullptr;    ///< per body: cell key (kLooseOverflowKey / kLooseNoKey)
+  /// The sort keys of overflow and NaN bodies: kLooseOverflowKey and kLooseNoKey with
+  /// depth `auto`; with a fixed D_w the two values after level D_w's last cell key
+  /// (loose_level_base(D_w + 1) and + 1), so the key sort covers only the bits they need
+  /// (D_w = 2: 7 bits, one radix pass instead of four).
+  std::uint32_t overflow_key = kLooseOverflowKey;
+  std::uint32_t nan_key = kLooseNoKey;
+  std::uint32_t* key = nullptr;    ///< per body: cell key, overflow_key or nan_key
   std::uint32_t* body = nullptr;   ///< per body: its index (the sort's values)
   LooseQBox* q = nullptr;          ///< per body: fixed-point unit box
   const std::uint32_t* sorted_key = nullptr;   ///< per slot: key, ascending
@@ -84,7 +90,8 @@ struct LooseDesc {
   std::uint32_t* level_begin = nullptr;
   CellEntry* cells = nullptr;      ///< the cell table: cell_mask + 1 entries
   std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 2 n)
-  unsigned long long* pair_keys = nullptr;  ///< out: (a << 32) | b, appended in any order
+  unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
+  int shift = 32;                           ///< PairOutput::shift
   std::uint32_t capacity = 0;               ///< entries pair_keys holds
   std::uint32_t* total = nullptr;           ///< out: pairs found (may exceed capacity)
   unsigned long long* candidates = nullptr; ///< out (added): exact AABB tests
@@ -108,13 +115,14 @@ __global__ void loose_keys_kernel(LooseDesc d) {
   d.body[i] = i;
   LooseQBox q{};
   if (loose_has_nan(b)) {
-    d.key[i] = kLooseNoKey;
+    d.key[i] = d.nan_key;
     d.q[i] = q;
     return;
   }
   const Vec3 lo = loose_unit(d.grid, b.min);
   const Vec3 hi = loose_unit(d.grid, b.max);
-  d.key[i] = loose_place_key(loose_place_unit(lo, hi, depth));
+  const std::uint32_t key = loose_place_key(loose_place_unit(lo, hi, depth));
+  d.key[i] = key == kLooseOverflowKey ? d.overflow_key : key;
   q.lo[0] = static_cast<std::int16_t>(loose_q_min(lo.x));
   q.lo[1] = static_cast<std::int16_t>(loose_q_min(lo.y));
   q.lo[2] = static_cast<std::int16_t>(loose_q_min(lo.z));
@@ -133,9 +141,10 @@ constexpr int kLevelTable = kLooseMaxDepth + 3;  // levels 0..10, overflow, NaN
 __global__ void loose_gather_kernel(LooseDesc d) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   if (s < kLevelTable) {  // the level table (the sorted keys are complete)
+    // Levels deeper than D_w hold no body: their entries are the overflow list's start.
     const std::uint32_t base = s <= static_cast<std::uint32_t>(kLooseMaxDepth)
-                                   ? loose_level_base(static_cast<int>(s))
-                                   : (s == kLooseMaxDepth + 1 ? kLooseOverflowKey : kLooseNoKey);
+                                   ? min(loose_level_base(static_cast<int>(s)), d.overflow_key)
+                                   : (s == kLooseMaxDepth + 1 ? d.overflow_key : d.nan_key);
     d.level_begin[s] = lower_bound(d.sorted_key, 0, d.n, base);
   }
   if (s >= d.n) return;
@@ -145,7 +154,7 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   // The cell table: the first slot of a run writes its begin, the last its end (both
   // claim or find the key's entry; the table is at least twice the cell count).
   const std::uint32_t key = d.sorted_key[s];
-  if (key >= kLooseOverflowKey) return;
+  if (key >= d.overflow_key) return;
   const bool first = s == 0 || d.sorted_key[s - 1] != key;
   const bool last = s + 1 == d.n || d.sorted_key[s + 1] != key;
   if (!first && !last) return;
@@ -201,7 +210,7 @@ struct WarpEmitter {
     base = __shfl_sync(bp::kFullMask, base, 0);
     if (hit) {
       const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
-      if (idx < d.capacity) d.pair_keys[idx] = bp::pair_key(body_s, d.slot_body[t]);
+      if (idx < d.capacity) d.pair_keys[idx] = bp::pair_key(body_s, d.slot_body[t], d.shift);
     }
   }
 
@@ -253,9 +262,9 @@ __global__ void loose_query_kernel(LooseDesc d) {
     const std::uint32_t key = d.sorted_key[s];
     e.body_s = d.slot_body[s];
     e.box_s = d.slot_box[s];
-    if (key == kLooseOverflowKey) {
+    if (key == d.overflow_key) {
       e.range(s + 1, d.level_begin[kLooseMaxDepth + 2]);  // the overflow bodies after it
-    } else if (key != kLooseNoKey) {                      // a NaN box overlaps nothing
+    } else if (key != d.nan_key) {                        // a NaN box overlaps nothing
       const int level = loose_key_level(key);
       const LooseQBox q = d.slot_q[s];
       for (int m = 0; m <= level; ++m) {
@@ -308,7 +317,7 @@ __global__ void loose_overflow_kernel(LooseDesc d) {
       base = __shfl_sync(bp::kFullMask, base, 0);
       if (hit) {
         const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
-        if (idx < d.capacity) d.pair_keys[idx] = bp::pair_key(body, d.slot_body[o]);
+        if (idx < d.capacity) d.pair_keys[idx] = bp::pair_key(body, d.slot_body[o], d.shift);
       }
     }
     if (mine) tests = ov_end - ov_begin;
@@ -319,7 +328,13 @@ __global__ void loose_overflow_kernel(LooseDesc d) {
 /// `octree` on the device (see the file comment).
 class LooseOctreeDevice final : public DeviceBroadPhase {
  public:
-  LooseOctreeDevice(int depth, const Aabb& domain) : depth_(depth), grid_(loose_grid(domain)) {}
+  LooseOctreeDevice(int depth, const Aabb& domain) : depth_(depth), grid_(loose_grid(domain)) {
+    if (depth_ >= 0 && depth_ < kLooseMaxDepth) {
+      overflow_key_ = loose_level_base(depth_ + 1);
+      key_bits_ = 1;
+      while ((overflow_key_ + 1) >> key_bits_ != 0) ++key_bits_;  // bits of the NaN key
+    }
+  }
 
   std::string name() const override { return "octree"; }
 
@@ -358,6 +373,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.n = n;
     d.grid = grid_;
     d.depth = depth_;
+    d.overflow_key = overflow_key_;
+    d.nan_key = overflow_key_ == kLooseOverflowKey ? kLooseNoKey : overflow_key_ + 1;
     d.extent = extent_.get();
     d.min_extent = min_.get();
     d.key = key_.get();
@@ -371,6 +388,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.cells = cells_.get();
     d.cell_mask = cell_mask_;
     d.pair_keys = out.keys;
+    d.shift = out.shift;
     d.capacity = out.capacity;
     d.total = out.total;
     d.candidates = out.candidates;
@@ -386,7 +404,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     bp::launched(cudaGetLastError(), "loose_keys");
     bytes = temp_.capacity();
     bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
-                                             slot_body_.get(), static_cast<int>(n), 0, 32, stream),
+                                             slot_body_.get(), static_cast<int>(n), 0, key_bits_, stream),
              "cub::DeviceRadixSort::SortPairs");
     check(cudaMemsetAsync(cells_.get(), 0xff, (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(CellEntry), stream),
           "cudaMemset octree cell table");
@@ -410,6 +428,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
  private:
   int depth_;
   LooseGrid grid_;
+  std::uint32_t overflow_key_ = kLooseOverflowKey;  // see LooseDesc::overflow_key
+  int key_bits_ = 32;                               // the key sort's end bit
   static constexpr std::uint32_t kNotReserved = 0xffffffffu;
   std::uint32_t n_ = kNotReserved;
   DeviceBuffer<float> extent_{"octree body extents"};

@@ -117,7 +117,7 @@ __global__ void strict_query_kernel(StrictDesc d) {
         unsigned long long pk = 0;
         if (t < end) {
           hit = overlaps(box, d.slot_box[t]);
-          if (kFill && hit) pk = bp::pair_key(body_s, d.slot_body[t]);
+          if (kFill && hit) pk = bp::pair_key(body_s, d.slot_body[t], d.out.shift);
         }
         w.round(hit, pk);
       }

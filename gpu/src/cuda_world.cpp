@@ -242,7 +242,7 @@ struct CudaWorld::Impl {
     items_b.ensure(list_cap);
     body_begin.ensure(n1);
     std::size_t a = 0, b = 0, c = 0;
-    check(gpu::sort_keys_u64(nullptr, a, pair_keys.get(), pair_keys_sorted.get(), pcap(), 32 + key_bits(n), stream),
+    check(gpu::sort_keys_u64(nullptr, a, pair_keys.get(), pair_keys_sorted.get(), pcap(), 2 * key_bits(n), stream),
           "cub::DeviceRadixSort::SortKeys (size)");
     check(gpu::sort_pairs_u32(nullptr, b, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(), 2 * pcap(),
                               key_bits(n), stream),
@@ -265,7 +265,8 @@ struct CudaWorld::Impl {
              "cub::DeviceScan::ExclusiveSum");
     check(cudaMemcpyAsync(counts(), bp_offset.get() + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, stream),
           "cudaMemcpy pair total");
-    launched(gpu::launch_flat_fill(aabb.get(), n, bp_offset.get(), pair_keys.get(), pcap(), stream), "flat_fill");
+    launched(gpu::launch_flat_fill(aabb.get(), n, bp_offset.get(), pair_keys.get(), pcap(), key_bits(n), stream),
+             "flat_fill");
   }
 
   /// Enqueues one whole step on the stream: no allocation, no host synchronisation (it
@@ -297,12 +298,15 @@ struct CudaWorld::Impl {
       out.capacity = pcap();
       out.total = counts();
       out.candidates = counters() + 3;
+      out.shift = key_bits(n);
       bp->find(aabb.get(), n, out, stream);
     } else {
       flat_broadphase();
     }
     std::size_t bytes = temp.capacity();
-    launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(), 32 + key_bits(n),
+    // Keys are (a << key_bits(n)) | b: the sort covers 2 key_bits(n) bits (padding keys,
+    // all ones, still sort after every real key: a < b < 2^key_bits(n)).
+    launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(), 2 * key_bits(n),
                                 stream),
              "cub::DeviceRadixSort::SortKeys");
     record_event(3);  // the pairs are unpacked from the sorted keys by mid_start
@@ -316,6 +320,7 @@ struct CudaWorld::Impl {
     md.levels = levels;
     md.pairs = pairs.get();
     md.pair_keys = pair_keys_sorted.get();
+    md.pair_shift = key_bits(n);
     md.pair_count = counts();
     md.pair_capacity = pcap();
     md.confirmed = confirmed.get();

@@ -33,7 +33,10 @@ namespace gpu {
 
 /// Where a device broadphase writes its pairs (all device pointers).
 struct PairOutput {
-  unsigned long long* keys = nullptr;        ///< capacity entries: (a << 32) | b, a < b
+  unsigned long long* keys = nullptr;        ///< capacity entries: (a << shift) | b, a < b
+  /// Bits of b in a key, in [1, 32]; every body index must be < 2^shift. The engine uses
+  /// the bits of n - 1 (key_bits), so its key sort covers 2 x shift bits, not 32 + shift.
+  int shift = 32;
   std::uint32_t capacity = 0;                ///< entries keys can hold
   std::uint32_t* total = nullptr;            ///< out: pairs found (may exceed capacity)
   unsigned long long* candidates = nullptr;  ///< added: exact AABB tests

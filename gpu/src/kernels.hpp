@@ -112,6 +112,7 @@ struct MidListDesc {
   hd::LevelList levels;
   Pair* pairs = nullptr;  ///< start writes pairs[k] from pair_keys; the others read them
   const unsigned long long* pair_keys = nullptr;  ///< start: the sorted pair keys
+  int pair_shift = 32;  ///< start: keys are (a << pair_shift) | b (PairOutput::shift)
   const std::uint32_t* pair_count = nullptr;  ///< device: pairs found (live = min with capacity)
   std::uint32_t pair_capacity = 0;
   std::uint8_t* confirmed = nullptr;        ///< out: 1 = contact confirmed (start writes every pair)
@@ -217,10 +218,11 @@ cudaError_t launch_clamp(const BodiesDesc& b, float v_max, cudaStream_t stream);
 // ---- broadphase_flat.cu --------------------------------------------------------------
 /// count[i] = number of j > i whose AABB overlaps body i's (Eq. 6); count[n] untouched.
 cudaError_t launch_flat_count(const Aabb* aabb, std::uint32_t n, std::uint32_t* count, cudaStream_t stream);
-/// Writes body i's pairs (i, j), j ascending, as keys (i << 32) | j at keys[offset[i] ..]
-/// (only below `capacity`): with offset the exclusive scan of count, sorted by (a, b).
+/// Writes body i's pairs (i, j), j ascending, as keys (i << shift) | j at keys[offset[i]
+/// ..] (only below `capacity`; n <= 2^shift): with offset the exclusive scan of count,
+/// sorted by (a, b).
 cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset,
-                             unsigned long long* keys, std::uint32_t capacity, cudaStream_t stream);
+                             unsigned long long* keys, std::uint32_t capacity, int shift, cudaStream_t stream);
 
 // ---- broadphase_octree.cu ------------------------------------------------------------
 // ---- midphase.cu -----------------------------------------------------------------------

@@ -150,8 +150,8 @@ __global__ void mid_start_kernel(MidListDesc d) {
     // The pair from its sorted key (the broadphase's output), kept for the later stages.
     const unsigned long long key = d.pair_keys[k];
     Pair p;
-    p.a = static_cast<std::uint32_t>(key >> 32);
-    p.b = static_cast<std::uint32_t>(key & 0xffffffffull);
+    p.a = static_cast<std::uint32_t>(key >> d.pair_shift);
+    p.b = static_cast<std::uint32_t>(key & ((1ull << d.pair_shift) - 1ull));
     if (lane_id() == 0) d.pairs[k] = p;
     const PairContext c = context(d, k, p);
     if (c.static_static || c.s.kind == hd::PairKind::Decided || c.s.kind == hd::PairKind::Exhaustive) {

@@ -291,6 +291,7 @@ struct FindResult {
   unsigned long long candidates = 0;
   std::vector<unsigned long long> keys;  ///< the first min(total, capacity) keys, as written
   bool wrote_past_capacity = false;      ///< the slot after `capacity` was overwritten
+  int shift = 32;                        ///< the PairOutput::shift the keys were written with
 };
 
 /// Output buffers of one find(): capacity + 1 key slots filled with the sentinel (the
@@ -301,8 +302,9 @@ struct Output {
   DeviceBuffer<std::uint32_t> total{"test pair total"};
   DeviceBuffer<unsigned long long> candidates{"test candidates"};
   std::uint32_t capacity = 0;
+  int shift = 32;  // PairOutput::shift
 
-  Output(std::uint32_t cap, cudaStream_t s) : capacity(cap) {
+  Output(std::uint32_t cap, cudaStream_t s, int key_shift = 32) : capacity(cap), shift(key_shift) {
     keys.reset(static_cast<std::size_t>(cap) + 1);
     total.reset(1);
     candidates.reset(1);
@@ -319,11 +321,13 @@ struct Output {
     o.capacity = capacity;
     o.total = total.get();
     o.candidates = candidates.get();
+    o.shift = shift;
     return o;
   }
   FindResult read(cudaStream_t s) const {
     gpu::check(cudaStreamSynchronize(s), "cudaStreamSynchronize (after find)");
     FindResult r;
+    r.shift = shift;
     r.total = read_one(total.get(), s);
     r.candidates = read_one(candidates.get(), s);
     std::vector<unsigned long long> all;
@@ -335,9 +339,16 @@ struct Output {
   }
 };
 
+/// The engine's PairOutput::shift for n bodies: the bits of n (cuda_world.cpp key_bits).
+int engine_shift(std::uint32_t n) {
+  int bits = 1;
+  while (bits < 32 && (n >> bits) != 0) ++bits;
+  return bits;
+}
+
 FindResult find_once(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, std::uint32_t n, std::uint32_t capacity,
-                     cudaStream_t s) {
-  Output out(capacity, s);
+                     cudaStream_t s, int shift = 32) {
+  Output out(capacity, s, shift);
   bp.find(boxes.get(), n, out.pair_output(), s);
   return out.read(s);
 }
@@ -345,17 +356,19 @@ FindResult find_once(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, std:
 /// find() as the engine uses it: a small output first, regrown to the total and rerun
 /// when it overflows.
 FindResult find_all(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, std::uint32_t n, cudaStream_t s) {
-  FindResult r = find_once(bp, boxes, n, 16, s);
-  if (r.total > 16) r = find_once(bp, boxes, n, r.total, s);
+  FindResult r = find_once(bp, boxes, n, 16, s, engine_shift(n));
+  if (r.total > 16) r = find_once(bp, boxes, n, r.total, s, engine_shift(n));
   return r;
 }
 
 /// The keys as pairs, checked (a < b < n, no duplicate) and sorted.
 ::testing::AssertionResult to_pairs(const std::vector<unsigned long long>& keys, std::size_t n,
-                                    std::vector<Pair>& pairs) {
+                                    std::vector<Pair>& pairs, int shift) {
   pairs.clear();
   for (const unsigned long long k : keys) {
-    const Pair p{static_cast<std::uint32_t>(k >> 32), static_cast<std::uint32_t>(k & 0xffffffffull)};
+    const Pair p{static_cast<std::uint32_t>(k >> shift), static_cast<std::uint32_t>(k & ((1ull << shift) - 1ull))};
+    if ((k >> shift) >> 32 != 0)
+      return ::testing::AssertionFailure() << fmt::format("bad key 0x{:016x}: a above 32 bits (shift {})", k, shift);
     if (!(p.a < p.b && p.b < n))
       return ::testing::AssertionFailure() << fmt::format("bad key 0x{:016x}: pair ({}, {}) with n = {}", k, p.a, p.b, n);
     pairs.push_back(p);
@@ -420,7 +433,7 @@ TEST_P(DeviceBroadPhaseTest, PairSetEqualsFlatOnEveryBoxSet) {
     ASSERT_EQ(r.total, set.flat.size());
     EXPECT_FALSE(r.wrote_past_capacity);
     std::vector<Pair> pairs;
-    ASSERT_TRUE(to_pairs(r.keys, n, pairs));
+    ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
     EXPECT_TRUE(same_pairs(pairs, set.flat, set.boxes));
     if (v.config.name == "octree-strict") {
       // Same node math: the related pairs the device tests are the CPU's cell candidates.
@@ -428,16 +441,15 @@ TEST_P(DeviceBroadPhaseTest, PairSetEqualsFlatOnEveryBoxSet) {
     } else {
       EXPECT_GE(r.candidates, static_cast<unsigned long long>(r.total));
     }
-    // Determinism: the same instance again gives the same bits.
-    const FindResult again = find_once(*bp, boxes, n, std::max<std::uint32_t>(r.total, 1), stream.s);
+    // Determinism: the same instance again gives the same set (the order of the keys may
+    // vary run to run: the loose octree appends with atomics; the caller sorts them),
+    // here with the default key shift 32 instead of the engine's.
+    const FindResult again = find_once(*bp, boxes, n, std::max<std::uint32_t>(r.total, 1), stream.s, 32);
     EXPECT_EQ(again.total, r.total);
     EXPECT_EQ(again.candidates, r.candidates);
-    // The contract is the set (the order of the keys may vary run to run: the loose
-    // octree appends with atomics); the caller sorts them.
-    std::vector<unsigned long long> k1 = r.keys, k2 = again.keys;
-    std::sort(k1.begin(), k1.end());
-    std::sort(k2.begin(), k2.end());
-    EXPECT_TRUE(k1 == k2) << "the key set changed between two runs";
+    std::vector<Pair> pairs_again;
+    ASSERT_TRUE(to_pairs(again.keys, n, pairs_again, again.shift));
+    EXPECT_TRUE(pairs_again == pairs) << "the pair set changed between two runs (shift 32 vs " << r.shift << ")";
     EXPECT_GT(bp->device_bytes(), 0u);
   }
 }
@@ -458,20 +470,20 @@ TEST_P(DeviceBroadPhaseTest, CapacityOverflowGivesTheTotalAndRerunGivesTheSet) {
   EXPECT_EQ(none.total, set.flat.size());
   EXPECT_FALSE(none.wrote_past_capacity) << "capacity 0: a key was written";
 
-  const FindResult one = find_once(*bp, boxes, n, 1, stream.s);
+  const FindResult one = find_once(*bp, boxes, n, 1, stream.s, engine_shift(n));
   EXPECT_EQ(one.total, set.flat.size());
   EXPECT_FALSE(one.wrote_past_capacity) << "capacity 1: a key was written past it";
   ASSERT_EQ(one.keys.size(), 1u);
   std::vector<Pair> first;
-  ASSERT_TRUE(to_pairs(one.keys, n, first));
+  ASSERT_TRUE(to_pairs(one.keys, n, first, one.shift));
   EXPECT_TRUE(std::binary_search(set.flat.begin(), set.flat.end(), first[0]));
   EXPECT_EQ(one.candidates, none.candidates);
 
-  const FindResult all = find_once(*bp, boxes, n, one.total, stream.s);
+  const FindResult all = find_once(*bp, boxes, n, one.total, stream.s, engine_shift(n));
   EXPECT_EQ(all.total, one.total);
   EXPECT_FALSE(all.wrote_past_capacity);
   std::vector<Pair> pairs;
-  ASSERT_TRUE(to_pairs(all.keys, n, pairs));
+  ASSERT_TRUE(to_pairs(all.keys, n, pairs, all.shift));
   EXPECT_TRUE(same_pairs(pairs, set.flat, set.boxes));
 }
 
@@ -490,7 +502,7 @@ TEST_P(DeviceBroadPhaseTest, FindIsCapturedInAGraphAndReplaysOnNewBoxes) {
   DeviceBuffer<Aabb> boxes("test boxes");
   gpu::upload(boxes, a.boxes, stream.s);
   bp->reserve(n, stream.s);
-  Output out(capacity, stream.s);
+  Output out(capacity, stream.s, engine_shift(n));
   gpu::check(cudaStreamSynchronize(stream.s), "cudaStreamSynchronize");
 
   cudaGraph_t graph = nullptr;
@@ -519,7 +531,7 @@ TEST_P(DeviceBroadPhaseTest, FindIsCapturedInAGraphAndReplaysOnNewBoxes) {
     const FindResult r = out.read(stream.s);
     EXPECT_EQ(r.total, flat.size());
     std::vector<Pair> pairs;
-    ASSERT_TRUE(to_pairs(r.keys, n, pairs));
+    ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
     EXPECT_TRUE(same_pairs(pairs, flat, host));
   }
   (void)cudaGraphExecDestroy(exec);
