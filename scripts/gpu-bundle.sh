@@ -20,9 +20,10 @@
 #   OCTOCD_GPU_TEST_FRAMES=1000 ./run-gpu-tests.sh --gtest_filter='*CpuVsCuda*'
 #   ./bin/octocd run datasets/scenes/bunny-random-400.json ...
 #   ./run-tests.sh                        # every gtest binary (CPU tests too)
+#   ./run-gpu-broadphase-bench.sh [OUTDIR] # bench_gpu_broadphase: OUTDIR/gpu-broadphase-scaling.{md,json}
 #
-# Layout: bin/ (octocd, test_*, bench_*; RPATH $ORIGIN/lib), bin/lib/ (shared libraries,
-# RPATH $ORIGIN), datasets/scenes, datasets/cache, tests/data; everything stripped. The
+# Layout: bin/ (octocd, test_*, bench_*, bench_gpu_broadphase among them; RPATH
+# $ORIGIN/lib), bin/lib/ (shared libraries, RPATH $ORIGIN), datasets/scenes, datasets/cache, tests/data; everything stripped. The
 # CUDA runtime is linked statically; libcuda comes from the driver. glibc (libc, libm,
 # libpthread, libdl, librt, libresolv, ld-linux, ...) is the target's own.
 set -euo pipefail
@@ -77,8 +78,10 @@ if [[ $do_build = 1 ]]; then
   fi
   cmake --build "$build_dir" -j"$jobs"
 fi
-[[ -x "$build_dir/tests/test_cuda_world" ]] || {
-  echo "gpu-bundle.sh: $build_dir/tests/test_cuda_world is missing (a build with OCTOCD_CUDA=ON?)" >&2; exit 1; }
+for needed in tests/test_cuda_world bench_gpu_broadphase; do
+  [[ -x "$build_dir/$needed" ]] || {
+    echo "gpu-bundle.sh: $build_dir/$needed is missing (a build with OCTOCD_CUDA=ON?)" >&2; exit 1; }
+done
 
 # ---- collect ------------------------------------------------------------------------
 name=octocd-bundle
@@ -157,7 +160,24 @@ for t in "$here"/bin/test_*; do
 done
 exit $status
 EOF
-chmod +x "$stage/run-gpu-tests.sh" "$stage/run-tests.sh"
+cat > "$stage/run-gpu-broadphase-bench.sh" <<'EOF'
+#!/usr/bin/env bash
+# GPU broadphase scaling (bench/bench_gpu_broadphase.cpp, issue 8): the device broadphases
+# on identical random boxes, 10^4 .. 4x10^6 bodies, sorted pair sets checked against each
+# other and the CPU oracle. Usage: ./run-gpu-broadphase-bench.sh [OUTDIR] [bench options]
+# Writes OUTDIR/gpu-broadphase-scaling.md (the Markdown table) and .json (default OUTDIR:
+# results); the exit status is the bench's (3: a pair set differs).
+here=$(cd "$(dirname "$0")" && pwd)
+out=results
+if [[ $# -gt 0 && "$1" != -* ]]; then out=$1; shift; fi
+mkdir -p "$out"
+command -v nvidia-smi >/dev/null && nvidia-smi -L
+"$here/bin/bench_gpu_broadphase" --json "$out/gpu-broadphase-scaling.json" "$@" > "$out/gpu-broadphase-scaling.md"
+status=$?
+cat "$out/gpu-broadphase-scaling.md"
+exit $status
+EOF
+chmod +x "$stage/run-gpu-tests.sh" "$stage/run-tests.sh" "$stage/run-gpu-broadphase-bench.sh"
 git -C "$repo" describe --always --dirty --tags > "$stage/VERSION" 2>/dev/null || echo unknown > "$stage/VERSION"
 
 # Every binary must resolve all its libraries from the bundle alone.

@@ -3,7 +3,7 @@
 # machine from an extracted bundle (scripts/gpu-bundle.sh). Usage, from the repository:
 #   bash scripts/gpu-run.sh BUNDLE_DIR OUTDIR [FRAMES]
 # Writes OUTDIR/{device.txt, test_cuda_world.txt, validate-cuda.txt, sanitizer.txt,
-# bench/<sweep>.json}. OCTOCD_SWEEPS picks sweeps, OCTOCD_BENCH_OPTIONS adds bench options
+# bench/<sweep>.json, gpu-broadphase-scaling.{md,json}}. OCTOCD_SWEEPS picks sweeps, OCTOCD_BENCH_OPTIONS adds bench options
 # (e.g. "--repeat 2"). Exit code 0 even when a step fails: read the files.
 set -u
 here=$(cd "${1:?usage: gpu-run.sh BUNDLE_DIR OUTDIR [FRAMES]}" && pwd)
@@ -46,3 +46,9 @@ for s in ${OCTOCD_SWEEPS:-table5 table6 tableA1 figA2 broadphase-scaling}; do
     > "$out/bench/$s.log" 2>&1
   echo "exit $? for $s" >> "$out/bench/$s.log"
 done
+
+# 5. GPU broadphase scaling (bench_gpu_broadphase, issue 8): 10^4 .. 4x10^6 random boxes,
+#    every device broadphase, sorted pair sets checked; the Markdown table and the JSON.
+timeout 600 "$bin/bench_gpu_broadphase" --json "$out/gpu-broadphase-scaling.json" \
+  > "$out/gpu-broadphase-scaling.md" 2> "$out/gpu-broadphase-scaling.log"
+echo "exit $?" >> "$out/gpu-broadphase-scaling.log"
