@@ -8,7 +8,8 @@
 //    contiguous run of slots and the levels follow each other in key order;
 // 3. a level table (first slot of every level, of the overflow list and of the NaN
 //    bodies) and a hash table of the occupied cells (cell key -> its run of slots, open
-//    addressing with linear probing, at most half full), then a query per slot, one
+//    addressing with linear probing over an array of keys, at most a quarter full, the
+//    runs in a parallel array read on a hit only), then a query per slot, one
 //    warp each:
 //    - a body in a cell (level l) looks at every level m <= l that holds bodies: the
 //      cells whose loose boxes meet its own box (loose_query_axis_q: at most 4 per axis),
@@ -42,15 +43,6 @@ namespace {
 struct LooseQBox {
   std::int16_t lo[3];
   std::int16_t hi[3];
-};
-
-/// One entry of the cell table: an occupied cell's key and its run of slots [begin, end).
-/// key == kLooseNoKey: an empty entry (kLooseNoKey is never a cell key).
-struct alignas(16) CellEntry {
-  std::uint32_t key;
-  std::uint32_t begin;
-  std::uint32_t end;
-  std::uint32_t pad;
 };
 
 /// The home entry of a cell key (murmur3's 32-bit finaliser: Morton keys of neighbouring
@@ -88,8 +80,11 @@ struct LooseDesc {
   /// Per level m in [0, kLooseMaxDepth + 1]: the first slot whose key is >= level m's base
   /// (entry kLooseMaxDepth + 1: the first overflow slot); then the first NaN slot.
   std::uint32_t* level_begin = nullptr;
-  CellEntry* cells = nullptr;      ///< the cell table: cell_mask + 1 entries
-  std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 2 n)
+  /// The cell table, cell_mask + 1 entries: the keys (kLooseNoKey = empty; never a cell
+  /// key) and each key's run of slots [x, y).
+  std::uint32_t* cell_keys = nullptr;
+  uint2* cell_runs = nullptr;
+  std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 4 n)
   unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
   int shift = 32;                           ///< PairOutput::shift
   std::uint32_t capacity = 0;               ///< entries pair_keys holds
@@ -152,7 +147,7 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   d.slot_box[s] = d.aabb[body];
   d.slot_q[s] = d.q[body];
   // The cell table: the first slot of a run writes its begin, the last its end (both
-  // claim or find the key's entry; the table is at least twice the cell count).
+  // claim or find the key's entry; the table holds at least four times the cell count).
   const std::uint32_t key = d.sorted_key[s];
   if (key >= d.overflow_key) return;
   const bool first = s == 0 || d.sorted_key[s - 1] != key;
@@ -160,21 +155,21 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   if (!first && !last) return;
   std::uint32_t h = cell_hash(key, d.cell_mask);
   for (;;) {
-    const std::uint32_t old = atomicCAS(&d.cells[h].key, kLooseNoKey, key);
+    const std::uint32_t old = atomicCAS(&d.cell_keys[h], kLooseNoKey, key);
     if (old == kLooseNoKey || old == key) break;
     h = (h + 1) & d.cell_mask;
   }
-  if (first) d.cells[h].begin = s;
-  if (last) d.cells[h].end = s + 1;
+  if (first) d.cell_runs[h].x = s;
+  if (last) d.cell_runs[h].y = s + 1;
 }
 
 /// The run of slots [begin, end) of cell `key` (empty when the cell holds no body).
 __device__ inline uint2 find_cell(const LooseDesc& d, std::uint32_t key) {
   std::uint32_t h = cell_hash(key, d.cell_mask);
   for (;;) {
-    const CellEntry e = d.cells[h];
-    if (e.key == key) return make_uint2(e.begin, e.end);
-    if (e.key == kLooseNoKey) return make_uint2(0, 0);
+    const std::uint32_t k = d.cell_keys[h];
+    if (k == key) return d.cell_runs[h];
+    if (k == kLooseNoKey) return make_uint2(0, 0);
     h = (h + 1) & d.cell_mask;
   }
 }
@@ -350,10 +345,11 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     slot_box_.ensure(n);
     slot_q_.ensure(n);
     level_begin_.ensure(kLevelTable);
-    if (n > (1u << 30)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^30", n));
+    if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
     cell_mask_ = 1;
-    while (cell_mask_ + 1 < 2ull * std::max<std::uint32_t>(n, 1)) cell_mask_ = (cell_mask_ << 1) | 1u;
-    cells_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
+    while (cell_mask_ + 1ull < 4ull * std::max<std::uint32_t>(n, 1)) cell_mask_ = (cell_mask_ << 1) | 1u;
+    cell_keys_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
+    cell_runs_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
     std::size_t a = 0, c = 0;
     check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
                                           static_cast<int>(n), 0, 32),
@@ -385,7 +381,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.slot_box = slot_box_.get();
     d.slot_q = slot_q_.get();
     d.level_begin = level_begin_.get();
-    d.cells = cells_.get();
+    d.cell_keys = cell_keys_.get();
+    d.cell_runs = cell_runs_.get();
     d.cell_mask = cell_mask_;
     d.pair_keys = out.keys;
     d.shift = out.shift;
@@ -406,7 +403,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
                                              slot_body_.get(), static_cast<int>(n), 0, key_bits_, stream),
              "cub::DeviceRadixSort::SortPairs");
-    check(cudaMemsetAsync(cells_.get(), 0xff, (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(CellEntry), stream),
+    check(cudaMemsetAsync(cell_keys_.get(), 0xff, (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(std::uint32_t),
+                          stream),
           "cudaMemset octree cell table");
     loose_gather_kernel<<<grid_for(std::max<std::uint32_t>(n, kLevelTable)), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_gather");
@@ -420,7 +418,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     std::uint64_t t = 0;
     for (const BufferBase* b : std::initializer_list<const BufferBase*>{
              &extent_, &min_, &key_, &body_, &q_, &sorted_key_, &slot_body_, &slot_box_, &slot_q_,
-             &level_begin_, &cells_, &temp_})
+             &level_begin_, &cell_keys_, &cell_runs_, &temp_})
       t += b->bytes();
     return t;
   }
@@ -443,7 +441,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   DeviceBuffer<LooseQBox> slot_q_{"octree slot unit boxes"};
   DeviceBuffer<std::uint32_t> level_begin_{"octree level table"};
   std::uint32_t cell_mask_ = 1;
-  DeviceBuffer<CellEntry> cells_{"octree cell table"};
+  DeviceBuffer<std::uint32_t> cell_keys_{"octree cell table keys"};
+  DeviceBuffer<uint2> cell_runs_{"octree cell table runs"};
   DeviceBuffer<unsigned char> temp_{"octree CUB temporary storage"};
 };
 

@@ -269,12 +269,19 @@ __global__ void mid_leaf_kernel(MidListDesc d) {
       while (!found && nb > 0 && ia < ca.vertex_count) {
         std::uint32_t na = 0;
         stage_tile(va, ca.vertex_count, b_in_a, pa, tile_a, ia, na);
-        bool hit = false;
-        for (std::uint32_t jj = lane; jj < nb; jj += 32) {
-          const Vec3 wb = tile_b[jj];
-          for (std::uint32_t ii = 0; ii < na; ++ii) hit = hit || hd::vertex_close(tile_a[ii], wb, c.s.theta2);
+        // Lane l takes B vertices l, l + 32, ... of the tile; the warp stops as soon as
+        // one lane has a close pair (checked every 16 A vertices: same answer, less work
+        // when the meshes are in contact).
+        for (std::uint32_t jj0 = 0; jj0 < nb && !found; jj0 += 32) {
+          const bool valid = jj0 + lane < nb;
+          const Vec3 wb = tile_b[valid ? jj0 + lane : 0u];
+          bool hit = false;
+          for (std::uint32_t i0 = 0; i0 < na && !found; i0 += 16) {
+            const std::uint32_t i1 = i0 + 16 < na ? i0 + 16 : na;
+            for (std::uint32_t ii = i0; ii < i1; ++ii) hit = hit || (valid && hd::vertex_close(tile_a[ii], wb, c.s.theta2));
+            found = __any_sync(kFull, hit);
+          }
         }
-        found = __any_sync(kFull, hit);
         __syncwarp();
       }
     }
