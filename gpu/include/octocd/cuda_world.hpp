@@ -43,7 +43,8 @@ constexpr std::uint64_t kCudaMaxBodies = 2147483647;
 /// counted: the CUDA context, kernels and graph, pinned host memory, and the growth of a
 /// step that finds more pairs than the first capacities hold. Linear in `bodies`; the
 /// value may exceed the engine's FrameMetrics::memory_bytes after its first step
-/// (which has CUB's actual sizes) by the CUB bounds, about 20 bytes per body.
+/// (which has CUB's actual sizes) by the slack of the CUB bounds: under 20 bytes per body
+/// plus 1 MiB.
 /// Needs no CUDA device and exists in builds without CUDA. Throws InputError for more than
 /// kCudaMaxBodies bodies and for a broadphase the device does not have (naming the ones it
 /// has).
