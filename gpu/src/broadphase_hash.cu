@@ -41,6 +41,7 @@
 // oversize tests, the quantity the CPU reports as cell_candidates (the numbers differ
 // from the CPU's where the oversize lists differ).
 #include "broadphase_common.cuh"
+#include "device_footprint.hpp"
 #include "octocd/broadphase.hpp"
 #include "octocd/spatial_hash.hpp"
 
@@ -50,8 +51,10 @@ namespace {
 
 /// Bodies covering at most this many cells always get grid entries.
 constexpr std::uint32_t kSmallCells = 8;
-/// Entry budget per body: E = kEntriesPerBody * n (>= kSmallCells, so small bodies fit).
-constexpr std::uint32_t kEntriesPerBody = 8;
+/// Entry budget per body: E = kEntriesPerBody * n (>= kSmallCells, so small bodies fit);
+/// from device_footprint.hpp, which the host memory estimate reads too.
+constexpr std::uint32_t kEntriesPerBody = footprint::kHashEntriesPerBody;
+static_assert(kEntriesPerBody >= kSmallCells, "small bodies always get their entries");
 /// Bodies covering more cells than this are oversize (the CPU's kMaxCells is 4096; one
 /// device thread writes a body's entries, so the device keeps this small).
 constexpr std::int64_t kMaxCells = 64;

@@ -33,6 +33,7 @@
 #include "broadphase_common.cuh"
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
+#include "device_footprint.hpp"
 #include "kernels.hpp"
 
 namespace octocd {
@@ -44,6 +45,7 @@ struct LooseQBox {
   std::int16_t lo[3];
   std::int16_t hi[3];
 };
+static_assert(sizeof(LooseQBox) == footprint::kLooseQBoxBytes, "device_footprint.hpp: LooseQBox");
 
 /// The home entry of a cell key (murmur3's 32-bit finaliser: Morton keys of neighbouring
 /// cells differ in low bits only).
@@ -132,6 +134,7 @@ __device__ std::uint32_t lower_bound(const std::uint32_t* keys, std::uint32_t lo
                                      std::uint32_t key);
 
 constexpr int kLevelTable = kLooseMaxDepth + 3;  // levels 0..10, overflow, NaN
+static_assert(kLevelTable == static_cast<int>(footprint::kLooseLevelTable), "device_footprint.hpp: level table");
 
 __global__ void loose_gather_kernel(LooseDesc d) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cerrno>
 #include <cstdlib>
 #include <cstddef>
 #include <cstring>
@@ -17,6 +18,7 @@
 
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
+#include "device_footprint.hpp"
 #include "kernels.hpp"
 #include "octocd/error.hpp"
 
@@ -66,6 +68,49 @@ int key_bits(std::uint32_t n) {
 }
 
 constexpr int kEvents = static_cast<int>(Stage::Count) + 1;
+
+// The host estimate (device_footprint.cpp) counts these structs by the sizes of
+// device_footprint.hpp.
+static_assert(sizeof(gpu::DeviceShape) == gpu::footprint::kDeviceShapeBytes, "device_footprint.hpp: DeviceShape");
+static_assert(sizeof(gpu::MidItem) == gpu::footprint::kMidItemBytes, "device_footprint.hpp: MidItem");
+static_assert(sizeof(gpu::DeviceContact) == gpu::footprint::kDeviceContactBytes, "device_footprint.hpp: DeviceContact");
+static_assert(sizeof(gpu::StepStats) == gpu::footprint::kStepStatsBytes, "device_footprint.hpp: StepStats");
+
+/// "1.23 GiB", "4.5 MiB" or "12.0 KiB": a byte count for a message.
+std::string human_bytes(std::uint64_t bytes) {
+  const double b = static_cast<double>(bytes);
+  if (b >= 1024.0 * 1024.0 * 1024.0) return fmt::format("{:.2f} GiB", b / (1024.0 * 1024.0 * 1024.0));
+  if (b >= 1024.0 * 1024.0) return fmt::format("{:.1f} MiB", b / (1024.0 * 1024.0));
+  return fmt::format("{:.1f} KiB", b / 1024.0);
+}
+
+/// Throws RuntimeError when the current device has fewer than `needed` bytes free
+/// (cudaMemGetInfo; the test hook OCTOCD_CUDA_FREE_BYTES=K lowers the free bytes to at
+/// most K), naming the scene, the bytes needed and free, and the device's total.
+void check_free_memory(const Model& m, const std::string& broadphase, std::uint64_t needed) {
+  std::size_t free_bytes = 0, total_bytes = 0;
+  check(cudaMemGetInfo(&free_bytes, &total_bytes), "cudaMemGetInfo");
+  std::uint64_t free = free_bytes;
+  std::string hook;
+  if (const char* k = std::getenv("OCTOCD_CUDA_FREE_BYTES")) {
+    char* end = nullptr;
+    errno = 0;
+    const unsigned long long v = std::strtoull(k, &end, 10);
+    if (*k < '0' || *k > '9' || end == k || *end != '\0' || errno != 0)
+      throw InputError(fmt::format("OCTOCD_CUDA_FREE_BYTES: '{}' is not a byte count; allowed: a decimal integer "
+                                   "(a test hook: the free device memory to assume)",
+                                   k));
+    free = std::min<std::uint64_t>(free, v);
+    hook = fmt::format(" (OCTOCD_CUDA_FREE_BYTES={})", v);
+  }
+  if (needed <= free) return;
+  throw RuntimeError(fmt::format(
+      "scene '{}': the cuda engine needs about {} bytes ({}) of device memory for {} bodies before its first step "
+      "(broadphase '{}'), but the device has {} bytes ({}) free{} of {} bytes ({}); run fewer bodies, or use "
+      "--engine cpu",
+      m.scene.name, needed, human_bytes(needed), m.initial.size(), broadphase, free, human_bytes(free), hook,
+      total_bytes, human_bytes(total_bytes)));
+}
 
 /// The environment variable `name` is "1".
 bool env_is_one(const char* name) {
@@ -492,6 +537,9 @@ std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, con
 CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase)
     : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
   if (!model_) throw InputError("CudaWorld: no model given");
+  // Needs no device; throws InputError for more than kCudaMaxBodies bodies and for a
+  // broadphase the device does not have, before anything is sized from the body count.
+  const std::uint64_t needed = cuda_device_bytes_needed(*model_, broadphase);
   std::unique_ptr<gpu::DeviceBroadPhase> bp;
   if (broadphase != "flat") {  // checked before the device: an unknown name is an input error anywhere
     BroadPhaseConfig cfg = model_->scene.broadphase;
@@ -500,6 +548,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   }
   const std::string reason = no_device_reason();
   if (!reason.empty()) throw RuntimeError("no CUDA device: " + reason + "; the cuda engine needs one");
+  check_free_memory(*model_, broadphase, needed);  // before the first allocation
 
   Impl& d = *impl_;
   d.broadphase = broadphase;
@@ -522,8 +571,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   for (cudaEvent_t& e : d.events) check(cudaEventCreate(&e), "cudaEventCreate");
 
   const Model& m = *model_;
-  const std::size_t n = m.initial.size();
-  if (n > 0x7fffffffu) throw InputError("the cuda engine takes at most 2^31 - 1 bodies");
+  const std::size_t n = m.initial.size();  // <= kCudaMaxBodies (checked above)
   d.n = static_cast<std::uint32_t>(n);
 
   // Midphase level list (SPEC 5.2), as the CPU's confirm_contact converts it.
@@ -581,8 +629,8 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.stats.reset(1);
   d.metric_partials.reset(gpu::kMetricsBlocks);
   // First guesses; a step that needs more grows them and runs again.
-  d.pair_cap = 2 * n + 64;
-  d.list_cap = 4 * n + 256;
+  d.pair_cap = static_cast<std::size_t>(gpu::footprint::initial_pair_capacity(n));
+  d.list_cap = static_cast<std::size_t>(gpu::footprint::initial_list_capacity(n));
   d.static_static = static_static_pairs(m);
   d.launched(gpu::launch_aabbs(d.bodies(), d.stream), "aabbs");
   check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize");

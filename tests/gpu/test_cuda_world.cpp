@@ -5,14 +5,21 @@
 // 10th frame (through record()). On the GPU alone: a rerun gives the same bits, and an
 // engine whose buffers all start at capacity 1 (and are shrunk again during the run) gives
 // the same results. The device's `octree` broadphase gives the `flat` pair set on every
-// scene (the large box scenes included) and the CPU `octree` engine's states.
+// scene (the large box scenes included) and the CPU `octree` engine's states. The memory
+// check (CudaMemory, issue 8): the host estimate cuda_device_bytes_needed against the
+// engine's own count, and a planted shortage (OCTOCD_CUDA_FREE_BYTES) failing construction
+// and `octocd run|validate --engine cuda` with exit 1.
 //
 // Without a usable CUDA device every device test is SKIPPED with the reason
 // ("no CUDA device: ..."); the error paths that need no device run everywhere.
 //
 // Environment: OCTOCD_SOURCE_DIR (scenes and datasets; default: the source tree this was
-// built from), OCTOCD_GPU_TEST_FRAMES (frames per scene, default 200).
+// built from), OCTOCD_GPU_TEST_FRAMES (frames per scene, default 200), OCTOCD_BIN (the
+// `octocd` binary; default: the one built with this test).
 #include <gtest/gtest.h>
+
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -21,10 +28,12 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <initializer_list>
 #include <iostream>
 #include <limits>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -342,6 +351,175 @@ TEST(CudaDevice, SetStateIsUsed) {
     ASSERT_EQ(cpu->state_hash(), gpu.state_hash()) << "frame " << f << ": " << first_difference(cpu->state(), gpu.state());
   }
 }
+
+// ---- device memory (issue 8, item 7: bad input at scale) --------------------------------
+
+namespace {
+
+/// Sets the environment variable `name` to `value` for the scope (the memory check's test
+/// hook OCTOCD_CUDA_FREE_BYTES), then unsets it.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const std::string& value) : name_(name) { ::setenv(name, value.c_str(), 1); }
+  ~ScopedEnv() { ::unsetenv(name_); }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  const char* name_;
+};
+
+/// The message of the RuntimeError that constructing CudaWorld(model, broadphase) throws,
+/// "" when it constructs.
+std::string construction_error(const std::shared_ptr<const Model>& model, const std::string& broadphase) {
+  try {
+    CudaWorld gpu(model, broadphase);
+  } catch (const RuntimeError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+// (a) The host estimate against the engine's own count after its first step, on the
+// 100k-body scale scene with every device broadphase: at least what the engine holds (the
+// estimate may only overshoot, by CUB's bounds) and at most 3 times that.
+TEST(CudaMemory, EstimateIsOneToThreeTimesTheEnginesBytesAfterTheFirstStep) {
+  REQUIRE_CUDA_DEVICE();
+  const auto model = load_model("boxes-uniform-100k");
+  for (const std::string bp : {"flat", "octree", "octree-strict", "spatial-hash"}) {
+    const std::uint64_t estimate = cuda_device_bytes_needed(*model, bp);
+    CudaWorld gpu(model, bp);
+    const FrameMetrics m = gpu.step();
+    ASSERT_GT(m.memory_bytes, 0u) << bp;
+    const double ratio = static_cast<double>(estimate) / static_cast<double>(m.memory_bytes);
+    std::cout << "[ info ] boxes-uniform-100k, " << bp << ": estimate " << estimate << " bytes, engine after frame 1 "
+              << m.memory_bytes << " bytes (ratio " << ratio << "), " << m.aabb_pairs << " pairs\n";
+    EXPECT_GE(ratio, 1.0) << bp << ": the estimate " << estimate << " is below the engine's " << m.memory_bytes;
+    EXPECT_LE(ratio, 3.0) << bp << ": the estimate " << estimate << " is over 3 x the engine's " << m.memory_bytes;
+  }
+}
+
+// (b) With less memory free than the estimate the constructor fails before allocating,
+// naming the scene, the bytes needed and free, and the body count; with exactly the
+// estimate free it constructs and steps. The free bytes come from the test hook
+// OCTOCD_CUDA_FREE_BYTES (a planted shortage: the device itself has plenty).
+TEST(CudaMemory, TooLittleFreeMemoryFailsAtConstructionNamingTheBytes) {
+  REQUIRE_CUDA_DEVICE();
+  for (const std::string name : {"box-stack", "boxes-uniform-100k"}) {
+    SCOPED_TRACE(name);
+    const auto model = load_model(name);
+    const std::string bp = model->scene.broadphase.name;
+    const std::uint64_t needed = cuda_device_bytes_needed(*model, bp);
+    {
+      ScopedEnv env("OCTOCD_CUDA_FREE_BYTES", std::to_string(needed - 1));
+      const std::string msg = construction_error(model, bp);
+      EXPECT_NE(msg.find(fmt::format("scene '{}': the cuda engine needs about {} bytes (", name, needed)),
+                std::string::npos)
+          << msg;
+      EXPECT_NE(msg.find(fmt::format("of device memory for {} bodies before its first step (broadphase '{}')",
+                                     model->initial.size(), bp)),
+                std::string::npos)
+          << msg;
+      EXPECT_NE(msg.find(fmt::format("but the device has {} bytes (", needed - 1)), std::string::npos) << msg;
+      EXPECT_NE(msg.find(fmt::format("free (OCTOCD_CUDA_FREE_BYTES={}) of ", needed - 1)), std::string::npos) << msg;
+      try {
+        (void)make_cuda_engine(model, bp);
+        ADD_FAILURE() << "make_cuda_engine succeeded with " << needed - 1 << " bytes free";
+      } catch (const RuntimeError& e) {
+        EXPECT_EQ(std::string(e.what()), msg);
+      }
+    }
+    {
+      ScopedEnv env("OCTOCD_CUDA_FREE_BYTES", std::to_string(needed));
+      CudaWorld gpu(model, bp);
+      EXPECT_EQ(gpu.step().frame, 1) << "exactly the estimate free is enough";
+    }
+  }
+  // The hook takes a decimal byte count, nothing else.
+  const auto model = load_model("box-stack");
+  for (const char* bad : {"", "-1", "12x", " 5", "lots"}) {
+    ScopedEnv env("OCTOCD_CUDA_FREE_BYTES", bad);
+    try {
+      CudaWorld gpu(model, "flat");
+      ADD_FAILURE() << "accepted OCTOCD_CUDA_FREE_BYTES='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("OCTOCD_CUDA_FREE_BYTES: '"), std::string::npos) << e.what();
+    }
+  }
+}
+
+#ifdef OCTOCD_TEST_BIN
+namespace {
+
+/// Exit status, stdout and stderr of `octocd ARGS` run with `env` (NAME=VALUE words) in
+/// front, through the shell; `dir` holds the captured stderr.
+struct CliResult {
+  int code = -1;
+  std::string out, err;
+};
+
+CliResult run_octocd(const std::filesystem::path& dir, const std::string& env, const std::vector<std::string>& args) {
+  const char* b = std::getenv("OCTOCD_BIN");
+  std::string cmd = env + " '" + std::string(b ? b : OCTOCD_TEST_BIN) + "'";
+  for (const std::string& a : args) cmd += " '" + a + "'";
+  const std::filesystem::path err = dir / "stderr.txt";
+  cmd += " 2>'" + err.string() + "'";
+  CliResult r;
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  for (std::size_t k; (k = std::fread(buf, 1, sizeof buf, p)) > 0;) r.out.append(buf, k);
+  const int status = ::pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream in(err);
+  std::ostringstream s;
+  s << in.rdbuf();
+  r.err = s.str();
+  return r;
+}
+
+}  // namespace
+
+// (b) through the command line: `run` and `validate` with --engine cuda exit 1 before
+// the first step with the one-line message, and leave no trace file behind (the engine is
+// built before the trace is opened).
+TEST(CudaMemory, CliExitsOneBeforeTheFirstStepNamingTheBytes) {
+  REQUIRE_CUDA_DEVICE();
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("octocd-cuda-memory-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string scene = source_dir() + "/datasets/scenes/box-stack.json";
+  const auto model = load_model("box-stack");
+  const std::uint64_t needed = cuda_device_bytes_needed(*model, model->scene.broadphase.name);
+  const std::string env = "OCTOCD_CUDA_FREE_BYTES=" + std::to_string(needed - 1);
+  const std::string trace = (dir / "t.h5").string();
+  const std::vector<std::vector<std::string>> commands = {
+      {"run", scene, "--engine", "cuda", "--frames", "5", "--trace", trace, "--quiet"},
+      {"validate", scene, "--engine", "cuda", "--frames", "5", "--every", "5", "--trace", trace}};
+  for (const std::vector<std::string>& args : commands) {
+    SCOPED_TRACE(args[0]);
+    const CliResult r = run_octocd(dir, env, args);
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_EQ(r.err.rfind("octocd: runtime failure: scene 'box-stack': the cuda engine needs about " +
+                              std::to_string(needed) + " bytes",
+                          0),
+              0u)
+        << r.err;
+    EXPECT_NE(r.err.find("before its first step"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("but the device has " + std::to_string(needed - 1) + " bytes"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "one line:\n" << r.err;
+    EXPECT_FALSE(std::filesystem::exists(trace)) << "no trace is started before the engine exists";
+  }
+  // The same command with the estimate free runs.
+  const CliResult ok = run_octocd(dir, "OCTOCD_CUDA_FREE_BYTES=" + std::to_string(needed), commands[0]);
+  EXPECT_EQ(ok.code, 0) << ok.err;
+  EXPECT_TRUE(std::filesystem::exists(trace));
+  std::filesystem::remove_all(dir);
+}
+#endif  // OCTOCD_TEST_BIN
 
 /// Runs CPU (flat) and CUDA side by side on `model` for `frames` frames, asserting equal
 /// states after every step and equal records every 10th frame.

@@ -282,6 +282,42 @@ TEST_F(Hardening, HugeCountIsBadInputBeforeAnyAllocation) {
   EXPECT_NE(r.err.find("groups[0].layout: the region holds only"), std::string::npos) << r.err;
 }
 
+// Issue 8, item 7: a body count past 2^31 - 1 (the engines index bodies with 32-bit
+// integers) is bad input at load, before any engine exists: exit 2 naming the file, the
+// key and the allowed range, with either engine and from `validate` too; also when written
+// as a float, and a total over limits::kMaxBodies across groups.
+TEST_F(Hardening, BodyCountsPast32BitIndicesAreBadInput) {
+  struct Case {
+    std::string count, problem;
+  };
+  const std::vector<Case> cases = {{"2147483648", "value 2147483648 out of range"},
+                                   {"4294967296", "value 4294967296 out of range"},
+                                   {"1000000000000", "value 1000000000000 out of range"},
+                                   {"1e12", "expected an integer, got number 1000000000000.0"}};
+  for (const Case& c : cases) {
+    const std::string file = group_scene(R"("shape": {"box": [0.1, 0.1, 0.1]}, "count": )" + c.count);
+    for (const std::vector<std::string>& args :
+         {std::vector<std::string>{"run", file, "--engine", "cuda", "--quiet"},
+          std::vector<std::string>{"run", file, "--engine", "cpu", "--quiet"},
+          std::vector<std::string>{"validate", file, "--engine", "cuda"}}) {
+      SCOPED_TRACE(c.count + " " + args[0] + " " + args[3]);
+      const Result r = run(args);
+      EXPECT_EQ(r.code, 2) << r.err;
+      EXPECT_EQ(r.err, "octocd: error: " + file + ": groups[0].count: " + c.problem +
+                           "; allowed: integer in [1, 10000000] (bodies in the whole scene at most 10000000)\n");
+    }
+  }
+  // Each group within the limit, the scene over it.
+  const std::string file = write("two.json", R"({"name": "two", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]},
+      "frames": 2, "groups": [{"name": "a", "shape": {"box": [0.001, 0.001, 0.001]}, "count": 10000000},
+                              {"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1}]})");
+  const Result r = run({"run", file, "--engine", "cuda", "--quiet"});
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_EQ(r.err, "octocd: error: " + file +
+                       ": groups: the groups' counts add up to 10000001 bodies; allowed: at most 10000000 bodies "
+                       "in a scene\n");
+}
+
 // ---- hostile meshes ----------------------------------------------------------------
 
 // Before: silently accepted (assimp clamps the index to the last vertex).

@@ -24,13 +24,49 @@
 
 namespace octocd {
 
+/// The most bodies the cuda engine takes: 2^31 - 1 (it indexes bodies with uint32 and
+/// int). Scenes stop far below (limits::kMaxBodies); a Model built another way is checked
+/// against this by cuda_device_bytes_needed and the CudaWorld constructor.
+constexpr std::uint64_t kCudaMaxBodies = 2147483647;
+
+/// Bytes of device memory the cuda engine allocates for `bodies` bodies before its first
+/// step, with broadphase `broadphase.name` (`flat`, `octree`, `octree-strict`,
+/// `spatial-hash`; `broadphase.octree_depth` -1 (auto) adds the strict octree's per-body
+/// extents) and no shape data (the packed shape arrays at their minimum of one element;
+/// the Model overload adds a model's shapes). Counted: the per-body buffers (state, the
+/// state saved before a step, inverse masses, local boxes, shape indices, world AABBs, the
+/// broadphase counts and offsets, the contact segments: 116 bytes per body plus 12), the
+/// buffers sized by the first pair and work-list capacities (2 n + 64 candidate pairs:
+/// keys, pairs, flags, contact terms and records, the body-major contact index; 4 n + 256
+/// items in each of two midphase work lists), the step statistics, the device
+/// broadphase's reserve() buffers, and CUB's temporary storage as an upper bound. Not
+/// counted: the CUDA context, kernels and graph, pinned host memory, and the growth of a
+/// step that finds more pairs than the first capacities hold. Linear in `bodies`; the
+/// value may exceed the engine's FrameMetrics::memory_bytes after its first step
+/// (which has CUB's actual sizes) by the slack of the CUB bounds: under 20 bytes per body
+/// plus 1 MiB.
+/// Needs no CUDA device and exists in builds without CUDA. Throws InputError for more than
+/// kCudaMaxBodies bodies and for a broadphase the device does not have (naming the ones it
+/// has).
+std::uint64_t cuda_device_bytes_needed(std::uint64_t bodies, const BroadPhaseConfig& broadphase);
+
+/// cuda_device_bytes_needed for `model`'s bodies and shapes (the packed octree vertices,
+/// cells and level offsets, one DeviceShape and one theta per shape) with broadphase
+/// `broadphase` (as in `--broadphase`; its depth from the scene's broadphase.depth): the
+/// estimate the CudaWorld constructor compares with the device's free memory. Bytes.
+/// Throws as the overload above.
+std::uint64_t cuda_device_bytes_needed(const Model& model, const std::string& broadphase);
+
 /// Creates the CUDA engine for `model` with broadphase `broadphase` (as in
 /// `--broadphase`; the device has `flat`, `octree`, `octree-strict` and `spatial-hash`; the
 /// octrees take their depth
 /// from the scene's broadphase.depth). The model is shared, not copied.
 /// Throws RuntimeError when this octocd was built without CUDA, when no CUDA device is
-/// usable (naming the CUDA runtime's reason) or when device memory runs out (naming the
-/// buffer and bytes); InputError for a broadphase the device does not have.
+/// usable (naming the CUDA runtime's reason), when the device has less memory free than
+/// cuda_device_bytes_needed(*model, broadphase) (checked before anything is allocated; the
+/// message names the scene, the bytes needed, the body count and the bytes free and
+/// total) or when device memory runs out later (naming the buffer and bytes); InputError
+/// for a broadphase the device does not have and for more than kCudaMaxBodies bodies.
 std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, const std::string& broadphase);
 
 /// One line about the CUDA device: its name, compute capability and memory (e.g.
@@ -68,18 +104,28 @@ bool cuda_device_available();
 /// OCTOCD_CUDA_STAGE_TIMES=0 drops the stage events).
 ///
 /// Errors (all thrown from the constructor or step()): RuntimeError when no device is
-/// usable, when a CUDA call fails (naming the call or kernel), when cudaMalloc fails
-/// (naming the buffer and the bytes), and when a dynamic body's position or velocity
+/// usable, when the device has less memory free (cudaMemGetInfo) than
+/// cuda_device_bytes_needed says the model needs (from the constructor, before anything
+/// is allocated: "scene 'S': the cuda engine needs about N bytes (G GiB) of device memory
+/// for M bodies before its first step (broadphase 'B'), but the device has F bytes (G GiB)
+/// free of T ..."), when a CUDA call fails (naming the call or kernel), when cudaMalloc
+/// fails (naming the buffer and the bytes), and when a dynamic body's position or velocity
 /// becomes non-finite (the same message as World::step: frame, body, group). InputError
-/// for a broadphase the device does not have. With the environment variable
+/// for a broadphase the device does not have and for more than kCudaMaxBodies bodies.
+/// Test hook: the environment variable OCTOCD_CUDA_FREE_BYTES=K (a decimal byte count)
+/// makes the constructor take min(K, the free bytes) as the free memory, so tests can
+/// make the memory check fail on any device. With the environment variable
 /// OCTOCD_CUDA_SYNC=1 every launch is followed by a synchronisation and an error check, so
 /// an asynchronous fault names its kernel.
 ///
 /// Not thread-safe (like every Engine).
 class CudaWorld : public Engine {
  public:
-  /// Uploads the model's initial state, shapes and octrees. `broadphase` as in
-  /// `--broadphase` ("flat", "octree", "octree-strict" or "spatial-hash"). `model` must not be null.
+  /// Checks the body count (InputError above kCudaMaxBodies) and that the device has
+  /// cuda_device_bytes_needed(*model, broadphase) bytes free (RuntimeError naming the bytes
+  /// needed and free otherwise; see the class comment), then uploads the model's initial
+  /// state, shapes and octrees. `broadphase` as in `--broadphase` ("flat", "octree",
+  /// "octree-strict" or "spatial-hash"). `model` must not be null (InputError).
   CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase);
   ~CudaWorld() override;
   CudaWorld(const CudaWorld&) = delete;

@@ -1,0 +1,121 @@
+// The host estimate of the CUDA engine's device memory before its first step
+// (cuda_device_bytes_needed, cuda_world.hpp): buffer by buffer, what the CudaWorld
+// constructor, CudaWorld::Impl::prepare() (cuda_world.cpp) and the device broadphases'
+// reserve() (broadphase_*.cu) allocate, with the struct sizes and capacities of
+// device_footprint.hpp. Plain C++: compiled in builds with and without CUDA, and needs no
+// device.
+#include <algorithm>
+#include <cstdint>
+#include <string>
+
+#include <fmt/format.h>
+
+#include "device_footprint.hpp"
+#include "octocd/cuda_world.hpp"
+#include "octocd/error.hpp"
+
+namespace octocd {
+
+namespace {
+
+using namespace gpu::footprint;
+
+/// Bytes of a device buffer of `count` elements of `elem` bytes (a DeviceBuffer holds at
+/// least one element).
+std::uint64_t buf(std::uint64_t count, std::uint64_t elem) { return std::max<std::uint64_t>(count, 1) * elem; }
+
+/// Elements of the packed shape arrays (CudaWorld constructor: "Shapes: every octree
+/// packed once").
+struct ShapeCounts {
+  std::uint64_t shapes = 0;
+  std::uint64_t vertices = 0;
+  std::uint64_t cells = 0;
+  std::uint64_t level_offsets = 0;
+  std::uint64_t theta = 0;
+};
+
+/// The device broadphase's reserve(n) buffers (0 for `flat`, which has none).
+std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
+  const std::uint64_t n1 = n + 1;
+  if (cfg.name == "flat") return 0;
+  if (cfg.name == "octree") {  // LooseOctreeDevice::reserve (broadphase_octree.cu)
+    const std::uint64_t temp = std::max({cub_sort_temp_bound(n, 4, 4), cub_scan_temp_bound(n), std::uint64_t{1}});
+    return buf(n, sizeof(float)) + buf(1, sizeof(float)) + 4 * buf(n, sizeof(std::uint32_t)) +
+           2 * buf(n, kLooseQBoxBytes) + buf(n, sizeof(Aabb)) + buf(kLooseLevelTable, sizeof(std::uint32_t)) +
+           buf(temp, 1);
+  }
+  if (cfg.name == "octree-strict") {  // StrictOctreeDevice::reserve (broadphase_strict.cu)
+    const bool auto_depth = cfg.octree_depth < 0;
+    std::uint64_t temp = std::max(cub_sort_temp_bound(n, 8, 4), cub_scan_temp_bound(n1));
+    if (auto_depth) temp = std::max(temp, cub_scan_temp_bound(n));
+    std::uint64_t b = 2 * buf(n, sizeof(std::uint64_t)) + 2 * buf(n, sizeof(std::uint32_t)) + buf(n, sizeof(Aabb)) +
+                      2 * buf(n1, sizeof(std::uint32_t)) + buf(1, sizeof(double)) + buf(1, sizeof(std::uint32_t)) +
+                      buf(1, sizeof(int)) + buf(temp, 1);
+    if (auto_depth) b += buf(n, sizeof(double)) + buf(n, sizeof(std::uint32_t));
+    return b;
+  }
+  if (cfg.name == "spatial-hash") {  // SpatialHashDevice::reserve (broadphase_hash.cu)
+    const std::uint64_t entries = std::uint64_t{kHashEntriesPerBody} * n;
+    const std::uint64_t counts = entries + n + 1;
+    const std::uint64_t temp =
+        std::max({cub_sort_temp_bound(entries, 8, 4), cub_scan_temp_bound(counts), cub_scan_temp_bound(n1)});
+    return buf(n, sizeof(std::uint8_t)) + buf(3 * n, sizeof(std::int32_t)) + 4 * buf(n1, sizeof(std::uint32_t)) +
+           2 * buf(entries, sizeof(std::uint64_t)) + 2 * buf(entries, sizeof(std::uint32_t)) +
+           2 * buf(counts, sizeof(std::uint32_t)) + buf(temp, 1);
+  }
+  throw InputError(fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: "
+                               "flat, octree, octree-strict, spatial-hash",
+                               cfg.name));
+}
+
+std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const ShapeCounts& sc) {
+  if (n > kCudaMaxBodies)
+    throw InputError(fmt::format("the cuda engine takes at most {} (2^31 - 1) bodies (it indexes bodies with "
+                                 "32-bit integers); this model has {}",
+                                 kCudaMaxBodies, n));
+  const std::uint64_t bp = broadphase_bytes(n, cfg);  // checks the name first
+  const std::uint64_t n1 = n + 1;
+  // Constructor: per body x, v, x_saved, v_saved, w, local, shape, aabb.
+  const std::uint64_t bodies = 4 * buf(n, sizeof(Vec3)) + buf(n, sizeof(float)) + 2 * buf(n, sizeof(Aabb)) +
+                               buf(n, sizeof(std::uint32_t));
+  // Constructor: the packed shapes, per-shape theta, the step statistics.
+  const std::uint64_t shapes = buf(sc.shapes, kDeviceShapeBytes) + buf(sc.vertices, sizeof(Vec3)) +
+                               buf(sc.cells, sizeof(MeshOctreeCell)) + buf(sc.level_offsets, sizeof(std::uint32_t)) +
+                               buf(sc.theta, sizeof(float)) + buf(1, kStepStatsBytes);
+  // prepare() at the first capacities: bp_count, bp_offset, body_begin (n + 1 each); per
+  // candidate pair: pair keys (2), pairs, confirmed, hit, dx_a, dx_b, dv_a, dv_b, depth0,
+  // records; the contact index keys and values (in and out, 2 entries per pair); the two
+  // work lists; CUB's temporary storage (the largest of its three uses).
+  const std::uint64_t pcap = initial_pair_capacity(n);
+  const std::uint64_t lcap = initial_list_capacity(n);
+  const std::uint64_t temp = std::max({cub_sort_temp_bound(pcap, 8, 0), cub_sort_temp_bound(2 * pcap, 4, 4),
+                                       cub_scan_temp_bound(n1), std::uint64_t{1}});
+  const std::uint64_t step = 3 * buf(n1, sizeof(std::uint32_t)) + 2 * buf(pcap, sizeof(unsigned long long)) +
+                             buf(pcap, sizeof(Pair)) + 2 * buf(pcap, sizeof(std::uint8_t)) +
+                             4 * buf(pcap, sizeof(Vec3)) + buf(pcap, sizeof(float)) + buf(pcap, kDeviceContactBytes) +
+                             4 * buf(2 * pcap, sizeof(std::uint32_t)) + 2 * buf(lcap, kMidItemBytes) + buf(temp, 1);
+  return bodies + shapes + step + bp;
+}
+
+}  // namespace
+
+std::uint64_t cuda_device_bytes_needed(std::uint64_t bodies, const BroadPhaseConfig& broadphase) {
+  return engine_bytes(bodies, broadphase, ShapeCounts{});
+}
+
+std::uint64_t cuda_device_bytes_needed(const Model& model, const std::string& broadphase) {
+  ShapeCounts sc;
+  sc.shapes = model.shapes.size();
+  sc.theta = model.theta_shape.size();
+  for (const Shape& s : model.shapes) {
+    if (!s.octree) continue;
+    sc.vertices += s.octree->vertices.size();
+    sc.cells += s.octree->cells.size();
+    sc.level_offsets += s.octree->level_offset.size();
+  }
+  BroadPhaseConfig cfg = model.scene.broadphase;
+  cfg.name = broadphase;
+  return engine_bytes(model.initial.size(), cfg, sc);
+}
+
+}  // namespace octocd

@@ -1,0 +1,61 @@
+#pragma once
+/// \file device_footprint.hpp
+/// What the CUDA engine allocates on the device before its first step, in plain C++ (no
+/// CUDA toolkit needed): the byte sizes of the device-only structs, the initial capacities
+/// of the variable-size buffers, the spatial hash's entry budget and bounds of CUB's
+/// temporary storage. One source for the code that allocates (cuda_world.cpp and
+/// broadphase_*.cu, which static_assert the sizes against their structs and take the
+/// capacities from here) and the host estimate cuda_device_bytes_needed
+/// (device_footprint.cpp), so the two cannot drift apart.
+
+#include <cstdint>
+
+#include "octocd/loose_octree.hpp"
+
+namespace octocd {
+namespace gpu {
+namespace footprint {
+
+/// sizeof(gpu::DeviceShape) (kernels.hpp): one packed shape.
+constexpr std::uint64_t kDeviceShapeBytes = 48;
+/// sizeof(gpu::MidItem) (kernels.hpp): one midphase work-list item.
+constexpr std::uint64_t kMidItemBytes = 16;
+/// sizeof(gpu::DeviceContact) (kernels.hpp): one contact record.
+constexpr std::uint64_t kDeviceContactBytes = 104;
+/// sizeof(gpu::StepStats) (kernels.hpp): what the host reads back after a step.
+constexpr std::uint64_t kStepStatsBytes = 152;
+/// sizeof(LooseQBox) (broadphase_octree.cu): a body's fixed-point unit box.
+constexpr std::uint64_t kLooseQBoxBytes = 12;
+/// Entries of the loose octree's level table: levels 0 .. kLooseMaxDepth, overflow, NaN.
+constexpr std::uint32_t kLooseLevelTable = kLooseMaxDepth + 3;
+/// The spatial hash's entry budget per body (E = kHashEntriesPerBody x n slots).
+constexpr std::uint32_t kHashEntriesPerBody = 8;
+
+/// Candidate pairs the engine has room for before its first step, for n bodies; a step that
+/// finds more grows the pair buffers and runs again.
+constexpr std::uint64_t initial_pair_capacity(std::uint64_t n) { return 2 * n + 64; }
+/// Items per midphase work list before the first step, for n bodies (grown likewise).
+constexpr std::uint64_t initial_list_capacity(std::uint64_t n) { return 4 * n + 256; }
+
+/// Fixed part of the CUB bounds below: onesweep's bins and counters (at most 16 portions
+/// of 2^28 items x 8 passes x 256 digits x 4 bytes = 128 KiB below 2^32 items) and the
+/// 256-byte alignment of each of its temporaries.
+constexpr std::uint64_t kCubFixedBytes = 256 * 1024;
+
+/// An upper bound of the temporary storage (bytes) of CUB's DeviceRadixSort::SortKeys /
+/// SortPairs (not in place, as primitives.cu calls them) on `count` items of `key_bytes`
+/// keys and `value_bytes` values (0 for keys only): the alternate key and value buffers
+/// (count x (key + value)), onesweep's look-back (256 digits x 4 bytes per tile; tiles hold
+/// well over 1024 items on sm_80 and later, so under 1 byte per item) and kCubFixedBytes.
+constexpr std::uint64_t cub_sort_temp_bound(std::uint64_t count, std::uint64_t key_bytes, std::uint64_t value_bytes) {
+  return count * (key_bytes + value_bytes + 1) + kCubFixedBytes;
+}
+
+/// An upper bound of the temporary storage (bytes) of CUB's DeviceScan::ExclusiveSum and
+/// DeviceReduce::Sum / Min on `count` items: a tile descriptor per tile or a partial per
+/// block (under 1 byte per item) and kCubFixedBytes.
+constexpr std::uint64_t cub_scan_temp_bound(std::uint64_t count) { return count + kCubFixedBytes; }
+
+}  // namespace footprint
+}  // namespace gpu
+}  // namespace octocd

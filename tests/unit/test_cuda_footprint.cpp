@@ -1,0 +1,145 @@
+// The host estimate of the CUDA engine's device memory (cuda_device_bytes_needed,
+// gpu/include/octocd/cuda_world.hpp; issue 8, "bad input at scale"): it needs no device
+// and exists in builds without CUDA, so these tests run everywhere. The GPU side (the
+// estimate against the engine's memory_bytes, the check at construction, the CLI's exit 1)
+// is in tests/gpu/test_cuda_world.cpp.
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "octocd/cuda_world.hpp"
+#include "octocd/error.hpp"
+#include "octocd/scene.hpp"
+
+using namespace octocd;
+
+namespace {
+
+BroadPhaseConfig bp(const std::string& name, int depth = 2) {
+  BroadPhaseConfig c;
+  c.name = name;
+  c.octree_depth = depth;
+  return c;
+}
+
+/// Every device broadphase, the octrees with a fixed and an automatic depth.
+std::vector<BroadPhaseConfig> device_broadphases() {
+  return {bp("flat"), bp("octree"), bp("octree", -1), bp("octree-strict"), bp("octree-strict", -1),
+          bp("spatial-hash")};
+}
+
+std::string label(const BroadPhaseConfig& c) { return c.name + " depth " + std::to_string(c.octree_depth); }
+
+/// Bytes of the engine's buffers of one element per body (CudaWorld::Impl: x, v, x_saved,
+/// v_saved, w, local, shape, aabb) and of n + 1 elements (bp_count, bp_offset,
+/// body_begin), counted here from the element types, apart from the estimate's own code.
+std::uint64_t per_body_buffers(std::uint64_t n) {
+  return n * (4 * sizeof(Vec3) + sizeof(float) + sizeof(Aabb) + sizeof(std::uint32_t) + sizeof(Aabb)) +
+         3 * (n + 1) * sizeof(std::uint32_t);
+}
+
+/// The message of the InputError that `f` throws, "" when it throws none.
+template <class F>
+std::string input_error(F f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+/// A model of `count` bodies of one shape (JSON members of a shape object) in a 2 m box.
+std::shared_ptr<const Model> model_of(const std::string& shape, int count) {
+  return build_model(parse_scene(R"({"name": "fp", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]},
+      "walls": "none", "broadphase": {"name": "octree-strict", "depth": "auto"},
+      "groups": [{"name": "b", "shape": )" + shape + R"(, "count": )" + std::to_string(count) +
+                                     R"(, "layout": {"type": "grid", "min": [-0.9, 0.1, -0.9], "max": [0.9, 1.9, 0.9]}}]})",
+                                 "fp.json"));
+}
+
+}  // namespace
+
+// Linear in the body count (every buffer is a multiple of n plus a constant), with a
+// slope of at least the per-body buffers, and at least their sum at every size.
+TEST(CudaFootprint, LinearInBodyCountAndCoversThePerBodyBuffers) {
+  for (const BroadPhaseConfig& c : device_broadphases()) {
+    SCOPED_TRACE(label(c));
+    for (std::uint64_t n : {1ull, 1000ull, 100000ull, 1000000ull, 10000000ull, 500000000ull}) {
+      const std::uint64_t f1 = cuda_device_bytes_needed(n, c);
+      const std::uint64_t f2 = cuda_device_bytes_needed(2 * n, c);
+      const std::uint64_t f4 = cuda_device_bytes_needed(4 * n, c);
+      EXPECT_EQ(f4 - f2, 2 * (f2 - f1)) << "not linear around n = " << n;
+      EXPECT_GE(f1, per_body_buffers(n)) << "n = " << n;
+      EXPECT_GE(f2 - f1, per_body_buffers(2 * n) - per_body_buffers(n)) << "slope below the per-body buffers, n = " << n;
+      // Per body: the per-body buffers, 2 candidate pairs (about 214 bytes each) and 8
+      // work-list items (16 bytes each) of the first capacities, the broadphase's scratch:
+      // under 2 KiB, and over the 116 bytes of the per-body buffers alone.
+      EXPECT_LT(f2 - f1, 2048 * n) << "n = " << n;
+      EXPECT_GT(f2 - f1, 500 * n) << "n = " << n;
+    }
+  }
+  // 100k bodies, `flat`: about 70 MB (the GPU test compares this with the engine's own count).
+  const std::uint64_t f = cuda_device_bytes_needed(100000, bp("flat"));
+  EXPECT_GT(f, 60000000u);
+  EXPECT_LT(f, 80000000u);
+  // The strict octree's automatic depth needs per-body extents (a double and a flag).
+  EXPECT_EQ(cuda_device_bytes_needed(1000, bp("octree-strict", -1)) - cuda_device_bytes_needed(1000, bp("octree-strict")),
+            1000u * (sizeof(double) + sizeof(std::uint32_t)));
+}
+
+// The cuda engine indexes bodies with 32-bit integers: more than 2^31 - 1 is bad input.
+TEST(CudaFootprint, MoreThan2Pow31Minus1BodiesIsAnInputError) {
+  EXPECT_EQ(kCudaMaxBodies, 2147483647u);
+  for (const BroadPhaseConfig& c : device_broadphases()) {
+    SCOPED_TRACE(label(c));
+    EXPECT_EQ(input_error([&] { (void)cuda_device_bytes_needed(kCudaMaxBodies, c); }), "");
+    for (std::uint64_t n : {2147483648ull, 4294967296ull, 1000000000000ull}) {
+      const std::string msg = input_error([&] { (void)cuda_device_bytes_needed(n, c); });
+      EXPECT_NE(msg.find("the cuda engine takes at most 2147483647 (2^31 - 1) bodies"), std::string::npos) << msg;
+      EXPECT_NE(msg.find("this model has " + std::to_string(n)), std::string::npos) << msg;
+    }
+  }
+}
+
+TEST(CudaFootprint, UnknownBroadphaseIsAnInputError) {
+  for (const std::string name : {"bullet-dbvt", "fcl-dynamic-aabb", "no-such"}) {
+    const std::string msg = input_error([&] { (void)cuda_device_bytes_needed(10, bp(name)); });
+    EXPECT_NE(msg.find("'" + name + "' is not available on the cuda engine"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("flat, octree, octree-strict, spatial-hash"), std::string::npos) << msg;
+  }
+}
+
+// The Model overload: the count overload plus the model's shapes (a mesh's octree
+// vertices and cells), with the scene's broadphase depth.
+TEST(CudaFootprint, ModelAddsItsShapesAndUsesTheScenesDepth) {
+  const int n = 64;
+  const auto boxes = model_of(R"({"box": [0.05, 0.05, 0.05]})", n);
+  const auto spheres = model_of(R"({"icosphere": {"radius": 0.05, "subdivisions": 3}})", n);
+  ASSERT_EQ(boxes->initial.size(), static_cast<std::size_t>(n));
+  ASSERT_EQ(spheres->initial.size(), static_cast<std::size_t>(n));
+  const Shape& s = spheres->shapes.at(spheres->bodies.at(0).shape);
+  ASSERT_TRUE(s.octree) << "an icosphere is a mesh with an octree";
+  const std::uint64_t mesh_bytes =
+      s.octree->vertices.size() * sizeof(Vec3) + s.octree->cells.size() * sizeof(MeshOctreeCell);
+  for (const std::string name : {"flat", "octree", "octree-strict", "spatial-hash"}) {
+    SCOPED_TRACE(name);
+    BroadPhaseConfig c = boxes->scene.broadphase;
+    c.name = name;
+    const std::uint64_t count_only = cuda_device_bytes_needed(static_cast<std::uint64_t>(n), c);
+    const std::uint64_t with_boxes = cuda_device_bytes_needed(*boxes, name);
+    const std::uint64_t with_spheres = cuda_device_bytes_needed(*spheres, name);
+    EXPECT_GE(with_boxes, count_only);
+    EXPECT_LT(with_boxes - count_only, 1024u) << "boxes have no octree: a shape record and a theta each";
+    EXPECT_GE(with_spheres - with_boxes + sizeof(Vec3) + sizeof(MeshOctreeCell), mesh_bytes);
+  }
+  // The scene says octree-strict at depth auto: the per-body extents are counted.
+  BroadPhaseConfig fixed = boxes->scene.broadphase;
+  fixed.octree_depth = 2;
+  EXPECT_EQ(boxes->scene.broadphase.octree_depth, -1);
+  EXPECT_GE(cuda_device_bytes_needed(*boxes, "octree-strict"),
+            cuda_device_bytes_needed(static_cast<std::uint64_t>(n), fixed) +
+                static_cast<std::uint64_t>(n) * (sizeof(double) + sizeof(std::uint32_t)));
+}
