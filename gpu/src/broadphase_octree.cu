@@ -349,8 +349,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     slot_q_.ensure(n);
     level_begin_.ensure(kLevelTable);
     if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
-    cell_mask_ = 1;
-    while (cell_mask_ + 1ull < 4ull * std::max<std::uint32_t>(n, 1)) cell_mask_ = (cell_mask_ << 1) | 1u;
+    cell_mask_ = static_cast<std::uint32_t>(footprint::loose_cell_table_entries(n) - 1);
     cell_keys_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
     cell_runs_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
     std::size_t a = 0, c = 0;

@@ -75,6 +75,8 @@ static_assert(sizeof(gpu::DeviceShape) == gpu::footprint::kDeviceShapeBytes, "de
 static_assert(sizeof(gpu::MidItem) == gpu::footprint::kMidItemBytes, "device_footprint.hpp: MidItem");
 static_assert(sizeof(gpu::DeviceContact) == gpu::footprint::kDeviceContactBytes, "device_footprint.hpp: DeviceContact");
 static_assert(sizeof(gpu::StepStats) == gpu::footprint::kStepStatsBytes, "device_footprint.hpp: StepStats");
+static_assert(sizeof(gpu::MetricsResult) == gpu::footprint::kMetricsResultBytes, "device_footprint.hpp: MetricsResult");
+static_assert(gpu::kMetricsBlocks == gpu::footprint::kMetricsPartials, "device_footprint.hpp: kMetricsBlocks");
 
 /// "1.23 GiB", "4.5 MiB" or "12.0 KiB": a byte count for a message.
 std::string human_bytes(std::uint64_t bytes) {

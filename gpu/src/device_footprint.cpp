@@ -40,9 +40,10 @@ std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
   if (cfg.name == "flat") return 0;
   if (cfg.name == "octree") {  // LooseOctreeDevice::reserve (broadphase_octree.cu)
     const std::uint64_t temp = std::max({cub_sort_temp_bound(n, 4, 4), cub_scan_temp_bound(n), std::uint64_t{1}});
+    const std::uint64_t table = loose_cell_table_entries(n);
     return buf(n, sizeof(float)) + buf(1, sizeof(float)) + 4 * buf(n, sizeof(std::uint32_t)) +
            2 * buf(n, kLooseQBoxBytes) + buf(n, sizeof(Aabb)) + buf(kLooseLevelTable, sizeof(std::uint32_t)) +
-           buf(temp, 1);
+           buf(table, sizeof(std::uint32_t)) + buf(table, 2 * sizeof(std::uint32_t)) + buf(temp, 1);
   }
   if (cfg.name == "octree-strict") {  // StrictOctreeDevice::reserve (broadphase_strict.cu)
     const bool auto_depth = cfg.octree_depth < 0;
@@ -81,7 +82,8 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
   // Constructor: the packed shapes, per-shape theta, the step statistics.
   const std::uint64_t shapes = buf(sc.shapes, kDeviceShapeBytes) + buf(sc.vertices, sizeof(Vec3)) +
                                buf(sc.cells, sizeof(MeshOctreeCell)) + buf(sc.level_offsets, sizeof(std::uint32_t)) +
-                               buf(sc.theta, sizeof(float)) + buf(1, kStepStatsBytes);
+                               buf(sc.theta, sizeof(float)) + buf(1, kStepStatsBytes) +
+                               buf(kMetricsPartials, kMetricsResultBytes);
   // prepare() at the first capacities: bp_count, bp_offset, body_begin (n + 1 each); per
   // candidate pair: pair keys (2), pairs, confirmed, hit, dx_a, dx_b, dv_a, dv_b, depth0,
   // records; the contact index keys and values (in and out, 2 entries per pair); the two
