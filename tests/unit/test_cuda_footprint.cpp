@@ -71,7 +71,14 @@ TEST(CudaFootprint, LinearInBodyCountAndCoversThePerBodyBuffers) {
       const std::uint64_t f1 = cuda_device_bytes_needed(n, c);
       const std::uint64_t f2 = cuda_device_bytes_needed(2 * n, c);
       const std::uint64_t f4 = cuda_device_bytes_needed(4 * n, c);
-      EXPECT_EQ(f4 - f2, 2 * (f2 - f1)) << "not linear around n = " << n;
+      if (c.name == "octree") {
+        // Linear within 5%: the cell table is a power of two >= 4 n and the occupancy
+        // bitmaps gain a level where 8^l passes 64 n (steps, each bounded per body).
+        const double d2 = static_cast<double>(f4 - f2), d1 = 2.0 * static_cast<double>(f2 - f1);
+        EXPECT_NEAR(d2, d1, 0.05 * d1) << "not linear around n = " << n;
+      } else {
+        EXPECT_EQ(f4 - f2, 2 * (f2 - f1)) << "not linear around n = " << n;
+      }
       EXPECT_GE(f1, per_body_buffers(n)) << "n = " << n;
       EXPECT_GE(f2 - f1, per_body_buffers(2 * n) - per_body_buffers(n)) << "slope below the per-body buffers, n = " << n;
       // Per body: the per-body buffers, 2 candidate pairs (about 214 bytes each) and 8
