@@ -87,13 +87,6 @@ struct LooseDesc {
   std::uint32_t* cell_keys = nullptr;
   uint2* cell_runs = nullptr;
   std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 4 n)
-  /// Occupancy bitmaps of levels 0..bitmap_levels - 1: bit c of level l (word
-  /// bitmap_offset[l] + c / 64) is set when cell c (Morton code) holds a body. A word is
-  /// an aligned 4 x 4 x 4 block of cells, so a query's at most 4 x 4 x 4 window reads at
-  /// most 8 words; the cell table is then probed for the occupied cells only.
-  unsigned long long* bitmap = nullptr;
-  int bitmap_levels = 0;
-  std::uint32_t bitmap_offset[kLooseMaxDepth + 1] = {};
   unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
   int shift = 32;                           ///< PairOutput::shift
   std::uint32_t capacity = 0;               ///< entries pair_keys holds
@@ -171,25 +164,6 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   }
   if (first) d.cell_runs[h].x = s;
   if (last) d.cell_runs[h].y = s + 1;
-  const int level = loose_key_level(key);
-  if (first && level < d.bitmap_levels) {
-    const std::uint32_t code = key - loose_level_base(level);
-    atomicOr(&d.bitmap[d.bitmap_offset[level] + (code >> 6)], 1ull << (code & 63u));
-  }
-}
-
-/// The 6-bit Morton codes (x at bits 0 and 3, y at 1 and 4, z at 2 and 5; math.hpp's
-/// morton3) of a 4 x 4 x 4 block whose coordinate along axis a is c: kAxisBits[a][c].
-__constant__ unsigned long long kAxisBits[3][4] = {
-    {0x0055005500550055ull, 0x00aa00aa00aa00aaull, 0x5500550055005500ull, 0xaa00aa00aa00aa00ull},
-    {0x0000333300003333ull, 0x0000cccc0000ccccull, 0x3333000033330000ull, 0xcccc0000cccc0000ull},
-    {0x000000000f0f0f0full, 0x00000000f0f0f0f0ull, 0x0f0f0f0f00000000ull, 0xf0f0f0f000000000ull}};
-
-/// The codes of a block whose axis-a coordinate lies in [lo, hi] (0 <= lo <= hi <= 3).
-__device__ inline unsigned long long axis_window(int a, int lo, int hi) {
-  unsigned long long m = 0;
-  for (int c = lo; c <= hi; ++c) m |= kAxisBits[a][c];
-  return m;
 }
 
 /// The run of slots [begin, end) of cell `key` (empty when the cell holds no body).
@@ -275,61 +249,6 @@ struct WarpEmitter {
   }
 };
 
-/// The query at level m (< bitmap_levels) of slot s (at `level`): lane b < 8 reads the
-/// bitmap word of block b of the window (at most 2 blocks per axis) masked to the
-/// window; the occupied cells are numbered across the lanes (a warp scan), each lane
-/// probes the cell table for one of them, and the warp tests the runs.
-__device__ void bitmap_level(const LooseDesc& d, WarpEmitter& e, int m, int level, std::uint32_t s, LooseRange rx,
-                             LooseRange ry, LooseRange rz) {
-  const std::uint32_t lane = e.lane;
-  const int bx0 = rx.lo >> 2, by0 = ry.lo >> 2, bz0 = rz.lo >> 2;
-  const int sx = (rx.hi >> 2) - bx0, sy = (ry.hi >> 2) - by0, sz = (rz.hi >> 2) - bz0;  // 0 or 1
-  unsigned long long occ = 0;
-  std::uint32_t block = 0;  // the block's Morton code (its cells: block * 64 + 0..63)
-  if (lane < (1u << (sx + sy + sz))) {
-    const int bx = bx0 + static_cast<int>(lane & static_cast<unsigned>(sx));
-    const int by = by0 + static_cast<int>((lane >> sx) & static_cast<unsigned>(sy));
-    const int bz = bz0 + static_cast<int>(lane >> (sx + sy));
-    block = morton3(static_cast<std::uint32_t>(bx), static_cast<std::uint32_t>(by), static_cast<std::uint32_t>(bz));
-    const auto clip = [](int lo, int hi, int b) {  // the window's local range in block b
-      return make_int2(lo > 4 * b ? lo - 4 * b : 0, hi < 4 * b + 3 ? hi - 4 * b : 3);
-    };
-    const int2 wx = clip(rx.lo, rx.hi, bx), wy = clip(ry.lo, ry.hi, by), wz = clip(rz.lo, rz.hi, bz);
-    occ = d.bitmap[d.bitmap_offset[m] + block] & axis_window(0, wx.x, wx.y) & axis_window(1, wy.x, wy.y) &
-          axis_window(2, wz.x, wz.y);
-  }
-  const std::uint32_t cnt = static_cast<std::uint32_t>(__popcll(occ));
-  std::uint32_t incl = cnt;
-  for (unsigned o = 1; o < 32; o <<= 1) {
-    const std::uint32_t v = __shfl_up_sync(bp::kFullMask, incl, o);
-    if (lane >= o) incl += v;
-  }
-  const std::uint32_t total = __shfl_sync(bp::kFullMask, incl, 31);
-  const std::uint32_t base_key = loose_level_base(m);
-  for (std::uint32_t k = 0; k < total; k += 32) {
-    const std::uint32_t j = k + lane;
-    std::uint32_t owner = 0;  // the first lane whose inclusive count exceeds j
-    for (std::uint32_t step = 16; step > 0; step >>= 1) {
-      const std::uint32_t probe = __shfl_sync(bp::kFullMask, incl, owner + step - 1);
-      if (probe <= j) owner += step;
-    }
-    unsigned long long bits = __shfl_sync(bp::kFullMask, occ, owner & 31u);
-    const std::uint32_t owner_block = __shfl_sync(bp::kFullMask, block, owner & 31u);
-    const std::uint32_t owner_incl = __shfl_sync(bp::kFullMask, incl, owner & 31u);
-    const std::uint32_t owner_cnt = __shfl_sync(bp::kFullMask, cnt, owner & 31u);
-    std::uint32_t t0 = 0, t1 = 0;
-    if (j < total) {
-      for (std::uint32_t r = j - (owner_incl - owner_cnt); r > 0; --r) bits &= bits - 1;  // the r-th set bit
-      const std::uint32_t code = (owner_block << 6) | static_cast<std::uint32_t>(__ffsll(bits) - 1);
-      const uint2 run = find_cell(d, base_key + code);
-      t0 = run.x;
-      t1 = run.y;
-      if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;  // same level: only the slots after s
-    }
-    e.runs(t0, t1);
-  }
-}
-
 /// One warp per slot: the loose octree query of the file comment. At each level the
 /// lanes look up the (at most 4 x 4 x 4) cells in the cell table, then the warp tests the
 /// concatenated runs.
@@ -351,11 +270,6 @@ __global__ void loose_query_kernel(LooseDesc d) {
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
         const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
         const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
-        if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) continue;
-        if (m < d.bitmap_levels) {
-          bitmap_level(d, e, m, level, s, rx, ry, rz);
-          continue;
-        }
         const int nx = rx.hi - rx.lo + 1, ny = ry.hi - ry.lo + 1, nz = rz.hi - rz.lo + 1;
         const int cells = nx * ny * nz;
         for (int c0 = 0; c0 < cells; c0 += 32) {
@@ -437,13 +351,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
     cell_mask_ = static_cast<std::uint32_t>(footprint::loose_cell_table_entries(n) - 1);
     cell_keys_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
-    // Bitmaps for the levels with at most 64 max(n, 64) cells (one word per body at most):
-    // their clearing costs what the other per-body buffers cost.
-    bitmap_levels_ = footprint::loose_bitmap_levels(n);
-    for (int l = 0; l < bitmap_levels_; ++l)
-      bitmap_offset_[l] = static_cast<std::uint32_t>(footprint::loose_bitmap_words(l));
-    bitmap_words_ = footprint::loose_bitmap_words(bitmap_levels_);
-    bitmap_.ensure(bitmap_words_);
     cell_runs_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
     std::size_t a = 0, c = 0;
     check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
@@ -479,9 +386,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.cell_keys = cell_keys_.get();
     d.cell_runs = cell_runs_.get();
     d.cell_mask = cell_mask_;
-    d.bitmap = bitmap_.get();
-    d.bitmap_levels = bitmap_levels_;
-    for (int l = 0; l < bitmap_levels_; ++l) d.bitmap_offset[l] = bitmap_offset_[l];
     d.pair_keys = out.keys;
     d.shift = out.shift;
     d.capacity = out.capacity;
@@ -504,8 +408,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     check(cudaMemsetAsync(cell_keys_.get(), 0xff, (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(std::uint32_t),
                           stream),
           "cudaMemset octree cell table");
-    check(cudaMemsetAsync(bitmap_.get(), 0, bitmap_words_ * sizeof(unsigned long long), stream),
-          "cudaMemset octree occupancy bitmaps");
     loose_gather_kernel<<<grid_for(std::max<std::uint32_t>(n, kLevelTable)), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_gather");
     loose_query_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(d);
@@ -518,7 +420,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     std::uint64_t t = 0;
     for (const BufferBase* b : std::initializer_list<const BufferBase*>{
              &extent_, &min_, &key_, &body_, &q_, &sorted_key_, &slot_body_, &slot_box_, &slot_q_,
-             &level_begin_, &cell_keys_, &cell_runs_, &bitmap_, &temp_})
+             &level_begin_, &cell_keys_, &cell_runs_, &temp_})
       t += b->bytes();
     return t;
   }
@@ -543,10 +445,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   std::uint32_t cell_mask_ = 1;
   DeviceBuffer<std::uint32_t> cell_keys_{"octree cell table keys"};
   DeviceBuffer<uint2> cell_runs_{"octree cell table runs"};
-  int bitmap_levels_ = 0;
-  std::uint64_t bitmap_words_ = 0;
-  std::uint32_t bitmap_offset_[kLooseMaxDepth + 1] = {};
-  DeviceBuffer<unsigned long long> bitmap_{"octree occupancy bitmaps"};
   DeviceBuffer<unsigned char> temp_{"octree CUB temporary storage"};
 };
 

@@ -29,19 +29,6 @@ constexpr std::uint64_t kMetricsResultBytes = 72;
 constexpr std::uint64_t kMetricsPartials = 128;
 /// Entries of the loose octree's cell table for n bodies: the smallest power of two >= 4 n
 /// (at least 2); each entry a 4-byte key and an 8-byte run (broadphase_octree.cu).
-/// Levels of the loose octree's occupancy bitmaps for n bodies: 0 .. L - 1 with 8^l <=
-/// 64 max(n, 64) cells (at most one 64-bit word per body), at most kLooseMaxDepth + 1.
-constexpr int loose_bitmap_levels(std::uint64_t n) {
-  int l = 0;
-  while (l <= kLooseMaxDepth && (std::uint64_t{1} << (3 * l)) <= 64 * (n > 64 ? n : 64)) ++l;
-  return l;
-}
-/// 64-bit words of the bitmaps of levels 0 .. levels - 1 (level l: ceil(8^l / 64)).
-constexpr std::uint64_t loose_bitmap_words(int levels) {
-  std::uint64_t w = 0;
-  for (int l = 0; l < levels; ++l) w += ((std::uint64_t{1} << (3 * l)) + 63) / 64;
-  return w;
-}
 constexpr std::uint64_t loose_cell_table_entries(std::uint64_t n) {
   std::uint64_t t = 2;
   while (t < 4 * (n > 0 ? n : 1)) t <<= 1;
