@@ -222,6 +222,7 @@ const BoxSet& box_set(const std::string& name) {
 struct Variant {
   std::string label;
   BroadPhaseConfig config;
+  const char* octree_query = "";  ///< OCTOCD_CUDA_OCTREE_QUERY while constructing ("" = auto)
 };
 
 /// gtest prints a parameter by its label.
@@ -250,6 +251,9 @@ std::vector<Variant> variants() {
     c.name = "octree";
     c.octree_depth = depth;
     v.push_back({depth < 0 ? std::string("loose_auto") : fmt::format("loose_depth_{}", depth), c});
+    // The box sets are small: the thread-per-slot query of large scenes, forced.
+    v.push_back({depth < 0 ? std::string("loose_thread_auto") : fmt::format("loose_thread_depth_{}", depth), c,
+                 "thread"});
   }
 #endif
   return v;
@@ -262,6 +266,21 @@ std::unique_ptr<DeviceBroadPhase> make_device(const BroadPhaseConfig& c, const A
   if (c.name == "octree") return gpu::make_device_loose_octree(c, domain);
 #endif
   throw std::runtime_error("no device broadphase " + c.name);
+}
+
+/// make_device with the variant's octree query forced through the test hook.
+std::unique_ptr<DeviceBroadPhase> make_device(const Variant& v, const Aabb& domain) {
+  if (*v.octree_query == '\0') return make_device(v.config, domain);
+  ::setenv("OCTOCD_CUDA_OCTREE_QUERY", v.octree_query, 1);
+  std::unique_ptr<DeviceBroadPhase> bp;
+  try {
+    bp = make_device(v.config, domain);
+  } catch (...) {
+    ::unsetenv("OCTOCD_CUDA_OCTREE_QUERY");
+    throw;
+  }
+  ::unsetenv("OCTOCD_CUDA_OCTREE_QUERY");
+  return bp;
 }
 
 // ---- running a device broadphase -----------------------------------------------------
@@ -424,7 +443,7 @@ TEST_P(DeviceBroadPhaseTest, PairSetEqualsFlatOnEveryBoxSet) {
     SCOPED_TRACE(name);
     const BoxSet& set = box_set(name);
     const auto n = static_cast<std::uint32_t>(set.boxes.size());
-    auto bp = make_device(v.config, set.domain);
+    auto bp = make_device(v, set.domain);
     EXPECT_EQ(bp->name(), v.config.name);
     DeviceBuffer<Aabb> boxes("test boxes");
     gpu::upload(boxes, set.boxes, stream.s);
@@ -461,7 +480,7 @@ TEST_P(DeviceBroadPhaseTest, CapacityOverflowGivesTheTotalAndRerunGivesTheSet) {
   ASSERT_GT(set.flat.size(), 10u);
   Stream stream;
   const auto n = static_cast<std::uint32_t>(set.boxes.size());
-  auto bp = make_device(v.config, set.domain);
+  auto bp = make_device(v, set.domain);
   DeviceBuffer<Aabb> boxes("test boxes");
   gpu::upload(boxes, set.boxes, stream.s);
   bp->reserve(n, stream.s);
@@ -498,7 +517,7 @@ TEST_P(DeviceBroadPhaseTest, FindIsCapturedInAGraphAndReplaysOnNewBoxes) {
   const auto capacity = static_cast<std::uint32_t>(std::max(a.flat.size(), moved_flat.size()));
 
   Stream stream;
-  auto bp = make_device(v.config, a.domain);
+  auto bp = make_device(v, a.domain);
   DeviceBuffer<Aabb> boxes("test boxes");
   gpu::upload(boxes, a.boxes, stream.s);
   bp->reserve(n, stream.s);
