@@ -69,6 +69,8 @@ struct Totals {
   double pen_mean_sum = 0.0, pen_max = 0.0;
   std::int64_t frames_with_contacts = 0;
   double energy_sum = 0.0, energy_max = 0.0;
+  double model_s = 0.0;   ///< set-up: scene file, meshes, bodies (build_model), s
+  double engine_s = 0.0;  ///< set-up: the engine (cuda: device buffers and upload), s
   octocd::FrameMetrics last;  ///< the last frame's row (the "last" column)
 
   void add(const octocd::FrameMetrics& m) {
@@ -160,6 +162,8 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
              world.shapes().size());
   fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", engine, world.broadphase_name(),
              world.midphase_name(), world.device());
+  fmt::print("set-up       {:.2f} s (scene and bodies {:.2f} s, engine {:.2f} s)\n", t.model_s + t.engine_s,
+             t.model_s, t.engine_s);
   fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
              static_cast<double>(t.frames) * s.dt, wall_s);
   fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n",
@@ -218,6 +222,8 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   j["midphase"] = world.midphase_name();
   j["frames"] = t.frames;
   j["wall_s"] = wall_s;
+  // Set-up before the first step: scene file, meshes and bodies; the engine.
+  j["setup_s"] = {{"model", t.model_s}, {"engine", t.engine_s}};
   j["steps_per_s"] = t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0;
   j["mean_step_ms"] = t.step_ms / n;
   for (int st = 0; st < kStages; ++st) {
@@ -334,14 +340,20 @@ void close_after_failure(std::unique_ptr<octocd::TraceWriter>& trace, const std:
 
 int run_command(const RunOptions& o) {
   octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
+  const auto t_setup = Clock::now();
   octocd::Scene scene = load_scene_for(o.scene, o.data_dir);
   if (!o.broadphase.empty()) scene.broadphase.name = o.broadphase;
   if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
   if (o.frames > 0) scene.frames = o.frames;
   check_overrides(scene, o.engine, o.broadphase, o.midphase);
 
-  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, octocd::build_model(scene));
+  const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
+  const auto t_model = Clock::now();
+  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model);
   octocd::Engine& world = *engine;
+  Totals totals;
+  totals.model_s = std::chrono::duration<double>(t_model - t_setup).count();
+  totals.engine_s = std::chrono::duration<double>(Clock::now() - t_model).count();
   std::unique_ptr<octocd::TraceWriter> trace;
   if (!o.trace.empty()) {
     octocd::TraceOptions topt;
@@ -354,7 +366,6 @@ int run_command(const RunOptions& o) {
     trace->append_state(0, world.state());
   }
 
-  Totals totals;
   Progress progress(scene.frames, !o.quiet);
   const auto t0 = Clock::now();
   try {
