@@ -290,12 +290,16 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
           const int c = c0 + static_cast<int>(lane);
           if (c < cells) {
             const int ix = rx.lo + c % nx, iy = ry.lo + (c / nx) % ny, iz = rz.lo + c / (nx * ny);
-            const uint2 run = find_cell(d, loose_cell_key(m, static_cast<std::uint32_t>(ix),
-                                                          static_cast<std::uint32_t>(iy),
-                                                          static_cast<std::uint32_t>(iz)));
-            t0 = run.x;
-            t1 = run.y;
-            if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;  // same level: only the slots after s
+            const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix), static_cast<std::uint32_t>(iy),
+                                                    static_cast<std::uint32_t>(iz));
+            // Same level: only the slots after s, so no cell before s's own (its slots all
+            // come before s in key order) is looked up.
+            if (m != level || ck >= key) {
+              const uint2 run = find_cell(d, ck);
+              t0 = run.x;
+              t1 = run.y;
+              if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;
+            }
           }
           e.runs(t0, t1);
         }
@@ -348,9 +352,10 @@ __global__ void loose_query_kernel(LooseDesc d) {
         for (int iz = rz.lo; iz <= rz.hi; ++iz)
           for (int iy = ry.lo; iy <= ry.hi; ++iy)
             for (int ix = rx.lo; ix <= rx.hi; ++ix) {
-              const uint2 run = find_cell(d, loose_cell_key(m, static_cast<std::uint32_t>(ix),
-                                                            static_cast<std::uint32_t>(iy),
-                                                            static_cast<std::uint32_t>(iz)));
+              const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix),
+                                                      static_cast<std::uint32_t>(iy), static_cast<std::uint32_t>(iz));
+              if (m == level && ck < key) continue;  // same level: its slots all come before s
+              const uint2 run = find_cell(d, ck);
               std::uint32_t t0 = run.x;
               if (m == level && t0 <= s) t0 = s + 1 < run.y ? s + 1 : run.y;  // same level: the slots after s
               test_run(d, box, body, t0, run.y, tests);
