@@ -5,7 +5,9 @@
 //    then per body loose_place_unit -> (level, Morton cell) key, the overflow key, or the
 //    NaN key; its unit box in fixed point (loose_q_min / loose_q_max);
 // 2. a stable radix sort by key: slot order = (key, body), so every occupied cell is a
-//    contiguous run of slots and the levels follow each other in key order;
+//    contiguous run of slots and the levels follow each other in key order (with a fixed
+//    D_w the overflow and NaN keys follow level D_w's cells, so the sort covers only the
+//    bits they need);
 // 3. a level table (first slot of every level, of the overflow list and of the NaN
 //    bodies) and a hash table of the occupied cells (cell key -> its run of slots, open
 //    addressing with linear probing over an array of keys, at most a quarter full, the
@@ -15,7 +17,8 @@
 //      looked up in the cell table (from kWarpQueryBodies bodies one thread per slot,
 //      the lookups one after another: at 10^6 bodies the query is instruction bound and
 //      most cells of a window are empty; below, one warp per slot, a lane per cell); at
-//      m = l it keeps only slots after its own, at m < l every body;
+//      m = l it keeps only slots after its own (a cell whose key precedes its own is not
+//      even looked up), at m < l every body;
 //    - an overflow body tests the overflow bodies after it;
 //    then the exact AABB test (octocd::overlaps, Eq. 6). A second kernel, one thread per
 //    in-tree slot, tests it against every overflow body (walls: a handful, each of which
