@@ -203,6 +203,21 @@ __device__ std::uint32_t lower_bound(const std::uint32_t* keys, std::uint32_t lo
 }
 
 
+/// Appends `key` for every lane with `hit` (every lane of the warp calls it): one atomic
+/// per warp, the keys in lane order after base (those below the capacity).
+__device__ inline void warp_emit(const LooseDesc& d, bool hit, unsigned long long key) {
+  const std::uint32_t lane = threadIdx.x & 31u;
+  const unsigned mask = __ballot_sync(bp::kFullMask, hit);
+  if (mask == 0) return;
+  std::uint32_t base = 0;
+  if (lane == 0) base = atomicAdd(d.total, static_cast<std::uint32_t>(__popc(mask)));
+  base = __shfl_sync(bp::kFullMask, base, 0);
+  if (hit) {
+    const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
+    if (idx < d.capacity) d.pair_keys[idx] = key;
+  }
+}
+
 /// One warp's query for slot s: the lanes test candidate slots 32 at a time and append
 /// the overlapping pairs (by body index, a < b) with one atomic per round that hits.
 struct WarpEmitter {
@@ -215,15 +230,7 @@ struct WarpEmitter {
   /// One round: the lanes with `valid` test slot t (every lane calls it).
   __device__ void test(bool valid, std::uint32_t t) {
     const bool hit = valid && overlaps(box_s, d.slot_box[t]);
-    const unsigned mask = __ballot_sync(bp::kFullMask, hit);
-    if (mask == 0) return;
-    std::uint32_t base = 0;
-    if (lane == 0) base = atomicAdd(d.total, static_cast<std::uint32_t>(__popc(mask)));
-    base = __shfl_sync(bp::kFullMask, base, 0);
-    if (hit) {
-      const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
-      if (idx < d.capacity) d.pair_keys[idx] = bp::pair_key(body_s, d.slot_body[t], d.shift);
-    }
+    warp_emit(d, hit, hit ? bp::pair_key(body_s, d.slot_body[t], d.shift) : 0ull);
   }
 
   /// Tests slots [t0, t1) (warp-uniform bounds).
@@ -374,7 +381,6 @@ __global__ void loose_query_kernel(LooseDesc d) {
 /// overflow body that hits any of them).
 __global__ void loose_overflow_kernel(LooseDesc d) {
   const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
-  const std::uint32_t lane = threadIdx.x & 31u;
   const std::uint32_t ov_begin = d.level_begin[kLooseMaxDepth + 1];
   const std::uint32_t ov_end = d.level_begin[kLooseMaxDepth + 2];
   const bool mine = t < ov_begin;
@@ -384,15 +390,7 @@ __global__ void loose_overflow_kernel(LooseDesc d) {
     const std::uint32_t body = mine ? d.slot_body[t] : 0u;
     for (std::uint32_t o = ov_begin; o < ov_end; ++o) {
       const bool hit = mine && overlaps(box, d.slot_box[o]);
-      const unsigned mask = __ballot_sync(bp::kFullMask, hit);
-      if (mask == 0) continue;
-      std::uint32_t base = 0;
-      if (lane == 0) base = atomicAdd(d.total, static_cast<std::uint32_t>(__popc(mask)));
-      base = __shfl_sync(bp::kFullMask, base, 0);
-      if (hit) {
-        const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
-        if (idx < d.capacity) d.pair_keys[idx] = bp::pair_key(body, d.slot_body[o], d.shift);
-      }
+      warp_emit(d, hit, hit ? bp::pair_key(body, d.slot_body[o], d.shift) : 0ull);
     }
     if (mine) tests = ov_end - ov_begin;
   }
