@@ -104,13 +104,6 @@ Aabb domain_for(std::uint32_t n) {
 
 // ---- small helpers ------------------------------------------------------------------------
 
-/// Bits needed to hold every value in [0, n], at least 1 (as cuda_world.cpp's key_bits).
-int key_bits(std::uint32_t n) {
-  int bits = 1;
-  while (bits < 32 && (n >> bits) != 0) ++bits;
-  return bits;
-}
-
 /// The capacity to grow to when `needed` keys did not fit (cuda_world.cpp's rule).
 std::size_t grown(std::size_t needed, std::size_t capacity) {
   return std::max(needed + needed / 4 + 64, 2 * capacity);
@@ -337,7 +330,7 @@ Result measure(std::unique_ptr<DeviceBroadPhase> bp, const DeviceBuffer<Aabb>& b
   Event start, stop;
   Graph graph;
   // The engine's keys: (a << key_bits(n)) | b, sorted over 2 key_bits(n) bits.
-  const int shift = key_bits(n);
+  const int shift = octocd::gpu::key_bits(n);
   const int end_bit = 2 * shift;
 
   bp->reserve(n, stream);

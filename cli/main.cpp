@@ -144,15 +144,6 @@ class Progress {
   Clock::time_point last_draw_{};
 };
 
-std::string utc_now() {
-  const std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
 void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
                    const std::string& trace, const std::string& xdmf) {
   const std::string engine = world.name();
@@ -361,7 +352,7 @@ int run_command(const RunOptions& o) {
     topt.contacts = o.contacts && world.can_record();
     if (topt.contacts) world.set_recording(true);  // the GPU copies contacts back only then
     octocd::TraceMetadata meta = octocd::trace_metadata(world, o.state_every);
-    meta.start_time = utc_now();
+    meta.start_time = octocd::cli::utc_time_now();
     trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(world), topt);
     trace->append_state(0, world.state());
   }
@@ -533,7 +524,7 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
     if (!o.trace.empty()) {
       if (!trace) {
         octocd::TraceMetadata meta = octocd::trace_metadata(w, 10);
-        meta.start_time = utc_now();
+        meta.start_time = octocd::cli::utc_time_now();
         trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(w),
                                                       octocd::TraceOptions{});
       }

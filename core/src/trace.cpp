@@ -28,6 +28,7 @@
 #include "octocd/error.hpp"
 #include "octocd/version.hpp"
 #include "octocd/xml.hpp"
+#include "hdf5_handle.hpp"
 
 namespace octocd {
 
@@ -55,22 +56,7 @@ const std::vector<std::string>& frame_column_names() {
   return names;
 }
 
-// Silences HDF5's automatic error printing for the lifetime of the guard (restoring the
-// previous handler afterwards) so that failures reach the caller only as exceptions.
-class QuietHdf5 {
- public:
-  QuietHdf5() {
-    H5Eget_auto2(H5E_DEFAULT, &func_, &data_);
-    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
-  }
-  ~QuietHdf5() { H5Eset_auto2(H5E_DEFAULT, func_, data_); }
-  QuietHdf5(const QuietHdf5&) = delete;
-  QuietHdf5& operator=(const QuietHdf5&) = delete;
-
- private:
-  H5E_auto2_t func_ = nullptr;
-  void* data_ = nullptr;
-};
+using detail::QuietHdf5;
 
 // The innermost (most specific) and outermost messages of HDF5's current error stack.
 std::string hdf5_message() {
@@ -138,46 +124,7 @@ T check(T ret, const std::string& path, const std::string& op) {
   return ret;
 }
 
-// Closes an HDF5 identifier of any kind when it goes out of scope.
-class Handle {
- public:
-  Handle() = default;
-  explicit Handle(hid_t id) : id_(id) {}
-  ~Handle() { reset(); }
-  Handle(const Handle&) = delete;
-  Handle& operator=(const Handle&) = delete;
-  Handle(Handle&& o) noexcept : id_(o.id_) { o.id_ = -1; }
-  Handle& operator=(Handle&& o) noexcept {
-    if (this != &o) {
-      reset();
-      id_ = o.id_;
-      o.id_ = -1;
-    }
-    return *this;
-  }
-  hid_t get() const { return id_; }
-  /// Forgets the identifier without closing it (a file abandoned after a failed write).
-  void release() { id_ = -1; }
-  operator hid_t() const { return id_; }  // NOLINT: used as an hid_t in C calls
-  void reset() {
-    if (id_ >= 0) {
-      switch (H5Iget_type(id_)) {
-        case H5I_FILE: H5Fclose(id_); break;
-        case H5I_GROUP: H5Gclose(id_); break;
-        case H5I_DATATYPE: H5Tclose(id_); break;
-        case H5I_DATASPACE: H5Sclose(id_); break;
-        case H5I_DATASET: H5Dclose(id_); break;
-        case H5I_ATTR: H5Aclose(id_); break;
-        case H5I_GENPROP_LST: H5Pclose(id_); break;
-        default: break;
-      }
-    }
-    id_ = -1;
-  }
-
- private:
-  hid_t id_ = -1;
-};
+using Handle = detail::Hdf5Handle;
 
 Handle vlen_string_type(const std::string& path) {
   Handle t(check(H5Tcopy(H5T_C_S1), path, "H5Tcopy"));

@@ -10,52 +10,14 @@
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
+#include "hdf5_handle.hpp"
 
 namespace octocd {
 
 namespace {
 
-// HDF5's automatic error printing off while a reader call runs (restored afterwards):
-// failures reach the caller as InputError only.
-class Quiet {
- public:
-  Quiet() {
-    H5Eget_auto2(H5E_DEFAULT, &func_, &data_);
-    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
-  }
-  ~Quiet() { H5Eset_auto2(H5E_DEFAULT, func_, data_); }
-  Quiet(const Quiet&) = delete;
-  Quiet& operator=(const Quiet&) = delete;
-
- private:
-  H5E_auto2_t func_ = nullptr;
-  void* data_ = nullptr;
-};
-
-// An HDF5 identifier closed with the matching call when it goes out of scope.
-class Id {
- public:
-  explicit Id(hid_t id = -1) : id_(id) {}
-  ~Id() {
-    if (id_ < 0) return;
-    switch (H5Iget_type(id_)) {
-      case H5I_FILE: H5Fclose(id_); break;
-      case H5I_DATASET: H5Dclose(id_); break;
-      case H5I_DATASPACE: H5Sclose(id_); break;
-      case H5I_DATATYPE: H5Tclose(id_); break;
-      case H5I_ATTR: H5Aclose(id_); break;
-      case H5I_GROUP: H5Gclose(id_); break;
-      default: H5Oclose(id_); break;
-    }
-  }
-  Id(const Id&) = delete;
-  Id& operator=(const Id&) = delete;
-  operator hid_t() const { return id_; }  // NOLINT: passed to the C API
-  bool ok() const { return id_ >= 0; }
-
- private:
-  hid_t id_;
-};
+using Quiet = detail::QuietHdf5;  // failures reach the caller as InputError only
+using Id = detail::Hdf5Handle;
 
 }  // namespace
 

@@ -60,13 +60,6 @@ std::string describe_current_device() {
                      static_cast<double>(p.totalGlobalMem) / (1024.0 * 1024.0 * 1024.0));
 }
 
-/// Bits needed to hold every key in [0, n] (the sort's end_bit), at least 1.
-int key_bits(std::uint32_t n) {
-  int bits = 1;
-  while (bits < 32 && (n >> bits) != 0) ++bits;
-  return bits;
-}
-
 constexpr int kEvents = static_cast<int>(Stage::Count) + 1;
 
 // The host estimate (device_footprint.cpp) counts these structs by the sizes of
@@ -289,10 +282,11 @@ struct CudaWorld::Impl {
     items_b.ensure(list_cap);
     body_begin.ensure(n1);
     std::size_t a = 0, b = 0, c = 0;
-    check(gpu::sort_keys_u64(nullptr, a, pair_keys.get(), pair_keys_sorted.get(), pcap(), 2 * key_bits(n), stream),
+    check(gpu::sort_keys_u64(nullptr, a, pair_keys.get(), pair_keys_sorted.get(), pcap(), 2 * gpu::key_bits(n),
+                             stream),
           "cub::DeviceRadixSort::SortKeys (size)");
     check(gpu::sort_pairs_u32(nullptr, b, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(), 2 * pcap(),
-                              key_bits(n), stream),
+                              gpu::key_bits(n), stream),
           "cub::DeviceRadixSort::SortPairs (size)");
     check(gpu::exclusive_scan_u32(nullptr, c, bp_count.get(), bp_offset.get(), n + 1, stream),
           "cub::DeviceScan::ExclusiveSum (size)");
@@ -312,7 +306,8 @@ struct CudaWorld::Impl {
              "cub::DeviceScan::ExclusiveSum");
     check(cudaMemcpyAsync(counts(), bp_offset.get() + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, stream),
           "cudaMemcpy pair total");
-    launched(gpu::launch_flat_fill(aabb.get(), n, bp_offset.get(), pair_keys.get(), pcap(), key_bits(n), stream),
+    launched(gpu::launch_flat_fill(aabb.get(), n, bp_offset.get(), pair_keys.get(), pcap(), gpu::key_bits(n),
+                                   stream),
              "flat_fill");
   }
 
@@ -345,7 +340,7 @@ struct CudaWorld::Impl {
       out.capacity = pcap();
       out.total = counts();
       out.candidates = counters() + 3;
-      out.shift = key_bits(n);
+      out.shift = gpu::key_bits(n);
       bp->find(aabb.get(), n, out, stream);
     } else {
       flat_broadphase();
@@ -353,7 +348,8 @@ struct CudaWorld::Impl {
     std::size_t bytes = temp.capacity();
     // Keys are (a << key_bits(n)) | b: the sort covers 2 key_bits(n) bits (padding keys,
     // all ones, still sort after every real key: a < b < 2^key_bits(n)).
-    launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(), 2 * key_bits(n),
+    launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(),
+                                2 * gpu::key_bits(n),
                                 stream),
              "cub::DeviceRadixSort::SortKeys");
     record_event(3);  // the pairs are unpacked from the sorted keys by mid_start
@@ -367,7 +363,7 @@ struct CudaWorld::Impl {
     md.levels = levels;
     md.pairs = pairs.get();
     md.pair_keys = pair_keys_sorted.get();
-    md.pair_shift = key_bits(n);
+    md.pair_shift = gpu::key_bits(n);
     md.pair_count = counts();
     md.pair_capacity = pcap();
     md.confirmed = confirmed.get();
@@ -404,7 +400,7 @@ struct CudaWorld::Impl {
              "contact_entries");
     bytes = temp.capacity();
     launched(gpu::sort_pairs_u32(temp.get(), bytes, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(),
-                                 entries, key_bits(n), stream),
+                                 entries, gpu::key_bits(n), stream),
              "cub::DeviceRadixSort::SortPairs");
     launched(gpu::launch_body_segments(keys_out.get(), entries, n, body_begin.get(), stream), "body_segments");
     gpu::TermsDesc td;

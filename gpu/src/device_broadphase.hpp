@@ -31,11 +31,20 @@
 namespace octocd {
 namespace gpu {
 
+/// Bits needed to hold every value in [0, n], at least 1 and at most 32: the engine's
+/// PairOutput::shift for n bodies (body indices < n < 2^key_bits(n)) and the end bit of
+/// its sorts by body index.
+inline int key_bits(std::uint32_t n) {
+  int bits = 1;
+  while (bits < 32 && (n >> bits) != 0) ++bits;
+  return bits;
+}
+
 /// Where a device broadphase writes its pairs (all device pointers).
 struct PairOutput {
   unsigned long long* keys = nullptr;        ///< capacity entries: (a << shift) | b, a < b
   /// Bits of b in a key, in [1, 32]; every body index must be < 2^shift. The engine uses
-  /// the bits of n - 1 (key_bits), so its key sort covers 2 x shift bits, not 32 + shift.
+  /// key_bits(n), so its key sort covers 2 x shift bits, not 32 + shift.
   int shift = 32;
   std::uint32_t capacity = 0;                ///< entries keys can hold
   std::uint32_t* total = nullptr;            ///< out: pairs found (may exceed capacity)

@@ -358,13 +358,6 @@ struct Output {
   }
 };
 
-/// The engine's PairOutput::shift for n bodies: the bits of n (cuda_world.cpp key_bits).
-int engine_shift(std::uint32_t n) {
-  int bits = 1;
-  while (bits < 32 && (n >> bits) != 0) ++bits;
-  return bits;
-}
-
 FindResult find_once(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, std::uint32_t n, std::uint32_t capacity,
                      cudaStream_t s, int shift = 32) {
   Output out(capacity, s, shift);
@@ -375,8 +368,8 @@ FindResult find_once(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, std:
 /// find() as the engine uses it: a small output first, regrown to the total and rerun
 /// when it overflows.
 FindResult find_all(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, std::uint32_t n, cudaStream_t s) {
-  FindResult r = find_once(bp, boxes, n, 16, s, engine_shift(n));
-  if (r.total > 16) r = find_once(bp, boxes, n, r.total, s, engine_shift(n));
+  FindResult r = find_once(bp, boxes, n, 16, s, gpu::key_bits(n));
+  if (r.total > 16) r = find_once(bp, boxes, n, r.total, s, gpu::key_bits(n));
   return r;
 }
 
@@ -489,7 +482,7 @@ TEST_P(DeviceBroadPhaseTest, CapacityOverflowGivesTheTotalAndRerunGivesTheSet) {
   EXPECT_EQ(none.total, set.flat.size());
   EXPECT_FALSE(none.wrote_past_capacity) << "capacity 0: a key was written";
 
-  const FindResult one = find_once(*bp, boxes, n, 1, stream.s, engine_shift(n));
+  const FindResult one = find_once(*bp, boxes, n, 1, stream.s, gpu::key_bits(n));
   EXPECT_EQ(one.total, set.flat.size());
   EXPECT_FALSE(one.wrote_past_capacity) << "capacity 1: a key was written past it";
   ASSERT_EQ(one.keys.size(), 1u);
@@ -498,7 +491,7 @@ TEST_P(DeviceBroadPhaseTest, CapacityOverflowGivesTheTotalAndRerunGivesTheSet) {
   EXPECT_TRUE(std::binary_search(set.flat.begin(), set.flat.end(), first[0]));
   EXPECT_EQ(one.candidates, none.candidates);
 
-  const FindResult all = find_once(*bp, boxes, n, one.total, stream.s, engine_shift(n));
+  const FindResult all = find_once(*bp, boxes, n, one.total, stream.s, gpu::key_bits(n));
   EXPECT_EQ(all.total, one.total);
   EXPECT_FALSE(all.wrote_past_capacity);
   std::vector<Pair> pairs;
@@ -521,7 +514,7 @@ TEST_P(DeviceBroadPhaseTest, FindIsCapturedInAGraphAndReplaysOnNewBoxes) {
   DeviceBuffer<Aabb> boxes("test boxes");
   gpu::upload(boxes, a.boxes, stream.s);
   bp->reserve(n, stream.s);
-  Output out(capacity, stream.s, engine_shift(n));
+  Output out(capacity, stream.s, gpu::key_bits(n));
   gpu::check(cudaStreamSynchronize(stream.s), "cudaStreamSynchronize");
 
   cudaGraph_t graph = nullptr;

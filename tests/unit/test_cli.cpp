@@ -14,32 +14,15 @@
 #include <thread>
 
 #include "octocd/trace.hpp"
+#include "cli_run.hpp"
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-  int code = -1;
-  std::string output;
-};
-
-std::string bin() {
-  const char* b = std::getenv("OCTOCD_BIN");
-  return b ? b : OCTOCD_TEST_BIN;
-}
-
-/// Runs `octocd ARGS` and returns its exit code and merged stdout/stderr.
-Result run_octocd(const std::string& args) {
-  Result r;
-  FILE* p = popen((bin() + " " + args + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  while (std::fgets(buf, sizeof buf, p)) r.output += buf;
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using octocd::test::Result;
+using octocd::test::bin;
+using octocd::test::run_octocd;
 
 class Cli : public ::testing::Test {
  protected:

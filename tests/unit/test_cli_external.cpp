@@ -17,35 +17,16 @@
 #include <string>
 #include <vector>
 
+#include "cli_run.hpp"
+
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-  int code = -1;
-  std::string output;
-};
-
-std::string bin() {
-  const char* b = std::getenv("OCTOCD_BIN");
-  return b ? b : OCTOCD_TEST_BIN;
-}
-
-std::string source_dir() {
-  const char* root = std::getenv("OCTOCD_SOURCE_DIR");
-  return root ? root : ".";
-}
-
-Result run(const std::string& command) {
-  Result r;
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  while (std::fgets(buf, sizeof buf, p)) r.output += buf;
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using octocd::test::Result;
+using octocd::test::bin;
+using octocd::test::source_dir;
+using octocd::test::run;
 
 /// A small external trace, held in arrays that a test may break before writing: 3 boxes
 /// of half side 0.1 (body 0 static), two overlapping by the slop (1, 2) and one apart, 3

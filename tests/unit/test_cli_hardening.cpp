@@ -21,10 +21,13 @@
 #include <vector>
 
 #include "octocd/trace.hpp"
+#include "cli_run.hpp"
 
 namespace fs = std::filesystem;
 
 namespace {
+
+using octocd::test::bin;
 
 #if defined(__SANITIZE_ADDRESS__)
 constexpr bool kAsan = true;
@@ -37,11 +40,6 @@ constexpr bool kAsan = false;
 #else
 constexpr bool kAsan = false;
 #endif
-
-std::string bin() {
-  const char* b = std::getenv("OCTOCD_BIN");
-  return b ? b : OCTOCD_TEST_BIN;
-}
 
 struct Result {
   int code = -1;        ///< exit status, or -1 when killed by a signal

@@ -22,37 +22,17 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/trace_reader.hpp"
+#include "cli_run.hpp"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 namespace {
 
-struct Result {
-  int code = -1;
-  std::string output;
-};
-
-std::string bin() {
-  const char* b = std::getenv("OCTOCD_BIN");
-  return b ? b : OCTOCD_TEST_BIN;
-}
-
-std::string source_dir() {
-  const char* s = std::getenv("OCTOCD_SOURCE_DIR");
-  return s ? s : ".";
-}
-
-Result run_octocd(const std::string& args) {
-  Result r;
-  FILE* p = popen((bin() + " " + args + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  while (std::fgets(buf, sizeof buf, p)) r.output += buf;
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using octocd::test::Result;
+using octocd::test::bin;
+using octocd::test::source_dir;
+using octocd::test::run_octocd;
 
 json read_json(const fs::path& p) {
   std::ifstream in(p);

@@ -30,19 +30,18 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_run.hpp"
+
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-  int code = -1;
-  std::string output;
-};
+using octocd::test::Result;
+using octocd::test::run;
 
-std::string bin() {
-  const char* b = std::getenv("OCTOCD_BIN");
-  return fs::absolute(b ? b : OCTOCD_TEST_BIN).string();
-}
+
+/// The binary under test as an absolute path (the tests run it from other folders).
+std::string bin() { return fs::absolute(octocd::test::bin()).string(); }
 
 fs::path source_dir() {
   const char* s = std::getenv("OCTOCD_SOURCE_DIR");
@@ -51,22 +50,11 @@ fs::path source_dir() {
 
 std::string quote(const std::string& s) { return "'" + s + "'"; }
 
-/// Runs a shell command line and returns its exit code and merged stdout/stderr.
-Result shell(const std::string& line) {
-  Result r;
-  FILE* p = popen((line + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  while (std::fgets(buf, sizeof buf, p)) r.output += buf;
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
 
 /// `octocd ARGS`, run in folder `cwd` ("" = the current one).
-Result octocd(const std::string& args, const fs::path& cwd = {}) {
+Result octocd_cmd(const std::string& args, const fs::path& cwd = {}) {
   const std::string cd = cwd.empty() ? "" : "cd " + quote(cwd.string()) + " && ";
-  return shell(cd + quote(bin()) + " " + args);
+  return run(cd + quote(bin()) + " " + args);
 }
 
 std::string slurp(const fs::path& p) {
@@ -251,7 +239,7 @@ TEST_F(CliUser, SceneNextToCacheFindsItHoweverSpelled) {
   for (const auto& [cwd, arg] : std::vector<std::pair<fs::path, std::string>>{
            {scenes, "mix.json"}, {scenes, "./mix.json"}, {scenes, (scenes / "mix.json").string()},
            {dir_, "proj/scenes/mix.json"}, {dir_ / "proj", "scenes/../scenes/mix.json"}}) {
-    const Result r = octocd("run " + quote(arg) + " --quiet --frames 2", cwd);
+    const Result r = octocd_cmd("run " + quote(arg) + " --quiet --frames 2", cwd);
     EXPECT_EQ(r.code, 0) << "cwd " << cwd << ", scene '" << arg << "':\n" << r.output;
   }
 }
@@ -266,7 +254,7 @@ TEST_F(CliUser, UserFolderFindsShippedDatasetsHoweverSpelled) {
   const fs::path mine = dir_ / "mine";
   write_file(mine / "mix.json", scene_text("", R"({"mesh": "bunny", "scale": 0.2})"));
   for (const std::string& arg : {std::string("mix.json"), std::string("./mix.json"), (mine / "mix.json").string()}) {
-    const Result r = shell("cd " + quote(mine.string()) + " && env -u OCTOCD_DATA_DIR " + quote(bin()) + " run " +
+    const Result r = run("cd " + quote(mine.string()) + " && env -u OCTOCD_DATA_DIR " + quote(bin()) + " run " +
                            quote(arg) + " --quiet --frames 2");
     EXPECT_EQ(r.code, 0) << "scene '" << arg << "':\n" << r.output;
   }
@@ -277,15 +265,15 @@ TEST_F(CliUser, UserFolderFindsShippedDatasetsHoweverSpelled) {
 TEST_F(CliUser, DataDirOption) {
   write_file(dir_ / "meshes" / "thing.obj", kTetraObj);
   const std::string path = scene("lonely", scene_text("", R"({"mesh": "thing", "scale": 0.2})"));
-  Result r = octocd("run " + path + " --quiet --frames 2");
+  Result r = octocd_cmd("run " + path + " --quiet --frames 2");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("groups[0].shape.mesh"), std::string::npos) << r.output;
   EXPECT_EQ(r.output.find("fetch.sh"), std::string::npos) << "'thing' is no dataset:\n" << r.output;
-  r = octocd("run " + path + " --quiet --frames 2 --data-dir " + (dir_ / "meshes").string());
+  r = octocd_cmd("run " + path + " --quiet --frames 2 --data-dir " + (dir_ / "meshes").string());
   EXPECT_EQ(r.code, 0) << r.output;
-  r = octocd("validate " + path + " --frames 2 --against none --data-dir " + (dir_ / "meshes").string());
+  r = octocd_cmd("validate " + path + " --frames 2 --against none --data-dir " + (dir_ / "meshes").string());
   EXPECT_EQ(r.code, 0) << r.output;
-  r = octocd("run " + path + " --quiet --data-dir " + (dir_ / "nowhere").string());
+  r = octocd_cmd("run " + path + " --quiet --data-dir " + (dir_ / "nowhere").string());
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--data-dir: "), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("; allowed: "), std::string::npos) << r.output;
@@ -296,7 +284,7 @@ TEST_F(CliUser, DataDirOption) {
 TEST_F(CliUser, MessagesNameFileKeyAndAllowed) {
   // A wrong relative mesh path is searched as given, not as ".../bunny.obj.obj".
   std::string path = scene("relpath", scene_text("", R"({"mesh": "meshes/bunny.obj"})"));
-  Result r = octocd("run " + path + " --quiet");
+  Result r = octocd_cmd("run " + path + " --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_EQ(r.output.find(".obj.obj"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find(path + ": groups[0].shape.mesh: "), std::string::npos) << r.output;
@@ -305,7 +293,7 @@ TEST_F(CliUser, MessagesNameFileKeyAndAllowed) {
   // A mesh file without vertices: the scene file and the key come first.
   write_file(dir_ / "hollow.obj", "# no vertices here\no thing\n");
   path = scene("hollow", scene_text("", R"({"mesh": "hollow.obj"})"));
-  r = octocd("run " + path + " --quiet");
+  r = octocd_cmd("run " + path + " --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find(path + ": groups[0].shape.mesh: mesh file '"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("; allowed: "), std::string::npos) << r.output;
@@ -313,7 +301,7 @@ TEST_F(CliUser, MessagesNameFileKeyAndAllowed) {
   // An unsupported format says which ones are.
   write_file(dir_ / "thing.gltf", R"({"asset": {"version": "2.0"}})");
   path = scene("gltf", scene_text("", R"({"mesh": "thing.gltf"})"));
-  r = octocd("run " + path + " --quiet");
+  r = octocd_cmd("run " + path + " --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find(path + ": groups[0].shape.mesh: "), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("allowed: a triangle mesh file in OBJ, OFF, PLY or STL format"), std::string::npos)
@@ -322,13 +310,13 @@ TEST_F(CliUser, MessagesNameFileKeyAndAllowed) {
   // An unknown broadphase: from the scene file (file and key) or from --broadphase.
   path = scene("kd", scene_text(R"(, "broadphase": {"name": "kd-tree"})"));
   for (const char* cmd : {"run", "validate"}) {
-    r = octocd(std::string(cmd) + " " + path + " --frames 2");
+    r = octocd_cmd(std::string(cmd) + " " + path + " --frames 2");
     EXPECT_EQ(r.code, 2) << r.output;
     EXPECT_NE(r.output.find(path + ": broadphase.name: unknown broadphase 'kd-tree'; allowed: flat, octree"),
               std::string::npos)
         << r.output;
   }
-  r = octocd("run " + scene("ok", scene_text()) + " --broadphase kd-tree --quiet");
+  r = octocd_cmd("run " + scene("ok", scene_text()) + " --broadphase kd-tree --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--broadphase: unknown broadphase 'kd-tree'; allowed: flat, octree"), std::string::npos)
       << r.output;
@@ -339,26 +327,26 @@ TEST_F(CliUser, MessagesNameFileKeyAndAllowed) {
 TEST_F(CliUser, CommandLineCheckedLikeSceneFile) {
   const std::string ok = scene("ok", scene_text());
   // The scene file rejects levels deeper than midphase.depth (default 2); so does --midphase.
-  Result r = octocd("run " + scene("deep", scene_text(R"(, "midphase": {"levels": "3"})")) + " --quiet");
+  Result r = octocd_cmd("run " + scene("deep", scene_text(R"(, "midphase": {"levels": "3"})")) + " --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
-  r = octocd("run " + ok + " --midphase 3 --quiet");
+  r = octocd_cmd("run " + ok + " --midphase 3 --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--midphase: "), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("midphase.depth"), std::string::npos) << r.output;
-  EXPECT_EQ(octocd("run " + scene("deep-ok", scene_text(R"(, "midphase": {"depth": 3})")) +
+  EXPECT_EQ(octocd_cmd("run " + scene("deep-ok", scene_text(R"(, "midphase": {"depth": 3})")) +
                    " --midphase 3 --quiet").code,
             0);
 
   // Bullet runs neither an octocd midphase nor another broadphase: saying so is bad input.
-  r = octocd("run " + ok + " --engine bullet --midphase 0,1,2 --quiet");
+  r = octocd_cmd("run " + ok + " --engine bullet --midphase 0,1,2 --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--midphase: engine bullet"), std::string::npos) << r.output;
-  r = octocd("run " + ok + " --engine bullet --broadphase fcl-naive --quiet");
+  r = octocd_cmd("run " + ok + " --engine bullet --broadphase fcl-naive --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--broadphase: engine bullet"), std::string::npos) << r.output;
   // ... and its trace records what it ran.
   const std::string trace = (dir_ / "bullet.h5").string();
-  r = octocd("run " + ok + " --engine bullet --quiet --trace " + trace);
+  r = octocd_cmd("run " + ok + " --engine bullet --quiet --trace " + trace);
   ASSERT_EQ(r.code, 0) << r.output;
   {
     H5File f(trace);
@@ -372,7 +360,7 @@ TEST_F(CliUser, CommandLineCheckedLikeSceneFile) {
 
   // --frames 0 says the range in a line, not a 300-digit double.
   for (const char* cmd : {"run", "validate"}) {
-    r = octocd(std::string(cmd) + " " + ok + " --frames 0");
+    r = octocd_cmd(std::string(cmd) + " " + ok + " --frames 0");
     EXPECT_EQ(r.code, 2) << r.output;
     EXPECT_NE(r.output.find("--frames: 0 is out of range; allowed: an integer in [1, 2147483647]"), std::string::npos)
         << r.output;
@@ -380,9 +368,9 @@ TEST_F(CliUser, CommandLineCheckedLikeSceneFile) {
   }
 
   // "dt": 0.1 is the documented inclusive maximum (float32 0.1 is above the double 0.1).
-  r = octocd("run " + scene("dt", scene_text(R"(, "dt": 0.1)")) + " --quiet --frames 2");
+  r = octocd_cmd("run " + scene("dt", scene_text(R"(, "dt": 0.1)")) + " --quiet --frames 2");
   EXPECT_EQ(r.code, 0) << r.output;
-  r = octocd("run " + scene("dt-big", scene_text(R"(, "dt": 0.1000001)")) + " --quiet --frames 2");
+  r = octocd_cmd("run " + scene("dt-big", scene_text(R"(, "dt": 0.1000001)")) + " --quiet --frames 2");
   EXPECT_EQ(r.code, 2) << r.output;
 }
 
@@ -421,7 +409,7 @@ TEST_F(CliUser, SummaryEnergyMatchesTrace) {
   for (const char* engine : {"cpu", "bullet"}) {
     const std::string trace = (dir_ / (std::string(engine) + ".h5")).string();
     const std::string json = (dir_ / (std::string(engine) + ".json")).string();
-    const Result r = octocd("run " + path + " --engine " + engine + " --frames 150 --trace " + trace +
+    const Result r = octocd_cmd("run " + path + " --engine " + engine + " --frames 150 --trace " + trace +
                             " --summary-json " + json + " 2>/dev/null");
     ASSERT_EQ(r.code, 0) << r.output;
     const TraceColumns c = read_columns(trace);
@@ -455,7 +443,7 @@ TEST_F(CliUser, DynamicPairsLeaveOutWallPairs) {
     for (const char* engine : {"cpu", "bullet"}) {
       const std::string trace = (dir_ / (walls + engine + ".h5")).string();
       const std::string json = (dir_ / (walls + engine + ".json")).string();
-      const Result r = octocd("run " + path + " --engine " + engine + " --frames 40 --quiet --trace " + trace +
+      const Result r = octocd_cmd("run " + path + " --engine " + engine + " --frames 40 --quiet --trace " + trace +
                               " --summary-json " + json);
       ASSERT_EQ(r.code, 0) << r.output;
       const TraceColumns c = read_columns(trace);
@@ -490,7 +478,7 @@ TEST_F(CliUser, BulletStagesAndPairsCompare) {
   for (const char* engine : {"cpu", "bullet"}) {
     const std::string json = (dir_ / (std::string(engine) + ".json")).string();
     const std::string trace = (dir_ / (std::string(engine) + ".h5")).string();
-    const Result r = octocd("run " + path + " --engine " + engine + " --trace " + trace + " --summary-json " + json +
+    const Result r = octocd_cmd("run " + path + " --engine " + engine + " --trace " + trace + " --summary-json " + json +
                             " 2>/dev/null");
     ASSERT_EQ(r.code, 0) << r.output;
     summary[engine] = nlohmann::json::parse(slurp(json));
@@ -535,7 +523,7 @@ TEST_F(CliUser, ValidateFramesHonouredByEveryValidator) {
   // bounce: the bounce happens at frame ~320, after the 300 asked for; box-stack: the
   // settling time (200) is longer than the 150 asked for; both compared with Bullet.
   for (const auto& [name, frames] : std::vector<std::pair<std::string, long>>{{"bounce", 300}, {"box-stack", 150}}) {
-    const Result r = octocd("validate " + (scenes / (name + ".json")).string() + " --frames " +
+    const Result r = octocd_cmd("validate " + (scenes / (name + ".json")).string() + " --frames " +
                             std::to_string(frames) + " --every 50 --against bullet");
     EXPECT_EQ(r.code, 3) << name << ": the event lies past --frames, analytic must fail:\n" << r.output;
     const std::vector<long> seen = frame_numbers(r.output);
@@ -544,7 +532,7 @@ TEST_F(CliUser, ValidateFramesHonouredByEveryValidator) {
     EXPECT_NE(std::find(seen.begin(), seen.end(), frames), seen.end()) << r.output;
   }
   // A long enough run passes and the Bullet comparison says how long it ran.
-  const Result r = octocd("validate " + (scenes / "box-stack.json").string() + " --frames 230 --every 50 --against bullet");
+  const Result r = octocd_cmd("validate " + (scenes / "box-stack.json").string() + " --frames 230 --every 50 --against bullet");
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("after 230 frames"), std::string::npos) << r.output;
   for (long f : frame_numbers(r.output)) EXPECT_LE(f, 230) << r.output;
@@ -558,7 +546,7 @@ TEST_F(CliUser, TraceWritesXdmfSidecarMatchingTheTrace) {
     "groups": [{"name": "small", "shape": {"box": [0.05, 0.1, 0.15]}, "count": 3},
                {"name": "big", "shape": {"box": [0.2, 0.2, 0.2]}, "count": 2}]})");
   const std::string trace = (dir_ / "two.h5").string();
-  Result r = octocd("run " + path + " --trace " + trace + " --state-every 10 2>/dev/null");
+  Result r = octocd_cmd("run " + path + " --trace " + trace + " --state-every 10 2>/dev/null");
   ASSERT_EQ(r.code, 0) << r.output;
   const fs::path xmf = trace + ".xmf";
   ASSERT_TRUE(fs::exists(xmf)) << r.output;
@@ -620,7 +608,7 @@ TEST_F(CliUser, TraceWritesXdmfSidecarMatchingTheTrace) {
 
   // --no-xdmf: no sidecar.
   const std::string quiet = (dir_ / "quiet.h5").string();
-  r = octocd("run " + path + " --trace " + quiet + " --no-xdmf --quiet");
+  r = octocd_cmd("run " + path + " --trace " + quiet + " --no-xdmf --quiet");
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_TRUE(fs::exists(quiet));
   EXPECT_FALSE(fs::exists(quiet + ".xmf"));
@@ -631,7 +619,7 @@ TEST_F(CliUser, TraceWritesXdmfSidecarMatchingTheTrace) {
 TEST_F(CliUser, ValidateWritesJUnit) {
   const std::string stack = (source_dir() / "datasets" / "scenes" / "box-stack.json").string();
   const fs::path pass_xml = dir_ / "pass.xml";
-  Result r = octocd("validate " + stack + " --frames 210 --every 70 --against none --junit " + pass_xml.string());
+  Result r = octocd_cmd("validate " + stack + " --frames 210 --every 70 --against none --junit " + pass_xml.string());
   ASSERT_EQ(r.code, 0) << r.output;
   {
     Xml x(pass_xml);
@@ -662,7 +650,7 @@ TEST_F(CliUser, ValidateWritesJUnit) {
 
   // A failing scene: the report is written, with the failure's detail line.
   const fs::path fail_xml = dir_ / "fail.xml";
-  r = octocd("validate " + scene("box-in-box", kFailingScene) + " --frames 20 --every 5 --against none --junit " +
+  r = octocd_cmd("validate " + scene("box-in-box", kFailingScene) + " --frames 20 --every 5 --against none --junit " +
              fail_xml.string());
   ASSERT_EQ(r.code, 3) << r.output;
   {
@@ -681,7 +669,7 @@ TEST_F(CliUser, ValidateWritesJUnit) {
 
   // Bad input: one errored case, exit 2.
   const fs::path bad_xml = dir_ / "bad.xml";
-  r = octocd("validate " + scene("bad", scene_text(R"(, "dt": -1)")) + " --junit " + bad_xml.string());
+  r = octocd_cmd("validate " + scene("bad", scene_text(R"(, "dt": -1)")) + " --junit " + bad_xml.string());
   ASSERT_EQ(r.code, 2) << r.output;
   Xml x(bad_xml);
   ASSERT_TRUE(x.ok()) << slurp(bad_xml);
@@ -698,7 +686,7 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   const std::string fail = scene("box-in-box", kFailingScene);
   const std::string bad = scene("bad", scene_text(R"(, "dt": "fast")"));
   auto nightly = [&](const std::string& out, const std::string& scenes) {
-    return shell("OCTOCD_BIN=" + quote(bin()) + " bash " + quote(script) + " --frames 20 --every 10 --out " +
+    return run("OCTOCD_BIN=" + quote(bin()) + " bash " + quote(script) + " --frames 20 --every 10 --out " +
                  quote((dir_ / out).string()) + " " + scenes);
   };
   Result r = nightly("ok", pass);
@@ -729,7 +717,7 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
 TEST_F(CliUser, CliDocMatchesHelp) {
   const std::string doc = slurp(source_dir() / "docs" / "cli.md");
   ASSERT_FALSE(doc.empty());
-  const Result top = octocd("--help");
+  const Result top = octocd_cmd("--help");
   ASSERT_EQ(top.code, 0);
   // Every subcommand `octocd --help` lists.
   std::vector<std::string> commands = {""};
@@ -754,7 +742,7 @@ TEST_F(CliUser, CliDocMatchesHelp) {
                                     << "': run scripts/cli-doc.sh BUILD_DIR to regenerate it";
     const auto e = doc.find(end, b);
     ASSERT_NE(e, std::string::npos) << label;
-    const Result help = octocd(c.empty() ? "--help" : c + " --help");
+    const Result help = octocd_cmd(c.empty() ? "--help" : c + " --help");
     ASSERT_EQ(help.code, 0);
     EXPECT_EQ(doc.substr(b + begin.size(), e - b - begin.size()), help.output)
         << "docs/cli.md differs from `" << label << "`: run scripts/cli-doc.sh BUILD_DIR";

@@ -13,38 +13,13 @@
 
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
+#include "hdf5_handle.hpp"  // core/src (private include)
 
 namespace octocd {
 
 namespace {
 
-/// Closes any HDF5 handle it holds.
-class Handle {
- public:
-  explicit Handle(hid_t id = -1) : id_(id) {}
-  ~Handle() {
-    if (id_ < 0) return;
-    switch (H5Iget_type(id_)) {
-      case H5I_FILE: H5Fclose(id_); break;
-      case H5I_DATASET: H5Dclose(id_); break;
-      case H5I_DATASPACE: H5Sclose(id_); break;
-      case H5I_DATATYPE: H5Tclose(id_); break;
-      case H5I_ATTR: H5Aclose(id_); break;
-      default: break;
-    }
-  }
-  Handle(Handle&& o) noexcept : id_(o.id_) { o.id_ = -1; }
-  Handle& operator=(Handle&& o) noexcept {
-    std::swap(id_, o.id_);
-    return *this;
-  }
-  Handle(const Handle&) = delete;
-  Handle& operator=(const Handle&) = delete;
-  operator hid_t() const { return id_; }  // NOLINT: used as an hid_t
-
- private:
-  hid_t id_;
-};
+using Handle = detail::Hdf5Handle;
 
 /// One dataset: its handle and dimensions.
 struct Dataset {
@@ -57,7 +32,6 @@ struct Dataset {
 class TraceIn {
  public:
   explicit TraceIn(const std::string& path) : path_(path) {
-    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
     if (H5Fis_hdf5(path.c_str()) <= 0)
       throw InputError(fmt::format("{}: not a readable HDF5 file; allowed: an external trace (docs/trace-format.md)",
                                    path));
@@ -377,6 +351,9 @@ class TraceIn {
     return out;
   }
 
+  // HDF5's error printing off while this reader lives (it used to stay off for the rest of
+  // the process); failures reach the caller as InputError. Declared first: outlives file_.
+  detail::QuietHdf5 quiet_;
   std::string path_;
   Handle file_;
   hsize_t n_ = 0;
