@@ -349,6 +349,15 @@ const std::vector<ToleranceEntry>& tolerance_table() {
       {"bullet_trajectory_m", &Tolerances::bullet_trajectory_m, "m"},
       {"applied_state_ulps", &Tolerances::applied_state_ulps, "float32 roundings"},
       {"applied_conservation_rel", &Tolerances::applied_conservation_rel, "relative"},
+      {"geometry_slack_m", &Tolerances::geometry_slack_m, "m"},
+      {"broadphase_margin_m", &Tolerances::broadphase_margin_m, "m"},
+      {"contact_depth_m", &Tolerances::contact_depth_m, "m"},
+      {"normal_angle_deg", &Tolerances::normal_angle_deg, "degrees"},
+      {"depth_m", &Tolerances::depth_m, "m"},
+      {"penetration_slops", &Tolerances::penetration_slops, "slops"},
+      {"penetration_settle_frames", &Tolerances::penetration_settle_frames, "frames"},
+      {"angular_momentum_rel", &Tolerances::angular_momentum_rel, "relative"},
+      {"energy_rel", &Tolerances::energy_rel, "relative"},
   };
   return table;
 }
@@ -424,6 +433,8 @@ std::vector<ValidationResult> validate_scene(const Scene& scene, const Validatio
       options);
 }
 
+const char* tier_name(Tier tier) { return tier == Tier::Physics ? "physics" : "model"; }
+
 std::string format_results(const std::vector<ValidationResult>& results,
                            const std::vector<std::string>& overridden) {
   auto marked = [&](const ValidationResult& r) {
@@ -431,13 +442,13 @@ std::string format_results(const std::vector<ValidationResult>& results,
       if (("," + r.tolerances + ",").find("," + o + ",") != std::string::npos) return true;
     return false;
   };
-  std::string out = fmt::format("{:<22} {:>12} {:>10}  {:<5}  {}\n", "validator", "measured", "bound",
-                                "", "figure / detail");
+  std::string out = fmt::format("{:<8} {:<24} {:>12} {:>10}  {:<5}  {}\n", "tier", "validator", "measured",
+                                "bound", "", "figure / detail");
   for (const ValidationResult& r : results) {
     const char* verdict = !r.applicable ? "n/a" : (r.pass ? "pass" : "FAIL");
-    out += fmt::format("{:<22} {:>12.6g} {:>10} {:<5}  {}\n", r.name, r.measured,
+    out += fmt::format("{:<8} {:<24} {:>12.6g} {:>10} {:<5}  {}\n", tier_name(r.tier), r.name, r.measured,
                        fmt::format("{:.4g}{}", r.bound, marked(r) ? "*" : " "), verdict, r.figure);
-    out += fmt::format("{:<22} {:>12} {:>10}  {:<5}  {}\n", "", "", "", "", r.detail);
+    out += fmt::format("{:<8} {:<24} {:>12} {:>10}  {:<5}  {}\n", "", "", "", "", "", r.detail);
   }
   if (!overridden.empty()) out += "* bound set with --tolerance\n";
   return out;
@@ -472,6 +483,7 @@ void write_validation(const std::string& path, const std::vector<ValidationResul
     H5Dclose(d);
   };
   if (ok) {
+    strings("tier", [](const ValidationResult& r) { return std::string(tier_name(r.tier)); });
     strings("name", [](const ValidationResult& r) { return r.name; });
     strings("figure", [](const ValidationResult& r) { return r.figure; });
     strings("detail", [](const ValidationResult& r) { return r.detail; });

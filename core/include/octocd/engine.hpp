@@ -19,6 +19,7 @@
 #include "octocd/math.hpp"
 #include "octocd/mesh.hpp"
 #include "octocd/mesh_octree.hpp"
+#include "octocd/pose.hpp"
 #include "octocd/scene.hpp"
 
 namespace octocd {
@@ -79,6 +80,9 @@ struct ContactRecord {
   Vec3 v_a, v_b;        ///< pre-response velocities (m/s)
   Vec3 dx_a, dx_b;      ///< this contact's position corrections, before per-body averaging (m)
   Vec3 dv_a, dv_b;      ///< this contact's velocity changes (m/s)
+  /// World contact point (m) of a manifold row (external traces v2, `bullet` with
+  /// rotation); meaningful only when FrameRecord::has_points. octocd's engines leave it 0.
+  Vec3 point;
 };
 
 /// A shape shared by bodies: a box or a mesh with its octree. Local frame centred on the
@@ -151,6 +155,25 @@ struct FrameRecord {
   /// jn, jt per contact; the validators then derive the rest from the states.
   bool has_pairs = true;          ///< `pairs` is the engine's candidate set for this step
   bool has_contact_terms = true;  ///< contacts carry axis, v_a/v_b, dx_a/dx_b, dv_a/dv_b
+
+  // ---- Rotating engines (SPEC 13, external traces v2). All empty for octocd's engines,
+  // which translate only: orientation = identity, angular velocity = 0.
+  /// Orientations before / after the step (unit quaternions, body to world); empty: the
+  /// identity for every body.
+  std::vector<Quat> q_pre, q_post;
+  /// Angular velocities before / after the step (rad/s, world frame); empty: zero.
+  std::vector<Vec3> w_pre, w_post;
+  /// The pose at which the step's collision detection ran (the AABBs, pairs and contacts
+  /// refer to it): positions (m) and orientations. Empty: octocd's rule, the position
+  /// after integration (world AABB minus local box, SPEC 4.1-4.2) with the identity
+  /// orientation. Engines that detect before integrating (Bullet, PhysX) give x_pre/q_pre.
+  std::vector<Vec3> x_det;
+  std::vector<Quat> q_det;
+  /// `contacts` may hold several rows per pair (a manifold), consecutive, in (a, b)
+  /// order; false: one row per pair (octocd's engines).
+  bool manifolds = false;
+  /// Every contact carries its world `point`.
+  bool has_points = false;
 };
 
 /// One simulation engine: `cpu` (World), `cuda` (CudaWorld), `bullet` (BulletWorld).

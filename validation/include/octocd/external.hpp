@@ -41,6 +41,7 @@
 
 #include "octocd/engine.hpp"
 #include "octocd/mesh.hpp"
+#include "octocd/physics.hpp"
 #include "octocd/validation.hpp"
 
 namespace octocd {
@@ -70,6 +71,10 @@ struct ExternalBodies {
   /// Domain box for octocd's octree and hash broadphases (m). Empty: the scene's domain,
   /// else the bounding box of the first frame's AABBs. Bodies outside are never lost.
   std::optional<Aabb> domain;
+  /// What the physics tier needs beyond the bodies (SPEC 13, external traces v2):
+  /// inertia, materials, the contact margin, and what the engine declares of itself
+  /// (exact AABB broadphase, the geometry its contacts are computed on).
+  PhysicsBodies physics;
 };
 
 /// How an ExternalValidator judges.
@@ -154,6 +159,10 @@ struct ExternalTraceInfo {
   bool has_pairs = false;           ///< /pairs
   bool has_contacts = false;        ///< /contacts
   bool spec6_response = false;      ///< root attribute `response_model` == "spec6"
+  int version = 1;                  ///< root attribute `version` (1 or 2)
+  bool has_rotation = false;        ///< v2: /states/orientation (and angular_velocity)
+  bool has_points = false;          ///< v2: /contacts/point
+  bool manifolds = false;           ///< v2: some pair has several contact rows in a frame
 };
 
 /// Checks an external trace (docs/trace-format.md, "External traces"): root attributes,

@@ -22,8 +22,22 @@
 
 namespace octocd {
 
+/// Which judge a row belongs to (SPEC 13, ARCHITECTURE.md seam 3).
+enum class Tier {
+  /// Physics: any engine (rotation, any solver, any broadphase), judged on the posed
+  /// shapes with FCL (validation/physics/).
+  Physics,
+  /// Model: the paper's SPEC 6 response (Eq. 14, averaged corrections, the applied-state
+  /// re-derivation, midphase completeness, analytic scenes, Bullet dynamics); n/a with
+  /// the reason for an engine that does not claim SPEC 6 (validation/model/).
+  Model,
+};
+/// "physics" or "model" (the table's tier column, JUnit, the trace's /validation/tier).
+const char* tier_name(Tier tier);
+
 /// One validator's verdict.
 struct ValidationResult {
+  Tier tier = Tier::Model;  ///< which judge this row belongs to
   std::string name;      ///< e.g. "candidate-sets"
   std::string figure;    ///< what `measured` is, with its unit
   double measured = 0;   ///< the measured figure
@@ -89,6 +103,30 @@ struct Tolerances {
   /// most this many metres at any frame (restitution and friction are combined by Bullet
   /// per contact point; the contact timing differs by a step).
   double bullet_trajectory_m = 0.03;
+
+  // ---- Physics tier (SPEC 13, octocd/physics.hpp). Provisional values: each states its
+  // reason once measured on Bullet with rotation and on octocd's engines.
+  /// Geometric slack (m) of every FCL comparison: float32 poses of O(1-10) m and FCL's
+  /// GJK/EPA tolerance.
+  double geometry_slack_m = 1e-5;
+  /// Broadphase completeness: pairs whose posed shapes are closer than this (m) must be
+  /// candidates (0: touching or penetrating pairs).
+  double broadphase_margin_m = 0.0;
+  /// Contact completeness: a pair penetrating deeper than this (m) needs a contact.
+  double contact_depth_m = 1e-3;
+  /// Contact geometry: largest angle between the engine's normal and FCL's (degrees).
+  double normal_angle_deg = 45.0;
+  /// Contact geometry: largest |engine depth - FCL depth| (m) of a pair's deepest row.
+  double depth_m = 5e-3;
+  /// Penetration: the largest true penetration is at most this many slops.
+  double penetration_slops = 20.0;
+  /// Penetration: frames before this one are not judged (settling), 0 = all.
+  double penetration_settle_frames = 0.0;
+  /// Angular momentum of an isolated group: |dL| <= this x the exchanged angular
+  /// momentum + slack.
+  double angular_momentum_rel = 1e-3;
+  /// Energy of an isolated group: KE' <= KE (after gravity) x (1 + this) + slack.
+  double energy_rel = 1e-3;
 };
 
 /// What `octocd validate` runs.
