@@ -35,6 +35,13 @@ struct PlantedFaults {
                                        ///< pair that has a dynamic body (fresh instances don't)
   bool midphase_drops_contact = false; ///< the World's midphase rejects its first confirmed
                                        ///< contact of every frame
+  bool jmin_first_pass_only = false;   ///< the J_min floor (Eq. 18) only in the first pass
+  bool one_pass_fewer = false;         ///< response.iterations - 1 passes (at least 1)
+  bool last_pass_no_corrections = false;  ///< the last pass's position corrections dropped
+  /// Not a fault: a SPEC 6 engine that rounds differently (J_n = -(1 + e)(v_n / (w_A + w_B)),
+  /// t = v_t / |v_t|), so near-ties of the relaxation passes go other ways than in
+  /// octocd's engines; the validators must pass it.
+  bool other_rounding = false;
 };
 
 /// The CPU reference engine (`cpu`, SPEC 4): owns its hot state and the chosen
