@@ -2,205 +2,732 @@
 // written from the SPEC text. It shares nothing with the engines' response code (no
 // math.hpp formula is called here): it reads only the model (scene, local boxes, inverse
 // masses) and one FrameRecord, and predicts the state the engine should have applied.
+//
+// Relaxation passes: a decision within float32 rounding of its threshold (a near-tie) may
+// go either way in the engine, and its outcome feeds every later pass. Each near-tie is a
+// branch; the branches of an island (dynamic bodies joined by confirmed contacts) are
+// explored breadth-first by the number of outcomes that differ from the proposal, within
+// the bounds of applied_state.hpp. A float32 evaluation of the same formulas, in the
+// order the SPEC writes them, runs beside the double one and proposes each near-tie's
+// outcome; it never decides a verdict: an outcome is only taken where the double value
+// allows it (within the rounding margin), and the engine's state is compared with the
+// double re-derivation.
+#include "applied_state.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <deque>
 #include <limits>
 
-#include "octocd/validation.hpp"
+#include <fmt/format.h>
 
 namespace octocd {
 
 namespace {
 
 using D3 = std::array<double, 3>;
+using F3 = std::array<float, 3>;
+
+constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23, float32 rounding
 
 D3 d3(Vec3 v) { return {v.x, v.y, v.z}; }
+F3 f3(Vec3 v) { return {v.x, v.y, v.z}; }
 double inf_norm(const D3& a) { return std::max({std::fabs(a[0]), std::fabs(a[1]), std::fabs(a[2])}); }
 double norm2(const D3& a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); }
+double norm(double x, double y, double z) { return std::sqrt(x * x + y * y + z * z); }
+
+/// The kinds of near-tie (for messages and statistics).
+enum Kind : std::uint8_t { kHit, kFixedAxis, kAxis, kSign, kApproach, kRestitution, kStick, kKinds };
+
+/// One near-tie met by a run: the outcome taken and the outcomes the double value allows.
+struct Choice {
+  std::uint8_t outcome = 0;
+  std::uint8_t allowed = 0;  // bit o: outcome o is consistent
+  std::uint16_t pass = 0;
+  std::uint32_t contact = 0;  // index into the island's contacts
+};
+
+/// An island: dynamic bodies joined by confirmed contacts, and the contacts (indices into
+/// rec.confirmed, in (a, b) order) touching them. `local` lists every body the contacts
+/// touch, the island's dynamic ones first.
+struct Island {
+  std::vector<std::uint32_t> local;
+  std::uint32_t dynamic = 0;
+  std::vector<std::uint32_t> contacts;
+  std::vector<std::array<std::uint32_t, 2>> ends;  // local indices of (a, b)
+};
+
+/// The result of one run of an island's passes.
+struct Run {
+  std::vector<Choice> trace;
+  bool open = false;  // a near-tie whose outcomes cannot be enumerated (an undefined direction)
+  std::vector<D3> x, v, x_tol, v_tol;
+  std::vector<std::uint8_t> clamped;
+  std::vector<std::uint32_t> count0;  // first-pass contacts per local body
+  std::uint64_t work = 0;
+  // Worst ratio |engine - prediction| / tolerance over the island's dynamic bodies, and
+  // how many bodies exceed 1.
+  double worst = 0.0;
+  std::uint32_t off = 0;
+};
+
+struct Tally {
+  std::uint64_t checks = 0, failures = 0;
+  double worst = 0.0;
+  std::string first;
+  void check(bool ok, double ratio, const std::string& what) {
+    ++checks;
+    worst = std::max(worst, ratio);
+    if (ok) return;
+    if (failures == 0) first = what;
+    ++failures;
+  }
+};
 
 }  // namespace
 
-StatePrediction predict_step(const Model& model, const FrameRecord& rec, const Tolerances& tol) {
-  const Scene& sc = model.scene;
-  const ContactParams& p = sc.response;
-  const std::size_t n = rec.x_pre.size();
-  const double dt = sc.dt;
-  const D3 g = d3(sc.gravity);
-  StatePrediction out;
-  out.x_int.resize(n);
-  out.x.resize(n);
-  out.v.resize(n);
-  out.judged.assign(n, 1);
-  out.clamped.assign(n, 0);
-  out.contact_count.assign(n, 0);
-  std::vector<D3> scale_x(n), scale_v(n);
-  std::vector<double> coord_max(n, 0.0), vel_max(n, 0.0);
+struct AppliedStateJudge::Impl {
+  const Model* model = nullptr;
+  Tolerances tol;
+  Tally bodies, group_momentum, group_centre;
+  std::uint64_t dynamic_frames = 0, unjudged = 0, searched = 0, resolved = 0, exceeded = 0;
+  std::uint64_t near_ties = 0, runs = 0;
+  double worst = 0.0;
+  bool any_response = false;
 
-  // SPEC 4.1, semi-implicit Euler: v <- v + dt g; x <- x + dt v (static bodies stay).
-  for (std::size_t i = 0; i < n; ++i) {
-    D3 x = d3(rec.x_pre[i]), v = d3(rec.v_pre[i]);
-    if (model.initial.w[i] > 0.0f)
-      for (int k = 0; k < 3; ++k) {
-        v[k] = v[k] + dt * g[k];
-        x[k] = x[k] + dt * v[k];
-      }
-    out.x_int[i] = out.x[i] = x;
-    out.v[i] = v;
-    for (int k = 0; k < 3; ++k) {
-      scale_x[i][k] = std::fabs(x[k]) + std::fabs(dt * v[k]);
-      scale_v[i][k] = std::fabs(v[k]) + std::fabs(dt * g[k]);
-    }
+  // Per frame.
+  const FrameRecord* rec = nullptr;
+  std::vector<D3> x_int, v_int;
+  std::vector<F3> xf_int, vf_int;
+  std::vector<std::uint32_t> parent;
+  std::vector<std::int32_t> slot;
+
+  std::uint32_t find(std::uint32_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
   }
 
-  // A decision closer to its threshold than float32 rounding can resolve is not judged:
-  // the bodies it touches are excluded from this frame's comparison (and counted).
-  const double eps32 = 1.0 / 8388608.0;  // 2^-23
-  const double margin_rel = 16.0 * eps32 * (p.iterations + 2);
-  auto ambiguous = [&](double value, double threshold, double scale) {
-    return std::fabs(value - threshold) <= margin_rel * (1.0 + std::fabs(scale));
+  /// Runs SPEC 6's passes over `is` with the first forced.size() near-ties taking the
+  /// outcomes given, the rest the float32 proposal (where consistent).
+  void run(const Island& is, const std::vector<std::uint8_t>& forced, Run& r) const;
+  /// Compares the run's prediction of the island's dynamic bodies with the engine's.
+  void compare(const Island& is, Run& r) const;
+  /// Explores the island's branches; returns the run judged against and sets `judged`
+  /// (per local dynamic body).
+  Run search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged);
+};
+
+AppliedStateJudge::AppliedStateJudge(const Model& model, const Tolerances& tol) : impl_(std::make_unique<Impl>()) {
+  impl_->model = &model;
+  impl_->tol = tol;
+}
+
+AppliedStateJudge::~AppliedStateJudge() = default;
+
+void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8_t>& forced, Run& r) const {
+  const Model& m = *model;
+  const ContactParams& p = m.scene.response;
+  const std::size_t nl = is.local.size();
+  const double dt = m.scene.dt;
+  const D3 g = d3(m.scene.gravity);
+  r.trace.clear();
+  r.open = false;
+  r.x.resize(nl);
+  r.v.resize(nl);
+  r.x_tol.resize(nl);
+  r.v_tol.resize(nl);
+  r.clamped.assign(nl, 0);
+  r.count0.assign(nl, 0);
+  std::vector<F3> xf(nl), vf(nl);
+  std::vector<D3> scale_x(nl), scale_v(nl);
+  std::vector<double> coord_max(nl, 0.0), vel_max(nl, 0.0), run_v(nl, 0.0);
+  std::vector<float> w(nl);
+  for (std::size_t l = 0; l < nl; ++l) {
+    const std::uint32_t i = is.local[l];
+    w[l] = m.initial.w[i];
+    r.x[l] = x_int[i];
+    r.v[l] = v_int[i];
+    xf[l] = xf_int[i];
+    vf[l] = vf_int[i];
+    for (int k = 0; k < 3; ++k) {
+      scale_x[l][k] = std::fabs(r.x[l][k]) + std::fabs(dt * r.v[l][k]);
+      scale_v[l][k] = std::fabs(r.v[l][k]) + (w[l] > 0.0f ? std::fabs(dt * g[k]) : 0.0);
+    }
+    run_v[l] = inf_norm(scale_v[l]);
+  }
+
+  const std::size_t nc = is.contacts.size();
+  std::vector<D3> dx_sum(nl), dv_sum(nl);
+  std::vector<F3> dxf_sum(nl), dvf_sum(nl);
+  std::vector<std::uint32_t> count(nl);
+  std::size_t next = 0;  // index of the next near-tie in the trace
+  // A near-tie: `allowed` outcomes are consistent with the double value; one outcome
+  // allowed is no branch. The outcome is the forced one, else the float32 proposal when
+  // consistent, else the double one.
+  auto decide = [&](std::uint8_t allowed, std::uint8_t by_double, std::uint8_t by_float, int pass,
+                    std::size_t c) -> std::uint8_t {
+    if ((allowed & (allowed - 1)) == 0) return by_double;
+    std::uint8_t out = (allowed >> by_float & 1) ? by_float : by_double;
+    if (next < forced.size()) out = forced[next];
+    ++next;
+    r.trace.push_back(Choice{out, allowed, static_cast<std::uint16_t>(pass), static_cast<std::uint32_t>(c)});
+    return out;
   };
 
-  // SPEC 6, `iterations` Jacobi passes over the confirmed contacts in (a, b) order.
-  const double w_eps = p.epsilon;
   for (int pass = 0; pass < p.iterations; ++pass) {
-    std::vector<D3> dx_sum(n, D3{0, 0, 0}), dv_sum(n, D3{0, 0, 0});
-    std::vector<std::uint32_t> count(n, 0);
-    for (const Pair& q : rec.confirmed) {
-      const std::uint32_t a = q.a, b = q.b;
-      const double wa = model.initial.w[a], wb = model.initial.w[b];
-      const Aabb& la = model.local_box(a);
-      const Aabb& lb = model.local_box(b);
+    // Rounding margin of a decision in this pass: a few roundings of the magnitudes that
+    // entered its value, per pass so far.
+    const double rel = 16.0 * kEps32 * (pass + 2);
+    std::fill(dx_sum.begin(), dx_sum.end(), D3{0, 0, 0});
+    std::fill(dv_sum.begin(), dv_sum.end(), D3{0, 0, 0});
+    std::fill(dxf_sum.begin(), dxf_sum.end(), F3{0, 0, 0});
+    std::fill(dvf_sum.begin(), dvf_sum.end(), F3{0, 0, 0});
+    std::fill(count.begin(), count.end(), 0u);
+    for (std::size_t c = 0; c < nc; ++c) {
+      ++r.work;
+      const std::uint32_t a = is.ends[c][0], b = is.ends[c][1];
+      const double wa = w[a], wb = w[b];
+      const Aabb& la = m.local_box(is.local[a]);
+      const Aabb& lb = m.local_box(is.local[b]);
       D3 amin, amax, bmin, bmax, pen;
+      F3 famin, famax, fbmin, fbmax, fpen;
       double coord_scale = 0.0;
       for (int k = 0; k < 3; ++k) {
-        amin[k] = la.min[k] + out.x[a][k];
-        amax[k] = la.max[k] + out.x[a][k];
-        bmin[k] = lb.min[k] + out.x[b][k];
-        bmax[k] = lb.max[k] + out.x[b][k];
-        coord_scale = std::max({coord_scale, std::fabs(amin[k]), std::fabs(amax[k]),
-                                std::fabs(bmin[k]), std::fabs(bmax[k])});
+        amin[k] = la.min[k] + r.x[a][k];
+        amax[k] = la.max[k] + r.x[a][k];
+        bmin[k] = lb.min[k] + r.x[b][k];
+        bmax[k] = lb.max[k] + r.x[b][k];
+        famin[k] = la.min[k] + xf[a][k];
+        famax[k] = la.max[k] + xf[a][k];
+        fbmin[k] = lb.min[k] + xf[b][k];
+        fbmax[k] = lb.max[k] + xf[b][k];
+        coord_scale = std::max({coord_scale, std::fabs(amin[k]), std::fabs(amax[k]), std::fabs(bmin[k]),
+                                std::fabs(bmax[k])});
       }
-      bool unsure = false;
-      bool hit = true;
+      const double mx = rel * coord_scale + 1e-300;
+      // Eq. 9: `separating` = the distance that separates the boxes along k; `paper` = the
+      // width of the overlap interval. Any p_k <= 0: discarded.
+      bool hit_d = true, hit_f = true, can_hit = true, can_miss = false;
       for (int k = 0; k < 3; ++k) {
-        // Eq. 9: `separating` = the distance that separates the boxes along k; `paper` =
-        // the width of the overlap interval.
-        pen[k] = p.overlap == OverlapMode::Paper
-                     ? std::min(amax[k], bmax[k]) - std::max(amin[k], bmin[k])
-                     : std::min(amax[k] - bmin[k], bmax[k] - amin[k]);
-        unsure = unsure || ambiguous(pen[k], 0.0, coord_scale);
-        if (!(pen[k] > 0.0)) hit = false;
+        if (p.overlap == OverlapMode::Paper) {
+          pen[k] = std::min(amax[k], bmax[k]) - std::max(amin[k], bmin[k]);
+          fpen[k] = std::min(famax[k], fbmax[k]) - std::max(famin[k], fbmin[k]);
+        } else {
+          pen[k] = std::min(amax[k] - bmin[k], bmax[k] - amin[k]);
+          fpen[k] = std::min(famax[k] - fbmin[k], fbmax[k] - famin[k]);
+        }
+        hit_d = hit_d && pen[k] > 0.0;
+        hit_f = hit_f && fpen[k] > 0.0f;
+        can_hit = can_hit && pen[k] > -mx;
+        can_miss = can_miss || pen[k] <= mx;
       }
-      if (!hit) {  // Eq. 9: discarded
-        if (unsure) out.judged[a] = out.judged[b] = 0;
+      if (!decide(static_cast<std::uint8_t>((can_miss ? 1 : 0) | (can_hit ? 2 : 0)), hit_d ? 1 : 0, hit_f ? 1 : 0,
+                  pass, c))
         continue;
-      }
-      // Eq. 10 and the fixed axis: normal along the least overlap, from B to A by centres.
+      // Eq. 10 and the fixed axis: the normal along the least overlap, from B to A by the
+      // AABB centres; centres closer than epsilon: +y.
       D3 d;
-      for (int k = 0; k < 3; ++k) d[k] = 0.5 * (amin[k] + amax[k]) - 0.5 * (bmin[k] + bmax[k]);
-      int axis = 1;
-      double depth;
-      D3 nrm{0, 0, 0};
-      const double dist = norm2(d);
-      unsure = unsure || ambiguous(dist, w_eps, coord_scale);
-      if (dist < w_eps) {
-        depth = pen[1];
-        nrm[1] = 1.0;
-      } else {
-        axis = 0;
-        if (pen[1] < pen[axis]) axis = 1;
-        if (pen[2] < pen[axis]) axis = 2;
-        for (int k = 0; k < 3; ++k)
-          if (k != axis) unsure = unsure || ambiguous(pen[k], pen[axis], coord_scale);
-        depth = pen[axis];
-        unsure = unsure || ambiguous(d[axis], 0.0, coord_scale);
-        nrm[axis] = d[axis] < 0.0 ? -1.0 : 1.0;
+      F3 fd;
+      for (int k = 0; k < 3; ++k) {
+        d[k] = 0.5 * (amin[k] + amax[k]) - 0.5 * (bmin[k] + bmax[k]);
+        fd[k] = 0.5f * (famin[k] + famax[k]) - 0.5f * (fbmin[k] + fbmax[k]);
       }
+      const double dist = norm2(d);
+      const float fdist = std::sqrt(fd[0] * fd[0] + fd[1] * fd[1] + fd[2] * fd[2]);
+      const double eps = p.epsilon;
+      const std::uint8_t fixed =
+          decide(static_cast<std::uint8_t>((dist >= eps - mx ? 1 : 0) | (dist < eps + mx ? 2 : 0)),
+                 dist < eps ? 1 : 0, fdist < p.epsilon ? 1 : 0, pass, c);
+      int axis = 1;
+      double sign = 1.0;
+      if (!fixed) {
+        int ad = 0, af = 0;
+        if (pen[1] < pen[ad]) ad = 1;
+        if (pen[2] < pen[ad]) ad = 2;
+        if (fpen[1] < fpen[af]) af = 1;
+        if (fpen[2] < fpen[af]) af = 2;
+        std::uint8_t axes = 0;
+        for (int k = 0; k < 3; ++k)
+          if (pen[k] <= pen[ad] + mx) axes = static_cast<std::uint8_t>(axes | (1 << k));
+        axis = decide(axes, static_cast<std::uint8_t>(ad), static_cast<std::uint8_t>(af), pass, c);
+        // The sign by the centres along the axis; an exact tie falls back to +.
+        const std::uint8_t positive =
+            decide(static_cast<std::uint8_t>((d[axis] < mx ? 1 : 0) | (d[axis] >= -mx ? 2 : 0)),
+                   d[axis] < 0.0 ? 0 : 1, fd[axis] < 0.0f ? 0 : 1, pass, c);
+        sign = positive ? 1.0 : -1.0;
+      }
+      const float fsign = static_cast<float>(sign);
       // Eq. 11, 13 with Algorithm 3's weights: A gets w_A/(w_A+w_B) of c, B -w_B/(...).
       const double wsum = wa + wb;
-      const double corr = static_cast<double>(p.alpha) * p.beta * std::max(depth - p.slop, 0.0);
-      // Eq. 16-22.
-      D3 vrel;
-      for (int k = 0; k < 3; ++k) vrel[k] = out.v[a][k] - out.v[b][k];
+      const float fwsum = w[a] + w[b];
+      const double corr = static_cast<double>(p.alpha) * p.beta * std::max(pen[axis] - p.slop, 0.0);
+      const float fcorr = p.alpha * p.beta * std::max(fpen[axis] - p.slop, 0.0f);
+      // Eq. 16-22: the impulses from the relative velocity.
+      D3 vrel, nrm{0, 0, 0};
+      F3 fvrel, fn{0, 0, 0};
+      nrm[axis] = sign;
+      fn[axis] = fsign;
+      for (int k = 0; k < 3; ++k) {
+        vrel[k] = r.v[a][k] - r.v[b][k];
+        fvrel[k] = vf[a][k] - vf[b][k];
+      }
       const double vn = vrel[0] * nrm[0] + vrel[1] * nrm[1] + vrel[2] * nrm[2];
-      const double vscale = inf_norm(out.v[a]) + inf_norm(out.v[b]);
+      const float fvn = fvrel[0] * fn[0] + fvrel[1] * fn[1] + fvrel[2] * fn[2];
+      const double mv = rel * (run_v[a] + run_v[b]) + 1e-300;
       double jn = 0.0, jt = 0.0;
+      float fjn = 0.0f, fjt = 0.0f;
       D3 t{0, 0, 0};
+      F3 ft{0, 0, 0};
       if (wsum > 0.0) {
-        unsure = unsure || ambiguous(vn, 0.0, vscale);
-        if (vn < 0.0) {
-          unsure = unsure || ambiguous(-vn, p.restitution_threshold, vscale);
-          const double e_eff = -vn < p.restitution_threshold ? 0.0 : p.restitution;
+        const std::uint8_t approach = decide(static_cast<std::uint8_t>((vn > -mv ? 1 : 0) | (vn < mv ? 2 : 0)),
+                                             vn < 0.0 ? 1 : 0, fvn < 0.0f ? 1 : 0, pass, c);
+        double e_eff = 0.0;
+        float fe = 0.0f;
+        if (approach) {
+          const double vth = p.restitution_threshold;
+          const std::uint8_t fast =
+              decide(static_cast<std::uint8_t>((-vn < vth + mv ? 1 : 0) | (-vn >= vth - mv ? 2 : 0)),
+                     -vn < vth ? 0 : 1, -fvn < p.restitution_threshold ? 0 : 1, pass, c);
+          e_eff = fast ? p.restitution : 0.0;
+          fe = fast ? p.restitution : 0.0f;
           jn = std::max(-(1.0 + e_eff) * vn / wsum, static_cast<double>(p.impulse_floor));
+          fjn = std::max(-(1.0f + fe) * fvn / fwsum, p.impulse_floor);
         }
         D3 vt;
-        for (int k = 0; k < 3; ++k) vt[k] = vrel[k] - vn * nrm[k];
+        F3 fvt;
+        for (int k = 0; k < 3; ++k) {
+          vt[k] = vrel[k] - vn * nrm[k];
+          fvt[k] = fvrel[k] - fvn * fn[k];
+        }
         const double vt_len = norm2(vt);
-        if (vt_len > 0.0) {
-          for (int k = 0; k < 3; ++k) t[k] = vt[k] / vt_len;
+        const float fvt_len = std::sqrt(fvt[0] * fvt[0] + fvt[1] * fvt[1] + fvt[2] * fvt[2]);
+        if (vt_len > 0.0 || fvt_len > 0.0f) {
+          for (int k = 0; k < 3; ++k) {
+            t[k] = vt_len > 0.0 ? vt[k] / vt_len : 0.0;
+            ft[k] = fvt_len > 0.0f ? (1.0f / fvt_len) * fvt[k] : 0.0f;
+          }
+          // Eq. 21: stick when |J_t*| <= mu_s J_n, J_t* = -|v_t| / (w_A + w_B). Both sides
+          // carry the velocity margin (J_n through v_n, with restitution).
           const double jt_star = -vt_len / wsum;
-          unsure = unsure || ambiguous(std::fabs(jt_star), p.mu_static * jn, vscale / wsum);
-          // A tiny slipping |v_t| has a direction float32 cannot resolve.
-          if (std::fabs(jt_star) > p.mu_static * jn && jn > 0.0)
-            unsure = unsure || vt_len <= margin_rel * (1.0 + vscale);
-          jt = std::fabs(jt_star) <= p.mu_static * jn ? jt_star : -p.mu_kinetic * jn;
+          const float fjt_star = -fvt_len / fwsum;
+          const double mj = mv * (1.0 + p.mu_static * (1.0 + e_eff)) / wsum;
+          const double gap = std::fabs(jt_star) - p.mu_static * jn;
+          const std::uint8_t stick =
+              decide(static_cast<std::uint8_t>((gap > -mj ? 1 : 0) | (gap <= mj ? 2 : 0)), gap <= 0.0 ? 1 : 0,
+                     std::fabs(fjt_star) <= p.mu_static * fjn ? 1 : 0, pass, c);
+          // A slipping |v_t| within rounding of 0 has a direction float32 cannot resolve.
+          if (!stick && jn > 0.0 && vt_len <= mv) r.open = true;
+          jt = stick ? jt_star : -p.mu_kinetic * jn;
+          fjt = stick ? fjt_star : -p.mu_kinetic * fjn;
         }
       }
+      D3 dva, dvb, dxa, dxb;
       for (int k = 0; k < 3; ++k) {
-        const double c = corr * nrm[k];
+        const double cc = corr * nrm[k];
         const double imp = jn * nrm[k] + jt * t[k];
-        if (wsum > 0.0) {
-          dx_sum[a][k] += wa / wsum * c;
-          dx_sum[b][k] -= wb / wsum * c;
-        }
-        dv_sum[a][k] += wa * imp;
-        dv_sum[b][k] -= wb * imp;
-        scale_x[a][k] += std::fabs(c);
-        scale_x[b][k] += std::fabs(c);
-        scale_v[a][k] += std::fabs(wa * imp);
-        scale_v[b][k] += std::fabs(wb * imp);
+        dxa[k] = wsum > 0.0 ? wa / wsum * cc : 0.0;
+        dxb[k] = wsum > 0.0 ? -(wb / wsum * cc) : 0.0;
+        dva[k] = wa * imp;
+        dvb[k] = -(wb * imp);
+        dx_sum[a][k] += dxa[k];
+        dx_sum[b][k] += dxb[k];
+        dv_sum[a][k] += dva[k];
+        dv_sum[b][k] += dvb[k];
+        // float32: the same terms, in the SPEC's order.
+        const float fcc = fcorr * fn[k];
+        const float fimp = fjn * fn[k] + fjt * ft[k];
+        const float sa = fwsum > 0.0f ? w[a] / fwsum : 0.0f, sb = fwsum > 0.0f ? w[b] / fwsum : 0.0f;
+        dxf_sum[a][k] += sa * fcc;
+        dxf_sum[b][k] += -(sb * fcc);
+        dvf_sum[a][k] += w[a] * fimp;
+        dvf_sum[b][k] += -(w[b] * fimp);
+        scale_x[a][k] += std::fabs(cc);
+        scale_x[b][k] += std::fabs(cc);
+        scale_v[a][k] += std::fabs(dva[k]);
+        scale_v[b][k] += std::fabs(dvb[k]);
       }
       // Rounding of the inputs a contact's terms came from: the AABB coordinates (depth,
       // hence the correction) and both velocities (v_n, v_t, hence the impulses).
-      for (const std::uint32_t body : {a, b}) {
-        coord_max[body] = std::max(coord_max[body], coord_scale);
-        vel_max[body] = std::max(vel_max[body], vscale);
+      const double vscale = inf_norm(r.v[a]) + inf_norm(r.v[b]);
+      for (const std::uint32_t l : {a, b}) {
+        coord_max[l] = std::max(coord_max[l], coord_scale);
+        vel_max[l] = std::max(vel_max[l], vscale);
       }
       ++count[a];
       ++count[b];
-      if (unsure) out.judged[a] = out.judged[b] = 0;
     }
     // Parallel semantics: corrections averaged per body, velocity changes summed.
-    for (std::size_t i = 0; i < n; ++i) {
-      if (pass == 0) out.contact_count[i] = count[i];
-      if (!(model.initial.w[i] > 0.0f) || count[i] == 0) continue;
+    for (std::size_t l = 0; l < nl; ++l) {
+      if (pass == 0) r.count0[l] = count[l];
+      if (!(w[l] > 0.0f) || count[l] == 0) continue;
+      const float inv = 1.0f / static_cast<float>(count[l]);
       for (int k = 0; k < 3; ++k) {
-        out.x[i][k] += dx_sum[i][k] / count[i];
-        out.v[i][k] += dv_sum[i][k];
+        r.x[l][k] += dx_sum[l][k] / count[l];
+        r.v[l][k] += dv_sum[l][k];
+        xf[l][k] = xf[l][k] + inv * dxf_sum[l][k];
+        vf[l][k] = vf[l][k] + dvf_sum[l][k];
       }
+      run_v[l] = inf_norm(scale_v[l]);
     }
   }
-  // Eq. 23: clamp each component to [-v_max, v_max].
+  // Eq. 23: clamp each component to [-v_max, v_max]. The clamp is continuous, so a
+  // component near v_max needs no branch; `clamped` is conservative (within rounding
+  // counts) since it changes the group's momentum.
   const double vmax = p.max_velocity;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!(model.initial.w[i] > 0.0f)) continue;
+  for (std::size_t l = 0; l < nl; ++l) {
+    if (!(w[l] > 0.0f)) continue;
     for (int k = 0; k < 3; ++k) {
-      // The clamp is continuous, so a component near v_max needs no exclusion; `clamped`
-      // is conservative (within rounding counts) since it changes the group's momentum.
-      if (std::fabs(out.v[i][k]) > vmax || ambiguous(std::fabs(out.v[i][k]), vmax, vmax)) out.clamped[i] = 1;
-      out.v[i][k] = std::min(std::max(out.v[i][k], -vmax), vmax);
+      if (std::fabs(r.v[l][k]) > vmax * (1.0 - 16.0 * kEps32 * (p.iterations + 2))) r.clamped[l] = 1;
+      r.v[l][k] = std::min(std::max(r.v[l][k], -vmax), vmax);
     }
   }
   // float32 tolerance: a few roundings of each magnitude that entered the value, per pass.
-  const double ulps = tol.applied_state_ulps * eps32 * (p.iterations + 2);
-  out.x_tol.resize(n);
-  out.v_tol.resize(n);
-  for (std::size_t i = 0; i < n; ++i)
+  const double ulps = tol.applied_state_ulps * kEps32 * (p.iterations + 2);
+  for (std::size_t l = 0; l < nl; ++l)
     for (int k = 0; k < 3; ++k) {
-      out.x_tol[i][k] = ulps * (scale_x[i][k] + coord_max[i]) + 1e-12;
-      out.v_tol[i][k] = ulps * (scale_v[i][k] + vel_max[i]) + 1e-12;
+      r.x_tol[l][k] = ulps * (scale_x[l][k] + coord_max[l]) + 1e-12;
+      r.v_tol[l][k] = ulps * (scale_v[l][k] + vel_max[l]) + 1e-12;
     }
+}
+
+void AppliedStateJudge::Impl::compare(const Island& is, Run& r) const {
+  r.worst = 0.0;
+  r.off = 0;
+  for (std::uint32_t l = 0; l < is.dynamic; ++l) {
+    const std::uint32_t i = is.local[l];
+    double body = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      body = std::max(body, std::fabs(rec->x_post[i][k] - r.x[l][k]) / r.x_tol[l][k]);
+      body = std::max(body, std::fabs(rec->v_post[i][k] - r.v[l][k]) / r.v_tol[l][k]);
+    }
+    if (!(body <= 1.0)) ++r.off;  // NaN counts as off
+    r.worst = std::max(r.worst, std::isnan(body) ? std::numeric_limits<double>::infinity() : body);
+  }
+}
+
+Run AppliedStateJudge::Impl::search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged) {
+  Run first;
+  run(is, {}, first);
+  judged.assign(is.dynamic, 1);
+  if (!judge_response) return first;
+  compare(is, first);
+  near_ties += first.trace.size();
+  ++runs;
+  if (first.off == 0) return first;
+  // Breadth-first over the near-ties by the number of outcomes changed from the first
+  // run's: each queued branch forces a prefix of outcomes, the rest follow the proposal;
+  // a branch only changes outcomes after its forced prefix, so no branch is run twice.
+  ++searched;
+  struct Branch {
+    std::vector<std::uint8_t> forced;
+  };
+  std::deque<Branch> queue;
+  std::uint64_t queue_bytes = 0, work = 0;
+  bool truncated = false;
+  auto expand = [&](const Run& r, std::size_t from) {
+    for (std::size_t i = from; i < r.trace.size(); ++i) {
+      for (std::uint8_t o = 0; o < 8; ++o) {
+        if (o == r.trace[i].outcome || !(r.trace[i].allowed >> o & 1)) continue;
+        if (queue.size() + static_cast<std::size_t>(runs) >= 1u << 20 ||
+            queue_bytes + i + 1 + sizeof(Branch) > kMaxQueueBytes || queue.size() >= static_cast<std::size_t>(kMaxRuns)) {
+          truncated = true;
+          return;
+        }
+        Branch b;
+        b.forced.reserve(i + 1);
+        for (std::size_t j = 0; j < i; ++j) b.forced.push_back(r.trace[j].outcome);
+        b.forced.push_back(o);
+        queue_bytes += b.forced.size() + sizeof(Branch);
+        queue.push_back(std::move(b));
+      }
+    }
+  };
+  bool open = first.open;
+  expand(first, 0);
+  Run best = first;
+  int done = 1;
+  Run r;
+  while (!queue.empty()) {
+    if (done >= kMaxRuns || work >= kMaxWork) {
+      truncated = true;
+      break;
+    }
+    Branch b = std::move(queue.front());
+    queue.pop_front();
+    queue_bytes -= b.forced.size() + sizeof(Branch);
+    r.work = 0;
+    run(is, b.forced, r);
+    work += r.work;
+    ++done;
+    ++runs;
+    compare(is, r);
+    open = open || r.open;
+    if (r.off == 0) {
+      ++resolved;
+      return r;
+    }
+    if (r.off < best.off || (r.off == best.off && r.worst < best.worst)) best = r;
+    expand(r, b.forced.size());
+  }
+  if (!truncated && !open) return best;  // every consistent choice explored: a failure
+  // Bound exceeded: judge only the bodies no near-tie of the first run can reach. A
+  // near-tie in pass p changes its two bodies at the end of pass p, their neighbours at
+  // the end of pass p + 1, ...: N - 1 - p contact hops.
+  ++exceeded;
+  const int passes = model->scene.response.iterations;
+  std::vector<int> reach(is.local.size(), -1);
+  std::vector<std::vector<std::uint32_t>> adj(is.local.size());
+  for (const auto& e : is.ends) {
+    adj[e[0]].push_back(e[1]);
+    adj[e[1]].push_back(e[0]);
+  }
+  std::vector<std::vector<std::uint32_t>> bucket(static_cast<std::size_t>(passes));
+  for (const Choice& c : first.trace)
+    for (const std::uint32_t l : is.ends[c.contact]) {
+      const int h = passes - 1 - c.pass;
+      if (h > reach[l]) {
+        reach[l] = h;
+        bucket[static_cast<std::size_t>(h)].push_back(l);
+      }
+    }
+  if (first.open)  // no trace entry for an undefined direction: the whole island
+    for (std::uint32_t l = 0; l < is.dynamic; ++l) reach[l] = 0;
+  for (int h = passes - 1; h > 0; --h)
+    for (std::size_t q = 0; q < bucket[static_cast<std::size_t>(h)].size(); ++q) {
+      const std::uint32_t l = bucket[static_cast<std::size_t>(h)][q];
+      if (reach[l] != h || l >= is.dynamic) continue;  // static bodies pass nothing on
+      for (const std::uint32_t nb : adj[l])
+        if (reach[nb] < h - 1) {
+          reach[nb] = h - 1;
+          bucket[static_cast<std::size_t>(h - 1)].push_back(nb);
+        }
+    }
+  for (std::uint32_t l = 0; l < is.dynamic; ++l) judged[l] = reach[l] < 0 ? 1 : 0;
+  return first;
+}
+
+void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
+  Impl& s = *impl_;
+  if (rec.x_pre.empty()) return;
+  const Model& model = *s.model;
+  const Scene& sc = model.scene;
+  const std::vector<float>& w = model.initial.w;
+  const std::size_t n = rec.x_pre.size();
+  const std::int64_t frame = rec.frame;
+  const Tolerances& tol = s.tol;
+  s.rec = &rec;
+  s.any_response = s.any_response || judge_response;
+
+  // SPEC 4.1, semi-implicit Euler: v <- v + dt g; x <- x + dt v (static bodies stay); in
+  // double for the prediction and in float32 for the proposal.
+  const double dt = sc.dt;
+  s.x_int.resize(n);
+  s.v_int.resize(n);
+  s.xf_int.resize(n);
+  s.vf_int.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    D3 x = d3(rec.x_pre[i]), v = d3(rec.v_pre[i]);
+    F3 xf = f3(rec.x_pre[i]), vf = f3(rec.v_pre[i]);
+    if (w[i] > 0.0f)
+      for (int k = 0; k < 3; ++k) {
+        v[k] = v[k] + dt * sc.gravity[k];
+        x[k] = x[k] + dt * v[k];
+        vf[k] = vf[k] + sc.dt * sc.gravity[k];
+        xf[k] = xf[k] + sc.dt * vf[k];
+      }
+    s.x_int[i] = x;
+    s.v_int[i] = v;
+    s.xf_int[i] = xf;
+    s.vf_int[i] = vf;
+  }
+
+  // Islands: dynamic bodies joined by confirmed contacts between two dynamic bodies; a
+  // contact with a static body belongs to its dynamic body's island.
+  s.parent.resize(n);
+  for (std::size_t i = 0; i < n; ++i) s.parent[i] = static_cast<std::uint32_t>(i);
+  for (const Pair& q : rec.confirmed)
+    if (w[q.a] > 0.0f && w[q.b] > 0.0f) s.parent[s.find(q.a)] = s.find(q.b);
+  std::vector<std::int32_t> island_of(n, -1);
+  std::vector<Island> islands;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(w[i] > 0.0f)) continue;
+    const std::uint32_t root = s.find(static_cast<std::uint32_t>(i));
+    if (island_of[root] < 0) {
+      island_of[root] = static_cast<std::int32_t>(islands.size());
+      islands.emplace_back();
+    }
+    Island& is = islands[static_cast<std::size_t>(island_of[root])];
+    is.local.push_back(static_cast<std::uint32_t>(i));
+    ++is.dynamic;
+  }
+  s.slot.assign(n, -1);
+  for (const Island& is : islands)
+    for (std::uint32_t l = 0; l < is.dynamic; ++l) s.slot[is.local[l]] = static_cast<std::int32_t>(l);
+  for (std::size_t c = 0; c < rec.confirmed.size(); ++c) {
+    const Pair q = rec.confirmed[c];
+    if (!(w[q.a] > 0.0f) && !(w[q.b] > 0.0f)) continue;  // static-static: changes nothing
+    const std::uint32_t dyn = w[q.a] > 0.0f ? q.a : q.b;
+    Island& is = islands[static_cast<std::size_t>(island_of[s.find(dyn)])];
+    std::array<std::uint32_t, 2> e{};
+    for (int k = 0; k < 2; ++k) {
+      const std::uint32_t body = k == 0 ? q.a : q.b;
+      if (w[body] > 0.0f) {
+        e[static_cast<std::size_t>(k)] = static_cast<std::uint32_t>(s.slot[body]);
+      } else {  // a static body: local to this island (a floor may serve many)
+        auto it = std::find(is.local.begin() + is.dynamic, is.local.end(), body);
+        e[static_cast<std::size_t>(k)] = static_cast<std::uint32_t>(it - is.local.begin());
+        if (it == is.local.end()) is.local.push_back(body);
+      }
+    }
+    is.contacts.push_back(static_cast<std::uint32_t>(c));
+    is.ends.push_back(e);
+  }
+
+  // Per island: the run judged against, then each dynamic body against it.
+  std::vector<std::uint8_t> clamped(n, 0);
+  std::vector<std::uint32_t> count0(n, 0);
+  std::vector<D3> x_tol(n), v_tol(n);
+  std::vector<std::uint8_t> judged;
+  for (const Island& is : islands) {
+    const Run r = s.search(is, judge_response, judged);
+    for (std::uint32_t l = 0; l < is.dynamic; ++l) {
+      const std::uint32_t i = is.local[l];
+      clamped[i] = r.clamped[l];
+      count0[i] = r.count0[l];
+      x_tol[i] = r.x_tol[l];
+      v_tol[i] = r.v_tol[l];
+      if (!judge_response) continue;
+      ++s.dynamic_frames;
+      if (!judged[l]) {
+        ++s.unjudged;
+        continue;
+      }
+      double worst = 0.0;
+      std::string what;
+      auto judge = [&](const char* quantity, int k, double got, double want, double tolerance) {
+        const double ratio = std::fabs(got - want) / tolerance;
+        if ((ratio <= worst || std::isnan(worst)) && !what.empty()) return;
+        worst = std::isnan(ratio) ? std::numeric_limits<double>::infinity() : ratio;
+        what = fmt::format("frame {}: body {} {}.{} = {:.9g}, SPEC 6 gives {:.9g} (tolerance {:.3g}; {} contacts)",
+                           frame, i, quantity, "xyz"[k], got, want, tolerance, r.count0[l]);
+      };
+      const Aabb& local = model.local_box(i);
+      for (int k = 0; k < 3; ++k) {
+        // The world AABB the engine used is its integrated position's box (SPEC 4.2); the
+        // float32 sum local + x rounds at the scale of both.
+        const double box_scale = std::max(std::fabs(local.min[k]), std::fabs(local.max[k]));
+        judge("aabb.min", k, rec.aabbs[i].min[k], static_cast<double>(local.min[k]) + s.x_int[i][k],
+              r.x_tol[l][k] + tol.applied_state_ulps * box_scale * kEps32);
+        judge("x", k, rec.x_post[i][k], r.x[l][k], r.x_tol[l][k]);
+        judge("v", k, rec.v_post[i][k], r.v[l][k], r.v_tol[l][k]);
+      }
+      s.worst = std::max(s.worst, worst);
+      s.bodies.check(worst <= 1.0, worst, what);
+    }
+  }
+
+  // Isolated dynamic groups: connected components of the confirmed-contact graph with no
+  // static body and no clamped body. Momentum is exchanged in equal and opposite impulses,
+  // so it is kept; the mass-weighted centre is kept where every body has one contact (an
+  // isolated pair): elsewhere the per-body averaging moves it by design.
+  auto x_int = [&](std::size_t i, int k) {
+    return judge_response ? s.x_int[i][k]
+                          : static_cast<double>(rec.aabbs[i].min[k]) - static_cast<double>(model.local_box(i).min[k]);
+  };
+  struct Group {
+    bool isolated = true, centre = true;
+    int bodies = 0;
+    D3 p0{}, p1{}, c0{}, c1{};
+    double exchange = 0, cexchange = 0, ctol = 0, mtol = 0;
+    std::uint32_t first = 0;
+  };
+  std::vector<std::uint8_t> touched(n, 0);
+  std::vector<std::uint8_t> touches_static(n, 0);
+  for (const Pair& q : rec.confirmed) {
+    touched[q.a] = touched[q.b] = 1;
+    if (!(w[q.a] > 0.0f) && w[q.b] > 0.0f) touches_static[q.b] = 1;
+    if (!(w[q.b] > 0.0f) && w[q.a] > 0.0f) touches_static[q.a] = 1;
+  }
+  std::vector<Group> g(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!touched[i] || !(w[i] > 0.0f)) continue;
+    Group& gr = g[s.find(static_cast<std::uint32_t>(i))];
+    if (gr.bodies == 0) gr.first = static_cast<std::uint32_t>(i);
+    ++gr.bodies;
+    // Clamped by the re-derivation's run, or at v_max in the engine's state (a body the
+    // re-derivation did not judge may have been clamped in a branch it did not run).
+    bool at_vmax = false;
+    for (int k = 0; k < 3; ++k)
+      at_vmax = at_vmax || std::fabs(rec.v_post[i][k]) >= sc.response.max_velocity * (1.0 - 16.0 * kEps32 *
+                                                                                                (sc.response.iterations + 2));
+    if (touches_static[i] || clamped[i] || at_vmax) gr.isolated = false;
+    if (count0[i] != 1) gr.centre = false;  // the centre is not kept by design
+    const double mi = 1.0 / w[i];
+    for (int k = 0; k < 3; ++k) {
+      const double v_int = static_cast<double>(rec.v_pre[i][k]) + dt * sc.gravity[k];
+      gr.p0[k] += mi * v_int;
+      gr.p1[k] += mi * rec.v_post[i][k];
+      gr.exchange += mi * std::fabs(rec.v_post[i][k] - v_int);
+      gr.mtol += mi * v_tol[i][k];
+      gr.c0[k] += mi * x_int(i, k);
+      gr.c1[k] += mi * rec.x_post[i][k];
+      gr.cexchange += mi * std::fabs(rec.x_post[i][k] - x_int(i, k));
+      gr.ctol += mi * x_tol[i][k];
+    }
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!touched[i] || !(w[i] > 0.0f) || s.find(static_cast<std::uint32_t>(i)) != i) continue;
+    const Group& gr = g[i];
+    if (!gr.isolated || gr.bodies < 2) continue;
+    const double dp = norm(gr.p1[0] - gr.p0[0], gr.p1[1] - gr.p0[1], gr.p1[2] - gr.p0[2]);
+    const double bound = tol.applied_conservation_rel * gr.exchange + gr.mtol + 1e-9;
+    s.group_momentum.check(dp <= bound, dp / bound,
+                           fmt::format("frame {}: isolated group of {} bodies (body {} ...) changes momentum by "
+                                       "{:.3g} kg m/s (exchanged {:.3g}, bound {:.3g})",
+                                       frame, gr.bodies, gr.first, dp, gr.exchange, bound));
+    if (gr.bodies == 2 && gr.centre) {
+      const double dc = norm(gr.c1[0] - gr.c0[0], gr.c1[1] - gr.c0[1], gr.c1[2] - gr.c0[2]);
+      const double cbound = tol.applied_conservation_rel * gr.cexchange + gr.ctol + 1e-12;
+      s.group_centre.check(dc <= cbound, dc / cbound,
+                           fmt::format("frame {}: isolated pair (body {} ...) moves its mass-weighted centre by "
+                                       "{:.3g} kg m (corrections {:.3g}, bound {:.3g})",
+                                       frame, gr.first, dc, gr.cexchange, cbound));
+    }
+  }
+  s.rec = nullptr;
+}
+
+ValidationResult AppliedStateJudge::result() const {
+  const Impl& s = *impl_;
+  ValidationResult r;
+  r.tier = Tier::Model;
+  r.name = "applied-state";
+  r.figure = "bodies off the SPEC 6 re-derivation";
+  r.measured = static_cast<double>(s.bodies.failures);
+  r.bound = 0;
+  r.pass = s.bodies.failures == 0;
+  r.applicable = s.bodies.checks > 0;
+  const double share =
+      s.dynamic_frames ? static_cast<double>(s.bodies.checks) / static_cast<double>(s.dynamic_frames) : 0.0;
+  const std::string coverage = fmt::format(
+      "{} of {} dynamic body-frames judged ({:.1f}%); {} not judged (branch bound exceeded on {} island-frames); "
+      "near-ties {} in {} runs, {} island-frames settled by a branch other than the float32 proposal",
+      s.bodies.checks, s.dynamic_frames, 100.0 * share, s.unjudged, s.exceeded, s.near_ties, s.runs, s.resolved);
+  r.detail = s.bodies.failures ? s.bodies.first + "; " + coverage
+                               : fmt::format("worst {:.3g} of the float32 tolerance; {}", s.worst, coverage);
+  r.tolerances = "applied_state_ulps";
+  return r;
+}
+
+AppliedStateJudge::Groups AppliedStateJudge::groups() const {
+  const Impl& s = *impl_;
+  Groups out;
+  out.groups = s.group_momentum.checks;
+  out.pairs = s.group_centre.checks;
+  out.failures = s.group_momentum.failures + s.group_centre.failures;
+  out.worst = std::max(s.group_momentum.worst, s.group_centre.worst);
+  out.first = !s.group_momentum.first.empty() ? s.group_momentum.first : s.group_centre.first;
   return out;
 }
 

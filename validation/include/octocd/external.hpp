@@ -84,8 +84,8 @@ struct ExternalOptions {
   /// Compare Bullet's and FCL's broadphases with `flat` beside the engine's pairs, and
   /// judge normals against FCL/libccd.
   bool against_fcl = true;
-  /// Also judge the applied state against the SPEC 6 re-derivation (validation.hpp,
-  /// predict_step): for an engine that implements octocd's response.
+  /// Also judge the applied state against the SPEC 6 re-derivation (SPEC 7.9,
+  /// validation/model/applied_state.hpp): for an engine that implements octocd's response.
   bool spec6_response = false;
   /// Bounds (validation.hpp); names in `overridden` are marked in format_results.
   Tolerances tol;

@@ -160,21 +160,6 @@ const std::vector<ToleranceEntry>& tolerance_table();
 /// the name and the allowed names or range.
 void set_tolerance(Tolerances& tol, const std::string& name, double value);
 
-/// The state SPEC 4.1 + SPEC 6 predict for one step, re-derived in double precision from
-/// a FrameRecord's pre-step state and confirmed contacts (SPEC 7.9).
-struct StatePrediction {
-  std::vector<std::array<double, 3>> x_int;  ///< positions after integration (m)
-  std::vector<std::array<double, 3>> x, v;   ///< post-step positions (m), velocities (m/s)
-  std::vector<std::array<double, 3>> x_tol, v_tol;  ///< per-component float32 tolerances
-  std::vector<std::uint8_t> judged;   ///< 0: a decision within float32 rounding of its threshold
-  std::vector<std::uint8_t> clamped;  ///< 1: Eq. 23 clamped a component
-  std::vector<std::uint32_t> contact_count;  ///< first-pass contacts per body
-};
-/// Predicts the post-step state from `rec` (x_pre, v_pre, confirmed) and the model
-/// (scene parameters, local boxes, inverse masses). Written from the SPEC text alone: no
-/// engine code is called. Shapes: every vector has one entry per body.
-StatePrediction predict_step(const Model& model, const FrameRecord& rec, const Tolerances& tol);
-
 /// Per-frame validators (SPEC 7 items 1-6 and 9), fed one FrameRecord at a time. They
 /// read only the record and the model, so the same code judges octocd's engines (the
 /// Engine overloads), another engine's frames given through the C++ API

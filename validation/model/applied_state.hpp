@@ -1,0 +1,75 @@
+#pragma once
+/// \file applied_state.hpp
+/// SPEC 7 item 9 (private to validation/): the applied-state judge. An independent
+/// re-derivation of SPEC 4.1 and SPEC 6 in double precision predicts every body's
+/// post-step x and v from a FrameRecord's pre-step state and confirmed contacts; the
+/// engine's state must match within a float32 tolerance. Momentum and the mass-weighted
+/// centre are measured on the applied state of isolated dynamic groups.
+///
+/// Relaxation passes (response.iterations > 1) make SPEC 6 discontinuous at decisions
+/// that float32 rounding can tip either way (v_n near 0, |v_n| near v_th, stick or slip,
+/// an overlap near 0, two overlaps or a centre offset near a tie, the fixed-axis
+/// distance): the outcome feeds the next pass of every neighbour. Each such near-tie is a
+/// branch. Within an island (dynamic bodies connected by confirmed contacts) the judge
+/// explores the outcomes, bounded (kMaxRuns, kMaxWork, kMaxQueueBytes), and accepts the
+/// engine's state when some consistent choice (an outcome the double value allows within
+/// the rounding margin) reproduces every body of the island within the tolerance. A
+/// float32 evaluation of the same formulas, run alongside, proposes the outcome of each
+/// near-tie (the first branch tried); the verdict is the double re-derivation's. When the
+/// bound is exceeded without a match, only the bodies that no near-tie can reach within
+/// the remaining passes are judged; the others are counted as not judged.
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "octocd/validation.hpp"
+
+namespace octocd {
+
+/// Judges the applied state frame by frame (FrameValidators owns one).
+class AppliedStateJudge {
+ public:
+  /// Branch runs (complete re-derivations of one island's passes) per island and frame.
+  static constexpr int kMaxRuns = 256;
+  /// Contact evaluations (contacts x passes, summed over the branch runs) per island and
+  /// frame, beyond the first run.
+  static constexpr std::uint64_t kMaxWork = std::uint64_t{1} << 22;
+  /// Memory of the queue of branches still to explore, per island and frame (bytes).
+  static constexpr std::uint64_t kMaxQueueBytes = std::uint64_t{8} << 20;
+
+  /// `model` (scene parameters, local boxes, inverse masses) must outlive the judge.
+  AppliedStateJudge(const Model& model, const Tolerances& tol);
+  ~AppliedStateJudge();
+  AppliedStateJudge(const AppliedStateJudge&) = delete;
+  AppliedStateJudge& operator=(const AppliedStateJudge&) = delete;
+
+  /// Judges one step. `rec` holds x_pre, v_pre, x_post, v_post (one entry per body; the
+  /// call does nothing when they are empty), aabbs and the sorted confirmed pairs.
+  /// `judge_response`: compare every dynamic body with the SPEC 6 re-derivation (octocd's
+  /// engines, or another engine that claims SPEC 6); false: only the isolated groups,
+  /// with the position after integration taken from the engine's world AABBs.
+  void observe(const FrameRecord& rec, bool judge_response);
+
+  /// The applied-state row (Tier::Model): failures = dynamic body-frames off the
+  /// re-derivation; the detail names the first, or the share of body-frames judged.
+  ValidationResult result() const;
+
+  /// The isolated-group checks on the applied state, for the conservation row.
+  struct Groups {
+    std::uint64_t groups = 0;    ///< isolated dynamic groups judged (momentum)
+    std::uint64_t pairs = 0;     ///< isolated pairs judged (mass-weighted centre)
+    std::uint64_t failures = 0;  ///< groups or pairs off their bound
+    double worst = 0.0;          ///< largest residual / bound over the judged ones
+    std::string first;           ///< the first failure ("" none)
+  };
+  /// Figures so far.
+  Groups groups() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace octocd
