@@ -429,8 +429,7 @@ Run AppliedStateJudge::Impl::search(const Island& is, bool judge_response, std::
     for (std::size_t i = from; i < r.trace.size(); ++i) {
       for (std::uint8_t o = 0; o < 8; ++o) {
         if (o == r.trace[i].outcome || !(r.trace[i].allowed >> o & 1)) continue;
-        if (queue.size() + static_cast<std::size_t>(runs) >= 1u << 20 ||
-            queue_bytes + i + 1 + sizeof(Branch) > kMaxQueueBytes || queue.size() >= static_cast<std::size_t>(kMaxRuns)) {
+        if (queue_bytes + i + 1 + sizeof(Branch) > kMaxQueueBytes || queue.size() >= static_cast<std::size_t>(kMaxRuns)) {
           truncated = true;
           return;
         }
