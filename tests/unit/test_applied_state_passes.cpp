@@ -217,3 +217,21 @@ TEST(MixedPile, FaultsAreCaughtAndTheCorrectEnginePasses) {
     EXPECT_FALSE(j.applied.pass) << fc.name << ": " << j.applied.detail;
   }
 }
+
+// Past the exploration bound (a faulty engine: no branch reproduces its state) the judge
+// stops, leaves the bodies near-ties can reach unjudged, counts them and still judges
+// the rest: box-stack with 8 passes and the impulse added to the wrong body.
+TEST(PassesBound, ExceededBoundIsCountedAndTheRestJudged) {
+  PlantedFaults f;
+  f.impulse_wrong_body = true;
+  const Judged j = judge(shipped("box-stack", 8), f, 400);
+  EXPECT_FALSE(j.applied.pass) << j.applied.detail;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(j.applied.detail, m,
+                                std::regex(R"(([0-9]+) not judged \(branch bound exceeded on ([0-9]+) island-frames\))")))
+      << j.applied.detail;
+  EXPECT_GT(std::stoi(m[1]), 0) << j.applied.detail;
+  EXPECT_GT(std::stoi(m[2]), 0) << j.applied.detail;
+  EXPECT_GT(j.share, 0.5) << j.applied.detail;
+  EXPECT_LT(j.share, 1.0) << j.applied.detail;
+}
