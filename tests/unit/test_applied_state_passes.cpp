@@ -49,7 +49,7 @@ Judged judge(const Scene& scene, PlantedFaults faults, int frames) {
   Judged out;
   for (const ValidationResult& r : v.results()) {
     if (r.name == "applied-state") out.applied = r;
-    if (r.name == "conservation") out.conservation = r;
+    if (r.name == "conservation" || r.name == "impulse-conservation") out.conservation = r;
   }
   std::smatch m;
   if (std::regex_search(out.applied.detail, m, std::regex(R"(dynamic body-frames judged \(([0-9.]+)%\))")))
