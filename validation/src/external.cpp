@@ -109,6 +109,7 @@ void check_frame_record(const FrameRecord& rec, std::size_t n, const std::string
 
 struct ExternalValidator::Impl {
   ExternalOptions options;
+  PhysicsBodies physics;
   std::shared_ptr<Model> model;
   bool domain_given = false;
   std::unique_ptr<FrameValidators> validators;
@@ -118,6 +119,7 @@ ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const Externa
     : impl_(std::make_unique<Impl>()) {
   Impl& s = *impl_;
   s.options = options;
+  s.physics = bodies.physics;
   const std::string& origin = options.engine;
   auto model = std::make_shared<Model>();
   if (!bodies.scene_json.empty()) {
@@ -262,7 +264,8 @@ void ExternalValidator::observe(FrameRecord rec, bool checked) {
     vo.overridden = s.options.overridden;
     s.validators = std::make_unique<FrameValidators>(
         model, vo, compared_broadphases(model.scene, s.options.against_fcl),
-        FrameValidators::Source{fmt::format("engine '{}'", s.options.engine), false, s.options.spec6_response});
+        FrameValidators::Source{fmt::format("engine '{}'", s.options.engine), false, s.options.spec6_response,
+                                std::make_shared<PhysicsBodies>(s.physics)});
   }
   s.validators->observe(rec, checked);
 }

@@ -90,6 +90,12 @@ struct PhysicsBodies {
   double slop = 0.001;
 };
 
+/// What octocd's own cpu and cuda engines declare: mu = the scene's mu_static (the
+/// cone of Eq. 21), restitution = the scene's e, the pair's theta as contact margin
+/// (vertex proximity, SPEC 5.3), an exact AABB broadphase, contacts on the world AABBs
+/// (SPEC 6), slop = delta. Bodies translate only: inertia is not needed.
+PhysicsBodies octocd_physics_bodies(const Model& model);
+
 /// Physics-tier validators, fed one FrameRecord at a time (octocd's engines, another
 /// engine through octocd/external.hpp, or an external trace v1/v2).
 class PhysicsValidators {
