@@ -152,6 +152,13 @@ class FrameRecord:
     q_det: Optional[_np.ndarray] = None
     manifolds: bool = False
 
+    def observation(self) -> Dict[str, Any]:
+        """This record as Validator.observe's keyword arguments (feeds an octocd engine's
+        frames to the external-engine validators, e.g. to compare with your engine's)."""
+        keys = ("aabbs", "pairs", "contacts", "x_pre", "v_pre", "x_post", "v_post", "q_pre", "q_post", "w_pre",
+                "w_post", "x_det", "q_det")
+        return dict(frame=self.frame, manifolds=self.manifolds, **{k: getattr(self, k) for k in keys})
+
     @property
     def stage_ms(self) -> Dict[str, Optional[float]]:
         """Wall time per stage (ms): integrate, aabbs, broadphase, midphase, response, metrics."""

@@ -662,10 +662,17 @@ class PyValidator {
         throw InputError("contacts: not a dict; allowed: {'pair': (C, 2), 'normal': (C, 3), 'depth': (C,), 'jn': "
                          "(C,), 'jt': (C,)[, 'point': (C, 3)]}");
       const py::dict c = py::reinterpret_borrow<py::dict>(contacts);
+      // octocd's own FrameRecord.contacts adds the SPEC 6 terms: accepted and ignored (the
+      // validators derive them from the states), so an octocd record can be fed back.
+      static const char* const kKeys[] = {"pair", "normal", "depth", "jn", "jt", "point", "axis",
+                                          "v_a", "v_b", "dx_a", "dx_b", "dv_a", "dv_b"};
       for (auto item : c) {
         const std::string k = py::str(item.first);
-        if (k != "pair" && k != "normal" && k != "depth" && k != "jn" && k != "jt" && k != "point")
-          throw InputError(fmt::format("contacts: unknown key '{}'; allowed: pair, normal, depth, jn, jt, point", k));
+        if (std::find(std::begin(kKeys), std::end(kKeys), k) == std::end(kKeys))
+          throw InputError(fmt::format("contacts: unknown key '{}'; allowed: pair, normal, depth, jn, jt, point "
+                                       "(and, ignored, the SPEC 6 terms of octocd's records: axis, v_a, v_b, dx_a, "
+                                       "dx_b, dv_a, dv_b)",
+                                       k));
       }
       for (const char* k : {"pair", "normal", "depth", "jn", "jt"})
         if (!c.contains(k))
@@ -749,7 +756,15 @@ PYBIND11_MODULE(_octocd, m) {
     return d;
   });
 
-  py::class_<PyScene>(m, "Scene")
+  py::class_<PyScene>(m, "Scene",
+                      "A loaded, validated scene (octocd.load_scene; docs/scenes.md). Read-only; one Scene can "
+                      "build several engines.")
+      .def("__repr__",
+           [](const PyScene& s) {
+             return fmt::format("octocd.Scene('{}', {} bodies in groups, dt {} s, {} frames, broadphase '{}')",
+                                s.scene->name, body_count(*s.scene), s.scene->dt, s.scene->frames,
+                                s.scene->broadphase.name);
+           })
       .def_property_readonly("name", [](const PyScene& s) { return s.scene->name; })
       .def_property_readonly("description", [](const PyScene& s) { return s.scene->description; })
       .def_property_readonly("path", [](const PyScene& s) { return s.scene->path; })

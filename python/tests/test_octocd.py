@@ -330,3 +330,42 @@ def test_layout_and_float64_are_converted_like_the_trace_reader(toy_frame):
     assert [(r.name, r.verdict, r.measured) for r in judge(half, w, as64)] == \
            [(r.name, r.verdict, r.measured) for r in ref]
     del boxes
+
+
+# ---- octocd's own engine through the external-engine path; the GIL ----------------------
+
+def test_octocd_engine_frames_fed_back_through_the_validator():
+    # octocd's cpu engine judged like another engine (Validator(scene) + FrameRecord.observation):
+    # its pairs are flat's, its normals agree with FCL; a pair dropped from one frame is caught.
+    scene = octocd.load_scene(scene_path("box-stack"))
+    eng = octocd.Engine(scene)
+    clean, planted = octocd.Validator(scene, engine="cpu-from-python"), octocd.Validator(scene, engine="planted")
+    for f in range(1, 31):
+        eng.step()
+        obs = eng.last_frame().observation()
+        clean.observe(**obs)
+        if f == 20:
+            obs["pairs"] = obs["pairs"][1:]  # lose the first pair
+        planted.observe(**obs)
+    ok = clean.results()
+    assert row(ok, "candidate-sets").passed and row(ok, "contact-normals").passed
+    bad = row(planted.results(), "candidate-sets")
+    assert bad.failed and "frame 20" in bad.detail, bad.detail
+    assert repr(scene).startswith("octocd.Scene('box-stack'")
+
+
+def test_step_releases_the_gil_and_guards_the_engine():
+    # While one thread is inside step(n), the main thread runs Python (so the GIL is
+    # released) and touching the same engine is refused instead of racing.
+    eng = octocd.Engine(scene_path("box-stack"))
+    t = threading.Thread(target=eng.step, args=(20000,))
+    t.start()
+    refused = None
+    while t.is_alive() and refused is None:
+        try:
+            eng.positions
+        except octocd.RuntimeError as e:
+            refused = str(e)
+    t.join()
+    assert refused is not None and "busy in another thread" in refused
+    assert eng.frame == 20000
