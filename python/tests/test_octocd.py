@@ -369,3 +369,35 @@ def test_step_releases_the_gil_and_guards_the_engine():
     t.join()
     assert refused is not None and "busy in another thread" in refused
     assert eng.frame == 20000
+
+
+def box_mesh(h):
+    """The 8 corners and 12 triangles of the box [-h, h] (a mesh that is exactly its local box)."""
+    v = np.array([[sx * h[0], sy * h[1], sz * h[2]] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
+                 dtype=np.float32)
+    t = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], dtype=np.int32)
+    return v, t
+
+
+def test_identity_poses_and_box_meshes_change_no_verdict():
+    # Orientations all identity and angular velocities zero are octocd's own rule: the
+    # figures must be those of the plain frames. A mesh equal to its box is judged on the
+    # mesh (FCL mesh-mesh and mesh-box normals) with the same verdicts.
+    half, w, frames = toy_run(plant=True)
+    n = len(w)
+    ident = np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1))
+    zero = np.zeros((n, 3), np.float32)
+    posed = [dict(fr, q_pre=ident, q_post=ident, w_pre=zero, w_post=zero) for fr in frames]
+    ref = [(r.name, r.verdict, r.measured) for r in judge(half, w, frames)]
+    assert [(r.name, r.verdict, r.measured) for r in judge(half, w, posed)] == ref
+    meshes = [None] + [box_mesh(half[i]) for i in range(1, n)]
+    with_meshes = judge(half, w, frames, meshes=meshes)
+    assert [(r.name, r.verdict) for r in with_meshes] == [(name, verdict) for name, verdict, _ in ref]
+    normals = row(with_meshes, "contact-normals").detail
+    assert "mesh-mesh none" not in normals and "mesh-box none" not in normals, normals
+    v, t = box_mesh(half[1] * 2)  # vertices outside body 1's local box
+    with pytest.raises(octocd.InputError, match=r"meshes: body 1: vertices outside its local box"):
+        judge(half, w, frames, meshes=[None, (v, t)] + [None] * (n - 2))
+    with pytest.raises(octocd.InputError, match=r"meshes\[1\]\[1\]: triangle 0 names vertex 99"):
+        judge(half, w, frames, meshes=[None, (v, np.array([[0, 1, 99]]))] + [None] * (n - 2))
