@@ -382,8 +382,8 @@ def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max
     """Judges an external trace (docs/trace-format.md, "External traces"; what `octocd
     validate --trace-in PATH` does): the costly validators every `every`-th frame, at most
     max_frames frames (0 = all). A trace of `octocd run --state-every 1 --contacts` is one.
-    Raises InputError "PATH: DATASET: [frame F: ]PROBLEM; allowed: ..." for a malformed
-    trace, RuntimeError when the file is not HDF5. The GIL is released while judging."""
+    Raises InputError "PATH: DATASET: [frame F: ]PROBLEM; allowed: ..." for a missing,
+    unreadable or malformed trace. The GIL is released while judging."""
     return _results(_octocd.validate_trace(_os.fspath(path), int(every), int(max_frames), bool(against_fcl),
                                            tolerances))
 

@@ -401,3 +401,13 @@ def test_identity_poses_and_box_meshes_change_no_verdict():
         judge(half, w, frames, meshes=[None, (v, t)] + [None] * (n - 2))
     with pytest.raises(octocd.InputError, match=r"meshes\[1\]\[1\]: triangle 0 names vertex 99"):
         judge(half, w, frames, meshes=[None, (v, np.array([[0, 1, 99]]))] + [None] * (n - 2))
+
+
+def test_validate_trace_of_a_cli_trace_and_of_a_missing_file(tmp_path):
+    # `octocd run --state-every 1 --contacts` writes a valid external trace (docs/trace-format.md).
+    trace = cli_trace(tmp_path, scene_path("box-stack"), 50)
+    results = octocd.validate_trace(trace, every=5)
+    assert row(results, "candidate-sets").passed and row(results, "contact-normals").passed
+    assert {r.tier for r in results} <= {"physics", "model"}
+    with pytest.raises(octocd.InputError, match=r"no-such\.h5: not a readable HDF5 file"):
+        octocd.validate_trace(tmp_path / "no-such.h5")
