@@ -418,10 +418,11 @@ class Trace:
         import h5py  # Debian: python3-h5py
         self.path = _os.fspath(path)
         self.h5 = h5py.File(self.path, "r", swmr=True)
-        if self.h5.attrs.get("format") != "octocd-trace":
+        fmt = self.h5.attrs.get("format")
+        if fmt != "octocd-trace":
             self.h5.close()
-            raise InputError(f"{self.path}: attribute format: {self.h5.attrs.get('format')!r}; "
-                             "allowed: 'octocd-trace' (docs/trace-format.md)")
+            raise InputError(f"{self.path}: attribute format: {fmt!r}; allowed: 'octocd-trace' "
+                             "(docs/trace-format.md)")
 
     def __enter__(self) -> "Trace":
         return self

@@ -411,3 +411,18 @@ def test_validate_trace_of_a_cli_trace_and_of_a_missing_file(tmp_path):
     assert {r.tier for r in results} <= {"physics", "model"}
     with pytest.raises(octocd.InputError, match=r"no-such\.h5: not a readable HDF5 file"):
         octocd.validate_trace(tmp_path / "no-such.h5")
+
+
+def test_trace_helper_refuses_other_files_and_missing_frames(tmp_path):
+    other = str(tmp_path / "other.h5")
+    with h5py.File(other, "w") as f:
+        f["x"] = np.zeros(3)
+    with pytest.raises(octocd.InputError, match=r"attribute format: None; allowed: 'octocd-trace'"):
+        octocd.Trace(other)
+    trace = cli_trace(tmp_path, scene_path("box-stack"), 10, contacts=False)
+    with octocd.Trace(trace) as t:
+        assert t.attrs["engine"] == "cpu" and len(t.frames["frame"]) == 10
+        with pytest.raises(octocd.InputError, match=r"no state for frame 11"):
+            t.state(11)
+        with pytest.raises(octocd.InputError, match=r"/contacts: absent"):
+            t.contacts(1)
