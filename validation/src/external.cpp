@@ -97,7 +97,7 @@ void check_quats(const std::vector<Quat>& q, std::size_t n, const std::string& o
                                  static_cast<double>(q[i].y) * q[i].y + static_cast<double>(q[i].z) * q[i].z);
     if (!std::isfinite(len) || !(std::fabs(len - 1.0) <= 1e-3))
       fail(origin, field, frame,
-           fmt::format("body {} {} is ({}, {}, {}, {}), |q| = {}", i, when, q[i].w, q[i].x, q[i].y, q[i].z, len),
+           fmt::format("body {} {} is ({}, {}, {}, {}), |q| = {:.6g}", i, when, q[i].w, q[i].x, q[i].y, q[i].z, len),
            "unit quaternions (w, x, y, z), body to world, | |q| - 1 | <= 1e-3");
   }
 }
@@ -188,7 +188,7 @@ void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inve
       bad(names.inertia, fmt::format("{} tensors for {} bodies", p.inertia.size(), n), "one 3 x 3 tensor per body");
     for (std::size_t i = 0; i < n; ++i) {
       const std::array<double, 9>& m = p.inertia[i];
-      const std::string I = fmt::format("[[{}, {}, {}], [{}, {}, {}], [{}, {}, {}]]", m[0], m[1], m[2], m[3], m[4],
+      const std::string I = fmt::format("[[{:.6g}, {:.6g}, {:.6g}], [{:.6g}, {:.6g}, {:.6g}], [{:.6g}, {:.6g}, {:.6g}]]", m[0], m[1], m[2], m[3], m[4],
                                         m[5], m[6], m[7], m[8]);
       double largest = 0.0;
       for (double x : m) {
@@ -210,7 +210,7 @@ void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inve
       for (int k = 0; k < 3; ++k)
         if (!(minors[static_cast<std::size_t>(k)] > 0.0))
           bad(names.inertia,
-              fmt::format("body {}: {} not positive definite (leading minor {} is {})", i, I, k + 1,
+              fmt::format("body {}: {} not positive definite (leading minor {} is {:.6g})", i, I, k + 1,
                           minors[static_cast<std::size_t>(k)]),
               allowed);
     }
