@@ -368,6 +368,10 @@ TEST(ExternalV2, CheckFrameRecordCoversRotationFields) {
   EXPECT_NE(error_of([&] { check_frame_record(no_w.rec, 3, "api"); })
                 .find("w_pre: frame 4: orientations without angular velocities"),
             std::string::npos);
+  TwoBoxes half = rotating();
+  half.rec.q_post.clear();
+  EXPECT_NE(error_of([&] { check_frame_record(half.rec, 3, "api"); }).find("q_post: frame 4: missing (q_pre given)"),
+            std::string::npos);
   TwoBoxes det = rotating();
   det.rec.q_det.pop_back();
   EXPECT_NE(error_of([&] { check_frame_record(det.rec, 3, "api"); }).find("q_det: frame 4: 2 rows for 3 bodies"),

@@ -271,12 +271,17 @@ void check_frame_record(const FrameRecord& rec, std::size_t n, const std::string
     if (!states)
       fail(origin, names.q_pre, f, "orientations without positions and velocities",
            "orientations and angular velocities with x_pre, v_pre, x_post, v_post");
+    const std::string together =
+        "orientations and angular velocities before and after the step together (or none: no rotation)";
+    const bool q = !rec.q_pre.empty() || !rec.q_post.empty(), w = !rec.w_pre.empty() || !rec.w_post.empty();
+    if (!q) fail(origin, names.q_pre, f, "angular velocities without orientations", together);
+    if (!w) fail(origin, names.w_pre, f, "orientations without angular velocities", together);
     if (rec.q_pre.empty() || rec.q_post.empty())
-      fail(origin, names.q_pre, f, "angular velocities without orientations (before and after the step)",
-           "orientations and angular velocities together (or neither: no rotation)");
+      fail(origin, rec.q_pre.empty() ? names.q_pre : names.q_post, f,
+           rec.q_pre.empty() ? "missing (q_post given)" : "missing (q_pre given)", together);
     if (rec.w_pre.empty() || rec.w_post.empty())
-      fail(origin, names.w_pre, f, "orientations without angular velocities (before and after the step)",
-           "orientations and angular velocities together (or neither: no rotation)");
+      fail(origin, rec.w_pre.empty() ? names.w_pre : names.w_post, f,
+           rec.w_pre.empty() ? "missing (w_post given)" : "missing (w_pre given)", together);
     check_quats(rec.q_pre, n, origin, names.q_pre, f, "before the step");
     check_quats(rec.q_post, n, origin, names.q_post, f, "after the step");
     check_vectors(rec.w_pre, n, origin, names.w_pre, f);
