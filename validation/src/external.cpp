@@ -325,17 +325,17 @@ void check_frame_record(const FrameRecord& rec, std::size_t n, const std::string
 
 struct ExternalValidator::Impl {
   ExternalOptions options;
+  PhysicsBodies physics;
   std::shared_ptr<Model> model;
   bool domain_given = false;
   std::unique_ptr<FrameValidators> validators;
-  /// What the physics tier is told of the bodies (checked: check_physics_bodies).
-  PhysicsBodies physics;
 };
 
 ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const ExternalOptions& options)
     : impl_(std::make_unique<Impl>()) {
   Impl& s = *impl_;
   s.options = options;
+  s.physics = bodies.physics;
   const std::string& origin = options.engine;
   auto model = std::make_shared<Model>();
   if (!bodies.scene_json.empty()) {
@@ -426,7 +426,6 @@ ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const Externa
     }
   }
   check_physics_bodies(bodies.physics, model->initial.w, origin);
-  s.physics = bodies.physics;
   s.model = std::move(model);
 }
 
