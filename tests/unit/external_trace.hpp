@@ -80,9 +80,9 @@ struct Trace {
         t.orientation.insert(t.orientation.end(), q, q + 4);
         t.angular_velocity.insert(t.angular_velocity.end(), w, w + 3);
       }
-    const float d = 0.2f * 0.2f / 6.0f;  // 1 kg box of side 0.2: m/12 (b^2 + c^2)
-    t.inertia = {0, 0, 0, 0, 0, 0, 0, 0, 0,  //
-                 d, 0, 0, 0, d, 0, 0, 0, d,  //
+    const float d = 0.2f * 0.2f / 6.0f;                // 1 kg box of side 0.2: m/12 (b^2 + c^2)
+    t.inertia = {0, 0,      0, 0,      0, 0, 0, 0, 0,  //
+                 d, 0,      0, 0,      d, 0, 0, 0, d,  //
                  d, 0.001f, 0, 0.001f, d, 0, 0, 0, 1.5f * d};
     t.contact_offsets = {0, 2, 3, 5};
     t.contact_pair = {1, 2, 1, 2, 1, 2, 1, 2, 1, 2};
@@ -93,8 +93,10 @@ struct Trace {
     t.point = {0.1f, 0.05f, 0.05f, 0.1f, -0.05f, -0.05f, 0.1f, 0, 0, 0.1f, 0.05f, 0, 0.1f, -0.05f, 0};
     t.friction = {0.5f, 0.7f, 0.9f};
     t.restitution = {0.1f, 0.2f, 0.3f};
-    t.string_attrs = {{"detection", "pre-step"},       {"friction_combine", "min"},
-                      {"restitution_combine", "max"},  {"contact_geometry", "aabb"}};
+    t.string_attrs = {{"detection", "pre-step"},
+                      {"friction_combine", "min"},
+                      {"restitution_combine", "max"},
+                      {"contact_geometry", "aabb"}};
     t.number_attrs = {{"mu", 0.4}, {"restitution", 0.2}, {"contact_margin", 0.01}, {"broadphase_exact", 1}};
     return t;
   }
@@ -168,7 +170,8 @@ struct Trace {
     put("/contacts/depth", F, FT, {c}, depth.data());
     put("/contacts/jn", F, FT, {c}, jn.data());
     put("/contacts/jt", F, FT, {c}, jt.data());
-    if (!orientation.empty()) put("/states/orientation", F, FT, {orientation.size() / (4 * n), n, 4}, orientation.data());
+    if (!orientation.empty())
+      put("/states/orientation", F, FT, {orientation.size() / (4 * n), n, 4}, orientation.data());
     if (!angular_velocity.empty())
       put("/states/angular_velocity", F, FT, {angular_velocity.size() / (3 * n), n, 3}, angular_velocity.data());
     if (!inertia.empty()) put("/bodies/inertia", F, FT, {inertia.size() / 9, 3, 3}, inertia.data());

@@ -190,6 +190,12 @@ struct TempTrace {
   ~TempTrace() { std::filesystem::remove(path); }
 };
 
+/// A scene of the test trace's three boxes with its own response and time step.
+const char* const kThreeBoxes = R"({"name": "three", "domain": {"min": [-1, -2, -1], "max": [1, 1, 1]},
+    "dt": 0.002, "gravity": [0, -5, 0], "walls": "none",
+    "response": {"mu_static": 0.35, "restitution": 0.1, "slop": 0.002},
+    "groups": [{"shape": {"box": [0.1, 0.1, 0.1]}, "count": 3, "positions": [[0, -1, 0], [0, 0, 0], [0.199, 0, 0]]}]})";
+
 std::string error_of(const std::function<void()>& f) {
   try {
     f();
@@ -312,10 +318,7 @@ TEST(ExternalV2, DefaultsAndTheIntegratedDetectionPose) {
     }
   }
   // With a scene: its response's mu_s, e and slop; its dt and gravity for "integrated".
-  t.string_attrs["scene"] = R"({"name": "three", "domain": {"min": [-1, -2, -1], "max": [1, 1, 1]},
-    "dt": 0.002, "gravity": [0, -5, 0], "walls": "none",
-    "response": {"mu_static": 0.35, "restitution": 0.1, "slop": 0.002},
-    "groups": [{"shape": {"box": [0.1, 0.1, 0.1]}, "count": 3, "positions": [[0, -1, 0], [0, 0, 0], [0.199, 0, 0]]}]})";
+  t.string_attrs["scene"] = kThreeBoxes;
   TempTrace file(t);
   ExternalTrace in(file.path.string());
   EXPECT_DOUBLE_EQ(in.bodies().physics.mu, 0.35f);
@@ -340,6 +343,19 @@ TEST(ExternalV2, Version1ReadsAsBefore) {
   EXPECT_FALSE(rec.manifolds || rec.has_points);
   EXPECT_EQ(rec.aabbs.size(), 3u);
   EXPECT_EQ(in.bodies().physics.inertia.size(), 0u);
+}
+
+// A version 1 trace with a scene: the physics tier gets the scene's mu_s, e and slop, not
+// the defaults (issue 17: the default 0.6 against an engine's 1.0 gave a wrong FAIL).
+TEST(ExternalV2, Version1TakesMaterialsFromTheScene) {
+  octocd::test::Trace t;
+  t.string_attrs["scene"] = kThreeBoxes;
+  TempTrace file(t);
+  ExternalTrace in(file.path.string());
+  EXPECT_DOUBLE_EQ(in.bodies().physics.mu, 0.35f);
+  EXPECT_DOUBLE_EQ(in.bodies().physics.restitution, 0.1f);
+  EXPECT_DOUBLE_EQ(in.bodies().physics.slop, 0.002f);
+  EXPECT_TRUE(in.frame(1).x_det.empty());  // version 1: octocd's rule, from the AABBs
 }
 
 // check_frame_record covers the rotation fields for C++ API users.

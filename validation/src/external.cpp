@@ -188,8 +188,9 @@ void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inve
       bad(names.inertia, fmt::format("{} tensors for {} bodies", p.inertia.size(), n), "one 3 x 3 tensor per body");
     for (std::size_t i = 0; i < n; ++i) {
       const std::array<double, 9>& m = p.inertia[i];
-      const std::string I = fmt::format("[[{:.6g}, {:.6g}, {:.6g}], [{:.6g}, {:.6g}, {:.6g}], [{:.6g}, {:.6g}, {:.6g}]]", m[0], m[1], m[2], m[3], m[4],
-                                        m[5], m[6], m[7], m[8]);
+      const std::string I =
+          fmt::format("[[{:.6g}, {:.6g}, {:.6g}], [{:.6g}, {:.6g}, {:.6g}], [{:.6g}, {:.6g}, {:.6g}]]", m[0], m[1],
+                      m[2], m[3], m[4], m[5], m[6], m[7], m[8]);
       double largest = 0.0;
       for (double x : m) {
         if (!std::isfinite(x))

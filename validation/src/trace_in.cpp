@@ -33,7 +33,10 @@ struct Dataset {
 
 class TraceIn {
  public:
-  explicit TraceIn(const std::string& path) : path_(path) {
+  /// Opens and checks `path`. `with_scene`: the root attribute `scene` is parsed for the
+  /// physics defaults (its response's mu_s, e and slop; dt and gravity of the "integrated"
+  /// detection pose); false (--check-only) leaves the scene to the validator, as in v1.
+  explicit TraceIn(const std::string& path, bool with_scene = true) : path_(path) {
     if (H5Fis_hdf5(path.c_str()) <= 0)
       throw InputError(fmt::format("{}: not a readable HDF5 file; allowed: an external trace (docs/trace-format.md)",
                                    path));
@@ -161,6 +164,9 @@ class TraceIn {
         expect(*d, {c}, fmt::format("{} values, one per contact (as /contacts/pair)", c));
       rows_match(c_pair_, contact_offsets_, "/contacts/offsets");
     }
+    det_dt_ = bodies.dt;
+    det_gravity_ = bodies.gravity;
+    if (with_scene && info.has_scene) scene_defaults();
     if (info.version == 2)
       read_v2();
     else
@@ -236,6 +242,18 @@ class TraceIn {
             "root attribute version = 2 with the version 2 datasets, or a version 1 file without them");
   }
 
+  /// The physics defaults from the scene (both versions): its response's mu_s, e and slop
+  /// (the root attributes and /bodies tables of version 2 override them); its dt and
+  /// gravity for the "integrated" detection pose.
+  void scene_defaults() {
+    const Scene scene = parse_scene(bodies.scene_json, path_ + ": / (root attribute scene)");
+    bodies.physics.mu = scene.response.mu_static;
+    bodies.physics.restitution = scene.response.restitution;
+    bodies.physics.slop = scene.response.slop;
+    det_dt_ = scene.dt;
+    det_gravity_ = scene.gravity;
+  }
+
   /// Root attributes, /bodies physics, rotation and contact points of a version 2 file.
   void read_v2() {
     PhysicsBodies& p = bodies.physics;
@@ -247,17 +265,6 @@ class TraceIn {
     names.restitution = "/ (root attribute restitution)";
     names.contact_margin = "/ (root attribute contact_margin)";
     names.slop = "/ (root attribute scene: response.slop)";
-    // Defaults: the scene's response (mu_s, e, delta), else those of version 1.
-    det_dt_ = bodies.dt;
-    det_gravity_ = bodies.gravity;
-    if (info.has_scene) {
-      const Scene scene = parse_scene(bodies.scene_json, path_ + ": / (root attribute scene)");
-      p.mu = scene.response.mu_static;
-      p.restitution = scene.response.restitution;
-      p.slop = scene.response.slop;
-      det_dt_ = scene.dt;
-      det_gravity_ = scene.gravity;
-    }
     const std::string detection = choice_attr("detection", {"pre-step", "integrated"}, "pre-step");
     integrated_ = detection == "integrated";
     if (has_attr("mu")) p.mu = number_attr("mu", 0.0);
@@ -276,8 +283,8 @@ class TraceIn {
             "0 (default: any broadphase, extras allowed) or 1 (exactly the overlapping world AABBs)");
       p.broadphase_exact = exact == 1.0;
     }
-    p.contact_geometry =
-        choice_attr("contact_geometry", {"shape", "aabb"}, "shape") == "aabb" ? ContactGeometry::Aabb : ContactGeometry::Shape;
+    p.contact_geometry = choice_attr("contact_geometry", {"shape", "aabb"}, "shape") == "aabb" ? ContactGeometry::Aabb
+                                                                                               : ContactGeometry::Shape;
 
     // Per-body tables.
     Dataset inertia = open("/bodies/inertia", H5T_FLOAT, 3, false);
@@ -285,7 +292,8 @@ class TraceIn {
       expect(inertia, {n_, 3, 3}, fmt::format("{} x 3 x 3: one body-frame tensor per body (kg m^2)", n_));
       const std::vector<double> v = read<double>(inertia, 0, n_);
       p.inertia.resize(n_);
-      for (hsize_t i = 0; i < n_; ++i) std::copy_n(v.begin() + static_cast<std::ptrdiff_t>(9 * i), 9, p.inertia[i].begin());
+      for (hsize_t i = 0; i < n_; ++i)
+        std::copy_n(v.begin() + static_cast<std::ptrdiff_t>(9 * i), 9, p.inertia[i].begin());
     } else {
       for (hsize_t i = 0; i < n_; ++i) p.inertia.push_back(box_inertia(bodies.local_boxes[i], bodies.inverse_mass[i]));
     }
@@ -309,15 +317,16 @@ class TraceIn {
       if (!info.has_states)
         bad(orientation_.name, "without /states/position", "orientations with /states/position and /states/velocity");
       const hsize_t rows = position_.dims[0];
-      expect(orientation_, {rows, n_, 4}, fmt::format("{} x {} x 4, as /states/position: (w, x, y, z) per body", rows, n_));
+      expect(orientation_, {rows, n_, 4},
+             fmt::format("{} x {} x 4, as /states/position: (w, x, y, z) per body", rows, n_));
       expect(angular_, {rows, n_, 3}, fmt::format("{} x {} x 3, as /states/position (rad/s, world frame)", rows, n_));
       info.has_rotation = true;
     }
     c_point_ = open("/contacts/point", H5T_FLOAT, 2, false);
     if (c_point_.present()) {
       if (!info.has_contacts) bad(c_point_.name, "without /contacts/pair", "contact points with /contacts");
-      expect(c_point_, {c_pair_.dims[0], 3}, fmt::format("{} x 3, one world point per contact row (as /contacts/pair)",
-                                                          c_pair_.dims[0]));
+      expect(c_point_, {c_pair_.dims[0], 3},
+             fmt::format("{} x 3, one world point per contact row (as /contacts/pair)", c_pair_.dims[0]));
       info.has_points = true;
     }
   }
@@ -368,7 +377,8 @@ class TraceIn {
   bool has_attr(const char* name) const { return H5Aexists(file_, name) > 0; }
 
   /// A string attribute that must be one of `allowed` (absent: `fallback`).
-  std::string choice_attr(const char* name, const std::vector<std::string>& allowed, const std::string& fallback) const {
+  std::string choice_attr(const char* name, const std::vector<std::string>& allowed,
+                          const std::string& fallback) const {
     if (!has_attr(name)) return fallback;
     const std::string value = string_attr(name);
     if (std::find(allowed.begin(), allowed.end(), value) != allowed.end()) return value;
@@ -558,12 +568,13 @@ const ExternalTraceInfo& ExternalTrace::info() const { return impl_->in.info; }
 const ExternalBodies& ExternalTrace::bodies() const { return impl_->in.bodies; }
 FrameRecord ExternalTrace::frame(std::int64_t f) {
   if (f < 1 || f > impl_->in.info.frames)
-    throw InputError(fmt::format("{}: frame {}: out of range; allowed: 1 .. {}", impl_->path, f, impl_->in.info.frames));
+    throw InputError(
+        fmt::format("{}: frame {}: out of range; allowed: 1 .. {}", impl_->path, f, impl_->in.info.frames));
   return impl_->in.frame(f);
 }
 
 ExternalTraceInfo check_external_trace(const std::string& path) {
-  TraceIn in(path);
+  TraceIn in(path, false);
   for (std::int64_t f = 1; f <= in.info.frames; ++f) in.frame(f);
   return in.info;
 }
