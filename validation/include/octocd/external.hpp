@@ -5,28 +5,28 @@
 /// (docs/trace-format.md, "External traces"; `octocd validate --trace-in FILE.h5`).
 ///
 /// The same FrameValidators that judge octocd's engines judge these frames: each frame is
-/// a FrameRecord (octocd/engine.hpp) that another program filled. What is judged:
-/// - candidate sets: the engine's pairs against `flat` (the oracle), with Bullet's and
-///   FCL's broadphases run on the same AABBs beside it (missing and extra pairs);
-/// - contact normals: sign agreement and angles against FCL/libccd (boxes, or meshes);
-/// - non-penetration (Eq. 14 contraction with the scene's alpha, beta, delta), friction
-///   (|v_t| never rises, |J_t| <= mu_s J_n) and conservation (momentum, mass-weighted
-///   centre) on the given before/after states;
-/// - optionally the applied state against the SPEC 6 re-derivation (an engine that
-///   implements octocd's response).
-/// Midphase completeness, the analytic scenes and the Bullet dynamics comparison need
-/// octocd's own pipeline or an engine to step; they are reported n/a with the reason.
+/// a FrameRecord (octocd/engine.hpp) that another program filled. What is judged (SPEC 13,
+/// README "Which rows judge what"): the physics tier (octocd/physics.hpp: broadphase and
+/// contact completeness, contact geometry against FCL on the posed shapes, penetration,
+/// friction, conservation) for any engine, with ExternalBodies::physics; the model tier
+/// (the paper's response: Eq. 14, friction monotonicity, impulse conservation, the
+/// applied state) only for an engine that claims SPEC 6 (ExternalOptions::spec6_response),
+/// n/a with the reason otherwise. Midphase completeness, the analytic scenes and the
+/// Bullet dynamics comparison need octocd's own pipeline or an engine to step: n/a.
 ///
 /// Conventions a caller must follow (SPEC 2). Units: m, s, kg; float32 state.
 /// - Pairs are body indices (a, b) with a < b < bodies, sorted by (a, b), unique.
-/// - One contact per pair (an engine with contact manifolds gives one representative
-///   point with the pair's summed impulses), in (a, b) order; the normal is unit and
-///   points from B to A (+n applied to A separates the pair); depth >= 0 (m); J_n >= 0
-///   and J_t (kg m/s) are impulses along n and along the tangent of the relative velocity.
+/// - One contact per pair in (a, b) order, or with manifolds = true several consecutive
+///   rows per pair; the normal is unit and points from B to A (+n applied to A separates
+///   the pair); depth >= 0 (m); J_n >= 0 (kg m/s) along n; J_t (kg m/s) the friction
+///   impulse along -v_t / |v_t|, v_t the tangential velocity of A relative to B at the
+///   contact point before the solver (so J_t >= 0 when friction opposes sliding).
 /// - AABB overlap is inclusive (Eq. 6): boxes that only touch are a pair.
-/// - A body's world AABB is its local box translated by its position.
+/// - A body's world AABB is its local box translated by its position (with rotation: the
+///   bounds of its posed shape at the detection pose).
 /// - States follow SPEC 4's order: x_pre, v_pre before the step; the world AABBs after
-///   integration (semi-implicit Euler, SPEC 4.1); x_post, v_post after the response.
+///   integration (semi-implicit Euler, SPEC 4.1) unless x_det gives the detection pose;
+///   x_post, v_post after the response.
 /// Rotating engines (SPEC 13; external traces version 2) fill q_pre/q_post, w_pre/w_post
 /// (empty: identity, zero), the detection pose x_det/q_det (the pose their collision
 /// detection ran at; Bullet, PhysX: the pre-step pose), and may give manifolds (several
