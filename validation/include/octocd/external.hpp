@@ -168,9 +168,11 @@ class ExternalValidator {
   const Model& model() const;
 
   /// Judges one step. Fill `rec.frame` (named in verdicts), `aabbs` (the world AABBs the
-  /// engine's collision detection used; leave empty to derive them from x_pre, v_pre by
-  /// SPEC 4.1), `pairs` (or set has_pairs = false), `contacts` (pair, normal, depth, jn,
-  /// jt; the other ContactRecord fields are ignored) and optionally the four states.
+  /// engine's collision detection used; leave empty to derive them: the exact bounds of
+  /// each shape at x_det/q_det when given, else from x_pre, v_pre by SPEC 4.1), `pairs` (or
+  /// set has_pairs = false), `contacts` (pair, normal, depth, jn, jt, and `point` with
+  /// has_points; the other ContactRecord fields are ignored) and optionally the four
+  /// states, with rotation q_pre/q_post/w_pre/w_post and the detection pose.
   /// `confirmed` is ignored (set to the contacts' pairs). `checked` runs the costly
   /// validators (candidate sets, normals) on this frame. Throws InputError
   /// (check_frame_record, origin = options.engine) before judging anything of the frame.
