@@ -407,9 +407,11 @@ struct ValidateOptions {
 int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions& vo) {
   if (o.check_only) {
     const octocd::ExternalTraceInfo info = octocd::check_external_trace(o.trace_in);
-    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames; {}{}{}{}{}\n", o.trace_in, info.engine,
-               info.bodies, info.frames, info.has_states ? "states " : "", info.has_aabbs ? "aabbs " : "",
-               info.has_pairs ? "pairs " : "", info.has_contacts ? "contacts " : "", info.has_scene ? "scene" : "");
+    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames, version {}; {}{}{}{}{}{}{}{}\n",
+               o.trace_in, info.engine, info.bodies, info.frames, info.version, info.has_states ? "states " : "",
+               info.has_rotation ? "rotation " : "", info.has_aabbs ? "aabbs " : "", info.has_pairs ? "pairs " : "",
+               info.has_contacts ? "contacts " : "", info.has_points ? "points " : "",
+               info.manifolds ? "manifolds " : "", info.has_scene ? "scene" : "");
     return 0;
   }
   octocd::ExternalOptions eo;

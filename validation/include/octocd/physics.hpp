@@ -72,8 +72,10 @@ struct PhysicsBodies {
   /// Pair friction coefficient and restitution when no per-body values are given.
   double mu = 0.6;
   double restitution = 0.5;
-  /// How per-body values combine into a pair's.
+  /// How per-body values combine into a pair's: friction (external traces v2:
+  /// `friction_combine`) and restitution (`restitution_combine`).
   MaterialCombine combine = MaterialCombine::Product;
+  MaterialCombine restitution_combine = MaterialCombine::Product;
   /// Contact margin (m, >= 0): contacts are expected up to this distance (Bullet's
   /// contact breaking threshold, PhysX's contact offset); a contact on a pair farther
   /// apart is a false contact. octocd's engines: the pair's theta (vertex proximity,
