@@ -479,9 +479,13 @@ void ExternalValidator::observe(FrameRecord rec, bool checked) {
     vo.tol = s.options.tol;
     vo.overridden = s.options.overridden;
     s.validators = std::make_unique<FrameValidators>(
-        model, vo, compared_broadphases(model.scene, s.options.against_fcl),
+        // Another engine's pairs are judged by the physics tier (broadphase completeness),
+        // not against octocd's broadphases: none are compared here.
+        model, vo, std::vector<std::unique_ptr<BroadPhase>>{},
         FrameValidators::Source{fmt::format("engine '{}'", s.options.engine), false, s.options.spec6_response,
-                                std::make_shared<PhysicsBodies>(s.physics)});
+                                std::make_shared<PhysicsBodies>(s.options.octocd_engine
+                                                                    ? octocd_physics_bodies(model)
+                                                                    : s.physics)});
   }
   s.validators->observe(rec, checked);
 }

@@ -586,6 +586,7 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   TraceIn in(path);
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;
+  options.octocd_engine = in.info.engine == "cpu" || in.info.engine == "cuda";
   // With a scene, the bodies come from it and the trace's tables must match it.
   ExternalValidator validator(in.bodies, options);
   const std::int64_t frames = max_frames > 0 ? std::min(max_frames, in.info.frames) : in.info.frames;

@@ -94,6 +94,11 @@ struct ExternalOptions {
   /// Also judge the applied state against the SPEC 6 re-derivation (validation.hpp,
   /// predict_step): for an engine that implements octocd's response.
   bool spec6_response = false;
+  /// The frames are octocd's own cpu or cuda engine's (a trace whose root attribute
+  /// `engine` is "cpu" or "cuda"): the physics tier takes what those engines declare
+  /// (octocd_physics_bodies: contacts on the world AABBs, the pair's theta as contact
+  /// margin, an exact AABB broadphase) instead of ExternalBodies::physics.
+  bool octocd_engine = false;
   /// Bounds (validation.hpp); names in `overridden` are marked in format_results.
   Tolerances tol;
   std::vector<std::string> overridden;
