@@ -458,7 +458,7 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0);
 /// temporary file, removed afterwards) with every state and contact, which is then judged
 /// as `--trace-in` judges it (validate_trace_in).
 int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationOptions& vo,
-                             const std::shared_ptr<const octocd::Model>& model) {
+                             const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
   namespace fs = std::filesystem;
   const bool temporary = o.trace.empty();
   const std::string path =
@@ -483,12 +483,14 @@ int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationO
     }
     trace.close();
   }
-  ValidateOptions judged = o;
-  judged.trace_in = path;
-  judged.check_only = false;
-  int rc = 0;
+  octocd::ExternalOptions eo;
+  eo.against_fcl = vo.against_fcl;
+  eo.tol = vo.tol;
+  eo.overridden = vo.overridden;
+  octocd::ExternalTraceInfo info;
+  std::vector<octocd::ValidationResult> results;
   try {
-    rc = validate_trace_in(judged, vo);
+    results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
   } catch (...) {
     std::error_code ec;
     if (temporary) fs::remove(path, ec);
@@ -496,8 +498,27 @@ int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationO
   }
   std::error_code ec;
   if (temporary) fs::remove(path, ec);
-  if (const int sig = octocd::stop_signal()) return octocd::stop_exit_code(sig);
-  return rc;
+  if (!o.junit.empty())
+    octocd::write_junit(o.junit, model->scene.name, results,
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", "bullet (rotation)"},
+                         {"frames", std::to_string(info.frames)},
+                         {"every", std::to_string(o.every)},
+                         {"against", o.against},
+                         {"scene_file", o.scene},
+                         {"build_id", octocd::build_id()}});
+  fmt::print("validate {} (engine bullet with rotation, judged as a version 2 external trace{}: {} bodies, {} "
+             "frames, checks every {}, against: {})\n\n",
+             model->scene.name, temporary ? "" : " " + path, info.bodies, info.frames, o.every, o.against);
+  fmt::print("{}", octocd::format_results(results, vo.overridden));
+  const bool all_pass = std::all_of(results.begin(), results.end(),
+                                    [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
+  if (const int sig = octocd::stop_signal()) {
+    report_stop(sig, "validate", info.frames, o.frames, o.trace);
+    return octocd::stop_exit_code(sig);
+  }
+  fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
+  return all_pass ? 0 : 3;
 }
 
 /// `octocd validate`: exit 0 when every validator passes, 3 when any fails. With
@@ -589,7 +610,7 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
       throw octocd::InputError(
           "--engine: bullet without rotation cannot be validated (no per-frame record); allowed: cpu, cuda, or "
           "bullet with --rotation (or a scene with rotation: true)");
-    return validate_bullet_rotation(o, vo, model);
+    return validate_bullet_rotation(o, vo, model, t0);
   }
   std::unique_ptr<octocd::TraceWriter> trace;
   std::int64_t done = 0;  // frames of the validated engine
