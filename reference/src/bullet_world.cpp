@@ -134,7 +134,6 @@ struct BulletWorld::Impl {
 };
 
 void BulletWorld::Impl::fill_record(const Model& model) {
-  (void)model;
   FrameRecord& r = record;
   const std::size_t n = bodies.size();
   r.aabbs.resize(n);
