@@ -72,9 +72,12 @@ namespace octocd {
 ///   box's edges and corners with it (4 cm at the default); meshes (and icospheres) are
 ///   btConvexHullShape of the vertices of the mesh's convex hull (btConvexHullComputer),
 ///   margin min(1 mm, a tenth of the smallest half side): a hull's margin lies OUTSIDE the
-///   hull (the default 0.04 m would inflate every mesh by 4 cm). The hull is convex: a
-///   concave mesh (bunny) collides as its hull, which is what the v2 trace's judge (FCL on
-///   the scene's mesh) must allow for; GImpact was not needed for the shipped scenes;
+///   hull (the default 0.04 m would inflate every mesh by 4 cm). A concave mesh collides
+///   as its hull: the bunny's hull at scale 0.2 lies up to 5 cm (mean 9 mm) off the mesh,
+///   so a judge on the true mesh (FCL) would see contacts where the meshes are farther
+///   apart than the contact margin. The rotating scenes (rot-*) therefore use convex
+///   meshes (icospheres), whose hull is the mesh; concave meshes would need GImpact
+///   (btGImpactMeshShape), not done;
 /// - contact breaking threshold: an absolute 0.02 m (gContactBreakingThreshold) for every
 ///   pair (the dispatcher's relative threshold, 0.02 x a body's angular motion disc, is
 ///   off), so the contact margin is one number: 0.02 m + twice the largest hull margin
