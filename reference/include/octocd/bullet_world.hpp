@@ -72,7 +72,8 @@ namespace octocd {
 ///   box's edges and corners with it (4 cm at the default); meshes (and icospheres) are
 ///   btConvexHullShape of the vertices of the mesh's convex hull (btConvexHullComputer),
 ///   margin min(1 mm, a tenth of the smallest half side): a hull's margin lies OUTSIDE the
-///   hull (the default 0.04 m would inflate every mesh by 4 cm). A concave mesh collides
+///   hull (the default 0.04 m would inflate every mesh by 4 cm), so a hull rests on its
+///   margin, 1 mm above what it touches (recorded rows: true distance 1 mm, depth 0). A concave mesh collides
 ///   as its hull: the bunny's hull at scale 0.2 lies up to 5 cm (mean 9 mm) off the mesh,
 ///   so a judge on the true mesh (FCL) would see contacts where the meshes are farther
 ///   apart than the contact margin. The rotating scenes (rot-*) therefore use convex
