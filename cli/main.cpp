@@ -55,6 +55,7 @@ struct RunOptions {
   std::string summary_json;
   std::string data_dir;
   bool no_xdmf = false;
+  bool rotation = false;  ///< --rotation: the scene's bodies rotate (engine bullet only)
 };
 
 /// Running sums for the summary table.
@@ -295,6 +296,17 @@ void check_overrides(const octocd::Scene& scene, const std::string& engine, cons
         scene.midphase.max_level(), depth, file, depth));
 }
 
+/// `--rotation` and rotating scenes (SPEC 13): `--rotation` sets the scene's `rotation`
+/// key and needs `--engine bullet`; engines that translate only (cpu, cuda) refuse a
+/// rotating scene (require_translation_only). Throws InputError.
+void apply_rotation(octocd::Scene& scene, const std::string& engine, bool rotation) {
+  if (rotation && engine != "bullet")
+    throw octocd::InputError(fmt::format(
+        "--rotation: engine {} translates only (SPEC 3); allowed: --rotation with --engine bullet", engine));
+  if (rotation) scene.rotation = true;
+  if (engine != "bullet") octocd::require_translation_only(scene, engine);
+}
+
 /// Loads the scene for `run` and `validate`: `--data-dir` (checked to be a folder) or the
 /// default lookup of docs/scenes.md.
 octocd::Scene load_scene_for(const std::string& path, const std::string& data_dir) {
@@ -337,6 +349,7 @@ int run_command(const RunOptions& o) {
   if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
   if (o.frames > 0) scene.frames = o.frames;
   check_overrides(scene, o.engine, o.broadphase, o.midphase);
+  apply_rotation(scene, o.engine, o.rotation);
 
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   const auto t_model = Clock::now();
@@ -351,6 +364,10 @@ int run_command(const RunOptions& o) {
     topt.state_every = o.state_every;
     topt.contacts = o.contacts && world.can_record();
     if (topt.contacts) world.set_recording(true);  // the GPU copies contacts back only then
+    if (const octocd::RotationTraits* traits = world.rotation_traits()) {  // a rotating engine: version 2
+      topt.v2 = *traits;
+      topt.gravity = scene.gravity;
+    }
     octocd::TraceMetadata meta = octocd::trace_metadata(world, o.state_every);
     meta.start_time = octocd::cli::utc_time_now();
     trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(world), topt);
@@ -363,7 +380,10 @@ int run_command(const RunOptions& o) {
     for (int f = 0; f < scene.frames && octocd::stop_signal() == 0; ++f) {
       const octocd::FrameMetrics& m = world.step();
       totals.add(m);
-      if (trace) trace->append_frame(m, world.state(), world.contacts());
+      if (trace && world.rotation_traits() && world.can_record())
+        trace->append_frame_v2(m, world.state(), world.record());
+      else if (trace)
+        trace->append_frame(m, world.state(), world.contacts());
       progress.update(m, totals);
     }
   } catch (const octocd::RuntimeError&) {
@@ -400,6 +420,7 @@ struct ValidateOptions {
   std::string data_dir;
   std::string junit;
   bool no_xdmf = false;
+  bool rotation = false;      ///< --rotation: the scene's bodies rotate (engine bullet only)
 };
 
 /// `octocd validate --trace-in FILE.h5`: another engine's trace judged frame by frame
@@ -407,9 +428,11 @@ struct ValidateOptions {
 int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions& vo) {
   if (o.check_only) {
     const octocd::ExternalTraceInfo info = octocd::check_external_trace(o.trace_in);
-    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames; {}{}{}{}{}\n", o.trace_in, info.engine,
-               info.bodies, info.frames, info.has_states ? "states " : "", info.has_aabbs ? "aabbs " : "",
-               info.has_pairs ? "pairs " : "", info.has_contacts ? "contacts " : "", info.has_scene ? "scene" : "");
+    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames, version {}; {}{}{}{}{}{}{}{}\n",
+               o.trace_in, info.engine, info.bodies, info.frames, info.version, info.has_states ? "states " : "",
+               info.has_rotation ? "rotation " : "", info.has_aabbs ? "aabbs " : "", info.has_pairs ? "pairs " : "",
+               info.has_contacts ? "contacts " : "", info.has_points ? "points " : "",
+               info.manifolds ? "manifolds " : "", info.has_scene ? "scene" : "");
     return 0;
   }
   octocd::ExternalOptions eo;
@@ -431,6 +454,74 @@ int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions&
 
 
 int validate_scene_command(const ValidateOptions& o, Clock::time_point t0);
+
+/// `octocd validate SCENE --engine bullet --rotation` (or a rotating scene): Bullet with
+/// rotation runs `--frames` steps into a version 2 trace (`--trace FILE`, else a
+/// temporary file, removed afterwards) with every state and contact, which is then judged
+/// as `--trace-in` judges it (validate_trace_in).
+int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationOptions& vo,
+                             const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
+  namespace fs = std::filesystem;
+  const bool temporary = o.trace.empty();
+  const std::string path =
+      temporary ? (fs::temp_directory_path() / fmt::format("octocd-validate-bullet-{}.h5", ::getpid())).string()
+                : o.trace;
+  {
+    const std::unique_ptr<octocd::Engine> engine = make_engine("bullet", model);
+    octocd::Engine& world = *engine;
+    octocd::TraceOptions topt;
+    topt.state_every = 1;
+    topt.contacts = true;
+    topt.v2 = *world.rotation_traits();
+    topt.gravity = model->scene.gravity;
+    world.set_recording(true);
+    octocd::TraceMetadata meta = octocd::trace_metadata(world, 1);
+    meta.start_time = octocd::cli::utc_time_now();
+    octocd::TraceWriter trace(path, meta, octocd::trace_bodies(world), topt);
+    trace.append_state(0, world.state());
+    for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
+      const octocd::FrameMetrics& m = world.step();
+      trace.append_frame_v2(m, world.state(), world.record());
+    }
+    trace.close();
+  }
+  octocd::ExternalOptions eo;
+  eo.against_fcl = vo.against_fcl;
+  eo.tol = vo.tol;
+  eo.overridden = vo.overridden;
+  octocd::ExternalTraceInfo info;
+  std::vector<octocd::ValidationResult> results;
+  try {
+    results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
+  } catch (...) {
+    std::error_code ec;
+    if (temporary) fs::remove(path, ec);
+    throw;
+  }
+  std::error_code ec;
+  if (temporary) fs::remove(path, ec);
+  if (!o.junit.empty())
+    octocd::write_junit(o.junit, model->scene.name, results,
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", "bullet (rotation)"},
+                         {"frames", std::to_string(info.frames)},
+                         {"every", std::to_string(o.every)},
+                         {"against", o.against},
+                         {"scene_file", o.scene},
+                         {"build_id", octocd::build_id()}});
+  fmt::print("validate {} (engine bullet with rotation, judged as a version 2 external trace{}: {} bodies, {} "
+             "frames, checks every {}, against: {})\n\n",
+             model->scene.name, temporary ? "" : " " + path, info.bodies, info.frames, o.every, o.against);
+  fmt::print("{}", octocd::format_results(results, vo.overridden));
+  const bool all_pass = std::all_of(results.begin(), results.end(),
+                                    [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
+  if (const int sig = octocd::stop_signal()) {
+    report_stop(sig, "validate", info.frames, o.frames, o.trace);
+    return octocd::stop_exit_code(sig);
+  }
+  fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
+  return all_pass ? 0 : 3;
+}
 
 /// `octocd validate`: exit 0 when every validator passes, 3 when any fails. With
 /// `--junit`, the report is written in every case that gets past the command line:
@@ -472,6 +563,8 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
     scene = load_scene_for(o.scene, o.data_dir);
     check_overrides(scene, o.engine, "", "");
+    apply_rotation(scene, o.engine, o.rotation);
+    if (o.engine == "bullet") scene.frames = o.frames;
   }
   octocd::ValidationOptions vo;
   vo.frames = o.frames;
@@ -514,8 +607,13 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   }
   if (!o.trace_in.empty()) return validate_trace_in(o, vo);
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
-  if (o.engine == "bullet")
-    throw octocd::InputError("--engine: bullet cannot be validated (no per-frame record); allowed: cpu, cuda");
+  if (o.engine == "bullet") {
+    if (!octocd::scene_rotates(scene))
+      throw octocd::InputError(
+          "--engine: bullet without rotation cannot be validated (no per-frame record); allowed: cpu, cuda, or "
+          "bullet with --rotation (or a scene with rotation: true)");
+    return validate_bullet_rotation(o, vo, model, t0);
+  }
   std::unique_ptr<octocd::TraceWriter> trace;
   std::int64_t done = 0;  // frames of the validated engine
   vo.stop = [] { return octocd::stop_signal() != 0; };
@@ -604,7 +702,8 @@ int main(int argc, char** argv) {
   run_cmd->add_option("scene", run.scene, "Scene file (JSON, see docs/scenes.md)")->required();
   run_cmd->add_option("--engine", run.engine,
                       "cpu: octocd's CPU reference pipeline; bullet: the same scene in Bullet's "
-                      "btDiscreteDynamicsWorld (translation-only boxes), same trace layout")
+                      "btDiscreteDynamicsWorld (translation-only boxes, same trace layout; with --rotation or "
+                      "a rotating scene: rotating boxes and hulls, trace version 2)")
       ->check(CLI::IsMember({"cpu", "cuda", "bullet"}))
       ->default_val("cpu");
   std::string bp_help = "Broadphase, overrides the scene's broadphase.name:";
@@ -633,6 +732,10 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--data-dir", run.data_dir, data_dir_help);
   run_cmd->add_flag("--no-xdmf", run.no_xdmf,
                     "With --trace: do not write the XDMF sidecar FILE.h5.xmf (ParaView) beside it");
+  run_cmd->add_flag("--rotation", run.rotation,
+                    "The bodies rotate (as the scene key rotation: true; --engine bullet only): Bullet with "
+                    "angular motion, boxes and convex hulls; --trace writes format version 2 (orientation, "
+                    "angular velocity, inertia; with --contacts manifold rows with points, /pairs, /aabbs)");
 
   ValidateOptions val;
   CLI::App* val_cmd = app.add_subcommand(
@@ -652,9 +755,13 @@ int main(int argc, char** argv) {
       ->check(at_least_one())
       ->default_val(10);
   val_cmd->add_option("--engine", val.engine,
-                      "cpu: the CPU reference; cuda: the GPU engine (needs a CUDA build and device)")
-      ->check(CLI::IsMember({"cpu", "cuda"}))
+                      "cpu: the CPU reference; cuda: the GPU engine (needs a CUDA build and device); bullet: "
+                      "only with --rotation (or a rotating scene): Bullet's run judged as a version 2 external "
+                      "trace (--trace keeps it)")
+      ->check(CLI::IsMember({"cpu", "cuda", "bullet"}))
       ->default_val("cpu");
+  val_cmd->add_flag("--rotation", val.rotation,
+                    "The bodies rotate (as the scene key rotation: true); needs --engine bullet");
   {
     std::string names;
     for (const auto& e : octocd::tolerance_table())

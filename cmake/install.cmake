@@ -3,7 +3,8 @@
 #   include/octocd/*.hpp, lib/liboctocd_{core,reference,validation[,cuda]}.a, bin/octocd,
 #   lib/cmake/octocd/{octocdConfig,octocdConfigVersion,octocdTargets}.cmake
 # with the exported targets octocd::core, octocd::reference, octocd::validation and,
-# when OCTOCD_CUDA is on, octocd::cuda. Included from the top-level CMakeLists.txt.
+# when OCTOCD_CUDA is on, octocd::cuda (in octocdCudaTargets.cmake, loaded only where the
+# consumer's machine has the CUDA toolkit). Included from the top-level CMakeLists.txt.
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
@@ -16,7 +17,6 @@ add_library(octocd::reference ALIAS octocd_reference)
 add_library(octocd::validation ALIAS octocd_validation)
 if(OCTOCD_CUDA_ENABLED)
   # Without CUDA, octocd_cuda is a stub for the CLI only: not installed, not exported.
-  list(APPEND _octocd_exported octocd_cuda)
   set_target_properties(octocd_cuda PROPERTIES EXPORT_NAME cuda)
   add_library(octocd::cuda ALIAS octocd_cuda)
   install(DIRECTORY ${CMAKE_SOURCE_DIR}/gpu/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
@@ -26,6 +26,14 @@ install(TARGETS ${_octocd_exported} EXPORT octocdTargets
   ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
   LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
   INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+# octocd::cuda has an export file of its own (octocdCudaTargets.cmake), loaded by the
+# package only where the CUDA toolkit is found: CPU-only consumers never need it (issue 17).
+if(OCTOCD_CUDA_ENABLED)
+  install(TARGETS octocd_cuda EXPORT octocdCudaTargets
+    ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+    LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
+    INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+endif()
 install(TARGETS octocd RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 foreach(dir core reference validation)
   install(DIRECTORY ${CMAKE_SOURCE_DIR}/${dir}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
@@ -33,6 +41,9 @@ endforeach()
 
 set(_octocd_cmake_dir ${CMAKE_INSTALL_LIBDIR}/cmake/octocd)
 install(EXPORT octocdTargets NAMESPACE octocd:: DESTINATION ${_octocd_cmake_dir})
+if(OCTOCD_CUDA_ENABLED)
+  install(EXPORT octocdCudaTargets NAMESPACE octocd:: DESTINATION ${_octocd_cmake_dir})
+endif()
 configure_package_config_file(${CMAKE_SOURCE_DIR}/cmake/octocdConfig.cmake.in
   ${CMAKE_BINARY_DIR}/octocdConfig.cmake INSTALL_DESTINATION ${_octocd_cmake_dir})
 # 0.x: a minor version may break the API, so only the same minor version is compatible.

@@ -53,10 +53,18 @@ std::shared_ptr<const Model> build_model(const Scene& scene) {
 
   const int depth_setting = sc.mesh_octree_depth;
   const int needed = sc.midphase.aabb_only ? 0 : sc.midphase.max_level();
-  auto add_body = [&](std::uint32_t shape, const std::string& group, Vec3 x, Vec3 v, float w) {
+  // Rotating scenes (SPEC 13, `--engine bullet` only) also carry every body's initial
+  // orientation and angular velocity; translation-only scenes leave them empty.
+  const bool rotates = scene_rotates(sc);
+  auto add_body = [&](std::uint32_t shape, const std::string& group, Vec3 x, Vec3 v, float w, Quat q = {},
+                      Vec3 omega = {}) {
     initial.x.push_back(x);
     initial.v.push_back(v);
     initial.w.push_back(w);
+    if (rotates) {
+      initial.q.push_back(q);
+      initial.omega.push_back(omega);
+    }
     bodies.push_back({shape, group});
   };
   auto mesh_shape = [&](Mesh mesh, const std::string& name) {
@@ -117,16 +125,20 @@ std::shared_ptr<const Model> build_model(const Scene& scene) {
         break;
       }
     }
-    const std::vector<Vec3> xs = group_positions(g, shapes[shape_id].local, sc.path, group_boxes);
+    // Layouts place the body's world AABB at its orientation (the exact box of the
+    // rotated local box, centred on the origin; the local box itself when unrotated).
+    const Aabb placed = posed_box_aabb(shapes[shape_id].local, Pose{Vec3{}, g.orientation});
+    const std::vector<Vec3> xs = group_positions(g, placed, sc.path, group_boxes);
     const std::vector<Vec3> vs = group_velocities(g);
     // Random layouts of later groups keep apart from these bodies (not from the walls).
     if (std::any_of(sc.groups.begin() + static_cast<std::ptrdiff_t>(gi) + 1, sc.groups.end(),
                     [](const GroupSpec& later) { return later.layout.kind == LayoutSpec::Kind::Random; }))
-      for (const Vec3& x : xs) group_boxes.push_back(translated(shapes[shape_id].local, x));
+      for (const Vec3& x : xs) group_boxes.push_back(translated(placed, x));
     const float w = g.mass > 0.0f ? 1.0f / g.mass : 0.0f;
     for (int i = 0; i < g.count; ++i)
       add_body(shape_id, g.name, xs[static_cast<std::size_t>(i)],
-               w > 0.0f ? vs[static_cast<std::size_t>(i)] : Vec3{}, w);
+               w > 0.0f ? vs[static_cast<std::size_t>(i)] : Vec3{}, w, g.orientation,
+               w > 0.0f ? g.angular_velocity : Vec3{});
   }
   // theta per shape pair (SPEC 6): the scene's value, or `auto` = the larger mean edge.
   model->theta_shape.resize(shapes.size());

@@ -307,10 +307,41 @@ VelocitySpec parse_velocity(const Ctx& c, const json& j, const std::string& key)
   return v;
 }
 
+/// A group's `orientation` (SPEC 13): a unit quaternion [w, x, y, z] (|q| within 1e-3 of
+/// 1, then normalised), or {"axis": [x, y, z] (non-zero, normalised here), "angle_deg": A
+/// in [-360, 360]}.
+Quat parse_orientation(const Ctx& c, const json& j, const std::string& key) {
+  const std::string allowed =
+      "a unit quaternion [w, x, y, z] (| |q| - 1 | <= 1e-3) or {\"axis\": [x, y, z] (non-zero), \"angle_deg\": "
+      "number in [-360, 360]}";
+  if (j.is_array()) {
+    if (j.size() != 4) c.fail(key, "expected 4 numbers [w, x, y, z], got " + describe(j), allowed);
+    Quat q;
+    float* parts[4] = {&q.w, &q.x, &q.y, &q.z};
+    for (std::size_t i = 0; i < 4; ++i) *parts[i] = c.number(j[i], at(key, i), allowed);
+    const double n = std::sqrt(double(q.w) * q.w + double(q.x) * q.x + double(q.y) * q.y + double(q.z) * q.z);
+    if (!(std::fabs(n - 1.0) <= 1e-3)) c.fail(key, "quaternion norm " + num(n) + " is not 1", allowed);
+    return normalized(q);
+  }
+  if (!j.is_object()) c.fail(key, "expected an array or an object, got " + describe(j), allowed);
+  c.check_keys(j, key, {"axis", "angle_deg"});
+  for (const char* k : {"axis", "angle_deg"})
+    if (!j.contains(k)) c.fail(child(key, k), "missing required key", allowed);
+  const Vec3 axis = c.vec3(j["axis"], child(key, "axis"), allowed);
+  const double len = std::sqrt(double(axis.x) * axis.x + double(axis.y) * axis.y + double(axis.z) * axis.z);
+  if (!(len > 1e-6)) c.fail(child(key, "axis"), "axis has length " + num(len), allowed);
+  const float angle = c.ranged(j["angle_deg"], child(key, "angle_deg"), -360, true, 360, true, allowed);
+  const double half = 0.5 * static_cast<double>(angle) * 3.14159265358979323846 / 180.0;
+  const double s = std::sin(half) / len;
+  return normalized(Quat{static_cast<float>(std::cos(half)), static_cast<float>(s * axis.x),
+                         static_cast<float>(s * axis.y), static_cast<float>(s * axis.z)});
+}
+
 GroupSpec parse_group(const Ctx& c, const json& j, std::size_t index, const Aabb& domain) {
   const std::string key = at("groups", index);
   c.expect_object(j, key, "an object with keys name, shape, count, mass, layout, positions, velocity");
-  c.check_keys(j, key, {"name", "shape", "count", "mass", "layout", "positions", "velocity"});
+  c.check_keys(j, key, {"name", "shape", "count", "mass", "layout", "positions", "velocity", "orientation",
+                        "angular_velocity"});
   GroupSpec g;
   g.index = static_cast<int>(index);
   g.name = "group" + std::to_string(index);
@@ -346,6 +377,10 @@ GroupSpec parse_group(const Ctx& c, const json& j, std::size_t index, const Aabb
     g.positions.reserve(p.size());
     for (std::size_t i = 0; i < p.size(); ++i) g.positions.push_back(c.coordinates(p[i], at(k, i)));
   }
+  if (j.contains("orientation")) g.orientation = parse_orientation(c, j["orientation"], child(key, "orientation"));
+  if (j.contains("angular_velocity"))
+    g.angular_velocity =
+        c.bounded_vec3(j["angular_velocity"], child(key, "angular_velocity"), limits::kMaxAngularSpeed, "rad/s, world frame");
   return g;
 }
 
@@ -510,6 +545,36 @@ bool looks_like_file(const std::string& mesh) {
 
 }  // namespace
 
+bool scene_rotates(const Scene& scene) {
+  if (scene.rotation) return true;
+  for (const GroupSpec& g : scene.groups)
+    if (!is_identity(g.orientation) || !(g.angular_velocity == Vec3{0.0f, 0.0f, 0.0f})) return true;
+  return false;
+}
+
+void require_translation_only(const Scene& scene, const std::string& engine) {
+  if (!scene_rotates(scene)) return;
+  std::string key = "rotation";
+  if (!scene.rotation)
+    for (const GroupSpec& g : scene.groups) {
+      const std::string gk = at("groups", static_cast<std::size_t>(g.index));
+      if (!is_identity(g.orientation)) {
+        key = child(gk, "orientation");
+        break;
+      }
+      if (!(g.angular_velocity == Vec3{0.0f, 0.0f, 0.0f})) {
+        key = child(gk, "angular_velocity");
+        break;
+      }
+    }
+  const Ctx c{scene.path.empty() ? std::string("<scene>") : scene.path};
+  c.fail(key,
+         "engine " + engine + " translates only (SPEC 3: no orientation, no angular velocity) but the scene " +
+             (key == "rotation" ? std::string("has rotation: true") : "sets " + key),
+         "rotation false (default), identity orientations and zero angular velocities for engines cpu and cuda; "
+         "or use --engine bullet (Bullet with rotation, SPEC 13)");
+}
+
 std::size_t body_count(const Scene& scene) {
   std::size_t n = 0;
   for (const auto& g : scene.groups) n += static_cast<std::size_t>(g.count);
@@ -524,7 +589,7 @@ Scene parse_scene(const std::string& text, const std::string& origin, const std:
   const json j = parse_json(c, text);
   if (!j.is_object()) c.fail("", "top level is " + describe(j), "a JSON object");
   c.check_keys(j, "", {"name", "description", "domain", "gravity", "dt", "frames", "walls", "wall_thickness",
-                       "response", "theta", "broadphase", "midphase", "groups"});
+                       "response", "theta", "broadphase", "midphase", "groups", "rotation"});
   Scene s;
   s.path = origin;
   s.json = text;
@@ -555,6 +620,12 @@ Scene parse_scene(const std::string& text, const std::string& origin, const std:
     else if (w == "open-box") s.walls = Walls::OpenBox;
     else if (w == "closed-box") s.walls = Walls::ClosedBox;
     else c.fail("walls", "unknown value " + j["walls"].dump(), allowed);
+  }
+  if (j.contains("rotation")) {
+    if (!j["rotation"].is_boolean())
+      c.fail("rotation", "expected true or false, got " + describe(j["rotation"]),
+             "true (the bodies rotate: --engine bullet only) or false (default)");
+    s.rotation = j["rotation"].get<bool>();
   }
   if (j.contains("wall_thickness"))
     s.wall_thickness = c.ranged(j["wall_thickness"], "wall_thickness", limits::kMinLength, true, limits::kMaxLength, true,

@@ -282,6 +282,9 @@ struct TraceWriter::Impl {
   Column s_frame, s_pos, s_vel;
   Column c_offsets, c_frame, c_pair, c_normal, c_depth, c_jn, c_jt;
   std::int64_t contact_total = 0;
+  // Version 2 (TraceOptions::v2): rotation, contact points, candidate pairs, AABBs.
+  Column s_orient, s_angvel, c_point, p_offsets, p_pair, a_min, a_max;
+  std::int64_t pair_total = 0;
   int since_flush = 0;
   bool closed = false;
   bool failed = false;               // a write failed: the file was abandoned
@@ -294,6 +297,8 @@ struct TraceWriter::Impl {
   std::vector<Column*> columns() {
     std::vector<Column*> all{&s_frame, &s_pos, &s_vel, &c_offsets, &c_frame, &c_pair, &c_normal,
                              &c_depth, &c_jn, &c_jt};
+    if (opt.v2)
+      for (Column* c : {&s_orient, &s_angvel, &c_point, &p_offsets, &p_pair, &a_min, &a_max}) all.push_back(c);
     for (Column& c : frames) all.push_back(&c);
     return all;
   }
@@ -336,7 +341,33 @@ struct TraceWriter::Impl {
     last_flushed = last_appended;
   }
 
+  // Version 2 columns, written before the version 1 ones they accompany.
+  void write_v2() {
+    if (!opt.v2) return;
+    s_orient.write(path);
+    s_angvel.write(path);
+    if (opt.contacts)
+      for (Column* c : {&c_point, &a_min, &a_max, &p_pair, &p_offsets}) c->write(path);
+  }
+
+  // Version 2: the orientation and angular velocity rows of a state row.
+  void push_rotation(const BodyState& st) {
+    static_assert(sizeof(Quat) == 4 * sizeof(float), "Quat must be four packed floats");
+    if (st.q.size() == bodies && st.omega.size() == bodies) {
+      s_orient.push(reinterpret_cast<const float*>(st.q.data()), 4 * bodies);
+      s_angvel.push(reinterpret_cast<const float*>(st.omega.data()), 3 * bodies);
+      return;
+    }
+    const float identity[4] = {1.0f, 0.0f, 0.0f, 0.0f};  // (w, x, y, z)
+    const float zero[3] = {0.0f, 0.0f, 0.0f};
+    for (std::size_t i = 0; i < bodies; ++i) {
+      s_orient.push(identity, 4);
+      s_angvel.push(zero, 3);
+    }
+  }
+
   void write_all() {
+    write_v2();
     // States before their frame column, contact arrays before offsets, /frames/frame
     // last: readers clip every group to the shortest column (docs/trace-format.md).
     s_pos.write(path);
@@ -359,6 +390,7 @@ struct TraceWriter::Impl {
     static_assert(sizeof(Vec3) == 3 * sizeof(float), "Vec3 must be three packed floats");
     s_pos.push(reinterpret_cast<const float*>(st.x.data()), 3 * bodies);
     s_vel.push(reinterpret_cast<const float*>(st.v.data()), 3 * bodies);
+    if (opt.v2) push_rotation(st);
   }
 };
 
@@ -419,7 +451,7 @@ void TraceWriter::create_layout(const TraceMetadata& meta, const TraceBodies& bo
   // ---- root attributes
   const hid_t root = m.file;
   attr_string(root, "format", kFormat, path);
-  attr_scalar(root, "version", H5T_STD_I32LE, H5T_NATIVE_INT, kVersion, path);
+  attr_scalar(root, "version", H5T_STD_I32LE, H5T_NATIVE_INT, m.opt.v2 ? 2 : kVersion, path);
   attr_string(root, "scene_name", meta.scene_name, path);
   attr_string(root, "scene", meta.scene_json, path);
   attr_string(root, "parameters", meta.parameters_json, path);
@@ -529,8 +561,106 @@ void TraceWriter::create_layout(const TraceMetadata& meta, const TraceBodies& bo
     m.c_offsets.write(path);
   }
 
+  if (m.opt.v2) create_v2_layout();
+
   check(H5Fstart_swmr_write(m.file), path, "H5Fstart_swmr_write");
   check(H5Fflush(m.file, H5F_SCOPE_GLOBAL), path, "flush");
+}
+
+// Version 2 (docs/trace-format.md, "Version 2"; V2-LAYOUT): the root attributes and
+// datasets a rotating engine's trace adds to version 1. Called before SWMR starts.
+void TraceWriter::create_v2_layout() {
+  Impl& m = *impl_;
+  const std::string& path = m.path;
+  const std::size_t n = m.bodies;
+  const RotationTraits& t = *m.opt.v2;
+  const hid_t root = m.file;
+  attr_string(root, "detection", t.detection, path);
+  attr_scalar(root, "mu", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, static_cast<double>(t.mu), path);
+  attr_scalar(root, "restitution", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, static_cast<double>(t.restitution), path);
+  attr_string(root, "friction_combine", t.friction_combine, path);
+  attr_string(root, "restitution_combine", t.restitution_combine, path);
+  attr_scalar(root, "contact_margin", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, static_cast<double>(t.contact_margin),
+              path);
+  attr_scalar(root, "broadphase_exact", H5T_STD_I32LE, H5T_NATIVE_INT, t.broadphase_exact ? 1 : 0, path);
+  attr_string(root, "contact_geometry", t.contact_geometry, path);
+  {
+    const hsize_t three = 3;
+    Handle space(check(H5Screate_simple(1, &three, nullptr), path, "H5Screate_simple"));
+    Handle a(check(H5Acreate2(root, "gravity", H5T_IEEE_F64LE, space, H5P_DEFAULT, H5P_DEFAULT), path,
+                   "create attribute gravity"));
+    const double g[3] = {m.opt.gravity.x, m.opt.gravity.y, m.opt.gravity.z};
+    check(H5Awrite(a, H5T_NATIVE_DOUBLE, g), path, "write attribute gravity");
+  }
+  auto per_body = [&](const std::vector<float>& v, const char* what) {
+    if (v.size() != n)
+      throw RuntimeError("trace '" + path + "': " + what + " has " + std::to_string(v.size()) +
+                         " values, the trace has " + std::to_string(n) + " bodies");
+  };
+  {
+    Handle g(check(H5Gopen2(root, "bodies", H5P_DEFAULT), path, "open group /bodies"));
+    if (t.inertia.size() != n)
+      throw RuntimeError("trace '" + path + "': inertia has " + std::to_string(t.inertia.size()) +
+                         " tensors, the trace has " + std::to_string(n) + " bodies");
+    std::vector<float> inertia(9 * n);
+    for (std::size_t i = 0; i < n; ++i) std::copy(t.inertia[i].begin(), t.inertia[i].end(), inertia.begin() + 9 * i);
+    fixed_dataset(g, "inertia", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3, 3}, inertia.data(), path);
+    if (!t.body_friction.empty()) {
+      per_body(t.body_friction, "body_friction");
+      fixed_dataset(g, "friction", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n}, t.body_friction.data(), path);
+    }
+    if (!t.body_restitution.empty()) {
+      per_body(t.body_restitution, "body_restitution");
+      fixed_dataset(g, "restitution", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n}, t.body_restitution.data(), path);
+    }
+  }
+  {
+    Handle g(check(H5Gopen2(root, "states", H5P_DEFAULT), path, "open group /states"));
+    m.s_orient = make_column(g, "/states", "orientation", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 4}, 1, 2, path);
+    m.s_angvel = make_column(g, "/states", "angular_velocity", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, 1, 2, path);
+  }
+  if (!m.opt.contacts) return;
+  constexpr hsize_t kChunk = 4096;
+  {
+    Handle g(check(H5Gopen2(root, "contacts", H5P_DEFAULT), path, "open group /contacts"));
+    m.c_point = make_column(g, "/contacts", "point", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {3}, kChunk, 0, path);
+  }
+  {
+    Handle g(check(H5Gcreate2(root, "pairs", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), path, "create group /pairs"));
+    m.p_offsets = make_column(g, "/pairs", "offsets", H5T_STD_I64LE, H5T_NATIVE_INT64, {}, 1024, 0, path);
+    m.p_pair = make_column(g, "/pairs", "pair", H5T_STD_U32LE, H5T_NATIVE_UINT32, {2}, kChunk, 0, path);
+    m.p_offsets.push1<std::int64_t>(0);
+    m.p_offsets.write(path);
+  }
+  {
+    Handle g(check(H5Gcreate2(root, "aabbs", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), path, "create group /aabbs"));
+    m.a_min = make_column(g, "/aabbs", "min", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, 1, 2, path);
+    m.a_max = make_column(g, "/aabbs", "max", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, 1, 2, path);
+  }
+}
+
+void TraceWriter::append_frame_v2(const FrameMetrics& fm, const BodyState& state, const FrameRecord& rec) {
+  Impl& m = *impl_;
+  if (m.closed) throw RuntimeError("trace '" + m.path + "': append_frame_v2 after close");
+  if (!m.opt.v2) throw RuntimeError("trace '" + m.path + "': append_frame_v2 on a version 1 trace");
+  if (m.opt.contacts) {
+    if (rec.aabbs.size() != m.bodies)
+      throw RuntimeError("trace '" + m.path + "': frame " + std::to_string(fm.frame) + " has " +
+                         std::to_string(rec.aabbs.size()) + " AABBs, the trace has " + std::to_string(m.bodies) +
+                         " bodies");
+    for (const Aabb& b : rec.aabbs) {
+      m.a_min.push(&b.min.x, 3);
+      m.a_max.push(&b.max.x, 3);
+    }
+    for (const Pair& p : rec.pairs) {
+      m.p_pair.push1(p.a);
+      m.p_pair.push1(p.b);
+    }
+    m.pair_total += static_cast<std::int64_t>(rec.pairs.size());
+    m.p_offsets.push1(m.pair_total);
+    for (const ContactRecord& c : rec.contacts) m.c_point.push(&c.point.x, 3);
+  }
+  append_frame(fm, state, rec.contacts);
 }
 
 TraceWriter::~TraceWriter() {

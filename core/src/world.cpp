@@ -72,6 +72,7 @@ World::World(const Scene& scene, std::unique_ptr<BroadPhase> broadphase)
 World::World(std::shared_ptr<const Model> model, std::unique_ptr<BroadPhase> broadphase)
     : model_(std::move(model)), state_(model_->initial), broadphase_(std::move(broadphase)) {
   if (!broadphase_) throw InputError("World: no broadphase given");
+  require_translation_only(model_->scene, "cpu");  // SPEC 3: octocd's engines translate only
   const std::size_t n = state_.size();
   aabbs_.resize(n);
   for (std::size_t i = 0; i < n; ++i) aabbs_[i] = translated(model_->local_box(i), state_.x[i]);

@@ -535,6 +535,7 @@ std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, con
 CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase)
     : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
   if (!model_) throw InputError("CudaWorld: no model given");
+  require_translation_only(model_->scene, "cuda");  // SPEC 3: octocd's engines translate only
   // Needs no device; throws InputError for more than kCudaMaxBodies bodies and for a
   // broadphase the device does not have, before anything is sized from the body count.
   const std::uint64_t needed = cuda_device_bytes_needed(*model_, broadphase);

@@ -6,8 +6,10 @@
 #include "octocd/version.hpp"
 
 #include <btBulletDynamicsCommon.h>
+#include <LinearMath/btConvexHullComputer.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -21,6 +23,16 @@ btVector3 to_bt(const Vec3& v) { return btVector3(v.x, v.y, v.z); }
 Vec3 from_bt(const btVector3& v) {
   return {static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())};
 }
+// btQuaternion is (x, y, z, w); octocd's Quat is (w, x, y, z).
+btQuaternion to_bt(const Quat& q) { return btQuaternion(q.x, q.y, q.z, q.w); }
+Quat from_bt(const btQuaternion& q) {
+  return {static_cast<float>(q.w()), static_cast<float>(q.x()), static_cast<float>(q.y()),
+          static_cast<float>(q.z())};
+}
+
+/// Rotation mode: the largest collision margin (m) of a shape: 1 mm, at most a tenth of
+/// its smallest half side (see bullet_world.hpp).
+constexpr float kRotationMargin = 0.001f;
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
@@ -84,11 +96,19 @@ struct BulletWorld::Impl {
   std::unique_ptr<TimedDynamicsWorld> world;
   std::vector<float> w;                 // inverse mass per body (0 = static)
   std::uint64_t static_static = 0;      // static_static_pairs(model), constant
-  std::vector<std::unique_ptr<btBoxShape>> shapes;  // one per octocd shape
+  std::vector<std::unique_ptr<btCollisionShape>> shapes;  // one per octocd shape
+  std::vector<float> outside_margin;    // per shape: margin lying outside the shape (hulls), m
   std::vector<std::unique_ptr<btRigidBody>> bodies;  // index = body id
   BodyState state;
   FrameMetrics metrics;
   std::int64_t frame = 0;
+  // Rotation mode (bullet_world.hpp).
+  bool rotation = false;
+  bool recording = false;
+  Vec3 gravity;
+  RotationTraits traits;
+  FrameRecord record;
+  std::vector<ContactRecord> no_contacts;
 
   ~Impl() {
     if (world) {
@@ -101,9 +121,99 @@ struct BulletWorld::Impl {
     for (std::size_t i = 0; i < bodies.size(); ++i) {
       state.x[i] = from_bt(bodies[i]->getWorldTransform().getOrigin());
       state.v[i] = from_bt(bodies[i]->getLinearVelocity());
+      if (rotation) {
+        state.q[i] = from_bt(bodies[i]->getWorldTransform().getRotation());
+        state.omega[i] = from_bt(bodies[i]->getAngularVelocity());
+      }
     }
   }
+
+  // Rotation mode: record's aabbs, pairs, contacts and confirmed from Bullet's broadphase
+  // and manifolds after stepSimulation (record.x_pre ... already set).
+  void fill_record(const Model& model);
 };
+
+void BulletWorld::Impl::fill_record(const Model& model) {
+  FrameRecord& r = record;
+  const std::size_t n = bodies.size();
+  r.aabbs.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const btBroadphaseProxy* proxy = bodies[i]->getBroadphaseHandle();
+    r.aabbs[i] = {from_bt(proxy->m_aabbMin), from_bt(proxy->m_aabbMax)};
+  }
+  // Candidate pairs: the overlapping pair cache.
+  r.pairs.clear();
+  btOverlappingPairCache* cache = broadphase->getOverlappingPairCache();
+  const int cached = cache->getNumOverlappingPairs();
+  const btBroadphasePair* bp = cached > 0 ? cache->getOverlappingPairArrayPtr() : nullptr;
+  for (int k = 0; k < cached; ++k) {
+    const auto* a = static_cast<const btCollisionObject*>(bp[k].m_pProxy0->m_clientObject);
+    const auto* b = static_cast<const btCollisionObject*>(bp[k].m_pProxy1->m_clientObject);
+    auto ia = static_cast<std::uint32_t>(a->getUserIndex());
+    auto ib = static_cast<std::uint32_t>(b->getUserIndex());
+    if (ia == ib) continue;
+    if (ia > ib) std::swap(ia, ib);
+    r.pairs.push_back({ia, ib});
+  }
+  std::sort(r.pairs.begin(), r.pairs.end());
+  r.pairs.erase(std::unique(r.pairs.begin(), r.pairs.end()), r.pairs.end());
+  r.has_pairs = true;
+
+  // Contacts: every manifold point within the breaking threshold, one row each.
+  r.contacts.clear();
+  const bool two_dirs = (world->getSolverInfo().m_solverMode & SOLVER_USE_2_FRICTION_DIRECTIONS) != 0;
+  const int nm = dispatcher->getNumManifolds();
+  for (int k = 0; k < nm; ++k) {
+    const btPersistentManifold* pm = dispatcher->getManifoldByIndexInternal(k);
+    const int np = pm->getNumContacts();
+    if (np == 0) continue;
+    const auto i0 = static_cast<std::uint32_t>(pm->getBody0()->getUserIndex());
+    const auto i1 = static_cast<std::uint32_t>(pm->getBody1()->getUserIndex());
+    const bool swap = i0 > i1;  // the row's A is body1
+    const std::uint32_t ia = swap ? i1 : i0, ib = swap ? i0 : i1;
+    const float margin0 = outside_margin[model.bodies[i0].shape];
+    const float margin1 = outside_margin[model.bodies[i1].shape];
+    for (int j = 0; j < np; ++j) {
+      const btManifoldPoint& cp = pm->getContactPoint(j);
+      if (cp.getDistance() > pm->getContactBreakingThreshold()) continue;
+      // Bullet: normalWorldOnB points from body1 to body0; the witness points lie on the
+      // shapes' inflated surfaces (hull margins outside): moved back to the true shapes.
+      const Vec3 n01 = from_bt(cp.m_normalWorldOnB);
+      const Vec3 p0 = from_bt(cp.getPositionWorldOnA()) + margin0 * n01;
+      const Vec3 p1 = from_bt(cp.getPositionWorldOnB()) - margin1 * n01;
+      const float distance = cp.getDistance() + margin0 + margin1;
+      Vec3 friction = cp.m_appliedImpulseLateral1 * from_bt(cp.m_lateralFrictionDir1);  // on body0
+      if (two_dirs) friction += cp.m_appliedImpulseLateral2 * from_bt(cp.m_lateralFrictionDir2);
+      ContactRecord c;
+      c.pair = {ia, ib};
+      c.normal = swap ? -n01 : n01;  // from B to A
+      c.depth = std::max(0.0f, -distance);
+      c.point = 0.5f * (p0 + p1);
+      c.jn = cp.m_appliedImpulse;
+      const Vec3 j_a = swap ? -friction : friction;  // friction impulse on A
+      // v_t: A's velocity relative to B's at the point, before the solver (v_pre + dt g
+      // on dynamic bodies, w_pre), tangential part w.r.t. the normal.
+      auto point_velocity = [&](std::uint32_t i) {
+        Vec3 v = r.v_pre[i];
+        if (w[i] > 0.0f) v += static_cast<float>(dt) * gravity;
+        return v + cross(r.w_pre[i], c.point - r.x_pre[i]);
+      };
+      const Vec3 v_rel = point_velocity(ia) - point_velocity(ib);
+      const Vec3 v_t = v_rel - dot(v_rel, c.normal) * c.normal;
+      const float vt_len = length(v_t);
+      c.jt = vt_len > 1e-6f ? dot(j_a, -(1.0f / vt_len) * v_t) : length(j_a);
+      r.contacts.push_back(c);
+    }
+  }
+  std::stable_sort(r.contacts.begin(), r.contacts.end(),
+                   [](const ContactRecord& x, const ContactRecord& y) { return x.pair < y.pair; });
+  r.confirmed.clear();
+  for (const ContactRecord& c : r.contacts)
+    if (r.confirmed.empty() || !(r.confirmed.back() == c.pair)) r.confirmed.push_back(c.pair);
+  r.has_contact_terms = false;
+  r.manifolds = true;
+  r.has_points = true;
+}
 
 BulletWorld::BulletWorld(const World& src) : BulletWorld(src.shared_model(), src.state()) {}
 
@@ -129,37 +239,85 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
   info.m_splitImpulse = 1;
   info.m_splitImpulsePenetrationThreshold = 0;
 
+  m.rotation = scene_rotates(scene);
+  m.gravity = scene.gravity;
+  float largest_outside = 0.0f;
   for (const Shape& s : src.shapes) {
     const Vec3 he = 0.5f * (s.local.max - s.local.min);
-    m.shapes.push_back(std::make_unique<btBoxShape>(to_bt(he)));  // default margin 0.04
+    const float smallest = std::min(he.x, std::min(he.y, he.z));
+    const float margin = std::min(kRotationMargin, 0.1f * smallest);
+    if (m.rotation && s.mesh && s.mesh->vertices.size() >= 4) {
+      // A mesh rotates as the convex hull of its vertices (margin outside the hull).
+      btConvexHullComputer hull;
+      static_assert(sizeof(Vec3) == 3 * sizeof(float), "Vec3 must be three packed floats");
+      hull.compute(reinterpret_cast<const float*>(s.mesh->vertices.data()), static_cast<int>(sizeof(Vec3)),
+                   static_cast<int>(s.mesh->vertices.size()), 0, 0);
+      auto shape = std::make_unique<btConvexHullShape>();
+      for (int k = 0; k < hull.vertices.size(); ++k) shape->addPoint(hull.vertices[k], false);
+      shape->setMargin(margin);
+      shape->recalcLocalAabb();
+      m.shapes.push_back(std::move(shape));
+      m.outside_margin.push_back(margin);
+      largest_outside = std::max(largest_outside, margin);
+      continue;
+    }
+    auto box = std::make_unique<btBoxShape>(to_bt(he));  // default margin 0.04, inside the box
+    if (m.rotation) box->setMargin(margin);                // GJK rounds edges by the margin
+    m.shapes.push_back(std::move(box));
+    m.outside_margin.push_back(0.0f);
   }
 
   // Product combination in Bullet: sqrt on every body gives mu_k and e for every pair.
   const btScalar friction = std::sqrt(scene.response.mu_kinetic);
   const btScalar restitution = std::sqrt(scene.response.restitution);
 
+  if (m.rotation) {
+    // One absolute breaking threshold for every pair (see bullet_world.hpp).
+    m.dispatcher->setDispatcherFlags(m.dispatcher->getDispatcherFlags() &
+                                     ~btCollisionDispatcher::CD_USE_RELATIVE_CONTACT_BREAKING_THRESHOLD);
+    m.traits.mu = scene.response.mu_kinetic;
+    m.traits.restitution = scene.response.restitution;
+    m.traits.contact_margin = static_cast<float>(gContactBreakingThreshold) + 2.0f * largest_outside;
+  }
+
   const BodyState& s0 = initial;
   m.state = s0;
   const std::size_t n = s0.size();
+  if (m.rotation) {  // identity / zero where the model has none
+    m.state.q.resize(n);
+    m.state.omega.resize(n);
+  }
   m.bodies.reserve(n);
   for (std::size_t i = 0; i < n; ++i) {
-    btBoxShape* box = m.shapes[src.bodies[i].shape].get();
+    btCollisionShape* shape = m.shapes[src.bodies[i].shape].get();
     const float w = s0.w[i];
     const btScalar mass = w > 0.0f ? btScalar(1.0f / w) : btScalar(0);
     btTransform t;
     t.setIdentity();
     // x is the centre of the world AABB; the box is centred on the local AABB centre.
+    // Rotation mode: x is the body frame's origin (the local AABB centre), q its turn.
     t.setOrigin(to_bt(s0.x[i]));
-    btRigidBody::btRigidBodyConstructionInfo ci(mass, nullptr, box, btVector3(0, 0, 0));
+    btVector3 inertia(0, 0, 0);
+    if (m.rotation) {
+      t.setRotation(to_bt(m.state.q[i]));
+      if (mass > 0) shape->calculateLocalInertia(mass, inertia);
+      std::array<float, 9> tensor{};
+      for (int k = 0; k < 3; ++k) tensor[static_cast<std::size_t>(4 * k)] = static_cast<float>(inertia[k]);
+      m.traits.inertia.push_back(tensor);
+      m.traits.body_friction.push_back(static_cast<float>(friction));
+      m.traits.body_restitution.push_back(static_cast<float>(restitution));
+    }
+    btRigidBody::btRigidBodyConstructionInfo ci(mass, nullptr, shape, inertia);
     ci.m_startWorldTransform = t;
     ci.m_friction = friction;
     ci.m_restitution = restitution;
     ci.m_linearDamping = 0;
     ci.m_angularDamping = 0;
     auto body = std::make_unique<btRigidBody>(ci);
-    body->setAngularFactor(btScalar(0));
+    if (!m.rotation) body->setAngularFactor(btScalar(0));
     if (mass > 0) {
       body->setLinearVelocity(to_bt(s0.v[i]));
+      if (m.rotation) body->setAngularVelocity(to_bt(m.state.omega[i]));
       body->setActivationState(DISABLE_DEACTIVATION);
     }
     body->setUserIndex(static_cast<int>(i));  // body id, for the pair counts
@@ -174,6 +332,13 @@ BulletWorld::~BulletWorld() = default;
 const FrameMetrics& BulletWorld::step() {
   Impl& m = *impl_;
   m.world->reset_times();
+  if (m.rotation && m.recording) {
+    m.record.frame = m.frame + 1;
+    m.record.x_pre = m.state.x;
+    m.record.v_pre = m.state.v;
+    m.record.q_pre = m.state.q;
+    m.record.w_pre = m.state.omega;
+  }
   const auto t0 = std::chrono::steady_clock::now();
   m.world->stepSimulation(static_cast<btScalar>(m.dt), 0);
   const double bullet_ms = ms_since(t0);
@@ -199,12 +364,28 @@ const FrameMetrics& BulletWorld::step() {
     const auto ia = static_cast<std::size_t>(a->getUserIndex());
     const auto ib = static_cast<std::size_t>(b->getUserIndex());
     if (m.w[ia] == 0.0f && m.w[ib] == 0.0f) continue;
-    if (overlaps(translated(model_->local_box(ia), m.state.x[ia]), translated(model_->local_box(ib), m.state.x[ib])))
+    if (m.rotation) {  // the exact boxes of the rotated local boxes at the pre-step pose
+      if (overlaps(posed_box_aabb(model_->local_box(ia), {m.state.x[ia], m.state.q[ia]}),
+                   posed_box_aabb(model_->local_box(ib), {m.state.x[ib], m.state.q[ib]})))
+        ++exact;
+    } else if (overlaps(translated(model_->local_box(ia), m.state.x[ia]),
+                        translated(model_->local_box(ib), m.state.x[ib]))) {
       ++exact;
+    }
   }
   fm.dynamic_pairs = exact;
   fm.aabb_pairs = exact + m.static_static;
   m.read_state();
+  if (m.rotation && m.recording) {
+    FrameRecord& r = m.record;
+    r.x_post = m.state.x;
+    r.v_post = m.state.v;
+    r.q_post = m.state.q;
+    r.w_post = m.state.omega;
+    r.x_det = r.x_pre;  // Bullet detects before it integrates
+    r.q_det = r.q_pre;
+    m.fill_record(*model_);
+  }
   std::uint64_t contacts = 0, pen_points = 0, above = 0;
   double pen_sum = 0.0, pen_max = 0.0;
   const int nm = m.dispatcher->getNumManifolds();
@@ -237,6 +418,13 @@ const FrameMetrics& BulletWorld::step() {
     const Vec3 v = m.state.v[i];
     const double vx = v.x, vy = v.y, vz = v.z;
     ke += 0.5 * mass * (vx * vx + vy * vy + vz * vz);
+    if (m.rotation) {  // + 0.5 w . (I w), in the body frame
+      const btRigidBody& body = *m.bodies[i];
+      const btVector3 wl = body.getAngularVelocity() * body.getWorldTransform().getBasis();  // R^T w
+      const btVector3 inv = body.getInvInertiaDiagLocal();
+      for (int k = 0; k < 3; ++k)
+        if (inv[k] > 0) ke += 0.5 * static_cast<double>(wl[k]) * static_cast<double>(wl[k]) / static_cast<double>(inv[k]);
+    }
     px += mass * vx;
     py += mass * vy;
     pz += mass * vz;
@@ -258,10 +446,26 @@ const FrameMetrics& BulletWorld::step() {
 }
 
 const BodyState& BulletWorld::state() const { return impl_->state; }
+bool BulletWorld::rotating() const { return impl_->rotation; }
+const RotationTraits* BulletWorld::rotation_traits() const { return impl_->rotation ? &impl_->traits : nullptr; }
+bool BulletWorld::can_record() const { return impl_->rotation; }
+void BulletWorld::set_recording(bool on) { impl_->recording = impl_->rotation && on; }
+const FrameRecord& BulletWorld::record() const { return impl_->record; }
+const std::vector<ContactRecord>& BulletWorld::contacts() const {
+  return impl_->rotation && impl_->recording ? impl_->record.contacts : impl_->no_contacts;
+}
+std::string BulletWorld::midphase_name() const { return impl_->rotation ? "bullet-convex" : "bullet-box-box"; }
 const FrameMetrics& BulletWorld::last_metrics() const { return impl_->metrics; }
 std::int64_t BulletWorld::frame() const { return impl_->frame; }
 std::string BulletWorld::device() const { return cpu_description(); }
 std::string BulletWorld::notes() const {
+  if (impl_->rotation)
+    return "rotation mode: btRigidBody with angular motion (boxes, convex hulls of meshes); broadphase\n"
+           "candidates are Bullet's pair cache (AABBs fattened by the 0.02 m contact threshold and the\n"
+           "step's motion; no static-static pairs); AABB and dynamic pairs are those of the cache whose\n"
+           "exact boxes at the pre-step pose overlap. midphase = Bullet's narrow phase (box-box detector,\n"
+           "GJK/EPA); contacts = manifolds with points, penetration over manifold points; kinetic energy\n"
+           "includes rotation.";
   return "broadphase candidates are Bullet's pair cache (AABBs fattened by the 0.02 m contact\n"
          "threshold, the step's motion and the dbvt margin, kept until they separate; no static-static\n"
          "pairs); AABB and dynamic pairs are those of the cache whose exact AABBs overlap, counted as\n"

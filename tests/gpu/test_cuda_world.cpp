@@ -72,6 +72,9 @@ bool is_scale_scene(const std::string& name) {
          (name.rfind("boxes-uniform-", 0) == 0 && (name.back() == 'k' || name.back() == 'm'));
 }
 
+/// The rotating scenes (rot-*, `rotation: true`): only `--engine bullet` runs them (SPEC 13).
+bool is_rotating_scene(const std::string& name) { return name.rfind("rot-", 0) == 0; }
+
 /// Every shipped scene except the ones too slow on the CPU side.
 std::vector<std::string> shipped_scenes() {
   std::vector<std::string> names;
@@ -80,7 +83,9 @@ std::vector<std::string> shipped_scenes() {
   for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
     if (e.path().extension() != ".json") continue;
     const std::string name = e.path().stem().string();
-    if (name == "boxes-random-10000" || name.rfind("boxes-uniform-", 0) == 0 || is_scale_scene(name)) continue;
+    if (name == "boxes-random-10000" || name.rfind("boxes-uniform-", 0) == 0 || is_scale_scene(name) ||
+        is_rotating_scene(name))
+      continue;
     names.push_back(name);
   }
   std::sort(names.begin(), names.end());
@@ -94,7 +99,8 @@ std::vector<std::string> all_scenes() {
   const std::filesystem::path dir = std::filesystem::path(source_dir()) / "datasets" / "scenes";
   std::error_code ec;
   for (const auto& e : std::filesystem::directory_iterator(dir, ec))
-    if (e.path().extension() == ".json" && !is_scale_scene(e.path().stem().string()))
+    if (e.path().extension() == ".json" && !is_scale_scene(e.path().stem().string()) &&
+        !is_rotating_scene(e.path().stem().string()))
       names.push_back(e.path().stem().string());
   std::sort(names.begin(), names.end());
   return names;

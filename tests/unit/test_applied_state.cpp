@@ -92,7 +92,7 @@ TEST(AppliedState, PredictionMatchesTheCpuEngine) {
   const ValidationResult r = find(rs, "applied-state");
   EXPECT_TRUE(r.applicable);
   EXPECT_TRUE(r.pass) << r.detail;
-  const ValidationResult c = find(rs, "conservation");
+  const ValidationResult c = find(rs, "impulse-conservation");
   EXPECT_TRUE(c.pass) << c.detail;
   EXPECT_NE(c.detail.find("isolated groups"), std::string::npos) << c.detail;
   for (const auto& x : rs) EXPECT_TRUE(x.pass || !x.applicable) << x.name << ": " << x.detail;
@@ -134,10 +134,10 @@ INSTANTIATE_TEST_SUITE_P(Faults, PlantedFault, ::testing::Range(0, 6));
 TEST(AppliedState, WrongBodyImpulseBreaksMomentumOfIsolatedGroups) {
   PlantedFaults f;
   f.impulse_wrong_body = true;
-  const ValidationResult good = find(validate_with(head_on(), PlantedFaults{}), "conservation");
+  const ValidationResult good = find(validate_with(head_on(), PlantedFaults{}), "impulse-conservation");
   EXPECT_TRUE(good.pass) << good.detail;
   EXPECT_NE(good.detail.find(" 1 isolated groups"), std::string::npos) << good.detail;
-  const ValidationResult r = find(validate_with(head_on(), f), "conservation");
+  const ValidationResult r = find(validate_with(head_on(), f), "impulse-conservation");
   EXPECT_FALSE(r.pass) << r.detail;
   EXPECT_NE(r.detail.find("isolated group of 2 bodies"), std::string::npos) << r.detail;
 }
@@ -264,7 +264,7 @@ TEST(Tolerances, OverridesByNameAndRejectsUnknownNames) {
   EXPECT_THROW(set_tolerance(t, "no_such_bound", 1.0), InputError);
   EXPECT_THROW(set_tolerance(t, "contraction_m", -1.0), InputError);
   std::vector<ValidationResult> rs(1);
-  rs[0].name = "non-penetration";
+  rs[0].name = "non-penetration-eq14";
   rs[0].tolerances = "contraction_m";
   EXPECT_NE(format_results(rs, {"contraction_m"}).find('*'), std::string::npos);
   EXPECT_EQ(format_results(rs, {}).find('*'), std::string::npos);

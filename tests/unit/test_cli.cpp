@@ -194,9 +194,12 @@ TEST_F(Cli, ValidatePassesPrintsTableAndStoresResults) {
   // 250 frames: the resting-stack check needs its 200 settling frames within --frames.
   const Result r = run_octocd("validate " + scene_file + " --frames 250 --every 50 --trace " + trace);
   EXPECT_EQ(r.code, 0) << r.output;
-  for (const char* name : {"candidate-sets", "midphase-completeness", "contact-normals",
-                           "non-penetration", "friction", "conservation", "analytic",
-                           "bullet-dynamics", "all validators pass"})
+  for (const char* name : {"physics  broadphase-completeness", "physics  contact-completeness",
+                           "physics  contact-geometry", "physics  penetration", "physics  friction",
+                           "physics  conservation", "model    candidate-sets", "model    midphase-completeness",
+                           "model    non-penetration-eq14", "model    friction-monotonicity",
+                           "model    impulse-conservation", "model    applied-state", "model    analytic",
+                           "model    bullet-dynamics", "all validators pass"})
     EXPECT_NE(r.output.find(name), std::string::npos) << name << " missing:\n" << r.output;
   EXPECT_EQ(octocd::read_trace_summary(trace).frames, 250);
   const Result h5 = [&] {
@@ -236,7 +239,7 @@ TEST_F(Cli, ValidateFailingSceneExitsThreeAndToleranceOverrides) {
   Result r = run_octocd("validate " + path + " --frames 20 --every 5 --against none");
   EXPECT_EQ(r.code, 3) << r.output;
   EXPECT_NE(r.output.find("VALIDATION FAILED"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("non-penetration"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("non-penetration-eq14"), std::string::npos) << r.output;
   // The same bound loosened by the user: passes, and the table marks the bound.
   r = run_octocd("validate " + path + " --frames 20 --every 5 --against none --tolerance contraction_m=1");
   EXPECT_EQ(r.code, 0) << r.output;

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "cli_run.hpp"
+#include "unit/external_trace.hpp"
 
 namespace fs = std::filesystem;
 
@@ -27,103 +28,7 @@ using octocd::test::Result;
 using octocd::test::bin;
 using octocd::test::source_dir;
 using octocd::test::run;
-
-/// A small external trace, held in arrays that a test may break before writing: 3 boxes
-/// of half side 0.1 (body 0 static), two overlapping by the slop (1, 2) and one apart, 3
-/// frames at rest without gravity, the pair and its contact in every frame.
-struct Trace {
-  static constexpr int kBodies = 3, kFrames = 3;
-  std::vector<float> local_min, local_max, inverse_mass{0.0f, 1.0f, 1.0f};
-  std::vector<float> position, velocity, aabb_min, aabb_max;  // (F+1) n 3, (F+1) n 3, F n 3
-  std::vector<std::int64_t> pair_offsets{0, 1, 2, 3}, contact_offsets{0, 1, 2, 3};
-  std::vector<std::uint32_t> pairs{1, 2, 1, 2, 1, 2}, contact_pair{1, 2, 1, 2, 1, 2};
-  std::vector<float> normal{-1, 0, 0, -1, 0, 0, -1, 0, 0}, depth{0.001f, 0.001f, 0.001f}, jn{0, 0, 0}, jt{0, 0, 0};
-  std::vector<std::string> skip;  // datasets to leave out
-  hsize_t aabb_bodies = kBodies;  // rows per frame written to /aabbs (a wrong body count)
-
-  Trace() {
-    const float x[kBodies][3] = {{0, -1, 0}, {0, 0, 0}, {0.199f, 0, 0}};
-    for (int i = 0; i < kBodies; ++i)
-      for (int k = 0; k < 3; ++k) {
-        local_min.push_back(-0.1f);
-        local_max.push_back(0.1f);
-      }
-    for (int f = 0; f <= kFrames; ++f)
-      for (int i = 0; i < kBodies; ++i)
-        for (int k = 0; k < 3; ++k) {
-          position.push_back(x[i][k]);
-          velocity.push_back(0.0f);
-          if (f > 0) {
-            aabb_min.push_back(x[i][k] - 0.1f);
-            aabb_max.push_back(x[i][k] + 0.1f);
-          }
-        }
-  }
-
-  void write(const std::string& path) const {
-    const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-    ASSERT_GE(file, 0);
-    const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
-    H5Pset_create_intermediate_group(lcpl, 1);
-    auto put = [&](const char* name, hid_t mem, hid_t type, std::vector<hsize_t> dims, const void* data) {
-      for (const std::string& s : skip)
-        if (s == name) return;
-      const hid_t space = H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr);
-      const hid_t d = H5Dcreate2(file, name, type, space, lcpl, H5P_DEFAULT, H5P_DEFAULT);
-      ASSERT_GE(d, 0) << name;
-      ASSERT_GE(H5Dwrite(d, mem, H5S_ALL, H5S_ALL, H5P_DEFAULT, data), 0) << name;
-      H5Dclose(d);
-      H5Sclose(space);
-    };
-    auto str_attr = [&](const char* name, const char* value) {
-      const hid_t t = H5Tcopy(H5T_C_S1);
-      H5Tset_size(t, H5T_VARIABLE);
-      const hid_t space = H5Screate(H5S_SCALAR);
-      const hid_t a = H5Acreate2(file, name, t, space, H5P_DEFAULT, H5P_DEFAULT);
-      H5Awrite(a, t, &value);
-      H5Aclose(a);
-      H5Sclose(space);
-      H5Tclose(t);
-    };
-    str_attr("format", "octocd-trace");
-    str_attr("engine", "test-engine");
-    {
-      const int version = 1;
-      const hid_t space = H5Screate(H5S_SCALAR);
-      const hid_t a = H5Acreate2(file, "version", H5T_STD_I32LE, space, H5P_DEFAULT, H5P_DEFAULT);
-      H5Awrite(a, H5T_NATIVE_INT, &version);
-      H5Aclose(a);
-      H5Sclose(space);
-      const double gravity[3] = {0, 0, 0};
-      const hsize_t three = 3;
-      const hid_t gs = H5Screate_simple(1, &three, nullptr);
-      const hid_t g = H5Acreate2(file, "gravity", H5T_IEEE_F64LE, gs, H5P_DEFAULT, H5P_DEFAULT);
-      H5Awrite(g, H5T_NATIVE_DOUBLE, gravity);
-      H5Aclose(g);
-      H5Sclose(gs);
-    }
-    const hsize_t n = kBodies, f = kFrames;
-    const hid_t F = H5T_NATIVE_FLOAT, FT = H5T_IEEE_F32LE;
-    put("/bodies/local_aabb_min", F, FT, {n, 3}, local_min.data());
-    put("/bodies/local_aabb_max", F, FT, {n, 3}, local_max.data());
-    put("/bodies/inverse_mass", F, FT, {inverse_mass.size()}, inverse_mass.data());
-    put("/states/position", F, FT, {f + 1, n, 3}, position.data());
-    put("/states/velocity", F, FT, {velocity.size() / (3 * n), n, 3}, velocity.data());
-    put("/aabbs/min", F, FT, {f, aabb_bodies, 3}, aabb_min.data());
-    put("/aabbs/max", F, FT, {f, aabb_bodies, 3}, aabb_max.data());
-    put("/pairs/offsets", H5T_NATIVE_INT64, H5T_STD_I64LE, {pair_offsets.size()}, pair_offsets.data());
-    put("/pairs/pair", H5T_NATIVE_UINT32, H5T_STD_U32LE, {pairs.size() / 2, 2}, pairs.data());
-    put("/contacts/offsets", H5T_NATIVE_INT64, H5T_STD_I64LE, {contact_offsets.size()}, contact_offsets.data());
-    const hsize_t c = contact_pair.size() / 2;
-    put("/contacts/pair", H5T_NATIVE_UINT32, H5T_STD_U32LE, {c, 2}, contact_pair.data());
-    put("/contacts/normal", F, FT, {c, 3}, normal.data());
-    put("/contacts/depth", F, FT, {c}, depth.data());
-    put("/contacts/jn", F, FT, {c}, jn.data());
-    put("/contacts/jt", F, FT, {c}, jt.data());
-    H5Pclose(lcpl);
-    H5Fclose(file);
-  }
-};
+using octocd::test::Trace;
 
 class TraceIn : public ::testing::Test {
  protected:
@@ -269,4 +174,197 @@ TEST_F(TraceIn, SceneAndTraceInAreExclusive) {
   EXPECT_EQ(run(bin() + " validate").code, 2);
   EXPECT_EQ(run(bin() + " validate " + source_dir() + "/tests/data/spheres-drop.json --trace-in " + path).code, 2);
   EXPECT_EQ(run(bin() + " validate --trace-in " + (dir_ / "missing.h5").string()).code, 2);
+}
+
+// ---- External traces version 2 (SPEC 13, issue 17): rotation, inertia, manifolds with
+// points, materials. Every problem exits 2 with and without --check-only, naming the
+// dataset (or attribute), the frame (or body) and the allowed values.
+
+namespace {
+
+/// Expects exit 2 naming every piece of `names`, with and without --check-only.
+void expect_bad_both(const std::function<Result(const std::string&)>& validate, const std::vector<std::string>& names) {
+  expect_bad(validate("--check-only"), names);
+  expect_bad(validate(""), names);
+}
+
+/// Grows make_v2's contacts to 7 rows: frame 2 has (0, 1), (1, 2), (0, 1).
+Trace split_manifold() {
+  Trace t = Trace::make_v2();
+  t.contact_offsets = {0, 2, 5, 7};
+  t.contact_pair = {1, 2, 1, 2, 0, 1, 1, 2, 0, 1, 1, 2, 1, 2};
+  t.normal.clear();
+  for (int k = 0; k < 7; ++k) t.normal.insert(t.normal.end(), {-1, 0, 0});
+  t.depth.assign(7, 0.001f);
+  t.jn.assign(7, 0.01f);
+  t.jt.assign(7, 0.0f);
+  t.point.assign(21, 0.1f);
+  return t;
+}
+
+}  // namespace
+
+TEST_F(TraceIn, AVersion2TraceOfARotatingEngineChecksCleanAndIsJudged) {
+  const Result c = validate(Trace::make_v2(), "--check-only");
+  EXPECT_EQ(c.code, 0) << c.output;
+  EXPECT_NE(c.output.find("version 2"), std::string::npos) << c.output;
+  EXPECT_NE(c.output.find("rotation"), std::string::npos) << c.output;
+  EXPECT_NE(c.output.find("manifolds"), std::string::npos) << c.output;
+  const Result r = validate(Trace::make_v2());
+  EXPECT_TRUE(r.code == 0 || r.code == 3) << r.output;  // judged, not refused
+  EXPECT_NE(r.output.find("engine 'test-engine', 3 bodies, 3 frames"), std::string::npos) << r.output;
+  // Conventions octocd's engine follows that physics does not need: no /aabbs, no
+  // /pairs, a manifold's rows repeating the pair, materials absent.
+  Trace bare = Trace::make_v2();
+  bare.skip = {"/aabbs/min", "/aabbs/max", "/pairs/offsets", "/pairs/pair", "/bodies/inertia", "/bodies/friction",
+               "/bodies/restitution"};
+  bare.string_attrs.clear();
+  bare.number_attrs.clear();
+  EXPECT_EQ(validate(bare, "--check-only").code, 0);
+}
+
+TEST_F(TraceIn, Version2NonUnitQuaternionsAndMissingHalves) {
+  Trace q = Trace::make_v2();
+  for (int k = 0; k < 4; ++k) q.orientation[(2 * 3 + 1) * 4 + k] *= 1.01f;  // row 2, body 1
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  expect_bad_both(v(q), {"/states/orientation", "frame 2", "body 1", "allowed: unit quaternions (w, x, y, z)",
+                         "| |q| - 1 | <= 1e-3"});
+  Trace small = Trace::make_v2();
+  small.orientation[0] = 0.99f;  // row 0, body 0: |q| = 0.99
+  expect_bad_both(v(small), {"/states/orientation", "frame 1", "body 0 before the step", "|q| = 0.99"});
+  Trace no_w = Trace::make_v2();
+  no_w.angular_velocity.clear();
+  expect_bad_both(v(no_w), {"/states/angular_velocity", "missing (orientation without angular_velocity)",
+                            "allowed: /states/orientation and /states/angular_velocity together"});
+  Trace no_q = Trace::make_v2();
+  no_q.orientation.clear();
+  expect_bad_both(v(no_q), {"/states/orientation", "missing (angular_velocity without orientation)"});
+}
+
+TEST_F(TraceIn, Version2InertiaMustBeSymmetricPositiveDefinite) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  Trace asym = Trace::make_v2();
+  asym.inertia[9 + 1] = 0.002f;  // body 1: I[0][1] = 0.002, I[1][0] = 0
+  expect_bad_both(v(asym), {"/bodies/inertia", "body 1", "not symmetric", "allowed: a symmetric positive definite"});
+  Trace indefinite = Trace::make_v2();
+  indefinite.inertia[18 + 8] = -0.001f;  // body 2: I[2][2] < 0
+  expect_bad_both(v(indefinite), {"/bodies/inertia", "body 2", "not positive definite (leading minor 3",
+                                  "leading minors > 0"});
+  Trace dyn_zero = Trace::make_v2();
+  dyn_zero.inertia.assign(27, 0.0f);  // zeros: fine for static body 0, not for 1
+  expect_bad_both(v(dyn_zero), {"/bodies/inertia", "body 1", "not positive definite"});
+  Trace shape = Trace::make_v2();
+  shape.dims["/bodies/inertia"] = {3, 9};
+  expect_bad_both(v(shape), {"/bodies/inertia", "2 dimensions", "allowed: 3 dimensions"});
+}
+
+TEST_F(TraceIn, Version2ManifoldRowsOfOnePairMustBeConsecutive) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  expect_bad_both(v(split_manifold()), {"/contacts/pair", "frame 2", "row 2 is (0, 1) again after (1, 2)",
+                                        "manifold rows of one pair not consecutive",
+                                        "the rows of one pair (a manifold) consecutive"});
+  // The same rows in (a, b) order: a valid manifold.
+  Trace sorted = split_manifold();
+  sorted.contact_pair = {1, 2, 1, 2, 0, 1, 0, 1, 1, 2, 1, 2, 1, 2};
+  EXPECT_EQ(validate(sorted, "--check-only").code, 0);
+}
+
+TEST_F(TraceIn, Version2MaterialsOutsideTheirRange) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  Trace mu = Trace::make_v2();
+  mu.number_attrs["mu"] = -0.1;
+  expect_bad_both(v(mu), {"/ (root attribute mu)", "-0.1", "allowed: a finite friction coefficient >= 0"});
+  Trace e = Trace::make_v2();
+  e.number_attrs["restitution"] = 1.5;
+  expect_bad_both(v(e), {"/ (root attribute restitution)", "1.5", "allowed: a restitution in [0, 1]"});
+  Trace friction = Trace::make_v2();
+  friction.friction[1] = -1.0f;
+  expect_bad_both(v(friction), {"/bodies/friction", "body 1: -1", "friction coefficient >= 0 per body"});
+  Trace restitution = Trace::make_v2();
+  restitution.restitution[2] = 2.0f;
+  expect_bad_both(v(restitution), {"/bodies/restitution", "body 2: 2", "in [0, 1] per body"});
+  Trace margin = Trace::make_v2();
+  margin.number_attrs["contact_margin"] = -0.01;
+  expect_bad_both(v(margin), {"/ (root attribute contact_margin)", "-0.01", "finite distance >= 0 (m)"});
+  Trace exact = Trace::make_v2();
+  exact.number_attrs["broadphase_exact"] = 2;
+  expect_bad_both(v(exact), {"/ (root attribute broadphase_exact)", "allowed: 0", "or 1"});
+  Trace count = Trace::make_v2();
+  count.friction.pop_back();
+  expect_bad_both(v(count), {"/bodies/friction", "shape 2", "3 values, one per body"});
+}
+
+TEST_F(TraceIn, Version2UnknownStrings) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  Trace detection = Trace::make_v2();
+  detection.string_attrs["detection"] = "post-step";
+  expect_bad_both(v(detection), {"/ (root attribute detection)", "'post-step' unknown",
+                                 "allowed: \"pre-step\", \"integrated\""});
+  Trace combine = Trace::make_v2();
+  combine.string_attrs["friction_combine"] = "median";
+  expect_bad_both(v(combine), {"/ (root attribute friction_combine)", "'median' unknown",
+                               "\"product\", \"min\", \"max\", \"average\", \"geometric\""});
+  Trace rcombine = Trace::make_v2();
+  rcombine.string_attrs["restitution_combine"] = "sum";
+  expect_bad_both(v(rcombine), {"/ (root attribute restitution_combine)", "'sum' unknown"});
+  Trace geometry = Trace::make_v2();
+  geometry.string_attrs["contact_geometry"] = "mesh";
+  expect_bad_both(v(geometry), {"/ (root attribute contact_geometry)", "'mesh' unknown", "\"shape\", \"aabb\""});
+}
+
+TEST_F(TraceIn, Version1And2FieldsMixed) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  const Trace v2 = Trace::make_v2();
+  Trace rotation;  // version 1 with orientations
+  rotation.orientation = v2.orientation;
+  rotation.angular_velocity = v2.angular_velocity;
+  expect_bad_both(v(rotation), {"/states/orientation", "present in a version 1 file (v1/v2 fields mixed)",
+                                "allowed: root attribute version = 2"});
+  Trace inertia;
+  inertia.inertia = v2.inertia;
+  expect_bad_both(v(inertia), {"/bodies/inertia", "v1/v2 fields mixed"});
+  Trace points;
+  points.point = {0.1f, 0, 0, 0.1f, 0, 0, 0.1f, 0, 0};
+  expect_bad_both(v(points), {"/contacts/point", "v1/v2 fields mixed"});
+  Trace friction;
+  friction.friction = v2.friction;
+  expect_bad_both(v(friction), {"/bodies/friction", "v1/v2 fields mixed"});
+  Trace version;
+  version.version = 3;
+  expect_bad_both(v(version), {"/ (root attribute version)", "3", "allowed: 1 or 2"});
+}
+
+TEST_F(TraceIn, Version2WrongShapesAndValues) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  Trace q = Trace::make_v2();
+  q.dims["/states/orientation"] = {4, 3, 3};
+  expect_bad_both(v(q), {"/states/orientation", "shape 4 x 3 x 3", "allowed: 4 x 3 x 4"});
+  Trace w = Trace::make_v2();
+  w.dims["/states/angular_velocity"] = {3, 3, 3};
+  expect_bad_both(v(w), {"/states/angular_velocity", "shape 3 x 3 x 3", "allowed: 4 x 3 x 3"});
+  Trace p = Trace::make_v2();
+  p.dims["/contacts/point"] = {5, 2};
+  expect_bad_both(v(p), {"/contacts/point", "shape 5 x 2", "allowed: 5 x 3"});
+  Trace nan = Trace::make_v2();
+  nan.point[3 * 3 + 1] = std::numeric_limits<float>::quiet_NaN();  // frame 3's first row
+  expect_bad_both(v(nan), {"/contacts/point", "frame 3", "row 0 (pair (1, 2))", "not finite", "finite world point"});
+  Trace spin = Trace::make_v2();
+  spin.angular_velocity[(1 * 3 + 2) * 3] = std::numeric_limits<float>::infinity();  // row 1, body 2
+  expect_bad_both(v(spin), {"/states/angular_velocity", "frame 1", "body 2", "not finite"});
+}
+
+TEST_F(TraceIn, PythonRotatingWriterIsAValidVersion2Trace) {
+  const std::string python = "/usr/bin/python3";
+  if (run(python + " -c 'import h5py, numpy'").code != 0)
+    GTEST_SKIP() << python << " lacks h5py or numpy (Debian: python3-h5py): the example cannot run";
+  const std::string example = source_dir() + "/examples/python/rotating_writer.py";
+  const std::string path = (dir_ / "rotating.h5").string();
+  const Result w = run(python + " " + example + " " + path);
+  ASSERT_EQ(w.code, 0) << w.output;
+  const Result c = run(bin() + " validate --trace-in " + path + " --check-only");
+  EXPECT_EQ(c.code, 0) << c.output;
+  EXPECT_NE(c.output.find("version 2"), std::string::npos) << c.output;
+  EXPECT_NE(c.output.find("rotation"), std::string::npos) << c.output;
+  const Result r = run(bin() + " validate --trace-in " + path);
+  EXPECT_TRUE(r.code == 0 || r.code == 3) << r.output;  // judged, never refused as input
 }

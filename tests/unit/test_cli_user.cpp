@@ -627,11 +627,13 @@ TEST_F(CliUser, ValidateWritesJUnit) {
     const auto cases = x.nodes("//testsuite/testcase");
     // One case per row of the table.
     std::size_t rows = 0;
-    for (const char* v : {"candidate-sets", "midphase-completeness", "contact-normals", "non-penetration",
-                          "friction", "conservation", "applied-state", "analytic", "bullet-dynamics"})
+    for (const char* v : {"broadphase-completeness", "contact-completeness", "contact-geometry", "penetration",
+                          "friction", "conservation", "candidate-sets", "midphase-completeness",
+                          "non-penetration-eq14", "friction-monotonicity", "impulse-conservation", "applied-state",
+                          "analytic", "bullet-dynamics"})
       rows += r.output.find(std::string(" ") + v + " ") != std::string::npos ? 1 : 0;
     EXPECT_EQ(cases.size(), rows);
-    EXPECT_EQ(cases.size(), 9u);
+    EXPECT_EQ(cases.size(), 14u);
     std::set<std::string> names;
     for (xmlNodePtr c : cases) {
       EXPECT_EQ(Xml::attr(c, "classname"), "box-stack");

@@ -120,7 +120,7 @@ TEST(Validators, NonPenetrationCatchesBetaOvershoot) {
   Scene scene = mixed_boxes();
   scene.response.beta = 1.5f;  // outside (0, 1]: the scene loader would refuse it
   World world(scene);
-  const ValidationResult r = find(run(world, 300), "non-penetration");
+  const ValidationResult r = find(run(world, 300), "non-penetration-eq14");
   EXPECT_FALSE(r.pass) << r.detail;
 }
 
@@ -129,7 +129,7 @@ TEST(Validators, FrictionCatchesTheWrongSign) {
   PlantedFaults f;
   f.friction_sign = true;
   world.plant_faults(f);
-  const ValidationResult r = find(run(world, 300), "friction");
+  const ValidationResult r = find(run(world, 300), "friction-monotonicity");
   EXPECT_FALSE(r.pass) << r.detail;
 }
 
@@ -140,7 +140,7 @@ TEST(Validators, ConservationCatchesEq12WeightsAndMomentumLeak) {
     f.eq12_weights = fault == 0;
     f.momentum_leak = fault == 1;
     world.plant_faults(f);
-    const ValidationResult r = find(run(world, 300), "conservation");
+    const ValidationResult r = find(run(world, 300), "impulse-conservation");
     EXPECT_FALSE(r.pass) << "fault " << fault << ": " << r.detail;
     EXPECT_NE(r.detail.find(fault == 0 ? "centre" : "momentum"), std::string::npos) << r.detail;
   }

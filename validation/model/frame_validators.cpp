@@ -1,5 +1,9 @@
-// Validators 1-6 and 9 of SPEC section 7, fed one FrameRecord at a time: from an octocd
-// engine, from another engine through the C++ API (external.cpp) or from an external trace.
+// The per-frame validators, fed one FrameRecord at a time: from an octocd engine, from
+// another engine through the C++ API (external.cpp) or from an external trace. The
+// physics tier (SPEC 13: any engine, posed shapes, FCL) lives in validation/physics/ and
+// is called from here; this file holds the model tier's per-frame rows (SPEC 7 items 1,
+// 2, 4-6 and 9 as the paper's model defines them), judged for octocd's engines and for
+// another engine only when it claims SPEC 6.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -10,6 +14,7 @@
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
+#include "octocd/physics.hpp"
 #include "octocd/reference_contact.hpp"
 #include "octocd/validation.hpp"
 
@@ -85,23 +90,18 @@ struct FrameValidators::Impl {
   std::vector<std::unique_ptr<BroadPhase>> broadphases;
   std::vector<MidphaseConfig> configs;
   ConfirmFn confirm;
-  std::unique_ptr<ReferenceGeometry> reference;
+  std::unique_ptr<PhysicsValidators> physics;
   std::vector<Pair> expected, got;
 
   Tally candidates, midphase, contraction, friction, momentum, centre;
   std::unique_ptr<AppliedStateJudge> applied;
   std::uint64_t candidate_frames = 0, midphase_pairs = 0, dynamic_pairs = 0;
-  std::uint64_t normals = 0, normals_agree = 0;
-  // Sign agreement per contact type: 0 mesh-mesh, 1 mesh-box, 2 box-box.
-  std::array<std::uint64_t, 3> type_normals{}, type_agree{};
   // Contacts of another engine whose per-contact terms could not be derived (a dynamic
   // body with several contacts in the frame, or no states given).
   std::uint64_t contacts_unjudged = 0;
   // Candidate-set differences of the engine's own pairs: missing pairs all touching only
   // (an overlap of exactly zero on some axis: the engine's overlap test is not inclusive).
   std::uint64_t missing_pairs = 0, missing_touching = 0;
-  std::vector<double> angles;
-  std::string normal_first;
   double pen_max = 0.0, share_above_max = 0.0;
 };
 
@@ -133,7 +133,8 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
     s.configs.push_back(scene.midphase);
   s.confirm = [](const PlacedShape& a, const PlacedShape& b, float theta, const MidphaseConfig& c,
                  MidphaseStats& st) { return confirm_contact(a, b, theta, c, st); };
-  if (options.against_fcl) s.reference = std::make_unique<ReferenceGeometry>(model);
+  const PhysicsBodies bodies = s.source.physics ? *s.source.physics : octocd_physics_bodies(model);
+  s.physics = std::make_unique<PhysicsValidators>(model, bodies, options.tol, s.source.label);
   s.applied = std::make_unique<AppliedStateJudge>(model, options.tol);
 }
 
@@ -155,6 +156,9 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
   const Model& model = *s.model;
   const std::int64_t frame = rec.frame;
   const bool has_states = !rec.x_pre.empty();
+  // The physics tier: any engine, every frame (its costly rows on checked frames).
+  s.physics->observe(rec, checked);
+  // The model tier: the paper's response, for engines that claim it.
   const bool judge_response = s.source.octocd_pipeline || s.source.spec6_response;
   const std::vector<Aabb>& boxes = rec.aabbs;
   const std::vector<float>& w = model.initial.w;
@@ -192,8 +196,10 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
   // re-derivation, every frame; momentum and centre on isolated dynamic groups.
   if (has_states) s.applied->observe(rec, judge_response);
 
-  if (checked) {
-    // 1. Candidate sets: every broadphase equals `flat` as a set (SPEC 7.1).
+  if (checked && s.source.octocd_pipeline) {
+    // 1. Candidate sets: octocd's (and the reference) broadphases equal `flat` as sets
+    // (SPEC 7.1). Another engine's pairs are judged by the physics tier's broadphase
+    // completeness (extras allowed), never against octocd's exact AABB rule.
     BroadPhaseStats bs;
     s.flat->find_pairs(boxes, s.expected, bs);
     ++s.candidate_frames;
@@ -233,8 +239,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
     }
 
     // 2. Midphase completeness: every level list equals the exhaustive test (SPEC 7.2).
-    // octocd's pipeline only: another engine's contacts are not octocd's vertex test.
-    if (s.source.octocd_pipeline) {
+    {
       for (const Pair& q : s.expected) {
         if (w[q.a] == 0.0f && w[q.b] == 0.0f) continue;
         const std::uint32_t sa = model.bodies[q.a].shape, sb = model.bodies[q.b].shape;
@@ -259,33 +264,10 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
         }
       }
     }
-
-    // 3. Contact normals against FCL (SPEC 7.3).
-    if (s.reference) {
-      for (const ContactRecord& c : rec.contacts) {
-        const ReferenceNormal r = s.reference->normal(c.pair.a, c.pair.b, pre_position(c.pair.a),
-                                                      pre_position(c.pair.b));
-        if (!r.valid) continue;
-        ++s.normals;
-        const bool agree = dot(c.normal, r.normal) > 0.0f;
-        const int meshes = (model.shapes[model.bodies[c.pair.a].shape].octree ? 1 : 0) +
-                           (model.shapes[model.bodies[c.pair.b].shape].octree ? 1 : 0);
-        const int type = 2 - meshes;  // 0 mesh-mesh, 1 mesh-box, 2 box-box
-        ++s.type_normals[static_cast<std::size_t>(type)];
-        if (agree) ++s.type_agree[static_cast<std::size_t>(type)];
-        if (agree) {
-          ++s.normals_agree;
-        } else if (s.normal_first.empty()) {
-          s.normal_first = fmt::format(
-              "frame {}: pair ({}, {}) normal ({}, {}, {}) vs FCL ({:.3f}, {:.3f}, {:.3f}) {}",
-              frame, c.pair.a, c.pair.b, c.normal.x, c.normal.y, c.normal.z, r.normal.x,
-              r.normal.y, r.normal.z, r.penetrating ? "(EPA)" : "(distance)");
-        }
-        s.angles.push_back(angle_between(c.normal, r.normal));
-      }
-    }
   }
 
+  // 4-6 on the model's per-contact terms (the paper's response only).
+  if (!judge_response) return;
   for (const ContactRecord& given : rec.contacts) {
     const float wa = w[given.pair.a], wb = w[given.pair.b];
     // 5. Friction cone, |J_t| <= mu_s J_n (section 3.3.2), on the reported impulses.
@@ -396,9 +378,24 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
 
 std::vector<ValidationResult> FrameValidators::results() const {
   const Impl& s = *impl_;
-  std::vector<ValidationResult> out;
+  // The physics tier first: it judges any engine.
+  std::vector<ValidationResult> out = s.physics->results();
+  const bool judge_response = s.source.octocd_pipeline || s.source.spec6_response;
+  // Model-tier rows for another engine: n/a with the reason, never a FAIL.
+  auto not_claimed = [&](const char* name, const char* figure, const char* why) {
+    ValidationResult r;
+    r.tier = Tier::Model;
+    r.name = name;
+    r.figure = figure;
+    r.applicable = false;
+    r.detail = why;
+    out.push_back(r);
+  };
+  const char* no_spec6 = "another engine that does not claim SPEC 6 (response_model \"spec6\"): the paper's "
+                         "response model is not judged; the physics tier judges its physics";
   auto tally = [](const char* name, const char* figure, const Tally& t, const std::string& ok_note) {
     ValidationResult r;
+    r.tier = Tier::Model;
     r.name = name;
     r.figure = figure;
     r.measured = static_cast<double>(t.failures);
@@ -408,76 +405,40 @@ std::vector<ValidationResult> FrameValidators::results() const {
     r.detail = t.failures ? t.first : fmt::format("{} checks; {}", t.checks, ok_note);
     return r;
   };
-  {
+  if (s.source.octocd_pipeline) {
     std::string names = "flat vs";
     for (const auto& bp : s.broadphases) names += " " + bp->name();
     out.push_back(tally("candidate-sets", "frames x broadphases differing from flat", s.candidates,
-                        fmt::format("{} frames, {}{}", s.candidate_frames, names,
-                                    s.source.octocd_pipeline ? "" : " (and the engine's own pairs where given)")));
+                        fmt::format("{} frames, the engine's own pairs and {}", s.candidate_frames, names)));
     if (s.missing_pairs > 0 && s.missing_touching == s.missing_pairs)
       out.back().detail += fmt::format("; all {} missing pairs only touch (zero overlap on an axis): overlap is "
                                        "inclusive (Eq. 6), min_A <= max_B and max_A >= min_B",
                                        s.missing_pairs);
-  }
-  if (!s.source.octocd_pipeline) {
-    ValidationResult r;
-    r.name = "midphase-completeness";
-    r.figure = "pair x level lists differing from exhaustive";
-    r.applicable = false;
-    r.detail = "another engine: its contacts are not octocd's vertex-proximity test (SPEC 5.3)";
-    out.push_back(r);
-  } else {
     std::string cfgs;
     for (const auto& c : s.configs) cfgs += (cfgs.empty() ? "" : " ") + std::string("[") + c.to_string() + "]";
     out.push_back(tally("midphase-completeness", "pair x level lists differing from exhaustive",
                         s.midphase, fmt::format("{} pairs, lists {}", s.midphase_pairs, cfgs)));
+  } else {
+    not_claimed("candidate-sets", "frames x broadphases differing from flat",
+                "another engine: octocd's exact AABB rule (Eq. 6) is not required of it; its pairs are judged by "
+                "broadphase-completeness (physics)");
+    not_claimed("midphase-completeness", "pair x level lists differing from exhaustive",
+                "another engine: its contacts are not octocd's vertex-proximity test (SPEC 5.3)");
   }
-  {
-    ValidationResult r;
-    r.name = "contact-normals";
-    r.figure = "sign agreement with FCL (share)";
-    r.applicable = s.normals > 0;
-    r.measured = s.normals ? static_cast<double>(s.normals_agree) / static_cast<double>(s.normals) : 1.0;
-    r.bound = s.options.tol.normal_sign_agreement;
-    r.pass = r.measured >= r.bound;
-    std::vector<double> a = s.angles;
-    std::sort(a.begin(), a.end());
-    const double deg = 180.0 / 3.14159265358979323846;
-    double mean = 0;
-    for (double x : a) mean += x;
-    if (!a.empty()) mean /= static_cast<double>(a.size());
-    r.detail = s.reference == nullptr
-                   ? "FCL not requested (--against)"
-                   : fmt::format("{} contacts; angle mean {:.1f} deg, median {:.1f}, p95 {:.1f}, max {:.1f}{}",
-                                 s.normals, mean * deg, a.empty() ? 0.0 : a[a.size() / 2] * deg,
-                                 a.empty() ? 0.0 : a[a.size() * 95 / 100] * deg,
-                                 a.empty() ? 0.0 : a.back() * deg,
-                                 s.normal_first.empty() ? "" : "; first disagreement " + s.normal_first);
-    if (s.normals > 0 && 2 * s.normals_agree < s.normals)
-      r.detail += "; most normals point from A to B: the convention is from B to A (SPEC 2)";
-    if (s.reference != nullptr) {
-      // The AABB-centre normal is weakest where a small body sits in a big body's AABB.
-      const char* names[3] = {"mesh-mesh", "mesh-box", "box-box"};
-      std::string per_type;
-      for (std::size_t t = 0; t < 3; ++t)
-        per_type += fmt::format("{}{} {}", per_type.empty() ? "" : ", ", names[t],
-                                s.type_normals[t] ? fmt::format("{:.3f} of {}",
-                                                                static_cast<double>(s.type_agree[t]) /
-                                                                    static_cast<double>(s.type_normals[t]),
-                                                                s.type_normals[t])
-                                                  : std::string("none"));
-      r.detail += "; sign agreement by type: " + per_type;
-    }
-    r.tolerances = "normal_sign_agreement";
-    out.push_back(r);
+  if (!judge_response) {
+    not_claimed("non-penetration-eq14", "contacts violating Eq. 14 contraction", no_spec6);
+    not_claimed("friction-monotonicity", "contacts raising |v_t| or leaving the cone (Eq. 21-22)", no_spec6);
+    not_claimed("impulse-conservation", "contacts and isolated groups breaking momentum or centre", no_spec6);
+    not_claimed("applied-state", "bodies off the SPEC 6 re-derivation", no_spec6);
+    return out;
   }
-  out.push_back(tally("non-penetration", "contacts violating Eq. 14 contraction", s.contraction,
+  out.push_back(tally("non-penetration-eq14", "contacts violating Eq. 14 contraction", s.contraction,
                       fmt::format("worst excess {:.3g} m; AABB penetration max {:.4g} m, share above "
                                   "slop up to {:.2f}",
                                   s.contraction.worst, s.pen_max, s.share_above_max)));
   out.back().tolerances = "contraction_m";
-  out.push_back(tally("friction", "contacts raising |v_t| or leaving the cone", s.friction,
-                      fmt::format("worst excess {:.3g}", s.friction.worst)));
+  out.push_back(tally("friction-monotonicity", "contacts raising |v_t| or leaving the cone (Eq. 21-22)",
+                      s.friction, fmt::format("worst excess {:.3g}", s.friction.worst)));
   if (s.contacts_unjudged > 0) {
     // Another engine's contacts on a dynamic body with several contacts: only the cone.
     const std::string note = fmt::format("; {} contacts judged on the cone only (a dynamic body with several "
@@ -489,7 +450,7 @@ std::vector<ValidationResult> FrameValidators::results() const {
   }
   out.back().tolerances = "friction_speed,friction_cone_rel";
   {
-    ValidationResult r = tally("conservation", "contacts and isolated groups breaking momentum or centre",
+    ValidationResult r = tally("impulse-conservation", "contacts and isolated groups breaking momentum or centre",
                                Tally{}, "");
     // Worst figures are residual / bound over the items judged, so a pass shows <= 1.
     const AppliedStateJudge::Groups g = s.applied->groups();
@@ -509,14 +470,7 @@ std::vector<ValidationResult> FrameValidators::results() const {
     r.tolerances = "momentum_rel,centre_rel,applied_conservation_rel";
     out.push_back(r);
   }
-  if (!s.source.octocd_pipeline && !s.source.spec6_response) {
-    ValidationResult r;
-    r.name = "applied-state";
-    r.figure = "bodies off the SPEC 6 re-derivation";
-    r.applicable = false;
-    r.detail = "another engine: its response is not judged against SPEC 6 (not requested)";
-    out.push_back(r);
-  } else {
+  {
     out.push_back(s.applied->result());
   }
   return out;

@@ -43,6 +43,18 @@ Pose detection_pose(const Model& model, const FrameRecord& rec, std::size_t i) {
   return p;
 }
 
+PhysicsBodies octocd_physics_bodies(const Model& model) {
+  PhysicsBodies b;
+  const ContactParams& p = model.scene.response;
+  b.mu = p.mu_static;
+  b.restitution = p.restitution;
+  b.theta_margin = true;
+  b.broadphase_exact = true;
+  b.contact_geometry = ContactGeometry::Aabb;
+  b.slop = p.slop;
+  return b;
+}
+
 struct PhysicsValidators::Impl {
   const Model* model = nullptr;
   PhysicsBodies bodies;

@@ -4,6 +4,7 @@
 #include "octocd/external.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -57,7 +58,188 @@ void check_vectors(const std::vector<Vec3>& v, std::size_t n, const std::string&
            "finite numbers");
 }
 
+/// Contact pairs of a record with manifolds: a < b < n, sorted by (a, b) non-decreasingly,
+/// so the rows of one pair are consecutive.
+void check_manifold_pairs(const std::vector<Pair>& pairs, std::size_t n, const std::string& origin,
+                          const std::string& field, std::int64_t frame) {
+  const std::string allowed = fmt::format(
+      "pairs (a, b) with a < b < {} bodies, sorted by (a, b) non-decreasingly: the rows of one pair (a manifold) "
+      "consecutive",
+      n);
+  for (std::size_t i = 0; i < pairs.size(); ++i) {
+    const Pair q = pairs[i];
+    if (q.a >= q.b)
+      fail(origin, field, frame, fmt::format("row {} is ({}, {}): a >= b", i, q.a, q.b), allowed);
+    if (q.b >= n)
+      fail(origin, field, frame, fmt::format("row {} is ({}, {}): body {} out of range", i, q.a, q.b, q.b),
+           allowed);
+    if (i > 0 && q < pairs[i - 1]) {
+      const bool repeated = std::find(pairs.begin(), pairs.begin() + static_cast<std::ptrdiff_t>(i), q) !=
+                            pairs.begin() + static_cast<std::ptrdiff_t>(i);
+      fail(origin, field, frame,
+           repeated ? fmt::format("row {} is ({}, {}) again after ({}, {}): manifold rows of one pair not "
+                                  "consecutive",
+                                  i, q.a, q.b, pairs[i - 1].a, pairs[i - 1].b)
+                    : fmt::format("row {} is ({}, {}) after ({}, {}): not sorted", i, q.a, q.b, pairs[i - 1].a,
+                                  pairs[i - 1].b),
+           allowed);
+    }
+  }
+}
+
+/// Quaternions: empty (identity) or one unit quaternion per body.
+void check_quats(const std::vector<Quat>& q, std::size_t n, const std::string& origin, const std::string& field,
+                 std::int64_t frame, const char* when) {
+  if (q.size() != n)
+    fail(origin, field, frame, fmt::format("{} rows for {} bodies", q.size(), n), "one row per body");
+  for (std::size_t i = 0; i < n; ++i) {
+    const double len = std::sqrt(static_cast<double>(q[i].w) * q[i].w + static_cast<double>(q[i].x) * q[i].x +
+                                 static_cast<double>(q[i].y) * q[i].y + static_cast<double>(q[i].z) * q[i].z);
+    if (!std::isfinite(len) || !(std::fabs(len - 1.0) <= 1e-3))
+      fail(origin, field, frame,
+           fmt::format("body {} {} is ({}, {}, {}, {}), |q| = {:.6g}", i, when, q[i].w, q[i].x, q[i].y, q[i].z, len),
+           "unit quaternions (w, x, y, z), body to world, | |q| - 1 | <= 1e-3");
+  }
+}
+
+/// Leading principal minors of a symmetric 3x3 matrix (row-major), in double.
+std::array<double, 3> leading_minors(const std::array<double, 9>& m) {
+  return {m[0], m[0] * m[4] - m[1] * m[3],
+          m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
+              m[2] * (m[3] * m[7] - m[4] * m[6])};
+}
+
+/// The exact world AABB of a mesh at `pose`: the bounds of its posed vertices (SPEC 13).
+Aabb posed_mesh_aabb(const Mesh& mesh, const Pose& pose) {
+  Aabb out{to_world(pose, mesh.vertices.front()), to_world(pose, mesh.vertices.front())};
+  for (const Vec3& v : mesh.vertices) {
+    const Vec3 w = to_world(pose, v);
+    out.min = {std::min(out.min.x, w.x), std::min(out.min.y, w.y), std::min(out.min.z, w.z)};
+    out.max = {std::max(out.max.x, w.x), std::max(out.max.y, w.y), std::max(out.max.z, w.z)};
+  }
+  return out;
+}
+
+/// With a scene: each body's local box must be the scene's, or (SPEC 13: the body frame's
+/// origin is the centre of mass) the scene's translated, same size within 1e-5 relative.
+/// A translated box gets a shape of its own (one per scene shape and offset) whose mesh
+/// is moved by the offset, so the shape's bounds are the given local box.
+void place_scene_shapes(Model& model, const std::vector<Aabb>& local_boxes, const std::string& origin) {
+  std::map<std::tuple<std::uint32_t, float, float, float>, std::uint32_t> moved;
+  for (std::size_t i = 0; i < local_boxes.size(); ++i) {
+    const Aabb a = local_boxes[i];
+    const Aabb b = model.local_box(i);
+    const float tol = 1e-5f * (1.0f + length(b.max - b.min));
+    const Vec3 sa = a.max - a.min, sb = b.max - b.min;
+    const float dsize = std::max({std::fabs(sa.x - sb.x), std::fabs(sa.y - sb.y), std::fabs(sa.z - sb.z)});
+    if (!finite(a.min) || !finite(a.max) || !(dsize <= tol))
+      throw InputError(fmt::format("{}: local_boxes: body {} is ({}, {}, {})-({}, {}, {}), the scene's is "
+                                   "({}, {}, {})-({}, {}, {}); allowed: the scene's local box (within 1e-5), or "
+                                   "it translated (the body frame's origin at the centre of mass; sizes within "
+                                   "1e-5)",
+                                   origin, i, a.min.x, a.min.y, a.min.z, a.max.x, a.max.y, a.max.z, b.min.x, b.min.y,
+                                   b.min.z, b.max.x, b.max.y, b.max.z));
+    const Vec3 offset = center(a) - center(b);
+    if (std::max({std::fabs(offset.x), std::fabs(offset.y), std::fabs(offset.z)}) <= tol) continue;
+    const std::uint32_t id = model.bodies[i].shape;
+    const auto key = std::make_tuple(id, offset.x, offset.y, offset.z);
+    auto it = moved.find(key);
+    if (it == moved.end()) {
+      Shape shape = model.shapes[id];
+      shape.name = fmt::format("{}@({}, {}, {})", shape.name, offset.x, offset.y, offset.z);
+      shape.local = translated(shape.local, offset);
+      if (shape.mesh) {
+        auto mesh = std::make_shared<Mesh>(*shape.mesh);
+        for (Vec3& v : mesh->vertices) v = v + offset;
+        const int depth = shape.octree ? shape.octree->depth : model.scene.mesh_octree_depth;
+        shape.octree = std::make_shared<const MeshOctree>(build_mesh_octree(*mesh, depth));
+        shape.mesh = std::move(mesh);
+      }
+      model.shapes.push_back(std::move(shape));
+      model.theta_shape.push_back(model.theta_shape[id]);
+      it = moved.emplace(key, static_cast<std::uint32_t>(model.shapes.size() - 1)).first;
+    }
+    model.bodies[i].shape = it->second;
+  }
+}
+
 }  // namespace
+
+std::array<double, 9> box_inertia(const Aabb& local, float inverse_mass) {
+  std::array<double, 9> out{};
+  if (!(inverse_mass > 0.0f)) return out;
+  const double m = 1.0 / inverse_mass;
+  const double a = static_cast<double>(local.max.x) - local.min.x, b = static_cast<double>(local.max.y) - local.min.y,
+               c = static_cast<double>(local.max.z) - local.min.z;
+  out[0] = m / 12.0 * (b * b + c * c);
+  out[4] = m / 12.0 * (a * a + c * c);
+  out[8] = m / 12.0 * (a * a + b * b);
+  return out;
+}
+
+void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inverse_mass, const std::string& origin,
+                          const PhysicsFieldNames& names) {
+  const std::size_t n = inverse_mass.size();
+  auto bad = [&](const std::string& field, const std::string& problem, const std::string& allowed) {
+    throw InputError(fmt::format("{}: {}: {}; allowed: {}", origin, field, problem, allowed));
+  };
+  if (!p.inertia.empty()) {
+    if (p.inertia.size() != n)
+      bad(names.inertia, fmt::format("{} tensors for {} bodies", p.inertia.size(), n), "one 3 x 3 tensor per body");
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::array<double, 9>& m = p.inertia[i];
+      const std::string I =
+          fmt::format("[[{:.6g}, {:.6g}, {:.6g}], [{:.6g}, {:.6g}, {:.6g}], [{:.6g}, {:.6g}, {:.6g}]]", m[0], m[1],
+                      m[2], m[3], m[4], m[5], m[6], m[7], m[8]);
+      double largest = 0.0;
+      for (double x : m) {
+        if (!std::isfinite(x))
+          bad(names.inertia, fmt::format("body {}: {} not finite", i, I), "finite numbers (kg m^2)");
+        largest = std::max(largest, std::fabs(x));
+      }
+      if (!(inverse_mass[i] > 0.0f)) continue;  // static: never used
+      const std::string allowed =
+          "a symmetric positive definite tensor (kg m^2, body frame) for a dynamic body: |I_rc - I_cr| <= 1e-4 "
+          "max |I|, leading minors > 0";
+      for (int r = 0; r < 3; ++r)
+        for (int c = r + 1; c < 3; ++c)
+          if (!(std::fabs(m[3 * r + c] - m[3 * c + r]) <= 1e-4 * largest))
+            bad(names.inertia, fmt::format("body {}: {} not symmetric (I[{}][{}] = {}, I[{}][{}] = {})", i, I, r, c,
+                                           m[3 * r + c], c, r, m[3 * c + r]),
+                allowed);
+      const std::array<double, 3> minors = leading_minors(m);
+      for (int k = 0; k < 3; ++k)
+        if (!(minors[static_cast<std::size_t>(k)] > 0.0))
+          bad(names.inertia,
+              fmt::format("body {}: {} not positive definite (leading minor {} is {:.6g})", i, I, k + 1,
+                          minors[static_cast<std::size_t>(k)]),
+              allowed);
+    }
+  }
+  if (!p.body_friction.empty()) {
+    if (p.body_friction.size() != n)
+      bad(names.body_friction, fmt::format("{} values for {} bodies", p.body_friction.size(), n), "one per body");
+    for (std::size_t i = 0; i < n; ++i)
+      if (!std::isfinite(p.body_friction[i]) || p.body_friction[i] < 0.0f)
+        bad(names.body_friction, fmt::format("body {}: {}", i, p.body_friction[i]),
+            "a finite friction coefficient >= 0 per body");
+  }
+  if (!p.body_restitution.empty()) {
+    if (p.body_restitution.size() != n)
+      bad(names.body_restitution, fmt::format("{} values for {} bodies", p.body_restitution.size(), n),
+          "one per body");
+    for (std::size_t i = 0; i < n; ++i)
+      if (!(p.body_restitution[i] >= 0.0f && p.body_restitution[i] <= 1.0f))
+        bad(names.body_restitution, fmt::format("body {}: {}", i, p.body_restitution[i]),
+            "a restitution in [0, 1] per body");
+  }
+  if (!std::isfinite(p.mu) || p.mu < 0.0) bad(names.mu, fmt::format("{}", p.mu), "a finite friction coefficient >= 0");
+  if (!(p.restitution >= 0.0 && p.restitution <= 1.0))
+    bad(names.restitution, fmt::format("{}", p.restitution), "a restitution in [0, 1]");
+  if (!std::isfinite(p.contact_margin) || p.contact_margin < 0.0)
+    bad(names.contact_margin, fmt::format("{}", p.contact_margin), "a finite distance >= 0 (m)");
+  if (!std::isfinite(p.slop) || !(p.slop > 0.0)) bad(names.slop, fmt::format("{}", p.slop), "a finite slop > 0 (m)");
+}
 
 void check_frame_record(const FrameRecord& rec, std::size_t n, const std::string& origin,
                         const RecordFieldNames& names) {
@@ -85,10 +267,41 @@ void check_frame_record(const FrameRecord& rec, std::size_t n, const std::string
     check_vectors(rec.x_post, n, origin, names.x_post, f);
     check_vectors(rec.v_post, n, origin, names.v_post, f);
   }
+  const bool rotation = !rec.q_pre.empty() || !rec.q_post.empty() || !rec.w_pre.empty() || !rec.w_post.empty();
+  if (rotation) {
+    if (!states)
+      fail(origin, names.q_pre, f, "orientations without positions and velocities",
+           "orientations and angular velocities with x_pre, v_pre, x_post, v_post");
+    const std::string together =
+        "orientations and angular velocities before and after the step together (or none: no rotation)";
+    const bool q = !rec.q_pre.empty() || !rec.q_post.empty(), w = !rec.w_pre.empty() || !rec.w_post.empty();
+    if (!q) fail(origin, names.q_pre, f, "angular velocities without orientations", together);
+    if (!w) fail(origin, names.w_pre, f, "orientations without angular velocities", together);
+    if (rec.q_pre.empty() || rec.q_post.empty())
+      fail(origin, rec.q_pre.empty() ? names.q_pre : names.q_post, f,
+           rec.q_pre.empty() ? "missing (q_post given)" : "missing (q_pre given)", together);
+    if (rec.w_pre.empty() || rec.w_post.empty())
+      fail(origin, rec.w_pre.empty() ? names.w_pre : names.w_post, f,
+           rec.w_pre.empty() ? "missing (w_post given)" : "missing (w_pre given)", together);
+    check_quats(rec.q_pre, n, origin, names.q_pre, f, "before the step");
+    check_quats(rec.q_post, n, origin, names.q_post, f, "after the step");
+    check_vectors(rec.w_pre, n, origin, names.w_pre, f);
+    check_vectors(rec.w_post, n, origin, names.w_post, f);
+  }
+  if (!rec.x_det.empty()) check_vectors(rec.x_det, n, origin, names.x_det, f);
+  if (!rec.q_det.empty()) {
+    if (rec.x_det.empty())
+      fail(origin, names.q_det, f, "a detection orientation without a detection position (x_det)",
+           "x_det with q_det (or x_det alone: identity orientation)");
+    check_quats(rec.q_det, n, origin, names.q_det, f, "at detection");
+  }
   if (rec.has_pairs) check_pairs(rec.pairs, n, origin, names.pairs, f);
   std::vector<Pair> contact_pairs(rec.contacts.size());
   for (std::size_t i = 0; i < rec.contacts.size(); ++i) contact_pairs[i] = rec.contacts[i].pair;
-  check_pairs(contact_pairs, n, origin, names.contact_pair, f);
+  if (rec.manifolds)
+    check_manifold_pairs(contact_pairs, n, origin, names.contact_pair, f);
+  else
+    check_pairs(contact_pairs, n, origin, names.contact_pair, f);
   for (std::size_t i = 0; i < rec.contacts.size(); ++i) {
     const ContactRecord& c = rec.contacts[i];
     const std::string which = fmt::format("row {} (pair ({}, {}))", i, c.pair.a, c.pair.b);
@@ -104,11 +317,16 @@ void check_frame_record(const FrameRecord& rec, std::size_t n, const std::string
            "a finite normal impulse >= 0 (kg m/s)");
     if (!std::isfinite(c.jt))
       fail(origin, names.contact_jt, f, fmt::format("{} is {}", which, c.jt), "a finite impulse (kg m/s)");
+    if (rec.has_points && !finite(c.point))
+      fail(origin, names.contact_point, f,
+           fmt::format("{} is ({}, {}, {}): not finite", which, c.point.x, c.point.y, c.point.z),
+           "a finite world point (m)");
   }
 }
 
 struct ExternalValidator::Impl {
   ExternalOptions options;
+  PhysicsBodies physics;
   std::shared_ptr<Model> model;
   bool domain_given = false;
   std::unique_ptr<FrameValidators> validators;
@@ -118,6 +336,7 @@ ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const Externa
     : impl_(std::make_unique<Impl>()) {
   Impl& s = *impl_;
   s.options = options;
+  s.physics = bodies.physics;
   const std::string& origin = options.engine;
   auto model = std::make_shared<Model>();
   if (!bodies.scene_json.empty()) {
@@ -128,18 +347,7 @@ ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const Externa
       throw InputError(fmt::format("{}: local_boxes: {} boxes, the scene has {} bodies; allowed: one per body of "
                                    "the scene (walls first, then each group's bodies)",
                                    origin, bodies.local_boxes.size(), n));
-    for (std::size_t i = 0; i < bodies.local_boxes.size(); ++i) {
-      const Aabb& a = bodies.local_boxes[i];
-      const Aabb& b = model->local_box(i);
-      const float d = std::max({std::fabs(a.min.x - b.min.x), std::fabs(a.min.y - b.min.y),
-                                std::fabs(a.min.z - b.min.z), std::fabs(a.max.x - b.max.x),
-                                std::fabs(a.max.y - b.max.y), std::fabs(a.max.z - b.max.z)});
-      if (!(d <= 1e-5f * (1.0f + length(b.max - b.min))))
-        throw InputError(fmt::format("{}: local_boxes: body {} is ({}, {}, {})-({}, {}, {}), the scene's is "
-                                     "({}, {}, {})-({}, {}, {}); allowed: the scene's local box (within 1e-5)",
-                                     origin, i, a.min.x, a.min.y, a.min.z, a.max.x, a.max.y, a.max.z, b.min.x,
-                                     b.min.y, b.min.z, b.max.x, b.max.y, b.max.z));
-    }
+    place_scene_shapes(*model, bodies.local_boxes, origin);
     if (!bodies.inverse_mass.empty() && bodies.inverse_mass.size() != n)
       throw InputError(fmt::format("{}: inverse_mass: {} values, the scene has {} bodies; allowed: one per body",
                                    origin, bodies.inverse_mass.size(), n));
@@ -218,6 +426,7 @@ ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const Externa
       s.domain_given = true;
     }
   }
+  check_physics_bodies(bodies.physics, model->initial.w, origin);
   s.model = std::move(model);
 }
 
@@ -232,7 +441,15 @@ void ExternalValidator::observe(FrameRecord rec, bool checked) {
   const Model& model = *s.model;
   const std::size_t n = model.bodies.size();
   check_frame_record(rec, n, s.options.engine);
-  if (rec.aabbs.empty()) {
+  if (rec.aabbs.empty() && !rec.x_det.empty()) {
+    // A rotating engine's record (SPEC 13): the exact world AABBs at its detection pose.
+    rec.aabbs.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Pose pose{rec.x_det[i], rec.q_det.empty() ? Quat{} : rec.q_det[i]};
+      const Shape& shape = model.shapes[model.bodies[i].shape];
+      rec.aabbs[i] = shape.mesh ? posed_mesh_aabb(*shape.mesh, pose) : posed_box_aabb(shape.local, pose);
+    }
+  } else if (rec.aabbs.empty()) {
     // SPEC 4.1 then 4.2, with the same float32 operations as octocd's engines.
     rec.aabbs.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
@@ -243,7 +460,8 @@ void ExternalValidator::observe(FrameRecord rec, bool checked) {
   }
   rec.has_contact_terms = false;
   rec.confirmed.clear();
-  for (const ContactRecord& c : rec.contacts) rec.confirmed.push_back(c.pair);
+  for (const ContactRecord& c : rec.contacts)  // a manifold's rows are consecutive: one pair each
+    if (rec.confirmed.empty() || !(rec.confirmed.back() == c.pair)) rec.confirmed.push_back(c.pair);
   if (!s.validators) {
     if (!s.domain_given) {
       // The first frame's bounding box (the octrees' root cube is built around it).
@@ -261,8 +479,13 @@ void ExternalValidator::observe(FrameRecord rec, bool checked) {
     vo.tol = s.options.tol;
     vo.overridden = s.options.overridden;
     s.validators = std::make_unique<FrameValidators>(
-        model, vo, compared_broadphases(model.scene, s.options.against_fcl),
-        FrameValidators::Source{fmt::format("engine '{}'", s.options.engine), false, s.options.spec6_response});
+        // Another engine's pairs are judged by the physics tier (broadphase completeness),
+        // not against octocd's broadphases: none are compared here.
+        model, vo, std::vector<std::unique_ptr<BroadPhase>>{},
+        FrameValidators::Source{fmt::format("engine '{}'", s.options.engine), false, s.options.spec6_response,
+                                std::make_shared<PhysicsBodies>(s.options.octocd_engine
+                                                                    ? octocd_physics_bodies(model)
+                                                                    : s.physics)});
   }
   s.validators->observe(rec, checked);
 }

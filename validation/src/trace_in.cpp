@@ -13,6 +13,8 @@
 
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
+#include "octocd/physics.hpp"
+#include "octocd/scene.hpp"
 #include "hdf5_handle.hpp"  // core/src (private include)
 
 namespace octocd {
@@ -31,7 +33,10 @@ struct Dataset {
 
 class TraceIn {
  public:
-  explicit TraceIn(const std::string& path) : path_(path) {
+  /// Opens and checks `path`. `with_scene`: the root attribute `scene` is parsed for the
+  /// physics defaults (its response's mu_s, e and slop; dt and gravity of the "integrated"
+  /// detection pose); false (--check-only) leaves the scene to the validator, as in v1.
+  explicit TraceIn(const std::string& path, bool with_scene = true) : path_(path) {
     if (H5Fis_hdf5(path.c_str()) <= 0)
       throw InputError(fmt::format("{}: not a readable HDF5 file; allowed: an external trace (docs/trace-format.md)",
                                    path));
@@ -44,7 +49,10 @@ class TraceIn {
     if (format != "octocd-trace")
       bad("/ (root attribute format)", format.empty() ? "missing" : fmt::format("'{}'", format), "\"octocd-trace\"");
     const double version = number_attr("version", -1);
-    if (version != 1) bad("/ (root attribute version)", version < 0 ? "missing" : fmt::format("{}", version), "1");
+    if (version != 1 && version != 2)
+      bad("/ (root attribute version)", version < 0 ? "missing" : fmt::format("{}", version),
+          "1 or 2 (docs/trace-format.md, External traces)");
+    info.version = static_cast<int>(version);
     const std::string engine = string_attr("engine");
     if (!engine.empty()) info.engine = engine;
     bodies.scene_json = string_attr("scene");
@@ -156,6 +164,13 @@ class TraceIn {
         expect(*d, {c}, fmt::format("{} values, one per contact (as /contacts/pair)", c));
       rows_match(c_pair_, contact_offsets_, "/contacts/offsets");
     }
+    det_dt_ = bodies.dt;
+    det_gravity_ = bodies.gravity;
+    if (with_scene && info.has_scene) scene_defaults();
+    if (info.version == 2)
+      read_v2();
+    else
+      reject_v2_datasets();
   }
 
   ExternalTraceInfo info;
@@ -165,6 +180,7 @@ class TraceIn {
   FrameRecord frame(std::int64_t f) {
     FrameRecord rec;
     rec.frame = f;
+    rec.has_contact_terms = false;  // a trace's contacts: pair, normal, depth, jn, jt (v2: point)
     const hsize_t r = static_cast<hsize_t>(f);
     if (info.has_aabbs) {
       const std::vector<float> lo = read<float>(aabb_min_, r - 1, 1), hi = read<float>(aabb_max_, r - 1, 1);
@@ -205,11 +221,181 @@ class TraceIn {
     names.contact_jt = "/contacts/jt";
     names.x_pre = names.x_post = "/states/position";
     names.v_pre = names.v_post = "/states/velocity";
+    if (info.version == 2) fill_v2(rec, f, names);
     check_frame_record(rec, n_, path_, names);
     return rec;
   }
 
  private:
+  // ---- Version 2 (SPEC 13; docs/trace-format.md, "Version 2"): kept apart from the v1
+  // reading above.
+
+  /// The datasets version 2 adds: an error in a version 1 file.
+  static constexpr const char* kV2Datasets[] = {"/states/orientation", "/states/angular_velocity",
+                                                "/bodies/inertia",     "/contacts/point",
+                                                "/bodies/friction",    "/bodies/restitution"};
+
+  void reject_v2_datasets() const {
+    for (const char* name : kV2Datasets)
+      if (exists(name))
+        bad(name, "present in a version 1 file (v1/v2 fields mixed)",
+            "root attribute version = 2 with the version 2 datasets, or a version 1 file without them");
+  }
+
+  /// The physics defaults from the scene (both versions): its response's mu_s, e and slop
+  /// (the root attributes and /bodies tables of version 2 override them); its dt and
+  /// gravity for the "integrated" detection pose.
+  void scene_defaults() {
+    const Scene scene = parse_scene(bodies.scene_json, path_ + ": / (root attribute scene)");
+    bodies.physics.mu = scene.response.mu_static;
+    bodies.physics.restitution = scene.response.restitution;
+    bodies.physics.slop = scene.response.slop;
+    det_dt_ = scene.dt;
+    det_gravity_ = scene.gravity;
+  }
+
+  /// Root attributes, /bodies physics, rotation and contact points of a version 2 file.
+  void read_v2() {
+    PhysicsBodies& p = bodies.physics;
+    PhysicsFieldNames names;
+    names.inertia = "/bodies/inertia";
+    names.body_friction = "/bodies/friction";
+    names.body_restitution = "/bodies/restitution";
+    names.mu = "/ (root attribute mu)";
+    names.restitution = "/ (root attribute restitution)";
+    names.contact_margin = "/ (root attribute contact_margin)";
+    names.slop = "/ (root attribute scene: response.slop)";
+    const std::string detection = choice_attr("detection", {"pre-step", "integrated"}, "pre-step");
+    integrated_ = detection == "integrated";
+    if (has_attr("mu")) p.mu = number_attr("mu", 0.0);
+    if (has_attr("restitution")) p.restitution = number_attr("restitution", 0.0);
+    std::vector<std::string> combines;
+    for (MaterialCombine c : {MaterialCombine::Product, MaterialCombine::Min, MaterialCombine::Max,
+                              MaterialCombine::Average, MaterialCombine::Geometric})
+      combines.push_back(material_combine_name(c));
+    p.combine = combine_attr("friction_combine", combines);
+    p.restitution_combine = combine_attr("restitution_combine", combines);
+    if (has_attr("contact_margin")) p.contact_margin = number_attr("contact_margin", 0.0);
+    if (has_attr("broadphase_exact")) {
+      const double exact = number_attr("broadphase_exact", 0.0);
+      if (exact != 0.0 && exact != 1.0)
+        bad("/ (root attribute broadphase_exact)", fmt::format("{}", exact),
+            "0 (default: any broadphase, extras allowed) or 1 (exactly the overlapping world AABBs)");
+      p.broadphase_exact = exact == 1.0;
+    }
+    p.contact_geometry = choice_attr("contact_geometry", {"shape", "aabb"}, "shape") == "aabb" ? ContactGeometry::Aabb
+                                                                                               : ContactGeometry::Shape;
+
+    // Per-body tables.
+    Dataset inertia = open("/bodies/inertia", H5T_FLOAT, 3, false);
+    if (inertia.present()) {
+      expect(inertia, {n_, 3, 3}, fmt::format("{} x 3 x 3: one body-frame tensor per body (kg m^2)", n_));
+      const std::vector<double> v = read<double>(inertia, 0, n_);
+      p.inertia.resize(n_);
+      for (hsize_t i = 0; i < n_; ++i)
+        std::copy_n(v.begin() + static_cast<std::ptrdiff_t>(9 * i), 9, p.inertia[i].begin());
+    } else {
+      for (hsize_t i = 0; i < n_; ++i) p.inertia.push_back(box_inertia(bodies.local_boxes[i], bodies.inverse_mass[i]));
+    }
+    for (const char* name : {"/bodies/friction", "/bodies/restitution"}) {
+      Dataset d = open(name, H5T_FLOAT, 1, false);
+      if (!d.present()) continue;
+      expect(d, {n_}, fmt::format("{} values, one per body (as /bodies/inverse_mass)", n_));
+      (std::string(name) == "/bodies/friction" ? p.body_friction : p.body_restitution) = read<float>(d, 0, n_);
+    }
+    check_physics_bodies(p, bodies.inverse_mass, path_, names);
+
+    // Rotation: both datasets or neither, with /states.
+    orientation_ = open("/states/orientation", H5T_FLOAT, 3, false);
+    angular_ = open("/states/angular_velocity", H5T_FLOAT, 3, false);
+    if (orientation_.present() != angular_.present())
+      bad(orientation_.present() ? "/states/angular_velocity" : "/states/orientation",
+          orientation_.present() ? "missing (orientation without angular_velocity)"
+                                 : "missing (angular_velocity without orientation)",
+          "/states/orientation and /states/angular_velocity together, or neither (no rotation)");
+    if (orientation_.present()) {
+      if (!info.has_states)
+        bad(orientation_.name, "without /states/position", "orientations with /states/position and /states/velocity");
+      const hsize_t rows = position_.dims[0];
+      expect(orientation_, {rows, n_, 4},
+             fmt::format("{} x {} x 4, as /states/position: (w, x, y, z) per body", rows, n_));
+      expect(angular_, {rows, n_, 3}, fmt::format("{} x {} x 3, as /states/position (rad/s, world frame)", rows, n_));
+      info.has_rotation = true;
+    }
+    c_point_ = open("/contacts/point", H5T_FLOAT, 2, false);
+    if (c_point_.present()) {
+      if (!info.has_contacts) bad(c_point_.name, "without /contacts/pair", "contact points with /contacts");
+      expect(c_point_, {c_pair_.dims[0], 3},
+             fmt::format("{} x 3, one world point per contact row (as /contacts/pair)", c_pair_.dims[0]));
+      info.has_points = true;
+    }
+  }
+
+  /// Step f's version 2 fields (the v1 fields are read already).
+  void fill_v2(FrameRecord& rec, std::int64_t f, RecordFieldNames& names) {
+    const hsize_t r = static_cast<hsize_t>(f);
+    names.q_pre = names.q_post = names.q_det = "/states/orientation";
+    names.w_pre = names.w_post = "/states/angular_velocity";
+    names.x_det = "/states/position";
+    names.contact_point = "/contacts/point";
+    if (info.has_rotation) {
+      rec.q_pre = quats(read<float>(orientation_, r - 1, 1));
+      rec.q_post = quats(read<float>(orientation_, r, 1));
+      rec.w_pre = vectors(read<float>(angular_, r - 1, 1));
+      rec.w_post = vectors(read<float>(angular_, r, 1));
+    }
+    if (info.has_states) {
+      // Where collision detection ran; never inferred from /aabbs.
+      rec.x_det = rec.x_pre;
+      rec.q_det = rec.q_pre;
+      if (integrated_)  // SPEC 4.1: v + dt g, then x + dt v (float32, as octocd's engines)
+        for (std::size_t i = 0; i < rec.x_det.size(); ++i) {
+          Vec3 v = rec.v_pre[i];
+          integrate(rec.x_det[i], v, bodies.inverse_mass[i], det_gravity_, Vec3{}, det_dt_);
+        }
+    }
+    rec.manifolds = true;
+    if (info.has_contacts) {
+      for (std::size_t k = 1; k < rec.contacts.size(); ++k)
+        if (rec.contacts[k].pair == rec.contacts[k - 1].pair) info.manifolds = true;
+      if (info.has_points) {
+        const hsize_t first = static_cast<hsize_t>(contact_offsets_[r - 1]);
+        const std::vector<Vec3> points = vectors(read<float>(c_point_, first, rec.contacts.size()));
+        for (std::size_t k = 0; k < points.size(); ++k) rec.contacts[k].point = points[k];
+        rec.has_points = true;
+      }
+    }
+  }
+
+  static std::vector<Quat> quats(const std::vector<float>& wxyz) {
+    std::vector<Quat> out(wxyz.size() / 4);
+    for (std::size_t i = 0; i < out.size(); ++i)
+      out[i] = {wxyz[4 * i], wxyz[4 * i + 1], wxyz[4 * i + 2], wxyz[4 * i + 3]};
+    return out;
+  }
+
+  bool has_attr(const char* name) const { return H5Aexists(file_, name) > 0; }
+
+  /// A string attribute that must be one of `allowed` (absent: `fallback`).
+  std::string choice_attr(const char* name, const std::vector<std::string>& allowed,
+                          const std::string& fallback) const {
+    if (!has_attr(name)) return fallback;
+    const std::string value = string_attr(name);
+    if (std::find(allowed.begin(), allowed.end(), value) != allowed.end()) return value;
+    std::string list;
+    for (const std::string& a : allowed) list += (list.empty() ? "\"" : ", \"") + a + "\"";
+    bad(fmt::format("/ (root attribute {})", name), fmt::format("'{}' unknown", value),
+        fmt::format("{} (default \"{}\")", list, fallback));
+  }
+
+  MaterialCombine combine_attr(const char* name, const std::vector<std::string>& names) const {
+    const std::string value = choice_attr(name, names, "product");
+    for (MaterialCombine c : {MaterialCombine::Product, MaterialCombine::Min, MaterialCombine::Max,
+                              MaterialCombine::Average, MaterialCombine::Geometric})
+      if (value == material_combine_name(c)) return c;
+    return MaterialCombine::Product;
+  }
+
   [[noreturn]] void bad(const std::string& dataset, const std::string& problem, const std::string& allowed) const {
     throw InputError(fmt::format("{}: {}: {}; allowed: {}", path_, dataset, problem, allowed));
   }
@@ -298,6 +484,7 @@ class TraceIn {
     Handle mem_space(H5Screate_simple(static_cast<int>(size.size()), size.data(), nullptr));
     hid_t mem_type = H5T_NATIVE_FLOAT;
     if constexpr (std::is_same_v<T, std::int64_t>) mem_type = H5T_NATIVE_INT64;
+    if constexpr (std::is_same_v<T, double>) mem_type = H5T_NATIVE_DOUBLE;
     if (H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start.data(), nullptr, size.data(), nullptr) < 0 ||
         H5Dread(d.id, mem_type, mem_space, file_space, H5P_DEFAULT, out.data()) < 0)
       throw RuntimeError(fmt::format("{}: {}: reading rows {}..{} failed", path_, d.name, row, row + count - 1));
@@ -359,13 +546,35 @@ class TraceIn {
   hsize_t n_ = 0;
   std::int64_t frames_ = 0;
   Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_;
+  // Version 2.
+  Dataset orientation_, angular_, c_point_;
+  bool integrated_ = false;  ///< root attribute detection = "integrated"
+  float det_dt_ = 0.001f;    ///< dt and gravity of the "integrated" detection pose
+  Vec3 det_gravity_{};
   std::vector<std::int64_t> pair_offsets_, contact_offsets_;
 };
 
 }  // namespace
 
+struct ExternalTrace::Impl {
+  explicit Impl(const std::string& file) : in(file), path(file) {}
+  TraceIn in;
+  std::string path;
+};
+
+ExternalTrace::ExternalTrace(const std::string& path) : impl_(std::make_unique<Impl>(path)) {}
+ExternalTrace::~ExternalTrace() = default;
+const ExternalTraceInfo& ExternalTrace::info() const { return impl_->in.info; }
+const ExternalBodies& ExternalTrace::bodies() const { return impl_->in.bodies; }
+FrameRecord ExternalTrace::frame(std::int64_t f) {
+  if (f < 1 || f > impl_->in.info.frames)
+    throw InputError(
+        fmt::format("{}: frame {}: out of range; allowed: 1 .. {}", impl_->path, f, impl_->in.info.frames));
+  return impl_->in.frame(f);
+}
+
 ExternalTraceInfo check_external_trace(const std::string& path) {
-  TraceIn in(path);
+  TraceIn in(path, false);
   for (std::int64_t f = 1; f <= in.info.frames; ++f) in.frame(f);
   return in.info;
 }
@@ -377,6 +586,7 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   TraceIn in(path);
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;
+  options.octocd_engine = in.info.engine == "cpu" || in.info.engine == "cuda";
   // With a scene, the bodies come from it and the trace's tables must match it.
   ExternalValidator validator(in.bodies, options);
   const std::int64_t frames = max_frames > 0 ? std::min(max_frames, in.info.frames) : in.info.frames;

@@ -100,6 +100,13 @@ struct BodyState {
   std::vector<Vec3> x;   ///< positions: centre of the world AABB (m)
   std::vector<Vec3> v;   ///< velocities (m/s)
   std::vector<float> w;  ///< inverse masses (1/kg); 0 = static
+  /// Rotating engines only (SPEC 13: `bullet` with rotation): orientations (unit
+  /// quaternions, body to world) and angular velocities (rad/s, world frame), one per
+  /// body; x is then the origin of the body frame (the centre of the shape's local AABB,
+  /// Bullet's centre of mass). Empty for octocd's engines, which translate only
+  /// (identity, zero).
+  std::vector<Quat> q;
+  std::vector<Vec3> omega;
   /// Number of bodies.
   std::size_t size() const { return x.size(); }
 };
@@ -116,7 +123,7 @@ struct Model {
   Scene scene;                  ///< the validated scene
   std::vector<Shape> shapes;    ///< indexed by BodyInfo::shape
   std::vector<BodyInfo> bodies; ///< per body
-  BodyState initial;            ///< state at frame 0
+  BodyState initial;            ///< state at frame 0 (q, omega filled when scene_rotates)
   /// Per shape (m): the scene's theta, or with `auto` the shape's mean edge; a pair's theta
   /// is the larger of its two shapes' values (pair_theta). O(shapes), not O(shapes^2).
   std::vector<float> theta_shape;
@@ -176,6 +183,30 @@ struct FrameRecord {
   bool has_points = false;
 };
 
+/// What a rotating engine states about its bodies and contacts beyond the Model (SPEC 13):
+/// the root attributes and /bodies tables of a version-2 trace (docs/trace-format.md,
+/// "Version 2"), so octocd's physics-tier validators judge it with the engine's own
+/// inertia, materials and contact margin. Engines that translate only have none.
+struct RotationTraits {
+  /// Body-frame inertia tensor per body (kg m^2, row-major 3x3; zeros for static bodies).
+  std::vector<std::array<float, 9>> inertia;
+  /// Per-body friction coefficient and restitution (>= 0), combined per pair by
+  /// `friction_combine` / `restitution_combine`.
+  std::vector<float> body_friction, body_restitution;
+  /// The pair values the per-body ones combine to (the scene's mu and e).
+  float mu = 0.6f, restitution = 0.5f;
+  /// "product" (Bullet's rule), "min", "max", "average" or "geometric".
+  std::string friction_combine = "product", restitution_combine = "product";
+  /// Contacts are reported up to this distance between the shapes (m).
+  float contact_margin = 0.02f;
+  /// "pre-step" (detection at the state before the step) or "integrated".
+  std::string detection = "pre-step";
+  /// The candidate pairs are exactly the overlapping world AABBs (false: conservative).
+  bool broadphase_exact = false;
+  /// "shape" (contacts computed on the posed shapes) or "aabb".
+  std::string contact_geometry = "shape";
+};
+
 /// One simulation engine: `cpu` (World), `cuda` (CudaWorld), `bullet` (BulletWorld).
 /// Holders never branch on the name. Not thread-safe.
 class Engine {
@@ -213,7 +244,12 @@ class Engine {
   /// (printed under the run summary); "" when they mean exactly what FrameMetrics says.
   virtual std::string notes() const { return ""; }
 
-  /// Whether this engine can fill FrameRecord (false for `bullet`).
+  /// For an engine whose bodies rotate (`bullet` in rotation mode): its inertia,
+  /// materials and contact conventions (a trace is then written as version 2). nullptr
+  /// (the default) for engines that translate only.
+  virtual const RotationTraits* rotation_traits() const { return nullptr; }
+
+  /// Whether this engine can fill FrameRecord (false for `bullet` without rotation).
   virtual bool can_record() const { return false; }
   /// Turns the per-step FrameRecord on or off (off by default: it costs copies).
   virtual void set_recording(bool on) { (void)on; }

@@ -16,6 +16,7 @@
 #include "octocd/broadphase.hpp"
 #include "octocd/math.hpp"
 #include "octocd/midphase.hpp"
+#include "octocd/pose.hpp"
 
 namespace octocd {
 
@@ -43,6 +44,9 @@ constexpr double kMaxMass = 1e9;
 constexpr double kMaxSpeed = 1e4;
 /// Largest |gravity component| (m/s^2).
 constexpr double kMaxAcceleration = 1e4;
+/// Largest |angular velocity component| (rad/s) of a group's `angular_velocity`
+/// (rotating scenes, `--engine bullet` only): 1000 rad/s turns a body 1 rad in a 1 ms step.
+constexpr double kMaxAngularSpeed = 1e3;
 /// Most bodies in a scene (sum of the groups' counts; walls excluded). Body indices are
 /// 32-bit; the CPU engine takes about 300 B a body (3 GB at 10^7).
 constexpr std::size_t kMaxBodies = 10000000;
@@ -101,6 +105,14 @@ struct GroupSpec {
   LayoutSpec layout;         ///< placement when `positions` is empty
   VelocitySpec velocity;     ///< initial velocities
   std::vector<Vec3> positions;  ///< explicit centres (m), overrides layout when non-empty
+  /// Initial orientation of every body of the group (unit quaternion, body to world;
+  /// scene key `orientation`: [w, x, y, z] or {"axis": [x, y, z], "angle_deg": A}).
+  /// Identity by default. Only `--engine bullet` rotates (SPEC 13); cpu and cuda refuse a
+  /// non-identity value (require_translation_only).
+  Quat orientation;
+  /// Initial angular velocity (rad/s, world frame) of every dynamic body of the group
+  /// (scene key `angular_velocity`); zero by default; static bodies get zero.
+  Vec3 angular_velocity{0.0f, 0.0f, 0.0f};
 };
 
 /// Static walls generated from the domain box ("none", "floor", "open-box",
@@ -127,7 +139,21 @@ struct Scene {
   MidphaseConfig midphase;      ///< "midphase.levels"
   int mesh_octree_depth = 2;    ///< D_m in [0, 10]; -1 = `auto`
   std::string data_dir;      ///< where dataset meshes are looked up
+  /// Scene key `rotation` (default false): the bodies rotate (SPEC 13). Only
+  /// `--engine bullet` runs such a scene (BulletWorld's rotation mode); `octocd run
+  /// --rotation` sets it on the loaded scene.
+  bool rotation = false;
 };
+
+/// True when the scene needs a rotating engine: `rotation` is true, or some group has a
+/// non-identity `orientation` or a non-zero `angular_velocity`.
+bool scene_rotates(const Scene& scene);
+
+/// Refuses a rotating scene (scene_rotates) for an engine that translates only (SPEC 3:
+/// `cpu`, `cuda`): throws InputError "<scene file>: KEY: engine ENGINE translates only
+/// (SPEC 3) ...; allowed: ..., or --engine bullet" naming the first key that asks for
+/// rotation (`rotation`, `groups[i].orientation` or `groups[i].angular_velocity`).
+void require_translation_only(const Scene& scene, const std::string& engine);
 
 /// Total number of bodies over all groups.
 std::size_t body_count(const Scene& scene);

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -44,6 +45,16 @@ struct TraceOptions {
   int state_every = 10;     ///< record positions/velocities every k-th frame (k >= 1)
   bool contacts = false;    ///< record /contacts
   int flush_every = 50;     ///< flush to disk every this many frames (>= 1)
+  /// Set: write format version 2 (docs/trace-format.md, "Version 2": a rotating engine,
+  /// Engine::rotation_traits()): root attributes detection, mu, restitution,
+  /// friction_combine, restitution_combine, contact_margin, broadphase_exact,
+  /// contact_geometry, gravity; /bodies/inertia, friction, restitution;
+  /// /states/orientation and angular_velocity beside every state row; with `contacts`,
+  /// /contacts/point, /pairs (offsets, pair) and /aabbs (min, max) from append_frame_v2.
+  /// Unset: version 1, byte for byte as before.
+  std::optional<RotationTraits> v2;
+  /// Version 2: gravity (m/s^2) for the root attribute `gravity`.
+  Vec3 gravity{0.0f, -9.81f, 0.0f};
 };
 
 /// Writes one trace file. Creates (truncates) `path`. All writes append; nothing written
@@ -67,8 +78,16 @@ class TraceWriter {
   /// `append_state`); flushes every `flush_every` rows.
   void append_frame(const FrameMetrics& m, const BodyState& state,
                     const std::vector<ContactRecord>& contacts);
-  /// Appends a state row for `frame` (used for the initial state, frame 0).
+  /// Appends a state row for `frame` (used for the initial state, frame 0). Version 2:
+  /// also the row of /states/orientation and /states/angular_velocity (state.q, omega;
+  /// identity and zero when empty).
   void append_state(std::int64_t frame, const BodyState& state);
+  /// Version 2 (TraceOptions::v2): one step of a rotating engine from its record: with
+  /// `contacts`, rec.aabbs (/aabbs, one row of n boxes), rec.pairs (/pairs, CSR) and
+  /// rec.contacts with their points (/contacts/point); then append_frame(m, state,
+  /// rec.contacts). Throws RuntimeError when the trace is version 1 or the record's sizes
+  /// do not match the bodies.
+  void append_frame_v2(const FrameMetrics& m, const BodyState& state, const FrameRecord& rec);
   /// Flushes everything written so far to disk.
   void flush();
   /// Flushes and closes the file (idempotent; the destructor calls it).
@@ -82,6 +101,7 @@ class TraceWriter {
 
  private:
   void create_layout(const TraceMetadata& meta, const TraceBodies& bodies);
+  void create_v2_layout();
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

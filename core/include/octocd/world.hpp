@@ -49,14 +49,16 @@ struct PlantedFaults {
 class World : public Engine {
  public:
   /// Builds the model (build_model) and the scene's broadphase. Throws InputError for
-  /// unreadable meshes or an unknown broadphase.
+  /// unreadable meshes, an unknown broadphase, or a rotating scene (scene_rotates: the
+  /// cpu engine translates only, SPEC 3; require_translation_only names the key).
   explicit World(const Scene& scene);
 
   /// Same, with a broadphase made by the caller (e.g. a Bullet or FCL reference from
   /// make_any_broadphase). Takes ownership; `broadphase` must not be null.
   World(const Scene& scene, std::unique_ptr<BroadPhase> broadphase);
 
-  /// From an already built model (shared, not copied) and a broadphase (owned).
+  /// From an already built model (shared, not copied) and a broadphase (owned). Throws
+  /// InputError for a rotating scene (require_translation_only).
   World(std::shared_ptr<const Model> model, std::unique_ptr<BroadPhase> broadphase);
 
   /// Turns planted faults on or off (validator self-tests only).

@@ -125,7 +125,9 @@ class CudaWorld : public Engine {
   /// cuda_device_bytes_needed(*model, broadphase) bytes free (RuntimeError naming the bytes
   /// needed and free otherwise; see the class comment), then uploads the model's initial
   /// state, shapes and octrees. `broadphase` as in `--broadphase` ("flat", "octree",
-  /// "octree-strict" or "spatial-hash"). `model` must not be null (InputError).
+  /// "octree-strict" or "spatial-hash"). `model` must not be null (InputError); a
+  /// rotating scene is refused (InputError naming the key, require_translation_only: the
+  /// cuda engine translates only, SPEC 3).
   CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase);
   ~CudaWorld() override;
   CudaWorld(const CudaWorld&) = delete;

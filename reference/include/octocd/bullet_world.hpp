@@ -57,6 +57,36 @@ namespace octocd {
 /// internal step of dt per frame, no sub-stepping and no interpolation. Bullet's
 /// integrator is semi-implicit Euler like SPEC 4.1 (v += dt g, then x += dt v), so free
 /// fall follows the same closed form as octocd.
+///
+/// Rotation mode (SPEC 13: octocd's own rotating reference). On when scene_rotates(scene):
+/// the scene key `rotation: true` (`octocd run --engine bullet --rotation` sets it), or a
+/// group with an `orientation` or `angular_velocity`. Everything above holds except:
+/// - angular motion: no setAngularFactor(0); inertia = btCollisionShape::
+///   calculateLocalInertia(mass) (boxes: the solid box m/12 (b^2 + c^2), ...; hulls: the
+///   same of their AABB, Bullet's rule for convex shapes); Bullet's default implicit
+///   gyroscopic term (BT_ENABLE_GYROSCOPIC_FORCE_IMPLICIT_BODY); initial orientation and
+///   angular velocity from the model (BodyState::q, omega);
+/// - shapes: boxes stay btBoxShape (btBoxBoxDetector for box-box pairs, GJK/EPA against
+///   hulls) with the collision margin lowered to min(1 mm, a tenth of the smallest half
+///   extent): btBoxShape keeps its margin INSIDE the half extents, but GJK rounds the
+///   box's edges and corners with it (4 cm at the default); meshes (and icospheres) are
+///   btConvexHullShape of the vertices of the mesh's convex hull (btConvexHullComputer),
+///   margin min(1 mm, a tenth of the smallest half side): a hull's margin lies OUTSIDE the
+///   hull (the default 0.04 m would inflate every mesh by 4 cm), so a hull rests on its
+///   margin, 1 mm above what it touches (recorded rows: true distance 1 mm, depth 0). A concave mesh collides
+///   as its hull: the bunny's hull at scale 0.2 lies up to 5 cm (mean 9 mm) off the mesh,
+///   so a judge on the true mesh (FCL) would see contacts where the meshes are farther
+///   apart than the contact margin. The rotating scenes (rot-*) therefore use convex
+///   meshes (icospheres), whose hull is the mesh; concave meshes would need GImpact
+///   (btGImpactMeshShape), not done;
+/// - contact breaking threshold: an absolute 0.02 m (gContactBreakingThreshold) for every
+///   pair (the dispatcher's relative threshold, 0.02 x a body's angular motion disc, is
+///   off), so the contact margin is one number: 0.02 m + twice the largest hull margin
+///   (rotation_traits().contact_margin);
+/// - recording (can_record() true): the FrameRecord of every step, see record();
+/// - kinetic_energy adds the rotational energy 0.5 w . (I w) of every dynamic body.
+/// Materials per body as without rotation (sqrt(mu_k), sqrt(e) on every body; Bullet
+/// multiplies them: friction_combine = restitution_combine = "product").
 class BulletWorld : public Engine {
  public:
   /// The scene, shapes and bodies of `world` (its model, shared) and its current state.
@@ -103,18 +133,52 @@ class BulletWorld : public Engine {
   std::string broadphase_name() const override { return "bullet-dbvt"; }
   /// The model it was built from.
   const Model& model() const override { return *model_; }
-  /// Bullet exposes no octocd contact records: always empty.
-  const std::vector<ContactRecord>& contacts() const override { return no_contacts_; }
+  /// Without rotation: always empty (no octocd contact records). In rotation mode while
+  /// recording: record().contacts (manifold rows with points).
+  const std::vector<ContactRecord>& contacts() const override;
+  /// True in rotation mode.
+  bool rotating() const;
+  /// In rotation mode: Bullet's local inertia, the per-body materials (product rule), the
+  /// contact margin (0.02 m breaking threshold + twice the largest hull margin),
+  /// detection "pre-step", a conservative broadphase, contacts on the shapes. nullptr
+  /// without rotation.
+  const RotationTraits* rotation_traits() const override;
+  /// True in rotation mode (false without rotation: translation-only Bullet records nothing).
+  bool can_record() const override;
+  /// Turns the per-step FrameRecord on or off (rotation mode; ignored otherwise).
+  void set_recording(bool on) override;
+  /// The last step's record (rotation mode, recording on), SPEC 13 / external trace v2:
+  /// - x_pre, v_pre, q_pre, w_pre: the state before the step; x_post, ...: after it;
+  ///   x_det, q_det = x_pre, q_pre (Bullet detects collisions before it integrates);
+  /// - aabbs: the boxes Bullet's broadphase was given this step (each proxy's AABB:
+  ///   the shape's AABB at the pre-step pose, grown over the step's predicted motion and
+  ///   fattened by the 0.02 m contact threshold);
+  /// - pairs (has_pairs): its overlapping pair cache (conservative: fattened AABBs, kept
+  ///   until they separate; never a static-static pair), as (a, b) a < b, sorted;
+  /// - contacts (manifolds, has_points; has_contact_terms false): one row per manifold
+  ///   point with distance <= the manifold's breaking threshold, the rows of a frame
+  ///   sorted by pair (a pair's rows consecutive). pair (a, b), a < b (body0/body1
+  ///   swapped and the normal flipped when body0 > body1); normal = Bullet's
+  ///   normalWorldOnB, which points from body1 to body0, i.e. from B to A; the distance
+  ///   and the two witness points are moved from the hulls' inflated surfaces (margin
+  ///   outside) to the true shapes; depth = max(0, -distance); point = the midpoint of the
+  ///   two witness points; jn = appliedImpulse; jt = the friction impulse on A
+  ///   (appliedImpulseLateral1 x lateralFrictionDir1, + lateral 2 when the solver uses
+  ///   two directions) projected on -v_t/|v_t|, v_t the tangential part of A's velocity
+  ///   relative to B's at the point, from v_pre + dt g (dynamic bodies) and w_pre, so
+  ///   jt >= 0 when friction opposes sliding; |J_t| when |v_t| <= 1e-6 m/s;
+  /// - confirmed: the pairs with at least one row.
+  const FrameRecord& record() const override;
   /// Every stage is timed (see step(); `midphase` holds Bullet's narrow phase).
   bool has_stage(Stage s) const override;
   /// How Bullet's figures differ from octocd's (see step()).
   std::string notes() const override;
-  /// "bullet-box-box": Bullet's btBoxBoxDetector on the AABB boxes, not a level list.
-  std::string midphase_name() const override { return "bullet-box-box"; }
+  /// "bullet-box-box": Bullet's btBoxBoxDetector on the AABB boxes, not a level list;
+  /// rotation mode: "bullet-convex" (btBoxBoxDetector for box pairs, GJK/EPA otherwise).
+  std::string midphase_name() const override;
 
  private:
   std::shared_ptr<const Model> model_;
-  std::vector<ContactRecord> no_contacts_;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -5,34 +5,41 @@
 /// (docs/trace-format.md, "External traces"; `octocd validate --trace-in FILE.h5`).
 ///
 /// The same FrameValidators that judge octocd's engines judge these frames: each frame is
-/// a FrameRecord (octocd/engine.hpp) that another program filled. What is judged:
-/// - candidate sets: the engine's pairs against `flat` (the oracle), with Bullet's and
-///   FCL's broadphases run on the same AABBs beside it (missing and extra pairs);
-/// - contact normals: sign agreement and angles against FCL/libccd (boxes, or meshes);
-/// - non-penetration (Eq. 14 contraction with the scene's alpha, beta, delta), friction
-///   (|v_t| never rises, |J_t| <= mu_s J_n) and conservation (momentum, mass-weighted
-///   centre) on the given before/after states;
-/// - optionally the applied state against the SPEC 6 re-derivation (an engine that
-///   implements octocd's response).
-/// Midphase completeness, the analytic scenes and the Bullet dynamics comparison need
-/// octocd's own pipeline or an engine to step; they are reported n/a with the reason.
+/// a FrameRecord (octocd/engine.hpp) that another program filled. What is judged (SPEC 13,
+/// README "Which rows judge what"): the physics tier (octocd/physics.hpp: broadphase and
+/// contact completeness, contact geometry against FCL on the posed shapes, penetration,
+/// friction, conservation) for any engine, with ExternalBodies::physics; the model tier
+/// (the paper's response: Eq. 14, friction monotonicity, impulse conservation, the
+/// applied state) only for an engine that claims SPEC 6 (ExternalOptions::spec6_response),
+/// n/a with the reason otherwise. Midphase completeness, the analytic scenes and the
+/// Bullet dynamics comparison need octocd's own pipeline or an engine to step: n/a.
 ///
 /// Conventions a caller must follow (SPEC 2). Units: m, s, kg; float32 state.
 /// - Pairs are body indices (a, b) with a < b < bodies, sorted by (a, b), unique.
-/// - One contact per pair (an engine with contact manifolds gives one representative
-///   point with the pair's summed impulses), in (a, b) order; the normal is unit and
-///   points from B to A (+n applied to A separates the pair); depth >= 0 (m); J_n >= 0
-///   and J_t (kg m/s) are impulses along n and along the tangent of the relative velocity.
+/// - One contact per pair in (a, b) order, or with manifolds = true several consecutive
+///   rows per pair; the normal is unit and points from B to A (+n applied to A separates
+///   the pair); depth >= 0 (m); J_n >= 0 (kg m/s) along n; J_t (kg m/s) the friction
+///   impulse along -v_t / |v_t|, v_t the tangential velocity of A relative to B at the
+///   contact point before the solver (so J_t >= 0 when friction opposes sliding).
 /// - AABB overlap is inclusive (Eq. 6): boxes that only touch are a pair.
-/// - A body's world AABB is its local box translated by its position.
+/// - A body's world AABB is its local box translated by its position (with rotation: the
+///   bounds of its posed shape at the detection pose).
 /// - States follow SPEC 4's order: x_pre, v_pre before the step; the world AABBs after
-///   integration (semi-implicit Euler, SPEC 4.1); x_post, v_post after the response.
+///   integration (semi-implicit Euler, SPEC 4.1) unless x_det gives the detection pose;
+///   x_post, v_post after the response.
+/// Rotating engines (SPEC 13; external traces version 2) fill q_pre/q_post, w_pre/w_post
+/// (empty: identity, zero), the detection pose x_det/q_det (the pose their collision
+/// detection ran at; Bullet, PhysX: the pre-step pose), and may give manifolds (several
+/// consecutive rows per pair, manifolds = true) with world contact points
+/// (has_points = true). A body's position is then the origin of its body frame (its
+/// centre of mass), and its local box is the shape's box in that frame.
 /// A violation that can be seen in the data (a >= b, an index out of range, unsorted or
 /// duplicated pairs, a non-unit or non-finite normal, a negative depth, wrong array
 /// sizes, a non-finite value) is an InputError naming the field, the frame and the
 /// problem, never a verdict. A normal pointing from A to B or a strict overlap test gives
 /// a FAIL whose detail names the convention.
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -87,6 +94,11 @@ struct ExternalOptions {
   /// Also judge the applied state against the SPEC 6 re-derivation (SPEC 7.9,
   /// validation/model/applied_state.hpp): for an engine that implements octocd's response.
   bool spec6_response = false;
+  /// The frames are octocd's own cpu or cuda engine's (a trace whose root attribute
+  /// `engine` is "cpu" or "cuda"): the physics tier takes what those engines declare
+  /// (octocd_physics_bodies: contacts on the world AABBs, the pair's theta as contact
+  /// margin, an exact AABB broadphase) instead of ExternalBodies::physics.
+  bool octocd_engine = false;
   /// Bounds (validation.hpp); names in `overridden` are marked in format_results.
   Tolerances tol;
   std::vector<std::string> overridden;
@@ -99,16 +111,50 @@ struct RecordFieldNames {
               contact_normal = "contacts.normal", contact_depth = "contacts.depth",
               contact_jn = "contacts.jn", contact_jt = "contacts.jt", x_pre = "x_pre", v_pre = "v_pre",
               x_post = "x_post", v_post = "v_post";
+  // Rotating engines (SPEC 13).
+  std::string q_pre = "q_pre", q_post = "q_post", w_pre = "w_pre", w_post = "w_post", x_det = "x_det",
+              q_det = "q_det", contact_point = "contacts.point";
 };
 
 /// Checks one record from outside octocd against the conventions above: `aabbs` (empty
 /// allowed when the states are given) and the states (all four empty, or one per body)
-/// sized `bodies`, finite, min <= max; `pairs` (when rec.has_pairs) and contact pairs with
-/// a < b < bodies, sorted, unique; normals finite and unit (|n| within 1e-3 of 1); depth
-/// finite >= 0; J_n finite >= 0; J_t finite. Throws InputError
+/// sized `bodies`, finite, min <= max; `pairs` (when rec.has_pairs) with a < b < bodies,
+/// sorted, unique; contact pairs likewise, except that with rec.manifolds a pair may have
+/// several rows, which must be consecutive (sorted by (a, b) non-decreasingly); normals
+/// finite and unit (|n| within 1e-3 of 1); depth finite >= 0; J_n finite >= 0; J_t finite;
+/// with rec.has_points every contact point finite (m).
+/// Rotation (SPEC 13): q_pre, q_post, w_pre, w_post all empty (no rotation) or all one per
+/// body, and then the states too; quaternions finite with | |q| - 1 | <= 1e-3; angular
+/// velocities finite (rad/s). Detection pose: x_det empty or one finite position per
+/// body; q_det empty or one unit quaternion per body, only with x_det. Throws InputError
 /// "ORIGIN: FIELD: frame F: PROBLEM; allowed: RANGE".
 void check_frame_record(const FrameRecord& rec, std::size_t bodies, const std::string& origin,
                         const RecordFieldNames& names = {});
+
+/// Names of PhysicsBodies' fields in error messages (the C++ names by default; external
+/// traces give their datasets and root attributes).
+struct PhysicsFieldNames {
+  std::string inertia = "physics.inertia", body_friction = "physics.body_friction",
+              body_restitution = "physics.body_restitution", mu = "physics.mu",
+              restitution = "physics.restitution", contact_margin = "physics.contact_margin",
+              slop = "physics.slop";
+};
+
+/// Checks what the physics tier is told of the bodies (SPEC 13) for `inverse_mass.size()`
+/// bodies: `inertia` empty or one per body, finite, symmetric (|I_rc - I_cr| <= 1e-4
+/// max |I|) and positive definite (Sylvester: leading minors > 0) for every dynamic body
+/// (static bodies: anything finite, zeros allowed); `body_friction` empty or one finite
+/// value >= 0 per body; `body_restitution` empty or one per body in [0, 1]; `mu` finite
+/// >= 0; `restitution` in [0, 1]; `contact_margin` finite >= 0; `slop` finite > 0.
+/// Throws InputError "ORIGIN: FIELD: [body I: ]PROBLEM; allowed: RANGE".
+void check_physics_bodies(const PhysicsBodies& physics, const std::vector<float>& inverse_mass,
+                          const std::string& origin, const PhysicsFieldNames& names = {});
+
+/// The inertia tensor (kg m^2, body frame, row-major 3x3) of a solid box `local` of mass
+/// 1 / inverse_mass: m/12 diag(b^2 + c^2, a^2 + c^2, a^2 + b^2) for side lengths a, b, c
+/// (Bullet's rule for convex shapes: btBoxShape::calculateLocalInertia of the bounding
+/// box). Zeros for a static body (inverse_mass 0).
+std::array<double, 9> box_inertia(const Aabb& local, float inverse_mass);
 
 /// Feeds another engine's frames to octocd's validators, one step at a time.
 class ExternalValidator {
@@ -127,9 +173,11 @@ class ExternalValidator {
   const Model& model() const;
 
   /// Judges one step. Fill `rec.frame` (named in verdicts), `aabbs` (the world AABBs the
-  /// engine's collision detection used; leave empty to derive them from x_pre, v_pre by
-  /// SPEC 4.1), `pairs` (or set has_pairs = false), `contacts` (pair, normal, depth, jn,
-  /// jt; the other ContactRecord fields are ignored) and optionally the four states.
+  /// engine's collision detection used; leave empty to derive them: the exact bounds of
+  /// each shape at x_det/q_det when given, else from x_pre, v_pre by SPEC 4.1), `pairs` (or
+  /// set has_pairs = false), `contacts` (pair, normal, depth, jn, jt, and `point` with
+  /// has_points; the other ContactRecord fields are ignored) and optionally the four
+  /// states, with rotation q_pre/q_post/w_pre/w_post and the detection pose.
   /// `confirmed` is ignored (set to the contacts' pairs). `checked` runs the costly
   /// validators (candidate sets, normals) on this frame. Throws InputError
   /// (check_frame_record, origin = options.engine) before judging anything of the frame.
@@ -165,11 +213,45 @@ struct ExternalTraceInfo {
   bool manifolds = false;           ///< v2: some pair has several contact rows in a frame
 };
 
-/// Checks an external trace (docs/trace-format.md, "External traces"): root attributes,
-/// every required dataset, shapes and body counts, then every frame's values
-/// (check_frame_record). Throws InputError "PATH: DATASET: [frame F: ]PROBLEM; allowed:
-/// ..." on the first problem; RuntimeError when the file cannot be opened as HDF5.
+/// Checks an external trace (docs/trace-format.md, "External traces", versions 1 and 2):
+/// root attributes, every required dataset, shapes and body counts, the bodies' physics
+/// (check_physics_bodies), then every frame's values (check_frame_record). Version 2
+/// datasets in a version 1 file are an error ("v1/v2 fields mixed"). Throws InputError
+/// "PATH: DATASET: [frame F: ]PROBLEM; allowed: ..." on the first problem; RuntimeError
+/// when the file cannot be opened as HDF5.
 ExternalTraceInfo check_external_trace(const std::string& path);
+
+/// An external trace opened for reading, frame by frame (what `octocd validate
+/// --trace-in` reads). Version 1: positions, velocities, world AABBs, pairs, one contact
+/// per pair. Version 2 (SPEC 13) also: orientations and angular velocities (q_pre/q_post,
+/// w_pre/w_post), the detection pose (x_det/q_det = row f-1 of /states for detection
+/// "pre-step"; for "integrated", x_det = SPEC 4.1's integrated position from row f-1 and
+/// q_det = row f-1's orientation), manifold contacts (manifolds = true) with their
+/// points, and ExternalBodies::physics (inertia given or derived with box_inertia,
+/// materials, contact margin, broadphase_exact, contact geometry, the scene's slop or
+/// 0.001). Positions are never inferred from /aabbs in version 2.
+class ExternalTrace {
+ public:
+  /// Opens `path` and checks everything but the per-frame values (as
+  /// check_external_trace). Throws InputError / RuntimeError as check_external_trace.
+  explicit ExternalTrace(const std::string& path);
+  ~ExternalTrace();
+  ExternalTrace(const ExternalTrace&) = delete;
+  ExternalTrace& operator=(const ExternalTrace&) = delete;
+
+  /// What the trace holds (`manifolds` only once a frame with a manifold was read).
+  const ExternalTraceInfo& info() const;
+  /// The bodies: local boxes, inverse masses, scene, dt, gravity, physics.
+  const ExternalBodies& bodies() const;
+  /// Step f in [1, info().frames] as a FrameRecord, checked (check_frame_record). Throws
+  /// InputError "PATH: DATASET: frame F: PROBLEM; allowed: ..." on a bad value, and for
+  /// f out of range.
+  FrameRecord frame(std::int64_t f);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 /// Checks the trace (check_external_trace), then judges it frame by frame with an
 /// ExternalValidator: the costly validators on every `every`-th frame (>= 1), at most

@@ -72,8 +72,10 @@ struct PhysicsBodies {
   /// Pair friction coefficient and restitution when no per-body values are given.
   double mu = 0.6;
   double restitution = 0.5;
-  /// How per-body values combine into a pair's.
+  /// How per-body values combine into a pair's: friction (external traces v2:
+  /// `friction_combine`) and restitution (`restitution_combine`).
   MaterialCombine combine = MaterialCombine::Product;
+  MaterialCombine restitution_combine = MaterialCombine::Product;
   /// Contact margin (m, >= 0): contacts are expected up to this distance (Bullet's
   /// contact breaking threshold, PhysX's contact offset); a contact on a pair farther
   /// apart is a false contact. octocd's engines: the pair's theta (vertex proximity,
@@ -89,6 +91,12 @@ struct PhysicsBodies {
   /// The scene's slop (m, SPEC 6 delta): the penetration bound is a multiple of it.
   double slop = 0.001;
 };
+
+/// What octocd's own cpu and cuda engines declare: mu = the scene's mu_static (the
+/// cone of Eq. 21), restitution = the scene's e, the pair's theta as contact margin
+/// (vertex proximity, SPEC 5.3), an exact AABB broadphase, contacts on the world AABBs
+/// (SPEC 6), slop = delta. Bodies translate only: inertia is not needed.
+PhysicsBodies octocd_physics_bodies(const Model& model);
 
 /// Physics-tier validators, fed one FrameRecord at a time (octocd's engines, another
 /// engine through octocd/external.hpp, or an external trace v1/v2).

@@ -22,6 +22,8 @@
 
 namespace octocd {
 
+struct PhysicsBodies;  // octocd/physics.hpp
+
 /// Which judge a row belongs to (SPEC 13, ARCHITECTURE.md seam 3).
 enum class Tier {
   /// Physics: any engine (rotation, any solver, any broadphase), judged on the posed
@@ -172,14 +174,19 @@ class FrameValidators {
   struct Source {
     /// How messages name it, e.g. "engine cpu (octree)" or "engine 'toy'".
     std::string label;
-    /// True for octocd's own pipeline: midphase completeness (its confirmed set against
-    /// the exhaustive vertex test) and the applied state (the SPEC 6 re-derivation) are
-    /// judged. False for another engine: both are reported n/a with the reason, unless
-    /// `spec6_response` asks for the applied state.
+    /// True for octocd's own pipeline: both tiers are judged, the model tier in full
+    /// (candidate sets of octocd's and the reference broadphases against `flat`, midphase
+    /// completeness, Eq. 14, friction monotonicity, impulse conservation, the applied
+    /// state). False for another engine: the physics tier only, and the model tier's
+    /// response rows when `spec6_response`; the others are n/a with the reason.
     bool octocd_pipeline = true;
-    /// For another engine: judge the applied state against SPEC 6 too (an engine that
-    /// implements octocd's response).
+    /// For another engine: it claims octocd's response (SPEC 6, trace attribute
+    /// `response_model = "spec6"`): the model tier's response rows are judged too.
     bool spec6_response = false;
+    /// What the physics tier knows of the bodies (inertia, materials, contact margin,
+    /// declared exact broadphase, contact geometry). nullptr: octocd's engines'
+    /// (octocd_physics_bodies).
+    std::shared_ptr<const PhysicsBodies> physics;
   };
 
   /// Validators for records of bodies described by `model` (scene parameters, shapes,

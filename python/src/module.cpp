@@ -1,0 +1,847 @@
+// octocd._octocd: the compiled half of the `octocd` Python package (issue 21). The
+// package's public names, their docstrings and the small conveniences (scene dicts,
+// result objects) are in python/octocd/__init__.py; this file converts arrays and calls
+// the C++ API: build_model + the engines (octocd/engine.hpp), ExternalValidator and
+// validate_external_trace (octocd/external.hpp).
+//
+// Arrays in: float arguments take any float dtype (float32 as is; float64 and others
+// rounded to float32, as `octocd validate --trace-in` reads float64 datasets), integer
+// arguments any integer dtype (range-checked); any other dtype (int for positions, float
+// for pairs, bool, complex, object) is an InputError naming the argument. Non-contiguous
+// arrays and plain sequences are converted (copied). Shapes are checked exactly and every
+// float must be finite. Arrays out are fresh copies the caller owns.
+//
+// The GIL is released while an engine steps and while frames are judged; an object
+// already busy in another thread raises RuntimeError instead of racing.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "octocd/bullet_world.hpp"
+#include "octocd/cuda_world.hpp"
+#include "octocd/engine.hpp"
+#include "octocd/error.hpp"
+#include "octocd/external.hpp"
+#include "octocd/reference_broadphase.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/validation.hpp"
+#include "octocd/version.hpp"
+#include "octocd/world.hpp"
+
+namespace py = pybind11;
+using namespace octocd;
+
+namespace {
+
+// ---- arrays in -----------------------------------------------------------------------
+
+/// Shape text "(n, 3)" for messages; -1 dims print as their name.
+std::string shape_text(const std::vector<py::ssize_t>& shape, const std::vector<std::string>& names) {
+  std::string s = "(";
+  for (std::size_t i = 0; i < shape.size(); ++i) {
+    if (i) s += ", ";
+    s += shape[i] >= 0 ? std::to_string(shape[i]) : names[i];
+  }
+  return s + (shape.size() == 1 ? ",)" : ")");
+}
+
+std::string actual_shape(const py::array& a) {
+  std::vector<py::ssize_t> s(a.shape(), a.shape() + a.ndim());
+  return shape_text(s, std::vector<std::string>(s.size()));
+}
+
+/// Checks `obj` against `shape` (-1: any length) and returns a C-contiguous copy or view
+/// of dtype T. `names` names each dimension in messages ("n", "P", ...); `what` is the
+/// allowed content ("positions (m)").
+template <class T>
+py::array_t<T, py::array::c_style> take(py::handle obj, const std::string& arg, std::vector<py::ssize_t> shape,
+                                        const std::vector<std::string>& names, const std::string& what) {
+  constexpr bool is_float = std::is_floating_point_v<T>;
+  const std::string allowed = fmt::format("{} {} array of shape {}", is_float ? "a float32" : "an integer", what,
+                                          shape_text(shape, names));
+  py::array arr;
+  if (py::isinstance<py::array>(obj)) {
+    arr = py::reinterpret_borrow<py::array>(obj);
+    const char kind = arr.dtype().kind();
+    const bool ok = is_float ? kind == 'f' : (kind == 'i' || kind == 'u');
+    if (!ok && arr.size() > 0)  // an empty array of any dtype stands for 'none'
+      throw InputError(fmt::format("{}: dtype {}; allowed: {}{}", arg, std::string(py::str(arr.dtype())), allowed,
+                                   is_float ? " (float64 is rounded to float32)" : ""));
+  } else {
+    // A plain sequence: converted to the dtype (numbers only).
+    try {
+      arr = py::array::ensure(obj);
+    } catch (const py::error_already_set&) {
+      arr = py::array();
+    }
+    if (!arr) throw InputError(fmt::format("{}: not an array; allowed: {}", arg, allowed));
+    const char kind = arr.dtype().kind();
+    const bool ok = is_float ? (kind == 'f' || kind == 'i' || kind == 'u') : (kind == 'i' || kind == 'u');
+    if (!ok && arr.size() > 0)
+      throw InputError(fmt::format("{}: a sequence of {}; allowed: {}", arg, std::string(py::str(arr.dtype())),
+                                   allowed));
+  }
+  bool shape_ok = arr.ndim() == static_cast<py::ssize_t>(shape.size());
+  for (std::size_t i = 0; shape_ok && i < shape.size(); ++i)
+    shape_ok = shape[i] < 0 || arr.shape(static_cast<py::ssize_t>(i)) == shape[i];
+  // An empty sequence ([] for "no pairs") stands for (0, k).
+  if (!shape_ok && arr.size() == 0 && arr.ndim() == 1 && shape.size() == 2 && shape[0] < 0) {
+    arr = py::array(py::dtype::of<T>(), std::vector<py::ssize_t>{0, shape[1]});
+    shape_ok = true;
+  }
+  if (!shape_ok)
+    throw InputError(fmt::format("{}: shape {}; allowed: {}", arg, actual_shape(arr), allowed));
+  if constexpr (!is_float) {
+    // Range-check in int64 before narrowing (uint64 above 2^63 is refused too).
+    if (arr.dtype().kind() == 'u' && arr.dtype().itemsize() == 8) {
+      auto u = py::array_t<std::uint64_t, py::array::c_style | py::array::forcecast>::ensure(arr);
+      for (py::ssize_t i = 0; i < u.size(); ++i)
+        if (u.data()[i] > 0xffffffffull)
+          throw InputError(fmt::format("{}: element {} is {}; allowed: body indices in [0, 2^32)", arg, i,
+                                       u.data()[i]));
+    } else {
+      auto s = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(arr);
+      for (py::ssize_t i = 0; i < s.size(); ++i)
+        if (s.data()[i] < 0 || s.data()[i] > 0xffffffffll)
+          throw InputError(fmt::format("{}: element {} is {}; allowed: body indices in [0, 2^32)", arg, i,
+                                       s.data()[i]));
+    }
+  }
+  auto out = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(arr);
+  if (!out) throw InputError(fmt::format("{}: cannot be converted; allowed: {}", arg, allowed));
+  if constexpr (is_float) {
+    const T* d = out.data();
+    const py::ssize_t row = out.ndim() > 1 ? out.size() / std::max<py::ssize_t>(out.shape(0), 1) : 1;
+    for (py::ssize_t i = 0; i < out.size(); ++i)
+      if (!std::isfinite(d[i]))
+        throw InputError(fmt::format("{}: row {} holds {} (as float32); allowed: finite values", arg, i / row,
+                                     static_cast<double>(d[i])));
+  }
+  return out;
+}
+
+/// (n, 3) floats as Vec3s.
+std::vector<Vec3> vec3s(py::handle obj, const std::string& arg, py::ssize_t n, const std::string& what) {
+  auto a = take<float>(obj, arg, {n, 3}, {"n", "3"}, what);
+  std::vector<Vec3> v(static_cast<std::size_t>(a.shape(0)));
+  if (!v.empty()) std::memcpy(static_cast<void*>(v.data()), a.data(), v.size() * sizeof(Vec3));
+  return v;
+}
+
+/// (n, 4) floats (w, x, y, z) as Quats.
+std::vector<Quat> quats(py::handle obj, const std::string& arg, py::ssize_t n) {
+  auto a = take<float>(obj, arg, {n, 4}, {"n", "4"}, "unit quaternion (w, x, y, z)");
+  std::vector<Quat> q(static_cast<std::size_t>(a.shape(0)));
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    const float* r = a.data() + 4 * i;
+    q[i] = {r[0], r[1], r[2], r[3]};
+    if (std::fabs(norm(q[i]) - 1.0f) > 1e-3f)
+      throw InputError(fmt::format("{}: row {} has norm {}; allowed: unit quaternions (w, x, y, z), |q| within "
+                                   "1e-3 of 1",
+                                   arg, i, norm(q[i])));
+  }
+  return q;
+}
+
+/// (n, 2, 3) floats as Aabbs ([:, 0] = min, [:, 1] = max).
+std::vector<Aabb> boxes(py::handle obj, const std::string& arg, py::ssize_t n, const std::string& what) {
+  auto a = take<float>(obj, arg, {n, 2, 3}, {"n", "2", "3"}, what);
+  std::vector<Aabb> b(static_cast<std::size_t>(a.shape(0)));
+  if (!b.empty()) std::memcpy(static_cast<void*>(b.data()), a.data(), b.size() * sizeof(Aabb));
+  for (std::size_t i = 0; i < b.size(); ++i)
+    if (!(b[i].min.x <= b[i].max.x && b[i].min.y <= b[i].max.y && b[i].min.z <= b[i].max.z))
+      throw InputError(fmt::format("{}: row {}: min above max; allowed: [:, 0] = min <= [:, 1] = max", arg, i));
+  return b;
+}
+
+/// (P, 2) integers as Pairs.
+std::vector<Pair> pairs(py::handle obj, const std::string& arg) {
+  auto a = take<std::uint32_t>(obj, arg, {-1, 2}, {"P", "2"}, "body-index pair (a, b), a < b,");
+  std::vector<Pair> p(static_cast<std::size_t>(a.shape(0)));
+  if (!p.empty()) std::memcpy(static_cast<void*>(p.data()), a.data(), p.size() * sizeof(Pair));
+  return p;
+}
+
+/// (C,) floats.
+std::vector<float> floats(py::handle obj, const std::string& arg, py::ssize_t n, const std::string& what) {
+  auto a = take<float>(obj, arg, {n}, {n >= 0 ? "" : "C"}, what);
+  return std::vector<float>(a.data(), a.data() + a.size());
+}
+
+// ---- arrays out ----------------------------------------------------------------------
+
+py::array_t<float> out_vec3(const std::vector<Vec3>& v) {
+  py::array_t<float> a({static_cast<py::ssize_t>(v.size()), py::ssize_t{3}});
+  if (!v.empty()) std::memcpy(a.mutable_data(), v.data(), v.size() * sizeof(Vec3));
+  return a;
+}
+py::object out_vec3_or_none(const std::vector<Vec3>& v) { return v.empty() ? py::object(py::none()) : out_vec3(v); }
+py::object out_quat_or_none(const std::vector<Quat>& q) {
+  if (q.empty()) return py::none();
+  py::array_t<float> a({static_cast<py::ssize_t>(q.size()), py::ssize_t{4}});
+  float* d = a.mutable_data();
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    d[4 * i] = q[i].w, d[4 * i + 1] = q[i].x, d[4 * i + 2] = q[i].y, d[4 * i + 3] = q[i].z;
+  }
+  return a;
+}
+py::array_t<float> out_boxes(const std::vector<Aabb>& b) {
+  py::array_t<float> a({static_cast<py::ssize_t>(b.size()), py::ssize_t{2}, py::ssize_t{3}});
+  if (!b.empty()) std::memcpy(a.mutable_data(), b.data(), b.size() * sizeof(Aabb));
+  return a;
+}
+py::array_t<std::int32_t> out_pairs(const std::vector<Pair>& p) {
+  py::array_t<std::int32_t> a({static_cast<py::ssize_t>(p.size()), py::ssize_t{2}});
+  std::int32_t* d = a.mutable_data();
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    d[2 * i] = static_cast<std::int32_t>(p[i].a);
+    d[2 * i + 1] = static_cast<std::int32_t>(p[i].b);
+  }
+  return a;
+}
+
+py::dict out_contacts(const std::vector<ContactRecord>& cs, bool terms, bool points) {
+  const auto c = static_cast<py::ssize_t>(cs.size());
+  std::vector<Pair> pr;
+  py::array_t<float> depth(c), jn(c), jt(c);
+  py::array_t<std::int32_t> axis(c);
+  std::vector<Vec3> normal, v_a, v_b, dx_a, dx_b, dv_a, dv_b, point;
+  for (py::ssize_t i = 0; i < c; ++i) {
+    const ContactRecord& r = cs[static_cast<std::size_t>(i)];
+    pr.push_back(r.pair);
+    normal.push_back(r.normal);
+    depth.mutable_data()[i] = r.depth;
+    jn.mutable_data()[i] = r.jn;
+    jt.mutable_data()[i] = r.jt;
+    axis.mutable_data()[i] = r.axis;
+    v_a.push_back(r.v_a), v_b.push_back(r.v_b), dx_a.push_back(r.dx_a), dx_b.push_back(r.dx_b);
+    dv_a.push_back(r.dv_a), dv_b.push_back(r.dv_b), point.push_back(r.point);
+  }
+  py::dict d;
+  d["pair"] = out_pairs(pr);
+  d["normal"] = out_vec3(normal);
+  d["depth"] = depth;
+  d["jn"] = jn;
+  d["jt"] = jt;
+  if (terms) {
+    d["axis"] = axis;
+    d["v_a"] = out_vec3(v_a), d["v_b"] = out_vec3(v_b);
+    d["dx_a"] = out_vec3(dx_a), d["dx_b"] = out_vec3(dx_b);
+    d["dv_a"] = out_vec3(dv_a), d["dv_b"] = out_vec3(dv_b);
+  }
+  if (points) d["point"] = out_vec3(point);
+  return d;
+}
+
+py::dict out_metrics(const FrameMetrics& m, const Engine* engine) {
+  py::dict d;
+  d["frame"] = m.frame;
+  d["time"] = m.time;
+  d["step_ms"] = m.step_ms;
+  py::dict stages;
+  for (int s = 0; s < static_cast<int>(Stage::Count); ++s) {
+    const auto st = static_cast<Stage>(s);
+    stages[stage_name(st)] = (engine && !engine->has_stage(st)) ? py::object(py::none()) : py::float_(m.stage_ms[s]);
+  }
+  d["stage_ms"] = stages;
+  d["cell_candidates"] = m.cell_candidates;
+  d["aabb_pairs"] = m.aabb_pairs;
+  d["dynamic_pairs"] = m.dynamic_pairs;
+  d["box_tests"] = m.box_tests;
+  d["box_pairs"] = m.box_pairs;
+  d["vertex_tests"] = m.vertex_tests;
+  d["contacts"] = m.contacts;
+  d["penetration_mean"] = m.penetration_mean;
+  d["penetration_max"] = m.penetration_max;
+  d["penetration_share_above_slop"] = m.penetration_share_above_slop;
+  d["kinetic_energy"] = m.kinetic_energy;
+  d["momentum"] = py::make_tuple(m.momentum[0], m.momentum[1], m.momentum[2]);
+  d["memory_bytes"] = m.memory_bytes;
+  return d;
+}
+
+py::list out_results(const std::vector<ValidationResult>& rs) {
+  py::list l;
+  for (const ValidationResult& r : rs) {
+    py::dict d;
+    d["tier"] = tier_name(r.tier);
+    d["name"] = r.name;
+    d["figure"] = r.figure;
+    d["measured"] = r.measured;
+    d["bound"] = r.bound;
+    d["passed"] = r.pass;
+    d["applicable"] = r.applicable;
+    d["verdict"] = !r.applicable ? "n/a" : (r.pass ? "pass" : "FAIL");
+    d["detail"] = r.detail;
+    d["tolerances"] = r.tolerances;
+    l.append(d);
+  }
+  return l;
+}
+
+/// Marks an object busy while the GIL is released; a second thread gets RuntimeError.
+class BusyGuard {
+ public:
+  BusyGuard(std::atomic<bool>& flag, const char* what) : flag_(flag) {
+    if (flag_.exchange(true))
+      throw RuntimeError(fmt::format("{} is busy in another thread; allowed: one call at a time per object", what));
+  }
+  ~BusyGuard() { flag_ = false; }
+  BusyGuard(const BusyGuard&) = delete;
+  BusyGuard& operator=(const BusyGuard&) = delete;
+
+ private:
+  std::atomic<bool>& flag_;
+};
+
+// ---- scenes and engines --------------------------------------------------------------
+
+/// A loaded scene (shared: several engines can be built from one).
+struct PyScene {
+  std::shared_ptr<const Scene> scene;
+};
+
+const std::vector<std::string>& engine_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v{"cpu", "bullet"};
+    if (OCTOCD_HAVE_CUDA) v.insert(v.begin() + 1, "cuda");
+    return v;
+  }();
+  return names;
+}
+
+std::string join(const std::vector<std::string>& v) {
+  std::string s;
+  for (const auto& x : v) s += (s.empty() ? "" : ", ") + x;
+  return s;
+}
+
+class PyEngine {
+ public:
+  PyEngine(const PyScene& scene, const std::string& engine, const std::optional<std::string>& broadphase,
+           const std::optional<std::string>& midphase, bool record) {
+    const std::vector<std::string>& names = engine_names();
+    if (std::find(names.begin(), names.end(), engine) == names.end()) {
+      if (engine == "cuda")
+        throw InputError(fmt::format("engine: 'cuda' is not built in this octocd (configured with OCTOCD_CUDA=OFF "
+                                     "or without nvcc); allowed: {}",
+                                     join(names)));
+      throw InputError(fmt::format("engine: unknown engine '{}'; allowed: {}", engine, join(names)));
+    }
+    Scene sc = *scene.scene;
+    if (engine == "bullet") {
+      if (midphase)
+        throw InputError("midphase: engine bullet has no octree midphase (Bullet's box-box narrow phase runs on the "
+                         "AABB boxes); allowed: None with engine='bullet'");
+      if (broadphase && *broadphase != "bullet-dbvt")
+        throw InputError(fmt::format("broadphase: engine bullet runs btDbvtBroadphase, not '{}'; allowed: None or "
+                                     "'bullet-dbvt' with engine='bullet'",
+                                     *broadphase));
+    } else {
+      if (broadphase) sc.broadphase.name = *broadphase;
+      const std::vector<std::string> bps = all_broadphase_names();
+      if (std::find(bps.begin(), bps.end(), sc.broadphase.name) == bps.end())
+        throw InputError(fmt::format("{}: unknown broadphase '{}'; allowed: {}",
+                                     broadphase ? "broadphase" : "scene broadphase.name", sc.broadphase.name,
+                                     join(bps)));
+      if (midphase) {
+        sc.midphase = MidphaseConfig::parse(*midphase, "midphase");
+        const int depth = sc.mesh_octree_depth;
+        if (depth >= 0 && !sc.midphase.aabb_only && sc.midphase.max_level() > depth)
+          throw InputError(fmt::format("midphase: level {} is deeper than the scene's midphase.depth {}; allowed: "
+                                       "'aabb-only' or ascending levels in [0, {}]",
+                                       sc.midphase.max_level(), depth, depth));
+      }
+    }
+    model_ = build_model(sc);
+    if (engine == "cpu") {
+      engine_ = std::make_unique<World>(model_, make_any_broadphase(sc.broadphase, sc.domain));
+    } else if (engine == "bullet") {
+      engine_ = std::make_unique<BulletWorld>(model_, model_->initial);
+    } else {
+      if (!cuda_device_available())
+        throw RuntimeError(fmt::format("engine 'cuda': {}; allowed: engine='cpu' or 'bullet' on this machine",
+                                       cuda_device_status()));
+      engine_ = make_cuda_engine(model_, sc.broadphase.name);
+    }
+    if (record && engine_->can_record()) engine_->set_recording(true);
+    recording_ = record && engine_->can_record();
+  }
+
+  py::dict step(long n) {
+    if (n < 0) throw InputError(fmt::format("n: {}; allowed: n >= 0 steps", n));
+    BusyGuard busy(busy_, "this Engine");
+    for (long i = 0; i < n; ++i) {
+      {
+        py::gil_scoped_release release;
+        engine_->step();
+      }
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();  // Ctrl-C between steps
+    }
+    return out_metrics(engine_->last_metrics(), engine_.get());
+  }
+
+  py::dict last_frame() {
+    BusyGuard busy(busy_, "this Engine");
+    const Engine& e = *engine_;
+    py::dict d;
+    d["frame"] = e.frame();
+    d["metrics"] = out_metrics(e.last_metrics(), &e);
+    if (recording_ && e.frame() > 0) {
+      const FrameRecord& r = e.record();
+      d["x_pre"] = out_vec3(r.x_pre), d["v_pre"] = out_vec3(r.v_pre);
+      d["x_post"] = out_vec3(r.x_post), d["v_post"] = out_vec3(r.v_post);
+      d["aabbs"] = out_boxes(r.aabbs);
+      d["pairs"] = r.has_pairs ? py::object(out_pairs(r.pairs)) : py::object(py::none());
+      d["confirmed"] = out_pairs(r.confirmed);
+      d["contacts"] = out_contacts(r.contacts, r.has_contact_terms, r.has_points);
+      d["q_pre"] = out_quat_or_none(r.q_pre), d["q_post"] = out_quat_or_none(r.q_post);
+      d["w_pre"] = out_vec3_or_none(r.w_pre), d["w_post"] = out_vec3_or_none(r.w_post);
+      d["x_det"] = out_vec3_or_none(r.x_det), d["q_det"] = out_quat_or_none(r.q_det);
+      d["manifolds"] = r.manifolds;
+    } else {
+      // Not recording (record=False, or `bullet`): the state after the step and the
+      // engine's own contacts only.
+      d["x_post"] = out_vec3(e.state().x), d["v_post"] = out_vec3(e.state().v);
+      d["contacts"] = out_contacts(e.contacts(), !e.contacts().empty(), false);
+    }
+    return d;
+  }
+
+  py::array_t<float> positions() {
+    BusyGuard busy(busy_, "this Engine");
+    return out_vec3(engine_->state().x);
+  }
+  py::array_t<float> velocities() {
+    BusyGuard busy(busy_, "this Engine");
+    return out_vec3(engine_->state().v);
+  }
+  py::array_t<float> inverse_masses() const {
+    const auto& w = engine_->state().w;
+    py::array_t<float> a(static_cast<py::ssize_t>(w.size()));
+    if (!w.empty()) std::memcpy(a.mutable_data(), w.data(), w.size() * sizeof(float));
+    return a;
+  }
+  py::array_t<float> local_boxes() const {
+    std::vector<Aabb> b;
+    for (std::size_t i = 0; i < model_->bodies.size(); ++i) b.push_back(model_->local_box(i));
+    return out_boxes(b);
+  }
+  py::list groups() const {
+    py::list l;
+    for (const BodyInfo& b : model_->bodies) l.append(b.group);
+    return l;
+  }
+
+  void set_state(py::handle x, py::handle v) {
+    const auto n = static_cast<py::ssize_t>(engine_->state().size());
+    BodyState s = engine_->state();
+    s.x = vec3s(x, "positions", n, "positions (m)");
+    s.v = vec3s(v, "velocities", n, "velocities (m/s)");
+    BusyGuard busy(busy_, "this Engine");
+    engine_->set_state(s);
+  }
+
+  const Engine& engine() const { return *engine_; }
+  bool recording() const { return recording_; }
+
+ private:
+  std::shared_ptr<const Model> model_;
+  std::unique_ptr<Engine> engine_;
+  bool recording_ = false;
+  std::atomic<bool> busy_{false};
+};
+
+// ---- judging another engine ----------------------------------------------------------
+
+MaterialCombine parse_combine(const std::string& s) {
+  for (MaterialCombine c : {MaterialCombine::Product, MaterialCombine::Min, MaterialCombine::Max,
+                            MaterialCombine::Average, MaterialCombine::Geometric})
+    if (s == material_combine_name(c)) return c;
+  throw InputError(fmt::format("physics['combine']: '{}'; allowed: product, min, max, average, geometric", s));
+}
+
+/// PhysicsBodies from a dict (keys as the C++ member names).
+PhysicsBodies parse_physics(const py::dict& d, py::ssize_t n) {
+  PhysicsBodies p;
+  for (auto item : d) {
+    const std::string key = py::str(item.first);
+    const py::handle v = item.second;
+    const std::string arg = "physics['" + key + "']";
+    auto number = [&](double lo) {
+      double x = 0;
+      try {
+        x = v.cast<double>();
+      } catch (const py::cast_error&) {
+        throw InputError(fmt::format("{}: not a number; allowed: a finite number >= {}", arg, lo));
+      }
+      if (!std::isfinite(x) || x < lo)
+        throw InputError(fmt::format("{}: {}; allowed: a finite number >= {}", arg, x, lo));
+      return x;
+    };
+    if (key == "inertia") {
+      auto a = take<float>(v, arg, {n, 3, 3}, {"n", "3", "3"}, "body-frame inertia tensor (kg m^2)");
+      p.inertia.resize(static_cast<std::size_t>(n));
+      for (std::size_t i = 0; i < p.inertia.size(); ++i)
+        for (int k = 0; k < 9; ++k) p.inertia[i][static_cast<std::size_t>(k)] = a.data()[9 * i + static_cast<std::size_t>(k)];
+    } else if (key == "body_friction" || key == "body_restitution") {
+      std::vector<float> f = floats(v, arg, n, "per-body value (>= 0)");
+      (key == "body_friction" ? p.body_friction : p.body_restitution) = f;
+    } else if (key == "mu") {
+      p.mu = number(0.0);
+    } else if (key == "restitution") {
+      p.restitution = number(0.0);
+    } else if (key == "contact_margin") {
+      p.contact_margin = number(0.0);
+    } else if (key == "slop") {
+      p.slop = number(0.0);
+    } else if (key == "combine") {
+      p.combine = parse_combine(py::str(v));
+    } else if (key == "theta_margin") {
+      p.theta_margin = v.cast<bool>();
+    } else if (key == "broadphase_exact") {
+      p.broadphase_exact = v.cast<bool>();
+    } else if (key == "contact_geometry") {
+      const std::string g = py::str(v);
+      if (g == "shape") p.contact_geometry = ContactGeometry::Shape;
+      else if (g == "aabb") p.contact_geometry = ContactGeometry::Aabb;
+      else throw InputError(fmt::format("{}: '{}'; allowed: 'shape' or 'aabb'", arg, g));
+    } else {
+      throw InputError(fmt::format("physics: unknown key '{}'; allowed: inertia, body_friction, body_restitution, "
+                                   "mu, restitution, combine, contact_margin, theta_margin, broadphase_exact, "
+                                   "contact_geometry, slop",
+                                   key));
+    }
+  }
+  return p;
+}
+
+void apply_tolerances(ExternalOptions& o, const py::object& tolerances) {
+  if (tolerances.is_none()) return;
+  if (!py::isinstance<py::dict>(tolerances))
+    throw InputError("tolerances: not a dict; allowed: {name: value} with names of octocd.tolerances()");
+  for (auto item : py::reinterpret_borrow<py::dict>(tolerances)) {
+    const std::string name = py::str(item.first);
+    double value = 0;
+    try {
+      value = item.second.cast<double>();
+    } catch (const py::cast_error&) {
+      throw InputError(fmt::format("tolerances['{}']: not a number; allowed: a finite number >= 0", name));
+    }
+    try {
+      set_tolerance(o.tol, name, value);
+    } catch (const InputError& e) {  // names the CLI's --tolerance: name the argument instead
+      std::string msg = e.what();
+      const std::string cli = "--tolerance";
+      if (msg.rfind(cli, 0) == 0) msg = fmt::format("tolerances['{}']", name) + msg.substr(cli.size());
+      throw InputError(msg);
+    }
+    o.overridden.push_back(name);
+  }
+}
+
+class PyValidator {
+ public:
+  PyValidator(py::object local_boxes, py::object inverse_mass, const std::string& scene_json, float dt,
+              py::object gravity, py::object domain, py::object meshes, py::object physics,
+              const std::string& engine, bool against_fcl, bool spec6_response, py::object tolerances) {
+    ExternalBodies b;
+    b.scene_json = scene_json;
+    b.dt = dt;
+    if (!local_boxes.is_none()) b.local_boxes = boxes(local_boxes, "local_boxes", -1, "local box (m)");
+    const auto n = static_cast<py::ssize_t>(b.local_boxes.size());
+    if (!inverse_mass.is_none())
+      b.inverse_mass = floats(inverse_mass, "inverse_mass", b.local_boxes.empty() ? -1 : n, "inverse mass (1/kg)");
+    if (!gravity.is_none()) {
+      auto g = take<float>(gravity, "gravity", {3}, {"3"}, "gravity (m/s^2)");
+      b.gravity = {g.data()[0], g.data()[1], g.data()[2]};
+    }
+    if (!domain.is_none()) {
+      auto d = boxes(py::array(take<float>(domain, "domain", {2, 3}, {"2", "3"}, "domain [min, max] (m)"))
+                         .attr("reshape")(1, 2, 3),
+                     "domain", 1, "domain [min, max] (m)");
+      b.domain = d[0];
+    }
+    if (!meshes.is_none()) {
+      // A list with one entry per body: None (the body is its box) or (vertices, triangles);
+      // entries that are the same Python object share one Mesh.
+      std::vector<std::pair<PyObject*, std::shared_ptr<const Mesh>>> seen;
+      const py::list l = py::list(meshes);
+      for (std::size_t i = 0; i < l.size(); ++i) {
+        const py::handle e = l[i];
+        if (e.is_none()) {
+          b.meshes.push_back(nullptr);
+          continue;
+        }
+        auto it = std::find_if(seen.begin(), seen.end(), [&](const auto& s) { return s.first == e.ptr(); });
+        if (it != seen.end()) {
+          b.meshes.push_back(it->second);
+          continue;
+        }
+        const std::string arg = fmt::format("meshes[{}]", i);
+        if (!py::isinstance<py::sequence>(e) || py::len(e) != 2)
+          throw InputError(fmt::format("{}: not a (vertices, triangles) pair; allowed: None or (V x 3 float32 "
+                                       "vertices in the body's local-box frame, T x 3 integer triangles)",
+                                       arg));
+        const py::sequence t = py::reinterpret_borrow<py::sequence>(e);
+        auto mesh = std::make_shared<Mesh>();
+        mesh->name = arg;
+        mesh->vertices = vec3s(t[0], arg + "[0]", -1, "vertex (m)");
+        auto tri = take<std::uint32_t>(t[1], arg + "[1]", {-1, 3}, {"T", "3"}, "triangle (vertex indices)");
+        mesh->triangles.resize(static_cast<std::size_t>(tri.shape(0)));
+        for (std::size_t k = 0; k < mesh->triangles.size(); ++k)
+          for (std::size_t c = 0; c < 3; ++c) {
+            const std::uint32_t idx = tri.data()[3 * k + c];
+            if (idx >= mesh->vertices.size())
+              throw InputError(fmt::format("{}[1]: triangle {} names vertex {}; allowed: indices below {}", arg, k,
+                                           idx, mesh->vertices.size()));
+            mesh->triangles[k][c] = idx;
+          }
+        seen.emplace_back(e.ptr(), mesh);
+        b.meshes.push_back(mesh);
+      }
+    }
+    if (!physics.is_none()) {
+      if (!py::isinstance<py::dict>(physics)) throw InputError("physics: not a dict; allowed: a dict of PhysicsBodies fields");
+      b.physics = parse_physics(py::reinterpret_borrow<py::dict>(physics), n > 0 ? n : -1);
+    }
+    ExternalOptions o;
+    o.engine = engine;
+    o.against_fcl = against_fcl;
+    o.spec6_response = spec6_response;
+    apply_tolerances(o, tolerances);
+    validator_ = std::make_unique<ExternalValidator>(b, o);
+  }
+
+  std::size_t bodies() const { return validator_->body_count(); }
+
+  void observe(std::int64_t frame, py::object aabbs, py::object pair_arr, py::object contacts, py::object x_pre,
+               py::object v_pre, py::object x_post, py::object v_post, py::object q_pre, py::object q_post,
+               py::object w_pre, py::object w_post, py::object x_det, py::object q_det, bool manifolds,
+               bool checked) {
+    const auto n = static_cast<py::ssize_t>(validator_->body_count());
+    FrameRecord rec;
+    rec.frame = frame;
+    if (!aabbs.is_none()) rec.aabbs = boxes(aabbs, "aabbs", n, "world AABB [min, max] (m)");
+    const std::pair<const char*, std::vector<Vec3>*> states[] = {
+        {"x_pre", &rec.x_pre}, {"v_pre", &rec.v_pre}, {"x_post", &rec.x_post}, {"v_post", &rec.v_post}};
+    const py::object* state_in[] = {&x_pre, &v_pre, &x_post, &v_post};
+    int given = 0;
+    for (int i = 0; i < 4; ++i)
+      if (!state_in[i]->is_none()) {
+        *states[i].second = vec3s(*state_in[i], states[i].first, n, i % 2 ? "velocity (m/s)" : "position (m)");
+        ++given;
+      }
+    if (given != 0 && given != 4)
+      throw InputError("x_pre, v_pre, x_post, v_post: some given, some None; allowed: all four (n, 3) arrays, or "
+                       "none (then aabbs is required)");
+    if (rec.aabbs.empty() && given == 0)
+      throw InputError("aabbs: None and no states; allowed: aabbs (n, 2, 3) and/or the four states x_pre, v_pre, "
+                       "x_post, v_post (n, 3)");
+    if (pair_arr.is_none()) rec.has_pairs = false;
+    else rec.pairs = pairs(pair_arr, "pairs");
+    if (!q_pre.is_none()) rec.q_pre = quats(q_pre, "q_pre", n);
+    if (!q_post.is_none()) rec.q_post = quats(q_post, "q_post", n);
+    if (!w_pre.is_none()) rec.w_pre = vec3s(w_pre, "w_pre", n, "angular velocity (rad/s)");
+    if (!w_post.is_none()) rec.w_post = vec3s(w_post, "w_post", n, "angular velocity (rad/s)");
+    if (!x_det.is_none()) rec.x_det = vec3s(x_det, "x_det", n, "detection position (m)");
+    if (!q_det.is_none()) rec.q_det = quats(q_det, "q_det", n);
+    rec.manifolds = manifolds;
+    if (!contacts.is_none()) {
+      if (!py::isinstance<py::dict>(contacts))
+        throw InputError("contacts: not a dict; allowed: {'pair': (C, 2), 'normal': (C, 3), 'depth': (C,), 'jn': "
+                         "(C,), 'jt': (C,)[, 'point': (C, 3)]}");
+      const py::dict c = py::reinterpret_borrow<py::dict>(contacts);
+      // octocd's own FrameRecord.contacts adds the SPEC 6 terms: accepted and ignored (the
+      // validators derive them from the states), so an octocd record can be fed back.
+      static const char* const kKeys[] = {"pair", "normal", "depth", "jn", "jt", "point", "axis",
+                                          "v_a", "v_b", "dx_a", "dx_b", "dv_a", "dv_b"};
+      for (auto item : c) {
+        const std::string k = py::str(item.first);
+        if (std::find(std::begin(kKeys), std::end(kKeys), k) == std::end(kKeys))
+          throw InputError(fmt::format("contacts: unknown key '{}'; allowed: pair, normal, depth, jn, jt, point "
+                                       "(and, ignored, the SPEC 6 terms of octocd's records: axis, v_a, v_b, dx_a, "
+                                       "dx_b, dv_a, dv_b)",
+                                       k));
+      }
+      for (const char* k : {"pair", "normal", "depth", "jn", "jt"})
+        if (!c.contains(k))
+          throw InputError(fmt::format("contacts: no '{}'; allowed: a dict with pair (C, 2), normal (C, 3), depth, "
+                                       "jn, jt (C,) and optionally point (C, 3)",
+                                       k));
+      const std::vector<Pair> cp = pairs(c["pair"], "contacts['pair']");
+      const auto cn = static_cast<py::ssize_t>(cp.size());
+      const std::vector<Vec3> normal = vec3s(c["normal"], "contacts['normal']", cn, "unit normal from B to A");
+      const std::vector<float> depth = floats(c["depth"], "contacts['depth']", cn, "depth (m)");
+      const std::vector<float> jn = floats(c["jn"], "contacts['jn']", cn, "normal impulse (kg m/s)");
+      const std::vector<float> jt = floats(c["jt"], "contacts['jt']", cn, "friction impulse (kg m/s)");
+      std::vector<Vec3> point;
+      if (c.contains("point")) {
+        point = vec3s(c["point"], "contacts['point']", cn, "world contact point (m)");
+        rec.has_points = true;
+      }
+      rec.contacts.resize(cp.size());
+      for (std::size_t i = 0; i < cp.size(); ++i) {
+        ContactRecord& r = rec.contacts[i];
+        r.pair = cp[i], r.normal = normal[i], r.depth = depth[i], r.jn = jn[i], r.jt = jt[i];
+        if (rec.has_points) r.point = point[i];
+      }
+    }
+    BusyGuard busy(busy_, "this Validator");
+    py::gil_scoped_release release;
+    validator_->observe(std::move(rec), checked);
+  }
+
+  py::list results() {
+    BusyGuard busy(busy_, "this Validator");
+    return out_results(validator_->results());
+  }
+
+ private:
+  std::unique_ptr<ExternalValidator> validator_;
+  std::atomic<bool> busy_{false};
+};
+
+ValidationResult result_from(const py::handle& r) {
+  ValidationResult v;
+  auto get = [&](const char* k) { return r.attr(k); };
+  const std::string tier = py::str(get("tier"));
+  v.tier = tier == "physics" ? Tier::Physics : Tier::Model;
+  v.name = py::str(get("name"));
+  v.figure = py::str(get("figure"));
+  v.measured = get("measured").cast<double>();
+  v.bound = get("bound").cast<double>();
+  v.pass = get("passed").cast<bool>();
+  v.applicable = get("applicable").cast<bool>();
+  v.detail = py::str(get("detail"));
+  v.tolerances = py::str(get("tolerances"));
+  return v;
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_octocd, m) {
+  m.doc() = "octocd's compiled core; use the `octocd` package (python/octocd/__init__.py).";
+
+  static py::exception<InputError> input_error(m, "InputError", PyExc_ValueError);
+  static py::exception<RuntimeError> runtime_error(m, "RuntimeError", PyExc_RuntimeError);
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const InputError& e) {
+      PyErr_SetString(input_error.ptr(), e.what());
+    } catch (const RuntimeError& e) {
+      PyErr_SetString(runtime_error.ptr(), e.what());
+    }
+  });
+
+  m.attr("build_id") = build_id();
+  m.attr("engines") = engine_names();
+  m.def("cuda_device_status", &cuda_device_status);
+  m.def("broadphases", &all_broadphase_names);
+  m.def("tolerances", [] {
+    py::dict d;
+    const Tolerances def;
+    for (const ToleranceEntry& e : tolerance_table()) d[e.name] = def.*(e.member);
+    return d;
+  });
+
+  py::class_<PyScene>(m, "Scene",
+                      "A loaded, validated scene (octocd.load_scene; docs/scenes.md). Read-only; one Scene can "
+                      "build several engines.")
+      .def("__repr__",
+           [](const PyScene& s) {
+             return fmt::format("octocd.Scene('{}', {} bodies in groups, dt {} s, {} frames, broadphase '{}')",
+                                s.scene->name, body_count(*s.scene), s.scene->dt, s.scene->frames,
+                                s.scene->broadphase.name);
+           })
+      .def_property_readonly("name", [](const PyScene& s) { return s.scene->name; })
+      .def_property_readonly("description", [](const PyScene& s) { return s.scene->description; })
+      .def_property_readonly("path", [](const PyScene& s) { return s.scene->path; })
+      .def_property_readonly("json", [](const PyScene& s) { return s.scene->json; })
+      .def_property_readonly("dt", [](const PyScene& s) { return s.scene->dt; })
+      .def_property_readonly("frames", [](const PyScene& s) { return s.scene->frames; })
+      .def_property_readonly("gravity",
+                             [](const PyScene& s) { return out_vec3({s.scene->gravity}).attr("reshape")(3); })
+      .def_property_readonly("domain", [](const PyScene& s) { return out_boxes({s.scene->domain}).attr("reshape")(2, 3); })
+      .def_property_readonly("body_count", [](const PyScene& s) { return body_count(*s.scene); })
+      .def_property_readonly("broadphase", [](const PyScene& s) { return s.scene->broadphase.name; })
+      .def_property_readonly("midphase", [](const PyScene& s) { return s.scene->midphase.to_string(); });
+
+  m.def("load_scene", [](const std::string& path, const std::string& data_dir) {
+    py::gil_scoped_release release;
+    return PyScene{std::make_shared<const Scene>(load_scene(path, data_dir))};
+  });
+  m.def("parse_scene", [](const std::string& text, const std::string& origin, const std::string& data_dir) {
+    py::gil_scoped_release release;
+    return PyScene{std::make_shared<const Scene>(parse_scene(text, origin, data_dir))};
+  });
+
+  py::class_<PyEngine>(m, "Engine")
+      .def(py::init<const PyScene&, const std::string&, const std::optional<std::string>&,
+                    const std::optional<std::string>&, bool>(),
+           py::arg("scene"), py::arg("engine"), py::arg("broadphase"), py::arg("midphase"), py::arg("record"))
+      .def("step", &PyEngine::step, py::arg("n"))
+      .def("last_frame", &PyEngine::last_frame)
+      .def("set_state", &PyEngine::set_state)
+      .def_property_readonly("positions", &PyEngine::positions)
+      .def_property_readonly("velocities", &PyEngine::velocities)
+      .def_property_readonly("inverse_masses", &PyEngine::inverse_masses)
+      .def_property_readonly("local_boxes", &PyEngine::local_boxes)
+      .def_property_readonly("groups", &PyEngine::groups)
+      .def_property_readonly("recording", &PyEngine::recording)
+      .def_property_readonly("name", [](const PyEngine& e) { return e.engine().name(); })
+      .def_property_readonly("device", [](const PyEngine& e) { return e.engine().device(); })
+      .def_property_readonly("broadphase", [](const PyEngine& e) { return e.engine().broadphase_name(); })
+      .def_property_readonly("midphase", [](const PyEngine& e) { return e.engine().midphase_name(); })
+      .def_property_readonly("frame", [](const PyEngine& e) { return e.engine().frame(); })
+      .def_property_readonly("body_count", [](const PyEngine& e) { return e.engine().state().size(); })
+      .def_property_readonly("notes", [](const PyEngine& e) { return e.engine().notes(); })
+      .def_property_readonly("state_hash", [](const PyEngine& e) { return e.engine().state_hash(); });
+
+  py::class_<PyValidator>(m, "Validator")
+      .def(py::init<py::object, py::object, const std::string&, float, py::object, py::object, py::object, py::object,
+                    const std::string&, bool, bool, py::object>(),
+           py::arg("local_boxes"), py::arg("inverse_mass"), py::arg("scene_json"), py::arg("dt"), py::arg("gravity"),
+           py::arg("domain"), py::arg("meshes"), py::arg("physics"), py::arg("engine"), py::arg("against_fcl"),
+           py::arg("spec6_response"), py::arg("tolerances"))
+      .def("observe", &PyValidator::observe, py::arg("frame"), py::arg("aabbs"), py::arg("pairs"),
+           py::arg("contacts"), py::arg("x_pre"), py::arg("v_pre"), py::arg("x_post"), py::arg("v_post"),
+           py::arg("q_pre"), py::arg("q_post"), py::arg("w_pre"), py::arg("w_post"), py::arg("x_det"),
+           py::arg("q_det"), py::arg("manifolds"), py::arg("checked"))
+      .def("results", &PyValidator::results)
+      .def_property_readonly("body_count", &PyValidator::bodies);
+
+  m.def(
+      "validate_trace",
+      [](const std::string& path, int every, std::int64_t max_frames, bool against_fcl, py::object tolerances) {
+        if (every < 1) throw InputError(fmt::format("every: {}; allowed: >= 1", every));
+        if (max_frames < 0) throw InputError(fmt::format("max_frames: {}; allowed: >= 0 (0 = all)", max_frames));
+        ExternalOptions o;  // engine name and response model: from the trace
+        o.against_fcl = against_fcl;
+        apply_tolerances(o, tolerances);
+        std::vector<ValidationResult> rs;
+        {
+          py::gil_scoped_release release;
+          rs = validate_external_trace(path, o, every, max_frames);
+        }
+        return out_results(rs);
+      },
+      py::arg("path"), py::arg("every"), py::arg("max_frames"), py::arg("against_fcl"), py::arg("tolerances"));
+
+  m.def("format_results", [](const py::list& results, const std::vector<std::string>& overridden) {
+    std::vector<ValidationResult> rs;
+    for (const py::handle r : results) rs.push_back(result_from(r));
+    return format_results(rs, overridden);
+  });
+}
