@@ -14,7 +14,7 @@ scenes=("$@")
 if [ ${#scenes[@]} -eq 0 ]; then
   for f in "$root"/datasets/scenes/*.json; do
     n=$(basename "$f" .json)
-    case "$n" in boxes-*|bunny-pile-*) continue ;; esac  # broadphase/scale scenes: bench, not validate
+    case "$n" in boxes-*|bunny-pile-*|rot-*) continue ;; esac  # scale scenes (bench) and rotating ones (--engine bullet)
     scenes+=("$n")
   done
   for f in "$root"/tests/data/*-iterations-*.json; do scenes+=("$(basename "$f" .json)"); done

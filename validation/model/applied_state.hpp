@@ -10,7 +10,8 @@
 /// that float32 rounding can tip either way (v_n near 0, |v_n| near v_th, stick or slip,
 /// an overlap near 0, two overlaps or a centre offset near a tie, the fixed-axis
 /// distance): the outcome feeds the next pass of every neighbour. Each such near-tie is a
-/// branch. Within an island (dynamic bodies connected by confirmed contacts) the judge
+/// branch (J_n = max(.., J_min), max(d_p - delta, 0) and the v_max clamp are continuous in
+/// their inputs: no branch). Within an island (dynamic bodies connected by confirmed contacts) the judge
 /// explores the outcomes, bounded (kMaxRuns, kMaxWork, kMaxQueueBytes), and accepts the
 /// engine's state when some consistent choice (an outcome the double value allows within
 /// the rounding margin) reproduces every body of the island within the tolerance. A
