@@ -164,7 +164,18 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
   const std::vector<float>& w = model.initial.w;
   const ContactParams& p = s.params;
   const Tolerances& tol = s.options.tol;
-  auto pre_position = [&](std::uint32_t i) { return boxes[i].min - model.local_box(i).min; };
+  // The position the engine's collision detection used (after integration, SPEC 4.1).
+  // octocd's engines: the same float32 integrate() they run (math.hpp), bit for bit; the
+  // world AABB minus the local box would be off by an ulp, enough to flip a vertex test
+  // sitting exactly at theta. Records without states: from the AABB.
+  auto pre_position = [&](std::uint32_t i) {
+    if (s.source.octocd_pipeline && has_states) {
+      Vec3 x = rec.x_pre[i], v = rec.v_pre[i];
+      integrate(x, v, w[i], model.scene.gravity, Vec3{}, model.scene.dt);
+      return x;
+    }
+    return boxes[i].min - model.local_box(i).min;
+  };
   auto placed = [&](std::uint32_t i) {
     const Shape& shape = model.shapes[model.bodies[i].shape];
     return PlacedShape{shape.octree.get(), pre_position(i), boxes[i]};
