@@ -115,7 +115,7 @@ struct Tolerances {
   /// Contact completeness: a pair penetrating deeper than this (m) needs a contact.
   double contact_depth_m = 1e-3;
   /// Contact geometry: largest angle between the engine's normal and FCL's (degrees).
-  double normal_angle_deg = 45.0;
+  double normal_angle_deg = 30.0;
   /// Contact geometry: largest |engine depth - FCL depth| (m) of a pair's deepest row.
   double depth_m = 5e-3;
   /// Penetration: the largest true penetration is at most this many slops.
