@@ -428,20 +428,45 @@ ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const
     // The meshes intersect: the smallest translation of A along the hulls' normal that
     // separates the meshes (bisection; the hull depth separates them).
     r.depth_upper_bound = true;
-    const V3 n = to_v3(r.normal);
-    auto separated_at = [&](S t) {
+    // Directional depths: the smallest translation of A along a direction that separates
+    // the meshes is an upper bound of the minimum translation; the least over a few
+    // directions is the tighter bound. Directions: the hulls' EPA normal first, then the
+    // centre line (B to A) and the six axes. A direction is bisected only when it
+    // separates the meshes within the best depth so far.
+    auto separated_at = [&](const V3& n, S t) {
       fcl::Transform3<S> moved = ta;
       moved.translation() += t * n;
       return !exact_collide(ga, moved, gb, tb);
     };
-    S lo = 0, hi = r.depth + 1e-6;
-    for (int k = 0; k < 8 && !separated_at(hi); ++k) hi = hi * 1.5 + 1e-6;
-    if (!separated_at(hi)) return r;  // keep the hull depth
-    while (hi - lo > 1e-6) {
-      const S mid = 0.5 * (lo + hi);
-      (separated_at(mid) ? hi : lo) = mid;
+    std::vector<V3> dirs = {to_v3(r.normal)};
+    const V3 centre_line = xa + ra * ga.offset - (xb + rb * gb.offset);
+    if (centre_line.norm() > 0) dirs.push_back(centre_line.normalized());
+    for (int k = 0; k < 3; ++k) {
+      dirs.push_back(V3::Unit(k));
+      dirs.push_back(-V3::Unit(k));
     }
-    r.depth = hi;
+    S best = r.depth + 1e-6;
+    std::size_t best_dir = 0;
+    bool found = false;
+    for (std::size_t d = 0; d < dirs.size(); ++d) {
+      S hi = best;
+      if (d == 0)
+        for (int k = 0; k < 8 && !separated_at(dirs[d], hi); ++k) hi = hi * 1.5 + 1e-6;
+      if (!separated_at(dirs[d], hi)) continue;
+      S lo = 0;
+      while (hi - lo > 1e-6) {
+        const S mid = 0.5 * (lo + hi);
+        (separated_at(dirs[d], mid) ? hi : lo) = mid;
+      }
+      if (!found || hi < best) {
+        best = hi;
+        best_dir = d;
+        found = true;
+      }
+    }
+    if (!found) return r;  // keep the hull depth
+    r.depth = best;
+    if (best_dir != 0) r.normal = to_vec3(dirs[best_dir]);
     return r;
   }
   exact_distance(ga, ta, gb, tb, r);

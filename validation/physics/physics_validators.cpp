@@ -807,8 +807,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     } else {
       r.detail = s.pen_what + fmt::format(" (largest of {} penetrating pair-frames; bound {} x slop {} m){}",
                                           s.pen_pairs, s.tol.penetration_slops, s.bodies.slop,
-                                          s.pen_upper ? "; non-convex mesh depth: the separating translation along "
-                                                        "the hulls' EPA normal, an upper bound"
+                                          s.pen_upper ? "; non-convex mesh depth: the least separating translation "
+                                                        "over 8 directions, an upper bound"
                                                       : "");
     }
     out.push_back(r);

@@ -47,12 +47,13 @@
 ///    hulls decides; EPA gives the exact minimum translation (depth, normal).
 ///  - a non-convex mesh: when the hulls intersect, FCL's BVH collide on the meshes decides
 ///    whether the meshes themselves intersect. If they do not, the pair is separated and
-///    FCL's BVH distance gives the distance and nearest points. If they do, the normal is
-///    the hulls' EPA normal and the depth is an UPPER BOUND of the true penetration
-///    depth (`depth_upper_bound`): the smallest translation along that normal that
-///    separates the meshes (bisection on BVH collide, 1e-6 m), itself at most the hull
-///    EPA depth (translating by the hull depth separates the hulls, hence the meshes).
-///    The true minimum translation of two non-convex meshes is not computed.
+///    FCL's BVH distance gives the distance and nearest points. If they do, the depth is
+///    an UPPER BOUND of the true penetration depth (`depth_upper_bound`): the least, over
+///    the hulls' EPA normal, the centre line and the six axes, of the smallest translation
+///    of A along that direction that separates the meshes (bisection on BVH collide,
+///    1e-6 m); along the EPA normal it is at most the hull EPA depth (translating by the
+///    hull depth separates the hulls, hence the meshes). The normal is the direction
+///    that gave it. The true minimum translation of two non-convex meshes is not computed.
 
 #include <cstdint>
 #include <memory>
