@@ -270,8 +270,12 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   s.last_frame = rec.frame;
   std::vector<Pose> det(n);
   const bool poses = !rec.x_det.empty() || rec.aabbs.size() == n;
-  if (poses)
+  if (poses) {
     for (std::size_t i = 0; i < n; ++i) det[i] = detection_pose(*s.model, rec, i);
+  } else if (rec.x_pre.size() == n) {
+    // No detection pose: the pre-step pose serves the contact-point lever arms.
+    for (std::size_t i = 0; i < n; ++i) det[i] = Pose{rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{}};
+  }
   if (checked && poses) s.geometry(rec, det);
   s.dynamics(rec, det);
 }
@@ -363,8 +367,12 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     }
     if (bodies.broadphase_exact) {
       // Set equality with `flat` on the engine's own world AABBs, static-static dropped.
+      // `flat` itself up to 10^7 pair tests; beyond, the loose octree (proven equal to
+      // flat by the model tier's candidate-sets row and the broadphase tests) keeps the
+      // frame's work near O(n log n + candidates).
       std::vector<Pair> want, got;
-      flat->find_pairs(rec.aabbs, want, st);
+      const bool small = double(n) * double(n - 1) / 2 <= 1e7;
+      (small ? flat : octree)->find_pairs(rec.aabbs, want, st);
       auto dyn = [&](Pair p) { return dynamic(p.a) || dynamic(p.b); };
       std::copy_if(want.begin(), want.end(), std::back_inserter(got), dyn);
       want.swap(got);
@@ -777,7 +785,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     } else {
       r.detail = fmt::format("{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}",
                              s.normal_angle.checks, aabb ? " on the world AABBs" : "",
-                             aabb ? "box-box EPA" : "EPA / nearest points", s.normal_angle.worst_or(0.0),
+                             aabb ? "FCL box-box" : "FCL: box-box, EPA or nearest points", s.normal_angle.worst_or(0.0),
                              s.depth.worst_or(0.0),
                              s.points.checks ? fmt::format(", {} points, worst {:.3g} m beyond the depth",
                                                            s.points.checks, s.points.worst_or(0.0))
