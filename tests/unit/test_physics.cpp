@@ -305,6 +305,25 @@ TEST(PhysicsRows, CorrectRotatedRecordPasses) {
   }
 }
 
+// A conservative broadphase (every pair a candidate, as a fattened-AABB pair cache may
+// give) passes completeness; the extras are counted, not failed.
+TEST(PhysicsRows, ConservativeBroadphasePassesWithExtrasCounted) {
+  const auto model = build_model(four_bodies());
+  RestingRecord r = resting(*model);
+  r.rec.pairs.clear();
+  for (std::uint32_t a = 0; a < 4; ++a)
+    for (std::uint32_t b = a + 1; b < 4; ++b) r.rec.pairs.push_back({a, b});
+  const auto rs = judge(*model, r.rec, rotating_engine());
+  expect_all_pass(rs);
+  // 6 candidates for 3 true pairs.
+  EXPECT_NE(row_of(rs, "broadphase-completeness").detail.find("2 candidates per true pair"), std::string::npos)
+      << row_of(rs, "broadphase-completeness").detail;
+  // Declared exact, the extras are a failure (set equality with flat, static-static dropped).
+  PhysicsBodies exact = rotating_engine();
+  exact.broadphase_exact = true;
+  expect_caught(judge(*model, r.rec, exact), "broadphase-completeness", {"frame 7", "adds pair (1, 2)"});
+}
+
 TEST(PhysicsRows, DroppedCandidatePairOfPenetratingPair) {
   const auto model = build_model(four_bodies());
   for (bool ss : {true, false}) {
