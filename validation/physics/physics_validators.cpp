@@ -55,12 +55,13 @@ Pose detection_pose(const Model& model, const FrameRecord& rec, std::size_t i) {
 
 PhysicsBodies octocd_physics_bodies(const Model& model) {
   PhysicsBodies b;
-  b.mu = model.scene.response.mu_static;
-  b.restitution = model.scene.response.restitution;
+  const ContactParams& p = model.scene.response;
+  b.mu = p.mu_static;
+  b.restitution = p.restitution;
   b.theta_margin = true;
   b.broadphase_exact = true;
   b.contact_geometry = ContactGeometry::Aabb;
-  b.slop = model.scene.response.slop;
+  b.slop = p.slop;
   return b;
 }
 

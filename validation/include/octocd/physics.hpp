@@ -115,11 +115,10 @@ struct PhysicsBodies {
   double slop = 0.001;
 };
 
-/// What octocd's own engines (cpu, cuda) declare of themselves: mu = the scene's
-/// response.mu_static, restitution = response.restitution, the pair's theta as the contact
-/// margin (vertex proximity, SPEC 5.3), an exact AABB broadphase (SPEC 5.1), contacts
-/// resolved on the world AABBs (SPEC 6), slop = response.slop (delta). Inertia empty
-/// (derived; unused: the records are translation-only).
+/// What octocd's own cpu and cuda engines declare: mu = the scene's mu_static (the
+/// cone of Eq. 21), restitution = the scene's e, the pair's theta as contact margin
+/// (vertex proximity, SPEC 5.3), an exact AABB broadphase, contacts on the world AABBs
+/// (SPEC 6), slop = delta. Bodies translate only: inertia is not needed.
 PhysicsBodies octocd_physics_bodies(const Model& model);
 
 /// Physics-tier validators, fed one FrameRecord at a time (octocd's engines, another
