@@ -266,11 +266,18 @@ void exact_distance(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const Sha
   req.abs_err = 0;
   req.rel_err = 0;
   fcl::DistanceResult<S> res;
-  fcl::distance(&oa, &ob, req, res);
+  // FCL 0.7 answers a shape (o1) against a BVH mesh (o2) with its nearest points
+  // swapped (pinned by PosedReference.SeparatedMeshAboveFloorNormal): ask mesh first.
+  const bool swap = ga.is_box && !gb.is_box;
+  if (swap) {
+    fcl::distance(&ob, &oa, req, res);
+  } else {
+    fcl::distance(&oa, &ob, req, res);
+  }
   r.penetrating = false;
   r.distance = res.min_distance;
-  // nearest_points[0] is on o1 (A), [1] on o2 (B), world frame (FCL 0.7).
-  const V3 pa = res.nearest_points[0], pb = res.nearest_points[1];
+  // nearest_points[0] is on o1, [1] on o2, world frame (FCL 0.7).
+  const V3 pa = res.nearest_points[swap ? 1 : 0], pb = res.nearest_points[swap ? 0 : 1];
   r.point_a = to_vec3(pa);
   r.point_b = to_vec3(pb);
   if (!(res.min_distance > 0) || !std::isfinite(res.min_distance)) return;

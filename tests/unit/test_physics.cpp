@@ -607,3 +607,30 @@ TEST_P(OctocdEnginePhysics, EveryRowPassesAtDefaultTolerances) {
 // penetration and energy: see Tolerances::penetration_slops and energy_rel.
 INSTANTIATE_TEST_SUITE_P(Scenes, OctocdEnginePhysics,
                          testing::Values("box-stack", "bunny-stack-50", "bunny-random-400"));
+
+// A mesh (icosphere) above a floor box, posed off the origin and turned: FCL's nearest
+// points must be in the world frame (the normal from the sphere down to... B to A).
+TEST(PosedReference, SeparatedMeshAboveFloorNormal) {
+  const std::string text = R"({"name": "ball", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]}, "walls": "none",
+    "groups": [{"name": "floor", "shape": {"box": [1.0, 0.1, 1.0]}, "count": 1, "mass": 0, "positions": [[0, -0.1, 0]]},
+               {"name": "ball", "shape": {"icosphere": {"radius": 0.1, "subdivisions": 2}}, "count": 1, "mass": 1,
+                "positions": [[0, 1, 0]]}]})";
+  const auto model = build_model(parse_scene(text, "ball (test)"));
+  const ReferenceGeometry ref(*model);
+  EXPECT_TRUE(ref.convex(1));
+  const Pose floor{v3(0, -0.1, 0), Quat{}};
+  for (const Pose& ball : {Pose{v3(0.3, 0.2, -0.4), Quat{}}, Pose{v3(0.3, 0.2, -0.4), axis_angle({1, 0, 0}, 0.7f)},
+                           Pose{v3(-0.5, 0.15, 0.6), axis_angle({0, 0.6f, 0.8f}, 2.0f)}}) {
+    const ReferenceNormal r = ref.posed(0, 1, floor, ball);  // A = floor, B = ball
+    ASSERT_TRUE(r.valid);
+    EXPECT_FALSE(r.penetrating);
+    EXPECT_NEAR(r.distance, ball.position.y - 0.1, 0.01);
+    EXPECT_NEAR(r.point_a.y, 0.0, 1e-5);
+    EXPECT_NEAR(r.point_b.x, ball.position.x, 0.03);
+    EXPECT_NEAR(r.point_b.z, ball.position.z, 0.03);
+    EXPECT_LT(r.normal.y, -0.99) << r.normal.x << " " << r.normal.y << " " << r.normal.z;
+    // B = floor, A = ball: the normal flips.
+    const ReferenceNormal s = ref.posed(1, 0, ball, floor);
+    EXPECT_GT(s.normal.y, 0.99);
+  }
+}
