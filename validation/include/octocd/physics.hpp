@@ -20,9 +20,11 @@
 ///     `contact_depth_m` (FCL; non-convex meshes must really intersect) has at least one
 ///     contact row; a row on a pair farther apart than the contact margin (or the pair's
 ///     theta) + slack is a false contact.
-///  3. `contact-geometry` (checked frames): per row, the angle between the engine's
-///     normal and FCL's (two boxes: FCL's box-box; convex hulls: libccd EPA; separated:
-///     nearest points) within `normal_angle_deg`; the pair's deepest row's depth against
+///  3. `contact-geometry` (checked frames): per row on shapes penetrating or at most a
+///     slop apart, the angle between the engine's normal and FCL's (two boxes: FCL's
+///     box-box; convex hulls: libccd EPA; separated: nearest points) within
+///     `normal_angle_deg` (speculative rows farther apart: a figure, since a persistent
+///     manifold keeps the normal a point was found with while the bodies turn); the pair's deepest row's depth against
 ///     FCL's within `depth_m` (one-sided against a non-convex upper bound); with points,
 ///     each point within the pair's depth (or distance) + `depth_m` of both surfaces
 ///     (any point of the intersection is). Engines resolving on world AABBs
@@ -42,7 +44,10 @@
 ///  6. `conservation` (every frame with states): isolated dynamic groups (components of
 ///     the contact graph, 2+ dynamic bodies, no static body in their contacts): linear
 ///     momentum changes by m g dt only; angular momentum about the group's centre of
-///     mass, sum m (x - c) x v + R I R^T w, kept (rotating records; n/a for
+///     mass, sum m (x_pre - c_pre) x v + R I R^T w (v, q, w before: v_pre + dt g, q_pre,
+///     w_pre; after: v_post, q_post, w_post), kept within angular_momentum_rel x the
+///     exchange + dt |w x I w| per body (free rotation) + (depth + margin) |jt| per row
+///     (impulses applied at two witness points) (rotating records; n/a for
 ///     translation-only ones); kinetic energy (translational + rotational) does not rise
 ///     when every restitution <= 1.
 /// Cost: a checked frame is O(n) for the posed AABBs plus FCL on the candidate pairs

@@ -150,8 +150,9 @@ struct Tolerances {
   double penetration_settle_frames = 0.0;
   /// Angular momentum of an isolated group: |dL| <= this x the exchanged angular
   /// momentum (sum of the bodies' |dL_i|) + dt |w x I w| per body (an explicit
-  /// orientation update of a non-isotropic body misses the gyroscopic term) + float32
-  /// slack. Exact to rounding on the off-centre collision record (impulses at the
+  /// orientation update of a non-isotropic body misses the gyroscopic term) + (depth +
+  /// margin) |jt| per row (Bullet applies a row's impulse at a witness point on each
+  /// body, apart along the normal) + float32 slack. Exact to rounding on the off-centre collision record (impulses at the
   /// detection pose); octocd's records are translation-only (n/a).
   double angular_momentum_rel = 1e-3;
   /// Energy of an isolated group: KE' <= KE (after gravity) x (1 + this) + slack, when
