@@ -403,8 +403,13 @@ TEST(PhysicsRows, FrictionImpulseOutsideTheCone) {
 TEST(PhysicsRows, OrientationNotAppliedToContactPoints) {
   const auto model = build_model(four_bodies());
   RestingRecord r = resting(*model);
-  // The diamond's points taken from its unrotated local box: its lower face's corners.
-  for (std::size_t k : {0u, 1u}) r.rec.contacts[k].point = r.x[2] + v3(0, -0.1, k == 0 ? -0.1 : 0.1);
+  // The diamond's points where they would be if its orientation were ignored: the
+  // body-frame offset of each point taken as a world offset (its edge's corners
+  // (-0.1, -0.1, +-0.1) instead of (0, -0.1 sqrt 2, +-0.1)).
+  for (std::size_t k : {0u, 1u}) {
+    const Vec3 w = r.rec.contacts[k].point;
+    r.rec.contacts[k].point = r.x[2] + rotate(conjugate(r.q[2]), w - r.x[2]);
+  }
   expect_caught(judge(*model, r.rec, rotating_engine()), "contact-geometry", {"frame 7", "pair (0, 2) row", "point"});
 }
 

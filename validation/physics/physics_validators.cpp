@@ -168,7 +168,7 @@ struct PhysicsValidators::Impl {
   std::uint64_t checked_frames = 0, rows_unjudged = 0, upper_bound_pairs = 0;
   std::uint64_t sign_rows = 0, sign_agree = 0, shape_angle_rows = 0;
   std::vector<double> shape_angles;  // Aabb geometry: angle to the posed shapes (figure)
-  std::uint64_t speculative_rows = 0;  // rows on shapes more than a slop apart (figure)
+  std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
   double speculative_worst = 0;
   std::uint64_t dissipation_cone_only = 0, groups = 0, groups_rotating = 0, state_frames = 0;
   double pen_max = 0;
@@ -437,32 +437,37 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
       const double angle = angle_between(c.normal, r.normal) * deg;
       ++sign_rows;
       if (dot(c.normal, r.normal) > 0.0f) ++sign_agree;
-      if (!r.penetrating && r.distance > bodies.slop) {
-        // A speculative row on shapes more than a slop apart pushes nothing yet; a
+      if (!r.penetrating || r.depth <= tol.geometry_slack_m) {
+        // A row on shapes that do not penetrate: the nearest-points direction of two
+        // shapes that (nearly) touch at an edge or a corner is no contact normal, and a
         // persistent manifold (Bullet) keeps the normal a point was found with while the
-        // bodies turn. Its angle is a figure.
+        // bodies turn. Its angle is a figure; the normal is judged where the shapes
+        // penetrate (the minimum translation, which a correct engine's normal follows).
         ++speculative_rows;
         speculative_worst = std::max(speculative_worst, angle);
-        continue;
+      } else {
+        normal_angle.check(angle <= tol.normal_angle_deg, angle, [&] {
+          return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from FCL's "
+                             "({:.3f}, {:.3f}, {:.3f}) ({}minimum translation)",
+                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle,
+                             r.normal.x, r.normal.y, r.normal.z, aabb ? "box-box on the world AABBs, " : "");
+        });
       }
-      normal_angle.check(angle <= tol.normal_angle_deg, angle, [&] {
-        return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from FCL's "
-                           "({:.3f}, {:.3f}, {:.3f}) ({}{})",
-                           frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle, r.normal.x,
-                           r.normal.y, r.normal.z, aabb ? "box-box on the world AABBs, " : "",
-                           r.penetrating ? "EPA" : "nearest points");
-      });
       if (aabb && shape_ref.valid) {
         ++shape_angle_rows;
         shape_angles.push_back(angle_between(c.normal, shape_ref.normal) * deg);
       }
       if (rec.has_points) {
-        // A row's point lies within the pair's penetration (or distance) of both
-        // surfaces: any point of the intersection is within the depth of each surface.
-        const double reach_p = std::max({r.penetrating ? r.depth : r.distance, double(c.depth)});
+        // A row's point lies on one of the two surfaces (a witness point), or between
+        // them (a midpoint: within the pair's depth or distance of each, since any point
+        // of the intersection is within the depth of both surfaces; a persistent
+        // manifold's row may be up to the contact margin apart, its midpoint half of it
+        // from each). So the nearer surface is at most that far.
+        const double reach_p =
+            std::max({r.penetrating ? r.depth : r.distance, double(c.depth), 0.5 * pair_margin(p)});
         const double da = ref->surface_distance(p.a, det[p.a], c.point);
         const double db = ref->surface_distance(p.b, det[p.b], c.point);
-        const double off = std::max(da, db) - reach_p;
+        const double off = std::min(da, db) - reach_p;
         points.check(off <= tol.depth_m, off, [&] {
           return fmt::format("frame {}: {} row {}: point ({:.4f}, {:.4f}, {:.4f}) is {:.4g} m from body {} "
                              "and {:.4g} m from body {} (depth or distance {:.4g} m)",
@@ -776,7 +781,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     r.measured = s.normal_angle.worst_or(0.0);
     r.bound = s.tol.normal_angle_deg;
     r.pass = s.normal_angle.failures == 0 && s.depth.failures == 0 && s.points.failures == 0;
-    r.applicable = s.normal_angle.checks > 0;
+    r.applicable = s.normal_angle.checks + s.depth.checks + s.points.checks > 0;
     const bool aabb = s.bodies.contact_geometry == ContactGeometry::Aabb;
     std::string stats;
     if (aabb && !s.shape_angles.empty()) {
@@ -806,7 +811,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     } else {
       r.detail = fmt::format("{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}",
                              s.normal_angle.checks, aabb ? " on the world AABBs" : "",
-                             aabb ? "FCL box-box" : "FCL: box-box, EPA or nearest points", s.normal_angle.worst_or(0.0),
+                             aabb ? "FCL box-box" : "FCL: box-box or EPA", s.normal_angle.worst_or(0.0),
                              s.depth.worst_or(0.0),
                              s.points.checks ? fmt::format(", {} points, worst {:.3g} m beyond the depth",
                                                            s.points.checks, s.points.worst_or(0.0))
@@ -815,8 +820,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                              : "",
                              sign, stats);
       if (s.speculative_rows)
-        r.detail += fmt::format("; {} speculative rows (shapes more than a slop apart) not judged on the normal, "
-                                "worst angle {:.3g} deg",
+        r.detail += fmt::format("; {} rows on shapes that do not penetrate not judged on the normal (worst "
+                                "angle {:.3g} deg to the nearest-points direction)",
                                 s.speculative_rows, s.speculative_worst);
       if (s.upper_bound_pairs)
         r.detail += fmt::format("; {} non-convex mesh pairs: depth judged one-sided against an upper bound",

@@ -20,14 +20,17 @@
 ///     `contact_depth_m` (FCL; non-convex meshes must really intersect) has at least one
 ///     contact row; a row on a pair farther apart than the contact margin (or the pair's
 ///     theta) + slack is a false contact.
-///  3. `contact-geometry` (checked frames): per row on shapes penetrating or at most a
-///     slop apart, the angle between the engine's normal and FCL's (two boxes: FCL's
-///     box-box; convex hulls: libccd EPA; separated: nearest points) within
-///     `normal_angle_deg` (speculative rows farther apart: a figure, since a persistent
-///     manifold keeps the normal a point was found with while the bodies turn); the pair's deepest row's depth against
+///  3. `contact-geometry` (checked frames): per row on penetrating shapes, the angle
+///     between the engine's normal and FCL's minimum translation (two boxes: FCL's
+///     box-box; convex hulls: libccd EPA) within `normal_angle_deg`; rows on shapes
+///     that do not penetrate give the angle to the nearest-points direction as a figure
+///     (two shapes touching at an edge or corner have no defined normal there, and a
+///     persistent manifold keeps the normal a point was found with while bodies turn); the pair's deepest row's depth against
 ///     FCL's within `depth_m` (one-sided against a non-convex upper bound); with points,
-///     each point within the pair's depth (or distance) + `depth_m` of both surfaces
-///     (any point of the intersection is). Engines resolving on world AABBs
+///     each point within the pair's depth (or distance, or half the contact margin:
+///     the midpoint of a persistent manifold's row) + `depth_m` of the nearer of the two
+///     surfaces (a witness point lies on one; any point of the intersection lies within
+///     the depth of both). Engines resolving on world AABBs
 ///     (ContactGeometry::Aabb) are judged against FCL box-box on rec.aabbs; their angle
 ///     to the posed shapes is a figure. The sign share is a figure.
 ///  4. `penetration` (checked frames): the largest true penetration (FCL) from frame
