@@ -10,6 +10,7 @@
 #include <fcl/geometry/bvh/BVH_model.h>
 #include <fcl/geometry/shape/box.h>
 #include <fcl/geometry/shape/convex.h>
+#include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
 #include <fcl/narrowphase/collision.h>
 #include <fcl/narrowphase/collision_object.h>
@@ -34,19 +35,27 @@ using V3 = fcl::Vector3<S>;
 struct ShapeGeom {
   std::shared_ptr<fcl::CollisionGeometry<S>> exact;  ///< BVH model (mesh) or box
   std::shared_ptr<fcl::CollisionGeometry<S>> hull;   ///< fcl::Convex (mesh) or the same box
-  std::vector<V3> hull_vertices;                     ///< hull vertices (boxes: 8 corners)
-  V3 offset = V3::Zero();  ///< local AABB centre (0 for our shapes; boxes are built around it)
+  /// Hull vertices in the body frame (boxes: 8 corners; meshes: hull vertices + offset).
+  std::vector<V3> hull_vertices;
+  /// Where the FCL geometry's own frame sits in the body frame: a box's local AABB
+  /// centre (fcl::Box is centred on its frame); for a mesh, the local AABB centre minus
+  /// the mesh's vertex bounds centre (0 for octocd's recentred meshes).
+  V3 offset = V3::Zero();
+  bool is_box = false;
+  bool convex = true;  ///< box, or a mesh whose every triangle lies on its hull
+  V3 half = V3::Zero();  ///< box half extents
 };
 
-/// A hull placed in the world for libccd (translation only).
+/// A hull placed in the world for libccd: world = R v + position.
 struct CcdObject {
   const std::vector<V3>* vertices;
+  fcl::Matrix3<S> rotation;
   V3 position;
 };
 
 void ccd_support(const void* obj, const ccd_vec3_t* dir, ccd_vec3_t* out) {
   const auto* o = static_cast<const CcdObject*>(obj);
-  const V3 d(ccdVec3X(dir), ccdVec3Y(dir), ccdVec3Z(dir));
+  const V3 d = o->rotation.transpose() * V3(ccdVec3X(dir), ccdVec3Y(dir), ccdVec3Z(dir));
   const V3* best = nullptr;
   S best_dot = -std::numeric_limits<S>::infinity();
   for (const V3& v : *o->vertices) {
@@ -56,7 +65,7 @@ void ccd_support(const void* obj, const ccd_vec3_t* dir, ccd_vec3_t* out) {
       best = &v;
     }
   }
-  const V3 p = *best + o->position;
+  const V3 p = o->rotation * *best + o->position;
   ccdVec3Set(out, p.x(), p.y(), p.z());
 }
 
@@ -65,8 +74,22 @@ void ccd_center(const void* obj, ccd_vec3_t* out) {
   V3 c = V3::Zero();
   for (const V3& v : *o->vertices) c += v;
   c /= S(o->vertices->size());
-  c += o->position;
+  c = o->rotation * c + o->position;
   ccdVec3Set(out, c.x(), c.y(), c.z());
+}
+
+/// libccd settings of every query.
+ccd_t make_ccd() {
+  ccd_t ccd;
+  CCD_INIT(&ccd);
+  ccd.support1 = ccd_support;
+  ccd.support2 = ccd_support;
+  ccd.center1 = ccd_center;
+  ccd.center2 = ccd_center;
+  ccd.max_iterations = 1000;
+  ccd.epa_tolerance = 1e-9;
+  ccd.dist_tolerance = 1e-12;
+  return ccd;
 }
 
 V3 to_v3(Vec3 v) { return V3(S(v.x), S(v.y), S(v.z)); }
@@ -80,6 +103,14 @@ bool unit(const V3& v, Vec3& out) {
   return true;
 }
 
+/// The 8 corners of the box [lo, hi].
+std::vector<V3> corners(const V3& lo, const V3& hi) {
+  std::vector<V3> out;
+  for (int i = 0; i < 8; ++i)
+    out.emplace_back((i & 1) ? hi.x() : lo.x(), (i & 2) ? hi.y() : lo.y(), (i & 4) ? hi.z() : lo.z());
+  return out;
+}
+
 ShapeGeom build_box(const Shape& shape) {
   ShapeGeom g;
   const V3 lo = to_v3(shape.local.min), hi = to_v3(shape.local.max);
@@ -89,11 +120,9 @@ ShapeGeom build_box(const Shape& shape) {
   box->computeLocalAABB();
   g.exact = box;
   g.hull = box;
-  for (int i = 0; i < 8; ++i) {
-    g.hull_vertices.emplace_back((i & 1) ? hi.x() : lo.x(), (i & 2) ? hi.y() : lo.y(),
-                                 (i & 4) ? hi.z() : lo.z());
-  }
-  for (V3& v : g.hull_vertices) v -= g.offset;  // box geometry is centred on offset
+  g.is_box = true;
+  g.half = side * 0.5;
+  g.hull_vertices = corners(lo, hi);  // body frame
   return g;
 }
 
@@ -103,6 +132,14 @@ ShapeGeom build_mesh(const Shape& shape) {
   std::vector<V3> pts;
   pts.reserve(mesh.vertices.size());
   for (const Vec3& v : mesh.vertices) pts.push_back(to_v3(v));
+  if (!pts.empty()) {
+    V3 lo = pts[0], hi = pts[0];
+    for (const V3& p : pts) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    g.offset = (to_v3(shape.local.min) + to_v3(shape.local.max)) * 0.5 - (lo + hi) * 0.5;
+  }
   std::vector<fcl::Triangle> tris;
   tris.reserve(mesh.triangles.size());
   for (const auto& t : mesh.triangles) tris.emplace_back(t[0], t[1], t[2]);
@@ -132,10 +169,12 @@ ShapeGeom build_mesh(const Shape& shape) {
   }
   if (verts->empty()) verts->assign(pts.begin(), pts.end());  // degenerate: support on all
   g.hull_vertices = *verts;
+  for (V3& v : g.hull_vertices) v += g.offset;  // body frame
   V3 centroid = V3::Zero();
   for (const V3& v : *verts) centroid += v;
   centroid /= S(std::max<std::size_t>(verts->size(), 1));
   auto faces = std::make_shared<std::vector<int>>();
+  std::vector<std::pair<V3, S>> planes;  // unit outward normal, offset
   int num_faces = 0;
   for (int f = 0; f < hc.faces.size(); ++f) {
     std::vector<int> idx;
@@ -159,11 +198,139 @@ ShapeGeom build_mesh(const Shape& shape) {
     faces->push_back(int(idx.size()));
     faces->insert(faces->end(), idx.begin(), idx.end());
     ++num_faces;
+    const S nn = n.norm();
+    if (nn > 0) planes.emplace_back(n / nn, (n / nn).dot((*verts)[std::size_t(idx[0])]));
+  }
+  // Convex when every triangle lies in a face plane of the hull (within 1e-6 m, relative
+  // to the mesh's size above 1 m): a vertex inside the hull, or a face across it (two
+  // boxes side by side: every vertex on the hull, the facing sides inside), shows it is
+  // not. Stops at the first such triangle.
+  S extent = 1;
+  for (const V3& p : pts) extent = std::max(extent, p.cwiseAbs().maxCoeff());
+  const S tol = 1e-6 * extent;
+  g.convex = !planes.empty();
+  for (const auto& t : tris) {
+    bool on_face = false;
+    for (const auto& pl : planes) {
+      if (std::abs(pl.first.dot(pts[std::size_t(t[0])]) - pl.second) <= tol &&
+          std::abs(pl.first.dot(pts[std::size_t(t[1])]) - pl.second) <= tol &&
+          std::abs(pl.first.dot(pts[std::size_t(t[2])]) - pl.second) <= tol) {
+        on_face = true;
+        break;
+      }
+    }
+    if (!on_face) {
+      g.convex = false;
+      break;
+    }
   }
   auto convex = std::make_shared<fcl::Convex<S>>(verts, num_faces, faces, false);
   convex->computeLocalAABB();
   g.hull = convex;
   return g;
+}
+
+
+/// The FCL transform of a shape's geometry frame for a body at (R, x): R, x + R offset.
+fcl::Transform3<S> geometry_transform(const ShapeGeom& g, const fcl::Matrix3<S>& r, const V3& x) {
+  fcl::Transform3<S> t = fcl::Transform3<S>::Identity();
+  t.linear() = r;
+  t.translation() = x + r * g.offset;
+  return t;
+}
+
+fcl::Matrix3<S> rotation_of(const Pose& p) {
+  const Quat q = p.orientation;
+  const fcl::Quaternion<S> e(S(q.w), S(q.x), S(q.y), S(q.z));
+  return e.normalized().toRotationMatrix();
+}
+
+/// FCL collide on the exact geometries (boxes / BVH models): do they intersect?
+bool exact_collide(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const ShapeGeom& gb,
+                   const fcl::Transform3<S>& tb) {
+  fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
+  fcl::CollisionRequest<S> req(1, false);
+  req.gjk_solver_type = fcl::GST_LIBCCD;
+  fcl::CollisionResult<S> res;
+  fcl::collide(&oa, &ob, req, res);
+  return res.isCollision();
+}
+
+/// FCL distance on the exact geometries, nearest points in the world frame.
+void exact_distance(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const ShapeGeom& gb,
+                    const fcl::Transform3<S>& tb, ReferenceNormal& r) {
+  fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
+  fcl::DistanceRequest<S> req(true);  // enable_nearest_points
+  req.gjk_solver_type = fcl::GST_LIBCCD;
+  req.distance_tolerance = 1e-9;
+  req.abs_err = 0;
+  req.rel_err = 0;
+  fcl::DistanceResult<S> res;
+  // FCL 0.7 answers a shape (o1) against a BVH mesh (o2) with its nearest points
+  // swapped (pinned by PosedReference.SeparatedMeshAboveFloorNormal): ask mesh first.
+  const bool swap = ga.is_box && !gb.is_box;
+  if (swap) {
+    fcl::distance(&ob, &oa, req, res);
+  } else {
+    fcl::distance(&oa, &ob, req, res);
+  }
+  r.penetrating = false;
+  r.distance = res.min_distance;
+  // nearest_points[0] is on o1, [1] on o2, world frame (FCL 0.7).
+  const V3 pa = res.nearest_points[swap ? 1 : 0], pb = res.nearest_points[swap ? 0 : 1];
+  r.point_a = to_vec3(pa);
+  r.point_b = to_vec3(pb);
+  if (!(res.min_distance > 0) || !std::isfinite(res.min_distance)) return;
+  r.valid = unit(pa - pb, r.normal);
+}
+
+/// libccd GJK + EPA on two placed hulls. Returns false when the hulls do not intersect;
+/// otherwise fills r (penetrating; valid when EPA answered).
+bool hull_penetration(const CcdObject& ca, const CcdObject& cb, ReferenceNormal& r) {
+  ccd_t ccd = make_ccd();
+  if (!ccdGJKIntersect(&ca, &cb, &ccd)) return false;
+  r.penetrating = true;
+  ccd_real_t depth = 0;
+  ccd_vec3_t dir, pos;
+  if (ccdGJKPenetration(&ca, &cb, &ccd, &depth, &dir, &pos) == 0) {
+    // dir points from obj1 (A) towards obj2 (B): B-to-A is -dir.
+    const V3 d(ccdVec3X(&dir), ccdVec3Y(&dir), ccdVec3Z(&dir));
+    if (std::isfinite(depth) && unit(-d, r.normal)) {
+      r.depth = std::max<S>(0, depth);
+      r.point_a = r.point_b = Vec3{float(ccdVec3X(&pos)), float(ccdVec3Y(&pos)), float(ccdVec3Z(&pos))};
+      r.valid = true;
+    }
+  }
+  return true;
+}
+
+/// Two posed boxes as boxes: FCL's box-box test (ODE's dBoxBox, the separating axis of
+/// least penetration among the 15 candidates: the exact minimum translation of two
+/// boxes), its deepest contact; FCL distance when apart. (libccd's EPA on box corners can
+/// cycle without end on coplanar faces.)
+ReferenceNormal box_box(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const ShapeGeom& gb,
+                        const fcl::Transform3<S>& tb) {
+  ReferenceNormal r;
+  fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
+  fcl::CollisionRequest<S> req(8, true);
+  req.gjk_solver_type = fcl::GST_LIBCCD;
+  fcl::CollisionResult<S> res;
+  fcl::collide(&oa, &ob, req, res);
+  if (res.numContacts() == 0) {
+    exact_distance(ga, ta, gb, tb, r);
+    return r;
+  }
+  r.penetrating = true;
+  std::size_t deepest = 0;
+  for (std::size_t k = 1; k < res.numContacts(); ++k)
+    if (res.getContact(k).penetration_depth > res.getContact(deepest).penetration_depth) deepest = k;
+  const fcl::Contact<S>& c = res.getContact(deepest);
+  // Contact::normal points from o1 (A) to o2 (B): B-to-A is its negation.
+  if (!unit(-c.normal, r.normal)) return r;
+  r.depth = std::max<S>(0, c.penetration_depth);
+  r.point_a = r.point_b = to_vec3(c.pos);
+  r.valid = std::isfinite(r.depth);
+  return r;
 }
 
 }  // namespace
@@ -196,11 +363,9 @@ ReferenceNormal ReferenceGeometry::fcl_collide_normal(std::uint32_t a, std::uint
                                                       Vec3 xb) const {
   const ShapeGeom& ga = impl_->geom(a);
   const ShapeGeom& gb = impl_->geom(b);
-  fcl::Transform3<S> ta = fcl::Transform3<S>::Identity();
-  fcl::Transform3<S> tb = fcl::Transform3<S>::Identity();
-  ta.translation() = to_v3(xa) + ga.offset;
-  tb.translation() = to_v3(xb) + gb.offset;
-  fcl::CollisionObject<S> oa(ga.hull, ta), ob(gb.hull, tb);
+  const fcl::Matrix3<S> id = fcl::Matrix3<S>::Identity();
+  fcl::CollisionObject<S> oa(ga.hull, geometry_transform(ga, id, to_v3(xa))),
+      ob(gb.hull, geometry_transform(gb, id, to_v3(xb)));
   fcl::CollisionRequest<S> req(1, true);
   req.gjk_solver_type = fcl::GST_LIBCCD;
   fcl::CollisionResult<S> res;
@@ -222,59 +387,154 @@ ReferenceNormal ReferenceGeometry::normal(std::uint32_t a, std::uint32_t b, Vec3
   const ShapeGeom& ga = impl_->geom(a);
   const ShapeGeom& gb = impl_->geom(b);
   ReferenceNormal r;
-
+  const fcl::Matrix3<S> id = fcl::Matrix3<S>::Identity();
   // 1. Do the hulls intersect? (libccd GJK on the hull vertices.)
-  CcdObject ca{&ga.hull_vertices, to_v3(xa) + ga.offset};
-  CcdObject cb{&gb.hull_vertices, to_v3(xb) + gb.offset};
-  ccd_t ccd;
-  CCD_INIT(&ccd);
-  ccd.support1 = ccd_support;
-  ccd.support2 = ccd_support;
-  ccd.center1 = ccd_center;
-  ccd.center2 = ccd_center;
-  ccd.max_iterations = 1000;
-  ccd.epa_tolerance = 1e-9;
-  ccd.dist_tolerance = 1e-12;
-  if (ccdGJKIntersect(&ca, &cb, &ccd)) {
-    ccd_real_t depth = 0;
-    ccd_vec3_t dir, pos;
-    if (ccdGJKPenetration(&ca, &cb, &ccd, &depth, &dir, &pos) == 0) {
-      r.penetrating = true;
-      // dir points from obj1 (A) towards obj2 (B): B-to-A is -dir.
-      const V3 d(ccdVec3X(&dir), ccdVec3Y(&dir), ccdVec3Z(&dir));
-      if (std::isfinite(depth) && unit(-d, r.normal)) {
-        r.depth = std::max<S>(0, depth);
-        r.point_a = r.point_b = Vec3{float(ccdVec3X(&pos)), float(ccdVec3Y(&pos)),
-                                     float(ccdVec3Z(&pos))};
-        r.valid = true;
-        return r;
-      }
-    }
+  const CcdObject ca{&ga.hull_vertices, id, to_v3(xa)};
+  const CcdObject cb{&gb.hull_vertices, id, to_v3(xb)};
+  if (hull_penetration(ca, cb, r)) {
+    if (r.valid) return r;
     return fcl_collide_normal(a, b, xa, xb);  // EPA failed: FCL's MPR estimate
   }
-
   // 2. Separated: FCL distance on the exact geometry (BVH models / boxes).
-  fcl::Transform3<S> ta = fcl::Transform3<S>::Identity();
-  fcl::Transform3<S> tb = fcl::Transform3<S>::Identity();
-  ta.translation() = to_v3(xa) + ga.offset;
-  tb.translation() = to_v3(xb) + gb.offset;
-  fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
-  fcl::DistanceRequest<S> req(true);  // enable_nearest_points
-  req.gjk_solver_type = fcl::GST_LIBCCD;
-  req.distance_tolerance = 1e-9;
-  req.abs_err = 0;
-  req.rel_err = 0;
-  fcl::DistanceResult<S> res;
-  fcl::distance(&oa, &ob, req, res);
-  r.penetrating = false;
-  r.distance = res.min_distance;
-  // nearest_points[0] is on o1 (A), [1] on o2 (B), world frame (FCL 0.7).
-  const V3 pa = res.nearest_points[0], pb = res.nearest_points[1];
-  r.point_a = to_vec3(pa);
-  r.point_b = to_vec3(pb);
-  if (!(res.min_distance > 0) || !std::isfinite(res.min_distance)) return r;
-  r.valid = unit(pa - pb, r.normal);
+  exact_distance(ga, geometry_transform(ga, id, to_v3(xa)), gb, geometry_transform(gb, id, to_v3(xb)), r);
   return r;
+}
+
+bool ReferenceGeometry::intersect(std::uint32_t a, std::uint32_t b, const Pose& pa, const Pose& pb) const {
+  const ShapeGeom& ga = impl_->geom(a);
+  const ShapeGeom& gb = impl_->geom(b);
+  const fcl::Matrix3<S> ra = rotation_of(pa), rb = rotation_of(pb);
+  const CcdObject ca{&ga.hull_vertices, ra, to_v3(pa.position)};
+  const CcdObject cb{&gb.hull_vertices, rb, to_v3(pb.position)};
+  ccd_t ccd = make_ccd();
+  if (!ccdGJKIntersect(&ca, &cb, &ccd)) return false;
+  if (ga.convex && gb.convex) return true;
+  return exact_collide(ga, geometry_transform(ga, ra, to_v3(pa.position)), gb,
+                       geometry_transform(gb, rb, to_v3(pb.position)));
+}
+
+ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const Pose& pa, const Pose& pb) const {
+  const ShapeGeom& ga = impl_->geom(a);
+  const ShapeGeom& gb = impl_->geom(b);
+  const fcl::Matrix3<S> ra = rotation_of(pa), rb = rotation_of(pb);
+  const V3 xa = to_v3(pa.position), xb = to_v3(pb.position);
+  const fcl::Transform3<S> ta = geometry_transform(ga, ra, xa), tb = geometry_transform(gb, rb, xb);
+  ReferenceNormal r;
+  if (ga.is_box && gb.is_box) return box_box(ga, ta, gb, tb);
+  const CcdObject ca{&ga.hull_vertices, ra, xa};
+  const CcdObject cb{&gb.hull_vertices, rb, xb};
+  if (hull_penetration(ca, cb, r)) {
+    if (ga.convex && gb.convex) return r;  // exact: EPA on the shapes themselves
+    if (!exact_collide(ga, ta, gb, tb)) {
+      // Hulls meet, the meshes do not: separated, BVH distance.
+      ReferenceNormal d;
+      exact_distance(ga, ta, gb, tb, d);
+      return d;
+    }
+    if (!r.valid) return r;
+    // The meshes intersect: the smallest translation of A along the hulls' normal that
+    // separates the meshes (bisection; the hull depth separates them).
+    r.depth_upper_bound = true;
+    // Directional depths: the smallest translation of A along a direction that separates
+    // the meshes is an upper bound of the minimum translation; the least over a few
+    // directions is the tighter bound. Directions: the hulls' EPA normal first, then the
+    // centre line (B to A) and the six axes. A direction is bisected only when it
+    // separates the meshes within the best depth so far.
+    auto separated_at = [&](const V3& n, S t) {
+      fcl::Transform3<S> moved = ta;
+      moved.translation() += t * n;
+      return !exact_collide(ga, moved, gb, tb);
+    };
+    std::vector<V3> dirs = {to_v3(r.normal)};
+    const V3 centre_line = xa + ra * ga.offset - (xb + rb * gb.offset);
+    if (centre_line.norm() > 0) dirs.push_back(centre_line.normalized());
+    for (int k = 0; k < 3; ++k) {
+      dirs.push_back(V3::Unit(k));
+      dirs.push_back(-V3::Unit(k));
+    }
+    S best = r.depth + 1e-6;
+    std::size_t best_dir = 0;
+    bool found = false;
+    for (std::size_t d = 0; d < dirs.size(); ++d) {
+      S hi = best;
+      if (d == 0)
+        for (int k = 0; k < 8 && !separated_at(dirs[d], hi); ++k) hi = hi * 1.5 + 1e-6;
+      if (!separated_at(dirs[d], hi)) continue;
+      S lo = 0;
+      while (hi - lo > 1e-6) {
+        const S mid = 0.5 * (lo + hi);
+        (separated_at(dirs[d], mid) ? hi : lo) = mid;
+      }
+      if (!found || hi < best) {
+        best = hi;
+        best_dir = d;
+        found = true;
+      }
+    }
+    if (!found) return r;  // keep the hull depth
+    r.depth = best;
+    if (best_dir != 0) r.normal = to_vec3(dirs[best_dir]);
+    return r;
+  }
+  exact_distance(ga, ta, gb, tb, r);
+  return r;
+}
+
+double ReferenceGeometry::surface_distance(std::uint32_t body, const Pose& pose, Vec3 p) const {
+  const ShapeGeom& g = impl_->geom(body);
+  const fcl::Matrix3<S> r = rotation_of(pose);
+  if (g.is_box) {
+    const V3 q = r.transpose() * (to_v3(p) - to_v3(pose.position)) - g.offset;
+    const V3 out = (q.cwiseAbs() - g.half).cwiseMax(0.0);
+    if (out.squaredNorm() > 0) return out.norm();
+    return (g.half - q.cwiseAbs()).minCoeff();  // inside: to the nearest face
+  }
+  auto sphere = std::make_shared<fcl::Sphere<S>>(1e-9);
+  fcl::Transform3<S> tp = fcl::Transform3<S>::Identity();
+  tp.translation() = to_v3(p);
+  fcl::CollisionObject<S> os(sphere, tp), om(g.exact, geometry_transform(g, r, to_v3(pose.position)));
+  fcl::DistanceRequest<S> req(false);
+  req.gjk_solver_type = fcl::GST_LIBCCD;
+  fcl::DistanceResult<S> res;
+  fcl::distance(&os, &om, req, res);
+  return std::max<S>(0, res.min_distance + 1e-9);
+}
+
+Aabb ReferenceGeometry::world_aabb(std::uint32_t body, const Pose& pose) const {
+  const ShapeGeom& g = impl_->geom(body);
+  if (g.is_box) {
+    Aabb local;
+    const V3 lo = g.offset - g.half, hi = g.offset + g.half;
+    local.min = to_vec3(lo);
+    local.max = to_vec3(hi);
+    return posed_box_aabb(local, pose);
+  }
+  const fcl::Matrix3<S> r = rotation_of(pose);
+  const V3 x = to_v3(pose.position);
+  V3 lo = V3::Constant(std::numeric_limits<S>::infinity()), hi = -lo;
+  for (const V3& v : g.hull_vertices) {
+    const V3 w = r * v + x;
+    lo = lo.cwiseMin(w);
+    hi = hi.cwiseMax(w);
+  }
+  Aabb out;
+  for (int k = 0; k < 3; ++k) {
+    out.min[k] = std::nextafter(float(lo[k]), -std::numeric_limits<float>::infinity());
+    out.max[k] = std::nextafter(float(hi[k]), std::numeric_limits<float>::infinity());
+  }
+  return out;
+}
+
+bool ReferenceGeometry::convex(std::uint32_t body) const { return impl_->geom(body).convex; }
+
+ReferenceNormal ReferenceGeometry::aabb_pair(const Aabb& a, const Aabb& b) {
+  const fcl::Matrix3<S> id = fcl::Matrix3<S>::Identity();
+  ShapeGeom ga, gb;
+  ga.exact = std::make_shared<fcl::Box<S>>(to_v3(a.max) - to_v3(a.min));
+  gb.exact = std::make_shared<fcl::Box<S>>(to_v3(b.max) - to_v3(b.min));
+  ga.offset = (to_v3(a.min) + to_v3(a.max)) * 0.5;
+  gb.offset = (to_v3(b.min) + to_v3(b.max)) * 0.5;
+  return box_box(ga, geometry_transform(ga, id, V3::Zero()), gb, geometry_transform(gb, id, V3::Zero()));
 }
 
 double angle_between(Vec3 u, Vec3 v) {

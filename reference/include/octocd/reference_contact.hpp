@@ -32,11 +32,34 @@
 ///    ccdGJKPenetration directly on the same hull vertices; fcl::collide is exposed as
 ///    fcl_collide_normal() for comparison and used as a fallback when EPA fails.
 ///  - FCL mesh-mesh (BVH-BVH) contacts are per triangle and are never used.
+///
+/// Posed queries (SPEC 13, the physics tier): the same queries for bodies that rotate,
+/// each body at a `Pose` (body-frame origin + orientation, body to world). The shape is
+/// in the body frame as the Model gives it: a box fills its local AABB; a mesh is placed
+/// so that its vertex bounds are the shape's local AABB (octocd's meshes are centred on
+/// it already; an external trace may give a local box off the body origin). Unlike the
+/// translation-only normal(), posed() decides "penetrating" on the shapes themselves:
+///  - two boxes: FCL's box-box test (ODE's dBoxBox: the separating axis of least
+///    penetration among the 15 of two boxes, the exact minimum translation); FCL's
+///    distance when apart. (libccd's EPA on box corners can cycle without end when faces
+///    are coplanar, as in a resting stack.)
+///  - other convex shapes (meshes whose every triangle lies on their hull): GJK on the
+///    hulls decides; EPA gives the exact minimum translation (depth, normal).
+///  - a non-convex mesh: when the hulls intersect, FCL's BVH collide on the meshes decides
+///    whether the meshes themselves intersect. If they do not, the pair is separated and
+///    FCL's BVH distance gives the distance and nearest points. If they do, the depth is
+///    an UPPER BOUND of the true penetration depth (`depth_upper_bound`): the least, over
+///    the hulls' EPA normal, the centre line and the six axes, of the smallest translation
+///    of A along that direction that separates the meshes (bisection on BVH collide,
+///    1e-6 m); along the EPA normal it is at most the hull EPA depth (translating by the
+///    hull depth separates the hulls, hence the meshes). The normal is the direction
+///    that gave it. The true minimum translation of two non-convex meshes is not computed.
 
 #include <cstdint>
 #include <memory>
 
 #include "octocd/math.hpp"
+#include "octocd/pose.hpp"
 #include "octocd/world.hpp"
 
 namespace octocd {
@@ -49,6 +72,11 @@ struct ReferenceNormal {
   double distance = 0;       ///< m, >= 0, separated pairs (mesh-mesh BVH distance)
   double depth = 0;          ///< m, >= 0, penetrating pairs (EPA depth on the hulls)
   Vec3 point_a, point_b;     ///< nearest points (separated) or contact point (penetrating; a == b), world frame
+  /// posed() on a non-convex mesh pair that intersects: `depth` is an upper bound (the
+  /// separating translation along `normal`), not the minimum translation.
+  bool depth_upper_bound = false;
+  /// Signed distance (m): -depth when penetrating, distance otherwise.
+  double signed_distance() const { return penetrating ? -depth : distance; }
 };
 
 /// Per-shape FCL geometry of a World, built once: for meshes fcl::BVHModel<fcl::OBBRSS<double>>
@@ -85,6 +113,35 @@ class ReferenceGeometry {
   /// (-Contact::normal with o1 = A). valid = false when FCL reports no contact.
   /// For comparison and fallback; normal() is the reference.
   ReferenceNormal fcl_collide_normal(std::uint32_t a, std::uint32_t b, Vec3 xa, Vec3 xb) const;
+
+  /// Contact geometry of bodies a, b at poses pa, pb (SPEC 13; see the file comment for
+  /// non-convex meshes). Penetrating: normal from B to A (the direction to translate A
+  /// to separate), depth >= 0, point_a = point_b = the EPA contact point. Separated:
+  /// distance > 0, point_a on A, point_b on B (FCL distance on the boxes / BVH models),
+  /// normal = normalize(point_a - point_b). Touching (distance 0 without an EPA answer):
+  /// penetrating with depth 0 and valid = false. Throws InputError for a body out of range.
+  ReferenceNormal posed(std::uint32_t a, std::uint32_t b, const Pose& pa, const Pose& pb) const;
+
+  /// Whether the posed shapes intersect (touching counts): hull GJK, then for a
+  /// non-convex mesh FCL's BVH collide. Cheaper than posed().
+  bool intersect(std::uint32_t a, std::uint32_t b, const Pose& pa, const Pose& pb) const;
+
+  /// Distance (m, >= 0) from the world point p to the surface of body `body` at `pose`
+  /// (box: its faces, also from inside; mesh: its triangles, FCL sphere-BVH distance).
+  double surface_distance(std::uint32_t body, const Pose& pose, Vec3 p) const;
+
+  /// The exact world AABB of body `body` at `pose` (SPEC 13): a box's posed_box_aabb, a
+  /// mesh's bounds of its rotated hull vertices (double, rounded outward to float).
+  Aabb world_aabb(std::uint32_t body, const Pose& pose) const;
+
+  /// Whether the body's shape is convex (a box, or a mesh whose every triangle lies in a
+  /// face plane of its convex hull, within 1e-6 m).
+  bool convex(std::uint32_t body) const;
+
+  /// Box-box geometry of two axis-aligned boxes given in the world (FCL's box-box test;
+  /// FCL distance when apart): what an engine that resolves contacts on world AABBs
+  /// (octocd's SPEC 6) should find. Same conventions as posed().
+  static ReferenceNormal aabb_pair(const Aabb& a, const Aabb& b);
 
  private:
   struct Impl;

@@ -6,23 +6,56 @@
 /// (validation.hpp: Eq. 14 contraction, averaged corrections, the applied-state
 /// re-derivation, midphase completeness, analytic scenes, Bullet dynamics) is apart.
 ///
-/// Rows (each ValidationResult has tier Physics):
-///  1. `broadphase-completeness`: every pair with a dynamic body whose posed shapes are
-///     closer than the contact margin is among the engine's candidate pairs; extra pairs
-///     are allowed and counted (candidates per true pair). An engine that declares an
-///     exact AABB broadphase is also held to set equality with `flat` on its world AABBs.
-///  2. `contact-completeness`: every pair penetrating deeper than a tolerance has at
-///     least one contact; a contact on a pair farther apart than the margin is a false
-///     contact.
-///  3. `contact-geometry`: per contact, the angle between the engine's normal and FCL's
-///     (EPA on penetrating pairs, nearest points otherwise) and the depth against FCL's.
-///  4. `penetration`: the largest true penetration over the run, after a settling window.
-///  5. `friction`: |J_t| <= mu J_n per contact row; a friction impulse never raises the
-///     relative tangential speed at the contact point (v + w x r).
-///  6. `conservation`: on isolated dynamic groups (no static contact in the step), linear
-///     momentum changes by m g dt only, angular momentum about the group's centre of mass
-///     is kept, kinetic energy (translational + rotational) does not rise beyond gravity's
-///     work when restitution <= 1.
+/// Rows (each ValidationResult has tier Physics; each detail names the frame and the
+/// pair or body of the first or worst offence, and how many items it judged):
+///  1. `broadphase-completeness` (checked frames): every pair with a dynamic body whose
+///     posed shapes (detection pose) are closer than `broadphase_margin_m` - slack is
+///     among the engine's candidate pairs; extra pairs are allowed and counted
+///     (candidates per true pair). Pairs are found through the exact posed world AABBs
+///     grown by the largest margin any row asks about, in octocd's loose octree, then
+///     FCL. An engine that declares an exact AABB broadphase is also held to set equality
+///     with `flat` on its world AABBs (static-static pairs dropped on both sides). n/a
+///     when the record has no candidate pairs.
+///  2. `contact-completeness` (checked frames): every pair penetrating deeper than
+///     `contact_depth_m` (FCL; non-convex meshes must really intersect) has at least one
+///     contact row; a row on a pair farther apart than the contact margin (or the pair's
+///     theta) + slack is a false contact.
+///  3. `contact-geometry` (checked frames): per row on penetrating shapes, the angle
+///     between the engine's normal and FCL's minimum translation (two boxes: FCL's
+///     box-box; convex hulls: libccd EPA) within `normal_angle_deg`; rows on shapes
+///     that do not penetrate give the angle to the nearest-points direction as a figure
+///     (two shapes touching at an edge or corner have no defined normal there, and a
+///     persistent manifold keeps the normal a point was found with while bodies turn); the pair's deepest row's depth against
+///     FCL's within `depth_m` (one-sided against a non-convex upper bound); with points,
+///     each point within the pair's depth (or distance, or half the contact margin:
+///     the midpoint of a persistent manifold's row) + `depth_m` of the nearer of the two
+///     surfaces (a witness point lies on one; any point of the intersection lies within
+///     the depth of both). Engines resolving on world AABBs
+///     (ContactGeometry::Aabb) are judged against FCL box-box on rec.aabbs; their angle
+///     to the posed shapes is a figure. The sign share is a figure.
+///  4. `penetration` (checked frames): the largest true penetration (FCL) from frame
+///     `penetration_settle_frames` on, at most `penetration_slops` x slop.
+///  5. `friction` (every frame): |jt| <= mu jn (1 + friction_cone_rel) + 1e-9 per row,
+///     mu the pair's (per-body values combined, else `mu`). Dissipation where the pair
+///     is the only contact pair of each of its dynamic bodies and states are given: at
+///     each row's point (the centres without points) the relative tangential speed
+///     after the step is at most the larger of the speed before it (v_pre + dt g on
+///     dynamic bodies, w_pre) and the speed with the pair's normal impulses alone
+///     applied (rotating records with points: an off-centre normal impulse turns the
+///     bodies and moves the point sideways, which friction then acts on), +
+///     `friction_speed`. Other rows are judged on the cone only (counted).
+///  6. `conservation` (every frame with states): isolated dynamic groups (components of
+///     the contact graph, 2+ dynamic bodies, no static body in their contacts): linear
+///     momentum changes by m g dt only; angular momentum about the group's centre of
+///     mass, sum m (x_pre - c_pre) x v + R I R^T w (v, q, w before: v_pre + dt g, q_pre,
+///     w_pre; after: v_post, q_post, w_post), kept within angular_momentum_rel x the
+///     exchange + dt |w x I w| per body (free rotation) + (depth + margin) |jt| per row
+///     (impulses applied at two witness points) (rotating records; n/a for
+///     translation-only ones); kinetic energy (translational + rotational) does not rise
+///     when every restitution <= 1.
+/// Cost: a checked frame is O(n) for the posed AABBs plus FCL on the candidate pairs
+/// (non-convex mesh pairs that intersect cost the most: their depth is bisected with
+/// BVH collide along up to 8 directions).
 
 #include <array>
 #include <cstdint>
