@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -178,10 +179,27 @@ struct ReplayOptions {
 CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o);
 int replay_command(const ReplayOptions& o);
 
+/// One quantity's tolerance in `octocd compare`: A and B differ when |A - B| > abs + rel *
+/// max(|A|, |B|) (numpy.isclose's rule); both 0 = bit for bit.
+struct Tolerance {
+  double abs = 0.0;  ///< absolute, in the quantity's unit (m, m/s, counts, J), >= 0
+  double rel = 0.0;  ///< relative, >= 0
+  /// Whether this is bit for bit (abs = rel = 0).
+  bool exact() const { return abs == 0.0 && rel == 0.0; }
+  /// "1e-06", "rel:0.0001", "1e-06+rel:0.0001" or "0 (bit for bit)".
+  std::string text() const;
+};
+
+/// Parses `--tolerance` arguments (each comma-separated items VALUE or QUANTITY=VALUE, VALUE
+/// ABS, rel:R or ABS+rel:R; later items override earlier ones) into one tolerance per
+/// quantity (positions, velocities, contacts, pairs, energy; unnamed ones 0). Throws
+/// InputError naming the item for an unknown quantity, a negative or non-numeric value.
+std::map<std::string, Tolerance> parse_tolerances(const std::vector<std::string>& args);
+
 /// `octocd compare` options (cli/compare.cpp).
 struct CompareOptions {
   std::string a, b;
-  double tolerance = 0.0;
+  std::vector<std::string> tolerance;  ///< --tolerance arguments (parse_tolerances)
   std::string quantities = "positions,velocities,contacts,pairs";
   std::string json;
 };

@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -21,6 +22,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "octocd/trace.hpp"
 #include "octocd/trace_reader.hpp"
 #include "cli_run.hpp"
 
@@ -107,6 +109,11 @@ void flip_position_bit(const std::string& path, hsize_t row, hsize_t body, hsize
   H5Sclose(fs_);
   H5Dclose(d);
   H5Fclose(f);
+}
+
+/// compare's frame-count line, e.g. "/frames: 1050 vs 1000 frames".
+std::string fmt_frames(std::int64_t a, std::int64_t b) {
+  return "/frames: " + std::to_string(a) + " vs " + std::to_string(b) + " frames";
 }
 
 }  // namespace
@@ -359,8 +366,8 @@ TEST_F(Tools, CompareIncompatibleOrUnreadableExitTwo) {
   const std::string c = (dir_ / "c.h5").string();
   ASSERT_EQ(run_octocd("run " + scene + " --frames 10 --quiet --trace " + c).code, 0);
   Result r = run_octocd("compare " + a + " " + c);
-  EXPECT_EQ(r.code, 2) << r.output;
-  EXPECT_NE(r.output.find("/bodies: 7 bodies, but " + a + " has 9"), std::string::npos) << r.output;
+  EXPECT_EQ(r.code, 3) << r.output;  // another body count is a difference, named
+  EXPECT_NE(r.output.find("/bodies: 9 vs 7 bodies"), std::string::npos) << r.output;
   const std::string text = write("not-a-trace.h5", "hello");
   r = run_octocd("compare " + a + " " + text);
   EXPECT_EQ(r.code, 2);
@@ -369,6 +376,114 @@ TEST_F(Tools, CompareIncompatibleOrUnreadableExitTwo) {
   EXPECT_EQ(r.code, 2);
   r = run_octocd("compare " + a + " " + a + " --quantity colour");
   EXPECT_EQ(r.code, 2);
+}
+
+// A run killed with SIGKILL mid-way leaves a readable trace holding fewer frames: compare
+// never passes it against the complete golden run, even though every frame it holds equals.
+TEST_F(Tools, CompareFailsATruncatedTraceOfAKilledRun) {
+  const std::string scene = write("long.json", std::string(kPile).replace(std::string(kPile).find("\"frames\": 60"),
+                                                                           12, "\"frames\": 100000000"));
+  const std::string killed = (dir_ / "killed.h5").string();
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const std::string b = bin();
+    execl(b.c_str(), b.c_str(), "run", scene.c_str(), "--trace", killed.c_str(), "--quiet",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  std::int64_t seen = 0;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (seen < 100 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    try {
+      seen = octocd::read_trace_summary(killed).frames;
+    } catch (const std::exception&) {
+    }
+  }
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "the run ended before the kill";
+  const std::int64_t kept = octocd::read_trace_summary(killed).frames;
+  ASSERT_GE(kept, 100);
+  // The golden run: the same scene, 50 frames further than the killed one got.
+  const std::string golden = (dir_ / "golden.h5").string();
+  ASSERT_EQ(run_octocd("run " + scene + " --frames " + std::to_string(kept + 50) + " --quiet --trace " + golden).code, 0);
+  const Result r = run_octocd("compare " + golden + " " + killed + " --json " + (dir_ / "c.json").string());
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find(fmt_frames(kept + 50, kept)), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("\nsame"), std::string::npos) << r.output;
+  const json j = read_json(dir_ / "c.json");
+  EXPECT_FALSE(j["same"].get<bool>());
+  ASSERT_FALSE(j["structure"].empty());
+  EXPECT_EQ(j["structure"][0].get<std::string>().rfind("/frames: ", 0), 0u) << j.dump();
+  // Every quantity it holds equals the golden one's: only the structure fails it.
+  for (const auto& q : j["quantities"]) EXPECT_FALSE(q["differs"].get<bool>()) << q.dump();
+}
+
+TEST_F(Tools, CompareFailsRunsOfDifferentLengthAndNamesASceneKeyThatDiffers) {
+  const std::string a = pile_trace("a.h5", 1000), b = pile_trace("b.h5", 500);
+  Result r = run_octocd("compare " + a + " " + b);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("/frames: 1000 vs 500 frames"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("/states: 1001 vs 501 state rows"), std::string::npos) << r.output;
+  r = run_octocd("compare " + b + " " + a);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("/frames: 500 vs 1000 frames"), std::string::npos) << r.output;
+
+  // One key changed in the scene: named with both values, and the comparison fails even
+  // with tolerances wide enough for every quantity.
+  const std::string p = pile_trace("p.h5");
+  std::string text = kPile;
+  text.replace(text.find("\"walls\": \"floor\","), 17, "\"walls\": \"floor\", \"response\": {\"beta\": 0.999},");
+  const std::string scene = write("beta.json", text);
+  const std::string q = (dir_ / "q.h5").string();
+  ASSERT_EQ(run_octocd("run " + scene + " --frames 60 --state-every 1 --quiet --trace " + q).code, 0);
+  r = run_octocd("compare " + p + " " + q + " --tolerance 1");
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("/response/beta: 1 vs 0.999"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("structure differs (1 key)"), std::string::npos) << r.output;
+}
+
+TEST_F(Tools, CompareToleranceIsPerQuantityAbsoluteOrRelative) {
+  const std::string a = pile_trace("a.h5"), b = pile_trace("b.h5");
+  flip_position_bit(b, 37, 5, 1);
+  // The largest difference is where the bit was flipped, with both values.
+  Result r = run_octocd("compare " + a + " " + b + " --json " + (dir_ / "c.json").string());
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("largest at frame 37, body 5: A ("), std::string::npos) << r.output;
+  json j = read_json(dir_ / "c.json");
+  EXPECT_EQ(j["quantities"][0]["max"]["frame"], 37);
+  EXPECT_EQ(j["quantities"][0]["max"]["body"], 5);
+  EXPECT_EQ(j["quantities"][0]["beyond_count"], 1);
+  // An absolute tolerance for positions alone passes it; one for velocities alone does not.
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=1e-6").code, 0);
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance velocities=1").code, 3);
+  // Relative: one bit of a float32 is ~6e-8 of it.
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=rel:1e-6").code, 0);
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=rel:1e-9").code, 3);
+  // SPEC 14's comma form, and the later item wins.
+  r = run_octocd("compare " + a + " " + b + " --tolerance positions=1e-6,velocities=1e-5 --json " +
+                 (dir_ / "d.json").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  j = read_json(dir_ / "d.json");
+  EXPECT_EQ(j["tolerance"]["positions"]["abs"], 1e-6);
+  EXPECT_EQ(j["tolerance"]["velocities"]["abs"], 1e-5);
+  EXPECT_EQ(j["tolerance"]["pairs"]["abs"], 0.0);
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=1e-6 --tolerance positions=0").code, 3);
+}
+
+TEST_F(Tools, CompareBadToleranceExitsTwoWithOneLine) {
+  const std::string a = pile_trace("a.h5", 10);
+  for (const std::string bad : {"positons=1e-6", "positions=-1e-6", "-1", "velocities=rel:-2", "positions=abc",
+                                "positions=1e999", "positions=1e-6x"}) {
+    const Result r = run_octocd("compare " + a + " " + a + " --tolerance " + bad);
+    EXPECT_EQ(r.code, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find("--tolerance '" + bad + "'"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("allowed: "), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  }
 }
 
 // ---- replay -----------------------------------------------------------------------------------
