@@ -401,7 +401,8 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
                 "absolute tolerance ABS (in the quantity's unit: m, m/s, counts, J; contacts: m for depth, N s for "
                 "impulses, 1 for normals), rel:R (relative: |A-B| <= R max(|A|,|B|)) or ABS+rel:R (|A-B| <= ABS + R "
                 "max(|A|,|B|)), each >= 0; 0 = bit for bit (the default). E.g. --tolerance positions=1e-6 "
-                "--tolerance velocities=rel:1e-4");
+                "--tolerance velocities=rel:1e-4")
+      ->allow_extra_args(false);
   c->add_option("--quantity", o.quantities,
                 "Comma-separated: positions, velocities (/states), contacts (/frames/contacts and /contacts when "
                 "both have it), pairs (/frames/aabb_pairs), energy (/frames/kinetic_energy)")

@@ -7,7 +7,8 @@
 /// over repetitions, the machine description and atomic file writes.
 ///
 /// Exit codes as everywhere in octocd: 0 ok, 1 runtime failure, 2 bad input, 3 a check
-/// failed (compare: the traces differ; replay: a broadphase disagrees).
+/// failed (compare: the traces differ; replay: a broadphase disagrees), 4 the performance
+/// gate found a confirmed slowdown (`report --baseline`).
 
 #include <cstdint>
 #include <functional>
@@ -211,6 +212,9 @@ struct ReportOptions {
   std::vector<std::string> inputs;
   std::string output;
   std::string title;
+  std::vector<std::string> baseline;  ///< --baseline result files: the performance gate
+  double threshold = 5.0;             ///< --threshold: slowdown in % that fails the gate
+  std::string csv;                    ///< --csv DIR: every table as CSV
 };
 CLI::App* add_report_command(CLI::App& app, ReportOptions& o);
 int report_command(const ReportOptions& o);

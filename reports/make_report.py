@@ -5,11 +5,16 @@ OUT/index.html (self-contained: every plot inline as SVG, no network) and OUT/re
 
     /usr/bin/python3 reports/make_report.py -o OUT RESULT.json [TRACE.h5 ...]
 
-Shards of one sweep (same sweep definition and machine) are merged. Exit codes: 0 ok,
-2 bad input (a file of another format or version, duplicate points), 1 anything else.
+Shards of one sweep (same sweep definition, machine and build) are merged. Performance
+gate: `--baseline BASE.json [--threshold P]` sets NEW beside BASE per point and exits 4 on
+a confirmed slowdown (beyond P % with the two runs' min-max ranges apart). `--csv DIR`
+writes every table as CSV. Exit codes: 0 ok, 2 bad input (a file of another format or
+version, duplicate points, shards of different builds, a baseline of another sweep, a
+malformed result: one line, never a traceback), 4 a confirmed slowdown, 1 anything else.
 Needs Debian's python3-matplotlib and python3-numpy (python3-h5py for traces).
 """
 import argparse
+import csv
 import datetime
 import html
 import io
@@ -68,6 +73,48 @@ def load(path):
     return ("result", path, j)
 
 
+def check_points(path, j):
+    """The fields the report reads, checked per point: one line naming file, point and key."""
+    if not isinstance(j.get("points"), list):
+        fail(f"{path}: points: not an array; allowed: an array of points (docs/bench-format.md)")
+    for i, p in enumerate(j["points"]):
+        where = f"{path}: points[{i}]"
+        if not isinstance(p, dict):
+            fail(f"{where}: not an object; allowed: a point object")
+        if not isinstance(p.get("id"), str):
+            fail(f"{where}.id: {p.get('id')!r}; allowed: a string")
+        if p.get("status") != "ok":
+            continue
+        if not isinstance(p.get("params"), dict):
+            fail(f"{where}.params: {p.get('params')!r}; allowed: an object")
+        spreads = []
+        if "windows" in p:
+            if not isinstance(p["windows"], dict) or not p["windows"]:
+                fail(f"{where}.windows: {json.dumps(p['windows'])[:60]}; allowed: an object of windows")
+            for wn, w in p["windows"].items():
+                if not isinstance(w, dict):
+                    fail(f"{where}.windows.{wn}: {json.dumps(w)[:60]}; allowed: an object of figures")
+                spreads += [(f"windows.{wn}.{k}", v) for k, v in w.items() if k not in ("first", "last", "frames")]
+                if "steps_per_s" not in w:
+                    fail(f"{where}.windows.{wn}.steps_per_s: missing; allowed: a spread object")
+        elif "ms_per_frame" in p:
+            spreads.append(("ms_per_frame", p["ms_per_frame"]))
+        else:
+            fail(f"{where}: neither windows nor ms_per_frame; allowed: a measured point (docs/bench-format.md)")
+        for k, v in spreads:
+            if k.endswith("stage_ms") and isinstance(v, dict):
+                spreads_v = list(v.items())
+            else:
+                spreads_v = [("", v)]
+            for sub, x in spreads_v:
+                name = f"{where}.{k}" + (f".{sub}" if sub else "")
+                if not isinstance(x, dict) or not isinstance(x.get("n"), int):
+                    fail(f"{name}: {json.dumps(x)[:60]}; allowed: a spread {{median, min, max, n, ...}}")
+                if x["n"] > 0 and not all(isinstance(x.get(f), (int, float)) and not isinstance(x.get(f), bool)
+                                          for f in ("median", "min", "max")):
+                    fail(f"{name}: {json.dumps(x)[:60]}; allowed: numbers median, min, max")
+
+
 def merge(results):
     """Groups result files of one sweep definition on one machine; points by id."""
     groups = {}
@@ -76,6 +123,10 @@ def merge(results):
         key = (j["sweep"]["name"], json.dumps(j["sweep"]["definition"], sort_keys=True),
                m.get("hostname"), m.get("cpu"), m.get("gpu"))
         g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}})
+        if g["files"] and j["build"].get("build_id") != g["first"]["build"].get("build_id"):
+            fail(f"{path}: build.build_id: {j['build'].get('build_id')!r}, but {g['files'][0]} (same sweep) has "
+                 f"{g['first']['build'].get('build_id')!r}; allowed: shards of one build in one report (compare two "
+                 "builds with --baseline BASE.json NEW.json)")
         g["files"].append(path)
         for p in j["points"]:
             pid = p.get("id")
@@ -111,20 +162,49 @@ def med(s):
 
 
 def spread_text(s, digits=3):
+    """median (min–max, n=N); '(1 rep.)' when there was one repetition: no spread to judge by."""
     if not isinstance(s, dict) or "median" not in s:
         return "-"
-    if s.get("n", 1) > 1 and s["max"] != s["min"]:
-        return f"{num(s['median'], digits)} ({num(s['min'], digits)}–{num(s['max'], digits)})"
-    return num(s["median"], digits)
+    n = s.get("n", 1)
+    if n > 1:
+        return f"{num(s['median'], digits)} ({num(s['min'], digits)}–{num(s['max'], digits)}, n={n})"
+    return f"{num(s['median'], digits)} (1 rep.)"
+
+
+def overlap(a, b):
+    """Whether two spreads' min-max ranges overlap (or either has one repetition): no verdict then."""
+    if min(a.get("n", 1), b.get("n", 1)) < 2:
+        return True
+    return not (a["max"] < b["min"] or b["max"] < a["min"])
+
+
+def load_warning(m):
+    """Why timings of this machine description are suspect (load above the free cores,
+    OpenMP threads oversubscribing them), or ''."""
+    threads, omp = m.get("threads") or 0, m.get("omp_threads") or 1
+    why = []
+    if threads and omp > threads:
+        why.append(f"{omp} OpenMP threads on {threads} cores")
+    for key, when in (("load_average", "start"), ("load_average_end", "end")):
+        la = m.get(key)
+        if threads and isinstance(la, list) and la and isinstance(la[0], (int, float)) and la[0] + omp > threads + 0.5:
+            why.append(f"load {la[0]:.1f} at the {when} leaves {max(threads - la[0], 0):.1f} of {threads} cores free "
+                       f"for {omp} OpenMP thread(s)")
+    return "; ".join(why)
 
 
 class Doc:
     """One report, written both as HTML and as Markdown."""
 
-    def __init__(self, out):
+    def __init__(self, out, csv_dir=None):
         self.out = out
         self.html, self.md = [], []
         self.nplot = 0
+        self.ntable = 0
+        self.section = "report"
+        self.csv_dir = csv_dir
+        if csv_dir:
+            os.makedirs(csv_dir, exist_ok=True)
         os.makedirs(os.path.join(out, "plots"), exist_ok=True)
 
     def h(self, level, text, anchor=None):
@@ -137,7 +217,14 @@ class Doc:
         self.html.append(f"<p{c}>{html.escape(text)}</p>")
         self.md.append(text + "\n")
 
-    def table(self, header, rows, note=None):
+    def table(self, header, rows, note=None, name="table"):
+        if self.csv_dir:
+            self.ntable += 1
+            slug = "".join(c if c.isalnum() or c in "-_" else "-" for c in (self.section + "-" + name).lower())
+            with open(os.path.join(self.csv_dir, f"{self.ntable:02d}-{slug.strip('-')}.csv"), "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(header)
+                w.writerows(rows)
         t = ['<div class="wide"><table><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
         for r in rows:
             t.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>")
@@ -207,6 +294,12 @@ def machine_block(doc, g):
              + f"; files: {', '.join(os.path.basename(f) for f in g['files'])}",
              f"Points: {len(g['points_list'])} of {total} in these files ({n_ok} measured)"
              + ("" if len(g["points_list"]) >= total else " — incomplete: missing shards or an interrupted run")]
+    if s.get("repeat") == 1:
+        parts.append("1 repetition per point: the figures have no spread, and no verdict (fastest, slower) can be "
+                     "taken from them.")
+    lw = load_warning(m)
+    if lw:
+        parts.append(f"⚠ Measured under load: {lw}. Verdicts of this run are marked ⚠.")
     doc.html.append('<div class="meta">' + "<br>".join(html.escape(x) for x in parts) + "</div>")
     doc.md.extend("> " + x.replace("`", "") + "  " for x in parts)
     doc.md.append("")
@@ -342,11 +435,19 @@ def section_table5(doc, g):
         pb = max(("A", "B", "C"), key=lambda c: ref[c][0])
         r = [sc, pb]
         for e in engines:
-            vals = {c: find(pts, scene=sc, engine=e, midphase=c) for c in ("A", "B", "C")}
-            vals = {c: med(first_window(p)["steps_per_s"]) for c, p in vals.items() if p}
-            r.append(max(vals, key=vals.get) + " (" + ", ".join(f"{c} {num(v / vals.get('A', v) if vals.get('A') else 1.0)}x"
-                                                                for c, v in vals.items()) + " of A)"
-                     if len(vals) == 3 else "-")
+            found = {c: find(pts, scene=sc, engine=e, midphase=c) for c in ("A", "B", "C")}
+            sp = {c: first_window(p)["steps_per_s"] for c, p in found.items() if p}
+            vals = {c: med(x) for c, x in sp.items()}
+            if len(vals) != 3:
+                r.append("-")
+                continue
+            order = sorted(vals, key=vals.get, reverse=True)
+            verdict = order[0] if not overlap(sp[order[0]], sp[order[1]]) else \
+                f"inconclusive ({order[0]} ~ {order[1]}: ranges overlap)"
+            if load_warning(g["first"]["machine"]):
+                verdict = "⚠ " + verdict
+            r.append(verdict + " (" + ", ".join(f"{c} {num(v / vals['A'] if vals.get('A') else 1.0)}x"
+                                                for c, v in vals.items()) + " of A)")
         rows.append(r)
     doc.table(["scene", "paper: fastest"] + [f"{e}: fastest (speed vs A)" for e in engines], rows)
     steps_bars(doc, pts, "midphase", "Table 5: steps/s per scene, midphase A [2] / B [1,2] / C [0,1,2], per engine",
@@ -635,6 +736,81 @@ def section_trace(doc, path):
                    f"{os.path.basename(path)}: energy, contacts and penetration over frames")
 
 
+
+# ---- performance gate ------------------------------------------------------------------------
+
+def timing_of(p):
+    """[(label, spread, higher_is_better)] of a point: steps/s per window, or replay ms/frame."""
+    out = []
+    if isinstance(p.get("windows"), dict):
+        for wn, w in p["windows"].items():
+            out.append((f"steps/s ({wn})", w["steps_per_s"], True))
+    elif isinstance(p.get("ms_per_frame"), dict):
+        out.append(("broadphase ms/frame", p["ms_per_frame"], False))
+    return out
+
+
+def machine_text(j):
+    m, b = j["machine"], j["build"]
+    return f"{m.get('hostname')} ({m.get('cpu')}), build {b.get('build_id')}"
+
+
+def section_gate(doc, base, new, threshold):
+    """NEW beside BASE per point. Returns the number of confirmed slowdowns."""
+    bj, nj = base["first"], new["first"]
+    for key, what in (("name", "sweep.name"), ("definition", "sweep.definition")):
+        if bj["sweep"].get(key) != nj["sweep"].get(key):
+            fail(f"{base['files'][0]}: {what}: baseline of another sweep ({bj['sweep'].get('name')!r} vs "
+                 f"{nj['sweep'].get('name')!r} in {new['files'][0]}); allowed: a baseline of the same sweep definition")
+    doc.section = "gate"
+    doc.h(2, f"Performance gate: {nj['sweep']['name']}", "gate")
+    across = (bj["machine"].get("hostname"), bj["machine"].get("cpu")) != (nj["machine"].get("hostname"),
+                                                                            nj["machine"].get("cpu"))
+    doc.p(f"Baseline: {machine_text(bj)}, {', '.join(os.path.basename(f) for f in base['files'])}. "
+          f"New: {machine_text(nj)}, {', '.join(os.path.basename(f) for f in new['files'])}. "
+          + (f"Across machines: {bj['machine'].get('hostname')} vs {nj['machine'].get('hostname')}: a ratio mixes the "
+             "machines' speed with the builds'. " if across else "Same machine. ")
+          + f"Ratio = new time / baseline time (> 1 slower). A point is SLOWER (exit 4) when its median is more "
+          f"than {threshold:g} % slower and the two min-max ranges do not overlap; more than {threshold:g} % with "
+          "overlapping ranges (or a single repetition) is inconclusive; ⚠ marks a run measured under load.")
+    warn = [f"{side}: {w}" for side, w in (("baseline", load_warning(bj["machine"])),
+                                            ("new", load_warning(nj["machine"]))) if w]
+    bp = {p["id"]: p for p in base["points_list"] if p.get("status") == "ok"}
+    rows, slower = [], 0
+    counts = {}
+    for p in new["points_list"]:
+        if p.get("status") != "ok" or p["id"] not in bp:
+            continue
+        q = bp[p["id"]]
+        for (label, ns, hib), (_, bs, _) in zip(timing_of(p), timing_of(q)):
+            if not (isinstance(bs, dict) and isinstance(ns, dict) and bs.get("median") and ns.get("median")):
+                continue
+            ratio = bs["median"] / ns["median"] if hib else ns["median"] / bs["median"]
+            change = 100.0 * (ratio - 1.0)
+            if abs(change) <= threshold:
+                verdict = "same (within threshold)"
+            elif overlap(bs, ns):
+                verdict = "inconclusive (ranges overlap)" if min(bs.get("n", 1), ns.get("n", 1)) > 1 else \
+                    "inconclusive (1 repetition)"
+            elif change > 0:
+                verdict = "SLOWER"
+                slower += 1
+            else:
+                verdict = "faster"
+            if warn and not verdict.startswith("same"):
+                verdict = "⚠ " + verdict
+            counts[verdict] = counts.get(verdict, 0) + 1
+            rows.append([p["id"], label, spread_text(bs), spread_text(ns), f"{ratio:.3f}", f"{change:+.1f}%", verdict])
+    missing = [i for i in bp if i not in {p["id"] for p in new["points_list"] if p.get("status") == "ok"}]
+    doc.table(["point", "figure", "baseline median (min–max, n)", "new median (min–max, n)", "ratio (time)",
+               "change", "verdict"], rows,
+              ("Measured under load: " + "; ".join(warn) + ". " if warn else "")
+              + (f"{len(missing)} baseline point(s) not measured in the new run: {', '.join(missing[:5])}"
+                 + (" ..." if len(missing) > 5 else "") + "." if missing else ""), name="gate")
+    doc.p("Verdicts: " + ", ".join(f"{v} {c}" for v, c in sorted(counts.items())) + "." if counts
+          else "No point measured in both runs.")
+    return slower
+
 SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table5),
             "table6": ("Table 6: Level 0 (AABB only) vs hierarchical C", section_table6),
             "tableA1": ("Table A1: spatial hash vs octree, early and late phases", section_tableA1),
@@ -642,21 +818,52 @@ SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table
             "broadphase-scaling": ("Broadphase scaling", section_scaling)}
 
 
+CURRENT = ["the inputs"]  # the file being read, for the one-line error of a malformed one
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("-o", "--output", required=True)
     ap.add_argument("--title", default="octocd benchmark report")
+    ap.add_argument("--baseline", action="append", default=[], help="baseline result file(s) (shards merged)")
+    ap.add_argument("--threshold", type=float, default=5.0, help="slowdown in %% that fails the gate")
+    ap.add_argument("--csv", help="write every table as CSV into this folder")
     ap.add_argument("inputs", nargs="+")
     a = ap.parse_args()
-    loaded = [load(p) for p in a.inputs]
+    if not (0 <= a.threshold < 1000) or math.isnan(a.threshold):
+        fail(f"--threshold: {a.threshold}; allowed: a percentage in [0, 1000)")
+    loaded = []
+    for p in a.inputs:
+        CURRENT[0] = p
+        loaded.append(load(p))
     results = [(x[1], x[2]) for x in loaded if x[0] == "result"]
     traces = [x[1] for x in loaded if x[0] == "trace"]
+    for p in a.baseline + [x[0] for x in results]:
+        CURRENT[0] = p
+        check_points(p, dict(results).get(p) or load(p)[2])
+    CURRENT[0] = "the inputs"
+    slower = 0
+    doc = None
+    if a.baseline:
+        base_loaded = []
+        for p in a.baseline:
+            x = load(p)
+            if x[0] != "result":
+                fail(f"{p}: --baseline: an HDF5 trace; allowed: a result of octocd bench (.json)")
+            base_loaded.append((x[1], x[2]))
+        bg, ng = merge(base_loaded), merge(results)
+        if len(bg) != 1 or len(ng) != 1:
+            fail(f"--baseline: {len(bg)} sweep(s) in the baseline, {len(ng)} in the new results; allowed: one sweep "
+                 "(its shards) on each side")
+        os.makedirs(a.output, exist_ok=True)
+        doc = Doc(a.output, a.csv)
+        slower = section_gate(doc, bg[0], ng[0], a.threshold)
     groups = merge(results)
     order = list(SECTIONS)
     groups.sort(key=lambda g: (order.index(g["first"]["sweep"]["name"]) if g["first"]["sweep"]["name"] in order
                                else len(order), g["first"]["sweep"]["name"]))
     os.makedirs(a.output, exist_ok=True)
-    doc = Doc(a.output)
+    doc = doc or Doc(a.output, a.csv)
     doc.p(f"Made by octocd report on {datetime.datetime.utcnow().strftime('%Y-%m-%d %H:%M UTC')} from "
           f"{len(results)} result file(s) and {len(traces)} trace(s). {NOISE_NOTE}", "note")
     nav = []
@@ -666,18 +873,33 @@ def main():
         if g["first"]["sweep"].get("kind") == "broadphase" and name not in SECTIONS:
             title, fn = (f"Sweep {name}: broadphase replay", section_scaling)
         nav.append((f"s{i}", title))
+        doc.section = name
+        CURRENT[0] = ", ".join(g["files"])
         doc.h(2, title, f"s{i}")
         machine_block(doc, g)
         fn(doc, g)
         skipped_block(doc, g)
     for t in traces:
+        CURRENT[0] = t
+        doc.section = "trace"
         section_trace(doc, t)
     if nav:
         doc.html.insert(1, "<nav>" + "".join(f'<a href="#{k}">{html.escape(t)}</a>' for k, t in nav) + "</nav>")
     doc.write(a.title)
     print(f"octocd report: wrote {os.path.join(a.output, 'index.html')} and {os.path.join(a.output, 'report.md')} "
-          f"({doc.nplot} plots)")
+          f"({doc.nplot} plots" + (f", {doc.ntable} CSV tables in {a.csv}" if a.csv else "") + ")")
+    if slower:
+        print(f"octocd report: gate: {slower} point figure(s) SLOWER than the baseline by more than "
+              f"{a.threshold:g} % with ranges apart", file=sys.stderr)
+        sys.exit(4)
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except SystemExit:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, ZeroDivisionError) as e:
+        # A result that passed the format check but holds something else where a figure should be.
+        fail(f"{CURRENT[0]}: malformed result ({type(e).__name__}: {e}); allowed: a result of octocd bench as "
+             "docs/bench-format.md describes it")

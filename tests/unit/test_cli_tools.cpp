@@ -599,6 +599,74 @@ TEST_F(Tools, ReportRendersFromTheCommittedSmallResults) {
   EXPECT_TRUE(fs::exists(out / "plots"));
 }
 
+// The performance gate on committed results (tests/data/README.md): gate-new.json is
+// gate-base.json with point 0 planted 20 % slower in every repetition (ranges apart) and
+// point 1 planted 20 % slower in its median with one repetition as fast as the baseline's
+// best (ranges overlap); points 2 and 3 are unchanged.
+TEST_F(Tools, ReportGateFlagsThePlantedSlowerPointOnly) {
+  const std::string data = source_dir() + "/tests/data/";
+  const fs::path out = dir_ / "gate", csv = dir_ / "csv";
+  Result r = run_octocd("report --baseline " + data + "gate-base.json " + data + "gate-new.json -o " + out.string() +
+                        " --csv " + csv.string());
+  EXPECT_EQ(r.code, 4) << r.output;
+  EXPECT_NE(r.output.find("gate: 1 point figure(s) SLOWER"), std::string::npos) << r.output;
+  // The CSV of the gate table: one row per point, the verdicts where they were planted.
+  std::ifstream in(csv / "01-gate-gate.csv");
+  ASSERT_TRUE(in) << "no gate CSV in " << csv;
+  std::string line;
+  std::vector<std::string> lines;
+  while (std::getline(in, line)) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 5u);
+  EXPECT_NE(lines[0].find("ratio (time)"), std::string::npos) << lines[0];
+  EXPECT_NE(lines[1].find("pile | midphase=aabb-only | cpu"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[1].find("1.200"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[1].find("SLOWER"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[2].find("inconclusive (ranges overlap)"), std::string::npos) << lines[2];
+  EXPECT_NE(lines[3].find("same (within threshold)"), std::string::npos) << lines[3];
+  EXPECT_NE(lines[4].find("same (within threshold)"), std::string::npos) << lines[4];
+  EXPECT_GE(std::distance(fs::directory_iterator(csv), fs::directory_iterator{}), 2);  // every table
+  // A threshold above the planted 20 % passes; the baseline against itself passes.
+  EXPECT_EQ(run_octocd("report --baseline " + data + "gate-base.json " + data + "gate-new.json -o " + out.string() +
+                       " --threshold 25").code, 0);
+  r = run_octocd("report --baseline " + data + "gate-base.json " + data + "gate-base.json -o " + out.string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  // Reversed, the planted point is faster: no failure.
+  EXPECT_EQ(run_octocd("report --baseline " + data + "gate-new.json " + data + "gate-base.json -o " + out.string()).code, 0);
+}
+
+TEST_F(Tools, ReportGateAndMergeRefuseMismatchedInputsWithOneLine) {
+  const std::string data = source_dir() + "/tests/data/";
+  const std::string o = " -o " + (dir_ / "rep").string();
+  // A baseline of another sweep.
+  Result r = run_octocd("report --baseline " + data + "bench-small-table6.json " + data + "gate-new.json" + o);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("baseline of another sweep"), std::string::npos) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  // A baseline of another format.
+  const std::string other = write("other.json", R"({"format": "something-else", "version": 1})");
+  r = run_octocd("report --baseline " + other + " " + data + "gate-new.json" + o);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(other + ": format"), std::string::npos) << r.output;
+  // Shards of different builds mixed in one report.
+  r = run_octocd("report " + data + "gate-base.json " + data + "gate-new.json" + o);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("build.build_id"), std::string::npos) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  // A kept point with garbage where its figures should be: one line, no traceback.
+  json j = read_json(data + "gate-base.json");
+  for (const json& bad : {json("nope"), json({{"all", 3}}), json({{"all", {{"steps_per_s", "fast"}}}})}) {
+    j["points"][1]["windows"] = bad;
+    const std::string f = write("bad.json", j.dump());
+    r = run_octocd("report " + f + o);
+    EXPECT_EQ(r.code, 2) << bad.dump() << ": " << r.output;
+    EXPECT_EQ(r.output.find("Traceback"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(f + ": points[1].windows"), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  }
+  r = run_octocd("report --baseline " + data + "gate-base.json " + data + "gate-new.json --threshold -3" + o);
+  EXPECT_EQ(r.code, 2) << r.output;
+}
+
 TEST_F(Tools, ReportRejectsAResultOfAnotherFormatOrVersion) {
   const std::string other = write("other.json", R"({"format": "octocd-bench", "version": 7, "points": []})");
   Result r = run_octocd("report " + other + " -o " + (dir_ / "rep").string());
