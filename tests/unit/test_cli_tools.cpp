@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <set>
 #include <sstream>
 #include <string>
@@ -167,7 +168,10 @@ TEST_F(Tools, BenchMalformedSweepNamesFileKeyAndAllowed) {
       "bad5.json", R"({"name": "x", "scenes": ["pile.json"], "engines": ["cpu"],
                        "axes": [{"name": "beta", "values": [1.5]}], "frames": 2, "warmup": 0})");
   r = run_octocd("bench " + bad_beta + " -o " + (dir_ / "r5.json").string() + " --quiet");
-  EXPECT_EQ(r.code, 0) << r.output;  // the point is skipped with the reason, the sweep goes on
+  // The point is skipped with the reason; as it is the sweep's only point, the sweep
+  // measured nothing: exit 2 (issue 22.5), the result file still says why.
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("every point skipped"), std::string::npos) << r.output;
   const json j = read_json(dir_ / "r5.json");
   EXPECT_EQ(j["points"][0]["status"], "skipped");
   EXPECT_NE(j["points"][0]["reason"].get<std::string>().find("response.beta"), std::string::npos)
@@ -260,6 +264,77 @@ TEST_F(Tools, BenchShardsSplitThePointsAndResumeKeepsFinishedOnes) {
   const Result other = run_octocd("bench " + sweep + " --engines cpu --shard 0/2 -o " + out.string() + " --resume");
   EXPECT_EQ(other.code, 2);
   EXPECT_NE(other.output.find("settings"), std::string::npos) << other.output;
+}
+
+// Issue 22.5: a result to resume whose points are not the sweep's is refused (exit 2,
+// naming the result file, the key and the sweep), never taken as finished work.
+TEST_F(Tools, BenchResumeRefusesPointsThatAreNotTheSweeps) {
+  const std::string sweep = tiny_sweep(5);
+  const fs::path out = dir_ / "r.json";
+  ASSERT_EQ(run_octocd("bench " + sweep + " --engines cpu -o " + out.string() + " --quiet").code, 0);
+  const json good = read_json(out);
+  ASSERT_EQ(good["points"].size(), 2u);
+  const auto resume = [&](const std::function<void(json&)>& plant) {
+    json j = good;
+    plant(j);
+    j["complete"] = false;
+    std::ofstream(out) << j.dump(1);
+    return run_octocd("bench " + sweep + " --engines cpu -o " + out.string() + " --resume --quiet");
+  };
+  Result r = resume([](json& j) { j["points"][0]["index"] = 1000000000000000000LL; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(out.string() + ": points[0].index: 1000000000000000000 (sweep " + sweep + ")"),
+            std::string::npos) << r.output;
+  r = resume([](json& j) { j["points"][1]["index"] = -1; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("points[1].index: -1"), std::string::npos) << r.output;
+  r = resume([](json& j) { j["points"][1]["windows"] = "nope"; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("points[1].windows: a point of another shape"), std::string::npos) << r.output;
+  r = resume([](json& j) { j["points"][0]["id"] = "elsewhere | cpu"; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("points[0].id: 'elsewhere | cpu' is not a point of the sweep"), std::string::npos)
+      << r.output;
+  r = resume([](json& j) { j["points"][1] = j["points"][0]; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  for (const Result& x : {r}) EXPECT_EQ(std::count(x.output.begin(), x.output.end(), '\n'), 1) << x.output;
+  // The untouched result resumes (nothing left to run).
+  std::ofstream(out) << good.dump(1);
+  EXPECT_EQ(run_octocd("bench " + sweep + " --engines cpu -o " + out.string() + " --resume --quiet").code, 0);
+}
+
+TEST_F(Tools, BenchRefusesMissingKeysAllSkippedAndOversizedSweeps) {
+  write("pile.json", kPile);
+  // A pointer to a key the scene does not have (and refuses): the sweep's key is named.
+  std::string sweep = write("typo.json", R"({"name": "typo", "scenes": ["pile.json"], "engines": ["cpu"],
+    "axes": [{"name": "b", "key": "/response/betta", "values": [0.2, 0.4]}], "warmup": 1, "frames": 2, "repeat": 1})");
+  Result r = run_octocd("bench " + sweep + " -o " + (dir_ / "t.json").string() + " --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(sweep + ": axes[0] (/response/betta): not a key of scene file"), std::string::npos)
+      << r.output;
+  // Every point skipped (a value the scene refuses at a key it has): exit 2 naming the sweep.
+  std::string scene = kPile;
+  scene.replace(scene.find("\"frames\": 60"), 12, "\"frames\": 60, \"dt\": 0.001");
+  write("pile-dt.json", scene);
+  sweep = write("skip.json", R"({"name": "skip", "scenes": ["pile-dt.json"], "engines": ["cpu"],
+    "axes": [{"name": "dt", "key": "/dt", "values": [-1, -2]}], "warmup": 1, "frames": 2, "repeat": 1})");
+  r = run_octocd("bench " + sweep + " -o " + (dir_ / "s.json").string() + " --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(sweep + ": every point skipped (2 of 2"), std::string::npos) << r.output;
+  EXPECT_FALSE(read_json(dir_ / "s.json")["points"].empty());  // the result says why, point by point
+  // 10^9 points: refused up front, at once, with the limit named.
+  std::string values = "[";
+  for (int i = 0; i < 1000; ++i) values += (i ? "," : "") + std::to_string(i);
+  values += "]";
+  sweep = write("huge.json", R"({"name": "huge", "scenes": ["pile.json"], "engines": ["cpu"], "axes": [
+    {"name": "a", "key": "/response/beta", "values": )" + values + R"(},
+    {"name": "b", "key": "/response/slop", "values": )" + values + R"(},
+    {"name": "c", "key": "/response/alpha", "values": )" + values + R"(}]})");
+  r = run_octocd("bench " + sweep + " -o " + (dir_ / "h.json").string() + " --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(sweep + ": axes: the sweep expands to more than 100000 points; allowed: at most 100000"),
+            std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir_ / "h.json"));
 }
 
 TEST_F(Tools, BenchKilledMidwayLeavesItsFinishedPointsAndResumes) {
