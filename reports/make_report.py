@@ -225,7 +225,8 @@ class Doc:
                 w = csv.writer(f)
                 w.writerow(header)
                 w.writerows(rows)
-        t = ['<div class="wide"><table><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
+        cls = ' class="compact"' if len(header) > 9 else ""
+        t = [f'<div class="wide"><table{cls}><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
         for r in rows:
             t.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>")
         t.append("</tbody></table></div>")
@@ -259,7 +260,8 @@ th,td{border:1px solid #ccc;padding:.25em .55em;text-align:right}th{background:#
 td:first-child,th:first-child{text-align:left}tbody tr:nth-child(even){background:#fafafa}
 figure{margin:1em 0}figure svg{max-width:100%;height:auto}figcaption{font-size:.85em;color:#555}
 .note{font-size:.85em;color:#555}.meta{font-size:.85em;background:#f6f6f6;padding:.5em .8em;border-left:3px solid #4e79a7}
-nav a{margin-right:1em}.wide{overflow-x:auto;max-width:100%}"""
+nav a{margin-right:1em}.wide{overflow-x:auto;max-width:100%}
+table.compact{font-size:.72em}table.compact th,table.compact td{padding:.15em .3em}"""
         page = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
                 f"<title>{html.escape(title)}</title><style>{css}</style></head><body>",
                 f"<h1>{html.escape(title)}</h1>"] + self.html + ["</body></html>"]
@@ -338,15 +340,31 @@ def first_window(p):
     return next(iter(p["windows"].values()))
 
 
-def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"]):
-    """steps/s bars per scene (or xkey) and engine (and group_axis value)."""
+HATCHES = ["", "///", "...", "xxx", "\\\\\\", "ooo", "+++"]
+
+
+def log_ticks(ax, axis="y"):
+    """Readable log ticks: 1, 2, 5 per decade, written as plain numbers (200, 1,000, 0.05)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    a = ax.yaxis if axis == "y" else ax.xaxis
+    a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    a.set_major_formatter(FuncFormatter(lambda v, _: num(v, 2) if v > 0 else ""))
+    a.set_minor_formatter(NullFormatter())
+
+
+def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"], paper=None):
+    """steps/s bars per scene (or xkey): one colour per engine, a hatch per group_axis value;
+    `paper` {(scene, label): FPS} draws the paper's figures as black diamonds."""
     scenes = list(dict.fromkeys(xkey(p) for p in pts))
-    combos = list(dict.fromkeys((axis_label(p, group_axis) if group_axis else "", p["params"]["engine"]) for p in pts))
+    vals = list(dict.fromkeys(axis_label(p, group_axis) if group_axis else "" for p in pts))
+    engines = list(dict.fromkeys(p["params"]["engine"] for p in pts))
+    combos = [(v, e) for e in engines for v in vals
+              if any(p["params"]["engine"] == e and (not group_axis or axis_label(p, group_axis) == v) for p in pts)]
     if not scenes or not combos:
         return
-    fig, ax = plt.subplots(figsize=(max(6, 1.6 * len(scenes) + 0.25 * len(combos) * len(scenes)), 3.6))
+    fig, ax = plt.subplots(figsize=(min(11, max(6, 1.4 * len(scenes) + 0.22 * len(combos) * len(scenes))), 4.2))
     width = 0.8 / len(combos)
-    cmap = plt.get_cmap("tab20")
+    centres = {}
     for k, (val, eng) in enumerate(combos):
         ys, lo, hi = [], [], []
         for sc in scenes:
@@ -357,15 +375,28 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
             lo.append(s["median"] - s["min"] if s else 0)
             hi.append(s["max"] - s["median"] if s else 0)
         xs = np.arange(len(scenes)) + (k - (len(combos) - 1) / 2) * width
-        lab = f"{eng} {val}".strip()
-        ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=lab, color=cmap(k % 20),
-               edgecolor=ENGINE_COLORS.get(eng, "#333"), linewidth=0.8)
+        for i, sc in enumerate(scenes):
+            centres.setdefault((sc, val), []).append(xs[i])
+        colour = ENGINE_COLORS.get(eng, "#777")
+        shade = 1.0 - 0.35 * (vals.index(val) / max(len(vals) - 1, 1))  # lighter for later values
+        ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=f"{eng} {val}".strip(), color=colour, alpha=shade,
+               hatch=HATCHES[vals.index(val) % len(HATCHES)], edgecolor="#222", linewidth=0.6)
+    if paper:
+        px, py = [], []
+        for (sc, val), fps in paper.items():
+            if (sc, val) in centres:
+                px.append(float(np.mean(centres[(sc, val)])))
+                py.append(fps)
+        if px:
+            ax.plot(px, py, "D", color="black", ms=6, label="paper FPS (Unity, whole application)")
     ax.set_xticks(np.arange(len(scenes)))
     ax.set_xticklabels(scenes, rotation=0)
     ax.set_yscale("log")
+    log_ticks(ax)
     ax.set_ylabel("steps/s (median, bars min–max)")
     ax.set_title(title)
-    ax.legend(fontsize=7, ncol=min(len(combos), 6), loc="upper center", bbox_to_anchor=(0.5, -0.1))
+    ax.legend(fontsize=9, ncol=min(len(combos) + (1 if paper else 0), 4), loc="upper center",
+              bbox_to_anchor=(0.5, -0.1))
     doc.figure(fig, name, title)
 
 
@@ -387,12 +418,12 @@ def stage_shares(doc, pts, group_axis, title, name):
         ax.barh(np.arange(len(rows)), arr[:, k], left=left, color=STAGE_COLORS[k], label=s)
         left += arr[:, k]
     ax.set_yticks(np.arange(len(rows)))
-    ax.set_yticklabels(labels, fontsize=7)
+    ax.set_yticklabels(labels, fontsize=8)
     ax.invert_yaxis()
     ax.set_xlim(0, 100)
     ax.set_xlabel("share of the step (%), median stage ms")
     ax.set_title(title)
-    ax.legend(fontsize=7, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.12 - 1.0 / max(len(rows), 4)))
+    ax.legend(fontsize=9, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.12 - 1.0 / max(len(rows), 4)))
     doc.figure(fig, name, title)
 
 
@@ -451,7 +482,7 @@ def section_table5(doc, g):
         rows.append(r)
     doc.table(["scene", "paper: fastest"] + [f"{e}: fastest (speed vs A)" for e in engines], rows)
     steps_bars(doc, pts, "midphase", "Table 5: steps/s per scene, midphase A [2] / B [1,2] / C [0,1,2], per engine",
-               "table5-steps")
+               "table5-steps", paper={(sc, c): ref[c][0] for sc, ref in paper["rows"].items() for c in ("A", "B", "C")})
     stage_shares(doc, pts, "midphase", "Table 5: share of each stage in the step", "table5-stages")
     counts = []
     for p in pts:
@@ -486,7 +517,8 @@ def section_table6(doc, g):
     for e in engines:
         head += [f"{e} L0", f"{e} C", f"{e} RCR"]
     doc.table(head, rows)
-    steps_bars(doc, pts, "midphase", "Table 6: steps/s, Level 0 (aabb-only) vs C [0,1,2], per engine", "table6-steps")
+    steps_bars(doc, pts, "midphase", "Table 6: steps/s, Level 0 (aabb-only) vs C [0,1,2], per engine", "table6-steps",
+               paper={(sc, c): ref[c][0] for sc, ref in paper["rows"].items() for c in ("L0", "C")})
     stage_shares(doc, pts, "midphase", "Table 6: share of each stage in the step", "table6-stages")
 
 
@@ -641,10 +673,12 @@ def section_scaling(doc, g):
                        "yes" if all(p.get("matches_recorded", True) for p in ps) else "NO"])
     ax.set_xscale("log")
     ax.set_yscale("log")
+    log_ticks(ax, "x")
+    log_ticks(ax, "y")
     ax.set_xlabel("bodies")
     ax.set_ylabel("broadphase ms per frame")
     ax.set_title("Broadphase scaling on identical recorded AABBs (solid: cpu, dashed: cuda)")
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     doc.figure(fig, "scaling", "Broadphase scaling, log-log: ms per frame against bodies")
     doc.table(["engine", "broadphase"] + [f"{s:,}" for s in sizes] + ["slope k", "last doubling", "pairs = recorded"],
               rows, "ms per frame, median over repetitions; '-' = not measured (skipped: see below).")
@@ -687,7 +721,11 @@ def section_generic(doc, g):
         stage_shares(doc, pts, axis, f"{g['first']['sweep']['name']}: stage shares", "sweep-stages")
 
 
-def section_trace(doc, path):
+TRACE_COLORS = ["#4e79a7", "#e15759", "#59a14f", "#f28e2b", "#76b7b2", "#b07aa1", "#9c755f", "#edc948"]
+
+
+def read_trace(path):
+    """The /frames columns of one trace and its attributes."""
     try:
         import h5py
     except ImportError:
@@ -705,36 +743,60 @@ def section_trace(doc, path):
             fail(f"{path}: /frames: missing; allowed: an octocd trace")
         fr = f["frames"]
         n = min(d.shape[0] for d in fr.values())
-        get = lambda k: fr[k][:n] if k in fr else np.zeros(n)
-        frame = get("frame")
-        doc.h(2, f"Trace {os.path.basename(path)}")
-        a = f.attrs
-        doc.p(f"Scene {a.get('scene_name')}, engine {a.get('engine')}, broadphase {a.get('broadphase')}, midphase "
-              f"{a.get('midphase')}, {a.get('body_count')} bodies, {n} frames; device {a.get('device')}; build "
-              f"{a.get('build_id')}; started {a.get('start_time')}.")
-        step = get("step_ms")
-        doc.table(["frames", "steps/s", "mean step ms", "mean contacts", "max contacts", "max d_p (mm)",
-                   "final kinetic energy (J)"],
-                  [[n, num(1000.0 * n / step.sum()) if step.sum() > 0 else "-", num(step.mean(), 4) if n else "-",
-                    num(get("contacts").mean()) if n else "-", int(get("contacts").max()) if n else "-",
-                    num(1e3 * get("penetration_max").max()) if n else "-",
-                    num(get("kinetic_energy")[-1]) if n else "-"]])
-        fig, axes = plt.subplots(1, 3, figsize=(12, 3))
-        axes[0].plot(frame, get("kinetic_energy"), color="#4e79a7")
-        axes[0].set_title("kinetic energy (J)")
-        axes[1].plot(frame, get("contacts"), color="#e15759", label="contacts")
-        axes[1].plot(frame, get("aabb_pairs"), color="#bab0ac", label="AABB pairs")
-        axes[1].legend(fontsize=7)
-        axes[1].set_title("contacts and AABB pairs per frame")
-        axes[2].plot(frame, 1e3 * get("penetration_mean"), color="#59a14f", label="mean")
-        axes[2].plot(frame, 1e3 * get("penetration_max"), color="#b6992d", label="max", alpha=0.6)
-        axes[2].legend(fontsize=7)
-        axes[2].set_title("AABB penetration d_p (mm)")
-        for ax in axes:
-            ax.set_xlabel("frame")
-        doc.figure(fig, "trace-" + os.path.splitext(os.path.basename(path))[0],
-                   f"{os.path.basename(path)}: energy, contacts and penetration over frames")
+        cols = {k: np.asarray(fr[k][:n], dtype=float) for k in ("frame", "step_ms", "contacts", "aabb_pairs",
+                                                                  "kinetic_energy", "penetration_mean",
+                                                                  "penetration_max") if k in fr}
+        for k in ("frame", "step_ms", "contacts", "aabb_pairs", "kinetic_energy", "penetration_mean",
+                  "penetration_max"):
+            cols.setdefault(k, np.zeros(n))
+        attrs = {k: f.attrs.get(k) for k in ("scene_name", "engine", "broadphase", "midphase", "body_count",
+                                               "device", "build_id", "start_time")}
+    return {"path": path, "n": n, "cols": cols, "attrs": attrs}
 
+
+def section_traces(doc, paths):
+    """One table row per trace, and the traces overlaid on shared axes (one colour each)."""
+    traces = []
+    for path in paths:
+        CURRENT[0] = path
+        traces.append(read_trace(path))
+    doc.h(2, "Traces" if len(traces) > 1 else f"Trace {os.path.basename(paths[0])}")
+    rows = []
+    for t in traces:
+        a, n, c = t["attrs"], t["n"], t["cols"]
+        step = c["step_ms"]
+        doc.p(f"{os.path.basename(t['path'])}: scene {a.get('scene_name')}, engine {a.get('engine')}, broadphase "
+              f"{a.get('broadphase')}, midphase {a.get('midphase')}, {a.get('body_count')} bodies, {n} frames; device "
+              f"{a.get('device')}; build {a.get('build_id')}; started {a.get('start_time')}.")
+        rows.append([os.path.basename(t["path"]), n, num(1000.0 * n / step.sum()) if step.sum() > 0 else "-",
+                     num(step.mean(), 4) if n else "-", num(c["contacts"].mean()) if n else "-",
+                     int(c["contacts"].max()) if n else "-", num(1e3 * c["penetration_max"].max()) if n else "-",
+                     num(c["kinetic_energy"][-1]) if n else "-"])
+    doc.table(["trace", "frames", "steps/s", "mean step ms", "mean contacts", "max contacts", "max d_p (mm)",
+               "final kinetic energy (J)"], rows, name="traces")
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), sharex=True)
+    for k, t in enumerate(traces):
+        c, col = t["cols"], TRACE_COLORS[k % len(TRACE_COLORS)]
+        lab = os.path.basename(t["path"])
+        axes[0].plot(c["frame"], c["kinetic_energy"], color=col, label=lab)
+        axes[1].plot(c["frame"], c["contacts"], color=col, label=f"{lab} contacts")
+        axes[1].plot(c["frame"], c["aabb_pairs"], color=col, linestyle=":", label=f"{lab} AABB pairs")
+        axes[2].plot(c["frame"], 1e3 * c["penetration_max"], color=col, label=f"{lab} max")
+        axes[2].plot(c["frame"], 1e3 * c["penetration_mean"], color=col, linestyle="--", alpha=0.7,
+                     label=f"{lab} mean")
+    axes[0].set_title("kinetic energy (J)")
+    axes[1].set_title("contacts (solid), AABB pairs (dotted)")
+    axes[2].set_title("AABB penetration d_p (mm): max, mean (dashed)")
+    for ax in axes:
+        ax.set_xlabel("frame")
+    handles, labels = axes[2].get_legend_handles_labels()
+    h1, l1 = axes[1].get_legend_handles_labels()
+    fig.legend(h1 + handles, l1 + labels, fontsize=9, ncol=min(4, 4 * len(traces)), loc="upper center",
+               bbox_to_anchor=(0.5, -0.02))
+    fig.tight_layout()
+    names = "-".join(os.path.splitext(os.path.basename(t["path"]))[0] for t in traces)[:60]
+    doc.figure(fig, "trace-" + names, ("Traces overlaid: " if len(traces) > 1 else "") +
+               ", ".join(os.path.basename(t["path"]) for t in traces) + ": energy, contacts and penetration over frames")
 
 
 # ---- performance gate ------------------------------------------------------------------------
@@ -879,10 +941,9 @@ def main():
         machine_block(doc, g)
         fn(doc, g)
         skipped_block(doc, g)
-    for t in traces:
-        CURRENT[0] = t
+    if traces:
         doc.section = "trace"
-        section_trace(doc, t)
+        section_traces(doc, traces)
     if nav:
         doc.html.insert(1, "<nav>" + "".join(f'<a href="#{k}">{html.escape(t)}</a>' for k, t in nav) + "</nav>")
     doc.write(a.title)
