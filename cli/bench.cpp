@@ -21,6 +21,7 @@
 #include "octocd/error.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
 #include "tools.hpp"
 
@@ -514,6 +515,14 @@ class SweepProgress {
 
 // ---- running steps points ----------------------------------------------------------------------
 
+/// Thrown between two frames (or replays) once SIGINT or SIGTERM arrived: the point is
+/// abandoned, the finished ones are kept (octocd/stop.hpp).
+struct BenchStopped {};
+
+void throw_if_stopped() {
+  if (octocd::stop_signal() != 0) throw BenchStopped{};
+}
+
 /// Sums over the frames of one window of one repetition.
 struct WindowSums {
   std::int64_t frames = 0;
@@ -641,6 +650,10 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     for (auto& b : series) b.emplace_back();
     const auto t0 = Clock::now();
     for (int f = 1; f <= total; ++f) {
+      if (octocd::stop_signal() != 0) {
+        if (trace) trace->close();
+        throw BenchStopped{};
+      }
       const FrameMetrics& m = engine->step();
       for (std::size_t w = 0; w < s.windows.size(); ++w)
         if (f >= s.windows[w].first && f <= s.windows[w].last) sums[w].back().add(m);
@@ -775,6 +788,7 @@ json run_broadphase_point(const Sweep& s, const Point& p, InputCache& cache, con
   std::size_t ticks = 0;
   const std::size_t total = in.x.size() * static_cast<std::size_t>(s.warm_replays + s.repeat);
   ReplayRun run = replay_broadphase(in, p.engine, p.broadphase, s.repeat, s.warm_replays, s.min_time_ms, [&] {
+    throw_if_stopped();
     ++ticks;
     progress.detail(fmt::format("replay {}/{}", ticks, total));
   });
@@ -1071,13 +1085,26 @@ int bench_command(const BenchOptions& o) {
     const auto it = kept.find(p->id);
     if (it != kept.end()) result["points"].push_back(it->second);  // resumed: kept as they were
   }
+  octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, keep the finished points
+  const auto stopped = [&](int sig) {
+    result["stopped"] = octocd::stop_signal_name(sig);
+    std::sort(result["points"].begin(), result["points"].end(),
+              [](const json& a, const json& b) { return a.value("index", 0) < b.value("index", 0); });
+    write();
+    std::fprintf(stderr, "\noctocd bench: stopped by %s after %zu of %zu points; result %s keeps them (--resume goes on)\n",
+                 octocd::stop_signal_name(sig), result["points"].size(), mine.size(), o.output.c_str());
+    return octocd::stop_exit_code(sig);
+  };
   for (std::size_t k = 0; k < mine.size(); ++k) {
     const Point& p = *mine[k];
     if (kept.count(p.id)) continue;
+    if (const int sig = octocd::stop_signal()) return stopped(sig);
     progress.start(k, p.id);
     json r;
     try {
       r = s.kind == "steps" ? run_steps_point(s, p, models, o, progress) : run_broadphase_point(s, p, inputs, o, progress);
+    } catch (const BenchStopped&) {
+      return stopped(octocd::stop_signal());
     } catch (const InputError&) {
       throw;
     } catch (const std::exception& e) {

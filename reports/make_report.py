@@ -348,7 +348,7 @@ def log_ticks(ax, axis="y"):
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
     a = ax.yaxis if axis == "y" else ax.xaxis
     a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-    a.set_major_formatter(FuncFormatter(lambda v, _: num(v, 2) if v > 0 else ""))
+    a.set_major_formatter(FuncFormatter(lambda v, _: "" if v <= 0 else f"{v:,.0f}" if v >= 1 else f"{v:g}"))
     a.set_minor_formatter(NullFormatter())
 
 
@@ -385,7 +385,7 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
         px, py = [], []
         for (sc, val), fps in paper.items():
             if (sc, val) in centres:
-                px.append(float(np.mean(centres[(sc, val)])))
+                px.append(float(centres[(sc, val)][0]))  # over the first engine's bar
                 py.append(fps)
         if px:
             ax.plot(px, py, "D", color="black", ms=6, label="paper FPS (Unity, whole application)")

@@ -371,6 +371,48 @@ TEST_F(Tools, BenchKilledMidwayLeavesItsFinishedPointsAndResumes) {
   EXPECT_EQ(k["points"][0], j["points"][0]);  // the finished point was kept, not rerun
 }
 
+// SIGTERM mid-point: bench stops between two frames (not at the end of the point), keeps
+// the finished points in the result with "stopped", exits 143, and --resume goes on.
+TEST_F(Tools, BenchStopsOnSigtermMidPointAndKeepsFinishedPoints) {
+  const std::string sweep = tiny_sweep(100000000);  // one point would run for hours
+  const fs::path out = dir_ / "stopped.json";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const std::string b = bin();
+    const std::string o = out.string();
+    std::freopen((dir_ / "stderr.txt").c_str(), "w", stderr);
+    execl(b.c_str(), b.c_str(), "bench", sweep.c_str(), "--engines", "cpu", "-o", o.c_str(), "--quiet",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // inside the first point's frames
+  kill(pid, SIGTERM);
+  int status = 0;
+  // Bounded wait (a functional bound: the point itself would take hours).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  pid_t done = 0;
+  while ((done = waitpid(pid, &status, WNOHANG)) == 0 && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  if (done == 0) {
+    kill(pid, SIGKILL);
+    waitpid(pid, &status, 0);
+    FAIL() << "bench did not stop on SIGTERM within 30 s";
+  }
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 143);
+  std::ifstream err(dir_ / "stderr.txt");
+  std::stringstream es;
+  es << err.rdbuf();
+  EXPECT_NE(es.str().find("octocd bench: stopped by SIGTERM after 0 of 2 points"), std::string::npos) << es.str();
+  ASSERT_TRUE(fs::exists(out));
+  const json j = read_json(out);
+  EXPECT_EQ(j["stopped"], "SIGTERM");
+  EXPECT_FALSE(j["complete"].get<bool>());
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_EQ(e.path().string().find(".tmp."), std::string::npos) << e.path();
+}
+
 TEST_F(Tools, BenchBroadphaseSweepMatchesTheRecordedPairs) {
   const std::string sweep = write("bp.json", R"({"name": "bp", "kind": "broadphase", "bodies": [300, 600],
     "broadphases": ["flat", "octree", "spatial-hash", "bullet-dbvt", "fcl-dynamic-aabb-tree"],
