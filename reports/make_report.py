@@ -498,7 +498,8 @@ def section_table6(doc, g):
     pts = steps_points(g)
     paper = PAPER["table6"]
     engines = engines_of(g)
-    doc.p("Relative change ratio RCR = (C - L0) / L0 x 100 % as in the paper. " + paper["source"] + ".")
+    doc.p("Relative change ratio RCR = (C - L0) / L0 x 100 % as in the paper; 'inconclusive' when the two min-max "
+          "ranges overlap (or one repetition), ⚠ when measured under load. " + paper["source"] + ".")
     rows = []
     for sc, ref in paper["rows"].items():
         r = [f"{sc} ({ref['count']})", f"{ref['L0'][0]} ± {ref['L0'][1]}", f"{ref['C'][0]} ± {ref['C'][1]}",
@@ -508,8 +509,10 @@ def section_table6(doc, g):
             r.append(spread_text(first_window(l0)["steps_per_s"]) if l0 else "-")
             r.append(spread_text(first_window(c)["steps_per_s"]) if c else ("(= L0: no midphase)" if l0 else "-"))
             if l0 and c:
-                a, b = med(first_window(l0)["steps_per_s"]), med(first_window(c)["steps_per_s"])
-                r.append(f"{100.0 * (b - a) / a:+.1f}%")
+                sa, sb = first_window(l0)["steps_per_s"], first_window(c)["steps_per_s"]
+                a, b = med(sa), med(sb)
+                r.append(f"{100.0 * (b - a) / a:+.1f}%" + (" (inconclusive: ranges overlap)" if overlap(sa, sb) else "")
+                         + (" ⚠" if load_warning(g["first"]["machine"]) else ""))
             else:
                 r.append("-")
         rows.append(r)
