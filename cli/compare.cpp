@@ -260,10 +260,15 @@ void compare_contact_records(const TraceReader& a, const TraceReader& b, const T
                                                           t.shape("/contacts/depth").at(0),
                                                           t.shape("/contacts/normal").at(0),
                                                           t.shape("/contacts/jn").at(0), t.shape("/contacts/jt").at(0)}));
-    // Offsets must start at 0 and never decrease; keep the rows before the first that breaks that.
+    // Offsets start at 0 and never decrease (else the file is garbage: exit 2); rows whose
+    // records lie past the flat arrays' end are a killed run's unwritten tail: dropped.
+    for (std::size_t i = 0; i < r.off.size(); ++i)
+      if ((i == 0 && r.off[0] != 0) || (i > 0 && r.off[i] < r.off[i - 1]))
+        throw InputError(fmt::format("{}: /contacts/offsets: row {} is {} after {}; allowed: offsets from 0, never "
+                                     "decreasing (docs/trace-format.md)",
+                                     t.path(), i, r.off[i], i == 0 ? std::int64_t{0} : r.off[i - 1]));
     std::size_t good = 0;
-    if (r.off.front() == 0)
-      while (good < r.frame.size() && r.off[good + 1] >= r.off[good] && r.off[good + 1] <= flat) ++good;
+    while (good < r.frame.size() && r.off[good + 1] <= flat) ++good;
     r.frame.resize(good);
     r.off.resize(good + 1);
     const std::int64_t used = r.off.empty() ? 0 : r.off.back();

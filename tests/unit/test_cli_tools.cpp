@@ -591,6 +591,39 @@ TEST_F(Tools, CompareToleranceIsPerQuantityAbsoluteOrRelative) {
   EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=1e-6 --tolerance positions=0").code, 3);
 }
 
+/// Writes one int64 at `row` of a 1-D dataset.
+void put_i64(const std::string& path, const char* dataset, hsize_t row, std::int64_t value) {
+  const hid_t f = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  const hid_t d = H5Dopen2(f, dataset, H5P_DEFAULT);
+  ASSERT_GE(d, 0) << dataset;
+  const hid_t sp = H5Dget_space(d);
+  const hsize_t count = 1;
+  H5Sselect_hyperslab(sp, H5S_SELECT_SET, &row, nullptr, &count, nullptr);
+  const hid_t m = H5Screate_simple(1, &count, nullptr);
+  ASSERT_GE(H5Dwrite(d, H5T_NATIVE_INT64, m, sp, H5P_DEFAULT, &value), 0);
+  H5Sclose(m);
+  H5Sclose(sp);
+  H5Dclose(d);
+  H5Fclose(f);
+}
+
+// Issue 22: garbage /states/frame or /contacts/offsets never pass as "same" on what little
+// still lines up.
+TEST_F(Tools, CompareGarbageFramesOrOffsetsNeverPass) {
+  const std::string a = pile_trace("a.h5", 60, "--contacts"), b = pile_trace("b.h5", 60, "--contacts");
+  ASSERT_EQ(run_octocd("compare " + a + " " + b).code, 0);
+  put_i64(b, "/states/frame", 5, 999);
+  Result r = run_octocd("compare " + a + " " + b);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("/states/frame: frame 5 only in A"), std::string::npos) << r.output;
+  const std::string c = pile_trace("c.h5", 60, "--contacts");
+  put_i64(c, "/contacts/offsets", 2, -5);
+  r = run_octocd("compare " + a + " " + c);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(c + ": /contacts/offsets: row 2 is -5"), std::string::npos) << r.output;
+}
+
 TEST_F(Tools, CompareBadToleranceExitsTwoWithOneLine) {
   const std::string a = pile_trace("a.h5", 10);
   for (const std::string bad : {"positons=1e-6", "positions=-1e-6", "-1", "velocities=rel:-2", "positions=abc",
