@@ -112,12 +112,16 @@ struct QuantityResult {
   bool available = true;       ///< false when a trace lacks the data (then `compared` says why)
 
   /// Records a difference `d` at (frame, body) with the values' text, if it is the largest.
-  void largest(double d, std::int64_t f, std::int64_t b, const std::function<std::string()>& values) {
+  std::vector<double> max_a, max_b;  ///< both values there (a vector's components; empty for contact pairs)
+  void largest(double d, std::int64_t f, std::int64_t b, const std::function<std::string()>& values,
+               std::vector<double> va = {}, std::vector<double> vb = {}) {
     if (d > max_diff || (max_frame < 0 && d > 0.0)) {
       max_diff = d;
       max_frame = f;
       max_body = b;
       max_detail = values();
+      max_a = std::move(va);
+      max_b = std::move(vb);
     }
   }
 };
@@ -173,7 +177,8 @@ QuantityResult compare_states(const TraceReader& a, const TraceReader& b, const 
       for (std::size_t c = 0; c < 3; ++c) {
         double d = 0.0;
         if (beyond(xa[k0 + c], xb[k0 + c], tol, d)) hit = true;
-        q.largest(d, frame, body, both);
+        if (d > q.max_diff || (q.max_frame < 0 && d > 0.0))
+          q.largest(d, frame, body, both, {xa[k0], xa[k0 + 1], xa[k0 + 2]}, {xb[k0], xb[k0 + 1], xb[k0 + 2]});
       }
       if (hit) ++q.beyond_count;
       if (hit && !q.differs) {
@@ -231,7 +236,7 @@ QuantityResult compare_column(const TraceReader& a, const TraceReader& b, const 
       q.frame = fa[i];
       q.detail = both();
     }
-    q.largest(diff, fa[i], -1, both);
+    q.largest(diff, fa[i], -1, both, {static_cast<double>(va[i])}, {static_cast<double>(vb[it->second])});
   }
   q.compared = fmt::format("{} common frames", common);
   return q;
@@ -313,7 +318,7 @@ void compare_contact_records(const TraceReader& a, const TraceReader& b, const T
             return fmt::format("contact ({}, {}) {}: A {} B {}", pa0, pa1, f.first, *f.second.first, *f.second.second);
           };
           if (beyond(*f.second.first, *f.second.second, tol, d) && what.empty()) what = both();
-          q.largest(d, ra.frame[i], pa0, both);
+          q.largest(d, ra.frame[i], pa0, both, {*f.second.first}, {*f.second.second});
         }
       }
       if (!what.empty()) ++q.beyond_count;
@@ -550,7 +555,8 @@ int compare_command(const CompareOptions& o) {
                   {"compared", r.compared},
                   {"available", r.available},
                   {"max_abs_difference", num(r.max_diff)},
-                  {"max", {{"frame", r.max_frame}, {"body", r.max_body}, {"values", r.max_detail}}},
+                  {"max", {{"frame", r.max_frame}, {"body", r.max_body}, {"values", r.max_detail},
+                           {"a", r.max_a}, {"b", r.max_b}}},
                   {"differs", r.differs},
                   {"beyond_count", r.beyond_count},
                   {"frame", r.frame},

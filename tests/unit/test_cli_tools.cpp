@@ -574,6 +574,9 @@ TEST_F(Tools, CompareToleranceIsPerQuantityAbsoluteOrRelative) {
   EXPECT_EQ(j["quantities"][0]["max"]["frame"], 37);
   EXPECT_EQ(j["quantities"][0]["max"]["body"], 5);
   EXPECT_EQ(j["quantities"][0]["beyond_count"], 1);
+  ASSERT_EQ(j["quantities"][0]["max"]["a"].size(), 3u);  // both values of the body there, y differs
+  EXPECT_EQ(j["quantities"][0]["max"]["a"][0], j["quantities"][0]["max"]["b"][0]);
+  EXPECT_NE(j["quantities"][0]["max"]["a"][1], j["quantities"][0]["max"]["b"][1]);
   // An absolute tolerance for positions alone passes it; one for velocities alone does not.
   EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=1e-6").code, 0);
   EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance velocities=1").code, 3);
