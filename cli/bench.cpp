@@ -1067,7 +1067,7 @@ int bench_command(const BenchOptions& o) {
     json warnings = json::array();
     if (threads > 0 && omp > threads)
       warnings.push_back(fmt::format("{} OpenMP threads on {} cores oversubscribe them", omp, threads));
-    if (threads > 0 && load + static_cast<double>(omp) > static_cast<double>(threads) + 0.5)
+    if (threads > 0 && load + static_cast<double>(omp) > static_cast<double>(threads) + 1.0)
       warnings.push_back(fmt::format("load average {:.1f} leaves {:.1f} of {} cores free for {} OpenMP thread(s)", load,
                                      std::max(0.0, static_cast<double>(threads) - load), threads, omp));
     result["hygiene"] = {{"threads", threads}, {"omp_threads", omp}, {"load_average_start", la}, {"warnings", warnings}};
@@ -1119,7 +1119,7 @@ int bench_command(const BenchOptions& o) {
       const long threads = result["machine"].value("threads", 0L);
       const json& la = r["load_average"];
       // More runnable threads than cores (the bench's own included) while it measured.
-      r["under_load"] = threads > 0 && !la.empty() && la[0].get<double>() > static_cast<double>(threads) + 0.5;
+      r["under_load"] = threads > 0 && !la.empty() && la[0].get<double>() > static_cast<double>(threads) + 1.0;
     }
     if (r.value("status", "") == "failed") any_failed = true;
     std::string status = r.value("status", "?");

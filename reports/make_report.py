@@ -185,11 +185,12 @@ def load_warning(m):
     why = []
     if threads and omp > threads:
         why.append(f"{omp} OpenMP threads on {threads} cores")
-    for key, when in (("load_average", "start"), ("load_average_end", "end")):
+    # At the start the load is the others'; at the end it includes the bench's own threads.
+    for key, when, own in (("load_average", "start", omp), ("load_average_end", "end", 0)):
         la = m.get(key)
-        if threads and isinstance(la, list) and la and isinstance(la[0], (int, float)) and la[0] + omp > threads + 0.5:
+        if threads and isinstance(la, list) and la and isinstance(la[0], (int, float)) and la[0] + own > threads + 1:
             why.append(f"load {la[0]:.1f} at the {when} leaves {max(threads - la[0], 0):.1f} of {threads} cores free "
-                       f"for {omp} OpenMP thread(s)")
+                       f"for {omp} OpenMP thread(s)" + (" (its own included)" if when == "end" else ""))
     return "; ".join(why)
 
 
@@ -473,8 +474,12 @@ def section_table5(doc, g):
                 r.append("-")
                 continue
             order = sorted(vals, key=vals.get, reverse=True)
-            verdict = order[0] if not overlap(sp[order[0]], sp[order[1]]) else \
-                f"inconclusive ({order[0]} ~ {order[1]}: ranges overlap)"
+            if min(sp[order[0]].get("n", 1), sp[order[1]].get("n", 1)) < 2:
+                verdict = f"no verdict (1 repetition; {order[0]} by median)"
+            elif overlap(sp[order[0]], sp[order[1]]):
+                verdict = f"inconclusive ({order[0]} ~ {order[1]}: ranges overlap)"
+            else:
+                verdict = order[0]
             if load_warning(g["first"]["machine"]):
                 verdict = "⚠ " + verdict
             r.append(verdict + " (" + ", ".join(f"{c} {num(v / vals['A'] if vals.get('A') else 1.0)}x"
@@ -511,7 +516,9 @@ def section_table6(doc, g):
             if l0 and c:
                 sa, sb = first_window(l0)["steps_per_s"], first_window(c)["steps_per_s"]
                 a, b = med(sa), med(sb)
-                r.append(f"{100.0 * (b - a) / a:+.1f}%" + (" (inconclusive: ranges overlap)" if overlap(sa, sb) else "")
+                r.append(f"{100.0 * (b - a) / a:+.1f}%"
+                         + ("" if not overlap(sa, sb) else " (1 repetition: no verdict)"
+                            if min(sa.get("n", 1), sb.get("n", 1)) < 2 else " (inconclusive: ranges overlap)")
                          + (" ⚠" if load_warning(g["first"]["machine"]) else ""))
             else:
                 r.append("-")
@@ -568,8 +575,11 @@ def section_tableA1(doc, g):
             ax.set_title(mesh)
             ax.set_xlabel("frame")
             ax.set_yscale("log")
+            log_ticks(ax)
         axes[0][0].set_ylabel("steps/s per 100 frames")
-        axes[0][-1].legend(fontsize=7)
+        h, l = axes[0][0].get_legend_handles_labels()
+        fig.legend(h, l, fontsize=9, ncol=min(len(l), 6), loc="upper center", bbox_to_anchor=(0.5, -0.02))
+        fig.tight_layout()
         doc.figure(fig, "tableA1-series", "Table A1 / Fig. 5: steps/s over the 3000 frames, spatial hash (dashed) vs "
                    "octree (solid), per mesh and engine (median over repetitions of each 100-frame block)")
     steps_bars(doc, [dict(p, windows={"late": p["windows"]["late"]}) for p in pts if "late" in p["windows"]],
