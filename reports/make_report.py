@@ -957,8 +957,10 @@ def main():
     if traces:
         doc.section = "trace"
         section_traces(doc, traces)
+    if a.baseline:
+        nav.insert(0, ("gate", "Performance gate"))
     if nav:
-        doc.html.insert(1, "<nav>" + "".join(f'<a href="#{k}">{html.escape(t)}</a>' for k, t in nav) + "</nav>")
+        doc.html.insert(0 if a.baseline else 1, "<nav>" + "".join(f'<a href="#{k}">{html.escape(t)}</a>' for k, t in nav) + "</nav>")
     doc.write(a.title)
     print(f"octocd report: wrote {os.path.join(a.output, 'index.html')} and {os.path.join(a.output, 'report.md')} "
           f"({doc.nplot} plots" + (f", {doc.ntable} CSV tables in {a.csv}" if a.csv else "") + ")")
