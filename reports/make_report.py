@@ -349,7 +349,15 @@ def log_ticks(ax, axis="y"):
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
     a = ax.yaxis if axis == "y" else ax.xaxis
     a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-    a.set_major_formatter(FuncFormatter(lambda v, _: "" if v <= 0 else f"{v:,.0f}" if v >= 1 else f"{v:g}"))
+    def text(v, _):
+        if v <= 0:
+            return ""
+        if v >= 1e6:
+            return f"{v / 1e6:g}M"
+        if v >= 1e4:
+            return f"{v / 1e3:g}k"
+        return f"{v:,.0f}" if v >= 1 else f"{v:g}"
+    a.set_major_formatter(FuncFormatter(text))
     a.set_minor_formatter(NullFormatter())
 
 
