@@ -21,6 +21,7 @@
 #include "octocd/error.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
 #include "tools.hpp"
 
@@ -51,7 +52,7 @@ const NamedSweep kNamed[] = {
   "axes": [{"name": "midphase", "values": ["2", "1,2", "0,1,2"], "labels": ["A", "B", "C"]}],
   "warmup": 30,
   "frames": 300,
-  "repeat": 3
+  "repeat": 5
 })"},
     {"table6", R"({
   "name": "table6",
@@ -62,7 +63,7 @@ const NamedSweep kNamed[] = {
   "axes": [{"name": "midphase", "values": ["aabb-only", "0,1,2"], "labels": ["L0", "C"]}],
   "warmup": 30,
   "frames": 300,
-  "repeat": 3
+  "repeat": 5
 })"},
     {"tableA1", R"({
   "name": "tableA1",
@@ -76,12 +77,12 @@ const NamedSweep kNamed[] = {
   "frames": 3000,
   "windows": [{"name": "early", "first": 1, "last": 300}, {"name": "late", "first": 2701, "last": 3000}],
   "series_every": 100,
-  "repeat": 3
+  "repeat": 5
 })"},
     {"figA2", R"({
   "name": "figA2",
   "kind": "steps",
-  "description": "Paper Fig. A2: Baumgarte factor beta x slop delta on the stacking scene (bunny-stack-50, dt 0.001, 3000 frames): mean and max AABB penetration and the share of contacts above delta. Bullet is left out: its solver has neither beta nor delta.",
+  "description": "Paper Fig. A2: Baumgarte factor beta x slop delta on the stacking scene (bunny-stack-50, dt 0.001, 3000 frames): mean and max AABB penetration and the share of contacts above delta. Bullet is left out: its solver has neither beta nor delta. One repetition: the figures are penetrations, the same in every run (the report says so); its steps/s are no verdict.",
   "scenes": ["bunny-stack-50"],
   "engines": ["cpu", "cuda"],
   "axes": [{"name": "beta", "key": "/response/beta", "values": [0.2, 0.4, 0.6, 0.8, 1.0]},
@@ -102,7 +103,7 @@ const NamedSweep kNamed[] = {
   "warmup": 10,
   "frames": 5,
   "warm_replays": 1,
-  "repeat": 3
+  "repeat": 5
 })"},
 };
 
@@ -215,7 +216,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   for (std::size_t i = 0; i < s.engines.size(); ++i)
     if (std::find(engine_names().begin(), engine_names().end(), s.engines[i]) == engine_names().end())
       bad(origin, fmt::format("engines[{}]", i), "'" + s.engines[i] + "'", "cpu, cuda, bullet");
-  s.repeat = get_int(j, "repeat", origin, 1, 1000, 3);
+  s.repeat = get_int(j, "repeat", origin, 1, 1000, 5);
   if (j.contains("set")) {
     if (!j.at("set").is_object()) bad(origin, "set", "not an object", "an object of JSON pointer -> value");
     s.set = j.at("set");
@@ -341,7 +342,28 @@ std::string stem(const std::string& path) { return fs::path(path).stem().string(
 
 std::string value_text(const json& v) { return v.is_string() ? v.get<std::string>() : v.dump(); }
 
+/// The most points a sweep may expand to (docs/bench-format.md): a larger one is refused
+/// before anything runs.
+constexpr std::size_t kMaxPoints = 100000;
+
 std::vector<Point> expand(const Sweep& s) {
+  {
+    // Count first (saturating), so a sweep of 10^9 points is refused without allocating.
+    std::size_t n = std::max<std::size_t>(s.engines.size(), 1);
+    const auto times = [&](std::size_t k) { n = (k != 0 && n > kMaxPoints / k) ? kMaxPoints + 1 : n * k; };
+    if (s.kind == "steps") {
+      times(s.scenes.size());
+      for (const auto& a : s.axes) times(a.values.size());
+    } else {
+      times(s.bodies.empty() ? s.scenes.size() : s.bodies.size());
+      times(s.broadphases.size());
+    }
+    if (n > kMaxPoints)
+      bad(s.origin, s.kind == "steps" ? "axes" : "bodies",
+          fmt::format("the sweep expands to {} points", n > kMaxPoints ? fmt::format("more than {}", kMaxPoints)
+                                                                        : std::to_string(n)),
+          fmt::format("at most {} points (scenes x axis values x engines)", kMaxPoints));
+  }
   // Point ids name the scene by its file stem: a scene listed twice would give two points
   // one id (and --resume would take one for the other).
   std::set<std::string> stems;
@@ -395,7 +417,7 @@ std::vector<Point> expand(const Sweep& s) {
 
 /// The scene text of a steps point: the scene file with the sweep's `set` and the point's
 /// axis values written at their JSON pointers.
-std::string scene_text(const Sweep& s, const Point& p) {
+std::string scene_text(const Sweep& s, const Point& p, std::vector<std::string>* added = nullptr) {
   const std::string& file = s.scenes[p.scene];
   std::ifstream in(file);
   if (!in) bad(s.origin, "scenes", "cannot read scene file '" + file + "'",
@@ -410,7 +432,9 @@ std::string scene_text(const Sweep& s, const Point& p) {
   }
   auto put = [&](const std::string& key, const json& v, const std::string& what) {
     try {
-      j[json::json_pointer(key)] = v;
+      const json::json_pointer ptr(key);
+      if (added && !j.contains(ptr)) added->push_back(what + " (" + key + ")");
+      j[ptr] = v;
     } catch (const json::exception& e) {
       bad(s.origin, what, "cannot set " + key + " in " + file + " (" + e.what() + ")", "a JSON pointer into the scene");
     }
@@ -491,6 +515,14 @@ class SweepProgress {
 
 // ---- running steps points ----------------------------------------------------------------------
 
+/// Thrown between two frames (or replays) once SIGINT or SIGTERM arrived: the point is
+/// abandoned, the finished ones are kept (octocd/stop.hpp).
+struct BenchStopped {};
+
+void throw_if_stopped() {
+  if (octocd::stop_signal() != 0) throw BenchStopped{};
+}
+
 /// Sums over the frames of one window of one repetition.
 struct WindowSums {
   std::int64_t frames = 0;
@@ -543,12 +575,19 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     if (!s.axes[a].labels[p.value[a]].empty()) params["labels"][s.axes[a].name] = s.axes[a].labels[p.value[a]];
   }
   r["params"] = params;
-  const std::string text = scene_text(s, p);
+  std::vector<std::string> added;
+  const std::string text = scene_text(s, p, &added);
   const std::string origin = s.scenes[p.scene];
   std::shared_ptr<const Model> model;
   try {
     model = cache.get(text, origin, o.data_dir);
   } catch (const InputError& e) {
+    // A key the sweep sets that the scene file does not have, and the scene refuses: the
+    // sweep's pointer is wrong, not the scene.
+    if (!added.empty() && std::string(e.what()).find("unknown key") != std::string::npos)
+      bad(s.origin, added.front(),
+          fmt::format("not a key of scene file {}, and the scene refuses it ({})", origin, e.what()),
+          "a JSON pointer to a scene key (docs/scenes.md), e.g. /response/beta");
     r["status"] = "skipped";
     r["reason"] = std::string("scene: ") + e.what();
     return r;
@@ -611,6 +650,10 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     for (auto& b : series) b.emplace_back();
     const auto t0 = Clock::now();
     for (int f = 1; f <= total; ++f) {
+      if (octocd::stop_signal() != 0) {
+        if (trace) trace->close();
+        throw BenchStopped{};
+      }
       const FrameMetrics& m = engine->step();
       for (std::size_t w = 0; w < s.windows.size(); ++w)
         if (f >= s.windows[w].first && f <= s.windows[w].last) sums[w].back().add(m);
@@ -745,6 +788,7 @@ json run_broadphase_point(const Sweep& s, const Point& p, InputCache& cache, con
   std::size_t ticks = 0;
   const std::size_t total = in.x.size() * static_cast<std::size_t>(s.warm_replays + s.repeat);
   ReplayRun run = replay_broadphase(in, p.engine, p.broadphase, s.repeat, s.warm_replays, s.min_time_ms, [&] {
+    throw_if_stopped();
     ++ticks;
     progress.detail(fmt::format("replay {}/{}", ticks, total));
   });
@@ -949,8 +993,52 @@ int bench_command(const BenchOptions& o) {
                                      "resume",
                                      o.output, k, old["machine"].value(k, ""), result["machine"].value(k, "")));
     result["started"] = old.value("started", result["started"].get<std::string>());
-    for (const auto& pt : old["points"])
-      if (pt.value("status", "") == "ok" || pt.value("status", "") == "skipped") kept[pt.value("id", "")] = pt;
+    if (!old.contains("points") || !old["points"].is_array())
+      throw InputError(fmt::format("{}: points: not an array; allowed: a result file of octocd bench to resume",
+                                   o.output));
+    std::map<std::string, const Point*> by_id;
+    for (const auto& p : points) by_id[p.id] = &p;
+    for (std::size_t i = 0; i < old["points"].size(); ++i) {
+      const json& pt = old["points"][i];
+      const std::string key = fmt::format("points[{}]", i);
+      const auto refuse = [&](const std::string& k, const std::string& problem, const std::string& allowed) {
+        throw InputError(fmt::format("{}: {}{}: {} (sweep {}); allowed: {}", o.output, key, k, problem, origin, allowed));
+      };
+      if (!pt.is_object()) refuse("", "not an object", "a point of the sweep");
+      if (!pt.contains("id") || !pt["id"].is_string()) refuse(".id", "missing or not a string", "a point id");
+      const std::string id = pt["id"];
+      const auto it = by_id.find(id);
+      if (it == by_id.end()) refuse(".id", "'" + id + "' is not a point of the sweep", "the ids the sweep expands to");
+      if (!pt.contains("index") || !pt["index"].is_number_integer() || pt["index"].get<long long>() != it->second->index)
+        refuse(".index", pt.contains("index") ? pt["index"].dump() : "missing",
+               fmt::format("{} (the index of '{}' among the sweep's {} points)", it->second->index, id, points.size()));
+      if (kept.count(id)) refuse(".id", "'" + id + "' twice", "each point once");
+      const std::string status = pt.value("status", "");
+      if (status == "ok") {
+        bool shaped = true;
+        if (s.kind == "steps") {
+          shaped = pt.contains("windows") && pt["windows"].is_object() && pt["windows"].size() == s.windows.size();
+          for (const auto& w : s.windows)
+            shaped = shaped && pt["windows"].contains(w.name) && pt["windows"][w.name].is_object() &&
+                     pt["windows"][w.name].contains("steps_per_s") && pt["windows"][w.name]["steps_per_s"].is_object();
+        } else {
+          shaped = pt.contains("ms_per_frame") && pt["ms_per_frame"].is_object();
+        }
+        if (!shaped)
+          refuse(s.kind == "steps" ? ".windows" : ".ms_per_frame", "a point of another shape",
+                 s.kind == "steps" ? "windows {" + [&] {
+                   std::string names;
+                   for (const auto& w : s.windows) names += (names.empty() ? "" : ", ") + w.name;
+                   return names;
+                 }() + "} each with steps_per_s (docs/bench-format.md)"
+                                   : std::string("a ms_per_frame spread (docs/bench-format.md)"));
+        kept[id] = pt;
+      } else if (status == "skipped") {
+        kept[id] = pt;
+      } else if (status != "failed") {
+        refuse(".status", "'" + status + "'", "ok, skipped, failed");
+      }
+    }
   } else if (o.resume) {
     // Nothing to resume: start afresh.
   }
@@ -968,6 +1056,27 @@ int bench_command(const BenchOptions& o) {
     result["updated"] = utc_time_now();
     write_file_atomically(o.output, result.dump(1) + "\n");
   };
+  // Timing hygiene: a loaded machine or oversubscribed OpenMP threads make timings noisy;
+  // warn, record it, and let the report mark the verdicts taken so.
+  {
+    const json& m = result["machine"];
+    const long threads = m.value("threads", 0L);
+    const long omp = m.value("omp_threads", 1L);
+    const json la = m.value("load_average", json::array());
+    const double load = la.empty() ? 0.0 : la[0].get<double>();
+    json warnings = json::array();
+    if (threads > 0 && omp > threads)
+      warnings.push_back(fmt::format("{} OpenMP threads on {} cores oversubscribe them", omp, threads));
+    if (threads > 0 && load + static_cast<double>(omp) > static_cast<double>(threads) + 1.0)
+      warnings.push_back(fmt::format("load average {:.1f} leaves {:.1f} of {} cores free for {} OpenMP thread(s)", load,
+                                     std::max(0.0, static_cast<double>(threads) - load), threads, omp));
+    result["hygiene"] = {{"threads", threads}, {"omp_threads", omp}, {"load_average_start", la}, {"warnings", warnings}};
+    for (const auto& w : warnings)
+      fmt::print(stderr, "bench {}: warning: {}; timings will be noisy (the report marks them){}\n", s.name,
+                 w.get<std::string>(), omp > 1 ? "; OMP_NUM_THREADS=1 helps on a shared machine" : "");
+    if (s.repeat < 2 && !o.quiet)
+      fmt::print(stderr, "bench {}: note: 1 repetition per point: no spread, so no timing verdict\n", s.name);
+  }
   if (!o.quiet)
     fmt::print(stderr, "bench {}: {} points ({} in this shard {}/{}), engines {}, {} repetitions; result {}\n", s.name,
                points.size(), mine.size(), shard, shards, o.engines.empty() ? json(s.engines).dump() : o.engines,
@@ -976,13 +1085,26 @@ int bench_command(const BenchOptions& o) {
     const auto it = kept.find(p->id);
     if (it != kept.end()) result["points"].push_back(it->second);  // resumed: kept as they were
   }
+  octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, keep the finished points
+  const auto stopped = [&](int sig) {
+    result["stopped"] = octocd::stop_signal_name(sig);
+    std::sort(result["points"].begin(), result["points"].end(),
+              [](const json& a, const json& b) { return a.value("index", 0) < b.value("index", 0); });
+    write();
+    std::fprintf(stderr, "\noctocd bench: stopped by %s after %zu of %zu points; result %s keeps them (--resume goes on)\n",
+                 octocd::stop_signal_name(sig), result["points"].size(), mine.size(), o.output.c_str());
+    return octocd::stop_exit_code(sig);
+  };
   for (std::size_t k = 0; k < mine.size(); ++k) {
     const Point& p = *mine[k];
     if (kept.count(p.id)) continue;
+    if (const int sig = octocd::stop_signal()) return stopped(sig);
     progress.start(k, p.id);
     json r;
     try {
       r = s.kind == "steps" ? run_steps_point(s, p, models, o, progress) : run_broadphase_point(s, p, inputs, o, progress);
+    } catch (const BenchStopped&) {
+      return stopped(octocd::stop_signal());
     } catch (const InputError&) {
       throw;
     } catch (const std::exception& e) {
@@ -992,6 +1114,13 @@ int bench_command(const BenchOptions& o) {
     r["id"] = p.id;
     r["index"] = p.index;
     r["finished"] = utc_time_now();
+    r["load_average"] = load_average();  // at the point's end: how busy the machine was meanwhile
+    {
+      const long threads = result["machine"].value("threads", 0L);
+      const json& la = r["load_average"];
+      // More runnable threads than cores (the bench's own included) while it measured.
+      r["under_load"] = threads > 0 && !la.empty() && la[0].get<double>() > static_cast<double>(threads) + 1.0;
+    }
     if (r.value("status", "") == "failed") any_failed = true;
     std::string status = r.value("status", "?");
     if (status == "ok" && r.contains("windows")) {
@@ -1012,6 +1141,15 @@ int bench_command(const BenchOptions& o) {
   result["complete"] = true;
   result["machine"]["load_average_end"] = load_average();
   write();
+  // A sweep none of whose points could run measured nothing: bad input, not success.
+  if (!mine.empty() && std::all_of(result["points"].begin(), result["points"].end(),
+                                   [](const json& pt) { return pt.value("status", "") == "skipped"; })) {
+    const json& first = result["points"].front();
+    throw InputError(fmt::format("{}: every point skipped ({} of {}; first: {}: {}); allowed: a sweep with a point "
+                                 "this octocd can run (result kept in {})",
+                                 origin, result["points"].size(), mine.size(), first.value("id", "?"),
+                                 first.value("reason", "?"), o.output));
+  }
   if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", s.name, o.output);
   return any_failed ? 1 : 0;
 }

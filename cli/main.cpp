@@ -692,7 +692,8 @@ int main(int argc, char** argv) {
   CLI::App app{
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
       "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a check failed (validate, compare, replay),\n"
-      "130/143 stopped by SIGINT/SIGTERM (run and validate stop between frames and close the trace).",
+      "4 a confirmed slowdown (report --baseline), 130/143 stopped by SIGINT/SIGTERM (run and validate\n"
+      "stop between frames and close the trace; bench keeps its finished points).",
       "octocd"};  // a fixed name: `--help` reads the same whatever path ran it (docs/cli.md)
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);

@@ -1,6 +1,7 @@
 // `octocd report RESULT.json|TRACE.h5 ... -o DIR` (SPEC 12): runs reports/make_report.py
 // (matplotlib; Debian python3-matplotlib) on bench results and traces, which writes
-// DIR/index.html (self-contained: plots inline as SVG) and DIR/report.md (+ DIR/plots/).
+// DIR/index.html (self-contained: plots inline as SVG) and DIR/report.md (+ DIR/plots/);
+// with --baseline a performance gate (exit 4 on a confirmed slowdown), with --csv every table as CSV.
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -39,15 +40,29 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
       "Make a report of bench results and traces: DIR/index.html (self-contained, plots inline) and DIR/report.md "
       "(plots in DIR/plots/): the paper's Tables 5, 6, A1 beside ours per engine, steps/s and stage shares, broadphase "
       "scaling, the beta-delta heatmap, and per trace energy, contacts and penetration over frames. Shards of one "
-      "sweep are merged. Exit 0 ok, 1 failure (e.g. no matplotlib), 2 bad input");
+      "sweep (one build) are merged. With --baseline, a performance gate. Exit 0 ok, 1 failure (e.g. no "
+      "matplotlib), 2 bad input (one line naming the file and key, never a traceback), 4 a confirmed slowdown "
+      "against --baseline");
   c->add_option("inputs", o.inputs, "Result files of `octocd bench` (.json) and traces (.h5)")->required();
   c->add_option("-o,--output", o.output, "Output folder (created)")->required();
   c->add_option("--title", o.title, "Title of the report");
+  c->add_option("--baseline", o.baseline,
+                "Performance gate: baseline result file(s) of the same sweep (shards merged; repeat the option). The "
+                "inputs are set beside it per point (ratio, both spreads); a point more than --threshold % slower with "
+                "the two min-max ranges apart is SLOWER and exits 4; beyond the threshold with overlapping ranges (or "
+                "one repetition) is 'inconclusive'. Works across machines (both named)")
+      ->allow_extra_args(false);
+  c->add_option("--threshold", o.threshold, "Slowdown in percent that fails the gate (default 5)")
+      ->check(CLI::Range(0.0, 999.0));
+  c->add_option("--csv", o.csv, "Also write every table as CSV into this folder (one file per table)");
   return c;
 }
 
 int report_command(const ReportOptions& o) {
   std::error_code ec;
+  for (const auto& in : o.baseline)
+    if (!fs::is_regular_file(in, ec))
+      throw InputError(fmt::format("--baseline {}: no such file; allowed: a result file of `octocd bench` (.json)", in));
   for (const auto& in : o.inputs)
     if (!fs::is_regular_file(in, ec))
       throw InputError(fmt::format("{}: no such file; allowed: result files of `octocd bench` (.json) and traces (.h5)",
@@ -62,6 +77,17 @@ int report_command(const ReportOptions& o) {
     args.push_back("--title");
     args.push_back(o.title);
   }
+  for (const auto& in : o.baseline) {
+    args.push_back("--baseline");
+    args.push_back(in);
+  }
+  args.push_back("--threshold");
+  args.push_back(fmt::format("{}", o.threshold));
+  if (!o.csv.empty()) {
+    args.push_back("--csv");
+    args.push_back(o.csv);
+  }
+  args.push_back("--");
   for (const auto& in : o.inputs) args.push_back(in);
   std::vector<char*> argv;
   for (auto& a : args) argv.push_back(a.data());
@@ -80,7 +106,7 @@ int report_command(const ReportOptions& o) {
   if (waitpid(pid, &status, 0) < 0) throw RuntimeError("report: waitpid failed");
   if (!WIFEXITED(status)) throw RuntimeError(fmt::format("report: {} was killed (signal {})", sc, WTERMSIG(status)));
   const int rc = WEXITSTATUS(status);
-  return rc == 0 || rc == 2 ? rc : 1;
+  return rc == 0 || rc == 2 || rc == 4 ? rc : 1;
 }
 
 }  // namespace octocd::cli

@@ -7,10 +7,12 @@
 /// over repetitions, the machine description and atomic file writes.
 ///
 /// Exit codes as everywhere in octocd: 0 ok, 1 runtime failure, 2 bad input, 3 a check
-/// failed (compare: the traces differ; replay: a broadphase disagrees).
+/// failed (compare: the traces differ; replay: a broadphase disagrees), 4 the performance
+/// gate found a confirmed slowdown (`report --baseline`).
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -178,10 +180,27 @@ struct ReplayOptions {
 CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o);
 int replay_command(const ReplayOptions& o);
 
+/// One quantity's tolerance in `octocd compare`: A and B differ when |A - B| > abs + rel *
+/// max(|A|, |B|) (numpy.isclose's rule); both 0 = bit for bit.
+struct Tolerance {
+  double abs = 0.0;  ///< absolute, in the quantity's unit (m, m/s, counts, J), >= 0
+  double rel = 0.0;  ///< relative, >= 0
+  /// Whether this is bit for bit (abs = rel = 0).
+  bool exact() const { return abs == 0.0 && rel == 0.0; }
+  /// "1e-06", "rel:0.0001", "1e-06+rel:0.0001" or "0 (bit for bit)".
+  std::string text() const;
+};
+
+/// Parses `--tolerance` arguments (each comma-separated items VALUE or QUANTITY=VALUE, VALUE
+/// ABS, rel:R or ABS+rel:R; later items override earlier ones) into one tolerance per
+/// quantity (positions, velocities, contacts, pairs, energy; unnamed ones 0). Throws
+/// InputError naming the item for an unknown quantity, a negative or non-numeric value.
+std::map<std::string, Tolerance> parse_tolerances(const std::vector<std::string>& args);
+
 /// `octocd compare` options (cli/compare.cpp).
 struct CompareOptions {
   std::string a, b;
-  double tolerance = 0.0;
+  std::vector<std::string> tolerance;  ///< --tolerance arguments (parse_tolerances)
   std::string quantities = "positions,velocities,contacts,pairs";
   std::string json;
 };
@@ -193,6 +212,9 @@ struct ReportOptions {
   std::vector<std::string> inputs;
   std::string output;
   std::string title;
+  std::vector<std::string> baseline;  ///< --baseline result files: the performance gate
+  double threshold = 5.0;             ///< --threshold: slowdown in % that fails the gate
+  std::string csv;                    ///< --csv DIR: every table as CSV
 };
 CLI::App* add_report_command(CLI::App& app, ReportOptions& o);
 int report_command(const ReportOptions& o);

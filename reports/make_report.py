@@ -5,11 +5,16 @@ OUT/index.html (self-contained: every plot inline as SVG, no network) and OUT/re
 
     /usr/bin/python3 reports/make_report.py -o OUT RESULT.json [TRACE.h5 ...]
 
-Shards of one sweep (same sweep definition and machine) are merged. Exit codes: 0 ok,
-2 bad input (a file of another format or version, duplicate points), 1 anything else.
+Shards of one sweep (same sweep definition, machine and build) are merged. Performance
+gate: `--baseline BASE.json [--threshold P]` sets NEW beside BASE per point and exits 4 on
+a confirmed slowdown (beyond P % with the two runs' min-max ranges apart). `--csv DIR`
+writes every table as CSV. Exit codes: 0 ok, 2 bad input (a file of another format or
+version, duplicate points, shards of different builds, a baseline of another sweep, a
+malformed result: one line, never a traceback), 4 a confirmed slowdown, 1 anything else.
 Needs Debian's python3-matplotlib and python3-numpy (python3-h5py for traces).
 """
 import argparse
+import csv
 import datetime
 import html
 import io
@@ -68,6 +73,48 @@ def load(path):
     return ("result", path, j)
 
 
+def check_points(path, j):
+    """The fields the report reads, checked per point: one line naming file, point and key."""
+    if not isinstance(j.get("points"), list):
+        fail(f"{path}: points: not an array; allowed: an array of points (docs/bench-format.md)")
+    for i, p in enumerate(j["points"]):
+        where = f"{path}: points[{i}]"
+        if not isinstance(p, dict):
+            fail(f"{where}: not an object; allowed: a point object")
+        if not isinstance(p.get("id"), str):
+            fail(f"{where}.id: {p.get('id')!r}; allowed: a string")
+        if p.get("status") != "ok":
+            continue
+        if not isinstance(p.get("params"), dict):
+            fail(f"{where}.params: {p.get('params')!r}; allowed: an object")
+        spreads = []
+        if "windows" in p:
+            if not isinstance(p["windows"], dict) or not p["windows"]:
+                fail(f"{where}.windows: {json.dumps(p['windows'])[:60]}; allowed: an object of windows")
+            for wn, w in p["windows"].items():
+                if not isinstance(w, dict):
+                    fail(f"{where}.windows.{wn}: {json.dumps(w)[:60]}; allowed: an object of figures")
+                spreads += [(f"windows.{wn}.{k}", v) for k, v in w.items() if k not in ("first", "last", "frames")]
+                if "steps_per_s" not in w:
+                    fail(f"{where}.windows.{wn}.steps_per_s: missing; allowed: a spread object")
+        elif "ms_per_frame" in p:
+            spreads.append(("ms_per_frame", p["ms_per_frame"]))
+        else:
+            fail(f"{where}: neither windows nor ms_per_frame; allowed: a measured point (docs/bench-format.md)")
+        for k, v in spreads:
+            if k.endswith("stage_ms") and isinstance(v, dict):
+                spreads_v = list(v.items())
+            else:
+                spreads_v = [("", v)]
+            for sub, x in spreads_v:
+                name = f"{where}.{k}" + (f".{sub}" if sub else "")
+                if not isinstance(x, dict) or not isinstance(x.get("n"), int):
+                    fail(f"{name}: {json.dumps(x)[:60]}; allowed: a spread {{median, min, max, n, ...}}")
+                if x["n"] > 0 and not all(isinstance(x.get(f), (int, float)) and not isinstance(x.get(f), bool)
+                                          for f in ("median", "min", "max")):
+                    fail(f"{name}: {json.dumps(x)[:60]}; allowed: numbers median, min, max")
+
+
 def merge(results):
     """Groups result files of one sweep definition on one machine; points by id."""
     groups = {}
@@ -76,6 +123,10 @@ def merge(results):
         key = (j["sweep"]["name"], json.dumps(j["sweep"]["definition"], sort_keys=True),
                m.get("hostname"), m.get("cpu"), m.get("gpu"))
         g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}})
+        if g["files"] and j["build"].get("build_id") != g["first"]["build"].get("build_id"):
+            fail(f"{path}: build.build_id: {j['build'].get('build_id')!r}, but {g['files'][0]} (same sweep) has "
+                 f"{g['first']['build'].get('build_id')!r}; allowed: shards of one build in one report (compare two "
+                 "builds with --baseline BASE.json NEW.json)")
         g["files"].append(path)
         for p in j["points"]:
             pid = p.get("id")
@@ -111,20 +162,50 @@ def med(s):
 
 
 def spread_text(s, digits=3):
+    """median (min–max, n=N); '(1 rep.)' when there was one repetition: no spread to judge by."""
     if not isinstance(s, dict) or "median" not in s:
         return "-"
-    if s.get("n", 1) > 1 and s["max"] != s["min"]:
-        return f"{num(s['median'], digits)} ({num(s['min'], digits)}–{num(s['max'], digits)})"
-    return num(s["median"], digits)
+    n = s.get("n", 1)
+    if n > 1:
+        return f"{num(s['median'], digits)} ({num(s['min'], digits)}–{num(s['max'], digits)}, n={n})"
+    return f"{num(s['median'], digits)} (1 rep.)"
+
+
+def overlap(a, b):
+    """Whether two spreads' min-max ranges overlap (or either has one repetition): no verdict then."""
+    if min(a.get("n", 1), b.get("n", 1)) < 2:
+        return True
+    return not (a["max"] < b["min"] or b["max"] < a["min"])
+
+
+def load_warning(m):
+    """Why timings of this machine description are suspect (load above the free cores,
+    OpenMP threads oversubscribing them), or ''."""
+    threads, omp = m.get("threads") or 0, m.get("omp_threads") or 1
+    why = []
+    if threads and omp > threads:
+        why.append(f"{omp} OpenMP threads on {threads} cores")
+    # At the start the load is the others'; at the end it includes the bench's own threads.
+    for key, when, own in (("load_average", "start", omp), ("load_average_end", "end", 0)):
+        la = m.get(key)
+        if threads and isinstance(la, list) and la and isinstance(la[0], (int, float)) and la[0] + own > threads + 1:
+            why.append(f"load {la[0]:.1f} at the {when} leaves {max(threads - la[0], 0):.1f} of {threads} cores free "
+                       f"for {omp} OpenMP thread(s)" + (" (its own included)" if when == "end" else ""))
+    return "; ".join(why)
 
 
 class Doc:
     """One report, written both as HTML and as Markdown."""
 
-    def __init__(self, out):
+    def __init__(self, out, csv_dir=None):
         self.out = out
         self.html, self.md = [], []
         self.nplot = 0
+        self.ntable = 0
+        self.section = "report"
+        self.csv_dir = csv_dir
+        if csv_dir:
+            os.makedirs(csv_dir, exist_ok=True)
         os.makedirs(os.path.join(out, "plots"), exist_ok=True)
 
     def h(self, level, text, anchor=None):
@@ -137,8 +218,16 @@ class Doc:
         self.html.append(f"<p{c}>{html.escape(text)}</p>")
         self.md.append(text + "\n")
 
-    def table(self, header, rows, note=None):
-        t = ['<div class="wide"><table><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
+    def table(self, header, rows, note=None, name="table"):
+        if self.csv_dir:
+            self.ntable += 1
+            slug = "".join(c if c.isalnum() or c in "-_" else "-" for c in (self.section + "-" + name).lower())
+            with open(os.path.join(self.csv_dir, f"{self.ntable:02d}-{slug.strip('-')}.csv"), "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(header)
+                w.writerows(rows)
+        cls = ' class="compact"' if len(header) > 9 else ""
+        t = [f'<div class="wide"><table{cls}><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
         for r in rows:
             t.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>")
         t.append("</tbody></table></div>")
@@ -172,7 +261,8 @@ th,td{border:1px solid #ccc;padding:.25em .55em;text-align:right}th{background:#
 td:first-child,th:first-child{text-align:left}tbody tr:nth-child(even){background:#fafafa}
 figure{margin:1em 0}figure svg{max-width:100%;height:auto}figcaption{font-size:.85em;color:#555}
 .note{font-size:.85em;color:#555}.meta{font-size:.85em;background:#f6f6f6;padding:.5em .8em;border-left:3px solid #4e79a7}
-nav a{margin-right:1em}.wide{overflow-x:auto;max-width:100%}"""
+nav a{margin-right:1em}.wide{overflow-x:auto;max-width:100%}
+table.compact{font-size:.72em}table.compact th,table.compact td{padding:.15em .3em}"""
         page = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
                 f"<title>{html.escape(title)}</title><style>{css}</style></head><body>",
                 f"<h1>{html.escape(title)}</h1>"] + self.html + ["</body></html>"]
@@ -207,6 +297,12 @@ def machine_block(doc, g):
              + f"; files: {', '.join(os.path.basename(f) for f in g['files'])}",
              f"Points: {len(g['points_list'])} of {total} in these files ({n_ok} measured)"
              + ("" if len(g["points_list"]) >= total else " — incomplete: missing shards or an interrupted run")]
+    if s.get("repeat") == 1:
+        parts.append("1 repetition per point: the figures have no spread, and no verdict (fastest, slower) can be "
+                     "taken from them.")
+    lw = load_warning(m)
+    if lw:
+        parts.append(f"⚠ Measured under load: {lw}. Verdicts of this run are marked ⚠.")
     doc.html.append('<div class="meta">' + "<br>".join(html.escape(x) for x in parts) + "</div>")
     doc.md.extend("> " + x.replace("`", "") + "  " for x in parts)
     doc.md.append("")
@@ -245,15 +341,39 @@ def first_window(p):
     return next(iter(p["windows"].values()))
 
 
-def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"]):
-    """steps/s bars per scene (or xkey) and engine (and group_axis value)."""
+HATCHES = ["", "///", "...", "xxx", "\\\\\\", "ooo", "+++"]
+
+
+def log_ticks(ax, axis="y"):
+    """Readable log ticks: 1, 2, 5 per decade, written as plain numbers (200, 1,000, 0.05)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    a = ax.yaxis if axis == "y" else ax.xaxis
+    a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    def text(v, _):
+        if v <= 0:
+            return ""
+        if v >= 1e6:
+            return f"{v / 1e6:g}M"
+        if v >= 1e4:
+            return f"{v / 1e3:g}k"
+        return f"{v:,.0f}" if v >= 1 else f"{v:g}"
+    a.set_major_formatter(FuncFormatter(text))
+    a.set_minor_formatter(NullFormatter())
+
+
+def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"], paper=None):
+    """steps/s bars per scene (or xkey): one colour per engine, a hatch per group_axis value;
+    `paper` {(scene, label): FPS} draws the paper's figures as black diamonds."""
     scenes = list(dict.fromkeys(xkey(p) for p in pts))
-    combos = list(dict.fromkeys((axis_label(p, group_axis) if group_axis else "", p["params"]["engine"]) for p in pts))
+    vals = list(dict.fromkeys(axis_label(p, group_axis) if group_axis else "" for p in pts))
+    engines = list(dict.fromkeys(p["params"]["engine"] for p in pts))
+    combos = [(v, e) for e in engines for v in vals
+              if any(p["params"]["engine"] == e and (not group_axis or axis_label(p, group_axis) == v) for p in pts)]
     if not scenes or not combos:
         return
-    fig, ax = plt.subplots(figsize=(max(6, 1.6 * len(scenes) + 0.25 * len(combos) * len(scenes)), 3.6))
+    fig, ax = plt.subplots(figsize=(min(11, max(6, 1.4 * len(scenes) + 0.22 * len(combos) * len(scenes))), 4.2))
     width = 0.8 / len(combos)
-    cmap = plt.get_cmap("tab20")
+    centres = {}
     for k, (val, eng) in enumerate(combos):
         ys, lo, hi = [], [], []
         for sc in scenes:
@@ -264,15 +384,28 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
             lo.append(s["median"] - s["min"] if s else 0)
             hi.append(s["max"] - s["median"] if s else 0)
         xs = np.arange(len(scenes)) + (k - (len(combos) - 1) / 2) * width
-        lab = f"{eng} {val}".strip()
-        ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=lab, color=cmap(k % 20),
-               edgecolor=ENGINE_COLORS.get(eng, "#333"), linewidth=0.8)
+        for i, sc in enumerate(scenes):
+            centres.setdefault((sc, val), []).append(xs[i])
+        colour = ENGINE_COLORS.get(eng, "#777")
+        shade = 1.0 - 0.35 * (vals.index(val) / max(len(vals) - 1, 1))  # lighter for later values
+        ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=f"{eng} {val}".strip(), color=colour, alpha=shade,
+               hatch=HATCHES[vals.index(val) % len(HATCHES)], edgecolor="#222", linewidth=0.6)
+    if paper:
+        px, py = [], []
+        for (sc, val), fps in paper.items():
+            if (sc, val) in centres:
+                px.append(float(centres[(sc, val)][0]))  # over the first engine's bar
+                py.append(fps)
+        if px:
+            ax.plot(px, py, "D", color="black", ms=6, label="paper FPS (Unity, whole application)")
     ax.set_xticks(np.arange(len(scenes)))
     ax.set_xticklabels(scenes, rotation=0)
     ax.set_yscale("log")
+    log_ticks(ax)
     ax.set_ylabel("steps/s (median, bars min–max)")
     ax.set_title(title)
-    ax.legend(fontsize=7, ncol=min(len(combos), 6), loc="upper center", bbox_to_anchor=(0.5, -0.1))
+    ax.legend(fontsize=9, ncol=min(len(combos) + (1 if paper else 0), 4), loc="upper center",
+              bbox_to_anchor=(0.5, -0.1))
     doc.figure(fig, name, title)
 
 
@@ -294,12 +427,12 @@ def stage_shares(doc, pts, group_axis, title, name):
         ax.barh(np.arange(len(rows)), arr[:, k], left=left, color=STAGE_COLORS[k], label=s)
         left += arr[:, k]
     ax.set_yticks(np.arange(len(rows)))
-    ax.set_yticklabels(labels, fontsize=7)
+    ax.set_yticklabels(labels, fontsize=8)
     ax.invert_yaxis()
     ax.set_xlim(0, 100)
     ax.set_xlabel("share of the step (%), median stage ms")
     ax.set_title(title)
-    ax.legend(fontsize=7, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.12 - 1.0 / max(len(rows), 4)))
+    ax.legend(fontsize=9, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.12 - 1.0 / max(len(rows), 4)))
     doc.figure(fig, name, title)
 
 
@@ -342,15 +475,27 @@ def section_table5(doc, g):
         pb = max(("A", "B", "C"), key=lambda c: ref[c][0])
         r = [sc, pb]
         for e in engines:
-            vals = {c: find(pts, scene=sc, engine=e, midphase=c) for c in ("A", "B", "C")}
-            vals = {c: med(first_window(p)["steps_per_s"]) for c, p in vals.items() if p}
-            r.append(max(vals, key=vals.get) + " (" + ", ".join(f"{c} {num(v / vals.get('A', v) if vals.get('A') else 1.0)}x"
-                                                                for c, v in vals.items()) + " of A)"
-                     if len(vals) == 3 else "-")
+            found = {c: find(pts, scene=sc, engine=e, midphase=c) for c in ("A", "B", "C")}
+            sp = {c: first_window(p)["steps_per_s"] for c, p in found.items() if p}
+            vals = {c: med(x) for c, x in sp.items()}
+            if len(vals) != 3:
+                r.append("-")
+                continue
+            order = sorted(vals, key=vals.get, reverse=True)
+            if min(sp[order[0]].get("n", 1), sp[order[1]].get("n", 1)) < 2:
+                verdict = f"no verdict (1 repetition; {order[0]} by median)"
+            elif overlap(sp[order[0]], sp[order[1]]):
+                verdict = f"inconclusive ({order[0]} ~ {order[1]}: ranges overlap)"
+            else:
+                verdict = order[0]
+            if load_warning(g["first"]["machine"]):
+                verdict = "⚠ " + verdict
+            r.append(verdict + " (" + ", ".join(f"{c} {num(v / vals['A'] if vals.get('A') else 1.0)}x"
+                                                for c, v in vals.items()) + " of A)")
         rows.append(r)
     doc.table(["scene", "paper: fastest"] + [f"{e}: fastest (speed vs A)" for e in engines], rows)
     steps_bars(doc, pts, "midphase", "Table 5: steps/s per scene, midphase A [2] / B [1,2] / C [0,1,2], per engine",
-               "table5-steps")
+               "table5-steps", paper={(sc, c): ref[c][0] for sc, ref in paper["rows"].items() for c in ("A", "B", "C")})
     stage_shares(doc, pts, "midphase", "Table 5: share of each stage in the step", "table5-stages")
     counts = []
     for p in pts:
@@ -366,7 +511,8 @@ def section_table6(doc, g):
     pts = steps_points(g)
     paper = PAPER["table6"]
     engines = engines_of(g)
-    doc.p("Relative change ratio RCR = (C - L0) / L0 x 100 % as in the paper. " + paper["source"] + ".")
+    doc.p("Relative change ratio RCR = (C - L0) / L0 x 100 % as in the paper; 'inconclusive' when the two min-max "
+          "ranges overlap (or one repetition), ⚠ when measured under load. " + paper["source"] + ".")
     rows = []
     for sc, ref in paper["rows"].items():
         r = [f"{sc} ({ref['count']})", f"{ref['L0'][0]} ± {ref['L0'][1]}", f"{ref['C'][0]} ± {ref['C'][1]}",
@@ -376,8 +522,12 @@ def section_table6(doc, g):
             r.append(spread_text(first_window(l0)["steps_per_s"]) if l0 else "-")
             r.append(spread_text(first_window(c)["steps_per_s"]) if c else ("(= L0: no midphase)" if l0 else "-"))
             if l0 and c:
-                a, b = med(first_window(l0)["steps_per_s"]), med(first_window(c)["steps_per_s"])
-                r.append(f"{100.0 * (b - a) / a:+.1f}%")
+                sa, sb = first_window(l0)["steps_per_s"], first_window(c)["steps_per_s"]
+                a, b = med(sa), med(sb)
+                r.append(f"{100.0 * (b - a) / a:+.1f}%"
+                         + ("" if not overlap(sa, sb) else " (1 repetition: no verdict)"
+                            if min(sa.get("n", 1), sb.get("n", 1)) < 2 else " (inconclusive: ranges overlap)")
+                         + (" ⚠" if load_warning(g["first"]["machine"]) else ""))
             else:
                 r.append("-")
         rows.append(r)
@@ -385,7 +535,8 @@ def section_table6(doc, g):
     for e in engines:
         head += [f"{e} L0", f"{e} C", f"{e} RCR"]
     doc.table(head, rows)
-    steps_bars(doc, pts, "midphase", "Table 6: steps/s, Level 0 (aabb-only) vs C [0,1,2], per engine", "table6-steps")
+    steps_bars(doc, pts, "midphase", "Table 6: steps/s, Level 0 (aabb-only) vs C [0,1,2], per engine", "table6-steps",
+               paper={(sc, c): ref[c][0] for sc, ref in paper["rows"].items() for c in ("L0", "C")})
     stage_shares(doc, pts, "midphase", "Table 6: share of each stage in the step", "table6-stages")
 
 
@@ -432,8 +583,11 @@ def section_tableA1(doc, g):
             ax.set_title(mesh)
             ax.set_xlabel("frame")
             ax.set_yscale("log")
+            log_ticks(ax)
         axes[0][0].set_ylabel("steps/s per 100 frames")
-        axes[0][-1].legend(fontsize=7)
+        h, l = axes[0][0].get_legend_handles_labels()
+        fig.legend(h, l, fontsize=9, ncol=min(len(l), 6), loc="upper center", bbox_to_anchor=(0.5, -0.02))
+        fig.tight_layout()
         doc.figure(fig, "tableA1-series", "Table A1 / Fig. 5: steps/s over the 3000 frames, spatial hash (dashed) vs "
                    "octree (solid), per mesh and engine (median over repetitions of each 100-frame block)")
     steps_bars(doc, [dict(p, windows={"late": p["windows"]["late"]}) for p in pts if "late" in p["windows"]],
@@ -540,10 +694,12 @@ def section_scaling(doc, g):
                        "yes" if all(p.get("matches_recorded", True) for p in ps) else "NO"])
     ax.set_xscale("log")
     ax.set_yscale("log")
+    log_ticks(ax, "x")
+    log_ticks(ax, "y")
     ax.set_xlabel("bodies")
     ax.set_ylabel("broadphase ms per frame")
     ax.set_title("Broadphase scaling on identical recorded AABBs (solid: cpu, dashed: cuda)")
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     doc.figure(fig, "scaling", "Broadphase scaling, log-log: ms per frame against bodies")
     doc.table(["engine", "broadphase"] + [f"{s:,}" for s in sizes] + ["slope k", "last doubling", "pairs = recorded"],
               rows, "ms per frame, median over repetitions; '-' = not measured (skipped: see below).")
@@ -586,7 +742,11 @@ def section_generic(doc, g):
         stage_shares(doc, pts, axis, f"{g['first']['sweep']['name']}: stage shares", "sweep-stages")
 
 
-def section_trace(doc, path):
+TRACE_COLORS = ["#4e79a7", "#e15759", "#59a14f", "#f28e2b", "#76b7b2", "#b07aa1", "#9c755f", "#edc948"]
+
+
+def read_trace(path):
+    """The /frames columns of one trace and its attributes."""
     try:
         import h5py
     except ImportError:
@@ -604,36 +764,135 @@ def section_trace(doc, path):
             fail(f"{path}: /frames: missing; allowed: an octocd trace")
         fr = f["frames"]
         n = min(d.shape[0] for d in fr.values())
-        get = lambda k: fr[k][:n] if k in fr else np.zeros(n)
-        frame = get("frame")
-        doc.h(2, f"Trace {os.path.basename(path)}")
-        a = f.attrs
-        doc.p(f"Scene {a.get('scene_name')}, engine {a.get('engine')}, broadphase {a.get('broadphase')}, midphase "
-              f"{a.get('midphase')}, {a.get('body_count')} bodies, {n} frames; device {a.get('device')}; build "
-              f"{a.get('build_id')}; started {a.get('start_time')}.")
-        step = get("step_ms")
-        doc.table(["frames", "steps/s", "mean step ms", "mean contacts", "max contacts", "max d_p (mm)",
-                   "final kinetic energy (J)"],
-                  [[n, num(1000.0 * n / step.sum()) if step.sum() > 0 else "-", num(step.mean(), 4) if n else "-",
-                    num(get("contacts").mean()) if n else "-", int(get("contacts").max()) if n else "-",
-                    num(1e3 * get("penetration_max").max()) if n else "-",
-                    num(get("kinetic_energy")[-1]) if n else "-"]])
-        fig, axes = plt.subplots(1, 3, figsize=(12, 3))
-        axes[0].plot(frame, get("kinetic_energy"), color="#4e79a7")
-        axes[0].set_title("kinetic energy (J)")
-        axes[1].plot(frame, get("contacts"), color="#e15759", label="contacts")
-        axes[1].plot(frame, get("aabb_pairs"), color="#bab0ac", label="AABB pairs")
-        axes[1].legend(fontsize=7)
-        axes[1].set_title("contacts and AABB pairs per frame")
-        axes[2].plot(frame, 1e3 * get("penetration_mean"), color="#59a14f", label="mean")
-        axes[2].plot(frame, 1e3 * get("penetration_max"), color="#b6992d", label="max", alpha=0.6)
-        axes[2].legend(fontsize=7)
-        axes[2].set_title("AABB penetration d_p (mm)")
-        for ax in axes:
-            ax.set_xlabel("frame")
-        doc.figure(fig, "trace-" + os.path.splitext(os.path.basename(path))[0],
-                   f"{os.path.basename(path)}: energy, contacts and penetration over frames")
+        cols = {k: np.asarray(fr[k][:n], dtype=float) for k in ("frame", "step_ms", "contacts", "aabb_pairs",
+                                                                  "kinetic_energy", "penetration_mean",
+                                                                  "penetration_max") if k in fr}
+        for k in ("frame", "step_ms", "contacts", "aabb_pairs", "kinetic_energy", "penetration_mean",
+                  "penetration_max"):
+            cols.setdefault(k, np.zeros(n))
+        attrs = {k: f.attrs.get(k) for k in ("scene_name", "engine", "broadphase", "midphase", "body_count",
+                                               "device", "build_id", "start_time")}
+    return {"path": path, "n": n, "cols": cols, "attrs": attrs}
 
+
+def section_traces(doc, paths):
+    """One table row per trace, and the traces overlaid on shared axes (one colour each)."""
+    traces = []
+    for path in paths:
+        CURRENT[0] = path
+        traces.append(read_trace(path))
+    doc.h(2, "Traces" if len(traces) > 1 else f"Trace {os.path.basename(paths[0])}")
+    rows = []
+    for t in traces:
+        a, n, c = t["attrs"], t["n"], t["cols"]
+        step = c["step_ms"]
+        doc.p(f"{os.path.basename(t['path'])}: scene {a.get('scene_name')}, engine {a.get('engine')}, broadphase "
+              f"{a.get('broadphase')}, midphase {a.get('midphase')}, {a.get('body_count')} bodies, {n} frames; device "
+              f"{a.get('device')}; build {a.get('build_id')}; started {a.get('start_time')}.")
+        rows.append([os.path.basename(t["path"]), n, num(1000.0 * n / step.sum()) if step.sum() > 0 else "-",
+                     num(step.mean(), 4) if n else "-", num(c["contacts"].mean()) if n else "-",
+                     int(c["contacts"].max()) if n else "-", num(1e3 * c["penetration_max"].max()) if n else "-",
+                     num(c["kinetic_energy"][-1]) if n else "-"])
+    doc.table(["trace", "frames", "steps/s", "mean step ms", "mean contacts", "max contacts", "max d_p (mm)",
+               "final kinetic energy (J)"], rows, name="traces")
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), sharex=True)
+    for k, t in enumerate(traces):
+        c, col = t["cols"], TRACE_COLORS[k % len(TRACE_COLORS)]
+        lab = os.path.basename(t["path"])
+        axes[0].plot(c["frame"], c["kinetic_energy"], color=col, label=lab)
+        axes[1].plot(c["frame"], c["contacts"], color=col, label=f"{lab} contacts")
+        axes[1].plot(c["frame"], c["aabb_pairs"], color=col, linestyle=":", label=f"{lab} AABB pairs")
+        axes[2].plot(c["frame"], 1e3 * c["penetration_max"], color=col, label=f"{lab} max")
+        axes[2].plot(c["frame"], 1e3 * c["penetration_mean"], color=col, linestyle="--", alpha=0.7,
+                     label=f"{lab} mean")
+    axes[0].set_title("kinetic energy (J)")
+    axes[1].set_title("contacts (solid), AABB pairs (dotted)")
+    axes[2].set_title("AABB penetration d_p (mm): max, mean (dashed)")
+    for ax in axes:
+        ax.set_xlabel("frame")
+    handles, labels = axes[2].get_legend_handles_labels()
+    h1, l1 = axes[1].get_legend_handles_labels()
+    fig.legend(h1 + handles, l1 + labels, fontsize=9, ncol=min(4, 4 * len(traces)), loc="upper center",
+               bbox_to_anchor=(0.5, -0.02))
+    fig.tight_layout()
+    names = "-".join(os.path.splitext(os.path.basename(t["path"]))[0] for t in traces)[:60]
+    doc.figure(fig, "trace-" + names, ("Traces overlaid: " if len(traces) > 1 else "") +
+               ", ".join(os.path.basename(t["path"]) for t in traces) + ": energy, contacts and penetration over frames")
+
+
+# ---- performance gate ------------------------------------------------------------------------
+
+def timing_of(p):
+    """[(label, spread, higher_is_better)] of a point: steps/s per window, or replay ms/frame."""
+    out = []
+    if isinstance(p.get("windows"), dict):
+        for wn, w in p["windows"].items():
+            out.append((f"steps/s ({wn})", w["steps_per_s"], True))
+    elif isinstance(p.get("ms_per_frame"), dict):
+        out.append(("broadphase ms/frame", p["ms_per_frame"], False))
+    return out
+
+
+def machine_text(j):
+    m, b = j["machine"], j["build"]
+    return f"{m.get('hostname')} ({m.get('cpu')}), build {b.get('build_id')}"
+
+
+def section_gate(doc, base, new, threshold):
+    """NEW beside BASE per point. Returns the number of confirmed slowdowns."""
+    bj, nj = base["first"], new["first"]
+    for key, what in (("name", "sweep.name"), ("definition", "sweep.definition")):
+        if bj["sweep"].get(key) != nj["sweep"].get(key):
+            fail(f"{base['files'][0]}: {what}: baseline of another sweep ({bj['sweep'].get('name')!r} vs "
+                 f"{nj['sweep'].get('name')!r} in {new['files'][0]}); allowed: a baseline of the same sweep definition")
+    doc.section = "gate"
+    doc.h(2, f"Performance gate: {nj['sweep']['name']}", "gate")
+    across = (bj["machine"].get("hostname"), bj["machine"].get("cpu")) != (nj["machine"].get("hostname"),
+                                                                            nj["machine"].get("cpu"))
+    doc.p(f"Baseline: {machine_text(bj)}, {', '.join(os.path.basename(f) for f in base['files'])}. "
+          f"New: {machine_text(nj)}, {', '.join(os.path.basename(f) for f in new['files'])}. "
+          + (f"Across machines: {bj['machine'].get('hostname')} vs {nj['machine'].get('hostname')}: a ratio mixes the "
+             "machines' speed with the builds'. " if across else "Same machine. ")
+          + f"Ratio = new time / baseline time (> 1 slower). A point is SLOWER (exit 4) when its median is more "
+          f"than {threshold:g} % slower and the two min-max ranges do not overlap; more than {threshold:g} % with "
+          "overlapping ranges (or a single repetition) is inconclusive; ⚠ marks a run measured under load.")
+    warn = [f"{side}: {w}" for side, w in (("baseline", load_warning(bj["machine"])),
+                                            ("new", load_warning(nj["machine"]))) if w]
+    bp = {p["id"]: p for p in base["points_list"] if p.get("status") == "ok"}
+    rows, slower = [], 0
+    counts = {}
+    for p in new["points_list"]:
+        if p.get("status") != "ok" or p["id"] not in bp:
+            continue
+        q = bp[p["id"]]
+        for (label, ns, hib), (_, bs, _) in zip(timing_of(p), timing_of(q)):
+            if not (isinstance(bs, dict) and isinstance(ns, dict) and bs.get("median") and ns.get("median")):
+                continue
+            ratio = bs["median"] / ns["median"] if hib else ns["median"] / bs["median"]
+            change = 100.0 * (ratio - 1.0)
+            if abs(change) <= threshold:
+                verdict = "same (within threshold)"
+            elif overlap(bs, ns):
+                verdict = "inconclusive (ranges overlap)" if min(bs.get("n", 1), ns.get("n", 1)) > 1 else \
+                    "inconclusive (1 repetition)"
+            elif change > 0:
+                verdict = "SLOWER"
+                slower += 1
+            else:
+                verdict = "faster"
+            if warn and not verdict.startswith("same"):
+                verdict = "⚠ " + verdict
+            counts[verdict] = counts.get(verdict, 0) + 1
+            rows.append([p["id"], label, spread_text(bs), spread_text(ns), f"{ratio:.3f}", f"{change:+.1f}%", verdict])
+    missing = [i for i in bp if i not in {p["id"] for p in new["points_list"] if p.get("status") == "ok"}]
+    doc.table(["point", "figure", "baseline median (min–max, n)", "new median (min–max, n)", "ratio (time)",
+               "change", "verdict"], rows,
+              ("Measured under load: " + "; ".join(warn) + ". " if warn else "")
+              + (f"{len(missing)} baseline point(s) not measured in the new run: {', '.join(missing[:5])}"
+                 + (" ..." if len(missing) > 5 else "") + "." if missing else ""), name="gate")
+    doc.p("Verdicts: " + ", ".join(f"{v} {c}" for v, c in sorted(counts.items())) + "." if counts
+          else "No point measured in both runs.")
+    return slower
 
 SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table5),
             "table6": ("Table 6: Level 0 (AABB only) vs hierarchical C", section_table6),
@@ -642,21 +901,52 @@ SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table
             "broadphase-scaling": ("Broadphase scaling", section_scaling)}
 
 
+CURRENT = ["the inputs"]  # the file being read, for the one-line error of a malformed one
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("-o", "--output", required=True)
     ap.add_argument("--title", default="octocd benchmark report")
+    ap.add_argument("--baseline", action="append", default=[], help="baseline result file(s) (shards merged)")
+    ap.add_argument("--threshold", type=float, default=5.0, help="slowdown in %% that fails the gate")
+    ap.add_argument("--csv", help="write every table as CSV into this folder")
     ap.add_argument("inputs", nargs="+")
     a = ap.parse_args()
-    loaded = [load(p) for p in a.inputs]
+    if not (0 <= a.threshold < 1000) or math.isnan(a.threshold):
+        fail(f"--threshold: {a.threshold}; allowed: a percentage in [0, 1000)")
+    loaded = []
+    for p in a.inputs:
+        CURRENT[0] = p
+        loaded.append(load(p))
     results = [(x[1], x[2]) for x in loaded if x[0] == "result"]
     traces = [x[1] for x in loaded if x[0] == "trace"]
+    for p in a.baseline + [x[0] for x in results]:
+        CURRENT[0] = p
+        check_points(p, dict(results).get(p) or load(p)[2])
+    CURRENT[0] = "the inputs"
+    slower = 0
+    doc = None
+    if a.baseline:
+        base_loaded = []
+        for p in a.baseline:
+            x = load(p)
+            if x[0] != "result":
+                fail(f"{p}: --baseline: an HDF5 trace; allowed: a result of octocd bench (.json)")
+            base_loaded.append((x[1], x[2]))
+        bg, ng = merge(base_loaded), merge(results)
+        if len(bg) != 1 or len(ng) != 1:
+            fail(f"--baseline: {len(bg)} sweep(s) in the baseline, {len(ng)} in the new results; allowed: one sweep "
+                 "(its shards) on each side")
+        os.makedirs(a.output, exist_ok=True)
+        doc = Doc(a.output, a.csv)
+        slower = section_gate(doc, bg[0], ng[0], a.threshold)
     groups = merge(results)
     order = list(SECTIONS)
     groups.sort(key=lambda g: (order.index(g["first"]["sweep"]["name"]) if g["first"]["sweep"]["name"] in order
                                else len(order), g["first"]["sweep"]["name"]))
     os.makedirs(a.output, exist_ok=True)
-    doc = Doc(a.output)
+    doc = doc or Doc(a.output, a.csv)
     doc.p(f"Made by octocd report on {datetime.datetime.utcnow().strftime('%Y-%m-%d %H:%M UTC')} from "
           f"{len(results)} result file(s) and {len(traces)} trace(s). {NOISE_NOTE}", "note")
     nav = []
@@ -666,18 +956,34 @@ def main():
         if g["first"]["sweep"].get("kind") == "broadphase" and name not in SECTIONS:
             title, fn = (f"Sweep {name}: broadphase replay", section_scaling)
         nav.append((f"s{i}", title))
+        doc.section = name
+        CURRENT[0] = ", ".join(g["files"])
         doc.h(2, title, f"s{i}")
         machine_block(doc, g)
         fn(doc, g)
         skipped_block(doc, g)
-    for t in traces:
-        section_trace(doc, t)
+    if traces:
+        doc.section = "trace"
+        section_traces(doc, traces)
+    if a.baseline:
+        nav.insert(0, ("gate", "Performance gate"))
     if nav:
-        doc.html.insert(1, "<nav>" + "".join(f'<a href="#{k}">{html.escape(t)}</a>' for k, t in nav) + "</nav>")
+        doc.html.insert(0 if a.baseline else 1, "<nav>" + "".join(f'<a href="#{k}">{html.escape(t)}</a>' for k, t in nav) + "</nav>")
     doc.write(a.title)
     print(f"octocd report: wrote {os.path.join(a.output, 'index.html')} and {os.path.join(a.output, 'report.md')} "
-          f"({doc.nplot} plots)")
+          f"({doc.nplot} plots" + (f", {doc.ntable} CSV tables in {a.csv}" if a.csv else "") + ")")
+    if slower:
+        print(f"octocd report: gate: {slower} point figure(s) SLOWER than the baseline by more than "
+              f"{a.threshold:g} % with ranges apart", file=sys.stderr)
+        sys.exit(4)
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except SystemExit:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, ZeroDivisionError) as e:
+        # A result that passed the format check but holds something else where a figure should be.
+        fail(f"{CURRENT[0]}: malformed result ({type(e).__name__}: {e}); allowed: a result of octocd bench as "
+             "docs/bench-format.md describes it")

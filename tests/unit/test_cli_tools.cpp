@@ -8,12 +8,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <set>
 #include <sstream>
 #include <string>
@@ -21,6 +23,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "octocd/trace.hpp"
 #include "octocd/trace_reader.hpp"
 #include "cli_run.hpp"
 
@@ -109,6 +112,11 @@ void flip_position_bit(const std::string& path, hsize_t row, hsize_t body, hsize
   H5Fclose(f);
 }
 
+/// compare's frame-count line, e.g. "/frames: 1050 vs 1000 frames".
+std::string fmt_frames(std::int64_t a, std::int64_t b) {
+  return "/frames: " + std::to_string(a) + " vs " + std::to_string(b) + " frames";
+}
+
 }  // namespace
 
 // ---- bench ------------------------------------------------------------------------------------
@@ -160,7 +168,10 @@ TEST_F(Tools, BenchMalformedSweepNamesFileKeyAndAllowed) {
       "bad5.json", R"({"name": "x", "scenes": ["pile.json"], "engines": ["cpu"],
                        "axes": [{"name": "beta", "values": [1.5]}], "frames": 2, "warmup": 0})");
   r = run_octocd("bench " + bad_beta + " -o " + (dir_ / "r5.json").string() + " --quiet");
-  EXPECT_EQ(r.code, 0) << r.output;  // the point is skipped with the reason, the sweep goes on
+  // The point is skipped with the reason; as it is the sweep's only point, the sweep
+  // measured nothing: exit 2 (issue 22.5), the result file still says why.
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("every point skipped"), std::string::npos) << r.output;
   const json j = read_json(dir_ / "r5.json");
   EXPECT_EQ(j["points"][0]["status"], "skipped");
   EXPECT_NE(j["points"][0]["reason"].get<std::string>().find("response.beta"), std::string::npos)
@@ -255,6 +266,77 @@ TEST_F(Tools, BenchShardsSplitThePointsAndResumeKeepsFinishedOnes) {
   EXPECT_NE(other.output.find("settings"), std::string::npos) << other.output;
 }
 
+// Issue 22.5: a result to resume whose points are not the sweep's is refused (exit 2,
+// naming the result file, the key and the sweep), never taken as finished work.
+TEST_F(Tools, BenchResumeRefusesPointsThatAreNotTheSweeps) {
+  const std::string sweep = tiny_sweep(5);
+  const fs::path out = dir_ / "r.json";
+  ASSERT_EQ(run_octocd("bench " + sweep + " --engines cpu -o " + out.string() + " --quiet").code, 0);
+  const json good = read_json(out);
+  ASSERT_EQ(good["points"].size(), 2u);
+  const auto resume = [&](const std::function<void(json&)>& plant) {
+    json j = good;
+    plant(j);
+    j["complete"] = false;
+    std::ofstream(out) << j.dump(1);
+    return run_octocd("bench " + sweep + " --engines cpu -o " + out.string() + " --resume --quiet");
+  };
+  Result r = resume([](json& j) { j["points"][0]["index"] = 1000000000000000000LL; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(out.string() + ": points[0].index: 1000000000000000000 (sweep " + sweep + ")"),
+            std::string::npos) << r.output;
+  r = resume([](json& j) { j["points"][1]["index"] = -1; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("points[1].index: -1"), std::string::npos) << r.output;
+  r = resume([](json& j) { j["points"][1]["windows"] = "nope"; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("points[1].windows: a point of another shape"), std::string::npos) << r.output;
+  r = resume([](json& j) { j["points"][0]["id"] = "elsewhere | cpu"; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("points[0].id: 'elsewhere | cpu' is not a point of the sweep"), std::string::npos)
+      << r.output;
+  r = resume([](json& j) { j["points"][1] = j["points"][0]; });
+  EXPECT_EQ(r.code, 2) << r.output;
+  for (const Result& x : {r}) EXPECT_EQ(std::count(x.output.begin(), x.output.end(), '\n'), 1) << x.output;
+  // The untouched result resumes (nothing left to run).
+  std::ofstream(out) << good.dump(1);
+  EXPECT_EQ(run_octocd("bench " + sweep + " --engines cpu -o " + out.string() + " --resume --quiet").code, 0);
+}
+
+TEST_F(Tools, BenchRefusesMissingKeysAllSkippedAndOversizedSweeps) {
+  write("pile.json", kPile);
+  // A pointer to a key the scene does not have (and refuses): the sweep's key is named.
+  std::string sweep = write("typo.json", R"({"name": "typo", "scenes": ["pile.json"], "engines": ["cpu"],
+    "axes": [{"name": "b", "key": "/response/betta", "values": [0.2, 0.4]}], "warmup": 1, "frames": 2, "repeat": 1})");
+  Result r = run_octocd("bench " + sweep + " -o " + (dir_ / "t.json").string() + " --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(sweep + ": axes[0] (/response/betta): not a key of scene file"), std::string::npos)
+      << r.output;
+  // Every point skipped (a value the scene refuses at a key it has): exit 2 naming the sweep.
+  std::string scene = kPile;
+  scene.replace(scene.find("\"frames\": 60"), 12, "\"frames\": 60, \"dt\": 0.001");
+  write("pile-dt.json", scene);
+  sweep = write("skip.json", R"({"name": "skip", "scenes": ["pile-dt.json"], "engines": ["cpu"],
+    "axes": [{"name": "dt", "key": "/dt", "values": [-1, -2]}], "warmup": 1, "frames": 2, "repeat": 1})");
+  r = run_octocd("bench " + sweep + " -o " + (dir_ / "s.json").string() + " --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(sweep + ": every point skipped (2 of 2"), std::string::npos) << r.output;
+  EXPECT_FALSE(read_json(dir_ / "s.json")["points"].empty());  // the result says why, point by point
+  // 10^9 points: refused up front, at once, with the limit named.
+  std::string values = "[";
+  for (int i = 0; i < 1000; ++i) values += (i ? "," : "") + std::to_string(i);
+  values += "]";
+  sweep = write("huge.json", R"({"name": "huge", "scenes": ["pile.json"], "engines": ["cpu"], "axes": [
+    {"name": "a", "key": "/response/beta", "values": )" + values + R"(},
+    {"name": "b", "key": "/response/slop", "values": )" + values + R"(},
+    {"name": "c", "key": "/response/alpha", "values": )" + values + R"(}]})");
+  r = run_octocd("bench " + sweep + " -o " + (dir_ / "h.json").string() + " --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(sweep + ": axes: the sweep expands to more than 100000 points; allowed: at most 100000"),
+            std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir_ / "h.json"));
+}
+
 TEST_F(Tools, BenchKilledMidwayLeavesItsFinishedPointsAndResumes) {
   const std::string sweep = tiny_sweep(30000, 2);  // 2 scenes x 2 midphases x (cpu, bullet) = 8 points
   const fs::path out = dir_ / "killed.json";
@@ -287,6 +369,48 @@ TEST_F(Tools, BenchKilledMidwayLeavesItsFinishedPointsAndResumes) {
   ASSERT_EQ(k["points"].size(), 8u);
   for (std::size_t i = 0; i < k["points"].size(); ++i) EXPECT_EQ(k["points"][i]["index"], static_cast<int>(i));
   EXPECT_EQ(k["points"][0], j["points"][0]);  // the finished point was kept, not rerun
+}
+
+// SIGTERM mid-point: bench stops between two frames (not at the end of the point), keeps
+// the finished points in the result with "stopped", exits 143, and --resume goes on.
+TEST_F(Tools, BenchStopsOnSigtermMidPointAndKeepsFinishedPoints) {
+  const std::string sweep = tiny_sweep(100000000);  // one point would run for hours
+  const fs::path out = dir_ / "stopped.json";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const std::string b = bin();
+    const std::string o = out.string();
+    std::freopen((dir_ / "stderr.txt").c_str(), "w", stderr);
+    execl(b.c_str(), b.c_str(), "bench", sweep.c_str(), "--engines", "cpu", "-o", o.c_str(), "--quiet",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // inside the first point's frames
+  kill(pid, SIGTERM);
+  int status = 0;
+  // Bounded wait (a functional bound: the point itself would take hours).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  pid_t done = 0;
+  while ((done = waitpid(pid, &status, WNOHANG)) == 0 && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  if (done == 0) {
+    kill(pid, SIGKILL);
+    waitpid(pid, &status, 0);
+    FAIL() << "bench did not stop on SIGTERM within 30 s";
+  }
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 143);
+  std::ifstream err(dir_ / "stderr.txt");
+  std::stringstream es;
+  es << err.rdbuf();
+  EXPECT_NE(es.str().find("octocd bench: stopped by SIGTERM after 0 of 2 points"), std::string::npos) << es.str();
+  ASSERT_TRUE(fs::exists(out));
+  const json j = read_json(out);
+  EXPECT_EQ(j["stopped"], "SIGTERM");
+  EXPECT_FALSE(j["complete"].get<bool>());
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_EQ(e.path().string().find(".tmp."), std::string::npos) << e.path();
 }
 
 TEST_F(Tools, BenchBroadphaseSweepMatchesTheRecordedPairs) {
@@ -359,8 +483,8 @@ TEST_F(Tools, CompareIncompatibleOrUnreadableExitTwo) {
   const std::string c = (dir_ / "c.h5").string();
   ASSERT_EQ(run_octocd("run " + scene + " --frames 10 --quiet --trace " + c).code, 0);
   Result r = run_octocd("compare " + a + " " + c);
-  EXPECT_EQ(r.code, 2) << r.output;
-  EXPECT_NE(r.output.find("/bodies: 7 bodies, but " + a + " has 9"), std::string::npos) << r.output;
+  EXPECT_EQ(r.code, 3) << r.output;  // another body count is a difference, named
+  EXPECT_NE(r.output.find("/bodies: 9 vs 7 bodies"), std::string::npos) << r.output;
   const std::string text = write("not-a-trace.h5", "hello");
   r = run_octocd("compare " + a + " " + text);
   EXPECT_EQ(r.code, 2);
@@ -369,6 +493,150 @@ TEST_F(Tools, CompareIncompatibleOrUnreadableExitTwo) {
   EXPECT_EQ(r.code, 2);
   r = run_octocd("compare " + a + " " + a + " --quantity colour");
   EXPECT_EQ(r.code, 2);
+}
+
+// A run killed with SIGKILL mid-way leaves a readable trace holding fewer frames: compare
+// never passes it against the complete golden run, even though every frame it holds equals.
+TEST_F(Tools, CompareFailsATruncatedTraceOfAKilledRun) {
+  const std::string scene = write("long.json", std::string(kPile).replace(std::string(kPile).find("\"frames\": 60"),
+                                                                           12, "\"frames\": 100000000"));
+  const std::string killed = (dir_ / "killed.h5").string();
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const std::string b = bin();
+    execl(b.c_str(), b.c_str(), "run", scene.c_str(), "--trace", killed.c_str(), "--quiet",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  std::int64_t seen = 0;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (seen < 100 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    try {
+      seen = octocd::read_trace_summary(killed).frames;
+    } catch (const std::exception&) {
+    }
+  }
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "the run ended before the kill";
+  const std::int64_t kept = octocd::read_trace_summary(killed).frames;
+  ASSERT_GE(kept, 100);
+  // The golden run: the same scene, 50 frames further than the killed one got.
+  const std::string golden = (dir_ / "golden.h5").string();
+  ASSERT_EQ(run_octocd("run " + scene + " --frames " + std::to_string(kept + 50) + " --quiet --trace " + golden).code, 0);
+  const Result r = run_octocd("compare " + golden + " " + killed + " --json " + (dir_ / "c.json").string());
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find(fmt_frames(kept + 50, kept)), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("\nsame"), std::string::npos) << r.output;
+  const json j = read_json(dir_ / "c.json");
+  EXPECT_FALSE(j["same"].get<bool>());
+  ASSERT_FALSE(j["structure"].empty());
+  EXPECT_EQ(j["structure"][0].get<std::string>().rfind("/frames: ", 0), 0u) << j.dump();
+  // Every quantity it holds equals the golden one's: only the structure fails it.
+  for (const auto& q : j["quantities"]) EXPECT_FALSE(q["differs"].get<bool>()) << q.dump();
+}
+
+TEST_F(Tools, CompareFailsRunsOfDifferentLengthAndNamesASceneKeyThatDiffers) {
+  const std::string a = pile_trace("a.h5", 1000), b = pile_trace("b.h5", 500);
+  Result r = run_octocd("compare " + a + " " + b);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("/frames: 1000 vs 500 frames"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("/states: 1001 vs 501 state rows"), std::string::npos) << r.output;
+  r = run_octocd("compare " + b + " " + a);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("/frames: 500 vs 1000 frames"), std::string::npos) << r.output;
+
+  // One key changed in the scene: named with both values, and the comparison fails even
+  // with tolerances wide enough for every quantity.
+  const std::string p = pile_trace("p.h5");
+  std::string text = kPile;
+  text.replace(text.find("\"walls\": \"floor\","), 17, "\"walls\": \"floor\", \"response\": {\"beta\": 0.999},");
+  const std::string scene = write("beta.json", text);
+  const std::string q = (dir_ / "q.h5").string();
+  ASSERT_EQ(run_octocd("run " + scene + " --frames 60 --state-every 1 --quiet --trace " + q).code, 0);
+  r = run_octocd("compare " + p + " " + q + " --tolerance 1");
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("/response/beta: 1 vs 0.999"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("structure differs (1 key)"), std::string::npos) << r.output;
+}
+
+TEST_F(Tools, CompareToleranceIsPerQuantityAbsoluteOrRelative) {
+  const std::string a = pile_trace("a.h5"), b = pile_trace("b.h5");
+  flip_position_bit(b, 37, 5, 1);
+  // The largest difference is where the bit was flipped, with both values.
+  Result r = run_octocd("compare " + a + " " + b + " --json " + (dir_ / "c.json").string());
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("largest at frame 37, body 5: A ("), std::string::npos) << r.output;
+  json j = read_json(dir_ / "c.json");
+  EXPECT_EQ(j["quantities"][0]["max"]["frame"], 37);
+  EXPECT_EQ(j["quantities"][0]["max"]["body"], 5);
+  EXPECT_EQ(j["quantities"][0]["beyond_count"], 1);
+  ASSERT_EQ(j["quantities"][0]["max"]["a"].size(), 3u);  // both values of the body there, y differs
+  EXPECT_EQ(j["quantities"][0]["max"]["a"][0], j["quantities"][0]["max"]["b"][0]);
+  EXPECT_NE(j["quantities"][0]["max"]["a"][1], j["quantities"][0]["max"]["b"][1]);
+  // An absolute tolerance for positions alone passes it; one for velocities alone does not.
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=1e-6").code, 0);
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance velocities=1").code, 3);
+  // Relative: one bit of a float32 is ~6e-8 of it.
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=rel:1e-6").code, 0);
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=rel:1e-9").code, 3);
+  // SPEC 14's comma form, and the later item wins.
+  r = run_octocd("compare " + a + " " + b + " --tolerance positions=1e-6,velocities=1e-5 --json " +
+                 (dir_ / "d.json").string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  j = read_json(dir_ / "d.json");
+  EXPECT_EQ(j["tolerance"]["positions"]["abs"], 1e-6);
+  EXPECT_EQ(j["tolerance"]["velocities"]["abs"], 1e-5);
+  EXPECT_EQ(j["tolerance"]["pairs"]["abs"], 0.0);
+  EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=1e-6 --tolerance positions=0").code, 3);
+}
+
+/// Writes one int64 at `row` of a 1-D dataset.
+void put_i64(const std::string& path, const char* dataset, hsize_t row, std::int64_t value) {
+  const hid_t f = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  const hid_t d = H5Dopen2(f, dataset, H5P_DEFAULT);
+  ASSERT_GE(d, 0) << dataset;
+  const hid_t sp = H5Dget_space(d);
+  const hsize_t count = 1;
+  H5Sselect_hyperslab(sp, H5S_SELECT_SET, &row, nullptr, &count, nullptr);
+  const hid_t m = H5Screate_simple(1, &count, nullptr);
+  ASSERT_GE(H5Dwrite(d, H5T_NATIVE_INT64, m, sp, H5P_DEFAULT, &value), 0);
+  H5Sclose(m);
+  H5Sclose(sp);
+  H5Dclose(d);
+  H5Fclose(f);
+}
+
+// Issue 22: garbage /states/frame or /contacts/offsets never pass as "same" on what little
+// still lines up.
+TEST_F(Tools, CompareGarbageFramesOrOffsetsNeverPass) {
+  const std::string a = pile_trace("a.h5", 60, "--contacts"), b = pile_trace("b.h5", 60, "--contacts");
+  ASSERT_EQ(run_octocd("compare " + a + " " + b).code, 0);
+  put_i64(b, "/states/frame", 5, 999);
+  Result r = run_octocd("compare " + a + " " + b);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("/states/frame: frame 5 only in A"), std::string::npos) << r.output;
+  const std::string c = pile_trace("c.h5", 60, "--contacts");
+  put_i64(c, "/contacts/offsets", 2, -5);
+  r = run_octocd("compare " + a + " " + c);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(c + ": /contacts/offsets: row 2 is -5"), std::string::npos) << r.output;
+}
+
+TEST_F(Tools, CompareBadToleranceExitsTwoWithOneLine) {
+  const std::string a = pile_trace("a.h5", 10);
+  for (const std::string bad : {"positons=1e-6", "positions=-1e-6", "-1", "velocities=rel:-2", "positions=abc",
+                                "positions=1e999", "positions=1e-6x"}) {
+    const Result r = run_octocd("compare " + a + " " + a + " --tolerance " + bad);
+    EXPECT_EQ(r.code, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find("--tolerance '" + bad + "'"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("allowed: "), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  }
 }
 
 // ---- replay -----------------------------------------------------------------------------------
@@ -482,6 +750,74 @@ TEST_F(Tools, ReportRendersFromTheCommittedSmallResults) {
   ms << md.rdbuf();
   EXPECT_NE(ms.str().find("| scene (bodies) | paper L0 FPS"), std::string::npos);
   EXPECT_TRUE(fs::exists(out / "plots"));
+}
+
+// The performance gate on committed results (tests/data/README.md): gate-new.json is
+// gate-base.json with point 0 planted 20 % slower in every repetition (ranges apart) and
+// point 1 planted 20 % slower in its median with one repetition as fast as the baseline's
+// best (ranges overlap); points 2 and 3 are unchanged.
+TEST_F(Tools, ReportGateFlagsThePlantedSlowerPointOnly) {
+  const std::string data = source_dir() + "/tests/data/";
+  const fs::path out = dir_ / "gate", csv = dir_ / "csv";
+  Result r = run_octocd("report --baseline " + data + "gate-base.json " + data + "gate-new.json -o " + out.string() +
+                        " --csv " + csv.string());
+  EXPECT_EQ(r.code, 4) << r.output;
+  EXPECT_NE(r.output.find("gate: 1 point figure(s) SLOWER"), std::string::npos) << r.output;
+  // The CSV of the gate table: one row per point, the verdicts where they were planted.
+  std::ifstream in(csv / "01-gate-gate.csv");
+  ASSERT_TRUE(in) << "no gate CSV in " << csv;
+  std::string line;
+  std::vector<std::string> lines;
+  while (std::getline(in, line)) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 5u);
+  EXPECT_NE(lines[0].find("ratio (time)"), std::string::npos) << lines[0];
+  EXPECT_NE(lines[1].find("pile | midphase=aabb-only | cpu"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[1].find("1.200"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[1].find("SLOWER"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[2].find("inconclusive (ranges overlap)"), std::string::npos) << lines[2];
+  EXPECT_NE(lines[3].find("same (within threshold)"), std::string::npos) << lines[3];
+  EXPECT_NE(lines[4].find("same (within threshold)"), std::string::npos) << lines[4];
+  EXPECT_GE(std::distance(fs::directory_iterator(csv), fs::directory_iterator{}), 2);  // every table
+  // A threshold above the planted 20 % passes; the baseline against itself passes.
+  EXPECT_EQ(run_octocd("report --baseline " + data + "gate-base.json " + data + "gate-new.json -o " + out.string() +
+                       " --threshold 25").code, 0);
+  r = run_octocd("report --baseline " + data + "gate-base.json " + data + "gate-base.json -o " + out.string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  // Reversed, the planted point is faster: no failure.
+  EXPECT_EQ(run_octocd("report --baseline " + data + "gate-new.json " + data + "gate-base.json -o " + out.string()).code, 0);
+}
+
+TEST_F(Tools, ReportGateAndMergeRefuseMismatchedInputsWithOneLine) {
+  const std::string data = source_dir() + "/tests/data/";
+  const std::string o = " -o " + (dir_ / "rep").string();
+  // A baseline of another sweep.
+  Result r = run_octocd("report --baseline " + data + "bench-small-table6.json " + data + "gate-new.json" + o);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("baseline of another sweep"), std::string::npos) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  // A baseline of another format.
+  const std::string other = write("other.json", R"({"format": "something-else", "version": 1})");
+  r = run_octocd("report --baseline " + other + " " + data + "gate-new.json" + o);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(other + ": format"), std::string::npos) << r.output;
+  // Shards of different builds mixed in one report.
+  r = run_octocd("report " + data + "gate-base.json " + data + "gate-new.json" + o);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("build.build_id"), std::string::npos) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  // A kept point with garbage where its figures should be: one line, no traceback.
+  json j = read_json(data + "gate-base.json");
+  for (const json& bad : {json("nope"), json({{"all", 3}}), json({{"all", {{"steps_per_s", "fast"}}}})}) {
+    j["points"][1]["windows"] = bad;
+    const std::string f = write("bad.json", j.dump());
+    r = run_octocd("report " + f + o);
+    EXPECT_EQ(r.code, 2) << bad.dump() << ": " << r.output;
+    EXPECT_EQ(r.output.find("Traceback"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(f + ": points[1].windows"), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  }
+  r = run_octocd("report --baseline " + data + "gate-base.json " + data + "gate-new.json --threshold -3" + o);
+  EXPECT_EQ(r.code, 2) << r.output;
 }
 
 TEST_F(Tools, ReportRejectsAResultOfAnotherFormatOrVersion) {

@@ -663,7 +663,11 @@ TEST_F(CliUser, ValidateWritesJUnit) {
     EXPECT_EQ(Xml::attr(x.nodes("//testsuite")[0], "failures"), std::to_string(failures.size()));
     const auto np = x.nodes("//testcase[@name='non-penetration']/failure");
     ASSERT_EQ(np.size(), 1u);
-    const std::string detail = Xml::attr(np[0], "message");
+    // "measured X > bound Y (figure): detail": the figures first, then the table's detail line.
+    const std::string message = Xml::attr(np[0], "message");
+    ASSERT_EQ(message.rfind("measured ", 0), 0u) << message;
+    EXPECT_NE(message.find(" > bound 0 (contacts violating Eq. 14 contraction): "), std::string::npos) << message;
+    const std::string detail = message.substr(message.find("): ") + 3);
     EXPECT_FALSE(detail.empty());
     EXPECT_NE(r.output.find(detail.substr(0, 40)), std::string::npos) << "the table's detail line:\n" << r.output;
     for (xmlNodePtr c : x.nodes("//testcase")) EXPECT_EQ(Xml::attr(c, "classname"), "box-in-box");
@@ -712,6 +716,27 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   EXPECT_EQ(Xml::attr(root[0], "failures"), std::to_string(x.nodes("//testcase/failure").size()));
   EXPECT_EQ(Xml::attr(root[0], "errors"), "1");
   for (const char* s : {"free-fall", "box-in-box", "bad"}) EXPECT_TRUE(fs::exists(dir_ / "bad" / "junit" / (std::string(s) + ".xml"))) << s;
+  for (xmlNodePtr f : x.nodes("//testcase/failure"))
+    EXPECT_EQ(Xml::attr(f, "message").rfind("measured ", 0), 0u) << Xml::attr(f, "message");
+
+  // --tolerance reaches validate (an unknown name is validate's bad input: exit 2), a
+  // wide enough tolerance passes the failing scene's non-penetration row.
+  r = nightly("tol", pass + " --tolerance no_such_bound=1");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(slurp(dir_ / "tol" / "free-fall.log").find("no_such_bound"), std::string::npos);
+  // --timeout: a scene that runs longer is stopped, an errored case says so with its time.
+  r = run("OCTOCD_BIN=" + quote(bin()) + " bash " + quote(script) + " --frames 100000000 --every 1 --timeout 2 --out " +
+          quote((dir_ / "slow").string()) + " " + quote((source_dir() / "datasets" / "scenes" / "bunny-stack-50.json").string()));
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("TIMEOUT  bunny-stack-50 (after 2 s"), std::string::npos) << r.output;
+  Xml slow(dir_ / "slow" / "junit.xml");
+  ASSERT_TRUE(slow.ok()) << slurp(dir_ / "slow" / "junit.xml");
+  ASSERT_EQ(slow.nodes("//testcase/error").size(), 1u);
+  EXPECT_NE(Xml::attr(slow.nodes("//testcase/error")[0], "message").find("timed out after 2 s"), std::string::npos);
+  EXPECT_GE(std::stod(Xml::attr(slow.nodes("//testcase")[0], "time")), 2.0);
+  // Called wrongly: exit 2.
+  EXPECT_EQ(run("bash " + quote(script) + " --scenes everything").code, 2);
+  EXPECT_EQ(run("bash " + quote(script) + " --timeout -5").code, 2);
 }
 
 // ---- docs/cli.md is `--help`, checked so they cannot drift ---------------------------

@@ -57,8 +57,12 @@ void write_junit(const std::string& path, const std::string& suite,
     if (!r.applicable) {
       o << ">\n      <skipped message=\"" << xml_escape("n/a: " + r.detail) << "\"/>\n    </testcase>\n";
     } else if (!r.pass) {
-      o << ">\n      <failure message=\"" << xml_escape(r.detail) << "\" type=\"ValidatorFailure\">"
-        << xml_escape(figures + "\n" + r.detail) << "</failure>\n    </testcase>\n";
+      // The measured value against the bound first: what a CI page shows in one line.
+      const std::string message = fmt::format("measured {} {} bound {} ({}): {}", num(r.measured),
+                                              r.measured > r.bound ? ">" : r.measured < r.bound ? "<" : "vs",
+                                              num(r.bound), r.figure, r.detail);
+      o << ">\n      <failure message=\"" << xml_escape(message) << "\" type=\"ValidatorFailure\">"
+        << xml_escape(message) << "</failure>\n    </testcase>\n";
     } else {
       o << ">\n      <system-out>" << xml_escape(figures + "\n" + r.detail) << "</system-out>\n    </testcase>\n";
     }
