@@ -6,9 +6,11 @@
 #include <gtest/gtest.h>
 #include <hdf5.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -18,6 +20,7 @@
 
 #include "cli_run.hpp"
 #include "octocd/error.hpp"
+#include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/trace_reader.hpp"
 
@@ -389,4 +392,125 @@ TEST_F(Untrusted, AFullDiskLeavesNoRowThatWasNotWrittenInFull) {
   EXPECT_GT(off.back(), 0) << "the kept frames hold contacts (the check above is not empty)";
   }
   std::system(("umount " + mnt.string()).c_str());
+}
+
+namespace {
+
+/// An external trace of `n` boxes of half side 0.1 on a line 1 m apart (none touch),
+/// `frames` frames at rest: world AABBs only.
+void write_line_trace(const std::string& path, hsize_t n, hsize_t frames) {
+  const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
+  H5Pset_create_intermediate_group(lcpl, 1);
+  const auto put = [&](const char* name, std::vector<hsize_t> dims, const std::vector<float>& v) {
+    const hid_t s = H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr);
+    const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s, lcpl, H5P_DEFAULT, H5P_DEFAULT);
+    H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+    H5Dclose(d);
+    H5Sclose(s);
+  };
+  const hid_t t = H5Tcopy(H5T_C_S1);
+  H5Tset_size(t, H5T_VARIABLE);
+  const hid_t sc = H5Screate(H5S_SCALAR);
+  const char* fmt_ = "octocd-trace";
+  const hid_t a = H5Acreate2(f, "format", t, sc, H5P_DEFAULT, H5P_DEFAULT);
+  H5Awrite(a, t, &fmt_);
+  H5Aclose(a);
+  const int one = 1;
+  const hid_t v = H5Acreate2(f, "version", H5T_STD_I32LE, sc, H5P_DEFAULT, H5P_DEFAULT);
+  H5Awrite(v, H5T_NATIVE_INT, &one);
+  H5Aclose(v);
+  H5Sclose(sc);
+  H5Tclose(t);
+  std::vector<float> lo(n * 3, -0.1f), hi(n * 3, 0.1f), w(n, 1.0f), amin, amax;
+  amin.reserve(frames * n * 3);
+  amax.reserve(frames * n * 3);
+  for (hsize_t fr = 0; fr < frames; ++fr)
+    for (hsize_t i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        const float c = k == 0 ? static_cast<float>(i) - 0.5f * static_cast<float>(n) : 0.0f;
+        amin.push_back(c - 0.1f);
+        amax.push_back(c + 0.1f);
+      }
+  put("/bodies/local_aabb_min", {n, 3}, lo);
+  put("/bodies/local_aabb_max", {n, 3}, hi);
+  put("/bodies/inverse_mass", {n}, w);
+  put("/aabbs/min", {frames, n, 3}, amin);
+  put("/aabbs/max", {frames, n, 3}, amax);
+  H5Pclose(lcpl);
+  H5Fclose(f);
+}
+
+}  // namespace
+
+// Before: an external trace of 10^6 bodies ran the O(n^2) flat oracle silently for days.
+TEST_F(Untrusted, TooManyBodiesToJudgeIsRefusedUpFront) {
+  const std::string p = (dir_ / "wide.h5").string();
+  write_line_trace(p, octocd::trace_limits::kMaxJudgedBodies + 1, 1);
+  const Result r = run("timeout 120 " + bin() + " validate --trace-in " + p);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("20001 bodies; allowed: at most 20000 bodies to judge"), std::string::npos) << r.output;
+  const Result c = run("timeout 120 " + bin() + " validate --trace-in " + p + " --check-only");
+  EXPECT_EQ(c.code, 0) << c.output;
+}
+
+// Before: validate --trace-in ignored SIGINT and SIGTERM (no loop polled the flag).
+TEST_F(Untrusted, SigtermEndsValidateTraceInAtOnce) {
+  const std::string p = (dir_ / "long.h5").string();
+  write_line_trace(p, octocd::trace_limits::kMaxJudgedBodies, 40);  // seconds of flat oracle a frame
+  const Result r = run("sh -c '" + bin() + " validate --trace-in " + p +
+                       " & pid=$!; sleep 1; kill -TERM $pid; wait $pid; echo rc=$?'");
+  EXPECT_NE(r.output.find("rc=143"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("octocd: stopped by SIGTERM while checking the trace; nothing was written"),
+            std::string::npos)
+      << r.output;
+}
+
+// Before: `bench -o` left o.json.tmp.PID behind on a full disk and named no errno. A file
+// size limit of 0 (SIGXFSZ ignored) fails the first write of the result with EFBIG.
+TEST_F(Untrusted, BenchOutputOnAFullDiskLeavesNoTemporaryFileAndNamesErrno) {
+  const std::string out = (dir_ / "o.json").string();
+  fs::copy_file(source_dir() + "/tests/data/spheres-drop.json", dir_ / "spheres-drop.json");
+  const std::string sweep = (dir_ / "sweep.json").string();
+  std::ofstream(sweep) << R"({"name": "x", "scenes": ["spheres-drop.json"], "frames": 2, "engines": ["cpu"]})";
+  const Result r = run("sh -c \"trap '' XFSZ; ulimit -f 0; exec " + bin() + " bench " + sweep + " -o " + out +
+                       " --quiet\"");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("o.json: writing failed: File too large (EFBIG)"), std::string::npos) << r.output;
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_EQ(e.path().filename().string().find("o.json.tmp"), std::string::npos) << e.path();
+}
+
+// Loading a scene and its meshes (assimp) polls no flag: before, run and validate ignored
+// SIGINT and SIGTERM there. Inside StopAtOnce a signal ends the process at once (130/143);
+// outside it the signal is only recorded for the loop to poll (StopOnSignals).
+TEST(StopAtOnce, ASignalEndsTheProcessAtOnceOnlyInsideTheGuard) {
+  for (int sig : {SIGINT, SIGTERM}) {
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      const octocd::StopOnSignals stop;
+      {
+        const octocd::StopAtOnce guard("loading the scene and its meshes");
+        ::raise(sig);
+        ::_exit(0);  // not reached: the handler exits
+      }
+    }
+    int status = 0;
+    ASSERT_EQ(::waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 128 + sig);
+  }
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    const octocd::StopOnSignals stop;
+    { const octocd::StopAtOnce guard("loading"); }
+    ::raise(SIGTERM);  // after the guard: recorded, the loop stops
+    ::_exit(octocd::stop_signal() == SIGTERM ? 7 : 8);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 7);
 }
