@@ -391,6 +391,10 @@ TEST_F(Untrusted, AFullDiskLeavesNoRowThatWasNotWrittenInFull) {
   }
   EXPECT_GT(off.back(), 0) << "the kept frames hold contacts (the check above is not empty)";
   }
+  // validate --trace-in reads the same rows (states every frame: N frames after row 0).
+  const Result v = run(bin() + " validate --trace-in " + trace + " --check-only");
+  EXPECT_EQ(v.code, 0) << v.output;
+  EXPECT_NE(v.output.find(std::to_string(said) + " frames"), std::string::npos) << v.output;
   std::system(("umount " + mnt.string()).c_str());
 }
 

@@ -102,8 +102,8 @@ class TraceIn {
       const double c = h5_->number_attribute("committed_states");
       if (!(c >= 0.0 && c <= static_cast<double>(trace_limits::kMaxFrames)))
         bad("/ (root attribute committed_states)", fmt::format("{}", c), "a row count >= 0");
-      for (Dataset* d : {&position_, &velocity_})
-        if (d->present() && !d->dims.empty() && d->dims[0] > static_cast<hsize_t>(c)) d->dims[0] = static_cast<hsize_t>(c);
+      committed_ = true;
+      for (Dataset* d : {&position_, &velocity_}) clip(*d, static_cast<hsize_t>(c));
     }
     info.has_states = position_.present();
     info.has_aabbs = aabb_min_.present();
@@ -146,6 +146,7 @@ class TraceIn {
     if (!pair_offsets_.empty()) {
       info.has_pairs = true;
       pairs_ = open("/pairs/pair", H5T_INTEGER, 2, true);
+      clip(pairs_, static_cast<hsize_t>(pair_offsets_.back()));
       expect(pairs_, {pairs_.dims[0], 2}, "P x 2 (body indices a, b)");
       rows_match(pairs_, pair_offsets_, "/pairs/offsets");
     }
@@ -157,6 +158,8 @@ class TraceIn {
       c_depth_ = open("/contacts/depth", H5T_FLOAT, 1, true);
       c_jn_ = open("/contacts/jn", H5T_FLOAT, 1, true);
       c_jt_ = open("/contacts/jt", H5T_FLOAT, 1, true);
+      for (Dataset* d : {&c_pair_, &c_normal_, &c_depth_, &c_jn_, &c_jt_})
+        clip(*d, static_cast<hsize_t>(contact_offsets_.back()));
       const hsize_t c = c_pair_.dims[0];
       expect(c_pair_, {c, 2}, "C x 2 (body indices a, b)");
       expect(c_normal_, {c, 3}, fmt::format("{} x 3, one row per contact (as /contacts/pair)", c));
@@ -224,6 +227,12 @@ class TraceIn {
   }
 
   bool exists(const std::string& name) const { return h5_->exists(name); }
+
+  /// In an octocd trace (root attribute committed_states), rows past the committed ones
+  /// may never have been written (a failed write: docs/trace-format.md): not read.
+  void clip(Dataset& d, hsize_t rows) const {
+    if (committed_ && d.present() && !d.dims.empty() && d.dims[0] > rows) d.dims[0] = rows;
+  }
 
   std::string string_attr(const char* name) const {
     return h5_->has_attribute(name) ? h5_->string_attribute(name) : std::string();
@@ -311,6 +320,7 @@ class TraceIn {
   /// A CSR offsets dataset: F + 1 values, 0 first, never decreasing. Empty when absent.
   std::vector<std::int64_t> offsets(const std::string& name) const {
     Dataset d = open(name, H5T_INTEGER, 1, false);
+    clip(d, static_cast<hsize_t>(frames_ + 1));
     if (!d.present()) {
       const std::string group = name.substr(0, name.rfind('/'));
       if (exists(group)) bad(name, "missing", fmt::format("{} with {} as CSR offsets (F + 1 values)", group, name));
@@ -351,6 +361,7 @@ class TraceIn {
 
   std::string path_;
   std::unique_ptr<detail::Hdf5Reader> h5_;  // quiets HDF5's error printing while it lives
+  bool committed_ = false;                  // the trace has committed_states (octocd's own)
   hsize_t n_ = 0;
   std::int64_t frames_ = 0;
   Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_;
