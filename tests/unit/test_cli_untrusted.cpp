@@ -71,7 +71,7 @@ class Untrusted : public ::testing::Test {
                              const std::string& secret = "") {
     for (const std::string& cmd : {"validate --trace-in " + path + " --check-only", "validate --trace-in " + path,
                                    "compare " + path + " " + base(), "replay " + path + " --broadphase octree"}) {
-      const Result r = run("timeout 60 " + bin() + " " + cmd);
+      const Result r = run("timeout -k 5 60 " + bin() + " " + cmd);
       EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
       for (const std::string& n : names) EXPECT_NE(r.output.find(n), std::string::npos) << cmd << ": " << n << " not in\n" << r.output;
       if (!secret.empty()) {
@@ -213,7 +213,7 @@ TEST_F(Untrusted, ExternalStorageIsRefusedAndNotRead) {
     replace_dataset(f, "/states/position", {21, 32, 3}, dcpl);
     H5Pclose(dcpl);
   });
-  const Result r = run("timeout 30 " + bin() + " validate --trace-in " + q + " --check-only");
+  const Result r = run("timeout -k 5 30 " + bin() + " validate --trace-in " + q + " --check-only");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("external storage"), std::string::npos) << r.output;
 }
@@ -240,11 +240,11 @@ TEST_F(Untrusted, AFifoOrAFolderAsTheTraceIsRefused) {
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
   for (const std::string& cmd : {"validate --trace-in " + fifo, "compare " + fifo + " " + fifo,
                                  "replay " + fifo + " --broadphase octree"}) {
-    const Result r = run("timeout 30 " + bin() + " " + cmd);
+    const Result r = run("timeout -k 5 30 " + bin() + " " + cmd);
     EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
     EXPECT_NE(r.output.find("not a regular file (a FIFO)"), std::string::npos) << r.output;
   }
-  const Result d = run("timeout 30 " + bin() + " validate --trace-in " + dir_.string());
+  const Result d = run("timeout -k 5 30 " + bin() + " validate --trace-in " + dir_.string());
   EXPECT_EQ(d.code, 2) << d.output;
   EXPECT_NE(d.output.find("not a regular file (a folder)"), std::string::npos) << d.output;
 }
@@ -268,6 +268,56 @@ TEST_F(Untrusted, DeclaredSizesBeyondTheFileAreRefusedUpFront) {
     }
   });
   expect_refused_by_all(p, {"/states/position", "declares 1000000000000 x 32 x 3", "more than a file of"});
+  // The file: a few KB of external trace (world AABBs only) declaring 10^12 frames.
+  const std::string q = (dir_ / "aabbs-1e12.h5").string();
+  {
+    const hid_t f = H5Fcreate(q.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
+    H5Pset_create_intermediate_group(lcpl, 1);
+    const hid_t t = H5Tcopy(H5T_C_S1);
+    H5Tset_size(t, H5T_VARIABLE);
+    const hid_t sc = H5Screate(H5S_SCALAR);
+    const char* text = "octocd-trace";
+    const hid_t a = H5Acreate2(f, "format", t, sc, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(a, t, &text);
+    H5Aclose(a);
+    const int one = 1;
+    const hid_t v = H5Acreate2(f, "version", H5T_STD_I32LE, sc, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(v, H5T_NATIVE_INT, &one);
+    H5Aclose(v);
+    const hsize_t nb[2] = {1, 3}, nw = 1;
+    const float box[3] = {0.1f, 0.1f, 0.1f}, w = 1.0f;
+    for (const char* name : {"/bodies/local_aabb_min", "/bodies/local_aabb_max"}) {
+      const hid_t s2 = H5Screate_simple(2, nb, nullptr);
+      const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s2, lcpl, H5P_DEFAULT, H5P_DEFAULT);
+      H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, box);
+      H5Dclose(d);
+      H5Sclose(s2);
+    }
+    const hid_t s1 = H5Screate_simple(1, &nw, nullptr);
+    const hid_t dm = H5Dcreate2(f, "/bodies/inverse_mass", H5T_IEEE_F32LE, s1, lcpl, H5P_DEFAULT, H5P_DEFAULT);
+    H5Dwrite(dm, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, &w);
+    H5Dclose(dm);
+    H5Sclose(s1);
+    const hsize_t dims[3] = {1000000000000ull, 1, 3}, chunk[3] = {1024, 1, 3};
+    for (const char* name : {"/aabbs/min", "/aabbs/max"}) {
+      const hid_t s3 = H5Screate_simple(3, dims, nullptr);
+      const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+      H5Pset_chunk(dcpl, 3, chunk);
+      const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s3, lcpl, dcpl, H5P_DEFAULT);
+      H5Dclose(d);
+      H5Pclose(dcpl);
+      H5Sclose(s3);
+    }
+    H5Sclose(sc);
+    H5Tclose(t);
+    H5Pclose(lcpl);
+    H5Fclose(f);
+  }
+  EXPECT_LT(fs::file_size(q), 20000u);
+  const Result r = run("timeout -k 5 60 " + bin() + " validate --trace-in " + q + " --check-only");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("/aabbs/min: declares 1000000000000 x 1 x 3"), std::string::npos) << r.output;
 }
 
 // Before: --check-only passed, then FCL's tree build crashed on non-finite AABBs.
@@ -278,7 +328,7 @@ TEST_F(Untrusted, ValuesThatOverflowWhenCombinedAreRefused) {
     poke(f, "/states/position", 3 * 32 * 5 + 3, 9.5e5f);
   });
   for (const std::string& cmd : {"validate --trace-in " + p + " --check-only", "replay " + p + " --broadphase octree"}) {
-    const Result r = run("timeout 60 " + bin() + " " + cmd);
+    const Result r = run("timeout -k 5 60 " + bin() + " " + cmd);
     EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
     EXPECT_NE(r.output.find("/states/position"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("|position| + |local extent| <= 1e+06 m"), std::string::npos) << r.output;
@@ -338,7 +388,7 @@ TEST_F(Untrusted, TheFuzzCorpusIsRefusedByEveryReader) {
     const std::string p = e.path().string();
     for (const std::string& cmd : {"validate --trace-in " + p + " --check-only", "validate --trace-in " + p,
                                    "compare " + p + " " + p, "replay " + p + " --broadphase octree"}) {
-      const Result r = run("timeout 60 " + bin() + " " + cmd);
+      const Result r = run("timeout -k 5 60 " + bin() + " " + cmd);
       EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
       EXPECT_NE(r.output.find(p), std::string::npos) << cmd << "\n" << r.output;
     }
@@ -451,10 +501,10 @@ void write_line_trace(const std::string& path, hsize_t n, hsize_t frames) {
 TEST_F(Untrusted, TooManyBodiesToJudgeIsRefusedUpFront) {
   const std::string p = (dir_ / "wide.h5").string();
   write_line_trace(p, octocd::trace_limits::kMaxJudgedBodies + 1, 1);
-  const Result r = run("timeout 120 " + bin() + " validate --trace-in " + p);
+  const Result r = run("timeout -k 5 120 " + bin() + " validate --trace-in " + p);
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("20001 bodies; allowed: at most 20000 bodies to judge"), std::string::npos) << r.output;
-  const Result c = run("timeout 120 " + bin() + " validate --trace-in " + p + " --check-only");
+  const Result c = run("timeout -k 5 120 " + bin() + " validate --trace-in " + p + " --check-only");
   EXPECT_EQ(c.code, 0) << c.output;
 }
 
