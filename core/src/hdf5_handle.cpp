@@ -341,6 +341,44 @@ void Hdf5Reader::read_rows(const Dataset& d, hsize_t first, hsize_t count, hid_t
          "a readable dataset of numbers");
 }
 
+void Hdf5Reader::check_vlen_lengths(const Dataset& d) const {
+  // Each stored element of a variable-length string is (length: 4 bytes, global heap
+  // address: 8, index: 4). libhdf5 1.10 allocates and zero-fills `length` bytes before it
+  // reads the heap object: a damaged length of 4 GB costs seconds and gigabytes of memory
+  // per element (found by mutation fuzzing of replay's /bodies/group). The lengths of a
+  // contiguous dataset are read from the file and bounded first; other layouts are refused.
+  Hdf5Handle dcpl(H5Dget_create_plist(d.id));
+  const haddr_t at = H5Dget_offset(d.id);
+  const std::uint64_t n = d.dims.empty() ? 1 : d.dims[0];
+  if (n == 0) return;
+  if (!dcpl.ok() || H5Pget_layout(dcpl) != H5D_CONTIGUOUS || at == HADDR_UNDEF)
+    fail(d.name, "variable-length strings not stored contiguously", "a contiguous dataset of strings (as h5py and "
+         "octocd write them)");
+  Hdf5Handle fcpl(H5Fget_create_plist(file_));
+  std::size_t addr = 0, len_size = 0;
+  if (!fcpl.ok() || H5Pget_sizes(fcpl, &addr, &len_size) < 0 || addr == 0 || addr > 8)
+    fail(d.name, "unreadable file layout", "a readable file");
+  const std::uint64_t elem = 4 + addr + 4;
+  if (n > file_bytes_ / elem || at > file_bytes_ - n * elem)
+    fail(d.name, fmt::format("{} strings past the end of the file", n), "strings stored in the file");
+  const int fd = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) fail(d.name, "cannot reread the file", "a readable file");
+  std::vector<unsigned char> raw(static_cast<std::size_t>(n * elem));
+  const ssize_t got = ::pread(fd, raw.data(), raw.size(), static_cast<off_t>(at));
+  ::close(fd);
+  if (got != static_cast<ssize_t>(raw.size())) fail(d.name, "cannot reread the strings", "a readable file");
+  std::uint64_t total = 0;
+  for (std::uint64_t i = 0; i < n; ++i) {
+    const unsigned char* p = raw.data() + i * elem;
+    const std::uint64_t len = static_cast<std::uint64_t>(p[0]) | (static_cast<std::uint64_t>(p[1]) << 8) |
+                              (static_cast<std::uint64_t>(p[2]) << 16) | (static_cast<std::uint64_t>(p[3]) << 24);
+    total += len;
+    if (len > file_bytes_ || len > trace_limits::kMaxStringBytes || total > file_bytes_)
+      fail(d.name, fmt::format("element {} claims a string of {} bytes", i, len),
+           fmt::format("strings held by the file (at most {} bytes each)", trace_limits::kMaxStringBytes));
+  }
+}
+
 std::vector<std::string> Hdf5Reader::read_strings(const std::string& name) const {
   const Dataset d = open_dataset(name);
   if (d.cls != H5T_STRING) fail(name, fmt::format("stored as {}", class_name(d.cls)), "strings");
@@ -351,6 +389,7 @@ std::vector<std::string> Hdf5Reader::read_strings(const std::string& name) const
   if (n == 0) return out;
   out.reserve(n);
   if (H5Tis_variable_str(type) > 0) {
+    check_vlen_lengths(d);
     Hdf5Handle mt(H5Tcopy(H5T_C_S1));
     H5Tset_size(mt, H5T_VARIABLE);
     H5Tset_cset(mt, H5Tget_cset(type));

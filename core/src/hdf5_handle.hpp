@@ -168,6 +168,7 @@ class Hdf5Reader {
   QuietHdf5 quiet_;  // declared before file_: outlives it
   Hdf5Handle file_;
   Hdf5Handle attribute(const std::string& name, H5T_class_t cls, std::size_t count) const;
+  void check_vlen_lengths(const Dataset& d) const;
 };
 
 /// The /frames columns of trace format version 1, in the writer's order (trace.cpp).
