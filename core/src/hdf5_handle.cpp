@@ -46,7 +46,8 @@ std::string shape_text(const std::vector<hsize_t>& dims) {
 
 }  // namespace
 
-void check_global_heaps(const std::string& path) {
+GlobalHeaps check_global_heaps(const std::string& path) {
+  GlobalHeaps heaps;
   // libhdf5 1.10 loops forever on a global heap collection ("GCOL": where variable-length
   // strings live, so every trace's root attributes) holding a free-space object of size 0
   // (H5HG__cache_heap_deserialize advances by the object's size; the heap has no
@@ -56,11 +57,11 @@ void check_global_heaps(const std::string& path) {
   // Read with pread, never mmap: reading a mapped hole of a file on a full tmpfs raises
   // SIGBUS (found by the full-disk test of issue 22).
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-  if (fd < 0) return;  // the caller's open reports it
+  if (fd < 0) return heaps;  // the caller's open reports it
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode) || st.st_size < 16) {
     ::close(fd);
-    return;
+    return heaps;
   }
   const auto size = static_cast<std::uint64_t>(st.st_size);
   // Bytes [at, at + n) of the file (n <= 16), zero past its end or on a read error.
@@ -104,6 +105,7 @@ void check_global_heaps(const std::string& path) {
                     std::to_string(len) + " bytes at byte " + std::to_string(obj) + " that does not fit it";
           break;
         }
+        if (idx > 0) heaps[start][idx] = len;
         obj += need;
       }
     }
@@ -111,6 +113,7 @@ void check_global_heaps(const std::string& path) {
   ::close(fd);
   if (!corrupt.empty())
     throw InputError(fmt::format("{}: corrupt file ({}); allowed: an HDF5 file that is not damaged", path, corrupt));
+  return heaps;
 }
 
 Hdf5Reader::Hdf5Reader(const std::string& path, const std::string& what) : path_(path), what_(what) {
@@ -134,7 +137,7 @@ Hdf5Reader::Hdf5Reader(const std::string& path, const std::string& what) : path_
     throw InputError(fmt::format("{}: not an HDF5 file{}; allowed: {} (docs/trace-format.md)", path,
                                  st.st_size < 512 ? fmt::format(" (only {} bytes: truncated?)", st.st_size) : "",
                                  what));
-  check_global_heaps(path);
+  heaps_ = check_global_heaps(path);
   // A SWMR reader retries a metadata read whose checksum fails (the writer may be half-way
   // through a write), sleeping 1 ns, 2 ns, 4 ns, ... between tries: HDF5's default of 100
   // tries never ends on a corrupt file (found by fuzz_trace). 24 tries wait about 17 ms.
@@ -367,15 +370,32 @@ void Hdf5Reader::check_vlen_lengths(const Dataset& d) const {
   const ssize_t got = ::pread(fd, raw.data(), raw.size(), static_cast<off_t>(at));
   ::close(fd);
   if (got != static_cast<ssize_t>(raw.size())) fail(d.name, "cannot reread the strings", "a readable file");
+  hsize_t userblock = 0;
+  H5Pget_userblock(fcpl, &userblock);
+  const auto le = [](const unsigned char* p, std::size_t bytes) {
+    std::uint64_t v = 0;
+    for (std::size_t k = bytes; k-- > 0;) v = (v << 8) | p[k];
+    return v;
+  };
   std::uint64_t total = 0;
   for (std::uint64_t i = 0; i < n; ++i) {
     const unsigned char* p = raw.data() + i * elem;
-    const std::uint64_t len = static_cast<std::uint64_t>(p[0]) | (static_cast<std::uint64_t>(p[1]) << 8) |
-                              (static_cast<std::uint64_t>(p[2]) << 16) | (static_cast<std::uint64_t>(p[3]) << 24);
+    const std::uint64_t len = le(p, 4);
+    const std::uint64_t heap = le(p + 4, addr) + userblock;
+    const auto idx = static_cast<unsigned>(le(p + 4 + addr, 4));
     total += len;
     if (len > file_bytes_ || len > trace_limits::kMaxStringBytes || total > file_bytes_)
       fail(d.name, fmt::format("element {} claims a string of {} bytes", i, len),
            fmt::format("strings held by the file (at most {} bytes each)", trace_limits::kMaxStringBytes));
+    if (len == 0) continue;  // HDF5 reads no heap object for an empty string
+    // The heap object must exist and hold the string: libhdf5 1.10 indexes its object
+    // table with the stored index unchecked (SIGSEGV in H5HG_read; found by fuzzing).
+    const auto h = heaps_.find(heap);
+    const auto o = h == heaps_.end() ? decltype(h->second.end()){} : h->second.find(idx);
+    if (h == heaps_.end() || o == h->second.end() || o->second < len)
+      fail(d.name, fmt::format("element {} points to global heap object {} at byte {}, which {}", i, idx, heap,
+                               h == heaps_.end() || o == h->second.end() ? "does not exist" : "is shorter"),
+           "strings held by the file's global heap");
   }
 }
 

@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -85,6 +86,10 @@ class QuietHdf5 {
   H5E_auto2_t func_ = nullptr;
   void* data_ = nullptr;
 };
+
+/// The objects of a file's global heap collections: collection address -> (object index
+/// -> object size in bytes).
+using GlobalHeaps = std::map<std::uint64_t, std::map<unsigned, std::uint64_t>>;
 
 /// A read-only HDF5 file from an untrusted source, opened and read under the rules of
 /// docs/trace-format.md ("Security rules and limits"):
@@ -165,6 +170,7 @@ class Hdf5Reader {
   std::string path_;
   std::string what_;
   std::uint64_t file_bytes_ = 0;
+  GlobalHeaps heaps_;  // every global heap object, checked before HDF5 opened the file
   QuietHdf5 quiet_;  // declared before file_: outlives it
   Hdf5Handle file_;
   Hdf5Handle attribute(const std::string& name, H5T_class_t cls, std::size_t count) const;
@@ -176,7 +182,8 @@ const std::vector<std::string>& trace_frame_columns();
 
 /// Walks every global heap collection of `path` the way libhdf5 1.10 does and throws
 /// InputError naming the file when one would make HDF5 loop forever or read past it.
-void check_global_heaps(const std::string& path);
+/// Returns the objects found.
+GlobalHeaps check_global_heaps(const std::string& path);
 
 }  // namespace detail
 }  // namespace octocd
