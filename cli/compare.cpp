@@ -15,6 +15,7 @@
 #include <set>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "octocd/error.hpp"
 #include "octocd/trace_reader.hpp"
@@ -149,6 +150,17 @@ bool beyond(T a, T b, const Tolerance& tol, double& diff) {
 
 std::string vec_text(const float* p) { return fmt::format("({}, {}, {})", p[0], p[1], p[2]); }
 
+/// The first `rows` values of a frame column, checked: frames >= 0, strictly increasing
+/// (as octocd writes them); garbage would otherwise match nothing and compare as "same".
+std::vector<std::int64_t> increasing_frames(const TraceReader& t, const char* dataset, std::int64_t rows) {
+  std::vector<std::int64_t> f = t.read_i64(dataset, rows);
+  for (std::size_t i = 0; i < f.size(); ++i)
+    if (f[i] < 0 || (i > 0 && f[i] <= f[i - 1]))
+      throw InputError(fmt::format("{}: {}: row {} is frame {}{}; allowed: frames >= 0, strictly increasing", t.path(),
+                                   dataset, i, f[i], i > 0 ? fmt::format(" after {}", f[i - 1]) : ""));
+  return f;
+}
+
 /// Positions or velocities at the states both traces hold.
 QuantityResult compare_states(const TraceReader& a, const TraceReader& b, const char* dataset, const char* name,
                               std::int64_t bodies, const Tolerance& tol) {
@@ -156,11 +168,14 @@ QuantityResult compare_states(const TraceReader& a, const TraceReader& b, const 
   q.name = name;
   q.tol = tol;
   const auto rows = [&](const TraceReader& t) {
-    return std::min({static_cast<std::int64_t>(t.shape("/states/frame").at(0)),
-                     static_cast<std::int64_t>(t.shape(dataset).at(0))});
+    const auto shape = t.shape(dataset);
+    if (shape.size() != 3 || shape[1] != static_cast<std::uint64_t>(bodies) || shape[2] != 3)
+      throw InputError(fmt::format("{}: {}: shape {}; allowed: states x {} bodies x 3", t.path(), dataset,
+                                   fmt::join(shape, " x "), bodies));
+    return t.complete_rows("/states");  // at most committed_states (docs/trace-format.md)
   };
   const std::int64_t ra = rows(a), rb = rows(b);
-  const auto fa = a.read_i64("/states/frame", ra), fb = b.read_i64("/states/frame", rb);
+  const auto fa = increasing_frames(a, "/states/frame", ra), fb = increasing_frames(b, "/states/frame", rb);
   std::map<std::int64_t, std::int64_t> row_b;
   for (std::int64_t i = 0; i < rb; ++i) row_b[fb[static_cast<std::size_t>(i)]] = i;
   std::int64_t common = 0;
@@ -211,7 +226,7 @@ QuantityResult compare_column(const TraceReader& a, const TraceReader& b, const 
     return q;
   }
   const std::int64_t ra = a.complete_rows("/frames"), rb = b.complete_rows("/frames");
-  const auto fa = a.read_i64("/frames/frame", ra), fb = b.read_i64("/frames/frame", rb);
+  const auto fa = increasing_frames(a, "/frames/frame", ra), fb = increasing_frames(b, "/frames/frame", rb);
   std::vector<T> va, vb;
   if constexpr (std::is_floating_point_v<T>) {
     va = a.read_f64(d, ra);
@@ -255,12 +270,15 @@ void compare_contact_records(const TraceReader& a, const TraceReader& b, const T
   };
   const auto load = [](const TraceReader& t) {
     Rec r;
-    const std::uint64_t offsets = t.shape("/contacts/offsets").at(0);
-    const auto rows = offsets == 0 ? std::int64_t{0}
-                                   : static_cast<std::int64_t>(std::min(t.shape("/contacts/frame").at(0), offsets - 1));
-    if (offsets == 0) return r;
-    r.frame = t.read_i64("/contacts/frame", rows);
+    // Complete rows: at most committed_frames (docs/trace-format.md).
+    if (t.shape("/contacts/offsets").at(0) == 0) return r;
+    const std::int64_t rows = t.complete_rows("/contacts");
+    r.frame = increasing_frames(t, "/contacts/frame", rows);
     r.off = t.read_i64("/contacts/offsets", rows + 1);
+    for (std::size_t i = 0; i < r.off.size(); ++i)
+      if ((i == 0 && r.off[i] != 0) || (i > 0 && r.off[i] < r.off[i - 1]))
+        throw InputError(fmt::format("{}: /contacts/offsets: row {} is {}{}; allowed: 0 first, never decreasing",
+                                     t.path(), i, r.off[i], i > 0 ? fmt::format(" after {}", r.off[i - 1]) : ""));
     const auto flat = static_cast<std::int64_t>(std::min({t.shape("/contacts/pair").at(0),
                                                           t.shape("/contacts/depth").at(0),
                                                           t.shape("/contacts/normal").at(0),

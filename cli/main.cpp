@@ -344,6 +344,7 @@ void close_after_failure(std::unique_ptr<octocd::TraceWriter>& trace, const std:
 int run_command(const RunOptions& o) {
   octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
   const auto t_setup = Clock::now();
+  std::optional<octocd::StopAtOnce> loading(std::in_place, "loading the scene and its meshes");
   octocd::Scene scene = load_scene_for(o.scene, o.data_dir);
   if (!o.broadphase.empty()) scene.broadphase.name = o.broadphase;
   if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
@@ -352,6 +353,7 @@ int run_command(const RunOptions& o) {
   apply_rotation(scene, o.engine, o.rotation);
 
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
+  loading.reset();  // from here on the loop polls the signal, flushes and reports
   const auto t_model = Clock::now();
   const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model);
   octocd::Engine& world = *engine;
@@ -561,6 +563,7 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
   octocd::Scene scene;
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
+    const octocd::StopAtOnce loading("loading the scene and its meshes");
     scene = load_scene_for(o.scene, o.data_dir);
     check_overrides(scene, o.engine, "", "");
     apply_rotation(scene, o.engine, o.rotation);
@@ -605,8 +608,14 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
     octocd::set_tolerance(vo.tol, name, value);
     vo.overridden.push_back(name);
   }
-  if (!o.trace_in.empty()) return validate_trace_in(o, vo);
+  if (!o.trace_in.empty()) {
+    // Checking and judging another engine's trace writes nothing: a signal ends it at once.
+    const octocd::StopAtOnce checking("checking the trace");
+    return validate_trace_in(o, vo);
+  }
+  std::optional<octocd::StopAtOnce> building(std::in_place, "building the model");
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
+  building.reset();
   if (o.engine == "bullet") {
     if (!octocd::scene_rotates(scene))
       throw octocd::InputError(

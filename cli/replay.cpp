@@ -3,6 +3,7 @@
 // the recorded pair counts, and timed. The replay core here also serves the
 // broadphase-scaling sweeps of `octocd bench` (cli/bench.cpp).
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -11,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
+#include "octocd/scene.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/trace_reader.hpp"
 #include "octocd/world.hpp"
@@ -107,6 +109,33 @@ ReplayInput replay_input_from_trace(const std::string& path, int every, int max_
     throw InputError(fmt::format("{}: parameters.gravity: {}", path, e.what()));
   }
 
+  // Values checked for what arithmetic will do with them (docs/trace-format.md, "Security
+  // rules and limits"), before any tree is built.
+  const auto bad_param = [&](const std::string& key, const std::string& value, const std::string& allowed) {
+    throw InputError(fmt::format("{}: parameters.{}: {}; allowed: {}", path, key, value, allowed));
+  };
+  for (int a = 0; a < 3; ++a) {
+    const float lo = scene.domain.min[a], hi = scene.domain.max[a];
+    if (!(std::fabs(lo) <= limits::kMaxCoordinate && std::fabs(hi) <= limits::kMaxCoordinate))
+      bad_param("domain", fmt::format("axis {}: [{}, {}]", a, lo, hi),
+                fmt::format("finite corners, |coordinate| <= {:g} m", limits::kMaxCoordinate));
+    if (!(hi - lo >= static_cast<float>(limits::kMinLength)))
+      bad_param("domain", fmt::format("axis {}: min {} max {}", a, lo, hi),
+                fmt::format("min < max by at least {:g} m on every axis", limits::kMinLength));
+  }
+  if (!(scene.dt > 0.0f && scene.dt <= static_cast<float>(trace_limits::kMaxDt)))
+    bad_param("dt", fmt::format("{}", scene.dt), fmt::format("a time step in (0, {:g}] s", trace_limits::kMaxDt));
+  if (!(scene.broadphase.cell_size >= static_cast<float>(limits::kMinLength) &&
+        scene.broadphase.cell_size <= static_cast<float>(limits::kMaxLength)))
+    bad_param("broadphase.cell_size", fmt::format("{}", scene.broadphase.cell_size),
+              fmt::format("[{:g}, {:g}] m", limits::kMinLength, limits::kMaxLength));
+  if (scene.broadphase.octree_depth < -1 || scene.broadphase.octree_depth > 10)
+    bad_param("broadphase.octree_depth", fmt::format("{}", scene.broadphase.octree_depth), "-1 (auto) or 0..10");
+  for (int a = 0; a < 3; ++a)
+    if (!(std::fabs(gravity[a]) <= static_cast<float>(limits::kMaxAcceleration)))
+      bad_param("gravity", fmt::format("({}, {}, {})", gravity.x, gravity.y, gravity.z),
+                fmt::format("finite, |component| <= {:g} m/s^2", limits::kMaxAcceleration));
+
   const std::vector<Aabb> local = tr.local_boxes();
   const auto n = static_cast<std::int64_t>(local.size());
   const std::vector<float> w = tr.read_f32("/bodies/inverse_mass", n);
@@ -129,15 +158,19 @@ ReplayInput replay_input_from_trace(const std::string& path, int every, int max_
     }
   }
 
-  const std::int64_t srows = std::min({static_cast<std::int64_t>(tr.shape("/states/frame").at(0)),
-                                       static_cast<std::int64_t>(tr.shape("/states/position").at(0)),
-                                       static_cast<std::int64_t>(tr.shape("/states/velocity").at(0))});
+  // Complete rows only: at most the committed_states attribute (docs/trace-format.md).
+  const std::int64_t srows = tr.complete_rows("/states");
   const auto sframes = tr.read_i64("/states/frame", srows);
-  const auto pos_shape = tr.shape("/states/position");
-  if (pos_shape.size() != 3 || static_cast<std::int64_t>(pos_shape[1]) != n || pos_shape[2] != 3)
-    throw InputError(fmt::format("{}: /states/position: shape does not match {} bodies x 3; allowed: "
-                                 "states x bodies x 3",
-                                 path, n));
+  for (const char* d : {"/states/position", "/states/velocity"}) {
+    const auto shape = tr.shape(d);
+    if (shape.size() != 3 || static_cast<std::int64_t>(shape[1]) != n || shape[2] != 3)
+      throw InputError(fmt::format("{}: {}: shape does not match {} bodies x 3; allowed: states x bodies x 3", path,
+                                   d, n));
+  }
+  for (std::size_t r = 0; r < sframes.size(); ++r)
+    if (sframes[r] < 0 || (r > 0 && sframes[r] <= sframes[r - 1]))
+      throw InputError(fmt::format("{}: /states/frame: row {} is frame {}{}; allowed: frames >= 0, increasing", path,
+                                   r, sframes[r], r > 0 ? fmt::format(" after {}", sframes[r - 1]) : ""));
 
   ReplayInput in;
   in.source = path;
@@ -150,6 +183,16 @@ ReplayInput replay_input_from_trace(const std::string& path, int every, int max_
     for (std::size_t i = 0; i < x.size(); ++i) {
       x[i] = Vec3{xf[3 * i], xf[3 * i + 1], xf[3 * i + 2]};
       Vec3 v{vf[3 * i], vf[3 * i + 1], vf[3 * i + 2]};
+      for (int a = 0; a < 3; ++a) {
+        const double reach = std::max(std::fabs(local[i].min[a]), std::fabs(local[i].max[a]));
+        if (!(std::fabs(x[i][a]) + reach <= trace_limits::kMaxCoordinate))
+          throw InputError(fmt::format("{}: /states/position: row {} body {}: {} (+ local extent {}); allowed: "
+                                       "|position| + |local extent| <= {:g} m",
+                                       path, r, i, x[i][a], reach, trace_limits::kMaxCoordinate));
+        if (!(std::fabs(v[a]) <= trace_limits::kMaxSpeed))
+          throw InputError(fmt::format("{}: /states/velocity: row {} body {}: {}; allowed: |velocity| <= {:g} m/s", path,
+                                       r, i, v[a], trace_limits::kMaxSpeed));
+      }
       integrate(x[i], v, w[i], gravity, Vec3{}, scene.dt);  // the engine's next step, Eq. 2-3
     }
     const std::int64_t f = sframes[static_cast<std::size_t>(r)] + 1;

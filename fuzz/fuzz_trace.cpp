@@ -1,7 +1,9 @@
-// libFuzzer target: the trace readers (issue 10). The input is written as a file and
-// every reader below opens it; a file that is not a readable octocd trace must end in
-// RuntimeError (exit 1); anything else is a finding. To fuzz a new reader (issue 9's
-// replay / compare / report), add it to kReaders.
+// libFuzzer target: the trace readers (issues 10 and 22). The input is written as a file
+// and every reader below opens it: read_trace_summary and the XDMF sidecar, the trace
+// reader of `octocd compare` and `octocd replay` (TraceReader, read the way they read it),
+// and the external-trace reader of `validate --trace-in` (check_external_trace). A file that
+// is not a readable trace must end in InputError (exit 2) or RuntimeError (exit 1);
+// anything else (a crash, a hang, another exception) is a finding.
 //
 // Note: the HDF5 library itself is not instrumented (Debian's libhdf5), so the fuzzer sees
 // coverage only in octocd's code; crashes inside libhdf5 on malformed files are upstream
@@ -16,7 +18,9 @@
 #include <string>
 
 #include "octocd/error.hpp"
+#include "octocd/external.hpp"
 #include "octocd/trace.hpp"
+#include "octocd/trace_reader.hpp"
 
 namespace {
 
@@ -29,6 +33,30 @@ const Reader kReaders[] = {
     {"read_trace_summary", [](const std::string& p) { (void)octocd::read_trace_summary(p); }},
     {"write_xdmf_sidecar",
      [](const std::string& p) { std::remove(octocd::write_xdmf_sidecar(p).c_str()); }},
+    // What compare and replay read (cli/compare.cpp, cli/replay.cpp).
+    {"TraceReader",
+     [](const std::string& p) {
+       const octocd::TraceReader t(p);
+       for (const char* a : {"scene_name", "scene", "parameters", "engine", "build_id"})
+         if (t.has_attribute(a)) (void)t.string_attribute(a);
+       const auto boxes = t.local_boxes();
+       const auto n = static_cast<std::int64_t>(boxes.size());
+       (void)t.read_f32("/bodies/inverse_mass", n);
+       (void)t.read_u32("/bodies/shape_id", n);
+       if (t.has_dataset("/bodies/group")) (void)t.read_strings("/bodies/group");
+       const std::int64_t rows = t.complete_rows("/frames");
+       (void)t.read_i64("/frames/frame", rows);
+       (void)t.read_u64("/frames/aabb_pairs", rows);
+       const std::int64_t states = t.complete_rows("/states");
+       (void)t.read_i64("/states/frame", states);
+       if (states > 0) (void)t.read_f32_rows("/states/position", states - 1, 1);
+       if (t.has_dataset("/contacts/offsets")) {
+         const std::int64_t c = t.complete_rows("/contacts");
+         (void)t.read_i64("/contacts/offsets", c + 1);
+       }
+     }},
+    // validate --trace-in --check-only (validation/src/trace_in.cpp).
+    {"check_external_trace", [](const std::string& p) { (void)octocd::check_external_trace(p); }},
 };
 
 std::string scratch_path() {
@@ -48,6 +76,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     try {
       r.read(path);
     } catch (const octocd::RuntimeError&) {
+    } catch (const octocd::InputError&) {
     }
   }
   std::remove(path.c_str());

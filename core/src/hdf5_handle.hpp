@@ -1,10 +1,25 @@
 #pragma once
 // HDF5 C API helpers shared by the trace writer (trace.cpp), the trace reader
-// (trace_reader.cpp) and the external-trace reader (validation/src/trace_in.cpp). Private
-// to the build (not installed): it needs HDF5's C headers.
+// (trace_reader.cpp: replay, compare), read_trace_summary and the XDMF sidecar
+// (trace.cpp) and the external-trace reader (validation/src/trace_in.cpp). Private to the
+// build (not installed): it needs HDF5's C headers.
+//
+// Every trace is untrusted input (issue 22): Hdf5Reader is the one way octocd opens and
+// reads an HDF5 file. Its rules and limits are documented in docs/trace-format.md,
+// "Security rules and limits".
 #include <hdf5.h>
 
+#include <cstddef>
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "octocd/trace_reader.hpp"  // trace_limits
+
 namespace octocd {
+
+
 namespace detail {
 
 /// Owns one HDF5 identifier of any kind (file, group, dataset, dataspace, datatype,
@@ -71,6 +86,104 @@ class QuietHdf5 {
   H5E_auto2_t func_ = nullptr;
   void* data_ = nullptr;
 };
+
+/// The objects of a file's global heap collections: collection address -> (object index
+/// -> object size in bytes).
+using GlobalHeaps = std::map<std::uint64_t, std::map<unsigned, std::uint64_t>>;
+
+/// A read-only HDF5 file from an untrusted source, opened and read under the rules of
+/// docs/trace-format.md ("Security rules and limits"):
+/// - a regular file only (a FIFO, a device or a folder is refused before HDF5 opens it);
+/// - global heap collections checked before HDF5 reads them (libhdf5 1.10 loops forever
+///   or reads past the heap on a corrupt one); metadata read retries capped (SWMR);
+/// - objects reached through hard links only: external links (to another file), soft
+///   links and user-defined links are refused;
+/// - datasets stored in the file only: external storage (raw data in another file) and
+///   virtual datasets (a view of other files) are refused; every filter must be available;
+/// - every attribute checked for its type class and for holding one value (not an array)
+///   before it is read; strings at most trace_limits::kMaxStringBytes;
+/// - every dataset checked for its type class, rank and declared size (bytes at most
+///   trace_limits::kMaxExpansion x the file's size + kSlackBytes) before it is read.
+/// Every failure is an InputError "<file>: <object>: <problem>; allowed: <values>".
+/// HDF5's error printing is off while the reader lives. Not thread-safe. Not movable.
+class Hdf5Reader {
+ public:
+  /// Opens `path` read-only (SWMR read first, so a trace being written reads too).
+  /// `what` names the expected content in messages (e.g. "an octocd trace").
+  Hdf5Reader(const std::string& path, const std::string& what);
+  Hdf5Reader(const Hdf5Reader&) = delete;
+  Hdf5Reader& operator=(const Hdf5Reader&) = delete;
+
+  /// The file's path as given.
+  const std::string& path() const { return path_; }
+  /// The file identifier.
+  hid_t file() const { return file_.get(); }
+  /// The file's size in bytes when opened.
+  std::uint64_t file_bytes() const { return file_bytes_; }
+
+  /// Throws InputError "<path>: <object>: <problem>; allowed: <allowed>".
+  [[noreturn]] void fail(const std::string& object, const std::string& problem, const std::string& allowed) const;
+
+  /// Whether the object at the absolute path `name` exists; throws InputError when any
+  /// link on the way is not a hard link (external, soft or user-defined).
+  bool exists(const std::string& name) const;
+  /// Whether `name` exists and is a dataset (same link rules).
+  bool is_dataset(const std::string& name) const;
+
+  /// Whether the root attribute `name` exists.
+  bool has_attribute(const std::string& name) const;
+  /// Root attribute `name` as one string (scalar or one element; fixed or variable
+  /// length). Throws InputError when missing, not a string, an array, or too long.
+  std::string string_attribute(const std::string& name) const;
+  /// Root attribute `name` as one number (an integer or float scalar, or one element).
+  double number_attribute(const std::string& name) const;
+  /// Root attribute `name` as exactly `count` numbers (any simple shape of `count`).
+  std::vector<double> number_attributes(const std::string& name, std::size_t count) const;
+
+  /// One dataset, checked: a hard-linked dataset with contiguous, compact or chunked
+  /// storage inside this file, filters available, declared size within the limit.
+  struct Dataset {
+    std::string name;            ///< absolute path, for messages
+    Hdf5Handle id;               ///< the open dataset
+    H5T_class_t cls = H5T_NO_CLASS;  ///< type class of the stored elements
+    std::size_t type_size = 0;   ///< bytes per stored element
+    std::vector<hsize_t> dims;   ///< dimensions (empty for a scalar)
+    /// Elements per row (product of dims[1..]).
+    std::uint64_t per_row() const;
+    /// Whether a dataset is held (an optional dataset that is absent holds none).
+    bool present() const { return id.ok(); }
+  };
+  /// Opens dataset `name` (throws InputError when missing, not a dataset, or refused).
+  Dataset open_dataset(const std::string& name) const;
+  /// As open_dataset, and checks the class (H5T_INTEGER or H5T_FLOAT: either is
+  /// accepted when `numeric`) and rank.
+  Dataset open_numeric(const std::string& name, int rank) const;
+
+  /// Rows [first, first + count) of `d` converted to `mem_type` into `out` (which must
+  /// hold count x per_row elements). Throws InputError for rows outside the dataset or a
+  /// failed read (a missing filter, a type HDF5 cannot convert, a damaged file).
+  void read_rows(const Dataset& d, hsize_t first, hsize_t count, hid_t mem_type, void* out) const;
+  /// Every element of a 1-D string dataset (fixed or variable length).
+  std::vector<std::string> read_strings(const std::string& name) const;
+
+ private:
+  std::string path_;
+  std::string what_;
+  std::uint64_t file_bytes_ = 0;
+  GlobalHeaps heaps_;  // every global heap object, checked before HDF5 opened the file
+  QuietHdf5 quiet_;  // declared before file_: outlives it
+  Hdf5Handle file_;
+  Hdf5Handle attribute(const std::string& name, H5T_class_t cls, std::size_t count) const;
+  void check_vlen_lengths(const Dataset& d) const;
+};
+
+/// The /frames columns of trace format version 1, in the writer's order (trace.cpp).
+const std::vector<std::string>& trace_frame_columns();
+
+/// Walks every global heap collection of `path` the way libhdf5 1.10 does and throws
+/// InputError naming the file when one would make HDF5 loop forever or read past it.
+/// Returns the objects found.
+GlobalHeaps check_global_heaps(const std::string& path);
 
 }  // namespace detail
 }  // namespace octocd

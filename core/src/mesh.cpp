@@ -268,6 +268,9 @@ Mesh load_mesh(const std::string& path) {
     const aiMesh* am = scene->mMeshes[i];
     for (unsigned f = 0; f < am->mNumFaces; ++f) {
       const aiFace& face = am->mFaces[f];
+      if (face.mNumIndices > limits::kMaxFaceCorners)
+        fail(path, "face " + std::to_string(first + f) + " has " + std::to_string(face.mNumIndices) +
+                       " corners (expected at most " + std::to_string(limits::kMaxFaceCorners) + ")");
       if (face.mNumIndices == 0 || face.mIndices == nullptr)
         fail(path, "face " + std::to_string(first + f) + " has no vertex indices (expected faces of 3 or "
                    "more vertices; a malformed face line?)");

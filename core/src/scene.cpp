@@ -931,7 +931,10 @@ std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aab
       for (int a = 0; a < 3; ++a) p[a] = rng.uniform(region.min[a], region.max[a]);
       const Aabb box = translated(body_local_aabb, p);
       std::int64_t cc[3];
-      for (int a = 0; a < 3; ++a) cc[a] = cell_of(static_cast<double>(p[a]), a);
+      // A drawn centre lies in the region, so its cell is in [1, dims - 2]; clamped there
+      // against rounding: a region with min == max on an axis put it in cell 0, and the
+      // -1 neighbour below read outside `head` (issue 22).
+      for (int a = 0; a < 3; ++a) cc[a] = std::clamp<std::int64_t>(cell_of(static_cast<double>(p[a]), a), 1, dims[a] - 2);
       ok = true;
       for (std::int64_t dx = -1; dx <= 1 && ok; ++dx)
         for (std::int64_t dy = -1; dy <= 1 && ok; ++dy)

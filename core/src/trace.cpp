@@ -58,6 +58,12 @@ const std::vector<std::string>& frame_column_names() {
 
 using detail::QuietHdf5;
 
+}  // namespace
+
+const std::vector<std::string>& detail::trace_frame_columns() { return frame_column_names(); }
+
+namespace {
+
 // The innermost (most specific) and outermost messages of HDF5's current error stack.
 std::string hdf5_message() {
   std::vector<std::string> msgs;
@@ -327,10 +333,18 @@ struct TraceWriter::Impl {
     return msg;
   }
 
-  // Writes the buffered rows and flushes; on failure abandons the file and throws.
+  // Writes the buffered rows and flushes; then, once they are on disk, records the new
+  // row counts in the root attributes committed_frames and committed_states and flushes
+  // again. Readers read no row past them (docs/trace-format.md): a failed write may leave
+  // datasets extended over rows whose data never reached the disk (a full disk), and the
+  // attributes still give the rows written in full. On failure abandons the file and
+  // throws; the message gives the rows the attributes on disk vouch for.
   void write_and_flush(const std::string& when) {
     try {
       write_all();
+      check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "flush");
+      write_committed(static_cast<std::int64_t>(frames.empty() ? 0 : frames[0].rows),
+                      static_cast<std::int64_t>(s_frame.rows));
       check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "flush");
     } catch (const Hdf5Failure& e) {
       abandon();
@@ -363,6 +377,15 @@ struct TraceWriter::Impl {
     for (std::size_t i = 0; i < bodies; ++i) {
       s_orient.push(identity, 4);
       s_angvel.push(zero, 3);
+    }
+  }
+
+  // Sets the root attributes committed_frames and committed_states (created with the file).
+  void write_committed(std::int64_t frame_rows, std::int64_t state_rows) {
+    for (const auto& [name, value] : {std::pair<const char*, std::int64_t>{"committed_frames", frame_rows},
+                                      std::pair<const char*, std::int64_t>{"committed_states", state_rows}}) {
+      Handle a(check(H5Aopen(file, name, H5P_DEFAULT), path, std::string("open attribute ") + name));
+      check(H5Awrite(a, H5T_NATIVE_INT64, &value), path, std::string("write attribute ") + name);
     }
   }
 
@@ -469,6 +492,9 @@ void TraceWriter::create_layout(const TraceMetadata& meta, const TraceBodies& bo
   std::vector<std::string> stages;
   for (int i = 0; i < kStageCount; ++i) stages.emplace_back(stage_name(static_cast<Stage>(i)));
   attr_strings(root, "stage_names", stages, path);
+  // Rows written in full (write_and_flush): readers read no row past them.
+  attr_scalar(root, "committed_frames", H5T_STD_I64LE, H5T_NATIVE_INT64, std::int64_t{0}, path);
+  attr_scalar(root, "committed_states", H5T_STD_I64LE, H5T_NATIVE_INT64, std::int64_t{0}, path);
 
   // ---- /bodies (fixed, written now)
   {
@@ -818,191 +844,99 @@ TraceBodies trace_bodies(const Engine& engine) {
 
 namespace {
 
-// Rows of a dataset (its first dimension).
-hsize_t dataset_rows(hid_t file, const char* name, const std::string& path) {
-  Handle d(check(H5Dopen2(file, name, H5P_DEFAULT), path, std::string("open ") + name));
-  Handle sp(check(H5Dget_space(d), path, std::string("H5Dget_space ") + name));
-  const int rank = check(H5Sget_simple_extent_ndims(sp), path, "H5Sget_simple_extent_ndims");
-  std::vector<hsize_t> dims(static_cast<std::size_t>(std::max(rank, 1)), 0);
-  check(H5Sget_simple_extent_dims(sp, dims.data(), nullptr), path, "H5Sget_simple_extent_dims");
-  return dims[0];
+// Rows (first dimension) of a dataset of rank >= 1.
+std::int64_t dataset_rows(const detail::Hdf5Reader& h5, const std::string& name) {
+  const detail::Hdf5Reader::Dataset d = h5.open_dataset(name);
+  if (d.dims.empty()) h5.fail(name, "a scalar", "a dataset of rank >= 1 (docs/trace-format.md)");
+  return static_cast<std::int64_t>(d.dims[0]);
 }
 
-std::string read_string_attr(hid_t obj, const char* name, const std::string& path) {
-  Handle a(check(H5Aopen(obj, name, H5P_DEFAULT), path, std::string("open attribute ") + name));
-  Handle ft(check(H5Aget_type(a), path, "H5Aget_type"));
-  if (H5Tget_class(ft) != H5T_STRING)
-    throw RuntimeError("trace '" + path + "': attribute " + name + " is not a string");
-  if (H5Tis_variable_str(ft) > 0) {
-    Handle mt = vlen_string_type(path);
-    char* p = nullptr;
-    check(H5Aread(a, mt, &p), path, std::string("read attribute ") + name);
-    std::string s = p ? p : "";
-    if (p) H5free_memory(p);
-    return s;
+// The committed-rows root attribute (committed_frames, committed_states), -1 when absent
+// (a trace written before it existed).
+std::int64_t committed_rows(const detail::Hdf5Reader& h5, const char* name) {
+  if (!h5.has_attribute(name)) return -1;
+  const double v = h5.number_attribute(name);
+  if (!(v >= 0.0 && v <= static_cast<double>(trace_limits::kMaxFrames)))
+    h5.fail(std::string("/ (root attribute ") + name + ")", fmt::format("{}", v),
+            fmt::format("a row count in [0, {}]", trace_limits::kMaxFrames));
+  return static_cast<std::int64_t>(v);
+}
+
+TraceSummary summary_of(const detail::Hdf5Reader& h5) {
+  const std::string& path = h5.path();
+  TraceSummary s;
+  if (!h5.has_attribute("format"))
+    throw RuntimeError("trace '" + path + "': not an octocd trace (no root attribute 'format')");
+  s.format = h5.string_attribute("format");
+  if (s.format != kFormat)
+    throw RuntimeError("trace '" + path + "': not an octocd trace (format '" + s.format + "')");
+  const double version = h5.number_attribute("version");
+  if (!(version >= 0.0 && version <= 1000.0))
+    h5.fail("/ (root attribute version)", fmt::format("{}", version), "1");
+  s.version = static_cast<int>(version);
+  // Every /frames column of format version 1, opened by name; the shortest gives the
+  // complete rows (docs/trace-format.md), and at most committed_frames. Not listed by
+  // index: libhdf5 1.10 frees uninitialised pointers (SIGSEGV) when a corrupt group's link
+  // table fails to load (H5Lget_name_by_idx -> H5G__link_release_table; found by fuzz_trace).
+  std::int64_t rows = -1;
+  for (const std::string& name : frame_column_names()) {
+    const std::int64_t r = dataset_rows(h5, "/frames/" + name);
+    rows = rows < 0 ? r : std::min(rows, r);
   }
-  const std::size_t size = H5Tget_size(ft);
-  if (size > (std::size_t{1} << 26))
-    throw RuntimeError("trace '" + path + "': attribute " + name + " claims " + std::to_string(size) +
-                       " bytes; not an octocd trace");
-  std::string s(size, '\0');
-  check(H5Aread(a, ft, s.data()), path, std::string("read attribute ") + name);
-  s.resize(std::strlen(s.c_str()));
+  const std::int64_t cf = committed_rows(h5, "committed_frames");
+  if (cf >= 0) rows = std::min(rows, cf);
+  s.frames = std::max<std::int64_t>(rows, 0);
+  s.state_rows = std::min({dataset_rows(h5, "/states/frame"), dataset_rows(h5, "/states/position"),
+                           dataset_rows(h5, "/states/velocity")});
+  const std::int64_t cs = committed_rows(h5, "committed_states");
+  if (cs >= 0) s.state_rows = std::min(s.state_rows, cs);
+  s.bodies = dataset_rows(h5, "/bodies/shape_id");
+  if (s.frames > 0) {
+    const detail::Hdf5Reader::Dataset d = h5.open_numeric("/frames/frame", 1);
+    h5.read_rows(d, static_cast<hsize_t>(s.frames - 1), 1, H5T_NATIVE_INT64, &s.last_frame);
+  }
   return s;
-}
-
-
-// libhdf5 1.10 loops forever on a global heap collection ("GCOL": where variable-length
-// strings live, so every trace's root attributes) holding a free-space object of size 0
-// (H5HG__cache_heap_deserialize advances by the object's size; the heap has no checksum),
-// and reads past the collection (SIGSEGV) for an object larger than what is left of it.
-// Found by fuzzing the trace readers with flipped bytes. Before HDF5 opens a file, every collection in
-// it is walked the way HDF5 walks it (HDF5 file format spec, "Global Heap"; 8-byte
-// lengths, as octocd writes), and a zero step is reported as a corrupt file.
-void check_global_heaps(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return;  // H5Fopen reports it
-  struct stat st {};
-  if (::fstat(fd, &st) != 0 || st.st_size < 16) {
-    ::close(fd);
-    return;
-  }
-  const auto size = static_cast<std::size_t>(st.st_size);
-  void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
-  ::close(fd);
-  if (map == MAP_FAILED) return;
-  const auto* data = static_cast<const unsigned char*>(map);
-  auto u64 = [&](std::size_t at) {
-    std::uint64_t v = 0;
-    for (int k = 7; k >= 0; --k) v = (v << 8) | data[at + static_cast<std::size_t>(k)];
-    return v;
-  };
-  std::string corrupt;
-  for (std::size_t at = 0; corrupt.empty() && at + 16 <= size;) {
-    const void* hit = ::memmem(data + at, size - at, "GCOL\x01", 5);
-    if (hit == nullptr) break;
-    const std::size_t start = static_cast<std::size_t>(static_cast<const unsigned char*>(hit) - data);
-    at = start + 1;
-    if (start + 16 > size) break;
-    const std::uint64_t claimed = u64(start + 8);
-    const std::size_t end = claimed > size - start ? size : start + static_cast<std::size_t>(claimed);
-    for (std::size_t obj = start + 16; obj < end;) {
-      if (obj + 16 > end) break;  // HDF5: the tail is free space
-      const unsigned idx = static_cast<unsigned>(data[obj]) | (static_cast<unsigned>(data[obj + 1]) << 8);
-      const std::uint64_t len = u64(obj + 8);
-      const std::uint64_t need = idx > 0 ? 16 + ((len + 7) / 8) * 8 : len;
-      if (need == 0 || need > end - obj) {  // HDF5 loops forever, or reads past the heap
-        corrupt = "global heap collection at byte " + std::to_string(start) + " holds an object of " +
-                  std::to_string(len) + " bytes at byte " + std::to_string(obj) + " that does not fit it";
-        break;
-      }
-      obj += static_cast<std::size_t>(need);
-    }
-  }
-  ::munmap(map, size);
-  if (!corrupt.empty())
-    throw RuntimeError("trace '" + path + "': corrupt file (" + corrupt + "); not a readable octocd trace");
-}
-
-// Opens a trace read-only in SWMR mode. A SWMR reader retries a metadata read whose
-// checksum fails (the writer may be half-way through a write), sleeping 1 ns, 2 ns, 4 ns,
-// ... between tries: HDF5's default of 100 tries never ends on a corrupt file (found by
-// fuzz_trace). 24 tries wait about 17 ms in all, ample for a write in progress.
-Handle open_for_reading(const std::string& path) {
-  check_global_heaps(path);
-  Handle fapl(check(H5Pcreate(H5P_FILE_ACCESS), path, "H5Pcreate"));
-  check(H5Pset_metadata_read_attempts(fapl, 24), path, "H5Pset_metadata_read_attempts");
-  return Handle(check(H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, fapl), path,
-                      "open file (read-only, SWMR)"));
 }
 
 }  // namespace
 
 TraceSummary read_trace_summary(const std::string& path) {
-  QuietHdf5 quiet;
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    throw RuntimeError("trace '" + path + "': no such file");
-  if (H5Fis_hdf5(path.c_str()) <= 0)
-    throw RuntimeError("trace '" + path + "': not an HDF5 file, so not an octocd trace");
-  Handle file = open_for_reading(path);
-  TraceSummary s;
-  if (H5Aexists(file, "format") <= 0)
-    throw RuntimeError("trace '" + path + "': not an octocd trace (no root attribute 'format')");
-  s.format = read_string_attr(file, "format", path);
-  if (s.format != kFormat)
-    throw RuntimeError("trace '" + path + "': not an octocd trace (format '" + s.format + "')");
-  {
-    Handle a(check(H5Aopen(file, "version", H5P_DEFAULT), path, "open attribute version"));
-    check(H5Aread(a, H5T_NATIVE_INT, &s.version), path, "read attribute version");
+  try {
+    const detail::Hdf5Reader h5(path, "an octocd trace");
+    return summary_of(h5);
+  } catch (const InputError& e) {  // a trace read back: a runtime failure of its writer's command
+    throw RuntimeError(std::string("trace ") + e.what());
   }
-  // Every /frames column of format version 1, opened by name; the shortest gives the
-  // complete rows (docs/trace-format.md). Not listed by index: libhdf5 1.10 frees
-  // uninitialised pointers (SIGSEGV) when a corrupt group's link table fails to load
-  // (H5Lget_name_by_idx -> H5G__link_release_table; found by fuzz_trace).
-  Handle g(check(H5Gopen2(file, "frames", H5P_DEFAULT), path, "open group /frames"));
-  hsize_t rows = 0;
-  bool first = true;
-  for (const std::string& name : frame_column_names()) {
-    const hsize_t r = dataset_rows(g, name.c_str(), path);
-    rows = first ? r : std::min(rows, r);
-    first = false;
-  }
-  s.frames = static_cast<std::int64_t>(rows);
-  s.state_rows = static_cast<std::int64_t>(std::min(
-      {dataset_rows(file, "/states/frame", path), dataset_rows(file, "/states/position", path),
-       dataset_rows(file, "/states/velocity", path)}));
-  s.bodies = static_cast<std::int64_t>(dataset_rows(file, "/bodies/shape_id", path));
-  if (rows > 0) {
-    Handle d(check(H5Dopen2(file, "/frames/frame", H5P_DEFAULT), path, "open /frames/frame"));
-    Handle fs(check(H5Dget_space(d), path, "H5Dget_space"));
-    const hsize_t start = rows - 1, count = 1;
-    check(H5Sselect_hyperslab(fs, H5S_SELECT_SET, &start, nullptr, &count, nullptr), path,
-          "select last row");
-    Handle ms(check(H5Screate_simple(1, &count, nullptr), path, "H5Screate_simple"));
-    check(H5Dread(d, H5T_NATIVE_INT64, ms, fs, H5P_DEFAULT, &s.last_frame), path,
-          "read /frames/frame");
-  }
-  return s;
 }
 
 // ---------------------------------------------------------------------------------------
 
+static std::string write_xdmf(const detail::Hdf5Reader& h5, const TraceSummary& sum);
+
 std::string write_xdmf_sidecar(const std::string& trace_path) {
-  const TraceSummary sum = read_trace_summary(trace_path);  // checks it is a trace
-  QuietHdf5 quiet;
   const std::string& path = trace_path;
-  Handle file = open_for_reading(path);
-  double dt = 0.0;
-  {
-    Handle a(check(H5Aopen(file, "dt", H5P_DEFAULT), path, "open attribute dt"));
-    check(H5Aread(a, H5T_NATIVE_DOUBLE, &dt), path, "read attribute dt");
+  try {
+    const detail::Hdf5Reader h5(path, "an octocd trace");
+    return write_xdmf(h5, summary_of(h5));  // summary_of checks it is a trace
+  } catch (const InputError& e) {
+    throw RuntimeError(std::string("trace ") + e.what());
   }
+}
+
+static std::string write_xdmf(const detail::Hdf5Reader& h5, const TraceSummary& sum) {
+  const std::string& path = h5.path();
+  const double dt = h5.number_attribute("dt");
   const auto rows = static_cast<std::size_t>(sum.state_rows);
-  std::error_code ec;
-  const std::uintmax_t file_bytes = std::filesystem::file_size(path, ec);
-  if (ec || rows > file_bytes)  // 8 bytes a row on disk: a larger extent is a corrupt file
-    throw RuntimeError("trace '" + path + "': /states has " + std::to_string(rows) +
-                       " rows, more than the file's size allows; not a readable octocd trace");
   std::vector<std::int64_t> frames(rows);
-  if (rows > 0) {
-    Handle d(check(H5Dopen2(file, "/states/frame", H5P_DEFAULT), path, "open /states/frame"));
-    Handle fs(check(H5Dget_space(d), path, "H5Dget_space"));
-    const hsize_t start = 0, count = rows;
-    check(H5Sselect_hyperslab(fs, H5S_SELECT_SET, &start, nullptr, &count, nullptr), path,
-          "select /states/frame");
-    Handle ms(check(H5Screate_simple(1, &count, nullptr), path, "H5Screate_simple"));
-    check(H5Dread(d, H5T_NATIVE_INT64, ms, fs, H5P_DEFAULT, frames.data()), path,
-          "read /states/frame");
-  }
-  const hsize_t disk_rows = dataset_rows(file, "/states/position", path);
+  if (rows > 0) h5.read_rows(h5.open_numeric("/states/frame", 1), 0, rows, H5T_NATIVE_INT64, frames.data());
+  const std::int64_t disk_rows = dataset_rows(h5, "/states/position");
   const std::size_t nb = static_cast<std::size_t>(sum.bodies);
   // The trace's file name, XML-escaped.
   const std::string name = xml_escape(std::filesystem::path(path).filename().string());
   // /bodies/half_extents and /bodies/group_id appeared after the first traces: older
   // files get the sidecar without them.
-  const bool has_half = H5Lexists(file, "/bodies/half_extents", H5P_DEFAULT) > 0;
-  const bool has_group = H5Lexists(file, "/bodies/group_id", H5P_DEFAULT) > 0;
+  const bool has_half = h5.exists("/bodies/half_extents");
+  const bool has_group = h5.exists("/bodies/group_id");
   const std::string xmf = path + ".xmf";
 
   std::ostringstream o;

@@ -302,3 +302,33 @@ INSTANTIATE_TEST_SUITE_P(
     });
 
 }  // namespace
+
+// Issue 22: assimp's triangulation is quadratic in a face's corners (3 x 10^4 corners took
+// 2.2 s; an OBJ face of 10^7 corners, minutes to days). A face of more than
+// limits::kMaxFaceCorners corners is refused before triangulation; 10^5 corners here (about
+// 25 s of triangulation before).
+TEST(LoadMesh, AFaceWithTooManyCornersIsRefusedBeforeTriangulation) {
+  constexpr int kCorners = 100000;
+  std::string obj;
+  obj.reserve(kCorners * 40);
+  for (int i = 0; i < kCorners; ++i) {
+    const double a = 2.0 * 3.141592653589793 * i / kCorners;
+    obj += "v " + std::to_string(std::cos(a)) + " " + std::to_string(std::sin(a)) + " 0\n";
+  }
+  obj += "f";
+  for (int i = 1; i <= kCorners; ++i) obj += " " + std::to_string(i);
+  obj += "\n";
+  const std::string p = write_temp("huge-face.obj", obj);
+  expect_load_error(p, "face 0 has 100000 corners (expected at most 1024)");
+  // At the limit: loaded and triangulated (a fan of 1022 triangles, welded).
+  std::string ok;
+  for (int i = 0; i < 1024; ++i) {
+    const double a = 2.0 * 3.141592653589793 * i / 1024;
+    ok += "v " + std::to_string(std::cos(a)) + " " + std::to_string(std::sin(a)) + " 0\n";
+  }
+  ok += "v 0 0 1\nf";
+  for (int i = 1; i <= 1024; ++i) ok += " " + std::to_string(i);
+  ok += "\n";
+  for (int i = 1; i <= 1024; ++i) ok += "f " + std::to_string(i) + " " + std::to_string(i % 1024 + 1) + " 1025\n";
+  EXPECT_GE(octocd::load_mesh(write_temp("limit-face.obj", ok)).triangles.size(), 1024u + 1022u - 10u);
+}

@@ -804,3 +804,23 @@ TEST(Model, ThetaIsPerShapeAndAPairTakesTheLarger) {
   const auto f = build_model(parse_scene(j.dump(), "theta.json"));
   EXPECT_EQ(f->theta(0, static_cast<std::uint32_t>(f->shapes.size() - 1)), 0.002f);
 }
+
+// Issue 22: a random layout whose region has min == max on an axis (e.g. [0, 1, 0] to
+// [1, 1, 1]) put drawn centres in grid cell 0 by rounding, and the -1 neighbour read
+// outside the grid's head array (crashed in 5 of 6 runs; ASan reports it in every run).
+TEST(Scene, RandomLayoutWithAFlatRegionStaysInsideTheGrid) {
+  for (float y : {0.0f, 0.1f, 0.3f, 1.0f, 1.7f, -2.3f, 123.4f}) {
+    for (std::uint64_t seed : {1u, 2u, 3u}) {
+      GroupSpec g = box_group(40, {0.0f, y, 0.0f}, {4.0f, y, 4.0f});
+      g.layout.kind = LayoutSpec::Kind::Random;
+      g.layout.seed = seed;
+      const std::vector<Vec3> p = group_positions(g, kBox01, "flat.json");
+      ASSERT_EQ(p.size(), 40u);
+      for (std::size_t i = 0; i < p.size(); ++i) {
+        EXPECT_EQ(p[i].y, y);
+        for (std::size_t j = 0; j < i; ++j)
+          EXPECT_FALSE(interiors_intersect(translated(kBox01, p[i]), translated(kBox01, p[j]))) << i << " " << j;
+      }
+    }
+  }
+}

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -23,13 +24,8 @@ namespace {
 
 using Handle = detail::Hdf5Handle;
 
-/// One dataset: its handle and dimensions.
-struct Dataset {
-  std::string name;
-  Handle id;
-  std::vector<hsize_t> dims;
-  bool present() const { return id >= 0; }
-};
+/// One dataset: its handle, type and dimensions (hdf5_handle.hpp).
+using Dataset = detail::Hdf5Reader::Dataset;
 
 class TraceIn {
  public:
@@ -37,12 +33,8 @@ class TraceIn {
   /// physics defaults (its response's mu_s, e and slop; dt and gravity of the "integrated"
   /// detection pose); false (--check-only) leaves the scene to the validator, as in v1.
   explicit TraceIn(const std::string& path, bool with_scene = true) : path_(path) {
-    if (H5Fis_hdf5(path.c_str()) <= 0)
-      throw InputError(fmt::format("{}: not a readable HDF5 file; allowed: an external trace (docs/trace-format.md)",
-                                   path));
-    file_ = Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, H5P_DEFAULT));
-    if (file_ < 0) file_ = Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT));
-    if (file_ < 0) throw RuntimeError(fmt::format("{}: cannot open the HDF5 file", path));
+    // Opened and read under docs/trace-format.md, "Security rules and limits".
+    h5_ = std::make_unique<detail::Hdf5Reader>(path, "an external trace");
 
     // Root attributes.
     const std::string format = string_attr("format");
@@ -60,17 +52,16 @@ class TraceIn {
     info.spec6_response = string_attr("response_model") == "spec6";
     const double dt = number_attr("dt", 0.0);
     if (dt != 0.0) {
-      if (!(dt > 0.0) || !(dt < 1e30)) bad("/ (root attribute dt)", fmt::format("{}", dt), "a time step > 0 (s)");
+      if (!(dt > 0.0) || !(dt <= trace_limits::kMaxDt))
+        bad("/ (root attribute dt)", fmt::format("{}", dt), fmt::format("a time step in (0, {:g}] s", trace_limits::kMaxDt));
       bodies.dt = static_cast<float>(dt);
     }
-    if (H5Aexists(file_, "gravity") > 0) {
-      Handle a(H5Aopen(file_, "gravity", H5P_DEFAULT));
-      Handle space(H5Aget_space(a));
-      Handle type(H5Aget_type(a));
-      double g[3] = {0, 0, 0};
-      if (H5Tget_class(type) != H5T_FLOAT || H5Sget_simple_extent_npoints(space) != 3 ||
-          H5Aread(a, H5T_NATIVE_DOUBLE, g) < 0 || !std::isfinite(g[0] + g[1] + g[2]))
-        bad("/ (root attribute gravity)", "not 3 finite numbers", "gravity (x, y, z) in m/s^2");
+    if (h5_->has_attribute("gravity")) {
+      const std::vector<double> g = h5_->number_attributes("gravity", 3);
+      for (double x : g)
+        if (!(std::fabs(x) <= trace_limits::kMaxSpeed))
+          bad("/ (root attribute gravity)", fmt::format("({}, {}, {})", g[0], g[1], g[2]),
+              fmt::format("gravity (x, y, z) in m/s^2, finite, |component| <= {:g}", trace_limits::kMaxSpeed));
       bodies.gravity = {static_cast<float>(g[0]), static_cast<float>(g[1]), static_cast<float>(g[2])};
     }
 
@@ -81,6 +72,8 @@ class TraceIn {
     n_ = lmin.dims[0];
     info.bodies = n_;
     if (n_ == 0) bad(lmin.name, "0 bodies", "at least one body");
+    if (n_ > trace_limits::kMaxBodies)
+      bad(lmin.name, fmt::format("{} bodies", n_), fmt::format("at most {} bodies", trace_limits::kMaxBodies));
     expect(lmin, {n_, 3}, "n x 3 with n = the body count");
     expect(lmax, {n_, 3}, fmt::format("{} x 3, as /bodies/local_aabb_min", n_));
     expect(mass, {n_}, fmt::format("{} values, one per body (as /bodies/local_aabb_min)", n_));
@@ -89,8 +82,12 @@ class TraceIn {
     for (hsize_t i = 0; i < n_; ++i) {
       bodies.local_boxes.push_back({{lo[3 * i], lo[3 * i + 1], lo[3 * i + 2]}, {hi[3 * i], hi[3 * i + 1], hi[3 * i + 2]}});
       const Aabb& b = bodies.local_boxes.back();
-      if (!std::isfinite(b.min.x + b.min.y + b.min.z + b.max.x + b.max.y + b.max.z))
-        bad(lmin.name, fmt::format("body {}: not finite", i), "finite numbers (m)");
+      for (int k = 0; k < 3; ++k) {  // each corner on its own: a NaN max is reported against max
+        if (!(std::fabs(b.min[k]) <= trace_limits::kMaxCoordinate))
+          bad(lmin.name, fmt::format("body {}: {}", i, b.min[k]), fmt::format("finite, |value| <= {:g} m", trace_limits::kMaxCoordinate));
+        if (!(std::fabs(b.max[k]) <= trace_limits::kMaxCoordinate))
+          bad(lmax.name, fmt::format("body {}: {}", i, b.max[k]), fmt::format("finite, |value| <= {:g} m", trace_limits::kMaxCoordinate));
+      }
       if (!(b.min.x <= b.max.x && b.min.y <= b.max.y && b.min.z <= b.max.z))
         bad(lmax.name, fmt::format("body {}: below /bodies/local_aabb_min", i), "min <= max on every axis");
       const float w = bodies.inverse_mass[i];
@@ -109,6 +106,13 @@ class TraceIn {
           "/states/position and /states/velocity together");
     if (aabb_min_.present() != aabb_max_.present())
       bad(aabb_min_.present() ? "/aabbs/max" : "/aabbs/min", "missing", "/aabbs/min and /aabbs/max together");
+    if (h5_->has_attribute("committed_states")) {  // an octocd trace: no row past it (docs/trace-format.md)
+      const double c = h5_->number_attribute("committed_states");
+      if (!(c >= 0.0 && c <= static_cast<double>(trace_limits::kMaxFrames)))
+        bad("/ (root attribute committed_states)", fmt::format("{}", c), "a row count >= 0");
+      committed_ = true;
+      for (Dataset* d : {&position_, &velocity_}) clip(*d, static_cast<hsize_t>(c));
+    }
     info.has_states = position_.present();
     info.has_aabbs = aabb_min_.present();
     if (!info.has_states && !info.has_aabbs)
@@ -120,6 +124,7 @@ class TraceIn {
       expect(position_, {position_.dims[0], n_, 3}, fmt::format("S x {} x 3 ({} bodies)", n_, n_));
       expect(velocity_, position_.dims, fmt::format("{} x {} x 3, as /states/position", position_.dims[0], n_));
       Dataset frame = open("/states/frame", H5T_INTEGER, 1, false);
+      if (frame.present() && frame.dims[0] > position_.dims[0]) frame.dims[0] = position_.dims[0];  // committed rows
       if (frame.present()) {
         expect(frame, {position_.dims[0]}, fmt::format("{} values, one per state row", position_.dims[0]));
         const std::vector<std::int64_t> f = read<std::int64_t>(frame, 0, position_.dims[0]);
@@ -139,6 +144,9 @@ class TraceIn {
       expect(aabb_min_, {aabb_min_.dims[0], n_, 3}, fmt::format("F x {} x 3 ({} bodies)", n_, n_));
       expect(aabb_max_, aabb_min_.dims, "the shape of /aabbs/min");
     }
+    if (static_cast<std::uint64_t>(frames_) > trace_limits::kMaxFrames)
+      bad(info.has_aabbs ? aabb_min_.name : position_.name, fmt::format("{} frames", frames_),
+          fmt::format("at most {} frames", trace_limits::kMaxFrames));
     info.frames = frames_;
 
     // Optional pairs and contacts (CSR: offsets per frame into flat rows).
@@ -146,6 +154,7 @@ class TraceIn {
     if (!pair_offsets_.empty()) {
       info.has_pairs = true;
       pairs_ = open("/pairs/pair", H5T_INTEGER, 2, true);
+      clip(pairs_, static_cast<hsize_t>(pair_offsets_.back()));
       expect(pairs_, {pairs_.dims[0], 2}, "P x 2 (body indices a, b)");
       rows_match(pairs_, pair_offsets_, "/pairs/offsets");
     }
@@ -157,6 +166,8 @@ class TraceIn {
       c_depth_ = open("/contacts/depth", H5T_FLOAT, 1, true);
       c_jn_ = open("/contacts/jn", H5T_FLOAT, 1, true);
       c_jt_ = open("/contacts/jt", H5T_FLOAT, 1, true);
+      for (Dataset* d : {&c_pair_, &c_normal_, &c_depth_, &c_jn_, &c_jt_})
+        clip(*d, static_cast<hsize_t>(contact_offsets_.back()));
       const hsize_t c = c_pair_.dims[0];
       expect(c_pair_, {c, 2}, "C x 2 (body indices a, b)");
       expect(c_normal_, {c, 3}, fmt::format("{} x 3, one row per contact (as /contacts/pair)", c));
@@ -223,6 +234,7 @@ class TraceIn {
     names.v_pre = names.v_post = "/states/velocity";
     if (info.version == 2) fill_v2(rec, f, names);
     check_frame_record(rec, n_, path_, names);
+    check_magnitudes(rec);
     return rec;
   }
 
@@ -374,7 +386,7 @@ class TraceIn {
     return out;
   }
 
-  bool has_attr(const char* name) const { return H5Aexists(file_, name) > 0; }
+  bool has_attr(const char* name) const { return h5_->has_attribute(name); }
 
   /// A string attribute that must be one of `allowed` (absent: `fallback`).
   std::string choice_attr(const char* name, const std::vector<std::string>& allowed,
@@ -400,66 +412,34 @@ class TraceIn {
     throw InputError(fmt::format("{}: {}: {}; allowed: {}", path_, dataset, problem, allowed));
   }
 
-  bool exists(const std::string& name) const {
-    // Each component in turn: H5Lexists fails on a path whose parent is missing.
-    std::size_t pos = 0;
-    while ((pos = name.find('/', pos + 1)) != std::string::npos)
-      if (H5Lexists(file_, name.substr(0, pos).c_str(), H5P_DEFAULT) <= 0) return false;
-    return H5Lexists(file_, name.c_str(), H5P_DEFAULT) > 0;
+  bool exists(const std::string& name) const { return h5_->exists(name); }
+
+  /// In an octocd trace (root attribute committed_states), rows past the committed ones
+  /// may never have been written (a failed write: docs/trace-format.md): not read.
+  void clip(Dataset& d, hsize_t rows) const {
+    if (committed_ && d.present() && !d.dims.empty() && d.dims[0] > rows) d.dims[0] = rows;
   }
 
   std::string string_attr(const char* name) const {
-    if (H5Aexists(file_, name) <= 0) return "";
-    Handle a(H5Aopen(file_, name, H5P_DEFAULT));
-    Handle type(H5Aget_type(a));
-    if (H5Tget_class(type) != H5T_STRING) bad(fmt::format("/ (root attribute {})", name), "not a string", "a string");
-    std::string out;
-    if (H5Tis_variable_str(type) > 0) {
-      Handle mem(H5Tcopy(H5T_C_S1));
-      H5Tset_size(mem, H5T_VARIABLE);
-      H5Tset_cset(mem, H5Tget_cset(type));
-      char* s = nullptr;
-      if (H5Aread(a, mem, &s) >= 0 && s != nullptr) {
-        out = s;
-        Handle space(H5Aget_space(a));
-        H5Dvlen_reclaim(mem, space, H5P_DEFAULT, &s);
-      }
-    } else {
-      const std::size_t size = H5Tget_size(type);
-      std::string buf(size, '\0');
-      if (H5Aread(a, type, buf.data()) >= 0) out = buf.substr(0, buf.find('\0'));
-    }
-    return out;
+    return h5_->has_attribute(name) ? h5_->string_attribute(name) : std::string();
   }
 
   double number_attr(const char* name, double missing) const {
-    if (H5Aexists(file_, name) <= 0) return missing;
-    Handle a(H5Aopen(file_, name, H5P_DEFAULT));
-    Handle type(H5Aget_type(a));
-    const H5T_class_t cls = H5Tget_class(type);
-    double value = 0.0;
-    if ((cls != H5T_INTEGER && cls != H5T_FLOAT) || H5Aread(a, H5T_NATIVE_DOUBLE, &value) < 0)
-      bad(fmt::format("/ (root attribute {})", name), "not a number", "a number");
-    return value;
+    return h5_->has_attribute(name) ? h5_->number_attribute(name) : missing;
   }
 
   Dataset open(const std::string& name, H5T_class_t cls, int rank, bool required) const {
-    Dataset d;
-    d.name = name;
     if (!exists(name)) {
       if (required) bad(name, "missing", "a dataset (docs/trace-format.md, External traces)");
+      Dataset d;
+      d.name = name;
       return d;
     }
-    d.id = Handle(H5Dopen2(file_, name.c_str(), H5P_DEFAULT));
-    if (d.id < 0) bad(name, "not a dataset", "a dataset");
-    Handle type(H5Dget_type(d.id));
-    if (H5Tget_class(type) != cls)
+    Dataset d = h5_->open_dataset(name);
+    if (d.cls != cls)
       bad(name, "wrong type", cls == H5T_FLOAT ? "floating point (float32 or float64)" : "integers");
-    Handle space(H5Dget_space(d.id));
-    const int r = H5Sget_simple_extent_ndims(space);
+    const int r = static_cast<int>(d.dims.size());
     if (r != rank) bad(name, fmt::format("{} dimensions", r), fmt::format("{} dimensions", rank));
-    d.dims.resize(static_cast<std::size_t>(rank));
-    H5Sget_simple_extent_dims(space, d.dims.data(), nullptr);
     return d;
   }
 
@@ -473,22 +453,49 @@ class TraceIn {
   /// Rows [row, row + count) of `d` (all its trailing dimensions), converted to T.
   template <typename T>
   std::vector<T> read(const Dataset& d, hsize_t row, hsize_t count) const {
-    hsize_t per_row = 1;
-    for (std::size_t k = 1; k < d.dims.size(); ++k) per_row *= d.dims[k];
-    std::vector<T> out(static_cast<std::size_t>(count * per_row));
+    // Sized after the range check: the dataset's declared size is bounded by the file's.
+    if (row > d.dims[0] || count > d.dims[0] - row)
+      bad(d.name, fmt::format("rows {}..{} asked, it has {}", row, row + count, d.dims[0]), "rows below its length");
+    std::vector<T> out(static_cast<std::size_t>(count * d.per_row()));
     if (count == 0) return out;
-    std::vector<hsize_t> start(d.dims.size(), 0), size = d.dims;
-    start[0] = row;
-    size[0] = count;
-    Handle file_space(H5Dget_space(d.id));
-    Handle mem_space(H5Screate_simple(static_cast<int>(size.size()), size.data(), nullptr));
     hid_t mem_type = H5T_NATIVE_FLOAT;
     if constexpr (std::is_same_v<T, std::int64_t>) mem_type = H5T_NATIVE_INT64;
     if constexpr (std::is_same_v<T, double>) mem_type = H5T_NATIVE_DOUBLE;
-    if (H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start.data(), nullptr, size.data(), nullptr) < 0 ||
-        H5Dread(d.id, mem_type, mem_space, file_space, H5P_DEFAULT, out.data()) < 0)
-      throw RuntimeError(fmt::format("{}: {}: reading rows {}..{} failed", path_, d.name, row, row + count - 1));
+    h5_->read_rows(d, row, count, mem_type, out.data());
     return out;
+  }
+
+  /// Values that arithmetic must not overflow (docs/trace-format.md, "Security rules and
+  /// limits"): every position, position + local extent and AABB corner within
+  /// trace_limits::kMaxCoordinate, every velocity within kMaxSpeed; checked before FCL or
+  /// any tree is built from them.
+  void check_magnitudes(const FrameRecord& rec) const {
+    const auto coord = [&](const std::vector<Vec3>& xs, const char* name, bool with_extent) {
+      for (std::size_t i = 0; i < xs.size(); ++i)
+        for (int k = 0; k < 3; ++k) {
+          double reach = 0.0;
+          if (with_extent && i < bodies.local_boxes.size())
+            reach = std::max(std::fabs(static_cast<double>(bodies.local_boxes[i].min[k])),
+                             std::fabs(static_cast<double>(bodies.local_boxes[i].max[k])));
+          if (!(std::fabs(static_cast<double>(xs[i][k])) + reach <= trace_limits::kMaxCoordinate))
+            bad(name, fmt::format("frame {}: body {}: {} (+ local extent {})", rec.frame, i, xs[i][k], reach),
+                fmt::format("|position| + |local extent| <= {:g} m on every axis", trace_limits::kMaxCoordinate));
+        }
+    };
+    coord(rec.x_pre, "/states/position", true);
+    coord(rec.x_post, "/states/position", true);
+    for (const auto* v : {&rec.v_pre, &rec.v_post})
+      for (std::size_t i = 0; i < v->size(); ++i)
+        for (int k = 0; k < 3; ++k)
+          if (!(std::fabs((*v)[i][k]) <= trace_limits::kMaxSpeed))
+            bad("/states/velocity", fmt::format("frame {}: body {}: {}", rec.frame, i, (*v)[i][k]),
+                fmt::format("|velocity| <= {:g} m/s per axis", trace_limits::kMaxSpeed));
+    for (std::size_t i = 0; i < rec.aabbs.size(); ++i)
+      for (int k = 0; k < 3; ++k)
+        for (float x : {rec.aabbs[i].min[k], rec.aabbs[i].max[k]})
+          if (!(std::fabs(x) <= trace_limits::kMaxCoordinate))
+            bad("/aabbs/min, /aabbs/max", fmt::format("frame {}: body {}: {}", rec.frame, i, x),
+                fmt::format("|corner| <= {:g} m", trace_limits::kMaxCoordinate));
   }
 
   std::vector<Vec3> vectors(const std::vector<float>& xyz) const {
@@ -500,6 +507,7 @@ class TraceIn {
   /// A CSR offsets dataset: F + 1 values, 0 first, never decreasing. Empty when absent.
   std::vector<std::int64_t> offsets(const std::string& name) const {
     Dataset d = open(name, H5T_INTEGER, 1, false);
+    clip(d, static_cast<hsize_t>(frames_ + 1));
     if (!d.present()) {
       const std::string group = name.substr(0, name.rfind('/'));
       if (exists(group)) bad(name, "missing", fmt::format("{} with {} as CSR offsets (F + 1 values)", group, name));
@@ -538,11 +546,9 @@ class TraceIn {
     return out;
   }
 
-  // HDF5's error printing off while this reader lives (it used to stay off for the rest of
-  // the process); failures reach the caller as InputError. Declared first: outlives file_.
-  detail::QuietHdf5 quiet_;
   std::string path_;
-  Handle file_;
+  std::unique_ptr<detail::Hdf5Reader> h5_;  // quiets HDF5's error printing while it lives
+  bool committed_ = false;                  // the trace has committed_states (octocd's own)
   hsize_t n_ = 0;
   std::int64_t frames_ = 0;
   Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_;
@@ -583,6 +589,11 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
                                                       std::int64_t max_frames, ExternalTraceInfo* info) {
   if (every < 1) throw InputError(fmt::format("--every: {}; allowed: >= 1", every));
   const ExternalTraceInfo checked = check_external_trace(path);
+  if (static_cast<std::uint64_t>(checked.bodies) > trace_limits::kMaxJudgedBodies)
+    throw InputError(fmt::format("{}: /bodies/local_aabb_min: {} bodies; allowed: at most {} bodies to judge (the flat "
+                                 "oracle tests every pair of bodies each frame: O(n^2)); --check-only checks traces of "
+                                 "up to {} bodies",
+                                 path, checked.bodies, trace_limits::kMaxJudgedBodies, trace_limits::kMaxBodies));
   TraceIn in(path);
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;

@@ -23,6 +23,10 @@ constexpr std::uintmax_t kMaxMeshFileBytes = 1ull << 30;
 constexpr std::uint64_t kMaxMeshVertices = 10000000;
 /// Most faces (polygons) of a mesh file: 2 x 10^7.
 constexpr std::uint64_t kMaxMeshFaces = 20000000;
+/// Most corners of one face (polygon): 1024. assimp triangulates a polygon in time
+/// quadratic in its corners (3 x 10^4 corners took 2.2 s, 10^7 would take days), so a
+/// larger face is refused before triangulation; with it, loading stays linear in the file.
+constexpr std::uint64_t kMaxFaceCorners = 1024;
 }  // namespace limits
 
 /// An indexed triangle mesh in its local frame (metres). Owns its arrays.

@@ -36,4 +36,19 @@ class StopOnSignals {
   StopOnSignals& operator=(const StopOnSignals&) = delete;
 };
 
+/// While alive (inside a StopOnSignals), a SIGINT or SIGTERM ends the process at once
+/// with stop_exit_code(sig), after one line on stderr "octocd: stopped by SIG... while
+/// <what>; nothing was written": for work that polls no flag and has nothing to flush
+/// (loading a scene and its meshes in assimp, checking or judging a trace another engine
+/// wrote), so a signal is honoured within a second there too (issue 22). A signal
+/// recorded before the guard is honoured when it is constructed. Not nestable.
+class StopAtOnce {
+ public:
+  /// `what`: a short phrase, e.g. "loading the scene"; must outlive the guard.
+  explicit StopAtOnce(const char* what);
+  ~StopAtOnce();
+  StopAtOnce(const StopAtOnce&) = delete;
+  StopAtOnce& operator=(const StopAtOnce&) = delete;
+};
+
 }  // namespace octocd

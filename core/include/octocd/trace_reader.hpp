@@ -7,7 +7,10 @@
 /// written or left by a killed run reads too (its complete rows: see complete_rows).
 ///
 /// Every error is an InputError (a trace is input: `octocd` exits with 2) whose message
-/// has the form `<file>: <dataset or attribute>: <problem>; allowed: ...`.
+/// has the form `<file>: <dataset or attribute>: <problem>; allowed: ...`. The file is
+/// opened and read under the rules of docs/trace-format.md, "Security rules and limits"
+/// (regular files only, no external links, external storage or virtual datasets, every
+/// attribute and dataset checked for type, shape and size before it is read).
 
 #include <cstdint>
 #include <memory>
@@ -17,6 +20,36 @@
 #include "octocd/math.hpp"
 
 namespace octocd {
+
+/// Limits on what a trace may declare or hold (docs/trace-format.md, "Security rules and
+/// limits"). A file beyond them is an InputError (exit 2) before anything is allocated.
+namespace trace_limits {
+/// Most bodies of a trace (as scenes: limits::kMaxBodies).
+constexpr std::uint64_t kMaxBodies = 10000000;
+/// Most frames (rows of /frames, /aabbs, /states) of a trace: 10^8 (a day at 1 kHz).
+constexpr std::uint64_t kMaxFrames = 100000000;
+/// Most rows of a flat per-record dataset (/contacts/pair, /pairs/pair, ...): 2^32.
+constexpr std::uint64_t kMaxRecords = 4294967296ull;
+/// Largest string attribute or string element (bytes): 64 MiB (a scene file's text).
+constexpr std::uint64_t kMaxStringBytes = 64ull << 20;
+/// A dataset may declare at most this many bytes per byte of the file (plus
+/// kSlackBytes): deflate, the only filter a trace may use, compresses at most 1032:1.
+constexpr std::uint64_t kMaxExpansion = 1100;
+/// Bytes any dataset may declare beyond kMaxExpansion x the file's size: 1 MiB.
+constexpr std::uint64_t kSlackBytes = 1ull << 20;
+/// Largest |coordinate| (m) of a position, an AABB corner or a local extent, and of a
+/// position plus an extent: 10^6 m (a float32 step of 6 cm there), so that sums,
+/// differences and squares stay finite in float32.
+constexpr double kMaxCoordinate = 1e6;
+/// Largest |velocity component| (m/s) and |gravity component| (m/s^2).
+constexpr double kMaxSpeed = 1e6;
+/// Largest time step dt (s); dt must also be > 0.
+constexpr double kMaxDt = 10.0;
+/// Most bodies `octocd validate --trace-in` judges (not --check-only): the `flat` oracle
+/// tests every pair, n^2 / 2 box tests a frame (2 x 10^8 at 2 x 10^4 bodies, about a
+/// second); a larger trace is refused up front (exit 2) rather than run for days silently.
+constexpr std::uint64_t kMaxJudgedBodies = 20000;
+}  // namespace trace_limits
 
 /// One trace file, open read-only. Not thread-safe. Move-only.
 class TraceReader {
@@ -43,8 +76,11 @@ class TraceReader {
   bool has_dataset(const std::string& dataset) const;
   /// The dataset's dimensions (throws InputError when absent).
   std::vector<std::uint64_t> shape(const std::string& dataset) const;
-  /// Complete rows of a group (docs/trace-format.md: the first min(len) rows over its
-  /// datasets); 0 for a group without datasets. Throws InputError when absent.
+  /// Complete rows of "/frames", "/states" or "/contacts" (docs/trace-format.md: the first
+  /// min(len) rows over the group's datasets of format version 1, and at most the root
+  /// attribute committed_frames or committed_states when the trace has it: rows past it
+  /// may never have reached the disk); 0 for a group without them. Throws InputError when
+  /// the group is absent or another group.
   std::int64_t complete_rows(const std::string& group) const;
 
   /// The first `rows` rows of a dataset, every element converted by HDF5 to the asked
@@ -62,7 +98,9 @@ class TraceReader {
   /// Every element of a 1-D string dataset (e.g. /bodies/group).
   std::vector<std::string> read_strings(const std::string& dataset) const;
 
-  /// Local AABBs of /bodies (local_aabb_min, local_aabb_max), one per body (m).
+  /// Local AABBs of /bodies (local_aabb_min, local_aabb_max), one per body (m). Throws
+  /// InputError naming the dataset unless both are bodies x 3 (at most
+  /// trace_limits::kMaxBodies bodies), finite, |value| <= 10^6 m and min <= max.
   std::vector<Aabb> local_boxes() const;
 
  private:

@@ -1,0 +1,573 @@
+// Untrusted traces, round two (issue 22): every reader (validate --trace-in, compare,
+// replay, and read_trace_summary / the trace reader in process) opens files through
+// detail::Hdf5Reader. Each hostile file is generated here with HDF5's C API from a trace
+// octocd wrote, then each reader must exit 2 with one line naming the file and the
+// attribute or dataset, without crashing, hanging or reading another file.
+#include <gtest/gtest.h>
+#include <hdf5.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <csignal>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "cli_run.hpp"
+#include "octocd/error.hpp"
+#include "octocd/stop.hpp"
+#include "octocd/trace.hpp"
+#include "octocd/trace_reader.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+using octocd::test::Result;
+using octocd::test::bin;
+using octocd::test::run;
+using octocd::test::source_dir;
+
+class Untrusted : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("octocd-untrusted-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  /// An octocd trace of spheres-drop (32 bodies, 20 frames, every state, contacts): valid
+  /// for validate --trace-in, compare and replay.
+  std::string base() {
+    const std::string p = (dir_ / "base.h5").string();
+    if (!fs::exists(p)) {
+      const Result r = run(bin() + " run " + source_dir() + "/tests/data/spheres-drop.json --frames 20 " +
+                           "--state-every 1 --contacts --quiet --no-xdmf --trace " + p);
+      EXPECT_EQ(r.code, 0) << r.output;
+    }
+    return p;
+  }
+
+  /// A copy of the base trace changed by `edit` (the file open read-write).
+  std::string hostile(const std::string& name, const std::function<void(hid_t)>& edit) {
+    const std::string p = (dir_ / (name + ".h5")).string();
+    fs::copy_file(base(), p, fs::copy_options::overwrite_existing);
+    const hid_t f = H5Fopen(p.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    EXPECT_GE(f, 0);
+    edit(f);
+    EXPECT_GE(H5Fclose(f), 0);
+    return p;
+  }
+
+  /// Runs every reader on `path` (within 60 s each) and expects exit 2 and each of
+  /// `names` in its message; `secret` must appear in no output.
+  void expect_refused_by_all(const std::string& path, const std::vector<std::string>& names,
+                             const std::string& secret = "") {
+    for (const std::string& cmd : {"validate --trace-in " + path + " --check-only", "validate --trace-in " + path,
+                                   "compare " + path + " " + base(), "replay " + path + " --broadphase octree"}) {
+      const Result r = run("timeout -k 5 60 " + bin() + " " + cmd);
+      EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
+      for (const std::string& n : names) EXPECT_NE(r.output.find(n), std::string::npos) << cmd << ": " << n << " not in\n" << r.output;
+      if (!secret.empty()) {
+        EXPECT_EQ(r.output.find(secret), std::string::npos) << cmd << " leaked\n" << r.output;
+      }
+    }
+  }
+
+  /// A second HDF5 file holding a float dataset /secret of the shape of /states/position
+  /// (21 x 32 x 3), every value 1234.5.
+  std::string secret_h5() {
+    const std::string p = (dir_ / "secret.h5").string();
+    const hid_t f = H5Fcreate(p.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    const hsize_t n[3] = {21, 32, 3};
+    const std::vector<float> v(21 * 32 * 3, 1234.5f);
+    const hid_t s = H5Screate_simple(3, n, nullptr);
+    const hid_t d = H5Dcreate2(f, "secret", H5T_IEEE_F32LE, s, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+    H5Dclose(d);
+    H5Sclose(s);
+    H5Fclose(f);
+    return p;
+  }
+
+  fs::path dir_;
+};
+
+/// Replaces root attribute `name` by an array of `n` doubles (or strings when `text`).
+void array_attribute(hid_t f, const char* name, hsize_t n, bool text) {
+  H5Adelete(f, name);
+  const hid_t s = H5Screate_simple(1, &n, nullptr);
+  if (text) {
+    const hid_t t = H5Tcopy(H5T_C_S1);
+    H5Tset_size(t, H5T_VARIABLE);
+    std::vector<const char*> v(n, "octocd-trace");
+    const hid_t a = H5Acreate2(f, name, t, s, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(a, t, v.data());
+    H5Aclose(a);
+    H5Tclose(t);
+  } else {
+    const std::vector<double> v(n, 1.0);
+    const hid_t a = H5Acreate2(f, name, H5T_IEEE_F64LE, s, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(a, H5T_NATIVE_DOUBLE, v.data());
+    H5Aclose(a);
+  }
+  H5Sclose(s);
+}
+
+/// Replaces dataset `name` (float32) by one built with `dcpl` over `dims`, without data.
+void replace_dataset(hid_t f, const char* name, std::vector<hsize_t> dims, hid_t dcpl) {
+  H5Ldelete(f, name, H5P_DEFAULT);
+  const hid_t s = H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr);
+  const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+  EXPECT_GE(d, 0) << name;
+  H5Dclose(d);
+  H5Sclose(s);
+}
+
+/// Overwrites element `index` of float dataset `name` with `value`.
+void poke(hid_t f, const char* name, hsize_t index, float value) {
+  const hid_t d = H5Dopen2(f, name, H5P_DEFAULT);
+  const hid_t fs_ = H5Dget_space(d);
+  const int rank = H5Sget_simple_extent_ndims(fs_);
+  std::vector<hsize_t> dims(static_cast<std::size_t>(rank));
+  H5Sget_simple_extent_dims(fs_, dims.data(), nullptr);
+  std::vector<hsize_t> coord(dims.size());
+  for (std::size_t k = dims.size(); k-- > 0;) {
+    coord[k] = index % dims[k];
+    index /= dims[k];
+  }
+  H5Sselect_elements(fs_, H5S_SELECT_SET, 1, coord.data());
+  const hsize_t one = 1;
+  const hid_t ms = H5Screate_simple(1, &one, nullptr);
+  EXPECT_GE(H5Dwrite(d, H5T_NATIVE_FLOAT, ms, fs_, H5P_DEFAULT, &value), 0);
+  H5Sclose(ms);
+  H5Sclose(fs_);
+  H5Dclose(d);
+}
+
+}  // namespace
+
+TEST_F(Untrusted, TheBaseTraceIsReadByEveryReader) {  // the readers' baseline: the others fail for their fault only
+  const std::string b = base();
+  EXPECT_EQ(run(bin() + " validate --trace-in " + b + " --check-only").code, 0);
+  EXPECT_EQ(run(bin() + " compare " + b + " " + b).code, 0);
+  const Result r = run(bin() + " replay " + b + " --broadphase octree");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(octocd::read_trace_summary(b).frames, 20);
+}
+
+// Before: SIGSEGV in validate --trace-in, compare and replay (read into one double).
+TEST_F(Untrusted, ARootAttributeStoredAsAnArrayIsRefusedNamingIt) {
+  expect_refused_by_all(hostile("version-array", [](hid_t f) { array_attribute(f, "version", 1000, false); }),
+                        {"version-array.h5", "version", "stored as an array of 1000 values", "allowed: one value"});
+  expect_refused_by_all(hostile("format-array", [](hid_t f) { array_attribute(f, "format", 1000, true); }),
+                        {"format", "stored as an array of 1000 values"});
+  const std::string dt = hostile("dt-array", [](hid_t f) { array_attribute(f, "dt", 1000, false); });
+  const Result r = run(bin() + " validate --trace-in " + dt + " --check-only");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("root attribute dt): stored as an array of 1000 values"), std::string::npos) << r.output;
+  const std::string eng = hostile("engine-array", [](hid_t f) { array_attribute(f, "engine", 1000, true); });
+  for (const std::string& cmd : {"validate --trace-in " + eng + " --check-only", "compare " + eng + " " + eng}) {
+    const Result e = run(bin() + " " + cmd);
+    EXPECT_EQ(e.code, 2) << cmd << "\n" << e.output;
+    EXPECT_NE(e.output.find("engine"), std::string::npos) << e.output;
+  }
+}
+
+// Before: /bodies/inverse_mass read from another file, its values printed in messages.
+TEST_F(Untrusted, AnExternalLinkIsRefusedAndNotFollowed) {
+  const std::string secret = secret_h5();
+  const std::string p = hostile("elink", [&](hid_t f) {
+    H5Ldelete(f, "/states/position", H5P_DEFAULT);
+    ASSERT_GE(H5Lcreate_external(secret.c_str(), "/secret", f, "/states/position", H5P_DEFAULT, H5P_DEFAULT), 0);
+  });
+  expect_refused_by_all(p, {"/states/position", "external link", "refused"}, "1234.5");
+}
+
+TEST_F(Untrusted, ExternalStorageIsRefusedAndNotRead) {
+  const std::string raw = (dir_ / "raw.bin").string();
+  {
+    std::ofstream out(raw, std::ios::binary);
+    const std::vector<float> v(21 * 32 * 3, 1234.5f);
+    out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(float)));
+  }
+  const std::string p = hostile("external-storage", [&](hid_t f) {
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    ASSERT_GE(H5Pset_external(dcpl, raw.c_str(), 0, 21 * 32 * 3 * sizeof(float)), 0);
+    replace_dataset(f, "/states/position", {21, 32, 3}, dcpl);
+    H5Pclose(dcpl);
+  });
+  expect_refused_by_all(p, {"/states/position", "external storage", "refused"}, "1234.5");
+  // A FIFO as the external raw-data file: refused before anything blocks on it.
+  const std::string fifo = (dir_ / "raw.fifo").string();
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const std::string q = hostile("external-fifo", [&](hid_t f) {
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_external(dcpl, fifo.c_str(), 0, 21 * 32 * 3 * sizeof(float));
+    replace_dataset(f, "/states/position", {21, 32, 3}, dcpl);
+    H5Pclose(dcpl);
+  });
+  const Result r = run("timeout -k 5 30 " + bin() + " validate --trace-in " + q + " --check-only");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("external storage"), std::string::npos) << r.output;
+}
+
+TEST_F(Untrusted, AVirtualDatasetIsRefusedAndNotRead) {
+  const std::string secret = secret_h5();
+  const std::string p = hostile("vds", [&](hid_t f) {
+    const hsize_t n[3] = {21, 32, 3};
+    const hid_t vspace = H5Screate_simple(3, n, nullptr);
+    const hid_t src = H5Screate_simple(3, n, nullptr);
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    ASSERT_GE(H5Pset_virtual(dcpl, vspace, secret.c_str(), "/secret", src), 0);
+    replace_dataset(f, "/states/position", {21, 32, 3}, dcpl);
+    H5Pclose(dcpl);
+    H5Sclose(src);
+    H5Sclose(vspace);
+  });
+  expect_refused_by_all(p, {"/states/position", "virtual dataset", "refused"}, "1234.5");
+}
+
+// Before: every reader hung on open.
+TEST_F(Untrusted, AFifoOrAFolderAsTheTraceIsRefused) {
+  const std::string fifo = (dir_ / "trace.fifo").string();
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  for (const std::string& cmd : {"validate --trace-in " + fifo, "compare " + fifo + " " + fifo,
+                                 "replay " + fifo + " --broadphase octree"}) {
+    const Result r = run("timeout -k 5 30 " + bin() + " " + cmd);
+    EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
+    EXPECT_NE(r.output.find("not a regular file (a FIFO)"), std::string::npos) << r.output;
+  }
+  const Result d = run("timeout -k 5 30 " + bin() + " validate --trace-in " + dir_.string());
+  EXPECT_EQ(d.code, 2) << d.output;
+  EXPECT_NE(d.output.find("not a regular file (a folder)"), std::string::npos) << d.output;
+}
+
+// Before: a ~10 KB file declaring 10^12 frames: even --check-only looped over them.
+TEST_F(Untrusted, DeclaredSizesBeyondTheFileAreRefusedUpFront) {
+  const std::string p = hostile("huge", [](hid_t f) {
+    const hsize_t maxdims[3] = {H5S_UNLIMITED, 32, 3};
+    const hsize_t dims[3] = {1000000000000ull, 32, 3};
+    const hsize_t chunk[3] = {1, 32, 3};
+    for (const char* name : {"/states/position", "/states/velocity"}) {
+      H5Ldelete(f, name, H5P_DEFAULT);
+      const hid_t s = H5Screate_simple(3, dims, maxdims);
+      const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+      H5Pset_chunk(dcpl, 3, chunk);
+      const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+      EXPECT_GE(d, 0);
+      H5Dclose(d);
+      H5Pclose(dcpl);
+      H5Sclose(s);
+    }
+  });
+  expect_refused_by_all(p, {"/states/position", "declares 1000000000000 x 32 x 3", "more than a file of"});
+  // The issue's file: a few KB of external trace (world AABBs only) declaring 10^12 frames.
+  const std::string q = (dir_ / "aabbs-1e12.h5").string();
+  {
+    const hid_t f = H5Fcreate(q.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
+    H5Pset_create_intermediate_group(lcpl, 1);
+    const hid_t t = H5Tcopy(H5T_C_S1);
+    H5Tset_size(t, H5T_VARIABLE);
+    const hid_t sc = H5Screate(H5S_SCALAR);
+    const char* text = "octocd-trace";
+    const hid_t a = H5Acreate2(f, "format", t, sc, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(a, t, &text);
+    H5Aclose(a);
+    const int one = 1;
+    const hid_t v = H5Acreate2(f, "version", H5T_STD_I32LE, sc, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(v, H5T_NATIVE_INT, &one);
+    H5Aclose(v);
+    const hsize_t nb[2] = {1, 3}, nw = 1;
+    const float box[3] = {0.1f, 0.1f, 0.1f}, w = 1.0f;
+    for (const char* name : {"/bodies/local_aabb_min", "/bodies/local_aabb_max"}) {
+      const hid_t s2 = H5Screate_simple(2, nb, nullptr);
+      const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s2, lcpl, H5P_DEFAULT, H5P_DEFAULT);
+      H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, box);
+      H5Dclose(d);
+      H5Sclose(s2);
+    }
+    const hid_t s1 = H5Screate_simple(1, &nw, nullptr);
+    const hid_t dm = H5Dcreate2(f, "/bodies/inverse_mass", H5T_IEEE_F32LE, s1, lcpl, H5P_DEFAULT, H5P_DEFAULT);
+    H5Dwrite(dm, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, &w);
+    H5Dclose(dm);
+    H5Sclose(s1);
+    const hsize_t dims[3] = {1000000000000ull, 1, 3}, chunk[3] = {1024, 1, 3};
+    for (const char* name : {"/aabbs/min", "/aabbs/max"}) {
+      const hid_t s3 = H5Screate_simple(3, dims, nullptr);
+      const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+      H5Pset_chunk(dcpl, 3, chunk);
+      const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s3, lcpl, dcpl, H5P_DEFAULT);
+      H5Dclose(d);
+      H5Pclose(dcpl);
+      H5Sclose(s3);
+    }
+    H5Sclose(sc);
+    H5Tclose(t);
+    H5Pclose(lcpl);
+    H5Fclose(f);
+  }
+  EXPECT_LT(fs::file_size(q), 20000u);
+  const Result r = run("timeout -k 5 60 " + bin() + " validate --trace-in " + q + " --check-only");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("/aabbs/min: declares 1000000000000 x 1 x 3"), std::string::npos) << r.output;
+}
+
+// Before: --check-only passed, then FCL's tree build crashed on non-finite AABBs.
+TEST_F(Untrusted, ValuesThatOverflowWhenCombinedAreRefused) {
+  // Body 1 at x = 9.5e5 m with a local extent of 1e5 m: each finite and small, the sum not.
+  const std::string p = hostile("overflow", [](hid_t f) {
+    poke(f, "/bodies/local_aabb_max", 3, 1e5f);
+    poke(f, "/states/position", 3 * 32 * 5 + 3, 9.5e5f);
+  });
+  for (const std::string& cmd : {"validate --trace-in " + p + " --check-only", "replay " + p + " --broadphase octree"}) {
+    const Result r = run("timeout -k 5 60 " + bin() + " " + cmd);
+    EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
+    EXPECT_NE(r.output.find("/states/position"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("|position| + |local extent| <= 1e+06 m"), std::string::npos) << r.output;
+  }
+  const std::string dt = hostile("dt-1e20", [](hid_t f) {
+    const hid_t a = H5Aopen(f, "dt", H5P_DEFAULT);
+    const double v = 1e20;
+    H5Awrite(a, H5T_NATIVE_DOUBLE, &v);
+    H5Aclose(a);
+  });
+  const Result r = run(bin() + " validate --trace-in " + dt + " --check-only");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("root attribute dt): 1e+20; allowed: a time step in (0, 10] s"), std::string::npos)
+      << r.output;
+  // A NaN in local_aabb_max is reported against local_aabb_max (before: against min).
+  const std::string nan = hostile("nan-max", [](hid_t f) { poke(f, "/bodies/local_aabb_max", 4, std::nanf("")); });
+  for (const std::string& cmd : {"validate --trace-in " + nan + " --check-only", "replay " + nan + " --broadphase octree"}) {
+    const Result n = run(bin() + " " + cmd);
+    EXPECT_EQ(n.code, 2) << n.output;
+    EXPECT_NE(n.output.find("/bodies/local_aabb_max: body 1: nan"), std::string::npos) << cmd << "\n" << n.output;
+  }
+}
+
+// Before: compare said "same" after comparing 1 or 0 records; replay accepted negative
+// state frames.
+TEST_F(Untrusted, GarbageFramesAndOffsetsAreRefused) {
+  const std::string p = hostile("frames", [](hid_t f) {
+    const hid_t d = H5Dopen2(f, "/states/frame", H5P_DEFAULT);
+    std::vector<std::int64_t> v(21, -5);
+    H5Dwrite(d, H5T_NATIVE_INT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+    H5Dclose(d);
+  });
+  for (const std::string& cmd : {"compare " + p + " " + base(), "replay " + p + " --broadphase octree"}) {
+    const Result r = run(bin() + " " + cmd);
+    EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
+    EXPECT_NE(r.output.find("/states/frame: row 0 is frame -5"), std::string::npos) << r.output;
+  }
+  const std::string o = hostile("offsets", [](hid_t f) {
+    const hid_t d = H5Dopen2(f, "/contacts/offsets", H5P_DEFAULT);
+    const hid_t s = H5Dget_space(d);
+    const hssize_t n = H5Sget_simple_extent_npoints(s);
+    std::vector<std::int64_t> v(static_cast<std::size_t>(n), 7);
+    H5Dwrite(d, H5T_NATIVE_INT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+    H5Sclose(s);
+    H5Dclose(d);
+  });
+  const Result r = run(bin() + " compare " + o + " " + base() + " --quantity contacts");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("/contacts/offsets: row 0 is 7; allowed: 0 first"), std::string::npos) << r.output;
+}
+
+// The fuzz corpus (fuzz/regressions/trace) against every reader: before, the heap files
+// crashed or hung validate --trace-in, compare and replay (the guards were in
+// read_trace_summary only).
+TEST_F(Untrusted, TheFuzzCorpusIsRefusedByEveryReader) {
+  for (const auto& e : fs::directory_iterator(source_dir() + "/fuzz/regressions/trace")) {
+    const std::string p = e.path().string();
+    for (const std::string& cmd : {"validate --trace-in " + p + " --check-only", "validate --trace-in " + p,
+                                   "compare " + p + " " + p, "replay " + p + " --broadphase octree"}) {
+      const Result r = run("timeout -k 5 60 " + bin() + " " + cmd);
+      EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
+      EXPECT_NE(r.output.find(p), std::string::npos) << cmd << "\n" << r.output;
+    }
+    try {  // refused, or a damaged file read as far as it goes: never a crash
+      (void)octocd::read_trace_summary(p);
+    } catch (const octocd::RuntimeError&) {
+    }
+    try {
+      (void)octocd::TraceReader(p).complete_rows("/frames");
+    } catch (const octocd::InputError&) {
+    }
+  }
+}
+
+// A full disk (a 1.2 MB tmpfs; the issue used 300 KB, where no flush succeeds; root only): before, the file held
+// 50 frames whose contact normals were all zero while the message said none was flushed.
+// Now every row a reader sees was written in full and the message gives that count.
+TEST_F(Untrusted, AFullDiskLeavesNoRowThatWasNotWrittenInFull) {
+  if (::geteuid() != 0) GTEST_SKIP() << "mounting a tmpfs needs root";
+  const fs::path mnt = dir_ / "small";
+  fs::create_directories(mnt);
+  if (std::system(("mount -t tmpfs -o size=1200k tmpfs " + mnt.string() + " 2>/dev/null").c_str()) != 0)
+    GTEST_SKIP() << "mount -t tmpfs failed (no CAP_SYS_ADMIN in this container)";
+  const std::string trace = (mnt / "t.h5").string();
+  const Result r = run(bin() + " run " + source_dir() + "/tests/data/spheres-drop.json --frames 3000 " +
+                       "--state-every 1 --contacts --quiet --trace " + trace);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("No space left on device"), std::string::npos) << r.output;
+  std::int64_t said = 0;
+  const auto at = r.output.find("keeps the ");
+  if (at != std::string::npos) said = std::stoll(r.output.substr(at + 10));
+  else EXPECT_NE(r.output.find("no frame was flushed"), std::string::npos) << r.output;
+  const octocd::TraceSummary s = octocd::read_trace_summary(trace);
+  EXPECT_EQ(s.frames, said) << r.output;
+  {
+  const octocd::TraceReader tr(trace);  // closed before the umount
+  EXPECT_EQ(tr.complete_rows("/frames"), said);
+  // Every state row a reader sees holds the spheres' positions (never all zero) ...
+  const std::int64_t states = tr.complete_rows("/states");
+  for (std::int64_t row = 0; row < states; ++row) {
+    const std::vector<float> x = tr.read_f32_rows("/states/position", row, 1);
+    bool any = false;
+    for (float v : x) any = any || v != 0.0f;
+    EXPECT_TRUE(any) << "state row " << row << " of " << states << " is all zero";
+  }
+  // ... and every contact row of the kept frames has a unit normal.
+  const std::int64_t rows = tr.complete_rows("/contacts");
+  const std::vector<std::int64_t> off = tr.read_i64("/contacts/offsets", rows + 1);
+  const std::vector<float> n = tr.read_f32("/contacts/normal", off.back());
+  for (std::int64_t k = 0; k < off.back(); ++k) {
+    const double len = std::hypot(n[3 * k], n[3 * k + 1], n[3 * k + 2]);
+    EXPECT_NEAR(len, 1.0, 1e-3) << "contact " << k << " of " << off.back();
+  }
+  EXPECT_GT(off.back(), 0) << "the kept frames hold contacts (the check above is not empty)";
+  }
+  // validate --trace-in reads the same rows (states every frame: N frames after row 0).
+  const Result v = run(bin() + " validate --trace-in " + trace + " --check-only");
+  EXPECT_EQ(v.code, 0) << v.output;
+  EXPECT_NE(v.output.find(std::to_string(said) + " frames"), std::string::npos) << v.output;
+  std::system(("umount " + mnt.string()).c_str());
+}
+
+namespace {
+
+/// An external trace of `n` boxes of half side 0.1 on a line 1 m apart (none touch),
+/// `frames` frames at rest: world AABBs only.
+void write_line_trace(const std::string& path, hsize_t n, hsize_t frames) {
+  const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
+  H5Pset_create_intermediate_group(lcpl, 1);
+  const auto put = [&](const char* name, std::vector<hsize_t> dims, const std::vector<float>& v) {
+    const hid_t s = H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr);
+    const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s, lcpl, H5P_DEFAULT, H5P_DEFAULT);
+    H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+    H5Dclose(d);
+    H5Sclose(s);
+  };
+  const hid_t t = H5Tcopy(H5T_C_S1);
+  H5Tset_size(t, H5T_VARIABLE);
+  const hid_t sc = H5Screate(H5S_SCALAR);
+  const char* fmt_ = "octocd-trace";
+  const hid_t a = H5Acreate2(f, "format", t, sc, H5P_DEFAULT, H5P_DEFAULT);
+  H5Awrite(a, t, &fmt_);
+  H5Aclose(a);
+  const int one = 1;
+  const hid_t v = H5Acreate2(f, "version", H5T_STD_I32LE, sc, H5P_DEFAULT, H5P_DEFAULT);
+  H5Awrite(v, H5T_NATIVE_INT, &one);
+  H5Aclose(v);
+  H5Sclose(sc);
+  H5Tclose(t);
+  std::vector<float> lo(n * 3, -0.1f), hi(n * 3, 0.1f), w(n, 1.0f), amin, amax;
+  amin.reserve(frames * n * 3);
+  amax.reserve(frames * n * 3);
+  for (hsize_t fr = 0; fr < frames; ++fr)
+    for (hsize_t i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        const float c = k == 0 ? static_cast<float>(i) - 0.5f * static_cast<float>(n) : 0.0f;
+        amin.push_back(c - 0.1f);
+        amax.push_back(c + 0.1f);
+      }
+  put("/bodies/local_aabb_min", {n, 3}, lo);
+  put("/bodies/local_aabb_max", {n, 3}, hi);
+  put("/bodies/inverse_mass", {n}, w);
+  put("/aabbs/min", {frames, n, 3}, amin);
+  put("/aabbs/max", {frames, n, 3}, amax);
+  H5Pclose(lcpl);
+  H5Fclose(f);
+}
+
+}  // namespace
+
+// Before: an external trace of 10^6 bodies ran the O(n^2) flat oracle silently for days.
+TEST_F(Untrusted, TooManyBodiesToJudgeIsRefusedUpFront) {
+  const std::string p = (dir_ / "wide.h5").string();
+  write_line_trace(p, octocd::trace_limits::kMaxJudgedBodies + 1, 1);
+  const Result r = run("timeout -k 5 120 " + bin() + " validate --trace-in " + p);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("20001 bodies; allowed: at most 20000 bodies to judge"), std::string::npos) << r.output;
+  const Result c = run("timeout -k 5 120 " + bin() + " validate --trace-in " + p + " --check-only");
+  EXPECT_EQ(c.code, 0) << c.output;
+}
+
+// Before: validate --trace-in ignored SIGINT and SIGTERM (no loop polled the flag).
+TEST_F(Untrusted, SigtermEndsValidateTraceInAtOnce) {
+  const std::string p = (dir_ / "long.h5").string();
+  write_line_trace(p, octocd::trace_limits::kMaxJudgedBodies, 40);  // seconds of flat oracle a frame
+  const Result r = run("sh -c '" + bin() + " validate --trace-in " + p +
+                       " & pid=$!; sleep 1; kill -TERM $pid; wait $pid; echo rc=$?'");
+  EXPECT_NE(r.output.find("rc=143"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("octocd: stopped by SIGTERM while checking the trace; nothing was written"),
+            std::string::npos)
+      << r.output;
+}
+
+// Before: `bench -o` left o.json.tmp.PID behind on a full disk and named no errno. A file
+// size limit of 0 (SIGXFSZ ignored) fails the first write of the result with EFBIG.
+TEST_F(Untrusted, BenchOutputOnAFullDiskLeavesNoTemporaryFileAndNamesErrno) {
+  const std::string out = (dir_ / "o.json").string();
+  fs::copy_file(source_dir() + "/tests/data/spheres-drop.json", dir_ / "spheres-drop.json");
+  const std::string sweep = (dir_ / "sweep.json").string();
+  std::ofstream(sweep) << R"({"name": "x", "scenes": ["spheres-drop.json"], "frames": 2, "engines": ["cpu"]})";
+  const Result r = run("sh -c \"trap '' XFSZ; ulimit -f 0; exec " + bin() + " bench " + sweep + " -o " + out +
+                       " --quiet\"");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("o.json: writing failed: File too large (EFBIG)"), std::string::npos) << r.output;
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_EQ(e.path().filename().string().find("o.json.tmp"), std::string::npos) << e.path();
+}
+
+// Loading a scene and its meshes (assimp) polls no flag: before, run and validate ignored
+// SIGINT and SIGTERM there. Inside StopAtOnce a signal ends the process at once (130/143);
+// outside it the signal is only recorded for the loop to poll (StopOnSignals).
+TEST(StopAtOnce, ASignalEndsTheProcessAtOnceOnlyInsideTheGuard) {
+  for (int sig : {SIGINT, SIGTERM}) {
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      const octocd::StopOnSignals stop;
+      {
+        const octocd::StopAtOnce guard("loading the scene and its meshes");
+        ::raise(sig);
+        ::_exit(0);  // not reached: the handler exits
+      }
+    }
+    int status = 0;
+    ASSERT_EQ(::waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 128 + sig);
+  }
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    const octocd::StopOnSignals stop;
+    { const octocd::StopAtOnce guard("loading"); }
+    ::raise(SIGTERM);  // after the guard: recorded, the loop stops
+    ::_exit(octocd::stop_signal() == SIGTERM ? 7 : 8);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 7);
+}
