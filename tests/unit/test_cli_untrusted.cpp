@@ -485,7 +485,8 @@ void write_line_trace(const std::string& path, hsize_t n, hsize_t frames) {
   for (hsize_t fr = 0; fr < frames; ++fr)
     for (hsize_t i = 0; i < n; ++i)
       for (int k = 0; k < 3; ++k) {
-        const float c = k == 0 ? static_cast<float>(i) - 0.5f * static_cast<float>(n) : 0.0f;
+        // 0.15 m apart: every neighbour penetrates by 5 cm (seconds of FCL work a frame).
+        const float c = k == 0 ? 0.15f * (static_cast<float>(i) - 0.5f * static_cast<float>(n)) : 0.0f;
         amin.push_back(c - 0.1f);
         amax.push_back(c + 0.1f);
       }
@@ -514,7 +515,7 @@ TEST_F(Untrusted, TooManyBodiesToJudgeIsRefusedUpFront) {
 // Before: validate --trace-in ignored SIGINT and SIGTERM (no loop polled the flag).
 TEST_F(Untrusted, SigtermEndsValidateTraceInAtOnce) {
   const std::string p = (dir_ / "long.h5").string();
-  write_line_trace(p, octocd::trace_limits::kMaxJudgedBodies, 40);  // seconds of flat oracle a frame
+  write_line_trace(p, octocd::trace_limits::kMaxJudgedBodies, 40);  // seconds of FCL work a frame
   const Result r = run("sh -c '" + bin() + " validate --trace-in " + p +
                        " & pid=$!; sleep 1; kill -TERM $pid; wait $pid; echo rc=$?'");
   EXPECT_NE(r.output.find("rc=143"), std::string::npos) << r.output;

@@ -661,7 +661,7 @@ TEST_F(CliUser, ValidateWritesJUnit) {
     const auto failures = x.nodes("//testcase/failure");
     ASSERT_GE(failures.size(), 1u);
     EXPECT_EQ(Xml::attr(x.nodes("//testsuite")[0], "failures"), std::to_string(failures.size()));
-    const auto np = x.nodes("//testcase[@name='non-penetration']/failure");
+    const auto np = x.nodes("//testcase[@name='non-penetration-eq14']/failure");
     ASSERT_EQ(np.size(), 1u);
     // "measured X > bound Y (figure): detail": the figures first, then the table's detail line.
     const std::string message = Xml::attr(np[0], "message");
@@ -708,7 +708,7 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   ASSERT_TRUE(x.ok()) << slurp(dir_ / "bad" / "junit.xml");
   const auto suites = x.nodes("/testsuites/testsuite");
   ASSERT_EQ(suites.size(), 3u);
-  EXPECT_EQ(x.nodes("//testcase[@classname='free-fall']").size(), 9u);
+  EXPECT_EQ(x.nodes("//testcase[@classname='free-fall']").size(), 14u);  // 6 physics + 8 model rows
   EXPECT_GE(x.nodes("//testcase[@classname='box-in-box']/failure").size(), 1u);
   EXPECT_EQ(x.nodes("//testcase/error").size(), 1u);
   const auto root = x.nodes("/testsuites");

@@ -123,6 +123,11 @@ struct PhysicsBodies {
   ContactGeometry contact_geometry = ContactGeometry::Shape;
   /// The scene's slop (m, SPEC 6 delta): the penetration bound is a multiple of it.
   double slop = 0.001;
+  /// A velocity clamp the engine declares (m/s, per component; 0 = none): octocd's Eq. 23
+  /// v_max, PhysX's maxLinearVelocity. A clamp removes momentum by design, so an isolated
+  /// group with a body at the clamp after the step is not judged on conservation (the
+  /// row counts such groups).
+  double velocity_clamp = 0.0;
 };
 
 /// What octocd's own cpu and cuda engines declare: mu = the scene's mu_static (the

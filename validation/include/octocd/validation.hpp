@@ -62,6 +62,19 @@ struct Tolerances {
   double friction_speed = 1e-5;
   /// Friction: relative slack on |J_t| <= mu_s J_n (float32 products).
   double friction_cone_rel = 1e-5;
+  /// Physics-tier friction cone: absolute slack (kg m/s) on a contact's sum |jt| <=
+  /// mu sum jn. A sequential-impulse solver clamps a row's friction by the normal impulse
+  /// of the iteration it solves, and the normal impulse may then fall to 0: Bullet with
+  /// rotation (tests/scene/test_cli_rotation_faults.cpp, boxes of 0.2-1 kg at dt 2 ms)
+  /// leaves up to 2.5e-4 kg m/s of friction on pairs whose final jn is 0. A planted
+  /// friction impulse outside the cone by 0.01 kg m/s is caught.
+  double friction_cone_abs = 1e-3;
+  /// Physics-tier friction cone: relative slack on a contact's sum |jt| <= mu sum jn. The
+  /// same iterative clamping moves the normal impulse between a manifold's rows after
+  /// their friction was clamped: Bullet with rotation (4-row box-floor manifolds, same
+  /// test) ends up to 13% above mu times the final normal impulses. 0.25 lets an iterative
+  /// solver through and catches a contact with twice its cone (planted).
+  double friction_cone_solver_rel = 0.25;
   /// Momentum per impulse: |m_a dv_a + m_b dv_b| <= this x (|m_a dv_a| + |m_b dv_b|) + 1e-9.
   /// float32 impulses carry ~6e-8 relative error; x 20 for the products and sums.
   double momentum_rel = 1e-5;
