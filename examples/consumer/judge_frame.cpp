@@ -1,7 +1,10 @@
 // Judges frames of "your own engine" with octocd's validators (octocd/external.hpp).
 // 1. A toy engine: four boxes, its candidate pairs and its contacts. It tests AABB overlap
-//    strictly (min_A < max_B), so it misses the box that rests exactly on the floor:
-//    octocd's rule is inclusive (Eq. 6), and the candidate-sets verdict says so.
+//    strictly (min_A < max_B), so it misses the box that rests exactly on the floor. It
+//    declares an exact AABB broadphase (physics.broadphase_exact), so the physics tier's
+//    broadphase-completeness holds it to flat's set and says octocd's rule is inclusive
+//    (Eq. 6). (A touching pair is not a penetrating one: without the declaration a
+//    conservative broadphase may leave it out.)
 // 2. A rotating engine (SPEC 13): two boxes, one turned 45 degrees about y and spinning,
 //    with orientations, angular velocities, its pre-step detection pose and a two-row
 //    contact manifold with world points, judged the same way.
@@ -108,6 +111,7 @@ int main() {
   c.jt = 0.0f;
   frame.contacts.push_back(c);
 
+  bodies.physics.broadphase_exact = true;  // its pairs claim to be the overlapping AABBs
   octocd::ExternalOptions options;
   options.engine = "toy-strict";
   try {

@@ -36,7 +36,7 @@ consume() {
   set -e
   echo "$out"
   [ "$rc" -eq 3 ] || { echo "judge_frame exited $rc, expected 3"; exit 1; }
-  grep -q "engine 'toy-strict' misses pair (0, 1)" <<<"$out" || { echo "no missed pair (0, 1) in the verdicts"; exit 1; }
+  grep -q "engine 'toy-strict' declares an exact AABB broadphase but misses pair (0, 1)" <<<"$out" || { echo "no missed pair (0, 1) in the verdicts"; exit 1; }
   grep -q "overlap is inclusive" <<<"$out" || { echo "no hint on the inclusive overlap"; exit 1; }
   grep -q "^rotating engine 'spinner'" <<<"$out" || { echo "the rotating engine's frame was not judged"; exit 1; }
   # Every row of its table names its tier.

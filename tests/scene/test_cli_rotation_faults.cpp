@@ -237,10 +237,10 @@ std::string verdict(const Result& r, const std::string& name) {
   return std::regex_search(r.output, m, line) ? m[2].str() : std::string("missing");
 }
 
-/// "(N of M rows outside the cone)" of the friction row, N (0 when the cone holds).
+/// "(N of M contacts outside the cone)" of the friction row, N (0 when the cone holds).
 int cone_failures(const Result& r) {
   std::smatch m;
-  return std::regex_search(r.output, m, std::regex("\\((\\d+) of \\d+ rows outside the cone\\)")) ? std::stoi(m[1].str()) : 0;
+  return std::regex_search(r.output, m, std::regex("\\((\\d+) of \\d+ contacts outside the cone\\)")) ? std::stoi(m[1].str()) : 0;
 }
 
 // Bullet itself breaks one physics rule here, and the friction row says so: its

@@ -389,10 +389,22 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
       broad_exact.check(same, same ? 0.0 : 1.0, [&] {
         if (same) return fmt::format("frame {}: equal to flat", frame);
         const Pair q = !missing.empty() ? missing.front() : extra.front();
+        // Pairs whose boxes only touch (zero overlap on an axis) are pairs under the
+        // inclusive rule of Eq. 6; an engine with a strict test misses exactly those.
+        const bool all_touch = !missing.empty() && std::all_of(missing.begin(), missing.end(), [&](Pair m) {
+          for (int k = 0; k < 3; ++k)
+            if (std::min(rec.aabbs[m.a].max[k], rec.aabbs[m.b].max[k]) ==
+                std::max(rec.aabbs[m.a].min[k], rec.aabbs[m.b].min[k]))
+              return true;
+          return false;
+        });
         return fmt::format("frame {}: {} declares an exact AABB broadphase but {} {} of flat on its world "
-                           "AABBs ({} missing, {} extra)",
+                           "AABBs ({} missing, {} extra){}",
                            frame, label, missing.empty() ? "adds" : "misses", pair_name(q), missing.size(),
-                           extra.size());
+                           extra.size(),
+                           all_touch ? "; the missing pairs only touch (zero overlap on an axis): overlap is "
+                                       "inclusive (Eq. 6), min_A <= max_B and max_A >= min_B"
+                                     : "");
       });
     }
   }
@@ -528,9 +540,11 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
       jn_sum += double(rec.contacts[k1].jn);
     }
     const double mu = pair_mu(pr);
-    const double limit = mu * jn_sum * (1.0 + tol.friction_cone_solver_rel) + tol.friction_cone_abs;
-    const double excess = jt_sum - limit;
     const std::size_t rows = k1 - k0;
+    // The solver slack applies to manifolds (normal impulse moving between rows).
+    const double rel = rows > 1 ? tol.friction_cone_solver_rel : tol.friction_cone_rel;
+    const double limit = mu * jn_sum * (1.0 + rel) + tol.friction_cone_abs;
+    const double excess = jt_sum - limit;
     cone.check(excess <= 0, excess, [&] {
       return fmt::format("frame {}: {} |jt| {:.6g} > mu {:.4g} x jn {:.6g}{}", frame, pair_name(pr), jt_sum, mu,
                          jn_sum, rows > 1 ? fmt::format(" (sums over its {} rows)", rows) : std::string());
@@ -892,20 +906,20 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
   }
   // 5. Friction.
   {
-    ValidationResult r = row("friction", "rows outside the cone or raising the tangential speed",
+    ValidationResult r = row("friction", "contacts outside the cone or rows raising the tangential speed",
                              "friction_cone_solver_rel,friction_cone_abs,friction_speed");
     r.measured = double(s.cone.failures + s.dissipation.failures);
     r.pass = r.measured == 0;
     r.applicable = s.cone.checks > 0;
     if (s.cone.failures) {
-      r.detail = s.cone.first + fmt::format(" ({} of {} rows outside the cone)", s.cone.failures, s.cone.checks);
+      r.detail = s.cone.first + fmt::format(" ({} of {} contacts outside the cone)", s.cone.failures, s.cone.checks);
     } else if (s.dissipation.failures) {
       r.detail = s.dissipation.first + fmt::format(" ({} of {} rows raise the tangential speed)",
                                                    s.dissipation.failures, s.dissipation.checks);
     } else if (!r.applicable) {
       r.detail = "no contact rows";
     } else {
-      r.detail = fmt::format("{} rows in the cone (worst {:.3g} kg m/s inside); dissipation on {} rows (worst rise "
+      r.detail = fmt::format("{} contacts in the cone (worst {:.3g} kg m/s inside); dissipation on {} rows (worst rise "
                              "{:.3g} m/s); {} rows judged on the cone only (the pair is not its bodies' only one, or "
                              "no states)",
                              s.cone.checks, -s.cone.worst_or(0.0), s.dissipation.checks, s.dissipation.worst_or(0.0),
