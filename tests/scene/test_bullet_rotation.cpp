@@ -310,7 +310,7 @@ TEST(BulletRotation, TraceVersion2HasEveryDataset) {
     EXPECT_EQ(attr_string(f, "contact_geometry"), "shape");
     EXPECT_NEAR(attr_number(f, "mu"), 0.5, 1e-6);
     EXPECT_NEAR(attr_number(f, "restitution"), 0.2, 1e-6);
-    EXPECT_NEAR(attr_number(f, "contact_margin"), 0.022, 1e-6);  // 0.02 + 2 x 1 mm hull margin
+    EXPECT_NEAR(attr_number(f, "contact_margin"), 0.023, 1e-6);  // 0.02 + 2 x 1 mm hull margin + 1 mm float32
     EXPECT_EQ(attr_number(f, "broadphase_exact"), 0.0);
     EXPECT_EQ(dims_of(f, "/states/position"), (std::vector<hsize_t>{F + 1, N, 3}));
     EXPECT_EQ(dims_of(f, "/states/velocity"), (std::vector<hsize_t>{F + 1, N, 3}));
