@@ -109,7 +109,7 @@ FrameValidators::FrameValidators(const Engine& engine, const ValidationOptions& 
                                  std::vector<std::unique_ptr<BroadPhase>> broadphases)
     : FrameValidators(engine.model(), options, std::move(broadphases),
                       Source{fmt::format("engine {} ({})", engine.name(), engine.broadphase_name()), true,
-                             false}) {}
+                             false, nullptr}) {}
 
 FrameValidators::FrameValidators(const Model& model, const ValidationOptions& options,
                                  std::vector<std::unique_ptr<BroadPhase>> broadphases, Source source)

@@ -391,10 +391,10 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
         const Pair q = !missing.empty() ? missing.front() : extra.front();
         // Pairs whose boxes only touch (zero overlap on an axis) are pairs under the
         // inclusive rule of Eq. 6; an engine with a strict test misses exactly those.
-        const bool all_touch = !missing.empty() && std::all_of(missing.begin(), missing.end(), [&](Pair m) {
+        const bool all_touch = !missing.empty() && std::all_of(missing.begin(), missing.end(), [&](Pair mp) {
           for (int k = 0; k < 3; ++k)
-            if (std::min(rec.aabbs[m.a].max[k], rec.aabbs[m.b].max[k]) ==
-                std::max(rec.aabbs[m.a].min[k], rec.aabbs[m.b].min[k]))
+            if (std::min(rec.aabbs[mp.a].max[k], rec.aabbs[mp.b].max[k]) ==
+                std::max(rec.aabbs[mp.a].min[k], rec.aabbs[mp.b].min[k]))
               return true;
           return false;
         });
