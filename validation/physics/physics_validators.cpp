@@ -172,9 +172,9 @@ struct PhysicsValidators::Impl {
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
   double speculative_worst = 0;
   std::uint64_t dissipation_cone_only = 0, groups = 0, groups_rotating = 0, state_frames = 0, groups_clamped = 0;
-  double pen_max = 0;
-  std::string pen_what;
-  bool pen_upper = false;
+  double pen_max = 0, pen_upper_max = 0;
+  std::string pen_what, pen_upper_what;
+  std::uint64_t pen_upper_over = 0;
   std::uint64_t pen_pairs = 0;
   std::int64_t last_frame = 0;
 
@@ -507,11 +507,21 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     for (auto& [k, t] : truth) {
       if (!t.have || !t.g.penetrating) continue;
       ++pen_pairs;
+      // A non-convex pair's depth is an upper bound (the least separating translation
+      // over 8 directions): it cannot prove a penetration beyond the bound, so it is a
+      // figure; exact depths (boxes, convex shapes) are judged.
+      if (t.g.depth_upper_bound) {
+        if (t.g.depth > pen_upper_max) {
+          pen_upper_max = t.g.depth;
+          pen_upper_what = fmt::format("frame {}: pair ({}, {}) {:.4g} m", frame, k.first, k.second, t.g.depth);
+        }
+        if (t.g.depth > tol.penetration_slops * bodies.slop) ++pen_upper_over;
+        continue;
+      }
       if (t.g.depth > pen_max) {
         pen_max = t.g.depth;
-        pen_upper = t.g.depth_upper_bound;
-        pen_what = fmt::format("frame {}: pair ({}, {}) penetrates by {:.4g} m{}", frame, k.first, k.second,
-                               t.g.depth, t.g.depth_upper_bound ? " (upper bound: non-convex mesh)" : "");
+        pen_what = fmt::format("frame {}: pair ({}, {}) penetrates by {:.4g} m", frame, k.first, k.second,
+                               t.g.depth);
       }
     }
   }
@@ -896,11 +906,13 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail = fmt::format("no penetrating pair on the checked frames from frame {} on",
                              s.tol.penetration_settle_frames);
     } else {
-      r.detail = s.pen_what + fmt::format(" (largest of {} penetrating pair-frames; bound {} x slop {} m){}",
-                                          s.pen_pairs, s.tol.penetration_slops, s.bodies.slop,
-                                          s.pen_upper ? "; non-convex mesh depth: the least separating translation "
-                                                        "over 8 directions, an upper bound"
-                                                      : "");
+      r.detail = (s.pen_what.empty() ? std::string("no exact depth (convex shapes)") : s.pen_what) +
+                 fmt::format(" (largest of {} penetrating pair-frames; bound {} x slop {} m)", s.pen_pairs,
+                             s.tol.penetration_slops, s.bodies.slop);
+      if (s.pen_upper_max > 0)
+        r.detail += fmt::format("; non-convex meshes, upper bounds only (the least separating translation over 8 "
+                                "directions: a figure, not judged): largest {}, {} pair-frames above the bound",
+                                s.pen_upper_what, s.pen_upper_over);
     }
     out.push_back(r);
   }
