@@ -453,9 +453,11 @@ TEST_F(Untrusted, AFullDiskLeavesNoRowThatWasNotWrittenInFull) {
 
 namespace {
 
-/// An external trace of `n` boxes of half side 0.1 on a line 1 m apart (none touch),
-/// `frames` frames at rest: world AABBs only.
-void write_line_trace(const std::string& path, hsize_t n, hsize_t frames) {
+/// An external trace of `n` boxes of half side 0.1 m, `frames` frames at rest, world AABBs
+/// only. Centres are 0.15 m apart, so every neighbour penetrates by 5 cm: on a line
+/// (`grid` false) each box overlaps 2 neighbours; in a cubic grid (`grid` true) it overlaps
+/// 26, so a frame holds about 13 n penetrating pairs for FCL to judge.
+void write_line_trace(const std::string& path, hsize_t n, hsize_t frames, bool grid = false) {
   const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
   const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
   H5Pset_create_intermediate_group(lcpl, 1);
@@ -482,11 +484,19 @@ void write_line_trace(const std::string& path, hsize_t n, hsize_t frames) {
   std::vector<float> lo(n * 3, -0.1f), hi(n * 3, 0.1f), w(n, 1.0f), amin, amax;
   amin.reserve(frames * n * 3);
   amax.reserve(frames * n * 3);
+  hsize_t side = 1;
+  while (side * side * side < n) ++side;
   for (hsize_t fr = 0; fr < frames; ++fr)
     for (hsize_t i = 0; i < n; ++i)
       for (int k = 0; k < 3; ++k) {
-        // 0.15 m apart: every neighbour penetrates by 5 cm (seconds of FCL work a frame).
-        const float c = k == 0 ? 0.15f * (static_cast<float>(i) - 0.5f * static_cast<float>(n)) : 0.0f;
+        hsize_t cell = i;  // k = 0 on a line; the k-th grid coordinate in a grid
+        if (grid) {
+          for (int d = 0; d < k; ++d) cell /= side;
+          cell %= side;
+        } else if (k != 0) {
+          cell = 0;
+        }
+        const float c = 0.15f * static_cast<float>(cell);
         amin.push_back(c - 0.1f);
         amax.push_back(c + 0.1f);
       }
@@ -513,15 +523,20 @@ TEST_F(Untrusted, TooManyBodiesToJudgeIsRefusedUpFront) {
 }
 
 // Before: validate --trace-in ignored SIGINT and SIGTERM (no loop polled the flag).
+// The trace is a cubic grid of 20,000 penetrating boxes, about 260,000 pairs a frame for
+// FCL, 60 frames: about 20 s of checks on the 2-core development VM, so the signal sent
+// after 1 s lands inside a check on any machine up to 20 times faster (a line of boxes,
+// 20,000 pairs a frame, finished within that second on a fast CI machine).
 TEST_F(Untrusted, SigtermEndsValidateTraceInAtOnce) {
   const std::string p = (dir_ / "long.h5").string();
-  write_line_trace(p, octocd::trace_limits::kMaxJudgedBodies, 40);  // seconds of FCL work a frame
+  write_line_trace(p, octocd::trace_limits::kMaxJudgedBodies, 60, /*grid=*/true);
   const Result r = run("sh -c '" + bin() + " validate --trace-in " + p +
                        " & pid=$!; sleep 1; kill -TERM $pid; wait $pid; echo rc=$?'");
   EXPECT_NE(r.output.find("rc=143"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("octocd: stopped by SIGTERM while checking the trace; nothing was written"),
             std::string::npos)
       << r.output;
+  EXPECT_EQ(r.output.find("VALIDATION"), std::string::npos) << "the checks ran to the end: " << r.output;
 }
 
 // Before: `bench -o` left o.json.tmp.PID behind on a full disk and named no errno. A file
