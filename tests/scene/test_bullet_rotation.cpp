@@ -465,3 +465,41 @@ TEST(BulletRotation, TranslationOnlyModeUnchanged) {
   EXPECT_TRUE(bw.state().q.empty());
   EXPECT_TRUE(bw.record().contacts.empty());
 }
+
+// Stock Bullet leaves friction on rows whose normal impulse fell to 0 (it solves a friction
+// row only while its contact's normal impulse is positive): outside the Coulomb cone.
+// BulletOptions::coulomb_friction (the default) brings those rows back to 0. Oracle: the
+// cone itself, per contact (a pair's rows summed, as the physics tier judges it).
+TEST(BulletRotation, FrictionStaysInTheConeOnlyWithTheProjection) {
+  const Scene scene = load_scene(scene_path("rot-drop-220"));
+  const auto model = build_model(scene);
+  const double mu = scene.response.mu_kinetic;
+  auto outside_cone = [&](bool project, std::int64_t* projections) {
+    BulletOptions options;
+    options.coulomb_friction = project;
+    BulletWorld bw(model, model->initial, options);
+    bw.set_recording(true);
+    int outside = 0;
+    for (int f = 1; f <= 200; ++f) {
+      bw.step();
+      const std::vector<ContactRecord>& c = bw.record().contacts;
+      for (std::size_t k0 = 0, k1 = 0; k0 < c.size(); k0 = k1) {
+        double jt = 0.0, jn = 0.0;
+        for (k1 = k0; k1 < c.size() && c[k1].pair == c[k0].pair; ++k1) {
+          jt += std::fabs(double(c[k1].jt));
+          jn += double(c[k1].jn);
+        }
+        if (jt > mu * jn * (1.0 + 1e-4) + 1e-7) ++outside;
+      }
+    }
+    *projections = bw.friction_projections();
+    return outside;
+  };
+  std::int64_t stock_projections = -1, projections = -1;
+  const int stock = outside_cone(false, &stock_projections);
+  const int projected = outside_cone(true, &projections);
+  EXPECT_GT(stock, 0) << "stock Bullet kept no stale friction in 200 frames (the fault this guards against)";
+  EXPECT_EQ(stock_projections, 0);
+  EXPECT_EQ(projected, 0);
+  EXPECT_GT(projections, 0);
+}

@@ -538,6 +538,34 @@ TEST(PhysicsRows, FrictionRaisingTangentialSpeed) {
   expect_caught(judge(*model, c.rec, rotating_engine()), "friction", {"frame 12", "pair (2, 3) row 0", "tangential speed"});
 }
 
+// Rotating records judge the work of the friction impulse, not |v_t|: A slides along +z
+// relative to B; a friction row along -z (opposing the sliding along its own direction)
+// leaves the point sliding slower along z, while A's spin (here planted directly) moves
+// the point along y, so |v_t| rises beyond the speed with the normal impulse alone, which
+// a sequential-impulse solver's one-direction friction row can do through the bodies'
+// rotation; friction did no positive work, so the row passes. The same impulse along +z (pushing the sliding) fails.
+TEST(PhysicsRows, FrictionIsJudgedOnItsWorkOnRotatingBodies) {
+  const auto model = build_model(four_bodies("[0, 0, 0]"));
+  for (const double sign : {-1.0, 1.0}) {
+    Collision c = off_centre_collision(*model, 0.0);
+    c.rec.v_pre[2].z = 0.3f;
+    c.rec.v_post[2].z = float(0.3 + sign * 0.1);  // friction impulse 0.1 kg m/s on A (1 kg) along sign z
+    c.rec.v_post[3].z = float(-sign * 0.1 / 2.0);  // and its reaction on B (2 kg)
+    // 5 rad/s more about z moves A's point (r_x = 0.0995 m) by 0.5 m/s along y.
+    c.rec.w_post[2].z += 5.0f;
+    c.rec.contacts[0].jt = float(-sign * 0.1);
+    const auto rs = judge(*model, c.rec, rotating_engine());
+    const ValidationResult& f = row_of(rs, "friction");
+    if (sign < 0) {
+      EXPECT_TRUE(f.pass) << f.detail;
+      EXPECT_NE(f.detail.find("dissipation on 1 rows"), std::string::npos) << f.detail;  // judged, not skipped
+    } else {
+      EXPECT_FALSE(f.pass) << f.detail;
+      EXPECT_NE(f.detail.find("pushes the contact point along its sliding"), std::string::npos) << f.detail;
+    }
+  }
+}
+
 TEST(PhysicsRows, BadBodiesAreInputErrors) {
   const auto model = build_model(four_bodies());
   PhysicsBodies b = rotating_engine();

@@ -83,16 +83,33 @@ namespace octocd {
 ///   pair (the dispatcher's relative threshold, 0.02 x a body's angular motion disc, is
 ///   off), so the contact margin is one number: 0.02 m + twice the largest hull margin
 ///   (rotation_traits().contact_margin);
+/// - solver: after the last iteration, friction rows of contacts whose normal impulse ends
+///   at 0 are brought back to 0 (BulletOptions::coulomb_friction, on by default), so the
+///   recorded manifolds obey the Coulomb cone that the physics tier judges;
 /// - recording (can_record() true): the FrameRecord of every step, see record();
 /// - kinetic_energy adds the rotational energy 0.5 w . (I w) of every dynamic body.
 /// Materials per body as without rotation (sqrt(mu_k), sqrt(e) on every body; Bullet
 /// multiplies them: friction_combine = restitution_combine = "product").
+/// Options of BulletWorld beyond the scene.
+struct BulletOptions {
+  /// Rotation mode only: after the sequential-impulse solver's last iteration, bring every
+  /// friction row whose contact ends with a normal impulse of 0 back to 0 (the bodies get
+  /// the opposite impulse), so every recorded contact lies in its Coulomb cone. Stock
+  /// Bullet solves a friction row only while its contact's normal impulse is positive and
+  /// otherwise keeps the friction of an earlier iteration or of the warm start: a
+  /// tangential impulse without a normal one (rot-drop-220: 16 of 4914 contacts; the
+  /// physics tier's friction row fails it). false: stock Bullet (tests show the physics
+  /// tier catches it). Without rotation the solver is always stock Bullet.
+  bool coulomb_friction = true;
+};
+
 class BulletWorld : public Engine {
  public:
   /// The scene, shapes and bodies of `world` (its model, shared) and its current state.
   explicit BulletWorld(const World& world);
   /// From a model (shared, not copied) and the state to start from (x, v, w per body).
-  BulletWorld(std::shared_ptr<const Model> model, const BodyState& initial);
+  BulletWorld(std::shared_ptr<const Model> model, const BodyState& initial,
+              const BulletOptions& options = BulletOptions());
   ~BulletWorld();
   BulletWorld(const BulletWorld&) = delete;
   BulletWorld& operator=(const BulletWorld&) = delete;
@@ -138,6 +155,9 @@ class BulletWorld : public Engine {
   const std::vector<ContactRecord>& contacts() const override;
   /// True in rotation mode.
   bool rotating() const;
+  /// Friction rows brought back to the Coulomb cone so far (BulletOptions::
+  /// coulomb_friction; 0 without rotation or with stock Bullet).
+  std::int64_t friction_projections() const;
   /// In rotation mode: Bullet's local inertia, the per-body materials (product rule), the
   /// contact margin (0.02 m breaking threshold + twice the largest hull margin),
   /// detection "pre-step", a conservative broadphase, contacts on the shapes. nullptr
