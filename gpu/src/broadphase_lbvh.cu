@@ -99,6 +99,7 @@ __global__ void lbvh_refit_kernel(LbvhDesc d) {
   while (p != kLbvhNone) {
     __threadfence();  // this thread's box writes before its arrival is counted
     if (atomicAdd(d.flag + p, 1u) == 0u) return;  // the sibling's subtree is not done yet
+    __threadfence();  // the sibling's box (written before its own fence and arrival) is read after
     const LbvhNode node = d.nodes[p];
     d.node_box[p] = lbvh_union(child_box(d, node.left), child_box(d, node.right));
     p = d.node_parent[p];
