@@ -1,5 +1,6 @@
 // GPU broadphase scaling (issue 8 item 2): the device broadphases behind the seam
-// gpu/src/device_broadphase.hpp (`octree`, `octree-strict`, `spatial-hash`), and the
+// gpu/src/device_broadphase.hpp (`octree`, `octree-strict`, `spatial-hash`, and `lbvh`, a
+// Karras 2012 linear BVH: the field's standard GPU baseline measured in the same process), and the
 // engine's device `flat` at the smallest sizes as the oracle, on identical AABB sets of
 // 10^4 .. 4x10^6 boxes in one process.
 //
@@ -29,7 +30,7 @@
 // pairs, exact AABB tests, device bytes; the machine; issue 8's targets met or not.
 //
 // Usage: bench_gpu_broadphase [--sizes 1e4,1e5,1e6,4e6] [--reps 20] [--warmup 3]
-//          [--only octree,octree-strict,spatial-hash] [--cell-size 0.24] [--depth -1]
+//          [--only octree,octree-strict,spatial-hash,lbvh] [--cell-size 0.24] [--depth -1]
 //          [--seed 1] [--flat-max 10000] [--oracle-max 4000000] [--graph] [--json FILE]
 // --graph times one CUDA graph launch of find() + sort (captured once; the engine replays
 // its step from a graph) instead of the launches on the stream.
@@ -271,7 +272,7 @@ class DeviceFlat final : public DeviceBroadPhase {
 
 struct Options {
   std::vector<std::uint32_t> sizes{10000, 100000, 1000000, 4000000};
-  std::vector<std::string> broadphases{"octree", "octree-strict", "spatial-hash"};
+  std::vector<std::string> broadphases{"octree", "octree-strict", "spatial-hash", "lbvh"};
   int reps = 20;
   int warmup = 3;
   float cell_size = 0.24f;
@@ -581,7 +582,36 @@ std::vector<Target> evaluate_targets(const std::vector<Result>& rs, const Option
     t.json["met"] = t.met ? Json(*t.met) : Json(nullptr);
     ts.push_back(t);
   }
-  // 3. growth of the time per body, per broadphase: every measured step between 10^5 and
+  // 3. `octree` ahead of the measured GPU LBVH (`lbvh`) at every size both ran (issue 20).
+  {
+    Target t{"`octree` faster than `lbvh` (Karras 2012 LBVH, same process) at every size",
+             "not measured (octree or lbvh missing)", std::nullopt, {}};
+    Json sizes = Json::array();
+    bool all_faster = true;
+    std::string worst;
+    double worst_ratio = 0.0;
+    for (std::uint32_t n : o.sizes) {
+      const Result* oct = find_result(rs, "octree", n);
+      const Result* lbvh = find_result(rs, "lbvh", n);
+      if (!oct || !lbvh) continue;
+      const double ratio = oct->median_ms / lbvh->median_ms;
+      all_faster = all_faster && ratio < 1.0;
+      if (ratio > worst_ratio) {
+        worst_ratio = ratio;
+        worst = fmt::format("n = {}: octree {:.3f} ms vs lbvh {:.3f} ms", size_label(n), oct->median_ms,
+                            lbvh->median_ms);
+      }
+      sizes.push_back({{"n", n}, {"octree_ms", oct->median_ms}, {"lbvh_ms", lbvh->median_ms}, {"ratio", ratio}});
+    }
+    if (!sizes.empty()) {
+      t.met = all_faster;
+      t.value = fmt::format("{} sizes; closest {} ({:.2f}x the lbvh time)", sizes.size(), worst, worst_ratio);
+      t.json = {{"sizes", sizes}, {"worst_ratio", worst_ratio}};
+    }
+    t.json["met"] = t.met ? Json(*t.met) : Json(nullptr);
+    ts.push_back(t);
+  }
+  // 4. growth of the time per body, per broadphase: every measured step between 10^5 and
   // 4x10^6 (the largest step ratio), and over the whole span.
   for (const std::string& bp : o.broadphases) {
     Target t{fmt::format("`{}`: time per body grows <= 1.2x per doubling, 10^5 .. 4x10^6", bp),
@@ -661,7 +691,8 @@ void print_markdown(std::ostream& os, const Machine& m, const Options& o, const 
   for (const Target& t : ts) os << fmt::format("| {} | {} | {} |\n", t.name, t.value, yes_no(t.met));
   os << fmt::format(
       "\nReference: a GPU LBVH (Karras 2012 style, build + self-query, unsorted pairs) takes about {} ms at 10^6 "
-      "boxes on an H100 (published figure, not measured here).",
+      "boxes on an H100 (published figure, not measured here); `lbvh` in the table is such an LBVH measured in "
+      "this process, on the same boxes, with the sort of its pairs.",
       kLbvhReferenceMs);
   std::vector<std::string> at6;
   for (const std::string& bp : o.broadphases)
@@ -913,12 +944,13 @@ int run(const Options& o) {
 int main(int argc, char** argv) {
   Options o;
   std::string sizes = "10000,100000,1000000,4000000";
-  std::string only = "octree,octree-strict,spatial-hash";
+  std::string only = "octree,octree-strict,spatial-hash,lbvh";
   CLI::App app{"GPU broadphase scaling: the device broadphases on identical random box sets (issue 8)",
                "bench_gpu_broadphase"};
   app.add_option("--sizes", sizes, "body counts, comma separated (1e5 and 4e6 are accepted)")
       ->capture_default_str();
-  app.add_option("--only", only, "device broadphases: octree, octree-strict, spatial-hash")->capture_default_str();
+  app.add_option("--only", only, "device broadphases: octree, octree-strict, spatial-hash, lbvh")
+      ->capture_default_str();
   app.add_option("--reps", o.reps, "timed repetitions per broadphase and size")
       ->capture_default_str()
       ->check(CLI::Range(1, 100000));
@@ -942,9 +974,9 @@ int main(int argc, char** argv) {
     o.broadphases = split_names(only);
     if (o.broadphases.empty()) throw octocd::InputError("--only: no broadphase given");
     for (const std::string& b : o.broadphases)
-      if (b != "octree" && b != "octree-strict" && b != "spatial-hash")
+      if (b != "octree" && b != "octree-strict" && b != "spatial-hash" && b != "lbvh")
         throw octocd::InputError(fmt::format(
-            "--only: '{}' is not a device broadphase behind the seam (octree, octree-strict, spatial-hash; "
+            "--only: '{}' is not a device broadphase behind the seam (octree, octree-strict, spatial-hash, lbvh; "
             "`flat` runs by itself up to --flat-max)",
             b));
     if (!(o.cell_size > 0.0f) || !std::isfinite(o.cell_size))

@@ -279,9 +279,18 @@ void check_overrides(const octocd::Scene& scene, const std::string& engine, cons
     return;  // the scene's broadphase and midphase are not used by Bullet
   }
   const std::vector<std::string> names = octocd::all_broadphase_names();
-  if (std::find(names.begin(), names.end(), scene.broadphase.name) == names.end()) {
+  const std::vector<std::string> cuda_only = octocd::cuda_only_broadphase_names();
+  const bool device_only =
+      std::find(cuda_only.begin(), cuda_only.end(), scene.broadphase.name) != cuda_only.end();
+  if (device_only && engine != "cuda")
+    throw octocd::InputError(fmt::format("{}: broadphase '{}' exists on the device only; allowed: --engine cuda "
+                                         "with it, or another broadphase",
+                                         broadphase.empty() ? file + ": broadphase.name" : "--broadphase",
+                                         scene.broadphase.name));
+  if (!device_only && std::find(names.begin(), names.end(), scene.broadphase.name) == names.end()) {
     std::string list;
     for (const auto& nm : names) list += (list.empty() ? "" : ", ") + nm;
+    for (const auto& nm : cuda_only) list += ", " + nm + " (--engine cuda)";
     if (!broadphase.empty())
       throw octocd::InputError(
           fmt::format("--broadphase: unknown broadphase '{}'; allowed: {}", scene.broadphase.name, list));
@@ -718,7 +727,8 @@ int main(int argc, char** argv) {
       ->default_val("cpu");
   std::string bp_help = "Broadphase, overrides the scene's broadphase.name:";
   for (const auto& name : octocd::all_broadphase_names()) bp_help += " " + name;
-  bp_help += " (with --engine bullet: bullet-dbvt only)";
+  for (const auto& name : octocd::cuda_only_broadphase_names()) bp_help += " " + name;
+  bp_help += " (with --engine bullet: bullet-dbvt only; lbvh, a Karras 2012 linear BVH: with --engine cuda only)";
   run_cmd->add_option("--broadphase", run.broadphase, bp_help);
   run_cmd->add_option("--midphase", run.midphase,
                       "Midphase levels, overrides the scene's midphase.levels: aabb-only | 2 | 1,2 | "

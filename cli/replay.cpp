@@ -360,7 +360,8 @@ CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o) {
       "they return the same pairs and the recorded counts, and time them. Exit 0 all agree, 3 one differs, 2 bad input");
   c->add_option("trace", o.trace, "Trace (.h5) of `octocd run --trace` (needs /bodies and /states)")->required();
   std::string names;
-  for (const auto& n : all_broadphase_names()) names += (names.empty() ? "" : ", ") + n;
+  for (const auto& n : any_engine_broadphase_names()) names += (names.empty() ? "" : ", ") + n;
+  names += " (lbvh: --engine cuda only)";
   c->add_option("--broadphase", o.broadphases,
                 "Comma-separated broadphases; the first is the reference the others must equal. Names: " + names)
       ->required();
@@ -388,7 +389,7 @@ CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o) {
 int replay_command(const ReplayOptions& o) {
   const std::vector<std::string> bps = split_list(o.broadphases);
   if (bps.empty()) throw InputError("--broadphase: empty; allowed: a comma-separated list of broadphase names");
-  const auto known = all_broadphase_names();
+  const auto known = any_engine_broadphase_names();
   for (const auto& b : bps)
     if (std::find(known.begin(), known.end(), b) == known.end()) {
       std::string names;

@@ -43,6 +43,12 @@ const std::vector<std::string>& engine_names() {
   return names;
 }
 
+std::vector<std::string> any_engine_broadphase_names() {
+  std::vector<std::string> names = all_broadphase_names();
+  for (const std::string& n : cuda_only_broadphase_names()) names.push_back(n);
+  return names;
+}
+
 nlohmann::json spread(const std::vector<double>& values) {
   nlohmann::json j;
   j["n"] = values.size();

@@ -32,6 +32,10 @@ std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_p
 /// Engine names make_engine accepts, in a stable order: cpu, cuda, bullet.
 const std::vector<std::string>& engine_names();
 
+/// Every broadphase name of some engine, in a stable order: all_broadphase_names() (cpu;
+/// cuda has those of make_broadphase) then cuda_only_broadphase_names() (lbvh).
+std::vector<std::string> any_engine_broadphase_names();
+
 /// Median, minimum, maximum, mean and sample standard deviation of repeated measurements,
 /// as stored in bench results: {"median", "min", "max", "mean", "stdev", "n", "values"}.
 /// An empty `values` gives n = 0 and no other keys.

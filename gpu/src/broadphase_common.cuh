@@ -1,15 +1,17 @@
 #pragma once
 // Device helpers shared by the device broadphases (broadphase_flat.cu, and behind
-// DeviceBroadPhase broadphase_octree.cu, broadphase_strict.cu, broadphase_hash.cu): the pair key, a binary search on sorted
-// 64-bit keys, the per-block sum of the exact-test counter, and a warp's ordered writer
-// into PairOutput::keys (count pass: counts only; fill pass: writes where the index is
-// below the capacity). CUDA only (nvcc).
+// DeviceBroadPhase broadphase_octree.cu, broadphase_strict.cu, broadphase_hash.cu,
+// broadphase_lbvh.cu): the pair key, a binary search on sorted 64-bit keys, the
+// per-block sum of the exact-test counter, a warp's ordered writer into PairOutput::keys
+// (count pass: counts only; fill pass: writes where the index is below the capacity),
+// and an unordered appender (one atomic per group of threads). CUDA only (nvcc).
 #include <algorithm>
 #include <cstdint>
 #include <initializer_list>
 #include <string>
 #include <vector>
 
+#include <cooperative_groups.h>
 #include <cub/block/block_reduce.cuh>
 
 #include "device_broadphase.hpp"
@@ -75,6 +77,18 @@ struct WarpWriter {
     written += static_cast<std::uint32_t>(__popc(ballot));
   }
 };
+
+/// Appends `key` to out.keys at the next free index of *out.total, written only when that
+/// index is below out.capacity (PairOutput's contract: the total still counts it): one
+/// atomicAdd per group of threads that reach the call together (their order varies from
+/// run to run; the set does not).
+__device__ inline void append_key(const PairOutput& out, unsigned long long key) {
+  const cooperative_groups::coalesced_group g = cooperative_groups::coalesced_threads();
+  std::uint32_t base = 0;
+  if (g.thread_rank() == 0) base = atomicAdd(out.total, static_cast<std::uint32_t>(g.size()));
+  const std::uint32_t idx = g.shfl(base, 0) + static_cast<std::uint32_t>(g.thread_rank());
+  if (idx < out.capacity) out.keys[idx] = key;
+}
 
 /// Blocks of kBlockSize threads for one warp per item (at least 1).
 inline unsigned warp_grid_for(std::size_t items) { return grid_for(items * kWarpSize); }

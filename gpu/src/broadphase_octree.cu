@@ -42,6 +42,7 @@
 #include "device_buffer.hpp"
 #include "device_footprint.hpp"
 #include "kernels.hpp"
+#include "octocd/cuda_world.hpp"
 
 namespace octocd {
 namespace gpu {
@@ -543,14 +544,16 @@ std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfi
 }
 
 std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain) {
+  if (config.name == "lbvh") return make_device_lbvh(domain);  // device only, no parameter
   // The parameter checks of make_broadphase (throws InputError naming the field).
   (void)make_broadphase(config, domain);
   if (config.name == "octree") return make_device_loose_octree(config, domain);
   if (config.name == "octree-strict") return make_device_strict_octree(config, domain);
   if (config.name == "spatial-hash") return make_device_spatial_hash(config);
-  throw InputError(fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: "
-                               "flat, octree, octree-strict, spatial-hash",
-                               config.name));
+  std::string names;
+  for (const std::string& nm : cuda_broadphase_names()) names += (names.empty() ? "" : ", ") + nm;
+  throw InputError(
+      fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: {}", config.name, names));
 }
 
 }  // namespace gpu

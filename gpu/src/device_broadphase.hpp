@@ -1,8 +1,9 @@
 #pragma once
 /// \file device_broadphase.hpp
 /// The seam between the CUDA engine's step (cuda_world.cpp) and its device broadphases
-/// (SPEC 5.1 on the GPU): `octree` (loose), `octree-strict`, `spatial-hash`; `flat` stays
-/// inside cuda_world.cpp as the device oracle.
+/// (SPEC 5.1 on the GPU): `octree` (loose), `octree-strict`, `spatial-hash`, and `lbvh`
+/// (a Karras 2012 linear BVH: the field's standard GPU baseline, on the device only);
+/// `flat` stays inside cuda_world.cpp as the device oracle.
 ///
 /// Contract of DeviceBroadPhase::find:
 /// - input: n world AABBs on the device (m), the same array the CPU broadphase gets;
@@ -68,8 +69,8 @@ class DeviceBroadPhase {
 
 /// The device broadphase named config.name over the scene's `domain` (m): `octree`,
 /// `octree-strict` or `spatial-hash`, with the parameters of BroadPhaseConfig (checked as
-/// make_broadphase checks them). Throws InputError for any other name, naming
-/// `broadphase.name` and the names the device has.
+/// make_broadphase checks them), or `lbvh` (no parameter). Throws InputError for any other
+/// name, naming `broadphase.name` and the names the device has (cuda_broadphase_names).
 std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain);
 
 /// `octree` (SPEC 5.1, Ulrich's loose octree, cell math of loose_octree.hpp), depth
@@ -82,6 +83,11 @@ std::unique_ptr<DeviceBroadPhase> make_device_strict_octree(const BroadPhaseConf
 /// `spatial-hash` (paper section 4.2; SPEC 5.1, as core/src/broadphase_spatial_hash.cpp),
 /// cell size config.cell_size. broadphase_hash.cu.
 std::unique_ptr<DeviceBroadPhase> make_device_spatial_hash(const BroadPhaseConfig& config);
+/// `lbvh`: a linear BVH (Karras 2012) rebuilt on every find() from a CUB radix sort of the
+/// bodies' Morton codes (the centres' level-10 cells in the loose octree's root cube of
+/// `domain`, m; they shape the tree only), boxes refitted bottom-up, one stack traversal
+/// per body (lbvh.hpp). Device only: the CPU has no `lbvh`. broadphase_lbvh.cu.
+std::unique_ptr<DeviceBroadPhase> make_device_lbvh(const Aabb& domain);
 
 }  // namespace gpu
 }  // namespace octocd

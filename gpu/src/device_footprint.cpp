@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -64,9 +65,17 @@ std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
            2 * buf(entries, sizeof(std::uint64_t)) + 2 * buf(entries, sizeof(std::uint32_t)) +
            2 * buf(counts, sizeof(std::uint32_t)) + buf(temp, 1);
   }
-  throw InputError(fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: "
-                               "flat, octree, octree-strict, spatial-hash",
-                               cfg.name));
+  if (cfg.name == "lbvh") {  // LbvhDevice::reserve (broadphase_lbvh.cu)
+    const std::uint64_t inner = n;  // n - 1 internal nodes, sized n
+    // Per body: code, index, sorted code, slot body, leaf parent; the slot boxes. Per
+    // internal node: the node, its box, its parent and refit flag.
+    return 5 * buf(n, sizeof(std::uint32_t)) + buf(n, sizeof(Aabb)) + buf(inner, kLbvhNodeBytes) + buf(inner, sizeof(Aabb)) +
+           2 * buf(inner, sizeof(std::uint32_t)) + buf(std::max(cub_sort_temp_bound(n, 4, 4), std::uint64_t{1}), 1);
+  }
+  std::string names;
+  for (const std::string& nm : cuda_broadphase_names()) names += (names.empty() ? "" : ", ") + nm;
+  throw InputError(
+      fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: {}", cfg.name, names));
 }
 
 std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const ShapeCounts& sc) {
@@ -100,6 +109,10 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
 }
 
 }  // namespace
+
+std::vector<std::string> cuda_broadphase_names() { return {"flat", "octree", "octree-strict", "spatial-hash", "lbvh"}; }
+
+std::vector<std::string> cuda_only_broadphase_names() { return {"lbvh"}; }
 
 std::uint64_t cuda_device_bytes_needed(std::uint64_t bodies, const BroadPhaseConfig& broadphase) {
   return engine_bytes(bodies, broadphase, ShapeCounts{});

@@ -38,6 +38,8 @@ constexpr std::uint64_t loose_cell_table_entries(std::uint64_t n) {
 constexpr std::uint64_t kLooseQBoxBytes = 12;
 /// Entries of the loose octree's level table: levels 0 .. kLooseMaxDepth, overflow, NaN.
 constexpr std::uint32_t kLooseLevelTable = kLooseMaxDepth + 3;
+/// sizeof(LbvhNode) (lbvh.hpp): an internal node of `lbvh`.
+constexpr std::uint64_t kLbvhNodeBytes = 12;
 /// The spatial hash's entry budget per body (E = kHashEntriesPerBody x n slots).
 constexpr std::uint32_t kHashEntriesPerBody = 8;
 

@@ -394,7 +394,7 @@ std::string construction_error(const std::shared_ptr<const Model>& model, const 
 TEST(CudaMemory, EstimateIsOneToThreeTimesTheEnginesBytesAfterTheFirstStep) {
   REQUIRE_CUDA_DEVICE();
   const auto model = load_model("boxes-uniform-100k");
-  for (const std::string bp : {"flat", "octree", "octree-strict", "spatial-hash"}) {
+  for (const std::string bp : {"flat", "octree", "octree-strict", "spatial-hash", "lbvh"}) {
     const std::uint64_t estimate = cuda_device_bytes_needed(*model, bp);
     CudaWorld gpu(model, bp);
     const FrameMetrics m = gpu.step();
@@ -660,7 +660,8 @@ TEST_P(CudaRerun, RerunAndCapacityOneGiveTheSameBits) {
 
 // The device's loose octree (`octree`) finds exactly the `flat` pair set, so the states
 // equal those of the CPU engine with its own `octree` and of the device's `flat`; an
-// octree engine whose buffers start at capacity 1 agrees too.
+// octree engine whose buffers start at capacity 1 agrees too, and so do the device's
+// `octree-strict`, `spatial-hash` and `lbvh` (the last also from capacity 1).
 TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
   REQUIRE_CUDA_DEVICE();
   const std::string name = GetParam();
@@ -676,6 +677,9 @@ TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
   tiny.reset_capacities(1);
   CudaWorld strict(model, "octree-strict");
   CudaWorld hash(model, "spatial-hash");
+  CudaWorld lbvh(model, "lbvh");
+  CudaWorld lbvh_tiny(model, "lbvh");  // the capacity-overflow rerun with `lbvh`
+  lbvh_tiny.reset_capacities(1);
   std::uint64_t pairs_seen = 0;
   for (int f = 1; f <= frames; ++f) {
     const bool rec = f == 1 || f % 10 == 0;
@@ -695,6 +699,13 @@ TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
     const FrameMetrics mh = hash.step();
     ASSERT_EQ(strict.state_hash(), oct.state_hash()) << what << ": cuda octree-strict differs";
     ASSERT_EQ(hash.state_hash(), oct.state_hash()) << what << ": cuda spatial-hash differs";
+    const FrameMetrics ml = lbvh.step();
+    ASSERT_EQ(lbvh.state_hash(), oct.state_hash()) << what << ": cuda lbvh differs";
+    const FrameMetrics mlt = lbvh_tiny.step();
+    ASSERT_EQ(lbvh_tiny.state_hash(), oct.state_hash()) << what << ": capacity-1 cuda lbvh differs";
+    EXPECT_EQ(ml.aabb_pairs, mo.aabb_pairs) << what;
+    EXPECT_EQ(mlt.cell_candidates, ml.cell_candidates) << what;
+    EXPECT_GE(ml.cell_candidates, ml.aabb_pairs) << what << ": every pair passes an exact test";
     EXPECT_EQ(ms.aabb_pairs, mo.aabb_pairs) << what;
     EXPECT_EQ(mh.aabb_pairs, mo.aabb_pairs) << what;
     EXPECT_EQ(mo.aabb_pairs, mf.aabb_pairs) << what;

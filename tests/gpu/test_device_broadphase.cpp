@@ -1,7 +1,8 @@
 // The device broadphases behind DeviceBroadPhase (gpu/src/device_broadphase.hpp; SPEC 5.1,
 // 11) against the CPU oracle `flat`: `octree-strict` at depths 0..10 and auto,
 // `spatial-hash` at cell sizes from 1e-6 m (every body out of cell range) to 1000 m (one
-// cell), and `octree` (loose) when gpu/src/broadphase_octree.cu has make_device_loose_octree.
+// cell), `octree` (loose) when gpu/src/broadphase_octree.cu has make_device_loose_octree,
+// and `lbvh` (Karras 2012 linear BVH, broadphase_lbvh.cu).
 //
 // Oracles and properties, on every AABB set (random 1k and 10k, touching lattices with
 // faces on the octree split planes and on the hash cell faces, boxes outside the domain,
@@ -12,6 +13,8 @@
 // - `octree-strict`: the exact tests counted on the device equal the CPU octree-strict's
 //   cell_candidates (both are the pairs in related nodes, same node math);
 // - `spatial-hash`: the exact tests are at least the pairs;
+// - `lbvh`: the exact tests equal those of the same tree built and queried on the host
+//   (LbvhHostModel below: the functions of gpu/src/lbvh.hpp, one slot after another);
 // - a rerun on the same instance gives the same total, test count and key set.
 // The PairOutput contract: with capacity 0 or 1 the total is still the true count and
 // nothing is written past the capacity; a rerun with capacity = total gives the full set.
@@ -19,7 +22,9 @@
 // graph, which then runs on two different sets of boxes (same n) and gives each one's set.
 //
 // Without a usable CUDA device the device tests are SKIPPED with the reason; the error
-// paths and a check of the AABB sets themselves need no device and run everywhere.
+// paths, a check of the AABB sets themselves and the host model of `lbvh` (its tree
+// checked node by node and its pairs against `flat` on every set, a planted fault caught)
+// need no device and run everywhere.
 //
 // Environment: OCTOCD_SOURCE_DIR (scenes; default: the source tree this was built from).
 #include <gtest/gtest.h>
@@ -29,6 +34,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <memory>
@@ -42,6 +48,7 @@
 
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
+#include "lbvh.hpp"
 #include "octocd/broadphase.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engine.hpp"
@@ -217,6 +224,156 @@ const BoxSet& box_set(const std::string& name) {
   return it->second;
 }
 
+// ---- `lbvh` on the host -----------------------------------------------------------------
+
+/// The `lbvh` of gpu/src/lbvh.hpp run on the host, one slot after another, as the kernels
+/// of broadphase_lbvh.cu run it: the same tree (CUB's radix sort is stable, so the slots
+/// are in (code, body) order), the same boxes, the same query.
+struct HostLbvh {
+  std::vector<std::uint32_t> code;       ///< per slot
+  std::vector<std::uint32_t> slot_body;  ///< per slot
+  std::vector<Aabb> slot_box;            ///< per slot
+  std::vector<gpu::LbvhNode> nodes;      ///< n - 1 internal nodes
+  std::vector<Aabb> node_box;            ///< n - 1 internal boxes (refitted)
+  std::vector<Pair> pairs;               ///< found by the query, sorted
+  std::uint64_t tests = 0;               ///< the query's exact tests (leaf tests)
+  int depth = 0;                         ///< internal nodes on the longest root-to-leaf path
+  std::string broken;                    ///< "" when the tree checks out, else what is wrong
+};
+
+/// The pairs and exact tests of the query of every slot on the built tree `h`.
+void host_lbvh_query(HostLbvh& h) {
+  h.pairs.clear();
+  h.tests = 0;
+  const auto n = static_cast<std::uint32_t>(h.slot_box.size());
+  if (n < 2) return;
+  for (std::uint32_t s = 0; s < n; ++s) {
+    const Aabb box = h.slot_box[s];
+    gpu::lbvh_query(h.nodes.data(), h.node_box.data(), s, box, [&](std::uint32_t t) {
+      ++h.tests;
+      if (overlaps(box, h.slot_box[t]))
+        h.pairs.push_back({std::min(h.slot_body[s], h.slot_body[t]), std::max(h.slot_body[s], h.slot_body[t])});
+    });
+  }
+  std::sort(h.pairs.begin(), h.pairs.end());
+}
+
+std::string refit_and_check(HostLbvh& h);
+
+/// Builds the tree over `boxes` in `domain` (codes, sort, Karras nodes, the refit with
+/// arrival counters as the device does), checks it (every slot one leaf, every internal
+/// node but the root one parent, each node's range contiguous and its `last` right, each
+/// box the union of its children's, every node refitted, depth within the query stack),
+/// then queries it.
+HostLbvh host_lbvh(const std::vector<Aabb>& boxes, const Aabb& domain) {
+  HostLbvh h;
+  const auto n = static_cast<std::uint32_t>(boxes.size());
+  const LooseGrid grid = loose_grid(domain);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> order(n);
+  for (std::uint32_t i = 0; i < n; ++i) order[i] = {gpu::lbvh_code(grid, boxes[i]), i};
+  std::sort(order.begin(), order.end());
+  for (const auto& [c, b] : order) {
+    if (c >= (1u << gpu::kLbvhCodeBits)) h.broken = fmt::format("code {} of body {} has more than 30 bits", c, b);
+    h.code.push_back(c);
+    h.slot_body.push_back(b);
+    h.slot_box.push_back(boxes[b]);
+  }
+  if (n < 2) return h;
+  h.nodes.resize(n - 1);
+  for (std::uint32_t i = 0; i + 1 < n; ++i) h.nodes[i] = gpu::lbvh_internal(h.code.data(), n, i);
+  if (h.broken.empty()) h.broken = refit_and_check(h);
+  if (h.broken.empty()) host_lbvh_query(h);
+  return h;
+}
+
+/// The refit and the checks of host_lbvh on the nodes of `h` (n >= 2 slots): "" when the
+/// tree checks out, else the first thing wrong. Writes h.node_box and h.depth.
+std::string refit_and_check(HostLbvh& h) {
+  std::string broken;
+  const auto n = static_cast<std::uint32_t>(h.slot_box.size());
+  const std::uint32_t inner = n - 1;
+  // Parents.
+  std::vector<std::uint32_t> leaf_parent(n, gpu::kLbvhNone), node_parent(inner, gpu::kLbvhNone);
+  std::vector<int> leaf_refs(n, 0), node_refs(inner, 0);
+  auto fail = [&](std::string what) {
+    if (broken.empty()) broken = std::move(what);
+  };
+  for (std::uint32_t i = 0; i < inner; ++i)
+    for (const std::uint32_t ref : {h.nodes[i].left, h.nodes[i].right}) {
+      const std::uint32_t k = ref & ~gpu::kLbvhLeaf;
+      if ((ref & gpu::kLbvhLeaf) ? k >= n : k >= inner) {
+        fail(fmt::format("node {}: child reference 0x{:08x} out of range", i, ref));
+        continue;
+      }
+      if (ref & gpu::kLbvhLeaf) {
+        ++leaf_refs[k];
+        leaf_parent[k] = i;
+      } else {
+        ++node_refs[k];
+        node_parent[k] = i;
+      }
+    }
+  for (std::uint32_t s = 0; s < n; ++s)
+    if (leaf_refs[s] != 1) fail(fmt::format("slot {} is the leaf of {} nodes", s, leaf_refs[s]));
+  for (std::uint32_t i = 0; i < inner; ++i)
+    if (node_refs[i] != (i == 0 ? 0 : 1)) fail(fmt::format("internal node {} has {} parents", i, node_refs[i]));
+  if (!broken.empty()) return broken;
+  // Refit as lbvh_refit_kernel: per leaf, climb; the second arrival at a node writes its box.
+  h.node_box.assign(inner, Aabb{});
+  std::vector<int> arrivals(inner, 0);
+  auto box_of = [&](std::uint32_t ref) {
+    return (ref & gpu::kLbvhLeaf) ? h.slot_box[ref & ~gpu::kLbvhLeaf] : h.node_box[ref];
+  };
+  for (std::uint32_t s = 0; s < n; ++s) {
+    std::uint32_t p = leaf_parent[s];
+    for (std::uint32_t steps = 0; p != gpu::kLbvhNone && steps < n; ++steps) {
+      if (arrivals[p]++ == 0) break;
+      h.node_box[p] = gpu::lbvh_union(box_of(h.nodes[p].left), box_of(h.nodes[p].right));
+      p = node_parent[p];
+    }
+  }
+  for (std::uint32_t i = 0; i < inner; ++i)
+    if (arrivals[i] != 2) fail(fmt::format("internal node {}: {} arrivals in the refit, not 2", i, arrivals[i]));
+  // Ranges, `last`, unions and depth, depth first from the root.
+  struct Visit {
+    std::uint32_t node;
+    int depth;
+  };
+  std::vector<Visit> stack{{0u, 1}};
+  std::vector<std::uint32_t> lo(inner), hi(inner), leaves(inner);
+  std::vector<std::uint32_t> post;  // nodes in visit order; ranges are filled children first below
+  while (!stack.empty() && post.size() <= inner) {
+    const Visit v = stack.back();
+    stack.pop_back();
+    post.push_back(v.node);
+    h.depth = std::max(h.depth, v.depth);
+    for (const std::uint32_t ref : {h.nodes[v.node].left, h.nodes[v.node].right})
+      if (!(ref & gpu::kLbvhLeaf)) stack.push_back({ref, v.depth + 1});
+  }
+  if (post.size() != inner) fail(fmt::format("{} internal nodes reached from the root, not {}", post.size(), inner));
+  for (auto it = post.rbegin(); it != post.rend() && broken.empty(); ++it) {
+    const std::uint32_t i = *it;
+    std::uint32_t l = ~0u, u = 0, count = 0;
+    for (const std::uint32_t ref : {h.nodes[i].left, h.nodes[i].right}) {
+      const std::uint32_t k = ref & ~gpu::kLbvhLeaf;
+      const bool leaf = (ref & gpu::kLbvhLeaf) != 0;
+      l = std::min(l, leaf ? k : lo[k]);
+      u = std::max(u, leaf ? k : hi[k]);
+      count += leaf ? 1u : leaves[k];
+    }
+    lo[i] = l;
+    hi[i] = u;
+    leaves[i] = count;
+    if (u - l + 1 != count) fail(fmt::format("node {}: slots [{}, {}] hold {} leaves: not contiguous", i, l, u, count));
+    if (h.nodes[i].last != u) fail(fmt::format("node {}: last {} but its last slot is {}", i, h.nodes[i].last, u));
+    const Aabb want = gpu::lbvh_union(box_of(h.nodes[i].left), box_of(h.nodes[i].right));
+    if (std::memcmp(&want, &h.node_box[i], sizeof(Aabb)) != 0) fail(fmt::format("node {}: box is not the union", i));
+  }
+  if (broken.empty() && (lo[0] != 0 || hi[0] != n - 1)) fail("the root does not cover every slot");
+  if (h.depth > gpu::kLbvhStack - 2) fail(fmt::format("depth {} exceeds the query stack", h.depth));
+  return broken;
+}
+
 // ---- the broadphases under test ------------------------------------------------------
 
 struct Variant {
@@ -256,10 +413,14 @@ std::vector<Variant> variants() {
                  "thread"});
   }
 #endif
+  BroadPhaseConfig lbvh;
+  lbvh.name = "lbvh";
+  v.push_back({"lbvh", lbvh});
   return v;
 }
 
 std::unique_ptr<DeviceBroadPhase> make_device(const BroadPhaseConfig& c, const Aabb& domain) {
+  if (c.name == "lbvh") return gpu::make_device_lbvh(domain);
   if (c.name == "octree-strict") return gpu::make_device_strict_octree(c, domain);
   if (c.name == "spatial-hash") return gpu::make_device_spatial_hash(c);
 #if defined(OCTOCD_HAVE_DEVICE_LOOSE_OCTREE)
@@ -450,6 +611,10 @@ TEST_P(DeviceBroadPhaseTest, PairSetEqualsFlatOnEveryBoxSet) {
     if (v.config.name == "octree-strict") {
       // Same node math: the related pairs the device tests are the CPU's cell candidates.
       EXPECT_EQ(r.candidates, cpu_candidates(v.config, set));
+    } else if (v.config.name == "lbvh") {
+      // Same tree, same boxes, same query: the leaf tests of the host model.
+      EXPECT_EQ(r.candidates, host_lbvh(set.boxes, set.domain).tests);
+      EXPECT_GE(r.candidates, static_cast<unsigned long long>(r.total));
     } else {
       EXPECT_GE(r.candidates, static_cast<unsigned long long>(r.total));
     }
@@ -634,9 +799,103 @@ TEST(DeviceBroadPhaseErrors, FindWithoutReserveIsRefused) {
   auto strict = gpu::make_device_strict_octree(c, cube(-1.0f, 1.0f));
   c.name = "spatial-hash";
   auto hash = gpu::make_device_spatial_hash(c);
-  for (DeviceBroadPhase* bp : {strict.get(), hash.get()}) {
+  auto lbvh = gpu::make_device_lbvh(cube(-1.0f, 1.0f));
+  for (DeviceBroadPhase* bp : {strict.get(), hash.get(), lbvh.get()}) {
     EXPECT_THROW(bp->find(nullptr, 5, gpu::PairOutput{}, nullptr), RuntimeError) << bp->name();
   }
+}
+
+// ---- `lbvh` on the host (needs no device) ----------------------------------------------
+
+TEST(LbvhHostModel, TreeChecksOutAndPairSetEqualsFlatOnEveryBoxSet) {
+  for (const std::string& name : box_set_names()) {
+    SCOPED_TRACE(name);
+    const BoxSet& set = box_set(name);
+    const HostLbvh h = host_lbvh(set.boxes, set.domain);
+    EXPECT_EQ(h.broken, "");
+    EXPECT_TRUE(same_pairs(h.pairs, set.flat, set.boxes));
+    EXPECT_GE(h.tests, h.pairs.size());
+    if (set.boxes.size() >= 2) {
+      EXPECT_LE(h.depth, gpu::kLbvhStack - 2);
+    }
+    // Fewer exact tests than `flat` once there are many boxes (the tree prunes).
+    if (set.boxes.size() >= 1000 && name != "huge-and-infinite" && name != "one-cell") {
+      EXPECT_LT(h.tests, static_cast<std::uint64_t>(set.boxes.size()) * (set.boxes.size() - 1) / 8) << name;
+    }
+  }
+}
+
+// Equal codes (Karras's tie-break on the slot), tiny sets and codes on every level-10
+// cell border: n = 2 .. 70 identical boxes, the same with half of them moved far away, and
+// random small sets.
+TEST(LbvhHostModel, EqualCodesAndSmallSets) {
+  const Aabb unit = cube(-1.0f, 1.0f);
+  for (std::size_t n = 2; n <= 70; ++n) {
+    SCOPED_TRACE(n);
+    std::vector<Aabb> same(n, cube(0.1f, 0.2f));
+    HostLbvh h = host_lbvh(same, unit);
+    EXPECT_EQ(h.broken, "");
+    EXPECT_EQ(h.pairs.size(), n * (n - 1) / 2);
+    EXPECT_TRUE(same_pairs(h.pairs, flat_pairs(same, unit), same));
+    for (std::size_t i = 0; i < n; i += 2) same[i] = cube(-0.9f, -0.85f);
+    h = host_lbvh(same, unit);
+    EXPECT_EQ(h.broken, "");
+    EXPECT_TRUE(same_pairs(h.pairs, flat_pairs(same, unit), same));
+    const std::vector<Aabb> rnd = random_boxes(n, static_cast<unsigned>(100 + n), unit, 0.01f, 0.4f);
+    h = host_lbvh(rnd, unit);
+    EXPECT_EQ(h.broken, "");
+    EXPECT_TRUE(same_pairs(h.pairs, flat_pairs(rnd, unit), rnd));
+  }
+  // Every centre in one level-10 cell (cell 665 of [-1, 1] covers [0.29883, 0.30079] m):
+  // a radix tree over the 13 bits of the slots alone, at most 13 internal nodes deep.
+  const std::vector<Aabb> packed = random_boxes(5000, 17, cube(0.2992f, 0.3004f), 0.0f, 0.0001f);
+  const HostLbvh h = host_lbvh(packed, unit);
+  EXPECT_EQ(h.broken, "");
+  EXPECT_TRUE(std::all_of(h.code.begin(), h.code.end(), [&](std::uint32_t c) { return c == h.code[0]; }));
+  EXPECT_LE(h.depth, 13);
+  EXPECT_TRUE(same_pairs(h.pairs, flat_pairs(packed, unit), packed));
+}
+
+// Planted faults: the checks above can fail. A root box that misses everything loses every
+// pair; a child reference pointed at the wrong slot is a broken tree.
+TEST(LbvhHostModel, PlantedFaultsAreCaught) {
+  const BoxSet& set = box_set("uniform-1000");
+  HostLbvh h = host_lbvh(set.boxes, set.domain);
+  ASSERT_EQ(h.broken, "");
+  ASSERT_TRUE(same_pairs(h.pairs, set.flat, set.boxes));
+  HostLbvh shrunk = h;
+  shrunk.node_box[0] = cube(5.0f, 6.0f);  // the root's box misses every body
+  host_lbvh_query(shrunk);
+  EXPECT_FALSE(same_pairs(shrunk.pairs, set.flat, set.boxes));
+  // One node of two leaves moved away: a pair of its second leaf with a body of a smaller
+  // slot is met only through that node's box, so it is lost.
+  HostLbvh moved = h;
+  std::vector<std::uint32_t> slot_of(moved.slot_body.size());
+  for (std::uint32_t t = 0; t < moved.slot_body.size(); ++t) slot_of[moved.slot_body[t]] = t;
+  std::uint32_t leaf_node = 0;
+  for (std::uint32_t i = 1; i < moved.nodes.size() && leaf_node == 0; ++i) {
+    const gpu::LbvhNode nd = moved.nodes[i];
+    if (!(nd.left & gpu::kLbvhLeaf) || !(nd.right & gpu::kLbvhLeaf)) continue;
+    const std::uint32_t a = nd.left & ~gpu::kLbvhLeaf;
+    for (const Pair q : set.flat) {
+      const std::uint32_t sa = slot_of[q.a], sb = slot_of[q.b];
+      if ((sa == a + 1 && sb < a) || (sb == a + 1 && sa < a)) leaf_node = i;
+    }
+  }
+  ASSERT_NE(leaf_node, 0u) << "no node of two leaves whose second leaf pairs with a smaller slot";
+  moved.node_box[leaf_node] = cube(5.0f, 6.0f);
+  host_lbvh_query(moved);
+  EXPECT_FALSE(same_pairs(moved.pairs, set.flat, set.boxes));
+  // Broken trees: the structure check names them.
+  HostLbvh twice = h;  // a leaf referenced twice, another never
+  twice.nodes[leaf_node].right = twice.nodes[leaf_node].left;
+  EXPECT_NE(refit_and_check(twice), "");
+  HostLbvh late = h;  // a wrong `last`: the query would skip a subtree it needs
+  late.nodes[0].last -= 1;
+  EXPECT_NE(refit_and_check(late), "");
+  HostLbvh cut = h;  // a subtree hung under the root a second time
+  cut.nodes[0].right = cut.nodes[0].left;
+  EXPECT_NE(refit_and_check(cut), "");
 }
 
 }  // namespace

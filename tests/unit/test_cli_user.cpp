@@ -320,6 +320,20 @@ TEST_F(CliUser, MessagesNameFileKeyAndAllowed) {
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--broadphase: unknown broadphase 'kd-tree'; allowed: flat, octree"), std::string::npos)
       << r.output;
+  EXPECT_NE(r.output.find("lbvh (--engine cuda)"), std::string::npos) << r.output;
+  // `lbvh` exists on the device only: with the cpu engine (from either place) it is bad
+  // input naming --engine cuda.
+  r = octocd_cmd("run " + scene("ok", scene_text()) + " --broadphase lbvh --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("--broadphase: broadphase 'lbvh' exists on the device only; allowed: --engine cuda"),
+            std::string::npos)
+      << r.output;
+  path = scene("lbvh", scene_text(R"(, "broadphase": {"name": "lbvh"})"));
+  r = octocd_cmd("run " + path + " --frames 2 --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(path + ": broadphase.name: broadphase 'lbvh' exists on the device only"),
+            std::string::npos)
+      << r.output;
 }
 
 // ---- 5. the command line is checked as the scene file is ----------------------------

@@ -27,7 +27,7 @@ BroadPhaseConfig bp(const std::string& name, int depth = 2) {
 /// Every device broadphase, the octrees with a fixed and an automatic depth.
 std::vector<BroadPhaseConfig> device_broadphases() {
   return {bp("flat"), bp("octree"), bp("octree", -1), bp("octree-strict"), bp("octree-strict", -1),
-          bp("spatial-hash")};
+          bp("spatial-hash"), bp("lbvh")};
 }
 
 std::string label(const BroadPhaseConfig& c) { return c.name + " depth " + std::to_string(c.octree_depth); }
@@ -115,7 +115,7 @@ TEST(CudaFootprint, UnknownBroadphaseIsAnInputError) {
   for (const std::string name : {"bullet-dbvt", "fcl-dynamic-aabb", "no-such"}) {
     const std::string msg = input_error([&] { (void)cuda_device_bytes_needed(10, bp(name)); });
     EXPECT_NE(msg.find("'" + name + "' is not available on the cuda engine"), std::string::npos) << msg;
-    EXPECT_NE(msg.find("flat, octree, octree-strict, spatial-hash"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("flat, octree, octree-strict, spatial-hash, lbvh"), std::string::npos) << msg;
   }
 }
 
@@ -131,7 +131,7 @@ TEST(CudaFootprint, ModelAddsItsShapesAndUsesTheScenesDepth) {
   ASSERT_TRUE(s.octree) << "an icosphere is a mesh with an octree";
   const std::uint64_t mesh_bytes =
       s.octree->vertices.size() * sizeof(Vec3) + s.octree->cells.size() * sizeof(MeshOctreeCell);
-  for (const std::string name : {"flat", "octree", "octree-strict", "spatial-hash"}) {
+  for (const std::string name : {"flat", "octree", "octree-strict", "spatial-hash", "lbvh"}) {
     SCOPED_TRACE(name);
     BroadPhaseConfig c = boxes->scene.broadphase;
     c.name = name;

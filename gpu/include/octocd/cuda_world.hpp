@@ -29,10 +29,19 @@ namespace octocd {
 /// against this by cuda_device_bytes_needed and the CudaWorld constructor.
 constexpr std::uint64_t kCudaMaxBodies = 2147483647;
 
+/// The broadphases the cuda engine has (`--broadphase` with `--engine cuda`), in a stable
+/// order: flat, octree, octree-strict, spatial-hash, lbvh. Exists in builds without CUDA.
+std::vector<std::string> cuda_broadphase_names();
+
+/// The names among cuda_broadphase_names() that only the cuda engine has (neither
+/// make_broadphase nor the references know them): lbvh (a Karras 2012 linear BVH, the
+/// standard GPU baseline). Exists in builds without CUDA.
+std::vector<std::string> cuda_only_broadphase_names();
+
 /// Bytes of device memory the cuda engine allocates for `bodies` bodies before its first
 /// step, with broadphase `broadphase.name` (`flat`, `octree`, `octree-strict`,
-/// `spatial-hash`; `broadphase.octree_depth` -1 (auto) adds the strict octree's per-body
-/// extents) and no shape data (the packed shape arrays at their minimum of one element;
+/// `spatial-hash`, `lbvh`; `broadphase.octree_depth` -1 (auto) adds the strict octree's
+/// per-body extents) and no shape data (the packed shape arrays at their minimum of one element;
 /// the Model overload adds a model's shapes). Counted: the per-body buffers (state, the
 /// state saved before a step, inverse masses, local boxes, shape indices, world AABBs, the
 /// broadphase counts and offsets, the contact segments: 116 bytes per body plus 12), the
@@ -58,9 +67,9 @@ std::uint64_t cuda_device_bytes_needed(std::uint64_t bodies, const BroadPhaseCon
 std::uint64_t cuda_device_bytes_needed(const Model& model, const std::string& broadphase);
 
 /// Creates the CUDA engine for `model` with broadphase `broadphase` (as in
-/// `--broadphase`; the device has `flat`, `octree`, `octree-strict` and `spatial-hash`; the
-/// octrees take their depth
-/// from the scene's broadphase.depth). The model is shared, not copied.
+/// `--broadphase`; the device has cuda_broadphase_names(): `flat`, `octree`,
+/// `octree-strict`, `spatial-hash` and `lbvh`; the octrees take their depth from the
+/// scene's broadphase.depth). The model is shared, not copied.
 /// Throws RuntimeError when this octocd was built without CUDA, when no CUDA device is
 /// usable (naming the CUDA runtime's reason), when the device has less memory free than
 /// cuda_device_bytes_needed(*model, broadphase) (checked before anything is allocated; the
@@ -91,8 +100,8 @@ bool cuda_device_available();
 /// Step: integrate; world AABBs; broadphase (`flat`: brute force, the device oracle;
 /// `octree`: the loose octree of SPEC 5.1 with the cell math of loose_octree.hpp;
 /// `octree-strict` and `spatial-hash` with the cell math of strict_octree.hpp and
-/// spatial_hash.hpp; each appends pair keys that are then radix-sorted: the sorted unique
-/// set of `flat`); midphase + narrow phase as per-level work lists of box pairs (one warp
+/// spatial_hash.hpp; `lbvh`: a Karras 2012 linear BVH rebuilt every step, gpu/src/lbvh.hpp;
+/// each appends pair keys that are then radix-sorted: the sorted unique set of `flat`); midphase + narrow phase as per-level work lists of box pairs (one warp
 /// per pair, per cell pair, per leaf chunk) through the shared OCTOCD_HD functions;
 /// response with `response.iterations` passes (per-contact terms, then per body a
 /// sequential reduction in (a, b) order over a body-major contact index built by a stable
@@ -125,7 +134,7 @@ class CudaWorld : public Engine {
   /// cuda_device_bytes_needed(*model, broadphase) bytes free (RuntimeError naming the bytes
   /// needed and free otherwise; see the class comment), then uploads the model's initial
   /// state, shapes and octrees. `broadphase` as in `--broadphase` ("flat", "octree",
-  /// "octree-strict" or "spatial-hash"). `model` must not be null (InputError); a
+  /// "octree-strict", "spatial-hash" or "lbvh"). `model` must not be null (InputError); a
   /// rotating scene is refused (InputError naming the key, require_translation_only: the
   /// cuda engine translates only, SPEC 3).
   CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase);
