@@ -411,7 +411,7 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   engine->set_recording(true);
   FrameValidators validators(*engine, options, compared_broadphases(engine->scene(), options.against_fcl));
   int done = 0;
-  bool stopped = false;
+  bool stopped = false, inside = false;
   try {
     for (int f = 1; f <= options.frames; ++f) {
       if (options.stop && options.stop()) {
@@ -424,11 +424,11 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
       done = f;
     }
   } catch (const ValidationStopped&) {
-    stopped = true;  // inside frame done + 1's checks: it is partly judged
+    stopped = inside = true;  // inside frame done + 1's checks: it is partly judged
   }
   std::vector<ValidationResult> results = validators.results();
   if (stopped) {  // the validators that rerun the scene do not run
-    if (stopped_in) *stopped_in = done + 1;
+    if (stopped_in && inside) *stopped_in = done + 1;
     const std::string why = fmt::format("not run: stopped after frame {} of {}", done, options.frames);
     results.push_back(not_applicable("analytic", "closed form of an analytic scene", why));
     results.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld", why));
@@ -449,7 +449,6 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   rerun("analytic", "closed form of an analytic scene",
         [&](Engine& e) { return validate_analytic(e, options.frames, options.tol, options.stop); });
   if (stopped) {
-    if (stopped_in) *stopped_in = options.frames;
     results.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld",
                                      "not run: stopped by a signal"));
     return results;
@@ -457,7 +456,6 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   if (options.against_bullet) {
     rerun("bullet-dynamics", "comparison with btDiscreteDynamicsWorld",
           [&](Engine& e) { return validate_against_bullet(e, options.frames, options.tol, options.stop); });
-    if (stopped && stopped_in) *stopped_in = options.frames;
   } else {
     results.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld",
                                      "Bullet not requested (--against)"));

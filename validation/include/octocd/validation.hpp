@@ -340,7 +340,8 @@ using EngineFactory = std::function<std::unique_ptr<Engine>()>;
 /// the reference broadphases. The engines must be able to record (FrameRecord). When
 /// `options.stop` stops it (between frames or inside a check), the results cover the
 /// frames judged so far and the validators not run are n/a ("not run: stopped ...");
-/// `stopped_in` (may be null) then receives the frame it stopped in (0: not stopped).
+/// `stopped_in` (may be null) receives the frame whose checks it stopped inside (that
+/// frame is partly judged), 0 when it stopped between frames or in a rerun, or did not stop.
 std::vector<ValidationResult> validate_engine(const EngineFactory& make, const ValidationOptions& options,
                                               std::int64_t* stopped_in = nullptr);
 
