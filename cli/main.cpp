@@ -687,7 +687,10 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   const bool all_pass = std::all_of(results.begin(), results.end(),
                                     [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
   if (const int sig = octocd::stop_signal()) {
-    fmt::print("\nSTOPPED: {}\n", stopped);
+    // (A signal after the JUnit was written: the whole table, stopped at its end.)
+    fmt::print("\nSTOPPED: {}\n", stopped.empty() ? fmt::format("the table covers frames 1..{} of {}; stopped by {}",
+                                                                done, o.frames, octocd::stop_signal_name(sig))
+                                                  : stopped);
     std::fflush(stdout);
     report_stop(sig, "validate", done, o.frames, o.trace);
     return octocd::stop_exit_code(sig);

@@ -15,7 +15,7 @@
 #                   set, names the binary itself and wins
 #   --scenes SET    default: the scenes that fit the nightly budget (15 minutes on a
 #                   2-core machine: the analytic scenes, bunny-stack-50, the four Table 5
-#                   scenes and the three 10^4-body scenes; measured 9 minutes on a 2-core
+#                   scenes and the three 10^4-body scenes; measured 5-9 minutes on a 2-core
 #                   VM under load 6-11, README); large: the 5x10^4..10^6-body scenes
 #                   (hours: one check of boxes-uniform-100k takes ~12 minutes; give them a
 #                   job of their own, with a larger --every); all: both. SCENE.json
