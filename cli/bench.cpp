@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -654,7 +655,14 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
         if (trace) trace->close();
         throw BenchStopped{};
       }
+      // A step of a big scene may take seconds: a signal it does not answer within the
+      // grace ends the bench there (the result file keeps the points finished before).
+      std::optional<octocd::StopWithin> within(
+          std::in_place, fmt::format("bench point {} stepped frame {} of {} (a step longer than the 0.5 s grace); "
+                                     "the result {} keeps the points finished before it (--resume goes on)",
+                                     p.id, f, total, o.output));
       const FrameMetrics& m = engine->step();
+      within.reset();
       for (std::size_t w = 0; w < s.windows.size(); ++w)
         if (f >= s.windows[w].first && f <= s.windows[w].last) sums[w].back().add(m);
       if (buckets > 0) {

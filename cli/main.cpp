@@ -389,7 +389,18 @@ int run_command(const RunOptions& o) {
   const auto t0 = Clock::now();
   try {
     for (int f = 0; f < scene.frames && octocd::stop_signal() == 0; ++f) {
+      // A step of a big scene may take seconds: a signal it does not answer within the
+      // grace ends the run there, with the trace's flushed frames (SWMR, trace.hpp).
+      std::optional<octocd::StopWithin> within(
+          std::in_place,
+          fmt::format("run stepped frame {} of {} (a step longer than the 0.5 s grace){}", f + 1, scene.frames,
+                      !trace ? std::string()
+                      : trace->flushed_frames() > 0
+                          ? fmt::format("; the trace {} holds frames 1..{} (its last flush), no sidecar", o.trace,
+                                        trace->flushed_frames())
+                          : fmt::format("; the trace {} holds no frame (none flushed yet), no sidecar", o.trace)));
       const octocd::FrameMetrics& m = world.step();
+      within.reset();
       totals.add(m);
       if (trace && world.rotation_traits() && world.can_record())
         trace->append_frame_v2(m, world.state(), world.record());
@@ -641,15 +652,17 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
       if (!trace) {
         octocd::TraceMetadata meta = octocd::trace_metadata(w, 10);
         meta.start_time = octocd::cli::utc_time_now();
-        trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(w),
-                                                      octocd::TraceOptions{});
+        octocd::TraceOptions topt;
+        topt.flush_every = 1;  // every checked frame on disk: a stopped or killed run keeps them all
+        trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(w), topt);
       }
       trace->append_frame(w.last_metrics(), w.state(), w.contacts());
     }
   };
   std::vector<octocd::ValidationResult> results;
+  std::int64_t stopped_in = 0;  // the frame a signal stopped the checks in (0: none)
   try {
-    results = octocd::validate_engine([&] { return make_engine(o.engine, model); }, vo);
+    results = octocd::validate_engine([&] { return make_engine(o.engine, model); }, vo, &stopped_in);
   } catch (const octocd::RuntimeError&) {
     close_after_failure(trace, o.trace, o.no_xdmf);
     throw;
@@ -659,6 +672,14 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
     octocd::write_validation(o.trace, results);
     write_sidecar(o.trace, o.no_xdmf);
   }
+  // Where a signal stopped the checks: the table covers the frames judged so far.
+  std::string stopped;
+  if (const int sig = octocd::stop_signal())
+    stopped = fmt::format("the table covers frames 1..{} of {}; stopped by {}{}", done, o.frames,
+                          octocd::stop_signal_name(sig),
+                          done == o.frames     ? " in the analytic or Bullet rerun (n/a)"
+                          : stopped_in > done ? fmt::format(" inside the checks of frame {} (partly judged)", stopped_in)
+                                              : std::string());
   if (!o.junit.empty())
     octocd::write_junit(o.junit, scene.name, results,
                         std::chrono::duration<double>(Clock::now() - t0).count(),
@@ -667,14 +688,18 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
                          {"every", std::to_string(o.every)},
                          {"against", o.against},
                          {"scene_file", o.scene},
-                         {"build_id", octocd::build_id()}});
+                         {"build_id", octocd::build_id()}},
+                        stopped);
   fmt::print("validate {} (engine {}, {} frames, checks every {}, against: {})\n\n", scene.name, o.engine,
              o.frames, o.every, o.against);
   fmt::print("{}", octocd::format_results(results, vo.overridden));
   const bool all_pass = std::all_of(results.begin(), results.end(),
                                     [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
   if (const int sig = octocd::stop_signal()) {
-    fmt::print("\nSTOPPED: the table covers frames 1..{} of {}\n", done, o.frames);
+    // (A signal after the JUnit was written: the whole table, stopped at its end.)
+    fmt::print("\nSTOPPED: {}\n", stopped.empty() ? fmt::format("the table covers frames 1..{} of {}; stopped by {}",
+                                                                done, o.frames, octocd::stop_signal_name(sig))
+                                                  : stopped);
     std::fflush(stdout);
     report_stop(sig, "validate", done, o.frames, o.trace);
     return octocd::stop_exit_code(sig);
@@ -711,7 +736,8 @@ int main(int argc, char** argv) {
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
       "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a check failed (validate, compare, replay),\n"
       "4 a confirmed slowdown (report --baseline), 130/143 stopped by SIGINT/SIGTERM (run and validate\n"
-      "stop between frames and close the trace; bench keeps its finished points).",
+      "stop between frames and close the trace, validate inside a frame's checks too; a step still\n"
+      "running 0.5 s after the signal is cut short; bench keeps its finished points).",
       "octocd"};  // a fixed name: `--help` reads the same whatever path ran it (docs/cli.md)
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);
@@ -796,8 +822,9 @@ int main(int argc, char** argv) {
   val_cmd->add_flag("--no-xdmf", val.no_xdmf, "With --trace: do not write the XDMF sidecar");
   val_cmd->add_option("--data-dir", val.data_dir, data_dir_help);
   val_cmd->add_option("--junit", val.junit,
-                      "Also write a JUnit XML report: one test case per validator (classname = scene "
-                      "name), failures with the detail line; written when validators fail too");
+                      "Also write a JUnit XML report: one test case per validator row (classname = "
+                      "SCENE.TIER) with its own time, failures with the measured value against the bound and "
+                      "the detail line; written when validators fail too, and when a signal stops the run");
   val_cmd->add_option(
       "--trace-in", val.trace_in,
       "Judge another engine's trace (docs/trace-format.md, External traces) instead of a scene, frame by "

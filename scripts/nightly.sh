@@ -15,8 +15,8 @@
 #                   set, names the binary itself and wins
 #   --scenes SET    default: the scenes that fit the nightly budget (15 minutes on a
 #                   2-core machine: the analytic scenes, bunny-stack-50, the four Table 5
-#                   scenes and the three 10^4-body scenes; measured 8 minutes on a 2-core
-#                   VM under load 9-14, README); large: the 5x10^4..10^6-body scenes
+#                   scenes and the three 10^4-body scenes; measured 5-9 minutes on a 2-core
+#                   VM under load 6-11, README); large: the 5x10^4..10^6-body scenes
 #                   (hours: one check of boxes-uniform-100k takes ~12 minutes; give them a
 #                   job of their own, with a larger --every); all: both. SCENE.json
 #                   arguments replace the set.
@@ -160,7 +160,7 @@ EOF2
   case $rc in
     0) passed=$((passed + 1)); echo "pass     $name ($n_frames frames, ${secs} s)" ;;
     3) failed=$((failed + 1)); failed_list+=("$name"); echo "FAILED   $name (a validator failed, ${secs} s: $log)"
-       grep -o 'message="[^"]*"' "$out/junit/$name.xml" | head -n 3 | sed 's/^/         /' ;;
+       grep -o '<failure message="[^"]*"' "$out/junit/$name.xml" | sed 's/^<failure //' | head -n 3 | sed 's/^/         /' ;;
     124) broken=$((broken + 1)); broken_list+=("$name"); echo "TIMEOUT  $name (after $timeout_s s: $log)" ;;
     2) bad=$((bad + 1)); bad_list+=("$name"); echo "BAD      $name (bad input: $log)"; tail -n 3 "$log" | sed 's/^/         /' ;;
     *) broken=$((broken + 1)); broken_list+=("$name"); echo "ERROR    $name (exit $rc: $log)"; tail -n 3 "$log" | sed 's/^/         /' ;;

@@ -20,6 +20,7 @@
 #include <thread>
 #include <vector>
 
+#include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
 #include "cli_run.hpp"
 
@@ -88,6 +89,27 @@ class Child {
     r.out = slurp(out_);
     r.err = slurp(err_);
     return r;
+  }
+  /// wait(), but for at most `seconds`: a child still running then is killed (SIGKILL)
+  /// and `ended` is false. A functional bound, not a timing assertion.
+  Result wait_within(double seconds, bool& ended) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    ended = false;
+    while (std::chrono::steady_clock::now() < deadline) {
+      int status = 0;
+      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+        ended = true;
+        Result r;
+        if (WIFEXITED(status)) r.code = WEXITSTATUS(status);
+        if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
+        r.out = slurp(out_);
+        r.err = slurp(err_);
+        return r;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ::kill(pid_, SIGKILL);
+    return wait();
   }
 
  private:
@@ -412,6 +434,137 @@ TEST_F(Hardening, ValidateStopsOnSigterm) {
             std::string::npos)
       << r.err;
   EXPECT_EQ(octocd::read_trace_summary(trace).frames, n);
+}
+
+
+// ---- a signal inside a long frame (issue 19 item 4) ----------------------------------
+
+/// A cubic grid of 19,683 penetrating boxes (each overlaps its 26 neighbours): about
+/// 237,000 pairs a frame, so one frame's checks (FCL on every pair, flat's O(n^2) pair
+/// tests, the exhaustive midphase) take seconds on any machine; no gravity, no walls.
+std::string grid_scene(const fs::path& dir) {
+  const fs::path p = dir / "grid.json";
+  std::ofstream(p) << R"({"name": "grid", "domain": {"min": [-1.2, -1.2, -1.2], "max": [1.2, 1.2, 1.2]},
+    "gravity": [0, 0, 0], "frames": 100000, "midphase": {"levels": "aabb-only"},
+    "groups": [{"name": "b", "shape": {"box": [0.06, 0.06, 0.06]}, "count": 19683,
+                "layout": {"type": "grid", "min": [-1, -1, -1], "max": [1, 1, 1], "spacing": 0.0769}}]})";
+  return p.string();
+}
+
+// SIGTERM inside the checks of a frame: validate polls the flag inside the checks' loops,
+// writes the table of the frames judged so far (marked stopped) and the JUnit report
+// (its rows and an errored "stopped" case), exit 143. The signal is sent once frame 1 is
+// in the trace (validate flushes every frame), so it lands in frame 2 (a checked frame,
+// --every 2) whatever the machine's speed: its step and checks take far longer than the
+// 50 ms the test takes to see the flush. Before: the checks of the frame ran to their end.
+TEST_F(Hardening, ValidateStopsInsideTheChecksOfALongFrame) {
+  const std::string trace = (dir_ / "v.h5").string(), junit = (dir_ / "v.xml").string();
+  Child c(dir_, {"validate", grid_scene(dir_), "--frames", "1000", "--every", "2", "--against", "none", "--trace",
+                 trace, "--junit", junit});
+  ASSERT_TRUE(wait_for_frames(trace, 1)) << "frame 1 not flushed within 60 s";
+  ::kill(c.pid(), SIGTERM);
+  bool ended = false;
+  const Result r = c.wait_within(30, ended);
+  ASSERT_TRUE(ended) << "still running 30 s after SIGTERM";
+  ASSERT_EQ(r.signal, 0) << "killed by the signal instead of stopping";
+  EXPECT_EQ(r.code, 143) << r.out << r.err;
+  EXPECT_NE(r.out.find("STOPPED: the table covers frames 1..1 of 1000; stopped by SIGTERM inside the checks of "
+                       "frame 2 (partly judged)"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("broadphase-completeness"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("not run: stopped after frame 1 of 1000"), std::string::npos) << r.out;
+  EXPECT_NE(r.err.find("octocd validate: stopped by SIGTERM after frame 1 of 1000"), std::string::npos) << r.err;
+  const std::string xml = slurp(junit);
+  EXPECT_NE(xml.find("name=\"stopped\""), std::string::npos) << xml;
+  EXPECT_NE(xml.find("<error message=\"the table covers frames 1..1 of 1000; stopped by SIGTERM"), std::string::npos)
+      << xml;
+  EXPECT_NE(xml.find("name=\"applied-state\""), std::string::npos) << xml;
+  EXPECT_EQ(octocd::read_trace_summary(trace).frames, 1);
+}
+
+// StopWithin around a step that never ends on its own: the signal ends the process after
+// the grace, with the guard's line and 128 + sig; a step that ends within the grace
+// leaves the signal to the loop. Before: a long engine step held a signal until its end.
+TEST(StopWithin, ASignalEndsAStepThatOutlastsTheGrace) {
+  const fs::path err = fs::temp_directory_path() / ("octocd-stopwithin-" + std::to_string(::getpid()) + ".txt");
+  for (int sig : {SIGINT, SIGTERM}) {
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      const int e = ::open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      ::dup2(e, 2);
+      const octocd::StopOnSignals stop;
+      const octocd::StopWithin guard("stepping frame 3 of 9; the trace holds frames 1..2", 0.2);
+      ::raise(sig);
+      // A step that does not end within the 60 s bound below on any machine.
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+      volatile double x = 0;
+      while (std::chrono::steady_clock::now() < until) x = x + 1;
+      ::_exit(0);  // not reached: the grace ends the process
+    }
+    int status = 0;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    pid_t got = 0;
+    while ((got = ::waitpid(child, &status, WNOHANG)) == 0 && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    if (got == 0) ::kill(child, SIGKILL), ::waitpid(child, &status, 0);
+    ASSERT_EQ(got, child) << "the step was not ended within 60 s";
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 128 + sig);
+    const std::string text = slurp(err);
+    EXPECT_NE(text.find(std::string("octocd: stopped by ") + (sig == SIGINT ? "SIGINT" : "SIGTERM") +
+                        " while stepping frame 3 of 9; the trace holds frames 1..2"),
+              std::string::npos)
+        << text;
+  }
+  fs::remove(err);
+  // A step that ends within the grace: the signal is recorded for the loop, no exit.
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    const octocd::StopOnSignals stop;
+    {
+      const octocd::StopWithin guard("stepping", 30.0);
+      ::raise(SIGTERM);
+    }
+    ::_exit(octocd::stop_signal() == SIGTERM ? 7 : 8);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 7);
+}
+
+// SIGTERM while `run` steps a big scene (a step of 237,000 penetrating box pairs): it
+// stops within the grace, either at the end of the step (the trace closed with every
+// frame) or inside it (the trace keeps its flushed frames), exit 143 either way. The
+// signal follows a visible event: the trace file exists once loading is over.
+TEST_F(Hardening, RunStopsInsideALongStep) {
+  const std::string trace = (dir_ / "r.h5").string();
+  Child c(dir_, {"run", grid_scene(dir_), "--trace", trace, "--quiet"});
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (!fs::exists(trace) && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ASSERT_TRUE(fs::exists(trace)) << "no trace within 60 s";
+  ::kill(c.pid(), SIGTERM);
+  bool ended = false;
+  const Result r = c.wait_within(30, ended);
+  ASSERT_TRUE(ended) << "still running 30 s after SIGTERM";
+  ASSERT_EQ(r.signal, 0) << "killed by the signal instead of stopping";
+  EXPECT_EQ(r.code, 143) << r.err;
+  const bool inside = r.err.find("octocd: stopped by SIGTERM while run stepped frame ") != std::string::npos;
+  const bool between = r.err.find("octocd run: stopped by SIGTERM after frame ") != std::string::npos;
+  EXPECT_TRUE(inside || between) << r.err;
+  if (inside) {
+    EXPECT_NE(r.err.find("(a step longer than the 0.5 s grace); the trace " + trace), std::string::npos) << r.err;
+    std::smatch m;
+    std::int64_t kept = 0;
+    if (std::regex_search(r.err, m, std::regex("holds frames 1\\.\\.([0-9]+)"))) kept = std::stoll(m[1]);
+    EXPECT_EQ(octocd::read_trace_summary(trace).frames, kept) << "the trace keeps its flushed frames";
+  } else {
+    EXPECT_EQ(octocd::read_trace_summary(trace).frames, stopped_after(r.err));
+  }
 }
 
 }  // namespace

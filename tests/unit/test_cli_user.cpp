@@ -648,13 +648,31 @@ TEST_F(CliUser, ValidateWritesJUnit) {
       rows += r.output.find(std::string(" ") + v + " ") != std::string::npos ? 1 : 0;
     EXPECT_EQ(cases.size(), rows);
     EXPECT_EQ(cases.size(), 14u);
-    std::set<std::string> names;
-    for (xmlNodePtr c : cases) {
-      EXPECT_EQ(Xml::attr(c, "classname"), "box-stack");
-      names.insert(Xml::attr(c, "name"));
+    // Each row of the table (tier, validator) is one case "box-stack.TIER" / validator,
+    // with its own time (s): >= 0, and together within the suite's time.
+    std::set<std::string> table_rows, names;
+    std::istringstream table(r.output);
+    for (std::string line; std::getline(table, line);) {
+      std::istringstream w(line);
+      std::string tier, name;
+      if (w >> tier >> name && (tier == "physics" || tier == "model")) table_rows.insert(tier + "/" + name);
     }
-    EXPECT_EQ(names.size(), cases.size()) << "one case per validator";
-    EXPECT_TRUE(names.count("analytic"));
+    EXPECT_EQ(table_rows.size(), 14u) << r.output;
+    double sum = 0;
+    for (xmlNodePtr c : cases) {
+      const std::string classname = Xml::attr(c, "classname");
+      ASSERT_EQ(classname.rfind("box-stack.", 0), 0u) << classname;
+      names.insert(classname.substr(std::string("box-stack.").size()) + "/" + Xml::attr(c, "name"));
+      const std::string time = Xml::attr(c, "time");
+      ASSERT_FALSE(time.empty());
+      EXPECT_GE(std::stod(time), 0.0) << time;
+      sum += std::stod(time);
+    }
+    EXPECT_EQ(names, table_rows) << "one case per row of the table";
+    EXPECT_TRUE(names.count("model/analytic"));
+    EXPECT_TRUE(names.count("physics/penetration"));
+    EXPECT_GT(sum, 0.0) << "the rows' own times are measured";
+    EXPECT_LE(sum, std::stod(Xml::attr(x.nodes("//testsuite")[0], "time")) + 1e-3);
     EXPECT_TRUE(x.nodes("//failure").empty());
     EXPECT_TRUE(x.nodes("//error").empty());
     const auto suite = x.nodes("//testsuite");
@@ -684,7 +702,8 @@ TEST_F(CliUser, ValidateWritesJUnit) {
     const std::string detail = message.substr(message.find("): ") + 3);
     EXPECT_FALSE(detail.empty());
     EXPECT_NE(r.output.find(detail.substr(0, 40)), std::string::npos) << "the table's detail line:\n" << r.output;
-    for (xmlNodePtr c : x.nodes("//testcase")) EXPECT_EQ(Xml::attr(c, "classname"), "box-in-box");
+    for (xmlNodePtr c : x.nodes("//testcase")) EXPECT_EQ(Xml::attr(c, "classname").rfind("box-in-box.", 0), 0u);
+    for (xmlNodePtr f : failures) EXPECT_EQ(Xml::attr(f, "message").rfind("measured ", 0), 0u);
   }
 
   // Bad input: one errored case, exit 2.
@@ -722,8 +741,20 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   ASSERT_TRUE(x.ok()) << slurp(dir_ / "bad" / "junit.xml");
   const auto suites = x.nodes("/testsuites/testsuite");
   ASSERT_EQ(suites.size(), 3u);
-  EXPECT_EQ(x.nodes("//testcase[@classname='free-fall']").size(), 14u);  // 6 physics + 8 model rows
-  EXPECT_GE(x.nodes("//testcase[@classname='box-in-box']/failure").size(), 1u);
+  EXPECT_EQ(x.nodes("//testcase[@classname='free-fall.physics']").size(), 6u);
+  EXPECT_EQ(x.nodes("//testcase[@classname='free-fall.model']").size(), 8u);
+  EXPECT_GE(x.nodes("//testcase[starts-with(@classname, 'box-in-box.')]/failure").size(), 1u);
+  {
+    // The merged report keeps each case's own time, as the scene's report has it.
+    Xml one(dir_ / "bad" / "junit" / "free-fall.xml");
+    ASSERT_TRUE(one.ok());
+    std::vector<std::string> merged_times, own_times;
+    for (xmlNodePtr c : x.nodes("//testcase[starts-with(@classname, 'free-fall.')]"))
+      merged_times.push_back(Xml::attr(c, "time"));
+    for (xmlNodePtr c : one.nodes("//testcase")) own_times.push_back(Xml::attr(c, "time"));
+    EXPECT_EQ(merged_times, own_times);
+    EXPECT_TRUE(std::any_of(own_times.begin(), own_times.end(), [](const std::string& t) { return std::stod(t) > 0; }));
+  }
   EXPECT_EQ(x.nodes("//testcase/error").size(), 1u);
   const auto root = x.nodes("/testsuites");
   EXPECT_EQ(Xml::attr(root[0], "tests"), std::to_string(x.nodes("//testcase").size()));

@@ -2,10 +2,13 @@
 // (issue 3 item 3: "a validator that cannot fail is a defect").
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 
 #include <unistd.h>
 
@@ -194,4 +197,74 @@ TEST(Validators, ResultsGoToTheTrace) {
   write_validation(path, rs);  // rewriting replaces the group
   EXPECT_EQ(read_trace_summary(path).frames, 1);
   std::filesystem::remove(path);
+}
+
+// ---- a stop inside a frame's checks (issue 19 item 4) --------------------------------
+
+namespace {
+
+std::atomic<bool> g_slow_started{false}, g_slow_release{false};
+
+/// A broadphase whose find_pairs does not return until released (up to 2 minutes): one
+/// call of an O(n^2) broadphase on 10^5 bodies, which polls nothing.
+class EndlessBroadPhase : public BroadPhase {
+ public:
+  std::string name() const override { return "endless"; }
+  void find_pairs(const std::vector<Aabb>&, std::vector<Pair>& out, BroadPhaseStats&) override {
+    g_slow_started = true;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::minutes(2);
+    while (!g_slow_release && std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    out.clear();
+  }
+};
+
+}  // namespace
+
+// ValidationOptions::stop is honoured inside the candidate-set check, while a broadphase
+// call that polls nothing is still running: observe throws ValidationStopped, and the
+// rows so far (with their own times) remain. Before: the check ran to the call's end.
+TEST(Validators, AStopEndsACheckWhoseBroadphaseCallPollsNothing) {
+  const Scene scene = mixed_boxes();
+  World world(scene);
+  world.set_recording(true);
+  ValidationOptions opt;
+  opt.stop = [] { return g_slow_started.load(); };  // stop once the endless call runs
+  std::vector<std::unique_ptr<BroadPhase>> extra;
+  extra.push_back(std::make_unique<EndlessBroadPhase>());
+  FrameValidators v(world, opt, std::move(extra));
+  world.step();
+  v.observe(world, false);  // no candidate-set check: no stop
+  world.step();
+  // Without the stop inside the check, observe would wait the 2 minutes and return.
+  EXPECT_THROW(v.observe(world, true), ValidationStopped);
+  g_slow_release = true;  // the helper thread ends
+  const std::vector<ValidationResult> rs = v.results();
+  EXPECT_EQ(rs.size(), 12u);
+  for (const ValidationResult& r : rs) EXPECT_GE(r.seconds, 0.0) << r.name;
+  EXPECT_GT(find(rs, "applied-state").seconds, 0.0);
+}
+
+// validate_engine stopped by ValidationOptions::stop inside the checks: the results of
+// the frames judged, the reruns n/a with the reason.
+TEST(Validators, ValidateEngineStoppedInsideAFrameKeepsItsRows) {
+  const Scene scene = mixed_boxes();
+  const std::shared_ptr<const Model> model = build_model(scene);
+  ValidationOptions opt;
+  opt.frames = 50;
+  opt.every = 5;
+  opt.against_fcl = false;
+  int polls = 0;
+  opt.stop = [&] { return ++polls > 40; };  // some poll inside a frame's checks
+  std::int64_t stopped_in = 0;
+  const std::vector<ValidationResult> rs = validate_engine(
+      [&]() -> std::unique_ptr<Engine> {
+        return std::make_unique<World>(model, make_any_broadphase(scene.broadphase, scene.domain));
+      },
+      opt, &stopped_in);
+  EXPECT_GT(stopped_in, 0);
+  EXPECT_LE(stopped_in, 50);
+  EXPECT_FALSE(find(rs, "analytic").applicable);
+  EXPECT_NE(find(rs, "analytic").detail.find("not run: stopped after frame"), std::string::npos);
+  EXPECT_FALSE(find(rs, "bullet-dynamics").applicable);
 }

@@ -14,10 +14,13 @@
 // double re-derivation.
 #include "applied_state.hpp"
 
+#include "../src/row_clock.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <deque>
+#include <functional>
 #include <limits>
 
 #include <fmt/format.h>
@@ -95,6 +98,11 @@ struct AppliedStateJudge::Impl {
   std::uint64_t near_ties = 0, runs = 0;
   double worst = 0.0;
   bool any_response = false;
+  std::function<bool()> stop;  // set_stop: polled per pass and per island
+  /// Throws ValidationStopped when `stop` says so.
+  void poll() const {
+    if (stop && stop()) throw ValidationStopped();
+  }
 
   // Per frame.
   const FrameRecord* rec = nullptr;
@@ -124,6 +132,8 @@ AppliedStateJudge::AppliedStateJudge(const Model& model, const Tolerances& tol) 
 }
 
 AppliedStateJudge::~AppliedStateJudge() = default;
+
+void AppliedStateJudge::set_stop(std::function<bool()> stop) { impl_->stop = std::move(stop); }
 
 void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8_t>& forced, Run& r) const {
   const Model& m = *model;
@@ -176,6 +186,7 @@ void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8
   };
 
   for (int pass = 0; pass < p.iterations; ++pass) {
+    poll();  // a pass over a pile's one island of 10^5 contacts: milliseconds
     // Rounding margin of a decision in this pass: a few roundings of the magnitudes that
     // entered its value, per pass so far.
     const double rel = 16.0 * kEps32 * (pass + 2);
@@ -588,7 +599,9 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   std::vector<std::uint32_t> count0(n, 0);
   std::vector<D3> x_tol(n), v_tol(n);
   std::vector<std::uint8_t> judged;
+  StopPoll poll(s.stop);
   for (const Island& is : islands) {
+    poll();
     const Run r = s.search(is, judge_response, judged);
     for (std::uint32_t l = 0; l < is.dynamic; ++l) {
       const std::uint32_t i = is.local[l];

@@ -21,6 +21,7 @@
 /// the remaining passes are judged; the others are counted as not judged.
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -67,6 +68,10 @@ class AppliedStateJudge {
   };
   /// Figures so far.
   Groups groups() const;
+
+  /// Polled per island and per relaxation pass of the re-derivation; observe throws
+  /// ValidationStopped when it returns true. Empty (default): never.
+  void set_stop(std::function<bool()> stop);
 
  private:
   struct Impl;

@@ -5,6 +5,12 @@
 // 2, 4-6 and 9 as the paper's model defines them), judged for octocd's engines and for
 // another engine only when it claims SPEC 6.
 #include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <exception>
+#include <functional>
+#include <mutex>
+#include <thread>
 #include <array>
 #include <cmath>
 #include <optional>
@@ -19,6 +25,7 @@
 #include "octocd/validation.hpp"
 
 #include "applied_state.hpp"
+#include "../src/row_clock.hpp"
 
 namespace octocd {
 
@@ -64,6 +71,50 @@ bool exhaustive_oracle(const PlacedShape& a_in, const PlacedShape& b_in, float t
   return false;
 }
 
+/// bp->find_pairs(boxes, out) on a helper thread while this one polls `stop` every 10 ms:
+/// one call of an O(n^2) broadphase (flat, fcl-naive) on 10^5 bodies takes minutes and
+/// polls nothing. A stop throws ValidationStopped at once and leaves the helper to finish
+/// on its own: it owns a copy of the boxes, a share of the broadphase and its result (the
+/// process ends it when it exits). Without `stop`, a plain call. Rethrows its errors.
+void find_pairs_stoppable(const std::shared_ptr<BroadPhase>& bp, const std::vector<Aabb>& boxes,
+                          std::vector<Pair>& out, const std::function<bool()>& stop) {
+  BroadPhaseStats stats;
+  if (!stop) {
+    bp->find_pairs(boxes, out, stats);
+    return;
+  }
+  if (stop()) throw ValidationStopped();
+  struct Job {
+    std::shared_ptr<BroadPhase> bp;
+    std::vector<Aabb> boxes;
+    std::vector<Pair> pairs;
+    std::exception_ptr error;
+    std::mutex m;
+    std::condition_variable cv;
+    bool done = false;
+  };
+  auto job = std::make_shared<Job>();
+  job->bp = bp;
+  job->boxes = boxes;
+  job->pairs.swap(out);  // keep its capacity
+  std::thread([job] {
+    try {
+      BroadPhaseStats st;
+      job->bp->find_pairs(job->boxes, job->pairs, st);
+    } catch (...) {
+      job->error = std::current_exception();
+    }
+    const std::lock_guard<std::mutex> lock(job->m);
+    job->done = true;
+    job->cv.notify_all();
+  }).detach();
+  std::unique_lock<std::mutex> lock(job->m);
+  while (!job->cv.wait_for(lock, std::chrono::milliseconds(10), [&] { return job->done; }))
+    if (stop()) throw ValidationStopped();
+  if (job->error) std::rethrow_exception(job->error);
+  out.swap(job->pairs);
+}
+
 /// A running count of checks and failures with the first failure's description.
 struct Tally {
   std::uint64_t checks = 0;
@@ -86,8 +137,9 @@ struct FrameValidators::Impl {
   Source source;
   ValidationOptions options;
   ContactParams params;
-  std::unique_ptr<BroadPhase> flat;
-  std::vector<std::unique_ptr<BroadPhase>> broadphases;
+  // Shared: a helper thread may still own one after a stop (find_pairs_stoppable).
+  std::shared_ptr<BroadPhase> flat;
+  std::vector<std::shared_ptr<BroadPhase>> broadphases;
   std::vector<MidphaseConfig> configs;
   ConfirmFn confirm;
   std::unique_ptr<PhysicsValidators> physics;
@@ -103,6 +155,8 @@ struct FrameValidators::Impl {
   // (an overlap of exactly zero on some axis: the engine's overlap test is not inclusive).
   std::uint64_t missing_pairs = 0, missing_touching = 0;
   double pen_max = 0.0, share_above_max = 0.0;
+  // Each model row's own time (s, RowClock).
+  double t_candidates = 0, t_midphase = 0, t_contraction = 0, t_friction = 0, t_conservation = 0, t_applied = 0;
 };
 
 FrameValidators::FrameValidators(const Engine& engine, const ValidationOptions& options,
@@ -123,7 +177,7 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   BroadPhaseConfig flat_cfg = scene.broadphase;
   flat_cfg.name = "flat";
   s.flat = make_broadphase(flat_cfg, scene.domain);
-  s.broadphases = std::move(broadphases);
+  for (auto& bp : broadphases) s.broadphases.push_back(std::move(bp));
   // The paper's configurations A, B, C and the scene's own (SPEC 5.2).
   for (const char* text : {"2", "1,2", "0,1,2"}) s.configs.push_back(MidphaseConfig::parse(text));
   if (!scene.midphase.aabb_only &&
@@ -136,6 +190,8 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   const PhysicsBodies bodies = s.source.physics ? *s.source.physics : octocd_physics_bodies(model);
   s.physics = std::make_unique<PhysicsValidators>(model, bodies, options.tol, s.source.label);
   s.applied = std::make_unique<AppliedStateJudge>(model, options.tol);
+  s.physics->set_stop(options.stop);
+  s.applied->set_stop(options.stop);
 }
 
 FrameValidators::~FrameValidators() = default;
@@ -156,6 +212,8 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
   const Model& model = *s.model;
   const std::int64_t frame = rec.frame;
   const bool has_states = !rec.x_pre.empty();
+  StopPoll poll(s.options.stop);
+  poll.now();
   // The physics tier: any engine, every frame (its costly rows on checked frames).
   s.physics->observe(rec, checked);
   // The model tier: the paper's response, for engines that claim it.
@@ -205,14 +263,17 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
 
   // 9. Applied state (SPEC 7.9): the engine's post-step state against the independent
   // re-derivation, every frame; momentum and centre on isolated dynamic groups.
-  if (has_states) s.applied->observe(rec, judge_response);
+  if (has_states) {
+    const RowClock clock(s.t_applied);
+    s.applied->observe(rec, judge_response);
+  }
 
   if (checked && s.source.octocd_pipeline) {
     // 1. Candidate sets: octocd's (and the reference) broadphases equal `flat` as sets
     // (SPEC 7.1). Another engine's pairs are judged by the physics tier's broadphase
     // completeness (extras allowed), never against octocd's exact AABB rule.
-    BroadPhaseStats bs;
-    s.flat->find_pairs(boxes, s.expected, bs);
+    std::optional<RowClock> clock(std::in_place, s.t_candidates);
+    find_pairs_stoppable(s.flat, boxes, s.expected, s.options.stop);
     ++s.candidate_frames;
     auto compare = [&](const std::vector<Pair>& got, const std::string& who, bool own) {
       const bool same = got == s.expected;
@@ -245,13 +306,15 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
     // The pairs the engine itself used this frame (SPEC 7.9), then fresh instances.
     if (rec.has_pairs) compare(rec.pairs, s.source.label, true);
     for (auto& bp : s.broadphases) {
-      bp->find_pairs(boxes, s.got, bs);
+      find_pairs_stoppable(bp, boxes, s.got, s.options.stop);
       compare(s.got, bp->name(), false);
     }
 
     // 2. Midphase completeness: every level list equals the exhaustive test (SPEC 7.2).
     {
+      clock.emplace(s.t_midphase);
       for (const Pair& q : s.expected) {
+        poll();
         if (w[q.a] == 0.0f && w[q.b] == 0.0f) continue;
         const std::uint32_t sa = model.bodies[q.a].shape, sb = model.bodies[q.b].shape;
         const PlacedShape a = placed(q.a), b = placed(q.b);
@@ -280,6 +343,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
   // 4-6 on the model's per-contact terms (the paper's response only).
   if (!judge_response) return;
   for (const ContactRecord& given : rec.contacts) {
+    poll();
     const float wa = w[given.pair.a], wb = w[given.pair.b];
     // 5. Friction cone, |J_t| <= mu_s J_n (section 3.3.2), on the reported impulses.
     const double cone = std::fabs(given.jt) - static_cast<double>(p.mu_static) * given.jn;
@@ -317,6 +381,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
     // correction only: d' - delta <= (1 - alpha beta)(d - delta) and no overshoot past
     // the slop (the sequence is monotone).
     {
+      const RowClock clock(s.t_contraction);
       const double d = overlap_along(boxes[c.pair.a], boxes[c.pair.b], c.axis);
       const double d1 = overlap_along(shifted(boxes[c.pair.a], c.dx_a),
                                       shifted(boxes[c.pair.b], c.dx_b), c.axis);
@@ -340,6 +405,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
     }
     // 5. Friction: no rise of the relative tangential speed, |J_t| <= mu_s J_n (3.3.2).
     {
+      const RowClock clock(s.t_friction);
       const Vec3 before = tangential(c.v_a - c.v_b, c.normal);
       const Vec3 after = tangential((c.v_a + c.dv_a) - (c.v_b + c.dv_b), c.normal);
       const double rise = static_cast<double>(length(after)) - length(before);
@@ -352,6 +418,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
     }
     // 6. Conservation per dynamic-dynamic contact: momentum and mass-weighted centre.
     if (wa > 0.0f && wb > 0.0f) {
+      const RowClock clock(s.t_conservation);
       ++s.dynamic_pairs;
       const double ma = 1.0 / wa, mb = 1.0 / wb;
       // Terms derived from another engine's states carry the float32 rounding of the
@@ -392,6 +459,17 @@ std::vector<ValidationResult> FrameValidators::results() const {
   // The physics tier first: it judges any engine.
   std::vector<ValidationResult> out = s.physics->results();
   const bool judge_response = s.source.octocd_pipeline || s.source.spec6_response;
+  // Each model row's own time (RowClock), set on the rows of the tier when they are done.
+  auto timed = [&](std::vector<ValidationResult>& rows) {
+    const std::pair<const char*, double> seconds[] = {
+        {"candidate-sets", s.t_candidates},          {"midphase-completeness", s.t_midphase},
+        {"non-penetration-eq14", s.t_contraction},   {"friction-monotonicity", s.t_friction},
+        {"impulse-conservation", s.t_conservation}, {"applied-state", s.t_applied}};
+    for (ValidationResult& r : rows)
+      for (const auto& [name, t] : seconds)
+        if (r.tier == Tier::Model && r.name == name) r.seconds = t;
+    return rows;
+  };
   // Model-tier rows for another engine: n/a with the reason, never a FAIL.
   auto not_claimed = [&](const char* name, const char* figure, const char* why) {
     ValidationResult r;
@@ -441,7 +519,7 @@ std::vector<ValidationResult> FrameValidators::results() const {
     not_claimed("friction-monotonicity", "contacts raising |v_t| or leaving the cone (Eq. 21-22)", no_spec6);
     not_claimed("impulse-conservation", "contacts and isolated groups breaking momentum or centre", no_spec6);
     not_claimed("applied-state", "bodies off the SPEC 6 re-derivation", no_spec6);
-    return out;
+    return timed(out);
   }
   out.push_back(tally("non-penetration-eq14", "contacts violating Eq. 14 contraction", s.contraction,
                       fmt::format("worst excess {:.3g} m; AABB penetration max {:.4g} m, share above "
@@ -484,7 +562,7 @@ std::vector<ValidationResult> FrameValidators::results() const {
   {
     out.push_back(s.applied->result());
   }
-  return out;
+  return timed(out);
 }
 
 }  // namespace octocd

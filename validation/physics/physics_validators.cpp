@@ -5,11 +5,14 @@
 // conservation (every frame that has states, O(bodies + contact rows)).
 #include "octocd/physics.hpp"
 
+#include "../src/row_clock.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -177,6 +180,10 @@ struct PhysicsValidators::Impl {
   std::uint64_t pen_upper_over = 0;
   std::uint64_t pen_pairs = 0;
   std::int64_t last_frame = 0;
+  std::function<bool()> stop;  // polled inside the long loops (set_stop)
+  // Each row's own time (s): RowClock around its work; shared work goes to the first row
+  // that needs it (the candidates and FCL truth of every pair: broadphase-completeness).
+  double t_broad = 0, t_complete = 0, t_geometry = 0, t_pen = 0, t_friction = 0, t_conservation = 0;
 
   double pair_margin(Pair p) const {
     if (!bodies.theta_margin) return bodies.contact_margin;
@@ -268,6 +275,8 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
 
 PhysicsValidators::~PhysicsValidators() = default;
 
+void PhysicsValidators::set_stop(std::function<bool()> stop) { impl_->stop = std::move(stop); }
+
 void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   Impl& s = *impl_;
   const std::size_t n = s.model->bodies.size();
@@ -291,6 +300,8 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   const std::int64_t frame = rec.frame;
   const double slack = tol.geometry_slack_m;
   ++checked_frames;
+  StopPoll poll(stop);
+  std::optional<RowClock> clock(std::in_place, t_broad);  // candidates, truth, row 1
 
   // Candidates: exact posed world AABBs, each grown by half the largest distance any row
   // asks about, through octocd's loose octree: every pair whose shapes are that close
@@ -325,6 +336,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   const bool need_distance = tol.broadphase_margin_m - slack > 0;
   std::vector<Pair> required;
   for (const Pair& p : cand) {
+    poll();
     bool close = false;
     if (need_distance) {
       close = full(p).signed_distance() < tol.broadphase_margin_m - slack;
@@ -410,6 +422,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   }
 
   // 2. Contact completeness: penetrating pairs need a contact; contacts need closeness.
+  clock.emplace(t_complete);
   for (const Pair& p : cand) {
     auto it = truth.find(key(p));
     if (it == truth.end() || !it->second.have || !it->second.g.penetrating) continue;
@@ -422,6 +435,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     });
   }
   for (const Pair& p : contact_pairs) {
+    poll();
     const ReferenceNormal& g = full(p);
     const double bound = pair_margin(p) + slack;
     const double d = g.signed_distance();
@@ -432,8 +446,10 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   }
 
   // 3. Contact geometry, per row: normal angle, the pair's deepest row's depth, points.
+  clock.emplace(t_geometry);
   const double deg = 180.0 / kPi;
   for (const PairRows& pr : rows) {
+    poll();
     const Pair p = pr.p;
     const ReferenceNormal& shape_ref = full(p);
     const bool aabb = bodies.contact_geometry == ContactGeometry::Aabb;
@@ -511,6 +527,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   }
 
   // 4. Penetration: the largest true penetration after the settling window.
+  clock.emplace(t_pen);
   if (double(frame) >= tol.penetration_settle_frames) {
     for (auto& [k, t] : truth) {
       if (!t.have || !t.g.penetrating) continue;
@@ -542,6 +559,8 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
   const std::int64_t frame = rec.frame;
   const D3 g = d3(m.scene.gravity);
   const double dt = m.scene.dt;
+  StopPoll poll(stop);
+  std::optional<RowClock> clock(std::in_place, t_friction);  // rows 5a-5b
 
   // 5a. The cone, per contact: a pair's rows together (a manifold is one contact patch).
   // A sequential-impulse solver (Bullet) clamps each row's friction by that row's normal
@@ -550,6 +569,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
   // tests/scene/test_cli_rotation_faults.cpp). The patch's friction stays within the
   // cone of its total normal impulse: sum |jt| <= mu sum jn.
   for (std::size_t k0 = 0; k0 < rec.contacts.size();) {
+    poll();
     const Pair pr = rec.contacts[k0].pair;
     std::size_t k1 = k0;
     double jt_sum = 0.0, jn_sum = 0.0;
@@ -599,6 +619,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
 
   // 5b. Dissipation at the contact points, where the pair is its dynamic bodies' only one.
   for (std::size_t k0 = 0; k0 < rec.contacts.size();) {
+    poll();
     const Pair p = rec.contacts[k0].pair;
     std::size_t k1 = k0;
     while (k1 < rec.contacts.size() && rec.contacts[k1].pair == p) ++k1;
@@ -709,6 +730,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
 
   // 6. Conservation on isolated dynamic groups: components of the contact graph with at
   // least 2 dynamic bodies and no static body among their contacts.
+  clock.emplace(t_conservation);
   std::vector<std::uint32_t> parent(n);
   for (std::size_t i = 0; i < n; ++i) parent[i] = static_cast<std::uint32_t>(i);
   auto find = [&](std::uint32_t i) {
@@ -740,6 +762,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
     if (touched[i] && dynamic(static_cast<std::uint32_t>(i))) groups_of[find(static_cast<std::uint32_t>(i))].push_back(
         static_cast<std::uint32_t>(i));
   for (auto& [root, members] : groups_of) {
+    poll();
     if (statics[root] || members.size() < 2) continue;
     if (bodies.velocity_clamp > 0.0 &&
         std::any_of(members.begin(), members.end(), [&](std::uint32_t i) {
@@ -1026,6 +1049,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                               s.groups_clamped, s.bodies.velocity_clamp);
     out.push_back(r);
   }
+  const double seconds[] = {s.t_broad, s.t_complete, s.t_geometry, s.t_pen, s.t_friction, s.t_conservation};
+  for (std::size_t i = 0; i < out.size() && i < 6; ++i) out[i].seconds = seconds[i];
   return out;
 }
 

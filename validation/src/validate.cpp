@@ -3,6 +3,8 @@
 #include <hdf5.h>
 
 #include <algorithm>
+#include <chrono>
+#include <functional>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -135,7 +137,14 @@ SceneKind classify_scene(const Model& m) {
   return SceneKind::Other;
 }
 
-ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances& tol) {
+ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances& tol,
+                                   const std::function<bool()>& stop) {
+  // Every engine step below is preceded by a poll (a long frame of a big scene is the
+  // costly part here).
+  auto step = [&]() -> const FrameMetrics& {
+    if (stop && stop()) throw ValidationStopped();
+    return engine.step();
+  };
   const Model& model = engine.model();
   const Scene& sc = model.scene;
   const char* name = "analytic";
@@ -153,7 +162,7 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
     const Vec3 x0 = engine.state().x[i], v0 = engine.state().v[i];
     const double dt = sc.dt;
     for (int n = 1; n <= n_frames; ++n) {
-      const FrameMetrics& fm = engine.step();
+      const FrameMetrics& fm = step();
       if (fm.contacts > 0) {
         r.measured = std::max(r.measured, 1.0);
         r.detail = fmt::format("frame {}: unexpected contact in free fall", n);
@@ -180,7 +189,7 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
     r.detail = fmt::format("never bounced in {} frames", n_frames);
     for (int n = 0; n < n_frames; ++n) {
       const float v_in = engine.state().v[i].y + sc.gravity.y * sc.dt;
-      engine.step();
+      step();
       if (engine.state().v[i].y > 0.0f) {
         const double v_out = engine.state().v[i].y;
         r.measured = std::fabs(v_out + sc.response.restitution * v_in) / std::fabs(v_in);
@@ -201,7 +210,7 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
     const Vec3 dir = v0 > 0 ? (1.0f / static_cast<float>(v0)) * engine.state().v[i] : Vec3{};
     int n = 0;
     while (n < n_frames && dot(engine.state().v[i], dir) > 0.0f) {
-      engine.step();
+      step();
       ++n;
     }
     const double travelled = dot(engine.state().x[i] - x0, dir);
@@ -246,7 +255,7 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
     const int total = n_frames;
     const int from = std::min(kSettle, total);
     for (int n = 1; n <= total; ++n) {
-      engine.step();
+      step();
       if (n < from) continue;
       for (std::size_t i : dyn) {
         const double d = std::fabs(engine.state().x[i].y - rest[i]) / slop;
@@ -275,7 +284,8 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
   return r;
 }
 
-ValidationResult validate_against_bullet(Engine& engine, int frames, const Tolerances& tol) {
+ValidationResult validate_against_bullet(Engine& engine, int frames, const Tolerances& tol,
+                                         const std::function<bool()>& stop) {
   const Model& model = engine.model();
   const char* name = "bullet-dynamics";
   const SceneKind kind = classify_scene(model);
@@ -294,6 +304,7 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
   double worst = 0.0;
   int worst_frame = 0;
   for (int f = 1; f <= n; ++f) {
+    if (stop && stop()) throw ValidationStopped();
     engine.step();
     bullet.step();
     if (trajectory) {
@@ -389,7 +400,9 @@ std::vector<std::unique_ptr<BroadPhase>> compared_broadphases(const Scene& scene
   return broadphases;
 }
 
-std::vector<ValidationResult> validate_engine(const EngineFactory& make, const ValidationOptions& options) {
+std::vector<ValidationResult> validate_engine(const EngineFactory& make, const ValidationOptions& options,
+                                              std::int64_t* stopped_in) {
+  if (stopped_in) *stopped_in = 0;
   std::unique_ptr<Engine> engine = make();
   if (!engine->can_record())
     throw InputError(fmt::format("validate: engine '{}' cannot record its frames (FrameRecord); "
@@ -398,27 +411,51 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   engine->set_recording(true);
   FrameValidators validators(*engine, options, compared_broadphases(engine->scene(), options.against_fcl));
   int done = 0;
-  for (int f = 1; f <= options.frames; ++f) {
-    if (options.stop && options.stop()) break;
-    engine->step();
-    validators.observe(*engine, f % options.every == 0);
-    if (options.on_step) options.on_step(*engine);
-    done = f;
+  bool stopped = false, inside = false;
+  try {
+    for (int f = 1; f <= options.frames; ++f) {
+      if (options.stop && options.stop()) {
+        stopped = true;
+        break;
+      }
+      engine->step();
+      validators.observe(*engine, f % options.every == 0);  // polls options.stop inside
+      if (options.on_step) options.on_step(*engine);
+      done = f;
+    }
+  } catch (const ValidationStopped&) {
+    stopped = inside = true;  // inside frame done + 1's checks: it is partly judged
   }
   std::vector<ValidationResult> results = validators.results();
-  if (done < options.frames) {  // stopped: the validators that rerun the scene do not run
+  if (stopped) {  // the validators that rerun the scene do not run
+    if (stopped_in && inside) *stopped_in = done + 1;
     const std::string why = fmt::format("not run: stopped after frame {} of {}", done, options.frames);
     results.push_back(not_applicable("analytic", "closed form of an analytic scene", why));
     results.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld", why));
     return results;
   }
-  {
-    std::unique_ptr<Engine> fresh = make();
-    results.push_back(validate_analytic(*fresh, options.frames, options.tol));
+  // Validators 7 and 8 rerun the scene on fresh engines (their time is their row's).
+  auto rerun = [&](const char* name, const char* figure, auto judge) {
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      std::unique_ptr<Engine> fresh = make();
+      results.push_back(judge(*fresh));
+    } catch (const ValidationStopped&) {
+      stopped = true;
+      results.push_back(not_applicable(name, figure, "not run to its end: stopped by a signal"));
+    }
+    results.back().seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+  rerun("analytic", "closed form of an analytic scene",
+        [&](Engine& e) { return validate_analytic(e, options.frames, options.tol, options.stop); });
+  if (stopped) {
+    results.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld",
+                                     "not run: stopped by a signal"));
+    return results;
   }
   if (options.against_bullet) {
-    std::unique_ptr<Engine> fresh = make();
-    results.push_back(validate_against_bullet(*fresh, options.frames, options.tol));
+    rerun("bullet-dynamics", "comparison with btDiscreteDynamicsWorld",
+          [&](Engine& e) { return validate_against_bullet(e, options.frames, options.tol, options.stop); });
   } else {
     results.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld",
                                      "Bullet not requested (--against)"));

@@ -13,6 +13,8 @@
 ///     for (int f = 0; f < frames && !octocd::stop_signal(); ++f) step();
 ///     if (const int sig = octocd::stop_signal()) { flush(); report(sig); return octocd::stop_exit_code(sig); }
 
+#include <string>
+
 namespace octocd {
 
 /// The signal (SIGINT or SIGTERM) received since the handlers were installed, 0 when none.
@@ -49,6 +51,28 @@ class StopAtOnce {
   ~StopAtOnce();
   StopAtOnce(const StopAtOnce&) = delete;
   StopAtOnce& operator=(const StopAtOnce&) = delete;
+};
+
+/// Around one long step of work that polls no flag (an engine's step() on a big scene: a
+/// frame may take seconds): while alive (inside a StopOnSignals), a SIGINT or SIGTERM
+/// that the loop does not reach within `grace_s` ends the process: one line on stderr
+/// "octocd: stopped by SIG... while <what>" and exit stop_exit_code(sig). Within the grace
+/// the guard is destroyed as usual and the loop polls stop_signal() and stops cleanly
+/// (flush, summary). `what` says what is kept, since nothing more is written, e.g.
+/// "run stepped frame 12 of 100; the trace t.h5 holds frames 1..10 (its last flush)".
+/// A signal recorded before the guard starts the grace at construction. Uses SIGALRM
+/// (ITIMER_REAL) while alive. Not nestable, not with StopAtOnce.
+class StopWithin {
+ public:
+  /// `what`: copied. `grace_s` > 0.
+  StopWithin(std::string what, double grace_s = 0.5);
+  ~StopWithin();
+  StopWithin(const StopWithin&) = delete;
+  StopWithin& operator=(const StopWithin&) = delete;
+
+ private:
+  std::string what_;
+  double grace_s_;
 };
 
 }  // namespace octocd

@@ -65,6 +65,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -162,8 +163,13 @@ class PhysicsValidators {
   /// every frame that has states.
   void observe(const FrameRecord& rec, bool checked);
 
-  /// The six rows so far, tier Physics, each saying how many items it judged.
+  /// The six rows so far, tier Physics, each saying how many items it judged, with its
+  /// own time (ValidationResult::seconds).
   std::vector<ValidationResult> results() const;
+
+  /// Polled inside observe's long loops (every 16 candidate pairs, contacts or groups);
+  /// observe throws ValidationStopped when it returns true. Empty (default): never.
+  void set_stop(std::function<bool()> stop);
 
  private:
   struct Impl;

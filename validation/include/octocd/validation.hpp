@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cstdint>
+#include <exception>
 #include <functional>
 #include <memory>
 #include <string>
@@ -50,6 +51,20 @@ struct ValidationResult {
   /// Names of the Tolerances fields this verdict depends on (comma-separated, "" none);
   /// format_results marks the row when one of them was overridden.
   std::string tolerances;
+  /// Time spent in this validator's own work (s, std::chrono::steady_clock), summed over
+  /// the frames it judged (for analytic and bullet-dynamics: their whole rerun). Work
+  /// that several rows share (the physics tier's FCL truth per candidate pair) is charged
+  /// to the first row that needs it. JUnit's per-testcase time.
+  double seconds = 0;
+};
+
+/// Thrown from inside a check when ValidationOptions::stop returns true (the long loops
+/// poll it every few dozen pairs, contacts or steps, so a stop is honoured within a
+/// fraction of a second even on a frame whose checks take minutes). validate_engine
+/// catches it and returns the results so far; FrameValidators::observe lets it through
+/// (the frame it stopped in is then partly judged).
+struct ValidationStopped : std::exception {
+  const char* what() const noexcept override { return "validation stopped"; }
 };
 
 /// Every tolerance of the validators, with the reason for its value (issue 3: "stated in
@@ -196,6 +211,8 @@ struct ValidationOptions {
   /// stops there: the results cover the frames run so far, and the validators that rerun
   /// the scene (analytic, bullet-dynamics) are `n/a` ("not run: stopped after frame N").
   /// May be empty (never stops). `octocd validate` stops on SIGINT/SIGTERM (stop.hpp).
+  /// Also polled inside the long loops of a frame's checks (FrameValidators, the physics
+  /// tier, the analytic and Bullet reruns), which then throw ValidationStopped.
   std::function<bool()> stop;
 };
 
@@ -302,21 +319,31 @@ const char* scene_kind_name(SceneKind kind);
 /// (never more): an event the run does not reach fails, saying so (a bounce after the
 /// last frame, a slide still moving, a stack judged before its 200 settling frames end
 /// is judged on its last frame).
-ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances& tol);
+/// `stop` (may be empty) is polled before every step; throws ValidationStopped when it
+/// returns true.
+ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances& tol,
+                                   const std::function<bool()>& stop = {});
 
 /// Validator 8 (SPEC 7.8): `engine` against Bullet's btDiscreteDynamicsWorld built from
 /// the same model: settled centre-of-mass height (resting stacks and piles) or the
 /// centre-of-mass trajectory (bounce, slide) over `frames` steps. Not applicable to other
 /// kinds. Steps `engine` itself, exactly `frames` steps.
-ValidationResult validate_against_bullet(Engine& engine, int frames, const Tolerances& tol);
+/// `stop` as for validate_analytic.
+ValidationResult validate_against_bullet(Engine& engine, int frames, const Tolerances& tol,
+                                         const std::function<bool()>& stop = {});
 
 /// Makes a fresh engine of the kind being validated (each call a new one, from the start).
 using EngineFactory = std::function<std::unique_ptr<Engine>()>;
 
 /// Runs every validator on the engines `make` builds: validators 1-6 and 9 over
 /// `options.frames` steps, then 7 and 8 on fresh engines. Uses octocd's and (against_fcl)
-/// the reference broadphases. The engines must be able to record (FrameRecord).
-std::vector<ValidationResult> validate_engine(const EngineFactory& make, const ValidationOptions& options);
+/// the reference broadphases. The engines must be able to record (FrameRecord). When
+/// `options.stop` stops it (between frames or inside a check), the results cover the
+/// frames judged so far and the validators not run are n/a ("not run: stopped ...");
+/// `stopped_in` (may be null) receives the frame whose checks it stopped inside (that
+/// frame is partly judged), 0 when it stopped between frames or in a rerun, or did not stop.
+std::vector<ValidationResult> validate_engine(const EngineFactory& make, const ValidationOptions& options,
+                                              std::int64_t* stopped_in = nullptr);
 
 /// validate_engine with the CPU engine (World) on `scene`.
 std::vector<ValidationResult> validate_scene(const Scene& scene, const ValidationOptions& options);
@@ -327,15 +354,20 @@ std::string format_results(const std::vector<ValidationResult>& results,
                            const std::vector<std::string>& overridden = {});
 
 /// Writes a JUnit XML report to `path` (`octocd validate --junit`): one <testsuite> named
-/// `suite` (the scene's name) inside <testsuites>, one <testcase> per result with
-/// classname = `suite` and name = the validator; a failed result carries
+/// `suite` (the scene's name) inside <testsuites>, one <testcase> per result; a failed result carries
 /// <failure message="detail"> (text: figure, measured, bound, detail), an n/a result
-/// <skipped>, a pass its figures in <system-out>. `seconds` is the suite's time;
-/// `properties` (engine, frames, ...) go to <properties>. Text is XML-escaped. Throws
-/// RuntimeError naming the path when it cannot be written.
+/// <skipped>, a pass its figures in <system-out>. A testcase's classname is "SUITE.TIER"
+/// (e.g. "box-stack.physics": CI servers show scene, tier and validator), its name the
+/// validator, its time the result's `seconds`; a failure's message starts with
+/// "measured X > bound Y". `seconds` is the suite's time; `properties` (engine,
+/// frames, ...) go to <properties>. `stopped` non-empty (a run stopped by a signal): one
+/// more testcase "stopped" with <error message="stopped">, so a CI server never reads a
+/// stopped run as passed. Text is XML-escaped. Throws RuntimeError naming the path when
+/// it cannot be written.
 void write_junit(const std::string& path, const std::string& suite,
                  const std::vector<ValidationResult>& results, double seconds,
-                 const std::vector<std::pair<std::string, std::string>>& properties = {});
+                 const std::vector<std::pair<std::string, std::string>>& properties = {},
+                 const std::string& stopped = "");
 
 /// Writes a JUnit XML report with one errored test case (classname `suite`, name `name`,
 /// e.g. "bad-input" or "runtime-failure", <error message="message">): what `validate
