@@ -152,11 +152,16 @@ struct BenchOptions {
   std::string engines;            ///< comma-separated, overrides the sweep's
   int repeat = 0;                 ///< > 0 overrides the sweep's repetitions
   int frames = 0;                 ///< > 0 overrides the sweep's timed (or recorded) frames
+  int warmup = -1;                ///< >= 0 overrides the sweep's untimed frames first
+  double target = 0.0;            ///< > 0 overrides a max-instances sweep's target steps/s
+  long max_instances = 0;         ///< > 0 overrides a max-instances sweep's cap
+  double resolution = -1.0;       ///< >= 0 overrides a max-instances sweep's bisection resolution
   std::string shard;              ///< "i/N"
   std::string output;             ///< RESULT.json
   bool resume = false;
   bool list = false;
   bool print = false;
+  long print_scene = 0;           ///< > 0: print a max-instances sweep's scenes at this count and exit
   bool quiet = false;
   std::string scene_dir;          ///< where named sweeps find their scenes
   std::string data_dir;           ///< meshes (as load_scene's data_dir)
