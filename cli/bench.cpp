@@ -1130,7 +1130,9 @@ Measured measure_count(MaxInstancesRun& run, std::size_t sc, const std::string& 
       const double med = r["windows"][s.windows[0].name]["steps_per_s"].value("median", 0.0);
       r["verdict"] = med >= s.target ? "pass" : "below";
     } else if (status == "skipped") {
-      r["verdict"] = n == 1 ? "skipped" : "limit";
+      // Count 1 that cannot start: the engine is missing (skip the search), unless the one
+      // instance does not fit (a limit: the result is 0 with the reason).
+      r["verdict"] = n == 1 && !is_memory_failure(r.value("reason", "")) ? "skipped" : "limit";
     } else {
       r["verdict"] = "failed";
     }
@@ -1309,8 +1311,8 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
   c->add_option("--repeat", o.repeat, "Repetitions of every point, overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
   c->add_option("--frames", o.frames,
-                "Timed frames per run (steps sweeps without windows) or recorded frames (broadphase sweeps), "
-                "overrides the sweep's (>= 1)")
+                "Timed frames per run (steps sweeps without windows; max-instances: the window's frames) or recorded "
+                "frames (broadphase sweeps), overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
   c->add_option("--warmup", o.warmup,
                 "Untimed frames before the timed ones (steps and max-instances sweeps without windows) or steps before "

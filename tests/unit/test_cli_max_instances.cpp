@@ -421,4 +421,13 @@ TEST_F(MaxInstances, DeviceMemoryStopsTheSearchThere) {
   ASSERT_NE(at41, nullptr);
   EXPECT_EQ((*at41)["status"], "skipped");
   EXPECT_EQ((*at41)["verdict"], "limit");
+  // Not even one instance fits: 0 with the reason (not a skipped search).
+  const Result z = octocd::test::run("OCTOCD_CUDA_FREE_BYTES=1 " + bin() + " bench " + sw + " -o " +
+                                     (dir_ / "zero.json").string() + " --quiet");
+  ASSERT_EQ(z.code, 0) << z.output;
+  const json zj = read_json(dir_ / "zero.json");
+  EXPECT_EQ(zj["searches"][0]["status"], "ok");
+  EXPECT_EQ(zj["searches"][0]["max_instances"], 0);
+  EXPECT_EQ(zj["searches"][0]["limited_by"], "memory");
+  EXPECT_NE(zj["searches"][0]["reason"].get<std::string>().find("a single instance does not fit"), std::string::npos);
 }
