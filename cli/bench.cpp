@@ -166,6 +166,7 @@ struct Sweep {
   long max_instances = 1048576;     // the search's cap
   double resolution = 0.0;          // bisection stops at hi - lo <= max(1, resolution * lo)
   int probe_repeat = 1;             // repetitions of a probe (the bracket's ends get `repeat`)
+  int search_time_s = 0;            // > 0: no new count is measured once a search has run this long
   json paper = json::object();      // scene stem -> {"count", "source"}
 };
 
@@ -229,8 +230,8 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     bad(origin, "name", "missing or not a non-empty string", "a non-empty string");
   s.name = j.at("name");
   s.kind = j.value("kind", "steps");
-  static const std::set<std::string> mi{"scenes",     "set",    "target_steps_per_s", "max_instances",
-                                        "resolution", "paper",  "probe_repeat"};
+  static const std::set<std::string> mi{"scenes", "set",          "target_steps_per_s", "max_instances",
+                                        "resolution", "paper", "probe_repeat", "search_time_s"};
   if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances")
     bad(origin, "kind", "'" + s.kind + "'", "\"steps\", \"broadphase\", \"max-instances\"");
   const auto& extra = s.kind == "steps" ? steps : s.kind == "broadphase" ? bp : mi;
@@ -262,6 +263,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     s.frames = get_int(j, "frames", origin, 1, 100000000, 300);
     s.warmup = get_int(j, "warmup", origin, 0, 100000000, 300);
     s.probe_repeat = get_int(j, "probe_repeat", origin, 1, 1000, 1);
+    s.search_time_s = get_int(j, "search_time_s", origin, 0, 100000000, 0);
     if (s.probe_repeat > s.repeat)
       bad(origin, "probe_repeat", fmt::format("{} is above repeat ({})", s.probe_repeat, s.repeat),
           "an integer in [1, repeat]");
@@ -995,7 +997,8 @@ enum class Verdict {
   Below,    ///< steps/s below the target
   Limit,    ///< the count does not fit (device or host memory, the engine's body limit): above the maximum
   Skipped,  ///< the engine cannot run at all (count 1): the search is skipped
-  Failed    ///< a runtime failure (e.g. a non-finite state): the search stops
+  Failed,   ///< a runtime failure (e.g. a non-finite state): the search stops
+  TimeUp    ///< the search's time limit passed before this count was measured: it ends as it is
 };
 
 /// The bracket a search ends with: lo = the largest count found to pass (0: none), hi = the
@@ -1006,13 +1009,13 @@ struct Bracket {
 
 /// Doubling from 1, then bisection, on `decide` (called once per count it needs; the caller
 /// memoizes): ends when hi - lo <= max(1, floor(resolution x lo)). A count that is not Pass
-/// counts as above the maximum (Below, Limit); Skipped or Failed end the search at once
-/// (`*stop` set to that verdict).
+/// counts as above the maximum (Below, Limit); Skipped, Failed or TimeUp end the search at
+/// once (`*stop` set to that verdict).
 Bracket search_bracket(long cap, double resolution, const std::function<Verdict(long)>& decide, Verdict* stop) {
   *stop = Verdict::Pass;
   const auto pass = [&](long n) {
     const Verdict v = decide(n);
-    if (v == Verdict::Skipped || v == Verdict::Failed) *stop = v;
+    if (v == Verdict::Skipped || v == Verdict::Failed || v == Verdict::TimeUp) *stop = v;
     return v == Verdict::Pass;
   };
   Bracket b;
@@ -1021,16 +1024,19 @@ Bracket search_bracket(long cap, double resolution, const std::function<Verdict(
     return b;
   }
   b.lo = 1;
+  // One count: false when the search ends there (the bracket left as it was).
+  const auto step = [&](long n) {
+    const bool ok = pass(n);
+    if (*stop != Verdict::Pass) return false;
+    (ok ? b.lo : b.hi) = n;
+    return true;
+  };
   while (b.hi < 0) {
     if (b.lo >= cap) return b;  // the cap still passes
-    const long n = std::min(2 * b.lo, cap);
-    (pass(n) ? b.lo : b.hi) = n;
-    if (*stop != Verdict::Pass) return b;
+    if (!step(std::min(2 * b.lo, cap))) return b;
   }
   while (b.hi - b.lo > std::max<long>(1, static_cast<long>(std::floor(resolution * static_cast<double>(b.lo))))) {
-    const long mid = b.lo + (b.hi - b.lo) / 2;
-    (pass(mid) ? b.lo : b.hi) = mid;
-    if (*stop != Verdict::Pass) return b;
+    if (!step(b.lo + (b.hi - b.lo) / 2)) return b;
   }
   return b;
 }
@@ -1168,19 +1174,33 @@ Measured measure_count(MaxInstancesRun& run, std::size_t sc, const std::string& 
 json search_max_instances(MaxInstancesRun& run, std::size_t sc, const std::string& engine, std::size_t search) {
   const Sweep& s = run.s;
   std::map<long, Measured> probe, full;
+  const auto started = Clock::now();
+  const auto time_up = [&] {
+    return s.search_time_s > 0 &&
+           std::chrono::duration<double>(Clock::now() - started).count() > static_cast<double>(s.search_time_s);
+  };
   const auto decide = [&](long n) {
     const auto f = full.find(n);
     if (f != full.end()) return f->second.verdict;
     auto it = probe.find(n);
-    if (it == probe.end()) it = probe.emplace(n, measure_count(run, sc, engine, n, false, search)).first;
+    if (it == probe.end()) {
+      if (time_up() && !run.kept.count(fmt::format("{} | instances={} | {}", stem(s.scenes[sc]), n, engine)))
+        return Verdict::TimeUp;
+      it = probe.emplace(n, measure_count(run, sc, engine, n, false, search)).first;
+    }
     return it->second.verdict;
   };
   const bool confirming = s.repeat > s.probe_repeat;
   Bracket b;
   Verdict stop = Verdict::Pass;
+  bool unconfirmed = false;  // the time limit came before the bracket's ends were confirmed
   for (;;) {
     b = search_bracket(s.max_instances, s.resolution, decide, &stop);
     if (stop != Verdict::Pass || !confirming) break;
+    if (time_up()) {
+      unconfirmed = (b.lo >= 1 && !full.count(b.lo)) || (b.hi >= 1 && !full.count(b.hi));
+      break;
+    }
     bool measured = false;
     for (const long n : {b.lo, b.hi}) {
       if (n < 1 || full.count(n)) continue;
@@ -1235,6 +1255,7 @@ json search_max_instances(MaxInstancesRun& run, std::size_t sc, const std::strin
   }
   sum["status"] = "ok";
   sum["max_instances"] = b.lo;
+  const bool timed_out = stop == Verdict::TimeUp || unconfirmed;
   sum["bracket"] = {b.lo, b.hi < 0 ? json(nullptr) : json(b.hi)};
   sum["steps_per_s"] = sps(b.lo);
   if (b.hi > 0) sum["steps_per_s_above"] = sps(b.hi);
@@ -1252,6 +1273,8 @@ json search_max_instances(MaxInstancesRun& run, std::size_t sc, const std::strin
                                "repetition(s))",
                                s.target, sps(1).is_null() ? 0.0 : sps(1).value("median", 0.0),
                                sps(1).is_null() ? 0 : sps(1).value("n", 0));
+  } else if (b.hi < 0 && stop == Verdict::TimeUp) {
+    reason = fmt::format("{} instances run at >= {:g} steps/s; no higher count was measured", b.lo, s.target);
   } else if (b.hi < 0) {
     sum["limited_by"] = "cap";
     reason = fmt::format("the cap max_instances = {} still runs at >= {:g} steps/s: the maximum is at least {} (raise "
@@ -1268,6 +1291,17 @@ json search_max_instances(MaxInstancesRun& run, std::size_t sc, const std::strin
                  : fmt::format("{} instances run at >= {:g} steps/s, {} below; counts between were not probed "
                                "(resolution {:g})",
                                b.lo, s.target, b.hi, s.resolution);
+  }
+  if (timed_out) {
+    sum["time_limit_s"] = s.search_time_s;
+    const long width = std::max<long>(1, static_cast<long>(std::floor(s.resolution * static_cast<double>(b.lo))));
+    reason += fmt::format(
+        "; the search's time limit ({} s) ended it{}", s.search_time_s,
+        b.hi < 0 && b.lo < s.max_instances
+            ? ": the maximum is at least " + std::to_string(b.lo)
+            : b.hi - b.lo > width ? std::string(" before the bracket was narrowed further")
+                                  : fmt::format(" before the bracket's ends were measured with {} repetitions", s.repeat));
+    if (b.hi < 0 && b.lo < s.max_instances) sum["limited_by"] = "time";
   }
   sum["reason"] = reason;
   return sum;
@@ -1328,6 +1362,10 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
                 "max-instances: stop bisecting at hi - lo <= max(1, resolution x lo), overrides the sweep's (default 0: "
                 "an integer bracket [N, N+1]; 0.05 saves device time)")
       ->check(CLI::Range(0.0, 0.999));
+  c->add_option("--search-time", o.search_time_s,
+                "max-instances: seconds after which a search measures no new count and ends with the bracket it has "
+                "(0: no limit), overrides the sweep's; bounds device time")
+      ->check(CLI::Range(0, 100000000));
   c->add_option("--shard", o.shard,
                 "i/N: run only the points whose index is i modulo N (0 <= i < N), for job arrays; `report` merges "
                 "the shards' result files");
@@ -1435,13 +1473,14 @@ int bench_command(const BenchOptions& o) {
       s.frames = s.warmup + timed;
     }
   }
-  if (s.kind != "max-instances" && (o.target > 0 || o.max_instances > 0 || o.resolution >= 0))
-    throw InputError(fmt::format("--target, --max-instances, --resolution: {} is of kind '{}'; allowed: only for "
+  if (s.kind != "max-instances" && (o.target > 0 || o.max_instances > 0 || o.resolution >= 0 || o.search_time_s >= 0))
+    throw InputError(fmt::format("--target, --max-instances, --resolution, --search-time: {} is of kind '{}'; allowed: only for "
                                  "sweeps of kind max-instances",
                                  origin, s.kind));
   if (o.target > 0) s.target = o.target;
   if (o.max_instances > 0) s.max_instances = o.max_instances;
   if (o.resolution >= 0) s.resolution = o.resolution;
+  if (o.search_time_s >= 0) s.search_time_s = o.search_time_s;
   if (o.frames > 0) {
     if (s.kind == "broadphase") {
       s.frames = o.frames;
@@ -1478,6 +1517,7 @@ int bench_command(const BenchOptions& o) {
     settings["target_steps_per_s"] = s.target;
     settings["max_instances"] = s.max_instances;
     settings["resolution"] = s.resolution;
+    settings["search_time_s"] = s.search_time_s;
     settings["window"] = {{"name", s.windows[0].name}, {"first", s.windows[0].first}, {"last", s.windows[0].last}};
     // The template must be grown into a scene (bad input now, not after an hour).
     for (std::size_t sc = 0; sc < s.scenes.size(); ++sc) (void)instance_scene(s, sc, 1);

@@ -156,6 +156,7 @@ struct BenchOptions {
   double target = 0.0;            ///< > 0 overrides a max-instances sweep's target steps/s
   long max_instances = 0;         ///< > 0 overrides a max-instances sweep's cap
   double resolution = -1.0;       ///< >= 0 overrides a max-instances sweep's bisection resolution
+  int search_time_s = -1;         ///< >= 0 overrides a max-instances sweep's time limit per search (0: none)
   std::string shard;              ///< "i/N"
   std::string output;             ///< RESULT.json
   bool resume = false;

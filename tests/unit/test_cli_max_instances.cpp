@@ -340,6 +340,29 @@ TEST_F(MaxInstances, SigtermKeepsTheProbesAndResumeGoesOn) {
   EXPECT_NE(r.output.find("settings"), std::string::npos) << r.output;
 }
 
+// --search-time: once a search has run that long it measures no new count and ends with the
+// bracket it has (here during doubling: at least the last passing count).
+TEST_F(MaxInstances, SearchTimeLimitEndsTheSearchWithItsBracket) {
+  const std::string sw = write("sweep.json", R"({"name": "mi", "kind": "max-instances", "scenes": ["boxes.json"],
+    "engines": ["cpu"], "warmup": 0, "frames": 4000, "repeat": 1, "max_instances": 16384,
+    "target_steps_per_s": 0.000001})");
+  const json j = bench(sw, "--search-time 1");
+  ASSERT_EQ(j["searches"].size(), 1u);
+  const json& s = j["searches"][0];
+  EXPECT_EQ(s["limited_by"], "time");
+  EXPECT_EQ(s["time_limit_s"], 1);
+  EXPECT_TRUE(s["bracket"][1].is_null());
+  long largest = 0;
+  for (const auto& p : j["points"]) largest = std::max(largest, p["params"]["axes"]["instances"].get<long>());
+  EXPECT_EQ(s["max_instances"], largest);  // every count measured passed; no unmeasured count in the bracket
+  EXPECT_LT(largest, 16384);
+  EXPECT_NE(s["reason"].get<std::string>().find("time limit (1 s) ended it: the maximum is at least " +
+                                                std::to_string(largest)),
+            std::string::npos)
+      << s["reason"];
+  EXPECT_EQ(j["settings"]["search_time_s"], 1);
+}
+
 // Bad input: one line, exit 2, naming the file and the key with the allowed values.
 TEST_F(MaxInstances, BadInputExits2) {
   struct Case {
