@@ -1258,7 +1258,12 @@ json search_max_instances(MaxInstancesRun& run, std::size_t sc, const std::strin
   const bool timed_out = stop == Verdict::TimeUp || unconfirmed;
   sum["bracket"] = {b.lo, b.hi < 0 ? json(nullptr) : json(b.hi)};
   sum["steps_per_s"] = sps(b.lo);
-  if (b.hi > 0) sum["steps_per_s_above"] = sps(b.hi);
+  if (b.hi > 0) {
+    sum["steps_per_s_above"] = sps(b.hi);
+    // Cut repetitions hold upper bounds (docs/bench-format.md): say so beside the figure.
+    const Measured* m = measured_at(b.hi);
+    sum["steps_per_s_above_cut"] = m && m->point.contains("cut") && m->point["cut"].value("repetitions_cut", 0) > 0;
+  }
   const Measured* at_lo = measured_at(b.lo);
   const Measured* at_hi = b.hi > 0 ? measured_at(b.hi) : nullptr;
   if (at_lo) sum["repetitions_at_max"] = at_lo->point["windows"][s.windows[0].name]["steps_per_s"].value("n", 0);
@@ -1580,13 +1585,17 @@ int bench_command(const BenchOptions& o) {
       const std::string id = pt["id"];
       if (s.kind == "max-instances") {
         // "SCENE | instances=N | ENGINE" or "... | confirm", N in [1, max_instances].
+        const json* n_json = nullptr;
+        if (pt.contains("params") && pt["params"].is_object() && pt["params"].contains("axes") &&
+            pt["params"]["axes"].is_object() && pt["params"]["axes"].contains("instances"))
+          n_json = &pt["params"]["axes"]["instances"];
+        const long n = n_json && n_json->is_number_integer() ? n_json->get<long>() : 0;
         bool known = false;
         for (const auto& sc : s.scenes)
           for (const auto& e : s.engines)
-            for (long n : {pt.value("params", json::object()).value("axes", json::object()).value("instances", 0L)})
-              for (const char* tail : {"", " | confirm"})
-                known = known || (n >= 1 && n <= s.max_instances &&
-                                  id == fmt::format("{} | instances={} | {}{}", stem(sc), n, e, tail));
+            for (const char* tail : {"", " | confirm"})
+              known = known || (n >= 1 && n <= s.max_instances &&
+                                id == fmt::format("{} | instances={} | {}{}", stem(sc), n, e, tail));
         if (!known)
           refuse(".id", "'" + id + "' is not a probe of the sweep",
                  fmt::format("'SCENE | instances=N | ENGINE[ | confirm]' with params.axes.instances = N in [1, {}]",

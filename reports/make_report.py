@@ -780,10 +780,12 @@ def section_max_instances(doc, g):
         br = f"[{br[0]}, {br[1] if br[1] is not None else '-'}]" if isinstance(br, list) and len(br) == 2 else "-"
         rows.append([x.get("model"), x.get("engine"), x.get("status"), x.get("max_instances", "-"),
                      br, spread_text(x.get("steps_per_s")),
-                     spread_text(x.get("steps_per_s_above")), x.get("limited_by", "-"), x.get("probes", 0),
+                     ("≤ " if x.get("steps_per_s_above_cut") else "") + spread_text(x.get("steps_per_s_above")), x.get("limited_by", "-"), x.get("probes", 0),
                      x.get("confirmations", 0), str(x.get("reason", ""))[:200]])
     doc.table(["model", "engine", "status", "N", "bracket", "steps/s at N", "steps/s at bracket top", "limited by",
-               "probes", "confirmations", "reason"], rows, name="searches")
+               "probes", "confirmations", "reason"], rows,
+              "≤: the top's repetitions were cut once below the target, so the figure is an upper bound.",
+              name="searches")
     pts = [p for p in g["points_list"] if p.get("status") == "ok" and "windows" in p
            and "instances" in p.get("params", {}).get("axes", {})]
     if pts:
