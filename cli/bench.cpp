@@ -795,7 +795,10 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   std::vector<double> wall;
   int cut = 0;
   for (int rep = 0; rep < repeat; ++rep) {
-    if (rep > 0) engine = make_engine(p.engine, model);
+    if (rep > 0) {
+      engine.reset();  // the last repetition's device memory back first: the memory check sees one engine
+      engine = make_engine(p.engine, model);
+    }
     std::unique_ptr<TraceWriter> trace;
     if (rep == 0 && !o.trace_dir.empty()) {
       fs::create_directories(o.trace_dir);
