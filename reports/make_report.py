@@ -735,7 +735,9 @@ def section_max_instances(doc, g):
     target = st.get("target_steps_per_s", 30)
     win = st.get("window", {})
     searches = g["searches"]
-    engines = engines_of(g)
+    # Every engine searched in any of the files (runs of one engine each merge into one table).
+    named = list(dict.fromkeys(engines_of(g) + [x.get("engine") for x in searches if x.get("engine")]))
+    engines = [e for e in ("cpu", "cuda", "bullet") if e in named] + [e for e in named if e not in ENGINE_COLORS]
     doc.p(f"Largest instance count N whose steps/s over frames {win.get('first')}-{win.get('last')} (the settled "
           f"window) is >= {target:g}, per model (its Table 5 random scene grown at the same density) and engine: "
           "doubling from 1, then bisection to the bracket [N, N+1] (or to the resolution "
