@@ -106,6 +106,27 @@ const NamedSweep kNamed[] = {
   "warm_replays": 1,
   "repeat": 5
 })"},
+    {"max-instances", R"J({
+  "name": "max-instances",
+  "kind": "max-instances",
+  "description": "The paper's headline (section 5.3, Table 5): per model and engine, the largest number of instances whose steps/s over a settled window stays >= 30, found by doubling from 1, then bisection to an integer bracket [N, N+1]. Each count runs the model's Table 5 random scene (closed box, no gravity, random velocities) grown at the same density: k = ceil(cbrt(N)) slots a side at the scene's 0.3 m spacing and margin (N = 400, 250, 60 give the shipped scenes exactly), broadphase depth auto (the scenes' fixed depth 2 has 64 leaf cells: about n/64 bodies a cell, a broadphase growing as n^2), midphase B [1,2]. Window: frames 701-1000: 400 bunnies start on the grid without contact; AABB pairs and contacts per frame rise over the first 600-700 frames (pairs 25, 124, 151, 178, 186, 198, 223 per 100-frame block) and then hold (230-236 pairs, 42-49 contacts per frame to frame 1200), so the window times the steady collision load. Probes run 1 repetition, and a repetition is cut as soon as its window's step time exceeds frames / 30 s (its steps/s can then only be below 30); the bracket's two ends are measured again with 3 repetitions (median decides).",
+  "scenes": ["bunny-random-400", "armadillo-random-250", "dragon-random-250", "asian-dragon-random-60"],
+  "engines": ["cpu", "cuda", "bullet"],
+  "set": {"/broadphase/depth": "auto", "/midphase/levels": "1,2"},
+  "target_steps_per_s": 30,
+  "max_instances": 1048576,
+  "resolution": 0,
+  "warmup": 700,
+  "frames": 300,
+  "repeat": 3,
+  "probe_repeat": 1,
+  "paper": {
+    "bunny-random-400": {"count": 400, "source": "paper section 5.3: 'The Bunny model maintained over 30 fps up to 400 instances' (Table 5, B: 46.7 fps at 400, 40.1 at 450, the table's last row)"},
+    "armadillo-random-250": {"count": 250, "source": "paper section 5.3: 'The Armadillo model sustained real-time performance up to around 250 instances' (Table 5, B: 45.14 fps at 250, 36.51 at 300, the table's last row)"},
+    "dragon-random-250": {"count": 250, "source": "paper Table 5, B: 40.35 fps at 250, 25.6 at 300 (section 5.3 says instead that the Dragon 'fell below 30 fps at approximately 200 instances')"},
+    "asian-dragon-random-60": {"count": 60, "source": "paper Table 5, B: 48.14 fps at 60, 20.15 at 70 (section 5.3 leaves the Asian Dragon out)"}
+  }
+})J"},
 };
 
 std::string named_list() {
@@ -141,7 +162,18 @@ struct Sweep {
   std::vector<long> bodies;
   std::vector<std::string> broadphases;
   std::map<std::string, long> max_bodies;
+  // max-instances
+  double target = 30.0;             // steps/s a count must reach
+  long max_instances = 1048576;     // the search's cap
+  double resolution = 0.0;          // bisection stops at hi - lo <= max(1, resolution * lo)
+  int probe_repeat = 1;             // repetitions of a probe (the bracket's ends get `repeat`)
+  int search_time_s = 0;            // > 0: no new count is measured once a search has run this long
+  json paper = json::object();      // scene stem -> {"count", "source"}
 };
+
+/// The largest instance count a max-instances sweep may search to (the scene format's body
+/// limit is far above; the CUDA engine's kCudaMaxBodies is 16,777,216).
+constexpr long kMaxInstancesCap = 16777216;
 
 [[noreturn]] void bad(const std::string& origin, const std::string& key, const std::string& problem,
                       const std::string& allowed) {
@@ -199,8 +231,11 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     bad(origin, "name", "missing or not a non-empty string", "a non-empty string");
   s.name = j.at("name");
   s.kind = j.value("kind", "steps");
-  if (s.kind != "steps" && s.kind != "broadphase") bad(origin, "kind", "'" + s.kind + "'", "\"steps\", \"broadphase\"");
-  const auto& extra = s.kind == "steps" ? steps : bp;
+  static const std::set<std::string> mi{"scenes", "set",          "target_steps_per_s", "max_instances",
+                                        "resolution", "paper", "probe_repeat", "search_time_s"};
+  if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances")
+    bad(origin, "kind", "'" + s.kind + "'", "\"steps\", \"broadphase\", \"max-instances\"");
+  const auto& extra = s.kind == "steps" ? steps : s.kind == "broadphase" ? bp : mi;
   for (auto it = j.begin(); it != j.end(); ++it) {
     if (!common.count(it.key()) && !extra.count(it.key())) {
       std::string keys;
@@ -225,7 +260,42 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
       if (it.key().empty() || it.key()[0] != '/')
         bad(origin, "set." + it.key(), "not a JSON pointer", "keys like \"/response/beta\"");
   }
-  if (s.kind == "steps") {
+  if (s.kind == "max-instances") {
+    s.frames = get_int(j, "frames", origin, 1, 100000000, 300);
+    s.warmup = get_int(j, "warmup", origin, 0, 100000000, 300);
+    s.probe_repeat = get_int(j, "probe_repeat", origin, 1, 1000, 1);
+    s.search_time_s = get_int(j, "search_time_s", origin, 0, 100000000, 0);
+    if (s.probe_repeat > s.repeat)
+      bad(origin, "probe_repeat", fmt::format("{} is above repeat ({})", s.probe_repeat, s.repeat),
+          "an integer in [1, repeat]");
+    if (j.contains("target_steps_per_s")) {
+      const json& v = j.at("target_steps_per_s");
+      if (!v.is_number() || !(v.get<double>() > 0.0) || !(v.get<double>() <= 1e9))
+        bad(origin, "target_steps_per_s", v.dump() + " is out of range", "a number in (0, 1e9] (steps/s)");
+      s.target = v.get<double>();
+    }
+    if (j.contains("max_instances")) {
+      const json& v = j.at("max_instances");
+      if (!v.is_number_integer() || v.get<long long>() < 1 || v.get<long long>() > kMaxInstancesCap)
+        bad(origin, "max_instances", v.dump() + " is out of range", fmt::format("an integer in [1, {}]", kMaxInstancesCap));
+      s.max_instances = v.get<long>();
+    }
+    if (j.contains("resolution")) {
+      const json& v = j.at("resolution");
+      if (!v.is_number() || !(v.get<double>() >= 0.0) || !(v.get<double>() < 1.0))
+        bad(origin, "resolution", v.dump() + " is out of range",
+            "a number in [0, 1): bisection stops at hi - lo <= max(1, resolution x lo); 0 = an integer bracket");
+      s.resolution = v.get<double>();
+    }
+    if (j.contains("paper")) {
+      if (!j.at("paper").is_object()) bad(origin, "paper", "not an object", "{\"SCENE\": {\"count\": N, \"source\": \"...\"}}");
+      s.paper = j.at("paper");
+    }
+    if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files (one model each)");
+    for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
+    s.windows.push_back(Window{"settled", s.warmup + 1, s.warmup + s.frames});
+    s.frames = s.warmup + s.frames;  // steps to run
+  } else if (s.kind == "steps") {
     s.frames = get_int(j, "frames", origin, 1, 100000000, 300);
     s.warmup = get_int(j, "warmup", origin, 0, 100000000, 30);
     s.series_every = get_int(j, "series_every", origin, 0, 100000000, 0);
@@ -348,6 +418,16 @@ std::string value_text(const json& v) { return v.is_string() ? v.get<std::string
 constexpr std::size_t kMaxPoints = 100000;
 
 std::vector<Point> expand(const Sweep& s) {
+  if (s.kind == "max-instances") {
+    // Its probes are found while it runs (run_max_instances); the scenes must still be
+    // distinct models (a probe's id names its scene by the file stem).
+    std::set<std::string> stems;
+    for (std::size_t i = 0; i < s.scenes.size(); ++i)
+      if (!stems.insert(stem(s.scenes[i])).second)
+        bad(s.origin, fmt::format("scenes[{}]", i), "listed twice ('" + stem(s.scenes[i]) + "')",
+            "each scene (file name) once");
+    return {};
+  }
   {
     // Count first (saturating), so a sweep of 10^9 points is refused without allocating.
     std::size_t n = std::max<std::size_t>(s.engines.size(), 1);
@@ -446,6 +526,73 @@ std::string scene_text(const Sweep& s, const Point& p, std::vector<std::string>*
   return j.dump(2);
 }
 
+/// The max-instances scene of `n` instances built from scene `sc` of the sweep (its
+/// template, with the sweep's `set`): one group with a grid layout; its count becomes `n`
+/// and its grid a cube of k = ceil(cbrt(n)) slots a side at the template's spacing, around
+/// the template grid's centre, the domain keeping the template's margin around the grid
+/// on every side. For the template's own count this gives the template's grid and domain
+/// when the template is such a cube (the paper's random scenes are: 400 -> 8^3, 250 -> 7^3,
+/// 60 -> 4^3 slots). Throws InputError naming the scene file and key when the template is
+/// not of that form.
+std::string instance_scene(const Sweep& s, std::size_t sc, long n, json* layout_out = nullptr) {
+  Point p;
+  p.scene = sc;
+  json j = json::parse(scene_text(s, p));
+  const std::string& file = s.scenes[sc];
+  const auto refuse = [&](const std::string& key, const std::string& problem) {
+    throw InputError(fmt::format("{}: {}: {} (sweep {}, kind max-instances); allowed: a scene of one group with a "
+                                 "grid layout (min, max, spacing > 0) inside a domain (min, max), like "
+                                 "datasets/scenes/bunny-random-400.json",
+                                 file, key, problem, s.origin));
+  };
+  if (!j.contains("groups") || !j["groups"].is_array() || j["groups"].size() != 1)
+    refuse("groups", "not exactly one group");
+  json& g = j["groups"][0];
+  if (!g.contains("layout") || !g["layout"].is_object() || g["layout"].value("type", "") != "grid")
+    refuse("groups[0].layout.type", "not \"grid\"");
+  json& l = g["layout"];
+  const auto vec3 = [&](const json& o, const char* k, const std::string& key) {
+    if (!o.contains(k) || !o[k].is_array() || o[k].size() != 3 || !o[k][0].is_number() || !o[k][1].is_number() ||
+        !o[k][2].is_number())
+      refuse(key, "missing or not 3 numbers");
+    return std::array<double, 3>{o[k][0].get<double>(), o[k][1].get<double>(), o[k][2].get<double>()};
+  };
+  if (!l.contains("spacing") || !l["spacing"].is_number() || !(l["spacing"].get<double>() > 0.0))
+    refuse("groups[0].layout.spacing", "missing or not > 0");
+  if (!j.contains("domain") || !j["domain"].is_object()) refuse("domain", "missing");
+  const auto lmin = vec3(l, "min", "groups[0].layout.min"), lmax = vec3(l, "max", "groups[0].layout.max");
+  const auto dmin = vec3(j["domain"], "min", "domain.min"), dmax = vec3(j["domain"], "max", "domain.max");
+  const double spacing = l["spacing"].get<double>();
+  long k = 1;
+  while (k * k * k < n) ++k;
+  const double half = 0.5 * spacing * static_cast<double>(k - 1);
+  // Rounded to 1e-9 m, so 0.15 x 7 is written 1.05 (as the scene files have it), not 1.0500000000000003.
+  const auto round9 = [](double v) { return std::round(v * 1e9) / 1e9; };
+  json nlmin = json::array(), nlmax = json::array(), ndmin = json::array(), ndmax = json::array();
+  for (int a = 0; a < 3; ++a) {
+    const double c = 0.5 * (lmin[a] + lmax[a]);
+    nlmin.push_back(round9(c - half));
+    nlmax.push_back(round9(c + half));
+    ndmin.push_back(round9(c - half - (lmin[a] - dmin[a])));
+    ndmax.push_back(round9(c + half + (dmax[a] - lmax[a])));
+  }
+  l["min"] = nlmin;
+  l["max"] = nlmax;
+  j["domain"]["min"] = ndmin;
+  j["domain"]["max"] = ndmax;
+  g["count"] = n;
+  std::string name = j.value("name", stem(file));
+  const auto dash = name.find_last_of('-');
+  if (dash != std::string::npos && dash + 1 < name.size() &&
+      name.find_first_not_of("0123456789", dash + 1) == std::string::npos)
+    name.erase(dash);
+  j["name"] = fmt::format("{}-{}", name, n);
+  j["description"] = fmt::format("{} Grown to {} instances on {}^3 grid slots by octocd bench (kind max-instances).",
+                                 j.value("description", ""), n, k);
+  if (layout_out) *layout_out = {{"domain", j["domain"]}, {"layout", l}, {"slots_per_side", k}, {"count", n}};
+  return j.dump(2);
+}
+
 /// A box lattice of `n` bodies at the density of boxes-random-10000 (0.1 m boxes,
 /// spacing 0.145 m, 2 cm jitter, random velocities up to 1 m/s, closed box, no gravity).
 std::string lattice_scene(long n) {
@@ -527,6 +674,7 @@ void throw_if_stopped() {
 /// Sums over the frames of one window of one repetition.
 struct WindowSums {
   std::int64_t frames = 0;
+  std::int64_t bound_frames = 0;  // > 0: cut short; steps/s is then the bound bound_frames / step_ms
   double step_ms = 0.0;
   std::array<double, kStages> stage_ms{};
   double pairs = 0, candidates = 0, box_pairs = 0, vertex_tests = 0, contacts = 0, memory = 0;
@@ -567,8 +715,18 @@ std::string file_safe(const std::string& id) {
   return out;
 }
 
+/// What a max-instances probe changes in run_steps_point.
+struct StepsOverride {
+  const std::string* text = nullptr;  ///< the scene text instead of scene_text(s, p)
+  int repeat = 0;                     ///< > 0: repetitions instead of s.repeat
+  /// > 0: a repetition is cut once its first window's step time exceeds frames / cut_below
+  /// seconds (its steps/s can then only end below cut_below: the stored value is that upper
+  /// bound), and no more repetitions run once most of them were cut (the median is below).
+  double cut_below = 0.0;
+};
+
 json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const BenchOptions& o,
-                     SweepProgress& progress) {
+                     SweepProgress& progress, const StepsOverride& ov = {}) {
   json r;
   json params{{"scene", stem(s.scenes[p.scene])}, {"engine", p.engine}};
   for (std::size_t a = 0; a < s.axes.size(); ++a) {
@@ -577,7 +735,8 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   }
   r["params"] = params;
   std::vector<std::string> added;
-  const std::string text = scene_text(s, p, &added);
+  const std::string text = ov.text ? *ov.text : scene_text(s, p, &added);
+  const int repeat = ov.repeat > 0 ? ov.repeat : s.repeat;
   const std::string origin = s.scenes[p.scene];
   std::shared_ptr<const Model> model;
   try {
@@ -635,8 +794,12 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   std::vector<std::vector<WindowSums>> series(static_cast<std::size_t>(buckets));  // [bucket][rep]
   std::vector<double> energy_series(static_cast<std::size_t>(buckets), 0.0);
   std::vector<double> wall;
-  for (int rep = 0; rep < s.repeat; ++rep) {
-    if (rep > 0) engine = make_engine(p.engine, model);
+  int cut = 0;
+  for (int rep = 0; rep < repeat; ++rep) {
+    if (rep > 0) {
+      engine.reset();  // the last repetition's device memory back first: the memory check sees one engine
+      engine = make_engine(p.engine, model);
+    }
     std::unique_ptr<TraceWriter> trace;
     if (rep == 0 && !o.trace_dir.empty()) {
       fs::create_directories(o.trace_dir);
@@ -665,6 +828,15 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
       within.reset();
       for (std::size_t w = 0; w < s.windows.size(); ++w)
         if (f >= s.windows[w].first && f <= s.windows[w].last) sums[w].back().add(m);
+      if (ov.cut_below > 0.0 && f >= s.windows[0].first) {
+        WindowSums& w0 = sums[0].back();
+        const std::int64_t planned = s.windows[0].last - s.windows[0].first + 1;
+        if (w0.step_ms > 1000.0 * static_cast<double>(planned) / ov.cut_below) {
+          w0.bound_frames = planned;
+          ++cut;
+          break;
+        }
+      }
       if (buckets > 0) {
         const auto b = static_cast<std::size_t>((f - 1) / s.series_every);
         series[b].back().add(m);
@@ -672,10 +844,20 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
       }
       if (trace) trace->append_frame(m, engine->state(), engine->contacts());
       if ((f & 15) == 0 || f == total)
-        progress.detail(fmt::format("rep {}/{} frame {}/{}", rep + 1, s.repeat, f, total));
+        progress.detail(fmt::format("rep {}/{} frame {}/{}", rep + 1, repeat, f, total));
     }
     wall.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
     if (trace) trace->close();
+    if (2 * cut > repeat) break;  // most repetitions below cut_below: the median is, whatever the rest
+  }
+  if (ov.cut_below > 0.0) {
+    r["cut"] = {{"repetitions_run", static_cast<int>(wall.size())},
+                {"repetitions_cut", cut},
+                {"repetitions_planned", repeat},
+                {"note", fmt::format("a repetition is cut once its window's step time exceeds {} frames / {} steps/s: "
+                                     "its steps/s value is then the upper bound frames / step time so far, below {}; "
+                                     "repetitions stop once most were cut",
+                                     s.windows[0].last - s.windows[0].first + 1, ov.cut_below, ov.cut_below)}};
   }
 
   auto figures = [&](const std::vector<WindowSums>& reps) {
@@ -684,7 +866,8 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     std::vector<std::vector<double>> stage(kStages);
     for (const auto& x : reps) {
       const double n = static_cast<double>(std::max<std::int64_t>(x.frames, 1));
-      sps.push_back(x.step_ms > 0 ? 1000.0 * static_cast<double>(x.frames) / x.step_ms : 0.0);
+      const std::int64_t fr = x.bound_frames > 0 ? x.bound_frames : x.frames;
+      sps.push_back(x.step_ms > 0 ? 1000.0 * static_cast<double>(fr) / x.step_ms : 0.0);
       step.push_back(x.step_ms / n);
       for (int st = 0; st < kStages; ++st) stage[st].push_back(x.stage_ms[st] / n);
       pairs.push_back(x.pairs / n);
@@ -817,6 +1000,329 @@ json run_broadphase_point(const Sweep& s, const Point& p, InputCache& cache, con
   return r;
 }
 
+// ---- max-instances: the largest count at the target steps/s -----------------------------------
+
+/// A probe's outcome as the search sees it.
+enum class Verdict {
+  Pass,     ///< steps/s (median over the repetitions) >= the target
+  Below,    ///< steps/s below the target
+  Limit,    ///< the count does not fit (device or host memory, the engine's body limit): above the maximum
+  Skipped,  ///< the engine cannot run at all (count 1): the search is skipped
+  Failed,   ///< a runtime failure (e.g. a non-finite state): the search stops
+  TimeUp    ///< the search's time limit passed before this count was measured: it ends as it is
+};
+
+/// The bracket a search ends with: lo = the largest count found to pass (0: none), hi = the
+/// smallest count above lo found not to pass (-1: none, lo is the cap).
+struct Bracket {
+  long lo = 0, hi = -1;
+};
+
+/// Doubling from 1, then bisection, on `decide` (called once per count it needs; the caller
+/// memoizes): ends when hi - lo <= max(1, floor(resolution x lo)). A count that is not Pass
+/// counts as above the maximum (Below, Limit); Skipped, Failed or TimeUp end the search at
+/// once (`*stop` set to that verdict).
+Bracket search_bracket(long cap, double resolution, const std::function<Verdict(long)>& decide, Verdict* stop) {
+  *stop = Verdict::Pass;
+  const auto pass = [&](long n) {
+    const Verdict v = decide(n);
+    if (v == Verdict::Skipped || v == Verdict::Failed || v == Verdict::TimeUp) *stop = v;
+    return v == Verdict::Pass;
+  };
+  Bracket b;
+  if (!pass(1)) {
+    b.hi = 1;
+    return b;
+  }
+  b.lo = 1;
+  // One count: false when the search ends there (the bracket left as it was).
+  const auto step = [&](long n) {
+    const bool ok = pass(n);
+    if (*stop != Verdict::Pass) return false;
+    (ok ? b.lo : b.hi) = n;
+    return true;
+  };
+  while (b.hi < 0) {
+    if (b.lo >= cap) return b;  // the cap still passes
+    if (!step(std::min(2 * b.lo, cap))) return b;
+  }
+  while (b.hi - b.lo > std::max<long>(1, static_cast<long>(std::floor(resolution * static_cast<double>(b.lo))))) {
+    if (!step(b.lo + (b.hi - b.lo) / 2)) return b;
+  }
+  return b;
+}
+
+/// Whether a runtime failure is memory running out (cudaMalloc, the CUDA engine's memory
+/// check, std::bad_alloc's text): the count does not fit, a limit, not a failure.
+bool is_memory_failure(const std::string& what) {
+  for (const char* k : {"cudaMalloc", "out of memory", "of device memory", "std::bad_alloc", "bad_alloc"})
+    if (what.find(k) != std::string::npos) return true;
+  return false;
+}
+
+/// Everything run_max_instances shares with bench_command.
+struct MaxInstancesRun {
+  const Sweep& s;
+  const BenchOptions& o;
+  json& result;
+  std::map<std::string, json>& kept;  // resumed points by id
+  std::set<std::string> visited;      // kept points met again
+  ModelCache models;
+  SweepProgress& progress;
+  std::function<void()> write;
+  int next_index = 0;
+  bool any_failed = false;
+};
+
+/// One measured (or resumed) count: its point in the result and the verdict.
+struct Measured {
+  Verdict verdict = Verdict::Below;
+  json point;
+};
+
+Measured measure_count(MaxInstancesRun& run, std::size_t sc, const std::string& engine, long n, bool confirm,
+                       std::size_t search) {
+  const Sweep& s = run.s;
+  const int reps = confirm ? s.repeat : s.probe_repeat;
+  Point p;
+  p.scene = sc;
+  p.engine = engine;
+  p.id = fmt::format("{} | instances={} | {}{}", stem(s.scenes[sc]), n, engine, confirm ? " | confirm" : "");
+  json r;
+  const auto kept = run.kept.find(p.id);
+  if (kept != run.kept.end()) {
+    r = kept->second;  // resumed: already in result["points"]
+    run.visited.insert(p.id);
+  } else {
+    if (const int sig = octocd::stop_signal()) {
+      (void)sig;
+      throw BenchStopped{};
+    }
+    p.index = run.next_index++;
+    run.progress.start(search, p.id);
+    json layout;
+    std::string text;
+    try {
+      text = instance_scene(s, sc, n, &layout);
+      StepsOverride ov;
+      ov.text = &text;
+      ov.repeat = reps;
+      ov.cut_below = s.target;
+      r = run_steps_point(s, p, run.models, run.o, run.progress, ov);
+    } catch (const BenchStopped&) {
+      throw;
+    } catch (const InputError& e) {
+      if (n == 1) throw;  // the template itself is refused: bad input
+      r = json::object();
+      r["status"] = "skipped";
+      r["reason"] = std::string("scene: ") + e.what();
+    } catch (const std::bad_alloc&) {
+      r = json::object();
+      r["status"] = "skipped";
+      r["reason"] = fmt::format("host memory: {} instances do not fit (std::bad_alloc)", n);
+      run.models = ModelCache{};
+    } catch (const std::exception& e) {
+      r = json::object();
+      r["status"] = is_memory_failure(e.what()) ? "skipped" : "failed";
+      r["reason"] = e.what();
+    }
+    r["id"] = p.id;
+    r["index"] = p.index;
+    r["params"]["scene"] = stem(s.scenes[sc]);
+    r["params"]["engine"] = engine;
+    r["params"]["axes"]["instances"] = n;
+    r["role"] = confirm ? "confirm" : "probe";
+    r["target_steps_per_s"] = s.target;
+    if (!layout.is_null()) r["scene"] = layout;
+    r["finished"] = utc_time_now();
+    r["load_average"] = load_average();
+    {
+      const long threads = run.result["machine"].value("threads", 0L);
+      const json& la = r["load_average"];
+      r["under_load"] = threads > 0 && !la.empty() && la[0].get<double>() > static_cast<double>(threads) + 1.0;
+    }
+    // The verdict, stored with the point so that a resumed run decides the same.
+    const std::string status = r.value("status", "");
+    if (status == "ok") {
+      const double med = r["windows"][s.windows[0].name]["steps_per_s"].value("median", 0.0);
+      r["verdict"] = med >= s.target ? "pass" : "below";
+    } else if (status == "skipped") {
+      // Count 1 that cannot start: the engine is missing (skip the search), unless the one
+      // instance does not fit (a limit: the result is 0 with the reason).
+      r["verdict"] = n == 1 && !is_memory_failure(r.value("reason", "")) ? "skipped" : "limit";
+    } else {
+      r["verdict"] = "failed";
+    }
+    std::string line = r.value("status", "?");
+    if (status == "ok")
+      line += fmt::format(" ({:.1f} steps/s median, {} {} {:g}{})",
+                          r["windows"][s.windows[0].name]["steps_per_s"].value("median", 0.0),
+                          r["verdict"] == "pass" ? "pass:" : "below", r["verdict"] == "pass" ? ">=" : "<", s.target,
+                          r.contains("cut") && r["cut"].value("repetitions_cut", 0) > 0 ? ", cut short" : "");
+    else
+      line += ": " + r.value("reason", "");
+    run.progress.finish(line);
+    if (status == "failed") run.any_failed = true;
+    run.result["points"].push_back(r);
+    run.result["points_total"] = run.result["points"].size();
+    run.write();
+  }
+  Measured m;
+  m.point = r;
+  const std::string v = r.value("verdict", "");
+  m.verdict = v == "pass"      ? Verdict::Pass
+              : v == "below"   ? Verdict::Below
+              : v == "limit"   ? Verdict::Limit
+              : v == "skipped" ? Verdict::Skipped
+                               : Verdict::Failed;
+  return m;
+}
+
+/// One (model, engine) search: doubling + bisection on probes of probe_repeat repetitions,
+/// then the bracket's ends measured again with `repeat` repetitions (their median
+/// decides); while that changes the bracket, the search goes on from the new decisions.
+/// Returns the summary stored in result["searches"].
+json search_max_instances(MaxInstancesRun& run, std::size_t sc, const std::string& engine, std::size_t search) {
+  const Sweep& s = run.s;
+  std::map<long, Measured> probe, full;
+  const auto started = Clock::now();
+  const auto time_up = [&] {
+    return s.search_time_s > 0 &&
+           std::chrono::duration<double>(Clock::now() - started).count() > static_cast<double>(s.search_time_s);
+  };
+  const auto decide = [&](long n) {
+    const auto f = full.find(n);
+    if (f != full.end()) return f->second.verdict;
+    auto it = probe.find(n);
+    if (it == probe.end()) {
+      if (time_up() && !run.kept.count(fmt::format("{} | instances={} | {}", stem(s.scenes[sc]), n, engine)))
+        return Verdict::TimeUp;
+      it = probe.emplace(n, measure_count(run, sc, engine, n, false, search)).first;
+    }
+    return it->second.verdict;
+  };
+  const bool confirming = s.repeat > s.probe_repeat;
+  Bracket b;
+  Verdict stop = Verdict::Pass;
+  bool unconfirmed = false;  // the time limit came before the bracket's ends were confirmed
+  for (;;) {
+    b = search_bracket(s.max_instances, s.resolution, decide, &stop);
+    if (stop != Verdict::Pass || !confirming) break;
+    if (time_up()) {
+      unconfirmed = (b.lo >= 1 && !full.count(b.lo)) || (b.hi >= 1 && !full.count(b.hi));
+      break;
+    }
+    bool measured = false;
+    for (const long n : {b.lo, b.hi}) {
+      if (n < 1 || full.count(n)) continue;
+      if (probe.count(n) && probe.at(n).verdict != Verdict::Pass && probe.at(n).verdict != Verdict::Below) continue;
+      full.emplace(n, measure_count(run, sc, engine, n, true, search));
+      measured = true;
+    }
+    if (!measured) break;
+  }
+  const auto measured_at = [&](long n) -> const Measured* {
+    if (full.count(n)) return &full.at(n);
+    if (probe.count(n)) return &probe.at(n);
+    return nullptr;
+  };
+  const std::string scene = stem(s.scenes[sc]);
+  json sum{{"scene", scene}, {"engine", engine}, {"target_steps_per_s", s.target}, {"max_instances_cap", s.max_instances},
+           {"resolution", s.resolution}, {"window", {{"first", s.windows[0].first}, {"last", s.windows[0].last}}},
+           {"probes", probe.size()}, {"confirmations", full.size()}};
+  try {
+    const json t = json::parse(scene_text(s, [&] {
+      Point p;
+      p.scene = sc;
+      return p;
+    }()));
+    sum["model"] = t["groups"][0]["shape"].value("mesh", t["groups"][0].value("name", scene));
+  } catch (const std::exception&) {
+    sum["model"] = scene;
+  }
+  if (s.paper.contains(scene)) sum["paper"] = s.paper[scene];
+  const auto sps = [&](long n) -> json {
+    const Measured* m = measured_at(n);
+    if (!m || m->point.value("status", "") != "ok") return nullptr;
+    return m->point["windows"][s.windows[0].name]["steps_per_s"];
+  };
+  if (stop == Verdict::Skipped) {
+    const Measured* m = measured_at(1);
+    sum["status"] = "skipped";
+    sum["reason"] = m ? m->point.value("reason", "") : "";
+    return sum;
+  }
+  if (stop == Verdict::Failed) {
+    long at = -1;
+    for (const auto& [n, m] : probe)
+      if (m.verdict == Verdict::Failed) at = n;
+    for (const auto& [n, m] : full)
+      if (m.verdict == Verdict::Failed) at = n;
+    const Measured* m = measured_at(at);
+    sum["status"] = "failed";
+    sum["reason"] = fmt::format("{} instances: {}", at, m ? m->point.value("reason", "") : "");
+    sum["bracket"] = {b.lo, nullptr};
+    return sum;
+  }
+  sum["status"] = "ok";
+  sum["max_instances"] = b.lo;
+  const bool timed_out = stop == Verdict::TimeUp || unconfirmed;
+  sum["bracket"] = {b.lo, b.hi < 0 ? json(nullptr) : json(b.hi)};
+  sum["steps_per_s"] = sps(b.lo);
+  if (b.hi > 0) {
+    sum["steps_per_s_above"] = sps(b.hi);
+    // Cut repetitions hold upper bounds (docs/bench-format.md): say so beside the figure.
+    const Measured* m = measured_at(b.hi);
+    sum["steps_per_s_above_cut"] = m && m->point.contains("cut") && m->point["cut"].value("repetitions_cut", 0) > 0;
+  }
+  const Measured* at_lo = measured_at(b.lo);
+  const Measured* at_hi = b.hi > 0 ? measured_at(b.hi) : nullptr;
+  if (at_lo) sum["repetitions_at_max"] = at_lo->point["windows"][s.windows[0].name]["steps_per_s"].value("n", 0);
+  std::string reason;
+  if (b.lo == 0) {
+    sum["limited_by"] = !(at_hi && at_hi->verdict == Verdict::Limit) ? "steps/s"
+                        : is_memory_failure(at_hi->point.value("reason", "")) ? "memory"
+                                                                               : "limit";
+    reason = at_hi && at_hi->verdict == Verdict::Limit
+                 ? "a single instance does not fit: " + at_hi->point.value("reason", "")
+                 : fmt::format("a single instance already runs under {:g} steps/s ({:.2f} steps/s median over {} "
+                               "repetition(s))",
+                               s.target, sps(1).is_null() ? 0.0 : sps(1).value("median", 0.0),
+                               sps(1).is_null() ? 0 : sps(1).value("n", 0));
+  } else if (b.hi < 0 && stop == Verdict::TimeUp) {
+    reason = fmt::format("{} instances run at >= {:g} steps/s; no higher count was measured", b.lo, s.target);
+  } else if (b.hi < 0) {
+    sum["limited_by"] = "cap";
+    reason = fmt::format("the cap max_instances = {} still runs at >= {:g} steps/s: the maximum is at least {} (raise "
+                         "--max-instances)",
+                         s.max_instances, s.target, s.max_instances);
+  } else if (at_hi && at_hi->verdict == Verdict::Limit) {
+    sum["limited_by"] = is_memory_failure(at_hi->point.value("reason", "")) ? "memory" : "limit";
+    reason = fmt::format("{} instances do not fit, so the search stopped there: {}", b.hi,
+                         at_hi->point.value("reason", ""));
+  } else {
+    sum["limited_by"] = "steps/s";
+    reason = b.hi == b.lo + 1
+                 ? fmt::format("{} instances run at >= {:g} steps/s, {} below", b.lo, s.target, b.hi)
+                 : fmt::format("{} instances run at >= {:g} steps/s, {} below; counts between were not probed "
+                               "(resolution {:g})",
+                               b.lo, s.target, b.hi, s.resolution);
+  }
+  if (timed_out) {
+    sum["time_limit_s"] = s.search_time_s;
+    const long width = std::max<long>(1, static_cast<long>(std::floor(s.resolution * static_cast<double>(b.lo))));
+    reason += fmt::format(
+        "; the search's time limit ({} s) ended it{}", s.search_time_s,
+        b.hi < 0 && b.lo < s.max_instances
+            ? ": the maximum is at least " + std::to_string(b.lo)
+            : b.hi - b.lo > width ? std::string(" before the bracket was narrowed further")
+                                  : fmt::format(" before the bracket's ends were measured with {} repetitions", s.repeat));
+    if (b.hi < 0 && b.lo < s.max_instances) sum["limited_by"] = "time";
+  }
+  sum["reason"] = reason;
+  return sum;
+}
+
 // ---- the command -----------------------------------------------------------------------------
 
 std::pair<int, int> parse_shard(const std::string& text) {
@@ -847,17 +1353,35 @@ std::string default_scene_dir() { return (fs::path(source_dir()) / "datasets" / 
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
   CLI::App* c = app.add_subcommand(
       "bench",
-      "Run a benchmark sweep (the paper's Tables 5, 6, A1, Fig. A2, broadphase scaling) on every engine this octocd "
-      "has, side by side; results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
+      "Run a benchmark sweep (the paper's Tables 5, 6, A1, Fig. A2, broadphase scaling, the most instances at 30 "
+      "steps/s) on every engine this octocd has, side by side; results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
   c->add_option("sweep", o.sweep, "A named sweep (" + named_list() + ") or a sweep JSON file");
   c->add_option("-o,--output", o.output, "Result file (JSON), rewritten after every finished point");
   c->add_option("--engines", o.engines, "Comma-separated engines, overrides the sweep's: cpu, cuda, bullet");
   c->add_option("--repeat", o.repeat, "Repetitions of every point, overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
   c->add_option("--frames", o.frames,
-                "Timed frames per run (steps sweeps without windows) or recorded frames (broadphase sweeps), "
-                "overrides the sweep's (>= 1)")
+                "Timed frames per run (steps sweeps without windows; max-instances: the window's frames) or recorded "
+                "frames (broadphase sweeps), overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
+  c->add_option("--warmup", o.warmup,
+                "Untimed frames before the timed ones (steps and max-instances sweeps without windows) or steps before "
+                "recording (broadphase sweeps), overrides the sweep's (>= 0)")
+      ->check(CLI::NonNegativeNumber);
+  c->add_option("--target", o.target,
+                "max-instances: the steps/s a count must reach over the window, overrides the sweep's (default 30)")
+      ->check(CLI::Range(1e-6, 1e9));
+  c->add_option("--max-instances", o.max_instances,
+                "max-instances: the largest count to try (the search's cap), overrides the sweep's (default 1048576)")
+      ->check(CLI::Range(1L, kMaxInstancesCap));
+  c->add_option("--resolution", o.resolution,
+                "max-instances: stop bisecting at hi - lo <= max(1, resolution x lo), overrides the sweep's (default 0: "
+                "an integer bracket [N, N+1]; 0.05 saves device time)")
+      ->check(CLI::Range(0.0, 0.999));
+  c->add_option("--search-time", o.search_time_s,
+                "max-instances: seconds after which a search measures no new count and ends with the bracket it has "
+                "(0: no limit), overrides the sweep's; bounds device time")
+      ->check(CLI::Range(0, 100000000));
   c->add_option("--shard", o.shard,
                 "i/N: run only the points whose index is i modulo N (0 <= i < N), for job arrays; `report` merges "
                 "the shards' result files");
@@ -865,6 +1389,10 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
               "Continue the result file of an interrupted run of the same sweep: keep its finished points, run the rest");
   c->add_flag("--list", o.list, "List the named sweeps and exit");
   c->add_flag("--print", o.print, "Print the sweep's definition (JSON) and exit");
+  c->add_option("--print-scene", o.print_scene,
+                "max-instances: print the scene each of the sweep's models runs at N instances (JSON, one per model "
+                "after a // SCENE line when there are several) and exit")
+      ->check(CLI::Range(1L, kMaxInstancesCap));
   c->add_flag("--quiet", o.quiet, "No progress output");
   c->add_option("--scene-dir", o.scene_dir,
                 "Folder of the scenes named in sweeps (default: datasets/scenes of the source tree, or "
@@ -919,6 +1447,21 @@ int bench_command(const BenchOptions& o) {
     fmt::print("{}\n", def.dump(2));
     return 0;
   }
+  if (o.print_scene > 0) {
+    if (s.kind != "max-instances")
+      throw InputError(fmt::format("--print-scene: {} is of kind '{}'; allowed: a sweep of kind max-instances", origin,
+                                   s.kind));
+    for (std::size_t sc = 0; sc < s.scenes.size(); ++sc) {
+      std::error_code ec;
+      if (!fs::is_regular_file(s.scenes[sc], ec))
+        throw InputError(fmt::format("{}: scenes: '{}' not found; allowed: a scene name under {} (--scene-dir) or a "
+                                     "scene file",
+                                     origin, s.scenes[sc], scene_dir));
+      if (s.scenes.size() > 1) fmt::print("// {}\n", stem(s.scenes[sc]));
+      fmt::print("{}\n", instance_scene(s, sc, o.print_scene));
+    }
+    return 0;
+  }
   if (o.output.empty()) throw InputError("bench: -o: missing; allowed: the result file to write (RESULT.json)");
   if (!o.engines.empty()) {
     s.engines = split_list(o.engines);
@@ -927,7 +1470,33 @@ int bench_command(const BenchOptions& o) {
         throw InputError(fmt::format("--engines: unknown engine '{}'; allowed: cpu, cuda, bullet", e));
     if (s.engines.empty()) throw InputError("--engines: empty; allowed: a comma-separated list of cpu, cuda, bullet");
   }
-  if (o.repeat > 0) s.repeat = o.repeat;
+  if (o.repeat > 0) {
+    s.repeat = o.repeat;
+    s.probe_repeat = std::min(s.probe_repeat, s.repeat);
+  }
+  if (o.warmup >= 0) {
+    if (s.kind == "broadphase") {
+      s.warmup = o.warmup;
+    } else if (def.contains("windows")) {
+      throw InputError(fmt::format("--warmup: {} has windows (fixed frame ranges); allowed: --warmup only for sweeps "
+                                   "without windows",
+                                   origin));
+    } else {
+      const int timed = s.windows.front().last - s.windows.front().first + 1;
+      s.warmup = o.warmup;
+      s.windows.front().first = s.warmup + 1;
+      s.windows.front().last = s.warmup + timed;
+      s.frames = s.warmup + timed;
+    }
+  }
+  if (s.kind != "max-instances" && (o.target > 0 || o.max_instances > 0 || o.resolution >= 0 || o.search_time_s >= 0))
+    throw InputError(fmt::format("--target, --max-instances, --resolution, --search-time: {} is of kind '{}'; allowed: only for "
+                                 "sweeps of kind max-instances",
+                                 origin, s.kind));
+  if (o.target > 0) s.target = o.target;
+  if (o.max_instances > 0) s.max_instances = o.max_instances;
+  if (o.resolution >= 0) s.resolution = o.resolution;
+  if (o.search_time_s >= 0) s.search_time_s = o.search_time_s;
   if (o.frames > 0) {
     if (s.kind == "broadphase") {
       s.frames = o.frames;
@@ -958,6 +1527,16 @@ int bench_command(const BenchOptions& o) {
   if (s.kind == "broadphase") {
     settings["warm_replays"] = s.warm_replays;
     settings["min_time_ms"] = s.min_time_ms;
+  }
+  if (s.kind == "max-instances") {
+    settings["probe_repeat"] = s.probe_repeat;
+    settings["target_steps_per_s"] = s.target;
+    settings["max_instances"] = s.max_instances;
+    settings["resolution"] = s.resolution;
+    settings["search_time_s"] = s.search_time_s;
+    settings["window"] = {{"name", s.windows[0].name}, {"first", s.windows[0].first}, {"last", s.windows[0].last}};
+    // The template must be grown into a scene (bad input now, not after an hour).
+    for (std::size_t sc = 0; sc < s.scenes.size(); ++sc) (void)instance_scene(s, sc, 1);
   }
   json result{{"format", "octocd-bench"},
               {"version", 1},
@@ -1015,16 +1594,41 @@ int bench_command(const BenchOptions& o) {
       if (!pt.is_object()) refuse("", "not an object", "a point of the sweep");
       if (!pt.contains("id") || !pt["id"].is_string()) refuse(".id", "missing or not a string", "a point id");
       const std::string id = pt["id"];
-      const auto it = by_id.find(id);
-      if (it == by_id.end()) refuse(".id", "'" + id + "' is not a point of the sweep", "the ids the sweep expands to");
-      if (!pt.contains("index") || !pt["index"].is_number_integer() || pt["index"].get<long long>() != it->second->index)
-        refuse(".index", pt.contains("index") ? pt["index"].dump() : "missing",
-               fmt::format("{} (the index of '{}' among the sweep's {} points)", it->second->index, id, points.size()));
+      if (s.kind == "max-instances") {
+        // "SCENE | instances=N | ENGINE" or "... | confirm", N in [1, max_instances].
+        const json* n_json = nullptr;
+        if (pt.contains("params") && pt["params"].is_object() && pt["params"].contains("axes") &&
+            pt["params"]["axes"].is_object() && pt["params"]["axes"].contains("instances"))
+          n_json = &pt["params"]["axes"]["instances"];
+        const long n = n_json && n_json->is_number_integer() ? n_json->get<long>() : 0;
+        bool known = false;
+        for (const auto& sc : s.scenes)
+          for (const auto& e : s.engines)
+            for (const char* tail : {"", " | confirm"})
+              known = known || (n >= 1 && n <= s.max_instances &&
+                                id == fmt::format("{} | instances={} | {}{}", stem(sc), n, e, tail));
+        if (!known)
+          refuse(".id", "'" + id + "' is not a probe of the sweep",
+                 fmt::format("'SCENE | instances=N | ENGINE[ | confirm]' with params.axes.instances = N in [1, {}]",
+                             s.max_instances));
+        if (!pt.contains("index") || !pt["index"].is_number_integer() || pt["index"].get<long long>() < 0)
+          refuse(".index", pt.contains("index") ? pt["index"].dump() : "missing", "an integer >= 0");
+        const std::string v = pt.value("verdict", "");
+        if (v != "pass" && v != "below" && v != "limit" && v != "skipped" && v != "failed")
+          refuse(".verdict", "'" + v + "'", "pass, below, limit, skipped, failed");
+      } else {
+        const auto it = by_id.find(id);
+        if (it == by_id.end()) refuse(".id", "'" + id + "' is not a point of the sweep", "the ids the sweep expands to");
+        if (!pt.contains("index") || !pt["index"].is_number_integer() || pt["index"].get<long long>() != it->second->index)
+          refuse(".index", pt.contains("index") ? pt["index"].dump() : "missing",
+                 fmt::format("{} (the index of '{}' among the sweep's {} points)", it->second->index, id,
+                             points.size()));
+      }
       if (kept.count(id)) refuse(".id", "'" + id + "' twice", "each point once");
       const std::string status = pt.value("status", "");
       if (status == "ok") {
         bool shaped = true;
-        if (s.kind == "steps") {
+        if (s.kind != "broadphase") {
           shaped = pt.contains("windows") && pt["windows"].is_object() && pt["windows"].size() == s.windows.size();
           for (const auto& w : s.windows)
             shaped = shaped && pt["windows"].contains(w.name) && pt["windows"][w.name].is_object() &&
@@ -1033,8 +1637,8 @@ int bench_command(const BenchOptions& o) {
           shaped = pt.contains("ms_per_frame") && pt["ms_per_frame"].is_object();
         }
         if (!shaped)
-          refuse(s.kind == "steps" ? ".windows" : ".ms_per_frame", "a point of another shape",
-                 s.kind == "steps" ? "windows {" + [&] {
+          refuse(s.kind != "broadphase" ? ".windows" : ".ms_per_frame", "a point of another shape",
+                 s.kind != "broadphase" ? "windows {" + [&] {
                    std::string names;
                    for (const auto& w : s.windows) names += (names.empty() ? "" : ", ") + w.name;
                    return names;
@@ -1056,7 +1660,15 @@ int bench_command(const BenchOptions& o) {
   std::vector<const Point*> mine;
   for (const auto& p : points)
     if (p.index % shards == shard) mine.push_back(&p);
-  SweepProgress progress(mine.size(), !o.quiet);
+  // max-instances: one search per (scene, engine), scene-major; a shard takes every N-th.
+  std::vector<std::pair<std::size_t, std::string>> my_searches;
+  if (s.kind == "max-instances") {
+    std::size_t k = 0;
+    for (std::size_t sc = 0; sc < s.scenes.size(); ++sc)
+      for (const auto& e : s.engines)
+        if (k++ % static_cast<std::size_t>(shards) == static_cast<std::size_t>(shard)) my_searches.emplace_back(sc, e);
+  }
+  SweepProgress progress(s.kind == "max-instances" ? my_searches.size() : mine.size(), !o.quiet);
   ModelCache models;
   InputCache inputs;
   bool any_failed = false;
@@ -1085,7 +1697,13 @@ int bench_command(const BenchOptions& o) {
     if (s.repeat < 2 && !o.quiet)
       fmt::print(stderr, "bench {}: note: 1 repetition per point: no spread, so no timing verdict\n", s.name);
   }
-  if (!o.quiet)
+  if (!o.quiet && s.kind == "max-instances")
+    fmt::print(stderr,
+               "bench {}: {} searches ({} in this shard {}/{}), engines {}, target {:g} steps/s over frames {}-{}, "
+               "counts 1 to {}, probes {} repetition(s), the bracket's ends {}; result {}\n",
+               s.name, s.scenes.size() * s.engines.size(), my_searches.size(), shard, shards, json(s.engines).dump(),
+               s.target, s.windows[0].first, s.windows[0].last, s.max_instances, s.probe_repeat, s.repeat, o.output);
+  else if (!o.quiet)
     fmt::print(stderr, "bench {}: {} points ({} in this shard {}/{}), engines {}, {} repetitions; result {}\n", s.name,
                points.size(), mine.size(), shard, shards, o.engines.empty() ? json(s.engines).dump() : o.engines,
                s.repeat, o.output);
@@ -1093,16 +1711,69 @@ int bench_command(const BenchOptions& o) {
     const auto it = kept.find(p->id);
     if (it != kept.end()) result["points"].push_back(it->second);  // resumed: kept as they were
   }
+  if (s.kind == "max-instances")
+    for (const auto& [id, pt] : kept) result["points"].push_back(pt);
   octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, keep the finished points
   const auto stopped = [&](int sig) {
     result["stopped"] = octocd::stop_signal_name(sig);
     std::sort(result["points"].begin(), result["points"].end(),
               [](const json& a, const json& b) { return a.value("index", 0) < b.value("index", 0); });
     write();
-    std::fprintf(stderr, "\noctocd bench: stopped by %s after %zu of %zu points; result %s keeps them (--resume goes on)\n",
-                 octocd::stop_signal_name(sig), result["points"].size(), mine.size(), o.output.c_str());
+    if (s.kind == "max-instances")
+      std::fprintf(stderr,
+                   "\noctocd bench: stopped by %s after %zu probes (%zu of %zu searches done); result %s keeps them "
+                   "(--resume goes on)\n",
+                   octocd::stop_signal_name(sig), result["points"].size(),
+                   result.contains("searches") ? result["searches"].size() : std::size_t{0}, my_searches.size(),
+                   o.output.c_str());
+    else
+      std::fprintf(stderr, "\noctocd bench: stopped by %s after %zu of %zu points; result %s keeps them (--resume goes on)\n",
+                   octocd::stop_signal_name(sig), result["points"].size(), mine.size(), o.output.c_str());
     return octocd::stop_exit_code(sig);
   };
+  if (s.kind == "max-instances") {
+    MaxInstancesRun run{s, o, result, kept, {}, {}, progress, write};
+    for (const auto& pt : result["points"]) run.next_index = std::max(run.next_index, pt.value("index", 0) + 1);
+    result["searches"] = json::array();
+    result["points_total"] = result["points"].size();
+    std::size_t k = 0;
+    for (const auto& [sc, engine] : my_searches) {
+      json sum;
+      try {
+        sum = search_max_instances(run, sc, engine, k++);
+      } catch (const BenchStopped&) {
+        return stopped(octocd::stop_signal());
+      }
+      result["searches"].push_back(sum);
+      write();
+      if (!o.quiet) {
+        const std::string line =
+            sum.value("status", "") == "ok"
+                ? fmt::format("max {} instances at >= {:g} steps/s ({})", sum["max_instances"].get<long>(), s.target,
+                              sum.value("reason", ""))
+                : sum.value("status", "") + ": " + sum.value("reason", "");
+        fmt::print(stderr, "bench {}: {} on {}: {}\n", s.name, sum.value("model", "?"), engine, line);
+      }
+    }
+    std::sort(result["points"].begin(), result["points"].end(),
+              [](const json& a, const json& b) { return a.value("index", 0) < b.value("index", 0); });
+    result["complete"] = true;
+    result["machine"]["load_average_end"] = load_average();
+    write();
+    if (!my_searches.empty() && std::all_of(result["searches"].begin(), result["searches"].end(), [](const json& x) {
+          return x.value("status", "") == "skipped";
+        })) {
+      const json& first = result["searches"].front();
+      throw InputError(fmt::format("{}: every search skipped ({}; first: {} on {}: {}); allowed: a sweep with an "
+                                   "engine this octocd can run (result kept in {})",
+                                   origin, result["searches"].size(), first.value("scene", "?"),
+                                   first.value("engine", "?"), first.value("reason", "?"), o.output));
+    }
+    if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", s.name, o.output);
+    const bool failed = run.any_failed || std::any_of(result["searches"].begin(), result["searches"].end(),
+                                                      [](const json& x) { return x.value("status", "") == "failed"; });
+    return failed ? 1 : 0;
+  }
   for (std::size_t k = 0; k < mine.size(); ++k) {
     const Point& p = *mine[k];
     if (kept.count(p.id)) continue;

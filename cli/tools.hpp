@@ -156,11 +156,17 @@ struct BenchOptions {
   std::string engines;            ///< comma-separated, overrides the sweep's
   int repeat = 0;                 ///< > 0 overrides the sweep's repetitions
   int frames = 0;                 ///< > 0 overrides the sweep's timed (or recorded) frames
+  int warmup = -1;                ///< >= 0 overrides the sweep's untimed frames first
+  double target = 0.0;            ///< > 0 overrides a max-instances sweep's target steps/s
+  long max_instances = 0;         ///< > 0 overrides a max-instances sweep's cap
+  double resolution = -1.0;       ///< >= 0 overrides a max-instances sweep's bisection resolution
+  int search_time_s = -1;         ///< >= 0 overrides a max-instances sweep's time limit per search (0: none)
   std::string shard;              ///< "i/N"
   std::string output;             ///< RESULT.json
   bool resume = false;
   bool list = false;
   bool print = false;
+  long print_scene = 0;           ///< > 0: print a max-instances sweep's scenes at this count and exit
   bool quiet = false;
   std::string scene_dir;          ///< where named sweeps find their scenes
   std::string data_dir;           ///< meshes (as load_scene's data_dir)

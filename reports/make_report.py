@@ -122,12 +122,17 @@ def merge(results):
         m = j["machine"]
         key = (j["sweep"]["name"], json.dumps(j["sweep"]["definition"], sort_keys=True),
                m.get("hostname"), m.get("cpu"), m.get("gpu"))
-        g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}})
+        g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}, "searches": []})
         if g["files"] and j["build"].get("build_id") != g["first"]["build"].get("build_id"):
             fail(f"{path}: build.build_id: {j['build'].get('build_id')!r}, but {g['files'][0]} (same sweep) has "
                  f"{g['first']['build'].get('build_id')!r}; allowed: shards of one build in one report (compare two "
                  "builds with --baseline BASE.json NEW.json)")
         g["files"].append(path)
+        searches = j.get("searches", [])
+        if not isinstance(searches, list) or not all(isinstance(x, dict) for x in searches):
+            fail(f"{path}: searches: {json.dumps(searches)[:60]}; allowed: an array of search summaries "
+                 "(docs/bench-format.md, kind max-instances)")
+        g["searches"].extend(searches)
         for p in j["points"]:
             pid = p.get("id")
             if pid in g["points"]:
@@ -723,6 +728,97 @@ def section_scaling(doc, g):
     doc.table(["bodies", "pairs per frame", "frames replayed"], rows)
 
 
+def section_max_instances(doc, g):
+    """The most instances at the target steps/s per model and engine, beside the paper's counts."""
+    j = g["first"]
+    st = j["settings"]
+    target = st.get("target_steps_per_s", 30)
+    win = st.get("window", {})
+    searches = g["searches"]
+    # Every engine searched in any of the files (runs of one engine each merge into one table).
+    named = list(dict.fromkeys(engines_of(g) + [x.get("engine") for x in searches if x.get("engine")]))
+    engines = [e for e in ("cpu", "cuda", "bullet") if e in named] + [e for e in named if e not in ENGINE_COLORS]
+    doc.p(f"Largest instance count N whose steps/s over frames {win.get('first')}-{win.get('last')} (the settled "
+          f"window) is >= {target:g}, per model (its Table 5 random scene grown at the same density) and engine: "
+          "doubling from 1, then bisection to the bracket [N, N+1] (or to the resolution "
+          f"{st.get('resolution', 0):g} x N); probes {st.get('probe_repeat', 1)} repetition(s), the bracket's ends "
+          f"{st.get('repeat')} repetition(s), median decides. A failing repetition is cut once its window's step time "
+          f"shows it below {target:g} steps/s (its value is then that upper bound). Ours: steps/s of the simulation "
+          "step alone; the paper's: FPS of the whole Unity application on an RTX 3090 Ti. "
+          "0 = a single instance is already below the target; '>= cap' = the cap still passed; memory = the next "
+          "count did not fit (the engine's memory check before its first step).")
+    scenes = list(dict.fromkeys(x.get("scene") for x in searches))
+    by = {(x.get("scene"), x.get("engine")): x for x in searches}
+
+    def cell(x):
+        if x is None:
+            return "-"
+        status = x.get("status")
+        if status != "ok":
+            return f"{status}: {str(x.get('reason', ''))[:80]}"
+        n, br = x.get("max_instances"), x.get("bracket") or [None, None]
+        sps = x.get("steps_per_s")
+        if br[1] is None:
+            return f">= {n:,} (cap)" + (f", {spread_text(sps)} steps/s" if sps else "")
+        if n == 0:
+            return f"0 ({x.get('limited_by')}: {str(x.get('reason', ''))[:80]})"
+        lim = "" if x.get("limited_by") == "steps/s" else f", {x.get('limited_by')}"
+        return f"{n:,} [{br[0]:,}, {br[1]:,}]: {spread_text(sps)} steps/s" + lim
+
+    rows, sources = [], []
+    for sc in scenes:
+        any_x = next((x for x in searches if x.get("scene") == sc), {})
+        paper = any_x.get("paper") or {}
+        if paper.get("source"):
+            sources.append(f"{any_x.get('model', sc)}: {paper['source']}")
+        rows.append([f"{any_x.get('model', sc)} ({sc})", f"{paper['count']:,}" if paper.get("count") else "-"]
+                    + [cell(by.get((sc, e))) for e in engines])
+    doc.table(["model (scene)", "paper: most instances at >= 30 FPS"]
+              + [f"{e}: N [bracket]: steps/s at N" for e in engines], rows,
+              "Paper sources: " + "; ".join(sources) + "." if sources else None, name="max-instances")
+    rows = []
+    for x in searches:
+        br = x.get("bracket")
+        br = f"[{br[0]}, {br[1] if br[1] is not None else '-'}]" if isinstance(br, list) and len(br) == 2 else "-"
+        rows.append([x.get("model"), x.get("engine"), x.get("status"), x.get("max_instances", "-"),
+                     br, spread_text(x.get("steps_per_s")),
+                     ("≤ " if x.get("steps_per_s_above_cut") else "") + spread_text(x.get("steps_per_s_above")), x.get("limited_by", "-"), x.get("probes", 0),
+                     x.get("confirmations", 0), str(x.get("reason", ""))[:200]])
+    doc.table(["model", "engine", "status", "N", "bracket", "steps/s at N", "steps/s at bracket top", "limited by",
+               "probes", "confirmations", "reason"], rows,
+              "≤: the top's repetitions were cut once below the target, so the figure is an upper bound.",
+              name="searches")
+    pts = [p for p in g["points_list"] if p.get("status") == "ok" and "windows" in p
+           and "instances" in p.get("params", {}).get("axes", {})]
+    if pts:
+        fig, ax = plt.subplots(figsize=(8, 4.6))
+        cmap = plt.get_cmap("tab10")
+        keys = list(dict.fromkeys((p["params"]["scene"], p["params"]["engine"]) for p in pts))
+        for k, key in enumerate(keys):
+            mine = [p for p in pts if (p["params"]["scene"], p["params"]["engine"]) == key]
+            for role, style in (("probe", "o"), ("confirm", "x")):
+                ps = sorted((p for p in mine if p.get("role", "probe") == role),
+                            key=lambda p: p["params"]["axes"]["instances"])
+                if not ps:
+                    continue
+                xs = [p["params"]["axes"]["instances"] for p in ps]
+                ys = [med(first_window(p)["steps_per_s"]) for p in ps]
+                ax.plot(xs, ys, marker=style, ms=3 if role == "probe" else 6, color=cmap(k % 10),
+                        label=f"{key[0]} {key[1]}" + (" (bracket ends, confirmed)" if role == "confirm" else ""),
+                        linestyle={"cpu": "-", "cuda": "--"}.get(key[1], ":") if role == "probe" else "none")
+        ax.axhline(target, color="black", linewidth=1)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        log_ticks(ax, "x")
+        log_ticks(ax, "y")
+        ax.set_xlabel("instances")
+        ax.set_ylabel("steps/s over the window (median; cut probes: upper bound)")
+        ax.set_title(f"Probes of the search; the line is the target {target:g} steps/s")
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        doc.figure(fig, "max-instances-probes", "max-instances: every probe's steps/s against its instance count "
+                   "(solid cpu, dashed cuda, dotted bullet; x: the bracket's ends measured again)")
+
+
 def section_generic(doc, g):
     rows = []
     for p in g["points_list"]:
@@ -898,7 +994,8 @@ SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table
             "table6": ("Table 6: Level 0 (AABB only) vs hierarchical C", section_table6),
             "tableA1": ("Table A1: spatial hash vs octree, early and late phases", section_tableA1),
             "figA2": ("Fig. A2: penetration for beta x delta", section_figA2),
-            "broadphase-scaling": ("Broadphase scaling", section_scaling)}
+            "broadphase-scaling": ("Broadphase scaling", section_scaling),
+            "max-instances": ("Most instances at 30 steps/s (paper section 5.3)", section_max_instances)}
 
 
 CURRENT = ["the inputs"]  # the file being read, for the one-line error of a malformed one
@@ -955,6 +1052,8 @@ def main():
         title, fn = SECTIONS.get(name, (f"Sweep {name}", section_generic))
         if g["first"]["sweep"].get("kind") == "broadphase" and name not in SECTIONS:
             title, fn = (f"Sweep {name}: broadphase replay", section_scaling)
+        if g["first"]["sweep"].get("kind") == "max-instances" and name not in SECTIONS:
+            title, fn = (f"Sweep {name}: most instances at the target steps/s", section_max_instances)
         nav.append((f"s{i}", title))
         doc.section = name
         CURRENT[0] = ", ".join(g["files"])

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The five named sweeps of `octocd bench` (table5, table6, tableA1, figA2,
 # broadphase-scaling) into OUT/<sweep>.json, then `octocd report` into OUT/index.html and
-# OUT/report.md. Re-running continues unfinished sweeps (--resume).
+# OUT/report.md. Re-running continues unfinished sweeps (--resume). max-instances runs only
+# when named (its search takes minutes per model and engine); its result joins the report.
 # Usage: reports/run-sweeps.sh OCTOCD OUT [SWEEPS] [-- extra bench options]
 #   e.g. reports/run-sweeps.sh build/octocd reports/cpu/bench
 #        reports/run-sweeps.sh build/octocd reports/h100/bench "table5 table6" -- --engines cpu,cuda
@@ -15,7 +16,7 @@ for s in $sweeps; do
   "$octocd" bench "$s" -o "$out/$s.json" --resume "$@"
 done
 results=()
-for s in table5 table6 tableA1 figA2 broadphase-scaling; do
+for s in table5 table6 tableA1 figA2 broadphase-scaling max-instances; do
   [ -f "$out/$s.json" ] && results+=("$out/$s.json")
 done
 "$octocd" report "${results[@]}" -o "$out" --title "octocd benchmarks: $(basename "$(dirname "$out")")"

@@ -124,7 +124,7 @@ std::string fmt_frames(std::int64_t a, std::int64_t b) {
 TEST_F(Tools, BenchUnknownSweepListsTheNames) {
   const Result r = run_octocd("bench no-such-sweep -o " + (dir_ / "r.json").string());
   EXPECT_EQ(r.code, 2) << r.output;
-  for (const char* n : {"table5", "table6", "tableA1", "figA2", "broadphase-scaling"})
+  for (const char* n : {"table5", "table6", "tableA1", "figA2", "broadphase-scaling", "max-instances"})
     EXPECT_NE(r.output.find(n), std::string::npos) << n << "\n" << r.output;
   EXPECT_FALSE(fs::exists(dir_ / "r.json"));
   const Result list = run_octocd("bench --list");
