@@ -514,6 +514,9 @@ int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationO
   octocd::ExternalTraceInfo info;
   std::vector<octocd::ValidationResult> results;
   try {
+    // Judging the written trace polls no flag: a signal ends it at once (no table).
+    const octocd::StopAtOnce judging(temporary ? "judging Bullet's trace (a temporary file left in the temp folder)"
+                                               : "judging Bullet's trace, which stays on disk");
     results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
   } catch (...) {
     std::error_code ec;
