@@ -483,9 +483,9 @@ Mesh make_box_mesh(Vec3 half_extents, int subdivisions) {
 }
 
 Mesh make_icosphere(float radius, int subdivisions) {
-  if (subdivisions < 0 || subdivisions > 7) {
-    throw InputError("make_icosphere: subdivisions " + std::to_string(subdivisions) +
-                     " (expected 0..7)");
+  if (subdivisions < 0 || subdivisions > limits::kMaxIcosphereSubdivisions) {
+    throw InputError("make_icosphere: subdivisions " + std::to_string(subdivisions) + " (expected 0.." +
+                     std::to_string(limits::kMaxIcosphereSubdivisions) + ")");
   }
   if (!(radius > 0.0f) || !std::isfinite(radius)) {
     throw InputError("make_icosphere: radius must be finite and > 0");
