@@ -167,28 +167,42 @@ void check_ply_lists(const std::string& path, std::istream& in, const std::strin
                    " items (expected at most " + std::to_string(limits::kMaxFaceCorners) + " corners)");
   };
   if (format == "ascii") {
+    // One element a line, exactly its properties' values, every value a number: a short or
+    // long line, or a word, puts assimp's reader out of step with the header, and the
+    // number it then takes for a list length is arbitrary (the fuzzer's file had "3 0 F").
     std::string line;
     for (const PlyElement& e : elements) {
-      const bool lists = std::any_of(e.properties.begin(), e.properties.end(), [](const PlyProperty& p) { return p.list; });
       for (std::uint64_t i = 0; i < e.count; ++i) {
-        if (!std::getline(in, line)) return;
-        if (!lists) continue;
+        if (!std::getline(in, line)) return;  // a short body: assimp's error
         std::istringstream ls(line);
-        for (const PlyProperty& p : e.properties) {
-          std::string tok;
-          if (!(ls >> tok)) return;
-          if (!p.list) continue;
+        std::string tok;
+        const auto value = [&](double& v) {
+          if (!(ls >> tok))
+            fail(path, "PLY " + e.name + " " + std::to_string(i) + ": its line ends before its last property " +
+                           "(expected one " + e.name + " a line with every property's values)");
           std::size_t used = 0;
-          double c = -1;
           try {
-            c = std::stod(tok, &used);
+            v = std::stod(tok, &used);
           } catch (const std::exception&) {
-            return;  // not a number: assimp's error
+            used = 0;
           }
+          if (used != tok.size())
+            fail(path, "PLY " + e.name + " " + std::to_string(i) + ": '" + tok.substr(0, 40) +
+                           "' is not a number (expected numbers only in an ASCII PLY body)");
+        };
+        for (const PlyProperty& p : e.properties) {
+          double c = 0;
+          value(c);
+          if (!p.list) continue;
           if (!(c >= 0 && c <= static_cast<double>(limits::kMaxFaceCorners))) too_many(e.name, i, tok);
-          for (std::uint64_t k = 0; k < static_cast<std::uint64_t>(c); ++k)
-            if (!(ls >> tok)) return;
+          for (std::uint64_t k = 0; k < static_cast<std::uint64_t>(c); ++k) {
+            double item = 0;
+            value(item);
+          }
         }
+        if (ls >> tok)
+          fail(path, "PLY " + e.name + " " + std::to_string(i) + ": its line has values past its last property " +
+                         "(expected one " + e.name + " a line with every property's values)");
       }
     }
     return;

@@ -333,6 +333,12 @@ TEST(LoadMesh, AFaceWithTooManyCornersIsRefusedBeforeTriangulation) {
   EXPECT_GE(octocd::load_mesh(write_temp("limit-face.obj", ok)).triangles.size(), 1024u + 1022u - 10u);
 }
 
+/// A file of fuzz/regressions/mesh/ in the source tree ($OCTOCD_SOURCE_DIR, else ".").
+std::string fuzz_regression(const std::string& name) {
+  const char* src = std::getenv("OCTOCD_SOURCE_DIR");
+  return std::string(src ? src : ".") + "/fuzz/regressions/mesh/" + name;
+}
+
 // Found by fuzz_mesh (issue 22, fuzz/regressions/mesh/fuzz-ply-ascii-list-4e18-oom.ply):
 // assimp 5.2 allocates a PLY list's declared length before reading it, so a 237-byte
 // file whose face declared 4 x 10^18 corners asked for 16 GB. Every list length of the
@@ -346,6 +352,14 @@ TEST(LoadMesh, APlyListLongerThanTheCornerLimitIsRefusedBeforeAssimp) {
   expect_load_error(write_temp("huge-list2.ply", header_ascii + "1025 0 1 2\n3 0 1 3\n"),
                     "PLY face 0 declares a list of 1025 items");
   EXPECT_EQ(octocd::load_mesh(write_temp("ok-list.ply", header_ascii + "3 0 1 2\n3 0 1 3\n")).triangles.size(), 2u);
+  // Lines out of step with the header (the fuzzer's file had a short line and "3 0 F").
+  expect_load_error(write_temp("word.ply", header_ascii + "3 0 F\n3 0 1 3\n"),
+                    "PLY face 0: 'F' is not a number");
+  expect_load_error(write_temp("short.ply", header_ascii + "3 0 1\n3 0 1 3\n"),
+                    "PLY face 0: its line ends before its last property");
+  expect_load_error(write_temp("long.ply", header_ascii + "3 0 1 2 3\n3 0 1 3\n"),
+                    "PLY face 0: its line has values past its last property");
+  expect_load_error(fuzz_regression("fuzz-ply-ascii-list-4e18-oom.ply"), "PLY vertex 2: its line ends before");
   // Binary: a uint count of 2^32 - 1 (little endian) and of 2000 (big endian).
   for (const bool little : {true, false}) {
     std::string f = std::string("ply\nformat ") + (little ? "binary_little_endian" : "binary_big_endian") +
