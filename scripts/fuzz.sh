@@ -46,9 +46,9 @@ for t in "${targets[@]}"; do
            if [ ! -f "$work/$t/corpus/box-stack-20.h5" ]; then
              [ -x build/octocd ] || { echo "fuzz.sh: build/octocd is needed for the trace seeds" >&2; exit 2; }
              ./build/octocd run datasets/scenes/box-stack.json --frames 20 --state-every 5 --contacts \
-               --trace "$work/$t/corpus/box-stack-20.h5" --quiet
+               --trace "$work/$t/corpus/box-stack-20.h5" --quiet --no-xdmf
              ./build/octocd run tests/data/spheres-drop.json --frames 10 --state-every 10 \
-               --trace "$work/$t/corpus/spheres-10.h5" --quiet || true
+               --trace "$work/$t/corpus/spheres-10.h5" --quiet --no-xdmf || true
            fi
            # External traces (docs/trace-format.md), versions 1 and 2, from the examples.
            if [ "$t" = external ] && [ ! -f "$work/$t/corpus/toy-v1.h5" ]; then
