@@ -1,7 +1,8 @@
 // libFuzzer target: the trace readers (issues 10 and 22). The input is written as a file
-// and every reader below opens it: read_trace_summary and the XDMF sidecar, the trace
-// reader of `octocd compare` and `octocd replay` (TraceReader, read the way they read it),
-// and the external-trace reader of `validate --trace-in` (check_external_trace). A file that
+// and every reader below opens it: read_trace_summary and the XDMF sidecar, and the trace
+// reader of `octocd compare` and `octocd replay` (TraceReader, read the way they read it).
+// The commands themselves have their own targets (fuzz_compare, fuzz_replay), and so has
+// the external-trace reader of `validate --trace-in` (fuzz_external). A file that
 // is not a readable trace must end in InputError (exit 2) or RuntimeError (exit 1);
 // anything else (a crash, a hang, another exception) is a finding.
 //
@@ -18,7 +19,6 @@
 #include <string>
 
 #include "octocd/error.hpp"
-#include "octocd/external.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/trace_reader.hpp"
 
@@ -55,8 +55,6 @@ const Reader kReaders[] = {
          (void)t.read_i64("/contacts/offsets", c + 1);
        }
      }},
-    // validate --trace-in --check-only (validation/src/trace_in.cpp).
-    {"check_external_trace", [](const std::string& p) { (void)octocd::check_external_trace(p); }},
 };
 
 std::string scratch_path() {

@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
-# Fuzz octocd's loaders with libFuzzer (issue 10): the scene loader, the mesh loader
-# (OFF/OBJ/PLY through assimp and octocd's checks) and the trace readers.
+# Fuzz octocd's loaders with libFuzzer (issues 10, 22): the scene loader, the mesh loader
+# (OFF/OBJ/PLY through assimp and octocd's checks), the trace readers (summary, XDMF,
+# TraceReader), `compare` and `replay` (the commands, on the fuzzed trace) and the
+# external-trace reader of `validate --trace-in` (check and 3 frames judged).
 #
-#   scripts/fuzz.sh [SECONDS] [TARGET...]     TARGET: scene mesh trace (default: all three)
+#   scripts/fuzz.sh [SECONDS] [TARGET...]
+#       TARGET: scene mesh trace compare replay external (default: all six)
 #
 # Builds build-fuzz/ (CMake preset "fuzz": clang, ASan + UBSan, -fsanitize=fuzzer), makes
 # a seed corpus from the shipped files (datasets/scenes, tests/data, fuzz/regressions, a
@@ -10,7 +13,8 @@
 # the other under `nice`, on one core. Work and crash artifacts go to fuzz/work/<target>/
 # (ignored by git). A crash is printed with the command that reproduces it; once fixed,
 # copy the input into fuzz/regressions/<target>/, where ctest replays it in every build
-# (fuzz.<target>.regressions, label unit).
+# (fuzz.<target>.regressions, label unit); fuzz/regressions/trace/ is replayed by every
+# trace-reading target (trace, compare, replay, external) and seeds all of them.
 #
 # Needs clang and libFuzzer from Debian: apt-get install clang (libclang-rt-14-dev).
 set -euo pipefail
@@ -18,7 +22,7 @@ cd "$(dirname "$0")/.."
 seconds=${1:-600}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -eq 0 ] && targets=(scene mesh trace)
+[ ${#targets[@]} -eq 0 ] && targets=(scene mesh trace compare replay external)
 
 command -v clang++ >/dev/null || { echo "fuzz.sh: clang++ not found; apt-get install clang" >&2; exit 2; }
 
@@ -29,20 +33,29 @@ work=fuzz/work
 for t in "${targets[@]}"; do
   mkdir -p "$work/$t/corpus" "$work/$t/artifacts"
   cp -n fuzz/regressions/"$t"/* "$work/$t/corpus/" 2>/dev/null || true
+  case $t in
+    compare|replay|external) cp -n fuzz/regressions/trace/* "$work/$t/corpus/" ;;
+  esac
 done
 # Seeds from the shipped files.
 for t in "${targets[@]}"; do
   case $t in
     scene) cp -n datasets/scenes/*.json tests/data/*.json "$work/scene/corpus/" ;;
     mesh)  cp -n tests/data/*.obj "$work/mesh/corpus/" ;;
-    trace) if [ ! -f "$work/trace/corpus/box-stack-20.h5" ]; then
+    trace|compare|replay|external)
+           if [ ! -f "$work/$t/corpus/box-stack-20.h5" ]; then
              [ -x build/octocd ] || { echo "fuzz.sh: build/octocd is needed for the trace seeds" >&2; exit 2; }
              ./build/octocd run datasets/scenes/box-stack.json --frames 20 --state-every 5 --contacts \
-               --trace "$work/trace/corpus/box-stack-20.h5" --quiet
+               --trace "$work/$t/corpus/box-stack-20.h5" --quiet --no-xdmf
              ./build/octocd run tests/data/spheres-drop.json --frames 10 --state-every 10 \
-               --trace "$work/trace/corpus/spheres-10.h5" --quiet || true
+               --trace "$work/$t/corpus/spheres-10.h5" --quiet --no-xdmf || true
+           fi
+           # External traces (docs/trace-format.md), versions 1 and 2, from the examples.
+           if [ "$t" = external ] && [ ! -f "$work/$t/corpus/toy-v1.h5" ]; then
+             /usr/bin/python3 examples/python/toy_engine.py "$work/$t/corpus/toy-v1.h5" >/dev/null || true
+             /usr/bin/python3 examples/python/rotating_writer.py "$work/$t/corpus/rotating-v2.h5" >/dev/null || true
            fi ;;
-    *) echo "fuzz.sh: unknown target '$t'; allowed: scene mesh trace" >&2; exit 2 ;;
+    *) echo "fuzz.sh: unknown target '$t'; allowed: scene mesh trace compare replay external" >&2; exit 2 ;;
   esac
 done
 
@@ -52,14 +65,16 @@ for t in "${targets[@]}"; do
   dict=()
   [ "$t" = scene ] && dict=(-dict=fuzz/scene.dict)
   max_len=65536
-  [ "$t" = trace ] && max_len=300000  # a trace is >= 200 KB (full chunks of /frames)
+  case $t in  # a trace is >= 200 KB (full chunks of /frames)
+    trace|compare|replay|external) max_len=300000 ;;
+  esac
   # assimp 5.2 and libhdf5 1.10.8 leak on some malformed files they reject (upstream; the
   # inputs are in fuzz/upstream/): leaks are not findings for the mesh and trace targets.
   leaks=1
   [ "$t" != scene ] && leaks=0
   if ! ASAN_OPTIONS="detect_leaks=$leaks" nice -n 15 ./build-fuzz/fuzz_"$t" "$work/$t/corpus" "${dict[@]}" \
         -max_total_time="$seconds" -timeout=20 -rss_limit_mb=4096 -max_len="$max_len" \
-        -artifact_prefix="$work/$t/artifacts/" -print_final_stats=1 2>"$work/$t/log.txt"; then
+        -artifact_prefix="$work/$t/artifacts/" -print_final_stats=1 -close_fd_mask=1 2>"$work/$t/log.txt"; then
     status=1
     echo "fuzz_$t found a crash:"; grep -E "ERROR|SUMMARY|Test unit written" "$work/$t/log.txt" | head -5
     echo "reproduce: ./build-fuzz/fuzz_$t $work/$t/artifacts/<crash-file>"

@@ -135,18 +135,132 @@ std::uint64_t check_off(const std::string& path) {
   return nf;
 }
 
+/// Bytes of a PLY scalar type ("float", "uchar", "int32", ...); 0 for an unknown name.
+std::size_t ply_type_size(const std::string& t) {
+  if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
+  if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
+  if (t == "int" || t == "uint" || t == "int32" || t == "uint32" || t == "float" || t == "float32") return 4;
+  if (t == "double" || t == "float64") return 8;
+  return 0;
+}
+
+/// One property of a PLY element: a scalar, or a list (a count, then that many items).
+struct PlyProperty {
+  bool list = false;
+  std::size_t count_size = 0, item_size = 0;  ///< bytes (binary files)
+};
+struct PlyElement {
+  std::string name;
+  std::uint64_t count = 0;
+  std::vector<PlyProperty> properties;
+};
+
+/// The list lengths of a PLY body (every element with a list property, e.g. a face's
+/// vertex_indices), each checked against limits::kMaxFaceCorners before assimp reads the
+/// file: assimp 5.2 allocates a list's declared length before reading it (a 237-byte
+/// file whose ASCII face declared 4 x 10^18 corners asked for 16 GB; found by fuzz_mesh).
+/// The walk stops quietly where the body ends or does not parse (assimp reports that).
+void check_ply_lists(const std::string& path, std::istream& in, const std::string& format,
+                     const std::vector<PlyElement>& elements) {
+  const auto too_many = [&](const std::string& element, std::uint64_t i, const std::string& what) {
+    fail(path, "PLY " + element + " " + std::to_string(i) + " declares a list of " + what.substr(0, 40) +
+                   " items (expected at most " + std::to_string(limits::kMaxFaceCorners) + " corners)");
+  };
+  if (format == "ascii") {
+    // One element a line, exactly its properties' values, every value a number: a short or
+    // long line, or a word, puts assimp's reader out of step with the header, and the
+    // number it then takes for a list length is arbitrary (the fuzzer's file had "3 0 F").
+    std::string line;
+    for (const PlyElement& e : elements) {
+      for (std::uint64_t i = 0; i < e.count; ++i) {
+        if (!std::getline(in, line)) return;  // a short body: assimp's error
+        std::istringstream ls(line);
+        std::string tok;
+        const auto value = [&](double& v) {
+          if (!(ls >> tok))
+            fail(path, "PLY " + e.name + " " + std::to_string(i) + ": its line ends before its last property " +
+                           "(expected one " + e.name + " a line with every property's values)");
+          std::size_t used = 0;
+          try {
+            v = std::stod(tok, &used);
+          } catch (const std::exception&) {
+            used = 0;
+          }
+          if (used != tok.size())
+            fail(path, "PLY " + e.name + " " + std::to_string(i) + ": '" + tok.substr(0, 40) +
+                           "' is not a number (expected numbers only in an ASCII PLY body)");
+        };
+        for (const PlyProperty& p : e.properties) {
+          double c = 0;
+          value(c);
+          if (!p.list) continue;
+          if (!(c >= 0 && c <= static_cast<double>(limits::kMaxFaceCorners))) too_many(e.name, i, tok);
+          for (std::uint64_t k = 0; k < static_cast<std::uint64_t>(c); ++k) {
+            double item = 0;
+            value(item);
+          }
+        }
+        if (ls >> tok)
+          fail(path, "PLY " + e.name + " " + std::to_string(i) + ": its line has values past its last property " +
+                         "(expected one " + e.name + " a line with every property's values)");
+      }
+    }
+    return;
+  }
+  const bool little = format == "binary_little_endian";
+  const auto read_uint = [&](std::size_t bytes, std::uint64_t& v) {
+    unsigned char b[8] = {};
+    if (!in.read(reinterpret_cast<char*>(b), static_cast<std::streamsize>(bytes))) return false;
+    v = 0;
+    for (std::size_t k = 0; k < bytes; ++k) v |= static_cast<std::uint64_t>(b[little ? k : bytes - 1 - k]) << (8 * k);
+    return true;
+  };
+  for (const PlyElement& e : elements) {
+    std::size_t fixed = 0;
+    bool lists = false;
+    for (const PlyProperty& p : e.properties) {
+      if (p.list) lists = true;
+      else fixed += p.item_size;
+      if ((p.list ? p.count_size : p.item_size) == 0) return;  // an unknown type: assimp's error
+    }
+    if (!lists) {
+      if (fixed == 0 || e.count > (std::uint64_t(1) << 40) / fixed) return;
+      in.seekg(static_cast<std::streamoff>(e.count * fixed), std::ios::cur);
+      continue;
+    }
+    for (std::uint64_t i = 0; i < e.count; ++i)
+      for (const PlyProperty& p : e.properties) {
+        if (!p.list) {
+          in.seekg(static_cast<std::streamoff>(p.item_size), std::ios::cur);
+          continue;
+        }
+        std::uint64_t c = 0;
+        if (!read_uint(p.count_size, c)) return;
+        // A signed count type reads as a huge unsigned value when negative: refused too.
+        if (c > limits::kMaxFaceCorners) too_many(e.name, i, std::to_string(c));
+        in.seekg(static_cast<std::streamoff>(c * p.item_size), std::ios::cur);
+      }
+    if (!in) return;
+  }
+}
+
 /// A PLY file's vertex and face counts from its header ("element vertex N", "element
-/// face N"), checked against the limits before assimp parses the file. Other files
+/// face N"), checked against the limits before assimp parses the file, then the lengths
+/// of its lists (check_ply_lists). Other files
 /// (OBJ has no header) are checked after parsing. A header without `end_header` in its
 /// first 1000 lines is rejected: assimp 5.2's PLY reader never returns on one (found by
 /// fuzz_mesh).
 void check_ply_header(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, "cannot open (expected a readable file)");
-  std::string line;
+  std::string line, format;
+  std::vector<PlyElement> elements;
   for (int n = 0; n < 1000 && std::getline(in, line); ++n) {
     while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) line.pop_back();
-    if (line == "end_header") return;
+    if (line == "end_header") {
+      check_ply_lists(path, in, format, elements);
+      return;
+    }
     std::istringstream ls(line);
     std::string kw, element, count;
     ls >> kw >> element >> count;
@@ -160,7 +274,24 @@ void check_ply_header(const std::string& path) {
                      "element, property or end_header (expected a PLY header)");
     if (kw == "format" && element != "ascii" && element != "binary_little_endian" && element != "binary_big_endian")
       fail(path, "PLY format '" + element.substr(0, 40) + "' (expected ascii, binary_little_endian or binary_big_endian)");
+    if (kw == "format") format = element;
+    if (kw == "property" && !elements.empty()) {
+      // "property TYPE NAME" or "property list COUNT_TYPE ITEM_TYPE NAME"
+      PlyProperty p;
+      p.list = element == "list";
+      p.count_size = p.list ? ply_type_size(count) : 0;
+      std::string item;
+      if (p.list) ls >> item;
+      p.item_size = ply_type_size(p.list ? item : element);
+      elements.back().properties.push_back(p);
+    }
     if (kw != "element") continue;
+    elements.push_back({element, 0, {}});
+    try {
+      elements.back().count = std::stoull(count);
+    } catch (const std::exception&) {
+      elements.back().count = 0;
+    }
     const bool vertex = element == "vertex", face = element == "face";
     if (!vertex && !face) continue;
     unsigned long long c = 0;
@@ -483,9 +614,9 @@ Mesh make_box_mesh(Vec3 half_extents, int subdivisions) {
 }
 
 Mesh make_icosphere(float radius, int subdivisions) {
-  if (subdivisions < 0 || subdivisions > 7) {
-    throw InputError("make_icosphere: subdivisions " + std::to_string(subdivisions) +
-                     " (expected 0..7)");
+  if (subdivisions < 0 || subdivisions > limits::kMaxIcosphereSubdivisions) {
+    throw InputError("make_icosphere: subdivisions " + std::to_string(subdivisions) + " (expected 0.." +
+                     std::to_string(limits::kMaxIcosphereSubdivisions) + ")");
   }
   if (!(radius > 0.0f) || !std::isfinite(radius)) {
     throw InputError("make_icosphere: radius must be finite and > 0");

@@ -16,6 +16,7 @@
 #include <utility>
 
 #include "octocd/error.hpp"
+#include "octocd/mesh.hpp"
 
 namespace octocd {
 namespace {
@@ -205,7 +206,7 @@ Aabb parse_box(const Ctx& c, const json& j, const std::string& key, bool strict)
 ShapeSpec parse_shape(const Ctx& c, const json& j, const std::string& key) {
   const std::string allowed_shape =
       "an object with exactly one of {\"mesh\": name|path, \"scale\": >0}, {\"box\": [hx,hy,hz]}, "
-      "{\"icosphere\": {\"radius\": >0, \"subdivisions\": 0..7}}";
+      "{\"icosphere\": {\"radius\": >0, \"subdivisions\": 0.." + std::to_string(limits::kMaxIcosphereSubdivisions) + "}}";
   c.expect_object(j, key, allowed_shape);
   c.check_keys(j, key, {"mesh", "scale", "box", "icosphere"});
   const int kinds = int(j.contains("mesh")) + int(j.contains("box")) + int(j.contains("icosphere"));
@@ -235,14 +236,16 @@ ShapeSpec parse_shape(const Ctx& c, const json& j, const std::string& key) {
     } else {
       s.kind = ShapeSpec::Kind::Icosphere;
       const std::string k = child(key, "icosphere");
-      c.expect_object(j["icosphere"], k, "{\"radius\": >0, \"subdivisions\": 0..7}");
+      const std::string most = std::to_string(limits::kMaxIcosphereSubdivisions);
+      c.expect_object(j["icosphere"], k, "{\"radius\": >0, \"subdivisions\": 0.." + most + "}");
       const json& ico = j["icosphere"];
       c.check_keys(ico, k, {"radius", "subdivisions"});
       if (ico.contains("radius"))
         s.radius = c.ranged(ico["radius"], child(k, "radius"), limits::kMinLength / 2, true, limits::kMaxLength / 2,
                             true, "number in [" + num(limits::kMinLength / 2) + ", " + num(limits::kMaxLength / 2) + "] (m)");
       if (ico.contains("subdivisions"))
-        s.subdivisions = static_cast<int>(c.integer(ico["subdivisions"], child(k, "subdivisions"), 0, 7, "integer in [0, 7]"));
+        s.subdivisions = static_cast<int>(c.integer(ico["subdivisions"], child(k, "subdivisions"), 0,
+                                                    limits::kMaxIcosphereSubdivisions, "integer in [0, " + most + "]"));
     }
   }
   return s;
@@ -538,6 +541,18 @@ std::string choose_data_dir(const std::string& origin, const std::string& data_d
 const char* const kDatasetNames[] = {"bunny", "armadillo", "dragon", "asian-dragon"};
 
 /// True when `mesh` is spelled as a file (has a folder or an extension), not a dataset name.
+/// "a folder", "a FIFO", ... for a path's type in messages (the trace readers' words).
+std::string file_type_text(fs::file_type t) {
+  switch (t) {
+    case fs::file_type::directory: return "a folder";
+    case fs::file_type::fifo: return "a FIFO";
+    case fs::file_type::character:
+    case fs::file_type::block: return "a device";
+    case fs::file_type::socket: return "a socket";
+    default: return "not a plain file";
+  }
+}
+
 bool looks_like_file(const std::string& mesh) {
   const fs::path m(mesh);
   return m.has_parent_path() || m.has_extension();
@@ -778,6 +793,9 @@ std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const
   // extension) is not: "meshes/bunny.obj" must not become ".../bunny.obj.obj".
   if (!scene.data_dir.empty() && !file_like)
     for (const char* ext : {".obj", ".off", ".ply"}) searched.push_back(fs::path(scene.data_dir) / (mesh + ext));
+  // stat only, never open here: opening a FIFO blocks, a device never ends. The first
+  // regular file wins; when there is none, a place that exists as something else (a
+  // folder, FIFO, device, socket) is named with its type rather than "not found".
   for (const auto& p : searched) {
     std::error_code ec;
     if (!fs::is_regular_file(p, ec)) continue;
@@ -786,6 +804,17 @@ std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const
       c.fail(key, "mesh file " + p.string() + " is empty (0 bytes)",
              "a non-empty mesh file (for datasets, run datasets/fetch.sh again)");
     return p.string();
+  }
+  for (const auto& p : searched) {
+    std::error_code ec;
+    const fs::file_status st = fs::status(p, ec);
+    if (st.type() == fs::file_type::not_found) continue;
+    if (st.type() == fs::file_type::none || ec)
+      c.fail(key, "mesh path " + p.string() + " cannot be examined: " + ec.message(),
+             "a readable regular mesh file");
+    c.fail(key, "mesh path " + p.string() + ": not a regular file (" + file_type_text(st.type()) + ")",
+           "a regular mesh file (.obj, .off, .ply, .stl), absolute or relative to the scene file's folder; or "
+           "a dataset name (bunny, armadillo, dragon, asian-dragon)");
   }
   std::string list;
   for (const auto& p : searched) list += (list.empty() ? "" : ", ") + p.string();

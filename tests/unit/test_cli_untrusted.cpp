@@ -9,6 +9,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <csignal>
 #include <cstdlib>
@@ -20,6 +21,8 @@
 
 #include "cli_run.hpp"
 #include "octocd/error.hpp"
+#include "octocd/mesh.hpp"
+#include "octocd/scene.hpp"
 #include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/trace_reader.hpp"
@@ -552,6 +555,65 @@ TEST_F(Untrusted, BenchOutputOnAFullDiskLeavesNoTemporaryFileAndNamesErrno) {
   EXPECT_NE(r.output.find("o.json: writing failed: File too large (EFBIG)"), std::string::npos) << r.output;
   for (const auto& e : fs::directory_iterator(dir_))
     EXPECT_EQ(e.path().filename().string().find("o.json.tmp"), std::string::npos) << e.path();
+}
+
+// Before: a mesh path naming a folder, a FIFO or a device was "not found" (the FIFO only
+// because the lookup skipped what is not a regular file; an open would block on it).
+// Each is refused with one line naming the scene file, the key, the path's type and what
+// is allowed; nothing is opened, so the FIFO (no writer) cannot hang the run.
+TEST_F(Untrusted, AMeshPathThatIsNotARegularFileIsRefusedNamingIt) {
+  const std::string fifo = (dir_ / "mesh.obj").string();
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  fs::create_directories(dir_ / "folder.obj");
+  struct Case {
+    std::string mesh, problem;
+  };
+  const std::vector<Case> cases = {{fifo, "not a regular file (a FIFO)"},
+                                   {(dir_ / "folder.obj").string(), "not a regular file (a folder)"},
+                                   {"folder.obj", "not a regular file (a folder)"},  // relative to the scene
+                                   {"/dev/zero", "not a regular file (a device)"},
+                                   {"/dev/null", "not a regular file (a device)"},
+                                   {(dir_ / "missing.obj").string(), "not found"}};
+  for (const Case& c : cases) {
+    const std::string scene = (dir_ / "scene.json").string();
+    std::ofstream(scene) << R"({"name": "m", "domain": {"min": [-1, -1, -1], "max": [1, 1, 1]}, "dt": 0.01,
+      "groups": [{"shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 1},
+                 {"shape": {"mesh": ")" << c.mesh << R"(", "scale": 0.2}, "count": 1, "mass": 1}]})";
+    for (const std::string& cmd : {"run " + scene + " --frames 1 --quiet", "validate " + scene + " --frames 1"}) {
+      const Result r = run("timeout -k 5 30 " + bin() + " " + cmd);
+      EXPECT_EQ(r.code, 2) << cmd << " (mesh " << c.mesh << ")\n" << r.output;
+      EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+      for (const std::string& n : {scene + ": groups[1].shape.mesh: ", c.problem, std::string("; allowed: ")})
+        EXPECT_NE(r.output.find(n), std::string::npos) << cmd << ": '" << n << "' not in\n" << r.output;
+    }
+  }
+}
+
+// Before: a scene's icosphere took 7 subdivisions (327,680 triangles a body shape, about
+// 10 s to build and step in the fuzzer). Subdivisions are bounded by
+// octocd::limits::kMaxIcosphereSubdivisions; one more is refused naming the scene file,
+// the key and the range, before any mesh is built.
+TEST_F(Untrusted, IcosphereSubdivisionsAreBounded) {
+  const std::string scene = (dir_ / "ico.json").string();
+  const auto write = [&](int n) {
+    std::ofstream(scene) << R"({"name": "ico", "domain": {"min": [-8, -8, -8], "max": [8, 8, 8]}, "dt": 0.01,
+      "groups": [{"shape": {"icosphere": {"radius": 6.1, "subdivisions": )"
+                         << n << R"(}}, "count": 1, "mass": 1}]})";
+  };
+  const int most = octocd::limits::kMaxIcosphereSubdivisions;
+  write(most + 1);
+  const Result r = run("timeout -k 5 30 " + bin() + " run " + scene + " --frames 1 --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  const std::string allowed = "allowed: integer in [0, " + std::to_string(most) + "]";
+  for (const std::string& n : {scene + ": groups[0].shape.icosphere.subdivisions: ", allowed})
+    EXPECT_NE(r.output.find(n), std::string::npos) << n << " not in\n" << r.output;
+  // The bound itself is accepted, and the library refuses past it too.
+  write(most);
+  const Result ok = run("timeout -k 5 60 " + bin() + " run " + scene + " --frames 1 --quiet");
+  EXPECT_EQ(ok.code, 0) << ok.output;
+  EXPECT_NO_THROW(octocd::make_icosphere(1.0f, most));
+  EXPECT_THROW(octocd::make_icosphere(1.0f, most + 1), octocd::InputError);
 }
 
 // Loading a scene and its meshes (assimp) polls no flag: before, run and validate ignored

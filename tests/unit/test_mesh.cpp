@@ -332,3 +332,44 @@ TEST(LoadMesh, AFaceWithTooManyCornersIsRefusedBeforeTriangulation) {
   for (int i = 1; i <= 1024; ++i) ok += "f " + std::to_string(i) + " " + std::to_string(i % 1024 + 1) + " 1025\n";
   EXPECT_GE(octocd::load_mesh(write_temp("limit-face.obj", ok)).triangles.size(), 1024u + 1022u - 10u);
 }
+
+/// A file of fuzz/regressions/mesh/ in the source tree ($OCTOCD_SOURCE_DIR, else ".").
+std::string fuzz_regression(const std::string& name) {
+  const char* src = std::getenv("OCTOCD_SOURCE_DIR");
+  return std::string(src ? src : ".") + "/fuzz/regressions/mesh/" + name;
+}
+
+// Found by fuzz_mesh (issue 22, fuzz/regressions/mesh/fuzz-ply-ascii-list-4e18-oom.ply):
+// assimp 5.2 allocates a PLY list's declared length before reading it, so a 237-byte
+// file whose face declared 4 x 10^18 corners asked for 16 GB. Every list length of the
+// body (ASCII and binary, little and big endian) is checked against kMaxFaceCorners first.
+TEST(LoadMesh, APlyListLongerThanTheCornerLimitIsRefusedBeforeAssimp) {
+  const std::string header_ascii =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n";
+  expect_load_error(write_temp("huge-list.ply", header_ascii + "3 0 1 2\n4000000000000000000 0 1 3\n"),
+                    "PLY face 1 declares a list of 4000000000000000000 items (expected at most 1024 corners)");
+  expect_load_error(write_temp("huge-list2.ply", header_ascii + "1025 0 1 2\n3 0 1 3\n"),
+                    "PLY face 0 declares a list of 1025 items");
+  EXPECT_EQ(octocd::load_mesh(write_temp("ok-list.ply", header_ascii + "3 0 1 2\n3 0 1 3\n")).triangles.size(), 2u);
+  // Lines out of step with the header (the fuzzer's file had a short line and "3 0 F").
+  expect_load_error(write_temp("word.ply", header_ascii + "3 0 F\n3 0 1 3\n"),
+                    "PLY face 0: 'F' is not a number");
+  expect_load_error(write_temp("short.ply", header_ascii + "3 0 1\n3 0 1 3\n"),
+                    "PLY face 0: its line ends before its last property");
+  expect_load_error(write_temp("long.ply", header_ascii + "3 0 1 2 3\n3 0 1 3\n"),
+                    "PLY face 0: its line has values past its last property");
+  expect_load_error(fuzz_regression("fuzz-ply-ascii-list-4e18-oom.ply"), "PLY vertex 2: its line ends before");
+  // Binary: a uint count of 2^32 - 1 (little endian) and of 2000 (big endian).
+  for (const bool little : {true, false}) {
+    std::string f = std::string("ply\nformat ") + (little ? "binary_little_endian" : "binary_big_endian") +
+                    " 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                    "element face 1\nproperty list uint int vertex_indices\nend_header\n";
+    f += std::string(36, '\0');  // 3 vertices at the origin
+    const std::uint32_t c = little ? 0xFFFFFFFFu : 2000u;
+    for (int k = 0; k < 4; ++k) f += static_cast<char>((c >> (8 * (little ? k : 3 - k))) & 0xFF);
+    f += std::string(12, '\0');
+    expect_load_error(write_temp(little ? "huge-list-le.ply" : "huge-list-be.ply", f),
+                      "PLY face 0 declares a list of " + std::to_string(c) + " items");
+  }
+}

@@ -761,8 +761,12 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
   for (std::size_t i = 0; i < n; ++i)
     if (touched[i] && dynamic(static_cast<std::uint32_t>(i))) groups_of[find(static_cast<std::uint32_t>(i))].push_back(
         static_cast<std::uint32_t>(i));
-  for (auto& [root, members] : groups_of) {
+  for (auto& group : groups_of) {
     poll();
+    // Not a structured binding: lambdas below capture it (clang 14, the fuzz preset's
+    // compiler, refuses to capture structured bindings before C++20).
+    const std::uint32_t root = group.first;
+    const std::vector<std::uint32_t>& members = group.second;
     if (statics[root] || members.size() < 2) continue;
     if (bodies.velocity_clamp > 0.0 &&
         std::any_of(members.begin(), members.end(), [&](std::uint32_t i) {

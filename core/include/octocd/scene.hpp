@@ -64,7 +64,7 @@ struct ShapeSpec {
   std::string mesh;          ///< Mesh: dataset name ("bunny", ...) or a file path
   Vec3 half_extents{0.5f, 0.5f, 0.5f};  ///< Box: half extents (m), each > 0
   float radius = 0.5f;       ///< Icosphere: radius (m), > 0
-  int subdivisions = 2;      ///< Icosphere: in [0, 7]
+  int subdivisions = 2;      ///< Icosphere: in [0, limits::kMaxIcosphereSubdivisions] (6)
   float scale = 1.0f;        ///< Mesh: longest side after normalisation (m), > 0
   std::string mesh_path;     ///< Mesh: the file `mesh` resolved to by load_scene/parse_scene
 };
@@ -188,7 +188,9 @@ std::vector<std::string> default_data_dirs(const std::string& origin);
 /// extension (a dataset name), DATA_DIR/NAME.obj, NAME.off, NAME.ply (first found;
 /// DATA_DIR = Scene::data_dir). Throws InputError naming `key` and the places searched,
 /// with advice that fits (run datasets/fetch.sh only for a shipped dataset name or a
-/// missing data dir); also when the file found is empty (size 0).
+/// missing data dir); also when the file found is empty (size 0), and, when no regular
+/// file is found but a place searched exists as a folder, FIFO, device or socket, naming
+/// that place and its type (found with stat: nothing is opened, so a FIFO cannot block).
 std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const std::string& key);
 
 /// SplitMix64 (Steele, Lea, Flood 2014): the scene's random stream. Integer-only, so it
