@@ -16,38 +16,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-/// PlantedFaults::other_rounding: Eq. 16-22 as contact_impulse computes them, with two
-/// operations in another (equally valid) order: J_n = -(1 + e)(v_n / w), t = v_t / |v_t|.
-ContactImpulse other_rounding_impulse(Vec3 v_a, Vec3 v_b, float w_a, float w_b, Vec3 n, const ContactParams& p) {
-  ContactImpulse r;
-  const float w = w_a + w_b;
-  if (!(w > 0.0f)) return r;
-  const Vec3 v_rel = v_a - v_b;
-  const float v_n = dot(v_rel, n);
-  const Vec3 v_t = v_rel - v_n * n;
-  const float vt_len = length(v_t);
-  r.normal_velocity = v_n;
-  r.tangent_speed = vt_len;
-  if (v_n < 0.0f) {
-    const float e_eff = (-v_n < p.restitution_threshold) ? 0.0f : p.restitution;
-    r.jn = fmaxf(-(1.0f + e_eff) * (v_n / w), p.impulse_floor);
-  }
-  if (vt_len > 0.0f) {
-    r.tangent = {v_t.x / vt_len, v_t.y / vt_len, v_t.z / vt_len};
-    const float jt_star = -vt_len / w;
-    if (fabsf(jt_star) <= p.mu_static * r.jn) {
-      r.jt = jt_star;
-      r.sticking = true;
-    } else {
-      r.jt = -p.mu_kinetic * r.jn;
-    }
-  }
-  const Vec3 impulse = r.jn * n + r.jt * r.tangent;
-  r.dv_a = w_a * impulse;
-  r.dv_b = -(w_b * impulse);
-  return r;
-}
-
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
@@ -190,7 +158,8 @@ const FrameMetrics& World::step() {
       ContactTerms t = contact_terms(pass_aabbs_[p.a], pass_aabbs_[p.b], state_.v[p.a], state_.v[p.b],
                                      wa, wb, pass > 0 ? later : params);
       if (!t.pen.hit) continue;  // Eq. 9: no overlap on an axis: discard
-      if (faults_.other_rounding) t.imp = other_rounding_impulse(state_.v[p.a], state_.v[p.b], wa, wb, t.pen.normal, params);
+      if (faults_.other_rounding)
+        t.imp = contact_impulse<true>(state_.v[p.a], state_.v[p.b], wa, wb, t.pen.normal, params);
       if (faults_.last_pass_no_corrections && pass == passes - 1) t.dx_a = t.dx_b = Vec3{};
       if (faults_.normal_sign) {
         t.pen.normal = -t.pen.normal;

@@ -35,7 +35,6 @@
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_reduce.cuh>
 #include <cub/device/device_scan.cuh>
-#include <cooperative_groups.h>
 
 #include "broadphase_common.cuh"
 #include "device_broadphase.hpp"
@@ -48,7 +47,6 @@ namespace octocd {
 namespace gpu {
 namespace {
 
-namespace cg = cooperative_groups;
 
 /// Below this many bodies the query runs one warp per slot, from it one thread per slot
 /// (bench_gpu_broadphase on the H100: 10^4 boxes 0.15 vs 0.21 ms, 10^5 0.28 vs 0.26 ms,
@@ -320,23 +318,14 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
   bp::block_add(d.candidates, lane == 0 ? e.tests : 0ull);
 }
 
-/// Appends the pair key at the next free index of the pair buffer (when it fits): one
-/// atomic per group of threads that reach it together.
-__device__ inline void emit_pair(const LooseDesc& d, unsigned long long key) {
-  const cg::coalesced_group g = cg::coalesced_threads();
-  std::uint32_t base = 0;
-  if (g.thread_rank() == 0) base = atomicAdd(d.total, g.size());
-  const std::uint32_t idx = g.shfl(base, 0) + g.thread_rank();
-  if (idx < d.capacity) d.pair_keys[idx] = key;
-}
-
 /// Tests slots [t0, t1) against the query box (body `body`), emitting overlapping pairs.
 __device__ inline void test_run(const LooseDesc& d, const Aabb& box, std::uint32_t body, std::uint32_t t0,
                                 std::uint32_t t1, unsigned long long& tests) {
   if (t0 >= t1) return;
   tests += t1 - t0;
+  const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
   for (std::uint32_t t = t0; t < t1; ++t)
-    if (overlaps(box, d.slot_box[t])) emit_pair(d, bp::pair_key(body, d.slot_body[t], d.shift));
+    if (overlaps(box, d.slot_box[t])) bp::append_key(out, bp::pair_key(body, d.slot_body[t], d.shift));
 }
 
 /// One thread per slot: the loose octree query of the file comment. At each level that
