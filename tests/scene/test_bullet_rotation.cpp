@@ -16,6 +16,7 @@
 
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/mesh.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/world.hpp"
@@ -310,7 +311,7 @@ TEST(BulletRotation, TraceVersion2HasEveryDataset) {
     EXPECT_EQ(attr_string(f, "contact_geometry"), "shape");
     EXPECT_NEAR(attr_number(f, "mu"), 0.5, 1e-6);
     EXPECT_NEAR(attr_number(f, "restitution"), 0.2, 1e-6);
-    EXPECT_NEAR(attr_number(f, "contact_margin"), 0.023, 1e-6);  // 0.02 + 2 x 1 mm hull margin + 1 mm float32
+    EXPECT_NEAR(attr_number(f, "contact_margin"), std::sqrt(2.0) * 0.02 + 0.001, 1e-6);  // sqrt(2) x 0.02 threshold + 1 mm float32
     EXPECT_EQ(attr_number(f, "broadphase_exact"), 0.0);
     EXPECT_EQ(dims_of(f, "/states/position"), (std::vector<hsize_t>{F + 1, N, 3}));
     EXPECT_EQ(dims_of(f, "/states/velocity"), (std::vector<hsize_t>{F + 1, N, 3}));
@@ -502,4 +503,81 @@ TEST(BulletRotation, FrictionStaysInTheConeOnlyWithTheProjection) {
   EXPECT_EQ(stock_projections, 0);
   EXPECT_EQ(projected, 0);
   EXPECT_GT(projections, 0);
+}
+
+namespace {
+
+/// Separation (m) of body 0 (a box of half extents `he`) from body 1 (an icosphere of
+/// radius 0.07 m, 2 subdivisions) along the unit normal n (from 1 to 0), by brute force
+/// over the box's corners and the icosphere's vertices: min n.a - max n.b.
+double separation_along(const Vec3& n, const BodyState& s, const std::array<double, 3>& he) {
+  const Mesh sphere = make_icosphere(0.07f, 2);
+  double min_a = 1e30, max_b = -1e30;
+  for (int k = 0; k < 8; ++k) {
+    const std::array<double, 3> c = rotate_d(s.q[0], {(k & 1) ? he[0] : -he[0], (k & 2) ? he[1] : -he[1],
+                                                       (k & 4) ? he[2] : -he[2]});
+    min_a = std::min(min_a, n.x * (c[0] + s.x[0].x) + n.y * (c[1] + s.x[0].y) + n.z * (c[2] + s.x[0].z));
+  }
+  for (const Vec3& v : sphere.vertices) {
+    const std::array<double, 3> c = rotate_d(s.q[1], {v.x, v.y, v.z});
+    max_b = std::max(max_b, n.x * (c[0] + s.x[1].x) + n.y * (c[1] + s.x[1].y) + n.z * (c[2] + s.x[1].z));
+  }
+  return min_a - max_b;
+}
+
+}  // namespace
+
+// Bullet 3.24's GJK on a box against a convex hull can report the shapes apart along a
+// normal on which they overlap: a slab and an icosphere of rot-drop-220 (bodies 89 and
+// 208 at frame 64, the poses copied bit for bit) come out 6.3 mm apart along a normal on
+// which they overlap by 0.5 mm (the polytopes are 0.77 mm apart). Stock GJK/EPA writes
+// that row; the checked narrow phase (BulletOptions::checked_narrowphase, on by default)
+// replaces it by the separating-axis contact, consistent with the brute-force separation.
+TEST(BulletRotation, CheckedNarrowphaseReplacesAWrongGjkContact) {
+  const Scene scene = parse_scene(R"({"name": "slab-sphere", "domain": {"min": [-2, -2, -2], "max": [2, 3, 2]},
+    "rotation": true, "walls": "none", "gravity": [0, 0, 0],
+    "groups": [{"name": "slab", "shape": {"box": [0.08, 0.04, 0.06]}, "count": 1, "mass": 1.0, "positions": [[0, 0, 0]]},
+               {"name": "sphere", "shape": {"icosphere": {"radius": 0.07, "subdivisions": 2}}, "count": 1,
+                "mass": 1.0, "positions": [[0, 1, 0]]}]})",
+                                  "slab-sphere (test)");
+  const auto model = build_model(scene);
+  BodyState s = model->initial;
+  ASSERT_EQ(s.size(), 2u);
+  s.q.resize(2);
+  s.omega.resize(2);
+  s.x[0] = {0x1.652172p-3f, 0x1.4bb1a2p+0f, 0x1.b1f9fep-3f};
+  s.q[0] = {0x1.d906bep-1f, 0.0f, 0x1.1517a6p-2f, 0x1.1517a6p-2f};
+  s.x[1] = {0x1.cf583ep-9f, 0x1.4ee1aep+0f, 0x1.abbffap-3f};
+  s.q[1] = {0x1.f3dd14p-1f, 0x1.bb4498p-3f, 0.0f, 0.0f};
+  const std::array<double, 3> he{0.08, 0.04, 0.06};
+  const double tol = 2e-4;
+  for (const bool checked : {false, true}) {
+    SCOPED_TRACE(checked ? "checked narrow phase" : "stock GJK/EPA");
+    BulletOptions opt;
+    opt.checked_narrowphase = checked;
+    BulletWorld bw(model, s, opt);
+    bw.set_recording(true);
+    bw.step();
+    const FrameRecord& r = bw.record();
+    ASSERT_FALSE(r.contacts.empty());
+    double worst = 0.0;  // the largest overlap along a row's normal beyond its depth
+    for (const ContactRecord& c : r.contacts) {
+      const double sep = separation_along(c.normal, s, he);
+      worst = std::max(worst, -sep - c.depth);
+      if (checked) {
+        EXPECT_GE(sep, -c.depth - tol) << "row normal overlaps beyond its depth";
+        if (c.depth > 0.0f) {
+          EXPECT_NEAR(sep, -c.depth, tol);
+        }
+      }
+    }
+    const BulletNarrowphaseCounts n = bw.narrowphase_counts();
+    if (checked) {
+      EXPECT_GE(n.replaced, 1);
+      EXPECT_GE(n.checked, n.replaced);
+    } else {
+      EXPECT_GT(worst, 3e-4) << "stock GJK must show its wrong row here (else the test proves nothing)";
+      EXPECT_EQ(n.checked, 0);
+    }
+  }
 }

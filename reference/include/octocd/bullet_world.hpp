@@ -67,22 +67,26 @@ namespace octocd {
 ///   gyroscopic term (BT_ENABLE_GYROSCOPIC_FORCE_IMPLICIT_BODY); initial orientation and
 ///   angular velocity from the model (BodyState::q, omega);
 /// - shapes: boxes stay btBoxShape (btBoxBoxDetector for box-box pairs, GJK/EPA against
-///   hulls) with the collision margin lowered to min(1 mm, a tenth of the smallest half
-///   extent): btBoxShape keeps its margin INSIDE the half extents, but GJK rounds the
-///   box's edges and corners with it (4 cm at the default); meshes (and icospheres) are
-///   btConvexHullShape of the vertices of the mesh's convex hull (btConvexHullComputer),
-///   margin min(1 mm, a tenth of the smallest half side): a hull's margin lies OUTSIDE the
-///   hull (the default 0.04 m would inflate every mesh by 4 cm), so a hull rests on its
-///   margin, 1 mm above what it touches (recorded rows: true distance 1 mm, depth 0). A concave mesh collides
-///   as its hull: the bunny's hull at scale 0.2 lies up to 5 cm (mean 9 mm) off the mesh,
-///   so a judge on the true mesh (FCL) would see contacts where the meshes are farther
-///   apart than the contact margin. The rotating scenes (rot-*) therefore use convex
-///   meshes (icospheres), whose hull is the mesh; concave meshes would need GImpact
-///   (btGImpactMeshShape), not done;
+///   hulls); meshes (and icospheres) are btConvexHullShape of the vertices of the mesh's
+///   convex hull (btConvexHullComputer). Every collision margin is 0, so the shapes are
+///   exactly the boxes and hulls FCL judges (with a margin GJK rounds a box's edges and
+///   corners, and a hull's margin lies outside it; with 1 mm margins Bullet's GJK also
+///   reported a cube corner 4.4 mm inside an icosphere as 0.5 mm apart). A concave mesh
+///   collides as its hull: the bunny's hull at scale 0.2 lies up to 5 cm (mean 9 mm) off
+///   the mesh, so a judge on the true mesh (FCL) would see contacts where the meshes are
+///   farther apart than the contact margin. The rotating scenes (rot-*) therefore use
+///   convex meshes (icospheres), whose hull is the mesh; concave meshes would need
+///   GImpact (btGImpactMeshShape), not done;
+/// - narrow phase: box-hull and hull-hull contacts of GJK/EPA checked on the polytopes
+///   and replaced by the exact separating-axis contact when wrong
+///   (BulletOptions::checked_narrowphase); manifold points whose normal turned more than
+///   20 degrees from the manifold's newest point dropped before the solver
+///   (BulletOptions::prune_stale_normals); narrowphase_counts() says how often;
 /// - contact breaking threshold: an absolute 0.02 m (gContactBreakingThreshold) for every
 ///   pair (the dispatcher's relative threshold, 0.02 x a body's angular motion disc, is
-///   off), so the contact margin is one number: 0.02 m + twice the largest hull margin
-///   (rotation_traits().contact_margin);
+///   off). A manifold point is kept while its distance along its normal and its drift
+///   across it are each within the threshold, so the contact margin is sqrt(2) x 0.02 m
+///   + 1 mm for float32 distances (rotation_traits().contact_margin);
 /// - solver: after the last iteration, friction rows of contacts whose normal impulse ends
 ///   at 0 are brought back to 0 (BulletOptions::coulomb_friction, on by default), so the
 ///   recorded manifolds obey the Coulomb cone that the physics tier judges;
@@ -101,6 +105,29 @@ struct BulletOptions {
   /// physics tier's friction row fails it). false: stock Bullet (tests show the physics
   /// tier catches it). Without rotation the solver is always stock Bullet.
   bool coulomb_friction = true;
+  /// Rotation mode only: box-hull and hull-hull contacts of Bullet's GJK/EPA are checked
+  /// on the two polytopes and replaced by the exact separating-axis contact when wrong
+  /// (a claimed distance along a normal on which the shapes overlap; a penetration whose
+  /// depth, normal or witness points disagree with the polytopes), and a pair GJK calls
+  /// apart while the polytopes penetrate gets that contact. Bullet 3.24's GJK/EPA on a
+  /// box against a convex hull writes such contacts: a cube corner 4.4 mm inside an
+  /// icosphere reported 0.5 mm apart along (0.144, 0.924, -0.354), on which the shapes
+  /// overlap by 94 mm. false: stock GJK/EPA. Box-box pairs keep btBoxBoxDetector.
+  bool checked_narrowphase = true;
+  /// Rotation mode only: after the narrow phase, a manifold point whose normal is more
+  /// than 20 degrees off the normal of the manifold's newest point is dropped before the
+  /// solver (a persistent manifold keeps each point with the normal it was found with
+  /// while the bodies turn; a cube pair of rot-pile-1000 kept one 50 degrees off the
+  /// minimum translation with a normal impulse). false: stock manifolds.
+  bool prune_stale_normals = true;
+};
+
+/// What the rotation mode's narrow-phase checks did so far (BulletOptions).
+struct BulletNarrowphaseCounts {
+  std::int64_t checked = 0;   ///< box-hull and hull-hull contacts of GJK/EPA checked
+  std::int64_t replaced = 0;  ///< of them, replaced by the separating-axis contact
+  std::int64_t added = 0;     ///< pairs GJK called apart that penetrate: contact added
+  std::int64_t pruned = 0;    ///< manifold points dropped for a stale normal
 };
 
 class BulletWorld : public Engine {
@@ -158,8 +185,10 @@ class BulletWorld : public Engine {
   /// Friction rows brought back to the Coulomb cone so far (BulletOptions::
   /// coulomb_friction; 0 without rotation or with stock Bullet).
   std::int64_t friction_projections() const;
+  /// What the narrow-phase checks did so far (all 0 without rotation or with them off).
+  BulletNarrowphaseCounts narrowphase_counts() const;
   /// In rotation mode: Bullet's local inertia, the per-body materials (product rule), the
-  /// contact margin (0.02 m breaking threshold + twice the largest hull margin),
+  /// contact margin (sqrt(2) x the 0.02 m breaking threshold + 1 mm),
   /// detection "pre-step", a conservative broadphase, contacts on the shapes. nullptr
   /// without rotation.
   const RotationTraits* rotation_traits() const override;
