@@ -365,6 +365,35 @@ TEST(PhysicsRows, FlippedAndTurnedNormals) {
   }
 }
 
+// A row the engine places at depth 0 is a touching contact when its pair penetrates less
+// than contact_depth_m (such a pair needs no contact at all): its normal is a figure (two
+// boxes grazing edge on edge have a minimum translation far from the face normal a
+// detector keeps). The same rows on a pair penetrating 2 mm are judged and caught.
+TEST(PhysicsRows, DepthZeroRowsOnAGrazingPairAreFigures) {
+  const auto model = build_model(four_bodies());
+  const Vec3 turned = v3(-std::cos(kPi / 3), std::sin(kPi / 3), 0);  // 60 deg off -x
+  for (const double shift : {0.0, 0.0015}) {
+    SCOPED_TRACE(shift == 0.0 ? "pair (2, 3) penetrates 2 mm" : "pair (2, 3) penetrates 0.5 mm");
+    RestingRecord r = resting(*model);
+    // Move the cube away from the diamond by `shift` (the floor contacts stay valid).
+    for (Vec3* x : {&r.rec.x_det[3], &r.rec.x_pre[3], &r.rec.x_post[3]}) x->x += float(shift);
+    r.rec.aabbs[3] = posed_box_aabb(model->local_box(3), Pose{r.rec.x_det[3], r.rec.q_det[3]});
+    for (ContactRecord& c : r.rec.contacts) {
+      if (c.pair.a == 0 && c.pair.b == 3) c.point.x += float(shift);
+      if (c.pair.a == 2 && c.pair.b == 3) {
+        c.depth = 0.0f;
+        c.normal = turned;
+      }
+    }
+    const auto rs = judge(*model, r.rec, rotating_engine());
+    if (shift == 0.0) {
+      expect_caught(rs, "contact-geometry", {"frame 7", "pair (2, 3) row 0", "60.0 deg"});
+    } else {
+      EXPECT_TRUE(row_of(rs, "contact-geometry").pass) << row_of(rs, "contact-geometry").detail;
+    }
+  }
+}
+
 TEST(PhysicsRows, ContactRemovedFromPenetratingPair) {
   const auto model = build_model(four_bodies());
   RestingRecord r = resting(*model);
