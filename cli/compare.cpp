@@ -713,21 +713,16 @@ const char* state_dataset(const std::string& q) {
 CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
   CLI::App* c = app.add_subcommand(
       "compare",
-      "Compare two traces (golden-trace regression, CPU vs CUDA, one engine's run against another's). Each is an "
-      "octocd trace (`octocd run --trace`, format version 1, or 2 with `--engine bullet --rotation`) or an external "
-      "trace (another engine's, version 1 or 2, docs/trace-format.md: checked in full first, as `validate --trace-in "
-      "--check-only` does). First their structure: frame count, state rows and their frames, body count, scene name "
-      "and scene parameters (every key that differs is named, e.g. `/response/beta: 1 vs 0.999`; the broadphase is "
-      "not compared: every broadphase finds the same pairs; an external trace has no parameters: its scene and dt "
-      "are compared when both have them). Then per quantity, with its own tolerance: the largest difference (frame, "
-      "body, both values) and the first frame and body beyond the tolerance. What is compared: positions and "
-      "velocities (/states, every version); orientations (the angle between the two quaternions, q and -q the same) "
-      "and angular velocities (version 2; a trace without them counts as unrotated: identity and zero); contacts: "
-      "two octocd version 1 traces record by record in order, otherwise by pair (the pairs with contacts in each "
-      "frame, each pair's row count, then its rows: depth, jn, jt, normal, and the point when both have "
-      "/contacts/point); pairs and energy (/frames: octocd traces only). Exit 0 same, 3 different (structure or a "
-      "quantity beyond its tolerance), 2 unreadable or malformed input (naming file, dataset, frame and the allowed "
-      "values) or bad option");
+      "Compare two traces (golden-trace regression, CPU vs CUDA, one engine's run against another's): octocd traces "
+      "(format version 1, or 2 with `--engine bullet --rotation`) or external traces of version 1 or 2 (another "
+      "engine's, docs/trace-format.md; checked in full first). First their structure: frame count, state rows and "
+      "their frames, body count, scene name and scene parameters (every key that differs is named, e.g. "
+      "`/response/beta: 1 vs 0.999`; the broadphase is not compared: every broadphase finds the same pairs; an "
+      "external trace has no parameters: its scene and dt when both have them). Then per quantity (--quantity: "
+      "which fields, for which version), with its own tolerance: the largest difference (frame, body, both values) "
+      "and the first frame and body beyond the tolerance. Exit 0 same, 3 different (structure or a quantity beyond "
+      "its tolerance), 2 unreadable or malformed input (naming file, dataset, frame and the allowed values) or bad "
+      "option");
   c->add_option("a", o.a, "First trace (.h5), e.g. the golden one")->required();
   c->add_option("b", o.b, "Second trace (.h5)")->required();
   c->add_option("--tolerance", o.tolerance,
@@ -740,10 +735,16 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
                 "orientations=1e-4")
       ->allow_extra_args(false);
   c->add_option("--quantity", o.quantities,
-                "Comma-separated: positions, velocities, orientations, angular_velocities (/states), contacts "
-                "(/contacts; octocd traces: /frames/contacts too), pairs (/frames/aabb_pairs), energy "
-                "(/frames/kinetic_energy). Default: positions,velocities,contacts,pairs, and orientations, "
-                "angular_velocities when either trace is of version 2");
+                "Comma-separated, each from /states, /contacts or /frames: positions, velocities (/states/position, "
+                "/states/velocity: every version, per component); orientations (/states/orientation, version 2: the "
+                "angle between the two quaternions, q and -q the same orientation) and angular_velocities "
+                "(/states/angular_velocity, version 2, per component), a trace without them counting as unrotated "
+                "(identity, zero: version 1 against version 2 works); contacts (two octocd version 1 traces: "
+                "/frames/contacts and the /contacts records in order; otherwise by pair: the pairs with contact rows "
+                "in each frame, each pair's row count (a manifold), then its rows: depth, jn, jt, normal, and point "
+                "when both have /contacts/point); pairs (/frames/aabb_pairs) and energy (/frames/kinetic_energy): "
+                "octocd traces only (an external trace has no /frames). Default: positions,velocities,contacts,pairs, "
+                "and orientations,angular_velocities when either trace is of version 2");
   c->add_option("--json", o.json,
                 "Also write everything as JSON to this file: structure differences, per quantity its tolerance, "
                 "largest difference (frame, body, values) and first difference");
