@@ -214,3 +214,27 @@ def test_bad_version_2_input_names_dataset_frame_and_allowed(tmp_path):
     with octocd.Trace(p) as t, pytest.raises(octocd.InputError, match=r"/bodies/inertia: shape 2 x 3; allowed: 2 x 3 "
                                                                       r"x 3"):
         t.inertia
+
+
+def test_external_version_1_trace_reads_unrotated(tmp_path):
+    """examples/python/toy_engine.py writes an external trace of version 1: no /frames, no
+    /states/frame, contacts by position; it reads as unrotated with the solid-box inertia."""
+    out = str(tmp_path / "toy.h5")
+    subprocess.run([sys.executable, os.path.join(SOURCE_DIR, "examples", "python", "toy_engine.py"), out],
+                   check=True, capture_output=True)
+    with octocd.Trace(out) as t, h5py.File(out, "r") as f:
+        n = t.body_count
+        assert t.version == 1 and t.external and not t.rotating and t.frames == {}
+        s = len(t.state_frames)
+        q, w = t.rotation(s - 1)
+        assert np.array_equal(q, np.tile(np.float32([1, 0, 0, 0]), (n, 1))) and not w.any()
+        assert t.orientations.shape == (s, n, 4) and not t.angular_velocities.any()
+        off = f["contacts/offsets"][:]
+        for fr in range(1, s):
+            c = t.contacts(fr)
+            assert "point" not in c
+            assert np.array_equal(c["pair"], f["contacts/pair"][off[fr - 1]:off[fr]])
+            assert sum(len(v["jn"]) for v in t.contacts_by_pair(fr).values()) == len(c["jn"])
+        half = (f["bodies/local_aabb_max"][:] - f["bodies/local_aabb_min"][:]) / 2
+        m = np.where(f["bodies/inverse_mass"][:] > 0, 1 / np.maximum(f["bodies/inverse_mass"][:], 1e-30), 0)
+        assert np.allclose(t.inertia[:, 1, 1], m / 3 * (half[:, 0] ** 2 + half[:, 2] ** 2), rtol=1e-6)

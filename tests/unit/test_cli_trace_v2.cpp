@@ -406,3 +406,44 @@ TEST_F(TraceV2, ReplayRefusesAVersion2TraceNamingWhy) {
   EXPECT_NE(r.output.find("allowed: a version 1 trace"), std::string::npos) << r.output;
   EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
 }
+
+TEST_F(TraceV2, AnExternalVersion1TraceComparesByPairWithItsOctocdTrace) {
+  // docs/trace-format.md: a trace of `octocd run --state-every 1 --contacts` without /frames
+  // is an external trace of version 1 (contacts by position: step f's rows are
+  // offsets[f-1] .. offsets[f]-1). Its contacts compare by pair, frame for frame.
+  const std::string v1 = path("v1.h5");
+  Result r = run_octocd("run " + source_dir() + "/datasets/scenes/box-stack.json --frames 30 --state-every 1 "
+                        "--contacts --quiet --no-xdmf --trace " + v1);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string e = copy(v1, "e.h5");
+  remove_link(e, "/frames");
+  r = run_octocd("compare " + v1 + " " + e);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("external trace version 1"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("30 common frames: "), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("orientations"), std::string::npos) << r.output;  // not by default in version 1
+  // One contact row's depth, in the flat row of frame 25's first contact.
+  std::vector<float> off;
+  {
+    const hid_t f = H5Fopen(e.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    const hid_t d = H5Dopen2(f, "/contacts/offsets", H5P_DEFAULT);
+    std::vector<std::int64_t> o(31);
+    ASSERT_GE(H5Dread(d, H5T_NATIVE_INT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, o.data()), 0);
+    for (auto x : o) off.push_back(static_cast<float>(x));
+    H5Dclose(d);
+    H5Fclose(f);
+  }
+  const auto k = static_cast<hsize_t>(off[24]);
+  ASSERT_GT(static_cast<hsize_t>(off[25]), k) << "frame 25 has contacts";
+  auto depth = get(e, "/contacts/depth", {k}, {1});
+  depth[0] += 1e-3f;
+  put(e, "/contacts/depth", {k}, {1}, depth);
+  r = run_octocd("compare " + v1 + " " + e);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("DIFFERENT: first at frame 25"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(": depth: A "), std::string::npos) << r.output;
+  // Asked for, orientations compare as identity on both sides: n/a, said so.
+  r = run_octocd("compare " + v1 + " " + e + " --quantity orientations,angular_velocities");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("/states/orientation in neither (no rotation)"), std::string::npos) << r.output;
+}
