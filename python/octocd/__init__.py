@@ -452,7 +452,8 @@ class Trace:
             self._fail("attribute format", repr(fmt), "'octocd-trace' (docs/trace-format.md)")
         ver = self.h5.attrs.get("version")
         try:
-            v = float(_np.asarray(ver).reshape(-1)[0]) if ver is not None and _np.asarray(ver).size == 1 else None
+            num = ver is not None and not isinstance(ver, (str, bytes)) and _np.asarray(ver).size == 1
+            v = float(_np.asarray(ver).reshape(-1)[0]) if num else None
         except (TypeError, ValueError):
             v = None
         if v not in (1.0, 2.0):
