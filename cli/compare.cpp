@@ -701,6 +701,50 @@ std::string range_text(const std::vector<std::int64_t>& f) {
   return fmt::format("{}..{}", *std::min_element(f.begin(), f.end()), *std::max_element(f.begin(), f.end()));
 }
 
+/// The bodies and materials a trace states beyond the scene (an external trace, or one of
+/// version 2), where both traces hold them: /bodies tables (the first body that differs,
+/// bit for bit) and the version 2 root attributes (docs/trace-format.md). A table or
+/// attribute that only one trace has is not compared (its default may be the same).
+std::vector<std::string> body_differences(const Side& a, const Side& b) {
+  std::vector<std::string> out;
+  if (a.bodies != b.bodies) return out;  // named already
+  const auto n = static_cast<std::uint64_t>(a.bodies);
+  const std::pair<const char*, std::uint64_t> tables[] = {{"/bodies/inverse_mass", 1},   {"/bodies/local_aabb_min", 3},
+                                                          {"/bodies/local_aabb_max", 3}, {"/bodies/inertia", 9},
+                                                          {"/bodies/friction", 1},       {"/bodies/restitution", 1}};
+  for (const auto& [d, k] : tables) {
+    if (!a.t->has_dataset(d) || !b.t->has_dataset(d)) continue;
+    for (const Side* s : {&a, &b}) {
+      const auto shape = s->t->shape(d);
+      std::uint64_t per = 1;
+      for (std::size_t i = 1; i < shape.size(); ++i) per *= shape[i];
+      if (shape.empty() || shape[0] != n || per != k)
+        throw InputError(fmt::format("{}: {}: shape {}; allowed: {} bodies{}", s->path(), d, fmt::join(shape, " x "), n,
+                                     k == 1 ? "" : k == 3 ? " x 3" : " x 3 x 3"));
+    }
+    const auto va = a.t->read_f32(d, a.bodies), vb = b.t->read_f32(d, b.bodies);
+    for (std::uint64_t i = 0; i < n; ++i)
+      if (std::memcmp(&va[i * k], &vb[i * k], k * sizeof(float)) != 0) {
+        const auto text = [&](const std::vector<float>& v) {
+          return k == 1 ? fmt::format("{}", v[i]) : fmt::format("({})", fmt::join(v.begin() + static_cast<std::ptrdiff_t>(i * k), v.begin() + static_cast<std::ptrdiff_t>((i + 1) * k), ", "));
+        };
+        out.push_back(fmt::format("{}: body {}: {} vs {}", d, i, text(va), text(vb)));
+        break;
+      }
+  }
+  for (const char* name : {"mu", "restitution", "contact_margin", "broadphase_exact"})
+    if (a.t->has_attribute(name) && b.t->has_attribute(name) &&
+        a.t->number_attribute(name) != b.t->number_attribute(name))
+      out.push_back(fmt::format("{}: {} vs {} (root attribute)", name, json_text(a.t->number_attribute(name)),
+                                json_text(b.t->number_attribute(name))));
+  for (const char* name : {"detection", "friction_combine", "restitution_combine", "contact_geometry", "response_model"})
+    if (a.t->has_attribute(name) && b.t->has_attribute(name) &&
+        a.t->string_attribute(name) != b.t->string_attribute(name))
+      out.push_back(fmt::format("{}: '{}' vs '{}' (root attribute)", name, a.t->string_attribute(name),
+                                b.t->string_attribute(name)));
+  return out;
+}
+
 const char* state_dataset(const std::string& q) {
   if (q == "positions") return "/states/position";
   if (q == "velocities") return "/states/velocity";
@@ -718,7 +762,9 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
       "engine's, docs/trace-format.md; checked in full first). First their structure: frame count, state rows and "
       "their frames, body count, scene name and scene parameters (every key that differs is named, e.g. "
       "`/response/beta: 1 vs 0.999`; the broadphase is not compared: every broadphase finds the same pairs; an "
-      "external trace has no parameters: its scene and dt when both have them). Then per quantity (--quantity: "
+      "external trace has no parameters: its scene and dt when both have them; an external or version 2 trace: "
+      "also its /bodies tables (masses, local boxes, inertia, materials) and the version 2 root attributes (mu, "
+      "restitution, combine rules, contact_margin, detection, ...) where both have them). Then per quantity (--quantity: "
       "which fields, for which version), with its own tolerance: the largest difference (frame, body, both values) "
       "and the first frame and body beyond the tolerance. Exit 0 same, 3 different (structure or a quantity beyond "
       "its tolerance), 2 unreadable or malformed input (naming file, dataset, frame and the allowed values) or bad "
@@ -821,7 +867,10 @@ int compare_command(const CompareOptions& o) {
     }
   if (!octocd_both && ta.has_attribute("dt") && tb.has_attribute("dt") &&
       ta.number_attribute("dt") != tb.number_attribute("dt"))
-    structure.push_back(fmt::format("dt: {} vs {} (root attribute)", ta.number_attribute("dt"), tb.number_attribute("dt")));
+    structure.push_back(fmt::format("dt: {} vs {} (root attribute)", json_text(ta.number_attribute("dt")),
+                                    json_text(tb.number_attribute("dt"))));
+  if (!octocd_both || a.version == 2 || b.version == 2)
+    for (const auto& d : body_differences(a, b)) structure.push_back(d);
 
   const auto attr = [](const TraceReader& t, const char* n) {
     return t.has_attribute(n) ? t.string_attribute(n) : std::string("?");

@@ -87,6 +87,19 @@ void set_version(const std::string& path, int version) {
   H5Fclose(f);
 }
 
+/// Sets a float64 root attribute.
+void set_number(const std::string& path, const char* name, double value) {
+  const hid_t f = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  if (H5Aexists(f, name) > 0) H5Adelete(f, name);
+  const hid_t s = H5Screate(H5S_SCALAR);
+  const hid_t a = H5Acreate2(f, name, H5T_IEEE_F64LE, s, H5P_DEFAULT, H5P_DEFAULT);
+  ASSERT_GE(H5Awrite(a, H5T_NATIVE_DOUBLE, &value), 0);
+  H5Aclose(a);
+  H5Sclose(s);
+  H5Fclose(f);
+}
+
 /// Creates a float32 dataset of the given shape and values.
 void create(const std::string& path, const char* name, const std::vector<hsize_t>& shape, const std::vector<float>& v) {
   const hid_t f = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
@@ -446,4 +459,21 @@ TEST_F(TraceV2, AnExternalVersion1TraceComparesByPairWithItsOctocdTrace) {
   r = run_octocd("compare " + v1 + " " + e + " --quantity orientations,angular_velocities");
   EXPECT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("/states/orientation in neither (no rotation)"), std::string::npos) << r.output;
+}
+
+TEST_F(TraceV2, BodiesAndMaterialsOfVersion2TracesAreStructure) {
+  // Inertia and materials are not scene parameters of an external trace: compare names
+  // them (exit 3) where both traces hold them.
+  const std::string a = bullet_trace("a.h5"), e = copy(a, "e.h5");
+  remove_link(e, "/frames");
+  auto inertia = get(e, "/bodies/inertia", {1, 0, 0}, {1, 3, 3});
+  inertia[4] *= 1.5f;  // I_yy of the box
+  put(e, "/bodies/inertia", {1, 0, 0}, {1, 3, 3}, inertia);
+  set_number(e, "mu", 0.3);
+  const Result r = run_octocd("compare " + a + " " + e);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("/bodies/inertia: body 1: ("), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("mu: 0.2"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(" vs 0.3 (root attribute)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("DIFFERENT: structure"), std::string::npos) << r.output;
 }
