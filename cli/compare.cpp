@@ -4,6 +4,14 @@
 // tolerance, the largest difference (frame, body, both values) and the first frame and
 // body beyond the tolerance (0 = bit for bit). Exit 0 same, 3 different (structure or a
 // quantity), 2 unreadable input or a bad option.
+//
+// Either trace may be octocd's own (it has /frames; version 1, or 2 for a rotating engine:
+// `--engine bullet --rotation`) or an external trace (no /frames; docs/trace-format.md,
+// "External traces", versions 1 and 2: checked in full by check_external_trace first).
+// Version 2 adds orientations (the angle between the two quaternions; q and -q are one
+// orientation) and angular velocities; a trace without rotation counts as the identity
+// and zero. Contacts of a version 2 or an external trace are compared by pair (the set of
+// pairs with contacts, each pair's row count, then its rows in order: manifolds).
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -18,6 +26,7 @@
 #include <fmt/ranges.h>
 
 #include "octocd/error.hpp"
+#include "octocd/external.hpp"
 #include "octocd/trace_reader.hpp"
 #include "tools.hpp"
 
@@ -28,13 +37,15 @@ namespace {
 using json = nlohmann::json;
 
 const std::vector<std::string>& quantity_names() {
-  static const std::vector<std::string> names{"positions", "velocities", "contacts", "pairs", "energy"};
+  static const std::vector<std::string> names{"positions",  "velocities", "orientations", "angular_velocities",
+                                              "contacts",   "pairs",      "energy"};
   return names;
 }
 
 const char* kToleranceAllowed =
     "VALUE or QUANTITY=VALUE, VALUE an absolute tolerance (ABS) or rel:R or ABS+rel:R, each a finite number >= 0, "
-    "QUANTITY one of positions, velocities, contacts, pairs, energy (comma-separated or repeated)";
+    "QUANTITY one of positions, velocities, orientations, angular_velocities, contacts, pairs, energy "
+    "(comma-separated or repeated)";
 
 /// Parses a finite number >= 0 of one --tolerance item; throws InputError naming the item.
 double tolerance_number(const std::string& text, const std::string& item) {
@@ -149,6 +160,7 @@ bool beyond(T a, T b, const Tolerance& tol, double& diff) {
 }
 
 std::string vec_text(const float* p) { return fmt::format("({}, {}, {})", p[0], p[1], p[2]); }
+std::string quat_text(const float* p) { return fmt::format("({}, {}, {}, {})", p[0], p[1], p[2], p[3]); }
 
 /// The first `rows` values of a frame column, checked: frames >= 0, strictly increasing
 /// (as octocd writes them); garbage would otherwise match nothing and compare as "same".
@@ -161,21 +173,172 @@ std::vector<std::int64_t> increasing_frames(const TraceReader& t, const char* da
   return f;
 }
 
-/// Positions or velocities at the states both traces hold.
-QuantityResult compare_states(const TraceReader& a, const TraceReader& b, const char* dataset, const char* name,
+std::vector<std::int64_t> frames_of(const TraceReader& t, const std::string& dataset, std::int64_t rows) {
+  return rows > 0 ? t.read_i64(dataset, rows) : std::vector<std::int64_t>{};
+}
+
+/// One trace of the comparison: octocd's own (it has /frames: docs/trace-format.md, format
+/// version 1, or 2 for a rotating engine) or an external trace (no /frames: "External
+/// traces", versions 1 and 2; checked in full by check_external_trace before anything is
+/// compared, so every bad value is an InputError naming dataset, frame and allowed values).
+struct Side {
+  const TraceReader* t = nullptr;
+  bool external = false;                   ///< no /frames: an external trace
+  int version = 1;                         ///< root attribute `version`
+  std::string engine;                      ///< root attribute `engine`
+  std::int64_t bodies = 0;
+  std::string scene_name = "?";            ///< root attribute scene_name (external: the scene's name)
+  bool scene_known = true;                 ///< false: an external trace that names no scene
+  std::int64_t frame_rows = 0;             ///< steps recorded (rows of /frames; external: F)
+  std::vector<std::int64_t> frames;        ///< their frames, as written
+  bool has_states = false;                 ///< octocd: /states/frame; external: /states/position
+  std::int64_t state_rows = 0;             ///< state rows (structure)
+  std::vector<std::int64_t> state_frames;  ///< their frames, as written
+  bool rotation = false;                   ///< /states/orientation and /states/angular_velocity
+  bool has_contacts = false;               ///< /contacts/offsets
+  bool points = false;                     ///< /contacts/point
+  const std::string& path() const { return t->path(); }
+  /// "octocd trace version 1" or "external trace version 2".
+  std::string kind() const { return fmt::format("{} trace version {}", external ? "external" : "octocd", version); }
+};
+
+Side make_side(const TraceReader& t) {
+  Side s;
+  s.t = &t;
+  s.version = t.version();
+  s.external = !t.has_dataset("/frames/frame");
+  s.engine = t.has_attribute("engine") ? t.string_attribute("engine") : std::string(s.external ? "external" : "?");
+  if (t.has_attribute("scene_name")) s.scene_name = t.string_attribute("scene_name");
+  if (s.external) {
+    const ExternalTraceInfo info = check_external_trace(t.path());  // exit 2 on the first bad value
+    s.bodies = static_cast<std::int64_t>(info.bodies);
+    s.frame_rows = info.frames;
+    for (std::int64_t f = 1; f <= info.frames; ++f) s.frames.push_back(f);
+    s.has_states = info.has_states;
+    if (s.has_states) {
+      s.state_rows = info.frames + 1;  // row f: the state after step f (checked: /states/frame is 0..F)
+      for (std::int64_t f = 0; f <= info.frames; ++f) s.state_frames.push_back(f);
+    }
+    s.rotation = info.has_rotation;
+    s.has_contacts = info.has_contacts;
+    s.points = info.has_points;
+    if (!t.has_attribute("scene_name")) {
+      s.scene_known = false;
+      if (info.has_scene) try {
+          const json scene = json::parse(t.string_attribute("scene"));
+          if (scene.is_object() && scene.contains("name") && scene["name"].is_string()) {
+            s.scene_name = scene["name"].get<std::string>();
+            s.scene_known = true;
+          }
+        } catch (const json::exception&) {  // checked by validate, not needed here
+        }
+    }
+    return s;
+  }
+  if (!t.has_dataset("/bodies/shape_id"))
+    throw InputError(fmt::format("{}: /bodies/shape_id: missing; allowed: a complete octocd trace (with /frames and "
+                                 "/bodies) or an external trace (without /frames; docs/trace-format.md)",
+                                 t.path()));
+  s.bodies = static_cast<std::int64_t>(t.shape("/bodies/shape_id").at(0));
+  s.frame_rows = t.complete_rows("/frames");
+  s.frames = frames_of(t, "/frames/frame", s.frame_rows);
+  s.has_states = t.has_dataset("/states/frame");
+  if (s.has_states) {
+    std::int64_t r = static_cast<std::int64_t>(t.shape("/states/frame").at(0));
+    for (const char* d : {"/states/position", "/states/velocity", "/states/orientation", "/states/angular_velocity"})
+      if (t.has_dataset(d)) r = std::min(r, static_cast<std::int64_t>(t.shape(d).at(0)));
+    s.state_rows = r;
+    s.state_frames = frames_of(t, "/states/frame", r);
+  }
+  const bool q = t.has_dataset("/states/orientation"), w = t.has_dataset("/states/angular_velocity");
+  for (const char* d : {"/states/orientation", "/states/angular_velocity", "/contacts/point"})
+    if (s.version == 1 && t.has_dataset(d))
+      throw InputError(fmt::format("{}: {}: a version 2 dataset in a version 1 trace (v1/v2 fields mixed); allowed: "
+                                   "/states/orientation, /states/angular_velocity and /contacts/point only with the "
+                                   "root attribute version = 2 (docs/trace-format.md)",
+                                   t.path(), d));
+  if (q != w)
+    throw InputError(fmt::format("{}: {}: missing ({} present); allowed: /states/orientation and "
+                                 "/states/angular_velocity together, or neither (no rotation)",
+                                 t.path(), q ? "/states/angular_velocity" : "/states/orientation",
+                                 q ? "/states/orientation" : "/states/angular_velocity"));
+  s.rotation = q && w;
+  s.has_contacts = t.has_dataset("/contacts/offsets");
+  s.points = s.has_contacts && t.has_dataset("/contacts/point");
+  return s;
+}
+
+/// The state rows a quantity is compared at: complete rows, their frames checked.
+std::pair<std::int64_t, std::vector<std::int64_t>> state_rows(const Side& s) {
+  if (s.external) return {s.state_rows, s.state_frames};  // 0..F, checked by check_external_trace
+  const std::int64_t r = s.t->complete_rows("/states");  // at most committed_states (docs/trace-format.md)
+  return {r, increasing_frames(*s.t, "/states/frame", r)};
+}
+
+/// The angle (rad) of the rotation from a to b, unit quaternions (w, x, y, z): 2 atan2(|r_xyz|,
+/// |r_w|) of r = conj(a) b, in double; q and -q give 0 exactly.
+double quat_angle(const float* a, const float* b) {
+  const double aw = a[0], ax = a[1], ay = a[2], az = a[3], bw = b[0], bx = b[1], by = b[2], bz = b[3];
+  const double rw = aw * bw + ax * bx + ay * by + az * bz;
+  const double rx = aw * bx - bw * ax - (ay * bz - az * by);
+  const double ry = aw * by - bw * ay - (az * bx - ax * bz);
+  const double rz = aw * bz - bw * az - (ax * by - ay * bx);
+  return 2.0 * std::atan2(std::sqrt(rx * rx + ry * ry + rz * rz), std::fabs(rw));
+}
+
+/// Throws InputError naming the body unless each quaternion of one state row is finite and
+/// unit within 1e-3 (the external format's rule, docs/trace-format.md).
+void check_unit_quaternions(const Side& s, const std::vector<float>& q, std::int64_t frame) {
+  for (std::size_t i = 0; 4 * i + 3 < q.size(); ++i) {
+    const float* p = &q[4 * i];
+    const double n = std::sqrt(static_cast<double>(p[0]) * p[0] + static_cast<double>(p[1]) * p[1] +
+                               static_cast<double>(p[2]) * p[2] + static_cast<double>(p[3]) * p[3]);
+    if (!(std::fabs(n - 1.0) <= 1e-3))
+      throw InputError(fmt::format("{}: /states/orientation: frame {}: body {}: {}, |q| = {:g}; allowed: unit "
+                                   "quaternions (w, x, y, z), body to world, | |q| - 1 | <= 1e-3",
+                                   s.path(), frame, i, quat_text(p), n));
+  }
+}
+
+/// Positions, velocities, orientations or angular velocities at the states both traces
+/// hold. A trace without the dataset (no rotation) holds the identity / zero there.
+/// Orientations: the difference is the angle between the two (rad); with |q| = 1 the
+/// relative part of the tolerance counts as radians too (numpy.isclose's rule with max(|A|,
+/// |B|) = 1).
+QuantityResult compare_states(const Side& a, const Side& b, const char* dataset, const char* name,
                               std::int64_t bodies, const Tolerance& tol) {
   QuantityResult q;
   q.name = name;
   q.tol = tol;
-  const auto rows = [&](const TraceReader& t) {
-    const auto shape = t.shape(dataset);
-    if (shape.size() != 3 || shape[1] != static_cast<std::uint64_t>(bodies) || shape[2] != 3)
-      throw InputError(fmt::format("{}: {}: shape {}; allowed: states x {} bodies x 3", t.path(), dataset,
-                                   fmt::join(shape, " x "), bodies));
-    return t.complete_rows("/states");  // at most committed_states (docs/trace-format.md)
+  const bool quat = std::strcmp(dataset, "/states/orientation") == 0;
+  const std::size_t dim = quat ? 4 : 3;
+  const auto has = [&](const Side& s) {
+    if (!s.t->has_dataset(dataset)) return false;
+    const auto shape = s.t->shape(dataset);
+    if (shape.size() != 3 || shape[1] != static_cast<std::uint64_t>(bodies) || shape[2] != dim)
+      throw InputError(fmt::format("{}: {}: shape {}; allowed: states x {} bodies x {}", s.path(), dataset,
+                                   fmt::join(shape, " x "), bodies, dim));
+    return true;
   };
-  const std::int64_t ra = rows(a), rb = rows(b);
-  const auto fa = increasing_frames(a, "/states/frame", ra), fb = increasing_frames(b, "/states/frame", rb);
+  const bool ha = has(a), hb = has(b);
+  if (!ha && !hb) {
+    q.available = false;
+    q.compared = fmt::format("{} in neither (no rotation)", dataset);
+    return q;
+  }
+  const auto [ra, fa] = state_rows(a);
+  const auto [rb, fb] = state_rows(b);
+  const auto row = [&](const Side& s, bool held, std::int64_t r, std::int64_t frame) {
+    if (!held) {  // no rotation: identity orientation, zero angular velocity
+      std::vector<float> v(static_cast<std::size_t>(bodies) * dim, 0.0f);
+      if (quat)
+        for (std::size_t i = 0; i < v.size(); i += 4) v[i] = 1.0f;
+      return v;
+    }
+    std::vector<float> v = s.t->read_f32_rows(dataset, r, 1);
+    if (quat) check_unit_quaternions(s, v, frame);
+    return v;
+  };
   std::map<std::int64_t, std::int64_t> row_b;
   for (std::int64_t i = 0; i < rb; ++i) row_b[fb[static_cast<std::size_t>(i)]] = i;
   std::int64_t common = 0;
@@ -184,10 +347,33 @@ QuantityResult compare_states(const TraceReader& a, const TraceReader& b, const 
     if (it == row_b.end()) continue;
     ++common;
     const std::int64_t frame = fa[static_cast<std::size_t>(i)];
-    const auto xa = a.read_f32_rows(dataset, i, 1), xb = b.read_f32_rows(dataset, it->second, 1);
+    const auto xa = row(a, ha, i, frame), xb = row(b, hb, it->second, frame);
     for (std::int64_t body = 0; body < bodies; ++body) {
       bool hit = false;
-      const std::size_t k0 = static_cast<std::size_t>(3 * body);
+      const std::size_t k0 = dim * static_cast<std::size_t>(body);
+      if (quat) {
+        const float* pa = &xa[k0];
+        const float* pb = &xb[k0];
+        const double d = quat_angle(pa, pb);
+        bool same = std::memcmp(pa, pb, 4 * sizeof(float)) == 0;
+        if (!same) {  // -q is the same orientation, bit for bit too
+          const float nb[4] = {-pb[0], -pb[1], -pb[2], -pb[3]};
+          same = std::memcmp(pa, nb, sizeof nb) == 0;
+        }
+        hit = !same && (tol.exact() ? d != 0.0 : d > tol.abs + tol.rel);
+        const auto both = [&] {
+          return fmt::format("A {} B {}, angle {:.6g} deg", quat_text(pa), quat_text(pb), d * 57.29577951308232);
+        };
+        q.largest(same ? 0.0 : d, frame, body, both, {pa[0], pa[1], pa[2], pa[3]}, {pb[0], pb[1], pb[2], pb[3]});
+        if (hit) ++q.beyond_count;
+        if (hit && !q.differs) {
+          q.differs = true;
+          q.frame = frame;
+          q.body = body;
+          q.detail = both();
+        }
+        continue;
+      }
       const auto both = [&] { return fmt::format("A {} B {}", vec_text(&xa[k0]), vec_text(&xb[k0])); };
       for (std::size_t c = 0; c < 3; ++c) {
         double d = 0.0;
@@ -205,6 +391,8 @@ QuantityResult compare_states(const TraceReader& a, const TraceReader& b, const 
     }
   }
   q.compared = fmt::format("{} common states x {} bodies", common, bodies);
+  if (!ha || !hb)
+    q.compared += fmt::format(" ({}: {} absent, no rotation: {})", ha ? "B" : "A", dataset, quat ? "identity" : "zero");
   if (common == 0) {
     q.available = false;
     q.compared = "no state frame in common";
@@ -214,15 +402,19 @@ QuantityResult compare_states(const TraceReader& a, const TraceReader& b, const 
 
 /// A per-frame column of /frames at the frames both traces hold.
 template <class T>
-QuantityResult compare_column(const TraceReader& a, const TraceReader& b, const std::string& column,
-                              const char* name, const Tolerance& tol) {
+QuantityResult compare_column(const Side& sa, const Side& sb, const std::string& column, const char* name,
+                              const Tolerance& tol) {
+  const TraceReader& a = *sa.t;
+  const TraceReader& b = *sb.t;
   QuantityResult q;
   q.name = name;
   q.tol = tol;
   const std::string d = "/frames/" + column;
   if (!a.has_dataset(d) || !b.has_dataset(d)) {
     q.available = false;
-    q.compared = fmt::format("{} missing in {}", d, a.has_dataset(d) ? "B" : "A");
+    const Side& missing = a.has_dataset(d) ? sb : sa;
+    q.compared = fmt::format("{} missing in {}{}", d, a.has_dataset(d) ? "B" : "A",
+                             missing.external ? " (an external trace: no /frames)" : "");
     return q;
   }
   const std::int64_t ra = a.complete_rows("/frames"), rb = b.complete_rows("/frames");
@@ -257,52 +449,66 @@ QuantityResult compare_column(const TraceReader& a, const TraceReader& b, const 
   return q;
 }
 
-/// /contacts records (pairs, then normal, depth, J_n, J_t) at the frames both hold.
-void compare_contact_records(const TraceReader& a, const TraceReader& b, const Tolerance& tol, QuantityResult& q) {
-  if (!a.has_dataset("/contacts/offsets") || !b.has_dataset("/contacts/offsets")) {
-    q.compared += " (counts; /contacts records not in both)";
-    return;
-  }
-  struct Rec {
-    std::vector<std::int64_t> off, frame;
-    std::vector<std::uint32_t> pair;
-    std::vector<float> normal, depth, jn, jt;
-  };
-  const auto load = [](const TraceReader& t) {
-    Rec r;
+/// The /contacts records of a trace: rows of frame[i] are off[i] .. off[i+1]-1.
+struct Contacts {
+  std::vector<std::int64_t> off, frame;
+  std::vector<std::uint32_t> pair;
+  std::vector<float> normal, depth, jn, jt, point;  ///< point: empty without /contacts/point
+};
+
+Contacts load_contacts(const Side& s) {
+  const TraceReader& t = *s.t;
+  Contacts r;
+  if (s.external) {
+    // Checked by check_external_trace: F + 1 offsets from 0, never decreasing, within the
+    // flat datasets; step f's rows are offsets[f-1] .. offsets[f]-1.
+    r.off = t.read_i64("/contacts/offsets", s.frame_rows + 1);
+    r.frame = s.frames;
+  } else {
     // Complete rows: at most committed_frames (docs/trace-format.md).
     if (t.shape("/contacts/offsets").at(0) == 0) return r;
     const std::int64_t rows = t.complete_rows("/contacts");
     r.frame = increasing_frames(t, "/contacts/frame", rows);
     r.off = t.read_i64("/contacts/offsets", rows + 1);
+    // Offsets start at 0 and never decrease (else the file is garbage: exit 2); rows whose
+    // records lie past the flat arrays' end are a killed run's unwritten tail: dropped.
     for (std::size_t i = 0; i < r.off.size(); ++i)
       if ((i == 0 && r.off[i] != 0) || (i > 0 && r.off[i] < r.off[i - 1]))
         throw InputError(fmt::format("{}: /contacts/offsets: row {} is {}{}; allowed: 0 first, never decreasing",
                                      t.path(), i, r.off[i], i > 0 ? fmt::format(" after {}", r.off[i - 1]) : ""));
-    const auto flat = static_cast<std::int64_t>(std::min({t.shape("/contacts/pair").at(0),
-                                                          t.shape("/contacts/depth").at(0),
-                                                          t.shape("/contacts/normal").at(0),
-                                                          t.shape("/contacts/jn").at(0), t.shape("/contacts/jt").at(0)}));
-    // Offsets start at 0 and never decrease (else the file is garbage: exit 2); rows whose
-    // records lie past the flat arrays' end are a killed run's unwritten tail: dropped.
-    for (std::size_t i = 0; i < r.off.size(); ++i)
-      if ((i == 0 && r.off[0] != 0) || (i > 0 && r.off[i] < r.off[i - 1]))
-        throw InputError(fmt::format("{}: /contacts/offsets: row {} is {} after {}; allowed: offsets from 0, never "
-                                     "decreasing (docs/trace-format.md)",
-                                     t.path(), i, r.off[i], i == 0 ? std::int64_t{0} : r.off[i - 1]));
+    std::uint64_t flat = std::min({t.shape("/contacts/pair").at(0), t.shape("/contacts/depth").at(0),
+                                   t.shape("/contacts/normal").at(0), t.shape("/contacts/jn").at(0),
+                                   t.shape("/contacts/jt").at(0)});
+    if (s.points) {
+      const auto shape = t.shape("/contacts/point");
+      if (shape.size() != 2 || shape[1] != 3)
+        throw InputError(fmt::format("{}: /contacts/point: shape {}; allowed: C x 3 (one world point per contact row)",
+                                     t.path(), fmt::join(shape, " x ")));
+      flat = std::min(flat, shape[0]);
+    }
     std::size_t good = 0;
-    while (good < r.frame.size() && r.off[good + 1] <= flat) ++good;
+    while (good < r.frame.size() && r.off[good + 1] <= static_cast<std::int64_t>(flat)) ++good;
     r.frame.resize(good);
     r.off.resize(good + 1);
-    const std::int64_t used = r.off.empty() ? 0 : r.off.back();
-    r.pair = t.read_u32("/contacts/pair", used);
-    r.normal = t.read_f32("/contacts/normal", used);
-    r.depth = t.read_f32("/contacts/depth", used);
-    r.jn = t.read_f32("/contacts/jn", used);
-    r.jt = t.read_f32("/contacts/jt", used);
-    return r;
-  };
-  const Rec ra = load(a), rb = load(b);
+  }
+  const std::int64_t used = r.off.empty() ? 0 : r.off.back();
+  r.pair = t.read_u32("/contacts/pair", used);
+  r.normal = t.read_f32("/contacts/normal", used);
+  r.depth = t.read_f32("/contacts/depth", used);
+  r.jn = t.read_f32("/contacts/jn", used);
+  r.jt = t.read_f32("/contacts/jt", used);
+  if (s.points) r.point = t.read_f32("/contacts/point", used);
+  return r;
+}
+
+/// /contacts records (pairs, then normal, depth, J_n, J_t) at the frames both hold, record
+/// by record in order: two octocd traces of version 1 (one contact per pair, in (a, b) order).
+void compare_contact_records(const Side& a, const Side& b, const Tolerance& tol, QuantityResult& q) {
+  if (!a.has_contacts || !b.has_contacts) {
+    q.compared += " (counts; /contacts records not in both)";
+    return;
+  }
+  const Contacts ra = load_contacts(a), rb = load_contacts(b);
   std::map<std::int64_t, std::size_t> row_b;
   for (std::size_t i = 0; i < rb.frame.size(); ++i) row_b[rb.frame[i]] = i;
   std::int64_t common = 0, records = 0;
@@ -352,6 +558,94 @@ void compare_contact_records(const TraceReader& a, const TraceReader& b, const T
   q.compared += fmt::format(" + {} /contacts records on {} frames", records, common);
 }
 
+/// Contacts by pair at the frames both traces hold (a version 2 or an external trace on
+/// either side): per frame the set of pairs with contact rows, each pair's row count (a
+/// manifold's points), then its rows in the order written: depth, jn, jt, normal and, when
+/// both traces have /contacts/point, the point. A pair on one side only, or with another
+/// row count, is an infinite difference.
+QuantityResult compare_contacts_by_pair(const Side& a, const Side& b, const Tolerance& tol) {
+  QuantityResult q;
+  q.name = "contacts";
+  q.tol = tol;
+  if (!a.has_contacts || !b.has_contacts) {
+    q.available = false;
+    q.compared = fmt::format("/contacts missing in {}", !a.has_contacts && !b.has_contacts ? "both"
+                                                        : a.has_contacts                    ? "B"
+                                                                                            : "A");
+    return q;
+  }
+  const Contacts ca = load_contacts(a), cb = load_contacts(b);
+  const bool points = a.points && b.points;
+  std::map<std::int64_t, std::size_t> row_b;
+  for (std::size_t i = 0; i < cb.frame.size(); ++i) row_b[cb.frame[i]] = i;
+  using Key = std::pair<std::uint32_t, std::uint32_t>;
+  const auto by_pair = [](const Contacts& c, std::size_t i) {
+    std::map<Key, std::vector<std::size_t>> m;
+    for (auto k = static_cast<std::size_t>(c.off[i]); k < static_cast<std::size_t>(c.off[i + 1]); ++k)
+      m[{c.pair[2 * k], c.pair[2 * k + 1]}].push_back(k);
+    return m;
+  };
+  const auto rows_text = [](std::size_t n) { return n == 0 ? std::string("none") : fmt::format("{} row{}", n, n == 1 ? "" : "s"); };
+  std::int64_t common = 0, pairs = 0, rows = 0;
+  for (std::size_t i = 0; i < ca.frame.size(); ++i) {
+    const auto it = row_b.find(ca.frame[i]);
+    if (it == row_b.end()) continue;
+    ++common;
+    const std::int64_t frame = ca.frame[i];
+    const auto pa = by_pair(ca, i), pb = by_pair(cb, it->second);
+    std::set<Key> keys;
+    for (const auto& [k, v] : pa) keys.insert(k);
+    for (const auto& [k, v] : pb) keys.insert(k);
+    for (const Key& key : keys) {
+      ++pairs;
+      const auto ia = pa.find(key), ib = pb.find(key);
+      const std::size_t na = ia == pa.end() ? 0 : ia->second.size(), nb = ib == pb.end() ? 0 : ib->second.size();
+      std::string what;
+      if (na != nb) {
+        what = fmt::format("pair ({}, {}): {} in A, {} in B", key.first, key.second, rows_text(na), rows_text(nb));
+        q.largest(std::numeric_limits<double>::infinity(), frame, key.first, [&] { return what; });
+      } else {
+        for (std::size_t r = 0; r < na; ++r) {
+          ++rows;
+          const std::size_t ka = ia->second[r], kb = ib->second[r];
+          std::vector<std::pair<std::string, std::pair<float, float>>> fields{
+              {"depth", {ca.depth[ka], cb.depth[kb]}},
+              {"jn", {ca.jn[ka], cb.jn[kb]}},
+              {"jt", {ca.jt[ka], cb.jt[kb]}},
+              {"normal.x", {ca.normal[3 * ka], cb.normal[3 * kb]}},
+              {"normal.y", {ca.normal[3 * ka + 1], cb.normal[3 * kb + 1]}},
+              {"normal.z", {ca.normal[3 * ka + 2], cb.normal[3 * kb + 2]}}};
+          if (points)
+            for (std::size_t c = 0; c < 3; ++c)
+              fields.push_back({fmt::format("point.{}", "xyz"[c]), {ca.point[3 * ka + c], cb.point[3 * kb + c]}});
+          for (const auto& [field, v] : fields) {
+            double d = 0.0;
+            const auto both = [&, &field = field, &v = v] {
+              return fmt::format("pair ({}, {}) row {} of {}: {}: A {} B {}", key.first, key.second, r, na, field,
+                                 v.first, v.second);
+            };
+            if (beyond(v.first, v.second, tol, d) && what.empty()) what = both();
+            q.largest(d, frame, key.first, both, {v.first}, {v.second});
+          }
+        }
+      }
+      if (what.empty()) continue;
+      ++q.beyond_count;
+      if (!q.differs || frame < q.frame) {
+        q.differs = true;
+        q.frame = frame;
+        q.body = key.first;
+        q.detail = what;
+      }
+    }
+  }
+  q.compared = fmt::format("{} common frames: {} pairs, {} rows by pair{}", common, pairs, rows,
+                           points                  ? " with points"
+                           : a.points || b.points ? fmt::format(" (/contacts/point only in {})", a.points ? "A" : "B")
+                                                   : "");
+  return q;
+}
+
 /// A JSON value as text; a number stored from a float32 prints as that float (0.999, not
 /// 0.9990000128746033), an integral one without ".0".
 std::string json_text(const json& v) {
@@ -391,10 +685,6 @@ json parsed_attribute(const TraceReader& t, const char* name) {
   }
 }
 
-std::vector<std::int64_t> frames_of(const TraceReader& t, const std::string& dataset, std::int64_t rows) {
-  return rows > 0 ? t.read_i64(dataset, rows) : std::vector<std::int64_t>{};
-}
-
 /// "frames 0..499" or the first frame only one side holds.
 std::string frame_set_difference(const std::vector<std::int64_t>& fa, const std::vector<std::int64_t>& fb) {
   const std::set<std::int64_t> sa(fa.begin(), fa.end()), sb(fb.begin(), fb.end());
@@ -411,30 +701,96 @@ std::string range_text(const std::vector<std::int64_t>& f) {
   return fmt::format("{}..{}", *std::min_element(f.begin(), f.end()), *std::max_element(f.begin(), f.end()));
 }
 
+/// The bodies and materials a trace states beyond the scene (an external trace, or one of
+/// version 2), where both traces hold them: /bodies tables (the first body that differs,
+/// bit for bit) and the version 2 root attributes (docs/trace-format.md). A table or
+/// attribute that only one trace has is not compared (its default may be the same).
+std::vector<std::string> body_differences(const Side& a, const Side& b) {
+  std::vector<std::string> out;
+  if (a.bodies != b.bodies) return out;  // named already
+  const auto n = static_cast<std::uint64_t>(a.bodies);
+  const std::pair<const char*, std::uint64_t> tables[] = {{"/bodies/inverse_mass", 1},   {"/bodies/local_aabb_min", 3},
+                                                          {"/bodies/local_aabb_max", 3}, {"/bodies/inertia", 9},
+                                                          {"/bodies/friction", 1},       {"/bodies/restitution", 1}};
+  for (const auto& [d, k] : tables) {
+    if (!a.t->has_dataset(d) || !b.t->has_dataset(d)) continue;
+    for (const Side* s : {&a, &b}) {
+      const auto shape = s->t->shape(d);
+      std::uint64_t per = 1;
+      for (std::size_t i = 1; i < shape.size(); ++i) per *= shape[i];
+      if (shape.empty() || shape[0] != n || per != k)
+        throw InputError(fmt::format("{}: {}: shape {}; allowed: {} bodies{}", s->path(), d, fmt::join(shape, " x "), n,
+                                     k == 1 ? "" : k == 3 ? " x 3" : " x 3 x 3"));
+    }
+    const auto va = a.t->read_f32(d, a.bodies), vb = b.t->read_f32(d, b.bodies);
+    for (std::uint64_t i = 0; i < n; ++i)
+      if (std::memcmp(&va[i * k], &vb[i * k], k * sizeof(float)) != 0) {
+        const auto text = [&](const std::vector<float>& v) {
+          return k == 1 ? fmt::format("{}", v[i]) : fmt::format("({})", fmt::join(v.begin() + static_cast<std::ptrdiff_t>(i * k), v.begin() + static_cast<std::ptrdiff_t>((i + 1) * k), ", "));
+        };
+        out.push_back(fmt::format("{}: body {}: {} vs {}", d, i, text(va), text(vb)));
+        break;
+      }
+  }
+  for (const char* name : {"mu", "restitution", "contact_margin", "broadphase_exact"})
+    if (a.t->has_attribute(name) && b.t->has_attribute(name) &&
+        a.t->number_attribute(name) != b.t->number_attribute(name))
+      out.push_back(fmt::format("{}: {} vs {} (root attribute)", name, json_text(a.t->number_attribute(name)),
+                                json_text(b.t->number_attribute(name))));
+  for (const char* name : {"detection", "friction_combine", "restitution_combine", "contact_geometry", "response_model"})
+    if (a.t->has_attribute(name) && b.t->has_attribute(name) &&
+        a.t->string_attribute(name) != b.t->string_attribute(name))
+      out.push_back(fmt::format("{}: '{}' vs '{}' (root attribute)", name, a.t->string_attribute(name),
+                                b.t->string_attribute(name)));
+  return out;
+}
+
+const char* state_dataset(const std::string& q) {
+  if (q == "positions") return "/states/position";
+  if (q == "velocities") return "/states/velocity";
+  if (q == "orientations") return "/states/orientation";
+  return "/states/angular_velocity";
+}
+
 }  // namespace
 
 CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
   CLI::App* c = app.add_subcommand(
       "compare",
-      "Compare two traces (golden-trace regression, CPU vs CUDA). First their structure: frame count, state rows and "
+      "Compare two traces (golden-trace regression, CPU vs CUDA, one engine's run against another's): octocd traces "
+      "(format version 1, or 2 with `--engine bullet --rotation`) or external traces of version 1 or 2 (another "
+      "engine's, docs/trace-format.md; checked in full first). First their structure: frame count, state rows and "
       "their frames, body count, scene name and scene parameters (every key that differs is named, e.g. "
-      "`/response/beta: 1 vs 0.999`; the broadphase is not compared: every broadphase finds the same pairs). Then per "
-      "quantity, with its own tolerance: the largest difference (frame, body, both values) and the first frame and "
-      "body beyond the tolerance. Exit 0 same, 3 different (structure or a quantity beyond its tolerance), 2 "
-      "unreadable input or bad option");
+      "`/response/beta: 1 vs 0.999`; the broadphase is not compared: every broadphase finds the same pairs; an "
+      "external trace has no parameters: its scene and dt when both have them; an external or version 2 trace: "
+      "also its /bodies tables (masses, local boxes, inertia, materials) and the version 2 root attributes (mu, "
+      "restitution, combine rules, contact_margin, detection, ...) where both have them). Then per quantity (--quantity: "
+      "which fields, for which version), with its own tolerance: the largest difference (frame, body, both values) "
+      "and the first frame and body beyond the tolerance. Exit 0 same, 3 different (structure or a quantity beyond "
+      "its tolerance), 2 unreadable or malformed input (naming file, dataset, frame and the allowed values) or bad "
+      "option");
   c->add_option("a", o.a, "First trace (.h5), e.g. the golden one")->required();
   c->add_option("b", o.b, "Second trace (.h5)")->required();
   c->add_option("--tolerance", o.tolerance,
                 "Tolerances, comma-separated or repeated: VALUE (every quantity) or QUANTITY=VALUE; VALUE is an "
-                "absolute tolerance ABS (in the quantity's unit: m, m/s, counts, J; contacts: m for depth, N s for "
-                "impulses, 1 for normals), rel:R (relative: |A-B| <= R max(|A|,|B|)) or ABS+rel:R (|A-B| <= ABS + R "
-                "max(|A|,|B|)), each >= 0; 0 = bit for bit (the default). E.g. --tolerance positions=1e-6 "
-                "--tolerance velocities=rel:1e-4")
+                "absolute tolerance ABS (in the quantity's unit: m, m/s, rad (orientations: the angle between the "
+                "two), rad/s, counts, J; contacts: m for depth and points, N s for impulses, 1 for normals), rel:R "
+                "(relative: |A-B| <= R max(|A|,|B|); orientations: R rad, as |q| = 1) or ABS+rel:R (|A-B| <= ABS + R "
+                "max(|A|,|B|)), each >= 0; 0 = bit for bit (the default; orientations: q or -q bit for bit, or an "
+                "angle of exactly 0). E.g. --tolerance positions=1e-6 --tolerance velocities=rel:1e-4 --tolerance "
+                "orientations=1e-4")
       ->allow_extra_args(false);
   c->add_option("--quantity", o.quantities,
-                "Comma-separated: positions, velocities (/states), contacts (/frames/contacts and /contacts when "
-                "both have it), pairs (/frames/aabb_pairs), energy (/frames/kinetic_energy)")
-      ->default_val("positions,velocities,contacts,pairs");
+                "Comma-separated, each from /states, /contacts or /frames: positions, velocities (/states/position, "
+                "/states/velocity: every version, per component); orientations (/states/orientation, version 2: the "
+                "angle between the two quaternions, q and -q the same orientation) and angular_velocities "
+                "(/states/angular_velocity, version 2, per component), a trace without them counting as unrotated "
+                "(identity, zero: version 1 against version 2 works); contacts (two octocd version 1 traces: "
+                "/frames/contacts and the /contacts records in order; otherwise by pair: the pairs with contact rows "
+                "in each frame, each pair's row count (a manifold), then its rows: depth, jn, jt, normal, and point "
+                "when both have /contacts/point); pairs (/frames/aabb_pairs) and energy (/frames/kinetic_energy): "
+                "octocd traces only (an external trace has no /frames). Default: positions,velocities,contacts,pairs, "
+                "and orientations,angular_velocities when either trace is of version 2");
   c->add_option("--json", o.json,
                 "Also write everything as JSON to this file: structure differences, per quantity its tolerance, "
                 "largest difference (frame, body, values) and first difference");
@@ -443,48 +799,45 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
 
 int compare_command(const CompareOptions& o) {
   const std::map<std::string, Tolerance> tols = parse_tolerances(o.tolerance);
-  const std::vector<std::string> qs = split_list(o.quantities);
-  if (qs.empty()) throw InputError("--quantity: empty; allowed: positions, velocities, contacts, pairs, energy");
+  const char* kQuantityAllowed =
+      "positions, velocities, orientations, angular_velocities, contacts, pairs, energy";
+  std::vector<std::string> qs = split_list(o.quantities);
+  if (!o.quantities.empty() && qs.empty()) throw InputError(fmt::format("--quantity: empty; allowed: {}", kQuantityAllowed));
   for (const auto& q : qs)
     if (std::find(quantity_names().begin(), quantity_names().end(), q) == quantity_names().end())
-      throw InputError(fmt::format("--quantity: unknown quantity '{}'; allowed: positions, velocities, contacts, "
-                                   "pairs, energy",
-                                   q));
-  const TraceReader a(o.a), b(o.b);
-  for (const TraceReader* t : {&a, &b})
-    for (const char* d : {"/bodies/shape_id", "/frames/frame"})
-      if (!t->has_dataset(d))
-        throw InputError(fmt::format("{}: {}: missing; allowed: a complete octocd trace", t->path(), d));
-  const auto attr = [](const TraceReader& t, const char* n) {
-    return t.has_attribute(n) ? t.string_attribute(n) : std::string("?");
-  };
-  const std::string sa = attr(a, "scene_name"), sb = attr(b, "scene_name");
-  const auto na = static_cast<std::int64_t>(a.shape("/bodies/shape_id").at(0));
-  const auto nb = static_cast<std::int64_t>(b.shape("/bodies/shape_id").at(0));
+      throw InputError(fmt::format("--quantity: unknown quantity '{}'; allowed: {}", q, kQuantityAllowed));
+  const TraceReader ta(o.a), tb(o.b);
+  const Side a = make_side(ta), b = make_side(tb);
+  if (qs.empty()) {
+    qs = {"positions", "velocities"};
+    if (a.version == 2 || b.version == 2) qs.insert(qs.end(), {"orientations", "angular_velocities"});
+    qs.insert(qs.end(), {"contacts", "pairs"});
+  }
+  const std::string& sa = a.scene_name;
+  const std::string& sb = b.scene_name;
+  const std::int64_t na = a.bodies, nb = b.bodies;
+  const bool octocd_both = !a.external && !b.external;
 
   // ---- structure: every difference here fails the comparison (exit 3)
   std::vector<std::string> structure;
-  if (sa != sb) structure.push_back(fmt::format("scene_name: '{}' vs '{}'", sa, sb));
+  if (a.scene_known && b.scene_known && sa != sb) structure.push_back(fmt::format("scene_name: '{}' vs '{}'", sa, sb));
   if (na != nb) structure.push_back(fmt::format("/bodies: {} vs {} bodies", na, nb));
-  const std::int64_t rows_a = a.complete_rows("/frames"), rows_b = b.complete_rows("/frames");
-  const auto ffa = frames_of(a, "/frames/frame", rows_a), ffb = frames_of(b, "/frames/frame", rows_b);
+  const std::int64_t rows_a = a.frame_rows, rows_b = b.frame_rows;
+  const auto& ffa = a.frames;
+  const auto& ffb = b.frames;
+  const char* frames_name = octocd_both ? "/frames" : "frames";
   if (rows_a != rows_b)
-    structure.push_back(fmt::format("/frames: {} vs {} frames (A frames {}, B frames {})", rows_a, rows_b,
+    structure.push_back(fmt::format("{}: {} vs {} frames (A frames {}, B frames {})", frames_name, rows_a, rows_b,
                                     range_text(ffa), range_text(ffb)));
   else if (const std::string d = frame_set_difference(ffa, ffb); !d.empty())
-    structure.push_back("/frames/frame: " + d);
-  const bool states_a = a.has_dataset("/states/frame"), states_b = b.has_dataset("/states/frame");
+    structure.push_back(fmt::format("{}: {}", octocd_both ? "/frames/frame" : "frames", d));
+  const bool states_a = a.has_states, states_b = b.has_states;
   if (states_a != states_b) {
     structure.push_back(fmt::format("/states: {} vs {}", states_a ? "present" : "absent", states_b ? "present" : "absent"));
   } else if (states_a) {
-    const auto srows = [](const TraceReader& t) {
-      std::int64_t r = static_cast<std::int64_t>(t.shape("/states/frame").at(0));
-      for (const char* d : {"/states/position", "/states/velocity"})
-        if (t.has_dataset(d)) r = std::min(r, static_cast<std::int64_t>(t.shape(d).at(0)));
-      return r;
-    };
-    const std::int64_t sra = srows(a), srb = srows(b);
-    const auto sfa = frames_of(a, "/states/frame", sra), sfb = frames_of(b, "/states/frame", srb);
+    const std::int64_t sra = a.state_rows, srb = b.state_rows;
+    const auto& sfa = a.state_frames;
+    const auto& sfb = b.state_frames;
     if (sra != srb)
       structure.push_back(fmt::format("/states: {} vs {} state rows (A frames {}, B frames {})", sra, srb,
                                       range_text(sfa), range_text(sfb)));
@@ -493,28 +846,49 @@ int compare_command(const CompareOptions& o) {
   }
   // Scene parameters as the engine resolved them, then the scene file's other keys. The
   // broadphase is engine configuration (every broadphase finds the same pairs); the
-  // frame count is judged above from the rows themselves.
+  // frame count is judged above from the rows themselves. An external trace has no
+  // `parameters`: then the scene (when both have one) and the root attribute dt.
   const std::vector<std::string> skip{"/broadphase", "/frames", "/description"};
   std::set<std::string> named;
-  for (const auto& d : json_differences(parsed_attribute(a, "parameters"), parsed_attribute(b, "parameters"), skip)) {
-    named.insert(d.substr(0, d.find(':')));
-    structure.push_back(d + " (parameters)");
-  }
-  for (const auto& d : json_differences(parsed_attribute(a, "scene"), parsed_attribute(b, "scene"),
-                                        std::vector<std::string>{"/broadphase", "/frames", "/description", "/name"}))
-  {
-    const std::string key = d.substr(0, d.find(':'));
-    bool covered = false;  // the resolved parameter under or above this key is named already
-    for (const auto& n : named)
-      if (n == key || n.rfind(key + "/", 0) == 0 || key.rfind(n + "/", 0) == 0) covered = true;
-    if (!covered) structure.push_back(d + " (scene)");
-  }
+  if (octocd_both)
+    for (const auto& d : json_differences(parsed_attribute(ta, "parameters"), parsed_attribute(tb, "parameters"), skip)) {
+      named.insert(d.substr(0, d.find(':')));
+      structure.push_back(d + " (parameters)");
+    }
+  if (octocd_both || (ta.has_attribute("scene") && tb.has_attribute("scene")))
+    for (const auto& d : json_differences(parsed_attribute(ta, "scene"), parsed_attribute(tb, "scene"),
+                                          std::vector<std::string>{"/broadphase", "/frames", "/description", "/name"}))
+    {
+      const std::string key = d.substr(0, d.find(':'));
+      bool covered = false;  // the resolved parameter under or above this key is named already
+      for (const auto& n : named)
+        if (n == key || n.rfind(key + "/", 0) == 0 || key.rfind(n + "/", 0) == 0) covered = true;
+      if (!covered) structure.push_back(d + " (scene)");
+    }
+  if (!octocd_both && ta.has_attribute("dt") && tb.has_attribute("dt") &&
+      ta.number_attribute("dt") != tb.number_attribute("dt"))
+    structure.push_back(fmt::format("dt: {} vs {} (root attribute)", json_text(ta.number_attribute("dt")),
+                                    json_text(tb.number_attribute("dt"))));
+  if (!octocd_both || a.version == 2 || b.version == 2)
+    for (const auto& d : body_differences(a, b)) structure.push_back(d);
 
-  fmt::print("compare {} ({}, {}, {})\n   with {} ({}, {}, {})\n", o.a, attr(a, "engine"), attr(a, "broadphase"),
-             attr(a, "build_id"), o.b, attr(b, "engine"), attr(b, "broadphase"), attr(b, "build_id"));
-  fmt::print("scene {}, {} bodies; tolerances:", sa, na);
+  const auto attr = [](const TraceReader& t, const char* n) {
+    return t.has_attribute(n) ? t.string_attribute(n) : std::string("?");
+  };
+  const auto header = [&](const Side& s) {
+    if (s.external) return fmt::format("{}, engine {}", s.kind(), s.engine);
+    return fmt::format("{}, {}, {}{}", attr(*s.t, "engine"), attr(*s.t, "broadphase"), attr(*s.t, "build_id"),
+                       s.version == 1 ? "" : fmt::format(", version {}", s.version));
+  };
+  fmt::print("compare {} ({})\n   with {} ({})\n", o.a, header(a), o.b, header(b));
+  fmt::print("scene {}, {} bodies; tolerances:", a.scene_known ? sa : sb, na);
   for (const auto& q : qs) fmt::print(" {}={}", q, tols.at(q).text());
-  fmt::print("\n\n");
+  fmt::print("\n");
+  if (a.version != b.version || a.rotation != b.rotation)
+    fmt::print("note: {} (A) vs {} (B); a trace without rotation counts as unrotated (orientation identity, angular "
+               "velocity zero)\n",
+               a.kind() + (a.rotation ? " with rotation" : ""), b.kind() + (b.rotation ? " with rotation" : ""));
+  fmt::print("\n");
   if (!structure.empty()) {
     fmt::print("structure differs ({} key{}):\n", structure.size(), structure.size() == 1 ? "" : "s");
     for (const auto& d : structure) fmt::print("  {}\n", d);
@@ -524,12 +898,16 @@ int compare_command(const CompareOptions& o) {
   std::vector<QuantityResult> results;
   for (const auto& q : qs) {
     const Tolerance& tol = tols.at(q);
-    if (q == "positions" || q == "velocities") {
-      const char* d = q == "positions" ? "/states/position" : "/states/velocity";
+    if (q == "positions" || q == "velocities" || q == "orientations" || q == "angular_velocities") {
+      const char* d = state_dataset(q);
+      const bool rotation = q == "orientations" || q == "angular_velocities";
       QuantityResult r;
       r.name = q;
       r.tol = tol;
-      if (!states_a || !states_b || !a.has_dataset(d) || !b.has_dataset(d)) {
+      if (!states_a || !states_b) {
+        r.available = false;
+        r.compared = fmt::format("/states missing in {}", !states_a && !states_b ? "both" : states_a ? "B" : "A");
+      } else if (!rotation && (!ta.has_dataset(d) || !tb.has_dataset(d))) {
         r.available = false;
         r.compared = std::string(d) + " missing";
       } else if (na != nb) {
@@ -540,17 +918,20 @@ int compare_command(const CompareOptions& o) {
       }
       results.push_back(r);
     } else if (q == "contacts") {
-      QuantityResult r = compare_column<std::uint64_t>(a, b, "contacts", "contacts", tol);
-      if (r.available) compare_contact_records(a, b, tol, r);
-      results.push_back(r);
+      if (octocd_both && a.version == 1 && b.version == 1) {
+        QuantityResult r = compare_column<std::uint64_t>(a, b, "contacts", "contacts", tol);
+        if (r.available) compare_contact_records(a, b, tol, r);
+        results.push_back(r);
+      } else {
+        results.push_back(compare_contacts_by_pair(a, b, tol));
+      }
     } else if (q == "pairs") {
       results.push_back(compare_column<std::uint64_t>(a, b, "aabb_pairs", "pairs", tol));
     } else {
       results.push_back(compare_column<double>(a, b, "kinetic_energy", "energy", tol));
     }
   }
-
-  fmt::print("{:<11} {:<56} {:>12}  {}\n", "quantity", "compared", "max |A-B|", "largest difference / first beyond tolerance");
+  fmt::print("{:<18} {:<56} {:>12}  {}\n", "quantity", "compared", "max |A-B|", "largest difference / first beyond tolerance");
   const QuantityResult* first = nullptr;
   bool any_missing = false;
   json jq = json::array();
@@ -561,12 +942,12 @@ int compare_command(const CompareOptions& o) {
     const auto at = [](std::int64_t f, std::int64_t body) {
       return body >= 0 ? fmt::format("frame {}, body {}", f, body) : fmt::format("frame {}", f);
     };
-    fmt::print("{:<11} {:<56} {:>12}  {}\n", r.name, r.compared, r.available ? fmt::format("{:.6g}", r.max_diff) : "n/a",
+    fmt::print("{:<18} {:<56} {:>12}  {}\n", r.name, r.compared, r.available ? fmt::format("{:.6g}", r.max_diff) : "n/a",
                !r.available ? "not compared"
                : r.max_frame < 0 ? "-"
                                  : fmt::format("largest at {}: {}", at(r.max_frame, r.max_body), r.max_detail));
     if (r.differs)
-      fmt::print("{:<11} {:<56} {:>12}  first beyond {} at {}: {} ({} beyond)\n", "", "", "", r.tol.text(),
+      fmt::print("{:<18} {:<56} {:>12}  first beyond {} at {}: {} ({} beyond)\n", "", "", "", r.tol.text(),
                  at(r.frame, r.body), r.detail, r.beyond_count);
     jq.push_back({{"quantity", r.name},
                   {"tolerance", {{"abs", r.tol.abs}, {"rel", r.tol.rel}}},
@@ -595,9 +976,17 @@ int compare_command(const CompareOptions& o) {
   if (!o.json.empty()) {
     json jt = json::object();
     for (const auto& q : qs) jt[q] = {{"abs", tols.at(q).abs}, {"rel", tols.at(q).rel}};
-    json j{{"format", "octocd-compare"}, {"version", 2},      {"a", o.a},
-           {"b", o.b},                   {"tolerance", jt},   {"scene", sa},
-           {"bodies", na},               {"same", !differ},   {"structure", structure},
+    json j{{"format", "octocd-compare"},
+           {"version", 2},
+           {"a", o.a},
+           {"b", o.b},
+           {"traces", {{{"version", a.version}, {"external", a.external}, {"rotation", a.rotation}},
+                       {{"version", b.version}, {"external", b.external}, {"rotation", b.rotation}}}},
+           {"tolerance", jt},
+           {"scene", a.scene_known ? sa : sb},
+           {"bodies", na},
+           {"same", !differ},
+           {"structure", structure},
            {"quantities", jq}};
     if (first) j["first"] = {{"frame", first->frame}, {"body", first->body}, {"quantity", first->name}};
     write_file_atomically(o.json, j.dump(1) + "\n");

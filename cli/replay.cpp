@@ -68,6 +68,19 @@ Vec3 vec3_of(const nlohmann::json& j) {
 
 ReplayInput replay_input_from_trace(const std::string& path, int every, int max_frames) {
   TraceReader tr(path);
+  // Version 2 (a rotating engine, SPEC 13): replay's input is each state advanced by
+  // octocd's translation-only Eq. 2-3 and the local box translated there; a rotating body's
+  // world AABB is the bounds of its rotated shape, and such an engine detects at the
+  // pre-step pose: these would not be the AABBs its broadphase saw (docs/trace-format.md).
+  if (tr.version() == 2)
+    throw InputError(fmt::format(
+        "{}: version: 2 (a rotating engine's trace); replay cannot replay it: it re-derives each step's world AABBs "
+        "as the local box translated to the recorded state advanced by octocd's translation-only Eq. 2-3, but the "
+        "bodies of a version 2 trace rotate (their world AABB is the bounds of the rotated shape) and its engine "
+        "detects at the pre-step pose, so replay would not feed the AABBs its broadphase saw; allowed: a version 1 "
+        "trace of `octocd run` (engine cpu, cuda, or bullet without --rotation); compare version 2 traces with "
+        "`octocd compare` and judge them with `octocd validate --trace-in`",
+        path));
   const auto need = [&](const char* d, const char* what) {
     if (!tr.has_dataset(d))
       throw InputError(fmt::format("{}: {}: missing; allowed: a trace holding {} (written by `octocd run --trace`, "
@@ -358,7 +371,12 @@ CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o) {
       "replay",
       "Replay the world AABBs recorded in a trace through several broadphases (each sees identical input), check "
       "they return the same pairs and the recorded counts, and time them. Exit 0 all agree, 3 one differs, 2 bad input");
-  c->add_option("trace", o.trace, "Trace (.h5) of `octocd run --trace` (needs /bodies and /states)")->required();
+  c->add_option("trace", o.trace,
+                "Trace (.h5) of `octocd run --trace` (needs /bodies, /states and the parameters attribute); format "
+                "version 1 only: a version 2 trace (`--engine bullet --rotation`, a rotating engine) is refused "
+                "(exit 2): its bodies rotate and its engine detects before integrating, so the translated local "
+                "boxes replay feeds are not what its broadphase saw")
+      ->required();
   std::string names;
   for (const auto& n : any_engine_broadphase_names()) names += (names.empty() ? "" : ", ") + n;
   names += " (lbvh: --engine cuda only)";

@@ -203,7 +203,8 @@ struct Tolerance {
 
 /// Parses `--tolerance` arguments (each comma-separated items VALUE or QUANTITY=VALUE, VALUE
 /// ABS, rel:R or ABS+rel:R; later items override earlier ones) into one tolerance per
-/// quantity (positions, velocities, contacts, pairs, energy; unnamed ones 0). Throws
+/// quantity (positions, velocities, orientations, angular_velocities, contacts, pairs,
+/// energy; unnamed ones 0). Throws
 /// InputError naming the item for an unknown quantity, a negative or non-numeric value.
 std::map<std::string, Tolerance> parse_tolerances(const std::vector<std::string>& args);
 
@@ -211,7 +212,9 @@ std::map<std::string, Tolerance> parse_tolerances(const std::vector<std::string>
 struct CompareOptions {
   std::string a, b;
   std::vector<std::string> tolerance;  ///< --tolerance arguments (parse_tolerances)
-  std::string quantities = "positions,velocities,contacts,pairs";
+  /// --quantity; empty: positions, velocities, contacts, pairs, plus orientations and
+  /// angular_velocities when either trace is of format version 2.
+  std::string quantities;
   std::string json;
 };
 CLI::App* add_compare_command(CLI::App& app, CompareOptions& o);

@@ -19,6 +19,7 @@ namespace octocd {
 
 struct TraceReader::Impl {
   std::unique_ptr<detail::Hdf5Reader> h5;
+  int version = 1;  ///< root attribute `version` (1 or 2)
 
   [[noreturn]] void fail(const std::string& what, const std::string& problem, const std::string& allowed) const {
     h5->fail(what, problem, allowed);
@@ -59,9 +60,10 @@ TraceReader::TraceReader(const std::string& path) : impl_(std::make_unique<Impl>
   if (format != "octocd-trace")
     throw InputError(fmt::format("{}: format: '{}'; allowed: \"octocd-trace\"", path, format));
   const double version = has_attribute("version") ? number_attribute("version") : -1.0;
-  if (version != 1.0)
-    throw InputError(fmt::format("{}: version: {}; allowed: 1 (this octocd reads octocd-trace version 1)", path,
-                                 version));
+  if (version != 1.0 && version != 2.0)
+    throw InputError(fmt::format("{}: version: {}; allowed: 1 or 2 (this octocd reads octocd-trace versions 1 and 2)",
+                                 path, version));
+  impl_->version = static_cast<int>(version);
 }
 
 TraceReader::~TraceReader() = default;
@@ -69,6 +71,8 @@ TraceReader::TraceReader(TraceReader&&) noexcept = default;
 TraceReader& TraceReader::operator=(TraceReader&&) noexcept = default;
 
 const std::string& TraceReader::path() const { return impl_->h5->path(); }
+
+int TraceReader::version() const { return impl_->version; }
 
 bool TraceReader::has_attribute(const std::string& name) const { return impl_->h5->has_attribute(name); }
 
@@ -93,7 +97,7 @@ std::int64_t TraceReader::complete_rows(const std::string& group) const {
   // fuzz_trace in read_trace_summary).
   std::vector<std::string> names;
   if (group == "/frames") names = detail::trace_frame_columns();
-  else if (group == "/states") names = {"frame", "position", "velocity"};
+  else if (group == "/states") names = {"frame", "position", "velocity", "orientation", "angular_velocity"};
   else if (group == "/contacts") names = {"offsets", "frame"};
   else impl_->fail(group, "not a group of rows", "/frames, /states or /contacts");
   std::int64_t rows = -1;

@@ -26,7 +26,9 @@ broadphase, an engine not built (`cuda` without CUDA). `octocd.RuntimeError` (a
 `RuntimeError`): no CUDA device, a NaN in the state while stepping, an unreadable trace.
 
 Reading traces: use h5py (docs/trace-format.md, "Reading with h5py"); `octocd.Trace` is a
-thin helper over it for the per-frame slices (states by frame, contacts by frame).
+thin helper over it for the per-frame slices (states by frame, contacts by frame), for
+octocd's traces and external ones, format version 1 or 2 (orientations, angular
+velocities, inertia, materials, manifold contacts with points).
 """
 from __future__ import annotations
 
@@ -402,27 +404,82 @@ def failures(results: Sequence[ValidationResult]) -> List[ValidationResult]:
 # ---- traces ---------------------------------------------------------------------------
 
 class Trace:
-    """A thin helper over h5py for octocd traces (docs/trace-format.md): the per-frame
-    slices that need the trace's layout (states by frame, CSR contacts by frame). For
-    anything else use `trace.h5` (the open h5py.File) directly.
+    """A thin helper over h5py for traces (docs/trace-format.md): the per-frame slices that
+    need the trace's layout (states by frame, CSR contacts by frame). For anything else use
+    `trace.h5` (the open h5py.File) directly.
 
         with octocd.Trace("run.h5") as t:
             x, v = t.state(100)           # (n, 3) float32 each
+            q, w = t.rotation(100)        # (n, 4) (w, x, y, z) and (n, 3) rad/s
             c = t.contacts(100)           # dict of arrays, as FrameRecord.contacts
             ms = t.frames["step_ms"]      # /frames datasets as NumPy arrays
 
-    Opened read-only with swmr=True, so killed runs read too (complete rows only).
+    Reads octocd's own traces (`octocd run --trace`: format version 1, or 2 with `--engine
+    bullet --rotation`) and external traces of version 1 or 2 (another engine's; no
+    /frames, contacts by position: step f's rows are /contacts/offsets[f-1] ..
+    offsets[f]-1). Version 2 adds orientations, angular velocities, inertia, materials and
+    manifold contacts with points (docs/trace-format.md, "External traces, version 2"); a
+    trace without rotation reads as unrotated (identity orientations, zero angular
+    velocities) and its inertia is derived (a solid box of the local AABB, Bullet's rule).
+
+    `version` (1 or 2), `external` (no /frames) and `rotating` (/states/orientation) say
+    what the file is. Opened read-only with swmr=True, so killed runs read too (complete
+    rows only). Raises InputError "PATH: DATASET: [frame F: ][body I: ]PROBLEM; allowed:
+    ..." for a file that is not such a trace, and for bad values where they are read.
     """
+
+    _V2_DATASETS = ("states/orientation", "states/angular_velocity", "bodies/inertia", "bodies/friction",
+                    "bodies/restitution", "contacts/point")
 
     def __init__(self, path: Union[str, "_os.PathLike[str]"]):
         import h5py  # Debian: python3-h5py
         self.path = _os.fspath(path)
         self.h5 = h5py.File(self.path, "r", swmr=True)
-        fmt = self.h5.attrs.get("format")
-        if fmt != "octocd-trace":
+        try:
+            self._check()
+        except BaseException:
             self.h5.close()
-            raise InputError(f"{self.path}: attribute format: {fmt!r}; allowed: 'octocd-trace' "
-                             "(docs/trace-format.md)")
+            raise
+
+    def _fail(self, what: str, problem: str, allowed: str) -> None:
+        raise InputError(f"{self.path}: {what}: {problem}; allowed: {allowed}")
+
+    def _check(self) -> None:
+        fmt = self.h5.attrs.get("format")
+        if isinstance(fmt, bytes):
+            fmt = fmt.decode("utf-8", "replace")
+        if fmt != "octocd-trace":
+            self._fail("attribute format", repr(fmt), "'octocd-trace' (docs/trace-format.md)")
+        ver = self.h5.attrs.get("version")
+        try:
+            num = ver is not None and not isinstance(ver, (str, bytes)) and _np.asarray(ver).size == 1
+            v = float(_np.asarray(ver).reshape(-1)[0]) if num else None
+        except (TypeError, ValueError):
+            v = None
+        if v not in (1.0, 2.0):
+            self._fail("attribute version", repr(ver), "1 or 2 (docs/trace-format.md)")
+        self.version = int(v)
+        self.external = "frames" not in self.h5
+        if self.version == 1:
+            for d in self._V2_DATASETS:
+                if d in self.h5:
+                    self._fail("/" + d, "a version 2 dataset in a version 1 trace (v1/v2 fields mixed)",
+                               "/states/orientation, /states/angular_velocity, /bodies/inertia, /bodies/friction, "
+                               "/bodies/restitution, /contacts/point only with the root attribute version = 2")
+        st = self.h5.get("states")
+        has_q = st is not None and "orientation" in st
+        has_w = st is not None and "angular_velocity" in st
+        if has_q != has_w:
+            self._fail("/states/" + ("angular_velocity" if has_q else "orientation"),
+                       f"missing (/states/{'orientation' if has_q else 'angular_velocity'} present)",
+                       "/states/orientation and /states/angular_velocity together, or neither (no rotation)")
+        n = self.body_count
+        for name, tail in (("orientation", 4), ("angular_velocity", 3)):
+            if st is not None and name in st:
+                shape = st[name].shape
+                if len(shape) != 3 or shape[1] != n or shape[2] != tail:
+                    self._fail(f"/states/{name}", f"shape {' x '.join(map(str, shape))}",
+                               f"states x {n} bodies x {tail}")
 
     def __enter__(self) -> "Trace":
         return self
@@ -439,39 +496,192 @@ class Trace:
         return dict(self.h5.attrs)
 
     @property
+    def body_count(self) -> int:
+        """Number of bodies n (rows of /bodies/inverse_mass)."""
+        if "bodies/inverse_mass" not in self.h5:
+            self._fail("/bodies/inverse_mass", "missing", "n values (1/kg, 0 = static), one per body")
+        return int(self.h5["bodies/inverse_mass"].shape[0])
+
+    @property
+    def rotating(self) -> bool:
+        """Whether the trace holds orientations (/states/orientation, version 2)."""
+        return "states/orientation" in self.h5
+
+    @property
     def frames(self) -> Dict[str, _np.ndarray]:
-        """/frames: one array per dataset, cut to the complete rows."""
+        """/frames: one array per dataset, cut to the complete rows ({} for an external
+        trace, which has no /frames)."""
+        if "frames" not in self.h5:
+            return {}
         fr = self.h5["frames"]
         n = min(d.shape[0] for d in fr.values())
         return {k: d[:n] for k, d in fr.items()}
 
+    def _state_rows(self) -> int:
+        st = self.h5["states"]
+        s = min(st[k].shape[0] for k in ("frame", "position", "velocity", "orientation", "angular_velocity")
+                if k in st)
+        c = self.h5.attrs.get("committed_states")
+        return s if c is None else min(s, int(c))
+
     @property
     def state_frames(self) -> _np.ndarray:
-        """Frames that have a state row (0, k, 2k, ...), complete rows only."""
+        """Frames that have a state row (0, k, 2k, ...; an external trace without
+        /states/frame: 0, 1, ..., F), complete rows only."""
+        if "states" not in self.h5:
+            self._fail("/states", "absent", "a trace with states (positions and velocities)")
+        s = self._state_rows()
         st = self.h5["states"]
-        s = min(st["frame"].shape[0], st["position"].shape[0], st["velocity"].shape[0])
-        return st["frame"][:s]
+        return st["frame"][:s] if "frame" in st else _np.arange(s, dtype=_np.int64)
+
+    def _state_row(self, frame: int) -> int:
+        frames = self.state_frames
+        rows = _np.flatnonzero(frames == frame)
+        if rows.size == 0:
+            raise InputError(f"{self.path}: /states: no state for frame {frame}; allowed: frames "
+                             f"{frames[:1].tolist()}..{frames[-1:].tolist()} "
+                             f"every {self.h5.attrs.get('state_every', 1)}")
+        return int(rows[0])
 
     def state(self, frame: int):
         """(positions, velocities) at `frame`, each (n, 3) float32. Raises InputError when
         the trace holds no state for that frame (it keeps every state_every-th)."""
-        rows = _np.flatnonzero(self.state_frames == frame)
-        if rows.size == 0:
-            raise InputError(f"{self.path}: /states: no state for frame {frame}; allowed: frames "
-                             f"{self.state_frames[:1].tolist()}..{self.state_frames[-1:].tolist()} "
-                             f"every {self.h5.attrs.get('state_every', 1)}")
+        r = self._state_row(frame)
         st = self.h5["states"]
-        return st["position"][rows[0]], st["velocity"][rows[0]]
+        return st["position"][r], st["velocity"][r]
 
-    def contacts(self, frame: int) -> Dict[str, _np.ndarray]:
-        """Frame `frame`'s /contacts rows: pair (C, 2), normal (C, 3), depth, jn, jt (C,).
-        Raises InputError when the trace has no contacts for it."""
+    def _check_unit(self, q: _np.ndarray, frames) -> None:
+        norm = _np.sqrt(_np.sum(_np.asarray(q, _np.float64) ** 2, axis=-1))
+        bad = ~(_np.abs(norm - 1.0) <= 1e-3)
+        if bad.any():
+            idx = tuple(int(i) for i in _np.argwhere(bad)[0])
+            row = idx[0] if q.ndim == 3 else None
+            body = idx[-1]
+            frame = frames if row is None else int(frames[row])
+            self._fail("/states/orientation", f"frame {frame}: body {body}: {q[idx].tolist()}, |q| = {norm[idx]:g}",
+                       "unit quaternions (w, x, y, z), body to world, | |q| - 1 | <= 1e-3")
+
+    def rotation(self, frame: int):
+        """(orientations, angular_velocities) at `frame`: (n, 4) float32 unit quaternions
+        (w, x, y, z), body to world, and (n, 3) float32 rad/s in the world frame. A trace
+        without rotation gives the identity and zeros. Raises InputError when the trace
+        holds no state for that frame, or naming the body of a non-unit quaternion."""
+        r = self._state_row(frame)
+        n = self.body_count
+        if not self.rotating:
+            q = _np.zeros((n, 4), _np.float32)
+            q[:, 0] = 1.0
+            return q, _np.zeros((n, 3), _np.float32)
+        st = self.h5["states"]
+        q = st["orientation"][r].astype(_np.float32, copy=False)
+        self._check_unit(q, frame)
+        return q, st["angular_velocity"][r].astype(_np.float32, copy=False)
+
+    @property
+    def orientations(self) -> _np.ndarray:
+        """(S, n, 4) float32: the orientation of every state row (state_frames), complete
+        rows only; identity without rotation. Raises InputError naming frame and body of a
+        non-unit quaternion."""
+        s, n = len(self.state_frames), self.body_count
+        if not self.rotating:
+            q = _np.zeros((s, n, 4), _np.float32)
+            q[..., 0] = 1.0
+            return q
+        q = self.h5["states/orientation"][:s].astype(_np.float32, copy=False)
+        self._check_unit(q, self.state_frames)
+        return q
+
+    @property
+    def angular_velocities(self) -> _np.ndarray:
+        """(S, n, 3) float32 rad/s (world frame) of every state row; zeros without rotation."""
+        s, n = len(self.state_frames), self.body_count
+        if not self.rotating:
+            return _np.zeros((s, n, 3), _np.float32)
+        return self.h5["states/angular_velocity"][:s].astype(_np.float32, copy=False)
+
+    @property
+    def inertia(self) -> _np.ndarray:
+        """(n, 3, 3) float32 body-frame inertia tensors (kg m^2): /bodies/inertia, else
+        derived as a solid box of the local AABB at the body's mass, m/12 diag(b^2 + c^2,
+        a^2 + c^2, a^2 + b^2) (Bullet's rule; zeros for static bodies)."""
+        n = self.body_count
+        if "bodies/inertia" in self.h5:
+            d = self.h5["bodies/inertia"]
+            if d.shape != (n, 3, 3):
+                self._fail("/bodies/inertia", f"shape {' x '.join(map(str, d.shape))}",
+                           f"{n} x 3 x 3 (kg m^2, body frame, one per body)")
+            return d[:].astype(_np.float32, copy=False)
+        lo = self.h5["bodies/local_aabb_min"][:].astype(_np.float64)
+        hi = self.h5["bodies/local_aabb_max"][:].astype(_np.float64)
+        w = self.h5["bodies/inverse_mass"][:].astype(_np.float64)
+        m = _np.where(w > 0, 1.0 / _np.where(w > 0, w, 1.0), 0.0)
+        a, b, c = (hi - lo).T
+        out = _np.zeros((n, 3, 3))
+        out[:, 0, 0] = m / 12 * (b * b + c * c)
+        out[:, 1, 1] = m / 12 * (a * a + c * c)
+        out[:, 2, 2] = m / 12 * (a * a + b * b)
+        return out.astype(_np.float32)
+
+    @property
+    def materials(self) -> Dict[str, Any]:
+        """The materials a version 2 trace states (docs/trace-format.md, "Materials"): mu,
+        restitution, friction_combine, restitution_combine, contact_margin (the root
+        attributes, None when absent) and body_friction, body_restitution ((n,) float32 per
+        body: /bodies/friction, /bodies/restitution, or None); the names of PhysicsBodies
+        (Validator's physics=)."""
+        at = self.h5.attrs
+
+        def attr(k):
+            v = at.get(k)
+            if isinstance(v, bytes):
+                return v.decode("utf-8", "replace")
+            if isinstance(v, _np.generic):
+                return v.item()
+            return v
+        out = {k: attr(k) for k in ("mu", "restitution", "friction_combine", "restitution_combine",
+                                    "contact_margin")}
+        for k in ("friction", "restitution"):
+            d = self.h5.get("bodies/" + k)
+            out["body_" + k] = None if d is None else d[:].astype(_np.float32)
+        return out
+
+    def _contact_rows(self, frame: int):
         if "contacts" not in self.h5:
             raise InputError(f"{self.path}: /contacts: absent; allowed: a trace written with --contacts")
         c = self.h5["contacts"]
-        rows = _np.flatnonzero(c["frame"][:] == frame)
-        if rows.size == 0:
-            raise InputError(f"{self.path}: /contacts/frame: no row for frame {frame}")
         off = c["offsets"]
-        a, b = int(off[rows[0]]), int(off[rows[0] + 1])
-        return {k: c[k][a:b] for k in ("pair", "normal", "depth", "jn", "jt") if k in c}
+        if "frame" in c:
+            rows = _np.flatnonzero(c["frame"][:] == frame)
+            if rows.size == 0:
+                raise InputError(f"{self.path}: /contacts/frame: no row for frame {frame}")
+            i = int(rows[0])
+        else:  # an external trace: step f's rows are offsets[f-1] .. offsets[f]-1
+            if not 1 <= frame <= off.shape[0] - 1:
+                raise InputError(f"{self.path}: /contacts/offsets: no row for frame {frame}; allowed: frames 1.."
+                                 f"{off.shape[0] - 1}")
+            i = frame - 1
+        a, b = int(off[i]), int(off[i + 1])
+        if not 0 <= a <= b <= c["pair"].shape[0]:
+            self._fail("/contacts/offsets", f"frame {frame}: rows {a}..{b - 1}",
+                       f"0 <= offsets[f-1] <= offsets[f] <= {c['pair'].shape[0]} (the rows of /contacts/pair)")
+        return c, a, b
+
+    def contacts(self, frame: int) -> Dict[str, _np.ndarray]:
+        """Frame `frame`'s /contacts rows: pair (C, 2), normal (C, 3), depth, jn, jt (C,)
+        and, when the trace has /contacts/point (version 2), point (C, 3) (world, m). A
+        version 2 trace may hold several rows per pair (a manifold, consecutive): see
+        contacts_by_pair. Raises InputError when the trace has no contacts for it."""
+        c, a, b = self._contact_rows(frame)
+        return {k: c[k][a:b] for k in ("pair", "normal", "depth", "jn", "jt", "point") if k in c}
+
+    def contacts_by_pair(self, frame: int) -> Dict[Any, Dict[str, _np.ndarray]]:
+        """Frame `frame`'s contacts grouped by pair: {(a, b): {"normal": (k, 3), "depth",
+        "jn", "jt": (k,), "point": (k, 3) when present}}, a pair's k rows (its manifold) in
+        the order written, pairs in (a, b) order."""
+        rows = self.contacts(frame)
+        out: Dict[Any, Dict[str, _np.ndarray]] = {}
+        pairs = [tuple(int(x) for x in p) for p in rows["pair"]]
+        for key in sorted(set(pairs)):
+            sel = _np.array([p == key for p in pairs], dtype=bool)
+            out[key] = {k: v[sel] for k, v in rows.items() if k != "pair"}
+        return out

@@ -1,7 +1,7 @@
 #pragma once
 /// \file trace_reader.hpp
 /// Reads traces back (SPEC section 8; layout in docs/trace-format.md, format
-/// "octocd-trace" version 1) for `octocd replay` and `octocd compare`: root attributes,
+/// "octocd-trace" versions 1 and 2) for `octocd replay` and `octocd compare`: root attributes,
 /// whole 1-D columns, and single rows of the per-body arrays of /states, without loading
 /// the whole file. Opened read-only with the SWMR-read flag, so a trace still being
 /// written or left by a killed run reads too (its complete rows: see complete_rows).
@@ -55,8 +55,10 @@ constexpr std::uint64_t kMaxJudgedBodies = 20000;
 class TraceReader {
  public:
   /// Opens `path` and checks the root attributes `format == "octocd-trace"` and
-  /// `version == 1`. Throws InputError naming the file when it does not exist, is not an
-  /// HDF5 file, or is a trace of another format or version.
+  /// `version` 1 or 2 (2: a rotating engine's trace, docs/trace-format.md "External
+  /// traces, version 2"; what a reader does with it is the reader's business: `replay`
+  /// refuses it, `compare` reads its rotation). Throws InputError naming the file when it
+  /// does not exist, is not an HDF5 file, or is a trace of another format or version.
   explicit TraceReader(const std::string& path);
   ~TraceReader();
   TraceReader(TraceReader&&) noexcept;
@@ -64,6 +66,8 @@ class TraceReader {
 
   /// The file's path as given.
   const std::string& path() const;
+  /// The root attribute `version`: 1 or 2.
+  int version() const;
 
   /// Whether the root attribute `name` exists.
   bool has_attribute(const std::string& name) const;
@@ -77,7 +81,8 @@ class TraceReader {
   /// The dataset's dimensions (throws InputError when absent).
   std::vector<std::uint64_t> shape(const std::string& dataset) const;
   /// Complete rows of "/frames", "/states" or "/contacts" (docs/trace-format.md: the first
-  /// min(len) rows over the group's datasets of format version 1, and at most the root
+  /// min(len) rows over the group's datasets of format version 1 (and
+  /// version 2's /states/orientation and /states/angular_velocity), and at most the root
   /// attribute committed_frames or committed_states when the trace has it: rows past it
   /// may never have reached the disk); 0 for a group without them. Throws InputError when
   /// the group is absent or another group.
