@@ -339,6 +339,16 @@ QuantityResult compare_states(const Side& a, const Side& b, const char* dataset,
     if (quat) check_unit_quaternions(s, v, frame);
     return v;
   };
+  // A body beyond the tolerance: counted, and the first one kept with its detail.
+  const auto count_hit = [&](bool hit, std::int64_t frame, std::int64_t body, const auto& detail) {
+    if (!hit) return;
+    ++q.beyond_count;
+    if (q.differs) return;
+    q.differs = true;
+    q.frame = frame;
+    q.body = body;
+    q.detail = detail();
+  };
   std::map<std::int64_t, std::int64_t> row_b;
   for (std::int64_t i = 0; i < rb; ++i) row_b[fb[static_cast<std::size_t>(i)]] = i;
   std::int64_t common = 0;
@@ -365,13 +375,7 @@ QuantityResult compare_states(const Side& a, const Side& b, const char* dataset,
           return fmt::format("A {} B {}, angle {:.6g} deg", quat_text(pa), quat_text(pb), d * 57.29577951308232);
         };
         q.largest(same ? 0.0 : d, frame, body, both, {pa[0], pa[1], pa[2], pa[3]}, {pb[0], pb[1], pb[2], pb[3]});
-        if (hit) ++q.beyond_count;
-        if (hit && !q.differs) {
-          q.differs = true;
-          q.frame = frame;
-          q.body = body;
-          q.detail = both();
-        }
+        count_hit(hit, frame, body, both);
         continue;
       }
       const auto both = [&] { return fmt::format("A {} B {}", vec_text(&xa[k0]), vec_text(&xb[k0])); };
@@ -381,13 +385,7 @@ QuantityResult compare_states(const Side& a, const Side& b, const char* dataset,
         if (d > q.max_diff || (q.max_frame < 0 && d > 0.0))
           q.largest(d, frame, body, both, {xa[k0], xa[k0 + 1], xa[k0 + 2]}, {xb[k0], xb[k0 + 1], xb[k0 + 2]});
       }
-      if (hit) ++q.beyond_count;
-      if (hit && !q.differs) {
-        q.differs = true;
-        q.frame = frame;
-        q.body = body;
-        q.detail = both();
-      }
+      count_hit(hit, frame, body, both);
     }
   }
   q.compared = fmt::format("{} common states x {} bodies", common, bodies);
