@@ -13,7 +13,9 @@
 // identical; a difference exits 3).
 //
 // Usage: bench_step_paths SCENE.json... [--frames 2000] [--warmup 20] [--repeat 5]
-//          [--midphase 1,2] [--engines graph,small,cpu] [--small-blocks K]
+//          [--midphase 1,2] [--engines graph,small,cpu] [--small-blocks K,K,...]
+// --small-blocks runs the small path once per grid size given (OCTOCD_CUDA_SMALL_BLOCKS;
+// default: the engine's own grid), each its own line ("small/K").
 // Exit: 0; 1 runtime error (no CUDA device); 2 bad arguments; 3 the state hashes differ.
 #include <algorithm>
 #include <chrono>
@@ -24,6 +26,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -45,7 +48,8 @@ std::unique_ptr<Engine> make(const std::string& engine, const std::shared_ptr<co
     return std::make_unique<World>(model, make_broadphase(model->scene.broadphase, model->scene.domain));
   ::setenv("OCTOCD_CUDA_STAGE_TIMES", "0", 1);
   ::setenv("OCTOCD_CUDA_SMALL", engine == "small" ? "1" : "0", 1);
-  if (!small_blocks.empty()) ::setenv("OCTOCD_CUDA_SMALL_BLOCKS", small_blocks.c_str(), 1);
+  if (small_blocks.empty()) ::unsetenv("OCTOCD_CUDA_SMALL_BLOCKS");
+  else ::setenv("OCTOCD_CUDA_SMALL_BLOCKS", small_blocks.c_str(), 1);
   return std::make_unique<CudaWorld>(model, model->scene.broadphase.name);
 }
 
@@ -61,7 +65,8 @@ int main(int argc, char** argv) {
   CLI::App app{"Steps per second of the cuda engine's graph and small step paths, and the cpu engine"};
   std::vector<std::string> scenes;
   int frames = 2000, warmup = 20, repeat = 5;
-  std::string midphase, small_blocks;
+  std::string midphase;
+  std::vector<std::string> small_blocks;
   std::vector<std::string> engines = {"graph", "small", "cpu"};
   app.add_option("scenes", scenes, "scene files")->required()->check(CLI::ExistingFile);
   app.add_option("--frames", frames, "timed steps per repetition")->check(CLI::Range(1, 10000000));
@@ -71,7 +76,8 @@ int main(int argc, char** argv) {
   app.add_option("--engines", engines, "graph, small, cpu")
       ->delimiter(',')
       ->check(CLI::IsMember({"graph", "small", "cpu"}));
-  app.add_option("--small-blocks", small_blocks, "OCTOCD_CUDA_SMALL_BLOCKS for the small path");
+  app.add_option("--small-blocks", small_blocks, "grid sizes (OCTOCD_CUDA_SMALL_BLOCKS) for the small path")
+      ->delimiter(',');
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -86,12 +92,19 @@ int main(int argc, char** argv) {
       if (!midphase.empty()) scene.midphase = MidphaseConfig::parse(midphase);
       const std::shared_ptr<const Model> model = build_model(scene);
       std::map<std::string, std::uint64_t> hashes;
+      std::vector<std::pair<std::string, std::string>> runs;  // (engine, small blocks)
       for (const std::string& engine : engines) {
+        if (engine == "small" && !small_blocks.empty())
+          for (const std::string& k : small_blocks) runs.emplace_back(engine, k);
+        else
+          runs.emplace_back(engine, "");
+      }
+      for (const auto& [engine, blocks] : runs) {
         std::vector<double> rates;
         std::string path = engine;
         std::uint64_t hash = 0;
         for (int r = 0; r < repeat; ++r) {
-          std::unique_ptr<Engine> e = make(engine, model, small_blocks);
+          std::unique_ptr<Engine> e = make(engine, model, blocks);
           if (auto* c = dynamic_cast<CudaWorld*>(e.get())) path = c->step_path();
           for (int f = 0; f < warmup; ++f) e->step();
           const auto t0 = std::chrono::steady_clock::now();
@@ -100,10 +113,11 @@ int main(int argc, char** argv) {
           rates.push_back(frames / s);
           hash = e->state_hash();
         }
-        hashes[engine] = hash;
+        const std::string label = blocks.empty() ? engine : engine + "/" + blocks;
+        hashes[label] = hash;
         const auto [lo, hi] = std::minmax_element(rates.begin(), rates.end());
         fmt::print("| {} | {} | {} | {} | {:.0f} | {:.0f} | {:.0f} | {:016x} |\n", scene.name, model->initial.size(),
-                   engine, path, median(rates), *lo, *hi, hash);
+                   label, path, median(rates), *lo, *hi, hash);
         std::fflush(stdout);
       }
       for (const auto& [engine, h] : hashes)
