@@ -149,6 +149,37 @@ long small_blocks_from_env() {
   return v;
 }
 
+/// OCTOCD_CUDA_SMALL_WAIT: how the host waits for the fused small step: "poll" (default:
+/// spin on the step number the kernel writes last into mapped memory, with a
+/// cudaStreamQuery now and then for errors) or "sync" (cudaStreamSynchronize).
+bool small_poll_from_env() {
+  const char* v = std::getenv("OCTOCD_CUDA_SMALL_WAIT");
+  if (v == nullptr || std::strcmp(v, "poll") == 0) return true;
+  if (std::strcmp(v, "sync") == 0) return false;
+  throw InputError(fmt::format("OCTOCD_CUDA_SMALL_WAIT: '{}' is not allowed; allowed: poll (spin on the step's "
+                               "number in mapped memory, the default) or sync (cudaStreamSynchronize)",
+                               v));
+}
+
+/// Pairs up to which the fused small step runs its response passes, clamp and metrics in one
+/// block (OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS overrides; 0: never).
+constexpr long kSmallOneBlockPairs = 512;
+
+/// OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS: an integer >= 0, or kSmallOneBlockPairs when unset.
+long small_one_block_pairs_from_env() {
+  const char* k = std::getenv("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS");
+  if (k == nullptr) return kSmallOneBlockPairs;
+  char* end = nullptr;
+  errno = 0;
+  const long v = std::strtol(k, &end, 10);
+  if (*k < '0' || *k > '9' || end == k || *end != '\0' || errno != 0 || v < 0 || v > 0x7fffffffL)
+    throw InputError(fmt::format("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS: '{}' is not a pair count; allowed: an integer "
+                                 "0 .. 2147483647 (the fused small step's response runs in one block up to that "
+                                 "many pairs; 0: never)",
+                                 k));
+  return v;
+}
+
 /// The capacity to grow to when `needed` entries did not fit into `capacity`.
 std::size_t grown(std::size_t needed, std::size_t capacity) {
   return std::max(needed + needed / 4 + 64, 2 * capacity);
@@ -176,6 +207,16 @@ struct CudaWorld::Impl {
   bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
   unsigned small_grid = 1;  // its blocks (co-resident)
   gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
+  std::uint32_t one_block_pairs = 0;   // SmallStepDesc::one_block_pairs
+  bool small_poll = false;             // poll `done` instead of cudaStreamSynchronize
+  // Pinned: [0] the last step number the kernel wrote, [1 ..] the profile's stamps.
+  unsigned long long* small_host = nullptr;
+  unsigned long long* small_dev = nullptr;  // the same, mapped (null: no polling, no profile)
+  unsigned long long sequence = 0;
+  bool small_profile = false;  // OCTOCD_CUDA_SMALL_PROFILE=1
+  double profile_ns[gpu::kSmallProfileSlots] = {};  // sums: slot p - slot p-1; [0]: host launch to seen done
+  double profile_kernel_ns = 0.0;                   // sum of slot 9 - slot 0
+  std::uint64_t profile_steps = 0;
 
   // Capacities of the variable-size buffers (entries); prepare() sizes the buffers.
   std::size_t pair_cap = 1;
@@ -231,6 +272,7 @@ struct CudaWorld::Impl {
   ~Impl() {
     drop_graph();
     if (host) (void)cudaFreeHost(host);
+    if (small_host) (void)cudaFreeHost(small_host);
     for (cudaEvent_t& e : events)
       if (e) (void)cudaEventDestroy(e);
     if (stream) (void)cudaStreamDestroy(stream);
@@ -403,6 +445,12 @@ struct CudaWorld::Impl {
     s.metrics = metrics_desc(params);
     s.stats = stats.get();
     s.host_stats = host_dev;
+    s.one_block_pairs = one_block_pairs;
+    if (small_dev) {
+      s.done = small_dev;
+      s.sequence = sequence;
+      if (small_profile) s.profile = small_dev + 1;
+    }
     return s;
   }
   std::uint32_t lcap() const { return static_cast<std::uint32_t>(list_cap); }
@@ -557,11 +605,22 @@ struct CudaWorld::Impl {
   void run_step(const Scene& scene, bool recording) {
     prepare();
     if (small) {  // one cooperative launch; the statistics come back through mapped memory
+      const auto t0 = std::chrono::steady_clock::now();
+      ++sequence;
       launched(gpu::launch_small_step(small_desc(scene, recording), small_grid, stream), "small_step");
       if (!host_dev)
         check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
               "cudaMemcpy step statistics");
-      check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+      if (small_poll && host_dev && small_dev) wait_small_step();
+      else check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+      if (small_profile && small_dev) {
+        const double host_ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
+        volatile const unsigned long long* p = small_host + 1;
+        for (int i = 1; i < gpu::kSmallProfileSlots; ++i) profile_ns[i] += static_cast<double>(p[i] - p[i - 1]);
+        profile_ns[0] += host_ns;
+        profile_kernel_ns += static_cast<double>(p[gpu::kSmallProfileSlots - 1] - p[0]);
+        ++profile_steps;
+      }
       return;
     }
     if (use_graph && !sync_each_launch && !recording) {
@@ -586,6 +645,19 @@ struct CudaWorld::Impl {
       enqueue_step(scene, recording);
     }
     check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+  }
+
+  /// Spins until the fused step's kernel has written this step's number (its last write,
+  /// after the statistics); every 1024 spins asks the stream, so a failed kernel throws and
+  /// a finished one ends the wait whatever the flag says.
+  void wait_small_step() {
+    volatile const unsigned long long* done = small_host;
+    for (unsigned spins = 1; *done != sequence; ++spins) {
+      if ((spins & 1023u) != 0) continue;
+      const cudaError_t e = cudaStreamQuery(stream);
+      if (e == cudaSuccess) break;
+      if (e != cudaErrorNotReady) check(e, "small_step (cudaStreamQuery)");
+    }
   }
 
   /// True when a list overflowed its capacity; grows the capacities then (the state must
@@ -652,6 +724,8 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   // The step path's switches are input wherever they are read, device or not.
   const SmallMode small_mode = small_mode_from_env();
   const long small_blocks = small_blocks_from_env();
+  const bool small_poll = small_poll_from_env();
+  const long one_block_pairs = small_one_block_pairs_from_env();
   const std::string reason = no_device_reason();
   if (!reason.empty()) throw RuntimeError("no CUDA device: " + reason + "; the cuda engine needs one");
   check_free_memory(*model_, broadphase, needed);  // before the first allocation
@@ -696,6 +770,17 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     void* mapped = nullptr;
     if (cudaHostGetDevicePointer(&mapped, d.host, 0) == cudaSuccess) d.host_dev = static_cast<gpu::StepStats*>(mapped);
     else (void)cudaGetLastError();  // no mapping: a copy after the kernel instead
+    d.one_block_pairs = static_cast<std::uint32_t>(one_block_pairs);
+    d.small_poll = small_poll;
+    d.small_profile = env_is_one("OCTOCD_CUDA_SMALL_PROFILE");
+    check(cudaMallocHost(reinterpret_cast<void**>(&d.small_host),
+                         sizeof(unsigned long long) * (1 + gpu::kSmallProfileSlots)),
+          "cudaMallocHost (step number, profile)");
+    for (int i = 0; i <= gpu::kSmallProfileSlots; ++i) d.small_host[i] = 0;
+    void* mapped_done = nullptr;
+    if (d.host_dev && cudaHostGetDevicePointer(&mapped_done, d.small_host, 0) == cudaSuccess)
+      d.small_dev = static_cast<unsigned long long*>(mapped_done);
+    else (void)cudaGetLastError();
   }
   check(cudaStreamCreateWithFlags(&d.stream, cudaStreamNonBlocking), "cudaStreamCreate");
   for (cudaEvent_t& e : d.events) check(cudaEventCreate(&e), "cudaEventCreate");
@@ -783,6 +868,20 @@ std::string CudaWorld::step_path() const {
 bool CudaWorld::has_stage(Stage s) const {
   (void)s;
   return !impl_->small;
+}
+
+std::string CudaWorld::small_profile() const {
+  const Impl& d = *impl_;
+  if (!d.small || !d.small_profile || d.profile_steps == 0) return "";
+  const double k = 1e-3 / static_cast<double>(d.profile_steps);  // ns sums -> mean us
+  std::string out = fmt::format("fused small step, mean over {} steps (us):", d.profile_steps);
+  for (int i = 1; i < gpu::kSmallProfileSlots; ++i)
+    out += fmt::format(" {} {:.2f};", gpu::kSmallProfilePhases[i], d.profile_ns[i] * k);
+  out += fmt::format(" kernel (first to last stamp) {:.2f}; host launch call to completion seen {:.2f}; "
+                     "launch + wake-up (host - kernel) {:.2f}; wait {}",
+                     d.profile_kernel_ns * k, d.profile_ns[0] * k, (d.profile_ns[0] - d.profile_kernel_ns) * k,
+                     d.small_poll && d.small_dev ? "poll" : "sync");
+  return out;
 }
 
 std::string CudaWorld::notes() const {

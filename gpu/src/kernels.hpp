@@ -242,7 +242,26 @@ struct SmallStepDesc {
   MetricsDesc metrics;  ///< one block (n <= kMetricsOneBlockBodies)
   StepStats* stats = nullptr;       ///< device: counters and counts (zeroed by the step), metrics
   StepStats* host_stats = nullptr;  ///< mapped pinned host memory: a copy of *stats at the end (may be null)
+  /// The response passes, the clamp and the metrics run in block 0 alone (__syncthreads
+  /// instead of grid-wide barriers; the other blocks are done after the midphase) when the
+  /// step's pair count is at most this (0: never). Same per-element code, same bits.
+  std::uint32_t one_block_pairs = 0;
+  /// Mapped pinned host memory (may be null): the step's sequence number, written last
+  /// (after host_stats, behind __threadfence_system) so that the host can poll for the end.
+  volatile unsigned long long* done = nullptr;
+  unsigned long long sequence = 0;  ///< the value written to *done
+  /// Mapped pinned host memory of kSmallProfileSlots %globaltimer stamps (ns) by thread 0 of
+  /// block 0 at the end of every phase (OCTOCD_CUDA_SMALL_PROFILE=1), or null (no stamps).
+  unsigned long long* profile = nullptr;
 };
+
+/// The fused small step's phases as stamped into SmallStepDesc::profile: slot 0 the kernel's
+/// start, slot p the end of phase p (a phase the step skips: the previous stamp again).
+constexpr int kSmallProfileSlots = 10;
+/// The phase names of slots 1 .. kSmallProfileSlots - 1.
+constexpr const char* kSmallProfilePhases[kSmallProfileSlots] = {
+    "start",          "integrate+aabb", "count",     "scan",           "fill",
+    "mid_start+in-k", "mid_expand",     "mid_leaf",  "response+clamp", "metrics+stats"};
 
 /// The in_list value of a pair that did not fit the pair capacity.
 constexpr std::uint32_t kNoPair = 0xffffffffu;

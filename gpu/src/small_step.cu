@@ -54,27 +54,51 @@ constexpr std::size_t max3(std::size_t a, std::size_t b, std::size_t c) {
   return a > b ? (a > c ? a : c) : (b > c ? b : c);
 }
 
+/// Bodies up to which every block scans both counts itself into shared memory and fills
+/// right after (no grid-wide barrier between the scan and the fill).
+constexpr std::uint32_t kSharedScanBodies = 2048;
+
+/// The scan phase's shared memory: CUB's storage and both offset arrays (n + 1 entries).
+struct ScanShared {
+  typename BlockScan::TempStorage storage;
+  std::uint32_t out_offset[kSharedScanBodies + 1];
+  std::uint32_t in_offset[kSharedScanBodies + 1];
+};
+
 /// Shared memory of the fused kernel, used by one phase at a time (grid.sync between):
-/// the scan's storage, the leaf tiles, the metrics slots.
+/// the scan's storage (and offsets), the leaf tiles, the metrics slots.
 constexpr std::size_t kSharedBytes =
-    max3(sizeof(typename BlockScan::TempStorage), sizeof(mid::LeafTiles), sizeof(metrics::Acc) * kMetricsBlockSize);
+    max3(sizeof(ScanShared), sizeof(mid::LeafTiles), sizeof(metrics::Acc) * kMetricsBlockSize);
 static_assert(kSharedBytes <= 48 * 1024, "static shared memory of the fused step");
 
-/// Exclusive prefix sum of in[0 .. count) into out by one block (every thread calls it);
-/// returns the total.
+/// Exclusive prefix sum of in[0 .. count) into out (and into out2 when not null) by one
+/// block (every thread calls it); returns the total.
 __device__ std::uint32_t block_exclusive_scan(const std::uint32_t* in, std::uint32_t* out, std::uint32_t count,
-                                              typename BlockScan::TempStorage& storage) {
+                                              typename BlockScan::TempStorage& storage,
+                                              std::uint32_t* out2 = nullptr) {
   std::uint32_t carry = 0;
   for (std::uint32_t base = 0; base < count; base += kBlockSize) {
     const std::uint32_t idx = base + threadIdx.x;
     const std::uint32_t v = idx < count ? in[idx] : 0u;
     std::uint32_t excl = 0, tile_total = 0;
     BlockScan(storage).ExclusiveSum(v, excl, tile_total);
-    if (idx < count) out[idx] = carry + excl;
+    if (idx < count) {
+      out[idx] = carry + excl;
+      if (out2) out2[idx] = carry + excl;
+    }
     carry += tile_total;
     __syncthreads();  // the storage is reused by the next tile
   }
   return carry;
+}
+
+/// Thread 0 of block 0 stamps %globaltimer (ns) into profile[slot] (when profiling).
+__device__ inline void stamp(unsigned long long* profile, int slot) {
+  if (profile && blockIdx.x == 0 && threadIdx.x == 0) {
+    unsigned long long t;
+    asm volatile("mov.u64 %0, %%globaltimer;" : "=l"(t));
+    profile[slot] = t;
+  }
 }
 
 __device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { return a < b ? a : b; }
@@ -91,6 +115,7 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
   const std::uint32_t lane = threadIdx.x & 31u;
   const std::uint32_t cap = s.mid.pair_capacity;
   StepStats* st = s.stats;
+  stamp(s.profile, 0);
 
   // 1. Integrate and world AABBs; the step's counts from zero.
   if (tid == 0) {
@@ -104,6 +129,7 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
     aabb_body(b, i);
   }
   grid.sync();
+  stamp(s.profile, 1);
 
   // 2. Broadphase `flat`, counting: body i's row (j > i) and column (a < i).
   for (std::uint32_t i = warp; i < n; i += warps) {
@@ -112,25 +138,45 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
     if (lane == 0) s.in_count[i] = in;
   }
   grid.sync();
+  stamp(s.profile, 2);
 
-  // 3. One block: both exclusive scans over n + 1 counts; the pair total.
-  if (blockIdx.x == 0) {
-    auto& storage = *reinterpret_cast<typename BlockScan::TempStorage*>(smem);
-    const std::uint32_t total = block_exclusive_scan(s.out_count, s.out_offset, n + 1, storage);
-    (void)block_exclusive_scan(s.in_count, s.in_offset, n + 1, storage);
-    if (threadIdx.x == 0) st->counts[0] = total;
+  // 3. Both exclusive scans over n + 1 counts; the pair total. Up to kSharedScanBodies
+  // every block scans into its shared memory (block 0 also into the global offsets) and
+  // fills from there at once; above, block 0 scans and a grid-wide barrier precedes the fill.
+  const bool shared_scan = n <= kSharedScanBodies;
+  const std::uint32_t* out_offset = s.out_offset;
+  const std::uint32_t* in_offset = s.in_offset;
+  if (shared_scan) {
+    ScanShared& sh = *reinterpret_cast<ScanShared*>(smem);
+    std::uint32_t* g_out = blockIdx.x == 0 ? s.out_offset : nullptr;
+    std::uint32_t* g_in = blockIdx.x == 0 ? s.in_offset : nullptr;
+    const std::uint32_t total = block_exclusive_scan(s.out_count, sh.out_offset, n + 1, sh.storage, g_out);
+    (void)block_exclusive_scan(s.in_count, sh.in_offset, n + 1, sh.storage, g_in);
+    if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
+    out_offset = sh.out_offset;
+    in_offset = sh.in_offset;
+    stamp(s.profile, 3);
+  } else {
+    if (blockIdx.x == 0) {
+      auto& storage = *reinterpret_cast<typename BlockScan::TempStorage*>(smem);
+      const std::uint32_t total = block_exclusive_scan(s.out_count, s.out_offset, n + 1, storage);
+      (void)block_exclusive_scan(s.in_count, s.in_offset, n + 1, storage);
+      if (threadIdx.x == 0) st->counts[0] = total;
+    }
+    grid.sync();
+    stamp(s.profile, 3);
   }
-  grid.sync();
 
   // 4. Fill: the pair keys in (a, b) order and the in-lists in a order (below the capacity).
   for (std::uint32_t i = warp; i < n; i += warps) {
-    flat_pairs_of(b.aabb, n, i, nullptr, s.out_offset, s.pair_keys, cap, s.shift);
-    const std::uint32_t o = s.in_offset[i];
+    flat_pairs_of(b.aabb, n, i, nullptr, out_offset, s.pair_keys, cap, s.shift);
+    const std::uint32_t o = in_offset[i];
     (void)flat_row<false>(b.aabb, b.aabb[i], 0u, i, [&](std::uint32_t r, std::uint32_t a) {
       if (o + r < cap) s.in_list[o + r] = a;
     });
   }
   grid.sync();
+  stamp(s.profile, 4);
 
   // 5. Midphase start (one warp per pair); the in-lists' a resolved to k.
   MidListDesc md = s.mid;
@@ -153,6 +199,7 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
     }
   }
   grid.sync();
+  stamp(s.profile, 5);
 
   // 6. Midphase expand steps and leaves (as cuda_world.cpp enqueues them).
   for (int i = 0; i + 1 < md.steps; ++i) {
@@ -164,6 +211,7 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
     mid::mid_expand_items(md, i);
     grid.sync();
   }
+  stamp(s.profile, 6);
   if (md.steps > 0) {
     md.in = s.lists[(md.steps - 1) % 2];
     md.in_count = st->counts + md.steps;
@@ -174,19 +222,26 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
     mid::mid_leaf_items(md, *reinterpret_cast<mid::LeafTiles*>(smem));
     grid.sync();
   }
+  stamp(s.profile, 7);
 
-  // 7. Response passes; the clamp after the last one.
+  // 7. Response passes; the clamp after the last one. With few pairs block 0 runs them
+  // alone (its own barriers), then the metrics; the other blocks are done.
   TermsDesc td = s.terms;
   const std::uint32_t live = live_count(st->counts, cap);
+  const bool one_block = live <= s.one_block_pairs;
+  if (one_block && blockIdx.x != 0) return;  // uniform per block; no grid.sync follows then
+  const std::uint32_t r_tid = one_block ? threadIdx.x : tid;
+  const std::uint32_t r_threads = one_block ? blockDim.x : threads;
   for (int pass = 0; pass < s.iterations; ++pass) {
     if (pass > 0) {
       td.depth0 = nullptr;
       td.records = nullptr;
     }
-    for (std::uint32_t k = tid; k < live; k += threads) contact_terms_at(td, k);
-    grid.sync();
+    for (std::uint32_t k = r_tid; k < live; k += r_threads) contact_terms_at(td, k);
+    if (one_block) __syncthreads();
+    else grid.sync();
     const bool last = pass + 1 == s.iterations;
-    for (std::uint32_t i = tid; i < n; i += threads) {
+    for (std::uint32_t i = r_tid; i < n; i += r_threads) {
       if (b.w[i] != 0.0f) {
         ContactSums sums;
         const std::uint32_t e1 = min_u32(s.in_offset[i + 1], cap);
@@ -200,13 +255,22 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
       }
       if (last) clamp_body(b, i, s.max_velocity);
     }
-    grid.sync();
+    if (one_block) __syncthreads();
+    else grid.sync();
   }
+  stamp(s.profile, 8);
 
-  // 8. Block 0: the metrics, then everything the host reads.
+  // 8. Block 0: the metrics, then everything the host reads, then the step's number.
   if (blockIdx.x == 0) {
     metrics::metrics_block(s.metrics, reinterpret_cast<metrics::Acc*>(smem), 0, 1, &st->metrics);
-    if (threadIdx.x == 0 && s.host_stats) *s.host_stats = *st;
+    if (threadIdx.x == 0) {
+      stamp(s.profile, 9);
+      if (s.host_stats) *s.host_stats = *st;
+      if (s.done) {
+        __threadfence_system();  // the statistics (and stamps) before the step's number
+        *s.done = s.sequence;
+      }
+    }
   }
 }
 

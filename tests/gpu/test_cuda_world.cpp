@@ -668,10 +668,39 @@ TEST(CudaSmallStep, BadSwitchValuesAreInputErrors) {
       ADD_FAILURE() << "OCTOCD_CUDA_SMALL_BLOCKS='" << bad << "' gave a runtime error: " << e.what();
     }
   }
+  for (const char* bad : {"", "Poll", "spin", "sync "}) {
+    const ScopedEnv env("OCTOCD_CUDA_SMALL_WAIT", bad);
+    try {
+      CudaWorld gpu(model, "flat");
+      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL_WAIT='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_SMALL_WAIT: '{}' is not allowed; allowed: poll", bad)),
+                std::string::npos)
+          << e.what();
+    } catch (const RuntimeError& e) {
+      ADD_FAILURE() << "OCTOCD_CUDA_SMALL_WAIT='" << bad << "' gave a runtime error: " << e.what();
+    }
+  }
+  for (const char* bad : {"", "-1", "x", "7y", "2147483648"}) {
+    const ScopedEnv env("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", bad);
+    try {
+      CudaWorld gpu(model, "flat");
+      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(
+                    fmt::format("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS: '{}' is not a pair count", bad)),
+                std::string::npos)
+          << e.what();
+    } catch (const RuntimeError& e) {
+      ADD_FAILURE() << "OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS='" << bad << "' gave a runtime error: " << e.what();
+    }
+  }
 }
 
-// The small path's grid does not change a bit: one block, the default grid and the most
-// blocks that fit give the graph path's states, pairs, contacts, counts and metric bits
+// The small path's grid does not change a bit: one block, the default grid (response in one
+// block, polled), the default grid with the response grid-wide and a synchronising wait
+// (OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS=0, OCTOCD_CUDA_SMALL_WAIT=sync) and the most blocks
+// that fit give the graph path's states, pairs, contacts, counts and metric bits
 // (bunny-stack-50 with its own broadphase `octree`, 300 frames, records every 25th). The
 // small engines say what differs: no stage is timed, and their broadphase candidates are
 // n(n-1)/2 (the all-pairs test), where the graph's `octree` counts its own tests.
@@ -680,7 +709,7 @@ TEST(CudaSmallStep, AnyGridGivesTheGraphPathsBits) {
   const auto model = load_model("bunny-stack-50");
   const std::uint64_t n = model->initial.size();
   const std::string bp = model->scene.broadphase.name;
-  std::unique_ptr<CudaWorld> graph, one, dflt, most;
+  std::unique_ptr<CudaWorld> graph, one, dflt, wide, most;
   {
     const PathEnv env("graph");
     graph = std::make_unique<CudaWorld>(model, bp);
@@ -692,13 +721,18 @@ TEST(CudaSmallStep, AnyGridGivesTheGraphPathsBits) {
       const ScopedEnv blocks("OCTOCD_CUDA_SMALL_BLOCKS", "1");
       one = std::make_unique<CudaWorld>(model, bp);
     }
+    {
+      const ScopedEnv pairs("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", "0");
+      const ScopedEnv wait("OCTOCD_CUDA_SMALL_WAIT", "sync");
+      wide = std::make_unique<CudaWorld>(model, bp);
+    }
     const ScopedEnv blocks("OCTOCD_CUDA_SMALL_BLOCKS", "1000000");  // clamped to the blocks that fit
     most = std::make_unique<CudaWorld>(model, bp);
   }
   ASSERT_NE(graph->step_path(), "small");
   EXPECT_TRUE(graph->notes().empty()) << graph->notes();
   EXPECT_TRUE(graph->has_stage(Stage::Broadphase));
-  const std::vector<CudaWorld*> small = {one.get(), dflt.get(), most.get()};
+  const std::vector<CudaWorld*> small = {one.get(), dflt.get(), wide.get(), most.get()};
   for (CudaWorld* e : small) {
     ASSERT_EQ(e->step_path(), "small");
     EXPECT_FALSE(e->has_stage(Stage::Broadphase));
@@ -715,7 +749,10 @@ TEST(CudaSmallStep, AnyGridGivesTheGraphPathsBits) {
     for (CudaWorld* e : small) {
       const FrameMetrics ms = e->step();
       const std::string what = fmt::format("frame {}, small path ({} blocks asked)", f,
-                                           e == one.get() ? "1" : e == most.get() ? "1000000" : "default");
+                                           e == one.get()    ? "1"
+                                           : e == most.get() ? "1000000"
+                                           : e == wide.get() ? "default, grid-wide response, sync"
+                                                             : "default");
       ASSERT_EQ(graph->state_hash(), e->state_hash()) << what << ": " << first_difference(graph->state(), e->state());
       EXPECT_EQ(ms.cell_candidates, n * (n - 1) / 2) << what;
       EXPECT_EQ(mg.aabb_pairs, ms.aabb_pairs) << what;

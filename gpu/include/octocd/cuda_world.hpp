@@ -126,7 +126,11 @@ bool cuda_device_available();
 /// run the whole step as one cooperative kernel instead (OCTOCD_CUDA_SMALL: see there; the
 /// same bits: the same per-element device code, pairs in the same order, the same
 /// per-body summation order); OCTOCD_CUDA_SMALL_BLOCKS=K sets that kernel's grid (blocks,
-/// at most what fits on the device at once).
+/// at most what fits on the device at once); OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS=P (default
+/// 512, 0: never) runs its response passes, clamp and metrics in one block when a step has at
+/// most P pairs; OCTOCD_CUDA_SMALL_WAIT=poll (default: spin on the step's number in mapped
+/// memory) or sync (cudaStreamSynchronize) is how the host waits; OCTOCD_CUDA_SMALL_PROFILE=1
+/// times its phases (small_profile()). A bad value of any of them is an InputError.
 ///
 /// Errors (all thrown from the constructor or step()): RuntimeError when no device is
 /// usable, when the device has less memory free (cudaMemGetInfo) than
@@ -198,6 +202,12 @@ class CudaWorld : public Engine {
   /// "launches" (the per-stage kernels launched one by one: OCTOCD_CUDA_GRAPH=0 or
   /// OCTOCD_CUDA_SYNC=1). Fixed at construction.
   std::string step_path() const;
+  /// With OCTOCD_CUDA_SMALL_PROFILE=1 on the small path: one line of the mean time per
+  /// phase of the fused kernel (us, from %globaltimer stamps by thread 0 of block 0 at each
+  /// phase's end), the kernel's span, and the host's time from the launch call to seeing the
+  /// step done (their difference: launch and wake-up latency), over every step so far;
+  /// else "".
+  std::string small_profile() const;
   /// On the small path: no stage is timed (one kernel); else every stage.
   bool has_stage(Stage s) const override;
   /// On the small path, what it changes in the metrics (broadphase candidates, stage
