@@ -974,6 +974,9 @@ const FrameMetrics& CudaWorld::step() {
   if (r.first_non_finite < n) {
     const std::uint32_t i = r.first_non_finite;
     Vec3 x, v;
+    // The polled wait may return before the kernel has exited; the default stream's copies
+    // below do not wait for the engine's (non-blocking) stream.
+    check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize (non-finite body)");
     check(cudaMemcpy(&x, d.x.get() + i, sizeof(Vec3), cudaMemcpyDeviceToHost), "cudaMemcpy x");
     check(cudaMemcpy(&v, d.v.get() + i, sizeof(Vec3), cudaMemcpyDeviceToHost), "cudaMemcpy v");
     // The message World::step gives.
