@@ -3,6 +3,7 @@
 // an exclusive scan and a fill pass: body i writes its pair keys in j order at its scanned
 // offset (those that fit the capacity; the total tells the host to regrow and rerun).
 #include "broadphase_common.cuh"
+#include "broadphase_flat.cuh"
 #include "kernels.hpp"
 
 namespace octocd {
@@ -10,30 +11,14 @@ namespace gpu {
 namespace {
 
 
-/// One warp per body i (grid-stride); the lanes test j = i + 1 .. n - 1, 32 at a time.
-/// Counting (keys == nullptr) or writing the keys in j order from offset[i].
+/// One warp per body i (grid-stride): flat_pairs_of (broadphase_flat.cuh), counting
+/// (keys == nullptr) or writing the keys in j order from offset[i].
 __global__ void flat_kernel(const Aabb* aabb, std::uint32_t n, std::uint32_t* count, const std::uint32_t* offset,
                             unsigned long long* keys, std::uint32_t capacity, int shift) {
-  const std::uint32_t lane = threadIdx.x & 31u;
   const std::uint32_t warps = (gridDim.x * blockDim.x) >> 5;
-  for (std::uint32_t i = (blockIdx.x * blockDim.x + threadIdx.x) >> 5; i < n; i += warps) {
-    const Aabb bi = aabb[i];
-    std::uint32_t found = 0;
-    const std::uint32_t o = keys ? offset[i] : 0u;
-    for (std::uint32_t b = i + 1; b < n; b += 32) {
-      const std::uint32_t j = b + lane;
-      const bool hit = j < n && overlaps(bi, aabb[j]);
-      const unsigned mask = __ballot_sync(bp::kFullMask, hit);
-      if (keys && hit) {
-        const std::uint32_t idx = o + found + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
-        if (idx < capacity) keys[idx] = bp::pair_key(i, j, shift);
-      }
-      found += static_cast<std::uint32_t>(__popc(mask));
-    }
-    if (!keys && lane == 0) count[i] = found;
-  }
+  for (std::uint32_t i = (blockIdx.x * blockDim.x + threadIdx.x) >> 5; i < n; i += warps)
+    flat_pairs_of(aabb, n, i, count, offset, keys, capacity, shift);
 }
-
 
 }  // namespace
 

@@ -113,6 +113,73 @@ bool env_is_one(const char* name) {
   return v != nullptr && std::strcmp(v, "1") == 0;
 }
 
+/// OCTOCD_CUDA_SMALL: unset = Auto (the fused small step for small scenes without stage
+/// times), "0" = Never, "1" = Always (wherever it can run).
+enum class SmallMode { Auto, Never, Always };
+
+/// Blocks per multiprocessor of the fused small step by default (at most what fits, 2 on
+/// sm_90 at 119 registers per thread): one gives 8 warps per SM for every phase (1056 on an
+/// H100) while each grid-wide barrier waits for as few blocks as possible
+/// (OCTOCD_CUDA_SMALL_BLOCKS overrides the grid).
+constexpr int kSmallStepBlocksPerSm = 1;
+
+SmallMode small_mode_from_env() {
+  const char* v = std::getenv("OCTOCD_CUDA_SMALL");
+  if (v == nullptr) return SmallMode::Auto;
+  if (std::strcmp(v, "0") == 0) return SmallMode::Never;
+  if (std::strcmp(v, "1") == 0) return SmallMode::Always;
+  throw InputError(fmt::format("OCTOCD_CUDA_SMALL: '{}' is not allowed; allowed: 0 (never the fused small-scene "
+                               "step), 1 (always, where it can run), or unset (for up to {} bodies when stage "
+                               "times are off)",
+                               v, kCudaSmallStepMaxBodies));
+}
+
+/// OCTOCD_CUDA_SMALL_BLOCKS: the fused small step's grid (blocks, >= 1; clamped to what
+/// fits on the device at once), or 0 when unset (kSmallStepBlocksPerSm per SM).
+long small_blocks_from_env() {
+  const char* k = std::getenv("OCTOCD_CUDA_SMALL_BLOCKS");
+  if (k == nullptr) return 0;
+  char* end = nullptr;
+  errno = 0;
+  const long v = std::strtol(k, &end, 10);
+  if (*k < '0' || *k > '9' || end == k || *end != '\0' || errno != 0 || v < 1)
+    throw InputError(fmt::format("OCTOCD_CUDA_SMALL_BLOCKS: '{}' is not a block count; allowed: an integer >= 1 (the "
+                                 "fused small step's grid, clamped to the blocks that fit on the device at once)",
+                                 k));
+  return v;
+}
+
+/// OCTOCD_CUDA_SMALL_WAIT: how the host waits for the fused small step: "poll" (default:
+/// spin on the step number the kernel writes last into mapped memory, with a
+/// cudaStreamQuery now and then for errors) or "sync" (cudaStreamSynchronize).
+bool small_poll_from_env() {
+  const char* v = std::getenv("OCTOCD_CUDA_SMALL_WAIT");
+  if (v == nullptr || std::strcmp(v, "poll") == 0) return true;
+  if (std::strcmp(v, "sync") == 0) return false;
+  throw InputError(fmt::format("OCTOCD_CUDA_SMALL_WAIT: '{}' is not allowed; allowed: poll (spin on the step's "
+                               "number in mapped memory, the default) or sync (cudaStreamSynchronize)",
+                               v));
+}
+
+/// Pairs up to which the fused small step runs its response passes, clamp and metrics in one
+/// block (OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS overrides; 0: never).
+constexpr long kSmallOneBlockPairs = 512;
+
+/// OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS: an integer >= 0, or kSmallOneBlockPairs when unset.
+long small_one_block_pairs_from_env() {
+  const char* k = std::getenv("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS");
+  if (k == nullptr) return kSmallOneBlockPairs;
+  char* end = nullptr;
+  errno = 0;
+  const long v = std::strtol(k, &end, 10);
+  if (*k < '0' || *k > '9' || end == k || *end != '\0' || errno != 0 || v < 0 || v > 0x7fffffffL)
+    throw InputError(fmt::format("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS: '{}' is not a pair count; allowed: an integer "
+                                 "0 .. 2147483647 (the fused small step's response runs in one block up to that "
+                                 "many pairs; 0: never)",
+                                 k));
+  return v;
+}
+
 /// The capacity to grow to when `needed` entries did not fit into `capacity`.
 std::size_t grown(std::size_t needed, std::size_t capacity) {
   return std::max(needed + needed / 4 + 64, 2 * capacity);
@@ -137,6 +204,19 @@ struct CudaWorld::Impl {
   hd::LevelList levels;
   int level_steps = 0;  // midphase steps (0: aabb-only, or no levels)
   unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
+  bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
+  unsigned small_grid = 1;  // its blocks (co-resident)
+  gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
+  std::uint32_t one_block_pairs = 0;   // SmallStepDesc::one_block_pairs
+  bool small_poll = false;             // poll `done` instead of cudaStreamSynchronize
+  // Pinned: [0] the last step number the kernel wrote, [1 ..] the profile's stamps.
+  unsigned long long* small_host = nullptr;
+  unsigned long long* small_dev = nullptr;  // the same, mapped (null: no polling, no profile)
+  unsigned long long sequence = 0;
+  bool small_profile = false;  // OCTOCD_CUDA_SMALL_PROFILE=1
+  double profile_ns[gpu::kSmallProfileSlots] = {};  // sums: slot p - slot p-1; [0]: host launch to seen done
+  double profile_kernel_ns = 0.0;                   // sum of slot 9 - slot 0
+  std::uint64_t profile_steps = 0;
 
   // Capacities of the variable-size buffers (entries); prepare() sizes the buffers.
   std::size_t pair_cap = 1;
@@ -182,6 +262,7 @@ struct CudaWorld::Impl {
   DeviceBuffer<std::uint32_t> vals_in{"contact index entries"};
   DeviceBuffer<std::uint32_t> vals_out{"sorted contact index entries"};
   DeviceBuffer<std::uint32_t> body_begin{"body contact segments"};
+  DeviceBuffer<std::uint32_t> in_count{"small-step column counts"};  // small path only
   DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
 
   gpu::StepStats* host = nullptr;  // pinned
@@ -191,6 +272,7 @@ struct CudaWorld::Impl {
   ~Impl() {
     drop_graph();
     if (host) (void)cudaFreeHost(host);
+    if (small_host) (void)cudaFreeHost(small_host);
     for (cudaEvent_t& e : events)
       if (e) (void)cudaEventDestroy(e);
     if (stream) (void)cudaStreamDestroy(stream);
@@ -212,7 +294,7 @@ struct CudaWorld::Impl {
   std::vector<BufferBase*> scratch_buffers() {
     return {&bp_count, &bp_offset, &pair_keys, &pair_keys_sorted, &pairs, &confirmed, &items_a, &items_b,
             &hit,      &dx_a,      &dx_b,      &dv_a,             &dv_b,  &depth0,    &records, &keys_in,
-            &keys_out, &vals_in,   &vals_out,  &body_begin,       &temp};
+            &keys_out, &vals_in,   &vals_out,  &body_begin,       &temp,  &in_count};
   }
 
   /// Checks a launch; with OCTOCD_CUDA_SYNC=1 also waits for it and checks its execution.
@@ -260,6 +342,117 @@ struct CudaWorld::Impl {
   }
 
   std::uint32_t pcap() const { return static_cast<std::uint32_t>(pair_cap); }
+
+  /// The midphase lists' common fields (in / out are set per step): pairs from `keys`.
+  gpu::MidListDesc mid_desc(const unsigned long long* keys) {
+    gpu::MidListDesc md;
+    md.x = x.get();
+    md.w = w.get();
+    md.aabb = aabb.get();
+    md.shape = shape.get();
+    md.shapes = shapes_desc();
+    md.levels = levels;
+    md.pairs = pairs.get();
+    md.pair_keys = keys;
+    md.pair_shift = gpu::key_bits(n);
+    md.pair_count = counts();
+    md.pair_capacity = pcap();
+    md.confirmed = confirmed.get();
+    md.counters = counters();
+    md.steps = level_steps;
+    return md;
+  }
+
+  /// contact_terms' descriptor (depth0 and records unset: per pass).
+  gpu::TermsDesc terms_desc(const ContactParams& params) {
+    gpu::TermsDesc td;
+    td.pairs = pairs.get();
+    td.confirmed = confirmed.get();
+    td.pair_count = counts();
+    td.pair_capacity = pcap();
+    td.x = x.get();
+    td.v = v.get();
+    td.w = w.get();
+    td.local = local.get();
+    td.params = params;
+    td.hit = hit.get();
+    td.dx_a = dx_a.get();
+    td.dx_b = dx_b.get();
+    td.dv_a = dv_a.get();
+    td.dv_b = dv_b.get();
+    return td;
+  }
+
+  /// apply_sums' descriptor over the sorted contact index.
+  gpu::ApplyDesc apply_desc() {
+    gpu::ApplyDesc ad;
+    ad.x = x.get();
+    ad.v = v.get();
+    ad.w = w.get();
+    ad.n = n;
+    ad.body_begin = body_begin.get();
+    ad.entries = vals_out.get();
+    ad.hit = hit.get();
+    ad.dx_a = dx_a.get();
+    ad.dx_b = dx_b.get();
+    ad.dv_a = dv_a.get();
+    ad.dv_b = dv_b.get();
+    return ad;
+  }
+
+  gpu::MetricsDesc metrics_desc(const ContactParams& params) {
+    gpu::MetricsDesc xd;
+    xd.x = x.get();
+    xd.v = v.get();
+    xd.w = w.get();
+    xd.n = n;
+    xd.depth0 = depth0.get();
+    xd.pair_count = counts();
+    xd.pair_capacity = pcap();
+    xd.slop = params.slop;
+    xd.out = &stats.get()->metrics;
+    xd.partials = metric_partials.get();
+    return xd;
+  }
+
+  /// The fused small step's descriptor (small_step.cu): the same buffers as the graph
+  /// path; the in-lists live in keys_in, their offsets in body_begin.
+  gpu::SmallStepDesc small_desc(const Scene& scene, bool recording) {
+    const ContactParams& params = scene.response;
+    gpu::SmallStepDesc s;
+    s.bodies = bodies();
+    s.bodies.x_saved = x_saved.get();
+    s.bodies.v_saved = v_saved.get();
+    s.gravity = scene.gravity;
+    s.dt = scene.dt;
+    s.max_velocity = params.max_velocity;
+    s.iterations = params.iterations;
+    s.out_count = bp_count.get();
+    s.out_offset = bp_offset.get();
+    s.in_count = in_count.get();
+    s.in_offset = body_begin.get();
+    s.in_list = keys_in.get();
+    s.pair_keys = pair_keys.get();
+    s.shift = gpu::key_bits(n);
+    s.mid = mid_desc(pair_keys.get());  // the fill writes them in (a, b) order: no sort
+    s.lists[0] = items_a.get();
+    s.lists[1] = items_b.get();
+    s.list_capacity = lcap();
+    s.terms = terms_desc(params);
+    s.terms.depth0 = depth0.get();
+    s.terms.records = recording ? records.get() : nullptr;
+    s.apply = apply_desc();
+    s.metrics = metrics_desc(params);
+    s.stats = stats.get();
+    s.host_stats = host_dev;
+    s.one_block_pairs = one_block_pairs;
+    if (small_dev) {
+      s.done = small_dev;
+      s.sequence = sequence;
+      if (small_profile) s.profile = small_dev + 1;
+    }
+    return s;
+  }
   std::uint32_t lcap() const { return static_cast<std::uint32_t>(list_cap); }
 
   /// Sizes every buffer for the current capacities (outside any capture); a change drops
@@ -281,6 +474,7 @@ struct CudaWorld::Impl {
     items_a.ensure(list_cap);
     items_b.ensure(list_cap);
     body_begin.ensure(n1);
+    if (small) in_count.ensure(n1);
     std::size_t a = 0, b = 0, c = 0;
     check(gpu::sort_keys_u64(nullptr, a, pair_keys.get(), pair_keys_sorted.get(), pcap(), 2 * gpu::key_bits(n),
                              stream),
@@ -354,21 +548,7 @@ struct CudaWorld::Impl {
              "cub::DeviceRadixSort::SortKeys");
     record_event(3);  // the pairs are unpacked from the sorted keys by mid_start
     // 4. Midphase + narrow phase (SPEC 5.2-5.3) as per-level work lists.
-    gpu::MidListDesc md;
-    md.x = x.get();
-    md.w = w.get();
-    md.aabb = aabb.get();
-    md.shape = shape.get();
-    md.shapes = shapes_desc();
-    md.levels = levels;
-    md.pairs = pairs.get();
-    md.pair_keys = pair_keys_sorted.get();
-    md.pair_shift = gpu::key_bits(n);
-    md.pair_count = counts();
-    md.pair_capacity = pcap();
-    md.confirmed = confirmed.get();
-    md.counters = counters();
-    md.steps = level_steps;
+    gpu::MidListDesc md = mid_desc(pair_keys_sorted.get());
     gpu::MidItem* lists[2] = {items_a.get(), items_b.get()};
     md.out = lists[0];
     md.out_count = counts() + 1;
@@ -403,33 +583,8 @@ struct CudaWorld::Impl {
                                  entries, gpu::key_bits(n), stream),
              "cub::DeviceRadixSort::SortPairs");
     launched(gpu::launch_body_segments(keys_out.get(), entries, n, body_begin.get(), stream), "body_segments");
-    gpu::TermsDesc td;
-    td.pairs = pairs.get();
-    td.confirmed = confirmed.get();
-    td.pair_count = counts();
-    td.pair_capacity = pcap();
-    td.x = x.get();
-    td.v = v.get();
-    td.w = w.get();
-    td.local = local.get();
-    td.params = params;
-    td.hit = hit.get();
-    td.dx_a = dx_a.get();
-    td.dx_b = dx_b.get();
-    td.dv_a = dv_a.get();
-    td.dv_b = dv_b.get();
-    gpu::ApplyDesc ad;
-    ad.x = x.get();
-    ad.v = v.get();
-    ad.w = w.get();
-    ad.n = n;
-    ad.body_begin = body_begin.get();
-    ad.entries = vals_out.get();
-    ad.hit = hit.get();
-    ad.dx_a = dx_a.get();
-    ad.dx_b = dx_b.get();
-    ad.dv_a = dv_a.get();
-    ad.dv_b = dv_b.get();
+    gpu::TermsDesc td = terms_desc(params);
+    const gpu::ApplyDesc ad = apply_desc();
     for (int pass = 0; pass < params.iterations; ++pass) {
       td.depth0 = pass == 0 ? depth0.get() : nullptr;
       td.records = pass == 0 && recording ? records.get() : nullptr;
@@ -439,18 +594,7 @@ struct CudaWorld::Impl {
     launched(gpu::launch_clamp(b, params.max_velocity, stream), "clamp");
     record_event(5);
     // 6. Metrics, and everything the host reads, in one place.
-    gpu::MetricsDesc xd;
-    xd.x = x.get();
-    xd.v = v.get();
-    xd.w = w.get();
-    xd.n = n;
-    xd.depth0 = depth0.get();
-    xd.pair_count = counts();
-    xd.pair_capacity = pcap();
-    xd.slop = params.slop;
-    xd.out = &stats.get()->metrics;
-    xd.partials = metric_partials.get();
-    launched(gpu::launch_metrics(xd, stream), "metrics");
+    launched(gpu::launch_metrics(metrics_desc(params), stream), "metrics");
     check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
           "cudaMemcpy step statistics");
     record_event(6);
@@ -460,6 +604,25 @@ struct CudaWorld::Impl {
   /// launch by launch; then waits for it.
   void run_step(const Scene& scene, bool recording) {
     prepare();
+    if (small) {  // one cooperative launch; the statistics come back through mapped memory
+      const auto t0 = std::chrono::steady_clock::now();
+      ++sequence;
+      launched(gpu::launch_small_step(small_desc(scene, recording), small_grid, stream), "small_step");
+      if (!host_dev)
+        check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
+              "cudaMemcpy step statistics");
+      if (small_poll && host_dev && small_dev) wait_small_step();
+      else check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+      if (small_profile && small_dev) {
+        const double host_ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
+        volatile const unsigned long long* p = small_host + 1;
+        for (int i = 1; i < gpu::kSmallProfileSlots; ++i) profile_ns[i] += static_cast<double>(p[i] - p[i - 1]);
+        profile_ns[0] += host_ns;
+        profile_kernel_ns += static_cast<double>(p[gpu::kSmallProfileSlots - 1] - p[0]);
+        ++profile_steps;
+      }
+      return;
+    }
     if (use_graph && !sync_each_launch && !recording) {
       if (!graph_exec) {
         capturing = true;
@@ -482,6 +645,19 @@ struct CudaWorld::Impl {
       enqueue_step(scene, recording);
     }
     check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+  }
+
+  /// Spins until the fused step's kernel has written this step's number (its last write,
+  /// after the statistics); every 1024 spins asks the stream, so a failed kernel throws and
+  /// a finished one ends the wait whatever the flag says.
+  void wait_small_step() {
+    volatile const unsigned long long* done = small_host;
+    for (unsigned spins = 1; *done != sequence; ++spins) {
+      if ((spins & 1023u) != 0) continue;
+      const cudaError_t e = cudaStreamQuery(stream);
+      if (e == cudaSuccess) break;
+      if (e != cudaErrorNotReady) check(e, "small_step (cudaStreamQuery)");
+    }
   }
 
   /// True when a list overflowed its capacity; grows the capacities then (the state must
@@ -545,6 +721,11 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     cfg.name = broadphase;
     bp = gpu::make_device_broadphase(cfg, model_->scene.domain);
   }
+  // The step path's switches are input wherever they are read, device or not.
+  const SmallMode small_mode = small_mode_from_env();
+  const long small_blocks = small_blocks_from_env();
+  const bool small_poll = small_poll_from_env();
+  const long one_block_pairs = small_one_block_pairs_from_env();
   const std::string reason = no_device_reason();
   if (!reason.empty()) throw RuntimeError("no CUDA device: " + reason + "; the cuda engine needs one");
   check_free_memory(*model_, broadphase, needed);  // before the first allocation
@@ -563,9 +744,44 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     check(cudaGetDevice(&dev), "cudaGetDevice");
     check(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev), "cudaDeviceGetAttribute");
     d.warp_grid = static_cast<unsigned>(std::max(1, sms) * 4);
+    // The fused small step: wanted for this scene and mode, and launchable (a device that
+    // cannot launch cooperative kernels, or a kernel that does not fit, keeps the graph).
+    const std::size_t bodies = model_->initial.size();
+    const bool wanted = small_mode == SmallMode::Always
+                            ? bodies >= 1 && bodies <= gpu::kMetricsOneBlockBodies
+                            : small_mode == SmallMode::Auto && bodies >= 1 && bodies <= kCudaSmallStepMaxBodies &&
+                                  !d.stage_times;
+    int coop = 0, per_sm = 0;
+    if (wanted) {
+      check(cudaDeviceGetAttribute(&coop, cudaDevAttrCooperativeLaunch, dev), "cudaDeviceGetAttribute");
+      if (coop) check(gpu::small_step_blocks_per_sm(per_sm), "cudaOccupancyMaxActiveBlocksPerMultiprocessor");
+    }
+    if (wanted && coop && per_sm > 0) {
+      const int max_blocks = per_sm * std::max(1, sms);
+      int blocks = std::min(per_sm, kSmallStepBlocksPerSm) * std::max(1, sms);
+      if (small_blocks > 0) blocks = static_cast<int>(std::min<long>(small_blocks, max_blocks));
+      d.small = true;
+      d.small_grid = static_cast<unsigned>(blocks);
+    }
   }
   check(cudaMallocHost(reinterpret_cast<void**>(&d.host), sizeof(gpu::StepStats)), "cudaMallocHost (step read-back)");
   *d.host = gpu::StepStats{};
+  if (d.small) {  // the kernel writes the statistics straight into the pinned host copy
+    void* mapped = nullptr;
+    if (cudaHostGetDevicePointer(&mapped, d.host, 0) == cudaSuccess) d.host_dev = static_cast<gpu::StepStats*>(mapped);
+    else (void)cudaGetLastError();  // no mapping: a copy after the kernel instead
+    d.one_block_pairs = static_cast<std::uint32_t>(one_block_pairs);
+    d.small_poll = small_poll;
+    d.small_profile = env_is_one("OCTOCD_CUDA_SMALL_PROFILE");
+    check(cudaMallocHost(reinterpret_cast<void**>(&d.small_host),
+                         sizeof(unsigned long long) * (1 + gpu::kSmallProfileSlots)),
+          "cudaMallocHost (step number, profile)");
+    for (int i = 0; i <= gpu::kSmallProfileSlots; ++i) d.small_host[i] = 0;
+    void* mapped_done = nullptr;
+    if (d.host_dev && cudaHostGetDevicePointer(&mapped_done, d.small_host, 0) == cudaSuccess)
+      d.small_dev = static_cast<unsigned long long*>(mapped_done);
+    else (void)cudaGetLastError();
+  }
   check(cudaStreamCreateWithFlags(&d.stream, cudaStreamNonBlocking), "cudaStreamCreate");
   for (cudaEvent_t& e : d.events) check(cudaEventCreate(&e), "cudaEventCreate");
 
@@ -643,6 +859,41 @@ std::string CudaWorld::device() const { return impl_->device; }
 
 std::string CudaWorld::broadphase_name() const { return impl_->broadphase; }
 
+std::string CudaWorld::step_path() const {
+  const Impl& d = *impl_;
+  if (d.small) return "small";
+  return d.use_graph && !d.sync_each_launch ? "graph" : "launches";
+}
+
+bool CudaWorld::has_stage(Stage s) const {
+  (void)s;
+  return !impl_->small;
+}
+
+std::string CudaWorld::small_profile() const {
+  const Impl& d = *impl_;
+  if (!d.small || !d.small_profile || d.profile_steps == 0) return "";
+  const double k = 1e-3 / static_cast<double>(d.profile_steps);  // ns sums -> mean us
+  std::string out = fmt::format("fused small step, mean over {} steps (us):", d.profile_steps);
+  for (int i = 1; i < gpu::kSmallProfileSlots; ++i)
+    out += fmt::format(" {} {:.2f};", gpu::kSmallProfilePhases[i], d.profile_ns[i] * k);
+  out += fmt::format(" kernel (first to last stamp) {:.2f}; host launch call to completion seen {:.2f}; "
+                     "launch + wake-up (host - kernel) {:.2f}; wait {}",
+                     d.profile_kernel_ns * k, d.profile_ns[0] * k, (d.profile_ns[0] - d.profile_kernel_ns) * k,
+                     d.small_poll && d.small_dev ? "poll" : "sync");
+  return out;
+}
+
+std::string CudaWorld::notes() const {
+  const Impl& d = *impl_;
+  if (!d.small) return "";
+  return fmt::format(
+      "each step is one fused cooperative kernel ({} bodies, small-scene path up to {}; OCTOCD_CUDA_SMALL=0 turns it "
+      "off): its broadphase is the all-pairs test whatever the broadphase named ('{}'; the same pairs), so "
+      "'broadphase candidates' is n(n-1)/2, and its stages are not timed",
+      d.n, kCudaSmallStepMaxBodies, d.broadphase);
+}
+
 std::uint64_t CudaWorld::device_bytes() const {
   std::uint64_t total = 0;
   for (const BufferBase* b : impl_->all_buffers()) total += b->bytes();
@@ -711,7 +962,7 @@ const FrameMetrics& CudaWorld::step() {
   const gpu::MetricsResult r = d.host->metrics;
   const unsigned long long* counters = d.host->counters;
   const std::uint32_t np = d.host->counts[0];
-  const bool flat = !d.bp;
+  const bool flat = !d.bp || d.small;  // the small path's broadphase is the all-pairs test
   m.aabb_pairs = np;
   if (flat) m.cell_candidates = static_cast<std::uint64_t>(n) * (n == 0 ? 0 : n - 1) / 2;
   // Static bodies never move, so the static-static overlaps are the constant counted at
@@ -723,6 +974,9 @@ const FrameMetrics& CudaWorld::step() {
   if (r.first_non_finite < n) {
     const std::uint32_t i = r.first_non_finite;
     Vec3 x, v;
+    // The polled wait may return before the kernel has exited; the default stream's copies
+    // below do not wait for the engine's (non-blocking) stream.
+    check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize (non-finite body)");
     check(cudaMemcpy(&x, d.x.get() + i, sizeof(Vec3), cudaMemcpyDeviceToHost), "cudaMemcpy x");
     check(cudaMemcpy(&v, d.v.get() + i, sizeof(Vec3), cudaMemcpyDeviceToHost), "cudaMemcpy v");
     // The message World::step gives.
@@ -743,7 +997,7 @@ const FrameMetrics& CudaWorld::step() {
   }
   m.kinetic_energy = r.kinetic_energy;
   m.momentum = {r.momentum[0], r.momentum[1], r.momentum[2]};
-  for (int s = 0; d.stage_times && s < static_cast<int>(Stage::Count); ++s) {
+  for (int s = 0; d.stage_times && !d.small && s < static_cast<int>(Stage::Count); ++s) {
     float ms = 0.0f;
     check(cudaEventElapsedTime(&ms, d.events[s], d.events[s + 1]), "cudaEventElapsedTime");
     m.stage_ms[static_cast<std::size_t>(s)] = static_cast<double>(ms);

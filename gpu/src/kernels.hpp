@@ -207,6 +207,65 @@ struct MetricsDesc {
   MetricsResult* partials = nullptr;
 };
 
+/// The whole step for the fused small-scene path (small_step.cu): every stage's
+/// descriptor as the per-stage launches get it, plus the small path's own index buffers.
+/// One cooperative launch runs integrate + AABBs, the `flat` broadphase (count, one-block
+/// scans, fill), the midphase lists, `iterations` response passes with the clamp, and the
+/// metrics, separated by grid-wide barriers.
+struct SmallStepDesc {
+  BodiesDesc bodies;  ///< with x_saved / v_saved (the rerun after an overflow)
+  Vec3 gravity;
+  float dt = 0.0f;
+  float max_velocity = 0.0f;  ///< Eq. 23
+  int iterations = 1;         ///< response passes (>= 1)
+  // Broadphase `flat`, n + 1 entries each (the last count is 0, so the last offset is the
+  // total): out_* counts / offsets of the pairs (i, j), j > i (the pair keys' segments);
+  // in_* those of the pairs (a, i), a < i (the in-lists' segments).
+  std::uint32_t* out_count = nullptr;
+  std::uint32_t* out_offset = nullptr;
+  std::uint32_t* in_count = nullptr;
+  std::uint32_t* in_offset = nullptr;
+  /// pair_capacity entries: body i's in-list at in_offset[i]: the pairs (a, i), a < i, in
+  /// increasing a, first as a, then resolved to the pair's index k (kNoPair when it did not
+  /// fit the capacity: the step is then rerun).
+  std::uint32_t* in_list = nullptr;
+  unsigned long long* pair_keys = nullptr;  ///< pair_capacity: (a << shift) | b, sorted by (a, b)
+  int shift = 32;
+  /// The midphase's lists as cuda_world.cpp sets them per step (pairs, pair_keys,
+  /// pair_count = &stats->counts[0], confirmed, counters, steps, levels...); in / out are
+  /// set per step from `lists`.
+  MidListDesc mid;
+  MidItem* lists[2] = {nullptr, nullptr};
+  std::uint32_t list_capacity = 0;
+  TermsDesc terms;      ///< depth0 and records: the first pass's (records may be null)
+  ApplyDesc apply;      ///< body_begin / entries unused (the small path's index is above)
+  MetricsDesc metrics;  ///< one block (n <= kMetricsOneBlockBodies)
+  StepStats* stats = nullptr;       ///< device: counters and counts (zeroed by the step), metrics
+  StepStats* host_stats = nullptr;  ///< mapped pinned host memory: a copy of *stats at the end (may be null)
+  /// The response passes, the clamp and the metrics run in block 0 alone (__syncthreads
+  /// instead of grid-wide barriers; the other blocks are done after the midphase) when the
+  /// step's pair count is at most this (0: never). Same per-element code, same bits.
+  std::uint32_t one_block_pairs = 0;
+  /// Mapped pinned host memory (may be null): the step's sequence number, written last
+  /// (after host_stats, behind __threadfence_system) so that the host can poll for the end.
+  volatile unsigned long long* done = nullptr;
+  unsigned long long sequence = 0;  ///< the value written to *done
+  /// Mapped pinned host memory of kSmallProfileSlots %globaltimer stamps (ns) by thread 0 of
+  /// block 0 at the end of every phase (OCTOCD_CUDA_SMALL_PROFILE=1), or null (no stamps).
+  unsigned long long* profile = nullptr;
+};
+
+/// The fused small step's phases as stamped into SmallStepDesc::profile: slot 0 the kernel's
+/// start, slot p the end of phase p (a phase the step skips: the previous stamp again).
+constexpr int kSmallProfileSlots = 10;
+/// The phase names of slots 1 .. kSmallProfileSlots - 1.
+constexpr const char* kSmallProfilePhases[kSmallProfileSlots] = {
+    "start",          "integrate+aabb", "count",     "scan",           "fill",
+    "mid_start+in-k", "mid_expand",     "mid_leaf",  "response+clamp", "metrics+stats"};
+
+/// The in_list value of a pair that did not fit the pair capacity.
+constexpr std::uint32_t kNoPair = 0xffffffffu;
+
 // ---- integrate.cu --------------------------------------------------------------------
 /// Eq. 1-3 per body (octocd::integrate, no external force).
 cudaError_t launch_integrate(const BodiesDesc& b, Vec3 gravity, float dt, cudaStream_t stream);
@@ -256,6 +315,15 @@ cudaError_t launch_apply_sums(const ApplyDesc& d, cudaStream_t stream);
 /// kMetricsBlocks blocks into d.partials and one block combining them; a fixed order for
 /// a given n, so deterministic run to run.
 cudaError_t launch_metrics(const MetricsDesc& d, cudaStream_t stream);
+
+// ---- small_step.cu -------------------------------------------------------------------
+/// Blocks of kBlockSize threads of the fused step kernel that fit on one multiprocessor at
+/// once (cudaOccupancyMaxActiveBlocksPerMultiprocessor); 0 when it cannot run.
+cudaError_t small_step_blocks_per_sm(int& blocks);
+/// The whole step as one cooperative launch (cudaLaunchCooperativeKernel) of `grid` blocks
+/// of kBlockSize threads; `grid` must not exceed small_step_blocks_per_sm x the SMs.
+/// Requires s.bodies.n in [1, kMetricsOneBlockBodies].
+cudaError_t launch_small_step(const SmallStepDesc& s, unsigned grid, cudaStream_t stream);
 
 // ---- primitives.cu (CUB) ------------------------------------------------------------
 /// Exclusive prefix sum of `count` uint32. With temp == nullptr only sets temp_bytes.

@@ -6,8 +6,11 @@
 //   current positions (the AABBs World uses: the Aabbs stage's on the first pass,
 //   recomputed by the same translated() on later passes);
 // - per body: dx and dv summed over its kept contacts, in that order, from zero, exactly
-//   as World accumulates dx_sum / dv_sum (no float atomics), then apply_contact_sums.
+//   as World accumulates dx_sum / dv_sum (no float atomics), then apply_contact_sums
+//   (the per-contact and per-body code is in response.cuh, which the fused small step of
+//   small_step.cu calls too).
 #include "kernels.hpp"
+#include "response.cuh"
 
 namespace octocd {
 namespace gpu {
@@ -43,69 +46,20 @@ __global__ void body_segments_kernel(const std::uint32_t* keys, std::uint32_t co
 __global__ void contact_terms_kernel(TermsDesc d) {
   const std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
   if (k >= d.pair_capacity || k >= live_count(d.pair_count, d.pair_capacity)) return;
-  if (!d.confirmed[k]) {
-    d.hit[k] = 0;
-    if (d.depth0) d.depth0[k] = -1.0f;
-    if (d.records) d.records[k].hit = 0;
-    return;
-  }
-  const Pair p = d.pairs[k];
-  const float wa = d.w[p.a], wb = d.w[p.b];
-  const Vec3 va = d.v[p.a], vb = d.v[p.b];
-  const Aabb box_a = translated(d.local[p.a], d.x[p.a]);
-  const Aabb box_b = translated(d.local[p.b], d.x[p.b]);
-  const ContactTerms t = contact_terms(box_a, box_b, va, vb, wa, wb, d.params);
-  d.hit[k] = t.pen.hit ? 1 : 0;
-  if (d.depth0) d.depth0[k] = t.pen.hit ? t.pen.depth : -1.0f;
-  if (d.records) {
-    DeviceContact r;
-    r.hit = t.pen.hit ? 1u : 0u;
-    r.axis = t.pen.axis;
-    r.depth = t.pen.depth;
-    r.jn = t.imp.jn;
-    r.jt = t.imp.jt;
-    r.normal = t.pen.normal;
-    r.v_a = va;
-    r.v_b = vb;
-    r.dx_a = t.dx_a;
-    r.dx_b = t.dx_b;
-    r.dv_a = t.imp.dv_a;
-    r.dv_b = t.imp.dv_b;
-    d.records[k] = r;
-  }
-  if (!t.pen.hit) return;  // Eq. 9: discarded
-  d.dx_a[k] = t.dx_a;
-  d.dx_b[k] = t.dx_b;
-  d.dv_a[k] = t.imp.dv_a;
-  d.dv_b[k] = t.imp.dv_b;
+  contact_terms_at(d, k);
 }
 
 __global__ void apply_sums_kernel(ApplyDesc d) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= d.n) return;
   if (d.w[i] == 0.0f) return;
-  Vec3 dx_sum{};
-  Vec3 dv_sum{};
-  unsigned count = 0;
+  ContactSums sums;
   const std::uint32_t end = d.body_begin[i + 1];
   for (std::uint32_t e = d.body_begin[i]; e < end; ++e) {
     const std::uint32_t entry = d.entries[e];
-    const std::uint32_t k = entry >> 1;
-    if (!d.hit[k]) continue;
-    if ((entry & 1u) == 0) {
-      dx_sum += d.dx_a[k];
-      dv_sum += d.dv_a[k];
-    } else {
-      dx_sum += d.dx_b[k];
-      dv_sum += d.dv_b[k];
-    }
-    ++count;
+    sums.add(d, entry >> 1, (entry & 1u) != 0);
   }
-  Vec3 x = d.x[i];
-  Vec3 v = d.v[i];
-  apply_contact_sums(x, v, dx_sum, dv_sum, count);
-  d.x[i] = x;
-  d.v[i] = v;
+  sums.apply(d, i);
 }
 
 }  // namespace

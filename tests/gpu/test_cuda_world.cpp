@@ -10,6 +10,12 @@
 // engine's own count, and a planted shortage (OCTOCD_CUDA_FREE_BYTES) failing construction
 // and `octocd run|validate --engine cuda` with exit 1.
 //
+// Every equality test runs on both step paths of the cuda engine (issue 20): "graph" (the
+// per-stage kernels, OCTOCD_CUDA_SMALL=0) and "small" (the whole step as one cooperative
+// kernel, OCTOCD_CUDA_SMALL=1, for scenes of at most 32768 bodies), named by a _graph or
+// _small suffix (e.g. --gtest_filter='*_small*'); CudaSmallStep checks the small path's
+// grid sizes against the graph and its switches.
+//
 // Without a usable CUDA device every device test is SKIPPED with the reason
 // ("no CUDA device: ..."); the error paths that need no device run everywhere.
 //
@@ -35,6 +41,7 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <fmt/format.h>
@@ -108,6 +115,59 @@ std::vector<std::string> all_scenes() {
 
 std::string test_name(const ::testing::TestParamInfo<std::string>& info) {
   std::string s = info.param;
+  for (char& c : s)
+    if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+  return s;
+}
+
+/// Sets the environment variable `name` to `value` for the scope (the memory check's test
+/// hook OCTOCD_CUDA_FREE_BYTES, the step path OCTOCD_CUDA_SMALL), then restores it.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const std::string& value) : name_(name) {
+    const char* old = std::getenv(name);
+    had_ = old != nullptr;
+    if (had_) old_ = old;
+    ::setenv(name, value.c_str(), 1);
+  }
+  ~ScopedEnv() {
+    if (had_) ::setenv(name_, old_.c_str(), 1);
+    else ::unsetenv(name_);
+  }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  const char* name_;
+  bool had_ = false;
+  std::string old_;
+};
+
+/// The two step paths of the cuda engine every equality test runs (issue 20): "graph"
+/// (OCTOCD_CUDA_SMALL=0: the per-stage kernels, from a CUDA graph) and "small"
+/// (OCTOCD_CUDA_SMALL=1: the whole step as one cooperative kernel, for scenes of at most
+/// kSmallPathMostBodies bodies; larger scenes stay on the graph).
+const std::vector<std::string> kPaths = {"graph", "small"};
+constexpr std::size_t kSmallPathMostBodies = 32768;  // OCTOCD_CUDA_SMALL=1's limit
+
+/// OCTOCD_CUDA_SMALL for `path` while the engines are built.
+class PathEnv : public ScopedEnv {
+ public:
+  explicit PathEnv(const std::string& path) : ScopedEnv("OCTOCD_CUDA_SMALL", path == "small" ? "1" : "0") {}
+};
+
+/// The engine runs the path asked for: "small" where the scene allows it (a device that
+/// cannot launch cooperative kernels would fall back: the test then fails, saying so).
+void expect_path(const CudaWorld& gpu, const std::string& path, std::size_t bodies, const std::string& what) {
+  const bool small = path == "small" && bodies >= 1 && bodies <= kSmallPathMostBodies;
+  EXPECT_EQ(gpu.step_path() == "small", small)
+      << what << ": asked for the " << path << " path with " << bodies << " bodies, got " << gpu.step_path();
+}
+
+using SceneAndPath = std::tuple<std::string, std::string>;
+
+std::string scene_path_name(const ::testing::TestParamInfo<SceneAndPath>& info) {
+  std::string s = std::get<0>(info.param) + "_" + std::get<1>(info.param);
   for (char& c : s)
     if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
   return s;
@@ -233,10 +293,10 @@ void expect_cpu_cuda_counts(const FrameMetrics& cpu, const FrameMetrics& gpu, co
 
 bool is_checkpoint(int frame, int frames) { return frame == 1 || frame == 10 || frame == 100 || frame == frames; }
 
-class CpuVsCuda : public ::testing::TestWithParam<std::string> {};
+class CpuVsCuda : public ::testing::TestWithParam<SceneAndPath> {};
 class CpuVsCudaScale : public ::testing::TestWithParam<std::string> {};
-class CudaOctree : public ::testing::TestWithParam<std::string> {};
-class CudaRerun : public ::testing::TestWithParam<std::string> {};
+class CudaOctree : public ::testing::TestWithParam<SceneAndPath> {};
+class CudaRerun : public ::testing::TestWithParam<SceneAndPath> {};
 
 }  // namespace
 
@@ -300,21 +360,26 @@ TEST(CudaDevice, NonFiniteStateGivesTheCpuMessage) {
   while (body < model->initial.size() && model->initial.w[body] == 0.0f) ++body;
   ASSERT_LT(body, model->initial.size()) << "free-fall has a dynamic body";
   model->initial.v[body].y = std::numeric_limits<float>::quiet_NaN();
-  std::string cpu_msg, gpu_msg;
+  std::string cpu_msg;
   try {
     cpu_flat(model)->step();
   } catch (const RuntimeError& e) {
     cpu_msg = e.what();
   }
-  CudaWorld gpu(model, "flat");
-  try {
-    gpu.step();
-  } catch (const RuntimeError& e) {
-    gpu_msg = e.what();
-  }
   EXPECT_FALSE(cpu_msg.empty());
-  EXPECT_EQ(gpu_msg, cpu_msg);
-  EXPECT_EQ(gpu.frame(), 0) << "the failed step is not counted";
+  for (const std::string& path : kPaths) {
+    const PathEnv env(path);
+    CudaWorld gpu(model, "flat");
+    expect_path(gpu, path, model->initial.size(), "free-fall");
+    std::string gpu_msg;
+    try {
+      gpu.step();
+    } catch (const RuntimeError& e) {
+      gpu_msg = e.what();
+    }
+    EXPECT_EQ(gpu_msg, cpu_msg) << path;
+    EXPECT_EQ(gpu.frame(), 0) << path << ": the failed step is not counted";
+  }
 }
 
 TEST(CudaDevice, OutOfMemoryNamesTheBufferAndBytes) {
@@ -344,17 +409,22 @@ TEST(CudaDevice, OutOfMemoryNamesTheBufferAndBytes) {
 TEST(CudaDevice, SetStateIsUsed) {
   REQUIRE_CUDA_DEVICE();
   const auto model = load_model("bunny-stack-50");
-  auto cpu = cpu_flat(model);
-  CudaWorld gpu(model, "flat");
-  BodyState s = model->initial;
-  for (std::size_t i = 0; i < s.size(); ++i)
-    if (s.w[i] > 0.0f) s.v[i] = Vec3{0.25f, -1.5f, 0.125f};
-  cpu->mutable_state() = s;
-  gpu.set_state(s);
-  for (int f = 1; f <= 20; ++f) {
-    cpu->step();
-    gpu.step();
-    ASSERT_EQ(cpu->state_hash(), gpu.state_hash()) << "frame " << f << ": " << first_difference(cpu->state(), gpu.state());
+  for (const std::string& path : kPaths) {
+    const PathEnv env(path);
+    auto cpu = cpu_flat(model);
+    CudaWorld gpu(model, "flat");
+    expect_path(gpu, path, model->initial.size(), "bunny-stack-50");
+    BodyState s = model->initial;
+    for (std::size_t i = 0; i < s.size(); ++i)
+      if (s.w[i] > 0.0f) s.v[i] = Vec3{0.25f, -1.5f, 0.125f};
+    cpu->mutable_state() = s;
+    gpu.set_state(s);
+    for (int f = 1; f <= 20; ++f) {
+      cpu->step();
+      gpu.step();
+      ASSERT_EQ(cpu->state_hash(), gpu.state_hash())
+          << path << " frame " << f << ": " << first_difference(cpu->state(), gpu.state());
+    }
   }
 }
 
@@ -362,18 +432,6 @@ TEST(CudaDevice, SetStateIsUsed) {
 
 namespace {
 
-/// Sets the environment variable `name` to `value` for the scope (the memory check's test
-/// hook OCTOCD_CUDA_FREE_BYTES), then unsets it.
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const std::string& value) : name_(name) { ::setenv(name, value.c_str(), 1); }
-  ~ScopedEnv() { ::unsetenv(name_); }
-  ScopedEnv(const ScopedEnv&) = delete;
-  ScopedEnv& operator=(const ScopedEnv&) = delete;
-
- private:
-  const char* name_;
-};
 
 /// The message of the RuntimeError that constructing CudaWorld(model, broadphase) throws,
 /// "" when it constructs.
@@ -529,9 +587,12 @@ TEST(CudaMemory, CliExitsOneBeforeTheFirstStepNamingTheBytes) {
 
 /// Runs CPU (flat) and CUDA side by side on `model` for `frames` frames, asserting equal
 /// states after every step and equal records every 10th frame.
-void expect_lockstep(const std::shared_ptr<const Model>& model, int frames, const std::string& label) {
+void expect_lockstep(const std::shared_ptr<const Model>& model, int frames, const std::string& label,
+                     const std::string& path) {
+  const PathEnv env(path);
   auto cpu = cpu_flat(model);
   CudaWorld gpu(model, "flat");
+  expect_path(gpu, path, model->initial.size(), label);
   std::uint64_t contacts = 0;
   for (int f = 1; f <= frames; ++f) {
     const bool rec = f % 10 == 0;
@@ -569,19 +630,161 @@ TEST(CudaVariants, RelaxationPassesOverlapModesAndLevelLists) {
       model->scene.response.iterations = v.iterations;
       model->scene.response.overlap = v.overlap;
       if (v.levels) model->scene.midphase = MidphaseConfig::parse(v.levels);
-      expect_lockstep(model, frames, fmt::format("{} ({})", scene, v.label));
-      if (::testing::Test::HasFailure()) return;
+      for (const std::string& path : kPaths) {
+        expect_lockstep(model, frames, fmt::format("{} ({}, {} path)", scene, v.label, path), path);
+        if (::testing::Test::HasFailure()) return;
+      }
     }
   }
 }
 
+// The small path's switches (issue 20): bad values are input errors, before the device
+// is looked at (so this runs without a device too).
+TEST(CudaSmallStep, BadSwitchValuesAreInputErrors) {
+  const auto model = load_model("box-stack");
+  for (const char* bad : {"", "2", "yes", " 1", "1 "}) {
+    const ScopedEnv env("OCTOCD_CUDA_SMALL", bad);
+    try {
+      CudaWorld gpu(model, "flat");
+      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_SMALL: '{}' is not allowed; allowed: 0", bad)),
+                std::string::npos)
+          << e.what();
+    } catch (const RuntimeError& e) {
+      ADD_FAILURE() << "OCTOCD_CUDA_SMALL='" << bad << "' gave a runtime error, not an input error: " << e.what();
+    }
+  }
+  for (const char* bad : {"", "0", "-3", "x", "12x"}) {
+    const ScopedEnv env("OCTOCD_CUDA_SMALL_BLOCKS", bad);
+    try {
+      CudaWorld gpu(model, "flat");
+      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL_BLOCKS='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_SMALL_BLOCKS: '{}' is not a block count", bad)),
+                std::string::npos)
+          << e.what();
+    } catch (const RuntimeError& e) {
+      ADD_FAILURE() << "OCTOCD_CUDA_SMALL_BLOCKS='" << bad << "' gave a runtime error: " << e.what();
+    }
+  }
+  for (const char* bad : {"", "Poll", "spin", "sync "}) {
+    const ScopedEnv env("OCTOCD_CUDA_SMALL_WAIT", bad);
+    try {
+      CudaWorld gpu(model, "flat");
+      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL_WAIT='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_SMALL_WAIT: '{}' is not allowed; allowed: poll", bad)),
+                std::string::npos)
+          << e.what();
+    } catch (const RuntimeError& e) {
+      ADD_FAILURE() << "OCTOCD_CUDA_SMALL_WAIT='" << bad << "' gave a runtime error: " << e.what();
+    }
+  }
+  for (const char* bad : {"", "-1", "x", "7y", "2147483648"}) {
+    const ScopedEnv env("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", bad);
+    try {
+      CudaWorld gpu(model, "flat");
+      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(
+                    fmt::format("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS: '{}' is not a pair count", bad)),
+                std::string::npos)
+          << e.what();
+    } catch (const RuntimeError& e) {
+      ADD_FAILURE() << "OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS='" << bad << "' gave a runtime error: " << e.what();
+    }
+  }
+}
+
+// The small path's grid does not change a bit: one block, the default grid (response in one
+// block, polled), the default grid with the response grid-wide and a synchronising wait
+// (OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS=0, OCTOCD_CUDA_SMALL_WAIT=sync) and the most blocks
+// that fit give the graph path's states, pairs, contacts, counts and metric bits
+// (bunny-stack-50 with its own broadphase `octree`, 300 frames, records every 25th). The
+// small engines say what differs: no stage is timed, and their broadphase candidates are
+// n(n-1)/2 (the all-pairs test), where the graph's `octree` counts its own tests.
+TEST(CudaSmallStep, AnyGridGivesTheGraphPathsBits) {
+  REQUIRE_CUDA_DEVICE();
+  const auto model = load_model("bunny-stack-50");
+  const std::uint64_t n = model->initial.size();
+  const std::string bp = model->scene.broadphase.name;
+  std::unique_ptr<CudaWorld> graph, one, dflt, wide, most;
+  {
+    const PathEnv env("graph");
+    graph = std::make_unique<CudaWorld>(model, bp);
+  }
+  {
+    const PathEnv env("small");
+    dflt = std::make_unique<CudaWorld>(model, bp);
+    {
+      const ScopedEnv blocks("OCTOCD_CUDA_SMALL_BLOCKS", "1");
+      one = std::make_unique<CudaWorld>(model, bp);
+    }
+    {
+      const ScopedEnv pairs("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", "0");
+      const ScopedEnv wait("OCTOCD_CUDA_SMALL_WAIT", "sync");
+      wide = std::make_unique<CudaWorld>(model, bp);
+    }
+    const ScopedEnv blocks("OCTOCD_CUDA_SMALL_BLOCKS", "1000000");  // clamped to the blocks that fit
+    most = std::make_unique<CudaWorld>(model, bp);
+  }
+  ASSERT_NE(graph->step_path(), "small");
+  EXPECT_TRUE(graph->notes().empty()) << graph->notes();
+  EXPECT_TRUE(graph->has_stage(Stage::Broadphase));
+  const std::vector<CudaWorld*> small = {one.get(), dflt.get(), wide.get(), most.get()};
+  for (CudaWorld* e : small) {
+    ASSERT_EQ(e->step_path(), "small");
+    EXPECT_FALSE(e->has_stage(Stage::Broadphase));
+    EXPECT_NE(e->notes().find("n(n-1)/2"), std::string::npos) << e->notes();
+  }
+  std::uint64_t contacts = 0, vertex_tests = 0;
+  for (int f = 1; f <= 300; ++f) {
+    const bool rec = f % 25 == 0;
+    graph->set_recording(rec);
+    for (CudaWorld* e : small) e->set_recording(rec);
+    const FrameMetrics mg = graph->step();
+    contacts += mg.contacts;
+    vertex_tests += mg.vertex_tests;
+    for (CudaWorld* e : small) {
+      const FrameMetrics ms = e->step();
+      const std::string what = fmt::format("frame {}, small path ({} blocks asked)", f,
+                                           e == one.get()    ? "1"
+                                           : e == most.get() ? "1000000"
+                                           : e == wide.get() ? "default, grid-wide response, sync"
+                                                             : "default");
+      ASSERT_EQ(graph->state_hash(), e->state_hash()) << what << ": " << first_difference(graph->state(), e->state());
+      EXPECT_EQ(ms.cell_candidates, n * (n - 1) / 2) << what;
+      EXPECT_EQ(mg.aabb_pairs, ms.aabb_pairs) << what;
+      EXPECT_EQ(mg.dynamic_pairs, ms.dynamic_pairs) << what;
+      EXPECT_EQ(mg.box_tests, ms.box_tests) << what;
+      EXPECT_EQ(mg.box_pairs, ms.box_pairs) << what;
+      EXPECT_EQ(mg.vertex_tests, ms.vertex_tests) << what;
+      EXPECT_EQ(mg.contacts, ms.contacts) << what;
+      EXPECT_EQ(mg.kinetic_energy, ms.kinetic_energy) << what << ": the same reduction order";
+      EXPECT_EQ(mg.momentum, ms.momentum) << what;
+      EXPECT_EQ(mg.penetration_mean, ms.penetration_mean) << what;
+      EXPECT_EQ(mg.penetration_max, ms.penetration_max) << what;
+      EXPECT_EQ(mg.penetration_share_above_slop, ms.penetration_share_above_slop) << what;
+      for (double ms_stage : ms.stage_ms) EXPECT_EQ(ms_stage, 0.0) << what << ": one kernel has no stage times";
+      if (rec) expect_same_record(graph->record(), e->record(), what);
+      if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
+    }
+  }
+  EXPECT_GT(contacts, 0u) << "the run must reach contacts";
+  EXPECT_GT(vertex_tests, 0u) << "the run must reach the narrow phase";
+}
+
 TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
   REQUIRE_CUDA_DEVICE();
-  const std::string name = GetParam();
+  const std::string name = std::get<0>(GetParam());
+  const std::string path = std::get<1>(GetParam());
   const int frames = test_frames();
   const auto model = load_model(name);
+  const PathEnv env(path);
   auto cpu = cpu_flat(model);
   CudaWorld gpu(model, "flat");
+  expect_path(gpu, path, model->initial.size(), name);
   ASSERT_EQ(cpu->state_hash(), gpu.state_hash()) << name << ": initial states differ";
   std::uint64_t pairs_seen = 0, contacts_seen = 0;
   double cpu_ms = 0.0, gpu_ms = 0.0;
@@ -623,7 +826,7 @@ TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
   std::string stages;
   for (std::size_t s = 0; s < gpu_stage_ms.size(); ++s)
     stages += fmt::format(" {} {:.3f}", stage_name(static_cast<Stage>(s)), gpu_stage_ms[s] / frames);
-  std::cout << "[ info ] " << name << ": " << frames << " frames equal bit for bit; " << pairs_seen
+  std::cout << "[ info ] " << name << " (" << gpu.step_path() << " path): " << frames << " frames equal bit for bit; " << pairs_seen
             << " candidate pairs and " << contacts_seen << " contacts in total; mean step ms (not recorded) cpu "
             << fmt::format("{:.3f}", cpu_ms / frames) << ", cuda " << fmt::format("{:.3f}", gpu_ms / frames)
             << " (cuda stages ms:" << stages << ")\n";
@@ -631,12 +834,15 @@ TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
 
 TEST_P(CudaRerun, RerunAndCapacityOneGiveTheSameBits) {
   REQUIRE_CUDA_DEVICE();
-  const std::string name = GetParam();
+  const std::string name = std::get<0>(GetParam());
+  const std::string path = std::get<1>(GetParam());
   const int frames = test_frames();
   const auto model = load_model(name);
+  const PathEnv env(path);
   CudaWorld a(model, "flat");
   CudaWorld b(model, "flat");
   CudaWorld tiny(model, "flat");
+  expect_path(tiny, path, model->initial.size(), name);
   tiny.reset_capacities(1);
   for (int f = 1; f <= frames; ++f) {
     if (f % 50 == 0) tiny.reset_capacities(1);  // regrow mid-run too
@@ -664,10 +870,12 @@ TEST_P(CudaRerun, RerunAndCapacityOneGiveTheSameBits) {
 // `octree-strict`, `spatial-hash` and `lbvh` (the last also from capacity 1).
 TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
   REQUIRE_CUDA_DEVICE();
-  const std::string name = GetParam();
+  const std::string name = std::get<0>(GetParam());
+  const std::string path = std::get<1>(GetParam());
   const bool big = name.rfind("boxes-", 0) == 0;
   const int frames = big ? std::min(test_frames(), 50) : test_frames();
   const auto model = load_model(name);
+  const PathEnv env(path);  // the cpu engine ignores it
   BroadPhaseConfig cfg = model->scene.broadphase;
   cfg.name = "octree";
   World cpu(model, make_broadphase(cfg, model->scene.domain));
@@ -680,6 +888,8 @@ TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
   CudaWorld lbvh(model, "lbvh");
   CudaWorld lbvh_tiny(model, "lbvh");  // the capacity-overflow rerun with `lbvh`
   lbvh_tiny.reset_capacities(1);
+  for (const CudaWorld* e : {&oct, &flat, &tiny, &strict, &hash, &lbvh, &lbvh_tiny})
+    expect_path(*e, path, model->initial.size(), name + " " + e->broadphase_name());
   std::uint64_t pairs_seen = 0;
   for (int f = 1; f <= frames; ++f) {
     const bool rec = f == 1 || f % 10 == 0;
@@ -720,7 +930,7 @@ TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
     }
     if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
   }
-  std::cout << "[ info ] " << name << ": octree = flat on " << frames << " frames (" << pairs_seen
+  std::cout << "[ info ] " << name << " (" << oct.step_path() << " path): octree = flat on " << frames << " frames (" << pairs_seen
             << " pairs)\n";
 }
 
@@ -766,9 +976,14 @@ TEST_P(CpuVsCudaScale, StatesPairsAndContactsEqualBitForBit) {
 
 INSTANTIATE_TEST_SUITE_P(Scale, CpuVsCudaScale,
                          ::testing::Values("boxes-uniform-10k", "boxes-uniform-100k", "bunny-pile-10k"), test_name);
-INSTANTIATE_TEST_SUITE_P(Scenes, CudaOctree, ::testing::ValuesIn(all_scenes()), test_name);
+INSTANTIATE_TEST_SUITE_P(Scenes, CudaOctree, ::testing::Combine(::testing::ValuesIn(all_scenes()), ::testing::ValuesIn(kPaths)),
+                         scene_path_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(CudaOctree);
-INSTANTIATE_TEST_SUITE_P(Scenes, CpuVsCuda, ::testing::ValuesIn(shipped_scenes()), test_name);
-INSTANTIATE_TEST_SUITE_P(Scenes, CudaRerun, ::testing::ValuesIn(shipped_scenes()), test_name);
+INSTANTIATE_TEST_SUITE_P(Scenes, CpuVsCuda,
+                         ::testing::Combine(::testing::ValuesIn(shipped_scenes()), ::testing::ValuesIn(kPaths)),
+                         scene_path_name);
+INSTANTIATE_TEST_SUITE_P(Scenes, CudaRerun,
+                         ::testing::Combine(::testing::ValuesIn(shipped_scenes()), ::testing::ValuesIn(kPaths)),
+                         scene_path_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(CpuVsCuda);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(CudaRerun);

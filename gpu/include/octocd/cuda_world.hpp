@@ -29,6 +29,18 @@ namespace octocd {
 /// against this by cuda_device_bytes_needed and the CudaWorld constructor.
 constexpr std::uint64_t kCudaMaxBodies = 2147483647;
 
+/// The most bodies for which the cuda engine runs a step as ONE cooperative kernel launch
+/// (the small-scene path, gpu/src/small_step.cu) instead of its CUDA graph of per-stage
+/// kernels, whose fixed cost (about 80 us per step on an H100) bounds small scenes. The
+/// small path's broadphase is the all-pairs `flat` test, whatever broadphase is named (the
+/// same pair set by the DeviceBroadPhase contract; O(n^2) tests, cheap below this count),
+/// so its `cell_candidates` is n(n-1)/2. It is taken by default (OCTOCD_CUDA_SMALL unset)
+/// for 1 .. kCudaSmallStepMaxBodies bodies when stage times are off
+/// (OCTOCD_CUDA_STAGE_TIMES=0: one kernel cannot be split into stages) and the device can
+/// launch cooperative kernels; OCTOCD_CUDA_SMALL=1 takes it wherever it can run (up to
+/// 32768 bodies, stage times or not: they then stay 0), OCTOCD_CUDA_SMALL=0 never.
+constexpr std::uint64_t kCudaSmallStepMaxBodies = 2048;
+
 /// The broadphases the cuda engine has (`--broadphase` with `--engine cuda`), in a stable
 /// order: flat, octree, octree-strict, spatial-hash, lbvh. Exists in builds without CUDA.
 std::vector<std::string> cuda_broadphase_names();
@@ -110,7 +122,15 @@ bool cuda_device_available();
 /// whose output did not fit is run again from the saved state with larger buffers, so
 /// nothing is ever dropped. While the capacities do not change and no frame is being
 /// recorded, the step is replayed from a CUDA graph (OCTOCD_CUDA_GRAPH=0 turns that off;
-/// OCTOCD_CUDA_STAGE_TIMES=0 drops the stage events).
+/// OCTOCD_CUDA_STAGE_TIMES=0 drops the stage events). Small scenes (kCudaSmallStepMaxBodies)
+/// run the whole step as one cooperative kernel instead (OCTOCD_CUDA_SMALL: see there; the
+/// same bits: the same per-element device code, pairs in the same order, the same
+/// per-body summation order); OCTOCD_CUDA_SMALL_BLOCKS=K sets that kernel's grid (blocks,
+/// at most what fits on the device at once); OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS=P (default
+/// 512, 0: never) runs its response passes, clamp and metrics in one block when a step has at
+/// most P pairs; OCTOCD_CUDA_SMALL_WAIT=poll (default: spin on the step's number in mapped
+/// memory) or sync (cudaStreamSynchronize) is how the host waits; OCTOCD_CUDA_SMALL_PROFILE=1
+/// times its phases (small_profile()). A bad value of any of them is an InputError.
 ///
 /// Errors (all thrown from the constructor or step()): RuntimeError when no device is
 /// usable, when the device has less memory free (cudaMemGetInfo) than
@@ -176,6 +196,23 @@ class CudaWorld : public Engine {
 
   /// Bytes of device memory held by this engine's buffers.
   std::uint64_t device_bytes() const;
+
+  /// How a step runs: "small" (one cooperative kernel launch, kCudaSmallStepMaxBodies),
+  /// "graph" (the per-stage kernels replayed from a CUDA graph while not recording) or
+  /// "launches" (the per-stage kernels launched one by one: OCTOCD_CUDA_GRAPH=0 or
+  /// OCTOCD_CUDA_SYNC=1). Fixed at construction.
+  std::string step_path() const;
+  /// With OCTOCD_CUDA_SMALL_PROFILE=1 on the small path: one line of the mean time per
+  /// phase of the fused kernel (us, from %globaltimer stamps by thread 0 of block 0 at each
+  /// phase's end), the kernel's span, and the host's time from the launch call to seeing the
+  /// step done (their difference: launch and wake-up latency), over every step so far;
+  /// else "".
+  std::string small_profile() const;
+  /// On the small path: no stage is timed (one kernel); else every stage.
+  bool has_stage(Stage s) const override;
+  /// On the small path, what it changes in the metrics (broadphase candidates, stage
+  /// times); else "".
+  std::string notes() const override;
 
   struct Impl;  ///< device buffers and kernels (cuda_world.cpp)
 

@@ -1,0 +1,33 @@
+#pragma once
+// Per-body device code of integrate.cu (SPEC 4.1, 4.2, Eq. 23): one call per body, shared
+// by the per-stage kernels (integrate.cu) and the fused small-scene step (small_step.cu).
+// Each calls the same OCTOCD_HD function World::step calls for its body. CUDA only (nvcc).
+#include "kernels.hpp"
+
+namespace octocd {
+namespace gpu {
+
+/// Eq. 1-3 for body i (octocd::integrate, no external force), keeping the state before
+/// the step in x_saved / v_saved when they are set (for a rerun after a buffer overflow).
+__device__ inline void integrate_body(const BodiesDesc& b, std::uint32_t i, Vec3 gravity, float dt) {
+  Vec3 x = b.x[i];
+  Vec3 v = b.v[i];
+  if (b.x_saved) {
+    b.x_saved[i] = x;
+    b.v_saved[i] = v;
+  }
+  integrate(x, v, b.w[i], gravity, Vec3{}, dt);
+  b.x[i] = x;
+  b.v[i] = v;
+}
+
+/// Body i's world AABB: translated(local, x).
+__device__ inline void aabb_body(const BodiesDesc& b, std::uint32_t i) { b.aabb[i] = translated(b.local[i], b.x[i]); }
+
+/// Eq. 23 for body i when it is dynamic.
+__device__ inline void clamp_body(const BodiesDesc& b, std::uint32_t i, float v_max) {
+  if (b.w[i] != 0.0f) b.v[i] = clamp_velocity(b.v[i], v_max);
+}
+
+}  // namespace gpu
+}  // namespace octocd

@@ -1,0 +1,294 @@
+// The fused small-scene step (issue 20, item 2): below kCudaSmallStepMaxBodies bodies the
+// whole step is one cooperative kernel launch instead of a graph of about 25-30 dependent
+// nodes, whose fixed cost (launch and dependency latency per node, about 80 us per step on
+// an H100 whatever the scene) bounds small scenes. The grid is co-resident (sized from the
+// occupancy, launched with cudaLaunchCooperativeKernel) and its phases are separated by
+// grid-wide barriers (cooperative_groups grid.sync). Every phase calls the per-element device
+// code of the per-stage kernels (integrate.cuh, broadphase_flat.cuh, midphase.cuh,
+// response.cuh, metrics.cuh); the formulas are those of core's OCTOCD_HD headers. Phases:
+//  1. integrate (Eq. 1-3, keeping x_saved / v_saved for a rerun) and world AABBs, per body;
+//     zero the step's counters and counts;
+//  2. broadphase `flat`, one warp per body i: count its pairs (i, j), j > i (the row of
+//     broadphase_flat.cu) and the pairs (a, i), a < i (the same tests, overlaps(aabb[a],
+//     aabb[i]), read by column);
+//  3. one block: exclusive scans of both counts (cub::BlockScan, tile by tile; integers, so
+//     the offsets are those of cub::DeviceScan); the pair total into counts[0];
+//  4. fill, one warp per body: the keys (i << shift) | j at out_offset[i] in j order: the
+//     keys come out sorted by (a, b), so no key sort is needed (the graph path sorts the
+//     same unique set into the same order); the in-list of body i (a ascending) at
+//     in_offset[i];
+//  5. mid_start (one warp per pair: pairs[k], confirmed[k], step 0 items); the in-lists'
+//     entries a resolved to their pair index k (binary search in a's key segment);
+//  6. mid_expand per level step, mid_leaf (the midphase's work lists, warp per item);
+//  7. per response pass: contact_terms per pair, then per dynamic body the sums of its kept
+//     contacts in the order the graph path's stable sort by body gives and World::step
+//     adds them: the pairs (a, i), a < i, in increasing a (its in-list), then the pairs
+//     (i, b) in increasing b (its key segment); apply_contact_sums; after the last pass the
+//     clamp (Eq. 23) of the same body;
+//  8. block 0: the metrics (the one-block pass of metrics.cu over the same 512 slots, so
+//     the same bits), and a copy of the step statistics into mapped pinned host memory
+//     (no separate device-to-host copy).
+// Overflow: a pair list or midphase list that passes its capacity is counted in full and
+// the host regrows and reruns the step, as on the graph path. Every thread reaches every
+// grid.sync (no early return); loops over warps have warp-uniform bounds.
+#include <cooperative_groups.h>
+#include <cub/block/block_scan.cuh>
+
+#include "broadphase_common.cuh"
+#include "broadphase_flat.cuh"
+#include "integrate.cuh"
+#include "kernels.hpp"
+#include "metrics.cuh"
+#include "midphase.cuh"
+#include "response.cuh"
+
+namespace octocd {
+namespace gpu {
+namespace {
+
+namespace cg = cooperative_groups;
+
+using BlockScan = cub::BlockScan<std::uint32_t, kBlockSize>;
+
+constexpr std::size_t max3(std::size_t a, std::size_t b, std::size_t c) {
+  return a > b ? (a > c ? a : c) : (b > c ? b : c);
+}
+
+/// Bodies up to which every block scans both counts itself into shared memory and fills
+/// right after (no grid-wide barrier between the scan and the fill).
+constexpr std::uint32_t kSharedScanBodies = 2048;
+
+/// The scan phase's shared memory: CUB's storage and both offset arrays (n + 1 entries).
+struct ScanShared {
+  typename BlockScan::TempStorage storage;
+  std::uint32_t out_offset[kSharedScanBodies + 1];
+  std::uint32_t in_offset[kSharedScanBodies + 1];
+};
+
+/// Shared memory of the fused kernel, used by one phase at a time (grid.sync between):
+/// the scan's storage (and offsets), the leaf tiles, the metrics slots.
+constexpr std::size_t kSharedBytes =
+    max3(sizeof(ScanShared), sizeof(mid::LeafTiles), sizeof(metrics::Acc) * kMetricsBlockSize);
+static_assert(kSharedBytes <= 48 * 1024, "static shared memory of the fused step");
+
+/// Exclusive prefix sum of in[0 .. count) into out (and into out2 when not null) by one
+/// block (every thread calls it); returns the total.
+__device__ std::uint32_t block_exclusive_scan(const std::uint32_t* in, std::uint32_t* out, std::uint32_t count,
+                                              typename BlockScan::TempStorage& storage,
+                                              std::uint32_t* out2 = nullptr) {
+  std::uint32_t carry = 0;
+  for (std::uint32_t base = 0; base < count; base += kBlockSize) {
+    const std::uint32_t idx = base + threadIdx.x;
+    const std::uint32_t v = idx < count ? in[idx] : 0u;
+    std::uint32_t excl = 0, tile_total = 0;
+    BlockScan(storage).ExclusiveSum(v, excl, tile_total);
+    if (idx < count) {
+      out[idx] = carry + excl;
+      if (out2) out2[idx] = carry + excl;
+    }
+    carry += tile_total;
+    __syncthreads();  // the storage is reused by the next tile
+  }
+  return carry;
+}
+
+/// Thread 0 of block 0 stamps %globaltimer (ns) into profile[slot] (when profiling).
+__device__ inline void stamp(unsigned long long* profile, int slot) {
+  if (profile && blockIdx.x == 0 && threadIdx.x == 0) {
+    unsigned long long t;
+    asm volatile("mov.u64 %0, %%globaltimer;" : "=l"(t));
+    profile[slot] = t;
+  }
+}
+
+__device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { return a < b ? a : b; }
+
+__global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s) {
+  cg::grid_group grid = cg::this_grid();
+  __shared__ alignas(16) unsigned char smem[kSharedBytes];
+  const BodiesDesc& b = s.bodies;
+  const std::uint32_t n = b.n;
+  const std::uint32_t tid = blockIdx.x * blockDim.x + threadIdx.x;
+  const std::uint32_t threads = gridDim.x * blockDim.x;
+  const std::uint32_t warp = tid >> 5;  // blockDim.x == kBlockSize, a multiple of 32
+  const std::uint32_t warps = threads >> 5;
+  const std::uint32_t lane = threadIdx.x & 31u;
+  const std::uint32_t cap = s.mid.pair_capacity;
+  StepStats* st = s.stats;
+  stamp(s.profile, 0);
+
+  // 1. Integrate and world AABBs; the step's counts from zero.
+  if (tid == 0) {
+    for (int c = 0; c < 4; ++c) st->counters[c] = 0;
+    for (int c = 0; c < hd::kMidphaseMaxLevels + 1; ++c) st->counts[c] = 0;
+    s.out_count[n] = 0;
+    s.in_count[n] = 0;
+  }
+  for (std::uint32_t i = tid; i < n; i += threads) {
+    integrate_body(b, i, s.gravity, s.dt);
+    aabb_body(b, i);
+  }
+  grid.sync();
+  stamp(s.profile, 1);
+
+  // 2. Broadphase `flat`, counting: body i's row (j > i) and column (a < i).
+  for (std::uint32_t i = warp; i < n; i += warps) {
+    flat_pairs_of(b.aabb, n, i, s.out_count, nullptr, nullptr, 0, s.shift);
+    const std::uint32_t in = flat_row<false>(b.aabb, b.aabb[i], 0u, i, [](std::uint32_t, std::uint32_t) {});
+    if (lane == 0) s.in_count[i] = in;
+  }
+  grid.sync();
+  stamp(s.profile, 2);
+
+  // 3. Both exclusive scans over n + 1 counts; the pair total. Up to kSharedScanBodies
+  // every block scans into its shared memory (block 0 also into the global offsets) and
+  // fills from there at once; above, block 0 scans and a grid-wide barrier precedes the fill.
+  const bool shared_scan = n <= kSharedScanBodies;
+  const std::uint32_t* out_offset = s.out_offset;
+  const std::uint32_t* in_offset = s.in_offset;
+  if (shared_scan) {
+    ScanShared& sh = *reinterpret_cast<ScanShared*>(smem);
+    std::uint32_t* g_out = blockIdx.x == 0 ? s.out_offset : nullptr;
+    std::uint32_t* g_in = blockIdx.x == 0 ? s.in_offset : nullptr;
+    const std::uint32_t total = block_exclusive_scan(s.out_count, sh.out_offset, n + 1, sh.storage, g_out);
+    (void)block_exclusive_scan(s.in_count, sh.in_offset, n + 1, sh.storage, g_in);
+    if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
+    out_offset = sh.out_offset;
+    in_offset = sh.in_offset;
+    stamp(s.profile, 3);
+  } else {
+    if (blockIdx.x == 0) {
+      auto& storage = *reinterpret_cast<typename BlockScan::TempStorage*>(smem);
+      const std::uint32_t total = block_exclusive_scan(s.out_count, s.out_offset, n + 1, storage);
+      (void)block_exclusive_scan(s.in_count, s.in_offset, n + 1, storage);
+      if (threadIdx.x == 0) st->counts[0] = total;
+    }
+    grid.sync();
+    stamp(s.profile, 3);
+  }
+
+  // 4. Fill: the pair keys in (a, b) order and the in-lists in a order (below the capacity).
+  for (std::uint32_t i = warp; i < n; i += warps) {
+    flat_pairs_of(b.aabb, n, i, nullptr, out_offset, s.pair_keys, cap, s.shift);
+    const std::uint32_t o = in_offset[i];
+    (void)flat_row<false>(b.aabb, b.aabb[i], 0u, i, [&](std::uint32_t r, std::uint32_t a) {
+      if (o + r < cap) s.in_list[o + r] = a;
+    });
+  }
+  grid.sync();
+  stamp(s.profile, 4);
+
+  // 5. Midphase start (one warp per pair); the in-lists' a resolved to k.
+  MidListDesc md = s.mid;
+  md.out = s.lists[0];
+  md.out_count = st->counts + 1;
+  md.out_capacity = s.list_capacity;
+  mid::mid_start_items(md);
+  {
+    const std::uint32_t live = live_count(st->counts, cap);
+    for (std::uint32_t i = tid; i < n; i += threads) {
+      const std::uint32_t e1 = min_u32(s.in_offset[i + 1], cap);
+      for (std::uint32_t e = s.in_offset[i]; e < e1; ++e) {
+        const std::uint32_t a = s.in_list[e];
+        const std::uint32_t lo = s.out_offset[a];
+        const std::uint32_t hi = min_u32(s.out_offset[a + 1], live);
+        const unsigned long long key = bp::pair_key(a, i, s.shift);
+        const std::uint32_t k = lo < hi ? bp::lower_bound_u64(s.pair_keys, lo, hi, key) : hi;
+        s.in_list[e] = k < hi && s.pair_keys[k] == key ? k : kNoPair;
+      }
+    }
+  }
+  grid.sync();
+  stamp(s.profile, 5);
+
+  // 6. Midphase expand steps and leaves (as cuda_world.cpp enqueues them).
+  for (int i = 0; i + 1 < md.steps; ++i) {
+    md.in = s.lists[i % 2];
+    md.in_count = st->counts + 1 + i;
+    md.in_capacity = s.list_capacity;
+    md.out = s.lists[(i + 1) % 2];
+    md.out_count = st->counts + 2 + i;
+    mid::mid_expand_items(md, i);
+    grid.sync();
+  }
+  stamp(s.profile, 6);
+  if (md.steps > 0) {
+    md.in = s.lists[(md.steps - 1) % 2];
+    md.in_count = st->counts + md.steps;
+    md.in_capacity = s.list_capacity;
+    md.out = nullptr;
+    md.out_count = nullptr;
+    md.out_capacity = 0;
+    mid::mid_leaf_items(md, *reinterpret_cast<mid::LeafTiles*>(smem));
+    grid.sync();
+  }
+  stamp(s.profile, 7);
+
+  // 7. Response passes; the clamp after the last one. With few pairs block 0 runs them
+  // alone (its own barriers), then the metrics; the other blocks are done.
+  TermsDesc td = s.terms;
+  const std::uint32_t live = live_count(st->counts, cap);
+  const bool one_block = live <= s.one_block_pairs;
+  if (one_block && blockIdx.x != 0) return;  // uniform per block; no grid.sync follows then
+  const std::uint32_t r_tid = one_block ? threadIdx.x : tid;
+  const std::uint32_t r_threads = one_block ? blockDim.x : threads;
+  for (int pass = 0; pass < s.iterations; ++pass) {
+    if (pass > 0) {
+      td.depth0 = nullptr;
+      td.records = nullptr;
+    }
+    for (std::uint32_t k = r_tid; k < live; k += r_threads) contact_terms_at(td, k);
+    if (one_block) __syncthreads();
+    else grid.sync();
+    const bool last = pass + 1 == s.iterations;
+    for (std::uint32_t i = r_tid; i < n; i += r_threads) {
+      if (b.w[i] != 0.0f) {
+        ContactSums sums;
+        const std::uint32_t e1 = min_u32(s.in_offset[i + 1], cap);
+        for (std::uint32_t e = s.in_offset[i]; e < e1; ++e) {
+          const std::uint32_t k = s.in_list[e];
+          if (k != kNoPair) sums.add(s.apply, k, true);
+        }
+        const std::uint32_t k1 = min_u32(s.out_offset[i + 1], live);
+        for (std::uint32_t k = s.out_offset[i]; k < k1; ++k) sums.add(s.apply, k, false);
+        sums.apply(s.apply, i);
+      }
+      if (last) clamp_body(b, i, s.max_velocity);
+    }
+    if (one_block) __syncthreads();
+    else grid.sync();
+  }
+  stamp(s.profile, 8);
+
+  // 8. Block 0: the metrics, then everything the host reads, then the step's number.
+  if (blockIdx.x == 0) {
+    metrics::metrics_block(s.metrics, reinterpret_cast<metrics::Acc*>(smem), 0, 1, &st->metrics);
+    if (threadIdx.x == 0) {
+      stamp(s.profile, 9);
+      if (s.host_stats) *s.host_stats = *st;
+      if (s.done) {
+        __threadfence_system();  // the statistics (and stamps) before the step's number
+        *s.done = s.sequence;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+cudaError_t small_step_blocks_per_sm(int& blocks) {
+  blocks = 0;
+  return cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, small_step_kernel, kBlockSize, 0);
+}
+
+cudaError_t launch_small_step(const SmallStepDesc& s, unsigned grid, cudaStream_t stream) {
+  SmallStepDesc arg = s;
+  void* args[] = {&arg};
+  const cudaError_t e = cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&small_step_kernel), dim3(grid),
+                                                    dim3(kBlockSize), args, 0, stream);
+  if (e != cudaSuccess) return e;
+  return cudaGetLastError();
+}
+
+}  // namespace gpu
+}  // namespace octocd
