@@ -2,6 +2,7 @@
 /// Per-mesh octree of the midphase (SPEC 5.2, paper Algorithm A1).
 
 #include "octocd/mesh_octree.hpp"
+#include "octocd/vertex_blocks.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -84,6 +85,18 @@ int auto_mesh_octree_depth(const Mesh& mesh) {
     if (largest <= kAutoLeafLimit) return d;
   }
   return kAutoMaxDepth;
+}
+
+std::vector<Aabb> vertex_block_boxes(const std::vector<Vec3>& vertices) {
+  std::vector<Aabb> boxes;
+  boxes.reserve((vertices.size() + kVertexBlock - 1) / kVertexBlock);
+  for (std::size_t i = 0; i < vertices.size(); i += kVertexBlock) {
+    const std::size_t end = std::min<std::size_t>(i + kVertexBlock, vertices.size());
+    Aabb box{vertices[i], vertices[i]};
+    for (std::size_t j = i + 1; j < end; ++j) box = grow(box, Aabb{vertices[j], vertices[j]});
+    boxes.push_back(box);
+  }
+  return boxes;
 }
 
 MeshOctree build_mesh_octree(const Mesh& mesh, int depth) {

@@ -21,6 +21,7 @@
 #include "device_footprint.hpp"
 #include "kernels.hpp"
 #include "octocd/error.hpp"
+#include "octocd/vertex_blocks.hpp"
 
 namespace octocd {
 
@@ -238,6 +239,7 @@ struct CudaWorld::Impl {
   DeviceBuffer<Vec3> vertices{"octree vertices"};
   DeviceBuffer<MeshOctreeCell> cells{"octree cells"};
   DeviceBuffer<std::uint32_t> level_offsets{"octree level offsets"};
+  DeviceBuffer<Aabb> blocks{"octree vertex block boxes"};
   DeviceBuffer<float> theta{"per-shape theta"};
   DeviceBuffer<gpu::StepStats> stats{"step statistics"};
   DeviceBuffer<gpu::MetricsResult> metric_partials{"metrics partial sums"};
@@ -287,7 +289,7 @@ struct CudaWorld::Impl {
 
   std::vector<BufferBase*> all_buffers() {
     std::vector<BufferBase*> all{&x, &v, &x_saved, &v_saved, &w, &local, &shape, &aabb, &shapes, &vertices, &cells,
-                                 &level_offsets, &theta, &stats, &metric_partials};
+                                 &level_offsets, &blocks, &theta, &stats, &metric_partials};
     for (BufferBase* b : scratch_buffers()) all.push_back(b);
     return all;
   }
@@ -336,6 +338,7 @@ struct CudaWorld::Impl {
     s.vertices = vertices.get();
     s.cells = cells.get();
     s.level_offsets = level_offsets.get();
+    s.blocks = blocks.get();
     s.theta = theta.get();
     s.count = shape_count;
     return s;
@@ -801,6 +804,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   std::vector<Vec3> vertices;
   std::vector<MeshOctreeCell> cells;
   std::vector<std::uint32_t> level_offsets;
+  std::vector<Aabb> blocks;
   for (const Shape& s : m.shapes) {
     gpu::DeviceShape ds;
     ds.bounds = s.local;
@@ -813,6 +817,9 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
       ds.vertex_count = static_cast<std::uint32_t>(t.vertices.size());
       ds.cell_offset = static_cast<std::uint32_t>(cells.size());
       ds.level_offset_offset = static_cast<std::uint32_t>(level_offsets.size());
+      ds.block_offset = static_cast<std::uint32_t>(blocks.size());
+      const std::vector<Aabb> own = vertex_block_boxes(t.vertices);
+      blocks.insert(blocks.end(), own.begin(), own.end());
       vertices.insert(vertices.end(), t.vertices.begin(), t.vertices.end());
       cells.insert(cells.end(), t.cells.begin(), t.cells.end());
       level_offsets.insert(level_offsets.end(), t.level_offset.begin(), t.level_offset.end());
@@ -824,6 +831,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   upload(d.vertices, vertices, d.stream);
   upload(d.cells, cells, d.stream);
   upload(d.level_offsets, level_offsets, d.stream);
+  upload(d.blocks, blocks, d.stream);
   upload(d.theta, m.theta_shape, d.stream);
 
   // Bodies.

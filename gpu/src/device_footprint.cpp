@@ -14,6 +14,7 @@
 #include "device_footprint.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/vertex_blocks.hpp"
 
 namespace octocd {
 
@@ -32,6 +33,7 @@ struct ShapeCounts {
   std::uint64_t vertices = 0;
   std::uint64_t cells = 0;
   std::uint64_t level_offsets = 0;
+  std::uint64_t blocks = 0;  ///< vertex block boxes: ceil(vertices / kVertexBlock) per mesh
   std::uint64_t theta = 0;
 };
 
@@ -91,7 +93,7 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
   // Constructor: the packed shapes, per-shape theta, the step statistics.
   const std::uint64_t shapes = buf(sc.shapes, kDeviceShapeBytes) + buf(sc.vertices, sizeof(Vec3)) +
                                buf(sc.cells, sizeof(MeshOctreeCell)) + buf(sc.level_offsets, sizeof(std::uint32_t)) +
-                               buf(sc.theta, sizeof(float)) + buf(1, kStepStatsBytes) +
+                               buf(sc.blocks, sizeof(Aabb)) + buf(sc.theta, sizeof(float)) + buf(1, kStepStatsBytes) +
                                buf(kMetricsPartials, kMetricsResultBytes);
   // prepare() at the first capacities: bp_count, bp_offset, body_begin (n + 1 each); per
   // candidate pair: pair keys (2), pairs, confirmed, hit, dx_a, dx_b, dv_a, dv_b, depth0,
@@ -130,6 +132,7 @@ std::uint64_t cuda_device_bytes_needed(const Model& model, const std::string& br
     sc.vertices += s.octree->vertices.size();
     sc.cells += s.octree->cells.size();
     sc.level_offsets += s.octree->level_offset.size();
+    sc.blocks += (s.octree->vertices.size() + kVertexBlock - 1) / kVertexBlock;
   }
   BroadPhaseConfig cfg = model.scene.broadphase;
   cfg.name = broadphase;

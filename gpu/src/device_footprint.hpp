@@ -17,7 +17,7 @@ namespace gpu {
 namespace footprint {
 
 /// sizeof(gpu::DeviceShape) (kernels.hpp): one packed shape.
-constexpr std::uint64_t kDeviceShapeBytes = 48;
+constexpr std::uint64_t kDeviceShapeBytes = 52;
 /// sizeof(gpu::MidItem) (kernels.hpp): one midphase work-list item.
 constexpr std::uint64_t kMidItemBytes = 16;
 /// sizeof(gpu::DeviceContact) (kernels.hpp): one contact record.

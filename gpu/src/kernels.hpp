@@ -65,8 +65,9 @@ struct BodiesDesc {
 };
 
 /// One shape in the packed device arrays: a box, or a mesh whose octree occupies
-/// vertices[vertex_offset ..], cells[cell_offset ..] and level_offsets[level_offset_offset ..]
-/// (indices inside cells and level offsets stay relative to the shape's own arrays).
+/// vertices[vertex_offset ..], cells[cell_offset ..], level_offsets[level_offset_offset ..]
+/// and blocks[block_offset ..] (indices inside cells, level offsets and blocks stay relative
+/// to the shape's own arrays).
 struct DeviceShape {
   int is_mesh = 0;
   int depth = 0;
@@ -75,6 +76,7 @@ struct DeviceShape {
   std::uint32_t vertex_count = 0;
   std::uint32_t cell_offset = 0;
   std::uint32_t level_offset_offset = 0;
+  std::uint32_t block_offset = 0;  ///< its vertex_block_boxes (mesh_octree.hpp)
 };
 
 /// All shapes' octrees, packed once at construction, and the per-shape theta.
@@ -83,6 +85,7 @@ struct ShapesDesc {
   const Vec3* vertices = nullptr;
   const MeshOctreeCell* cells = nullptr;
   const std::uint32_t* level_offsets = nullptr;
+  const Aabb* blocks = nullptr;  ///< per mesh: vertex_block_boxes of its octree's vertices
   const float* theta = nullptr;  ///< per shape (Model::theta_shape, m); pair: pair_theta
   std::uint32_t count = 0;       ///< number of shapes
 };

@@ -12,6 +12,11 @@
 //   list;
 // - leaf (one warp per item of the last step): the narrow phase of hd::mesh_mesh_leaf /
 //   mesh_box_descend on that cell pair, lanes over B's vertices, A's vertices in order.
+//   The vertex filters scan whole blocks of 32 vertices (vertex_blocks.hpp) and skip a
+//   block whose box misses the filter box: mesh-mesh, the other's grown cell box (no vertex
+//   of the block is inside it, so the filtered vertices, their order and the counts are
+//   unchanged); mesh-box, box_local (a vertex outside it cannot be within theta of the box:
+//   the argument that lets the cell test skip a cell).
 // A pair is confirmed when any of its leaves has a vertex pair within theta: the same
 // vertex tests on the same floats as the CPU's depth-first descent, so the same answer;
 // only the order of the work differs. Lists are appended with warp-aggregated integer
@@ -29,6 +34,7 @@
 // over whole warps (the item index and its bounds are warp-uniform), so the warp
 // collectives (__ballot_sync / __shfl_sync with the full mask) see all 32 lanes. CUDA only.
 #include "kernels.hpp"
+#include "octocd/vertex_blocks.hpp"
 
 namespace octocd {
 namespace gpu {
@@ -56,6 +62,8 @@ __device__ inline hd::PlacedView place(const ShapesDesc& s, std::uint32_t shape,
 /// The two placed shapes of pair k and the test's set-up, A first (after the swap).
 struct PairContext {
   hd::PlacedView a, b;
+  const Aabb* blocks_a = nullptr;  ///< A's vertex block boxes (mesh only)
+  const Aabb* blocks_b = nullptr;  ///< B's vertex block boxes (mesh only)
   hd::PairSetup s;
   float theta = 0.0f;
   bool static_static = false;
@@ -72,6 +80,10 @@ __device__ inline PairContext context(const MidListDesc& d, std::uint32_t k, con
   c.s = hd::setup_pair(va, vb, c.theta, d.levels);
   c.a = c.s.swap ? vb : va;
   c.b = c.s.swap ? va : vb;
+  const Aabb* blocks_sa = d.shapes.blocks + d.shapes.shapes[sa].block_offset;
+  const Aabb* blocks_sb = d.shapes.blocks + d.shapes.shapes[sb].block_offset;
+  c.blocks_a = c.s.swap ? blocks_sb : blocks_sa;
+  c.blocks_b = c.s.swap ? blocks_sa : blocks_sb;
   return c;
 }
 
@@ -197,19 +209,70 @@ __device__ inline void mid_expand_items(const MidListDesc& d, int step) {
 constexpr std::uint32_t kLeafTile = 128;
 constexpr int kWarpsPerBlock = kBlockSize / 32;
 
-/// Appends to tile[fill ..] the world positions of the vertices v[pos ..] inside `box`
-/// (the lanes test 32 at a time, in order) until the vertices end or a further 32 might
-/// not fit; advances pos and fill (warp-uniform).
-__device__ inline void stage_tile(const Vec3* v, std::uint32_t count, const Aabb& box, Vec3 position, Vec3* tile,
-                           std::uint32_t& pos, std::uint32_t& fill) {
+static_assert(kVertexBlock == 32, "one lane per vertex of a block (mesh_octree.hpp)");
+
+/// The vertex blocks of v[begin, end): blocks [begin / 32, block_end(end)) of the shape's
+/// vertex_block_boxes (the first and last may hold vertices outside the range).
+__device__ inline std::uint32_t block_end(std::uint32_t end) { return (end + kVertexBlock - 1) / kVertexBlock; }
+
+/// Bit l: block g0 + l (< g1) has a box overlapping `box` (lane l tests it): the blocks
+/// that may hold a vertex inside `box` (vertex_block_boxes), the others are skipped.
+__device__ inline unsigned blocks_overlapping(const Aabb* blocks, std::uint32_t g0, std::uint32_t g1, const Aabb& box) {
+  const std::uint32_t g = g0 + lane_id();
+  return __ballot_sync(kFull, g < g1 && overlaps(blocks[g], box));
+}
+
+/// Ballot of the lanes whose vertex of block g (vertex g * 32 + lane) is in [begin, end)
+/// and inside `box`; j is the lane's vertex.
+__device__ inline unsigned block_inside(const Vec3* v, std::uint32_t g, std::uint32_t begin, std::uint32_t end,
+                                        const Aabb& box, std::uint32_t& j) {
+  j = g * kVertexBlock + lane_id();
+  return __ballot_sync(kFull, j >= begin && j < end && hd::inside(v[j], box));
+}
+
+/// The number of vertices of v[begin, end) inside `box` (warp-uniform), whole blocks of
+/// 32 vertices skipped when their box misses `box`.
+__device__ inline std::uint32_t count_inside(const Vec3* v, const Aabb* blocks, std::uint32_t begin,
+                                             std::uint32_t end, const Aabb& box) {
+  std::uint32_t n = 0;
+  const std::uint32_t g1 = block_end(end);
+  for (std::uint32_t g0 = begin / kVertexBlock; g0 < g1; g0 += 32) {
+    unsigned m = blocks_overlapping(blocks, g0, g1, box);
+    while (m) {
+      const std::uint32_t g = g0 + static_cast<std::uint32_t>(__ffs(m) - 1);
+      m &= m - 1u;
+      std::uint32_t j;
+      n += static_cast<std::uint32_t>(__popc(block_inside(v, g, begin, end, box, j)));
+    }
+  }
+  return n;
+}
+
+/// Appends to tile[fill ..] the world positions of the vertices of v[begin, end) inside
+/// `box`, in order, from vertex block `pos` on (blocks whose box misses `box` skipped, the
+/// lanes test a block's 32 vertices at once) until the blocks end or a further 32 might
+/// not fit; advances pos (a block index) and fill (warp-uniform).
+__device__ inline void stage_tile(const Vec3* v, const Aabb* blocks, std::uint32_t begin, std::uint32_t end,
+                                  const Aabb& box, Vec3 position, Vec3* tile, std::uint32_t& pos, std::uint32_t& fill) {
   const std::uint32_t lane = lane_id();
-  while (pos < count && fill + 32 <= kLeafTile) {
-    const std::uint32_t j = pos + lane;
-    const bool in = j < count && hd::inside(v[j], box);
-    const unsigned mask = __ballot_sync(kFull, in);
-    if (in) tile[fill + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)))] = hd::world_vertex(v[j], position);
-    fill += static_cast<std::uint32_t>(__popc(mask));
-    pos += 32;
+  const std::uint32_t g1 = block_end(end);
+  while (pos < g1 && fill + 32 <= kLeafTile) {
+    unsigned m = blocks_overlapping(blocks, pos, g1, box);
+    std::uint32_t next = pos + 32;  // past the blocks tested
+    while (m) {
+      const std::uint32_t g = pos + static_cast<std::uint32_t>(__ffs(m) - 1);
+      if (fill + 32 > kLeafTile) {  // resume at block g
+        next = g;
+        break;
+      }
+      m &= m - 1u;
+      std::uint32_t j;
+      const unsigned mask = block_inside(v, g, begin, end, box, j);
+      if ((mask >> lane) & 1u)
+        tile[fill + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)))] = hd::world_vertex(v[j], position);
+      fill += static_cast<std::uint32_t>(__popc(mask));
+    }
+    pos = next;
   }
   __syncwarp();
 }
@@ -234,12 +297,23 @@ __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
     const PairContext c = context(d, item.k, d.pairs[item.k]);
     const hd::OctreeView& A = c.a.octree;
     const MeshOctreeCell ca = A.cells[item.ca];
-    const Vec3* va = A.vertices + ca.first_vertex;
+    const std::uint32_t a_begin = ca.first_vertex;
+    const std::uint32_t a_end = ca.first_vertex + ca.vertex_count;
     const Vec3 pa = c.a.position;
     if (c.s.kind == hd::PairKind::MeshBox) {  // as mesh_box_descend's last step
+      // Only the blocks whose box overlaps box_local (the box in A's frame grown by
+      // theta + tolerance, as the cell test) can hold a vertex within theta of the box.
       bool hit = false;
-      for (std::uint32_t j = lane; j < ca.vertex_count; j += 32)
-        hit = hit || hd::vertex_box_close(hd::world_vertex(va[j], pa), c.b.box, c.s.theta2);
+      const std::uint32_t g1 = block_end(a_end);
+      for (std::uint32_t g0 = a_begin / kVertexBlock; g0 < g1; g0 += 32) {
+        unsigned m = blocks_overlapping(c.blocks_a, g0, g1, c.s.box_local);
+        while (m) {
+          const std::uint32_t j = (g0 + static_cast<std::uint32_t>(__ffs(m) - 1)) * kVertexBlock + lane;
+          m &= m - 1u;
+          hit = hit || (j >= a_begin && j < a_end &&
+                        hd::vertex_box_close(hd::world_vertex(A.vertices[j], pa), c.b.box, c.s.theta2));
+        }
+      }
       if (lane == 0 && ca.vertex_count > 0)
         atomicAdd(&d.counters[2], static_cast<unsigned long long>(ca.vertex_count));
       if (__any_sync(kFull, hit) && lane == 0) d.confirmed[item.k] = 1;
@@ -253,35 +327,34 @@ __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
     const std::uint32_t chunk_begin = item.chunk * kLeafChunk;
     const std::uint32_t rest = cb.vertex_count > chunk_begin ? cb.vertex_count - chunk_begin : 0u;
     const std::uint32_t nbv = rest < kLeafChunk ? rest : kLeafChunk;
-    const Vec3* vb = B.vertices + cb.first_vertex + chunk_begin;
+    const std::uint32_t b_begin = cb.first_vertex + chunk_begin;
+    const std::uint32_t b_end = b_begin + nbv;
     const Vec3 pb = c.b.position;
     const Aabb a_in_b = hd::moved_grown(ca.box, c.s.d, c.s.margin);
     const Aabb b_in_a = hd::moved_back_grown(cb.box, c.s.d, c.s.margin);
-    std::uint32_t nbf = 0, naf = 0;
-    for (std::uint32_t j0 = 0; j0 < nbv; j0 += 32) {
-      const std::uint32_t j = j0 + lane;
-      nbf += static_cast<std::uint32_t>(__popc(__ballot_sync(kFull, j < nbv && hd::inside(vb[j], a_in_b))));
-    }
+    // The filtered counts, whole blocks of 32 vertices skipped when their box misses the
+    // filter box (no vertex of theirs is inside it): the same counts.
+    const std::uint32_t nbf = count_inside(B.vertices, c.blocks_b, b_begin, b_end, a_in_b);
     if (nbf == 0) continue;  // as mesh_mesh_leaf: no vertex test
-    for (std::uint32_t i0 = 0; i0 < ca.vertex_count; i0 += 32) {
-      const std::uint32_t i = i0 + lane;
-      naf += static_cast<std::uint32_t>(__popc(__ballot_sync(kFull, i < ca.vertex_count && hd::inside(va[i], b_in_a))));
-    }
+    const std::uint32_t naf = count_inside(A.vertices, c.blocks_a, a_begin, a_end, b_in_a);
     if (lane == 0 && naf > 0)
       atomicAdd(&d.counters[2], static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf));
     if (naf == 0) continue;
     // Tiles of B's filtered world vertices against tiles of A's; another leaf of this
     // pair may confirm it first (checked between tiles): the answer is the same.
     bool found = false;
-    std::uint32_t jb = 0;
-    while (!found && jb < nbv) {
+    // jb, ia: the next vertex block of B's and A's ranges to stage.
+    std::uint32_t jb = b_begin / kVertexBlock;
+    const std::uint32_t jb_end = block_end(b_end);
+    const std::uint32_t ia_end = block_end(a_end);
+    while (!found && jb < jb_end) {
       if (__shfl_sync(kFull, lane == 0 ? static_cast<int>(pair_confirmed(d, item.k)) : 0, 0)) break;
       std::uint32_t nb = 0;
-      stage_tile(vb, nbv, a_in_b, pb, tile_b, jb, nb);
-      std::uint32_t ia = 0;
-      while (!found && nb > 0 && ia < ca.vertex_count) {
+      stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
+      std::uint32_t ia = a_begin / kVertexBlock;
+      while (!found && nb > 0 && ia < ia_end) {
         std::uint32_t na = 0;
-        stage_tile(va, ca.vertex_count, b_in_a, pa, tile_a, ia, na);
+        stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia, na);
         // Lane l takes B vertices l, l + 32, ... of the tile; the warp stops as soon as
         // one lane has a close pair (checked every 16 A vertices: same answer, less work
         // when the meshes are in contact).

@@ -12,6 +12,7 @@
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/vertex_blocks.hpp"
 
 using namespace octocd;
 
@@ -120,7 +121,7 @@ TEST(CudaFootprint, UnknownBroadphaseIsAnInputError) {
 }
 
 // The Model overload: the count overload plus the model's shapes (a mesh's octree
-// vertices and cells), with the scene's broadphase depth.
+// vertices, cells and vertex block boxes), with the scene's broadphase depth.
 TEST(CudaFootprint, ModelAddsItsShapesAndUsesTheScenesDepth) {
   const int n = 64;
   const auto boxes = model_of(R"({"box": [0.05, 0.05, 0.05]})", n);
@@ -130,7 +131,8 @@ TEST(CudaFootprint, ModelAddsItsShapesAndUsesTheScenesDepth) {
   const Shape& s = spheres->shapes.at(spheres->bodies.at(0).shape);
   ASSERT_TRUE(s.octree) << "an icosphere is a mesh with an octree";
   const std::uint64_t mesh_bytes =
-      s.octree->vertices.size() * sizeof(Vec3) + s.octree->cells.size() * sizeof(MeshOctreeCell);
+      s.octree->vertices.size() * sizeof(Vec3) + s.octree->cells.size() * sizeof(MeshOctreeCell) +
+      vertex_block_boxes(s.octree->vertices).size() * sizeof(Aabb);
   for (const std::string name : {"flat", "octree", "octree-strict", "spatial-hash", "lbvh"}) {
     SCOPED_TRACE(name);
     BroadPhaseConfig c = boxes->scene.broadphase;
@@ -140,7 +142,8 @@ TEST(CudaFootprint, ModelAddsItsShapesAndUsesTheScenesDepth) {
     const std::uint64_t with_spheres = cuda_device_bytes_needed(*spheres, name);
     EXPECT_GE(with_boxes, count_only);
     EXPECT_LT(with_boxes - count_only, 1024u) << "boxes have no octree: a shape record and a theta each";
-    EXPECT_GE(with_spheres - with_boxes + sizeof(Vec3) + sizeof(MeshOctreeCell), mesh_bytes);
+    // The box model holds one-element minimum buffers of vertices, cells and block boxes.
+    EXPECT_GE(with_spheres - with_boxes + sizeof(Vec3) + sizeof(MeshOctreeCell) + sizeof(Aabb), mesh_bytes);
   }
   // The scene says octree-strict at depth auto: the per-body extents are counted.
   BroadPhaseConfig fixed = boxes->scene.broadphase;

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
@@ -11,6 +12,8 @@
 #include "octocd/error.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/mesh_octree.hpp"
+#include "octocd/midphase_hd.hpp"
+#include "octocd/vertex_blocks.hpp"
 
 namespace {
 
@@ -170,6 +173,73 @@ TEST(MeshOctree, AutoDepthRule) {
   // <= 64 vertices: depth 0.
   std::mt19937 rng(3);
   EXPECT_EQ(octocd::auto_mesh_octree_depth(random_cloud(rng, 64, {1, 1, 1})), 0);
+}
+
+/// Vertices [begin, end) inside `x` found by skipping the kVertexBlock blocks whose box
+/// misses `x` (the CUDA leaf filter's scan), in order.
+std::vector<std::uint32_t> block_scan(const std::vector<Vec3>& v, const std::vector<Aabb>& boxes, std::uint32_t begin,
+                                      std::uint32_t end, const Aabb& x) {
+  std::vector<std::uint32_t> out;
+  for (std::uint32_t g = begin / octocd::kVertexBlock; g * octocd::kVertexBlock < end; ++g) {
+    if (!octocd::overlaps(boxes[g], x)) continue;
+    for (std::uint32_t j = std::max(begin, g * octocd::kVertexBlock);
+         j < std::min(end, (g + 1) * octocd::kVertexBlock); ++j)
+      if (octocd::hd::inside(v[j], x)) out.push_back(j);
+  }
+  return out;
+}
+
+TEST(MeshOctree, VertexBlockBoxesSkipNoVertexInside) {
+  std::mt19937 rng(11);
+  const MeshOctree t = octocd::build_mesh_octree(random_cloud(rng, 1000, {1.0f, 0.5f, 0.25f}), 3);
+  const std::vector<Aabb> boxes = octocd::vertex_block_boxes(t.vertices);
+  ASSERT_EQ(boxes.size(), (t.vertices.size() + 31) / 32);
+  EXPECT_TRUE(octocd::vertex_block_boxes({}).empty());
+  // Each box is the tight box of its 32 vertices (the last block: the rest).
+  for (std::size_t b = 0; b < boxes.size(); ++b) {
+    Aabb tight{t.vertices[32 * b], t.vertices[32 * b]};
+    for (std::size_t j = 32 * b; j < std::min(t.vertices.size(), 32 * b + 32); ++j) {
+      const Vec3 p = t.vertices[j];
+      tight.min = {std::min(tight.min.x, p.x), std::min(tight.min.y, p.y), std::min(tight.min.z, p.z)};
+      tight.max = {std::max(tight.max.x, p.x), std::max(tight.max.y, p.y), std::max(tight.max.z, p.z)};
+    }
+    EXPECT_TRUE(tight.min == boxes[b].min && tight.max == boxes[b].max) << "block " << b;
+  }
+  // Against brute force: every leaf cell's range, query boxes around random vertices,
+  // including degenerate ones touching a single vertex exactly.
+  std::uniform_int_distribution<std::size_t> pick(0, t.vertices.size() - 1);
+  std::uniform_real_distribution<float> half(0.0f, 0.2f);
+  std::vector<Aabb> queries;
+  for (int q = 0; q < 200; ++q) {
+    const Vec3 c = t.vertices[pick(rng)];
+    const float h = q % 4 == 0 ? 0.0f : half(rng);
+    queries.push_back({{c.x - h, c.y - h, c.z - h}, {c.x + h, c.y + h, c.z + h}});
+  }
+  auto brute = [&](std::uint32_t begin, std::uint32_t end, const Aabb& x) {
+    std::vector<std::uint32_t> out;
+    for (std::uint32_t j = begin; j < end; ++j)
+      if (octocd::hd::inside(t.vertices[j], x)) out.push_back(j);
+    return out;
+  };
+  std::size_t found = 0;
+  for (std::uint32_t c = 0; c < t.cells.size(); ++c) {
+    const std::uint32_t b0 = t.cells[c].first_vertex, b1 = b0 + t.cells[c].vertex_count;
+    for (const Aabb& x : queries) {
+      const std::vector<std::uint32_t> want = brute(b0, b1, x);
+      found += want.size();
+      EXPECT_EQ(block_scan(t.vertices, boxes, b0, b1, x), want) << "cell " << c;
+    }
+  }
+  EXPECT_GT(found, 0u);
+  // The planted fault: a box shrunk by one ulp below its largest x drops that vertex.
+  std::vector<Aabb> bad = boxes;
+  const Aabb b0 = boxes[0];
+  bad[0].max.x = std::nextafter(b0.max.x, b0.min.x - 1.0f);
+  std::uint32_t at = 0;
+  while (t.vertices[at].x != b0.max.x) ++at;
+  const Aabb x{t.vertices[at], t.vertices[at]};
+  EXPECT_EQ(block_scan(t.vertices, boxes, 0, 32, x), brute(0, 32, x));
+  EXPECT_NE(block_scan(t.vertices, bad, 0, 32, x), brute(0, 32, x));
 }
 
 // ---- configuration ---------------------------------------------------------------------------
