@@ -46,6 +46,11 @@
 ///      arrays, vectorised; overflow bodies with a larger slot).
 /// 5. The pairs are sorted by (a, b) with detail::sort_pairs.
 ///
+/// Threads: from kParallelMinBodies bodies on, step 1 and the queries of step 4 run on
+/// omp_get_max_threads() OpenMP threads (cells in dynamic chunks; the overflow tests in
+/// chunks of in-tree slots), each appending to its own pair list; the lists are joined
+/// before the sort of step 5, so pairs and candidates do not depend on the thread count.
+///
 /// `cell_candidates` counts the pairs that reach the exact AABB test.
 
 #include <algorithm>
@@ -54,6 +59,9 @@
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
+#endif
+#if defined(_OPENMP)
+#include <omp.h>
 #endif
 
 #include "octocd/broadphase.hpp"
@@ -74,6 +82,29 @@ constexpr std::uint32_t kEmpty = 0xffffffffu;
 constexpr unsigned kSlotBits = 26;
 constexpr std::uint32_t kSlotMask = (1u << kSlotBits) - 1u;
 constexpr std::uint32_t kCountCap = 1u << (32 - kSlotBits);
+/// Below this many bodies the query runs on the calling thread only (a parallel region
+/// costs more than the work).
+constexpr std::size_t kParallelMinBodies = 4096;
+/// In-tree slots per task of the overflow tests when they run on several threads.
+constexpr std::uint32_t kOverflowChunk = 4096;
+
+/// The OpenMP threads the query may use (omp_get_max_threads; 1 without OpenMP).
+inline int max_threads() {
+#if defined(_OPENMP)
+  return omp_get_max_threads();
+#else
+  return 1;
+#endif
+}
+
+/// The calling thread's number in the current parallel region (0 outside one).
+inline int thread_num() {
+#if defined(_OPENMP)
+  return omp_get_thread_num();
+#else
+  return 0;
+#endif
+}
 
 /// A box in the fixed-point unit coordinates of loose_q_min / loose_q_max (which lie in
 /// [-2^11, 2^12], so 16 bits hold them).
@@ -142,13 +173,63 @@ class LooseOctreeBroadPhase final : public BroadPhase {
                   BroadPhaseStats& stats) override {
     out.clear();
     const std::size_t n = boxes.size();
-    compute_keys(boxes);
+    const int threads = n >= kParallelMinBodies ? std::max(1, max_threads()) : 1;
+    if (workers_.size() < static_cast<std::size_t>(threads)) workers_.resize(static_cast<std::size_t>(threads));
+    for (int t = 0; t < threads; ++t) {
+      auto& f = workers_[static_cast<std::size_t>(t)].flat;
+      if (f.size() < 512) f.resize(512);
+    }
+    compute_keys(boxes, threads);
     sort_order();
     build_cells(boxes);
     build_tables();
     std::uint64_t candidates = 0;
-    for (std::uint32_t c = 0; c < cells_.size(); ++c) candidates += query_cell(c, out);
-    candidates += query_overflow(out);
+    const auto ncells = static_cast<std::int64_t>(cells_.size());
+    if (threads == 1) {
+      std::vector<std::uint32_t>& flat = workers_[0].flat;
+      for (std::int64_t c = 0; c < ncells; ++c) candidates += query_cell(static_cast<std::uint32_t>(c), flat, out);
+      candidates += query_overflow(0, overflow_begin_, true, out);
+    } else {
+      // Each thread appends to its own pair list; the lists are joined, then sorted (the
+      // output does not depend on the thread count or on the schedule).
+      const auto chunks = static_cast<std::int64_t>((overflow_begin_ + kOverflowChunk - 1) / kOverflowChunk);
+      const bool any_overflow = overflow_end_ > overflow_begin_;
+#if defined(_OPENMP)
+#pragma omp parallel num_threads(threads)
+#endif
+      {
+        Worker& w = workers_[static_cast<std::size_t>(thread_num())];
+        w.pairs.clear();
+        w.candidates = 0;
+#if defined(_OPENMP)
+#pragma omp for schedule(dynamic, 256) nowait
+#endif
+        for (std::int64_t c = 0; c < ncells; ++c) {
+          w.candidates += query_cell(static_cast<std::uint32_t>(c), w.flat, w.pairs);
+        }
+        if (any_overflow) {
+#if defined(_OPENMP)
+#pragma omp for schedule(dynamic, 1) nowait
+#endif
+          for (std::int64_t k = 0; k <= chunks; ++k) {
+            // Task `chunks` (possibly the only one) holds the overflow-overflow tests.
+            const auto lo = static_cast<std::uint32_t>(std::min<std::int64_t>(k * kOverflowChunk, overflow_begin_));
+            const auto hi = static_cast<std::uint32_t>(std::min<std::int64_t>((k + 1) * kOverflowChunk, overflow_begin_));
+            w.candidates += query_overflow(lo, hi, k == chunks, w.pairs);
+          }
+        }
+      }
+      std::size_t total = 0;
+      for (int t = 0; t < threads; ++t) total += workers_[static_cast<std::size_t>(t)].pairs.size();
+      out.resize(total);
+      std::size_t at = 0;
+      for (int t = 0; t < threads; ++t) {
+        const Worker& w = workers_[static_cast<std::size_t>(t)];
+        if (!w.pairs.empty()) std::memcpy(out.data() + at, w.pairs.data(), w.pairs.size() * sizeof(Pair));
+        at += w.pairs.size();
+        candidates += w.candidates;
+      }
+    }
     detail::sort_pairs(out, n, tmp_pairs_, count_);
     stats.cell_candidates = candidates;
     stats.pairs = out.size();
@@ -156,18 +237,21 @@ class LooseOctreeBroadPhase final : public BroadPhase {
         (qbody_.capacity() + qslot_.capacity()) * sizeof(QBox) +
         (key_.capacity() + lin_.capacity() + slot_of_.capacity() + cell_linear_.capacity() +
          radix_count_.capacity() + count_.capacity()) *
-            sizeof(std::uint32_t) + flat_.capacity() * sizeof(std::uint32_t) +
+            sizeof(std::uint32_t) +
         (order_.capacity() + moved_.capacity() + merge_buf_.capacity()) * sizeof(std::uint64_t) +
         slots_.capacity() * sizeof(Slot) + cells_.capacity() * sizeof(Cell) +
         hash_.capacity() * sizeof(HashSlot) + tmp_pairs_.capacity() * sizeof(Pair);
     for (const auto& t : dense_) stats.memory_bytes += t.capacity() * sizeof(std::uint32_t);
     for (const auto& b : bits_) stats.memory_bytes += b.capacity() * sizeof(std::uint64_t);
     for (const auto& a : soa_) stats.memory_bytes += a.capacity() * sizeof(float);
+    for (const auto& w : workers_) {
+      stats.memory_bytes += w.flat.capacity() * sizeof(std::uint32_t) + w.pairs.capacity() * sizeof(Pair);
+    }
   }
 
  private:
   /// Step 1: D_w, then the key and fixed-point box of every body (in body order).
-  void compute_keys(const std::vector<Aabb>& boxes) {
+  void compute_keys(const std::vector<Aabb>& boxes, int threads) {
     const std::size_t n = boxes.size();
     qbody_.resize(n);
     key_.resize(n);
@@ -183,7 +267,12 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       }
       depth_ = loose_auto_depth(min_ext);
     }
-    for (std::size_t i = 0; i < n; ++i) {
+    const auto sn = static_cast<std::int64_t>(n);
+#if defined(_OPENMP)
+#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1)
+#endif
+    for (std::int64_t si = 0; si < sn; ++si) {
+      const auto i = static_cast<std::size_t>(si);
       const Aabb& b = boxes[i];
       if (loose_has_nan(b)) {
         key_[i] = kLooseNoKey;
@@ -361,7 +450,6 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       hash_.assign(cap, HashSlot{kLooseNoKey, 0});
       hash_mask_ = static_cast<std::uint32_t>(cap - 1);
     }
-    if (flat_.size() < 512) flat_.resize(512);
     for (std::uint32_t c = 0; c < cells_.size(); ++c) {
       const Cell& cell = cells_[c];
       const std::uint32_t p = cell_linear_[c];
@@ -392,33 +480,34 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     }
   }
 
-  /// Appends the slots of a cell given by its dense-table entry `e` to flat_ at `n`.
-  std::uint32_t append_cell(std::uint32_t e, std::uint32_t n) {
+  /// Appends the slots of a cell given by its dense-table entry `e` to scratch at `n`.
+  std::uint32_t append_cell(std::uint32_t e, std::uint32_t n, std::vector<std::uint32_t>& scratch) const {
     const std::uint32_t begin = (e & kSlotMask) - 1u;
     if ((e >> kSlotBits) == 0u) {  // one body: the common case
-      flat_[n] = begin;
+      scratch[n] = begin;
       return n + 1u;
     }
     std::uint32_t len = (e >> kSlotBits) + 1u;
     if (len == kCountCap) len = slots_[begin].run_end - begin;
-    if (flat_.size() < n + len + 64) flat_.resize(2 * (n + len + 64));
-    for (std::uint32_t j = 0; j < len; ++j) flat_[n + j] = begin + j;
+    if (scratch.size() < n + len + 64) scratch.resize(2 * (n + len + 64));
+    for (std::uint32_t j = 0; j < len; ++j) scratch[n + j] = begin + j;
     return n + len;
   }
 
-  /// Appends to flat_ (from `n`) the slots of the occupied cells of dense level m in the
+  /// Appends to scratch (from `n`) the slots of the occupied cells of dense level m in the
   /// ranges; when `own` is not null (the querying cell's own level, cell coordinates
   /// own[0..2]), only the cells after it in the order x + 2^m y + 4^m z. Returns the new
   /// length.
   std::uint32_t gather_dense(int m, const LooseRange& rx, const LooseRange& ry,
-                             const LooseRange& rz, const std::uint32_t* own, std::uint32_t n) {
+                             const LooseRange& rz, const std::uint32_t* own, std::uint32_t n,
+                             std::vector<std::uint32_t>& scratch) const {
     const std::uint32_t* table = dense_[static_cast<std::size_t>(m)].data();
     const std::uint64_t* bm = bits_[static_cast<std::size_t>(m)].data();
     const std::size_t row = std::size_t{1} << m;
     const std::size_t plane = std::size_t{1} << (2 * m);
     const std::size_t p0 = static_cast<std::size_t>(rz.lo) * plane +
                            static_cast<std::size_t>(ry.lo) * row + static_cast<std::size_t>(rx.lo);
-    if (flat_.size() < n + 128) flat_.resize(2 * (n + 128));
+    if (scratch.size() < n + 128) scratch.resize(2 * (n + 128));
     if (rx.hi - rx.lo <= 2 && ry.hi - ry.lo <= 2 && rz.hi - rz.lo <= 2) {
       // The usual case: the occupancy bits of a fixed 3 x 3 x 3 block from the low
       // corner (one 64-bit word per row: dense levels have rows of <= 64 cells; cells
@@ -451,7 +540,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       while (mask != 0) {
         const int k = __builtin_ctz(mask);
         mask &= mask - 1u;
-        n = append_cell(t0[off[k]], n);
+        n = append_cell(t0[off[k]], n, scratch);
       }
       return n;
     }
@@ -463,8 +552,8 @@ class LooseOctreeBroadPhase final : public BroadPhase {
         for (int x = rx.lo; x <= rx.hi; ++x) {
           const std::uint32_t e = table[r + static_cast<std::size_t>(x)];
           if (e == 0u || (own != nullptr && r + static_cast<std::size_t>(x) <= own_pos)) continue;
-          if (flat_.size() < n + 64) flat_.resize(2 * (n + 64));
-          n = append_cell(e, n);
+          if (scratch.size() < n + 64) scratch.resize(2 * (n + 64));
+          n = append_cell(e, n, scratch);
         }
       }
     }
@@ -472,7 +561,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   }
 
   /// Step 4b: the pairs of cell c with its own level (larger slots) and coarser levels.
-  std::uint64_t query_cell(std::uint32_t c, std::vector<Pair>& out) {
+  std::uint64_t query_cell(std::uint32_t c, std::vector<std::uint32_t>& scratch, std::vector<Pair>& out) const {
     const Cell cell = cells_[c];
     std::uint64_t candidates = 0;
     // Own cell: later slots.
@@ -503,7 +592,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       // each.
       std::uint32_t nflat = 0;
       if (m <= kDenseLevels) {
-        nflat = gather_dense(m, rx, ry, rz, own ? own_xyz : nullptr, 0u);
+        nflat = gather_dense(m, rx, ry, rz, own ? own_xyz : nullptr, 0u, scratch);
       } else {
         for (int z = rz.lo; z <= rz.hi; ++z) {
           const std::uint32_t mz = morton_spread3(static_cast<std::uint32_t>(z)) << 2;
@@ -519,15 +608,15 @@ class LooseOctreeBroadPhase final : public BroadPhase {
               }
               const Cell& other = cells_[d];
               const std::uint32_t len = other.end - other.begin;
-              if (flat_.size() < nflat + len) flat_.resize(2 * (nflat + len));
-              for (std::uint32_t j = 0; j < len; ++j) flat_[nflat + j] = other.begin + j;
+              if (scratch.size() < nflat + len) scratch.resize(2 * (nflat + len));
+              for (std::uint32_t j = 0; j < len; ++j) scratch[nflat + j] = other.begin + j;
               nflat += len;
             }
           }
         }
       }
       candidates += static_cast<std::uint64_t>(nflat) * pop;
-      const std::uint32_t* flat = flat_.data();
+      const std::uint32_t* flat = scratch.data();
       const Slot* slots = slots_.data();
       for (std::uint32_t i = cell.begin; i < cell.end; ++i) {
         const Slot si = slots[i];
@@ -555,13 +644,14 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     return candidates;
   }
 
-  /// Step 4c: overflow bodies against every in-tree body and later overflow bodies. The
+  /// Step 4c: overflow bodies against the in-tree slots [begin, end) and, when
+  /// `with_overflow`, against later overflow bodies. The
   /// in-tree part reads the slots' coordinates as structure of arrays, 64 at a time, so
   /// the compiler vectorises the Eq. 6 test.
-  std::uint64_t query_overflow(std::vector<Pair>& out) const {
+  std::uint64_t query_overflow(std::uint32_t begin, std::uint32_t end, bool with_overflow,
+                               std::vector<Pair>& out) const {
     // Overflow slots come after every cell's slots (their key sorts last).
     std::uint64_t candidates = 0;
-    const std::uint32_t end = overflow_begin_;
     const float* minx = soa_[0].data();
     const float* miny = soa_[1].data();
     const float* minz = soa_[2].data();
@@ -571,7 +661,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     for (std::uint32_t o = overflow_begin_; o < overflow_end_; ++o) {
       const Aabb bo = slots_[o].box;
       const std::uint32_t body_o = slots_[o].body;
-      for (std::uint32_t j0 = 0; j0 < end; j0 += 64) {
+      for (std::uint32_t j0 = begin; j0 < end; j0 += 64) {
         const std::uint32_t len = std::min<std::uint32_t>(64u, end - j0);
         std::uint32_t hit[64];
         for (std::uint32_t k = 0; k < len; ++k) {
@@ -590,7 +680,8 @@ class LooseOctreeBroadPhase final : public BroadPhase {
           if (hit[k]) emit(body_o, slots_[j0 + k].body, out);
         }
       }
-      candidates += end;
+      candidates += end - begin;
+      if (!with_overflow) continue;
       for (std::uint32_t j = o + 1; j < overflow_end_; ++j) {
         if (overlaps(bo, slots_[j].box)) emit(body_o, slots_[j].body, out);
       }
@@ -622,7 +713,6 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   std::vector<float> soa_[6];             // min x, y, z, max x, y, z of in-tree slots
   std::vector<Cell> cells_;               // occupied cells in key order
   std::vector<std::uint32_t> cell_linear_;  // their x + 2^l y + 4^l z
-  std::vector<std::uint32_t> flat_;       // query scratch: the slots of those cells
   std::uint32_t level_cells_[kLooseMaxDepth + 1] = {};
   int occupied_[kLooseMaxDepth + 1] = {};
   int occupied_count_ = 0;
@@ -633,6 +723,13 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   std::vector<HashSlot> hash_;
   std::uint32_t hash_mask_ = 0;
   std::vector<Pair> tmp_pairs_;
+  /// Per-thread query state: scratch slot list, pairs found, candidates counted.
+  struct Worker {
+    std::vector<std::uint32_t> flat;
+    std::vector<Pair> pairs;
+    std::uint64_t candidates = 0;
+  };
+  std::vector<Worker> workers_;
   std::vector<std::uint32_t> count_;
 };
 

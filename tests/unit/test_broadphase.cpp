@@ -12,6 +12,10 @@
 #include <string>
 #include <vector>
 
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
+
 #include "octocd/broadphase.hpp"
 #include "octocd/error.hpp"
 #include "octocd/loose_octree.hpp"
@@ -735,6 +739,36 @@ TEST(BroadPhase, AutoLooseOctreeDepth) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   std::vector<Aabb> with_nan = {{{nan, 0, 0}, {0, 0, 0}}, {{0, 0, 0}, {1.0f, 1.0f, 1.0f}}};
   EXPECT_EQ(auto_loose_octree_depth(with_nan, kDomain), 2);
+}
+
+// The loose octree runs its keys and queries on OpenMP threads from 4096 bodies on: the
+// pairs (and the candidate count) must not depend on the thread count, including the
+// overflow tests split in chunks of in-tree bodies (walls and huge bodies here).
+TEST(BroadPhase, LooseOctreeThreadCountDoesNotChangeTheAnswer) {
+#if defined(_OPENMP)
+  std::vector<Aabb> boxes = random_boxes(12000, 77);
+  boxes[10] = {{-3.0f, -0.1f, -3.0f}, {3.0f, 0.0f, 3.0f}};        // floor slab (overflow)
+  boxes[11] = {{-2.1f, -3.0f, -3.0f}, {-2.0f, 3.0f, 3.0f}};       // wall (overflow)
+  boxes[12] = {{-10.0f, -10.0f, -10.0f}, {10.0f, 10.0f, 10.0f}};  // contains everything
+  const std::vector<Pair> want = brute(boxes);
+  const int saved = omp_get_max_threads();
+  std::vector<std::uint64_t> candidates;
+  for (int threads : {1, 2, 3}) {
+    omp_set_num_threads(threads);
+    auto bp = make_broadphase({"octree", -1, 0.25f}, kDomain);
+    std::vector<Pair> got;
+    BroadPhaseStats st;
+    for (int call = 0; call < 2; ++call) {  // fresh, then with the kept order
+      bp->find_pairs(boxes, got, st);
+      EXPECT_TRUE(got == want) << threads << " threads, call " << call << ": " << describe_diff(got, want);
+      candidates.push_back(st.cell_candidates);
+    }
+  }
+  omp_set_num_threads(saved);
+  for (std::uint64_t c : candidates) EXPECT_EQ(c, candidates.front());
+#else
+  GTEST_SKIP() << "built without OpenMP";
+#endif
 }
 
 }  // namespace
