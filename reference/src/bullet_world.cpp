@@ -275,21 +275,18 @@ class PosedPair {
   /// contact margin (sqrt(2) x 0.02 m).
   static constexpr btScalar kReach = btScalar(0.03);
 
+  /// The world vertices are computed on first use: most pairs Bullet visits are far apart
+  /// (far_apart needs none) or get no contact to check.
   PosedPair(const Polytope& a, const btTransform& ta, const Polytope& b, const btTransform& tb)
-      : a_(a), b_(b), ta_(ta), tb_(tb) {
-    wa_.reserve(a.vertices.size());
-    wb_.reserve(b.vertices.size());
-    for (const btVector3& x : a.vertices) wa_.push_back(ta * x);
-    for (const btVector3& x : b.vertices) wb_.push_back(tb * x);
-  }
+      : a_(a), b_(b), ta_(ta), tb_(tb) {}
 
   /// Separation (m) of A from B along the unit axis u (A on u's side): min_A u.a -
   /// max_B u.b; negative = the overlap A must move along u to leave B.
   btScalar separation(const btVector3& u) const {
     btScalar max_b = -std::numeric_limits<btScalar>::infinity();
     btScalar min_a = std::numeric_limits<btScalar>::infinity();
-    for (const btVector3& x : wb_) max_b = std::max(max_b, u.dot(x));
-    for (const btVector3& x : wa_) min_a = std::min(min_a, u.dot(x));
+    for (const btVector3& x : world_b()) max_b = std::max(max_b, u.dot(x));
+    for (const btVector3& x : world_a()) min_a = std::min(min_a, u.dot(x));
     return min_a - max_b;
   }
 
@@ -350,8 +347,8 @@ class PosedPair {
     // meet, so only edges with an end within the other's bounding sphere (grown by
     // kReach) are crossed (a hull-hull pair has 480 x 480 edges otherwise).
     std::vector<btVector3> dirs_a, dirs_b;
-    near_edges(a_, wa_, ta_, tb_.getOrigin(), b_.radius + kReach, dirs_a);
-    near_edges(b_, wb_, tb_, ta_.getOrigin(), a_.radius + kReach, dirs_b);
+    near_edges(a_, world_a(), ta_, tb_.getOrigin(), b_.radius + kReach, dirs_a);
+    near_edges(b_, world_b(), tb_, ta_.getOrigin(), a_.radius + kReach, dirs_b);
     for (const btVector3& ea : dirs_a) {
       for (const btVector3& eb : dirs_b) {
         const btVector3 u = ea.cross(eb);
@@ -381,8 +378,8 @@ class PosedPair {
     };
     btVector3 mean_a, mean_b;
     std::vector<btVector3> set_a, set_b;
-    const btScalar extent_a = extreme(wa_, -best_u, mean_a, set_a);
-    const btScalar extent_b = extreme(wb_, best_u, mean_b, set_b);
+    const btScalar extent_a = extreme(world_a(), -best_u, mean_a, set_a);
+    const btScalar extent_b = extreme(world_b(), best_u, mean_b, set_b);
     if (set_a.size() == 2 && set_b.size() == 2) {
       // Edge against edge: the closest points of the two segments.
       btVector3 ca, cb;
@@ -413,7 +410,18 @@ class PosedPair {
   const Polytope& a_;
   const Polytope& b_;
   btTransform ta_, tb_;
-  std::vector<btVector3> wa_, wb_;
+  /// The vertices of `p` posed by `t`, into `w` once.
+  static const std::vector<btVector3>& posed(const Polytope& p, const btTransform& t, std::vector<btVector3>& w) {
+    if (w.empty()) {
+      w.reserve(p.vertices.size());
+      for (const btVector3& x : p.vertices) w.push_back(t * x);
+    }
+    return w;
+  }
+  const std::vector<btVector3>& world_a() const { return posed(a_, ta_, wa_); }
+  const std::vector<btVector3>& world_b() const { return posed(b_, tb_, wb_); }
+
+  mutable std::vector<btVector3> wa_, wb_;  ///< world vertices, filled on first use
 };
 
 
