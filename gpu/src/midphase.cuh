@@ -20,7 +20,9 @@
 //   block whose box misses the filter box: mesh-mesh, the other's grown cell box (no vertex
 //   of the block is inside it, so the filtered vertices, their order and the counts are
 //   unchanged); mesh-box, box_local (a vertex outside it cannot be within theta of the box:
-//   the argument that lets the cell test skip a cell).
+//   the argument that lets the cell test skip a cell). The first tile of each of B's and
+//   A's ranges is staged while counting (the rest of a range only counted), so a small
+//   leaf scans its vertices once.
 // A pair is confirmed when any of its leaves has a vertex pair within theta: the same
 // vertex tests on the same floats as the CPU's depth-first descent, so the same answer;
 // only the order of the work differs. Lists are appended with warp-aggregated integer
@@ -302,27 +304,48 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   const Aabb a_in_b = hd::moved_grown(ca.box, c.s.d, c.s.margin);
   const Aabb b_in_a = hd::moved_back_grown(cb.box, c.s.d, c.s.margin);
   // The filtered counts, whole blocks of 32 vertices skipped when their box misses the
-  // filter box (no vertex of theirs is inside it): the same counts.
-  const std::uint32_t nbf = count_inside(B.vertices, c.blocks_b, b_begin, b_end, a_in_b);
+  // filter box (no vertex of theirs is inside it): the first tile of each range is staged
+  // while counting (stage_tile counts what it stages), the rest of the range only counted;
+  // the counts are those of the whole ranges.
+  std::uint32_t jb = b_begin / kVertexBlock;  // the next vertex block of B's range to stage
+  const std::uint32_t jb_end = block_end(b_end);
+  std::uint32_t nb = 0;
+  stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
+  const std::uint32_t nbf =
+      nb + (jb < jb_end ? count_inside(B.vertices, c.blocks_b, jb * kVertexBlock, b_end, a_in_b) : 0u);
   if (nbf == 0) return;  // as mesh_mesh_leaf: no vertex test
-  const std::uint32_t naf = count_inside(A.vertices, c.blocks_a, a_begin, a_end, b_in_a);
+  const std::uint32_t ia_end = block_end(a_end);
+  std::uint32_t ia_first = a_begin / kVertexBlock;  // A's next block after its first tile
+  std::uint32_t na_first = 0;
+  stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia_first, na_first);
+  const std::uint32_t naf =
+      na_first + (ia_first < ia_end ? count_inside(A.vertices, c.blocks_a, ia_first * kVertexBlock, a_end, b_in_a) : 0u);
   t.vertex_tests += static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf);
   if (naf == 0) return;
-  // Tiles of B's filtered world vertices against tiles of A's; another leaf of this
-  // pair may confirm it first (checked between tiles): the answer is the same.
+  // Tiles of B's filtered world vertices against tiles of A's (B's first tile and, for it,
+  // A's first tile are already staged); another leaf of this pair may confirm it first
+  // (checked between B's tiles): the answer is the same.
   bool found = false;
-  // jb, ia: the next vertex block of B's and A's ranges to stage.
-  std::uint32_t jb = b_begin / kVertexBlock;
-  const std::uint32_t jb_end = block_end(b_end);
-  const std::uint32_t ia_end = block_end(a_end);
-  while (!found && jb < jb_end) {
+  bool b_staged = true;  // tile_b holds B's next tile (nb vertices)
+  while (!found) {
     if (confirmed_now(d, k)) break;
-    std::uint32_t nb = 0;
-    stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
-    std::uint32_t ia = a_begin / kVertexBlock;
-    while (!found && nb > 0 && ia < ia_end) {
-      std::uint32_t na = 0;
-      stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia, na);
+    if (!b_staged) {
+      if (jb >= jb_end) break;
+      nb = 0;
+      stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
+    }
+    // tile_a still holds A's first tile only while B's first tile is tested.
+    bool a_staged = b_staged;
+    b_staged = false;
+    std::uint32_t ia = a_staged ? ia_first : a_begin / kVertexBlock;
+    std::uint32_t na = a_staged ? na_first : 0u;
+    while (!found && nb > 0) {
+      if (!a_staged) {
+        if (ia >= ia_end) break;
+        na = 0;
+        stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia, na);
+      }
+      a_staged = false;
       // Lane l takes B vertices l, l + 32, ... of the tile; the warp stops as soon as
       // one lane has a close pair (checked every 16 A vertices: same answer, less work
       // when the meshes are in contact).
