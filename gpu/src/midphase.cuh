@@ -250,6 +250,45 @@ __device__ inline bool confirmed_now(const MidListDesc& d, std::uint32_t k) {
   return __shfl_sync(kFull, lane_id() == 0 ? static_cast<int>(pair_confirmed(d, k)) : 0, 0) != 0;
 }
 
+/// Whether some vertex of tile_a[0, na) and some vertex of tile_b[0, nb) are closer than
+/// theta (hd::vertex_close; the whole warp, warp-uniform result): every one of the na x nb
+/// pairs is tested unless a close pair ends the scan early (checked every 16 rounds: the
+/// same answer, less work when the meshes are in contact). Lanes: with nb <= 16, lane l
+/// takes B vertex l % P (P: nb rounded up to a power of two) and A vertices l / P,
+/// l / P + 32 / P, ... (so a small B tile keeps all 32 lanes busy); otherwise lane l takes
+/// B vertices l, l + 32, ... against every A vertex.
+__device__ inline bool tiles_close(const Vec3* tile_a, std::uint32_t na, const Vec3* tile_b, std::uint32_t nb,
+                                   float theta2) {
+  const std::uint32_t lane = lane_id();
+  bool found = false;
+  if (nb <= 16) {
+    const std::uint32_t p = nb <= 1 ? 1u : 1u << (32 - __clz(static_cast<int>(nb - 1)));  // 1, 2, 4, 8 or 16
+    const std::uint32_t groups = 32u / p;
+    const std::uint32_t j = lane % p;
+    const bool valid = j < nb;
+    const Vec3 wb = tile_b[valid ? j : 0u];
+    bool hit = false;
+    for (std::uint32_t i0 = 0; i0 < na && !found; i0 += 16u * groups) {
+      const std::uint32_t i1 = i0 + 16u * groups < na ? i0 + 16u * groups : na;
+      for (std::uint32_t ii = i0 + lane / p; ii < i1; ii += groups)
+        hit = hit || (valid && hd::vertex_close(tile_a[ii], wb, theta2));
+      found = __any_sync(kFull, hit);
+    }
+    return found;
+  }
+  for (std::uint32_t jj0 = 0; jj0 < nb && !found; jj0 += 32) {
+    const bool valid = jj0 + lane < nb;
+    const Vec3 wb = tile_b[valid ? jj0 + lane : 0u];
+    bool hit = false;
+    for (std::uint32_t i0 = 0; i0 < na && !found; i0 += 16) {
+      const std::uint32_t i1 = i0 + 16 < na ? i0 + 16 : na;
+      for (std::uint32_t ii = i0; ii < i1; ++ii) hit = hit || (valid && hd::vertex_close(tile_a[ii], wb, theta2));
+      found = __any_sync(kFull, hit);
+    }
+  }
+  return found;
+}
+
 /// Shared memory of mid_leaf_items and of the last mid_expand step when it runs the
 /// leaves itself: per warp of the block, a tile of B's and one of A's filtered world
 /// vertices.
@@ -346,19 +385,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
         stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia, na);
       }
       a_staged = false;
-      // Lane l takes B vertices l, l + 32, ... of the tile; the warp stops as soon as
-      // one lane has a close pair (checked every 16 A vertices: same answer, less work
-      // when the meshes are in contact).
-      for (std::uint32_t jj0 = 0; jj0 < nb && !found; jj0 += 32) {
-        const bool valid = jj0 + lane < nb;
-        const Vec3 wb = tile_b[valid ? jj0 + lane : 0u];
-        bool hit = false;
-        for (std::uint32_t i0 = 0; i0 < na && !found; i0 += 16) {
-          const std::uint32_t i1 = i0 + 16 < na ? i0 + 16 : na;
-          for (std::uint32_t ii = i0; ii < i1; ++ii) hit = hit || (valid && hd::vertex_close(tile_a[ii], wb, c.s.theta2));
-          found = __any_sync(kFull, hit);
-        }
-      }
+      found = tiles_close(tile_a, na, tile_b, nb, c.s.theta2);
       __syncwarp();
     }
   }
