@@ -244,7 +244,6 @@ __device__ inline bool pair_confirmed(const MidListDesc& d, std::uint32_t k) {
   return *(volatile const std::uint8_t*)(d.confirmed + k) != 0;
 }
 
-
 /// pair_confirmed as one warp-uniform value (lane 0 reads, every lane gets it).
 __device__ inline bool confirmed_now(const MidListDesc& d, std::uint32_t k) {
   return __shfl_sync(kFull, lane_id() == 0 ? static_cast<int>(pair_confirmed(d, k)) : 0, 0) != 0;
