@@ -13,7 +13,7 @@ __global__ void __launch_bounds__(kBlockSize, 4) mid_start_kernel(MidListDesc d)
 
 __global__ void mid_expand_kernel(MidListDesc d, int step) { mid::mid_expand_items(d, step); }
 
-// The last expand step, which may run its items' leaves itself (mid::fuse_leaves); 114
+// The last expand step, which may run its items' leaves itself (mid::fuse_leaves); 118
 // registers: 2 of the grid's 4 blocks per SM at a time (bounding it to 3 spilled > 200 bytes).
 __global__ void mid_expand_last_kernel(MidListDesc d, int step) {
   __shared__ mid::LeafTiles tiles;
