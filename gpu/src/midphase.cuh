@@ -358,7 +358,8 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   std::uint32_t na_first = 0;
   stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia_first, na_first);
   const std::uint32_t naf =
-      na_first + (ia_first < ia_end ? count_inside(A.vertices, c.blocks_a, ia_first * kVertexBlock, a_end, b_in_a) : 0u);
+      na_first +
+      (ia_first < ia_end ? count_inside(A.vertices, c.blocks_a, ia_first * kVertexBlock, a_end, b_in_a) : 0u);
   t.vertex_tests += static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf);
   if (naf == 0) return;
   // Tiles of B's filtered world vertices against tiles of A's (B's first tile and, for it,

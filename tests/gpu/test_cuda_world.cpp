@@ -832,7 +832,8 @@ TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
       const std::string what = fmt::format("{} (levels {}) frame {}", cs.scene, cs.levels ? cs.levels : "own", f);
       vertex_tests += m1.vertex_tests;
       contacts += mc.contacts;
-      ASSERT_EQ(cpu.state_hash(), never->state_hash()) << what << " (fuse 0): " << first_difference(cpu.state(), never->state());
+      ASSERT_EQ(cpu.state_hash(), never->state_hash())
+          << what << " (fuse 0): " << first_difference(cpu.state(), never->state());
       ASSERT_EQ(cpu.state_hash(), always->state_hash())
           << what << " (fuse 1): " << first_difference(cpu.state(), always->state());
       expect_same_counts(m0, m1, what + " (fuse 0 vs 1)");
