@@ -181,6 +181,19 @@ long small_one_block_pairs_from_env() {
   return v;
 }
 
+/// OCTOCD_CUDA_MID_FUSE: whether the last midphase expand step of the graph path runs its
+/// items' leaves itself (MidListDesc::fuse_leaves): unset = -1 (auto), "0" never, "1" always.
+int mid_fuse_from_env() {
+  const char* v = std::getenv("OCTOCD_CUDA_MID_FUSE");
+  if (v == nullptr) return -1;
+  if (std::strcmp(v, "0") == 0) return 0;
+  if (std::strcmp(v, "1") == 0) return 1;
+  throw InputError(fmt::format("OCTOCD_CUDA_MID_FUSE: '{}' is not allowed; allowed: 0 (the leaves always go through "
+                               "the leaf list), 1 (the last expand step always runs them), or unset (it runs them "
+                               "when it has at least two items per warp)",
+                               v));
+}
+
 /// The capacity to grow to when `needed` entries did not fit into `capacity`.
 std::size_t grown(std::size_t needed, std::size_t capacity) {
   return std::max(needed + needed / 4 + 64, 2 * capacity);
@@ -205,6 +218,7 @@ struct CudaWorld::Impl {
   hd::LevelList levels;
   int level_steps = 0;  // midphase steps (0: aabb-only, or no levels)
   unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
+  int mid_fuse = -1;       // OCTOCD_CUDA_MID_FUSE (MidListDesc::fuse_leaves)
   bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
   unsigned small_grid = 1;  // its blocks (co-resident)
   gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
@@ -363,6 +377,7 @@ struct CudaWorld::Impl {
     md.confirmed = confirmed.get();
     md.counters = counters();
     md.steps = level_steps;
+    md.fuse_leaves = mid_fuse;
     return md;
   }
 
@@ -729,6 +744,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   const long small_blocks = small_blocks_from_env();
   const bool small_poll = small_poll_from_env();
   const long one_block_pairs = small_one_block_pairs_from_env();
+  const int mid_fuse = mid_fuse_from_env();
   const std::string reason = no_device_reason();
   if (!reason.empty()) throw RuntimeError("no CUDA device: " + reason + "; the cuda engine needs one");
   check_free_memory(*model_, broadphase, needed);  // before the first allocation
@@ -737,6 +753,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.broadphase = broadphase;
   d.bp = std::move(bp);
   d.device = describe_current_device();
+  d.mid_fuse = mid_fuse;
   d.sync_each_launch = env_is_one("OCTOCD_CUDA_SYNC");
   const char* graph = std::getenv("OCTOCD_CUDA_GRAPH");
   d.use_graph = !(graph != nullptr && std::strcmp(graph, "0") == 0);

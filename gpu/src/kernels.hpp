@@ -127,6 +127,10 @@ struct MidListDesc {
   MidItem* out = nullptr;                   ///< start / expand: the next step's items
   std::uint32_t* out_count = nullptr;       ///< device: items appended (may exceed out_capacity)
   std::uint32_t out_capacity = 0;
+  /// The last expand step runs the leaves of its items itself instead of appending them
+  /// to the leaf list (midphase.cuh, fuse_leaves): -1 auto (enough items per warp), 0
+  /// never, 1 always. Neither a result nor a count depends on it (OCTOCD_CUDA_MID_FUSE).
+  int fuse_leaves = -1;
 };
 
 /// One contact of the first response pass, as the host's ContactRecord wants it.

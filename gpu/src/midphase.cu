@@ -7,11 +7,21 @@ namespace octocd {
 namespace gpu {
 namespace {
 
-__global__ void mid_start_kernel(MidListDesc d) { mid::mid_start_items(d); }
+// The grid is 4 blocks per SM (cuda_world.cpp, warp_grid): at 64 registers all 4 are
+// resident (66 without the bound: 3, and the 4th ran as a second wave; 28 bytes spilled).
+__global__ void __launch_bounds__(kBlockSize, 4) mid_start_kernel(MidListDesc d) { mid::mid_start_items(d); }
 
 __global__ void mid_expand_kernel(MidListDesc d, int step) { mid::mid_expand_items(d, step); }
 
-__global__ void mid_leaf_kernel(MidListDesc d) {
+// The last expand step, which may run its items' leaves itself (mid::fuse_leaves); 118
+// registers: 2 of the grid's 4 blocks per SM at a time (bounding it to 3 spilled > 200 bytes).
+__global__ void mid_expand_last_kernel(MidListDesc d, int step) {
+  __shared__ mid::LeafTiles tiles;
+  mid::mid_expand_items(d, step, &tiles);
+}
+
+// Four blocks per SM (64 registers; ptxas spills 4 bytes for it, 68 without the bound).
+__global__ void __launch_bounds__(kBlockSize, 4) mid_leaf_kernel(MidListDesc d) {
   __shared__ mid::LeafTiles tiles;
   mid::mid_leaf_items(d, tiles);
 }
@@ -24,7 +34,8 @@ cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t s
 }
 
 cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cudaStream_t stream) {
-  mid_expand_kernel<<<grid, kBlockSize, 0, stream>>>(d, step);
+  if (step + 2 == d.steps) mid_expand_last_kernel<<<grid, kBlockSize, 0, stream>>>(d, step);
+  else mid_expand_kernel<<<grid, kBlockSize, 0, stream>>>(d, step);
   return cudaGetLastError();
 }
 

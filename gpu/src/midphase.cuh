@@ -9,14 +9,20 @@
 //   overlapping ones (pair, cell of A, cell of B) to the first list;
 // - expand (one warp per item of step i): the descendants at step i + 1 of both cells
 //   (hd::descendants), tested with the same boxes (hd::moved_grown), appended to the next
-//   list;
+//   list; the last expand step of the graph path (mid_expand_last_kernel) runs the
+//   surviving leaf cell pairs of its item itself, in lane order, as the leaf items the list
+//   would have held (leaf_item, the same code mid_leaf runs), when the step has at least
+//   kFuseItemsPerWarp items per warp (fuse_leaves; OCTOCD_CUDA_MID_FUSE): no leaf item is
+//   written, read or set up again, and the leaf list stays empty;
 // - leaf (one warp per item of the last step): the narrow phase of hd::mesh_mesh_leaf /
 //   mesh_box_descend on that cell pair, lanes over B's vertices, A's vertices in order.
 //   The vertex filters scan whole blocks of 32 vertices (vertex_blocks.hpp) and skip a
 //   block whose box misses the filter box: mesh-mesh, the other's grown cell box (no vertex
 //   of the block is inside it, so the filtered vertices, their order and the counts are
 //   unchanged); mesh-box, box_local (a vertex outside it cannot be within theta of the box:
-//   the argument that lets the cell test skip a cell).
+//   the argument that lets the cell test skip a cell). The first tile of each of B's and
+//   A's ranges is staged while counting (the rest of a range only counted), so a small
+//   leaf scans its vertices once.
 // A pair is confirmed when any of its leaves has a vertex pair within theta: the same
 // vertex tests on the same floats as the CPU's depth-first descent, so the same answer;
 // only the order of the work differs. Lists are appended with warp-aggregated integer
@@ -26,12 +32,18 @@
 // vertex tests spread over several warps.
 // Counts: box tests = every cell pair tested, box pairs = surviving leaf cell pairs,
 // vertex tests = per leaf (A's filtered vertices) x (B's filtered vertices) or the cell's
-// vertices against a box: the work done here, with no early exit, so each is >= the
-// CPU's count.
+// vertices against a box: the work of the lists with no early exit (a leaf of a pair
+// already confirmed still computes its filtered counts and only skips its vertex tests),
+// so each is >= the CPU's count and none depends on timing or on where the leaves run.
+// Each warp sums its counts in registers (Tally) and adds them once per launch.
+// Set-up: context() orders the pair (mesh first) on body indices and reads a step's levels
+// with hd::clamped_level, so no PlacedView is chosen by reference and no level array is
+// indexed at a run-time step: the per-item set-up stays in registers (no local memory).
 // This header holds the per-item device code; midphase.cu wraps it in its kernels
 // (mid_start, mid_expand, mid_leaf) and the fused small-scene step (small_step.cu) calls the
-// same functions between grid-wide barriers. Every loop over items is a grid-stride loop
-// over whole warps (the item index and its bounds are warp-uniform), so the warp
+// same functions between grid-wide barriers. Every loop over pairs is a grid-stride loop
+// over whole warps, every loop over list items a contiguous share per warp (warp_range);
+// the item index and its bounds are warp-uniform, so the warp
 // collectives (__ballot_sync / __shfl_sync with the full mask) see all 32 lanes. CUDA only.
 #include "kernels.hpp"
 #include "octocd/vertex_blocks.hpp"
@@ -59,7 +71,11 @@ __device__ inline hd::PlacedView place(const ShapesDesc& s, std::uint32_t shape,
   return p;
 }
 
-/// The two placed shapes of pair k and the test's set-up, A first (after the swap).
+/// The two placed shapes of pair k and the test's set-up, A first (the mesh when one of
+/// the two is a box: hd::setup_pair's order, chosen here on body indices so that the set-up
+/// sees the ordered pair and no PlacedView is chosen by reference, which would put both in
+/// local memory; `s.swap` is then false and the set-up is otherwise the one of the pair in
+/// its own order: an aabb-only or box-box answer is symmetric).
 struct PairContext {
   hd::PlacedView a, b;
   const Aabb* blocks_a = nullptr;  ///< A's vertex block boxes (mesh only)
@@ -74,22 +90,48 @@ __device__ inline PairContext context(const MidListDesc& d, std::uint32_t k, con
   c.static_static = d.w[p.a] == 0.0f && d.w[p.b] == 0.0f;
   const std::uint32_t sa = d.shape[p.a];
   const std::uint32_t sb = d.shape[p.b];
-  const hd::PlacedView va = place(d.shapes, sa, d.x[p.a], d.aabb[p.a]);
-  const hd::PlacedView vb = place(d.shapes, sb, d.x[p.b], d.aabb[p.b]);
   c.theta = pair_theta(d.shapes.theta[sa], d.shapes.theta[sb]);
-  c.s = hd::setup_pair(va, vb, c.theta, d.levels);
-  c.a = c.s.swap ? vb : va;
-  c.b = c.s.swap ? va : vb;
-  const Aabb* blocks_sa = d.shapes.blocks + d.shapes.shapes[sa].block_offset;
-  const Aabb* blocks_sb = d.shapes.blocks + d.shapes.shapes[sb].block_offset;
-  c.blocks_a = c.s.swap ? blocks_sb : blocks_sa;
-  c.blocks_b = c.s.swap ? blocks_sa : blocks_sb;
+  const bool swap = d.shapes.shapes[sa].is_mesh == 0;  // as setup_pair: (box, mesh) -> (mesh, box)
+  const std::uint32_t ia = swap ? p.b : p.a;
+  const std::uint32_t ib = swap ? p.a : p.b;
+  const std::uint32_t s_a = swap ? sb : sa;
+  const std::uint32_t s_b = swap ? sa : sb;
+  c.a = place(d.shapes, s_a, d.x[ia], d.aabb[ia]);
+  c.b = place(d.shapes, s_b, d.x[ib], d.aabb[ib]);
+  c.s = hd::setup_pair(c.a, c.b, c.theta, d.levels);
+  c.blocks_a = d.shapes.blocks + d.shapes.shapes[s_a].block_offset;
+  c.blocks_b = d.shapes.blocks + d.shapes.shapes[s_b].block_offset;
   return c;
+}
+
+/// Step i's level of A (`of_b` false) or B in pair context c: hd::clamped_level (the entry
+/// of c.s.la / c.s.lb, read without indexing those arrays at a run-time step, which would
+/// put them in local memory).
+__device__ inline int step_level(const MidListDesc& d, const PairContext& c, int i, bool of_b) {
+  return hd::clamped_level(d.levels, i, of_b ? c.b.octree.depth : c.a.octree.depth);
 }
 
 __device__ inline std::uint32_t lane_id() { return threadIdx.x & 31u; }
 __device__ inline std::uint32_t global_warp() { return (blockIdx.x * blockDim.x + threadIdx.x) >> 5; }
 __device__ inline std::uint32_t warp_count() { return (gridDim.x * blockDim.x) >> 5; }
+
+/// One warp's sums of the three counters (box tests, leaf box pairs, vertex tests) over
+/// the items it runs: every value added is warp-uniform, so every lane holds the same sums;
+/// `flush` adds them to d.counters once per warp and launch instead of one same-address
+/// atomic per item (integer sums: the totals do not depend on the order).
+struct Tally {
+  unsigned long long box_tests = 0;
+  unsigned long long box_pairs = 0;
+  unsigned long long vertex_tests = 0;
+};
+
+/// Adds a warp's tally to d.counters (lane 0; every lane calls it).
+__device__ inline void flush(const MidListDesc& d, const Tally& t) {
+  if (lane_id() != 0) return;
+  if (t.box_tests) atomicAdd(&d.counters[0], t.box_tests);
+  if (t.box_pairs) atomicAdd(&d.counters[1], t.box_pairs);
+  if (t.vertex_tests) atomicAdd(&d.counters[2], t.vertex_tests);
+}
 
 /// Warp-aggregated append of this lane's item when `keep` (every lane calls it).
 __device__ inline void append(const MidListDesc& d, bool keep, const MidItem& item) {
@@ -124,84 +166,6 @@ __device__ inline void append_chunks(const MidListDesc& d, std::uint32_t cnt, Mi
       item.chunk = c;
       d.out[start + c] = item;
     }
-  }
-}
-
-/// Tests the cell pairs [a0, a1) x [b0, b1) of pair k (mesh-box: [a0, a1) against the
-/// box; b is unused) with the lanes of the warp and appends the overlapping ones; at the
-/// last step (`last`) a mesh-mesh cell pair is appended once per kLeafChunk of B's
-/// vertices, and the surviving leaf box pairs are counted.
-__device__ inline void test_cells(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t a0,
-                           std::uint32_t a1, std::uint32_t b0, std::uint32_t b1, bool last) {
-  const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
-  const std::uint32_t nb = mesh_box ? 1u : b1 - b0;
-  const std::uint32_t total = (a1 - a0) * nb;
-  const hd::OctreeView& A = c.a.octree;
-  const hd::OctreeView& B = c.b.octree;
-  for (std::uint32_t c0 = 0; c0 < total; c0 += 32) {
-    const std::uint32_t t = c0 + lane_id();
-    bool keep = false;
-    MidItem item{k, 0, 0};
-    if (t < total) {
-      item.ca = a0 + t / nb;
-      item.cb = mesh_box ? 0u : b0 + t % nb;
-      keep = mesh_box ? overlaps(A.cells[item.ca].box, c.s.box_local)
-                      : overlaps(hd::moved_grown(A.cells[item.ca].box, c.s.d, c.s.margin), B.cells[item.cb].box);
-    }
-    if (last) {
-      const unsigned mask = __ballot_sync(kFull, keep);
-      if (lane_id() == 0 && mask) atomicAdd(&d.counters[1], static_cast<unsigned long long>(__popc(mask)));
-    }
-    if (last && !mesh_box) {
-      const std::uint32_t nv = keep ? B.cells[item.cb].vertex_count : 0u;
-      append_chunks(d, keep ? (nv + kLeafChunk - 1) / kLeafChunk : 0u, item);
-    } else {
-      append(d, keep, item);
-    }
-  }
-  if (lane_id() == 0 && total > 0) atomicAdd(&d.counters[0], static_cast<unsigned long long>(total));
-}
-
-/// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid).
-__device__ inline void mid_start_items(const MidListDesc& d) {
-  const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
-  for (std::uint32_t k = global_warp(); k < np; k += warp_count()) {
-    // The pair from its sorted key (the broadphase's output), kept for the later stages.
-    const unsigned long long key = d.pair_keys[k];
-    Pair p;
-    p.a = static_cast<std::uint32_t>(key >> d.pair_shift);
-    p.b = static_cast<std::uint32_t>(key & ((1ull << d.pair_shift) - 1ull));
-    if (lane_id() == 0) d.pairs[k] = p;
-    const PairContext c = context(d, k, p);
-    if (c.static_static || c.s.kind == hd::PairKind::Decided || c.s.kind == hd::PairKind::Exhaustive) {
-      if (lane_id() == 0) {
-        bool hit = false;
-        if (!c.static_static)
-          hit = c.s.kind == hd::PairKind::Decided ? c.s.result : hd::exhaustive_contact(c.a, c.b, c.theta);
-        d.confirmed[k] = hit ? 1 : 0;
-      }
-      continue;
-    }
-    if (lane_id() == 0) d.confirmed[k] = 0;
-    const hd::OctreeView& A = c.a.octree;
-    const hd::OctreeView& B = c.b.octree;
-    const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
-    test_cells(d, c, k, A.level_begin(c.s.la[0]), A.level_end(c.s.la[0]), mesh_box ? 0u : B.level_begin(c.s.lb[0]),
-               mesh_box ? 1u : B.level_end(c.s.lb[0]), d.steps == 1);
-  }
-}
-
-/// mid_expand's work: one warp per item of step `step` (grid-stride over the whole grid).
-__device__ inline void mid_expand_items(const MidListDesc& d, int step) {
-  const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
-  for (std::uint32_t it = global_warp(); it < count; it += warp_count()) {
-    const MidItem item = d.in[it];
-    const PairContext c = context(d, item.k, d.pairs[item.k]);
-    const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
-    std::uint32_t a0, a1, b0 = 0, b1 = 1;
-    hd::descendants(c.a.octree, item.ca, c.s.la[step], c.s.la[step + 1], a0, a1);
-    if (!mesh_box) hd::descendants(c.b.octree, item.cb, c.s.lb[step], c.s.lb[step + 1], b0, b1);
-    test_cells(d, c, item.k, a0, a1, b0, b1, step + 2 == d.steps);
   }
 }
 
@@ -281,98 +245,318 @@ __device__ inline bool pair_confirmed(const MidListDesc& d, std::uint32_t k) {
   return *(volatile const std::uint8_t*)(d.confirmed + k) != 0;
 }
 
-/// Shared memory of mid_leaf_items: per warp of the block, a tile of B's and one of A's
-/// filtered world vertices.
+/// pair_confirmed as one warp-uniform value (lane 0 reads, every lane gets it).
+__device__ inline bool confirmed_now(const MidListDesc& d, std::uint32_t k) {
+  return __shfl_sync(kFull, lane_id() == 0 ? static_cast<int>(pair_confirmed(d, k)) : 0, 0) != 0;
+}
+
+/// Whether some vertex of tile_a[0, na) and some vertex of tile_b[0, nb) are closer than
+/// theta (hd::vertex_close; the whole warp, warp-uniform result): every one of the na x nb
+/// pairs is tested unless a close pair ends the scan early (checked every 16 rounds: the
+/// same answer, less work when the meshes are in contact). Lanes: with nb <= 16, lane l
+/// takes B vertex l % P (P: nb rounded up to a power of two) and A vertices l / P,
+/// l / P + 32 / P, ... (so a small B tile keeps all 32 lanes busy); otherwise lane l takes
+/// B vertices l, l + 32, ... against every A vertex.
+__device__ inline bool tiles_close(const Vec3* tile_a, std::uint32_t na, const Vec3* tile_b, std::uint32_t nb,
+                                   float theta2) {
+  const std::uint32_t lane = lane_id();
+  bool found = false;
+  if (nb <= 16) {
+    const std::uint32_t p = nb <= 1 ? 1u : 1u << (32 - __clz(static_cast<int>(nb - 1)));  // 1, 2, 4, 8 or 16
+    const std::uint32_t groups = 32u / p;
+    const std::uint32_t j = lane % p;
+    const bool valid = j < nb;
+    const Vec3 wb = tile_b[valid ? j : 0u];
+    bool hit = false;
+    for (std::uint32_t i0 = 0; i0 < na && !found; i0 += 16u * groups) {
+      const std::uint32_t i1 = i0 + 16u * groups < na ? i0 + 16u * groups : na;
+      for (std::uint32_t ii = i0 + lane / p; ii < i1; ii += groups)
+        hit = hit || (valid && hd::vertex_close(tile_a[ii], wb, theta2));
+      found = __any_sync(kFull, hit);
+    }
+    return found;
+  }
+  for (std::uint32_t jj0 = 0; jj0 < nb && !found; jj0 += 32) {
+    const bool valid = jj0 + lane < nb;
+    const Vec3 wb = tile_b[valid ? jj0 + lane : 0u];
+    bool hit = false;
+    for (std::uint32_t i0 = 0; i0 < na && !found; i0 += 16) {
+      const std::uint32_t i1 = i0 + 16 < na ? i0 + 16 : na;
+      for (std::uint32_t ii = i0; ii < i1; ++ii) hit = hit || (valid && hd::vertex_close(tile_a[ii], wb, theta2));
+      found = __any_sync(kFull, hit);
+    }
+  }
+  return found;
+}
+
+/// Shared memory of mid_leaf_items and of the last mid_expand step when it runs the
+/// leaves itself: per warp of the block, a tile of B's and one of A's filtered world
+/// vertices.
 using LeafTiles = Vec3[kWarpsPerBlock][2][kLeafTile];
 
-/// mid_leaf's work: one warp per item of the last step (grid-stride over the whole grid);
+/// The narrow phase of one leaf item of pair k (the whole warp): mesh-box, A's cell `ca`
+/// against the box (as mesh_box_descend's last step); mesh-mesh, A's cell `ca` against
+/// chunk `chunk` (kLeafChunk vertices) of B's cell `cb` (as mesh_mesh_leaf). Sets
+/// confirmed[k] on a vertex pair within theta; adds the vertex tests to `t`: the leaf's
+/// whole count (the vertex count of A's cell, or filtered A x filtered B), whether or not
+/// the tests are cut short because the pair is confirmed (here or by another warp), so the
+/// counts do not depend on timing. `tile_a`, `tile_b`: the warp's kLeafTile-vertex tiles.
+__device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t ca_index,
+                                 std::uint32_t cb_index, std::uint32_t chunk, Vec3* tile_a, Vec3* tile_b,
+                                 Tally& t) {
+  const std::uint32_t lane = lane_id();
+  const hd::OctreeView& A = c.a.octree;
+  const MeshOctreeCell ca = A.cells[ca_index];
+  const std::uint32_t a_begin = ca.first_vertex;
+  const std::uint32_t a_end = ca.first_vertex + ca.vertex_count;
+  const Vec3 pa = c.a.position;
+  if (c.s.kind == hd::PairKind::MeshBox) {  // as mesh_box_descend's last step
+    t.vertex_tests += ca.vertex_count;
+    if (confirmed_now(d, k)) return;  // the answer is known: the tests would not change it
+    // Only the blocks whose box overlaps box_local (the box in A's frame grown by
+    // theta + tolerance, as the cell test) can hold a vertex within theta of the box.
+    bool hit = false;
+    const std::uint32_t g1 = block_end(a_end);
+    for (std::uint32_t g0 = a_begin / kVertexBlock; g0 < g1; g0 += 32) {
+      unsigned m = blocks_overlapping(c.blocks_a, g0, g1, c.s.box_local);
+      while (m) {
+        const std::uint32_t j = (g0 + static_cast<std::uint32_t>(__ffs(m) - 1)) * kVertexBlock + lane;
+        m &= m - 1u;
+        hit = hit || (j >= a_begin && j < a_end &&
+                      hd::vertex_box_close(hd::world_vertex(A.vertices[j], pa), c.b.box, c.s.theta2));
+      }
+    }
+    if (__any_sync(kFull, hit) && lane == 0) d.confirmed[k] = 1;
+    return;
+  }
+  // As mesh_mesh_leaf: B's vertices inside A's grown cell box (in B's frame) against
+  // A's vertices inside B's grown cell box (in A's frame), vertex_close(wa, wb).
+  const hd::OctreeView& B = c.b.octree;
+  const MeshOctreeCell cb = B.cells[cb_index];
+  // This item's share of B's vertices: chunk `chunk` of the cell's.
+  const std::uint32_t chunk_begin = chunk * kLeafChunk;
+  const std::uint32_t rest = cb.vertex_count > chunk_begin ? cb.vertex_count - chunk_begin : 0u;
+  const std::uint32_t nbv = rest < kLeafChunk ? rest : kLeafChunk;
+  const std::uint32_t b_begin = cb.first_vertex + chunk_begin;
+  const std::uint32_t b_end = b_begin + nbv;
+  const Vec3 pb = c.b.position;
+  const Aabb a_in_b = hd::moved_grown(ca.box, c.s.d, c.s.margin);
+  const Aabb b_in_a = hd::moved_back_grown(cb.box, c.s.d, c.s.margin);
+  // The filtered counts, whole blocks of 32 vertices skipped when their box misses the
+  // filter box (no vertex of theirs is inside it): the first tile of each range is staged
+  // while counting (stage_tile counts what it stages), the rest of the range only counted;
+  // the counts are those of the whole ranges.
+  std::uint32_t jb = b_begin / kVertexBlock;  // the next vertex block of B's range to stage
+  const std::uint32_t jb_end = block_end(b_end);
+  std::uint32_t nb = 0;
+  stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
+  const std::uint32_t nbf =
+      nb + (jb < jb_end ? count_inside(B.vertices, c.blocks_b, jb * kVertexBlock, b_end, a_in_b) : 0u);
+  if (nbf == 0) return;  // as mesh_mesh_leaf: no vertex test
+  const std::uint32_t ia_end = block_end(a_end);
+  std::uint32_t ia_first = a_begin / kVertexBlock;  // A's next block after its first tile
+  std::uint32_t na_first = 0;
+  stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia_first, na_first);
+  const std::uint32_t naf =
+      na_first +
+      (ia_first < ia_end ? count_inside(A.vertices, c.blocks_a, ia_first * kVertexBlock, a_end, b_in_a) : 0u);
+  t.vertex_tests += static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf);
+  if (naf == 0) return;
+  // Tiles of B's filtered world vertices against tiles of A's (B's first tile and, for it,
+  // A's first tile are already staged); another leaf of this pair may confirm it first
+  // (checked between B's tiles): the answer is the same.
+  bool found = false;
+  bool b_staged = true;  // tile_b holds B's next tile (nb vertices)
+  while (!found) {
+    if (confirmed_now(d, k)) break;
+    if (!b_staged) {
+      if (jb >= jb_end) break;
+      nb = 0;
+      stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
+    }
+    // tile_a still holds A's first tile only while B's first tile is tested.
+    bool a_staged = b_staged;
+    b_staged = false;
+    std::uint32_t ia = a_staged ? ia_first : a_begin / kVertexBlock;
+    std::uint32_t na = a_staged ? na_first : 0u;
+    while (!found && nb > 0) {
+      if (!a_staged) {
+        if (ia >= ia_end) break;
+        na = 0;
+        stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia, na);
+      }
+      a_staged = false;
+      found = tiles_close(tile_a, na, tile_b, nb, c.s.theta2);
+      __syncwarp();
+    }
+  }
+  if (found && lane == 0) d.confirmed[k] = 1;
+}
+
+/// The last step's cell pairs of `mask` (bit l: lane l's `item` survived), run as leaves by
+/// this warp in lane order instead of being appended to the leaf list: each mesh-mesh cell
+/// pair as its kLeafChunk chunks, each mesh-box cell once, exactly the items the list would
+/// have held (so the same tests and counts).
+__device__ inline void run_leaves(const MidListDesc& d, const PairContext& c, std::uint32_t k, unsigned mask,
+                                  const MidItem& item, LeafTiles& tiles, Tally& t) {
+  Vec3* tile_b = tiles[threadIdx.x >> 5][0];
+  Vec3* tile_a = tiles[threadIdx.x >> 5][1];
+  const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+  while (mask) {
+    const int l = __ffs(mask) - 1;
+    mask &= mask - 1u;
+    const std::uint32_t ca = __shfl_sync(kFull, item.ca, l);
+    const std::uint32_t cb = __shfl_sync(kFull, item.cb, l);
+    const std::uint32_t chunks = mesh_box ? 1u : (c.b.octree.cells[cb].vertex_count + kLeafChunk - 1) / kLeafChunk;
+    for (std::uint32_t ch = 0; ch < chunks; ++ch) leaf_item(d, c, k, ca, cb, ch, tile_a, tile_b, t);
+  }
+}
+
+/// Tests the cell pairs [a0, a1) x [b0, b1) of pair k (mesh-box: [a0, a1) against the
+/// box; b is unused) with the lanes of the warp and appends the overlapping ones; at the
+/// last step (`last`) a mesh-mesh cell pair is appended once per kLeafChunk of B's
+/// vertices, and the surviving leaf box pairs are counted; with `leaves` (last step only)
+/// the surviving cell pairs are run here as leaves (run_leaves) instead of appended.
+__device__ inline void test_cells(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t a0,
+                                  std::uint32_t a1, std::uint32_t b0, std::uint32_t b1, bool last, Tally& t,
+                                  LeafTiles* leaves = nullptr) {
+  const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+  const std::uint32_t nb = mesh_box ? 1u : b1 - b0;
+  const std::uint32_t total = (a1 - a0) * nb;
+  const hd::OctreeView& A = c.a.octree;
+  const hd::OctreeView& B = c.b.octree;
+  for (std::uint32_t c0 = 0; c0 < total; c0 += 32) {
+    const std::uint32_t i = c0 + lane_id();
+    bool keep = false;
+    MidItem item{k, 0, 0};
+    if (i < total) {
+      item.ca = a0 + i / nb;
+      item.cb = mesh_box ? 0u : b0 + i % nb;
+      keep = mesh_box ? overlaps(A.cells[item.ca].box, c.s.box_local)
+                      : overlaps(hd::moved_grown(A.cells[item.ca].box, c.s.d, c.s.margin), B.cells[item.cb].box);
+    }
+    if (last) {
+      const unsigned mask = __ballot_sync(kFull, keep);
+      t.box_pairs += static_cast<unsigned long long>(__popc(mask));
+      if (leaves != nullptr) {
+        run_leaves(d, c, k, mask, item, *leaves, t);
+        continue;
+      }
+    }
+    if (last && !mesh_box) {
+      const std::uint32_t nv = keep ? B.cells[item.cb].vertex_count : 0u;
+      append_chunks(d, keep ? (nv + kLeafChunk - 1) / kLeafChunk : 0u, item);
+    } else {
+      append(d, keep, item);
+    }
+  }
+  t.box_tests += total;
+}
+
+/// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid).
+__device__ inline void mid_start_items(const MidListDesc& d) {
+  const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
+  Tally t;
+  for (std::uint32_t k = global_warp(); k < np; k += warp_count()) {
+    // The pair from its sorted key (the broadphase's output), kept for the later stages.
+    const unsigned long long key = d.pair_keys[k];
+    Pair p;
+    p.a = static_cast<std::uint32_t>(key >> d.pair_shift);
+    p.b = static_cast<std::uint32_t>(key & ((1ull << d.pair_shift) - 1ull));
+    if (lane_id() == 0) d.pairs[k] = p;
+    const PairContext c = context(d, k, p);
+    if (c.static_static || c.s.kind == hd::PairKind::Decided || c.s.kind == hd::PairKind::Exhaustive) {
+      if (lane_id() == 0) {
+        bool hit = false;
+        if (!c.static_static)
+          hit = c.s.kind == hd::PairKind::Decided ? c.s.result : hd::exhaustive_contact(c.a, c.b, c.theta);
+        d.confirmed[k] = hit ? 1 : 0;
+      }
+      continue;
+    }
+    if (lane_id() == 0) d.confirmed[k] = 0;
+    const hd::OctreeView& A = c.a.octree;
+    const hd::OctreeView& B = c.b.octree;
+    const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+    const int la0 = step_level(d, c, 0, false);
+    const int lb0 = mesh_box ? 0 : step_level(d, c, 0, true);
+    test_cells(d, c, k, A.level_begin(la0), A.level_end(la0), mesh_box ? 0u : B.level_begin(lb0),
+               mesh_box ? 1u : B.level_end(lb0), d.steps == 1, t);
+  }
+  flush(d, t);
+}
+
+/// Whether the last expand step runs its leaves itself (test_cells' `leaves`): d.fuse_leaves
+/// 1 always, 0 never, -1 (auto) when the step has at least kFuseItemsPerWarp items per warp
+/// of the grid (then the leaves of an item on one warp still leave every warp busy; with
+/// fewer items the leaf list spreads a pair's chunks over more warps). Grid-uniform. Where
+/// the leaves run changes neither a result nor a count (the same leaf items either way).
+constexpr std::uint32_t kFuseItemsPerWarp = 2;
+__device__ inline bool fuse_leaves(const MidListDesc& d, std::uint32_t count) {
+  if (d.fuse_leaves >= 0) return d.fuse_leaves == 1;
+  return count >= kFuseItemsPerWarp * warp_count();
+}
+
+/// This warp's share of `count` list items: the contiguous range [begin, end), an equal
+/// share per warp of the grid. A warp (start or expand) appends the items of one pair
+/// together, so consecutive items often belong to the same pair: mid_expand_items sets a
+/// pair up once per run of its items (context() again only when k changes), and a leaf of
+/// a pair this warp has just confirmed skips its vertex tests.
+__device__ inline void warp_range(std::uint32_t count, std::uint32_t& begin, std::uint32_t& end) {
+  const unsigned long long per = (static_cast<unsigned long long>(count) + warp_count() - 1) / warp_count();
+  const unsigned long long b = global_warp() * per;
+  const unsigned long long e = b + per;
+  begin = b < count ? static_cast<std::uint32_t>(b) : count;
+  end = e < count ? static_cast<std::uint32_t>(e) : count;
+}
+
+/// mid_expand's work: one warp per item of step `step` (warp_range of the list).
+/// `tiles`: the block's LeafTiles (blockDim.x == kBlockSize) when the last step may run its
+/// leaves itself (fuse_leaves), or null (never).
+__device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTiles* tiles = nullptr) {
+  const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
+  const bool last = step + 2 == d.steps;
+  LeafTiles* leaves = last && tiles != nullptr && fuse_leaves(d, count) ? tiles : nullptr;
+  Tally t;
+  std::uint32_t begin, end;
+  warp_range(count, begin, end);
+  PairContext c;
+  bool have = false;  // c is the set-up of pair ck
+  std::uint32_t ck = 0;
+  for (std::uint32_t it = begin; it < end; ++it) {
+    const MidItem item = d.in[it];
+    if (!have || item.k != ck) {
+      c = context(d, item.k, d.pairs[item.k]);
+      ck = item.k;
+      have = true;
+    }
+    const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+    std::uint32_t a0, a1, b0 = 0, b1 = 1;
+    hd::descendants(c.a.octree, item.ca, step_level(d, c, step, false), step_level(d, c, step + 1, false), a0, a1);
+    if (!mesh_box)
+      hd::descendants(c.b.octree, item.cb, step_level(d, c, step, true), step_level(d, c, step + 1, true), b0, b1);
+    test_cells(d, c, item.k, a0, a1, b0, b1, last, t, leaves);
+  }
+  flush(d, t);
+}
+
+/// mid_leaf's work: one warp per item of the last step (warp_range of the list);
 /// `tiles` is the block's shared memory (blockDim.x == kBlockSize).
 __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
   Vec3* tile_b = tiles[threadIdx.x >> 5][0];
   Vec3* tile_a = tiles[threadIdx.x >> 5][1];
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
-  const std::uint32_t lane = lane_id();
-  for (std::uint32_t it = global_warp(); it < count; it += warp_count()) {
+  Tally t;
+  std::uint32_t begin, end;
+  warp_range(count, begin, end);
+  for (std::uint32_t it = begin; it < end; ++it) {
     const MidItem item = d.in[it];
+    // Set up per item: keeping the set-up across a run of the same pair's items (as
+    // mid_expand_items does) takes 89 registers here, or spills 352 bytes at 64.
     const PairContext c = context(d, item.k, d.pairs[item.k]);
-    const hd::OctreeView& A = c.a.octree;
-    const MeshOctreeCell ca = A.cells[item.ca];
-    const std::uint32_t a_begin = ca.first_vertex;
-    const std::uint32_t a_end = ca.first_vertex + ca.vertex_count;
-    const Vec3 pa = c.a.position;
-    if (c.s.kind == hd::PairKind::MeshBox) {  // as mesh_box_descend's last step
-      // Only the blocks whose box overlaps box_local (the box in A's frame grown by
-      // theta + tolerance, as the cell test) can hold a vertex within theta of the box.
-      bool hit = false;
-      const std::uint32_t g1 = block_end(a_end);
-      for (std::uint32_t g0 = a_begin / kVertexBlock; g0 < g1; g0 += 32) {
-        unsigned m = blocks_overlapping(c.blocks_a, g0, g1, c.s.box_local);
-        while (m) {
-          const std::uint32_t j = (g0 + static_cast<std::uint32_t>(__ffs(m) - 1)) * kVertexBlock + lane;
-          m &= m - 1u;
-          hit = hit || (j >= a_begin && j < a_end &&
-                        hd::vertex_box_close(hd::world_vertex(A.vertices[j], pa), c.b.box, c.s.theta2));
-        }
-      }
-      if (lane == 0 && ca.vertex_count > 0)
-        atomicAdd(&d.counters[2], static_cast<unsigned long long>(ca.vertex_count));
-      if (__any_sync(kFull, hit) && lane == 0) d.confirmed[item.k] = 1;
-      continue;
-    }
-    // As mesh_mesh_leaf: B's vertices inside A's grown cell box (in B's frame) against
-    // A's vertices inside B's grown cell box (in A's frame), vertex_close(wa, wb).
-    const hd::OctreeView& B = c.b.octree;
-    const MeshOctreeCell cb = B.cells[item.cb];
-    // This item's share of B's vertices: chunk `item.chunk` of the cell's.
-    const std::uint32_t chunk_begin = item.chunk * kLeafChunk;
-    const std::uint32_t rest = cb.vertex_count > chunk_begin ? cb.vertex_count - chunk_begin : 0u;
-    const std::uint32_t nbv = rest < kLeafChunk ? rest : kLeafChunk;
-    const std::uint32_t b_begin = cb.first_vertex + chunk_begin;
-    const std::uint32_t b_end = b_begin + nbv;
-    const Vec3 pb = c.b.position;
-    const Aabb a_in_b = hd::moved_grown(ca.box, c.s.d, c.s.margin);
-    const Aabb b_in_a = hd::moved_back_grown(cb.box, c.s.d, c.s.margin);
-    // The filtered counts, whole blocks of 32 vertices skipped when their box misses the
-    // filter box (no vertex of theirs is inside it): the same counts.
-    const std::uint32_t nbf = count_inside(B.vertices, c.blocks_b, b_begin, b_end, a_in_b);
-    if (nbf == 0) continue;  // as mesh_mesh_leaf: no vertex test
-    const std::uint32_t naf = count_inside(A.vertices, c.blocks_a, a_begin, a_end, b_in_a);
-    if (lane == 0 && naf > 0)
-      atomicAdd(&d.counters[2], static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf));
-    if (naf == 0) continue;
-    // Tiles of B's filtered world vertices against tiles of A's; another leaf of this
-    // pair may confirm it first (checked between tiles): the answer is the same.
-    bool found = false;
-    // jb, ia: the next vertex block of B's and A's ranges to stage.
-    std::uint32_t jb = b_begin / kVertexBlock;
-    const std::uint32_t jb_end = block_end(b_end);
-    const std::uint32_t ia_end = block_end(a_end);
-    while (!found && jb < jb_end) {
-      if (__shfl_sync(kFull, lane == 0 ? static_cast<int>(pair_confirmed(d, item.k)) : 0, 0)) break;
-      std::uint32_t nb = 0;
-      stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
-      std::uint32_t ia = a_begin / kVertexBlock;
-      while (!found && nb > 0 && ia < ia_end) {
-        std::uint32_t na = 0;
-        stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia, na);
-        // Lane l takes B vertices l, l + 32, ... of the tile; the warp stops as soon as
-        // one lane has a close pair (checked every 16 A vertices: same answer, less work
-        // when the meshes are in contact).
-        for (std::uint32_t jj0 = 0; jj0 < nb && !found; jj0 += 32) {
-          const bool valid = jj0 + lane < nb;
-          const Vec3 wb = tile_b[valid ? jj0 + lane : 0u];
-          bool hit = false;
-          for (std::uint32_t i0 = 0; i0 < na && !found; i0 += 16) {
-            const std::uint32_t i1 = i0 + 16 < na ? i0 + 16 : na;
-            for (std::uint32_t ii = i0; ii < i1; ++ii) hit = hit || (valid && hd::vertex_close(tile_a[ii], wb, c.s.theta2));
-            found = __any_sync(kFull, hit);
-          }
-        }
-        __syncwarp();
-      }
-    }
-    if (found && lane == 0) d.confirmed[item.k] = 1;
+    leaf_item(d, c, item.k, item.ca, item.cb, item.chunk, tile_a, tile_b, t);
   }
+  flush(d, t);
 }
 
 }  // namespace mid

@@ -775,6 +775,77 @@ TEST(CudaSmallStep, AnyGridGivesTheGraphPathsBits) {
   EXPECT_GT(vertex_tests, 0u) << "the run must reach the narrow phase";
 }
 
+// OCTOCD_CUDA_MID_FUSE (issue 20): where the last expand step runs its items' leaves (in
+// the expand step's own warp, or through the leaf list) changes no bit and no count: the
+// graph path with the switch at 0 and at 1 against the CPU engine, every frame, on a pile
+// (mesh-mesh and mesh-box leaves, many items per warp) and on bunny-random-400 with two and
+// three level steps. A bad value is an input error, before the device is looked at.
+TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
+  for (const char* bad : {"", "2", "auto", " 1"}) {
+    const ScopedEnv env("OCTOCD_CUDA_MID_FUSE", bad);
+    try {
+      CudaWorld gpu(load_model("box-stack"), "flat");
+      ADD_FAILURE() << "accepted OCTOCD_CUDA_MID_FUSE='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_MID_FUSE: '{}' is not allowed; allowed: 0", bad)),
+                std::string::npos)
+          << e.what();
+    } catch (const RuntimeError& e) {
+      ADD_FAILURE() << "OCTOCD_CUDA_MID_FUSE='" << bad << "' gave a runtime error: " << e.what();
+    }
+  }
+  REQUIRE_CUDA_DEVICE();
+  const PathEnv path("graph");
+  struct Case {
+    const char* scene;
+    const char* levels;  // null: the scene's own
+    int frames;
+  };
+  for (const Case& cs : {Case{"bunny-pile-10k", nullptr, 300}, Case{"bunny-random-400", nullptr, 300},
+                         Case{"bunny-random-400", "0,1,2", 200}}) {
+    auto model = std::make_shared<Model>(*load_model(cs.scene));
+    if (cs.levels) model->scene.midphase = MidphaseConfig::parse(cs.levels);
+    const std::shared_ptr<const Model> m = model;
+    BroadPhaseConfig cfg = m->scene.broadphase;
+    cfg.name = "octree";
+    World cpu(m, make_broadphase(cfg, m->scene.domain));
+    std::unique_ptr<CudaWorld> never, always;
+    {
+      const ScopedEnv env("OCTOCD_CUDA_MID_FUSE", "0");
+      never = std::make_unique<CudaWorld>(m, "octree");
+    }
+    {
+      const ScopedEnv env("OCTOCD_CUDA_MID_FUSE", "1");
+      always = std::make_unique<CudaWorld>(m, "octree");
+    }
+    ASSERT_EQ(never->step_path(), "graph");
+    ASSERT_EQ(always->step_path(), "graph");
+    std::uint64_t vertex_tests = 0, contacts = 0;
+    for (int f = 1; f <= cs.frames; ++f) {
+      const bool rec = f % 25 == 0;
+      cpu.set_recording(rec);
+      never->set_recording(rec);
+      always->set_recording(rec);
+      const FrameMetrics mc = cpu.step();
+      const FrameMetrics m0 = never->step();
+      const FrameMetrics m1 = always->step();
+      const std::string what = fmt::format("{} (levels {}) frame {}", cs.scene, cs.levels ? cs.levels : "own", f);
+      vertex_tests += m1.vertex_tests;
+      contacts += mc.contacts;
+      ASSERT_EQ(cpu.state_hash(), never->state_hash())
+          << what << " (fuse 0): " << first_difference(cpu.state(), never->state());
+      ASSERT_EQ(cpu.state_hash(), always->state_hash())
+          << what << " (fuse 1): " << first_difference(cpu.state(), always->state());
+      expect_same_counts(m0, m1, what + " (fuse 0 vs 1)");
+      expect_cpu_cuda_counts(mc, m1, what, false);
+      if (rec) expect_same_record(never->record(), always->record(), what + " (fuse 0 vs 1)");
+      if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
+    }
+    EXPECT_GT(contacts, 0u) << cs.scene << ": the run must reach contacts";
+    EXPECT_GT(vertex_tests, 0u) << cs.scene << ": the run must reach the leaves";
+  }
+}
+
 TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
   REQUIRE_CUDA_DEVICE();
   const std::string name = std::get<0>(GetParam());

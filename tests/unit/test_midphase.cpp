@@ -24,6 +24,7 @@ using octocd::MidphaseConfig;
 using octocd::MidphaseStats;
 using octocd::PlacedShape;
 using octocd::Vec3;
+namespace hd = octocd::hd;
 
 Mesh random_cloud(std::mt19937& rng, int n, Vec3 half) {
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
@@ -454,6 +455,114 @@ TEST(Midphase, FarApartIsRejectedEarly) {
   EXPECT_FALSE(octocd::confirm_contact(place(t, {0, 0, 0}), place(t, {1, 0, 0}), 0.01f, MidphaseConfig{}, st));
   EXPECT_EQ(st.box_tests, 0u);
   EXPECT_EQ(st.vertex_tests, 0u);
+}
+
+// The CUDA midphase (gpu/src/midphase.cuh, context) puts the mesh first itself and calls
+// hd::setup_pair on the ordered pair, so no placed shape is chosen by reference on the
+// device; that is only right if the set-up of (box, mesh) is the set-up of (mesh, box) but
+// for `swap`, field for field, and if the box-box / aabb-only answer does not depend on the
+// order. Checked on random placements (hits, misses and early rejections) for every level
+// list, with hd::clamped_level equal to the entries clamp_levels writes.
+hd::PlacedView hd_view(const PlacedShape& s) {
+  hd::PlacedView v;
+  v.is_mesh = s.octree != nullptr;
+  if (s.octree) {
+    v.octree.depth = s.octree->depth;
+    v.octree.bounds = s.octree->bounds;
+    v.octree.vertices = s.octree->vertices.data();
+    v.octree.vertex_count = static_cast<std::uint32_t>(s.octree->vertices.size());
+    v.octree.cells = s.octree->cells.data();
+    v.octree.level_offset = s.octree->level_offset.data();
+  }
+  v.position = s.position;
+  v.box = s.box;
+  return v;
+}
+
+hd::LevelList hd_levels(const MidphaseConfig& cfg) {
+  hd::LevelList l;
+  l.aabb_only = cfg.aabb_only;
+  l.count = static_cast<int>(cfg.levels.size());
+  for (int i = 0; i < l.count; ++i) l.levels[i] = cfg.levels[static_cast<std::size_t>(i)];
+  return l;
+}
+
+bool same_box(const Aabb& a, const Aabb& b) {
+  return a.min.x == b.min.x && a.min.y == b.min.y && a.min.z == b.min.z && a.max.x == b.max.x &&
+         a.max.y == b.max.y && a.max.z == b.max.z;
+}
+
+/// Every field of two set-ups but `swap` (levels up to k) equal; "" or the first difference.
+std::string setup_difference(const hd::PairSetup& x, const hd::PairSetup& y) {
+  if (x.kind != y.kind) return "kind";
+  if (x.result != y.result) return "result";
+  if (x.theta2 != y.theta2) return "theta2";
+  if (x.d.x != y.d.x || x.d.y != y.d.y || x.d.z != y.d.z) return "d";
+  if (x.margin != y.margin) return "margin";
+  if (!same_box(x.box_local, y.box_local)) return "box_local";
+  if (x.k != y.k) return "k";
+  for (int i = 0; i < x.k; ++i)
+    if (x.la[i] != y.la[i] || x.lb[i] != y.lb[i]) return "levels";
+  return "";
+}
+
+TEST(Midphase, SetupOfTheOrderedPairIsTheSetup) {
+  std::mt19937 rng(17);
+  const MeshOctree ta = octocd::build_mesh_octree(random_cloud(rng, 300, {0.1f, 0.08f, 0.06f}), 3);
+  const MeshOctree tb = octocd::build_mesh_octree(sphere_cloud(0.07f, 400), 2);
+  std::uniform_real_distribution<float> u(-0.3f, 0.3f);
+  std::uniform_real_distribution<float> h(0.01f, 0.15f);
+  std::vector<std::string> configs = kConfigs;
+  configs.push_back("aabb-only");
+  int kinds[4] = {0, 0, 0, 0};
+  for (int p = 0; p < 300; ++p) {
+    const Vec3 pa{u(rng), u(rng), u(rng)};
+    const Vec3 pb = pa + near_contact(rng, 0.2f, 0.3f, 1.6f);
+    const Vec3 c = pa + Vec3{u(rng), u(rng), u(rng)};
+    const Vec3 e{h(rng), h(rng), h(rng)};
+    const hd::PlacedView ma = hd_view(place(ta, pa));
+    const hd::PlacedView mb = hd_view(place(tb, pb));
+    const hd::PlacedView box = hd_view(place_box({c - e, c + e}));
+    const hd::PlacedView box2 = hd_view(place_box({pb - e, pb + e}));
+    for (const std::string& cs : configs) {
+      const MidphaseConfig cfg = cs == "aabb-only" ? [] {
+        MidphaseConfig a;
+        a.aabb_only = true;
+        return a;
+      }()
+                                                   : MidphaseConfig::parse(cs);
+      const hd::LevelList l = hd_levels(cfg);
+      const float theta = 0.01f;
+      // (box, mesh) is set up as (mesh, box) with swap; (mesh, box) has no swap.
+      const hd::PairSetup bm = hd::setup_pair(box, ma, theta, l);
+      const hd::PairSetup mbx = hd::setup_pair(ma, box, theta, l);
+      EXPECT_EQ(setup_difference(bm, mbx), "") << cs << " placement " << p;
+      EXPECT_EQ(mbx.swap, false);
+      EXPECT_EQ(bm.swap, !cfg.aabb_only) << cs;  // aabb-only is decided before the order
+      kinds[static_cast<int>(mbx.kind)]++;
+      // Box-box: the AABB overlap, either order.
+      const hd::PairSetup bb = hd::setup_pair(box, box2, theta, l);
+      const hd::PairSetup bb2 = hd::setup_pair(box2, box, theta, l);
+      EXPECT_EQ(setup_difference(bb, bb2), "") << cs;
+      EXPECT_EQ(bb.result, octocd::overlaps(box.box, box2.box));
+      // Mesh-mesh: never swapped.
+      const hd::PairSetup mm = hd::setup_pair(ma, mb, theta, l);
+      EXPECT_FALSE(mm.swap);
+      kinds[static_cast<int>(mm.kind)]++;
+      // The exhaustive oracle: either order, as the brute force over all vertices.
+      bool truth = false;
+      for (const Vec3& v : ta.vertices) truth = truth || octocd::distance2_point_aabb(v + pa, box.box) < theta * theta;
+      EXPECT_EQ(hd::exhaustive_contact(box, ma, theta), truth);
+      EXPECT_EQ(hd::exhaustive_contact(ma, box, theta), truth);
+      // clamped_level: the entries clamp_levels writes.
+      int out[hd::kMidphaseMaxLevels];
+      const int k = hd::clamp_levels(l, ta.depth, out);
+      for (int i = 0; i < k; ++i) EXPECT_EQ(hd::clamped_level(l, i, ta.depth), out[i]) << cs;
+    }
+  }
+  EXPECT_GT(kinds[static_cast<int>(hd::PairKind::Decided)], 50) << "early rejections and aabb-only";
+  EXPECT_GT(kinds[static_cast<int>(hd::PairKind::MeshBox)], 50);
+  EXPECT_GT(kinds[static_cast<int>(hd::PairKind::MeshMesh)], 50);
 }
 
 }  // namespace

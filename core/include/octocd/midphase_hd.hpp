@@ -144,11 +144,17 @@ OCTOCD_HD inline void descendants(const OctreeView& t, std::uint32_t c, int from
   end = hi + 1;
 }
 
-/// Level list clamped to an octree's depth (a level deeper than the octree is its
-/// deepest). Returns the number of levels written to `out`.
+/// Entry i (< the list's count) of a level list clamped to an octree's depth (a level
+/// deeper than the octree is its deepest).
+OCTOCD_HD inline int clamped_level(const LevelList& cfg, int i, int depth) {
+  return cfg.levels[i] < depth ? cfg.levels[i] : depth;
+}
+
+/// Level list clamped to an octree's depth (clamped_level of every entry). Returns the
+/// number of levels written to `out`.
 OCTOCD_HD inline int clamp_levels(const LevelList& cfg, int depth, int* out) {
   const int k = cfg.count < kMidphaseMaxLevels ? cfg.count : kMidphaseMaxLevels;
-  for (int i = 0; i < k; ++i) out[i] = cfg.levels[i] < depth ? cfg.levels[i] : depth;
+  for (int i = 0; i < k; ++i) out[i] = clamped_level(cfg, i, depth);
   return k;
 }
 
@@ -159,13 +165,8 @@ OCTOCD_HD inline float midphase_tolerance(float theta, float magnitudes) {
 
 // ---- the oracle --------------------------------------------------------------------------
 
-/// Tests every vertex pair (mesh-mesh), every vertex against the box (mesh-box) or the
-/// AABBs (box-box), with no pruning.
-OCTOCD_HD inline bool exhaustive_contact(const PlacedView& a_in, const PlacedView& b_in, float theta) {
-  if (!a_in.is_mesh && !b_in.is_mesh) return overlaps(a_in.box, b_in.box);
-  const bool swap = !a_in.is_mesh;
-  const PlacedView& a = swap ? b_in : a_in;
-  const PlacedView& b = swap ? a_in : b_in;
+/// exhaustive_contact once the order is fixed: mesh `a` against `b` (a mesh or a box).
+OCTOCD_HD inline bool exhaustive_ordered(const PlacedView& a, const PlacedView& b, float theta) {
   const float theta2 = theta * theta;
   const Vec3* va = a.octree.vertices;
   const std::uint32_t na = a.octree.vertex_count;
@@ -184,6 +185,15 @@ OCTOCD_HD inline bool exhaustive_contact(const PlacedView& a_in, const PlacedVie
     }
   }
   return false;
+}
+
+/// Tests every vertex pair (mesh-mesh), every vertex against the box (mesh-box) or the
+/// AABBs (box-box), with no pruning. (The mesh goes first through exhaustive_ordered,
+/// called with each order rather than with a reference chosen at run time: see
+/// setup_ordered.)
+OCTOCD_HD inline bool exhaustive_contact(const PlacedView& a_in, const PlacedView& b_in, float theta) {
+  if (!a_in.is_mesh && !b_in.is_mesh) return overlaps(a_in.box, b_in.box);
+  return a_in.is_mesh ? exhaustive_ordered(a_in, b_in, theta) : exhaustive_ordered(b_in, a_in, theta);
 }
 
 // ---- mesh-mesh -----------------------------------------------------------------------------
@@ -363,6 +373,38 @@ struct PairSetup {
   int lb[kMidphaseMaxLevels] = {};  ///< B's levels per step (mesh-mesh)
 };
 
+/// setup_pair's work once the order is fixed: mesh `a` (A) against `b` (B: a mesh or a
+/// box); fills every field of `s` but `swap` (its own function, called with the two
+/// orders, so no reference to one of two PlacedViews is chosen at run time: on the device
+/// such a choice puts both views in local memory).
+OCTOCD_HD inline void setup_ordered(PairSetup& s, const PlacedView& a, const PlacedView& b, float theta,
+                                    const LevelList& config) {
+  s.theta2 = theta * theta;
+  const OctreeView& A = a.octree;
+  if (!b.is_mesh) {
+    const float tol = midphase_tolerance(theta, max_abs(a.position) + max_abs(A.bounds) + max_abs(b.box));
+    const Vec3 lo = b.box.min - a.position;
+    const Vec3 hi = b.box.max - a.position;
+    s.box_local = expanded(Aabb{lo, hi}, theta + tol);
+    // Early rejection: the mesh's bounds against the box, with the margin.
+    if (!overlaps(A.bounds, s.box_local)) return;
+    s.k = clamp_levels(config, A.depth, s.la);
+    s.kind = s.k == 0 ? PairKind::Exhaustive : PairKind::MeshBox;  // no levels: nothing to prune
+    return;
+  }
+  const OctreeView& B = b.octree;
+  s.d = a.position - b.position;
+  const float tol = midphase_tolerance(
+      theta, max_abs(a.position) + max_abs(b.position) + max_abs(A.bounds) + max_abs(B.bounds));
+  s.margin = theta + tol;
+  // Early rejection (SPEC 5.3): the two bounds, each grown by theta/2, must overlap.
+  const Aabb e{A.bounds.min + s.d, A.bounds.max + s.d};
+  if (!overlaps_margin(e, B.bounds, s.margin)) return;
+  s.k = clamp_levels(config, A.depth, s.la);
+  clamp_levels(config, B.depth, s.lb);
+  s.kind = s.k == 0 ? PairKind::Exhaustive : PairKind::MeshMesh;
+}
+
 /// Classifies a contact test and computes its frame (see PairSetup): aabb-only and
 /// box-box are decided by the AABB overlap; a mesh pair whose bounds (grown by the
 /// margin) miss is rejected early.
@@ -374,32 +416,8 @@ OCTOCD_HD inline PairSetup setup_pair(const PlacedView& a_in, const PlacedView& 
     return s;
   }
   s.swap = !a_in.is_mesh;  // (box, mesh) -> (mesh, box)
-  const PlacedView& a = s.swap ? b_in : a_in;
-  const PlacedView& b = s.swap ? a_in : b_in;
-  s.theta2 = theta * theta;
-  const OctreeView& A = a.octree;
-  if (!b.is_mesh) {
-    const float tol = midphase_tolerance(theta, max_abs(a.position) + max_abs(A.bounds) + max_abs(b.box));
-    const Vec3 lo = b.box.min - a.position;
-    const Vec3 hi = b.box.max - a.position;
-    s.box_local = expanded(Aabb{lo, hi}, theta + tol);
-    // Early rejection: the mesh's bounds against the box, with the margin.
-    if (!overlaps(A.bounds, s.box_local)) return s;
-    s.k = clamp_levels(config, A.depth, s.la);
-    s.kind = s.k == 0 ? PairKind::Exhaustive : PairKind::MeshBox;  // no levels: nothing to prune
-    return s;
-  }
-  const OctreeView& B = b.octree;
-  s.d = a.position - b.position;
-  const float tol = midphase_tolerance(
-      theta, max_abs(a.position) + max_abs(b.position) + max_abs(A.bounds) + max_abs(B.bounds));
-  s.margin = theta + tol;
-  // Early rejection (SPEC 5.3): the two bounds, each grown by theta/2, must overlap.
-  const Aabb e{A.bounds.min + s.d, A.bounds.max + s.d};
-  if (!overlaps_margin(e, B.bounds, s.margin)) return s;
-  s.k = clamp_levels(config, A.depth, s.la);
-  clamp_levels(config, B.depth, s.lb);
-  s.kind = s.k == 0 ? PairKind::Exhaustive : PairKind::MeshMesh;
+  if (s.swap) setup_ordered(s, b_in, a_in, theta, config);
+  else setup_ordered(s, a_in, b_in, theta, config);
   return s;
 }
 

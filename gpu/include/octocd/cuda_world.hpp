@@ -130,7 +130,10 @@ bool cuda_device_available();
 /// 512, 0: never) runs its response passes, clamp and metrics in one block when a step has at
 /// most P pairs; OCTOCD_CUDA_SMALL_WAIT=poll (default: spin on the step's number in mapped
 /// memory) or sync (cudaStreamSynchronize) is how the host waits; OCTOCD_CUDA_SMALL_PROFILE=1
-/// times its phases (small_profile()). A bad value of any of them is an InputError.
+/// times its phases (small_profile()). OCTOCD_CUDA_MID_FUSE=0/1 (graph path; unset: auto,
+/// when the step has at least two items per warp) makes the last midphase expand step never /
+/// always run its items' leaves itself instead of appending them to the leaf list (the same
+/// leaf items, so the same bits and counts). A bad value of any of them is an InputError.
 ///
 /// Errors (all thrown from the constructor or step()): RuntimeError when no device is
 /// usable, when the device has less memory free (cudaMemGetInfo) than
