@@ -9,16 +9,20 @@
 //    D_w the overflow and NaN keys follow level D_w's cells, so the sort covers only the
 //    bits they need);
 // 3. a level table (first slot of every level, of the overflow list and of the NaN
-//    bodies) and a hash table of the occupied cells (cell key -> its run of slots, open
-//    addressing with linear probing over an array of keys, at most a quarter full, the
-//    runs in a parallel array read on a hit only), then a query per slot:
+//    bodies) and a hash table of the occupied blocks (aligned 2 x 2 x 2 groups of cells,
+//    whose slots are one run: loose_blocks.hpp; one 64-bit entry per block, its key and
+//    its first slot, open addressing with linear probing, at most half full), then a
+//    query per slot:
 //    - a body in a cell (level l) looks at every level m <= l that holds bodies: the
-//      cells whose loose boxes meet its own box (loose_query_axis_q: at most 4 per axis),
-//      looked up in the cell table (from kWarpQueryBodies bodies one thread per slot,
-//      the lookups one after another: at 10^6 bodies the query is instruction bound and
-//      most cells of a window are empty; below, one warp per slot, a lane per cell); at
-//      m = l it keeps only slots after its own (a cell whose key precedes its own is not
-//      even looked up), at m < l every body;
+//      cells whose loose boxes meet its own box (loose_query_axis_q: at most 4 per axis);
+//      from kWarpQueryBodies bodies one thread per slot probes the blocks that hold
+//      them (at most 3 per axis, 2 for a window of 3 cells: 8 probes where a probe per
+//      cell took 27; at 10^6 bodies most cells of a window are empty) and walks each
+//      block's run, skipping the slots of cells outside the window (the block's octant
+//      mask), so it tests exactly the slots of the window's cells; below, one warp per
+//      slot, a lane per cell (its run found through its block); at m = l it keeps only
+//      slots after its own (a block or cell whose keys all precede its own is not even
+//      looked up), at m < l every body;
 //    - an overflow body tests the overflow bodies after it;
 //    then the exact AABB test (octocd::overlaps, Eq. 6). A second kernel, one thread per
 //    in-tree slot, tests it against every overflow body (walls: a handful, each of which
@@ -41,6 +45,7 @@
 #include "device_buffer.hpp"
 #include "device_footprint.hpp"
 #include "kernels.hpp"
+#include "loose_blocks.hpp"
 #include "octocd/cuda_world.hpp"
 
 namespace octocd {
@@ -59,17 +64,6 @@ struct LooseQBox {
   std::int16_t hi[3];
 };
 static_assert(sizeof(LooseQBox) == footprint::kLooseQBoxBytes, "device_footprint.hpp: LooseQBox");
-
-/// The home entry of a cell key (murmur3's 32-bit finaliser: Morton keys of neighbouring
-/// cells differ in low bits only).
-__device__ inline std::uint32_t cell_hash(std::uint32_t k, std::uint32_t mask) {
-  k ^= k >> 16;
-  k *= 0x85ebca6bu;
-  k ^= k >> 13;
-  k *= 0xc2b2ae35u;
-  k ^= k >> 16;
-  return k & mask;
-}
 
 /// What the kernels read and write (device pointers).
 struct LooseDesc {
@@ -95,11 +89,10 @@ struct LooseDesc {
   /// Per level m in [0, kLooseMaxDepth + 1]: the first slot whose key is >= level m's base
   /// (entry kLooseMaxDepth + 1: the first overflow slot); then the first NaN slot.
   std::uint32_t* level_begin = nullptr;
-  /// The cell table, cell_mask + 1 entries: the keys (kLooseNoKey = empty; never a cell
-  /// key) and each key's run of slots [x, y).
-  std::uint32_t* cell_keys = nullptr;
-  uint2* cell_runs = nullptr;
-  std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 4 n)
+  /// The block table, cell_mask + 1 entries (loose_blocks.hpp): loose_block_entry(block
+  /// key, first slot), kLooseBlockEmpty where empty.
+  unsigned long long* cell_table = nullptr;
+  std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 2 n)
   unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
   int shift = 32;                           ///< PairOutput::shift
   std::uint32_t capacity = 0;               ///< entries pair_keys holds
@@ -162,32 +155,20 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   const std::uint32_t body = d.slot_body[s];
   d.slot_box[s] = d.aabb[body];
   d.slot_q[s] = d.q[body];
-  // The cell table: the first slot of a run writes its begin, the last its end (both
-  // claim or find the key's entry; the table holds at least four times the cell count).
+  // The block table: the first slot of a block's run claims an empty entry (one per
+  // block, so a claimed entry is another block's: probe on; at most half full).
   const std::uint32_t key = d.sorted_key[s];
   if (key >= d.overflow_key) return;
-  const bool first = s == 0 || d.sorted_key[s - 1] != key;
-  const bool last = s + 1 == d.n || d.sorted_key[s + 1] != key;
-  if (!first && !last) return;
-  std::uint32_t h = cell_hash(key, d.cell_mask);
-  for (;;) {
-    const std::uint32_t old = atomicCAS(&d.cell_keys[h], kLooseNoKey, key);
-    if (old == kLooseNoKey || old == key) break;
-    h = (h + 1) & d.cell_mask;
-  }
-  if (first) d.cell_runs[h].x = s;
-  if (last) d.cell_runs[h].y = s + 1;
+  const int level = loose_key_level(key);
+  if (!loose_block_first(d.sorted_key, s, level)) return;
+  const unsigned long long entry = loose_block_entry(loose_block_key(key, level), s);
+  std::uint32_t h = loose_block_hash(loose_block_key(key, level), d.cell_mask);
+  while (atomicCAS(&d.cell_table[h], kLooseBlockEmpty, entry) != kLooseBlockEmpty) h = (h + 1) & d.cell_mask;
 }
 
-/// The run of slots [begin, end) of cell `key` (empty when the cell holds no body).
-__device__ inline uint2 find_cell(const LooseDesc& d, std::uint32_t key) {
-  std::uint32_t h = cell_hash(key, d.cell_mask);
-  for (;;) {
-    const std::uint32_t k = d.cell_keys[h];
-    if (k == key) return d.cell_runs[h];
-    if (k == kLooseNoKey) return make_uint2(0, 0);
-    h = (h + 1) & d.cell_mask;
-  }
+/// The first slot of block `block_key` (kLooseNoSlot when it holds no body).
+__device__ inline std::uint32_t find_block(const LooseDesc& d, std::uint32_t block_key) {
+  return loose_block_find(d.cell_table, d.cell_mask, block_key);
 }
 
 /// First slot in [lo, hi) whose key is >= key.
@@ -304,9 +285,8 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
             // Same level: only the slots after s, so no cell before s's own (its slots all
             // come before s in key order) is looked up.
             if (m != level || ck >= key) {
-              const uint2 run = find_cell(d, ck);
-              t0 = run.x;
-              t1 = run.y;
+              loose_cell_run(
+                  d.sorted_key, d.n, ck, m, [&](std::uint32_t bk) { return find_block(d, bk); }, &t0, &t1);
               if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;
             }
           }
@@ -329,10 +309,11 @@ __device__ inline void test_run(const LooseDesc& d, const Aabb& box, std::uint32
 }
 
 /// One thread per slot: the loose octree query of the file comment. At each level that
-/// holds bodies, the thread walks the (at most 4 x 4 x 4) cells of its window, looks each
-/// up in the cell table and tests the run of slots it holds (at its own level only the
-/// slots after its own).
-__global__ void loose_query_kernel(LooseDesc d) {
+/// holds bodies, the thread probes the blocks that hold the (at most 4 x 4 x 4) cells of
+/// its window (at most 3 x 3 x 3) in the block table and tests the slots of the window's
+/// cells in each block's run (loose_block_query; at its own level only the slots after
+/// its own).
+__global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   unsigned long long tests = 0;
   if (s < d.n) {
@@ -342,6 +323,7 @@ __global__ void loose_query_kernel(LooseDesc d) {
     if (key == d.overflow_key) {
       test_run(d, box, body, s + 1, d.level_begin[kLooseMaxDepth + 2], tests);  // the overflow bodies after it
     } else if (key != d.nan_key) {  // a NaN box overlaps nothing
+      const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
       const int level = loose_key_level(key);
       const LooseQBox q = d.slot_q[s];
       for (int m = 0; m <= level; ++m) {
@@ -349,17 +331,12 @@ __global__ void loose_query_kernel(LooseDesc d) {
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
         const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
         const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
-        for (int iz = rz.lo; iz <= rz.hi; ++iz)
-          for (int iy = ry.lo; iy <= ry.hi; ++iy)
-            for (int ix = rx.lo; ix <= rx.hi; ++ix) {
-              const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix),
-                                                      static_cast<std::uint32_t>(iy), static_cast<std::uint32_t>(iz));
-              if (m == level && ck < key) continue;  // same level: its slots all come before s
-              const uint2 run = find_cell(d, ck);
-              std::uint32_t t0 = run.x;
-              if (m == level && t0 <= s) t0 = s + 1 < run.y ? s + 1 : run.y;  // same level: the slots after s
-              test_run(d, box, body, t0, run.y, tests);
-            }
+        loose_block_query(
+            d.sorted_key, d.n, s, key, level, m, rx, ry, rz, [&](std::uint32_t bk) { return find_block(d, bk); },
+            [&](std::uint32_t t) {
+              ++tests;
+              if (overlaps(box, d.slot_box[t])) bp::append_key(out, bp::pair_key(body, d.slot_body[t], d.shift));
+            });
       }
     }
   }
@@ -422,8 +399,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     level_begin_.ensure(kLevelTable);
     if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
     cell_mask_ = static_cast<std::uint32_t>(footprint::loose_cell_table_entries(n) - 1);
-    cell_keys_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
-    cell_runs_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
+    cell_table_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
     std::size_t a = 0, c = 0;
     check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
                                           static_cast<int>(n), 0, 32),
@@ -455,8 +431,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.slot_box = slot_box_.get();
     d.slot_q = slot_q_.get();
     d.level_begin = level_begin_.get();
-    d.cell_keys = cell_keys_.get();
-    d.cell_runs = cell_runs_.get();
+    d.cell_table = cell_table_.get();
     d.cell_mask = cell_mask_;
     d.pair_keys = out.keys;
     d.shift = out.shift;
@@ -477,9 +452,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
                                              slot_body_.get(), static_cast<int>(n), 0, key_bits_, stream),
              "cub::DeviceRadixSort::SortPairs");
-    check(cudaMemsetAsync(cell_keys_.get(), 0xff, (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(std::uint32_t),
-                          stream),
-          "cudaMemset octree cell table");
+    check(cudaMemsetAsync(cell_table_.get(), 0xff,
+                          (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(unsigned long long), stream),
+          "cudaMemset octree block table");
     loose_gather_kernel<<<grid_for(std::max<std::uint32_t>(n, kLevelTable)), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_gather");
     if (query_ == Query::Warp || (query_ == Query::Auto && n < kWarpQueryBodies)) {
@@ -496,7 +471,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     std::uint64_t t = 0;
     for (const BufferBase* b : std::initializer_list<const BufferBase*>{
              &extent_, &min_, &key_, &body_, &q_, &sorted_key_, &slot_body_, &slot_box_, &slot_q_,
-             &level_begin_, &cell_keys_, &cell_runs_, &temp_})
+             &level_begin_, &cell_table_, &temp_})
       t += b->bytes();
     return t;
   }
@@ -521,8 +496,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   DeviceBuffer<LooseQBox> slot_q_{"octree slot unit boxes"};
   DeviceBuffer<std::uint32_t> level_begin_{"octree level table"};
   std::uint32_t cell_mask_ = 1;
-  DeviceBuffer<std::uint32_t> cell_keys_{"octree cell table keys"};
-  DeviceBuffer<uint2> cell_runs_{"octree cell table runs"};
+  DeviceBuffer<unsigned long long> cell_table_{"octree block table"};
   DeviceBuffer<unsigned char> temp_{"octree CUB temporary storage"};
 };
 
