@@ -3,7 +3,8 @@
 // driver (core/src/broadphase_octree.cpp) uses. Steps (orchestrated by cuda_world.cpp):
 // 1. keys: D_w (the scene's, or `auto` from the smallest body extent, a CUB minimum),
 //    then per body loose_place_unit -> (level, Morton cell) key, the overflow key, or the
-//    NaN key; its unit box in fixed point (loose_q_min / loose_q_max);
+//    NaN key (the query recomputes its unit box in fixed point, loose_q_min / loose_q_max,
+//    from the slot's AABB);
 // 2. a stable radix sort by key: slot order = (key, body), so every occupied cell is a
 //    contiguous run of slots and the levels follow each other in key order (with a fixed
 //    D_w the overflow and NaN keys follow level D_w's cells, so the sort covers only the
@@ -60,10 +61,20 @@ constexpr std::uint32_t kWarpQueryBodies = 65536;
 
 /// A body's unit box in the fixed point of loose_q_min / loose_q_max.
 struct LooseQBox {
-  std::int16_t lo[3];
-  std::int16_t hi[3];
+  std::int32_t lo[3];
+  std::int32_t hi[3];
 };
-static_assert(sizeof(LooseQBox) == footprint::kLooseQBoxBytes, "device_footprint.hpp: LooseQBox");
+
+/// The fixed-point unit box of a body's AABB, computed where the query needs it (from
+/// the slot's AABB, bit for bit what loose_keys_kernel placed the body with: the same
+/// functions of the same floats; a stored copy per body and per slot cost 48 bytes of
+/// traffic a body).
+__device__ inline LooseQBox loose_qbox(const LooseGrid& g, const Aabb& b) {
+  const Vec3 lo = loose_unit(g, b.min);
+  const Vec3 hi = loose_unit(g, b.max);
+  return {{loose_q_min(lo.x), loose_q_min(lo.y), loose_q_min(lo.z)},
+          {loose_q_max(hi.x), loose_q_max(hi.y), loose_q_max(hi.z)}};
+}
 
 /// What the kernels read and write (device pointers).
 struct LooseDesc {
@@ -81,11 +92,9 @@ struct LooseDesc {
   std::uint32_t nan_key = kLooseNoKey;
   std::uint32_t* key = nullptr;    ///< per body: cell key, overflow_key or nan_key
   std::uint32_t* body = nullptr;   ///< per body: its index (the sort's values)
-  LooseQBox* q = nullptr;          ///< per body: fixed-point unit box
   const std::uint32_t* sorted_key = nullptr;   ///< per slot: key, ascending
   const std::uint32_t* slot_body = nullptr;    ///< per slot: body (stable: body order per cell)
   Aabb* slot_box = nullptr;        ///< per slot: the body's AABB
-  LooseQBox* slot_q = nullptr;     ///< per slot: the body's fixed-point box
   /// Per level m in [0, kLooseMaxDepth + 1]: the first slot whose key is >= level m's base
   /// (entry kLooseMaxDepth + 1: the first overflow slot); then the first NaN slot.
   std::uint32_t* level_begin = nullptr;
@@ -116,23 +125,14 @@ __global__ void loose_keys_kernel(LooseDesc d) {
   const int depth = d.depth >= 0 ? d.depth : loose_auto_depth(*d.min_extent);
   const Aabb b = d.aabb[i];
   d.body[i] = i;
-  LooseQBox q{};
   if (loose_has_nan(b)) {
     d.key[i] = d.nan_key;
-    d.q[i] = q;
     return;
   }
   const Vec3 lo = loose_unit(d.grid, b.min);
   const Vec3 hi = loose_unit(d.grid, b.max);
   const std::uint32_t key = loose_place_key(loose_place_unit(lo, hi, depth));
   d.key[i] = key == kLooseOverflowKey ? d.overflow_key : key;
-  q.lo[0] = static_cast<std::int16_t>(loose_q_min(lo.x));
-  q.lo[1] = static_cast<std::int16_t>(loose_q_min(lo.y));
-  q.lo[2] = static_cast<std::int16_t>(loose_q_min(lo.z));
-  q.hi[0] = static_cast<std::int16_t>(loose_q_max(hi.x));
-  q.hi[1] = static_cast<std::int16_t>(loose_q_max(hi.y));
-  q.hi[2] = static_cast<std::int16_t>(loose_q_max(hi.z));
-  d.q[i] = q;
 }
 
 /// First slot in [lo, hi) whose key is >= key.
@@ -154,7 +154,6 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   if (s >= d.n) return;
   const std::uint32_t body = d.slot_body[s];
   d.slot_box[s] = d.aabb[body];
-  d.slot_q[s] = d.q[body];
   // The block table: the first slot of a block's run claims an empty entry (one per
   // block, so a claimed entry is another block's: probe on; at most half full).
   const std::uint32_t key = d.sorted_key[s];
@@ -266,7 +265,7 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
       e.range(s + 1, d.level_begin[kLooseMaxDepth + 2]);  // the overflow bodies after it
     } else if (key != d.nan_key) {                        // a NaN box overlaps nothing
       const int level = loose_key_level(key);
-      const LooseQBox q = d.slot_q[s];
+      const LooseQBox q = loose_qbox(d.grid, e.box_s);
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
@@ -325,7 +324,7 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
     } else if (key != d.nan_key) {  // a NaN box overlaps nothing
       const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
       const int level = loose_key_level(key);
-      const LooseQBox q = d.slot_q[s];
+      const LooseQBox q = loose_qbox(d.grid, box);
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
@@ -391,11 +390,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     min_.ensure(1);
     key_.ensure(n);
     body_.ensure(n);
-    q_.ensure(n);
     sorted_key_.ensure(n);
     slot_body_.ensure(n);
     slot_box_.ensure(n);
-    slot_q_.ensure(n);
     level_begin_.ensure(kLevelTable);
     if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
     cell_mask_ = static_cast<std::uint32_t>(footprint::loose_cell_table_entries(n) - 1);
@@ -425,11 +422,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.min_extent = min_.get();
     d.key = key_.get();
     d.body = body_.get();
-    d.q = q_.get();
     d.sorted_key = sorted_key_.get();
     d.slot_body = slot_body_.get();
     d.slot_box = slot_box_.get();
-    d.slot_q = slot_q_.get();
     d.level_begin = level_begin_.get();
     d.cell_table = cell_table_.get();
     d.cell_mask = cell_mask_;
@@ -470,7 +465,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   std::uint64_t device_bytes() const override {
     std::uint64_t t = 0;
     for (const BufferBase* b : std::initializer_list<const BufferBase*>{
-             &extent_, &min_, &key_, &body_, &q_, &sorted_key_, &slot_body_, &slot_box_, &slot_q_,
+             &extent_, &min_, &key_, &body_, &sorted_key_, &slot_body_, &slot_box_,
              &level_begin_, &cell_table_, &temp_})
       t += b->bytes();
     return t;
@@ -489,11 +484,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   DeviceBuffer<float> min_{"octree smallest extent"};
   DeviceBuffer<std::uint32_t> key_{"octree body keys"};
   DeviceBuffer<std::uint32_t> body_{"octree body indices"};
-  DeviceBuffer<LooseQBox> q_{"octree body unit boxes"};
   DeviceBuffer<std::uint32_t> sorted_key_{"octree sorted keys"};
   DeviceBuffer<std::uint32_t> slot_body_{"octree slot bodies"};
   DeviceBuffer<Aabb> slot_box_{"octree slot boxes"};
-  DeviceBuffer<LooseQBox> slot_q_{"octree slot unit boxes"};
   DeviceBuffer<std::uint32_t> level_begin_{"octree level table"};
   std::uint32_t cell_mask_ = 1;
   DeviceBuffer<unsigned long long> cell_table_{"octree block table"};

@@ -35,8 +35,6 @@ constexpr std::uint64_t loose_cell_table_entries(std::uint64_t n) {
   while (t < 2 * (n > 0 ? n : 1)) t <<= 1;
   return t;
 }
-/// sizeof(LooseQBox) (broadphase_octree.cu): a body's fixed-point unit box.
-constexpr std::uint64_t kLooseQBoxBytes = 12;
 /// Entries of the loose octree's level table: levels 0 .. kLooseMaxDepth, overflow, NaN.
 constexpr std::uint32_t kLooseLevelTable = kLooseMaxDepth + 3;
 /// sizeof(LbvhNode) (lbvh.hpp): an internal node of `lbvh`.
