@@ -1,7 +1,8 @@
 // Broadphase `octree` on the device: the loose octree of SPEC 5.1 (Ulrich 2000, looseness
 // 2) with every cell and level decision from octocd/loose_octree.hpp, the header the CPU
 // driver (core/src/broadphase_octree.cpp) uses. Steps (orchestrated by cuda_world.cpp):
-// 1. keys: D_w (the scene's, or `auto` from the smallest body extent, a CUB minimum),
+// 1. keys: D_w (the scene's, or `auto` from the smallest body extent: a block minimum,
+//    then one atomicMin per block on the float's bits),
 //    then per body loose_place_unit -> (level, Morton cell) key, the overflow key, or the
 //    NaN key (the query recomputes its unit box in fixed point, loose_q_min / loose_q_max,
 //    from the slot's AABB);
@@ -38,7 +39,8 @@
 #include <string>
 
 #include <cub/device/device_radix_sort.cuh>
-#include <cub/device/device_reduce.cuh>
+#include <cub/block/block_reduce.cuh>
+#include <cuda/functional>
 #include <cub/device/device_scan.cuh>
 
 #include "broadphase_common.cuh"
@@ -82,8 +84,10 @@ struct LooseDesc {
   std::uint32_t n = 0;             ///< bodies
   LooseGrid grid;                  ///< root cube of the scene's domain
   int depth = 2;                   ///< D_w in [0, 10]; -1 = auto (from *min_extent)
-  float* extent = nullptr;         ///< scratch per body (auto depth): largest unit side
-  float* min_extent = nullptr;     ///< one float: the smallest extent (auto depth)
+  /// One float (auto depth): the smallest extent (largest unit side of a body's box),
+  /// as its bits (non-negative floats order as their bits); kMinExtentInit before the
+  /// minimum.
+  float* min_extent = nullptr;
   /// The sort keys of overflow and NaN bodies: kLooseOverflowKey and kLooseNoKey with
   /// depth `auto`; with a fixed D_w the two values after level D_w's last cell key
   /// (loose_level_base(D_w + 1) and + 1), so the key sort covers only the bits they need
@@ -109,14 +113,24 @@ struct LooseDesc {
   unsigned long long* candidates = nullptr; ///< out (added): exact AABB tests
 };
 
+/// The byte cudaMemset fills min_extent with: 0x7f7f7f7f = 3.4e38, above every extent that
+/// gives a depth other than 0 (loose_auto_depth of it and of +inf, all NaN bodies, is 0).
+constexpr int kMinExtentInit = 0x7f;
+
 __global__ void loose_extent_kernel(LooseDesc d) {
+  using Reduce = cub::BlockReduce<std::uint32_t, kBlockSize>;
+  __shared__ typename Reduce::TempStorage storage;
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= d.n) return;
-  const Aabb b = d.aabb[i];
-  float ext = loose_unit_extent(loose_unit(d.grid, b.min), loose_unit(d.grid, b.max));
-  ext = ext < 0.0f ? 0.0f : ext;
-  // As the CPU driver: NaN extents are left out of the minimum.
-  d.extent[i] = ext != ext ? __int_as_float(0x7f800000) : ext;
+  std::uint32_t bits = 0x7f800000u;  // +inf: no body, or a NaN extent
+  if (i < d.n) {
+    const Aabb b = d.aabb[i];
+    const float ext = loose_unit_extent(loose_unit(d.grid, b.min), loose_unit(d.grid, b.max));
+    // As the CPU driver: NaN extents are left out of the minimum; negative (and -0) are 0
+    // (+0: the bits of non-negative floats order as the floats).
+    if (ext == ext) bits = ext > 0.0f ? __float_as_uint(ext) : 0u;
+  }
+  const std::uint32_t m = Reduce(storage).Reduce(bits, cuda::minimum<>{});
+  if (threadIdx.x == 0) atomicMin(reinterpret_cast<unsigned int*>(d.min_extent), m);
 }
 
 __global__ void loose_keys_kernel(LooseDesc d) {
@@ -386,7 +400,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
     (void)stream;
-    extent_.ensure(n);
     min_.ensure(1);
     key_.ensure(n);
     body_.ensure(n);
@@ -397,13 +410,11 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
     cell_mask_ = static_cast<std::uint32_t>(footprint::loose_cell_table_entries(n) - 1);
     cell_table_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
-    std::size_t a = 0, c = 0;
+    std::size_t a = 0;
     check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
                                           static_cast<int>(n), 0, 32),
           "cub::DeviceRadixSort::SortPairs (size)");
-    check(cub::DeviceReduce::Min(nullptr, c, extent_.get(), min_.get(), static_cast<int>(n)),
-          "cub::DeviceReduce::Min (size)");
-    temp_.ensure(std::max({a, c, std::size_t{1}}));
+    temp_.ensure(std::max(a, std::size_t{1}));
     n_ = n;
   }
 
@@ -418,7 +429,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.depth = depth_;
     d.overflow_key = overflow_key_;
     d.nan_key = overflow_key_ == kLooseOverflowKey ? kLooseNoKey : overflow_key_ + 1;
-    d.extent = extent_.get();
     d.min_extent = min_.get();
     d.key = key_.get();
     d.body = body_.get();
@@ -434,16 +444,14 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.total = out.total;
     d.candidates = out.candidates;
     const unsigned g = grid_for(n);
-    std::size_t bytes = temp_.capacity();
     if (depth_ < 0) {
+      check(cudaMemsetAsync(min_.get(), kMinExtentInit, sizeof(float), stream), "cudaMemset octree smallest extent");
       loose_extent_kernel<<<g, kBlockSize, 0, stream>>>(d);
       bp::launched(cudaGetLastError(), "loose_extent");
-      bp::launched(cub::DeviceReduce::Min(temp_.get(), bytes, extent_.get(), min_.get(), static_cast<int>(n), stream),
-               "cub::DeviceReduce::Min");
     }
     loose_keys_kernel<<<g, kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_keys");
-    bytes = temp_.capacity();
+    std::size_t bytes = temp_.capacity();
     bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
                                              slot_body_.get(), static_cast<int>(n), 0, key_bits_, stream),
              "cub::DeviceRadixSort::SortPairs");
@@ -465,7 +473,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   std::uint64_t device_bytes() const override {
     std::uint64_t t = 0;
     for (const BufferBase* b : std::initializer_list<const BufferBase*>{
-             &extent_, &min_, &key_, &body_, &sorted_key_, &slot_body_, &slot_box_,
+             &min_, &key_, &body_, &sorted_key_, &slot_body_, &slot_box_,
              &level_begin_, &cell_table_, &temp_})
       t += b->bytes();
     return t;
@@ -480,7 +488,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   int key_bits_ = 32;                               // the key sort's end bit
   static constexpr std::uint32_t kNotReserved = 0xffffffffu;
   std::uint32_t n_ = kNotReserved;
-  DeviceBuffer<float> extent_{"octree body extents"};
   DeviceBuffer<float> min_{"octree smallest extent"};
   DeviceBuffer<std::uint32_t> key_{"octree body keys"};
   DeviceBuffer<std::uint32_t> body_{"octree body indices"};
