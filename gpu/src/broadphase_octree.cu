@@ -172,7 +172,7 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   // block, so a claimed entry is another block's: probe on; at most half full).
   const std::uint32_t key = d.sorted_key[s];
   if (key >= d.overflow_key) return;
-  const int level = loose_key_level(key);
+  const int level = loose_cell_key_level(key);
   if (!loose_block_first(d.sorted_key, s, level)) return;
   const unsigned long long entry = loose_block_entry(loose_block_key(key, level), s);
   std::uint32_t h = loose_block_hash(loose_block_key(key, level), d.cell_mask);
@@ -278,7 +278,7 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
     if (key == d.overflow_key) {
       e.range(s + 1, d.level_begin[kLooseMaxDepth + 2]);  // the overflow bodies after it
     } else if (key != d.nan_key) {                        // a NaN box overlaps nothing
-      const int level = loose_key_level(key);
+      const int level = loose_cell_key_level(key);
       const LooseQBox q = loose_qbox(d.grid, e.box_s);
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
@@ -337,7 +337,7 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
       test_run(d, box, body, s + 1, d.level_begin[kLooseMaxDepth + 2], tests);  // the overflow bodies after it
     } else if (key != d.nan_key) {  // a NaN box overlaps nothing
       const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
-      const int level = loose_key_level(key);
+      const int level = loose_cell_key_level(key);
       const LooseQBox q = loose_qbox(d.grid, box);
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level

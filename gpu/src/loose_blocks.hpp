@@ -38,6 +38,20 @@ constexpr unsigned long long kLooseBlockEmpty = ~0ull;
 /// No slot: loose_block_find's answer for a block that holds no body.
 constexpr std::uint32_t kLooseNoSlot = 0xffffffffu;
 
+/// loose_key_level of a cell key (key < loose_level_base(kLooseMaxDepth + 1)) without its
+/// loop: level l's keys are [(8^l - 1) / 7, (8^(l+1) - 1) / 7), so 7 key + 1 lies in
+/// [2^(3 l), 2^(3 l + 3)) and l = floor(log2(7 key + 1) / 3) (64-bit: 7 key + 1 < 2^33).
+OCTOCD_HD inline int loose_cell_key_level(std::uint32_t key) {
+  const unsigned long long v = 7ull * key + 1ull;
+  int log2 = 0;
+#if defined(__CUDA_ARCH__)
+  log2 = 63 - __clzll(static_cast<long long>(v));
+#else
+  while ((v >> (log2 + 1)) != 0) ++log2;
+#endif
+  return log2 / 3;
+}
+
 /// Cells (keys) in a block of `level`: 8, or 1 at level 0.
 OCTOCD_HD inline std::uint32_t loose_block_span(int level) { return level == 0 ? 1u : 8u; }
 

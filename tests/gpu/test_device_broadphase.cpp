@@ -1138,6 +1138,35 @@ TEST(LooseBlockHostModel, FewerProbesThanCells) {
   EXPECT_LE(2 * block_probes, m.cell_probes) << block_probes << " block probes, " << m.cell_probes << " cells";
 }
 
+// The loop-free level of a cell key (the kernels' loose_cell_key_level) against
+// loose_key_level on every level's first and last keys, their neighbours and random keys.
+TEST(LooseBlockHostModel, CellKeyLevelEqualsTheLoop) {
+  // Level l's keys: [(8^l - 1) / 7, (8^(l+1) - 1) / 7) (64-bit: level 11's base is above 2^30).
+  auto base = [](int l) { return static_cast<std::uint32_t>(((1ull << (3 * l)) - 1) / 7); };
+  std::vector<std::uint32_t> keys;
+  for (int l = 0; l <= kLooseMaxDepth; ++l) {
+    ASSERT_EQ(base(l), loose_level_base(l));
+    const std::uint32_t b = base(l), e = base(l + 1);
+    for (std::uint32_t k : {b, b + 1, b + 7, b + 8, e - 2, e - 1})
+      if (k >= b && k < e) keys.push_back(k);
+  }
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<std::uint32_t> u(0, base(kLooseMaxDepth + 1) - 1);
+  for (int i = 0; i < 100000; ++i) keys.push_back(u(rng));
+  for (const std::uint32_t k : keys) ASSERT_EQ(gpu::loose_cell_key_level(k), loose_key_level(k)) << "key " << k;
+  // Planted fault: the formula with a 32-bit product wraps from key 613566757 (level 10)
+  // on: 7 k + 1 = 2^32 + 4 reads as level 0.
+  auto level32 = [](std::uint32_t k) {
+    const std::uint32_t v = 7u * k + 1u;
+    int l2 = 0;
+    while (l2 < 31 && (v >> (l2 + 1)) != 0) ++l2;
+    return l2 / 3;
+  };
+  EXPECT_EQ(level32(5u), loose_key_level(5u));
+  EXPECT_EQ(loose_key_level(613566757u), 10);
+  EXPECT_NE(level32(613566757u), loose_key_level(613566757u));
+}
+
 // Planted faults: the checks above can fail.
 TEST(LooseBlockHostModel, PlantedFaultsAreCaught) {
   for (const char* name : {"uniform-1000", "touching-lattice", "nested-levels"}) {
