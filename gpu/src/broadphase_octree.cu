@@ -57,8 +57,9 @@ namespace {
 
 
 /// Below this many bodies the query runs one warp per slot, from it one thread per slot
-/// (bench_gpu_broadphase on the H100: 10^4 boxes 0.15 vs 0.21 ms, 10^5 0.28 vs 0.26 ms,
-/// 10^6 1.63 vs 1.16 ms).
+/// (bench_gpu_broadphase on the H100 with the per-cell table this replaced: 10^4 boxes
+/// 0.15 vs 0.21 ms, 10^5 0.28 vs 0.26 ms, 10^6 1.63 vs 1.16 ms; not yet measured again
+/// with the block table).
 constexpr std::uint32_t kWarpQueryBodies = 65536;
 
 /// A body's unit box in the fixed point of loose_q_min / loose_q_max.
