@@ -34,11 +34,21 @@
 //    box lies in its cell's loose box and the query ranges are exact;
 // 4. the pairs are appended as keys (a << shift) | b (PairOutput::shift) with one atomic
 //    per group of threads that append together (their order varies; the set does not),
-//    then radix-sorted by the caller: the sorted unique set `flat` gives.
+//    then radix-sorted by the caller: the sorted unique set `flat` gives. Given
+//    PairOutput::scratch (sorts_pairs()), the octree sorts them itself, without a radix
+//    sort of the pairs (5 or 6 passes of 8 bits over 2 bits(n) bits): the queries append
+//    into the scratch and count the pairs of each smaller body a (one atomicAdd each); an
+//    exclusive scan of the n counts gives each a's segment of the output; each pair goes
+//    to its segment (one atomicSub: any order within it); then each segment is sorted on
+//    its own: one thread per body for at most kLocalSortMax keys (insertion sort), one
+//    block (a CUB block radix sort) for at most kBlockSortMax, beyond that one block by
+//    counting (each key's rank in its segment: length^2 / 256 steps, for a body that
+//    overlaps thousands of bodies of larger index).
 #include <cstdlib>
 #include <string>
 
 #include <cub/device/device_radix_sort.cuh>
+#include <cub/block/block_radix_sort.cuh>
 #include <cub/block/block_reduce.cuh>
 #include <cuda/functional>
 #include <cub/device/device_scan.cuh>
@@ -108,6 +118,9 @@ struct LooseDesc {
   unsigned long long* cell_table = nullptr;
   std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 2 n)
   unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
+  /// Sorted mode (PairOutput::scratch given; pair_keys is then the scratch): per body a,
+  /// n + 1 entries zeroed before the query, the pairs (a, b) appended; else nullptr.
+  std::uint32_t* pair_count = nullptr;
   int shift = 32;                           ///< PairOutput::shift
   std::uint32_t capacity = 0;               ///< entries pair_keys holds
   std::uint32_t* total = nullptr;           ///< out: pairs found (may exceed capacity)
@@ -209,7 +222,14 @@ __device__ inline void warp_emit(const LooseDesc& d, bool hit, unsigned long lon
   if (hit) {
     const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
     if (idx < d.capacity) d.pair_keys[idx] = key;
+    if (d.pair_count) atomicAdd(&d.pair_count[key >> d.shift], 1u);
   }
+}
+
+/// Appends one pair's key (bp::append_key) and, in sorted mode, counts it for its body a.
+__device__ inline void append_pair(const LooseDesc& d, const PairOutput& out, unsigned long long key) {
+  bp::append_key(out, key);
+  if (d.pair_count) atomicAdd(&d.pair_count[key >> d.shift], 1u);
 }
 
 /// One warp's query for slot s: the lanes test candidate slots 32 at a time and append
@@ -319,7 +339,7 @@ __device__ inline void test_run(const LooseDesc& d, const Aabb& box, std::uint32
   tests += t1 - t0;
   const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
   for (std::uint32_t t = t0; t < t1; ++t)
-    if (overlaps(box, d.slot_box[t])) bp::append_key(out, bp::pair_key(body, d.slot_body[t], d.shift));
+    if (overlaps(box, d.slot_box[t])) append_pair(d, out, bp::pair_key(body, d.slot_body[t], d.shift));
 }
 
 /// One thread per slot: the loose octree query of the file comment. At each level that
@@ -349,7 +369,7 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
             d.sorted_key, d.n, s, key, level, m, rx, ry, rz, [&](std::uint32_t bk) { return find_block(d, bk); },
             [&](std::uint32_t t) {
               ++tests;
-              if (overlaps(box, d.slot_box[t])) bp::append_key(out, bp::pair_key(body, d.slot_body[t], d.shift));
+              if (overlaps(box, d.slot_box[t])) append_pair(d, out, bp::pair_key(body, d.slot_body[t], d.shift));
             });
       }
     }
@@ -378,6 +398,102 @@ __global__ void loose_overflow_kernel(LooseDesc d) {
   bp::block_add(d.candidates, tests);
 }
 
+/// Segments of at most this many keys are sorted by one thread (insertion sort).
+constexpr std::uint32_t kLocalSortMax = 16;
+/// Keys per thread of the block radix sort of longer segments.
+constexpr int kBlockSortItems = 16;
+/// Segments of at most this many keys are sorted by one block's radix sort in shared memory.
+constexpr std::uint32_t kBlockSortMax = static_cast<std::uint32_t>(kBlockSize * kBlockSortItems);
+/// Blocks of loose_long_sort_kernel (each takes long segments one after another).
+constexpr unsigned kLongSortBlocks = 264;
+
+/// What the sorting kernels of the sorted mode read and write (device pointers).
+struct LooseSortDesc {
+  const unsigned long long* scratch = nullptr;  ///< the appended keys (in any order)
+  unsigned long long* scratch_rw = nullptr;     ///< the same, reused by the long sort
+  unsigned long long* keys = nullptr;           ///< out: PairOutput::keys
+  std::uint32_t* count = nullptr;               ///< per body a: its pairs (consumed by the scatter)
+  const std::uint32_t* offset = nullptr;        ///< n + 1: exclusive scan of the counts
+  std::uint32_t* long_list = nullptr;           ///< bodies whose segment is longer than kLocalSortMax
+  std::uint32_t* long_count = nullptr;          ///< one word, zeroed before
+  const std::uint32_t* total = nullptr;         ///< the pairs found
+  std::uint32_t capacity = 0;
+  std::uint32_t n = 0;
+  int shift = 32;
+};
+
+/// Sorted mode, 1: pair i of the scratch to its body a's segment (in any order within it).
+__global__ void loose_scatter_kernel(LooseSortDesc d) {
+  const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  const std::uint32_t total = *d.total;
+  if (i >= total || i >= d.capacity) return;
+  const unsigned long long k = d.scratch[i];
+  const auto a = static_cast<std::uint32_t>(k >> d.shift);
+  const std::uint32_t pos = d.offset[a] + atomicSub(&d.count[a], 1u) - 1u;
+  if (pos < d.capacity) d.keys[pos] = k;
+}
+
+/// Sorted mode, 2: one thread per body sorts its segment (at most kLocalSortMax keys) or
+/// lists it for loose_long_sort_kernel. Nothing when the pairs did not fit (the caller
+/// grows the output and runs find() again).
+__global__ void loose_segment_sort_kernel(LooseSortDesc d) {
+  const std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x;
+  if (a >= d.n || *d.total > d.capacity) return;
+  const std::uint32_t b0 = d.offset[a];
+  const std::uint32_t len = d.offset[a + 1] - b0;
+  if (len < 2) return;
+  if (len > kLocalSortMax) {
+    d.long_list[atomicAdd(d.long_count, 1u)] = a;
+    return;
+  }
+  unsigned long long v[kLocalSortMax];
+  for (std::uint32_t i = 0; i < len; ++i) {
+    const unsigned long long k = d.keys[b0 + i];
+    std::uint32_t j = i;
+    for (; j > 0 && v[j - 1] > k; --j) v[j] = v[j - 1];
+    v[j] = k;
+  }
+  for (std::uint32_t i = 0; i < len; ++i) d.keys[b0 + i] = v[i];
+}
+
+/// Sorted mode, 3: the listed segments, one block each (kLongSortBlocks blocks take them
+/// in turn): a block radix sort over the key bits [0, 2 shift) up to kBlockSortMax keys,
+/// else each key's rank among its segment's (distinct) keys, written to the scratch and
+/// copied back.
+__global__ void __launch_bounds__(kBlockSize) loose_long_sort_kernel(LooseSortDesc d) {
+  using Sort = cub::BlockRadixSort<unsigned long long, kBlockSize, kBlockSortItems>;
+  __shared__ typename Sort::TempStorage storage;
+  if (*d.total > d.capacity) return;
+  const std::uint32_t lists = *d.long_count;
+  for (std::uint32_t j = blockIdx.x; j < lists; j += gridDim.x) {
+    const std::uint32_t a = d.long_list[j];
+    const std::uint32_t b0 = d.offset[a];
+    const std::uint32_t len = d.offset[a + 1] - b0;
+    if (len <= kBlockSortMax) {
+      unsigned long long v[kBlockSortItems];
+      for (int k = 0; k < kBlockSortItems; ++k) {
+        const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
+        v[k] = i < len ? d.keys[b0 + i] : ~0ull;  // padding: all ones, after every key
+      }
+      Sort(storage).Sort(v, 0, 2 * d.shift);
+      for (int k = 0; k < kBlockSortItems; ++k) {
+        const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
+        if (i < len) d.keys[b0 + i] = v[k];
+      }
+    } else {
+      for (std::uint32_t i = threadIdx.x; i < len; i += blockDim.x) {
+        const unsigned long long k = d.keys[b0 + i];
+        std::uint32_t rank = 0;
+        for (std::uint32_t t = 0; t < len; ++t) rank += d.keys[b0 + t] < k ? 1u : 0u;
+        d.scratch_rw[b0 + rank] = k;
+      }
+      __syncthreads();
+      for (std::uint32_t i = threadIdx.x; i < len; i += blockDim.x) d.keys[b0 + i] = d.scratch_rw[b0 + i];
+    }
+    __syncthreads();  // the shared storage and the segment are reused by the next one
+  }
+}
+
 /// `octree` on the device (see the file comment).
 class LooseOctreeDevice final : public DeviceBroadPhase {
  public:
@@ -398,6 +514,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   }
 
   std::string name() const override { return "octree"; }
+  bool sorts_pairs() const override { return true; }
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
     (void)stream;
@@ -411,11 +528,18 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
     cell_mask_ = static_cast<std::uint32_t>(footprint::loose_cell_table_entries(n) - 1);
     cell_table_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
-    std::size_t a = 0;
+    const std::size_t n1 = static_cast<std::size_t>(n) + 1;
+    pair_count_.ensure(n1);
+    pair_offset_.ensure(n1);
+    long_list_.ensure(std::max<std::size_t>(n, 1));
+    long_count_.ensure(1);
+    std::size_t a = 0, c = 0;
     check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
                                           static_cast<int>(n), 0, 32),
           "cub::DeviceRadixSort::SortPairs (size)");
-    temp_.ensure(std::max(a, std::size_t{1}));
+    check(exclusive_scan_u32(nullptr, c, pair_count_.get(), pair_offset_.get(), n + 1, stream),
+          "cub::DeviceScan::ExclusiveSum (size)");
+    temp_.ensure(std::max({a, c, std::size_t{1}}));
     n_ = n;
   }
 
@@ -423,6 +547,11 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     bp::check_reserved(n_ != kNotReserved, n_, n, "octree");
     check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
     if (n == 0) return;
+    if (out.scratch) {
+      check(cudaMemsetAsync(pair_count_.get(), 0, (static_cast<std::size_t>(n) + 1) * sizeof(std::uint32_t), stream),
+            "cudaMemset octree pair counts");
+      check(cudaMemsetAsync(long_count_.get(), 0, sizeof(std::uint32_t), stream), "cudaMemset octree long segments");
+    }
     LooseDesc d;
     d.aabb = aabb;
     d.n = n;
@@ -439,7 +568,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.level_begin = level_begin_.get();
     d.cell_table = cell_table_.get();
     d.cell_mask = cell_mask_;
-    d.pair_keys = out.keys;
+    const bool sorted = out.scratch != nullptr;
+    d.pair_keys = sorted ? out.scratch : out.keys;
+    d.pair_count = sorted ? pair_count_.get() : nullptr;
     d.shift = out.shift;
     d.capacity = out.capacity;
     d.total = out.total;
@@ -469,13 +600,41 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     bp::launched(cudaGetLastError(), "loose_query");
     loose_overflow_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_overflow");
+    if (sorted) sort_pairs(out, n, stream);
+  }
+
+  /// The sorted mode's last steps (see the file comment): the segments, the scatter, the
+  /// segment sorts.
+  void sort_pairs(const PairOutput& out, std::uint32_t n, cudaStream_t stream) {
+    std::size_t bytes = temp_.capacity();
+    bp::launched(exclusive_scan_u32(temp_.get(), bytes, pair_count_.get(), pair_offset_.get(), n + 1, stream),
+                 "cub::DeviceScan::ExclusiveSum (octree pair segments)");
+    LooseSortDesc s;
+    s.scratch = out.scratch;
+    s.scratch_rw = out.scratch;
+    s.keys = out.keys;
+    s.count = pair_count_.get();
+    s.offset = pair_offset_.get();
+    s.long_list = long_list_.get();
+    s.long_count = long_count_.get();
+    s.total = out.total;
+    s.capacity = out.capacity;
+    s.n = n;
+    s.shift = out.shift;
+    loose_scatter_kernel<<<grid_for(std::max<std::uint32_t>(out.capacity, 1)), kBlockSize, 0, stream>>>(s);
+    bp::launched(cudaGetLastError(), "loose_scatter");
+    loose_segment_sort_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(s);
+    bp::launched(cudaGetLastError(), "loose_segment_sort");
+    loose_long_sort_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
+    bp::launched(cudaGetLastError(), "loose_long_sort");
   }
 
   std::uint64_t device_bytes() const override {
     std::uint64_t t = 0;
     for (const BufferBase* b : std::initializer_list<const BufferBase*>{
              &min_, &key_, &body_, &sorted_key_, &slot_body_, &slot_box_,
-             &level_begin_, &cell_table_, &temp_})
+             &level_begin_, &cell_table_, &pair_count_, &pair_offset_, &long_list_,
+             &long_count_, &temp_})
       t += b->bytes();
     return t;
   }
@@ -498,6 +657,10 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   DeviceBuffer<std::uint32_t> level_begin_{"octree level table"};
   std::uint32_t cell_mask_ = 1;
   DeviceBuffer<unsigned long long> cell_table_{"octree block table"};
+  DeviceBuffer<std::uint32_t> pair_count_{"octree pairs per body"};
+  DeviceBuffer<std::uint32_t> pair_offset_{"octree pair segments"};
+  DeviceBuffer<std::uint32_t> long_list_{"octree long pair segments"};
+  DeviceBuffer<std::uint32_t> long_count_{"octree long pair segment count"};
   DeviceBuffer<unsigned char> temp_{"octree CUB temporary storage"};
 };
 

@@ -198,7 +198,7 @@ std::vector<Pair> flat_pairs(const std::vector<Aabb>& boxes, const Aabb& domain)
 const std::vector<std::string>& box_set_names() {
   static const std::vector<std::string> names = {
       "empty",    "single", "uniform-1000", "uniform-10000", "touching-lattice", "outside-domain", "huge-and-infinite",
-      "nan", "degenerate", "one-cell", "nested-levels", "boxes-random-10000-frame-100"};
+      "nan", "degenerate", "one-cell", "nested-levels", "long-segments", "boxes-random-10000-frame-100"};
   return names;
 }
 
@@ -240,6 +240,13 @@ BoxSet make_box_set(const std::string& name) {
     s.boxes = random_boxes(600, 6, cube(0.3f, 0.31f), 0.0f, 0.002f);
   } else if (name == "nested-levels") {
     s.boxes = nested_levels();
+  } else if (name == "long-segments") {
+    // Body 0 meets every other body (a segment of 5999 pairs (0, b): longer than one
+    // block's radix sort of the octree's sorted mode), body 1 a few hundred (one block's
+    // sort), the rest a handful each (one thread's).
+    s.boxes = random_boxes(6000, 8, unit, 0.002f, 0.02f);
+    s.boxes[0] = cube(-1.0f, 1.0f);
+    s.boxes[1] = cube(-0.3f, 0.0f);
   } else if (name == "boxes-random-10000-frame-100") {
     s.boxes = scene_frame("boxes-random-10000", 100, s.domain);
   } else {
@@ -747,6 +754,64 @@ TEST_P(DeviceBroadPhaseTest, FindIsCapturedInAGraphAndReplaysOnNewBoxes) {
   (void)cudaGraphDestroy(graph);
 }
 
+// With PairOutput::scratch: a broadphase whose sorts_pairs() is true (`octree`) writes
+// exactly flat's keys in flat's order (every segment length: one thread's, one block's radix
+// sort, one block's ranks), leaves the entries after the total alone, and on overflow
+// reports the total and writes nothing past the capacity (keys or scratch); the others
+// ignore the scratch (the set, in any order).
+TEST_P(DeviceBroadPhaseTest, WithScratchSortsWhenItSaysSo) {
+  REQUIRE_CUDA_DEVICE();
+  const Variant& v = GetParam();
+  Stream stream;
+  for (const std::string& name : box_set_names()) {
+    SCOPED_TRACE(name);
+    const BoxSet& set = box_set(name);
+    const auto n = static_cast<std::uint32_t>(set.boxes.size());
+    auto bp = make_device(v, set.domain);
+    EXPECT_EQ(bp->sorts_pairs(), v.config.name == "octree");
+    DeviceBuffer<Aabb> boxes("test boxes");
+    gpu::upload(boxes, set.boxes, stream.s);
+    bp->reserve(n, stream.s);
+    const int shift = gpu::key_bits(std::max<std::uint32_t>(n, 1));
+    std::vector<unsigned long long> want;
+    for (const Pair p : set.flat) want.push_back((static_cast<unsigned long long>(p.a) << shift) | p.b);
+    const auto total = static_cast<std::uint32_t>(want.size());
+    for (const std::uint32_t cap : {total + 5, total / 2}) {
+      SCOPED_TRACE(fmt::format("capacity {} for {} pairs", cap, total));
+      Output out(cap, stream.s, shift);
+      DeviceBuffer<unsigned long long> scratch("test scratch");
+      scratch.reset(static_cast<std::size_t>(cap) + 1);
+      gpu::check(cudaMemsetAsync(scratch.get(), 0xff, (static_cast<std::size_t>(cap) + 1) * 8, stream.s), "cudaMemset");
+      gpu::PairOutput po = out.pair_output();
+      po.scratch = scratch.get();
+      bp->find(boxes.get(), n, po, stream.s);
+      const FindResult r = out.read(stream.s);
+      std::vector<unsigned long long> scratch_host;
+      gpu::download(scratch_host, scratch, static_cast<std::size_t>(cap) + 1, stream.s);
+      ASSERT_EQ(r.total, total);
+      EXPECT_FALSE(r.wrote_past_capacity);
+      EXPECT_EQ(scratch_host[cap], kSentinel) << "the scratch was written past the capacity";
+      if (cap < total) continue;  // overflow: the caller grows the output and runs find() again
+      std::vector<unsigned long long> all;
+      gpu::download(all, out.keys, static_cast<std::size_t>(cap) + 1, stream.s);
+      EXPECT_TRUE(std::all_of(all.begin() + total, all.end(), [](unsigned long long k) { return k == kSentinel; }))
+          << "an entry after the total was written";
+      if (bp->sorts_pairs()) {
+        ASSERT_EQ(r.keys.size(), want.size());
+        std::size_t first = 0;
+        while (first < want.size() && r.keys[first] == want[first]) ++first;
+        EXPECT_EQ(first, want.size()) << fmt::format("first difference at {} of {}: 0x{:x} for 0x{:x}", first,
+                                                     want.size(), first < want.size() ? r.keys[first] : 0ull,
+                                                     first < want.size() ? want[first] : 0ull);
+      } else {
+        std::vector<Pair> pairs;
+        ASSERT_TRUE(to_pairs(r.keys, n, pairs, shift));
+        EXPECT_TRUE(same_pairs(pairs, set.flat, set.boxes));
+      }
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Device, DeviceBroadPhaseTest, ::testing::ValuesIn(variants()), variant_name);
 
 // ---- needs no device -----------------------------------------------------------------
@@ -799,6 +864,15 @@ TEST(DeviceBroadPhaseSets, EverySetHoldsWhatItsNameSays) {  // the fixtures, on 
       std::set<int> levels;
       for (const Aabb& b : s.boxes) levels.insert(loose_place(g, b, kLooseMaxDepth).level);
       EXPECT_EQ(levels, (std::set<int>{0, 1, 2, 3, 4, 5, 6, 7}));
+    }
+    if (name == "long-segments") {  // segments (pairs (a, b) of one a) of every length class
+      std::map<std::uint32_t, std::size_t> seg;
+      for (const Pair p : s.flat) ++seg[p.a];
+      EXPECT_EQ(seg[0], s.boxes.size() - 1);
+      EXPECT_GT(seg[0], 4096u);
+      EXPECT_GT(seg[1], 16u);
+      EXPECT_LE(seg[1], 4096u);
+      EXPECT_TRUE(std::any_of(seg.begin(), seg.end(), [](const auto& e) { return e.second >= 2 && e.second <= 16; }));
     }
     if (name == "boxes-random-10000-frame-100") {
       EXPECT_GE(s.boxes.size(), 10000u);
