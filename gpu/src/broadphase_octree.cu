@@ -40,9 +40,9 @@
 //    into the scratch and count the pairs of each smaller body a (one atomicAdd each); an
 //    exclusive scan of the n counts gives each a's segment of the output; each pair goes
 //    to its segment (one atomicSub: any order within it); then each segment is sorted on
-//    its own: one thread per body for at most kLocalSortMax keys (insertion sort), one
-//    block (a CUB block radix sort) for at most kBlockSortMax, beyond that one block by
-//    counting (each key's rank in its segment: length^2 / 256 steps, for a body that
+//    its own: one thread per body for at most kLocalSortMax keys (insertion sort in
+//    place), else one block (CUB block radix sorts of kBlockSortMax keys, then for longer
+//    segments each key's rank from binary searches in the other chunks: a body that
 //    overlaps thousands of bodies of larger index).
 #include <cstdlib>
 #include <string>
@@ -398,8 +398,9 @@ __global__ void loose_overflow_kernel(LooseDesc d) {
   bp::block_add(d.candidates, tests);
 }
 
-/// Segments of at most this many keys are sorted by one thread (insertion sort).
-constexpr std::uint32_t kLocalSortMax = 16;
+/// Segments of at most this many keys are sorted by one thread (insertion sort in place:
+/// at most 64 x 63 / 2 moves; a body of a dense pile has a few dozen partners at most).
+constexpr std::uint32_t kLocalSortMax = 64;
 /// Keys per thread of the block radix sort of longer segments.
 constexpr int kBlockSortItems = 16;
 /// Segments of at most this many keys are sorted by one block's radix sort in shared memory.
@@ -446,20 +447,20 @@ __global__ void loose_segment_sort_kernel(LooseSortDesc d) {
     d.long_list[atomicAdd(d.long_count, 1u)] = a;
     return;
   }
-  unsigned long long v[kLocalSortMax];
-  for (std::uint32_t i = 0; i < len; ++i) {
-    const unsigned long long k = d.keys[b0 + i];
+  unsigned long long* seg = d.keys + b0;  // this thread's alone
+  for (std::uint32_t i = 1; i < len; ++i) {
+    const unsigned long long k = seg[i];
     std::uint32_t j = i;
-    for (; j > 0 && v[j - 1] > k; --j) v[j] = v[j - 1];
-    v[j] = k;
+    for (; j > 0 && seg[j - 1] > k; --j) seg[j] = seg[j - 1];
+    seg[j] = k;
   }
-  for (std::uint32_t i = 0; i < len; ++i) d.keys[b0 + i] = v[i];
 }
 
 /// Sorted mode, 3: the listed segments, one block each (kLongSortBlocks blocks take them
-/// in turn): a block radix sort over the key bits [0, 2 shift) up to kBlockSortMax keys,
-/// else each key's rank among its segment's (distinct) keys, written to the scratch and
-/// copied back.
+/// in turn): each chunk of kBlockSortMax keys by a block radix sort over the key bits
+/// [0, 2 shift); a segment of several chunks then puts each key at its rank (its index in
+/// its chunk plus, per other chunk, a binary search: the keys are distinct) in the scratch
+/// and copies the segment back.
 __global__ void __launch_bounds__(kBlockSize) loose_long_sort_kernel(LooseSortDesc d) {
   using Sort = cub::BlockRadixSort<unsigned long long, kBlockSize, kBlockSortItems>;
   __shared__ typename Sort::TempStorage storage;
@@ -469,28 +470,37 @@ __global__ void __launch_bounds__(kBlockSize) loose_long_sort_kernel(LooseSortDe
     const std::uint32_t a = d.long_list[j];
     const std::uint32_t b0 = d.offset[a];
     const std::uint32_t len = d.offset[a + 1] - b0;
-    if (len <= kBlockSortMax) {
+    unsigned long long* seg = d.keys + b0;
+    for (std::uint32_t c0 = 0; c0 < len; c0 += kBlockSortMax) {
+      const std::uint32_t clen = len - c0 < kBlockSortMax ? len - c0 : kBlockSortMax;
       unsigned long long v[kBlockSortItems];
       for (int k = 0; k < kBlockSortItems; ++k) {
         const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
-        v[k] = i < len ? d.keys[b0 + i] : ~0ull;  // padding: all ones, after every key
+        v[k] = i < clen ? seg[c0 + i] : ~0ull;  // padding: all ones, after every key
       }
       Sort(storage).Sort(v, 0, 2 * d.shift);
       for (int k = 0; k < kBlockSortItems; ++k) {
         const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
-        if (i < len) d.keys[b0 + i] = v[k];
+        if (i < clen) seg[c0 + i] = v[k];
       }
-    } else {
+      __syncthreads();  // the shared storage is reused by the next chunk
+    }
+    if (len > kBlockSortMax) {
       for (std::uint32_t i = threadIdx.x; i < len; i += blockDim.x) {
-        const unsigned long long k = d.keys[b0 + i];
-        std::uint32_t rank = 0;
-        for (std::uint32_t t = 0; t < len; ++t) rank += d.keys[b0 + t] < k ? 1u : 0u;
+        const unsigned long long k = seg[i];
+        const std::uint32_t own = i / kBlockSortMax * kBlockSortMax;
+        std::uint32_t rank = i - own;
+        for (std::uint32_t c0 = 0; c0 < len; c0 += kBlockSortMax) {
+          if (c0 == own) continue;
+          const std::uint32_t c1 = len - c0 < kBlockSortMax ? len : c0 + kBlockSortMax;
+          rank += bp::lower_bound_u64(seg, c0, c1, k) - c0;
+        }
         d.scratch_rw[b0 + rank] = k;
       }
       __syncthreads();
-      for (std::uint32_t i = threadIdx.x; i < len; i += blockDim.x) d.keys[b0 + i] = d.scratch_rw[b0 + i];
+      for (std::uint32_t i = threadIdx.x; i < len; i += blockDim.x) seg[i] = d.scratch_rw[b0 + i];
+      __syncthreads();  // the segment is final before the block moves on
     }
-    __syncthreads();  // the shared storage and the segment are reused by the next one
   }
 }
 
