@@ -16,8 +16,9 @@
 // of the keys (gpu::sort_keys_u64, bits [0, 2 bits(n))), between two CUDA events on one
 // stream; a broadphase that sorts its own pairs (sorts_pairs(): `octree`) gets a scratch
 // buffer of the capacity (PairOutput::scratch) and find() alone is timed, its keys already
-// in order (what the engine does with it too). The capacity is grown on overflow and the pair count is read before timing (untimed), so the sort covers exactly the pairs
-// (the engine also sorts its padding: capacity >= 1.25 x pairs). Then --warmup untimed
+// in order (what the engine does with it too). The capacity is grown on overflow and the
+// pair count is read before timing (untimed), so the sort covers exactly the pairs (the
+// engine also sorts its padding: capacity >= 1.25 x pairs). Then --warmup untimed
 // calls, then --reps timed ones: median, min and max.
 //
 // Checked: every broadphase's sorted keys are pairs a < b < n, strictly increasing (so
