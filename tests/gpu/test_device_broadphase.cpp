@@ -1207,6 +1207,9 @@ TEST(LooseBlockHostModel, FewerProbesThanCells) {
     }
   }
   EXPECT_GT(m.cell_probes, 0u);
+  RecordProperty("blocks", std::to_string(std::count_if(m.table.begin(), m.table.end(), [](unsigned long long e) {
+                   return e != gpu::kLooseBlockEmpty;
+                 })));
   RecordProperty("block_probes", std::to_string(block_probes));
   RecordProperty("cell_probes", std::to_string(m.cell_probes));
   EXPECT_LE(2 * block_probes, m.cell_probes) << block_probes << " block probes, " << m.cell_probes << " cells";
