@@ -194,6 +194,39 @@ int mid_fuse_from_env() {
                                v));
 }
 
+/// The environment variable `name` as an integer in [lo, hi], or `dflt` when unset; an
+/// InputError naming the variable, the value, the range and `what` it sets otherwise.
+long env_integer(const char* name, long lo, long hi, long dflt, const char* what) {
+  const char* k = std::getenv(name);
+  if (k == nullptr) return dflt;
+  char* end = nullptr;
+  errno = 0;
+  const long v = std::strtol(k, &end, 10);
+  if (*k < '0' || *k > '9' || end == k || *end != '\0' || errno != 0 || v < lo || v > hi)
+    throw InputError(fmt::format("{}: '{}' is not allowed; allowed: an integer {} .. {} ({})", name, k, lo, hi, what));
+  return v;
+}
+
+/// OCTOCD_CUDA_PERSISTENT: unset or "1" = the resident small-step kernel where the small path
+/// runs with the polled wait, "0" = one cooperative launch per step.
+bool persistent_from_env() {
+  const char* v = std::getenv("OCTOCD_CUDA_PERSISTENT");
+  if (v == nullptr || std::strcmp(v, "1") == 0) return true;
+  if (std::strcmp(v, "0") == 0) return false;
+  throw InputError(fmt::format("OCTOCD_CUDA_PERSISTENT: '{}' is not allowed; allowed: 1 (the small path's kernel "
+                               "stays resident and runs step after step on request, the default), 0 (one "
+                               "cooperative launch per step), or unset",
+                               v));
+}
+
+/// Default of OCTOCD_CUDA_PERSISTENT_IDLE_US: the resident kernel ends itself after this
+/// long without a request (the next step launches it again).
+constexpr long kResidentIdleUs = 2000;
+/// Default of OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS: the host's wait for one resident step.
+constexpr long kResidentTimeoutMs = 60000;
+/// Default of OCTOCD_CUDA_SMALL_FRONT_BODIES: the fused front up to this many bodies.
+constexpr long kSmallFrontBodies = 256;
+
 /// The capacity to grow to when `needed` entries did not fit into `capacity`.
 std::size_t grown(std::size_t needed, std::size_t capacity) {
   return std::max(needed + needed / 4 + 64, 2 * capacity);
@@ -232,6 +265,28 @@ struct CudaWorld::Impl {
   double profile_ns[gpu::kSmallProfileSlots] = {};  // sums: slot p - slot p-1; [0]: host launch to seen done
   double profile_kernel_ns = 0.0;                   // sum of slot 9 - slot 0
   std::uint64_t profile_steps = 0;
+  std::uint32_t front_bodies = 0;  // SmallStepDesc::front_bodies (OCTOCD_CUDA_SMALL_FRONT_BODIES)
+
+  // The resident small step (OCTOCD_CUDA_PERSISTENT): its own stream, so that the copies
+  // and waits on `stream` never queue behind it.
+  bool resident_possible = false;  // small path, polled wait, mapped memory, the kernel fits
+  bool persistent = false;         // run steps through the resident kernel
+  bool resident_alive = false;     // launched, and not yet seen to have exited
+  bool resident_hung = false;      // an exit request went unanswered: nothing may be freed
+  bool resident_stall = false;     // OCTOCD_CUDA_PERSISTENT_STALL=1 (test hook)
+  unsigned resident_grid = 1;
+  unsigned long long resident_idle_ns = 0;
+  long resident_timeout_ms = kResidentTimeoutMs;
+  unsigned long long epoch = 0;           // launches so far; the last one's number
+  std::uint64_t resident_launches = 0;
+  cudaStream_t resident_stream = nullptr;
+  // Pinned: [0] the request (host writes), [8] the exit mark (kernel writes); apart, so the
+  // two sides write different cache lines.
+  static constexpr int kRequestWord = 0;
+  static constexpr int kExitedWord = 8;
+  unsigned long long* resident_host = nullptr;
+  unsigned long long* resident_dev = nullptr;  // the same, mapped
+  DeviceBuffer<unsigned long long> resident_control{"resident step control"};
 
   // Capacities of the variable-size buffers (entries); prepare() sizes the buffers.
   std::size_t pair_cap = 1;
@@ -286,12 +341,26 @@ struct CudaWorld::Impl {
   cudaGraphExec_t graph_exec = nullptr;
 
   ~Impl() {
+    try {
+      stop_resident();
+    } catch (const std::exception&) {  // a hung kernel: resident_hung is set
+    }
+    if (resident_hung) {
+      // cudaFree and cudaFreeHost would wait for the kernel forever: leave the memory to the
+      // process's end (the driver reclaims it).
+      for (BufferBase* b : all_buffers()) b->abandon();
+      resident_control.abandon();
+      (void)bp.release();
+      return;
+    }
     drop_graph();
     if (host) (void)cudaFreeHost(host);
     if (small_host) (void)cudaFreeHost(small_host);
+    if (resident_host) (void)cudaFreeHost(resident_host);
     for (cudaEvent_t& e : events)
       if (e) (void)cudaEventDestroy(e);
     if (stream) (void)cudaStreamDestroy(stream);
+    if (resident_stream) (void)cudaStreamDestroy(resident_stream);
   }
 
   void drop_graph() {
@@ -464,6 +533,7 @@ struct CudaWorld::Impl {
     s.stats = stats.get();
     s.host_stats = host_dev;
     s.one_block_pairs = one_block_pairs;
+    s.front_bodies = front_bodies;
     if (small_dev) {
       s.done = small_dev;
       s.sequence = sequence;
@@ -626,16 +696,21 @@ struct CudaWorld::Impl {
   /// Runs the step: from the captured graph when allowed (not recording, graphs on), else
   /// launch by launch; then waits for it.
   void run_step(const Scene& scene, bool recording) {
+    if (!prepared) stop_resident();  // prepare() frees buffers: cudaFree waits for every kernel
     prepare();
     if (small) {  // one cooperative launch; the statistics come back through mapped memory
       const auto t0 = std::chrono::steady_clock::now();
       ++sequence;
-      launched(gpu::launch_small_step(small_desc(scene, recording), small_grid, stream), "small_step");
-      if (!host_dev)
-        check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
-              "cudaMemcpy step statistics");
-      if (small_poll && host_dev && small_dev) wait_small_step();
-      else check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+      if (persistent) {
+        resident_step(scene, recording);
+      } else {
+        launched(gpu::launch_small_step(small_desc(scene, recording), small_grid, stream), "small_step");
+        if (!host_dev)
+          check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
+                "cudaMemcpy step statistics");
+        if (small_poll && host_dev && small_dev) wait_small_step();
+        else check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+      }
       if (small_profile && small_dev) {
         const double host_ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count();
         volatile const unsigned long long* p = small_host + 1;
@@ -683,6 +758,101 @@ struct CudaWorld::Impl {
     }
   }
 
+  // ---- the resident small step --------------------------------------------------------
+
+  volatile unsigned long long* request_word() { return resident_host + kRequestWord; }
+  unsigned long long exited_mark() const {
+    return __atomic_load_n(resident_host + kExitedWord, __ATOMIC_ACQUIRE);
+  }
+  unsigned long long done_mark() const { return __atomic_load_n(small_host, __ATOMIC_ACQUIRE); }
+  void write_request(unsigned long long value) {
+    __atomic_store_n(resident_host + kRequestWord, value, __ATOMIC_SEQ_CST);  // drains the store buffer
+  }
+
+  /// Launches the resident kernel on its stream (after any earlier one there); the request
+  /// already written is its first.
+  void launch_resident(const Scene& scene) {
+    gpu::ResidentDesc r;
+    r.request = resident_dev + kRequestWord;
+    r.exited = resident_dev + kExitedWord;
+    r.control = resident_control.get();
+    r.handled = 0;  // every request is > 0 (sequence >= 1)
+    r.epoch = ++epoch;
+    r.idle_ns = resident_stall ? 0 : resident_idle_ns;
+    r.records = records.get();
+    r.stall = resident_stall ? 1 : 0;
+    const cudaError_t e = gpu::launch_small_resident(small_desc(scene, false), r, resident_grid, resident_stream);
+    if (e != cudaSuccess) {
+      (void)cudaGetLastError();
+      throw RuntimeError(fmt::format("CUDA kernel 'small_resident' failed to launch: {}", cuda_text(e)));
+    }
+    resident_alive = true;
+    ++resident_launches;
+  }
+
+  /// One step through the resident kernel: writes the request (launching the kernel when
+  /// none is resident, or when the one resident ended itself, idle, without taking it), then
+  /// spins until the kernel writes the step's number. Throws RuntimeError after
+  /// resident_timeout_ms, or when the kernel failed.
+  void resident_step(const Scene& scene, bool recording) {
+    if (resident_alive && exited_mark() == epoch) stop_resident();  // it ended itself, idle
+    write_request((sequence << gpu::kResidentShift) | (recording ? gpu::kResidentRecord : 0ull));
+    if (!resident_alive) launch_resident(scene);
+    const auto t0 = Clock::now();
+    for (unsigned spins = 1;; ++spins) {
+      if (done_mark() == sequence) return;
+      if (exited_mark() == epoch) {
+        if (done_mark() == sequence) return;  // it ran the step, then ended idle
+        resident_alive = false;               // it ended without taking the request
+        launch_resident(scene);
+        continue;
+      }
+      if ((spins & 1023u) != 0) continue;
+      const cudaError_t e = cudaStreamQuery(resident_stream);
+      if (e != cudaSuccess && e != cudaErrorNotReady) {
+        resident_alive = false;
+        check(e, "small_resident (cudaStreamQuery)");
+      }
+      if (ms_since(t0) > static_cast<double>(resident_timeout_ms))
+        throw RuntimeError(fmt::format(
+            "the resident small-step kernel did not finish step {} within {} ms (OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS; "
+            "launch {}{}); the engine cannot step any more: destroy it, and run with OCTOCD_CUDA_PERSISTENT=0 to "
+            "launch a kernel per step",
+            sequence, resident_timeout_ms, epoch,
+            resident_stall ? ", OCTOCD_CUDA_PERSISTENT_STALL=1 makes it ignore requests" : ""));
+    }
+  }
+
+  /// Ends the resident kernel (when one runs) and waits for it: before anything frees or
+  /// reallocates device memory, and in the destructor. Throws RuntimeError (and marks the
+  /// engine hung: its memory is then never freed) when the kernel does not end within
+  /// resident_timeout_ms.
+  void stop_resident() {
+    if (!resident_alive) return;
+    const auto t0 = Clock::now();
+    if (exited_mark() != epoch) {
+      write_request((sequence << gpu::kResidentShift) | gpu::kResidentExit);
+      for (unsigned spins = 1; exited_mark() != epoch; ++spins) {
+        if ((spins & 1023u) != 0) continue;
+        const cudaError_t e = cudaStreamQuery(resident_stream);
+        if (e == cudaSuccess) break;  // ended (its mark is then visible too)
+        if (e != cudaErrorNotReady) {
+          resident_alive = false;
+          check(e, "small_resident (cudaStreamQuery, exit)");
+        }
+        if (ms_since(t0) > static_cast<double>(resident_timeout_ms)) {
+          resident_hung = true;
+          throw RuntimeError(fmt::format("the resident small-step kernel did not end within {} ms of the exit "
+                                         "request (OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS); its device memory is left "
+                                         "allocated",
+                                         resident_timeout_ms));
+        }
+      }
+    }
+    resident_alive = false;
+    check(cudaStreamSynchronize(resident_stream), "cudaStreamSynchronize (resident kernel's end)");
+  }
+
   /// True when a list overflowed its capacity; grows the capacities then (the state must
   /// be restored and the step run again).
   bool grow_if_needed() {
@@ -698,7 +868,10 @@ struct CudaWorld::Impl {
       list_cap = grown(items, list_cap);
       grow = true;
     }
-    if (grow) prepared = false;
+    if (grow) {
+      prepared = false;
+      stop_resident();  // before restore_state and prepare()
+    }
     return grow;
   }
 
@@ -750,6 +923,15 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   const bool small_poll = small_poll_from_env();
   const long one_block_pairs = small_one_block_pairs_from_env();
   const int mid_fuse = mid_fuse_from_env();
+  const bool persistent = persistent_from_env();
+  const long idle_us = env_integer("OCTOCD_CUDA_PERSISTENT_IDLE_US", 1, 600000000L, kResidentIdleUs,
+                                   "microseconds after which the idle resident kernel ends itself");
+  const long timeout_ms = env_integer("OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS", 1, 86400000L, kResidentTimeoutMs,
+                                      "milliseconds the host waits for one resident step before it throws");
+  const long front_bodies = env_integer("OCTOCD_CUDA_SMALL_FRONT_BODIES", 0, gpu::kSmallFrontMaxBodies,
+                                        kSmallFrontBodies,
+                                        "bodies up to which the fused small step integrates, counts and fills "
+                                        "without a grid-wide barrier; 0: never");
   const std::string reason = no_device_reason();
   if (!reason.empty()) throw RuntimeError("no CUDA device: " + reason + "; the cuda engine needs one");
   check_free_memory(*model_, broadphase, needed);  // before the first allocation
@@ -787,6 +969,13 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
       if (small_blocks > 0) blocks = static_cast<int>(std::min<long>(small_blocks, max_blocks));
       d.small = true;
       d.small_grid = static_cast<unsigned>(blocks);
+      // The resident kernel: the same grid where it fits (it may need more registers).
+      int resident_per_sm = 0;
+      check(gpu::small_resident_blocks_per_sm(resident_per_sm), "cudaOccupancyMaxActiveBlocksPerMultiprocessor");
+      if (resident_per_sm > 0) {
+        d.resident_grid = static_cast<unsigned>(std::min(blocks, resident_per_sm * std::max(1, sms)));
+        d.resident_possible = true;
+      }
     }
   }
   check(cudaMallocHost(reinterpret_cast<void**>(&d.host), sizeof(gpu::StepStats)), "cudaMallocHost (step read-back)");
@@ -806,8 +995,33 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     if (d.host_dev && cudaHostGetDevicePointer(&mapped_done, d.small_host, 0) == cudaSuccess)
       d.small_dev = static_cast<unsigned long long*>(mapped_done);
     else (void)cudaGetLastError();
+    d.front_bodies = static_cast<std::uint32_t>(front_bodies);
+    // The resident kernel needs the polled wait (mapped memory) and no per-launch sync.
+    d.resident_possible = d.resident_possible && d.small_poll && d.small_dev && !d.sync_each_launch;
+    if (d.resident_possible) {
+      check(cudaMallocHost(reinterpret_cast<void**>(&d.resident_host), sizeof(unsigned long long) * 16),
+            "cudaMallocHost (resident step request)");
+      for (int i = 0; i < 16; ++i) d.resident_host[i] = 0;
+      void* mapped_request = nullptr;
+      if (cudaHostGetDevicePointer(&mapped_request, d.resident_host, 0) == cudaSuccess) {
+        d.resident_dev = static_cast<unsigned long long*>(mapped_request);
+      } else {
+        (void)cudaGetLastError();
+        d.resident_possible = false;
+      }
+    }
+    d.persistent = persistent && d.resident_possible;
+    d.resident_idle_ns = static_cast<unsigned long long>(idle_us) * 1000ull;
+    d.resident_timeout_ms = timeout_ms;
+    d.resident_stall = env_is_one("OCTOCD_CUDA_PERSISTENT_STALL");
   }
   check(cudaStreamCreateWithFlags(&d.stream, cudaStreamNonBlocking), "cudaStreamCreate");
+  if (d.resident_possible) {
+    check(cudaStreamCreateWithFlags(&d.resident_stream, cudaStreamNonBlocking), "cudaStreamCreate (resident)");
+    d.resident_control.reset(2);
+    check(cudaMemsetAsync(d.resident_control.get(), 0, 2 * sizeof(unsigned long long), d.stream),
+          "cudaMemset resident control");
+  }
   for (cudaEvent_t& e : d.events) check(cudaEventCreate(&e), "cudaEventCreate");
 
   const Model& m = *model_;
@@ -869,8 +1083,8 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   upload(d.v, m.initial.v, d.stream);
   upload(d.w, m.initial.w, d.stream);
   d.aabb.reset(n);
-  d.x_saved.reset(n);
-  d.v_saved.reset(n);
+  upload(d.x_saved, m.initial.x, d.stream);  // == x at a step's start (the fused front reads them)
+  upload(d.v_saved, m.initial.v, d.stream);
   d.stats.reset(1);
   d.metric_partials.reset(gpu::kMetricsBlocks);
   // First guesses; a step that needs more grows them and runs again.
@@ -919,10 +1133,23 @@ std::string CudaWorld::notes() const {
   if (!d.small) return "";
   return fmt::format(
       "each step is one fused cooperative kernel ({} bodies, small-scene path up to {}; OCTOCD_CUDA_SMALL=0 turns it "
-      "off): its broadphase is the all-pairs test whatever the broadphase named ('{}'; the same pairs), so "
+      "off){}: its broadphase is the all-pairs test whatever the broadphase named ('{}'; the same pairs), so "
       "'broadphase candidates' is n(n-1)/2, and its stages are not timed",
-      d.n, kCudaSmallStepMaxBodies, d.broadphase);
+      d.n, kCudaSmallStepMaxBodies,
+      d.persistent ? ", run by a resident kernel that steps on request (OCTOCD_CUDA_PERSISTENT=0: a launch per step)"
+                   : "",
+      d.broadphase);
 }
+
+bool CudaWorld::persistent() const { return impl_->persistent; }
+
+void CudaWorld::set_persistent(bool on) {
+  Impl& d = *impl_;
+  if (!on) d.stop_resident();
+  d.persistent = on && d.resident_possible;
+}
+
+std::uint64_t CudaWorld::resident_launches() const { return impl_->resident_launches; }
 
 std::uint64_t CudaWorld::device_bytes() const {
   std::uint64_t total = 0;
@@ -934,6 +1161,7 @@ std::uint64_t CudaWorld::device_bytes() const {
 void CudaWorld::reset_capacities(std::size_t capacity) {
   if (capacity < 1) capacity = 1;
   Impl& d = *impl_;
+  d.stop_resident();  // before any cudaFree
   d.drop_graph();
   for (BufferBase* b : d.scratch_buffers()) b->reset(capacity);
   d.pair_cap = capacity;
@@ -946,9 +1174,13 @@ void CudaWorld::set_state(const BodyState& s) {
   if (s.x.size() != d.n || s.v.size() != d.n || s.w.size() != d.n)
     throw InputError(fmt::format("CudaWorld::set_state: expected {} bodies, got x {}, v {}, w {}", d.n, s.x.size(),
                                  s.v.size(), s.w.size()));
+  // A resident kernel waits between steps and touches no state then: the copies (on the
+  // engine's stream, not the kernel's) need not end it.
   upload(d.x, s.x, d.stream, false);
   upload(d.v, s.v, d.stream, false);
   upload(d.w, s.w, d.stream, false);
+  upload(d.x_saved, s.x, d.stream, false);  // == x at a step's start (the fused front reads them)
+  upload(d.v_saved, s.v, d.stream, false);
   state_ = s;
   state_frame_ = frame_;
 }

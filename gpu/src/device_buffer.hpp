@@ -47,6 +47,12 @@ class BufferBase {
   }
   /// Frees the buffer and allocates exactly `count` elements (>= 1).
   void reset(std::size_t count) { allocate(std::max<std::size_t>(count, 1)); }
+  /// Forgets the allocation without freeing it (cudaFree would wait for a kernel that never
+  /// ends: CudaWorld after a hung resident kernel); the process's end reclaims it.
+  void abandon() {
+    ptr_ = nullptr;
+    cap_ = 0;
+  }
   std::size_t capacity() const { return cap_; }
   std::uint64_t bytes() const { return static_cast<std::uint64_t>(cap_) * elem_size_; }
   const char* name() const { return name_; }

@@ -21,6 +21,16 @@ __device__ inline void integrate_body(const BodiesDesc& b, std::uint32_t i, Vec3
   b.v[i] = v;
 }
 
+/// Eq. 1-3 for body i from the state (x0, v0) into (x, v), stored nowhere: the fused
+/// small step's front (small_step.cu), whose every block integrates every body from the
+/// saved state into its shared memory. The same call as integrate_body, so the same bits.
+__device__ inline void integrated(const BodiesDesc& b, std::uint32_t i, Vec3 x0, Vec3 v0, Vec3 gravity, float dt,
+                                  Vec3& x, Vec3& v) {
+  x = x0;
+  v = v0;
+  integrate(x, v, b.w[i], gravity, Vec3{}, dt);
+}
+
 /// Body i's world AABB: translated(local, x).
 __device__ inline void aabb_body(const BodiesDesc& b, std::uint32_t i) { b.aabb[i] = translated(b.local[i], b.x[i]); }
 

@@ -260,7 +260,43 @@ struct SmallStepDesc {
   /// Mapped pinned host memory of kSmallProfileSlots %globaltimer stamps (ns) by thread 0 of
   /// block 0 at the end of every phase (OCTOCD_CUDA_SMALL_PROFILE=1), or null (no stamps).
   unsigned long long* profile = nullptr;
+  /// The fused front: when n <= front_bodies (at most kSmallFrontMaxBodies), every block
+  /// integrates every body from x_saved / v_saved into its shared memory, counts, scans and
+  /// fills the pairs from there, and block 0 stores the integrated state: no grid-wide
+  /// barrier before the midphase (else three). It needs x_saved == x and v_saved == v at
+  /// the step's start: the host uploads both, and the step's clamp copies the new state into
+  /// them unless a list overflowed (the host then restores x from x_saved and reruns).
+  std::uint32_t front_bodies = 0;
 };
+
+/// The most bodies of the fused front (SmallStepDesc::front_bodies): its shared memory holds
+/// their boxes, counts and offsets.
+constexpr std::uint32_t kSmallFrontMaxBodies = 512;
+
+/// The resident (persistent) small step (small_step.cu, launch_small_resident): one
+/// cooperative launch that runs step after step. Block 0's thread 0 polls `request` in
+/// mapped pinned host memory (system-scope acquire loads, __nanosleep backoff) and forwards
+/// each new value to the other blocks through `control` in device memory; a request is
+/// (sequence << kResidentShift) | flags: kResidentRecord (the first pass writes `records`),
+/// kResidentExit (end the kernel). Each step runs the per-step kernel's code with that
+/// sequence, so it ends by writing the sequence to SmallStepDesc::done. The kernel also ends
+/// by itself after idle_ns without a new request (so that nothing else on the device waits
+/// on an idle resident kernel for long); on every exit it writes `epoch` to `exited`
+/// (mapped), after its last step's `done`. The host tells the two apart: a request is
+/// either run (done == its sequence) or left (exited == epoch and done older).
+struct ResidentDesc {
+  unsigned long long* request = nullptr;  ///< mapped pinned host memory, written by the host
+  unsigned long long* exited = nullptr;   ///< mapped pinned host memory, written at exit
+  unsigned long long* control = nullptr;  ///< device, 2 words: [0] ticket, [1] command
+  unsigned long long handled = 0;         ///< the request value taken as already run at launch
+  unsigned long long epoch = 0;           ///< this launch's number, written to *exited
+  unsigned long long idle_ns = 0;         ///< exit after this long without a request (0: never)
+  DeviceContact* records = nullptr;       ///< the first pass's records of a recorded step
+  int stall = 0;  ///< test hook (OCTOCD_CUDA_PERSISTENT_STALL=1): ignore step requests, honour exit
+};
+constexpr int kResidentShift = 2;
+constexpr unsigned long long kResidentRecord = 1;
+constexpr unsigned long long kResidentExit = 2;
 
 /// The fused small step's phases as stamped into SmallStepDesc::profile: slot 0 the kernel's
 /// start, slot p the end of phase p (a phase the step skips: the previous stamp again).
@@ -331,6 +367,12 @@ cudaError_t small_step_blocks_per_sm(int& blocks);
 /// of kBlockSize threads; `grid` must not exceed small_step_blocks_per_sm x the SMs.
 /// Requires s.bodies.n in [1, kMetricsOneBlockBodies].
 cudaError_t launch_small_step(const SmallStepDesc& s, unsigned grid, cudaStream_t stream);
+/// Blocks of the resident small step kernel that fit on one multiprocessor at once.
+cudaError_t small_resident_blocks_per_sm(int& blocks);
+/// The resident small step (ResidentDesc) as one cooperative launch of `grid` blocks; s's
+/// sequence and terms.records are ignored (each request brings its own). It returns when
+/// asked to (kResidentExit), or after r.idle_ns without a request.
+cudaError_t launch_small_resident(const SmallStepDesc& s, const ResidentDesc& r, unsigned grid, cudaStream_t stream);
 
 // ---- primitives.cu (CUB) ------------------------------------------------------------
 /// Exclusive prefix sum of `count` uint32. With temp == nullptr only sets temp_bytes.

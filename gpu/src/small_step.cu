@@ -28,11 +28,21 @@
 //  8. block 0: the metrics (the one-block pass of metrics.cu over the same 512 slots, so
 //     the same bits), and a copy of the step statistics into mapped pinned host memory
 //     (no separate device-to-host copy).
+// Fused front (n <= SmallStepDesc::front_bodies): phases 1-4 without a grid-wide barrier:
+// every block integrates every body from x_saved / v_saved (equal to x / v at a step's
+// start) into its shared memory, with the boxes, counts (one thread per body: its row and its
+// column, the same overlap tests as the warp rows), scans both counts and fills its share of
+// the rows from there; block 0 stores the integrated state and the boxes. The last response
+// pass copies the new state into x_saved / v_saved (not when a list overflowed: the host
+// then restores the state from them and reruns).
+// Resident kernel (small_resident_kernel): the same step in a loop, one step per request
+// the host writes into mapped memory (ResidentDesc in kernels.hpp).
 // Overflow: a pair list or midphase list that passes its capacity is counted in full and
 // the host regrows and reruns the step, as on the graph path. Every thread reaches every
 // grid.sync (no early return); loops over warps have warp-uniform bounds.
 #include <cooperative_groups.h>
 #include <cub/block/block_scan.cuh>
+#include <cuda/atomic>
 
 #include "broadphase_common.cuh"
 #include "broadphase_flat.cuh"
@@ -65,10 +75,23 @@ struct ScanShared {
   std::uint32_t in_offset[kSharedScanBodies + 1];
 };
 
+/// The fused front's shared memory (n <= kSmallFrontMaxBodies): the integrated boxes, both
+/// counts and both offsets (n + 1 entries each), CUB's storage.
+struct FrontShared {
+  typename BlockScan::TempStorage storage;
+  Aabb aabb[kSmallFrontMaxBodies];
+  std::uint32_t out_count[kSmallFrontMaxBodies + 1];
+  std::uint32_t in_count[kSmallFrontMaxBodies + 1];
+  std::uint32_t out_offset[kSmallFrontMaxBodies + 1];
+  std::uint32_t in_offset[kSmallFrontMaxBodies + 1];
+};
+
+constexpr std::size_t max2(std::size_t a, std::size_t b) { return a > b ? a : b; }
+
 /// Shared memory of the fused kernel, used by one phase at a time (grid.sync between):
-/// the scan's storage (and offsets), the leaf tiles, the metrics slots.
-constexpr std::size_t kSharedBytes =
-    max3(sizeof(ScanShared), sizeof(mid::LeafTiles), sizeof(metrics::Acc) * kMetricsBlockSize);
+/// the scan's storage (and offsets) or the fused front's, the leaf tiles, the metrics slots.
+constexpr std::size_t kSharedBytes = max2(
+    max3(sizeof(ScanShared), sizeof(mid::LeafTiles), sizeof(metrics::Acc) * kMetricsBlockSize), sizeof(FrontShared));
 static_assert(kSharedBytes <= 48 * 1024, "static shared memory of the fused step");
 
 /// Exclusive prefix sum of in[0 .. count) into out (and into out2 when not null) by one
@@ -92,20 +115,25 @@ __device__ std::uint32_t block_exclusive_scan(const std::uint32_t* in, std::uint
   return carry;
 }
 
+/// %globaltimer (ns).
+__device__ inline unsigned long long global_ns() {
+  unsigned long long t;
+  asm volatile("mov.u64 %0, %%globaltimer;" : "=l"(t));
+  return t;
+}
+
 /// Thread 0 of block 0 stamps %globaltimer (ns) into profile[slot] (when profiling).
 __device__ inline void stamp(unsigned long long* profile, int slot) {
-  if (profile && blockIdx.x == 0 && threadIdx.x == 0) {
-    unsigned long long t;
-    asm volatile("mov.u64 %0, %%globaltimer;" : "=l"(t));
-    profile[slot] = t;
-  }
+  if (profile && blockIdx.x == 0 && threadIdx.x == 0) profile[slot] = global_ns();
 }
 
 __device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { return a < b ? a : b; }
 
-__global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s) {
+/// One whole step (every thread of the grid calls it): `sequence` is written to *s.done at
+/// the end, `records` (may be null) gets the first pass's contacts; smem: kSharedBytes.
+__device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned long long sequence,
+                                                DeviceContact* records, unsigned char* smem) {
   cg::grid_group grid = cg::this_grid();
-  __shared__ alignas(16) unsigned char smem[kSharedBytes];
   const BodiesDesc& b = s.bodies;
   const std::uint32_t n = b.n;
   const std::uint32_t tid = blockIdx.x * blockDim.x + threadIdx.x;
@@ -124,61 +152,113 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
     s.out_count[n] = 0;
     s.in_count[n] = 0;
   }
-  for (std::uint32_t i = tid; i < n; i += threads) {
-    integrate_body(b, i, s.gravity, s.dt);
-    aabb_body(b, i);
-  }
-  grid.sync();
-  stamp(s.profile, 1);
-
-  // 2. Broadphase `flat`, counting: body i's row (j > i) and column (a < i).
-  for (std::uint32_t i = warp; i < n; i += warps) {
-    flat_pairs_of(b.aabb, n, i, s.out_count, nullptr, nullptr, 0, s.shift);
-    const std::uint32_t in = flat_row<false>(b.aabb, b.aabb[i], 0u, i, [](std::uint32_t, std::uint32_t) {});
-    if (lane == 0) s.in_count[i] = in;
-  }
-  grid.sync();
-  stamp(s.profile, 2);
-
-  // 3. Both exclusive scans over n + 1 counts; the pair total. Up to kSharedScanBodies
-  // every block scans into its shared memory (block 0 also into the global offsets) and
-  // fills from there at once; above, block 0 scans and a grid-wide barrier precedes the fill.
-  const bool shared_scan = n <= kSharedScanBodies;
-  const std::uint32_t* out_offset = s.out_offset;
-  const std::uint32_t* in_offset = s.in_offset;
-  if (shared_scan) {
-    ScanShared& sh = *reinterpret_cast<ScanShared*>(smem);
+  const bool front = n <= s.front_bodies;  // uniform
+  if (front) {
+    // 1-4 fused: every block integrates every body from the saved state (== the state at
+    // the step's start) into its shared memory; block 0 stores the result.
+    FrontShared& f = *reinterpret_cast<FrontShared*>(smem);
+    for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) {
+      Vec3 x, v;
+      integrated(b, i, b.x_saved[i], b.v_saved[i], s.gravity, s.dt, x, v);
+      const Aabb box = translated(b.local[i], x);
+      f.aabb[i] = box;
+      if (blockIdx.x == 0) {
+        b.x[i] = x;
+        b.v[i] = v;
+        b.aabb[i] = box;
+      }
+    }
+    __syncthreads();
+    stamp(s.profile, 1);
+    // Body i's row (j > i, overlaps(box_i, box_j)) and column (a < i, overlaps(box_a,
+    // box_i)): the tests of flat_row, counted by one thread.
+    for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) {
+      const Aabb bi = f.aabb[i];
+      std::uint32_t out = 0, in = 0;
+      for (std::uint32_t j = 0; j < i; ++j) in += overlaps(f.aabb[j], bi) ? 1u : 0u;
+      for (std::uint32_t j = i + 1; j < n; ++j) out += overlaps(bi, f.aabb[j]) ? 1u : 0u;
+      f.out_count[i] = out;
+      f.in_count[i] = in;
+    }
+    if (threadIdx.x == 0) {
+      f.out_count[n] = 0;
+      f.in_count[n] = 0;
+    }
+    __syncthreads();
+    stamp(s.profile, 2);
     std::uint32_t* g_out = blockIdx.x == 0 ? s.out_offset : nullptr;
     std::uint32_t* g_in = blockIdx.x == 0 ? s.in_offset : nullptr;
-    const std::uint32_t total = block_exclusive_scan(s.out_count, sh.out_offset, n + 1, sh.storage, g_out);
-    (void)block_exclusive_scan(s.in_count, sh.in_offset, n + 1, sh.storage, g_in);
+    const std::uint32_t total = block_exclusive_scan(f.out_count, f.out_offset, n + 1, f.storage, g_out);
+    (void)block_exclusive_scan(f.in_count, f.in_offset, n + 1, f.storage, g_in);
     if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
-    out_offset = sh.out_offset;
-    in_offset = sh.in_offset;
     stamp(s.profile, 3);
-  } else {
-    if (blockIdx.x == 0) {
-      auto& storage = *reinterpret_cast<typename BlockScan::TempStorage*>(smem);
-      const std::uint32_t total = block_exclusive_scan(s.out_count, s.out_offset, n + 1, storage);
-      (void)block_exclusive_scan(s.in_count, s.in_offset, n + 1, storage);
-      if (threadIdx.x == 0) st->counts[0] = total;
+    for (std::uint32_t i = warp; i < n; i += warps) {
+      flat_pairs_of(f.aabb, n, i, nullptr, f.out_offset, s.pair_keys, cap, s.shift);
+      const std::uint32_t o = f.in_offset[i];
+      (void)flat_row<false>(f.aabb, f.aabb[i], 0u, i, [&](std::uint32_t r, std::uint32_t a) {
+        if (o + r < cap) s.in_list[o + r] = a;
+      });
     }
     grid.sync();
-    stamp(s.profile, 3);
-  }
+    stamp(s.profile, 4);
+  } else {
+    for (std::uint32_t i = tid; i < n; i += threads) {
+      integrate_body(b, i, s.gravity, s.dt);
+      aabb_body(b, i);
+    }
+    grid.sync();
+    stamp(s.profile, 1);
 
-  // 4. Fill: the pair keys in (a, b) order and the in-lists in a order (below the capacity).
-  for (std::uint32_t i = warp; i < n; i += warps) {
-    flat_pairs_of(b.aabb, n, i, nullptr, out_offset, s.pair_keys, cap, s.shift);
-    const std::uint32_t o = in_offset[i];
-    (void)flat_row<false>(b.aabb, b.aabb[i], 0u, i, [&](std::uint32_t r, std::uint32_t a) {
-      if (o + r < cap) s.in_list[o + r] = a;
-    });
-  }
-  grid.sync();
-  stamp(s.profile, 4);
+    // 2. Broadphase `flat`, counting: body i's row (j > i) and column (a < i).
+    for (std::uint32_t i = warp; i < n; i += warps) {
+      flat_pairs_of(b.aabb, n, i, s.out_count, nullptr, nullptr, 0, s.shift);
+      const std::uint32_t in = flat_row<false>(b.aabb, b.aabb[i], 0u, i, [](std::uint32_t, std::uint32_t) {});
+      if (lane == 0) s.in_count[i] = in;
+    }
+    grid.sync();
+    stamp(s.profile, 2);
 
-  // 5. Midphase start (one warp per pair); the in-lists' a resolved to k.
+    // 3. Both exclusive scans over n + 1 counts; the pair total. Up to kSharedScanBodies
+    // every block scans into its shared memory (block 0 also into the global offsets) and
+    // fills from there at once; above, block 0 scans and a grid-wide barrier precedes the fill.
+    const bool shared_scan = n <= kSharedScanBodies;
+    const std::uint32_t* out_offset = s.out_offset;
+    const std::uint32_t* in_offset = s.in_offset;
+    if (shared_scan) {
+      ScanShared& sh = *reinterpret_cast<ScanShared*>(smem);
+      std::uint32_t* g_out = blockIdx.x == 0 ? s.out_offset : nullptr;
+      std::uint32_t* g_in = blockIdx.x == 0 ? s.in_offset : nullptr;
+      const std::uint32_t total = block_exclusive_scan(s.out_count, sh.out_offset, n + 1, sh.storage, g_out);
+      (void)block_exclusive_scan(s.in_count, sh.in_offset, n + 1, sh.storage, g_in);
+      if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
+      out_offset = sh.out_offset;
+      in_offset = sh.in_offset;
+      stamp(s.profile, 3);
+    } else {
+      if (blockIdx.x == 0) {
+        auto& storage = *reinterpret_cast<typename BlockScan::TempStorage*>(smem);
+        const std::uint32_t total = block_exclusive_scan(s.out_count, s.out_offset, n + 1, storage);
+        (void)block_exclusive_scan(s.in_count, s.in_offset, n + 1, storage);
+        if (threadIdx.x == 0) st->counts[0] = total;
+      }
+      grid.sync();
+      stamp(s.profile, 3);
+    }
+
+    // 4. Fill: the pair keys in (a, b) order and the in-lists in a order (below the capacity).
+    for (std::uint32_t i = warp; i < n; i += warps) {
+      flat_pairs_of(b.aabb, n, i, nullptr, out_offset, s.pair_keys, cap, s.shift);
+      const std::uint32_t o = in_offset[i];
+      (void)flat_row<false>(b.aabb, b.aabb[i], 0u, i, [&](std::uint32_t r, std::uint32_t a) {
+        if (o + r < cap) s.in_list[o + r] = a;
+      });
+    }
+    grid.sync();
+    stamp(s.profile, 4);
+  }  // not fused
+
+  // 5. Midphase start (one warp per pair); the in-lists' a resolved to k, by the grid's
+  // last threads (the first warps take the pairs).
   MidListDesc md = s.mid;
   md.out = s.lists[0];
   md.out_count = st->counts + 1;
@@ -186,7 +266,7 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
   mid::mid_start_items(md);
   {
     const std::uint32_t live = live_count(st->counts, cap);
-    for (std::uint32_t i = tid; i < n; i += threads) {
+    for (std::uint32_t i = threads - 1u - tid; i < n; i += threads) {
       const std::uint32_t e1 = min_u32(s.in_offset[i + 1], cap);
       for (std::uint32_t e = s.in_offset[i]; e < e1; ++e) {
         const std::uint32_t a = s.in_list[e];
@@ -227,7 +307,11 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
   // 7. Response passes; the clamp after the last one. With few pairs block 0 runs them
   // alone (its own barriers), then the metrics; the other blocks are done.
   TermsDesc td = s.terms;
+  td.records = records;
   const std::uint32_t live = live_count(st->counts, cap);
+  // The fused front's saved state becomes the new state unless the step is to be rerun.
+  bool save = front && st->counts[0] <= cap;
+  for (int i = 0; i < md.steps; ++i) save = save && st->counts[1 + i] <= s.list_capacity;
   const bool one_block = live <= s.one_block_pairs;
   if (one_block && blockIdx.x != 0) return;  // uniform per block; no grid.sync follows then
   const std::uint32_t r_tid = one_block ? threadIdx.x : tid;
@@ -253,7 +337,13 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
         for (std::uint32_t k = s.out_offset[i]; k < k1; ++k) sums.add(s.apply, k, false);
         sums.apply(s.apply, i);
       }
-      if (last) clamp_body(b, i, s.max_velocity);
+      if (last) {
+        clamp_body(b, i, s.max_velocity);
+        if (save) {
+          b.x_saved[i] = b.x[i];
+          b.v_saved[i] = b.v[i];
+        }
+      }
     }
     if (one_block) __syncthreads();
     else grid.sync();
@@ -268,9 +358,89 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(SmallStepDesc s)
       if (s.host_stats) *s.host_stats = *st;
       if (s.done) {
         __threadfence_system();  // the statistics (and stamps) before the step's number
-        *s.done = s.sequence;
+        *s.done = sequence;
       }
     }
+  }
+}
+
+__global__ void __launch_bounds__(kBlockSize) small_step_kernel(const __grid_constant__ SmallStepDesc s) {
+  __shared__ alignas(16) unsigned char smem[kSharedBytes];
+  small_step_body(s, s.sequence, s.terms.records, smem);
+}
+
+/// The command that ends the resident kernel (never a request: those have a sequence
+/// below 2^62).
+constexpr unsigned long long kExitCommand = ~0ull;
+
+/// Block 0, thread 0: waits for a request other than `handled` (system-scope loads of the
+/// mapped word, tight at first, then __nanosleep backoff up to 1 us); returns it, or
+/// kExitCommand for an exit request or after r.idle_ns without one.
+__device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long long handled) {
+  cuda::atomic_ref<unsigned long long, cuda::thread_scope_system> request(*r.request);
+  const unsigned long long t0 = global_ns();
+  unsigned sleep_ns = 0;
+  for (unsigned spins = 0;; ++spins) {
+    const unsigned long long req = request.load(cuda::std::memory_order_acquire);
+    if (req != handled) {
+      if (req & kResidentExit) return kExitCommand;
+      if (!r.stall) return req;
+    }
+    if ((spins & 7u) == 0 && r.idle_ns != 0 && global_ns() - t0 > r.idle_ns) return kExitCommand;
+    if (spins >= 256) {
+      __nanosleep(sleep_ns);
+      sleep_ns = sleep_ns < 1024 ? sleep_ns * 2 + 32 : 1024;
+    }
+  }
+}
+
+/// Steps on request (ResidentDesc). Block 0 takes each request and publishes it as the
+/// next command (control[1], then control[0] = the next ticket, release); the other blocks
+/// wait for the ticket (acquire). Every block reads the first ticket before a grid-wide
+/// barrier, so none can miss the first command. After a step's last phase (block 0: the
+/// metrics and *done) block 0 waits for the next request; a block done earlier (the
+/// one-block response) waits for the next ticket.
+__global__ void __launch_bounds__(kBlockSize)
+    small_resident_kernel(const __grid_constant__ SmallStepDesc s, const __grid_constant__ ResidentDesc r) {
+  __shared__ alignas(16) unsigned char smem[kSharedBytes];
+  __shared__ unsigned long long command;
+  cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> ticket(r.control[0]);
+  cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> published(r.control[1]);
+  unsigned long long my_ticket = 0;
+  if (threadIdx.x == 0) my_ticket = ticket.load(cuda::std::memory_order_relaxed);
+  cg::this_grid().sync();
+  unsigned long long handled = r.handled;
+  for (;;) {
+    if (threadIdx.x == 0) {
+      unsigned long long cmd;
+      if (blockIdx.x == 0) {
+        cmd = wait_request(r, handled);
+        published.store(cmd, cuda::std::memory_order_relaxed);
+        ticket.store(my_ticket + 1, cuda::std::memory_order_release);
+      } else {
+        unsigned sleep_ns = 0;
+        for (unsigned spins = 0; ticket.load(cuda::std::memory_order_acquire) == my_ticket; ++spins) {
+          if (spins >= 64) {
+            __nanosleep(sleep_ns);
+            sleep_ns = sleep_ns < 256 ? sleep_ns * 2 + 32 : 256;
+          }
+        }
+        cmd = published.load(cuda::std::memory_order_relaxed);
+      }
+      ++my_ticket;
+      command = cmd;
+    }
+    __syncthreads();
+    const unsigned long long cmd = command;
+    __syncthreads();  // every thread has read it before thread 0 writes the next one
+    if (cmd == kExitCommand) break;
+    handled = cmd;
+    small_step_body(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr, smem);
+  }
+  if (blockIdx.x == 0 && threadIdx.x == 0) {
+    __threadfence_system();  // the last step's writes before the exit's mark
+    cuda::atomic_ref<unsigned long long, cuda::thread_scope_system>(*r.exited)
+        .store(r.epoch, cuda::std::memory_order_release);
   }
 }
 
@@ -286,6 +456,21 @@ cudaError_t launch_small_step(const SmallStepDesc& s, unsigned grid, cudaStream_
   void* args[] = {&arg};
   const cudaError_t e = cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&small_step_kernel), dim3(grid),
                                                     dim3(kBlockSize), args, 0, stream);
+  if (e != cudaSuccess) return e;
+  return cudaGetLastError();
+}
+
+cudaError_t small_resident_blocks_per_sm(int& blocks) {
+  blocks = 0;
+  return cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, small_resident_kernel, kBlockSize, 0);
+}
+
+cudaError_t launch_small_resident(const SmallStepDesc& s, const ResidentDesc& r, unsigned grid, cudaStream_t stream) {
+  SmallStepDesc arg = s;
+  ResidentDesc res = r;
+  void* args[] = {&arg, &res};
+  const cudaError_t e = cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&small_resident_kernel),
+                                                    dim3(grid), dim3(kBlockSize), args, 0, stream);
   if (e != cudaSuccess) return e;
   return cudaGetLastError();
 }

@@ -42,6 +42,7 @@
 #include <sstream>
 #include <string>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include <fmt/format.h>
@@ -1058,3 +1059,230 @@ INSTANTIATE_TEST_SUITE_P(Scenes, CudaRerun,
                          scene_path_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(CpuVsCuda);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(CudaRerun);
+
+// ---- the resident (persistent) small step (issue 20, item 2) -----------------------------
+//
+// The small path's kernel stays resident (OCTOCD_CUDA_PERSISTENT, the default) and steps on
+// request. Every test compares with the cpu engine after every step: states bit for bit
+// (state() read back while the kernel waits), counts, and on recorded frames the pairs,
+// contacts and terms.
+
+namespace {
+
+/// Steps the cpu engine and every engine of `gpus` once, asserts that every state equals the
+/// cpu's bit for bit and the counts agree; records on frames divisible by 10.
+void step_all_and_compare(World& cpu, const std::vector<CudaWorld*>& gpus, int f, const std::string& label) {
+  const bool rec = f % 10 == 0;
+  cpu.set_recording(rec);
+  const FrameMetrics mc = cpu.step();
+  for (CudaWorld* g : gpus) {
+    g->set_recording(rec);
+    const FrameMetrics mg = g->step();
+    const std::string what = fmt::format("{} frame {} ({} path{})", label, f, g->step_path(),
+                                         g->persistent() ? ", resident" : "");
+    ASSERT_EQ(cpu.state_hash(), g->state_hash()) << what << ": " << first_difference(cpu.state(), g->state());
+    expect_cpu_cuda_counts(mc, mg, what);
+    if (rec) expect_same_record(cpu.record(), g->record(), what);
+    if (::testing::Test::HasFailure()) return;
+  }
+}
+
+/// A model with the midphase levels the benches use for bunny-stack-50 (1,2).
+std::shared_ptr<const Model> with_levels(const std::shared_ptr<const Model>& base, const char* levels) {
+  auto m = std::make_shared<Model>(*base);
+  m->scene.midphase = MidphaseConfig::parse(levels);
+  return m;
+}
+
+}  // namespace
+
+// The new switches are input errors whatever the device (checked before it is looked at).
+TEST(CudaPersistent, BadSwitchValuesAreInputErrors) {
+  const auto model = load_model("box-stack");
+  const std::vector<std::pair<const char*, std::vector<const char*>>> cases = {
+      {"OCTOCD_CUDA_PERSISTENT", {"", "2", "yes", "on", " 1"}},
+      {"OCTOCD_CUDA_PERSISTENT_IDLE_US", {"", "0", "-1", "x", "600000001", "5us"}},
+      {"OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS", {"", "0", "x", "86400001"}},
+      {"OCTOCD_CUDA_SMALL_FRONT_BODIES", {"", "-1", "513", "x", "1e3"}}};
+  for (const auto& [name, bads] : cases) {
+    for (const char* bad : bads) {
+      const ScopedEnv env(name, bad);
+      try {
+        CudaWorld gpu(model, "flat");
+        ADD_FAILURE() << "accepted " << name << "='" << bad << "'";
+      } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find(fmt::format("{}: '{}' is not allowed; allowed: ", name, bad)),
+                  std::string::npos)
+            << e.what();
+      } catch (const RuntimeError& e) {
+        ADD_FAILURE() << name << "='" << bad << "' gave a runtime error, not an input error: " << e.what();
+      }
+    }
+  }
+}
+
+// Many steps through one resident kernel (idle exit far away): the cpu's bits after every
+// step with the state read back after every step, recorded frames (the request's flag),
+// set_state while the kernel waits (every 97th frame, both engines); the kernel stays
+// resident: one launch, plus one per buffer regrow (a regrow ends it: cudaFree).
+TEST(CudaPersistent, ManyStepsWithStateReadsAndSetStateEqualTheCpu) {
+  REQUIRE_CUDA_DEVICE();
+  const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "600000000");
+  for (const char* scene : {"bunny-stack-50", "box-stack"}) {
+    const auto model = with_levels(load_model(scene), "1,2");
+    const PathEnv env("small");
+    auto cpu = cpu_flat(model);
+    CudaWorld gpu(model, "flat");
+    ASSERT_EQ(gpu.step_path(), "small") << scene;
+    ASSERT_TRUE(gpu.persistent()) << scene << ": the resident kernel is the small path's default";
+    EXPECT_NE(gpu.notes().find("resident kernel"), std::string::npos) << gpu.notes();
+    EXPECT_EQ(gpu.resident_launches(), 0u) << "nothing launched before the first step";
+    const int frames = 400;
+    std::uint64_t grows = 0, last_bytes = 0, contacts = 0;
+    for (int f = 1; f <= frames; ++f) {
+      if (f % 97 == 0) {
+        BodyState s = cpu->state();
+        for (std::size_t i = 0; i < s.size(); ++i)
+          if (s.w[i] > 0.0f) s.v[i] = s.v[i] * 0.5f + Vec3{0.0f, 0.25f, 0.0f};
+        cpu->mutable_state() = s;
+        gpu.set_state(s);
+      }
+      step_all_and_compare(*cpu, {&gpu}, f, scene);
+      if (::testing::Test::HasFailure()) FAIL() << scene << " frame " << f;
+      contacts += gpu.last_metrics().contacts;
+      const std::uint64_t bytes = gpu.last_metrics().memory_bytes;
+      if (f > 1 && bytes != last_bytes) ++grows;
+      last_bytes = bytes;
+    }
+    EXPECT_GT(contacts, 0u) << scene;
+    EXPECT_GE(gpu.resident_launches(), 1u);
+    EXPECT_LE(gpu.resident_launches(), 2 + grows)
+        << scene << ": the kernel must stay resident between steps (" << grows << " regrows seen)";
+    std::cout << "[ info ] " << scene << ": " << frames << " resident steps equal to the cpu; "
+              << gpu.resident_launches() << " launches, " << grows << " regrows\n";
+  }
+}
+
+// Switching paths in one process, every step against the cpu: a resident engine that is
+// switched to a launch per step and back every 25 frames; a resident engine with the fused
+// front off whose buffers are shrunk to capacity 1 every 40 frames (regrow: end, rerun,
+// relaunch); a per-step engine with the fused front for up to 512 bodies; the graph path.
+// bunny-random-400 (406 bodies: the fused front only with 512) and bunny-stack-50.
+TEST(CudaPersistent, SwitchingPathsAndRegrowsKeepTheCpuBits) {
+  REQUIRE_CUDA_DEVICE();
+  for (const char* scene : {"bunny-stack-50", "bunny-random-400"}) {
+    const auto model = with_levels(load_model(scene), "1,2");
+    auto cpu = cpu_flat(model);
+    std::unique_ptr<CudaWorld> toggled, tiny, launches, graph;
+    {
+      const PathEnv env("small");
+      toggled = std::make_unique<CudaWorld>(model, "flat");
+      {
+        const ScopedEnv front("OCTOCD_CUDA_SMALL_FRONT_BODIES", "0");
+        tiny = std::make_unique<CudaWorld>(model, "flat");
+      }
+      const ScopedEnv front("OCTOCD_CUDA_SMALL_FRONT_BODIES", "512");
+      const ScopedEnv off("OCTOCD_CUDA_PERSISTENT", "0");
+      launches = std::make_unique<CudaWorld>(model, "flat");
+    }
+    {
+      const PathEnv env("graph");
+      graph = std::make_unique<CudaWorld>(model, "flat");
+    }
+    ASSERT_TRUE(toggled->persistent());
+    ASSERT_TRUE(tiny->persistent());
+    ASSERT_FALSE(launches->persistent());
+    ASSERT_EQ(launches->step_path(), "small");
+    ASSERT_FALSE(graph->persistent());
+    graph->set_persistent(true);  // a no-op off the small path
+    ASSERT_FALSE(graph->persistent());
+    tiny->reset_capacities(1);
+    const int frames = std::string(scene) == "bunny-random-400" ? 150 : 300;
+    for (int f = 1; f <= frames; ++f) {
+      if (f % 25 == 0) toggled->set_persistent(!toggled->persistent());
+      if (f % 40 == 0) tiny->reset_capacities(1);
+      step_all_and_compare(*cpu, {toggled.get(), tiny.get(), launches.get(), graph.get()}, f, scene);
+      if (::testing::Test::HasFailure()) FAIL() << scene << " frame " << f;
+    }
+    EXPECT_GT(tiny->resident_launches(), static_cast<std::uint64_t>(frames / 40))
+        << "every capacity reset ends the kernel; the next step launches it again";
+    EXPECT_GE(toggled->resident_launches(), static_cast<std::uint64_t>(frames / 50));
+    EXPECT_EQ(launches->resident_launches(), 0u);
+  }
+}
+
+// Destroying an engine whose kernel is resident ends the kernel and frees everything: right
+// after construction, after steps, after set_persistent(false), several at once; then a new
+// resident engine still gives the cpu's bits.
+TEST(CudaPersistent, DestroyWhileResident) {
+  REQUIRE_CUDA_DEVICE();
+  const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "600000000");
+  const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
+  const PathEnv env("small");
+  { CudaWorld unused(model, "flat"); }
+  for (int round = 0; round < 3; ++round) {
+    std::vector<std::unique_ptr<CudaWorld>> engines;
+    for (int k = 0; k < 3; ++k) {
+      engines.push_back(std::make_unique<CudaWorld>(model, "flat"));
+      for (int f = 0; f < 5 + k; ++f) engines.back()->step();
+      ASSERT_GT(engines.back()->resident_launches(), 0u);
+    }
+    if (round == 1) engines[0]->set_persistent(false);
+    engines.clear();  // three destructors, two or three with a resident kernel
+  }
+  auto cpu = cpu_flat(model);
+  CudaWorld gpu(model, "flat");
+  for (int f = 1; f <= 30; ++f) {
+    step_all_and_compare(*cpu, {&gpu}, f, "after the destroyed engines");
+    if (::testing::Test::HasFailure()) FAIL();
+  }
+}
+
+// The host's timeout turns a kernel that never finishes a step into a RuntimeError, not a
+// deadlock (planted: OCTOCD_CUDA_PERSISTENT_STALL=1 makes the kernel ignore step requests);
+// the engine is then destroyed (the kernel still honours the exit request) and the device
+// works: a fresh engine gives the cpu's bits.
+TEST(CudaPersistent, HostTimeoutIsAnErrorNotAHang) {
+  REQUIRE_CUDA_DEVICE();
+  const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
+  const PathEnv env("small");
+  {
+    const ScopedEnv stall("OCTOCD_CUDA_PERSISTENT_STALL", "1");
+    const ScopedEnv timeout("OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS", "300");
+    CudaWorld gpu(model, "flat");
+    ASSERT_TRUE(gpu.persistent());
+    try {
+      gpu.step();
+      ADD_FAILURE() << "a stalled resident kernel's step returned";
+    } catch (const RuntimeError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find("did not finish step 1 within 300 ms"), std::string::npos) << m;
+      EXPECT_NE(m.find("OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS"), std::string::npos) << m;
+      EXPECT_NE(m.find("OCTOCD_CUDA_PERSISTENT_STALL=1"), std::string::npos) << m;
+    }
+  }  // destroyed: the exit request ends the kernel
+  auto cpu = cpu_flat(model);
+  CudaWorld gpu(model, "flat");
+  for (int f = 1; f <= 20; ++f) {
+    step_all_and_compare(*cpu, {&gpu}, f, "after the timeout");
+    if (::testing::Test::HasFailure()) FAIL();
+  }
+}
+
+// The resident kernel ends itself when idle (OCTOCD_CUDA_PERSISTENT_IDLE_US=1: after 1 us
+// without a request, so nearly every step finds it gone) and the next step launches it
+// again: the same bits as the cpu, whether the kernel took the request or had left.
+TEST(CudaPersistent, IdleExitAndRelaunchKeepTheCpuBits) {
+  REQUIRE_CUDA_DEVICE();
+  const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "1");
+  const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
+  const PathEnv env("small");
+  auto cpu = cpu_flat(model);
+  CudaWorld gpu(model, "flat");
+  ASSERT_TRUE(gpu.persistent());
+  for (int f = 1; f <= 200; ++f) {
+    step_all_and_compare(*cpu, {&gpu}, f, "idle exits");
+    if (::testing::Test::HasFailure()) FAIL();
+  }
+  EXPECT_GT(gpu.resident_launches(), 1u) << "the cpu's steps between take longer than 1 us: relaunches";
+}

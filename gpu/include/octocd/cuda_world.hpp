@@ -133,7 +133,23 @@ bool cuda_device_available();
 /// times its phases (small_profile()). OCTOCD_CUDA_MID_FUSE=0/1 (graph path; unset: auto,
 /// when the step has at least two items per warp) makes the last midphase expand step never /
 /// always run its items' leaves itself instead of appending them to the leaf list (the same
-/// leaf items, so the same bits and counts). A bad value of any of them is an InputError.
+/// leaf items, so the same bits and counts). OCTOCD_CUDA_SMALL_FRONT_BODIES=B (default 256, at most
+/// 512, 0: never) fuses its integrate, broadphase count, scan and fill without a grid-wide
+/// barrier up to B bodies (every block integrates every body into its shared memory).
+/// Persistent (resident) kernel, OCTOCD_CUDA_PERSISTENT (unset or 1: on, 0: a launch per
+/// step): with the polled wait, the small path's kernel is launched once, on a stream of its
+/// own, and stays resident: it waits on a request word in mapped host memory, runs a step per
+/// request and writes the step's number back, so a step costs no launch. Between steps it
+/// touches no state, so state(), set_state() and the recording's copies run beside it (on the
+/// engine's stream); reset_capacities(), a buffer regrow (the step's rerun), set_persistent(false)
+/// and the destructor end it first (cudaFree waits for every kernel). It ends itself after
+/// OCTOCD_CUDA_PERSISTENT_IDLE_US microseconds without a request (default 2000, 1 ..
+/// 600000000; the next step launches it again), so another engine's work on the device never
+/// waits on an idle one for longer. The host waits at most OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS
+/// milliseconds for a step (default 60000, 1 .. 86400000), then throws RuntimeError (the
+/// engine can then only be destroyed); test hook: OCTOCD_CUDA_PERSISTENT_STALL=1 makes the
+/// kernel ignore step requests (it still ends on exit), so that timeout fires.
+/// A bad value of any of them is an InputError.
 ///
 /// Errors (all thrown from the constructor or step()): RuntimeError when no device is
 /// usable, when the device has less memory free (cudaMemGetInfo) than
@@ -211,6 +227,17 @@ class CudaWorld : public Engine {
   /// step done (their difference: launch and wake-up latency), over every step so far;
   /// else "".
   std::string small_profile() const;
+  /// True while steps run through the resident small-step kernel (OCTOCD_CUDA_PERSISTENT;
+  /// the small path with the polled wait only).
+  bool persistent() const;
+  /// Turns the resident kernel on (where persistent() could be true: the small path with the
+  /// polled wait; elsewhere a no-op) or off (ending a resident kernel first; the steps then
+  /// launch one kernel each). The steps' results do not change. Throws RuntimeError when a
+  /// resident kernel does not end (see the class comment).
+  void set_persistent(bool on);
+  /// Launches of the resident kernel so far: one, plus one per regrow, per
+  /// set_persistent(false) / (true) and per idle exit (OCTOCD_CUDA_PERSISTENT_IDLE_US).
+  std::uint64_t resident_launches() const;
   /// On the small path: no stage is timed (one kernel); else every stage.
   bool has_stage(Stage s) const override;
   /// On the small path, what it changes in the metrics (broadphase candidates, stage
