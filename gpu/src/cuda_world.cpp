@@ -224,8 +224,10 @@ bool persistent_from_env() {
 constexpr long kResidentIdleUs = 2000;
 /// Default of OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS: the host's wait for one resident step.
 constexpr long kResidentTimeoutMs = 60000;
-/// Default of OCTOCD_CUDA_SMALL_FRONT_BODIES: the fused front up to this many bodies.
-constexpr long kSmallFrontBodies = 256;
+/// Default of OCTOCD_CUDA_SMALL_FRONT_BODIES: 0, never. On the H100 the fused front made the
+/// small path slower where it applied (armadillo-random-250, 256 bodies: 7,801 steps/s with it
+/// against 10,793 without; reports/h100/step-paths/run4), so it is opt-in.
+constexpr long kSmallFrontBodies = 0;
 
 /// The capacity to grow to when `needed` entries did not fit into `capacity`.
 std::size_t grown(std::size_t needed, std::size_t capacity) {

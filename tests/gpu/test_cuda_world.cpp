@@ -1216,7 +1216,11 @@ TEST(CudaPersistent, SwitchingPathsAndRegrowsKeepTheCpuBits) {
 // resident engine still gives the cpu's bits.
 TEST(CudaPersistent, DestroyWhileResident) {
   REQUIRE_CUDA_DEVICE();
-  const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "600000000");
+  // 200 ms: long enough that the last engine of a round is resident when it is destroyed;
+  // short, because two resident kernels need not fit on the device at once (the next
+  // engine's launch waits until the previous one has ended itself: on the H100, with
+  // 600 s here, the host's 60 s timeout fired instead).
+  const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "200000");
   const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
   const PathEnv env("small");
   { CudaWorld unused(model, "flat"); }

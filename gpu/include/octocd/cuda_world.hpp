@@ -133,7 +133,7 @@ bool cuda_device_available();
 /// times its phases (small_profile()). OCTOCD_CUDA_MID_FUSE=0/1 (graph path; unset: auto,
 /// when the step has at least two items per warp) makes the last midphase expand step never /
 /// always run its items' leaves itself instead of appending them to the leaf list (the same
-/// leaf items, so the same bits and counts). OCTOCD_CUDA_SMALL_FRONT_BODIES=B (default 256, at most
+/// leaf items, so the same bits and counts). OCTOCD_CUDA_SMALL_FRONT_BODIES=B (default 0: never; at most
 /// 512, 0: never) fuses its integrate, broadphase count, scan and fill without a grid-wide
 /// barrier up to B bodies (every block integrates every body into its shared memory).
 /// Persistent (resident) kernel, OCTOCD_CUDA_PERSISTENT (unset or 1: on, 0: a launch per
