@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Table of reports/cpu/bp-threads/*.json (octree vs bullet-dbvt, ms per frame)."""
+"""Table of reports/cpu/bp-threads/*.json, or of the folder given as the argument (octree vs bullet-dbvt, ms per frame)."""
 import glob, json, os, sys
-d = os.path.dirname(os.path.abspath(__file__))
+d = sys.argv[1] if len(sys.argv) > 1 else os.path.dirname(os.path.abspath(__file__))
 print("| scene | threads | broadphase | mean | stddev | cv | median | min | dbvt/octree (mean) | dbvt/octree (min) |")
 print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|")
 for f in sorted(glob.glob(os.path.join(d, "*-t*.json"))):
