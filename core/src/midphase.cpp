@@ -14,6 +14,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/midphase_hd.hpp"
+#include "octocd/midphase_views.hpp"
 
 namespace octocd {
 namespace {
@@ -28,23 +29,6 @@ hd::OctreeView view(const MeshOctree& t) {
   v.cells = t.cells.data();
   v.level_offset = t.level_offset.data();
   return v;
-}
-
-hd::PlacedView view(const PlacedShape& s) {
-  hd::PlacedView v;
-  v.is_mesh = s.octree != nullptr;
-  if (s.octree) v.octree = view(*s.octree);
-  v.position = s.position;
-  v.box = s.box;
-  return v;
-}
-
-hd::LevelList level_list(const MidphaseConfig& cfg) {
-  hd::LevelList l;
-  l.aabb_only = cfg.aabb_only;
-  l.count = static_cast<int>(std::min(cfg.levels.size(), static_cast<std::size_t>(hd::kMidphaseMaxLevels)));
-  for (int i = 0; i < l.count; ++i) l.levels[i] = cfg.levels[static_cast<std::size_t>(i)];
-  return l;
 }
 
 /// Reused scratch of world vertex positions (grows, never shrinks: no allocation once warm).
@@ -62,6 +46,23 @@ std::string trim(const std::string& s) {
 }
 
 }  // namespace
+
+hd::PlacedView placed_view(const PlacedShape& s) {
+  hd::PlacedView v;
+  v.is_mesh = s.octree != nullptr;
+  if (s.octree) v.octree = view(*s.octree);
+  v.position = s.position;
+  v.box = s.box;
+  return v;
+}
+
+hd::LevelList level_list(const MidphaseConfig& cfg) {
+  hd::LevelList l;
+  l.aabb_only = cfg.aabb_only;
+  l.count = static_cast<int>(std::min(cfg.levels.size(), static_cast<std::size_t>(hd::kMidphaseMaxLevels)));
+  for (int i = 0; i < l.count; ++i) l.levels[i] = cfg.levels[static_cast<std::size_t>(i)];
+  return l;
+}
 
 // ---- MidphaseConfig ------------------------------------------------------------------------
 
@@ -121,8 +122,8 @@ int MidphaseConfig::max_level() const {
 
 bool confirm_contact(const PlacedShape& a_in, const PlacedShape& b_in, float theta,
                      const MidphaseConfig& config, MidphaseStats& stats) {
-  const hd::PlacedView a = view(a_in);
-  const hd::PlacedView b = view(b_in);
+  const hd::PlacedView a = placed_view(a_in);
+  const hd::PlacedView b = placed_view(b_in);
   // Scratch for B's filtered world vertices: a leaf cell holds at most all of a mesh's
   // vertices, so this size always takes the cached path (same tests as the uncached one).
   std::vector<Vec3>& s = scratch();
@@ -139,7 +140,7 @@ bool confirm_contact(const PlacedShape& a_in, const PlacedShape& b_in, float the
 }
 
 bool exhaustive_contact(const PlacedShape& a_in, const PlacedShape& b_in, float theta) {
-  return hd::exhaustive_contact(view(a_in), view(b_in), theta);
+  return hd::exhaustive_contact(placed_view(a_in), placed_view(b_in), theta);
 }
 
 }  // namespace octocd

@@ -225,8 +225,8 @@ constexpr long kResidentIdleUs = 2000;
 /// Default of OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS: the host's wait for one resident step.
 constexpr long kResidentTimeoutMs = 60000;
 /// Default of OCTOCD_CUDA_SMALL_FRONT_BODIES: 0, never. On the H100 the fused front made the
-/// small path slower where it applied (armadillo-random-250, 256 bodies: 7,801 steps/s with it
-/// against 10,793 without; reports/h100/step-paths/run4), so it is opt-in.
+/// small path slower where it applied (armadillo-random-250, 256 bodies: 7,801 steps/s with it,
+/// reports/h100/perf-v3/run-a-5fa024b, against 10,821 without, run-b-5c8bc84), so it is opt-in.
 constexpr long kSmallFrontBodies = 0;
 
 /// The capacity to grow to when `needed` entries did not fit into `capacity`.

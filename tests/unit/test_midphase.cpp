@@ -13,6 +13,7 @@
 #include "octocd/midphase.hpp"
 #include "octocd/mesh_octree.hpp"
 #include "octocd/midphase_hd.hpp"
+#include "octocd/midphase_views.hpp"
 #include "octocd/vertex_blocks.hpp"
 
 namespace {
@@ -462,31 +463,8 @@ TEST(Midphase, FarApartIsRejectedEarly) {
 // device; that is only right if the set-up of (box, mesh) is the set-up of (mesh, box) but
 // for `swap`, field for field, and if the box-box / aabb-only answer does not depend on the
 // order. Checked on random placements (hits, misses and early rejections) for every level
-// list, with hd::clamped_level equal to the entries clamp_levels writes.
-hd::PlacedView hd_view(const PlacedShape& s) {
-  hd::PlacedView v;
-  v.is_mesh = s.octree != nullptr;
-  if (s.octree) {
-    v.octree.depth = s.octree->depth;
-    v.octree.bounds = s.octree->bounds;
-    v.octree.vertices = s.octree->vertices.data();
-    v.octree.vertex_count = static_cast<std::uint32_t>(s.octree->vertices.size());
-    v.octree.cells = s.octree->cells.data();
-    v.octree.level_offset = s.octree->level_offset.data();
-  }
-  v.position = s.position;
-  v.box = s.box;
-  return v;
-}
-
-hd::LevelList hd_levels(const MidphaseConfig& cfg) {
-  hd::LevelList l;
-  l.aabb_only = cfg.aabb_only;
-  l.count = static_cast<int>(cfg.levels.size());
-  for (int i = 0; i < l.count; ++i) l.levels[i] = cfg.levels[static_cast<std::size_t>(i)];
-  return l;
-}
-
+// list, with hd::clamped_level equal to the entries clamp_levels writes. The views are the
+// ones confirm_contact hands to the shared header (midphase_views.hpp).
 bool same_box(const Aabb& a, const Aabb& b) {
   return a.min.x == b.min.x && a.min.y == b.min.y && a.min.z == b.min.z && a.max.x == b.max.x &&
          a.max.y == b.max.y && a.max.z == b.max.z;
@@ -520,10 +498,10 @@ TEST(Midphase, SetupOfTheOrderedPairIsTheSetup) {
     const Vec3 pb = pa + near_contact(rng, 0.2f, 0.3f, 1.6f);
     const Vec3 c = pa + Vec3{u(rng), u(rng), u(rng)};
     const Vec3 e{h(rng), h(rng), h(rng)};
-    const hd::PlacedView ma = hd_view(place(ta, pa));
-    const hd::PlacedView mb = hd_view(place(tb, pb));
-    const hd::PlacedView box = hd_view(place_box({c - e, c + e}));
-    const hd::PlacedView box2 = hd_view(place_box({pb - e, pb + e}));
+    const hd::PlacedView ma = octocd::placed_view(place(ta, pa));
+    const hd::PlacedView mb = octocd::placed_view(place(tb, pb));
+    const hd::PlacedView box = octocd::placed_view(place_box({c - e, c + e}));
+    const hd::PlacedView box2 = octocd::placed_view(place_box({pb - e, pb + e}));
     for (const std::string& cs : configs) {
       const MidphaseConfig cfg = cs == "aabb-only" ? [] {
         MidphaseConfig a;
@@ -531,7 +509,7 @@ TEST(Midphase, SetupOfTheOrderedPairIsTheSetup) {
         return a;
       }()
                                                    : MidphaseConfig::parse(cs);
-      const hd::LevelList l = hd_levels(cfg);
+      const hd::LevelList l = octocd::level_list(cfg);
       const float theta = 0.01f;
       // (box, mesh) is set up as (mesh, box) with swap; (mesh, box) has no swap.
       const hd::PairSetup bm = hd::setup_pair(box, ma, theta, l);
