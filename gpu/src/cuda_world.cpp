@@ -124,6 +124,13 @@ enum class SmallMode { Auto, Never, Always };
 /// (OCTOCD_CUDA_SMALL_BLOCKS overrides the grid).
 constexpr int kSmallStepBlocksPerSm = 1;
 
+/// Bodies up to which the fused small step's default grid is half that (one block per two
+/// SMs): its phases then have little work, and fewer blocks meet at each grid-wide barrier.
+/// On the H100 (reports/h100/perf-v5): bunny-stack-50 (55 bodies) 30,225 steps/s on 66
+/// blocks against 29,389 on 132; with more work per step the full grid wins
+/// (asian-dragon-random-60, 66 bodies of large meshes: 3,038 on 66 against 3,760 on 132).
+constexpr std::size_t kSmallHalfGridBodies = 64;
+
 SmallMode small_mode_from_env() {
   const char* v = std::getenv("OCTOCD_CUDA_SMALL");
   if (v == nullptr) return SmallMode::Auto;
@@ -224,10 +231,10 @@ bool persistent_from_env() {
 constexpr long kResidentIdleUs = 2000;
 /// Default of OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS: the host's wait for one resident step.
 constexpr long kResidentTimeoutMs = 60000;
-/// Default of OCTOCD_CUDA_SMALL_FRONT_BODIES: 0, never. On the H100 the fused front made the
-/// small path slower where it applied (armadillo-random-250, 256 bodies: 7,801 steps/s with it,
-/// reports/h100/perf-v3/run-a-5fa024b, against 10,821 without, run-b-5c8bc84), so it is opt-in.
-constexpr long kSmallFrontBodies = 0;
+/// Default of OCTOCD_CUDA_SMALL_FRONT_BODIES: 64. On the H100 (reports/h100/perf-v5) the
+/// fused front, with its counts over body pairs, gains about 1% on bunny-stack-50 (55 bodies)
+/// and costs 38% on armadillo-random-250 (256 bodies: every block counts all n^2 / 2 pairs).
+constexpr long kSmallFrontBodies = 64;
 
 /// The capacity to grow to when `needed` entries did not fit into `capacity`.
 std::size_t grown(std::size_t needed, std::size_t capacity) {
@@ -963,6 +970,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     if (wanted && coop && per_sm > 0) {
       const int max_blocks = per_sm * std::max(1, sms);
       int blocks = std::min(per_sm, kSmallStepBlocksPerSm) * std::max(1, sms);
+      if (bodies <= kSmallHalfGridBodies) blocks = (blocks + 1) / 2;
       if (small_blocks > 0) blocks = static_cast<int>(std::min<long>(small_blocks, max_blocks));
       d.small = true;
       d.small_grid = static_cast<unsigned>(blocks);

@@ -27,16 +27,38 @@ __device__ inline void combine(Acc& a, const Acc& b) {
   a.first_bad = b.first_bad < a.first_bad ? b.first_bad : a.first_bad;
 }
 
+/// `a` of lane + delta (warp-wide, full mask).
+__device__ inline Acc shfl_down(const Acc& a, unsigned delta) {
+  constexpr unsigned kAll = 0xffffffffu;
+  return Acc{__shfl_down_sync(kAll, a.ke, delta),       __shfl_down_sync(kAll, a.px, delta),
+             __shfl_down_sync(kAll, a.py, delta),       __shfl_down_sync(kAll, a.pz, delta),
+             __shfl_down_sync(kAll, a.pen_sum, delta),  __shfl_down_sync(kAll, a.pen_max, delta),
+             __shfl_down_sync(kAll, a.contacts, delta), __shfl_down_sync(kAll, a.pen_above, delta),
+             __shfl_down_sync(kAll, a.first_bad, delta)};
+}
+
 /// The block's combined accumulator of s[0 .. kMetricsBlockSize) lands in s[0]: a fixed
 /// tree over the kMetricsBlockSize slots, whatever the block size (thread t combines the
 /// slots t, t + blockDim.x, ... of each level; with blockDim.x == kMetricsBlockSize one
-/// slot per thread). Every thread of the block calls it.
+/// slot per thread). The last five levels (slots 0 .. 31) run in warp 0's registers: lane t
+/// holds slot t and combines lane t + half's value into it, the same pairs in the same
+/// order as in shared memory (so the same bits), without a block barrier per level.
+/// blockDim.x >= 32. Every thread of the block calls it.
 __device__ inline void block_combine(Acc* s) {
   __syncthreads();
-  for (std::uint32_t half = kMetricsBlockSize / 2; half > 0; half /= 2) {
+  for (std::uint32_t half = kMetricsBlockSize / 2; half >= 32; half /= 2) {
     for (std::uint32_t t = threadIdx.x; t < half; t += blockDim.x) combine(s[t], s[t + half]);
     __syncthreads();
   }
+  if (threadIdx.x < 32) {
+    Acc a = s[threadIdx.x];
+    for (unsigned half = 16; half > 0; half /= 2) {
+      const Acc b = shfl_down(a, half);
+      if (threadIdx.x < half) combine(a, b);
+    }
+    if (threadIdx.x == 0) s[0] = a;
+  }
+  __syncthreads();
 }
 
 __device__ inline MetricsResult to_result(const Acc& r) {

@@ -171,18 +171,21 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
     __syncthreads();
     stamp(s.profile, 1);
     // Body i's row (j > i, overlaps(box_i, box_j)) and column (a < i, overlaps(box_a,
-    // box_i)): the tests of flat_row, counted by one thread.
-    for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) {
-      const Aabb bi = f.aabb[i];
-      std::uint32_t out = 0, in = 0;
-      for (std::uint32_t j = 0; j < i; ++j) in += overlaps(f.aabb[j], bi) ? 1u : 0u;
-      for (std::uint32_t j = i + 1; j < n; ++j) out += overlaps(bi, f.aabb[j]) ? 1u : 0u;
-      f.out_count[i] = out;
-      f.in_count[i] = in;
+    // box_i)), counted over the block's threads one body pair (i, j), i < j, at a time from
+    // the shared boxes (the tests of flat_row; integer counts, so the order of the shared
+    // atomics changes nothing). One thread per body counting both serially took 11.2 us of
+    // a 38.6 us bunny-stack-50 step on an H100, a warp per body 4.4 us (reports/h100/perf-v3).
+    for (std::uint32_t i = threadIdx.x; i <= n; i += blockDim.x) {
+      f.out_count[i] = 0;
+      f.in_count[i] = 0;
     }
-    if (threadIdx.x == 0) {
-      f.out_count[n] = 0;
-      f.in_count[n] = 0;
+    __syncthreads();
+    for (std::uint32_t q = threadIdx.x; q < n * n; q += blockDim.x) {
+      const std::uint32_t i = q / n, j = q - i * n;
+      if (i < j && overlaps(f.aabb[i], f.aabb[j])) {
+        atomicAdd(&f.out_count[i], 1u);
+        atomicAdd(&f.in_count[j], 1u);
+      }
     }
     __syncthreads();
     stamp(s.profile, 2);
