@@ -14,8 +14,11 @@
 // Timed: what the engine needs for its sorted unique pair set: find() into a pair-key
 // buffer (keys (a << bits(n)) | b, as the engine writes them), then the CUB radix sort
 // of the keys (gpu::sort_keys_u64, bits [0, 2 bits(n))), between two CUDA events on one
-// stream. The capacity is grown on overflow and the pair count is read before timing (untimed), so the sort covers exactly the pairs
-// (the engine also sorts its padding: capacity >= 1.25 x pairs). Then --warmup untimed
+// stream; a broadphase that sorts its own pairs (sorts_pairs(): `octree`) gets a scratch
+// buffer of the capacity (PairOutput::scratch) and find() alone is timed, its keys already
+// in order (what the engine does with it too). The capacity is grown on overflow and the
+// pair count is read before timing (untimed), so the sort covers exactly the pairs (the
+// engine also sorts its padding: capacity >= 1.25 x pairs). Then --warmup untimed
 // calls, then --reps timed ones: median, min and max.
 //
 // Checked: every broadphase's sorted keys are pairs a < b < n, strictly increasing (so
@@ -322,6 +325,9 @@ Result measure(std::unique_ptr<DeviceBroadPhase> bp, const DeviceBuffer<Aabb>& b
 
   DeviceBuffer<unsigned long long> keys("pair keys");
   DeviceBuffer<unsigned long long> sorted("sorted pair keys");
+  // A broadphase that sorts its own keys (PairOutput::scratch) needs no sort here.
+  const bool self_sorts = bp->sorts_pairs();
+  DeviceBuffer<unsigned long long> scratch("pair key scratch");
   DeviceBuffer<std::uint32_t> total("pair total");
   DeviceBuffer<unsigned long long> candidates("exact AABB tests");
   DeviceBuffer<unsigned char> temp("pair sort temporary storage");
@@ -344,6 +350,7 @@ Result measure(std::unique_ptr<DeviceBroadPhase> bp, const DeviceBuffer<Aabb>& b
     out.total = total.get();
     out.candidates = candidates.get();
     out.shift = shift;
+    out.scratch = self_sorts ? scratch.get() : nullptr;
     return out;
   };
   // One untimed call; read back the total and the exact tests.
@@ -361,12 +368,14 @@ Result measure(std::unique_ptr<DeviceBroadPhase> bp, const DeviceBuffer<Aabb>& b
 
   // Capacity: grow until the pairs fit (outside the timed region).
   keys.ensure(cap);
+  if (self_sorts) scratch.ensure(cap);
   call_and_read();
   while (*host.total > cap) {
     if (*host.total > 0x7fffffffu)
       throw octocd::RuntimeError(fmt::format("{}: {} pairs, more than 2^31 - 1", what, *host.total));
     cap = grown(*host.total, cap);
     keys.reset(cap);
+    if (self_sorts) scratch.reset(cap);
     ++r.regrows;
     call_and_read();
   }
@@ -374,18 +383,20 @@ Result measure(std::unique_ptr<DeviceBroadPhase> bp, const DeviceBuffer<Aabb>& b
   r.pairs = pairs;
   r.candidates = r.broadphase == "flat" ? static_cast<std::uint64_t>(n) * (n - 1) / 2 : *host.candidates;
   r.capacity = cap;
-  sorted.reset(std::max<std::uint32_t>(pairs, 1));
   std::size_t temp_bytes = 0;
-  check(octocd::gpu::sort_keys_u64(nullptr, temp_bytes, keys.get(), sorted.get(), pairs, end_bit, stream),
-        ctx("cub::DeviceRadixSort::SortKeys (size)").c_str());
-  temp.reset(std::max<std::size_t>(temp_bytes, 1));
+  if (!self_sorts) {
+    sorted.reset(std::max<std::uint32_t>(pairs, 1));
+    check(octocd::gpu::sort_keys_u64(nullptr, temp_bytes, keys.get(), sorted.get(), pairs, end_bit, stream),
+          ctx("cub::DeviceRadixSort::SortKeys (size)").c_str());
+    temp.reset(std::max<std::size_t>(temp_bytes, 1));
+  }
 
   // find() + sort of exactly `pairs` keys: what is timed.
   auto enqueue = [&]() {
     bp->find(boxes.get(), n, out_for(), stream);
     check(cudaGetLastError(), c_find.c_str());
     std::size_t bytes = temp.capacity();
-    if (pairs > 0)
+    if (pairs > 0 && !self_sorts)
       check(octocd::gpu::sort_keys_u64(temp.get(), bytes, keys.get(), sorted.get(), pairs, end_bit, stream),
             c_sort.c_str());
   };
@@ -436,12 +447,13 @@ Result measure(std::unique_ptr<DeviceBroadPhase> bp, const DeviceBuffer<Aabb>& b
   r.min_ms = *std::min_element(r.times.begin(), r.times.end());
   r.max_ms = *std::max_element(r.times.begin(), r.times.end());
   r.scratch_bytes = bp->device_bytes();
-  r.output_bytes = 2ull * 8ull * pairs + temp_bytes;
+  r.output_bytes = self_sorts ? 2ull * 8ull * cap : 2ull * 8ull * pairs + temp_bytes;
 
   // The sorted pair set of the last repetition (--reps >= 1; the same input each time).
   r.keys.resize(pairs);
   if (pairs > 0)
-    check(cudaMemcpyAsync(r.keys.data(), sorted.get(), static_cast<std::size_t>(pairs) * 8, cudaMemcpyDeviceToHost,
+    check(cudaMemcpyAsync(r.keys.data(), self_sorts ? keys.get() : sorted.get(), static_cast<std::size_t>(pairs) * 8,
+                          cudaMemcpyDeviceToHost,
                           stream),
           ctx("cudaMemcpyAsync (sorted keys)").c_str());
   check(cudaStreamSynchronize(stream), ctx("cudaStreamSynchronize (download)").c_str());
@@ -667,11 +679,13 @@ void print_markdown(std::ostream& os, const Machine& m, const Options& o, const 
       "`flat` (the engine's device flat) up to n = {}\n",
       o.depth < 0 ? std::string("auto") : std::to_string(o.depth), o.cell_size, kLargestExtent, o.flat_max);
   os << fmt::format(
-      "- timed: find() + CUB radix sort of the pair keys (the sorted unique pair set), {}, CUDA events, {} "
+      "- timed: find() + CUB radix sort of the pair keys (the sorted unique pair set; `octree` sorts its own "
+      "keys given a scratch buffer: find() alone), {}, CUDA events, {} "
       "warm-up calls, median (min, max) of {} repetitions; capacity grown before timing\n",
       o.graph ? "replayed from a CUDA graph" : "launched on one stream", o.warmup, o.reps);
   os << "- device MiB: the broadphase's scratch (device_bytes()) + pair keys, sorted keys and the sort's "
-        "temporary storage; the input AABBs (24 B per body) not included\n\n";
+        "temporary storage (`octree`: pair keys and their scratch, capacity each); the input AABBs (24 B per body) "
+        "not included\n\n";
 
   os << "| broadphase | n | median ms | min ms | max ms | ns/body | per doubling | pairs | exact tests | "
         "device MiB |\n";

@@ -1,24 +1,30 @@
 // Broadphase `octree` on the device: the loose octree of SPEC 5.1 (Ulrich 2000, looseness
 // 2) with every cell and level decision from octocd/loose_octree.hpp, the header the CPU
 // driver (core/src/broadphase_octree.cpp) uses. Steps (orchestrated by cuda_world.cpp):
-// 1. keys: D_w (the scene's, or `auto` from the smallest body extent, a CUB minimum),
+// 1. keys: D_w (the scene's, or `auto` from the smallest body extent: a block minimum,
+//    then one atomicMin per block on the float's bits),
 //    then per body loose_place_unit -> (level, Morton cell) key, the overflow key, or the
-//    NaN key; its unit box in fixed point (loose_q_min / loose_q_max);
+//    NaN key (the query recomputes its unit box in fixed point, loose_q_min / loose_q_max,
+//    from the slot's AABB);
 // 2. a stable radix sort by key: slot order = (key, body), so every occupied cell is a
 //    contiguous run of slots and the levels follow each other in key order (with a fixed
 //    D_w the overflow and NaN keys follow level D_w's cells, so the sort covers only the
 //    bits they need);
 // 3. a level table (first slot of every level, of the overflow list and of the NaN
-//    bodies) and a hash table of the occupied cells (cell key -> its run of slots, open
-//    addressing with linear probing over an array of keys, at most a quarter full, the
-//    runs in a parallel array read on a hit only), then a query per slot:
+//    bodies) and a hash table of the occupied blocks (aligned 2 x 2 x 2 groups of cells,
+//    whose slots are one run: loose_blocks.hpp; one 64-bit entry per block, its key and
+//    its first slot, open addressing with linear probing, at most half full), then a
+//    query per slot:
 //    - a body in a cell (level l) looks at every level m <= l that holds bodies: the
-//      cells whose loose boxes meet its own box (loose_query_axis_q: at most 4 per axis),
-//      looked up in the cell table (from kWarpQueryBodies bodies one thread per slot,
-//      the lookups one after another: at 10^6 bodies the query is instruction bound and
-//      most cells of a window are empty; below, one warp per slot, a lane per cell); at
-//      m = l it keeps only slots after its own (a cell whose key precedes its own is not
-//      even looked up), at m < l every body;
+//      cells whose loose boxes meet its own box (loose_query_axis_q: at most 4 per axis);
+//      from kWarpQueryBodies bodies one thread per slot probes the blocks that hold
+//      them (at most 3 per axis, 2 for a window of 3 cells: 8 probes where a probe per
+//      cell took 27; at 10^6 bodies most cells of a window are empty) and walks each
+//      block's run, skipping the slots of cells outside the window (the block's octant
+//      mask), so it tests exactly the slots of the window's cells; below, one warp per
+//      slot, a lane per cell (its run found through its block); at m = l it keeps only
+//      slots after its own (a block or cell whose keys all precede its own is not even
+//      looked up), at m < l every body;
 //    - an overflow body tests the overflow bodies after it;
 //    then the exact AABB test (octocd::overlaps, Eq. 6). A second kernel, one thread per
 //    in-tree slot, tests it against every overflow body (walls: a handful, each of which
@@ -28,12 +34,23 @@
 //    box lies in its cell's loose box and the query ranges are exact;
 // 4. the pairs are appended as keys (a << shift) | b (PairOutput::shift) with one atomic
 //    per group of threads that append together (their order varies; the set does not),
-//    then radix-sorted by the caller: the sorted unique set `flat` gives.
+//    then radix-sorted by the caller: the sorted unique set `flat` gives. Given
+//    PairOutput::scratch (sorts_pairs()), the octree sorts them itself, without a radix
+//    sort of the pairs (5 or 6 passes of 8 bits over 2 bits(n) bits): the queries append
+//    into the scratch and count the pairs of each smaller body a (one atomicAdd each); an
+//    exclusive scan of the n counts gives each a's segment of the output; each pair goes
+//    to its segment (one atomicSub: any order within it); then each segment is sorted on
+//    its own: one thread per body for at most kLocalSortMax keys (insertion sort in
+//    place), else one block (CUB block radix sorts of kBlockSortMax keys, then for longer
+//    segments each key's rank from binary searches in the other chunks: a body that
+//    overlaps thousands of bodies of larger index).
 #include <cstdlib>
 #include <string>
 
 #include <cub/device/device_radix_sort.cuh>
-#include <cub/device/device_reduce.cuh>
+#include <cub/block/block_radix_sort.cuh>
+#include <cub/block/block_reduce.cuh>
+#include <cuda/functional>
 #include <cub/device/device_scan.cuh>
 
 #include "broadphase_common.cuh"
@@ -41,6 +58,7 @@
 #include "device_buffer.hpp"
 #include "device_footprint.hpp"
 #include "kernels.hpp"
+#include "loose_blocks.hpp"
 #include "octocd/cuda_world.hpp"
 
 namespace octocd {
@@ -49,26 +67,26 @@ namespace {
 
 
 /// Below this many bodies the query runs one warp per slot, from it one thread per slot
-/// (bench_gpu_broadphase on the H100: 10^4 boxes 0.15 vs 0.21 ms, 10^5 0.28 vs 0.26 ms,
-/// 10^6 1.63 vs 1.16 ms).
+/// (bench_gpu_broadphase on the H100 with the per-cell table this replaced: 10^4 boxes
+/// 0.15 vs 0.21 ms, 10^5 0.28 vs 0.26 ms, 10^6 1.63 vs 1.16 ms; not yet measured again
+/// with the block table).
 constexpr std::uint32_t kWarpQueryBodies = 65536;
 
 /// A body's unit box in the fixed point of loose_q_min / loose_q_max.
 struct LooseQBox {
-  std::int16_t lo[3];
-  std::int16_t hi[3];
+  std::int32_t lo[3];
+  std::int32_t hi[3];
 };
-static_assert(sizeof(LooseQBox) == footprint::kLooseQBoxBytes, "device_footprint.hpp: LooseQBox");
 
-/// The home entry of a cell key (murmur3's 32-bit finaliser: Morton keys of neighbouring
-/// cells differ in low bits only).
-__device__ inline std::uint32_t cell_hash(std::uint32_t k, std::uint32_t mask) {
-  k ^= k >> 16;
-  k *= 0x85ebca6bu;
-  k ^= k >> 13;
-  k *= 0xc2b2ae35u;
-  k ^= k >> 16;
-  return k & mask;
+/// The fixed-point unit box of a body's AABB, computed where the query needs it (from
+/// the slot's AABB, bit for bit what loose_keys_kernel placed the body with: the same
+/// functions of the same floats; a stored copy per body and per slot cost 48 bytes of
+/// traffic a body).
+__device__ inline LooseQBox loose_qbox(const LooseGrid& g, const Aabb& b) {
+  const Vec3 lo = loose_unit(g, b.min);
+  const Vec3 hi = loose_unit(g, b.max);
+  return {{loose_q_min(lo.x), loose_q_min(lo.y), loose_q_min(lo.z)},
+          {loose_q_max(hi.x), loose_q_max(hi.y), loose_q_max(hi.z)}};
 }
 
 /// What the kernels read and write (device pointers).
@@ -77,8 +95,10 @@ struct LooseDesc {
   std::uint32_t n = 0;             ///< bodies
   LooseGrid grid;                  ///< root cube of the scene's domain
   int depth = 2;                   ///< D_w in [0, 10]; -1 = auto (from *min_extent)
-  float* extent = nullptr;         ///< scratch per body (auto depth): largest unit side
-  float* min_extent = nullptr;     ///< one float: the smallest extent (auto depth)
+  /// One float (auto depth): the smallest extent (largest unit side of a body's box),
+  /// as its bits (non-negative floats order as their bits); kMinExtentInit before the
+  /// minimum.
+  float* min_extent = nullptr;
   /// The sort keys of overflow and NaN bodies: kLooseOverflowKey and kLooseNoKey with
   /// depth `auto`; with a fixed D_w the two values after level D_w's last cell key
   /// (loose_level_base(D_w + 1) and + 1), so the key sort covers only the bits they need
@@ -87,34 +107,44 @@ struct LooseDesc {
   std::uint32_t nan_key = kLooseNoKey;
   std::uint32_t* key = nullptr;    ///< per body: cell key, overflow_key or nan_key
   std::uint32_t* body = nullptr;   ///< per body: its index (the sort's values)
-  LooseQBox* q = nullptr;          ///< per body: fixed-point unit box
   const std::uint32_t* sorted_key = nullptr;   ///< per slot: key, ascending
   const std::uint32_t* slot_body = nullptr;    ///< per slot: body (stable: body order per cell)
   Aabb* slot_box = nullptr;        ///< per slot: the body's AABB
-  LooseQBox* slot_q = nullptr;     ///< per slot: the body's fixed-point box
   /// Per level m in [0, kLooseMaxDepth + 1]: the first slot whose key is >= level m's base
   /// (entry kLooseMaxDepth + 1: the first overflow slot); then the first NaN slot.
   std::uint32_t* level_begin = nullptr;
-  /// The cell table, cell_mask + 1 entries: the keys (kLooseNoKey = empty; never a cell
-  /// key) and each key's run of slots [x, y).
-  std::uint32_t* cell_keys = nullptr;
-  uint2* cell_runs = nullptr;
-  std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 4 n)
+  /// The block table, cell_mask + 1 entries (loose_blocks.hpp): loose_block_entry(block
+  /// key, first slot), kLooseBlockEmpty where empty.
+  unsigned long long* cell_table = nullptr;
+  std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 2 n)
   unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
+  /// Sorted mode (PairOutput::scratch given; pair_keys is then the scratch): per body a,
+  /// n + 1 entries zeroed before the query, the pairs (a, b) appended; else nullptr.
+  std::uint32_t* pair_count = nullptr;
   int shift = 32;                           ///< PairOutput::shift
   std::uint32_t capacity = 0;               ///< entries pair_keys holds
   std::uint32_t* total = nullptr;           ///< out: pairs found (may exceed capacity)
   unsigned long long* candidates = nullptr; ///< out (added): exact AABB tests
 };
 
+/// The byte cudaMemset fills min_extent with: 0x7f7f7f7f = 3.4e38, above every extent that
+/// gives a depth other than 0 (loose_auto_depth of it and of +inf, all NaN bodies, is 0).
+constexpr int kMinExtentInit = 0x7f;
+
 __global__ void loose_extent_kernel(LooseDesc d) {
+  using Reduce = cub::BlockReduce<std::uint32_t, kBlockSize>;
+  __shared__ typename Reduce::TempStorage storage;
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= d.n) return;
-  const Aabb b = d.aabb[i];
-  float ext = loose_unit_extent(loose_unit(d.grid, b.min), loose_unit(d.grid, b.max));
-  ext = ext < 0.0f ? 0.0f : ext;
-  // As the CPU driver: NaN extents are left out of the minimum.
-  d.extent[i] = ext != ext ? __int_as_float(0x7f800000) : ext;
+  std::uint32_t bits = 0x7f800000u;  // +inf: no body, or a NaN extent
+  if (i < d.n) {
+    const Aabb b = d.aabb[i];
+    const float ext = loose_unit_extent(loose_unit(d.grid, b.min), loose_unit(d.grid, b.max));
+    // As the CPU driver: NaN extents are left out of the minimum; negative (and -0) are 0
+    // (+0: the bits of non-negative floats order as the floats).
+    if (ext == ext) bits = ext > 0.0f ? __float_as_uint(ext) : 0u;
+  }
+  const std::uint32_t m = Reduce(storage).Reduce(bits, cuda::minimum<>{});
+  if (threadIdx.x == 0) atomicMin(reinterpret_cast<unsigned int*>(d.min_extent), m);
 }
 
 __global__ void loose_keys_kernel(LooseDesc d) {
@@ -123,23 +153,14 @@ __global__ void loose_keys_kernel(LooseDesc d) {
   const int depth = d.depth >= 0 ? d.depth : loose_auto_depth(*d.min_extent);
   const Aabb b = d.aabb[i];
   d.body[i] = i;
-  LooseQBox q{};
   if (loose_has_nan(b)) {
     d.key[i] = d.nan_key;
-    d.q[i] = q;
     return;
   }
   const Vec3 lo = loose_unit(d.grid, b.min);
   const Vec3 hi = loose_unit(d.grid, b.max);
   const std::uint32_t key = loose_place_key(loose_place_unit(lo, hi, depth));
   d.key[i] = key == kLooseOverflowKey ? d.overflow_key : key;
-  q.lo[0] = static_cast<std::int16_t>(loose_q_min(lo.x));
-  q.lo[1] = static_cast<std::int16_t>(loose_q_min(lo.y));
-  q.lo[2] = static_cast<std::int16_t>(loose_q_min(lo.z));
-  q.hi[0] = static_cast<std::int16_t>(loose_q_max(hi.x));
-  q.hi[1] = static_cast<std::int16_t>(loose_q_max(hi.y));
-  q.hi[2] = static_cast<std::int16_t>(loose_q_max(hi.z));
-  d.q[i] = q;
 }
 
 /// First slot in [lo, hi) whose key is >= key.
@@ -161,33 +182,20 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   if (s >= d.n) return;
   const std::uint32_t body = d.slot_body[s];
   d.slot_box[s] = d.aabb[body];
-  d.slot_q[s] = d.q[body];
-  // The cell table: the first slot of a run writes its begin, the last its end (both
-  // claim or find the key's entry; the table holds at least four times the cell count).
+  // The block table: the first slot of a block's run claims an empty entry (one per
+  // block, so a claimed entry is another block's: probe on; at most half full).
   const std::uint32_t key = d.sorted_key[s];
   if (key >= d.overflow_key) return;
-  const bool first = s == 0 || d.sorted_key[s - 1] != key;
-  const bool last = s + 1 == d.n || d.sorted_key[s + 1] != key;
-  if (!first && !last) return;
-  std::uint32_t h = cell_hash(key, d.cell_mask);
-  for (;;) {
-    const std::uint32_t old = atomicCAS(&d.cell_keys[h], kLooseNoKey, key);
-    if (old == kLooseNoKey || old == key) break;
-    h = (h + 1) & d.cell_mask;
-  }
-  if (first) d.cell_runs[h].x = s;
-  if (last) d.cell_runs[h].y = s + 1;
+  const int level = loose_cell_key_level(key);
+  if (!loose_block_first(d.sorted_key, s, level)) return;
+  const unsigned long long entry = loose_block_entry(loose_block_key(key, level), s);
+  std::uint32_t h = loose_block_hash(loose_block_key(key, level), d.cell_mask);
+  while (atomicCAS(&d.cell_table[h], kLooseBlockEmpty, entry) != kLooseBlockEmpty) h = (h + 1) & d.cell_mask;
 }
 
-/// The run of slots [begin, end) of cell `key` (empty when the cell holds no body).
-__device__ inline uint2 find_cell(const LooseDesc& d, std::uint32_t key) {
-  std::uint32_t h = cell_hash(key, d.cell_mask);
-  for (;;) {
-    const std::uint32_t k = d.cell_keys[h];
-    if (k == key) return d.cell_runs[h];
-    if (k == kLooseNoKey) return make_uint2(0, 0);
-    h = (h + 1) & d.cell_mask;
-  }
+/// The first slot of block `block_key` (kLooseNoSlot when it holds no body).
+__device__ inline std::uint32_t find_block(const LooseDesc& d, std::uint32_t block_key) {
+  return loose_block_find(d.cell_table, d.cell_mask, block_key);
 }
 
 /// First slot in [lo, hi) whose key is >= key.
@@ -214,7 +222,14 @@ __device__ inline void warp_emit(const LooseDesc& d, bool hit, unsigned long lon
   if (hit) {
     const std::uint32_t idx = base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
     if (idx < d.capacity) d.pair_keys[idx] = key;
+    if (d.pair_count) atomicAdd(&d.pair_count[key >> d.shift], 1u);
   }
+}
+
+/// Appends one pair's key (bp::append_key) and, in sorted mode, counts it for its body a.
+__device__ inline void append_pair(const LooseDesc& d, const PairOutput& out, unsigned long long key) {
+  bp::append_key(out, key);
+  if (d.pair_count) atomicAdd(&d.pair_count[key >> d.shift], 1u);
 }
 
 /// One warp's query for slot s: the lanes test candidate slots 32 at a time and append
@@ -284,8 +299,8 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
     if (key == d.overflow_key) {
       e.range(s + 1, d.level_begin[kLooseMaxDepth + 2]);  // the overflow bodies after it
     } else if (key != d.nan_key) {                        // a NaN box overlaps nothing
-      const int level = loose_key_level(key);
-      const LooseQBox q = d.slot_q[s];
+      const int level = loose_cell_key_level(key);
+      const LooseQBox q = loose_qbox(d.grid, e.box_s);
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
@@ -304,9 +319,8 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
             // Same level: only the slots after s, so no cell before s's own (its slots all
             // come before s in key order) is looked up.
             if (m != level || ck >= key) {
-              const uint2 run = find_cell(d, ck);
-              t0 = run.x;
-              t1 = run.y;
+              loose_cell_run(
+                  d.sorted_key, d.n, ck, m, [&](std::uint32_t bk) { return find_block(d, bk); }, &t0, &t1);
               if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;
             }
           }
@@ -325,14 +339,15 @@ __device__ inline void test_run(const LooseDesc& d, const Aabb& box, std::uint32
   tests += t1 - t0;
   const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
   for (std::uint32_t t = t0; t < t1; ++t)
-    if (overlaps(box, d.slot_box[t])) bp::append_key(out, bp::pair_key(body, d.slot_body[t], d.shift));
+    if (overlaps(box, d.slot_box[t])) append_pair(d, out, bp::pair_key(body, d.slot_body[t], d.shift));
 }
 
 /// One thread per slot: the loose octree query of the file comment. At each level that
-/// holds bodies, the thread walks the (at most 4 x 4 x 4) cells of its window, looks each
-/// up in the cell table and tests the run of slots it holds (at its own level only the
-/// slots after its own).
-__global__ void loose_query_kernel(LooseDesc d) {
+/// holds bodies, the thread probes the blocks that hold the (at most 4 x 4 x 4) cells of
+/// its window (at most 3 x 3 x 3) in the block table and tests the slots of the window's
+/// cells in each block's run (loose_block_query; at its own level only the slots after
+/// its own).
+__global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   unsigned long long tests = 0;
   if (s < d.n) {
@@ -342,24 +357,20 @@ __global__ void loose_query_kernel(LooseDesc d) {
     if (key == d.overflow_key) {
       test_run(d, box, body, s + 1, d.level_begin[kLooseMaxDepth + 2], tests);  // the overflow bodies after it
     } else if (key != d.nan_key) {  // a NaN box overlaps nothing
-      const int level = loose_key_level(key);
-      const LooseQBox q = d.slot_q[s];
+      const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
+      const int level = loose_cell_key_level(key);
+      const LooseQBox q = loose_qbox(d.grid, box);
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
         const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
         const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
-        for (int iz = rz.lo; iz <= rz.hi; ++iz)
-          for (int iy = ry.lo; iy <= ry.hi; ++iy)
-            for (int ix = rx.lo; ix <= rx.hi; ++ix) {
-              const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix),
-                                                      static_cast<std::uint32_t>(iy), static_cast<std::uint32_t>(iz));
-              if (m == level && ck < key) continue;  // same level: its slots all come before s
-              const uint2 run = find_cell(d, ck);
-              std::uint32_t t0 = run.x;
-              if (m == level && t0 <= s) t0 = s + 1 < run.y ? s + 1 : run.y;  // same level: the slots after s
-              test_run(d, box, body, t0, run.y, tests);
-            }
+        loose_block_query(
+            d.sorted_key, d.n, s, key, level, m, rx, ry, rz, [&](std::uint32_t bk) { return find_block(d, bk); },
+            [&](std::uint32_t t) {
+              ++tests;
+              if (overlaps(box, d.slot_box[t])) append_pair(d, out, bp::pair_key(body, d.slot_body[t], d.shift));
+            });
       }
     }
   }
@@ -387,6 +398,112 @@ __global__ void loose_overflow_kernel(LooseDesc d) {
   bp::block_add(d.candidates, tests);
 }
 
+/// Segments of at most this many keys are sorted by one thread (insertion sort in place:
+/// at most 64 x 63 / 2 moves; a body of a dense pile has a few dozen partners at most).
+constexpr std::uint32_t kLocalSortMax = 64;
+/// Keys per thread of the block radix sort of longer segments.
+constexpr int kBlockSortItems = 16;
+/// Segments of at most this many keys are sorted by one block's radix sort in shared memory.
+constexpr std::uint32_t kBlockSortMax = static_cast<std::uint32_t>(kBlockSize * kBlockSortItems);
+/// Blocks of loose_long_sort_kernel (each takes long segments one after another).
+constexpr unsigned kLongSortBlocks = 264;
+
+/// What the sorting kernels of the sorted mode read and write (device pointers).
+struct LooseSortDesc {
+  const unsigned long long* scratch = nullptr;  ///< the appended keys (in any order)
+  unsigned long long* scratch_rw = nullptr;     ///< the same, reused by the long sort
+  unsigned long long* keys = nullptr;           ///< out: PairOutput::keys
+  std::uint32_t* count = nullptr;               ///< per body a: its pairs (consumed by the scatter)
+  const std::uint32_t* offset = nullptr;        ///< n + 1: exclusive scan of the counts
+  std::uint32_t* long_list = nullptr;           ///< bodies whose segment is longer than kLocalSortMax
+  std::uint32_t* long_count = nullptr;          ///< one word, zeroed before
+  const std::uint32_t* total = nullptr;         ///< the pairs found
+  std::uint32_t capacity = 0;
+  std::uint32_t n = 0;
+  int shift = 32;
+};
+
+/// Sorted mode, 1: pair i of the scratch to its body a's segment (in any order within it).
+__global__ void loose_scatter_kernel(LooseSortDesc d) {
+  const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  const std::uint32_t total = *d.total;
+  if (i >= total || i >= d.capacity) return;
+  const unsigned long long k = d.scratch[i];
+  const auto a = static_cast<std::uint32_t>(k >> d.shift);
+  const std::uint32_t pos = d.offset[a] + atomicSub(&d.count[a], 1u) - 1u;
+  if (pos < d.capacity) d.keys[pos] = k;
+}
+
+/// Sorted mode, 2: one thread per body sorts its segment (at most kLocalSortMax keys) or
+/// lists it for loose_long_sort_kernel. Nothing when the pairs did not fit (the caller
+/// grows the output and runs find() again).
+__global__ void loose_segment_sort_kernel(LooseSortDesc d) {
+  const std::uint32_t a = blockIdx.x * blockDim.x + threadIdx.x;
+  if (a >= d.n || *d.total > d.capacity) return;
+  const std::uint32_t b0 = d.offset[a];
+  const std::uint32_t len = d.offset[a + 1] - b0;
+  if (len < 2) return;
+  if (len > kLocalSortMax) {
+    d.long_list[atomicAdd(d.long_count, 1u)] = a;
+    return;
+  }
+  unsigned long long* seg = d.keys + b0;  // this thread's alone
+  for (std::uint32_t i = 1; i < len; ++i) {
+    const unsigned long long k = seg[i];
+    std::uint32_t j = i;
+    for (; j > 0 && seg[j - 1] > k; --j) seg[j] = seg[j - 1];
+    seg[j] = k;
+  }
+}
+
+/// Sorted mode, 3: the listed segments, one block each (kLongSortBlocks blocks take them
+/// in turn): each chunk of kBlockSortMax keys by a block radix sort over the key bits
+/// [0, 2 shift); a segment of several chunks then puts each key at its rank (its index in
+/// its chunk plus, per other chunk, a binary search: the keys are distinct) in the scratch
+/// and copies the segment back.
+__global__ void __launch_bounds__(kBlockSize) loose_long_sort_kernel(LooseSortDesc d) {
+  using Sort = cub::BlockRadixSort<unsigned long long, kBlockSize, kBlockSortItems>;
+  __shared__ typename Sort::TempStorage storage;
+  if (*d.total > d.capacity) return;
+  const std::uint32_t lists = *d.long_count;
+  for (std::uint32_t j = blockIdx.x; j < lists; j += gridDim.x) {
+    const std::uint32_t a = d.long_list[j];
+    const std::uint32_t b0 = d.offset[a];
+    const std::uint32_t len = d.offset[a + 1] - b0;
+    unsigned long long* seg = d.keys + b0;
+    for (std::uint32_t c0 = 0; c0 < len; c0 += kBlockSortMax) {
+      const std::uint32_t clen = len - c0 < kBlockSortMax ? len - c0 : kBlockSortMax;
+      unsigned long long v[kBlockSortItems];
+      for (int k = 0; k < kBlockSortItems; ++k) {
+        const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
+        v[k] = i < clen ? seg[c0 + i] : ~0ull;  // padding: all ones, after every key
+      }
+      Sort(storage).Sort(v, 0, 2 * d.shift);
+      for (int k = 0; k < kBlockSortItems; ++k) {
+        const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
+        if (i < clen) seg[c0 + i] = v[k];
+      }
+      __syncthreads();  // the shared storage is reused by the next chunk
+    }
+    if (len > kBlockSortMax) {
+      for (std::uint32_t i = threadIdx.x; i < len; i += blockDim.x) {
+        const unsigned long long k = seg[i];
+        const std::uint32_t own = i / kBlockSortMax * kBlockSortMax;
+        std::uint32_t rank = i - own;
+        for (std::uint32_t c0 = 0; c0 < len; c0 += kBlockSortMax) {
+          if (c0 == own) continue;
+          const std::uint32_t c1 = len - c0 < kBlockSortMax ? len : c0 + kBlockSortMax;
+          rank += bp::lower_bound_u64(seg, c0, c1, k) - c0;
+        }
+        d.scratch_rw[b0 + rank] = k;
+      }
+      __syncthreads();
+      for (std::uint32_t i = threadIdx.x; i < len; i += blockDim.x) seg[i] = d.scratch_rw[b0 + i];
+      __syncthreads();  // the segment is final before the block moves on
+    }
+  }
+}
+
 /// `octree` on the device (see the file comment).
 class LooseOctreeDevice final : public DeviceBroadPhase {
  public:
@@ -407,29 +524,31 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   }
 
   std::string name() const override { return "octree"; }
+  bool sorts_pairs() const override { return true; }
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
     (void)stream;
-    extent_.ensure(n);
     min_.ensure(1);
     key_.ensure(n);
     body_.ensure(n);
-    q_.ensure(n);
     sorted_key_.ensure(n);
     slot_body_.ensure(n);
     slot_box_.ensure(n);
-    slot_q_.ensure(n);
     level_begin_.ensure(kLevelTable);
     if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
     cell_mask_ = static_cast<std::uint32_t>(footprint::loose_cell_table_entries(n) - 1);
-    cell_keys_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
-    cell_runs_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
+    cell_table_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
+    const std::size_t n1 = static_cast<std::size_t>(n) + 1;
+    pair_count_.ensure(n1);
+    pair_offset_.ensure(n1);
+    long_list_.ensure(std::max<std::size_t>(n, 1));
+    long_count_.ensure(1);
     std::size_t a = 0, c = 0;
     check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
                                           static_cast<int>(n), 0, 32),
           "cub::DeviceRadixSort::SortPairs (size)");
-    check(cub::DeviceReduce::Min(nullptr, c, extent_.get(), min_.get(), static_cast<int>(n)),
-          "cub::DeviceReduce::Min (size)");
+    check(exclusive_scan_u32(nullptr, c, pair_count_.get(), pair_offset_.get(), n + 1, stream),
+          "cub::DeviceScan::ExclusiveSum (size)");
     temp_.ensure(std::max({a, c, std::size_t{1}}));
     n_ = n;
   }
@@ -438,6 +557,11 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     bp::check_reserved(n_ != kNotReserved, n_, n, "octree");
     check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
     if (n == 0) return;
+    if (out.scratch) {
+      check(cudaMemsetAsync(pair_count_.get(), 0, (static_cast<std::size_t>(n) + 1) * sizeof(std::uint32_t), stream),
+            "cudaMemset octree pair counts");
+      check(cudaMemsetAsync(long_count_.get(), 0, sizeof(std::uint32_t), stream), "cudaMemset octree long segments");
+    }
     LooseDesc d;
     d.aabb = aabb;
     d.n = n;
@@ -445,41 +569,37 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.depth = depth_;
     d.overflow_key = overflow_key_;
     d.nan_key = overflow_key_ == kLooseOverflowKey ? kLooseNoKey : overflow_key_ + 1;
-    d.extent = extent_.get();
     d.min_extent = min_.get();
     d.key = key_.get();
     d.body = body_.get();
-    d.q = q_.get();
     d.sorted_key = sorted_key_.get();
     d.slot_body = slot_body_.get();
     d.slot_box = slot_box_.get();
-    d.slot_q = slot_q_.get();
     d.level_begin = level_begin_.get();
-    d.cell_keys = cell_keys_.get();
-    d.cell_runs = cell_runs_.get();
+    d.cell_table = cell_table_.get();
     d.cell_mask = cell_mask_;
-    d.pair_keys = out.keys;
+    const bool sorted = out.scratch != nullptr;
+    d.pair_keys = sorted ? out.scratch : out.keys;
+    d.pair_count = sorted ? pair_count_.get() : nullptr;
     d.shift = out.shift;
     d.capacity = out.capacity;
     d.total = out.total;
     d.candidates = out.candidates;
     const unsigned g = grid_for(n);
-    std::size_t bytes = temp_.capacity();
     if (depth_ < 0) {
+      check(cudaMemsetAsync(min_.get(), kMinExtentInit, sizeof(float), stream), "cudaMemset octree smallest extent");
       loose_extent_kernel<<<g, kBlockSize, 0, stream>>>(d);
       bp::launched(cudaGetLastError(), "loose_extent");
-      bp::launched(cub::DeviceReduce::Min(temp_.get(), bytes, extent_.get(), min_.get(), static_cast<int>(n), stream),
-               "cub::DeviceReduce::Min");
     }
     loose_keys_kernel<<<g, kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_keys");
-    bytes = temp_.capacity();
+    std::size_t bytes = temp_.capacity();
     bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
                                              slot_body_.get(), static_cast<int>(n), 0, key_bits_, stream),
              "cub::DeviceRadixSort::SortPairs");
-    check(cudaMemsetAsync(cell_keys_.get(), 0xff, (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(std::uint32_t),
-                          stream),
-          "cudaMemset octree cell table");
+    check(cudaMemsetAsync(cell_table_.get(), 0xff,
+                          (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(unsigned long long), stream),
+          "cudaMemset octree block table");
     loose_gather_kernel<<<grid_for(std::max<std::uint32_t>(n, kLevelTable)), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_gather");
     if (query_ == Query::Warp || (query_ == Query::Auto && n < kWarpQueryBodies)) {
@@ -490,13 +610,41 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     bp::launched(cudaGetLastError(), "loose_query");
     loose_overflow_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_overflow");
+    if (sorted) sort_pairs(out, n, stream);
+  }
+
+  /// The sorted mode's last steps (see the file comment): the segments, the scatter, the
+  /// segment sorts.
+  void sort_pairs(const PairOutput& out, std::uint32_t n, cudaStream_t stream) {
+    std::size_t bytes = temp_.capacity();
+    bp::launched(exclusive_scan_u32(temp_.get(), bytes, pair_count_.get(), pair_offset_.get(), n + 1, stream),
+                 "cub::DeviceScan::ExclusiveSum (octree pair segments)");
+    LooseSortDesc s;
+    s.scratch = out.scratch;
+    s.scratch_rw = out.scratch;
+    s.keys = out.keys;
+    s.count = pair_count_.get();
+    s.offset = pair_offset_.get();
+    s.long_list = long_list_.get();
+    s.long_count = long_count_.get();
+    s.total = out.total;
+    s.capacity = out.capacity;
+    s.n = n;
+    s.shift = out.shift;
+    loose_scatter_kernel<<<grid_for(std::max<std::uint32_t>(out.capacity, 1)), kBlockSize, 0, stream>>>(s);
+    bp::launched(cudaGetLastError(), "loose_scatter");
+    loose_segment_sort_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(s);
+    bp::launched(cudaGetLastError(), "loose_segment_sort");
+    loose_long_sort_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
+    bp::launched(cudaGetLastError(), "loose_long_sort");
   }
 
   std::uint64_t device_bytes() const override {
     std::uint64_t t = 0;
     for (const BufferBase* b : std::initializer_list<const BufferBase*>{
-             &extent_, &min_, &key_, &body_, &q_, &sorted_key_, &slot_body_, &slot_box_, &slot_q_,
-             &level_begin_, &cell_keys_, &cell_runs_, &temp_})
+             &min_, &key_, &body_, &sorted_key_, &slot_body_, &slot_box_,
+             &level_begin_, &cell_table_, &pair_count_, &pair_offset_, &long_list_,
+             &long_count_, &temp_})
       t += b->bytes();
     return t;
   }
@@ -510,19 +658,19 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   int key_bits_ = 32;                               // the key sort's end bit
   static constexpr std::uint32_t kNotReserved = 0xffffffffu;
   std::uint32_t n_ = kNotReserved;
-  DeviceBuffer<float> extent_{"octree body extents"};
   DeviceBuffer<float> min_{"octree smallest extent"};
   DeviceBuffer<std::uint32_t> key_{"octree body keys"};
   DeviceBuffer<std::uint32_t> body_{"octree body indices"};
-  DeviceBuffer<LooseQBox> q_{"octree body unit boxes"};
   DeviceBuffer<std::uint32_t> sorted_key_{"octree sorted keys"};
   DeviceBuffer<std::uint32_t> slot_body_{"octree slot bodies"};
   DeviceBuffer<Aabb> slot_box_{"octree slot boxes"};
-  DeviceBuffer<LooseQBox> slot_q_{"octree slot unit boxes"};
   DeviceBuffer<std::uint32_t> level_begin_{"octree level table"};
   std::uint32_t cell_mask_ = 1;
-  DeviceBuffer<std::uint32_t> cell_keys_{"octree cell table keys"};
-  DeviceBuffer<uint2> cell_runs_{"octree cell table runs"};
+  DeviceBuffer<unsigned long long> cell_table_{"octree block table"};
+  DeviceBuffer<std::uint32_t> pair_count_{"octree pairs per body"};
+  DeviceBuffer<std::uint32_t> pair_offset_{"octree pair segments"};
+  DeviceBuffer<std::uint32_t> long_list_{"octree long pair segments"};
+  DeviceBuffer<std::uint32_t> long_count_{"octree long pair segment count"};
   DeviceBuffer<unsigned char> temp_{"octree CUB temporary storage"};
 };
 

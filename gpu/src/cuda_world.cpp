@@ -623,11 +623,16 @@ struct CudaWorld::Impl {
                   "counters and counts are contiguous");
     check(cudaMemsetAsync(counters(), 0, sizeof(gpu::StepStats::counters) + sizeof(gpu::StepStats::counts), stream),
           "cudaMemset step counts");
-    check(cudaMemsetAsync(pair_keys.get(), 0xff, pair_cap * sizeof(unsigned long long), stream),
+    // A broadphase that sorts its own keys (`octree`) writes them straight into the sorted
+    // buffer (pair_keys as its scratch), after which the padding stays all ones.
+    const bool self_sorts = bp && bp->sorts_pairs();
+    check(cudaMemsetAsync(self_sorts ? pair_keys_sorted.get() : pair_keys.get(), 0xff,
+                          pair_cap * sizeof(unsigned long long), stream),
           "cudaMemset pair keys");
     if (bp) {
       gpu::PairOutput out;
-      out.keys = pair_keys.get();
+      out.keys = self_sorts ? pair_keys_sorted.get() : pair_keys.get();
+      out.scratch = self_sorts ? pair_keys.get() : nullptr;
       out.capacity = pcap();
       out.total = counts();
       out.candidates = counters() + 3;
@@ -639,10 +644,10 @@ struct CudaWorld::Impl {
     std::size_t bytes = temp.capacity();
     // Keys are (a << key_bits(n)) | b: the sort covers 2 key_bits(n) bits (padding keys,
     // all ones, still sort after every real key: a < b < 2^key_bits(n)).
-    launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(),
-                                2 * gpu::key_bits(n),
-                                stream),
-             "cub::DeviceRadixSort::SortKeys");
+    if (!self_sorts)
+      launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(),
+                                  2 * gpu::key_bits(n), stream),
+               "cub::DeviceRadixSort::SortKeys");
     record_event(3);  // the pairs are unpacked from the sorted keys by mid_start
     // 4. Midphase + narrow phase (SPEC 5.2-5.3) as per-level work lists.
     gpu::MidListDesc md = mid_desc(pair_keys_sorted.get());

@@ -50,6 +50,11 @@ struct PairOutput {
   std::uint32_t capacity = 0;                ///< entries keys can hold
   std::uint32_t* total = nullptr;            ///< out: pairs found (may exceed capacity)
   unsigned long long* candidates = nullptr;  ///< added: exact AABB tests
+  /// Optional (nullptr: unused), capacity entries the broadphase may overwrite. Given to a
+  /// broadphase whose sorts_pairs() is true, find() leaves keys[0 .. total) in ascending
+  /// order whenever total <= capacity (the sorted unique set `flat` gives), so the caller
+  /// needs no sort of its own; the entries from total on are left as they were.
+  unsigned long long* scratch = nullptr;
 };
 
 /// A broadphase on the device; owns its scratch buffers (released by the destructor).
@@ -63,6 +68,9 @@ class DeviceBroadPhase {
   virtual void reserve(std::uint32_t n, cudaStream_t stream) = 0;
   /// Enqueues the broadphase on `stream` (see the file comment for the contract).
   virtual void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) = 0;
+  /// Whether find() sorts its keys when given PairOutput::scratch (`octree`); without it
+  /// (or when false) the keys come in any order and the caller sorts them.
+  virtual bool sorts_pairs() const { return false; }
   /// Device bytes held by the scratch.
   virtual std::uint64_t device_bytes() const = 0;
 };

@@ -42,11 +42,13 @@ std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
   const std::uint64_t n1 = n + 1;
   if (cfg.name == "flat") return 0;
   if (cfg.name == "octree") {  // LooseOctreeDevice::reserve (broadphase_octree.cu)
-    const std::uint64_t temp = std::max({cub_sort_temp_bound(n, 4, 4), cub_scan_temp_bound(n), std::uint64_t{1}});
+    const std::uint64_t temp = std::max({cub_sort_temp_bound(n, 4, 4), cub_scan_temp_bound(n1), std::uint64_t{1}});
     const std::uint64_t table = loose_cell_table_entries(n);
-    return buf(n, sizeof(float)) + buf(1, sizeof(float)) + 4 * buf(n, sizeof(std::uint32_t)) +
-           2 * buf(n, kLooseQBoxBytes) + buf(n, sizeof(Aabb)) + buf(kLooseLevelTable, sizeof(std::uint32_t)) +
-           buf(table, sizeof(std::uint32_t)) + buf(table, 2 * sizeof(std::uint32_t)) + buf(temp, 1);
+    // + the sorted mode's pair counts and segments (n + 1 each), long-segment list and count.
+    return buf(1, sizeof(float)) + 4 * buf(n, sizeof(std::uint32_t)) + 2 * buf(n1, sizeof(std::uint32_t)) +
+           buf(n, sizeof(std::uint32_t)) + buf(1, sizeof(std::uint32_t)) +
+           buf(n, sizeof(Aabb)) + buf(kLooseLevelTable, sizeof(std::uint32_t)) +
+           buf(table, sizeof(std::uint64_t)) + buf(temp, 1);
   }
   if (cfg.name == "octree-strict") {  // StrictOctreeDevice::reserve (broadphase_strict.cu)
     const bool auto_depth = cfg.octree_depth < 0;

@@ -27,15 +27,14 @@ constexpr std::uint64_t kStepStatsBytes = 152;
 /// sizeof(gpu::MetricsResult) (kernels.hpp); the engine holds kMetricsBlocks of them.
 constexpr std::uint64_t kMetricsResultBytes = 72;
 constexpr std::uint64_t kMetricsPartials = 128;
-/// Entries of the loose octree's cell table for n bodies: the smallest power of two >= 4 n
-/// (at least 2); each entry a 4-byte key and an 8-byte run (broadphase_octree.cu).
+/// Entries of the loose octree's block table for n bodies: the smallest power of two >= 2 n
+/// (at least 2; at most n blocks, so at most half full); each entry 8 bytes, a block key
+/// and its first slot (loose_blocks.hpp, broadphase_octree.cu).
 constexpr std::uint64_t loose_cell_table_entries(std::uint64_t n) {
   std::uint64_t t = 2;
-  while (t < 4 * (n > 0 ? n : 1)) t <<= 1;
+  while (t < 2 * (n > 0 ? n : 1)) t <<= 1;
   return t;
 }
-/// sizeof(LooseQBox) (broadphase_octree.cu): a body's fixed-point unit box.
-constexpr std::uint64_t kLooseQBoxBytes = 12;
 /// Entries of the loose octree's level table: levels 0 .. kLooseMaxDepth, overflow, NaN.
 constexpr std::uint32_t kLooseLevelTable = kLooseMaxDepth + 3;
 /// sizeof(LbvhNode) (lbvh.hpp): an internal node of `lbvh`.

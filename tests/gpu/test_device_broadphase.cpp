@@ -30,6 +30,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstdint>
@@ -40,6 +41,7 @@
 #include <memory>
 #include <ostream>
 #include <random>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -48,7 +50,9 @@
 
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
+#include "device_footprint.hpp"
 #include "lbvh.hpp"
+#include "loose_blocks.hpp"
 #include "octocd/broadphase.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engine.hpp"
@@ -146,6 +150,32 @@ std::vector<Aabb> degenerate_boxes() {
   return out;
 }
 
+/// Cubes of every loose-octree level 0 .. 7 of the root cube [-1, 1]^3 (side 0.9 x 2^(1 - l)
+/// for level l: 3 of level 0, 10 of level 1, 60 of each finer level), centred near the
+/// origin and on the split planes x, y, z in {0, +-0.5, +-0.25} (block and cell borders of
+/// every level), so bodies of every level meet bodies of every coarser level, level 0's
+/// one-cell block sits right before level 1's first block in key order, and windows cross
+/// block borders.
+std::vector<Aabb> nested_levels() {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> plane(-4, 4);
+  std::uniform_real_distribution<float> jitter(-0.02f, 0.02f);
+  auto coord = [&] {
+    const float p = static_cast<float>(plane(rng)) * 0.125f;
+    return p + jitter(rng);
+  };
+  std::vector<Aabb> out;
+  for (int level = 0; level <= 7; ++level) {
+    const int count = level == 0 ? 3 : (level == 1 ? 10 : 60);
+    const float h = 0.45f * 2.0f / static_cast<float>(1 << level);  // half side
+    for (int i = 0; i < count; ++i) {
+      const Vec3 c{coord(), coord(), coord()};  // braced: evaluated in order
+      out.push_back(box_at(c, {h, h, h}));
+    }
+  }
+  return out;
+}
+
 /// The world AABBs of a shipped scene after `steps` CPU steps (its own broadphase).
 std::vector<Aabb> scene_frame(const std::string& name, int steps, Aabb& domain) {
   const Scene scene = load_scene(source_dir() + "/datasets/scenes/" + name + ".json");
@@ -168,7 +198,7 @@ std::vector<Pair> flat_pairs(const std::vector<Aabb>& boxes, const Aabb& domain)
 const std::vector<std::string>& box_set_names() {
   static const std::vector<std::string> names = {
       "empty",    "single", "uniform-1000", "uniform-10000", "touching-lattice", "outside-domain", "huge-and-infinite",
-      "nan", "degenerate", "one-cell", "boxes-random-10000-frame-100"};
+      "nan", "degenerate", "one-cell", "nested-levels", "long-segments", "boxes-random-10000-frame-100"};
   return names;
 }
 
@@ -208,6 +238,15 @@ BoxSet make_box_set(const std::string& name) {
     s.boxes = degenerate_boxes();
   } else if (name == "one-cell") {
     s.boxes = random_boxes(600, 6, cube(0.3f, 0.31f), 0.0f, 0.002f);
+  } else if (name == "nested-levels") {
+    s.boxes = nested_levels();
+  } else if (name == "long-segments") {
+    // Body 0 meets every other body (a segment of 5999 pairs (0, b): longer than one
+    // block's radix sort of the octree's sorted mode, 4096), body 1 about 200 (one
+    // block's sort: over 64), the rest a handful each (one thread's).
+    s.boxes = random_boxes(6000, 8, unit, 0.002f, 0.02f);
+    s.boxes[0] = cube(-1.0f, 1.0f);
+    s.boxes[1] = cube(-0.6f, 0.0f);
   } else if (name == "boxes-random-10000-frame-100") {
     s.boxes = scene_frame("boxes-random-10000", 100, s.domain);
   } else {
@@ -715,6 +754,64 @@ TEST_P(DeviceBroadPhaseTest, FindIsCapturedInAGraphAndReplaysOnNewBoxes) {
   (void)cudaGraphDestroy(graph);
 }
 
+// With PairOutput::scratch: a broadphase whose sorts_pairs() is true (`octree`) writes
+// exactly flat's keys in flat's order (every segment length: one thread's, one block's radix
+// sort, one block's ranks), leaves the entries after the total alone, and on overflow
+// reports the total and writes nothing past the capacity (keys or scratch); the others
+// ignore the scratch (the set, in any order).
+TEST_P(DeviceBroadPhaseTest, WithScratchSortsWhenItSaysSo) {
+  REQUIRE_CUDA_DEVICE();
+  const Variant& v = GetParam();
+  Stream stream;
+  for (const std::string& name : box_set_names()) {
+    SCOPED_TRACE(name);
+    const BoxSet& set = box_set(name);
+    const auto n = static_cast<std::uint32_t>(set.boxes.size());
+    auto bp = make_device(v, set.domain);
+    EXPECT_EQ(bp->sorts_pairs(), v.config.name == "octree");
+    DeviceBuffer<Aabb> boxes("test boxes");
+    gpu::upload(boxes, set.boxes, stream.s);
+    bp->reserve(n, stream.s);
+    const int shift = gpu::key_bits(std::max<std::uint32_t>(n, 1));
+    std::vector<unsigned long long> want;
+    for (const Pair p : set.flat) want.push_back((static_cast<unsigned long long>(p.a) << shift) | p.b);
+    const auto total = static_cast<std::uint32_t>(want.size());
+    for (const std::uint32_t cap : {total + 5, total / 2}) {
+      SCOPED_TRACE(fmt::format("capacity {} for {} pairs", cap, total));
+      Output out(cap, stream.s, shift);
+      DeviceBuffer<unsigned long long> scratch("test scratch");
+      scratch.reset(static_cast<std::size_t>(cap) + 1);
+      gpu::check(cudaMemsetAsync(scratch.get(), 0xff, (static_cast<std::size_t>(cap) + 1) * 8, stream.s), "cudaMemset");
+      gpu::PairOutput po = out.pair_output();
+      po.scratch = scratch.get();
+      bp->find(boxes.get(), n, po, stream.s);
+      const FindResult r = out.read(stream.s);
+      std::vector<unsigned long long> scratch_host;
+      gpu::download(scratch_host, scratch, static_cast<std::size_t>(cap) + 1, stream.s);
+      ASSERT_EQ(r.total, total);
+      EXPECT_FALSE(r.wrote_past_capacity);
+      EXPECT_EQ(scratch_host[cap], kSentinel) << "the scratch was written past the capacity";
+      if (cap < total) continue;  // overflow: the caller grows the output and runs find() again
+      std::vector<unsigned long long> all;
+      gpu::download(all, out.keys, static_cast<std::size_t>(cap) + 1, stream.s);
+      EXPECT_TRUE(std::all_of(all.begin() + total, all.end(), [](unsigned long long k) { return k == kSentinel; }))
+          << "an entry after the total was written";
+      if (bp->sorts_pairs()) {
+        ASSERT_EQ(r.keys.size(), want.size());
+        std::size_t first = 0;
+        while (first < want.size() && r.keys[first] == want[first]) ++first;
+        EXPECT_EQ(first, want.size()) << fmt::format("first difference at {} of {}: 0x{:x} for 0x{:x}", first,
+                                                     want.size(), first < want.size() ? r.keys[first] : 0ull,
+                                                     first < want.size() ? want[first] : 0ull);
+      } else {
+        std::vector<Pair> pairs;
+        ASSERT_TRUE(to_pairs(r.keys, n, pairs, shift));
+        EXPECT_TRUE(same_pairs(pairs, set.flat, set.boxes));
+      }
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Device, DeviceBroadPhaseTest, ::testing::ValuesIn(variants()), variant_name);
 
 // ---- needs no device -----------------------------------------------------------------
@@ -761,6 +858,21 @@ TEST(DeviceBroadPhaseSets, EverySetHoldsWhatItsNameSays) {  // the fixtures, on 
     if (name == "one-cell") {
       EXPECT_TRUE(std::all_of(s.boxes.begin(), s.boxes.end(),
                               [](const Aabb& b) { return contains(cube(0.29f, 0.32f), b); }));
+    }
+    if (name == "nested-levels") {  // bodies on every level 0 .. 7 (depth 10)
+      const LooseGrid g = loose_grid(s.domain);
+      std::set<int> levels;
+      for (const Aabb& b : s.boxes) levels.insert(loose_place(g, b, kLooseMaxDepth).level);
+      EXPECT_EQ(levels, (std::set<int>{0, 1, 2, 3, 4, 5, 6, 7}));
+    }
+    if (name == "long-segments") {  // segments (pairs (a, b) of one a) of every length class
+      std::map<std::uint32_t, std::size_t> seg;
+      for (const Pair p : s.flat) ++seg[p.a];
+      EXPECT_EQ(seg[0], s.boxes.size() - 1);
+      EXPECT_GT(seg[0], 4096u);
+      EXPECT_GT(seg[1], 64u);
+      EXPECT_LE(seg[1], 4096u);
+      EXPECT_TRUE(std::any_of(seg.begin(), seg.end(), [](const auto& e) { return e.second >= 2 && e.second <= 64; }));
     }
     if (name == "boxes-random-10000-frame-100") {
       EXPECT_GE(s.boxes.size(), 10000u);
@@ -896,6 +1008,254 @@ TEST(LbvhHostModel, PlantedFaultsAreCaught) {
   HostLbvh cut = h;  // a subtree hung under the root a second time
   cut.nodes[0].right = cut.nodes[0].left;
   EXPECT_NE(refit_and_check(cut), "");
+}
+
+// ---- `octree`'s block table on the host (needs no device) ------------------------------
+
+/// A fault planted in the host model of the block table (to show its checks can fail).
+enum class BlockFault {
+  None,
+  DropFirstSlot,  ///< find() answers a block's second slot: its first body is never tested
+  Misplaced,      ///< entries stored one past their home: find() meets an empty entry
+  NarrowWindow,   ///< the window loses its last cell along x when it has more than one
+};
+
+/// broadphase_octree.cu on the host, slot after slot, with the functions of
+/// loose_blocks.hpp: the keys of loose_keys_kernel (D_w fixed, or `auto` from the smallest
+/// extent), the stable (key, body) sort, the block table of loose_gather_kernel (inserted
+/// in slot order, as one of the device's insertion orders), the block query of
+/// loose_query_kernel and the cell runs of loose_query_warp_kernel, checked slot by slot
+/// against the per-cell query (every cell of the window looked up in the sorted keys);
+/// then the overflow list (loose_overflow_kernel) and the exact tests.
+struct HostLooseBlocks {
+  std::vector<std::uint32_t> key;        ///< per slot, ascending
+  std::vector<std::uint32_t> slot_body;  ///< per slot
+  std::vector<unsigned long long> table;
+  std::vector<Pair> pairs;               ///< sorted
+  std::uint64_t tests = 0;               ///< exact tests of the block query + overflow
+  std::uint64_t probes = 0;              ///< block probes (find calls)
+  std::uint64_t cell_probes = 0;         ///< cells the per-cell query looks up
+  std::string broken;                    ///< "" when every check holds, else the first failure
+};
+
+HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& domain, int depth,
+                                  BlockFault fault = BlockFault::None) {
+  HostLooseBlocks h;
+  auto fail = [&](std::string what) {
+    if (h.broken.empty()) h.broken = std::move(what);
+  };
+  const auto n = static_cast<std::uint32_t>(boxes.size());
+  const LooseGrid grid = loose_grid(domain);
+  if (depth < 0) {  // `auto`: loose_extent_kernel + the CUB minimum
+    float mn = kInf;
+    for (const Aabb& b : boxes) {
+      float e = loose_unit_extent(loose_unit(grid, b.min), loose_unit(grid, b.max));
+      e = e < 0.0f ? 0.0f : e;
+      mn = std::min(mn, e != e ? kInf : e);
+    }
+    depth = loose_auto_depth(mn);
+  }
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> order(n);
+  std::vector<std::array<std::int32_t, 6>> q(n);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const Aabb& b = boxes[i];
+    std::uint32_t k = kLooseNoKey;
+    if (!loose_has_nan(b)) {
+      const Vec3 lo = loose_unit(grid, b.min), hi = loose_unit(grid, b.max);
+      k = loose_place_key(loose_place_unit(lo, hi, depth));
+      q[i] = {loose_q_min(lo.x), loose_q_min(lo.y), loose_q_min(lo.z),
+              loose_q_max(hi.x), loose_q_max(hi.y), loose_q_max(hi.z)};
+    }
+    order[i] = {k, i};
+  }
+  std::sort(order.begin(), order.end());  // = the stable sort by key of bodies 0 .. n-1
+  for (const auto& [k, b] : order) {
+    h.key.push_back(k);
+    h.slot_body.push_back(b);
+  }
+  // The block table (loose_gather_kernel).
+  const std::uint32_t mask = static_cast<std::uint32_t>(gpu::footprint::loose_cell_table_entries(n) - 1);
+  h.table.assign(static_cast<std::size_t>(mask) + 1, gpu::kLooseBlockEmpty);
+  std::uint32_t blocks = 0;
+  for (std::uint32_t s = 0; s < n; ++s) {
+    if (h.key[s] >= kLooseOverflowKey) continue;
+    const int level = loose_key_level(h.key[s]);
+    const std::uint32_t bk = gpu::loose_block_key(h.key[s], level);
+    if (h.key[s] - bk >= gpu::loose_block_span(level)) fail(fmt::format("slot {}: key {} outside its block {}", s, h.key[s], bk));
+    if (!gpu::loose_block_first(h.key.data(), s, level)) continue;
+    ++blocks;
+    std::uint32_t e = gpu::loose_block_hash(bk, mask);
+    if (fault == BlockFault::Misplaced) e = (e + 1) & mask;
+    while (h.table[e] != gpu::kLooseBlockEmpty) e = (e + 1) & mask;
+    h.table[e] = gpu::loose_block_entry(bk, s);
+  }
+  if (2ull * blocks > h.table.size()) fail(fmt::format("{} blocks in a table of {} entries", blocks, h.table.size()));
+  auto find = [&](std::uint32_t bk) {
+    ++h.probes;
+    std::uint32_t t = gpu::loose_block_find(h.table.data(), mask, bk);
+    if (fault == BlockFault::DropFirstSlot && t != gpu::kLooseNoSlot) ++t;
+    return t;
+  };
+  auto emit = [&](std::uint32_t s, std::uint32_t t) {
+    ++h.tests;
+    if (overlaps(boxes[h.slot_body[s]], boxes[h.slot_body[t]]))
+      h.pairs.push_back({std::min(h.slot_body[s], h.slot_body[t]), std::max(h.slot_body[s], h.slot_body[t])});
+  };
+  // The in-tree query, against the per-cell query.
+  for (std::uint32_t s = 0; s < n && h.key[s] < kLooseOverflowKey; ++s) {
+    const std::uint32_t key = h.key[s];
+    const int level = loose_key_level(key);
+    const auto& qb = q[h.slot_body[s]];
+    for (int m = 0; m <= level; ++m) {
+      LooseRange rx = loose_query_axis_q(qb[0], qb[3], m);
+      const LooseRange ry = loose_query_axis_q(qb[1], qb[4], m);
+      const LooseRange rz = loose_query_axis_q(qb[2], qb[5], m);
+      std::vector<std::uint32_t> want;
+      for (int iz = rz.lo; iz <= rz.hi; ++iz)
+        for (int iy = ry.lo; iy <= ry.hi; ++iy)
+          for (int ix = rx.lo; ix <= rx.hi; ++ix) {
+            const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix), static_cast<std::uint32_t>(iy),
+                                                    static_cast<std::uint32_t>(iz));
+            const auto range = std::equal_range(h.key.begin(), h.key.end(), ck);
+            auto t0 = static_cast<std::uint32_t>(range.first - h.key.begin());
+            const auto t1 = static_cast<std::uint32_t>(range.second - h.key.begin());
+            // The warp kernel's run of the cell, through its block.
+            std::uint32_t r0 = 0, r1 = 0;
+            gpu::loose_cell_run(h.key.data(), n, ck, m, find, &r0, &r1);
+            if ((t0 == t1) ? r0 != r1 : (r0 != t0 || r1 != t1))
+              fail(fmt::format("slot {}: cell {} holds slots [{}, {}), its run through the block table is [{}, {})", s,
+                               ck, t0, t1, r0, r1));
+            if (m == level && ck < key) continue;
+            ++h.cell_probes;
+            if (m == level) t0 = std::max(t0, s + 1);
+            for (std::uint32_t t = t0; t < t1; ++t) want.push_back(t);
+          }
+      if (fault == BlockFault::NarrowWindow && rx.hi > rx.lo) --rx.hi;
+      std::vector<std::uint32_t> got;
+      gpu::loose_block_query(h.key.data(), n, s, key, level, m, rx, ry, rz, find,
+                             [&](std::uint32_t t) { got.push_back(t); });
+      std::sort(want.begin(), want.end());
+      std::sort(got.begin(), got.end());
+      if (got != want)
+        fail(fmt::format("slot {} (key {}, level {}) at level {}: the block query visits {} slots, the cells hold {}",
+                         s, key, level, m, got.size(), want.size()));
+      for (const std::uint32_t t : got) emit(s, t);
+    }
+  }
+  // The overflow list (loose_query_kernel's overflow slots, loose_overflow_kernel).
+  const auto ov_begin = static_cast<std::uint32_t>(
+      std::lower_bound(h.key.begin(), h.key.end(), kLooseOverflowKey) - h.key.begin());
+  const auto ov_end =
+      static_cast<std::uint32_t>(std::lower_bound(h.key.begin(), h.key.end(), kLooseNoKey) - h.key.begin());
+  for (std::uint32_t o = ov_begin; o < ov_end; ++o) {
+    for (std::uint32_t t = o + 1; t < ov_end; ++t) emit(o, t);
+    for (std::uint32_t t = 0; t < ov_begin; ++t) emit(t, o);
+  }
+  std::sort(h.pairs.begin(), h.pairs.end());
+  return h;
+}
+
+TEST(LooseBlockHostModel, BlockQueryVisitsThePerCellSlotsAndPairSetEqualsFlat) {
+  for (const std::string& name : box_set_names()) {
+    for (int depth : {-1, 0, 1, 2, 3, 10}) {
+      SCOPED_TRACE(fmt::format("{} depth {}", name, depth));
+      const BoxSet& set = box_set(name);
+      const HostLooseBlocks h = host_loose_blocks(set.boxes, set.domain, depth);
+      EXPECT_EQ(h.broken, "");
+      EXPECT_TRUE(same_pairs(h.pairs, set.flat, set.boxes));
+    }
+  }
+}
+
+// Fewer probes: on the bench's distribution (cubes of half side 0.06 / 0.03 at
+// boxes-random-10000's density) the block query probes at most half as often as the
+// per-cell query looked cells up (the cell runs of the warp kernel's check excluded).
+TEST(LooseBlockHostModel, FewerProbesThanCells) {
+  const std::uint32_t n = 20000;
+  const float side = 3.4f * std::cbrt(2.0f);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-side / 2, side / 2);
+  std::vector<Aabb> boxes;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const float e = i % 2 == 0 ? 0.06f : 0.03f;
+    boxes.push_back(box_at({u(rng), u(rng), u(rng)}, {e, e, e}));
+  }
+  const float h = side / 2 + 0.06f;
+  const Aabb domain{{-h, -h, -h}, {h, h, h}};
+  HostLooseBlocks m = host_loose_blocks(boxes, domain, -1);
+  EXPECT_EQ(m.broken, "");
+  EXPECT_TRUE(same_pairs(m.pairs, flat_pairs(boxes, domain), boxes));
+  // host_loose_blocks counts the warp kernel's cell-run probes too: count the block query's alone.
+  std::uint64_t block_probes = 0;
+  {
+    const LooseGrid grid = loose_grid(domain);
+    const std::uint32_t mask = static_cast<std::uint32_t>(m.table.size() - 1);
+    for (std::uint32_t s = 0; s < n && m.key[s] < kLooseOverflowKey; ++s) {
+      const Aabb& b = boxes[m.slot_body[s]];
+      const Vec3 lo = loose_unit(grid, b.min), hi = loose_unit(grid, b.max);
+      const int level = loose_key_level(m.key[s]);
+      for (int l = 0; l <= level; ++l)
+        gpu::loose_block_query(
+            m.key.data(), n, s, m.key[s], level, l, loose_query_axis_q(loose_q_min(lo.x), loose_q_max(hi.x), l),
+            loose_query_axis_q(loose_q_min(lo.y), loose_q_max(hi.y), l),
+            loose_query_axis_q(loose_q_min(lo.z), loose_q_max(hi.z), l),
+            [&](std::uint32_t bk) {
+              ++block_probes;
+              return gpu::loose_block_find(m.table.data(), mask, bk);
+            },
+            [](std::uint32_t) {});
+    }
+  }
+  EXPECT_GT(m.cell_probes, 0u);
+  RecordProperty("blocks", std::to_string(std::count_if(m.table.begin(), m.table.end(), [](unsigned long long e) {
+                   return e != gpu::kLooseBlockEmpty;
+                 })));
+  RecordProperty("block_probes", std::to_string(block_probes));
+  RecordProperty("cell_probes", std::to_string(m.cell_probes));
+  EXPECT_LE(2 * block_probes, m.cell_probes) << block_probes << " block probes, " << m.cell_probes << " cells";
+}
+
+// The loop-free level of a cell key (the kernels' loose_cell_key_level) against
+// loose_key_level on every level's first and last keys, their neighbours and random keys.
+TEST(LooseBlockHostModel, CellKeyLevelEqualsTheLoop) {
+  // Level l's keys: [(8^l - 1) / 7, (8^(l+1) - 1) / 7) (64-bit: level 11's base is above 2^30).
+  auto base = [](int l) { return static_cast<std::uint32_t>(((1ull << (3 * l)) - 1) / 7); };
+  std::vector<std::uint32_t> keys;
+  for (int l = 0; l <= kLooseMaxDepth; ++l) {
+    ASSERT_EQ(base(l), loose_level_base(l));
+    const std::uint32_t b = base(l), e = base(l + 1);
+    for (std::uint32_t k : {b, b + 1, b + 7, b + 8, e - 2, e - 1})
+      if (k >= b && k < e) keys.push_back(k);
+  }
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<std::uint32_t> u(0, base(kLooseMaxDepth + 1) - 1);
+  for (int i = 0; i < 100000; ++i) keys.push_back(u(rng));
+  for (const std::uint32_t k : keys) ASSERT_EQ(gpu::loose_cell_key_level(k), loose_key_level(k)) << "key " << k;
+  // Planted fault: the formula with a 32-bit product wraps from key 613566757 (level 10)
+  // on: 7 k + 1 = 2^32 + 4 reads as level 0.
+  auto level32 = [](std::uint32_t k) {
+    const std::uint32_t v = 7u * k + 1u;
+    int l2 = 0;
+    while (l2 < 31 && (v >> (l2 + 1)) != 0) ++l2;
+    return l2 / 3;
+  };
+  EXPECT_EQ(level32(5u), loose_key_level(5u));
+  EXPECT_EQ(loose_key_level(613566757u), 10);
+  EXPECT_NE(level32(613566757u), loose_key_level(613566757u));
+}
+
+// Planted faults: the checks above can fail.
+TEST(LooseBlockHostModel, PlantedFaultsAreCaught) {
+  for (const char* name : {"uniform-1000", "touching-lattice", "nested-levels"}) {
+    SCOPED_TRACE(name);
+    const BoxSet& set = box_set(name);
+    for (const BlockFault f : {BlockFault::DropFirstSlot, BlockFault::Misplaced, BlockFault::NarrowWindow}) {
+      SCOPED_TRACE(static_cast<int>(f));
+      const HostLooseBlocks h = host_loose_blocks(set.boxes, set.domain, -1, f);
+      EXPECT_NE(h.broken, "");
+      EXPECT_FALSE(same_pairs(h.pairs, set.flat, set.boxes));
+    }
+  }
 }
 
 }  // namespace

@@ -73,8 +73,8 @@ TEST(CudaFootprint, LinearInBodyCountAndCoversThePerBodyBuffers) {
       const std::uint64_t f2 = cuda_device_bytes_needed(2 * n, c);
       const std::uint64_t f4 = cuda_device_bytes_needed(4 * n, c);
       if (c.name == "octree") {
-        // Linear within 5%: the cell table is the power of two >= 4 n (steps of at most
-        // 4 entries per body).
+        // Linear within 5%: the block table is the power of two >= 2 n (steps of at most
+        // 2 entries per body).
         const double d2 = static_cast<double>(f4 - f2), d1 = 2.0 * static_cast<double>(f2 - f1);
         EXPECT_NEAR(d2, d1, 0.05 * d1) << "not linear around n = " << n;
       } else {

@@ -1,0 +1,166 @@
+#pragma once
+/// \file loose_blocks.hpp
+/// Block math of the device broadphase `octree` (broadphase_octree.cu): its cell table
+/// holds blocks, not cells. Every function is `OCTOCD_HD` (host and device), takes plain
+/// values and pointers, allocates nothing and throws nothing, so the host tests run the
+/// very code of the kernels (tests/gpu/test_device_broadphase.cpp, LooseBlockHostModel).
+///
+/// Blocks. A block of level m >= 1 is an aligned group of 2 x 2 x 2 cells of level m (the
+/// children of one level m - 1 cell); its cells' keys are the 8 consecutive keys
+/// [b, b + 8) with b = loose_cell_key(m, 2 px, 2 py, 2 pz) (morton3 puts the octant
+/// o = x | y << 1 | z << 2 in the low 3 bits), so in slot order (key, body) its bodies
+/// are one contiguous run of slots. Level 0's block is its one cell (key 0, span 1).
+///
+/// Table. One 64-bit entry per occupied block: (block key << 32) | the block's first slot,
+/// open addressing with linear probing from loose_block_hash over a power-of-two array of
+/// at least 2 n entries (footprint::loose_cell_table_entries; at most half full: at most n
+/// blocks), empty entries all ones
+/// (kLooseBlockEmpty; a block key is below 2^31, never 0xffffffff). One load per probe
+/// (the key and the run's start in one word); a run ends where the keys leave the block.
+///
+/// Query. A window of w cells per axis at level m meets at most floor(w / 2) + 1 blocks per
+/// axis (w <= 4: at most 3, 2 for w = 3), so a body probes 8 blocks where it probed 27
+/// cells; the slots of a block whose cell is outside the window are skipped by the
+/// block's octant mask (loose_octant_mask), so the slots visited, and the exact tests
+/// made, are exactly those of the per-cell query (every cell of the window, at the
+/// body's own level only the slots after its own).
+
+#include <cstdint>
+
+#include "octocd/loose_octree.hpp"
+#include "octocd/math.hpp"
+
+namespace octocd {
+namespace gpu {
+
+/// An empty entry of the block table.
+constexpr unsigned long long kLooseBlockEmpty = ~0ull;
+/// No slot: loose_block_find's answer for a block that holds no body.
+constexpr std::uint32_t kLooseNoSlot = 0xffffffffu;
+
+/// loose_key_level of a cell key (key < loose_level_base(kLooseMaxDepth + 1)) without its
+/// loop: level l's keys are [(8^l - 1) / 7, (8^(l+1) - 1) / 7), so 7 key + 1 lies in
+/// [2^(3 l), 2^(3 l + 3)) and l = floor(log2(7 key + 1) / 3) (64-bit: 7 key + 1 < 2^33).
+OCTOCD_HD inline int loose_cell_key_level(std::uint32_t key) {
+  const unsigned long long v = 7ull * key + 1ull;
+  int log2 = 0;
+#if defined(__CUDA_ARCH__)
+  log2 = 63 - __clzll(static_cast<long long>(v));
+#else
+  while ((v >> (log2 + 1)) != 0) ++log2;
+#endif
+  return log2 / 3;
+}
+
+/// Cells (keys) in a block of `level`: 8, or 1 at level 0.
+OCTOCD_HD inline std::uint32_t loose_block_span(int level) { return level == 0 ? 1u : 8u; }
+
+/// The block key (its first cell's key) of cell `key` of `level`.
+OCTOCD_HD inline std::uint32_t loose_block_key(std::uint32_t key, int level) {
+  const std::uint32_t base = loose_level_base(level);
+  return base + ((key - base) & ~7u);
+}
+
+/// The home entry of a block key in a table of mask + 1 entries (murmur3's 32-bit
+/// finaliser: neighbouring block keys differ in low bits only).
+OCTOCD_HD inline std::uint32_t loose_block_hash(std::uint32_t k, std::uint32_t mask) {
+  k ^= k >> 16;
+  k *= 0x85ebca6bu;
+  k ^= k >> 13;
+  k *= 0xc2b2ae35u;
+  k ^= k >> 16;
+  return k & mask;
+}
+
+/// The table entry of a block: its key and its first slot.
+OCTOCD_HD inline unsigned long long loose_block_entry(std::uint32_t block_key, std::uint32_t first_slot) {
+  return (static_cast<unsigned long long>(block_key) << 32) | first_slot;
+}
+
+/// The first slot of block `block_key`, or kLooseNoSlot when no entry holds it (the table
+/// must hold an empty entry: at most half full).
+OCTOCD_HD inline std::uint32_t loose_block_find(const unsigned long long* table, std::uint32_t mask,
+                                                std::uint32_t block_key) {
+  std::uint32_t h = loose_block_hash(block_key, mask);
+  for (;;) {
+    const unsigned long long e = table[h];
+    const auto k = static_cast<std::uint32_t>(e >> 32);
+    if (k == block_key) return static_cast<std::uint32_t>(e);
+    if (e == kLooseBlockEmpty) return kLooseNoSlot;
+    h = (h + 1) & mask;
+  }
+}
+
+/// Whether slot s (sorted keys, n slots) is the first of its block's run: its key is a
+/// cell key of `level` and the slot before holds a key of an earlier block (or none).
+OCTOCD_HD inline bool loose_block_first(const std::uint32_t* sorted_key, std::uint32_t s, int level) {
+  return s == 0 || sorted_key[s - 1] < loose_block_key(sorted_key[s], level);
+}
+
+/// Which of the two cells 2 p and 2 p + 1 along one axis lie in the closed range r: bit 0
+/// for 2 p, bit 1 for 2 p + 1.
+OCTOCD_HD inline std::uint32_t loose_axis_pair_mask(int p, const LooseRange& r) {
+  const int c = 2 * p;
+  return (c >= r.lo && c <= r.hi ? 1u : 0u) | (c + 1 >= r.lo && c + 1 <= r.hi ? 2u : 0u);
+}
+
+/// The octants o of a block whose cell lies in the window (bit o set; o = x | y << 1 |
+/// z << 2, morton3's order), from the three axes' pair masks (loose_axis_pair_mask).
+OCTOCD_HD inline std::uint32_t loose_octant_mask(std::uint32_t mx, std::uint32_t my, std::uint32_t mz) {
+  const std::uint32_t x = ((mx & 1u) ? 0x55u : 0u) | ((mx & 2u) ? 0xaau : 0u);
+  const std::uint32_t y = ((my & 1u) ? 0x33u : 0u) | ((my & 2u) ? 0xccu : 0u);
+  const std::uint32_t z = ((mz & 1u) ? 0x0fu : 0u) | ((mz & 2u) ? 0xf0u : 0u);
+  return x & y & z;
+}
+
+/// The query of slot s (key `key`, a cell of `level`) at level m <= level, cell window
+/// rx x ry x rz (loose_query_axis_q): visit(t) for every slot t in a window cell, at
+/// m == level only t > s; find(block_key) gives a block's first slot or kLooseNoSlot.
+/// `sorted_key` holds the n slots' keys in ascending order (overflow and NaN keys last).
+template <class Find, class Visit>
+OCTOCD_HD inline void loose_block_query(const std::uint32_t* sorted_key, std::uint32_t n, std::uint32_t s,
+                                        std::uint32_t key, int level, int m, const LooseRange& rx,
+                                        const LooseRange& ry, const LooseRange& rz, Find&& find, Visit&& visit) {
+  if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) return;
+  const std::uint32_t span = loose_block_span(m);
+  for (int pz = rz.lo >> 1; pz <= rz.hi >> 1; ++pz) {
+    const std::uint32_t mz = loose_axis_pair_mask(pz, rz);
+    for (int py = ry.lo >> 1; py <= ry.hi >> 1; ++py) {
+      const std::uint32_t my = loose_axis_pair_mask(py, ry);
+      for (int px = rx.lo >> 1; px <= rx.hi >> 1; ++px) {
+        const std::uint32_t mask = loose_octant_mask(loose_axis_pair_mask(px, rx), my, mz);
+        const std::uint32_t bk = loose_cell_key(m, 2u * static_cast<std::uint32_t>(px),
+                                                2u * static_cast<std::uint32_t>(py), 2u * static_cast<std::uint32_t>(pz));
+        // Same level: a block whose every cell precedes s's own holds only slots before s.
+        if (mask == 0 || (m == level && bk + (span - 1) < key)) continue;
+        std::uint32_t t = find(bk);
+        if (t == kLooseNoSlot) continue;
+        if (m == level && t <= s) t = s + 1;
+        for (; t < n; ++t) {
+          const std::uint32_t o = sorted_key[t] - bk;  // the octant while the key is in the block
+          if (o >= span) break;
+          if ((mask >> o) & 1u) visit(t);
+        }
+      }
+    }
+  }
+}
+
+/// The run [*t0, *t1) of the slots of cell `key` of `level` (empty: *t0 == *t1), from its
+/// block's first slot (find, as loose_block_query's).
+template <class Find>
+OCTOCD_HD inline void loose_cell_run(const std::uint32_t* sorted_key, std::uint32_t n, std::uint32_t key, int level,
+                                     Find&& find, std::uint32_t* t0, std::uint32_t* t1) {
+  std::uint32_t t = find(loose_block_key(key, level));
+  if (t == kLooseNoSlot) {
+    *t0 = *t1 = 0;
+    return;
+  }
+  while (t < n && sorted_key[t] < key) ++t;  // the block's cells before this one
+  *t0 = t;
+  while (t < n && sorted_key[t] == key) ++t;
+  *t1 = t;
+}
+
+}  // namespace gpu
+}  // namespace octocd
