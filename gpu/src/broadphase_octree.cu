@@ -43,7 +43,9 @@
 //    its own: one thread per body for at most kLocalSortMax keys (insertion sort in
 //    place), else one block (CUB block radix sorts of kBlockSortMax keys, then for longer
 //    segments each key's rank from binary searches in the other chunks: a body that
-//    overlaps thousands of bodies of larger index).
+//    overlaps thousands of bodies of larger index). Pairs that do not fit the output are
+//    copied from the scratch as they are (keys [0, capacity), any order; the caller grows
+//    the output and runs find() again).
 #include <cstdlib>
 #include <string>
 
@@ -424,11 +426,18 @@ struct LooseSortDesc {
 };
 
 /// Sorted mode, 1: pair i of the scratch to its body a's segment (in any order within it).
+/// When the pairs did not fit (total > capacity) the scratch's keys are copied as they are:
+/// the segments then pass the capacity, and the caller, which grows the output and runs
+/// find() again, still decodes keys [0, capacity) as pairs (none may be the padding).
 __global__ void loose_scatter_kernel(LooseSortDesc d) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   const std::uint32_t total = *d.total;
   if (i >= total || i >= d.capacity) return;
   const unsigned long long k = d.scratch[i];
+  if (total > d.capacity) {
+    d.keys[i] = k;
+    return;
+  }
   const auto a = static_cast<std::uint32_t>(k >> d.shift);
   const std::uint32_t pos = d.offset[a] + atomicSub(&d.count[a], 1u) - 1u;
   if (pos < d.capacity) d.keys[pos] = k;

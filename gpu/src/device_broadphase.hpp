@@ -53,7 +53,9 @@ struct PairOutput {
   /// Optional (nullptr: unused), capacity entries the broadphase may overwrite. Given to a
   /// broadphase whose sorts_pairs() is true, find() leaves keys[0 .. total) in ascending
   /// order whenever total <= capacity (the sorted unique set `flat` gives), so the caller
-  /// needs no sort of its own; the entries from total on are left as they were.
+  /// needs no sort of its own; the entries from total on are left as they were. When the
+  /// pairs do not fit (total > capacity), keys[0 .. capacity) hold pairs of the set in any
+  /// order, as without a scratch.
   unsigned long long* scratch = nullptr;
 };
 
