@@ -21,7 +21,8 @@
 //          [--midphase 1,2] [--engines graph,small,persistent,cpu] [--small-blocks K,K,...]
 //          [--small-wait poll,sync] [--one-block-pairs P,P,...] [--front-bodies B,B,...]
 // --small-blocks runs the small and persistent paths once per grid size given
-// (OCTOCD_CUDA_SMALL_BLOCKS; default: the engine's own grid), each its own line ("small/K");
+// (OCTOCD_CUDA_SMALL_BLOCKS; without the option: the environment's value, else the engine's
+// own grid; the same for the three switches below), each its own line ("small/K");
 // --small-wait once per host wait (OCTOCD_CUDA_SMALL_WAIT, "small/K/sync"; the persistent
 // path needs poll: with sync it runs as small), --one-block-pairs once per threshold of the
 // one-block response (OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS, "small/K/poll/1b=P"),
@@ -38,6 +39,7 @@
 #include <iostream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -55,10 +57,18 @@ using namespace octocd;
 
 namespace {
 
-/// Sets the environment variable `name` to `value`, or unsets it when `value` is empty.
-void set_or_unset(const char* name, const std::string& value) {
-  if (value.empty()) ::unsetenv(name);
-  else ::setenv(name, value.c_str(), 1);
+/// Sets the environment variable `name` to `value`; an empty `value` gives it back the value
+/// it had when first set here (the caller's environment), or unsets it if it had none.
+void set_or_restore(const char* name, const std::string& value) {
+  static std::map<std::string, std::optional<std::string>> initial;
+  auto it = initial.find(name);
+  if (it == initial.end()) {
+    const char* v = std::getenv(name);
+    it = initial.emplace(name, v ? std::optional<std::string>(v) : std::nullopt).first;
+  }
+  const std::optional<std::string> want = value.empty() ? it->second : std::optional<std::string>(value);
+  if (want) ::setenv(name, want->c_str(), 1);
+  else ::unsetenv(name);
 }
 
 /// One measured configuration: the engine and, for the small path, its switches ("" = the
@@ -84,10 +94,10 @@ std::unique_ptr<Engine> make(const Run& run, const std::shared_ptr<const Model>&
   ::setenv("OCTOCD_CUDA_STAGE_TIMES", "0", 1);
   ::setenv("OCTOCD_CUDA_SMALL", fused(engine) ? "1" : "0", 1);
   ::setenv("OCTOCD_CUDA_PERSISTENT", engine == "persistent" ? "1" : "0", 1);
-  set_or_unset("OCTOCD_CUDA_SMALL_BLOCKS", run.blocks);
-  set_or_unset("OCTOCD_CUDA_SMALL_WAIT", run.wait);
-  set_or_unset("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", run.one_block);
-  set_or_unset("OCTOCD_CUDA_SMALL_FRONT_BODIES", run.front);
+  set_or_restore("OCTOCD_CUDA_SMALL_BLOCKS", run.blocks);
+  set_or_restore("OCTOCD_CUDA_SMALL_WAIT", run.wait);
+  set_or_restore("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", run.one_block);
+  set_or_restore("OCTOCD_CUDA_SMALL_FRONT_BODIES", run.front);
   return std::make_unique<CudaWorld>(model, model->scene.broadphase.name);
 }
 
