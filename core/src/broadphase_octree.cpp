@@ -62,8 +62,10 @@
 ///    directly against the bodies whose F was replaced since the build; both sorted lists
 ///    are merged. Otherwise, or when an escaped box would visit more than 4096 cells, the
 ///    tree is rebuilt (steps 1-6 on the new fattened boxes). The first call on an
-///    instance, and a miss right after a cache that served no call (incoherent input),
-///    run steps 1-5 on the boxes themselves and keep nothing; the next miss builds again.
+///    instance runs steps 1-5 on the boxes themselves and keeps nothing; the next call
+///    builds. After a cache that served no call (incoherent input) the next 2 calls run
+///    steps 1-5 on the boxes, then one builds; each further useless cache doubles that
+///    count, up to 64; a cache that serves a call resets it.
 ///    The answer never depends on this history; `cell_candidates` does (below).
 ///
 /// Threads: from kParallelMinBodies bodies on, step 1 and the queries of step 4 run on
@@ -210,23 +212,31 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       ++cache_hits_;
       filter_cached(boxes, out);
       stats.cell_candidates = update_candidates_ + cached_.size();
-    } else if (build_next_ || (cache_ready_ && cache_hits_ > 0)) {
-      // (Re)build: the tree over the fattened boxes gives the kept pairs.
-      fatten(boxes);
-      const std::uint64_t tree_candidates = find_tree(fat_, cached_);
-      cache_ready_ = true;
-      cache_hits_ = 0;
-      build_next_ = false;
-      in_moved_.assign(n, 0u);
-      moved_count_ = 0;
-      moved_list_.clear();
-      filter_cached(boxes, out);
-      stats.cell_candidates = tree_candidates + cached_.size();
     } else {
-      // First call, or the last cache served no call: the tree on the boxes themselves.
-      stats.cell_candidates = find_tree(boxes, out);
-      cache_ready_ = false;
-      build_next_ = true;
+      if (cache_ready_ && cache_hits_ == 0) {
+        // The last cache served no call (incoherent input): back off, run the tree on the
+        // boxes themselves for 2, 4, ... kBackoffMax calls before building again.
+        backoff_ = std::min(2 * backoff_, kBackoffMax);
+        plain_left_ = backoff_;
+        cache_ready_ = false;
+      }
+      if (cache_ready_ || plain_left_ == 0) {
+        // (Re)build: the tree over the fattened boxes gives the kept pairs.
+        if (cache_ready_) backoff_ = 1;  // the cache served calls
+        fatten(boxes);
+        const std::uint64_t tree_candidates = find_tree(fat_, cached_);
+        cache_ready_ = true;
+        cache_hits_ = 0;
+        in_moved_.assign(n, 0u);
+        moved_count_ = 0;
+        moved_list_.clear();
+        filter_cached(boxes, out);
+        stats.cell_candidates = tree_candidates + cached_.size();
+      } else {
+        // The tree on the boxes themselves (the first call, or backing off).
+        --plain_left_;
+        stats.cell_candidates = find_tree(boxes, out);
+      }
     }
     stats.pairs = out.size();
     stats.memory_bytes = memory_bytes();
@@ -242,6 +252,8 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   static constexpr std::size_t kMovedShare = 256;
   /// An escaped body whose query would visit more cells than this makes a rebuild.
   static constexpr std::uint64_t kQueryCellsMax = 4096;
+  /// Most calls run without a cache after caches that served no call.
+  static constexpr std::uint32_t kBackoffMax = 64;
   /// Bodies sampled (evenly spaced in body order) for the median size.
   static constexpr std::size_t kFatSample = 1023;
 
@@ -1028,7 +1040,8 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   std::vector<Pair> fresh_;               // pairs found by an update
   std::uint64_t update_candidates_ = 0;
   bool cache_ready_ = false;     // cached_ and fat_ are valid
-  bool build_next_ = false;      // the next miss builds the cache
+  std::uint32_t plain_left_ = 1; // calls that run the tree on the boxes before a build
+  std::uint32_t backoff_ = 1;    // the last back-off (calls)
   std::uint64_t cache_hits_ = 0; // calls served by the current cache
 };
 

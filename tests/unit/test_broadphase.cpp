@@ -914,5 +914,26 @@ TEST(BroadPhase, LooseOctreePairCacheMatchesBruteForceOverAMotionSequence) {
   call("same boxes again");
 }
 
+// Incoherent input (a new random set on every call): every answer equals brute force, and
+// the cache is built less and less often (calls 2, 5, 10, then after 8 and 16 calls of
+// the tree on the boxes): a build is the call whose candidates differ from those of a
+// fresh instance's first call on the same boxes. Planted fault: without the back-off
+// (a build after every useless cache and one plain call) builds would come at 2, 4, 6, ...
+TEST(BroadPhase, LooseOctreeBacksOffOnIncoherentInput) {
+  auto bp = make_broadphase({"octree", -1, 0.25f}, kDomain);
+  std::vector<int> builds;
+  for (int call = 1; call <= 20; ++call) {
+    const std::vector<Aabb> boxes = random_boxes(1500, 1000u + static_cast<unsigned>(call));
+    std::vector<Pair> got, fresh;
+    BroadPhaseStats st, fs;
+    bp->find_pairs(boxes, got, st);
+    const std::vector<Pair> want = brute(boxes);
+    EXPECT_TRUE(got == want) << "call " << call << ": " << describe_diff(got, want);
+    make_broadphase({"octree", -1, 0.25f}, kDomain)->find_pairs(boxes, fresh, fs);
+    if (st.cell_candidates != fs.cell_candidates) builds.push_back(call);
+  }
+  EXPECT_EQ(builds, (std::vector<int>{2, 5, 10, 19}));
+}
+
 }  // namespace
 }  // namespace octocd
