@@ -9,7 +9,7 @@
 // per iteration divided by the frame count) with counters `pairs` and `candidates`.
 //
 // With --benchmark_repetitions=R each broadphase is run R times; the aggregates include
-// the minimum over the repetitions besides Google Benchmark's mean, median and stddev
+// the minimum and maximum over the repetitions besides Google Benchmark's mean, median and stddev
 // (bench/broadphase_table.py reports the median and the minimum).
 //
 // Usage: bench_broadphase SCENE.json [--frames N] [--warmup N] [--warm-replays N]
@@ -108,6 +108,9 @@ int main(int argc, char** argv) {
     // On a shared machine the minimum over repetitions is the steadiest figure.
     b->ComputeStatistics("min", [](const std::vector<double>& v) {
       return *std::min_element(v.begin(), v.end());
+    });
+    b->ComputeStatistics("max", [](const std::vector<double>& v) {
+      return *std::max_element(v.begin(), v.end());
     });
     // O(n^2) ones at 10k bodies take seconds per replay: one iteration, one repetition.
     if (name == "flat" || name == "fcl-naive") b->Iterations(1)->Repetitions(1);

@@ -45,13 +45,38 @@
 ///    - overflow bodies are tested against every body (in-tree bodies as structure of
 ///      arrays, vectorised; overflow bodies with a larger slot).
 /// 5. The pairs are sorted by (a, b) with detail::sort_pairs.
+/// 6. Pair cache across calls (the "fat AABB" idea of Bullet's dbvt, whose leaves are
+///    grown by a margin; a Verlet list in molecular dynamics). Steps 1-5 run on the
+///    fattened boxes F_i (every box grown on every side by one margin d, kFatMargin = 1/8
+///    of the median body size: the median largest AABB side of at most 1023 bodies
+///    spaced evenly in body order; a NaN box stays NaN); their sorted pairs are kept with
+///    F and the tree. A later call whose every box B_i lies inside its F_i (or has a NaN
+///    coordinate: it overlaps nothing) is a hit: its pairs are the kept pairs whose boxes
+///    overlap (Eq. 6), in the kept (sorted) order. Exact: if B_i and B_j overlap, so do
+///    F_i and F_j (they contain them), and that pair is kept.
+/// 7. Escaped bodies. When a few bodies left their F_i (at most n / 64 in this call and
+///    64 + n / 256 since the tree was built), only they are updated: new F_e = B_e grown
+///    by d; their kept pairs are dropped; their new pairs are found against the bodies
+///    still in the tree under their build-time F (a query of the kept tree at every
+///    occupied level, the cells whose loose boxes meet F_e, and the overflow run) and
+///    directly against the bodies whose F was replaced since the build; both sorted lists
+///    are merged. Otherwise, or when an escaped box would visit more than 4096 cells, the
+///    tree is rebuilt (steps 1-6 on the new fattened boxes). The first call on an
+///    instance runs steps 1-5 on the boxes themselves and keeps nothing; the next call
+///    builds. After a cache that served no call (incoherent input) the next 2 calls run
+///    steps 1-5 on the boxes, then one builds; each further useless cache doubles that
+///    count, up to 64; a cache that serves a call resets it.
+///    The answer never depends on this history; `cell_candidates` does (below).
 ///
 /// Threads: from kParallelMinBodies bodies on, step 1 and the queries of step 4 run on
 /// omp_get_max_threads() OpenMP threads (cells in dynamic chunks; the overflow tests in
 /// chunks of in-tree slots), each appending to its own pair list; the lists are joined
 /// before the sort of step 5, so pairs and candidates do not depend on the thread count.
 ///
-/// `cell_candidates` counts the pairs that reach the exact AABB test.
+/// `cell_candidates` counts the pairs that reach an exact AABB test: on a call that runs
+/// steps 1-5 on the boxes, the tree's tests; on a hit, the kept pairs (all tested on the
+/// boxes); on a rebuild, the tree's tests on the fattened boxes plus the kept pairs; on
+/// an update, the escaped bodies' tests on fattened boxes plus the kept pairs.
 
 #include <algorithm>
 #include <cstring>
@@ -171,6 +196,274 @@ class LooseOctreeBroadPhase final : public BroadPhase {
 
   void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
                   BroadPhaseStats& stats) override {
+    const std::size_t n = boxes.size();
+    const bool usable = cache_ready_ && fat_.size() == n;
+    if (usable) collect_escaped(boxes);
+    if (usable && escaped_.empty()) {
+      // Hit: every body still lies in its fattened box, so every overlapping pair is
+      // among the kept ones (step 6).
+      ++cache_hits_;
+      filter_cached(boxes, out);
+      stats.cell_candidates = cached_.size();
+    } else if (usable && escaped_.size() <= n / kEscapedShare &&
+               moved_count_ + escaped_.size() <= kMovedMax + n / kMovedShare &&
+               update_escaped(boxes)) {
+      // Update: the escaped bodies' pairs are replaced (step 7).
+      ++cache_hits_;
+      filter_cached(boxes, out);
+      stats.cell_candidates = update_candidates_ + cached_.size();
+    } else {
+      if (cache_ready_ && cache_hits_ == 0) {
+        // The last cache served no call (incoherent input): back off, run the tree on the
+        // boxes themselves for 2, 4, ... kBackoffMax calls before building again.
+        backoff_ = std::min(2 * backoff_, kBackoffMax);
+        plain_left_ = backoff_;
+        cache_ready_ = false;
+      }
+      if (cache_ready_ || plain_left_ == 0) {
+        // (Re)build: the tree over the fattened boxes gives the kept pairs.
+        if (cache_ready_) backoff_ = 1;  // the cache served calls
+        fatten(boxes);
+        const std::uint64_t tree_candidates = find_tree(fat_, cached_);
+        cache_ready_ = true;
+        cache_hits_ = 0;
+        in_moved_.assign(n, 0u);
+        moved_count_ = 0;
+        moved_list_.clear();
+        filter_cached(boxes, out);
+        stats.cell_candidates = tree_candidates + cached_.size();
+      } else {
+        // The tree on the boxes themselves (the first call, or backing off).
+        --plain_left_;
+        stats.cell_candidates = find_tree(boxes, out);
+      }
+    }
+    stats.pairs = out.size();
+    stats.memory_bytes = memory_bytes();
+  }
+
+ private:
+  /// Margin of the fattened boxes (step 6) as a fraction of the median body size.
+  static constexpr float kFatMargin = 0.125f;
+  /// An update (step 7) replaces at most n / kEscapedShare escaped bodies per call, and
+  /// at most kMovedMax + n / kMovedShare since the build; more rebuild.
+  static constexpr std::size_t kEscapedShare = 64;
+  static constexpr std::size_t kMovedMax = 64;
+  static constexpr std::size_t kMovedShare = 256;
+  /// An escaped body whose query would visit more cells than this makes a rebuild.
+  static constexpr std::uint64_t kQueryCellsMax = 4096;
+  /// Most calls run without a cache after caches that served no call.
+  static constexpr std::uint32_t kBackoffMax = 64;
+  /// Bodies sampled (evenly spaced in body order) for the median size.
+  static constexpr std::size_t kFatSample = 1023;
+
+  /// Largest side of a box; 0 unless finite and > 0.
+  static float largest_side(const Aabb& b) {
+    float ext = b.max.x - b.min.x;
+    ext = ext > b.max.y - b.min.y ? ext : b.max.y - b.min.y;
+    ext = ext > b.max.z - b.min.z ? ext : b.max.z - b.min.z;
+    return (ext > 0.0f && ext <= 3.4e38f) ? ext : 0.0f;
+  }
+
+  /// fat_ = every box grown on every side by the margin d = kFatMargin x the median of
+  /// the largest sides (finite and > 0) of at most kFatSample bodies spaced evenly in
+  /// body order (0 when there are none; a NaN box stays NaN).
+  void fatten(const std::vector<Aabb>& boxes) {
+    const std::size_t n = boxes.size();
+    sizes_.clear();
+    const std::size_t stride = n / kFatSample + 1;
+    for (std::size_t i = 0; i < n; i += stride) {
+      const float e = largest_side(boxes[i]);
+      if (e > 0.0f) sizes_.push_back(e);
+    }
+    float d = 0.0f;
+    if (!sizes_.empty()) {
+      const auto mid = sizes_.begin() + static_cast<std::ptrdiff_t>(sizes_.size() / 2);
+      std::nth_element(sizes_.begin(), mid, sizes_.end());
+      d = kFatMargin * *mid;
+    }
+    fat_d_ = d;
+    fat_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) fat_[i] = expanded(boxes[i], d);
+  }
+
+  /// escaped_ = the bodies whose box is not inside its fattened box (inclusive) and has
+  /// no NaN coordinate (a NaN box overlaps nothing), in body order.
+  void collect_escaped(const std::vector<Aabb>& boxes) {
+    escaped_.clear();
+    const std::size_t n = boxes.size();
+    const Aabb* b = boxes.data();
+    const Aabb* f = fat_.data();
+    for (std::size_t i0 = 0; i0 < n; i0 += 256) {
+      const std::size_t i1 = std::min(n, i0 + 256);
+      unsigned bad = 0;
+      for (std::size_t i = i0; i < i1; ++i) bad |= escaped(b[i], f[i]);
+      if (bad == 0u) continue;
+      for (std::size_t i = i0; i < i1; ++i) {
+        if (escaped(b[i], f[i]) != 0u) escaped_.push_back(static_cast<std::uint32_t>(i));
+      }
+    }
+  }
+
+  /// 1 when box b is not inside f (inclusive) and has no NaN coordinate, else 0.
+  static unsigned escaped(const Aabb& b, const Aabb& f) {
+    const unsigned inside = static_cast<unsigned>(b.min.x >= f.min.x) & static_cast<unsigned>(b.min.y >= f.min.y) &
+                            static_cast<unsigned>(b.min.z >= f.min.z) & static_cast<unsigned>(b.max.x <= f.max.x) &
+                            static_cast<unsigned>(b.max.y <= f.max.y) & static_cast<unsigned>(b.max.z <= f.max.z);
+    const unsigned nan = static_cast<unsigned>(b.min.x != b.min.x) | static_cast<unsigned>(b.min.y != b.min.y) |
+                         static_cast<unsigned>(b.min.z != b.min.z) | static_cast<unsigned>(b.max.x != b.max.x) |
+                         static_cast<unsigned>(b.max.y != b.max.y) | static_cast<unsigned>(b.max.z != b.max.z);
+    return (inside | nan) ^ 1u;
+  }
+
+  /// Step 7: the bodies of escaped_ get new fattened boxes (same margin) and their kept
+  /// pairs are replaced by the pairs of their new fattened boxes: with the bodies still
+  /// in the tree under their build-time fattened box (a query of the tree at every
+  /// occupied level, and the overflow run), and with the bodies whose fattened box was
+  /// replaced since the build (moved, tested directly). Returns false, changing nothing,
+  /// when an escaped box's query would visit more than kQueryCellsMax cells (a huge box:
+  /// the caller rebuilds). update_candidates_ = the tests made on fattened boxes.
+  bool update_escaped(const std::vector<Aabb>& boxes) {
+    // Query ranges first: a box too large for a query leaves everything unchanged.
+    equery_.clear();
+    for (const std::uint32_t e : escaped_) {
+      const Aabb f = expanded(boxes[e], fat_d_);
+      const Vec3 lo = loose_unit(grid_, f.min);
+      const Vec3 hi = loose_unit(grid_, f.max);
+      const QBox q{{static_cast<std::int16_t>(loose_q_min(lo.x)), static_cast<std::int16_t>(loose_q_min(lo.y)),
+                    static_cast<std::int16_t>(loose_q_min(lo.z))},
+                   {static_cast<std::int16_t>(loose_q_max(hi.x)), static_cast<std::int16_t>(loose_q_max(hi.y)),
+                    static_cast<std::int16_t>(loose_q_max(hi.z))}};
+      std::uint64_t cells = 0;
+      for (int o = 0; o < occupied_count_; ++o) {
+        const int m = occupied_[o];
+        const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
+        const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
+        const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
+        if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) continue;
+        cells += static_cast<std::uint64_t>(rx.hi - rx.lo + 1) * static_cast<std::uint64_t>(ry.hi - ry.lo + 1) *
+                 static_cast<std::uint64_t>(rz.hi - rz.lo + 1);
+      }
+      if (cells > kQueryCellsMax) return false;
+      equery_.push_back(q);
+    }
+    // New fattened boxes; the escaped bodies join the moved ones.
+    for (const std::uint32_t e : escaped_) {
+      fat_[e] = expanded(boxes[e], fat_d_);
+      if (in_moved_[e] == 0u) {
+        in_moved_[e] = 1u;
+        moved_list_.push_back(e);
+        ++moved_count_;
+      }
+      in_moved_[e] |= 2u;  // escaped in this call
+    }
+    // Drop their kept pairs.
+    std::size_t w = 0;
+    for (const Pair p : cached_) {
+      cached_[w] = p;
+      w += ((in_moved_[p.a] | in_moved_[p.b]) & 2u) == 0u ? 1u : 0u;
+    }
+    cached_.resize(w);
+    // Their new pairs.
+    fresh_.clear();
+    std::uint64_t tests = 0;
+    std::vector<std::uint32_t>& scratch = workers_[0].flat;
+    const Slot* slots = slots_.data();
+    for (std::size_t k = 0; k < escaped_.size(); ++k) {
+      const std::uint32_t e = escaped_[k];
+      const Aabb fe = fat_[e];
+      const std::uint32_t nflat = gather_all_levels(equery_[k], scratch);
+      tests += nflat + (overflow_end_ - overflow_begin_);
+      for (std::uint32_t t = 0; t < nflat; ++t) {
+        const Slot& sj = slots[scratch[t]];
+        if (in_moved_[sj.body] != 0u) continue;  // tested below with its current box
+        if (overlaps_nb(fe, sj.box)) fresh_.push_back(e < sj.body ? Pair{e, sj.body} : Pair{sj.body, e});
+      }
+      for (std::uint32_t o = overflow_begin_; o < overflow_end_; ++o) {
+        const Slot& sj = slots[o];
+        if (in_moved_[sj.body] != 0u) continue;
+        if (overlaps_nb(fe, sj.box)) fresh_.push_back(e < sj.body ? Pair{e, sj.body} : Pair{sj.body, e});
+      }
+      for (const std::uint32_t j : moved_list_) {
+        // Each pair of two escaped bodies once (from the smaller index).
+        if (j == e || ((in_moved_[j] & 2u) != 0u && j < e)) continue;
+        ++tests;
+        if (overlaps_nb(fe, fat_[j])) fresh_.push_back(e < j ? Pair{e, j} : Pair{j, e});
+      }
+    }
+    for (const std::uint32_t e : escaped_) in_moved_[e] = 1u;
+    // Merge (both sorted; disjoint: every new pair has an escaped body, no kept one has).
+    std::sort(fresh_.begin(), fresh_.end());
+    const std::size_t kept = cached_.size();
+    cached_.resize(kept + fresh_.size());
+    std::copy(fresh_.begin(), fresh_.end(), cached_.begin() + static_cast<std::ptrdiff_t>(kept));
+    std::inplace_merge(cached_.begin(), cached_.begin() + static_cast<std::ptrdiff_t>(kept), cached_.end());
+    update_candidates_ = tests;
+    return true;
+  }
+
+  /// The slots of every occupied cell, at every occupied level, whose loose box meets
+  /// the fixed-point box q (in scratch; returns their count).
+  std::uint32_t gather_all_levels(const QBox& q, std::vector<std::uint32_t>& scratch) const {
+    std::uint32_t nflat = 0;
+    for (int o = 0; o < occupied_count_; ++o) {
+      const int m = occupied_[o];
+      const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
+      const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
+      const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
+      if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) continue;
+      for (int z = rz.lo; z <= rz.hi; ++z) {
+        for (int y = ry.lo; y <= ry.hi; ++y) {
+          for (int x = rx.lo; x <= rx.hi; ++x) {
+            std::uint32_t begin = 0, len = 0;
+            if (m <= kDenseLevels) {
+              const std::size_t p = (static_cast<std::size_t>(z) << (2 * m)) + (static_cast<std::size_t>(y) << m) +
+                                    static_cast<std::size_t>(x);
+              const std::uint32_t e = dense_[static_cast<std::size_t>(m)][p];
+              if (e == 0u) continue;
+              begin = (e & kSlotMask) - 1u;
+              len = slots_[begin].run_end - begin;
+            } else {
+              const std::uint32_t d = find_sparse_cell(
+                  m, morton_spread3(static_cast<std::uint32_t>(x)) | (morton_spread3(static_cast<std::uint32_t>(y)) << 1) |
+                         (morton_spread3(static_cast<std::uint32_t>(z)) << 2));
+              if (d == kEmpty) continue;
+              begin = cells_[d].begin;
+              len = cells_[d].end - begin;
+            }
+            if (scratch.size() < nflat + len) scratch.resize(2 * (nflat + len));
+            for (std::uint32_t j = 0; j < len; ++j) scratch[nflat + j] = begin + j;
+            nflat += len;
+          }
+        }
+      }
+    }
+    return nflat;
+  }
+
+  /// out = the cached pairs whose boxes overlap (Eq. 6), in the cache's sorted order.
+  void filter_cached(const std::vector<Aabb>& boxes, std::vector<Pair>& out) const {
+    out.resize(cached_.size());
+    const Aabb* b = boxes.data();
+    std::size_t w = 0;
+    for (const Pair p : cached_) {
+      out[w] = p;
+      w += overlaps_nb(b[p.a], b[p.b]) ? 1u : 0u;
+    }
+    out.resize(w);
+  }
+
+  std::uint64_t memory_bytes() const {
+    const std::uint64_t bytes = fat_.capacity() * sizeof(Aabb) +
+                                (cached_.capacity() + fresh_.capacity()) * sizeof(Pair) +
+                                (escaped_.capacity() + moved_list_.capacity()) * sizeof(std::uint32_t) +
+                                in_moved_.capacity() + equery_.capacity() * sizeof(QBox) +
+                                sizes_.capacity() * sizeof(float);
+    return bytes + tree_memory_bytes();
+  }
+
+  /// Steps 1-5 on `boxes`: out = the sorted overlapping pairs; returns the candidates.
+  std::uint64_t find_tree(const std::vector<Aabb>& boxes, std::vector<Pair>& out) {
     out.clear();
     const std::size_t n = boxes.size();
     const int threads = n >= kParallelMinBodies ? std::max(1, max_threads()) : 1;
@@ -231,9 +524,11 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       }
     }
     detail::sort_pairs(out, n, tmp_pairs_, count_);
-    stats.cell_candidates = candidates;
-    stats.pairs = out.size();
-    stats.memory_bytes =
+    return candidates;
+  }
+
+  std::uint64_t tree_memory_bytes() const {
+    std::uint64_t memory_bytes =
         (qbody_.capacity() + qslot_.capacity()) * sizeof(QBox) +
         (key_.capacity() + lin_.capacity() + slot_of_.capacity() + cell_linear_.capacity() +
          radix_count_.capacity() + count_.capacity()) *
@@ -241,15 +536,15 @@ class LooseOctreeBroadPhase final : public BroadPhase {
         (order_.capacity() + moved_.capacity() + merge_buf_.capacity()) * sizeof(std::uint64_t) +
         slots_.capacity() * sizeof(Slot) + cells_.capacity() * sizeof(Cell) +
         hash_.capacity() * sizeof(HashSlot) + tmp_pairs_.capacity() * sizeof(Pair);
-    for (const auto& t : dense_) stats.memory_bytes += t.capacity() * sizeof(std::uint32_t);
-    for (const auto& b : bits_) stats.memory_bytes += b.capacity() * sizeof(std::uint64_t);
-    for (const auto& a : soa_) stats.memory_bytes += a.capacity() * sizeof(float);
+    for (const auto& t : dense_) memory_bytes += t.capacity() * sizeof(std::uint32_t);
+    for (const auto& b : bits_) memory_bytes += b.capacity() * sizeof(std::uint64_t);
+    for (const auto& a : soa_) memory_bytes += a.capacity() * sizeof(float);
     for (const auto& w : workers_) {
-      stats.memory_bytes += w.flat.capacity() * sizeof(std::uint32_t) + w.pairs.capacity() * sizeof(Pair);
+      memory_bytes += w.flat.capacity() * sizeof(std::uint32_t) + w.pairs.capacity() * sizeof(Pair);
     }
+    return memory_bytes;
   }
 
- private:
   /// Step 1: D_w, then the key and fixed-point box of every body (in body order).
   void compute_keys(const std::vector<Aabb>& boxes, int threads) {
     const std::size_t n = boxes.size();
@@ -731,6 +1026,23 @@ class LooseOctreeBroadPhase final : public BroadPhase {
   };
   std::vector<Worker> workers_;
   std::vector<std::uint32_t> count_;
+  // Step 6: the pair cache.
+  std::vector<Aabb> fat_;        // per body: its fattened box when the cache was built
+  std::vector<float> sizes_;     // sampled body sizes (scratch of fatten)
+  std::vector<Pair> cached_;     // sorted pairs whose fattened boxes overlap
+  float fat_d_ = 0.0f;           // the margin of fat_ (m)
+  std::vector<std::uint32_t> escaped_;    // bodies outside their fattened box (this call)
+  std::vector<QBox> equery_;              // their new fattened boxes, fixed point
+  std::vector<std::uint8_t> in_moved_;    // per body: 1 = fattened box replaced since the build
+                                          // (2 added while it escapes in this call)
+  std::vector<std::uint32_t> moved_list_; // those bodies
+  std::size_t moved_count_ = 0;
+  std::vector<Pair> fresh_;               // pairs found by an update
+  std::uint64_t update_candidates_ = 0;
+  bool cache_ready_ = false;     // cached_ and fat_ are valid
+  std::uint32_t plain_left_ = 1; // calls that run the tree on the boxes before a build
+  std::uint32_t backoff_ = 1;    // the last back-off (calls)
+  std::uint64_t cache_hits_ = 0; // calls served by the current cache
 };
 
 }  // namespace

@@ -743,32 +743,196 @@ TEST(BroadPhase, AutoLooseOctreeDepth) {
 
 // The loose octree runs its keys and queries on OpenMP threads from 4096 bodies on: the
 // pairs (and the candidate count) must not depend on the thread count, including the
-// overflow tests split in chunks of in-tree bodies (walls and huge bodies here).
+// overflow tests split in chunks of in-tree bodies (walls and huge bodies here), on every
+// kind of call of one instance: the first (tree on the boxes), the build of the pair
+// cache, a hit, an update of a few escaped bodies, a rebuild after a teleport.
 TEST(BroadPhase, LooseOctreeThreadCountDoesNotChangeTheAnswer) {
 #if defined(_OPENMP)
   std::vector<Aabb> boxes = random_boxes(12000, 77);
   boxes[10] = {{-3.0f, -0.1f, -3.0f}, {3.0f, 0.0f, 3.0f}};        // floor slab (overflow)
   boxes[11] = {{-2.1f, -3.0f, -3.0f}, {-2.0f, 3.0f, 3.0f}};       // wall (overflow)
   boxes[12] = {{-10.0f, -10.0f, -10.0f}, {10.0f, 10.0f, 10.0f}};  // contains everything
-  const std::vector<Pair> want = brute(boxes);
+  std::vector<std::vector<Aabb>> frames = {boxes, boxes, boxes};
+  for (std::uint32_t i : {100u, 2000u, 7000u}) boxes[i] = translated(boxes[i], {0.3f, 0.1f, -0.2f});
+  frames.push_back(boxes);
+  for (Aabb& b : boxes) b = translated(b, {0.25f, 0.0f, 0.0f});
+  frames.push_back(boxes);
   const int saved = omp_get_max_threads();
-  std::vector<std::uint64_t> candidates;
+  std::vector<std::vector<std::uint64_t>> candidates;
   for (int threads : {1, 2, 3}) {
     omp_set_num_threads(threads);
     auto bp = make_broadphase({"octree", -1, 0.25f}, kDomain);
     std::vector<Pair> got;
     BroadPhaseStats st;
-    for (int call = 0; call < 2; ++call) {  // fresh, then with the kept order
-      bp->find_pairs(boxes, got, st);
+    candidates.emplace_back();
+    for (std::size_t call = 0; call < frames.size(); ++call) {
+      bp->find_pairs(frames[call], got, st);
+      const std::vector<Pair> want = brute(frames[call]);
       EXPECT_TRUE(got == want) << threads << " threads, call " << call << ": " << describe_diff(got, want);
-      candidates.push_back(st.cell_candidates);
+      candidates.back().push_back(st.cell_candidates);
     }
   }
   omp_set_num_threads(saved);
-  for (std::uint64_t c : candidates) EXPECT_EQ(c, candidates.front());
+  for (const auto& c : candidates) EXPECT_EQ(c, candidates.front());
 #else
   GTEST_SKIP() << "built without OpenMP";
 #endif
+}
+
+// ---- the loose octree's pair cache (broadphase_octree.cpp, steps 6-7) -----------
+
+/// Host model of the cache's fattened boxes: every box grown by 1/8 of the median largest
+/// side (finite, > 0) of at most 1023 bodies spaced evenly in body order.
+std::vector<Aabb> fattened(const std::vector<Aabb>& boxes) {
+  std::vector<float> sizes;
+  const std::size_t stride = boxes.size() / 1023 + 1;
+  for (std::size_t i = 0; i < boxes.size(); i += stride) {
+    const Aabb& b = boxes[i];
+    const float e = std::max({b.max.x - b.min.x, b.max.y - b.min.y, b.max.z - b.min.z});
+    if (e > 0.0f && e <= 3.4e38f) sizes.push_back(e);
+  }
+  std::nth_element(sizes.begin(), sizes.begin() + static_cast<std::ptrdiff_t>(sizes.size() / 2), sizes.end());
+  const float d = sizes.empty() ? 0.0f : 0.125f * sizes[sizes.size() / 2];
+  std::vector<Aabb> out;
+  for (const Aabb& b : boxes) out.push_back(expanded(b, d));
+  return out;
+}
+
+/// The kept pairs filtered by the boxes (what a hit returns).
+std::vector<Pair> filtered(const std::vector<Pair>& kept, const std::vector<Aabb>& boxes) {
+  std::vector<Pair> out;
+  for (const Pair p : kept) {
+    if (overlaps(boxes[p.a], boxes[p.b])) out.push_back(p);
+  }
+  return out;
+}
+
+// One instance over a motion sequence: every answer equals brute force, through every
+// path (first call, build, hits, updates of escaped bodies, a NaN body, rebuilds). The
+// kept set is checked against the host model (the fattened boxes' pairs), and the faults
+// the cache must not have are planted in the model and shown to give a wrong answer on
+// this sequence: no containment check (a stale cache), and an update that re-queries an
+// escaped body against the tree's build-time boxes only (missing a body that escaped
+// before it).
+TEST(BroadPhase, LooseOctreePairCacheMatchesBruteForceOverAMotionSequence) {
+  std::vector<Aabb> boxes = random_boxes(3000, 5);
+  boxes[400] = {{-3.0f, -0.4f, -3.0f}, {3.0f, -0.3f, 3.0f}};  // floor slab (overflow list)
+  const std::size_t n = boxes.size();
+  auto bp = make_broadphase({"octree", -1, 0.25f}, kDomain);
+  std::vector<Pair> got;
+  BroadPhaseStats st;
+  const auto call = [&](const std::string& what) {
+    SCOPED_TRACE(what);
+    bp->find_pairs(boxes, got, st);
+    const std::vector<Pair> want = brute(boxes);
+    expect_well_formed(got, n);
+    EXPECT_TRUE(got == want) << describe_diff(got, want);
+    EXPECT_EQ(st.pairs, want.size());
+  };
+  const auto plain_candidates = [&] {
+    std::vector<Pair> p;
+    BroadPhaseStats s;
+    make_broadphase({"octree", -1, 0.25f}, kDomain)->find_pairs(boxes, p, s);
+    return s.cell_candidates;
+  };
+  call("first call");
+  call("build");
+  // Hits: the kept pairs are those of the fattened boxes of the build.
+  const std::vector<Aabb> before_moves = boxes;
+  const std::vector<Aabb> fat0 = fattened(boxes);
+  const std::vector<Pair> kept0 = brute(fat0);
+  ASSERT_GT(kept0.size(), brute(boxes).size()) << "the margin must add pairs";
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> drift(-0.0005f, 0.0005f);
+  for (int f = 0; f < 6; ++f) {
+    for (Aabb& b : boxes) b = translated(b, {drift(rng), drift(rng), drift(rng)});
+    call("drift " + std::to_string(f));
+    EXPECT_EQ(st.cell_candidates, kept0.size()) << "a hit re-tests the kept pairs only";
+  }
+  // Body a leaves its fattened box: an update (far fewer tests than a tree).
+  const std::uint32_t a = 100, b = 200, c = 300;
+  const Vec3 p{0.5f, 0.5f, 0.3f};
+  boxes[a] = {{p.x - 0.05f, p.y - 0.05f, p.z - 0.05f}, {p.x + 0.05f, p.y + 0.05f, p.z + 0.05f}};
+  call("a escapes");
+  EXPECT_LT(st.cell_candidates, plain_candidates() / 2) << "an update, not a rebuild";
+  // Body b lands on a: the pair is found although a's box in the tree is the build's.
+  boxes[b] = {{p.x - 0.02f, p.y, p.z}, {p.x + 0.02f, p.y + 0.08f, p.z + 0.01f}};
+  call("b lands on a");
+  EXPECT_LT(st.cell_candidates, plain_candidates() / 2) << "an update, not a rebuild";
+  EXPECT_TRUE(std::binary_search(got.begin(), got.end(), Pair{a, b}));
+  {
+    // Planted fault: b re-queried against the build-time fattened boxes only.
+    std::vector<Aabb> stale = fat0;
+    stale[b] = fattened(boxes)[b];
+    std::vector<Pair> faulty = filtered(brute(stale), boxes);
+    EXPECT_FALSE(std::binary_search(faulty.begin(), faulty.end(), Pair{a, b}))
+        << "the planted fault must lose the pair (a, b)";
+    EXPECT_FALSE(faulty == got);
+  }
+  // Body e lands on the slab (found through the overflow run); body g, which has pairs,
+  // moves just past the margin: its new pairs replace its kept ones (none twice).
+  const std::uint32_t e = 500;
+  boxes[e] = {{1.0f, -0.31f, 0.2f}, {1.05f, -0.26f, 0.25f}};
+  call("e lands on the slab");
+  EXPECT_TRUE(std::binary_search(got.begin(), got.end(), Pair{400, e}));
+  std::uint32_t g = 0;
+  for (const Pair q : got) {
+    if (q.a > 600 && q.a != e && q.b != 400) {
+      g = q.a;
+      break;
+    }
+  }
+  ASSERT_GT(g, 0u);
+  const std::vector<Aabb> fat_now = fattened(before_moves);
+  boxes[g] = translated(boxes[g], {fat_now[g].max.x - before_moves[g].max.x + 0.004f, 0.0f, 0.0f});
+  call("g nudged out");
+  EXPECT_LT(st.cell_candidates, plain_candidates() / 2) << "an update, not a rebuild";
+  // A NaN box overlaps nothing and keeps the cache; back in place it is a hit again.
+  const Aabb saved_c = boxes[c];
+  boxes[c].min.y = std::numeric_limits<float>::quiet_NaN();
+  call("c is NaN");
+  boxes[c] = saved_c;
+  call("c back");
+  // Every body jumps by up to 8 cm: a rebuild; a cache kept without the
+  // containment check (planted fault) gives a wrong answer here.
+  const std::vector<Aabb> before = boxes;
+  std::uniform_real_distribution<float> jump(-0.08f, 0.08f);
+  for (Aabb& x : boxes) x = translated(x, {jump(rng), jump(rng), jump(rng)});
+  {
+    const std::vector<Pair> stale = filtered(brute(fattened(before)), boxes);
+    EXPECT_FALSE(stale == brute(boxes)) << "the planted fault (no containment check) must be caught";
+  }
+  call("teleport");
+  call("hit after the rebuild");
+  // A body grows over the whole domain (too many cells to re-query: a rebuild), then
+  // becomes infinite (overflow list).
+  boxes[c] = {{-3.0f, -3.0f, -3.0f}, {3.0f, 3.0f, 3.0f}};
+  call("c covers the domain");
+  const float inf = std::numeric_limits<float>::infinity();
+  boxes[c] = {{-inf, -inf, -inf}, {inf, inf, inf}};
+  call("c infinite");
+  call("same boxes again");
+}
+
+// Incoherent input (a new random set on every call): every answer equals brute force, and
+// the cache is built less and less often (calls 2, 5, 10, then after 8 and 16 calls of
+// the tree on the boxes): a build is the call whose candidates differ from those of a
+// fresh instance's first call on the same boxes. Planted fault: without the back-off
+// (a build after every useless cache and one plain call) builds would come at 2, 4, 6, ...
+TEST(BroadPhase, LooseOctreeBacksOffOnIncoherentInput) {
+  auto bp = make_broadphase({"octree", -1, 0.25f}, kDomain);
+  std::vector<int> builds;
+  for (int call = 1; call <= 20; ++call) {
+    const std::vector<Aabb> boxes = random_boxes(1500, 1000u + static_cast<unsigned>(call));
+    std::vector<Pair> got, fresh;
+    BroadPhaseStats st, fs;
+    bp->find_pairs(boxes, got, st);
+    const std::vector<Pair> want = brute(boxes);
+    EXPECT_TRUE(got == want) << "call " << call << ": " << describe_diff(got, want);
+    make_broadphase({"octree", -1, 0.25f}, kDomain)->find_pairs(boxes, fresh, fs);
+    if (st.cell_candidates != fs.cell_candidates) builds.push_back(call);
+  }
+  EXPECT_EQ(builds, (std::vector<int>{2, 5, 10, 19}));
 }
 
 }  // namespace
