@@ -201,6 +201,19 @@ int mid_fuse_from_env() {
                                v));
 }
 
+/// OCTOCD_CUDA_MID_EARLY_EXIT: whether the midphase skips the remaining work of a pair once
+/// it is confirmed (MidListDesc::early_exit): unset or "1" on, "0" off (every list item runs;
+/// the counts are the deterministic work of the lists with no early exit).
+int mid_early_exit_from_env() {
+  const char* v = std::getenv("OCTOCD_CUDA_MID_EARLY_EXIT");
+  if (v == nullptr || std::strcmp(v, "1") == 0) return 1;
+  if (std::strcmp(v, "0") == 0) return 0;
+  throw InputError(fmt::format("OCTOCD_CUDA_MID_EARLY_EXIT: '{}' is not allowed; allowed: 1 (the midphase skips the "
+                               "rest of a pair's work once it is confirmed, the default), 0 (every item runs: "
+                               "deterministic counts), or unset",
+                               v));
+}
+
 /// The environment variable `name` as an integer in [lo, hi], or `dflt` when unset; an
 /// InputError naming the variable, the value, the range and `what` it sets otherwise.
 long env_integer(const char* name, long lo, long hi, long dflt, const char* what) {
@@ -261,6 +274,7 @@ struct CudaWorld::Impl {
   int level_steps = 0;  // midphase steps (0: aabb-only, or no levels)
   unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
   int mid_fuse = -1;       // OCTOCD_CUDA_MID_FUSE (MidListDesc::fuse_leaves)
+  int mid_early_exit = 1;  // OCTOCD_CUDA_MID_EARLY_EXIT (MidListDesc::early_exit)
   bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
   unsigned small_grid = 1;  // its blocks (co-resident)
   gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
@@ -456,6 +470,7 @@ struct CudaWorld::Impl {
     md.counters = counters();
     md.steps = level_steps;
     md.fuse_leaves = mid_fuse;
+    md.early_exit = mid_early_exit;
     return md;
   }
 
@@ -927,6 +942,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   const bool small_poll = small_poll_from_env();
   const long one_block_pairs = small_one_block_pairs_from_env();
   const int mid_fuse = mid_fuse_from_env();
+  const int mid_early_exit = mid_early_exit_from_env();
   const bool persistent = persistent_from_env();
   const long idle_us = env_integer("OCTOCD_CUDA_PERSISTENT_IDLE_US", 1, 600000000L, kResidentIdleUs,
                                    "microseconds after which the idle resident kernel ends itself");
@@ -945,6 +961,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.bp = std::move(bp);
   d.device = describe_current_device();
   d.mid_fuse = mid_fuse;
+  d.mid_early_exit = mid_early_exit;
   d.sync_each_launch = env_is_one("OCTOCD_CUDA_SYNC");
   const char* graph = std::getenv("OCTOCD_CUDA_GRAPH");
   d.use_graph = !(graph != nullptr && std::strcmp(graph, "0") == 0);
