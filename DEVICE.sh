@@ -29,7 +29,7 @@ T5="bunny-random-400 armadillo-random-250 dragon-random-250 asian-dragon-random-
 # exit on: graph, fused leaves, small path; bits, records, counts on <= off), the fused-leaf
 # test, the small path's grids, and every suite on the Table 5 scenes and the piles
 # (CpuVsCuda, CudaRerun incl. capacity 1, CudaOctree, CpuVsCudaScale bunny-pile-10k).
-F='CudaMidphase.*:CudaSmallStep.*:*bunny_random_400*:*armadillo_random_250*:*dragon_random_250*:*bunny_pile*'
+F='CudaMidphase.*:CudaSmallStep.*:*bunny_random_400*:*armadillo_random_250*:*dragon_random_250*:*asian_dragon_random_60*:*bunny_pile*'
 TMO=200 s tests_exit_on env OCTOCD_CUDA_MID_EARLY_EXIT=1 bin/test_cuda_world --gtest_filter="$F"
 grep -h "PASSED\|FAILED\|\[ info \].*exit on\|tests, listed" "$R/tests_exit_on.txt" | head -30
 
