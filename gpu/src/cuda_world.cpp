@@ -189,7 +189,8 @@ long small_one_block_pairs_from_env() {
 }
 
 /// OCTOCD_CUDA_MID_FUSE: whether the last midphase expand step of the graph path runs its
-/// items' leaves itself (MidListDesc::fuse_leaves): unset = -1 (auto), "0" never, "1" always.
+/// items' leaves itself (MidListDesc::fuse_leaves): unset = -1 (auto), "0" never, "1" always
+/// (on the small path too, which otherwise never does: small_step.cu's kFuse kernels).
 int mid_fuse_from_env() {
   const char* v = std::getenv("OCTOCD_CUDA_MID_FUSE");
   if (v == nullptr) return -1;

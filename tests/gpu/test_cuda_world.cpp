@@ -815,7 +815,9 @@ TEST(CudaSmallStep, AnyGridGivesTheGraphPathsBits) {
 // three level steps. A bad value is an input error, before the device is looked at. Both
 // engines run with no early exit (OCTOCD_CUDA_MID_EARLY_EXIT=0), so that their counts are
 // the lists' whole work and must be equal; CudaMidphase.EarlyExit* runs the fused leaves
-// with the early exit.
+// with the early exit. The small path with OCTOCD_CUDA_MID_FUSE=1 (its own kernel
+// instantiation, whose last expand step runs the leaves in the block's shared tiles) gives
+// the same bits and counts too.
 TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
   for (const char* bad : {"", "2", "auto", " 1"}) {
     const ScopedEnv env("OCTOCD_CUDA_MID_FUSE", bad);
@@ -851,21 +853,27 @@ TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
       const ScopedEnv env("OCTOCD_CUDA_MID_FUSE", "0");
       never = std::make_unique<CudaWorld>(m, "octree");
     }
+    std::unique_ptr<CudaWorld> small_fused;
     {
       const ScopedEnv env("OCTOCD_CUDA_MID_FUSE", "1");
       always = std::make_unique<CudaWorld>(m, "octree");
+      const PathEnv small("small");
+      small_fused = std::make_unique<CudaWorld>(m, "octree");
     }
     ASSERT_EQ(never->step_path(), "graph");
     ASSERT_EQ(always->step_path(), "graph");
+    expect_path(*small_fused, "small", m->initial.size(), cs.scene);
     std::uint64_t vertex_tests = 0, contacts = 0;
     for (int f = 1; f <= cs.frames; ++f) {
       const bool rec = f % 25 == 0;
       cpu.set_recording(rec);
       never->set_recording(rec);
       always->set_recording(rec);
+      small_fused->set_recording(rec);
       const FrameMetrics mc = cpu.step();
       const FrameMetrics m0 = never->step();
       const FrameMetrics m1 = always->step();
+      const FrameMetrics ms = small_fused->step();
       const std::string what = fmt::format("{} (levels {}) frame {}", cs.scene, cs.levels ? cs.levels : "own", f);
       vertex_tests += m1.vertex_tests;
       contacts += mc.contacts;
@@ -873,9 +881,18 @@ TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
           << what << " (fuse 0): " << first_difference(cpu.state(), never->state());
       ASSERT_EQ(cpu.state_hash(), always->state_hash())
           << what << " (fuse 1): " << first_difference(cpu.state(), always->state());
+      ASSERT_EQ(cpu.state_hash(), small_fused->state_hash())
+          << what << " (small path, fuse 1): " << first_difference(cpu.state(), small_fused->state());
       expect_same_counts(m0, m1, what + " (fuse 0 vs 1)");
       expect_cpu_cuda_counts(mc, m1, what, false, true);
-      if (rec) expect_same_record(never->record(), always->record(), what + " (fuse 0 vs 1)");
+      EXPECT_EQ(m0.box_tests, ms.box_tests) << what << " (small path, fuse 1)";
+      EXPECT_EQ(m0.box_pairs, ms.box_pairs) << what << " (small path, fuse 1)";
+      EXPECT_EQ(m0.vertex_tests, ms.vertex_tests) << what << " (small path, fuse 1)";
+      EXPECT_EQ(m0.contacts, ms.contacts) << what << " (small path, fuse 1)";
+      if (rec) {
+        expect_same_record(never->record(), always->record(), what + " (fuse 0 vs 1)");
+        expect_same_record(never->record(), small_fused->record(), what + " (small path, fuse 1)");
+      }
       if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
     }
     EXPECT_GT(contacts, 0u) << cs.scene << ": the run must reach contacts";
@@ -887,7 +904,7 @@ TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
 // changes no bit; it only lowers the midphase counts. On the Table 5 scenes with --midphase
 // 1,2 and on a pile, the CPU engine (octree) against cuda engines with the early exit off
 // (graph path) and on (graph path with the fused leaves at their default and always on, and
-// the small path where the scene allows it), every frame: equal state bits; every 25th frame:
+// the small path with the leaf list and with fused leaves where the scene allows it), every frame: equal state bits; every 25th frame:
 // equal pairs, confirmed contacts and contact terms; counts: with the exit off each is >=
 // the CPU's (the lists' whole work), with it on each is <= the figure with it off on the
 // same state and zero exactly when it is. Over each Table 5 run the exit must save vertex
@@ -941,6 +958,9 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
       const PathEnv small("small");
       const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", "1");
       on.emplace_back("small", std::make_unique<CudaWorld>(m, "octree"));
+      ASSERT_EQ(on.back().second->step_path(), "small") << cs.scene;
+      const ScopedEnv fuse("OCTOCD_CUDA_MID_FUSE", "1");
+      on.emplace_back("small, fused leaves", std::make_unique<CudaWorld>(m, "octree"));
       ASSERT_EQ(on.back().second->step_path(), "small") << cs.scene;
     }
     ASSERT_EQ(off->step_path(), "graph");
