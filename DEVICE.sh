@@ -5,7 +5,8 @@
 # datasets/). Logs and JSON go to R. Every command has a timeout, each clipped to what is
 # left of a 520 s budget, so the script ends within 9 minutes (expected about 6).
 # Order: correctness with the exit on (the default), the Table 5 scenes with the exit on and
-# off (`octocd bench`, 1000 frames x 5), bunny-pile-100k (3000 frames) on and off, the
+# off (`octocd bench`, 1000 frames x 5), bunny-pile-100k (3000 frames) on and off, the Table 5
+# scenes with the exit on and OCTOCD_CUDA_MID_FUSE=1 (fused leaves, small path too), the
 # count-equality tests with the exit off, and last (if time is left) bench_step_paths on the
 # Table 5 scenes (graph and resident small path, on and off).
 set -u
@@ -41,29 +42,34 @@ cat > "$R/table5-12.json" <<'EOF'
  "scenes": ["bunny-random-400", "armadillo-random-250", "dragon-random-250", "asian-dragon-random-60"],
  "axes": [{"name": "midphase", "values": ["1,2"], "labels": ["B"]}]}
 EOF
-for x in 1 0; do
-  TMO=100 s bench_exit$x env OCTOCD_CUDA_MID_EARLY_EXIT=$x OCTOCD_CUDA_STAGE_TIMES=0 bin/octocd bench \
-    "$R/table5-12.json" --quiet -o "$R/table5-exit$x.json"
-done
-timeout 10 python3 - "$R" <<'EOF'
+# table5 V ENV...: the sweep with the environment ENV, result R/table5-V.json.
+table5() {
+  local v=$1; shift
+  TMO=100 s bench_$v env "$@" OCTOCD_CUDA_STAGE_TIMES=0 bin/octocd bench "$R/table5-12.json" --quiet -o "$R/table5-$v.json"
+}
+# t5_table V...: steps/s median (min-max) and vertex tests per frame of each variant.
+t5_table() {
+  timeout 10 python3 - "$R" "$@" <<'EOF'
 import json, os, sys
-r = sys.argv[1]
+r, variants = sys.argv[1], sys.argv[2:]
 rows = {}
-for x in ("1", "0"):
-    f = os.path.join(r, f"table5-exit{x}.json")
+for v in variants:
+    f = os.path.join(r, f"table5-{v}.json")
     if not os.path.exists(f): continue
     for p in json.load(open(f))["points"]:
-        if p.get("status") != "ok": print("  ", x, p["id"], p.get("status"), p.get("reason", "")); continue
+        if p.get("status") != "ok": print("  ", v, p["id"], p.get("status"), p.get("reason", "")); continue
         w = p["windows"]["all"]; s = w["steps_per_s"]
-        rows.setdefault(p["params"]["scene"], {})[x] = (s["median"], s["min"], s["max"], w["vertex_tests"]["median"])
-print("| scene | exit on steps/s (min-max) | exit off steps/s (min-max) | on/off | vertex tests/frame on | off |")
-print("|---|---:|---:|---:|---:|---:|")
+        rows.setdefault(p["params"]["scene"], {})[v] = (s["median"], s["min"], s["max"], w["vertex_tests"]["median"])
+print("| scene | " + " | ".join(f"{v}: steps/s (min-max), vertex tests/frame" for v in variants) + " |")
+print("|---|" + "---:|" * len(variants))
 for sc, d in rows.items():
-    on, off = d.get("1"), d.get("0")
-    f = lambda v: f"{v[0]:,.0f} ({v[1]:,.0f}-{v[2]:,.0f})" if v else "-"
-    ratio = f"{on[0] / off[0]:.2f}x" if on and off and off[0] else "-"
-    print(f"| {sc} | {f(on)} | {f(off)} | {ratio} | {on[3]:,.0f} | {off[3]:,.0f} |" if on and off else f"| {sc} | {f(on)} | {f(off)} | - | - | - |")
+    cells = [f"{d[v][0]:,.0f} ({d[v][1]:,.0f}-{d[v][2]:,.0f}), {d[v][3]:,.0f}" if v in d else "-" for v in variants]
+    print(f"| {sc} | " + " | ".join(cells) + " |")
 EOF
+}
+table5 exit1 OCTOCD_CUDA_MID_EARLY_EXIT=1
+table5 exit0 OCTOCD_CUDA_MID_EARLY_EXIT=0
+t5_table exit1 exit0
 
 # 3. bunny-pile-100k, 3000 frames (target >= 150 steps/s), exit on and off; with the exit
 # off the counts must equal main's (reports/h100/midphase-v3: the same as f70290f).
@@ -81,6 +87,10 @@ print(f"  exit={sys.argv[2]}: {d['steps_per_s']:.2f} steps/s, mean step {d['mean
       f"vertex tests {got[1]!r}, contacts {got[2]!r}, last KE {got[3]!r}: {same}")
 EOF
 done
+
+# 3b. The Table 5 scenes with the leaves in the last expand step (small path too) and the exit on.
+table5 exit1fuse1 OCTOCD_CUDA_MID_EARLY_EXIT=1 OCTOCD_CUDA_MID_FUSE=1
+t5_table exit1 exit0 exit1fuse1
 
 # 4. The exact count comparisons with the exit off (rerun and capacity 1, small path grids,
 # fuse 0 vs 1): the counts are deterministic again.
