@@ -37,7 +37,8 @@
 // stops before its next 32 cell pairs, the fused leaves stop before the next chunk, and a
 // leaf checks the pair before each tile of B and of A (each check one volatile load by lane
 // 0, shuffled: warp-uniform, so no lane leaves a warp collective). A leaf then runs no count
-// over its whole vertex ranges (only the tiles it stages).
+// over its whole vertex ranges (only the tiles it stages), and the fused leaves of an expand
+// item run deepest overlap first (overlap_depth: the likelier hits first).
 // Counts, early exit off: box tests = every cell pair tested, box pairs = surviving leaf
 // cell pairs, vertex tests = per leaf (A's filtered vertices) x (B's filtered vertices) or
 // the cell's vertices against a box: the work of the lists with no early exit (a leaf of a
@@ -430,15 +431,25 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
 /// this warp in lane order instead of being appended to the leaf list: each mesh-mesh cell
 /// pair as its kLeafChunk chunks, each mesh-box cell once, exactly the items the list would
 /// have held (so the same tests and counts); with the early exit on, none after the pair is
-/// confirmed.
+/// confirmed, and the cell pairs in the order of `depth` (lane's overlap_depth), deepest
+/// first (the likelier hits first; ties in lane order), else in lane order.
 __device__ inline void run_leaves(const MidListDesc& d, const PairContext& c, std::uint32_t k, unsigned mask,
-                                  const MidItem& item, LeafTiles& tiles, Tally& t) {
+                                  const MidItem& item, float depth, LeafTiles& tiles, Tally& t) {
   Vec3* tile_b = tiles[threadIdx.x >> 5][0];
   Vec3* tile_a = tiles[threadIdx.x >> 5][1];
   const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+  const bool deepest_first = d.early_exit != 0;
+  const unsigned key = __float_as_uint(depth);  // depth >= +0: ordered as the floats
   while (mask) {
-    const int l = __ffs(mask) - 1;
-    mask &= mask - 1u;
+    int l;
+    if (deepest_first) {
+      const bool in = ((mask >> lane_id()) & 1u) != 0;
+      const unsigned best = __reduce_max_sync(kFull, in ? key : 0u);
+      l = __ffs(__ballot_sync(kFull, in && key == best)) - 1;
+    } else {
+      l = __ffs(mask) - 1;
+    }
+    mask &= ~(1u << l);
     const std::uint32_t ca = __shfl_sync(kFull, item.ca, l);
     const std::uint32_t cb = __shfl_sync(kFull, item.cb, l);
     const std::uint32_t chunks = mesh_box ? 1u : (c.b.octree.cells[cb].vertex_count + kLeafChunk - 1) / kLeafChunk;
@@ -447,6 +458,16 @@ __device__ inline void run_leaves(const MidListDesc& d, const PairContext& c, st
       leaf_item(d, c, k, ca, cb, ch, tile_a, tile_b, t);
     }
   }
+}
+
+/// The smallest extent of the overlap of two boxes (+0 when they touch or miss): how deep a
+/// leaf cell pair overlaps, the fused leaves' order with the early exit (run_leaves).
+__device__ inline float overlap_depth(const Aabb& a, const Aabb& b) {
+  const float x = fminf(a.max.x, b.max.x) - fmaxf(a.min.x, b.min.x);
+  const float y = fminf(a.max.y, b.max.y) - fmaxf(a.min.y, b.min.y);
+  const float z = fminf(a.max.z, b.max.z) - fmaxf(a.min.z, b.min.z);
+  const float m = fminf(x, fminf(y, z));
+  return m > 0.0f ? m : 0.0f;
 }
 
 /// Tests the cell pairs [a0, a1) x [b0, b1) of pair k (mesh-box: [a0, a1) against the
@@ -480,7 +501,12 @@ __device__ inline void test_cells(const MidListDesc& d, const PairContext& c, st
       const unsigned mask = __ballot_sync(kFull, keep);
       t.box_pairs += static_cast<unsigned long long>(__popc(mask));
       if (leaves != nullptr) {
-        run_leaves(d, c, k, mask, item, *leaves, t);
+        float depth = 0.0f;  // the order of the leaves with the early exit
+        if (keep && d.early_exit != 0)
+          depth = mesh_box ? overlap_depth(A.cells[item.ca].box, c.s.box_local)
+                           : overlap_depth(hd::moved_grown(A.cells[item.ca].box, c.s.d, c.s.margin),
+                                           B.cells[item.cb].box);
+        run_leaves(d, c, k, mask, item, depth, *leaves, t);
         continue;
       }
     }
