@@ -378,7 +378,8 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   std::uint32_t nb = 0;
   stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
   const std::uint32_t nbf =
-      exit_early ? nb : nb + (jb < jb_end ? count_inside(B.vertices, c.blocks_b, jb * kVertexBlock, b_end, a_in_b) : 0u);
+      exit_early ? nb
+                 : nb + (jb < jb_end ? count_inside(B.vertices, c.blocks_b, jb * kVertexBlock, b_end, a_in_b) : 0u);
   if (nbf == 0) return;  // as mesh_mesh_leaf: no vertex test
   const std::uint32_t ia_end = block_end(a_end);
   std::uint32_t ia_first = a_begin / kVertexBlock;  // A's next block after its first tile
