@@ -39,6 +39,9 @@
 // 0, shuffled: warp-uniform, so no lane leaves a warp collective). A leaf then runs no count
 // over its whole vertex ranges (only the tiles it stages), and the fused leaves of an expand
 // item run deepest overlap first (overlap_depth: the likelier hits first).
+// Tile culling (either way): a leaf skips a pair of staged vertex tiles whose bounding boxes
+// are apart by theta on some axis (tiles_apart; exact for hd::vertex_close's float sum), so
+// a large leaf tests only the tile pairs that are near each other.
 // Counts, early exit off: box tests = every cell pair tested, box pairs = surviving leaf
 // cell pairs, vertex tests = per leaf (A's filtered vertices) x (B's filtered vertices) or
 // the cell's vertices against a box: the work of the lists with no early exit (a leaf of a
@@ -308,6 +311,45 @@ __device__ inline bool tiles_close(const Vec3* tile_a, std::uint32_t na, const V
   return found;
 }
 
+/// The bounding box of the world vertices tile[0, n) (the whole warp; warp-uniform result;
+/// n >= 1): exact minima and maxima, no rounding.
+__device__ inline Aabb tile_box(const Vec3* tile, std::uint32_t n) {
+  Vec3 lo = tile[0], hi = tile[0];
+  for (std::uint32_t i = lane_id(); i < n; i += 32) {
+    const Vec3 v = tile[i];
+    lo = {fminf(lo.x, v.x), fminf(lo.y, v.y), fminf(lo.z, v.z)};
+    hi = {fmaxf(hi.x, v.x), fmaxf(hi.y, v.y), fmaxf(hi.z, v.z)};
+  }
+  for (int o = 16; o > 0; o >>= 1) {
+    lo.x = fminf(lo.x, __shfl_xor_sync(kFull, lo.x, o));
+    lo.y = fminf(lo.y, __shfl_xor_sync(kFull, lo.y, o));
+    lo.z = fminf(lo.z, __shfl_xor_sync(kFull, lo.z, o));
+    hi.x = fmaxf(hi.x, __shfl_xor_sync(kFull, hi.x, o));
+    hi.y = fmaxf(hi.y, __shfl_xor_sync(kFull, hi.y, o));
+    hi.z = fmaxf(hi.z, __shfl_xor_sync(kFull, hi.z, o));
+  }
+  return {lo, hi};
+}
+
+/// Whether the coordinates on one axis of every vertex of one set are >= `lo` and of every
+/// vertex of the other set <= `hi` with a gap g = lo - hi (in float) > 0 and g * g >= theta2:
+/// then no pair of the two is within theta as hd::vertex_close computes it. Exact: rounding
+/// is monotone, so each pair's |dx| = |fl(wa.x - wb.x)| >= g, fl(dx * dx) >= fl(g * g), and
+/// adding the other (non-negative) squares never lowers the sum below that (no FMA:
+/// --fmad=false), so the sum is >= theta2 and vertex_close(wa, wb) is false.
+__device__ inline bool axis_apart(float lo, float hi, float theta2) {
+  const float g = lo - hi;
+  return g > 0.0f && g * g >= theta2;
+}
+
+/// Whether two tiles' boxes (tile_box) are apart by theta on some axis (axis_apart): then
+/// tiles_close on them is false, and the tile pair is skipped (the same answer).
+__device__ inline bool tiles_apart(const Aabb& a, const Aabb& b, float theta2) {
+  return axis_apart(b.min.x, a.max.x, theta2) || axis_apart(a.min.x, b.max.x, theta2) ||
+         axis_apart(b.min.y, a.max.y, theta2) || axis_apart(a.min.y, b.max.y, theta2) ||
+         axis_apart(b.min.z, a.max.z, theta2) || axis_apart(a.min.z, b.max.z, theta2);
+}
+
 /// Shared memory of mid_leaf_items and of the last mid_expand step when it runs the
 /// leaves itself: per warp of the block, a tile of B's and one of A's filtered world
 /// vertices.
@@ -407,6 +449,9 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
       nb = 0;
       stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
     }
+    if (nb == 0) break;  // (only at the range's end)
+    const Aabb box_b = tile_box(tile_b, nb);
+    __syncwarp();  // tile_b is read; it is staged again only after the loop below
     // tile_a still holds A's first tile only while B's first tile is tested.
     bool a_staged = b_staged;
     b_staged = false;
@@ -420,8 +465,12 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
         stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia, na);
       }
       a_staged = false;
-      if (exit_early) t.vertex_tests += static_cast<unsigned long long>(na) * static_cast<unsigned long long>(nb);
-      found = tiles_close(tile_a, na, tile_b, nb, c.s.theta2);
+      // A pair of tiles whose boxes are apart by theta on some axis has no close vertex
+      // pair (tiles_apart: exact), so its tests are skipped (not counted with the exit on).
+      if (na > 0 && !tiles_apart(tile_box(tile_a, na), box_b, c.s.theta2)) {
+        if (exit_early) t.vertex_tests += static_cast<unsigned long long>(na) * static_cast<unsigned long long>(nb);
+        found = tiles_close(tile_a, na, tile_b, nb, c.s.theta2);
+      }
       __syncwarp();
     }
   }
