@@ -276,6 +276,7 @@ struct CudaWorld::Impl {
   unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
   int mid_fuse = -1;       // OCTOCD_CUDA_MID_FUSE (MidListDesc::fuse_leaves)
   int mid_early_exit = 1;  // OCTOCD_CUDA_MID_EARLY_EXIT (MidListDesc::early_exit)
+  int mid_tile_cull = 1;   // OCTOCD_CUDA_MID_TILE_CULL (MidListDesc::tile_cull)
   bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
   unsigned small_grid = 1;  // its blocks (co-resident)
   gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
@@ -472,6 +473,7 @@ struct CudaWorld::Impl {
     md.steps = level_steps;
     md.fuse_leaves = mid_fuse;
     md.early_exit = mid_early_exit;
+    md.tile_cull = mid_tile_cull;
     return md;
   }
 
@@ -944,6 +946,9 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   const long one_block_pairs = small_one_block_pairs_from_env();
   const int mid_fuse = mid_fuse_from_env();
   const int mid_early_exit = mid_early_exit_from_env();
+  const long mid_tile_cull = env_integer("OCTOCD_CUDA_MID_TILE_CULL", 0, 1, 1,
+                                         "1: a midphase leaf skips pairs of vertex tiles more than theta apart, "
+                                         "the default; 0: it tests every pair of tiles");
   const bool persistent = persistent_from_env();
   const long idle_us = env_integer("OCTOCD_CUDA_PERSISTENT_IDLE_US", 1, 600000000L, kResidentIdleUs,
                                    "microseconds after which the idle resident kernel ends itself");
@@ -963,6 +968,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.device = describe_current_device();
   d.mid_fuse = mid_fuse;
   d.mid_early_exit = mid_early_exit;
+  d.mid_tile_cull = static_cast<int>(mid_tile_cull);
   d.sync_each_launch = env_is_one("OCTOCD_CUDA_SYNC");
   const char* graph = std::getenv("OCTOCD_CUDA_GRAPH");
   d.use_graph = !(graph != nullptr && std::strcmp(graph, "0") == 0);

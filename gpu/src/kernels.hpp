@@ -136,6 +136,9 @@ struct MidListDesc {
   /// skipped (counts: the work done, timing-dependent); 0, every item of the lists runs and
   /// every leaf counts its whole filtered work (deterministic counts). Same results either way.
   int early_exit = 1;
+  /// A leaf skips a pair of vertex tiles whose boxes are more than theta apart on an axis
+  /// (midphase.cuh, tiles_apart; OCTOCD_CUDA_MID_TILE_CULL, default 1): the same results.
+  int tile_cull = 1;
 };
 
 /// One contact of the first response pass, as the host's ContactRecord wants it.

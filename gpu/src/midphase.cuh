@@ -39,9 +39,10 @@
 // 0, shuffled: warp-uniform, so no lane leaves a warp collective). A leaf then runs no count
 // over its whole vertex ranges (only the tiles it stages), and the fused leaves of an expand
 // item run deepest overlap first (overlap_depth: the likelier hits first).
-// Tile culling (either way): a leaf skips a pair of staged vertex tiles whose bounding boxes
-// are apart by theta on some axis (tiles_apart; exact for hd::vertex_close's float sum), so
-// a large leaf tests only the tile pairs that are near each other.
+// Tile culling (MidListDesc::tile_cull, OCTOCD_CUDA_MID_TILE_CULL, on by default; with the
+// exit on or off): a leaf skips a pair of staged vertex tiles whose bounding boxes are apart
+// by theta on some axis (tiles_apart; exact for hd::vertex_close's float sum), so a large
+// leaf tests only the tile pairs that are near each other.
 // Counts, early exit off: box tests = every cell pair tested, box pairs = surviving leaf
 // cell pairs, vertex tests = per leaf (A's filtered vertices) x (B's filtered vertices) or
 // the cell's vertices against a box: the work of the lists with no early exit (a leaf of a
@@ -450,8 +451,12 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
       stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
     }
     if (nb == 0) break;  // (only at the range's end)
-    const Aabb box_b = tile_box(tile_b, nb);
-    __syncwarp();  // tile_b is read; it is staged again only after the loop below
+    const bool cull = d.tile_cull != 0;
+    Aabb box_b{};
+    if (cull) {
+      box_b = tile_box(tile_b, nb);
+      __syncwarp();  // tile_b is read; it is staged again only after the loop below
+    }
     // tile_a still holds A's first tile only while B's first tile is tested.
     bool a_staged = b_staged;
     b_staged = false;
@@ -467,7 +472,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
       a_staged = false;
       // A pair of tiles whose boxes are apart by theta on some axis has no close vertex
       // pair (tiles_apart: exact), so its tests are skipped (not counted with the exit on).
-      if (na > 0 && !tiles_apart(tile_box(tile_a, na), box_b, c.s.theta2)) {
+      if (na > 0 && !(cull && tiles_apart(tile_box(tile_a, na), box_b, c.s.theta2))) {
         if (exit_early) t.vertex_tests += static_cast<unsigned long long>(na) * static_cast<unsigned long long>(nb);
         found = tiles_close(tile_a, na, tile_b, nb, c.s.theta2);
       }

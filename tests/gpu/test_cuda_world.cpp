@@ -912,8 +912,26 @@ TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
 // an expand item's leaves in turn, so the exit saves work whatever the timing) must do fewer
 // box tests and fewer vertex tests in total than with the exit off (box tests drop only by
 // skipping a confirmed pair's expand items or cell tests: an exit that is never taken fails
-// here). A bad value is an input error, before the device is looked at.
+// here). A graph engine with the exit off and the tile culling off
+// (OCTOCD_CUDA_MID_TILE_CULL=0: every pair of tiles tested) gives the same bits and, the
+// counts being the lists' whole work either way, the same counts as the one with it on. A bad
+// value of either switch is an input error, before the device is looked at.
 TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
+  for (const char* bad : {"", "2", "on"}) {
+    const ScopedEnv env("OCTOCD_CUDA_MID_TILE_CULL", bad);
+    try {
+      CudaWorld gpu(load_model("box-stack"), "flat");
+      ADD_FAILURE() << "accepted OCTOCD_CUDA_MID_TILE_CULL='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_MID_TILE_CULL: '{}' is not allowed; allowed: an "
+                                                       "integer 0 .. 1",
+                                                       bad)),
+                std::string::npos)
+          << e.what();
+    } catch (const RuntimeError& e) {
+      ADD_FAILURE() << "OCTOCD_CUDA_MID_TILE_CULL='" << bad << "' gave a runtime error: " << e.what();
+    }
+  }
   for (const char* bad : {"", "2", "on", " 0"}) {
     const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", bad);
     try {
@@ -944,13 +962,15 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
     BroadPhaseConfig cfg = m->scene.broadphase;
     cfg.name = "octree";
     World cpu(m, make_broadphase(cfg, m->scene.domain));
-    std::unique_ptr<CudaWorld> off;
+    std::unique_ptr<CudaWorld> off, off_no_cull;
     std::vector<std::pair<std::string, std::unique_ptr<CudaWorld>>> on;
     {
       const PathEnv graph("graph");
       {
         const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", "0");
         off = std::make_unique<CudaWorld>(m, "octree");
+        const ScopedEnv cull("OCTOCD_CUDA_MID_TILE_CULL", "0");
+        off_no_cull = std::make_unique<CudaWorld>(m, "octree");
       }
       const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", "1");
       on.emplace_back("graph", std::make_unique<CudaWorld>(m, "octree"));
@@ -973,9 +993,11 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
       const bool rec = f % 25 == 0;
       cpu.set_recording(rec);
       off->set_recording(rec);
+      off_no_cull->set_recording(rec);
       for (auto& e : on) e.second->set_recording(rec);
       const FrameMetrics mc = cpu.step();
       const FrameMetrics m0 = off->step();
+      const FrameMetrics mn = off_no_cull->step();
       const std::string what = fmt::format("{} (levels {}) frame {}", cs.scene, cs.levels ? cs.levels : "own", f);
       contacts += mc.contacts;
       cpu_vt += mc.vertex_tests;
@@ -984,6 +1006,12 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
       ASSERT_EQ(cpu.state_hash(), off->state_hash())
           << what << " (exit off): " << first_difference(cpu.state(), off->state());
       expect_cpu_cuda_counts(mc, m0, what + " (exit off)", false, true);
+      ASSERT_EQ(cpu.state_hash(), off_no_cull->state_hash())
+          << what << " (exit off, no tile culling): " << first_difference(cpu.state(), off_no_cull->state());
+      EXPECT_EQ(mn.box_tests, m0.box_tests) << what << " (tile culling off vs on)";
+      EXPECT_EQ(mn.box_pairs, m0.box_pairs) << what << " (tile culling off vs on)";
+      EXPECT_EQ(mn.vertex_tests, m0.vertex_tests) << what << " (tile culling off vs on)";
+      if (rec) expect_same_record(off->record(), off_no_cull->record(), what + " (tile culling off vs on)");
       for (std::size_t i = 0; i < on.size(); ++i) {
         CudaWorld& e = *on[i].second;
         const FrameMetrics m1 = e.step();
