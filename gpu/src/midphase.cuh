@@ -50,8 +50,9 @@
 // tests), so each is >= the CPU's count and none depends on timing or on where the leaves
 // run. Early exit on: the work done (box tests: per 32 cell pairs tested; box pairs: the
 // surviving leaf cell pairs of the tests run; vertex tests: na x nb per pair of tiles
-// tested, a mesh-box leaf's cell vertices), each <= the figure with the exit off on the same
-// state, > 0 exactly when it is, and dependent on timing (run to run, grid, path).
+// tested and not culled, a mesh-box leaf's cell vertices), each <= the figure with the exit
+// off on the same state (box tests and box pairs > 0 exactly when they are), and dependent
+// on timing (run to run, grid, path).
 // Each warp sums its counts in registers (Tally) and adds them once per launch.
 // Set-up: context() orders the pair (mesh first) on body indices and reads a step's levels
 // with hd::clamped_level, so no PlacedView is chosen by reference and no level array is
