@@ -8,8 +8,8 @@
 # off (`octocd bench`, 1000 frames x 5), bunny-pile-100k (3000 frames) on and off, the Table 5
 # scenes with the exit on and OCTOCD_CUDA_MID_FUSE=1 (fused leaves, small path too), with the
 # tile culling off (exit on, and exit off: main's midphase), the count-equality tests with
-# the exit off, and last (if time is left) bench_step_paths on the
-# Table 5 scenes (graph and resident small path, on and off).
+# the exit off, compute-sanitizer racecheck / memcheck on bunny-random-400, and last (if time
+# is left) bench_step_paths on the Table 5 scenes (graph and resident small path, on and off).
 set -u
 R=${1:?usage: DEVICE.sh RESULTS_DIR}
 mkdir -p "$R"
@@ -102,6 +102,17 @@ t5_table exit1 exit0 exit1fuse1 exit1cull0 exit0cull0
 F0='CudaMidphase.Leaves*:CudaSmallStep.*:*CudaRerun*bunny_random_400*:*CudaRerun*dragon_random_250*'
 TMO=120 s tests_exit_off env OCTOCD_CUDA_MID_EARLY_EXIT=0 bin/test_cuda_world --gtest_filter="$F0"
 grep -h "PASSED\|FAILED\|tests, listed" "$R/tests_exit_off.txt" | head -12
+
+# 4b. Sanitizers on the new device code (the exit's checks, the deepest-first fused leaves,
+# the tile boxes' shuffles): racecheck on the graph path with fused leaves and on the small
+# path with fused leaves (its kFuse kernel), memcheck on the small path's leaf list;
+# bunny-random-400 with 1,2 for 40 frames (contacts from the first frames).
+for v in "racecheck graph 0" "racecheck small 1" "memcheck small 1"; do
+  set -- $v
+  TMO=70 s san_$1_$2 env OCTOCD_CUDA_SMALL=$3 OCTOCD_CUDA_STAGE_TIMES=0 OCTOCD_CUDA_MID_FUSE=$([ $1 = memcheck ] && echo 0 || echo 1) \
+    compute-sanitizer --tool $1 bin/octocd run $S/bunny-random-400.json --midphase 1,2 --engine cuda --frames 40 --quiet
+  grep -h "SUMMARY" "$R/san_$1_$2.txt"
+done
 
 # 5. If time is left: bench_step_paths (graph path and resident small path in one process,
 # one state hash per scene and path: equal on and off).
