@@ -289,7 +289,8 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   stamp(s.profile, 5);
 
   // 6. Midphase expand steps and leaves (as cuda_world.cpp enqueues them). With
-  // OCTOCD_CUDA_MID_FUSE=1 (kFuse; never by default on this path) the last expand step runs its
+  // OCTOCD_CUDA_MID_FUSE=1 (kFuse; never by default on this path: on the H100 it made the
+  // Table 5 scenes 1.3-13x slower, one warp running an item's leaves in turn) the last expand step runs its
   // items' leaves itself in the block's shared tiles, as the graph path's
   // mid_expand_last_kernel: the same leaf items (the leaf list stays empty), so that with the
   // early exit a warp skips the rest of a pair it has just confirmed.
