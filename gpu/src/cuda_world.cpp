@@ -189,7 +189,8 @@ long small_one_block_pairs_from_env() {
 }
 
 /// OCTOCD_CUDA_MID_FUSE: whether the last midphase expand step of the graph path runs its
-/// items' leaves itself (MidListDesc::fuse_leaves): unset = -1 (auto), "0" never, "1" always.
+/// items' leaves itself (MidListDesc::fuse_leaves): unset = -1 (auto), "0" never, "1" always
+/// (on the small path too, which otherwise never does: small_step.cu's kFuse kernels).
 int mid_fuse_from_env() {
   const char* v = std::getenv("OCTOCD_CUDA_MID_FUSE");
   if (v == nullptr) return -1;
@@ -198,6 +199,19 @@ int mid_fuse_from_env() {
   throw InputError(fmt::format("OCTOCD_CUDA_MID_FUSE: '{}' is not allowed; allowed: 0 (the leaves always go through "
                                "the leaf list), 1 (the last expand step always runs them), or unset (it runs them "
                                "when it has at least two items per warp)",
+                               v));
+}
+
+/// OCTOCD_CUDA_MID_EARLY_EXIT: whether the midphase skips the remaining work of a pair once
+/// it is confirmed (MidListDesc::early_exit): unset or "1" on, "0" off (every list item runs;
+/// the counts are the deterministic work of the lists with no early exit).
+int mid_early_exit_from_env() {
+  const char* v = std::getenv("OCTOCD_CUDA_MID_EARLY_EXIT");
+  if (v == nullptr || std::strcmp(v, "1") == 0) return 1;
+  if (std::strcmp(v, "0") == 0) return 0;
+  throw InputError(fmt::format("OCTOCD_CUDA_MID_EARLY_EXIT: '{}' is not allowed; allowed: 1 (the midphase skips the "
+                               "rest of a pair's work once it is confirmed, the default), 0 (every item runs: "
+                               "deterministic counts), or unset",
                                v));
 }
 
@@ -261,6 +275,8 @@ struct CudaWorld::Impl {
   int level_steps = 0;  // midphase steps (0: aabb-only, or no levels)
   unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
   int mid_fuse = -1;       // OCTOCD_CUDA_MID_FUSE (MidListDesc::fuse_leaves)
+  int mid_early_exit = 1;  // OCTOCD_CUDA_MID_EARLY_EXIT (MidListDesc::early_exit)
+  int mid_tile_cull = 1;   // OCTOCD_CUDA_MID_TILE_CULL (MidListDesc::tile_cull)
   bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
   unsigned small_grid = 1;  // its blocks (co-resident)
   gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
@@ -456,6 +472,8 @@ struct CudaWorld::Impl {
     md.counters = counters();
     md.steps = level_steps;
     md.fuse_leaves = mid_fuse;
+    md.early_exit = mid_early_exit;
+    md.tile_cull = mid_tile_cull;
     return md;
   }
 
@@ -932,6 +950,10 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   const bool small_poll = small_poll_from_env();
   const long one_block_pairs = small_one_block_pairs_from_env();
   const int mid_fuse = mid_fuse_from_env();
+  const int mid_early_exit = mid_early_exit_from_env();
+  const long mid_tile_cull = env_integer("OCTOCD_CUDA_MID_TILE_CULL", 0, 1, 1,
+                                         "1: a midphase leaf skips pairs of vertex tiles more than theta apart, "
+                                         "the default; 0: it tests every pair of tiles");
   const bool persistent = persistent_from_env();
   const long idle_us = env_integer("OCTOCD_CUDA_PERSISTENT_IDLE_US", 1, 600000000L, kResidentIdleUs,
                                    "microseconds after which the idle resident kernel ends itself");
@@ -950,6 +972,8 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.bp = std::move(bp);
   d.device = describe_current_device();
   d.mid_fuse = mid_fuse;
+  d.mid_early_exit = mid_early_exit;
+  d.mid_tile_cull = static_cast<int>(mid_tile_cull);
   d.sync_each_launch = env_is_one("OCTOCD_CUDA_SYNC");
   const char* graph = std::getenv("OCTOCD_CUDA_GRAPH");
   d.use_graph = !(graph != nullptr && std::strcmp(graph, "0") == 0);

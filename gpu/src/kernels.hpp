@@ -131,6 +131,14 @@ struct MidListDesc {
   /// to the leaf list (midphase.cuh, fuse_leaves): -1 auto (enough items per warp), 0
   /// never, 1 always. Neither a result nor a count depends on it (OCTOCD_CUDA_MID_FUSE).
   int fuse_leaves = -1;
+  /// Per-pair early exit (midphase.cuh, "Early exit"; OCTOCD_CUDA_MID_EARLY_EXIT): 1, an
+  /// expand item, a leaf item and a leaf's vertex tiles of a pair already confirmed are
+  /// skipped (counts: the work done, timing-dependent); 0, every item of the lists runs and
+  /// every leaf counts its whole filtered work (deterministic counts). Same results either way.
+  int early_exit = 1;
+  /// A leaf skips a pair of vertex tiles whose boxes are more than theta apart on an axis
+  /// (midphase.cuh, tiles_apart; OCTOCD_CUDA_MID_TILE_CULL, default 1): the same results.
+  int tile_cull = 1;
 };
 
 /// One contact of the first response pass, as the host's ContactRecord wants it.

@@ -30,11 +30,29 @@
 // pass its capacity still counts every item (the host then regrows and reruns the step).
 // A large leaf cell pair is split into items of kLeafChunk of B's vertices each, so its
 // vertex tests spread over several warps.
-// Counts: box tests = every cell pair tested, box pairs = surviving leaf cell pairs,
-// vertex tests = per leaf (A's filtered vertices) x (B's filtered vertices) or the cell's
-// vertices against a box: the work of the lists with no early exit (a leaf of a pair
-// already confirmed still computes its filtered counts and only skips its vertex tests),
-// so each is >= the CPU's count and none depends on timing or on where the leaves run.
+// Early exit (MidListDesc::early_exit, OCTOCD_CUDA_MID_EARLY_EXIT, on by default): the
+// answer per pair is a boolean, so once confirmed[k] is set the rest of pair k's work
+// cannot change it (nor any result: the response reads only confirmed[k]). With it on, an
+// expand item or leaf item of a confirmed pair is skipped before its set-up, a cell test
+// stops before its next 32 cell pairs, the fused leaves stop before the next chunk, and a
+// leaf checks the pair before each tile of B and of A (each check one volatile load by lane
+// 0, shuffled: warp-uniform, so no lane leaves a warp collective). A leaf then runs no count
+// over its whole vertex ranges (only the tiles it stages), and the fused leaves of an expand
+// item run deepest overlap first (overlap_depth: the likelier hits first).
+// Tile culling (MidListDesc::tile_cull, OCTOCD_CUDA_MID_TILE_CULL, on by default; with the
+// exit on or off): a leaf skips a pair of staged vertex tiles whose bounding boxes are apart
+// by theta on some axis (tiles_apart; exact for hd::vertex_close's float sum), so a large
+// leaf tests only the tile pairs that are near each other.
+// Counts, early exit off: box tests = every cell pair tested, box pairs = surviving leaf
+// cell pairs, vertex tests = per leaf (A's filtered vertices) x (B's filtered vertices) or
+// the cell's vertices against a box: the work of the lists with no early exit (a leaf of a
+// pair already confirmed still computes its filtered counts and only skips its vertex
+// tests), so each is >= the CPU's count and none depends on timing or on where the leaves
+// run. Early exit on: the work done (box tests: per 32 cell pairs tested; box pairs: the
+// surviving leaf cell pairs of the tests run; vertex tests: na x nb per pair of tiles
+// tested and not culled, a mesh-box leaf's cell vertices), each <= the figure with the exit
+// off on the same state (box tests and box pairs > 0 exactly when they are), and dependent
+// on timing (run to run, grid, path).
 // Each warp sums its counts in registers (Tally) and adds them once per launch.
 // Set-up: context() orders the pair (mesh first) on body indices and reads a step's levels
 // with hd::clamped_level, so no PlacedView is chosen by reference and no level array is
@@ -250,6 +268,12 @@ __device__ inline bool confirmed_now(const MidListDesc& d, std::uint32_t k) {
   return __shfl_sync(kFull, lane_id() == 0 ? static_cast<int>(pair_confirmed(d, k)) : 0, 0) != 0;
 }
 
+/// With the early exit on (d.early_exit), whether pair k is already confirmed, so that the
+/// rest of its work can be skipped (warp-uniform: one load by lane 0); false with it off.
+__device__ inline bool skip_confirmed(const MidListDesc& d, std::uint32_t k) {
+  return d.early_exit != 0 && confirmed_now(d, k);
+}
+
 /// Whether some vertex of tile_a[0, na) and some vertex of tile_b[0, nb) are closer than
 /// theta (hd::vertex_close; the whole warp, warp-uniform result): every one of the na x nb
 /// pairs is tested unless a close pair ends the scan early (checked every 16 rounds: the
@@ -289,6 +313,45 @@ __device__ inline bool tiles_close(const Vec3* tile_a, std::uint32_t na, const V
   return found;
 }
 
+/// The bounding box of the world vertices tile[0, n) (the whole warp; warp-uniform result;
+/// n >= 1): exact minima and maxima, no rounding.
+__device__ inline Aabb tile_box(const Vec3* tile, std::uint32_t n) {
+  Vec3 lo = tile[0], hi = tile[0];
+  for (std::uint32_t i = lane_id(); i < n; i += 32) {
+    const Vec3 v = tile[i];
+    lo = {fminf(lo.x, v.x), fminf(lo.y, v.y), fminf(lo.z, v.z)};
+    hi = {fmaxf(hi.x, v.x), fmaxf(hi.y, v.y), fmaxf(hi.z, v.z)};
+  }
+  for (int o = 16; o > 0; o >>= 1) {
+    lo.x = fminf(lo.x, __shfl_xor_sync(kFull, lo.x, o));
+    lo.y = fminf(lo.y, __shfl_xor_sync(kFull, lo.y, o));
+    lo.z = fminf(lo.z, __shfl_xor_sync(kFull, lo.z, o));
+    hi.x = fmaxf(hi.x, __shfl_xor_sync(kFull, hi.x, o));
+    hi.y = fmaxf(hi.y, __shfl_xor_sync(kFull, hi.y, o));
+    hi.z = fmaxf(hi.z, __shfl_xor_sync(kFull, hi.z, o));
+  }
+  return {lo, hi};
+}
+
+/// Whether the coordinates on one axis of every vertex of one set are >= `lo` and of every
+/// vertex of the other set <= `hi` with a gap g = lo - hi (in float) > 0 and g * g >= theta2:
+/// then no pair of the two is within theta as hd::vertex_close computes it. Exact: rounding
+/// is monotone, so each pair's |dx| = |fl(wa.x - wb.x)| >= g, fl(dx * dx) >= fl(g * g), and
+/// adding the other (non-negative) squares never lowers the sum below that (no FMA:
+/// --fmad=false), so the sum is >= theta2 and vertex_close(wa, wb) is false.
+__device__ inline bool axis_apart(float lo, float hi, float theta2) {
+  const float g = lo - hi;
+  return g > 0.0f && g * g >= theta2;
+}
+
+/// Whether two tiles' boxes (tile_box) are apart by theta on some axis (axis_apart): then
+/// tiles_close on them is false, and the tile pair is skipped (the same answer).
+__device__ inline bool tiles_apart(const Aabb& a, const Aabb& b, float theta2) {
+  return axis_apart(b.min.x, a.max.x, theta2) || axis_apart(a.min.x, b.max.x, theta2) ||
+         axis_apart(b.min.y, a.max.y, theta2) || axis_apart(a.min.y, b.max.y, theta2) ||
+         axis_apart(b.min.z, a.max.z, theta2) || axis_apart(a.min.z, b.max.z, theta2);
+}
+
 /// Shared memory of mid_leaf_items and of the last mid_expand step when it runs the
 /// leaves itself: per warp of the block, a tile of B's and one of A's filtered world
 /// vertices.
@@ -297,10 +360,14 @@ using LeafTiles = Vec3[kWarpsPerBlock][2][kLeafTile];
 /// The narrow phase of one leaf item of pair k (the whole warp): mesh-box, A's cell `ca`
 /// against the box (as mesh_box_descend's last step); mesh-mesh, A's cell `ca` against
 /// chunk `chunk` (kLeafChunk vertices) of B's cell `cb` (as mesh_mesh_leaf). Sets
-/// confirmed[k] on a vertex pair within theta; adds the vertex tests to `t`: the leaf's
-/// whole count (the vertex count of A's cell, or filtered A x filtered B), whether or not
-/// the tests are cut short because the pair is confirmed (here or by another warp), so the
-/// counts do not depend on timing. `tile_a`, `tile_b`: the warp's kLeafTile-vertex tiles.
+/// confirmed[k] on a vertex pair within theta; adds the vertex tests to `t`. Early exit off:
+/// the leaf's whole count (the vertex count of A's cell, or filtered A x filtered B),
+/// whether or not the tests are cut short because the pair is confirmed (here or by another
+/// warp), so the counts do not depend on timing. Early exit on (the caller skips the item
+/// when the pair is already confirmed): mesh-box, the cell's vertex count; mesh-mesh,
+/// na x nb for every pair of tiles tested (a tile pair cut short by a hit counts in full),
+/// no count over the whole ranges is run, and the pair is checked before every tile of B
+/// and of A. `tile_a`, `tile_b`: the warp's kLeafTile-vertex tiles.
 __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t ca_index,
                                  std::uint32_t cb_index, std::uint32_t chunk, Vec3* tile_a, Vec3* tile_b,
                                  Tally& t) {
@@ -310,9 +377,11 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   const std::uint32_t a_begin = ca.first_vertex;
   const std::uint32_t a_end = ca.first_vertex + ca.vertex_count;
   const Vec3 pa = c.a.position;
+  const bool exit_early = d.early_exit != 0;
   if (c.s.kind == hd::PairKind::MeshBox) {  // as mesh_box_descend's last step
     t.vertex_tests += ca.vertex_count;
-    if (confirmed_now(d, k)) return;  // the answer is known: the tests would not change it
+    // The answer is known: the tests would not change it (early exit on: checked already).
+    if (!exit_early && confirmed_now(d, k)) return;
     // Only the blocks whose box overlaps box_local (the box in A's frame grown by
     // theta + tolerance, as the cell test) can hold a vertex within theta of the box.
     bool hit = false;
@@ -342,37 +411,52 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   const Vec3 pb = c.b.position;
   const Aabb a_in_b = hd::moved_grown(ca.box, c.s.d, c.s.margin);
   const Aabb b_in_a = hd::moved_back_grown(cb.box, c.s.d, c.s.margin);
-  // The filtered counts, whole blocks of 32 vertices skipped when their box misses the
-  // filter box (no vertex of theirs is inside it): the first tile of each range is staged
-  // while counting (stage_tile counts what it stages), the rest of the range only counted;
-  // the counts are those of the whole ranges.
+  // Early exit off: the filtered counts, whole blocks of 32 vertices skipped when their box
+  // misses the filter box (no vertex of theirs is inside it): the first tile of each range
+  // is staged while counting (stage_tile counts what it stages), the rest of the range only
+  // counted; the counts are those of the whole ranges. Early exit on: only the first tiles
+  // are staged (a tile short of full ends its range, so an empty first tile means no
+  // filtered vertex: no vertex test, as mesh_mesh_leaf).
   std::uint32_t jb = b_begin / kVertexBlock;  // the next vertex block of B's range to stage
   const std::uint32_t jb_end = block_end(b_end);
   std::uint32_t nb = 0;
   stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
   const std::uint32_t nbf =
-      nb + (jb < jb_end ? count_inside(B.vertices, c.blocks_b, jb * kVertexBlock, b_end, a_in_b) : 0u);
+      exit_early ? nb
+                 : nb + (jb < jb_end ? count_inside(B.vertices, c.blocks_b, jb * kVertexBlock, b_end, a_in_b) : 0u);
   if (nbf == 0) return;  // as mesh_mesh_leaf: no vertex test
   const std::uint32_t ia_end = block_end(a_end);
   std::uint32_t ia_first = a_begin / kVertexBlock;  // A's next block after its first tile
   std::uint32_t na_first = 0;
   stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia_first, na_first);
   const std::uint32_t naf =
-      na_first +
-      (ia_first < ia_end ? count_inside(A.vertices, c.blocks_a, ia_first * kVertexBlock, a_end, b_in_a) : 0u);
-  t.vertex_tests += static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf);
+      exit_early ? na_first
+                 : na_first + (ia_first < ia_end
+                                   ? count_inside(A.vertices, c.blocks_a, ia_first * kVertexBlock, a_end, b_in_a)
+                                   : 0u);
+  if (!exit_early) t.vertex_tests += static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf);
   if (naf == 0) return;
   // Tiles of B's filtered world vertices against tiles of A's (B's first tile and, for it,
   // A's first tile are already staged); another leaf of this pair may confirm it first
-  // (checked between B's tiles): the answer is the same.
+  // (checked between B's tiles, and with the early exit on between A's too): the answer is
+  // the same.
   bool found = false;
   bool b_staged = true;  // tile_b holds B's next tile (nb vertices)
   while (!found) {
-    if (confirmed_now(d, k)) break;
+    if (!b_staged || !exit_early) {  // early exit on: the caller has just checked
+      if (confirmed_now(d, k)) break;
+    }
     if (!b_staged) {
       if (jb >= jb_end) break;
       nb = 0;
       stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
+    }
+    if (nb == 0) break;  // (only at the range's end)
+    const bool cull = d.tile_cull != 0;
+    Aabb box_b{};
+    if (cull) {
+      box_b = tile_box(tile_b, nb);
+      __syncwarp();  // tile_b is read; it is staged again only after the loop below
     }
     // tile_a still holds A's first tile only while B's first tile is tested.
     bool a_staged = b_staged;
@@ -382,11 +466,17 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
     while (!found && nb > 0) {
       if (!a_staged) {
         if (ia >= ia_end) break;
+        if (exit_early && confirmed_now(d, k)) break;
         na = 0;
         stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia, na);
       }
       a_staged = false;
-      found = tiles_close(tile_a, na, tile_b, nb, c.s.theta2);
+      // A pair of tiles whose boxes are apart by theta on some axis has no close vertex
+      // pair (tiles_apart: exact), so its tests are skipped (not counted with the exit on).
+      if (na > 0 && !(cull && tiles_apart(tile_box(tile_a, na), box_b, c.s.theta2))) {
+        if (exit_early) t.vertex_tests += static_cast<unsigned long long>(na) * static_cast<unsigned long long>(nb);
+        found = tiles_close(tile_a, na, tile_b, nb, c.s.theta2);
+      }
       __syncwarp();
     }
   }
@@ -396,27 +486,53 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
 /// The last step's cell pairs of `mask` (bit l: lane l's `item` survived), run as leaves by
 /// this warp in lane order instead of being appended to the leaf list: each mesh-mesh cell
 /// pair as its kLeafChunk chunks, each mesh-box cell once, exactly the items the list would
-/// have held (so the same tests and counts).
+/// have held (so the same tests and counts); with the early exit on, none after the pair is
+/// confirmed, and the cell pairs in the order of `depth` (lane's overlap_depth), deepest
+/// first (the likelier hits first; ties in lane order), else in lane order.
 __device__ inline void run_leaves(const MidListDesc& d, const PairContext& c, std::uint32_t k, unsigned mask,
-                                  const MidItem& item, LeafTiles& tiles, Tally& t) {
+                                  const MidItem& item, float depth, LeafTiles& tiles, Tally& t) {
   Vec3* tile_b = tiles[threadIdx.x >> 5][0];
   Vec3* tile_a = tiles[threadIdx.x >> 5][1];
   const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+  const bool deepest_first = d.early_exit != 0;
+  const unsigned key = __float_as_uint(depth);  // depth >= +0: ordered as the floats
   while (mask) {
-    const int l = __ffs(mask) - 1;
-    mask &= mask - 1u;
+    int l;
+    if (deepest_first) {
+      const bool in = ((mask >> lane_id()) & 1u) != 0;
+      const unsigned best = __reduce_max_sync(kFull, in ? key : 0u);
+      l = __ffs(__ballot_sync(kFull, in && key == best)) - 1;
+    } else {
+      l = __ffs(mask) - 1;
+    }
+    mask &= ~(1u << l);
     const std::uint32_t ca = __shfl_sync(kFull, item.ca, l);
     const std::uint32_t cb = __shfl_sync(kFull, item.cb, l);
     const std::uint32_t chunks = mesh_box ? 1u : (c.b.octree.cells[cb].vertex_count + kLeafChunk - 1) / kLeafChunk;
-    for (std::uint32_t ch = 0; ch < chunks; ++ch) leaf_item(d, c, k, ca, cb, ch, tile_a, tile_b, t);
+    for (std::uint32_t ch = 0; ch < chunks; ++ch) {
+      if (skip_confirmed(d, k)) return;
+      leaf_item(d, c, k, ca, cb, ch, tile_a, tile_b, t);
+    }
   }
+}
+
+/// The smallest extent of the overlap of two boxes (+0 when they touch or miss): how deep a
+/// leaf cell pair overlaps, the fused leaves' order with the early exit (run_leaves).
+__device__ inline float overlap_depth(const Aabb& a, const Aabb& b) {
+  const float x = fminf(a.max.x, b.max.x) - fmaxf(a.min.x, b.min.x);
+  const float y = fminf(a.max.y, b.max.y) - fmaxf(a.min.y, b.min.y);
+  const float z = fminf(a.max.z, b.max.z) - fmaxf(a.min.z, b.min.z);
+  const float m = fminf(x, fminf(y, z));
+  return m > 0.0f ? m : 0.0f;
 }
 
 /// Tests the cell pairs [a0, a1) x [b0, b1) of pair k (mesh-box: [a0, a1) against the
 /// box; b is unused) with the lanes of the warp and appends the overlapping ones; at the
 /// last step (`last`) a mesh-mesh cell pair is appended once per kLeafChunk of B's
 /// vertices, and the surviving leaf box pairs are counted; with `leaves` (last step only)
-/// the surviving cell pairs are run here as leaves (run_leaves) instead of appended.
+/// the surviving cell pairs are run here as leaves (run_leaves) instead of appended. Box
+/// tests are counted per 32 cell pairs tested; with the early exit on, the test stops before
+/// the next 32 once the pair is confirmed (the caller checked it before the first).
 __device__ inline void test_cells(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t a0,
                                   std::uint32_t a1, std::uint32_t b0, std::uint32_t b1, bool last, Tally& t,
                                   LeafTiles* leaves = nullptr) {
@@ -426,6 +542,8 @@ __device__ inline void test_cells(const MidListDesc& d, const PairContext& c, st
   const hd::OctreeView& A = c.a.octree;
   const hd::OctreeView& B = c.b.octree;
   for (std::uint32_t c0 = 0; c0 < total; c0 += 32) {
+    if (c0 > 0 && skip_confirmed(d, k)) break;
+    t.box_tests += total - c0 < 32u ? total - c0 : 32u;
     const std::uint32_t i = c0 + lane_id();
     bool keep = false;
     MidItem item{k, 0, 0};
@@ -439,7 +557,12 @@ __device__ inline void test_cells(const MidListDesc& d, const PairContext& c, st
       const unsigned mask = __ballot_sync(kFull, keep);
       t.box_pairs += static_cast<unsigned long long>(__popc(mask));
       if (leaves != nullptr) {
-        run_leaves(d, c, k, mask, item, *leaves, t);
+        float depth = 0.0f;  // the order of the leaves with the early exit
+        if (keep && d.early_exit != 0)
+          depth = mesh_box ? overlap_depth(A.cells[item.ca].box, c.s.box_local)
+                           : overlap_depth(hd::moved_grown(A.cells[item.ca].box, c.s.d, c.s.margin),
+                                           B.cells[item.cb].box);
+        run_leaves(d, c, k, mask, item, depth, *leaves, t);
         continue;
       }
     }
@@ -450,7 +573,6 @@ __device__ inline void test_cells(const MidListDesc& d, const PairContext& c, st
       append(d, keep, item);
     }
   }
-  t.box_tests += total;
 }
 
 /// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid).
@@ -525,6 +647,7 @@ __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTile
   std::uint32_t ck = 0;
   for (std::uint32_t it = begin; it < end; ++it) {
     const MidItem item = d.in[it];
+    if (skip_confirmed(d, item.k)) continue;  // early exit: neither set up nor counted
     if (!have || item.k != ck) {
       c = context(d, item.k, d.pairs[item.k]);
       ck = item.k;
@@ -551,6 +674,7 @@ __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
   warp_range(count, begin, end);
   for (std::uint32_t it = begin; it < end; ++it) {
     const MidItem item = d.in[it];
+    if (skip_confirmed(d, item.k)) continue;  // early exit: neither set up nor counted
     // Set up per item: keeping the set-up across a run of the same pair's items (as
     // mid_expand_items does) takes 89 registers here, or spills 352 bytes at 64.
     const PairContext c = context(d, item.k, d.pairs[item.k]);

@@ -131,6 +131,10 @@ __device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { retu
 
 /// One whole step (every thread of the grid calls it): `sequence` is written to *s.done at
 /// the end, `records` (may be null) gets the first pass's contacts; smem: kSharedBytes.
+/// kFuse: the last midphase expand step runs its items' leaves itself (the kernels of
+/// s.mid.fuse_leaves == 1: OCTOCD_CUDA_MID_FUSE=1), a separate instantiation so that the
+/// default kernel's registers stay as they were.
+template <bool kFuse>
 __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned long long sequence,
                                                 DeviceContact* records, unsigned char* smem) {
   cg::grid_group grid = cg::this_grid();
@@ -284,14 +288,19 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   grid.sync();
   stamp(s.profile, 5);
 
-  // 6. Midphase expand steps and leaves (as cuda_world.cpp enqueues them).
+  // 6. Midphase expand steps and leaves (as cuda_world.cpp enqueues them). With
+  // OCTOCD_CUDA_MID_FUSE=1 (kFuse; never by default on this path: on the H100 it made the
+  // Table 5 scenes 1.3-13x slower, one warp running an item's leaves in turn) the last expand step runs its
+  // items' leaves itself in the block's shared tiles, as the graph path's
+  // mid_expand_last_kernel: the same leaf items (the leaf list stays empty), so that with the
+  // early exit a warp skips the rest of a pair it has just confirmed.
   for (int i = 0; i + 1 < md.steps; ++i) {
     md.in = s.lists[i % 2];
     md.in_count = st->counts + 1 + i;
     md.in_capacity = s.list_capacity;
     md.out = s.lists[(i + 1) % 2];
     md.out_count = st->counts + 2 + i;
-    mid::mid_expand_items(md, i);
+    mid::mid_expand_items(md, i, kFuse ? reinterpret_cast<mid::LeafTiles*>(smem) : nullptr);
     grid.sync();
   }
   stamp(s.profile, 6);
@@ -367,9 +376,10 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   }
 }
 
+template <bool kFuse>
 __global__ void __launch_bounds__(kBlockSize) small_step_kernel(const __grid_constant__ SmallStepDesc s) {
   __shared__ alignas(16) unsigned char smem[kSharedBytes];
-  small_step_body(s, s.sequence, s.terms.records, smem);
+  small_step_body<kFuse>(s, s.sequence, s.terms.records, smem);
 }
 
 /// The command that ends the resident kernel (never a request: those have a sequence
@@ -403,6 +413,7 @@ __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long 
 /// barrier, so none can miss the first command. After a step's last phase (block 0: the
 /// metrics and *done) block 0 waits for the next request; a block done earlier (the
 /// one-block response) waits for the next ticket.
+template <bool kFuse>
 __global__ void __launch_bounds__(kBlockSize)
     small_resident_kernel(const __grid_constant__ SmallStepDesc s, const __grid_constant__ ResidentDesc r) {
   __shared__ alignas(16) unsigned char smem[kSharedBytes];
@@ -438,7 +449,7 @@ __global__ void __launch_bounds__(kBlockSize)
     __syncthreads();  // every thread has read it before thread 0 writes the next one
     if (cmd == kExitCommand) break;
     handled = cmd;
-    small_step_body(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr, smem);
+    small_step_body<kFuse>(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr, smem);
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) {
     __threadfence_system();  // the last step's writes before the exit's mark
@@ -447,33 +458,46 @@ __global__ void __launch_bounds__(kBlockSize)
   }
 }
 
+/// The blocks per SM of both instantiations of a kernel (the fewer: the grid fits either).
+template <typename K>
+cudaError_t both_blocks_per_sm(int& blocks, K plain, K fused) {
+  int b0 = 0, b1 = 0;
+  blocks = 0;
+  cudaError_t e = cudaOccupancyMaxActiveBlocksPerMultiprocessor(&b0, plain, kBlockSize, 0);
+  if (e != cudaSuccess) return e;
+  e = cudaOccupancyMaxActiveBlocksPerMultiprocessor(&b1, fused, kBlockSize, 0);
+  if (e != cudaSuccess) return e;
+  blocks = b0 < b1 ? b0 : b1;
+  return cudaSuccess;
+}
+
 }  // namespace
 
 cudaError_t small_step_blocks_per_sm(int& blocks) {
-  blocks = 0;
-  return cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, small_step_kernel, kBlockSize, 0);
+  return both_blocks_per_sm(blocks, small_step_kernel<false>, small_step_kernel<true>);
 }
 
 cudaError_t launch_small_step(const SmallStepDesc& s, unsigned grid, cudaStream_t stream) {
   SmallStepDesc arg = s;
   void* args[] = {&arg};
-  const cudaError_t e = cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&small_step_kernel), dim3(grid),
-                                                    dim3(kBlockSize), args, 0, stream);
+  const void* kernel = s.mid.fuse_leaves == 1 ? reinterpret_cast<const void*>(&small_step_kernel<true>)
+                                              : reinterpret_cast<const void*>(&small_step_kernel<false>);
+  const cudaError_t e = cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlockSize), args, 0, stream);
   if (e != cudaSuccess) return e;
   return cudaGetLastError();
 }
 
 cudaError_t small_resident_blocks_per_sm(int& blocks) {
-  blocks = 0;
-  return cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, small_resident_kernel, kBlockSize, 0);
+  return both_blocks_per_sm(blocks, small_resident_kernel<false>, small_resident_kernel<true>);
 }
 
 cudaError_t launch_small_resident(const SmallStepDesc& s, const ResidentDesc& r, unsigned grid, cudaStream_t stream) {
   SmallStepDesc arg = s;
   ResidentDesc res = r;
   void* args[] = {&arg, &res};
-  const cudaError_t e = cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(&small_resident_kernel),
-                                                    dim3(grid), dim3(kBlockSize), args, 0, stream);
+  const void* kernel = s.mid.fuse_leaves == 1 ? reinterpret_cast<const void*>(&small_resident_kernel<true>)
+                                              : reinterpret_cast<const void*>(&small_resident_kernel<false>);
+  const cudaError_t e = cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlockSize), args, 0, stream);
   if (e != cudaSuccess) return e;
   return cudaGetLastError();
 }
