@@ -138,6 +138,23 @@ struct QBox {
   std::int16_t hi[3];
 };
 
+/// The fixed-point box of the unit-coordinate box [lo, hi] (loose_q_min / loose_q_max).
+inline QBox qbox_of(const Vec3& lo, const Vec3& hi) {
+  return {{static_cast<std::int16_t>(loose_q_min(lo.x)), static_cast<std::int16_t>(loose_q_min(lo.y)),
+           static_cast<std::int16_t>(loose_q_min(lo.z))},
+          {static_cast<std::int16_t>(loose_q_max(hi.x)), static_cast<std::int16_t>(loose_q_max(hi.y)),
+           static_cast<std::int16_t>(loose_q_max(hi.z))}};
+}
+
+/// The cells of level m whose loose boxes meet q, per axis (loose_query_axis_q); false
+/// when the range is empty on some axis.
+inline bool level_ranges(const QBox& q, int m, LooseRange& rx, LooseRange& ry, LooseRange& rz) {
+  rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
+  ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
+  rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
+  return rx.lo <= rx.hi && ry.lo <= ry.hi && rz.lo <= rz.hi;
+}
+
 /// One slot of the sorted order: the body's world AABB, its index, and the end of its
 /// cell's run of slots (32 bytes: one load gives all a test needs).
 struct Slot {
@@ -330,17 +347,12 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       const Aabb f = expanded(boxes[e], fat_d_);
       const Vec3 lo = loose_unit(grid_, f.min);
       const Vec3 hi = loose_unit(grid_, f.max);
-      const QBox q{{static_cast<std::int16_t>(loose_q_min(lo.x)), static_cast<std::int16_t>(loose_q_min(lo.y)),
-                    static_cast<std::int16_t>(loose_q_min(lo.z))},
-                   {static_cast<std::int16_t>(loose_q_max(hi.x)), static_cast<std::int16_t>(loose_q_max(hi.y)),
-                    static_cast<std::int16_t>(loose_q_max(hi.z))}};
+      const QBox q = qbox_of(lo, hi);
       std::uint64_t cells = 0;
       for (int o = 0; o < occupied_count_; ++o) {
         const int m = occupied_[o];
-        const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
-        const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
-        const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
-        if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) continue;
+        LooseRange rx, ry, rz;
+        if (!level_ranges(q, m, rx, ry, rz)) continue;
         cells += static_cast<std::uint64_t>(rx.hi - rx.lo + 1) * static_cast<std::uint64_t>(ry.hi - ry.lo + 1) *
                  static_cast<std::uint64_t>(rz.hi - rz.lo + 1);
       }
@@ -408,10 +420,8 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     std::uint32_t nflat = 0;
     for (int o = 0; o < occupied_count_; ++o) {
       const int m = occupied_[o];
-      const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
-      const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
-      const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
-      if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) continue;
+      LooseRange rx, ry, rz;
+      if (!level_ranges(q, m, rx, ry, rz)) continue;
       for (int z = rz.lo; z <= rz.hi; ++z) {
         for (int y = ry.lo; y <= ry.hi; ++y) {
           for (int x = rx.lo; x <= rx.hi; ++x) {
@@ -584,12 +594,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
       const unsigned l = static_cast<unsigned>(pl.level);
       key_[i] = level_base_[l] + (spread_[pl.ix] | (spread_[pl.iy] << 1) | (spread_[pl.iz] << 2));
       lin_[i] = pl.ix | (pl.iy << l) | (pl.iz << (2 * l));
-      qbody_[i] = {{static_cast<std::int16_t>(loose_q_min(lo.x)),
-                    static_cast<std::int16_t>(loose_q_min(lo.y)),
-                    static_cast<std::int16_t>(loose_q_min(lo.z))},
-                   {static_cast<std::int16_t>(loose_q_max(hi.x)),
-                    static_cast<std::int16_t>(loose_q_max(hi.y)),
-                    static_cast<std::int16_t>(loose_q_max(hi.z))}};
+      qbody_[i] = qbox_of(lo, hi);
     }
   }
 
@@ -872,10 +877,8 @@ class LooseOctreeBroadPhase final : public BroadPhase {
     for (int o = 0; o < occupied_count_; ++o) {
       const int m = occupied_[o];
       if (m > cell.level) break;
-      const LooseRange rx = loose_query_axis_q(cell.q.lo[0], cell.q.hi[0], m);
-      const LooseRange ry = loose_query_axis_q(cell.q.lo[1], cell.q.hi[1], m);
-      const LooseRange rz = loose_query_axis_q(cell.q.lo[2], cell.q.hi[2], m);
-      if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) continue;
+      LooseRange rx, ry, rz;
+      if (!level_ranges(cell.q, m, rx, ry, rz)) continue;
       const bool own = m == cell.level;
       // The own cell's coordinates (for the own level's "cells after it" rule).
       const std::uint32_t pos = cell_linear_[c];
