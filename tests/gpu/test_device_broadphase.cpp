@@ -1290,18 +1290,20 @@ struct LooseTestCount {
   std::array<std::uint32_t, kLooseMaxDepth + 2> per_level{};  ///< bodies per level, [11] = overflow
 };
 
-LooseTestCount count_loose_tests(const std::vector<Aabb>& boxes, const Aabb& domain, int depth) {
-  LooseTestCount r;
-  const LooseGrid grid = loose_grid(domain);
-  if (depth < 0) {
-    float mn = kInf;
-    for (const Aabb& b : boxes) {
-      float e = loose_unit_extent(loose_unit(grid, b.min), loose_unit(grid, b.max));
-      e = e < 0.0f ? 0.0f : e;
-      mn = std::min(mn, e != e ? kInf : e);
-    }
-    depth = loose_auto_depth(mn);
+/// The smallest unit extent of `boxes` on `grid` (loose_extent_kernel's minimum).
+float smallest_unit_extent(const std::vector<Aabb>& boxes, const LooseGrid& grid) {
+  float mn = kInf;
+  for (const Aabb& b : boxes) {
+    float e = loose_unit_extent(loose_unit(grid, b.min), loose_unit(grid, b.max));
+    e = e < 0.0f ? 0.0f : e;
+    mn = std::min(mn, e != e ? kInf : e);
   }
+  return mn;
+}
+
+/// count_loose_tests on the root `grid` with D_w `depth` (>= 0).
+LooseTestCount count_loose_tests_on(const std::vector<Aabb>& boxes, const LooseGrid& grid, int depth) {
+  LooseTestCount r;
   r.depth = depth;
   const auto n = boxes.size();
   std::vector<std::uint32_t> key(n);
@@ -1344,6 +1346,21 @@ LooseTestCount count_loose_tests(const std::vector<Aabb>& boxes, const Aabb& dom
   }
   r.tests += overflow * (overflow - 1) / 2 + overflow * tree;
   return r;
+}
+
+/// The exact tests with the domain's root (D_w `depth`, -1 = auto).
+LooseTestCount count_loose_tests(const std::vector<Aabb>& boxes, const Aabb& domain, int depth) {
+  const LooseGrid grid = loose_grid(domain);
+  return count_loose_tests_on(boxes, grid, depth >= 0 ? depth : loose_auto_depth(smallest_unit_extent(boxes, grid)));
+}
+
+/// The exact tests of the device octree with depth `auto` and the snapped root
+/// (loose_snapped_grid of the smallest extent, OCTOCD_CUDA_OCTREE_SNAP=1).
+LooseTestCount count_loose_tests_snapped(const std::vector<Aabb>& boxes, const Aabb& domain) {
+  const LooseGrid grid = loose_grid(domain);
+  int depth = 0;
+  const LooseGrid snapped = loose_snapped_grid(grid, smallest_unit_extent(boxes, grid), &depth);
+  return count_loose_tests_on(boxes, snapped, depth);
 }
 
 /// bench_gpu_broadphase's boxes (make_boxes, domain_for): n cubes of half side 0.06 m
@@ -1414,6 +1431,7 @@ TEST(LooseBlockHostModel, ExactTestsPerDepthOnTheBenchBoxes) {
     const LooseTestCount a = count_loose_tests(boxes, domain, -1);
     const Aabb snapped = snapped_domain(domain, 0.06f);
     const LooseTestCount s = count_loose_tests(boxes, snapped, -1);
+    const LooseTestCount dev = count_loose_tests_snapped(boxes, domain);
     const float cell = loose_grid(domain).side / static_cast<float>(1 << a.depth);
     std::string line = fmt::format("n {}: domain side {:.3f} m, auto D_w {} (cell {:.4f} m = {:.2f} x 0.06): {} tests;",
                                    n, loose_grid(domain).side, a.depth, cell, cell / 0.06f, a.tests);
@@ -1426,7 +1444,11 @@ TEST(LooseBlockHostModel, ExactTestsPerDepthOnTheBenchBoxes) {
                         s.depth, s.tests, static_cast<double>(s.tests) / static_cast<double>(a.tests));
     for (int l = 0; l <= kLooseMaxDepth + 1; ++l)
       if (s.per_level[l] != 0) line += fmt::format(" {}:{}", l, s.per_level[l]);
+    line += fmt::format("; device root (loose_snapped_grid): D_w {}, {} tests", dev.depth, dev.tests);
     std::printf("%s\n", line.c_str());
+    if (cell > 1.25f * 0.06f) {
+      EXPECT_LT(dev.tests, a.tests);
+    }
     // The snapped grid puts the small cubes at a level of cell side 0.06 m (their extent).
     const float scell = loose_grid(snapped).side / static_cast<float>(1 << s.depth);
     EXPECT_NEAR(scell, 0.06f, 0.001f);
@@ -1434,6 +1456,46 @@ TEST(LooseBlockHostModel, ExactTestsPerDepthOnTheBenchBoxes) {
       EXPECT_LT(s.tests, a.tests);
     }
   }
+}
+
+// The device octree (depth auto) tests exactly what the counter says for its root: the
+// snapped one by default, the domain's with OCTOCD_CUDA_OCTREE_SNAP=0; the pair set is
+// flat's either way; a bad value of the switch is an input error.
+TEST(DeviceOctreeRoot, CandidatesEqualTheCountOfItsRoot) {
+  REQUIRE_CUDA_DEVICE();
+  Stream stream;
+  std::vector<std::pair<std::string, std::pair<std::vector<Aabb>, Aabb>>> sets;
+  sets.push_back({"bench-20000", bench_boxes(20000, 7)});
+  sets.push_back({"bench-50000", bench_boxes(50000, 3)});
+  for (const char* name : {"uniform-1000", "nested-levels", "touching-lattice"})
+    sets.push_back({name, {box_set(name).boxes, box_set(name).domain}});
+  BroadPhaseConfig c;
+  c.name = "octree";
+  c.octree_depth = -1;
+  for (const auto& [name, set] : sets) {
+    const auto& [boxes, domain] = set;
+    const auto n = static_cast<std::uint32_t>(boxes.size());
+    const std::vector<Pair> flat = flat_pairs(boxes, domain);
+    DeviceBuffer<Aabb> dboxes("test boxes");
+    gpu::upload(dboxes, boxes, stream.s);
+    for (const char* snap : {"1", "0"}) {
+      SCOPED_TRACE(fmt::format("{} OCTOCD_CUDA_OCTREE_SNAP={}", name, snap));
+      ::setenv("OCTOCD_CUDA_OCTREE_SNAP", snap, 1);
+      auto bp = make_device(c, domain);
+      ::unsetenv("OCTOCD_CUDA_OCTREE_SNAP");
+      bp->reserve(n, stream.s);
+      const FindResult r = find_all(*bp, dboxes, n, stream.s);
+      std::vector<Pair> pairs;
+      ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
+      EXPECT_TRUE(same_pairs(pairs, flat, boxes));
+      const LooseTestCount want =
+          *snap == '1' ? count_loose_tests_snapped(boxes, domain) : count_loose_tests(boxes, domain, -1);
+      EXPECT_EQ(r.candidates, want.tests);
+    }
+  }
+  ::setenv("OCTOCD_CUDA_OCTREE_SNAP", "yes", 1);
+  EXPECT_THROW(make_device(c, sets[0].second.second), InputError);
+  ::unsetenv("OCTOCD_CUDA_OCTREE_SNAP");
 }
 
 }  // namespace
