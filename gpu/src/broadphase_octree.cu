@@ -91,6 +91,12 @@ __device__ inline LooseQBox loose_qbox(const LooseGrid& g, const Aabb& b) {
           {loose_q_max(hi.x), loose_q_max(hi.y), loose_q_max(hi.z)}};
 }
 
+/// The root cube and D_w of one find() with the snapped root (loose_snapped_grid).
+struct LooseRoot {
+  LooseGrid grid;
+  int depth = 0;
+};
+
 /// What the kernels read and write (device pointers).
 struct LooseDesc {
   const Aabb* aabb = nullptr;      ///< world AABBs, per body
@@ -101,6 +107,10 @@ struct LooseDesc {
   /// as its bits (non-negative floats order as their bits); kMinExtentInit before the
   /// minimum.
   float* min_extent = nullptr;
+  /// Depth `auto` with the snapped root (OCTOCD_CUDA_OCTREE_SNAP=1): one LooseRoot that
+  /// loose_root_kernel writes from *min_extent (loose_snapped_grid); the keys and the
+  /// queries then use its grid and depth instead of `grid` and `depth`. nullptr: off.
+  LooseRoot* root = nullptr;
   /// The sort keys of overflow and NaN bodies: kLooseOverflowKey and kLooseNoKey with
   /// depth `auto`; with a fixed D_w the two values after level D_w's last cell key
   /// (loose_level_base(D_w + 1) and + 1), so the key sort covers only the bits they need
@@ -149,18 +159,29 @@ __global__ void loose_extent_kernel(LooseDesc d) {
   if (threadIdx.x == 0) atomicMin(reinterpret_cast<unsigned int*>(d.min_extent), m);
 }
 
+/// One thread: the snapped root from the smallest extent (LooseDesc::root).
+__global__ void loose_root_kernel(LooseDesc d) {
+  LooseRoot r;
+  r.grid = loose_snapped_grid(d.grid, *d.min_extent, &r.depth);
+  *d.root = r;
+}
+
+/// The root cube of this find(): the snapped one when LooseDesc::root is given.
+__device__ inline LooseGrid loose_call_grid(const LooseDesc& d) { return d.root ? d.root->grid : d.grid; }
+
 __global__ void loose_keys_kernel(LooseDesc d) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= d.n) return;
-  const int depth = d.depth >= 0 ? d.depth : loose_auto_depth(*d.min_extent);
+  const int depth = d.root ? d.root->depth : (d.depth >= 0 ? d.depth : loose_auto_depth(*d.min_extent));
+  const LooseGrid grid = loose_call_grid(d);
   const Aabb b = d.aabb[i];
   d.body[i] = i;
   if (loose_has_nan(b)) {
     d.key[i] = d.nan_key;
     return;
   }
-  const Vec3 lo = loose_unit(d.grid, b.min);
-  const Vec3 hi = loose_unit(d.grid, b.max);
+  const Vec3 lo = loose_unit(grid, b.min);
+  const Vec3 hi = loose_unit(grid, b.max);
   const std::uint32_t key = loose_place_key(loose_place_unit(lo, hi, depth));
   d.key[i] = key == kLooseOverflowKey ? d.overflow_key : key;
 }
@@ -302,7 +323,7 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
       e.range(s + 1, d.level_begin[kLooseMaxDepth + 2]);  // the overflow bodies after it
     } else if (key != d.nan_key) {                        // a NaN box overlaps nothing
       const int level = loose_cell_key_level(key);
-      const LooseQBox q = loose_qbox(d.grid, e.box_s);
+      const LooseQBox q = loose_qbox(loose_call_grid(d), e.box_s);
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
@@ -361,7 +382,7 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
     } else if (key != d.nan_key) {  // a NaN box overlaps nothing
       const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
       const int level = loose_cell_key_level(key);
-      const LooseQBox q = loose_qbox(d.grid, box);
+      const LooseQBox q = loose_qbox(loose_call_grid(d), box);
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
@@ -525,6 +546,15 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
       else if (!v.empty())
         throw InputError(fmt::format("OCTOCD_CUDA_OCTREE_QUERY: '{}'; allowed: warp, thread (or unset)", v));
     }
+    // OCTOCD_CUDA_OCTREE_SNAP=0|1 (default 1): depth `auto` roots the tree at
+    // loose_snapped_grid (1) or at the domain's cube (0, as the CPU octree).
+    if (const char* v = std::getenv("OCTOCD_CUDA_OCTREE_SNAP")) {
+      const std::string t = v;
+      if (t == "0") snap_ = false;
+      else if (t == "1") snap_ = true;
+      else if (!t.empty())
+        throw InputError(fmt::format("OCTOCD_CUDA_OCTREE_SNAP: '{}'; allowed: 0, 1 (or unset)", t));
+    }
     if (depth_ >= 0 && depth_ < kLooseMaxDepth) {
       overflow_key_ = loose_level_base(depth_ + 1);
       key_bits_ = 1;
@@ -538,6 +568,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   void reserve(std::uint32_t n, cudaStream_t stream) override {
     (void)stream;
     min_.ensure(1);
+    root_.ensure(1);
     key_.ensure(n);
     body_.ensure(n);
     sorted_key_.ensure(n);
@@ -579,6 +610,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.overflow_key = overflow_key_;
     d.nan_key = overflow_key_ == kLooseOverflowKey ? kLooseNoKey : overflow_key_ + 1;
     d.min_extent = min_.get();
+    d.root = depth_ < 0 && snap_ ? root_.get() : nullptr;
     d.key = key_.get();
     d.body = body_.get();
     d.sorted_key = sorted_key_.get();
@@ -599,6 +631,10 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
       check(cudaMemsetAsync(min_.get(), kMinExtentInit, sizeof(float), stream), "cudaMemset octree smallest extent");
       loose_extent_kernel<<<g, kBlockSize, 0, stream>>>(d);
       bp::launched(cudaGetLastError(), "loose_extent");
+      if (d.root) {
+        loose_root_kernel<<<1, 1, 0, stream>>>(d);
+        bp::launched(cudaGetLastError(), "loose_root");
+      }
     }
     loose_keys_kernel<<<g, kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_keys");
@@ -668,6 +704,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   static constexpr std::uint32_t kNotReserved = 0xffffffffu;
   std::uint32_t n_ = kNotReserved;
   DeviceBuffer<float> min_{"octree smallest extent"};
+  DeviceBuffer<LooseRoot> root_{"octree snapped root"};
+  bool snap_ = true;  ///< OCTOCD_CUDA_OCTREE_SNAP
   DeviceBuffer<std::uint32_t> key_{"octree body keys"};
   DeviceBuffer<std::uint32_t> body_{"octree body indices"};
   DeviceBuffer<std::uint32_t> sorted_key_{"octree sorted keys"};

@@ -43,6 +43,7 @@
 #include <random>
 #include <set>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include <cuda_runtime_api.h>
@@ -1272,6 +1273,229 @@ TEST(LooseBlockHostModel, PlantedFaultsAreCaught) {
       EXPECT_FALSE(same_pairs(h.pairs, set.flat, set.boxes));
     }
   }
+}
+
+// ---- exact tests per depth on the bench's distribution (issue 20 item 5) ----------------
+//
+// count_loose_tests counts the exact tests of loose_query_kernel + loose_overflow_kernel
+// (what host_loose_blocks counts in `tests`) without visiting slots: a body at level L
+// with key k tests every body of each cell of its window at levels m < L, of the cells
+// with keys > k at level L, and the c(c - 1) / 2 pairs of each cell with c bodies once;
+// the overflow bodies test each other and every tree body. The same header functions as
+// the device (loose_place_key, loose_query_axis_q, loose_cell_key), O(n x windows) with a
+// hash map of the cells, so the bench's 4x10^6 boxes count in seconds.
+struct LooseTestCount {
+  int depth = 0;                            ///< D_w used (auto resolved)
+  std::uint64_t tests = 0;                  ///< exact tests
+  std::array<std::uint32_t, kLooseMaxDepth + 2> per_level{};  ///< bodies per level, [11] = overflow
+};
+
+/// The smallest unit extent of `boxes` on `grid` (loose_extent_kernel's minimum).
+float smallest_unit_extent(const std::vector<Aabb>& boxes, const LooseGrid& grid) {
+  float mn = kInf;
+  for (const Aabb& b : boxes) {
+    float e = loose_unit_extent(loose_unit(grid, b.min), loose_unit(grid, b.max));
+    e = e < 0.0f ? 0.0f : e;
+    mn = std::min(mn, e != e ? kInf : e);
+  }
+  return mn;
+}
+
+/// count_loose_tests on the root `grid` with D_w `depth` (>= 0).
+LooseTestCount count_loose_tests_on(const std::vector<Aabb>& boxes, const LooseGrid& grid, int depth) {
+  LooseTestCount r;
+  r.depth = depth;
+  const auto n = boxes.size();
+  std::vector<std::uint32_t> key(n);
+  std::unordered_map<std::uint32_t, std::uint32_t> cell;
+  cell.reserve(n);
+  std::uint64_t overflow = 0, tree = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3 lo = loose_unit(grid, boxes[i].min), hi = loose_unit(grid, boxes[i].max);
+    key[i] = loose_has_nan(boxes[i]) ? kLooseNoKey : loose_place_key(loose_place_unit(lo, hi, depth));
+    if (key[i] == kLooseNoKey) continue;
+    if (key[i] >= kLooseOverflowKey) {
+      ++overflow;
+      ++r.per_level[kLooseMaxDepth + 1];
+      continue;
+    }
+    ++tree;
+    ++r.per_level[loose_key_level(key[i])];
+    ++cell[key[i]];
+  }
+  for (const auto& [k, c] : cell) r.tests += static_cast<std::uint64_t>(c) * (c - 1) / 2;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (key[i] >= kLooseOverflowKey) continue;
+    const int level = loose_key_level(key[i]);
+    const Vec3 lo = loose_unit(grid, boxes[i].min), hi = loose_unit(grid, boxes[i].max);
+    for (int m = 0; m <= level; ++m) {
+      if (r.per_level[m] == 0) continue;
+      const LooseRange rx = loose_query_axis_q(loose_q_min(lo.x), loose_q_max(hi.x), m);
+      const LooseRange ry = loose_query_axis_q(loose_q_min(lo.y), loose_q_max(hi.y), m);
+      const LooseRange rz = loose_query_axis_q(loose_q_min(lo.z), loose_q_max(hi.z), m);
+      for (int iz = rz.lo; iz <= rz.hi; ++iz)
+        for (int iy = ry.lo; iy <= ry.hi; ++iy)
+          for (int ix = rx.lo; ix <= rx.hi; ++ix) {
+            const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix), static_cast<std::uint32_t>(iy),
+                                                    static_cast<std::uint32_t>(iz));
+            if (m == level && ck <= key[i]) continue;
+            const auto it = cell.find(ck);
+            if (it != cell.end()) r.tests += it->second;
+          }
+    }
+  }
+  r.tests += overflow * (overflow - 1) / 2 + overflow * tree;
+  return r;
+}
+
+/// The exact tests with the domain's root (D_w `depth`, -1 = auto).
+LooseTestCount count_loose_tests(const std::vector<Aabb>& boxes, const Aabb& domain, int depth) {
+  const LooseGrid grid = loose_grid(domain);
+  return count_loose_tests_on(boxes, grid, depth >= 0 ? depth : loose_auto_depth(smallest_unit_extent(boxes, grid)));
+}
+
+/// The exact tests of the device octree with depth `auto` and the snapped root
+/// (loose_snapped_grid of the smallest extent, OCTOCD_CUDA_OCTREE_SNAP=1).
+LooseTestCount count_loose_tests_snapped(const std::vector<Aabb>& boxes, const Aabb& domain) {
+  const LooseGrid grid = loose_grid(domain);
+  int depth = 0;
+  const LooseGrid snapped = loose_snapped_grid(grid, smallest_unit_extent(boxes, grid), &depth);
+  return count_loose_tests_on(boxes, snapped, depth);
+}
+
+/// bench_gpu_broadphase's boxes (make_boxes, domain_for): n cubes of half side 0.06 m
+/// (even bodies) and 0.03 m (odd), centres uniform (SplitMix64 `seed`, x, y, z in that
+/// order) in a cube of side 3.4 (n / 10^4)^(1/3) m; the domain is that cube grown by 0.06.
+std::pair<std::vector<Aabb>, Aabb> bench_boxes(std::uint32_t n, std::uint64_t seed = 1) {
+  const double side = 3.4 * std::cbrt(static_cast<double>(n) / 1e4);
+  SplitMix64 rng(seed);
+  const float h = static_cast<float>(side / 2.0);
+  std::vector<Aabb> boxes(n);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const float x = rng.uniform(-h, h), y = rng.uniform(-h, h), z = rng.uniform(-h, h);
+    const float e = (i % 2 == 0) ? 0.06f : 0.03f;
+    boxes[i] = {{x - e, y - e, z - e}, {x + e, y + e, z + e}};
+  }
+  const float d = h + 0.06f;
+  return {boxes, Aabb{{-d, -d, -d}, {d, d, d}}};
+}
+
+/// The domain grown about its centre to the side e 2^D (a hair more, so that a body of
+/// extent e fits level D through the unit rounding), D the smallest level whose cell of
+/// that side covers the domain: the smallest bodies then sit in cells of their own size.
+Aabb snapped_domain(const Aabb& domain, float e) {
+  const LooseGrid g = loose_grid(domain);
+  double side = e;
+  while (side < g.side) side *= 2.0;
+  side *= 1.0 + 1.0 / 4096.0;
+  const Vec3 c = center(domain);
+  const auto h = static_cast<float>(side / 2.0);
+  return {{c.x - h, c.y - h, c.z - h}, {c.x + h, c.y + h, c.z + h}};
+}
+
+// The counter agrees with the host model's test count (every variant of host_loose_blocks'
+// walk) on the shipped box sets and the bench's distribution, at auto and fixed depths.
+TEST(LooseBlockHostModel, TestCountEqualsTheModel) {
+  for (const std::string& name : box_set_names()) {
+    for (int depth : {-1, 0, 2, 10}) {
+      SCOPED_TRACE(fmt::format("{} depth {}", name, depth));
+      const BoxSet& set = box_set(name);
+      EXPECT_EQ(count_loose_tests(set.boxes, set.domain, depth).tests,
+                host_loose_blocks(set.boxes, set.domain, depth).tests);
+    }
+  }
+  const auto [boxes, domain] = bench_boxes(20000, 7);
+  for (const Aabb& d : {domain, snapped_domain(domain, 0.06f)}) {
+    for (int depth : {-1, 4, 7}) {
+      SCOPED_TRACE(fmt::format("bench 2e4, side {}, depth {}", loose_grid(d).side, depth));
+      const HostLooseBlocks h = host_loose_blocks(boxes, d, depth);
+      EXPECT_EQ(h.broken, "");
+      EXPECT_EQ(count_loose_tests(boxes, d, depth).tests, h.tests);
+    }
+  }
+}
+
+// Exact tests per depth on the bench's boxes (10^4 .. 4x10^6 with OCTOCD_BP_COUNT_LARGE=1,
+// else 10^4 and 10^5): D_w above auto changes nothing (no body fits a deeper cell), so
+// `auto` is the best D_w of the domain's grid; what decides the count is how the smallest
+// extent falls between two powers of two of the root side. A grid snapped to the
+// smallest extent (snapped_domain) puts the small cubes in cells of their own side at
+// every size. Printed: the table for the report; asserted: auto <= every fixed depth,
+// and the snapped grid at most the domain grid's count where its cells fit worse.
+TEST(LooseBlockHostModel, ExactTestsPerDepthOnTheBenchBoxes) {
+  std::vector<std::uint32_t> sizes{10000, 100000};
+  const char* large = std::getenv("OCTOCD_BP_COUNT_LARGE");
+  if (large != nullptr && std::string(large) == "1") sizes = {10000, 100000, 1000000, 4000000};
+  for (const std::uint32_t n : sizes) {
+    const auto [boxes, domain] = bench_boxes(n);
+    const LooseTestCount a = count_loose_tests(boxes, domain, -1);
+    const Aabb snapped = snapped_domain(domain, 0.06f);
+    const LooseTestCount s = count_loose_tests(boxes, snapped, -1);
+    const LooseTestCount dev = count_loose_tests_snapped(boxes, domain);
+    const float cell = loose_grid(domain).side / static_cast<float>(1 << a.depth);
+    std::string line = fmt::format("n {}: domain side {:.3f} m, auto D_w {} (cell {:.4f} m = {:.2f} x 0.06): {} tests;",
+                                   n, loose_grid(domain).side, a.depth, cell, cell / 0.06f, a.tests);
+    for (int depth = std::max(0, a.depth - 3); depth <= std::min(kLooseMaxDepth, a.depth + 2); ++depth) {
+      const LooseTestCount f = count_loose_tests(boxes, domain, depth);
+      line += fmt::format(" D {} {},", depth, f.tests);
+      EXPECT_LE(a.tests, f.tests) << "depth " << depth;
+    }
+    line += fmt::format(" snapped side {:.3f} m, D_w {}: {} tests ({:.2f} x); levels", loose_grid(snapped).side,
+                        s.depth, s.tests, static_cast<double>(s.tests) / static_cast<double>(a.tests));
+    for (int l = 0; l <= kLooseMaxDepth + 1; ++l)
+      if (s.per_level[l] != 0) line += fmt::format(" {}:{}", l, s.per_level[l]);
+    line += fmt::format("; device root (loose_snapped_grid): D_w {}, {} tests", dev.depth, dev.tests);
+    std::printf("%s\n", line.c_str());
+    if (cell > 1.25f * 0.06f) {
+      EXPECT_LT(dev.tests, a.tests);
+    }
+    // The snapped grid puts the small cubes at a level of cell side 0.06 m (their extent).
+    const float scell = loose_grid(snapped).side / static_cast<float>(1 << s.depth);
+    EXPECT_NEAR(scell, 0.06f, 0.001f);
+    if (cell > 1.25f * 0.06f) {
+      EXPECT_LT(s.tests, a.tests);
+    }
+  }
+}
+
+// The device octree (depth auto) tests exactly what the counter says for its root: the
+// snapped one by default, the domain's with OCTOCD_CUDA_OCTREE_SNAP=0; the pair set is
+// flat's either way; a bad value of the switch is an input error.
+TEST(DeviceOctreeRoot, CandidatesEqualTheCountOfItsRoot) {
+  REQUIRE_CUDA_DEVICE();
+  Stream stream;
+  std::vector<std::pair<std::string, std::pair<std::vector<Aabb>, Aabb>>> sets;
+  sets.push_back({"bench-20000", bench_boxes(20000, 7)});
+  sets.push_back({"bench-50000", bench_boxes(50000, 3)});
+  for (const char* name : {"uniform-1000", "nested-levels", "touching-lattice"})
+    sets.push_back({name, {box_set(name).boxes, box_set(name).domain}});
+  BroadPhaseConfig c;
+  c.name = "octree";
+  c.octree_depth = -1;
+  for (const auto& [name, set] : sets) {
+    const auto& [boxes, domain] = set;
+    const auto n = static_cast<std::uint32_t>(boxes.size());
+    const std::vector<Pair> flat = flat_pairs(boxes, domain);
+    DeviceBuffer<Aabb> dboxes("test boxes");
+    gpu::upload(dboxes, boxes, stream.s);
+    for (const char* snap : {"1", "0"}) {
+      SCOPED_TRACE(fmt::format("{} OCTOCD_CUDA_OCTREE_SNAP={}", name, snap));
+      ::setenv("OCTOCD_CUDA_OCTREE_SNAP", snap, 1);
+      auto bp = make_device(c, domain);
+      ::unsetenv("OCTOCD_CUDA_OCTREE_SNAP");
+      bp->reserve(n, stream.s);
+      const FindResult r = find_all(*bp, dboxes, n, stream.s);
+      std::vector<Pair> pairs;
+      ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
+      EXPECT_TRUE(same_pairs(pairs, flat, boxes));
+      const LooseTestCount want =
+          *snap == '1' ? count_loose_tests_snapped(boxes, domain) : count_loose_tests(boxes, domain, -1);
+      EXPECT_EQ(r.candidates, want.tests);
+    }
+  }
+  ::setenv("OCTOCD_CUDA_OCTREE_SNAP", "yes", 1);
+  EXPECT_THROW(make_device(c, sets[0].second.second), InputError);
+  ::unsetenv("OCTOCD_CUDA_OCTREE_SNAP");
 }
 
 }  // namespace
