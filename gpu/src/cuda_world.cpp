@@ -561,6 +561,7 @@ struct CudaWorld::Impl {
     s.host_stats = host_dev;
     s.one_block_pairs = one_block_pairs;
     s.front_bodies = front_bodies;
+    s.lean = n <= gpu::kSmallLeanBodies ? 1 : 0;
     if (small_dev) {
       s.done = small_dev;
       s.sequence = sequence;

@@ -275,7 +275,17 @@ struct SmallStepDesc {
   /// the step's start: the host uploads both, and the step's clamp copies the new state into
   /// them unless a list overflowed (the host then restores x from x_saved and reruns).
   std::uint32_t front_bodies = 0;
+  /// Run the kernel compiled without the midphase's early exit and tile culling (their
+  /// switches read as off: small_step.cu's kLean instantiation); the host sets it for
+  /// scenes of at most kSmallLeanBodies bodies. Neither a result nor a count depends on where
+  /// it is set but the midphase counts (those of OCTOCD_CUDA_MID_EARLY_EXIT=0).
+  int lean = 0;
 };
+
+/// Bodies up to which the fused small step runs its lean kernel (SmallStepDesc::lean): with
+/// that little midphase work the early exit's and the tile culling's code cost more than
+/// they save (bunny-stack-50, 55 bodies, on the H100: reports/h100/perf-v5).
+constexpr std::uint32_t kSmallLeanBodies = 64;
 
 /// The most bodies of the fused front (SmallStepDesc::front_bodies): its shared memory holds
 /// their boxes, counts and offsets.

@@ -40,6 +40,8 @@
 // Overflow: a pair list or midphase list that passes its capacity is counted in full and
 // the host regrows and reruns the step, as on the graph path. Every thread reaches every
 // grid.sync (no early return); loops over warps have warp-uniform bounds.
+#include <initializer_list>
+
 #include <cooperative_groups.h>
 #include <cub/block/block_scan.cuh>
 #include <cuda/atomic>
@@ -133,8 +135,9 @@ __device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { retu
 /// the end, `records` (may be null) gets the first pass's contacts; smem: kSharedBytes.
 /// kFuse: the last midphase expand step runs its items' leaves itself (the kernels of
 /// s.mid.fuse_leaves == 1: OCTOCD_CUDA_MID_FUSE=1), a separate instantiation so that the
-/// default kernel's registers stay as they were.
-template <bool kFuse>
+/// default kernel's registers stay as they were. kLean (s.lean, tiny scenes): the
+/// midphase's early exit and tile culling read as off, constants the compiler folds away.
+template <bool kFuse, bool kLean>
 __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned long long sequence,
                                                 DeviceContact* records, unsigned char* smem) {
   cg::grid_group grid = cg::this_grid();
@@ -267,6 +270,10 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   // 5. Midphase start (one warp per pair); the in-lists' a resolved to k, by the grid's
   // last threads (the first warps take the pairs).
   MidListDesc md = s.mid;
+  if (kLean) {
+    md.early_exit = 0;
+    md.tile_cull = 0;
+  }
   md.out = s.lists[0];
   md.out_count = st->counts + 1;
   md.out_capacity = s.list_capacity;
@@ -376,10 +383,10 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   }
 }
 
-template <bool kFuse>
+template <bool kFuse, bool kLean>
 __global__ void __launch_bounds__(kBlockSize) small_step_kernel(const __grid_constant__ SmallStepDesc s) {
   __shared__ alignas(16) unsigned char smem[kSharedBytes];
-  small_step_body<kFuse>(s, s.sequence, s.terms.records, smem);
+  small_step_body<kFuse, kLean>(s, s.sequence, s.terms.records, smem);
 }
 
 /// The command that ends the resident kernel (never a request: those have a sequence
@@ -413,7 +420,7 @@ __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long 
 /// barrier, so none can miss the first command. After a step's last phase (block 0: the
 /// metrics and *done) block 0 waits for the next request; a block done earlier (the
 /// one-block response) waits for the next ticket.
-template <bool kFuse>
+template <bool kFuse, bool kLean>
 __global__ void __launch_bounds__(kBlockSize)
     small_resident_kernel(const __grid_constant__ SmallStepDesc s, const __grid_constant__ ResidentDesc r) {
   __shared__ alignas(16) unsigned char smem[kSharedBytes];
@@ -449,7 +456,7 @@ __global__ void __launch_bounds__(kBlockSize)
     __syncthreads();  // every thread has read it before thread 0 writes the next one
     if (cmd == kExitCommand) break;
     handled = cmd;
-    small_step_body<kFuse>(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr, smem);
+    small_step_body<kFuse, kLean>(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr, smem);
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) {
     __threadfence_system();  // the last step's writes before the exit's mark
@@ -458,45 +465,56 @@ __global__ void __launch_bounds__(kBlockSize)
   }
 }
 
-/// The blocks per SM of both instantiations of a kernel (the fewer: the grid fits either).
-template <typename K>
-cudaError_t both_blocks_per_sm(int& blocks, K plain, K fused) {
-  int b0 = 0, b1 = 0;
+/// The blocks per SM of every instantiation of a kernel (the fewest: the grid fits each).
+cudaError_t all_blocks_per_sm(int& blocks, std::initializer_list<const void*> kernels) {
   blocks = 0;
-  cudaError_t e = cudaOccupancyMaxActiveBlocksPerMultiprocessor(&b0, plain, kBlockSize, 0);
-  if (e != cudaSuccess) return e;
-  e = cudaOccupancyMaxActiveBlocksPerMultiprocessor(&b1, fused, kBlockSize, 0);
-  if (e != cudaSuccess) return e;
-  blocks = b0 < b1 ? b0 : b1;
+  int fewest = -1;
+  for (const void* k : kernels) {
+    int b = 0;
+    const cudaError_t e = cudaOccupancyMaxActiveBlocksPerMultiprocessor(&b, k, kBlockSize, 0);
+    if (e != cudaSuccess) return e;
+    fewest = fewest < 0 || b < fewest ? b : fewest;
+  }
+  blocks = fewest < 0 ? 0 : fewest;
   return cudaSuccess;
+}
+
+/// The instantiation for `s`: fused leaves (OCTOCD_CUDA_MID_FUSE=1) first, else lean (s.lean).
+template <typename K>
+const void* pick(const SmallStepDesc& s, K* plain, K* fused, K* lean) {
+  return reinterpret_cast<const void*>(s.mid.fuse_leaves == 1 ? fused : s.lean != 0 ? lean : plain);
 }
 
 }  // namespace
 
 cudaError_t small_step_blocks_per_sm(int& blocks) {
-  return both_blocks_per_sm(blocks, small_step_kernel<false>, small_step_kernel<true>);
+  return all_blocks_per_sm(blocks, {reinterpret_cast<const void*>(&small_step_kernel<false, false>),
+                                    reinterpret_cast<const void*>(&small_step_kernel<true, false>),
+                                    reinterpret_cast<const void*>(&small_step_kernel<false, true>)});
 }
 
 cudaError_t launch_small_step(const SmallStepDesc& s, unsigned grid, cudaStream_t stream) {
   SmallStepDesc arg = s;
   void* args[] = {&arg};
-  const void* kernel = s.mid.fuse_leaves == 1 ? reinterpret_cast<const void*>(&small_step_kernel<true>)
-                                              : reinterpret_cast<const void*>(&small_step_kernel<false>);
+  const void* kernel =
+      pick(s, &small_step_kernel<false, false>, &small_step_kernel<true, false>, &small_step_kernel<false, true>);
   const cudaError_t e = cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlockSize), args, 0, stream);
   if (e != cudaSuccess) return e;
   return cudaGetLastError();
 }
 
 cudaError_t small_resident_blocks_per_sm(int& blocks) {
-  return both_blocks_per_sm(blocks, small_resident_kernel<false>, small_resident_kernel<true>);
+  return all_blocks_per_sm(blocks, {reinterpret_cast<const void*>(&small_resident_kernel<false, false>),
+                                    reinterpret_cast<const void*>(&small_resident_kernel<true, false>),
+                                    reinterpret_cast<const void*>(&small_resident_kernel<false, true>)});
 }
 
 cudaError_t launch_small_resident(const SmallStepDesc& s, const ResidentDesc& r, unsigned grid, cudaStream_t stream) {
   SmallStepDesc arg = s;
   ResidentDesc res = r;
   void* args[] = {&arg, &res};
-  const void* kernel = s.mid.fuse_leaves == 1 ? reinterpret_cast<const void*>(&small_resident_kernel<true>)
-                                              : reinterpret_cast<const void*>(&small_resident_kernel<false>);
+  const void* kernel = pick(s, &small_resident_kernel<false, false>, &small_resident_kernel<true, false>,
+                            &small_resident_kernel<false, true>);
   const cudaError_t e = cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlockSize), args, 0, stream);
   if (e != cudaSuccess) return e;
   return cudaGetLastError();
