@@ -186,6 +186,26 @@ std::shared_ptr<const Model> load_model(const std::string& name) {
   return build_model(load_scene(path));
 }
 
+/// A step-path switch's bad values: for each of `bads`, the environment variable `name` set
+/// to it, constructing a CudaWorld of box-stack must throw an InputError whose message holds
+/// "NAME: 'VALUE' " followed by `says` (checked before the device is looked at, so this runs
+/// without one too); an accepted value or a RuntimeError is a failure.
+void expect_bad_values_rejected(const char* name, const std::vector<const char*>& bads, const char* says) {
+  const auto model = load_model("box-stack");
+  for (const char* bad : bads) {
+    const ScopedEnv env(name, bad);
+    try {
+      CudaWorld gpu(model, "flat");
+      ADD_FAILURE() << "accepted " << name << "='" << bad << "'";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(fmt::format("{}: '{}' {}", name, bad, says)), std::string::npos)
+          << e.what();
+    } catch (const RuntimeError& e) {
+      ADD_FAILURE() << name << "='" << bad << "' gave a runtime error, not an input error: " << e.what();
+    }
+  }
+}
+
 std::unique_ptr<World> cpu_flat(const std::shared_ptr<const Model>& model) {
   BroadPhaseConfig cfg = model->scene.broadphase;
   cfg.name = "flat";
@@ -671,60 +691,12 @@ TEST(CudaVariants, RelaxationPassesOverlapModesAndLevelLists) {
 // The small path's switches (issue 20): bad values are input errors, before the device
 // is looked at (so this runs without a device too).
 TEST(CudaSmallStep, BadSwitchValuesAreInputErrors) {
-  const auto model = load_model("box-stack");
-  for (const char* bad : {"", "2", "yes", " 1", "1 "}) {
-    const ScopedEnv env("OCTOCD_CUDA_SMALL", bad);
-    try {
-      CudaWorld gpu(model, "flat");
-      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL='" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_SMALL: '{}' is not allowed; allowed: 0", bad)),
-                std::string::npos)
-          << e.what();
-    } catch (const RuntimeError& e) {
-      ADD_FAILURE() << "OCTOCD_CUDA_SMALL='" << bad << "' gave a runtime error, not an input error: " << e.what();
-    }
-  }
-  for (const char* bad : {"", "0", "-3", "x", "12x"}) {
-    const ScopedEnv env("OCTOCD_CUDA_SMALL_BLOCKS", bad);
-    try {
-      CudaWorld gpu(model, "flat");
-      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL_BLOCKS='" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_SMALL_BLOCKS: '{}' is not a block count", bad)),
-                std::string::npos)
-          << e.what();
-    } catch (const RuntimeError& e) {
-      ADD_FAILURE() << "OCTOCD_CUDA_SMALL_BLOCKS='" << bad << "' gave a runtime error: " << e.what();
-    }
-  }
-  for (const char* bad : {"", "Poll", "spin", "sync "}) {
-    const ScopedEnv env("OCTOCD_CUDA_SMALL_WAIT", bad);
-    try {
-      CudaWorld gpu(model, "flat");
-      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL_WAIT='" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_SMALL_WAIT: '{}' is not allowed; allowed: poll", bad)),
-                std::string::npos)
-          << e.what();
-    } catch (const RuntimeError& e) {
-      ADD_FAILURE() << "OCTOCD_CUDA_SMALL_WAIT='" << bad << "' gave a runtime error: " << e.what();
-    }
-  }
-  for (const char* bad : {"", "-1", "x", "7y", "2147483648"}) {
-    const ScopedEnv env("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", bad);
-    try {
-      CudaWorld gpu(model, "flat");
-      ADD_FAILURE() << "accepted OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS='" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find(
-                    fmt::format("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS: '{}' is not a pair count", bad)),
-                std::string::npos)
-          << e.what();
-    } catch (const RuntimeError& e) {
-      ADD_FAILURE() << "OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS='" << bad << "' gave a runtime error: " << e.what();
-    }
-  }
+  expect_bad_values_rejected("OCTOCD_CUDA_SMALL", {"", "2", "yes", " 1", "1 "}, "is not allowed; allowed: 0");
+  expect_bad_values_rejected("OCTOCD_CUDA_SMALL_BLOCKS", {"", "0", "-3", "x", "12x"}, "is not a block count");
+  expect_bad_values_rejected("OCTOCD_CUDA_SMALL_WAIT", {"", "Poll", "spin", "sync "},
+                             "is not allowed; allowed: poll");
+  expect_bad_values_rejected("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", {"", "-1", "x", "7y", "2147483648"},
+                             "is not a pair count");
 }
 
 // The small path's grid does not change a bit: one block, the default grid (response in one
@@ -821,19 +793,7 @@ TEST(CudaSmallStep, AnyGridGivesTheGraphPathsBits) {
 // instantiation, whose last expand step runs the leaves in the block's shared tiles) gives
 // the same bits and counts too.
 TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
-  for (const char* bad : {"", "2", "auto", " 1"}) {
-    const ScopedEnv env("OCTOCD_CUDA_MID_FUSE", bad);
-    try {
-      CudaWorld gpu(load_model("box-stack"), "flat");
-      ADD_FAILURE() << "accepted OCTOCD_CUDA_MID_FUSE='" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_MID_FUSE: '{}' is not allowed; allowed: 0", bad)),
-                std::string::npos)
-          << e.what();
-    } catch (const RuntimeError& e) {
-      ADD_FAILURE() << "OCTOCD_CUDA_MID_FUSE='" << bad << "' gave a runtime error: " << e.what();
-    }
-  }
+  expect_bad_values_rejected("OCTOCD_CUDA_MID_FUSE", {"", "2", "auto", " 1"}, "is not allowed; allowed: 0");
   REQUIRE_CUDA_DEVICE();
   const PathEnv path("graph");
   struct Case {
@@ -919,35 +879,9 @@ TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
 // counts being the lists' whole work either way, the same counts as the one with it on. A bad
 // value of either switch is an input error, before the device is looked at.
 TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
-  for (const char* bad : {"", "2", "on"}) {
-    const ScopedEnv env("OCTOCD_CUDA_MID_TILE_CULL", bad);
-    try {
-      CudaWorld gpu(load_model("box-stack"), "flat");
-      ADD_FAILURE() << "accepted OCTOCD_CUDA_MID_TILE_CULL='" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_MID_TILE_CULL: '{}' is not allowed; allowed: an "
-                                                       "integer 0 .. 1",
-                                                       bad)),
-                std::string::npos)
-          << e.what();
-    } catch (const RuntimeError& e) {
-      ADD_FAILURE() << "OCTOCD_CUDA_MID_TILE_CULL='" << bad << "' gave a runtime error: " << e.what();
-    }
-  }
-  for (const char* bad : {"", "2", "on", " 0"}) {
-    const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", bad);
-    try {
-      CudaWorld gpu(load_model("box-stack"), "flat");
-      ADD_FAILURE() << "accepted OCTOCD_CUDA_MID_EARLY_EXIT='" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find(fmt::format("OCTOCD_CUDA_MID_EARLY_EXIT: '{}' is not allowed; allowed: 1",
-                                                       bad)),
-                std::string::npos)
-          << e.what();
-    } catch (const RuntimeError& e) {
-      ADD_FAILURE() << "OCTOCD_CUDA_MID_EARLY_EXIT='" << bad << "' gave a runtime error: " << e.what();
-    }
-  }
+  expect_bad_values_rejected("OCTOCD_CUDA_MID_TILE_CULL", {"", "2", "on"},
+                             "is not allowed; allowed: an integer 0 .. 1");
+  expect_bad_values_rejected("OCTOCD_CUDA_MID_EARLY_EXIT", {"", "2", "on", " 0"}, "is not allowed; allowed: 1");
   REQUIRE_CUDA_DEVICE();
   struct Case {
     const char* scene;
@@ -1321,27 +1255,12 @@ std::shared_ptr<const Model> with_levels(const std::shared_ptr<const Model>& bas
 
 // The new switches are input errors whatever the device (checked before it is looked at).
 TEST(CudaPersistent, BadSwitchValuesAreInputErrors) {
-  const auto model = load_model("box-stack");
   const std::vector<std::pair<const char*, std::vector<const char*>>> cases = {
       {"OCTOCD_CUDA_PERSISTENT", {"", "2", "yes", "on", " 1"}},
       {"OCTOCD_CUDA_PERSISTENT_IDLE_US", {"", "0", "-1", "x", "600000001", "5us"}},
       {"OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS", {"", "0", "x", "86400001"}},
       {"OCTOCD_CUDA_SMALL_FRONT_BODIES", {"", "-1", "513", "x", "1e3"}}};
-  for (const auto& [name, bads] : cases) {
-    for (const char* bad : bads) {
-      const ScopedEnv env(name, bad);
-      try {
-        CudaWorld gpu(model, "flat");
-        ADD_FAILURE() << "accepted " << name << "='" << bad << "'";
-      } catch (const InputError& e) {
-        EXPECT_NE(std::string(e.what()).find(fmt::format("{}: '{}' is not allowed; allowed: ", name, bad)),
-                  std::string::npos)
-            << e.what();
-      } catch (const RuntimeError& e) {
-        ADD_FAILURE() << name << "='" << bad << "' gave a runtime error, not an input error: " << e.what();
-      }
-    }
-  }
+  for (const auto& [name, bads] : cases) expect_bad_values_rejected(name, bads, "is not allowed; allowed: ");
 }
 
 // Many steps through one resident kernel (idle exit far away): the cpu's bits after every
