@@ -277,8 +277,8 @@ struct SmallStepDesc {
   std::uint32_t front_bodies = 0;
   /// Run the kernel compiled without the midphase's early exit and tile culling (their
   /// switches read as off: small_step.cu's kLean instantiation); the host sets it for
-  /// scenes of at most kSmallLeanBodies bodies. Neither a result nor a count depends on where
-  /// it is set but the midphase counts (those of OCTOCD_CUDA_MID_EARLY_EXIT=0).
+  /// scenes of at most kSmallLeanBodies bodies. States, pairs and contacts are the same either
+  /// way; the midphase counts are then those of OCTOCD_CUDA_MID_EARLY_EXIT=0 (deterministic).
   int lean = 0;
 };
 

@@ -181,7 +181,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
     // box_i)), counted over the block's threads one body pair (i, j), i < j, at a time from
     // the shared boxes (the tests of flat_row; integer counts, so the order of the shared
     // atomics changes nothing). One thread per body counting both serially took 11.2 us of
-    // a 38.6 us bunny-stack-50 step on an H100, a warp per body 4.4 us (reports/h100/perf-v3).
+    // a 38.6 us bunny-stack-50 step on an H100, a warp per body 4.4 us (reports/h100/perf-v5, dev5, dev6).
     for (std::uint32_t i = threadIdx.x; i <= n; i += blockDim.x) {
       f.out_count[i] = 0;
       f.in_count[i] = 0;
