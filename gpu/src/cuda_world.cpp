@@ -277,6 +277,7 @@ struct CudaWorld::Impl {
   int mid_fuse = -1;       // OCTOCD_CUDA_MID_FUSE (MidListDesc::fuse_leaves)
   int mid_early_exit = 1;  // OCTOCD_CUDA_MID_EARLY_EXIT (MidListDesc::early_exit)
   int mid_tile_cull = 1;   // OCTOCD_CUDA_MID_TILE_CULL (MidListDesc::tile_cull)
+  int mid_tile_filter = 1;  // OCTOCD_CUDA_MID_TILE_FILTER (MidListDesc::tile_filter)
   bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
   unsigned small_grid = 1;  // its blocks (co-resident)
   gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
@@ -474,6 +475,7 @@ struct CudaWorld::Impl {
     md.fuse_leaves = mid_fuse;
     md.early_exit = mid_early_exit;
     md.tile_cull = mid_tile_cull;
+    md.tile_filter = mid_tile_filter;
     return md;
   }
 
@@ -955,6 +957,10 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   const long mid_tile_cull = env_integer("OCTOCD_CUDA_MID_TILE_CULL", 0, 1, 1,
                                          "1: a midphase leaf skips pairs of vertex tiles more than theta apart, "
                                          "the default; 0: it tests every pair of tiles");
+  const long mid_tile_filter = env_integer("OCTOCD_CUDA_MID_TILE_FILTER", 0, 1, 1,
+                                           "1: a midphase leaf stages, per tile of one mesh's vertices, only the "
+                                           "other mesh's vertices near that tile, the default; 0: every one inside "
+                                           "the grown cell box");
   const bool persistent = persistent_from_env();
   const long idle_us = env_integer("OCTOCD_CUDA_PERSISTENT_IDLE_US", 1, 600000000L, kResidentIdleUs,
                                    "microseconds after which the idle resident kernel ends itself");
@@ -975,6 +981,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.mid_fuse = mid_fuse;
   d.mid_early_exit = mid_early_exit;
   d.mid_tile_cull = static_cast<int>(mid_tile_cull);
+  d.mid_tile_filter = static_cast<int>(mid_tile_filter);
   d.sync_each_launch = env_is_one("OCTOCD_CUDA_SYNC");
   const char* graph = std::getenv("OCTOCD_CUDA_GRAPH");
   d.use_graph = !(graph != nullptr && std::strcmp(graph, "0") == 0);

@@ -139,6 +139,12 @@ struct MidListDesc {
   /// A leaf skips a pair of vertex tiles whose boxes are more than theta apart on an axis
   /// (midphase.cuh, tiles_apart; OCTOCD_CUDA_MID_TILE_CULL, default 1): the same results.
   int tile_cull = 1;
+  /// A leaf stages, for each tile of B's vertices, only A's vertices near that tile (within
+  /// theta of its box, midphase.cuh near_tile; whole vertex blocks skipped by their boxes)
+  /// instead of every vertex of A's cell inside B's grown cell box
+  /// (OCTOCD_CUDA_MID_TILE_FILTER, default 1): the same results; with the early exit off the
+  /// same counts too (they count the whole filtered ranges either way).
+  int tile_filter = 1;
 };
 
 /// One contact of the first response pass, as the host's ContactRecord wants it.

@@ -43,6 +43,11 @@
 // exit on or off): a leaf skips a pair of staged vertex tiles whose bounding boxes are apart
 // by theta on some axis (tiles_apart; exact for hd::vertex_close's float sum), so a large
 // leaf tests only the tile pairs that are near each other.
+// Tile filter (MidListDesc::tile_filter, OCTOCD_CUDA_MID_TILE_FILTER, on by default): for
+// each staged tile of B a leaf stages only A's vertices near it (near_tile: the tile's box
+// in A's frame grown by the margin, within b_in_a; whole vertex blocks skipped by their
+// boxes), so a large leaf no longer rescans and stages A's whole filtered cell per tile of
+// B; with the exit on A's first tile is then not staged ahead of B's tiles.
 // Counts, early exit off: box tests = every cell pair tested, box pairs = surviving leaf
 // cell pairs, vertex tests = per leaf (A's filtered vertices) x (B's filtered vertices) or
 // the cell's vertices against a box: the work of the lists with no early exit (a leaf of a
@@ -352,6 +357,28 @@ __device__ inline bool tiles_apart(const Aabb& a, const Aabb& b, float theta2) {
          axis_apart(b.min.z, a.max.z, theta2) || axis_apart(a.min.z, b.max.z, theta2);
 }
 
+/// The part of `box` (A's filter box b_in_a, in A's frame) that can hold a vertex of A
+/// within theta of a vertex of the world box `tile` (a staged tile of B, tile_box): `tile`
+/// moved into A's frame (minus pa) and grown by `margin` (theta + midphase_tolerance),
+/// intersected with `box`. Conservative as moved_back_grown: if vertex_close(wa, wb) with
+/// wa = world_vertex(va, pa) and wb in `tile`, then on each axis |wa - wb| < theta up to a
+/// few roundings of the magnitudes |pa|, |pb|, |A.bounds|, |B.bounds| (those of
+/// wa, wb and pa), far below the tolerance (1e-5 of them: about 170 float ulps), so va is
+/// inside the result. A leaf stages for a tile of B only A's vertices inside it (whole vertex
+/// blocks skipped by their boxes), not every vertex inside b_in_a: the same answer, since a
+/// vertex outside it is close to no vertex of the tile. May be empty (box_empty).
+__device__ inline Aabb near_tile(const Aabb& box, const Aabb& tile, Vec3 pa, float margin) {
+  return {{fmaxf(box.min.x, tile.min.x - pa.x - margin), fmaxf(box.min.y, tile.min.y - pa.y - margin),
+           fmaxf(box.min.z, tile.min.z - pa.z - margin)},
+          {fminf(box.max.x, tile.max.x - pa.x + margin), fminf(box.max.y, tile.max.y - pa.y + margin),
+           fminf(box.max.z, tile.max.z - pa.z + margin)}};
+}
+
+/// Whether `b` holds no point (min > max on some axis; hd::inside is false for every point).
+__device__ inline bool box_empty(const Aabb& b) {
+  return b.min.x > b.max.x || b.min.y > b.max.y || b.min.z > b.max.z;
+}
+
 /// Shared memory of mid_leaf_items and of the last mid_expand step when it runs the
 /// leaves itself: per warp of the block, a tile of B's and one of A's filtered world
 /// vertices.
@@ -416,7 +443,11 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   // is staged while counting (stage_tile counts what it stages), the rest of the range only
   // counted; the counts are those of the whole ranges. Early exit on: only the first tiles
   // are staged (a tile short of full ends its range, so an empty first tile means no
-  // filtered vertex: no vertex test, as mesh_mesh_leaf).
+  // filtered vertex: no vertex test, as mesh_mesh_leaf); with the tile filter as well
+  // (d.tile_filter) A's first tile is not staged here: A's tiles are staged per tile of B,
+  // only the vertices near it (near_tile).
+  const bool filter = d.tile_filter != 0;
+  const bool a_first = !(exit_early && filter);  // A's first tile staged before the tiles of B
   std::uint32_t jb = b_begin / kVertexBlock;  // the next vertex block of B's range to stage
   const std::uint32_t jb_end = block_end(b_end);
   std::uint32_t nb = 0;
@@ -428,14 +459,16 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   const std::uint32_t ia_end = block_end(a_end);
   std::uint32_t ia_first = a_begin / kVertexBlock;  // A's next block after its first tile
   std::uint32_t na_first = 0;
-  stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia_first, na_first);
-  const std::uint32_t naf =
-      exit_early ? na_first
-                 : na_first + (ia_first < ia_end
-                                   ? count_inside(A.vertices, c.blocks_a, ia_first * kVertexBlock, a_end, b_in_a)
-                                   : 0u);
-  if (!exit_early) t.vertex_tests += static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf);
-  if (naf == 0) return;
+  if (a_first) {
+    stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia_first, na_first);
+    const std::uint32_t naf =
+        exit_early ? na_first
+                   : na_first + (ia_first < ia_end
+                                     ? count_inside(A.vertices, c.blocks_a, ia_first * kVertexBlock, a_end, b_in_a)
+                                     : 0u);
+    if (!exit_early) t.vertex_tests += static_cast<unsigned long long>(naf) * static_cast<unsigned long long>(nbf);
+    if (naf == 0) return;
+  }
   // Tiles of B's filtered world vertices against tiles of A's (B's first tile and, for it,
   // A's first tile are already staged); another leaf of this pair may confirm it first
   // (checked between B's tiles, and with the early exit on between A's too): the answer is
@@ -454,12 +487,21 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
     if (nb == 0) break;  // (only at the range's end)
     const bool cull = d.tile_cull != 0;
     Aabb box_b{};
-    if (cull) {
+    if (cull || filter) {
       box_b = tile_box(tile_b, nb);
       __syncwarp();  // tile_b is read; it is staged again only after the loop below
     }
-    // tile_a still holds A's first tile only while B's first tile is tested.
-    bool a_staged = b_staged;
+    // A's vertices staged for this tile of B: with the tile filter only those near the
+    // tile (near_tile), else every one inside b_in_a. An empty filter box holds none of A's
+    // vertices: no vertex of this tile can be close to A's (the next tile of B is taken).
+    const Aabb a_filter = filter ? near_tile(b_in_a, box_b, pa, c.s.margin) : b_in_a;
+    if (filter && box_empty(a_filter)) {
+      b_staged = false;
+      continue;
+    }
+    // tile_a still holds A's first tile (if staged: a_first) only while B's first tile is
+    // tested.
+    bool a_staged = b_staged && a_first;
     b_staged = false;
     std::uint32_t ia = a_staged ? ia_first : a_begin / kVertexBlock;
     std::uint32_t na = a_staged ? na_first : 0u;
@@ -468,7 +510,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
         if (ia >= ia_end) break;
         if (exit_early && confirmed_now(d, k)) break;
         na = 0;
-        stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia, na);
+        stage_tile(A.vertices, c.blocks_a, a_begin, a_end, a_filter, pa, tile_a, ia, na);
       }
       a_staged = false;
       // A pair of tiles whose boxes are apart by theta on some axis has no close vertex

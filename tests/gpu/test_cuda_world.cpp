@@ -874,12 +874,19 @@ TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
 // with fused leaves (a warp runs an expand item's leaves in turn, so the exit saves work
 // whatever the timing) must do fewer box tests and fewer vertex tests than with the exit off
 // (box tests drop only by skipping a confirmed pair's expand items or cell tests: an exit
-// that is never taken fails here). A graph engine with the exit off and the tile culling off
-// (OCTOCD_CUDA_MID_TILE_CULL=0: every pair of tiles tested) gives the same bits and, the
-// counts being the lists' whole work either way, the same counts as the one with it on. A bad
-// value of either switch is an input error, before the device is looked at.
+// that is never taken fails here). A graph engine with the exit off and the tile culling and
+// tile filter off (OCTOCD_CUDA_MID_TILE_CULL=0: every pair of tiles tested;
+// OCTOCD_CUDA_MID_TILE_FILTER=0: A's vertices staged for a tile of B are every one in B's
+// grown cell box) gives the same bits and, the counts being the lists' whole work either way,
+// the same counts as the one with them on. With the exit on, graph engines with the tile
+// filter off (on the small path too) give the same bits, and over the Table 5 runs the graph
+// engine with the filter on does fewer vertex tests than the one with it off (a filter that
+// never narrows A's tiles fails here). A bad value of any switch is an input error, before the
+// device is looked at.
 TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
   expect_bad_values_rejected("OCTOCD_CUDA_MID_TILE_CULL", {"", "2", "on"},
+                             "is not allowed; allowed: an integer 0 .. 1");
+  expect_bad_values_rejected("OCTOCD_CUDA_MID_TILE_FILTER", {"", "2", "on", "-1"},
                              "is not allowed; allowed: an integer 0 .. 1");
   expect_bad_values_rejected("OCTOCD_CUDA_MID_EARLY_EXIT", {"", "2", "on", " 0"}, "is not allowed; allowed: 1");
   REQUIRE_CUDA_DEVICE();
@@ -893,6 +900,7 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
   // (by name) with it on.
   std::uint64_t t5_off_bt = 0, t5_off_vt = 0;
   std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> t5_fused;  // name -> (box, vertex tests)
+  std::map<std::string, std::uint64_t> t5_vt;  // name -> vertex tests of the exit-on engines
   for (const Case& cs : {Case{"bunny-random-400", "1,2", 200, true}, Case{"armadillo-random-250", "1,2", 150, true},
                          Case{"dragon-random-250", "1,2", 150, true}, Case{"asian-dragon-random-60", "1,2", 150, true},
                          Case{"bunny-random-400", "0,1,2", 100, true}, Case{"bunny-pile-10k", nullptr, 250, false}}) {
@@ -910,10 +918,15 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
         const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", "0");
         off = std::make_unique<CudaWorld>(m, "octree");
         const ScopedEnv cull("OCTOCD_CUDA_MID_TILE_CULL", "0");
+        const ScopedEnv filter("OCTOCD_CUDA_MID_TILE_FILTER", "0");
         off_no_cull = std::make_unique<CudaWorld>(m, "octree");
       }
       const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", "1");
       on.emplace_back("graph", std::make_unique<CudaWorld>(m, "octree"));
+      {
+        const ScopedEnv filter("OCTOCD_CUDA_MID_TILE_FILTER", "0");
+        on.emplace_back("graph, no tile filter", std::make_unique<CudaWorld>(m, "octree"));
+      }
       const ScopedEnv fuse("OCTOCD_CUDA_MID_FUSE", "1");
       on.emplace_back("graph, fused leaves", std::make_unique<CudaWorld>(m, "octree"));
     }
@@ -922,6 +935,11 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
       const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", "1");
       on.emplace_back("small", std::make_unique<CudaWorld>(m, "octree"));
       ASSERT_EQ(on.back().second->step_path(), "small") << cs.scene;
+      {
+        const ScopedEnv filter("OCTOCD_CUDA_MID_TILE_FILTER", "0");
+        on.emplace_back("small, no tile filter", std::make_unique<CudaWorld>(m, "octree"));
+        ASSERT_EQ(on.back().second->step_path(), "small") << cs.scene;
+      }
       const ScopedEnv fuse("OCTOCD_CUDA_MID_FUSE", "1");
       on.emplace_back("small, fused leaves", std::make_unique<CudaWorld>(m, "octree"));
       ASSERT_EQ(on.back().second->step_path(), "small") << cs.scene;
@@ -947,11 +965,11 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
           << what << " (exit off): " << first_difference(cpu.state(), off->state());
       expect_cpu_cuda_counts(mc, m0, what + " (exit off)", false, true);
       ASSERT_EQ(cpu.state_hash(), off_no_cull->state_hash())
-          << what << " (exit off, no tile culling): " << first_difference(cpu.state(), off_no_cull->state());
-      EXPECT_EQ(mn.box_tests, m0.box_tests) << what << " (tile culling off vs on)";
-      EXPECT_EQ(mn.box_pairs, m0.box_pairs) << what << " (tile culling off vs on)";
-      EXPECT_EQ(mn.vertex_tests, m0.vertex_tests) << what << " (tile culling off vs on)";
-      if (rec) expect_same_record(off->record(), off_no_cull->record(), what + " (tile culling off vs on)");
+          << what << " (exit off, no tile culling or filter): " << first_difference(cpu.state(), off_no_cull->state());
+      EXPECT_EQ(mn.box_tests, m0.box_tests) << what << " (tile culling and filter off vs on)";
+      EXPECT_EQ(mn.box_pairs, m0.box_pairs) << what << " (tile culling and filter off vs on)";
+      EXPECT_EQ(mn.vertex_tests, m0.vertex_tests) << what << " (tile culling and filter off vs on)";
+      if (rec) expect_same_record(off->record(), off_no_cull->record(), what + " (tile culling and filter off vs on)");
       for (std::size_t i = 0; i < on.size(); ++i) {
         CudaWorld& e = *on[i].second;
         const FrameMetrics m1 = e.step();
@@ -985,6 +1003,7 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
     for (std::size_t i = 0; i < on.size(); ++i) {
       ratios += fmt::format("; exit on ({}): {} ({:.3f} of off), box tests {:.3f} of off", on[i].first, on_vt[i],
                             share(on_vt[i], off_vt), share(on_bt[i], off_bt));
+      if (cs.table5) t5_vt[on[i].first] += on_vt[i];
       if (cs.table5 && on[i].first.find("fused") != std::string::npos) {
         t5_fused[on[i].first].first += on_bt[i];
         t5_fused[on[i].first].second += on_vt[i];
@@ -1002,6 +1021,12 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
     EXPECT_LT(bt_vt.first, t5_off_bt) << name << ": the early exit saved no box test over the Table 5 runs";
     EXPECT_LT(bt_vt.second, t5_off_vt) << name << ": the early exit saved no vertex test over the Table 5 runs";
   }
+  ASSERT_EQ(t5_vt.count("graph"), 1u);
+  ASSERT_EQ(t5_vt.count("graph, no tile filter"), 1u);
+  std::cout << "[ info ] Table 5 runs, exit on, graph: vertex tests with the tile filter " << t5_vt["graph"]
+            << ", without " << t5_vt["graph, no tile filter"] << "\n";
+  EXPECT_LT(t5_vt["graph"], t5_vt["graph, no tile filter"])
+      << "the tile filter saved no vertex test over the Table 5 runs (graph path, exit on)";
 }
 
 TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
