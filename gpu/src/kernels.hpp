@@ -97,12 +97,28 @@ struct MidItem {
   std::uint32_t k = 0;
   std::uint32_t ca = 0;
   std::uint32_t cb = 0;
-  std::uint32_t chunk = 0;  ///< last step, mesh-mesh: B's vertices [chunk * kLeafChunk, + kLeafChunk)
+  /// Last step, mesh-mesh: the leaf item of the cell pair (leaf_items): B's vertices
+  /// [c * kLeafChunk, + kLeafChunk) of its cell against A's [p * kLeafAPart, + kLeafAPart)
+  /// of its own, c = chunk / P and p = chunk % P, P = leaf_a_parts(A's cell vertex count).
+  std::uint32_t chunk = 0;
 };
 
-/// B's vertices per leaf work item of a mesh-mesh cell pair (a large cell pair becomes
-/// several items, so its vertex tests spread over several warps).
-constexpr std::uint32_t kLeafChunk = 256;
+/// B's vertices per leaf work item of a mesh-mesh cell pair, and A's: a large cell pair
+/// becomes several items, so its vertex tests spread over several warps (one warp's items
+/// were the critical path of a Table 5 step on the H100: reports/h100/perf-v6).
+constexpr std::uint32_t kLeafChunk = 128;
+constexpr std::uint32_t kLeafAPart = 1024;
+
+/// The parts of kLeafAPart vertices of A's cell of `a_vertices` vertices (at least 1).
+OCTOCD_HD inline std::uint32_t leaf_a_parts(std::uint32_t a_vertices) {
+  return a_vertices > kLeafAPart ? (a_vertices + kLeafAPart - 1) / kLeafAPart : 1u;
+}
+
+/// The leaf items of a mesh-mesh cell pair whose cells hold `a_vertices` and `b_vertices`:
+/// B's chunks x A's parts (MidItem::chunk).
+OCTOCD_HD inline std::uint32_t leaf_items(std::uint32_t a_vertices, std::uint32_t b_vertices) {
+  return (b_vertices + kLeafChunk - 1) / kLeafChunk * leaf_a_parts(a_vertices);
+}
 
 /// One launch of the midphase work lists (midphase.cu): start (pairs -> step 0 items),
 /// expand (step i items -> step i + 1 items) or leaf (last step items -> confirmed).

@@ -28,8 +28,9 @@
 // only the order of the work differs. Lists are appended with warp-aggregated integer
 // atomics (item order varies run to run; results and counts do not). A list that would
 // pass its capacity still counts every item (the host then regrows and reruns the step).
-// A large leaf cell pair is split into items of kLeafChunk of B's vertices each, so its
-// vertex tests spread over several warps.
+// A large leaf cell pair is split into items (leaf_items): each kLeafChunk of B's vertices
+// against each kLeafAPart of A's, so its vertex tests spread over several warps (the filtered
+// counts of an item's parts add up to the cell pair's).
 // Early exit (MidListDesc::early_exit, OCTOCD_CUDA_MID_EARLY_EXIT, on by default): the
 // answer per pair is a boolean, so once confirmed[k] is set the rest of pair k's work
 // cannot change it (nor any result: the response reads only confirmed[k]). With it on, an
@@ -385,10 +386,11 @@ __device__ inline bool box_empty(const Aabb& b) {
 using LeafTiles = Vec3[kWarpsPerBlock][2][kLeafTile];
 
 /// The narrow phase of one leaf item of pair k (the whole warp): mesh-box, A's cell `ca`
-/// against the box (as mesh_box_descend's last step); mesh-mesh, A's cell `ca` against
-/// chunk `chunk` (kLeafChunk vertices) of B's cell `cb` (as mesh_mesh_leaf). Sets
-/// confirmed[k] on a vertex pair within theta; adds the vertex tests to `t`. Early exit off:
-/// the leaf's whole count (the vertex count of A's cell, or filtered A x filtered B),
+/// against the box (as mesh_box_descend's last step); mesh-mesh, leaf item `chunk` of A's
+/// cell `ca` and B's cell `cb` (MidItem::chunk: kLeafChunk of B's vertices against kLeafAPart
+/// of A's, as mesh_mesh_leaf on those). Sets confirmed[k] on a vertex pair within theta;
+/// adds the vertex tests to `t`. Early exit off: the item's whole count (the vertex count of
+/// A's cell, or filtered A x filtered B of its part and chunk),
 /// whether or not the tests are cut short because the pair is confirmed (here or by another
 /// warp), so the counts do not depend on timing. Early exit on (the caller skips the item
 /// when the pair is already confirmed): mesh-box, the cell's vertex count; mesh-mesh,
@@ -401,8 +403,8 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   const std::uint32_t lane = lane_id();
   const hd::OctreeView& A = c.a.octree;
   const MeshOctreeCell ca = A.cells[ca_index];
-  const std::uint32_t a_begin = ca.first_vertex;
-  const std::uint32_t a_end = ca.first_vertex + ca.vertex_count;
+  std::uint32_t a_begin = ca.first_vertex;  // mesh-mesh: this item's part of A's cell (below)
+  std::uint32_t a_end = ca.first_vertex + ca.vertex_count;
   const Vec3 pa = c.a.position;
   const bool exit_early = d.early_exit != 0;
   if (c.s.kind == hd::PairKind::MeshBox) {  // as mesh_box_descend's last step
@@ -429,12 +431,18 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   // A's vertices inside B's grown cell box (in A's frame), vertex_close(wa, wb).
   const hd::OctreeView& B = c.b.octree;
   const MeshOctreeCell cb = B.cells[cb_index];
-  // This item's share of B's vertices: chunk `chunk` of the cell's.
-  const std::uint32_t chunk_begin = chunk * kLeafChunk;
+  // This item's share (MidItem::chunk): a chunk of B's cell's vertices against a part of
+  // A's cell's vertices.
+  const std::uint32_t parts = leaf_a_parts(ca.vertex_count);
+  const std::uint32_t chunk_begin = chunk / parts * kLeafChunk;
   const std::uint32_t rest = cb.vertex_count > chunk_begin ? cb.vertex_count - chunk_begin : 0u;
   const std::uint32_t nbv = rest < kLeafChunk ? rest : kLeafChunk;
   const std::uint32_t b_begin = cb.first_vertex + chunk_begin;
   const std::uint32_t b_end = b_begin + nbv;
+  const std::uint32_t part_begin = chunk % parts * kLeafAPart;  // < ca.vertex_count
+  const std::uint32_t a_rest = ca.vertex_count - part_begin;
+  a_begin = ca.first_vertex + part_begin;
+  a_end = a_begin + (a_rest < kLeafAPart ? a_rest : kLeafAPart);
   const Vec3 pb = c.b.position;
   const Aabb a_in_b = hd::moved_grown(ca.box, c.s.d, c.s.margin);
   const Aabb b_in_a = hd::moved_back_grown(cb.box, c.s.d, c.s.margin);
@@ -527,7 +535,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
 
 /// The last step's cell pairs of `mask` (bit l: lane l's `item` survived), run as leaves by
 /// this warp in lane order instead of being appended to the leaf list: each mesh-mesh cell
-/// pair as its kLeafChunk chunks, each mesh-box cell once, exactly the items the list would
+/// pair as its leaf_items items, each mesh-box cell once, exactly the items the list would
 /// have held (so the same tests and counts); with the early exit on, none after the pair is
 /// confirmed, and the cell pairs in the order of `depth` (lane's overlap_depth), deepest
 /// first (the likelier hits first; ties in lane order), else in lane order.
@@ -550,7 +558,8 @@ __device__ inline void run_leaves(const MidListDesc& d, const PairContext& c, st
     mask &= ~(1u << l);
     const std::uint32_t ca = __shfl_sync(kFull, item.ca, l);
     const std::uint32_t cb = __shfl_sync(kFull, item.cb, l);
-    const std::uint32_t chunks = mesh_box ? 1u : (c.b.octree.cells[cb].vertex_count + kLeafChunk - 1) / kLeafChunk;
+    const std::uint32_t chunks =
+        mesh_box ? 1u : leaf_items(c.a.octree.cells[ca].vertex_count, c.b.octree.cells[cb].vertex_count);
     for (std::uint32_t ch = 0; ch < chunks; ++ch) {
       if (skip_confirmed(d, k)) return;
       leaf_item(d, c, k, ca, cb, ch, tile_a, tile_b, t);
@@ -570,8 +579,8 @@ __device__ inline float overlap_depth(const Aabb& a, const Aabb& b) {
 
 /// Tests the cell pairs [a0, a1) x [b0, b1) of pair k (mesh-box: [a0, a1) against the
 /// box; b is unused) with the lanes of the warp and appends the overlapping ones; at the
-/// last step (`last`) a mesh-mesh cell pair is appended once per kLeafChunk of B's
-/// vertices, and the surviving leaf box pairs are counted; with `leaves` (last step only)
+/// last step (`last`) a mesh-mesh cell pair is appended once per leaf item (leaf_items),
+/// and the surviving leaf box pairs are counted; with `leaves` (last step only)
 /// the surviving cell pairs are run here as leaves (run_leaves) instead of appended. Box
 /// tests are counted per 32 cell pairs tested; with the early exit on, the test stops before
 /// the next 32 once the pair is confirmed (the caller checked it before the first).
@@ -609,8 +618,7 @@ __device__ inline void test_cells(const MidListDesc& d, const PairContext& c, st
       }
     }
     if (last && !mesh_box) {
-      const std::uint32_t nv = keep ? B.cells[item.cb].vertex_count : 0u;
-      append_chunks(d, keep ? (nv + kLeafChunk - 1) / kLeafChunk : 0u, item);
+      append_chunks(d, keep ? leaf_items(A.cells[item.ca].vertex_count, B.cells[item.cb].vertex_count) : 0u, item);
     } else {
       append(d, keep, item);
     }
