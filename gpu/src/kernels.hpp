@@ -120,6 +120,18 @@ OCTOCD_HD inline std::uint32_t leaf_items(std::uint32_t a_vertices, std::uint32_
   return (b_vertices + kLeafChunk - 1) / kLeafChunk * leaf_a_parts(a_vertices);
 }
 
+/// Leaf item `item` (< leaf_items(a_vertices, b_vertices)) of a mesh-mesh cell pair: A's
+/// vertices [a0, a1) and B's [b0, b1), relative to each cell's first vertex (both non-empty
+/// when the cells are; over the items they cover every pair of the cells' vertices once).
+OCTOCD_HD inline void leaf_ranges(std::uint32_t item, std::uint32_t a_vertices, std::uint32_t b_vertices,
+                                  std::uint32_t& a0, std::uint32_t& a1, std::uint32_t& b0, std::uint32_t& b1) {
+  const std::uint32_t parts = leaf_a_parts(a_vertices);
+  b0 = item / parts * kLeafChunk;
+  b1 = b_vertices - b0 < kLeafChunk ? b_vertices : b0 + kLeafChunk;
+  a0 = item % parts * kLeafAPart;
+  a1 = a_vertices - a0 < kLeafAPart ? a_vertices : a0 + kLeafAPart;
+}
+
 /// One launch of the midphase work lists (midphase.cu): start (pairs -> step 0 items),
 /// expand (step i items -> step i + 1 items) or leaf (last step items -> confirmed).
 struct MidListDesc {

@@ -433,16 +433,12 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   const MeshOctreeCell cb = B.cells[cb_index];
   // This item's share (MidItem::chunk): a chunk of B's cell's vertices against a part of
   // A's cell's vertices.
-  const std::uint32_t parts = leaf_a_parts(ca.vertex_count);
-  const std::uint32_t chunk_begin = chunk / parts * kLeafChunk;
-  const std::uint32_t rest = cb.vertex_count > chunk_begin ? cb.vertex_count - chunk_begin : 0u;
-  const std::uint32_t nbv = rest < kLeafChunk ? rest : kLeafChunk;
-  const std::uint32_t b_begin = cb.first_vertex + chunk_begin;
-  const std::uint32_t b_end = b_begin + nbv;
-  const std::uint32_t part_begin = chunk % parts * kLeafAPart;  // < ca.vertex_count
-  const std::uint32_t a_rest = ca.vertex_count - part_begin;
-  a_begin = ca.first_vertex + part_begin;
-  a_end = a_begin + (a_rest < kLeafAPart ? a_rest : kLeafAPart);
+  std::uint32_t a0, a1, b0, b1;
+  leaf_ranges(chunk, ca.vertex_count, cb.vertex_count, a0, a1, b0, b1);
+  a_begin = ca.first_vertex + a0;
+  a_end = ca.first_vertex + a1;
+  const std::uint32_t b_begin = cb.first_vertex + b0;
+  const std::uint32_t b_end = cb.first_vertex + b1;
   const Vec3 pb = c.b.position;
   const Aabb a_in_b = hd::moved_grown(ca.box, c.s.d, c.s.margin);
   const Aabb b_in_a = hd::moved_back_grown(cb.box, c.s.d, c.s.margin);

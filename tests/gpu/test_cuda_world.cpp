@@ -48,6 +48,7 @@
 
 #include <fmt/format.h>
 
+#include "kernels.hpp"  // gpu/src: leaf_items, leaf_ranges (host-callable)
 #include "octocd/cuda_world.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/error.hpp"
@@ -792,6 +793,43 @@ TEST(CudaSmallStep, AnyGridGivesTheGraphPathsBits) {
 // with the early exit. The small path with OCTOCD_CUDA_MID_FUSE=1 (its own kernel
 // instantiation, whose last expand step runs the leaves in the block's shared tiles) gives
 // the same bits and counts too.
+// The leaf items of a mesh-mesh cell pair (gpu/src/kernels.hpp, leaf_items / leaf_ranges:
+// chunks of B's cell's vertices against parts of A's) cover every pair of the two cells'
+// vertices exactly once, each item's ranges non-empty and inside the cells, so the leaves
+// test what the CPU's mesh_mesh_leaf tests and the exit-off counts of the items add up to
+// the cell pair's (filtered A x filtered B). Host code only: runs without a device.
+TEST(CudaMidphase, LeafItemsCoverEveryVertexPairOnce) {
+  using octocd::gpu::kLeafAPart;
+  using octocd::gpu::kLeafChunk;
+  const std::vector<std::uint32_t> counts = {1,  2,  31, 32, 33, kLeafChunk - 1, kLeafChunk, kLeafChunk + 1,
+                                             kLeafAPart - 1, kLeafAPart, kLeafAPart + 1, 2 * kLeafAPart + 7,
+                                             3 * kLeafChunk, 3 * kLeafAPart + 5};
+  for (const std::uint32_t na : counts) {
+    for (const std::uint32_t nb : counts) {
+      const std::uint32_t items = octocd::gpu::leaf_items(na, nb);
+      ASSERT_GE(items, 1u);
+      std::vector<std::uint32_t> covered(static_cast<std::size_t>(na) * nb, 0);
+      for (std::uint32_t it = 0; it < items; ++it) {
+        std::uint32_t a0 = 0, a1 = 0, b0 = 0, b1 = 0;
+        octocd::gpu::leaf_ranges(it, na, nb, a0, a1, b0, b1);
+        ASSERT_TRUE(a0 < a1 && a1 <= na && b0 < b1 && b1 <= nb)
+            << "cells of " << na << " and " << nb << " vertices, item " << it << ": A [" << a0 << ", " << a1
+            << "), B [" << b0 << ", " << b1 << ")";
+        EXPECT_LE(a1 - a0, kLeafAPart);
+        EXPECT_LE(b1 - b0, kLeafChunk);
+        for (std::uint32_t i = a0; i < a1; ++i)
+          for (std::uint32_t j = b0; j < b1; ++j) ++covered[static_cast<std::size_t>(i) * nb + j];
+      }
+      const auto bad = std::find_if(covered.begin(), covered.end(), [](std::uint32_t c) { return c != 1; });
+      ASSERT_TRUE(bad == covered.end()) << "cells of " << na << " and " << nb << " vertices: vertex pair "
+                                        << (bad - covered.begin()) << " covered " << *bad << " times";
+    }
+  }
+  // A cell of up to kLeafAPart vertices is one part: only B is chunked, as before the parts.
+  EXPECT_EQ(octocd::gpu::leaf_items(kLeafAPart, 5000), (5000 + kLeafChunk - 1) / kLeafChunk);
+  EXPECT_EQ(octocd::gpu::leaf_items(kLeafAPart + 1, kLeafChunk), 2u);
+}
+
 TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
   expect_bad_values_rejected("OCTOCD_CUDA_MID_FUSE", {"", "2", "auto", " 1"}, "is not allowed; allowed: 0");
   REQUIRE_CUDA_DEVICE();
