@@ -66,8 +66,8 @@
 // This header holds the per-item device code; midphase.cu wraps it in its kernels
 // (mid_start, mid_expand, mid_leaf) and the fused small-scene step (small_step.cu) calls the
 // same functions between grid-wide barriers. Every loop over pairs is a grid-stride loop
-// over whole warps, every loop over list items a contiguous share per warp (warp_range);
-// the item index and its bounds are warp-uniform, so the warp
+// over whole warps, every loop over expand items a contiguous share per warp (warp_range),
+// over leaf items a stride of the grid's warps; the item index and its bounds are warp-uniform, so the warp
 // collectives (__ballot_sync / __shfl_sync with the full mask) see all 32 lanes. CUDA only.
 #include "kernels.hpp"
 #include "octocd/vertex_blocks.hpp"
@@ -171,8 +171,11 @@ __device__ inline void append(const MidListDesc& d, bool keep, const MidItem& it
 }
 
 /// Warp-aggregated append of `cnt` copies of this lane's item, with chunk = 0 .. cnt - 1
-/// (every lane calls it).
-__device__ inline void append_chunks(const MidListDesc& d, std::uint32_t cnt, MidItem item) {
+/// (every lane calls it): lane l's copies at base + (the counts of lanes < l) + chunk. The
+/// whole warp writes them, 32 at a time (copy i: the first lane whose inclusive count
+/// exceeds i, found by a binary search over the lanes), not each lane its own in turn (a
+/// lane with a large cell pair's leaf items would write them alone).
+__device__ inline void append_chunks(const MidListDesc& d, std::uint32_t cnt, const MidItem& item) {
   const std::uint32_t lane = lane_id();
   std::uint32_t incl = cnt;
   for (int o = 1; o < 32; o <<= 1) {
@@ -184,12 +187,18 @@ __device__ inline void append_chunks(const MidListDesc& d, std::uint32_t cnt, Mi
   std::uint32_t base = 0;
   if (lane == 0) base = atomicAdd(d.out_count, total);
   base = __shfl_sync(kFull, base, 0);
-  const std::uint32_t start = base + incl - cnt;
-  for (std::uint32_t c = 0; c < cnt; ++c) {
-    if (start + c < d.out_capacity) {
-      item.chunk = c;
-      d.out[start + c] = item;
-    }
+  const std::uint32_t excl = incl - cnt;
+  for (std::uint32_t i0 = 0; i0 < total; i0 += 32) {
+    const std::uint32_t i = i0 + lane;
+    int owner = 0;  // lanes whose inclusive count is <= i (incl is non-decreasing over lanes)
+    for (int step = 16; step > 0; step >>= 1)
+      if (__shfl_sync(kFull, incl, owner + step - 1) <= i) owner += step;
+    MidItem copy;
+    copy.k = __shfl_sync(kFull, item.k, owner);
+    copy.ca = __shfl_sync(kFull, item.ca, owner);
+    copy.cb = __shfl_sync(kFull, item.cb, owner);
+    copy.chunk = i - __shfl_sync(kFull, excl, owner);
+    if (i < total && base + i < d.out_capacity) d.out[base + i] = copy;
   }
 }
 
@@ -668,8 +677,7 @@ __device__ inline bool fuse_leaves(const MidListDesc& d, std::uint32_t count) {
 /// This warp's share of `count` list items: the contiguous range [begin, end), an equal
 /// share per warp of the grid. A warp (start or expand) appends the items of one pair
 /// together, so consecutive items often belong to the same pair: mid_expand_items sets a
-/// pair up once per run of its items (context() again only when k changes), and a leaf of
-/// a pair this warp has just confirmed skips its vertex tests.
+/// pair up once per run of its items (context() again only when k changes).
 __device__ inline void warp_range(std::uint32_t count, std::uint32_t& begin, std::uint32_t& end) {
   const unsigned long long per = (static_cast<unsigned long long>(count) + warp_count() - 1) / warp_count();
   const unsigned long long b = global_warp() * per;
@@ -709,16 +717,17 @@ __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTile
   flush(d, t);
 }
 
-/// mid_leaf's work: one warp per item of the last step (warp_range of the list);
-/// `tiles` is the block's shared memory (blockDim.x == kBlockSize).
+/// mid_leaf's work: one warp per item of the last step, every warp_count()-th item from
+/// the warp's own index on (a large cell pair's items are appended together, and those near
+/// its contact cost the most: striding spreads them over the warps where a contiguous share
+/// per warp put them on a few); `tiles` is the block's shared memory (blockDim.x ==
+/// kBlockSize).
 __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
   Vec3* tile_b = tiles[threadIdx.x >> 5][0];
   Vec3* tile_a = tiles[threadIdx.x >> 5][1];
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
   Tally t;
-  std::uint32_t begin, end;
-  warp_range(count, begin, end);
-  for (std::uint32_t it = begin; it < end; ++it) {
+  for (std::uint32_t it = global_warp(); it < count; it += warp_count()) {
     const MidItem item = d.in[it];
     if (skip_confirmed(d, item.k)) continue;  // early exit: neither set up nor counted
     // Set up per item: keeping the set-up across a run of the same pair's items (as
