@@ -97,27 +97,35 @@ struct MidItem {
   std::uint32_t k = 0;
   std::uint32_t ca = 0;
   std::uint32_t cb = 0;
-  /// Last step, mesh-mesh: the leaf item of the cell pair (leaf_items): B's vertices
-  /// [c * kLeafChunk, + kLeafChunk) of its cell against A's [p * kLeafAPart, + kLeafAPart)
-  /// of its own, c = chunk / P and p = chunk % P, P = leaf_a_parts(A's cell vertex count).
+  /// Last step, mesh-mesh: the leaf item of the cell pair (leaf_items, leaf_ranges): a
+  /// chunk of B's cell's vertices (leaf_b_chunk of them) against a part of A's (kLeafAPart).
   std::uint32_t chunk = 0;
 };
 
-/// B's vertices per leaf work item of a mesh-mesh cell pair, and A's: a large cell pair
-/// becomes several items, so its vertex tests spread over several warps (one warp's items
-/// were the critical path of a Table 5 step on the H100: reports/h100/perf-v6).
-constexpr std::uint32_t kLeafChunk = 128;
+/// A's vertices per leaf work item of a mesh-mesh cell pair, and B's (kLeafChunk, or
+/// kLeafChunkSplit when A's cell is split into parts): a large cell pair becomes several
+/// items, so its vertex tests spread over several warps (one warp's items were the critical
+/// path of a Table 5 step on the H100; the sizes are the fastest measured there on the Table
+/// 5 mesh scenes: reports/h100/perf-v6).
 constexpr std::uint32_t kLeafAPart = 1024;
+constexpr std::uint32_t kLeafChunk = 64;
+constexpr std::uint32_t kLeafChunkSplit = 128;
 
 /// The parts of kLeafAPart vertices of A's cell of `a_vertices` vertices (at least 1).
 OCTOCD_HD inline std::uint32_t leaf_a_parts(std::uint32_t a_vertices) {
   return a_vertices > kLeafAPart ? (a_vertices + kLeafAPart - 1) / kLeafAPart : 1u;
 }
 
+/// B's vertices per leaf item of a cell pair whose A cell holds `a_vertices` vertices.
+OCTOCD_HD inline std::uint32_t leaf_b_chunk(std::uint32_t a_vertices) {
+  return a_vertices > kLeafAPart ? kLeafChunkSplit : kLeafChunk;
+}
+
 /// The leaf items of a mesh-mesh cell pair whose cells hold `a_vertices` and `b_vertices`:
 /// B's chunks x A's parts (MidItem::chunk).
 OCTOCD_HD inline std::uint32_t leaf_items(std::uint32_t a_vertices, std::uint32_t b_vertices) {
-  return (b_vertices + kLeafChunk - 1) / kLeafChunk * leaf_a_parts(a_vertices);
+  const std::uint32_t chunk = leaf_b_chunk(a_vertices);
+  return (b_vertices + chunk - 1) / chunk * leaf_a_parts(a_vertices);
 }
 
 /// Leaf item `item` (< leaf_items(a_vertices, b_vertices)) of a mesh-mesh cell pair: A's
@@ -126,8 +134,9 @@ OCTOCD_HD inline std::uint32_t leaf_items(std::uint32_t a_vertices, std::uint32_
 OCTOCD_HD inline void leaf_ranges(std::uint32_t item, std::uint32_t a_vertices, std::uint32_t b_vertices,
                                   std::uint32_t& a0, std::uint32_t& a1, std::uint32_t& b0, std::uint32_t& b1) {
   const std::uint32_t parts = leaf_a_parts(a_vertices);
-  b0 = item / parts * kLeafChunk;
-  b1 = b_vertices - b0 < kLeafChunk ? b_vertices : b0 + kLeafChunk;
+  const std::uint32_t chunk = leaf_b_chunk(a_vertices);
+  b0 = item / parts * chunk;
+  b1 = b_vertices - b0 < chunk ? b_vertices : b0 + chunk;
   a0 = item % parts * kLeafAPart;
   a1 = a_vertices - a0 < kLeafAPart ? a_vertices : a0 + kLeafAPart;
 }

@@ -28,8 +28,8 @@
 // only the order of the work differs. Lists are appended with warp-aggregated integer
 // atomics (item order varies run to run; results and counts do not). A list that would
 // pass its capacity still counts every item (the host then regrows and reruns the step).
-// A large leaf cell pair is split into items (leaf_items): each kLeafChunk of B's vertices
-// against each kLeafAPart of A's, so its vertex tests spread over several warps (the filtered
+// A large leaf cell pair is split into items (leaf_items): each chunk of B's vertices
+// (leaf_b_chunk) against each kLeafAPart of A's, so its vertex tests spread over several warps (the filtered
 // counts of an item's parts add up to the cell pair's).
 // Early exit (MidListDesc::early_exit, OCTOCD_CUDA_MID_EARLY_EXIT, on by default): the
 // answer per pair is a boolean, so once confirmed[k] is set the rest of pair k's work
@@ -396,7 +396,7 @@ using LeafTiles = Vec3[kWarpsPerBlock][2][kLeafTile];
 
 /// The narrow phase of one leaf item of pair k (the whole warp): mesh-box, A's cell `ca`
 /// against the box (as mesh_box_descend's last step); mesh-mesh, leaf item `chunk` of A's
-/// cell `ca` and B's cell `cb` (MidItem::chunk: kLeafChunk of B's vertices against kLeafAPart
+/// cell `ca` and B's cell `cb` (MidItem::chunk: leaf_b_chunk of B's vertices against kLeafAPart
 /// of A's, as mesh_mesh_leaf on those). Sets confirmed[k] on a vertex pair within theta;
 /// adds the vertex tests to `t`. Early exit off: the item's whole count (the vertex count of
 /// A's cell, or filtered A x filtered B of its part and chunk),

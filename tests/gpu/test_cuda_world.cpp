@@ -816,7 +816,7 @@ TEST(CudaMidphase, LeafItemsCoverEveryVertexPairOnce) {
             << "cells of " << na << " and " << nb << " vertices, item " << it << ": A [" << a0 << ", " << a1
             << "), B [" << b0 << ", " << b1 << ")";
         EXPECT_LE(a1 - a0, kLeafAPart);
-        EXPECT_LE(b1 - b0, kLeafChunk);
+        EXPECT_LE(b1 - b0, octocd::gpu::leaf_b_chunk(na));
         for (std::uint32_t i = a0; i < a1; ++i)
           for (std::uint32_t j = b0; j < b1; ++j) ++covered[static_cast<std::size_t>(i) * nb + j];
       }
@@ -827,7 +827,7 @@ TEST(CudaMidphase, LeafItemsCoverEveryVertexPairOnce) {
   }
   // A cell of up to kLeafAPart vertices is one part: only B is chunked, as before the parts.
   EXPECT_EQ(octocd::gpu::leaf_items(kLeafAPart, 5000), (5000 + kLeafChunk - 1) / kLeafChunk);
-  EXPECT_EQ(octocd::gpu::leaf_items(kLeafAPart + 1, kLeafChunk), 2u);
+  EXPECT_EQ(octocd::gpu::leaf_items(kLeafAPart + 1, octocd::gpu::kLeafChunkSplit), 2u);
 }
 
 TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
