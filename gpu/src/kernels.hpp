@@ -102,23 +102,24 @@ struct MidItem {
   std::uint32_t chunk = 0;
 };
 
-/// A's vertices per leaf work item of a mesh-mesh cell pair, and B's (kLeafChunk, or
-/// kLeafChunkSplit when A's cell is split into parts): a large cell pair becomes several
-/// items, so its vertex tests spread over several warps (one warp's items were the critical
-/// path of a Table 5 step on the H100; the sizes are the fastest measured there on the Table
-/// 5 mesh scenes: reports/h100/perf-v6).
+/// A's vertices per leaf work item of a mesh-mesh cell pair, and B's (kLeafChunk for every
+/// two parts of A's cell: leaf_b_chunk): a large cell pair becomes several items, so its
+/// vertex tests spread over several warps (one warp's items were the critical path of a
+/// Table 5 step on the H100), while B's chunk grows with A's cell, so a cell pair's items
+/// grow about as B's cell, not as the product (the sizes are the fastest measured there on
+/// the Table 5 mesh scenes: reports/h100/perf-v6).
 constexpr std::uint32_t kLeafAPart = 1024;
 constexpr std::uint32_t kLeafChunk = 64;
-constexpr std::uint32_t kLeafChunkSplit = 128;
 
 /// The parts of kLeafAPart vertices of A's cell of `a_vertices` vertices (at least 1).
 OCTOCD_HD inline std::uint32_t leaf_a_parts(std::uint32_t a_vertices) {
   return a_vertices > kLeafAPart ? (a_vertices + kLeafAPart - 1) / kLeafAPart : 1u;
 }
 
-/// B's vertices per leaf item of a cell pair whose A cell holds `a_vertices` vertices.
+/// B's vertices per leaf item of a cell pair whose A cell holds `a_vertices` vertices:
+/// kLeafChunk for every two of its parts (64 up to 2 parts, 128 up to 4, ...).
 OCTOCD_HD inline std::uint32_t leaf_b_chunk(std::uint32_t a_vertices) {
-  return a_vertices > kLeafAPart ? kLeafChunkSplit : kLeafChunk;
+  return kLeafChunk * ((leaf_a_parts(a_vertices) + 1) / 2);
 }
 
 /// The leaf items of a mesh-mesh cell pair whose cells hold `a_vertices` and `b_vertices`:

@@ -176,6 +176,10 @@ __device__ inline void append(const MidListDesc& d, bool keep, const MidItem& it
 /// exceeds i, found by a binary search over the lanes), not each lane its own in turn (a
 /// lane with a large cell pair's leaf items would write them alone).
 __device__ inline void append_chunks(const MidListDesc& d, std::uint32_t cnt, const MidItem& item) {
+  if (__all_sync(kFull, cnt <= 1u)) {  // at most one copy per lane (small cells): as append
+    append(d, cnt == 1u, item);         // (item.chunk is 0)
+    return;
+  }
   const std::uint32_t lane = lane_id();
   std::uint32_t incl = cnt;
   for (int o = 1; o < 32; o <<= 1) {

@@ -827,7 +827,8 @@ TEST(CudaMidphase, LeafItemsCoverEveryVertexPairOnce) {
   }
   // A cell of up to kLeafAPart vertices is one part: only B is chunked, as before the parts.
   EXPECT_EQ(octocd::gpu::leaf_items(kLeafAPart, 5000), (5000 + kLeafChunk - 1) / kLeafChunk);
-  EXPECT_EQ(octocd::gpu::leaf_items(kLeafAPart + 1, octocd::gpu::kLeafChunkSplit), 2u);
+  EXPECT_EQ(octocd::gpu::leaf_items(kLeafAPart + 1, kLeafChunk), 2u);
+  EXPECT_EQ(octocd::gpu::leaf_items(3 * kLeafAPart, 2 * kLeafChunk), 3u);  // B's chunk 2 x kLeafChunk
 }
 
 TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
