@@ -110,6 +110,14 @@ struct MidItem {
 /// the Table 5 mesh scenes: reports/h100/perf-v6).
 constexpr std::uint32_t kLeafAPart = 1024;
 constexpr std::uint32_t kLeafChunk = 64;
+/// A cell pair of at most this many vertex pairs stays one leaf item (its tests take a warp
+/// about as long as the set-up of more items would: a bunny's cells, bunny-stack-50).
+constexpr std::uint64_t kLeafWholePairs = 32768;
+
+/// Whether a cell pair whose cells hold `a_vertices` and `b_vertices` is one leaf item.
+OCTOCD_HD inline bool leaf_whole(std::uint32_t a_vertices, std::uint32_t b_vertices) {
+  return static_cast<std::uint64_t>(a_vertices) * b_vertices <= kLeafWholePairs;
+}
 
 /// The parts of kLeafAPart vertices of A's cell of `a_vertices` vertices (at least 1).
 OCTOCD_HD inline std::uint32_t leaf_a_parts(std::uint32_t a_vertices) {
@@ -125,6 +133,7 @@ OCTOCD_HD inline std::uint32_t leaf_b_chunk(std::uint32_t a_vertices) {
 /// The leaf items of a mesh-mesh cell pair whose cells hold `a_vertices` and `b_vertices`:
 /// B's chunks x A's parts (MidItem::chunk).
 OCTOCD_HD inline std::uint32_t leaf_items(std::uint32_t a_vertices, std::uint32_t b_vertices) {
+  if (leaf_whole(a_vertices, b_vertices)) return 1;
   const std::uint32_t chunk = leaf_b_chunk(a_vertices);
   return (b_vertices + chunk - 1) / chunk * leaf_a_parts(a_vertices);
 }
@@ -134,6 +143,12 @@ OCTOCD_HD inline std::uint32_t leaf_items(std::uint32_t a_vertices, std::uint32_
 /// when the cells are; over the items they cover every pair of the cells' vertices once).
 OCTOCD_HD inline void leaf_ranges(std::uint32_t item, std::uint32_t a_vertices, std::uint32_t b_vertices,
                                   std::uint32_t& a0, std::uint32_t& a1, std::uint32_t& b0, std::uint32_t& b1) {
+  if (leaf_whole(a_vertices, b_vertices)) {
+    a0 = b0 = 0;
+    a1 = a_vertices;
+    b1 = b_vertices;
+    return;
+  }
   const std::uint32_t parts = leaf_a_parts(a_vertices);
   const std::uint32_t chunk = leaf_b_chunk(a_vertices);
   b0 = item / parts * chunk;

@@ -28,8 +28,8 @@
 // only the order of the work differs. Lists are appended with warp-aggregated integer
 // atomics (item order varies run to run; results and counts do not). A list that would
 // pass its capacity still counts every item (the host then regrows and reruns the step).
-// A large leaf cell pair is split into items (leaf_items): each chunk of B's vertices
-// (leaf_b_chunk) against each kLeafAPart of A's, so its vertex tests spread over several warps (the filtered
+// A large leaf cell pair (over kLeafWholePairs vertex pairs) is split into items
+// (leaf_items): each chunk of B's vertices (leaf_b_chunk) against each kLeafAPart of A's, so its vertex tests spread over several warps (the filtered
 // counts of an item's parts add up to the cell pair's).
 // Early exit (MidListDesc::early_exit, OCTOCD_CUDA_MID_EARLY_EXIT, on by default): the
 // answer per pair is a boolean, so once confirmed[k] is set the rest of pair k's work
