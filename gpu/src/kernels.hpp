@@ -110,8 +110,9 @@ struct MidItem {
 /// the Table 5 mesh scenes: reports/h100/perf-v6).
 constexpr std::uint32_t kLeafAPart = 1024;
 constexpr std::uint32_t kLeafChunk = 64;
-/// A cell pair of at most this many vertex pairs stays one leaf item (its tests take a warp
-/// about as long as the set-up of more items would: a bunny's cells, bunny-stack-50).
+/// A cell pair of at most this many vertex pairs stays one leaf item (small cells, a
+/// bunny's: on the H100 bunny-stack-50 ran 1.1% behind the code before the split with them
+/// split into kLeafChunk chunks, 0.8% with them whole: reports/h100/perf-v6).
 constexpr std::uint64_t kLeafWholePairs = 32768;
 
 /// Whether a cell pair whose cells hold `a_vertices` and `b_vertices` is one leaf item.

@@ -29,8 +29,9 @@
 // atomics (item order varies run to run; results and counts do not). A list that would
 // pass its capacity still counts every item (the host then regrows and reruns the step).
 // A large leaf cell pair (over kLeafWholePairs vertex pairs) is split into items
-// (leaf_items): each chunk of B's vertices (leaf_b_chunk) against each kLeafAPart of A's, so its vertex tests spread over several warps (the filtered
-// counts of an item's parts add up to the cell pair's).
+// (leaf_items): each chunk of B's vertices (leaf_b_chunk) against each kLeafAPart of A's,
+// so its vertex tests spread over several warps (the filtered counts of an item's parts add
+// up to the cell pair's).
 // Early exit (MidListDesc::early_exit, OCTOCD_CUDA_MID_EARLY_EXIT, on by default): the
 // answer per pair is a boolean, so once confirmed[k] is set the rest of pair k's work
 // cannot change it (nor any result: the response reads only confirmed[k]). With it on, an
@@ -67,8 +68,9 @@
 // (mid_start, mid_expand, mid_leaf) and the fused small-scene step (small_step.cu) calls the
 // same functions between grid-wide barriers. Every loop over pairs is a grid-stride loop
 // over whole warps, every loop over expand items a contiguous share per warp (warp_range),
-// over leaf items a stride of the grid's warps; the item index and its bounds are warp-uniform, so the warp
-// collectives (__ballot_sync / __shfl_sync with the full mask) see all 32 lanes. CUDA only.
+// over leaf items a stride of the grid's warps; the item index and its bounds are
+// warp-uniform, so the warp collectives (__ballot_sync / __shfl_sync with the full mask) see
+// all 32 lanes. CUDA only.
 #include "kernels.hpp"
 #include "octocd/vertex_blocks.hpp"
 
@@ -400,8 +402,8 @@ using LeafTiles = Vec3[kWarpsPerBlock][2][kLeafTile];
 
 /// The narrow phase of one leaf item of pair k (the whole warp): mesh-box, A's cell `ca`
 /// against the box (as mesh_box_descend's last step); mesh-mesh, leaf item `chunk` of A's
-/// cell `ca` and B's cell `cb` (MidItem::chunk: leaf_b_chunk of B's vertices against kLeafAPart
-/// of A's, as mesh_mesh_leaf on those). Sets confirmed[k] on a vertex pair within theta;
+/// cell `ca` and B's cell `cb` (MidItem::chunk, leaf_ranges: a chunk of B's vertices against
+/// a part of A's, as mesh_mesh_leaf on those). Sets confirmed[k] on a vertex pair within theta;
 /// adds the vertex tests to `t`. Early exit off: the item's whole count (the vertex count of
 /// A's cell, or filtered A x filtered B of its part and chunk),
 /// whether or not the tests are cut short because the pair is confirmed (here or by another
