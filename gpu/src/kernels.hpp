@@ -335,8 +335,8 @@ struct SmallStepDesc {
   /// the step's start: the host uploads both, and the step's clamp copies the new state into
   /// them unless a list overflowed (the host then restores x from x_saved and reruns).
   std::uint32_t front_bodies = 0;
-  /// Run the kernel compiled without the midphase's early exit and tile culling (their
-  /// switches read as off: small_step.cu's kLean instantiation); the host sets it for
+  /// Run the kernel compiled without the midphase's early exit, tile culling and tile
+  /// filter (their switches read as off: small_step.cu's kLean instantiation); the host sets it for
   /// scenes of at most kSmallLeanBodies bodies. States, pairs and contacts are the same either
   /// way; the midphase counts are then those of OCTOCD_CUDA_MID_EARLY_EXIT=0 (deterministic).
   int lean = 0;

@@ -136,7 +136,8 @@ __device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { retu
 /// kFuse: the last midphase expand step runs its items' leaves itself (the kernels of
 /// s.mid.fuse_leaves == 1: OCTOCD_CUDA_MID_FUSE=1), a separate instantiation so that the
 /// default kernel's registers stay as they were. kLean (s.lean, tiny scenes): the
-/// midphase's early exit, tile culling and tile filter read as off, constants the compiler folds away.
+/// midphase's early exit, tile culling and tile filter read as off, constants the compiler
+/// folds away.
 template <bool kFuse, bool kLean>
 __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned long long sequence,
                                                 DeviceContact* records, unsigned char* smem) {
