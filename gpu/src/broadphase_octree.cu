@@ -129,6 +129,11 @@ struct LooseDesc {
   /// key, first slot), kLooseBlockEmpty where empty.
   unsigned long long* cell_table = nullptr;
   std::uint32_t cell_mask = 0;     ///< table size - 1 (a power of two >= 2 n)
+  /// The occupancy map (loose_blocks.hpp): occupancy_blocks bytes as 32-bit words; the
+  /// words levels 0 .. D_w use are cleared by loose_keys_kernel and set by
+  /// loose_gather_kernel.
+  std::uint32_t* occupancy = nullptr;
+  std::uint32_t occupancy_blocks = 0;
   unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
   /// Sorted mode (PairOutput::scratch given; pair_keys is then the scratch): per body a,
   /// n + 1 entries zeroed before the query, the pairs (a, b) appended; else nullptr.
@@ -171,8 +176,12 @@ __device__ inline LooseGrid loose_call_grid(const LooseDesc& d) { return d.root 
 
 __global__ void loose_keys_kernel(LooseDesc d) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= d.n) return;
   const int depth = d.root ? d.root->depth : (d.depth >= 0 ? d.depth : loose_auto_depth(*d.min_extent));
+  // The occupancy words of levels 0 .. D_w, cleared by the whole grid (the previous
+  // find's queries are done: stream order; loose_gather_kernel sets them after the sort).
+  const std::uint32_t words = loose_occupancy_words(d.occupancy_blocks, depth);
+  for (std::uint32_t w = i; w < words; w += gridDim.x * blockDim.x) d.occupancy[w] = 0u;
+  if (i >= d.n) return;
   const LooseGrid grid = loose_call_grid(d);
   const Aabb b = d.aabb[i];
   d.body[i] = i;
@@ -210,6 +219,12 @@ __global__ void loose_gather_kernel(LooseDesc d) {
   const std::uint32_t key = d.sorted_key[s];
   if (key >= d.overflow_key) return;
   const int level = loose_cell_key_level(key);
+  // The occupancy map: the first slot of a cell sets the cell's bit.
+  if (s == 0 || d.sorted_key[s - 1] != key) {
+    std::uint32_t w = 0;
+    const std::uint32_t bit = loose_occupancy_bit(key, level, d.occupancy_blocks, &w);
+    if (bit != 0) atomicOr(&d.occupancy[w], bit);
+  }
   if (!loose_block_first(d.sorted_key, s, level)) return;
   const unsigned long long entry = loose_block_entry(loose_block_key(key, level), s);
   std::uint32_t h = loose_block_hash(loose_block_key(key, level), d.cell_mask);
@@ -219,6 +234,11 @@ __global__ void loose_gather_kernel(LooseDesc d) {
 /// The first slot of block `block_key` (kLooseNoSlot when it holds no body).
 __device__ inline std::uint32_t find_block(const LooseDesc& d, std::uint32_t block_key) {
   return loose_block_find(d.cell_table, d.cell_mask, block_key);
+}
+
+/// The occupancy byte of block `block_key` (0xff outside the map).
+__device__ inline std::uint32_t block_octants(const LooseDesc& d, std::uint32_t block_key) {
+  return loose_block_octants(d.occupancy, d.occupancy_blocks, block_key);
 }
 
 /// First slot in [lo, hi) whose key is >= key.
@@ -343,7 +363,8 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
             // come before s in key order) is looked up.
             if (m != level || ck >= key) {
               loose_cell_run(
-                  d.sorted_key, d.n, ck, m, [&](std::uint32_t bk) { return find_block(d, bk); }, &t0, &t1);
+                  d.sorted_key, d.n, ck, m, [&](std::uint32_t bk) { return find_block(d, bk); },
+                  [&](std::uint32_t bk) { return block_octants(d, bk); }, &t0, &t1);
               if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;
             }
           }
@@ -390,6 +411,7 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
         const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
         loose_block_query(
             d.sorted_key, d.n, s, key, level, m, rx, ry, rz, [&](std::uint32_t bk) { return find_block(d, bk); },
+            [&](std::uint32_t bk) { return block_octants(d, bk); },
             [&](std::uint32_t t) {
               ++tests;
               if (overlaps(box, d.slot_box[t])) append_pair(d, out, bp::pair_key(body, d.slot_body[t], d.shift));
@@ -555,6 +577,15 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
       else if (!t.empty())
         throw InputError(fmt::format("OCTOCD_CUDA_OCTREE_SNAP: '{}'; allowed: 0, 1 (or unset)", t));
     }
+    // OCTOCD_CUDA_OCTREE_OCCUPANCY=0|1 (default 1): the query skips blocks by the
+    // occupancy map (1) or probes every block of a window (0); the same slots either way.
+    if (const char* v = std::getenv("OCTOCD_CUDA_OCTREE_OCCUPANCY")) {
+      const std::string t = v;
+      if (t == "0") occupancy_on_ = false;
+      else if (t == "1") occupancy_on_ = true;
+      else if (!t.empty())
+        throw InputError(fmt::format("OCTOCD_CUDA_OCTREE_OCCUPANCY: '{}'; allowed: 0, 1 (or unset)", t));
+    }
     if (depth_ >= 0 && depth_ < kLooseMaxDepth) {
       overflow_key_ = loose_level_base(depth_ + 1);
       key_bits_ = 1;
@@ -578,6 +609,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
     cell_mask_ = static_cast<std::uint32_t>(footprint::loose_cell_table_entries(n) - 1);
     cell_table_.ensure(static_cast<std::size_t>(cell_mask_) + 1);
+    occupancy_blocks_ = static_cast<std::uint32_t>(footprint::loose_occupancy_blocks(n));
+    occupancy_.ensure(occupancy_blocks_ / 4);
     const std::size_t n1 = static_cast<std::size_t>(n) + 1;
     pair_count_.ensure(n1);
     pair_offset_.ensure(n1);
@@ -619,6 +652,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.level_begin = level_begin_.get();
     d.cell_table = cell_table_.get();
     d.cell_mask = cell_mask_;
+    d.occupancy = occupancy_.get();
+    d.occupancy_blocks = occupancy_on_ ? occupancy_blocks_ : 0u;  // 0: no map
     const bool sorted = out.scratch != nullptr;
     d.pair_keys = sorted ? out.scratch : out.keys;
     d.pair_count = sorted ? pair_count_.get() : nullptr;
@@ -688,7 +723,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     std::uint64_t t = 0;
     for (const BufferBase* b : std::initializer_list<const BufferBase*>{
              &min_, &key_, &body_, &sorted_key_, &slot_body_, &slot_box_,
-             &level_begin_, &cell_table_, &pair_count_, &pair_offset_, &long_list_,
+             &level_begin_, &cell_table_, &occupancy_, &pair_count_, &pair_offset_, &long_list_,
              &long_count_, &temp_})
       t += b->bytes();
     return t;
@@ -706,6 +741,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   DeviceBuffer<float> min_{"octree smallest extent"};
   DeviceBuffer<LooseRoot> root_{"octree snapped root"};
   bool snap_ = true;  ///< OCTOCD_CUDA_OCTREE_SNAP
+  bool occupancy_on_ = true;  ///< OCTOCD_CUDA_OCTREE_OCCUPANCY
   DeviceBuffer<std::uint32_t> key_{"octree body keys"};
   DeviceBuffer<std::uint32_t> body_{"octree body indices"};
   DeviceBuffer<std::uint32_t> sorted_key_{"octree sorted keys"};
@@ -714,6 +750,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   DeviceBuffer<std::uint32_t> level_begin_{"octree level table"};
   std::uint32_t cell_mask_ = 1;
   DeviceBuffer<unsigned long long> cell_table_{"octree block table"};
+  std::uint32_t occupancy_blocks_ = 0;
+  DeviceBuffer<std::uint32_t> occupancy_{"octree occupancy map"};
   DeviceBuffer<std::uint32_t> pair_count_{"octree pairs per body"};
   DeviceBuffer<std::uint32_t> pair_offset_{"octree pair segments"};
   DeviceBuffer<std::uint32_t> long_list_{"octree long pair segments"};

@@ -48,7 +48,8 @@ std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
     return buf(1, sizeof(float)) + 4 * buf(n, sizeof(std::uint32_t)) + 2 * buf(n1, sizeof(std::uint32_t)) +
            buf(n, sizeof(std::uint32_t)) + buf(1, sizeof(std::uint32_t)) +
            buf(n, sizeof(Aabb)) + buf(kLooseLevelTable, sizeof(std::uint32_t)) +
-           buf(table, sizeof(std::uint64_t)) + buf(temp, 1);
+           buf(table, sizeof(std::uint64_t)) + buf(loose_occupancy_blocks(n) / 4, sizeof(std::uint32_t)) +
+           buf(temp, 1);
   }
   if (cfg.name == "octree-strict") {  // StrictOctreeDevice::reserve (broadphase_strict.cu)
     const bool auto_depth = cfg.octree_depth < 0;

@@ -35,6 +35,19 @@ constexpr std::uint64_t loose_cell_table_entries(std::uint64_t n) {
   while (t < 2 * (n > 0 ? n : 1)) t <<= 1;
   return t;
 }
+/// Bytes (blocks) of the loose octree's occupancy map for n bodies (loose_blocks.hpp: a
+/// byte per block, blocks in key order): 32 per body, at least 2^16 (levels 0 .. 6), at
+/// most the blocks of levels 0 .. kLooseMaxDepth, a multiple of 4 (stored as 32-bit
+/// words). 32 n covers the levels the bench's boxes use at 10^4 .. 4x10^6 (at 10^6, D_w 9:
+/// 19.2 x 10^6 blocks); a scene whose deepest levels need more has them probed without
+/// the map.
+constexpr std::uint64_t loose_occupancy_blocks(std::uint64_t n) {
+  const std::uint64_t all = ((((1ull << (3 * (kLooseMaxDepth + 1))) - 1) / 7 + 7) / 8 + 3) / 4 * 4;
+  std::uint64_t b = 32 * n;
+  if (b < (1ull << 16)) b = 1ull << 16;
+  if (b > all) b = all;
+  return (b + 3) / 4 * 4;
+}
 /// Entries of the loose octree's level table: levels 0 .. kLooseMaxDepth, overflow, NaN.
 constexpr std::uint32_t kLooseLevelTable = kLooseMaxDepth + 3;
 /// sizeof(LbvhNode) (lbvh.hpp): an internal node of `lbvh`.

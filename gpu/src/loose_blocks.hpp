@@ -91,6 +91,51 @@ OCTOCD_HD inline std::uint32_t loose_block_find(const unsigned long long* table,
   }
 }
 
+/// Occupancy map. A byte per block, in the order of the block keys: block `bk`'s byte is
+/// loose_block_index(bk) (level 0's block 0, level m >= 1's blocks from
+/// (loose_level_base(m) + 7) / 8 on: every level's blocks follow the coarser levels'), bit
+/// o set when the block's cell of octant o holds a body. Stored as 32-bit words (4 blocks
+/// a word: loose_gather_kernel sets the bits with atomicOr); a map of `blocks` bytes covers
+/// the blocks of index < blocks (footprint::loose_occupancy_blocks(n): every level down to
+/// the bench's deepest at 10^4 .. 4x10^6 bodies); a block outside it reads as every octant
+/// occupied (loose_block_octants: 0xff), so the query probes it as without a map. The
+/// query intersects a block's window mask with its byte and probes the block table only
+/// for a block with an occupied cell in the window (most of a window's blocks are empty at
+/// 10^6 bodies: each such probe was a miss of 2.5 entries on average, at a random address
+/// of a table of 16-64 MiB), and stops walking a block's run after its last wanted octant.
+OCTOCD_HD inline std::uint32_t loose_block_index(std::uint32_t block_key) { return (block_key + 7u) >> 3; }
+
+/// The occupancy byte of block `bk` from a map of `blocks` bytes (0xff outside the map).
+OCTOCD_HD inline std::uint32_t loose_block_octants(const std::uint32_t* occupancy, std::uint32_t blocks,
+                                                   std::uint32_t bk) {
+  const std::uint32_t i = loose_block_index(bk);
+  if (i >= blocks) return 0xffu;
+  return (occupancy[i >> 2] >> ((i & 3u) * 8u)) & 0xffu;
+}
+
+/// The word and the bit of cell `key` (of `level`) in a map of `blocks` bytes: *word =
+/// the word's index, the return the bit to set (0 when the cell's block is outside the
+/// map: nothing to set).
+OCTOCD_HD inline std::uint32_t loose_occupancy_bit(std::uint32_t key, int level, std::uint32_t blocks,
+                                                   std::uint32_t* word) {
+  const std::uint32_t bk = loose_block_key(key, level);
+  const std::uint32_t i = loose_block_index(bk);
+  *word = i >> 2;
+  if (i >= blocks) return 0u;
+  return 1u << ((i & 3u) * 8u + (key - bk));
+}
+
+/// Words of a map of `blocks` bytes that levels 0 .. depth use (the words to clear before
+/// loose_gather_kernel sets the bits of a find with D_w = depth; overflow and NaN keys
+/// have no bit).
+OCTOCD_HD inline std::uint32_t loose_occupancy_words(std::uint32_t blocks, int depth) {
+  // Blocks of levels <= depth: loose_block_index(loose_level_base(depth + 1)), in 64 bits
+  // (level 11's base is above 2^32).
+  const unsigned long long base = ((1ull << (3u * static_cast<unsigned>(depth + 1))) - 1ull) / 7ull;
+  const unsigned long long used = (base + 7ull) >> 3;
+  return static_cast<std::uint32_t>(((used < blocks ? used : blocks) + 3ull) >> 2);
+}
+
 /// Whether slot s (sorted keys, n slots) is the first of its block's run: its key is a
 /// cell key of `level` and the slot before holds a key of an earlier block (or none).
 OCTOCD_HD inline bool loose_block_first(const std::uint32_t* sorted_key, std::uint32_t s, int level) {
@@ -115,12 +160,16 @@ OCTOCD_HD inline std::uint32_t loose_octant_mask(std::uint32_t mx, std::uint32_t
 
 /// The query of slot s (key `key`, a cell of `level`) at level m <= level, cell window
 /// rx x ry x rz (loose_query_axis_q): visit(t) for every slot t in a window cell, at
-/// m == level only t > s; find(block_key) gives a block's first slot or kLooseNoSlot.
+/// m == level only t > s; find(block_key) gives a block's first slot or kLooseNoSlot,
+/// octants(block_key) its occupancy byte (loose_block_octants; a set bit for every cell
+/// that holds a body, 0xff when unknown): a block with no occupied cell in the window is
+/// not looked up, and a block's walk ends after its last occupied cell of the window.
 /// `sorted_key` holds the n slots' keys in ascending order (overflow and NaN keys last).
-template <class Find, class Visit>
+template <class Find, class Octants, class Visit>
 OCTOCD_HD inline void loose_block_query(const std::uint32_t* sorted_key, std::uint32_t n, std::uint32_t s,
                                         std::uint32_t key, int level, int m, const LooseRange& rx,
-                                        const LooseRange& ry, const LooseRange& rz, Find&& find, Visit&& visit) {
+                                        const LooseRange& ry, const LooseRange& rz, Find&& find,
+                                        Octants&& octants, Visit&& visit) {
   if (rx.lo > rx.hi || ry.lo > ry.hi || rz.lo > rz.hi) return;
   const std::uint32_t span = loose_block_span(m);
   for (int pz = rz.lo >> 1; pz <= rz.hi >> 1; ++pz) {
@@ -133,25 +182,32 @@ OCTOCD_HD inline void loose_block_query(const std::uint32_t* sorted_key, std::ui
                                                 2u * static_cast<std::uint32_t>(py), 2u * static_cast<std::uint32_t>(pz));
         // Same level: a block whose every cell precedes s's own holds only slots before s.
         if (mask == 0 || (m == level && bk + (span - 1) < key)) continue;
+        const std::uint32_t want = mask & octants(bk);
+        if (want == 0) continue;
         std::uint32_t t = find(bk);
         if (t == kLooseNoSlot) continue;
         if (m == level && t <= s) t = s + 1;
+        // The last wanted octant (< span): past it the run holds no wanted slot.
+#if defined(__CUDA_ARCH__)
+        const std::uint32_t last = 31u - static_cast<std::uint32_t>(__clz(static_cast<int>(want)));
+#else
+        std::uint32_t last = 0;
+        while ((want >> (last + 1)) != 0) ++last;
+#endif
         for (; t < n; ++t) {
           const std::uint32_t o = sorted_key[t] - bk;  // the octant while the key is in the block
-          if (o >= span) break;
-          if ((mask >> o) & 1u) visit(t);
+          if (o > last) break;
+          if ((want >> o) & 1u) visit(t);
         }
       }
     }
   }
 }
 
-/// The run [*t0, *t1) of the slots of cell `key` of `level` (empty: *t0 == *t1), from its
-/// block's first slot (find, as loose_block_query's).
-template <class Find>
-OCTOCD_HD inline void loose_cell_run(const std::uint32_t* sorted_key, std::uint32_t n, std::uint32_t key, int level,
-                                     Find&& find, std::uint32_t* t0, std::uint32_t* t1) {
-  std::uint32_t t = find(loose_block_key(key, level));
+/// The run [*t0, *t1) of cell `key`'s slots from its block's first slot t (kLooseNoSlot:
+/// the cell is empty; empty: *t0 == *t1).
+OCTOCD_HD inline void loose_cell_run_from(const std::uint32_t* sorted_key, std::uint32_t n, std::uint32_t key,
+                                          std::uint32_t t, std::uint32_t* t0, std::uint32_t* t1) {
   if (t == kLooseNoSlot) {
     *t0 = *t1 = 0;
     return;
@@ -160,6 +216,17 @@ OCTOCD_HD inline void loose_cell_run(const std::uint32_t* sorted_key, std::uint3
   *t0 = t;
   while (t < n && sorted_key[t] == key) ++t;
   *t1 = t;
+}
+
+/// The run [*t0, *t1) of the slots of cell `key` of `level` (empty: *t0 == *t1), from its
+/// block's first slot (find and octants, as loose_block_query's: a cell whose bit is
+/// clear is not looked up).
+template <class Find, class Octants>
+OCTOCD_HD inline void loose_cell_run(const std::uint32_t* sorted_key, std::uint32_t n, std::uint32_t key, int level,
+                                     Find&& find, Octants&& octants, std::uint32_t* t0, std::uint32_t* t1) {
+  const std::uint32_t bk = loose_block_key(key, level);
+  const std::uint32_t t = ((octants(bk) >> (key - bk)) & 1u) != 0 ? find(bk) : kLooseNoSlot;
+  loose_cell_run_from(sorted_key, n, key, t, t0, t1);
 }
 
 }  // namespace gpu

@@ -1035,6 +1035,7 @@ enum class BlockFault {
   DropFirstSlot,  ///< find() answers a block's second slot: its first body is never tested
   Misplaced,      ///< entries stored one past their home: find() meets an empty entry
   NarrowWindow,   ///< the window loses its last cell along x when it has more than one
+  DropOctant,     ///< the occupancy map misses the bit of every octant-0 cell
 };
 
 /// broadphase_octree.cu on the host, slot after slot, with the functions of
@@ -1048,6 +1049,8 @@ struct HostLooseBlocks {
   std::vector<std::uint32_t> key;        ///< per slot, ascending
   std::vector<std::uint32_t> slot_body;  ///< per slot
   std::vector<unsigned long long> table;
+  std::vector<std::uint32_t> occupancy;  ///< the occupancy map (words), blocks bytes
+  std::uint32_t occupancy_blocks = 0;
   std::vector<Pair> pairs;               ///< sorted
   std::uint64_t tests = 0;               ///< exact tests of the block query + overflow
   std::uint64_t probes = 0;              ///< block probes (find calls)
@@ -1107,6 +1110,26 @@ HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& do
     h.table[e] = gpu::loose_block_entry(bk, s);
   }
   if (2ull * blocks > h.table.size()) fail(fmt::format("{} blocks in a table of {} entries", blocks, h.table.size()));
+  // The occupancy map (loose_keys_kernel clears the words of levels <= D_w, then
+  // loose_gather_kernel sets a bit per cell from the cell's first slot).
+  h.occupancy_blocks = static_cast<std::uint32_t>(gpu::footprint::loose_occupancy_blocks(n));
+  h.occupancy.assign(h.occupancy_blocks / 4, 0xdeadbeefu);  // not cleared: garbage
+  const std::uint32_t words = gpu::loose_occupancy_words(h.occupancy_blocks, depth);
+  if (words > h.occupancy.size()) fail(fmt::format("{} words to clear in a map of {}", words, h.occupancy.size()));
+  std::fill(h.occupancy.begin(), h.occupancy.begin() + std::min<std::size_t>(words, h.occupancy.size()), 0u);
+  for (std::uint32_t s = 0; s < n; ++s) {
+    if (h.key[s] >= kLooseOverflowKey || (s > 0 && h.key[s - 1] == h.key[s])) continue;
+    const int level = loose_key_level(h.key[s]);
+    std::uint32_t w = 0;
+    const std::uint32_t bit = gpu::loose_occupancy_bit(h.key[s], level, h.occupancy_blocks, &w);
+    if (bit == 0) continue;
+    if (w >= words) fail(fmt::format("slot {}: key {} sets word {}, past the {} cleared", s, h.key[s], w, words));
+    if (fault == BlockFault::DropOctant && h.key[s] == gpu::loose_block_key(h.key[s], level)) continue;
+    h.occupancy[w] |= bit;
+  }
+  auto octants = [&](std::uint32_t bk) {
+    return gpu::loose_block_octants(h.occupancy.data(), h.occupancy_blocks, bk);
+  };
   auto find = [&](std::uint32_t bk) {
     ++h.probes;
     std::uint32_t t = gpu::loose_block_find(h.table.data(), mask, bk);
@@ -1138,7 +1161,7 @@ HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& do
             const auto t1 = static_cast<std::uint32_t>(range.second - h.key.begin());
             // The warp kernel's run of the cell, through its block.
             std::uint32_t r0 = 0, r1 = 0;
-            gpu::loose_cell_run(h.key.data(), n, ck, m, find, &r0, &r1);
+            gpu::loose_cell_run(h.key.data(), n, ck, m, find, octants, &r0, &r1);
             if ((t0 == t1) ? r0 != r1 : (r0 != t0 || r1 != t1))
               fail(fmt::format("slot {}: cell {} holds slots [{}, {}), its run through the block table is [{}, {})", s,
                                ck, t0, t1, r0, r1));
@@ -1149,7 +1172,7 @@ HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& do
           }
       if (fault == BlockFault::NarrowWindow && rx.hi > rx.lo) --rx.hi;
       std::vector<std::uint32_t> got;
-      gpu::loose_block_query(h.key.data(), n, s, key, level, m, rx, ry, rz, find,
+      gpu::loose_block_query(h.key.data(), n, s, key, level, m, rx, ry, rz, find, octants,
                              [&](std::uint32_t t) { got.push_back(t); });
       std::sort(want.begin(), want.end());
       std::sort(got.begin(), got.end());
@@ -1202,28 +1225,41 @@ TEST(LooseBlockHostModel, FewerProbesThanCells) {
   HostLooseBlocks m = host_loose_blocks(boxes, domain, -1);
   EXPECT_EQ(m.broken, "");
   EXPECT_TRUE(same_pairs(m.pairs, flat_pairs(boxes, domain), boxes));
-  // host_loose_blocks counts the warp kernel's cell-run probes too: count the block query's alone.
-  std::uint64_t block_probes = 0;
+  // host_loose_blocks counts the warp kernel's cell-run probes too: count the block query's
+  // alone, without the occupancy map (every block's byte 0xff) and with it.
+  std::uint64_t block_probes = 0, map_probes = 0, visits = 0, map_visits = 0;
   {
     const LooseGrid grid = loose_grid(domain);
     const std::uint32_t mask = static_cast<std::uint32_t>(m.table.size() - 1);
-    for (std::uint32_t s = 0; s < n && m.key[s] < kLooseOverflowKey; ++s) {
-      const Aabb& b = boxes[m.slot_body[s]];
-      const Vec3 lo = loose_unit(grid, b.min), hi = loose_unit(grid, b.max);
-      const int level = loose_key_level(m.key[s]);
-      for (int l = 0; l <= level; ++l)
-        gpu::loose_block_query(
-            m.key.data(), n, s, m.key[s], level, l, loose_query_axis_q(loose_q_min(lo.x), loose_q_max(hi.x), l),
-            loose_query_axis_q(loose_q_min(lo.y), loose_q_max(hi.y), l),
-            loose_query_axis_q(loose_q_min(lo.z), loose_q_max(hi.z), l),
-            [&](std::uint32_t bk) {
-              ++block_probes;
-              return gpu::loose_block_find(m.table.data(), mask, bk);
-            },
-            [](std::uint32_t) {});
+    for (const bool map : {false, true}) {
+      std::uint64_t& probes = map ? map_probes : block_probes;
+      std::uint64_t& visited = map ? map_visits : visits;
+      for (std::uint32_t s = 0; s < n && m.key[s] < kLooseOverflowKey; ++s) {
+        const Aabb& b = boxes[m.slot_body[s]];
+        const Vec3 lo = loose_unit(grid, b.min), hi = loose_unit(grid, b.max);
+        const int level = loose_key_level(m.key[s]);
+        for (int l = 0; l <= level; ++l)
+          gpu::loose_block_query(
+              m.key.data(), n, s, m.key[s], level, l, loose_query_axis_q(loose_q_min(lo.x), loose_q_max(hi.x), l),
+              loose_query_axis_q(loose_q_min(lo.y), loose_q_max(hi.y), l),
+              loose_query_axis_q(loose_q_min(lo.z), loose_q_max(hi.z), l),
+              [&](std::uint32_t bk) {
+                ++probes;
+                return gpu::loose_block_find(m.table.data(), mask, bk);
+              },
+              [&](std::uint32_t bk) {
+                return map ? gpu::loose_block_octants(m.occupancy.data(), m.occupancy_blocks, bk) : 0xffu;
+              },
+              [&](std::uint32_t) { ++visited; });
+      }
     }
   }
   EXPECT_GT(m.cell_probes, 0u);
+  // The map skips the blocks with no occupied cell in the window: the same slots, at most a
+  // quarter of the probes (levels 0 .. 7 of this set are in the map).
+  EXPECT_EQ(visits, map_visits);
+  EXPECT_LE(4 * map_probes, block_probes) << map_probes << " probes with the map, " << block_probes << " without";
+  RecordProperty("map_probes", std::to_string(map_probes));
   RecordProperty("blocks", std::to_string(std::count_if(m.table.begin(), m.table.end(), [](unsigned long long e) {
                    return e != gpu::kLooseBlockEmpty;
                  })));
@@ -1266,7 +1302,8 @@ TEST(LooseBlockHostModel, PlantedFaultsAreCaught) {
   for (const char* name : {"uniform-1000", "touching-lattice", "nested-levels"}) {
     SCOPED_TRACE(name);
     const BoxSet& set = box_set(name);
-    for (const BlockFault f : {BlockFault::DropFirstSlot, BlockFault::Misplaced, BlockFault::NarrowWindow}) {
+    for (const BlockFault f :
+         {BlockFault::DropFirstSlot, BlockFault::Misplaced, BlockFault::NarrowWindow, BlockFault::DropOctant}) {
       SCOPED_TRACE(static_cast<int>(f));
       const HostLooseBlocks h = host_loose_blocks(set.boxes, set.domain, -1, f);
       EXPECT_NE(h.broken, "");
@@ -1460,7 +1497,9 @@ TEST(LooseBlockHostModel, ExactTestsPerDepthOnTheBenchBoxes) {
 
 // The device octree (depth auto) tests exactly what the counter says for its root: the
 // snapped one by default, the domain's with OCTOCD_CUDA_OCTREE_SNAP=0; the pair set is
-// flat's either way; a bad value of the switch is an input error.
+// flat's either way, with the occupancy map and without (OCTOCD_CUDA_OCTREE_OCCUPANCY=0:
+// it skips only empty blocks, so the tests are the same); a bad value of either switch is
+// an input error.
 TEST(DeviceOctreeRoot, CandidatesEqualTheCountOfItsRoot) {
   REQUIRE_CUDA_DEVICE();
   Stream stream;
@@ -1478,11 +1517,14 @@ TEST(DeviceOctreeRoot, CandidatesEqualTheCountOfItsRoot) {
     const std::vector<Pair> flat = flat_pairs(boxes, domain);
     DeviceBuffer<Aabb> dboxes("test boxes");
     gpu::upload(dboxes, boxes, stream.s);
-    for (const char* snap : {"1", "0"}) {
-      SCOPED_TRACE(fmt::format("{} OCTOCD_CUDA_OCTREE_SNAP={}", name, snap));
+    for (const char* snap : {"1", "0"})
+    for (const char* occupancy : {"1", "0"}) {
+      SCOPED_TRACE(fmt::format("{} OCTOCD_CUDA_OCTREE_SNAP={} OCTOCD_CUDA_OCTREE_OCCUPANCY={}", name, snap, occupancy));
       ::setenv("OCTOCD_CUDA_OCTREE_SNAP", snap, 1);
+      ::setenv("OCTOCD_CUDA_OCTREE_OCCUPANCY", occupancy, 1);
       auto bp = make_device(c, domain);
       ::unsetenv("OCTOCD_CUDA_OCTREE_SNAP");
+      ::unsetenv("OCTOCD_CUDA_OCTREE_OCCUPANCY");
       bp->reserve(n, stream.s);
       const FindResult r = find_all(*bp, dboxes, n, stream.s);
       std::vector<Pair> pairs;
@@ -1496,6 +1538,9 @@ TEST(DeviceOctreeRoot, CandidatesEqualTheCountOfItsRoot) {
   ::setenv("OCTOCD_CUDA_OCTREE_SNAP", "yes", 1);
   EXPECT_THROW(make_device(c, sets[0].second.second), InputError);
   ::unsetenv("OCTOCD_CUDA_OCTREE_SNAP");
+  ::setenv("OCTOCD_CUDA_OCTREE_OCCUPANCY", "2", 1);
+  EXPECT_THROW(make_device(c, sets[0].second.second), InputError);
+  ::unsetenv("OCTOCD_CUDA_OCTREE_OCCUPANCY");
 }
 
 }  // namespace
