@@ -386,14 +386,22 @@ __device__ inline void test_run(const LooseDesc& d, const Aabb& box, std::uint32
     if (overlaps(box, d.slot_box[t])) append_pair(d, out, bp::pair_key(body, d.slot_body[t], d.shift));
 }
 
+/// Pairs a thread of loose_query_kernel keeps until the warp appends them together (a body
+/// of the bench's boxes has 0.86 pairs on average); the ones after go out one by one.
+constexpr int kQueryPairBuffer = 8;
+
 /// One thread per slot: the loose octree query of the file comment. At each level that
 /// holds bodies, the thread probes the blocks that hold the (at most 4 x 4 x 4) cells of
 /// its window (at most 3 x 3 x 3) in the block table and tests the slots of the window's
 /// cells in each block's run (loose_block_query; at its own level only the slots after
-/// its own).
+/// its own). Its first kQueryPairBuffer pairs wait in a local buffer and the warp appends
+/// them with one atomic at the end (an append per pair, from the few lanes that meet a
+/// pair at the same time, was one atomic on the one total per pair or two).
 __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   unsigned long long tests = 0;
+  unsigned long long buffer[kQueryPairBuffer];
+  int buffered = 0;
   if (s < d.n) {
     const std::uint32_t key = d.sorted_key[s];
     const std::uint32_t body = d.slot_body[s];
@@ -414,9 +422,29 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
             [&](std::uint32_t bk) { return block_octants(d, bk); },
             [&](std::uint32_t t) {
               ++tests;
-              if (overlaps(box, d.slot_box[t])) append_pair(d, out, bp::pair_key(body, d.slot_body[t], d.shift));
+              if (!overlaps(box, d.slot_box[t])) return;
+              const unsigned long long k = bp::pair_key(body, d.slot_body[t], d.shift);
+              if (buffered < kQueryPairBuffer) buffer[buffered++] = k;
+              else append_pair(d, out, k);
             });
       }
+    }
+  }
+  // The warp's buffered pairs: an inclusive scan of the counts, one atomic for the warp.
+  const std::uint32_t lane = threadIdx.x & 31u;
+  std::uint32_t incl = static_cast<std::uint32_t>(buffered);
+  for (unsigned o = 1; o < 32; o <<= 1) {
+    const std::uint32_t v = __shfl_up_sync(bp::kFullMask, incl, o);
+    if (lane >= o) incl += v;
+  }
+  const std::uint32_t warp_total = __shfl_sync(bp::kFullMask, incl, 31);
+  if (warp_total != 0) {
+    std::uint32_t base = 0;
+    if (lane == 31) base = atomicAdd(d.total, warp_total);
+    base = __shfl_sync(bp::kFullMask, base, 31) + incl - static_cast<std::uint32_t>(buffered);
+    for (int k = 0; k < buffered; ++k) {
+      if (base + static_cast<std::uint32_t>(k) < d.capacity) d.pair_keys[base + static_cast<std::uint32_t>(k)] = buffer[k];
+      if (d.pair_count) atomicAdd(&d.pair_count[buffer[k] >> d.shift], 1u);
     }
   }
   bp::block_add(d.candidates, tests);
