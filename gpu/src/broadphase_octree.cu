@@ -13,15 +13,17 @@
 // 3. a level table (first slot of every level, of the overflow list and of the NaN
 //    bodies) and a hash table of the occupied blocks (aligned 2 x 2 x 2 groups of cells,
 //    whose slots are one run: loose_blocks.hpp; one 64-bit entry per block, its key and
-//    its first slot, open addressing with linear probing, at most half full), then a
-//    query per slot:
+//    its first slot, open addressing with linear probing, at most half full) and the
+//    occupancy map (a byte per block in key order, a bit per occupied cell, for the levels
+//    that fit footprint::loose_occupancy_blocks: loose_blocks.hpp), then a query per slot:
 //    - a body in a cell (level l) looks at every level m <= l that holds bodies: the
 //      cells whose loose boxes meet its own box (loose_query_axis_q: at most 4 per axis);
 //      from kWarpQueryBodies bodies one thread per slot probes the blocks that hold
 //      them (at most 3 per axis, 2 for a window of 3 cells: 8 probes where a probe per
-//      cell took 27; at 10^6 bodies most cells of a window are empty) and walks each
-//      block's run, skipping the slots of cells outside the window (the block's octant
-//      mask), so it tests exactly the slots of the window's cells; below, one warp per
+//      cell took 27), but only a block whose byte in the occupancy map has an occupied
+//      cell in the window (at 10^6 bodies most blocks of a window are empty), and walks
+//      each block's run, skipping the slots of cells outside the window (the block's
+//      octant mask), so it tests exactly the slots of the window's cells; below, one warp per
 //      slot, a lane per cell (its run found through its block); at m = l it keeps only
 //      slots after its own (a block or cell whose keys all precede its own is not even
 //      looked up), at m < l every body;
@@ -33,7 +35,9 @@
 //    overflow list: by the in-tree body, or the smaller overflow slot), because a body's
 //    box lies in its cell's loose box and the query ranges are exact;
 // 4. the pairs are appended as keys (a << shift) | b (PairOutput::shift) with one atomic
-//    per group of threads that append together (their order varies; the set does not),
+//    per group of threads that append together (their order varies; the set does not;
+//    the thread query keeps a thread's first pairs until the end and appends the warp's
+//    with one atomic: one atomic on the total per pair bounded it at 10^6 bodies),
 //    then radix-sorted by the caller: the sorted unique set `flat` gives. Given
 //    PairOutput::scratch (sorts_pairs()), the octree sorts them itself, without a radix
 //    sort of the pairs (5 or 6 passes of 8 bits over 2 bits(n) bits): the queries append
@@ -69,10 +73,10 @@ namespace {
 
 
 /// Below this many bodies the query runs one warp per slot, from it one thread per slot
-/// (bench_gpu_broadphase on the H100 with the per-cell table this replaced: 10^4 boxes
-/// 0.15 vs 0.21 ms, 10^5 0.28 vs 0.26 ms, 10^6 1.63 vs 1.16 ms; not yet measured again
-/// with the block table).
-constexpr std::uint32_t kWarpQueryBodies = 65536;
+/// (bench_gpu_broadphase on the H100 with the occupancy map and the warp's pair append,
+/// reports/h100/perf-v7/r3: warp / thread 0.128 / 0.146 ms at 10^4, 0.156 / 0.160 at
+/// 3x10^4, 0.202 / 0.167 at 6x10^4, 0.249 / 0.171 at 10^5).
+constexpr std::uint32_t kWarpQueryBodies = 32768;
 
 /// A body's unit box in the fixed point of loose_q_min / loose_q_max.
 struct LooseQBox {
