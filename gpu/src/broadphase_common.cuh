@@ -7,6 +7,7 @@
 // and an unordered appender (one atomic per group of threads). CUDA only (nvcc).
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
 #include <initializer_list>
 #include <string>
 #include <vector>
@@ -88,6 +89,71 @@ __device__ inline void append_key(const PairOutput& out, unsigned long long key)
   if (g.thread_rank() == 0) base = atomicAdd(out.total, static_cast<std::uint32_t>(g.size()));
   const std::uint32_t idx = g.shfl(base, 0) + static_cast<std::uint32_t>(g.thread_rank());
   if (idx < out.capacity) out.keys[idx] = key;
+}
+
+/// Pairs a thread keeps in PairBuffer before it appends the rest one by one.
+constexpr int kPairBufferKeys = 8;
+
+/// A thread's pair keys, appended by its whole warp at once (one-thread-per-item queries:
+/// `octree`, `lbvh`). append_key from inside a thread's own traversal aggregates only the
+/// few lanes that meet a pair at the same moment, so at 10^6 bodies it was about one atomic
+/// on the one *out.total per pair, which bounded both queries (reports/h100/perf-v7). A
+/// thread keeps its first kPairBufferKeys keys here (the bench's boxes have 0.86 pairs per
+/// body) and appends those after with append_key; flush() then gives the warp's kept keys
+/// consecutive indices with one atomicAdd. `on` == false (a test and benchmark switch,
+/// OCTOCD_CUDA_BP_PAIR_BUFFER=0) appends every key at once, as before. The set of keys in
+/// out.keys[0 .. min(total, capacity)) is the same either way; their order varies.
+struct PairBuffer {
+  unsigned long long key[kPairBufferKeys];
+  int count = 0;
+  bool on = true;
+
+  /// Keeps `k`, or appends it (append_key) when the buffer is full or off; then
+  /// counted(k) (the octree's per-body pair count) when appended here.
+  template <class Counted>
+  __device__ void add(const PairOutput& out, unsigned long long k, Counted&& counted) {
+    if (on && count < kPairBufferKeys) {
+      key[count++] = k;
+      return;
+    }
+    append_key(out, k);
+    counted(k);
+  }
+
+  /// Appends the kept keys of the warp: every lane of the warp calls it, converged; one
+  /// atomicAdd on *out.total for the warp (by its last lane), keys written below the
+  /// capacity; counted(k) for each.
+  template <class Counted>
+  __device__ void flush(const PairOutput& out, Counted&& counted) {
+    const std::uint32_t lane = threadIdx.x & 31u;
+    std::uint32_t incl = static_cast<std::uint32_t>(count);
+    for (unsigned o = 1; o < 32; o <<= 1) {
+      const std::uint32_t v = __shfl_up_sync(kFullMask, incl, o);
+      if (lane >= o) incl += v;
+    }
+    const std::uint32_t warp_total = __shfl_sync(kFullMask, incl, 31);
+    if (warp_total == 0) return;
+    std::uint32_t base = 0;
+    if (lane == 31) base = atomicAdd(out.total, warp_total);
+    base = __shfl_sync(kFullMask, base, 31) + incl - static_cast<std::uint32_t>(count);
+    for (int i = 0; i < count; ++i) {
+      const std::uint32_t idx = base + static_cast<std::uint32_t>(i);
+      if (idx < out.capacity) out.keys[idx] = key[i];
+      counted(key[i]);
+    }
+  }
+};
+
+/// OCTOCD_CUDA_BP_PAIR_BUFFER=0|1 (default 1): whether `octree` and `lbvh` append their
+/// pairs through PairBuffer (read when the broadphase is made). Throws InputError for
+/// another value.
+inline bool pair_buffer_from_env() {
+  const char* v = std::getenv("OCTOCD_CUDA_BP_PAIR_BUFFER");
+  if (v == nullptr || *v == '\0') return true;
+  const std::string t = v;
+  if (t == "1") return true;
+  if (t == "0") return false;
+  throw InputError(fmt::format("OCTOCD_CUDA_BP_PAIR_BUFFER: '{}'; allowed: 0, 1 (or unset)", t));
 }
 
 /// Blocks of kBlockSize threads for one warp per item (at least 1).

@@ -15,7 +15,8 @@
 // 5. one thread per slot s walks the tree with a stack (lbvh_query: subtrees whose boxes
 //    miss its box, or whose slots all come before s, are skipped), makes the exact test
 //    (octocd::overlaps, Eq. 6) against every leaf t > s it reaches and appends the
-//    overlapping pairs (bp::append_key), so each pair is met once, from its smaller slot.
+//    overlapping pairs (bp::PairBuffer: its first pairs appended by the whole warp at the
+//    end, as the octree's query), so each pair is met once, from its smaller slot.
 // The pairs are appended in an order that varies run to run; the caller sorts them: the
 // sorted unique set `flat` gives. FrameMetrics::cell_candidates: the leaf tests.
 #include <algorithm>
@@ -53,6 +54,7 @@ struct LbvhDesc {
   std::uint32_t* leaf_parent = nullptr;    ///< n: parent of each slot's leaf
   std::uint32_t* flag = nullptr;           ///< n - 1 refit counters
   PairOutput out;                          ///< pair keys, total, exact tests
+  bool pair_buffer = true;                 ///< bp::PairBuffer on (OCTOCD_CUDA_BP_PAIR_BUFFER)
 };
 
 __global__ void lbvh_code_kernel(LbvhDesc d) {
@@ -110,14 +112,18 @@ __global__ void lbvh_refit_kernel(LbvhDesc d) {
 __global__ void lbvh_query_kernel(LbvhDesc d) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   unsigned long long tests = 0;
+  bp::PairBuffer pairs;
+  pairs.on = d.pair_buffer;
+  auto counted = [](unsigned long long) {};
   if (s < d.n) {
     const Aabb box = d.slot_box[s];
     const std::uint32_t body = d.slot_body[s];
     lbvh_query(d.nodes, d.node_box, s, box, [&](std::uint32_t t) {
       ++tests;
-      if (overlaps(box, d.slot_box[t])) bp::append_key(d.out, bp::pair_key(body, d.slot_body[t], d.out.shift));
+      if (overlaps(box, d.slot_box[t])) pairs.add(d.out, bp::pair_key(body, d.slot_body[t], d.out.shift), counted);
     });
   }
+  pairs.flush(d.out, counted);
   bp::block_add(d.out.candidates, tests);
 }
 
@@ -173,6 +179,7 @@ class LbvhDevice final : public DeviceBroadPhase {
     d.leaf_parent = leaf_parent_.get();
     d.flag = flag_.get();
     d.out = out;
+    d.pair_buffer = pair_buffer_;
     const unsigned g = grid_for(n);
     lbvh_code_kernel<<<g, kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "lbvh_code");
@@ -199,6 +206,7 @@ class LbvhDevice final : public DeviceBroadPhase {
 
  private:
   LooseGrid grid_;
+  bool pair_buffer_ = bp::pair_buffer_from_env();  ///< OCTOCD_CUDA_BP_PAIR_BUFFER
   bool reserved_ = false;
   std::uint32_t n_ = 0;
   DeviceBuffer<std::uint32_t> code_{"lbvh body codes"};

@@ -138,6 +138,7 @@ struct LooseDesc {
   /// loose_gather_kernel.
   std::uint32_t* occupancy = nullptr;
   std::uint32_t occupancy_blocks = 0;
+  bool pair_buffer = true;  ///< bp::PairBuffer on (OCTOCD_CUDA_BP_PAIR_BUFFER)
   unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
   /// Sorted mode (PairOutput::scratch given; pair_keys is then the scratch): per body a,
   /// n + 1 entries zeroed before the query, the pairs (a, b) appended; else nullptr.
@@ -390,22 +391,20 @@ __device__ inline void test_run(const LooseDesc& d, const Aabb& box, std::uint32
     if (overlaps(box, d.slot_box[t])) append_pair(d, out, bp::pair_key(body, d.slot_body[t], d.shift));
 }
 
-/// Pairs a thread of loose_query_kernel keeps until the warp appends them together (a body
-/// of the bench's boxes has 0.86 pairs on average); the ones after go out one by one.
-constexpr int kQueryPairBuffer = 8;
-
 /// One thread per slot: the loose octree query of the file comment. At each level that
 /// holds bodies, the thread probes the blocks that hold the (at most 4 x 4 x 4) cells of
 /// its window (at most 3 x 3 x 3) in the block table and tests the slots of the window's
 /// cells in each block's run (loose_block_query; at its own level only the slots after
-/// its own). Its first kQueryPairBuffer pairs wait in a local buffer and the warp appends
-/// them with one atomic at the end (an append per pair, from the few lanes that meet a
-/// pair at the same time, was one atomic on the one total per pair or two).
+/// its own). Its pairs go through bp::PairBuffer (the warp appends them at the end).
 __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   unsigned long long tests = 0;
-  unsigned long long buffer[kQueryPairBuffer];
-  int buffered = 0;
+  const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
+  bp::PairBuffer pairs;
+  pairs.on = d.pair_buffer;
+  auto counted = [&](unsigned long long k) {
+    if (d.pair_count) atomicAdd(&d.pair_count[k >> d.shift], 1u);
+  };
   if (s < d.n) {
     const std::uint32_t key = d.sorted_key[s];
     const std::uint32_t body = d.slot_body[s];
@@ -413,7 +412,6 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
     if (key == d.overflow_key) {
       test_run(d, box, body, s + 1, d.level_begin[kLooseMaxDepth + 2], tests);  // the overflow bodies after it
     } else if (key != d.nan_key) {  // a NaN box overlaps nothing
-      const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
       const int level = loose_cell_key_level(key);
       const LooseQBox q = loose_qbox(loose_call_grid(d), box);
       for (int m = 0; m <= level; ++m) {
@@ -426,31 +424,12 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
             [&](std::uint32_t bk) { return block_octants(d, bk); },
             [&](std::uint32_t t) {
               ++tests;
-              if (!overlaps(box, d.slot_box[t])) return;
-              const unsigned long long k = bp::pair_key(body, d.slot_body[t], d.shift);
-              if (buffered < kQueryPairBuffer) buffer[buffered++] = k;
-              else append_pair(d, out, k);
+              if (overlaps(box, d.slot_box[t])) pairs.add(out, bp::pair_key(body, d.slot_body[t], d.shift), counted);
             });
       }
     }
   }
-  // The warp's buffered pairs: an inclusive scan of the counts, one atomic for the warp.
-  const std::uint32_t lane = threadIdx.x & 31u;
-  std::uint32_t incl = static_cast<std::uint32_t>(buffered);
-  for (unsigned o = 1; o < 32; o <<= 1) {
-    const std::uint32_t v = __shfl_up_sync(bp::kFullMask, incl, o);
-    if (lane >= o) incl += v;
-  }
-  const std::uint32_t warp_total = __shfl_sync(bp::kFullMask, incl, 31);
-  if (warp_total != 0) {
-    std::uint32_t base = 0;
-    if (lane == 31) base = atomicAdd(d.total, warp_total);
-    base = __shfl_sync(bp::kFullMask, base, 31) + incl - static_cast<std::uint32_t>(buffered);
-    for (int k = 0; k < buffered; ++k) {
-      if (base + static_cast<std::uint32_t>(k) < d.capacity) d.pair_keys[base + static_cast<std::uint32_t>(k)] = buffer[k];
-      if (d.pair_count) atomicAdd(&d.pair_count[buffer[k] >> d.shift], 1u);
-    }
-  }
+  pairs.flush(out, counted);
   bp::block_add(d.candidates, tests);
 }
 
@@ -686,6 +665,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.cell_mask = cell_mask_;
     d.occupancy = occupancy_.get();
     d.occupancy_blocks = occupancy_on_ ? occupancy_blocks_ : 0u;  // 0: no map
+    d.pair_buffer = pair_buffer_;
     const bool sorted = out.scratch != nullptr;
     d.pair_keys = sorted ? out.scratch : out.keys;
     d.pair_count = sorted ? pair_count_.get() : nullptr;
@@ -774,6 +754,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   DeviceBuffer<LooseRoot> root_{"octree snapped root"};
   bool snap_ = true;  ///< OCTOCD_CUDA_OCTREE_SNAP
   bool occupancy_on_ = true;  ///< OCTOCD_CUDA_OCTREE_OCCUPANCY
+  bool pair_buffer_ = bp::pair_buffer_from_env();  ///< OCTOCD_CUDA_BP_PAIR_BUFFER
   DeviceBuffer<std::uint32_t> key_{"octree body keys"};
   DeviceBuffer<std::uint32_t> body_{"octree body indices"};
   DeviceBuffer<std::uint32_t> sorted_key_{"octree sorted keys"};

@@ -1495,6 +1495,53 @@ TEST(LooseBlockHostModel, ExactTestsPerDepthOnTheBenchBoxes) {
   }
 }
 
+// bp::PairBuffer (the warp appends a thread's first pairs at the end) on and off
+// (OCTOCD_CUDA_BP_PAIR_BUFFER) in the one-thread-per-slot queries of `octree` and `lbvh`:
+// the same total, pair set and exact tests, with the first find at capacity 16 (find_all:
+// the keys that fit, the total counted in full) and on a set whose bodies have more pairs
+// than the buffer keeps (one-cell); a bad value of the switch is an input error.
+TEST(DevicePairBuffer, OnAndOffGiveTheSamePairsAndTests) {
+  REQUIRE_CUDA_DEVICE();
+  Stream stream;
+  std::vector<std::pair<std::string, std::pair<std::vector<Aabb>, Aabb>>> sets;
+  sets.push_back({"bench-50000", bench_boxes(50000, 5)});
+  for (const char* name : {"one-cell", "uniform-10000", "nested-levels", "huge-and-infinite"})
+    sets.push_back({name, {box_set(name).boxes, box_set(name).domain}});
+  for (const char* bp_name : {"octree", "lbvh"}) {
+    BroadPhaseConfig c;
+    c.name = bp_name;
+    c.octree_depth = -1;
+    for (const auto& [name, set] : sets) {
+      const auto& [boxes, domain] = set;
+      const auto n = static_cast<std::uint32_t>(boxes.size());
+      const std::vector<Pair> flat = flat_pairs(boxes, domain);
+      DeviceBuffer<Aabb> dboxes("test boxes");
+      gpu::upload(dboxes, boxes, stream.s);
+      unsigned long long tests[2] = {0, 0};
+      for (const int on : {1, 0}) {
+        SCOPED_TRACE(fmt::format("{} on {}, OCTOCD_CUDA_BP_PAIR_BUFFER={}", bp_name, name, on));
+        ::setenv("OCTOCD_CUDA_BP_PAIR_BUFFER", on ? "1" : "0", 1);
+        ::setenv("OCTOCD_CUDA_OCTREE_QUERY", "thread", 1);
+        auto bp = make_device(c, domain);
+        ::unsetenv("OCTOCD_CUDA_BP_PAIR_BUFFER");
+        ::unsetenv("OCTOCD_CUDA_OCTREE_QUERY");
+        bp->reserve(n, stream.s);
+        const FindResult r = find_all(*bp, dboxes, n, stream.s);
+        ASSERT_EQ(r.total, flat.size());
+        EXPECT_FALSE(r.wrote_past_capacity);
+        std::vector<Pair> pairs;
+        ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
+        EXPECT_TRUE(same_pairs(pairs, flat, boxes));
+        tests[on] = r.candidates;
+      }
+      EXPECT_EQ(tests[0], tests[1]) << bp_name << " on " << name;
+    }
+    ::setenv("OCTOCD_CUDA_BP_PAIR_BUFFER", "yes", 1);
+    EXPECT_THROW(make_device(c, sets[0].second.second), InputError);
+    ::unsetenv("OCTOCD_CUDA_BP_PAIR_BUFFER");
+  }
+}
+
 // The device octree (depth auto) tests exactly what the counter says for its root: the
 // snapped one by default, the domain's with OCTOCD_CUDA_OCTREE_SNAP=0; the pair set is
 // flat's either way, with the occupancy map and without (OCTOCD_CUDA_OCTREE_OCCUPANCY=0:
