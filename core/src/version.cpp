@@ -1,5 +1,7 @@
 #include "octocd/version.hpp"
 
+#include "octocd_build_id.h"  // OCTOCD_BUILD_ID, generated at build time (cmake/build_id.cmake)
+
 #include <fstream>
 #include <string>
 #include <thread>
