@@ -144,17 +144,20 @@ struct PairBuffer {
   }
 };
 
-/// OCTOCD_CUDA_BP_PAIR_BUFFER=0|1 (default 1): whether `octree` and `lbvh` append their
-/// pairs through PairBuffer (read when the broadphase is made). Throws InputError for
-/// another value.
-inline bool pair_buffer_from_env() {
-  const char* v = std::getenv("OCTOCD_CUDA_BP_PAIR_BUFFER");
-  if (v == nullptr || *v == '\0') return true;
+/// A 0|1 switch from the environment: "1" true, "0" false, unset or empty `fallback`.
+/// Throws InputError naming the variable and the allowed values for anything else.
+inline bool env_switch(const char* name, bool fallback) {
+  const char* v = std::getenv(name);
+  if (v == nullptr || *v == '\0') return fallback;
   const std::string t = v;
   if (t == "1") return true;
   if (t == "0") return false;
-  throw InputError(fmt::format("OCTOCD_CUDA_BP_PAIR_BUFFER: '{}'; allowed: 0, 1 (or unset)", t));
+  throw InputError(fmt::format("{}: '{}'; allowed: 0, 1 (or unset)", name, t));
 }
+
+/// OCTOCD_CUDA_BP_PAIR_BUFFER=0|1 (default 1): whether `octree` and `lbvh` append their
+/// pairs through PairBuffer (read when the broadphase is made).
+inline bool pair_buffer_from_env() { return env_switch("OCTOCD_CUDA_BP_PAIR_BUFFER", true); }
 
 /// Blocks of kBlockSize threads for one warp per item (at least 1).
 inline unsigned warp_grid_for(std::size_t items) { return grid_for(items * kWarpSize); }

@@ -581,22 +581,10 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     }
     // OCTOCD_CUDA_OCTREE_SNAP=0|1 (default 1): depth `auto` roots the tree at
     // loose_snapped_grid (1) or at the domain's cube (0, as the CPU octree).
-    if (const char* v = std::getenv("OCTOCD_CUDA_OCTREE_SNAP")) {
-      const std::string t = v;
-      if (t == "0") snap_ = false;
-      else if (t == "1") snap_ = true;
-      else if (!t.empty())
-        throw InputError(fmt::format("OCTOCD_CUDA_OCTREE_SNAP: '{}'; allowed: 0, 1 (or unset)", t));
-    }
+    snap_ = bp::env_switch("OCTOCD_CUDA_OCTREE_SNAP", true);
     // OCTOCD_CUDA_OCTREE_OCCUPANCY=0|1 (default 1): the query skips blocks by the
     // occupancy map (1) or probes every block of a window (0); the same slots either way.
-    if (const char* v = std::getenv("OCTOCD_CUDA_OCTREE_OCCUPANCY")) {
-      const std::string t = v;
-      if (t == "0") occupancy_on_ = false;
-      else if (t == "1") occupancy_on_ = true;
-      else if (!t.empty())
-        throw InputError(fmt::format("OCTOCD_CUDA_OCTREE_OCCUPANCY: '{}'; allowed: 0, 1 (or unset)", t));
-    }
+    occupancy_on_ = bp::env_switch("OCTOCD_CUDA_OCTREE_OCCUPANCY", true);
     if (depth_ >= 0 && depth_ < kLooseMaxDepth) {
       overflow_key_ = loose_level_base(depth_ + 1);
       key_bits_ = 1;
