@@ -243,9 +243,6 @@ bool persistent_from_env() {
 /// Default of OCTOCD_CUDA_PERSISTENT_IDLE_US: the resident kernel ends itself after this
 /// long without a request (the next step launches it again).
 constexpr long kResidentIdleUs = 2000;
-/// Default of OCTOCD_CUDA_PERSISTENT_POLLERS: warps of the resident kernel's block 0 that
-/// poll the host's request (ResidentDesc::pollers).
-constexpr long kResidentPollers = 1;
 /// Default of OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS: the host's wait for one resident step.
 constexpr long kResidentTimeoutMs = 60000;
 /// Default of OCTOCD_CUDA_SMALL_FRONT_BODIES: 64. On the H100 (reports/h100/perf-v5) the
@@ -303,7 +300,6 @@ struct CudaWorld::Impl {
   bool resident_alive = false;     // launched, and not yet seen to have exited
   bool resident_hung = false;      // an exit request went unanswered: nothing may be freed
   bool resident_stall = false;     // OCTOCD_CUDA_PERSISTENT_STALL=1 (test hook)
-  int resident_pollers = 1;        // OCTOCD_CUDA_PERSISTENT_POLLERS (ResidentDesc::pollers)
   unsigned resident_grid = 1;
   unsigned long long resident_idle_ns = 0;
   long resident_timeout_ms = kResidentTimeoutMs;
@@ -815,7 +811,6 @@ struct CudaWorld::Impl {
     r.idle_ns = resident_stall ? 0 : resident_idle_ns;
     r.records = records.get();
     r.stall = resident_stall ? 1 : 0;
-    r.pollers = resident_pollers;
     const cudaError_t e = gpu::launch_small_resident(small_desc(scene, false), r, resident_grid, resident_stream);
     if (e != cudaSuccess) {
       (void)cudaGetLastError();
@@ -971,8 +966,6 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
                                    "microseconds after which the idle resident kernel ends itself");
   const long timeout_ms = env_integer("OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS", 1, 86400000L, kResidentTimeoutMs,
                                       "milliseconds the host waits for one resident step before it throws");
-  const long pollers = env_integer("OCTOCD_CUDA_PERSISTENT_POLLERS", 1, gpu::kResidentMaxPollers, kResidentPollers,
-                                   "warps of the resident kernel's first block that poll the host's step request");
   const long front_bodies = env_integer("OCTOCD_CUDA_SMALL_FRONT_BODIES", 0, gpu::kSmallFrontMaxBodies,
                                         kSmallFrontBodies,
                                         "bodies up to which the fused small step integrates, counts and fills "
@@ -1063,7 +1056,6 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     d.resident_idle_ns = static_cast<unsigned long long>(idle_us) * 1000ull;
     d.resident_timeout_ms = timeout_ms;
     d.resident_stall = env_is_one("OCTOCD_CUDA_PERSISTENT_STALL");
-    d.resident_pollers = static_cast<int>(pollers);
   }
   check(cudaStreamCreateWithFlags(&d.stream, cudaStreamNonBlocking), "cudaStreamCreate");
   if (d.resident_possible) {

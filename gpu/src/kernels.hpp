@@ -371,13 +371,7 @@ struct ResidentDesc {
   unsigned long long idle_ns = 0;         ///< exit after this long without a request (0: never)
   DeviceContact* records = nullptr;       ///< the first pass's records of a recorded step
   int stall = 0;  ///< test hook (OCTOCD_CUDA_PERSISTENT_STALL=1): ignore step requests, honour exit
-  /// Warps of block 0 that poll *request, each from one lane, started kResidentPollStagger
-  /// ns apart (OCTOCD_CUDA_PERSISTENT_POLLERS, 1 .. kResidentMaxPollers): a poll of mapped
-  /// host memory is a PCIe round trip, so staggered pollers see a request sooner.
-  int pollers = 1;
 };
-constexpr int kResidentMaxPollers = 8;
-constexpr unsigned kResidentPollStagger = 250;
 constexpr int kResidentShift = 2;
 constexpr unsigned long long kResidentRecord = 1;
 constexpr unsigned long long kResidentExit = 2;

@@ -395,22 +395,14 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(const __grid_con
 /// below 2^62).
 constexpr unsigned long long kExitCommand = ~0ull;
 
-/// No command yet (ResidentShared::found): never a request (those are below 2^62) nor
-/// kExitCommand.
-constexpr unsigned long long kNoCommand = ~0ull - 1ull;
-
-/// A poller of block 0 (lane 0 of one of its first r.pollers warps): waits for a request
-/// other than `handled` (system-scope loads of the mapped word, tight at first, then
-/// __nanosleep backoff up to 1 us) or for another poller's find (*found != kNoCommand,
-/// returned as it is); returns the request, or kExitCommand for an exit request or after
-/// r.idle_ns without one.
-__device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long long handled,
-                                           volatile unsigned long long* found) {
+/// Block 0, thread 0: waits for a request other than `handled` (system-scope loads of the
+/// mapped word, tight at first, then __nanosleep backoff up to 1 us); returns it, or
+/// kExitCommand for an exit request or after r.idle_ns without one.
+__device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long long handled) {
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_system> request(*r.request);
   const unsigned long long t0 = global_ns();
   unsigned sleep_ns = 0;
   for (unsigned spins = 0;; ++spins) {
-    if (*found != kNoCommand) return *found;
     const unsigned long long req = request.load(cuda::std::memory_order_acquire);
     if (req != handled) {
       if (req & kResidentExit) return kExitCommand;
@@ -425,10 +417,8 @@ __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long 
 }
 
 /// Steps on request (ResidentDesc). Block 0 takes each request and publishes it as the
-/// next command (control[1], then control[0] = the next ticket, release): r.pollers of its
-/// warps poll the request, started kResidentPollStagger ns apart, and the first that sees
-/// it publishes it (the others stop at its find); the other blocks wait for the ticket
-/// (acquire). Every block reads the first ticket before a grid-wide
+/// next command (control[1], then control[0] = the next ticket, release); the other blocks
+/// wait for the ticket (acquire). Every block reads the first ticket before a grid-wide
 /// barrier, so none can miss the first command. After a step's last phase (block 0: the
 /// metrics and *done) block 0 waits for the next request; a block done earlier (the
 /// one-block response) waits for the next ticket.
@@ -437,47 +427,31 @@ __global__ void __launch_bounds__(kBlockSize)
     small_resident_kernel(const __grid_constant__ SmallStepDesc s, const __grid_constant__ ResidentDesc r) {
   __shared__ alignas(16) unsigned char smem[kSharedBytes];
   __shared__ unsigned long long command;
-  __shared__ unsigned long long found;       // block 0: the command its pollers found
-  __shared__ unsigned long long ticket_now;  // block 0: the ticket before this command
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> ticket(r.control[0]);
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_device> published(r.control[1]);
   unsigned long long my_ticket = 0;
   if (threadIdx.x == 0) my_ticket = ticket.load(cuda::std::memory_order_relaxed);
   cg::this_grid().sync();
   unsigned long long handled = r.handled;
-  const int pollers = r.pollers < 1 ? 1 : (r.pollers > kResidentMaxPollers ? kResidentMaxPollers : r.pollers);
   for (;;) {
-    if (blockIdx.x == 0) {  // block-uniform
-      if (threadIdx.x == 0) {
-        found = kNoCommand;
-        ticket_now = my_ticket;
-      }
-      __syncthreads();
-      const unsigned w = threadIdx.x >> 5;
-      if ((threadIdx.x & 31u) == 0 && w < static_cast<unsigned>(pollers)) {
-        if (w > 0) __nanosleep(w * kResidentPollStagger);
-        const unsigned long long cmd = wait_request(r, handled, &found);
-        // The first poller to find it publishes it (its acquire load, then the release).
-        if (atomicCAS(&found, kNoCommand, cmd) == kNoCommand) {
-          published.store(cmd, cuda::std::memory_order_relaxed);
-          ticket.store(ticket_now + 1, cuda::std::memory_order_release);
+    if (threadIdx.x == 0) {
+      unsigned long long cmd;
+      if (blockIdx.x == 0) {
+        cmd = wait_request(r, handled);
+        published.store(cmd, cuda::std::memory_order_relaxed);
+        ticket.store(my_ticket + 1, cuda::std::memory_order_release);
+      } else {
+        unsigned sleep_ns = 0;
+        for (unsigned spins = 0; ticket.load(cuda::std::memory_order_acquire) == my_ticket; ++spins) {
+          if (spins >= 64) {
+            __nanosleep(sleep_ns);
+            sleep_ns = sleep_ns < 256 ? sleep_ns * 2 + 32 : 256;
+          }
         }
-      }
-      __syncthreads();
-      if (threadIdx.x == 0) {
-        ++my_ticket;
-        command = found;
-      }
-    } else if (threadIdx.x == 0) {
-      unsigned sleep_ns = 0;
-      for (unsigned spins = 0; ticket.load(cuda::std::memory_order_acquire) == my_ticket; ++spins) {
-        if (spins >= 64) {
-          __nanosleep(sleep_ns);
-          sleep_ns = sleep_ns < 256 ? sleep_ns * 2 + 32 : 256;
-        }
+        cmd = published.load(cuda::std::memory_order_relaxed);
       }
       ++my_ticket;
-      command = published.load(cuda::std::memory_order_relaxed);
+      command = cmd;
     }
     __syncthreads();
     const unsigned long long cmd = command;

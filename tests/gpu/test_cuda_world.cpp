@@ -1329,7 +1329,6 @@ TEST(CudaPersistent, BadSwitchValuesAreInputErrors) {
       {"OCTOCD_CUDA_PERSISTENT", {"", "2", "yes", "on", " 1"}},
       {"OCTOCD_CUDA_PERSISTENT_IDLE_US", {"", "0", "-1", "x", "600000001", "5us"}},
       {"OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS", {"", "0", "x", "86400001"}},
-      {"OCTOCD_CUDA_PERSISTENT_POLLERS", {"", "0", "9", "x", "2w"}},
       {"OCTOCD_CUDA_SMALL_FRONT_BODIES", {"", "-1", "513", "x", "1e3"}}};
   for (const auto& [name, bads] : cases) expect_bad_values_rejected(name, bads, "is not allowed; allowed: ");
 }
@@ -1337,15 +1336,11 @@ TEST(CudaPersistent, BadSwitchValuesAreInputErrors) {
 // Many steps through one resident kernel (idle exit far away): the cpu's bits after every
 // step with the state read back after every step, recorded frames (the request's flag),
 // set_state while the kernel waits (every 97th frame, both engines); the kernel stays
-// resident: one launch, plus one per buffer regrow (a regrow ends it: cudaFree). With one
-// poller of the host's request and with four (OCTOCD_CUDA_PERSISTENT_POLLERS).
+// resident: one launch, plus one per buffer regrow (a regrow ends it: cudaFree).
 TEST(CudaPersistent, ManyStepsWithStateReadsAndSetStateEqualTheCpu) {
   REQUIRE_CUDA_DEVICE();
   const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "600000000");
-  for (const char* pollers : {"1", "4"})
   for (const char* scene : {"bunny-stack-50", "box-stack"}) {
-    SCOPED_TRACE(fmt::format("OCTOCD_CUDA_PERSISTENT_POLLERS={}", pollers));
-    const ScopedEnv poll("OCTOCD_CUDA_PERSISTENT_POLLERS", pollers);
     const auto model = with_levels(load_model(scene), "1,2");
     const PathEnv env("small");
     auto cpu = cpu_flat(model);
@@ -1492,24 +1487,18 @@ TEST(CudaPersistent, HostTimeoutIsAnErrorNotAHang) {
 
 // The resident kernel ends itself when idle (OCTOCD_CUDA_PERSISTENT_IDLE_US=1: after 1 us
 // without a request, so nearly every step finds it gone) and the next step launches it
-// again: the same bits as the cpu, whether the kernel took the request or had left; with
-// one poller of the request and with four (each poller's idle clock, the first to give up
-// ends the kernel).
+// again: the same bits as the cpu, whether the kernel took the request or had left.
 TEST(CudaPersistent, IdleExitAndRelaunchKeepTheCpuBits) {
   REQUIRE_CUDA_DEVICE();
   const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "1");
-  for (const char* pollers : {"1", "4"}) {
-    SCOPED_TRACE(fmt::format("OCTOCD_CUDA_PERSISTENT_POLLERS={}", pollers));
-    const ScopedEnv poll("OCTOCD_CUDA_PERSISTENT_POLLERS", pollers);
-    const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
-    const PathEnv env("small");
-    auto cpu = cpu_flat(model);
-    CudaWorld gpu(model, "flat");
-    ASSERT_TRUE(gpu.persistent());
-    for (int f = 1; f <= 200; ++f) {
-      step_all_and_compare(*cpu, {&gpu}, f, "idle exits");
-      if (::testing::Test::HasFailure()) FAIL();
-    }
-    EXPECT_GT(gpu.resident_launches(), 1u) << "the cpu's steps between take longer than 1 us: relaunches";
+  const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
+  const PathEnv env("small");
+  auto cpu = cpu_flat(model);
+  CudaWorld gpu(model, "flat");
+  ASSERT_TRUE(gpu.persistent());
+  for (int f = 1; f <= 200; ++f) {
+    step_all_and_compare(*cpu, {&gpu}, f, "idle exits");
+    if (::testing::Test::HasFailure()) FAIL();
   }
+  EXPECT_GT(gpu.resident_launches(), 1u) << "the cpu's steps between take longer than 1 us: relaunches";
 }
