@@ -10,6 +10,7 @@
 
 #include <cstdint>
 
+#include "loose_blocks.hpp"
 #include "octocd/loose_octree.hpp"
 
 namespace octocd {
@@ -42,7 +43,7 @@ constexpr std::uint64_t loose_cell_table_entries(std::uint64_t n) {
 /// 19.2 x 10^6 blocks); a scene whose deepest levels need more has them probed without
 /// the map.
 constexpr std::uint64_t loose_occupancy_blocks(std::uint64_t n) {
-  const std::uint64_t all = ((((1ull << (3 * (kLooseMaxDepth + 1))) - 1) / 7 + 7) / 8 + 3) / 4 * 4;
+  const std::uint64_t all = (gpu::loose_blocks_through(kLooseMaxDepth) + 3) / 4 * 4;
   std::uint64_t b = 32 * n;
   if (b < (1ull << 16)) b = 1ull << 16;
   if (b > all) b = all;

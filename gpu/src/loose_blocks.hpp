@@ -105,6 +105,13 @@ OCTOCD_HD inline std::uint32_t loose_block_find(const unsigned long long* table,
 /// of a table of 16-64 MiB), and stops walking a block's run after its last wanted octant.
 OCTOCD_HD inline std::uint32_t loose_block_index(std::uint32_t block_key) { return (block_key + 7u) >> 3; }
 
+/// Blocks of levels 0 .. depth (depth in [0, kLooseMaxDepth]): the occupancy index of
+/// level depth + 1's first block, loose_block_index(loose_level_base(depth + 1)), in 64
+/// bits (level 11's base is above 2^32).
+OCTOCD_HD constexpr unsigned long long loose_blocks_through(int depth) {
+  return ((((1ull << (3u * static_cast<unsigned>(depth + 1))) - 1ull) / 7ull) + 7ull) >> 3;
+}
+
 /// The occupancy byte of block `bk` from a map of `blocks` bytes (0xff outside the map).
 OCTOCD_HD inline std::uint32_t loose_block_octants(const std::uint32_t* occupancy, std::uint32_t blocks,
                                                    std::uint32_t bk) {
@@ -129,10 +136,7 @@ OCTOCD_HD inline std::uint32_t loose_occupancy_bit(std::uint32_t key, int level,
 /// loose_gather_kernel sets the bits of a find with D_w = depth; overflow and NaN keys
 /// have no bit).
 OCTOCD_HD inline std::uint32_t loose_occupancy_words(std::uint32_t blocks, int depth) {
-  // Blocks of levels <= depth: loose_block_index(loose_level_base(depth + 1)), in 64 bits
-  // (level 11's base is above 2^32).
-  const unsigned long long base = ((1ull << (3u * static_cast<unsigned>(depth + 1))) - 1ull) / 7ull;
-  const unsigned long long used = (base + 7ull) >> 3;
+  const unsigned long long used = loose_blocks_through(depth);
   return static_cast<std::uint32_t>(((used < blocks ? used : blocks) + 3ull) >> 2);
 }
 
@@ -204,10 +208,14 @@ OCTOCD_HD inline void loose_block_query(const std::uint32_t* sorted_key, std::ui
   }
 }
 
-/// The run [*t0, *t1) of cell `key`'s slots from its block's first slot t (kLooseNoSlot:
-/// the cell is empty; empty: *t0 == *t1).
-OCTOCD_HD inline void loose_cell_run_from(const std::uint32_t* sorted_key, std::uint32_t n, std::uint32_t key,
-                                          std::uint32_t t, std::uint32_t* t0, std::uint32_t* t1) {
+/// The run [*t0, *t1) of the slots of cell `key` of `level` (empty: *t0 == *t1), from its
+/// block's first slot (find and octants, as loose_block_query's: a cell whose bit is
+/// clear is not looked up).
+template <class Find, class Octants>
+OCTOCD_HD inline void loose_cell_run(const std::uint32_t* sorted_key, std::uint32_t n, std::uint32_t key, int level,
+                                     Find&& find, Octants&& octants, std::uint32_t* t0, std::uint32_t* t1) {
+  const std::uint32_t bk = loose_block_key(key, level);
+  std::uint32_t t = ((octants(bk) >> (key - bk)) & 1u) != 0 ? find(bk) : kLooseNoSlot;
   if (t == kLooseNoSlot) {
     *t0 = *t1 = 0;
     return;
@@ -216,17 +224,6 @@ OCTOCD_HD inline void loose_cell_run_from(const std::uint32_t* sorted_key, std::
   *t0 = t;
   while (t < n && sorted_key[t] == key) ++t;
   *t1 = t;
-}
-
-/// The run [*t0, *t1) of the slots of cell `key` of `level` (empty: *t0 == *t1), from its
-/// block's first slot (find and octants, as loose_block_query's: a cell whose bit is
-/// clear is not looked up).
-template <class Find, class Octants>
-OCTOCD_HD inline void loose_cell_run(const std::uint32_t* sorted_key, std::uint32_t n, std::uint32_t key, int level,
-                                     Find&& find, Octants&& octants, std::uint32_t* t0, std::uint32_t* t1) {
-  const std::uint32_t bk = loose_block_key(key, level);
-  const std::uint32_t t = ((octants(bk) >> (key - bk)) & 1u) != 0 ? find(bk) : kLooseNoSlot;
-  loose_cell_run_from(sorted_key, n, key, t, t0, t1);
 }
 
 }  // namespace gpu
