@@ -7,6 +7,7 @@
 /// tolerance is defined once, in `Tolerances`, with the reason for its value.
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <exception>
 #include <functional>
@@ -38,6 +39,34 @@ enum class Tier {
 /// "physics" or "model" (the table's tier column, JUnit, the trace's /validation/tier).
 const char* tier_name(Tier tier);
 
+/// One judged item of a row: where, and its figure (SPEC 13b.13).
+struct ValidationExample {
+  std::int64_t frame = -1;  ///< the frame (step number) it was judged on; -1: not a frame's item
+  /// What was judged, in the form expectations name it: "pair (A, B)", "body I",
+  /// "group (I, ...)" (an isolated group by its first bodies), "" for the whole run.
+  std::string item;
+  double figure = 0;        ///< the item's measured figure, in its cause's unit
+  std::string text;         ///< one line: what was measured against what, with the bound
+};
+
+/// One cause of a row's failures (SPEC 13b.13): e.g. row `contact-completeness` has the
+/// causes `missing-contact` and `false-contact`. A second fault never hides behind the
+/// first: every cause is counted, and each keeps its first examples.
+struct ValidationCause {
+  std::string name;         ///< kebab-case, unique within its row (e.g. "normal-angle")
+  std::string unit;         ///< unit of the figures (e.g. "deg", "m", "kg m/s", "rel")
+  std::uint64_t count = 0;  ///< items that failed for this cause
+  double worst = 0;         ///< the largest figure among them (0 when count is 0)
+  /// The first failing items in the order judged, at most kMaxExamples.
+  std::vector<ValidationExample> examples;
+  /// Every distinct failing item (ValidationExample::item) up to kMaxItems, sorted;
+  /// `items_complete` false when more failed (expectations listing items then fail).
+  std::vector<std::string> items;
+  bool items_complete = true;
+  static constexpr std::size_t kMaxExamples = 5;
+  static constexpr std::size_t kMaxItems = 1000;
+};
+
 /// One validator's verdict.
 struct ValidationResult {
   Tier tier = Tier::Model;  ///< which judge this row belongs to
@@ -56,6 +85,12 @@ struct ValidationResult {
   /// that several rows share (the physics tier's FCL truth per candidate pair) is charged
   /// to the first row that needs it. JUnit's per-testcase time.
   double seconds = 0;
+  /// Items this row judged (contacts, pairs, groups, bodies, frames: the row says which
+  /// in its detail). A row that judged nothing is n/a (`applicable` false), never a pass.
+  std::uint64_t judged = 0;
+  /// Its failures by cause (empty when it passed). A validator that does not split its
+  /// failures gives one cause named like the row, with count = the failing items.
+  std::vector<ValidationCause> causes;
 };
 
 /// Thrown from inside a check when ValidationOptions::stop returns true (the long loops
