@@ -755,7 +755,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   r["bodies"] = model->initial.x.size();
   std::unique_ptr<Engine> engine;
   try {
-    engine = make_engine(p.engine, model);
+    engine = make_engine(p.engine, model, cuda_settings_from(o.cuda));
   } catch (const std::exception& e) {
     r["status"] = "skipped";
     r["reason"] = e.what();
@@ -798,7 +798,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   for (int rep = 0; rep < repeat; ++rep) {
     if (rep > 0) {
       engine.reset();  // the last repetition's device memory back first: the memory check sees one engine
-      engine = make_engine(p.engine, model);
+      engine = make_engine(p.engine, model, cuda_settings_from(o.cuda));
     }
     std::unique_ptr<TraceWriter> trace;
     if (rep == 0 && !o.trace_dir.empty()) {
@@ -1358,6 +1358,7 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
   c->add_option("sweep", o.sweep, "A named sweep (" + named_list() + ") or a sweep JSON file");
   c->add_option("-o,--output", o.output, "Result file (JSON), rewritten after every finished point");
   c->add_option("--engines", o.engines, "Comma-separated engines, overrides the sweep's: cpu, cuda, bullet");
+  add_cuda_settings_option(c, o.cuda);
   c->add_option("--repeat", o.repeat, "Repetitions of every point, overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
   c->add_option("--frames", o.frames,
@@ -1404,6 +1405,7 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
 }
 
 int bench_command(const BenchOptions& o) {
+  (void)cuda_settings_from(o.cuda);  // bad --cuda items are input errors before any point runs
   if (o.list) {
     for (const auto& n : kNamed) {
       const json j = json::parse(n.text);

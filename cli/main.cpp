@@ -56,6 +56,7 @@ struct RunOptions {
   std::string data_dir;
   bool no_xdmf = false;
   bool rotation = false;  ///< --rotation: the scene's bodies rotate (engine bullet only)
+  std::vector<std::string> cuda;  ///< --cuda KEY=VALUE items (CudaSettings)
 };
 
 /// Running sums for the summary table.
@@ -364,7 +365,7 @@ int run_command(const RunOptions& o) {
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   loading.reset();  // from here on the loop polls the signal, flushes and reports
   const auto t_model = Clock::now();
-  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model);
+  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model, octocd::cli::cuda_settings_from(o.cuda));
   octocd::Engine& world = *engine;
   Totals totals;
   totals.model_s = std::chrono::duration<double>(t_model - t_setup).count();
@@ -443,6 +444,7 @@ struct ValidateOptions {
   std::string junit;
   bool no_xdmf = false;
   bool rotation = false;      ///< --rotation: the scene's bodies rotate (engine bullet only)
+  std::vector<std::string> cuda;  ///< --cuda KEY=VALUE items (CudaSettings)
 };
 
 /// `octocd validate --trace-in FILE.h5`: another engine's trace judged frame by frame
@@ -665,7 +667,8 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   std::vector<octocd::ValidationResult> results;
   std::int64_t stopped_in = 0;  // the frame a signal stopped the checks in (0: none)
   try {
-    results = octocd::validate_engine([&] { return make_engine(o.engine, model); }, vo, &stopped_in);
+    const octocd::CudaSettings cuda = octocd::cli::cuda_settings_from(o.cuda);
+    results = octocd::validate_engine([&] { return make_engine(o.engine, model, cuda); }, vo, &stopped_in);
   } catch (const octocd::RuntimeError&) {
     close_after_failure(trace, o.trace, o.no_xdmf);
     throw;
@@ -785,6 +788,7 @@ int main(int argc, char** argv) {
                     "The bodies rotate (as the scene key rotation: true; --engine bullet only): Bullet with "
                     "angular motion, boxes and convex hulls; --trace writes format version 2 (orientation, "
                     "angular velocity, inertia; with --contacts manifold rows with points, /pairs, /aabbs)");
+  octocd::cli::add_cuda_settings_option(run_cmd, run.cuda);
 
   ValidateOptions val;
   CLI::App* val_cmd = app.add_subcommand(
@@ -811,6 +815,7 @@ int main(int argc, char** argv) {
       ->default_val("cpu");
   val_cmd->add_flag("--rotation", val.rotation,
                     "The bodies rotate (as the scene key rotation: true); needs --engine bullet");
+  octocd::cli::add_cuda_settings_option(val_cmd, val.cuda);
   {
     std::string names;
     for (const auto& e : octocd::tolerance_table())

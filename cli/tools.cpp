@@ -30,12 +30,27 @@
 
 namespace octocd::cli {
 
-std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model) {
+std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
+                                    const CudaSettings& cuda_settings) {
   const Scene& scene = model->scene;
   if (name == "cpu") return std::make_unique<World>(model, make_any_broadphase(scene.broadphase, scene.domain));
   if (name == "bullet") return std::make_unique<BulletWorld>(model, model->initial);
-  if (name == "cuda") return make_cuda_engine(model, scene.broadphase.name);
+  if (name == "cuda") return make_cuda_engine(model, scene.broadphase.name, cuda_settings);
   throw InputError(fmt::format("--engine: unknown engine '{}'; allowed: cpu, cuda, bullet", name));
+}
+
+void add_cuda_settings_option(CLI::App* command, std::vector<std::string>& items) {
+  std::string keys;
+  for (const std::string& k : cuda_setting_names()) keys += (keys.empty() ? "" : ", ") + k;
+  command->add_option("--cuda", items,
+                      "A setting of the cuda engine, KEY=VALUE, repeatable (docs/settings.md); keys: " + keys);
+}
+
+CudaSettings cuda_settings_from(const std::vector<std::string>& items) {
+  CudaSettings s;
+  apply_cuda_settings(s, items, "--cuda");
+  check_cuda_settings(s, "--cuda");
+  return s;
 }
 
 const std::vector<std::string>& engine_names() {

@@ -20,14 +20,24 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "octocd/cuda_settings.hpp"
 #include "octocd/engine.hpp"
 
 namespace octocd::cli {
 
-/// The engine `name` (cpu, cuda, bullet) built from `model` with the scene's broadphase.
+/// The engine `name` (cpu, cuda, bullet) built from `model` with the scene's broadphase;
+/// `cuda` with `cuda_settings` (`--cuda KEY=VALUE`, docs/settings.md).
 /// Throws InputError for an unknown name or a broadphase the engine does not have,
 /// RuntimeError when the engine cannot start (no CUDA device, or a build without CUDA).
-std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model);
+std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
+                                    const CudaSettings& cuda_settings = {});
+
+/// Adds the repeatable `--cuda KEY=VALUE` option (CudaSettings, docs/settings.md) to
+/// `command`, collecting its items into `items`.
+void add_cuda_settings_option(CLI::App* command, std::vector<std::string>& items);
+
+/// CudaSettings from `--cuda` items (apply_cuda_settings). Throws InputError "--cuda: ...".
+CudaSettings cuda_settings_from(const std::vector<std::string>& items);
 
 /// Engine names make_engine accepts, in a stable order: cpu, cuda, bullet.
 const std::vector<std::string>& engine_names();
@@ -171,6 +181,7 @@ struct BenchOptions {
   std::string scene_dir;          ///< where named sweeps find their scenes
   std::string data_dir;           ///< meshes (as load_scene's data_dir)
   std::string trace_dir;          ///< write one trace per steps point here
+  std::vector<std::string> cuda;  ///< --cuda KEY=VALUE items (CudaSettings)
 };
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o);
 int bench_command(const BenchOptions& o);

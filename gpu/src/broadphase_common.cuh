@@ -100,9 +100,9 @@ constexpr int kPairBufferKeys = 8;
 /// on the one *out.total per pair, which bounded both queries (reports/h100/perf-v7). A
 /// thread keeps its first kPairBufferKeys keys here (the bench's boxes have 0.86 pairs per
 /// body) and appends those after with append_key; flush() then gives the warp's kept keys
-/// consecutive indices with one atomicAdd. `on` == false (a test and benchmark switch,
-/// OCTOCD_CUDA_BP_PAIR_BUFFER=0) appends every key at once, as before. The set of keys in
-/// out.keys[0 .. min(total, capacity)) is the same either way; their order varies.
+/// consecutive indices with one atomicAdd. `on` == false (kPairBufferOn) appends every key
+/// at once. The set of keys in out.keys[0 .. min(total, capacity)) is the same either way;
+/// their order varies.
 struct PairBuffer {
   unsigned long long key[kPairBufferKeys];
   int count = 0;
@@ -144,20 +144,9 @@ struct PairBuffer {
   }
 };
 
-/// A 0|1 switch from the environment: "1" true, "0" false, unset or empty `fallback`.
-/// Throws InputError naming the variable and the allowed values for anything else.
-inline bool env_switch(const char* name, bool fallback) {
-  const char* v = std::getenv(name);
-  if (v == nullptr || *v == '\0') return fallback;
-  const std::string t = v;
-  if (t == "1") return true;
-  if (t == "0") return false;
-  throw InputError(fmt::format("{}: '{}'; allowed: 0, 1 (or unset)", name, t));
-}
-
-/// OCTOCD_CUDA_BP_PAIR_BUFFER=0|1 (default 1): whether `octree` and `lbvh` append their
-/// pairs through PairBuffer (read when the broadphase is made).
-inline bool pair_buffer_from_env() { return env_switch("OCTOCD_CUDA_BP_PAIR_BUFFER", true); }
+/// Whether the thread queries of `octree` and `lbvh` append their pairs through
+/// PairBuffer (PairBuffer::on).
+constexpr bool kPairBufferOn = true;
 
 /// Blocks of kBlockSize threads for one warp per item (at least 1).
 inline unsigned warp_grid_for(std::size_t items) { return grid_for(items * kWarpSize); }

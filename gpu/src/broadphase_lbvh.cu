@@ -54,7 +54,7 @@ struct LbvhDesc {
   std::uint32_t* leaf_parent = nullptr;    ///< n: parent of each slot's leaf
   std::uint32_t* flag = nullptr;           ///< n - 1 refit counters
   PairOutput out;                          ///< pair keys, total, exact tests
-  bool pair_buffer = true;                 ///< bp::PairBuffer on (OCTOCD_CUDA_BP_PAIR_BUFFER)
+  bool pair_buffer = true;                 ///< bp::PairBuffer on (bp::kPairBufferOn)
 };
 
 __global__ void lbvh_code_kernel(LbvhDesc d) {
@@ -206,7 +206,7 @@ class LbvhDevice final : public DeviceBroadPhase {
 
  private:
   LooseGrid grid_;
-  bool pair_buffer_ = bp::pair_buffer_from_env();  ///< OCTOCD_CUDA_BP_PAIR_BUFFER
+  bool pair_buffer_ = bp::kPairBufferOn;
   bool reserved_ = false;
   std::uint32_t n_ = 0;
   DeviceBuffer<std::uint32_t> code_{"lbvh body codes"};

@@ -78,6 +78,14 @@ namespace {
 /// 3x10^4, 0.202 / 0.167 at 6x10^4, 0.249 / 0.171 at 10^5).
 constexpr std::uint32_t kWarpQueryBodies = 32768;
 
+/// Depth `auto` roots the tree at loose_snapped_grid (true) instead of the domain's cube
+/// (as the CPU octree).
+constexpr bool kLooseSnapRoot = true;
+
+/// The query skips blocks by the occupancy map (true) instead of probing every block of a
+/// window; the same slots either way.
+constexpr bool kLooseOccupancyMap = true;
+
 /// A body's unit box in the fixed point of loose_q_min / loose_q_max.
 struct LooseQBox {
   std::int32_t lo[3];
@@ -111,7 +119,7 @@ struct LooseDesc {
   /// as its bits (non-negative floats order as their bits); kMinExtentInit before the
   /// minimum.
   float* min_extent = nullptr;
-  /// Depth `auto` with the snapped root (OCTOCD_CUDA_OCTREE_SNAP=1): one LooseRoot that
+  /// Depth `auto` with the snapped root (kLooseSnapRoot): one LooseRoot that
   /// loose_root_kernel writes from *min_extent (loose_snapped_grid); the keys and the
   /// queries then use its grid and depth instead of `grid` and `depth`. nullptr: off.
   LooseRoot* root = nullptr;
@@ -138,7 +146,7 @@ struct LooseDesc {
   /// loose_gather_kernel.
   std::uint32_t* occupancy = nullptr;
   std::uint32_t occupancy_blocks = 0;
-  bool pair_buffer = true;  ///< bp::PairBuffer on (OCTOCD_CUDA_BP_PAIR_BUFFER)
+  bool pair_buffer = true;  ///< bp::PairBuffer on (bp::kPairBufferOn)
   unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
   /// Sorted mode (PairOutput::scratch given; pair_keys is then the scratch): per body a,
   /// n + 1 entries zeroed before the query, the pairs (a, b) appended; else nullptr.
@@ -570,21 +578,8 @@ __global__ void __launch_bounds__(kBlockSize) loose_long_sort_kernel(LooseSortDe
 /// `octree` on the device (see the file comment).
 class LooseOctreeDevice final : public DeviceBroadPhase {
  public:
-  LooseOctreeDevice(int depth, const Aabb& domain) : depth_(depth), grid_(loose_grid(domain)) {
-    // Test hook: OCTOCD_CUDA_OCTREE_QUERY=warp|thread forces one query kernel.
-    if (const char* q = std::getenv("OCTOCD_CUDA_OCTREE_QUERY")) {
-      const std::string v = q;
-      if (v == "warp") query_ = Query::Warp;
-      else if (v == "thread") query_ = Query::Thread;
-      else if (!v.empty())
-        throw InputError(fmt::format("OCTOCD_CUDA_OCTREE_QUERY: '{}'; allowed: warp, thread (or unset)", v));
-    }
-    // OCTOCD_CUDA_OCTREE_SNAP=0|1 (default 1): depth `auto` roots the tree at
-    // loose_snapped_grid (1) or at the domain's cube (0, as the CPU octree).
-    snap_ = bp::env_switch("OCTOCD_CUDA_OCTREE_SNAP", true);
-    // OCTOCD_CUDA_OCTREE_OCCUPANCY=0|1 (default 1): the query skips blocks by the
-    // occupancy map (1) or probes every block of a window (0); the same slots either way.
-    occupancy_on_ = bp::env_switch("OCTOCD_CUDA_OCTREE_OCCUPANCY", true);
+  LooseOctreeDevice(int depth, const Aabb& domain, LooseOctreeQuery query)
+      : depth_(depth), grid_(loose_grid(domain)), query_(query) {
     if (depth_ >= 0 && depth_ < kLooseMaxDepth) {
       overflow_key_ = loose_level_base(depth_ + 1);
       key_bits_ = 1;
@@ -732,7 +727,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
  private:
   int depth_;
   LooseGrid grid_;
-  enum class Query { Auto, Warp, Thread };
+  using Query = LooseOctreeQuery;
   Query query_ = Query::Auto;
   std::uint32_t overflow_key_ = kLooseOverflowKey;  // see LooseDesc::overflow_key
   int key_bits_ = 32;                               // the key sort's end bit
@@ -740,9 +735,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   std::uint32_t n_ = kNotReserved;
   DeviceBuffer<float> min_{"octree smallest extent"};
   DeviceBuffer<LooseRoot> root_{"octree snapped root"};
-  bool snap_ = true;  ///< OCTOCD_CUDA_OCTREE_SNAP
-  bool occupancy_on_ = true;  ///< OCTOCD_CUDA_OCTREE_OCCUPANCY
-  bool pair_buffer_ = bp::pair_buffer_from_env();  ///< OCTOCD_CUDA_BP_PAIR_BUFFER
+  bool snap_ = kLooseSnapRoot;
+  bool occupancy_on_ = kLooseOccupancyMap;
+  bool pair_buffer_ = bp::kPairBufferOn;
   DeviceBuffer<std::uint32_t> key_{"octree body keys"};
   DeviceBuffer<std::uint32_t> body_{"octree body indices"};
   DeviceBuffer<std::uint32_t> sorted_key_{"octree sorted keys"};
@@ -762,8 +757,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
 
 }  // namespace
 
-std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain) {
-  return std::make_unique<LooseOctreeDevice>(config.octree_depth, domain);
+std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain,
+                                                           LooseOctreeQuery query) {
+  return std::make_unique<LooseOctreeDevice>(config.octree_depth, domain, query);
 }
 
 std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain) {

@@ -10,7 +10,8 @@ namespace {
 const char* const kNotBuilt = "this octocd was built without CUDA (OCTOCD_CUDA=OFF)";
 }  // namespace
 
-std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> /*model*/, const std::string& /*broadphase*/) {
+std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> /*model*/, const std::string& /*broadphase*/,
+                                         const CudaSettings& /*settings*/) {
   throw RuntimeError(std::string(kNotBuilt) +
                      ": the cuda engine is not available; rebuild on a machine with the CUDA toolkit (nvcc) "
                      "with -DOCTOCD_CUDA=ON, or use --engine cpu");

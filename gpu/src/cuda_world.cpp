@@ -6,10 +6,9 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cerrno>
-#include <cstdlib>
 #include <cstddef>
 #include <cstring>
+#include <functional>
 #include <initializer_list>
 #include <utility>
 
@@ -81,174 +80,69 @@ std::string human_bytes(std::uint64_t bytes) {
 }
 
 /// Throws RuntimeError when the current device has fewer than `needed` bytes free
-/// (cudaMemGetInfo; the test hook OCTOCD_CUDA_FREE_BYTES=K lowers the free bytes to at
-/// most K), naming the scene, the bytes needed and free, and the device's total.
-void check_free_memory(const Model& m, const std::string& broadphase, std::uint64_t needed) {
-  std::size_t free_bytes = 0, total_bytes = 0;
-  check(cudaMemGetInfo(&free_bytes, &total_bytes), "cudaMemGetInfo");
-  std::uint64_t free = free_bytes;
-  std::string hook;
-  if (const char* k = std::getenv("OCTOCD_CUDA_FREE_BYTES")) {
-    char* end = nullptr;
-    errno = 0;
-    const unsigned long long v = std::strtoull(k, &end, 10);
-    if (*k < '0' || *k > '9' || end == k || *end != '\0' || errno != 0)
-      throw InputError(fmt::format("OCTOCD_CUDA_FREE_BYTES: '{}' is not a byte count; allowed: a decimal integer "
-                                   "(a test hook: the free device memory to assume)",
-                                   k));
-    free = std::min<std::uint64_t>(free, v);
-    hook = fmt::format(" (OCTOCD_CUDA_FREE_BYTES={})", v);
+/// (cudaMemGetInfo, or `free_bytes` of it where given: a test's seam), or more than
+/// `limit` (CudaSettings::memory_limit_bytes, 0: none), naming the scene, the bytes needed
+/// and free, and the device's total.
+void check_free_memory(const Model& m, const std::string& broadphase, std::uint64_t needed, std::uint64_t limit,
+                       const std::function<std::uint64_t(std::uint64_t)>& free_bytes) {
+  std::size_t device_free = 0, total_bytes = 0;
+  check(cudaMemGetInfo(&device_free, &total_bytes), "cudaMemGetInfo");
+  std::uint64_t free = free_bytes ? free_bytes(device_free) : device_free;
+  std::string why;
+  if (limit > 0 && limit < free) {
+    free = limit;
+    why = fmt::format(" (memory_limit_bytes={})", limit);
   }
   if (needed <= free) return;
   throw RuntimeError(fmt::format(
       "scene '{}': the cuda engine needs about {} bytes ({}) of device memory for {} bodies before its first step "
       "(broadphase '{}'), but the device has {} bytes ({}) free{} of {} bytes ({}); run fewer bodies, or use "
       "--engine cpu",
-      m.scene.name, needed, human_bytes(needed), m.initial.size(), broadphase, free, human_bytes(free), hook,
+      m.scene.name, needed, human_bytes(needed), m.initial.size(), broadphase, free, human_bytes(free), why,
       total_bytes, human_bytes(total_bytes)));
 }
 
-/// The environment variable `name` is "1".
-bool env_is_one(const char* name) {
-  const char* v = std::getenv(name);
-  return v != nullptr && std::strcmp(v, "1") == 0;
-}
-
-/// OCTOCD_CUDA_SMALL: unset = Auto (the fused small step for small scenes without stage
-/// times), "0" = Never, "1" = Always (wherever it can run).
-enum class SmallMode { Auto, Never, Always };
-
-/// Blocks per multiprocessor of the fused small step by default (at most what fits, 2 on
-/// sm_90 at 119 registers per thread): one gives 8 warps per SM for every phase (1056 on an
-/// H100) while each grid-wide barrier waits for as few blocks as possible
-/// (OCTOCD_CUDA_SMALL_BLOCKS overrides the grid).
+/// Blocks per multiprocessor of the fused small step (at most what fits, 2 on sm_90 at 119
+/// registers per thread): one gives 8 warps per SM for every phase (1056 on an H100) while
+/// each grid-wide barrier waits for as few blocks as possible.
 constexpr int kSmallStepBlocksPerSm = 1;
 
-/// Bodies up to which the fused small step's default grid is half that (one block per two
-/// SMs): its phases then have little work, and fewer blocks meet at each grid-wide barrier.
-/// On the H100 (reports/h100/perf-v5): bunny-stack-50 (55 bodies) 30,225 steps/s on 66
-/// blocks against 29,389 on 132; with more work per step the full grid wins
-/// (asian-dragon-random-60, 66 bodies of large meshes: 3,038 on 66 against 3,760 on 132).
+/// Bodies up to which the fused small step's grid is half that (one block per two SMs):
+/// its phases then have little work, and fewer blocks meet at each grid-wide barrier.
 constexpr std::size_t kSmallHalfGridBodies = 64;
 
-SmallMode small_mode_from_env() {
-  const char* v = std::getenv("OCTOCD_CUDA_SMALL");
-  if (v == nullptr) return SmallMode::Auto;
-  if (std::strcmp(v, "0") == 0) return SmallMode::Never;
-  if (std::strcmp(v, "1") == 0) return SmallMode::Always;
-  throw InputError(fmt::format("OCTOCD_CUDA_SMALL: '{}' is not allowed; allowed: 0 (never the fused small-scene "
-                               "step), 1 (always, where it can run), or unset (for up to {} bodies when stage "
-                               "times are off)",
-                               v, kCudaSmallStepMaxBodies));
-}
+/// Pairs up to which the fused small step runs its response passes, clamp and metrics in
+/// one block (SmallStepDesc::one_block_pairs).
+constexpr std::uint32_t kSmallOneBlockPairs = 512;
 
-/// OCTOCD_CUDA_SMALL_BLOCKS: the fused small step's grid (blocks, >= 1; clamped to what
-/// fits on the device at once), or 0 when unset (kSmallStepBlocksPerSm per SM).
-long small_blocks_from_env() {
-  const char* k = std::getenv("OCTOCD_CUDA_SMALL_BLOCKS");
-  if (k == nullptr) return 0;
-  char* end = nullptr;
-  errno = 0;
-  const long v = std::strtol(k, &end, 10);
-  if (*k < '0' || *k > '9' || end == k || *end != '\0' || errno != 0 || v < 1)
-    throw InputError(fmt::format("OCTOCD_CUDA_SMALL_BLOCKS: '{}' is not a block count; allowed: an integer >= 1 (the "
-                                 "fused small step's grid, clamped to the blocks that fit on the device at once)",
-                                 k));
-  return v;
-}
+/// How the host waits for the fused small step: true polls the step number the kernel
+/// writes last into mapped memory (with a cudaStreamQuery now and then for errors), false
+/// calls cudaStreamSynchronize. The resident kernel needs the polled wait.
+constexpr bool kSmallPoll = true;
 
-/// OCTOCD_CUDA_SMALL_WAIT: how the host waits for the fused small step: "poll" (default:
-/// spin on the step number the kernel writes last into mapped memory, with a
-/// cudaStreamQuery now and then for errors) or "sync" (cudaStreamSynchronize).
-bool small_poll_from_env() {
-  const char* v = std::getenv("OCTOCD_CUDA_SMALL_WAIT");
-  if (v == nullptr || std::strcmp(v, "poll") == 0) return true;
-  if (std::strcmp(v, "sync") == 0) return false;
-  throw InputError(fmt::format("OCTOCD_CUDA_SMALL_WAIT: '{}' is not allowed; allowed: poll (spin on the step's "
-                               "number in mapped memory, the default) or sync (cudaStreamSynchronize)",
-                               v));
-}
+/// Whether the small path's kernel stays resident and steps on request (set_persistent
+/// changes it per engine).
+constexpr bool kSmallPersistent = true;
 
-/// Pairs up to which the fused small step runs its response passes, clamp and metrics in one
-/// block (OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS overrides; 0: never).
-constexpr long kSmallOneBlockPairs = 512;
-
-/// OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS: an integer >= 0, or kSmallOneBlockPairs when unset.
-long small_one_block_pairs_from_env() {
-  const char* k = std::getenv("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS");
-  if (k == nullptr) return kSmallOneBlockPairs;
-  char* end = nullptr;
-  errno = 0;
-  const long v = std::strtol(k, &end, 10);
-  if (*k < '0' || *k > '9' || end == k || *end != '\0' || errno != 0 || v < 0 || v > 0x7fffffffL)
-    throw InputError(fmt::format("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS: '{}' is not a pair count; allowed: an integer "
-                                 "0 .. 2147483647 (the fused small step's response runs in one block up to that "
-                                 "many pairs; 0: never)",
-                                 k));
-  return v;
-}
-
-/// OCTOCD_CUDA_MID_FUSE: whether the last midphase expand step of the graph path runs its
-/// items' leaves itself (MidListDesc::fuse_leaves): unset = -1 (auto), "0" never, "1" always
-/// (on the small path too, which otherwise never does: small_step.cu's kFuse kernels).
-int mid_fuse_from_env() {
-  const char* v = std::getenv("OCTOCD_CUDA_MID_FUSE");
-  if (v == nullptr) return -1;
-  if (std::strcmp(v, "0") == 0) return 0;
-  if (std::strcmp(v, "1") == 0) return 1;
-  throw InputError(fmt::format("OCTOCD_CUDA_MID_FUSE: '{}' is not allowed; allowed: 0 (the leaves always go through "
-                               "the leaf list), 1 (the last expand step always runs them), or unset (it runs them "
-                               "when it has at least two items per warp)",
-                               v));
-}
-
-/// OCTOCD_CUDA_MID_EARLY_EXIT: whether the midphase skips the remaining work of a pair once
-/// it is confirmed (MidListDesc::early_exit): unset or "1" on, "0" off (every list item runs;
-/// the counts are the deterministic work of the lists with no early exit).
-int mid_early_exit_from_env() {
-  const char* v = std::getenv("OCTOCD_CUDA_MID_EARLY_EXIT");
-  if (v == nullptr || std::strcmp(v, "1") == 0) return 1;
-  if (std::strcmp(v, "0") == 0) return 0;
-  throw InputError(fmt::format("OCTOCD_CUDA_MID_EARLY_EXIT: '{}' is not allowed; allowed: 1 (the midphase skips the "
-                               "rest of a pair's work once it is confirmed, the default), 0 (every item runs: "
-                               "deterministic counts), or unset",
-                               v));
-}
-
-/// The environment variable `name` as an integer in [lo, hi], or `dflt` when unset; an
-/// InputError naming the variable, the value, the range and `what` it sets otherwise.
-long env_integer(const char* name, long lo, long hi, long dflt, const char* what) {
-  const char* k = std::getenv(name);
-  if (k == nullptr) return dflt;
-  char* end = nullptr;
-  errno = 0;
-  const long v = std::strtol(k, &end, 10);
-  if (*k < '0' || *k > '9' || end == k || *end != '\0' || errno != 0 || v < lo || v > hi)
-    throw InputError(fmt::format("{}: '{}' is not allowed; allowed: an integer {} .. {} ({})", name, k, lo, hi, what));
-  return v;
-}
-
-/// OCTOCD_CUDA_PERSISTENT: unset or "1" = the resident small-step kernel where the small path
-/// runs with the polled wait, "0" = one cooperative launch per step.
-bool persistent_from_env() {
-  const char* v = std::getenv("OCTOCD_CUDA_PERSISTENT");
-  if (v == nullptr || std::strcmp(v, "1") == 0) return true;
-  if (std::strcmp(v, "0") == 0) return false;
-  throw InputError(fmt::format("OCTOCD_CUDA_PERSISTENT: '{}' is not allowed; allowed: 1 (the small path's kernel "
-                               "stays resident and runs step after step on request, the default), 0 (one "
-                               "cooperative launch per step), or unset",
-                               v));
-}
-
-/// Default of OCTOCD_CUDA_PERSISTENT_IDLE_US: the resident kernel ends itself after this
-/// long without a request (the next step launches it again).
+/// The resident kernel ends itself after this long without a request (unit: us; the next
+/// step launches it again).
 constexpr long kResidentIdleUs = 2000;
-/// Default of OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS: the host's wait for one resident step.
-constexpr long kResidentTimeoutMs = 60000;
-/// Default of OCTOCD_CUDA_SMALL_FRONT_BODIES: 64. On the H100 (reports/h100/perf-v5) the
-/// fused front, with its counts over body pairs, gains about 1% on bunny-stack-50 (55 bodies)
-/// and costs 38% on armadillo-random-250 (256 bodies: every block counts all n^2 / 2 pairs).
-constexpr long kSmallFrontBodies = 64;
+
+/// Bodies up to which the fused small step integrates, counts and fills without a
+/// grid-wide barrier (SmallStepDesc::front_bodies; at most gpu::kSmallFrontMaxBodies).
+constexpr std::uint32_t kSmallFrontBodies = 64;
+
+/// The last midphase expand step of the graph path runs its items' leaves itself
+/// (MidListDesc::fuse_leaves): -1 when it has at least kFuseItemsPerWarp items per warp,
+/// as midphase.cuh decides.
+constexpr int kMidFuseLeaves = -1;
+
+/// A midphase leaf skips pairs of vertex tiles more than theta apart (MidListDesc::tile_cull).
+constexpr int kMidTileCull = 1;
+
+/// A midphase leaf stages, per tile of one mesh's vertices, only the other mesh's vertices
+/// near that tile (MidListDesc::tile_filter).
+constexpr int kMidTileFilter = 1;
 
 /// The capacity to grow to when `needed` entries did not fit into `capacity`.
 std::size_t grown(std::size_t needed, std::size_t capacity) {
@@ -262,9 +156,9 @@ std::size_t grown(std::size_t needed, std::size_t capacity) {
 struct CudaWorld::Impl {
   cudaStream_t stream = nullptr;
   cudaEvent_t events[kEvents] = {};
-  bool sync_each_launch = false;  // OCTOCD_CUDA_SYNC=1
-  bool use_graph = true;          // OCTOCD_CUDA_GRAPH=0 turns the CUDA graph off
-  bool stage_times = true;        // OCTOCD_CUDA_STAGE_TIMES=0: no events (stage_ms stay 0)
+  bool sync_each_launch = false;  // CudaSettings::sync_each_launch
+  bool use_graph = true;          // CudaSettings::graph
+  bool stage_times = true;        // CudaSettings::stage_times (off: no events, stage_ms stay 0)
   bool capturing = false;
   std::string device;
   std::string broadphase;
@@ -274,10 +168,10 @@ struct CudaWorld::Impl {
   hd::LevelList levels;
   int level_steps = 0;  // midphase steps (0: aabb-only, or no levels)
   unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
-  int mid_fuse = -1;       // OCTOCD_CUDA_MID_FUSE (MidListDesc::fuse_leaves)
-  int mid_early_exit = 1;  // OCTOCD_CUDA_MID_EARLY_EXIT (MidListDesc::early_exit)
-  int mid_tile_cull = 1;   // OCTOCD_CUDA_MID_TILE_CULL (MidListDesc::tile_cull)
-  int mid_tile_filter = 1;  // OCTOCD_CUDA_MID_TILE_FILTER (MidListDesc::tile_filter)
+  int mid_fuse = kMidFuseLeaves;      // MidListDesc::fuse_leaves
+  int mid_early_exit = 1;             // CudaSettings::midphase_early_exit (MidListDesc::early_exit)
+  int mid_tile_cull = kMidTileCull;   // MidListDesc::tile_cull
+  int mid_tile_filter = kMidTileFilter;  // MidListDesc::tile_filter
   bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
   unsigned small_grid = 1;  // its blocks (co-resident)
   gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
@@ -287,22 +181,22 @@ struct CudaWorld::Impl {
   unsigned long long* small_host = nullptr;
   unsigned long long* small_dev = nullptr;  // the same, mapped (null: no polling, no profile)
   unsigned long long sequence = 0;
-  bool small_profile = false;  // OCTOCD_CUDA_SMALL_PROFILE=1
+  bool small_profile = false;  // CudaSettings::small_profile
   double profile_ns[gpu::kSmallProfileSlots] = {};  // sums: slot p - slot p-1; [0]: host launch to seen done
   double profile_kernel_ns = 0.0;                   // sum of slot 9 - slot 0
   std::uint64_t profile_steps = 0;
-  std::uint32_t front_bodies = 0;  // SmallStepDesc::front_bodies (OCTOCD_CUDA_SMALL_FRONT_BODIES)
+  std::uint32_t front_bodies = 0;  // SmallStepDesc::front_bodies (kSmallFrontBodies)
 
-  // The resident small step (OCTOCD_CUDA_PERSISTENT): its own stream, so that the copies
+  // The resident small step (kSmallPersistent, set_persistent): its own stream, so that the copies
   // and waits on `stream` never queue behind it.
   bool resident_possible = false;  // small path, polled wait, mapped memory, the kernel fits
   bool persistent = false;         // run steps through the resident kernel
   bool resident_alive = false;     // launched, and not yet seen to have exited
   bool resident_hung = false;      // an exit request went unanswered: nothing may be freed
-  bool resident_stall = false;     // OCTOCD_CUDA_PERSISTENT_STALL=1 (test hook)
+  bool resident_stall = false;     // TestHooks::resident_ignores_requests
   unsigned resident_grid = 1;
   unsigned long long resident_idle_ns = 0;
-  long resident_timeout_ms = kResidentTimeoutMs;
+  long resident_timeout_ms = 60000;  // CudaSettings::resident_timeout_ms
   unsigned long long epoch = 0;           // launches so far; the last one's number
   std::uint64_t resident_launches = 0;
   cudaStream_t resident_stream = nullptr;
@@ -408,7 +302,7 @@ struct CudaWorld::Impl {
             &keys_out, &vals_in,   &vals_out,  &body_begin,       &temp,  &in_count};
   }
 
-  /// Checks a launch; with OCTOCD_CUDA_SYNC=1 also waits for it and checks its execution.
+  /// Checks a launch; with sync_each_launch also waits for it and checks its execution.
   void launched(cudaError_t e, const char* kernel) {
     if (e != cudaSuccess) {
       (void)cudaGetLastError();
@@ -845,11 +739,11 @@ struct CudaWorld::Impl {
       }
       if (ms_since(t0) > static_cast<double>(resident_timeout_ms))
         throw RuntimeError(fmt::format(
-            "the resident small-step kernel did not finish step {} within {} ms (OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS; "
-            "launch {}{}); the engine cannot step any more: destroy it, and run with OCTOCD_CUDA_PERSISTENT=0 to "
-            "launch a kernel per step",
+            "the resident small-step kernel did not finish step {} within {} ms (resident_timeout_ms; "
+            "launch {}{}); the engine cannot step any more: destroy it, and call set_persistent(false) on a new "
+            "engine to launch a kernel per step",
             sequence, resident_timeout_ms, epoch,
-            resident_stall ? ", OCTOCD_CUDA_PERSISTENT_STALL=1 makes it ignore requests" : ""));
+            resident_stall ? ", the test hook resident_ignores_requests makes it ignore requests" : ""));
     }
   }
 
@@ -873,7 +767,7 @@ struct CudaWorld::Impl {
         if (ms_since(t0) > static_cast<double>(resident_timeout_ms)) {
           resident_hung = true;
           throw RuntimeError(fmt::format("the resident small-step kernel did not end within {} ms of the exit "
-                                         "request (OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS); its device memory is left "
+                                         "request (resident_timeout_ms); its device memory is left "
                                          "allocated",
                                          resident_timeout_ms));
         }
@@ -928,13 +822,15 @@ std::string cuda_device_status() {
 
 bool cuda_device_available() { return no_device_reason().empty(); }
 
-std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, const std::string& broadphase) {
-  return std::make_unique<CudaWorld>(std::move(model), broadphase);
+std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, const std::string& broadphase,
+                                         const CudaSettings& settings) {
+  return std::make_unique<CudaWorld>(std::move(model), broadphase, settings);
 }
 
 // ---- CudaWorld ---------------------------------------------------------------------------
 
-CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase)
+CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase,
+                     const CudaSettings& settings, const TestHooks& hooks)
     : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
   if (!model_) throw InputError("CudaWorld: no model given");
   require_translation_only(model_->scene, "cuda");  // SPEC 3: octocd's engines translate only
@@ -947,68 +843,38 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     cfg.name = broadphase;
     bp = gpu::make_device_broadphase(cfg, model_->scene.domain);
   }
-  // The step path's switches are input wherever they are read, device or not.
-  const SmallMode small_mode = small_mode_from_env();
-  const long small_blocks = small_blocks_from_env();
-  const bool small_poll = small_poll_from_env();
-  const long one_block_pairs = small_one_block_pairs_from_env();
-  const int mid_fuse = mid_fuse_from_env();
-  const int mid_early_exit = mid_early_exit_from_env();
-  const long mid_tile_cull = env_integer("OCTOCD_CUDA_MID_TILE_CULL", 0, 1, 1,
-                                         "1: a midphase leaf skips pairs of vertex tiles more than theta apart, "
-                                         "the default; 0: it tests every pair of tiles");
-  const long mid_tile_filter = env_integer("OCTOCD_CUDA_MID_TILE_FILTER", 0, 1, 1,
-                                           "1: a midphase leaf stages, per tile of one mesh's vertices, only the "
-                                           "other mesh's vertices near that tile, the default; 0: every one inside "
-                                           "the grown cell box");
-  const bool persistent = persistent_from_env();
-  const long idle_us = env_integer("OCTOCD_CUDA_PERSISTENT_IDLE_US", 1, 600000000L, kResidentIdleUs,
-                                   "microseconds after which the idle resident kernel ends itself");
-  const long timeout_ms = env_integer("OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS", 1, 86400000L, kResidentTimeoutMs,
-                                      "milliseconds the host waits for one resident step before it throws");
-  const long front_bodies = env_integer("OCTOCD_CUDA_SMALL_FRONT_BODIES", 0, gpu::kSmallFrontMaxBodies,
-                                        kSmallFrontBodies,
-                                        "bodies up to which the fused small step integrates, counts and fills "
-                                        "without a grid-wide barrier; 0: never");
+  check_cuda_settings(settings, "cuda settings");  // input wherever it is read, device or not
+  if (hooks.resident_idle_us < 0) throw InputError("CudaWorld::TestHooks: resident_idle_us < 0");
   const std::string reason = no_device_reason();
   if (!reason.empty()) throw RuntimeError("no CUDA device: " + reason + "; the cuda engine needs one");
-  check_free_memory(*model_, broadphase, needed);  // before the first allocation
+  check_free_memory(*model_, broadphase, needed, settings.memory_limit_bytes,
+                    hooks.free_bytes);  // before the first allocation
 
   Impl& d = *impl_;
   d.broadphase = broadphase;
   d.bp = std::move(bp);
   d.device = describe_current_device();
-  d.mid_fuse = mid_fuse;
-  d.mid_early_exit = mid_early_exit;
-  d.mid_tile_cull = static_cast<int>(mid_tile_cull);
-  d.mid_tile_filter = static_cast<int>(mid_tile_filter);
-  d.sync_each_launch = env_is_one("OCTOCD_CUDA_SYNC");
-  const char* graph = std::getenv("OCTOCD_CUDA_GRAPH");
-  d.use_graph = !(graph != nullptr && std::strcmp(graph, "0") == 0);
-  const char* times = std::getenv("OCTOCD_CUDA_STAGE_TIMES");
-  d.stage_times = !(times != nullptr && std::strcmp(times, "0") == 0);
+  d.mid_early_exit = settings.midphase_early_exit ? 1 : 0;
+  d.sync_each_launch = settings.sync_each_launch;
+  d.use_graph = settings.graph;
+  d.stage_times = settings.stage_times;
   {
     int dev = 0, sms = 1;
     check(cudaGetDevice(&dev), "cudaGetDevice");
     check(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev), "cudaDeviceGetAttribute");
     d.warp_grid = static_cast<unsigned>(std::max(1, sms) * 4);
-    // The fused small step: wanted for this scene and mode, and launchable (a device that
-    // cannot launch cooperative kernels, or a kernel that does not fit, keeps the graph).
+    // The fused small step: wanted for this scene, and launchable (a device that cannot
+    // launch cooperative kernels, or a kernel that does not fit, keeps the graph).
     const std::size_t bodies = model_->initial.size();
-    const bool wanted = small_mode == SmallMode::Always
-                            ? bodies >= 1 && bodies <= gpu::kMetricsOneBlockBodies
-                            : small_mode == SmallMode::Auto && bodies >= 1 && bodies <= kCudaSmallStepMaxBodies &&
-                                  !d.stage_times;
+    const bool wanted = bodies >= 1 && bodies <= kCudaSmallStepMaxBodies && !d.stage_times;
     int coop = 0, per_sm = 0;
     if (wanted) {
       check(cudaDeviceGetAttribute(&coop, cudaDevAttrCooperativeLaunch, dev), "cudaDeviceGetAttribute");
       if (coop) check(gpu::small_step_blocks_per_sm(per_sm), "cudaOccupancyMaxActiveBlocksPerMultiprocessor");
     }
     if (wanted && coop && per_sm > 0) {
-      const int max_blocks = per_sm * std::max(1, sms);
       int blocks = std::min(per_sm, kSmallStepBlocksPerSm) * std::max(1, sms);
       if (bodies <= kSmallHalfGridBodies) blocks = (blocks + 1) / 2;
-      if (small_blocks > 0) blocks = static_cast<int>(std::min<long>(small_blocks, max_blocks));
       d.small = true;
       d.small_grid = static_cast<unsigned>(blocks);
       // The resident kernel: the same grid where it fits (it may need more registers).
@@ -1026,9 +892,9 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     void* mapped = nullptr;
     if (cudaHostGetDevicePointer(&mapped, d.host, 0) == cudaSuccess) d.host_dev = static_cast<gpu::StepStats*>(mapped);
     else (void)cudaGetLastError();  // no mapping: a copy after the kernel instead
-    d.one_block_pairs = static_cast<std::uint32_t>(one_block_pairs);
-    d.small_poll = small_poll;
-    d.small_profile = env_is_one("OCTOCD_CUDA_SMALL_PROFILE");
+    d.one_block_pairs = kSmallOneBlockPairs;
+    d.small_poll = kSmallPoll;
+    d.small_profile = settings.small_profile;
     check(cudaMallocHost(reinterpret_cast<void**>(&d.small_host),
                          sizeof(unsigned long long) * (1 + gpu::kSmallProfileSlots)),
           "cudaMallocHost (step number, profile)");
@@ -1037,7 +903,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     if (d.host_dev && cudaHostGetDevicePointer(&mapped_done, d.small_host, 0) == cudaSuccess)
       d.small_dev = static_cast<unsigned long long*>(mapped_done);
     else (void)cudaGetLastError();
-    d.front_bodies = static_cast<std::uint32_t>(front_bodies);
+    d.front_bodies = kSmallFrontBodies;
     // The resident kernel needs the polled wait (mapped memory) and no per-launch sync.
     d.resident_possible = d.resident_possible && d.small_poll && d.small_dev && !d.sync_each_launch;
     if (d.resident_possible) {
@@ -1052,10 +918,11 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
         d.resident_possible = false;
       }
     }
-    d.persistent = persistent && d.resident_possible;
+    d.persistent = kSmallPersistent && d.resident_possible;
+    const long idle_us = hooks.resident_idle_us > 0 ? hooks.resident_idle_us : kResidentIdleUs;
     d.resident_idle_ns = static_cast<unsigned long long>(idle_us) * 1000ull;
-    d.resident_timeout_ms = timeout_ms;
-    d.resident_stall = env_is_one("OCTOCD_CUDA_PERSISTENT_STALL");
+    d.resident_timeout_ms = settings.resident_timeout_ms;
+    d.resident_stall = hooks.resident_ignores_requests;
   }
   check(cudaStreamCreateWithFlags(&d.stream, cudaStreamNonBlocking), "cudaStreamCreate");
   if (d.resident_possible) {
@@ -1174,12 +1041,11 @@ std::string CudaWorld::notes() const {
   const Impl& d = *impl_;
   if (!d.small) return "";
   return fmt::format(
-      "each step is one fused cooperative kernel ({} bodies, small-scene path up to {}; OCTOCD_CUDA_SMALL=0 turns it "
-      "off){}: its broadphase is the all-pairs test whatever the broadphase named ('{}'; the same pairs), so "
+      "each step is one fused cooperative kernel ({} bodies, small-scene path up to {} with stage times off; "
+      "stage_times=true turns it off){}: its broadphase is the all-pairs test whatever the broadphase named ('{}'; the same pairs), so "
       "'broadphase candidates' is n(n-1)/2, and its stages are not timed",
       d.n, kCudaSmallStepMaxBodies,
-      d.persistent ? ", run by a resident kernel that steps on request (OCTOCD_CUDA_PERSISTENT=0: a launch per step)"
-                   : "",
+      d.persistent ? ", run by a resident kernel that steps on request" : "",
       d.broadphase);
 }
 

@@ -83,9 +83,15 @@ class DeviceBroadPhase {
 /// name, naming `broadphase.name` and the names the device has (cuda_broadphase_names).
 std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain);
 
+/// Which query kernel the device `octree` runs: Auto (a warp per body below 32768 bodies,
+/// a thread per body from there), or one of them forced (its tests run both on small box
+/// sets). The pair set is the same.
+enum class LooseOctreeQuery { Auto, Warp, Thread };
+
 /// `octree` (SPEC 5.1, Ulrich's loose octree, cell math of loose_octree.hpp), depth
-/// config.octree_depth (-1 = auto). broadphase_octree.cu.
-std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain);
+/// config.octree_depth (-1 = auto), query kernel `query`. broadphase_octree.cu.
+std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain,
+                                                           LooseOctreeQuery query = LooseOctreeQuery::Auto);
 /// `octree-strict` (SPEC 5.1, the paper's octree read literally, as
 /// core/src/broadphase_octree_strict.cpp), depth config.octree_depth (-1 = auto).
 /// broadphase_strict.cu.

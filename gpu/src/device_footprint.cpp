@@ -110,8 +110,8 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
                              buf(pcap, sizeof(Pair)) + 2 * buf(pcap, sizeof(std::uint8_t)) +
                              4 * buf(pcap, sizeof(Vec3)) + buf(pcap, sizeof(float)) + buf(pcap, kDeviceContactBytes) +
                              4 * buf(2 * pcap, sizeof(std::uint32_t)) + 2 * buf(lcap, kMidItemBytes) + buf(temp, 1);
-  // The fused small step's column counts (n + 1), allocated when it runs (up to 32768
-  // bodies, kMetricsOneBlockBodies, with OCTOCD_CUDA_SMALL=1).
+  // The fused small step's column counts (n + 1), allocated when it runs (counted up to 32768
+  // bodies, kMetricsOneBlockBodies: above the small path's kCudaSmallStepMaxBodies).
   const std::uint64_t small = n >= 1 && n <= 32768 ? buf(n1, sizeof(std::uint32_t)) : 0;
   return bodies + shapes + step + bp + small;
 }

@@ -8,7 +8,7 @@
 /// Plain C++ (compiled by both the host compiler and nvcc): only the CUDA runtime API's
 /// types, no kernel code. Every wrapper launches on `stream` and returns the launch's
 /// cudaError_t (cudaGetLastError); the caller checks it (and synchronises when
-/// OCTOCD_CUDA_SYNC=1).
+/// CudaSettings::sync_each_launch).
 ///
 /// Every formula a kernel evaluates comes from core/include/octocd/math.hpp or
 /// midphase_hd.hpp (OCTOCD_HD); kernels only index, loop and store.
@@ -183,20 +183,20 @@ struct MidListDesc {
   std::uint32_t out_capacity = 0;
   /// The last expand step runs the leaves of its items itself instead of appending them
   /// to the leaf list (midphase.cuh, fuse_leaves): -1 auto (enough items per warp), 0
-  /// never, 1 always. Neither a result nor a count depends on it (OCTOCD_CUDA_MID_FUSE).
+  /// never, 1 always. Neither a result nor a count depends on it (kMidFuseLeaves).
   int fuse_leaves = -1;
-  /// Per-pair early exit (midphase.cuh, "Early exit"; OCTOCD_CUDA_MID_EARLY_EXIT): 1, an
+  /// Per-pair early exit (midphase.cuh, "Early exit"; CudaSettings::midphase_early_exit): 1, an
   /// expand item, a leaf item and a leaf's vertex tiles of a pair already confirmed are
   /// skipped (counts: the work done, timing-dependent); 0, every item of the lists runs and
   /// every leaf counts its whole filtered work (deterministic counts). Same results either way.
   int early_exit = 1;
   /// A leaf skips a pair of vertex tiles whose boxes are more than theta apart on an axis
-  /// (midphase.cuh, tiles_apart; OCTOCD_CUDA_MID_TILE_CULL, default 1): the same results.
+  /// (midphase.cuh, tiles_apart; kMidTileCull): the same results.
   int tile_cull = 1;
   /// A leaf stages, for each tile of B's vertices, only A's vertices near that tile (within
   /// theta of its box, midphase.cuh near_tile; whole vertex blocks skipped by their boxes)
   /// instead of every vertex of A's cell inside B's grown cell box
-  /// (OCTOCD_CUDA_MID_TILE_FILTER, default 1): the same results; with the early exit off the
+  /// (kMidTileFilter): the same results; with the early exit off the
   /// same counts too (they count the whole filtered ranges either way).
   int tile_filter = 1;
 };
@@ -326,7 +326,7 @@ struct SmallStepDesc {
   volatile unsigned long long* done = nullptr;
   unsigned long long sequence = 0;  ///< the value written to *done
   /// Mapped pinned host memory of kSmallProfileSlots %globaltimer stamps (ns) by thread 0 of
-  /// block 0 at the end of every phase (OCTOCD_CUDA_SMALL_PROFILE=1), or null (no stamps).
+  /// block 0 at the end of every phase (CudaSettings::small_profile), or null (no stamps).
   unsigned long long* profile = nullptr;
   /// The fused front: when n <= front_bodies (at most kSmallFrontMaxBodies), every block
   /// integrates every body from x_saved / v_saved into its shared memory, counts, scans and
@@ -338,7 +338,7 @@ struct SmallStepDesc {
   /// Run the kernel compiled without the midphase's early exit, tile culling and tile
   /// filter (their switches read as off: small_step.cu's kLean instantiation); the host sets it for
   /// scenes of at most kSmallLeanBodies bodies. States, pairs and contacts are the same either
-  /// way; the midphase counts are then those of OCTOCD_CUDA_MID_EARLY_EXIT=0 (deterministic).
+  /// way; the midphase counts are then those of midphase_early_exit off (deterministic).
   int lean = 0;
 };
 
@@ -370,7 +370,7 @@ struct ResidentDesc {
   unsigned long long epoch = 0;           ///< this launch's number, written to *exited
   unsigned long long idle_ns = 0;         ///< exit after this long without a request (0: never)
   DeviceContact* records = nullptr;       ///< the first pass's records of a recorded step
-  int stall = 0;  ///< test hook (OCTOCD_CUDA_PERSISTENT_STALL=1): ignore step requests, honour exit
+  int stall = 0;  ///< test hook (CudaWorld::TestHooks::resident_ignores_requests): ignore step requests, honour exit
 };
 constexpr int kResidentShift = 2;
 constexpr unsigned long long kResidentRecord = 1;

@@ -227,7 +227,7 @@ OCTOCD_HD inline void loose_cell_run(const std::uint32_t* sorted_key, std::uint3
 }
 
 }  // namespace gpu
-/// The device octree's root with D_w `auto` (OCTOCD_CUDA_OCTREE_SNAP=1, the default): the
+/// The device octree's root with D_w `auto` (kLooseSnapRoot): the
 /// domain's root cube `g` grown about its centre to the side e (1 + 2^-10) 2^D, e the
 /// smallest body extent (`min_extent_u`, in units of g.side: loose_extent_kernel's
 /// minimum) and D the smallest level in [0, 10] for which that side covers g, so that the

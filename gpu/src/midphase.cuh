@@ -12,7 +12,7 @@
 //   list; the last expand step of the graph path (mid_expand_last_kernel) runs the
 //   surviving leaf cell pairs of its item itself, in lane order, as the leaf items the list
 //   would have held (leaf_item, the same code mid_leaf runs), when the step has at least
-//   kFuseItemsPerWarp items per warp (fuse_leaves; OCTOCD_CUDA_MID_FUSE): no leaf item is
+//   kFuseItemsPerWarp items per warp (fuse_leaves; kMidFuseLeaves in cuda_world.cpp): no leaf item is
 //   written, read or set up again, and the leaf list stays empty;
 // - leaf (one warp per item of the last step): the narrow phase of hd::mesh_mesh_leaf /
 //   mesh_box_descend on that cell pair, lanes over B's vertices, A's vertices in order.
@@ -32,7 +32,7 @@
 // (leaf_items): each chunk of B's vertices (leaf_b_chunk) against each kLeafAPart of A's,
 // so its vertex tests spread over several warps (the filtered counts of an item's parts add
 // up to the cell pair's).
-// Early exit (MidListDesc::early_exit, OCTOCD_CUDA_MID_EARLY_EXIT, on by default): the
+// Early exit (MidListDesc::early_exit, CudaSettings::midphase_early_exit, on by default): the
 // answer per pair is a boolean, so once confirmed[k] is set the rest of pair k's work
 // cannot change it (nor any result: the response reads only confirmed[k]). With it on, an
 // expand item or leaf item of a confirmed pair is skipped before its set-up, a cell test
@@ -41,11 +41,11 @@
 // 0, shuffled: warp-uniform, so no lane leaves a warp collective). A leaf then runs no count
 // over its whole vertex ranges (only the tiles it stages), and the fused leaves of an expand
 // item run deepest overlap first (overlap_depth: the likelier hits first).
-// Tile culling (MidListDesc::tile_cull, OCTOCD_CUDA_MID_TILE_CULL, on by default; with the
+// Tile culling (MidListDesc::tile_cull, kMidTileCull, on; with the
 // exit on or off): a leaf skips a pair of staged vertex tiles whose bounding boxes are apart
 // by theta on some axis (tiles_apart; exact for hd::vertex_close's float sum), so a large
 // leaf tests only the tile pairs that are near each other.
-// Tile filter (MidListDesc::tile_filter, OCTOCD_CUDA_MID_TILE_FILTER, on by default): for
+// Tile filter (MidListDesc::tile_filter, kMidTileFilter, on): for
 // each staged tile of B a leaf stages only A's vertices near it (near_tile: the tile's box
 // in A's frame grown by the margin, within b_in_a; whole vertex blocks skipped by their
 // boxes), so a large leaf no longer rescans and stages A's whole filtered cell per tile of

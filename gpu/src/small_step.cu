@@ -134,7 +134,7 @@ __device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { retu
 /// One whole step (every thread of the grid calls it): `sequence` is written to *s.done at
 /// the end, `records` (may be null) gets the first pass's contacts; smem: kSharedBytes.
 /// kFuse: the last midphase expand step runs its items' leaves itself (the kernels of
-/// s.mid.fuse_leaves == 1: OCTOCD_CUDA_MID_FUSE=1), a separate instantiation so that the
+/// s.mid.fuse_leaves == 1), a separate instantiation so that the
 /// default kernel's registers stay as they were. kLean (s.lean, tiny scenes): the
 /// midphase's early exit, tile culling and tile filter read as off, constants the compiler
 /// folds away.
@@ -298,7 +298,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   stamp(s.profile, 5);
 
   // 6. Midphase expand steps and leaves (as cuda_world.cpp enqueues them). With
-  // OCTOCD_CUDA_MID_FUSE=1 (kFuse; never by default on this path: on the H100 it made the
+  // fuse_leaves == 1 (kFuse; never on this path, kMidFuseLeaves: on the H100 it made the
   // Table 5 scenes 1.3-13x slower, one warp running an item's leaves in turn) the last expand step runs its
   // items' leaves itself in the block's shared tiles, as the graph path's
   // mid_expand_last_kernel: the same leaf items (the leaf list stays empty), so that with the
@@ -481,7 +481,7 @@ cudaError_t all_blocks_per_sm(int& blocks, std::initializer_list<const void*> ke
   return cudaSuccess;
 }
 
-/// The instantiation for `s`: fused leaves (OCTOCD_CUDA_MID_FUSE=1) first, else lean (s.lean).
+/// The instantiation for `s`: fused leaves (fuse_leaves == 1) first, else lean (s.lean).
 template <typename K>
 const void* pick(const SmallStepDesc& s, K* plain, K* fused, K* lean) {
   return reinterpret_cast<const void*>(s.mid.fuse_leaves == 1 ? fused : s.lean != 0 ? lean : plain);

@@ -170,7 +170,7 @@ class FrameRecord:
 class Engine:
     """One of octocd's engines stepping a scene (octocd/engine.hpp).
 
-    Engine(scene, engine="cpu", broadphase=None, midphase=None, record=True)
+    Engine(scene, engine="cpu", broadphase=None, midphase=None, record=True, cuda=None)
 
     scene: an octocd.Scene, a scene path or a dict (load_scene).
     engine: "cpu", "cuda" or "bullet" (octocd.engines lists those built).
@@ -179,6 +179,9 @@ class Engine:
     midphase: overrides midphase.levels ("aabb-only", "2", "1,2", ...); not with "bullet".
     record: keep each step's FrameRecord for last_frame() (copies per step; the stepping
         itself is unchanged, bit for bit). False: last_frame() has metrics and states only.
+    cuda: settings of the "cuda" engine as keyword arguments, e.g. {"graph": False,
+        "stage_times": False} (CudaSettings; docs/settings.md lists the keys); ignored by
+        the other engines.
 
     Raises InputError for a bad scene or argument and for an engine not built ("cuda"
     without CUDA), RuntimeError for "cuda" without a usable device.
@@ -186,9 +189,11 @@ class Engine:
     """
 
     def __init__(self, scene: Union[Scene, str, Dict[str, Any]], engine: str = "cpu",
-                 broadphase: Optional[str] = None, midphase: Optional[str] = None, record: bool = True):
+                 broadphase: Optional[str] = None, midphase: Optional[str] = None, record: bool = True,
+                 cuda: Optional[Dict[str, Any]] = None):
         self.scene = load_scene(scene)
-        self._e = _octocd.Engine(self.scene, engine, broadphase, midphase, bool(record))
+        items = [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in (cuda or {}).items()]
+        self._e = _octocd.Engine(self.scene, engine, broadphase, midphase, bool(record), items)
 
     def step(self, n: int = 1) -> Dict[str, Any]:
         """Runs n steps (SPEC 4) with the GIL released; Ctrl-C stops between steps.

@@ -329,7 +329,7 @@ std::string join(const std::vector<std::string>& v) {
 class PyEngine {
  public:
   PyEngine(const PyScene& scene, const std::string& engine, const std::optional<std::string>& broadphase,
-           const std::optional<std::string>& midphase, bool record) {
+           const std::optional<std::string>& midphase, bool record, const std::vector<std::string>& cuda) {
     const std::vector<std::string>& names = engine_names();
     if (std::find(names.begin(), names.end(), engine) == names.end()) {
       if (engine == "cuda")
@@ -363,6 +363,9 @@ class PyEngine {
                                        sc.midphase.max_level(), depth, depth));
       }
     }
+    CudaSettings cuda_settings;  // checked whatever the engine: a bad key is an input error anywhere
+    apply_cuda_settings(cuda_settings, cuda, "cuda");
+    check_cuda_settings(cuda_settings, "cuda");
     model_ = build_model(sc);
     if (engine == "cpu") {
       engine_ = std::make_unique<World>(model_, make_any_broadphase(sc.broadphase, sc.domain));
@@ -372,7 +375,7 @@ class PyEngine {
       if (!cuda_device_available())
         throw RuntimeError(fmt::format("engine 'cuda': {}; allowed: engine='cpu' or 'bullet' on this machine",
                                        cuda_device_status()));
-      engine_ = make_cuda_engine(model_, sc.broadphase.name);
+      engine_ = make_cuda_engine(model_, sc.broadphase.name, cuda_settings);
     }
     if (record && engine_->can_record()) engine_->set_recording(true);
     recording_ = record && engine_->can_record();
@@ -789,8 +792,9 @@ PYBIND11_MODULE(_octocd, m) {
 
   py::class_<PyEngine>(m, "Engine")
       .def(py::init<const PyScene&, const std::string&, const std::optional<std::string>&,
-                    const std::optional<std::string>&, bool>(),
-           py::arg("scene"), py::arg("engine"), py::arg("broadphase"), py::arg("midphase"), py::arg("record"))
+                    const std::optional<std::string>&, bool, const std::vector<std::string>&>(),
+           py::arg("scene"), py::arg("engine"), py::arg("broadphase"), py::arg("midphase"), py::arg("record"),
+           py::arg("cuda") = std::vector<std::string>{})
       .def("step", &PyEngine::step, py::arg("n"))
       .def("last_frame", &PyEngine::last_frame)
       .def("set_state", &PyEngine::set_state)

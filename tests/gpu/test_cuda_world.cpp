@@ -7,14 +7,15 @@
 // the same results. The device's `octree` broadphase gives the `flat` pair set on every
 // scene (the large box scenes included) and the CPU `octree` engine's states. The memory
 // check (CudaMemory, issue 8): the host estimate cuda_device_bytes_needed against the
-// engine's own count, and a planted shortage (OCTOCD_CUDA_FREE_BYTES) failing construction
-// and `octocd run|validate --engine cuda` with exit 1.
+// engine's own count, and a planted shortage (CudaWorld::TestHooks::free_bytes, and
+// CudaSettings::memory_limit_bytes through `octocd run|validate --engine cuda --cuda ...`)
+// failing construction with exit 1.
 //
 // Every equality test runs on both step paths of the cuda engine (issue 20): "graph" (the
-// per-stage kernels, OCTOCD_CUDA_SMALL=0) and "small" (the whole step as one cooperative
-// kernel, OCTOCD_CUDA_SMALL=1, for scenes of at most 32768 bodies), named by a _graph or
-// _small suffix (e.g. --gtest_filter='*_small*'); CudaSmallStep checks the small path's
-// grid sizes against the graph and its switches.
+// per-stage kernels, stage times on) and "small" (the whole step as one cooperative kernel:
+// CudaSettings::stage_times off, for scenes of at most kCudaSmallStepMaxBodies bodies),
+// named by a _graph or _small suffix (e.g. --gtest_filter='*_small*'); CudaSmallStep checks
+// the small path against the graph.
 //
 // Without a usable CUDA device every device test is SKIPPED with the reason
 // ("no CUDA device: ..."); the error paths that need no device run everywhere.
@@ -123,41 +124,18 @@ std::string test_name(const ::testing::TestParamInfo<std::string>& info) {
   return s;
 }
 
-/// Sets the environment variable `name` to `value` for the scope (the memory check's test
-/// hook OCTOCD_CUDA_FREE_BYTES, the step path OCTOCD_CUDA_SMALL), then restores it.
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const std::string& value) : name_(name) {
-    const char* old = std::getenv(name);
-    had_ = old != nullptr;
-    if (had_) old_ = old;
-    ::setenv(name, value.c_str(), 1);
-  }
-  ~ScopedEnv() {
-    if (had_) ::setenv(name_, old_.c_str(), 1);
-    else ::unsetenv(name_);
-  }
-  ScopedEnv(const ScopedEnv&) = delete;
-  ScopedEnv& operator=(const ScopedEnv&) = delete;
-
- private:
-  const char* name_;
-  bool had_ = false;
-  std::string old_;
-};
-
 /// The two step paths of the cuda engine every equality test runs (issue 20): "graph"
-/// (OCTOCD_CUDA_SMALL=0: the per-stage kernels, from a CUDA graph) and "small"
-/// (OCTOCD_CUDA_SMALL=1: the whole step as one cooperative kernel, for scenes of at most
-/// kSmallPathMostBodies bodies; larger scenes stay on the graph).
+/// (the per-stage kernels, from a CUDA graph) and "small" (the whole step as one
+/// cooperative kernel, for scenes of at most kSmallPathMostBodies bodies; larger scenes
+/// stay on the graph).
 const std::vector<std::string> kPaths = {"graph", "small"};
-constexpr std::size_t kSmallPathMostBodies = 32768;  // OCTOCD_CUDA_SMALL=1's limit
+constexpr std::size_t kSmallPathMostBodies = kCudaSmallStepMaxBodies;
 
-/// OCTOCD_CUDA_SMALL for `path` while the engines are built.
-class PathEnv : public ScopedEnv {
- public:
-  explicit PathEnv(const std::string& path) : ScopedEnv("OCTOCD_CUDA_SMALL", path == "small" ? "1" : "0") {}
-};
+/// `base` for `path`: the small path runs where the stage times are off.
+CudaSettings path_settings(const std::string& path, CudaSettings base = {}) {
+  base.stage_times = path != "small";
+  return base;
+}
 
 /// The engine runs the path asked for: "small" where the scene allows it (a device that
 /// cannot launch cooperative kernels would fall back: the test then fails, saying so).
@@ -187,23 +165,19 @@ std::shared_ptr<const Model> load_model(const std::string& name) {
   return build_model(load_scene(path));
 }
 
-/// A step-path switch's bad values: for each of `bads`, the environment variable `name` set
-/// to it, constructing a CudaWorld of box-stack must throw an InputError whose message holds
-/// "NAME: 'VALUE' " followed by `says` (checked before the device is looked at, so this runs
-/// without one too); an accepted value or a RuntimeError is a failure.
-void expect_bad_values_rejected(const char* name, const std::vector<const char*>& bads, const char* says) {
+/// A settings value out of range: constructing a CudaWorld of box-stack with `settings`
+/// must throw an InputError whose message holds `says` (checked before the device is
+/// looked at, so this runs without one too); an accepted value or a RuntimeError is a
+/// failure.
+void expect_bad_settings_rejected(const CudaSettings& settings, const std::string& says) {
   const auto model = load_model("box-stack");
-  for (const char* bad : bads) {
-    const ScopedEnv env(name, bad);
-    try {
-      CudaWorld gpu(model, "flat");
-      ADD_FAILURE() << "accepted " << name << "='" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find(fmt::format("{}: '{}' {}", name, bad, says)), std::string::npos)
-          << e.what();
-    } catch (const RuntimeError& e) {
-      ADD_FAILURE() << name << "='" << bad << "' gave a runtime error, not an input error: " << e.what();
-    }
+  try {
+    CudaWorld gpu(model, "flat", settings);
+    ADD_FAILURE() << "accepted settings that should say " << says;
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+  } catch (const RuntimeError& e) {
+    ADD_FAILURE() << "a runtime error, not an input error: " << e.what();
   }
 }
 
@@ -280,15 +254,6 @@ void expect_same_record(const FrameRecord& a, const FrameRecord& b, const std::s
   EXPECT_TRUE(same_vecs(a.v_post, b.v_post)) << what << ": v_post differs";
 }
 
-/// Whether the cuda engines built now run the midphase with no early exit
-/// (OCTOCD_CUDA_MID_EARLY_EXIT=0): then their midphase counts (box tests, box pairs, vertex
-/// tests) are the lists' whole work and do not depend on timing; with the early exit on (the
-/// default) they are the work done, which varies run to run (gpu/src/midphase.cuh).
-bool mid_counts_deterministic() {
-  const char* v = std::getenv("OCTOCD_CUDA_MID_EARLY_EXIT");
-  return v != nullptr && std::strcmp(v, "0") == 0;
-}
-
 /// The midphase counts of two cuda runs on the same states, with the same switches, whose work
 /// may differ by the early exit's timing: each is zero exactly when the other is (a pair is
 /// only confirmed by a leaf that counted a tested tile pair, a run that confirms no pair skips
@@ -302,13 +267,14 @@ void expect_same_zero_counts(const FrameMetrics& a, const FrameMetrics& b, const
 
 /// The integer counts of two runs of the cuda engine must match exactly (run to run, and
 /// whatever the buffer capacities); the midphase's counts only with no early exit
-/// (mid_counts_deterministic), else zero together.
-void expect_same_counts(const FrameMetrics& a, const FrameMetrics& b, const std::string& what) {
+/// (`no_exit`: CudaSettings::midphase_early_exit off: then they are the lists' whole work
+/// and do not depend on timing), else zero together.
+void expect_same_counts(const FrameMetrics& a, const FrameMetrics& b, const std::string& what, bool no_exit = false) {
   EXPECT_EQ(a.frame, b.frame) << what;
   EXPECT_EQ(a.cell_candidates, b.cell_candidates) << what;
   EXPECT_EQ(a.aabb_pairs, b.aabb_pairs) << what;
   EXPECT_EQ(a.dynamic_pairs, b.dynamic_pairs) << what;
-  if (mid_counts_deterministic()) {
+  if (no_exit) {
     EXPECT_EQ(a.box_tests, b.box_tests) << what;
     EXPECT_EQ(a.box_pairs, b.box_pairs) << what;
     EXPECT_EQ(a.vertex_tests, b.vertex_tests) << what;
@@ -321,13 +287,13 @@ void expect_same_counts(const FrameMetrics& a, const FrameMetrics& b, const std:
 /// The cpu engine against the cuda engine: the broadphase counts and contacts are equal;
 /// the midphase's test counts are the work each engine did: the cpu descends depth first
 /// and stops at the first confirmed vertex pair; the cuda engine's level work lists with no
-/// early exit (`no_exit`, default: mid_counts_deterministic()) test every candidate, so
+/// early exit (`no_exit`: CudaSettings::midphase_early_exit off) test every candidate, so
 /// each of its counts is at least the cpu's; with the early exit on they may be fewer (the
 /// parallel lists find another first hit). Both are zero together either way.
 /// `same_broadphase_work`: false when the two engines ran different broadphase algorithms
 /// (cpu octree vs device octree), whose candidate counts differ by design.
 void expect_cpu_cuda_counts(const FrameMetrics& cpu, const FrameMetrics& gpu, const std::string& what,
-                            bool same_broadphase_work = true, bool no_exit = mid_counts_deterministic()) {
+                            bool same_broadphase_work = true, bool no_exit = false) {
   EXPECT_EQ(cpu.frame, gpu.frame) << what;
   if (same_broadphase_work) {
     EXPECT_EQ(cpu.cell_candidates, gpu.cell_candidates) << what;
@@ -419,8 +385,7 @@ TEST(CudaDevice, NonFiniteStateGivesTheCpuMessage) {
   }
   EXPECT_FALSE(cpu_msg.empty());
   for (const std::string& path : kPaths) {
-    const PathEnv env(path);
-    CudaWorld gpu(model, "flat");
+    CudaWorld gpu(model, "flat", path_settings(path));
     expect_path(gpu, path, model->initial.size(), "free-fall");
     std::string gpu_msg;
     try {
@@ -461,9 +426,8 @@ TEST(CudaDevice, SetStateIsUsed) {
   REQUIRE_CUDA_DEVICE();
   const auto model = load_model("bunny-stack-50");
   for (const std::string& path : kPaths) {
-    const PathEnv env(path);
     auto cpu = cpu_flat(model);
-    CudaWorld gpu(model, "flat");
+    CudaWorld gpu(model, "flat", path_settings(path));
     expect_path(gpu, path, model->initial.size(), "bunny-stack-50");
     BodyState s = model->initial;
     for (std::size_t i = 0; i < s.size(); ++i)
@@ -484,11 +448,12 @@ TEST(CudaDevice, SetStateIsUsed) {
 namespace {
 
 
-/// The message of the RuntimeError that constructing CudaWorld(model, broadphase) throws,
-/// "" when it constructs.
-std::string construction_error(const std::shared_ptr<const Model>& model, const std::string& broadphase) {
+/// The message of the RuntimeError that constructing CudaWorld(model, broadphase, settings,
+/// hooks) throws, "" when it constructs.
+std::string construction_error(const std::shared_ptr<const Model>& model, const std::string& broadphase,
+                               const CudaSettings& settings, const CudaWorld::TestHooks& hooks) {
   try {
-    CudaWorld gpu(model, broadphase);
+    CudaWorld gpu(model, broadphase, settings, hooks);
   } catch (const RuntimeError& e) {
     return e.what();
   }
@@ -519,7 +484,8 @@ TEST(CudaMemory, EstimateIsOneToThreeTimesTheEnginesBytesAfterTheFirstStep) {
 // (b) With less memory free than the estimate the constructor fails before allocating,
 // naming the scene, the bytes needed and free, and the body count; with exactly the
 // estimate free it constructs and steps. The free bytes come from the test hook
-// OCTOCD_CUDA_FREE_BYTES (a planted shortage: the device itself has plenty).
+// TestHooks::free_bytes (a planted shortage: the device itself has plenty), and the same
+// shortage from CudaSettings::memory_limit_bytes gives the same message naming the limit.
 TEST(CudaMemory, TooLittleFreeMemoryFailsAtConstructionNamingTheBytes) {
   REQUIRE_CUDA_DEVICE();
   for (const std::string name : {"box-stack", "boxes-uniform-100k"}) {
@@ -527,9 +493,10 @@ TEST(CudaMemory, TooLittleFreeMemoryFailsAtConstructionNamingTheBytes) {
     const auto model = load_model(name);
     const std::string bp = model->scene.broadphase.name;
     const std::uint64_t needed = cuda_device_bytes_needed(*model, bp);
+    CudaWorld::TestHooks short_hooks;
+    short_hooks.free_bytes = [&](std::uint64_t free) { return std::min<std::uint64_t>(free, needed - 1); };
     {
-      ScopedEnv env("OCTOCD_CUDA_FREE_BYTES", std::to_string(needed - 1));
-      const std::string msg = construction_error(model, bp);
+      const std::string msg = construction_error(model, bp, {}, short_hooks);
       EXPECT_NE(msg.find(fmt::format("scene '{}': the cuda engine needs about {} bytes (", name, needed)),
                 std::string::npos)
           << msg;
@@ -538,29 +505,24 @@ TEST(CudaMemory, TooLittleFreeMemoryFailsAtConstructionNamingTheBytes) {
                 std::string::npos)
           << msg;
       EXPECT_NE(msg.find(fmt::format("but the device has {} bytes (", needed - 1)), std::string::npos) << msg;
-      EXPECT_NE(msg.find(fmt::format("free (OCTOCD_CUDA_FREE_BYTES={}) of ", needed - 1)), std::string::npos) << msg;
+      CudaSettings limited;
+      limited.memory_limit_bytes = needed - 1;
       try {
-        (void)make_cuda_engine(model, bp);
-        ADD_FAILURE() << "make_cuda_engine succeeded with " << needed - 1 << " bytes free";
+        (void)make_cuda_engine(model, bp, limited);
+        ADD_FAILURE() << "make_cuda_engine succeeded with a limit of " << needed - 1 << " bytes";
       } catch (const RuntimeError& e) {
-        EXPECT_EQ(std::string(e.what()), msg);
+        const std::string lim = e.what();
+        EXPECT_NE(lim.find(fmt::format("free (memory_limit_bytes={}) of ", needed - 1)), std::string::npos) << lim;
+        EXPECT_EQ(lim.substr(0, lim.find(" free")), msg.substr(0, msg.find(" free")));
       }
     }
     {
-      ScopedEnv env("OCTOCD_CUDA_FREE_BYTES", std::to_string(needed));
-      CudaWorld gpu(model, bp);
+      CudaWorld::TestHooks exact;
+      exact.free_bytes = [&](std::uint64_t free) { return std::min<std::uint64_t>(free, needed); };
+      CudaSettings limited;
+      limited.memory_limit_bytes = needed;
+      CudaWorld gpu(model, bp, limited, exact);
       EXPECT_EQ(gpu.step().frame, 1) << "exactly the estimate free is enough";
-    }
-  }
-  // The hook takes a decimal byte count, nothing else.
-  const auto model = load_model("box-stack");
-  for (const char* bad : {"", "-1", "12x", " 5", "lots"}) {
-    ScopedEnv env("OCTOCD_CUDA_FREE_BYTES", bad);
-    try {
-      CudaWorld gpu(model, "flat");
-      ADD_FAILURE() << "accepted OCTOCD_CUDA_FREE_BYTES='" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("OCTOCD_CUDA_FREE_BYTES: '"), std::string::npos) << e.what();
     }
   }
 }
@@ -609,14 +571,14 @@ TEST(CudaMemory, CliExitsOneBeforeTheFirstStepNamingTheBytes) {
   const std::string scene = source_dir() + "/datasets/scenes/box-stack.json";
   const auto model = load_model("box-stack");
   const std::uint64_t needed = cuda_device_bytes_needed(*model, model->scene.broadphase.name);
-  const std::string env = "OCTOCD_CUDA_FREE_BYTES=" + std::to_string(needed - 1);
+  const std::string limit = "memory_limit_bytes=" + std::to_string(needed - 1);
   const std::string trace = (dir / "t.h5").string();
   const std::vector<std::vector<std::string>> commands = {
-      {"run", scene, "--engine", "cuda", "--frames", "5", "--trace", trace, "--quiet"},
-      {"validate", scene, "--engine", "cuda", "--frames", "5", "--every", "5", "--trace", trace}};
+      {"run", scene, "--engine", "cuda", "--frames", "5", "--trace", trace, "--quiet", "--cuda", limit},
+      {"validate", scene, "--engine", "cuda", "--frames", "5", "--every", "5", "--trace", trace, "--cuda", limit}};
   for (const std::vector<std::string>& args : commands) {
     SCOPED_TRACE(args[0]);
-    const CliResult r = run_octocd(dir, env, args);
+    const CliResult r = run_octocd(dir, "", args);
     EXPECT_EQ(r.code, 1) << r.err;
     EXPECT_EQ(r.err.rfind("octocd: runtime failure: scene 'box-stack': the cuda engine needs about " +
                               std::to_string(needed) + " bytes",
@@ -629,7 +591,9 @@ TEST(CudaMemory, CliExitsOneBeforeTheFirstStepNamingTheBytes) {
     EXPECT_FALSE(std::filesystem::exists(trace)) << "no trace is started before the engine exists";
   }
   // The same command with the estimate free runs.
-  const CliResult ok = run_octocd(dir, "OCTOCD_CUDA_FREE_BYTES=" + std::to_string(needed), commands[0]);
+  std::vector<std::string> enough = commands[0];
+  enough.back() = "memory_limit_bytes=" + std::to_string(needed);
+  const CliResult ok = run_octocd(dir, "", enough);
   EXPECT_EQ(ok.code, 0) << ok.err;
   EXPECT_TRUE(std::filesystem::exists(trace));
   std::filesystem::remove_all(dir);
@@ -640,9 +604,8 @@ TEST(CudaMemory, CliExitsOneBeforeTheFirstStepNamingTheBytes) {
 /// states after every step and equal records every 10th frame.
 void expect_lockstep(const std::shared_ptr<const Model>& model, int frames, const std::string& label,
                      const std::string& path) {
-  const PathEnv env(path);
   auto cpu = cpu_flat(model);
-  CudaWorld gpu(model, "flat");
+  CudaWorld gpu(model, "flat", path_settings(path));
   expect_path(gpu, path, model->initial.size(), label);
   std::uint64_t contacts = 0;
   for (int f = 1; f <= frames; ++f) {
@@ -689,110 +652,110 @@ TEST(CudaVariants, RelaxationPassesOverlapModesAndLevelLists) {
   }
 }
 
-// The small path's switches (issue 20): bad values are input errors, before the device
-// is looked at (so this runs without a device too).
-TEST(CudaSmallStep, BadSwitchValuesAreInputErrors) {
-  expect_bad_values_rejected("OCTOCD_CUDA_SMALL", {"", "2", "yes", " 1", "1 "}, "is not allowed; allowed: 0");
-  expect_bad_values_rejected("OCTOCD_CUDA_SMALL_BLOCKS", {"", "0", "-3", "x", "12x"}, "is not a block count");
-  expect_bad_values_rejected("OCTOCD_CUDA_SMALL_WAIT", {"", "Poll", "spin", "sync "},
-                             "is not allowed; allowed: poll");
-  expect_bad_values_rejected("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", {"", "-1", "x", "7y", "2147483648"},
-                             "is not a pair count");
+// Settings out of range are input errors, before the device is looked at (so this runs
+// without a device too); set_cuda_setting parses KEY=VALUE and names what it refuses.
+TEST(CudaSettingsCheck, OutOfRangeValuesAreInputErrors) {
+  for (const long bad : {0L, -1L, 86400001L}) {
+    CudaSettings s;
+    s.resident_timeout_ms = bad;
+    expect_bad_settings_rejected(s, fmt::format("resident_timeout_ms={} is not allowed; allowed: 1 .. 86400000", bad));
+  }
+  CudaSettings s;
+  apply_cuda_settings(s, {"graph=false", "stage_times=0", "midphase_early_exit=off", "memory_limit_bytes=4096",
+                          "resident_timeout_ms=300", "sync_each_launch=true", "small_profile=1"},
+                      "--cuda");
+  EXPECT_FALSE(s.graph);
+  EXPECT_FALSE(s.stage_times);
+  EXPECT_FALSE(s.midphase_early_exit);
+  EXPECT_EQ(s.memory_limit_bytes, 4096u);
+  EXPECT_EQ(s.resident_timeout_ms, 300);
+  EXPECT_TRUE(s.sync_each_launch);
+  EXPECT_TRUE(s.small_profile);
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"graph=yes", "--cuda: graph='yes' is not a switch"},
+      {"resident_timeout_ms=0", "--cuda: resident_timeout_ms='0' is not allowed; allowed: an integer 1 .. 86400000"},
+      {"memory_limit_bytes=12x", "--cuda: memory_limit_bytes='12x' is not allowed"},
+      {"small=1", "--cuda: unknown cuda setting 'small'; allowed: midphase_early_exit, "},
+      {"graph", "--cuda: 'graph' is not KEY=VALUE"}};
+  for (const auto& [item, says] : bad) {
+    CudaSettings t;
+    try {
+      apply_cuda_settings(t, {item}, "--cuda");
+      ADD_FAILURE() << "accepted " << item;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+  }
 }
 
-// The small path's grid does not change a bit: one block, the default grid (response in one
-// block, polled), the default grid with the response grid-wide and a synchronising wait
-// (OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS=0, OCTOCD_CUDA_SMALL_WAIT=sync) and the most blocks
-// that fit give the graph path's states, pairs, contacts, counts (the midphase's exactly with
-// OCTOCD_CUDA_MID_EARLY_EXIT=0, else zero together) and metric bits
-// (bunny-stack-50 with its own broadphase `octree`, 300 frames, records every 25th). The
-// small engines say what differs: no stage is timed, and their broadphase candidates are
-// n(n-1)/2 (the all-pairs test), where the graph's `octree` counts its own tests.
-TEST(CudaSmallStep, AnyGridGivesTheGraphPathsBits) {
+// The small path does not change a bit: resident and with a launch per step
+// (set_persistent(false)), with the early exit on and off, it gives the graph path's states,
+// pairs, contacts, counts (the midphase's exactly with the early exit off, else zero
+// together) and metric bits (bunny-stack-50 with its own broadphase `octree`, 300 frames,
+// records every 25th). The small engines say what differs: no stage is timed, and their
+// broadphase candidates are n(n-1)/2 (the all-pairs test), where the graph's `octree`
+// counts its own tests.
+TEST(CudaSmallStep, SmallPathGivesTheGraphPathsBits) {
   REQUIRE_CUDA_DEVICE();
   const auto model = load_model("bunny-stack-50");
   const std::uint64_t n = model->initial.size();
   const std::string bp = model->scene.broadphase.name;
-  std::unique_ptr<CudaWorld> graph, one, dflt, wide, most;
-  {
-    const PathEnv env("graph");
-    graph = std::make_unique<CudaWorld>(model, bp);
-  }
-  {
-    const PathEnv env("small");
-    dflt = std::make_unique<CudaWorld>(model, bp);
-    {
-      const ScopedEnv blocks("OCTOCD_CUDA_SMALL_BLOCKS", "1");
-      one = std::make_unique<CudaWorld>(model, bp);
-    }
-    {
-      const ScopedEnv pairs("OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS", "0");
-      const ScopedEnv wait("OCTOCD_CUDA_SMALL_WAIT", "sync");
-      wide = std::make_unique<CudaWorld>(model, bp);
-    }
-    const ScopedEnv blocks("OCTOCD_CUDA_SMALL_BLOCKS", "1000000");  // clamped to the blocks that fit
-    most = std::make_unique<CudaWorld>(model, bp);
-  }
-  ASSERT_NE(graph->step_path(), "small");
-  EXPECT_TRUE(graph->notes().empty()) << graph->notes();
-  EXPECT_TRUE(graph->has_stage(Stage::Broadphase));
-  const std::vector<CudaWorld*> small = {one.get(), dflt.get(), wide.get(), most.get()};
-  for (CudaWorld* e : small) {
-    ASSERT_EQ(e->step_path(), "small");
-    EXPECT_FALSE(e->has_stage(Stage::Broadphase));
-    EXPECT_NE(e->notes().find("n(n-1)/2"), std::string::npos) << e->notes();
-  }
-  std::uint64_t contacts = 0, vertex_tests = 0;
-  for (int f = 1; f <= 300; ++f) {
-    const bool rec = f % 25 == 0;
-    graph->set_recording(rec);
-    for (CudaWorld* e : small) e->set_recording(rec);
-    const FrameMetrics mg = graph->step();
-    contacts += mg.contacts;
-    vertex_tests += mg.vertex_tests;
+  for (const bool no_exit : {false, true}) {
+    CudaSettings base;
+    base.midphase_early_exit = !no_exit;
+    const auto graph = std::make_unique<CudaWorld>(model, bp, path_settings("graph", base));
+    const auto dflt = std::make_unique<CudaWorld>(model, bp, path_settings("small", base));
+    const auto launches = std::make_unique<CudaWorld>(model, bp, path_settings("small", base));
+    launches->set_persistent(false);
+    ASSERT_NE(graph->step_path(), "small");
+    EXPECT_TRUE(graph->notes().empty()) << graph->notes();
+    EXPECT_TRUE(graph->has_stage(Stage::Broadphase));
+    const std::vector<CudaWorld*> small = {dflt.get(), launches.get()};
     for (CudaWorld* e : small) {
-      const FrameMetrics ms = e->step();
-      const std::string what = fmt::format("frame {}, small path ({} blocks asked)", f,
-                                           e == one.get()    ? "1"
-                                           : e == most.get() ? "1000000"
-                                           : e == wide.get() ? "default, grid-wide response, sync"
-                                                             : "default");
-      ASSERT_EQ(graph->state_hash(), e->state_hash()) << what << ": " << first_difference(graph->state(), e->state());
-      EXPECT_EQ(ms.cell_candidates, n * (n - 1) / 2) << what;
-      EXPECT_EQ(mg.aabb_pairs, ms.aabb_pairs) << what;
-      EXPECT_EQ(mg.dynamic_pairs, ms.dynamic_pairs) << what;
-      if (mid_counts_deterministic()) {
-        EXPECT_EQ(mg.box_tests, ms.box_tests) << what;
-        EXPECT_EQ(mg.box_pairs, ms.box_pairs) << what;
-        EXPECT_EQ(mg.vertex_tests, ms.vertex_tests) << what;
-      } else {
-        expect_same_zero_counts(mg, ms, what);
-      }
-      EXPECT_EQ(mg.contacts, ms.contacts) << what;
-      EXPECT_EQ(mg.kinetic_energy, ms.kinetic_energy) << what << ": the same reduction order";
-      EXPECT_EQ(mg.momentum, ms.momentum) << what;
-      EXPECT_EQ(mg.penetration_mean, ms.penetration_mean) << what;
-      EXPECT_EQ(mg.penetration_max, ms.penetration_max) << what;
-      EXPECT_EQ(mg.penetration_share_above_slop, ms.penetration_share_above_slop) << what;
-      for (double ms_stage : ms.stage_ms) EXPECT_EQ(ms_stage, 0.0) << what << ": one kernel has no stage times";
-      if (rec) expect_same_record(graph->record(), e->record(), what);
-      if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
+      ASSERT_EQ(e->step_path(), "small");
+      EXPECT_FALSE(e->has_stage(Stage::Broadphase));
+      EXPECT_NE(e->notes().find("n(n-1)/2"), std::string::npos) << e->notes();
     }
+    std::uint64_t contacts = 0, vertex_tests = 0;
+    for (int f = 1; f <= 300; ++f) {
+      const bool rec = f % 25 == 0;
+      graph->set_recording(rec);
+      for (CudaWorld* e : small) e->set_recording(rec);
+      const FrameMetrics mg = graph->step();
+      contacts += mg.contacts;
+      vertex_tests += mg.vertex_tests;
+      for (CudaWorld* e : small) {
+        const FrameMetrics ms = e->step();
+        const std::string what = fmt::format("frame {}, small path ({}, early exit {})", f,
+                                             e == launches.get() ? "a launch per step" : "resident",
+                                             no_exit ? "off" : "on");
+        ASSERT_EQ(graph->state_hash(), e->state_hash()) << what << ": " << first_difference(graph->state(), e->state());
+        EXPECT_EQ(ms.cell_candidates, n * (n - 1) / 2) << what;
+        EXPECT_EQ(mg.aabb_pairs, ms.aabb_pairs) << what;
+        EXPECT_EQ(mg.dynamic_pairs, ms.dynamic_pairs) << what;
+        if (no_exit) {
+          EXPECT_EQ(mg.box_tests, ms.box_tests) << what;
+          EXPECT_EQ(mg.box_pairs, ms.box_pairs) << what;
+          EXPECT_EQ(mg.vertex_tests, ms.vertex_tests) << what;
+        } else {
+          expect_same_zero_counts(mg, ms, what);
+        }
+        EXPECT_EQ(mg.contacts, ms.contacts) << what;
+        EXPECT_EQ(mg.kinetic_energy, ms.kinetic_energy) << what << ": the same reduction order";
+        EXPECT_EQ(mg.momentum, ms.momentum) << what;
+        EXPECT_EQ(mg.penetration_mean, ms.penetration_mean) << what;
+        EXPECT_EQ(mg.penetration_max, ms.penetration_max) << what;
+        EXPECT_EQ(mg.penetration_share_above_slop, ms.penetration_share_above_slop) << what;
+        for (double ms_stage : ms.stage_ms) EXPECT_EQ(ms_stage, 0.0) << what << ": one kernel has no stage times";
+        if (rec) expect_same_record(graph->record(), e->record(), what);
+        if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
+      }
+    }
+    EXPECT_GT(contacts, 0u) << "the run must reach contacts";
+    EXPECT_GT(vertex_tests, 0u) << "the run must reach the narrow phase";
   }
-  EXPECT_GT(contacts, 0u) << "the run must reach contacts";
-  EXPECT_GT(vertex_tests, 0u) << "the run must reach the narrow phase";
 }
 
-// OCTOCD_CUDA_MID_FUSE (issue 20): where the last expand step runs its items' leaves (in
-// the expand step's own warp, or through the leaf list) changes no bit and no count: the
-// graph path with the switch at 0 and at 1 against the CPU engine, every frame, on a pile
-// (mesh-mesh and mesh-box leaves, many items per warp) and on bunny-random-400 with two and
-// three level steps. A bad value is an input error, before the device is looked at. Both
-// engines run with no early exit (OCTOCD_CUDA_MID_EARLY_EXIT=0), so that their counts are
-// the lists' whole work and must be equal; CudaMidphase.EarlyExit* runs the fused leaves
-// with the early exit. The small path with OCTOCD_CUDA_MID_FUSE=1 (its own kernel
-// instantiation, whose last expand step runs the leaves in the block's shared tiles) gives
-// the same bits and counts too.
 // The leaf items of a mesh-mesh cell pair (gpu/src/kernels.hpp, leaf_items / leaf_ranges:
 // chunks of B's cell's vertices against parts of A's) cover every pair of the two cells'
 // vertices exactly once, each item's ranges non-empty and inside the cells, so the leaves
@@ -837,103 +800,16 @@ TEST(CudaMidphase, LeafItemsCoverEveryVertexPairOnce) {
   EXPECT_EQ(octocd::gpu::leaf_items(129, b_whole), (b_whole + kLeafChunk - 1) / kLeafChunk);
 }
 
-TEST(CudaMidphase, LeavesInTheExpandStepChangeNoBitAndNoCount) {
-  expect_bad_values_rejected("OCTOCD_CUDA_MID_FUSE", {"", "2", "auto", " 1"}, "is not allowed; allowed: 0");
-  REQUIRE_CUDA_DEVICE();
-  const PathEnv path("graph");
-  struct Case {
-    const char* scene;
-    const char* levels;  // null: the scene's own
-    int frames;
-  };
-  for (const Case& cs : {Case{"bunny-pile-10k", nullptr, 300}, Case{"bunny-random-400", nullptr, 300},
-                         Case{"bunny-random-400", "0,1,2", 200}}) {
-    auto model = std::make_shared<Model>(*load_model(cs.scene));
-    if (cs.levels) model->scene.midphase = MidphaseConfig::parse(cs.levels);
-    const std::shared_ptr<const Model> m = model;
-    BroadPhaseConfig cfg = m->scene.broadphase;
-    cfg.name = "octree";
-    World cpu(m, make_broadphase(cfg, m->scene.domain));
-    std::unique_ptr<CudaWorld> never, always;
-    const ScopedEnv no_exit("OCTOCD_CUDA_MID_EARLY_EXIT", "0");
-    {
-      const ScopedEnv env("OCTOCD_CUDA_MID_FUSE", "0");
-      never = std::make_unique<CudaWorld>(m, "octree");
-    }
-    std::unique_ptr<CudaWorld> small_fused;
-    {
-      const ScopedEnv env("OCTOCD_CUDA_MID_FUSE", "1");
-      always = std::make_unique<CudaWorld>(m, "octree");
-      const PathEnv small("small");
-      small_fused = std::make_unique<CudaWorld>(m, "octree");
-    }
-    ASSERT_EQ(never->step_path(), "graph");
-    ASSERT_EQ(always->step_path(), "graph");
-    expect_path(*small_fused, "small", m->initial.size(), cs.scene);
-    std::uint64_t vertex_tests = 0, contacts = 0;
-    for (int f = 1; f <= cs.frames; ++f) {
-      const bool rec = f % 25 == 0;
-      cpu.set_recording(rec);
-      never->set_recording(rec);
-      always->set_recording(rec);
-      small_fused->set_recording(rec);
-      const FrameMetrics mc = cpu.step();
-      const FrameMetrics m0 = never->step();
-      const FrameMetrics m1 = always->step();
-      const FrameMetrics ms = small_fused->step();
-      const std::string what = fmt::format("{} (levels {}) frame {}", cs.scene, cs.levels ? cs.levels : "own", f);
-      vertex_tests += m1.vertex_tests;
-      contacts += mc.contacts;
-      ASSERT_EQ(cpu.state_hash(), never->state_hash())
-          << what << " (fuse 0): " << first_difference(cpu.state(), never->state());
-      ASSERT_EQ(cpu.state_hash(), always->state_hash())
-          << what << " (fuse 1): " << first_difference(cpu.state(), always->state());
-      ASSERT_EQ(cpu.state_hash(), small_fused->state_hash())
-          << what << " (small path, fuse 1): " << first_difference(cpu.state(), small_fused->state());
-      expect_same_counts(m0, m1, what + " (fuse 0 vs 1)");
-      expect_cpu_cuda_counts(mc, m1, what, false, true);
-      EXPECT_EQ(m0.box_tests, ms.box_tests) << what << " (small path, fuse 1)";
-      EXPECT_EQ(m0.box_pairs, ms.box_pairs) << what << " (small path, fuse 1)";
-      EXPECT_EQ(m0.vertex_tests, ms.vertex_tests) << what << " (small path, fuse 1)";
-      EXPECT_EQ(m0.contacts, ms.contacts) << what << " (small path, fuse 1)";
-      if (rec) {
-        expect_same_record(never->record(), always->record(), what + " (fuse 0 vs 1)");
-        expect_same_record(never->record(), small_fused->record(), what + " (small path, fuse 1)");
-      }
-      if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
-    }
-    EXPECT_GT(contacts, 0u) << cs.scene << ": the run must reach contacts";
-    EXPECT_GT(vertex_tests, 0u) << cs.scene << ": the run must reach the leaves";
-  }
-}
-
-// OCTOCD_CUDA_MID_EARLY_EXIT (issue 20 item 3): skipping the rest of a confirmed pair's work
-// changes no bit; it only lowers the midphase counts. On the Table 5 scenes with --midphase
-// 1,2 (and bunny-random-400 with 0,1,2) and on a pile, the CPU engine (octree) against cuda
-// engines with the early exit off (graph path) and on (graph path with the fused leaves at
-// their default and always on; the small path with the leaf list and with fused leaves where
-// the scene allows it). Every frame: equal state bits; every 25th frame: equal pairs,
-// confirmed contacts and contact terms. Counts: with the exit off each is >= the CPU's (the
+// CudaSettings::midphase_early_exit (issue 20 item 3): skipping the rest of a confirmed
+// pair's work changes no bit; it only lowers the midphase counts. On the Table 5 scenes with
+// --midphase 1,2 (and bunny-random-400 with 0,1,2) and on a pile, the CPU engine (octree)
+// against cuda engines with the early exit off (graph path) and on (graph and small path).
+// Every frame: equal state bits; every 25th frame: equal pairs, confirmed contacts and contact terms. Counts: with the exit off each is >= the CPU's (the
 // lists' whole work); with it on each is <= the figure with it off on the same state, box
-// tests and box pairs zero exactly when they are. Over the Table 5 runs together, each engine
-// with fused leaves (a warp runs an expand item's leaves in turn, so the exit saves work
-// whatever the timing) must do fewer box tests and fewer vertex tests than with the exit off
-// (box tests drop only by skipping a confirmed pair's expand items or cell tests: an exit
-// that is never taken fails here). A graph engine with the exit off and the tile culling and
-// tile filter off (OCTOCD_CUDA_MID_TILE_CULL=0: every pair of tiles tested;
-// OCTOCD_CUDA_MID_TILE_FILTER=0: A's vertices staged for a tile of B are every one in B's
-// grown cell box) gives the same bits and, the counts being the lists' whole work either way,
-// the same counts as the one with them on. With the exit on, graph engines with the tile
-// filter off (on the small path too) give the same bits, and over the Table 5 runs the graph
-// engine with the filter on does fewer vertex tests than the one with it off (a filter that
-// never narrows A's tiles fails here). A bad value of any switch is an input error, before the
-// device is looked at.
+// tests and box pairs zero exactly when they are. Over the Table 5 runs together, the engines
+// with the exit on must do fewer vertex tests than with the exit off (an exit that is never
+// taken fails here).
 TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
-  expect_bad_values_rejected("OCTOCD_CUDA_MID_TILE_CULL", {"", "2", "on"},
-                             "is not allowed; allowed: an integer 0 .. 1");
-  expect_bad_values_rejected("OCTOCD_CUDA_MID_TILE_FILTER", {"", "2", "on", "-1"},
-                             "is not allowed; allowed: an integer 0 .. 1");
-  expect_bad_values_rejected("OCTOCD_CUDA_MID_EARLY_EXIT", {"", "2", "on", " 0"}, "is not allowed; allowed: 1");
   REQUIRE_CUDA_DEVICE();
   struct Case {
     const char* scene;
@@ -941,10 +817,8 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
     int frames;
     bool table5;  // the exit must save vertex tests over the run
   };
-  // Over the Table 5 runs: box tests and vertex tests with the exit off, and per fused engine
-  // (by name) with it on.
-  std::uint64_t t5_off_bt = 0, t5_off_vt = 0;
-  std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> t5_fused;  // name -> (box, vertex tests)
+  // Over the Table 5 runs: vertex tests with the exit off, and per exit-on engine (by name).
+  std::uint64_t t5_off_vt = 0;
   std::map<std::string, std::uint64_t> t5_vt;  // name -> vertex tests of the exit-on engines
   for (const Case& cs : {Case{"bunny-random-400", "1,2", 200, true}, Case{"armadillo-random-250", "1,2", 150, true},
                          Case{"dragon-random-250", "1,2", 150, true}, Case{"asian-dragon-random-60", "1,2", 150, true},
@@ -955,38 +829,13 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
     BroadPhaseConfig cfg = m->scene.broadphase;
     cfg.name = "octree";
     World cpu(m, make_broadphase(cfg, m->scene.domain));
-    std::unique_ptr<CudaWorld> off, off_no_cull;
+    CudaSettings no_exit;
+    no_exit.midphase_early_exit = false;
+    const auto off = std::make_unique<CudaWorld>(m, "octree", path_settings("graph", no_exit));
     std::vector<std::pair<std::string, std::unique_ptr<CudaWorld>>> on;
-    {
-      const PathEnv graph("graph");
-      {
-        const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", "0");
-        off = std::make_unique<CudaWorld>(m, "octree");
-        const ScopedEnv cull("OCTOCD_CUDA_MID_TILE_CULL", "0");
-        const ScopedEnv filter("OCTOCD_CUDA_MID_TILE_FILTER", "0");
-        off_no_cull = std::make_unique<CudaWorld>(m, "octree");
-      }
-      const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", "1");
-      on.emplace_back("graph", std::make_unique<CudaWorld>(m, "octree"));
-      {
-        const ScopedEnv filter("OCTOCD_CUDA_MID_TILE_FILTER", "0");
-        on.emplace_back("graph, no tile filter", std::make_unique<CudaWorld>(m, "octree"));
-      }
-      const ScopedEnv fuse("OCTOCD_CUDA_MID_FUSE", "1");
-      on.emplace_back("graph, fused leaves", std::make_unique<CudaWorld>(m, "octree"));
-    }
+    on.emplace_back("graph", std::make_unique<CudaWorld>(m, "octree", path_settings("graph")));
     if (m->initial.size() <= kSmallPathMostBodies) {
-      const PathEnv small("small");
-      const ScopedEnv env("OCTOCD_CUDA_MID_EARLY_EXIT", "1");
-      on.emplace_back("small", std::make_unique<CudaWorld>(m, "octree"));
-      ASSERT_EQ(on.back().second->step_path(), "small") << cs.scene;
-      {
-        const ScopedEnv filter("OCTOCD_CUDA_MID_TILE_FILTER", "0");
-        on.emplace_back("small, no tile filter", std::make_unique<CudaWorld>(m, "octree"));
-        ASSERT_EQ(on.back().second->step_path(), "small") << cs.scene;
-      }
-      const ScopedEnv fuse("OCTOCD_CUDA_MID_FUSE", "1");
-      on.emplace_back("small, fused leaves", std::make_unique<CudaWorld>(m, "octree"));
+      on.emplace_back("small", std::make_unique<CudaWorld>(m, "octree", path_settings("small")));
       ASSERT_EQ(on.back().second->step_path(), "small") << cs.scene;
     }
     ASSERT_EQ(off->step_path(), "graph");
@@ -996,11 +845,9 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
       const bool rec = f % 25 == 0;
       cpu.set_recording(rec);
       off->set_recording(rec);
-      off_no_cull->set_recording(rec);
       for (auto& e : on) e.second->set_recording(rec);
       const FrameMetrics mc = cpu.step();
       const FrameMetrics m0 = off->step();
-      const FrameMetrics mn = off_no_cull->step();
       const std::string what = fmt::format("{} (levels {}) frame {}", cs.scene, cs.levels ? cs.levels : "own", f);
       contacts += mc.contacts;
       cpu_vt += mc.vertex_tests;
@@ -1009,12 +856,6 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
       ASSERT_EQ(cpu.state_hash(), off->state_hash())
           << what << " (exit off): " << first_difference(cpu.state(), off->state());
       expect_cpu_cuda_counts(mc, m0, what + " (exit off)", false, true);
-      ASSERT_EQ(cpu.state_hash(), off_no_cull->state_hash())
-          << what << " (exit off, no tile culling or filter): " << first_difference(cpu.state(), off_no_cull->state());
-      EXPECT_EQ(mn.box_tests, m0.box_tests) << what << " (tile culling and filter off vs on)";
-      EXPECT_EQ(mn.box_pairs, m0.box_pairs) << what << " (tile culling and filter off vs on)";
-      EXPECT_EQ(mn.vertex_tests, m0.vertex_tests) << what << " (tile culling and filter off vs on)";
-      if (rec) expect_same_record(off->record(), off_no_cull->record(), what + " (tile culling and filter off vs on)");
       for (std::size_t i = 0; i < on.size(); ++i) {
         CudaWorld& e = *on[i].second;
         const FrameMetrics m1 = e.step();
@@ -1049,29 +890,14 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
       ratios += fmt::format("; exit on ({}): {} ({:.3f} of off), box tests {:.3f} of off", on[i].first, on_vt[i],
                             share(on_vt[i], off_vt), share(on_bt[i], off_bt));
       if (cs.table5) t5_vt[on[i].first] += on_vt[i];
-      if (cs.table5 && on[i].first.find("fused") != std::string::npos) {
-        t5_fused[on[i].first].first += on_bt[i];
-        t5_fused[on[i].first].second += on_vt[i];
-      }
     }
-    if (cs.table5) {
-      t5_off_bt += off_bt;
-      t5_off_vt += off_vt;
-    }
+    if (cs.table5) t5_off_vt += off_vt;
     std::cout << "[ info ] " << cs.scene << " (levels " << (cs.levels ? cs.levels : "own") << "), " << cs.frames
               << " frames equal bit for bit; vertex tests: cpu " << cpu_vt << ", exit off " << off_vt << ratios << "\n";
   }
-  EXPECT_FALSE(t5_fused.empty()) << "the Table 5 runs had engines with fused leaves";
-  for (const auto& [name, bt_vt] : t5_fused) {
-    EXPECT_LT(bt_vt.first, t5_off_bt) << name << ": the early exit saved no box test over the Table 5 runs";
-    EXPECT_LT(bt_vt.second, t5_off_vt) << name << ": the early exit saved no vertex test over the Table 5 runs";
-  }
   ASSERT_EQ(t5_vt.count("graph"), 1u);
-  ASSERT_EQ(t5_vt.count("graph, no tile filter"), 1u);
-  std::cout << "[ info ] Table 5 runs, exit on, graph: vertex tests with the tile filter " << t5_vt["graph"]
-            << ", without " << t5_vt["graph, no tile filter"] << "\n";
-  EXPECT_LT(t5_vt["graph"], t5_vt["graph, no tile filter"])
-      << "the tile filter saved no vertex test over the Table 5 runs (graph path, exit on)";
+  for (const auto& [name, vt] : t5_vt)
+    EXPECT_LT(vt, t5_off_vt) << name << ": the early exit saved no vertex test over the Table 5 runs";
 }
 
 TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
@@ -1080,9 +906,8 @@ TEST_P(CpuVsCuda, StatesPairsAndContactsEqualBitForBit) {
   const std::string path = std::get<1>(GetParam());
   const int frames = test_frames();
   const auto model = load_model(name);
-  const PathEnv env(path);
   auto cpu = cpu_flat(model);
-  CudaWorld gpu(model, "flat");
+  CudaWorld gpu(model, "flat", path_settings(path));
   expect_path(gpu, path, model->initial.size(), name);
   ASSERT_EQ(cpu->state_hash(), gpu.state_hash()) << name << ": initial states differ";
   std::uint64_t pairs_seen = 0, contacts_seen = 0;
@@ -1137,10 +962,10 @@ TEST_P(CudaRerun, RerunAndCapacityOneGiveTheSameBits) {
   const std::string path = std::get<1>(GetParam());
   const int frames = test_frames();
   const auto model = load_model(name);
-  const PathEnv env(path);
-  CudaWorld a(model, "flat");
-  CudaWorld b(model, "flat");
-  CudaWorld tiny(model, "flat");
+  const CudaSettings settings = path_settings(path);
+  CudaWorld a(model, "flat", settings);
+  CudaWorld b(model, "flat", settings);
+  CudaWorld tiny(model, "flat", settings);
   expect_path(tiny, path, model->initial.size(), name);
   tiny.reset_capacities(1);
   for (int f = 1; f <= frames; ++f) {
@@ -1174,18 +999,18 @@ TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
   const bool big = name.rfind("boxes-", 0) == 0;
   const int frames = big ? std::min(test_frames(), 50) : test_frames();
   const auto model = load_model(name);
-  const PathEnv env(path);  // the cpu engine ignores it
+  const CudaSettings settings = path_settings(path);
   BroadPhaseConfig cfg = model->scene.broadphase;
   cfg.name = "octree";
   World cpu(model, make_broadphase(cfg, model->scene.domain));
-  CudaWorld oct(model, "octree");
-  CudaWorld flat(model, "flat");
-  CudaWorld tiny(model, "octree");
+  CudaWorld oct(model, "octree", settings);
+  CudaWorld flat(model, "flat", settings);
+  CudaWorld tiny(model, "octree", settings);
   tiny.reset_capacities(1);
-  CudaWorld strict(model, "octree-strict");
-  CudaWorld hash(model, "spatial-hash");
-  CudaWorld lbvh(model, "lbvh");
-  CudaWorld lbvh_tiny(model, "lbvh");  // the capacity-overflow rerun with `lbvh`
+  CudaWorld strict(model, "octree-strict", settings);
+  CudaWorld hash(model, "spatial-hash", settings);
+  CudaWorld lbvh(model, "lbvh", settings);
+  CudaWorld lbvh_tiny(model, "lbvh", settings);  // the capacity-overflow rerun with `lbvh`
   lbvh_tiny.reset_capacities(1);
   for (const CudaWorld* e : {&oct, &flat, &tiny, &strict, &hash, &lbvh, &lbvh_tiny})
     expect_path(*e, path, model->initial.size(), name + " " + e->broadphase_name());
@@ -1289,7 +1114,7 @@ GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(CudaRerun);
 
 // ---- the resident (persistent) small step (issue 20, item 2) -----------------------------
 //
-// The small path's kernel stays resident (OCTOCD_CUDA_PERSISTENT, the default) and steps on
+// The small path's kernel stays resident (the default; set_persistent) and steps on
 // request. Every test compares with the cpu engine after every step: states bit for bit
 // (state() read back while the kernel waits), counts, and on recorded frames the pairs,
 // contacts and terms.
@@ -1323,14 +1148,11 @@ std::shared_ptr<const Model> with_levels(const std::shared_ptr<const Model>& bas
 
 }  // namespace
 
-// The new switches are input errors whatever the device (checked before it is looked at).
-TEST(CudaPersistent, BadSwitchValuesAreInputErrors) {
-  const std::vector<std::pair<const char*, std::vector<const char*>>> cases = {
-      {"OCTOCD_CUDA_PERSISTENT", {"", "2", "yes", "on", " 1"}},
-      {"OCTOCD_CUDA_PERSISTENT_IDLE_US", {"", "0", "-1", "x", "600000001", "5us"}},
-      {"OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS", {"", "0", "x", "86400001"}},
-      {"OCTOCD_CUDA_SMALL_FRONT_BODIES", {"", "-1", "513", "x", "1e3"}}};
-  for (const auto& [name, bads] : cases) expect_bad_values_rejected(name, bads, "is not allowed; allowed: ");
+/// Test hooks with the resident kernel's idle exit after `idle_us` microseconds.
+CudaWorld::TestHooks idle_after(long idle_us) {
+  CudaWorld::TestHooks h;
+  h.resident_idle_us = idle_us;
+  return h;
 }
 
 // Many steps through one resident kernel (idle exit far away): the cpu's bits after every
@@ -1339,12 +1161,10 @@ TEST(CudaPersistent, BadSwitchValuesAreInputErrors) {
 // resident: one launch, plus one per buffer regrow (a regrow ends it: cudaFree).
 TEST(CudaPersistent, ManyStepsWithStateReadsAndSetStateEqualTheCpu) {
   REQUIRE_CUDA_DEVICE();
-  const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "600000000");
   for (const char* scene : {"bunny-stack-50", "box-stack"}) {
     const auto model = with_levels(load_model(scene), "1,2");
-    const PathEnv env("small");
     auto cpu = cpu_flat(model);
-    CudaWorld gpu(model, "flat");
+    CudaWorld gpu(model, "flat", path_settings("small"), idle_after(600000000L));
     ASSERT_EQ(gpu.step_path(), "small") << scene;
     ASSERT_TRUE(gpu.persistent()) << scene << ": the resident kernel is the small path's default";
     EXPECT_NE(gpu.notes().find("resident kernel"), std::string::npos) << gpu.notes();
@@ -1376,33 +1196,24 @@ TEST(CudaPersistent, ManyStepsWithStateReadsAndSetStateEqualTheCpu) {
 }
 
 // Switching paths in one process, every step against the cpu: a resident engine that is
-// switched to a launch per step and back every 25 frames; a resident engine with the fused
-// front off whose buffers are shrunk to capacity 1 every 40 frames (regrow: end, rerun,
-// relaunch); a per-step engine with the fused front for up to 512 bodies; the graph path.
-// bunny-random-400 (406 bodies: the fused front only with 512) and bunny-stack-50.
+// switched to a launch per step and back every 25 frames; a resident engine whose buffers
+// are shrunk to capacity 1 every 40 frames (regrow: end, rerun, relaunch); a per-step
+// engine; the graph path. bunny-random-400 (406 bodies: no fused front) and bunny-stack-50
+// (55 bodies: the fused front).
 TEST(CudaPersistent, SwitchingPathsAndRegrowsKeepTheCpuBits) {
   REQUIRE_CUDA_DEVICE();
   for (const char* scene : {"bunny-stack-50", "bunny-random-400"}) {
     const auto model = with_levels(load_model(scene), "1,2");
     auto cpu = cpu_flat(model);
     std::unique_ptr<CudaWorld> toggled, tiny, launches, graph;
-    {
-      const PathEnv env("small");
-      toggled = std::make_unique<CudaWorld>(model, "flat");
-      {
-        const ScopedEnv front("OCTOCD_CUDA_SMALL_FRONT_BODIES", "0");
-        tiny = std::make_unique<CudaWorld>(model, "flat");
-      }
-      const ScopedEnv front("OCTOCD_CUDA_SMALL_FRONT_BODIES", "512");
-      const ScopedEnv off("OCTOCD_CUDA_PERSISTENT", "0");
-      launches = std::make_unique<CudaWorld>(model, "flat");
-    }
-    {
-      const PathEnv env("graph");
-      graph = std::make_unique<CudaWorld>(model, "flat");
-    }
+    toggled = std::make_unique<CudaWorld>(model, "flat", path_settings("small"));
+    tiny = std::make_unique<CudaWorld>(model, "flat", path_settings("small"));
+    launches = std::make_unique<CudaWorld>(model, "flat", path_settings("small"));
+    graph = std::make_unique<CudaWorld>(model, "flat", path_settings("graph"));
     ASSERT_TRUE(toggled->persistent());
     ASSERT_TRUE(tiny->persistent());
+    ASSERT_TRUE(launches->persistent());
+    launches->set_persistent(false);
     ASSERT_FALSE(launches->persistent());
     ASSERT_EQ(launches->step_path(), "small");
     ASSERT_FALSE(graph->persistent());
@@ -1432,14 +1243,14 @@ TEST(CudaPersistent, DestroyWhileResident) {
   // short, because two resident kernels need not fit on the device at once (the next
   // engine's launch waits until the previous one has ended itself: on the H100, with
   // 600 s here, the host's 60 s timeout fired instead).
-  const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "200000");
+  const CudaWorld::TestHooks idle = idle_after(200000);
+  const CudaSettings small = path_settings("small");
   const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
-  const PathEnv env("small");
-  { CudaWorld unused(model, "flat"); }
+  { CudaWorld unused(model, "flat", small, idle); }
   for (int round = 0; round < 3; ++round) {
     std::vector<std::unique_ptr<CudaWorld>> engines;
     for (int k = 0; k < 3; ++k) {
-      engines.push_back(std::make_unique<CudaWorld>(model, "flat"));
+      engines.push_back(std::make_unique<CudaWorld>(model, "flat", small, idle));
       for (int f = 0; f < 5 + k; ++f) engines.back()->step();
       ASSERT_GT(engines.back()->resident_launches(), 0u);
     }
@@ -1447,7 +1258,7 @@ TEST(CudaPersistent, DestroyWhileResident) {
     engines.clear();  // three destructors, two or three with a resident kernel
   }
   auto cpu = cpu_flat(model);
-  CudaWorld gpu(model, "flat");
+  CudaWorld gpu(model, "flat", small, idle);
   for (int f = 1; f <= 30; ++f) {
     step_all_and_compare(*cpu, {&gpu}, f, "after the destroyed engines");
     if (::testing::Test::HasFailure()) FAIL();
@@ -1455,17 +1266,19 @@ TEST(CudaPersistent, DestroyWhileResident) {
 }
 
 // The host's timeout turns a kernel that never finishes a step into a RuntimeError, not a
-// deadlock (planted: OCTOCD_CUDA_PERSISTENT_STALL=1 makes the kernel ignore step requests);
+// deadlock (planted: TestHooks::resident_ignores_requests makes the kernel ignore step requests);
 // the engine is then destroyed (the kernel still honours the exit request) and the device
 // works: a fresh engine gives the cpu's bits.
 TEST(CudaPersistent, HostTimeoutIsAnErrorNotAHang) {
   REQUIRE_CUDA_DEVICE();
   const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
-  const PathEnv env("small");
+  CudaSettings small = path_settings("small");
   {
-    const ScopedEnv stall("OCTOCD_CUDA_PERSISTENT_STALL", "1");
-    const ScopedEnv timeout("OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS", "300");
-    CudaWorld gpu(model, "flat");
+    CudaWorld::TestHooks stall;
+    stall.resident_ignores_requests = true;
+    CudaSettings timeout = small;
+    timeout.resident_timeout_ms = 300;
+    CudaWorld gpu(model, "flat", timeout, stall);
     ASSERT_TRUE(gpu.persistent());
     try {
       gpu.step();
@@ -1473,28 +1286,26 @@ TEST(CudaPersistent, HostTimeoutIsAnErrorNotAHang) {
     } catch (const RuntimeError& e) {
       const std::string m = e.what();
       EXPECT_NE(m.find("did not finish step 1 within 300 ms"), std::string::npos) << m;
-      EXPECT_NE(m.find("OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS"), std::string::npos) << m;
-      EXPECT_NE(m.find("OCTOCD_CUDA_PERSISTENT_STALL=1"), std::string::npos) << m;
+      EXPECT_NE(m.find("resident_timeout_ms"), std::string::npos) << m;
+      EXPECT_NE(m.find("resident_ignores_requests"), std::string::npos) << m;
     }
   }  // destroyed: the exit request ends the kernel
   auto cpu = cpu_flat(model);
-  CudaWorld gpu(model, "flat");
+  CudaWorld gpu(model, "flat", small);
   for (int f = 1; f <= 20; ++f) {
     step_all_and_compare(*cpu, {&gpu}, f, "after the timeout");
     if (::testing::Test::HasFailure()) FAIL();
   }
 }
 
-// The resident kernel ends itself when idle (OCTOCD_CUDA_PERSISTENT_IDLE_US=1: after 1 us
+// The resident kernel ends itself when idle (TestHooks::resident_idle_us = 1: after 1 us
 // without a request, so nearly every step finds it gone) and the next step launches it
 // again: the same bits as the cpu, whether the kernel took the request or had left.
 TEST(CudaPersistent, IdleExitAndRelaunchKeepTheCpuBits) {
   REQUIRE_CUDA_DEVICE();
-  const ScopedEnv idle("OCTOCD_CUDA_PERSISTENT_IDLE_US", "1");
   const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
-  const PathEnv env("small");
   auto cpu = cpu_flat(model);
-  CudaWorld gpu(model, "flat");
+  CudaWorld gpu(model, "flat", path_settings("small"), idle_after(1));
   ASSERT_TRUE(gpu.persistent());
   for (int f = 1; f <= 200; ++f) {
     step_all_and_compare(*cpu, {&gpu}, f, "idle exits");

@@ -419,7 +419,7 @@ std::string refit_and_check(HostLbvh& h) {
 struct Variant {
   std::string label;
   BroadPhaseConfig config;
-  const char* octree_query = "";  ///< OCTOCD_CUDA_OCTREE_QUERY while constructing ("" = auto)
+  gpu::LooseOctreeQuery octree_query = gpu::LooseOctreeQuery::Auto;  ///< `octree`'s query kernel
 };
 
 /// gtest prints a parameter by its label.
@@ -450,7 +450,7 @@ std::vector<Variant> variants() {
     v.push_back({depth < 0 ? std::string("loose_auto") : fmt::format("loose_depth_{}", depth), c});
     // The box sets are small: the thread-per-slot query of large scenes, forced.
     v.push_back({depth < 0 ? std::string("loose_thread_auto") : fmt::format("loose_thread_depth_{}", depth), c,
-                 "thread"});
+                 gpu::LooseOctreeQuery::Thread});
   }
 #endif
   BroadPhaseConfig lbvh;
@@ -459,29 +459,22 @@ std::vector<Variant> variants() {
   return v;
 }
 
-std::unique_ptr<DeviceBroadPhase> make_device(const BroadPhaseConfig& c, const Aabb& domain) {
+/// The device broadphase of `c`; `octree` with the query kernel `query`.
+std::unique_ptr<DeviceBroadPhase> make_device(const BroadPhaseConfig& c, const Aabb& domain,
+                                              gpu::LooseOctreeQuery query = gpu::LooseOctreeQuery::Auto) {
   if (c.name == "lbvh") return gpu::make_device_lbvh(domain);
   if (c.name == "octree-strict") return gpu::make_device_strict_octree(c, domain);
   if (c.name == "spatial-hash") return gpu::make_device_spatial_hash(c);
 #if defined(OCTOCD_HAVE_DEVICE_LOOSE_OCTREE)
-  if (c.name == "octree") return gpu::make_device_loose_octree(c, domain);
+  if (c.name == "octree") return gpu::make_device_loose_octree(c, domain, query);
 #endif
+  (void)query;
   throw std::runtime_error("no device broadphase " + c.name);
 }
 
-/// make_device with the variant's octree query forced through the test hook.
+/// make_device with the variant's octree query.
 std::unique_ptr<DeviceBroadPhase> make_device(const Variant& v, const Aabb& domain) {
-  if (*v.octree_query == '\0') return make_device(v.config, domain);
-  ::setenv("OCTOCD_CUDA_OCTREE_QUERY", v.octree_query, 1);
-  std::unique_ptr<DeviceBroadPhase> bp;
-  try {
-    bp = make_device(v.config, domain);
-  } catch (...) {
-    ::unsetenv("OCTOCD_CUDA_OCTREE_QUERY");
-    throw;
-  }
-  ::unsetenv("OCTOCD_CUDA_OCTREE_QUERY");
-  return bp;
+  return make_device(v.config, domain, v.octree_query);
 }
 
 // ---- running a device broadphase -----------------------------------------------------
@@ -1392,7 +1385,7 @@ LooseTestCount count_loose_tests(const std::vector<Aabb>& boxes, const Aabb& dom
 }
 
 /// The exact tests of the device octree with depth `auto` and the snapped root
-/// (loose_snapped_grid of the smallest extent, OCTOCD_CUDA_OCTREE_SNAP=1).
+/// (loose_snapped_grid of the smallest extent, broadphase_octree.cu's kLooseSnapRoot).
 LooseTestCount count_loose_tests_snapped(const std::vector<Aabb>& boxes, const Aabb& domain) {
   const LooseGrid grid = loose_grid(domain);
   int depth = 0;
@@ -1495,12 +1488,12 @@ TEST(LooseBlockHostModel, ExactTestsPerDepthOnTheBenchBoxes) {
   }
 }
 
-// bp::PairBuffer (the warp appends a thread's first pairs at the end) on and off
-// (OCTOCD_CUDA_BP_PAIR_BUFFER) in the one-thread-per-slot queries of `octree` and `lbvh`:
-// the same total, pair set and exact tests, with the first find at capacity 16 (find_all:
-// the keys that fit, the total counted in full) and on a set whose bodies have more pairs
-// than the buffer keeps (one-cell); a bad value of the switch is an input error.
-TEST(DevicePairBuffer, OnAndOffGiveTheSamePairsAndTests) {
+// bp::PairBuffer (the warp appends a thread's first pairs at the end) in the
+// one-thread-per-slot queries of `octree` and `lbvh`: flat's total and pair set, with the
+// first find at capacity 16 (find_all: the keys that fit, the total counted in full), on
+// sets whose bodies have more pairs than the buffer keeps (one-cell) and on the bench's
+// boxes.
+TEST(DevicePairBuffer, ThreadQueriesGiveFlatsPairs) {
   REQUIRE_CUDA_DEVICE();
   Stream stream;
   std::vector<std::pair<std::string, std::pair<std::vector<Aabb>, Aabb>>> sets;
@@ -1512,41 +1505,26 @@ TEST(DevicePairBuffer, OnAndOffGiveTheSamePairsAndTests) {
     c.name = bp_name;
     c.octree_depth = -1;
     for (const auto& [name, set] : sets) {
+      SCOPED_TRACE(fmt::format("{} on {}", bp_name, name));
       const auto& [boxes, domain] = set;
       const auto n = static_cast<std::uint32_t>(boxes.size());
       const std::vector<Pair> flat = flat_pairs(boxes, domain);
       DeviceBuffer<Aabb> dboxes("test boxes");
       gpu::upload(dboxes, boxes, stream.s);
-      unsigned long long tests[2] = {0, 0};
-      for (const int on : {1, 0}) {
-        SCOPED_TRACE(fmt::format("{} on {}, OCTOCD_CUDA_BP_PAIR_BUFFER={}", bp_name, name, on));
-        ::setenv("OCTOCD_CUDA_BP_PAIR_BUFFER", on ? "1" : "0", 1);
-        ::setenv("OCTOCD_CUDA_OCTREE_QUERY", "thread", 1);
-        auto bp = make_device(c, domain);
-        ::unsetenv("OCTOCD_CUDA_BP_PAIR_BUFFER");
-        ::unsetenv("OCTOCD_CUDA_OCTREE_QUERY");
-        bp->reserve(n, stream.s);
-        const FindResult r = find_all(*bp, dboxes, n, stream.s);
-        ASSERT_EQ(r.total, flat.size());
-        EXPECT_FALSE(r.wrote_past_capacity);
-        std::vector<Pair> pairs;
-        ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
-        EXPECT_TRUE(same_pairs(pairs, flat, boxes));
-        tests[on] = r.candidates;
-      }
-      EXPECT_EQ(tests[0], tests[1]) << bp_name << " on " << name;
+      auto bp = make_device(c, domain, gpu::LooseOctreeQuery::Thread);
+      bp->reserve(n, stream.s);
+      const FindResult r = find_all(*bp, dboxes, n, stream.s);
+      ASSERT_EQ(r.total, flat.size());
+      EXPECT_FALSE(r.wrote_past_capacity);
+      std::vector<Pair> pairs;
+      ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
+      EXPECT_TRUE(same_pairs(pairs, flat, boxes));
     }
-    ::setenv("OCTOCD_CUDA_BP_PAIR_BUFFER", "yes", 1);
-    EXPECT_THROW(make_device(c, sets[0].second.second), InputError);
-    ::unsetenv("OCTOCD_CUDA_BP_PAIR_BUFFER");
   }
 }
 
-// The device octree (depth auto) tests exactly what the counter says for its root: the
-// snapped one by default, the domain's with OCTOCD_CUDA_OCTREE_SNAP=0; the pair set is
-// flat's either way, with the occupancy map and without (OCTOCD_CUDA_OCTREE_OCCUPANCY=0:
-// it skips only empty blocks, so the tests are the same); a bad value of either switch is
-// an input error.
+// The device octree (depth auto, the snapped root, the occupancy map) tests exactly what the
+// counter says for its snapped root, and its pair set is flat's.
 TEST(DeviceOctreeRoot, CandidatesEqualTheCountOfItsRoot) {
   REQUIRE_CUDA_DEVICE();
   Stream stream;
@@ -1559,35 +1537,20 @@ TEST(DeviceOctreeRoot, CandidatesEqualTheCountOfItsRoot) {
   c.name = "octree";
   c.octree_depth = -1;
   for (const auto& [name, set] : sets) {
+    SCOPED_TRACE(name);
     const auto& [boxes, domain] = set;
     const auto n = static_cast<std::uint32_t>(boxes.size());
     const std::vector<Pair> flat = flat_pairs(boxes, domain);
     DeviceBuffer<Aabb> dboxes("test boxes");
     gpu::upload(dboxes, boxes, stream.s);
-    for (const char* snap : {"1", "0"})
-    for (const char* occupancy : {"1", "0"}) {
-      SCOPED_TRACE(fmt::format("{} OCTOCD_CUDA_OCTREE_SNAP={} OCTOCD_CUDA_OCTREE_OCCUPANCY={}", name, snap, occupancy));
-      ::setenv("OCTOCD_CUDA_OCTREE_SNAP", snap, 1);
-      ::setenv("OCTOCD_CUDA_OCTREE_OCCUPANCY", occupancy, 1);
-      auto bp = make_device(c, domain);
-      ::unsetenv("OCTOCD_CUDA_OCTREE_SNAP");
-      ::unsetenv("OCTOCD_CUDA_OCTREE_OCCUPANCY");
-      bp->reserve(n, stream.s);
-      const FindResult r = find_all(*bp, dboxes, n, stream.s);
-      std::vector<Pair> pairs;
-      ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
-      EXPECT_TRUE(same_pairs(pairs, flat, boxes));
-      const LooseTestCount want =
-          *snap == '1' ? count_loose_tests_snapped(boxes, domain) : count_loose_tests(boxes, domain, -1);
-      EXPECT_EQ(r.candidates, want.tests);
-    }
+    auto bp = make_device(c, domain);
+    bp->reserve(n, stream.s);
+    const FindResult r = find_all(*bp, dboxes, n, stream.s);
+    std::vector<Pair> pairs;
+    ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
+    EXPECT_TRUE(same_pairs(pairs, flat, boxes));
+    EXPECT_EQ(r.candidates, count_loose_tests_snapped(boxes, domain).tests);
   }
-  ::setenv("OCTOCD_CUDA_OCTREE_SNAP", "yes", 1);
-  EXPECT_THROW(make_device(c, sets[0].second.second), InputError);
-  ::unsetenv("OCTOCD_CUDA_OCTREE_SNAP");
-  ::setenv("OCTOCD_CUDA_OCTREE_OCCUPANCY", "2", 1);
-  EXPECT_THROW(make_device(c, sets[0].second.second), InputError);
-  ::unsetenv("OCTOCD_CUDA_OCTREE_OCCUPANCY");
 }
 
 }  // namespace

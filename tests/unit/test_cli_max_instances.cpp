@@ -2,7 +2,7 @@
 // the grown scenes against the shipped paper scenes, the bracket of a search against its
 // own recorded probes (the oracle: the found count passes, the next one does not), the 0
 // and the cap outcomes, SIGTERM and --resume, bad input (exit 2), and on a CUDA machine the
-// device-memory limit (the engine's memory check, lowered by OCTOCD_CUDA_FREE_BYTES) as the
+// device-memory limit (the engine's memory check, lowered by --cuda memory_limit_bytes=N) as the
 // end of the search. CPU runs use a box template, a 2 + 5 frame window and a target steps/s
 // of their own, so a search ends in seconds; no assertion depends on timings.
 #include <gtest/gtest.h>
@@ -416,7 +416,7 @@ TEST_F(MaxInstances, BadInputExits2) {
 }
 
 // On a CUDA machine: a count that does not fit device memory stops the search there (the
-// engine's memory check before its first step, lowered by OCTOCD_CUDA_FREE_BYTES to the
+// engine's memory check before its first step, lowered by --cuda memory_limit_bytes to the
 // estimate for 40 boxes): the bracket is [40, 41] with the reason, never a crash.
 TEST_F(MaxInstances, DeviceMemoryStopsTheSearchThere) {
   const std::string sw = sweep(R"("repeat": 1, "max_instances": 1024, "target_steps_per_s": 0.000001)", R"(["cuda"])");
@@ -428,8 +428,8 @@ TEST_F(MaxInstances, DeviceMemoryStopsTheSearchThere) {
   ASSERT_EQ(scene.code, 0) << scene.output;
   const auto model = octocd::build_model(octocd::parse_scene(scene.output, "grown", ""));
   const std::uint64_t bytes = octocd::cuda_device_bytes_needed(*model, "octree");
-  const Result m = octocd::test::run("OCTOCD_CUDA_FREE_BYTES=" + std::to_string(bytes) + " " + bin() + " bench " + sw +
-                                     " -o " + (dir_ / "mem2.json").string() + " --quiet");
+  const Result m = octocd::test::run(bin() + " bench " + sw + " -o " + (dir_ / "mem2.json").string() +
+                                     " --quiet --cuda memory_limit_bytes=" + std::to_string(bytes));
   ASSERT_EQ(m.code, 0) << m.output;
   const json j = read_json(dir_ / "mem2.json");
   ASSERT_EQ(j["searches"].size(), 1u);
@@ -445,8 +445,8 @@ TEST_F(MaxInstances, DeviceMemoryStopsTheSearchThere) {
   EXPECT_EQ((*at41)["status"], "skipped");
   EXPECT_EQ((*at41)["verdict"], "limit");
   // Not even one instance fits: 0 with the reason (not a skipped search).
-  const Result z = octocd::test::run("OCTOCD_CUDA_FREE_BYTES=1 " + bin() + " bench " + sw + " -o " +
-                                     (dir_ / "zero.json").string() + " --quiet");
+  const Result z = octocd::test::run(bin() + " bench " + sw + " -o " + (dir_ / "zero.json").string() +
+                                     " --quiet --cuda memory_limit_bytes=1");
   ASSERT_EQ(z.code, 0) << z.output;
   const json zj = read_json(dir_ / "zero.json");
   EXPECT_EQ(zj["searches"][0]["status"], "ok");

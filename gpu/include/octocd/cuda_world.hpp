@@ -12,10 +12,12 @@
 /// Units as everywhere in octocd: metres, seconds, kilograms; state is float32.
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "octocd/cuda_settings.hpp"
 #include "octocd/engine.hpp"
 
 #ifndef OCTOCD_HAVE_CUDA
@@ -34,11 +36,9 @@ constexpr std::uint64_t kCudaMaxBodies = 2147483647;
 /// kernels, whose fixed cost (about 80 us per step on an H100) bounds small scenes. The
 /// small path's broadphase is the all-pairs `flat` test, whatever broadphase is named (the
 /// same pair set by the DeviceBroadPhase contract; O(n^2) tests, cheap below this count),
-/// so its `cell_candidates` is n(n-1)/2. It is taken by default (OCTOCD_CUDA_SMALL unset)
-/// for 1 .. kCudaSmallStepMaxBodies bodies when stage times are off
-/// (OCTOCD_CUDA_STAGE_TIMES=0: one kernel cannot be split into stages) and the device can
-/// launch cooperative kernels; OCTOCD_CUDA_SMALL=1 takes it wherever it can run (up to
-/// 32768 bodies, stage times or not: they then stay 0), OCTOCD_CUDA_SMALL=0 never.
+/// so its `cell_candidates` is n(n-1)/2. It is taken for 1 .. kCudaSmallStepMaxBodies
+/// bodies when stage times are off (CudaSettings::stage_times false: one kernel cannot be
+/// split into stages) and the device can launch cooperative kernels.
 constexpr std::uint64_t kCudaSmallStepMaxBodies = 2048;
 
 /// The broadphases the cuda engine has (`--broadphase` with `--engine cuda`), in a stable
@@ -86,9 +86,12 @@ std::uint64_t cuda_device_bytes_needed(const Model& model, const std::string& br
 /// usable (naming the CUDA runtime's reason), when the device has less memory free than
 /// cuda_device_bytes_needed(*model, broadphase) (checked before anything is allocated; the
 /// message names the scene, the bytes needed, the body count and the bytes free and
-/// total) or when device memory runs out later (naming the buffer and bytes); InputError
-/// for a broadphase the device does not have and for more than kCudaMaxBodies bodies.
-std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, const std::string& broadphase);
+/// total; CudaSettings::memory_limit_bytes lowers the free bytes) or when device memory
+/// runs out later (naming the buffer and bytes); InputError for a broadphase the device
+/// does not have, for more than kCudaMaxBodies bodies and for `settings` out of range
+/// (check_cuda_settings).
+std::unique_ptr<Engine> make_cuda_engine(std::shared_ptr<const Model> model, const std::string& broadphase,
+                                         const CudaSettings& settings = {});
 
 /// One line about the CUDA device: its name, compute capability and memory (e.g.
 /// "NVIDIA H100 80GB HBM3 (sm_90, 79.1 GiB)"), or "no CUDA device: <reason from the CUDA
@@ -100,6 +103,20 @@ std::string cuda_device_status();
 bool cuda_device_available();
 
 #if OCTOCD_HAVE_CUDA
+
+/// Seams of CudaWorld for tests only (tests/gpu): no command, scene or Python argument
+/// reaches them.
+struct CudaTestHooks {
+  /// When set, the constructor's memory check takes its result as the free bytes, given
+  /// the device's (cudaMemGetInfo): a test plants a shortage on any device with it.
+  std::function<std::uint64_t(std::uint64_t free)> free_bytes;
+  /// The resident kernel ignores step requests (it still ends on exit), so the host's
+  /// timeout (CudaSettings::resident_timeout_ms) fires.
+  bool resident_ignores_requests = false;
+  /// > 0: the resident kernel ends itself after this many microseconds without a request
+  /// instead of 2000 (tests of the idle exit and of the launch count).
+  long resident_idle_us = 0;
+};
 
 /// The CUDA engine. Owns its device buffers (released by the destructor) and a CUDA
 /// stream on the current device (device 0 unless the caller selected another with
@@ -121,35 +138,24 @@ bool cuda_device_available();
 /// variable-size buffer has a capacity, every producer counts what it found, and a step
 /// whose output did not fit is run again from the saved state with larger buffers, so
 /// nothing is ever dropped. While the capacities do not change and no frame is being
-/// recorded, the step is replayed from a CUDA graph (OCTOCD_CUDA_GRAPH=0 turns that off;
-/// OCTOCD_CUDA_STAGE_TIMES=0 drops the stage events). Small scenes (kCudaSmallStepMaxBodies)
-/// run the whole step as one cooperative kernel instead (OCTOCD_CUDA_SMALL: see there; the
-/// same bits: the same per-element device code, pairs in the same order, the same
-/// per-body summation order); OCTOCD_CUDA_SMALL_BLOCKS=K sets that kernel's grid (blocks,
-/// at most what fits on the device at once); OCTOCD_CUDA_SMALL_ONE_BLOCK_PAIRS=P (default
-/// 512, 0: never) runs its response passes, clamp and metrics in one block when a step has at
-/// most P pairs; OCTOCD_CUDA_SMALL_WAIT=poll (default: spin on the step's number in mapped
-/// memory) or sync (cudaStreamSynchronize) is how the host waits; OCTOCD_CUDA_SMALL_PROFILE=1
-/// times its phases (small_profile()). OCTOCD_CUDA_MID_FUSE=0/1 (graph path; unset: auto,
-/// when the step has at least two items per warp) makes the last midphase expand step never /
-/// always run its items' leaves itself instead of appending them to the leaf list (the same
-/// leaf items, so the same bits and counts). OCTOCD_CUDA_SMALL_FRONT_BODIES=B (default 0: never; at most
-/// 512, 0: never) fuses its integrate, broadphase count, scan and fill without a grid-wide
-/// barrier up to B bodies (every block integrates every body into its shared memory).
-/// Persistent (resident) kernel, OCTOCD_CUDA_PERSISTENT (unset or 1: on, 0: a launch per
-/// step): with the polled wait, the small path's kernel is launched once, on a stream of its
-/// own, and stays resident: it waits on a request word in mapped host memory, runs a step per
-/// request and writes the step's number back, so a step costs no launch. Between steps it
-/// touches no state, so state(), set_state() and the recording's copies run beside it (on the
-/// engine's stream); reset_capacities(), a buffer regrow (the step's rerun), set_persistent(false)
+/// recorded, the step is replayed from a CUDA graph (CudaSettings::graph). Small scenes
+/// (kCudaSmallStepMaxBodies, with CudaSettings::stage_times off) run the whole step as one
+/// cooperative kernel instead (the same bits: the same per-element device code, pairs in
+/// the same order, the same per-body summation order; its grid, one-block response, host
+/// wait and fused front are constants beside it in cuda_world.cpp). On the graph path the
+/// last midphase expand step runs its items' leaves itself when it has at least two items
+/// per warp (the same leaf items, so the same bits and counts).
+/// Persistent (resident) kernel: on the small path the kernel is launched once, on a
+/// stream of its own, and stays resident (set_persistent(false): a launch per step): it
+/// waits on a request word in mapped host memory, runs a step per request and writes the
+/// step's number back, so a step costs no launch. Between steps it touches no state, so
+/// state(), set_state() and the recording's copies run beside it (on the engine's
+/// stream); reset_capacities(), a buffer regrow (the step's rerun), set_persistent(false)
 /// and the destructor end it first (cudaFree waits for every kernel). It ends itself after
-/// OCTOCD_CUDA_PERSISTENT_IDLE_US microseconds without a request (default 2000, 1 ..
-/// 600000000; the next step launches it again), so another engine's work on the device never
-/// waits on an idle one for longer. The host waits at most OCTOCD_CUDA_PERSISTENT_TIMEOUT_MS
-/// milliseconds for a step (default 60000, 1 .. 86400000), then throws RuntimeError (the
-/// engine can then only be destroyed); test hook: OCTOCD_CUDA_PERSISTENT_STALL=1 makes the
-/// kernel ignore step requests (it still ends on exit), so that timeout fires.
-/// A bad value of any of them is an InputError.
+/// 2000 us without a request (the next step launches it again), so another engine's work
+/// on the device never waits on an idle one for longer. The host waits at most
+/// CudaSettings::resident_timeout_ms for a step, then throws RuntimeError (the engine can
+/// then only be destroyed).
 ///
 /// Errors (all thrown from the constructor or step()): RuntimeError when no device is
 /// usable, when the device has less memory free (cudaMemGetInfo) than
@@ -160,23 +166,24 @@ bool cuda_device_available();
 /// fails (naming the buffer and the bytes), and when a dynamic body's position or velocity
 /// becomes non-finite (the same message as World::step: frame, body, group). InputError
 /// for a broadphase the device does not have and for more than kCudaMaxBodies bodies.
-/// Test hook: the environment variable OCTOCD_CUDA_FREE_BYTES=K (a decimal byte count)
-/// makes the constructor take min(K, the free bytes) as the free memory, so tests can
-/// make the memory check fail on any device. With the environment variable
-/// OCTOCD_CUDA_SYNC=1 every launch is followed by a synchronisation and an error check, so
-/// an asynchronous fault names its kernel.
+/// With CudaSettings::sync_each_launch every launch is followed by a synchronisation and
+/// an error check, so an asynchronous fault names its kernel.
 ///
 /// Not thread-safe (like every Engine).
 class CudaWorld : public Engine {
  public:
+  using TestHooks = CudaTestHooks;
+
   /// Checks the body count (InputError above kCudaMaxBodies) and that the device has
   /// cuda_device_bytes_needed(*model, broadphase) bytes free (RuntimeError naming the bytes
   /// needed and free otherwise; see the class comment), then uploads the model's initial
   /// state, shapes and octrees. `broadphase` as in `--broadphase` ("flat", "octree",
   /// "octree-strict", "spatial-hash" or "lbvh"). `model` must not be null (InputError); a
   /// rotating scene is refused (InputError naming the key, require_translation_only: the
-  /// cuda engine translates only, SPEC 3).
-  CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase);
+  /// cuda engine translates only, SPEC 3). `settings` as in CudaSettings (InputError when
+  /// out of range, check_cuda_settings); `hooks` for tests only.
+  CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase, const CudaSettings& settings = {},
+            const TestHooks& hooks = {});
   ~CudaWorld() override;
   CudaWorld(const CudaWorld&) = delete;
   CudaWorld& operator=(const CudaWorld&) = delete;
@@ -218,17 +225,17 @@ class CudaWorld : public Engine {
 
   /// How a step runs: "small" (one cooperative kernel launch, kCudaSmallStepMaxBodies),
   /// "graph" (the per-stage kernels replayed from a CUDA graph while not recording) or
-  /// "launches" (the per-stage kernels launched one by one: OCTOCD_CUDA_GRAPH=0 or
-  /// OCTOCD_CUDA_SYNC=1). Fixed at construction.
+  /// "launches" (the per-stage kernels launched one by one: CudaSettings::graph off or
+  /// sync_each_launch on). Fixed at construction.
   std::string step_path() const;
-  /// With OCTOCD_CUDA_SMALL_PROFILE=1 on the small path: one line of the mean time per
+  /// With CudaSettings::small_profile on the small path: one line of the mean time per
   /// phase of the fused kernel (us, from %globaltimer stamps by thread 0 of block 0 at each
   /// phase's end), the kernel's span, and the host's time from the launch call to seeing the
   /// step done (their difference: launch and wake-up latency), over every step so far;
   /// else "".
   std::string small_profile() const;
-  /// True while steps run through the resident small-step kernel (OCTOCD_CUDA_PERSISTENT;
-  /// the small path with the polled wait only).
+  /// True while steps run through the resident small-step kernel (on by default on the
+  /// small path; set_persistent).
   bool persistent() const;
   /// Turns the resident kernel on (where persistent() could be true: the small path with the
   /// polled wait; elsewhere a no-op) or off (ending a resident kernel first; the steps then
@@ -236,7 +243,7 @@ class CudaWorld : public Engine {
   /// resident kernel does not end (see the class comment).
   void set_persistent(bool on);
   /// Launches of the resident kernel so far: one, plus one per regrow, per
-  /// set_persistent(false) / (true) and per idle exit (OCTOCD_CUDA_PERSISTENT_IDLE_US).
+  /// set_persistent(false) / (true) and per idle exit.
   std::uint64_t resident_launches() const;
   /// On the small path: no stage is timed (one kernel); else every stage.
   bool has_stage(Stage s) const override;

@@ -1,0 +1,71 @@
+#pragma once
+/// \file cuda_settings.hpp
+/// The settings of the CUDA engine (`cuda`, SPEC 11): every knob the engine has, in one
+/// struct, read once by the CudaWorld constructor. docs/settings.md lists them with the
+/// ways to set them: C++ (`make_engine("cuda", model, options)` or make_cuda_engine),
+/// the CLI (`--cuda KEY=VALUE`, repeatable) and Python (`Engine(..., cuda={KEY: VALUE})`).
+///
+/// Plain C++: including this header needs no CUDA toolkit; the functions exist in builds
+/// without CUDA too.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace octocd {
+
+/// The cuda engine's settings. The defaults are what `octocd run --engine cuda` runs.
+struct CudaSettings {
+  // ---- behaviour ------------------------------------------------------------------------
+  /// Midphase early exit: once a pair is confirmed, the rest of its work (its expand and
+  /// leaf items, remaining cell tests and vertex tiles) is skipped. States, pairs and
+  /// contacts are the same bits either way; off, the midphase counts (box tests, box
+  /// pairs, vertex tests) are the deterministic work of the level lists, each >= the cpu
+  /// engine's. Default true.
+  bool midphase_early_exit = true;
+  /// The most device memory the engine plans for (unit: bytes; default 0: no limit but
+  /// the device's free memory). The constructor refuses a scene whose estimate
+  /// (cuda_device_bytes_needed) exceeds min(free, this), with the message that names both.
+  std::uint64_t memory_limit_bytes = 0;
+  /// How long the host waits for one step of the resident small-step kernel before it
+  /// throws RuntimeError (the engine can then only be destroyed) (unit: milliseconds,
+  /// 1 .. 86400000; default 60000).
+  long resident_timeout_ms = 60000;
+
+  // ---- debugging ------------------------------------------------------------------------
+  /// Synchronise and check errors after every kernel launch, so that an asynchronous
+  /// fault names its kernel; also turns the CUDA graph and the resident kernel off.
+  /// Default false.
+  bool sync_each_launch = false;
+  /// Replay the per-stage kernels from a CUDA graph while the buffer capacities do not
+  /// change and no frame is recorded (false: launch them one by one). Default true.
+  bool graph = true;
+  /// Time every stage with CUDA events (FrameMetrics::stage_ms). Off, the stage times stay
+  /// 0, and scenes of 1 .. kCudaSmallStepMaxBodies bodies run each step as one
+  /// cooperative kernel (the small-scene path: the same bits, no stage to time). Default
+  /// true.
+  bool stage_times = true;
+  /// On the small-scene path: stamp each phase of the fused kernel with %globaltimer and
+  /// keep the means (CudaWorld::small_profile). Default false.
+  bool small_profile = false;
+};
+
+/// Throws InputError naming the field, its value and the allowed range when a field of
+/// `settings` is out of range (resident_timeout_ms). `where` prefixes the message (e.g.
+/// "--cuda").
+void check_cuda_settings(const CudaSettings& settings, const std::string& where);
+
+/// The keys set_cuda_setting takes, in the struct's order: the field names.
+std::vector<std::string> cuda_setting_names();
+
+/// Sets the field `key` (a name of cuda_setting_names()) of `settings` from text:
+/// booleans take true/false/1/0/on/off, integers a decimal number in the field's range.
+/// Throws InputError "<where>: ..." naming the key, the value and what is allowed.
+void set_cuda_setting(CudaSettings& settings, const std::string& key, const std::string& value,
+                      const std::string& where);
+
+/// Applies "KEY=VALUE" items (the CLI's repeated `--cuda KEY=VALUE`) in order with
+/// set_cuda_setting. Throws InputError naming `where` and the item for text without '='.
+void apply_cuda_settings(CudaSettings& settings, const std::vector<std::string>& items, const std::string& where);
+
+}  // namespace octocd
