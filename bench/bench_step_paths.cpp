@@ -37,24 +37,40 @@
 
 #include "octocd/cuda_world.hpp"
 #include "octocd/engine.hpp"
+#include "octocd/engines.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
-#include "octocd/world.hpp"
 
 using namespace octocd;
 
 namespace {
 
-/// The engine `name` measures ("graph", "small", "persistent" or "cpu").
-std::unique_ptr<Engine> make(const std::string& name, const std::shared_ptr<const Model>& model, bool profile) {
-  if (name == "cpu")
-    return std::make_unique<World>(model, make_broadphase(model->scene.broadphase, model->scene.domain));
-  CudaSettings settings;
-  settings.stage_times = name == "graph";
-  settings.small_profile = profile;
-  auto e = std::make_unique<CudaWorld>(model, model->scene.broadphase.name, settings);
-  if (name == "small") e->set_persistent(false);
-  return e;
+/// One measured line: an engine of the registry (engines.hpp) and, for the cuda engine,
+/// its step path.
+struct Run {
+  const char* label;
+  const char* engine;
+  bool stage_times;  ///< CudaSettings::stage_times (off: the small path)
+  bool resident;     ///< CudaWorld::set_persistent
+};
+
+constexpr Run kRuns[] = {{"graph", "cuda", true, true},
+                         {"small", "cuda", false, false},
+                         {"persistent", "cuda", false, true},
+                         {"cpu", "cpu", true, true}};
+
+/// The engine of the line labelled `label` (one of kRuns).
+std::unique_ptr<Engine> make(const std::string& label, const std::shared_ptr<const Model>& model, bool profile) {
+  for (const Run& run : kRuns) {
+    if (label != run.label) continue;
+    CudaSettings settings;
+    settings.stage_times = run.stage_times;
+    settings.small_profile = profile;
+    std::unique_ptr<Engine> e = make_engine(run.engine, model, settings);
+    if (auto* c = dynamic_cast<CudaWorld*>(e.get())) c->set_persistent(run.resident);
+    return e;
+  }
+  throw InputError("--engines: unknown line '" + label + "'");
 }
 
 double median(std::vector<double> v) {

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <ctime>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <new>
 #include <optional>
@@ -33,6 +34,7 @@
 #include "octocd/version.hpp"
 #include "octocd/world.hpp"
 #include "octocd/cuda_world.hpp"
+#include "octocd/engines.hpp"
 #include "tools.hpp"
 
 namespace {
@@ -40,7 +42,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr int kStages = static_cast<int>(octocd::Stage::Count);
 
-using octocd::cli::make_engine;  // cli/tools.cpp
+using octocd::make_engine;  // engines/include/octocd/engines.hpp
 
 struct RunOptions {
   std::string scene;
@@ -149,6 +151,7 @@ class Progress {
 void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
                    const std::string& trace, const std::string& xdmf) {
   const std::string engine = world.name();
+  const std::string memory_kind = octocd::engine_info(engine, "engine").memory_kind;
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
   const octocd::Scene& s = world.scene();
   fmt::print("\nscene        {} ({} bodies, {} shapes)\n", s.name, world.state().size(),
@@ -164,7 +167,7 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
              t.step_ms / n);
   if (t.max_memory_bytes > 0)  // engines that report it (cuda: device memory)
     fmt::print("memory       {:.1f} MiB held by the pipeline's buffers (largest over frames{})\n",
-               static_cast<double>(t.max_memory_bytes) / 1048576.0, engine == "cuda" ? ", device memory" : "");
+               static_cast<double>(t.max_memory_bytes) / 1048576.0, memory_kind.empty() ? "" : ", " + memory_kind);
   fmt::print("\n");
   fmt::print("{:<12} {:>10} {:>8}\n", "stage", "mean ms", "share");
   for (int st = 0; st < kStages; ++st) {
@@ -259,64 +262,6 @@ void report_stop(int sig, const char* command, std::int64_t done, std::int64_t t
                static_cast<long long>(total), kept.c_str());
 }
 
-/// Checks what the command line changed against the scene and the engine, as strictly
-/// as the scene file is checked (issue 12): a `--midphase` deeper than the scene's
-/// midphase.depth, an unknown broadphase name (from `--broadphase` or the file), and
-/// `--midphase` / `--broadphase` with an engine that does not use them. Throws InputError
-/// in the form `<where>: <problem>; allowed: <what>`.
-void check_overrides(const octocd::Scene& scene, const std::string& engine, const std::string& broadphase,
-                     const std::string& midphase) {
-  const std::string file = scene.path.empty() ? std::string("<scene>") : scene.path;
-  if (engine == "bullet") {
-    if (!midphase.empty())
-      throw octocd::InputError(fmt::format(
-          "--midphase: engine bullet has no octree midphase (Bullet's box-box narrow phase runs on the "
-          "AABB boxes); allowed: no --midphase with --engine bullet"));
-    if (!broadphase.empty() && broadphase != "bullet-dbvt")
-      throw octocd::InputError(fmt::format(
-          "--broadphase: engine bullet runs btDbvtBroadphase, not '{}'; allowed: bullet-dbvt, or no "
-          "--broadphase with --engine bullet",
-          broadphase));
-    return;  // the scene's broadphase and midphase are not used by Bullet
-  }
-  const std::vector<std::string> names = octocd::all_broadphase_names();
-  const std::vector<std::string> cuda_only = octocd::cuda_only_broadphase_names();
-  const bool device_only =
-      std::find(cuda_only.begin(), cuda_only.end(), scene.broadphase.name) != cuda_only.end();
-  if (device_only && engine != "cuda")
-    throw octocd::InputError(fmt::format("{}: broadphase '{}' exists on the device only; allowed: --engine cuda "
-                                         "with it, or another broadphase",
-                                         broadphase.empty() ? file + ": broadphase.name" : "--broadphase",
-                                         scene.broadphase.name));
-  if (!device_only && std::find(names.begin(), names.end(), scene.broadphase.name) == names.end()) {
-    std::string list;
-    for (const auto& nm : names) list += (list.empty() ? "" : ", ") + nm;
-    for (const auto& nm : cuda_only) list += ", " + nm + " (--engine cuda)";
-    if (!broadphase.empty())
-      throw octocd::InputError(
-          fmt::format("--broadphase: unknown broadphase '{}'; allowed: {}", scene.broadphase.name, list));
-    throw octocd::InputError(fmt::format("{}: broadphase.name: unknown broadphase '{}'; allowed: {}", file,
-                                         scene.broadphase.name, list));
-  }
-  const int depth = scene.mesh_octree_depth;
-  if (!midphase.empty() && depth >= 0 && !scene.midphase.aabb_only && scene.midphase.max_level() > depth)
-    throw octocd::InputError(fmt::format(
-        "--midphase: level {} is deeper than the scene's midphase.depth {} ({}); allowed: aabb-only or "
-        "ascending levels in [0, {}], or raise midphase.depth in the scene",
-        scene.midphase.max_level(), depth, file, depth));
-}
-
-/// `--rotation` and rotating scenes (SPEC 13): `--rotation` sets the scene's `rotation`
-/// key and needs `--engine bullet`; engines that translate only (cpu, cuda) refuse a
-/// rotating scene (require_translation_only). Throws InputError.
-void apply_rotation(octocd::Scene& scene, const std::string& engine, bool rotation) {
-  if (rotation && engine != "bullet")
-    throw octocd::InputError(fmt::format(
-        "--rotation: engine {} translates only (SPEC 3); allowed: --rotation with --engine bullet", engine));
-  if (rotation) scene.rotation = true;
-  if (engine != "bullet") octocd::require_translation_only(scene, engine);
-}
-
 /// Loads the scene for `run` and `validate`: `--data-dir` (checked to be a folder) or the
 /// default lookup of docs/scenes.md.
 octocd::Scene load_scene_for(const std::string& path, const std::string& data_dir) {
@@ -356,16 +301,18 @@ int run_command(const RunOptions& o) {
   const auto t_setup = Clock::now();
   std::optional<octocd::StopAtOnce> loading(std::in_place, "loading the scene and its meshes");
   octocd::Scene scene = load_scene_for(o.scene, o.data_dir);
-  if (!o.broadphase.empty()) scene.broadphase.name = o.broadphase;
-  if (!o.midphase.empty()) scene.midphase = octocd::MidphaseConfig::parse(o.midphase, "--midphase");
   if (o.frames > 0) scene.frames = o.frames;
-  check_overrides(scene, o.engine, o.broadphase, o.midphase);
-  apply_rotation(scene, o.engine, o.rotation);
+  octocd::EngineOptions eo;
+  eo.broadphase = o.broadphase;
+  eo.midphase = o.midphase;
+  eo.rotation = o.rotation;
+  eo.cuda = octocd::cli::cuda_settings_from(o.cuda);
+  octocd::apply_engine_options(scene, octocd::engine_info(o.engine, "--engine"), eo, octocd::cli_argument_names());
 
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   loading.reset();  // from here on the loop polls the signal, flushes and reports
   const auto t_model = Clock::now();
-  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model, octocd::cli::cuda_settings_from(o.cuda));
+  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model, eo.cuda);
   octocd::Engine& world = *engine;
   Totals totals;
   totals.model_s = std::chrono::duration<double>(t_model - t_setup).count();
@@ -445,6 +392,7 @@ struct ValidateOptions {
   bool no_xdmf = false;
   bool rotation = false;      ///< --rotation: the scene's bodies rotate (engine bullet only)
   std::vector<std::string> cuda;  ///< --cuda KEY=VALUE items (CudaSettings)
+  bool engine_given = false;  ///< --engine was on the command line
 };
 
 /// `octocd validate --trace-in FILE.h5`: another engine's trace judged frame by frame
@@ -491,7 +439,7 @@ int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationO
       temporary ? (fs::temp_directory_path() / fmt::format("octocd-validate-bullet-{}.h5", ::getpid())).string()
                 : o.trace;
   {
-    const std::unique_ptr<octocd::Engine> engine = make_engine("bullet", model);
+    const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model);
     octocd::Engine& world = *engine;
     octocd::TraceOptions topt;
     topt.state_every = 1;
@@ -559,7 +507,7 @@ int validate_command(const ValidateOptions& o) {
     throw octocd::InputError("validate: give either SCENE.json or --trace-in FILE.h5 (not both)");
   if (o.check_only && o.trace_in.empty())
     throw octocd::InputError("--check-only: needs --trace-in FILE.h5");
-  if (!o.trace_in.empty() && (!o.trace.empty() || o.engine != "cpu"))
+  if (!o.trace_in.empty() && (!o.trace.empty() || o.engine_given))
     throw octocd::InputError("--trace-in: judges a trace another engine wrote; allowed without --trace and --engine");
   const auto t0 = Clock::now();
   // The report of a scene that could not be validated; the original error is what the
@@ -590,9 +538,11 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
     const octocd::StopAtOnce loading("loading the scene and its meshes");
     scene = load_scene_for(o.scene, o.data_dir);
-    check_overrides(scene, o.engine, "", "");
-    apply_rotation(scene, o.engine, o.rotation);
-    if (o.engine == "bullet") scene.frames = o.frames;
+    octocd::EngineOptions eo;
+    eo.rotation = o.rotation;
+    const octocd::EngineInfo& info = octocd::engine_info(o.engine, "--engine");
+    octocd::apply_engine_options(scene, info, eo, octocd::cli_argument_names());
+    if (!info.records_every_step) scene.frames = o.frames;  // it is judged through its trace
   }
   octocd::ValidationOptions vo;
   vo.frames = o.frames;
@@ -603,10 +553,9 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
     const auto comma = rest.find(',');
     const std::string item = rest.substr(0, comma);
     rest = comma == std::string::npos ? "" : rest.substr(comma + 1);
-    if (item == "bullet") {
-      vo.against_bullet = true;
-    } else if (item == "fcl") {
-      vo.against_fcl = true;
+    const std::map<std::string, bool*> references{{"bullet", &vo.against_bullet}, {"fcl", &vo.against_fcl}};
+    if (const auto ref = references.find(item); ref != references.end()) {
+      *ref->second = true;
     } else if (item != "none" && !item.empty()) {
       throw octocd::InputError(fmt::format(
           "--against: unknown reference '{}'; allowed: a comma-separated list of bullet, fcl, or none",
@@ -641,11 +590,12 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   std::optional<octocd::StopAtOnce> building(std::in_place, "building the model");
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   building.reset();
-  if (o.engine == "bullet") {
+  if (!octocd::engine_info(o.engine, "--engine").records_every_step) {
     if (!octocd::scene_rotates(scene))
-      throw octocd::InputError(
-          "--engine: bullet without rotation cannot be validated (no per-frame record); allowed: cpu, cuda, or "
-          "bullet with --rotation (or a scene with rotation: true)");
+      throw octocd::InputError(fmt::format(
+          "--engine: {} without rotation cannot be validated (no per-frame record); allowed: cpu, cuda, or "
+          "{} with --rotation (or a scene with rotation: true)",
+          o.engine, o.engine));
     return validate_bullet_rotation(o, vo, model, t0);
   }
   std::unique_ptr<octocd::TraceWriter> trace;
@@ -755,7 +705,7 @@ int main(int argc, char** argv) {
                       "cpu: octocd's CPU reference pipeline; bullet: the same scene in Bullet's "
                       "btDiscreteDynamicsWorld (translation-only boxes, same trace layout; with --rotation or "
                       "a rotating scene: rotating boxes and hulls, trace version 2)")
-      ->check(CLI::IsMember({"cpu", "cuda", "bullet"}))
+      ->check(CLI::IsMember(octocd::engine_names()))
       ->default_val("cpu");
   std::string bp_help = "Broadphase, overrides the scene's broadphase.name:";
   for (const auto& name : octocd::all_broadphase_names()) bp_help += " " + name;
@@ -811,7 +761,7 @@ int main(int argc, char** argv) {
                       "cpu: the CPU reference; cuda: the GPU engine (needs a CUDA build and device); bullet: "
                       "only with --rotation (or a rotating scene): Bullet's run judged as a version 2 external "
                       "trace (--trace keeps it)")
-      ->check(CLI::IsMember({"cpu", "cuda", "bullet"}))
+      ->check(CLI::IsMember(octocd::engine_names()))
       ->default_val("cpu");
   val_cmd->add_flag("--rotation", val.rotation,
                     "The bodies rotate (as the scene key rotation: true); needs --engine bullet");
@@ -854,6 +804,7 @@ int main(int argc, char** argv) {
     if (*val_cmd) {
       val.frames_given = val_cmd->get_option("--frames")->count() > 0;
       val.every_given = val_cmd->get_option("--every")->count() > 0;
+      val.engine_given = val_cmd->get_option("--engine")->count() > 0;
       return validate_command(val);
     }
     if (tools.selected()) return tools.run();

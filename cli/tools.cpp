@@ -17,27 +17,15 @@
 
 #include <fmt/format.h>
 
-#include "octocd/bullet_world.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
-#include "octocd/reference_broadphase.hpp"
 #include "octocd/version.hpp"
-#include "octocd/world.hpp"
 
 #ifndef OCTOCD_SOURCE_DIR
 #define OCTOCD_SOURCE_DIR "."
 #endif
 
 namespace octocd::cli {
-
-std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
-                                    const CudaSettings& cuda_settings) {
-  const Scene& scene = model->scene;
-  if (name == "cpu") return std::make_unique<World>(model, make_any_broadphase(scene.broadphase, scene.domain));
-  if (name == "bullet") return std::make_unique<BulletWorld>(model, model->initial);
-  if (name == "cuda") return make_cuda_engine(model, scene.broadphase.name, cuda_settings);
-  throw InputError(fmt::format("--engine: unknown engine '{}'; allowed: cpu, cuda, bullet", name));
-}
 
 void add_cuda_settings_option(CLI::App* command, std::vector<std::string>& items) {
   std::string keys;
@@ -51,17 +39,6 @@ CudaSettings cuda_settings_from(const std::vector<std::string>& items) {
   apply_cuda_settings(s, items, "--cuda");
   check_cuda_settings(s, "--cuda");
   return s;
-}
-
-const std::vector<std::string>& engine_names() {
-  static const std::vector<std::string> names{"cpu", "cuda", "bullet"};
-  return names;
-}
-
-std::vector<std::string> any_engine_broadphase_names() {
-  std::vector<std::string> names = all_broadphase_names();
-  for (const std::string& n : cuda_only_broadphase_names()) names.push_back(n);
-  return names;
 }
 
 nlohmann::json spread(const std::vector<double>& values) {

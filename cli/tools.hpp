@@ -22,15 +22,9 @@
 
 #include "octocd/cuda_settings.hpp"
 #include "octocd/engine.hpp"
+#include "octocd/engines.hpp"
 
 namespace octocd::cli {
-
-/// The engine `name` (cpu, cuda, bullet) built from `model` with the scene's broadphase;
-/// `cuda` with `cuda_settings` (`--cuda KEY=VALUE`, docs/settings.md).
-/// Throws InputError for an unknown name or a broadphase the engine does not have,
-/// RuntimeError when the engine cannot start (no CUDA device, or a build without CUDA).
-std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
-                                    const CudaSettings& cuda_settings = {});
 
 /// Adds the repeatable `--cuda KEY=VALUE` option (CudaSettings, docs/settings.md) to
 /// `command`, collecting its items into `items`.
@@ -39,12 +33,6 @@ void add_cuda_settings_option(CLI::App* command, std::vector<std::string>& items
 /// CudaSettings from `--cuda` items (apply_cuda_settings). Throws InputError "--cuda: ...".
 CudaSettings cuda_settings_from(const std::vector<std::string>& items);
 
-/// Engine names make_engine accepts, in a stable order: cpu, cuda, bullet.
-const std::vector<std::string>& engine_names();
-
-/// Every broadphase name of some engine, in a stable order: all_broadphase_names() (cpu;
-/// cuda has those of make_broadphase) then cuda_only_broadphase_names() (lbvh).
-std::vector<std::string> any_engine_broadphase_names();
 
 /// Median, minimum, maximum, mean and sample standard deviation of repeated measurements,
 /// as stored in bench results: {"median", "min", "max", "mean", "stdev", "n", "values"}.

@@ -27,9 +27,9 @@
 
 #include <fmt/format.h>
 
-#include "octocd/bullet_world.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engine.hpp"
+#include "octocd/engines.hpp"
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -311,18 +311,15 @@ struct PyScene {
   std::shared_ptr<const Scene> scene;
 };
 
-const std::vector<std::string>& engine_names() {
-  static const std::vector<std::string> names = [] {
-    std::vector<std::string> v{"cpu", "bullet"};
-    if (OCTOCD_HAVE_CUDA) v.insert(v.begin() + 1, "cuda");
-    return v;
-  }();
+/// The engines this build has (octocd.engines), in engine_infos() order.
+const std::vector<std::string>& built_engines() {
+  static const std::vector<std::string> names = built_engine_names();
   return names;
 }
 
-std::string join(const std::vector<std::string>& v) {
+std::string join(const std::vector<std::string>& v, const char* sep = ", ") {
   std::string s;
-  for (const auto& x : v) s += (s.empty() ? "" : ", ") + x;
+  for (const auto& x : v) s += (s.empty() ? "" : sep) + x;
   return s;
 }
 
@@ -330,53 +327,30 @@ class PyEngine {
  public:
   PyEngine(const PyScene& scene, const std::string& engine, const std::optional<std::string>& broadphase,
            const std::optional<std::string>& midphase, bool record, const std::vector<std::string>& cuda) {
-    const std::vector<std::string>& names = engine_names();
-    if (std::find(names.begin(), names.end(), engine) == names.end()) {
-      if (engine == "cuda")
-        throw InputError(fmt::format("engine: 'cuda' is not built in this octocd (configured with OCTOCD_CUDA=OFF "
-                                     "or without nvcc); allowed: {}",
-                                     join(names)));
+    const EngineInfo* info = find_engine_info(engine);
+    const std::vector<std::string>& names = built_engines();
+    if (info == nullptr)
       throw InputError(fmt::format("engine: unknown engine '{}'; allowed: {}", engine, join(names)));
-    }
+    if (!engine_built(*info))
+      throw InputError(fmt::format("engine: '{}' is not built in this octocd (configured with OCTOCD_CUDA=OFF "
+                                   "or without nvcc); allowed: {}",
+                                   engine, join(names)));
+    EngineOptions options;
+    options.broadphase = broadphase.value_or("");
+    options.midphase = midphase.value_or("");
+    apply_cuda_settings(options.cuda, cuda, "cuda");  // checked whatever the engine: a bad key is an input error
+    check_cuda_settings(options.cuda, "cuda");
     Scene sc = *scene.scene;
-    if (engine == "bullet") {
-      if (midphase)
-        throw InputError("midphase: engine bullet has no octree midphase (Bullet's box-box narrow phase runs on the "
-                         "AABB boxes); allowed: None with engine='bullet'");
-      if (broadphase && *broadphase != "bullet-dbvt")
-        throw InputError(fmt::format("broadphase: engine bullet runs btDbvtBroadphase, not '{}'; allowed: None or "
-                                     "'bullet-dbvt' with engine='bullet'",
-                                     *broadphase));
-    } else {
-      if (broadphase) sc.broadphase.name = *broadphase;
-      const std::vector<std::string> bps = all_broadphase_names();
-      if (std::find(bps.begin(), bps.end(), sc.broadphase.name) == bps.end())
-        throw InputError(fmt::format("{}: unknown broadphase '{}'; allowed: {}",
-                                     broadphase ? "broadphase" : "scene broadphase.name", sc.broadphase.name,
-                                     join(bps)));
-      if (midphase) {
-        sc.midphase = MidphaseConfig::parse(*midphase, "midphase");
-        const int depth = sc.mesh_octree_depth;
-        if (depth >= 0 && !sc.midphase.aabb_only && sc.midphase.max_level() > depth)
-          throw InputError(fmt::format("midphase: level {} is deeper than the scene's midphase.depth {}; allowed: "
-                                       "'aabb-only' or ascending levels in [0, {}]",
-                                       sc.midphase.max_level(), depth, depth));
-      }
+    apply_engine_options(sc, *info, options, python_argument_names());
+    if (const std::string why = engine_unavailable(*info); !why.empty()) {
+      std::vector<std::string> others;
+      for (const std::string& n : names)
+        if (n != engine) others.push_back("'" + n + "'");
+      throw RuntimeError(fmt::format("engine '{}': {}; allowed: engine={} on this machine", engine, why,
+                                     join(others, " or ")));
     }
-    CudaSettings cuda_settings;  // checked whatever the engine: a bad key is an input error anywhere
-    apply_cuda_settings(cuda_settings, cuda, "cuda");
-    check_cuda_settings(cuda_settings, "cuda");
     model_ = build_model(sc);
-    if (engine == "cpu") {
-      engine_ = std::make_unique<World>(model_, make_any_broadphase(sc.broadphase, sc.domain));
-    } else if (engine == "bullet") {
-      engine_ = std::make_unique<BulletWorld>(model_, model_->initial);
-    } else {
-      if (!cuda_device_available())
-        throw RuntimeError(fmt::format("engine 'cuda': {}; allowed: engine='cpu' or 'bullet' on this machine",
-                                       cuda_device_status()));
-      engine_ = make_cuda_engine(model_, sc.broadphase.name, cuda_settings);
-    }
+    engine_ = make_engine(engine, model_, options.cuda);
     if (record && engine_->can_record()) engine_->set_recording(true);
     recording_ = record && engine_->can_record();
   }
@@ -749,7 +723,7 @@ PYBIND11_MODULE(_octocd, m) {
   });
 
   m.attr("build_id") = build_id();
-  m.attr("engines") = engine_names();
+  m.attr("engines") = built_engines();
   m.def("cuda_device_status", &cuda_device_status);
   m.def("broadphases", &all_broadphase_names);
   m.def("tolerances", [] {

@@ -12,6 +12,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
 #include "octocd/physics.hpp"
@@ -597,7 +598,7 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   TraceIn in(path);
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;
-  options.octocd_engine = in.info.engine == "cpu" || in.info.engine == "cuda";
+  options.octocd_engine = writes_octocd_contacts(in.info.engine);  // the registry's one mapping of a trace's engine
   // With a scene, the bodies come from it and the trace's tables must match it.
   ExternalValidator validator(in.bodies, options);
   const std::int64_t frames = max_frames > 0 ? std::min(max_frames, in.info.frames) : in.info.frames;

@@ -1,0 +1,71 @@
+#pragma once
+/// \file engine_registry.hpp
+/// The engines octocd has (`cpu`, `cuda`, `bullet`) and what each can do: the one place
+/// that knows an engine by its name. Callers (CLI, Python, bench, trace readers) ask an
+/// EngineInfo for a capability instead of comparing names (a ctest grep keeps it so).
+///
+/// Pure data in core: building an engine needs the libraries that hold them (the cuda
+/// engine in gpu/, Bullet in reference/), so `make_engine` lives in the small library
+/// octocd_engines (engines/include/octocd/engines.hpp) that links all three.
+
+#include <string>
+#include <vector>
+
+namespace octocd {
+
+/// What one engine can do. Every field is a fact of the engine, fixed at compile time.
+struct EngineInfo {
+  std::string name;         ///< as in `--engine`: "cpu", "cuda", "bullet"
+  std::string description;  ///< one line for help texts
+  /// Its bodies may rotate (a scene with rotation: true, `--rotation`); false: it
+  /// translates only and refuses a rotating scene (SPEC 3, require_translation_only).
+  bool rotates = false;
+  /// It runs the scene's midphase level list (SPEC 5.2); false: `--midphase` is refused.
+  bool has_midphase = false;
+  /// It runs the broadphase the scene or `--broadphase` names; false: it runs its own
+  /// (own_broadphase) and refuses any other name.
+  bool uses_scene_broadphase = false;
+  /// The broadphase an engine that does not use the scene's runs ("bullet-dbvt"), else "".
+  std::string own_broadphase;
+  /// That broadphase's class, for messages ("btDbvtBroadphase"), else "".
+  std::string own_broadphase_class;
+  /// Why an engine without has_midphase has none, for messages, else "".
+  std::string no_midphase_reason;
+  /// It also has the device-only broadphases (cuda_only_broadphase_names: `lbvh`).
+  bool device_broadphases = false;
+  /// It runs on a GPU (needs a CUDA build and device).
+  bool device = false;
+  /// What FrameMetrics::memory_bytes counts, for summaries ("device memory"), or "" when
+  /// it is the host's pipeline buffers.
+  std::string memory_kind;
+  /// It fills a FrameRecord every step of a translation-only scene, so `validate` judges
+  /// it in process (cpu, cuda); false: only a rotating run records (bullet), judged as a
+  /// version 2 external trace.
+  bool records_every_step = false;
+  /// Traces it writes follow octocd's contact conventions (contacts on the world AABBs,
+  /// the pair's theta as contact margin, an exact AABB broadphase: octocd_physics_bodies).
+  /// Trace readers map a trace's root attribute `engine` to this through
+  /// writes_octocd_contacts(): traces of octocd's own engines declare nothing else.
+  bool octocd_contacts = false;
+};
+
+/// Every engine, built in this octocd or not, in a stable order: cpu, cuda, bullet.
+const std::vector<EngineInfo>& engine_infos();
+
+/// The names of engine_infos(), in its order.
+const std::vector<std::string>& engine_names();
+
+/// The engine `name`, or nullptr for a name no engine has.
+const EngineInfo* find_engine_info(const std::string& name);
+
+/// The engine `name`; throws InputError "<where>: unknown engine 'NAME'; allowed: cpu,
+/// cuda, bullet" for any other name.
+const EngineInfo& engine_info(const std::string& name, const std::string& where);
+
+/// Whether a trace whose root attribute `engine` is `engine` follows octocd's contact
+/// conventions (EngineInfo::octocd_contacts): true for traces of `cpu` and `cuda`, false for
+/// any other engine, known or not. The one place a trace's engine name decides how it is
+/// judged.
+bool writes_octocd_contacts(const std::string& engine);
+
+}  // namespace octocd

@@ -1,0 +1,70 @@
+// The engines octocd has and their capabilities (engine_registry.hpp).
+#include "octocd/engine_registry.hpp"
+
+#include <fmt/format.h>
+
+#include "octocd/error.hpp"
+
+namespace octocd {
+
+const std::vector<EngineInfo>& engine_infos() {
+  static const std::vector<EngineInfo> infos = [] {
+    EngineInfo cpu;
+    cpu.name = "cpu";
+    cpu.description = "octocd's CPU reference pipeline";
+    cpu.has_midphase = true;
+    cpu.uses_scene_broadphase = true;
+    cpu.records_every_step = true;
+    cpu.octocd_contacts = true;
+
+    EngineInfo cuda;
+    cuda.name = "cuda";
+    cuda.description = "the GPU engine (needs a CUDA build and device)";
+    cuda.has_midphase = true;
+    cuda.uses_scene_broadphase = true;
+    cuda.device_broadphases = true;
+    cuda.device = true;
+    cuda.memory_kind = "device memory";
+    cuda.records_every_step = true;
+    cuda.octocd_contacts = true;
+
+    EngineInfo bullet;
+    bullet.name = "bullet";
+    bullet.description = "the same scene in Bullet's btDiscreteDynamicsWorld";
+    bullet.rotates = true;
+    bullet.own_broadphase = "bullet-dbvt";
+    bullet.own_broadphase_class = "btDbvtBroadphase";
+    bullet.no_midphase_reason = "Bullet's box-box narrow phase runs on the AABB boxes";
+    return std::vector<EngineInfo>{cpu, cuda, bullet};
+  }();
+  return infos;
+}
+
+const std::vector<std::string>& engine_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v;
+    for (const EngineInfo& e : engine_infos()) v.push_back(e.name);
+    return v;
+  }();
+  return names;
+}
+
+const EngineInfo* find_engine_info(const std::string& name) {
+  for (const EngineInfo& e : engine_infos())
+    if (e.name == name) return &e;
+  return nullptr;
+}
+
+const EngineInfo& engine_info(const std::string& name, const std::string& where) {
+  if (const EngineInfo* e = find_engine_info(name)) return *e;
+  std::string names;
+  for (const EngineInfo& e : engine_infos()) names += (names.empty() ? "" : ", ") + e.name;
+  throw InputError(fmt::format("{}: unknown engine '{}'; allowed: {}", where, name, names));
+}
+
+bool writes_octocd_contacts(const std::string& engine) {
+  const EngineInfo* e = find_engine_info(engine);
+  return e != nullptr && e->octocd_contacts;
+}
+
+}  // namespace octocd

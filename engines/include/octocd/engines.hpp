@@ -1,0 +1,74 @@
+#pragma once
+/// \file engines.hpp
+/// Building any of octocd's engines by name (the registry of engine_registry.hpp, made
+/// concrete): the one factory the CLI, Python and bench call. The library octocd_engines
+/// links the three engines' libraries (core's World, reference's BulletWorld, gpu's cuda
+/// engine or its stub), so nothing above it names an engine's class or branches on a name.
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "octocd/cuda_settings.hpp"
+#include "octocd/engine.hpp"
+#include "octocd/engine_registry.hpp"
+#include "octocd/scene.hpp"
+
+namespace octocd {
+
+/// How a caller names its arguments in messages: the CLI's flags or Python's keywords.
+struct ArgumentNames {
+  std::string broadphase = "--broadphase";
+  std::string midphase = "--midphase";
+  std::string rotation = "--rotation";
+  /// How choosing an engine reads, "{}" for its name: "--engine {}" or "engine='{}'".
+  std::string choose = "--engine {}";
+  /// How leaving an option out reads, "{}" for the option: "no {}" or "None".
+  std::string omit = "no {}";
+};
+
+/// The CLI's spelling (the defaults) and Python's (broadphase=, engine='bullet', None).
+ArgumentNames cli_argument_names();
+ArgumentNames python_argument_names();
+
+/// What a caller overrides on top of a scene when it builds an engine.
+struct EngineOptions {
+  std::string broadphase;  ///< replaces the scene's broadphase.name; "": the scene's
+  std::string midphase;    ///< replaces the scene's midphase.levels ("1,2", "aabb-only"); "": the scene's
+  bool rotation = false;   ///< the bodies rotate (as the scene key rotation: true)
+  CudaSettings cuda;       ///< settings of the cuda engine (docs/settings.md); other engines ignore them
+};
+
+/// Applies `options` to `scene` for the engine `info` and checks them as strictly as the
+/// scene file is checked: a broadphase or midphase for an engine that runs its own or
+/// none, an unknown broadphase name (from the option or the file), a device-only
+/// broadphase off the device, a midphase level deeper than the scene's midphase.depth,
+/// rotation with an engine that translates only (and a rotating scene there:
+/// require_translation_only). Throws InputError "<where>: <problem>; allowed: <what>", the
+/// options named as `names` spells them.
+void apply_engine_options(Scene& scene, const EngineInfo& info, const EngineOptions& options,
+                          const ArgumentNames& names);
+
+/// Whether the engine `info` is in this build (cuda: a build with CUDA).
+bool engine_built(const EngineInfo& info);
+
+/// "" when the engine `info` can run on this machine, else why not (e.g. "no CUDA device:
+/// <the CUDA runtime's reason>"). Never throws.
+std::string engine_unavailable(const EngineInfo& info);
+
+/// The names of the engines in this build, in engine_infos() order.
+std::vector<std::string> built_engine_names();
+
+/// Builds the engine `name` from `model` (shared, not copied) with the model's broadphase
+/// (checked by apply_engine_options when it came from a caller), `cuda` for the cuda
+/// engine. Throws InputError for an unknown name ("--engine: unknown engine ...") or a
+/// broadphase the engine does not have, RuntimeError when the engine cannot start (no
+/// CUDA device, a build without CUDA, too little device memory).
+std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
+                                    const CudaSettings& cuda = {});
+
+/// Every broadphase name of some engine, in a stable order: all_broadphase_names() (cpu;
+/// cuda has those too) then cuda_only_broadphase_names() (lbvh).
+std::vector<std::string> any_engine_broadphase_names();
+
+}  // namespace octocd

@@ -1,0 +1,31 @@
+# No branch on an engine's name outside the registry (ARCHITECTURE "One engine registry";
+# core/include/octocd/engine_registry.hpp, engines/include/octocd/engines.hpp): fails when a
+# C++ or CUDA source under cli/, python/src/, bench/ or validation/ compares a string with
+# "cpu", "cuda" or "bullet" (== or !=, either side). Callers ask EngineInfo instead.
+# Run: cmake -DSRC=<source dir> -P tests/house/engine_names.cmake
+if(NOT SRC)
+  message(FATAL_ERROR "engine_names.cmake: pass -DSRC=<the source directory>")
+endif()
+set(_hits "")
+set(_files_seen 0)
+foreach(dir cli python/src bench validation)
+  file(GLOB_RECURSE _files ${SRC}/${dir}/*.cpp ${SRC}/${dir}/*.hpp ${SRC}/${dir}/*.h ${SRC}/${dir}/*.cu
+    ${SRC}/${dir}/*.cuh)
+  foreach(f IN LISTS _files)
+    math(EXPR _files_seen "${_files_seen} + 1")
+    file(STRINGS ${f} _lines REGEX "[!=]=[ ]*\"(cpu|cuda|bullet)\"|\"(cpu|cuda|bullet)\"[ ]*[!=]=")
+    foreach(l IN LISTS _lines)
+      file(RELATIVE_PATH _rel ${SRC} ${f})
+      string(STRIP "${l}" l)
+      string(APPEND _hits "  ${_rel}: ${l}\n")
+    endforeach()
+  endforeach()
+endforeach()
+if(_files_seen EQUAL 0)
+  message(FATAL_ERROR "engine_names.cmake: no source found under ${SRC} (cli, python/src, bench, validation)")
+endif()
+if(NOT _hits STREQUAL "")
+  message(FATAL_ERROR "a branch on an engine's name outside the registry; ask octocd::engine_info(name) for the "
+    "capability instead (core/include/octocd/engine_registry.hpp):\n${_hits}")
+endif()
+message(STATUS "engine_names: ${_files_seen} files, no branch on an engine's name")

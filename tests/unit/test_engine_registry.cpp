@@ -1,0 +1,104 @@
+// The engine registry (core/include/octocd/engine_registry.hpp, engines/include/octocd/
+// engines.hpp) against the engines it builds: every capability an EngineInfo states is
+// checked on the engine itself (broadphase and midphase it runs, recording, rotation), on
+// box-stack; apply_engine_options refuses what an engine cannot run, with the caller's
+// spelling (CLI flags or Python keywords); traces of octocd's own engines are the ones
+// judged with its contact conventions. The cuda engine is checked where a device is.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <string>
+
+#include "octocd/engine_registry.hpp"
+#include "octocd/engines.hpp"
+#include "octocd/error.hpp"
+#include "octocd/scene.hpp"
+
+using namespace octocd;
+
+namespace {
+
+std::string source_dir() {
+  const char* s = std::getenv("OCTOCD_SOURCE_DIR");
+  return s ? s : ".";
+}
+
+Scene box_stack() { return load_scene(source_dir() + "/datasets/scenes/box-stack.json"); }
+
+/// The InputError message of apply_engine_options, "" when it accepts.
+std::string refusal(const std::string& engine, const EngineOptions& o, const ArgumentNames& names) {
+  Scene scene = box_stack();
+  try {
+    apply_engine_options(scene, engine_info(engine, "engine"), o, names);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST(EngineRegistry, CapabilitiesAreWhatTheEnginesDo) {
+  ASSERT_EQ(engine_names(), (std::vector<std::string>{"cpu", "cuda", "bullet"}));
+  for (const EngineInfo& info : engine_infos()) {
+    SCOPED_TRACE(info.name);
+    if (!engine_unavailable(info).empty()) continue;  // cuda without a device
+    Scene scene = box_stack();
+    scene.midphase = MidphaseConfig::parse("aabb-only");
+    apply_engine_options(scene, info, {}, cli_argument_names());
+    const auto model = build_model(scene);
+    const std::unique_ptr<Engine> e = make_engine(info.name, model);
+    EXPECT_EQ(e->name(), info.name);
+    EXPECT_EQ(e->broadphase_name() == scene.broadphase.name, info.uses_scene_broadphase) << e->broadphase_name();
+    if (!info.uses_scene_broadphase) {
+      EXPECT_EQ(e->broadphase_name(), info.own_broadphase);
+    }
+    EXPECT_EQ(e->midphase_name() == scene.midphase.to_string(), info.has_midphase) << e->midphase_name();
+    EXPECT_EQ(e->can_record(), info.records_every_step) << "a translation-only scene";
+    EXPECT_EQ(info.octocd_contacts, writes_octocd_contacts(info.name));
+  }
+  // The engines this build has: cpu and bullet always; each of them names a factory.
+  const std::vector<std::string> built = built_engine_names();
+  EXPECT_NE(std::find(built.begin(), built.end(), "cpu"), built.end());
+  EXPECT_NE(std::find(built.begin(), built.end(), "bullet"), built.end());
+  EXPECT_FALSE(writes_octocd_contacts("external"));
+  EXPECT_FALSE(writes_octocd_contacts("mujoco"));
+  try {
+    (void)engine_info("physx", "--engine");
+    ADD_FAILURE() << "an unknown engine was accepted";
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "--engine: unknown engine 'physx'; allowed: cpu, cuda, bullet");
+  }
+}
+
+TEST(EngineRegistry, OptionsAnEngineCannotRunAreRefusedInTheCallersSpelling) {
+  EngineOptions mid;
+  mid.midphase = "1,2";
+  EXPECT_EQ(refusal("cpu", mid, cli_argument_names()), "");
+  EXPECT_EQ(refusal("bullet", mid, cli_argument_names()),
+            "--midphase: engine bullet has no octree midphase (Bullet's box-box narrow phase runs on the AABB "
+            "boxes); allowed: no --midphase with --engine bullet");
+  EXPECT_EQ(refusal("bullet", mid, python_argument_names()),
+            "midphase: engine bullet has no octree midphase (Bullet's box-box narrow phase runs on the AABB "
+            "boxes); allowed: None with engine='bullet'");
+  EngineOptions bp;
+  bp.broadphase = "octree";
+  EXPECT_EQ(refusal("bullet", bp, cli_argument_names()),
+            "--broadphase: engine bullet runs btDbvtBroadphase, not 'octree'; allowed: bullet-dbvt, or no "
+            "--broadphase with --engine bullet");
+  bp.broadphase = "lbvh";
+  EXPECT_EQ(refusal("cpu", bp, cli_argument_names()),
+            "--broadphase: broadphase 'lbvh' exists on the device only; allowed: --engine cuda with it, or another "
+            "broadphase");
+  EXPECT_EQ(refusal("cuda", bp, cli_argument_names()), "");
+  bp.broadphase = "kd-tree";
+  EXPECT_NE(refusal("cuda", bp, python_argument_names())
+                .find("broadphase: unknown broadphase 'kd-tree'; allowed: flat, octree"),
+            std::string::npos);
+  EngineOptions rot;
+  rot.rotation = true;
+  EXPECT_EQ(refusal("cpu", rot, cli_argument_names()),
+            "--rotation: engine cpu translates only (SPEC 3); allowed: --rotation with --engine bullet");
+  EXPECT_EQ(refusal("bullet", rot, cli_argument_names()), "");
+}
