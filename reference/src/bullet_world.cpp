@@ -43,7 +43,7 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }
 
 /// btDiscreteDynamicsWorld with its step's phases timed, so the Bullet engine reports
-/// the stages octocd has (docs: README "Bullet as an engine"). stepSimulation(dt, 0) runs
+/// the stages octocd has (docs/architecture.md, "Engine"). stepSimulation(dt, 0) runs
 /// internalSingleStepSimulation once: predictUnconstraintMotion,
 /// performDiscreteCollisionDetection (updateAabbs, computeOverlappingPairs,
 /// dispatchAllCollisionPairs), calculateSimulationIslands, solveConstraints,

@@ -6,7 +6,7 @@
 ///
 /// The same FrameValidators that judge octocd's engines judge these frames: each frame is
 /// a FrameRecord (octocd/engine.hpp) that another program filled. What is judged (SPEC 13,
-/// README "Which rows judge what"): the physics tier (octocd/physics.hpp: broadphase and
+/// docs/validation.md, "Which rows judge what"): the physics tier (octocd/physics.hpp: broadphase and
 /// contact completeness, contact geometry against FCL on the posed shapes, penetration,
 /// friction, conservation) for any engine, with ExternalBodies::physics; the model tier
 /// (the paper's response: Eq. 14, friction monotonicity, impulse conservation, the

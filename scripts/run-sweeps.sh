@@ -3,9 +3,9 @@
 # broadphase-scaling) into OUT/<sweep>.json, then `octocd report` into OUT/index.html and
 # OUT/report.md. Re-running continues unfinished sweeps (--resume). max-instances runs only
 # when named (its search takes minutes per model and engine); its result joins the report.
-# Usage: reports/run-sweeps.sh OCTOCD OUT [SWEEPS] [-- extra bench options]
-#   e.g. reports/run-sweeps.sh build/octocd reports/cpu/bench
-#        reports/run-sweeps.sh build/octocd reports/h100/bench "table5 table6" -- --engines cpu,cuda
+# Usage: scripts/run-sweeps.sh OCTOCD OUT [SWEEPS] [-- extra bench options]
+#   e.g. scripts/run-sweeps.sh build/octocd OUT
+#        scripts/run-sweeps.sh build/octocd OUT "table5 table6" -- --engines cpu,cuda
 set -euo pipefail
 octocd=$1; out=$2; shift 2
 sweeps="table5 table6 tableA1 figA2 broadphase-scaling"
