@@ -942,18 +942,17 @@ static std::string write_xdmf(const detail::Hdf5Reader& h5, const TraceSummary& 
   std::ostringstream o;
   o.precision(15);
   const std::string all = std::to_string(disk_rows) + " " + std::to_string(nb) + " 3";
+  // Row r of a (rows x bodies x 3) dataset as an (bodies x 3) item, in XDMF 3's HDF5
+  // hyperslab notation "file:/dataset|start:stride:count:dataset dimensions" (one value per
+  // dimension in each group). ParaView's Xdmf3 readers read it; they do not read the older
+  // ItemType="HyperSlab" wrapper (its array stays untyped: "unrecognized array type [None]").
   auto slab = [&](std::size_t r, const char* dataset) {
-    o << "          <DataItem ItemType=\"HyperSlab\" Dimensions=\"" << nb << " 3\">\n"
-      << "            <DataItem Dimensions=\"3 3\" Format=\"XML\">" << r << " 0 0 1 1 1 1 " << nb
-      << " 3</DataItem>\n"
-      << "            <DataItem Dimensions=\"" << all
-      << "\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << name << ":" << dataset
-      << "</DataItem>\n"
-      << "          </DataItem>\n";
+    o << "          <DataItem Dimensions=\"" << nb << " 3\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">"
+      << name << ":" << dataset << "|" << r << " 0 0:1 1 1:1 " << nb << " 3:" << all << "</DataItem>\n";
   };
   o << "<?xml version=\"1.0\" ?>\n"
     << "<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n"
-    << "<!-- octocd trace sidecar: open in ParaView with the Xdmf3 reader -->\n"
+    << "<!-- octocd trace sidecar: open in ParaView with the XDMF Reader (Xdmf3) -->\n"
     << "<Xdmf Version=\"3.0\">\n  <Domain>\n"
     << "    <Grid Name=\"states\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
   for (std::size_t r = 0; r < rows; ++r) {
