@@ -15,7 +15,8 @@
 # Exit 2 on a bad argument, 1 when a step fails.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
-machine=${1:?usage: scripts/record.sh cpu [BUILD_DIR] | scripts/record.sh MACHINE GPU_RUN_OUT}
+machine=${1:-}
+[ -n "$machine" ] || { echo "usage: scripts/record.sh cpu [BUILD_DIR] | scripts/record.sh MACHINE GPU_RUN_OUT" >&2; exit 2; }
 case "$machine" in *[!a-z0-9-]*|"") echo "record.sh: machine name '$machine': use a-z, 0-9, -" >&2; exit 2 ;; esac
 out="$root/reports/$machine"
 rev=${OCTOCD_RECORD_BUILD:-$(git -C "$root" describe --always --dirty 2>/dev/null || echo unknown)}
@@ -45,7 +46,8 @@ if [ "$machine" = cpu ]; then
   in=$work
   note="Made on this project's 2-core development VM, shared with other jobs: read orders and ratios where the ranges are apart, not absolute figures (each result records its load average). Sweeps: ${OCTOCD_RECORD_SWEEPS:-table5 table6 figA2}; validate: every shipped scene but the 10^4+ body, rotating and mixed-pile ones, and the relaxation-pass copies of tests/data. Not in this record (tens of minutes each on 2 cores): the sweeps tableA1, broadphase-scaling and max-instances, validate of mixed-pile-1000 (6 minutes) and of the rotating scenes with --engine bullet; add them with OCTOCD_RECORD_SWEEPS on a quiet machine."
 else
-  in=${2:?usage: scripts/record.sh $machine GPU_RUN_OUT (the folder scripts/gpu-run.sh wrote)}
+  in=${2:-}
+  [ -n "$in" ] || { echo "usage: scripts/record.sh $machine GPU_RUN_OUT (the folder scripts/gpu-run.sh wrote)" >&2; exit 2; }
   [ -d "$in/bench" ] || { echo "record.sh: $in/bench: no such folder (expected scripts/gpu-run.sh's output)" >&2; exit 2; }
   rev=${OCTOCD_RECORD_BUILD:-$(cat "$in/VERSION" 2>/dev/null || echo "$rev")}
   note="From the output of scripts/gpu-run.sh on the $machine (${in##*/})."
