@@ -44,7 +44,18 @@ struct ShapeGeom {
   bool is_box = false;
   bool convex = true;  ///< box, or a mesh whose every triangle lies on its hull
   V3 half = V3::Zero();  ///< box half extents
+  HullFeatures features;  ///< the hull for the separating-axis test (body frame)
 };
+
+/// Adds the unit direction of d to `dirs` unless it is (anti)parallel to one there.
+void add_direction(std::vector<std::array<double, 3>>& dirs, const V3& d) {
+  const S n = d.norm();
+  if (!(n > 0) || !std::isfinite(n)) return;
+  const V3 u = d / n;
+  for (const auto& e : dirs)
+    if (u.cross(V3(e[0], e[1], e[2])).norm() < 1e-9) return;
+  dirs.push_back({u.x(), u.y(), u.z()});
+}
 
 /// A hull placed in the world for libccd: world = R v + position.
 struct CcdObject {
@@ -123,6 +134,11 @@ ShapeGeom build_box(const Shape& shape) {
   g.is_box = true;
   g.half = side * 0.5;
   g.hull_vertices = corners(lo, hi);  // body frame
+  for (const V3& v : g.hull_vertices) g.features.vertices.push_back({v.x(), v.y(), v.z()});
+  for (int k = 0; k < 3; ++k) {
+    add_direction(g.features.face_normals, V3::Unit(k));
+    add_direction(g.features.edge_dirs, V3::Unit(k));
+  }
   return g;
 }
 
@@ -170,6 +186,7 @@ ShapeGeom build_mesh(const Shape& shape) {
   if (verts->empty()) verts->assign(pts.begin(), pts.end());  // degenerate: support on all
   g.hull_vertices = *verts;
   for (V3& v : g.hull_vertices) v += g.offset;  // body frame
+  for (const V3& v : g.hull_vertices) g.features.vertices.push_back({v.x(), v.y(), v.z()});
   V3 centroid = V3::Zero();
   for (const V3& v : *verts) centroid += v;
   centroid /= S(std::max<std::size_t>(verts->size(), 1));
@@ -198,6 +215,10 @@ ShapeGeom build_mesh(const Shape& shape) {
     faces->push_back(int(idx.size()));
     faces->insert(faces->end(), idx.begin(), idx.end());
     ++num_faces;
+    add_direction(g.features.face_normals, n);
+    for (std::size_t k = 0; k < idx.size(); ++k)
+      add_direction(g.features.edge_dirs,
+                    (*verts)[std::size_t(idx[(k + 1) % idx.size()])] - (*verts)[std::size_t(idx[k])]);
     const S nn = n.norm();
     if (nn > 0) planes.emplace_back(n / nn, (n / nn).dot((*verts)[std::size_t(idx[0])]));
   }
@@ -526,6 +547,8 @@ Aabb ReferenceGeometry::world_aabb(std::uint32_t body, const Pose& pose) const {
 }
 
 bool ReferenceGeometry::convex(std::uint32_t body) const { return impl_->geom(body).convex; }
+
+const HullFeatures& ReferenceGeometry::hull_features(std::uint32_t body) const { return impl_->geom(body).features; }
 
 ReferenceNormal ReferenceGeometry::aabb_pair(const Aabb& a, const Aabb& b) {
   const fcl::Matrix3<S> id = fcl::Matrix3<S>::Identity();

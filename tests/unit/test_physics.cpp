@@ -16,6 +16,7 @@
 #include "octocd/physics.hpp"
 #include "octocd/reference_contact.hpp"
 #include "octocd/validation.hpp"
+#include "../../validation/physics/sat.hpp"
 
 using namespace octocd;
 
@@ -698,5 +699,141 @@ TEST(PosedReference, SeparatedMeshAboveFloorNormal) {
     // B = floor, A = ball: the normal flips.
     const ReferenceNormal s = ref.posed(1, 0, ball, floor);
     EXPECT_GT(s.normal.y, 0.99);
+  }
+}
+
+// ---- Exact reference geometry: the separating-axis test (SPEC 13b.9) -----------------
+
+namespace {
+
+/// Two dynamic boxes of half extents 0.1 x 0.05 x 0.08, no gravity, crossed edge on edge:
+/// the minimum translation is an edge-edge axis (SAT: 19.04 mm), while FCL's box-box test
+/// (ODE's dBoxBox, which keeps a face axis unless an edge-edge one overlaps less than
+/// 1/1.05 of it) answers a face normal of B, 19.89 mm deep and 83.8 deg away. Found by a
+/// random search over orientations (seed 5, draw 44392).
+struct CrossedBoxes {
+  std::shared_ptr<const Model> model;
+  Pose pa, pb;
+  FrameRecord rec;
+};
+
+CrossedBoxes crossed_boxes() {
+  const std::string text = R"({
+    "name": "crossed", "domain": {"min": [-1, -1, -1], "max": [1, 1, 1]}, "walls": "none",
+    "gravity": [0, 0, 0],
+    "groups": [
+      {"name": "a", "shape": {"box": [0.1, 0.05, 0.08]}, "count": 1, "mass": 1.0, "positions": [[0, 0, 0]]},
+      {"name": "b", "shape": {"box": [0.1, 0.05, 0.08]}, "count": 1, "mass": 1.0, "positions": [[0.5, 0, 0]]}
+    ]})";
+  CrossedBoxes c;
+  c.model = build_model(parse_scene(text, "crossed boxes (test)"));
+  c.pa = Pose{v3(0.1, 0.2, 0.3), Quat{0.997567654f, -0.00725969253f, -0.0395310596f, -0.0569506921f}};
+  c.pb = Pose{v3(-0.0387659743, 0.129426897, 0.427107513),
+              Quat{0.991080165f, 0.0486282595f, -0.0467353426f, -0.114939965f}};
+  FrameRecord& rec = c.rec;
+  rec.frame = 3;
+  rec.manifolds = true;
+  rec.has_points = true;
+  for (const Pose& p : {c.pa, c.pb}) {
+    rec.x_det.push_back(p.position);
+    rec.q_det.push_back(p.orientation);
+  }
+  for (std::size_t i = 0; i < 2; ++i) rec.aabbs.push_back(posed_box_aabb(c.model->local_box(i), i ? c.pb : c.pa));
+  rec.pairs.push_back({0, 1});
+  return c;
+}
+
+/// The engine's one row: normal n, depth d, at FCL's contact point.
+void add_row(CrossedBoxes& c, const std::array<double, 3>& n, double d, Vec3 point) {
+  ContactRecord row;
+  row.pair = {0, 1};
+  row.normal = v3(n[0], n[1], n[2]);
+  row.depth = float(d);
+  row.point = point;
+  row.jn = 0.01f;
+  row.jt = 0.0f;
+  c.rec.contacts.push_back(row);
+}
+
+}  // namespace
+
+// The separating-axis test itself: the figures of the crossed boxes, every axis within
+// epsilon accepted, FCL's face normal among them (within 5%), the edge-edge minimum first.
+TEST(SeparatingAxis, CrossedBoxesMinimumIsTheEdgeEdgeAxis) {
+  CrossedBoxes c = crossed_boxes();
+  ReferenceGeometry ref(*c.model);
+  const SatResult s = sat_min_translation(ref.hull_features(0), c.pa, ref.hull_features(1), c.pb);
+  ASSERT_TRUE(s.tested);
+  ASSERT_FALSE(s.separated);
+  EXPECT_EQ(s.axes, 15u);
+  EXPECT_NEAR(s.depth, 0.01904, 1e-5);
+  ASSERT_EQ(s.accepted.size(), 2u);
+  const ReferenceNormal f = ref.posed(0, 1, c.pa, c.pb);
+  ASSERT_TRUE(f.penetrating && f.valid);
+  EXPECT_NEAR(f.depth, 0.01989, 1e-5);  // FCL: 4.5% deeper than the minimum
+  EXPECT_GT(f.depth, 1.04 * s.depth);
+  // The minimum is an edge-edge axis 83.8 deg from FCL's face normal.
+  EXPECT_NEAR(angle_between(f.normal, v3(s.normal[0], s.normal[1], s.normal[2])) * 180 / kPi, 83.8, 0.1);
+  // FCL's normal is an accepted axis (within 5% of the minimum); no translation along any
+  // axis is smaller than the minimum's.
+  EXPECT_LT(sat_angle_to_accepted(s, {f.normal.x, f.normal.y, f.normal.z}) * 180 / kPi, 1e-3);
+  // Without the relative epsilon only the minimum is accepted.
+  SatSettings exact;
+  exact.rel = 0;
+  EXPECT_EQ(sat_min_translation(ref.hull_features(0), c.pa, ref.hull_features(1), c.pb, exact).accepted.size(), 1u);
+  // Moved apart along the minimum's axis by more than the depth: separated.
+  Pose far = c.pa;
+  far.position = far.position + float(s.depth + 1e-3) * v3(s.normal[0], s.normal[1], s.normal[2]);
+  EXPECT_TRUE(sat_min_translation(ref.hull_features(0), far, ref.hull_features(1), c.pb).separated);
+  EXPECT_FALSE(ref.posed(0, 1, far, c.pb).penetrating);
+}
+
+// An engine whose normal is the exact minimum (edge-edge) passed as a failure against
+// FCL's box-box (83.8 deg "off FCL"): judged by the separating-axis test it passes, and
+// the detail names the reference. A normal turned 45 deg from every accepted axis is
+// still caught, and so is a depth far from the SAT minimum.
+TEST(SeparatingAxis, ExactMinimumPassesTurnedNormalCaught) {
+  CrossedBoxes c = crossed_boxes();
+  ReferenceGeometry ref(*c.model);
+  const SatResult s = sat_min_translation(ref.hull_features(0), c.pa, ref.hull_features(1), c.pb);
+  const ReferenceNormal f = ref.posed(0, 1, c.pa, c.pb);
+  PhysicsBodies bodies = rotating_engine();
+  {
+    CrossedBoxes e = c;
+    add_row(e, s.normal, s.depth, f.point_a);
+    const auto rs = judge(*e.model, e.rec, bodies);
+    expect_all_pass(rs);
+    const ValidationResult& g = row_of(rs, "contact-geometry");
+    EXPECT_LT(g.measured, 0.02) << g.detail;
+    EXPECT_NE(g.detail.find("SAT on 1 convex pair-frames"), std::string::npos) << g.detail;
+    EXPECT_NE(g.detail.find("second opinion: FCL's normal on another axis than the minimum on 1 pair-frames"),
+              std::string::npos)
+        << g.detail;
+  }
+  {
+    // FCL's face normal and depth (ODE's choice) are accepted too.
+    CrossedBoxes e = c;
+    add_row(e, {f.normal.x, f.normal.y, f.normal.z}, f.depth, f.point_a);
+    expect_all_pass(judge(*e.model, e.rec, bodies));
+  }
+  {
+    // The minimum's normal turned by 45 deg away from FCL's face normal: 45 deg from the
+    // nearest accepted axis.
+    const Vec3 n = v3(s.normal[0], s.normal[1], s.normal[2]);
+    const Vec3 side = cross(f.normal, n);
+    const Vec3 axis = (1.0f / length(side)) * side;
+    const Vec3 turned = rotate(axis_angle(axis, float(kPi / 4)), n);
+    EXPECT_NEAR(sat_angle_to_accepted(s, {turned.x, turned.y, turned.z}) * 180 / kPi, 45.0, 0.01);
+    CrossedBoxes e = c;
+    add_row(e, {turned.x, turned.y, turned.z}, s.depth, f.point_a);
+    expect_caught(judge(*e.model, e.rec, bodies), "contact-geometry",
+                  {"frame 3", "pair (0, 1) row 0", "45.0 deg from SAT's", "[reference: SAT]"});
+  }
+  {
+    // A depth 6 mm beyond the minimum (depth_m 5 mm).
+    CrossedBoxes e = c;
+    add_row(e, s.normal, s.depth + 0.006, f.point_a);
+    expect_caught(judge(*e.model, e.rec, bodies), "contact-geometry",
+                  {"frame 3", "pair (0, 1)", "SAT minimum 0.01904 m", "[reference: SAT]"});
   }
 }

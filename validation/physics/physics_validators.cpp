@@ -20,6 +20,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/reference_contact.hpp"
+#include "sat.hpp"
 
 namespace octocd {
 
@@ -173,6 +174,13 @@ struct PhysicsValidators::Impl {
   std::uint64_t sign_rows = 0, sign_agree = 0, shape_angle_rows = 0;
   std::vector<double> shape_angles;  // Aabb geometry: angle to the posed shapes (figure)
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
+  // Contact geometry's references: pairs judged by the separating-axis test and by FCL;
+  // where FCL's normal lies outside SAT's accepted axes (figure: FCL's box-box keeps a
+  // face axis up to 5% deeper than the minimum).
+  std::uint64_t sat_pairs = 0, fcl_pairs = 0, sat_fcl_other = 0, sat_fcl_disagree = 0;
+  double sat_fcl_worst_excess = 0, sat_fcl_other_excess = 0;
+  std::string sat_fcl_what;
+  SatSettings sat_settings;
   double speculative_worst = 0;
   std::uint64_t dissipation_cone_only = 0, groups = 0, groups_rotating = 0, state_frames = 0, groups_clamped = 0;
   double pen_max = 0, pen_upper_max = 0;
@@ -194,6 +202,9 @@ struct PhysicsValidators::Impl {
     return combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
   }
   bool dynamic(std::uint32_t i) const { return mass[i] > 0; }
+  /// Whether body i's collision shape is a convex polytope the separating-axis test
+  /// judges (a box, or a convex mesh).
+  bool sat_shape(std::uint32_t i) const { return ref->convex(i); }
 
   void geometry(const FrameRecord& rec, const std::vector<Pose>& det);
   void dynamics(const FrameRecord& rec, const std::vector<Pose>& det);
@@ -264,6 +275,8 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
     for (float t : model.theta_shape) s.max_margin = std::max(s.max_margin, double(t));
   }
   s.ref = std::make_unique<ReferenceGeometry>(model);
+  s.sat_settings.abs_m = tol.geometry_slack_m;
+  s.sat_settings.rel = tol.sat_accept_rel;
   BroadPhaseConfig oc;
   oc.name = "octree";
   oc.octree_depth = -1;
@@ -318,21 +331,41 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
 
   // Truth per pair, lazily: intersect() for every candidate, posed() where a row needs
   // the depth or the distance.
+  // Two convex shapes (boxes, convex meshes) that penetrate get the exact minimum
+  // translation of the separating-axis test (SPEC 13b.9: FCL's box-box keeps a face axis
+  // up to 5% deeper than an edge-edge one, so its depth and normal are not the minimum
+  // there); FCL's answer stays beside it as the second opinion.
   struct Truth {
     bool intersects = false, have = false;
     ReferenceNormal g;
+    bool sat = false;  // g's depth and normal are the separating-axis test's
+    SatResult sat_result;
+    ReferenceNormal fcl;  // FCL's own answer (the second opinion where sat)
   };
   std::map<std::pair<std::uint32_t, std::uint32_t>, Truth> truth;
   auto key = [](Pair p) { return std::make_pair(p.a, p.b); };
-  auto full = [&](Pair p) -> const ReferenceNormal& {
+  auto full_truth = [&](Pair p) -> const Truth& {
     Truth& t = truth[key(p)];
     if (!t.have) {
       t.g = ref->posed(p.a, p.b, det[p.a], det[p.b]);
+      t.fcl = t.g;
+      if (t.g.penetrating && t.g.valid && sat_shape(p.a) && sat_shape(p.b)) {
+        t.sat_result = sat_min_translation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b), det[p.b],
+                                           sat_settings);
+        if (t.sat_result.tested && !t.sat_result.separated) {
+          t.sat = true;
+          t.g.depth = t.sat_result.depth;
+          t.g.depth_upper_bound = false;
+          const auto& u = t.sat_result.normal;
+          t.g.normal = Vec3{float(u[0]), float(u[1]), float(u[2])};
+        }
+      }
       t.have = true;
       t.intersects = t.g.penetrating;
     }
-    return t.g;
+    return t;
   };
+  auto full = [&](Pair p) -> const ReferenceNormal& { return full_truth(p).g; };
   const bool need_distance = tol.broadphase_margin_m - slack > 0;
   std::vector<Pair> required;
   for (const Pair& p : cand) {
@@ -451,8 +484,36 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   for (const PairRows& pr : rows) {
     poll();
     const Pair p = pr.p;
-    const ReferenceNormal& shape_ref = full(p);
+    const Truth& shape_truth = full_truth(p);
+    const ReferenceNormal& shape_ref = shape_truth.g;
     const bool aabb = bodies.contact_geometry == ContactGeometry::Aabb;
+    // The reference that judges this pair: the separating-axis test (every near-minimal
+    // axis accepted) or FCL (box-box, EPA, or the BVH bound of non-convex meshes).
+    const bool by_sat = !aabb && shape_truth.sat;
+    const char* judge = by_sat ? "SAT" : "FCL";
+    if (by_sat) {
+      ++sat_pairs;
+      // The second opinion: FCL's normal outside SAT's accepted axes is a figure.
+      const double fcl_angle = sat_angle_to_accepted(shape_truth.sat_result, d3(shape_truth.fcl.normal)) * 180.0 / kPi;
+      const double fcl_excess = shape_truth.fcl.depth - shape_truth.g.depth;
+      if (angle_between(shape_truth.fcl.normal, shape_truth.g.normal) * 180.0 / kPi > 1.0) {
+        ++sat_fcl_other;
+        if (fcl_excess > sat_fcl_other_excess) sat_fcl_other_excess = fcl_excess;
+      }
+      if (fcl_angle > 1.0) {
+        ++sat_fcl_disagree;
+        if (fcl_excess > sat_fcl_worst_excess) {
+          sat_fcl_worst_excess = fcl_excess;
+          sat_fcl_what = fmt::format("frame {}: {} FCL {:.4g} m along ({:.3f}, {:.3f}, {:.3f}), {:.1f} deg from "
+                                     "SAT's accepted axes, minimum {:.4g} m",
+                                     frame, pair_name(p), shape_truth.fcl.depth, shape_truth.fcl.normal.x,
+                                     shape_truth.fcl.normal.y, shape_truth.fcl.normal.z, fcl_angle,
+                                     shape_truth.g.depth);
+        }
+      }
+    } else if (!aabb) {
+      ++fcl_pairs;
+    }
     const ReferenceNormal r = aabb ? ReferenceGeometry::aabb_pair(rec.aabbs[p.a], rec.aabbs[p.b]) : shape_ref;
     if (!r.valid) {
       rows_unjudged += pr.count;
@@ -472,7 +533,14 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     const bool engine_places_depth = rec.contacts[deepest].depth > tol.geometry_slack_m;
     for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
       const ContactRecord& c = rec.contacts[k];
-      const double angle = angle_between(c.normal, r.normal) * deg;
+      std::size_t nearest = 0;
+      const double angle =
+          (by_sat ? sat_angle_to_accepted(shape_truth.sat_result, d3(c.normal), &nearest) : angle_between(c.normal, r.normal)) *
+          deg;
+      const Vec3 ref_normal = by_sat ? Vec3{float(shape_truth.sat_result.accepted[nearest].normal[0]),
+                                            float(shape_truth.sat_result.accepted[nearest].normal[1]),
+                                            float(shape_truth.sat_result.accepted[nearest].normal[2])}
+                                     : r.normal;
       ++sign_rows;
       if (dot(c.normal, r.normal) > 0.0f) ++sign_agree;
       // A row the engine places at depth 0 on a pair that penetrates less than
@@ -492,10 +560,17 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
         speculative_worst = std::max(speculative_worst, angle);
       } else {
         normal_angle.check(angle <= tol.normal_angle_deg, angle, [&] {
-          return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from FCL's "
-                             "({:.3f}, {:.3f}, {:.3f}) ({}minimum translation)",
-                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle,
-                             r.normal.x, r.normal.y, r.normal.z, aabb ? "box-box on the world AABBs, " : "");
+          return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from {}'s "
+                             "({:.3f}, {:.3f}, {:.3f}) ({}){}",
+                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle, judge,
+                             ref_normal.x, ref_normal.y, ref_normal.z,
+                             aabb     ? "box-box on the world AABBs, minimum translation"
+                             : by_sat ? fmt::format("the nearest of {} axes within {:.3g} m of the minimum "
+                                                    "translation {:.4g} m",
+                                                    shape_truth.sat_result.accepted.size(),
+                                                    shape_truth.sat_result.epsilon, r.depth)
+                                      : std::string("minimum translation"),
+                             by_sat ? " [reference: SAT]" : " [reference: FCL]");
         });
       }
       if (aabb && shape_ref.valid) {
@@ -529,8 +604,9 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     // An upper bound (non-convex meshes) judges one side only: the engine may be shallower.
     const double diff = r.depth_upper_bound ? double(c.depth) - want : std::fabs(double(c.depth) - want);
     depth.check(diff <= tol.depth_m, diff, [&] {
-      return fmt::format("frame {}: {} deepest row depth {:.4g} m, FCL {:.4g} m{}", frame, pair_name(p), c.depth,
-                         want, r.depth_upper_bound ? " (upper bound)" : "");
+      return fmt::format("frame {}: {} deepest row depth {:.4g} m, {} {:.4g} m{} [reference: {}]", frame,
+                         pair_name(p), c.depth, by_sat ? "SAT minimum" : "FCL", want,
+                         r.depth_upper_bound ? " (upper bound)" : "", judge);
     });
   }
 
@@ -926,7 +1002,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
   }
   // 3. Contact geometry.
   {
-    ValidationResult r = row("contact-geometry", "worst normal angle to FCL's (deg)", "normal_angle_deg,depth_m");
+    ValidationResult r = row("contact-geometry", "worst normal angle to the reference's (deg; SAT or FCL)",
+                             "normal_angle_deg,depth_m,sat_accept_rel");
     r.measured = s.normal_angle.worst_or(0.0);
     r.bound = s.tol.normal_angle_deg;
     r.pass = s.normal_angle.failures == 0 && s.depth.failures == 0 && s.points.failures == 0;
@@ -962,7 +1039,11 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     } else {
       r.detail = fmt::format("{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}",
                              s.normal_angle.checks, aabb ? " on the world AABBs" : "",
-                             aabb ? "FCL box-box" : "FCL: box-box or EPA", s.normal_angle.worst_or(0.0),
+                             aabb ? std::string("FCL box-box")
+                                  : fmt::format("reference: SAT on {} convex pair-frames, FCL (box-box, EPA or the "
+                                                "non-convex BVH bound) on {}",
+                                                s.sat_pairs, s.fcl_pairs),
+                             s.normal_angle.worst_or(0.0),
                              s.depth.worst_or(0.0),
                              s.points.checks ? fmt::format(", {} points, worst {:.3g} m beyond the depth",
                                                            s.points.checks, s.points.worst_or(0.0))
@@ -978,6 +1059,14 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       if (s.upper_bound_pairs)
         r.detail += fmt::format("; {} non-convex mesh pairs: depth judged one-sided against an upper bound",
                                 s.upper_bound_pairs);
+      if (s.sat_fcl_other)
+        r.detail += fmt::format("; second opinion: FCL's normal on another axis than the minimum on {} pair-frames "
+                                "(figure; FCL up to {:.3g} m deeper)",
+                                s.sat_fcl_other, s.sat_fcl_other_excess);
+      if (s.sat_fcl_disagree)
+        r.detail += fmt::format("; FCL's normal outside SAT's accepted axes on {} pair-frames "
+                                "(figure; largest depth excess {}: {:.3g} m)",
+                                s.sat_fcl_disagree, s.sat_fcl_what, s.sat_fcl_worst_excess);
     }
     out.push_back(r);
   }

@@ -366,6 +366,7 @@ const std::vector<ToleranceEntry>& tolerance_table() {
       {"broadphase_margin_m", &Tolerances::broadphase_margin_m, "m"},
       {"contact_depth_m", &Tolerances::contact_depth_m, "m"},
       {"normal_angle_deg", &Tolerances::normal_angle_deg, "degrees"},
+      {"sat_accept_rel", &Tolerances::sat_accept_rel, "relative (of the minimum translation)"},
       {"depth_m", &Tolerances::depth_m, "m"},
       {"penetration_slops", &Tolerances::penetration_slops, "slops"},
       {"penetration_settle_frames", &Tolerances::penetration_settle_frames, "frames"},

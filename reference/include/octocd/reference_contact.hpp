@@ -55,8 +55,10 @@
 ///    hull depth separates the hulls, hence the meshes). The normal is the direction
 ///    that gave it. The true minimum translation of two non-convex meshes is not computed.
 
+#include <array>
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "octocd/math.hpp"
 #include "octocd/pose.hpp"
@@ -77,6 +79,18 @@ struct ReferenceNormal {
   bool depth_upper_bound = false;
   /// Signed distance (m): -depth when penetrating, distance otherwise.
   double signed_distance() const { return penetrating ? -depth : distance; }
+};
+
+/// A shape's convex hull in the body frame, as the separating-axis test needs it
+/// (validation/physics/sat.hpp): a box's 8 corners, 3 face axes and 3 edge axes; a mesh's
+/// convex hull (Bullet's btConvexHullComputer on its vertices, exact: hull vertices are
+/// mesh vertices) with its faces' unit outward normals and its edges' unit directions.
+/// Axes parallel or antiparallel to one already listed (|cross| < 1e-9) are dropped: the
+/// test projects on both orientations of an axis. Double precision, metres.
+struct HullFeatures {
+  std::vector<std::array<double, 3>> vertices;      ///< body frame, m
+  std::vector<std::array<double, 3>> face_normals;  ///< unit, body frame, one per direction
+  std::vector<std::array<double, 3>> edge_dirs;     ///< unit, body frame, one per direction
 };
 
 /// Per-shape FCL geometry of a World, built once: for meshes fcl::BVHModel<fcl::OBBRSS<double>>
@@ -137,6 +151,10 @@ class ReferenceGeometry {
   /// Whether the body's shape is convex (a box, or a mesh whose every triangle lies in a
   /// face plane of its convex hull, within 1e-6 m).
   bool convex(std::uint32_t body) const;
+
+  /// The convex hull of body `body`'s shape in the body frame (see HullFeatures). Throws
+  /// InputError for a body out of range.
+  const HullFeatures& hull_features(std::uint32_t body) const;
 
   /// Box-box geometry of two axis-aligned boxes given in the world (FCL's box-box test;
   /// FCL distance when apart): what an engine that resolves contacts on world AABBs

@@ -199,6 +199,14 @@ struct Tolerances {
   /// normals deviate by p95 28-30 deg, max 57 deg (bunny-stack-50) and 115 deg
   /// (bunny-random-400).
   double normal_angle_deg = 40.0;
+  /// Contact geometry of two convex polytopes (boxes, convex meshes; SPEC 13b.9): the
+  /// separating-axis test accepts as a normal every axis whose overlap is within
+  /// geometry_slack_m + this fraction of the minimum translation (validation/physics/
+  /// sat.hpp). 0.05: ODE's box-box test (FCL's, Bullet's btBoxBoxDetector) keeps a face
+  /// axis unless an edge-edge axis overlaps less than 1/1.05 of it (its fudge_factor), so
+  /// a face normal up to 5% deeper than the minimum is a deliberate choice of widely used
+  /// detectors; a normal 45 deg from every accepted axis is still caught.
+  double sat_accept_rel = 0.05;
   /// Contact geometry: largest |engine depth - FCL depth| (m) of a pair's deepest row,
   /// and how far beyond the pair's depth (or distance) a row's point may lie from either
   /// surface. A solver's depth is measured at its own point of the manifold, FCL's is the
