@@ -368,3 +368,26 @@ TEST_F(TraceIn, PythonRotatingWriterIsAValidVersion2Trace) {
   const Result r = run(bin() + " validate --trace-in " + path);
   EXPECT_TRUE(r.code == 0 || r.code == 3) << r.output;  // judged, never refused as input
 }
+
+// /contacts/jt3 (SPEC 13b.11): the tangential impulse vectors; each must lie in its row's
+// contact plane (within kJt3MaxAngleDeg = 1 deg), one per contact row.
+TEST_F(TraceIn, Version2Jt3InTheContactPlane) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  Trace good = Trace::make_v2();
+  // Normals are -x: friction along y and z, |jt3| = |jt|.
+  good.jt3 = {0, 0.001f, 0, 0, -0.002f, 0, 0, 0, 0.003f, 0, 0, 0, 0, 0.003f, 0.004f};
+  const Result ok = validate(good);
+  EXPECT_TRUE(ok.code == 0 || ok.code == 3) << ok.output;
+  EXPECT_NE(ok.output.find("rule jt3 on"), std::string::npos) << ok.output;
+  Trace tilted = good;
+  tilted.jt3[3 * 3 + 0] = 0.004f;  // frame 3's first row: (0.004, 0, 0.004) is 45 deg out of the plane
+  tilted.jt3[3 * 3 + 2] = 0.004f;
+  expect_bad_both(v(tilted), {"/contacts/jt3", "frame 3", "row 0 (pair (1, 2))", "45 deg out of the contact plane",
+                              "orthogonal to the row's normal (within 1 deg)"});
+  Trace shape = good;
+  shape.dims["/contacts/jt3"] = {4, 3};
+  expect_bad_both(v(shape), {"/contacts/jt3", "shape 4 x 3", "allowed: 5 x 3"});
+  Trace v1;
+  v1.jt3 = {0, 0.001f, 0, 0, 0.001f, 0, 0, 0.001f, 0};
+  expect_bad(validate(v1), {"/contacts/jt3", "present in a version 1 file"});
+}

@@ -423,11 +423,17 @@ TEST(PhysicsRows, FrictionImpulseOutsideTheCone) {
   float jn_pair = 0.0f;
   for (const ContactRecord& c : r.rec.contacts)
     if (c.pair == r.rec.contacts[4].pair) jn_pair += c.jn;
-  r.rec.contacts[4].jt = -0.5f * jn_pair * 1.5f - 0.01f;  // outside (beyond the solver slack)
-  expect_caught(judge(*model, r.rec, rotating_engine()), "friction", {"frame 7", "pair (0, 3)", "|jt|"});
+  r.rec.contacts[4].jt = -0.5f * jn_pair * 1.5f - 0.01f;  // outside
+  expect_caught(judge(*model, r.rec, rotating_engine()), "friction",
+                {"frame 7", "pair (0, 3)", "|jt|", "[rule: scalar]"});
+  // 1.2x the cone over the pair's 4 rows (the other 3 rows carry 0.001 each): caught, no
+  // relative slack (the scalar rule's absolute slack friction_cone_abs is 1e-3 kg m/s,
+  // the excess here 0.002).
+  r.rec.contacts[4].jt = 1.2f * 0.5f * jn_pair - 0.003f;
+  expect_caught(judge(*model, r.rec, rotating_engine()), "friction", {"frame 7", "pair (0, 3)", "1.2 x the cone"});
   // Per-body friction with the product rule: 0.4 x 0.5 = 0.2 < 0.45 -> also out.
   RestingRecord q = resting(*model);
-  q.rec.contacts[4].jt = 0.45f * jn_pair;
+  q.rec.contacts[4].jt = 0.45f * jn_pair - 0.003f;  // the pair's sum: 0.45 jn, inside mu = 0.5
   PhysicsBodies b = rotating_engine();
   EXPECT_TRUE(row_of(judge(*model, q.rec, b), "friction").pass);
   b.body_friction = {0.4f, 0.4f, 0.4f, 0.5f};  // 0.2: 0.45 is 2.25 times the cone

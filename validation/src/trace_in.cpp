@@ -245,7 +245,8 @@ class TraceIn {
   /// The datasets version 2 adds: an error in a version 1 file.
   static constexpr const char* kV2Datasets[] = {"/states/orientation", "/states/angular_velocity",
                                                 "/bodies/inertia",     "/contacts/point",
-                                                "/bodies/friction",    "/bodies/restitution"};
+                                                "/bodies/friction",    "/bodies/restitution",
+                                                "/contacts/jt3"};
 
   void reject_v2_datasets() const {
     for (const char* name : kV2Datasets)
@@ -341,6 +342,13 @@ class TraceIn {
              fmt::format("{} x 3, one world point per contact row (as /contacts/pair)", c_pair_.dims[0]));
       info.has_points = true;
     }
+    c_jt3_ = open("/contacts/jt3", H5T_FLOAT, 2, false);
+    if (c_jt3_.present()) {
+      if (!info.has_contacts) bad(c_jt3_.name, "without /contacts/pair", "tangential impulse vectors with /contacts");
+      expect(c_jt3_, {c_pair_.dims[0], 3},
+             fmt::format("{} x 3, one tangential impulse vector (world, N s) per contact row (as /contacts/pair)",
+                         c_pair_.dims[0]));
+    }
   }
 
   /// Step f's version 2 fields (the v1 fields are read already).
@@ -375,6 +383,11 @@ class TraceIn {
         const std::vector<Vec3> points = vectors(read<float>(c_point_, first, rec.contacts.size()));
         for (std::size_t k = 0; k < points.size(); ++k) rec.contacts[k].point = points[k];
         rec.has_points = true;
+      }
+      if (c_jt3_.present()) {
+        const hsize_t first = static_cast<hsize_t>(contact_offsets_[r - 1]);
+        rec.jt3 = vectors(read<float>(c_jt3_, first, rec.contacts.size()));
+        names.contact_jt3 = "/contacts/jt3";
       }
     }
   }
@@ -551,7 +564,7 @@ class TraceIn {
   bool committed_ = false;                  // the trace has committed_states (octocd's own)
   hsize_t n_ = 0;
   std::int64_t frames_ = 0;
-  Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_;
+  Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_, c_jt3_;
   // Version 2.
   Dataset orientation_, angular_, c_point_;
   bool integrated_ = false;  ///< root attribute detection = "integrated"

@@ -350,7 +350,6 @@ const std::vector<ToleranceEntry>& tolerance_table() {
       {"friction_speed", &Tolerances::friction_speed, "m/s"},
       {"friction_cone_rel", &Tolerances::friction_cone_rel, "relative"},
       {"friction_cone_abs", &Tolerances::friction_cone_abs, "kg m/s"},
-      {"friction_cone_solver_rel", &Tolerances::friction_cone_solver_rel, "relative"},
       {"momentum_rel", &Tolerances::momentum_rel, "relative"},
       {"centre_rel", &Tolerances::centre_rel, "relative"},
       {"normal_sign_agreement", &Tolerances::normal_sign_agreement, "share in [0, 1]"},

@@ -35,9 +35,22 @@
 ///     to the posed shapes is a figure. The sign share is a figure.
 ///  4. `penetration` (checked frames): the largest true penetration (FCL) from frame
 ///     `penetration_settle_frames` on, at most `penetration_slops` x slop.
-///  5. `friction` (every frame): |jt| <= mu jn (1 + friction_cone_rel) + 1e-9 per row,
-///     mu the pair's (per-body values combined, else `mu`). Dissipation where the pair
-///     is the only contact pair of each of its dynamic bodies and states are given.
+///  5. `friction` (every frame), per pair (a manifold's rows together), two rules; the
+///     detail says which judged ("[rule: jt3]" or "[rule: scalar]"):
+///     - jt3 (FrameRecord::jt3, the tangential impulse vectors): the cone |sum jt3| <=
+///       mu sum jn + rounding (16 x 2^-23 of sum |jt3| + mu sum jn; no relative slack),
+///       mu the pair's (per-body values combined, else `mu`); dissipation on every pair
+///       that is its dynamic bodies' only contact pair, manifolds included: the summed
+///       friction impulse must not push the rows' points along their relative sliding
+///       (v + w x r at each row's point), sum_k jt3_k . v_t,k / sum_k |jt3_k| <=
+///       `friction_speed` + the witness-point allowance, with the sliding taken before
+///       the step, with the pair's normal impulses alone, and after the step (a solver
+///       may fix its friction direction at any of them; it fails when it pushes along the
+///       sliding at all three). Pairs whose friction impulse is at most
+///       `friction_cone_abs` are not judged on direction (counted).
+///     - scalar jt (no jt3): the cone sum |jt| <= mu sum jn + rounding +
+///       `friction_cone_abs`; dissipation where the pair is a single row and the only
+///       contact of each of its dynamic bodies, as follows.
 ///     Translation-only records (or no points): the relative tangential speed at the
 ///     centres after the step is at most the speed before it (v_pre + dt g on dynamic
 ///     bodies) + `friction_speed`. Rotating records with points: the row's friction
