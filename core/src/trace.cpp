@@ -610,6 +610,7 @@ void TraceWriter::create_v2_layout() {
               path);
   attr_scalar(root, "broadphase_exact", H5T_STD_I32LE, H5T_NATIVE_INT, t.broadphase_exact ? 1 : 0, path);
   attr_string(root, "contact_geometry", t.contact_geometry, path);
+  if (!t.collision_shape.empty()) attr_string(root, "collision_shape", t.collision_shape, path);
   {
     const hsize_t three = 3;
     Handle space(check(H5Screate_simple(1, &three, nullptr), path, "H5Screate_simple"));

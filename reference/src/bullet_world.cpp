@@ -748,6 +748,7 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
     // sqrt(2) x the threshold apart; + 1 mm for the float32 distances.
     m.traits.contact_margin = static_cast<float>(std::sqrt(2.0) * gContactBreakingThreshold) + 0.001f;
     m.traits.jt3 = true;  // fill_record gives every row its friction impulse vector
+    m.traits.collision_shape = "convex_hull";  // a mesh rotates as its hull, a box as itself
     // Box-hull and hull-hull pairs: Bullet's convex-convex algorithm with the checked
     // contacts (CheckedConvexAlgorithm). Box-box pairs keep btBoxBoxDetector.
     m.convex_convex.pd = &m.epa;

@@ -391,3 +391,37 @@ TEST_F(TraceIn, Version2Jt3InTheContactPlane) {
   v1.jt3 = {0, 0.001f, 0, 0, 0.001f, 0, 0, 0.001f, 0};
   expect_bad(validate(v1), {"/contacts/jt3", "present in a version 1 file"});
 }
+
+// Declared collision shapes (SPEC 13b.10): the root attribute or one string per body;
+// an unknown value, a sphere on a box, both forms at once, a wrong count: exit 2 naming
+// the file, the dataset or attribute, the body and the allowed values.
+TEST_F(TraceIn, Version2CollisionShapes) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  Trace all = Trace::make_v2();
+  all.string_attrs["collision_shape"] = "convex_hull";
+  const Result ok = validate(all);
+  EXPECT_TRUE(ok.code == 0 || ok.code == 3) << ok.output;
+  Trace per_body = Trace::make_v2();
+  per_body.collision_shape = {"mesh", "box", "convex_hull"};
+  EXPECT_EQ(validate(per_body, "--check-only").code, 0);
+  Trace unknown = Trace::make_v2();
+  unknown.collision_shape = {"mesh", "capsule", "box"};
+  expect_bad_both(v(unknown), {"t.h5", "/bodies/collision_shape: body 1", "'capsule' unknown",
+                               "\"mesh\", \"convex_hull\", \"box\" or \"sphere\""});
+  Trace attr = Trace::make_v2();
+  attr.string_attrs["collision_shape"] = "hull";
+  expect_bad_both(v(attr), {"root attribute collision_shape", "'hull' unknown", "\"convex_hull\""});
+  Trace both = per_body;
+  both.string_attrs["collision_shape"] = "mesh";
+  expect_bad_both(v(both), {"/bodies/collision_shape", "given with the root attribute"});
+  Trace count = Trace::make_v2();
+  count.collision_shape = {"mesh", "box"};
+  expect_bad_both(v(count), {"/bodies/collision_shape", "2 values", "3 strings, one per body"});
+  // Every body here is a box: a box cannot be collided as a sphere.
+  Trace sphere = Trace::make_v2();
+  sphere.collision_shape = {"mesh", "mesh", "sphere"};
+  const Result s = validate(sphere);
+  EXPECT_EQ(s.code, 2) << s.output;
+  for (const char* f : {"t.h5", "/bodies/collision_shape", "body 2", "\"sphere\" on a box shape", "allowed for a box"})
+    EXPECT_NE(s.output.find(f), std::string::npos) << f << " not in:\n" << s.output;
+}

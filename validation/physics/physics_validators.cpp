@@ -181,6 +181,9 @@ struct PhysicsValidators::Impl {
   double sat_fcl_worst_excess = 0, sat_fcl_other_excess = 0;
   std::string sat_fcl_what;
   SatSettings sat_settings;
+  // Declared collision shapes other than the body's own (figure): bodies per kind and the
+  // largest gap between the declared shape and the true one (m).
+  std::map<std::string, std::pair<std::uint64_t, double>> declared;
   double speculative_worst = 0;
   // Friction rules: pairs judged on jt3 (vectors) and on the scalar jt.
   std::uint64_t cone_jt3_pairs = 0, cone_scalar_pairs = 0, dissipation_jt3_pairs = 0, dissipation_small = 0;
@@ -279,7 +282,25 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
     s.max_margin = 0;
     for (float t : model.theta_shape) s.max_margin = std::max(s.max_margin, double(t));
   }
-  s.ref = std::make_unique<ReferenceGeometry>(model);
+  if (!bodies.collision_shape.empty()) {
+    if (bodies.collision_shape.size() != n)
+      bad("collision_shape", fmt::format("{} values for {} bodies; allowed: 0 (every body as its shape) or {}",
+                                         bodies.collision_shape.size(), n, n));
+    for (std::size_t i = 0; i < n; ++i)
+      if (bodies.collision_shape[i] == CollisionShape::Sphere && !model.shapes[model.bodies[i].shape].mesh)
+        bad("collision_shape", fmt::format("body {}: \"sphere\" on a box shape (a box cannot be collided as a "
+                                           "sphere); allowed for a box: \"mesh\", \"convex_hull\", \"box\" (each the "
+                                           "box itself)",
+                                           i));
+  }
+  s.ref = std::make_unique<ReferenceGeometry>(model, bodies.collision_shape);
+  for (std::size_t i = 0; i < bodies.collision_shape.size(); ++i) {
+    const CollisionShape c = bodies.collision_shape[i];
+    if (c == CollisionShape::Mesh) continue;
+    auto& [count, gap] = s.declared[collision_shape_name(c)];
+    ++count;
+    gap = std::max(gap, s.ref->declared_gap(static_cast<std::uint32_t>(i)));
+  }
   s.sat_settings.abs_m = tol.geometry_slack_m;
   s.sat_settings.rel = tol.sat_accept_rel;
   BroadPhaseConfig oc;
@@ -1186,6 +1207,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       if (s.upper_bound_pairs)
         r.detail += fmt::format("; {} non-convex mesh pairs: depth judged one-sided against an upper bound",
                                 s.upper_bound_pairs);
+      for (const auto& [kind, figure] : s.declared)
+        r.detail += fmt::format("; {} bodies collided as declared \"{}\" (judged on it; its surface lies up to "
+                                "{:.3g} m from the true shape: a figure)",
+                                figure.first, kind, figure.second);
       if (s.sat_fcl_other)
         r.detail += fmt::format("; second opinion: FCL's normal on another axis than the minimum on {} pair-frames "
                                 "(figure; FCL up to {:.3g} m deeper)",

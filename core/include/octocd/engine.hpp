@@ -211,6 +211,10 @@ struct RotationTraits {
   bool broadphase_exact = false;
   /// "shape" (contacts computed on the posed shapes) or "aabb".
   std::string contact_geometry = "shape";
+  /// What every body is collided as, written as the root attribute `collision_shape`
+  /// ("mesh", "convex_hull", "box", "sphere"; SPEC 13b.10); empty: not written (each body
+  /// as its shape). Bullet with rotation: "convex_hull" (a mesh is its hull, a box itself).
+  std::string collision_shape;
   /// Every record carries FrameRecord::jt3 (the tangential impulse vectors): the trace
   /// writes /contacts/jt3.
   bool jt3 = false;

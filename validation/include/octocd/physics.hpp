@@ -84,6 +84,7 @@
 #include <vector>
 
 #include "octocd/engine.hpp"
+#include "octocd/reference_contact.hpp"
 #include "octocd/validation.hpp"
 
 namespace octocd {
@@ -141,6 +142,11 @@ struct PhysicsBodies {
   bool broadphase_exact = false;
   /// What the engine's contact normals and depths are computed on.
   ContactGeometry contact_geometry = ContactGeometry::Shape;
+  /// What the engine collided each body as (SPEC 13b.10): empty, every body as its shape
+  /// (a box, or a mesh's triangles); else one per body. The geometric rows (broadphase
+  /// and contact completeness, contact geometry, penetration) judge the declared shape;
+  /// its gap to the true shape is a figure. `Sphere` on a box shape is an InputError.
+  std::vector<CollisionShape> collision_shape;
   /// The scene's slop (m, SPEC 6 delta): the penetration bound is a multiple of it.
   double slop = 0.001;
   /// A velocity clamp the engine declares (m/s, per component; 0 = none): octocd's Eq. 23
