@@ -608,3 +608,37 @@ TEST(DeclaredCollisionShapes, BulletsBunnyHullsPassDeclaredAndFailAsMeshes) {
   std::error_code ec;
   fs::remove_all(dir, ec);
 }
+
+// SPEC 13b.11 on Bullet's rot-slope (a box sliding down a slope on a 4-row manifold):
+// the clean trace passes the friction row on jt3; friction reversed (every row's jt3
+// negated) is caught, naming the frame and the pair.
+TEST(FrictionOnManifolds, BulletsSlopeReversedFrictionIsCaught) {
+  const fs::path dir = fs::temp_directory_path() / ("octocd-slope-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path trace = dir / "slope.h5";
+  const Result r = run_octocd("run " + (fs::path(source_dir()) / "datasets/scenes/rot-slope.json").string() +
+                              " --engine bullet --rotation --frames 100 --trace " + trace.string() +
+                              " --state-every 1 --contacts --no-xdmf --quiet");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Result clean = run_octocd("validate --trace-in " + trace.string());
+  EXPECT_EQ(clean.code, 0) << clean.output;
+  EXPECT_EQ(verdict(clean, "friction"), "pass") << clean.output;
+  EXPECT_NE(clean.output.find("rule jt3 on"), std::string::npos) << clean.output;
+  const fs::path reversed = dir / "reversed.h5";
+  fs::copy_file(trace, reversed, fs::copy_options::overwrite_existing);
+  const hid_t f = H5Fopen(reversed.string().c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  Data j = read(f, "/contacts/jt3");
+  ASSERT_FALSE(j.v.empty());
+  for (double& x : j.v) x = -x;
+  replace(f, "/contacts/jt3", j);
+  H5Fclose(f);
+  const Result bad = run_octocd("validate --trace-in " + reversed.string());
+  EXPECT_EQ(bad.code, 3) << bad.output;
+  EXPECT_EQ(verdict(bad, "friction"), "FAIL") << bad.output;
+  EXPECT_TRUE(std::regex_search(bad.output, std::regex("frame \\d+: pair \\(0, 1\\) \\(4 rows\\): the friction "
+                                                       "impulse .* pushes the contact points along their sliding")))
+      << bad.output;
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+}
