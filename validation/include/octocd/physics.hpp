@@ -21,8 +21,13 @@
 ///     contact row; a row on a pair farther apart than the contact margin (or the pair's
 ///     theta) + slack is a false contact.
 ///  3. `contact-geometry` (checked frames): per row on penetrating shapes, the angle
-///     between the engine's normal and FCL's minimum translation (two boxes: FCL's
-///     box-box; convex hulls: libccd EPA) within `normal_angle_deg`; rows on shapes
+///     between the engine's normal and the reference's within `normal_angle_deg`. Two
+///     convex polytopes (boxes, convex meshes, declared hulls and boxes): the
+///     separating-axis test (sat.hpp), the angle to the nearest axis whose overlap is
+///     within geometry_slack_m + `sat_accept_rel` of the minimum, the depth against the
+///     SAT minimum, FCL's answer a second opinion (figure). Other shapes: FCL (two boxes
+///     beyond SAT's budget: FCL's box-box; convex hulls: libccd EPA). Details name the
+///     reference ("[reference: SAT]" / "[reference: FCL]"); rows on shapes
 ///     that do not penetrate give the angle to the nearest-points direction as a figure
 ///     (two shapes touching at an edge or corner have no defined normal there, and a
 ///     persistent manifold keeps the normal a point was found with while bodies turn); the pair's deepest row's depth against
