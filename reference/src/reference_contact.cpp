@@ -395,7 +395,7 @@ bool hull_penetration(const CcdObject& ca, const CcdObject& cb, ReferenceNormal&
   return true;
 }
 
-/// Two posed boxes as boxes: FCL's box-box test (ODE's dBoxBox, the separating axis of
+/// Two posed boxes as boxes (or a declared sphere and a primitive): FCL's box-box test (ODE's dBoxBox, the separating axis of
 /// least penetration among the 15 candidates: the exact minimum translation of two
 /// boxes), its deepest contact; FCL distance when apart. (libccd's EPA on box corners can
 /// cycle without end on coplanar faces.)
@@ -556,6 +556,10 @@ ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const
   const fcl::Transform3<S> ta = geometry_transform(ga, ra, xa), tb = geometry_transform(gb, rb, xb);
   ReferenceNormal r;
   if (ga.is_box && gb.is_box) return box_box(ga, ta, gb, tb);
+  // A declared sphere against a primitive or a hull: FCL's own test (sphere-box and
+  // sphere-sphere exact, GJK/EPA on its sphere support otherwise); libccd's EPA on a
+  // sphere's support may stop short when the centres coincide.
+  if ((ga.is_sphere || gb.is_sphere) && !ga.bvh && !gb.bvh) return box_box(ga, ta, gb, tb);
   const CcdObject ca{&ga.hull_vertices, ra, xa, ga.radius};
   const CcdObject cb{&gb.hull_vertices, rb, xb, gb.radius};
   if (hull_penetration(ca, cb, r)) {

@@ -843,3 +843,43 @@ TEST(SeparatingAxis, ExactMinimumPassesTurnedNormalCaught) {
                   {"frame 3", "pair (0, 1)", "SAT minimum 0.01904 m", "[reference: SAT]"});
   }
 }
+
+// Declared collision shapes (SPEC 13b.10): the dumbbell collided as its convex hull, its
+// local box or a sphere; a small box in its gap then penetrates what was collided. The
+// gap to the true mesh is a figure: the hull's top face centre (0, 0.5, 0) lies 0.5 m
+// from the nearest cube edge.
+TEST(PosedReference, DeclaredCollisionShapes) {
+  const std::string text = R"({"name": "db", "domain": {"min": [-3, -3, -3], "max": [3, 3, 3]}, "walls": "none",
+    "groups": [{"name": "db", "shape": {"mesh": ")" + dumbbell_obj() + R"(", "scale": 3}, "count": 1,
+                "mass": 0, "positions": [[0, 0, 0]]},
+               {"name": "box", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 1, "positions": [[0, 0, 0]]}]})";
+  const auto model = build_model(parse_scene(text, "dumbbell (test)"));
+  const Pose db{v3(0, 0, 0), Quat{}}, box{v3(0, 0, 0), Quat{}};
+  EXPECT_FALSE(ReferenceGeometry(*model).posed(0, 1, db, box).penetrating);  // the true mesh: in the gap
+  for (CollisionShape kind : {CollisionShape::ConvexHull, CollisionShape::Box}) {
+    const ReferenceGeometry ref(*model, {kind, CollisionShape::Mesh});
+    const ReferenceNormal r = ref.posed(0, 1, db, box);
+    EXPECT_TRUE(r.penetrating) << collision_shape_name(kind);
+    EXPECT_NEAR(r.depth, 0.6, 1e-6) << collision_shape_name(kind);  // out through y or z
+    EXPECT_TRUE(ref.convex(0));
+    EXPECT_NEAR(ref.declared_gap(0), 0.5, 1e-6) << collision_shape_name(kind);
+    EXPECT_EQ(ref.declared_gap(1), 0.0);
+  }
+  const double radius = std::sqrt(1.5 * 1.5 + 0.5 * 0.5 + 0.5 * 0.5);
+  const ReferenceGeometry sphere(*model, {CollisionShape::Sphere, CollisionShape::Mesh});
+  const ReferenceNormal s = sphere.posed(0, 1, db, box);
+  EXPECT_TRUE(s.penetrating);
+  EXPECT_NEAR(s.depth, radius + 0.1, 1e-3);  // EPA on the sphere's support
+  EXPECT_NEAR(sphere.surface_distance(0, db, v3(0, 2, 0)), 2 - radius, 1e-6);
+  EXPECT_NEAR(sphere.world_aabb(0, db).max.x, radius, 1e-5);
+  EXPECT_FALSE(sphere.posed(0, 1, db, Pose{v3(0, radius + 0.2, 0), Quat{}}).penetrating);
+  // A box cannot be collided as a sphere: the physics validators refuse it.
+  PhysicsBodies bodies = rotating_engine();
+  bodies.collision_shape = {CollisionShape::Mesh, CollisionShape::Sphere};
+  try {
+    PhysicsValidators v(*model, bodies, Tolerances{}, "engine 'test'");
+    ADD_FAILURE() << "a sphere on a box shape was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("body 1: \"sphere\" on a box shape"), std::string::npos) << e.what();
+  }
+}

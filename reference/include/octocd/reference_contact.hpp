@@ -43,6 +43,8 @@
 ///    penetration among the 15 of two boxes, the exact minimum translation); FCL's
 ///    distance when apart. (libccd's EPA on box corners can cycle without end when faces
 ///    are coplanar, as in a resting stack.)
+///  - a declared sphere (CollisionShape::Sphere) with a box, sphere or hull: FCL's
+///    collide on the primitives (sphere-box and sphere-sphere exact).
 ///  - other convex shapes (meshes whose every triangle lies on their hull): GJK on the
 ///    hulls decides; EPA gives the exact minimum translation (depth, normal).
 ///  - a non-convex mesh: when the hulls intersect, FCL's BVH collide on the meshes decides
