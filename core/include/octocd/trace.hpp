@@ -50,7 +50,8 @@ struct TraceOptions {
   /// friction_combine, restitution_combine, contact_margin, broadphase_exact,
   /// contact_geometry, gravity; /bodies/inertia, friction, restitution;
   /// /states/orientation and angular_velocity beside every state row; with `contacts`,
-  /// /contacts/point, /pairs (offsets, pair) and /aabbs (min, max) from append_frame_v2.
+  /// /contacts/point (and /contacts/jt3 when RotationTraits::jt3), /pairs (offsets, pair)
+  /// and /aabbs (min, max) from append_frame_v2.
   /// Unset: version 1, byte for byte as before.
   std::optional<RotationTraits> v2;
   /// Version 2: gravity (m/s^2) for the root attribute `gravity`.
