@@ -342,13 +342,20 @@ nlohmann::ordered_json expectations_json(const std::vector<Expectation>& entries
 
 void write_expectations(const std::string& path, const RunName& run, const std::vector<Expectation>& entries) {
   std::vector<Expectation> all;
+  std::string comment;
   std::error_code ec;
   if (std::filesystem::exists(path, ec)) {
     for (Expectation& e : load_expectations(path).entries)
       if (!run.matches(e)) all.push_back(std::move(e));
+    std::ifstream in(path, std::ios::binary);
+    const nlohmann::json old = nlohmann::json::parse(in, nullptr, false);
+    if (old.is_object() && old.contains("comment") && old["comment"].is_string()) comment = old["comment"];
   }
   all.insert(all.end(), entries.begin(), entries.end());
-  write_json_file(path, expectations_json(all), "--write-expect");
+  nlohmann::ordered_json doc = nlohmann::ordered_json::object();
+  if (!comment.empty()) doc["comment"] = comment;  // the file's own note stays
+  doc["expectations"] = expectations_json(all)["expectations"];
+  write_json_file(path, doc, "--write-expect");
 }
 
 std::string row_verdict(const ValidationResult& r, const ExpectationReport* report) {

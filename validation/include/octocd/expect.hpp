@@ -14,7 +14,8 @@
 ///
 /// Each entry names its run by `scene` (the scene's name) or `trace` (the trace file's
 /// name, without folders), a row, one of its causes, optionally the only items allowed to
-/// fail, the worst figure allowed (in the cause's unit, >= 0) and a one-line reason.
+/// fail, the worst figure allowed (in the cause's unit, >= 0) and a one-line reason. A
+/// root key "comment" (a string) may say what the file is.
 
 #include <cstdint>
 #include <string>
@@ -133,7 +134,7 @@ nlohmann::ordered_json expectations_json(const std::vector<Expectation>& entries
 
 /// `--write-expect PATH`: replaces the entries of `run` in PATH (kept when PATH exists and
 /// parses; other runs' entries stay, so one file collects a whole scene set) by `entries`
-/// and writes it. Throws InputError when an existing PATH is malformed, RuntimeError when
+/// and writes it (its `comment` kept). Throws InputError when an existing PATH is malformed, RuntimeError when
 /// it cannot be written.
 void write_expectations(const std::string& path, const RunName& run, const std::vector<Expectation>& entries);
 
