@@ -189,6 +189,17 @@ std::vector<hsize_t> parse_dims(const std::string& text) {
   return d;
 }
 
+/// The four groups of an XDMF 3 HDF5 hyperslab "file:/dataset|start:stride:count:dims"
+/// (each a space-separated list, one value per dimension); empty when `ref` has no '|'.
+std::vector<std::string> hdf_hyperslab(const std::string& ref) {
+  const auto bar = ref.find('|');
+  if (bar == std::string::npos) return {};
+  std::vector<std::string> groups;
+  std::istringstream in(ref.substr(bar + 1));
+  for (std::string g; std::getline(in, g, ':');) groups.push_back(g);
+  return groups;
+}
+
 class CliUser : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -581,10 +592,17 @@ TEST_F(CliUser, TraceWritesXdmfSidecarMatchingTheTrace) {
     const auto time = x.nodes("Time", grids[g]);
     ASSERT_EQ(time.size(), 1u);
     EXPECT_NEAR(std::stod(Xml::attr(time[0], "Value")), 0.001 * static_cast<double>(state_frames[g]), 1e-6);
-    // Geometry: row g of /states/position.
-    const auto slab = x.nodes("Geometry/DataItem[@ItemType='HyperSlab']/DataItem", grids[g]);
-    ASSERT_EQ(slab.size(), 2u);
-    EXPECT_EQ(parse_dims(Xml::text(slab[0])), (std::vector<hsize_t>{g, 0, 0, 1, 1, 1, 1, n, 3}));
+    // Geometry: row g of /states/position, as an XDMF 3 HDF5 hyperslab
+    // "file:/dataset|start:stride:count:dataset dimensions" of n x 3 values.
+    const auto geo = x.nodes("Geometry[@GeometryType='XYZ']/DataItem[@Format='HDF']", grids[g]);
+    ASSERT_EQ(geo.size(), 1u);
+    EXPECT_EQ(parse_dims(Xml::attr(geo[0], "Dimensions")), (std::vector<hsize_t>{n, 3}));
+    const std::vector<std::string> slab = hdf_hyperslab(Xml::text(geo[0]));
+    ASSERT_EQ(slab.size(), 4u) << Xml::text(geo[0]);
+    EXPECT_EQ(parse_dims(slab[0]), (std::vector<hsize_t>{g, 0, 0})) << "start";
+    EXPECT_EQ(parse_dims(slab[1]), (std::vector<hsize_t>{1, 1, 1})) << "stride";
+    EXPECT_EQ(parse_dims(slab[2]), (std::vector<hsize_t>{1, n, 3})) << "count";
+    EXPECT_EQ(parse_dims(slab[3]), dims_of(f.id, "/states/position")) << "dataset dimensions";
     // Every attribute a viewer needs to draw the boxes the right size and colour.
     std::set<std::string> names;
     for (xmlNodePtr a : x.nodes("Attribute", grids[g])) names.insert(Xml::attr(a, "Name"));
@@ -600,8 +618,23 @@ TEST_F(CliUser, TraceWritesXdmfSidecarMatchingTheTrace) {
     const auto colon = ref.find(':');
     ASSERT_NE(colon, std::string::npos) << ref;
     EXPECT_EQ(ref.substr(0, colon), "two.h5") << "the sidecar names the trace by file name";
-    const std::string dataset = ref.substr(colon + 1);
-    EXPECT_EQ(parse_dims(Xml::attr(item, "Dimensions")), dims_of(f.id, dataset)) << dataset;
+    const auto bar = ref.find('|');
+    const std::string dataset = ref.substr(colon + 1, bar == std::string::npos ? std::string::npos : bar - colon - 1);
+    if (bar == std::string::npos) {
+      EXPECT_EQ(parse_dims(Xml::attr(item, "Dimensions")), dims_of(f.id, dataset)) << dataset;
+      continue;
+    }
+    // A hyperslab: its dataset dimensions are the dataset's, it lies inside them, and the
+    // item's Dimensions are its count without the leading 1 (one state row).
+    const std::vector<std::string> slab = hdf_hyperslab(ref);
+    ASSERT_EQ(slab.size(), 4u) << ref;
+    const auto start = parse_dims(slab[0]), count = parse_dims(slab[2]), dims = parse_dims(slab[3]);
+    EXPECT_EQ(dims, dims_of(f.id, dataset)) << ref;
+    ASSERT_EQ(start.size(), dims.size()) << ref;
+    ASSERT_EQ(count.size(), dims.size()) << ref;
+    for (std::size_t k = 0; k < dims.size(); ++k) EXPECT_LE(start[k] + count[k], dims[k]) << ref;
+    EXPECT_EQ(count.front(), 1u) << ref;
+    EXPECT_EQ(parse_dims(Xml::attr(item, "Dimensions")), std::vector<hsize_t>(count.begin() + 1, count.end())) << ref;
   }
 
   // The values: half extents of each body, and group ids that map to the group names.
@@ -718,6 +751,82 @@ TEST_F(CliUser, ValidateWritesJUnit) {
 
 // ---- 2. the nightly script: non-zero on any failure, 2 on bad input ------------------
 
+// ---- expectations (SPEC 14b) and --json: box-in-box fails non-penetration-eq14 (4 contacts)
+TEST_F(CliUser, ValidateExpectationsGateOnNewAndGrownFailures) {
+  const std::string fail = scene("box-in-box", kFailingScene);
+  const std::string args = " --frames 20 --every 5 --against none";
+  const fs::path expect = dir_ / "expect.json", out_json = dir_ / "out.json", xml = dir_ / "j.xml";
+  // Without expectations: the failure is new, named in plain text (no XML escapes).
+  Result r = octocd_cmd("validate " + fail + args);
+  ASSERT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("NEW FAILURE non-penetration-eq14/non-penetration-eq14: measured 4 > bound 0"),
+            std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("&gt;"), std::string::npos) << r.output;
+  // --write-expect records it (exit 0); --expect then passes, the row reads `expected`.
+  r = octocd_cmd("validate " + fail + args + " --write-expect " + expect.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  nlohmann::json e = nlohmann::json::parse(slurp(expect));
+  ASSERT_EQ(e["expectations"].size(), 1u) << e.dump();
+  EXPECT_EQ(e["expectations"][0]["scene"], "box-in-box");
+  EXPECT_EQ(e["expectations"][0]["worst"], 4.0);
+  r = octocd_cmd("validate " + fail + args + " --expect " + expect.string() + " --junit " + xml.string() +
+                 " --json " + out_json.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("expected non-penetration-eq14/non-penetration-eq14: worst 4 <= allowed 4"),
+            std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("all validators pass or fail as expected (1 expected failure(s)"), std::string::npos);
+  {
+    Xml x(xml);
+    ASSERT_TRUE(x.ok()) << slurp(xml);
+    EXPECT_TRUE(x.nodes("//testcase/failure").empty());
+    const auto skipped = x.nodes("//testcase[@name='non-penetration-eq14']/skipped");
+    ASSERT_EQ(skipped.size(), 1u);
+    EXPECT_EQ(Xml::attr(skipped[0], "message").rfind("expected: non-penetration-eq14 worst 4 <= allowed 4", 0), 0u)
+        << Xml::attr(skipped[0], "message");
+  }
+  const nlohmann::json j = nlohmann::json::parse(slurp(out_json));
+  ASSERT_EQ(j["rows"].size(), 14u);
+  for (const auto& row : j["rows"]) {
+    if (row["name"] == "non-penetration-eq14") {
+      EXPECT_EQ(row["verdict"], "expected");
+      ASSERT_EQ(row["causes"].size(), 1u);
+      EXPECT_EQ(row["causes"][0]["count"], 4);
+    } else if (row["name"] == "analytic") {
+      EXPECT_EQ(row["verdict"], "n/a");
+    }
+  }
+  // Grown: a figure below the measured one fails (exit 3), named.
+  e["expectations"][0]["worst"] = 3;
+  write_file(expect, e.dump());
+  r = octocd_cmd("validate " + fail + args + " --expect " + expect.string() + " --junit " + xml.string());
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("GROWN non-penetration-eq14/non-penetration-eq14: worst 4 > allowed 3"), std::string::npos)
+      << r.output;
+  {
+    Xml x(xml);
+    ASSERT_EQ(x.nodes("//testcase[@name='non-penetration-eq14']/failure").size(), 1u);
+  }
+  // Fixed: an expectation of a row that passes is reported; exit 3 only with --strict.
+  e["expectations"][0]["worst"] = 4;
+  e["expectations"].push_back({{"scene", "box-in-box"}, {"row", "conservation"}, {"cause", "energy"},
+                               {"worst", 0.01}, {"reason", "planted"}});
+  write_file(expect, e.dump());
+  r = octocd_cmd("validate " + fail + args + " --expect " + expect.string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("fixed conservation/energy: no longer fails: remove it from " + expect.string()),
+            std::string::npos) << r.output;
+  EXPECT_EQ(octocd_cmd("validate " + fail + args + " --expect " + expect.string() + " --strict").code, 3);
+  // Bad input: exit 2 naming the file and the entry, before anything runs.
+  write_file(expect, R"({"expectations": [{"scene": "box-in-box", "row": "non-penetration-eq14",
+      "cause": "non-penetration-eq14", "worst": -1, "reason": "r"}]})");
+  r = octocd_cmd("validate " + fail + args + " --expect " + expect.string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find(expect.string() + ": expectations[0] (worst): -1 is out of range"), std::string::npos)
+      << r.output;
+  write_file(expect, "not json");
+  EXPECT_EQ(octocd_cmd("validate " + fail + args + " --expect " + expect.string()).code, 2);
+}
+
 TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   const std::string script = (source_dir() / "scripts" / "nightly.sh").string();
   ASSERT_TRUE(fs::exists(script));
@@ -782,6 +891,64 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   // Called wrongly: exit 2.
   EXPECT_EQ(run("bash " + quote(script) + " --scenes everything").code, 2);
   EXPECT_EQ(run("bash " + quote(script) + " --timeout -5").code, 2);
+}
+
+// The nightly's gate (SPEC 14b): green on a healthy build whose only failure is expected,
+// red on a planted regression. box-in-box's non-penetration-eq14 failure (a box inside a
+// box: the paper's AABB response cannot separate them, 4 contacts) stands for a known
+// finding like the Jacobi energy rise. Two regressions are planted the only ways a test
+// can without touching the engine: (a) the expected failure grown (its committed figure
+// lowered below the measured one: to the gate the same as the figure growing past it),
+// (b) a new failure on a scene that passed (--tolerance penetration_slops=0 makes the
+// resting stack's true penetration exceed its bound: the same comparison a deeper
+// penetration after an engine change would fail).
+TEST_F(CliUser, NightlyScriptGatesOnExpectations) {
+  const std::string script = (source_dir() / "scripts" / "nightly.sh").string();
+  const std::string pass = (source_dir() / "datasets" / "scenes" / "free-fall.json").string();
+  const std::string fail = scene("box-in-box", kFailingScene);
+  const fs::path expect = dir_ / "nightly-expect.json";
+  auto nightly = [&](const std::string& out, const std::string& args) {
+    return run("OCTOCD_BIN=" + quote(bin()) + " bash " + quote(script) + " --frames 20 --every 10 --against none " +
+               "--out " + quote((dir_ / out).string()) + " " + args);
+  };
+  // The committed expectations file parses (octocd refuses a malformed one with exit 2).
+  Result r = nightly("committed", pass);
+  EXPECT_EQ(r.code, 0) << r.output;
+  // Record the known failure, then the healthy build is green with it listed as expected.
+  r = nightly("write", "--expect none --write-expect " + quote(expect.string()) + " " + pass + " " + fail);
+  ASSERT_EQ(r.code, 0) << r.output;
+  nlohmann::json e = nlohmann::json::parse(slurp(expect));
+  ASSERT_EQ(e["expectations"].size(), 1u) << e.dump();
+  r = nightly("healthy", "--expect " + quote(expect.string()) + " " + pass + " " + fail);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("pass     box-in-box (20 frames"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("expected non-penetration-eq14/non-penetration-eq14: worst 4 <= allowed 4"),
+            std::string::npos) << r.output;
+  {
+    Xml x(dir_ / "healthy" / "junit.xml");
+    ASSERT_TRUE(x.ok());
+    EXPECT_TRUE(x.nodes("//testcase/failure").empty());
+    const auto skipped = x.nodes("//testcase[@classname='box-in-box.model'][@name='non-penetration-eq14']/skipped");
+    ASSERT_EQ(skipped.size(), 1u);
+    EXPECT_EQ(Xml::attr(skipped[0], "message").rfind("expected: ", 0), 0u);
+    const std::string total = Xml::attr(x.nodes("/testsuites")[0], "time");  // the whole run's time
+    ASSERT_FALSE(total.empty());
+    EXPECT_GT(std::stod(total), 0.0);
+  }
+  // (a) grown: exit 3, named in plain text.
+  e["expectations"][0]["worst"] = 3;
+  write_file(dir_ / "grown.json", e.dump());
+  r = nightly("grown", "--expect " + quote((dir_ / "grown.json").string()) + " " + pass + " " + fail);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("GROWN non-penetration-eq14/non-penetration-eq14: worst 4 > allowed 3"), std::string::npos)
+      << r.output;
+  // (b) a new failure: exit 3, "measured X > bound Y" in plain text, never XML-escaped.
+  r = nightly("new", "--expect " + quote(expect.string()) + " --tolerance penetration_slops=0 " + fail);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("NEW FAILURE penetration/penetration: measured "), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("&gt;"), std::string::npos) << r.output;
+  // A missing expectations file is bad input.
+  EXPECT_EQ(nightly("missing", "--expect " + quote((dir_ / "no-such.json").string()) + " " + pass).code, 2);
 }
 
 // ---- docs/cli.md is `--help`, checked so they cannot drift ---------------------------
