@@ -703,3 +703,230 @@ TEST(PosedReference, SeparatedMeshAboveFloorNormal) {
     EXPECT_GT(s.normal.y, 0.99);
   }
 }
+
+// ---- Reporting (SPEC 13b.13): every cause counted, first examples named --------------
+
+// Three faults in one row: two turned normals on different pairs and a depth off on a
+// third pair. Each cause is counted with its own examples and items; the second normal
+// fault does not hide behind the first, nor the depth behind the normals.
+TEST(PhysicsReporting, EveryCauseOfARowIsCountedWithItsExamples) {
+  const auto model = build_model(four_bodies());
+  RestingRecord r = resting(*model);
+  r.rec.contacts[6].normal = v3(1, 0, 0);                                    // pair (2, 3): flipped
+  r.rec.contacts[3].normal = v3(std::sin(kPi / 4), -std::cos(kPi / 4), 0);  // pair (0, 3): 45 deg
+  r.rec.contacts[0].depth = 0.02f;                                           // pair (0, 2): 18 mm too deep
+  r.rec.contacts[1].depth = 0.02f;
+  const auto rs = judge(*model, r.rec, rotating_engine());
+  const ValidationResult& g = row_of(rs, "contact-geometry");
+  EXPECT_FALSE(g.pass);
+  EXPECT_EQ(g.judged, 8u + 3u + 8u);  // rows on the normal, pairs on the depth, points
+  ASSERT_EQ(g.causes.size(), 2u) << g.detail;
+  const ValidationCause& na = g.causes[0];
+  EXPECT_EQ(na.name, "normal-angle");
+  EXPECT_EQ(na.unit, "deg");
+  EXPECT_EQ(na.count, 2u);
+  EXPECT_NEAR(na.worst, 180.0, 0.1);
+  ASSERT_EQ(na.examples.size(), 2u);
+  EXPECT_EQ(na.examples[0].frame, 7);
+  EXPECT_EQ(na.examples[0].item, "pair (0, 3)");
+  EXPECT_NEAR(na.examples[0].figure, 45.0, 0.1);
+  EXPECT_EQ(na.examples[1].item, "pair (2, 3)");
+  EXPECT_EQ(na.items, (std::vector<std::string>{"pair (0, 3)", "pair (2, 3)"}));
+  EXPECT_TRUE(na.items_complete);
+  EXPECT_EQ(g.causes[1].name, "depth");
+  EXPECT_EQ(g.causes[1].count, 1u);
+  EXPECT_EQ(g.causes[1].items, (std::vector<std::string>{"pair (0, 2)"}));
+  for (const char* f : {"normal-angle 2 of 8 rows", "frame 7 pair (2, 3)", "depth 1 of 3 pairs", "point-off-shape 0"})
+    EXPECT_NE(g.detail.find(f), std::string::npos) << f << "\n" << g.detail;
+  // Rows that passed carry no causes and count what they judged.
+  const ValidationResult& b = row_of(rs, "broadphase-completeness");
+  EXPECT_TRUE(b.pass);
+  EXPECT_TRUE(b.causes.empty());
+  EXPECT_EQ(b.judged, 3u);
+}
+
+// A row that judged nothing is n/a, never a pass: no record with states leaves the
+// dynamics rows without items.
+TEST(PhysicsReporting, RowsThatJudgedNothingAreNotApplicable) {
+  const auto model = build_model(four_bodies());
+  FrameRecord rec = resting(*model).rec;
+  rec.x_pre.clear();
+  rec.v_pre.clear();
+  rec.x_post.clear();
+  rec.v_post.clear();
+  rec.q_pre.clear();
+  rec.q_post.clear();
+  rec.w_pre.clear();
+  rec.w_post.clear();
+  const auto rs = judge(*model, rec, rotating_engine());
+  for (const char* name : {"conservation", "momentum-balance", "free-flight"}) {
+    const ValidationResult& r = row_of(rs, name);
+    EXPECT_FALSE(r.applicable) << name << ": " << r.detail;
+    EXPECT_EQ(r.judged, 0u) << name;
+    EXPECT_NE(r.detail.find("no states"), std::string::npos) << name << ": " << r.detail;
+  }
+}
+
+// ---- Momentum balance per body (SPEC 13b.7) -------------------------------------------
+
+TEST(PhysicsBalance, ConsistentRecordsPassEveryBody) {
+  const auto model = build_model(four_bodies());
+  const auto rs = judge(*model, resting(*model).rec, rotating_engine());
+  const ValidationResult& b = row_of(rs, "momentum-balance");
+  EXPECT_TRUE(b.pass) << b.detail;
+  EXPECT_TRUE(b.applicable);
+  EXPECT_EQ(b.judged, 2u) << b.detail;  // the diamond and the cube
+  const auto model0 = build_model(four_bodies("[0, 0, 0]"));
+  const auto rc = judge(*model0, off_centre_collision(*model0, 0.0).rec, rotating_engine());
+  EXPECT_TRUE(row_of(rc, "momentum-balance").pass) << row_of(rc, "momentum-balance").detail;
+  EXPECT_NE(row_of(rc, "momentum-balance").detail.find("angular 2 body-steps"), std::string::npos)
+      << row_of(rc, "momentum-balance").detail;
+}
+
+TEST(PhysicsBalance, DroppedRowEditedVelocityAndWrongBodyAreCaught) {
+  const auto model = build_model(four_bodies());
+  {  // one row of the cube's 4-row floor manifold removed
+    RestingRecord r = resting(*model);
+    r.rec.contacts.erase(r.rec.contacts.begin() + 2);
+    const auto rs = judge(*model, r.rec, rotating_engine());
+    expect_caught(rs, "momentum-balance", {"frame 7: body 3", "linear 1 of 2 body-steps"});
+    EXPECT_EQ(row_of(rs, "momentum-balance").causes.at(0).items, std::vector<std::string>{"body 3"});
+  }
+  {  // the velocity of a body in contact edited by 0.05 m/s
+    RestingRecord r = resting(*model);
+    r.rec.v_post[3].x += 0.05f;
+    expect_caught(judge(*model, r.rec, rotating_engine()), "momentum-balance", {"frame 7: body 3"});
+  }
+  {  // one floor row's impulse applied to the diamond instead of the cube
+    RestingRecord r = resting(*model);
+    const float jn = r.rec.contacts[2].jn;
+    r.rec.v_post[3].y -= jn / 2.0f;
+    r.rec.v_post[2].y += jn / 1.0f;
+    const auto rs = judge(*model, r.rec, rotating_engine());
+    expect_caught(rs, "momentum-balance", {"linear 2 of 2 body-steps", "body 2"});
+    EXPECT_EQ(row_of(rs, "momentum-balance").causes.at(0).items, (std::vector<std::string>{"body 2", "body 3"}));
+  }
+  {  // a torque from nowhere on a body in contact
+    const auto model0 = build_model(four_bodies("[0, 0, 0]"));
+    expect_caught(judge(*model0, off_centre_collision(*model0, 0.0, true).rec, rotating_engine()),
+                  "momentum-balance", {"frame 12: body 3", "angular 1 of 2"});
+  }
+}
+
+// ---- Free flight (SPEC 13b.8) ----------------------------------------------------------
+
+/// The diamond (turned) and the cube fly apart above the floor, spinning, without
+/// contacts: v' = v + g dt, x' = x + dt v' (semi-implicit), w' = w, q' = q advanced by
+/// w dt (exponential map).
+FrameRecord free_flight(const Model& model, bool explicit_euler = false) {
+  FrameRecord rec;
+  rec.frame = 12;
+  rec.manifolds = true;
+  rec.has_points = true;
+  rec.has_contact_terms = false;
+  const float dt = model.scene.dt;
+  const Vec3 g = model.scene.gravity;
+  const Vec3 x[4] = {model.initial.x[0], model.initial.x[1], v3(0, 0.6, 0), v3(0.5, 0.6, 0.3)};
+  const Vec3 v[4] = {v3(0, 0, 0), v3(0, 0, 0), v3(0.3, 1.0, -0.2), v3(-0.5, 0.2, 0)};
+  const Vec3 w[4] = {v3(0, 0, 0), v3(0, 0, 0), v3(0, 2, 1), v3(3, 0, 0)};
+  const Quat q[4] = {Quat{}, Quat{}, kDiamond, Quat{}};
+  for (int i = 0; i < 4; ++i) {
+    const bool dyn = i >= 2;
+    rec.x_pre.push_back(x[i]);
+    rec.v_pre.push_back(v[i]);
+    rec.q_pre.push_back(q[i]);
+    rec.w_pre.push_back(w[i]);
+    const Vec3 v1 = dyn ? v[i] + dt * g : v[i];
+    rec.v_post.push_back(v1);
+    rec.x_post.push_back(dyn ? x[i] + dt * (explicit_euler ? v[i] : v1) : x[i]);
+    rec.w_post.push_back(w[i]);
+    const float angle = length(w[i]) * dt;
+    rec.q_post.push_back(angle > 0 ? normalized(axis_angle((1.0f / length(w[i])) * w[i], angle) * q[i]) : q[i]);
+    rec.x_det.push_back(x[i]);
+    rec.q_det.push_back(q[i]);
+    rec.aabbs.push_back(posed_box_aabb(model.local_box(std::size_t(i)), Pose{x[i], q[i]}));
+  }
+  rec.pairs = {{0, 1}};
+  return rec;
+}
+
+TEST(PhysicsFreeFlight, FreeBodiesFollowGravityAndTheirSpin) {
+  const auto model = build_model(four_bodies());
+  const auto rs = judge(*model, free_flight(*model), rotating_engine());
+  const ValidationResult& f = row_of(rs, "free-flight");
+  EXPECT_TRUE(f.pass) << f.detail;
+  EXPECT_TRUE(f.applicable);
+  EXPECT_EQ(f.judged, 2u);
+  EXPECT_NE(f.detail.find("orientation"), std::string::npos) << f.detail;
+  EXPECT_FALSE(row_of(rs, "momentum-balance").applicable);  // no body in contact
+  // Explicit Euler positions fail the default (semi-implicit) and pass when declared.
+  const FrameRecord ex = free_flight(*model, true);
+  expect_caught(judge(*model, ex, rotating_engine()), "free-flight", {"frame 12: body 2", "position"});
+  PhysicsBodies b = rotating_engine();
+  b.integrator = PhysicsBodies::Integrator::Explicit;
+  EXPECT_TRUE(row_of(judge(*model, ex, b), "free-flight").pass);
+  b.integrator = PhysicsBodies::Integrator::Any;
+  EXPECT_TRUE(row_of(judge(*model, ex, b), "free-flight").pass);
+  EXPECT_TRUE(row_of(judge(*model, free_flight(*model), b), "free-flight").pass);
+}
+
+TEST(PhysicsFreeFlight, EditedLoneBodiesAreCaughtByCause) {
+  const auto model = build_model(four_bodies());
+  auto cause_items = [](const ValidationResult& r, const std::string& cause) {
+    for (const ValidationCause& c : r.causes)
+      if (c.name == cause) return c.items;
+    return std::vector<std::string>{};
+  };
+  for (float k : {1.5f, 2.0f}) {  // a lone body's velocity x1.5, x2 in one frame
+    FrameRecord rec = free_flight(*model);
+    rec.v_post[2] = k * rec.v_post[2];
+    const auto rs = judge(*model, rec, rotating_engine());
+    expect_caught(rs, "free-flight", {"frame 12: body 2 without contacts: v'"});
+    EXPECT_EQ(cause_items(row_of(rs, "free-flight"), "velocity"), std::vector<std::string>{"body 2"});
+  }
+  {  // teleported by 1 cm
+    FrameRecord rec = free_flight(*model);
+    rec.x_post[3].x += 0.01f;
+    const auto rs = judge(*model, rec, rotating_engine());
+    expect_caught(rs, "free-flight", {"frame 12: body 3 without contacts: x'", "position 1 of 2"});
+    EXPECT_EQ(cause_items(row_of(rs, "free-flight"), "velocity"), std::vector<std::string>{});
+  }
+  {  // angular velocity x1.5 on a lone spinning body
+    FrameRecord rec = free_flight(*model);
+    rec.w_post[3] = 1.5f * rec.w_post[3];
+    const auto rs = judge(*model, rec, rotating_engine());
+    expect_caught(rs, "free-flight", {"frame 12: body 3 without contacts: w'", "angular-velocity 1 of 2"});
+  }
+  {  // one orientation turned by 30 deg
+    FrameRecord rec = free_flight(*model);
+    rec.q_post[2] = normalized(axis_angle(v3(0, 1, 0), float(kPi / 6)) * rec.q_post[2]);
+    const auto rs = judge(*model, rec, rotating_engine());
+    expect_caught(rs, "free-flight", {"frame 12: body 2 without contacts: q' is 30", "orientation 1 of 2"});
+  }
+}
+
+// ---- Declarations (SPEC 13b.12) ----------------------------------------------------------
+
+// Joints lock the diamond's rotation: its angular velocity stays 0 although the contact
+// torque would turn it. Undeclared, momentum-balance (angular) and conservation (angular
+// momentum) fail; declared (locked_dofs bits 3-5), those parts are n/a for it and counted.
+TEST(PhysicsDeclarations, LockedRotationIsNotApplicableAndCounted) {
+  const auto model = build_model(four_bodies("[0, 0, 0]"));
+  FrameRecord rec = off_centre_collision(*model, 0.0).rec;
+  rec.w_post[2] = v3(0, 0, 0);
+  rec.q_post[2] = rec.q_pre[2];
+  const auto undeclared = judge(*model, rec, rotating_engine());
+  expect_caught(undeclared, "momentum-balance", {"frame 12: body 2", "I_w (w' - w)"});
+  expect_caught(undeclared, "conservation", {"angular momentum"});
+  PhysicsBodies b = rotating_engine();
+  b.locked_dofs = {0, 0, 0x38, 0};
+  const auto declared = judge(*model, rec, b);
+  for (const char* name : {"momentum-balance", "conservation"}) {
+    EXPECT_TRUE(row_of(declared, name).pass) << name << ": " << row_of(declared, name).detail;
+    EXPECT_NE(row_of(declared, name).detail.find("locked"), std::string::npos) << row_of(declared, name).detail;
+  }
+  b.locked_dofs = {0, 0, 64, 0};
+  EXPECT_THROW(judge(*model, rec, b), InputError);
+  b.locked_dofs = {0, 0};
+  EXPECT_THROW(judge(*model, rec, b), InputError);
+}

@@ -94,6 +94,9 @@ using M3 = std::array<double, 9>;  // row-major
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23
+/// A relative sliding speed (m/s) below which v_t has no direction: jt is then J_t's
+/// magnitude (the trace convention; octocd's Bullet adapter uses the same threshold).
+constexpr double kNoSliding = 1e-6;
 
 D3 d3(Vec3 v) { return {double(v.x), double(v.y), double(v.z)}; }
 D3 operator+(D3 a, D3 b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
@@ -305,6 +308,20 @@ struct PhysicsValidators::Impl {
   void geometry(const FrameRecord& rec, const std::vector<Pose>& det);
   void dynamics(const FrameRecord& rec, const std::vector<Pose>& det);
   void balance(const FrameRecord& rec, const std::vector<Pose>& det);
+  /// Mechanical energy of body i (kinetic + rotational - m g . x), before or after the step.
+  double mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const;
+  /// contact_model soft: opens, spoils and closes (judging energy) each pair's contact
+  /// episode; `isolated`: this step's dynamic-dynamic contact pairs, with whether the
+  /// pair is an isolated group on its own.
+  void soft_episodes(const FrameRecord& rec, const std::vector<std::pair<Pair, bool>>& isolated);
+  struct Episode {
+    std::int64_t start = 0;
+    double e0 = 0, ke0 = 0, scale = 0;
+    bool spoiled = false;
+  };
+  std::map<Pair, Episode> episodes;  // contact_model soft: open episodes per pair
+  std::uint64_t episodes_judged = 0, episodes_unjudged = 0, energy_soft_steps = 0;
+  std::uint64_t groups_locked = 0, groups_rotation_locked = 0;
 };
 
 PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bodies, const Tolerances& tol,
@@ -337,6 +354,11 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
     bad("restitution", fmt::format("{}; allowed: finite >= 0", bodies.restitution));
   if (!(bodies.contact_margin >= 0) || !std::isfinite(bodies.contact_margin))
     bad("contact_margin", fmt::format("{}; allowed: finite >= 0 m", bodies.contact_margin));
+  if (!bodies.locked_dofs.empty() && bodies.locked_dofs.size() != n)
+    bad("locked_dofs", fmt::format("{} values for {} bodies; allowed: 0 or {}", bodies.locked_dofs.size(), n, n));
+  for (std::size_t i = 0; i < bodies.locked_dofs.size(); ++i)
+    if (bodies.locked_dofs[i] > 63)
+      bad("locked_dofs", fmt::format("body {}: {}; allowed: 0 .. 63 (6 bits)", i, unsigned(bodies.locked_dofs[i])));
   if (!(bodies.slop >= 0) || !std::isfinite(bodies.slop))
     bad("slop", fmt::format("{}; allowed: finite >= 0 m", bodies.slop));
 
@@ -739,6 +761,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
                       rec.v_post.size() == n;
   if (!states) {
     dissipation_cone_only += rec.contacts.size();
+    for (auto& e : episodes) e.second.spoiled = true;  // a step without states: the episode is not seen whole
     return;
   }
   ++state_frames;
@@ -923,6 +946,12 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
       continue;
     }
     ++groups;
+    // Axes locked by a joint on any member: the joint's impulses are not in the rows, so
+    // the momentum along them and (rotation) the angular momentum are not judged.
+    unsigned group_locks = 0;
+    if (!bodies.locked_dofs.empty())
+      for (std::uint32_t i : members) group_locks |= bodies.locked_dofs[i];
+    if (group_locks) ++groups_locked;
     // Linear momentum: only gravity's m g dt (already in v_int).
     D3 p0{}, p1{};
     double exchanged = 0, scale = 0, mass_sum = 0;
@@ -938,7 +967,10 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
       c0 = c0 + mi * d3(rec.x_pre[i]);
     }
     c0 = (1.0 / mass_sum) * c0;
-    const double dp = len3(p1 - p0);
+    D3 dp3 = p1 - p0;
+    for (int k = 0; k < 3; ++k)
+      if (group_locks & (1u << k)) dp3[static_cast<std::size_t>(k)] = 0;
+    const double dp = len3(dp3);
     const double pbound = tol.momentum_rel * exchanged + 8.0 * kEps32 * scale + 1e-9;
     momentum.check(dp <= pbound, dp / pbound, Where{frame, group_name(members)}, [&] {
       return fmt::format("frame {}: isolated group of {} bodies (body {} ...): momentum changes by {:.4g} kg m/s "
@@ -957,16 +989,27 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
         ke1 += 0.5 * dot3(w1, mul(conjugated(rotation(rec.q_post[i]), inertia[i]), w1));
       }
     }
-    if (restitution_le_1) {
+    if (restitution_le_1 && bodies.contact_model == PhysicsBodies::ContactModel::Soft) {
+      ++energy_soft_steps;  // judged per contact episode (soft_episodes)
+    } else if (restitution_le_1) {
       const double ebound = ke0 * (1.0 + tol.energy_rel) + 16.0 * kEps32 * (ke0 + ke1) + 1e-12;
       energy.check(ke1 <= ebound, ke0 > 0 ? (ke1 - ke0) / ke0 : 0.0, Where{frame, group_name(members)}, [&] {
         return fmt::format("frame {}: isolated group of {} bodies (body {} ...): kinetic energy {:.6g} -> {:.6g} J "
-                           "(+{:.3g} of it)",
-                           frame, members.size(), members.front(), ke0, ke1, ke0 > 0 ? (ke1 - ke0) / ke0 : 0.0);
+                           "(+{:.3g} of it){}",
+                           frame, members.size(), members.front(), ke0, ke1, ke0 > 0 ? (ke1 - ke0) / ke0 : 0.0,
+                           bodies.jacobi_response
+                               ? ": a property of the paper's model (SPEC 6's Jacobi response sums each body's "
+                                 "impulses computed from one pre-response state, which overshoots on chains; "
+                                 "SPEC 13b.13: reported, not loosened)"
+                               : "");
       });
     }
     // Angular momentum about the group's centre of mass (rotating records only).
     if (!rotating) continue;
+    if (group_locks >> 3) {
+      ++groups_rotation_locked;
+      continue;
+    }
     ++groups_rotating;
     D3 l0{}, l1{};
     double lexchanged = 0, lscale = 0, gyro = 0;
@@ -999,6 +1042,90 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
                          "of mass changes by {:.4g} kg m^2/s (exchanged {:.4g}, bound {:.3g})",
                          frame, members.size(), members.front(), dl, lexchanged, lbound);
     });
+  }
+  if (bodies.contact_model == PhysicsBodies::ContactModel::Soft && restitution_le_1) {
+    // Pairs of two dynamic bodies that form an isolated group on their own this step.
+    std::map<std::uint32_t, std::uint32_t> pairs_in_group;
+    std::vector<Pair> distinct;
+    for (std::size_t k = 0; k < rec.contacts.size(); ++k)
+      if (k == 0 || !(rec.contacts[k].pair == rec.contacts[k - 1].pair)) distinct.push_back(rec.contacts[k].pair);
+    for (const Pair& q : rec.confirmed)
+      if (!std::binary_search(distinct.begin(), distinct.end(), q)) distinct.push_back(q);
+    std::sort(distinct.begin(), distinct.end());
+    for (const Pair& q : distinct) ++pairs_in_group[find(q.a)];
+    std::vector<std::pair<Pair, bool>> isolated;  // this step's contact pairs, alone in their group
+    for (const Pair& q : distinct) {
+      if (!dynamic(q.a) || !dynamic(q.b)) continue;
+      const std::uint32_t root = find(q.a);
+      isolated.push_back({q, !statics[root] && pairs_in_group[root] == 1 && groups_of[root].size() == 2});
+    }
+    soft_episodes(rec, isolated);
+  }
+}
+
+double PhysicsValidators::Impl::mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const {
+  const std::size_t n = model->bodies.size();
+  const bool rotating = rec.q_pre.size() == n && rec.w_pre.size() == n;
+  const D3 x = d3(post ? rec.x_post[i] : rec.x_pre[i]), v = d3(post ? rec.v_post[i] : rec.v_pre[i]);
+  double e = 0.5 * mass[i] * dot3(v, v) - mass[i] * dot3(d3(model->scene.gravity), x);
+  if (rotating) {
+    const D3 w = d3(post ? rec.w_post[i] : rec.w_pre[i]);
+    e += 0.5 * dot3(w, mul(conjugated(rotation(post ? rec.q_post[i] : rec.q_pre[i]), inertia[i]), w));
+  }
+  return e;
+}
+
+void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec,
+                                            const std::vector<std::pair<Pair, bool>>& isolated) {
+  const std::int64_t frame = rec.frame;
+  const double g2dt2 = dot3(d3(model->scene.gravity), d3(model->scene.gravity)) * model->scene.dt * model->scene.dt;
+  auto kinetic = [&](std::uint32_t i, bool post) {
+    const D3 v = d3(post ? rec.v_post[i] : rec.v_pre[i]);
+    return 0.5 * mass[i] * dot3(v, v);
+  };
+  // Close the episodes of pairs without contact this step: judged on the state before
+  // it (the state after the episode's last step).
+  for (auto it = episodes.begin(); it != episodes.end();) {
+    const Pair q = it->first;
+    const bool still = std::any_of(isolated.begin(), isolated.end(), [&](const auto& e) { return e.first == q; });
+    if (still) {
+      ++it;
+      continue;
+    }
+    Episode& ep = it->second;
+    if (ep.spoiled) {
+      ++episodes_unjudged;
+    } else {
+      const double e1 = mechanical_energy(rec, q.a, false) + mechanical_energy(rec, q.b, false);
+      const std::int64_t steps = frame - ep.start;
+      // Gravity's integration changes E by up to m |g|^2 dt^2 per step and body (explicit
+      // Euler gains half of it, semi-implicit loses half); rounding of E's terms.
+      const double slack = double(steps) * (mass[q.a] + mass[q.b]) * g2dt2 +
+                           16.0 * kEps32 * double(steps + 1) * (ep.scale + std::fabs(e1)) + 1e-12;
+      const double bound = ep.e0 + tol.energy_rel * ep.ke0 + slack;
+      const double rise = ep.ke0 > 0 ? (e1 - ep.e0) / ep.ke0 : 0.0;
+      energy.check(e1 <= bound, rise, Where{frame, pair_name(q)}, [&] {
+        return fmt::format("frame {}: {} (soft contacts) over its contact episode, frames {}..{}: mechanical energy "
+                           "{:.6g} -> {:.6g} J (+{:.3g} of its kinetic energy {:.4g} J at the start; bound {:.6g})",
+                           frame, pair_name(q), ep.start, frame - 1, ep.e0, e1, rise, ep.ke0, bound);
+      });
+      ++episodes_judged;
+    }
+    it = episodes.erase(it);
+  }
+  for (const auto& [q, alone] : isolated) {
+    auto it = episodes.find(q);
+    if (it == episodes.end()) {
+      Episode ep;
+      ep.start = frame;
+      ep.e0 = mechanical_energy(rec, q.a, false) + mechanical_energy(rec, q.b, false);
+      ep.ke0 = kinetic(q.a, false) + kinetic(q.b, false);
+      ep.scale = std::fabs(ep.e0) + ep.ke0;
+      ep.spoiled = !alone;
+      episodes.emplace(q, ep);
+    } else if (!alone) {
+      it->second.spoiled = true;
+    }
   }
 }
 
@@ -1115,13 +1242,17 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
             std::min(2.0, (len3(w_of(rec.w_pre, p.a)) + len3(w_of(rec.w_pre, p.b))) * s / vt_len);
         uncertain = turn * (jt + pair_mu(p) * std::fabs(double(c.jn)));
       }
-    } else {
-      // (Nearly) no sliding before the step: the engine picks the friction direction
-      // itself (Bullet below sqrt(FLT_EPSILON) = 3.45e-4 m/s: btPlaneSpace1's axis) and a
-      // scalar jt does not say which, nor how large J_t is off its recorded direction; it
-      // lies in the cone (the friction row judges that).
+    } else if (vt_len > kNoSliding) {
+      // Nearly no sliding before the step: the engine picks the friction direction
+      // itself (Bullet below sqrt(FLT_EPSILON) = 3.45e-4 m/s: btPlaneSpace1's axis), and a
+      // scalar jt, the impulse's projection on the recorded -v_t, says neither which nor
+      // how large J_t is; it lies in the cone (the friction row judges that).
       uncertain = std::max(jt, pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + tol.friction_cone_solver_rel) +
                                    tol.friction_cone_abs);
+    } else {
+      // No sliding: v_t has no direction; jt is the friction impulse's magnitude (the
+      // convention, and octocd's Bullet adapter below 1e-6 m/s), its direction open.
+      uncertain = jt;
     }
     const D3 j = double(c.jn) * nrm + jt_vec;
     force[p.a] = force[p.a] + j;
@@ -1503,6 +1634,16 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     if (s.groups_clamped)
       r.detail += fmt::format("; {} group-frames not judged (a body at the declared velocity clamp {} m/s)",
                               s.groups_clamped, s.bodies.velocity_clamp);
+    if (s.bodies.contact_model == PhysicsBodies::ContactModel::Soft)
+      r.detail += fmt::format("; contact_model soft: energy judged per contact episode of a pair alone in its "
+                              "isolated group ({} episodes judged, {} not judged: the pair touched other bodies, a "
+                              "step had no states, or still in contact at the end ({} open)), not on {} group-steps",
+                              s.episodes_judged, s.episodes_unjudged + s.episodes.size(), s.episodes.size(),
+                              s.energy_soft_steps);
+    if (s.groups_locked)
+      r.detail += fmt::format("; {} group-frames with locked axes (declared locked_dofs): momentum along them n/a, "
+                              "{} of them rotation-locked: angular momentum n/a",
+                              s.groups_locked, s.groups_rotation_locked);
     if (r.applicable) {
       fill_causes(r, {{&s.momentum, "momentum", "group-frames", "of bound"},
                       {&s.angular, "angular-momentum", "group-frames", "of bound"},
