@@ -202,8 +202,11 @@ struct Tally {
   void check(bool ok, double figure, F&& describe) {
     check(ok, figure, Where{}, std::forward<F>(describe));
   }
-  /// A judged item that cannot fail (counted, no figure).
-  void judged() { ++checks; }
+  /// A judged item that cannot fail, with figure 0.
+  void judged() {
+    ++checks;
+    worst = std::max(worst, 0.0);
+  }
   double worst_or(double none) const { return checks ? worst : none; }
   /// This tally as a ValidationCause named `name` with figures in `unit`.
   ValidationCause cause(const char* name, const char* unit) const {
@@ -274,7 +277,7 @@ struct PhysicsValidators::Impl {
   Tally broad, broad_exact, complete, false_contact, normal_angle, depth, points, pen, cone, dissipation;
   Tally momentum, angular, energy;
   Tally balance_lin, balance_ang, free_vel, free_pos, free_w, free_q;
-  std::uint64_t balance_clamped = 0, balance_no_rows = 0, balance_locked = 0, free_locked = 0;
+  std::uint64_t balance_clamped = 0, balance_no_rows = 0, balance_locked = 0, free_locked = 0, balance_rot_locked = 0;
   double t_balance = 0;
   std::uint64_t broad_frames = 0, broad_candidates = 0, broad_true = 0, broad_no_pairs = 0;
   std::uint64_t checked_frames = 0, rows_unjudged = 0, upper_bound_pairs = 0;
@@ -1330,7 +1333,10 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
                            force[i][0], force[i][1], force[i][2], dpl, ratio, float_bound, open_along);
       });
       if (!rotating || !rec.has_points) continue;
-      if ((locked(i) >> 3) == 7u) continue;  // every rotation locked: counted in balance_locked
+      if ((locked(i) >> 3) == 7u) {  // every rotation locked by a joint
+        ++balance_rot_locked;
+        continue;
+      }
       const D3 lhs = mul(iw, w1 - w0) + gyro;
       const D3 dl = unlocked(lhs - torque[i], i, 3);
       const double gyro_allow = bodies.gyroscopic ? tol.gyroscopic_rel * len3(gyro) : 0.0;
@@ -1628,6 +1634,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                              s.groups_rotating
                                  ? fmt::format("{} groups, worst change {:.3g} of its bound", s.groups_rotating,
                                                s.angular.worst_or(0.0))
+                             : s.groups_rotation_locked
+                                 ? std::string("n/a: every group has a body whose rotation is locked (locked_dofs)")
                                  : std::string("n/a: translation-only records (no orientation or angular "
                                                "velocity), contact torques are not modelled"));
     }
@@ -1641,8 +1649,9 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                               s.episodes_judged, s.episodes_unjudged + s.episodes.size(), s.episodes.size(),
                               s.energy_soft_steps);
     if (s.groups_locked)
-      r.detail += fmt::format("; {} group-frames with locked axes (declared locked_dofs): momentum along them n/a, "
-                              "{} of them rotation-locked: angular momentum n/a",
+      r.detail += fmt::format("; {} group-frames with a body whose axes are locked (locked_dofs): momentum along "
+                              "locked translation axes not judged; {} with a rotation locked: angular momentum not "
+                              "judged",
                               s.groups_locked, s.groups_rotation_locked);
     if (r.applicable) {
       fill_causes(r, {{&s.momentum, "momentum", "group-frames", "of bound"},
@@ -1685,7 +1694,11 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                  ? fmt::format("{} body-steps, worst {:.3g} of its bound{}", s.balance_ang.checks,
                                                s.balance_ang.worst_or(0.0),
                                                s.bodies.gyroscopic ? " (gyroscopic term declared)" : "")
-                                 : std::string("n/a: no rotation or no contact points (torques unknown)"));
+                                 : s.balance_rot_locked
+                                       ? fmt::format("n/a: rotation locked (locked_dofs) on all {} body-steps with "
+                                                     "rotation and points",
+                                                     s.balance_rot_locked)
+                                       : std::string("n/a: no rotation or no contact points (torques unknown)"));
       r.detail += extras;
       fill_causes(r, {{&s.balance_lin, "linear", "body-steps", "of bound"},
                       {&s.balance_ang, "angular", "body-steps", "of bound"}});
