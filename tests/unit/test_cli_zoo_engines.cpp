@@ -606,3 +606,23 @@ TEST_F(ZooEngines, BadDeclarationsExitTwoNamingTheAttribute) {
 }
 
 }  // namespace
+
+namespace {
+
+// The h5py writer example of the declarations (docs/trace-format.md, "Declarations"):
+// explicit Euler, a gyroscopic term, soft contacts and a rotation-locked cube pass.
+TEST_F(ZooEngines, PythonDeclarationsWriterPasses) {
+  const std::string python = "/usr/bin/python3";
+  if (octocd::test::run(python + " -c 'import h5py, numpy'").code != 0)
+    GTEST_SKIP() << python << " lacks h5py or numpy: the example cannot run";
+  const std::string out = (dir_ / "declared.h5").string();
+  const Result w = octocd::test::run(python + " " + octocd::test::source_dir() +
+                                     "/examples/python/declarations_writer.py " + out);
+  ASSERT_EQ(w.code, 0) << w.output;
+  const Result r = run_octocd("validate --trace-in " + out);
+  expect_clean(r);
+  for (const char* f : {"integrator explicit", "gyroscopic term declared", "contact_model soft", "rotation locked"})
+    EXPECT_NE(r.output.find(f), std::string::npos) << f << "\n" << r.output;
+}
+
+}  // namespace
