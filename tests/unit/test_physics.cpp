@@ -930,3 +930,67 @@ TEST(PhysicsDeclarations, LockedRotationIsNotApplicableAndCounted) {
   b.locked_dofs = {0, 0};
   EXPECT_THROW(judge(*model, rec, b), InputError);
 }
+
+// A gyroscopic term (explicit: w' = w - dt I_w^-1 (w x I_w w), q advanced by w' dt) on two
+// bodies of unequal principal moments that collide through their centres (no contact
+// torque): declared, momentum-balance and conservation pass; undeclared, the angular
+// balance fails on both bodies (I_w (w' - w) != 0 with no torque).
+TEST(PhysicsDeclarations, GyroscopicTermDeclaredInAnIsolatedCollision) {
+  const auto model = build_model(four_bodies("[0, 0, 0]"));
+  const std::array<double, 9> tensor{0.004, 0, 0, 0, 0.008, 0, 0, 0, 0.011};
+  PhysicsBodies b = rotating_engine();
+  b.inertia.assign(4, tensor);
+  b.mu = 0.0;
+  b.contact_margin = 0.002;
+  FrameRecord rec;
+  rec.frame = 12;
+  rec.has_points = true;
+  rec.manifolds = true;
+  rec.has_contact_terms = false;
+  const float dt = model->scene.dt;
+  const Vec3 x[4] = {model->initial.x[0], model->initial.x[1], v3(0, 0.5, 0), v3(0.199, 0.5, 0)};
+  const Vec3 v[4] = {v3(0, 0, 0), v3(0, 0, 0), v3(1, 0, 0), v3(-0.5, 0, 0)};
+  // Fast spins (|w| dt ~ 0.07 rad): the term, dt |w x I_w w| ~ 0.01 kg m^2/s, is above
+  // what a frictionless row leaves open at its witness points (half the depth and the
+  // contact margin times jn: 2.3e-3).
+  const Vec3 w[4] = {v3(0, 0, 0), v3(0, 0, 0), v3(30, 60, 20), v3(-20, 40, 50)};
+  const double j = 1.5 * 1.5 / (1.0 + 0.5);  // e = 0.5, masses 1 and 2, along x through the centres
+  for (int i = 0; i < 4; ++i) {
+    rec.x_pre.push_back(x[i]);
+    rec.v_pre.push_back(v[i]);
+    rec.q_pre.push_back(Quat{});
+    rec.w_pre.push_back(w[i]);
+    rec.x_det.push_back(x[i]);
+    rec.q_det.push_back(Quat{});
+    rec.aabbs.push_back(translated(model->local_box(std::size_t(i)), x[i]));
+    Vec3 w1 = w[i];
+    if (i >= 2) {  // identity orientation: I_w = the body tensor
+      const Vec3 iw = v3(tensor[0] * w[i].x, tensor[4] * w[i].y, tensor[8] * w[i].z);
+      const Vec3 torque = cross(w[i], iw);
+      w1 = w[i] - dt * v3(torque.x / tensor[0], torque.y / tensor[4], torque.z / tensor[8]);
+    }
+    rec.w_post.push_back(w1);
+    Vec3 v1 = v[i];
+    if (i == 2) v1 = v[i] - v3(j, 0, 0);
+    if (i == 3) v1 = v[i] + v3(j / 2, 0, 0);
+    rec.v_post.push_back(v1);
+    rec.x_post.push_back(i >= 2 ? x[i] + dt * v1 : x[i]);
+    rec.q_post.push_back(i >= 2 ? normalized(axis_angle((1.0f / length(w1)) * w1, length(w1) * dt)) : Quat{});
+  }
+  rec.pairs = {{2, 3}};
+  ContactRecord c;
+  c.pair = {2, 3};
+  c.normal = v3(-1, 0, 0);
+  c.depth = 0.001f;
+  c.point = v3(0.0995, 0.5, 0);
+  c.jn = float(j);
+  rec.contacts.push_back(c);
+  b.gyroscopic = true;
+  const auto declared = judge(*model, rec, b);
+  for (const char* name : {"momentum-balance", "conservation"})
+    EXPECT_TRUE(row_of(declared, name).pass) << name << ": " << row_of(declared, name).detail;
+  EXPECT_NE(row_of(declared, "momentum-balance").detail.find("gyroscopic term declared"), std::string::npos);
+  b.gyroscopic = false;
+  const auto undeclared = judge(*model, rec, b);
+  expect_caught(undeclared, "momentum-balance", {"frame 12: body 2", "angular 2 of 2"});
+}

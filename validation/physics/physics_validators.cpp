@@ -1,8 +1,9 @@
 // The physics tier (SPEC 13): any engine judged on its posed shapes with FCL, never on
-// octocd's own response model (that is validation/model/). Six rows: broadphase
+// octocd's own response model (that is validation/model/). Eight rows: broadphase
 // completeness, contact completeness, contact geometry, penetration (the costly,
-// geometric rows, run on checked frames, O(candidate pairs) each) and friction and
-// conservation (every frame that has states, O(bodies + contact rows)).
+// geometric rows, run on checked frames, O(candidate pairs) each) and friction,
+// conservation, momentum balance and free flight (every frame that has states,
+// O(bodies + contact rows)).
 #include "octocd/physics.hpp"
 
 #include "../src/row_clock.hpp"
@@ -1035,7 +1036,10 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
                 len3(mul(i1, w1));
       // Free rotation of a body whose inertia is not isotropic turns I w: an engine
       // integrating the orientation explicitly (no gyroscopic term) misses dt w x (I w).
+      // One with the term (declared gyroscopic) keeps L to second order in |w| dt: its
+      // explicit or implicit form differs from the exact rotation by (|w| dt)^2 |I w|.
       gyro += dt * len3(cross3(w1, mul(i1, w1)));
+      if (bodies.gyroscopic) gyro += dt * dt * dot3(w1, w1) * len3(mul(i1, w1));
     }
     const double dl = len3(l1 - l0);
     const double lbound =

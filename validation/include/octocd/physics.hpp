@@ -58,7 +58,24 @@
 ///     exchange + dt |w x I w| per body (free rotation) + (depth + margin) |jt| per row
 ///     (impulses applied at two witness points) (rotating records; n/a for
 ///     translation-only ones); kinetic energy (translational + rotational) does not rise
-///     when every restitution <= 1.
+///     when every restitution <= 1 (contact_model soft: per pair contact episode instead,
+///     PhysicsBodies::contact_model). Groups with locked axes (locked_dofs) do not judge
+///     the momentum along them nor, rotation locked, the angular momentum (counted).
+///  7. `momentum-balance` (every frame with states; SPEC 13b.7): per dynamic body with
+///     contact rows, m (v' - v) - m g dt = sum of its rows' J = jn n + J_t (J_t: jt along
+///     -v_t, or +t for octocd's records), and with rotation and points I_w (w' - w)
+///     (+ dt w x I_w w when gyroscopic) = sum (p - x) x J; bound: balance_ulps x 2^-23 x
+///     (rows + 2) x the magnitudes, plus what a scalar jt leaves open (discs in each row's
+///     tangent plane; docs/validate-your-engine.md derives it). n/a when the rows are not
+///     the step's impulses (impulses_complete false).
+///  8. `free-flight` (every frame with states; SPEC 13b.8): per dynamic body without a
+///     contact row (or confirmed pair): v' = v + g dt, x' by the declared integrator,
+///     w' = w (less the declared gyroscopic term), q' = q advanced by w dt within
+///     free_flight_angle_rad + (|w| dt)^2. Locked axes are not judged (counted).
+/// Reporting (SPEC 13b.13): every row fills ValidationResult::judged and ::causes (per
+/// cause its count, worst figure, first examples with frame and item "pair (A, B)",
+/// "body I" or "group (I, J, K)", and the failing items) and lists every cause in its
+/// detail; a row that judged nothing is n/a with its reason.
 /// Cost: a checked frame is O(n) for the posed AABBs plus FCL on the candidate pairs
 /// (non-convex mesh pairs that intersect cost the most: their depth is bisected with
 /// BVH collide along up to 8 directions).
@@ -210,8 +227,8 @@ class PhysicsValidators {
   /// every frame that has states.
   void observe(const FrameRecord& rec, bool checked);
 
-  /// The six rows so far, tier Physics, each saying how many items it judged, with its
-  /// own time (ValidationResult::seconds).
+  /// The eight rows so far (1-8 above), tier Physics, each with how many items it judged,
+  /// its causes and its own time (ValidationResult::seconds).
   std::vector<ValidationResult> results() const;
 
   /// Polled inside observe's long loops (every 16 candidate pairs, contacts or groups);
