@@ -2,7 +2,7 @@
 // the correct rotating engine (issue 30 item 7): its version 2 traces of the shipped
 // rotating scenes pass both rows, and faults planted into a copy of each trace (edited
 // in place) are caught with exit 3 and a detail naming the frame and the body: an edited
-// velocity of a body in contact, a lone body's velocity x1.5, a lone body teleported by
+// velocity of a body in contact, one row of a manifold dropped, a lone body's velocity x1.5, a lone body teleported by
 // 1 cm, a lone spinning body's angular velocity x1.5, a lone body's orientation turned
 // by 30 deg. The bodies are found in the trace (no contact row in the step), never
 // pinned by number. Few frames each, the geometric rows on a few frames only.
@@ -58,10 +58,28 @@ void write(hid_t file, const char* name, const Data& d) {
   H5Dclose(ds);
 }
 
+/// Replaces dataset `name` by `d` (any shape), keeping its file type.
+void replace(hid_t file, const char* name, const Data& d) {
+  const hid_t old = H5Dopen2(file, name, H5P_DEFAULT);
+  ASSERT_GE(old, 0) << name;
+  const hid_t type = H5Dget_type(old);
+  H5Dclose(old);
+  ASSERT_GE(H5Ldelete(file, name, H5P_DEFAULT), 0) << name;
+  const hid_t space = H5Screate_simple(static_cast<int>(d.dims.size()), d.dims.data(), nullptr);
+  const hid_t ds = H5Dcreate2(file, name, type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  ASSERT_GE(ds, 0) << name;
+  if (!d.v.empty()) {
+    ASSERT_GE(H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, d.v.data()), 0) << name;
+  }
+  H5Dclose(ds);
+  H5Sclose(space);
+  H5Tclose(type);
+}
+
 /// What a trace says about who is in contact when.
 struct Layout {
   int bodies = 0, frames = 0;
-  Data inv_mass, offsets, pairs, velocity, angular;
+  Data inv_mass, offsets, pairs, velocity, angular, jn;
   /// Bodies with a contact row in step f (1-based).
   std::set<int> in_contact(int f) const {
     std::set<int> s;
@@ -112,6 +130,7 @@ class BulletBalance : public ::testing::TestWithParam<Case> {
     layout_.pairs = read(f, "/contacts/pair");
     layout_.velocity = read(f, "/states/velocity");
     layout_.angular = read(f, "/states/angular_velocity");
+    layout_.jn = read(f, "/contacts/jn");
     H5Fclose(f);
     layout_.bodies = static_cast<int>(layout_.velocity.dims.at(1));
     layout_.frames = static_cast<int>(layout_.velocity.dims.at(0)) - 1;
@@ -119,6 +138,29 @@ class BulletBalance : public ::testing::TestWithParam<Case> {
   void TearDown() override {
     std::error_code ec;
     fs::remove_all(dir_, ec);
+  }
+
+  /// A copy of the trace without contact row `row` of step f (its later offsets shifted).
+  Result dropped_row(int f, std::size_t row) {
+    const fs::path p = dir_ / "dropped-row.h5";
+    fs::copy_file(trace_, p, fs::copy_options::overwrite_existing);
+    const hid_t file = H5Fopen(p.string().c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    EXPECT_GE(file, 0);
+    for (const char* name : {"/contacts/pair", "/contacts/normal", "/contacts/depth", "/contacts/jn", "/contacts/jt",
+                             "/contacts/point"}) {
+      Data d = read(file, name);
+      std::size_t per = 1;
+      for (std::size_t k = 1; k < d.dims.size(); ++k) per *= d.dims[k];
+      d.v.erase(d.v.begin() + static_cast<std::ptrdiff_t>(row * per),
+                d.v.begin() + static_cast<std::ptrdiff_t>((row + 1) * per));
+      d.dims[0] -= 1;
+      replace(file, name, d);
+    }
+    Data o = read(file, "/contacts/offsets");
+    for (std::size_t k = static_cast<std::size_t>(f); k < o.v.size(); ++k) o.v[k] -= 1;
+    write(file, "/contacts/offsets", o);
+    H5Fclose(file);
+    return run_octocd("validate --trace-in " + p.string() + " --every " + std::to_string(layout_.frames));
   }
 
   /// A copy of the trace with state row `row` of `dataset` changed for body i by `edit`
@@ -163,6 +205,22 @@ TEST_P(BulletBalance, CleanRunPassesAndPlantedFaultsAreCaught) {
     ++planted_faults;
     expect_caught(planted("contact-velocity", "/states/velocity", fc, ic, [](double* v) { v[1] += 0.1; }),
                   "momentum-balance", fc, ic, ": m (v' - v)");
+  }
+  // One row of a manifold (a pair with 2+ rows in the step) with a normal impulse
+  // dropped: the bodies' momentum change keeps it, their rows no longer do.
+  for (int f = 5; f <= L.frames && fc > 0; ++f) {
+    const auto b = static_cast<std::size_t>(L.offsets.v[f - 1]), e = static_cast<std::size_t>(L.offsets.v[f]);
+    std::size_t pick = e;
+    for (std::size_t r = b; r + 1 < e && pick == e; ++r)
+      if (L.pairs.v[2 * r] == L.pairs.v[2 * r + 2] && L.pairs.v[2 * r + 1] == L.pairs.v[2 * r + 3] &&
+          L.jn.v[r] > 1e-3)
+        pick = r;
+    if (pick == e) continue;
+    const int a = static_cast<int>(L.pairs.v[2 * pick]), bb = static_cast<int>(L.pairs.v[2 * pick + 1]);
+    const Result r = dropped_row(f, pick);
+    expect_caught(r, "momentum-balance", f, L.dynamic(a) ? a : bb, ": m (v' - v)");
+    ++planted_faults;
+    break;
   }
   // A lone body (no contact row in the step), moving: velocity x1.5, then teleported by 1 cm.
   const auto [fl, il] = L.find(
