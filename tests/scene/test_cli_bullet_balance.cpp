@@ -2,7 +2,8 @@
 // the correct rotating engine (issue 30 item 7): its version 2 traces of the shipped
 // rotating scenes pass both rows, and faults planted into a copy of each trace (edited
 // in place) are caught with exit 3 and a detail naming the frame and the body: an edited
-// velocity of a body in contact, one row of a manifold dropped, a lone body's velocity x1.5, a lone body teleported by
+// velocity of a body in contact, one row of a manifold dropped, a row's impulse applied to
+// a lone body instead of its own, a lone body's velocity x1.5, a lone body teleported by
 // 1 cm, a lone spinning body's angular velocity x1.5, a lone body's orientation turned
 // by 30 deg. The bodies are found in the trace (no contact row in the step), never
 // pinned by number. Few frames each, the geometric rows on a few frames only.
@@ -79,7 +80,7 @@ void replace(hid_t file, const char* name, const Data& d) {
 /// What a trace says about who is in contact when.
 struct Layout {
   int bodies = 0, frames = 0;
-  Data inv_mass, offsets, pairs, velocity, angular, jn;
+  Data inv_mass, offsets, pairs, velocity, angular, jn, normal;
   /// Bodies with a contact row in step f (1-based).
   std::set<int> in_contact(int f) const {
     std::set<int> s;
@@ -131,6 +132,7 @@ class BulletBalance : public ::testing::TestWithParam<Case> {
     layout_.velocity = read(f, "/states/velocity");
     layout_.angular = read(f, "/states/angular_velocity");
     layout_.jn = read(f, "/contacts/jn");
+    layout_.normal = read(f, "/contacts/normal");
     H5Fclose(f);
     layout_.bodies = static_cast<int>(layout_.velocity.dims.at(1));
     layout_.frames = static_cast<int>(layout_.velocity.dims.at(0)) - 1;
@@ -164,9 +166,11 @@ class BulletBalance : public ::testing::TestWithParam<Case> {
   }
 
   /// A copy of the trace with state row `row` of `dataset` changed for body i by `edit`
-  /// (its components), judged with the geometric rows on one frame.
+  /// (its components), and for body j by `edit_j` when given, judged with the geometric
+  /// rows on one frame.
   Result planted(const std::string& tag, const char* dataset, int row, int i,
-                 const std::function<void(double*)>& edit) {
+                 const std::function<void(double*)>& edit, int j = -1,
+                 const std::function<void(double*)>& edit_j = {}) {
     const fs::path p = dir_ / (tag + ".h5");
     fs::copy_file(trace_, p, fs::copy_options::overwrite_existing);
     const hid_t f = H5Fopen(p.string().c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
@@ -174,6 +178,7 @@ class BulletBalance : public ::testing::TestWithParam<Case> {
     Data d = read(f, dataset);
     const std::size_t per = d.dims.at(2);
     edit(&d.v[(static_cast<std::size_t>(row) * layout_.bodies + i) * per]);
+    if (j >= 0) edit_j(&d.v[(static_cast<std::size_t>(row) * layout_.bodies + j) * per]);
     write(f, dataset, d);
     H5Fclose(f);
     return run_octocd("validate --trace-in " + p.string() + " --every " + std::to_string(layout_.frames));
@@ -244,6 +249,36 @@ TEST_P(BulletBalance, CleanRunPassesAndPlantedFaultsAreCaught) {
                             q[3] = c * o[3] + s * o[2];
                           }),
                   "free-flight", fl, il, " without contacts: q' is 30");
+  }
+  // A row's normal impulse applied to a lone body instead of the row's body B.
+  for (int f = 5; f <= L.frames; ++f) {
+    const auto b = static_cast<std::size_t>(L.offsets.v[f - 1]), e = static_cast<std::size_t>(L.offsets.v[f]);
+    std::size_t pick = e;
+    for (std::size_t r = b; r < e && pick == e; ++r)
+      if (L.jn.v[r] > 1e-2 && L.dynamic(static_cast<int>(L.pairs.v[2 * r + 1]))) pick = r;
+    if (pick == e) continue;
+    const std::set<int> busy = L.in_contact(f);
+    int lone = -1;
+    for (int i = 0; i < L.bodies && lone < 0; ++i)
+      if (L.dynamic(i) && busy.count(i) == 0) lone = i;
+    if (lone < 0) continue;
+    const int body_b = static_cast<int>(L.pairs.v[2 * pick + 1]);
+    const double* n = &L.normal.v[3 * pick];
+    const double jn = L.jn.v[pick], wb = L.inv_mass.v[static_cast<std::size_t>(body_b)],
+                 wl = L.inv_mass.v[static_cast<std::size_t>(lone)];
+    const Result r = planted(
+        "wrong-body", "/states/velocity", f, body_b,
+        [&](double* v) {
+          for (int k = 0; k < 3; ++k) v[k] += wb * jn * n[k];  // B no longer gets -jn n
+        },
+        lone,
+        [&](double* v) {
+          for (int k = 0; k < 3; ++k) v[k] -= wl * jn * n[k];  // the lone body does
+        });
+    expect_caught(r, "momentum-balance", f, body_b, ": m (v' - v)");
+    expect_caught(r, "free-flight", f, lone, " without contacts: v'");
+    ++planted_faults;
+    break;
   }
   // A lone spinning body: angular velocity x1.5.
   const auto [fs_, is] = L.find(
