@@ -3,7 +3,7 @@
 
     /usr/bin/python3 bench/soak.py [--build build] [--engine cpu|cuda] [--frames 100000]
         [--scenes bunny-random-400,bunny-stack-50] [--state-every 1000] [--every 10]
-        [--out reports/cpu/soak] [--report reports/cpu/soak.md]
+        [--out soak-out] [--report soak-out/soak.md]
 
 For each scene it starts `octocd run SCENE --frames N --engine E --trace OUT/SCENE.h5
 --state-every K --quiet --summary-json OUT/SCENE.json` and, every `--every` seconds until
@@ -132,12 +132,12 @@ def main():
     p.add_argument("--scenes", default="bunny-random-400,bunny-stack-50")
     p.add_argument("--state-every", type=int, default=1000)
     p.add_argument("--every", type=float, default=10.0, help="seconds between samples")
-    p.add_argument("--out", default=None, help="folder for traces, samples, JSON (default reports/<engine>/soak)")
-    p.add_argument("--report", default=None, help="Markdown table to write (default reports/<engine>/soak-table.md)")
+    p.add_argument("--out", default=None, help="folder for traces, samples, JSON (default soak-<engine>)")
+    p.add_argument("--report", default=None, help="Markdown table to write (default soak-<engine>/soak-table.md)")
     args = p.parse_args()
-    dev = "cpu" if args.engine == "cpu" else "h100"
-    args.out = args.out or os.path.join("reports", dev, "soak")
-    report = args.report or os.path.join("reports", dev, "soak-table.md")
+    dev = args.engine
+    args.out = args.out or f"soak-{dev}"
+    report = args.report or os.path.join(args.out, "soak-table.md")
     results = [soak(args, s) for s in args.scenes.split(",")]
     with open(os.path.join(args.out, "results.json"), "w") as f:
         json.dump(results, f, indent=2)

@@ -8,7 +8,7 @@
 //
 // Note: the HDF5 library itself is not instrumented (Debian's libhdf5), so the fuzzer sees
 // coverage only in octocd's code; crashes inside libhdf5 on malformed files are upstream
-// bugs, reported as such (reports/cpu/fuzz.md).
+// bugs, reported as such.
 #include <unistd.h>
 
 #include <cstddef>

@@ -14,6 +14,7 @@ bin=$here/bin
 export OCTOCD_SOURCE_DIR=$here OCTOCD_DATA_DIR=$here/datasets/cache
 mkdir -p "$out"
 { nvidia-smi; nproc; lscpu | grep 'Model name'; } > "$out/device.txt" 2>&1
+cp "$here/VERSION" "$out/VERSION" 2>/dev/null || true  # the build the bundle was made from (scripts/record.sh names it)
 
 # 1. The CUDA engine against the CPU engine (state hashes, pairs, contacts, capacity 1).
 OCTOCD_GPU_TEST_FRAMES=${OCTOCD_GPU_TEST_FRAMES:-1000} timeout 1200 "$bin/test_cuda_world" > "$out/test_cuda_world.txt" 2>&1
@@ -39,7 +40,7 @@ done
 
 # 4. The benchmark sweeps (docs/bench-format.md): cpu (this machine's CPU, same binary), cuda
 #    and bullet side by side. The report is made where matplotlib is:
-#    octocd report OUTDIR/bench/*.json -o reports/h100/bench
+#    octocd report OUTDIR/bench/*.json -o DIR; scripts/record.sh h100 OUTDIR writes reports/h100/
 mkdir -p "$out/bench"
 for s in ${OCTOCD_SWEEPS:-table5 table6 tableA1 figA2 broadphase-scaling}; do
   timeout 3000 "$bin/octocd" bench "$s" -o "$out/bench/$s.json" --resume --quiet ${OCTOCD_BENCH_OPTIONS:-} \

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Nightly validation (README, "Nightly validation"): `octocd validate` on a scene set, one
+# Nightly validation (docs/validation.md, "Nightly validation"): `octocd validate` on a scene set, one
 # JUnit report per scene plus one merged report, and an exit code a CI job can trust:
 #   0  every validator of every scene passed
 #   3  a validator failed on some scene (and no scene was bad input or failed to run)
@@ -16,7 +16,7 @@
 #   --scenes SET    default: the scenes that fit the nightly budget (15 minutes on a
 #                   2-core machine: the analytic scenes, bunny-stack-50, the four Table 5
 #                   scenes and the three 10^4-body scenes; measured 5-9 minutes on a 2-core
-#                   VM under load 6-11, README); large: the 5x10^4..10^6-body scenes
+#                   VM under load 6-11, docs/validation.md); large: the 5x10^4..10^6-body scenes
 #                   (hours: one check of boxes-uniform-100k takes ~12 minutes; give them a
 #                   job of their own, with a larger --every); all: both. SCENE.json
 #                   arguments replace the set.
@@ -84,7 +84,7 @@ if [ ${#scenes[@]} -eq 0 ]; then
   esac
   for n in "${names[@]}"; do scenes+=("$root/datasets/scenes/$n.json"); done
 fi
-# Frames per scene when --frames is not given (README, "Nightly validation").
+# Frames per scene when --frames is not given (docs/validation.md, "Nightly validation").
 frames_of() {
   if [ -n "$frames" ]; then echo "$frames"; return; fi
   case "$1" in

@@ -289,7 +289,7 @@ struct TraceWriter::Impl {
   Column c_offsets, c_frame, c_pair, c_normal, c_depth, c_jn, c_jt;
   std::int64_t contact_total = 0;
   // Version 2 (TraceOptions::v2): rotation, contact points, candidate pairs, AABBs.
-  Column s_orient, s_angvel, c_point, p_offsets, p_pair, a_min, a_max;
+  Column s_orient, s_angvel, c_point, c_jt3, p_offsets, p_pair, a_min, a_max;
   std::int64_t pair_total = 0;
   int since_flush = 0;
   bool closed = false;
@@ -304,7 +304,7 @@ struct TraceWriter::Impl {
     std::vector<Column*> all{&s_frame, &s_pos, &s_vel, &c_offsets, &c_frame, &c_pair, &c_normal,
                              &c_depth, &c_jn, &c_jt};
     if (opt.v2)
-      for (Column* c : {&s_orient, &s_angvel, &c_point, &p_offsets, &p_pair, &a_min, &a_max}) all.push_back(c);
+      for (Column* c : {&s_orient, &s_angvel, &c_point, &c_jt3, &p_offsets, &p_pair, &a_min, &a_max}) all.push_back(c);
     for (Column& c : frames) all.push_back(&c);
     return all;
   }
@@ -361,7 +361,7 @@ struct TraceWriter::Impl {
     s_orient.write(path);
     s_angvel.write(path);
     if (opt.contacts)
-      for (Column* c : {&c_point, &a_min, &a_max, &p_pair, &p_offsets}) c->write(path);
+      for (Column* c : {&c_point, &c_jt3, &a_min, &a_max, &p_pair, &p_offsets}) c->write(path);
   }
 
   // Version 2: the orientation and angular velocity rows of a state row.
@@ -610,6 +610,7 @@ void TraceWriter::create_v2_layout() {
               path);
   attr_scalar(root, "broadphase_exact", H5T_STD_I32LE, H5T_NATIVE_INT, t.broadphase_exact ? 1 : 0, path);
   attr_string(root, "contact_geometry", t.contact_geometry, path);
+  if (!t.collision_shape.empty()) attr_string(root, "collision_shape", t.collision_shape, path);
   {
     const hsize_t three = 3;
     Handle space(check(H5Screate_simple(1, &three, nullptr), path, "H5Screate_simple"));
@@ -650,6 +651,8 @@ void TraceWriter::create_v2_layout() {
   {
     Handle g(check(H5Gopen2(root, "contacts", H5P_DEFAULT), path, "open group /contacts"));
     m.c_point = make_column(g, "/contacts", "point", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {3}, kChunk, 0, path);
+    if (t.jt3)
+      m.c_jt3 = make_column(g, "/contacts", "jt3", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {3}, kChunk, 0, path);
   }
   {
     Handle g(check(H5Gcreate2(root, "pairs", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), path, "create group /pairs"));
@@ -685,6 +688,13 @@ void TraceWriter::append_frame_v2(const FrameMetrics& fm, const BodyState& state
     m.pair_total += static_cast<std::int64_t>(rec.pairs.size());
     m.p_offsets.push1(m.pair_total);
     for (const ContactRecord& c : rec.contacts) m.c_point.push(&c.point.x, 3);
+    if (m.opt.v2->jt3) {
+      if (rec.jt3.size() != rec.contacts.size())
+        throw RuntimeError("trace '" + m.path + "': frame " + std::to_string(fm.frame) + " has " +
+                           std::to_string(rec.jt3.size()) + " tangential impulse vectors for " +
+                           std::to_string(rec.contacts.size()) + " contacts");
+      for (const Vec3& j : rec.jt3) m.c_jt3.push(&j.x, 3);
+    }
   }
   append_frame(fm, state, rec.contacts);
 }
@@ -942,18 +952,17 @@ static std::string write_xdmf(const detail::Hdf5Reader& h5, const TraceSummary& 
   std::ostringstream o;
   o.precision(15);
   const std::string all = std::to_string(disk_rows) + " " + std::to_string(nb) + " 3";
+  // Row r of a (rows x bodies x 3) dataset as an (bodies x 3) item, in XDMF 3's HDF5
+  // hyperslab notation "file:/dataset|start:stride:count:dataset dimensions" (one value per
+  // dimension in each group). ParaView's Xdmf3 readers read it; they do not read the older
+  // ItemType="HyperSlab" wrapper (its array stays untyped: "unrecognized array type [None]").
   auto slab = [&](std::size_t r, const char* dataset) {
-    o << "          <DataItem ItemType=\"HyperSlab\" Dimensions=\"" << nb << " 3\">\n"
-      << "            <DataItem Dimensions=\"3 3\" Format=\"XML\">" << r << " 0 0 1 1 1 1 " << nb
-      << " 3</DataItem>\n"
-      << "            <DataItem Dimensions=\"" << all
-      << "\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << name << ":" << dataset
-      << "</DataItem>\n"
-      << "          </DataItem>\n";
+    o << "          <DataItem Dimensions=\"" << nb << " 3\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">"
+      << name << ":" << dataset << "|" << r << " 0 0:1 1 1:1 " << nb << " 3:" << all << "</DataItem>\n";
   };
   o << "<?xml version=\"1.0\" ?>\n"
     << "<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n"
-    << "<!-- octocd trace sidecar: open in ParaView with the Xdmf3 reader -->\n"
+    << "<!-- octocd trace sidecar: open in ParaView with the XDMF Reader (Xdmf3) -->\n"
     << "<Xdmf Version=\"3.0\">\n  <Domain>\n"
     << "    <Grid Name=\"states\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
   for (std::size_t r = 0; r < rows; ++r) {

@@ -28,3 +28,9 @@ with h5py.File(sys.argv[1], "w") as f:
     f["contacts/depth"] = np.zeros(4 * F, np.float32)
     f["contacts/jn"] = np.full(4 * F, 9.81 * DT / 4, np.float32)  # m g dt over the 4 rows
     f["contacts/jt"] = np.zeros(4 * F, np.float32)  # no friction
+    # The friction impulse of each row on A as a vector (world, N s; in the contact plane,
+    # within 1 deg): an engine with two friction directions writes their sum here. None.
+    f["contacts/jt3"] = np.zeros((4 * F, 3), np.float32)
+    # What the engine collided each body as: "mesh" (the shape), "convex_hull", "box" (the
+    # local box) or "sphere"; one string for every body, or f["bodies/collision_shape"].
+    f.attrs["collision_shape"] = "box"

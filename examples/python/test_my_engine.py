@@ -2,7 +2,7 @@
 
 Copy this file into your engine's test suite and replace the two functions under "Your
 engine" with calls into your engine. octocd must be importable: PYTHONPATH=build/python
-(octocd's build tree) or `cmake --install` (README.md, "From Python").
+(octocd's build tree) or `cmake --install` (docs/python.md).
 
     PYTHONPATH=build/python /usr/bin/python3 -m pytest -q examples/python/test_my_engine.py
 
@@ -16,7 +16,7 @@ import sys
 import numpy as np
 import pytest
 
-octocd = pytest.importorskip("octocd", reason="octocd's Python module is not on PYTHONPATH (README, 'From Python')")
+octocd = pytest.importorskip("octocd", reason="octocd's Python module is not on PYTHONPATH (docs/python.md)")
 
 # ---- Your engine -------------------------------------------------------------------------
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))

@@ -43,7 +43,7 @@ except ImportError as _e:  # pragma: no cover - depends on the build
     raise ImportError(
         "octocd: the compiled module octocd._octocd is missing or was built for another Python "
         f"({_e}); build it with CMake (OCTOCD_PYTHON=ON, Debian's python3-pybind11) and put "
-        "build/python on PYTHONPATH, or `cmake --install` it (README.md, 'From Python')") from _e
+        "build/python on PYTHONPATH, or `cmake --install` it (docs/python.md)") from _e
 
 import numpy as _np
 

@@ -43,7 +43,7 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }
 
 /// btDiscreteDynamicsWorld with its step's phases timed, so the Bullet engine reports
-/// the stages octocd has (docs: README "Bullet as an engine"). stepSimulation(dt, 0) runs
+/// the stages octocd has (docs/architecture.md, "Engine"). stepSimulation(dt, 0) runs
 /// internalSingleStepSimulation once: predictUnconstraintMotion,
 /// performDiscreteCollisionDetection (updateAabbs, computeOverlappingPairs,
 /// dispatchAllCollisionPairs), calculateSimulationIslands, solveConstraints,
@@ -613,8 +613,10 @@ void BulletWorld::Impl::fill_record() {
   r.pairs.erase(std::unique(r.pairs.begin(), r.pairs.end()), r.pairs.end());
   r.has_pairs = true;
 
-  // Contacts: every manifold point within the breaking threshold, one row each.
+  // Contacts: every manifold point within the breaking threshold, one row each, with its
+  // friction impulse vector (the friction directions' impulses summed, on A).
   r.contacts.clear();
+  std::vector<Vec3> jt3;
   const bool two_dirs = (world->getSolverInfo().m_solverMode & SOLVER_USE_2_FRICTION_DIRECTIONS) != 0;
   const int nm = dispatcher->getNumManifolds();
   for (int k = 0; k < nm; ++k) {
@@ -655,10 +657,21 @@ void BulletWorld::Impl::fill_record() {
       const float vt_len = length(v_t);
       c.jt = vt_len > 1e-6f ? dot(j_a, -(1.0f / vt_len) * v_t) : length(j_a);
       r.contacts.push_back(c);
+      jt3.push_back(j_a);
     }
   }
-  std::stable_sort(r.contacts.begin(), r.contacts.end(),
-                   [](const ContactRecord& x, const ContactRecord& y) { return x.pair < y.pair; });
+  std::vector<std::size_t> order(r.contacts.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t x, std::size_t y) { return r.contacts[x].pair < r.contacts[y].pair; });
+  std::vector<ContactRecord> sorted;
+  sorted.reserve(order.size());
+  r.jt3.clear();
+  for (std::size_t k : order) {
+    sorted.push_back(r.contacts[k]);
+    r.jt3.push_back(jt3[k]);
+  }
+  r.contacts.swap(sorted);
   r.confirmed.clear();
   for (const ContactRecord& c : r.contacts)
     if (r.confirmed.empty() || !(r.confirmed.back() == c.pair)) r.confirmed.push_back(c.pair);
@@ -734,6 +747,8 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
     // refreshContactPoints), so its two witness points, and the shapes, are at most
     // sqrt(2) x the threshold apart; + 1 mm for the float32 distances.
     m.traits.contact_margin = static_cast<float>(std::sqrt(2.0) * gContactBreakingThreshold) + 0.001f;
+    m.traits.jt3 = true;  // fill_record gives every row its friction impulse vector
+    m.traits.collision_shape = "convex_hull";  // a mesh rotates as its hull, a box as itself
     // Box-hull and hull-hull pairs: Bullet's convex-convex algorithm with the checked
     // contacts (CheckedConvexAlgorithm). Box-box pairs keep btBoxBoxDetector.
     m.convex_convex.pd = &m.epa;

@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -44,13 +45,32 @@ struct ShapeGeom {
   bool is_box = false;
   bool convex = true;  ///< box, or a mesh whose every triangle lies on its hull
   V3 half = V3::Zero();  ///< box half extents
+  HullFeatures features;  ///< the hull for the separating-axis test (body frame)
+  bool is_sphere = false;  ///< a declared sphere: centre `offset`, radius `radius`
+  bool bvh = false;        ///< `exact` is a BVH model (a mesh collided as its triangles)
+  S radius = 0;
+  /// Points on the surface of the shape collided (body frame): a hull's face centroids, a
+  /// box's corners and face centres, a sphere's 14 axis and diagonal points; for the gap
+  /// between a declared shape and the true one (ReferenceGeometry::declared_gap).
+  std::vector<V3> surface_samples;
 };
+
+/// Adds the unit direction of d to `dirs` unless it is (anti)parallel to one there.
+void add_direction(std::vector<std::array<double, 3>>& dirs, const V3& d) {
+  const S n = d.norm();
+  if (!(n > 0) || !std::isfinite(n)) return;
+  const V3 u = d / n;
+  for (const auto& e : dirs)
+    if (u.cross(V3(e[0], e[1], e[2])).norm() < 1e-9) return;
+  dirs.push_back({u.x(), u.y(), u.z()});
+}
 
 /// A hull placed in the world for libccd: world = R v + position.
 struct CcdObject {
   const std::vector<V3>* vertices;
   fcl::Matrix3<S> rotation;
   V3 position;
+  S radius = 0;  ///< a sphere: its centre is the one vertex, its surface this far out
 };
 
 void ccd_support(const void* obj, const ccd_vec3_t* dir, ccd_vec3_t* out) {
@@ -65,7 +85,12 @@ void ccd_support(const void* obj, const ccd_vec3_t* dir, ccd_vec3_t* out) {
       best = &v;
     }
   }
-  const V3 p = o->rotation * *best + o->position;
+  V3 p = o->rotation * *best + o->position;
+  if (o->radius > 0) {
+    const V3 w(ccdVec3X(dir), ccdVec3Y(dir), ccdVec3Z(dir));
+    const S n = w.norm();
+    if (n > 0) p += (o->radius / n) * w;
+  }
   ccdVec3Set(out, p.x(), p.y(), p.z());
 }
 
@@ -123,6 +148,14 @@ ShapeGeom build_box(const Shape& shape) {
   g.is_box = true;
   g.half = side * 0.5;
   g.hull_vertices = corners(lo, hi);  // body frame
+  for (const V3& v : g.hull_vertices) g.features.vertices.push_back({v.x(), v.y(), v.z()});
+  for (int k = 0; k < 3; ++k) {
+    add_direction(g.features.face_normals, V3::Unit(k));
+    add_direction(g.features.edge_dirs, V3::Unit(k));
+  }
+  g.surface_samples = g.hull_vertices;
+  for (int k = 0; k < 3; ++k)
+    for (S sign : {-1.0, 1.0}) g.surface_samples.push_back(g.offset + sign * g.half[k] * V3::Unit(k));
   return g;
 }
 
@@ -149,6 +182,7 @@ ShapeGeom build_mesh(const Shape& shape) {
   bvh->endModel();
   bvh->computeLocalAABB();
   g.exact = bvh;
+  g.bvh = true;
 
   // Convex hull (Bullet); hull vertices are mapped back to the exact mesh vertices.
   std::vector<double> coords;
@@ -170,6 +204,7 @@ ShapeGeom build_mesh(const Shape& shape) {
   if (verts->empty()) verts->assign(pts.begin(), pts.end());  // degenerate: support on all
   g.hull_vertices = *verts;
   for (V3& v : g.hull_vertices) v += g.offset;  // body frame
+  for (const V3& v : g.hull_vertices) g.features.vertices.push_back({v.x(), v.y(), v.z()});
   V3 centroid = V3::Zero();
   for (const V3& v : *verts) centroid += v;
   centroid /= S(std::max<std::size_t>(verts->size(), 1));
@@ -198,6 +233,15 @@ ShapeGeom build_mesh(const Shape& shape) {
     faces->push_back(int(idx.size()));
     faces->insert(faces->end(), idx.begin(), idx.end());
     ++num_faces;
+    add_direction(g.features.face_normals, n);
+    {
+      V3 c = V3::Zero();
+      for (int v : idx) c += (*verts)[std::size_t(v)];
+      g.surface_samples.push_back(c / S(idx.size()) + g.offset);
+    }
+    for (std::size_t k = 0; k < idx.size(); ++k)
+      add_direction(g.features.edge_dirs,
+                    (*verts)[std::size_t(idx[(k + 1) % idx.size()])] - (*verts)[std::size_t(idx[k])]);
     const S nn = n.norm();
     if (nn > 0) planes.emplace_back(n / nn, (n / nn).dot((*verts)[std::size_t(idx[0])]));
   }
@@ -230,6 +274,53 @@ ShapeGeom build_mesh(const Shape& shape) {
   return g;
 }
 
+
+/// A declared sphere of a shape: centred on its local box, through its farthest mesh
+/// vertex (the mesh placed as build_mesh places it). Boxes have none (a body's shape
+/// cannot be a sphere when it is a box: PhysicsValidators refuses it).
+ShapeGeom build_sphere(const Shape& shape) {
+  ShapeGeom g;
+  const V3 centre = (to_v3(shape.local.min) + to_v3(shape.local.max)) * 0.5;
+  const ShapeGeom m = build_mesh(shape);
+  S r = 0;
+  for (const V3& v : m.hull_vertices) r = std::max(r, (v - centre).norm());
+  g.is_sphere = true;
+  g.radius = r;
+  g.offset = centre;
+  auto sphere = std::make_shared<fcl::Sphere<S>>(r);
+  sphere->computeLocalAABB();
+  g.exact = sphere;
+  g.hull = sphere;
+  g.hull_vertices = {centre};
+  for (int k = 0; k < 3; ++k)
+    for (S sign : {-1.0, 1.0}) g.surface_samples.push_back(centre + sign * r * V3::Unit(k));
+  for (int i = 0; i < 8; ++i)
+    g.surface_samples.push_back(centre + (r / std::sqrt(3.0)) * V3((i & 1) ? 1 : -1, (i & 2) ? 1 : -1, (i & 4) ? 1 : -1));
+  return g;
+}
+
+/// The geometry body shapes are collided as (CollisionShape) for `shape`.
+ShapeGeom build_declared(const Shape& shape, CollisionShape kind) {
+  switch (kind) {
+    case CollisionShape::Mesh: return shape.mesh ? build_mesh(shape) : build_box(shape);
+    case CollisionShape::ConvexHull: {
+      if (!shape.mesh) return build_box(shape);
+      ShapeGeom g = build_mesh(shape);
+      g.exact = g.hull;
+      g.bvh = false;
+      g.convex = true;
+      return g;
+    }
+    case CollisionShape::Box: return build_box(shape);
+    case CollisionShape::Sphere: return build_sphere(shape);
+  }
+  return build_box(shape);
+}
+
+/// Distance (m, >= 0) from the world point p to the surface of geometry g placed at
+/// (r, x) (box: its faces, also from inside; sphere: | |p - c| - radius |; mesh: its
+/// triangles, FCL sphere-BVH distance).
+double geometry_surface_distance(const ShapeGeom& g, const fcl::Matrix3<S>& r, const V3& x, const V3& p);
 
 /// The FCL transform of a shape's geometry frame for a body at (R, x): R, x + R offset.
 fcl::Transform3<S> geometry_transform(const ShapeGeom& g, const fcl::Matrix3<S>& r, const V3& x) {
@@ -268,7 +359,7 @@ void exact_distance(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const Sha
   fcl::DistanceResult<S> res;
   // FCL 0.7 answers a shape (o1) against a BVH mesh (o2) with its nearest points
   // swapped (pinned by PosedReference.SeparatedMeshAboveFloorNormal): ask mesh first.
-  const bool swap = ga.is_box && !gb.is_box;
+  const bool swap = !ga.bvh && gb.bvh;
   if (swap) {
     fcl::distance(&ob, &oa, req, res);
   } else {
@@ -304,7 +395,7 @@ bool hull_penetration(const CcdObject& ca, const CcdObject& cb, ReferenceNormal&
   return true;
 }
 
-/// Two posed boxes as boxes: FCL's box-box test (ODE's dBoxBox, the separating axis of
+/// Two posed boxes as boxes (or a declared sphere and a primitive): FCL's box-box test (ODE's dBoxBox, the separating axis of
 /// least penetration among the 15 candidates: the exact minimum translation of two
 /// boxes), its deepest contact; FCL distance when apart. (libccd's EPA on box corners can
 /// cycle without end on coplanar faces.)
@@ -337,6 +428,7 @@ ReferenceNormal box_box(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const
 
 struct ReferenceGeometry::Impl {
   std::vector<ShapeGeom> shapes;
+  std::vector<double> gaps;  ///< per entry of `shapes`: declared_gap
   std::vector<std::uint32_t> body_shape;
 
   const ShapeGeom& geom(std::uint32_t body) const {
@@ -350,11 +442,54 @@ struct ReferenceGeometry::Impl {
 
 ReferenceGeometry::ReferenceGeometry(const Engine& world) : ReferenceGeometry(world.model()) {}
 
-ReferenceGeometry::ReferenceGeometry(const Model& model) : impl_(std::make_unique<Impl>()) {
-  for (const Shape& s : model.shapes) {
-    impl_->shapes.push_back(s.mesh ? build_mesh(s) : build_box(s));
+ReferenceGeometry::ReferenceGeometry(const Model& model) : ReferenceGeometry(model, {}) {}
+
+ReferenceGeometry::ReferenceGeometry(const Model& model, const std::vector<CollisionShape>& declared)
+    : impl_(std::make_unique<Impl>()) {
+  if (!declared.empty() && declared.size() != model.bodies.size())
+    throw InputError("ReferenceGeometry: " + std::to_string(declared.size()) + " collision shapes for " +
+                     std::to_string(model.bodies.size()) + " bodies; allowed: none or one per body");
+  // One geometry per (shape, declared kind) in use; the true shape of each kind's shape
+  // for the gap figure.
+  std::map<std::pair<std::uint32_t, int>, std::uint32_t> ids;
+  std::map<std::uint32_t, ShapeGeom> truth;
+  for (std::size_t i = 0; i < model.bodies.size(); ++i) {
+    const std::uint32_t shape = model.bodies[i].shape;
+    const CollisionShape kind = declared.empty() ? CollisionShape::Mesh : declared[i];
+    const auto key = std::make_pair(shape, static_cast<int>(kind));
+    auto it = ids.find(key);
+    if (it == ids.end()) {
+      it = ids.emplace(key, static_cast<std::uint32_t>(impl_->shapes.size())).first;
+      impl_->shapes.push_back(build_declared(model.shapes[shape], kind));
+      double gap = 0;
+      const Shape& s = model.shapes[shape];
+      const bool same = kind == CollisionShape::Mesh || (!s.mesh && kind != CollisionShape::Sphere);
+      if (!same) {
+        auto t = truth.find(shape);
+        if (t == truth.end()) t = truth.emplace(shape, build_declared(s, CollisionShape::Mesh)).first;
+        const fcl::Matrix3<S> id = fcl::Matrix3<S>::Identity();
+        for (const V3& p : impl_->shapes.back().surface_samples)
+          gap = std::max(gap, geometry_surface_distance(t->second, id, V3::Zero(), p));
+      }
+      impl_->gaps.push_back(gap);
+    }
+    impl_->body_shape.push_back(it->second);
   }
-  for (const BodyInfo& b : model.bodies) impl_->body_shape.push_back(b.shape);
+}
+
+double ReferenceGeometry::declared_gap(std::uint32_t body) const {
+  impl_->geom(body);  // range check
+  return impl_->gaps[impl_->body_shape[body]];
+}
+
+const char* collision_shape_name(CollisionShape c) {
+  switch (c) {
+    case CollisionShape::Mesh: return "mesh";
+    case CollisionShape::ConvexHull: return "convex_hull";
+    case CollisionShape::Box: return "box";
+    case CollisionShape::Sphere: return "sphere";
+  }
+  return "mesh";
 }
 
 ReferenceGeometry::~ReferenceGeometry() = default;
@@ -389,8 +524,8 @@ ReferenceNormal ReferenceGeometry::normal(std::uint32_t a, std::uint32_t b, Vec3
   ReferenceNormal r;
   const fcl::Matrix3<S> id = fcl::Matrix3<S>::Identity();
   // 1. Do the hulls intersect? (libccd GJK on the hull vertices.)
-  const CcdObject ca{&ga.hull_vertices, id, to_v3(xa)};
-  const CcdObject cb{&gb.hull_vertices, id, to_v3(xb)};
+  const CcdObject ca{&ga.hull_vertices, id, to_v3(xa), ga.radius};
+  const CcdObject cb{&gb.hull_vertices, id, to_v3(xb), gb.radius};
   if (hull_penetration(ca, cb, r)) {
     if (r.valid) return r;
     return fcl_collide_normal(a, b, xa, xb);  // EPA failed: FCL's MPR estimate
@@ -404,8 +539,8 @@ bool ReferenceGeometry::intersect(std::uint32_t a, std::uint32_t b, const Pose& 
   const ShapeGeom& ga = impl_->geom(a);
   const ShapeGeom& gb = impl_->geom(b);
   const fcl::Matrix3<S> ra = rotation_of(pa), rb = rotation_of(pb);
-  const CcdObject ca{&ga.hull_vertices, ra, to_v3(pa.position)};
-  const CcdObject cb{&gb.hull_vertices, rb, to_v3(pb.position)};
+  const CcdObject ca{&ga.hull_vertices, ra, to_v3(pa.position), ga.radius};
+  const CcdObject cb{&gb.hull_vertices, rb, to_v3(pb.position), gb.radius};
   ccd_t ccd = make_ccd();
   if (!ccdGJKIntersect(&ca, &cb, &ccd)) return false;
   if (ga.convex && gb.convex) return true;
@@ -421,8 +556,12 @@ ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const
   const fcl::Transform3<S> ta = geometry_transform(ga, ra, xa), tb = geometry_transform(gb, rb, xb);
   ReferenceNormal r;
   if (ga.is_box && gb.is_box) return box_box(ga, ta, gb, tb);
-  const CcdObject ca{&ga.hull_vertices, ra, xa};
-  const CcdObject cb{&gb.hull_vertices, rb, xb};
+  // A declared sphere against a primitive or a hull: FCL's own test (sphere-box and
+  // sphere-sphere exact, GJK/EPA on its sphere support otherwise); libccd's EPA on a
+  // sphere's support may stop short when the centres coincide.
+  if ((ga.is_sphere || gb.is_sphere) && !ga.bvh && !gb.bvh) return box_box(ga, ta, gb, tb);
+  const CcdObject ca{&ga.hull_vertices, ra, xa, ga.radius};
+  const CcdObject cb{&gb.hull_vertices, rb, xb, gb.radius};
   if (hull_penetration(ca, cb, r)) {
     if (ga.convex && gb.convex) return r;  // exact: EPA on the shapes themselves
     if (!exact_collide(ga, ta, gb, tb)) {
@@ -481,27 +620,41 @@ ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const
 }
 
 double ReferenceGeometry::surface_distance(std::uint32_t body, const Pose& pose, Vec3 p) const {
-  const ShapeGeom& g = impl_->geom(body);
-  const fcl::Matrix3<S> r = rotation_of(pose);
+  return geometry_surface_distance(impl_->geom(body), rotation_of(pose), to_v3(pose.position), to_v3(p));
+}
+
+namespace {
+double geometry_surface_distance(const ShapeGeom& g, const fcl::Matrix3<S>& r, const V3& x, const V3& p) {
   if (g.is_box) {
-    const V3 q = r.transpose() * (to_v3(p) - to_v3(pose.position)) - g.offset;
+    const V3 q = r.transpose() * (p - x) - g.offset;
     const V3 out = (q.cwiseAbs() - g.half).cwiseMax(0.0);
     if (out.squaredNorm() > 0) return out.norm();
     return (g.half - q.cwiseAbs()).minCoeff();  // inside: to the nearest face
   }
+  if (g.is_sphere) return std::abs((p - (x + r * g.offset)).norm() - g.radius);
   auto sphere = std::make_shared<fcl::Sphere<S>>(1e-9);
   fcl::Transform3<S> tp = fcl::Transform3<S>::Identity();
-  tp.translation() = to_v3(p);
-  fcl::CollisionObject<S> os(sphere, tp), om(g.exact, geometry_transform(g, r, to_v3(pose.position)));
+  tp.translation() = p;
+  fcl::CollisionObject<S> os(sphere, tp), om(g.exact, geometry_transform(g, r, x));
   fcl::DistanceRequest<S> req(false);
   req.gjk_solver_type = fcl::GST_LIBCCD;
   fcl::DistanceResult<S> res;
   fcl::distance(&os, &om, req, res);
   return std::max<S>(0, res.min_distance + 1e-9);
 }
+}  // namespace
 
 Aabb ReferenceGeometry::world_aabb(std::uint32_t body, const Pose& pose) const {
   const ShapeGeom& g = impl_->geom(body);
+  if (g.is_sphere) {
+    const V3 c = rotation_of(pose) * g.offset + to_v3(pose.position);
+    Aabb out;
+    for (int k = 0; k < 3; ++k) {
+      out.min[k] = std::nextafter(float(c[k] - g.radius), -std::numeric_limits<float>::infinity());
+      out.max[k] = std::nextafter(float(c[k] + g.radius), std::numeric_limits<float>::infinity());
+    }
+    return out;
+  }
   if (g.is_box) {
     Aabb local;
     const V3 lo = g.offset - g.half, hi = g.offset + g.half;
@@ -526,6 +679,8 @@ Aabb ReferenceGeometry::world_aabb(std::uint32_t body, const Pose& pose) const {
 }
 
 bool ReferenceGeometry::convex(std::uint32_t body) const { return impl_->geom(body).convex; }
+
+const HullFeatures& ReferenceGeometry::hull_features(std::uint32_t body) const { return impl_->geom(body).features; }
 
 ReferenceNormal ReferenceGeometry::aabb_pair(const Aabb& a, const Aabb& b) {
   const fcl::Matrix3<S> id = fcl::Matrix3<S>::Identity();

@@ -109,7 +109,7 @@ V3 rotate(const double* q, V3 v, bool inverse = false) {
 struct Trace {
   std::string path;
   int bodies = 0, frames = 0;
-  Data pos, vel, quat, inv_mass, contact_offsets, contact_pair, normal, depth, jn, jt, point, pair_offsets, pairs;
+  Data pos, vel, quat, inv_mass, contact_offsets, contact_pair, normal, depth, jn, jt, jt3, point, pair_offsets, pairs;
   double mu = 0.5;
 
   void load(const std::string& p) {
@@ -126,6 +126,7 @@ struct Trace {
     depth = read(f, "/contacts/depth");
     jn = read(f, "/contacts/jn");
     jt = read(f, "/contacts/jt");
+    jt3 = read(f, "/contacts/jt3");
     point = read(f, "/contacts/point");
     pair_offsets = read(f, "/pairs/offsets");
     pairs = read(f, "/pairs/pair");
@@ -332,6 +333,14 @@ TEST_F(RotationFaults, ANormalTurned45DegreesFails) {
     n.v[3 * r + 1] = t.y;
     n.v[3 * r + 2] = t.z;
     replace(h, "/contacts/normal", n);
+    // The row's friction impulse kept in its (turned) contact plane.
+    Data j = base_.jt3;
+    const V3 jr{j.v[3 * r], j.v[3 * r + 1], j.v[3 * r + 2]};
+    const V3 jp = jr - dotp(jr, t) * t;
+    j.v[3 * r] = jp.x;
+    j.v[3 * r + 1] = jp.y;
+    j.v[3 * r + 2] = jp.z;
+    replace(h, "/contacts/jt3", j);
   });
   EXPECT_EQ(res.code, 3) << res.output;
   EXPECT_EQ(verdict(res, "contact-geometry"), "FAIL") << res.output;
@@ -369,6 +378,7 @@ void drop_contact(hid_t file, const Trace& t, int frame, int a, int b) {
   replace(file, "/contacts/depth", subset(t.depth));
   replace(file, "/contacts/jn", subset(t.jn));
   replace(file, "/contacts/jt", subset(t.jt));
+  if (!t.jt3.v.empty()) replace(file, "/contacts/jt3", subset(t.jt3));
   if (!t.point.v.empty()) replace(file, "/contacts/point", subset(t.point));
 }
 
@@ -395,15 +405,58 @@ TEST_F(RotationFaults, AFrictionImpulseOutsideTheConeFails) {
   double jn_pair = 0.0;
   for (std::size_t r = base_.rows(f).first; r < base_.rows(f).second; ++r)
     if (base_.a(r) == base_.a(best) && base_.b(r) == base_.b(best)) jn_pair += base_.jn.v[r];
+  // Bullet writes /contacts/jt3, which the cone judges (the scalar jt is then not used):
+  // the row's friction vector set along a tangent of its normal.
+  ASSERT_FALSE(base_.jt3.v.empty());
+  const V3 nb{base_.normal.v[3 * best], base_.normal.v[3 * best + 1], base_.normal.v[3 * best + 2]};
+  V3 tangent = std::fabs(nb.x) < 0.9 ? crossp(nb, V3{1, 0, 0}) : crossp(nb, V3{0, 1, 0});
+  tangent = (1.0 / len(tangent)) * tangent;
   const Result res = planted("cone", [&](hid_t h) {
     Data jt = base_.jt;
     jt.v[best] = 2.0 * base_.mu * jn_pair + 0.01;
     replace(h, "/contacts/jt", jt);
+    Data j = base_.jt3;
+    for (int k = 0; k < 3; ++k)
+      j.v[3 * best + k] = (2.0 * base_.mu * jn_pair + 0.01) * (k == 0 ? tangent.x : k == 1 ? tangent.y : tangent.z);
+    replace(h, "/contacts/jt3", j);
   });
   EXPECT_EQ(res.code, 3) << res.output;
   EXPECT_EQ(verdict(res, "friction"), "FAIL") << res.output;
   // Exactly the planted contact outside the cone (Bullet's own trace has none: the first test).
   EXPECT_EQ(cone_failures(res), cone_failures(base_result_) + 1) << res.output;
+  EXPECT_NE(res.output.find("[rule: jt3]"), std::string::npos) << res.output;
+  EXPECT_TRUE(names(res, f, base_.a(best), base_.b(best)));
+}
+
+// SPEC 13b.11: friction 1.2x the cone on a pair (its rows' friction vectors all along one
+// tangent, each 1.2 mu jn of its row) is caught: the per-pair cone has no relative slack.
+TEST_F(RotationFaults, AFrictionImpulseOfOnePointTwoTimesTheConeFails) {
+  // The pair with the largest summed normal impulse.
+  std::size_t best = 0;
+  for (std::size_t r = 0; r < base_.jn.v.size(); ++r)
+    if (base_.jn.v[r] > base_.jn.v[best]) best = r;
+  int f = 1;
+  while (base_.rows(f).second <= best) ++f;
+  const int a = base_.a(best), b = base_.b(best);
+  const V3 nb{base_.normal.v[3 * best], base_.normal.v[3 * best + 1], base_.normal.v[3 * best + 2]};
+  V3 tangent = std::fabs(nb.x) < 0.9 ? crossp(nb, V3{1, 0, 0}) : crossp(nb, V3{0, 1, 0});
+  tangent = (1.0 / len(tangent)) * tangent;
+  const Result res = planted("cone12", [&](hid_t h) {
+    Data j = base_.jt3;
+    for (std::size_t r = base_.rows(f).first; r < base_.rows(f).second; ++r) {
+      if (base_.a(r) != a || base_.b(r) != b) continue;
+      const V3 n{base_.normal.v[3 * r], base_.normal.v[3 * r + 1], base_.normal.v[3 * r + 2]};
+      V3 t = tangent - dotp(tangent, n) * n;  // in this row's contact plane
+      t = (1.0 / len(t)) * t;
+      for (int k = 0; k < 3; ++k)
+        j.v[3 * r + k] = 1.2 * base_.mu * base_.jn.v[r] * (k == 0 ? t.x : k == 1 ? t.y : t.z);
+    }
+    replace(h, "/contacts/jt3", j);
+  });
+  EXPECT_EQ(res.code, 3) << res.output;
+  EXPECT_EQ(verdict(res, "friction"), "FAIL") << res.output;
+  EXPECT_NE(res.output.find("1.2 x the cone"), std::string::npos) << res.output;
+  EXPECT_TRUE(names(res, f, a, b));
 }
 
 TEST_F(RotationFaults, EnergyAddedToAnIsolatedGroupFails) {
@@ -519,3 +572,73 @@ TEST_F(RotationFaults, AnOrientationNotAppliedToContactPointsFails) {
 }
 
 }  // namespace
+
+// SPEC 13b.10: Bullet with rotation collides a mesh as its convex hull and declares it
+// (root attribute collision_shape = "convex_hull"): four bunnies dropped in a column pass
+// every physics row. The same trace without the declaration is judged on the concave
+// bunny, where the hulls' contacts are 7 mm deeper than the meshes' overlap (a false
+// verdict the declaration removes).
+TEST(DeclaredCollisionShapes, BulletsBunnyHullsPassDeclaredAndFailAsMeshes) {
+  const fs::path dir = fs::temp_directory_path() / ("octocd-hulls-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path scene = dir / "column.json";
+  std::ofstream(scene) << R"({"name": "bunny-rot-column", "rotation": true, "dt": 0.001, "frames": 30,
+    "domain": {"min": [-0.6, 0.0, -0.6], "max": [0.6, 1.5, 0.6]}, "walls": "open-box",
+    "groups": [{"name": "bunnies", "shape": {"mesh": "bunny", "scale": 0.2}, "count": 4, "mass": 1.0,
+      "positions": [[0, 0.1, 0], [0.03, 0.28, 0.01], [-0.02, 0.46, 0.02], [0.01, 0.64, -0.02]],
+      "velocity": {"type": "fixed", "value": [0.0, -1.0, 0.0]}}]})";
+  const fs::path trace = dir / "column.h5";
+  const Result r = run_octocd("validate " + scene.string() + " --engine bullet --frames 30 --trace " + trace.string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  for (const char* row : {"broadphase-completeness", "contact-completeness", "contact-geometry", "penetration",
+                          "friction"})
+    EXPECT_EQ(verdict(r, row), "pass") << row << "\n" << r.output;
+  EXPECT_NE(r.output.find("collided as declared \"convex_hull\""), std::string::npos) << r.output;
+  // Without the declaration: judged on the true (concave) mesh.
+  const fs::path bare = dir / "bare.h5";
+  fs::copy_file(trace, bare, fs::copy_options::overwrite_existing);
+  const hid_t f = H5Fopen(bare.string().c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  ASSERT_GE(H5Adelete(f, "collision_shape"), 0);
+  H5Fclose(f);
+  const Result m = run_octocd("validate --trace-in " + bare.string());
+  EXPECT_EQ(m.code, 3) << m.output;
+  EXPECT_EQ(verdict(m, "contact-geometry"), "FAIL") << m.output;
+  EXPECT_NE(m.output.find("(upper bound) [reference: FCL]"), std::string::npos) << m.output;
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+}
+
+// SPEC 13b.11 on Bullet's rot-slope (a box sliding down a slope on a 4-row manifold):
+// the clean trace passes the friction row on jt3; friction reversed (every row's jt3
+// negated) is caught, naming the frame and the pair.
+TEST(FrictionOnManifolds, BulletsSlopeReversedFrictionIsCaught) {
+  const fs::path dir = fs::temp_directory_path() / ("octocd-slope-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path trace = dir / "slope.h5";
+  const Result r = run_octocd("run " + (fs::path(source_dir()) / "datasets/scenes/rot-slope.json").string() +
+                              " --engine bullet --rotation --frames 100 --trace " + trace.string() +
+                              " --state-every 1 --contacts --no-xdmf --quiet");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Result clean = run_octocd("validate --trace-in " + trace.string());
+  EXPECT_EQ(clean.code, 0) << clean.output;
+  EXPECT_EQ(verdict(clean, "friction"), "pass") << clean.output;
+  EXPECT_NE(clean.output.find("rule jt3 on"), std::string::npos) << clean.output;
+  const fs::path reversed = dir / "reversed.h5";
+  fs::copy_file(trace, reversed, fs::copy_options::overwrite_existing);
+  const hid_t f = H5Fopen(reversed.string().c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  Data j = read(f, "/contacts/jt3");
+  ASSERT_FALSE(j.v.empty());
+  for (double& x : j.v) x = -x;
+  replace(f, "/contacts/jt3", j);
+  H5Fclose(f);
+  const Result bad = run_octocd("validate --trace-in " + reversed.string());
+  EXPECT_EQ(bad.code, 3) << bad.output;
+  EXPECT_EQ(verdict(bad, "friction"), "FAIL") << bad.output;
+  EXPECT_TRUE(std::regex_search(bad.output, std::regex("frame \\d+: pair \\(0, 1\\) \\(4 rows\\): the friction "
+                                                       "impulse .* pushes the contact points along their sliding")))
+      << bad.output;
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+}

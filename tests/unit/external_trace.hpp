@@ -33,6 +33,8 @@ struct Trace {
   std::vector<float> orientation, angular_velocity;  // (F+1) n 4, (F+1) n 3
   std::vector<float> inertia;                        // n 3 3
   std::vector<float> point;                          // C 3
+  std::vector<float> jt3;                            // C 3: tangential impulse vectors (written when non-empty)
+  std::vector<std::string> collision_shape;          // n: /bodies/collision_shape (written when non-empty)
   std::vector<float> friction, restitution;          // n
   std::map<std::string, std::string> string_attrs;   // root attributes
   std::map<std::string, double> number_attrs;
@@ -176,6 +178,15 @@ struct Trace {
       put("/states/angular_velocity", F, FT, {angular_velocity.size() / (3 * n), n, 3}, angular_velocity.data());
     if (!inertia.empty()) put("/bodies/inertia", F, FT, {inertia.size() / 9, 3, 3}, inertia.data());
     if (!point.empty()) put("/contacts/point", F, FT, {point.size() / 3, 3}, point.data());
+    if (!jt3.empty()) put("/contacts/jt3", F, FT, {jt3.size() / 3, 3}, jt3.data());
+    if (!collision_shape.empty()) {
+      std::vector<const char*> ptrs;
+      for (const std::string& c : collision_shape) ptrs.push_back(c.c_str());
+      const hid_t st = H5Tcopy(H5T_C_S1);
+      H5Tset_size(st, H5T_VARIABLE);
+      put("/bodies/collision_shape", st, st, {ptrs.size()}, ptrs.data());
+      H5Tclose(st);
+    }
     if (!friction.empty()) put("/bodies/friction", F, FT, {friction.size()}, friction.data());
     if (!restitution.empty()) put("/bodies/restitution", F, FT, {restitution.size()}, restitution.data());
     H5Pclose(lcpl);

@@ -2,7 +2,7 @@
 // applied-state validator gives no false alarm on piles (near-ties of SPEC 6 explored as
 // branches), judges at least 90% of the dynamic body-frames, and still catches every
 // planted fault of the response on the same scenes. Figures over 2000 frames are in
-// reports/cpu/validate-*.txt; these tests run fewer frames.
+// reports/cpu/validation.csv (scripts/record.sh cpu); these tests run fewer frames.
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -179,7 +179,7 @@ TEST(PassesRows, PassingRowsSayWhatTheyJudged) {
 // mixed-pile-1000 (1000 bodies of bunny, armadillo, dragon and box shapes, 4 passes): the
 // pile the correct engine forms in 700 frames, then 40 frames judged per engine, the
 // correct one and each faulty one (one test: the pile is built once; the 2000-frame
-// figures are in reports/cpu/validate-mixed-pile-1000.txt).
+// figures come from `octocd validate datasets/scenes/mixed-pile-1000.json --frames 2000`).
 TEST(MixedPile, FaultsAreCaughtAndTheCorrectEnginePasses) {
   const Scene scene = load_scene(source_dir() + "/datasets/scenes/mixed-pile-1000.json");
   ASSERT_EQ(scene.response.iterations, 4);

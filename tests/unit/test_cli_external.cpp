@@ -368,3 +368,60 @@ TEST_F(TraceIn, PythonRotatingWriterIsAValidVersion2Trace) {
   const Result r = run(bin() + " validate --trace-in " + path);
   EXPECT_TRUE(r.code == 0 || r.code == 3) << r.output;  // judged, never refused as input
 }
+
+// /contacts/jt3 (SPEC 13b.11): the tangential impulse vectors; each must lie in its row's
+// contact plane (within kJt3MaxAngleDeg = 1 deg), one per contact row.
+TEST_F(TraceIn, Version2Jt3InTheContactPlane) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  Trace good = Trace::make_v2();
+  // Normals are -x: friction along y and z, |jt3| = |jt|.
+  good.jt3 = {0, 0.001f, 0, 0, -0.002f, 0, 0, 0, 0.003f, 0, 0, 0, 0, 0.003f, 0.004f};
+  const Result ok = validate(good);
+  EXPECT_TRUE(ok.code == 0 || ok.code == 3) << ok.output;
+  EXPECT_NE(ok.output.find("rule jt3 on"), std::string::npos) << ok.output;
+  Trace tilted = good;
+  tilted.jt3[3 * 3 + 0] = 0.004f;  // frame 3's first row: (0.004, 0, 0.004) is 45 deg out of the plane
+  tilted.jt3[3 * 3 + 2] = 0.004f;
+  expect_bad_both(v(tilted), {"/contacts/jt3", "frame 3", "row 0 (pair (1, 2))", "45 deg out of the contact plane",
+                              "orthogonal to the row's normal (within 1 deg)"});
+  Trace shape = good;
+  shape.dims["/contacts/jt3"] = {4, 3};
+  expect_bad_both(v(shape), {"/contacts/jt3", "shape 4 x 3", "allowed: 5 x 3"});
+  Trace v1;
+  v1.jt3 = {0, 0.001f, 0, 0, 0.001f, 0, 0, 0.001f, 0};
+  expect_bad(validate(v1), {"/contacts/jt3", "present in a version 1 file"});
+}
+
+// Declared collision shapes (SPEC 13b.10): the root attribute or one string per body;
+// an unknown value, a sphere on a box, both forms at once, a wrong count: exit 2 naming
+// the file, the dataset or attribute, the body and the allowed values.
+TEST_F(TraceIn, Version2CollisionShapes) {
+  auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
+  Trace all = Trace::make_v2();
+  all.string_attrs["collision_shape"] = "convex_hull";
+  const Result ok = validate(all);
+  EXPECT_TRUE(ok.code == 0 || ok.code == 3) << ok.output;
+  Trace per_body = Trace::make_v2();
+  per_body.collision_shape = {"mesh", "box", "convex_hull"};
+  EXPECT_EQ(validate(per_body, "--check-only").code, 0);
+  Trace unknown = Trace::make_v2();
+  unknown.collision_shape = {"mesh", "capsule", "box"};
+  expect_bad_both(v(unknown), {"t.h5", "/bodies/collision_shape: body 1", "'capsule' unknown",
+                               "\"mesh\", \"convex_hull\", \"box\" or \"sphere\""});
+  Trace attr = Trace::make_v2();
+  attr.string_attrs["collision_shape"] = "hull";
+  expect_bad_both(v(attr), {"root attribute collision_shape", "'hull' unknown", "\"convex_hull\""});
+  Trace both = per_body;
+  both.string_attrs["collision_shape"] = "mesh";
+  expect_bad_both(v(both), {"/bodies/collision_shape", "given with the root attribute"});
+  Trace count = Trace::make_v2();
+  count.collision_shape = {"mesh", "box"};
+  expect_bad_both(v(count), {"/bodies/collision_shape", "2 values", "3 strings, one per body"});
+  // Every body here is a box: a box cannot be collided as a sphere.
+  Trace sphere = Trace::make_v2();
+  sphere.collision_shape = {"mesh", "mesh", "sphere"};
+  const Result s = validate(sphere);
+  EXPECT_EQ(s.code, 2) << s.output;
+  for (const char* f : {"t.h5", "/bodies/collision_shape", "body 2", "\"sphere\" on a box shape", "allowed for a box"})
+    EXPECT_NE(s.output.find(f), std::string::npos) << f << " not in:\n" << s.output;
+}

@@ -189,6 +189,17 @@ std::vector<hsize_t> parse_dims(const std::string& text) {
   return d;
 }
 
+/// The four groups of an XDMF 3 HDF5 hyperslab "file:/dataset|start:stride:count:dims"
+/// (each a space-separated list, one value per dimension); empty when `ref` has no '|'.
+std::vector<std::string> hdf_hyperslab(const std::string& ref) {
+  const auto bar = ref.find('|');
+  if (bar == std::string::npos) return {};
+  std::vector<std::string> groups;
+  std::istringstream in(ref.substr(bar + 1));
+  for (std::string g; std::getline(in, g, ':');) groups.push_back(g);
+  return groups;
+}
+
 class CliUser : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -581,10 +592,17 @@ TEST_F(CliUser, TraceWritesXdmfSidecarMatchingTheTrace) {
     const auto time = x.nodes("Time", grids[g]);
     ASSERT_EQ(time.size(), 1u);
     EXPECT_NEAR(std::stod(Xml::attr(time[0], "Value")), 0.001 * static_cast<double>(state_frames[g]), 1e-6);
-    // Geometry: row g of /states/position.
-    const auto slab = x.nodes("Geometry/DataItem[@ItemType='HyperSlab']/DataItem", grids[g]);
-    ASSERT_EQ(slab.size(), 2u);
-    EXPECT_EQ(parse_dims(Xml::text(slab[0])), (std::vector<hsize_t>{g, 0, 0, 1, 1, 1, 1, n, 3}));
+    // Geometry: row g of /states/position, as an XDMF 3 HDF5 hyperslab
+    // "file:/dataset|start:stride:count:dataset dimensions" of n x 3 values.
+    const auto geo = x.nodes("Geometry[@GeometryType='XYZ']/DataItem[@Format='HDF']", grids[g]);
+    ASSERT_EQ(geo.size(), 1u);
+    EXPECT_EQ(parse_dims(Xml::attr(geo[0], "Dimensions")), (std::vector<hsize_t>{n, 3}));
+    const std::vector<std::string> slab = hdf_hyperslab(Xml::text(geo[0]));
+    ASSERT_EQ(slab.size(), 4u) << Xml::text(geo[0]);
+    EXPECT_EQ(parse_dims(slab[0]), (std::vector<hsize_t>{g, 0, 0})) << "start";
+    EXPECT_EQ(parse_dims(slab[1]), (std::vector<hsize_t>{1, 1, 1})) << "stride";
+    EXPECT_EQ(parse_dims(slab[2]), (std::vector<hsize_t>{1, n, 3})) << "count";
+    EXPECT_EQ(parse_dims(slab[3]), dims_of(f.id, "/states/position")) << "dataset dimensions";
     // Every attribute a viewer needs to draw the boxes the right size and colour.
     std::set<std::string> names;
     for (xmlNodePtr a : x.nodes("Attribute", grids[g])) names.insert(Xml::attr(a, "Name"));
@@ -600,8 +618,23 @@ TEST_F(CliUser, TraceWritesXdmfSidecarMatchingTheTrace) {
     const auto colon = ref.find(':');
     ASSERT_NE(colon, std::string::npos) << ref;
     EXPECT_EQ(ref.substr(0, colon), "two.h5") << "the sidecar names the trace by file name";
-    const std::string dataset = ref.substr(colon + 1);
-    EXPECT_EQ(parse_dims(Xml::attr(item, "Dimensions")), dims_of(f.id, dataset)) << dataset;
+    const auto bar = ref.find('|');
+    const std::string dataset = ref.substr(colon + 1, bar == std::string::npos ? std::string::npos : bar - colon - 1);
+    if (bar == std::string::npos) {
+      EXPECT_EQ(parse_dims(Xml::attr(item, "Dimensions")), dims_of(f.id, dataset)) << dataset;
+      continue;
+    }
+    // A hyperslab: its dataset dimensions are the dataset's, it lies inside them, and the
+    // item's Dimensions are its count without the leading 1 (one state row).
+    const std::vector<std::string> slab = hdf_hyperslab(ref);
+    ASSERT_EQ(slab.size(), 4u) << ref;
+    const auto start = parse_dims(slab[0]), count = parse_dims(slab[2]), dims = parse_dims(slab[3]);
+    EXPECT_EQ(dims, dims_of(f.id, dataset)) << ref;
+    ASSERT_EQ(start.size(), dims.size()) << ref;
+    ASSERT_EQ(count.size(), dims.size()) << ref;
+    for (std::size_t k = 0; k < dims.size(); ++k) EXPECT_LE(start[k] + count[k], dims[k]) << ref;
+    EXPECT_EQ(count.front(), 1u) << ref;
+    EXPECT_EQ(parse_dims(Xml::attr(item, "Dimensions")), std::vector<hsize_t>(count.begin() + 1, count.end())) << ref;
   }
 
   // The values: half extents of each body, and group ids that map to the group names.

@@ -16,6 +16,7 @@
 #include "octocd/physics.hpp"
 #include "octocd/reference_contact.hpp"
 #include "octocd/validation.hpp"
+#include "../../validation/physics/sat.hpp"
 
 using namespace octocd;
 
@@ -425,11 +426,17 @@ TEST(PhysicsRows, FrictionImpulseOutsideTheCone) {
   float jn_pair = 0.0f;
   for (const ContactRecord& c : r.rec.contacts)
     if (c.pair == r.rec.contacts[4].pair) jn_pair += c.jn;
-  r.rec.contacts[4].jt = -0.5f * jn_pair * 1.5f - 0.01f;  // outside (beyond the solver slack)
-  expect_caught(judge(*model, r.rec, rotating_engine()), "friction", {"frame 7", "pair (0, 3)", "|jt|"});
+  r.rec.contacts[4].jt = -0.5f * jn_pair * 1.5f - 0.01f;  // outside
+  expect_caught(judge(*model, r.rec, rotating_engine()), "friction",
+                {"frame 7", "pair (0, 3)", "|jt|", "[rule: scalar]"});
+  // 1.2x the cone over the pair's 4 rows (the other 3 rows carry 0.001 each): caught, no
+  // relative slack (the scalar rule's absolute slack friction_cone_abs is 1e-3 kg m/s,
+  // the excess here 0.002).
+  r.rec.contacts[4].jt = 1.2f * 0.5f * jn_pair - 0.003f;
+  expect_caught(judge(*model, r.rec, rotating_engine()), "friction", {"frame 7", "pair (0, 3)", "1.2 x the cone"});
   // Per-body friction with the product rule: 0.4 x 0.5 = 0.2 < 0.45 -> also out.
   RestingRecord q = resting(*model);
-  q.rec.contacts[4].jt = 0.45f * jn_pair;
+  q.rec.contacts[4].jt = 0.45f * jn_pair - 0.003f;  // the pair's sum: 0.45 jn, inside mu = 0.5
   PhysicsBodies b = rotating_engine();
   EXPECT_TRUE(row_of(judge(*model, q.rec, b), "friction").pass);
   b.body_friction = {0.4f, 0.4f, 0.4f, 0.5f};  // 0.2: 0.45 is 2.25 times the cone
@@ -1000,4 +1007,180 @@ TEST(PhysicsDeclarations, GyroscopicTermDeclaredInAnIsolatedCollision) {
   expect_caught(judge(*model, twice, b), "momentum-balance", {"frame 12: body 2", "angular 2 of 2"});
   b.gyroscopic = true;
   expect_caught(judge(*model, twice, b), "momentum-balance", {"frame 12: body 2", "angular 2 of 2"});
+}
+
+// ---- Exact reference geometry: the separating-axis test (SPEC 13b.9) -----------------
+
+namespace {
+
+/// Two dynamic boxes of half extents 0.1 x 0.05 x 0.08, no gravity, crossed edge on edge:
+/// the minimum translation is an edge-edge axis (SAT: 19.04 mm), while FCL's box-box test
+/// (ODE's dBoxBox, which keeps a face axis unless an edge-edge one overlaps less than
+/// 1/1.05 of it) answers a face normal of B, 19.89 mm deep and 83.8 deg away. Found by a
+/// random search over orientations (seed 5, draw 44392).
+struct CrossedBoxes {
+  std::shared_ptr<const Model> model;
+  Pose pa, pb;
+  FrameRecord rec;
+};
+
+CrossedBoxes crossed_boxes() {
+  const std::string text = R"({
+    "name": "crossed", "domain": {"min": [-1, -1, -1], "max": [1, 1, 1]}, "walls": "none",
+    "gravity": [0, 0, 0],
+    "groups": [
+      {"name": "a", "shape": {"box": [0.1, 0.05, 0.08]}, "count": 1, "mass": 1.0, "positions": [[0, 0, 0]]},
+      {"name": "b", "shape": {"box": [0.1, 0.05, 0.08]}, "count": 1, "mass": 1.0, "positions": [[0.5, 0, 0]]}
+    ]})";
+  CrossedBoxes c;
+  c.model = build_model(parse_scene(text, "crossed boxes (test)"));
+  c.pa = Pose{v3(0.1, 0.2, 0.3), Quat{0.997567654f, -0.00725969253f, -0.0395310596f, -0.0569506921f}};
+  c.pb = Pose{v3(-0.0387659743, 0.129426897, 0.427107513),
+              Quat{0.991080165f, 0.0486282595f, -0.0467353426f, -0.114939965f}};
+  FrameRecord& rec = c.rec;
+  rec.frame = 3;
+  rec.manifolds = true;
+  rec.has_points = true;
+  for (const Pose& p : {c.pa, c.pb}) {
+    rec.x_det.push_back(p.position);
+    rec.q_det.push_back(p.orientation);
+  }
+  for (std::size_t i = 0; i < 2; ++i) rec.aabbs.push_back(posed_box_aabb(c.model->local_box(i), i ? c.pb : c.pa));
+  rec.pairs.push_back({0, 1});
+  return c;
+}
+
+/// The engine's one row: normal n, depth d, at FCL's contact point.
+void add_row(CrossedBoxes& c, const std::array<double, 3>& n, double d, Vec3 point) {
+  ContactRecord row;
+  row.pair = {0, 1};
+  row.normal = v3(n[0], n[1], n[2]);
+  row.depth = float(d);
+  row.point = point;
+  row.jn = 0.01f;
+  row.jt = 0.0f;
+  c.rec.contacts.push_back(row);
+}
+
+}  // namespace
+
+// The separating-axis test itself: the figures of the crossed boxes, every axis within
+// epsilon accepted, FCL's face normal among them (within 5%), the edge-edge minimum first.
+TEST(SeparatingAxis, CrossedBoxesMinimumIsTheEdgeEdgeAxis) {
+  CrossedBoxes c = crossed_boxes();
+  ReferenceGeometry ref(*c.model);
+  const SatResult s = sat_min_translation(ref.hull_features(0), c.pa, ref.hull_features(1), c.pb);
+  ASSERT_TRUE(s.tested);
+  ASSERT_FALSE(s.separated);
+  EXPECT_EQ(s.axes, 15u);
+  EXPECT_NEAR(s.depth, 0.01904, 1e-5);
+  ASSERT_EQ(s.accepted.size(), 2u);
+  const ReferenceNormal f = ref.posed(0, 1, c.pa, c.pb);
+  ASSERT_TRUE(f.penetrating && f.valid);
+  EXPECT_NEAR(f.depth, 0.01989, 1e-5);  // FCL: 4.5% deeper than the minimum
+  EXPECT_GT(f.depth, 1.04 * s.depth);
+  // The minimum is an edge-edge axis 83.8 deg from FCL's face normal.
+  EXPECT_NEAR(angle_between(f.normal, v3(s.normal[0], s.normal[1], s.normal[2])) * 180 / kPi, 83.8, 0.1);
+  // FCL's normal is an accepted axis (within 5% of the minimum); no translation along any
+  // axis is smaller than the minimum's.
+  EXPECT_LT(sat_angle_to_accepted(s, {f.normal.x, f.normal.y, f.normal.z}) * 180 / kPi, 1e-3);
+  // Without the relative epsilon only the minimum is accepted.
+  SatSettings exact;
+  exact.rel = 0;
+  EXPECT_EQ(sat_min_translation(ref.hull_features(0), c.pa, ref.hull_features(1), c.pb, exact).accepted.size(), 1u);
+  // Moved apart along the minimum's axis by more than the depth: separated.
+  Pose far = c.pa;
+  far.position = far.position + float(s.depth + 1e-3) * v3(s.normal[0], s.normal[1], s.normal[2]);
+  EXPECT_TRUE(sat_min_translation(ref.hull_features(0), far, ref.hull_features(1), c.pb).separated);
+  EXPECT_FALSE(ref.posed(0, 1, far, c.pb).penetrating);
+}
+
+// An engine whose normal is the exact minimum (edge-edge) passed as a failure against
+// FCL's box-box (83.8 deg "off FCL"): judged by the separating-axis test it passes, and
+// the detail names the reference. A normal turned 45 deg from every accepted axis is
+// still caught, and so is a depth far from the SAT minimum.
+TEST(SeparatingAxis, ExactMinimumPassesTurnedNormalCaught) {
+  CrossedBoxes c = crossed_boxes();
+  ReferenceGeometry ref(*c.model);
+  const SatResult s = sat_min_translation(ref.hull_features(0), c.pa, ref.hull_features(1), c.pb);
+  const ReferenceNormal f = ref.posed(0, 1, c.pa, c.pb);
+  PhysicsBodies bodies = rotating_engine();
+  {
+    CrossedBoxes e = c;
+    add_row(e, s.normal, s.depth, f.point_a);
+    const auto rs = judge(*e.model, e.rec, bodies);
+    expect_all_pass(rs);
+    const ValidationResult& g = row_of(rs, "contact-geometry");
+    EXPECT_LT(g.measured, 0.02) << g.detail;
+    EXPECT_NE(g.detail.find("SAT on 1 convex pair-frames"), std::string::npos) << g.detail;
+    EXPECT_NE(g.detail.find("second opinion: FCL's normal on another axis than the minimum on 1 pair-frames"),
+              std::string::npos)
+        << g.detail;
+  }
+  {
+    // FCL's face normal and depth (ODE's choice) are accepted too.
+    CrossedBoxes e = c;
+    add_row(e, {f.normal.x, f.normal.y, f.normal.z}, f.depth, f.point_a);
+    expect_all_pass(judge(*e.model, e.rec, bodies));
+  }
+  {
+    // The minimum's normal turned by 45 deg away from FCL's face normal: 45 deg from the
+    // nearest accepted axis.
+    const Vec3 n = v3(s.normal[0], s.normal[1], s.normal[2]);
+    const Vec3 side = cross(f.normal, n);
+    const Vec3 axis = (1.0f / length(side)) * side;
+    const Vec3 turned = rotate(axis_angle(axis, float(kPi / 4)), n);
+    EXPECT_NEAR(sat_angle_to_accepted(s, {turned.x, turned.y, turned.z}) * 180 / kPi, 45.0, 0.01);
+    CrossedBoxes e = c;
+    add_row(e, {turned.x, turned.y, turned.z}, s.depth, f.point_a);
+    expect_caught(judge(*e.model, e.rec, bodies), "contact-geometry",
+                  {"frame 3", "pair (0, 1) row 0", "45.0 deg from SAT's", "[reference: SAT]"});
+  }
+  {
+    // A depth 6 mm beyond the minimum (depth_m 5 mm).
+    CrossedBoxes e = c;
+    add_row(e, s.normal, s.depth + 0.006, f.point_a);
+    expect_caught(judge(*e.model, e.rec, bodies), "contact-geometry",
+                  {"frame 3", "pair (0, 1)", "SAT minimum 0.01904 m", "[reference: SAT]"});
+  }
+}
+
+// Declared collision shapes (SPEC 13b.10): the dumbbell collided as its convex hull, its
+// local box or a sphere; a small box in its gap then penetrates what was collided. The
+// gap to the true mesh is a figure: the hull's top face centre (0, 0.5, 0) lies 0.5 m
+// from the nearest cube edge.
+TEST(PosedReference, DeclaredCollisionShapes) {
+  const std::string text = R"({"name": "db", "domain": {"min": [-3, -3, -3], "max": [3, 3, 3]}, "walls": "none",
+    "groups": [{"name": "db", "shape": {"mesh": ")" + dumbbell_obj() + R"(", "scale": 3}, "count": 1,
+                "mass": 0, "positions": [[0, 0, 0]]},
+               {"name": "box", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 1, "positions": [[0, 0, 0]]}]})";
+  const auto model = build_model(parse_scene(text, "dumbbell (test)"));
+  const Pose db{v3(0, 0, 0), Quat{}}, box{v3(0, 0, 0), Quat{}};
+  EXPECT_FALSE(ReferenceGeometry(*model).posed(0, 1, db, box).penetrating);  // the true mesh: in the gap
+  for (CollisionShape kind : {CollisionShape::ConvexHull, CollisionShape::Box}) {
+    const ReferenceGeometry ref(*model, {kind, CollisionShape::Mesh});
+    const ReferenceNormal r = ref.posed(0, 1, db, box);
+    EXPECT_TRUE(r.penetrating) << collision_shape_name(kind);
+    EXPECT_NEAR(r.depth, 0.6, 1e-6) << collision_shape_name(kind);  // out through y or z
+    EXPECT_TRUE(ref.convex(0));
+    EXPECT_NEAR(ref.declared_gap(0), 0.5, 1e-6) << collision_shape_name(kind);
+    EXPECT_EQ(ref.declared_gap(1), 0.0);
+  }
+  const double radius = std::sqrt(1.5 * 1.5 + 0.5 * 0.5 + 0.5 * 0.5);
+  const ReferenceGeometry sphere(*model, {CollisionShape::Sphere, CollisionShape::Mesh});
+  const ReferenceNormal s = sphere.posed(0, 1, db, box);
+  EXPECT_TRUE(s.penetrating);
+  EXPECT_NEAR(s.depth, radius + 0.1, 1e-3);  // EPA on the sphere's support
+  EXPECT_NEAR(sphere.surface_distance(0, db, v3(0, 2, 0)), 2 - radius, 1e-6);
+  EXPECT_NEAR(sphere.world_aabb(0, db).max.x, radius, 1e-5);
+  EXPECT_FALSE(sphere.posed(0, 1, db, Pose{v3(0, radius + 0.2, 0), Quat{}}).penetrating);
+  // A box cannot be collided as a sphere: the physics validators refuse it.
+  PhysicsBodies bodies = rotating_engine();
+  bodies.collision_shape = {CollisionShape::Mesh, CollisionShape::Sphere};
+  try {
+    PhysicsValidators v(*model, bodies, Tolerances{}, "engine 'test'");
+    ADD_FAILURE() << "a sphere on a box shape was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("body 1: \"sphere\" on a box shape"), std::string::npos) << e.what();
+  }
 }

@@ -84,7 +84,7 @@ TEST(Validators, AllPassOnTheCorrectPipeline) {
     // here: SPEC 6 sums each body's impulses computed from the same pre-response state
     // (Jacobi), which overshoots where a body is squeezed between others (frame 201: an
     // isolated group of 4 boxes goes from 17.9 to 69.3 J). That is a finding about the
-    // model (README, "Validate your own engine"), not a validator fault; momentum and
+    // model (docs/validation.md, "Validate your own engine"), not a validator fault; momentum and
     // every other row still pass.
     if (r.tier == Tier::Physics && r.name == "conservation" && !r.pass) {
       EXPECT_NE(r.detail.find("kinetic energy"), std::string::npos) << r.detail;

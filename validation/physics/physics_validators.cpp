@@ -22,6 +22,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/reference_contact.hpp"
+#include "sat.hpp"
 
 namespace octocd {
 
@@ -287,7 +288,19 @@ struct PhysicsValidators::Impl {
   std::uint64_t aabb_angle_rows = 0;  // Aabb geometry: rows compared with box-box on the AABBs (figure)
   double aabb_angle_worst = 0;
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
+  // Contact geometry's references: pairs judged by the separating-axis test and by FCL;
+  // where FCL's normal lies outside SAT's accepted axes (figure: FCL's box-box keeps a
+  // face axis up to 5% deeper than the minimum).
+  std::uint64_t sat_pairs = 0, fcl_pairs = 0, sat_fcl_other = 0, sat_fcl_disagree = 0;
+  double sat_fcl_worst_excess = 0, sat_fcl_other_excess = 0;
+  std::string sat_fcl_what;
+  SatSettings sat_settings;
+  // Declared collision shapes other than the body's own (figure): bodies per kind and the
+  // largest gap between the declared shape and the true one (m).
+  std::map<std::string, std::pair<std::uint64_t, double>> declared;
   double speculative_worst = 0;
+  // Friction rules: pairs judged on jt3 (vectors) and on the scalar jt.
+  std::uint64_t cone_jt3_pairs = 0, cone_scalar_pairs = 0, dissipation_jt3_pairs = 0, dissipation_small = 0;
   std::uint64_t dissipation_cone_only = 0, groups = 0, groups_rotating = 0, state_frames = 0, groups_clamped = 0;
   double pen_max = 0, pen_upper_max = 0;
   std::string pen_what, pen_upper_what;
@@ -308,8 +321,14 @@ struct PhysicsValidators::Impl {
     return combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
   }
   bool dynamic(std::uint32_t i) const { return mass[i] > 0; }
+  /// Whether body i's collision shape is a convex polytope the separating-axis test
+  /// judges (a box, or a convex mesh).
+  bool sat_shape(std::uint32_t i) const { return ref->convex(i); }
 
   void geometry(const FrameRecord& rec, const std::vector<Pose>& det);
+  /// Dissipation of pair p's rows [k0, k1) from their tangential impulse vectors (jt3).
+  void judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p, std::size_t k0,
+                           std::size_t k1);
   void dynamics(const FrameRecord& rec, const std::vector<Pose>& det);
   void balance(const FrameRecord& rec, const std::vector<Pose>& det);
   /// Mechanical energy of body i (kinetic + rotational - m g . x), before or after the step.
@@ -397,7 +416,27 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
     s.max_margin = 0;
     for (float t : model.theta_shape) s.max_margin = std::max(s.max_margin, double(t));
   }
-  s.ref = std::make_unique<ReferenceGeometry>(model);
+  if (!bodies.collision_shape.empty()) {
+    if (bodies.collision_shape.size() != n)
+      bad("collision_shape", fmt::format("{} values for {} bodies; allowed: 0 (every body as its shape) or {}",
+                                         bodies.collision_shape.size(), n, n));
+    for (std::size_t i = 0; i < n; ++i)
+      if (bodies.collision_shape[i] == CollisionShape::Sphere && !model.shapes[model.bodies[i].shape].mesh)
+        bad("collision_shape", fmt::format("body {}: \"sphere\" on a box shape (a box cannot be collided as a "
+                                           "sphere); allowed for a box: \"mesh\", \"convex_hull\", \"box\" (each the "
+                                           "box itself)",
+                                           i));
+  }
+  s.ref = std::make_unique<ReferenceGeometry>(model, bodies.collision_shape);
+  for (std::size_t i = 0; i < bodies.collision_shape.size(); ++i) {
+    const CollisionShape c = bodies.collision_shape[i];
+    if (c == CollisionShape::Mesh) continue;
+    auto& [count, gap] = s.declared[collision_shape_name(c)];
+    ++count;
+    gap = std::max(gap, s.ref->declared_gap(static_cast<std::uint32_t>(i)));
+  }
+  s.sat_settings.abs_m = tol.geometry_slack_m;
+  s.sat_settings.rel = tol.sat_accept_rel;
   BroadPhaseConfig oc;
   oc.name = "octree";
   oc.octree_depth = -1;
@@ -453,21 +492,41 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
 
   // Truth per pair, lazily: intersect() for every candidate, posed() where a row needs
   // the depth or the distance.
+  // Two convex shapes (boxes, convex meshes) that penetrate get the exact minimum
+  // translation of the separating-axis test (SPEC 13b.9: FCL's box-box keeps a face axis
+  // up to 5% deeper than an edge-edge one, so its depth and normal are not the minimum
+  // there); FCL's answer stays beside it as the second opinion.
   struct Truth {
     bool intersects = false, have = false;
     ReferenceNormal g;
+    bool sat = false;  // g's depth and normal are the separating-axis test's
+    SatResult sat_result;
+    ReferenceNormal fcl;  // FCL's own answer (the second opinion where sat)
   };
   std::map<std::pair<std::uint32_t, std::uint32_t>, Truth> truth;
   auto key = [](Pair p) { return std::make_pair(p.a, p.b); };
-  auto full = [&](Pair p) -> const ReferenceNormal& {
+  auto full_truth = [&](Pair p) -> const Truth& {
     Truth& t = truth[key(p)];
     if (!t.have) {
       t.g = ref->posed(p.a, p.b, det[p.a], det[p.b]);
+      t.fcl = t.g;
+      if (t.g.penetrating && t.g.valid && sat_shape(p.a) && sat_shape(p.b)) {
+        t.sat_result = sat_min_translation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b), det[p.b],
+                                           sat_settings);
+        if (t.sat_result.tested && !t.sat_result.separated) {
+          t.sat = true;
+          t.g.depth = t.sat_result.depth;
+          t.g.depth_upper_bound = false;
+          const auto& u = t.sat_result.normal;
+          t.g.normal = Vec3{float(u[0]), float(u[1]), float(u[2])};
+        }
+      }
       t.have = true;
       t.intersects = t.g.penetrating;
     }
-    return t.g;
+    return t;
   };
+  auto full = [&](Pair p) -> const ReferenceNormal& { return full_truth(p).g; };
   const bool need_distance = tol.broadphase_margin_m - slack > 0;
   std::vector<Pair> required;
   for (const Pair& p : cand) {
@@ -588,8 +647,36 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   for (const PairRows& pr : rows) {
     poll();
     const Pair p = pr.p;
-    const ReferenceNormal& shape_ref = full(p);
+    const Truth& shape_truth = full_truth(p);
+    const ReferenceNormal& shape_ref = shape_truth.g;
     const bool aabb = bodies.contact_geometry == ContactGeometry::Aabb;
+    // The reference that judges this pair: the separating-axis test (every near-minimal
+    // axis accepted) or FCL (box-box, EPA, or the BVH bound of non-convex meshes).
+    const bool by_sat = !aabb && shape_truth.sat;
+    const char* judge = by_sat ? "SAT" : "FCL";
+    if (by_sat) {
+      ++sat_pairs;
+      // The second opinion: FCL's normal outside SAT's accepted axes is a figure.
+      const double fcl_angle = sat_angle_to_accepted(shape_truth.sat_result, d3(shape_truth.fcl.normal)) * 180.0 / kPi;
+      const double fcl_excess = shape_truth.fcl.depth - shape_truth.g.depth;
+      if (angle_between(shape_truth.fcl.normal, shape_truth.g.normal) * 180.0 / kPi > 1.0) {
+        ++sat_fcl_other;
+        if (fcl_excess > sat_fcl_other_excess) sat_fcl_other_excess = fcl_excess;
+      }
+      if (fcl_angle > 1.0) {
+        ++sat_fcl_disagree;
+        if (fcl_excess > sat_fcl_worst_excess) {
+          sat_fcl_worst_excess = fcl_excess;
+          sat_fcl_what = fmt::format("frame {}: {} FCL {:.4g} m along ({:.3f}, {:.3f}, {:.3f}), {:.1f} deg from "
+                                     "SAT's accepted axes, minimum {:.4g} m",
+                                     frame, pair_name(p), shape_truth.fcl.depth, shape_truth.fcl.normal.x,
+                                     shape_truth.fcl.normal.y, shape_truth.fcl.normal.z, fcl_angle,
+                                     shape_truth.g.depth);
+        }
+      }
+    } else if (!aabb) {
+      ++fcl_pairs;
+    }
     const ReferenceNormal r = aabb ? ReferenceGeometry::aabb_pair(rec.aabbs[p.a], rec.aabbs[p.b]) : shape_ref;
     if (!r.valid) {
       rows_unjudged += pr.count;
@@ -609,7 +696,14 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     const bool engine_places_depth = rec.contacts[deepest].depth > tol.geometry_slack_m;
     for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
       const ContactRecord& c = rec.contacts[k];
-      const double angle = angle_between(c.normal, r.normal) * deg;
+      std::size_t nearest = 0;
+      const double angle =
+          (by_sat ? sat_angle_to_accepted(shape_truth.sat_result, d3(c.normal), &nearest) : angle_between(c.normal, r.normal)) *
+          deg;
+      const Vec3 ref_normal = by_sat ? Vec3{float(shape_truth.sat_result.accepted[nearest].normal[0]),
+                                            float(shape_truth.sat_result.accepted[nearest].normal[1]),
+                                            float(shape_truth.sat_result.accepted[nearest].normal[2])}
+                                     : r.normal;
       ++sign_rows;
       if (dot(c.normal, r.normal) > 0.0f) ++sign_agree;
       // A row the engine places at depth 0 on a pair that penetrates less than
@@ -643,10 +737,17 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
         });
       } else {
         normal_angle.check(angle <= tol.normal_angle_deg, angle, Where{frame, pair_name(p)}, [&] {
-          return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from FCL's "
-                             "({:.3f}, {:.3f}, {:.3f}) ({}minimum translation)",
-                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle,
-                             r.normal.x, r.normal.y, r.normal.z, aabb ? "box-box on the world AABBs, " : "");
+          return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from {}'s "
+                             "({:.3f}, {:.3f}, {:.3f}) ({}){}",
+                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle, judge,
+                             ref_normal.x, ref_normal.y, ref_normal.z,
+                             aabb     ? "box-box on the world AABBs, minimum translation"
+                             : by_sat ? fmt::format("the nearest of {} axes within {:.3g} m of the minimum "
+                                                    "translation {:.4g} m",
+                                                    shape_truth.sat_result.accepted.size(),
+                                                    shape_truth.sat_result.epsilon, r.depth)
+                                      : std::string("minimum translation"),
+                             by_sat ? " [reference: SAT]" : " [reference: FCL]");
         });
       }
       if (aabb && shape_ref.valid) {
@@ -680,8 +781,9 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     // An upper bound (non-convex meshes) judges one side only: the engine may be shallower.
     const double diff = r.depth_upper_bound ? double(c.depth) - want : std::fabs(double(c.depth) - want);
     depth.check(diff <= tol.depth_m, diff, Where{frame, pair_name(p)}, [&] {
-      return fmt::format("frame {}: {} deepest row depth {:.4g} m, FCL {:.4g} m{}", frame, pair_name(p), c.depth,
-                         want, r.depth_upper_bound ? " (upper bound)" : "");
+      return fmt::format("frame {}: {} deepest row depth {:.4g} m, {} {:.4g} m{} [reference: {}]", frame,
+                         pair_name(p), c.depth, by_sat ? "SAT minimum" : "FCL", want,
+                         r.depth_upper_bound ? " (upper bound)" : "", judge);
     });
   }
 
@@ -723,6 +825,102 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   }
 }
 
+void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p,
+                                                  std::size_t k0, std::size_t k1) {
+  const std::size_t n = model->bodies.size();
+  const D3 g = d3(model->scene.gravity);
+  const double dt = model->scene.dt;
+  auto w_of = [&](const std::vector<Vec3>& w, std::size_t i) { return w.size() == n ? d3(w[i]) : D3{}; };
+  auto v_int = [&](std::uint32_t i) { return dynamic(i) ? d3(rec.v_pre[i]) + dt * g : d3(rec.v_pre[i]); };
+  const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
+  // Three states of the bodies' velocities: before the solver (after gravity), with the
+  // pair's normal impulses alone applied (rotating records with points), after the step.
+  struct Vel {
+    D3 va, wa, vb, wb;
+  };
+  const Vel before{v_int(p.a), w_of(rec.w_pre, p.a), v_int(p.b), w_of(rec.w_pre, p.b)};
+  const Vel after{d3(rec.v_post[p.a]), w_of(rec.w_post, p.a), d3(rec.v_post[p.b]), w_of(rec.w_post, p.b)};
+  Vel normal = before;
+  const bool coupled = rec.w_pre.size() == n && rec.has_points;
+  if (coupled) {
+    const M3 ia = dynamic(p.a) ? conjugated(rotation(det[p.a].orientation), inverse(inertia[p.a])) : M3{};
+    const M3 ib = dynamic(p.b) ? conjugated(rotation(det[p.b].orientation), inverse(inertia[p.b])) : M3{};
+    for (std::size_t k = k0; k < k1; ++k) {
+      const ContactRecord& c = rec.contacts[k];
+      const D3 j = double(c.jn) * d3(c.normal), pt = d3(c.point);
+      if (dynamic(p.a)) {
+        normal.va = normal.va + (1.0 / mass[p.a]) * j;
+        normal.wa = normal.wa + mul(ia, cross3(pt - xa, j));
+      }
+      if (dynamic(p.b)) {
+        normal.vb = normal.vb - (1.0 / mass[p.b]) * j;
+        normal.wb = normal.wb - mul(ib, cross3(pt - xb, j));
+      }
+    }
+  }
+  // The friction impulses' mean push along the sliding at the rows' points (m/s):
+  // sum_k jt3_k . v_t,k / sum_k |jt3_k|; the largest tangential speed at a row.
+  auto push = [&](const Vel& v, double& fastest) {
+    double work = 0, impulse = 0;
+    fastest = 0;
+    for (std::size_t k = k0; k < k1; ++k) {
+      const ContactRecord& c = rec.contacts[k];
+      const D3 nrm = d3(c.normal), j = d3(rec.jt3[k]);
+      const D3 ra = rec.has_points ? d3(c.point) - xa : D3{}, rb = rec.has_points ? d3(c.point) - xb : D3{};
+      const D3 rel = (v.va + cross3(v.wa, ra)) - (v.vb + cross3(v.wb, rb));
+      const D3 vt = rel - dot3(rel, nrm) * nrm;
+      work += dot3(j, vt);
+      impulse += len3(j);
+      fastest = std::max(fastest, len3(vt));
+    }
+    return impulse > 0 ? work / impulse : 0.0;
+  };
+  double impulse = 0, jn_sum = 0, gap = 0;
+  D3 j_sum{};
+  for (std::size_t k = k0; k < k1; ++k) {
+    const ContactRecord& c = rec.contacts[k];
+    impulse += len3(d3(rec.jt3[k]));
+    j_sum = j_sum + d3(rec.jt3[k]);
+    jn_sum += double(c.jn);
+    if (rec.has_points && (len3(after.wa) + len3(after.wb)) > 0)
+      gap = std::max(gap, std::max(double(c.depth), ref->surface_distance(p.a, det[p.a], c.point) +
+                                                        ref->surface_distance(p.b, det[p.b], c.point)));
+  }
+  // No friction impulse (within float rounding of the normal impulses): nothing to judge.
+  if (!(impulse > 16.0 * kEps32 * jn_sum + 1e-12)) {
+    dissipation.judged();
+    return;
+  }
+  // A friction impulse up to friction_cone_abs is a sequential-impulse solver's leftover
+  // (warm start, clamped rows) and is not judged on its direction (Bullet: 2 pairs of
+  // rot-drop-220 and 2 of rot-pile-1000, sum |jt3| 0.96e-3 - 0.99e-3 kg m/s, on a body
+  // landing with a tiny normal impulse while sliding at 0.5 m/s). Counted.
+  if (impulse <= tol.friction_cone_abs) {
+    ++dissipation_small;
+    return;
+  }
+  ++dissipation_jt3_pairs;
+  double fast0 = 0, fastn = 0, fast1 = 0;
+  const double along0 = push(before, fast0), alongn = coupled ? push(normal, fastn) : along0, along1 = push(after, fast1);
+  // Coulomb friction opposes the sliding. A discrete solver takes the sliding before its
+  // impulses (an explicit friction direction: Bullet's lateral friction direction is the
+  // relative velocity when the row is set up), after the normal impulses, or after the
+  // step (the maximal-dissipation condition of an implicit solve); the sliding turns
+  // between them (a box landing on an edge spins). The friction is judged against all
+  // three and fails when it pushes the points along their sliding in every one.
+  const double along = std::min({along0, alongn, along1});
+  const double allowance = (len3(after.wa) + len3(after.wb)) * gap;
+  const std::int64_t frame = rec.frame;
+  dissipation.check(along <= tol.friction_speed + allowance, along, Where{frame, pair_name(p)}, [&] {
+    return fmt::format("frame {}: {} ({} rows): the friction impulse (sum jt3 ({:.4g}, {:.4g}, {:.4g}) kg m/s) "
+                       "pushes the contact points along their sliding: {:.4g} m/s along the impulses before the "
+                       "step, {:.4g} with the normal impulses, {:.4g} after it (largest tangential speed at a row "
+                       "{:.6g} -> {:.6g} m/s; witness-point allowance {:.3g} m/s) [rule: jt3]",
+                       frame, pair_name(p), k1 - k0, j_sum[0], j_sum[1], j_sum[2], along0, alongn, along1, fast0,
+                       fast1, allowance);
+  });
+}
+
 // ---- Rows 5-6: friction and conservation, every frame ------------------------------
 void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector<Pose>& det) {
   const Model& m = *model;
@@ -733,30 +931,44 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
   StopPoll poll(stop);
   std::optional<RowClock> clock(std::in_place, t_friction);  // rows 5a-5b
 
-  // 5a. The cone, per contact: a pair's rows together (a manifold is one contact patch).
-  // A sequential-impulse solver (Bullet) clamps each row's friction by that row's normal
-  // impulse of the iteration it solves; the normal impulse then moves between the rows
-  // of the patch, so a row may end with jt != 0 and jn = 0 (Bullet: 40 of 2687 rows in
-  // tests/scene/test_cli_rotation_faults.cpp). The patch's friction stays within the
-  // cone of its total normal impulse: sum |jt| <= mu sum jn.
+  // 5a. The cone, per pair: a pair's rows together (a manifold is one contact patch):
+  // |sum J_t| <= mu sum jn. A sequential-impulse solver clamps each row's friction by that
+  // row's normal impulse (Bullet: |lateral impulse| <= mu jn of its row after the normal
+  // rows of each iteration), so the patch's friction is within the cone of its total
+  // normal impulse. Rules:
+  //  - jt3 (the tangential impulse vectors): |sum_k jt3_k| <= mu sum_k jn_k + rounding
+  //    (16 x 2^-23 of sum |jt3_k| + mu sum jn, + 1e-12 kg m/s): no relative slack.
+  //  - scalar jt (no jt3): sum |jt_k| <= mu sum jn + the same rounding + friction_cone_abs
+  //    (a scalar along -v_t / |v_t| cannot show a second friction direction).
+  const bool vector_friction = !rec.jt3.empty();
   for (std::size_t k0 = 0; k0 < rec.contacts.size();) {
     poll();
     const Pair pr = rec.contacts[k0].pair;
     std::size_t k1 = k0;
-    double jt_sum = 0.0, jn_sum = 0.0;
+    double jt_sum = 0.0, jn_sum = 0.0, jt_abs = 0.0;
+    D3 jt_vec{};
     for (; k1 < rec.contacts.size() && rec.contacts[k1].pair == pr; ++k1) {
-      jt_sum += std::fabs(double(rec.contacts[k1].jt));
+      if (vector_friction) {
+        jt_vec = jt_vec + d3(rec.jt3[k1]);
+        jt_abs += len3(d3(rec.jt3[k1]));
+      } else {
+        jt_abs += std::fabs(double(rec.contacts[k1].jt));
+      }
       jn_sum += double(rec.contacts[k1].jn);
     }
+    jt_sum = vector_friction ? len3(jt_vec) : jt_abs;
     const double mu = pair_mu(pr);
     const std::size_t rows = k1 - k0;
-    // The solver slack applies to manifolds (normal impulse moving between rows).
-    const double rel = rows > 1 ? tol.friction_cone_solver_rel : tol.friction_cone_rel;
-    const double limit = mu * jn_sum * (1.0 + rel) + tol.friction_cone_abs;
+    const double rounding = 16.0 * kEps32 * (jt_abs + mu * jn_sum) + 1e-12;
+    const double limit = mu * jn_sum + rounding + (vector_friction ? 0.0 : tol.friction_cone_abs);
     const double excess = jt_sum - limit;
+    (vector_friction ? ++cone_jt3_pairs : ++cone_scalar_pairs);
     cone.check(excess <= 0, excess, Where{frame, pair_name(pr)}, [&] {
-      return fmt::format("frame {}: {} |jt| {:.6g} > mu {:.4g} x jn {:.6g}{}", frame, pair_name(pr), jt_sum, mu,
-                         jn_sum, rows > 1 ? fmt::format(" (sums over its {} rows)", rows) : std::string());
+      return fmt::format("frame {}: {} |{}| {:.6g} > mu {:.4g} x jn {:.6g} ({:.4g} x the cone){} [rule: {}]", frame,
+                         pair_name(pr), vector_friction ? "sum jt3" : "jt", jt_sum, mu, jn_sum,
+                         mu * jn_sum > 0 ? jt_sum / (mu * jn_sum) : std::numeric_limits<double>::infinity(),
+                         rows > 1 ? fmt::format(" (sums over its {} rows)", rows) : std::string(),
+                         vector_friction ? "jt3" : "scalar");
     });
     k0 = k1;
   }
@@ -799,6 +1011,18 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
     // row is a contact; with several rows, friction at one row turns the bodies and so
     // moves the tangential velocity at the others (Bullet: a 4-row box pair raised one
     // row's speed from 1.05 to 1.12 m/s while dissipating): judged on the cone only.
+    const bool pair_alone = (!dynamic(p.a) || pairs_of[p.a] == 1) && (!dynamic(p.b) || pairs_of[p.b] == 1);
+    if (vector_friction && pair_alone) {
+      // jt3: the pair's friction impulse is known, whatever else touches its bodies. It
+      // must do no positive work on the final relative sliding at the rows' points
+      // (maximal dissipation, summed over the manifold): sum_k jt3_k . v_t,k' <= 0, as a
+      // mean speed along the impulses, sum_k jt3_k . v_t,k' / sum_k |jt3_k|, within
+      // friction_speed + the witness-point allowance (|w_a| + |w_b|) s, s the largest
+      // distance between a row's witness points (its depth, or the gap across its point).
+      judge_pair_friction(rec, det, p, k0, k1);
+      k0 = k1;
+      continue;
+    }
     const bool alone = k1 - k0 == 1 && (!dynamic(p.a) || pairs_of[p.a] == 1) &&
                        (!dynamic(p.b) || pairs_of[p.b] == 1);
     if (!alone) {
@@ -1234,10 +1458,13 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     const D3 rel = va - vb;
     const D3 vt = rel - dot3(rel, nrm) * nrm;
     const double vt_len = len3(vt);
-    const double jt = std::fabs(double(c.jt));
+    const bool vector_friction = rec.jt3.size() == rec.contacts.size();
+    const double jt = vector_friction ? len3(d3(rec.jt3[k])) : std::fabs(double(c.jt));
     D3 jt_vec{};
     double uncertain = 0;  // |J_t - jt_vec| at most this (kg m/s), in the tangent plane
-    if (vt_len > tol.friction_direction_speed) {
+    if (vector_friction) {
+      jt_vec = d3(rec.jt3[k]);  // /contacts/jt3: the friction impulse on A, nothing left open
+    } else if (vt_len > tol.friction_direction_speed) {
       jt_vec = (bodies.jt_along_sliding ? double(c.jt) : -double(c.jt)) * ((1.0 / vt_len) * vt);
       if (rotating && rec.has_points) {
         // An engine may take each body's velocity at its own witness point (Bullet), up
@@ -1254,8 +1481,12 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       // itself (Bullet below sqrt(FLT_EPSILON) = 3.45e-4 m/s: btPlaneSpace1's axis), and a
       // scalar jt, the impulse's projection on the recorded -v_t, says neither which nor
       // how large J_t is; it lies in the cone (the friction row judges that).
-      uncertain = std::max(jt, pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + tol.friction_cone_solver_rel) +
-                                   tol.friction_cone_abs);
+      // A row's own cone, with the margin a sequential solver leaves on a row whose normal
+      // impulse moved to the manifold's other rows after its friction was clamped (Bullet:
+      // up to 13% above mu times the row's final jn; the friction row holds the pair's sum
+      // to the cone itself).
+      constexpr double kRowConeMargin = 0.25;
+      uncertain = std::max(jt, pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs);
     } else {
       // No sliding: v_t has no direction; jt is the friction impulse's magnitude (the
       // convention, and octocd's Bullet adapter below 1e-6 m/s), its direction open.
@@ -1502,7 +1733,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
   }
   // 3. Contact geometry.
   {
-    ValidationResult r = row("contact-geometry", "worst normal angle to FCL's (deg)", "normal_angle_deg,depth_m");
+    ValidationResult r = row("contact-geometry", "worst normal angle to the reference's (deg; SAT or FCL)",
+                             "normal_angle_deg,depth_m,sat_accept_rel");
     r.measured = s.normal_angle.worst_or(0.0);
     r.bound = s.tol.normal_angle_deg;
     r.pass = s.normal_angle.failures == 0 && s.depth.failures == 0 && s.points.failures == 0;
@@ -1549,7 +1781,11 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     } else {
       r.detail = fmt::format("{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}",
                              s.normal_angle.checks, aabb ? " on the world AABBs" : "",
-                             aabb ? "FCL box-box" : "FCL: box-box or EPA", s.normal_angle.worst_or(0.0),
+                             aabb ? std::string("FCL box-box")
+                                  : fmt::format("reference: SAT on {} convex pair-frames, FCL (box-box, EPA or the "
+                                                "non-convex BVH bound) on {}",
+                                                s.sat_pairs, s.fcl_pairs),
+                             s.normal_angle.worst_or(0.0),
                              s.depth.worst_or(0.0),
                              s.points.checks ? fmt::format(", {} points, worst {:.3g} m beyond the depth",
                                                            s.points.checks, s.points.worst_or(0.0))
@@ -1565,6 +1801,18 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       if (s.upper_bound_pairs)
         r.detail += fmt::format("; {} non-convex mesh pairs: depth judged one-sided against an upper bound",
                                 s.upper_bound_pairs);
+      for (const auto& [kind, figure] : s.declared)
+        r.detail += fmt::format("; {} bodies collided as declared \"{}\" (judged on it; its surface lies up to "
+                                "{:.3g} m from the true shape: a figure)",
+                                figure.first, kind, figure.second);
+      if (s.sat_fcl_other)
+        r.detail += fmt::format("; second opinion: FCL's normal on another axis than the minimum on {} pair-frames "
+                                "(figure; FCL up to {:.3g} m deeper)",
+                                s.sat_fcl_other, s.sat_fcl_other_excess);
+      if (s.sat_fcl_disagree)
+        r.detail += fmt::format("; FCL's normal outside SAT's accepted axes on {} pair-frames "
+                                "(figure; largest depth excess {}: {:.3g} m)",
+                                s.sat_fcl_disagree, s.sat_fcl_what, s.sat_fcl_worst_excess);
     }
     if (r.applicable)
       fill_causes(r, {{&s.normal_angle, "normal-angle", "rows", "deg"},
@@ -1610,7 +1858,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
   // 5. Friction.
   {
     ValidationResult r = row("friction", "contacts outside the cone or rows raising the tangential speed",
-                             "friction_cone_solver_rel,friction_cone_abs,friction_speed");
+                             "friction_cone_abs,friction_speed");
     r.measured = double(s.cone.failures + s.dissipation.failures);
     r.pass = r.measured == 0;
     r.applicable = s.cone.checks > 0;
@@ -1622,11 +1870,16 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     } else if (!r.applicable) {
       r.detail = "no contact rows";
     } else {
-      r.detail = fmt::format("{} contacts in the cone (worst {:.3g} kg m/s inside); dissipation on {} rows (worst "
-                             "{:.3g} m/s); {} rows judged on the cone only (the pair is not its bodies' only one, or "
-                             "no states)",
-                             s.cone.checks, -s.cone.worst_or(0.0), s.dissipation.checks, s.dissipation.worst_or(0.0),
+      r.detail = fmt::format("{} contacts in the cone (worst {:.3g} kg m/s inside; rule jt3 on {} pairs, scalar jt on "
+                             "{}); dissipation on {} rows or pairs (worst {:.3g} m/s; {} pairs on jt3); {} rows judged "
+                             "on the cone only (scalar jt: the pair is not its bodies' only one, or no states)",
+                             s.cone.checks, -s.cone.worst_or(0.0), s.cone_jt3_pairs, s.cone_scalar_pairs,
+                             s.dissipation.checks, s.dissipation.worst_or(0.0), s.dissipation_jt3_pairs,
                              s.dissipation_cone_only);
+      if (s.dissipation_small)
+        r.detail += fmt::format("; {} pairs with a friction impulse up to friction_cone_abs not judged on its "
+                                "direction",
+                                s.dissipation_small);
     }
     if (r.applicable)
       fill_causes(r, {{&s.cone, "cone", "contacts", "kg m/s"}, {&s.dissipation, "dissipation", "rows", "m/s"}});

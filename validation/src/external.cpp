@@ -330,6 +330,30 @@ void check_frame_record(const FrameRecord& rec, std::size_t n, const std::string
            fmt::format("{} is ({}, {}, {}): not finite", which, c.point.x, c.point.y, c.point.z),
            "a finite world point (m)");
   }
+  if (!rec.jt3.empty()) {
+    if (rec.jt3.size() != rec.contacts.size())
+      fail(origin, names.contact_jt3, f, fmt::format("{} vectors for {} contact rows", rec.jt3.size(), rec.contacts.size()),
+           "one tangential impulse vector per contact row (or none)");
+    const double max_sin = std::sin(kJt3MaxAngleDeg * 3.14159265358979323846 / 180.0);
+    for (std::size_t i = 0; i < rec.jt3.size(); ++i) {
+      const ContactRecord& c = rec.contacts[i];
+      const Vec3 j = rec.jt3[i];
+      const std::string which = fmt::format("row {} (pair ({}, {}))", i, c.pair.a, c.pair.b);
+      if (!finite(j))
+        fail(origin, names.contact_jt3, f, fmt::format("{} is ({}, {}, {}): not finite", which, j.x, j.y, j.z),
+             "a finite impulse vector (kg m/s)");
+      const double jl = std::sqrt(double(j.x) * j.x + double(j.y) * j.y + double(j.z) * j.z);
+      if (!(jl > 1e-9)) continue;
+      const double along = std::fabs(double(j.x) * c.normal.x + double(j.y) * c.normal.y + double(j.z) * c.normal.z) /
+                           (jl * double(length(c.normal)));
+      if (along > max_sin)
+        fail(origin, names.contact_jt3, f,
+             fmt::format("{} is ({}, {}, {}), {:.3g} deg out of the contact plane of its normal ({}, {}, {})", which,
+                         j.x, j.y, j.z, std::asin(std::min(1.0, along)) * 180.0 / 3.14159265358979323846, c.normal.x,
+                         c.normal.y, c.normal.z),
+             fmt::format("a tangential impulse orthogonal to the row's normal (within {} deg)", kJt3MaxAngleDeg));
+    }
+  }
 }
 
 struct ExternalValidator::Impl {

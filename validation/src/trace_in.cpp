@@ -246,6 +246,7 @@ class TraceIn {
   static constexpr const char* kV2Datasets[] = {"/states/orientation", "/states/angular_velocity",
                                                 "/bodies/inertia",     "/contacts/point",
                                                 "/bodies/friction",    "/bodies/restitution",
+                                                "/contacts/jt3",       "/bodies/collision_shape",
                                                 "/bodies/locked_dofs"};
 
   void reject_v2_datasets() const {
@@ -319,6 +320,7 @@ class TraceIn {
       (std::string(name) == "/bodies/friction" ? p.body_friction : p.body_restitution) = read<float>(d, 0, n_);
     }
     check_physics_bodies(p, bodies.inverse_mass, path_, names);
+    read_collision_shapes(p);
 
     // Rotation: both datasets or neither, with /states.
     orientation_ = open("/states/orientation", H5T_FLOAT, 3, false);
@@ -343,6 +345,45 @@ class TraceIn {
       expect(c_point_, {c_pair_.dims[0], 3},
              fmt::format("{} x 3, one world point per contact row (as /contacts/pair)", c_pair_.dims[0]));
       info.has_points = true;
+    }
+    c_jt3_ = open("/contacts/jt3", H5T_FLOAT, 2, false);
+    if (c_jt3_.present()) {
+      if (!info.has_contacts) bad(c_jt3_.name, "without /contacts/pair", "tangential impulse vectors with /contacts");
+      expect(c_jt3_, {c_pair_.dims[0], 3},
+             fmt::format("{} x 3, one tangential impulse vector (world, N s) per contact row (as /contacts/pair)",
+                         c_pair_.dims[0]));
+    }
+  }
+
+  /// What the engine collided each body as (SPEC 13b.10): the root attribute
+  /// `collision_shape` (every body) or `/bodies/collision_shape` (one string per body),
+  /// each "mesh", "convex_hull", "box" or "sphere"; absent: every body as its shape.
+  void read_collision_shapes(PhysicsBodies& p) const {
+    const std::vector<std::pair<std::string, CollisionShape>> kinds = {
+        {"mesh", CollisionShape::Mesh},
+        {"convex_hull", CollisionShape::ConvexHull},
+        {"box", CollisionShape::Box},
+        {"sphere", CollisionShape::Sphere}};
+    const std::string allowed =
+        "\"mesh\", \"convex_hull\", \"box\" or \"sphere\" (what the engine collided the body as; docs/trace-format.md)";
+    auto kind_of = [&](const std::string& where, const std::string& value) {
+      for (const auto& [name, kind] : kinds)
+        if (value == name) return kind;
+      bad(where, fmt::format("'{}' unknown", value), allowed);
+    };
+    const bool attr = has_attr("collision_shape"), table = exists("/bodies/collision_shape");
+    if (attr && table)
+      bad("/bodies/collision_shape", "given with the root attribute collision_shape",
+          "one of them: the root attribute (every body) or the dataset (one per body)");
+    if (attr) {
+      p.collision_shape.assign(n_, kind_of("/ (root attribute collision_shape)", string_attr("collision_shape")));
+    } else if (table) {
+      const std::vector<std::string> values = h5_->read_strings("/bodies/collision_shape");
+      if (values.size() != n_)
+        bad("/bodies/collision_shape", fmt::format("{} values", values.size()),
+            fmt::format("{} strings, one per body (as /bodies/inverse_mass)", n_));
+      for (std::size_t i = 0; i < values.size(); ++i)
+        p.collision_shape.push_back(kind_of(fmt::format("/bodies/collision_shape: body {}", i), values[i]));
     }
   }
 
@@ -423,6 +464,11 @@ class TraceIn {
         const std::vector<Vec3> points = vectors(read<float>(c_point_, first, rec.contacts.size()));
         for (std::size_t k = 0; k < points.size(); ++k) rec.contacts[k].point = points[k];
         rec.has_points = true;
+      }
+      if (c_jt3_.present()) {
+        const hsize_t first = static_cast<hsize_t>(contact_offsets_[r - 1]);
+        rec.jt3 = vectors(read<float>(c_jt3_, first, rec.contacts.size()));
+        names.contact_jt3 = "/contacts/jt3";
       }
     }
   }
@@ -599,7 +645,7 @@ class TraceIn {
   bool committed_ = false;                  // the trace has committed_states (octocd's own)
   hsize_t n_ = 0;
   std::int64_t frames_ = 0;
-  Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_;
+  Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_, c_jt3_;
   // Version 2.
   Dataset orientation_, angular_, c_point_;
   bool integrated_ = false;  ///< root attribute detection = "integrated"
@@ -647,9 +693,25 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   options.spec6_response = in.info.spec6_response;
   options.octocd_engine = in.info.engine == "cpu" || in.info.engine == "cuda";
   // With a scene, the bodies come from it and the trace's tables must match it.
-  ExternalValidator validator(in.bodies, options);
+  // The bodies' declarations are checked against the scene's shapes where the validators
+  // are built: an error about them names the file and its dataset.
+  auto named = [&](const InputError& e) {
+    std::string what = e.what();
+    const std::string field = "PhysicsBodies.collision_shape";
+    const std::size_t at = what.find(field);
+    if (at == std::string::npos || in.bodies.physics.collision_shape.empty()) throw;  // as it came
+    what.replace(at, field.size(), "/bodies/collision_shape (or the root attribute collision_shape)");
+    throw InputError(fmt::format("{}: {}", path, what));
+  };
+  std::unique_ptr<ExternalValidator> made;
   const std::int64_t frames = max_frames > 0 ? std::min(max_frames, in.info.frames) : in.info.frames;
-  for (std::int64_t f = 1; f <= frames; ++f) validator.observe(in.frame(f), f % every == 0);
+  try {
+    made = std::make_unique<ExternalValidator>(in.bodies, options);
+    for (std::int64_t f = 1; f <= frames; ++f) made->observe(in.frame(f), f % every == 0);
+  } catch (const InputError& e) {
+    named(e);
+  }
+  ExternalValidator& validator = *made;
   if (info) {
     *info = checked;
     info->frames = frames;

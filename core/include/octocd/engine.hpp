@@ -181,6 +181,12 @@ struct FrameRecord {
   bool manifolds = false;
   /// Every contact carries its world `point`.
   bool has_points = false;
+  /// The tangential (friction) impulse vector of each contact row on A (kg m/s, world
+  /// frame, orthogonal to the row's normal), one per entry of `contacts`, in the same
+  /// order (external traces v2: `/contacts/jt3`; `bullet` with rotation: the impulses of
+  /// its friction directions summed as a vector). Empty when the engine gives none: the
+  /// physics tier then judges the scalar ContactRecord::jt.
+  std::vector<Vec3> jt3;
 };
 
 /// What a rotating engine states about its bodies and contacts beyond the Model (SPEC 13):
@@ -205,6 +211,13 @@ struct RotationTraits {
   bool broadphase_exact = false;
   /// "shape" (contacts computed on the posed shapes) or "aabb".
   std::string contact_geometry = "shape";
+  /// What every body is collided as, written as the root attribute `collision_shape`
+  /// ("mesh", "convex_hull", "box", "sphere"; SPEC 13b.10); empty: not written (each body
+  /// as its shape). Bullet with rotation: "convex_hull" (a mesh is its hull, a box itself).
+  std::string collision_shape;
+  /// Every record carries FrameRecord::jt3 (the tangential impulse vectors): the trace
+  /// writes /contacts/jt3.
+  bool jt3 = false;
 };
 
 /// One simulation engine: `cpu` (World), `cuda` (CudaWorld), `bullet` (BulletWorld).

@@ -50,7 +50,8 @@ struct TraceOptions {
   /// friction_combine, restitution_combine, contact_margin, broadphase_exact,
   /// contact_geometry, gravity; /bodies/inertia, friction, restitution;
   /// /states/orientation and angular_velocity beside every state row; with `contacts`,
-  /// /contacts/point, /pairs (offsets, pair) and /aabbs (min, max) from append_frame_v2.
+  /// /contacts/point (and /contacts/jt3 when RotationTraits::jt3), /pairs (offsets, pair)
+  /// and /aabbs (min, max) from append_frame_v2.
   /// Unset: version 1, byte for byte as before.
   std::optional<RotationTraits> v2;
   /// Version 2: gravity (m/s^2) for the root attribute `gravity`.
@@ -128,8 +129,10 @@ TraceSummary read_trace_summary(const std::string& path);
 
 /// Writes an XDMF 3 sidecar `<trace_path>.xmf` next to the trace, so that ParaView (Xdmf3
 /// reader) opens the trace as an animation: one Polyvertex grid per /states row (time =
-/// state frame x dt), geometry = that row of /states/position, node attributes velocity,
-/// shape_id and inverse_mass. The sidecar references the trace by file name, so keep them
+/// state frame x dt), geometry = that row of /states/position (an XDMF 3 HDF5 hyperslab
+/// "file:/dataset|start:stride:count:dims", which ParaView's Xdmf3 readers read and its
+/// legacy XDMF reader does not), node attributes velocity, shape_id, inverse_mass and, where
+/// the trace has them, half_extents and group_id. The sidecar references the trace by file name, so keep them
 /// in one folder. Reads the trace as it is now (a trace still being written gets the rows
 /// flushed so far). Returns the sidecar's path. Throws RuntimeError naming the path when
 /// the trace is unreadable or the sidecar cannot be written.

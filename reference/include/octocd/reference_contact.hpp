@@ -43,6 +43,8 @@
 ///    penetration among the 15 of two boxes, the exact minimum translation); FCL's
 ///    distance when apart. (libccd's EPA on box corners can cycle without end when faces
 ///    are coplanar, as in a resting stack.)
+///  - a declared sphere (CollisionShape::Sphere) with a box, sphere or hull: FCL's
+///    collide on the primitives (sphere-box and sphere-sphere exact).
 ///  - other convex shapes (meshes whose every triangle lies on their hull): GJK on the
 ///    hulls decides; EPA gives the exact minimum translation (depth, normal).
 ///  - a non-convex mesh: when the hulls intersect, FCL's BVH collide on the meshes decides
@@ -55,8 +57,10 @@
 ///    hull depth separates the hulls, hence the meshes). The normal is the direction
 ///    that gave it. The true minimum translation of two non-convex meshes is not computed.
 
+#include <array>
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "octocd/math.hpp"
 #include "octocd/pose.hpp"
@@ -79,6 +83,32 @@ struct ReferenceNormal {
   double signed_distance() const { return penetrating ? -depth : distance; }
 };
 
+/// What an engine collided a body as (SPEC 13b.10; external traces v2:
+/// `/bodies/collision_shape` or the root attribute `collision_shape`). The physics tier's
+/// geometric rows judge this shape; its gap to the true shape is a figure.
+enum class CollisionShape {
+  Mesh,        ///< "mesh": the shape itself (a box shape: the box; a mesh: its triangles)
+  ConvexHull,  ///< "convex_hull": the convex hull of the shape's vertices (a box: itself)
+  Box,         ///< "box": the shape's local box (its AABB in the body frame)
+  /// "sphere": centred on the local box, through the mesh's farthest vertex. Mesh shapes
+  /// only (a box shape cannot be a sphere: refused).
+  Sphere,
+};
+/// "mesh", "convex_hull", "box", "sphere".
+const char* collision_shape_name(CollisionShape c);
+
+/// A shape's convex hull in the body frame, as the separating-axis test needs it
+/// (validation/physics/sat.hpp): a box's 8 corners, 3 face axes and 3 edge axes; a mesh's
+/// convex hull (Bullet's btConvexHullComputer on its vertices, exact: hull vertices are
+/// mesh vertices) with its faces' unit outward normals and its edges' unit directions.
+/// Axes parallel or antiparallel to one already listed (|cross| < 1e-9) are dropped: the
+/// test projects on both orientations of an axis. Double precision, metres.
+struct HullFeatures {
+  std::vector<std::array<double, 3>> vertices;      ///< body frame, m
+  std::vector<std::array<double, 3>> face_normals;  ///< unit, body frame, one per direction
+  std::vector<std::array<double, 3>> edge_dirs;     ///< unit, body frame, one per direction
+};
+
 /// Per-shape FCL geometry of a World, built once: for meshes fcl::BVHModel<fcl::OBBRSS<double>>
 /// from Shape::mesh and fcl::Convex<double> from the convex hull of the mesh vertices
 /// (Bullet's btConvexHullComputer; hull vertices are the original mesh vertices, exact);
@@ -92,6 +122,10 @@ class ReferenceGeometry {
   /// The same from a model's shapes and bodies (read at construction only; body indices
   /// passed to normal() are the model's).
   explicit ReferenceGeometry(const Model& model);
+  /// The same with each body collided as `declared[i]` (empty: every body as its shape;
+  /// else one per body, else InputError). A sphere declared on a box shape is built as
+  /// the box (callers refuse it first).
+  ReferenceGeometry(const Model& model, const std::vector<CollisionShape>& declared);
   ~ReferenceGeometry();
   ReferenceGeometry(const ReferenceGeometry&) = delete;
   ReferenceGeometry& operator=(const ReferenceGeometry&) = delete;
@@ -137,6 +171,16 @@ class ReferenceGeometry {
   /// Whether the body's shape is convex (a box, or a mesh whose every triangle lies in a
   /// face plane of its convex hull, within 1e-6 m).
   bool convex(std::uint32_t body) const;
+
+  /// How far the surface of the shape body `body` is collided as lies from its true
+  /// shape (m, >= 0): the largest distance to the true surface over the declared shape's
+  /// face centroids (hull), corners and face centres (box) or 14 axis and diagonal points
+  /// (sphere); 0 when the body is collided as its shape. A figure, never a verdict.
+  double declared_gap(std::uint32_t body) const;
+
+  /// The convex hull of body `body`'s shape in the body frame (see HullFeatures). Throws
+  /// InputError for a body out of range.
+  const HullFeatures& hull_features(std::uint32_t body) const;
 
   /// Box-box geometry of two axis-aligned boxes given in the world (FCL's box-box test;
   /// FCL distance when apart): what an engine that resolves contacts on world AABBs

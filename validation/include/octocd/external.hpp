@@ -6,7 +6,7 @@
 ///
 /// The same FrameValidators that judge octocd's engines judge these frames: each frame is
 /// a FrameRecord (octocd/engine.hpp) that another program filled. What is judged (SPEC 13,
-/// README "Which rows judge what"): the physics tier (octocd/physics.hpp: broadphase and
+/// docs/validation.md, "Which rows judge what"): the physics tier (octocd/physics.hpp: broadphase and
 /// contact completeness, contact geometry against FCL on the posed shapes, penetration,
 /// friction, conservation) for any engine, with ExternalBodies::physics; the model tier
 /// (the paper's response: Eq. 14, friction monotonicity, impulse conservation, the
@@ -114,7 +114,19 @@ struct RecordFieldNames {
   // Rotating engines (SPEC 13).
   std::string q_pre = "q_pre", q_post = "q_post", w_pre = "w_pre", w_post = "w_post", x_det = "x_det",
               q_det = "q_det", contact_point = "contacts.point";
+  /// The tangential impulse vectors (SPEC 13b.11; traces: /contacts/jt3).
+  std::string contact_jt3 = "contacts.jt3";
 };
+
+/// Largest angle (degrees) between a contact row's tangential impulse vector
+/// (FrameRecord::jt3) and its contact plane (the plane orthogonal to its normal). float32
+/// rounding of a vector built from unit friction directions orthogonal to the normal
+/// leaves ~1e-5 deg; an engine that keeps a manifold point's friction directions from when
+/// it was found (persistent friction anchors) while its normal turns by a fraction of a
+/// degree per step stays well within 1 deg; a row whose jt3 carries the normal impulse
+/// (the total impulse written by mistake) lies tens of degrees out. Rows with |jt3| <=
+/// 1e-9 kg m/s have no direction and are not checked.
+inline constexpr double kJt3MaxAngleDeg = 1.0;
 
 /// Checks one record from outside octocd against the conventions above: `aabbs` (empty
 /// allowed when the states are given) and the states (all four empty, or one per body)
@@ -122,7 +134,8 @@ struct RecordFieldNames {
 /// sorted, unique; contact pairs likewise, except that with rec.manifolds a pair may have
 /// several rows, which must be consecutive (sorted by (a, b) non-decreasingly); normals
 /// finite and unit (|n| within 1e-3 of 1); depth finite >= 0; J_n finite >= 0; J_t finite;
-/// with rec.has_points every contact point finite (m).
+/// with rec.has_points every contact point finite (m); rec.jt3 empty or one finite vector
+/// per contact within kJt3MaxAngleDeg of its contact plane.
 /// Rotation (SPEC 13): q_pre, q_post, w_pre, w_post all empty (no rotation) or all one per
 /// body, and then the states too; quaternions finite with | |q| - 1 | <= 1e-3; angular
 /// velocities finite (rad/s). Detection pose: x_det empty or one finite position per

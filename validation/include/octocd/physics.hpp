@@ -21,8 +21,13 @@
 ///     contact row; a row on a pair farther apart than the contact margin (or the pair's
 ///     theta) + slack is a false contact.
 ///  3. `contact-geometry` (checked frames): per row on penetrating shapes, the angle
-///     between the engine's normal and FCL's minimum translation (two boxes: FCL's
-///     box-box; convex hulls: libccd EPA) within `normal_angle_deg`; rows on shapes
+///     between the engine's normal and the reference's within `normal_angle_deg`. Two
+///     convex polytopes (boxes, convex meshes, declared hulls and boxes): the
+///     separating-axis test (sat.hpp), the angle to the nearest axis whose overlap is
+///     within geometry_slack_m + `sat_accept_rel` of the minimum, the depth against the
+///     SAT minimum, FCL's answer a second opinion (figure). Other shapes: FCL (two boxes
+///     beyond SAT's budget: FCL's box-box; convex hulls: libccd EPA). Details name the
+///     reference ("[reference: SAT]" / "[reference: FCL]"); rows on shapes
 ///     that do not penetrate give the angle to the nearest-points direction as a figure
 ///     (two shapes touching at an edge or corner have no defined normal there, and a
 ///     persistent manifold keeps the normal a point was found with while bodies turn); the pair's deepest row's depth against
@@ -35,9 +40,22 @@
 ///     to the posed shapes is a figure. The sign share is a figure.
 ///  4. `penetration` (checked frames): the largest true penetration (FCL) from frame
 ///     `penetration_settle_frames` on, at most `penetration_slops` x slop.
-///  5. `friction` (every frame): |jt| <= mu jn (1 + friction_cone_rel) + 1e-9 per row,
-///     mu the pair's (per-body values combined, else `mu`). Dissipation where the pair
-///     is the only contact pair of each of its dynamic bodies and states are given.
+///  5. `friction` (every frame), per pair (a manifold's rows together), two rules; the
+///     detail says which judged ("[rule: jt3]" or "[rule: scalar]"):
+///     - jt3 (FrameRecord::jt3, the tangential impulse vectors): the cone |sum jt3| <=
+///       mu sum jn + rounding (16 x 2^-23 of sum |jt3| + mu sum jn; no relative slack),
+///       mu the pair's (per-body values combined, else `mu`); dissipation on every pair
+///       that is its dynamic bodies' only contact pair, manifolds included: the summed
+///       friction impulse must not push the rows' points along their relative sliding
+///       (v + w x r at each row's point), sum_k jt3_k . v_t,k / sum_k |jt3_k| <=
+///       `friction_speed` + the witness-point allowance, with the sliding taken before
+///       the step, with the pair's normal impulses alone, and after the step (a solver
+///       may fix its friction direction at any of them; it fails when it pushes along the
+///       sliding at all three). Pairs whose friction impulse is at most
+///       `friction_cone_abs` are not judged on direction (counted).
+///     - scalar jt (no jt3): the cone sum |jt| <= mu sum jn + rounding +
+///       `friction_cone_abs`; dissipation where the pair is a single row and the only
+///       contact of each of its dynamic bodies, as follows.
 ///     Translation-only records (or no points): the relative tangential speed at the
 ///     centres after the step is at most the speed before it (v_pre + dt g on dynamic
 ///     bodies) + `friction_speed`. Rotating records with points: the row's friction
@@ -88,6 +106,7 @@
 #include <vector>
 
 #include "octocd/engine.hpp"
+#include "octocd/reference_contact.hpp"
 #include "octocd/validation.hpp"
 
 namespace octocd {
@@ -145,6 +164,11 @@ struct PhysicsBodies {
   bool broadphase_exact = false;
   /// What the engine's contact normals and depths are computed on.
   ContactGeometry contact_geometry = ContactGeometry::Shape;
+  /// What the engine collided each body as (SPEC 13b.10): empty, every body as its shape
+  /// (a box, or a mesh's triangles); else one per body. The geometric rows (broadphase
+  /// and contact completeness, contact geometry, penetration) judge the declared shape;
+  /// its gap to the true shape is a figure. `Sphere` on a box shape is an InputError.
+  std::vector<CollisionShape> collision_shape;
   /// The scene's slop (m, SPEC 6 delta): the penetration bound is a multiple of it.
   double slop = 0.001;
   /// A velocity clamp the engine declares (m/s, per component; 0 = none): octocd's Eq. 23

@@ -1,0 +1,134 @@
+// The separating-axis test of two posed convex hulls (see sat.hpp).
+#include "sat.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace octocd {
+
+namespace {
+
+using D3 = std::array<double, 3>;
+
+double dot(const D3& a, const D3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+D3 cross(const D3& a, const D3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+
+/// The body-to-world rotation of a pose (its quaternion normalised in double), row-major.
+std::array<double, 9> rotation_of(const Quat& q) {
+  double w = q.w, x = q.x, y = q.y, z = q.z;
+  const double n = std::sqrt(w * w + x * x + y * y + z * z);
+  if (n > 0) {
+    w /= n;
+    x /= n;
+    y /= n;
+    z /= n;
+  }
+  return {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+          2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+          2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+}
+D3 apply(const std::array<double, 9>& r, const D3& v) {
+  return {r[0] * v[0] + r[1] * v[1] + r[2] * v[2], r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
+          r[6] * v[0] + r[7] * v[1] + r[8] * v[2]};
+}
+
+/// A hull in the world frame.
+struct Placed {
+  std::vector<D3> vertices, faces, edges;
+};
+Placed place(const HullFeatures& h, const Pose& p) {
+  const auto r = rotation_of(p.orientation);
+  const D3 x{double(p.position.x), double(p.position.y), double(p.position.z)};
+  Placed out;
+  for (const D3& v : h.vertices) {
+    const D3 w = apply(r, v);
+    out.vertices.push_back({w[0] + x[0], w[1] + x[1], w[2] + x[2]});
+  }
+  for (const D3& f : h.face_normals) out.faces.push_back(apply(r, f));
+  for (const D3& e : h.edge_dirs) out.edges.push_back(apply(r, e));
+  return out;
+}
+
+void project(const std::vector<D3>& vs, const D3& u, double& lo, double& hi) {
+  lo = std::numeric_limits<double>::infinity();
+  hi = -lo;
+  for (const D3& v : vs) {
+    const double t = dot(v, u);
+    lo = std::min(lo, t);
+    hi = std::max(hi, t);
+  }
+}
+
+}  // namespace
+
+SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullFeatures& b, const Pose& pb,
+                              const SatSettings& settings) {
+  SatResult r;
+  if (a.vertices.empty() || b.vertices.empty()) return r;
+  const double naxes = double(a.face_normals.size() + b.face_normals.size()) +
+                       double(a.edge_dirs.size()) * double(b.edge_dirs.size());
+  if (naxes * double(a.vertices.size() + b.vertices.size()) > settings.max_work) return r;
+  r.tested = true;
+  const Placed A = place(a, pa), B = place(b, pb);
+
+  // Every axis with its overlap; the minimum found as they come.
+  std::vector<SatAxis> all;
+  all.reserve(std::size_t(naxes));
+  auto test = [&](D3 u, int kind) {
+    const double len = std::sqrt(dot(u, u));
+    if (!(len > 1e-9)) return;
+    u = {u[0] / len, u[1] / len, u[2] / len};
+    double a0, a1, b0, b1;
+    project(A.vertices, u, a0, a1);
+    project(B.vertices, u, b0, b1);
+    const double plus = b1 - a0, minus = a1 - b0;  // translate A along +u, or along -u
+    SatAxis ax;
+    ax.kind = kind;
+    if (plus <= minus) {
+      ax.normal = u;
+      ax.overlap = plus;
+    } else {
+      ax.normal = {-u[0], -u[1], -u[2]};
+      ax.overlap = minus;
+    }
+    ++r.axes;
+    all.push_back(ax);
+  };
+  for (const D3& f : A.faces) test(f, 0);
+  for (const D3& f : B.faces) test(f, 1);
+  for (const D3& ea : A.edges)
+    for (const D3& eb : B.edges) test(cross(ea, eb), 2);
+  if (all.empty()) {
+    r.tested = false;
+    return r;
+  }
+  const auto min_it =
+      std::min_element(all.begin(), all.end(), [](const SatAxis& x, const SatAxis& y) { return x.overlap < y.overlap; });
+  r.depth = min_it->overlap;
+  r.normal = min_it->normal;
+  r.separated = r.depth <= 0;
+  r.epsilon = settings.abs_m + settings.rel * std::max(r.depth, 0.0);
+  if (!r.separated)
+    for (const SatAxis& ax : all)
+      if (ax.overlap <= r.depth + r.epsilon) r.accepted.push_back(ax);
+  return r;
+}
+
+double sat_angle_to_accepted(const SatResult& r, const std::array<double, 3>& n, std::size_t* nearest) {
+  double best = 3.14159265358979323846;
+  for (std::size_t k = 0; k < r.accepted.size(); ++k) {
+    const D3& u = r.accepted[k].normal;
+    const D3 c = cross(n, u);
+    const double angle = std::atan2(std::sqrt(dot(c, c)), dot(n, u));
+    if (angle < best) {
+      best = angle;
+      if (nearest) *nearest = k;
+    }
+  }
+  return best;
+}
+
+}  // namespace octocd
