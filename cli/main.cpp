@@ -23,6 +23,7 @@
 #include "octocd/broadphase.hpp"
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/expect.hpp"
 #include "octocd/external.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -443,7 +444,48 @@ struct ValidateOptions {
   std::string junit;
   bool no_xdmf = false;
   bool rotation = false;      ///< --rotation: the scene's bodies rotate (engine bullet only)
+  std::string expect;         ///< --expect FILE.json: known failures (SPEC 14b)
+  std::string write_expect;   ///< --write-expect FILE.json: record the current failures
+  bool strict = false;        ///< --strict: an expected failure that no longer fails is exit 3
+  std::string json;           ///< --json FILE: every row, cause and item as JSON
+  octocd::Expectations expectations;  ///< --expect's file, read before the run
 };
+
+/// The end of every `validate` path: matches `results` of `run` against --expect, writes
+/// --json and --write-expect, prints the outcome lines (plain text) and the verdict line;
+/// returns the exit code: 0 when every failure is expected (or none), 3 when one is new or
+/// grown (or, with --strict, an expectation is fixed); 0 after --write-expect.
+/// `print_table` prints the table (it needs the report for its verdicts) before them.
+int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
+                      const std::vector<octocd::ValidationResult>& results,
+                      const octocd::ExpectationReport& report, const nlohmann::ordered_json& meta) {
+  using Kind = octocd::ExpectationOutcome::Kind;
+  if (!o.json.empty())
+    octocd::write_json_file(o.json, octocd::results_json(results, run, &report, meta), "--json");
+  if (!report.outcomes.empty()) fmt::print("\n");
+  for (const octocd::ExpectationOutcome& x : report.outcomes) fmt::print("{}\n", x.text);
+  if (!o.write_expect.empty()) {
+    const std::vector<octocd::Expectation> entries = octocd::expectations_from(run, results);
+    octocd::write_expectations(o.write_expect, run, entries);
+    fmt::print("\nwrote {} expectation(s) of {} {} to {} (edit each reason)\n", entries.size(),
+               run.scene.empty() ? "trace" : "scene", run.scene.empty() ? run.trace : run.scene, o.write_expect);
+    return 0;
+  }
+  const int code = report.exit_code(o.strict);
+  const std::size_t expected = report.count(Kind::Expected), fixed = report.count(Kind::Fixed);
+  const std::size_t failing = report.count(Kind::New) + report.count(Kind::Grown);
+  if (failing == 0 && expected == 0) {
+    fmt::print("\n{}\n", fixed > 0 && o.strict ? "VALIDATION FAILED: an expected failure no longer fails (--strict)"
+                                                 : "all validators pass");
+  } else if (failing == 0) {
+    fmt::print("\nall validators pass or fail as expected ({} expected failure(s), {} fixed; {}){}\n", expected,
+               fixed, report.file, fixed > 0 && o.strict ? "; VALIDATION FAILED: --strict and a fixed expectation" : "");
+  } else {
+    fmt::print("\nVALIDATION FAILED: {} new or grown failure(s){}\n", failing,
+               expected > 0 ? fmt::format(", {} expected", expected) : std::string());
+  }
+  return code;
+}
 
 /// `octocd validate --trace-in FILE.h5`: another engine's trace judged frame by frame
 /// (octocd/external.hpp); exit 0 all pass, 3 any fails, 2 a malformed trace.
@@ -465,13 +507,14 @@ int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions&
   const int every = o.every_given ? o.every : 1;
   const std::vector<octocd::ValidationResult> results =
       octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
+  const octocd::RunName run = octocd::trace_run(o.trace_in);
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {})\n\n",
              o.trace_in, info.engine, info.bodies, info.frames, every, o.against);
-  fmt::print("{}", octocd::format_results(results, vo.overridden));
-  const bool all_pass = std::all_of(results.begin(), results.end(),
-                                    [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
-  fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
-  return all_pass ? 0 : 3;
+  fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
+  return conclude_validate(o, run, results, report,
+                           {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
+                            {"against", o.against}, {"build_id", octocd::build_id()}});
 }
 
 
@@ -525,6 +568,8 @@ int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationO
   }
   std::error_code ec;
   if (temporary) fs::remove(path, ec);
+  const octocd::RunName run{model->scene.name, ""};
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   if (!o.junit.empty())
     octocd::write_junit(o.junit, model->scene.name, results,
                         std::chrono::duration<double>(Clock::now() - t0).count(),
@@ -533,26 +578,29 @@ int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationO
                          {"every", std::to_string(o.every)},
                          {"against", o.against},
                          {"scene_file", o.scene},
-                         {"build_id", octocd::build_id()}});
+                         {"build_id", octocd::build_id()}},
+                        "", &report);
   fmt::print("validate {} (engine bullet with rotation, judged as a version 2 external trace{}: {} bodies, {} "
              "frames, checks every {}, against: {})\n\n",
              model->scene.name, temporary ? "" : " " + path, info.bodies, info.frames, o.every, o.against);
-  fmt::print("{}", octocd::format_results(results, vo.overridden));
-  const bool all_pass = std::all_of(results.begin(), results.end(),
-                                    [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
+  fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
   if (const int sig = octocd::stop_signal()) {
     report_stop(sig, "validate", info.frames, o.frames, o.trace);
     return octocd::stop_exit_code(sig);
   }
-  fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
-  return all_pass ? 0 : 3;
+  return conclude_validate(o, run, results, report,
+                           {{"engine", "bullet (rotation)"}, {"frames", info.frames}, {"every", o.every},
+                            {"against", o.against}, {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
 }
 
 /// `octocd validate`: exit 0 when every validator passes, 3 when any fails. With
 /// `--junit`, the report is written in every case that gets past the command line:
 /// results (failures included), or one errored case when the scene is bad input or the
 /// run fails.
-int validate_command(const ValidateOptions& o) {
+int validate_command(ValidateOptions& o) {
+  if (!o.expect.empty()) o.expectations = octocd::load_expectations(o.expect);  // bad input before the run
+  if (!o.write_expect.empty() && o.check_only)
+    throw octocd::InputError("--write-expect: records a judged run's failures; allowed without --check-only");
   if (o.scene.empty() == o.trace_in.empty())
     throw octocd::InputError("validate: give either SCENE.json or --trace-in FILE.h5 (not both)");
   if (o.check_only && o.trace_in.empty())
@@ -683,6 +731,8 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
                           done == o.frames     ? " in the analytic or Bullet rerun (n/a)"
                           : stopped_in > done ? fmt::format(" inside the checks of frame {} (partly judged)", stopped_in)
                                               : std::string());
+  const octocd::RunName run{scene.name, ""};
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   if (!o.junit.empty())
     octocd::write_junit(o.junit, scene.name, results,
                         std::chrono::duration<double>(Clock::now() - t0).count(),
@@ -692,12 +742,10 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
                          {"against", o.against},
                          {"scene_file", o.scene},
                          {"build_id", octocd::build_id()}},
-                        stopped);
+                        stopped, &report);
   fmt::print("validate {} (engine {}, {} frames, checks every {}, against: {})\n\n", scene.name, o.engine,
              o.frames, o.every, o.against);
-  fmt::print("{}", octocd::format_results(results, vo.overridden));
-  const bool all_pass = std::all_of(results.begin(), results.end(),
-                                    [](const octocd::ValidationResult& r) { return r.pass || !r.applicable; });
+  fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
   if (const int sig = octocd::stop_signal()) {
     // (A signal after the JUnit was written: the whole table, stopped at its end.)
     fmt::print("\nSTOPPED: {}\n", stopped.empty() ? fmt::format("the table covers frames 1..{} of {}; stopped by {}",
@@ -707,8 +755,9 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
     report_stop(sig, "validate", done, o.frames, o.trace);
     return octocd::stop_exit_code(sig);
   }
-  fmt::print("\n{}\n", all_pass ? "all validators pass" : "VALIDATION FAILED");
-  return all_pass ? 0 : 3;
+  return conclude_validate(o, run, results, report,
+                           {{"engine", o.engine}, {"frames", o.frames}, {"every", o.every}, {"against", o.against},
+                            {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
 }
 
 /// An integer option in [1, 2147483647], with the message in the project's form
@@ -788,7 +837,8 @@ int main(int argc, char** argv) {
 
   ValidateOptions val;
   CLI::App* val_cmd = app.add_subcommand(
-      "validate", "Run the validators of SPEC 7 on a scene; exit 0 all pass, 3 any fails, 2 bad input");
+      "validate", "Run the validators of SPEC 7 on a scene; exit 0 all pass (or fail as --expect expects), 3 a "
+                  "new or grown failure, 2 bad input");
   val_cmd->add_option("scene", val.scene, "Scene file (JSON, see docs/scenes.md); or give --trace-in");
   val_cmd->add_option("--against", val.against,
                       "References: comma-separated bullet, fcl (Bullet/FCL broadphases, FCL "
@@ -832,6 +882,18 @@ int main(int argc, char** argv) {
       "--trace-in", val.trace_in,
       "Judge another engine's trace (docs/trace-format.md, External traces) instead of a scene, frame by "
       "frame; --frames limits the frames (default all), --every defaults to 1");
+  val_cmd->add_option("--expect", val.expect,
+                      "Known failures (JSON, docs/validation-output.md): per scene or trace, row, cause, optional "
+                      "items, the worst figure allowed and a reason. Exit 0 when every failure is expected and "
+                      "within its figure; 3 naming each new or grown one; an expectation that no longer fails "
+                      "is reported as fixed");
+  val_cmd->add_option("--write-expect", val.write_expect,
+                      "Record this run's failures (worst figures, items, a placeholder reason to edit) in FILE.json, "
+                      "replacing this scene's or trace's entries and keeping the others; exits 0");
+  val_cmd->add_flag("--strict", val.strict, "With --expect: an expected failure that no longer fails is exit 3");
+  val_cmd->add_option("--json", val.json,
+                      "Also write every row (verdict pass|fail|n/a|expected, figures, judged, seconds) with its causes, "
+                      "examples and failing items, and the expectation outcomes, as JSON (docs/validation-output.md)");
   val_cmd->add_flag("--check-only", val.check_only,
                     "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not)");
 

@@ -58,7 +58,7 @@ engines: List[str] = list(_octocd.engines)
 
 __all__ = [
     "InputError", "RuntimeError", "Scene", "load_scene", "Engine", "FrameRecord", "ValidationResult",
-    "Validator", "validate_frame", "validate_trace", "format_results", "failures", "Trace", "engines",
+    "ValidationCause", "ValidationExample", "ValidationResults", "ExpectationOutcome", "Validator", "validate_frame", "validate_trace", "format_results", "failures", "Trace", "engines",
     "broadphases", "tolerances", "cuda_device_status", "build_id",
 ]
 
@@ -249,6 +249,32 @@ class Engine:
 # ---- judging another engine -----------------------------------------------------------
 
 @dataclass
+class ValidationExample:
+    """One judged item of a failing cause (SPEC 13b.13): frame (step; -1 when not a
+    frame's item), item ("pair (A, B)", "body I", "group (I, J, K)", "" for the run),
+    figure (in its cause's unit) and one line of text."""
+    frame: int
+    item: str
+    figure: float
+    text: str
+
+
+@dataclass
+class ValidationCause:
+    """One cause of a row's failures (e.g. row "conservation", cause "energy"): how many
+    items failed for it (count), the worst figure (in `unit`), the first examples and the
+    sorted distinct failing items (complete when items_complete). A row that does not
+    split its failures has one cause named like the row."""
+    name: str
+    unit: str
+    count: int
+    worst: float
+    examples: List[ValidationExample] = field(default_factory=list)
+    items: List[str] = field(default_factory=list)
+    items_complete: bool = True
+
+
+@dataclass
 class ValidationResult:
     """One validator's verdict (one row of the `octocd validate` table).
 
@@ -256,8 +282,10 @@ class ValidationResult:
     response); name: e.g. "candidate-sets"; figure: what `measured` is, with its unit;
     measured, bound: the figure and the bound it is held to; passed: within the bound;
     applicable: False when there was nothing to judge (n/a, counts as a pass); verdict:
-    "pass", "FAIL" or "n/a"; detail: the first offending frame/pair, or a summary;
-    tolerances: the Tolerances names the verdict depends on (comma-separated).
+    "pass", "FAIL", "n/a" or (with expectations) "expected"; detail: the first offending
+    frame/pair, or a summary; tolerances: the Tolerances names the verdict depends on
+    (comma-separated); judged: items the row judged; seconds: its own time; causes: its
+    failures by cause (empty when it passed).
     """
     tier: str
     name: str
@@ -269,10 +297,13 @@ class ValidationResult:
     verdict: str
     detail: str
     tolerances: str = ""
+    judged: int = 0
+    seconds: float = 0.0
+    causes: List[ValidationCause] = field(default_factory=list)
 
     @property
     def failed(self) -> bool:
-        """True for a FAIL (applicable and not passed)."""
+        """True for a FAIL (applicable and not passed; an expected failure too)."""
         return self.applicable and not self.passed
 
     def __str__(self) -> str:
@@ -280,8 +311,49 @@ class ValidationResult:
                 f"bound {self.bound:g}) {self.detail}")
 
 
+@dataclass
+class ExpectationOutcome:
+    """What became of one failing cause or one expectation (SPEC 14b): outcome is
+    "expected" (within its figure and items), "new" (no expectation), "grown" (beyond its
+    figure, or items outside the listed ones: `outside`) or "fixed" (expected, no longer
+    failing); worst: the measured figure, allowed: the expectation's (new: the row's
+    bound); text: the line `octocd validate --expect` prints."""
+    outcome: str
+    row: str
+    cause: str
+    unit: str
+    count: int
+    worst: float
+    allowed: float
+    outside: List[str]
+    reason: str
+    text: str
+
+
+class ValidationResults(list):
+    """The rows of a validation (a list of ValidationResult), with what expectations made
+    of them: `outcomes` (ExpectationOutcome; without expectations every failure is "new")
+    and `exit_code` (0 when nothing failed beyond the expectations, 3 otherwise: what
+    `octocd validate --expect` exits with); `ok` is exit_code == 0."""
+
+    def __init__(self, rows=(), outcomes=(), exit_code: int = 0):
+        super().__init__(rows)
+        self.outcomes: List[ExpectationOutcome] = list(outcomes)
+        self.exit_code: int = exit_code
+
+    @property
+    def ok(self) -> bool:
+        return self.exit_code == 0
+
+
 def _results(rows) -> List[ValidationResult]:
-    return [ValidationResult(**r) for r in rows]
+    out = []
+    for r in rows:
+        r = dict(r)
+        r["causes"] = [ValidationCause(**{**c, "examples": [ValidationExample(**x) for x in c["examples"]]})
+                       for c in r.get("causes", [])]
+        out.append(ValidationResult(**r))
+    return out
 
 
 class Validator:
@@ -379,15 +451,34 @@ def validate_frame(scene=None, *, frame: int = 1, aabbs=None, pairs=None, contac
 
 
 def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max_frames: int = 0,
-                   against_fcl: bool = True, tolerances: Optional[Dict[str, float]] = None
-                   ) -> List[ValidationResult]:
+                   against_fcl: bool = True, tolerances: Optional[Dict[str, float]] = None,
+                   expect: Union[None, str, "_os.PathLike[str]", Dict[str, Any]] = None,
+                   strict: bool = False) -> ValidationResults:
     """Judges an external trace (docs/trace-format.md, "External traces"; what `octocd
     validate --trace-in PATH` does): the costly validators every `every`-th frame, at most
     max_frames frames (0 = all). A trace of `octocd run --state-every 1 --contacts` is one.
     Raises InputError "PATH: DATASET: [frame F: ]PROBLEM; allowed: ..." for a missing,
-    unreadable or malformed trace. The GIL is released while judging."""
-    return _results(_octocd.validate_trace(_os.fspath(path), int(every), int(max_frames), bool(against_fcl),
-                                           tolerances))
+    unreadable or malformed trace. The GIL is released while judging.
+
+    expect: known failures (SPEC 14b; docs/validation-output.md), a path to an
+    expectations file or the same as a dict ({"expectations": [...]}); entries name the
+    trace by its file name ("trace": "run.h5"). Rows whose every failure is expected read
+    verdict "expected"; the returned list's `outcomes` and `exit_code` (3 for a new or
+    grown failure, or with `strict` a fixed expectation) say the rest. A malformed
+    expectations file raises InputError naming the entry, before the trace is judged."""
+    text, origin = None, ""
+    if isinstance(expect, dict):
+        text, origin = _json.dumps(expect), "expect"
+    elif expect is not None:
+        origin = _os.fspath(expect)
+        try:
+            with open(origin, encoding="utf-8") as f:
+                text = f.read()
+        except OSError as e:
+            raise InputError(f"expect: cannot read '{origin}' ({e.strerror}); allowed: an expectations file (JSON)")
+    rows, outcomes, code = _octocd.validate_trace(_os.fspath(path), int(every), int(max_frames), bool(against_fcl),
+                                                 tolerances, text, origin, bool(strict))
+    return ValidationResults(_results(rows), [ExpectationOutcome(**o) for o in outcomes], code)
 
 
 def format_results(results: Sequence[ValidationResult], overridden: Sequence[str] = ()) -> str:

@@ -31,6 +31,7 @@
 #include "octocd/cuda_world.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/error.hpp"
+#include "octocd/expect.hpp"
 #include "octocd/external.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
@@ -270,7 +271,10 @@ py::dict out_metrics(const FrameMetrics& m, const Engine* engine) {
   return d;
 }
 
-py::list out_results(const std::vector<ValidationResult>& rs) {
+/// The rows as dicts (octocd.ValidationResult's fields); causes normalised by
+/// failure_causes (octocd/expect.hpp). With `report`, a row whose every failing cause is
+/// expected has verdict "expected".
+py::list out_results(const std::vector<ValidationResult>& rs, const ExpectationReport* report = nullptr) {
   py::list l;
   for (const ValidationResult& r : rs) {
     py::dict d;
@@ -281,9 +285,54 @@ py::list out_results(const std::vector<ValidationResult>& rs) {
     d["bound"] = r.bound;
     d["passed"] = r.pass;
     d["applicable"] = r.applicable;
-    d["verdict"] = !r.applicable ? "n/a" : (r.pass ? "pass" : "FAIL");
+    const std::string verdict = row_verdict(r, report);
+    d["verdict"] = verdict == "fail" ? "FAIL" : verdict;
     d["detail"] = r.detail;
     d["tolerances"] = r.tolerances;
+    d["judged"] = r.judged;
+    d["seconds"] = r.seconds;
+    py::list causes;
+    for (const ValidationCause& c : failure_causes(r)) {
+      py::dict cd;
+      cd["name"] = c.name;
+      cd["unit"] = c.unit;
+      cd["count"] = c.count;
+      cd["worst"] = c.worst;
+      py::list examples;
+      for (const ValidationExample& x : c.examples) {
+        py::dict xd;
+        xd["frame"] = x.frame;
+        xd["item"] = x.item;
+        xd["figure"] = x.figure;
+        xd["text"] = x.text;
+        examples.append(xd);
+      }
+      cd["examples"] = examples;
+      cd["items"] = c.items;
+      cd["items_complete"] = c.items_complete;
+      causes.append(cd);
+    }
+    d["causes"] = causes;
+    l.append(d);
+  }
+  return l;
+}
+
+/// The outcomes of matching expectations, as dicts (octocd.ExpectationOutcome's fields).
+py::list out_outcomes(const ExpectationReport& report) {
+  py::list l;
+  for (const ExpectationOutcome& o : report.outcomes) {
+    py::dict d;
+    d["outcome"] = outcome_name(o.kind);
+    d["row"] = o.row;
+    d["cause"] = o.cause;
+    d["unit"] = o.unit;
+    d["count"] = o.count;
+    d["worst"] = o.worst;
+    d["allowed"] = o.allowed;
+    d["outside"] = o.outside;
+    d["reason"] = o.reason;
+    d["text"] = o.text;
     l.append(d);
   }
   return l;
@@ -725,6 +774,23 @@ ValidationResult result_from(const py::handle& r) {
   v.applicable = get("applicable").cast<bool>();
   v.detail = py::str(get("detail"));
   v.tolerances = py::str(get("tolerances"));
+  if (py::hasattr(r, "judged")) v.judged = get("judged").cast<std::uint64_t>();
+  if (py::hasattr(r, "seconds")) v.seconds = get("seconds").cast<double>();
+  if (py::hasattr(r, "causes")) {
+    for (const py::handle c : get("causes")) {
+      ValidationCause vc;
+      vc.name = py::str(c.attr("name"));
+      vc.unit = py::str(c.attr("unit"));
+      vc.count = c.attr("count").cast<std::uint64_t>();
+      vc.worst = c.attr("worst").cast<double>();
+      for (const py::handle x : c.attr("examples"))
+        vc.examples.push_back(ValidationExample{x.attr("frame").cast<std::int64_t>(), py::str(x.attr("item")),
+                                                x.attr("figure").cast<double>(), py::str(x.attr("text"))});
+      vc.items = c.attr("items").cast<std::vector<std::string>>();
+      vc.items_complete = c.attr("items_complete").cast<bool>();
+      v.causes.push_back(std::move(vc));
+    }
+  }
   return v;
 }
 
@@ -824,20 +890,27 @@ PYBIND11_MODULE(_octocd, m) {
 
   m.def(
       "validate_trace",
-      [](const std::string& path, int every, std::int64_t max_frames, bool against_fcl, py::object tolerances) {
+      [](const std::string& path, int every, std::int64_t max_frames, bool against_fcl, py::object tolerances,
+         const std::optional<std::string>& expect_json, const std::string& expect_origin, bool strict) {
         if (every < 1) throw InputError(fmt::format("every: {}; allowed: >= 1", every));
         if (max_frames < 0) throw InputError(fmt::format("max_frames: {}; allowed: >= 0 (0 = all)", max_frames));
         ExternalOptions o;  // engine name and response model: from the trace
         o.against_fcl = against_fcl;
         apply_tolerances(o, tolerances);
+        // Expectations are read (and refused) before the trace is judged.
+        const Expectations expect =
+            expect_json ? parse_expectations_text(*expect_json, expect_origin) : Expectations{};
         std::vector<ValidationResult> rs;
         {
           py::gil_scoped_release release;
           rs = validate_external_trace(path, o, every, max_frames);
         }
-        return out_results(rs);
+        const ExpectationReport report = match_expectations(expect, trace_run(path), rs);
+        return py::make_tuple(out_results(rs, expect_json ? &report : nullptr), out_outcomes(report),
+                              report.exit_code(strict));
       },
-      py::arg("path"), py::arg("every"), py::arg("max_frames"), py::arg("against_fcl"), py::arg("tolerances"));
+      py::arg("path"), py::arg("every"), py::arg("max_frames"), py::arg("against_fcl"), py::arg("tolerances"),
+      py::arg("expect_json"), py::arg("expect_origin"), py::arg("strict"));
 
   m.def("format_results", [](const py::list& results, const std::vector<std::string>& overridden) {
     std::vector<ValidationResult> rs;

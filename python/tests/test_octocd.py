@@ -7,6 +7,7 @@ Row names used below: the physics tier's `broadphase-completeness` and `contact-
 (octocd/physics.hpp) and the model tier's `candidate-sets` (validation.hpp,
 FrameValidators); every other assertion is on tiers, verdicts and whole result lists.
 """
+import json
 import os
 import subprocess
 import sys
@@ -432,3 +433,31 @@ def test_trace_helper_refuses_other_files_and_missing_frames(tmp_path):
             t.state(11)
         with pytest.raises(octocd.InputError, match=r"/contacts: absent"):
             t.contacts(1)
+
+
+def test_validate_trace_with_expectations_and_causes(tmp_path):
+    # A bound of 0 slops makes the resting stack's penetration a failure (SPEC 14b).
+    trace = cli_trace(tmp_path, scene_path("box-stack"), 50)
+    tol = {"penetration_slops": 0.0}
+    plain = octocd.validate_trace(trace, every=5, tolerances=tol)
+    pen = row(plain, "penetration")
+    assert pen.verdict == "FAIL" and plain.exit_code == 3 and not plain.ok
+    assert pen.causes and pen.causes[0].count >= 1 and pen.causes[0].worst == pytest.approx(pen.measured)
+    assert pen.causes[0].examples and isinstance(pen.causes[0].examples[0], octocd.ValidationExample)
+    assert [o.outcome for o in plain.outcomes] == ["new"]
+    entry = {"trace": os.path.basename(trace), "row": "penetration", "cause": pen.causes[0].name,
+             "worst": pen.measured * 1.01, "reason": "planted: bound of 0 slops"}
+    within = octocd.validate_trace(trace, every=5, tolerances=tol, expect={"expectations": [entry]})
+    assert within.ok and row(within, "penetration").verdict == "expected"
+    assert [o.outcome for o in within.outcomes] == ["expected"]
+    path = tmp_path / "expect.json"
+    path.write_text(json.dumps({"expectations": [dict(entry, worst=pen.measured / 2)]}))
+    grown = octocd.validate_trace(trace, every=5, tolerances=tol, expect=path)
+    assert grown.exit_code == 3 and grown.outcomes[0].outcome == "grown"
+    assert "GROWN penetration/" in grown.outcomes[0].text
+    # The table (built from the Python rows, causes included) marks the failing row.
+    assert "FAIL" in octocd.format_results(plain)
+    fixed = octocd.validate_trace(trace, every=5, expect={"expectations": [entry]}, strict=True)
+    assert fixed.exit_code == 3 and fixed.outcomes[0].outcome == "fixed"
+    with pytest.raises(octocd.InputError, match=r"expect: expectations\[0\] \(worst\): -1 is out of range"):
+        octocd.validate_trace(trace, expect={"expectations": [dict(entry, worst=-1)]})

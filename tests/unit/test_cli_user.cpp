@@ -751,6 +751,82 @@ TEST_F(CliUser, ValidateWritesJUnit) {
 
 // ---- 2. the nightly script: non-zero on any failure, 2 on bad input ------------------
 
+// ---- expectations (SPEC 14b) and --json: box-in-box fails non-penetration-eq14 (4 contacts)
+TEST_F(CliUser, ValidateExpectationsGateOnNewAndGrownFailures) {
+  const std::string fail = scene("box-in-box", kFailingScene);
+  const std::string args = " --frames 20 --every 5 --against none";
+  const fs::path expect = dir_ / "expect.json", out_json = dir_ / "out.json", xml = dir_ / "j.xml";
+  // Without expectations: the failure is new, named in plain text (no XML escapes).
+  Result r = octocd_cmd("validate " + fail + args);
+  ASSERT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("NEW FAILURE non-penetration-eq14/non-penetration-eq14: measured 4 > bound 0"),
+            std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("&gt;"), std::string::npos) << r.output;
+  // --write-expect records it (exit 0); --expect then passes, the row reads `expected`.
+  r = octocd_cmd("validate " + fail + args + " --write-expect " + expect.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  nlohmann::json e = nlohmann::json::parse(slurp(expect));
+  ASSERT_EQ(e["expectations"].size(), 1u) << e.dump();
+  EXPECT_EQ(e["expectations"][0]["scene"], "box-in-box");
+  EXPECT_EQ(e["expectations"][0]["worst"], 4.0);
+  r = octocd_cmd("validate " + fail + args + " --expect " + expect.string() + " --junit " + xml.string() +
+                 " --json " + out_json.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("expected non-penetration-eq14/non-penetration-eq14: worst 4 <= allowed 4"),
+            std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("all validators pass or fail as expected (1 expected failure(s)"), std::string::npos);
+  {
+    Xml x(xml);
+    ASSERT_TRUE(x.ok()) << slurp(xml);
+    EXPECT_TRUE(x.nodes("//testcase/failure").empty());
+    const auto skipped = x.nodes("//testcase[@name='non-penetration-eq14']/skipped");
+    ASSERT_EQ(skipped.size(), 1u);
+    EXPECT_EQ(Xml::attr(skipped[0], "message").rfind("expected: non-penetration-eq14 worst 4 <= allowed 4", 0), 0u)
+        << Xml::attr(skipped[0], "message");
+  }
+  const nlohmann::json j = nlohmann::json::parse(slurp(out_json));
+  ASSERT_EQ(j["rows"].size(), 16u);
+  for (const auto& row : j["rows"]) {
+    if (row["name"] == "non-penetration-eq14") {
+      EXPECT_EQ(row["verdict"], "expected");
+      ASSERT_EQ(row["causes"].size(), 1u);
+      EXPECT_EQ(row["causes"][0]["count"], 4);
+    } else if (row["name"] == "analytic") {
+      EXPECT_EQ(row["verdict"], "n/a");
+    }
+  }
+  // Grown: a figure below the measured one fails (exit 3), named.
+  e["expectations"][0]["worst"] = 3;
+  write_file(expect, e.dump());
+  r = octocd_cmd("validate " + fail + args + " --expect " + expect.string() + " --junit " + xml.string());
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("GROWN non-penetration-eq14/non-penetration-eq14: worst 4 > allowed 3"), std::string::npos)
+      << r.output;
+  {
+    Xml x(xml);
+    ASSERT_EQ(x.nodes("//testcase[@name='non-penetration-eq14']/failure").size(), 1u);
+  }
+  // Fixed: an expectation of a row that passes is reported; exit 3 only with --strict.
+  e["expectations"][0]["worst"] = 4;
+  e["expectations"].push_back({{"scene", "box-in-box"}, {"row", "conservation"}, {"cause", "energy"},
+                               {"worst", 0.01}, {"reason", "planted"}});
+  write_file(expect, e.dump());
+  r = octocd_cmd("validate " + fail + args + " --expect " + expect.string());
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("fixed conservation/energy: no longer fails: remove it from " + expect.string()),
+            std::string::npos) << r.output;
+  EXPECT_EQ(octocd_cmd("validate " + fail + args + " --expect " + expect.string() + " --strict").code, 3);
+  // Bad input: exit 2 naming the file and the entry, before anything runs.
+  write_file(expect, R"({"expectations": [{"scene": "box-in-box", "row": "non-penetration-eq14",
+      "cause": "non-penetration-eq14", "worst": -1, "reason": "r"}]})");
+  r = octocd_cmd("validate " + fail + args + " --expect " + expect.string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find(expect.string() + ": expectations[0] (worst): -1 is out of range"), std::string::npos)
+      << r.output;
+  write_file(expect, "not json");
+  EXPECT_EQ(octocd_cmd("validate " + fail + args + " --expect " + expect.string()).code, 2);
+}
+
 TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   const std::string script = (source_dir() / "scripts" / "nightly.sh").string();
   ASSERT_TRUE(fs::exists(script));
@@ -815,6 +891,64 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   // Called wrongly: exit 2.
   EXPECT_EQ(run("bash " + quote(script) + " --scenes everything").code, 2);
   EXPECT_EQ(run("bash " + quote(script) + " --timeout -5").code, 2);
+}
+
+// The nightly's gate (SPEC 14b): green on a healthy build whose only failure is expected,
+// red on a planted regression. box-in-box's non-penetration-eq14 failure (a box inside a
+// box: the paper's AABB response cannot separate them, 4 contacts) stands for a known
+// finding like the Jacobi energy rise. Two regressions are planted the only ways a test
+// can without touching the engine: (a) the expected failure grown (its committed figure
+// lowered below the measured one: to the gate the same as the figure growing past it),
+// (b) a new failure on a scene that passed (--tolerance penetration_slops=0 makes the
+// resting stack's true penetration exceed its bound: the same comparison a deeper
+// penetration after an engine change would fail).
+TEST_F(CliUser, NightlyScriptGatesOnExpectations) {
+  const std::string script = (source_dir() / "scripts" / "nightly.sh").string();
+  const std::string pass = (source_dir() / "datasets" / "scenes" / "free-fall.json").string();
+  const std::string fail = scene("box-in-box", kFailingScene);
+  const fs::path expect = dir_ / "nightly-expect.json";
+  auto nightly = [&](const std::string& out, const std::string& args) {
+    return run("OCTOCD_BIN=" + quote(bin()) + " bash " + quote(script) + " --frames 20 --every 10 --against none " +
+               "--out " + quote((dir_ / out).string()) + " " + args);
+  };
+  // The committed expectations file parses (octocd refuses a malformed one with exit 2).
+  Result r = nightly("committed", pass);
+  EXPECT_EQ(r.code, 0) << r.output;
+  // Record the known failure, then the healthy build is green with it listed as expected.
+  r = nightly("write", "--expect none --write-expect " + quote(expect.string()) + " " + pass + " " + fail);
+  ASSERT_EQ(r.code, 0) << r.output;
+  nlohmann::json e = nlohmann::json::parse(slurp(expect));
+  ASSERT_EQ(e["expectations"].size(), 1u) << e.dump();
+  r = nightly("healthy", "--expect " + quote(expect.string()) + " " + pass + " " + fail);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("pass     box-in-box (20 frames"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("expected non-penetration-eq14/non-penetration-eq14: worst 4 <= allowed 4"),
+            std::string::npos) << r.output;
+  {
+    Xml x(dir_ / "healthy" / "junit.xml");
+    ASSERT_TRUE(x.ok());
+    EXPECT_TRUE(x.nodes("//testcase/failure").empty());
+    const auto skipped = x.nodes("//testcase[@classname='box-in-box.model'][@name='non-penetration-eq14']/skipped");
+    ASSERT_EQ(skipped.size(), 1u);
+    EXPECT_EQ(Xml::attr(skipped[0], "message").rfind("expected: ", 0), 0u);
+    const std::string total = Xml::attr(x.nodes("/testsuites")[0], "time");  // the whole run's time
+    ASSERT_FALSE(total.empty());
+    EXPECT_GT(std::stod(total), 0.0);
+  }
+  // (a) grown: exit 3, named in plain text.
+  e["expectations"][0]["worst"] = 3;
+  write_file(dir_ / "grown.json", e.dump());
+  r = nightly("grown", "--expect " + quote((dir_ / "grown.json").string()) + " " + pass + " " + fail);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("GROWN non-penetration-eq14/non-penetration-eq14: worst 4 > allowed 3"), std::string::npos)
+      << r.output;
+  // (b) a new failure: exit 3, "measured X > bound Y" in plain text, never XML-escaped.
+  r = nightly("new", "--expect " + quote(expect.string()) + " --tolerance penetration_slops=0 " + fail);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("NEW FAILURE penetration/penetration: measured "), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("&gt;"), std::string::npos) << r.output;
+  // A missing expectations file is bad input.
+  EXPECT_EQ(nightly("missing", "--expect " + quote((dir_ / "no-such.json").string()) + " " + pass).code, 2);
 }
 
 // ---- docs/cli.md is `--help`, checked so they cannot drift ---------------------------
