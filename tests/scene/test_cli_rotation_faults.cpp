@@ -253,7 +253,7 @@ TEST_F(RotationFaults, TheCorrectRotatingEnginePassesEveryPhysicsRow) {
   // Friction too: octocd's Bullet adapter brings the stale friction of rows whose normal
   // impulse fell to 0 back to the cone (BulletOptions::coulomb_friction).
   for (const char* row : {"broadphase-completeness", "contact-completeness", "contact-geometry", "penetration",
-                          "friction", "conservation"})
+                          "friction", "conservation", "momentum-balance", "free-flight"})
     EXPECT_EQ(verdict(base_result_, row), "pass") << row << "\n" << base_result_.output;
   // Bullet's pair cache is conservative (fattened AABBs): extras are counted, not failed.
   EXPECT_NE(base_result_.output.find("candidates per true pair"), std::string::npos) << base_result_.output;

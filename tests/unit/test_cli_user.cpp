@@ -675,12 +675,12 @@ TEST_F(CliUser, ValidateWritesJUnit) {
     // One case per row of the table.
     std::size_t rows = 0;
     for (const char* v : {"broadphase-completeness", "contact-completeness", "contact-geometry", "penetration",
-                          "friction", "conservation", "candidate-sets", "midphase-completeness",
-                          "non-penetration-eq14", "friction-monotonicity", "impulse-conservation", "applied-state",
-                          "analytic", "bullet-dynamics"})
+                          "friction", "conservation", "momentum-balance", "free-flight", "candidate-sets",
+                          "midphase-completeness", "non-penetration-eq14", "friction-monotonicity",
+                          "impulse-conservation", "applied-state", "analytic", "bullet-dynamics"})
       rows += r.output.find(std::string(" ") + v + " ") != std::string::npos ? 1 : 0;
     EXPECT_EQ(cases.size(), rows);
-    EXPECT_EQ(cases.size(), 14u);
+    EXPECT_EQ(cases.size(), 16u);
     // Each row of the table (tier, validator) is one case "box-stack.TIER" / validator,
     // with its own time (s): >= 0, and together within the suite's time.
     std::set<std::string> table_rows, names;
@@ -690,7 +690,7 @@ TEST_F(CliUser, ValidateWritesJUnit) {
       std::string tier, name;
       if (w >> tier >> name && (tier == "physics" || tier == "model")) table_rows.insert(tier + "/" + name);
     }
-    EXPECT_EQ(table_rows.size(), 14u) << r.output;
+    EXPECT_EQ(table_rows.size(), 16u) << r.output;
     double sum = 0;
     for (xmlNodePtr c : cases) {
       const std::string classname = Xml::attr(c, "classname");
@@ -785,7 +785,7 @@ TEST_F(CliUser, ValidateExpectationsGateOnNewAndGrownFailures) {
         << Xml::attr(skipped[0], "message");
   }
   const nlohmann::json j = nlohmann::json::parse(slurp(out_json));
-  ASSERT_EQ(j["rows"].size(), 14u);
+  ASSERT_EQ(j["rows"].size(), 16u);
   for (const auto& row : j["rows"]) {
     if (row["name"] == "non-penetration-eq14") {
       EXPECT_EQ(row["verdict"], "expected");
@@ -850,7 +850,7 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   ASSERT_TRUE(x.ok()) << slurp(dir_ / "bad" / "junit.xml");
   const auto suites = x.nodes("/testsuites/testsuite");
   ASSERT_EQ(suites.size(), 3u);
-  EXPECT_EQ(x.nodes("//testcase[@classname='free-fall.physics']").size(), 6u);
+  EXPECT_EQ(x.nodes("//testcase[@classname='free-fall.physics']").size(), 8u);
   EXPECT_EQ(x.nodes("//testcase[@classname='free-fall.model']").size(), 8u);
   EXPECT_GE(x.nodes("//testcase[starts-with(@classname, 'box-in-box.')]/failure").size(), 1u);
   {

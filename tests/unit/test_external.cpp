@@ -165,7 +165,7 @@ TEST(External, TheCpuEnginesFramesPassAndAPlantedLossFails) {
         reported.normal = c.normal;
         reported.depth = c.depth;
         reported.jn = c.jn;
-        reported.jt = c.jt;
+        reported.jt = -c.jt;  // the trace convention: along -v_t (octocd's J_t is along +t, SPEC 6)
         c = reported;
       }
       v.observe(rec, f % 5 == 0);

@@ -240,7 +240,7 @@ TEST(Validators, AStopEndsACheckWhoseBroadphaseCallPollsNothing) {
   EXPECT_THROW(v.observe(world, true), ValidationStopped);
   g_slow_release = true;  // the helper thread ends
   const std::vector<ValidationResult> rs = v.results();
-  EXPECT_EQ(rs.size(), 12u);
+  EXPECT_EQ(rs.size(), 14u);
   for (const ValidationResult& r : rs) EXPECT_GE(r.seconds, 0.0) << r.name;
   EXPECT_GT(find(rs, "applied-state").seconds, 0.0);
 }

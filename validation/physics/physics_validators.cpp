@@ -1,8 +1,9 @@
 // The physics tier (SPEC 13): any engine judged on its posed shapes with FCL, never on
-// octocd's own response model (that is validation/model/). Six rows: broadphase
+// octocd's own response model (that is validation/model/). Eight rows: broadphase
 // completeness, contact completeness, contact geometry, penetration (the costly,
-// geometric rows, run on checked frames, O(candidate pairs) each) and friction and
-// conservation (every frame that has states, O(bodies + contact rows)).
+// geometric rows, run on checked frames, O(candidate pairs) each) and friction,
+// conservation, momentum balance and free flight (every frame that has states,
+// O(bodies + contact rows)).
 #include "octocd/physics.hpp"
 
 #include "../src/row_clock.hpp"
@@ -13,6 +14,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -67,7 +69,24 @@ PhysicsBodies octocd_physics_bodies(const Model& model) {
   b.contact_geometry = ContactGeometry::Aabb;
   b.slop = p.slop;
   b.velocity_clamp = p.max_velocity;
+  b.integrator = PhysicsBodies::Integrator::SemiImplicit;  // SPEC 4.1: v += dt g, then x += dt v
+  b.jt_along_sliding = true;
+  b.impulses_complete = p.iterations <= 1;
+  b.jacobi_response = true;
   return b;
+}
+
+const char* contact_model_name(PhysicsBodies::ContactModel m) {
+  return m == PhysicsBodies::ContactModel::Soft ? "soft" : "rigid";
+}
+
+const char* integrator_name(PhysicsBodies::Integrator i) {
+  switch (i) {
+    case PhysicsBodies::Integrator::SemiImplicit: return "semi-implicit";
+    case PhysicsBodies::Integrator::Explicit: return "explicit";
+    case PhysicsBodies::Integrator::Any: return "any";
+  }
+  return "semi-implicit";
 }
 
 namespace {
@@ -77,6 +96,9 @@ using M3 = std::array<double, 9>;  // row-major
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23
+/// A relative sliding speed (m/s) below which v_t has no direction: jt is then J_t's
+/// magnitude (the trace convention; octocd's Bullet adapter uses the same threshold).
+constexpr double kNoSliding = 1e-6;
 
 D3 d3(Vec3 v) { return {double(v.x), double(v.y), double(v.z)}; }
 D3 operator+(D3 a, D3 b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
@@ -126,16 +148,36 @@ M3 inverse(const M3& m) {
 }
 
 std::string pair_name(Pair p) { return fmt::format("pair ({}, {})", p.a, p.b); }
+std::string body_name(std::size_t i) { return fmt::format("body {}", i); }
+/// "group (I, J, K)": an isolated group by its first bodies (up to 3, then "...").
+std::string group_name(const std::vector<std::uint32_t>& members) {
+  std::string s = "group (";
+  for (std::size_t k = 0; k < members.size() && k < 3; ++k) s += (k ? ", " : "") + std::to_string(members[k]);
+  return s + (members.size() > 3 ? ", ...)" : ")");
+}
 
-/// A running count of judged items and failures: the first failure's description and the
-/// worst judged figure with its description.
+/// Where a judged item is: its frame and its name as expectations write it ("pair (A, B)",
+/// "body I", "group (I, J, K)").
+struct Where {
+  std::int64_t frame = -1;
+  std::string item;
+};
+
+/// One cause of a row (SPEC 13b.13): judged items, failures, the worst judged figure with
+/// its description (pass details), the first failing examples (at most
+/// ValidationCause::kMaxExamples) with frame, item and figure, the worst failure, and the
+/// distinct failing items (at most ValidationCause::kMaxItems).
 struct Tally {
   std::uint64_t checks = 0;
   std::uint64_t failures = 0;
   double worst = -std::numeric_limits<double>::infinity();
   std::string worst_what, first;
+  std::vector<ValidationExample> examples;
+  ValidationExample worst_failure;
+  std::set<std::string> items;
+  bool items_complete = true;
   template <class F>
-  void check(bool ok, double figure, F&& describe) {
+  void check(bool ok, double figure, const Where& where, F&& describe) {
     ++checks;
     const bool new_worst = figure > worst;
     if (ok && !new_worst) return;
@@ -144,13 +186,80 @@ struct Tally {
       worst = figure;
       worst_what = what;
     }
-    if (!ok) {
-      if (failures == 0) first = what;
-      ++failures;
+    if (ok) return;
+    if (failures == 0) first = what;
+    ++failures;
+    ValidationExample e{where.frame, where.item, figure, what};
+    if (failures == 1 || figure > worst_failure.figure) worst_failure = e;
+    if (examples.size() < ValidationCause::kMaxExamples) examples.push_back(std::move(e));
+    if (!where.item.empty()) {
+      if (items.size() < ValidationCause::kMaxItems || items.count(where.item))
+        items.insert(where.item);
+      else
+        items_complete = false;
     }
   }
+  /// The same without a named item (the frame and item then come from the text only).
+  template <class F>
+  void check(bool ok, double figure, F&& describe) {
+    check(ok, figure, Where{}, std::forward<F>(describe));
+  }
+  /// A judged item that cannot fail, with figure 0.
+  void judged() {
+    ++checks;
+    worst = std::max(worst, 0.0);
+  }
   double worst_or(double none) const { return checks ? worst : none; }
+  /// This tally as a ValidationCause named `name` with figures in `unit`.
+  ValidationCause cause(const char* name, const char* unit) const {
+    ValidationCause c;
+    c.name = name;
+    c.unit = unit;
+    c.count = failures;
+    c.worst = failures ? worst_failure.figure : 0.0;
+    c.examples = examples;
+    c.items.assign(items.begin(), items.end());
+    c.items_complete = items_complete;
+    return c;
+  }
+  /// "NAME N of M NOUN (worst W UNIT, frame F ITEM: TEXT[; first: TEXT])", or "NAME 0 of M NOUN".
+  std::string summary(const char* name, const char* noun, const char* unit) const {
+    if (failures == 0) return fmt::format("{} 0 of {} {}", name, checks, noun);
+    std::string s = fmt::format("{} {} of {} {} (worst {:.4g} {}", name, failures, checks, noun, worst_failure.figure,
+                                unit);
+    if (worst_failure.frame >= 0) s += fmt::format(", frame {}", worst_failure.frame);
+    if (!worst_failure.item.empty()) s += " " + worst_failure.item;
+    s += ": " + worst_failure.text;
+    if (!examples.empty() && examples.front().text != worst_failure.text) s += "; first: " + examples.front().text;
+    return s + ")";
+  }
 };
+
+/// The row's failures by cause (causes with failures only), its judged count, its verdict
+/// and n/a when it judged nothing: the detail gets "; causes: ..." listing every cause.
+struct CauseSpec {
+  const Tally* tally;
+  const char* name;
+  const char* noun;
+  const char* unit;
+};
+void fill_causes(ValidationResult& r, std::initializer_list<CauseSpec> causes) {
+  std::string list;
+  std::uint64_t failing = 0, judged = 0;
+  for (const CauseSpec& c : causes) {
+    judged += c.tally->checks;
+    if (c.tally->failures) {
+      r.causes.push_back(c.tally->cause(c.name, c.unit));
+      ++failing;
+    }
+    list += (list.empty() ? "" : "; ") + c.tally->summary(c.name, c.noun, c.unit);
+  }
+  r.judged = judged;
+  if (failing) {
+    r.pass = false;
+    r.detail += "; causes: " + list;
+  }
+}
 
 }  // namespace
 
@@ -169,10 +278,15 @@ struct PhysicsValidators::Impl {
   // Rows.
   Tally broad, broad_exact, complete, false_contact, normal_angle, depth, points, pen, cone, dissipation;
   Tally momentum, angular, energy;
+  Tally balance_lin, balance_ang, free_vel, free_pos, free_w, free_q;
+  std::uint64_t balance_clamped = 0, balance_no_rows = 0, balance_locked = 0, free_locked = 0, balance_rot_locked = 0;
+  double t_balance = 0;
   std::uint64_t broad_frames = 0, broad_candidates = 0, broad_true = 0, broad_no_pairs = 0;
   std::uint64_t checked_frames = 0, rows_unjudged = 0, upper_bound_pairs = 0;
   std::uint64_t sign_rows = 0, sign_agree = 0, shape_angle_rows = 0;
   std::vector<double> shape_angles;  // Aabb geometry: angle to the posed shapes (figure)
+  std::uint64_t aabb_angle_rows = 0;  // Aabb geometry: rows compared with box-box on the AABBs (figure)
+  double aabb_angle_worst = 0;
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
   // Contact geometry's references: pairs judged by the separating-axis test and by FCL;
   // where FCL's normal lies outside SAT's accepted axes (figure: FCL's box-box keeps a
@@ -191,7 +305,7 @@ struct PhysicsValidators::Impl {
   double pen_max = 0, pen_upper_max = 0;
   std::string pen_what, pen_upper_what;
   std::uint64_t pen_upper_over = 0;
-  std::uint64_t pen_pairs = 0;
+  std::uint64_t pen_pairs = 0, pen_upper_pairs = 0;
   std::int64_t last_frame = 0;
   std::function<bool()> stop;  // polled inside the long loops (set_stop)
   // Each row's own time (s): RowClock around its work; shared work goes to the first row
@@ -216,6 +330,21 @@ struct PhysicsValidators::Impl {
   void judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p, std::size_t k0,
                            std::size_t k1);
   void dynamics(const FrameRecord& rec, const std::vector<Pose>& det);
+  void balance(const FrameRecord& rec, const std::vector<Pose>& det);
+  /// Mechanical energy of body i (kinetic + rotational - m g . x), before or after the step.
+  double mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const;
+  /// contact_model soft: opens, spoils and closes (judging energy) each pair's contact
+  /// episode; `isolated`: this step's dynamic-dynamic contact pairs, with whether the
+  /// pair is an isolated group on its own.
+  void soft_episodes(const FrameRecord& rec, const std::vector<std::pair<Pair, bool>>& isolated);
+  struct Episode {
+    std::int64_t start = 0;
+    double e0 = 0, ke0 = 0, scale = 0;
+    bool spoiled = false;
+  };
+  std::map<Pair, Episode> episodes;  // contact_model soft: open episodes per pair
+  std::uint64_t episodes_judged = 0, episodes_unjudged = 0, energy_soft_steps = 0;
+  std::uint64_t groups_locked = 0, groups_rotation_locked = 0;
 };
 
 PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bodies, const Tolerances& tol,
@@ -248,6 +377,11 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
     bad("restitution", fmt::format("{}; allowed: finite >= 0", bodies.restitution));
   if (!(bodies.contact_margin >= 0) || !std::isfinite(bodies.contact_margin))
     bad("contact_margin", fmt::format("{}; allowed: finite >= 0 m", bodies.contact_margin));
+  if (!bodies.locked_dofs.empty() && bodies.locked_dofs.size() != n)
+    bad("locked_dofs", fmt::format("{} values for {} bodies; allowed: 0 or {}", bodies.locked_dofs.size(), n, n));
+  for (std::size_t i = 0; i < bodies.locked_dofs.size(); ++i)
+    if (bodies.locked_dofs[i] > 63)
+      bad("locked_dofs", fmt::format("body {}: {}; allowed: 0 .. 63 (6 bits)", i, unsigned(bodies.locked_dofs[i])));
   if (!(bodies.slop >= 0) || !std::isfinite(bodies.slop))
     bad("slop", fmt::format("{}; allowed: finite >= 0 m", bodies.slop));
 
@@ -330,6 +464,7 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   }
   if (checked && poses) s.geometry(rec, det);
   s.dynamics(rec, det);
+  s.balance(rec, det);
 }
 
 // ---- Rows 1-4: the geometric rows, on checked frames ------------------------------
@@ -434,7 +569,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     for (const Pair& p : required) {
       const bool found = std::binary_search(rec.pairs.begin(), rec.pairs.end(), p);
       const ReferenceNormal& g = full(p);
-      broad.check(found, found ? 0.0 : 1.0, [&] {
+      broad.check(found, g.penetrating ? g.depth : -g.distance, Where{frame, pair_name(p)}, [&] {
         return fmt::format("frame {}: {} misses {} whose shapes are {} {:.3g} m (margin {} m)", frame, label,
                            pair_name(p), g.penetrating ? "penetrating by" : "apart by",
                            g.penetrating ? g.depth : g.distance, tol.broadphase_margin_m);
@@ -457,7 +592,9 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
       std::set_difference(want.begin(), want.end(), got.begin(), got.end(), std::back_inserter(missing));
       std::set_difference(got.begin(), got.end(), want.begin(), want.end(), std::back_inserter(extra));
       const bool same = missing.empty() && extra.empty();
-      broad_exact.check(same, same ? 0.0 : 1.0, [&] {
+      const Pair first_diff = !missing.empty() ? missing.front() : !extra.empty() ? extra.front() : Pair{};
+      broad_exact.check(same, double(missing.size() + extra.size()),
+                        Where{frame, same ? std::string() : pair_name(first_diff)}, [&] {
         if (same) return fmt::format("frame {}: equal to flat", frame);
         const Pair q = !missing.empty() ? missing.front() : extra.front();
         // Pairs whose boxes only touch (zero overlap on an axis) are pairs under the
@@ -488,7 +625,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     const ReferenceNormal& g = it->second.g;
     if (!(g.depth > tol.contact_depth_m)) continue;
     const bool found = std::binary_search(contact_pairs.begin(), contact_pairs.end(), p);
-    complete.check(found, found ? 0.0 : 1.0, [&] {
+    complete.check(found, g.depth, Where{frame, pair_name(p)}, [&] {
       return fmt::format("frame {}: {} penetrates by {:.4g} m{} and has no contact", frame, pair_name(p), g.depth,
                          g.depth_upper_bound ? " (upper bound: non-convex mesh)" : "");
     });
@@ -498,7 +635,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     const ReferenceNormal& g = full(p);
     const double bound = pair_margin(p) + slack;
     const double d = g.signed_distance();
-    false_contact.check(d <= bound, d - bound, [&] {
+    false_contact.check(d <= bound, d - bound, Where{frame, pair_name(p)}, [&] {
       return fmt::format("frame {}: false contact on {}: shapes {:.4g} m apart (margin {:.4g} m)", frame,
                          pair_name(p), d, pair_margin(p));
     });
@@ -584,8 +721,22 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
         // engine's normal follows).
         ++speculative_rows;
         speculative_worst = std::max(speculative_worst, angle);
+      } else if (aabb) {
+        // The engine's normal is an axis of the two world AABBs (Eq. 10): compared with
+        // FCL box-box on the same boxes its angle says nothing about the shapes (a
+        // figure; the angle to the posed shapes is the other figure, below). Its sign is
+        // judged: a normal pointing from A to B pushes the bodies into each other.
+        ++aabb_angle_rows;
+        aabb_angle_worst = std::max(aabb_angle_worst, angle);
+        normal_angle.check(angle < 90.0, angle, Where{frame, pair_name(p)}, [&] {
+          return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) points against the world AABBs' "
+                             "minimum translation ({:.3f}, {:.3f}, {:.3f}): {:.1f} deg (sign judged only: the engine "
+                             "resolves on world AABBs)",
+                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, r.normal.x,
+                             r.normal.y, r.normal.z, angle);
+        });
       } else {
-        normal_angle.check(angle <= tol.normal_angle_deg, angle, [&] {
+        normal_angle.check(angle <= tol.normal_angle_deg, angle, Where{frame, pair_name(p)}, [&] {
           return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from {}'s "
                              "({:.3f}, {:.3f}, {:.3f}) ({}){}",
                              frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle, judge,
@@ -617,7 +768,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
         const double da = ref->surface_distance(p.a, det[p.a], c.point);
         const double db = ref->surface_distance(p.b, det[p.b], c.point);
         const double off = std::max(da, db) - reach_p;
-        points.check(off <= tol.depth_m, off, [&] {
+        points.check(off <= tol.depth_m, off, Where{frame, pair_name(p)}, [&] {
           return fmt::format("frame {}: {} row {}: point ({:.4f}, {:.4f}, {:.4f}) is {:.4g} m from body {} "
                              "and {:.4g} m from body {} (depth or distance {:.4g} m)",
                              frame, pair_name(p), k - pr.first, c.point.x, c.point.y, c.point.z, da, p.a, db, p.b,
@@ -629,7 +780,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     const double want = r.penetrating ? r.depth : 0.0;
     // An upper bound (non-convex meshes) judges one side only: the engine may be shallower.
     const double diff = r.depth_upper_bound ? double(c.depth) - want : std::fabs(double(c.depth) - want);
-    depth.check(diff <= tol.depth_m, diff, [&] {
+    depth.check(diff <= tol.depth_m, diff, Where{frame, pair_name(p)}, [&] {
       return fmt::format("frame {}: {} deepest row depth {:.4g} m, {} {:.4g} m{} [reference: {}]", frame,
                          pair_name(p), c.depth, by_sat ? "SAT minimum" : "FCL", want,
                          r.depth_upper_bound ? " (upper bound)" : "", judge);
@@ -639,8 +790,14 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   // 4. Penetration: the largest true penetration after the settling window.
   clock.emplace(t_pen);
   if (double(frame) >= tol.penetration_settle_frames) {
+    const double pen_bound = tol.penetration_slops * bodies.slop;
     for (auto& [k, t] : truth) {
-      if (!t.have || !t.g.penetrating) continue;
+      if (!t.have) continue;
+      const Pair p{k.first, k.second};
+      if (!t.g.penetrating) {  // exactly apart (or touching): judged at depth 0
+        pen.check(true, 0.0, Where{frame, pair_name(p)}, [] { return std::string(); });
+        continue;
+      }
       ++pen_pairs;
       // A non-convex pair's depth is an upper bound (the least separating translation
       // over 8 directions): it cannot prove a penetration beyond the bound, so it is a
@@ -650,7 +807,8 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
           pen_upper_max = t.g.depth;
           pen_upper_what = fmt::format("frame {}: pair ({}, {}) {:.4g} m", frame, k.first, k.second, t.g.depth);
         }
-        if (t.g.depth > tol.penetration_slops * bodies.slop) ++pen_upper_over;
+        if (t.g.depth > pen_bound) ++pen_upper_over;
+        ++pen_upper_pairs;
         continue;
       }
       if (t.g.depth > pen_max) {
@@ -658,6 +816,11 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
         pen_what = fmt::format("frame {}: pair ({}, {}) penetrates by {:.4g} m", frame, k.first, k.second,
                                t.g.depth);
       }
+      const double d = t.g.depth;
+      pen.check(d <= pen_bound, d, Where{frame, pair_name(p)}, [&] {
+        return fmt::format("frame {}: {} penetrates by {:.4g} m (bound {:.4g} m)", frame, pair_name(p), d,
+                           pen_bound);
+      });
     }
   }
 }
@@ -725,7 +888,7 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
   }
   // No friction impulse (within float rounding of the normal impulses): nothing to judge.
   if (!(impulse > 16.0 * kEps32 * jn_sum + 1e-12)) {
-    dissipation.check(true, 0.0, [] { return std::string(); });
+    dissipation.judged();
     return;
   }
   // A friction impulse up to friction_cone_abs is a sequential-impulse solver's leftover
@@ -748,7 +911,7 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
   const double along = std::min({along0, alongn, along1});
   const double allowance = (len3(after.wa) + len3(after.wb)) * gap;
   const std::int64_t frame = rec.frame;
-  dissipation.check(along <= tol.friction_speed + allowance, along, [&] {
+  dissipation.check(along <= tol.friction_speed + allowance, along, Where{frame, pair_name(p)}, [&] {
     return fmt::format("frame {}: {} ({} rows): the friction impulse (sum jt3 ({:.4g}, {:.4g}, {:.4g}) kg m/s) "
                        "pushes the contact points along their sliding: {:.4g} m/s along the impulses before the "
                        "step, {:.4g} with the normal impulses, {:.4g} after it (largest tangential speed at a row "
@@ -800,7 +963,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
     const double limit = mu * jn_sum + rounding + (vector_friction ? 0.0 : tol.friction_cone_abs);
     const double excess = jt_sum - limit;
     (vector_friction ? ++cone_jt3_pairs : ++cone_scalar_pairs);
-    cone.check(excess <= 0, excess, [&] {
+    cone.check(excess <= 0, excess, Where{frame, pair_name(pr)}, [&] {
       return fmt::format("frame {}: {} |{}| {:.6g} > mu {:.4g} x jn {:.6g} ({:.4g} x the cone){} [rule: {}]", frame,
                          pair_name(pr), vector_friction ? "sum jt3" : "jt", jt_sum, mu, jn_sum,
                          mu * jn_sum > 0 ? jt_sum / (mu * jn_sum) : std::numeric_limits<double>::infinity(),
@@ -814,6 +977,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
                       rec.v_post.size() == n;
   if (!states) {
     dissipation_cone_only += rec.contacts.size();
+    for (auto& e : episodes) e.second.spoiled = true;  // a step without states: the episode is not seen whole
     return;
   }
   ++state_frames;
@@ -907,7 +1071,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
       const double after = tangential_speed(va1, wa1, vb1, wb1);
       if (!coupled) {
         const double rise = after - std::max(before, with_normal);
-        dissipation.check(rise <= tol.friction_speed, rise, [&] {
+        dissipation.check(rise <= tol.friction_speed, rise, Where{frame, pair_name(p)}, [&] {
           return fmt::format("frame {}: {} row {}: tangential speed at the {} {:.6g} -> {:.6g} m/s", frame,
                              pair_name(p), k - k0, rec.has_points ? "contact point" : "centres", before, after);
         });
@@ -929,7 +1093,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
       const double noise = 1e-6 * (dynamic(p.a) ? mass[p.a] * (len3(va1) + len3(va0))
                                                 : mass[p.b] * (len3(vb1) + len3(vb0))) + 1e-12;
       if (imp_len <= noise) {  // no friction impulse (within float rounding): nothing to judge
-        dissipation.check(true, 0.0, [] { return std::string(); });
+        dissipation.judged();
         continue;
       }
       const D3 rel1 = (va1 + cross3(wa1, ra)) - (vb1 + cross3(wb1, rb));
@@ -949,7 +1113,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
                                                          ref->surface_distance(p.b, det[p.b], c.point));
         allowance += (len3(wa1) + len3(wb1)) * gap;
       }
-      dissipation.check(along <= tol.friction_speed + allowance, along, [&] {
+      dissipation.check(along <= tol.friction_speed + allowance, along, Where{frame, pair_name(p)}, [&] {
         return fmt::format(
             "frame {}: {} row {}: the friction impulse ({:.4g} kg m/s, from the momentum change) pushes the contact "
             "point along its sliding: {:.4g} m/s along the impulse after the step (tangential speed at the contact "
@@ -1010,6 +1174,12 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
       continue;
     }
     ++groups;
+    // Axes locked by a joint on any member: the joint's impulses are not in the rows, so
+    // the momentum along them and (rotation) the angular momentum are not judged.
+    unsigned group_locks = 0;
+    if (!bodies.locked_dofs.empty())
+      for (std::uint32_t i : members) group_locks |= bodies.locked_dofs[i];
+    if (group_locks) ++groups_locked;
     // Linear momentum: only gravity's m g dt (already in v_int).
     D3 p0{}, p1{};
     double exchanged = 0, scale = 0, mass_sum = 0;
@@ -1025,9 +1195,12 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
       c0 = c0 + mi * d3(rec.x_pre[i]);
     }
     c0 = (1.0 / mass_sum) * c0;
-    const double dp = len3(p1 - p0);
+    D3 dp3 = p1 - p0;
+    for (int k = 0; k < 3; ++k)
+      if (group_locks & (1u << k)) dp3[static_cast<std::size_t>(k)] = 0;
+    const double dp = len3(dp3);
     const double pbound = tol.momentum_rel * exchanged + 8.0 * kEps32 * scale + 1e-9;
-    momentum.check(dp <= pbound, dp / pbound, [&] {
+    momentum.check(dp <= pbound, dp / pbound, Where{frame, group_name(members)}, [&] {
       return fmt::format("frame {}: isolated group of {} bodies (body {} ...): momentum changes by {:.4g} kg m/s "
                          "beyond gravity (exchanged {:.4g}, bound {:.3g})",
                          frame, members.size(), members.front(), dp, exchanged, pbound);
@@ -1044,16 +1217,27 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
         ke1 += 0.5 * dot3(w1, mul(conjugated(rotation(rec.q_post[i]), inertia[i]), w1));
       }
     }
-    if (restitution_le_1) {
+    if (restitution_le_1 && bodies.contact_model == PhysicsBodies::ContactModel::Soft) {
+      ++energy_soft_steps;  // judged per contact episode (soft_episodes)
+    } else if (restitution_le_1) {
       const double ebound = ke0 * (1.0 + tol.energy_rel) + 16.0 * kEps32 * (ke0 + ke1) + 1e-12;
-      energy.check(ke1 <= ebound, ke0 > 0 ? (ke1 - ke0) / ke0 : 0.0, [&] {
+      energy.check(ke1 <= ebound, ke0 > 0 ? (ke1 - ke0) / ke0 : 0.0, Where{frame, group_name(members)}, [&] {
         return fmt::format("frame {}: isolated group of {} bodies (body {} ...): kinetic energy {:.6g} -> {:.6g} J "
-                           "(+{:.3g} of it)",
-                           frame, members.size(), members.front(), ke0, ke1, ke0 > 0 ? (ke1 - ke0) / ke0 : 0.0);
+                           "(+{:.3g} of it){}",
+                           frame, members.size(), members.front(), ke0, ke1, ke0 > 0 ? (ke1 - ke0) / ke0 : 0.0,
+                           bodies.jacobi_response
+                               ? ": a property of the paper's model (SPEC 6's Jacobi response sums each body's "
+                                 "impulses computed from one pre-response state, which overshoots on chains; "
+                                 "SPEC 13b.13: reported, not loosened)"
+                               : "");
       });
     }
     // Angular momentum about the group's centre of mass (rotating records only).
     if (!rotating) continue;
+    if (group_locks >> 3) {
+      ++groups_rotation_locked;
+      continue;
+    }
     ++groups_rotating;
     D3 l0{}, l1{};
     double lexchanged = 0, lscale = 0, gyro = 0;
@@ -1076,15 +1260,403 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
                 len3(mul(i1, w1));
       // Free rotation of a body whose inertia is not isotropic turns I w: an engine
       // integrating the orientation explicitly (no gyroscopic term) misses dt w x (I w).
+      // One with the term (declared gyroscopic) keeps L to second order in |w| dt: its
+      // explicit or implicit form differs from the exact rotation by (|w| dt)^2 |I w|.
       gyro += dt * len3(cross3(w1, mul(i1, w1)));
+      if (bodies.gyroscopic) gyro += dt * dt * dot3(w1, w1) * len3(mul(i1, w1));
     }
     const double dl = len3(l1 - l0);
     const double lbound =
         tol.angular_momentum_rel * lexchanged + gyro + witness_torque[root] + 16.0 * kEps32 * lscale + 1e-9;
-    angular.check(dl <= lbound, dl / lbound, [&] {
+    angular.check(dl <= lbound, dl / lbound, Where{frame, group_name(members)}, [&] {
       return fmt::format("frame {}: isolated group of {} bodies (body {} ...): angular momentum about its centre "
                          "of mass changes by {:.4g} kg m^2/s (exchanged {:.4g}, bound {:.3g})",
                          frame, members.size(), members.front(), dl, lexchanged, lbound);
+    });
+  }
+  if (bodies.contact_model == PhysicsBodies::ContactModel::Soft && restitution_le_1) {
+    // Pairs of two dynamic bodies that form an isolated group on their own this step.
+    std::map<std::uint32_t, std::uint32_t> pairs_in_group;
+    std::vector<Pair> distinct;
+    for (std::size_t k = 0; k < rec.contacts.size(); ++k)
+      if (k == 0 || !(rec.contacts[k].pair == rec.contacts[k - 1].pair)) distinct.push_back(rec.contacts[k].pair);
+    for (const Pair& q : rec.confirmed)
+      if (!std::binary_search(distinct.begin(), distinct.end(), q)) distinct.push_back(q);
+    std::sort(distinct.begin(), distinct.end());
+    for (const Pair& q : distinct) ++pairs_in_group[find(q.a)];
+    std::vector<std::pair<Pair, bool>> isolated;  // this step's contact pairs, alone in their group
+    for (const Pair& q : distinct) {
+      if (!dynamic(q.a) || !dynamic(q.b)) continue;
+      const std::uint32_t root = find(q.a);
+      isolated.push_back({q, !statics[root] && pairs_in_group[root] == 1 && groups_of[root].size() == 2});
+    }
+    soft_episodes(rec, isolated);
+  }
+}
+
+double PhysicsValidators::Impl::mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const {
+  const std::size_t n = model->bodies.size();
+  const bool rotating = rec.q_pre.size() == n && rec.w_pre.size() == n;
+  const D3 x = d3(post ? rec.x_post[i] : rec.x_pre[i]), v = d3(post ? rec.v_post[i] : rec.v_pre[i]);
+  double e = 0.5 * mass[i] * dot3(v, v) - mass[i] * dot3(d3(model->scene.gravity), x);
+  if (rotating) {
+    const D3 w = d3(post ? rec.w_post[i] : rec.w_pre[i]);
+    e += 0.5 * dot3(w, mul(conjugated(rotation(post ? rec.q_post[i] : rec.q_pre[i]), inertia[i]), w));
+  }
+  return e;
+}
+
+void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec,
+                                            const std::vector<std::pair<Pair, bool>>& isolated) {
+  const std::int64_t frame = rec.frame;
+  const double g2dt2 = dot3(d3(model->scene.gravity), d3(model->scene.gravity)) * model->scene.dt * model->scene.dt;
+  auto kinetic = [&](std::uint32_t i, bool post) {
+    const D3 v = d3(post ? rec.v_post[i] : rec.v_pre[i]);
+    return 0.5 * mass[i] * dot3(v, v);
+  };
+  // Close the episodes of pairs without contact this step: judged on the state before
+  // it (the state after the episode's last step).
+  for (auto it = episodes.begin(); it != episodes.end();) {
+    const Pair q = it->first;
+    const bool still = std::any_of(isolated.begin(), isolated.end(), [&](const auto& e) { return e.first == q; });
+    if (still) {
+      ++it;
+      continue;
+    }
+    Episode& ep = it->second;
+    if (ep.spoiled) {
+      ++episodes_unjudged;
+    } else {
+      const double e1 = mechanical_energy(rec, q.a, false) + mechanical_energy(rec, q.b, false);
+      const std::int64_t steps = frame - ep.start;
+      // Gravity's integration changes E by up to m |g|^2 dt^2 per step and body (explicit
+      // Euler gains half of it, semi-implicit loses half); rounding of E's terms.
+      const double slack = double(steps) * (mass[q.a] + mass[q.b]) * g2dt2 +
+                           16.0 * kEps32 * double(steps + 1) * (ep.scale + std::fabs(e1)) + 1e-12;
+      const double bound = ep.e0 + tol.energy_rel * ep.ke0 + slack;
+      const double rise = ep.ke0 > 0 ? (e1 - ep.e0) / ep.ke0 : 0.0;
+      energy.check(e1 <= bound, rise, Where{frame, pair_name(q)}, [&] {
+        return fmt::format("frame {}: {} (soft contacts) over its contact episode, frames {}..{}: mechanical energy "
+                           "{:.6g} -> {:.6g} J (+{:.3g} of its kinetic energy {:.4g} J at the start; bound {:.6g})",
+                           frame, pair_name(q), ep.start, frame - 1, ep.e0, e1, rise, ep.ke0, bound);
+      });
+      ++episodes_judged;
+    }
+    it = episodes.erase(it);
+  }
+  for (const auto& [q, alone] : isolated) {
+    auto it = episodes.find(q);
+    if (it == episodes.end()) {
+      Episode ep;
+      ep.start = frame;
+      ep.e0 = mechanical_energy(rec, q.a, false) + mechanical_energy(rec, q.b, false);
+      ep.ke0 = kinetic(q.a, false) + kinetic(q.b, false);
+      ep.scale = std::fabs(ep.e0) + ep.ke0;
+      ep.spoiled = !alone;
+      episodes.emplace(q, ep);
+    } else if (!alone) {
+      it->second.spoiled = true;
+    }
+  }
+}
+
+// ---- Rows 7-8: momentum balance per body and free flight, every frame with states ---
+namespace {
+/// Unit vector of a (double; zero stays zero).
+D3 unit3(D3 a) {
+  const double l = len3(a);
+  return l > 0 ? (1.0 / l) * a : D3{};
+}
+/// Angle (rad) between two orientations (the rotation q1 q0^-1), sign of q ignored.
+double quat_angle(Quat a, Quat b) {
+  const double na = std::sqrt(double(a.w) * a.w + double(a.x) * a.x + double(a.y) * a.y + double(a.z) * a.z);
+  const double nb = std::sqrt(double(b.w) * b.w + double(b.x) * b.x + double(b.y) * b.y + double(b.z) * b.z);
+  const double d = std::fabs(double(a.w) * b.w + double(a.x) * b.x + double(a.y) * b.y + double(a.z) * b.z) /
+                   (na * nb);
+  return 2.0 * std::acos(std::min(1.0, d));
+}
+/// q advanced by the rotation w dt (exponential map: the quaternion of angle |w| dt about
+/// w, applied in the world frame: q' = dq q), in double.
+std::array<double, 4> advanced(Quat q, D3 w, double dt) {
+  const double angle = len3(w) * dt;
+  double dw = 1, dx = 0, dy = 0, dz = 0;
+  if (angle > 0) {
+    const D3 axis = unit3(w);
+    const double s = std::sin(0.5 * angle);
+    dw = std::cos(0.5 * angle);
+    dx = s * axis[0];
+    dy = s * axis[1];
+    dz = s * axis[2];
+  }
+  return {dw * q.w - dx * q.x - dy * q.y - dz * q.z, dw * q.x + dx * q.w + dy * q.z - dz * q.y,
+          dw * q.y - dx * q.z + dy * q.w + dz * q.x, dw * q.z + dx * q.y - dy * q.x + dz * q.w};
+}
+double quat_angle(const std::array<double, 4>& a, Quat b) {
+  return quat_angle(Quat{float(a[0]), float(a[1]), float(a[2]), float(a[3])}, b);
+}
+}  // namespace
+
+void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<Pose>& det) {
+  const Model& m = *model;
+  const std::size_t n = m.bodies.size();
+  const std::int64_t frame = rec.frame;
+  const bool states = rec.x_pre.size() == n && rec.v_pre.size() == n && rec.x_post.size() == n &&
+                      rec.v_post.size() == n;
+  if (!states) return;
+  const bool rotating = rec.q_pre.size() == n && rec.q_post.size() == n && rec.w_pre.size() == n &&
+                        rec.w_post.size() == n;
+  const D3 g = d3(m.scene.gravity);
+  const double dt = m.scene.dt;
+  const double eps = tol.balance_ulps * kEps32;
+  StopPoll poll(stop);
+  std::optional<RowClock> clock(std::in_place, t_balance);
+  auto v_int = [&](std::size_t i) { return d3(rec.v_pre[i]) + dt * g; };  // dynamic bodies
+  auto w_of = [&](const std::vector<Vec3>& w, std::size_t i) { return rotating ? d3(w[i]) : D3{}; };
+  auto locked = [&](std::size_t i) -> unsigned { return bodies.locked_dofs.empty() ? 0u : bodies.locked_dofs[i]; };
+  // Zeroes the components about locked world axes (bits `first` .. first + 2).
+  auto unlocked = [&](D3 a, std::size_t i, int first) {
+    for (int k = 0; k < 3; ++k)
+      if (locked(i) & (1u << (first + k))) a[static_cast<std::size_t>(k)] = 0;
+    return a;
+  };
+  auto clamped = [&](std::size_t i) {
+    if (!(bodies.velocity_clamp > 0.0)) return false;
+    const Vec3 v = rec.v_post[i];
+    const double c = bodies.velocity_clamp * (1.0 - 1e-6);
+    return std::fabs(v.x) >= c || std::fabs(v.y) >= c || std::fabs(v.z) >= c;
+  };
+
+  // Each row's impulse J = jn n + J_t on A (and -J on B), summed per body with its torque
+  // about the body's detection-pose position, and what the record leaves uncertain.
+  std::vector<D3> force(n), torque(n);
+  std::vector<double> mag(n, 0.0), tmag(n, 0.0), tallow(n, 0.0);
+  // Per body, what the record leaves open of its rows' friction: a disc of radius u in the
+  // plane normal to n per row (direction and size of J_t beyond the scalar jt).
+  struct Disc {
+    D3 n;
+    double u;
+  };
+  std::vector<std::vector<Disc>> discs(n);
+  std::vector<std::uint32_t> rows_of(n, 0);
+  std::vector<std::uint8_t> in_contact(n, 0);
+  for (const Pair& p : rec.confirmed) in_contact[p.a] = in_contact[p.b] = 1;
+  for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
+    const ContactRecord& c = rec.contacts[k];
+    const Pair p = c.pair;
+    in_contact[p.a] = in_contact[p.b] = 1;
+    ++rows_of[p.a];
+    ++rows_of[p.b];
+    const D3 nrm = unit3(d3(c.normal));
+    const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
+    const D3 pt = rec.has_points ? d3(c.point) : D3{};
+    const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? pt - xb : D3{};
+    // The friction impulse's direction: the trace convention's -v_t / |v_t|, v_t the
+    // tangential velocity of A relative to B at the row's point before the solver
+    // (v_pre + dt g on dynamic bodies, w_pre); octocd's records: J_t along +t.
+    const D3 va = (dynamic(p.a) ? v_int(p.a) : d3(rec.v_pre[p.a])) + cross3(w_of(rec.w_pre, p.a), ra);
+    const D3 vb = (dynamic(p.b) ? v_int(p.b) : d3(rec.v_pre[p.b])) + cross3(w_of(rec.w_pre, p.b), rb);
+    const D3 rel = va - vb;
+    const D3 vt = rel - dot3(rel, nrm) * nrm;
+    const double vt_len = len3(vt);
+    const bool vector_friction = rec.jt3.size() == rec.contacts.size();
+    const double jt = vector_friction ? len3(d3(rec.jt3[k])) : std::fabs(double(c.jt));
+    D3 jt_vec{};
+    double uncertain = 0;  // |J_t - jt_vec| at most this (kg m/s), in the tangent plane
+    if (vector_friction) {
+      jt_vec = d3(rec.jt3[k]);  // /contacts/jt3: the friction impulse on A, nothing left open
+    } else if (vt_len > tol.friction_direction_speed) {
+      jt_vec = (bodies.jt_along_sliding ? double(c.jt) : -double(c.jt)) * ((1.0 / vt_len) * vt);
+      if (rotating && rec.has_points) {
+        // An engine may take each body's velocity at its own witness point (Bullet), up
+        // to the depth or the contact margin apart along the normal: v_t there differs by
+        // up to (|w_a| + |w_b|) s, turning the direction by at most that over |v_t|; the
+        // part of J_t across the recorded direction is not in a scalar jt.
+        const double s = double(c.depth) + pair_margin(p);
+        const double turn =
+            std::min(2.0, (len3(w_of(rec.w_pre, p.a)) + len3(w_of(rec.w_pre, p.b))) * s / vt_len);
+        uncertain = turn * (jt + pair_mu(p) * std::fabs(double(c.jn)));
+      }
+    } else if (vt_len > kNoSliding) {
+      // Nearly no sliding before the step: the engine picks the friction direction
+      // itself (Bullet below sqrt(FLT_EPSILON) = 3.45e-4 m/s: btPlaneSpace1's axis), and a
+      // scalar jt, the impulse's projection on the recorded -v_t, says neither which nor
+      // how large J_t is; it lies in the cone (the friction row judges that).
+      // A row's own cone, with the margin a sequential solver leaves on a row whose normal
+      // impulse moved to the manifold's other rows after its friction was clamped (Bullet:
+      // up to 13% above mu times the row's final jn; the friction row holds the pair's sum
+      // to the cone itself).
+      constexpr double kRowConeMargin = 0.25;
+      uncertain = std::max(jt, pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs);
+    } else {
+      // No sliding: v_t has no direction; jt is the friction impulse's magnitude (the
+      // convention, and octocd's Bullet adapter below 1e-6 m/s), its direction open.
+      uncertain = jt;
+    }
+    const D3 j = double(c.jn) * nrm + jt_vec;
+    force[p.a] = force[p.a] + j;
+    force[p.b] = force[p.b] - j;
+    mag[p.a] += len3(j) + uncertain;
+    mag[p.b] += len3(j) + uncertain;
+    if (uncertain > 0) {
+      discs[p.a].push_back({nrm, uncertain});
+      discs[p.b].push_back({nrm, uncertain});
+    }
+    if (rec.has_points) {
+      torque[p.a] = torque[p.a] + cross3(ra, j);
+      torque[p.b] = torque[p.b] - cross3(rb, j);
+      // An engine may apply the row at a witness point on each body (Bullet) instead of
+      // the recorded point between them: the two lie the depth apart along the normal
+      // (which moves the friction part's lever) and, in a persistent manifold, up to the
+      // contact margin apart sideways as the bodies move before the point is dropped
+      // (which moves the normal part's lever): half of that from the recorded point.
+      const double s = double(c.depth) + pair_margin(p);
+      const double lever = s * (jt + uncertain) + 0.5 * s * std::fabs(double(c.jn));
+      tallow[p.a] += len3(ra) * uncertain + lever;
+      tallow[p.b] += len3(rb) * uncertain + lever;
+      tmag[p.a] += len3(ra) * (len3(j) + uncertain);
+      tmag[p.b] += len3(rb) * (len3(j) + uncertain);
+    }
+  }
+
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!dynamic(static_cast<std::uint32_t>(i))) continue;
+    if ((i & 63u) == 0) poll();
+    const double mi = mass[i];
+    const D3 v0 = v_int(i), v1 = d3(rec.v_post[i]);
+    const D3 w0 = w_of(rec.w_pre, i), w1 = w_of(rec.w_post, i);
+    const M3 iw = rotating ? conjugated(rotation(det[i].orientation), inertia[i]) : M3{};
+    // The gyroscopic term dt w x I_w w of the step (zero without rotation).
+    const D3 gyro_term = rotating ? dt * cross3(w0, mul(iw, w0)) : D3{};
+    const D3 gyro = bodies.gyroscopic ? gyro_term : D3{};
+    const double locked_count = double(locked(i) != 0);
+    if (clamped(i)) {
+      ++balance_clamped;
+      continue;
+    }
+    if (in_contact[i]) {
+      // 7. Momentum balance.
+      if (rows_of[i] == 0) {
+        ++balance_no_rows;  // a confirmed pair without rows (octocd's later passes)
+        continue;
+      }
+      if (!bodies.impulses_complete) continue;
+      if (locked(i)) ++balance_locked;
+      const D3 dp = unlocked(mi * (v1 - v0) - force[i], i, 0);
+      const double float_bound =
+          eps * double(rows_of[i] + 2) * (mi * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + mag[i]) + 1e-9;
+      // The residual must lie in the sum of the rows' friction discs (plus rounding): its
+      // component along a direction d is at most sum u |d x n| + the rounding bound. Tested
+      // along the residual itself and along each row's normal (where a manifold's discs,
+      // all normal to it, allow nothing: a dropped row's jn n shows there).
+      double ratio = 0, open_along = 0;
+      const double dpl = len3(dp);
+      auto test_dir = [&](D3 d) {
+        double support = 0;
+        for (const Disc& dc : discs[i]) support += dc.u * len3(cross3(d, dc.n));
+        const double r = std::fabs(dot3(dp, d)) / (support + float_bound);
+        if (r > ratio) {
+          ratio = r;
+          open_along = support;
+        }
+      };
+      if (dpl > 0) test_dir((1.0 / dpl) * dp);
+      for (const Disc& dc : discs[i]) test_dir(dc.n);
+      if (discs[i].empty()) ratio = dpl / float_bound;
+      balance_lin.check(ratio <= 1.0, ratio, Where{frame, body_name(i)}, [&] {
+        return fmt::format("frame {}: body {}: m (v' - v) - m g dt = ({:.4g}, {:.4g}, {:.4g}) kg m/s but its {} "
+                           "contact rows' impulses sum to ({:.4g}, {:.4g}, {:.4g}): off by {:.4g} ({:.3g} of the "
+                           "bound: rounding {:.3g}, friction the record leaves open {:.3g})",
+                           frame, i, mi * (v1[0] - v0[0]), mi * (v1[1] - v0[1]), mi * (v1[2] - v0[2]), rows_of[i],
+                           force[i][0], force[i][1], force[i][2], dpl, ratio, float_bound, open_along);
+      });
+      if (!rotating || !rec.has_points) continue;
+      if ((locked(i) >> 3) == 7u) {  // every rotation locked by a joint
+        ++balance_rot_locked;
+        continue;
+      }
+      // Declared gyroscopic: the term is required (within gyroscopic_rel of it).
+      // Undeclared: allowed either way on a body in contact: an engine may apply it only
+      // to the bodies its solver sees (Bullet's BT_ENABLE_GYROSCOPIC_FORCE_IMPLICIT_BODY
+      // acts in the solver's islands, on bodies with contacts, never on free ones:
+      // bunny-stack-50, a bunny spinning at 8.9 rad/s on a row with jn = 0); free-flight
+      // holds free bodies to the declaration.
+      const double rounding =
+          eps * double(rows_of[i] + 2) * (len3(mul(iw, w0)) + len3(mul(iw, w1)) + tmag[i]) + tallow[i] + 1e-9;
+      const double gyro_allow = tol.gyroscopic_rel * len3(gyro_term);
+      D3 lhs = mul(iw, w1 - w0) + gyro;
+      double dll = len3(unlocked(lhs - torque[i], i, 3));
+      double ang_bound = rounding + (bodies.gyroscopic ? gyro_allow : 0.0);
+      bool with_term = bodies.gyroscopic;
+      if (!bodies.gyroscopic && len3(gyro_term) > 0) {
+        const D3 lhs_with = lhs + gyro_term;
+        const double dl_with = len3(unlocked(lhs_with - torque[i], i, 3));
+        if (dl_with / (rounding + gyro_allow) < dll / ang_bound) {
+          lhs = lhs_with;
+          dll = dl_with;
+          ang_bound = rounding + gyro_allow;
+          with_term = true;
+        }
+      }
+      balance_ang.check(dll <= ang_bound, dll / ang_bound, Where{frame, body_name(i)}, [&] {
+        return fmt::format("frame {}: body {}: I_w (w' - w){} = ({:.4g}, {:.4g}, {:.4g}) kg m^2/s but its {} "
+                           "contact rows' torques (p - x) x J sum to ({:.4g}, {:.4g}, {:.4g}): off by {:.4g} "
+                           "(bound {:.3g})",
+                           frame, i, with_term ? " + dt w x I_w w" : "", lhs[0], lhs[1], lhs[2], rows_of[i],
+                           torque[i][0], torque[i][1], torque[i][2], dll, ang_bound);
+      });
+      continue;
+    }
+    // 8. Free flight: no contact row and no confirmed pair in this step.
+    if (locked_count > 0) ++free_locked;
+    const D3 dv = unlocked(v1 - v0, i, 0);
+    const double v_bound = 4.0 * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + 1e-12;
+    const double dvl = len3(dv);
+    free_vel.check(dvl <= v_bound, dvl, Where{frame, body_name(i)}, [&] {
+      return fmt::format("frame {}: body {} without contacts: v' = ({:.6g}, {:.6g}, {:.6g}) m/s, v + g dt = "
+                         "({:.6g}, {:.6g}, {:.6g}): off by {:.4g} m/s (bound {:.3g})",
+                         frame, i, v1[0], v1[1], v1[2], v0[0], v0[1], v0[2], dvl, v_bound);
+    });
+    const D3 x0 = d3(rec.x_pre[i]), x1 = d3(rec.x_post[i]);
+    const D3 semi = x0 + dt * v1, expl = x0 + dt * d3(rec.v_pre[i]);
+    const double d_semi = len3(unlocked(x1 - semi, i, 0)), d_expl = len3(unlocked(x1 - expl, i, 0));
+    const double dx = bodies.integrator == PhysicsBodies::Integrator::SemiImplicit ? d_semi
+                      : bodies.integrator == PhysicsBodies::Integrator::Explicit ? d_expl
+                                                                                  : std::min(d_semi, d_expl);
+    const double x_bound =
+        4.0 * kEps32 * (len3(x0) + len3(x1) + dt * (len3(v1) + len3(d3(rec.v_pre[i])))) + 1e-12;
+    free_pos.check(dx <= x_bound, dx, Where{frame, body_name(i)}, [&] {
+      return fmt::format("frame {}: body {} without contacts: x' = ({:.6g}, {:.6g}, {:.6g}) m is {:.4g} m from x + "
+                         "dt v{} (integrator {}; bound {:.3g})",
+                         frame, i, x1[0], x1[1], x1[2], dx,
+                         bodies.integrator == PhysicsBodies::Integrator::Explicit ? "" : "'",
+                         integrator_name(bodies.integrator), x_bound);
+    });
+    if (!rotating) continue;
+    // w' = w, less the declared gyroscopic term: I_w (w' - w) = -dt w x I_w w.
+    const D3 dw_expected = bodies.gyroscopic ? -1.0 * mul(inverse(iw), gyro) : D3{};
+    const D3 dw = unlocked(w1 - w0 - dw_expected, i, 3);
+    const double w_bound = 4.0 * kEps32 * (len3(w0) + len3(w1)) + tol.gyroscopic_rel * len3(dw_expected) + 1e-9;
+    const double dwl = len3(dw);
+    free_w.check(dwl <= w_bound, dwl, Where{frame, body_name(i)}, [&] {
+      return fmt::format("frame {}: body {} without contacts: w' = ({:.6g}, {:.6g}, {:.6g}) rad/s, w{} = "
+                         "({:.6g}, {:.6g}, {:.6g}): off by {:.4g} rad/s (bound {:.3g})",
+                         frame, i, w1[0], w1[1], w1[2], bodies.gyroscopic ? " - dt I_w^-1 (w x I_w w)" : "",
+                         w0[0] + dw_expected[0], w0[1] + dw_expected[1], w0[2] + dw_expected[2], dwl, w_bound);
+    });
+    if (locked(i) >> 3) continue;  // a joint turns it: counted in free_locked
+    const Quat q0 = rec.q_pre[i], q1 = rec.q_post[i];
+    const double a_semi = quat_angle(advanced(q0, w1, dt), q1), a_expl = quat_angle(advanced(q0, w0, dt), q1);
+    const double angle = bodies.integrator == PhysicsBodies::Integrator::SemiImplicit ? a_semi
+                         : bodies.integrator == PhysicsBodies::Integrator::Explicit ? a_expl
+                                                                                     : std::min(a_semi, a_expl);
+    const double wdt = std::max(len3(w0), len3(w1)) * dt;
+    const double q_bound = tol.free_flight_angle_rad + wdt * wdt;
+    free_q.check(angle <= q_bound, angle * 180.0 / kPi, Where{frame, body_name(i)}, [&] {
+      return fmt::format("frame {}: body {} without contacts: q' is {:.4g} deg from q advanced by w{} dt (|w| dt "
+                         "{:.3g} rad; bound {:.3g} deg)",
+                         frame, i, angle * 180.0 / kPi,
+                         bodies.integrator == PhysicsBodies::Integrator::Explicit ? "" : "'", wdt,
+                         q_bound * 180.0 / kPi);
     });
   }
 }
@@ -1109,7 +1681,12 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     r.measured = double(s.broad.failures + s.broad_exact.failures);
     r.bound = 0;
     r.pass = r.measured == 0;
-    if (s.broad_frames == 0) {
+    if (s.broad_frames > 0 && s.broad.checks + s.broad_exact.checks == 0) {
+      r.applicable = false;
+      r.detail = fmt::format("no pair required on {} checked frames (no shapes within the margin) and no exact "
+                             "broadphase declared: nothing judged ({:.3g} candidates per frame)",
+                             s.broad_frames, double(s.broad_candidates) / double(s.broad_frames));
+    } else if (s.broad_frames == 0) {
       r.applicable = false;
       r.detail = s.broad_no_pairs ? "the engine gave no candidate pairs (has_pairs false)" : no_checked;
     } else if (s.broad.failures) {
@@ -1124,6 +1701,9 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                                          "pairs dropped)"
                                                        : "");
     }
+    if (r.applicable)
+      fill_causes(r, {{&s.broad, "missing-pair", "required pairs", "m"},
+                      {&s.broad_exact, "not-flat", "frames", "pairs"}});
     out.push_back(r);
   }
   // 2. Contact completeness.
@@ -1146,6 +1726,9 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                              "{:.3g} m beyond it)",
                              s.complete.checks, s.false_contact.checks, margin, s.false_contact.worst_or(0.0));
     }
+    if (r.applicable)
+      fill_causes(r, {{&s.complete, "missing-contact", "penetrating pairs", "m"},
+                      {&s.false_contact, "false-contact", "contact pairs", "m"}});
     out.push_back(r);
   }
   // 3. Contact geometry.
@@ -1157,6 +1740,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     r.pass = s.normal_angle.failures == 0 && s.depth.failures == 0 && s.points.failures == 0;
     r.applicable = s.normal_angle.checks + s.depth.checks + s.points.checks > 0;
     const bool aabb = s.bodies.contact_geometry == ContactGeometry::Aabb;
+    if (aabb) {
+      r.figure = "worst normal angle to FCL box-box on the world AABBs (deg; its sign judged)";
+      r.bound = 90.0;
+    }
     std::string stats;
     if (aabb && !s.shape_angles.empty()) {
       std::vector<double> a = s.shape_angles;
@@ -1175,7 +1762,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail = s.checked_frames ? "no contact rows on checked frames" : no_checked;
     } else if (s.normal_angle.failures) {
       r.detail = s.normal_angle.worst_what + fmt::format(" ({} of {} rows beyond {} deg; {})", s.normal_angle.failures,
-                                                         s.normal_angle.checks, s.tol.normal_angle_deg, sign);
+                                                         s.normal_angle.checks, aabb ? 90.0 : s.tol.normal_angle_deg, sign);
       if (s.sign_rows > 0 && 2 * s.sign_agree < s.sign_rows)
         r.detail += "; most normals point from A to B: the convention is from B to A (SPEC 2)";
     } else if (s.depth.failures) {
@@ -1184,6 +1771,13 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     } else if (s.points.failures) {
       r.detail = s.points.worst_what + fmt::format(" (points off the shapes by more than {} m on {} of {} rows)",
                                                    s.tol.depth_m, s.points.failures, s.points.checks);
+    } else if (aabb) {
+      r.detail = fmt::format("normal angle n/a: the engine resolves contacts on world AABBs (its normal is an AABB "
+                             "axis; its angle to FCL box-box on the same boxes judges nothing about the shapes: worst "
+                             "{:.3g} deg over {} rows, a figure; its sign is judged on {} rows); depth of {} pairs "
+                             "judged against FCL box-box on the world AABBs: worst difference {:.3g} m; {}{}",
+                             s.aabb_angle_worst, s.aabb_angle_rows, s.normal_angle.checks, s.depth.checks,
+                             s.depth.worst_or(0.0), sign, stats);
     } else {
       r.detail = fmt::format("{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}",
                              s.normal_angle.checks, aabb ? " on the world AABBs" : "",
@@ -1220,6 +1814,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                 "(figure; largest depth excess {}: {:.3g} m)",
                                 s.sat_fcl_disagree, s.sat_fcl_what, s.sat_fcl_worst_excess);
     }
+    if (r.applicable)
+      fill_causes(r, {{&s.normal_angle, "normal-angle", "rows", "deg"},
+                      {&s.depth, "depth", "pairs", "m"},
+                      {&s.points, "point-off-shape", "points", "m"}});
     out.push_back(r);
   }
   // 4. Penetration.
@@ -1229,9 +1827,19 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     r.measured = s.pen_max;
     r.bound = s.tol.penetration_slops * s.bodies.slop;
     r.pass = r.measured <= r.bound;
-    r.applicable = s.checked_frames > 0;
-    if (!r.applicable) {
+    // Judged: pair-frames with an exact depth. Where every penetrating pair-frame was a
+    // non-convex pair's upper bound, the row proved no penetration: n/a.
+    r.applicable = s.checked_frames > 0 && s.pen.checks > 0 && !(s.pen_upper_pairs > 0 && s.pen_upper_pairs == s.pen_pairs);
+    if (s.checked_frames == 0) {
       r.detail = no_checked;
+    } else if (!r.applicable) {
+      r.detail = s.pen_upper_max > 0
+                     ? fmt::format("no exact depth: every penetrating pair is a non-convex mesh pair, whose depth is "
+                                   "an upper bound only (the least separating translation over 8 directions: a "
+                                   "figure, not judged): largest {}, {} pair-frames above the bound {} m",
+                                   s.pen_upper_what, s.pen_upper_over, fmt::format("{:.3g}", r.bound))
+                     : fmt::format("no pair-frame with an exact depth from frame {} on",
+                                   s.tol.penetration_settle_frames);
     } else if (s.pen_pairs == 0) {
       r.detail = fmt::format("no penetrating pair on the checked frames from frame {} on",
                              s.tol.penetration_settle_frames);
@@ -1244,6 +1852,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                 "directions: a figure, not judged): largest {}, {} pair-frames above the bound",
                                 s.pen_upper_what, s.pen_upper_over);
     }
+    if (r.applicable) fill_causes(r, {{&s.pen, "penetration", "pair-frames", "m"}});
     out.push_back(r);
   }
   // 5. Friction.
@@ -1272,6 +1881,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                 "direction",
                                 s.dissipation_small);
     }
+    if (r.applicable)
+      fill_causes(r, {{&s.cone, "cone", "contacts", "kg m/s"}, {&s.dissipation, "dissipation", "rows", "m/s"}});
     out.push_back(r);
   }
   // 6. Conservation.
@@ -1299,16 +1910,109 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                              s.groups_rotating
                                  ? fmt::format("{} groups, worst change {:.3g} of its bound", s.groups_rotating,
                                                s.angular.worst_or(0.0))
+                             : s.groups_rotation_locked
+                                 ? std::string("n/a: every group has a body whose rotation is locked (locked_dofs)")
                                  : std::string("n/a: translation-only records (no orientation or angular "
                                                "velocity), contact torques are not modelled"));
     }
     if (s.groups_clamped)
       r.detail += fmt::format("; {} group-frames not judged (a body at the declared velocity clamp {} m/s)",
                               s.groups_clamped, s.bodies.velocity_clamp);
+    if (s.bodies.contact_model == PhysicsBodies::ContactModel::Soft)
+      r.detail += fmt::format("; contact_model soft: energy judged per contact episode of a pair alone in its "
+                              "isolated group ({} episodes judged, {} not judged: the pair touched other bodies, a "
+                              "step had no states, or still in contact at the end ({} open)), not on {} group-steps",
+                              s.episodes_judged, s.episodes_unjudged + s.episodes.size(), s.episodes.size(),
+                              s.energy_soft_steps);
+    if (s.groups_locked)
+      r.detail += fmt::format("; {} group-frames with a body whose axes are locked (locked_dofs): momentum along "
+                              "locked translation axes not judged; {} with a rotation locked: angular momentum not "
+                              "judged",
+                              s.groups_locked, s.groups_rotation_locked);
+    if (r.applicable) {
+      fill_causes(r, {{&s.momentum, "momentum", "group-frames", "of bound"},
+                      {&s.angular, "angular-momentum", "group-frames", "of bound"},
+                      {&s.energy, "energy", "group-frames", "rel"}});
+      r.judged = s.groups;
+    }
     out.push_back(r);
   }
-  const double seconds[] = {s.t_broad, s.t_complete, s.t_geometry, s.t_pen, s.t_friction, s.t_conservation};
-  for (std::size_t i = 0; i < out.size() && i < 6; ++i) out[i].seconds = seconds[i];
+  // 7. Momentum balance per body.
+  {
+    ValidationResult r = row("momentum-balance", "bodies whose velocity change is not their rows' impulses",
+                             "balance_ulps,gyroscopic_rel,friction_direction_speed");
+    r.measured = double(s.balance_lin.failures + s.balance_ang.failures);
+    r.pass = r.measured == 0;
+    r.applicable = s.balance_lin.checks + s.balance_ang.checks > 0;
+    const std::string extras =
+        (s.balance_locked ? fmt::format("; {} body-steps with locked axes (those components n/a: a joint's impulses "
+                                        "are not in the rows)",
+                                        s.balance_locked)
+                          : std::string()) +
+        (s.balance_no_rows ? fmt::format("; {} body-steps in a confirmed pair without rows, not judged",
+                                         s.balance_no_rows)
+                           : std::string()) +
+        (s.balance_clamped ? fmt::format("; {} body-steps at the declared velocity clamp, not judged",
+                                         s.balance_clamped)
+                           : std::string());
+    if (!s.bodies.impulses_complete) {
+      r.applicable = false;
+      r.detail = fmt::format("n/a: the record holds the impulses of the first of response.iterations = {} "
+                             "relaxation passes (octocd's ContactRecord); the later passes apply more impulses on the "
+                             "same pairs, so the rows are not the step's impulses",
+                             s.model->scene.response.iterations);
+    } else if (!r.applicable) {
+      r.detail = s.state_frames ? "no dynamic body with contact rows in a step with states" : "no states";
+    } else {
+      r.detail = fmt::format("{} body-steps: linear worst {:.3g} of its bound; angular {}", s.balance_lin.checks,
+                             s.balance_lin.worst_or(0.0),
+                             s.balance_ang.checks
+                                 ? fmt::format("{} body-steps, worst {:.3g} of its bound{}", s.balance_ang.checks,
+                                               s.balance_ang.worst_or(0.0),
+                                               s.bodies.gyroscopic ? " (gyroscopic term declared)" : "")
+                                 : s.balance_rot_locked
+                                       ? fmt::format("n/a: rotation locked (locked_dofs) on all {} body-steps with "
+                                                     "rotation and points",
+                                                     s.balance_rot_locked)
+                                       : std::string("n/a: no rotation or no contact points (torques unknown)"));
+      r.detail += extras;
+      fill_causes(r, {{&s.balance_lin, "linear", "body-steps", "of bound"},
+                      {&s.balance_ang, "angular", "body-steps", "of bound"}});
+      r.judged = s.balance_lin.checks;
+    }
+    out.push_back(r);
+  }
+  // 8. Free flight.
+  {
+    ValidationResult r = row("free-flight", "bodies without contacts not following gravity and their spin",
+                             "free_flight_angle_rad,gyroscopic_rel");
+    r.measured = double(s.free_vel.failures + s.free_pos.failures + s.free_w.failures + s.free_q.failures);
+    r.pass = r.measured == 0;
+    r.applicable = s.free_vel.checks > 0;
+    if (!r.applicable) {
+      r.detail = s.state_frames ? "no dynamic body without contacts in a step with states" : "no states";
+    } else {
+      r.detail = fmt::format(
+          "{} body-steps (integrator {}): worst velocity {:.3g} m/s, position {:.3g} m{}{}", s.free_vel.checks,
+          integrator_name(s.bodies.integrator), s.free_vel.worst_or(0.0), s.free_pos.worst_or(0.0),
+          s.free_w.checks ? fmt::format(", angular velocity {:.3g} rad/s{} over {}, orientation {:.3g} deg over {}",
+                                        s.free_w.worst_or(0.0), s.bodies.gyroscopic ? " (gyroscopic term declared)" : "",
+                                        s.free_w.checks, s.free_q.worst_or(0.0), s.free_q.checks)
+                          : std::string("; rotation n/a (translation-only records)"),
+          s.free_locked ? fmt::format("; {} body-steps with locked axes (those components n/a)", s.free_locked)
+                        : std::string());
+      fill_causes(r, {{&s.free_vel, "velocity", "body-steps", "m/s"},
+                      {&s.free_pos, "position", "body-steps", "m"},
+                      {&s.free_w, "angular-velocity", "body-steps", "rad/s"},
+                      {&s.free_q, "orientation", "body-steps", "deg"}});
+      r.judged = s.free_vel.checks;
+    }
+    out.push_back(r);
+  }
+  // Free flight's work is charged to momentum-balance (one pass over the bodies).
+  const double seconds[] = {s.t_broad, s.t_complete, s.t_geometry, s.t_pen, s.t_friction, s.t_conservation,
+                            s.t_balance, 0.0};
+  for (std::size_t i = 0; i < out.size() && i < 8; ++i) out[i].seconds = seconds[i];
   return out;
 }
 

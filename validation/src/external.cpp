@@ -216,6 +216,14 @@ void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inve
               allowed);
     }
   }
+  if (!p.locked_dofs.empty()) {
+    if (p.locked_dofs.size() != n)
+      bad(names.locked_dofs, fmt::format("{} values for {} bodies", p.locked_dofs.size(), n), "0 or one per body");
+    for (std::size_t i = 0; i < n; ++i)
+      if (p.locked_dofs[i] > 63)
+        bad(names.locked_dofs, fmt::format("body {}: {}", i, unsigned(p.locked_dofs[i])),
+            "0 .. 63: bits 0-2 translation along world x, y, z, bits 3-5 rotation about world x, y, z locked");
+  }
   if (!p.body_friction.empty()) {
     if (p.body_friction.size() != n)
       bad(names.body_friction, fmt::format("{} values for {} bodies", p.body_friction.size(), n), "one per body");

@@ -247,7 +247,8 @@ class TraceIn {
   static constexpr const char* kV2Datasets[] = {"/states/orientation", "/states/angular_velocity",
                                                 "/bodies/inertia",     "/contacts/point",
                                                 "/bodies/friction",    "/bodies/restitution",
-                                                "/contacts/jt3",       "/bodies/collision_shape"};
+                                                "/contacts/jt3",       "/bodies/collision_shape",
+                                                "/bodies/locked_dofs"};
 
   void reject_v2_datasets() const {
     for (const char* name : kV2Datasets)
@@ -279,6 +280,7 @@ class TraceIn {
     names.restitution = "/ (root attribute restitution)";
     names.contact_margin = "/ (root attribute contact_margin)";
     names.slop = "/ (root attribute scene: response.slop)";
+    names.locked_dofs = "/bodies/locked_dofs";
     const std::string detection = choice_attr("detection", {"pre-step", "integrated"}, "pre-step");
     integrated_ = detection == "integrated";
     if (has_attr("mu")) p.mu = number_attr("mu", 0.0);
@@ -299,6 +301,7 @@ class TraceIn {
     }
     p.contact_geometry = choice_attr("contact_geometry", {"shape", "aabb"}, "shape") == "aabb" ? ContactGeometry::Aabb
                                                                                                : ContactGeometry::Shape;
+    read_declarations(p);
 
     // Per-body tables.
     Dataset inertia = open("/bodies/inertia", H5T_FLOAT, 3, false);
@@ -382,6 +385,51 @@ class TraceIn {
             fmt::format("{} strings, one per body (as /bodies/inverse_mass)", n_));
       for (std::size_t i = 0; i < values.size(); ++i)
         p.collision_shape.push_back(kind_of(fmt::format("/bodies/collision_shape: body {}", i), values[i]));
+    }
+  }
+
+  /// The declarations of SPEC 13b.12 (docs/trace-format.md, "Declarations"): root
+  /// attributes `contact_model`, `gyroscopic`, `integrator` and /bodies/locked_dofs.
+  void read_declarations(PhysicsBodies& p) {
+    p.contact_model = choice_attr("contact_model", {"rigid", "soft"}, "rigid") == "soft"
+                          ? PhysicsBodies::ContactModel::Soft
+                          : PhysicsBodies::ContactModel::Rigid;
+    const std::string integrator = choice_attr("integrator", {"semi-implicit", "explicit", "any"}, "semi-implicit");
+    p.integrator = integrator == "explicit" ? PhysicsBodies::Integrator::Explicit
+                   : integrator == "any"    ? PhysicsBodies::Integrator::Any
+                                            : PhysicsBodies::Integrator::SemiImplicit;
+    if (has_attr("gyroscopic")) {
+      // A string "true" / "false", or an integer 0 / 1 (as broadphase_exact).
+      const char* allowed = "\"true\" or \"false\" (a string), or the integer 1 or 0 (default \"false\")";
+      std::string text;
+      try {
+        text = string_attr("gyroscopic");
+      } catch (const InputError&) {
+        double v = -1.0;
+        try {
+          v = number_attr("gyroscopic", -1.0);
+        } catch (const InputError&) {
+          bad("/ (root attribute gyroscopic)", "neither a string nor a number (h5py: write np.int32(1) or \"true\", "
+              "not a Python bool, which HDF5 stores as an enum)", allowed);
+        }
+        if (v != 0.0 && v != 1.0) bad("/ (root attribute gyroscopic)", fmt::format("{}", v), allowed);
+        text = v == 1.0 ? "true" : "false";
+      }
+      if (text != "true" && text != "false")
+        bad("/ (root attribute gyroscopic)", fmt::format("'{}' unknown", text), allowed);
+      p.gyroscopic = text == "true";
+    }
+    Dataset locked = open("/bodies/locked_dofs", H5T_INTEGER, 1, false);
+    if (locked.present()) {
+      expect(locked, {n_}, fmt::format("{} values, one per body (as /bodies/inverse_mass)", n_));
+      const std::vector<std::int64_t> v = read<std::int64_t>(locked, 0, n_);
+      p.locked_dofs.resize(n_);
+      for (hsize_t i = 0; i < n_; ++i) {
+        if (v[i] < 0 || v[i] > 63)
+          bad(locked.name, fmt::format("body {}: {}", i, v[i]),
+              "0 .. 63: bits 0-2 translation along world x, y, z, bits 3-5 rotation about world x, y, z locked");
+        p.locked_dofs[i] = static_cast<std::uint8_t>(v[i]);
+      }
     }
   }
 

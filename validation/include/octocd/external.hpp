@@ -150,7 +150,7 @@ struct PhysicsFieldNames {
   std::string inertia = "physics.inertia", body_friction = "physics.body_friction",
               body_restitution = "physics.body_restitution", mu = "physics.mu",
               restitution = "physics.restitution", contact_margin = "physics.contact_margin",
-              slop = "physics.slop";
+              slop = "physics.slop", locked_dofs = "physics.locked_dofs";
 };
 
 /// Checks what the physics tier is told of the bodies (SPEC 13) for `inverse_mass.size()`
@@ -158,7 +158,8 @@ struct PhysicsFieldNames {
 /// max |I|) and positive definite (Sylvester: leading minors > 0) for every dynamic body
 /// (static bodies: anything finite, zeros allowed); `body_friction` empty or one finite
 /// value >= 0 per body; `body_restitution` empty or one per body in [0, 1]; `mu` finite
-/// >= 0; `restitution` in [0, 1]; `contact_margin` finite >= 0; `slop` finite > 0.
+/// >= 0; `restitution` in [0, 1]; `contact_margin` finite >= 0; `slop` finite > 0;
+/// `locked_dofs` empty or one value in 0 .. 63 per body (SPEC 13b.12).
 /// Throws InputError "ORIGIN: FIELD: [body I: ]PROBLEM; allowed: RANGE".
 void check_physics_bodies(const PhysicsBodies& physics, const std::vector<float>& inverse_mass,
                           const std::string& origin, const PhysicsFieldNames& names = {});

@@ -76,7 +76,24 @@
 ///     exchange + dt |w x I w| per body (free rotation) + (depth + margin) |jt| per row
 ///     (impulses applied at two witness points) (rotating records; n/a for
 ///     translation-only ones); kinetic energy (translational + rotational) does not rise
-///     when every restitution <= 1.
+///     when every restitution <= 1 (contact_model soft: per pair contact episode instead,
+///     PhysicsBodies::contact_model). Groups with locked axes (locked_dofs) do not judge
+///     the momentum along them nor, rotation locked, the angular momentum (counted).
+///  7. `momentum-balance` (every frame with states; SPEC 13b.7): per dynamic body with
+///     contact rows, m (v' - v) - m g dt = sum of its rows' J = jn n + J_t (J_t: jt along
+///     -v_t, or +t for octocd's records), and with rotation and points I_w (w' - w)
+///     (+ dt w x I_w w when gyroscopic) = sum (p - x) x J; bound: balance_ulps x 2^-23 x
+///     (rows + 2) x the magnitudes, plus what a scalar jt leaves open (discs in each row's
+///     tangent plane; docs/validate-your-engine.md derives it). n/a when the rows are not
+///     the step's impulses (impulses_complete false).
+///  8. `free-flight` (every frame with states; SPEC 13b.8): per dynamic body without a
+///     contact row (or confirmed pair): v' = v + g dt, x' by the declared integrator,
+///     w' = w (less the declared gyroscopic term), q' = q advanced by w dt within
+///     free_flight_angle_rad + (|w| dt)^2. Locked axes are not judged (counted).
+/// Reporting (SPEC 13b.13): every row fills ValidationResult::judged and ::causes (per
+/// cause its count, worst figure, first examples with frame and item "pair (A, B)",
+/// "body I" or "group (I, J, K)", and the failing items) and lists every cause in its
+/// detail; a row that judged nothing is n/a with its reason.
 /// Cost: a checked frame is O(n) for the posed AABBs plus FCL on the candidate pairs
 /// (non-convex mesh pairs that intersect cost the most: their depth is bisected with
 /// BVH collide along up to 8 directions).
@@ -159,12 +176,59 @@ struct PhysicsBodies {
   /// group with a body at the clamp after the step is not judged on conservation (the
   /// row counts such groups).
   double velocity_clamp = 0.0;
+
+  // ---- Declarations (SPEC 13b.12; external traces v2: root attributes and
+  // /bodies/locked_dofs; docs/trace-format.md, "Declarations").
+  /// `contact_model`: how the engine's contacts act. Rigid: impulses resolve a contact
+  /// within the step, so an isolated group's kinetic energy never rises in a step. Soft
+  /// (compliant contacts: springs, soft constraints, XPBD compliance): a contact may store
+  /// energy in its penetration and give it back in a later step, so energy is judged over
+  /// each pair's contact episode (first step with a row to the first without), not per step.
+  enum class ContactModel { Rigid, Soft };
+  ContactModel contact_model = ContactModel::Rigid;
+  /// `gyroscopic`: the engine integrates the gyroscopic term (w x I w) of free rotation.
+  /// momentum-balance then expects I_w (w' - w) + dt w x I_w w = the contact torques and
+  /// free-flight w' = w - dt I_w^-1 (w x I_w w) (each within `gyroscopic_rel` of the term:
+  /// implicit and explicit forms differ at second order); false: w' = w without contacts.
+  bool gyroscopic = false;
+  /// `integrator`: how a free body's position advances: semi-implicit Euler x' = x + dt v'
+  /// (SPEC 4.1, octocd's engines, Bullet), explicit x' = x + dt v, or either.
+  enum class Integrator { SemiImplicit, Explicit, Any };
+  Integrator integrator = Integrator::SemiImplicit;
+  /// Per body (empty: none locked): bits 0-2 translation along world x, y, z, bits 3-5
+  /// rotation about world x, y, z locked by a joint (6 bits at most). Rows about a locked
+  /// axis are n/a for that body and counted (a joint's impulses are not in the contact
+  /// rows): momentum-balance and free-flight skip the locked components, conservation does
+  /// not judge the angular momentum (rotation locked) or the momentum along a locked axis
+  /// (translation locked) of a group with such a body.
+  std::vector<std::uint8_t> locked_dofs;
+
+  // ---- What octocd's own records mean (set by octocd_physics_bodies).
+  /// The rows' `jt` is SPEC 6's J_t along t = v_t / |v_t| (negative when friction opposes
+  /// the sliding: octocd's ContactRecord), not the trace convention's impulse along
+  /// -v_t / |v_t|.
+  bool jt_along_sliding = false;
+  /// The rows carry every impulse the step applied. octocd with response.iterations > 1
+  /// records the first relaxation pass only (its later passes apply more impulses on the
+  /// same pairs): momentum-balance is then n/a with that reason.
+  bool impulses_complete = true;
+  /// The engine is SPEC 6's Jacobi response (octocd's cpu and cuda): an energy failure of
+  /// an isolated group is reported as the model's property (its Jacobi-summed impulses
+  /// computed from one pre-response state overshoot on chains), not as an engine fault.
+  bool jacobi_response = false;
 };
+
+/// "rigid" or "soft".
+const char* contact_model_name(PhysicsBodies::ContactModel m);
+/// "semi-implicit", "explicit" or "any".
+const char* integrator_name(PhysicsBodies::Integrator i);
 
 /// What octocd's own cpu and cuda engines declare: mu = the scene's mu_static (the
 /// cone of Eq. 21), restitution = the scene's e, the pair's theta as contact margin
 /// (vertex proximity, SPEC 5.3), an exact AABB broadphase, contacts on the world AABBs
-/// (SPEC 6), slop = delta. Bodies translate only: inertia is not needed.
+/// (SPEC 6), slop = delta, semi-implicit Euler (SPEC 4.1), jt along the sliding (SPEC 6's
+/// J_t), impulses complete only with response.iterations = 1 (the record holds the first
+/// pass), the Jacobi response. Bodies translate only: inertia is not needed.
 PhysicsBodies octocd_physics_bodies(const Model& model);
 
 /// Physics-tier validators, fed one FrameRecord at a time (octocd's engines, another
@@ -187,8 +251,8 @@ class PhysicsValidators {
   /// every frame that has states.
   void observe(const FrameRecord& rec, bool checked);
 
-  /// The six rows so far, tier Physics, each saying how many items it judged, with its
-  /// own time (ValidationResult::seconds).
+  /// The eight rows so far (1-8 above), tier Physics, each with how many items it judged,
+  /// its causes and its own time (ValidationResult::seconds).
   std::vector<ValidationResult> results() const;
 
   /// Polled inside observe's long loops (every 16 candidate pairs, contacts or groups);

@@ -241,6 +241,30 @@ struct Tolerances {
   /// frame 584, a group of 3 bodies): SPEC 6 sums the impulses of a body's contacts
   /// computed from the same pre-response state (Jacobi), which overshoots on chains.
   double energy_rel = 1e-3;
+  /// Momentum balance per body (SPEC 13b.7) and free flight (13b.8): rounding allowance
+  /// in units of 2^-23 of the magnitudes that entered the compared values (docs/
+  /// validate-your-engine.md, "momentum-balance", derives it). A float32 velocity update
+  /// v' = v + sum of k terms rounds at most k + 1 times by 2^-24 of the running sum; an
+  /// iterative solver (Bullet: 10 iterations) adds every row's increment each iteration.
+  /// 16 x (rows + 2) covers 10 iterations of sums whose partial sums stay within the
+  /// magnitudes; a dropped row, an edited velocity or an impulse on the wrong body is
+  /// larger by orders of magnitude.
+  double balance_ulps = 16.0;
+  /// Free flight: angle (rad) between the engine's q' and q advanced by w dt, beyond
+  /// (|w| dt)^2 (the second-order difference between integrators: exponential map,
+  /// normalised first-order update) and float32 rounding of the quaternion (~1e-7 rad).
+  /// A body turned by 30 deg (0.52 rad) in one step is caught.
+  double free_flight_angle_rad = 1e-4;
+  /// Declared gyroscopic term: the engine's term may differ from the explicit
+  /// dt w x I_w w by this share of it (implicit forms, Bullet's
+  /// computeGyroscopicImpulseImplicit_Body, differ at second order in |w| dt).
+  double gyroscopic_rel = 0.5;
+  /// Momentum balance with a scalar `jt`: below this relative sliding speed at a row
+  /// before the step (m/s), the friction impulse's direction is the engine's choice
+  /// (Bullet: below sqrt(FLT_EPSILON) = 3.45e-4 m/s it takes btPlaneSpace1's axis), so the
+  /// row's J_t is known only to lie in its cone; above it, J_t is jt along -v_t / |v_t|.
+  /// /contacts/jt3 (the vector) removes the question.
+  double friction_direction_speed = 1e-3;
 };
 
 /// What `octocd validate` runs.

@@ -1,0 +1,628 @@
+// A zoo of engines unlike octocd's (issue 30 item 7, SPEC 13b.12): small plain programs
+// that step their own bodies and write a version 2 external trace, judged by `octocd
+// validate --trace-in` at default tolerances. Each clean run passes every physics row
+// (exit 0) once it declares what it is; the same run undeclared fails the row the
+// declaration is about; each planted fault (a lone body's velocity x1.5 / x2, a body
+// teleported by 1 cm, an angular velocity x1.5 on a lone spinning body, an orientation
+// turned by 30 deg, a dropped manifold row, an edited velocity of a body in contact, an
+// impulse on the wrong body) exits 3 with a detail naming the frame and the body.
+//  (a) soft contacts: a damped penalty spring lets two boxes penetrate by ~4 mm and
+//      pushes them apart over ~10 steps (contact_model "soft");
+//  (c) a gyroscopic term: a flat box spinning about a non-principal axis bounces off the
+//      floor, another spins alone (gyroscopic "true");
+//  (d) joints locking rotation: a box sliding on the floor on a 4-row manifold and two
+//      boxes colliding off-centre in the air keep w = 0 (/bodies/locked_dofs = 0x38).
+#include <gtest/gtest.h>
+#include <hdf5.h>
+#include <unistd.h>
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <cstdlib>
+#include <functional>
+#include <iostream>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "cli_run.hpp"
+
+namespace fs = std::filesystem;
+using octocd::test::Result;
+using octocd::test::run_octocd;
+
+namespace {
+
+using V = std::array<double, 3>;
+using Q = std::array<double, 4>;  // (w, x, y, z)
+using M = std::array<double, 9>;  // row-major
+
+V operator+(V a, V b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+V operator-(V a, V b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+V operator*(double s, V a) { return {s * a[0], s * a[1], s * a[2]}; }
+double dot(V a, V b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+V cross(V a, V b) { return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}; }
+double norm(V a) { return std::sqrt(dot(a, a)); }
+V mul(const M& m, V v) {
+  return {m[0] * v[0] + m[1] * v[1] + m[2] * v[2], m[3] * v[0] + m[4] * v[1] + m[5] * v[2],
+          m[6] * v[0] + m[7] * v[1] + m[8] * v[2]};
+}
+Q qmul(Q a, Q b) {
+  return {a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3], a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+          a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1], a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]};
+}
+Q qnorm(Q q) {
+  const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  return {q[0] / n, q[1] / n, q[2] / n, q[3] / n};
+}
+/// The rotation of `angle` rad about `axis` (any length > 0).
+Q axis_angle(V axis, double angle) {
+  const V u = (1.0 / norm(axis)) * axis;
+  const double s = std::sin(0.5 * angle);
+  return {std::cos(0.5 * angle), s * u[0], s * u[1], s * u[2]};
+}
+M rotation(Q q) {
+  const double w = q[0], x = q[1], y = q[2], z = q[3];
+  return {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+          2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+          2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+}
+/// R M R^T.
+M conj(const M& r, const M& m) {
+  M rm{}, out{};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) rm[3 * i + j] += r[3 * i + k] * m[3 * k + j];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) out[3 * i + j] += rm[3 * i + k] * r[3 * j + k];
+  return out;
+}
+M diag(V d) { return {d[0], 0, 0, 0, d[1], 0, 0, 0, d[2]}; }
+/// Rounds to float32, as the engine stores its state.
+double f32(double x) { return static_cast<double>(static_cast<float>(x)); }
+V f32(V a) { return {f32(a[0]), f32(a[1]), f32(a[2])}; }
+Q f32(Q q) { return {f32(q[0]), f32(q[1]), f32(q[2]), f32(q[3])}; }
+
+/// One body of a zoo engine: a box of half extents `h`, mass m (0: static), its locked
+/// degrees of freedom (SPEC 13b.12 bits).
+struct Body {
+  V h{0.1, 0.1, 0.1};
+  double m = 1.0;
+  unsigned locked = 0;
+  M inertia() const {
+    const double a = 2 * h[0], b = 2 * h[1], c = 2 * h[2], k = m / 12.0;
+    return diag({k * (b * b + c * c), k * (a * a + c * c), k * (a * a + b * b)});
+  }
+};
+struct State {
+  std::vector<V> x, v, w;
+  std::vector<Q> q;
+};
+/// One contact row: impulse jn along n (from B to A) on A, friction jt along -v_t.
+struct Row {
+  int a = 0, b = 0;
+  V n{}, p{};
+  double depth = 0, jn = 0, jt = 0;
+};
+
+/// A zoo engine's run: bodies, states (row 0 the initial one), contact rows per step,
+/// and what the engine declares (root attributes).
+struct Zoo {
+  std::string engine;
+  std::vector<Body> bodies;
+  double dt = 0.001;
+  V g{0, -9.81, 0};
+  std::vector<State> states;
+  std::vector<std::vector<Row>> rows;
+  std::map<std::string, std::string> text;
+  std::map<std::string, double> numbers{{"mu", 0.5}, {"restitution", 0.5}, {"contact_margin", 0.005}};
+  bool write_locked = true;
+
+  int n() const { return static_cast<int>(bodies.size()); }
+  M inertia_world(int i, const State& s) const { return conj(rotation(s.q[i]), bodies[i].inertia()); }
+
+  /// Free motion of body i over one step from `s`: v + g dt, w less the gyroscopic term
+  /// when `gyroscopic`, then (after the caller's impulses) x + dt v', q advanced by w' dt.
+  void integrate_velocity(int i, const State& s, State& t, bool gyroscopic) const {
+    if (bodies[i].m == 0) return;
+    t.v[i] = s.v[i] + dt * g;
+    t.w[i] = s.w[i];
+    if (gyroscopic) {
+      const M iw = inertia_world(i, s);
+      const M inv = conj(rotation(s.q[i]), diag({1 / bodies[i].inertia()[0], 1 / bodies[i].inertia()[4],
+                                                 1 / bodies[i].inertia()[8]}));
+      t.w[i] = s.w[i] - dt * mul(inv, cross(s.w[i], mul(iw, s.w[i])));
+    }
+  }
+  void integrate_position(int i, const State& s, State& t) const {
+    t.v[i] = f32(t.v[i]);
+    t.w[i] = f32(t.w[i]);
+    if (bodies[i].m == 0) return;
+    t.x[i] = f32(s.x[i] + dt * t.v[i]);
+    const double angle = norm(t.w[i]) * dt;
+    t.q[i] = f32(angle > 0 ? qnorm(qmul(axis_angle(t.w[i], angle), s.q[i])) : s.q[i]);
+  }
+
+  /// Writes the run as an external trace, version 2 (docs/trace-format.md).
+  void write(const std::string& path) const {
+    const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    ASSERT_GE(file, 0) << path;
+    const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
+    H5Pset_create_intermediate_group(lcpl, 1);
+    auto put = [&](const char* name, hid_t mem, hid_t type, std::vector<hsize_t> shape, const void* data) {
+      const hid_t space = H5Screate_simple(static_cast<int>(shape.size()), shape.data(), nullptr);
+      const hid_t d = H5Dcreate2(file, name, type, space, lcpl, H5P_DEFAULT, H5P_DEFAULT);
+      ASSERT_GE(d, 0) << name;
+      if (shape[0] > 0) {
+        ASSERT_GE(H5Dwrite(d, mem, H5S_ALL, H5S_ALL, H5P_DEFAULT, data), 0) << name;
+      }
+      H5Dclose(d);
+      H5Sclose(space);
+    };
+    auto floats = [&](const char* name, std::vector<hsize_t> shape, const std::vector<double>& v) {
+      put(name, H5T_NATIVE_DOUBLE, H5T_IEEE_F32LE, shape, v.data());
+    };
+    auto str_attr = [&](const char* name, const std::string& value) {
+      const hid_t t = H5Tcopy(H5T_C_S1);
+      H5Tset_size(t, H5T_VARIABLE);
+      const hid_t space = H5Screate(H5S_SCALAR);
+      const hid_t a = H5Acreate2(file, name, t, space, H5P_DEFAULT, H5P_DEFAULT);
+      const char* c = value.c_str();
+      H5Awrite(a, t, &c);
+      H5Aclose(a);
+      H5Sclose(space);
+      H5Tclose(t);
+    };
+    auto num_attr = [&](const char* name, const std::vector<double>& v) {
+      const hsize_t count = v.size();
+      const hid_t space = count == 1 ? H5Screate(H5S_SCALAR) : H5Screate_simple(1, &count, nullptr);
+      const hid_t a = H5Acreate2(file, name, H5T_IEEE_F64LE, space, H5P_DEFAULT, H5P_DEFAULT);
+      H5Awrite(a, H5T_NATIVE_DOUBLE, v.data());
+      H5Aclose(a);
+      H5Sclose(space);
+    };
+    str_attr("format", "octocd-trace");
+    str_attr("engine", engine);
+    num_attr("version", {2});
+    num_attr("dt", {dt});
+    num_attr("gravity", {g[0], g[1], g[2]});
+    for (const auto& [k, v] : text) str_attr(k.c_str(), v);
+    for (const auto& [k, v] : numbers) num_attr(k.c_str(), {v});
+    const hsize_t nb = static_cast<hsize_t>(n()), rows_n = states.size(), frames = rows.size();
+    std::vector<double> lo, hi, im, inertia;
+    std::vector<std::uint8_t> locked;
+    for (const Body& b : bodies) {
+      for (int k = 0; k < 3; ++k) {
+        lo.push_back(-b.h[k]);
+        hi.push_back(b.h[k]);
+      }
+      im.push_back(b.m > 0 ? 1.0 / b.m : 0.0);
+      const M I = b.m > 0 ? b.inertia() : M{};
+      inertia.insert(inertia.end(), I.begin(), I.end());
+      locked.push_back(static_cast<std::uint8_t>(b.locked));
+    }
+    floats("/bodies/local_aabb_min", {nb, 3}, lo);
+    floats("/bodies/local_aabb_max", {nb, 3}, hi);
+    floats("/bodies/inverse_mass", {nb}, im);
+    floats("/bodies/inertia", {nb, 3, 3}, inertia);
+    if (write_locked) put("/bodies/locked_dofs", H5T_NATIVE_UINT8, H5T_STD_U8LE, {nb}, locked.data());
+    std::vector<double> x, v, w, q;
+    for (const State& s : states)
+      for (int i = 0; i < n(); ++i) {
+        x.insert(x.end(), s.x[i].begin(), s.x[i].end());
+        v.insert(v.end(), s.v[i].begin(), s.v[i].end());
+        w.insert(w.end(), s.w[i].begin(), s.w[i].end());
+        q.insert(q.end(), s.q[i].begin(), s.q[i].end());
+      }
+    floats("/states/position", {rows_n, nb, 3}, x);
+    floats("/states/velocity", {rows_n, nb, 3}, v);
+    floats("/states/orientation", {rows_n, nb, 4}, q);
+    floats("/states/angular_velocity", {rows_n, nb, 3}, w);
+    // Candidate pairs: every pair with a dynamic body, every step (a conservative broadphase).
+    std::vector<std::int64_t> pair_offsets{0}, pairs;
+    for (hsize_t f = 0; f < frames; ++f) {
+      for (int a = 0; a < n(); ++a)
+        for (int b = a + 1; b < n(); ++b)
+          if (bodies[a].m > 0 || bodies[b].m > 0) {
+            pairs.push_back(a);
+            pairs.push_back(b);
+          }
+      pair_offsets.push_back(static_cast<std::int64_t>(pairs.size() / 2));
+    }
+    put("/pairs/offsets", H5T_NATIVE_INT64, H5T_STD_I64LE, {pair_offsets.size()}, pair_offsets.data());
+    put("/pairs/pair", H5T_NATIVE_INT64, H5T_STD_I64LE, {pairs.size() / 2, 2}, pairs.data());
+    std::vector<std::int64_t> offsets{0}, cpair;
+    std::vector<double> normal, point, depth, jn, jt;
+    for (const auto& step : rows) {
+      for (const Row& r : step) {
+        cpair.push_back(r.a);
+        cpair.push_back(r.b);
+        normal.insert(normal.end(), r.n.begin(), r.n.end());
+        point.insert(point.end(), r.p.begin(), r.p.end());
+        depth.push_back(r.depth);
+        jn.push_back(r.jn);
+        jt.push_back(r.jt);
+      }
+      offsets.push_back(static_cast<std::int64_t>(cpair.size() / 2));
+    }
+    const hsize_t c = cpair.size() / 2;
+    put("/contacts/offsets", H5T_NATIVE_INT64, H5T_STD_I64LE, {offsets.size()}, offsets.data());
+    put("/contacts/pair", H5T_NATIVE_INT64, H5T_STD_I64LE, {c, 2}, cpair.data());
+    floats("/contacts/normal", {c, 3}, normal);
+    floats("/contacts/point", {c, 3}, point);
+    floats("/contacts/depth", {c}, depth);
+    floats("/contacts/jn", {c}, jn);
+    floats("/contacts/jt", {c}, jt);
+    H5Pclose(lcpl);
+    H5Fclose(file);
+  }
+};
+
+State initial(const Zoo& z, const std::vector<V>& x, const std::vector<V>& v, const std::vector<V>& w,
+              const std::vector<Q>& q) {
+  State s;
+  s.x = x;
+  s.v = v;
+  s.w = w;
+  s.q = q;
+  for (int i = 0; i < z.n(); ++i) {
+    s.x[i] = f32(s.x[i]);
+    s.v[i] = f32(s.v[i]);
+    s.w[i] = f32(s.w[i]);
+    s.q[i] = f32(s.q[i]);
+  }
+  return s;
+}
+
+/// (a) Soft contacts: boxes 0 and 1 (1 kg) meet head-on in the air at 2 m/s and a
+/// damped penalty spring (k = 125 kN/m, c = 50 N s/m) pushes them apart: ~4 mm deep, over
+/// ~12 steps, its kinetic energy rising in the steps that release the penetration; body 2
+/// spins alone. Contacts found at the pre-step pose, impulses jn = (k d + c v_close) dt.
+Zoo soft_engine(int frames = 60) {
+  Zoo z;
+  z.engine = "zoo-soft";
+  z.bodies = {Body{}, Body{}, Body{}};
+  z.text["contact_model"] = "soft";
+  const double k = 125000, c = 50;
+  z.states.push_back(initial(z, {{-0.13, 1.0, 0}, {0.13, 1.0, 0}, {0, 2.0, 1.0}},
+                             {{1, 0, 0}, {-1, 0, 0}, {0.2, 0.5, 0}}, {{0, 0, 0}, {0, 0, 0}, {1, 2, 0}},
+                             {{1, 0, 0, 0}, {1, 0, 0, 0}, axis_angle({0, 0, 1}, 0.3)}));
+  for (int f = 1; f <= frames; ++f) {
+    const State& s = z.states.back();
+    State t = s;
+    std::vector<Row> rows;
+    for (int i = 0; i < z.n(); ++i) z.integrate_velocity(i, s, t, false);
+    const double d = 0.2 - (s.x[1][0] - s.x[0][0]);
+    if (d > 0) {
+      Row r;
+      r.a = 0;
+      r.b = 1;
+      r.n = {-1, 0, 0};
+      r.depth = f32(d);
+      r.p = f32(V{0.5 * (s.x[0][0] + 0.1 + s.x[1][0] - 0.1), 0.5 * (s.x[0][1] + s.x[1][1]), 0.0});
+      const double closing = t.v[0][0] - t.v[1][0];
+      r.jn = f32(std::max(0.0, (k * d + c * closing) * z.dt));
+      t.v[0] = t.v[0] + r.jn * r.n;  // 1 kg each
+      t.v[1] = t.v[1] - r.jn * r.n;
+      rows.push_back(r);
+    }
+    for (int i = 0; i < z.n(); ++i) z.integrate_position(i, s, t);
+    z.states.push_back(t);
+    z.rows.push_back(rows);
+  }
+  return z;
+}
+
+/// Corner rows of box i against the floor (body 0, top at y = 0) at state s, resolved one
+/// after the other on t's velocities (restitution e, no friction): each row's impulse is
+/// applied at its corner to v and w (rotation locked: v only).
+void floor_corners(const Zoo& z, int i, const State& s, State& t, std::vector<Row>& rows, double e) {
+  const Body& b = z.bodies[i];
+  const M r = rotation(s.q[i]);
+  const M iw_inv = conj(r, diag({1 / b.inertia()[0], 1 / b.inertia()[4], 1 / b.inertia()[8]}));
+  const bool spin = (b.locked >> 3) == 0;
+  for (int c = 0; c < 8; ++c) {
+    const V local{(c & 1 ? 1 : -1) * b.h[0], (c & 2 ? 1 : -1) * b.h[1], (c & 4 ? 1 : -1) * b.h[2]};
+    const V arm = mul(r, local);
+    const V corner = s.x[i] + arm;
+    if (!(corner[1] < 0)) continue;
+    Row row;
+    row.a = 0;
+    row.b = i;
+    row.n = {0, -1, 0};
+    row.depth = f32(-corner[1]);
+    row.p = f32(V{corner[0], 0.5 * corner[1], corner[2]});
+    const V lever = row.p - s.x[i];
+    const V vp = t.v[i] + cross(t.w[i], lever);
+    const double vn = vp[1];  // (v_A - v_B) . n with A the static floor, n = -y
+    if (vn < 0) {
+      const V rn = cross(lever, V{0, 1, 0});
+      const double kk = 1 / b.m + (spin ? dot(rn, mul(iw_inv, rn)) : 0.0);
+      row.jn = f32(-(1 + e) * vn / kk);
+      t.v[i] = t.v[i] + (row.jn / b.m) * V{0, 1, 0};
+      if (spin) t.w[i] = t.w[i] + mul(iw_inv, cross(lever, row.jn * V{0, 1, 0}));
+    }
+    rows.push_back(row);
+  }
+}
+
+/// (c) A gyroscopic term: body 1, a flat box (0.4 x 0.2 x 0.1 m, 1 kg) spinning about a
+/// non-principal axis, falls onto the floor and bounces off its corners; body 2, the same
+/// box, spins alone. Free rotation: w' = w - dt I_w^-1 (w x I_w w) (explicit, I_w at the
+/// pre-step orientation), then q advanced by w' dt.
+Zoo gyroscopic_engine(int frames = 200) {
+  Zoo z;
+  z.engine = "zoo-gyroscopic";
+  Body floor;
+  floor.h = {2, 0.1, 2};
+  floor.m = 0;
+  Body flat;
+  flat.h = {0.2, 0.1, 0.05};
+  z.bodies = {floor, flat, flat};
+  z.text["gyroscopic"] = "true";
+  z.states.push_back(initial(z, {{0, -0.1, 0}, {0, 0.22, 0}, {1.2, 1.5, 0.5}}, {{0, 0, 0}, {0, 0, 0}, {0, 1, 0}},
+                             {{0, 0, 0}, {2, 5, 1}, {3, 6, 2}},
+                             {{1, 0, 0, 0}, axis_angle({1, 1, 0}, 0.5), axis_angle({0, 1, 1}, 0.2)}));
+  for (int f = 1; f <= frames; ++f) {
+    const State& s = z.states.back();
+    State t = s;
+    std::vector<Row> rows;
+    for (int i = 0; i < z.n(); ++i) z.integrate_velocity(i, s, t, true);
+    floor_corners(z, 1, s, t, rows, 0.5);
+    floor_corners(z, 2, s, t, rows, 0.5);
+    for (int i = 0; i < z.n(); ++i) z.integrate_position(i, s, t);
+    z.states.push_back(t);
+    z.rows.push_back(rows);
+  }
+  return z;
+}
+
+/// (d) Joints locking rotation (locked_dofs 0x38 on bodies 1-3): box 1 slides on the floor
+/// on 4 corner rows (0.5 mm deep, Coulomb friction mu 0.5 along -v_t), boxes 2 (1 kg) and
+/// 3 (2 kg) collide in the air 5 cm off their line of centres (e = 0.5, one impulse at the
+/// face centre of their overlap); none turns. Body 4, a cube, spins alone.
+Zoo locked_engine(int frames = 80) {
+  Zoo z;
+  z.engine = "zoo-joints";
+  Body floor;
+  floor.h = {2, 0.1, 2};
+  floor.m = 0;
+  Body locked;
+  locked.locked = 0x38;
+  Body heavy = locked;
+  heavy.m = 2;
+  z.bodies = {floor, locked, locked, heavy, Body{}};
+  const double mu = 0.5, e = 0.5;
+  z.states.push_back(initial(z, {{0, -0.1, 0}, {-1.0, 0.0995, 0}, {0, 1.0, 0}, {0.23, 1.05, 0}, {1.2, 1.5, 0.8}},
+                             {{0, 0, 0}, {1.5, 0, 0}, {1, 0, 0}, {-1, 0, 0}, {0, 0.3, 0}},
+                             {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {1, 2, 3}},
+                             {{1, 0, 0, 0}, {1, 0, 0, 0}, {1, 0, 0, 0}, {1, 0, 0, 0}, axis_angle({1, 0, 0}, 0.4)}));
+  for (int f = 1; f <= frames; ++f) {
+    const State& s = z.states.back();
+    State t = s;
+    std::vector<Row> rows;
+    for (int i = 0; i < z.n(); ++i) z.integrate_velocity(i, s, t, false);
+    // Box 1 on the floor: the 4 bottom corners carry m g dt and Coulomb friction.
+    {
+      const double jn = f32(z.bodies[1].m * 9.81 * z.dt / 4);
+      const double vx = t.v[1][0];
+      const double total = std::min(mu * 4 * jn, z.bodies[1].m * std::fabs(vx));
+      const double jt = f32(total / 4);
+      for (int c = 0; c < 4; ++c) {
+        Row r;
+        r.a = 0;
+        r.b = 1;
+        r.n = {0, -1, 0};
+        r.depth = f32(0.1 - s.x[1][1]);
+        r.p = f32(V{s.x[1][0] + (c & 1 ? 0.1 : -0.1), -0.5 * r.depth, (c & 2 ? 0.1 : -0.1)});
+        r.jn = jn;
+        r.jt = vx != 0 ? jt : 0.0;
+        // On B (the box): -J = jn y + jt along v_t (A's -v_t: A is the static floor).
+        t.v[1] = t.v[1] + (r.jn / z.bodies[1].m) * V{0, 1, 0} - (r.jt / z.bodies[1].m) * V{vx > 0 ? 1.0 : -1.0, 0, 0};
+        rows.push_back(r);
+      }
+    }
+    // Boxes 2 and 3: face contact along x.
+    const double d = 0.2 - (s.x[3][0] - s.x[2][0]);
+    if (d > 0) {
+      Row r;
+      r.a = 2;
+      r.b = 3;
+      r.n = {-1, 0, 0};
+      r.depth = f32(d);
+      r.p = f32(V{0.5 * (s.x[2][0] + 0.1 + s.x[3][0] - 0.1), 0.5 * (s.x[2][1] + s.x[3][1]), 0.0});
+      const double vn = dot(t.v[2] - t.v[3], r.n);
+      if (vn < 0) {
+        r.jn = f32(-(1 + e) * vn / (1 / z.bodies[2].m + 1 / z.bodies[3].m));
+        t.v[2] = t.v[2] + (r.jn / z.bodies[2].m) * r.n;
+        t.v[3] = t.v[3] - (r.jn / z.bodies[3].m) * r.n;
+      }
+      rows.push_back(r);
+    }
+    for (int i = 0; i < z.n(); ++i) z.integrate_position(i, s, t);
+    z.states.push_back(t);
+    z.rows.push_back(rows);
+  }
+  return z;
+}
+
+/// The first step (1-based) with a row on pair (a, b) and a normal impulse.
+int first_impulse(const Zoo& z, int a, int b) {
+  for (std::size_t f = 0; f < z.rows.size(); ++f)
+    for (const Row& r : z.rows[f])
+      if (r.a == a && r.b == b && r.jn > 0) return static_cast<int>(f) + 1;
+  return -1;
+}
+
+class ZooEngines : public ::testing::Test {
+ protected:
+  fs::path dir_;
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("octocd-zoo-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  Result judge(const Zoo& z, const std::string& tag) {
+    const fs::path p = dir_ / (tag + ".h5");
+    z.write(p.string());
+    return run_octocd("validate --trace-in " + p.string());
+  }
+};
+
+/// Every physics row passes or is n/a; lists the table on failure.
+void expect_clean(const Result& r) {
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("FAIL"), std::string::npos) << r.output;
+}
+
+/// Exit 3 and every fragment in the output.
+void expect_caught(const Result& r, const std::vector<std::string>& fragments) {
+  EXPECT_EQ(r.code, 3) << r.output;
+  for (const std::string& f : fragments) EXPECT_NE(r.output.find(f), std::string::npos) << f << "\n" << r.output;
+}
+
+TEST_F(ZooEngines, SoftContactsPassDeclaredAndFailPerStepEnergyUndeclared) {
+  const Zoo z = soft_engine();
+  ASSERT_GT(first_impulse(z, 0, 1), 0);
+  double deepest = 0;
+  for (const auto& step : z.rows)
+    for (const Row& r : step) deepest = std::max(deepest, r.depth);
+  EXPECT_GT(deepest, 0.002);  // a few mm
+  EXPECT_LT(deepest, 0.006);
+  const Result ok = judge(z, "soft");
+  expect_clean(ok);
+  EXPECT_NE(ok.output.find("1 episodes judged"), std::string::npos) << ok.output;
+  Zoo rigid = z;
+  rigid.text.erase("contact_model");
+  expect_caught(judge(rigid, "rigid"), {"kinetic energy", "group (0, 1)"});
+}
+
+TEST_F(ZooEngines, SoftContactsEditedVelocityAndWrongBodyAreCaught) {
+  const Zoo base = soft_engine();
+  const int f = first_impulse(base, 0, 1) + 2;
+  {  // the velocity of body 0, in contact, edited in step f
+    Zoo z = base;
+    z.states[f].v[0][1] += 0.05;
+    expect_caught(judge(z, "edited"), {"momentum-balance", "frame " + std::to_string(f) + ": body 0"});
+  }
+  {  // step f's impulse on body 1 given to body 2 (which flies alone)
+    Zoo z = base;
+    const double jn = z.rows[f - 1].at(0).jn;
+    z.states[f].v[1][0] -= jn;
+    z.states[f].v[2][0] += jn;
+    const Result r = judge(z, "wrong-body");
+    expect_caught(r, {"frame " + std::to_string(f) + ": body 1: m (v' - v)",
+                      "frame " + std::to_string(f) + ": body 2 without contacts: v'"});
+  }
+}
+
+TEST_F(ZooEngines, GyroscopicTermPassesDeclaredAndFailsUndeclared) {
+  const Zoo z = gyroscopic_engine();
+  ASSERT_GT(first_impulse(z, 0, 1), 0);
+  const Result ok = judge(z, "gyro");
+  expect_clean(ok);
+  EXPECT_NE(ok.output.find("gyroscopic term declared"), std::string::npos) << ok.output;
+  Zoo plain = z;
+  plain.text.erase("gyroscopic");
+  expect_caught(judge(plain, "undeclared"), {"free-flight", "frame 1: body 1 without contacts: w'", "angular-velocity"});
+}
+
+TEST_F(ZooEngines, GyroscopicLoneSpinEditsAreCaught) {
+  const Zoo base = gyroscopic_engine(60);
+  {  // angular velocity x1.5 on the lone spinning body 2 in step 30
+    Zoo z = base;
+    z.states[30].w[2] = f32(1.5 * z.states[30].w[2]);
+    expect_caught(judge(z, "spin"), {"frame 30: body 2 without contacts: w'", "angular-velocity 2 of"});
+  }
+  {  // its orientation turned by 30 deg in step 31
+    Zoo z = base;
+    z.states[31].q[2] = f32(qnorm(qmul(axis_angle({0, 0, 1}, M_PI / 6), z.states[31].q[2])));
+    expect_caught(judge(z, "turned"), {"frame 31: body 2 without contacts: q' is 30", "orientation"});
+  }
+}
+
+TEST_F(ZooEngines, LockedRotationPassesDeclaredAndFailsUndeclared) {
+  const Zoo z = locked_engine();
+  ASSERT_GT(first_impulse(z, 2, 3), 0);
+  const Result ok = judge(z, "joints");
+  expect_clean(ok);
+  EXPECT_NE(ok.output.find("locked axes"), std::string::npos) << ok.output;
+  Zoo plain = z;
+  plain.write_locked = false;  // identity orientations, w = 0, nothing declared
+  const Result r = judge(plain, "undeclared");
+  expect_caught(r, {"momentum-balance", "I_w (w' - w)", "angular momentum"});
+}
+
+TEST_F(ZooEngines, LockedEngineDroppedRowAndLoneBodyEditsAreCaught) {
+  const Zoo base = locked_engine();
+  {  // one row of box 1's 4-row floor manifold dropped in step 50
+    Zoo z = base;
+    z.rows[49].erase(z.rows[49].begin() + 2);
+    expect_caught(judge(z, "dropped"), {"momentum-balance", "frame 50: body 1"});
+  }
+  for (double k : {1.5, 2.0}) {  // the lone body 4's velocity x1.5 / x2 in step 40
+    Zoo z = base;
+    z.states[40].v[4] = f32(k * z.states[40].v[4]);
+    expect_caught(judge(z, "fast"), {"free-flight", "frame 40: body 4 without contacts: v'"});
+  }
+  {  // body 4 teleported by 1 cm in step 60
+    Zoo z = base;
+    z.states[60].x[4][2] = f32(z.states[60].x[4][2] + 0.01);
+    expect_caught(judge(z, "teleport"), {"frame 60: body 4 without contacts: x'", "position"});
+  }
+}
+
+TEST_F(ZooEngines, BadDeclarationsExitTwoNamingTheAttribute) {
+  Zoo z = soft_engine(5);
+  z.text["contact_model"] = "squishy";
+  Result r = judge(z, "bad-model");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("contact_model"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("\"rigid\", \"soft\""), std::string::npos) << r.output;
+  z.text["contact_model"] = "soft";
+  z.text["integrator"] = "verlet";
+  r = judge(z, "bad-integrator");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("\"semi-implicit\", \"explicit\", \"any\""), std::string::npos) << r.output;
+  z.text.erase("integrator");
+  z.text["gyroscopic"] = "yes";
+  r = judge(z, "bad-gyro");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("gyroscopic"), std::string::npos) << r.output;
+  z.text.erase("gyroscopic");
+  z.bodies[1].locked = 64;
+  r = judge(z, "bad-locked");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("/bodies/locked_dofs: body 1: 64"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("0 .. 63"), std::string::npos) << r.output;
+}
+
+}  // namespace
+
+namespace {
+
+// The h5py writer example of the declarations (docs/trace-format.md, "Declarations"):
+// explicit Euler, a gyroscopic term, soft contacts and a rotation-locked cube pass.
+TEST_F(ZooEngines, PythonDeclarationsWriterPasses) {
+  const std::string python = "/usr/bin/python3";
+  if (octocd::test::run(python + " -c 'import h5py, numpy'").code != 0)
+    GTEST_SKIP() << python << " lacks h5py or numpy: the example cannot run";
+  const std::string out = (dir_ / "declared.h5").string();
+  const Result w = octocd::test::run(python + " " + octocd::test::source_dir() +
+                                     "/examples/python/declarations_writer.py " + out);
+  ASSERT_EQ(w.code, 0) << w.output;
+  const Result r = run_octocd("validate --trace-in " + out);
+  expect_clean(r);
+  for (const char* f : {"integrator explicit", "gyroscopic term declared", "contact_model soft", "rotation locked"})
+    EXPECT_NE(r.output.find(f), std::string::npos) << f << "\n" << r.output;
+}
+
+}  // namespace
