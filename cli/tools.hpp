@@ -227,7 +227,9 @@ struct ReportOptions {
   std::string title;
   std::vector<std::string> baseline;  ///< --baseline result files: the performance gate
   double threshold = 5.0;             ///< --threshold: slowdown in % that fails the gate
-  std::string csv;                    ///< --csv DIR: every table as CSV
+  double level = 0.05;                ///< --level: the gate's significance level (one-sided Mann-Whitney U)
+  bool across_machines = false;       ///< --across-machines: gate runs of two machines
+  std::string csv;                    ///< --csv DIR: the data as CSV (docs/bench-format.md)
 };
 CLI::App* add_report_command(CLI::App& app, ReportOptions& o);
 int report_command(const ReportOptions& o);
