@@ -337,6 +337,29 @@ TEST_F(Tools, BenchRefusesMissingKeysAllSkippedAndOversizedSweeps) {
   EXPECT_FALSE(fs::exists(dir_ / "h.json"));
 }
 
+// Round-robin (SPEC 14b): repetition r of every point runs before repetition r + 1 of any,
+// so a load burst hits every point alike; each point's repetitions are all in its spreads.
+TEST_F(Tools, BenchRunsRepetitionsRoundRobinOverThePoints) {
+  const std::string sweep = tiny_sweep(20);  // 2 midphases on the cpu engine
+  const fs::path out = dir_ / "rr.json";
+  const Result r = run_octocd("bench " + sweep + " --engines cpu --repeat 3 -o " + out.string() + " --quiet");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json j = read_json(out);
+  std::vector<std::vector<double>> starts;
+  for (const auto& p : j["points"]) {
+    if (p["status"] != "ok") continue;
+    ASSERT_EQ(p["repetition_start_s"].size(), 3u) << p.dump();
+    starts.push_back(p["repetition_start_s"].get<std::vector<double>>());
+    const json& sps = p["windows"].begin().value()["steps_per_s"];
+    EXPECT_EQ(sps["n"], 3);
+    EXPECT_EQ(sps["values"].size(), 3u);
+  }
+  ASSERT_GE(starts.size(), 2u);
+  for (std::size_t rep = 0; rep + 1 < 3; ++rep)
+    for (const auto& a : starts)
+      for (const auto& b : starts) EXPECT_LT(a[rep], b[rep + 1]);
+}
+
 TEST_F(Tools, BenchKilledMidwayLeavesItsFinishedPointsAndResumes) {
   const std::string sweep = tiny_sweep(30000, 2);  // 2 scenes x 2 midphases x (cpu, bullet) = 8 points
   const fs::path out = dir_ / "killed.json";
@@ -368,7 +391,9 @@ TEST_F(Tools, BenchKilledMidwayLeavesItsFinishedPointsAndResumes) {
   EXPECT_TRUE(k["complete"].get<bool>());
   ASSERT_EQ(k["points"].size(), 8u);
   for (std::size_t i = 0; i < k["points"].size(); ++i) EXPECT_EQ(k["points"][i]["index"], static_cast<int>(i));
-  EXPECT_EQ(k["points"][0], j["points"][0]);  // the finished point was kept, not rerun
+  // The finished points were kept, not rerun (round-robin: a point finishes with its last
+  // repetition, or at once when skipped).
+  for (const auto& pt : j["points"]) EXPECT_EQ(k["points"][pt["index"].get<std::size_t>()], pt);
 }
 
 // SIGTERM mid-point: bench stops between two frames (not at the end of the point), keeps
