@@ -216,6 +216,8 @@ struct CompareOptions {
   /// angular_velocities when either trace is of format version 2.
   std::string quantities;
   std::string json;
+  /// --ignore: structure keys not compared (a key such as /midphase, and every key under it).
+  std::vector<std::string> ignore;
 };
 CLI::App* add_compare_command(CLI::App& app, CompareOptions& o);
 int compare_command(const CompareOptions& o);
