@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -673,6 +674,14 @@ void throw_if_stopped() {
   if (octocd::stop_signal() != 0) throw BenchStopped{};
 }
 
+/// The process's CPU time (every thread, user + system) in ms: what a step costs the machine,
+/// without the time the scheduler gave other processes (a shared machine's load).
+double process_cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
+
 /// Sums over the frames of one window of one repetition.
 struct WindowSums {
   std::int64_t frames = 0;
@@ -681,6 +690,7 @@ struct WindowSums {
   std::array<double, kStages> stage_ms{};
   double pairs = 0, candidates = 0, box_pairs = 0, vertex_tests = 0, contacts = 0, memory = 0;
   double pen_weighted = 0, share_weighted = 0, pen_max = 0;
+  double cpu_ms = 0.0;  // process CPU time (every thread) spent in the step calls
   void add(const FrameMetrics& m) {
     ++frames;
     step_ms += m.step_ms;
@@ -792,6 +802,9 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     r["has_stage"][stage_name(static_cast<Stage>(st))] = engine->has_stage(static_cast<Stage>(st));
 
   const int total = s.frames;
+  // Engines that step on the host: their steps per process CPU second are a figure too (the
+  // gate's, on a shared machine). A device engine's CPU time would miss its kernels.
+  const bool host_engine = p.engine != "cuda";
   std::vector<std::vector<WindowSums>> sums(s.windows.size());  // [window][rep]
   const int buckets = s.series_every > 0 ? (total + s.series_every - 1) / s.series_every : 0;
   std::vector<std::vector<WindowSums>> series(static_cast<std::size_t>(buckets));  // [bucket][rep]
@@ -827,10 +840,15 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
           std::in_place, fmt::format("bench point {} stepped frame {} of {} (a step longer than the 0.5 s grace); "
                                      "the result {} keeps the points finished before it (--resume goes on)",
                                      p.id, f, total, o.output));
+      const double cpu0 = host_engine ? process_cpu_ms() : 0.0;
       const FrameMetrics& m = engine->step();
+      const double cpu = host_engine ? process_cpu_ms() - cpu0 : 0.0;
       within.reset();
       for (std::size_t w = 0; w < s.windows.size(); ++w)
-        if (f >= s.windows[w].first && f <= s.windows[w].last) sums[w].back().add(m);
+        if (f >= s.windows[w].first && f <= s.windows[w].last) {
+          sums[w].back().add(m);
+          sums[w].back().cpu_ms += cpu;
+        }
       if (ov.cut_below > 0.0 && f >= s.windows[0].first) {
         WindowSums& w0 = sums[0].back();
         const std::int64_t planned = s.windows[0].last - s.windows[0].first + 1;
@@ -865,12 +883,13 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
 
   auto figures = [&](const std::vector<WindowSums>& reps) {
     json w;
-    std::vector<double> sps, step, pairs, cand, boxes, verts, contacts, mem, pen, share, penmax;
+    std::vector<double> sps, cpu_sps, step, pairs, cand, boxes, verts, contacts, mem, pen, share, penmax;
     std::vector<std::vector<double>> stage(kStages);
     for (const auto& x : reps) {
       const double n = static_cast<double>(std::max<std::int64_t>(x.frames, 1));
       const std::int64_t fr = x.bound_frames > 0 ? x.bound_frames : x.frames;
       sps.push_back(x.step_ms > 0 ? 1000.0 * static_cast<double>(fr) / x.step_ms : 0.0);
+      cpu_sps.push_back(x.cpu_ms > 0 ? 1000.0 * static_cast<double>(x.frames) / x.cpu_ms : 0.0);
       step.push_back(x.step_ms / n);
       for (int st = 0; st < kStages; ++st) stage[st].push_back(x.stage_ms[st] / n);
       pairs.push_back(x.pairs / n);
@@ -885,6 +904,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     }
     w["frames"] = reps.empty() ? 0 : reps.front().frames;
     w["steps_per_s"] = spread(sps);
+    if (host_engine && ov.cut_below <= 0.0) w["cpu_steps_per_s"] = spread(cpu_sps);
     w["step_ms"] = spread(step);
     for (int st = 0; st < kStages; ++st) w["stage_ms"][stage_name(static_cast<Stage>(st))] = spread(stage[st]);
     w["pairs"] = spread(pairs);

@@ -60,6 +60,11 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
       ->check(CLI::Range(0.0, 999.0));
   c->add_option("--level", o.level, "The gate's significance level, one-sided (default 0.05)")
       ->check(CLI::Range(1e-6, 0.25));
+  c->add_option("--timing", o.timing,
+                "The gate's figure: cpu (steps per process CPU second, recorded for host engines: another process's "
+                "load on a shared machine hardly moves it), wall (wall-clock steps/s), or auto (default: cpu where "
+                "both runs have it, else wall)")
+      ->check(CLI::IsMember({"auto", "cpu", "wall"}));
   c->add_flag("--across-machines", o.across_machines,
               "Gate runs of two machines (without it a baseline of another host or CPU is exit 2)");
   c->add_option("--csv", o.csv,
@@ -96,6 +101,8 @@ int report_command(const ReportOptions& o) {
   args.push_back("--level");
   args.push_back(fmt::format("{}", o.level));
   if (o.across_machines) args.push_back("--across-machines");
+  args.push_back("--timing");
+  args.push_back(o.timing);
   if (!o.csv.empty()) {
     args.push_back("--csv");
     args.push_back(o.csv);

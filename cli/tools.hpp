@@ -231,6 +231,7 @@ struct ReportOptions {
   double threshold = 5.0;             ///< --threshold: slowdown in % that fails the gate
   double level = 0.05;                ///< --level: the gate's significance level (one-sided Mann-Whitney U)
   bool across_machines = false;       ///< --across-machines: gate runs of two machines
+  std::string timing = "auto";        ///< --timing: the gate's figure, auto, cpu or wall
   std::string csv;                    ///< --csv DIR: the data as CSV (docs/bench-format.md)
 };
 CLI::App* add_report_command(CLI::App& app, ReportOptions& o);

@@ -208,7 +208,7 @@ class Doc:
         self.out = out
         self.html, self.md = [], []
         self.nplot = 0
-        self.ntable = 0
+        self.ncsv = 0
         self.section = "report"
         self.csv_dir = csv_dir
         if csv_dir:
@@ -225,14 +225,7 @@ class Doc:
         self.html.append(f"<p{c}>{html.escape(text)}</p>")
         self.md.append(text + "\n")
 
-    def table(self, header, rows, note=None, name="table", as_csv=True):
-        if self.csv_dir and as_csv:
-            self.ntable += 1
-            slug = "".join(c if c.isalnum() or c in "-_" else "-" for c in (self.section + "-" + name).lower())
-            with open(os.path.join(self.csv_dir, f"{self.ntable:02d}-{slug.strip('-')}.csv"), "w", newline="") as f:
-                w = csv.writer(f)
-                w.writerow(header)
-                w.writerows(rows)
+    def table(self, header, rows, note=None, name="table"):
         cls = ' class="compact"' if len(header) > 9 else ""
         t = [f'<div class="wide"><table{cls}><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
         for r in rows:
@@ -986,15 +979,24 @@ def gate_test(new_t, base_t, threshold, alpha):
     return verdict, p_slow, ratio, lo, hi
 
 
-def timing_of(p):
-    """[(label, spread, higher_is_better)] of a point: steps/s per window, or replay ms/frame."""
+def timing_of(p, cpu=False):
+    """[(label, spread, higher_is_better)] of a point: steps/s per window (with cpu: steps per
+    process CPU second, where the point has them), or replay ms/frame."""
     out = []
     if isinstance(p.get("windows"), dict):
         for wn, w in p["windows"].items():
-            out.append((f"steps/s ({wn})", w.get("steps_per_s") if isinstance(w, dict) else None, True))
+            if cpu and isinstance(w, dict) and "cpu_steps_per_s" in w:
+                out.append((f"CPU steps/s ({wn})", w["cpu_steps_per_s"], True))
+            else:
+                out.append((f"steps/s ({wn})", w.get("steps_per_s") if isinstance(w, dict) else None, True))
     elif "ms_per_frame" in p:
         out.append(("broadphase ms/frame", p["ms_per_frame"], False))
     return out
+
+
+def has_cpu_timing(p):
+    w = p.get("windows")
+    return isinstance(w, dict) and bool(w) and all(isinstance(x, dict) and "cpu_steps_per_s" in x for x in w.values())
 
 
 def machine_text(j):
@@ -1055,7 +1057,7 @@ def stopped_text(g):
     return "; ".join(why)
 
 
-def gate_decide(base, new, threshold, alpha, across=False):
+def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
     """NEW beside BASE per point and timing figure. Returns a dict: rows (one per point and
     figure, numbers), broken (points of the baseline the new run lacks, failed, skipped or
     measured as non-finite or <= 0: exit 4), few (figures with < 5 repetitions a side: exit 2),
@@ -1085,7 +1087,10 @@ def gate_decide(base, new, threshold, alpha, across=False):
         if p.get("status") != "ok":
             out["broken"].append((pid, f"{p.get('status')} in the new run ({nfile}): {p.get('reason', 'no reason')}"))
             continue
-        bt, nt = timing_of(q), timing_of(p)
+        # Steps per process CPU second where both runs have them (host engines: the load of
+        # other processes on a shared machine hardly moves them), else wall-clock steps/s.
+        cpu = timing == "cpu" or (timing == "auto" and has_cpu_timing(q) and has_cpu_timing(p))
+        bt, nt = timing_of(q, cpu), timing_of(p, cpu)
         if [x[0] for x in bt] != [x[0] for x in nt]:
             out["broken"].append((pid, f"the new run ({nfile}) has figures {[x[0] for x in nt]}, the baseline "
                                        f"{[x[0] for x in bt]}"))
@@ -1093,7 +1098,7 @@ def gate_decide(base, new, threshold, alpha, across=False):
         i = next(k for k, x in enumerate(base["points_list"]) if x["id"] == pid)
         j = next(k for k, x in enumerate(new["points_list"]) if x["id"] == pid)
         for (label, bs, hib), (_, ns, _) in zip(bt, nt):
-            key = "steps_per_s" if hib else "ms_per_frame"
+            key = ("cpu_steps_per_s" if label.startswith("CPU") else "steps_per_s") if hib else "ms_per_frame"
             bv = repetitions(bs, f"points[{i}] '{pid}' {label}", bfile)
             nv = repetitions(ns, f"points[{j}] '{pid}' {label}", nfile)
             bad_b = [v for v in bv if not finite_positive(v)]
@@ -1126,9 +1131,9 @@ def gate_decide(base, new, threshold, alpha, across=False):
     return out
 
 
-def section_gate(doc, base, new, threshold, alpha, across):
+def section_gate(doc, base, new, threshold, alpha, across, timing="auto"):
     """The gate's section of the report; returns gate_decide's result."""
-    res = gate_decide(base, new, threshold, alpha, across)
+    res = gate_decide(base, new, threshold, alpha, across, timing)
     bj, nj = base["first"], new["first"]
     doc.section = "gate"
     doc.h(2, f"Performance gate: {nj['sweep']['name']}", "gate")
@@ -1154,7 +1159,7 @@ def section_gate(doc, base, new, threshold, alpha, across):
     doc.table(["point", "figure", "baseline median", "new median", "ratio (time)", f"{conf:g} % interval",
                "p (slower)", "verdict"], rows,
               ("Measured under load: " + "; ".join(warn) + ". " if warn else "") + " ".join(res["notes"]),
-              name="gate", as_csv=False)
+              name="gate")
     counts = {}
     for r in res["rows"]:
         counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
@@ -1163,7 +1168,82 @@ def section_gate(doc, base, new, threshold, alpha, across):
           else "No point measured in both runs.")
     if doc.csv_dir:
         gate_csv(os.path.join(doc.csv_dir, "gate.csv"), res)
+        doc.ncsv += 1
     return res
+
+
+# ---- CSV: the data, numbers only ---------------------------------------------------------------
+
+CSV_UNITS = {"steps_per_s": "1/s", "cpu_steps_per_s": "1/s", "step_ms": "ms", "stage_ms": "ms", "pairs": "1/frame",
+             "cell_candidates": "1/frame", "box_pairs": "1/frame", "vertex_tests": "1/frame", "contacts": "1/frame",
+             "memory_bytes": "B", "penetration_mean": "m", "penetration_max": "m",
+             "penetration_share_above_slop": "1", "wall_s": "s", "ms_per_frame": "ms"}
+
+
+def file_slug(name):
+    return "".join(c if c.isalnum() or c in "-_." else "-" for c in name).strip("-") or "sweep"
+
+
+def is_spread(x):
+    return isinstance(x, dict) and isinstance(x.get("values"), list)
+
+
+def point_spreads(p):
+    """[(window or '', column, spread)] of a point: every figure with its repetitions."""
+    out = []
+    for wn, w in (p.get("windows") or {}).items():
+        for k, v in w.items():
+            if is_spread(v):
+                out.append((wn, k, v))
+            elif k == "stage_ms" and isinstance(v, dict):
+                out += [(wn, f"stage_ms.{st}", x) for st, x in v.items() if is_spread(x)]
+    out += [("", k, v) for k, v in p.items() if is_spread(v)]
+    return out
+
+
+def csv_number(v):
+    return repr(float(v)) if isinstance(v, (int, float)) and not isinstance(v, bool) else ""
+
+
+def sweep_csv(path, g):
+    """One sweep as data: per point and window one row per repetition (kind rep, repetition
+    0..n-1) and one summary row (kind summary: the median over the repetitions); numbers only,
+    the unit of each figure in its header (`steps_per_s [1/s]`); a point without figures
+    (skipped, failed) one summary row with its status and no figures."""
+    pts = g["points_list"]
+    axes = sorted({a for p in pts for a in (p.get("params", {}).get("axes") or {})})
+    figs = []
+    for p in pts:
+        for _, k, _ in point_spreads(p):
+            if k not in figs:
+                figs.append(k)
+    head = ["sweep", "point", "index", "status", "scene", "engine", "broadphase", "bodies"] + \
+        [f"axis.{a}" for a in axes] + ["window", "first_frame", "last_frame", "kind", "repetition"] + \
+        [f"{k} [{CSV_UNITS.get(k.split('.')[0], '1')}]" for k in figs]
+    name = g["first"]["sweep"]["name"]
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(head)
+        for p in pts:
+            par = p.get("params", {})
+            base = [name, p.get("id"), p.get("index"), p.get("status"), par.get("scene", ""), par.get("engine", ""),
+                    par.get("broadphase", ""), p.get("bodies", par.get("bodies", ""))] + \
+                [(par.get("axes") or {}).get(a, "") for a in axes]
+            sp = point_spreads(p)
+            windows = list(dict.fromkeys(wn for wn, _, _ in sp if wn)) or [""]
+            if not sp:
+                w.writerow(base + ["", "", "", "summary", ""] + [""] * len(figs))
+                continue
+            for wn in windows:
+                wd = (p.get("windows") or {}).get(wn, {})
+                cols = {k: v for x, k, v in sp if x in (wn, "")}
+                n = max(len(v["values"]) for v in cols.values())
+                pre = base + [wn, wd.get("first", ""), wd.get("last", "")]
+                for r in range(n):
+                    w.writerow(pre + ["rep", r] + [csv_number(cols[k]["values"][r]) if k in cols and
+                                                    r < len(cols[k]["values"]) else "" for k in figs])
+                w.writerow(pre + ["summary", ""] + [csv_number(cols[k].get("median")) if k in cols else ""
+                                                      for k in figs])
 
 
 def gate_summary(res, threshold, alpha):
@@ -1196,7 +1276,7 @@ def gate_csv(path, res):
         w.writerow(["point", "figure", "kind", "side", "repetition", "value", "unit", "base_median", "new_median",
                     "ratio_time", "ratio_lo", "ratio_hi", "p_slower", "slower"])
         for r in res["rows"]:
-            unit = "1/s" if r["key"] == "steps_per_s" else "ms"
+            unit = "ms" if r["key"] == "ms_per_frame" else "1/s"
             for side in ("base", "new"):
                 for k, v in enumerate(r[side]):
                     w.writerow([r["point"], r["figure"], "rep", side, k, repr(float(v)), unit] + [""] * 7)
@@ -1224,6 +1304,9 @@ def main():
     ap.add_argument("--threshold", type=float, default=5.0, help="slowdown in %% that fails the gate")
     ap.add_argument("--level", type=float, default=0.05, help="the gate's significance level")
     ap.add_argument("--across-machines", action="store_true", help="gate runs of two machines")
+    ap.add_argument("--timing", choices=["auto", "cpu", "wall"], default="auto",
+                    help="the gate's figure: steps per process CPU second (cpu), wall-clock steps/s (wall), or cpu "
+                         "where both runs have it (auto)")
     ap.add_argument("--csv", help="write the data as CSV into this folder")
     ap.add_argument("inputs", nargs="+")
     a = ap.parse_args()
@@ -1256,7 +1339,7 @@ def main():
                  "allowed: one sweep (its shards) of one machine on each side")
         os.makedirs(a.output, exist_ok=True)
         doc = Doc(a.output, a.csv)
-        gate = section_gate(doc, bg[0], ng[0], a.threshold, a.level, a.across_machines)
+        gate = section_gate(doc, bg[0], ng[0], a.threshold, a.level, a.across_machines, a.timing)
         if gate["few"] and not gate["broken"]:
             pid, label, nb, nn = gate["few"][0]
             fail(f"too few repetitions to decide: '{pid}' {label} has {nb} in the baseline and {nn} in the new run"
@@ -1289,6 +1372,9 @@ def main():
         machine_block(doc, g)
         fn(doc, g)
         skipped_block(doc, g)
+        if doc.csv_dir:
+            sweep_csv(os.path.join(doc.csv_dir, file_slug(name) + ".csv"), g)
+            doc.ncsv += 1
     if traces:
         doc.section = "trace"
         section_traces(doc, traces)
@@ -1298,7 +1384,7 @@ def main():
         doc.html.insert(0 if a.baseline else 1, "<nav>" + "".join(f'<a href="#{k}">{html.escape(t)}</a>' for k, t in nav) + "</nav>")
     doc.write(a.title)
     print(f"octocd report: wrote {os.path.join(a.output, 'index.html')} and {os.path.join(a.output, 'report.md')} "
-          f"({doc.nplot} plots" + (f", {doc.ntable} CSV tables in {a.csv}" if a.csv else "") + ")")
+          f"({doc.nplot} plots" + (f", {doc.ncsv} CSV file(s) in {a.csv}" if a.csv else "") + ")")
     if gate is not None:
         gate_summary(gate, a.threshold, a.level)
         if gate["broken"] or gate["slower"]:

@@ -239,3 +239,52 @@ def test_another_sweep_is_refused(tmp_path):
 def test_bad_level_is_refused(tmp_path):
     rc, out, err = gate(tmp_path, "gate-base.json", "gate-base.json", "--level", "0.9")
     assert rc == 2, out + err
+
+
+def report(tmp_path, *args):
+    """(exit code, stdout, stderr) of make_report.py in-process."""
+    out, err = io.StringIO(), io.StringIO()
+    argv, sys.argv = sys.argv, ["make_report.py", "-o", str(tmp_path / "out"), *args]
+    rc = 0
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            MAKE_REPORT.main()
+    except SystemExit as e:
+        rc = e.code if isinstance(e.code, int) else 1
+    finally:
+        sys.argv = argv
+    return rc, out.getvalue(), err.getvalue()
+
+
+@pytest.mark.parametrize("name", ["bench-small-table6.json", "bench-small-scaling.json", "gate-base.json"])
+def test_csv_is_data(tmp_path, name):
+    """--csv: per point and window one row per repetition and a summary row (the median);
+    numbers only, units in the header; the values are the result's repetitions."""
+    j = load(name)
+    rc, out, err = report(tmp_path, "--csv", str(tmp_path / "csv"), os.path.join(DATA, name))
+    assert rc == 0, out + err
+    rows = list(csv.DictReader(open(tmp_path / "csv" / (j["sweep"]["name"] + ".csv"))))
+    head = list(rows[0].keys())
+    figs = [h for h in head if h.endswith("]")]
+    assert figs and all(" [" in h for h in figs), head
+    for r in rows:
+        assert r["kind"] in ("rep", "summary")
+        for h in figs:
+            if r[h] != "":
+                float(r[h])  # a number, never "20,196 (3,396-27,014, n=5)" or "+42.9%"
+    for p in j["points"]:
+        mine = [r for r in rows if r["point"] == p["id"]]
+        if p["status"] != "ok":
+            assert [r["kind"] for r in mine] == ["summary"], mine
+            continue
+        if "windows" in p:
+            for wn, w in p["windows"].items():
+                sp = w["steps_per_s"]
+                reps = [r for r in mine if r["window"] == wn and r["kind"] == "rep"]
+                summ = [r for r in mine if r["window"] == wn and r["kind"] == "summary"]
+                assert [float(r["steps_per_s [1/s]"]) for r in reps] == sp["values"]
+                assert [int(r["repetition"]) for r in reps] == list(range(sp["n"]))
+                assert len(summ) == 1 and float(summ[0]["steps_per_s [1/s]"]) == sp["median"]
+        else:
+            reps = [r for r in mine if r["kind"] == "rep"]
+            assert [float(r["ms_per_frame [ms]"]) for r in reps] == p["ms_per_frame"]["values"]
