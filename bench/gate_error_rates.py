@@ -40,7 +40,7 @@ def slowed(j, factor):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+")
-    ap.add_argument("--threshold", type=float, default=5.0)
+    ap.add_argument("--threshold", type=float, default=10.0)
     ap.add_argument("--level", type=float, default=0.05)
     ap.add_argument("--slowdown", type=float, action="append", default=[])
     ap.add_argument("--timing", choices=["auto", "cpu", "wall"], default="auto")

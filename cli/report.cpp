@@ -56,7 +56,7 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
                 "repetitions a side: exit 2; a baseline point the new run lacks, failed, skipped or measured as "
                 "non-finite or <= 0, or a stopped new run: exit 4 (named)")
       ->allow_extra_args(false);
-  c->add_option("--threshold", o.threshold, "Slowdown in percent that fails the gate (default 5)")
+  c->add_option("--threshold", o.threshold, "Slowdown in percent that fails the gate (default 10: on a shared 2-core machine the same build twice differs by up to 30 % between runs; docs/bench-format.md, error rates)")
       ->check(CLI::Range(0.0, 999.0));
   c->add_option("--level", o.level, "The gate's significance level, one-sided (default 0.05)")
       ->check(CLI::Range(1e-6, 0.25));

@@ -1090,6 +1090,10 @@ def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
         # Steps per process CPU second where both runs have them (host engines: the load of
         # other processes on a shared machine hardly moves them), else wall-clock steps/s.
         cpu = timing == "cpu" or (timing == "auto" and has_cpu_timing(q) and has_cpu_timing(p))
+        if timing == "cpu" and not (has_cpu_timing(q) and has_cpu_timing(p)):
+            fail(f"--timing cpu: '{pid}' has no cpu_steps_per_s in "
+                 + (base["origin"][pid] if not has_cpu_timing(q) else new["origin"][pid])
+                 + "; allowed: results of a bench that records them (host engines), or --timing auto|wall")
         bt, nt = timing_of(q, cpu), timing_of(p, cpu)
         if [x[0] for x in bt] != [x[0] for x in nt]:
             out["broken"].append((pid, f"the new run ({nfile}) has figures {[x[0] for x in nt]}, the baseline "
@@ -1301,7 +1305,7 @@ def main():
     ap.add_argument("-o", "--output", required=True)
     ap.add_argument("--title", default="octocd benchmark report")
     ap.add_argument("--baseline", action="append", default=[], help="baseline result file(s) (shards merged)")
-    ap.add_argument("--threshold", type=float, default=5.0, help="slowdown in %% that fails the gate")
+    ap.add_argument("--threshold", type=float, default=10.0, help="slowdown in %% that fails the gate")
     ap.add_argument("--level", type=float, default=0.05, help="the gate's significance level")
     ap.add_argument("--across-machines", action="store_true", help="gate runs of two machines")
     ap.add_argument("--timing", choices=["auto", "cpu", "wall"], default="auto",

@@ -236,6 +236,32 @@ def test_another_sweep_is_refused(tmp_path):
     assert "baseline of another sweep" in err
 
 
+def with_cpu(j, wall_factor=1.0, cpu_factor=1.0):
+    """A copy with cpu_steps_per_s (the wall repetitions x 0.8), both figures slowed apart."""
+    j = copy.deepcopy(j)
+    for i, p in enumerate(j["points"]):
+        w = p["windows"]["all"]
+        w["cpu_steps_per_s"] = {}
+        set_values(w["cpu_steps_per_s"], [0.8 * v / cpu_factor for v in w["steps_per_s"]["values"]])
+        set_values(w["steps_per_s"], [v / wall_factor for v in w["steps_per_s"]["values"]])
+    return j
+
+
+def test_cpu_time_decides_where_both_runs_have_it(tmp_path):
+    # Wall-clock 30 % slower (another process's load), CPU time unchanged: passes by default.
+    base = with_cpu(BASE)
+    rc, out, err = gate(tmp_path, with_cpu(BASE, wall_factor=1.3), base)
+    assert rc == 0, out + err
+    rc, out, err = gate(tmp_path, with_cpu(BASE, wall_factor=1.3), base, "--timing", "wall")
+    assert rc == 4 and out.count("gate: SLOWER") == 4, out + err
+    # CPU time 30 % slower: the code is.
+    rc, out, err = gate(tmp_path, with_cpu(BASE, cpu_factor=1.3), base)
+    assert rc == 4 and out.count("gate: SLOWER: ") == 4 and "CPU steps/s (all)" in out, out + err
+    # Forced CPU time on results without it: bad input.
+    rc, out, err = gate(tmp_path, BASE, BASE, "--timing", "cpu")
+    assert rc == 2 and "no cpu_steps_per_s" in err, out + err
+
+
 def test_bad_level_is_refused(tmp_path):
     rc, out, err = gate(tmp_path, "gate-base.json", "gate-base.json", "--level", "0.9")
     assert rc == 2, out + err
