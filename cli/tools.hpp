@@ -8,7 +8,8 @@
 ///
 /// Exit codes as everywhere in octocd: 0 ok, 1 runtime failure, 2 bad input, 3 a check
 /// failed (compare: the traces differ; replay: a broadphase disagrees), 4 the performance
-/// gate found a confirmed slowdown (`report --baseline`).
+/// gate failed (`report --baseline`: a point shown slower, or a baseline point missing,
+/// failed or unmeasured in the new run).
 
 #include <cstdint>
 #include <functional>
