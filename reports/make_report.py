@@ -6,11 +6,14 @@ OUT/index.html (self-contained: every plot inline as SVG, no network) and OUT/re
     /usr/bin/python3 reports/make_report.py -o OUT RESULT.json [TRACE.h5 ...]
 
 Shards of one sweep (same sweep definition, machine and build) are merged. Performance
-gate: `--baseline BASE.json [--threshold P]` sets NEW beside BASE per point and exits 4 on
-a confirmed slowdown (beyond P % with the two runs' min-max ranges apart). `--csv DIR`
-writes every table as CSV. Exit codes: 0 ok, 2 bad input (a file of another format or
-version, duplicate points, shards of different builds, a baseline of another sweep, a
-malformed result: one line, never a traceback), 4 a confirmed slowdown, 1 anything else.
+gate: `--baseline BASE.json [--threshold P] [--level A]` sets NEW beside BASE per point and
+decides on the repetitions with a one-sided Mann-Whitney U test (docs/bench-format.md,
+"Performance gate"). `--csv DIR` writes the data as CSV (per point and repetition, plus a
+summary row). Exit codes: 0 ok, 2 bad input (a file of another format or version, duplicate
+points, shards of different builds, a baseline of another sweep or machine, a forged
+summary, too few repetitions to decide: one line, never a traceback), 4 the gate failed (a
+point slower, or a baseline point missing, failed or unmeasured in the new run), 1 anything
+else.
 Needs Debian's python3-matplotlib and python3-numpy (python3-h5py for traces).
 """
 import argparse
