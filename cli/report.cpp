@@ -49,7 +49,8 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
   c->add_option("-o,--output", o.output, "Output folder (created)")->required();
   c->add_option("--title", o.title, "Title of the report");
   c->add_option("--baseline", o.baseline,
-                "Performance gate: baseline result file(s) of the same sweep (shards merged; repeat the option). Per "
+                "Performance gate: baseline result file(s) of the same sweep (shards merged, runs of one build pooled; repeat "
+                "the option). Per "
                 "point and timing figure, the repetitions of both runs: SLOWER (exit 4) when the one-sided "
                 "Mann-Whitney U test of the new times against the baseline times x (1 + threshold) rejects at --level; "
                 "the time ratio (Hodges-Lehmann) and its interval are printed for every slower point. Fewer than 5 "

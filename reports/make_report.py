@@ -119,14 +119,17 @@ def check_points(path, j):
                     fail(f"{name}: {json.dumps(x)[:60]}; allowed: numbers median, min, max")
 
 
-def merge(results):
-    """Groups result files of one sweep definition on one machine; points by id."""
+def merge(results, pool=False):
+    """Groups result files of one sweep definition on one machine; points by id. With pool
+    (a side of the performance gate), a point in several files (runs of one build) is kept
+    once, its other runs in g["pooled"][id] (the gate pools their repetitions)."""
     groups = {}
     for path, j in results:
         m = j["machine"]
         key = (j["sweep"]["name"], json.dumps(j["sweep"]["definition"], sort_keys=True),
                m.get("hostname"), m.get("cpu"), m.get("gpu"))
-        g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}, "searches": [], "json": {}})
+        g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}, "searches": [], "json": {},
+                                    "pooled": {}})
         if g["files"] and j["build"].get("build_id") != g["first"]["build"].get("build_id"):
             fail(f"{path}: build.build_id: {j['build'].get('build_id')!r}, but {g['files'][0]} (same sweep) has "
                  f"{g['first']['build'].get('build_id')!r}; allowed: shards of one build in one report (compare two "
@@ -140,6 +143,9 @@ def merge(results):
         g["searches"].extend(searches)
         for p in j["points"]:
             pid = p.get("id")
+            if pid in g["points"] and pool:
+                g["pooled"].setdefault(pid, [(g["origin"][pid], g["points"][pid])]).append((path, p))
+                continue
             if pid in g["points"]:
                 fail(f"{path}: points: '{pid}' is also in {g['origin'][pid]}; allowed: each point in one "
                      "result file (shards of one sweep are disjoint)")
@@ -1075,6 +1081,15 @@ def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
     if nwhy:
         out["broken"].append(("the new run", f"not a finished run: {nwhy}"))
     newp = new["points"]
+    def runs_of(g, pid):
+        """[(file, point)] of a point: one per run of the side (several runs pooled)."""
+        return g["pooled"].get(pid) or [(g["origin"][pid], g["points"][pid])]
+
+    for q in base["points_list"]:
+        st = {x.get("status") for _, x in runs_of(base, q["id"])}
+        if "ok" in st and len(st) > 1:
+            fail(f"--baseline: '{q['id']}': ok in some runs, {', '.join(sorted(st - {'ok'}))} in others "
+                 f"({', '.join(f for f, _ in runs_of(base, q['id']))}); allowed: a baseline whose runs measured it")
     base_ok = [p for p in base["points_list"] if p.get("status") == "ok"]
     if not base_ok:
         fail(f"--baseline {base['files'][0]}: no measured point (every point failed or skipped); allowed: a baseline "
@@ -1087,8 +1102,10 @@ def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
             out["broken"].append((pid, "missing in the new run"))
             continue
         nfile = new["origin"][pid]
-        if p.get("status") != "ok":
-            out["broken"].append((pid, f"{p.get('status')} in the new run ({nfile}): {p.get('reason', 'no reason')}"))
+        bad = [(f, x) for f, x in runs_of(new, pid) if x.get("status") != "ok"]
+        if bad:
+            f, x = bad[0]
+            out["broken"].append((pid, f"{x.get('status')} in the new run ({f}): {x.get('reason', 'no reason')}"))
             continue
         # Steps per process CPU second where both runs have them (host engines: the load of
         # other processes on a shared machine hardly moves them), else wall-clock steps/s.
@@ -1103,11 +1120,17 @@ def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
                                        f"{[x[0] for x in bt]}"))
             continue
         i = next(k for k, x in enumerate(base["points_list"]) if x["id"] == pid)
-        j = next(k for k, x in enumerate(new["points_list"]) if x["id"] == pid)
-        for (label, bs, hib), (_, ns, _) in zip(bt, nt):
+        for k, ((label, bs, hib), (_, ns, _)) in enumerate(zip(bt, nt)):
             key = ("cpu_steps_per_s" if label.startswith("CPU") else "steps_per_s") if hib else "ms_per_frame"
-            bv = repetitions(bs, f"points[{i}] '{pid}' {label}", bfile)
-            nv = repetitions(ns, f"points[{j}] '{pid}' {label}", nfile)
+            # Every run of a side: its repetitions pooled (each run's summary checked).
+            bv, nv = [], []
+            for side, vals in ((base, bv), (new, nv)):
+                for f, x in runs_of(side, pid):
+                    tx = timing_of(x, cpu)
+                    if k >= len(tx) or tx[k][0] != label:
+                        out["broken"].append((pid, f"{f} has figures {[t[0] for t in tx]}, expected {label}"))
+                        continue
+                    vals += repetitions(tx[k][1], f"point '{pid}' {label}", f)
             bad_b = [v for v in bv if not finite_positive(v)]
             if bad_b:
                 fail(f"{bfile}: points[{i}] '{pid}' {label}: repetition(s) {bad_b[:3]}; allowed: finite figures > 0 "
@@ -1340,7 +1363,7 @@ def main():
             if x[0] != "result":
                 fail(f"{p}: --baseline: an HDF5 trace; allowed: a result of octocd bench (.json)")
             base_loaded.append((x[1], x[2]))
-        bg, ng = merge(base_loaded), merge(results)
+        bg, ng = merge(base_loaded, pool=True), merge(results, pool=True)
         if len(bg) != 1 or len(ng) != 1:
             fail(f"--baseline: {len(bg)} sweep(s) or machine(s) in the baseline, {len(ng)} in the new results; "
                  "allowed: one sweep (its shards) of one machine on each side")
@@ -1356,7 +1379,7 @@ def main():
             # A failed new run: its sections are not drawn (their figures are what failed).
             results = []
             traces = []
-    groups = merge(results)
+    groups = merge(results, pool=bool(a.baseline))  # the gate pools runs; the sections show the first
     order = list(SECTIONS)
     groups.sort(key=lambda g: (order.index(g["first"]["sweep"]["name"]) if g["first"]["sweep"]["name"] in order
                                else len(order), g["first"]["sweep"]["name"]))

@@ -314,3 +314,25 @@ def test_csv_is_data(tmp_path, name):
         else:
             reps = [r for r in mine if r["kind"] == "rep"]
             assert [float(r["ms_per_frame [ms]"]) for r in reps] == p["ms_per_frame"]["values"]
+
+
+def test_several_runs_a_side_are_pooled(tmp_path):
+    """--baseline R1 --baseline R2 NEW1 NEW2: runs of one build, the same points: their
+    repetitions pooled (10 a side here); a point failed in one new run fails the gate."""
+    paths = {}
+    for name, j in (("b1", BASE), ("b2", scaled(BASE, 1.0)), ("n1", scaled(BASE, 1.3)), ("n2", scaled(BASE, 1.3))):
+        j = copy.deepcopy(j)
+        j["build"]["build_id"] = "base" if name[0] == "b" else "new"
+        paths[name] = tmp_path / f"{name}.json"
+        paths[name].write_text(json.dumps(j))
+    args = ["--baseline", str(paths["b1"]), "--baseline", str(paths["b2"]), "--csv", str(tmp_path / "csv"),
+            str(paths["n1"]), str(paths["n2"])]
+    rc, out, err = report(tmp_path, *args)
+    assert rc == 4 and out.count("gate: SLOWER: ") == 4, out + err
+    rows = list(csv.DictReader(open(tmp_path / "csv" / "gate.csv")))
+    assert sum(1 for r in rows if r["kind"] == "rep" and r["side"] == "new") == 4 * 10
+    bad = json.loads(paths["n2"].read_text())
+    bad["points"][3] = {"id": BASE["points"][3]["id"], "index": 3, "status": "failed", "reason": "boom"}
+    paths["n2"].write_text(json.dumps(bad))
+    rc, out, err = report(tmp_path, *args)
+    assert rc == 4 and f"gate: FAILED: {BASE['points'][3]['id']}: failed in the new run" in out, out + err
