@@ -10,8 +10,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <functional>
 #include <map>
 #include <optional>
 #include <set>
@@ -671,6 +674,14 @@ void throw_if_stopped() {
   if (octocd::stop_signal() != 0) throw BenchStopped{};
 }
 
+/// The process's CPU time (every thread, user + system) in ms: what a step costs the machine,
+/// without the time the scheduler gave other processes (a shared machine's load).
+double process_cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
+
 /// Sums over the frames of one window of one repetition.
 struct WindowSums {
   std::int64_t frames = 0;
@@ -679,6 +690,7 @@ struct WindowSums {
   std::array<double, kStages> stage_ms{};
   double pairs = 0, candidates = 0, box_pairs = 0, vertex_tests = 0, contacts = 0, memory = 0;
   double pen_weighted = 0, share_weighted = 0, pen_max = 0;
+  double cpu_ms = 0.0;  // process CPU time (every thread) spent in the step calls
   void add(const FrameMetrics& m) {
     ++frames;
     step_ms += m.step_ms;
@@ -723,6 +735,7 @@ struct StepsOverride {
   /// seconds (its steps/s can then only end below cut_below: the stored value is that upper
   /// bound), and no more repetitions run once most of them were cut (the median is below).
   double cut_below = 0.0;
+  bool trace = true;  ///< false: no trace even with --trace-dir (a later round-robin repetition)
 };
 
 json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const BenchOptions& o,
@@ -789,6 +802,9 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     r["has_stage"][stage_name(static_cast<Stage>(st))] = engine->has_stage(static_cast<Stage>(st));
 
   const int total = s.frames;
+  // Engines that step on the host: their steps per process CPU second are a figure too (the
+  // gate's, on a shared machine). A device engine's CPU time would miss its kernels.
+  const bool host_engine = p.engine != "cuda";
   std::vector<std::vector<WindowSums>> sums(s.windows.size());  // [window][rep]
   const int buckets = s.series_every > 0 ? (total + s.series_every - 1) / s.series_every : 0;
   std::vector<std::vector<WindowSums>> series(static_cast<std::size_t>(buckets));  // [bucket][rep]
@@ -801,7 +817,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
       engine = make_engine(p.engine, model, cuda_settings_from(o.cuda));
     }
     std::unique_ptr<TraceWriter> trace;
-    if (rep == 0 && !o.trace_dir.empty()) {
+    if (rep == 0 && ov.trace && !o.trace_dir.empty()) {
       fs::create_directories(o.trace_dir);
       TraceMetadata meta = trace_metadata(*engine, 10);
       meta.start_time = utc_time_now();
@@ -824,10 +840,15 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
           std::in_place, fmt::format("bench point {} stepped frame {} of {} (a step longer than the 0.5 s grace); "
                                      "the result {} keeps the points finished before it (--resume goes on)",
                                      p.id, f, total, o.output));
+      const double cpu0 = host_engine ? process_cpu_ms() : 0.0;
       const FrameMetrics& m = engine->step();
+      const double cpu = host_engine ? process_cpu_ms() - cpu0 : 0.0;
       within.reset();
       for (std::size_t w = 0; w < s.windows.size(); ++w)
-        if (f >= s.windows[w].first && f <= s.windows[w].last) sums[w].back().add(m);
+        if (f >= s.windows[w].first && f <= s.windows[w].last) {
+          sums[w].back().add(m);
+          sums[w].back().cpu_ms += cpu;
+        }
       if (ov.cut_below > 0.0 && f >= s.windows[0].first) {
         WindowSums& w0 = sums[0].back();
         const std::int64_t planned = s.windows[0].last - s.windows[0].first + 1;
@@ -862,12 +883,13 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
 
   auto figures = [&](const std::vector<WindowSums>& reps) {
     json w;
-    std::vector<double> sps, step, pairs, cand, boxes, verts, contacts, mem, pen, share, penmax;
+    std::vector<double> sps, cpu_sps, step, pairs, cand, boxes, verts, contacts, mem, pen, share, penmax;
     std::vector<std::vector<double>> stage(kStages);
     for (const auto& x : reps) {
       const double n = static_cast<double>(std::max<std::int64_t>(x.frames, 1));
       const std::int64_t fr = x.bound_frames > 0 ? x.bound_frames : x.frames;
       sps.push_back(x.step_ms > 0 ? 1000.0 * static_cast<double>(fr) / x.step_ms : 0.0);
+      cpu_sps.push_back(x.cpu_ms > 0 ? 1000.0 * static_cast<double>(x.frames) / x.cpu_ms : 0.0);
       step.push_back(x.step_ms / n);
       for (int st = 0; st < kStages; ++st) stage[st].push_back(x.stage_ms[st] / n);
       pairs.push_back(x.pairs / n);
@@ -882,6 +904,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     }
     w["frames"] = reps.empty() ? 0 : reps.front().frames;
     w["steps_per_s"] = spread(sps);
+    if (host_engine && ov.cut_below <= 0.0) w["cpu_steps_per_s"] = spread(cpu_sps);
     w["step_ms"] = spread(step);
     for (int st = 0; st < kStages; ++st) w["stage_ms"][stage_name(static_cast<Stage>(st))] = spread(stage[st]);
     w["pairs"] = spread(pairs);
@@ -919,6 +942,49 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   r["wall_s"] = spread(wall);
   r["status"] = "ok";
   return r;
+}
+
+/// The results of one-repetition runs of one steps point (round-robin, in the order run)
+/// as one result: every spread (an object with "values") over all the repetitions, the
+/// series' per-block figures the median over the repetitions (kinetic energy, the trace and
+/// every other field as the first repetition has them).
+json merge_repetitions(const std::vector<json>& reps) {
+  json out = reps.front();
+  std::function<void(json&, const std::vector<const json*>&)> walk = [&](json& o,
+                                                                        const std::vector<const json*>& all) {
+    if (!o.is_object()) return;
+    if (o.contains("values") && o["values"].is_array() && o.contains("n")) {
+      std::vector<double> v;
+      for (const json* a : all)
+        for (const auto& x : (*a)["values"])
+          v.push_back(x.is_number() ? x.get<double>() : std::numeric_limits<double>::quiet_NaN());
+      o = spread(v);
+      return;
+    }
+    for (auto it = o.begin(); it != o.end(); ++it) {
+      std::vector<const json*> sub;
+      for (const json* a : all)
+        if (a->is_object() && a->contains(it.key())) sub.push_back(&(*a)[it.key()]);
+      if (sub.size() == all.size()) walk(it.value(), sub);
+    }
+  };
+  std::vector<const json*> all;
+  for (const json& r : reps) all.push_back(&r);
+  walk(out, all);
+  if (out.contains("series")) {
+    for (const char* key : {"steps_per_s", "contacts", "pairs", "penetration_mean", "penetration_max"}) {
+      json& col = out["series"][key];
+      for (std::size_t b = 0; b < col.size(); ++b) {
+        std::vector<double> v;
+        for (const json& r : reps) {
+          const json& x = r["series"][key];
+          if (b < x.size() && x[b].is_number()) v.push_back(x[b].get<double>());
+        }
+        if (!v.empty()) col[b] = spread(v)["median"];
+      }
+    }
+  }
+  return out;
 }
 
 // ---- running broadphase points -----------------------------------------------------------------
@@ -1776,22 +1842,9 @@ int bench_command(const BenchOptions& o) {
                                                       [](const json& x) { return x.value("status", "") == "failed"; });
     return failed ? 1 : 0;
   }
-  for (std::size_t k = 0; k < mine.size(); ++k) {
-    const Point& p = *mine[k];
-    if (kept.count(p.id)) continue;
-    if (const int sig = octocd::stop_signal()) return stopped(sig);
-    progress.start(k, p.id);
-    json r;
-    try {
-      r = s.kind == "steps" ? run_steps_point(s, p, models, o, progress) : run_broadphase_point(s, p, inputs, o, progress);
-    } catch (const BenchStopped&) {
-      return stopped(octocd::stop_signal());
-    } catch (const InputError&) {
-      throw;
-    } catch (const std::exception& e) {
-      r["status"] = "failed";
-      r["reason"] = e.what();
-    }
+  // A finished point (all its repetitions, or skipped/failed): stamped, stored, file rewritten.
+  std::size_t finished = 0;
+  const auto finish_point = [&](const Point& p, json r) {
     r["id"] = p.id;
     r["index"] = p.index;
     r["finished"] = utc_time_now();
@@ -1812,9 +1865,81 @@ int bench_command(const BenchOptions& o) {
     } else if (r.contains("reason")) {
       status += ": " + r.value("reason", "");
     }
+    progress.start(finished++, p.id);
     progress.finish(status);
     result["points"].push_back(r);
     write();
+  };
+  const auto run_point = [&](const Point& p, const StepsOverride& ov) {
+    json r;
+    try {
+      r = s.kind == "steps" ? run_steps_point(s, p, models, o, progress, ov)
+                            : run_broadphase_point(s, p, inputs, o, progress);
+    } catch (const InputError&) {
+      throw;
+    } catch (const BenchStopped&) {
+      throw;
+    } catch (const std::exception& e) {
+      r["status"] = "failed";
+      r["reason"] = e.what();
+    }
+    return r;
+  };
+  std::vector<const Point*> todo;
+  for (const Point* p : mine)
+    if (!kept.count(p->id)) todo.push_back(p);
+  if (s.kind == "steps") {
+    // Round-robin: repetition r of every point, then repetition r + 1 of every point, so a
+    // load burst on the machine hits every point's repetitions alike (SPEC 14b). A point
+    // is stored once its last repetition ran (a stop before that drops its repetitions).
+    std::vector<std::vector<json>> reps(todo.size());
+    std::vector<std::vector<double>> started(todo.size());  // each repetition's start, s after t0
+    std::vector<bool> over(todo.size(), false);
+    const auto t0 = Clock::now();
+    for (int rep = 0; rep < s.repeat; ++rep) {
+      for (std::size_t k = 0; k < todo.size(); ++k) {
+        if (over[k]) continue;
+        const Point& p = *todo[k];
+        if (const int sig = octocd::stop_signal()) return stopped(sig);
+        progress.start(finished, fmt::format("{} (repetition {}/{})", p.id, rep + 1, s.repeat));
+        StepsOverride ov;
+        ov.repeat = 1;
+        ov.trace = rep == 0;
+        started[k].push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+        json r;
+        try {
+          r = run_point(p, ov);
+        } catch (const BenchStopped&) {
+          return stopped(octocd::stop_signal());
+        }
+        if (r.value("status", "") != "ok") {
+          over[k] = true;
+          finish_point(p, r);
+          continue;
+        }
+        reps[k].push_back(std::move(r));
+        if (rep + 1 == s.repeat) {
+          over[k] = true;
+          json m = merge_repetitions(reps[k]);
+          m["repetition_start_s"] = started[k];
+          finish_point(p, std::move(m));
+          reps[k].clear();
+        }
+      }
+    }
+  }
+  for (const Point* pp : todo) {
+    if (s.kind == "steps") break;
+    const Point& p = *pp;
+    if (const int sig = octocd::stop_signal()) return stopped(sig);
+    progress.start(finished, p.id);
+    json r;
+    try {
+      r = run_point(p, {});
+    } catch (const BenchStopped&) {
+      return stopped(octocd::stop_signal());
+    }
+    finish_point(p, r);
   }
   // Keep the points in sweep order (resumed ones first otherwise).
   std::sort(result["points"].begin(), result["points"].end(),

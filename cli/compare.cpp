@@ -2,8 +2,9 @@
 // frame count, state rows and their frames, body count, scene name and scene parameters
 // (naming every key that differs); then per quantity, with its own absolute and relative
 // tolerance, the largest difference (frame, body, both values) and the first frame and
-// body beyond the tolerance (0 = bit for bit). Exit 0 same, 3 different (structure or a
-// quantity), 2 unreadable input or a bad option.
+// body beyond the tolerance (0 = bit for bit). --ignore KEY leaves structure keys out.
+// Exit 0 same, 3 different (structure or a quantity), 2 unreadable input, a bad option, or
+// no requested quantity in both traces (nothing compared is not "same").
 //
 // Either trace may be octocd's own (it has /frames; version 1, or 2 for a rotating engine:
 // `--engine bullet --rotation`) or an external trace (no /frames; docs/trace-format.md,
@@ -765,8 +766,8 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
       "restitution, combine rules, contact_margin, detection, ...) where both have them). Then per quantity (--quantity: "
       "which fields, for which version), with its own tolerance: the largest difference (frame, body, both values) "
       "and the first frame and body beyond the tolerance. Exit 0 same, 3 different (structure or a quantity beyond "
-      "its tolerance), 2 unreadable or malformed input (naming file, dataset, frame and the allowed values) or bad "
-      "option");
+      "its tolerance), 2 unreadable or malformed input (naming file, dataset, frame and the allowed values), bad "
+      "option, or no requested quantity that both traces hold (nothing compared, naming what each trace lacks)");
   c->add_option("a", o.a, "First trace (.h5), e.g. the golden one")->required();
   c->add_option("b", o.b, "Second trace (.h5)")->required();
   c->add_option("--tolerance", o.tolerance,
@@ -789,6 +790,11 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
                 "when both have /contacts/point); pairs (/frames/aabb_pairs) and energy (/frames/kinetic_energy): "
                 "octocd traces only (an external trace has no /frames). Default: positions,velocities,contacts,pairs, "
                 "and orientations,angular_velocities when either trace is of version 2");
+  c->add_option("--ignore", o.ignore,
+                "A structure key not to compare (repeatable), as the structure lines name it: e.g. --ignore /midphase "
+                "(cpu against bullet, which has no midphase), --ignore /response (and every key under it), --ignore "
+                "dt, --ignore scene_name; the ignored differences are listed")
+      ->allow_extra_args(false);
   c->add_option("--json", o.json,
                 "Also write everything as JSON to this file: structure differences, per quantity its tolerance, "
                 "largest difference (frame, body, values) and first difference");
@@ -869,6 +875,24 @@ int compare_command(const CompareOptions& o) {
                                     json_text(tb.number_attribute("dt"))));
   if (!octocd_both || a.version == 2 || b.version == 2)
     for (const auto& d : body_differences(a, b)) structure.push_back(d);
+  // --ignore: a difference whose key is an ignored key or lies under one is listed, not failed.
+  std::vector<std::string> ignored;
+  for (const auto& k : o.ignore)
+    if (k.empty() || k.back() == '/')
+      throw InputError(fmt::format("--ignore '{}': allowed: a structure key as `compare` names it, e.g. /midphase, "
+                                   "/response/beta, dt, scene_name",
+                                   k));
+  {
+    std::vector<std::string> kept;
+    for (const auto& d : structure) {
+      const std::string key = d.substr(0, d.find(':'));
+      const bool drop = std::any_of(o.ignore.begin(), o.ignore.end(), [&](const std::string& k) {
+        return key == k || key.rfind(k + "/", 0) == 0;
+      });
+      (drop ? ignored : kept).push_back(d);
+    }
+    structure = std::move(kept);
+  }
 
   const auto attr = [](const TraceReader& t, const char* n) {
     return t.has_attribute(n) ? t.string_attribute(n) : std::string("?");
@@ -890,6 +914,11 @@ int compare_command(const CompareOptions& o) {
   if (!structure.empty()) {
     fmt::print("structure differs ({} key{}):\n", structure.size(), structure.size() == 1 ? "" : "s");
     for (const auto& d : structure) fmt::print("  {}\n", d);
+    fmt::print("\n");
+  }
+  if (!ignored.empty()) {
+    fmt::print("structure ignored (--ignore, {} key{}):\n", ignored.size(), ignored.size() == 1 ? "" : "s");
+    for (const auto& d : ignored) fmt::print("  {}\n", d);
     fmt::print("\n");
   }
 
@@ -961,7 +990,11 @@ int compare_command(const CompareOptions& o) {
                   {"detail", r.detail}});
   }
   const bool differ = first != nullptr || !structure.empty();
-  if (!structure.empty())
+  const bool compared_any =
+      std::any_of(results.begin(), results.end(), [](const QuantityResult& r) { return r.available; });
+  if (!compared_any)
+    fmt::print("\nNOTHING COMPARED: no requested quantity is in both traces\n");
+  else if (!structure.empty())
     fmt::print("\nDIFFERENT: structure ({}){}\n", structure.front(),
                first ? fmt::format("; values first at frame {}{} ({})", first->frame,
                                    first->body >= 0 ? fmt::format(", body {}", first->body) : "", first->name)
@@ -985,9 +1018,19 @@ int compare_command(const CompareOptions& o) {
            {"bodies", na},
            {"same", !differ},
            {"structure", structure},
+           {"ignored", ignored},
+           {"compared_any", compared_any},
            {"quantities", jq}};
     if (first) j["first"] = {{"frame", first->frame}, {"body", first->body}, {"quantity", first->name}};
     write_file_atomically(o.json, j.dump(1) + "\n");
+  }
+  if (!compared_any) {
+    // Nothing requested could be compared: not "same" (exit 2, naming what each trace lacks).
+    std::string why;
+    for (const auto& r : results) why += fmt::format("{}{}: {}", why.empty() ? "" : "; ", r.name, r.compared);
+    throw InputError(fmt::format("{} and {}: no requested quantity could be compared ({}); allowed: a quantity both "
+                                 "traces hold (--quantity positions,velocities works on every trace with /states)",
+                                 o.a, o.b, why));
   }
   return differ ? 3 : 0;
 }

@@ -740,7 +740,8 @@ int main(int argc, char** argv) {
   CLI::App app{
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
       "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a check failed (validate, compare, replay),\n"
-      "4 a confirmed slowdown (report --baseline), 130/143 stopped by SIGINT/SIGTERM (run and validate\n"
+      "4 the performance gate failed (report --baseline: a point slower, or missing or failed in the new run),\n"
+      "130/143 stopped by SIGINT/SIGTERM (run and validate\n"
       "stop between frames and close the trace, validate inside a frame's checks too; a step still\n"
       "running 0.5 s after the signal is cut short; bench keeps its finished points).",
       "octocd"};  // a fixed name: `--help` reads the same whatever path ran it (docs/cli.md)

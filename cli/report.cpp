@@ -1,7 +1,8 @@
 // `octocd report RESULT.json|TRACE.h5 ... -o DIR` (SPEC 12): runs reports/make_report.py
 // (matplotlib; Debian python3-matplotlib) on bench results and traces, which writes
 // DIR/index.html (self-contained: plots inline as SVG) and DIR/report.md (+ DIR/plots/);
-// with --baseline a performance gate (exit 4 on a confirmed slowdown), with --csv every table as CSV.
+// with --baseline a performance gate (exit 4 on a slowdown shown by a one-sided Mann-Whitney U test
+// on the repetitions, or a failed new run), with --csv the data as CSV.
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -41,20 +42,35 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
       "(plots in DIR/plots/): the paper's Tables 5, 6, A1 beside ours per engine, steps/s and stage shares, broadphase "
       "scaling, the beta-delta heatmap, and per trace energy, contacts and penetration over frames. Shards of one "
       "sweep (one build) are merged. With --baseline, a performance gate. Exit 0 ok, 1 failure (e.g. no "
-      "matplotlib), 2 bad input (one line naming the file and key, never a traceback), 4 a confirmed slowdown "
-      "against --baseline");
+      "matplotlib), 2 bad input (one line naming the file and key, never a traceback; too few repetitions to "
+      "decide), 4 the gate fails: a slowdown against --baseline, or a point of the baseline missing, failed or "
+      "unmeasured in the new run");
   c->add_option("inputs", o.inputs, "Result files of `octocd bench` (.json) and traces (.h5)")->required();
   c->add_option("-o,--output", o.output, "Output folder (created)")->required();
   c->add_option("--title", o.title, "Title of the report");
   c->add_option("--baseline", o.baseline,
-                "Performance gate: baseline result file(s) of the same sweep (shards merged; repeat the option). The "
-                "inputs are set beside it per point (ratio, both spreads); a point more than --threshold % slower with "
-                "the two min-max ranges apart is SLOWER and exits 4; beyond the threshold with overlapping ranges (or "
-                "one repetition) is 'inconclusive'. Works across machines (both named)")
+                "Performance gate: baseline result file(s) of the same sweep (shards merged, runs of one build pooled; repeat "
+                "the option). Per "
+                "point and timing figure, the repetitions of both runs: SLOWER (exit 4) when the one-sided "
+                "Mann-Whitney U test of the new times against the baseline times x (1 + threshold) rejects at --level; "
+                "the time ratio (Hodges-Lehmann) and its interval are printed for every slower point. Fewer than 5 "
+                "repetitions a side: exit 2; a baseline point the new run lacks, failed, skipped or measured as "
+                "non-finite or <= 0, or a stopped new run: exit 4 (named)")
       ->allow_extra_args(false);
-  c->add_option("--threshold", o.threshold, "Slowdown in percent that fails the gate (default 5)")
+  c->add_option("--threshold", o.threshold, "Slowdown in percent that fails the gate (default 10: on a shared 2-core machine the same build twice differs by up to 30 % between runs; docs/bench-format.md, error rates)")
       ->check(CLI::Range(0.0, 999.0));
-  c->add_option("--csv", o.csv, "Also write every table as CSV into this folder (one file per table)");
+  c->add_option("--level", o.level, "The gate's significance level, one-sided (default 0.05)")
+      ->check(CLI::Range(1e-6, 0.25));
+  c->add_option("--timing", o.timing,
+                "The gate's figure: cpu (steps per process CPU second, recorded for host engines: another process's "
+                "load on a shared machine hardly moves it), wall (wall-clock steps/s), or auto (default: cpu where "
+                "both runs have it, else wall)")
+      ->check(CLI::IsMember({"auto", "cpu", "wall"}));
+  c->add_flag("--across-machines", o.across_machines,
+              "Gate runs of two machines (without it a baseline of another host or CPU is exit 2)");
+  c->add_option("--csv", o.csv,
+                "Also write the data as CSV into this folder: per sweep one row per point, window and repetition plus "
+                "a summary row per point (numbers only, units in the header); gate.csv with --baseline");
   return c;
 }
 
@@ -83,6 +99,11 @@ int report_command(const ReportOptions& o) {
   }
   args.push_back("--threshold");
   args.push_back(fmt::format("{}", o.threshold));
+  args.push_back("--level");
+  args.push_back(fmt::format("{}", o.level));
+  if (o.across_machines) args.push_back("--across-machines");
+  args.push_back("--timing");
+  args.push_back(o.timing);
   if (!o.csv.empty()) {
     args.push_back("--csv");
     args.push_back(o.csv);

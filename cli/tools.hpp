@@ -8,7 +8,8 @@
 ///
 /// Exit codes as everywhere in octocd: 0 ok, 1 runtime failure, 2 bad input, 3 a check
 /// failed (compare: the traces differ; replay: a broadphase disagrees), 4 the performance
-/// gate found a confirmed slowdown (`report --baseline`).
+/// gate failed (`report --baseline`: a point shown slower, or a baseline point missing,
+/// failed or unmeasured in the new run).
 
 #include <cstdint>
 #include <functional>
@@ -215,6 +216,8 @@ struct CompareOptions {
   /// angular_velocities when either trace is of format version 2.
   std::string quantities;
   std::string json;
+  /// --ignore: structure keys not compared (a key such as /midphase, and every key under it).
+  std::vector<std::string> ignore;
 };
 CLI::App* add_compare_command(CLI::App& app, CompareOptions& o);
 int compare_command(const CompareOptions& o);
@@ -225,8 +228,11 @@ struct ReportOptions {
   std::string output;
   std::string title;
   std::vector<std::string> baseline;  ///< --baseline result files: the performance gate
-  double threshold = 5.0;             ///< --threshold: slowdown in % that fails the gate
-  std::string csv;                    ///< --csv DIR: every table as CSV
+  double threshold = 10.0;            ///< --threshold: slowdown in % that fails the gate (docs/bench-format.md: error rates)
+  double level = 0.05;                ///< --level: the gate's significance level (one-sided Mann-Whitney U)
+  bool across_machines = false;       ///< --across-machines: gate runs of two machines
+  std::string timing = "auto";        ///< --timing: the gate's figure, auto, cpu or wall
+  std::string csv;                    ///< --csv DIR: the data as CSV (docs/bench-format.md)
 };
 CLI::App* add_report_command(CLI::App& app, ReportOptions& o);
 int report_command(const ReportOptions& o);

@@ -6,11 +6,14 @@ OUT/index.html (self-contained: every plot inline as SVG, no network) and OUT/re
     /usr/bin/python3 reports/make_report.py -o OUT RESULT.json [TRACE.h5 ...]
 
 Shards of one sweep (same sweep definition, machine and build) are merged. Performance
-gate: `--baseline BASE.json [--threshold P]` sets NEW beside BASE per point and exits 4 on
-a confirmed slowdown (beyond P % with the two runs' min-max ranges apart). `--csv DIR`
-writes every table as CSV. Exit codes: 0 ok, 2 bad input (a file of another format or
-version, duplicate points, shards of different builds, a baseline of another sweep, a
-malformed result: one line, never a traceback), 4 a confirmed slowdown, 1 anything else.
+gate: `--baseline BASE.json [--threshold P] [--level A]` sets NEW beside BASE per point and
+decides on the repetitions with a one-sided Mann-Whitney U test (docs/bench-format.md,
+"Performance gate"). `--csv DIR` writes the data as CSV (per point and repetition, plus a
+summary row). Exit codes: 0 ok, 2 bad input (a file of another format or version, duplicate
+points, shards of different builds, a baseline of another sweep or machine, a forged
+summary, too few repetitions to decide: one line, never a traceback), 4 the gate failed (a
+point slower, or a baseline point missing, failed or unmeasured in the new run), 1 anything
+else.
 Needs Debian's python3-matplotlib and python3-numpy (python3-h5py for traces).
 """
 import argparse
@@ -110,24 +113,29 @@ def check_points(path, j):
                 name = f"{where}.{k}" + (f".{sub}" if sub else "")
                 if not isinstance(x, dict) or not isinstance(x.get("n"), int):
                     fail(f"{name}: {json.dumps(x)[:60]}; allowed: a spread {{median, min, max, n, ...}}")
-                if x["n"] > 0 and not all(isinstance(x.get(f), (int, float)) and not isinstance(x.get(f), bool)
-                                          for f in ("median", "min", "max")):
+                # null: a non-finite figure (JSON has no NaN); the gate fails such a point, exit 4.
+                if x["n"] > 0 and not all(x.get(f) is None or isinstance(x.get(f), (int, float))
+                                          and not isinstance(x.get(f), bool) for f in ("median", "min", "max")):
                     fail(f"{name}: {json.dumps(x)[:60]}; allowed: numbers median, min, max")
 
 
-def merge(results):
-    """Groups result files of one sweep definition on one machine; points by id."""
+def merge(results, pool=False):
+    """Groups result files of one sweep definition on one machine; points by id. With pool
+    (a side of the performance gate), a point in several files (runs of one build) is kept
+    once, its other runs in g["pooled"][id] (the gate pools their repetitions)."""
     groups = {}
     for path, j in results:
         m = j["machine"]
         key = (j["sweep"]["name"], json.dumps(j["sweep"]["definition"], sort_keys=True),
                m.get("hostname"), m.get("cpu"), m.get("gpu"))
-        g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}, "searches": []})
+        g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}, "searches": [], "json": {},
+                                    "pooled": {}})
         if g["files"] and j["build"].get("build_id") != g["first"]["build"].get("build_id"):
             fail(f"{path}: build.build_id: {j['build'].get('build_id')!r}, but {g['files'][0]} (same sweep) has "
                  f"{g['first']['build'].get('build_id')!r}; allowed: shards of one build in one report (compare two "
                  "builds with --baseline BASE.json NEW.json)")
         g["files"].append(path)
+        g["json"][path] = j
         searches = j.get("searches", [])
         if not isinstance(searches, list) or not all(isinstance(x, dict) for x in searches):
             fail(f"{path}: searches: {json.dumps(searches)[:60]}; allowed: an array of search summaries "
@@ -135,6 +143,9 @@ def merge(results):
         g["searches"].extend(searches)
         for p in j["points"]:
             pid = p.get("id")
+            if pid in g["points"] and pool:
+                g["pooled"].setdefault(pid, [(g["origin"][pid], g["points"][pid])]).append((path, p))
+                continue
             if pid in g["points"]:
                 fail(f"{path}: points: '{pid}' is also in {g['origin'][pid]}; allowed: each point in one "
                      "result file (shards of one sweep are disjoint)")
@@ -206,7 +217,7 @@ class Doc:
         self.out = out
         self.html, self.md = [], []
         self.nplot = 0
-        self.ntable = 0
+        self.ncsv = 0
         self.section = "report"
         self.csv_dir = csv_dir
         if csv_dir:
@@ -224,13 +235,6 @@ class Doc:
         self.md.append(text + "\n")
 
     def table(self, header, rows, note=None, name="table"):
-        if self.csv_dir:
-            self.ntable += 1
-            slug = "".join(c if c.isalnum() or c in "-_" else "-" for c in (self.section + "-" + name).lower())
-            with open(os.path.join(self.csv_dir, f"{self.ntable:02d}-{slug.strip('-')}.csv"), "w", newline="") as f:
-                w = csv.writer(f)
-                w.writerow(header)
-                w.writerows(rows)
         cls = ' class="compact"' if len(header) > 9 else ""
         t = [f'<div class="wide"><table{cls}><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
         for r in rows:
@@ -917,16 +921,91 @@ def section_traces(doc, paths):
 
 
 # ---- performance gate ------------------------------------------------------------------------
+#
+# The statistic (docs/bench-format.md, "Performance gate"): per point and timing figure, the
+# repetitions as times (1 / steps/s, or ms/frame) of both runs. The gate's test is the
+# one-sided Mann-Whitney U test (scipy.stats.mannwhitneyu, exact null distribution) of
+# H0 "new time <= (1 + P/100) x baseline time" against "new slower than that", at level
+# alpha (--level, default 0.05): SLOWER when p < alpha. The ratio shown is the Hodges-Lehmann
+# estimate (median of the m x n pairwise ratios new_i / base_j) with its distribution-free
+# 1 - 2 alpha interval (the pairwise ratios' order statistics at U's critical value), the
+# interval that goes with the test: SLOWER <=> its lower end lies above 1 + P/100 (up to ties).
 
-def timing_of(p):
-    """[(label, spread, higher_is_better)] of a point: steps/s per window, or replay ms/frame."""
+GATE_MIN_REPS = 5
+
+
+def u_null_sf_counts(m, n):
+    """Counts of U = 0 .. m*n under H0 for samples of m and n (no ties): the coefficients of
+    the Gaussian binomial [m+n choose m]_q = prod_{i=1..m} (1 - q^(n+i)) / (1 - q^i)."""
+    c = [1] + [0] * (m * n)
+    for i in range(1, m + 1):
+        for k in range(m * n, n + i - 1, -1):  # times (1 - q^(n+i))
+            c[k] -= c[k - n - i]
+        for k in range(i, m * n + 1):  # divided by (1 - q^i)
+            c[k] += c[k - i]
+    return c
+
+
+def u_critical(m, n, alpha):
+    """The smallest c with P(U >= c) <= alpha under H0, or None when no c is (too few repetitions)."""
+    counts = u_null_sf_counts(m, n)
+    total, tail = sum(counts), 0
+    for c in range(m * n, -1, -1):
+        if (tail + counts[c]) / total > alpha:
+            return c + 1 if c + 1 <= m * n else None
+        tail += counts[c]
+    return 0
+
+
+def ratio_interval(new_t, base_t, alpha):
+    """Hodges-Lehmann ratio new/base with its 1 - 2 alpha interval (from U's critical value)."""
+    d = sorted(math.log(x) - math.log(y) for x in new_t for y in base_t)
+    mn = len(d)
+    c = u_critical(len(new_t), len(base_t), alpha)
+    est = math.exp(float(np.median(d)))
+    if c is None:
+        return est, 0.0, math.inf
+    return est, math.exp(d[mn - c]), math.exp(d[c - 1])
+
+
+def gate_test(new_t, base_t, threshold, alpha):
+    """One figure: (verdict, p_slower, ratio, lo, hi). p_slower: one-sided Mann-Whitney U of
+    new times against baseline times x (1 + threshold/100)."""
+    from scipy.stats import mannwhitneyu
+    f = 1.0 + threshold / 100.0
+    scaled = [y * f for y in base_t]
+    p_slow = float(mannwhitneyu(new_t, scaled, alternative="greater", method="exact").pvalue)
+    p_fast = float(mannwhitneyu([x * f for x in new_t], base_t, alternative="less", method="exact").pvalue)
+    ratio, lo, hi = ratio_interval(new_t, base_t, alpha)
+    if p_slow < alpha:
+        verdict = "SLOWER"
+    elif p_fast < alpha:
+        verdict = "faster"
+    elif lo >= 1.0 / f and hi <= f:
+        verdict = "same"
+    else:
+        verdict = "not shown slower"
+    return verdict, p_slow, ratio, lo, hi
+
+
+def timing_of(p, cpu=False):
+    """[(label, spread, higher_is_better)] of a point: steps/s per window (with cpu: steps per
+    process CPU second, where the point has them), or replay ms/frame."""
     out = []
     if isinstance(p.get("windows"), dict):
         for wn, w in p["windows"].items():
-            out.append((f"steps/s ({wn})", w["steps_per_s"], True))
-    elif isinstance(p.get("ms_per_frame"), dict):
+            if cpu and isinstance(w, dict) and "cpu_steps_per_s" in w:
+                out.append((f"CPU steps/s ({wn})", w["cpu_steps_per_s"], True))
+            else:
+                out.append((f"steps/s ({wn})", w.get("steps_per_s") if isinstance(w, dict) else None, True))
+    elif "ms_per_frame" in p:
         out.append(("broadphase ms/frame", p["ms_per_frame"], False))
     return out
+
+
+def has_cpu_timing(p):
+    w = p.get("windows")
+    return isinstance(w, dict) and bool(w) and all(isinstance(x, dict) and "cpu_steps_per_s" in x for x in w.values())
 
 
 def machine_text(j):
@@ -934,61 +1013,307 @@ def machine_text(j):
     return f"{m.get('hostname')} ({m.get('cpu')}), build {b.get('build_id')}"
 
 
-def section_gate(doc, base, new, threshold):
-    """NEW beside BASE per point. Returns the number of confirmed slowdowns."""
+def finite_positive(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+
+
+def repetitions(spread, where, side_file):
+    """The raw repetitions of a spread, checked against its stored summary (median, min, max,
+    n): a summary that does not match its repetitions (an edited or forged file) is bad input.
+    Values may be non-finite or <= 0 (the caller judges them)."""
+    if not isinstance(spread, dict) or not isinstance(spread.get("values"), list):
+        fail(f"{side_file}: {where}.values: missing; allowed: a spread with its repetitions (octocd bench writes "
+             "them; the gate decides on the repetitions, never on stored ranges)")
+    vals = spread["values"]
+    nums = [v for v in vals if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)]
+    if len(nums) == len(vals) and vals:
+        expect = {"n": len(vals), "median": float(np.median(vals)), "min": min(vals), "max": max(vals)}
+        for k, e in expect.items():
+            got = spread.get(k)
+            if not isinstance(got, (int, float)) or isinstance(got, bool) or \
+                    not math.isclose(got, e, rel_tol=1e-9, abs_tol=1e-300):
+                fail(f"{side_file}: {where}.{k}: {got!r}, but its {len(vals)} repetitions give {e!r}; allowed: a "
+                     "summary that matches its values (an edited or forged result is refused)")
+    elif spread.get("n") != len(vals):
+        fail(f"{side_file}: {where}.n: {spread.get('n')!r}, but it holds {len(vals)} values; allowed: n = the "
+             "number of values")
+    return vals
+
+
+def check_same_sweep(base, new, across):
     bj, nj = base["first"], new["first"]
     for key, what in (("name", "sweep.name"), ("definition", "sweep.definition")):
         if bj["sweep"].get(key) != nj["sweep"].get(key):
             fail(f"{base['files'][0]}: {what}: baseline of another sweep ({bj['sweep'].get('name')!r} vs "
                  f"{nj['sweep'].get('name')!r} in {new['files'][0]}); allowed: a baseline of the same sweep definition")
+    bm, nm = bj["machine"], nj["machine"]
+    if (bm.get("hostname"), bm.get("cpu")) != (nm.get("hostname"), nm.get("cpu")) and not across:
+        fail(f"{new['files'][0]}: machine: {nm.get('hostname')!r} ({nm.get('cpu')}), but the baseline "
+             f"{base['files'][0]} ran on {bm.get('hostname')!r} ({bm.get('cpu')}); allowed: runs of one machine, or "
+             "--across-machines (a ratio then mixes the machines' speed with the builds')")
+    return (bm.get("hostname"), bm.get("cpu")) != (nm.get("hostname"), nm.get("cpu"))
+
+
+def stopped_text(g):
+    """Why a side's result is not a finished run ('' when it is)."""
+    why = []
+    for path in g["files"]:
+        j = g["json"][path]
+        if j.get("stopped"):
+            why.append(f"{path}: stopped by {j['stopped']}")
+        elif j.get("complete") is not True:
+            why.append(f"{path}: complete: {json.dumps(j.get('complete'))} (an interrupted or unfinished run)")
+    return "; ".join(why)
+
+
+def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
+    """NEW beside BASE per point and timing figure. Returns a dict: rows (one per point and
+    figure, numbers), broken (points of the baseline the new run lacks, failed, skipped or
+    measured as non-finite or <= 0: exit 4), few (figures with < 5 repetitions a side: exit 2),
+    slower (rows SLOWER: exit 4), across, notes. Bad input (another sweep, another machine
+    without `across`, a forged summary, a broken baseline) exits 2 here."""
+    across = check_same_sweep(base, new, across)
+    bwhy = stopped_text(base)
+    if bwhy:
+        fail(f"--baseline: {bwhy}; allowed: a finished run of `octocd bench` as the baseline")
+    out = {"rows": [], "broken": [], "few": [], "slower": [], "across": across, "notes": []}
+    nwhy = stopped_text(new)
+    if nwhy:
+        out["broken"].append(("the new run", f"not a finished run: {nwhy}"))
+    newp = new["points"]
+    def runs_of(g, pid):
+        """[(file, point)] of a point: one per run of the side (several runs pooled)."""
+        return g["pooled"].get(pid) or [(g["origin"][pid], g["points"][pid])]
+
+    for q in base["points_list"]:
+        st = {x.get("status") for _, x in runs_of(base, q["id"])}
+        if "ok" in st and len(st) > 1:
+            fail(f"--baseline: '{q['id']}': ok in some runs, {', '.join(sorted(st - {'ok'}))} in others "
+                 f"({', '.join(f for f, _ in runs_of(base, q['id']))}); allowed: a baseline whose runs measured it")
+    base_ok = [p for p in base["points_list"] if p.get("status") == "ok"]
+    if not base_ok:
+        fail(f"--baseline {base['files'][0]}: no measured point (every point failed or skipped); allowed: a baseline "
+             "with measured points")
+    for q in base_ok:
+        pid = q["id"]
+        bfile = base["origin"][pid]
+        p = newp.get(pid)
+        if p is None:
+            out["broken"].append((pid, "missing in the new run"))
+            continue
+        nfile = new["origin"][pid]
+        bad = [(f, x) for f, x in runs_of(new, pid) if x.get("status") != "ok"]
+        if bad:
+            f, x = bad[0]
+            out["broken"].append((pid, f"{x.get('status')} in the new run ({f}): {x.get('reason', 'no reason')}"))
+            continue
+        # Steps per process CPU second where both runs have them (host engines: the load of
+        # other processes on a shared machine hardly moves them), else wall-clock steps/s.
+        cpu = timing == "cpu" or (timing == "auto" and has_cpu_timing(q) and has_cpu_timing(p))
+        if timing == "cpu" and not (has_cpu_timing(q) and has_cpu_timing(p)):
+            fail(f"--timing cpu: '{pid}' has no cpu_steps_per_s in "
+                 + (base["origin"][pid] if not has_cpu_timing(q) else new["origin"][pid])
+                 + "; allowed: results of a bench that records them (host engines), or --timing auto|wall")
+        bt, nt = timing_of(q, cpu), timing_of(p, cpu)
+        if [x[0] for x in bt] != [x[0] for x in nt]:
+            out["broken"].append((pid, f"the new run ({nfile}) has figures {[x[0] for x in nt]}, the baseline "
+                                       f"{[x[0] for x in bt]}"))
+            continue
+        i = next(k for k, x in enumerate(base["points_list"]) if x["id"] == pid)
+        for k, ((label, bs, hib), (_, ns, _)) in enumerate(zip(bt, nt)):
+            key = ("cpu_steps_per_s" if label.startswith("CPU") else "steps_per_s") if hib else "ms_per_frame"
+            # Every run of a side: its repetitions pooled (each run's summary checked).
+            bv, nv = [], []
+            for side, vals in ((base, bv), (new, nv)):
+                for f, x in runs_of(side, pid):
+                    tx = timing_of(x, cpu)
+                    if k >= len(tx) or tx[k][0] != label:
+                        out["broken"].append((pid, f"{f} has figures {[t[0] for t in tx]}, expected {label}"))
+                        continue
+                    vals += repetitions(tx[k][1], f"point '{pid}' {label}", f)
+            bad_b = [v for v in bv if not finite_positive(v)]
+            if bad_b:
+                fail(f"{bfile}: points[{i}] '{pid}' {label}: repetition(s) {bad_b[:3]}; allowed: finite figures > 0 "
+                     "in the baseline")
+            bad_n = [v for v in nv if not finite_positive(v)]
+            if bad_n or not nv:
+                out["broken"].append((pid, f"{label} in the new run ({nfile}): "
+                                           + (f"repetition(s) {', '.join(str(v) for v in bad_n[:3])}: not finite "
+                                              "and > 0" if bad_n else "no repetitions")))
+                continue
+            if min(len(bv), len(nv)) < GATE_MIN_REPS:
+                out["few"].append((pid, label, len(bv), len(nv)))
+                continue
+            bt_s = [1.0 / v for v in bv] if hib else list(bv)
+            nt_s = [1.0 / v for v in nv] if hib else list(nv)
+            verdict, pval, ratio, lo, hi = gate_test(nt_s, bt_s, threshold, alpha)
+            row = {"point": pid, "figure": label, "key": key, "base": bv, "new": nv, "base_median": float(np.median(bv)),
+                   "new_median": float(np.median(nv)), "ratio": ratio, "lo": lo, "hi": hi, "p": pval,
+                   "verdict": verdict}
+            out["rows"].append(row)
+            if verdict == "SLOWER":
+                out["slower"].append(row)
+    base_ids = {p["id"] for p in base_ok}
+    extra = [p["id"] for p in new["points_list"] if p["id"] not in base_ids and p.get("status") == "ok"]
+    if extra:
+        out["notes"].append(f"{len(extra)} point(s) of the new run not measured in the baseline (not gated): "
+                            + ", ".join(extra))
+    return out
+
+
+def section_gate(doc, base, new, threshold, alpha, across, timing="auto"):
+    """The gate's section of the report; returns gate_decide's result."""
+    res = gate_decide(base, new, threshold, alpha, across, timing)
+    bj, nj = base["first"], new["first"]
     doc.section = "gate"
     doc.h(2, f"Performance gate: {nj['sweep']['name']}", "gate")
-    across = (bj["machine"].get("hostname"), bj["machine"].get("cpu")) != (nj["machine"].get("hostname"),
-                                                                            nj["machine"].get("cpu"))
+    conf = 100.0 * (1.0 - 2.0 * alpha)
     doc.p(f"Baseline: {machine_text(bj)}, {', '.join(os.path.basename(f) for f in base['files'])}. "
           f"New: {machine_text(nj)}, {', '.join(os.path.basename(f) for f in new['files'])}. "
-          + (f"Across machines: {bj['machine'].get('hostname')} vs {nj['machine'].get('hostname')}: a ratio mixes the "
-             "machines' speed with the builds'. " if across else "Same machine. ")
-          + f"Ratio = new time / baseline time (> 1 slower). A point is SLOWER (exit 4) when its median is more "
-          f"than {threshold:g} % slower and the two min-max ranges do not overlap; more than {threshold:g} % with "
-          "overlapping ranges (or a single repetition) is inconclusive; ⚠ marks a run measured under load.")
+          + (f"Across machines (--across-machines): {bj['machine'].get('hostname')} vs "
+             f"{nj['machine'].get('hostname')}: a ratio mixes the machines' speed with the builds'. "
+             if res["across"] else "Same machine. ")
+          + f"Ratio = new time / baseline time (> 1 slower): the median of the pairwise ratios of the repetitions "
+          f"(Hodges-Lehmann) with its {conf:g} % interval. A figure is SLOWER (exit 4) when the one-sided "
+          f"Mann-Whitney U test of the new times against the baseline times x {1 + threshold / 100:g} rejects at level "
+          f"{alpha:g} (p < {alpha:g}): slower by more than {threshold:g} % with confidence; 'same' when the interval "
+          f"lies within {threshold:g} % either way; 'not shown slower' otherwise (passes). At least "
+          f"{GATE_MIN_REPS} repetitions a side; a baseline point the new run lacks, failed, skipped or measured as "
+          "non-finite or <= 0 fails the gate (exit 4).")
     warn = [f"{side}: {w}" for side, w in (("baseline", load_warning(bj["machine"])),
                                             ("new", load_warning(nj["machine"]))) if w]
-    bp = {p["id"]: p for p in base["points_list"] if p.get("status") == "ok"}
-    rows, slower = [], 0
+    rows = [[r["point"], r["figure"], f"{num(r['base_median'])} (n={len(r['base'])})",
+             f"{num(r['new_median'])} (n={len(r['new'])})", f"{r['ratio']:.3f}", f"{r['lo']:.3f}–{r['hi']:.3f}",
+             f"{r['p']:.3g}", ("⚠ " if warn and r["verdict"] != "same" else "") + r["verdict"]] for r in res["rows"]]
+    rows += [[pid, "", "", "", "", "", "", "FAILED: " + why] for pid, why in res["broken"]]
+    doc.table(["point", "figure", "baseline median", "new median", "ratio (time)", f"{conf:g} % interval",
+               "p (slower)", "verdict"], rows,
+              ("Measured under load: " + "; ".join(warn) + ". " if warn else "") + " ".join(res["notes"]),
+              name="gate")
     counts = {}
-    for p in new["points_list"]:
-        if p.get("status") != "ok" or p["id"] not in bp:
-            continue
-        q = bp[p["id"]]
-        for (label, ns, hib), (_, bs, _) in zip(timing_of(p), timing_of(q)):
-            if not (isinstance(bs, dict) and isinstance(ns, dict) and bs.get("median") and ns.get("median")):
-                continue
-            ratio = bs["median"] / ns["median"] if hib else ns["median"] / bs["median"]
-            change = 100.0 * (ratio - 1.0)
-            if abs(change) <= threshold:
-                verdict = "same (within threshold)"
-            elif overlap(bs, ns):
-                verdict = "inconclusive (ranges overlap)" if min(bs.get("n", 1), ns.get("n", 1)) > 1 else \
-                    "inconclusive (1 repetition)"
-            elif change > 0:
-                verdict = "SLOWER"
-                slower += 1
-            else:
-                verdict = "faster"
-            if warn and not verdict.startswith("same"):
-                verdict = "⚠ " + verdict
-            counts[verdict] = counts.get(verdict, 0) + 1
-            rows.append([p["id"], label, spread_text(bs), spread_text(ns), f"{ratio:.3f}", f"{change:+.1f}%", verdict])
-    missing = [i for i in bp if i not in {p["id"] for p in new["points_list"] if p.get("status") == "ok"}]
-    doc.table(["point", "figure", "baseline median (min–max, n)", "new median (min–max, n)", "ratio (time)",
-               "change", "verdict"], rows,
-              ("Measured under load: " + "; ".join(warn) + ". " if warn else "")
-              + (f"{len(missing)} baseline point(s) not measured in the new run: {', '.join(missing[:5])}"
-                 + (" ..." if len(missing) > 5 else "") + "." if missing else ""), name="gate")
-    doc.p("Verdicts: " + ", ".join(f"{v} {c}" for v, c in sorted(counts.items())) + "." if counts
+    for r in res["rows"]:
+        counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
+    doc.p("Verdicts: " + ", ".join(f"{v} {c}" for v, c in sorted(counts.items()))
+          + (f", FAILED {len(res['broken'])}" if res["broken"] else "") + "." if counts or res["broken"]
           else "No point measured in both runs.")
-    return slower
+    if doc.csv_dir:
+        gate_csv(os.path.join(doc.csv_dir, "gate.csv"), res)
+        doc.ncsv += 1
+    return res
+
+
+# ---- CSV: the data, numbers only ---------------------------------------------------------------
+
+CSV_UNITS = {"steps_per_s": "1/s", "cpu_steps_per_s": "1/s", "step_ms": "ms", "stage_ms": "ms", "pairs": "1/frame",
+             "cell_candidates": "1/frame", "box_pairs": "1/frame", "vertex_tests": "1/frame", "contacts": "1/frame",
+             "memory_bytes": "B", "penetration_mean": "m", "penetration_max": "m",
+             "penetration_share_above_slop": "1", "wall_s": "s", "ms_per_frame": "ms"}
+
+
+def file_slug(name):
+    return "".join(c if c.isalnum() or c in "-_." else "-" for c in name).strip("-") or "sweep"
+
+
+def is_spread(x):
+    return isinstance(x, dict) and isinstance(x.get("values"), list)
+
+
+def point_spreads(p):
+    """[(window or '', column, spread)] of a point: every figure with its repetitions."""
+    out = []
+    for wn, w in (p.get("windows") or {}).items():
+        for k, v in w.items():
+            if is_spread(v):
+                out.append((wn, k, v))
+            elif k == "stage_ms" and isinstance(v, dict):
+                out += [(wn, f"stage_ms.{st}", x) for st, x in v.items() if is_spread(x)]
+    out += [("", k, v) for k, v in p.items() if is_spread(v)]
+    return out
+
+
+def csv_number(v):
+    return repr(float(v)) if isinstance(v, (int, float)) and not isinstance(v, bool) else ""
+
+
+def sweep_csv(path, g):
+    """One sweep as data: per point and window one row per repetition (kind rep, repetition
+    0..n-1) and one summary row (kind summary: the median over the repetitions); numbers only,
+    the unit of each figure in its header (`steps_per_s [1/s]`); a point without figures
+    (skipped, failed) one summary row with its status and no figures."""
+    pts = g["points_list"]
+    axes = sorted({a for p in pts for a in (p.get("params", {}).get("axes") or {})})
+    figs = []
+    for p in pts:
+        for _, k, _ in point_spreads(p):
+            if k not in figs:
+                figs.append(k)
+    head = ["sweep", "point", "index", "status", "scene", "engine", "broadphase", "bodies"] + \
+        [f"axis.{a}" for a in axes] + ["window", "first_frame", "last_frame", "kind", "repetition"] + \
+        [f"{k} [{CSV_UNITS.get(k.split('.')[0], '1')}]" for k in figs]
+    name = g["first"]["sweep"]["name"]
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(head)
+        for p in pts:
+            par = p.get("params", {})
+            base = [name, p.get("id"), p.get("index"), p.get("status"), par.get("scene", ""), par.get("engine", ""),
+                    par.get("broadphase", ""), p.get("bodies", par.get("bodies", ""))] + \
+                [(par.get("axes") or {}).get(a, "") for a in axes]
+            sp = point_spreads(p)
+            windows = list(dict.fromkeys(wn for wn, _, _ in sp if wn)) or [""]
+            if not sp:
+                w.writerow(base + ["", "", "", "summary", ""] + [""] * len(figs))
+                continue
+            for wn in windows:
+                wd = (p.get("windows") or {}).get(wn, {})
+                cols = {k: v for x, k, v in sp if x in (wn, "")}
+                n = max(len(v["values"]) for v in cols.values())
+                pre = base + [wn, wd.get("first", ""), wd.get("last", "")]
+                for r in range(n):
+                    w.writerow(pre + ["rep", r] + [csv_number(cols[k]["values"][r]) if k in cols and
+                                                    r < len(cols[k]["values"]) else "" for k in figs])
+                w.writerow(pre + ["summary", ""] + [csv_number(cols[k].get("median")) if k in cols else ""
+                                                      for k in figs])
+
+
+def gate_summary(res, threshold, alpha):
+    """The gate's verdict on stdout: every failed and every slower point named."""
+    conf = 100.0 * (1.0 - 2.0 * alpha)
+    for pid, why in res["broken"]:
+        print(f"octocd report: gate: FAILED: {pid}: {why}")
+    for r in res["slower"]:
+        print(f"octocd report: gate: SLOWER: {r['point']}: {r['figure']}: time ratio {r['ratio']:.3f} "
+              f"({conf:g} % interval {r['lo']:.3f}-{r['hi']:.3f}; Mann-Whitney U p = {r['p']:.3g} against "
+              f"{1 + threshold / 100:g}x)")
+    n = len(res["rows"])
+    if res["broken"]:
+        print(f"octocd report: gate: FAILED: {len(res['broken'])} point(s) of the baseline missing, failed, skipped "
+              f"or not measured in the new run" + (f"; {len(res['slower'])} of {n} figure(s) SLOWER" if res["slower"]
+                                                  else ""))
+    elif res["slower"]:
+        print(f"octocd report: gate: FAILED: {len(res['slower'])} of {n} figure(s) SLOWER by more than "
+              f"{threshold:g} % (one-sided Mann-Whitney U, level {alpha:g})")
+    else:
+        print(f"octocd report: gate: passed: {n} figure(s), none shown slower by more than {threshold:g} % "
+              f"(one-sided Mann-Whitney U, level {alpha:g})")
+
+
+def gate_csv(path, res):
+    """The gate as data: per point and figure one row per side and repetition (kind rep) and
+    one summary row (kind summary: both medians, ratio, interval, p, slower 0/1)."""
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["point", "figure", "kind", "side", "repetition", "value", "unit", "base_median", "new_median",
+                    "ratio_time", "ratio_lo", "ratio_hi", "p_slower", "slower"])
+        for r in res["rows"]:
+            unit = "ms" if r["key"] == "ms_per_frame" else "1/s"
+            for side in ("base", "new"):
+                for k, v in enumerate(r[side]):
+                    w.writerow([r["point"], r["figure"], "rep", side, k, repr(float(v)), unit] + [""] * 7)
+            w.writerow([r["point"], r["figure"], "summary", "", "", "", unit, repr(r["base_median"]),
+                        repr(r["new_median"]), repr(r["ratio"]), repr(r["lo"]), repr(r["hi"]), repr(r["p"]),
+                        int(r["verdict"] == "SLOWER")])
+
 
 SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table5),
             "table6": ("Table 6: Level 0 (AABB only) vs hierarchical C", section_table6),
@@ -1006,12 +1331,19 @@ def main():
     ap.add_argument("-o", "--output", required=True)
     ap.add_argument("--title", default="octocd benchmark report")
     ap.add_argument("--baseline", action="append", default=[], help="baseline result file(s) (shards merged)")
-    ap.add_argument("--threshold", type=float, default=5.0, help="slowdown in %% that fails the gate")
-    ap.add_argument("--csv", help="write every table as CSV into this folder")
+    ap.add_argument("--threshold", type=float, default=10.0, help="slowdown in %% that fails the gate")
+    ap.add_argument("--level", type=float, default=0.05, help="the gate's significance level")
+    ap.add_argument("--across-machines", action="store_true", help="gate runs of two machines")
+    ap.add_argument("--timing", choices=["auto", "cpu", "wall"], default="auto",
+                    help="the gate's figure: steps per process CPU second (cpu), wall-clock steps/s (wall), or cpu "
+                         "where both runs have it (auto)")
+    ap.add_argument("--csv", help="write the data as CSV into this folder")
     ap.add_argument("inputs", nargs="+")
     a = ap.parse_args()
     if not (0 <= a.threshold < 1000) or math.isnan(a.threshold):
         fail(f"--threshold: {a.threshold}; allowed: a percentage in [0, 1000)")
+    if not (0 < a.level <= 0.25):
+        fail(f"--level: {a.level}; allowed: a significance level in (0, 0.25]")
     loaded = []
     for p in a.inputs:
         CURRENT[0] = p
@@ -1022,7 +1354,7 @@ def main():
         CURRENT[0] = p
         check_points(p, dict(results).get(p) or load(p)[2])
     CURRENT[0] = "the inputs"
-    slower = 0
+    gate = None
     doc = None
     if a.baseline:
         base_loaded = []
@@ -1031,14 +1363,23 @@ def main():
             if x[0] != "result":
                 fail(f"{p}: --baseline: an HDF5 trace; allowed: a result of octocd bench (.json)")
             base_loaded.append((x[1], x[2]))
-        bg, ng = merge(base_loaded), merge(results)
+        bg, ng = merge(base_loaded, pool=True), merge(results, pool=True)
         if len(bg) != 1 or len(ng) != 1:
-            fail(f"--baseline: {len(bg)} sweep(s) in the baseline, {len(ng)} in the new results; allowed: one sweep "
-                 "(its shards) on each side")
+            fail(f"--baseline: {len(bg)} sweep(s) or machine(s) in the baseline, {len(ng)} in the new results; "
+                 "allowed: one sweep (its shards) of one machine on each side")
         os.makedirs(a.output, exist_ok=True)
         doc = Doc(a.output, a.csv)
-        slower = section_gate(doc, bg[0], ng[0], a.threshold)
-    groups = merge(results)
+        gate = section_gate(doc, bg[0], ng[0], a.threshold, a.level, a.across_machines, a.timing)
+        if gate["few"] and not gate["broken"]:
+            pid, label, nb, nn = gate["few"][0]
+            fail(f"too few repetitions to decide: '{pid}' {label} has {nb} in the baseline and {nn} in the new run"
+                 + (f" (and {len(gate['few']) - 1} more figure(s))" if len(gate["few"]) > 1 else "")
+                 + f"; allowed: >= {GATE_MIN_REPS} repetitions a side (octocd bench --repeat {GATE_MIN_REPS})")
+        if gate["broken"]:
+            # A failed new run: its sections are not drawn (their figures are what failed).
+            results = []
+            traces = []
+    groups = merge(results, pool=bool(a.baseline))  # the gate pools runs; the sections show the first
     order = list(SECTIONS)
     groups.sort(key=lambda g: (order.index(g["first"]["sweep"]["name"]) if g["first"]["sweep"]["name"] in order
                                else len(order), g["first"]["sweep"]["name"]))
@@ -1061,6 +1402,9 @@ def main():
         machine_block(doc, g)
         fn(doc, g)
         skipped_block(doc, g)
+        if doc.csv_dir:
+            sweep_csv(os.path.join(doc.csv_dir, file_slug(name) + ".csv"), g)
+            doc.ncsv += 1
     if traces:
         doc.section = "trace"
         section_traces(doc, traces)
@@ -1070,12 +1414,11 @@ def main():
         doc.html.insert(0 if a.baseline else 1, "<nav>" + "".join(f'<a href="#{k}">{html.escape(t)}</a>' for k, t in nav) + "</nav>")
     doc.write(a.title)
     print(f"octocd report: wrote {os.path.join(a.output, 'index.html')} and {os.path.join(a.output, 'report.md')} "
-          f"({doc.nplot} plots" + (f", {doc.ntable} CSV tables in {a.csv}" if a.csv else "") + ")")
-    if slower:
-        print(f"octocd report: gate: {slower} point figure(s) SLOWER than the baseline by more than "
-              f"{a.threshold:g} % with ranges apart", file=sys.stderr)
-        sys.exit(4)
-
+          f"({doc.nplot} plots" + (f", {doc.ncsv} CSV file(s) in {a.csv}" if a.csv else "") + ")")
+    if gate is not None:
+        gate_summary(gate, a.threshold, a.level)
+        if gate["broken"] or gate["slower"]:
+            sys.exit(4)
 
 if __name__ == "__main__":
     try:
