@@ -15,7 +15,7 @@ PACKAGES=(
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev libxml2-dev
   # reports (Debian's /usr/bin/python3) and the dataset split
-  python3 python3-numpy python3-h5py python3-matplotlib
+  python3 python3-numpy python3-h5py python3-matplotlib python3-scipy
   # the Python package `import octocd` (python/, OCTOCD_PYTHON) and its pytest tests
   python3-dev python3-pybind11 python3-pytest
 )
