@@ -22,6 +22,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
@@ -804,7 +805,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   const int total = s.frames;
   // Engines that step on the host: their steps per process CPU second are a figure too (the
   // gate's, on a shared machine). A device engine's CPU time would miss its kernels.
-  const bool host_engine = p.engine != "cuda";
+  const bool host_engine = !octocd::engine_info(p.engine, "engines").device;
   std::vector<std::vector<WindowSums>> sums(s.windows.size());  // [window][rep]
   const int buckets = s.series_every > 0 ? (total + s.series_every - 1) / s.series_every : 0;
   std::vector<std::vector<WindowSums>> series(static_cast<std::size_t>(buckets));  // [bucket][rep]

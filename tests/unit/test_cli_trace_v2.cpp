@@ -455,9 +455,11 @@ TEST_F(TraceV2, AnExternalVersion1TraceComparesByPairWithItsOctocdTrace) {
   EXPECT_EQ(r.code, 3) << r.output;
   EXPECT_NE(r.output.find("DIFFERENT: first at frame 25"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find(": depth: A "), std::string::npos) << r.output;
-  // Asked for, orientations compare as identity on both sides: n/a, said so.
+  // Asked for, orientations are in neither trace: nothing requested was compared, exit 2
+  // naming what each lacks (never "same").
   r = run_octocd("compare " + v1 + " " + e + " --quantity orientations,angular_velocities");
-  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("no requested quantity could be compared"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("/states/orientation in neither (no rotation)"), std::string::npos) << r.output;
 }
 
