@@ -22,6 +22,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/reference_contact.hpp"
+#include "dmath.hpp"
 #include "sat.hpp"
 
 namespace octocd {
@@ -91,8 +92,7 @@ const char* integrator_name(PhysicsBodies::Integrator i) {
 
 namespace {
 
-using D3 = std::array<double, 3>;
-using M3 = std::array<double, 9>;  // row-major
+using namespace dmath;
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23
@@ -100,31 +100,6 @@ constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23
 /// magnitude (the trace convention; octocd's Bullet adapter uses the same threshold).
 constexpr double kNoSliding = 1e-6;
 
-D3 d3(Vec3 v) { return {double(v.x), double(v.y), double(v.z)}; }
-D3 operator+(D3 a, D3 b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-D3 operator-(D3 a, D3 b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-D3 operator*(double s, D3 a) { return {s * a[0], s * a[1], s * a[2]}; }
-double dot3(D3 a, D3 b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-D3 cross3(D3 a, D3 b) { return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}; }
-double len3(D3 a) { return std::sqrt(dot3(a, a)); }
-D3 mul(const M3& m, D3 v) {
-  return {m[0] * v[0] + m[1] * v[1] + m[2] * v[2], m[3] * v[0] + m[4] * v[1] + m[5] * v[2],
-          m[6] * v[0] + m[7] * v[1] + m[8] * v[2]};
-}
-/// Rotation matrix of a quaternion (normalised in double).
-M3 rotation(Quat q) {
-  double w = q.w, x = q.x, y = q.y, z = q.z;
-  const double n = std::sqrt(w * w + x * x + y * y + z * z);
-  if (n > 0) {
-    w /= n;
-    x /= n;
-    y /= n;
-    z /= n;
-  }
-  return {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
-          2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-          2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
-}
 /// R M R^T.
 M3 conjugated(const M3& r, const M3& m) {
   M3 rm{}, out{};

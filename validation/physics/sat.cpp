@@ -1,5 +1,6 @@
 // The separating-axis test of two posed convex hulls (see sat.hpp).
 #include "sat.hpp"
+#include "dmath.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -9,46 +10,22 @@ namespace octocd {
 
 namespace {
 
-using D3 = std::array<double, 3>;
-
-double dot(const D3& a, const D3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-D3 cross(const D3& a, const D3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-
-/// The body-to-world rotation of a pose (its quaternion normalised in double), row-major.
-std::array<double, 9> rotation_of(const Quat& q) {
-  double w = q.w, x = q.x, y = q.y, z = q.z;
-  const double n = std::sqrt(w * w + x * x + y * y + z * z);
-  if (n > 0) {
-    w /= n;
-    x /= n;
-    y /= n;
-    z /= n;
-  }
-  return {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
-          2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-          2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
-}
-D3 apply(const std::array<double, 9>& r, const D3& v) {
-  return {r[0] * v[0] + r[1] * v[1] + r[2] * v[2], r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
-          r[6] * v[0] + r[7] * v[1] + r[8] * v[2]};
-}
+using namespace dmath;
 
 /// A hull in the world frame.
 struct Placed {
   std::vector<D3> vertices, faces, edges;
 };
 Placed place(const HullFeatures& h, const Pose& p) {
-  const auto r = rotation_of(p.orientation);
+  const auto r = rotation(p.orientation);
   const D3 x{double(p.position.x), double(p.position.y), double(p.position.z)};
   Placed out;
   for (const D3& v : h.vertices) {
-    const D3 w = apply(r, v);
+    const D3 w = mul(r, v);
     out.vertices.push_back({w[0] + x[0], w[1] + x[1], w[2] + x[2]});
   }
-  for (const D3& f : h.face_normals) out.faces.push_back(apply(r, f));
-  for (const D3& e : h.edge_dirs) out.edges.push_back(apply(r, e));
+  for (const D3& f : h.face_normals) out.faces.push_back(mul(r, f));
+  for (const D3& e : h.edge_dirs) out.edges.push_back(mul(r, e));
   return out;
 }
 
@@ -56,7 +33,7 @@ void project(const std::vector<D3>& vs, const D3& u, double& lo, double& hi) {
   lo = std::numeric_limits<double>::infinity();
   hi = -lo;
   for (const D3& v : vs) {
-    const double t = dot(v, u);
+    const double t = dot3(v, u);
     lo = std::min(lo, t);
     hi = std::max(hi, t);
   }
@@ -78,7 +55,7 @@ SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullF
   std::vector<SatAxis> all;
   all.reserve(std::size_t(naxes));
   auto test = [&](D3 u, int kind) {
-    const double len = std::sqrt(dot(u, u));
+    const double len = std::sqrt(dot3(u, u));
     if (!(len > 1e-9)) return;
     u = {u[0] / len, u[1] / len, u[2] / len};
     double a0, a1, b0, b1;
@@ -100,7 +77,7 @@ SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullF
   for (const D3& f : A.faces) test(f, 0);
   for (const D3& f : B.faces) test(f, 1);
   for (const D3& ea : A.edges)
-    for (const D3& eb : B.edges) test(cross(ea, eb), 2);
+    for (const D3& eb : B.edges) test(cross3(ea, eb), 2);
   if (all.empty()) {
     r.tested = false;
     return r;
@@ -121,8 +98,8 @@ double sat_angle_to_accepted(const SatResult& r, const std::array<double, 3>& n,
   double best = 3.14159265358979323846;
   for (std::size_t k = 0; k < r.accepted.size(); ++k) {
     const D3& u = r.accepted[k].normal;
-    const D3 c = cross(n, u);
-    const double angle = std::atan2(std::sqrt(dot(c, c)), dot(n, u));
+    const D3 c = cross3(n, u);
+    const double angle = std::atan2(std::sqrt(dot3(c, c)), dot3(n, u));
     if (angle < best) {
       best = angle;
       if (nearest) *nearest = k;

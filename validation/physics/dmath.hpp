@@ -1,0 +1,48 @@
+#pragma once
+/// \file dmath.hpp
+/// Double-precision 3-vectors and row-major 3x3 matrices of the physics tier's judges
+/// (physics_validators.cpp, sat.cpp): they recompute in double what engines did in float32.
+/// Internal to validation/physics.
+
+#include <array>
+#include <cmath>
+
+#include "octocd/math.hpp"
+
+namespace octocd::dmath {
+
+using D3 = std::array<double, 3>;  ///< (x, y, z)
+using M3 = std::array<double, 9>;  ///< row-major 3x3
+
+/// A float32 vector in double.
+inline D3 d3(Vec3 v) { return {double(v.x), double(v.y), double(v.z)}; }
+inline D3 operator+(const D3& a, const D3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+inline D3 operator-(const D3& a, const D3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+inline D3 operator*(double s, const D3& a) { return {s * a[0], s * a[1], s * a[2]}; }
+inline double dot3(const D3& a, const D3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline D3 cross3(const D3& a, const D3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+inline double len3(const D3& a) { return std::sqrt(dot3(a, a)); }
+/// m v.
+inline D3 mul(const M3& m, const D3& v) {
+  return {m[0] * v[0] + m[1] * v[1] + m[2] * v[2], m[3] * v[0] + m[4] * v[1] + m[5] * v[2],
+          m[6] * v[0] + m[7] * v[1] + m[8] * v[2]};
+}
+/// The body-to-world rotation matrix of a unit quaternion (w, x, y, z), normalised in double
+/// first (a float32 quaternion is unit only to rounding).
+inline M3 rotation(Quat q) {
+  double w = q.w, x = q.x, y = q.y, z = q.z;
+  const double n = std::sqrt(w * w + x * x + y * y + z * z);
+  if (n > 0) {
+    w /= n;
+    x /= n;
+    y /= n;
+    z /= n;
+  }
+  return {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+          2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+          2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+}
+
+}  // namespace octocd::dmath
