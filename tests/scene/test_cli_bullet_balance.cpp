@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "unit/cli_run.hpp"
+#include "unit/trace_edit.hpp"
 
 namespace fs = std::filesystem;
 using octocd::test::Result;
@@ -29,53 +30,10 @@ using octocd::test::source_dir;
 
 namespace {
 
-/// A float dataset read whole as doubles, with its shape.
-struct Data {
-  std::vector<hsize_t> dims;
-  std::vector<double> v;
-};
-
-Data read(hid_t file, const char* name) {
-  Data d;
-  const hid_t ds = H5Dopen2(file, name, H5P_DEFAULT);
-  if (ds < 0) return d;
-  const hid_t space = H5Dget_space(ds);
-  d.dims.resize(static_cast<std::size_t>(H5Sget_simple_extent_ndims(space)));
-  H5Sget_simple_extent_dims(space, d.dims.data(), nullptr);
-  hsize_t n = 1;
-  for (hsize_t x : d.dims) n *= x;
-  d.v.resize(n);
-  if (n > 0) H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, d.v.data());
-  H5Sclose(space);
-  H5Dclose(ds);
-  return d;
-}
-
-/// Writes `d` back over dataset `name` (same shape; the file keeps its type).
-void write(hid_t file, const char* name, const Data& d) {
-  const hid_t ds = H5Dopen2(file, name, H5P_DEFAULT);
-  ASSERT_GE(ds, 0) << name;
-  ASSERT_GE(H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, d.v.data()), 0) << name;
-  H5Dclose(ds);
-}
-
-/// Replaces dataset `name` by `d` (any shape), keeping its file type.
-void replace(hid_t file, const char* name, const Data& d) {
-  const hid_t old = H5Dopen2(file, name, H5P_DEFAULT);
-  ASSERT_GE(old, 0) << name;
-  const hid_t type = H5Dget_type(old);
-  H5Dclose(old);
-  ASSERT_GE(H5Ldelete(file, name, H5P_DEFAULT), 0) << name;
-  const hid_t space = H5Screate_simple(static_cast<int>(d.dims.size()), d.dims.data(), nullptr);
-  const hid_t ds = H5Dcreate2(file, name, type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  ASSERT_GE(ds, 0) << name;
-  if (!d.v.empty()) {
-    ASSERT_GE(H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, d.v.data()), 0) << name;
-  }
-  H5Dclose(ds);
-  H5Sclose(space);
-  H5Tclose(type);
-}
+using octocd::test::Data;
+using octocd::test::read;
+using octocd::test::replace;
+using octocd::test::write;
 
 /// What a trace says about who is in contact when.
 struct Layout {

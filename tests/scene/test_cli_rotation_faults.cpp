@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "unit/cli_run.hpp"
+#include "unit/trace_edit.hpp"
 
 namespace fs = std::filesystem;
 
@@ -33,51 +34,9 @@ using octocd::test::Result;
 using octocd::test::run_octocd;
 using octocd::test::source_dir;
 
-/// One dataset read as doubles (integers converted exactly below 2^53), with its shape.
-struct Data {
-  std::vector<hsize_t> dims;
-  std::vector<double> v;
-  hsize_t rows() const { return dims.empty() ? 0 : dims[0]; }
-  hsize_t row_size() const {
-    hsize_t r = 1;
-    for (std::size_t i = 1; i < dims.size(); ++i) r *= dims[i];
-    return r;
-  }
-};
-
-Data read(hid_t file, const std::string& name) {
-  Data d;
-  const hid_t ds = H5Dopen2(file, name.c_str(), H5P_DEFAULT);
-  if (ds < 0) return d;
-  const hid_t space = H5Dget_space(ds);
-  d.dims.resize(static_cast<std::size_t>(H5Sget_simple_extent_ndims(space)));
-  H5Sget_simple_extent_dims(space, d.dims.data(), nullptr);
-  hsize_t n = 1;
-  for (hsize_t x : d.dims) n *= x;
-  d.v.resize(n);
-  if (n > 0) H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, d.v.data());
-  H5Sclose(space);
-  H5Dclose(ds);
-  return d;
-}
-
-/// Replaces dataset `name` by `d`, keeping its file type (integers stay integers).
-void replace(hid_t file, const std::string& name, const Data& d) {
-  const hid_t old = H5Dopen2(file, name.c_str(), H5P_DEFAULT);
-  ASSERT_GE(old, 0) << name;
-  const hid_t type = H5Dget_type(old);
-  H5Dclose(old);
-  ASSERT_GE(H5Ldelete(file, name.c_str(), H5P_DEFAULT), 0) << name;
-  const hid_t space = H5Screate_simple(static_cast<int>(d.dims.size()), d.dims.data(), nullptr);
-  const hid_t ds = H5Dcreate2(file, name.c_str(), type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  ASSERT_GE(ds, 0) << name;
-  if (!d.v.empty()) {
-    ASSERT_GE(H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, d.v.data()), 0);
-  }
-  H5Dclose(ds);
-  H5Sclose(space);
-  H5Tclose(type);
-}
+using octocd::test::Data;
+using octocd::test::read;
+using octocd::test::replace;
 
 double root_double(hid_t file, const char* name, double fallback) {
   if (H5Aexists(file, name) <= 0) return fallback;
