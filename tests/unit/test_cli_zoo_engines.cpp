@@ -11,7 +11,10 @@
 //  (c) a gyroscopic term: a flat box spinning about a non-principal axis bounces off the
 //      floor, another spins alone (gyroscopic "true");
 //  (d) joints locking rotation: a box sliding on the floor on a 4-row manifold and two
-//      boxes colliding off-centre in the air keep w = 0 (/bodies/locked_dofs = 0x38).
+//      boxes colliding off-centre in the air keep w = 0 (/bodies/locked_dofs = 0x38);
+//  (f) convex hulls of concave meshes: an L-shaped bar lands turning on the hull of a
+//      U-shaped channel, across its hollow (collision_shape "convex_hull"); declared as
+//      the meshes, its rows are false contacts.
 #include <gtest/gtest.h>
 #include <hdf5.h>
 #include <unistd.h>
@@ -19,17 +22,26 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <filesystem>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <functional>
 #include <iostream>
 #include <map>
+#include <regex>
 #include <string>
 #include <vector>
 
 #include "cli_run.hpp"
+#include "octocd/engine.hpp"
+#include "octocd/reference_contact.hpp"
+#include "octocd/scene.hpp"
 
 namespace fs = std::filesystem;
+using octocd::build_model;
+using octocd::CollisionShape;
+using octocd::parse_scene;
+using octocd::ReferenceGeometry;
 using octocd::test::Result;
 using octocd::test::run_octocd;
 
@@ -120,6 +132,7 @@ struct Zoo {
   std::map<std::string, std::string> text;
   std::map<std::string, double> numbers{{"mu", 0.5}, {"restitution", 0.5}, {"contact_margin", 0.005}};
   bool write_locked = true;
+  std::size_t hull_vertices = 0;  // (f): the L's hull vertex count
 
   int n() const { return static_cast<int>(bodies.size()); }
   M inertia_world(int i, const State& s) const { return conj(rotation(s.q[i]), bodies[i].inertia()); }
@@ -316,16 +329,24 @@ Zoo soft_engine(int frames = 60) {
   return z;
 }
 
-/// Corner rows of box i against the floor (body 0, top at y = 0) at state s, resolved one
-/// after the other on t's velocities (restitution e, no friction): each row's impulse is
-/// applied at its corner to v and w (rotation locked: v only).
-void floor_corners(const Zoo& z, int i, const State& s, State& t, std::vector<Row>& rows, double e) {
+/// The 8 corners of a box of half extents h, body frame.
+std::vector<V> box_corners(V h) {
+  std::vector<V> out;
+  for (int c = 0; c < 8; ++c) out.push_back({(c & 1 ? 1 : -1) * h[0], (c & 2 ? 1 : -1) * h[1], (c & 4 ? 1 : -1) * h[2]});
+  return out;
+}
+
+/// Rows of body i's `vertices` (body frame; default: its box's corners) against the floor
+/// (body 0, top at y = 0) at state s, resolved one after the other on t's velocities
+/// (restitution e, no friction): each row's impulse is applied at its vertex to v and w
+/// (rotation locked: v only).
+void floor_corners(const Zoo& z, int i, const State& s, State& t, std::vector<Row>& rows, double e,
+                   const std::vector<V>& vertices = {}) {
   const Body& b = z.bodies[i];
   const M r = rotation(s.q[i]);
   const M iw_inv = conj(r, diag({1 / b.inertia()[0], 1 / b.inertia()[4], 1 / b.inertia()[8]}));
   const bool spin = (b.locked >> 3) == 0;
-  for (int c = 0; c < 8; ++c) {
-    const V local{(c & 1 ? 1 : -1) * b.h[0], (c & 2 ? 1 : -1) * b.h[1], (c & 4 ? 1 : -1) * b.h[2]};
+  for (const V& local : vertices.empty() ? box_corners(b.h) : vertices) {
     const V arm = mul(r, local);
     const V corner = s.x[i] + arm;
     if (!(corner[1] < 0)) continue;
@@ -446,6 +467,79 @@ Zoo locked_engine(int frames = 80) {
     z.states.push_back(t);
     z.rows.push_back(rows);
   }
+  return z;
+}
+
+/// A prism as a triangle mesh (OBJ): the polygon `profile` (x, y; counter-clockwise)
+/// extruded along z over [0, depth]; `caps`: convex quads of profile indices tiling it.
+void write_prism_obj(const fs::path& path, const std::vector<std::array<double, 2>>& profile,
+                     const std::vector<std::array<int, 4>>& caps, double depth) {
+  std::ofstream out(path);
+  const int k = static_cast<int>(profile.size());
+  for (double zc : {0.0, depth})
+    for (const auto& p : profile) out << "v " << p[0] << ' ' << p[1] << ' ' << zc << '\n';
+  for (const auto& c : caps) {  // OBJ indices from 1: front (z = 0, facing -z), back (+z)
+    out << "f " << c[0] + 1 << ' ' << c[3] + 1 << ' ' << c[2] + 1 << '\n' << "f " << c[0] + 1 << ' ' << c[2] + 1
+        << ' ' << c[1] + 1 << '\n';
+    out << "f " << c[0] + k + 1 << ' ' << c[1] + k + 1 << ' ' << c[2] + k + 1 << '\n'
+        << "f " << c[0] + k + 1 << ' ' << c[2] + k + 1 << ' ' << c[3] + k + 1 << '\n';
+  }
+  for (int i = 0; i < k; ++i) {  // sides, facing out of the counter-clockwise profile
+    const int j = (i + 1) % k;
+    out << "f " << i + 1 << ' ' << j + 1 << ' ' << j + k + 1 << '\n' << "f " << i + 1 << ' ' << j + k + 1 << ' '
+        << i + k + 1 << '\n';
+  }
+}
+
+/// (f) Convex hulls of concave meshes: a static U-shaped channel (body 0: 0.8 x 0.3 x
+/// 0.6 m, its hollow 0.6 m wide and 0.2 m deep, top at y = 0) and an L-shaped bar (body 1:
+/// 0.2 x 0.15 x 0.06 m, 1 kg) dropped turning onto it; body 2, another L, spins alone.
+/// The engine collides convex hulls, computed by btConvexHullComputer (octocd's
+/// ReferenceGeometry::hull_features): the U's hull is its bounding box, so the L lands on
+/// the lid across the hollow, where the U itself has nothing. Its rows are the L's hull
+/// vertices below the lid (frictionless, e = 0.2, resolved one after the other at each
+/// vertex, as floor_corners). Declares collision_shape "convex_hull"; the trace's scene
+/// gives the meshes (OBJ files in `dir`).
+Zoo hull_engine(const fs::path& dir, int frames = 200) {
+  const fs::path u = dir / "u-channel.obj", l = dir / "l-bar.obj";
+  write_prism_obj(u, {{0, 0}, {0.8, 0}, {0.8, 0.3}, {0.7, 0.3}, {0.7, 0.1}, {0.1, 0.1}, {0.1, 0.3}, {0, 0.3}},
+                  {{0, 1, 4, 5}, {1, 2, 3, 4}, {0, 5, 6, 7}}, 0.6);
+  write_prism_obj(l, {{0, 0}, {0.2, 0}, {0.2, 0.05}, {0.05, 0.05}, {0.05, 0.15}, {0, 0.15}},
+                  {{0, 1, 2, 3}, {0, 3, 4, 5}}, 0.06);
+  Zoo z;
+  z.engine = "zoo-hulls";
+  Body channel;
+  channel.h = {0.4, 0.15, 0.3};
+  channel.m = 0;
+  Body bar;
+  bar.h = {0.1, 0.075, 0.03};
+  z.bodies = {channel, bar, bar};
+  const std::vector<V> x0{{0, -0.15, 0}, {0.05, 0.14, 0.02}, {1.5, 1.0, 0}};
+  z.text["collision_shape"] = "convex_hull";
+  z.text["scene"] = R"({"name": "zoo-hulls", "rotation": true, "dt": 0.001, "frames": )" + std::to_string(frames) +
+                    R"(, "walls": "none", "gravity": [0, -9.81, 0], "domain": {"min": [-2, -1, -2], "max": [3, 3, 2]},
+    "groups": [
+      {"name": "channel", "shape": {"mesh": ")" + u.string() + R"(", "scale": 0.8}, "count": 1, "mass": 0,
+       "positions": [[0, -0.15, 0]]},
+      {"name": "bars", "shape": {"mesh": ")" + l.string() + R"(", "scale": 0.2}, "count": 2, "mass": 1,
+       "positions": [[0.05, 0.14, 0.02], [1.5, 1.0, 0]]}]})";
+  const auto model = build_model(parse_scene(z.text["scene"], (dir / "zoo-hulls.json").string()));
+  const ReferenceGeometry hulls(*model, std::vector<CollisionShape>(3, CollisionShape::ConvexHull));
+  std::vector<V> bar_hull;
+  for (const auto& p : hulls.hull_features(1).vertices) bar_hull.push_back({p[0], p[1], p[2]});
+  z.states.push_back(initial(z, x0, {{0, 0, 0}, {0.1, -0.5, 0}, {0, 0.5, 0}}, {{0, 0, 0}, {3, 2, 5}, {1, 2, 3}},
+                             {{1, 0, 0, 0}, axis_angle({1, 0.5, 0.2}, 0.7), axis_angle({0, 0, 1}, 0.3)}));
+  for (int f = 1; f <= frames; ++f) {
+    const State& s = z.states.back();
+    State t = s;
+    std::vector<Row> rows;
+    for (int i = 0; i < z.n(); ++i) z.integrate_velocity(i, s, t, false);
+    floor_corners(z, 1, s, t, rows, 0.2, bar_hull);
+    for (int i = 0; i < z.n(); ++i) z.integrate_position(i, s, t);
+    z.states.push_back(t);
+    z.rows.push_back(rows);
+  }
+  z.hull_vertices = bar_hull.size();
   return z;
 }
 
@@ -577,6 +671,84 @@ TEST_F(ZooEngines, LockedEngineDroppedRowAndLoneBodyEditsAreCaught) {
     Zoo z = base;
     z.states[60].x[4][2] = f32(z.states[60].x[4][2] + 0.01);
     expect_caught(judge(z, "teleport"), {"frame 60: body 4 without contacts: x'", "position"});
+  }
+}
+
+TEST_F(ZooEngines, ConvexHullsOfConcaveMeshesPassDeclaredAndFailAsMeshes) {
+  const Zoo z = hull_engine(dir_);
+  EXPECT_EQ(z.hull_vertices, 10u);  // the L's 6 profile corners less its reflex one, twice
+  const int first = first_impulse(z, 0, 1);
+  ASSERT_GT(first, 0);
+  std::size_t rows = 0;
+  for (const auto& step : z.rows) rows += step.size();
+  std::size_t multi = 0, pair_frames = 0;
+  for (const auto& step : z.rows) {
+    multi += step.size() >= 2;
+    pair_frames += !step.empty();
+  }
+
+  std::cout << "zoo-hulls: " << rows << " rows, first impulse at frame " << first << ", " << multi
+            << " steps with 2+ rows\n";
+  const Result ok = judge(z, "hulls");
+  expect_clean(ok);
+  EXPECT_NE(ok.output.find("collided as declared \"convex_hull\""), std::string::npos) << ok.output;
+  // Declared as the concave meshes: the L lands on the lid of the U's hull, 0.15-0.2 m
+  // from the hollow's floor and walls: every row is a false contact, its point off body 0.
+  Zoo mesh = z;
+  mesh.text["collision_shape"] = "mesh";
+  const Result r = judge(mesh, "meshes");
+  expect_caught(r, {"contact-completeness", "frame " + std::to_string(first) + ": pair (0, 1)"});
+  for (const char* row : {"contact-completeness", "contact-geometry"})
+    EXPECT_TRUE(std::regex_search(r.output, std::regex(std::string("(^|\n)physics +") + row + " +[^ ]+ +[^ ]+ +FAIL")))
+        << row << "\n" << r.output;
+  const std::string every = "false-contact " + std::to_string(pair_frames) + " of " + std::to_string(pair_frames);
+  EXPECT_NE(r.output.find(every), std::string::npos) << every << "\n" << r.output;
+  EXPECT_NE(r.output.find("cause point-off-shape"), std::string::npos) << r.output;
+}
+
+TEST_F(ZooEngines, ConvexHullEngineFaultsAreCaught) {
+  const Zoo base = hull_engine(dir_);
+  // A step of the L's manifold with 2+ rows, one carrying a normal impulse: dropped.
+  int fd = -1;
+  std::size_t drop = 0;
+  for (std::size_t f = 0; f < base.rows.size() && fd < 0; ++f)
+    for (std::size_t k = 0; k < base.rows[f].size() && base.rows[f].size() >= 2; ++k)
+      if (base.rows[f][k].jn > 1e-3) {
+        fd = static_cast<int>(f) + 1;
+        drop = k;
+        break;
+      }
+  ASSERT_GT(fd, 0);
+  {
+    Zoo z = base;
+    z.rows[fd - 1].erase(z.rows[fd - 1].begin() + static_cast<std::ptrdiff_t>(drop));
+    expect_caught(judge(z, "dropped"), {"momentum-balance", "frame " + std::to_string(fd) + ": body 1"});
+  }
+  {  // that row's impulse given to the lone L (body 2) instead of the falling one
+    Zoo z = base;
+    const Row& row = z.rows[fd - 1][drop];
+    z.states[fd].v[1] = f32(z.states[fd].v[1] + row.jn * row.n);  // body 1 no longer gets -jn n
+    z.states[fd].v[2] = f32(z.states[fd].v[2] - row.jn * row.n);
+    expect_caught(judge(z, "wrong-body"), {"frame " + std::to_string(fd) + ": body 1: m (v' - v)",
+                                           "frame " + std::to_string(fd) + ": body 2 without contacts: v'"});
+  }
+  {  // the lone L's orientation turned by 30 deg in step 40
+    Zoo z = base;
+    z.states[40].q[2] = f32(qnorm(qmul(axis_angle({1, 0, 0}, M_PI / 6), z.states[40].q[2])));
+    expect_caught(judge(z, "turned"), {"frame 40: body 2 without contacts: q' is 30", "orientation"});
+  }
+  {  // its angular velocity x1.5 in step 50
+    Zoo z = base;
+    z.states[50].w[2] = f32(1.5 * z.states[50].w[2]);
+    expect_caught(judge(z, "spin"), {"frame 50: body 2 without contacts: w'", "angular-velocity"});
+  }
+  {  // its velocity x1.5 in step 60, then teleported by 1 cm in step 70
+    Zoo z = base;
+    z.states[60].v[2] = f32(1.5 * z.states[60].v[2]);
+    expect_caught(judge(z, "fast"), {"free-flight", "frame 60: body 2 without contacts: v'"});
+    z = base;
+    z.states[70].x[2][0] = f32(z.states[70].x[2][0] + 0.01);
+    expect_caught(judge(z, "teleport"), {"frame 70: body 2 without contacts: x'", "position"});
   }
 }
 
