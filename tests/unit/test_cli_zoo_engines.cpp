@@ -293,33 +293,42 @@ State initial(const Zoo& z, const std::vector<V>& x, const std::vector<V>& v, co
 /// (a) Soft contacts: boxes 0 and 1 (1 kg) meet head-on in the air at 2 m/s and a
 /// damped penalty spring (k = 125 kN/m, c = 50 N s/m) pushes them apart: ~4 mm deep, over
 /// ~12 steps, its kinetic energy rising in the steps that release the penetration; body 2
-/// spins alone. Contacts found at the pre-step pose, impulses jn = (k d + c v_close) dt.
-Zoo soft_engine(int frames = 60) {
+/// spins alone. Boxes 3, 4 and 5 in a row (4 and 5 1 mm apart) make one 3-body episode: 3
+/// hits 4 at 1 m/s, 4 meets 5 while 3 still presses it, and the three separate; its
+/// springs' damping is `chain_c` (a negative value feeds energy in: a planted fault).
+/// Contacts found at the pre-step pose, impulses jn = (k d + c v_close) dt, every spring's
+/// from the velocities after gravity.
+Zoo soft_engine(int frames = 60, double chain_c = 50) {
   Zoo z;
   z.engine = "zoo-soft";
-  z.bodies = {Body{}, Body{}, Body{}};
+  z.bodies = {Body{}, Body{}, Body{}, Body{}, Body{}, Body{}};
   z.text["contact_model"] = "soft";
   const double k = 125000, c = 50;
-  z.states.push_back(initial(z, {{-0.13, 1.0, 0}, {0.13, 1.0, 0}, {0, 2.0, 1.0}},
-                             {{1, 0, 0}, {-1, 0, 0}, {0.2, 0.5, 0}}, {{0, 0, 0}, {0, 0, 0}, {1, 2, 0}},
-                             {{1, 0, 0, 0}, {1, 0, 0, 0}, axis_angle({0, 0, 1}, 0.3)}));
+  z.states.push_back(initial(
+      z, {{-0.13, 1.0, 0}, {0.13, 1.0, 0}, {0, 2.0, 1.0}, {-0.21, 1.0, -1.0}, {0, 1.0, -1.0}, {0.201, 1.0, -1.0}},
+      {{1, 0, 0}, {-1, 0, 0}, {0.2, 0.5, 0}, {1, 0, 0}, {0, 0, 0}, {0, 0, 0}},
+      {{0, 0, 0}, {0, 0, 0}, {1, 2, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}},
+      {{1, 0, 0, 0}, {1, 0, 0, 0}, axis_angle({0, 0, 1}, 0.3), {1, 0, 0, 0}, {1, 0, 0, 0}, {1, 0, 0, 0}}));
+  const std::vector<std::array<int, 2>> springs{{0, 1}, {3, 4}, {4, 5}};
   for (int f = 1; f <= frames; ++f) {
     const State& s = z.states.back();
     State t = s;
     std::vector<Row> rows;
     for (int i = 0; i < z.n(); ++i) z.integrate_velocity(i, s, t, false);
-    const double d = 0.2 - (s.x[1][0] - s.x[0][0]);
-    if (d > 0) {
+    const State after_gravity = t;
+    for (const auto& [a, b] : springs) {
+      const double d = 0.2 - (s.x[b][0] - s.x[a][0]);
+      if (!(d > 0)) continue;
       Row r;
-      r.a = 0;
-      r.b = 1;
+      r.a = a;
+      r.b = b;
       r.n = {-1, 0, 0};
       r.depth = f32(d);
-      r.p = f32(V{0.5 * (s.x[0][0] + 0.1 + s.x[1][0] - 0.1), 0.5 * (s.x[0][1] + s.x[1][1]), 0.0});
-      const double closing = t.v[0][0] - t.v[1][0];
-      r.jn = f32(std::max(0.0, (k * d + c * closing) * z.dt));
-      t.v[0] = t.v[0] + r.jn * r.n;  // 1 kg each
-      t.v[1] = t.v[1] - r.jn * r.n;
+      r.p = f32(V{0.5 * (s.x[a][0] + 0.1 + s.x[b][0] - 0.1), 0.5 * (s.x[a][1] + s.x[b][1]), s.x[a][2]});
+      const double closing = after_gravity.v[a][0] - after_gravity.v[b][0];
+      r.jn = f32(std::max(0.0, (k * d + (a == 0 ? c : chain_c) * closing) * z.dt));
+      t.v[a] = t.v[a] + r.jn * r.n;  // 1 kg each
+      t.v[b] = t.v[b] - r.jn * r.n;
       rows.push_back(r);
     }
     for (int i = 0; i < z.n(); ++i) z.integrate_position(i, s, t);
@@ -593,10 +602,33 @@ TEST_F(ZooEngines, SoftContactsPassDeclaredAndFailPerStepEnergyUndeclared) {
   EXPECT_LT(deepest, 0.006);
   const Result ok = judge(z, "soft");
   expect_clean(ok);
-  EXPECT_NE(ok.output.find("1 episodes judged"), std::string::npos) << ok.output;
+  EXPECT_NE(ok.output.find("2 episodes judged, 1 of them of 3 or more bodies"), std::string::npos) << ok.output;
   Zoo rigid = z;
   rigid.text.erase("contact_model");
-  expect_caught(judge(rigid, "rigid"), {"kinetic energy", "group (0, 1)"});
+  expect_caught(judge(rigid, "rigid"), {"kinetic energy", "group (0, 1)", "group (3, 4, 5)"});
+}
+
+// SPEC 13b.12 for episodes of 3 or more bodies: the row's energy is judged over the
+// isolated group's whole episode. The chain 3-4-5 passes with damped springs; springs
+// with negative damping (c = -50 N s/m: each step's impulses still balance momentum)
+// gain energy over the episode and fail it, naming the group.
+TEST_F(ZooEngines, SoftContactsThreeBodyEpisodeIsJudged) {
+  const Zoo z = soft_engine();
+  int together = -1;  // a step where 4 touches 3 and 5 at once
+  for (std::size_t f = 0; f < z.rows.size() && together < 0; ++f) {
+    int hits = 0;
+    for (const Row& r : z.rows[f]) hits += (r.a == 3 && r.b == 4) || (r.a == 4 && r.b == 5);
+    if (hits == 2) together = static_cast<int>(f) + 1;
+  }
+  ASSERT_GT(together, 0) << "the chain never forms one group";
+  const Zoo gain = soft_engine(60, -50);
+  const Result r = judge(gain, "gain");
+  expect_caught(r, {"conservation", "group (3, 4, 5) of 3 bodies (soft contacts) over its contact episode"});
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("(^|\n)physics +conservation +[^ ]+ +[^ ]+ +FAIL"))) << r.output;
+  for (const char* row : {"momentum-balance", "free-flight"})
+    EXPECT_TRUE(std::regex_search(r.output, std::regex(std::string("(^|\n)physics +") + row + " +[^ ]+ +[^ ]+ +pass")))
+        << row << "\n" << r.output;
+  std::cout << "3-body episode: one group at frame " << together << "\n" << r.output.substr(0, r.output.find("\nmodel")) << "\n";
 }
 
 TEST_F(ZooEngines, SoftContactsEditedVelocityAndWrongBodyAreCaught) {

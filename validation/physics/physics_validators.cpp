@@ -308,17 +308,26 @@ struct PhysicsValidators::Impl {
   void balance(const FrameRecord& rec, const std::vector<Pose>& det);
   /// Mechanical energy of body i (kinetic + rotational - m g . x), before or after the step.
   double mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const;
-  /// contact_model soft: opens, spoils and closes (judging energy) each pair's contact
-  /// episode; `isolated`: this step's dynamic-dynamic contact pairs, with whether the
-  /// pair is an isolated group on its own.
-  void soft_episodes(const FrameRecord& rec, const std::vector<std::pair<Pair, bool>>& isolated);
+  /// A step's component of the contact graph: its dynamic bodies (sorted) and whether it
+  /// touches no static body.
+  struct Component {
+    std::vector<std::uint32_t> members;
+    bool isolated = false;
+  };
+  /// contact_model soft: opens, grows, spoils and closes (judging energy) the contact
+  /// episodes of isolated groups; `components`: this step's components with a dynamic body.
+  void soft_episodes(const FrameRecord& rec, const std::vector<Component>& components);
+  /// A contact episode of an isolated group (contact_model soft): its dynamic bodies
+  /// (sorted), from its first contact step until none of them touches another; energy and
+  /// kinetic energy at the start (a body joining later: at the step it joins).
   struct Episode {
     std::int64_t start = 0;
+    std::vector<std::uint32_t> bodies;
     double e0 = 0, ke0 = 0, scale = 0;
     bool spoiled = false;
   };
-  std::map<Pair, Episode> episodes;  // contact_model soft: open episodes per pair
-  std::uint64_t episodes_judged = 0, episodes_unjudged = 0, energy_soft_steps = 0;
+  std::vector<Episode> episodes;  // contact_model soft: open episodes
+  std::uint64_t episodes_judged = 0, episodes_judged_groups = 0, episodes_unjudged = 0, energy_soft_steps = 0;
   std::uint64_t groups_locked = 0, groups_rotation_locked = 0;
 };
 
@@ -952,7 +961,7 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
                       rec.v_post.size() == n;
   if (!states) {
     dissipation_cone_only += rec.contacts.size();
-    for (auto& e : episodes) e.second.spoiled = true;  // a step without states: the episode is not seen whole
+    for (auto& e : episodes) e.spoiled = true;  // a step without states: the episode is not seen whole
     return;
   }
   ++state_frames;
@@ -1250,22 +1259,9 @@ void PhysicsValidators::Impl::dynamics(const FrameRecord& rec, const std::vector
     });
   }
   if (bodies.contact_model == PhysicsBodies::ContactModel::Soft && restitution_le_1) {
-    // Pairs of two dynamic bodies that form an isolated group on their own this step.
-    std::map<std::uint32_t, std::uint32_t> pairs_in_group;
-    std::vector<Pair> distinct;
-    for (std::size_t k = 0; k < rec.contacts.size(); ++k)
-      if (k == 0 || !(rec.contacts[k].pair == rec.contacts[k - 1].pair)) distinct.push_back(rec.contacts[k].pair);
-    for (const Pair& q : rec.confirmed)
-      if (!std::binary_search(distinct.begin(), distinct.end(), q)) distinct.push_back(q);
-    std::sort(distinct.begin(), distinct.end());
-    for (const Pair& q : distinct) ++pairs_in_group[find(q.a)];
-    std::vector<std::pair<Pair, bool>> isolated;  // this step's contact pairs, alone in their group
-    for (const Pair& q : distinct) {
-      if (!dynamic(q.a) || !dynamic(q.b)) continue;
-      const std::uint32_t root = find(q.a);
-      isolated.push_back({q, !statics[root] && pairs_in_group[root] == 1 && groups_of[root].size() == 2});
-    }
-    soft_episodes(rec, isolated);
+    std::vector<Component> components;  // this step's, with their dynamic bodies
+    for (const auto& group : groups_of) components.push_back({group.second, !statics[group.first]});
+    soft_episodes(rec, components);
   }
 }
 
@@ -1281,57 +1277,90 @@ double PhysicsValidators::Impl::mechanical_energy(const FrameRecord& rec, std::u
   return e;
 }
 
-void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec,
-                                            const std::vector<std::pair<Pair, bool>>& isolated) {
+void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::vector<Component>& components) {
   const std::int64_t frame = rec.frame;
   const double g2dt2 = dot3(d3(model->scene.gravity), d3(model->scene.gravity)) * model->scene.dt * model->scene.dt;
-  auto kinetic = [&](std::uint32_t i, bool post) {
-    const D3 v = d3(post ? rec.v_post[i] : rec.v_pre[i]);
+  auto kinetic = [&](std::uint32_t i) {
+    const D3 v = d3(rec.v_pre[i]);
     return 0.5 * mass[i] * dot3(v, v);
   };
-  // Close the episodes of pairs without contact this step: judged on the state before
-  // it (the state after the episode's last step).
+  std::set<std::uint32_t> busy;  // dynamic bodies in contact this step
+  for (const Component& c : components) busy.insert(c.members.begin(), c.members.end());
+  // Close the episodes none of whose bodies is in contact this step: judged on the state
+  // before it (the state after the episode's last step). Between contacts a member flies
+  // free (free-flight judges it), so the group's energy is judged over the whole episode.
   for (auto it = episodes.begin(); it != episodes.end();) {
-    const Pair q = it->first;
-    const bool still = std::any_of(isolated.begin(), isolated.end(), [&](const auto& e) { return e.first == q; });
-    if (still) {
+    if (std::any_of(it->bodies.begin(), it->bodies.end(), [&](std::uint32_t i) { return busy.count(i) > 0; })) {
       ++it;
       continue;
     }
-    Episode& ep = it->second;
+    const Episode& ep = *it;
     if (ep.spoiled) {
       ++episodes_unjudged;
     } else {
-      const double e1 = mechanical_energy(rec, q.a, false) + mechanical_energy(rec, q.b, false);
+      double e1 = 0, masses = 0;
+      for (std::uint32_t i : ep.bodies) {
+        e1 += mechanical_energy(rec, i, false);
+        masses += mass[i];
+      }
       const std::int64_t steps = frame - ep.start;
       // Gravity's integration changes E by up to m |g|^2 dt^2 per step and body (explicit
       // Euler gains half of it, semi-implicit loses half); rounding of E's terms.
-      const double slack = double(steps) * (mass[q.a] + mass[q.b]) * g2dt2 +
+      const double slack = double(steps) * masses * g2dt2 +
                            16.0 * kEps32 * double(steps + 1) * (ep.scale + std::fabs(e1)) + 1e-12;
       const double bound = ep.e0 + tol.energy_rel * ep.ke0 + slack;
       const double rise = ep.ke0 > 0 ? (e1 - ep.e0) / ep.ke0 : 0.0;
-      energy.check(e1 <= bound, rise, Where{frame, pair_name(q)}, [&] {
-        return fmt::format("frame {}: {} (soft contacts) over its contact episode, frames {}..{}: mechanical energy "
-                           "{:.6g} -> {:.6g} J (+{:.3g} of its kinetic energy {:.4g} J at the start; bound {:.6g})",
-                           frame, pair_name(q), ep.start, frame - 1, ep.e0, e1, rise, ep.ke0, bound);
+      const std::string item = ep.bodies.size() == 2 ? pair_name(Pair{ep.bodies[0], ep.bodies[1]})
+                                                     : group_name(ep.bodies);
+      energy.check(e1 <= bound, rise, Where{frame, item}, [&] {
+        return fmt::format("frame {}: {}{} (soft contacts) over its contact episode, frames {}..{}: mechanical "
+                           "energy {:.6g} -> {:.6g} J (+{:.3g} of its kinetic energy {:.4g} J at the start; bound "
+                           "{:.6g})",
+                           frame, item,
+                           ep.bodies.size() == 2 ? std::string() : fmt::format(" of {} bodies", ep.bodies.size()),
+                           ep.start, frame - 1, ep.e0, e1, rise, ep.ke0, bound);
       });
       ++episodes_judged;
+      if (ep.bodies.size() > 2) ++episodes_judged_groups;
     }
     it = episodes.erase(it);
   }
-  for (const auto& [q, alone] : isolated) {
-    auto it = episodes.find(q);
-    if (it == episodes.end()) {
-      Episode ep;
-      ep.start = frame;
-      ep.e0 = mechanical_energy(rec, q.a, false) + mechanical_energy(rec, q.b, false);
-      ep.ke0 = kinetic(q.a, false) + kinetic(q.b, false);
-      ep.scale = std::fabs(ep.e0) + ep.ke0;
-      ep.spoiled = !alone;
-      episodes.emplace(q, ep);
-    } else if (!alone) {
-      it->second.spoiled = true;
+  // Open, grow (a component touching an episode's bodies, or two episodes', merges them;
+  // a body joining brings its energy at this step) or spoil (a member touches a static
+  // body) the episodes.
+  for (const Component& c : components) {
+    std::vector<std::size_t> hit;  // open episodes sharing a body with c
+    for (std::size_t e = 0; e < episodes.size(); ++e)
+      if (std::any_of(c.members.begin(), c.members.end(), [&](std::uint32_t i) {
+            return std::binary_search(episodes[e].bodies.begin(), episodes[e].bodies.end(), i);
+          }))
+        hit.push_back(e);
+    if (!c.isolated || c.members.size() < 2) {
+      for (std::size_t e : hit) episodes[e].spoiled = true;
+      continue;
     }
+    Episode merged;
+    merged.start = frame;
+    for (std::size_t e : hit) {
+      const Episode& ep = episodes[e];
+      merged.start = std::min(merged.start, ep.start);
+      merged.bodies.insert(merged.bodies.end(), ep.bodies.begin(), ep.bodies.end());
+      merged.e0 += ep.e0;
+      merged.ke0 += ep.ke0;
+      merged.scale += ep.scale;
+      merged.spoiled = merged.spoiled || ep.spoiled;
+    }
+    for (std::uint32_t i : c.members) {
+      if (std::find(merged.bodies.begin(), merged.bodies.end(), i) != merged.bodies.end()) continue;
+      const double e = mechanical_energy(rec, i, false), ke = kinetic(i);
+      merged.bodies.push_back(i);
+      merged.e0 += e;
+      merged.ke0 += ke;
+      merged.scale += std::fabs(e) + ke;
+    }
+    std::sort(merged.bodies.begin(), merged.bodies.end());
+    for (auto e = hit.rbegin(); e != hit.rend(); ++e) episodes.erase(episodes.begin() + static_cast<std::ptrdiff_t>(*e));
+    episodes.push_back(std::move(merged));
   }
 }
 
@@ -1459,7 +1488,8 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       // A row's own cone, with the margin a sequential solver leaves on a row whose normal
       // impulse moved to the manifold's other rows after its friction was clamped (Bullet:
       // up to 13% above mu times the row's final jn; the friction row holds the pair's sum
-      // to the cone itself).
+      // to the cone itself). Never with jt3; what it leaves open is stated in
+      // docs/validate-your-engine.md, "The row cone margin".
       constexpr double kRowConeMargin = 0.25;
       uncertain = std::max(jt, pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs);
     } else {
@@ -1894,11 +1924,12 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail += fmt::format("; {} group-frames not judged (a body at the declared velocity clamp {} m/s)",
                               s.groups_clamped, s.bodies.velocity_clamp);
     if (s.bodies.contact_model == PhysicsBodies::ContactModel::Soft)
-      r.detail += fmt::format("; contact_model soft: energy judged per contact episode of a pair alone in its "
-                              "isolated group ({} episodes judged, {} not judged: the pair touched other bodies, a "
-                              "step had no states, or still in contact at the end ({} open)), not on {} group-steps",
-                              s.episodes_judged, s.episodes_unjudged + s.episodes.size(), s.episodes.size(),
-                              s.energy_soft_steps);
+      r.detail += fmt::format("; contact_model soft: energy judged per contact episode of an isolated group, "
+                              "from its first contact until none of its bodies touches another ({} episodes judged, "
+                              "{} of them of 3 or more bodies; {} not judged: a body touched a static one, a step "
+                              "had no states, or still in contact at the end ({} open)), not on {} group-steps",
+                              s.episodes_judged, s.episodes_judged_groups, s.episodes_unjudged + s.episodes.size(),
+                              s.episodes.size(), s.energy_soft_steps);
     if (s.groups_locked)
       r.detail += fmt::format("; {} group-frames with a body whose axes are locked (locked_dofs): momentum along "
                               "locked translation axes not judged; {} with a rotation locked: angular momentum not "
