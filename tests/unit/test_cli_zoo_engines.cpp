@@ -159,6 +159,23 @@ struct Zoo {
     t.q[i] = f32(angle > 0 ? qnorm(qmul(axis_angle(t.w[i], angle), s.q[i])) : s.q[i]);
   }
 
+  /// Steps the run `frames` times from its last state: gravity (and the gyroscopic term
+  /// when `gyroscopic`) on every body, then `contacts(s, t, rows)` (s the state before the
+  /// step, t the state being stepped, the step's rows), then the positions.
+  void run(int frames, bool gyroscopic,
+           const std::function<void(const State&, State&, std::vector<Row>&)>& contacts) {
+    for (int f = 1; f <= frames; ++f) {
+      const State s = states.back();
+      State t = s;
+      std::vector<Row> step;
+      for (int i = 0; i < n(); ++i) integrate_velocity(i, s, t, gyroscopic);
+      contacts(s, t, step);
+      for (int i = 0; i < n(); ++i) integrate_position(i, s, t);
+      states.push_back(t);
+      rows.push_back(step);
+    }
+  }
+
   /// Writes the run as an external trace, version 2 (docs/trace-format.md).
   void write(const std::string& path) const {
     const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
@@ -310,11 +327,7 @@ Zoo soft_engine(int frames = 60, double chain_c = 50) {
       {{0, 0, 0}, {0, 0, 0}, {1, 2, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}},
       {{1, 0, 0, 0}, {1, 0, 0, 0}, axis_angle({0, 0, 1}, 0.3), {1, 0, 0, 0}, {1, 0, 0, 0}, {1, 0, 0, 0}}));
   const std::vector<std::array<int, 2>> springs{{0, 1}, {3, 4}, {4, 5}};
-  for (int f = 1; f <= frames; ++f) {
-    const State& s = z.states.back();
-    State t = s;
-    std::vector<Row> rows;
-    for (int i = 0; i < z.n(); ++i) z.integrate_velocity(i, s, t, false);
+  z.run(frames, false, [&](const State& s, State& t, std::vector<Row>& rows) {
     const State after_gravity = t;
     for (const auto& [a, b] : springs) {
       const double d = 0.2 - (s.x[b][0] - s.x[a][0]);
@@ -331,10 +344,7 @@ Zoo soft_engine(int frames = 60, double chain_c = 50) {
       t.v[b] = t.v[b] - r.jn * r.n;
       rows.push_back(r);
     }
-    for (int i = 0; i < z.n(); ++i) z.integrate_position(i, s, t);
-    z.states.push_back(t);
-    z.rows.push_back(rows);
-  }
+  });
   return z;
 }
 
@@ -396,17 +406,10 @@ Zoo gyroscopic_engine(int frames = 200) {
   z.states.push_back(initial(z, {{0, -0.1, 0}, {0, 0.22, 0}, {1.2, 1.5, 0.5}}, {{0, 0, 0}, {0, 0, 0}, {0, 1, 0}},
                              {{0, 0, 0}, {2, 5, 1}, {3, 6, 2}},
                              {{1, 0, 0, 0}, axis_angle({1, 1, 0}, 0.5), axis_angle({0, 1, 1}, 0.2)}));
-  for (int f = 1; f <= frames; ++f) {
-    const State& s = z.states.back();
-    State t = s;
-    std::vector<Row> rows;
-    for (int i = 0; i < z.n(); ++i) z.integrate_velocity(i, s, t, true);
+  z.run(frames, true, [&](const State& s, State& t, std::vector<Row>& rows) {
     floor_corners(z, 1, s, t, rows, 0.5);
     floor_corners(z, 2, s, t, rows, 0.5);
-    for (int i = 0; i < z.n(); ++i) z.integrate_position(i, s, t);
-    z.states.push_back(t);
-    z.rows.push_back(rows);
-  }
+  });
   return z;
 }
 
@@ -430,11 +433,7 @@ Zoo locked_engine(int frames = 80) {
                              {{0, 0, 0}, {1.5, 0, 0}, {1, 0, 0}, {-1, 0, 0}, {0, 0.3, 0}},
                              {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {1, 2, 3}},
                              {{1, 0, 0, 0}, {1, 0, 0, 0}, {1, 0, 0, 0}, {1, 0, 0, 0}, axis_angle({1, 0, 0}, 0.4)}));
-  for (int f = 1; f <= frames; ++f) {
-    const State& s = z.states.back();
-    State t = s;
-    std::vector<Row> rows;
-    for (int i = 0; i < z.n(); ++i) z.integrate_velocity(i, s, t, false);
+  z.run(frames, false, [&](const State& s, State& t, std::vector<Row>& rows) {
     // Box 1 on the floor: the 4 bottom corners carry m g dt and Coulomb friction.
     {
       const double jn = f32(z.bodies[1].m * 9.81 * z.dt / 4);
@@ -472,10 +471,7 @@ Zoo locked_engine(int frames = 80) {
       }
       rows.push_back(r);
     }
-    for (int i = 0; i < z.n(); ++i) z.integrate_position(i, s, t);
-    z.states.push_back(t);
-    z.rows.push_back(rows);
-  }
+  });
   return z;
 }
 
@@ -517,12 +513,8 @@ Zoo hull_engine(const fs::path& dir, int frames = 200) {
                   {{0, 1, 2, 3}, {0, 3, 4, 5}}, 0.06);
   Zoo z;
   z.engine = "zoo-hulls";
-  Body channel;
-  channel.h = {0.4, 0.15, 0.3};
-  channel.m = 0;
-  Body bar;
-  bar.h = {0.1, 0.075, 0.03};
-  z.bodies = {channel, bar, bar};
+  const Body bar{{0.1, 0.075, 0.03}};  // 1 kg
+  z.bodies = {Body{{0.4, 0.15, 0.3}, 0.0}, bar, bar};
   const std::vector<V> x0{{0, -0.15, 0}, {0.05, 0.14, 0.02}, {1.5, 1.0, 0}};
   z.text["collision_shape"] = "convex_hull";
   z.text["scene"] = R"({"name": "zoo-hulls", "rotation": true, "dt": 0.001, "frames": )" + std::to_string(frames) +
@@ -538,16 +530,9 @@ Zoo hull_engine(const fs::path& dir, int frames = 200) {
   for (const auto& p : hulls.hull_features(1).vertices) bar_hull.push_back({p[0], p[1], p[2]});
   z.states.push_back(initial(z, x0, {{0, 0, 0}, {0.1, -0.5, 0}, {0, 0.5, 0}}, {{0, 0, 0}, {3, 2, 5}, {1, 2, 3}},
                              {{1, 0, 0, 0}, axis_angle({1, 0.5, 0.2}, 0.7), axis_angle({0, 0, 1}, 0.3)}));
-  for (int f = 1; f <= frames; ++f) {
-    const State& s = z.states.back();
-    State t = s;
-    std::vector<Row> rows;
-    for (int i = 0; i < z.n(); ++i) z.integrate_velocity(i, s, t, false);
+  z.run(frames, false, [&](const State& s, State& t, std::vector<Row>& rows) {
     floor_corners(z, 1, s, t, rows, 0.2, bar_hull);
-    for (int i = 0; i < z.n(); ++i) z.integrate_position(i, s, t);
-    z.states.push_back(t);
-    z.rows.push_back(rows);
-  }
+  });
   z.hull_vertices = bar_hull.size();
   return z;
 }
