@@ -37,6 +37,7 @@
 #include "octocd/cuda_world.hpp"
 #include "octocd/engines.hpp"
 #include "tools.hpp"
+#include "view.hpp"
 
 namespace {
 
@@ -854,6 +855,7 @@ int main(int argc, char** argv) {
                     "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not)");
 
   octocd::cli::ToolCommands tools(app);  // bench, replay, compare, report (cli/tools.hpp)
+  octocd::cli::ViewCommand view(app);    // view (cli/view.hpp)
 
   try {
     app.parse(argc, argv);
@@ -871,6 +873,7 @@ int main(int argc, char** argv) {
       return validate_command(val);
     }
     if (tools.selected()) return tools.run();
+    if (view.selected()) return view.run();
   } catch (const octocd::InputError& e) {
     std::fprintf(stderr, "octocd: error: %s\n", e.what());
     return 2;

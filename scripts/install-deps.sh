@@ -18,6 +18,9 @@ PACKAGES=(
   python3 python3-numpy python3-h5py python3-matplotlib python3-scipy
   # the Python package `import octocd` (python/, OCTOCD_PYTHON) and its pytest tests
   python3-dev python3-pybind11 python3-pytest
+  # `octocd view` (three.js, inlined in its pages) and its headless-browser test (PIL reads
+  # the screenshot)
+  libjs-three chromium python3-pil
 )
 if [ "${1:-}" = "--list" ]; then echo "${PACKAGES[@]}"; exit 0; fi
 missing=()

@@ -23,6 +23,7 @@
 #include "octocd/error.hpp"
 #include "octocd/reference_contact.hpp"
 #include "dmath.hpp"
+#include "reference.hpp"
 #include "sat.hpp"
 
 namespace octocd {
@@ -296,9 +297,6 @@ struct PhysicsValidators::Impl {
     return combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
   }
   bool dynamic(std::uint32_t i) const { return mass[i] > 0; }
-  /// Whether body i's collision shape is a convex polytope the separating-axis test
-  /// judges (a box, or a convex mesh).
-  bool sat_shape(std::uint32_t i) const { return ref->convex(i); }
 
   void geometry(const FrameRecord& rec, const std::vector<Pose>& det);
   /// Dissipation of pair p's rows [k0, k1) from their tangential impulse vectors (jt3).
@@ -480,31 +478,15 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   // translation of the separating-axis test (SPEC 13b.9: FCL's box-box keeps a face axis
   // up to 5% deeper than an edge-edge one, so its depth and normal are not the minimum
   // there); FCL's answer stays beside it as the second opinion.
-  struct Truth {
+  struct Truth : PairReference {  // reference.hpp: g, sat, sat_result, fcl
     bool intersects = false, have = false;
-    ReferenceNormal g;
-    bool sat = false;  // g's depth and normal are the separating-axis test's
-    SatResult sat_result;
-    ReferenceNormal fcl;  // FCL's own answer (the second opinion where sat)
   };
   std::map<std::pair<std::uint32_t, std::uint32_t>, Truth> truth;
   auto key = [](Pair p) { return std::make_pair(p.a, p.b); };
   auto full_truth = [&](Pair p) -> const Truth& {
     Truth& t = truth[key(p)];
     if (!t.have) {
-      t.g = ref->posed(p.a, p.b, det[p.a], det[p.b]);
-      t.fcl = t.g;
-      if (t.g.penetrating && t.g.valid && sat_shape(p.a) && sat_shape(p.b)) {
-        t.sat_result = sat_min_translation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b), det[p.b],
-                                           sat_settings);
-        if (t.sat_result.tested && !t.sat_result.separated) {
-          t.sat = true;
-          t.g.depth = t.sat_result.depth;
-          t.g.depth_upper_bound = false;
-          const auto& u = t.sat_result.normal;
-          t.g.normal = Vec3{float(u[0]), float(u[1]), float(u[2])};
-        }
-      }
+      static_cast<PairReference&>(t) = pair_reference(*ref, p.a, p.b, det[p.a], det[p.b], sat_settings);
       t.have = true;
       t.intersects = t.g.penetrating;
     }
@@ -680,14 +662,9 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     const bool engine_places_depth = rec.contacts[deepest].depth > tol.geometry_slack_m;
     for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
       const ContactRecord& c = rec.contacts[k];
-      std::size_t nearest = 0;
-      const double angle =
-          (by_sat ? sat_angle_to_accepted(shape_truth.sat_result, d3(c.normal), &nearest) : angle_between(c.normal, r.normal)) *
-          deg;
-      const Vec3 ref_normal = by_sat ? Vec3{float(shape_truth.sat_result.accepted[nearest].normal[0]),
-                                            float(shape_truth.sat_result.accepted[nearest].normal[1]),
-                                            float(shape_truth.sat_result.accepted[nearest].normal[2])}
-                                     : r.normal;
+      const RowReference row_ref = row_reference(shape_truth, r, by_sat, c.normal);
+      const double angle = row_ref.angle * deg;
+      const Vec3 ref_normal = row_ref.normal;
       ++sign_rows;
       if (dot(c.normal, r.normal) > 0.0f) ++sign_agree;
       // A row the engine places at depth 0 on a pair that penetrates less than

@@ -1,0 +1,81 @@
+#pragma once
+/// \file view.hpp
+/// `octocd view TRACE.h5 [--frame F] [--pair A,B | --body I] [--window K] -o DIR` (SPEC 16,
+/// octocd/view.hpp) and what `octocd validate --view DIR` shares with it: a page per
+/// failing example of a judged trace.
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "octocd/validation.hpp"
+
+namespace octocd::cli {
+
+/// Registers `view` on `app`; after parsing, `selected()` says whether it was chosen and
+/// `run()` writes the page (throwing InputError / RuntimeError like the other commands)
+/// and returns its exit code (0).
+class ViewCommand {
+ public:
+  explicit ViewCommand(CLI::App& app);
+  ~ViewCommand();
+  ViewCommand(const ViewCommand&) = delete;
+  ViewCommand& operator=(const ViewCommand&) = delete;
+  /// Whether `view` was given on the command line.
+  bool selected() const;
+  /// Writes the page; returns 0.
+  int run();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Most pages `validate --view` writes for one run (the failing examples beyond it are
+/// counted and said).
+constexpr std::size_t kMaxViewPages = 20;
+
+/// One page of a failing example: where it is in the results and where it was written.
+struct ViewLink {
+  std::size_t row = 0;      ///< index into the results
+  std::string cause;        ///< the cause's name (failure_causes of the row)
+  std::size_t example = 0;  ///< index into the cause's examples
+  std::string item;         ///< "pair (A, B)" or "body I"
+  std::int64_t frame = 0;   ///< the example's frame
+  std::string path;         ///< the page, DIR/NAME.html as DIR was given
+};
+
+/// The pages `validate --view` wrote, and one line saying how many, the cap and what was
+/// left without a page.
+struct FailureViews {
+  std::vector<ViewLink> links;
+  std::string summary;
+};
+
+/// `validate --view DIR`: for each failing row's causes (failure_causes), each example
+/// that names a frame and a pair or a body gets the page of `trace` at that frame and item
+/// in `dir` (row order, at most kMaxViewPages; one per row, cause and item). An example
+/// whose page cannot be drawn is counted in the summary, with the first reason.
+FailureViews write_failure_views(const std::string& trace, const std::vector<ValidationResult>& results,
+                                 const std::string& dir);
+
+/// The table's lines of the pages (after format_results): "  ROW/CAUSE frame F ITEM: PATH".
+std::string format_views(const FailureViews& views);
+
+/// A link as seen from the folder of `written_file` (the JSON or JUnit file that holds
+/// it), so an artifact folder holding both works wherever it is unpacked.
+std::string view_link(const std::string& page, const std::string& written_file);
+
+/// Adds "view": LINK (view_link from `json_file`) to each example of `doc` (results_json)
+/// that has a page.
+void add_views_to_json(nlohmann::ordered_json& doc, const FailureViews& views, const std::string& json_file);
+
+/// `results` with "; view: LINK" (view_link from `junit_file`) appended to the detail of
+/// each row with pages: what JUnit's failure message shows.
+std::vector<ValidationResult> with_views_in_details(const std::vector<ValidationResult>& results,
+                                                    const FailureViews& views, const std::string& junit_file);
+
+}  // namespace octocd::cli

@@ -1,0 +1,241 @@
+// `octocd view` (SPEC 16, octocd/view.hpp) and `octocd validate --view`: the page's
+// embedded data holds the engine's contact and the physics tier's reference for a planted
+// fault, bad input exits 2 naming the argument, the page embeds only the trace's numbers,
+// and a page of a 10^6-body trace viewed at a pair stays as small as one of 3 bodies.
+#include <gtest/gtest.h>
+#include <hdf5.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "unit/cli_run.hpp"
+#include "unit/external_trace.hpp"
+
+namespace fs = std::filesystem;
+using octocd::test::run_octocd;
+using octocd::test::Trace;
+
+namespace {
+
+/// A fresh folder for one test.
+std::string scratch(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("octocd-test-view-" + std::to_string(::getpid()) + "-" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir.string();
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+/// The page's embedded data (<script type="application/json" id="octocd-data">).
+nlohmann::json page_data(const std::string& page) {
+  const std::string open = "<script type=\"application/json\" id=\"octocd-data\">";
+  const std::size_t a = page.find(open);
+  if (a == std::string::npos) return nullptr;
+  const std::size_t b = page.find("</script>", a);
+  return nlohmann::json::parse(page.substr(a + open.size(), b - a - open.size()));
+}
+
+/// The test trace (external_trace.hpp: boxes 1 and 2 overlap by 0.001 m along x, one
+/// contact row per frame with the correct normal (-1, 0, 0), from body 2 to body 1) with
+/// frame 2's normal flipped to (+1, 0, 0): a planted fault of the contact normal.
+std::string flipped_trace(const std::string& dir) {
+  Trace t;
+  t.normal[3] = 1.0f;  // frame 2's row (offsets 1..2)
+  const std::string path = dir + "/flipped.h5";
+  t.write(path);
+  return path;
+}
+
+const nlohmann::json* frame_of(const nlohmann::json& data, std::int64_t f) {
+  for (const auto& fr : data["frames"])
+    if (fr["frame"] == f) return &fr;
+  return nullptr;
+}
+
+}  // namespace
+
+TEST(CliView, PlantedFlippedNormalPageHoldsThePairAndBothNormals) {
+  const std::string dir = scratch("flipped");
+  const std::string trace = flipped_trace(dir);
+  const auto r = run_octocd("view " + trace + " --frame 2 --pair 2,1 -o " + dir + "/out");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string page = slurp(dir + "/out/view-f2-pair-1-2.html");
+  ASSERT_FALSE(page.empty()) << r.output;
+  const nlohmann::json data = page_data(page);
+  ASSERT_TRUE(data.is_object());
+  EXPECT_EQ(data["item"]["kind"], "pair");
+  EXPECT_EQ(data["item"]["a"], 1);
+  EXPECT_EQ(data["item"]["b"], 2);
+  EXPECT_EQ(data["frame"], 2);
+  const nlohmann::json* f2 = frame_of(data, 2);
+  ASSERT_NE(f2, nullptr);
+  ASSERT_EQ((*f2)["contacts"].size(), 1u);
+  const auto& c = (*f2)["contacts"][0];
+  EXPECT_EQ(c["a"], 1);
+  EXPECT_EQ(c["b"], 2);
+  EXPECT_EQ(c["normal"], nlohmann::json::array({1, 0, 0}));  // the engine's (flipped)
+  // The reference: two boxes overlapping by 0.001 m along x, minimum translation -x.
+  ASSERT_FALSE(c["ref"].is_null());
+  const auto& ref = (*f2)["references"][c["ref"].get<std::size_t>()];
+  EXPECT_EQ(ref["a"], 1);
+  EXPECT_EQ(ref["b"], 2);
+  EXPECT_EQ(ref["judge"], "SAT");
+  EXPECT_TRUE(ref["judged"]["penetrating"].get<bool>());
+  EXPECT_NEAR(ref["judged"]["normal"][0].get<double>(), -1.0, 1e-6);
+  EXPECT_NEAR(ref["judged"]["depth"].get<double>(), 0.001, 1e-5);
+  EXPECT_NEAR(c["ref_normal"][0].get<double>(), -1.0, 1e-6);
+  EXPECT_NEAR(c["angle_deg"].get<double>(), 180.0, 1e-3);
+  // The frames around it keep the correct normal: the angle there is 0.
+  const nlohmann::json* f1 = frame_of(data, 1);
+  ASSERT_NE(f1, nullptr);
+  ASSERT_EQ((*f1)["contacts"].size(), 1u);
+  EXPECT_NEAR((*f1)["contacts"][0]["angle_deg"].get<double>(), 0.0, 1e-3);
+  // The pair first (highlighted); body 0 lies 0.8 m away, beyond the pair's size: not drawn.
+  ASSERT_EQ(data["bodies"].size(), 2u);
+  EXPECT_TRUE(data["bodies"][0]["item"].get<bool>());
+  EXPECT_EQ(data["bodies"][0]["id"], 1);
+  // The page embeds the trace's numbers only: the root attribute engine ("test-engine")
+  // is text of the file and never appears.
+  EXPECT_EQ(page.find("test-engine"), std::string::npos);
+  // three.js is inlined: no network.
+  EXPECT_EQ(page.find("<script src"), std::string::npos);
+  EXPECT_NE(page.find("OrbitControls"), std::string::npos);
+  fs::remove_all(dir);
+}
+
+TEST(CliView, BadInputExitsTwoNamingTheArgument) {
+  const std::string dir = scratch("bad");
+  const std::string trace = flipped_trace(dir);
+  const std::string out = " -o " + dir + "/out";
+  struct Case {
+    std::string args, names;
+  };
+  const std::vector<Case> cases = {
+      {"--frame 4", "--frame: 4: outside the trace"},
+      {"--frame 0", "--frame: 0"},
+      {"--pair 1,3", "--pair: body 3 does not exist"},
+      {"--pair 1,1", "--pair: 1,1: one body twice"},
+      {"--pair x", "--pair: 'x'"},
+      {"--body 9", "--body: body 9 does not exist"},
+      {"--window 51", "--window: 51"},
+      {"--pair 0,1 --body 2", "--pair and --body"},
+  };
+  for (const Case& c : cases) {
+    const auto r = run_octocd("view " + trace + " " + c.args + out);
+    EXPECT_EQ(r.code, 2) << c.args << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.names), std::string::npos) << c.args << "\n" << r.output;
+  }
+  // A trace the hardened reader refuses: a non-finite position (named with the dataset).
+  Trace t;
+  t.position[4] = std::nanf("");
+  t.write(dir + "/nan.h5");
+  auto r = run_octocd("view " + dir + "/nan.h5 --frame 1" + out);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("/states/position"), std::string::npos) << r.output;
+  // Not HDF5 at all.
+  std::ofstream(dir + "/text.h5") << "not a trace";
+  r = run_octocd("view " + dir + "/text.h5" + out);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("text.h5"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir + "/out/view-f1-all.html"));
+  fs::remove_all(dir);
+}
+
+TEST(CliView, PairNotInContactIsDrawnWithANote) {
+  const std::string dir = scratch("apart");
+  const std::string trace = flipped_trace(dir);
+  const auto r = run_octocd("view " + trace + " --frame 1 --pair 0,2 --window 0 -o " + dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("pair (0, 2) has no contact row in frame 1"), std::string::npos) << r.output;
+  const nlohmann::json data = page_data(slurp(dir + "/view-f1-pair-0-2.html"));
+  ASSERT_TRUE(data.is_object());
+  EXPECT_NE(data["note"].get<std::string>().find("no contact row"), std::string::npos);
+  ASSERT_EQ(data["frames"].size(), 1u);
+  const auto& f = data["frames"][0];
+  EXPECT_FALSE(f["pair_in_contact"].get<bool>());
+  // The pair still has its reference: apart by 1 - 0.2 m along y, nearest points between.
+  ASSERT_GE(f["references"].size(), 1u);
+  const auto& ref = f["references"][0];
+  EXPECT_EQ(ref["a"], 0);
+  EXPECT_EQ(ref["b"], 2);
+  EXPECT_FALSE(ref["judged"]["penetrating"].get<bool>());
+  EXPECT_NEAR(ref["judged"]["distance"].get<double>(), 0.8, 1e-4);
+  fs::remove_all(dir);
+}
+
+// 10^6 boxes on a grid (one frame, states only, no contacts): a page viewed at a pair
+// holds the pair and at most the cap of bodies near it, whatever the trace's size. The
+// trace is written uncompressed (about 48 MB) in well under a second.
+TEST(CliView, MillionBodyTraceViewedAtAPairWritesABoundedPage) {
+  const std::string dir = scratch("large");
+  const std::string path = dir + "/grid.h5";
+  const hsize_t n = 1000000, side = 100;  // 100^3 boxes of side 0.1 m, 0.15 m apart
+  {
+    std::vector<float> lo(3 * n, -0.05f), hi(3 * n, 0.05f), w(n, 1.0f), x(2 * 3 * n), v(2 * 3 * n, 0.0f);
+    for (hsize_t r = 0; r < 2; ++r)
+      for (hsize_t i = 0; i < n; ++i) {
+        x[(r * n + i) * 3 + 0] = 0.15f * static_cast<float>(i % side);
+        x[(r * n + i) * 3 + 1] = 0.15f * static_cast<float>((i / side) % side);
+        x[(r * n + i) * 3 + 2] = 0.15f * static_cast<float>(i / (side * side));
+      }
+    const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    ASSERT_GE(file, 0);
+    const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
+    H5Pset_create_intermediate_group(lcpl, 1);
+    auto put = [&](const char* name, std::vector<hsize_t> shape, const std::vector<float>& data) {
+      const hid_t space = H5Screate_simple(static_cast<int>(shape.size()), shape.data(), nullptr);
+      const hid_t d = H5Dcreate2(file, name, H5T_IEEE_F32LE, space, lcpl, H5P_DEFAULT, H5P_DEFAULT);
+      ASSERT_GE(d, 0) << name;
+      ASSERT_GE(H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), 0) << name;
+      H5Dclose(d);
+      H5Sclose(space);
+    };
+    const hid_t st = H5Tcopy(H5T_C_S1);
+    H5Tset_size(st, H5T_VARIABLE);
+    const hid_t scalar = H5Screate(H5S_SCALAR);
+    const char* format = "octocd-trace";
+    const hid_t fa = H5Acreate2(file, "format", st, scalar, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(fa, st, &format);
+    H5Aclose(fa);
+    const int version = 1;
+    const hid_t va = H5Acreate2(file, "version", H5T_STD_I32LE, scalar, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(va, H5T_NATIVE_INT, &version);
+    H5Aclose(va);
+    H5Sclose(scalar);
+    H5Tclose(st);
+    put("/bodies/local_aabb_min", {n, 3}, lo);
+    put("/bodies/local_aabb_max", {n, 3}, hi);
+    put("/bodies/inverse_mass", {n}, w);
+    put("/states/position", {2, n, 3}, x);
+    put("/states/velocity", {2, n, 3}, v);
+    H5Pclose(lcpl);
+    H5Fclose(file);
+  }
+  // Bodies 505050 and 505051 are grid neighbours in the middle of the block.
+  const auto r = run_octocd("view " + path + " --frame 1 --pair 505050,505051 -o " + dir + "/out");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string page = slurp(dir + "/out/view-f1-pair-505050-505051.html");
+  const nlohmann::json data = page_data(page);
+  ASSERT_TRUE(data.is_object());
+  EXPECT_EQ(data["bodies_in_trace"], n);
+  EXPECT_LE(data["bodies"].size(), data["cap"].get<std::size_t>());
+  EXPECT_EQ(data["bodies"][0]["id"], 505050);
+  EXPECT_EQ(data["bodies"][1]["id"], 505051);
+  // Bounded: three.js (about 0.9 MB) plus at most 64 bodies over 1 frame: under 1.5 MB.
+  EXPECT_LT(page.size(), 1500000u) << page.size();
+  fs::remove_all(dir);
+}

@@ -1,0 +1,52 @@
+#pragma once
+/// \file reference.hpp
+/// The reference contact geometry of one pair, as the physics tier's `contact-geometry`
+/// row judges it (octocd/physics.hpp, row 3; SPEC 13b.9): shared by the validators
+/// (physics_validators.cpp) and `octocd view` (validation/src/view.cpp), so a page draws
+/// exactly the normal a row was judged against. Internal to validation/.
+///
+/// Two convex polytopes (boxes, convex meshes, declared hulls and boxes) that penetrate:
+/// the separating-axis test (sat.hpp) gives the depth and the normal of the minimum
+/// translation, and every axis within its epsilon is an accepted normal; FCL's answer is
+/// kept beside it (the second opinion). Other shapes: FCL / libccd (ReferenceGeometry::
+/// posed). Units: metres; normals unit, from B to A (SPEC 2).
+
+#include <cstdint>
+
+#include "octocd/math.hpp"
+#include "octocd/pose.hpp"
+#include "octocd/reference_contact.hpp"
+#include "sat.hpp"
+
+namespace octocd {
+
+/// The reference geometry of one pair at its detection poses.
+struct PairReference {
+  /// The reference: FCL's posed() answer, with SAT's depth and normal when `sat`.
+  ReferenceNormal g;
+  /// g's depth and normal are the separating-axis test's (both shapes convex polytopes
+  /// and FCL found them penetrating).
+  bool sat = false;
+  SatResult sat_result;  ///< the separating-axis test (filled when `sat`)
+  ReferenceNormal fcl;   ///< FCL's own answer (the second opinion where `sat`)
+};
+
+/// The reference of bodies a, b at poses pa, pb: ref.posed(a, b, pa, pb); when it
+/// penetrates (valid) and both shapes are convex (ReferenceGeometry::convex), the
+/// separating-axis test with `settings` replaces its depth (no longer an upper bound) and
+/// normal. Throws InputError for a body out of range (ReferenceGeometry).
+PairReference pair_reference(const ReferenceGeometry& ref, std::uint32_t a, std::uint32_t b, const Pose& pa,
+                             const Pose& pb, const SatSettings& settings);
+
+/// The normal one contact row is judged against, and its angle.
+struct RowReference {
+  Vec3 normal;         ///< unit, B to A: SAT's nearest accepted axis, or `r`'s normal
+  double angle = 0;    ///< radians in [0, pi] between the row's normal and `normal`
+};
+
+/// For a row with normal `n`: with `by_sat`, the accepted axis of t.sat_result nearest to
+/// n (sat_angle_to_accepted); otherwise r.normal (the FCL answer, or box-box on the world
+/// AABBs for an engine that resolves on them) and angle_between(n, r.normal).
+RowReference row_reference(const PairReference& t, const ReferenceNormal& r, bool by_sat, Vec3 n);
+
+}  // namespace octocd

@@ -1,0 +1,286 @@
+#pragma once
+// The HTML and script of a viewer page (view.cpp, octocd/view.hpp). Internal to validation/.
+//
+// The page reads its data from <script type="application/json" id="octocd-data"> (the
+// numbers of the trace) and draws it with three.js (inlined before it). It records every
+// error (window.onerror, console.error) in <pre id="octocd-errors"> and sets
+// <body data-status="drawn"> once the first frame is rendered, so a headless browser
+// (tests/view/test_view_chromium.py) can tell a page that drew from one that failed.
+#include <string>
+
+namespace octocd::detail {
+
+/// The whole page: `title` (plain text of numbers), `json` (already safe inside a script
+/// element) and `js` (three.js and its examples, already safe inside a script element).
+inline std::string view_page_html(const std::string& title, const std::string& json, const std::string& js) {
+  static const char* const head = R"HTML(<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8">
+<title>)HTML";
+  static const char* const style = R"HTML(</title>
+<script>
+window.octocdErrors = [];
+window.addEventListener('error', function (e) { window.octocdErrors.push(String(e.message || e)); showErrors(); });
+(function () { var ce = console.error; console.error = function () {
+  window.octocdErrors.push(Array.prototype.join.call(arguments, ' ')); showErrors(); ce.apply(console, arguments); }; })();
+function showErrors() { var p = document.getElementById('octocd-errors'); if (p) p.textContent = window.octocdErrors.join('\n'); }
+</script>
+<style>
+html, body { margin: 0; height: 100%; overflow: hidden; font: 13px/1.35 sans-serif; background: #f4f4f2; }
+#view { position: absolute; inset: 0; }
+#panel { position: absolute; left: 8px; top: 8px; width: 400px; max-height: calc(100% - 16px); overflow: auto;
+  background: rgba(255,255,255,0.92); border: 1px solid #bbb; padding: 8px; border-radius: 4px; }
+#panel h1 { font-size: 14px; margin: 0 0 4px 0; }
+#figures { white-space: pre-wrap; font: 12px/1.3 monospace; margin: 6px 0; }
+#note { color: #a04000; margin: 4px 0; }
+#legend div { margin: 1px 0; } #legend span { display: inline-block; width: 12px; height: 12px; margin-right: 6px;
+  vertical-align: middle; border: 1px solid #666; }
+#octocd-errors { color: #b00; white-space: pre-wrap; margin: 0; }
+input[type=range] { width: 100%; } select { max-width: 100%; }
+</style></head>
+<body data-status="loading">
+<div id="view"></div>
+<div id="panel">
+<h1 id="heading"></h1>
+<div id="about"></div>
+<div id="note"></div>
+<div><label>frame <b id="frame-label"></b><input id="slider" type="range"></label></div>
+<div><label>contact <select id="pick"></select></label></div>
+<div id="figures"></div>
+<div id="legend">
+<div><span style="background:#e8642c"></span>the item's bodies (highlighted)</div>
+<div><span style="background:#9aa7b8"></span>other bodies (dark: static)</div>
+<div><span style="background:none;border-color:#3a6fd8"></span>world AABBs (the item's: orange)</div>
+<div><span style="background:#1f5fd0"></span>engine normal at its point (length: depth x scale)</div>
+<div><span style="background:#d01f1f"></span>engine normal of the selected contact</div>
+<div><span style="background:#1a9a3a"></span>reference normal (SAT or FCL, the physics tier's own)</div>
+<div><span style="background:#b01fb0"></span>reference points (nearest points / contact point)</div>
+<div id="scale"></div>
+<div>drag: orbit, wheel: zoom, right drag: pan</div>
+</div>
+<pre id="octocd-errors"></pre>
+</div>
+<script>
+)HTML";
+  static const char* const between = R"HTML(
+</script>
+<script type="application/json" id="octocd-data">)HTML";
+  static const char* const tail = R"HTML(</script>
+<script>
+(function () {
+'use strict';
+var D = JSON.parse(document.getElementById('octocd-data').textContent);
+function $(id) { return document.getElementById(id); }
+function v3(a) { return new THREE.Vector3(a[0], a[1], a[2]); }
+function f4(x) { return x === null || x === undefined ? 'n/a' : Number(x).toPrecision(4); }
+function fv(a) { return a ? '(' + a.map(function (x) { return Number(x).toFixed(3); }).join(', ') + ')' : 'n/a'; }
+var item = D.item;
+$('heading').textContent = document.title;
+var about = 'trace ' + D.trace + ' (version ' + D.trace_version + (D.octocd_engine ? ', octocd engine' : '') +
+  '): ' + D.bodies_in_trace + ' bodies, ' + D.frames_in_trace + ' frames. Drawn: ' + D.bodies.length +
+  ' bodies (cap ' + D.cap + '), frames ' + D.frames[0].frame + '..' + D.frames[D.frames.length - 1].frame + '.';
+if (D.failure) about += ' Failing: ' + D.failure.row + '/' + D.failure.cause + ', figure ' + f4(D.failure.figure) + ' ' + D.failure.unit + '.';
+if (D.contact_geometry === 'aabb') about += ' The engine resolves contacts on world AABBs: judged against box-box on them (AABB); the shapes\' reference is shown too.';
+$('about').textContent = about;
+$('note').textContent = D.note;
+
+var view = $('view');
+var renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio || 1);
+renderer.setSize(view.clientWidth || window.innerWidth, view.clientHeight || window.innerHeight);
+renderer.setClearColor(0xf4f4f2, 1);
+view.appendChild(renderer.domElement);
+var scene = new THREE.Scene();
+var camera = new THREE.PerspectiveCamera(45, (view.clientWidth || 1) / (view.clientHeight || 1), 1e-4, 1e5);
+scene.add(new THREE.AmbientLight(0xffffff, 0.55));
+var sun = new THREE.DirectionalLight(0xffffff, 0.6); sun.position.set(1, 2, 1.5); scene.add(sun);
+var controls = new THREE.OrbitControls(camera, renderer.domElement);
+
+// Shapes (body frame).
+var geoms = D.shapes.map(function (s) {
+  var g;
+  if (s.kind === 'box') {
+    g = new THREE.BoxBufferGeometry(s.max[0] - s.min[0], s.max[1] - s.min[1], s.max[2] - s.min[2]);
+    g.translate((s.max[0] + s.min[0]) / 2, (s.max[1] + s.min[1]) / 2, (s.max[2] + s.min[2]) / 2);
+  } else if (s.kind === 'sphere') {
+    g = new THREE.SphereBufferGeometry(s.radius, 24, 16); g.translate(s.center[0], s.center[1], s.center[2]);
+  } else if (s.kind === 'hull') {
+    var pts = []; for (var i = 0; i < s.vertices.length; i += 3) pts.push(new THREE.Vector3(s.vertices[i], s.vertices[i + 1], s.vertices[i + 2]));
+    g = new THREE.ConvexBufferGeometry(pts);
+  } else {
+    g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.Float32BufferAttribute(s.vertices, 3));
+    g.setIndex(s.triangles);
+    g.computeVertexNormals();
+  }
+  return g;
+});
+var bodies = D.bodies.map(function (b) {
+  var color = b.item ? 0xe8642c : (b.static ? 0x5d6673 : 0x9aa7b8);
+  var mat = new THREE.MeshLambertMaterial({ color: color, transparent: !b.item, opacity: b.item ? 0.85 : 0.45,
+    side: THREE.DoubleSide, depthWrite: b.item });
+  var mesh = new THREE.Mesh(geoms[b.shape], mat);
+  mesh.add(new THREE.LineSegments(new THREE.EdgesGeometry(geoms[b.shape], 30),
+    new THREE.LineBasicMaterial({ color: b.item ? 0x7a2a00 : 0x555555 })));
+  scene.add(mesh);
+  var box = new THREE.Box3(new THREE.Vector3(), new THREE.Vector3());
+  var helper = new THREE.Box3Helper(box, b.item ? 0xe8642c : 0x3a6fd8);
+  scene.add(helper);
+  return { mesh: mesh, box: box, helper: helper };
+});
+
+// Camera on the item (or everything drawn) at the first frame.
+var first = D.frames.filter(function (f) { return f.frame === D.frame; })[0] || D.frames[0];
+var focus = new THREE.Box3();
+D.bodies.forEach(function (b, k) {
+  if (item.kind === 'none' || b.item) focus.union(new THREE.Box3(v3(first.aabbs[k][0]), v3(first.aabbs[k][1])));
+});
+var centre = new THREE.Vector3(), size = new THREE.Vector3();
+focus.getCenter(centre); focus.getSize(size);
+var radius = Math.max(size.length() / 2, 1e-3);
+camera.position.copy(centre).add(new THREE.Vector3(1.2, 0.9, 1.6).multiplyScalar(radius * 1.6));
+controls.target.copy(centre); controls.update();
+camera.near = radius / 1000; camera.far = radius * 1000; camera.updateProjectionMatrix();
+
+// Arrows: a depth of maxDepth draws as half the item's size; depth 0 as a stub.
+var maxDepth = 0;
+D.frames.forEach(function (f) {
+  f.contacts.forEach(function (c) { maxDepth = Math.max(maxDepth, c.depth); });
+  f.references.forEach(function (r) { if (r.judged.penetrating) maxDepth = Math.max(maxDepth, r.judged.depth); });
+});
+var scale = maxDepth > 0 ? radius / maxDepth : 1;
+var stub = radius * 0.15;
+$('scale').textContent = 'arrow length = ' + f4(stub) + ' m + depth x ' + f4(scale) + ' (deepest ' + f4(maxDepth) + ' m)';
+function arrowLength(depth) { return stub + Math.max(depth, 0) * scale; }
+var overlay = new THREE.Group(); scene.add(overlay);
+function addArrow(dir, origin, length, color, width) {
+  var d = v3(dir); if (d.lengthSq() === 0) return;
+  d.normalize();
+  var a = new THREE.ArrowHelper(d, origin, length, color, length * 0.25, length * 0.12 * width);
+  onTop(a.line); onTop(a.cone); overlay.add(a);
+}
+// Overlays drawn over the shapes (never hidden inside a body).
+function onTop(o) { o.material.depthTest = false; o.material.transparent = true; o.renderOrder = 10; }
+function addDot(p, color, r) {
+  var m = new THREE.Mesh(new THREE.SphereBufferGeometry(r, 12, 8), new THREE.MeshBasicMaterial({ color: color }));
+  onTop(m); m.position.copy(p); overlay.add(m);
+}
+function indexOf(id) { for (var k = 0; k < D.bodies.length; k++) if (D.bodies[k].id === id) return k; return -1; }
+// Where a row without a point is drawn: the centre of the two world AABBs' overlap.
+function rowPoint(f, c) {
+  if (c.point) return v3(c.point);
+  var A = f.aabbs[indexOf(c.a)], B = f.aabbs[indexOf(c.b)], p = new THREE.Vector3();
+  for (var k = 0; k < 3; k++) p.setComponent(k, (Math.max(A[0][k], B[0][k]) + Math.min(A[1][k], B[1][k])) / 2);
+  return p;
+}
+
+var slider = $('slider'), pick = $('pick');
+slider.min = 0; slider.max = D.frames.length - 1; slider.step = 1;
+slider.value = D.frames.indexOf(first);
+function isItem(c) { return item.kind === 'pair' ? (c.a === item.a && c.b === item.b) :
+  item.kind === 'body' ? (c.a === item.body || c.b === item.body) : false; }
+
+function show(fi, keep) {
+  var f = D.frames[fi];
+  $('frame-label').textContent = f.frame + (f.frame === D.frame ? (D.failure ? ' (the failing frame)' : ' (the frame asked for)') : '');
+  D.bodies.forEach(function (b, k) {
+    var o = bodies[k];
+    o.mesh.position.copy(v3(f.x[k]));
+    o.mesh.quaternion.set(f.q[k][1], f.q[k][2], f.q[k][3], f.q[k][0]);
+    o.box.min.copy(v3(f.aabbs[k][0])); o.box.max.copy(v3(f.aabbs[k][1]));
+  });
+  if (!keep) {
+    var previous = pick.value;
+    while (pick.firstChild) pick.removeChild(pick.firstChild);
+    var options = [];
+    f.contacts.forEach(function (c, k) { options.push({ v: 'c' + k, t: 'pair (' + c.a + ', ' + c.b + ') row, depth ' + f4(c.depth), item: isItem(c) }); });
+    f.references.forEach(function (r, k) { if (!r.in_contact) options.push({ v: 'r' + k, t: 'pair (' + r.a + ', ' + r.b + '): no contact row (reference only)', item: isItem(r) }); });
+    options.sort(function (x, y) { return (y.item ? 1 : 0) - (x.item ? 1 : 0); });
+    options.forEach(function (o) { var e = document.createElement('option'); e.value = o.v; e.textContent = o.t; pick.appendChild(e); });
+    if (options.some(function (o) { return o.v === previous; }) && previous) pick.value = previous;
+  }
+  draw(f);
+}
+
+function draw(f) {
+  while (overlay.children.length) overlay.remove(overlay.children[0]);
+  var sel = pick.value || '', selected = null, selRef = null;
+  if (sel[0] === 'c') { selected = f.contacts[+sel.slice(1)]; selRef = selected.ref === null ? null : f.references[selected.ref]; }
+  if (sel[0] === 'r') selRef = f.references[+sel.slice(1)];
+  var dot = radius * 0.02;
+  f.references.forEach(function (r) {
+    var showIt = r === selRef || isItem(r);
+    if (!showIt) return;
+    var j = r.judged, pa = v3(j.point_a), pb = v3(j.point_b);
+    var origin = selected ? rowPoint(f, selected) : pa.clone().add(pb).multiplyScalar(0.5);
+    if (j.valid || j.penetrating) addArrow(selected ? selected.ref_normal : j.normal, origin, arrowLength(j.penetrating ? j.depth : 0), 0x1a9a3a, 1.8);
+    addDot(pa, 0xb01fb0, dot * 0.8); addDot(pb, 0xb01fb0, dot * 0.8);
+    if (!j.penetrating) {
+      var g = new THREE.BufferGeometry().setFromPoints([pa, pb]);
+      var l = new THREE.Line(g, new THREE.LineBasicMaterial({ color: 0xb01fb0 })); onTop(l); overlay.add(l);
+    }
+  });
+  f.contacts.forEach(function (c) {
+    if (c === selected) return;
+    var p = rowPoint(f, c);
+    addArrow(c.normal, p, arrowLength(c.depth), 0x1f5fd0, 1);
+    addDot(p, 0x1f5fd0, dot);
+  });
+  if (selected) {  // last: over the reference's wider arrow
+    var sp = rowPoint(f, selected);
+    addArrow(selected.normal, sp, arrowLength(selected.depth), 0xd01f1f, 1);
+    addDot(sp, 0xd01f1f, dot);
+  }
+  var t = [];
+  if (selected) {
+    t.push('pair (' + selected.a + ', ' + selected.b + '), frame ' + f.frame);
+    t.push('engine normal   ' + fv(selected.normal));
+    t.push('engine depth    ' + f4(selected.depth) + ' m');
+    t.push('engine point    ' + (selected.point ? fv(selected.point) : 'none (drawn at the AABBs\' overlap)'));
+    t.push('J_n, J_t        ' + f4(selected.jn) + ', ' + f4(selected.jt) + ' kg m/s');
+  }
+  if (selRef) {
+    var j = selRef.judged;
+    if (!selected) t.push('pair (' + selRef.a + ', ' + selRef.b + '), frame ' + f.frame + ': no contact row');
+    t.push('reference       ' + selRef.judge + (j.valid ? '' : ' (no usable answer)'));
+    t.push('ref normal      ' + fv(selected ? selected.ref_normal : j.normal));
+    if (selected) t.push('angle           ' + f4(selected.angle_deg) + ' deg');
+    t.push(j.penetrating ? 'ref depth       ' + f4(j.depth) + ' m' + (j.depth_upper_bound ? ' (upper bound)' : '')
+                         : 'ref distance    ' + f4(j.distance) + ' m');
+    t.push('ref points      ' + fv(j.point_a) + ' / ' + fv(j.point_b));
+    if (selRef.sat_accepted) t.push('SAT axes within ' + f4(selRef.sat_epsilon) + ' m of the minimum: ' + selRef.sat_accepted.length);
+    if (selRef.judge === 'AABB') t.push('shapes\' ref     ' + selRef.shapes.kind + ' ' + fv(selRef.shapes.normal) + ' depth ' + f4(selRef.shapes.depth));
+  }
+  if (!selected && !selRef) t.push('no contact among the bodies drawn in frame ' + f.frame);
+  if (f.rows_not_drawn) t.push(f.rows_not_drawn + ' more rows not drawn (cap)');
+  if (f.pairs_without_reference) t.push(f.pairs_without_reference + ' pairs without a reference (cap)');
+  $('figures').textContent = t.join('\n');
+}
+
+slider.addEventListener('input', function () { show(+slider.value, false); });
+pick.addEventListener('change', function () { draw(D.frames[+slider.value]); });
+window.addEventListener('resize', function () {
+  renderer.setSize(window.innerWidth, window.innerHeight);
+  camera.aspect = window.innerWidth / Math.max(window.innerHeight, 1); camera.updateProjectionMatrix();
+});
+show(+slider.value, false);
+function loop() { controls.update(); renderer.render(scene, camera); requestAnimationFrame(loop); }
+renderer.render(scene, camera);
+document.body.setAttribute('data-status', window.octocdErrors.length ? 'error' : 'drawn');
+requestAnimationFrame(loop);
+})();
+</script>
+</body></html>
+)HTML";
+  std::string out;
+  out.reserve(js.size() + json.size() + 20000);
+  out += head;
+  out += title;
+  out += style;
+  out += js;
+  out += between;
+  out += json;
+  out += tail;
+  return out;
+}
+
+}  // namespace octocd::detail
