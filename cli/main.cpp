@@ -399,6 +399,8 @@ struct ValidateOptions {
   std::string write_expect;   ///< --write-expect FILE.json: record the current failures
   bool strict = false;        ///< --strict: an expected failure that no longer fails is exit 3
   std::string json;           ///< --json FILE: every row, cause and item as JSON
+  std::string view;           ///< --view DIR: a page per failing example (cli/view.hpp)
+  octocd::cli::FailureViews views;  ///< the pages --view wrote (linked from the table, JSON, JUnit)
   octocd::Expectations expectations;  ///< --expect's file, read before the run
 };
 
@@ -411,8 +413,12 @@ int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
                       const std::vector<octocd::ValidationResult>& results,
                       const octocd::ExpectationReport& report, const nlohmann::ordered_json& meta) {
   using Kind = octocd::ExpectationOutcome::Kind;
-  if (!o.json.empty())
-    octocd::write_json_file(o.json, octocd::results_json(results, run, &report, meta), "--json");
+  if (!o.views.summary.empty()) fmt::print("\n{}", octocd::cli::format_views(o.views));
+  if (!o.json.empty()) {
+    nlohmann::ordered_json doc = octocd::results_json(results, run, &report, meta);
+    octocd::cli::add_views_to_json(doc, o.views, o.json);
+    octocd::write_json_file(o.json, doc, "--json");
+  }
   if (!report.outcomes.empty()) fmt::print("\n");
   for (const octocd::ExpectationOutcome& x : report.outcomes) fmt::print("{}\n", x.text);
   if (!o.write_expect.empty()) {
@@ -440,7 +446,7 @@ int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
 
 /// `octocd validate --trace-in FILE.h5`: another engine's trace judged frame by frame
 /// (octocd/external.hpp); exit 0 all pass, 3 any fails, 2 a malformed trace.
-int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions& vo) {
+int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, Clock::time_point t0) {
   if (o.check_only) {
     const octocd::ExternalTraceInfo info = octocd::check_external_trace(o.trace_in);
     fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames, version {}; {}{}{}{}{}{}{}{}\n",
@@ -458,8 +464,20 @@ int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions&
   const int every = o.every_given ? o.every : 1;
   const std::vector<octocd::ValidationResult> results =
       octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
+  if (!o.view.empty()) o.views = octocd::cli::write_failure_views(o.trace_in, results, o.view);
   const octocd::RunName run = octocd::trace_run(o.trace_in);
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
+  if (!o.junit.empty())
+    octocd::write_junit(o.junit, std::filesystem::path(o.trace_in).stem().string(),
+                        octocd::cli::with_views_in_details(results, o.views, o.junit),
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", info.engine},
+                         {"frames", std::to_string(info.frames)},
+                         {"every", std::to_string(every)},
+                         {"against", o.against},
+                         {"trace_file", o.trace_in},
+                         {"build_id", octocd::build_id()}},
+                        "", &report);
   fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {})\n\n",
              o.trace_in, info.engine, info.bodies, info.frames, every, o.against);
   fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
@@ -469,13 +487,13 @@ int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions&
 }
 
 
-int validate_scene_command(const ValidateOptions& o, Clock::time_point t0);
+int validate_scene_command(ValidateOptions& o, Clock::time_point t0);
 
 /// `octocd validate SCENE --engine bullet --rotation` (or a rotating scene): Bullet with
 /// rotation runs `--frames` steps into a version 2 trace (`--trace FILE`, else a
 /// temporary file, removed afterwards) with every state and contact, which is then judged
 /// as `--trace-in` judges it (validate_trace_in).
-int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationOptions& vo,
+int validate_bullet_rotation(ValidateOptions& o, const octocd::ValidationOptions& vo,
                              const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
   namespace fs = std::filesystem;
   const bool temporary = o.trace.empty();
@@ -512,6 +530,7 @@ int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationO
     const octocd::StopAtOnce judging(temporary ? "judging Bullet's trace (a temporary file left in the temp folder)"
                                                : "judging Bullet's trace, which stays on disk");
     results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
+    if (!o.view.empty()) o.views = octocd::cli::write_failure_views(path, results, o.view);
   } catch (...) {
     std::error_code ec;
     if (temporary) fs::remove(path, ec);
@@ -522,7 +541,7 @@ int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationO
   const octocd::RunName run{model->scene.name, ""};
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   if (!o.junit.empty())
-    octocd::write_junit(o.junit, model->scene.name, results,
+    octocd::write_junit(o.junit, model->scene.name, octocd::cli::with_views_in_details(results, o.views, o.junit),
                         std::chrono::duration<double>(Clock::now() - t0).count(),
                         {{"engine", "bullet (rotation)"},
                          {"frames", std::to_string(info.frames)},
@@ -558,6 +577,14 @@ int validate_command(ValidateOptions& o) {
     throw octocd::InputError("--check-only: needs --trace-in FILE.h5");
   if (!o.trace_in.empty() && (!o.trace.empty() || o.engine_given))
     throw octocd::InputError("--trace-in: judges a trace another engine wrote; allowed without --trace and --engine");
+  if (!o.view.empty() && o.check_only)
+    throw octocd::InputError("--view: draws a judged run's failures; allowed without --check-only");
+  if (!o.view.empty() && o.trace_in.empty() && o.trace.empty()) {
+    // The pages are drawn from a trace: without --trace, DIR/SCENE-trace.h5 (kept beside them).
+    std::error_code ec;
+    std::filesystem::create_directories(o.view, ec);
+    o.trace = (std::filesystem::path(o.view) / (std::filesystem::path(o.scene).stem().string() + "-trace.h5")).string();
+  }
   const auto t0 = Clock::now();
   // The report of a scene that could not be validated; the original error is what the
   // caller sees (and its exit code), even when the report cannot be written.
@@ -581,7 +608,7 @@ int validate_command(ValidateOptions& o) {
   }
 }
 
-int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
+int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
   octocd::Scene scene;
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
@@ -634,7 +661,7 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   if (!o.trace_in.empty()) {
     // Checking and judging another engine's trace writes nothing: a signal ends it at once.
     const octocd::StopAtOnce checking("checking the trace");
-    return validate_trace_in(o, vo);
+    return validate_trace_in(o, vo, t0);
   }
   std::optional<octocd::StopAtOnce> building(std::in_place, "building the model");
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
@@ -654,11 +681,18 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
     ++done;
     if (!o.trace.empty()) {
       if (!trace) {
-        octocd::TraceMetadata meta = octocd::trace_metadata(w, 10);
+        // --view draws frames from the trace: every state (the initial one first) and contact.
+        const bool every = !o.view.empty();
+        octocd::TraceMetadata meta = octocd::trace_metadata(w, every ? 1 : 10);
         meta.start_time = octocd::cli::utc_time_now();
         octocd::TraceOptions topt;
         topt.flush_every = 1;  // every checked frame on disk: a stopped or killed run keeps them all
+        if (every) {
+          topt.state_every = 1;
+          topt.contacts = true;
+        }
         trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(w), topt);
+        if (every) trace->append_state(0, model->initial);
       }
       trace->append_frame(w.last_metrics(), w.state(), w.contacts());
     }
@@ -676,6 +710,7 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
     trace->close();
     octocd::write_validation(o.trace, results);
     write_sidecar(o.trace, o.no_xdmf);
+    if (!o.view.empty()) o.views = octocd::cli::write_failure_views(o.trace, results, o.view);
   }
   // Where a signal stopped the checks: the table covers the frames judged so far.
   std::string stopped;
@@ -688,7 +723,7 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   const octocd::RunName run{scene.name, ""};
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   if (!o.junit.empty())
-    octocd::write_junit(o.junit, scene.name, results,
+    octocd::write_junit(o.junit, scene.name, octocd::cli::with_views_in_details(results, o.views, o.junit),
                         std::chrono::duration<double>(Clock::now() - t0).count(),
                         {{"engine", o.engine},
                          {"frames", std::to_string(o.frames)},
@@ -851,6 +886,11 @@ int main(int argc, char** argv) {
   val_cmd->add_option("--json", val.json,
                       "Also write every row (verdict pass|fail|n/a|expected, figures, judged, seconds) with its causes, "
                       "examples and failing items, and the expectation outcomes, as JSON (docs/validation-output.md)");
+  val_cmd->add_option("--view", val.view,
+                      "Also write a page per failing example (octocd view: the frame, the pair or body, the engine's "
+                      "contacts beside the reference; at most 20 pages) into DIR, linked from the table, --json and "
+                      "--junit by relative paths; without --trace or --trace-in the run's trace goes to "
+                      "DIR/SCENE-trace.h5 (docs/debugging.md)");
   val_cmd->add_flag("--check-only", val.check_only,
                     "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not)");
 

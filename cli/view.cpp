@@ -127,7 +127,7 @@ FailureViews write_failure_views(const std::string& trace, const std::vector<Val
         vs.file_name = name;
         try {
           const ViewPage page = write_view(trace, vs, dir);
-          out.links.push_back(ViewLink{ri, c.name, xi, x.item, x.frame, page.path});
+          out.links.push_back(ViewLink{ri, r.name, c.name, xi, x.item, x.frame, page.path});
         } catch (const InputError& e) {
           ++undrawable;
           if (first_error.empty()) first_error = e.what();
@@ -147,7 +147,7 @@ FailureViews write_failure_views(const std::string& trace, const std::vector<Val
 std::string format_views(const FailureViews& views) {
   std::string text = views.summary + "\n";
   for (const ViewLink& l : views.links)
-    text += fmt::format("  {} frame {} {}: {}\n", l.cause, l.frame, l.item, l.path);
+    text += fmt::format("  {}/{} frame {} {}: {}\n", l.row_name, l.cause, l.frame, l.item, l.path);
   return text;
 }
 

@@ -41,6 +41,7 @@ constexpr std::size_t kMaxViewPages = 20;
 /// One page of a failing example: where it is in the results and where it was written.
 struct ViewLink {
   std::size_t row = 0;      ///< index into the results
+  std::string row_name;     ///< the row's name
   std::string cause;        ///< the cause's name (failure_causes of the row)
   std::size_t example = 0;  ///< index into the cause's examples
   std::string item;         ///< "pair (A, B)" or "body I"

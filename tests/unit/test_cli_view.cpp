@@ -239,3 +239,40 @@ TEST(CliView, MillionBodyTraceViewedAtAPairWritesABoundedPage) {
   EXPECT_LT(page.size(), 1500000u) << page.size();
   fs::remove_all(dir);
 }
+
+// `validate --view DIR`: the failing example of the planted flipped normal gets its page,
+// linked by a path relative to each file that names it (table: as given; JSON and JUnit:
+// from their own folder), so the artifact folder works wherever it is unpacked.
+TEST(CliView, ValidateViewLinksThePageFromTableJsonAndJunit) {
+  const std::string dir = scratch("validate");
+  const std::string trace = flipped_trace(dir);
+  fs::create_directories(dir + "/art/junit");
+  const auto r = run_octocd("validate --trace-in " + trace + " --view " + dir + "/art/pages --json " + dir +
+                            "/art/result.json --junit " + dir + "/art/junit/report.xml");
+  ASSERT_EQ(r.code, 3) << r.output;
+  const std::string page = dir + "/art/pages/contact-geometry-normal-angle-f2-pair-1-2.html";
+  EXPECT_NE(r.output.find("view: 1 page(s) of failing examples"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("contact-geometry/normal-angle frame 2 pair (1, 2): " + page), std::string::npos)
+      << r.output;
+  ASSERT_TRUE(fs::exists(page));
+  const nlohmann::json data = page_data(slurp(page));
+  ASSERT_TRUE(data.is_object());
+  EXPECT_EQ(data["failure"]["row"], "contact-geometry");
+  EXPECT_EQ(data["failure"]["cause"], "normal-angle");
+  EXPECT_NEAR(data["failure"]["figure"].get<double>(), 180.0, 1e-3);
+  // JSON: the example's "view", relative to the JSON's folder.
+  const nlohmann::json doc = nlohmann::json::parse(slurp(dir + "/art/result.json"));
+  std::string link;
+  for (const auto& row : doc["rows"])
+    if (row["name"] == "contact-geometry")
+      for (const auto& c : row["causes"])
+        for (const auto& x : c["examples"])
+          if (x.contains("view")) link = x["view"].get<std::string>();
+  EXPECT_EQ(link, "pages/contact-geometry-normal-angle-f2-pair-1-2.html");
+  EXPECT_TRUE(fs::exists(dir + "/art/" + link));
+  // JUnit: the failure message names the page, relative to the report's folder.
+  const std::string junit = slurp(dir + "/art/junit/report.xml");
+  EXPECT_NE(junit.find("view: ../pages/contact-geometry-normal-angle-f2-pair-1-2.html\""), std::string::npos)
+      << junit;
+  fs::remove_all(dir);
+}
