@@ -37,6 +37,7 @@
 #include "octocd/scene.hpp"
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
+#include "octocd/view.hpp"
 #include "octocd/world.hpp"
 
 namespace py = pybind11;
@@ -895,4 +896,50 @@ PYBIND11_MODULE(_octocd, m) {
     for (const py::handle r : results) rs.push_back(result_from(r));
     return format_results(rs, overridden);
   });
+
+  // octocd.view (SPEC 16): the page of `octocd view`, by the same code (octocd/view.hpp).
+  m.def(
+      "view",
+      [](const std::string& trace, std::int64_t frame, const std::optional<std::pair<std::int64_t, std::int64_t>>& pair,
+         const std::optional<std::int64_t>& body, int window, const std::string& out_dir) {
+        ViewSettings vs;
+        auto index = [](const char* arg, std::int64_t i) {
+          if (i < 0 || i > 0xffffffffll)
+            throw InputError(fmt::format("{}: body {} does not exist; allowed: a body index 0 .. bodies - 1", arg, i));
+          return static_cast<std::uint32_t>(i);
+        };
+        if (frame < 1) throw InputError(fmt::format("frame: {}: outside the trace; allowed: 1 .. the trace's frames", frame));
+        vs.frame = frame;
+        vs.window = window;
+        if (pair) {
+          vs.has_pair = true;
+          vs.pair_a = index("pair", pair->first);
+          vs.pair_b = index("pair", pair->second);
+        }
+        if (body) {
+          vs.has_body = true;
+          vs.body = index("body", *body);
+        }
+        ViewPage page;
+        try {
+          py::gil_scoped_release release;
+          page = write_view(trace, vs, out_dir);
+        } catch (const InputError& e) {  // the CLI's option names as the keyword arguments
+          std::string msg = e.what();
+          for (const char* o : {"--frame", "--pair", "--body", "--window"})
+            if (msg.rfind(o, 0) == 0) msg = msg.substr(2);
+          if (msg.rfind("-o:", 0) == 0) msg = "out_dir:" + msg.substr(3);
+          if (msg.rfind("pair and --body", 0) == 0) msg = "pair and body" + msg.substr(15);
+          throw InputError(msg);
+        }
+        py::dict d;
+        d["path"] = page.path;
+        d["bytes"] = page.bytes;
+        d["bodies"] = page.bodies;
+        d["frames"] = page.frames;
+        d["frame"] = page.frame;
+        d["note"] = page.note;
+        return d;
+      },
+      py::arg("trace"), py::arg("frame"), py::arg("pair"), py::arg("body"), py::arg("window"), py::arg("out_dir"));
 }
