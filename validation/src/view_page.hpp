@@ -116,7 +116,7 @@ var geoms = D.shapes.map(function (s) {
 });
 var bodies = D.bodies.map(function (b) {
   var color = b.item ? 0xe8642c : (b.static ? 0x5d6673 : 0x9aa7b8);
-  var mat = new THREE.MeshLambertMaterial({ color: color, transparent: !b.item, opacity: b.item ? 0.85 : 0.45,
+  var mat = new THREE.MeshLambertMaterial({ color: color, transparent: !b.item, opacity: b.item ? 0.85 : 0.3,
     side: THREE.DoubleSide, depthWrite: b.item });
   var mesh = new THREE.Mesh(geoms[b.shape], mat);
   mesh.add(new THREE.LineSegments(new THREE.EdgesGeometry(geoms[b.shape], 30),
@@ -248,7 +248,8 @@ function draw(f) {
                          : 'ref distance    ' + f4(j.distance) + ' m');
     t.push('ref points      ' + fv(j.point_a) + ' / ' + fv(j.point_b));
     if (selRef.sat_accepted) t.push('SAT axes within ' + f4(selRef.sat_epsilon) + ' m of the minimum: ' + selRef.sat_accepted.length);
-    if (selRef.judge === 'AABB') t.push('shapes\' ref     ' + selRef.shapes.kind + ' ' + fv(selRef.shapes.normal) + ' depth ' + f4(selRef.shapes.depth));
+    if (selRef.judge === 'AABB') t.push('shapes\' ref     ' + selRef.shapes.kind + ' ' + fv(selRef.shapes.normal) +
+      (selRef.shapes.penetrating ? ' depth ' + f4(selRef.shapes.depth) : ' distance ' + f4(selRef.shapes.distance)) + ' m');
   }
   if (!selected && !selRef) t.push('no contact among the bodies drawn in frame ' + f.frame);
   if (f.rows_not_drawn) t.push(f.rows_not_drawn + ' more rows not drawn (cap)');
