@@ -276,3 +276,30 @@ TEST(CliView, ValidateViewLinksThePageFromTableJsonAndJunit) {
       << junit;
   fs::remove_all(dir);
 }
+
+// A version 2 trace (rotation, a manifold with points, declared materials): the page
+// holds the orientations as given, each manifold row with its point, and the reference of
+// the pair judged on the posed (rotated) boxes.
+TEST(CliView, VersionTwoTraceKeepsOrientationsAndManifoldPoints) {
+  const std::string dir = scratch("v2");
+  const Trace t = Trace::make_v2();
+  t.write(dir + "/v2.h5");
+  const auto r = run_octocd("view " + dir + "/v2.h5 --frame 1 --pair 1,2 --window 0 -o " + dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const nlohmann::json data = page_data(slurp(dir + "/view-f1-pair-1-2.html"));
+  ASSERT_TRUE(data.is_object());
+  EXPECT_EQ(data["trace_version"], 2);
+  const auto& f = data["frames"][0];
+  // Body 1 (drawn first) is turned 0.3 rad about z: q = (cos 0.15, 0, 0, sin 0.15).
+  EXPECT_NEAR(f["q"][0][0].get<double>(), std::cos(0.15), 1e-6);
+  EXPECT_NEAR(f["q"][0][3].get<double>(), std::sin(0.15), 1e-6);
+  // Frame 1's two-row manifold, each row with its world point (external_trace.hpp).
+  ASSERT_EQ(f["contacts"].size(), 2u);
+  EXPECT_NEAR(f["contacts"][0]["point"][1].get<double>(), 0.05, 1e-6);
+  EXPECT_NEAR(f["contacts"][1]["point"][1].get<double>(), -0.05, 1e-6);
+  // Both rows share the pair's reference, computed on the posed boxes.
+  EXPECT_EQ(f["contacts"][0]["ref"], f["contacts"][1]["ref"]);
+  const auto& ref = f["references"][f["contacts"][0]["ref"].get<std::size_t>()];
+  EXPECT_TRUE(ref["judged"]["valid"].get<bool>());
+  fs::remove_all(dir);
+}
