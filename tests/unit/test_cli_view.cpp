@@ -179,7 +179,7 @@ TEST(CliView, PairNotInContactIsDrawnWithANote) {
 
 // 10^6 boxes on a grid (one frame, states only, no contacts): a page viewed at a pair
 // holds the pair and at most the cap of bodies near it, whatever the trace's size. The
-// trace is written uncompressed (about 48 MB) in well under a second.
+// trace is written uncompressed (76 MB) in well under a second.
 TEST(CliView, MillionBodyTraceViewedAtAPairWritesABoundedPage) {
   const std::string dir = scratch("large");
   const std::string path = dir + "/grid.h5";
