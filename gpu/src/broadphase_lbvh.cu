@@ -54,7 +54,6 @@ struct LbvhDesc {
   std::uint32_t* leaf_parent = nullptr;    ///< n: parent of each slot's leaf
   std::uint32_t* flag = nullptr;           ///< n - 1 refit counters
   PairOutput out;                          ///< pair keys, total, exact tests
-  bool pair_buffer = true;                 ///< bp::PairBuffer on (bp::kPairBufferOn)
 };
 
 __global__ void lbvh_code_kernel(LbvhDesc d) {
@@ -113,7 +112,6 @@ __global__ void lbvh_query_kernel(LbvhDesc d) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   unsigned long long tests = 0;
   bp::PairBuffer pairs;
-  pairs.on = d.pair_buffer;
   auto counted = [](unsigned long long) {};
   if (s < d.n) {
     const Aabb box = d.slot_box[s];
@@ -179,7 +177,6 @@ class LbvhDevice final : public DeviceBroadPhase {
     d.leaf_parent = leaf_parent_.get();
     d.flag = flag_.get();
     d.out = out;
-    d.pair_buffer = pair_buffer_;
     const unsigned g = grid_for(n);
     lbvh_code_kernel<<<g, kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "lbvh_code");
@@ -206,7 +203,6 @@ class LbvhDevice final : public DeviceBroadPhase {
 
  private:
   LooseGrid grid_;
-  bool pair_buffer_ = bp::kPairBufferOn;
   bool reserved_ = false;
   std::uint32_t n_ = 0;
   DeviceBuffer<std::uint32_t> code_{"lbvh body codes"};

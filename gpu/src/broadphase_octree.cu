@@ -78,14 +78,6 @@ namespace {
 /// 3x10^4, 0.202 / 0.167 at 6x10^4, 0.249 / 0.171 at 10^5).
 constexpr std::uint32_t kWarpQueryBodies = 32768;
 
-/// Depth `auto` roots the tree at loose_snapped_grid (true) instead of the domain's cube
-/// (as the CPU octree).
-constexpr bool kLooseSnapRoot = true;
-
-/// The query skips blocks by the occupancy map (true) instead of probing every block of a
-/// window; the same slots either way.
-constexpr bool kLooseOccupancyMap = true;
-
 /// A body's unit box in the fixed point of loose_q_min / loose_q_max.
 struct LooseQBox {
   std::int32_t lo[3];
@@ -114,14 +106,15 @@ struct LooseDesc {
   const Aabb* aabb = nullptr;      ///< world AABBs, per body
   std::uint32_t n = 0;             ///< bodies
   LooseGrid grid;                  ///< root cube of the scene's domain
-  int depth = 2;                   ///< D_w in [0, 10]; -1 = auto (from *min_extent)
+  int depth = 2;                   ///< D_w in [0, 10]; -1 = auto (root->depth)
   /// One float (auto depth): the smallest extent (largest unit side of a body's box),
   /// as its bits (non-negative floats order as their bits); kMinExtentInit before the
   /// minimum.
   float* min_extent = nullptr;
-  /// Depth `auto` with the snapped root (kLooseSnapRoot): one LooseRoot that
-  /// loose_root_kernel writes from *min_extent (loose_snapped_grid); the keys and the
-  /// queries then use its grid and depth instead of `grid` and `depth`. nullptr: off.
+  /// Depth `auto`: one LooseRoot that loose_root_kernel writes from *min_extent
+  /// (loose_snapped_grid: exact tests 0.21-0.93 x those of the domain's cube on the bench
+  /// boxes at 10^4 .. 4x10^6); the keys and the queries then use its grid and depth instead
+  /// of `grid` and `depth`. nullptr: a fixed depth.
   LooseRoot* root = nullptr;
   /// The sort keys of overflow and NaN bodies: kLooseOverflowKey and kLooseNoKey with
   /// depth `auto`; with a fixed D_w the two values after level D_w's last cell key
@@ -146,7 +139,6 @@ struct LooseDesc {
   /// loose_gather_kernel.
   std::uint32_t* occupancy = nullptr;
   std::uint32_t occupancy_blocks = 0;
-  bool pair_buffer = true;  ///< bp::PairBuffer on (bp::kPairBufferOn)
   unsigned long long* pair_keys = nullptr;  ///< out: (a << shift) | b, appended in any order
   /// Sorted mode (PairOutput::scratch given; pair_keys is then the scratch): per body a,
   /// n + 1 entries zeroed before the query, the pairs (a, b) appended; else nullptr.
@@ -189,7 +181,7 @@ __device__ inline LooseGrid loose_call_grid(const LooseDesc& d) { return d.root 
 
 __global__ void loose_keys_kernel(LooseDesc d) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  const int depth = d.root ? d.root->depth : (d.depth >= 0 ? d.depth : loose_auto_depth(*d.min_extent));
+  const int depth = d.root ? d.root->depth : d.depth;
   // The occupancy words of levels 0 .. D_w, cleared by the whole grid (the previous
   // find's queries are done: stream order; loose_gather_kernel sets them after the sort).
   const std::uint32_t words = loose_occupancy_words(d.occupancy_blocks, depth);
@@ -409,7 +401,6 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
   unsigned long long tests = 0;
   const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
   bp::PairBuffer pairs;
-  pairs.on = d.pair_buffer;
   auto counted = [&](unsigned long long k) {
     if (d.pair_count) atomicAdd(&d.pair_count[k >> d.shift], 1u);
   };
@@ -637,7 +628,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.overflow_key = overflow_key_;
     d.nan_key = overflow_key_ == kLooseOverflowKey ? kLooseNoKey : overflow_key_ + 1;
     d.min_extent = min_.get();
-    d.root = depth_ < 0 && snap_ ? root_.get() : nullptr;
+    d.root = depth_ < 0 ? root_.get() : nullptr;
     d.key = key_.get();
     d.body = body_.get();
     d.sorted_key = sorted_key_.get();
@@ -647,8 +638,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.cell_table = cell_table_.get();
     d.cell_mask = cell_mask_;
     d.occupancy = occupancy_.get();
-    d.occupancy_blocks = occupancy_on_ ? occupancy_blocks_ : 0u;  // 0: no map
-    d.pair_buffer = pair_buffer_;
+    d.occupancy_blocks = occupancy_blocks_;
     const bool sorted = out.scratch != nullptr;
     d.pair_keys = sorted ? out.scratch : out.keys;
     d.pair_count = sorted ? pair_count_.get() : nullptr;
@@ -735,9 +725,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   std::uint32_t n_ = kNotReserved;
   DeviceBuffer<float> min_{"octree smallest extent"};
   DeviceBuffer<LooseRoot> root_{"octree snapped root"};
-  bool snap_ = kLooseSnapRoot;
-  bool occupancy_on_ = kLooseOccupancyMap;
-  bool pair_buffer_ = bp::kPairBufferOn;
   DeviceBuffer<std::uint32_t> key_{"octree body keys"};
   DeviceBuffer<std::uint32_t> body_{"octree body indices"};
   DeviceBuffer<std::uint32_t> sorted_key_{"octree sorted keys"};

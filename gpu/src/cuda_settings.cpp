@@ -14,6 +14,7 @@ namespace octocd {
 namespace {
 
 constexpr long kMostTimeoutMs = 86400000L;
+constexpr long kMostStageTimeEvery = 1000000L;
 
 bool parse_bool(const std::string& where, const std::string& key, const std::string& value) {
   if (value == "1" || value == "true" || value == "on") return true;
@@ -39,11 +40,14 @@ void check_cuda_settings(const CudaSettings& s, const std::string& where) {
   if (s.resident_timeout_ms < 1 || s.resident_timeout_ms > kMostTimeoutMs)
     throw InputError(fmt::format("{}: resident_timeout_ms={} is not allowed; allowed: 1 .. {} (milliseconds)", where,
                                  s.resident_timeout_ms, kMostTimeoutMs));
+  if (s.stage_time_every < 1 || s.stage_time_every > kMostStageTimeEvery)
+    throw InputError(fmt::format("{}: stage_time_every={} is not allowed; allowed: 1 .. {} (steps per timed step)",
+                                 where, s.stage_time_every, kMostStageTimeEvery));
 }
 
 std::vector<std::string> cuda_setting_names() {
-  return {"midphase_early_exit", "memory_limit_bytes", "resident_timeout_ms", "sync_each_launch",
-          "graph",               "stage_times",        "small_profile"};
+  return {"midphase_early_exit", "memory_limit_bytes", "resident_timeout_ms", "stage_times", "stage_time_every",
+          "sync_each_launch",    "graph",              "small_path",          "small_profile"};
 }
 
 void set_cuda_setting(CudaSettings& s, const std::string& key, const std::string& value, const std::string& where) {
@@ -56,6 +60,10 @@ void set_cuda_setting(CudaSettings& s, const std::string& key, const std::string
   else if (key == "sync_each_launch") s.sync_each_launch = parse_bool(where, key, value);
   else if (key == "graph") s.graph = parse_bool(where, key, value);
   else if (key == "stage_times") s.stage_times = parse_bool(where, key, value);
+  else if (key == "stage_time_every")
+    s.stage_time_every =
+        static_cast<long>(parse_integer(where, key, value, 1, kMostStageTimeEvery, "steps per timed step"));
+  else if (key == "small_path") s.small_path = parse_bool(where, key, value);
   else if (key == "small_profile") s.small_profile = parse_bool(where, key, value);
   else {
     std::string names;

@@ -181,23 +181,20 @@ struct MidListDesc {
   MidItem* out = nullptr;                   ///< start / expand: the next step's items
   std::uint32_t* out_count = nullptr;       ///< device: items appended (may exceed out_capacity)
   std::uint32_t out_capacity = 0;
-  /// The last expand step runs the leaves of its items itself instead of appending them
-  /// to the leaf list (midphase.cuh, fuse_leaves): -1 auto (enough items per warp), 0
-  /// never, 1 always. Neither a result nor a count depends on it (kMidFuseLeaves).
-  int fuse_leaves = -1;
   /// Per-pair early exit (midphase.cuh, "Early exit"; CudaSettings::midphase_early_exit): 1, an
   /// expand item, a leaf item and a leaf's vertex tiles of a pair already confirmed are
   /// skipped (counts: the work done, timing-dependent); 0, every item of the lists runs and
   /// every leaf counts its whole filtered work (deterministic counts). Same results either way.
   int early_exit = 1;
   /// A leaf skips a pair of vertex tiles whose boxes are more than theta apart on an axis
-  /// (midphase.cuh, tiles_apart; kMidTileCull): the same results.
+  /// (midphase.cuh, tiles_apart): the same results. 1 on every path; the small path's lean
+  /// kernel compiles it as 0.
   int tile_cull = 1;
   /// A leaf stages, for each tile of B's vertices, only A's vertices near that tile (within
   /// theta of its box, midphase.cuh near_tile; whole vertex blocks skipped by their boxes)
-  /// instead of every vertex of A's cell inside B's grown cell box
-  /// (kMidTileFilter): the same results; with the early exit off the
-  /// same counts too (they count the whole filtered ranges either way).
+  /// instead of every vertex of A's cell inside B's grown cell box: the same results; with
+  /// the early exit off the same counts too (they count the whole filtered ranges either
+  /// way). 1 on every path; the small path's lean kernel compiles it as 0.
   int tile_filter = 1;
 };
 
@@ -326,7 +323,9 @@ struct SmallStepDesc {
   volatile unsigned long long* done = nullptr;
   unsigned long long sequence = 0;  ///< the value written to *done
   /// Mapped pinned host memory of kSmallProfileSlots %globaltimer stamps (ns) by thread 0 of
-  /// block 0 at the end of every phase (CudaSettings::small_profile), or null (no stamps).
+  /// block 0 at the end of every phase (a timed step: CudaSettings::stage_time_every, or
+  /// CudaSettings::small_profile), or null (no stamps). The resident kernel stamps into it
+  /// on the requests that carry kResidentStamp.
   unsigned long long* profile = nullptr;
   /// The fused front: when n <= front_bodies (at most kSmallFrontMaxBodies), every block
   /// integrates every body from x_saved / v_saved into its shared memory, counts, scans and
@@ -356,7 +355,8 @@ constexpr std::uint32_t kSmallFrontMaxBodies = 512;
 /// mapped pinned host memory (system-scope acquire loads, __nanosleep backoff) and forwards
 /// each new value to the other blocks through `control` in device memory; a request is
 /// (sequence << kResidentShift) | flags: kResidentRecord (the first pass writes `records`),
-/// kResidentExit (end the kernel). Each step runs the per-step kernel's code with that
+/// kResidentStamp (stamp the phases into SmallStepDesc::profile), kResidentExit (end the
+/// kernel). Each step runs the per-step kernel's code with that
 /// sequence, so it ends by writing the sequence to SmallStepDesc::done. The kernel also ends
 /// by itself after idle_ns without a new request (so that nothing else on the device waits
 /// on an idle resident kernel for long); on every exit it writes `epoch` to `exited`
@@ -372,9 +372,10 @@ struct ResidentDesc {
   DeviceContact* records = nullptr;       ///< the first pass's records of a recorded step
   int stall = 0;  ///< test hook (CudaWorld::TestHooks::resident_ignores_requests): ignore step requests, honour exit
 };
-constexpr int kResidentShift = 2;
+constexpr int kResidentShift = 3;
 constexpr unsigned long long kResidentRecord = 1;
 constexpr unsigned long long kResidentExit = 2;
+constexpr unsigned long long kResidentStamp = 4;
 
 /// The fused small step's phases as stamped into SmallStepDesc::profile: slot 0 the kernel's
 /// start, slot p the end of phase p (a phase the step skips: the previous stamp again).

@@ -12,8 +12,8 @@
 //   list; the last expand step of the graph path (mid_expand_last_kernel) runs the
 //   surviving leaf cell pairs of its item itself, in lane order, as the leaf items the list
 //   would have held (leaf_item, the same code mid_leaf runs), when the step has at least
-//   kFuseItemsPerWarp items per warp (fuse_leaves; kMidFuseLeaves in cuda_world.cpp): no leaf item is
-//   written, read or set up again, and the leaf list stays empty;
+//   kFuseItemsPerWarp items per warp (fuse_leaves): no leaf item is written, read or set up
+//   again, and the leaf list stays empty;
 // - leaf (one warp per item of the last step): the narrow phase of hd::mesh_mesh_leaf /
 //   mesh_box_descend on that cell pair, lanes over B's vertices, A's vertices in order.
 //   The vertex filters scan whole blocks of 32 vertices (vertex_blocks.hpp) and skip a
@@ -41,11 +41,11 @@
 // 0, shuffled: warp-uniform, so no lane leaves a warp collective). A leaf then runs no count
 // over its whole vertex ranges (only the tiles it stages), and the fused leaves of an expand
 // item run deepest overlap first (overlap_depth: the likelier hits first).
-// Tile culling (MidListDesc::tile_cull, kMidTileCull, on; with the
+// Tile culling (MidListDesc::tile_cull: on, except in the small path's lean kernel; with the
 // exit on or off): a leaf skips a pair of staged vertex tiles whose bounding boxes are apart
 // by theta on some axis (tiles_apart; exact for hd::vertex_close's float sum), so a large
 // leaf tests only the tile pairs that are near each other.
-// Tile filter (MidListDesc::tile_filter, kMidTileFilter, on): for
+// Tile filter (MidListDesc::tile_filter: on, except in the lean kernel): for
 // each staged tile of B a leaf stages only A's vertices near it (near_tile: the tile's box
 // in A's frame grown by the margin, within b_in_a; whole vertex blocks skipped by their
 // boxes), so a large leaf no longer rescans and stages A's whole filtered cell per tile of
@@ -669,16 +669,14 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
   flush(d, t);
 }
 
-/// Whether the last expand step runs its leaves itself (test_cells' `leaves`): d.fuse_leaves
-/// 1 always, 0 never, -1 (auto) when the step has at least kFuseItemsPerWarp items per warp
-/// of the grid (then the leaves of an item on one warp still leave every warp busy; with
-/// fewer items the leaf list spreads a pair's chunks over more warps). Grid-uniform. Where
-/// the leaves run changes neither a result nor a count (the same leaf items either way).
+/// Whether the last expand step runs its leaves itself (test_cells' `leaves`): when the
+/// step has at least kFuseItemsPerWarp items per warp of the grid (then the leaves of an
+/// item on one warp still leave every warp busy; with fewer items the leaf list spreads a
+/// pair's chunks over more warps; fusing them always made the Table 5 scenes 1.3-13x slower
+/// on an H100). Grid-uniform. Where the leaves run changes neither a result nor a count (the
+/// same leaf items either way).
 constexpr std::uint32_t kFuseItemsPerWarp = 2;
-__device__ inline bool fuse_leaves(const MidListDesc& d, std::uint32_t count) {
-  if (d.fuse_leaves >= 0) return d.fuse_leaves == 1;
-  return count >= kFuseItemsPerWarp * warp_count();
-}
+__device__ inline bool fuse_leaves(std::uint32_t count) { return count >= kFuseItemsPerWarp * warp_count(); }
 
 /// This warp's share of `count` list items: the contiguous range [begin, end), an equal
 /// share per warp of the grid. A warp (start or expand) appends the items of one pair
@@ -698,7 +696,7 @@ __device__ inline void warp_range(std::uint32_t count, std::uint32_t& begin, std
 __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTiles* tiles = nullptr) {
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
   const bool last = step + 2 == d.steps;
-  LeafTiles* leaves = last && tiles != nullptr && fuse_leaves(d, count) ? tiles : nullptr;
+  LeafTiles* leaves = last && tiles != nullptr && fuse_leaves(count) ? tiles : nullptr;
   Tally t;
   std::uint32_t begin, end;
   warp_range(count, begin, end);

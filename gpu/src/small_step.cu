@@ -124,7 +124,7 @@ __device__ inline unsigned long long global_ns() {
   return t;
 }
 
-/// Thread 0 of block 0 stamps %globaltimer (ns) into profile[slot] (when profiling).
+/// Thread 0 of block 0 stamps %globaltimer (ns) into profile[slot] (a timed step, or profiling).
 __device__ inline void stamp(unsigned long long* profile, int slot) {
   if (profile && blockIdx.x == 0 && threadIdx.x == 0) profile[slot] = global_ns();
 }
@@ -132,15 +132,13 @@ __device__ inline void stamp(unsigned long long* profile, int slot) {
 __device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { return a < b ? a : b; }
 
 /// One whole step (every thread of the grid calls it): `sequence` is written to *s.done at
-/// the end, `records` (may be null) gets the first pass's contacts; smem: kSharedBytes.
-/// kFuse: the last midphase expand step runs its items' leaves itself (the kernels of
-/// s.mid.fuse_leaves == 1), a separate instantiation so that the
-/// default kernel's registers stay as they were. kLean (s.lean, tiny scenes): the
-/// midphase's early exit, tile culling and tile filter read as off, constants the compiler
-/// folds away.
-template <bool kFuse, bool kLean>
+/// the end, `records` (may be null) gets the first pass's contacts, `profile` (may be null)
+/// the phase stamps; smem: kSharedBytes. kLean (s.lean, tiny scenes): the midphase's early
+/// exit, tile culling and tile filter read as off, constants the compiler folds away.
+template <bool kLean>
 __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned long long sequence,
-                                                DeviceContact* records, unsigned char* smem) {
+                                                DeviceContact* records, unsigned long long* profile,
+                                                unsigned char* smem) {
   cg::grid_group grid = cg::this_grid();
   const BodiesDesc& b = s.bodies;
   const std::uint32_t n = b.n;
@@ -151,7 +149,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   const std::uint32_t lane = threadIdx.x & 31u;
   const std::uint32_t cap = s.mid.pair_capacity;
   StepStats* st = s.stats;
-  stamp(s.profile, 0);
+  stamp(profile, 0);
 
   // 1. Integrate and world AABBs; the step's counts from zero.
   if (tid == 0) {
@@ -177,7 +175,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
       }
     }
     __syncthreads();
-    stamp(s.profile, 1);
+    stamp(profile, 1);
     // Body i's row (j > i, overlaps(box_i, box_j)) and column (a < i, overlaps(box_a,
     // box_i)), counted over the block's threads one body pair (i, j), i < j, at a time from
     // the shared boxes (the tests of flat_row; integer counts, so the order of the shared
@@ -196,13 +194,13 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
       }
     }
     __syncthreads();
-    stamp(s.profile, 2);
+    stamp(profile, 2);
     std::uint32_t* g_out = blockIdx.x == 0 ? s.out_offset : nullptr;
     std::uint32_t* g_in = blockIdx.x == 0 ? s.in_offset : nullptr;
     const std::uint32_t total = block_exclusive_scan(f.out_count, f.out_offset, n + 1, f.storage, g_out);
     (void)block_exclusive_scan(f.in_count, f.in_offset, n + 1, f.storage, g_in);
     if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
-    stamp(s.profile, 3);
+    stamp(profile, 3);
     for (std::uint32_t i = warp; i < n; i += warps) {
       flat_pairs_of(f.aabb, n, i, nullptr, f.out_offset, s.pair_keys, cap, s.shift);
       const std::uint32_t o = f.in_offset[i];
@@ -211,14 +209,14 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
       });
     }
     grid.sync();
-    stamp(s.profile, 4);
+    stamp(profile, 4);
   } else {
     for (std::uint32_t i = tid; i < n; i += threads) {
       integrate_body(b, i, s.gravity, s.dt);
       aabb_body(b, i);
     }
     grid.sync();
-    stamp(s.profile, 1);
+    stamp(profile, 1);
 
     // 2. Broadphase `flat`, counting: body i's row (j > i) and column (a < i).
     for (std::uint32_t i = warp; i < n; i += warps) {
@@ -227,7 +225,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
       if (lane == 0) s.in_count[i] = in;
     }
     grid.sync();
-    stamp(s.profile, 2);
+    stamp(profile, 2);
 
     // 3. Both exclusive scans over n + 1 counts; the pair total. Up to kSharedScanBodies
     // every block scans into its shared memory (block 0 also into the global offsets) and
@@ -244,7 +242,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
       if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
       out_offset = sh.out_offset;
       in_offset = sh.in_offset;
-      stamp(s.profile, 3);
+      stamp(profile, 3);
     } else {
       if (blockIdx.x == 0) {
         auto& storage = *reinterpret_cast<typename BlockScan::TempStorage*>(smem);
@@ -253,7 +251,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
         if (threadIdx.x == 0) st->counts[0] = total;
       }
       grid.sync();
-      stamp(s.profile, 3);
+      stamp(profile, 3);
     }
 
     // 4. Fill: the pair keys in (a, b) order and the in-lists in a order (below the capacity).
@@ -265,7 +263,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
       });
     }
     grid.sync();
-    stamp(s.profile, 4);
+    stamp(profile, 4);
   }  // not fused
 
   // 5. Midphase start (one warp per pair); the in-lists' a resolved to k, by the grid's
@@ -295,24 +293,20 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
     }
   }
   grid.sync();
-  stamp(s.profile, 5);
+  stamp(profile, 5);
 
-  // 6. Midphase expand steps and leaves (as cuda_world.cpp enqueues them). With
-  // fuse_leaves == 1 (kFuse; never on this path, kMidFuseLeaves: on the H100 it made the
-  // Table 5 scenes 1.3-13x slower, one warp running an item's leaves in turn) the last expand step runs its
-  // items' leaves itself in the block's shared tiles, as the graph path's
-  // mid_expand_last_kernel: the same leaf items (the leaf list stays empty), so that with the
-  // early exit a warp skips the rest of a pair it has just confirmed.
+  // 6. Midphase expand steps and leaves (as step_stages.cpp enqueues them; the leaves stay
+  // in the leaf list: no expand step runs them itself here).
   for (int i = 0; i + 1 < md.steps; ++i) {
     md.in = s.lists[i % 2];
     md.in_count = st->counts + 1 + i;
     md.in_capacity = s.list_capacity;
     md.out = s.lists[(i + 1) % 2];
     md.out_count = st->counts + 2 + i;
-    mid::mid_expand_items(md, i, kFuse ? reinterpret_cast<mid::LeafTiles*>(smem) : nullptr);
+    mid::mid_expand_items(md, i);
     grid.sync();
   }
-  stamp(s.profile, 6);
+  stamp(profile, 6);
   if (md.steps > 0) {
     md.in = s.lists[(md.steps - 1) % 2];
     md.in_count = st->counts + md.steps;
@@ -323,7 +317,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
     mid::mid_leaf_items(md, *reinterpret_cast<mid::LeafTiles*>(smem));
     grid.sync();
   }
-  stamp(s.profile, 7);
+  stamp(profile, 7);
 
   // 7. Response passes; the clamp after the last one. With few pairs block 0 runs them
   // alone (its own barriers), then the metrics; the other blocks are done.
@@ -369,13 +363,13 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
     if (one_block) __syncthreads();
     else grid.sync();
   }
-  stamp(s.profile, 8);
+  stamp(profile, 8);
 
   // 8. Block 0: the metrics, then everything the host reads, then the step's number.
   if (blockIdx.x == 0) {
     metrics::metrics_block(s.metrics, reinterpret_cast<metrics::Acc*>(smem), 0, 1, &st->metrics);
     if (threadIdx.x == 0) {
-      stamp(s.profile, 9);
+      stamp(profile, 9);
       if (s.host_stats) *s.host_stats = *st;
       if (s.done) {
         __threadfence_system();  // the statistics (and stamps) before the step's number
@@ -385,10 +379,10 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   }
 }
 
-template <bool kFuse, bool kLean>
+template <bool kLean>
 __global__ void __launch_bounds__(kBlockSize) small_step_kernel(const __grid_constant__ SmallStepDesc s) {
   __shared__ alignas(16) unsigned char smem[kSharedBytes];
-  small_step_body<kFuse, kLean>(s, s.sequence, s.terms.records, smem);
+  small_step_body<kLean>(s, s.sequence, s.terms.records, s.profile, smem);
 }
 
 /// The command that ends the resident kernel (never a request: those have a sequence
@@ -422,7 +416,7 @@ __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long 
 /// barrier, so none can miss the first command. After a step's last phase (block 0: the
 /// metrics and *done) block 0 waits for the next request; a block done earlier (the
 /// one-block response) waits for the next ticket.
-template <bool kFuse, bool kLean>
+template <bool kLean>
 __global__ void __launch_bounds__(kBlockSize)
     small_resident_kernel(const __grid_constant__ SmallStepDesc s, const __grid_constant__ ResidentDesc r) {
   __shared__ alignas(16) unsigned char smem[kSharedBytes];
@@ -458,7 +452,8 @@ __global__ void __launch_bounds__(kBlockSize)
     __syncthreads();  // every thread has read it before thread 0 writes the next one
     if (cmd == kExitCommand) break;
     handled = cmd;
-    small_step_body<kFuse, kLean>(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr, smem);
+    small_step_body<kLean>(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr,
+                           (cmd & kResidentStamp) != 0 ? s.profile : nullptr, smem);
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) {
     __threadfence_system();  // the last step's writes before the exit's mark
@@ -481,42 +476,38 @@ cudaError_t all_blocks_per_sm(int& blocks, std::initializer_list<const void*> ke
   return cudaSuccess;
 }
 
-/// The instantiation for `s`: fused leaves (fuse_leaves == 1) first, else lean (s.lean).
+/// The instantiation for `s`: lean (s.lean) or plain.
 template <typename K>
-const void* pick(const SmallStepDesc& s, K* plain, K* fused, K* lean) {
-  return reinterpret_cast<const void*>(s.mid.fuse_leaves == 1 ? fused : s.lean != 0 ? lean : plain);
+const void* pick(const SmallStepDesc& s, K* plain, K* lean) {
+  return reinterpret_cast<const void*>(s.lean != 0 ? lean : plain);
 }
 
 }  // namespace
 
 cudaError_t small_step_blocks_per_sm(int& blocks) {
-  return all_blocks_per_sm(blocks, {reinterpret_cast<const void*>(&small_step_kernel<false, false>),
-                                    reinterpret_cast<const void*>(&small_step_kernel<true, false>),
-                                    reinterpret_cast<const void*>(&small_step_kernel<false, true>)});
+  return all_blocks_per_sm(blocks, {reinterpret_cast<const void*>(&small_step_kernel<false>),
+                                    reinterpret_cast<const void*>(&small_step_kernel<true>)});
 }
 
 cudaError_t launch_small_step(const SmallStepDesc& s, unsigned grid, cudaStream_t stream) {
   SmallStepDesc arg = s;
   void* args[] = {&arg};
-  const void* kernel =
-      pick(s, &small_step_kernel<false, false>, &small_step_kernel<true, false>, &small_step_kernel<false, true>);
+  const void* kernel = pick(s, &small_step_kernel<false>, &small_step_kernel<true>);
   const cudaError_t e = cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlockSize), args, 0, stream);
   if (e != cudaSuccess) return e;
   return cudaGetLastError();
 }
 
 cudaError_t small_resident_blocks_per_sm(int& blocks) {
-  return all_blocks_per_sm(blocks, {reinterpret_cast<const void*>(&small_resident_kernel<false, false>),
-                                    reinterpret_cast<const void*>(&small_resident_kernel<true, false>),
-                                    reinterpret_cast<const void*>(&small_resident_kernel<false, true>)});
+  return all_blocks_per_sm(blocks, {reinterpret_cast<const void*>(&small_resident_kernel<false>),
+                                    reinterpret_cast<const void*>(&small_resident_kernel<true>)});
 }
 
 cudaError_t launch_small_resident(const SmallStepDesc& s, const ResidentDesc& r, unsigned grid, cudaStream_t stream) {
   SmallStepDesc arg = s;
   ResidentDesc res = r;
   void* args[] = {&arg, &res};
-  const void* kernel = pick(s, &small_resident_kernel<false, false>, &small_resident_kernel<true, false>,
-                            &small_resident_kernel<false, true>);
+  const void* kernel = pick(s, &small_resident_kernel<false>, &small_resident_kernel<true>);
   const cudaError_t e = cudaLaunchCooperativeKernel(kernel, dim3(grid), dim3(kBlockSize), args, 0, stream);
   if (e != cudaSuccess) return e;
   return cudaGetLastError();

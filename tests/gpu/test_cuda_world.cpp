@@ -12,8 +12,9 @@
 // failing construction with exit 1.
 //
 // Every equality test runs on both step paths of the cuda engine (issue 20): "graph" (the
-// per-stage kernels, stage times on) and "small" (the whole step as one cooperative kernel:
-// CudaSettings::stage_times off, for scenes of at most kCudaSmallStepMaxBodies bodies),
+// per-stage kernels: CudaSettings::small_path off, stage times sampled as by default) and
+// "small" (the whole step as one cooperative kernel, stage times off, for scenes of at most
+// kCudaSmallStepMaxBodies bodies),
 // named by a _graph or _small suffix (e.g. --gtest_filter='*_small*'); CudaSmallStep checks
 // the small path against the graph.
 //
@@ -131,9 +132,11 @@ std::string test_name(const ::testing::TestParamInfo<std::string>& info) {
 const std::vector<std::string> kPaths = {"graph", "small"};
 constexpr std::size_t kSmallPathMostBodies = kCudaSmallStepMaxBodies;
 
-/// `base` for `path`: the small path runs where the stage times are off.
+/// `base` for `path`: "graph" turns the small path off; "small" keeps it and turns the
+/// stage times off.
 CudaSettings path_settings(const std::string& path, CudaSettings base = {}) {
-  base.stage_times = path != "small";
+  base.small_path = path != "graph";
+  if (path == "small") base.stage_times = false;
   return base;
 }
 
@@ -660,12 +663,20 @@ TEST(CudaSettingsCheck, OutOfRangeValuesAreInputErrors) {
     s.resident_timeout_ms = bad;
     expect_bad_settings_rejected(s, fmt::format("resident_timeout_ms={} is not allowed; allowed: 1 .. 86400000", bad));
   }
+  for (const long bad : {0L, -3L, 1000001L}) {
+    CudaSettings t;
+    t.stage_time_every = bad;
+    expect_bad_settings_rejected(t, fmt::format("stage_time_every={} is not allowed; allowed: 1 .. 1000000", bad));
+  }
   CudaSettings s;
   apply_cuda_settings(s, {"graph=false", "stage_times=0", "midphase_early_exit=off", "memory_limit_bytes=4096",
-                          "resident_timeout_ms=300", "sync_each_launch=true", "small_profile=1"},
+                          "resident_timeout_ms=300", "sync_each_launch=true", "small_profile=1",
+                          "stage_time_every=7", "small_path=off"},
                       "--cuda");
   EXPECT_FALSE(s.graph);
   EXPECT_FALSE(s.stage_times);
+  EXPECT_EQ(s.stage_time_every, 7);
+  EXPECT_FALSE(s.small_path);
   EXPECT_FALSE(s.midphase_early_exit);
   EXPECT_EQ(s.memory_limit_bytes, 4096u);
   EXPECT_EQ(s.resident_timeout_ms, 300);
@@ -675,6 +686,7 @@ TEST(CudaSettingsCheck, OutOfRangeValuesAreInputErrors) {
       {"graph=yes", "--cuda: graph='yes' is not a switch"},
       {"resident_timeout_ms=0", "--cuda: resident_timeout_ms='0' is not allowed; allowed: an integer 1 .. 86400000"},
       {"memory_limit_bytes=12x", "--cuda: memory_limit_bytes='12x' is not allowed"},
+      {"stage_time_every=0", "--cuda: stage_time_every='0' is not allowed; allowed: an integer 1 .. 1000000"},
       {"small=1", "--cuda: unknown cuda setting 'small'; allowed: midphase_early_exit, "},
       {"graph", "--cuda: 'graph' is not KEY=VALUE"}};
   for (const auto& [item, says] : bad) {
@@ -708,7 +720,7 @@ TEST(CudaSmallStep, SmallPathGivesTheGraphPathsBits) {
     const auto launches = std::make_unique<CudaWorld>(model, bp, path_settings("small", base));
     launches->set_persistent(false);
     ASSERT_NE(graph->step_path(), "small");
-    EXPECT_TRUE(graph->notes().empty()) << graph->notes();
+    EXPECT_EQ(graph->notes().find("n(n-1)/2"), std::string::npos) << graph->notes();
     EXPECT_TRUE(graph->has_stage(Stage::Broadphase));
     const std::vector<CudaWorld*> small = {dflt.get(), launches.get()};
     for (CudaWorld* e : small) {
@@ -1312,4 +1324,92 @@ TEST(CudaPersistent, IdleExitAndRelaunchKeepTheCpuBits) {
     if (::testing::Test::HasFailure()) FAIL();
   }
   EXPECT_GT(gpu.resident_launches(), 1u) << "the cpu's steps between take longer than 1 us: relaunches";
+}
+
+// Stage times cost the step nothing and change no bit (issue 33 item 1): by default one step
+// in CudaSettings::stage_time_every is timed (%globaltimer stamps of the fused kernel on the
+// small path, the graph captured with events on the per-stage path) and the others report
+// that step's times. Every engine steps beside the cpu engine with its bits after every
+// step: the default (small path, resident), stamps on every step, a launch per step, the
+// per-stage path from its graphs sampled every 3rd and on every step, launch by launch
+// every 5th, and stage times off.
+TEST(CudaStageTimes, SampledStageTimesKeepTheCpuBits) {
+  REQUIRE_CUDA_DEVICE();
+  const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
+  auto cpu = cpu_flat(model);
+  struct Spec {
+    const char* label;
+    CudaSettings settings;
+    bool resident;
+    long every;  // 0: stage times off
+  };
+  auto with = [](bool small_path, bool graph, bool times, long every) {
+    CudaSettings s;
+    s.small_path = small_path;
+    s.graph = graph;
+    s.stage_times = times;
+    s.stage_time_every = every;
+    return s;
+  };
+  const std::vector<Spec> specs = {{"default", CudaSettings{}, true, 64},
+                                     {"small, every step", with(true, true, true, 1), true, 1},
+                                     {"small, a launch per step", CudaSettings{}, false, 64},
+                                     {"graph, every 3rd", with(false, true, true, 3), false, 3},
+                                     {"graph, every step", with(false, true, true, 1), false, 1},
+                                     {"launches, every 5th", with(false, false, true, 5), false, 5},
+                                     {"small, off", with(true, true, false, 64), true, 0}};
+  std::vector<std::unique_ptr<CudaWorld>> engines;
+  std::vector<CudaWorld*> all;
+  for (const Spec& e : specs) {
+    engines.push_back(std::make_unique<CudaWorld>(model, "flat", e.settings));
+    engines.back()->set_persistent(e.resident);
+    all.push_back(engines.back().get());
+  }
+  EXPECT_EQ(CudaSettings{}.stage_time_every, 64);
+  EXPECT_TRUE(CudaSettings{}.stage_times);
+  EXPECT_EQ(all[0]->step_path(), "small") << "the default runs the fused kernel, stage times on";
+  EXPECT_TRUE(all[0]->persistent());
+  EXPECT_NE(all[0]->notes().find("sampled 1 step in 64 (steps 1, 65, 129, ...;"), std::string::npos)
+      << all[0]->notes();
+  EXPECT_NE(all[1]->notes().find("stamps at the fused kernel's phase ends, on every step"), std::string::npos)
+      << all[1]->notes();
+  EXPECT_EQ(all[3]->step_path(), "graph");
+  EXPECT_EQ(all[3]->notes(), "stage times: CUDA events between the stages, sampled 1 step in 3 (steps 1, 4, 7, "
+                             "...; the others report the last sample)");
+  EXPECT_EQ(all[5]->step_path(), "launches");
+  EXPECT_NE(all[6]->notes().find("stage times: off"), std::string::npos) << all[6]->notes();
+  for (std::size_t i = 0; i < specs.size(); ++i) {
+    for (int s = 0; s < static_cast<int>(Stage::Count); ++s) {
+      const auto st = static_cast<Stage>(s);
+      const bool expected = specs[i].every > 0 && !(all[i]->step_path() == "small" && st == Stage::Aabbs);
+      EXPECT_EQ(all[i]->has_stage(st), expected) << specs[i].label << ": " << stage_name(st);
+    }
+  }
+  std::vector<FrameMetrics> last(specs.size());
+  std::vector<double> timed_sum(specs.size(), 0.0);
+  for (int f = 1; f <= 140; ++f) {
+    step_all_and_compare(*cpu, all, f, "stage times");
+    if (::testing::Test::HasFailure()) FAIL() << "frame " << f;
+    for (std::size_t i = 0; i < specs.size(); ++i) {
+      const FrameMetrics& m = all[i]->last_metrics();
+      const std::string what = fmt::format("{}, frame {}", specs[i].label, f);
+      double sum = 0.0;
+      for (double ms : m.stage_ms) {
+        EXPECT_GE(ms, 0.0) << what;
+        sum += ms;
+      }
+      if (specs[i].every == 0) {
+        EXPECT_EQ(sum, 0.0) << what << ": stage times off";
+      } else if ((f - 1) % specs[i].every == 0) {
+        EXPECT_GT(sum, 0.0) << what << ": a timed step";
+        // The stages ran inside the step the host waited for.
+        EXPECT_LE(sum, m.step_ms + 0.01) << what;
+        timed_sum[i] += sum;
+      } else {
+        EXPECT_EQ(m.stage_ms, last[i].stage_ms) << what << ": an untimed step reports the last sample";
+      }
+      last[i] = m;
+    }
+  }
+  for (std::size_t i = 0; i + 1 < specs.size(); ++i) EXPECT_GT(timed_sum[i], 0.0) << specs[i].label;
 }

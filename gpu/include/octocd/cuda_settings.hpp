@@ -31,6 +31,17 @@ struct CudaSettings {
   /// throws RuntimeError (the engine can then only be destroyed) (unit: milliseconds,
   /// 1 .. 86400000; default 60000).
   long resident_timeout_ms = 60000;
+  /// Take stage times (FrameMetrics::stage_ms), on one step in stage_time_every. Off, the
+  /// stage times stay 0 and CudaWorld::has_stage is false for every stage. The path a step
+  /// runs does not depend on it, nor do its results. Default true.
+  bool stage_times = true;
+  /// Steps per stage-time sample (1 .. 1000000; default 64): steps 1, 1 + k, 1 + 2k, ... are
+  /// timed, on the per-stage path by CUDA events between the stages (a second CUDA graph,
+  /// captured with them), on the small-scene path by %globaltimer stamps at the fused
+  /// kernel's phase ends; every other step runs untimed and reports the last timed step's
+  /// stage times, so their mean over a run is the mean over the samples. 1 times every step
+  /// (on the per-stage path that costs an event graph every step).
+  long stage_time_every = 64;
 
   // ---- debugging ------------------------------------------------------------------------
   /// Synchronise and check errors after every kernel launch, so that an asynchronous
@@ -40,18 +51,17 @@ struct CudaSettings {
   /// Replay the per-stage kernels from a CUDA graph while the buffer capacities do not
   /// change and no frame is recorded (false: launch them one by one). Default true.
   bool graph = true;
-  /// Time every stage with CUDA events (FrameMetrics::stage_ms). Off, the stage times stay
-  /// 0, and scenes of 1 .. kCudaSmallStepMaxBodies bodies run each step as one
-  /// cooperative kernel (the small-scene path: the same bits, no stage to time). Default
-  /// true.
-  bool stage_times = true;
+  /// Run scenes of 1 .. kCudaSmallStepMaxBodies bodies as one cooperative kernel per step
+  /// (the small-scene path: the same bits); false runs them as the per-stage kernels, as
+  /// larger scenes. Default true.
+  bool small_path = true;
   /// On the small-scene path: stamp each phase of the fused kernel with %globaltimer and
   /// keep the means (CudaWorld::small_profile). Default false.
   bool small_profile = false;
 };
 
 /// Throws InputError naming the field, its value and the allowed range when a field of
-/// `settings` is out of range (resident_timeout_ms). `where` prefixes the message (e.g.
+/// `settings` is out of range (resident_timeout_ms, stage_time_every). `where` prefixes the message (e.g.
 /// "--cuda").
 void check_cuda_settings(const CudaSettings& settings, const std::string& where);
 

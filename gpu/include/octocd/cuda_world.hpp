@@ -37,8 +37,8 @@ constexpr std::uint64_t kCudaMaxBodies = 2147483647;
 /// small path's broadphase is the all-pairs `flat` test, whatever broadphase is named (the
 /// same pair set by the DeviceBroadPhase contract; O(n^2) tests, cheap below this count),
 /// so its `cell_candidates` is n(n-1)/2. It is taken for 1 .. kCudaSmallStepMaxBodies
-/// bodies when stage times are off (CudaSettings::stage_times false: one kernel cannot be
-/// split into stages) and the device can launch cooperative kernels.
+/// bodies when CudaSettings::small_path is on (the default) and the device can launch
+/// cooperative kernels; its stage times come from %globaltimer stamps at the phase ends.
 constexpr std::uint64_t kCudaSmallStepMaxBodies = 2048;
 
 /// The broadphases the cuda engine has (`--broadphase` with `--engine cuda`), in a stable
@@ -139,10 +139,14 @@ struct CudaTestHooks {
 /// whose output did not fit is run again from the saved state with larger buffers, so
 /// nothing is ever dropped. While the capacities do not change and no frame is being
 /// recorded, the step is replayed from a CUDA graph (CudaSettings::graph). Small scenes
-/// (kCudaSmallStepMaxBodies, with CudaSettings::stage_times off) run the whole step as one
+/// (kCudaSmallStepMaxBodies, CudaSettings::small_path) run the whole step as one
 /// cooperative kernel instead (the same bits: the same per-element device code, pairs in
 /// the same order, the same per-body summation order; its grid, one-block response, host
-/// wait and fused front are constants beside it in cuda_world.cpp). On the graph path the
+/// wait and fused front are constants beside it in gpu/src/cuda_impl.hpp). Stage times
+/// (CudaSettings::stage_times, stage_time_every) are taken on one step in
+/// stage_time_every, by CUDA events from a second graph captured with them on the
+/// per-stage path, by %globaltimer stamps in the fused kernel; the other steps run untimed
+/// and report the last timed step's times; neither changes a bit. On the graph path the
 /// last midphase expand step runs its items' leaves itself when it has at least two items
 /// per warp (the same leaf items, so the same bits and counts).
 /// Persistent (resident) kernel: on the small path the kernel is launched once, on a
@@ -193,9 +197,9 @@ class CudaWorld : public Engine {
   std::string device() const override;
   std::string broadphase_name() const override;
   const Model& model() const override { return *model_; }
-  /// Runs one step (SPEC 4) on the device and returns its metrics (stage times from CUDA
-  /// events, ms). Synchronises once, for the metrics (and again only when a buffer had to
-  /// grow).
+  /// Runs one step (SPEC 4) on the device and returns its metrics (stage times in ms: this
+  /// step's when it is timed, else the last timed step's; see the class comment).
+  /// Synchronises once, for the metrics (and again only when a buffer had to grow).
   const FrameMetrics& step() override;
   /// Hot state after the last step, downloaded on the first call after each step.
   const BodyState& state() const override;
@@ -245,13 +249,15 @@ class CudaWorld : public Engine {
   /// Launches of the resident kernel so far: one, plus one per regrow, per
   /// set_persistent(false) / (true) and per idle exit.
   std::uint64_t resident_launches() const;
-  /// On the small path: no stage is timed (one kernel); else every stage.
+  /// With stage times on (CudaSettings::stage_times), every stage but, on the small path,
+  /// Aabbs (built in the integration's phase, whose time includes them); off, none.
   bool has_stage(Stage s) const override;
-  /// On the small path, what it changes in the metrics (broadphase candidates, stage
-  /// times); else "".
+  /// How the stage times were taken (e.g. "stage times: CUDA events between the stages,
+  /// sampled 1 step in 64 (steps 1, 65, 129, ...; the others report the last sample)"),
+  /// after, on the small path, what it changes in the metrics (broadphase candidates).
   std::string notes() const override;
 
-  struct Impl;  ///< device buffers and kernels (cuda_world.cpp)
+  struct Impl;  ///< device buffers and the step's host side (gpu/src/cuda_impl.hpp)
 
  private:
   std::shared_ptr<const Model> model_;

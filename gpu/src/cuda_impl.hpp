@@ -1,0 +1,271 @@
+#pragma once
+/// \file cuda_impl.hpp
+/// CudaWorld::Impl: the CUDA engine's device state (buffers, stream, graphs, the resident
+/// kernel's control words) and the host side of its step, split by job over
+///   cuda_world.cpp    construction, CudaWorld's methods, one step's dispatch and metrics;
+///   device_status.cpp the device's description and the free-memory check;
+///   step_stages.cpp   the per-stage path: buffer sizes, descriptors, the stages in
+///                     World::step's order, the CUDA graph, regrow and rerun;
+///   step_small.cpp    the fused small step: its descriptor, the launch per step and the
+///                     resident kernel;
+///   stage_times.cpp   the stage times: which steps are timed, CUDA events on the per-stage
+///                     path, %globaltimer stamps of the fused kernel.
+/// Plain C++ over the CUDA runtime API; the kernels are behind kernels.hpp. Internal to gpu/.
+
+#include <array>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <cuda_runtime_api.h>
+
+#include "device_broadphase.hpp"
+#include "device_buffer.hpp"
+#include "kernels.hpp"
+#include "octocd/cuda_world.hpp"
+
+namespace octocd {
+
+namespace gpu {
+
+using Clock = std::chrono::steady_clock;
+
+/// Milliseconds since `t0`.
+inline double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+/// The reason no device is usable, or "" when one is (device_status.cpp).
+std::string no_device_reason();
+/// "NAME (device D, sm_XY, G GiB)" of the current device; throws RuntimeError when a CUDA call fails.
+std::string describe_current_device();
+/// Throws RuntimeError when the current device has fewer than `needed` bytes free
+/// (cudaMemGetInfo, or `free_bytes` of it where given: a test's seam), or more than
+/// `limit` (CudaSettings::memory_limit_bytes, 0: none), naming the scene, the bytes needed
+/// and free, and the device's total (device_status.cpp).
+void check_free_memory(const Model& m, const std::string& broadphase, std::uint64_t needed, std::uint64_t limit,
+                       const std::function<std::uint64_t(std::uint64_t)>& free_bytes);
+
+/// CUDA events around the stages: event s before stage s, event Stage::Count after the last.
+constexpr int kStageEvents = static_cast<int>(Stage::Count) + 1;
+
+/// Blocks per multiprocessor of the fused small step (at most what fits, 2 on sm_90 at 119
+/// registers per thread): one gives 8 warps per SM for every phase (1056 on an H100) while
+/// each grid-wide barrier waits for as few blocks as possible.
+constexpr int kSmallStepBlocksPerSm = 1;
+
+/// Bodies up to which the fused small step's grid is half that (one block per two SMs):
+/// its phases then have little work, and fewer blocks meet at each grid-wide barrier.
+constexpr std::size_t kSmallHalfGridBodies = 64;
+
+/// Pairs up to which the fused small step runs its response passes, clamp and metrics in
+/// one block (SmallStepDesc::one_block_pairs).
+constexpr std::uint32_t kSmallOneBlockPairs = 512;
+
+/// The resident kernel ends itself after this long without a request (unit: us; the next
+/// step launches it again).
+constexpr long kResidentIdleUs = 2000;
+
+/// Bodies up to which the fused small step integrates, counts and fills without a
+/// grid-wide barrier (SmallStepDesc::front_bodies; at most gpu::kSmallFrontMaxBodies).
+constexpr std::uint32_t kSmallFrontBodies = 64;
+
+}  // namespace gpu
+
+struct CudaWorld::Impl {
+  cudaStream_t stream = nullptr;
+  bool sync_each_launch = false;  // CudaSettings::sync_each_launch
+  bool use_graph = true;          // CudaSettings::graph
+  bool capturing = false;
+  std::string device;
+  std::string broadphase;
+  std::unique_ptr<gpu::DeviceBroadPhase> bp;  // null for `flat`
+  std::uint32_t n = 0;
+  std::uint32_t shape_count = 0;
+  hd::LevelList levels;
+  int level_steps = 0;     // midphase steps (0: aabb-only, or no levels)
+  unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
+  int mid_early_exit = 1;  // CudaSettings::midphase_early_exit (MidListDesc::early_exit)
+
+  // ---- stage times (stage_times.cpp) ---------------------------------------------------
+  bool stage_times = true;        // CudaSettings::stage_times
+  long stage_time_every = 64;     // CudaSettings::stage_time_every
+  bool timed = false;             // the step under way is timed
+  cudaEvent_t events[gpu::kStageEvents] = {};
+  /// The last timed step's stage times (ms): what every untimed step reports.
+  std::array<double, static_cast<std::size_t>(Stage::Count)> held_ms{};
+  std::uint64_t timed_steps = 0;
+
+  // ---- the fused small step (step_small.cpp) -------------------------------------------
+  bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
+  unsigned small_grid = 1;  // its blocks (co-resident)
+  gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
+  // Pinned: [0] the last step number the kernel wrote, [1 ..] the phase stamps.
+  unsigned long long* small_host = nullptr;
+  unsigned long long* small_dev = nullptr;  // the same, mapped (null: no polling, no stamps)
+  unsigned long long sequence = 0;
+  bool small_profile = false;  // CudaSettings::small_profile
+  double profile_ns[gpu::kSmallProfileSlots] = {};  // sums: slot p - slot p-1; [0]: host launch to seen done
+  double profile_kernel_ns = 0.0;                   // sum of slot 9 - slot 0
+  std::uint64_t profile_steps = 0;
+
+  // The resident small step (set_persistent): its own stream, so that the copies and waits
+  // on `stream` never queue behind it.
+  bool resident_possible = false;  // small path, mapped memory, the kernel fits
+  bool persistent = false;         // run steps through the resident kernel
+  bool resident_alive = false;     // launched, and not yet seen to have exited
+  bool resident_hung = false;      // an exit request went unanswered: nothing may be freed
+  bool resident_stall = false;     // TestHooks::resident_ignores_requests
+  unsigned resident_grid = 1;
+  unsigned long long resident_idle_ns = 0;
+  long resident_timeout_ms = 60000;  // CudaSettings::resident_timeout_ms
+  unsigned long long epoch = 0;      // launches so far; the last one's number
+  std::uint64_t resident_launches = 0;
+  cudaStream_t resident_stream = nullptr;
+  // Pinned: [0] the request (host writes), [8] the exit mark (kernel writes); apart, so the
+  // two sides write different cache lines.
+  static constexpr int kRequestWord = 0;
+  static constexpr int kExitedWord = 8;
+  unsigned long long* resident_host = nullptr;
+  unsigned long long* resident_dev = nullptr;  // the same, mapped
+  gpu::DeviceBuffer<unsigned long long> resident_control{"resident step control"};
+
+  // ---- buffers (step_stages.cpp sizes them) ---------------------------------------------
+  // Capacities of the variable-size buffers (entries); prepare() sizes the buffers.
+  std::size_t pair_cap = 1;
+  std::size_t list_cap = 1;
+  bool prepared = false;
+  std::uint64_t static_static = 0;  // static_static_pairs(model): constant over the run
+
+  // Bodies (fixed size n).
+  gpu::DeviceBuffer<Vec3> x{"body positions"};
+  gpu::DeviceBuffer<Vec3> v{"body velocities"};
+  gpu::DeviceBuffer<Vec3> x_saved{"body positions before the step"};
+  gpu::DeviceBuffer<Vec3> v_saved{"body velocities before the step"};
+  gpu::DeviceBuffer<float> w{"body inverse masses"};
+  gpu::DeviceBuffer<Aabb> local{"body local boxes"};
+  gpu::DeviceBuffer<std::uint32_t> shape{"body shapes"};
+  gpu::DeviceBuffer<Aabb> aabb{"world AABBs"};
+  // Shapes, packed once.
+  gpu::DeviceBuffer<gpu::DeviceShape> shapes{"shapes"};
+  gpu::DeviceBuffer<Vec3> vertices{"octree vertices"};
+  gpu::DeviceBuffer<MeshOctreeCell> cells{"octree cells"};
+  gpu::DeviceBuffer<std::uint32_t> level_offsets{"octree level offsets"};
+  gpu::DeviceBuffer<Aabb> blocks{"octree vertex block boxes"};
+  gpu::DeviceBuffer<float> theta{"per-shape theta"};
+  gpu::DeviceBuffer<gpu::StepStats> stats{"step statistics"};
+  gpu::DeviceBuffer<gpu::MetricsResult> metric_partials{"metrics partial sums"};
+  // Variable size (pair_cap, list_cap), grown on overflow; reset_capacities shrinks them.
+  gpu::DeviceBuffer<std::uint32_t> bp_count{"broadphase counts"};
+  gpu::DeviceBuffer<std::uint32_t> bp_offset{"broadphase offsets"};
+  gpu::DeviceBuffer<unsigned long long> pair_keys{"pair keys"};
+  gpu::DeviceBuffer<unsigned long long> pair_keys_sorted{"sorted pair keys"};
+  gpu::DeviceBuffer<Pair> pairs{"candidate pairs"};
+  gpu::DeviceBuffer<std::uint8_t> confirmed{"confirmed flags"};
+  gpu::DeviceBuffer<gpu::MidItem> items_a{"midphase work list A"};
+  gpu::DeviceBuffer<gpu::MidItem> items_b{"midphase work list B"};
+  gpu::DeviceBuffer<std::uint8_t> hit{"contact hit flags"};
+  gpu::DeviceBuffer<Vec3> dx_a{"contact dx_a"};
+  gpu::DeviceBuffer<Vec3> dx_b{"contact dx_b"};
+  gpu::DeviceBuffer<Vec3> dv_a{"contact dv_a"};
+  gpu::DeviceBuffer<Vec3> dv_b{"contact dv_b"};
+  gpu::DeviceBuffer<float> depth0{"contact depths"};
+  gpu::DeviceBuffer<gpu::DeviceContact> records{"contact records"};
+  gpu::DeviceBuffer<std::uint32_t> keys_in{"contact index keys"};
+  gpu::DeviceBuffer<std::uint32_t> keys_out{"sorted contact index keys"};
+  gpu::DeviceBuffer<std::uint32_t> vals_in{"contact index entries"};
+  gpu::DeviceBuffer<std::uint32_t> vals_out{"sorted contact index entries"};
+  gpu::DeviceBuffer<std::uint32_t> body_begin{"body contact segments"};
+  gpu::DeviceBuffer<std::uint32_t> in_count{"small-step column counts"};  // small path only
+  gpu::DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
+
+  gpu::StepStats* host = nullptr;  // pinned
+  // The per-stage step captured twice: plain (untimed steps) and with the stage events.
+  cudaGraph_t graph = nullptr;
+  cudaGraphExec_t graph_exec = nullptr;
+  cudaGraph_t timed_graph = nullptr;
+  cudaGraphExec_t timed_graph_exec = nullptr;
+
+  ~Impl();
+
+  // ---- cuda_world.cpp -------------------------------------------------------------------
+  /// Runs one step on the path fixed at construction and waits for it.
+  void run_step(const Scene& scene, bool recording);
+
+  // ---- step_stages.cpp: the per-stage path ---------------------------------------------
+  void drop_graph();
+  std::vector<gpu::BufferBase*> all_buffers();
+  std::vector<gpu::BufferBase*> scratch_buffers();
+  /// Checks a launch; with sync_each_launch also waits for it and checks its execution.
+  void launched(cudaError_t e, const char* kernel);
+  unsigned long long* counters() { return stats.get()->counters; }
+  std::uint32_t* counts() { return stats.get()->counts; }
+  std::uint32_t pcap() const { return static_cast<std::uint32_t>(pair_cap); }
+  std::uint32_t lcap() const { return static_cast<std::uint32_t>(list_cap); }
+  gpu::BodiesDesc bodies();
+  gpu::ShapesDesc shapes_desc();
+  /// The midphase lists' common fields (in / out are set per step): pairs from `keys`.
+  gpu::MidListDesc mid_desc(const unsigned long long* keys);
+  /// contact_terms' descriptor (depth0 and records unset: per pass).
+  gpu::TermsDesc terms_desc(const ContactParams& params);
+  /// apply_sums' descriptor over the sorted contact index.
+  gpu::ApplyDesc apply_desc();
+  gpu::MetricsDesc metrics_desc(const ContactParams& params);
+  /// Sizes every buffer for the current capacities (outside any capture); a change drops
+  /// the captured graphs.
+  void prepare();
+  /// Broadphase `flat` (SPEC 5.1): count, exclusive scan over n + 1, fill the keys that fit.
+  void flat_broadphase();
+  /// Enqueues one whole step on the stream: no allocation, no host synchronisation (it
+  /// may be captured into a graph). `recording`: the first pass writes contact records;
+  /// `timed`: the stage events are recorded around the stages.
+  void enqueue_step(const Scene& scene, bool recording, bool with_events);
+  /// The per-stage step: replayed from the plain or the timed graph when allowed (not
+  /// recording, graphs on), else launch by launch; then waits for it.
+  void run_stages(const Scene& scene, bool recording);
+  /// True when a list overflowed its capacity; grows the capacities then (the state must
+  /// be restored and the step run again).
+  bool grow_if_needed();
+  void restore_state();
+
+  // ---- step_small.cpp: the fused small step --------------------------------------------
+  /// The fused small step's descriptor (small_step.cu): the same buffers as the per-stage
+  /// path; the in-lists live in keys_in, their offsets in body_begin.
+  gpu::SmallStepDesc small_desc(const Scene& scene, bool recording);
+  /// One fused step (resident or a launch), its statistics through mapped memory.
+  void run_small(const Scene& scene, bool recording);
+  /// Spins until the fused step's kernel has written this step's number.
+  void wait_small_step();
+  unsigned long long exited_mark() const;
+  unsigned long long done_mark() const;
+  void write_request(unsigned long long value);
+  void launch_resident(const Scene& scene);
+  void resident_step(const Scene& scene, bool recording);
+  /// Ends the resident kernel (when one runs) and waits for it: before anything frees or
+  /// reallocates device memory, and in the destructor. Throws RuntimeError (and marks the
+  /// engine hung: its memory is then never freed) when the kernel does not end within
+  /// resident_timeout_ms.
+  void stop_resident();
+
+  // ---- stage_times.cpp -----------------------------------------------------------------
+  /// Decides whether step `frame` (1-based) is timed: frames 1, 1 + k, 1 + 2k, ... with
+  /// k = stage_time_every, while stage times are on.
+  void begin_step(std::int64_t frame);
+  /// Records stage event `i` on the stream (only while enqueueing a timed step).
+  void record_event(int i, bool with_events);
+  /// The phase stamps of the fused kernel for this step, or null (untimed, no profile).
+  unsigned long long* stamps() const;
+  /// After the step: the timed step's stage times into held_ms (events, or the fused
+  /// kernel's stamps), then held_ms into `stage_ms`.
+  void end_step(std::array<double, static_cast<std::size_t>(Stage::Count)>& stage_ms);
+  /// Whether stage `s` has a time on this engine's path.
+  bool has_stage(Stage s) const;
+  /// The summary's line on how the stage times were taken.
+  std::string stage_times_note() const;
+};
+
+}  // namespace octocd

@@ -1,0 +1,177 @@
+// The fused small step of the cuda engine (small_step.cu) from the host: its descriptor,
+// one cooperative launch per step with a polled wait on mapped memory, and the resident
+// kernel that stays launched and steps on request (CudaWorld's class comment).
+#include <chrono>
+
+#include <fmt/format.h>
+
+#include "cuda_impl.hpp"
+#include "octocd/error.hpp"
+
+namespace octocd {
+
+using gpu::check;
+using gpu::Clock;
+using gpu::cuda_text;
+using gpu::ms_since;
+
+gpu::SmallStepDesc CudaWorld::Impl::small_desc(const Scene& scene, bool recording) {
+  const ContactParams& params = scene.response;
+  gpu::SmallStepDesc s;
+  s.bodies = bodies();
+  s.bodies.x_saved = x_saved.get();
+  s.bodies.v_saved = v_saved.get();
+  s.gravity = scene.gravity;
+  s.dt = scene.dt;
+  s.max_velocity = params.max_velocity;
+  s.iterations = params.iterations;
+  s.out_count = bp_count.get();
+  s.out_offset = bp_offset.get();
+  s.in_count = in_count.get();
+  s.in_offset = body_begin.get();
+  s.in_list = keys_in.get();
+  s.pair_keys = pair_keys.get();
+  s.shift = gpu::key_bits(n);
+  s.mid = mid_desc(pair_keys.get());  // the fill writes them in (a, b) order: no sort
+  s.lists[0] = items_a.get();
+  s.lists[1] = items_b.get();
+  s.list_capacity = lcap();
+  s.terms = terms_desc(params);
+  s.terms.depth0 = depth0.get();
+  s.terms.records = recording ? records.get() : nullptr;
+  s.apply = apply_desc();
+  s.metrics = metrics_desc(params);
+  s.stats = stats.get();
+  s.host_stats = host_dev;
+  s.one_block_pairs = gpu::kSmallOneBlockPairs;
+  s.front_bodies = gpu::kSmallFrontBodies;
+  s.lean = n <= gpu::kSmallLeanBodies ? 1 : 0;
+  if (small_dev) {
+    s.done = small_dev;
+    s.sequence = sequence;
+    s.profile = stamps();
+  }
+  return s;
+}
+
+void CudaWorld::Impl::run_small(const Scene& scene, bool recording) {
+  const auto t0 = Clock::now();
+  ++sequence;
+  if (persistent) {
+    resident_step(scene, recording);
+  } else {
+    launched(gpu::launch_small_step(small_desc(scene, recording), small_grid, stream), "small_step");
+    if (!host_dev)
+      check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
+            "cudaMemcpy step statistics");
+    if (host_dev && small_dev) wait_small_step();
+    else check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+  }
+  if (small_profile && small_dev) {
+    const double host_ns = std::chrono::duration<double, std::nano>(Clock::now() - t0).count();
+    volatile const unsigned long long* p = small_host + 1;
+    for (int i = 1; i < gpu::kSmallProfileSlots; ++i) profile_ns[i] += static_cast<double>(p[i] - p[i - 1]);
+    profile_ns[0] += host_ns;
+    profile_kernel_ns += static_cast<double>(p[gpu::kSmallProfileSlots - 1] - p[0]);
+    ++profile_steps;
+  }
+}
+
+void CudaWorld::Impl::wait_small_step() {
+  volatile const unsigned long long* done = small_host;
+  for (unsigned spins = 1; *done != sequence; ++spins) {
+    if ((spins & 1023u) != 0) continue;
+    const cudaError_t e = cudaStreamQuery(stream);
+    if (e == cudaSuccess) break;
+    if (e != cudaErrorNotReady) check(e, "small_step (cudaStreamQuery)");
+  }
+}
+
+// ---- the resident small step ------------------------------------------------------------
+
+unsigned long long CudaWorld::Impl::exited_mark() const {
+  return __atomic_load_n(resident_host + kExitedWord, __ATOMIC_ACQUIRE);
+}
+unsigned long long CudaWorld::Impl::done_mark() const { return __atomic_load_n(small_host, __ATOMIC_ACQUIRE); }
+void CudaWorld::Impl::write_request(unsigned long long value) {
+  __atomic_store_n(resident_host + kRequestWord, value, __ATOMIC_SEQ_CST);  // drains the store buffer
+}
+
+void CudaWorld::Impl::launch_resident(const Scene& scene) {
+  gpu::ResidentDesc r;
+  r.request = resident_dev + kRequestWord;
+  r.exited = resident_dev + kExitedWord;
+  r.control = resident_control.get();
+  r.handled = 0;  // every request is > 0 (sequence >= 1)
+  r.epoch = ++epoch;
+  r.idle_ns = resident_stall ? 0 : resident_idle_ns;
+  r.records = records.get();
+  r.stall = resident_stall ? 1 : 0;
+  gpu::SmallStepDesc s = small_desc(scene, false);
+  s.profile = small_dev + 1;  // stamped on the requests that carry kResidentStamp
+  const cudaError_t e = gpu::launch_small_resident(s, r, resident_grid, resident_stream);
+  if (e != cudaSuccess) {
+    (void)cudaGetLastError();
+    throw RuntimeError(fmt::format("CUDA kernel 'small_resident' failed to launch: {}", cuda_text(e)));
+  }
+  resident_alive = true;
+  ++resident_launches;
+}
+
+void CudaWorld::Impl::resident_step(const Scene& scene, bool recording) {
+  if (resident_alive && exited_mark() == epoch) stop_resident();  // it ended itself, idle
+  write_request((sequence << gpu::kResidentShift) | (recording ? gpu::kResidentRecord : 0ull) |
+                (stamps() ? gpu::kResidentStamp : 0ull));
+  if (!resident_alive) launch_resident(scene);
+  const auto t0 = Clock::now();
+  for (unsigned spins = 1;; ++spins) {
+    if (done_mark() == sequence) return;
+    if (exited_mark() == epoch) {
+      if (done_mark() == sequence) return;  // it ran the step, then ended idle
+      resident_alive = false;               // it ended without taking the request
+      launch_resident(scene);
+      continue;
+    }
+    if ((spins & 1023u) != 0) continue;
+    const cudaError_t e = cudaStreamQuery(resident_stream);
+    if (e != cudaSuccess && e != cudaErrorNotReady) {
+      resident_alive = false;
+      check(e, "small_resident (cudaStreamQuery)");
+    }
+    if (ms_since(t0) > static_cast<double>(resident_timeout_ms))
+      throw RuntimeError(fmt::format(
+          "the resident small-step kernel did not finish step {} within {} ms (resident_timeout_ms; "
+          "launch {}{}); the engine cannot step any more: destroy it, and call set_persistent(false) on a new "
+          "engine to launch a kernel per step",
+          sequence, resident_timeout_ms, epoch,
+          resident_stall ? ", the test hook resident_ignores_requests makes it ignore requests" : ""));
+  }
+}
+
+void CudaWorld::Impl::stop_resident() {
+  if (!resident_alive) return;
+  const auto t0 = Clock::now();
+  if (exited_mark() != epoch) {
+    write_request((sequence << gpu::kResidentShift) | gpu::kResidentExit);
+    for (unsigned spins = 1; exited_mark() != epoch; ++spins) {
+      if ((spins & 1023u) != 0) continue;
+      const cudaError_t e = cudaStreamQuery(resident_stream);
+      if (e == cudaSuccess) break;  // ended (its mark is then visible too)
+      if (e != cudaErrorNotReady) {
+        resident_alive = false;
+        check(e, "small_resident (cudaStreamQuery, exit)");
+      }
+      if (ms_since(t0) > static_cast<double>(resident_timeout_ms)) {
+        resident_hung = true;
+        throw RuntimeError(fmt::format("the resident small-step kernel did not end within {} ms of the exit "
+                                       "request (resident_timeout_ms); its device memory is left "
+                                       "allocated",
+                                       resident_timeout_ms));
+      }
+    }
+  }
+  resident_alive = false;
+  check(cudaStreamSynchronize(resident_stream), "cudaStreamSynchronize (resident kernel's end)");
+}
+
+}  // namespace octocd

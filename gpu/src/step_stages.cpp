@@ -1,0 +1,371 @@
+// The per-stage path of the cuda engine (SPEC 11): the step's stages in World::step's
+// order as separate kernels (integrate.cu, the broadphases, midphase.cu, response.cu,
+// metrics.cu), enqueued on one stream with no host synchronisation inside a step, replayed
+// from a CUDA graph while the buffer capacities do not change; the buffers' sizes, the
+// kernels' descriptors, and the regrow and rerun of a step whose lists overflowed.
+#include <algorithm>
+#include <cstddef>
+#include <initializer_list>
+
+#include <fmt/format.h>
+
+#include "cuda_impl.hpp"
+#include "device_footprint.hpp"
+#include "octocd/error.hpp"
+
+namespace octocd {
+
+using gpu::BufferBase;
+using gpu::check;
+using gpu::cuda_text;
+
+namespace {
+
+// The host estimate (device_footprint.cpp) counts these structs by the sizes of
+// device_footprint.hpp.
+static_assert(sizeof(gpu::DeviceShape) == gpu::footprint::kDeviceShapeBytes, "device_footprint.hpp: DeviceShape");
+static_assert(sizeof(gpu::MidItem) == gpu::footprint::kMidItemBytes, "device_footprint.hpp: MidItem");
+static_assert(sizeof(gpu::DeviceContact) == gpu::footprint::kDeviceContactBytes, "device_footprint.hpp: DeviceContact");
+static_assert(sizeof(gpu::StepStats) == gpu::footprint::kStepStatsBytes, "device_footprint.hpp: StepStats");
+static_assert(sizeof(gpu::MetricsResult) == gpu::footprint::kMetricsResultBytes, "device_footprint.hpp: MetricsResult");
+static_assert(gpu::kMetricsBlocks == gpu::footprint::kMetricsPartials, "device_footprint.hpp: kMetricsBlocks");
+
+/// The capacity to grow to when `needed` entries did not fit into `capacity`.
+std::size_t grown(std::size_t needed, std::size_t capacity) {
+  return std::max(needed + needed / 4 + 64, 2 * capacity);
+}
+
+/// Destroys a captured graph and its executable (either may be null) and nulls both.
+void destroy_graph(cudaGraph_t& graph, cudaGraphExec_t& exec) {
+  if (exec) (void)cudaGraphExecDestroy(exec);
+  if (graph) (void)cudaGraphDestroy(graph);
+  exec = nullptr;
+  graph = nullptr;
+}
+
+}  // namespace
+
+void CudaWorld::Impl::drop_graph() {
+  destroy_graph(graph, graph_exec);
+  destroy_graph(timed_graph, timed_graph_exec);
+}
+
+std::vector<BufferBase*> CudaWorld::Impl::all_buffers() {
+  std::vector<BufferBase*> all{&x, &v, &x_saved, &v_saved, &w, &local, &shape, &aabb, &shapes, &vertices, &cells,
+                               &level_offsets, &blocks, &theta, &stats, &metric_partials};
+  for (BufferBase* b : scratch_buffers()) all.push_back(b);
+  return all;
+}
+
+std::vector<BufferBase*> CudaWorld::Impl::scratch_buffers() {
+  return {&bp_count, &bp_offset, &pair_keys, &pair_keys_sorted, &pairs, &confirmed, &items_a, &items_b,
+          &hit,      &dx_a,      &dx_b,      &dv_a,             &dv_b,  &depth0,    &records, &keys_in,
+          &keys_out, &vals_in,   &vals_out,  &body_begin,       &temp,  &in_count};
+}
+
+void CudaWorld::Impl::launched(cudaError_t e, const char* kernel) {
+  if (e != cudaSuccess) {
+    (void)cudaGetLastError();
+    throw RuntimeError(fmt::format("CUDA kernel '{}' failed to launch: {}", kernel, cuda_text(e)));
+  }
+  if (sync_each_launch && !capturing) {
+    e = cudaStreamSynchronize(stream);
+    if (e != cudaSuccess) throw RuntimeError(fmt::format("CUDA kernel '{}' failed: {}", kernel, cuda_text(e)));
+  }
+}
+
+gpu::BodiesDesc CudaWorld::Impl::bodies() {
+  gpu::BodiesDesc b;
+  b.x = x.get();
+  b.v = v.get();
+  b.w = w.get();
+  b.local = local.get();
+  b.shape = shape.get();
+  b.aabb = aabb.get();
+  b.n = n;
+  return b;
+}
+
+gpu::ShapesDesc CudaWorld::Impl::shapes_desc() {
+  gpu::ShapesDesc s;
+  s.shapes = shapes.get();
+  s.vertices = vertices.get();
+  s.cells = cells.get();
+  s.level_offsets = level_offsets.get();
+  s.blocks = blocks.get();
+  s.theta = theta.get();
+  s.count = shape_count;
+  return s;
+}
+
+gpu::MidListDesc CudaWorld::Impl::mid_desc(const unsigned long long* keys) {
+  gpu::MidListDesc md;
+  md.x = x.get();
+  md.w = w.get();
+  md.aabb = aabb.get();
+  md.shape = shape.get();
+  md.shapes = shapes_desc();
+  md.levels = levels;
+  md.pairs = pairs.get();
+  md.pair_keys = keys;
+  md.pair_shift = gpu::key_bits(n);
+  md.pair_count = counts();
+  md.pair_capacity = pcap();
+  md.confirmed = confirmed.get();
+  md.counters = counters();
+  md.steps = level_steps;
+  md.early_exit = mid_early_exit;
+  return md;
+}
+
+gpu::TermsDesc CudaWorld::Impl::terms_desc(const ContactParams& params) {
+  gpu::TermsDesc td;
+  td.pairs = pairs.get();
+  td.confirmed = confirmed.get();
+  td.pair_count = counts();
+  td.pair_capacity = pcap();
+  td.x = x.get();
+  td.v = v.get();
+  td.w = w.get();
+  td.local = local.get();
+  td.params = params;
+  td.hit = hit.get();
+  td.dx_a = dx_a.get();
+  td.dx_b = dx_b.get();
+  td.dv_a = dv_a.get();
+  td.dv_b = dv_b.get();
+  return td;
+}
+
+gpu::ApplyDesc CudaWorld::Impl::apply_desc() {
+  gpu::ApplyDesc ad;
+  ad.x = x.get();
+  ad.v = v.get();
+  ad.w = w.get();
+  ad.n = n;
+  ad.body_begin = body_begin.get();
+  ad.entries = vals_out.get();
+  ad.hit = hit.get();
+  ad.dx_a = dx_a.get();
+  ad.dx_b = dx_b.get();
+  ad.dv_a = dv_a.get();
+  ad.dv_b = dv_b.get();
+  return ad;
+}
+
+gpu::MetricsDesc CudaWorld::Impl::metrics_desc(const ContactParams& params) {
+  gpu::MetricsDesc xd;
+  xd.x = x.get();
+  xd.v = v.get();
+  xd.w = w.get();
+  xd.n = n;
+  xd.depth0 = depth0.get();
+  xd.pair_count = counts();
+  xd.pair_capacity = pcap();
+  xd.slop = params.slop;
+  xd.out = &stats.get()->metrics;
+  xd.partials = metric_partials.get();
+  return xd;
+}
+
+void CudaWorld::Impl::prepare() {
+  if (prepared) return;
+  drop_graph();
+  if (pair_cap > 0x7fffffffu || list_cap > 0x7fffffffu)
+    throw RuntimeError(fmt::format("the step needs more than 2^31 - 1 pairs ({}) or midphase items ({})",
+                                   pair_cap, list_cap));
+  const std::size_t n1 = static_cast<std::size_t>(n) + 1;
+  bp_count.ensure(n1);
+  bp_offset.ensure(n1);
+  for (BufferBase* b : std::initializer_list<BufferBase*>{&pair_keys, &pair_keys_sorted, &pairs, &confirmed, &hit,
+                                                           &dx_a, &dx_b, &dv_a, &dv_b, &depth0, &records})
+    b->ensure(pair_cap);
+  for (BufferBase* b : std::initializer_list<BufferBase*>{&keys_in, &keys_out, &vals_in, &vals_out})
+    b->ensure(2 * pair_cap);
+  items_a.ensure(list_cap);
+  items_b.ensure(list_cap);
+  body_begin.ensure(n1);
+  if (small) in_count.ensure(n1);
+  std::size_t a = 0, b = 0, c = 0;
+  check(gpu::sort_keys_u64(nullptr, a, pair_keys.get(), pair_keys_sorted.get(), pcap(), 2 * gpu::key_bits(n),
+                           stream),
+        "cub::DeviceRadixSort::SortKeys (size)");
+  check(gpu::sort_pairs_u32(nullptr, b, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(), 2 * pcap(),
+                            gpu::key_bits(n), stream),
+        "cub::DeviceRadixSort::SortPairs (size)");
+  check(gpu::exclusive_scan_u32(nullptr, c, bp_count.get(), bp_offset.get(), n + 1, stream),
+        "cub::DeviceScan::ExclusiveSum (size)");
+  temp.ensure(std::max({a, b, c, std::size_t{1}}));
+  if (bp) bp->reserve(n, stream);
+  prepared = true;
+}
+
+void CudaWorld::Impl::flat_broadphase() {
+  const std::size_t n1 = static_cast<std::size_t>(n) + 1;
+  check(cudaMemsetAsync(bp_count.get(), 0, n1 * sizeof(std::uint32_t), stream), "cudaMemset broadphase counts");
+  launched(gpu::launch_flat_count(aabb.get(), n, bp_count.get(), stream), "flat_count");
+  std::size_t bytes = temp.capacity();
+  launched(gpu::exclusive_scan_u32(temp.get(), bytes, bp_count.get(), bp_offset.get(), n + 1, stream),
+           "cub::DeviceScan::ExclusiveSum");
+  check(cudaMemcpyAsync(counts(), bp_offset.get() + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, stream),
+        "cudaMemcpy pair total");
+  launched(gpu::launch_flat_fill(aabb.get(), n, bp_offset.get(), pair_keys.get(), pcap(), gpu::key_bits(n),
+                                 stream),
+           "flat_fill");
+}
+
+void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with_events) {
+  const ContactParams& params = scene.response;
+  const gpu::BodiesDesc b = bodies();
+  record_event(0, with_events);
+  // 1. Integrate (Eq. 1-3), keeping the state before the step for a rerun.
+  gpu::BodiesDesc bi = b;
+  bi.x_saved = x_saved.get();
+  bi.v_saved = v_saved.get();
+  launched(gpu::launch_integrate(bi, scene.gravity, scene.dt, stream), "integrate");
+  record_event(1, with_events);
+  // 2. World AABBs.
+  launched(gpu::launch_aabbs(b, stream), "aabbs");
+  record_event(2, with_events);
+  // 3. Broadphase (SPEC 5.1): pair keys (padding sorts last), sorted, unpacked.
+  static_assert(offsetof(gpu::StepStats, counts) ==
+                    offsetof(gpu::StepStats, counters) + sizeof(gpu::StepStats::counters),
+                "counters and counts are contiguous");
+  check(cudaMemsetAsync(counters(), 0, sizeof(gpu::StepStats::counters) + sizeof(gpu::StepStats::counts), stream),
+        "cudaMemset step counts");
+  // A broadphase that sorts its own keys (`octree`) writes them straight into the sorted
+  // buffer (pair_keys as its scratch), after which the padding stays all ones.
+  const bool self_sorts = bp && bp->sorts_pairs();
+  check(cudaMemsetAsync(self_sorts ? pair_keys_sorted.get() : pair_keys.get(), 0xff,
+                        pair_cap * sizeof(unsigned long long), stream),
+        "cudaMemset pair keys");
+  if (bp) {
+    gpu::PairOutput out;
+    out.keys = self_sorts ? pair_keys_sorted.get() : pair_keys.get();
+    out.scratch = self_sorts ? pair_keys.get() : nullptr;
+    out.capacity = pcap();
+    out.total = counts();
+    out.candidates = counters() + 3;
+    out.shift = gpu::key_bits(n);
+    bp->find(aabb.get(), n, out, stream);
+  } else {
+    flat_broadphase();
+  }
+  std::size_t bytes = temp.capacity();
+  // Keys are (a << key_bits(n)) | b: the sort covers 2 key_bits(n) bits (padding keys,
+  // all ones, still sort after every real key: a < b < 2^key_bits(n)).
+  if (!self_sorts)
+    launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(),
+                                2 * gpu::key_bits(n), stream),
+             "cub::DeviceRadixSort::SortKeys");
+  record_event(3, with_events);  // the pairs are unpacked from the sorted keys by mid_start
+  // 4. Midphase + narrow phase (SPEC 5.2-5.3) as per-level work lists.
+  gpu::MidListDesc md = mid_desc(pair_keys_sorted.get());
+  gpu::MidItem* lists[2] = {items_a.get(), items_b.get()};
+  md.out = lists[0];
+  md.out_count = counts() + 1;
+  md.out_capacity = lcap();
+  launched(gpu::launch_mid_start(md, warp_grid, stream), "mid_start");
+  for (int i = 0; i + 1 < level_steps; ++i) {
+    md.in = lists[i % 2];
+    md.in_count = counts() + 1 + i;
+    md.in_capacity = lcap();
+    md.out = lists[(i + 1) % 2];
+    md.out_count = counts() + 2 + i;
+    launched(gpu::launch_mid_expand(md, i, warp_grid, stream), "mid_expand");
+  }
+  if (level_steps > 0) {
+    md.in = lists[(level_steps - 1) % 2];
+    md.in_count = counts() + level_steps;
+    md.in_capacity = lcap();
+    md.out = nullptr;
+    md.out_count = nullptr;
+    md.out_capacity = 0;
+    launched(gpu::launch_mid_leaf(md, warp_grid, stream), "mid_leaf");
+  }
+  record_event(4, with_events);
+  // 5. Response (SPEC 6): body-major index of the confirmed contacts (stable sort by
+  // body keeps (a, b) order per body), `iterations` passes, then the clamp (Eq. 23).
+  const std::uint32_t entries = 2 * pcap();
+  launched(gpu::launch_contact_entries(pairs.get(), confirmed.get(), counts(), pcap(), n, keys_in.get(),
+                                       vals_in.get(), stream),
+           "contact_entries");
+  bytes = temp.capacity();
+  launched(gpu::sort_pairs_u32(temp.get(), bytes, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(),
+                               entries, gpu::key_bits(n), stream),
+           "cub::DeviceRadixSort::SortPairs");
+  launched(gpu::launch_body_segments(keys_out.get(), entries, n, body_begin.get(), stream), "body_segments");
+  gpu::TermsDesc td = terms_desc(params);
+  const gpu::ApplyDesc ad = apply_desc();
+  for (int pass = 0; pass < params.iterations; ++pass) {
+    td.depth0 = pass == 0 ? depth0.get() : nullptr;
+    td.records = pass == 0 && recording ? records.get() : nullptr;
+    launched(gpu::launch_contact_terms(td, stream), "contact_terms");
+    launched(gpu::launch_apply_sums(ad, stream), "apply_sums");
+  }
+  launched(gpu::launch_clamp(b, params.max_velocity, stream), "clamp");
+  record_event(5, with_events);
+  // 6. Metrics, and everything the host reads, in one place.
+  launched(gpu::launch_metrics(metrics_desc(params), stream), "metrics");
+  check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
+        "cudaMemcpy step statistics");
+  record_event(6, with_events);
+}
+
+void CudaWorld::Impl::run_stages(const Scene& scene, bool recording) {
+  if (use_graph && !sync_each_launch && !recording) {
+    // Two graphs of the same step: without events (untimed steps) and with them.
+    cudaGraph_t& g = timed ? timed_graph : graph;
+    cudaGraphExec_t& exec = timed ? timed_graph_exec : graph_exec;
+    if (!exec) {
+      capturing = true;
+      check(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal), "cudaStreamBeginCapture");
+      try {
+        enqueue_step(scene, false, timed);
+      } catch (...) {
+        cudaGraph_t partial = nullptr;
+        (void)cudaStreamEndCapture(stream, &partial);
+        if (partial) (void)cudaGraphDestroy(partial);
+        capturing = false;
+        throw;
+      }
+      capturing = false;
+      check(cudaStreamEndCapture(stream, &g), "cudaStreamEndCapture");
+      check(cudaGraphInstantiate(&exec, g, 0), "cudaGraphInstantiate");
+    }
+    check(cudaGraphLaunch(exec, stream), "cudaGraphLaunch");
+  } else {
+    enqueue_step(scene, recording, timed);
+  }
+  check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (step)");
+}
+
+bool CudaWorld::Impl::grow_if_needed() {
+  bool grow = false;
+  const std::size_t pairs_found = host->counts[0];
+  if (pairs_found > pair_cap) {
+    pair_cap = grown(pairs_found, pair_cap);
+    grow = true;
+  }
+  std::size_t items = 0;
+  for (int i = 0; i < level_steps; ++i) items = std::max<std::size_t>(items, host->counts[1 + i]);
+  if (items > list_cap) {
+    list_cap = grown(items, list_cap);
+    grow = true;
+  }
+  if (grow) {
+    prepared = false;
+    stop_resident();  // before restore_state and prepare()
+  }
+  return grow;
+}
+
+void CudaWorld::Impl::restore_state() {
+  const std::size_t vec_bytes = static_cast<std::size_t>(n) * sizeof(Vec3);
+  if (n == 0) return;
+  check(cudaMemcpyAsync(x.get(), x_saved.get(), vec_bytes, cudaMemcpyDeviceToDevice, stream), "cudaMemcpy restore x");
+  check(cudaMemcpyAsync(v.get(), v_saved.get(), vec_bytes, cudaMemcpyDeviceToDevice, stream), "cudaMemcpy restore v");
+  check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (restore)");
+}
+
+}  // namespace octocd
