@@ -195,8 +195,9 @@ def overlap(a, b):
 
 
 def load_warning(m):
-    """Why timings of this machine description are suspect (load above the free cores,
-    OpenMP threads oversubscribing them), or ''."""
+    """Why timings of this machine description are suspect (OpenMP threads oversubscribing the
+    cores, or a load at the start or end above them), or ''. A run-level note; verdicts are
+    marked per point (point_load)."""
     threads, omp = m.get("threads") or 0, m.get("omp_threads") or 1
     why = []
     if threads and omp > threads:
@@ -208,6 +209,45 @@ def load_warning(m):
             why.append(f"load {la[0]:.1f} at the {when} leaves {max(threads - la[0], 0):.1f} of {threads} cores free "
                        f"for {omp} OpenMP thread(s)" + (" (its own included)" if when == "end" else ""))
     return "; ".join(why)
+
+
+def own_threads(p, m):
+    """The threads the bench itself ran while measuring point p: the CPU engine's OpenMP
+    threads, one for any other engine (cuda's host thread, Bullet)."""
+    return (m.get("omp_threads") or 1) if p.get("params", {}).get("engine") == "cpu" else 1
+
+
+def point_load(p, m):
+    """Why point p's timing is suspect, or '': the load of the other processes exceeded the
+    cores left free for the bench's own threads while it ran. Read from the point's load
+    average (recorded at its end, the bench's own threads included: others = load - own);
+    a point without one is judged by the run's load at the start (others') and end."""
+    threads = m.get("threads") or 0
+    if not threads:
+        return ""
+    own = own_threads(p, m)
+    if own > threads:
+        return f"{own} threads on {threads} cores"
+    la = p.get("load_average")
+    if isinstance(la, list) and la and isinstance(la[0], (int, float)):
+        others = [(max(la[0] - own, 0.0), "during the point")]
+    else:
+        others = []
+        for key, sub in (("load_average", 0), ("load_average_end", own)):
+            x = m.get(key)
+            if isinstance(x, list) and x and isinstance(x[0], (int, float)):
+                others.append((max(x[0] - sub, 0.0), "at the run's " + ("start" if sub == 0 else "end")))
+    for load, when in others:
+        free = threads - load
+        if own > free + 1e-9:
+            return f"load of other processes {load:.1f} {when} left {max(free, 0):.1f} of {threads} cores free for " \
+                   f"{own} thread(s)"
+    return ""
+
+
+def load_mark(m, *points):
+    """'⚠ ' when one of the points a verdict compares was measured under load (point_load)."""
+    return "⚠ " if any(p is not None and point_load(p, m) for p in points) else ""
 
 
 class Doc:
@@ -310,8 +350,15 @@ def machine_block(doc, g):
         parts.append("1 repetition per point: the figures have no spread, and no verdict (fastest, slower) can be "
                      "taken from them.")
     lw = load_warning(m)
-    if lw:
-        parts.append(f"⚠ Measured under load: {lw}. Verdicts of this run are marked ⚠.")
+    measured = [p for p in g["points_list"] if p.get("status") == "ok"]
+    loaded = [p for p in measured if point_load(p, m)]
+    if loaded:
+        parts.append(f"⚠ {len(loaded)} of {len(measured)} measured points ran under load (e.g. '{loaded[0]['id']}': "
+                     f"{point_load(loaded[0], m)}); the verdicts that use them are marked ⚠."
+                     + (f" Run: {lw}." if lw else ""))
+    elif lw:
+        parts.append(f"Load at the run's start or end: {lw}; no point ran with fewer free cores than its threads, "
+                     "so no verdict is marked.")
     doc.html.append('<div class="meta">' + "<br>".join(html.escape(x) for x in parts) + "</div>")
     doc.md.extend("> " + x.replace("`", "") + "  " for x in parts)
     doc.md.append("")
@@ -340,6 +387,24 @@ def axis_label(p, axis):
     lab = p.get("params", {}).get("labels", {}).get(axis)
     val = p.get("params", {}).get("axes", {}).get(axis)
     return lab if lab is not None else str(val)
+
+
+# The engine registry's own broadphases (core/src/engine_registry.cpp: EngineInfo::own_broadphase
+# -> own_broadphase_class), for results whose points record only `engine_broadphase`; a test
+# (tests/report/test_report_fixes.py) keeps this in step with the registry.
+OWN_BROADPHASE_CLASS = {"bullet-dbvt": "btDbvtBroadphase"}
+
+
+def point_label(p, axis):
+    """What point p ran on `axis`: the axis label, or for an axis its engine ignores what the
+    engine ran instead (its own broadphase by the registry's class name, "no midphase")."""
+    if axis and axis in (p.get("ignores") or {}):
+        if axis == "broadphase":
+            eb = p.get("engine_broadphase") or ""
+            return OWN_BROADPHASE_CLASS.get(eb, eb or "own broadphase")
+        if axis == "midphase":
+            return "no midphase"
+    return axis_label(p, axis) if axis else ""
 
 
 def engines_of(g):
@@ -371,78 +436,124 @@ def log_ticks(ax, axis="y"):
 
 
 def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"], paper=None):
-    """steps/s bars per scene (or xkey): one colour per engine, a hatch per group_axis value;
-    `paper` {(scene, label): FPS} draws the paper's figures as black diamonds."""
+    """steps/s bars per scene (or xkey): one colour per engine, a hatch per group_axis value,
+    each bar after an engine's first value of group_axis labelled with its speed-up over that
+    one ("1.8x"); `paper` {(scene, label): FPS} draws the paper's figures (FPS of a whole Unity
+    application) in a panel of their own beside ours, never on our steps/s axis."""
     scenes = list(dict.fromkeys(xkey(p) for p in pts))
-    vals = list(dict.fromkeys(axis_label(p, group_axis) if group_axis else "" for p in pts))
+    vals = list(dict.fromkeys(point_label(p, group_axis) for p in pts))
     engines = list(dict.fromkeys(p["params"]["engine"] for p in pts))
     combos = [(v, e) for e in engines for v in vals
-              if any(p["params"]["engine"] == e and (not group_axis or axis_label(p, group_axis) == v) for p in pts)]
+              if any(p["params"]["engine"] == e and point_label(p, group_axis) == v for p in pts)]
     if not scenes or not combos:
         return
-    fig, ax = plt.subplots(figsize=(min(11, max(6, 1.4 * len(scenes) + 0.22 * len(combos) * len(scenes))), 4.2))
+    fpts = {}  # (scene, engine) -> {value: steps/s spread}
+    for p in pts:
+        fpts.setdefault((xkey(p), p["params"]["engine"]), {})[point_label(p, group_axis)] = \
+            first_window(p)["steps_per_s"]
+    width_in = min(11, max(6, 1.4 * len(scenes) + 0.22 * len(combos) * len(scenes)))
+    paper_vals = sorted({v for (sc, v) in paper if sc in scenes}, key=lambda v: vals.index(v) if v in vals else len(vals)) \
+        if paper else []
+    if paper_vals:
+        fig, (ax, pax) = plt.subplots(1, 2, figsize=(min(14, width_in + 4), 4.2),
+                                      gridspec_kw={"width_ratios": [max(width_in, 1), 4]})
+    else:
+        fig, ax = plt.subplots(figsize=(width_in, 4.2))
     width = 0.8 / len(combos)
-    centres = {}
     for k, (val, eng) in enumerate(combos):
         ys, lo, hi = [], [], []
         for sc in scenes:
-            m = [p for p in pts if xkey(p) == sc and p["params"]["engine"] == eng
-                 and (not group_axis or axis_label(p, group_axis) == val)]
-            s = first_window(m[0])["steps_per_s"] if m else None
+            s = fpts.get((sc, eng), {}).get(val)
             ys.append(s["median"] if s else np.nan)
             lo.append(s["median"] - s["min"] if s else 0)
             hi.append(s["max"] - s["median"] if s else 0)
         xs = np.arange(len(scenes)) + (k - (len(combos) - 1) / 2) * width
-        for i, sc in enumerate(scenes):
-            centres.setdefault((sc, val), []).append(xs[i])
         colour = ENGINE_COLORS.get(eng, "#777")
         shade = 1.0 - 0.35 * (vals.index(val) / max(len(vals) - 1, 1))  # lighter for later values
         ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=f"{eng} {val}".strip(), color=colour, alpha=shade,
                hatch=HATCHES[vals.index(val) % len(HATCHES)], edgecolor="#222", linewidth=0.6)
-    if paper:
-        px, py = [], []
-        for (sc, val), fps in paper.items():
-            if (sc, val) in centres:
-                px.append(float(centres[(sc, val)][0]))  # over the first engine's bar
-                py.append(fps)
-        if px:
-            ax.plot(px, py, "D", color="black", ms=6, label="paper FPS (Unity, whole application)")
+        # The speed-up over the engine's first value on this axis, printed over the bar.
+        for i, sc in enumerate(scenes):
+            mine = fpts.get((sc, eng), {})
+            ref_val = next((v for v in vals if v in mine), None)
+            if ref_val is None or ref_val == val or val not in mine or not med(mine[ref_val]) or not med(mine[val]):
+                continue
+            ax.annotate(speedup_text(med(mine[val]) / med(mine[ref_val])), (xs[i], mine[val]["max"]),
+                        xytext=(0, 2), textcoords="offset points", ha="center", va="bottom", fontsize=7,
+                        rotation=90 if len(combos) > 4 else 0)
     ax.set_xticks(np.arange(len(scenes)))
     ax.set_xticklabels(scenes, rotation=0)
     ax.set_yscale("log")
     log_ticks(ax)
-    ax.set_ylabel("steps/s (median, bars min–max)")
-    ax.set_title(title)
-    ax.legend(fontsize=9, ncol=min(len(combos) + (1 if paper else 0), 4), loc="upper center",
-              bbox_to_anchor=(0.5, -0.1))
-    doc.figure(fig, name, title)
+    ax.margins(y=0.15)
+    ax.set_ylabel("octocd steps/s (median, bars min–max)")
+    ax.set_title(title + (" (Nx: speed-up over the engine's first " + group_axis + ")" if group_axis else ""),
+                 fontsize=9)
+    ax.legend(fontsize=9, ncol=min(len(combos), 4), loc="upper center", bbox_to_anchor=(0.5, -0.1))
+    if paper_vals:
+        pw = 0.8 / len(paper_vals)
+        for k, val in enumerate(paper_vals):
+            ys = [paper.get((sc, val), np.nan) for sc in scenes]
+            xs = np.arange(len(scenes)) + (k - (len(paper_vals) - 1) / 2) * pw
+            pax.bar(xs, ys, pw, color="#bbb", edgecolor="#222", linewidth=0.6,
+                    hatch=HATCHES[(vals.index(val) if val in vals else k) % len(HATCHES)], label=f"paper {val}")
+            for x, y in zip(xs, ys):
+                if not np.isnan(y):
+                    pax.annotate(f"{y:g}", (x, y), xytext=(0, 2), textcoords="offset points", ha="center",
+                                 va="bottom", fontsize=6, rotation=90)
+        pax.set_xticks(np.arange(len(scenes)))
+        pax.set_xticklabels(scenes, rotation=30, ha="right", fontsize=7)
+        pax.margins(y=0.2)
+        pax.set_ylabel("paper FPS (Unity, whole application)")
+        pax.set_title("The paper's FPS (its own axis: not our steps/s)", fontsize=9)
+        pax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=len(paper_vals))
+    doc.figure(fig, name, title + ("; the paper's FPS in the right-hand panel, on its own axis" if paper_vals else ""))
+
+
+def speedup_text(r):
+    """A speed-up as printed on plots and in tables: 1.84x, 0.52x."""
+    return f"{num(r)}x"
 
 
 def stage_shares(doc, pts, group_axis, title, name):
+    """Per point the share of each stage in the step (bars, %) with the stage's time in ms printed
+    in its segment and the step's total ms at the bar's end; the same as a table (ms and %)."""
     rows = [p for p in pts if p.get("has_stage", {}).get("midphase", True)]
     if not rows:
         return
-    labels, shares = [], []
+    labels, shares, times = [], [], []
     for p in rows:
         w = first_window(p)
         st = [med(w["stage_ms"].get(s, {})) or 0.0 for s in STAGES]
         tot = sum(st) or 1.0
         shares.append([100.0 * x / tot for x in st])
-        labels.append(f"{p['params']['scene']} {axis_label(p, group_axis) if group_axis else ''} {p['params']['engine']}")
-    fig, ax = plt.subplots(figsize=(8, 0.22 * len(rows) + 1.2))
+        times.append(st)
+        labels.append(f"{p['params']['scene']} {point_label(p, group_axis)} {p['params']['engine']}")
+    fig, ax = plt.subplots(figsize=(9, 0.26 * len(rows) + 1.3))
     left = np.zeros(len(rows))
     arr = np.array(shares)
     for k, s in enumerate(STAGES):
         ax.barh(np.arange(len(rows)), arr[:, k], left=left, color=STAGE_COLORS[k], label=s)
+        for i in range(len(rows)):
+            if arr[i, k] >= 9.0:  # room for the figure inside the segment
+                ax.text(left[i] + arr[i, k] / 2, i, num(times[i][k], 2), ha="center", va="center", fontsize=6,
+                        color="black")
         left += arr[:, k]
+    for i in range(len(rows)):
+        ax.text(101, i, f"{num(sum(times[i]), 3)} ms", ha="left", va="center", fontsize=7)
     ax.set_yticks(np.arange(len(rows)))
     ax.set_yticklabels(labels, fontsize=8)
     ax.invert_yaxis()
     ax.set_xlim(0, 100)
-    ax.set_xlabel("share of the step (%), median stage ms")
+    ax.set_xlabel("share of the step (%); in the segments: the stage's median ms per frame; right: the step's ms")
     ax.set_title(title)
     ax.legend(fontsize=9, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.12 - 1.0 / max(len(rows), 4)))
-    doc.figure(fig, name, title)
+    doc.figure(fig, name, title + " (ms per frame printed in each segment and at the bar's end)")
+    doc.table(["point"] + [f"{s} ms (%)" for s in STAGES] + ["sum ms"],
+              [[lab] + [f"{num(t, 3)} ({num(sh, 2)}%)" for t, sh in zip(ts, shs)] + [num(sum(ts), 3)]
+               for lab, ts, shs in zip(labels, times, shares)],
+              "Median ms per frame of each stage over the repetitions, its share of their sum in brackets.",
+              name=name)
 
 
 def find(pts, **kw):
@@ -487,6 +598,11 @@ def section_table5(doc, g):
             found = {c: find(pts, scene=sc, engine=e, midphase=c) for c in ("A", "B", "C")}
             sp = {c: first_window(p)["steps_per_s"] for c, p in found.items() if p}
             vals = {c: med(x) for c, x in sp.items()}
+            only = found["A"] if found["A"] is not None and "midphase" in (found["A"].get("ignores") or {}) else None
+            if only is not None:  # an engine without a midphase ran once: its figure, no order to judge
+                r.append(f"{load_mark(g['first']['machine'], only)}{point_label(only, 'midphase')}, one configuration: "
+                         f"{spread_text(sp['A'])} steps/s")
+                continue
             if len(vals) != 3:
                 r.append("-")
                 continue
@@ -497,8 +613,7 @@ def section_table5(doc, g):
                 verdict = f"inconclusive ({order[0]} ~ {order[1]}: ranges overlap)"
             else:
                 verdict = order[0]
-            if load_warning(g["first"]["machine"]):
-                verdict = "⚠ " + verdict
+            verdict = load_mark(g["first"]["machine"], *found.values()) + verdict
             r.append(verdict + " (" + ", ".join(f"{c} {num(v / vals['A'] if vals.get('A') else 1.0)}x"
                                                 for c, v in vals.items()) + " of A)")
         rows.append(r)
@@ -509,7 +624,7 @@ def section_table5(doc, g):
     counts = []
     for p in pts:
         w = first_window(p)
-        counts.append([p["params"]["scene"], axis_label(p, "midphase"), p["params"]["engine"], num(med(w["step_ms"]), 4),
+        counts.append([p["params"]["scene"], point_label(p, "midphase"), p["params"]["engine"], num(med(w["step_ms"]), 4),
                        num(med(w["pairs"])), num(med(w["box_pairs"])), num(med(w["vertex_tests"])),
                        num(med(w["contacts"]))])
     doc.table(["scene", "config", "engine", "step ms", "AABB pairs", "box pairs", "vertex tests", "contacts"], counts,
@@ -536,7 +651,7 @@ def section_table6(doc, g):
                 r.append(f"{100.0 * (b - a) / a:+.1f}%"
                          + ("" if not overlap(sa, sb) else " (1 repetition: no verdict)"
                             if min(sa.get("n", 1), sb.get("n", 1)) < 2 else " (inconclusive: ranges overlap)")
-                         + (" ⚠" if load_warning(g["first"]["machine"]) else ""))
+                         + (" ⚠" if load_mark(g["first"]["machine"], l0, c) else ""))
             else:
                 r.append("-")
         rows.append(r)
@@ -561,20 +676,25 @@ def section_tableA1(doc, g):
         for ph in ("early", "late"):
             r = [mesh if ph == "early" else "", ph, num(ref[ph]["SH"]), num(ref[ph]["O-A"]), f"{ref[ph]['rcr']:+.2f}%"]
             for e in engines:
+                own = next((p for p in pts if p["params"]["engine"] == e and p["params"]["axes"].get("mesh") == mesh
+                            and "broadphase" in (p.get("ignores") or {})), None)
+                if own is not None:  # the engine's own broadphase, measured once: named, no SH/O-A
+                    a = own["windows"].get(ph, {}).get("steps_per_s")
+                    r += [spread_text(a) if a else "-", f"(one broadphase: {point_label(own, 'broadphase')})", "-"]
+                    continue
                 sh, oa = find(pts, engine=e, mesh=mesh, broadphase="SH"), find(pts, engine=e, mesh=mesh, broadphase="O-A")
-                if sh is None and oa is not None:
-                    sh = oa
-                if oa is None and sh is not None and sh.get("ignores"):
-                    oa = sh
                 a = sh["windows"].get(ph, {}).get("steps_per_s") if sh else None
                 b = oa["windows"].get(ph, {}).get("steps_per_s") if oa else None
-                same = sh is not None and sh is oa
-                r += [spread_text(a) if a else "-", "(same engine broadphase)" if same else (spread_text(b) if b else "-")]
-                r.append(f"{100.0 * (b['median'] - a['median']) / b['median']:+.1f}%" if a and b and not same else "-")
+                r += [spread_text(a) if a else "-", spread_text(b) if b else "-"]
+                r.append(f"{100.0 * (b['median'] - a['median']) / b['median']:+.1f}%" if a and b else "-")
             rows.append(r)
     head = ["mesh", "phase", "paper SH FPS", "paper O-A FPS", "paper RCR"]
     for e in engines:
-        head += [f"{e} SH", f"{e} O-A", f"{e} RCR"]
+        mine = [p for p in pts if p["params"]["engine"] == e]
+        if mine and all("broadphase" in (p.get("ignores") or {}) for p in mine):  # its own broadphase only
+            head += [f"{e} steps/s", f"{e} broadphase", f"{e} RCR"]
+        else:
+            head += [f"{e} SH", f"{e} O-A", f"{e} RCR"]
     doc.table(head, rows, "Ours in steps/s (median, min–max over repetitions).")
     # Steps/s over frames (the paper's Fig. 5).
     meshes = list(dict.fromkeys(p["params"]["axes"].get("mesh") for p in pts))
@@ -585,7 +705,7 @@ def section_tableA1(doc, g):
                 if p["params"]["axes"].get("mesh") != mesh:
                     continue
                 s = p["series"]
-                bp = axis_label(p, "broadphase")
+                bp = point_label(p, "broadphase")
                 ax.plot(s["last_frame"], s["steps_per_s"], label=f"{p['params']['engine']} {bp}",
                         color=ENGINE_COLORS.get(p["params"]["engine"], "#333"),
                         linestyle="-" if bp == "O-A" else "--")
@@ -607,7 +727,7 @@ def section_tableA1(doc, g):
         for ph in ("early", "late"):
             w = p["windows"].get(ph)
             if w:
-                rows.append([p["params"]["axes"].get("mesh"), axis_label(p, "broadphase"), p["params"]["engine"], ph,
+                rows.append([p["params"]["axes"].get("mesh"), point_label(p, "broadphase"), p["params"]["engine"], ph,
                              num(med(w["stage_ms"]["broadphase"]), 4), num(med(w["pairs"])),
                              num(med(w["cell_candidates"])), num(med(w["memory_bytes"]) / 1e6 if med(w["memory_bytes"]) else 0)])
     doc.table(["mesh", "broadphase", "engine", "phase", "broadphase ms", "AABB pairs", "cell candidates", "memory MB"],
@@ -875,6 +995,38 @@ def read_trace(path):
     return {"path": path, "n": n, "cols": cols, "attrs": attrs}
 
 
+def penetration_comment(cols, name="the trace"):
+    """One sentence on the penetration of a trace from its /frames columns (penetration_mean,
+    penetration_max in m, per frame): the mean over frames, the largest and its frame, and
+    whether it settles: the last third's largest penetration against the first third's
+    (settles: at most half of it; grows: above 1.1 times it; jitters: the last third's range of the per-frame largest
+    penetration, max - min, is at least a quarter of its mean). '' for an empty trace or one
+    without contacts."""
+    pm, pmax = np.asarray(cols.get("penetration_mean", [])), np.asarray(cols.get("penetration_max", []))
+    frame = np.asarray(cols.get("frame", np.arange(len(pmax))))
+    n = len(pmax)
+    if n == 0 or not np.isfinite(pmax).all() or pmax.max() <= 0:
+        return ""
+    third = max(n // 3, 1)
+    first, last = pmax[:third], pmax[n - third:]
+    k = int(np.argmax(pmax))
+    text = (f"{name}: AABB penetration d_p over {n} frames: mean {num(1e3 * float(np.mean(pm)))} mm (mean of the "
+            f"per-frame means), largest {num(1e3 * float(pmax[k]))} mm at frame {int(frame[k])}. Last third of the "
+            f"run: largest {num(1e3 * float(last.max()))} mm against {num(1e3 * float(first.max()))} mm in the first "
+            "third: ")
+    if last.max() <= 0.5 * first.max():
+        text += "it settles"
+    elif last.max() <= 1.1 * first.max():
+        text += "it does not settle (down by less than half)"
+    else:
+        text += "it grows (does not settle)"
+    spread = float(last.max() - last.min())
+    if last.mean() > 0 and spread >= 0.25 * float(last.mean()):
+        text += (f"; the per-frame largest d_p jitters between {num(1e3 * float(last.min()))} and "
+                 f"{num(1e3 * float(last.max()))} mm in the last third")
+    return text + "."
+
+
 def section_traces(doc, paths):
     """One table row per trace, and the traces overlaid on shared axes (one colour each)."""
     traces = []
@@ -889,6 +1041,9 @@ def section_traces(doc, paths):
         doc.p(f"{os.path.basename(t['path'])}: scene {a.get('scene_name')}, engine {a.get('engine')}, broadphase "
               f"{a.get('broadphase')}, midphase {a.get('midphase')}, {a.get('body_count')} bodies, {n} frames; device "
               f"{a.get('device')}; build {a.get('build_id')}; started {a.get('start_time')}.")
+        comment = penetration_comment(c, os.path.basename(t["path"]))
+        if comment:
+            doc.p(comment)
         rows.append([os.path.basename(t["path"]), n, num(1000.0 * n / step.sum()) if step.sum() > 0 else "-",
                      num(step.mean(), 4) if n else "-", num(c["contacts"].mean()) if n else "-",
                      int(c["contacts"].max()) if n else "-", num(1e3 * c["penetration_max"].max()) if n else "-",
@@ -1184,7 +1339,9 @@ def section_gate(doc, base, new, threshold, alpha, across, timing="auto"):
                                             ("new", load_warning(nj["machine"]))) if w]
     rows = [[r["point"], r["figure"], f"{num(r['base_median'])} (n={len(r['base'])})",
              f"{num(r['new_median'])} (n={len(r['new'])})", f"{r['ratio']:.3f}", f"{r['lo']:.3f}–{r['hi']:.3f}",
-             f"{r['p']:.3g}", ("⚠ " if warn and r["verdict"] != "same" else "") + r["verdict"]] for r in res["rows"]]
+             f"{r['p']:.3g}", (load_mark(bj["machine"], base["points"].get(r["point"]))
+                               or load_mark(nj["machine"], new["points"].get(r["point"]))
+                               if r["verdict"] != "same" else "") + r["verdict"]] for r in res["rows"]]
     rows += [[pid, "", "", "", "", "", "", "FAILED: " + why] for pid, why in res["broken"]]
     doc.table(["point", "figure", "baseline median", "new median", "ratio (time)", f"{conf:g} % interval",
                "p (slower)", "verdict"], rows,

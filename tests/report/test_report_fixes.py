@@ -1,0 +1,311 @@
+"""The report's comparisons (issue 34 item 4) on small generated bench results: the paper's
+FPS on its own axis, engine labels from the registry, stage ms beside the shares, speed-ups
+on the plots, the load mark only where the load exceeded the free cores, the penetration
+of a stack commented from its frames. Run by ctest (`report.gate`, pytest on tests/report)."""
+import contextlib
+import copy
+import importlib.util
+import io
+import json
+import os
+import re
+import sys
+
+import numpy as np
+
+SRC = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+_spec = importlib.util.spec_from_file_location("make_report_fixes", os.path.join(SRC, "reports", "make_report.py"))
+MR = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(MR)
+
+STAGE_MS = {"integrate": 0.1, "aabbs": 0.05, "broadphase": 0.6, "midphase": 0.2, "response": 0.3, "metrics": 0.05}
+
+
+def spread(v, n=3, rel=0.01):
+    vals = [v * (1 - rel), v, v * (1 + rel)][:n]
+    s = sorted(vals)
+    return {"median": s[len(s) // 2], "min": s[0], "max": s[-1], "n": n, "values": vals}
+
+
+def window(sps, scale=1.0):
+    w = {"first": 31, "last": 330, "frames": 300, "steps_per_s": spread(sps), "step_ms": spread(1000.0 / sps),
+         "stage_ms": {k: spread(v * scale) for k, v in STAGE_MS.items()}}
+    for k in ("pairs", "box_pairs", "vertex_tests", "contacts", "cell_candidates", "memory_bytes",
+              "penetration_mean", "penetration_max"):
+        w[k] = spread(1.0)
+    return w
+
+
+def point(idx, scene, engine, axis, value, label, sps, load=None, ignores=False, windows=("all",),
+          engine_broadphase="octree"):
+    p = {"id": f"{scene} | {axis}={value} | {engine}", "index": idx, "status": "ok", "bodies": 400,
+         "params": {"scene": scene, "engine": engine, "axes": {axis: value}, "labels": {axis: label}},
+         "engine_broadphase": engine_broadphase,
+         "has_stage": {s: engine != "bullet" for s in STAGE_MS},
+         "windows": {w: window(sps) for w in windows}}
+    if load is not None:
+        p["load_average"] = [load, load, load]
+    if ignores:
+        p["ignores"] = {axis: f"engine {engine} has no {axis}"}
+    return p
+
+
+def result(name, points, threads=16, omp=16, load_start=1.1, load_end=1.1):
+    return {"format": "octocd-bench", "version": 1, "complete": True,
+            "sweep": {"name": name, "kind": "steps", "description": "generated", "definition": {"name": name}},
+            "settings": {"engines": ["cpu", "cuda", "bullet"], "repeat": 3, "frames": 330, "warmup": 30},
+            "machine": {"hostname": "h", "cpu": "c", "gpu": "g", "threads": threads, "omp_threads": omp,
+                        "load_average": [load_start] * 3, "load_average_end": [load_end] * 3},
+            "build": {"build_id": "0.1.0+t", "git_revision": "t"}, "points": points,
+            "points_total": len(points), "started": "s", "updated": "u"}
+
+
+def table5(cpu_load=17.0, cuda_load=1.1):
+    """table5 on 16 cores, the CPU engine on 16 OpenMP threads: cpu and cuda (A, B, C) and
+    bullet (no midphase: A only, labelled A by the sweep)."""
+    pts, i = [], 0
+    for sc in ("bunny-random-400", "dragon-random-250"):
+        for cfg, val in (("A", "2"), ("B", "1,2"), ("C", "0,1,2")):
+            for eng, base, load in (("cpu", 2000.0, cpu_load), ("cuda", 20000.0, cuda_load)):
+                sps = base * {"A": 1.0, "B": 1.5, "C": 2.0}[cfg]
+                pts.append(point(i, sc, eng, "midphase", val, cfg, sps, load))
+                i += 1
+        pts.append(point(i, sc, "bullet", "midphase", "2", "A", 21336.0, 1.1, ignores=True,
+                         engine_broadphase="bullet-dbvt"))
+        i += 1
+    return result("table5", pts)
+
+
+class FakeDoc:
+    """Collects what a section writes; keeps the figures open for inspection."""
+
+    def __init__(self):
+        self.texts, self.tables, self.figs = [], [], []
+        self.csv_dir = None
+
+    def p(self, text, cls=None):
+        self.texts.append(text)
+
+    def h(self, *a, **k):
+        pass
+
+    def table(self, header, rows, note=None, name="table"):
+        self.tables.append((header, rows))
+
+    def figure(self, fig, name, caption):
+        self.figs.append((name, fig, caption))
+
+    def cells(self):
+        return [str(c) for _, rows in self.tables for r in rows for c in r]
+
+
+def section(fn, j):
+    MR.plt.close("all")  # the previous test's figures
+    doc = FakeDoc()
+    g = MR.merge([("r.json", j)])[0]
+    fn(doc, g)
+    return doc
+
+
+def fig_texts(fig):
+    return [t.get_text() for ax in fig.axes for t in ax.texts]
+
+
+def run_main(tmp_path, *inputs):
+    paths = []
+    for k, x in enumerate(inputs):
+        p = tmp_path / f"in{k}.json"
+        p.write_text(json.dumps(x))
+        paths.append(str(p))
+    out, err = io.StringIO(), io.StringIO()
+    argv, sys.argv = sys.argv, ["make_report.py", "-o", str(tmp_path / "out"), *paths]
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            MR.main()
+        rc = 0
+    except SystemExit as e:
+        rc = e.code if isinstance(e.code, int) else 1
+    finally:
+        sys.argv = argv
+    md = (tmp_path / "out" / "report.md").read_text() if rc == 0 else ""
+    return rc, md, out.getvalue() + err.getvalue()
+
+
+# ---- the paper's FPS never on our steps/s axis ------------------------------------------------
+
+def test_paper_fps_has_its_own_axis_not_ours():
+    doc = section(MR.section_table5, table5())
+    name, fig, caption = next(f for f in doc.figs if f[0] == "table5-steps")
+    ours, paper = fig.axes[0], fig.axes[1]
+    fps = {MR.PAPER["table5"]["rows"][sc][c][0] for sc in ("bunny-random-400", "dragon-random-250") for c in "ABC"}
+    our_heights = {round(b.get_height(), 6) for b in ours.patches}
+    our_lines = {round(float(y), 6) for ln in ours.lines for y in ln.get_ydata()}
+    assert not {round(f, 6) for f in fps} & (our_heights | our_lines), "a paper FPS is drawn on our steps/s axis"
+    assert "steps/s" in ours.get_ylabel() and ours.get_yscale() == "log"
+    assert "paper FPS" in paper.get_ylabel() and "steps/s" not in paper.get_ylabel()
+    assert {round(b.get_height(), 6) for b in paper.patches} == {round(f, 6) for f in fps}
+    assert "own axis" in caption
+
+
+# ---- speed-ups printed on the plots -----------------------------------------------------------
+
+def test_speedups_are_printed_on_the_steps_plot():
+    doc = section(MR.section_table5, table5())
+    fig = next(f for n, f, _ in doc.figs if n == "table5-steps")
+    texts = fig_texts(fig)
+    # B = 1.5 x A and C = 2 x A for cpu and cuda on both scenes: 8 speed-ups; bullet (one value) none.
+    assert sorted(t for t in texts if t.endswith("x")) == ["1.50x"] * 4 + ["2.00x"] * 4, texts
+
+
+# ---- absolute stage times beside the shares ---------------------------------------------------
+
+def test_stage_ms_printed_beside_shares():
+    doc = section(MR.section_table5, table5())
+    fig = next(f for n, f, _ in doc.figs if n == "table5-stages")
+    texts = fig_texts(fig)
+    assert texts.count("1.30 ms") == 12, texts  # each bar's step total (sum of the stage medians)
+    assert "0.60" in texts  # broadphase, 46 % of the step: its ms inside the segment
+    header, rows = next(t for t in doc.tables if t[0][0] == "point")
+    assert header[3] == "broadphase ms (%)"
+    assert rows[0][3] == "0.600 (46%)" and rows[0][-1] == "1.30"
+
+
+# ---- labels from the engine registry; Bullet in the fastest table -----------------------------
+
+def test_bullet_named_by_what_it_ran():
+    bullet_col = [r[-1] for r in verdicts(table5())]
+    assert len(bullet_col) == 2
+    doc = section(MR.section_table5, table5())
+    assert all("no midphase, one configuration: 21,336 (" in c for c in bullet_col), bullet_col
+    fig = next(f for n, f, _ in doc.figs if n == "table5-steps")
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert "bullet no midphase" in labels and "bullet A" not in labels
+
+
+def tablea1():
+    pts, i = [], 0
+    for mesh in ("bunny", "dragon"):
+        for eng, bp, lab, sps, ign, eb in (("cpu", "hash:0.25", "SH", 900.0, False, "hash"),
+                                           ("cpu", "octree", "O-A", 1000.0, False, "octree"),
+                                           ("bullet", "hash:0.25", "SH", 5000.0, True, "bullet-dbvt")):
+            p = point(i, "bunny-stack-50", eng, "broadphase", bp, lab, sps, 1.0, ignores=ign,
+                      windows=("early", "late"), engine_broadphase=eb)
+            p["params"]["axes"]["mesh"] = mesh
+            p["id"] += f" | mesh={mesh}"
+            p["params"]["labels"]["mesh"] = mesh
+            pts.append(p)
+            i += 1
+    return result("tableA1", pts)
+
+
+def test_bullet_broadphase_named_btdbvt_never_sh(tmp_path):
+    doc = section(MR.section_tableA1, tablea1())
+    cells = doc.cells()
+    assert "(one broadphase: btDbvtBroadphase)" in cells
+    fig = next(f for n, f, _ in doc.figs if n == "tableA1-late")
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert "bullet btDbvtBroadphase" in labels and not any(l.startswith("bullet SH") for l in labels), labels
+    texts = fig_texts(fig)
+    assert texts.count("1.11x") == 2, texts  # O-A over SH, cpu, both meshes
+    rc, md, log = run_main(tmp_path, tablea1())
+    assert rc == 0, log
+    assert "bullet SH" not in md and "btDbvtBroadphase" in md
+
+
+def test_registry_mirror_matches_engine_registry():
+    """OWN_BROADPHASE_CLASS holds every engine's own broadphase -> class of the registry."""
+    src = open(os.path.join(SRC, "core", "src", "engine_registry.cpp")).read()
+    pairs = dict(zip(re.findall(r'own_broadphase = "([^"]+)"', src),
+                     re.findall(r'own_broadphase_class = "([^"]+)"', src)))
+    assert pairs and pairs == MR.OWN_BROADPHASE_CLASS
+
+
+# ---- the load mark only where the load exceeded the free cores ---------------------------------
+
+SCENES = ("bunny-random-400", "dragon-random-250")
+
+
+def verdicts(j):
+    """The fastest table's rows of the scenes the generated result has."""
+    doc = section(MR.section_table5, j)
+    return [r for r in next(rows for h, rows in doc.tables if h[1] == "paper: fastest") if r[0] in SCENES]
+
+
+def test_no_load_mark_at_low_load():
+    # Load 1.1 on 16 cores at the start and end, cuda and bullet points at 1.1 (their own thread
+    # included), cpu points at 16.5 (its 16 OpenMP threads and 0.5 of others on 16 cores, within
+    # the cores): nothing is marked.
+    rows = verdicts(table5(cpu_load=16.0))
+    assert not any("⚠" in str(c) for r in rows for c in r), rows
+    g = MR.merge([("r.json", table5(cpu_load=16.0))])[0]
+    assert MR.load_warning(g["first"]["machine"])  # the run-level rule still flags 1.1 + 16 threads ...
+    doc = FakeDoc()
+    doc.html, doc.md = [], []
+    MR.machine_block(doc, g)
+    assert "⚠" not in "".join(doc.md)  # ... but no point ran short of cores, so nothing is marked
+
+
+def test_load_mark_where_load_exceeds_free_cores():
+    # cpu points measured at load 18 (2 runnable threads of others beside its 16 on 16 cores):
+    # the cpu verdicts are marked, the cuda and bullet ones (load 1.1) are not.
+    rows = verdicts(table5(cpu_load=18.0))
+    cpu = [r[2] for r in rows]
+    cuda = [r[3] for r in rows]
+    bullet = [r[4] for r in rows]
+    assert all(c.startswith("⚠ ") for c in cpu), cpu
+    assert not any("⚠" in c for c in cuda + bullet), cuda + bullet
+    # A cuda point where others held 15.5 of 16 cores: its one host thread still had a core ...
+    j = table5(cpu_load=16.0, cuda_load=16.0)
+    assert not any("⚠" in r[3] for r in verdicts(j))
+    # ... at 17.5 (16.5 of others) it had none.
+    j = table5(cpu_load=16.0, cuda_load=17.5)
+    assert all(r[3].startswith("⚠ ") for r in verdicts(j))
+    g = MR.merge([("r.json", j)])[0]
+    doc = FakeDoc()
+    doc.html, doc.md = [], []
+    MR.machine_block(doc, g)
+    assert "⚠ 6 of 14 measured points ran under load" in "".join(doc.md)
+
+
+def test_load_mark_without_point_loads_uses_the_run_start_and_end():
+    j = table5()
+    for p in j["points"]:
+        p.pop("load_average", None)
+    j["machine"]["load_average"] = [1.1] * 3
+    j["machine"]["load_average_end"] = [1.2] * 3
+    rows = verdicts(j)
+    # Others' 1.1 at the start leaves 14.9 cores for the cpu engine's 16 threads: cpu marked; cuda not.
+    assert all(r[2].startswith("⚠ ") for r in rows) and not any("⚠" in r[3] for r in rows)
+    j["machine"]["omp_threads"] = 4
+    assert not any("⚠" in str(c) for r in verdicts(j) for c in r)
+
+
+# ---- the penetration of a stack commented from the data -----------------------------------------
+
+def test_penetration_comment_settling_and_jittering():
+    n = 300
+    frame = np.arange(1, n + 1, dtype=float)
+    # Settles: 8 mm at the impact, 1 mm at rest.
+    settle = {"frame": frame, "penetration_max": np.where(frame < 50, 0.008, 0.001),
+              "penetration_mean": np.where(frame < 50, 0.004, 0.0005)}
+    t = MR.penetration_comment(settle, "stack.h5")
+    assert "it settles" in t and "largest 8.00 mm at frame 1" in t and "jitters" not in t, t
+    # Jitters between 6 and 10 mm for the whole run (the CPU stack of issue 34).
+    jit = 0.008 + 0.002 * np.sin(frame * 1.3)
+    t = MR.penetration_comment({"frame": frame, "penetration_max": jit, "penetration_mean": jit / 2}, "stack.h5")
+    assert "it does not settle (down by less than half)" in t, t
+    assert re.search(r"jitters between 6\.0+ and 10\.0+ mm", t), t
+    assert "mean 4.0" in t
+    # Grows: the last third deeper than the first.
+    t = MR.penetration_comment({"frame": frame, "penetration_max": 0.001 + frame * 1e-5,
+                                "penetration_mean": frame * 1e-6}, "x")
+    assert "it grows" in t, t
+    assert MR.penetration_comment({"frame": frame, "penetration_max": np.zeros(n),
+                                   "penetration_mean": np.zeros(n)}) == ""
+
+
+def test_report_end_to_end_table5(tmp_path):
+    rc, md, log = run_main(tmp_path, table5(cpu_load=18.0))
+    assert rc == 0, log
+    assert "⚠ 6 of 14 measured points ran under load" in md
+    assert "broadphase ms (%)" in md and "no midphase, one configuration" in md
