@@ -997,34 +997,37 @@ def read_trace(path):
 
 def penetration_comment(cols, name="the trace"):
     """One sentence on the penetration of a trace from its /frames columns (penetration_mean,
-    penetration_max in m, per frame): the mean over frames, the largest and its frame, and
-    whether it settles: the last third's largest penetration against the first third's
-    (settles: at most half of it; grows: above 1.1 times it; jitters: the last third's range of the per-frame largest
-    penetration, max - min, is at least a quarter of its mean). '' for an empty trace or one
-    without contacts."""
-    pm, pmax = np.asarray(cols.get("penetration_mean", [])), np.asarray(cols.get("penetration_max", []))
+    penetration_max in m, per frame): the mean over frames, the largest and its frame; the
+    last third's largest against the first third's (down by more than half: at most half of it;
+    down by less than half: at most 0.9 times it; deeper: above 1.1 times it; else about as deep); and whether it settles: in the last third the per-frame
+    largest d_p stays within 10 % of its top (or 0.01 mm), else it jitters between its min and
+    max there. '' for an empty trace, a non-finite one or one without penetration."""
+    pm, pmax = np.asarray(cols.get("penetration_mean", []), float), np.asarray(cols.get("penetration_max", []), float)
     frame = np.asarray(cols.get("frame", np.arange(len(pmax))))
     n = len(pmax)
-    if n == 0 or not np.isfinite(pmax).all() or pmax.max() <= 0:
+    if n == 0 or not np.isfinite(pmax).all() or not np.isfinite(pm).all() or pmax.max() <= 0:
         return ""
     third = max(n // 3, 1)
     first, last = pmax[:third], pmax[n - third:]
     k = int(np.argmax(pmax))
-    text = (f"{name}: AABB penetration d_p over {n} frames: mean {num(1e3 * float(np.mean(pm)))} mm (mean of the "
-            f"per-frame means), largest {num(1e3 * float(pmax[k]))} mm at frame {int(frame[k])}. Last third of the "
-            f"run: largest {num(1e3 * float(last.max()))} mm against {num(1e3 * float(first.max()))} mm in the first "
-            "third: ")
+    mm = lambda v: num(1e3 * float(v))
     if last.max() <= 0.5 * first.max():
-        text += "it settles"
-    elif last.max() <= 1.1 * first.max():
-        text += "it does not settle (down by less than half)"
+        trend = "down by more than half"
+    elif last.max() <= 0.9 * first.max():
+        trend = "down by less than half"
+    elif last.max() > 1.1 * first.max():
+        trend = "deeper"
     else:
-        text += "it grows (does not settle)"
-    spread = float(last.max() - last.min())
-    if last.mean() > 0 and spread >= 0.25 * float(last.mean()):
-        text += (f"; the per-frame largest d_p jitters between {num(1e3 * float(last.min()))} and "
-                 f"{num(1e3 * float(last.max()))} mm in the last third")
-    return text + "."
+        trend = "about as deep"
+    swing = float(last.max() - last.min())
+    if swing <= max(0.1 * float(last.max()), 1e-5):
+        settle = f"it settles (the per-frame largest d_p stays within {mm(swing)} mm of {mm(last.max())} mm)"
+    else:
+        settle = (f"it does not settle: the per-frame largest d_p jitters between {mm(last.min())} and "
+                  f"{mm(last.max())} mm")
+    return (f"{name}: AABB penetration d_p over {n} frames: mean {mm(np.mean(pm))} mm (mean of the per-frame "
+            f"means), largest {mm(pmax[k])} mm at frame {int(frame[k])}. In the last third of the run the largest "
+            f"is {mm(last.max())} mm against {mm(first.max())} mm in the first third ({trend}), and {settle}.")
 
 
 def section_traces(doc, paths):

@@ -289,19 +289,23 @@ def test_penetration_comment_settling_and_jittering():
     settle = {"frame": frame, "penetration_max": np.where(frame < 50, 0.008, 0.001),
               "penetration_mean": np.where(frame < 50, 0.004, 0.0005)}
     t = MR.penetration_comment(settle, "stack.h5")
-    assert "it settles" in t and "largest 8.00 mm at frame 1" in t and "jitters" not in t, t
+    assert "largest 8.00 mm at frame 1." in t and "(down by more than half)" in t, t
+    assert "it settles (the per-frame largest d_p stays within 0 mm of 1.00 mm)" in t, t
+    # Rests at the slop from the start (box-stack): as deep as at first, and settled.
+    rest = 0.00102 + 1e-6 * np.sin(frame)
+    t = MR.penetration_comment({"frame": frame, "penetration_max": rest, "penetration_mean": rest}, "s")
+    assert "(about as deep)" in t and "it settles" in t, t
     # Jitters between 6 and 10 mm for the whole run (the CPU stack of issue 34).
     jit = 0.008 + 0.002 * np.sin(frame * 1.3)
     t = MR.penetration_comment({"frame": frame, "penetration_max": jit, "penetration_mean": jit / 2}, "stack.h5")
-    assert "it does not settle (down by less than half)" in t, t
-    assert re.search(r"jitters between 6\.0+ and 10\.0+ mm", t), t
-    assert "mean 4.0" in t
-    # Grows: the last third deeper than the first.
+    assert "(about as deep)" in t and "mean 4.00 mm" in t, t
+    assert re.search(r"it does not settle: the per-frame largest d_p jitters between 6\.0+ and 10\.0+ mm", t), t
+    # Grows: the last third deeper than the first, and not settled.
     t = MR.penetration_comment({"frame": frame, "penetration_max": 0.001 + frame * 1e-5,
                                 "penetration_mean": frame * 1e-6}, "x")
-    assert "it grows" in t, t
-    assert MR.penetration_comment({"frame": frame, "penetration_max": np.zeros(n),
-                                   "penetration_mean": np.zeros(n)}) == ""
+    assert "(deeper)" in t and "does not settle" in t, t
+    for bad in (np.zeros(n), np.full(n, np.nan), np.zeros(0)):
+        assert MR.penetration_comment({"penetration_max": bad, "penetration_mean": bad}) == ""
 
 
 def test_report_end_to_end_table5(tmp_path):
