@@ -323,6 +323,29 @@ table.compact{font-size:.72em}table.compact th,table.compact td{padding:.15em .3
 
 # ---- sections ----------------------------------------------------------------------------------
 
+def engines_ran_text(g):
+    """What each engine of a sweep ran, as its measured points record it: its broadphase (an
+    engine's own by the registry's class name) and, where recorded, the geometry it collided."""
+    seen = {}
+    for p in g["points_list"]:
+        if p.get("status") != "ok":
+            continue
+        e = p.get("params", {}).get("engine", "?")
+        bp = p.get("engine_broadphase")
+        d = seen.setdefault(e, {"broadphase": [], "geometry": []})
+        if bp:
+            label = OWN_BROADPHASE_CLASS.get(bp, bp)
+            if label not in d["broadphase"]:
+                d["broadphase"].append(label)
+        if p.get("geometry") and p["geometry"] not in d["geometry"]:
+            d["geometry"].append(p["geometry"])
+    if not seen:
+        return ""
+    return "Engines ran: " + "; ".join(
+        f"{e}: broadphase {', '.join(d['broadphase']) or '?'}"
+        + (f", geometry {' | '.join(d['geometry'])}" if d["geometry"] else "") for e, d in seen.items())
+
+
 def machine_block(doc, g):
     j = g["first"]
     m, b, s = j["machine"], j["build"], j["settings"]
@@ -346,6 +369,9 @@ def machine_block(doc, g):
              + f"; files: {', '.join(os.path.basename(f) for f in g['files'])}",
              f"Points: {len(g['points_list'])} of {total} in these files ({n_ok} measured)"
              + ("" if len(g["points_list"]) >= total else " — incomplete: missing shards or an interrupted run")]
+    ran = engines_ran_text(g)
+    if ran:
+        parts.append(ran)
     if s.get("repeat") == 1:
         parts.append("1 repetition per point: the figures have no spread, and no verdict (fastest, slower) can be "
                      "taken from them.")
@@ -487,8 +513,9 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
     log_ticks(ax)
     ax.margins(y=0.15)
     ax.set_ylabel("octocd steps/s (median, bars min–max)")
-    ax.set_title(title + (" (Nx: speed-up over the engine's first " + group_axis + ")" if group_axis else ""),
+    ax.set_title("octocd" + (f" (Nx: speed-up over the engine's first {group_axis})" if group_axis else ""),
                  fontsize=9)
+    fig.suptitle(title, fontsize=10)
     ax.legend(fontsize=9, ncol=min(len(combos), 4), loc="upper center", bbox_to_anchor=(0.5, -0.1))
     if paper_vals:
         pw = 0.8 / len(paper_vals)
@@ -505,7 +532,7 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
         pax.set_xticklabels(scenes, rotation=30, ha="right", fontsize=7)
         pax.margins(y=0.2)
         pax.set_ylabel("paper FPS (Unity, whole application)")
-        pax.set_title("The paper's FPS (its own axis: not our steps/s)", fontsize=9)
+        pax.set_title("the paper's FPS (its own axis)", fontsize=9)
         pax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=len(paper_vals))
     doc.figure(fig, name, title + ("; the paper's FPS in the right-hand panel, on its own axis" if paper_vals else ""))
 

@@ -212,6 +212,16 @@ def test_bullet_broadphase_named_btdbvt_never_sh(tmp_path):
     assert "bullet SH" not in md and "btDbvtBroadphase" in md
 
 
+def test_what_each_engine_ran_is_named():
+    j = tablea1()
+    for p in j["points"]:
+        if p["params"]["engine"] == "bullet":
+            p["geometry"] = "convex hulls of the meshes"
+    g = MR.merge([("r.json", j)])[0]
+    assert MR.engines_ran_text(g) == ("Engines ran: cpu: broadphase hash, octree; bullet: broadphase btDbvtBroadphase, "
+                                      "geometry convex hulls of the meshes")
+
+
 def test_registry_mirror_matches_engine_registry():
     """OWN_BROADPHASE_CLASS holds every engine's own broadphase -> class of the registry."""
     src = open(os.path.join(SRC, "core", "src", "engine_registry.cpp")).read()
