@@ -323,3 +323,21 @@ def test_report_end_to_end_table5(tmp_path):
     assert rc == 0, log
     assert "⚠ 6 of 14 measured points ran under load" in md
     assert "broadphase ms (%)" in md and "no midphase, one configuration" in md
+
+
+def test_gate_marks_only_points_measured_under_load(tmp_path):
+    """The gate's verdicts: ⚠ on a point whose run (either side) ran short of cores."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import test_gate as tg
+    new = tg.scaled(tg.BASE, 1.3)  # every point 30 % slower: SLOWER verdicts to mark or not
+    base = copy.deepcopy(tg.BASE)
+    for j in (base, new):
+        j["machine"]["load_average"] = j["machine"]["load_average_end"] = [0.3] * 3
+        for p in j["points"]:
+            p["load_average"] = [1.2] * 3  # its own thread and 0.2 of others on 2 cores
+    new["points"][0]["load_average"] = [3.5] * 3  # 2.5 of others on 2 cores: no core left for it
+    rc, out, err = tg.gate(tmp_path, new, base)
+    assert rc == 4, out + err
+    rows = [l for l in (tmp_path / "out" / "report.md").read_text().splitlines() if l.endswith("SLOWER |")]
+    assert len(rows) == 4, rows
+    assert [("⚠ SLOWER" in r) for r in rows] == [True, False, False, False], rows
