@@ -424,7 +424,8 @@ OWN_BROADPHASE_CLASS = {"bullet-dbvt": "btDbvtBroadphase"}
 def point_label(p, axis):
     """What point p ran on `axis`: the axis label, or for an axis its engine ignores what the
     engine ran instead (its own broadphase by the registry's class name, "no midphase")."""
-    if axis and axis in (p.get("ignores") or {}):
+    ignores = p.get("ignores")
+    if axis and isinstance(ignores, dict) and axis in ignores:
         if axis == "broadphase":
             eb = p.get("engine_broadphase") or ""
             return OWN_BROADPHASE_CLASS.get(eb, eb or "own broadphase")
