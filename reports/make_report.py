@@ -1026,14 +1026,19 @@ def read_trace(path):
 def penetration_comment(cols, name="the trace"):
     """One sentence on the penetration of a trace from its /frames columns (penetration_mean,
     penetration_max in m, per frame): the mean over frames, the largest and its frame; the
-    last third's largest against the first third's (down by more than half: at most half of it;
-    down by less than half: at most 0.9 times it; deeper: above 1.1 times it; else about as deep); and whether it settles: in the last third the per-frame
-    largest d_p stays within 10 % of its top (or 0.01 mm), else it jitters between its min and
-    max there. '' for an empty trace, a non-finite one or one without penetration."""
+    last third's largest against the first third's (down by more than half: at most half of
+    it; down by less than half: at most 0.9 times it; deeper: above 1.1 times it; else about
+    as deep); and whether it settles: in the last third the per-frame largest d_p stays within
+    10 % of its top (or 0.01 mm), else it jitters between its min and max there. Frames whose
+    figures are not finite are left out; '' when none is left or nothing penetrates."""
     pm, pmax = np.asarray(cols.get("penetration_mean", []), float), np.asarray(cols.get("penetration_max", []), float)
-    frame = np.asarray(cols.get("frame", np.arange(len(pmax))))
+    frame = np.asarray(cols.get("frame", np.arange(len(pmax))), float)
+    if len(pm) != len(pmax) or len(frame) != len(pmax):
+        return ""
+    keep = np.isfinite(pm) & np.isfinite(pmax)  # frames with a figure (a reader gives NaN for a missing one)
+    pm, pmax, frame = pm[keep], pmax[keep], frame[keep]
     n = len(pmax)
-    if n == 0 or not np.isfinite(pmax).all() or not np.isfinite(pm).all() or pmax.max() <= 0:
+    if n == 0 or pmax.max() <= 0:
         return ""
     third = max(n // 3, 1)
     first, last = pmax[:third], pmax[n - third:]

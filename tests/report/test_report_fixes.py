@@ -314,8 +314,14 @@ def test_penetration_comment_settling_and_jittering():
     t = MR.penetration_comment({"frame": frame, "penetration_max": 0.001 + frame * 1e-5,
                                 "penetration_mean": frame * 1e-6}, "x")
     assert "(deeper)" in t and "does not settle" in t, t
+    # Frames without a figure (NaN from the reader) are left out.
+    holes = settle["penetration_max"].copy()
+    holes[100:110] = np.nan
+    t2 = MR.penetration_comment(dict(settle, penetration_max=holes), "stack.h5")
+    assert "over 290 frames" in t2 and "it settles" in t2, t2
     for bad in (np.zeros(n), np.full(n, np.nan), np.zeros(0)):
-        assert MR.penetration_comment({"penetration_max": bad, "penetration_mean": bad}) == ""
+        assert MR.penetration_comment({"frame": np.arange(len(bad)), "penetration_max": bad,
+                                       "penetration_mean": bad}) == ""
 
 
 def test_report_end_to_end_table5(tmp_path):
