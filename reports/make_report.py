@@ -479,8 +479,8 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
         fpts.setdefault((xkey(p), p["params"]["engine"]), {})[point_label(p, group_axis)] = \
             first_window(p)["steps_per_s"]
     width_in = min(11, max(6, 1.4 * len(scenes) + 0.22 * len(combos) * len(scenes)))
-    paper_vals = sorted({v for (sc, v) in paper if sc in scenes}, key=lambda v: vals.index(v) if v in vals else len(vals)) \
-        if paper else []
+    paper_vals = sorted({v for (sc, v) in paper if sc in scenes},
+                        key=lambda v: vals.index(v) if v in vals else len(vals)) if paper else []
     if paper_vals:
         fig, (ax, pax) = plt.subplots(1, 2, figsize=(min(14, width_in + 4), 4.2),
                                       gridspec_kw={"width_ratios": [max(width_in, 1), 4]})
