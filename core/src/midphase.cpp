@@ -1,6 +1,7 @@
 /// \file midphase.cpp
 /// Midphase over per-mesh octree levels (SPEC 5.2) and the vertex-proximity narrow phase
-/// (paper Eq. 7-8, Algorithm A2; SPEC 5.3).
+/// (paper Eq. 7-8, Algorithm A2; SPEC 5.3), and the step's midphase stage (confirm_pairs:
+/// every broadphase pair of a frame; gpu/src/midphase.cu is the CUDA engine's).
 ///
 /// The per-pair tests themselves live in octocd/midphase_hd.hpp (OCTOCD_HD functions that
 /// the CUDA engine's kernels call too); this file parses level lists and adapts the host
@@ -15,6 +16,7 @@
 #include "octocd/error.hpp"
 #include "octocd/midphase_hd.hpp"
 #include "octocd/midphase_views.hpp"
+#include "octocd/stages.hpp"
 
 namespace octocd {
 namespace {
@@ -141,6 +143,38 @@ bool confirm_contact(const PlacedShape& a_in, const PlacedShape& b_in, float the
 
 bool exhaustive_contact(const PlacedShape& a_in, const PlacedShape& b_in, float theta) {
   return hd::exhaustive_contact(placed_view(a_in), placed_view(b_in), theta);
+}
+
+// ---- the step's midphase stage ----------------------------------------------------------
+
+void confirm_pairs(const Model& model, const BodyState& state, const std::vector<Aabb>& boxes,
+                   const std::vector<Pair>& pairs, std::vector<std::uint8_t>& confirmed, FrameMetrics& m) {
+  // Pairs are independent, so they run in parallel; the confirmed flags are stored in
+  // pair order, so the result does not depend on the thread count.
+  confirmed.assign(pairs.size(), 0);
+  std::uint64_t box_tests = 0, box_pairs = 0, vertex_tests = 0, dynamic_pairs = 0;
+  const std::int64_t np = static_cast<std::int64_t>(pairs.size());
+  const MidphaseConfig& config = model.scene.midphase;
+  // Few pairs are cheaper on one thread than waking the team.
+#pragma omp parallel for schedule(dynamic, 8) \
+    reduction(+ : box_tests, box_pairs, vertex_tests, dynamic_pairs) if (np >= 64)
+  for (std::int64_t k = 0; k < np; ++k) {
+    const Pair p = pairs[static_cast<std::size_t>(k)];
+    if (state.w[p.a] == 0.0f && state.w[p.b] == 0.0f) continue;  // static-static
+    ++dynamic_pairs;
+    const std::uint32_t sa = model.bodies[p.a].shape, sb = model.bodies[p.b].shape;
+    const PlacedShape a{model.shapes[sa].octree.get(), state.x[p.a], boxes[p.a]};
+    const PlacedShape b{model.shapes[sb].octree.get(), state.x[p.b], boxes[p.b]};
+    MidphaseStats st;
+    confirmed[static_cast<std::size_t>(k)] = confirm_contact(a, b, model.theta(sa, sb), config, st) ? 1 : 0;
+    box_tests += st.box_tests;
+    box_pairs += st.box_pairs;
+    vertex_tests += st.vertex_tests;
+  }
+  m.dynamic_pairs = dynamic_pairs;
+  m.box_tests = box_tests;
+  m.box_pairs = box_pairs;
+  m.vertex_tests = vertex_tests;
 }
 
 }  // namespace octocd

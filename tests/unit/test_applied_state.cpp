@@ -8,12 +8,15 @@
 #include <cstdlib>
 #include <string>
 
+#include "faults/planted_faults.hpp"
 #include "octocd/error.hpp"
 #include "octocd/validation.hpp"
 #include "unit/test_scenes.hpp"
 
 using namespace octocd;
+using octocd::test::FaultyWorld;
 using octocd::test::mixed_boxes;
+using octocd::test::PlantedFaults;
 
 namespace {
 
@@ -58,7 +61,7 @@ ValidationResult find(const std::vector<ValidationResult>& rs, const std::string
   return none;
 }
 
-/// validate_engine on CPU worlds of `scene` with `faults` planted.
+/// validate_engine on CPU engines of `scene` with `faults` planted (World when none).
 std::vector<ValidationResult> validate_with(const Scene& scene, PlantedFaults faults, int frames = 200) {
   ValidationOptions opt;
   opt.frames = frames;
@@ -68,9 +71,7 @@ std::vector<ValidationResult> validate_with(const Scene& scene, PlantedFaults fa
   const auto model = build_model(scene);
   return validate_engine(
       [&]() -> std::unique_ptr<Engine> {
-        auto w = std::make_unique<World>(model, make_broadphase(scene.broadphase, scene.domain));
-        w->plant_faults(faults);
-        return w;
+        return octocd::test::cpu_engine(model, make_broadphase(scene.broadphase, scene.domain), faults);
       },
       opt);
 }
@@ -247,21 +248,19 @@ TEST(AnalyticByContent, FreeFallCatchesExplicitEuler) {
   const Scene scene = load_scene(source_dir() + "/datasets/scenes/free-fall.json");
   World good(scene);
   EXPECT_TRUE(validate_analytic(good, 1000, Tolerances{}).pass);
-  World bad(scene);
   PlantedFaults f;
   f.explicit_euler = true;
-  bad.plant_faults(f);
+  FaultyWorld bad(scene, f);
   const ValidationResult r = validate_analytic(bad, 1000, Tolerances{});
   EXPECT_FALSE(r.pass) << r.detail;
 }
 
 TEST(AnalyticByContent, StackCatchesSinking) {
   Scene scene = load_scene(source_dir() + "/datasets/scenes/box-stack.json");
-  World world(scene);
   PlantedFaults f;
   f.corrections_summed = true;  // over-corrects: the column jitters off its rest heights
   f.eq12_weights = true;
-  world.plant_faults(f);
+  FaultyWorld world(scene, f);
   EXPECT_FALSE(validate_analytic(world, 1000, Tolerances{}).pass);
 }
 

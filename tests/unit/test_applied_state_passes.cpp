@@ -10,10 +10,12 @@
 #include <string>
 #include <tuple>
 
+#include "faults/planted_faults.hpp"
 #include "octocd/validation.hpp"
 #include "octocd/world.hpp"
 
 using namespace octocd;
+using octocd::test::PlantedFaults;
 
 namespace {
 
@@ -33,13 +35,14 @@ struct Judged {
   double share = 0.0;  // share of dynamic body-frames judged, from the detail
 };
 
-/// Runs `frames` steps of a CPU World with `faults` and the per-frame validators only
-/// (no candidate-set, midphase or normal checks: they do not judge the response).
+/// Runs `frames` steps of a CPU engine with `faults` (World when none) and the per-frame
+/// validators only (no candidate-set, midphase or normal checks: they do not judge the
+/// response).
 Judged judge(const Scene& scene, PlantedFaults faults, int frames) {
   ValidationOptions opt;
   opt.against_fcl = false;
-  World world(scene);
-  world.plant_faults(faults);
+  const std::unique_ptr<Engine> engine = octocd::test::cpu_engine(scene, faults);
+  Engine& world = *engine;
   world.set_recording(true);
   FrameValidators v(world, opt, {});
   for (int f = 0; f < frames; ++f) {
@@ -192,9 +195,9 @@ TEST(MixedPile, FaultsAreCaughtAndTheCorrectEnginePasses) {
   auto judge_pile = [&](PlantedFaults faults) {
     ValidationOptions opt;
     opt.against_fcl = false;
-    World world(scene);
+    const std::unique_ptr<Engine> engine = octocd::test::cpu_engine(scene, faults);
+    Engine& world = *engine;
     world.set_state(pile);
-    world.plant_faults(faults);
     world.set_recording(true);
     FrameValidators v(world, opt, {});
     for (int f = 0; f < 40; ++f) {

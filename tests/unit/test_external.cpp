@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "faults/planted_faults.hpp"
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
 #include "octocd/world.hpp"
@@ -142,10 +143,10 @@ TEST(External, MeshBodiesGetReferenceNormals) {
 TEST(External, TheCpuEnginesFramesPassAndAPlantedLossFails) {
   for (const bool plant : {false, true}) {
     const Scene scene = octocd::test::mixed_boxes();
-    World world(scene);
-    PlantedFaults faults;
+    octocd::test::PlantedFaults faults;
     faults.broadphase_drops_pair = plant;
-    world.plant_faults(faults);
+    const std::unique_ptr<Engine> engine = octocd::test::cpu_engine(scene, faults);
+    Engine& world = *engine;
     world.set_recording(true);
     ExternalBodies bodies;
     bodies.scene_json = scene.json;

@@ -14,11 +14,14 @@
 
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/trace.hpp"
+#include "faults/planted_faults.hpp"
 #include "octocd/validation.hpp"
 #include "unit/test_scenes.hpp"
 
 using namespace octocd;
+using octocd::test::FaultyWorld;
 using octocd::test::mixed_boxes;
+using octocd::test::PlantedFaults;
 
 namespace {
 
@@ -36,7 +39,7 @@ ValidationResult find(const std::vector<ValidationResult>& rs, const std::string
 }
 
 /// Runs validators 1-6 on `world` for `frames` steps.
-std::vector<ValidationResult> run(World& world, int frames,
+std::vector<ValidationResult> run(Engine& world, int frames,
                                   std::vector<std::unique_ptr<BroadPhase>> extra = {},
                                   FrameValidators::ConfirmFn midphase = nullptr) {
   ValidationOptions opt;
@@ -119,10 +122,9 @@ TEST(Validators, MidphaseCompletenessCatchesLossyPruning) {
 }
 
 TEST(Validators, ContactNormalsCatchAFlippedNormal) {
-  World world(mixed_boxes());
   PlantedFaults f;
   f.normal_sign = true;
-  world.plant_faults(f);
+  FaultyWorld world(mixed_boxes(), f);
   const ValidationResult r = find(run(world, 60), "contact-geometry");
   EXPECT_TRUE(r.applicable);
   EXPECT_FALSE(r.pass) << r.detail;
@@ -139,21 +141,19 @@ TEST(Validators, NonPenetrationCatchesBetaOvershoot) {
 }
 
 TEST(Validators, FrictionCatchesTheWrongSign) {
-  World world(mixed_boxes());
   PlantedFaults f;
   f.friction_sign = true;
-  world.plant_faults(f);
+  FaultyWorld world(mixed_boxes(), f);
   const ValidationResult r = find(run(world, 300), "friction-monotonicity");
   EXPECT_FALSE(r.pass) << r.detail;
 }
 
 TEST(Validators, ConservationCatchesEq12WeightsAndMomentumLeak) {
   for (int fault = 0; fault < 2; ++fault) {
-    World world(mixed_boxes());
     PlantedFaults f;
     f.eq12_weights = fault == 0;
     f.momentum_leak = fault == 1;
-    world.plant_faults(f);
+    FaultyWorld world(mixed_boxes(), f);
     const ValidationResult r = find(run(world, 300), "impulse-conservation");
     EXPECT_FALSE(r.pass) << "fault " << fault << ": " << r.detail;
     EXPECT_NE(r.detail.find(fault == 0 ? "centre" : "momentum"), std::string::npos) << r.detail;
@@ -173,12 +173,10 @@ TEST(Validators, AnalyticAndBulletCatchWrongFriction) {
   }
   PlantedFaults f;
   f.friction_sign = true;
-  World bad(scene);
-  bad.plant_faults(f);
+  FaultyWorld bad(scene, f);
   const ValidationResult a = validate_analytic(bad, scene.frames, tol);
   EXPECT_FALSE(a.pass) << a.detail;
-  World bad2(scene);
-  bad2.plant_faults(f);
+  FaultyWorld bad2(scene, f);
   const ValidationResult b = validate_against_bullet(bad2, scene.frames, tol);
   EXPECT_FALSE(b.pass) << b.detail;
 }

@@ -236,10 +236,6 @@ struct ContactImpulse {
 ///   J_t = J_t* when |J_t*| <= mu_s J_n (stick) else -mu_k J_n (slip) (Eq. 21);
 /// - dv_A = w_A (J_n n + J_t t), dv_B = -w_B (J_n n + J_t t) (Eq. 19, 22).
 /// n must be a unit vector from B to A. Both static (w_A + w_B = 0): no impulse.
-/// kOtherRounding (tests only: PlantedFaults::other_rounding) evaluates two operations in
-/// another, equally valid float order: J_n = -(1 + e)(v_n / w) and t = v_t / |v_t| per
-/// component. The default instantiation is what both engines run.
-template <bool kOtherRounding = false>
 OCTOCD_HD inline ContactImpulse contact_impulse(Vec3 v_a, Vec3 v_b, float w_a, float w_b, Vec3 n,
                                                 const ContactParams& p) {
   ContactImpulse r;
@@ -253,10 +249,10 @@ OCTOCD_HD inline ContactImpulse contact_impulse(Vec3 v_a, Vec3 v_b, float w_a, f
   r.tangent_speed = vt_len;
   if (v_n < 0.0f) {
     const float e_eff = (-v_n < p.restitution_threshold) ? 0.0f : p.restitution;
-    r.jn = fmaxf(kOtherRounding ? -(1.0f + e_eff) * (v_n / w) : -(1.0f + e_eff) * v_n / w, p.impulse_floor);
+    r.jn = fmaxf(-(1.0f + e_eff) * v_n / w, p.impulse_floor);
   }
   if (vt_len > 0.0f) {
-    r.tangent = kOtherRounding ? Vec3{v_t.x / vt_len, v_t.y / vt_len, v_t.z / vt_len} : (1.0f / vt_len) * v_t;
+    r.tangent = (1.0f / vt_len) * v_t;
     const float jt_star = -vt_len / w;
     if (fabsf(jt_star) <= p.mu_static * r.jn) {
       r.jt = jt_star;

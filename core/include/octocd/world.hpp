@@ -1,7 +1,8 @@
 #pragma once
 /// \file world.hpp
 /// The CPU reference pipeline (SPEC section 4): bodies in structure-of-arrays hot state,
-/// shapes with their per-mesh octrees, and one step of named, timed stages.
+/// shapes with their per-mesh octrees, and one step of named, timed stages (the stage
+/// functions of octocd/stages.hpp, called in order).
 
 #include <array>
 #include <cstdint>
@@ -16,33 +17,9 @@
 #include "octocd/mesh_octree.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/stages.hpp"
 
 namespace octocd {
-
-/// Deliberate faults for validator self-tests ("a validator that cannot fail is a
-/// defect"). All off by default; `octocd` never sets them. Each one is caught by a
-/// validator in tests/unit/test_validation.cpp or tests/unit/test_applied_state.cpp.
-struct PlantedFaults {
-  bool eq12_weights = false;     ///< split corrections with the paper's Eq. 12 (swapped) weights
-  bool friction_sign = false;    ///< apply friction with the wrong sign (speeds sliding up)
-  bool momentum_leak = false;    ///< apply only 90% of each impulse to body B
-  bool normal_sign = false;      ///< use the contact normal pointing from A to B
-  bool impulse_wrong_body = false;   ///< add B's velocity change to A (dv_sum[a] += dv_b)
-  bool corrections_summed = false;   ///< sum position corrections instead of averaging them
-  bool explicit_euler = false;   ///< x += dt v_old, then v += dt g (explicit, not Eq. 2-3)
-  bool skip_clamp = false;       ///< leave out the Eq. 23 velocity clamp
-  bool broadphase_drops_pair = false;  ///< the World's own broadphase call loses its first
-                                       ///< pair that has a dynamic body (fresh instances don't)
-  bool midphase_drops_contact = false; ///< the World's midphase rejects its first confirmed
-                                       ///< contact of every frame
-  bool jmin_first_pass_only = false;   ///< the J_min floor (Eq. 18) only in the first pass
-  bool one_pass_fewer = false;         ///< response.iterations - 1 passes (at least 1)
-  bool last_pass_no_corrections = false;  ///< the last pass's position corrections dropped
-  /// Not a fault: a SPEC 6 engine that rounds differently (J_n = -(1 + e)(v_n / (w_A + w_B)),
-  /// t = v_t / |v_t|), so near-ties of the relaxation passes go other ways than in
-  /// octocd's engines; the validators must pass it.
-  bool other_rounding = false;
-};
 
 /// The CPU reference engine (`cpu`, SPEC 4): owns its hot state and the chosen
 /// broadphase; shares the Model (shapes, bodies) it was built from.
@@ -60,9 +37,6 @@ class World : public Engine {
   /// From an already built model (shared, not copied) and a broadphase (owned). Throws
   /// InputError for a rotating scene (require_translation_only).
   World(std::shared_ptr<const Model> model, std::unique_ptr<BroadPhase> broadphase);
-
-  /// Turns planted faults on or off (validator self-tests only).
-  void plant_faults(const PlantedFaults& faults) { faults_ = faults; }
 
   std::string name() const override { return "cpu"; }
   std::string device() const override;
@@ -102,14 +76,10 @@ class World : public Engine {
   std::vector<std::uint8_t> confirmed_;  // per pair: midphase verdict
   std::vector<ContactRecord> contacts_;
   FrameMetrics metrics_;
-  PlantedFaults faults_;
   std::int64_t frame_ = 0;
   bool recording_ = false;
   FrameRecord record_;
-  // Response scratch (SPEC 6 Jacobi reduction).
-  std::vector<Vec3> dx_sum_, dv_sum_;
-  std::vector<std::uint32_t> contact_count_;
-  std::vector<Aabb> pass_aabbs_;
+  ResponseScratch response_;  // the response stage's buffers (SPEC 6 Jacobi reduction)
 };
 
 }  // namespace octocd
