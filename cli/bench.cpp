@@ -15,6 +15,7 @@
 #include "bench_sweep.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
+#include "octocd/shared_files.hpp"
 #include "octocd/stop.hpp"
 #include "tools.hpp"
 
@@ -46,7 +47,7 @@ std::pair<int, int> parse_shard(const std::string& text) {
   return {i, n};
 }
 
-std::string default_scene_dir() { return (fs::path(source_dir()) / "datasets" / "scenes").string(); }
+std::string default_scene_dir() { return (fs::path(shared_dir()) / "datasets" / "scenes").string(); }
 
 }  // namespace
 
@@ -96,8 +97,8 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
       ->check(CLI::Range(1L, kMaxInstancesCap));
   c->add_flag("--quiet", o.quiet, "No progress output");
   c->add_option("--scene-dir", o.scene_dir,
-                "Folder of the scenes named in sweeps (default: datasets/scenes of the source tree, or "
-                "$OCTOCD_SOURCE_DIR/datasets/scenes)");
+                "Folder of the scenes named in sweeps (default: datasets/scenes of octocd's shared files: "
+                "PREFIX/share/octocd when installed, else the source tree; $OCTOCD_SOURCE_DIR overrides, docs/install.md)");
   c->add_option("--data-dir", o.data_dir, "Folder of the dataset meshes (default as for `run`)");
   c->add_option("--trace-dir", o.trace_dir,
                 "Also write the first repetition of every steps point as a trace (.h5) into this folder");

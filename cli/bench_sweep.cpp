@@ -15,6 +15,7 @@
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/reference_broadphase.hpp"
+#include "octocd/shared_files.hpp"
 
 namespace octocd::cli::bench {
 
@@ -25,7 +26,7 @@ namespace fs = std::filesystem;
   throw InputError(fmt::format("{}: {}: {}; allowed: {}", origin, key, problem, allowed));
 }
 
-std::string named_sweeps_dir() { return (fs::path(source_dir()) / "bench" / "sweeps").string(); }
+std::string named_sweeps_dir() { return (fs::path(shared_dir()) / "bench" / "sweeps").string(); }
 
 std::vector<std::string> named_sweeps() {
   std::vector<std::string> names;

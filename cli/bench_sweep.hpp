@@ -87,7 +87,7 @@ constexpr std::size_t kMaxPoints = 100000;
 [[noreturn]] void bad(const std::string& origin, const std::string& key, const std::string& problem,
                       const std::string& allowed);
 
-/// The folder of the named sweeps: bench/sweeps/ of octocd's shipped files (source_dir()).
+/// The folder of the named sweeps: bench/sweeps/ of octocd's shipped files (shared_dir()).
 std::string named_sweeps_dir();
 
 /// The named sweeps: the stems of the *.json files of named_sweeps_dir(), sorted; empty

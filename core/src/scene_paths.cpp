@@ -10,6 +10,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/shared_files.hpp"
 #include "scene_detail.hpp"
 
 namespace octocd {
@@ -64,11 +65,7 @@ std::vector<std::string> default_data_dirs(const std::string& origin) {
   std::vector<std::string> dirs;
   const fs::path folder = scene_folder(origin);
   if (!folder.empty()) dirs.push_back((folder / ".." / "cache").lexically_normal().string());
-#ifdef OCTOCD_SOURCE_DIR
-  const std::string built = (fs::path(OCTOCD_SOURCE_DIR) / "datasets" / "cache").lexically_normal().string();
-#else
-  const std::string built = (fs::current_path() / "datasets" / "cache").lexically_normal().string();
-#endif
+  const std::string built = (fs::path(shared_dir()) / "datasets" / "cache").lexically_normal().string();
   if (std::find(dirs.begin(), dirs.end(), built) == dirs.end()) dirs.push_back(built);
   return dirs;
 }
@@ -137,7 +134,8 @@ std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const
   c.fail(key, "mesh \"" + mesh + "\" not found (searched: " + list + "); " + advice,
          "an existing mesh file (absolute or relative to the scene's folder), or a dataset name with "
          "NAME.obj|.off|.ply in the data dir (--data-dir, $OCTOCD_DATA_DIR, else <scene folder>/../cache, "
-         "else the datasets/cache of the source tree octocd was built from)");
+         "else the datasets/cache of octocd's shared files: PREFIX/share/octocd when installed, else the source "
+         "tree)");
 }
 
 }  // namespace octocd
