@@ -18,6 +18,8 @@ PACKAGES=(
   python3 python3-numpy python3-h5py python3-matplotlib python3-scipy
   # the Python package `import octocd` (python/, OCTOCD_PYTHON) and its pytest tests
   python3-dev python3-pybind11 python3-pytest
+  # `pip install --no-build-isolation .` (pyproject.toml, setup.py; docs/install.md)
+  python3-pip python3-setuptools python3-wheel
 )
 if [ "${1:-}" = "--list" ]; then echo "${PACKAGES[@]}"; exit 0; fi
 missing=()
