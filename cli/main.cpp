@@ -816,7 +816,8 @@ int main(int argc, char** argv) {
                       "this file");
   const std::string data_dir_help =
       "Folder of the dataset meshes (NAME.obj|.off|.ply); default: $OCTOCD_DATA_DIR, else "
-      "<scene folder>/../cache, else the datasets/cache of the source tree (docs/scenes.md)";
+      "<scene folder>/../cache, else the datasets/cache of the shared files (PREFIX/share/octocd when installed, else "
+      "the source tree; docs/scenes.md)";
   run_cmd->add_option("--data-dir", run.data_dir, data_dir_help);
   run_cmd->add_flag("--no-xdmf", run.no_xdmf,
                     "With --trace: do not write the XDMF sidecar FILE.h5.xmf (ParaView) beside it");

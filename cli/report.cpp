@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
+#include "octocd/shared_files.hpp"
 #include "tools.hpp"
 
 namespace octocd::cli {
@@ -30,7 +31,7 @@ std::string python() {
 
 std::string script() {
   if (const char* p = std::getenv("OCTOCD_REPORT_SCRIPT"); p && *p) return p;
-  return (fs::path(source_dir()) / "reports" / "make_report.py").string();
+  return (fs::path(shared_dir()) / "reports" / "make_report.py").string();
 }
 
 }  // namespace
@@ -85,8 +86,8 @@ int report_command(const ReportOptions& o) {
                                    in));
   const std::string py = python(), sc = script();
   if (!fs::is_regular_file(sc, ec))
-    throw RuntimeError(fmt::format("report script {} not found (set OCTOCD_SOURCE_DIR to the octocd source tree, or "
-                                   "OCTOCD_REPORT_SCRIPT to the script)",
+    throw RuntimeError(fmt::format("report script {} not found (an octocd installed without its share/octocd? set "
+                                   "OCTOCD_SOURCE_DIR to the octocd source tree, or OCTOCD_REPORT_SCRIPT to the script)",
                                    sc));
   std::vector<std::string> args{py, sc, "-o", o.output};
   if (!o.title.empty()) {

@@ -19,11 +19,8 @@
 
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/shared_files.hpp"
 #include "octocd/version.hpp"
-
-#ifndef OCTOCD_SOURCE_DIR
-#define OCTOCD_SOURCE_DIR "."
-#endif
 
 namespace octocd::cli {
 
@@ -90,7 +87,7 @@ nlohmann::json build_description() {
   nlohmann::json b;
   b["build_id"] = build_id();
   std::string rev;
-  const std::string dir = source_dir();
+  const std::string dir = shared_dir();  // a source tree has .git; an installed share/octocd has not
   std::error_code ec;
   if (std::filesystem::exists(std::filesystem::path(dir) / ".git", ec)) {
     const std::string cmd = "git -C '" + dir + "' describe --always --dirty --tags 2>/dev/null";
@@ -138,11 +135,6 @@ void write_file_atomically(const std::string& path, const std::string& text) {
                                    "no temporary file is left",
                                    path, reason(err), path));
   }
-}
-
-std::string source_dir() {
-  const char* env = std::getenv("OCTOCD_SOURCE_DIR");
-  return env && *env ? env : OCTOCD_SOURCE_DIR;
 }
 
 std::vector<std::string> split_list(const std::string& text) {

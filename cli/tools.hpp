@@ -58,10 +58,6 @@ nlohmann::json build_description();
 /// path on failure.
 void write_file_atomically(const std::string& path, const std::string& text);
 
-/// The source tree (for datasets/scenes and reports/): $OCTOCD_SOURCE_DIR, else the tree
-/// this octocd was built from.
-std::string source_dir();
-
 /// Splits "a,b,c" into {"a", "b", "c"} (empty items dropped).
 std::vector<std::string> split_list(const std::string& text);
 

@@ -34,7 +34,7 @@ if(OCTOCD_CUDA_ENABLED)
     LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
     INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 endif()
-install(TARGETS octocd RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+install(TARGETS octocd RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT runtime)
 foreach(dir core reference validation)
   install(DIRECTORY ${CMAKE_SOURCE_DIR}/${dir}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 endforeach()
@@ -51,3 +51,23 @@ write_basic_package_version_file(${CMAKE_BINARY_DIR}/octocdConfigVersion.cmake
   VERSION ${PROJECT_VERSION} COMPATIBILITY SameMinorVersion)
 install(FILES ${CMAKE_BINARY_DIR}/octocdConfig.cmake ${CMAKE_BINARY_DIR}/octocdConfigVersion.cmake
   DESTINATION ${_octocd_cmake_dir})
+
+# ---- shared files: PREFIX/share/octocd, laid out as in the source tree -------------------
+# The scenes, the dataset fetch script, the named bench sweeps and the report generator.
+# The installed `octocd` finds them at <its folder>/../share/octocd (octocd::shared_dir(),
+# core/include/octocd/shared_files.hpp), so the prefix may be copied or moved and the
+# source tree removed (ctest install.relocatable; docs/install.md). That rule assumes the
+# default CMAKE_INSTALL_BINDIR (bin) and CMAKE_INSTALL_DATADIR (share). With bin/octocd they
+# form the component `runtime` (`cmake --install build --component runtime`: the command
+# alone, without headers, libraries or the Python package).
+set(_octocd_share ${CMAKE_INSTALL_DATADIR}/octocd)
+install(DIRECTORY ${CMAKE_SOURCE_DIR}/datasets/scenes DESTINATION ${_octocd_share}/datasets
+  COMPONENT runtime FILES_MATCHING PATTERN "*.json")
+install(PROGRAMS ${CMAKE_SOURCE_DIR}/datasets/fetch.sh DESTINATION ${_octocd_share}/datasets COMPONENT runtime)
+install(FILES ${CMAKE_SOURCE_DIR}/datasets/SHA256SUMS ${CMAKE_SOURCE_DIR}/datasets/split_mesh.py
+  ${CMAKE_SOURCE_DIR}/datasets/README.md DESTINATION ${_octocd_share}/datasets COMPONENT runtime)
+install(DIRECTORY ${CMAKE_SOURCE_DIR}/bench/sweeps DESTINATION ${_octocd_share}/bench
+  COMPONENT runtime FILES_MATCHING PATTERN "*.json")
+file(GLOB _octocd_report_py ${CMAKE_SOURCE_DIR}/reports/*.py)
+install(FILES ${_octocd_report_py} ${CMAKE_SOURCE_DIR}/reports/paper_tables.json
+  DESTINATION ${_octocd_share}/reports COMPONENT runtime)

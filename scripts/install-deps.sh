@@ -21,6 +21,8 @@ PACKAGES=(
   # `octocd view` (three.js, inlined in its pages) and its headless-browser test (PIL reads
   # the screenshot)
   libjs-three chromium python3-pil
+  # `pip install --no-build-isolation .` (pyproject.toml, setup.py; docs/install.md)
+  python3-pip python3-setuptools python3-wheel
 )
 if [ "${1:-}" = "--list" ]; then echo "${PACKAGES[@]}"; exit 0; fi
 missing=()

@@ -1,0 +1,398 @@
+// Running the points of `octocd bench` (bench_sweep.hpp): a steps point (its repetitions
+// stepped on an engine, figures per window and series block, a trace with --trace-dir) and
+// a broadphase point (recorded AABBs replayed through one broadphase of one engine).
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <ctime>
+#include <filesystem>
+#include <limits>
+#include <optional>
+
+#include <fmt/format.h>
+
+#include "bench_sweep.hpp"
+#include "octocd/engine_registry.hpp"
+#include "octocd/error.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/stop.hpp"
+#include "octocd/trace.hpp"
+
+namespace octocd::cli::bench {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+void throw_if_stopped() {
+  if (octocd::stop_signal() != 0) throw BenchStopped{};
+}
+
+/// The process's CPU time (every thread, user + system) in ms: what a step costs the machine,
+/// without the time the scheduler gave other processes (a shared machine's load).
+double process_cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
+
+/// Sums over the frames of one window of one repetition.
+struct WindowSums {
+  std::int64_t frames = 0;
+  std::int64_t bound_frames = 0;  // > 0: cut short; steps/s is then the bound bound_frames / step_ms
+  double step_ms = 0.0;
+  std::array<double, kStages> stage_ms{};
+  double pairs = 0, candidates = 0, box_pairs = 0, vertex_tests = 0, contacts = 0, memory = 0;
+  double pen_weighted = 0, share_weighted = 0, pen_max = 0;
+  double cpu_ms = 0.0;  // process CPU time (every thread) spent in the step calls
+  void add(const FrameMetrics& m) {
+    ++frames;
+    step_ms += m.step_ms;
+    for (int s = 0; s < kStages; ++s) stage_ms[s] += m.stage_ms[s];
+    pairs += static_cast<double>(m.aabb_pairs);
+    candidates += static_cast<double>(m.cell_candidates);
+    box_pairs += static_cast<double>(m.box_pairs);
+    vertex_tests += static_cast<double>(m.vertex_tests);
+    const double c = static_cast<double>(m.contacts);
+    contacts += c;
+    memory += static_cast<double>(m.memory_bytes);
+    pen_weighted += c * m.penetration_mean;
+    share_weighted += c * m.penetration_share_above_slop;
+    pen_max = std::max(pen_max, m.penetration_max);
+  }
+};
+
+std::string file_safe(const std::string& id) {
+  std::string out;
+  for (char c : id) out += (std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-') ? c : '_';
+  return out;
+}
+
+}  // namespace
+
+std::shared_ptr<const Model> ModelCache::get(const std::string& t, const std::string& origin,
+                                             const std::string& data_dir) {
+  if (t != text || !model) {
+    model.reset();
+    model = build_model(parse_scene(t, origin, data_dir));
+    text = t;
+  }
+  return model;
+}
+
+json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const BenchOptions& o,
+                     SweepProgress& progress, const StepsOverride& ov) {
+  json r;
+  json params{{"scene", stem(s.scenes[p.scene])}, {"engine", p.engine}};
+  for (std::size_t a = 0; a < s.axes.size(); ++a) {
+    params["axes"][s.axes[a].name] = s.axes[a].values[p.value[a]];
+    if (!s.axes[a].labels[p.value[a]].empty()) params["labels"][s.axes[a].name] = s.axes[a].labels[p.value[a]];
+  }
+  r["params"] = params;
+  std::vector<std::string> added;
+  const std::string text = ov.text ? *ov.text : scene_text(s, p, &added);
+  const int repeat = ov.repeat > 0 ? ov.repeat : s.repeat;
+  const std::string origin = s.scenes[p.scene];
+  std::shared_ptr<const Model> model;
+  try {
+    model = cache.get(text, origin, o.data_dir);
+  } catch (const InputError& e) {
+    // A key the sweep sets that the scene file does not have, and the scene refuses: the
+    // sweep's pointer is wrong, not the scene.
+    if (!added.empty() && std::string(e.what()).find("unknown key") != std::string::npos)
+      bad(s.origin, added.front(),
+          fmt::format("not a key of scene file {}, and the scene refuses it ({})", origin, e.what()),
+          "a JSON pointer to a scene key (docs/scenes.md), e.g. /response/beta");
+    r["status"] = "skipped";
+    r["reason"] = std::string("scene: ") + e.what();
+    return r;
+  }
+  r["bodies"] = model->initial.x.size();
+  std::unique_ptr<Engine> engine;
+  try {
+    engine = make_engine(p.engine, model, cuda_settings_from(o.cuda));
+  } catch (const std::exception& e) {
+    r["status"] = "skipped";
+    r["reason"] = e.what();
+    return r;
+  }
+  // An engine that ignores an axis (its own broadphase, no midphase stage) is measured once,
+  // under the axis's first value.
+  for (std::size_t a = 0; a < s.axes.size(); ++a) {
+    bool ignores = false;
+    std::string why;
+    if (s.axes[a].key == "/broadphase/name" && engine->broadphase_name() != model->scene.broadphase.name) {
+      ignores = true;
+      why = fmt::format("engine {} runs its own broadphase ({})", p.engine, engine->broadphase_name());
+    }
+    if (s.axes[a].key == "/midphase/levels" && engine->midphase_name() != model->scene.midphase.to_string()) {
+      ignores = true;
+      why = fmt::format("engine {} has no midphase level list (it runs {})", p.engine, engine->midphase_name());
+    }
+    if (ignores) {
+      r["ignores"][s.axes[a].name] = why;
+      if (p.value[a] != 0) {
+        r["status"] = "skipped";
+        r["reason"] = why + fmt::format(": measured once, under {}={}", s.axes[a].name, value_text(s.axes[a].values[0]));
+        return r;
+      }
+    }
+  }
+  r["device"] = engine->device();
+  r["engine_broadphase"] = engine->broadphase_name();
+  for (int st = 0; st < kStages; ++st)
+    r["has_stage"][stage_name(static_cast<Stage>(st))] = engine->has_stage(static_cast<Stage>(st));
+
+  const int total = s.frames;
+  // Engines that step on the host: their steps per process CPU second are a figure too (the
+  // gate's, on a shared machine). A device engine's CPU time would miss its kernels.
+  const bool host_engine = !octocd::engine_info(p.engine, "engines").device;
+  std::vector<std::vector<WindowSums>> sums(s.windows.size());  // [window][rep]
+  const int buckets = s.series_every > 0 ? (total + s.series_every - 1) / s.series_every : 0;
+  std::vector<std::vector<WindowSums>> series(static_cast<std::size_t>(buckets));  // [bucket][rep]
+  std::vector<double> energy_series(static_cast<std::size_t>(buckets), 0.0);
+  std::vector<double> wall;
+  int cut = 0;
+  for (int rep = 0; rep < repeat; ++rep) {
+    if (rep > 0) {
+      engine.reset();  // the last repetition's device memory back first: the memory check sees one engine
+      engine = make_engine(p.engine, model, cuda_settings_from(o.cuda));
+    }
+    std::unique_ptr<TraceWriter> trace;
+    if (rep == 0 && ov.trace && !o.trace_dir.empty()) {
+      fs::create_directories(o.trace_dir);
+      TraceMetadata meta = trace_metadata(*engine, 10);
+      meta.start_time = utc_time_now();
+      const std::string path = (fs::path(o.trace_dir) / (file_safe(p.id) + ".h5")).string();
+      trace = std::make_unique<TraceWriter>(path, meta, trace_bodies(*engine), TraceOptions{});
+      trace->append_state(0, engine->state());
+      r["trace"] = path;
+    }
+    for (auto& w : sums) w.emplace_back();
+    for (auto& b : series) b.emplace_back();
+    const auto t0 = Clock::now();
+    for (int f = 1; f <= total; ++f) {
+      if (octocd::stop_signal() != 0) {
+        if (trace) trace->close();
+        throw BenchStopped{};
+      }
+      // A step of a big scene may take seconds: a signal it does not answer within the
+      // grace ends the bench there (the result file keeps the points finished before).
+      std::optional<octocd::StopWithin> within(
+          std::in_place, fmt::format("bench point {} stepped frame {} of {} (a step longer than the 0.5 s grace); "
+                                     "the result {} keeps the points finished before it (--resume goes on)",
+                                     p.id, f, total, o.output));
+      const double cpu0 = host_engine ? process_cpu_ms() : 0.0;
+      const FrameMetrics& m = engine->step();
+      const double cpu = host_engine ? process_cpu_ms() - cpu0 : 0.0;
+      within.reset();
+      for (std::size_t w = 0; w < s.windows.size(); ++w)
+        if (f >= s.windows[w].first && f <= s.windows[w].last) {
+          sums[w].back().add(m);
+          sums[w].back().cpu_ms += cpu;
+        }
+      if (ov.cut_below > 0.0 && f >= s.windows[0].first) {
+        WindowSums& w0 = sums[0].back();
+        const std::int64_t planned = s.windows[0].last - s.windows[0].first + 1;
+        if (w0.step_ms > 1000.0 * static_cast<double>(planned) / ov.cut_below) {
+          w0.bound_frames = planned;
+          ++cut;
+          break;
+        }
+      }
+      if (buckets > 0) {
+        const auto b = static_cast<std::size_t>((f - 1) / s.series_every);
+        series[b].back().add(m);
+        if (rep == 0) energy_series[b] = m.kinetic_energy;
+      }
+      if (trace) trace->append_frame(m, engine->state(), engine->contacts());
+      if ((f & 15) == 0 || f == total)
+        progress.detail(fmt::format("rep {}/{} frame {}/{}", rep + 1, repeat, f, total));
+    }
+    wall.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+    if (trace) trace->close();
+    if (2 * cut > repeat) break;  // most repetitions below cut_below: the median is, whatever the rest
+  }
+  if (ov.cut_below > 0.0) {
+    r["cut"] = {{"repetitions_run", static_cast<int>(wall.size())},
+                {"repetitions_cut", cut},
+                {"repetitions_planned", repeat},
+                {"note", fmt::format("a repetition is cut once its window's step time exceeds {} frames / {} steps/s: "
+                                     "its steps/s value is then the upper bound frames / step time so far, below {}; "
+                                     "repetitions stop once most were cut",
+                                     s.windows[0].last - s.windows[0].first + 1, ov.cut_below, ov.cut_below)}};
+  }
+
+  auto figures = [&](const std::vector<WindowSums>& reps) {
+    json w;
+    std::vector<double> sps, cpu_sps, step, pairs, cand, boxes, verts, contacts, mem, pen, share, penmax;
+    std::vector<std::vector<double>> stage(kStages);
+    for (const auto& x : reps) {
+      const double n = static_cast<double>(std::max<std::int64_t>(x.frames, 1));
+      const std::int64_t fr = x.bound_frames > 0 ? x.bound_frames : x.frames;
+      sps.push_back(x.step_ms > 0 ? 1000.0 * static_cast<double>(fr) / x.step_ms : 0.0);
+      cpu_sps.push_back(x.cpu_ms > 0 ? 1000.0 * static_cast<double>(x.frames) / x.cpu_ms : 0.0);
+      step.push_back(x.step_ms / n);
+      for (int st = 0; st < kStages; ++st) stage[st].push_back(x.stage_ms[st] / n);
+      pairs.push_back(x.pairs / n);
+      cand.push_back(x.candidates / n);
+      boxes.push_back(x.box_pairs / n);
+      verts.push_back(x.vertex_tests / n);
+      contacts.push_back(x.contacts / n);
+      mem.push_back(x.memory / n);
+      pen.push_back(x.contacts > 0 ? x.pen_weighted / x.contacts : 0.0);
+      share.push_back(x.contacts > 0 ? x.share_weighted / x.contacts : 0.0);
+      penmax.push_back(x.pen_max);
+    }
+    w["frames"] = reps.empty() ? 0 : reps.front().frames;
+    w["steps_per_s"] = spread(sps);
+    if (host_engine && ov.cut_below <= 0.0) w["cpu_steps_per_s"] = spread(cpu_sps);
+    w["step_ms"] = spread(step);
+    for (int st = 0; st < kStages; ++st) w["stage_ms"][stage_name(static_cast<Stage>(st))] = spread(stage[st]);
+    w["pairs"] = spread(pairs);
+    w["cell_candidates"] = spread(cand);
+    w["box_pairs"] = spread(boxes);
+    w["vertex_tests"] = spread(verts);
+    w["contacts"] = spread(contacts);
+    w["memory_bytes"] = spread(mem);
+    w["penetration_mean"] = spread(pen);
+    w["penetration_max"] = spread(penmax);
+    w["penetration_share_above_slop"] = spread(share);
+    return w;
+  };
+  for (std::size_t w = 0; w < s.windows.size(); ++w) {
+    json fw = figures(sums[w]);
+    fw["first"] = s.windows[w].first;
+    fw["last"] = s.windows[w].last;
+    r["windows"][s.windows[w].name] = fw;
+  }
+  if (buckets > 0) {
+    json ser;
+    ser["every"] = s.series_every;
+    for (int b = 0; b < buckets; ++b) {
+      const json f = figures(series[static_cast<std::size_t>(b)]);
+      ser["last_frame"].push_back(std::min(total, (b + 1) * s.series_every));
+      ser["steps_per_s"].push_back(f["steps_per_s"]["median"]);
+      ser["contacts"].push_back(f["contacts"]["median"]);
+      ser["pairs"].push_back(f["pairs"]["median"]);
+      ser["penetration_mean"].push_back(f["penetration_mean"]["median"]);
+      ser["penetration_max"].push_back(f["penetration_max"]["median"]);
+      ser["kinetic_energy"].push_back(energy_series[static_cast<std::size_t>(b)]);
+    }
+    r["series"] = ser;
+  }
+  r["wall_s"] = spread(wall);
+  r["status"] = "ok";
+  return r;
+}
+
+json merge_repetitions(const std::vector<json>& reps) {
+  json out = reps.front();
+  std::function<void(json&, const std::vector<const json*>&)> walk = [&](json& o,
+                                                                        const std::vector<const json*>& all) {
+    if (!o.is_object()) return;
+    if (o.contains("values") && o["values"].is_array() && o.contains("n")) {
+      std::vector<double> v;
+      for (const json* a : all)
+        for (const auto& x : (*a)["values"])
+          v.push_back(x.is_number() ? x.get<double>() : std::numeric_limits<double>::quiet_NaN());
+      o = spread(v);
+      return;
+    }
+    for (auto it = o.begin(); it != o.end(); ++it) {
+      std::vector<const json*> sub;
+      for (const json* a : all)
+        if (a->is_object() && a->contains(it.key())) sub.push_back(&(*a)[it.key()]);
+      if (sub.size() == all.size()) walk(it.value(), sub);
+    }
+  };
+  std::vector<const json*> all;
+  for (const json& r : reps) all.push_back(&r);
+  walk(out, all);
+  if (out.contains("series")) {
+    for (const char* key : {"steps_per_s", "contacts", "pairs", "penetration_mean", "penetration_max"}) {
+      json& col = out["series"][key];
+      for (std::size_t b = 0; b < col.size(); ++b) {
+        std::vector<double> v;
+        for (const json& r : reps) {
+          const json& x = r["series"][key];
+          if (b < x.size() && x[b].is_number()) v.push_back(x[b].get<double>());
+        }
+        if (!v.empty()) col[b] = spread(v)["median"];
+      }
+    }
+  }
+  return out;
+}
+
+json run_broadphase_point(const Sweep& s, const Point& p, InputCache& cache, const BenchOptions& o,
+                          SweepProgress& progress) {
+  json r;
+  r["params"] = {{"broadphase", p.broadphase}, {"engine", p.engine}};
+  if (p.bodies > 0) r["params"]["bodies"] = p.bodies;
+  else r["params"]["scene"] = stem(s.scenes[p.scene]);
+  long limit = -1;
+  for (const std::string& k : {p.engine + ":" + p.broadphase, p.broadphase}) {
+    const auto it = s.max_bodies.find(k);
+    if (it != s.max_bodies.end()) {
+      limit = it->second;
+      break;
+    }
+  }
+  if (p.bodies > 0 && limit >= 0 && p.bodies > limit) {
+    r["status"] = "skipped";
+    r["reason"] = fmt::format("above max_bodies {} for {} on {} (one replay would take minutes)", limit, p.broadphase,
+                              p.engine);
+    return r;
+  }
+  if (cache.key != p.scene) {
+    cache.input.reset();
+    cache.error.clear();
+    cache.key = p.scene;
+    progress.detail("recording the input frames");
+    try {
+      const Scene scene = p.bodies > 0 ? parse_scene(lattice_scene(p.bodies), "", o.data_dir)
+                                       : load_scene(s.scenes[p.scene], o.data_dir);
+      Scene sc = scene;
+      sc.broadphase.name = "octree";
+      cache.input = std::make_unique<ReplayInput>(replay_input_from_scene(sc, s.warmup, s.frames));
+    } catch (const InputError& e) {
+      cache.error = e.what();
+    }
+  }
+  if (!cache.input) {
+    r["status"] = "skipped";
+    r["reason"] = "scene: " + cache.error;
+    return r;
+  }
+  const ReplayInput& in = *cache.input;
+  r["bodies"] = in.model->initial.x.size();
+  if (p.bodies <= 0 && limit >= 0 && static_cast<long>(in.model->initial.x.size()) > limit) {
+    r["status"] = "skipped";
+    r["reason"] = fmt::format("above max_bodies {} for {} on {}", limit, p.broadphase, p.engine);
+    return r;
+  }
+  std::size_t ticks = 0;
+  const std::size_t total = in.x.size() * static_cast<std::size_t>(s.warm_replays + s.repeat);
+  ReplayRun run = replay_broadphase(in, p.engine, p.broadphase, s.repeat, s.warm_replays, s.min_time_ms, [&] {
+    throw_if_stopped();
+    ++ticks;
+    progress.detail(fmt::format("replay {}/{}", ticks, total));
+  });
+  if (!run.ok) {
+    r["status"] = "skipped";
+    r["reason"] = run.reason;
+    return r;
+  }
+  r["device"] = run.device;
+  r["frames"] = in.frames.size();
+  r["ms_per_frame"] = spread(run.ms);
+  r["pairs"] = run.pairs;
+  r["cell_candidates"] = run.candidates;
+  r["matches_recorded"] = run.matches_recorded;
+  r["recorded"] = run.recorded_detail;
+  r["status"] = run.matches_recorded ? "ok" : "failed";
+  if (!run.matches_recorded) r["reason"] = "pairs differ from the recording run's: " + run.recorded_detail;
+  return r;
+}
+}  // namespace octocd::cli::bench

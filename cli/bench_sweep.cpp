@@ -1,0 +1,472 @@
+// A sweep of `octocd bench` (bench_sweep.hpp): the named sweeps (bench/sweeps/*.json, read
+// like any sweep file), parsing and checking a definition, expanding it to points, and the
+// scene text of a point (a steps point, a max-instances count, a broadphase lattice).
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "bench_sweep.hpp"
+#include "octocd/engine_registry.hpp"
+#include "octocd/error.hpp"
+#include "octocd/reference_broadphase.hpp"
+#include "octocd/shared_files.hpp"
+
+namespace octocd::cli::bench {
+
+namespace fs = std::filesystem;
+
+[[noreturn]] void bad(const std::string& origin, const std::string& key, const std::string& problem,
+                      const std::string& allowed) {
+  throw InputError(fmt::format("{}: {}: {}; allowed: {}", origin, key, problem, allowed));
+}
+
+std::string named_sweeps_dir() { return (fs::path(shared_dir()) / "bench" / "sweeps").string(); }
+
+std::vector<std::string> named_sweeps() {
+  std::vector<std::string> names;
+  std::error_code ec;
+  for (fs::directory_iterator it(named_sweeps_dir(), ec), end; !ec && it != end; it.increment(ec))
+    if (it->path().extension() == ".json" && it->is_regular_file(ec)) names.push_back(it->path().stem().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+std::string named_list() {
+  std::string s;
+  for (const auto& n : named_sweeps()) s += (s.empty() ? "" : ", ") + n;
+  return s;
+}
+
+json read_sweep_file(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  try {
+    return json::parse(ss.str());
+  } catch (const json::exception& e) {
+    throw InputError(fmt::format("{}: not JSON ({}); allowed: a sweep file (docs/bench-format.md)", path, e.what()));
+  }
+}
+
+namespace {
+
+int get_int(const json& j, const std::string& key, const std::string& origin, int lo, int hi, int def) {
+  if (!j.contains(key)) return def;
+  const json& v = j.at(key);
+  if (!v.is_number_integer() || v.get<long long>() < lo || v.get<long long>() > hi)
+    bad(origin, key, fmt::format("{} is not an integer in range", v.dump()), fmt::format("an integer in [{}, {}]", lo, hi));
+  return v.get<int>();
+}
+
+std::vector<std::string> string_list(const json& j, const std::string& key, const std::string& origin) {
+  std::vector<std::string> out;
+  if (!j.at(key).is_array() || j.at(key).empty()) bad(origin, key, "not a non-empty array", "an array of strings");
+  for (std::size_t i = 0; i < j.at(key).size(); ++i) {
+    const json& v = j.at(key)[i];
+    if (!v.is_string()) bad(origin, fmt::format("{}[{}]", key, i), v.dump() + " is not a string", "a string");
+    out.push_back(v.get<std::string>());
+  }
+  return out;
+}
+
+/// The scene key a known axis name sets.
+std::string axis_key(const std::string& name) {
+  static const std::map<std::string, std::string> keys{
+      {"midphase", "/midphase/levels"}, {"broadphase", "/broadphase/name"}, {"cell_size", "/broadphase/cell_size"},
+      {"beta", "/response/beta"},       {"delta", "/response/slop"},      {"slop", "/response/slop"},
+      {"alpha", "/response/alpha"},     {"count", "/groups/0/count"},     {"mesh", "/groups/0/shape/mesh"},
+      {"iterations", "/response/iterations"}};
+  const auto it = keys.find(name);
+  return it == keys.end() ? "" : it->second;
+}
+
+std::string resolve_scene(const std::string& entry, const std::string& scene_dir, const std::string& sweep_dir) {
+  const bool bare = entry.find('/') == std::string::npos && fs::path(entry).extension() != ".json";
+  if (bare) return (fs::path(scene_dir) / (entry + ".json")).string();
+  const fs::path p(entry);
+  return p.is_absolute() || sweep_dir.empty() ? entry : (fs::path(sweep_dir) / p).string();
+}
+
+}  // namespace
+
+Sweep parse_sweep(const json& j, const std::string& origin, const std::string& scene_dir, const std::string& sweep_dir) {
+  Sweep s;
+  s.origin = origin;
+  s.definition = j;
+  if (!j.is_object()) bad(origin, "(top level)", "not a JSON object", "an object with name, kind, ...");
+  static const std::set<std::string> common{"name",  "kind",   "description", "engines", "frames",
+                                            "warmup", "repeat", "format",      "version"};
+  static const std::set<std::string> steps{"scenes", "axes", "set", "windows", "series_every"};
+  static const std::set<std::string> bp{"bodies",       "scenes", "broadphases", "max_bodies",
+                                        "warm_replays", "set",    "min_time_ms"};
+  if (!j.contains("name") || !j.at("name").is_string() || j.at("name").get<std::string>().empty())
+    bad(origin, "name", "missing or not a non-empty string", "a non-empty string");
+  s.name = j.at("name");
+  s.kind = j.value("kind", "steps");
+  static const std::set<std::string> mi{"scenes", "set",          "target_steps_per_s", "max_instances",
+                                        "resolution", "paper", "probe_repeat", "search_time_s"};
+  if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances")
+    bad(origin, "kind", "'" + s.kind + "'", "\"steps\", \"broadphase\", \"max-instances\"");
+  const auto& extra = s.kind == "steps" ? steps : s.kind == "broadphase" ? bp : mi;
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    if (!common.count(it.key()) && !extra.count(it.key())) {
+      std::string keys;
+      for (const auto& k : common) keys += (keys.empty() ? "" : ", ") + k;
+      for (const auto& k : extra) keys += ", " + k;
+      bad(origin, it.key(), "unknown key for kind '" + s.kind + "'", keys);
+    }
+  }
+  if (j.contains("format") && j.at("format") != "octocd-sweep")
+    bad(origin, "format", j.at("format").dump(), "\"octocd-sweep\"");
+  if (j.contains("version") && j.at("version") != 1) bad(origin, "version", j.at("version").dump(), "1");
+  s.description = j.value("description", "");
+  s.engines = j.contains("engines") ? string_list(j, "engines", origin) : engine_names();
+  for (std::size_t i = 0; i < s.engines.size(); ++i)
+    if (std::find(engine_names().begin(), engine_names().end(), s.engines[i]) == engine_names().end())
+      bad(origin, fmt::format("engines[{}]", i), "'" + s.engines[i] + "'", "cpu, cuda, bullet");
+  s.repeat = get_int(j, "repeat", origin, 1, 1000, 5);
+  if (j.contains("set")) {
+    if (!j.at("set").is_object()) bad(origin, "set", "not an object", "an object of JSON pointer -> value");
+    s.set = j.at("set");
+    for (auto it = s.set.begin(); it != s.set.end(); ++it)
+      if (it.key().empty() || it.key()[0] != '/')
+        bad(origin, "set." + it.key(), "not a JSON pointer", "keys like \"/response/beta\"");
+  }
+  if (s.kind == "max-instances") {
+    s.frames = get_int(j, "frames", origin, 1, 100000000, 300);
+    s.warmup = get_int(j, "warmup", origin, 0, 100000000, 300);
+    s.probe_repeat = get_int(j, "probe_repeat", origin, 1, 1000, 1);
+    s.search_time_s = get_int(j, "search_time_s", origin, 0, 100000000, 0);
+    if (s.probe_repeat > s.repeat)
+      bad(origin, "probe_repeat", fmt::format("{} is above repeat ({})", s.probe_repeat, s.repeat),
+          "an integer in [1, repeat]");
+    if (j.contains("target_steps_per_s")) {
+      const json& v = j.at("target_steps_per_s");
+      if (!v.is_number() || !(v.get<double>() > 0.0) || !(v.get<double>() <= 1e9))
+        bad(origin, "target_steps_per_s", v.dump() + " is out of range", "a number in (0, 1e9] (steps/s)");
+      s.target = v.get<double>();
+    }
+    if (j.contains("max_instances")) {
+      const json& v = j.at("max_instances");
+      if (!v.is_number_integer() || v.get<long long>() < 1 || v.get<long long>() > kMaxInstancesCap)
+        bad(origin, "max_instances", v.dump() + " is out of range", fmt::format("an integer in [1, {}]", kMaxInstancesCap));
+      s.max_instances = v.get<long>();
+    }
+    if (j.contains("resolution")) {
+      const json& v = j.at("resolution");
+      if (!v.is_number() || !(v.get<double>() >= 0.0) || !(v.get<double>() < 1.0))
+        bad(origin, "resolution", v.dump() + " is out of range",
+            "a number in [0, 1): bisection stops at hi - lo <= max(1, resolution x lo); 0 = an integer bracket");
+      s.resolution = v.get<double>();
+    }
+    if (j.contains("paper")) {
+      if (!j.at("paper").is_object()) bad(origin, "paper", "not an object", "{\"SCENE\": {\"count\": N, \"source\": \"...\"}}");
+      s.paper = j.at("paper");
+    }
+    if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files (one model each)");
+    for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
+    s.windows.push_back(Window{"settled", s.warmup + 1, s.warmup + s.frames});
+    s.frames = s.warmup + s.frames;  // steps to run
+  } else if (s.kind == "steps") {
+    s.frames = get_int(j, "frames", origin, 1, 100000000, 300);
+    s.warmup = get_int(j, "warmup", origin, 0, 100000000, 30);
+    s.series_every = get_int(j, "series_every", origin, 0, 100000000, 0);
+    if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
+    for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
+    if (j.contains("axes")) {
+      if (!j.at("axes").is_array()) bad(origin, "axes", "not an array", "an array of {name, key?, values, labels?}");
+      for (std::size_t i = 0; i < j.at("axes").size(); ++i) {
+        const json& a = j.at("axes")[i];
+        const std::string k = fmt::format("axes[{}]", i);
+        if (!a.is_object()) bad(origin, k, "not an object", "{name, key?, values, labels?}");
+        for (auto it = a.begin(); it != a.end(); ++it)
+          if (it.key() != "name" && it.key() != "key" && it.key() != "values" && it.key() != "labels")
+            bad(origin, k + "." + it.key(), "unknown key", "name, key, values, labels");
+        Axis ax;
+        if (!a.contains("name") || !a.at("name").is_string()) bad(origin, k + ".name", "missing", "a string");
+        ax.name = a.at("name");
+        ax.key = a.contains("key") ? a.at("key").get<std::string>() : axis_key(ax.name);
+        if (ax.key.empty() || ax.key[0] != '/')
+          bad(origin, k + ".key", "missing for axis '" + ax.name + "'",
+              "a JSON pointer into the scene, or an axis name among midphase, broadphase, cell_size, beta, delta, "
+              "slop, alpha, iterations, count, mesh");
+        if (!a.contains("values") || !a.at("values").is_array() || a.at("values").empty())
+          bad(origin, k + ".values", "missing or empty", "a non-empty array");
+        for (const auto& v : a.at("values")) ax.values.push_back(v);
+        ax.labels.assign(ax.values.size(), "");
+        if (a.contains("labels")) {
+          const auto labels = string_list(a, "labels", origin + ": " + k);
+          if (labels.size() != ax.values.size())
+            bad(origin, k + ".labels", fmt::format("{} labels for {} values", labels.size(), ax.values.size()),
+                "one label per value");
+          ax.labels = labels;
+        }
+        s.axes.push_back(std::move(ax));
+      }
+    }
+    if (j.contains("windows")) {
+      if (!j.at("windows").is_array() || j.at("windows").empty())
+        bad(origin, "windows", "not a non-empty array", "an array of {name, first, last}");
+      int last = 0;
+      for (std::size_t i = 0; i < j.at("windows").size(); ++i) {
+        const json& w = j.at("windows")[i];
+        const std::string k = fmt::format("windows[{}]", i);
+        if (!w.is_object() || !w.contains("name") || !w.at("name").is_string())
+          bad(origin, k, "not an object with a name", "{name, first, last}");
+        Window win;
+        win.name = w.at("name");
+        win.first = get_int(w, "first", origin + ": " + k, 1, 100000000, 1);
+        win.last = get_int(w, "last", origin + ": " + k, win.first, 100000000, win.first);
+        last = std::max(last, win.last);
+        s.windows.push_back(win);
+      }
+      s.frames = last;
+      s.warmup = 0;
+    } else {
+      s.windows.push_back(Window{"all", s.warmup + 1, s.warmup + s.frames});
+      s.frames = s.warmup + s.frames;  // steps to run
+    }
+  } else {
+    s.frames = get_int(j, "frames", origin, 1, 100000, 5);
+    s.warmup = get_int(j, "warmup", origin, 0, 100000, 10);
+    s.warm_replays = get_int(j, "warm_replays", origin, 0, 1000, 1);
+    s.min_time_ms = get_int(j, "min_time_ms", origin, 0, 600000, 50);
+    const bool has_bodies = j.contains("bodies"), has_scenes = j.contains("scenes");
+    if (has_bodies == has_scenes) bad(origin, "bodies", "give exactly one of bodies and scenes", "bodies or scenes");
+    if (has_bodies) {
+      if (!j.at("bodies").is_array() || j.at("bodies").empty())
+        bad(origin, "bodies", "not a non-empty array", "an array of integers in [2, 16777216]");
+      for (std::size_t i = 0; i < j.at("bodies").size(); ++i) {
+        const json& v = j.at("bodies")[i];
+        if (!v.is_number_integer() || v.get<long>() < 2 || v.get<long>() > 16777216)
+          bad(origin, fmt::format("bodies[{}]", i), v.dump(), "an integer in [2, 16777216]");
+        s.bodies.push_back(v.get<long>());
+      }
+    } else {
+      for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
+    }
+    const auto known = any_engine_broadphase_names();
+    if (j.contains("broadphases")) {
+      s.broadphases = string_list(j, "broadphases", origin);
+      for (std::size_t i = 0; i < s.broadphases.size(); ++i)
+        if (std::find(known.begin(), known.end(), s.broadphases[i]) == known.end()) {
+          std::string names;
+          for (const auto& n : known) names += (names.empty() ? "" : ", ") + n;
+          bad(origin, fmt::format("broadphases[{}]", i), "'" + s.broadphases[i] + "'", names);
+        }
+    } else {
+      s.broadphases = known;
+    }
+    if (j.contains("max_bodies")) {
+      if (!j.at("max_bodies").is_object()) bad(origin, "max_bodies", "not an object", "{\"NAME\" or \"ENGINE:NAME\": N}");
+      for (auto it = j.at("max_bodies").begin(); it != j.at("max_bodies").end(); ++it) {
+        if (!it.value().is_number_integer() || it.value().get<long>() < 0)
+          bad(origin, "max_bodies." + it.key(), it.value().dump(), "an integer >= 0");
+        s.max_bodies[it.key()] = it.value().get<long>();
+      }
+    }
+  }
+  return s;
+}
+
+std::string stem(const std::string& path) { return fs::path(path).stem().string(); }
+
+std::string value_text(const json& v) { return v.is_string() ? v.get<std::string>() : v.dump(); }
+
+std::vector<Point> expand(const Sweep& s) {
+  if (s.kind == "max-instances") {
+    // Its probes are found while it runs (run_max_instances); the scenes must still be
+    // distinct models (a probe's id names its scene by the file stem).
+    std::set<std::string> stems;
+    for (std::size_t i = 0; i < s.scenes.size(); ++i)
+      if (!stems.insert(stem(s.scenes[i])).second)
+        bad(s.origin, fmt::format("scenes[{}]", i), "listed twice ('" + stem(s.scenes[i]) + "')",
+            "each scene (file name) once");
+    return {};
+  }
+  {
+    // Count first (saturating), so a sweep of 10^9 points is refused without allocating.
+    std::size_t n = std::max<std::size_t>(s.engines.size(), 1);
+    const auto times = [&](std::size_t k) { n = (k != 0 && n > kMaxPoints / k) ? kMaxPoints + 1 : n * k; };
+    if (s.kind == "steps") {
+      times(s.scenes.size());
+      for (const auto& a : s.axes) times(a.values.size());
+    } else {
+      times(s.bodies.empty() ? s.scenes.size() : s.bodies.size());
+      times(s.broadphases.size());
+    }
+    if (n > kMaxPoints)
+      bad(s.origin, s.kind == "steps" ? "axes" : "bodies",
+          fmt::format("the sweep expands to {} points", n > kMaxPoints ? fmt::format("more than {}", kMaxPoints)
+                                                                        : std::to_string(n)),
+          fmt::format("at most {} points (scenes x axis values x engines)", kMaxPoints));
+  }
+  // Point ids name the scene by its file stem: a scene listed twice would give two points
+  // one id (and --resume would take one for the other).
+  std::set<std::string> stems;
+  for (std::size_t i = 0; i < s.scenes.size(); ++i)
+    if (!stems.insert(stem(s.scenes[i])).second)
+      bad(s.origin, fmt::format("scenes[{}]", i), "listed twice ('" + stem(s.scenes[i]) + "')",
+          "each scene (file name) once");
+  std::vector<Point> pts;
+  if (s.kind == "steps") {
+    std::size_t combos = 1;
+    for (const auto& a : s.axes) combos *= a.values.size();
+    for (std::size_t sc = 0; sc < s.scenes.size(); ++sc) {
+      for (std::size_t c = 0; c < combos; ++c) {
+        std::vector<std::size_t> idx(s.axes.size(), 0);
+        std::size_t rest = c;  // last axis fastest
+        for (std::size_t a = s.axes.size(); a-- > 0;) {
+          idx[a] = rest % s.axes[a].values.size();
+          rest /= s.axes[a].values.size();
+        }
+        for (const auto& e : s.engines) {
+          Point p;
+          p.index = static_cast<int>(pts.size());
+          p.engine = e;
+          p.scene = sc;
+          p.value = idx;
+          p.id = stem(s.scenes[sc]);
+          for (std::size_t a = 0; a < s.axes.size(); ++a)
+            p.id += " | " + s.axes[a].name + "=" + value_text(s.axes[a].values[idx[a]]);
+          p.id += " | " + e;
+          pts.push_back(p);
+        }
+      }
+    }
+  } else {
+    const std::size_t sizes = s.bodies.empty() ? s.scenes.size() : s.bodies.size();
+    for (std::size_t k = 0; k < sizes; ++k)
+      for (const auto& bp : s.broadphases)
+        for (const auto& e : s.engines) {
+          Point p;
+          p.index = static_cast<int>(pts.size());
+          p.engine = e;
+          p.broadphase = bp;
+          p.scene = k;
+          p.bodies = s.bodies.empty() ? -1 : s.bodies[k];
+          p.id = (s.bodies.empty() ? stem(s.scenes[k]) : fmt::format("bodies={}", s.bodies[k])) + " | " + bp + " | " + e;
+          pts.push_back(p);
+        }
+  }
+  return pts;
+}
+
+std::string scene_text(const Sweep& s, const Point& p, std::vector<std::string>* added) {
+  const std::string& file = s.scenes[p.scene];
+  std::ifstream in(file);
+  if (!in) bad(s.origin, "scenes", "cannot read scene file '" + file + "'",
+               "a scene name under the scene folder (--scene-dir) or a readable file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  json j;
+  try {
+    j = json::parse(ss.str());
+  } catch (const json::exception& e) {
+    throw InputError(fmt::format("{}: not JSON ({}); allowed: a scene file (docs/scenes.md)", file, e.what()));
+  }
+  auto put = [&](const std::string& key, const json& v, const std::string& what) {
+    try {
+      const json::json_pointer ptr(key);
+      if (added && !j.contains(ptr)) added->push_back(what + " (" + key + ")");
+      j[ptr] = v;
+    } catch (const json::exception& e) {
+      bad(s.origin, what, "cannot set " + key + " in " + file + " (" + e.what() + ")", "a JSON pointer into the scene");
+    }
+  };
+  for (auto it = s.set.begin(); it != s.set.end(); ++it) put(it.key(), it.value(), "set." + it.key());
+  for (std::size_t a = 0; a < s.axes.size(); ++a)
+    put(s.axes[a].key, s.axes[a].values[p.value[a]], fmt::format("axes[{}]", a));
+  return j.dump(2);
+}
+
+std::string instance_scene(const Sweep& s, std::size_t sc, long n, json* layout_out) {
+  Point p;
+  p.scene = sc;
+  json j = json::parse(scene_text(s, p));
+  const std::string& file = s.scenes[sc];
+  const auto refuse = [&](const std::string& key, const std::string& problem) {
+    throw InputError(fmt::format("{}: {}: {} (sweep {}, kind max-instances); allowed: a scene of one group with a "
+                                 "grid layout (min, max, spacing > 0) inside a domain (min, max), like "
+                                 "datasets/scenes/bunny-random-400.json",
+                                 file, key, problem, s.origin));
+  };
+  if (!j.contains("groups") || !j["groups"].is_array() || j["groups"].size() != 1)
+    refuse("groups", "not exactly one group");
+  json& g = j["groups"][0];
+  if (!g.contains("layout") || !g["layout"].is_object() || g["layout"].value("type", "") != "grid")
+    refuse("groups[0].layout.type", "not \"grid\"");
+  json& l = g["layout"];
+  const auto vec3 = [&](const json& o, const char* k, const std::string& key) {
+    if (!o.contains(k) || !o[k].is_array() || o[k].size() != 3 || !o[k][0].is_number() || !o[k][1].is_number() ||
+        !o[k][2].is_number())
+      refuse(key, "missing or not 3 numbers");
+    return std::array<double, 3>{o[k][0].get<double>(), o[k][1].get<double>(), o[k][2].get<double>()};
+  };
+  if (!l.contains("spacing") || !l["spacing"].is_number() || !(l["spacing"].get<double>() > 0.0))
+    refuse("groups[0].layout.spacing", "missing or not > 0");
+  if (!j.contains("domain") || !j["domain"].is_object()) refuse("domain", "missing");
+  const auto lmin = vec3(l, "min", "groups[0].layout.min"), lmax = vec3(l, "max", "groups[0].layout.max");
+  const auto dmin = vec3(j["domain"], "min", "domain.min"), dmax = vec3(j["domain"], "max", "domain.max");
+  const double spacing = l["spacing"].get<double>();
+  long k = 1;
+  while (k * k * k < n) ++k;
+  const double half = 0.5 * spacing * static_cast<double>(k - 1);
+  // Rounded to 1e-9 m, so 0.15 x 7 is written 1.05 (as the scene files have it), not 1.0500000000000003.
+  const auto round9 = [](double v) { return std::round(v * 1e9) / 1e9; };
+  json nlmin = json::array(), nlmax = json::array(), ndmin = json::array(), ndmax = json::array();
+  for (int a = 0; a < 3; ++a) {
+    const double c = 0.5 * (lmin[a] + lmax[a]);
+    nlmin.push_back(round9(c - half));
+    nlmax.push_back(round9(c + half));
+    ndmin.push_back(round9(c - half - (lmin[a] - dmin[a])));
+    ndmax.push_back(round9(c + half + (dmax[a] - lmax[a])));
+  }
+  l["min"] = nlmin;
+  l["max"] = nlmax;
+  j["domain"]["min"] = ndmin;
+  j["domain"]["max"] = ndmax;
+  g["count"] = n;
+  std::string name = j.value("name", stem(file));
+  const auto dash = name.find_last_of('-');
+  if (dash != std::string::npos && dash + 1 < name.size() &&
+      name.find_first_not_of("0123456789", dash + 1) == std::string::npos)
+    name.erase(dash);
+  j["name"] = fmt::format("{}-{}", name, n);
+  j["description"] = fmt::format("{} Grown to {} instances on {}^3 grid slots by octocd bench (kind max-instances).",
+                                 j.value("description", ""), n, k);
+  if (layout_out) *layout_out = {{"domain", j["domain"]}, {"layout", l}, {"slots_per_side", k}, {"count", n}};
+  return j.dump(2);
+}
+
+std::string lattice_scene(long n) {
+  long k = 1;
+  while (k * k * k < n) ++k;
+  const double half = 0.5 * 0.145 * static_cast<double>(k - 1);
+  json j{{"name", fmt::format("boxes-lattice-{}", n)},
+         {"description", "box lattice for the broadphase-scaling sweep (octocd bench)"},
+         {"domain", {{"min", {-half - 0.1, -half - 0.1, -half - 0.1}}, {"max", {half + 0.1, half + 0.1, half + 0.1}}}},
+         {"gravity", {0.0, 0.0, 0.0}},
+         {"dt", 0.001},
+         {"frames", 1000},
+         {"walls", "closed-box"},
+         {"broadphase", {{"name", "octree"}, {"depth", "auto"}}},
+         {"midphase", {{"levels", "aabb-only"}}},
+         {"groups",
+          {{{"name", "boxes"},
+            {"shape", {{"box", {0.05, 0.05, 0.05}}}},
+            {"count", n},
+            {"mass", 1.0},
+            {"layout",
+             {{"type", "grid"}, {"min", {-half, -half, -half}}, {"max", {half, half, half}}, {"spacing", 0.145},
+              {"jitter", 0.02}, {"seed", 11}}},
+            {"velocity", {{"type", "random"}, {"max", 1.0}, {"seed", 12}}}}}}};
+  return j.dump(2);
+}
+}  // namespace octocd::cli::bench

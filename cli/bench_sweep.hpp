@@ -1,0 +1,292 @@
+#pragma once
+/// \file bench_sweep.hpp
+/// What the files of `octocd bench` share (not a public header):
+///   cli/bench.cpp               the command: options, overrides, the loop over points
+///   cli/bench_sweep.cpp         a sweep's definition: the named sweeps (bench/sweeps/*.json),
+///                               parsing and checking, its points, the scene text of a point
+///   cli/bench_points.cpp        running a steps point or a broadphase point
+///   cli/bench_max_instances.cpp the max-instances search (doubling, bisection, confirmation)
+///   cli/bench_result.cpp        the result file: its header, resuming, timing hygiene
+/// Sweep and result formats: docs/bench-format.md.
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <functional>
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "octocd/engine.hpp"
+#include "octocd/world.hpp"
+#include "tools.hpp"
+
+namespace octocd::cli::bench {
+
+using json = nlohmann::json;
+using Clock = std::chrono::steady_clock;
+constexpr int kStages = static_cast<int>(Stage::Count);
+
+// ---- sweep definition (bench_sweep.cpp) -----------------------------------------------------
+
+/// One axis of a steps sweep: a scene key and the values it takes.
+struct Axis {
+  std::string name;
+  std::string key;                  ///< JSON pointer into the scene
+  std::vector<json> values;
+  std::vector<std::string> labels;  ///< same size as values ("" when none)
+};
+
+/// A range of frames whose figures are reported together (1-based, inclusive).
+struct Window {
+  std::string name;
+  int first = 1, last = 1;
+};
+
+/// A parsed, checked sweep (docs/bench-format.md), with the command line's overrides
+/// applied by bench_command.
+struct Sweep {
+  std::string name, kind, description, origin;
+  json definition;
+  std::vector<std::string> scenes;  ///< resolved files
+  std::vector<std::string> engines;
+  std::vector<Axis> axes;
+  json set = json::object();
+  int frames = 300, warmup = 30, repeat = 3, series_every = 0, warm_replays = 1;
+  double min_time_ms = 50.0;
+  std::vector<Window> windows;
+  std::vector<long> bodies;
+  std::vector<std::string> broadphases;
+  std::map<std::string, long> max_bodies;
+  // max-instances
+  double target = 30.0;             ///< steps/s a count must reach
+  long max_instances = 1048576;     ///< the search's cap
+  double resolution = 0.0;          ///< bisection stops at hi - lo <= max(1, resolution * lo)
+  int probe_repeat = 1;             ///< repetitions of a probe (the bracket's ends get `repeat`)
+  int search_time_s = 0;            ///< > 0: no new count is measured once a search has run this long
+  json paper = json::object();      ///< scene stem -> {"count", "source"}
+};
+
+/// The largest instance count a max-instances sweep may search to (the scene format's body
+/// limit is far above; the CUDA engine's kCudaMaxBodies is 16,777,216).
+constexpr long kMaxInstancesCap = 16777216;
+
+/// The most points a sweep may expand to (docs/bench-format.md): a larger one is refused
+/// before anything runs.
+constexpr std::size_t kMaxPoints = 100000;
+
+/// Throws InputError "<origin>: <key>: <problem>; allowed: <allowed>".
+[[noreturn]] void bad(const std::string& origin, const std::string& key, const std::string& problem,
+                      const std::string& allowed);
+
+/// The folder of the named sweeps: bench/sweeps/ of octocd's shipped files (shared_dir()).
+std::string named_sweeps_dir();
+
+/// The named sweeps: the stems of the *.json files of named_sweeps_dir(), sorted; empty
+/// when the folder is missing.
+std::vector<std::string> named_sweeps();
+
+/// named_sweeps() joined by ", ", for help texts and messages.
+std::string named_list();
+
+/// The JSON of a sweep file, named or given on the command line. Throws InputError
+/// "<path>: not JSON (...); allowed: a sweep file (docs/bench-format.md)".
+json read_sweep_file(const std::string& path);
+
+/// Checks sweep definition `j` and resolves its scenes: a bare name is
+/// `scene_dir`/NAME.json, a relative path is relative to `sweep_dir` (the sweep file's
+/// folder; "" for named sweeps). Throws InputError naming `origin`, the key and the
+/// allowed values.
+Sweep parse_sweep(const json& j, const std::string& origin, const std::string& scene_dir,
+                  const std::string& sweep_dir);
+
+// ---- points (bench_sweep.cpp) --------------------------------------------------------------
+
+/// One measurement of a sweep: a scene (or body count) x axis values (or broadphase) x engine.
+struct Point {
+  int index = 0;
+  std::string id;
+  std::string engine;
+  std::size_t scene = 0;           ///< steps: index into Sweep::scenes
+  std::vector<std::size_t> value;  ///< steps: value index per axis
+  long bodies = 0;                 ///< broadphase: body count (bodies) or -1 (scenes)
+  std::string broadphase;          ///< broadphase kind
+};
+
+/// The file name of `path` without its folder and extension.
+std::string stem(const std::string& path);
+
+/// A JSON value as text: a string as it is, anything else as JSON.
+std::string value_text(const json& v);
+
+/// The points of a steps or broadphase sweep in index order (scene-major, last axis
+/// fastest, engine innermost); none for max-instances (its probes are found while it runs).
+/// Throws InputError for more than kMaxPoints points or a scene listed twice.
+std::vector<Point> expand(const Sweep& s);
+
+/// The scene text of a steps point: the scene file with the sweep's `set` and the point's
+/// axis values written at their JSON pointers. `added` (optional) receives the keys that
+/// the scene file did not have.
+std::string scene_text(const Sweep& s, const Point& p, std::vector<std::string>* added = nullptr);
+
+/// The max-instances scene of `n` instances built from scene `sc` of the sweep (its
+/// template, with the sweep's `set`): one group with a grid layout; its count becomes `n`
+/// and its grid a cube of k = ceil(cbrt(n)) slots a side at the template's spacing, around
+/// the template grid's centre, the domain keeping the template's margin around the grid
+/// on every side. For the template's own count this gives the template's grid and domain
+/// when the template is such a cube (the paper's random scenes are: 400 -> 8^3, 250 -> 7^3,
+/// 60 -> 4^3 slots). `layout_out` (optional) receives the grown domain and layout. Throws
+/// InputError naming the scene file and key when the template is not of that form.
+std::string instance_scene(const Sweep& s, std::size_t sc, long n, json* layout_out = nullptr);
+
+/// A box lattice of `n` bodies at the density of boxes-random-10000 (0.1 m boxes,
+/// spacing 0.145 m, 2 cm jitter, random velocities up to 1 m/s, closed box, no gravity).
+std::string lattice_scene(long n);
+
+// ---- running points (bench_points.cpp) -------------------------------------------------------
+
+/// Progress on stderr: a redrawn bar on a terminal, one line per finished point always
+/// (unless disabled by --quiet).
+class SweepProgress {
+ public:
+  SweepProgress(std::size_t total, bool enabled) : total_(total), enabled_(enabled), tty_(isatty(fileno(stderr)) != 0) {}
+  void start(std::size_t done, const std::string& label) {
+    done_ = done;
+    label_ = label;
+    detail_.clear();
+    draw(true);
+  }
+  void detail(const std::string& d) {
+    detail_ = d;
+    draw(false);
+  }
+  void finish(const std::string& status) {
+    if (!enabled_) return;
+    if (tty_) std::fprintf(stderr, "\r\033[K");
+    std::fprintf(stderr, "[%zu/%zu] %s: %s\n", done_ + 1, total_, label_.c_str(), status.c_str());
+    std::fflush(stderr);
+  }
+
+ private:
+  void draw(bool force) {
+    if (!enabled_ || !tty_) return;
+    const auto now = Clock::now();
+    if (!force && now - last_ < std::chrono::milliseconds(100)) return;
+    last_ = now;
+    constexpr int kWidth = 24;
+    const int filled = static_cast<int>(kWidth * done_ / std::max<std::size_t>(total_, 1));
+    std::fprintf(stderr, "\r\033[K[%s%s] %zu/%zu  %s  %s", std::string(static_cast<std::size_t>(filled), '#').c_str(),
+                 std::string(static_cast<std::size_t>(kWidth - filled), ' ').c_str(), done_, total_, label_.c_str(),
+                 detail_.c_str());
+    std::fflush(stderr);
+  }
+  std::size_t total_, done_ = 0;
+  bool enabled_, tty_;
+  std::string label_, detail_;
+  Clock::time_point last_{};
+};
+
+/// Thrown between two frames (or replays) once SIGINT or SIGTERM arrived: the point is
+/// abandoned, the finished ones are kept (octocd/stop.hpp).
+struct BenchStopped {};
+
+/// The model of the last scene text built, reused while the text stays the same.
+struct ModelCache {
+  std::string text;
+  std::shared_ptr<const Model> model;
+  /// The model of scene text `t` (parse_scene with `origin` and `data_dir`); InputError as
+  /// parse_scene.
+  std::shared_ptr<const Model> get(const std::string& t, const std::string& origin, const std::string& data_dir);
+};
+
+/// The recorded broadphase input of the last scene (or body count) replayed.
+struct InputCache {
+  std::size_t key = static_cast<std::size_t>(-1);
+  std::unique_ptr<ReplayInput> input;
+  std::string error;
+};
+
+/// What a max-instances probe changes in run_steps_point.
+struct StepsOverride {
+  const std::string* text = nullptr;  ///< the scene text instead of scene_text(s, p)
+  int repeat = 0;                     ///< > 0: repetitions instead of s.repeat
+  /// > 0: a repetition is cut once its first window's step time exceeds frames / cut_below
+  /// seconds (its steps/s can then only end below cut_below: the stored value is that upper
+  /// bound), and no more repetitions run once most of them were cut (the median is below).
+  double cut_below = 0.0;
+  bool trace = true;  ///< false: no trace even with --trace-dir (a later round-robin repetition)
+};
+
+/// Runs steps point `p` (its repetitions, windows, series; a trace with --trace-dir) and
+/// returns its result object (docs/bench-format.md), status ok or skipped with the reason.
+/// Throws BenchStopped on a signal, InputError when the sweep's pointer is wrong.
+json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const BenchOptions& o,
+                     SweepProgress& progress, const StepsOverride& ov = {});
+
+/// The results of one-repetition runs of one steps point (round-robin, in the order run)
+/// as one result: every spread (an object with "values") over all the repetitions, the
+/// series' per-block figures the median over the repetitions (kinetic energy, the trace and
+/// every other field as the first repetition has them).
+json merge_repetitions(const std::vector<json>& reps);
+
+/// Runs broadphase point `p`: records the input frames once per scene (or body count),
+/// replays them through the point's broadphase and engine; status ok, skipped (above
+/// max_bodies, the engine lacks it) or failed (pairs differ from the recording run's).
+json run_broadphase_point(const Sweep& s, const Point& p, InputCache& cache, const BenchOptions& o,
+                          SweepProgress& progress);
+
+// ---- max-instances (bench_max_instances.cpp) --------------------------------------------------
+
+/// Everything a max-instances search shares with bench_command.
+struct MaxInstancesRun {
+  const Sweep& s;
+  const BenchOptions& o;
+  json& result;
+  std::map<std::string, json>& kept;  ///< resumed points by id
+  std::set<std::string> visited;      ///< kept points met again
+  ModelCache models;
+  SweepProgress& progress;
+  std::function<void()> write;
+  int next_index = 0;
+  bool any_failed = false;
+};
+
+/// One (model, engine) search: doubling + bisection on probes of probe_repeat repetitions,
+/// then the bracket's ends measured again with `repeat` repetitions (their median
+/// decides); while that changes the bracket, the search goes on from the new decisions.
+/// Every probe is appended to run.result["points"] and the file rewritten. Returns the
+/// summary stored in result["searches"]; throws BenchStopped on a signal.
+json search_max_instances(MaxInstancesRun& run, std::size_t sc, const std::string& engine, std::size_t search);
+
+// ---- the result file (bench_result.cpp) -----------------------------------------------------
+
+/// The result's "settings": engines, repeat, frames, warmup, shard, and the kind's own
+/// (warm_replays and min_time_ms; the max-instances search's target, cap and window).
+json result_settings(const Sweep& s, int shard, int shards);
+
+/// A new result document (format octocd-bench version 1) of sweep `s` with definition
+/// `def`: machine, build, start time, no points yet.
+json new_result(const Sweep& s, const std::string& origin, const json& def, const json& settings,
+                std::size_t points_total);
+
+/// When `o.output` exists: with --resume, checks it is a result of the same definition,
+/// settings and machine and returns its finished (ok or skipped) points by id, keeping its
+/// start time in `result`; without --resume, InputError. Returns {} when there is no file.
+/// Throws InputError naming the file and key for anything else.
+std::map<std::string, json> resumed_points(const BenchOptions& o, const Sweep& s, const std::string& origin,
+                                           const json& def, const std::vector<Point>& points, json& result);
+
+/// Records result["hygiene"] (threads, OpenMP threads, load average, warnings) and prints
+/// its warnings: a loaded machine or oversubscribed threads make timings noisy.
+void record_hygiene(json& result, const Sweep& s, bool quiet);
+
+}  // namespace octocd::cli::bench
