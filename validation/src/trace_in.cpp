@@ -684,11 +684,6 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
                                                       std::int64_t max_frames, ExternalTraceInfo* info) {
   if (every < 1) throw InputError(fmt::format("--every: {}; allowed: >= 1", every));
   const ExternalTraceInfo checked = check_external_trace(path);
-  if (static_cast<std::uint64_t>(checked.bodies) > trace_limits::kMaxJudgedBodies)
-    throw InputError(fmt::format("{}: /bodies/local_aabb_min: {} bodies; allowed: at most {} bodies to judge (the flat "
-                                 "oracle tests every pair of bodies each frame: O(n^2)); --check-only checks traces of "
-                                 "up to {} bodies",
-                                 path, checked.bodies, trace_limits::kMaxJudgedBodies, trace_limits::kMaxBodies));
   TraceIn in(path);
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;
