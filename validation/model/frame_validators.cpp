@@ -177,7 +177,9 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   const Scene& scene = model.scene;
   s.params = scene.response;
   // `flat`'s pair set without its n(n-1)/2 tests (octocd/exact_pairs.hpp).
-  s.flat = make_exact_pairs_broadphase();
+  ExactPairsSettings pair_threads;
+  pair_threads.threads = options.threads;
+  s.flat = make_exact_pairs_broadphase(pair_threads);
   for (auto& bp : broadphases) s.broadphases.push_back(std::move(bp));
   // The paper's configurations A, B, C and the scene's own (SPEC 5.2).
   for (const char* text : {"2", "1,2", "0,1,2"}) s.configs.push_back(MidphaseConfig::parse(text));
@@ -192,6 +194,7 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   s.physics = std::make_unique<PhysicsValidators>(model, bodies, options.tol, s.source.label);
   s.applied = std::make_unique<AppliedStateJudge>(model, options.tol);
   s.physics->set_stop(options.stop);
+  s.physics->set_threads(options.threads);
   s.applied->set_stop(options.stop);
 }
 

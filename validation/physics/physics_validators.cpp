@@ -284,6 +284,7 @@ struct PhysicsValidators::Impl {
   std::uint64_t pen_pairs = 0, pen_upper_pairs = 0;
   std::int64_t last_frame = 0;
   std::function<bool()> stop;  // polled inside the long loops (set_stop)
+  int threads = 0;              // set_threads (0: the hardware's)
   // Each row's own time (s): RowClock around its work; shared work goes to the first row
   // that needs it (the candidates and FCL truth of every pair: broadphase-completeness).
   double t_broad = 0, t_complete = 0, t_geometry = 0, t_pen = 0, t_friction = 0, t_conservation = 0;
@@ -419,6 +420,8 @@ PhysicsValidators::~PhysicsValidators() = default;
 
 void PhysicsValidators::set_stop(std::function<bool()> stop) { impl_->stop = std::move(stop); }
 
+void PhysicsValidators::set_threads(int threads) { impl_->threads = threads; }
+
 void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   Impl& s = *impl_;
   const std::size_t n = s.model->bodies.size();
@@ -455,7 +458,9 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   for (std::size_t i = 0; i < n; ++i)
     grown[i] = expanded(ref->world_aabb(static_cast<std::uint32_t>(i), det[i]), static_cast<float>(0.5 * reach));
   std::vector<Pair> cand;
-  exact_pairs(grown, cand);
+  ExactPairsSettings pair_threads;
+  pair_threads.threads = threads;
+  exact_pairs(grown, cand, pair_threads);
   cand.erase(std::remove_if(cand.begin(), cand.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }),
              cand.end());
 
@@ -519,13 +524,13 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   for (const PairRows& r : rows) contact_pairs.push_back(r.p);
   std::sort(contact_pairs.begin(), contact_pairs.end());
 
-  // The truth the rows below read, on OpenMP's threads (parallel_items): every candidate
+  // The truth the rows below read, on `threads` threads (parallel_items): every candidate
   // that intersects (or, with a broadphase margin, every candidate) and every contact
   // pair; the rows then read it in their own order, so their verdicts, causes and
   // examples are those of a serial run.
   std::vector<char> hit(cand.size(), 1);
   if (!need_distance)
-    parallel_items(cand.size(), stop, [&](std::size_t i) {
+    parallel_items(cand.size(), threads, stop, [&](std::size_t i, unsigned) {
       hit[i] = ref->intersect(cand[i].a, cand[i].b, det[cand[i].a], det[cand[i].b]) ? 1 : 0;
     });
   {
@@ -536,7 +541,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
     std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
     all.erase(std::unique(all.begin(), all.end()), all.end());
     std::vector<Truth> computed(all.size());
-    parallel_items(all.size(), stop, [&](std::size_t i) { compute_truth(all[i], computed[i]); });
+    parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned) { compute_truth(all[i], computed[i]); });
     for (std::size_t i = 0; i < all.size(); ++i) truth.emplace_hint(truth.end(), key(all[i]), std::move(computed[i]));
   }
   std::vector<Pair> required;
@@ -573,7 +578,7 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
       // Set equality with `flat` on the engine's own world AABBs, static-static dropped:
       // flat's set through exact_pairs (O(n log n + pairs); tests/unit/test_exact_pairs).
       std::vector<Pair> want, got;
-      exact_pairs(rec.aabbs, want);
+      exact_pairs(rec.aabbs, want, pair_threads);
       auto dyn = [&](Pair p) { return dynamic(p.a) || dynamic(p.b); };
       std::copy_if(want.begin(), want.end(), std::back_inserter(got), dyn);
       want.swap(got);

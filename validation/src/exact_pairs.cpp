@@ -2,13 +2,14 @@
 // hierarchical uniform grid.
 #include "octocd/exact_pairs.hpp"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <string>
+
+#include "parallel.hpp"
 
 namespace octocd {
 
@@ -43,12 +44,12 @@ struct Hull {
   std::array<double, 3> lo, hi;
 };
 
-/// Below this many boxes the default is one thread (a team costs more than it saves).
+/// Below this many boxes the default is one thread (threads cost more than they save).
 constexpr std::size_t kSerialBelow = 4096;
 
-int thread_count(const ExactPairsSettings& s, std::size_t n) {
-  if (s.threads > 0) return s.threads;
-  return n < kSerialBelow ? 1 : omp_get_max_threads();
+unsigned thread_count(const ExactPairsSettings& s, std::size_t n) {
+  if (s.threads > 0) return static_cast<unsigned>(s.threads);
+  return loop_threads(0, n, kSerialBelow);
 }
 
 }  // namespace
@@ -142,70 +143,80 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     for (int k = 0; k < 3; ++k) c[k] = grid.index(std::max(hull[a].lo[k], hull[b].lo[k]), k, l);
     return c;
   };
-  const int threads = thread_count(settings, n);
-  std::vector<std::vector<Pair>> found(std::size_t(std::max(threads, 1)));
-  auto emit = [&](std::uint32_t a, std::uint32_t b) {
-    found[std::size_t(omp_get_thread_num())].push_back(a < b ? Pair{a, b} : Pair{b, a});
+  const unsigned threads = thread_count(settings, n);
+  std::vector<std::vector<Pair>> found(std::max(threads, 1u));
+  auto emit = [&](unsigned worker, std::uint32_t a, std::uint32_t b) {
+    found[worker].push_back(a < b ? Pair{a, b} : Pair{b, a});
   };
+  const std::function<bool()> never;
 
-  // 1. Pairs of one level, in their shared cell.
+  // 1. Pairs of one level, in their shared cell (every level's cells, one list).
+  struct Run {
+    int level;
+    std::size_t first, last;
+  };
+  std::vector<Run> runs;
   for (int l = 0; l < levels; ++l) {
     const std::vector<Entry>& e = entries[l];
-    std::vector<std::size_t> runs;
-    for (std::size_t k = 0; k < e.size(); ++k)
-      if (k == 0 || !(e[k].cell == e[k - 1].cell)) runs.push_back(k);
-    runs.push_back(e.size());
-    const std::int64_t count = std::int64_t(runs.size()) - 1;
-#pragma omp parallel for schedule(dynamic, 64) num_threads(threads)
-    for (std::int64_t r = 0; r < count; ++r) {
-      const std::size_t first = runs[std::size_t(r)], last = runs[std::size_t(r) + 1];
-      for (std::size_t p = first; p < last; ++p)
-        for (std::size_t q = p + 1; q < last; ++q) {
-          const std::uint32_t a = e[p].box, b = e[q].box;
-          if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, l) == e[p].cell) emit(a, b);
-        }
+    for (std::size_t k = 0; k < e.size();) {
+      std::size_t j = k + 1;
+      while (j < e.size() && e[j].cell == e[k].cell) ++j;
+      if (j - k > 1) runs.push_back({l, k, j});
+      k = j;
     }
   }
+  parallel_items_on(runs.size(), std::min<unsigned>(threads, unsigned(std::max<std::size_t>(runs.size(), 1))), never,
+                    [&](std::size_t r, unsigned worker) {
+    const Run& run = runs[r];
+    const std::vector<Entry>& e = entries[run.level];
+    for (std::size_t p = run.first; p < run.last; ++p)
+      for (std::size_t q = p + 1; q < run.last; ++q) {
+        const std::uint32_t a = e[p].box, b = e[q].box;
+        if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, run.level) == e[p].cell) emit(worker, a, b);
+      }
+  });
 
   // 2. A box against the boxes of every coarser level, in its own range of their cells.
-  const std::int64_t n64 = std::int64_t(n);
-#pragma omp parallel for schedule(dynamic, 256) num_threads(threads)
-  for (std::int64_t i64 = 0; i64 < n64; ++i64) {
-    const std::uint32_t a = std::uint32_t(i64);
-    if (level[a] < 0) continue;
-    for (int l = level[a] + 1; l < levels; ++l) {
-      if (!used[l]) continue;
-      const std::vector<Entry>& e = entries[l];
-      Cell lo, hi;
-      for (int k = 0; k < 3; ++k) {
-        lo[k] = grid.index(hull[a].lo[k], k, l);
-        hi[k] = grid.index(hull[a].hi[k], k, l);
-      }
-      for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
-        for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
-          for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
-            const Cell c{x, y, z};
-            auto it = std::lower_bound(e.begin(), e.end(), c, [](const Entry& en, const Cell& key) {
-              return en.cell < key;
-            });
-            for (; it != e.end() && it->cell == c; ++it) {
-              const std::uint32_t b = it->box;
-              if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, l) == c) emit(a, b);
+  int finest_used = levels;
+  for (int l = levels - 1; l >= 0; --l)
+    if (used[l]) finest_used = l;
+  bool coarser = false;
+  for (int l = finest_used + 1; l < levels; ++l) coarser = coarser || used[l];
+  if (coarser)
+    parallel_items_on(n, threads, never, [&](std::size_t i, unsigned worker) {
+      const std::uint32_t a = std::uint32_t(i);
+      if (level[a] < 0) return;
+      for (int l = level[a] + 1; l < levels; ++l) {
+        if (!used[l]) continue;
+        const std::vector<Entry>& e = entries[l];
+        Cell lo, hi;
+        for (int k = 0; k < 3; ++k) {
+          lo[k] = grid.index(hull[a].lo[k], k, l);
+          hi[k] = grid.index(hull[a].hi[k], k, l);
+        }
+        for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
+          for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+            for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
+              const Cell c{x, y, z};
+              auto it = std::lower_bound(e.begin(), e.end(), c,
+                                         [](const Entry& en, const Cell& key) { return en.cell < key; });
+              for (; it != e.end() && it->cell == c; ++it) {
+                const std::uint32_t b = it->box;
+                if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, l) == c) emit(worker, a, b);
+              }
             }
-          }
-    }
-  }
+      }
+    });
 
   // 3. Unbounded boxes against every other box (pairs of two unbounded boxes once).
-  const std::int64_t nu = std::int64_t(unbounded.size());
-#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-  for (std::int64_t u = 0; u < nu; ++u) {
-    const std::uint32_t a = unbounded[std::size_t(u)];
+  parallel_items_on(unbounded.size(), std::min<unsigned>(threads, unsigned(std::max<std::size_t>(unbounded.size(), 1))),
+                    never, [&](std::size_t u, unsigned worker) {
+    const std::uint32_t a = unbounded[u];
     for (std::uint32_t b = 0; b < n; ++b) {
       if (b == a || level[b] == -1 || (level[b] == -2 && b < a)) continue;
-      if (overlaps(boxes[a], boxes[b])) emit(a, b);
+      if (overlaps(boxes[a], boxes[b])) emit(worker, a, b);
     }
-  }
+  });
 
   std::size_t total = 0;
   for (const auto& f : found) total += f.size();

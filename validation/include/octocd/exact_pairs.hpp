@@ -15,8 +15,8 @@ namespace octocd {
 
 /// Knobs of exact_pairs (defaults are what the validators use).
 struct ExactPairsSettings {
-  /// Threads for the cell scan (OpenMP); 0: one below 4096 boxes, else OpenMP's default
-  /// (OMP_NUM_THREADS or the cores). The result does not depend on it.
+  /// Threads for the cell scan; 0: one below 4096 boxes, else the hardware's threads
+  /// (std::thread::hardware_concurrency). The result does not depend on it.
   int threads = 0;
 };
 

@@ -285,6 +285,11 @@ struct ValidationOptions {
   /// Also polled inside the long loops of a frame's checks (FrameValidators, the physics
   /// tier, the analytic and Bullet reruns), which then throw ValidationStopped.
   std::function<bool()> stop;
+  /// Threads that judge one frame's heavy loops (the physics tier's reference geometry
+  /// per candidate pair, the reference pair set): 0 = the hardware's
+  /// (std::thread::hardware_concurrency), 1 = serial. Results do not depend on it (items
+  /// are judged into their own slots and tallied in serial order).
+  int threads = 0;
 };
 
 /// One entry of the tolerance table: its name (as in `--tolerance NAME=VALUE`), the
