@@ -25,6 +25,7 @@
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
 #include "octocd/expect.hpp"
+#include "octocd/shards.hpp"
 #include "octocd/external.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -398,6 +399,9 @@ struct ValidateOptions {
   std::string write_expect;   ///< --write-expect FILE.json: record the current failures
   bool strict = false;        ///< --strict: an expected failure that no longer fails is exit 3
   std::string json;           ///< --json FILE: every row, cause and item as JSON
+  std::string shard;          ///< --shard i/N: judge only this share of the trace's frames
+  std::vector<std::string> merge;  ///< --merge A.json B.json ...: join shards' verdicts
+  int threads = 0;            ///< --threads: threads per frame (0: the hardware's)
   octocd::Expectations expectations;  ///< --expect's file, read before the run
 };
 
@@ -453,18 +457,69 @@ int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions&
   eo.against_fcl = vo.against_fcl;
   eo.tol = vo.tol;
   eo.overridden = vo.overridden;
+  eo.threads = o.threads;
+  if (!o.shard.empty()) eo.shard = octocd::parse_shard(o.shard);
   octocd::ExternalTraceInfo info;
   const int every = o.every_given ? o.every : 1;
   const std::vector<octocd::ValidationResult> results =
       octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
   const octocd::RunName run = octocd::trace_run(o.trace_in);
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
-  fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {})\n\n",
-             o.trace_in, info.engine, info.bodies, info.frames, every, o.against);
+  std::string share;
+  if (!o.shard.empty()) {
+    const auto [first, last] = octocd::shard_frames(eo.shard, info.frames);
+    share = fmt::format(", shard {}/{}: frames {}..{}", eo.shard.index, eo.shard.count, first, last);
+  }
+  fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {}{})\n\n",
+             o.trace_in, info.engine, info.bodies, info.frames, every, o.against, share);
   fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
-  return conclude_validate(o, run, results, report,
-                           {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
-                            {"against", o.against}, {"build_id", octocd::build_id()}});
+  nlohmann::ordered_json meta = {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
+                                 {"against", o.against}, {"build_id", octocd::build_id()}};
+  if (!o.shard.empty()) {
+    octocd::ShardIdentity id;
+    id.trace = run.trace;
+    std::error_code ec;
+    id.trace_bytes = std::filesystem::file_size(o.trace_in, ec);
+    id.engine = info.engine;
+    id.bodies = info.bodies;
+    id.frames = info.frames;
+    id.every = every;
+    id.against = o.against;
+    id.tol = vo.tol;
+    meta["shard"] = octocd::shard_json(eo.shard, id);
+  }
+  return conclude_validate(o, run, results, report, meta);
+}
+
+/// `octocd validate --merge A.json B.json ...`: the shards' verdicts joined into the
+/// unsharded run's (octocd/shards.hpp); exit as `validate`, 2 for bad shards.
+int validate_merge(const ValidateOptions& o) {
+  const octocd::MergedValidation m = octocd::merge_validations(o.merge);
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, m.run, m.results);
+  std::vector<std::string> overridden;
+  const octocd::Tolerances defaults;
+  for (const octocd::ToleranceEntry& e : octocd::tolerance_table())
+    if (m.identity.tol.*(e.member) != defaults.*(e.member)) overridden.push_back(e.name);
+  fmt::print("validate external trace {} merged from {} shards (engine '{}', {} bodies, {} frames, checks every {}, "
+             "against: {})\n\n",
+             m.identity.trace, m.files.size(), m.identity.engine, m.identity.bodies, m.identity.frames,
+             m.identity.every, m.identity.against);
+  fmt::print("{}", octocd::format_results(m.results, overridden, &report));
+  if (!o.junit.empty()) {
+    double seconds = 0;
+    for (const octocd::ValidationResult& r : m.results) seconds += r.seconds;
+    octocd::write_junit(o.junit, std::filesystem::path(m.identity.trace).stem().string(), m.results, seconds,
+                        {{"engine", m.identity.engine},
+                         {"frames", std::to_string(m.identity.frames)},
+                         {"shards", std::to_string(m.files.size())}},
+                        "", &report);
+  }
+  nlohmann::ordered_json files = nlohmann::ordered_json::array();
+  for (const std::string& f : m.files) files.push_back(f);
+  return conclude_validate(o, m.run, m.results, report,
+                           {{"engine", m.identity.engine}, {"frames", m.identity.frames}, {"every", m.identity.every},
+                            {"against", m.identity.against}, {"build_id", octocd::build_id()},
+                            {"merged_from", files}});
 }
 
 
@@ -549,6 +604,15 @@ int validate_bullet_rotation(const ValidateOptions& o, const octocd::ValidationO
 /// run fails.
 int validate_command(ValidateOptions& o) {
   if (!o.expect.empty()) o.expectations = octocd::load_expectations(o.expect);  // bad input before the run
+  if (!o.merge.empty()) {
+    if (!o.scene.empty() || !o.trace_in.empty() || !o.shard.empty() || o.check_only)
+      throw octocd::InputError("--merge: joins shards' JSON verdicts; allowed without SCENE, --trace-in, --shard and "
+                               "--check-only");
+    return validate_merge(o);
+  }
+  if (!o.shard.empty() && (o.trace_in.empty() || o.check_only))
+    throw octocd::InputError("--shard: splits the frames of a judged trace; allowed with --trace-in FILE.h5 (not "
+                             "--check-only); a scene's run is judged whole");
   if (!o.write_expect.empty() && o.check_only)
     throw octocd::InputError("--write-expect: records a judged run's failures; allowed without --check-only");
   if (o.scene.empty() == o.trace_in.empty())
@@ -595,6 +659,7 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   octocd::ValidationOptions vo;
   vo.frames = o.frames;
   vo.every = o.every;
+  vo.threads = o.threads;
   vo.against_bullet = vo.against_fcl = false;
   std::string rest = o.against;
   while (!rest.empty()) {
@@ -850,6 +915,20 @@ int main(int argc, char** argv) {
   val_cmd->add_option("--json", val.json,
                       "Also write every row (verdict pass|fail|n/a|expected, figures, judged, seconds) with its causes, "
                       "examples and failing items, and the expectation outcomes, as JSON (docs/validation-output.md)");
+  val_cmd->add_option("--shard", val.shard,
+                      "With --trace-in: judge only shard i of N (i/N, 0 <= i < N): the contiguous block of frames "
+                      "floor(iF/N)+1 .. floor((i+1)F/N); write its --json for --merge (a Slurm job array: "
+                      "--shard $SLURM_ARRAY_TASK_ID/N)");
+  val_cmd->add_option("--merge", val.merge,
+                      "Join the --json files of every shard of one --trace-in run into its verdict (table, --json, "
+                      "--junit, --expect as an unsharded run); exit 2 naming a file for overlapping, missing or "
+                      "foreign shards")
+      ->expected(1, -1);
+  val_cmd->add_option("--threads", val.threads,
+                      "Threads judging one frame's heavy loops (reference geometry per pair, the reference pair set); "
+                      "0 = the hardware's (default), 1 = serial; verdicts do not depend on it")
+      ->check(CLI::Range(0, 4096))
+      ->default_val(0);
   val_cmd->add_flag("--check-only", val.check_only,
                     "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not)");
 

@@ -15,6 +15,7 @@
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
+#include "octocd/shards.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/scene.hpp"
 #include "hdf5_handle.hpp"  // core/src (private include)
@@ -703,7 +704,9 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   const std::int64_t frames = max_frames > 0 ? std::min(max_frames, in.info.frames) : in.info.frames;
   try {
     made = std::make_unique<ExternalValidator>(in.bodies, options);
-    for (std::int64_t f = 1; f <= frames; ++f) made->observe(in.frame(f), f % every == 0);
+    // A shard judges its block of the run's frames; checked frames keep the run's numbering.
+    const auto [first, last] = shard_frames(options.shard, frames);
+    for (std::int64_t f = first; f <= last; ++f) made->observe(in.frame(f), f % every == 0);
   } catch (const InputError& e) {
     named(e);
   }
