@@ -484,7 +484,7 @@ int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions&
     id.bodies = info.bodies;
     id.frames = info.frames;
     id.every = every;
-    id.against = o.against;
+    id.against = vo.against_fcl ? "fcl" : "none";  // what --against changes for a trace
     id.tol = vo.tol;
     meta["shard"] = octocd::shard_json(eo.shard, id);
   }

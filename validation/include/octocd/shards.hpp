@@ -34,7 +34,7 @@ struct ShardIdentity {
   std::int64_t bodies = 0;
   std::int64_t frames = 0;    ///< frames judged by the whole (unsharded) run
   int every = 1;              ///< checked frames: f % every == 0 (global frame numbers)
-  std::string against;        ///< `--against`
+  std::string against;        ///< "fcl" (FCL references on) or "none"
   Tolerances tol;             ///< every tolerance's value
 };
 
@@ -51,8 +51,9 @@ struct MergedValidation {
 };
 
 /// Reads the shards' JSON files (`validate --trace-in ... --shard i/N --json FILE`) and
-/// joins them into the verdict of the unsharded run: per row, counts (rows with bound 0)
-/// are summed and figures (rows with a bound) take the largest; judged and seconds are
+/// joins them into the verdict of the unsharded run: per row, counts of failing items are
+/// summed and the rows that measure their largest figure (contact-geometry, penetration)
+/// take the largest; judged and seconds are
 /// summed; a row fails when any shard's fails and is n/a when every shard's is; per
 /// cause, counts summed, worst the largest, examples the first kMaxExamples in frame
 /// order, items the sorted union (kMaxItems at most; incomplete when any shard's was or
