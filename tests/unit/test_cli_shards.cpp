@@ -147,3 +147,35 @@ TEST_F(Shards, BadShardsExitTwoNamingTheFile) {
 }
 
 }  // namespace
+
+namespace {
+
+// Threads (per frame: reference geometry, the reference pair set) and the pipeline (frame f
+// judged while the engine runs f + 1) change no verdict: a settling pile with contacts
+// judged serially (--threads 1) and with 3 threads gives the same rows (all but seconds).
+TEST(ValidateThreads, ThreadsAndPipelineGiveTheSerialVerdict) {
+  const fs::path dir = fs::temp_directory_path() / ("octocd-threads-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string scene = octocd::test::source_dir() + "/datasets/scenes/mixed-pile-1000.json";
+  auto judge = [&](const std::string& threads) {
+    const fs::path out = dir / ("t" + threads + ".json");
+    const Result r = run_octocd("validate " + scene + " --frames 150 --every 10 --against none --threads " + threads +
+                                " --json " + out.string());
+    EXPECT_TRUE(r.code == 0 || r.code == 3) << r.output;
+    nlohmann::json j = load(out);
+    for (auto& row : j["rows"]) row.erase("seconds");
+    return j["rows"];
+  };
+  const nlohmann::json serial = judge("1"), threaded = judge("3");
+  ASSERT_EQ(serial.size(), threaded.size());
+  std::uint64_t judged = 0;
+  for (std::size_t k = 0; k < serial.size(); ++k) {
+    EXPECT_EQ(serial[k], threaded[k]) << serial[k]["name"];
+    if (serial[k]["name"] == "contact-geometry") judged = serial[k]["judged"].get<std::uint64_t>();
+  }
+  EXPECT_GT(judged, 0u) << "the pile has contacts: the comparison covers judged rows";
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+}
+
+}  // namespace
