@@ -16,7 +16,7 @@
 //
 // Usage: bench_validation [SCENE.json] [--bodies 20000,100000] [--reps 5] [--warmup 20]
 //                         [--only physics,full,pairs] [--rows]
-#include <omp.h>
+#include <thread>
 
 #include <algorithm>
 #include <chrono>
@@ -117,8 +117,8 @@ int main(int argc, char** argv) {
     }
   }
   auto wanted = [&](const char* what) { return ("," + only + ",").find(std::string(",") + what + ",") != std::string::npos; };
-  fmt::print("bench_validation: {} threads (OpenMP), load average {:.2f} at start, {} repetitions\n",
-             omp_get_max_threads(), load_average(), reps);
+  fmt::print("bench_validation: {} hardware threads, load average {:.2f} at start, {} repetitions\n",
+             std::thread::hardware_concurrency(), load_average(), reps);
   fmt::print("{:<10} {:>8} {:>9} {:>10} {:>10} {:>10} {:>14} {:>8}\n", "what", "bodies", "pairs", "median s",
              "min s", "max s", "us/body-frame", "load");
   for (long target : sizes) {

@@ -660,6 +660,9 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
   vo.frames = o.frames;
   vo.every = o.every;
   vo.threads = o.threads;
+  // Frames judged while the engine runs the next ones, unless a trace is written (its
+  // frames then stay those judged when a signal stops the checks of a frame).
+  vo.pipeline = o.trace.empty();
   vo.against_bullet = vo.against_fcl = false;
   std::string rest = o.against;
   while (!rest.empty()) {
@@ -926,7 +929,8 @@ int main(int argc, char** argv) {
       ->expected(1, -1);
   val_cmd->add_option("--threads", val.threads,
                       "Threads judging one frame's heavy loops (reference geometry per pair, the reference pair set); "
-                      "0 = the hardware's (default), 1 = serial; verdicts do not depend on it")
+                      "0 = the hardware's (default), 1 = serial; a scene's frame is judged while the engine runs the "
+                      "next (not with --trace, not with 1); verdicts do not depend on it")
       ->check(CLI::Range(0, 4096))
       ->default_val(0);
   val_cmd->add_flag("--check-only", val.check_only,

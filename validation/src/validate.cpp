@@ -418,10 +418,10 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   FrameValidators validators(*engine, options, compared_broadphases(engine->scene(), options.against_fcl));
   int done = 0;
   bool stopped = false, inside = false;
-  // Frame f is judged (on a copy of its record) while the engine runs frame f + 1; one
-  // frame in flight, judged in order, so the verdicts are the serial run's. threads 1:
-  // judged in turn on this thread.
-  const bool pipelined = options.threads != 1;
+  // options.pipeline: frame f is judged (on a copy of its record) while the engine runs
+  // frame f + 1; one frame in flight, judged in order, so the verdicts are the serial
+  // run's. Otherwise (or threads 1): judged in turn on this thread.
+  const bool pipelined = options.pipeline && options.threads != 1;
   std::future<void> judging;
   int judging_frame = 0;
   auto finish = [&] {  // waits for the frame in flight; rethrows its errors
