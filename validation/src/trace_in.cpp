@@ -3,6 +3,7 @@
 #include <hdf5.h>
 
 #include <algorithm>
+#include <future>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -705,8 +706,16 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   try {
     made = std::make_unique<ExternalValidator>(in.bodies, options);
     // A shard judges its block of the run's frames; checked frames keep the run's numbering.
+    // Frame f + 1 is read (HDF5, on a second thread: the only one that calls HDF5 meanwhile)
+    // while frame f is judged.
     const auto [first, last] = shard_frames(options.shard, frames);
-    for (std::int64_t f = first; f <= last; ++f) made->observe(in.frame(f), f % every == 0);
+    std::future<FrameRecord> next;
+    if (first <= last) next = std::async(std::launch::async, [&in, f = first] { return in.frame(f); });
+    for (std::int64_t f = first; f <= last; ++f) {
+      const FrameRecord rec = next.get();
+      if (f < last) next = std::async(std::launch::async, [&in, f] { return in.frame(f + 1); });
+      made->observe(rec, f % every == 0);
+    }
   } catch (const InputError& e) {
     named(e);
   }
