@@ -25,6 +25,7 @@
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
 #include "octocd/expect.hpp"
+#include "octocd/shards.hpp"
 #include "octocd/external.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -401,6 +402,9 @@ struct ValidateOptions {
   std::string json;           ///< --json FILE: every row, cause and item as JSON
   std::string view;           ///< --view DIR: a page per failing example (cli/view.hpp)
   octocd::cli::FailureViews views;  ///< the pages --view wrote (linked from the table, JSON, JUnit)
+  std::string shard;          ///< --shard i/N: judge only this share of the trace's frames
+  std::vector<std::string> merge;  ///< --merge A.json B.json ...: join shards' verdicts
+  int threads = 0;            ///< --threads: threads per frame (0: the hardware's)
   octocd::Expectations expectations;  ///< --expect's file, read before the run
 };
 
@@ -460,6 +464,8 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
   eo.against_fcl = vo.against_fcl;
   eo.tol = vo.tol;
   eo.overridden = vo.overridden;
+  eo.threads = o.threads;
+  if (!o.shard.empty()) eo.shard = octocd::parse_shard(o.shard);
   octocd::ExternalTraceInfo info;
   const int every = o.every_given ? o.every : 1;
   const std::vector<octocd::ValidationResult> results =
@@ -467,6 +473,11 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
   if (!o.view.empty()) o.views = octocd::cli::write_failure_views(o.trace_in, results, o.view);
   const octocd::RunName run = octocd::trace_run(o.trace_in);
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
+  std::string share;
+  if (!o.shard.empty()) {
+    const auto [first, last] = octocd::shard_frames(eo.shard, info.frames);
+    share = fmt::format(", shard {}/{}: frames {}..{}", eo.shard.index, eo.shard.count, first, last);
+  }
   if (!o.junit.empty())
     octocd::write_junit(o.junit, std::filesystem::path(o.trace_in).stem().string(),
                         octocd::cli::with_views_in_details(results, o.views, o.junit),
@@ -478,12 +489,56 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
                          {"trace_file", o.trace_in},
                          {"build_id", octocd::build_id()}},
                         "", &report);
-  fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {})\n\n",
-             o.trace_in, info.engine, info.bodies, info.frames, every, o.against);
+  fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {}{})\n\n",
+             o.trace_in, info.engine, info.bodies, info.frames, every, o.against, share);
   fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
-  return conclude_validate(o, run, results, report,
-                           {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
-                            {"against", o.against}, {"build_id", octocd::build_id()}});
+  nlohmann::ordered_json meta = {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
+                                 {"against", o.against}, {"build_id", octocd::build_id()}};
+  if (!o.shard.empty()) {
+    octocd::ShardIdentity id;
+    id.trace = run.trace;
+    std::error_code ec;
+    id.trace_bytes = std::filesystem::file_size(o.trace_in, ec);
+    id.engine = info.engine;
+    id.bodies = info.bodies;
+    id.frames = info.frames;
+    id.every = every;
+    id.against = vo.against_fcl ? "fcl" : "none";  // what --against changes for a trace
+    id.tol = vo.tol;
+    meta["shard"] = octocd::shard_json(eo.shard, id);
+  }
+  return conclude_validate(o, run, results, report, meta);
+}
+
+/// `octocd validate --merge A.json B.json ...`: the shards' verdicts joined into the
+/// unsharded run's (octocd/shards.hpp); exit as `validate`, 2 for bad shards.
+int validate_merge(const ValidateOptions& o) {
+  const octocd::MergedValidation m = octocd::merge_validations(o.merge);
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, m.run, m.results);
+  std::vector<std::string> overridden;
+  const octocd::Tolerances defaults;
+  for (const octocd::ToleranceEntry& e : octocd::tolerance_table())
+    if (m.identity.tol.*(e.member) != defaults.*(e.member)) overridden.push_back(e.name);
+  fmt::print("validate external trace {} merged from {} shards (engine '{}', {} bodies, {} frames, checks every {}, "
+             "against: {})\n\n",
+             m.identity.trace, m.files.size(), m.identity.engine, m.identity.bodies, m.identity.frames,
+             m.identity.every, m.identity.against);
+  fmt::print("{}", octocd::format_results(m.results, overridden, &report));
+  if (!o.junit.empty()) {
+    double seconds = 0;
+    for (const octocd::ValidationResult& r : m.results) seconds += r.seconds;
+    octocd::write_junit(o.junit, std::filesystem::path(m.identity.trace).stem().string(), m.results, seconds,
+                        {{"engine", m.identity.engine},
+                         {"frames", std::to_string(m.identity.frames)},
+                         {"shards", std::to_string(m.files.size())}},
+                        "", &report);
+  }
+  nlohmann::ordered_json files = nlohmann::ordered_json::array();
+  for (const std::string& f : m.files) files.push_back(f);
+  return conclude_validate(o, m.run, m.results, report,
+                           {{"engine", m.identity.engine}, {"frames", m.identity.frames}, {"every", m.identity.every},
+                            {"against", m.identity.against}, {"build_id", octocd::build_id()},
+                            {"merged_from", files}});
 }
 
 
@@ -569,6 +624,15 @@ int validate_bullet_rotation(ValidateOptions& o, const octocd::ValidationOptions
 /// run fails.
 int validate_command(ValidateOptions& o) {
   if (!o.expect.empty()) o.expectations = octocd::load_expectations(o.expect);  // bad input before the run
+  if (!o.merge.empty()) {
+    if (!o.scene.empty() || !o.trace_in.empty() || !o.shard.empty() || o.check_only)
+      throw octocd::InputError("--merge: joins shards' JSON verdicts; allowed without SCENE, --trace-in, --shard and "
+                               "--check-only");
+    return validate_merge(o);
+  }
+  if (!o.shard.empty() && (o.trace_in.empty() || o.check_only))
+    throw octocd::InputError("--shard: splits the frames of a judged trace; allowed with --trace-in FILE.h5 (not "
+                             "--check-only); a scene's run is judged whole");
   if (!o.write_expect.empty() && o.check_only)
     throw octocd::InputError("--write-expect: records a judged run's failures; allowed without --check-only");
   if (o.scene.empty() == o.trace_in.empty())
@@ -623,6 +687,10 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   octocd::ValidationOptions vo;
   vo.frames = o.frames;
   vo.every = o.every;
+  vo.threads = o.threads;
+  // Frames judged while the engine runs the next ones, unless a trace is written (its
+  // frames then stay those judged when a signal stops the checks of a frame).
+  vo.pipeline = o.trace.empty();
   vo.against_bullet = vo.against_fcl = false;
   std::string rest = o.against;
   while (!rest.empty()) {
@@ -892,6 +960,21 @@ int main(int argc, char** argv) {
                       "contacts beside the reference; at most 20 pages) into DIR, linked from the table, --json and "
                       "--junit by relative paths; without --trace or --trace-in the run's trace goes to "
                       "DIR/SCENE-trace.h5 (docs/debugging.md)");
+  val_cmd->add_option("--shard", val.shard,
+                      "With --trace-in: judge only shard i of N (i/N, 0 <= i < N): the contiguous block of frames "
+                      "floor(iF/N)+1 .. floor((i+1)F/N); write its --json for --merge (a Slurm job array: "
+                      "--shard $SLURM_ARRAY_TASK_ID/N)");
+  val_cmd->add_option("--merge", val.merge,
+                      "Join the --json files of every shard of one --trace-in run into its verdict (table, --json, "
+                      "--junit, --expect as an unsharded run); exit 2 naming a file for overlapping, missing or "
+                      "foreign shards")
+      ->expected(1, -1);
+  val_cmd->add_option("--threads", val.threads,
+                      "Threads judging one frame's heavy loops (reference geometry per pair, the reference pair set); "
+                      "0 = the hardware's (default), 1 = serial; a scene's frame is judged while the engine runs the "
+                      "next (not with --trace, not with 1); verdicts do not depend on it")
+      ->check(CLI::Range(0, 4096))
+      ->default_val(0);
   val_cmd->add_flag("--check-only", val.check_only,
                     "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not)");
 

@@ -35,7 +35,7 @@ from __future__ import annotations
 import json as _json
 import os as _os
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Sequence, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 try:
     from . import _octocd
@@ -58,7 +58,7 @@ engines: List[str] = list(_octocd.engines)
 
 __all__ = [
     "InputError", "RuntimeError", "Scene", "load_scene", "Engine", "FrameRecord", "ValidationResult",
-    "ValidationCause", "ValidationExample", "ValidationResults", "ExpectationOutcome", "Validator", "validate_frame", "validate_trace", "format_results", "failures", "Trace", "engines",
+    "ValidationCause", "ValidationExample", "ValidationResults", "ExpectationOutcome", "Validator", "validate_frame", "validate_trace", "merge_validations", "format_results", "failures", "Trace", "engines",
     "broadphases", "tolerances", "cuda_device_status", "build_id", "view",
 ]
 
@@ -345,6 +345,8 @@ class ValidationResults(list):
         super().__init__(rows)
         self.outcomes: List[ExpectationOutcome] = list(outcomes)
         self.exit_code: int = exit_code
+        # validate_trace(..., shard=...): the shard's verdict as JSON (merge_validations).
+        self.shard_json: Optional[Dict[str, Any]] = None
 
     @property
     def ok(self) -> bool:
@@ -458,7 +460,7 @@ def validate_frame(scene=None, *, frame: int = 1, aabbs=None, pairs=None, contac
 def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max_frames: int = 0,
                    against_fcl: bool = True, tolerances: Optional[Dict[str, float]] = None,
                    expect: Union[None, str, "_os.PathLike[str]", Dict[str, Any]] = None,
-                   strict: bool = False) -> ValidationResults:
+                   strict: bool = False, shard: Optional[Tuple[int, int]] = None) -> ValidationResults:
     """Judges an external trace (docs/trace-format.md, "External traces"; what `octocd
     validate --trace-in PATH` does): the costly validators every `every`-th frame, at most
     max_frames frames (0 = all). A trace of `octocd run --state-every 1 --contacts` is one.
@@ -470,7 +472,11 @@ def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max
     trace by its file name ("trace": "run.h5"). Rows whose every failure is expected read
     verdict "expected"; the returned list's `outcomes` and `exit_code` (3 for a new or
     grown failure, or with `strict` a fixed expectation) say the rest. A malformed
-    expectations file raises InputError naming the entry, before the trace is judged."""
+    expectations file raises InputError naming the entry, before the trace is judged.
+
+    shard: (i, n) judges only shard i of n (`validate --shard i/n`: the contiguous block of
+    frames floor(i F / n) + 1 .. floor((i + 1) F / n)); the result's `shard_json` is the
+    verdict as `validate --shard --json` writes it, for merge_validations."""
     text, origin = None, ""
     if isinstance(expect, dict):
         text, origin = _json.dumps(expect), "expect"
@@ -481,8 +487,42 @@ def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max
                 text = f.read()
         except OSError as e:
             raise InputError(f"expect: cannot read '{origin}' ({e.strerror}); allowed: an expectations file (JSON)")
-    rows, outcomes, code = _octocd.validate_trace(_os.fspath(path), int(every), int(max_frames), bool(against_fcl),
-                                                 tolerances, text, origin, bool(strict))
+    share = None if shard is None else f"{int(shard[0])}/{int(shard[1])}"
+    rows, outcomes, code, doc = _octocd.validate_trace(_os.fspath(path), int(every), int(max_frames),
+                                                      bool(against_fcl), tolerances, text, origin, bool(strict), share)
+    out = ValidationResults(_results(rows), [ExpectationOutcome(**o) for o in outcomes], code)
+    out.shard_json = _json.loads(doc) if doc else None
+    return out
+
+
+def merge_validations(shards) -> ValidationResults:
+    """Joins the verdicts of every shard of one trace's judging (`octocd validate --merge`;
+    docs/validation-output.md, "Shards") into the unsharded run's rows. `shards`: a list of
+    validate_trace(..., shard=(i, n)) results, their `shard_json` dicts, or paths of
+    `validate --shard --json` files, in any order. Raises InputError naming the shard for
+    overlapping, missing or foreign shards (another trace, engine, frames, every, against
+    or tolerances). exit_code: 0 when every row passes, 3 otherwise."""
+    texts, names = [], []
+    for k, s in enumerate(shards):
+        if isinstance(s, ValidationResults):
+            if s.shard_json is None:
+                raise InputError(f"merge_validations: shard {k}: not a shard's result; allowed: "
+                                 "validate_trace(..., shard=(i, n)) results")
+            texts.append(_json.dumps(s.shard_json))
+            names.append(f"shard {k}")
+        elif isinstance(s, dict):
+            texts.append(_json.dumps(s))
+            names.append(f"shard {k}")
+        else:
+            name = _os.fspath(s)
+            try:
+                with open(name, encoding="utf-8") as f:
+                    texts.append(f.read())
+            except OSError as e:
+                raise InputError(f"merge_validations: cannot read '{name}' ({e.strerror}); allowed: a shard's "
+                                 "--json file")
+            names.append(name)
+    rows, outcomes, code = _octocd.merge_validations(texts, names)
     return ValidationResults(_results(rows), [ExpectationOutcome(**o) for o in outcomes], code)
 
 

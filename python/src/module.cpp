@@ -21,6 +21,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -35,6 +36,7 @@
 #include "octocd/external.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/shards.hpp"
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
 #include "octocd/view.hpp"
@@ -870,26 +872,62 @@ PYBIND11_MODULE(_octocd, m) {
   m.def(
       "validate_trace",
       [](const std::string& path, int every, std::int64_t max_frames, bool against_fcl, py::object tolerances,
-         const std::optional<std::string>& expect_json, const std::string& expect_origin, bool strict) {
+         const std::optional<std::string>& expect_json, const std::string& expect_origin, bool strict,
+         const std::optional<std::string>& shard) {
         if (every < 1) throw InputError(fmt::format("every: {}; allowed: >= 1", every));
         if (max_frames < 0) throw InputError(fmt::format("max_frames: {}; allowed: >= 0 (0 = all)", max_frames));
         ExternalOptions o;  // engine name and response model: from the trace
         o.against_fcl = against_fcl;
         apply_tolerances(o, tolerances);
+        if (shard) o.shard = parse_shard(*shard);
         // Expectations are read (and refused) before the trace is judged.
         const Expectations expect =
             expect_json ? parse_expectations_text(*expect_json, expect_origin) : Expectations{};
         std::vector<ValidationResult> rs;
+        ExternalTraceInfo info;
         {
           py::gil_scoped_release release;
-          rs = validate_external_trace(path, o, every, max_frames);
+          rs = validate_external_trace(path, o, every, max_frames, &info);
         }
         const ExpectationReport report = match_expectations(expect, trace_run(path), rs);
+        // A shard's verdict as `validate --shard --json` writes it (merge_validations reads it).
+        std::string doc;
+        if (shard) {
+          ShardIdentity id;
+          id.trace = trace_run(path).trace;
+          std::error_code ec;
+          id.trace_bytes = std::filesystem::file_size(path, ec);
+          id.engine = info.engine;
+          id.bodies = info.bodies;
+          id.frames = info.frames;
+          id.every = every;
+          id.against = against_fcl ? "fcl" : "none";
+          id.tol = o.tol;
+          nlohmann::ordered_json meta = {{"engine", info.engine}, {"frames", info.frames}, {"every", every}};
+          meta["shard"] = shard_json(o.shard, id);
+          doc = results_json(rs, trace_run(path), &report, meta).dump();
+        }
         return py::make_tuple(out_results(rs, expect_json ? &report : nullptr), out_outcomes(report),
-                              report.exit_code(strict));
+                              report.exit_code(strict), doc);
       },
       py::arg("path"), py::arg("every"), py::arg("max_frames"), py::arg("against_fcl"), py::arg("tolerances"),
-      py::arg("expect_json"), py::arg("expect_origin"), py::arg("strict"));
+      py::arg("expect_json"), py::arg("expect_origin"), py::arg("strict"), py::arg("shard"));
+
+  m.def(
+      "merge_validations",
+      [](const std::vector<std::string>& texts, const std::vector<std::string>& names) {
+        std::vector<nlohmann::json> docs;
+        for (std::size_t k = 0; k < texts.size(); ++k) {
+          nlohmann::json d = nlohmann::json::parse(texts[k], nullptr, false);
+          if (d.is_discarded())
+            throw InputError(fmt::format("merge_validations: {}: not JSON; allowed: a shard's verdict", names[k]));
+          docs.push_back(std::move(d));
+        }
+        const MergedValidation merged = merge_validation_docs(docs, names);
+        const ExpectationReport report = match_expectations({}, merged.run, merged.results);
+        return py::make_tuple(out_results(merged.results, nullptr), out_outcomes(report), report.exit_code(false));
+      },
+      py::arg("texts"), py::arg("names"));
 
   m.def("format_results", [](const py::list& results, const std::vector<std::string>& overridden) {
     std::vector<ValidationResult> rs;

@@ -420,6 +420,28 @@ def test_validate_trace_of_a_cli_trace_and_of_a_missing_file(tmp_path):
         octocd.validate_trace(tmp_path / "no-such.h5")
 
 
+def test_shards_of_a_trace_merge_into_the_whole_verdict(tmp_path):
+    # `validate --shard` / `--merge` in Python: 3 shards of a failing run (penetration bound
+    # of 0 slops) joined equal the whole run, row by row, causes included.
+    trace = cli_trace(tmp_path, scene_path("box-stack"), 45)
+    tol = {"penetration_slops": 0.0}
+    whole = octocd.validate_trace(trace, every=5, tolerances=tol)
+    shards = [octocd.validate_trace(trace, every=5, tolerances=tol, shard=(i, 3)) for i in (2, 0, 1)]
+    assert shards[1].shard_json["shard"]["first_frame"] == 1 and shards[0].shard_json["shard"]["last_frame"] == 45
+    merged = octocd.merge_validations(shards)
+    assert merged.exit_code == whole.exit_code == 3
+    assert [r.name for r in merged] == [r.name for r in whole]
+    for a, b in zip(whole, merged):
+        assert (a.tier, a.measured, a.bound, a.passed, a.applicable, a.judged) == \
+            (b.tier, b.measured, b.bound, b.passed, b.applicable, b.judged), a.name
+        assert a.causes == b.causes, a.name
+    assert row(merged, "penetration").causes[0].count > 5
+    with pytest.raises(octocd.InputError, match=r"shard 1: shard 0/3 overlaps shard 0"):
+        octocd.merge_validations([shards[1], shards[1], shards[0]])
+    with pytest.raises(octocd.InputError, match=r"shard 1/3 \(frames 16..30\) is missing"):
+        octocd.merge_validations([shards[1], shards[0]])
+
+
 def test_trace_helper_refuses_other_files_and_missing_frames(tmp_path):
     other = str(tmp_path / "other.h5")
     with h5py.File(other, "w") as f:

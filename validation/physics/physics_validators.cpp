@@ -6,6 +6,7 @@
 // O(bodies + contact rows)).
 #include "octocd/physics.hpp"
 
+#include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
 
 #include <algorithm>
@@ -21,6 +22,7 @@
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
+#include "octocd/exact_pairs.hpp"
 #include "octocd/reference_contact.hpp"
 #include "dmath.hpp"
 #include "reference.hpp"
@@ -245,7 +247,6 @@ struct PhysicsValidators::Impl {
   Tolerances tol;
   std::string label;
   std::unique_ptr<ReferenceGeometry> ref;
-  std::unique_ptr<BroadPhase> octree, flat;
   std::vector<M3> inertia;  // body frame
   std::vector<double> mass;  // 0 for static bodies
   double max_margin = 0;
@@ -284,6 +285,7 @@ struct PhysicsValidators::Impl {
   std::uint64_t pen_pairs = 0, pen_upper_pairs = 0;
   std::int64_t last_frame = 0;
   std::function<bool()> stop;  // polled inside the long loops (set_stop)
+  int threads = 0;              // set_threads (0: the hardware's)
   // Each row's own time (s): RowClock around its work; shared work goes to the first row
   // that needs it (the candidates and FCL truth of every pair: broadphase-completeness).
   double t_broad = 0, t_complete = 0, t_geometry = 0, t_pen = 0, t_friction = 0, t_conservation = 0;
@@ -419,18 +421,13 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
   }
   s.sat_settings.abs_m = tol.geometry_slack_m;
   s.sat_settings.rel = tol.sat_accept_rel;
-  BroadPhaseConfig oc;
-  oc.name = "octree";
-  oc.octree_depth = -1;
-  s.octree = make_broadphase(oc, model.scene.domain);
-  BroadPhaseConfig fc;
-  fc.name = "flat";
-  s.flat = make_broadphase(fc, model.scene.domain);
 }
 
 PhysicsValidators::~PhysicsValidators() = default;
 
 void PhysicsValidators::set_stop(std::function<bool()> stop) { impl_->stop = std::move(stop); }
+
+void PhysicsValidators::set_threads(int threads) { impl_->threads = threads; }
 
 void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   Impl& s = *impl_;
@@ -460,15 +457,17 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   std::optional<RowClock> clock(std::in_place, t_broad);  // candidates, truth, row 1
 
   // Candidates: exact posed world AABBs, each grown by half the largest distance any row
-  // asks about, through octocd's loose octree: every pair whose shapes are that close
-  // has overlapping grown boxes (the AABB gap is at most the shapes' distance).
+  // asks about, through exact_pairs (flat's set in O(n log n + pairs), independent of
+  // octocd's broadphases): every pair whose shapes are that close has overlapping grown
+  // boxes (the AABB gap is at most the shapes' distance).
   const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
   std::vector<Aabb> grown(n);
   for (std::size_t i = 0; i < n; ++i)
     grown[i] = expanded(ref->world_aabb(static_cast<std::uint32_t>(i), det[i]), static_cast<float>(0.5 * reach));
   std::vector<Pair> cand;
-  BroadPhaseStats st;
-  octree->find_pairs(grown, cand, st);
+  ExactPairsSettings pair_threads;
+  pair_threads.threads = threads;
+  exact_pairs(grown, cand, pair_threads);
   cand.erase(std::remove_if(cand.begin(), cand.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }),
              cand.end());
 
@@ -483,29 +482,20 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   };
   std::map<std::pair<std::uint32_t, std::uint32_t>, Truth> truth;
   auto key = [](Pair p) { return std::make_pair(p.a, p.b); };
+  // One pair's truth (const, thread-safe: ReferenceGeometry's queries build their FCL
+  // objects locally).
+  auto compute_truth = [&](Pair p, Truth& t) {
+    static_cast<PairReference&>(t) = pair_reference(*ref, p.a, p.b, det[p.a], det[p.b], sat_settings);
+    t.have = true;
+    t.intersects = t.g.penetrating;
+  };
   auto full_truth = [&](Pair p) -> const Truth& {
     Truth& t = truth[key(p)];
-    if (!t.have) {
-      static_cast<PairReference&>(t) = pair_reference(*ref, p.a, p.b, det[p.a], det[p.b], sat_settings);
-      t.have = true;
-      t.intersects = t.g.penetrating;
-    }
+    if (!t.have) compute_truth(p, t);
     return t;
   };
   auto full = [&](Pair p) -> const ReferenceNormal& { return full_truth(p).g; };
   const bool need_distance = tol.broadphase_margin_m - slack > 0;
-  std::vector<Pair> required;
-  for (const Pair& p : cand) {
-    poll();
-    bool close = false;
-    if (need_distance) {
-      close = full(p).signed_distance() < tol.broadphase_margin_m - slack;
-    } else if (ref->intersect(p.a, p.b, det[p.a], det[p.b])) {
-      const ReferenceNormal& g = full(p);
-      close = g.penetrating && -g.depth < tol.broadphase_margin_m - slack;
-    }
-    if (close) required.push_back(p);
-  }
 
   // Contact rows per pair (rows of a pair are consecutive).
   struct PairRows {
@@ -525,6 +515,40 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
   for (const PairRows& r : rows) contact_pairs.push_back(r.p);
   std::sort(contact_pairs.begin(), contact_pairs.end());
 
+  // The truth the rows below read, on `threads` threads (parallel_items): every candidate
+  // that intersects (or, with a broadphase margin, every candidate) and every contact
+  // pair; the rows then read it in their own order, so their verdicts, causes and
+  // examples are those of a serial run.
+  std::vector<char> hit(cand.size(), 1);
+  if (!need_distance)
+    parallel_items(cand.size(), threads, stop, [&](std::size_t i, unsigned) {
+      hit[i] = ref->intersect(cand[i].a, cand[i].b, det[cand[i].a], det[cand[i].b]) ? 1 : 0;
+    });
+  {
+    std::vector<Pair> todo;
+    for (std::size_t i = 0; i < cand.size(); ++i)
+      if (hit[i]) todo.push_back(cand[i]);
+    std::vector<Pair> all;
+    std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
+    all.erase(std::unique(all.begin(), all.end()), all.end());
+    std::vector<Truth> computed(all.size());
+    parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned) { compute_truth(all[i], computed[i]); });
+    for (std::size_t i = 0; i < all.size(); ++i) truth.emplace_hint(truth.end(), key(all[i]), std::move(computed[i]));
+  }
+  std::vector<Pair> required;
+  for (std::size_t i = 0; i < cand.size(); ++i) {
+    const Pair p = cand[i];
+    poll();
+    bool close = false;
+    if (need_distance) {
+      close = full(p).signed_distance() < tol.broadphase_margin_m - slack;
+    } else if (hit[i]) {
+      const ReferenceNormal& g = full(p);
+      close = g.penetrating && -g.depth < tol.broadphase_margin_m - slack;
+    }
+    if (close) required.push_back(p);
+  }
+
   // 1. Broadphase completeness.
   if (!rec.has_pairs) {
     ++broad_no_pairs;
@@ -542,13 +566,10 @@ void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector
       });
     }
     if (bodies.broadphase_exact) {
-      // Set equality with `flat` on the engine's own world AABBs, static-static dropped.
-      // `flat` itself up to 10^7 pair tests; beyond, the loose octree (proven equal to
-      // flat by the model tier's candidate-sets row and the broadphase tests) keeps the
-      // frame's work near O(n log n + candidates).
+      // Set equality with `flat` on the engine's own world AABBs, static-static dropped:
+      // flat's set through exact_pairs (O(n log n + pairs); tests/unit/test_exact_pairs).
       std::vector<Pair> want, got;
-      const bool small = double(n) * double(n - 1) / 2 <= 1e7;
-      (small ? flat : octree)->find_pairs(rec.aabbs, want, st);
+      exact_pairs(rec.aabbs, want, pair_threads);
       auto dyn = [&](Pair p) { return dynamic(p.a) || dynamic(p.b); };
       std::copy_if(want.begin(), want.end(), std::back_inserter(got), dyn);
       want.swap(got);

@@ -510,6 +510,7 @@ void ExternalValidator::observe(FrameRecord rec, bool checked) {
     vo.against_bullet = false;
     vo.tol = s.options.tol;
     vo.overridden = s.options.overridden;
+    vo.threads = s.options.threads;
     s.validators = std::make_unique<FrameValidators>(
         // Another engine's pairs are judged by the physics tier (broadphase completeness),
         // not against octocd's broadphases: none are compared here.

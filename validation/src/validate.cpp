@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <functional>
+#include <future>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -417,6 +418,17 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   FrameValidators validators(*engine, options, compared_broadphases(engine->scene(), options.against_fcl));
   int done = 0;
   bool stopped = false, inside = false;
+  // options.pipeline: frame f is judged (on a copy of its record) while the engine runs
+  // frame f + 1; one frame in flight, judged in order, so the verdicts are the serial
+  // run's. Otherwise (or threads 1): judged in turn on this thread.
+  const bool pipelined = options.pipeline && options.threads != 1;
+  std::future<void> judging;
+  int judging_frame = 0;
+  auto finish = [&] {  // waits for the frame in flight; rethrows its errors
+    if (!judging.valid()) return;
+    judging.get();
+    done = judging_frame;
+  };
   try {
     for (int f = 1; f <= options.frames; ++f) {
       if (options.stop && options.stop()) {
@@ -424,10 +436,25 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
         break;
       }
       engine->step();
-      validators.observe(*engine, f % options.every == 0);  // polls options.stop inside
+      const bool checked = f % options.every == 0;
+      if (!pipelined) {
+        validators.observe(*engine, checked);  // polls options.stop inside
+        if (options.on_step) options.on_step(*engine);
+        done = f;
+        continue;
+      }
+      const FrameRecord& live = engine->record();
+      if (!engine->can_record() || live.frame != engine->frame())
+        throw RuntimeError(fmt::format("validators: engine '{}' gave no FrameRecord for frame {} "
+                                       "(recording off or unsupported)",
+                                       engine->name(), engine->frame()));
+      auto rec = std::make_shared<const FrameRecord>(live);
       if (options.on_step) options.on_step(*engine);
-      done = f;
+      finish();  // frame f - 1 judged
+      judging = std::async(std::launch::async, [&validators, rec, checked] { validators.observe(*rec, checked); });
+      judging_frame = f;
     }
+    finish();
   } catch (const ValidationStopped&) {
     stopped = inside = true;  // inside frame done + 1's checks: it is partly judged
   }

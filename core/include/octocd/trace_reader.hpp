@@ -45,10 +45,6 @@ constexpr double kMaxCoordinate = 1e6;
 constexpr double kMaxSpeed = 1e6;
 /// Largest time step dt (s); dt must also be > 0.
 constexpr double kMaxDt = 10.0;
-/// Most bodies `octocd validate --trace-in` judges (not --check-only): the `flat` oracle
-/// tests every pair, n^2 / 2 box tests a frame (2 x 10^8 at 2 x 10^4 bodies, about a
-/// second); a larger trace is refused up front (exit 2) rather than run for days silently.
-constexpr std::uint64_t kMaxJudgedBodies = 20000;
 }  // namespace trace_limits
 
 /// One trace file, open read-only. Not thread-safe. Move-only.

@@ -49,6 +49,7 @@
 #include "octocd/engine.hpp"
 #include "octocd/mesh.hpp"
 #include "octocd/physics.hpp"
+#include "octocd/shard_spec.hpp"
 #include "octocd/validation.hpp"
 
 namespace octocd {
@@ -102,6 +103,11 @@ struct ExternalOptions {
   /// Bounds (validation.hpp); names in `overridden` are marked in format_results.
   Tolerances tol;
   std::vector<std::string> overridden;
+  /// validate_external_trace judges only this shard's frames (octocd/shards.hpp:
+  /// shard_frames of the frames the whole run judges); default: every frame.
+  ShardSpec shard;
+  /// Threads per frame (ValidationOptions::threads; 0: the hardware's).
+  int threads = 0;
 };
 
 /// Names of a FrameRecord's fields in error messages (the C++ field names by default;

@@ -259,6 +259,10 @@ class PhysicsValidators {
   /// observe throws ValidationStopped when it returns true. Empty (default): never.
   void set_stop(std::function<bool()> stop);
 
+  /// Threads for the per-pair reference geometry of a checked frame (FCL, SAT):
+  /// ValidationOptions::threads (0: the hardware's). Verdicts do not depend on it.
+  void set_threads(int threads);
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;

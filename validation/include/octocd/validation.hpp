@@ -285,6 +285,16 @@ struct ValidationOptions {
   /// Also polled inside the long loops of a frame's checks (FrameValidators, the physics
   /// tier, the analytic and Bullet reruns), which then throw ValidationStopped.
   std::function<bool()> stop;
+  /// Threads that judge one frame's heavy loops (the physics tier's reference geometry
+  /// per candidate pair, the reference pair set): 0 = the hardware's
+  /// (std::thread::hardware_concurrency), 1 = serial. Results do not depend on it (items
+  /// are judged into their own slots and tallied in serial order).
+  int threads = 0;
+  /// validate_engine judges frame f (on a copy of its record, on a second thread) while
+  /// the engine runs frame f + 1; ignored when threads is 1. Verdicts are the serial
+  /// run's; what changes: on_step(f) runs before frame f is judged, so a stop inside
+  /// frame f's checks finds frame f already passed to on_step (a trace holds it).
+  bool pipeline = false;
 };
 
 /// One entry of the tolerance table: its name (as in `--tolerance NAME=VALUE`), the
@@ -407,7 +417,9 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
 using EngineFactory = std::function<std::unique_ptr<Engine>()>;
 
 /// Runs every validator on the engines `make` builds: validators 1-6 and 9 over
-/// `options.frames` steps, then 7 and 8 on fresh engines. Uses octocd's and (against_fcl)
+/// `options.frames` steps (with options.pipeline, frame f judged on a copy of its record
+/// on a second thread while the engine runs frame f + 1, in order: the serial run's
+/// verdicts), then 7 and 8 on fresh engines. Uses octocd's and (against_fcl)
 /// the reference broadphases. The engines must be able to record (FrameRecord). When
 /// `options.stop` stops it (between frames or inside a check), the results cover the
 /// frames judged so far and the validators not run are n/a ("not run: stopped ...");

@@ -1,0 +1,196 @@
+// Validation cost at scale (issue 33 item 6): the time to judge one frame of N bodies, per
+// frame and per body-frame, for
+//   physics   the physics tier alone, as `validate --trace-in` judges another engine
+//             (FrameValidators with an external source: FCL/SAT truth per candidate pair,
+//             the reference pair set, contact rows, dynamics rows), on a checked frame;
+//   full      both tiers as `octocd validate` judges octocd's own engine (candidate sets
+//             of octocd's broadphases against the reference pair set, midphase, Eq. 14,
+//             applied state), without the Bullet/FCL broadphases;
+//   pairs     the reference pair set alone (exact_pairs) and, up to 2 x 10^4 bodies,
+//             the `flat` broadphase it replaces.
+// The scene (default datasets/scenes/boxes-uniform-100k.json) is scaled to N bodies at its
+// own density: every group's count times N / N0, the domain and every layout box times
+// (N / N0)^(1/3). The CPU engine runs --warmup frames (not timed) and records the next one;
+// each repetition judges that record on fresh validators. Reported: median, min and max
+// over --reps repetitions, the threads (OpenMP) and the 1-minute load average.
+//
+// Usage: bench_validation [SCENE.json] [--bodies 20000,100000] [--reps 5] [--warmup 20]
+//                         [--only physics,full,pairs] [--rows]
+#include <thread>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "octocd/exact_pairs.hpp"
+#include "octocd/physics.hpp"
+#include "octocd/reference_broadphase.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/validation.hpp"
+#include "octocd/world.hpp"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double load_average() {
+  std::ifstream in("/proc/loadavg");
+  double l = -1;
+  in >> l;
+  return l;
+}
+
+std::vector<long> parse_list(const std::string& s) {
+  std::vector<long> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ',')) out.push_back(std::stol(item));
+  return out;
+}
+
+/// The scene scaled to about `bodies` bodies at its own density.
+octocd::Scene scaled_scene(const std::string& path, long bodies) {
+  std::ifstream in(path);
+  nlohmann::json j = nlohmann::json::parse(in);
+  long n0 = 0;
+  for (const auto& g : j["groups"]) n0 += g["count"].get<long>();
+  const double ratio = double(bodies) / double(n0), s = std::cbrt(ratio);
+  auto scale3 = [&](nlohmann::json& v) {
+    for (auto& c : v) c = c.get<double>() * s;
+  };
+  scale3(j["domain"]["min"]);
+  scale3(j["domain"]["max"]);
+  for (auto& g : j["groups"]) {
+    g["count"] = std::max(1L, std::lround(double(g["count"].get<long>()) * ratio));
+    if (g.contains("layout")) {
+      if (g["layout"].contains("min")) scale3(g["layout"]["min"]);
+      if (g["layout"].contains("max")) scale3(g["layout"]["max"]);
+    }
+  }
+  j["name"] = fmt::format("{}-{}", j["name"].get<std::string>(), bodies);
+  return octocd::parse_scene(j.dump(), path);
+}
+
+struct Stats {
+  double median, min, max;
+};
+Stats stats(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return {v[v.size() / 2], v.front(), v.back()};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scene_path = std::string(OCTOCD_SOURCE_DIR) + "/datasets/scenes/boxes-uniform-100k.json";
+  std::vector<long> sizes{20000, 100000};
+  int reps = 5, warmup = 20;
+  std::string only = "physics,full,pairs";
+  bool rows_shown = false;  // --rows: each row's own seconds on the last repetition
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "%s: missing value\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--bodies") sizes = parse_list(next());
+    else if (a == "--reps") reps = std::stoi(next());
+    else if (a == "--warmup") warmup = std::stoi(next());
+    else if (a == "--only") only = next();
+    else if (a == "--rows") rows_shown = true;
+    else if (!a.empty() && a[0] != '-') scene_path = a;
+    else {
+      std::fprintf(stderr, "usage: bench_validation [SCENE.json] [--bodies N,..] [--reps R] [--warmup W] [--only ...]\n");
+      return 2;
+    }
+  }
+  auto wanted = [&](const char* what) { return ("," + only + ",").find(std::string(",") + what + ",") != std::string::npos; };
+  fmt::print("bench_validation: {} hardware threads, load average {:.2f} at start, {} repetitions\n",
+             std::thread::hardware_concurrency(), load_average(), reps);
+  fmt::print("{:<10} {:>8} {:>9} {:>10} {:>10} {:>10} {:>14} {:>8}\n", "what", "bodies", "pairs", "median s",
+             "min s", "max s", "us/body-frame", "load");
+  for (long target : sizes) {
+    const octocd::Scene scene = scaled_scene(scene_path, target);
+    const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
+    octocd::World world(model, octocd::make_any_broadphase(scene.broadphase, scene.domain));
+    world.set_recording(true);
+    for (int f = 0; f <= warmup; ++f) world.step();
+    const octocd::FrameRecord rec = world.record();
+    const long n = long(rec.aabbs.size());
+    std::vector<octocd::Pair> pairs;
+    octocd::exact_pairs(rec.aabbs, pairs);
+    auto row = [&](const char* what, const std::vector<double>& t) {
+      const Stats st = stats(t);
+      fmt::print("{:<10} {:>8} {:>9} {:>10.4f} {:>10.4f} {:>10.4f} {:>14.3f} {:>8.2f}\n", what, n, pairs.size(),
+                 st.median, st.min, st.max, 1e6 * st.median / double(n), load_average());
+      std::fflush(stdout);
+    };
+    octocd::ValidationOptions vo;
+    vo.against_fcl = false;
+    vo.against_bullet = false;
+    if (wanted("physics")) {
+      std::vector<double> t;
+      for (int r = 0; r < reps; ++r) {
+        octocd::FrameValidators v(*model, vo, {},
+                                  octocd::FrameValidators::Source{"engine 'bench'", false, false, nullptr});
+        const auto t0 = Clock::now();
+        v.observe(rec, true);
+        t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+        if (r + 1 == reps && rows_shown) {
+          for (const octocd::ValidationResult& x : v.results())
+            if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
+        }
+      }
+      row("physics", t);
+    }
+    if (wanted("full")) {
+      std::vector<double> t;
+      for (int r = 0; r < reps; ++r) {
+        octocd::FrameValidators v(world, vo, octocd::compared_broadphases(scene, false));
+        const auto t0 = Clock::now();
+        v.observe(rec, true);
+        t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+        if (r + 1 == reps && rows_shown) {
+          for (const octocd::ValidationResult& x : v.results())
+            if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
+        }
+      }
+      row("full", t);
+    }
+    if (wanted("pairs")) {
+      std::vector<double> t, tf;
+      std::vector<octocd::Pair> out;
+      for (int r = 0; r < reps; ++r) {
+        const auto t0 = Clock::now();
+        octocd::exact_pairs(rec.aabbs, out);
+        t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+      }
+      row("exact", t);
+      if (n <= 25000) {
+        octocd::BroadPhaseConfig cfg;
+        cfg.name = "flat";
+        auto flat = octocd::make_broadphase(cfg, scene.domain);
+        octocd::BroadPhaseStats bs;
+        for (int r = 0; r < reps; ++r) {
+          const auto t0 = Clock::now();
+          flat->find_pairs(rec.aabbs, out, bs);
+          tf.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+        }
+        row("flat", tf);
+      }
+    }
+  }
+  return 0;
+}

@@ -1,0 +1,141 @@
+// exact_pairs (octocd/exact_pairs.hpp) against the `flat` oracle: the same pair set,
+// compared as sorted vectors, on random and adversarial boxes.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include "octocd/broadphase.hpp"
+#include "octocd/exact_pairs.hpp"
+
+namespace octocd {
+namespace {
+
+std::vector<Pair> flat_pairs(const std::vector<Aabb>& boxes) {
+  BroadPhaseConfig cfg;
+  cfg.name = "flat";
+  auto flat = make_broadphase(cfg, Aabb{{-1, -1, -1}, {1, 1, 1}});
+  std::vector<Pair> out;
+  BroadPhaseStats st;
+  flat->find_pairs(boxes, out, st);
+  return out;
+}
+
+void expect_same(const std::vector<Aabb>& boxes, const char* what) {
+  const std::vector<Pair> want = flat_pairs(boxes);
+  for (int threads : {1, 2, 3}) {
+    ExactPairsSettings s;
+    s.threads = threads;
+    std::vector<Pair> got{{7, 9}};  // cleared by the call
+    exact_pairs(boxes, got, s);
+    ASSERT_EQ(got.size(), want.size()) << what << ", " << threads << " threads";
+    for (std::size_t k = 0; k < got.size(); ++k)
+      ASSERT_TRUE(got[k] == want[k]) << what << ": pair " << k << " (" << got[k].a << ", " << got[k].b << ") vs ("
+                                     << want[k].a << ", " << want[k].b << ")";
+  }
+}
+
+Aabb box(float x, float y, float z, float hx, float hy, float hz) { return {{x - hx, y - hy, z - hz}, {x + hx, y + hy, z + hz}}; }
+
+TEST(ExactPairs, RandomBoxesOfMixedSizes) {
+  std::mt19937 rng(1234);
+  std::uniform_real_distribution<float> pos(-10, 10), size(0.01f, 0.6f), u(0, 1);
+  for (int round = 0; round < 6; ++round) {
+    std::vector<Aabb> boxes;
+    const int n = 300 + 250 * round;
+    for (int i = 0; i < n; ++i) {
+      float h = size(rng);
+      if (u(rng) < 0.05f) h *= 30;    // a few large boxes (coarser levels)
+      if (u(rng) < 0.05f) h *= 1e-4f;  // and tiny ones
+      boxes.push_back(box(pos(rng), pos(rng), pos(rng), h, h * u(rng) + 1e-6f, h));
+    }
+    ASSERT_GT(flat_pairs(boxes).size(), std::size_t(n) / 4) << "the boxes meet: the test compares real pairs";
+    expect_same(boxes, "random");
+  }
+}
+
+TEST(ExactPairs, TouchingFacesAndSharedCoordinates) {
+  // A lattice of unit boxes whose faces, edges and corners touch exactly (inclusive
+  // overlap: every neighbour, diagonal ones included, is a pair), coordinates on a few
+  // values only, plus coincident copies and zero-size boxes on the faces.
+  std::vector<Aabb> boxes;
+  for (int x = 0; x < 7; ++x)
+    for (int y = 0; y < 5; ++y)
+      for (int z = 0; z < 6; ++z) boxes.push_back({{float(x), float(y), float(z)}, {float(x + 1), float(y + 1), float(z + 1)}});
+  const std::size_t lattice = boxes.size();
+  for (std::size_t i = 0; i < lattice; i += 3) boxes.push_back(boxes[i]);  // coincident
+  for (int x = 0; x <= 7; ++x) boxes.push_back({{float(x), 2, 3}, {float(x), 2, 3}});  // points on corners
+  boxes.push_back({{3, 0, 0}, {3, 5, 6}});  // a flat plate on a face plane
+  const std::vector<Pair> want = flat_pairs(boxes);
+  // Box (0,0,0) meets its 7 neighbours of the 2x2x2 block by faces, edges and a corner.
+  std::size_t of_first = 0;
+  for (const Pair& p : want) of_first += p.a == 0 && p.b < lattice;
+  EXPECT_EQ(of_first, 7u);
+  expect_same(boxes, "lattice");
+  // The same lattice shifted off the origin by a non-representable step, and scaled
+  // small (cells of the grid then fall between the floats).
+  for (Aabb& b : boxes)
+    for (int k = 0; k < 3; ++k) {
+      b.min[k] = b.min[k] * 1e-3f + 0.1f;
+      b.max[k] = b.max[k] * 1e-3f + 0.1f;
+    }
+  expect_same(boxes, "scaled lattice");
+}
+
+TEST(ExactPairs, HugeTinyCoincidentAndDegenerateBoxes) {
+  std::mt19937 rng(99);
+  std::uniform_real_distribution<float> pos(-5, 5);
+  std::vector<Aabb> boxes;
+  for (int i = 0; i < 200; ++i) boxes.push_back(box(pos(rng), pos(rng), pos(rng), 1e-7f, 1e-7f, 1e-7f));  // tiny
+  for (int i = 0; i < 40; ++i) boxes.push_back(box(0, 0, 0, 0.3f, 0.3f, 0.3f));  // coincident
+  boxes.push_back(box(0, 0, 0, 1e6f, 1e6f, 1e6f));  // huge: meets all
+  boxes.push_back(box(3, 0, 0, 1e30f, 1e-3f, 1e30f));  // huge slab
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  boxes.push_back({{-inf, -inf, -inf}, {inf, inf, inf}});  // unbounded
+  boxes.push_back({{-inf, 1, 1}, {inf, 1.5f, 1.5f}});      // an infinite rod
+  boxes.push_back({{-inf, 1, 1}, {inf, 1.5f, 1.5f}});      // and its copy
+  boxes.push_back({{inf, inf, inf}, {inf, inf, inf}});     // a point at infinity
+  boxes.push_back({{nan, 0, 0}, {1, 1, 1}});               // NaN: overlaps nothing in flat
+  boxes.push_back({{0, 0, 0}, {1, 1, nan}});
+  boxes.push_back({{1, 1, 1}, {-1, -1, -1}});  // inverted (min > max)
+  boxes.push_back({{0.5f, -1, -1}, {0.2f, 1, 1}});  // inverted on x only
+  boxes.push_back({{0.2f, 0.2f, 0.2f}, {0.2f, 0.2f, 0.2f}});  // a point
+  boxes.push_back({{-0.0f, 0, 0}, {0.0f, 0, 0}});  // signed zeros
+  boxes.push_back(box(1e30f, 1e30f, 1e30f, 1e25f, 1e25f, 1e25f));  // far away
+  boxes.push_back(box(1e30f, 1e30f, 1e30f, 1.0f, 1.0f, 1.0f));
+  expect_same(boxes, "adversarial");
+}
+
+TEST(ExactPairs, AllPointsAndAllCoincident) {
+  std::vector<Aabb> points;
+  for (int i = 0; i < 500; ++i) {
+    const float x = float(i % 10), y = float((i / 10) % 10), z = float(i / 100);
+    points.push_back({{x, y, z}, {x, y, z}});
+  }
+  expect_same(points, "points (zero median extent)");
+  std::vector<Aabb> same(300, box(1, 2, 3, 0.5f, 0.5f, 0.5f));
+  expect_same(same, "all coincident");
+  expect_same({}, "none");
+  expect_same({box(0, 0, 0, 1, 1, 1)}, "one");
+}
+
+TEST(ExactPairs, BroadPhaseAdapterMatchesFlat) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> pos(-3, 3);
+  std::vector<Aabb> boxes;
+  for (int i = 0; i < 400; ++i) boxes.push_back(box(pos(rng), pos(rng), pos(rng), 0.2f, 0.2f, 0.2f));
+  auto bp = make_exact_pairs_broadphase();
+  EXPECT_EQ(bp->name(), "exact-grid");
+  std::vector<Pair> got;
+  BroadPhaseStats st;
+  bp->find_pairs(boxes, got, st);
+  const std::vector<Pair> want = flat_pairs(boxes);
+  ASSERT_EQ(got.size(), want.size());
+  EXPECT_TRUE(std::equal(got.begin(), got.end(), want.begin(), [](Pair p, Pair q) { return p == q; }));
+  EXPECT_EQ(st.pairs, want.size());
+}
+
+}  // namespace
+}  // namespace octocd

@@ -1,0 +1,53 @@
+#pragma once
+/// \file exact_pairs.hpp
+/// The validators' reference pair set in O(n log n + pairs) for the scenes engines run:
+/// exactly the set `flat` finds (every pair tested through Eq. 6, `overlaps` in
+/// octocd/math.hpp: inclusive float comparisons), without testing every pair.
+
+#include <cstddef>
+#include <memory>
+#include <vector>
+
+#include "octocd/broadphase.hpp"
+#include "octocd/math.hpp"
+
+namespace octocd {
+
+/// Knobs of exact_pairs (defaults are what the validators use).
+struct ExactPairsSettings {
+  /// Threads for the cell scan; 0: one below 4096 boxes, else the hardware's threads
+  /// (std::thread::hardware_concurrency). The result does not depend on it.
+  int threads = 0;
+};
+
+/// Every pair (a, b), a < b, of `boxes` (world AABBs, m, one per body) for which
+/// overlaps(boxes[a], boxes[b]) holds (Eq. 6: min_A <= max_B and max_A >= min_B on every
+/// axis, float comparisons, touching faces included), sorted ascending, unique: the same
+/// set as the `flat` broadphase, for every input (NaN, infinite, inverted and
+/// coincident boxes included). `out` is cleared first.
+///
+/// Algorithm: a hierarchical uniform grid on each box's hull [min(lo, hi), max(lo, hi)]
+/// per axis (a superset of Eq. 6's pairs; an inverted box is still found). Level L has
+/// cells of side c0 2^L (c0: the median of the boxes' largest finite hull side); a box
+/// lives on the lowest level whose side is at least its largest side, in 8 cells at most
+/// (up to 27 where rounding of the cell index lands a side exactly on a cell border).
+/// Pairs of one level meet in a shared cell; a box meets the boxes of coarser levels by
+/// looking up its own range of their cells. Every candidate is tested with `overlaps`
+/// itself and reported only from the one cell holding the lowest corner of the two hulls'
+/// intersection (cell indices are floor((x - origin) / side), monotone in x, so that
+/// cell lies in both boxes' ranges). A box with a NaN coordinate overlaps nothing under
+/// Eq. 6 (each coordinate enters one comparison) and is skipped; a box with an infinite
+/// side (or one 2^60 cells wide) is tested against every other box.
+///
+/// Cost: O(n log n) for the grid plus the candidates that share a cell (for bodies of
+/// similar size spread through a scene, a few per body) plus n x the unbounded boxes;
+/// memory: 8 cell entries per box (32 bytes each) plus the pairs (8 bytes each). Many
+/// boxes crowded into one cell (all coincident) make it quadratic, as their pairs are.
+void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings = {});
+
+/// exact_pairs as a BroadPhase named "exact-grid" (the validators' reference where
+/// `flat`'s n(n-1)/2 tests cost too much). Stateless; stats.pairs and
+/// stats.cell_candidates are the pairs found.
+std::unique_ptr<BroadPhase> make_exact_pairs_broadphase(const ExactPairsSettings& settings = {});
+
+}  // namespace octocd

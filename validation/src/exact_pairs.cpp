@@ -1,0 +1,251 @@
+// The validators' reference pair set (octocd/exact_pairs.hpp): `flat`'s set through a
+// hierarchical uniform grid.
+#include "octocd/exact_pairs.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "parallel.hpp"
+
+namespace octocd {
+
+namespace {
+
+using Cell = std::array<std::int64_t, 3>;
+
+/// One box's presence in one cell of a level.
+struct Entry {
+  Cell cell;
+  std::uint32_t box;
+};
+
+bool entry_less(const Entry& x, const Entry& y) { return x.cell < y.cell || (x.cell == y.cell && x.box < y.box); }
+
+/// Cell indices are clamped here: far boxes share the border cells (slower, never wrong:
+/// the clamp is monotone).
+constexpr double kCellClamp = 1099511627776.0;  // 2^40
+constexpr int kMaxLevel = 60;
+
+struct Grid {
+  std::array<double, 3> origin{};
+  std::vector<double> side;  // per level
+
+  std::int64_t index(double x, int k, int level) const {
+    const double c = std::floor((x - origin[k]) / side[level]);
+    return static_cast<std::int64_t>(std::clamp(c, -kCellClamp, kCellClamp));
+  }
+};
+
+struct Hull {
+  std::array<double, 3> lo, hi;
+};
+
+/// Below this many boxes the default is one thread (threads cost more than they save).
+constexpr std::size_t kSerialBelow = 4096;
+
+unsigned thread_count(const ExactPairsSettings& s, std::size_t n) {
+  if (s.threads > 0) return static_cast<unsigned>(s.threads);
+  return loop_threads(0, n, kSerialBelow);
+}
+
+}  // namespace
+
+void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings) {
+  out.clear();
+  const std::size_t n = boxes.size();
+  if (n < 2) return;
+  // Hulls; NaN boxes (which overlap nothing) and unbounded ones set apart.
+  std::vector<Hull> hull(n);
+  std::vector<int> level(n, 0);  // -1: NaN (skipped), -2: unbounded (tested against all)
+  std::vector<double> extents;
+  extents.reserve(n);
+  std::array<double, 3> lowest{HUGE_VAL, HUGE_VAL, HUGE_VAL}, highest{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+  for (std::size_t i = 0; i < n; ++i) {
+    const Aabb& b = boxes[i];
+    bool nan = false, finite = true;
+    double ext = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double lo = b.min[k], hi = b.max[k];
+      if (std::isnan(lo) || std::isnan(hi)) nan = true;
+      if (!std::isfinite(lo) || !std::isfinite(hi)) finite = false;
+      hull[i].lo[k] = std::min(lo, hi);
+      hull[i].hi[k] = std::max(lo, hi);
+      ext = std::max(ext, hull[i].hi[k] - hull[i].lo[k]);
+    }
+    if (nan) {
+      level[i] = -1;
+    } else if (!finite) {
+      level[i] = -2;
+    } else {
+      extents.push_back(ext);
+      for (int k = 0; k < 3; ++k) {
+        lowest[k] = std::min(lowest[k], hull[i].lo[k]);
+        highest[k] = std::max(highest[k], hull[i].hi[k]);
+      }
+    }
+  }
+  Grid grid;
+  double c0 = 1.0;
+  if (!extents.empty()) {
+    std::nth_element(extents.begin(), extents.begin() + extents.size() / 2, extents.end());
+    c0 = extents[extents.size() / 2];
+    if (!(c0 > 0)) {  // mostly points: about one box per cell of the occupied span
+      double span = 0;
+      for (int k = 0; k < 3; ++k) span = std::max(span, highest[k] - lowest[k]);
+      c0 = span > 0 ? span / std::cbrt(double(extents.size())) : 1.0;
+    }
+    grid.origin = lowest;
+  }
+  if (!(c0 > 0) || !std::isfinite(c0)) c0 = 1.0;
+  for (int l = 0, done = 0; l <= kMaxLevel && !done; ++l) {
+    grid.side.push_back(std::ldexp(c0, l));
+    done = !std::isfinite(grid.side.back() * 2);
+  }
+  const int levels = int(grid.side.size());
+  std::vector<std::uint32_t> unbounded;
+  std::vector<std::vector<Entry>> entries(levels);
+  std::vector<int> used(levels, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (level[i] == -1) continue;
+    if (level[i] == -2) {
+      unbounded.push_back(std::uint32_t(i));
+      continue;
+    }
+    double ext = 0;
+    for (int k = 0; k < 3; ++k) ext = std::max(ext, hull[i].hi[k] - hull[i].lo[k]);
+    int l = 0;
+    while (l < levels && ext > grid.side[l]) ++l;
+    if (l == levels) {
+      level[i] = -2;
+      unbounded.push_back(std::uint32_t(i));
+      continue;
+    }
+    level[i] = l;
+    used[l] = 1;
+    Cell c0c, c1c;
+    for (int k = 0; k < 3; ++k) {
+      c0c[k] = grid.index(hull[i].lo[k], k, l);
+      c1c[k] = grid.index(hull[i].hi[k], k, l);
+    }
+    for (std::int64_t x = c0c[0]; x <= c1c[0]; ++x)
+      for (std::int64_t y = c0c[1]; y <= c1c[1]; ++y)
+        for (std::int64_t z = c0c[2]; z <= c1c[2]; ++z) entries[l].push_back({{x, y, z}, std::uint32_t(i)});
+  }
+  for (auto& e : entries) std::sort(e.begin(), e.end(), entry_less);
+
+  // The cell of the lowest corner of two hulls' intersection, on `l`.
+  auto reference_cell = [&](std::uint32_t a, std::uint32_t b, int l) {
+    Cell c;
+    for (int k = 0; k < 3; ++k) c[k] = grid.index(std::max(hull[a].lo[k], hull[b].lo[k]), k, l);
+    return c;
+  };
+  const unsigned threads = thread_count(settings, n);
+  std::vector<std::vector<Pair>> found(std::max(threads, 1u));
+  auto emit = [&](unsigned worker, std::uint32_t a, std::uint32_t b) {
+    found[worker].push_back(a < b ? Pair{a, b} : Pair{b, a});
+  };
+  const std::function<bool()> never;
+
+  // 1. Pairs of one level, in their shared cell (every level's cells, one list).
+  struct Run {
+    int level;
+    std::size_t first, last;
+  };
+  std::vector<Run> runs;
+  for (int l = 0; l < levels; ++l) {
+    const std::vector<Entry>& e = entries[l];
+    for (std::size_t k = 0; k < e.size();) {
+      std::size_t j = k + 1;
+      while (j < e.size() && e[j].cell == e[k].cell) ++j;
+      if (j - k > 1) runs.push_back({l, k, j});
+      k = j;
+    }
+  }
+  parallel_items_on(runs.size(), std::min<unsigned>(threads, unsigned(std::max<std::size_t>(runs.size(), 1))), never,
+                    [&](std::size_t r, unsigned worker) {
+    const Run& run = runs[r];
+    const std::vector<Entry>& e = entries[run.level];
+    for (std::size_t p = run.first; p < run.last; ++p)
+      for (std::size_t q = p + 1; q < run.last; ++q) {
+        const std::uint32_t a = e[p].box, b = e[q].box;
+        if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, run.level) == e[p].cell) emit(worker, a, b);
+      }
+  });
+
+  // 2. A box against the boxes of every coarser level, in its own range of their cells.
+  int finest_used = levels;
+  for (int l = levels - 1; l >= 0; --l)
+    if (used[l]) finest_used = l;
+  bool coarser = false;
+  for (int l = finest_used + 1; l < levels; ++l) coarser = coarser || used[l];
+  if (coarser)
+    parallel_items_on(n, threads, never, [&](std::size_t i, unsigned worker) {
+      const std::uint32_t a = std::uint32_t(i);
+      if (level[a] < 0) return;
+      for (int l = level[a] + 1; l < levels; ++l) {
+        if (!used[l]) continue;
+        const std::vector<Entry>& e = entries[l];
+        Cell lo, hi;
+        for (int k = 0; k < 3; ++k) {
+          lo[k] = grid.index(hull[a].lo[k], k, l);
+          hi[k] = grid.index(hull[a].hi[k], k, l);
+        }
+        for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
+          for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+            for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
+              const Cell c{x, y, z};
+              auto it = std::lower_bound(e.begin(), e.end(), c,
+                                         [](const Entry& en, const Cell& key) { return en.cell < key; });
+              for (; it != e.end() && it->cell == c; ++it) {
+                const std::uint32_t b = it->box;
+                if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, l) == c) emit(worker, a, b);
+              }
+            }
+      }
+    });
+
+  // 3. Unbounded boxes against every other box (pairs of two unbounded boxes once).
+  parallel_items_on(unbounded.size(), std::min<unsigned>(threads, unsigned(std::max<std::size_t>(unbounded.size(), 1))),
+                    never, [&](std::size_t u, unsigned worker) {
+    const std::uint32_t a = unbounded[u];
+    for (std::uint32_t b = 0; b < n; ++b) {
+      if (b == a || level[b] == -1 || (level[b] == -2 && b < a)) continue;
+      if (overlaps(boxes[a], boxes[b])) emit(worker, a, b);
+    }
+  });
+
+  std::size_t total = 0;
+  for (const auto& f : found) total += f.size();
+  out.reserve(total);
+  for (const auto& f : found) out.insert(out.end(), f.begin(), f.end());
+  std::sort(out.begin(), out.end());
+}
+
+namespace {
+
+class ExactPairsBroadPhase final : public BroadPhase {
+ public:
+  explicit ExactPairsBroadPhase(const ExactPairsSettings& s) : settings_(s) {}
+  std::string name() const override { return "exact-grid"; }
+  void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, BroadPhaseStats& stats) override {
+    exact_pairs(boxes, out, settings_);
+    stats.pairs = out.size();
+    stats.cell_candidates = out.size();
+    stats.memory_bytes = 0;
+  }
+
+ private:
+  ExactPairsSettings settings_;
+};
+
+}  // namespace
+
+std::unique_ptr<BroadPhase> make_exact_pairs_broadphase(const ExactPairsSettings& settings) {
+  return std::make_unique<ExactPairsBroadPhase>(settings);
+}
+
+}  // namespace octocd
