@@ -397,21 +397,36 @@ TEST_F(Tools, BenchKilledMidwayLeavesItsFinishedPointsAndResumes) {
 }
 
 // SIGTERM mid-point: bench stops between two frames (not at the end of the point), keeps
-// the finished points in the result with "stopped", exits 143, and --resume goes on.
+// the finished points in the result with "stopped", exits 143, and --resume goes on. The
+// signal follows an event: the first point's trace (--trace-dir) holds a flushed frame,
+// so the point is inside its frames.
 TEST_F(Tools, BenchStopsOnSigtermMidPointAndKeepsFinishedPoints) {
   const std::string sweep = tiny_sweep(100000000);  // one point would run for hours
-  const fs::path out = dir_ / "stopped.json";
+  const fs::path out = dir_ / "stopped.json", traces = dir_ / "traces";
   const pid_t pid = fork();
   ASSERT_GE(pid, 0);
   if (pid == 0) {
     const std::string b = bin();
-    const std::string o = out.string();
+    const std::string o = out.string(), t = traces.string();
     std::freopen((dir_ / "stderr.txt").c_str(), "w", stderr);
-    execl(b.c_str(), b.c_str(), "bench", sweep.c_str(), "--engines", "cpu", "-o", o.c_str(), "--quiet",
-          static_cast<char*>(nullptr));
+    execl(b.c_str(), b.c_str(), "bench", sweep.c_str(), "--engines", "cpu", "-o", o.c_str(), "--trace-dir", t.c_str(),
+          "--quiet", static_cast<char*>(nullptr));
     _exit(127);
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // inside the first point's frames
+  bool inside = false;
+  for (const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+       !inside && std::chrono::steady_clock::now() < until;) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(traces, ec)) {
+      if (e.path().extension() != ".h5") continue;
+      try {
+        inside = inside || octocd::read_trace_summary(e.path().string()).frames > 0;
+      } catch (const std::exception&) {
+      }
+    }
+  }
+  ASSERT_TRUE(inside) << "no frame of the first point flushed within 60 s";
   kill(pid, SIGTERM);
   int status = 0;
   // Bounded wait (a functional bound: the point itself would take hours).
@@ -434,7 +449,7 @@ TEST_F(Tools, BenchStopsOnSigtermMidPointAndKeepsFinishedPoints) {
   const json j = read_json(out);
   EXPECT_EQ(j["stopped"], "SIGTERM");
   EXPECT_FALSE(j["complete"].get<bool>());
-  for (const auto& e : fs::directory_iterator(dir_))
+  for (const auto& e : fs::recursive_directory_iterator(dir_))
     EXPECT_EQ(e.path().string().find(".tmp."), std::string::npos) << e.path();
 }
 

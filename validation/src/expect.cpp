@@ -13,6 +13,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 
 namespace octocd {
@@ -420,11 +421,7 @@ nlohmann::ordered_json results_json(const std::vector<ValidationResult>& results
 }
 
 void write_json_file(const std::string& path, const nlohmann::ordered_json& doc, const std::string& what) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) throw RuntimeError(fmt::format("{}: cannot write '{}'", what, path));
-  out << doc.dump(2) << "\n";
-  out.close();
-  if (!out) throw RuntimeError(fmt::format("{}: writing '{}' failed", what, path));
+  write_file_atomically(path, doc.dump(2) + "\n", what);  // no half or 0-byte file on a full disk
 }
 
 }  // namespace octocd
