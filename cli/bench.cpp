@@ -26,6 +26,7 @@
 #include "octocd/error.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/json_strict.hpp"
 #include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
 #include "tools.hpp"
@@ -203,6 +204,15 @@ std::vector<std::string> string_list(const json& j, const std::string& key, cons
   return out;
 }
 
+/// The string at `key`, or `fallback` when absent; anything else is bad input naming the
+/// key (before: a raw json type_error, exit 1).
+std::string optional_string(const json& j, const std::string& key, const std::string& origin,
+                            const std::string& fallback) {
+  if (!j.contains(key)) return fallback;
+  if (!j.at(key).is_string()) bad(origin, key, j.at(key).dump() + " is not a string", "a string");
+  return j.at(key).get<std::string>();
+}
+
 /// The scene key a known axis name sets.
 std::string axis_key(const std::string& name) {
   static const std::map<std::string, std::string> keys{
@@ -234,7 +244,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   if (!j.contains("name") || !j.at("name").is_string() || j.at("name").get<std::string>().empty())
     bad(origin, "name", "missing or not a non-empty string", "a non-empty string");
   s.name = j.at("name");
-  s.kind = j.value("kind", "steps");
+  s.kind = optional_string(j, "kind", origin, "steps");
   static const std::set<std::string> mi{"scenes", "set",          "target_steps_per_s", "max_instances",
                                         "resolution", "paper", "probe_repeat", "search_time_s"};
   if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances")
@@ -251,7 +261,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   if (j.contains("format") && j.at("format") != "octocd-sweep")
     bad(origin, "format", j.at("format").dump(), "\"octocd-sweep\"");
   if (j.contains("version") && j.at("version") != 1) bad(origin, "version", j.at("version").dump(), "1");
-  s.description = j.value("description", "");
+  s.description = optional_string(j, "description", origin, "");
   s.engines = j.contains("engines") ? string_list(j, "engines", origin) : engine_names();
   for (std::size_t i = 0; i < s.engines.size(); ++i)
     if (std::find(engine_names().begin(), engine_names().end(), s.engines[i]) == engine_names().end())
@@ -317,7 +327,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
         Axis ax;
         if (!a.contains("name") || !a.at("name").is_string()) bad(origin, k + ".name", "missing", "a string");
         ax.name = a.at("name");
-        ax.key = a.contains("key") ? a.at("key").get<std::string>() : axis_key(ax.name);
+        ax.key = a.contains("key") ? optional_string(a, "key", origin, "") : axis_key(ax.name);
         if (ax.key.empty() || ax.key[0] != '/')
           bad(origin, k + ".key", "missing for axis '" + ax.name + "'",
               "a JSON pointer into the scene, or an axis name among midphase, broadphase, cell_size, beta, delta, "
@@ -1503,11 +1513,7 @@ int bench_command(const BenchOptions& o) {
     std::ifstream in(o.sweep);
     std::stringstream ss;
     ss << in.rdbuf();
-    try {
-      def = json::parse(ss.str());
-    } catch (const json::exception& e) {
-      throw InputError(fmt::format("{}: not JSON ({}); allowed: a sweep file (docs/bench-format.md)", o.sweep, e.what()));
-    }
+    def = octocd::parse_json_strict(ss.str(), o.sweep);  // duplicate keys and NUL bytes refused
     origin = o.sweep;
     sweep_dir = fs::path(o.sweep).parent_path().string();
   }
@@ -1626,12 +1632,11 @@ int bench_command(const BenchOptions& o) {
                                    "over)",
                                    o.output));
     json old;
-    try {
+    {
       std::ifstream in(o.output);
-      old = json::parse(in);
-    } catch (const json::exception& e) {
-      throw InputError(fmt::format("{}: not JSON ({}); allowed: a result file of octocd bench to resume", o.output,
-                                   e.what()));
+      std::stringstream text;
+      text << in.rdbuf();
+      old = octocd::parse_json_strict(text.str(), o.output);  // a second "points" key refused, not silently won
     }
     if (old.value("format", "") != "octocd-bench" || old.value("version", 0) != 1)
       throw InputError(fmt::format("{}: format: {} version {}; allowed: octocd-bench version 1", o.output,

@@ -485,7 +485,7 @@ int validate_trace_in(const ValidateOptions& o, const octocd::ValidationOptions&
 }
 
 
-int validate_scene_command(const ValidateOptions& o, Clock::time_point t0);
+int validate_scene_command(ValidateOptions o, Clock::time_point t0);
 
 /// `octocd validate SCENE --engine bullet --rotation` (or a rotating scene): Bullet with
 /// rotation runs `--frames` steps into a version 2 trace (`--trace FILE`, else a
@@ -597,12 +597,18 @@ int validate_command(ValidateOptions& o) {
   }
 }
 
-int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
+int validate_scene_command(ValidateOptions o, Clock::time_point t0) {
   octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
   octocd::Scene scene;
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
     const octocd::StopAtOnce loading("loading the scene and its meshes");
     scene = load_scene_for(o.scene, o.data_dir);
+    // Without --engine, a rotating scene (rotation: true, an orientation or an angular
+    // velocity) is validated on the one engine that rotates: Bullet with rotation (SPEC 13).
+    if (!o.engine_given && octocd::scene_rotates(scene)) {
+      o.engine = "bullet";
+      o.rotation = true;
+    }
     octocd::EngineOptions eo;
     eo.rotation = o.rotation;
     const octocd::EngineInfo& info = octocd::engine_info(o.engine, "--engine");
@@ -627,6 +633,7 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
           item));
     }
   }
+  std::map<std::string, std::string> given;  // --tolerance NAME: the item that set it
   for (const std::string& item : o.tolerances) {
     const auto eq = item.find('=');
     std::string names;
@@ -634,16 +641,23 @@ int validate_scene_command(const ValidateOptions& o, Clock::time_point t0) {
     if (eq == std::string::npos || eq == 0)
       throw octocd::InputError(fmt::format("--tolerance: '{}' is not NAME=VALUE; allowed names: {}", item, names));
     const std::string name = item.substr(0, eq), text = item.substr(eq + 1);
+    if (const auto before = given.find(name); before != given.end())
+      throw octocd::InputError(fmt::format("--tolerance: {} given twice ('{}' and '{}'); allowed: each tolerance once",
+                                           name, before->second, item));
+    given[name] = item;
     double value = 0.0;
     std::size_t used = 0;
+    // Decimal only: std::stod also reads "0x10" (16), "inf" and "nan".
+    const bool decimal = !text.empty() && text.find_first_not_of("0123456789+-.eE") == std::string::npos;
     try {
-      value = std::stod(text, &used);
+      if (decimal) value = std::stod(text, &used);
     } catch (const std::exception&) {
       used = 0;
     }
     if (used == 0 || used != text.size())
-      throw octocd::InputError(
-          fmt::format("--tolerance: {}: '{}' is not a number; allowed: a finite number >= 0", name, text));
+      throw octocd::InputError(fmt::format(
+          "--tolerance: {}: '{}' is not a decimal number; allowed: a finite number >= 0 (decimal, e.g. 0.01 or 1e-3)",
+          name, text));
     octocd::set_tolerance(vo.tol, name, value);
     vo.overridden.push_back(name);
   }
@@ -832,7 +846,8 @@ int main(int argc, char** argv) {
   val_cmd->add_option("--engine", val.engine,
                       "cpu: the CPU reference; cuda: the GPU engine (needs a CUDA build and device); bullet: "
                       "only with --rotation (or a rotating scene): Bullet's run judged as a version 2 external "
-                      "trace (--trace keeps it)")
+                      "trace (--trace keeps it). Default: cpu, or bullet with rotation for a rotating scene "
+                      "(rotation: true, an orientation or an angular velocity)")
       ->check(CLI::IsMember(octocd::engine_names()))
       ->default_val("cpu");
   val_cmd->add_flag("--rotation", val.rotation,

@@ -137,6 +137,9 @@ class Hdf5Reader {
   std::string string_attribute(const std::string& name) const;
   /// Root attribute `name` as one number (an integer or float scalar, or one element).
   double number_attribute(const std::string& name) const;
+  /// Root attribute `name` as one integer stored as a 32- or 64-bit integer (a float, an
+  /// 8- or 16-bit integer are refused naming the type: a format version is written so).
+  std::int64_t integer_attribute(const std::string& name) const;
   /// Root attribute `name` as exactly `count` numbers (any simple shape of `count`).
   std::vector<double> number_attributes(const std::string& name, std::size_t count) const;
 

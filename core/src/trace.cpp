@@ -905,7 +905,7 @@ TraceSummary summary_of(const detail::Hdf5Reader& h5) {
   s.format = h5.string_attribute("format");
   if (s.format != kFormat)
     throw RuntimeError("trace '" + path + "': not an octocd trace (format '" + s.format + "')");
-  const double version = h5.number_attribute("version");
+  const double version = static_cast<double>(h5.integer_attribute("version"));
   if (!(version >= 0.0 && version <= 1000.0))
     h5.fail("/ (root attribute version)", fmt::format("{}", version), "1");
   s.version = static_cast<int>(version);

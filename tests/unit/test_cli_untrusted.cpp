@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "cli_run.hpp"
+#include "trace_edit.hpp"
 #include "octocd/error.hpp"
 #include "octocd/mesh.hpp"
 #include "octocd/scene.hpp"
@@ -344,7 +345,7 @@ TEST_F(Untrusted, ValuesThatOverflowWhenCombinedAreRefused) {
   });
   const Result r = run(bin() + " validate --trace-in " + dt + " --check-only");
   EXPECT_EQ(r.code, 2) << r.output;
-  EXPECT_NE(r.output.find("root attribute dt): 1e+20; allowed: a time step in (0, 10] s"), std::string::npos)
+  EXPECT_NE(r.output.find("root attribute dt): 1e+20; allowed: a time step in [1e-07, 10] s"), std::string::npos)
       << r.output;
   // A NaN in local_aabb_max is reported against local_aabb_max (before: against min).
   const std::string nan = hostile("nan-max", [](hid_t f) { poke(f, "/bodies/local_aabb_max", 4, std::nanf("")); });
@@ -649,4 +650,225 @@ TEST(StopAtOnce, ASignalEndsTheProcessAtOnceOnlyInsideTheGuard) {
   ASSERT_EQ(::waitpid(child, &status, 0), child);
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 7);
+}
+
+// ---- issue 36: round three --------------------------------------------------------------
+
+namespace {
+
+/// Replaces root attribute `name` by a scalar of file type `type` holding `value`.
+void scalar_attribute(hid_t f, const char* name, hid_t type, double value) {
+  H5Adelete(f, name);
+  const hid_t s = H5Screate(H5S_SCALAR);
+  const hid_t a = H5Acreate2(f, name, type, s, H5P_DEFAULT, H5P_DEFAULT);
+  EXPECT_GE(H5Awrite(a, H5T_NATIVE_DOUBLE, &value), 0) << name;
+  H5Aclose(a);
+  H5Sclose(s);
+}
+
+/// Replaces root attribute `name` by a fixed-length string holding `bytes` (NULs kept).
+void fixed_string_attribute(hid_t f, const char* name, const std::string& bytes) {
+  H5Adelete(f, name);
+  const hid_t t = H5Tcopy(H5T_C_S1);
+  H5Tset_size(t, bytes.size());
+  H5Tset_strpad(t, H5T_STR_NULLPAD);
+  const hid_t s = H5Screate(H5S_SCALAR);
+  const hid_t a = H5Acreate2(f, name, t, s, H5P_DEFAULT, H5P_DEFAULT);
+  EXPECT_GE(H5Awrite(a, t, bytes.data()), 0) << name;
+  H5Aclose(a);
+  H5Sclose(s);
+  H5Tclose(t);
+}
+
+/// Rewrites float dataset `name` with its values stored as IEEE half precision (float16).
+void as_float16(hid_t f, const char* name) {
+  const octocd::test::Data d = octocd::test::read(f, name);
+  H5Ldelete(f, name, H5P_DEFAULT);
+  const hid_t half = H5Tcopy(H5T_IEEE_F32LE);
+  H5Tset_fields(half, 15, 10, 5, 0, 10);
+  H5Tset_size(half, 2);
+  H5Tset_ebias(half, 15);
+  const hid_t s = H5Screate_simple(static_cast<int>(d.dims.size()), d.dims.data(), nullptr);
+  const hid_t ds = H5Dcreate2(f, name, half, s, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  EXPECT_GE(H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, d.v.data()), 0) << name;
+  H5Dclose(ds);
+  H5Sclose(s);
+  H5Tclose(half);
+}
+
+}  // namespace
+
+class UntrustedV3 : public Untrusted {
+ protected:
+  /// Bullet's version 2 trace of spheres-drop (rotation, contacts with points, 20 frames).
+  std::string base_v2() {
+    const std::string p = (dir_ / "base2.h5").string();
+    if (!fs::exists(p)) {
+      const Result r = run(bin() + " run " + source_dir() + "/tests/data/spheres-drop.json --engine bullet --rotation " +
+                           "--frames 20 --state-every 1 --contacts --quiet --no-xdmf --trace " + p);
+      EXPECT_EQ(r.code, 0) << r.output;
+    }
+    return p;
+  }
+  /// A copy of `from` changed by `edit`.
+  std::string edited(const std::string& from, const std::string& name, const std::function<void(hid_t)>& edit) {
+    const std::string p = (dir_ / (name + ".h5")).string();
+    fs::copy_file(from, p, fs::copy_options::overwrite_existing);
+    const hid_t f = H5Fopen(p.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    EXPECT_GE(f, 0);
+    edit(f);
+    EXPECT_GE(H5Fclose(f), 0);
+    return p;
+  }
+  /// `validate --trace-in` (--check-only and judged) exit 2, one same line naming `names`.
+  void expect_refused_by_validate(const std::string& path, const std::vector<std::string>& names) {
+    std::string first;
+    for (const std::string& cmd : {"validate --trace-in " + path + " --check-only", "validate --trace-in " + path}) {
+      const Result r = run("timeout -k 5 60 " + bin() + " " + cmd);
+      EXPECT_EQ(r.code, 2) << cmd << "\n" << r.output;
+      EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << cmd << "\n" << r.output;
+      for (const std::string& n : names) EXPECT_NE(r.output.find(n), std::string::npos) << cmd << ": " << n << " not in\n" << r.output;
+      if (first.empty()) first = r.output;
+      else EXPECT_EQ(r.output, first) << "--check-only and the judged run differ";
+    }
+  }
+};
+
+// Before: --check-only said a trace with dt 1e-300 was valid while the judged run said
+// "external: dt: 0"; dt 0 and -0 were taken for "no dt". One check, one message, both runs.
+TEST_F(UntrustedV3, DtOutsideItsRangeIsOneCheckOneMessage) {
+  for (const double dt : {1e-300, 0.0, -0.0, 11.0}) {
+    SCOPED_TRACE(dt);
+    const std::string p = edited(base(), "dt", [&](hid_t f) { scalar_attribute(f, "dt", H5T_IEEE_F64LE, dt); });
+    expect_refused_by_validate(p, {p + ": / (root attribute dt): ", "; allowed: a time step in [1e-07, 10] s"});
+  }
+}
+
+// Before: each was accepted and judged (exit 0 or 3). Each is refused naming the attribute
+// or dataset and what is allowed.
+TEST_F(UntrustedV3, AttributesAcceptedAlthoughWrongAreRefused) {
+  struct Case {
+    std::string name;
+    std::function<void(hid_t)> edit;
+    std::vector<std::string> names;
+  };
+  const std::vector<Case> cases = {
+      {"response-spec7", [](hid_t f) { fixed_string_attribute(f, "response_model", "spec7"); },
+       {"/ (root attribute response_model): 'spec7' unknown; allowed: \"spec6\""}},
+      {"combine-nul", [](hid_t f) { fixed_string_attribute(f, "friction_combine", std::string("product\0min", 11)); },
+       {"/ (root attribute friction_combine): a string with an embedded NUL byte at byte 7",
+        "allowed: a string without NUL bytes"}},
+      {"version-float", [](hid_t f) { scalar_attribute(f, "version", H5T_IEEE_F64LE, 2.0); },
+       {"/ (root attribute version): stored as a 64-bit float; allowed: a 32- or 64-bit integer"}},
+      {"version-uint8", [](hid_t f) { scalar_attribute(f, "version", H5T_STD_U8LE, 2.0); },
+       {"/ (root attribute version): stored as a 8-bit integer; allowed: a 32- or 64-bit integer"}},
+      {"orientation-f16", [](hid_t f) { as_float16(f, "/states/orientation"); },
+       {"/states/orientation: float16; allowed: floating point (float32 or float64)"}},
+      {"margin-1e300", [](hid_t f) { scalar_attribute(f, "contact_margin", H5T_IEEE_F64LE, 1e300); },
+       {"/ (root attribute contact_margin): 1e+300; allowed: a distance in [0, 1] m"}},
+      {"inertia-1e-45",
+       [](hid_t f) {
+         octocd::test::Data d = octocd::test::read(f, "/bodies/inertia");
+         for (std::size_t i = 0; i < d.v.size(); ++i) d.v[i] = i % 9 % 4 == 0 ? 1e-45 : 0.0;
+         octocd::test::write(f, "/bodies/inertia", d);
+       },
+       {"/bodies/inertia: body ", "allowed: diagonal moments in [1e-12, 1e+15] kg m^2 for a dynamic body"}},
+      {"jn-3e38", [](hid_t f) { poke(f, "/contacts/jn", 0, 3e38f); },
+       {"/contacts/jn: frame ", "3e+38; allowed: |impulse| <= 1e+09 N s"}},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    expect_refused_by_validate(edited(base_v2(), c.name, c.edit), c.names);
+  }
+}
+
+// Before: `compare` of a trace whose /states/frame is a scalar exited 1 with
+// "vector::_M_range_check". Now exit 2 naming the file and the dataset.
+TEST_F(UntrustedV3, CompareRefusesAScalarWhereRowsBelong) {
+  const std::string p = edited(base(), "scalar-states", [](hid_t f) {
+    H5Ldelete(f, "/states/frame", H5P_DEFAULT);
+    const hid_t s = H5Screate(H5S_SCALAR);
+    const hid_t d = H5Dcreate2(f, "/states/frame", H5T_STD_I64LE, s, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    const std::int64_t zero = 0;
+    H5Dwrite(d, H5T_NATIVE_INT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, &zero);
+    H5Dclose(d);
+    H5Sclose(s);
+  });
+  for (const std::string& args : {base() + " " + p, p + " " + base()}) {
+    const Result r = run("timeout -k 5 60 " + bin() + " compare " + args);
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find(p + ": /states/frame: "), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("allowed: "), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("range_check"), std::string::npos) << r.output;
+  }
+}
+
+// Before: a sweep whose description or kind was not a string exited 1 with a raw json
+// type_error; a scene followed by a NUL and garbage ran (exit 0); a key given twice in a
+// sweep, an expectations file or a --resume result silently took the last value; --tolerance
+// read "0x10" as 16 and took the last of two values for one name. Each is exit 2 naming
+// the file and the key (or the option) and what is allowed.
+TEST_F(UntrustedV3, JsonAndOptionsAcceptedAlthoughWrongAreRefused) {
+  fs::copy_file(source_dir() + "/tests/data/spheres-drop.json", dir_ / "s.json");
+  const std::string sweep = (dir_ / "sweep.json").string();
+  struct Case {
+    std::string text, names;
+  };
+  for (const Case& c : std::vector<Case>{
+           {R"({"name": "x", "scenes": ["s.json"], "frames": 2, "description": 7})", "description: 7 is not a string; allowed: a string"},
+           {R"({"name": "x", "scenes": ["s.json"], "frames": 2, "kind": ["steps"]})", "kind: [\"steps\"] is not a string; allowed: a string"},
+           {R"({"name": "x", "scenes": ["s.json"], "frames": 2, "frames": 3})", "frames: duplicate key in one object"},
+           {std::string(R"({"name": "x", "scenes": ["s.json"], "frames": 2})") + std::string("\0garbage", 8), "a NUL byte at byte 48"}}) {
+    std::ofstream(sweep, std::ios::binary) << c.text;
+    const Result r = run("timeout -k 5 60 " + bin() + " bench " + sweep + " -o " + (dir_ / "o.json").string() + " --quiet");
+    EXPECT_EQ(r.code, 2) << c.text << "\n" << r.output;
+    EXPECT_NE(r.output.find(sweep + ": " + c.names), std::string::npos) << r.output;
+  }
+  // A scene followed by a NUL and garbage.
+  std::string scene;
+  {
+    std::ifstream in(dir_ / "s.json", std::ios::binary);
+    scene.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const std::string nul = (dir_ / "nul.json").string();
+  std::ofstream(nul, std::ios::binary) << scene << std::string("\0{garbage", 9);
+  const Result s = run("timeout -k 5 60 " + bin() + " run " + nul + " --frames 1 --quiet");
+  EXPECT_EQ(s.code, 2) << s.output;
+  EXPECT_NE(s.output.find(nul + ": a NUL byte at byte " + std::to_string(scene.size())), std::string::npos) << s.output;
+  // An expectations file with a key twice.
+  const std::string expect = (dir_ / "e.json").string();
+  std::ofstream(expect) << R"({"format": "octocd-expectations", "version": 1, "version": 1, "entries": []})";
+  const Result e = run("timeout -k 5 60 " + bin() + " validate --trace-in " + base() + " --expect " + expect);
+  EXPECT_EQ(e.code, 2) << e.output;
+  EXPECT_NE(e.output.find(expect + ": version: duplicate key in one object"), std::string::npos) << e.output;
+  // --tolerance: hexadecimal, and one name twice (validate and compare).
+  const Result h = run(bin() + " validate --trace-in " + base() + " --tolerance depth_m=0x10");
+  EXPECT_EQ(h.code, 2) << h.output;
+  EXPECT_NE(h.output.find("--tolerance: depth_m: '0x10' is not a decimal number"), std::string::npos) << h.output;
+  const Result t = run(bin() + " validate --trace-in " + base() + " --tolerance depth_m=0.1 --tolerance depth_m=0.2");
+  EXPECT_EQ(t.code, 2) << t.output;
+  EXPECT_NE(t.output.find("--tolerance: depth_m given twice ('depth_m=0.1' and 'depth_m=0.2')"), std::string::npos) << t.output;
+  const Result ch = run(bin() + " compare " + base() + " " + base() + " --tolerance positions=0x10");
+  EXPECT_EQ(ch.code, 2) << ch.output;
+  EXPECT_NE(ch.output.find("'0x10' is not a number"), std::string::npos) << ch.output;
+  const Result ct = run(bin() + " compare " + base() + " " + base() + " --tolerance positions=1,positions=2");
+  EXPECT_EQ(ct.code, 2) << ct.output;
+  EXPECT_NE(ct.output.find("positions given twice"), std::string::npos) << ct.output;
+}
+
+// Before: scripts/nightly.sh found Bullet's scenes with grep '"rotation": *true', so
+// `"rotation" : true` or an angular velocity alone was "BAD input". Now octocd decides:
+// without --engine, validate runs a rotating scene on Bullet with rotation.
+TEST_F(UntrustedV3, ValidateRunsARotatingSceneOnBulletWithoutEngine) {
+  for (const std::string& spin : {std::string(R"("rotation" : true,)"), std::string()}) {
+    const std::string scene = (dir_ / "rot.json").string();
+    std::ofstream(scene) << R"({"name": "r", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]}, "walls": "floor",)"
+                         << spin << R"( "frames": 3, "groups": [{"name": "b", "shape": {"box": [0.1, 0.1, 0.1]},)"
+                         << R"( "count": 2, )" << (spin.empty() ? R"("angular_velocity": [0, 1, 0],)" : "")
+                         << R"( "layout": {"type": "grid", "min": [-0.5, 0.3, -0.5], "max": [0.5, 1.0, 0.5]}}]})";
+    const Result r = run("timeout -k 5 60 " + bin() + " validate " + scene + " --frames 3 --against none");
+    EXPECT_NE(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find("(engine bullet with rotation, judged as a version 2 external trace"), std::string::npos)
+        << r.output;
+  }
 }

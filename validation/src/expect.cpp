@@ -15,6 +15,7 @@
 
 #include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
+#include "octocd/json_strict.hpp"
 
 namespace octocd {
 namespace {
@@ -175,15 +176,9 @@ Expectations parse_expectations(const nlohmann::json& doc, const std::string& or
 }
 
 Expectations parse_expectations_text(const std::string& text, const std::string& origin) {
-  nlohmann::json doc;
-  try {
-    doc = nlohmann::json::parse(text);
-  } catch (const nlohmann::json::exception& e) {
-    throw InputError(fmt::format("{}: not JSON ({}); allowed: the expectations format of "
-                                 "docs/validation-output.md",
-                                 origin, e.what()));
-  }
-  return parse_expectations(doc, origin);
+  // Strict: a key twice in one object (a second "tolerance" or "items") is refused, not
+  // silently won by the last one; a NUL byte ends nothing.
+  return parse_expectations(parse_json_strict(text, origin), origin);
 }
 
 Expectations load_expectations(const std::string& path) {
