@@ -199,11 +199,6 @@ void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inve
         largest = std::max(largest, std::fabs(x));
       }
       if (!(inverse_mass[i] > 0.0f)) continue;  // static: never used
-      for (int k = 0; k < 3; ++k)  // principal moments a real body has (trace_limits)
-        if (!(m[4 * k] >= trace_limits::kMinInertia && m[4 * k] <= trace_limits::kMaxInertia))
-          bad(names.inertia, fmt::format("body {}: I[{}][{}] = {:g}", i, k, k, m[4 * k]),
-              fmt::format("diagonal moments in [{:g}, {:g}] kg m^2 for a dynamic body", trace_limits::kMinInertia,
-                          trace_limits::kMaxInertia));
       const std::string allowed =
           "a symmetric positive definite tensor (kg m^2, body frame) for a dynamic body: |I_rc - I_cr| <= 1e-4 "
           "max |I|, leading minors > 0";
@@ -220,6 +215,11 @@ void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inve
               fmt::format("body {}: {} not positive definite (leading minor {} is {:.6g})", i, I, k + 1,
                           minors[static_cast<std::size_t>(k)]),
               allowed);
+      for (int k = 0; k < 3; ++k)  // principal moments a real body has (trace_limits)
+        if (!(m[4 * k] >= trace_limits::kMinInertia && m[4 * k] <= trace_limits::kMaxInertia))
+          bad(names.inertia, fmt::format("body {}: I[{}][{}] = {:g}", i, k, k, m[4 * k]),
+              fmt::format("diagonal moments in [{:g}, {:g}] kg m^2 for a dynamic body", trace_limits::kMinInertia,
+                          trace_limits::kMaxInertia));
     }
   }
   if (!p.locked_dofs.empty()) {
@@ -252,7 +252,7 @@ void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inve
     bad(names.restitution, fmt::format("{}", p.restitution), "a restitution in [0, 1]");
   if (!(p.contact_margin >= 0.0 && p.contact_margin <= trace_limits::kMaxContactMargin))
     bad(names.contact_margin, fmt::format("{}", p.contact_margin),
-        fmt::format("a distance in [0, {:g}] m", trace_limits::kMaxContactMargin));
+        fmt::format("a finite distance >= 0 (m), at most {:g} m", trace_limits::kMaxContactMargin));
   if (!std::isfinite(p.slop) || !(p.slop > 0.0)) bad(names.slop, fmt::format("{}", p.slop), "a finite slop > 0 (m)");
 }
 
