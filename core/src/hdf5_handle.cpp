@@ -346,6 +346,16 @@ void Hdf5Reader::read_rows(const Dataset& d, hsize_t first, hsize_t count, hid_t
     fail(d.name, fmt::format("rows {}..{} asked, it has {}", first, first + count, d.dims[0]),
          "rows below its length");
   if (count == 0 || d.per_row() == 0) return;
+  // The read budget: values stored (count x per_row x the stored element's size).
+  const std::uint64_t budget = trace_limits::kMaxReadExpansion * file_bytes_ + trace_limits::kReadSlackBytes;
+  read_bytes_ += count * d.per_row() * std::max<std::uint64_t>(d.type_size, 1);
+  if (read_bytes_ > budget)
+    fail(d.name,
+         fmt::format("reading rows {}..{} takes the values read from this {}-byte file past {} bytes (a compression "
+                     "bomb?)",
+                     first, first + count - 1, file_bytes_, budget),
+         fmt::format("a file whose values read in all are at most {} x its size + {} MiB", trace_limits::kMaxReadExpansion,
+                     trace_limits::kReadSlackBytes >> 20));
   Hdf5Handle fspace(H5Dget_space(d.id));
   std::vector<hsize_t> start(d.dims.size(), 0), cnt = d.dims;
   start[0] = first;

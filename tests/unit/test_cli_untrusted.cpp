@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdlib>
@@ -871,4 +872,60 @@ TEST_F(UntrustedV3, ValidateRunsARotatingSceneOnBulletWithoutEngine) {
     EXPECT_NE(r.output.find("(engine bullet with rotation, judged as a version 2 external trace"), std::string::npos)
         << r.output;
   }
+}
+
+// Before: an 11.8 MB file of deflated zeros declaring 13 GB took 88 s for --check-only.
+// Here /aabbs/min and /aabbs/max of 1,000 bodies declare 12,000 frames (144 MB each, one
+// deflated chunk of zeros a row, 2.5 MB of file): every reader stops once the values it
+// read pass 64 x the file's size + 64 MiB, naming the dataset, within seconds.
+TEST_F(UntrustedV3, ACompressionBombIsRefusedOnceItsReadsPassTheBudget) {
+  const std::string p = (dir_ / "bomb.h5").string();
+  const hsize_t n = 1000, frames = 12000;
+  write_line_trace(p, n, 1);
+  const hid_t f = H5Fopen(p.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  for (const char* name : {"/aabbs/min", "/aabbs/max"}) {
+    H5Ldelete(f, name, H5P_DEFAULT);
+    const hsize_t dims[3] = {frames, n, 3}, chunk[3] = {1, n, 3};
+    const hid_t s = H5Screate_simple(3, dims, nullptr);
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_chunk(dcpl, 3, chunk);
+    H5Pset_deflate(dcpl, 9);
+    const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+    ASSERT_GE(d, 0);
+    // Row 0 through the filter, then its deflated bytes copied to every other row.
+    const std::vector<float> zeros(n * 3, 0.0f);
+    const hsize_t one[3] = {1, n, 3}, at0[3] = {0, 0, 0};
+    const hid_t ms = H5Screate_simple(3, one, nullptr);
+    const hid_t fs_ = H5Dget_space(d);
+    H5Sselect_hyperslab(fs_, H5S_SELECT_SET, at0, nullptr, one, nullptr);
+    ASSERT_GE(H5Dwrite(d, H5T_NATIVE_FLOAT, ms, fs_, H5P_DEFAULT, zeros.data()), 0);
+    hsize_t bytes = 0;
+    ASSERT_GE(H5Dget_chunk_storage_size(d, at0, &bytes), 0);
+    std::vector<unsigned char> raw(bytes);
+    std::uint32_t mask = 0;
+    ASSERT_GE(H5Dread_chunk(d, H5P_DEFAULT, at0, &mask, raw.data()), 0);
+    for (hsize_t r = 1; r < frames; ++r) {
+      const hsize_t at[3] = {r, 0, 0};
+      ASSERT_GE(H5Dwrite_chunk(d, H5P_DEFAULT, mask, at, raw.size(), raw.data()), 0);
+    }
+    H5Sclose(fs_);
+    H5Sclose(ms);
+    H5Dclose(d);
+    H5Pclose(dcpl);
+    H5Sclose(s);
+  }
+  ASSERT_GE(H5Fclose(f), 0);
+  std::printf("bomb: %llu bytes declaring %llu\n", static_cast<unsigned long long>(fs::file_size(p)),
+              static_cast<unsigned long long>(2 * frames * n * 3 * 4));
+  const auto t0 = std::chrono::steady_clock::now();
+  const Result r = run("timeout -k 5 120 " + bin() + " validate --trace-in " + p + " --check-only");
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("--check-only refused the bomb after %.2f s\n", took);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(p + ": /aabbs/m"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("(a compression bomb?); allowed: a file whose values read in all are at most 64 x its size"),
+            std::string::npos)
+      << r.output;
+  EXPECT_LT(took, 60.0);
 }

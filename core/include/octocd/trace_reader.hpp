@@ -37,6 +37,15 @@ constexpr std::uint64_t kMaxStringBytes = 64ull << 20;
 constexpr std::uint64_t kMaxExpansion = 1100;
 /// Bytes any dataset may declare beyond kMaxExpansion x the file's size: 1 MiB.
 constexpr std::uint64_t kSlackBytes = 1ull << 20;
+/// One reader reads at most kMaxReadExpansion x the file's size + kReadSlackBytes of
+/// values in all (every row read counts, each time it is read): a compression bomb (an
+/// 11.8 MB file of deflated zeros declaring 13 GB) took 88 s for --check-only. octocd's own
+/// traces store about 3 bytes of values per byte of file (positions shuffled and deflated
+/// to about 1/2, velocities at rest to almost nothing) and `validate --trace-in` reads each
+/// state row twice: 64 leaves a factor of 10 and bounds a bomb to seconds.
+constexpr std::uint64_t kMaxReadExpansion = 64;
+/// Bytes of values any reader may read beyond kMaxReadExpansion x the file's size: 64 MiB.
+constexpr std::uint64_t kReadSlackBytes = 64ull << 20;
 /// Largest |coordinate| (m) of a position, an AABB corner or a local extent, and of a
 /// position plus an extent: 10^6 m (a float32 step of 6 cm there), so that sums,
 /// differences and squares stay finite in float32.
