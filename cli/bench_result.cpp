@@ -4,11 +4,13 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include <fmt/format.h>
 
 #include "bench_sweep.hpp"
 #include "octocd/error.hpp"
+#include "octocd/json_strict.hpp"
 
 namespace octocd::cli::bench {
 
@@ -62,12 +64,11 @@ std::map<std::string, json> resumed_points(const BenchOptions& o, const Sweep& s
                                  "over)",
                                  o.output));
   json old;
-  try {
+  {
     std::ifstream in(o.output);
-    old = json::parse(in);
-  } catch (const json::exception& e) {
-    throw InputError(fmt::format("{}: not JSON ({}); allowed: a result file of octocd bench to resume", o.output,
-                                 e.what()));
+    std::stringstream text;
+    text << in.rdbuf();
+    old = octocd::parse_json_strict(text.str(), o.output);  // a second "points" key refused, not silently won
   }
   if (old.value("format", "") != "octocd-bench" || old.value("version", 0) != 1)
     throw InputError(fmt::format("{}: format: {} version {}; allowed: octocd-bench version 1", o.output,

@@ -14,6 +14,7 @@
 #include "bench_sweep.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
+#include "octocd/json_strict.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/shared_files.hpp"
 
@@ -47,11 +48,7 @@ json read_sweep_file(const std::string& path) {
   std::ifstream in(path);
   std::stringstream ss;
   ss << in.rdbuf();
-  try {
-    return json::parse(ss.str());
-  } catch (const json::exception& e) {
-    throw InputError(fmt::format("{}: not JSON ({}); allowed: a sweep file (docs/bench-format.md)", path, e.what()));
-  }
+  return octocd::parse_json_strict(ss.str(), path);  // duplicate keys and NUL bytes refused
 }
 
 namespace {
@@ -73,6 +70,15 @@ std::vector<std::string> string_list(const json& j, const std::string& key, cons
     out.push_back(v.get<std::string>());
   }
   return out;
+}
+
+/// The string at `key`, or `fallback` when absent; anything else is bad input naming the
+/// key (not a raw json type_error).
+std::string optional_string(const json& j, const std::string& key, const std::string& origin,
+                            const std::string& fallback) {
+  if (!j.contains(key)) return fallback;
+  if (!j.at(key).is_string()) bad(origin, key, j.at(key).dump() + " is not a string", "a string");
+  return j.at(key).get<std::string>();
 }
 
 /// The scene key a known axis name sets.
@@ -108,7 +114,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   if (!j.contains("name") || !j.at("name").is_string() || j.at("name").get<std::string>().empty())
     bad(origin, "name", "missing or not a non-empty string", "a non-empty string");
   s.name = j.at("name");
-  s.kind = j.value("kind", "steps");
+  s.kind = optional_string(j, "kind", origin, "steps");
   static const std::set<std::string> mi{"scenes", "set",          "target_steps_per_s", "max_instances",
                                         "resolution", "paper", "probe_repeat", "search_time_s"};
   if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances")
@@ -125,7 +131,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   if (j.contains("format") && j.at("format") != "octocd-sweep")
     bad(origin, "format", j.at("format").dump(), "\"octocd-sweep\"");
   if (j.contains("version") && j.at("version") != 1) bad(origin, "version", j.at("version").dump(), "1");
-  s.description = j.value("description", "");
+  s.description = optional_string(j, "description", origin, "");
   s.engines = j.contains("engines") ? string_list(j, "engines", origin) : engine_names();
   for (std::size_t i = 0; i < s.engines.size(); ++i)
     if (std::find(engine_names().begin(), engine_names().end(), s.engines[i]) == engine_names().end())
@@ -191,7 +197,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
         Axis ax;
         if (!a.contains("name") || !a.at("name").is_string()) bad(origin, k + ".name", "missing", "a string");
         ax.name = a.at("name");
-        ax.key = a.contains("key") ? a.at("key").get<std::string>() : axis_key(ax.name);
+        ax.key = a.contains("key") ? optional_string(a, "key", origin, "") : axis_key(ax.name);
         if (ax.key.empty() || ax.key[0] != '/')
           bad(origin, k + ".key", "missing for axis '" + ax.name + "'",
               "a JSON pointer into the scene, or an axis name among midphase, broadphase, cell_size, beta, delta, "

@@ -53,7 +53,8 @@ double tolerance_number(const std::string& text, const std::string& item) {
   errno = 0;
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
-  if (text.empty() || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v))
+  // Decimal only: strtod also reads "0x10" (16), "inf" and "nan".
+  if (text.empty() || text.find_first_not_of("0123456789+-.eE") != std::string::npos || end != text.c_str() + text.size() || errno == ERANGE || !std::isfinite(v))
     throw InputError(fmt::format("--tolerance '{}': '{}' is not a number; allowed: {}", item, text, kToleranceAllowed));
   if (v < 0.0)
     throw InputError(fmt::format("--tolerance '{}': {} is negative; allowed: {}", item, text, kToleranceAllowed));
@@ -65,6 +66,7 @@ double tolerance_number(const std::string& text, const std::string& item) {
 std::map<std::string, Tolerance> parse_tolerances(const std::vector<std::string>& args) {
   std::map<std::string, Tolerance> out;
   for (const auto& q : quantity_names()) out[q] = Tolerance{};
+  std::map<std::string, std::string> named;  // QUANTITY=VALUE items given: the item
   for (const auto& arg : args) {
     if (split_list(arg).empty())
       throw InputError(fmt::format("--tolerance '{}': empty; allowed: {}", arg, kToleranceAllowed));
@@ -76,6 +78,10 @@ std::map<std::string, Tolerance> parse_tolerances(const std::vector<std::string>
         const std::string q = item.substr(0, eq);
         if (std::find(quantity_names().begin(), quantity_names().end(), q) == quantity_names().end())
           throw InputError(fmt::format("--tolerance '{}': unknown quantity '{}'; allowed: {}", item, q, kToleranceAllowed));
+        if (const auto before = named.find(q); before != named.end())
+          throw InputError(fmt::format("--tolerance '{}': {} given twice ('{}' and '{}'); allowed: each quantity once",
+                                       item, q, before->second, item));
+        named[q] = item;
         targets.push_back(q);
         spec = item.substr(eq + 1);
       } else {
@@ -108,6 +114,16 @@ std::string Tolerance::text() const {
 }
 
 namespace {
+
+/// Rows of `dataset` (its first dimension). Throws InputError naming the file and the
+/// dataset when it is a scalar (before: std::out_of_range "vector::_M_range_check", exit 1).
+std::uint64_t rows_of(const TraceReader& t, const std::string& dataset) {
+  const std::vector<std::uint64_t> shape = t.shape(dataset);
+  if (shape.empty())
+    throw InputError(fmt::format("{}: {}: a scalar; allowed: a dataset of rows (rank >= 1; docs/trace-format.md)",
+                                 t.path(), dataset));
+  return shape[0];
+}
 
 /// The result for one quantity.
 struct QuantityResult {
@@ -240,14 +256,14 @@ Side make_side(const TraceReader& t) {
     throw InputError(fmt::format("{}: /bodies/shape_id: missing; allowed: a complete octocd trace (with /frames and "
                                  "/bodies) or an external trace (without /frames; docs/trace-format.md)",
                                  t.path()));
-  s.bodies = static_cast<std::int64_t>(t.shape("/bodies/shape_id").at(0));
+  s.bodies = static_cast<std::int64_t>(rows_of(t, "/bodies/shape_id"));
   s.frame_rows = t.complete_rows("/frames");
   s.frames = frames_of(t, "/frames/frame", s.frame_rows);
   s.has_states = t.has_dataset("/states/frame");
   if (s.has_states) {
-    std::int64_t r = static_cast<std::int64_t>(t.shape("/states/frame").at(0));
+    std::int64_t r = static_cast<std::int64_t>(rows_of(t, "/states/frame"));
     for (const char* d : {"/states/position", "/states/velocity", "/states/orientation", "/states/angular_velocity"})
-      if (t.has_dataset(d)) r = std::min(r, static_cast<std::int64_t>(t.shape(d).at(0)));
+      if (t.has_dataset(d)) r = std::min(r, static_cast<std::int64_t>(rows_of(t, d)));
     s.state_rows = r;
     s.state_frames = frames_of(t, "/states/frame", r);
   }
@@ -465,7 +481,7 @@ Contacts load_contacts(const Side& s) {
     r.frame = s.frames;
   } else {
     // Complete rows: at most committed_frames (docs/trace-format.md).
-    if (t.shape("/contacts/offsets").at(0) == 0) return r;
+    if (rows_of(t, "/contacts/offsets") == 0) return r;
     const std::int64_t rows = t.complete_rows("/contacts");
     r.frame = increasing_frames(t, "/contacts/frame", rows);
     r.off = t.read_i64("/contacts/offsets", rows + 1);
@@ -475,9 +491,9 @@ Contacts load_contacts(const Side& s) {
       if ((i == 0 && r.off[i] != 0) || (i > 0 && r.off[i] < r.off[i - 1]))
         throw InputError(fmt::format("{}: /contacts/offsets: row {} is {}{}; allowed: 0 first, never decreasing",
                                      t.path(), i, r.off[i], i > 0 ? fmt::format(" after {}", r.off[i - 1]) : ""));
-    std::uint64_t flat = std::min({t.shape("/contacts/pair").at(0), t.shape("/contacts/depth").at(0),
-                                   t.shape("/contacts/normal").at(0), t.shape("/contacts/jn").at(0),
-                                   t.shape("/contacts/jt").at(0)});
+    std::uint64_t flat = std::min({rows_of(t, "/contacts/pair"), rows_of(t, "/contacts/depth"),
+                                   rows_of(t, "/contacts/normal"), rows_of(t, "/contacts/jn"),
+                                   rows_of(t, "/contacts/jt")});
     if (s.points) {
       const auto shape = t.shape("/contacts/point");
       if (shape.size() != 2 || shape[1] != 3)

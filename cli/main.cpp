@@ -1,4 +1,5 @@
 // The `octocd` command (SPEC section 9). Exit codes: 0 ok, 1 runtime failure, 2 bad input.
+#include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -30,6 +31,7 @@
 #include "octocd/midphase.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/atomic_file.hpp"
 #include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/validation.hpp"
@@ -247,22 +249,20 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   j["kinetic_energy"] = {{"mean", t.energy_sum / n}, {"max", t.energy_max}, {"last", t.last.kinetic_energy}};
   j["device"] = world.device();
   j["build_id"] = octocd::build_id();
-  std::ofstream out(path);
-  if (!out) throw octocd::RuntimeError(fmt::format("cannot write summary '{}'", path));
-  out << j.dump(2) << "\n";
+  octocd::write_file_atomically(path, j.dump(2) + "\n", "--summary-json");
 }
 
 /// The line a command stopped by SIGINT/SIGTERM prints on stderr: where it stopped and
 /// what it kept.
 void report_stop(int sig, const char* command, std::int64_t done, std::int64_t total,
-                 const std::string& trace) {
+                 const std::string& trace, const std::string& note = "") {
   std::string kept;
   if (!trace.empty())
     kept = done > 0 ? fmt::format("; the trace {} holds frames 1..{}", trace, done)
                     : fmt::format("; the trace {} holds no frame", trace);
   std::fprintf(stderr, "octocd %s: stopped by %s after frame %lld of %lld%s\n", command,
                octocd::stop_signal_name(sig), static_cast<long long>(done),
-               static_cast<long long>(total), kept.c_str());
+               static_cast<long long>(total), (kept + note).c_str());
 }
 
 /// Loads the scene for `run` and `validate`: `--data-dir` (checked to be a folder) or the
@@ -299,8 +299,23 @@ void close_after_failure(std::unique_ptr<octocd::TraceWriter>& trace, const std:
   }
 }
 
+/// What `run` keeps should it end at once (a second signal, the 1 s bound): the trace's
+/// frames as of its last flush (trace.hpp: readable at any instant).
+std::string run_kept(const octocd::TraceWriter* trace, const std::string& path) {
+  if (!trace) return "";
+  return trace->flushed_frames() > 0
+             ? fmt::format("the trace {} holds frames 1..{} (its last flush), no sidecar", path, trace->flushed_frames())
+             : fmt::format("the trace {} holds no frame (none flushed yet), no sidecar", path);
+}
+
+/// `run`: from a SIGINT or SIGTERM to the end of the process, at most this long (s): the
+/// step in progress gets the 0.5 s grace, the trace's last flush is bounded by
+/// TraceOptions::flush_bytes; past it the process ends keeping the flushed frames.
+constexpr double kRunStopBound = 0.95;
+
 int run_command(const RunOptions& o) {
-  octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
+  // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kRunStopBound.
+  octocd::StopOnSignals stop_on_signals(kRunStopBound);
   const auto t_setup = Clock::now();
   std::optional<octocd::StopAtOnce> loading(std::in_place, "loading the scene and its meshes");
   octocd::Scene scene = load_scene_for(o.scene, o.data_dir);
@@ -334,6 +349,7 @@ int run_command(const RunOptions& o) {
     meta.start_time = octocd::cli::utc_time_now();
     trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(world), topt);
     trace->append_state(0, world.state());
+    octocd::set_stop_kept(run_kept(trace.get(), o.trace));
   }
 
   Progress progress(scene.frames, !o.quiet);
@@ -344,19 +360,16 @@ int run_command(const RunOptions& o) {
       // grace ends the run there, with the trace's flushed frames (SWMR, trace.hpp).
       std::optional<octocd::StopWithin> within(
           std::in_place,
-          fmt::format("run stepped frame {} of {} (a step longer than the 0.5 s grace){}", f + 1, scene.frames,
-                      !trace ? std::string()
-                      : trace->flushed_frames() > 0
-                          ? fmt::format("; the trace {} holds frames 1..{} (its last flush), no sidecar", o.trace,
-                                        trace->flushed_frames())
-                          : fmt::format("; the trace {} holds no frame (none flushed yet), no sidecar", o.trace)));
+          fmt::format("run stepped frame {} of {} (a step longer than the 0.5 s grace)", f + 1, scene.frames));
       const octocd::FrameMetrics& m = world.step();
       within.reset();
       totals.add(m);
+      const std::int64_t flushed = trace ? trace->flushed_frames() : 0;
       if (trace && world.rotation_traits() && world.can_record())
         trace->append_frame_v2(m, world.state(), world.record());
       else if (trace)
         trace->append_frame(m, world.state(), world.contacts());
+      if (trace && trace->flushed_frames() != flushed) octocd::set_stop_kept(run_kept(trace.get(), o.trace));
       progress.update(m, totals);
     }
   } catch (const octocd::RuntimeError&) {
@@ -366,13 +379,17 @@ int run_command(const RunOptions& o) {
   std::string xdmf;
   if (trace) {
     trace->close();
-    xdmf = write_sidecar(o.trace, o.no_xdmf);
+    // A stopped run has a second: the sidecar re-reads the whole trace (the hardened
+    // reader walks its heaps: 1 s for 200 MB), so it is left out.
+    if (octocd::stop_signal() == 0) xdmf = write_sidecar(o.trace, o.no_xdmf);
+    octocd::set_stop_kept(fmt::format("the trace {} holds frames 1..{}, closed", o.trace, totals.frames));
   }
   const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
   if (!o.quiet) print_summary(world, totals, wall_s, o.trace, xdmf);
   if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s);
   if (const int sig = octocd::stop_signal()) {
-    report_stop(sig, "run", totals.frames, scene.frames, o.trace);
+    report_stop(sig, "run", totals.frames, scene.frames, o.trace,
+                o.trace.empty() || o.no_xdmf ? "" : "; no XDMF sidecar (a stopped run writes none)");
     return octocd::stop_exit_code(sig);
   }
   return 0;
@@ -678,6 +695,12 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
     const octocd::StopAtOnce loading("loading the scene and its meshes");
     scene = load_scene_for(o.scene, o.data_dir);
+    // Without --engine, a rotating scene (rotation: true, an orientation or an angular
+    // velocity) is validated on the one engine that rotates: Bullet with rotation (SPEC 13).
+    if (!o.engine_given && octocd::scene_rotates(scene)) {
+      o.engine = "bullet";
+      o.rotation = true;
+    }
     octocd::EngineOptions eo;
     eo.rotation = o.rotation;
     const octocd::EngineInfo& info = octocd::engine_info(o.engine, "--engine");
@@ -706,6 +729,7 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
           item));
     }
   }
+  std::map<std::string, std::string> given;  // --tolerance NAME: the item that set it
   for (const std::string& item : o.tolerances) {
     const auto eq = item.find('=');
     std::string names;
@@ -713,16 +737,23 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
     if (eq == std::string::npos || eq == 0)
       throw octocd::InputError(fmt::format("--tolerance: '{}' is not NAME=VALUE; allowed names: {}", item, names));
     const std::string name = item.substr(0, eq), text = item.substr(eq + 1);
+    if (const auto before = given.find(name); before != given.end())
+      throw octocd::InputError(fmt::format("--tolerance: {} given twice ('{}' and '{}'); allowed: each tolerance once",
+                                           name, before->second, item));
+    given[name] = item;
     double value = 0.0;
     std::size_t used = 0;
+    // Decimal only: std::stod also reads "0x10" (16), "inf" and "nan".
+    const bool decimal = !text.empty() && text.find_first_not_of("0123456789+-.eE") == std::string::npos;
     try {
-      value = std::stod(text, &used);
+      if (decimal) value = std::stod(text, &used);
     } catch (const std::exception&) {
       used = 0;
     }
     if (used == 0 || used != text.size())
-      throw octocd::InputError(
-          fmt::format("--tolerance: {}: '{}' is not a number; allowed: a finite number >= 0", name, text));
+      throw octocd::InputError(fmt::format(
+          "--tolerance: {}: '{}' is not a decimal number; allowed: a finite number >= 0 (decimal, e.g. 0.01 or 1e-3)",
+          name, text));
     octocd::set_tolerance(vo.tol, name, value);
     vo.overridden.push_back(name);
   }
@@ -841,6 +872,10 @@ CLI::Validator at_least_one() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // A file size limit (ulimit -f) or a full file system is an error message and exit 1,
+  // never death by SIGXFSZ (exit 153, no message, a 0-byte or temporary file left): a
+  // write past the limit fails with EFBIG and the writer says which file and what it kept.
+  ::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
       "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a check failed (validate, compare, replay),\n"
@@ -916,7 +951,8 @@ int main(int argc, char** argv) {
   val_cmd->add_option("--engine", val.engine,
                       "cpu: the CPU reference; cuda: the GPU engine (needs a CUDA build and device); bullet: "
                       "only with --rotation (or a rotating scene): Bullet's run judged as a version 2 external "
-                      "trace (--trace keeps it)")
+                      "trace (--trace keeps it). Default: cpu, or bullet with rotation for a rotating scene "
+                      "(rotation: true, an orientation or an angular velocity)")
       ->check(CLI::IsMember(octocd::engine_names()))
       ->default_val("cpu");
   val_cmd->add_flag("--rotation", val.rotation,

@@ -21,6 +21,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/cuda_settings.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/engines.hpp"
@@ -53,10 +54,8 @@ nlohmann::json load_average();
 /// tree when it is there, else the id compiled in).
 nlohmann::json build_description();
 
-/// Writes `text` to `path` atomically (a temporary file in the same folder, then rename),
-/// so a reader or a killed process never sees half a file. Throws RuntimeError naming the
-/// path on failure.
-void write_file_atomically(const std::string& path, const std::string& text);
+/// Atomic result files (octocd/atomic_file.hpp), as the subcommands call them.
+using octocd::write_file_atomically;
 
 /// Splits "a,b,c" into {"a", "b", "c"} (empty items dropped).
 std::vector<std::string> split_list(const std::string& text);

@@ -141,13 +141,11 @@ started_all=$(date +%s.%N)
 for scene in "${scenes[@]}"; do
   name="$(basename "$scene" .json)"
   log="$out/$name.log"
-  engine=()  # a rotating scene (rotation: true) runs only on Bullet with rotation (SPEC 13)
-  if grep -q '"rotation": *true' "$scene"; then engine=(--engine bullet); fi
   n_frames="$(frames_of "$name")"
   t0=$(date +%s.%N)
   timeout --signal=TERM --kill-after=10 "$timeout_s" \
     "$bin" validate "$scene" --frames "$n_frames" --every "$every" --against "$against" \
-    --junit "$out/junit/$name.xml" "${engine[@]}" "${tolerances[@]}" "${extra[@]}" >"$log" 2>&1 &
+    --junit "$out/junit/$name.xml" "${tolerances[@]}" "${extra[@]}" >"$log" 2>&1 &
   child=$!
   wait "$child"
   rc=$?

@@ -234,6 +234,10 @@ std::string Hdf5Reader::string_attribute(const std::string& name) const {
     std::string buf(H5Tget_size(type), '\0');
     if (H5Aread(a, type, buf.data()) < 0) fail(obj, "unreadable (damaged file?)", "a readable string");
     out = buf.substr(0, buf.find('\0'));
+    // NUL padding only: "product\0min" is neither "product" nor "min".
+    if (buf.find_first_not_of('\0', out.size()) != std::string::npos)
+      fail(obj, fmt::format("a string with an embedded NUL byte at byte {}", out.size()),
+           "a string without NUL bytes (NUL padding only at its end)");
   }
   return out;
 }
@@ -243,6 +247,19 @@ double Hdf5Reader::number_attribute(const std::string& name) const {
   double v = 0.0;
   if (H5Aread(a, H5T_NATIVE_DOUBLE, &v) < 0)
     fail("/ (root attribute " + name + ")", "unreadable as a number", "a number");
+  return v;
+}
+
+std::int64_t Hdf5Reader::integer_attribute(const std::string& name) const {
+  const Hdf5Handle a = attribute(name, H5T_FLOAT, 1);
+  const std::string obj = "/ (root attribute " + name + ")";
+  Hdf5Handle type(H5Aget_type(a));
+  const std::size_t size = H5Tget_size(type);
+  if (H5Tget_class(type) != H5T_INTEGER || (size != 4 && size != 8))
+    fail(obj, fmt::format("stored as a {}-bit {}", 8 * size, H5Tget_class(type) == H5T_INTEGER ? "integer" : "float"),
+         "a 32- or 64-bit integer");
+  std::int64_t v = 0;
+  if (H5Aread(a, H5T_NATIVE_INT64, &v) < 0) fail(obj, "unreadable as an integer", "a 32- or 64-bit integer");
   return v;
 }
 
@@ -329,6 +346,16 @@ void Hdf5Reader::read_rows(const Dataset& d, hsize_t first, hsize_t count, hid_t
     fail(d.name, fmt::format("rows {}..{} asked, it has {}", first, first + count, d.dims[0]),
          "rows below its length");
   if (count == 0 || d.per_row() == 0) return;
+  // The read budget: values stored (count x per_row x the stored element's size).
+  const std::uint64_t budget = trace_limits::kMaxReadExpansion * file_bytes_ + trace_limits::kReadSlackBytes;
+  read_bytes_ += count * d.per_row() * std::max<std::uint64_t>(d.type_size, 1);
+  if (read_bytes_ > budget)
+    fail(d.name,
+         fmt::format("reading rows {}..{} takes the values read from this {}-byte file past {} bytes (a compression "
+                     "bomb?)",
+                     first, first + count - 1, file_bytes_, budget),
+         fmt::format("a file whose values read in all are at most {} x its size + {} MiB", trace_limits::kMaxReadExpansion,
+                     trace_limits::kReadSlackBytes >> 20));
   Hdf5Handle fspace(H5Dget_space(d.id));
   std::vector<hsize_t> start(d.dims.size(), 0), cnt = d.dims;
   start[0] = first;

@@ -137,6 +137,9 @@ class Hdf5Reader {
   std::string string_attribute(const std::string& name) const;
   /// Root attribute `name` as one number (an integer or float scalar, or one element).
   double number_attribute(const std::string& name) const;
+  /// Root attribute `name` as one integer stored as a 32- or 64-bit integer (a float, an
+  /// 8- or 16-bit integer are refused naming the type: a format version is written so).
+  std::int64_t integer_attribute(const std::string& name) const;
   /// Root attribute `name` as exactly `count` numbers (any simple shape of `count`).
   std::vector<double> number_attributes(const std::string& name, std::size_t count) const;
 
@@ -160,8 +163,10 @@ class Hdf5Reader {
   Dataset open_numeric(const std::string& name, int rank) const;
 
   /// Rows [first, first + count) of `d` converted to `mem_type` into `out` (which must
-  /// hold count x per_row elements). Throws InputError for rows outside the dataset or a
-  /// failed read (a missing filter, a type HDF5 cannot convert, a damaged file).
+  /// hold count x per_row elements). Throws InputError for rows outside the dataset, a
+  /// failed read (a missing filter, a type HDF5 cannot convert, a damaged file), or a read
+  /// that takes the values read from this file past trace_limits::kMaxReadExpansion x its
+  /// size + kReadSlackBytes (a compression bomb).
   void read_rows(const Dataset& d, hsize_t first, hsize_t count, hid_t mem_type, void* out) const;
   /// Every element of a 1-D string dataset (fixed or variable length).
   std::vector<std::string> read_strings(const std::string& name) const;
@@ -171,6 +176,7 @@ class Hdf5Reader {
   std::string what_;
   std::uint64_t file_bytes_ = 0;
   GlobalHeaps heaps_;  // every global heap object, checked before HDF5 opened the file
+  mutable std::uint64_t read_bytes_ = 0;  // values read so far (read_rows), against the read budget
   QuietHdf5 quiet_;  // declared before file_: outlives it
   Hdf5Handle file_;
   Hdf5Handle attribute(const std::string& name, H5T_class_t cls, std::size_t count) const;

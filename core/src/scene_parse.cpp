@@ -320,6 +320,9 @@ class PathTracker : public nlohmann::json_sax<json> {
 };
 
 json parse_json(const Ctx& c, const std::string& text) {
+  // nlohmann's lexer ends the input at a NUL: a scene followed by "\0garbage" parsed.
+  if (const std::size_t nul = text.find('\0'); nul != std::string::npos)
+    c.fail("", "a NUL byte at byte " + std::to_string(nul), "a JSON text (RFC 8259, UTF-8) without NUL bytes");
   PathTracker tracker;
   json::sax_parse(text, &tracker, json::input_format_t::json, true, false);
   if (tracker.too_deep)

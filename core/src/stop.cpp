@@ -1,13 +1,18 @@
 /// \file stop.cpp
-/// SIGINT/SIGTERM recorded in a lock-free atomic, polled by the commands' loops.
+/// SIGINT/SIGTERM recorded in a lock-free atomic, polled by the commands' loops; after the
+/// first signal a 20 ms SIGALRM tick enforces StopWithin's grace and StopOnSignals'
+/// deadline.
 
 #include "octocd/stop.hpp"
 
 #include <signal.h>
 #include <sys/time.h>
+#include <time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstddef>
+#include <cstring>
 
 #include <atomic>
 #include <string>
@@ -24,49 +29,84 @@ std::atomic<const char*> g_at_once{nullptr};  // StopAtOnce's phrase while one i
 static_assert(std::atomic<const char*>::is_always_lock_free, "the handler needs a lock-free pointer");
 std::atomic<const char*> g_within{nullptr};  // StopWithin's phrase while one is alive
 std::atomic<long> g_grace_us{500000};        // its grace (microseconds)
-std::atomic<bool> g_armed{false};            // the grace timer runs
+std::atomic<long> g_deadline_us{0};          // StopOnSignals' deadline (0: none)
+std::atomic<long long> g_signal_ns{0};       // CLOCK_MONOTONIC at the first signal
+std::atomic<bool> g_ticking{false};          // the 20 ms SIGALRM tick runs
+
+// set_stop_kept's text: a ring of buffers, so the handler never reads one being rewritten
+// (the text changes at most once a frame; a handler reads it within microseconds).
+constexpr std::size_t kKeptSlots = 4, kKeptBytes = 1024;
+char g_kept_text[kKeptSlots][kKeptBytes];
+std::atomic<const char*> g_kept{nullptr};
+std::atomic<unsigned> g_kept_slot{0};
+
+// Async-signal-safe (clock_gettime is).
+long long now_ns() {
+  timespec t{};
+  ::clock_gettime(CLOCK_MONOTONIC, &t);
+  return static_cast<long long>(t.tv_sec) * 1000000000LL + t.tv_nsec;
+}
 
 // Async-signal-safe: setitimer is a plain system call.
-void arm_grace() {
-  const long us = g_grace_us.load();
+void start_tick() {
+  if (g_ticking.exchange(true)) return;
   itimerval t{};
-  t.it_value.tv_sec = us / 1000000;
-  t.it_value.tv_usec = us % 1000000;
-  g_armed.store(true);
+  t.it_value.tv_usec = 20000;
+  t.it_interval.tv_usec = 20000;
   ::setitimer(ITIMER_REAL, &t, nullptr);
 }
 
-// Async-signal-safe: write(2) and _exit(2) only. `tail` follows `what`.
-void exit_now(int sig, const char* what, const char* tail = "; nothing was written\n") {
-  const auto put = [](const char* t) {
-    std::size_t n = 0;
-    while (t[n] != '\0') ++n;
-    (void)!::write(2, t, n);
-  };
+void stop_tick() {
+  if (!g_ticking.exchange(false)) return;
+  const itimerval off{};
+  ::setitimer(ITIMER_REAL, &off, nullptr);
+}
+
+// Async-signal-safe: write(2) only.
+void put(const char* t) {
+  std::size_t n = 0;
+  while (t[n] != '\0') ++n;
+  (void)!::write(2, t, n);
+}
+
+// Async-signal-safe: write(2) and _exit(2) only. Prints "octocd: stopped by SIG...",
+// then `middle` and `what`, then "; <kept>" when set_stop_kept gave a text (else `tail`).
+[[noreturn]] void exit_now(int sig, const char* middle, const char* what, const char* tail) {
   put("octocd: stopped by ");
   put(sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal");
-  put(" while ");
+  put(middle);
   put(what);
-  put(tail);
+  if (const char* kept = g_kept.load()) {
+    put("; ");
+    put(kept);
+    put("\n");
+  } else {
+    put(tail);
+  }
   ::_exit(128 + sig);
 }
 
-// SIGALRM: the grace of a StopWithin ran out while it is still alive.
-extern "C" void grace_over(int) {
+// SIGALRM, every 20 ms after the first signal: StopWithin's grace or the deadline ran out.
+extern "C" void tick(int) {
   const int sig = g_signal.load();
+  if (sig == 0) return;
+  const long long elapsed_us = (now_ns() - g_signal_ns.load()) / 1000;
   if (const char* what = g_within.load())
-    if (sig != 0) exit_now(sig, what, "\n");
+    if (elapsed_us >= g_grace_us.load()) exit_now(sig, " while ", what, "\n");
+  const long deadline = g_deadline_us.load();
+  if (deadline > 0 && elapsed_us >= deadline) exit_now(sig, "", ": stopping took longer than its bound", "\n");
 }
 
 extern "C" void record_signal(int sig) {
-  if (const char* what = g_at_once.load()) exit_now(sig, what);
+  if (const char* what = g_at_once.load()) exit_now(sig, " while ", what, "; nothing was written\n");
   int expected = 0;
   if (!g_signal.compare_exchange_strong(expected, sig)) {
-    // A second signal while stopping: the user insists. Default action (ends the process).
-    ::signal(sig, SIG_DFL);
-    ::raise(sig);
+    // A second signal while stopping: the user insists; the process ends now, saying
+    // what it keeps (everything flushed before: a trace is readable at any instant).
+    exit_now(sig, " again", " while stopping", "\n");
   }
-  if (g_within.load() != nullptr) arm_grace();
+  g_signal_ns.store(now_ns());
+  if (g_within.load() != nullptr || g_deadline_us.load() > 0) start_tick();
 }
 
 }  // namespace
@@ -83,8 +123,22 @@ const char* stop_signal_name(int sig) {
   }
 }
 
-StopOnSignals::StopOnSignals() {
+void set_stop_kept(const std::string& text) {
+  if (text.empty()) {
+    g_kept.store(nullptr);
+    return;
+  }
+  const unsigned slot = (g_kept_slot.fetch_add(1) + 1) % kKeptSlots;
+  const std::size_t n = std::min(text.size(), kKeptBytes - 1);
+  std::memcpy(g_kept_text[slot], text.data(), n);
+  g_kept_text[slot][n] = '\0';
+  g_kept.store(g_kept_text[slot]);
+}
+
+StopOnSignals::StopOnSignals(double deadline_s) {
   g_signal.store(0);
+  g_kept.store(nullptr);
+  g_deadline_us.store(deadline_s > 0.0 ? std::max(1L, static_cast<long>(deadline_s * 1e6)) : 0L);
   struct sigaction sa {};
   sa.sa_handler = record_signal;
   sigemptyset(&sa.sa_mask);
@@ -92,7 +146,7 @@ StopOnSignals::StopOnSignals() {
   sigaction(SIGINT, &sa, &g_old_int);
   sigaction(SIGTERM, &sa, &g_old_term);
   struct sigaction alrm {};
-  alrm.sa_handler = grace_over;
+  alrm.sa_handler = tick;
   sigemptyset(&alrm.sa_mask);
   alrm.sa_flags = SA_RESTART;
   sigaction(SIGALRM, &alrm, &g_old_alrm);
@@ -101,25 +155,28 @@ StopOnSignals::StopOnSignals() {
 StopWithin::StopWithin(std::string what, double grace_s) : what_(std::move(what)), grace_s_(grace_s) {
   g_grace_us.store(static_cast<long>(grace_s_ * 1e6) > 0 ? static_cast<long>(grace_s_ * 1e6) : 1);
   g_within.store(what_.c_str());
-  if (g_signal.load() != 0) arm_grace();  // recorded between the loop's poll and here
+  if (g_signal.load() != 0) {  // recorded between the loop's poll and here: the grace starts now
+    g_signal_ns.store(now_ns());
+    start_tick();
+  }
 }
 
 StopWithin::~StopWithin() {
   g_within.store(nullptr);
-  if (g_armed.exchange(false)) {
-    const itimerval off{};
-    ::setitimer(ITIMER_REAL, &off, nullptr);
-  }
+  if (g_deadline_us.load() == 0) stop_tick();  // a deadline keeps the tick running
 }
 
 StopAtOnce::StopAtOnce(const char* what) {
   g_at_once.store(what);
-  if (const int sig = g_signal.load()) exit_now(sig, what);
+  if (const int sig = g_signal.load()) exit_now(sig, " while ", what, "; nothing was written\n");
 }
 
 StopAtOnce::~StopAtOnce() { g_at_once.store(nullptr); }
 
 StopOnSignals::~StopOnSignals() {
+  stop_tick();
+  g_deadline_us.store(0);
+  g_kept.store(nullptr);
   sigaction(SIGINT, &g_old_int, nullptr);
   sigaction(SIGTERM, &g_old_term, nullptr);
   sigaction(SIGALRM, &g_old_alrm, nullptr);

@@ -59,7 +59,8 @@ TraceReader::TraceReader(const std::string& path) : impl_(std::make_unique<Impl>
   const std::string format = string_attribute("format");
   if (format != "octocd-trace")
     throw InputError(fmt::format("{}: format: '{}'; allowed: \"octocd-trace\"", path, format));
-  const double version = has_attribute("version") ? number_attribute("version") : -1.0;
+  // A 32- or 64-bit integer (a float or uint8 version is refused naming its type).
+  const double version = has_attribute("version") ? static_cast<double>(impl_->h5->integer_attribute("version")) : -1.0;
   if (version != 1.0 && version != 2.0)
     throw InputError(fmt::format("{}: version: {}; allowed: 1 or 2 (this octocd reads octocd-trace versions 1 and 2)",
                                  path, version));

@@ -216,7 +216,14 @@ struct Zoo {
     };
     str_attr("format", "octocd-trace");
     str_attr("engine", engine);
-    num_attr("version", {2});
+    {  // an integer, as docs/trace-format.md says (a float version is refused)
+      const hid_t space = H5Screate(H5S_SCALAR);
+      const hid_t a = H5Acreate2(file, "version", H5T_STD_I32LE, space, H5P_DEFAULT, H5P_DEFAULT);
+      const int two = 2;
+      H5Awrite(a, H5T_NATIVE_INT, &two);
+      H5Aclose(a);
+      H5Sclose(space);
+    }
     num_attr("dt", {dt});
     num_attr("gravity", {g[0], g[1], g[2]});
     for (const auto& [k, v] : text) str_attr(k.c_str(), v);

@@ -13,7 +13,9 @@
 
 #include <fmt/format.h>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
+#include "octocd/json_strict.hpp"
 
 namespace octocd {
 namespace {
@@ -174,15 +176,9 @@ Expectations parse_expectations(const nlohmann::json& doc, const std::string& or
 }
 
 Expectations parse_expectations_text(const std::string& text, const std::string& origin) {
-  nlohmann::json doc;
-  try {
-    doc = nlohmann::json::parse(text);
-  } catch (const nlohmann::json::exception& e) {
-    throw InputError(fmt::format("{}: not JSON ({}); allowed: the expectations format of "
-                                 "docs/validation-output.md",
-                                 origin, e.what()));
-  }
-  return parse_expectations(doc, origin);
+  // Strict: a key twice in one object (a second "tolerance" or "items") is refused, not
+  // silently won by the last one; a NUL byte ends nothing.
+  return parse_expectations(parse_json_strict(text, origin), origin);
 }
 
 Expectations load_expectations(const std::string& path) {
@@ -420,11 +416,7 @@ nlohmann::ordered_json results_json(const std::vector<ValidationResult>& results
 }
 
 void write_json_file(const std::string& path, const nlohmann::ordered_json& doc, const std::string& what) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) throw RuntimeError(fmt::format("{}: cannot write '{}'", what, path));
-  out << doc.dump(2) << "\n";
-  out.close();
-  if (!out) throw RuntimeError(fmt::format("{}: writing '{}' failed", what, path));
+  write_file_atomically(path, doc.dump(2) + "\n", what);  // no half or 0-byte file on a full disk
 }
 
 }  // namespace octocd

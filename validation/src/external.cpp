@@ -16,6 +16,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/mesh_octree.hpp"
+#include "octocd/trace_reader.hpp"
 
 namespace octocd {
 
@@ -214,6 +215,11 @@ void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inve
               fmt::format("body {}: {} not positive definite (leading minor {} is {:.6g})", i, I, k + 1,
                           minors[static_cast<std::size_t>(k)]),
               allowed);
+      for (int k = 0; k < 3; ++k)  // principal moments a real body has (trace_limits)
+        if (!(m[4 * k] >= trace_limits::kMinInertia && m[4 * k] <= trace_limits::kMaxInertia))
+          bad(names.inertia, fmt::format("body {}: I[{}][{}] = {:g}", i, k, k, m[4 * k]),
+              fmt::format("diagonal moments in [{:g}, {:g}] kg m^2 for a dynamic body", trace_limits::kMinInertia,
+                          trace_limits::kMaxInertia));
     }
   }
   if (!p.locked_dofs.empty()) {
@@ -244,8 +250,9 @@ void check_physics_bodies(const PhysicsBodies& p, const std::vector<float>& inve
   if (!std::isfinite(p.mu) || p.mu < 0.0) bad(names.mu, fmt::format("{}", p.mu), "a finite friction coefficient >= 0");
   if (!(p.restitution >= 0.0 && p.restitution <= 1.0))
     bad(names.restitution, fmt::format("{}", p.restitution), "a restitution in [0, 1]");
-  if (!std::isfinite(p.contact_margin) || p.contact_margin < 0.0)
-    bad(names.contact_margin, fmt::format("{}", p.contact_margin), "a finite distance >= 0 (m)");
+  if (!(p.contact_margin >= 0.0 && p.contact_margin <= trace_limits::kMaxContactMargin))
+    bad(names.contact_margin, fmt::format("{}", p.contact_margin),
+        fmt::format("a finite distance >= 0 (m), at most {:g} m", trace_limits::kMaxContactMargin));
   if (!std::isfinite(p.slop) || !(p.slop > 0.0)) bad(names.slop, fmt::format("{}", p.slop), "a finite slop > 0 (m)");
 }
 

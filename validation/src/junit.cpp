@@ -5,11 +5,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <sstream>
 
 #include <fmt/format.h>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/expect.hpp"
 #include "octocd/validation.hpp"
@@ -21,13 +21,9 @@ namespace {
 /// "%.9g" of a figure (JUnit text, not for machines).
 std::string num(double v) { return fmt::format("{:.9g}", v); }
 
-void write_file(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) throw RuntimeError("--junit: cannot write '" + path + "'");
-  out << text;
-  out.close();
-  if (!out) throw RuntimeError("--junit: writing '" + path + "' failed");
-}
+// Atomically: a failed write (a full disk, a file size limit) leaves the previous report,
+// if any, intact and no 0-byte or half file.
+void write_file(const std::string& path, const std::string& text) { write_file_atomically(path, text, "--junit"); }
 
 }  // namespace
 

@@ -4,8 +4,9 @@
 /// signal (async-signal-safe); the command's loop polls stop_signal() between steps,
 /// flushes its trace or result, says where it stopped and exits with stop_exit_code()
 /// (130 for SIGINT, 143 for SIGTERM, the shells' 128 + signal). A second signal while
-/// the first is being handled ends the process at once (the signal's default action), so
-/// a stuck flush can still be interrupted.
+/// the first is being handled ends the process at once with 128 + sig and one line on
+/// stderr saying what is kept (set_stop_kept), so a stuck flush can still be interrupted;
+/// so does a deadline passed (StopOnSignals' `deadline_s`, e.g. `run`'s 1 s bound).
 ///
 /// Use (as `octocd run` and `octocd validate` do; `octocd bench` should do the same):
 ///
@@ -27,12 +28,23 @@ int stop_exit_code(int sig);
 /// "SIGINT", "SIGTERM" or "signal N".
 const char* stop_signal_name(int sig);
 
+/// What the process keeps should it end at once while stopping (a second signal, the
+/// deadline, a StopWithin's grace), e.g. "the trace t.h5 holds frames 1..40 (its last
+/// flush)"; the line on stderr then ends with "; <text>". Copied (at most 1023 bytes);
+/// "" clears it. Call from the thread that runs the command, at most once a frame or so
+/// (a ring of four buffers: a handler never reads one being rewritten).
+void set_stop_kept(const std::string& text);
+
 /// Installs handlers for SIGINT and SIGTERM that record the signal (see stop_signal) and
 /// clears any signal recorded before; the destructor restores the previous handlers.
+/// `deadline_s` > 0: the process ends at most that long after the first signal, with
+/// 128 + sig and one line "octocd: stopped by SIG...: stopping took longer than its
+/// bound; <set_stop_kept's text>" when the command has not returned by then (a 20 ms
+/// SIGALRM tick checks it, ITIMER_REAL). 0: no deadline.
 /// One at a time per process (not nestable); not thread-safe to construct.
 class StopOnSignals {
  public:
-  StopOnSignals();
+  explicit StopOnSignals(double deadline_s = 0.0);
   ~StopOnSignals();
   StopOnSignals(const StopOnSignals&) = delete;
   StopOnSignals& operator=(const StopOnSignals&) = delete;
@@ -60,8 +72,8 @@ class StopAtOnce {
 /// the guard is destroyed as usual and the loop polls stop_signal() and stops cleanly
 /// (flush, summary). `what` says what is kept, since nothing more is written, e.g.
 /// "run stepped frame 12 of 100; the trace t.h5 holds frames 1..10 (its last flush)".
-/// A signal recorded before the guard starts the grace at construction. Uses SIGALRM
-/// (ITIMER_REAL) while alive. Not nestable, not with StopAtOnce.
+/// The grace counts from the signal (a signal recorded before the guard: from its
+/// construction). Uses SIGALRM (ITIMER_REAL). Not nestable, not with StopAtOnce.
 class StopWithin {
  public:
   /// `what`: copied. `grace_s` > 0.

@@ -37,14 +37,38 @@ constexpr std::uint64_t kMaxStringBytes = 64ull << 20;
 constexpr std::uint64_t kMaxExpansion = 1100;
 /// Bytes any dataset may declare beyond kMaxExpansion x the file's size: 1 MiB.
 constexpr std::uint64_t kSlackBytes = 1ull << 20;
+/// One reader reads at most kMaxReadExpansion x the file's size + kReadSlackBytes of
+/// values in all (every row read counts, each time it is read): a compression bomb (an
+/// 11.8 MB file of deflated zeros declaring 13 GB) took 88 s for --check-only. octocd's own
+/// traces store about 3 bytes of values per byte of file (positions shuffled and deflated
+/// to about 1/2, velocities at rest to almost nothing) and `validate --trace-in` reads each
+/// state row twice: 64 leaves a factor of 10 and bounds a bomb to seconds.
+constexpr std::uint64_t kMaxReadExpansion = 64;
+/// Bytes of values any reader may read beyond kMaxReadExpansion x the file's size: 64 MiB.
+constexpr std::uint64_t kReadSlackBytes = 64ull << 20;
 /// Largest |coordinate| (m) of a position, an AABB corner or a local extent, and of a
 /// position plus an extent: 10^6 m (a float32 step of 6 cm there), so that sums,
 /// differences and squares stay finite in float32.
 constexpr double kMaxCoordinate = 1e6;
 /// Largest |velocity component| (m/s) and |gravity component| (m/s^2).
 constexpr double kMaxSpeed = 1e6;
-/// Largest time step dt (s); dt must also be > 0.
+/// Largest time step dt (s).
 constexpr double kMaxDt = 10.0;
+/// Smallest time step dt (s): 10^-7 s, ten times below the microsecond steps of stiff
+/// contact solvers; a smaller dt (1e-300) rounds to 0 in float32 where the engines use it.
+constexpr double kMinDt = 1e-7;
+/// Largest contact margin (m), the distance up to which contacts are expected (Bullet's
+/// breaking threshold 0.02 m, PhysX's contact offset about 0.02 m): 1 m, above any engine's
+/// setting for bodies within the +-1000 m scenes; 1e300 switched the false-contact check off.
+constexpr double kMaxContactMargin = 1.0;
+/// Principal moments of inertia (the diagonal, kg m^2, body frame) of a dynamic body lie
+/// in [kMinInertia, kMaxInertia]: 10^-12 is a 1 mm steel bead (4 mg, 0.4 m r^2 = 1.6e-12),
+/// 10^15 a 10^8 kg ship of 100 m radius x 10; inertia 1e-45 let a body spin up for free.
+constexpr double kMinInertia = 1e-12;
+constexpr double kMaxInertia = 1e15;
+/// Largest |contact impulse| (N s, jn, jt, each jt3 component): 10^9, a 10^6 kg body
+/// stopped from 1000 m/s in one step; jn = 3e38 made every physics row pass.
+constexpr double kMaxImpulse = 1e9;
 }  // namespace trace_limits
 
 /// One trace file, open read-only. Not thread-safe. Move-only.
