@@ -105,8 +105,6 @@ nlohmann::json build_description() {
   return b;
 }
 
-}
-
 std::vector<std::string> split_list(const std::string& text) {
   std::vector<std::string> out;
   std::string item;
