@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <type_traits>
@@ -674,16 +675,24 @@ FrameRecord ExternalTrace::frame(std::int64_t f) {
   return impl_->in.frame(f);
 }
 
-ExternalTraceInfo check_external_trace(const std::string& path) {
+namespace {
+// Every frame's values checked; `stop` (may be empty) polled between frames.
+ExternalTraceInfo check_frames(const std::string& path, const std::function<bool()>& stop) {
   TraceIn in(path, false);
-  for (std::int64_t f = 1; f <= in.info.frames; ++f) in.frame(f);
+  for (std::int64_t f = 1; f <= in.info.frames; ++f) {
+    if (stop && stop()) throw ValidationStopped();
+    in.frame(f);
+  }
   return in.info;
 }
+}  // namespace
+
+ExternalTraceInfo check_external_trace(const std::string& path) { return check_frames(path, {}); }
 
 std::vector<ValidationResult> validate_external_trace(const std::string& path, ExternalOptions options, int every,
                                                       std::int64_t max_frames, ExternalTraceInfo* info) {
   if (every < 1) throw InputError(fmt::format("--every: {}; allowed: >= 1", every));
-  const ExternalTraceInfo checked = check_external_trace(path);
+  const ExternalTraceInfo checked = check_frames(path, options.stop);
   if (static_cast<std::uint64_t>(checked.bodies) > trace_limits::kMaxJudgedBodies)
     throw InputError(fmt::format("{}: /bodies/local_aabb_min: {} bodies; allowed: at most {} bodies to judge (the flat "
                                  "oracle tests every pair of bodies each frame: O(n^2)); --check-only checks traces of "
@@ -708,7 +717,10 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   const std::int64_t frames = max_frames > 0 ? std::min(max_frames, in.info.frames) : in.info.frames;
   try {
     made = std::make_unique<ExternalValidator>(in.bodies, options);
-    for (std::int64_t f = 1; f <= frames; ++f) made->observe(in.frame(f), f % every == 0);
+    for (std::int64_t f = 1; f <= frames; ++f) {
+      if (options.stop && options.stop()) throw ValidationStopped();
+      made->observe(in.frame(f), f % every == 0);
+    }
   } catch (const InputError& e) {
     named(e);
   }
