@@ -1,6 +1,6 @@
 // octocd._octocd: the compiled half of the `octocd` Python package (issue 21). The
 // package's public names, their docstrings and the small conveniences (scene dicts,
-// result objects) are in python/octocd/__init__.py; this file converts arrays and calls
+// result objects) are in python/octocd/*.py (one module per job); this file converts arrays and calls
 // the C++ API: build_model + the engines (octocd/engine.hpp), ExternalValidator and
 // validate_external_trace (octocd/external.hpp).
 //
@@ -1073,7 +1073,7 @@ ValidationResult result_from(const py::handle& r) {
 }  // namespace
 
 PYBIND11_MODULE(_octocd, m) {
-  m.doc() = "octocd's compiled core; use the `octocd` package (python/octocd/__init__.py).";
+  m.doc() = "octocd's compiled core; use the `octocd` package (python/octocd/).";
 
   static py::exception<InputError> input_error(m, "InputError", PyExc_ValueError);
   static py::exception<RuntimeError> runtime_error(m, "RuntimeError", PyExc_RuntimeError);
