@@ -153,7 +153,12 @@ class Validator:
                  gravity=(0.0, -9.81, 0.0), domain=None, meshes=None, physics=None,
                  engine: str = "external", against_fcl: bool = True, spec6_response: bool = False,
                  tolerances: Optional[Dict[str, float]] = None):
-        scene_json = "" if scene is None else load_scene(scene).json
+        sc = None if scene is None else load_scene(scene)
+        if sc is not None and sc.body_count > _octocd.max_judged_bodies:  # before any model is built
+            raise InputError(f"scene: {sc.body_count} bodies; allowed: at most {_octocd.max_judged_bodies} bodies to "
+                             "judge (the flat oracle tests every pair of bodies each frame: O(n^2)), as `octocd "
+                             "validate --trace-in`")
+        scene_json = "" if sc is None else sc.json
         self._tolerances = dict(tolerances or {})
         self._v = _octocd.Validator(local_boxes, inverse_mass, scene_json, float(dt), gravity, domain, meshes,
                                     physics, engine, bool(against_fcl), bool(spec6_response), tolerances)

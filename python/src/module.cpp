@@ -1180,6 +1180,7 @@ PYBIND11_MODULE(_octocd, m) {
       .def("strings", &PyTraceFile::strings, py::arg("name"))
       .def("close", &PyTraceFile::close);
   m.attr("trace_frame_columns") = TraceReader::frame_columns();
+  m.attr("max_judged_bodies") = trace_limits::kMaxJudgedBodies;
 
   m.def(
       "validate_trace",

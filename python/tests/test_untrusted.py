@@ -187,6 +187,10 @@ def test_body_cap_magnitudes_and_settings_are_checked():
     cap = 20000  # trace_limits::kMaxJudgedBodies, the CLI's cap of validate --trace-in
     with pytest.raises(octocd.InputError, match=rf"local_boxes: {cap + 1} bodies; allowed: at most {cap} bodies"):
         octocd.Validator(local_boxes=boxes(cap + 1))
+    big = {"name": "big", "domain": {"min": [-100, -100, -100], "max": [100, 100, 100]},
+           "groups": [{"count": cap + 1, "shape": {"box": [0.1, 0.1, 0.1]}}]}
+    with pytest.raises(octocd.InputError, match=rf"scene: {cap + 1} bodies; allowed: at most {cap} bodies"):
+        octocd.Validator(big)
     with pytest.raises(octocd.InputError, match=r"local_boxes: row 1 holds -3e\+38; allowed: local box corners"):
         octocd.Validator(local_boxes=np.array([[[0, 0, 0], [1, 1, 1]], [[-3e38, 0, 0], [1, 1, 1]]], np.float32))
     val = octocd.Validator(local_boxes=boxes(2), gravity=(0, 0, 0))
