@@ -2,17 +2,29 @@
 // (matplotlib; Debian python3-matplotlib) on bench results and traces, which writes
 // DIR/index.html (self-contained: plots inline as SVG) and DIR/report.md (+ DIR/plots/);
 // with --baseline a performance gate (exit 4 on a slowdown shown by a one-sided Mann-Whitney U test
-// on the repetitions, or a failed new run), with --csv the data as CSV.
+// on the repetitions, or a failed new run), with --csv the data as CSV. The script reads
+// traces through `octocd trace-summary --json` (this file too): octocd's hardened reader.
+// SIGINT/SIGTERM to octocd are forwarded to the script, which is waited for.
+#include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <cerrno>
+#include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
+#include <nlohmann/json.hpp>
 
 #include "octocd/error.hpp"
 #include "octocd/shared_files.hpp"
+#include "octocd/stop.hpp"
+#include "octocd/trace_reader.hpp"
 #include "tools.hpp"
 
 namespace octocd::cli {
@@ -34,7 +46,146 @@ std::string script() {
   return (fs::path(shared_dir()) / "reports" / "make_report.py").string();
 }
 
+// The script's process while it runs (0: none), and the signal forwarded to it.
+std::atomic<pid_t> g_child{0};
+std::atomic<int> g_forwarded{0};
+static_assert(std::atomic<pid_t>::is_always_lock_free, "the handler needs a lock-free pid");
+
+// Async-signal-safe: kill(2) only. The first SIGINT/SIGTERM is passed to the script (which
+// ends and is waited for); a second one kills it.
+extern "C" void forward_signal(int sig) {
+  const int before = g_forwarded.exchange(sig);
+  if (const pid_t pid = g_child.load(); pid > 0) ::kill(pid, before == 0 ? sig : SIGKILL);
+}
+
+/// Installs forward_signal for SIGINT and SIGTERM while alive (restores the old handlers).
+class ForwardSignals {
+ public:
+  ForwardSignals() {
+    struct sigaction sa {};
+    sa.sa_handler = forward_signal;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = 0;  // waitpid returns EINTR: the loop waits again
+    sigaction(SIGINT, &sa, &old_int_);
+    sigaction(SIGTERM, &sa, &old_term_);
+  }
+  ~ForwardSignals() {
+    sigaction(SIGINT, &old_int_, nullptr);
+    sigaction(SIGTERM, &old_term_, nullptr);
+  }
+  ForwardSignals(const ForwardSignals&) = delete;
+  ForwardSignals& operator=(const ForwardSignals&) = delete;
+
+ private:
+  struct sigaction old_int_ {}, old_term_ {};
+};
+
+/// An output folder (-o, --csv): a folder, or a path that can become one. Refuses a file,
+/// a FIFO, a device (/dev/null), a symbolic link (e.g. to /etc) and a read-only folder
+/// (no write bit: refused even for root), naming the option.
+void check_output_folder(const std::string& path, const char* option) {
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) != 0) {
+    if (errno != ENOENT)
+      throw InputError(fmt::format("{} {}: cannot be examined ({}); allowed: a folder octocd may write in", option,
+                                   path, std::strerror(errno)));
+    return;  // created by the script (its parents must be writable: it says so otherwise)
+  }
+  if (S_ISLNK(st.st_mode)) {
+    std::error_code ec;
+    const fs::path to = fs::read_symlink(path, ec);
+    throw InputError(fmt::format("{} {}: a symbolic link (to {}); allowed: a folder path that is not a link", option,
+                                 path, ec ? "?" : to.string()));
+  }
+  if (!S_ISDIR(st.st_mode))
+    throw InputError(fmt::format("{} {}: {}, not a folder; allowed: a folder (created when missing)", option, path,
+                                 S_ISFIFO(st.st_mode)                        ? "a FIFO"
+                                 : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
+                                                                              : "a file"));
+  if ((st.st_mode & 0222) == 0 || ::access(path.c_str(), W_OK) != 0)
+    throw InputError(fmt::format("{} {}: a read-only folder; allowed: a folder octocd may write in", option, path));
+}
+
+/// An input of the report: a regular file (a FIFO would block the script forever).
+void check_input(const std::string& path, const char* what) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0)
+    throw InputError(fmt::format("{}: no such file; allowed: {}", path, what));
+  if (!S_ISREG(st.st_mode))
+    throw InputError(fmt::format("{}: not a regular file ({}); allowed: {}", path,
+                                 S_ISDIR(st.st_mode)                          ? "a folder"
+                                 : S_ISFIFO(st.st_mode)                       ? "a FIFO"
+                                 : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
+                                                                              : "not a plain file",
+                                 what));
+}
+
+/// This executable (the script runs its `trace-summary`).
+std::string self_path() {
+  std::error_code ec;
+  const fs::path p = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string("octocd") : p.string();
+}
+
+/// A JSON number (an integer when integral), or null when not finite (JSON has no NaN or
+/// infinity).
+nlohmann::ordered_json number(double v) {
+  if (!std::isfinite(v)) return nullptr;
+  if (v == std::floor(v) && std::fabs(v) < 9007199254740992.0) return static_cast<std::int64_t>(v);  // 2^53
+  return v;
+}
+
 }  // namespace
+
+CLI::App* add_trace_summary_command(CLI::App& app, TraceSummaryOptions& o) {
+  CLI::App* c = app.add_subcommand(
+      "trace-summary",
+      "What a trace holds, read by octocd's hardened reader (docs/trace-format.md, \"Security rules and limits\"): "
+      "format, version, root attributes, the complete rows of /frames (at most committed_frames) and, with --json, "
+      "its columns. `octocd report` reads traces through it. Exit 0, or 2 naming the file and dataset of a trace it "
+      "refuses (external links, external storage, virtual datasets, not a regular file, damaged)");
+  c->add_option("trace", o.trace, "The trace (.h5)")->required();
+  c->add_flag("--json", o.json,
+              "One JSON object: format, version, path, frames, attributes {name: value}, columns {name: [values]} "
+              "(frame, time, step_ms, the stage times, counters and figures of /frames; null for a non-finite value)");
+  return c;
+}
+
+int trace_summary_command(const TraceSummaryOptions& o) {
+  const TraceReader r(o.trace);
+  const std::int64_t frames = r.complete_rows("/frames");
+  nlohmann::ordered_json attrs = nlohmann::ordered_json::object();
+  for (const char* name : {"scene_name", "engine", "broadphase", "midphase", "body_count", "device", "build_id",
+                           "start_time", "dt", "state_every", "committed_frames", "committed_states"}) {
+    if (!r.has_attribute(name)) continue;
+    const TraceAttribute a = r.attribute(name);
+    if (!a.scalar) continue;
+    attrs[name] = a.is_string ? nlohmann::ordered_json(a.strings.front()) : number(a.numbers.front());
+  }
+  nlohmann::ordered_json cols = nlohmann::ordered_json::object();
+  for (const std::string& name : TraceReader::frame_columns()) {
+    const std::string d = "/frames/" + name;
+    if (!r.has_dataset(d) || r.shape(d).size() != 1) continue;  // momentum (F x 3) is not a column
+    nlohmann::ordered_json col = nlohmann::ordered_json::array();
+    for (const double v : r.read_f64(d, frames)) col.push_back(number(v));
+    cols[name] = std::move(col);
+  }
+  if (o.json) {
+    nlohmann::ordered_json j;
+    j["format"] = "octocd-trace";
+    j["version"] = r.version();
+    j["path"] = o.trace;
+    j["frames"] = frames;
+    j["attributes"] = std::move(attrs);
+    j["columns"] = std::move(cols);
+    fmt::print("{}\n", j.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace));
+    return 0;
+  }
+  fmt::print("{}: octocd-trace version {}, {} complete frames\n", o.trace, r.version(), frames);
+  for (const auto& [k, v] : attrs.items())
+    fmt::print("  {}: {}\n", k, v.is_string() ? v.get<std::string>() : v.dump());
+  return 0;
+}
 
 CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
   CLI::App* c = app.add_subcommand(
@@ -78,12 +229,10 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
 int report_command(const ReportOptions& o) {
   std::error_code ec;
   for (const auto& in : o.baseline)
-    if (!fs::is_regular_file(in, ec))
-      throw InputError(fmt::format("--baseline {}: no such file; allowed: a result file of `octocd bench` (.json)", in));
-  for (const auto& in : o.inputs)
-    if (!fs::is_regular_file(in, ec))
-      throw InputError(fmt::format("{}: no such file; allowed: result files of `octocd bench` (.json) and traces (.h5)",
-                                   in));
+    check_input(in, "a result file of `octocd bench` (.json) for --baseline");
+  for (const auto& in : o.inputs) check_input(in, "result files of `octocd bench` (.json) and traces (.h5)");
+  check_output_folder(o.output, "-o");
+  if (!o.csv.empty()) check_output_folder(o.csv, "--csv");
   const std::string py = python(), sc = script();
   if (!fs::is_regular_file(sc, ec))
     throw RuntimeError(fmt::format("report script {} not found (an octocd installed without its share/octocd? set "
@@ -109,6 +258,8 @@ int report_command(const ReportOptions& o) {
     args.push_back("--csv");
     args.push_back(o.csv);
   }
+  args.push_back("--octocd");
+  args.push_back(self_path());
   args.push_back("--");
   for (const auto& in : o.inputs) args.push_back(in);
   std::vector<char*> argv;
@@ -116,17 +267,36 @@ int report_command(const ReportOptions& o) {
   argv.push_back(nullptr);
   std::fflush(stdout);
   std::fflush(stderr);
+  // SIGINT/SIGTERM to octocd reach the script too (forwarded; a terminal's Ctrl-C reaches
+  // both, the script being in octocd's process group), and octocd waits for it to end.
+  g_forwarded = 0;
+  const ForwardSignals forward;
   const pid_t pid = fork();
   if (pid < 0) throw RuntimeError("report: fork failed");
   if (pid == 0) {
+    signal(SIGINT, SIG_DFL);  // the script's own handling (Python: KeyboardInterrupt)
+    signal(SIGTERM, SIG_DFL);
     execvp(argv[0], argv.data());
     std::fprintf(stderr, "octocd: runtime failure: report: cannot run %s (install Debian's python3-matplotlib, or set "
                          "OCTOCD_PYTHON)\n", argv[0]);
     _exit(1);
   }
+  g_child = pid;
+  if (const int sig = g_forwarded.load()) ::kill(pid, sig);  // a signal between fork and here
   int status = 0;
-  if (waitpid(pid, &status, 0) < 0) throw RuntimeError("report: waitpid failed");
-  if (!WIFEXITED(status)) throw RuntimeError(fmt::format("report: {} was killed (signal {})", sc, WTERMSIG(status)));
+  pid_t got = 0;
+  while ((got = waitpid(pid, &status, 0)) < 0 && errno == EINTR) {
+  }
+  g_child = 0;
+  if (got < 0) throw RuntimeError("report: waitpid failed");
+  if (const int sig = g_forwarded.load()) {
+    std::fprintf(stderr, "octocd: report stopped by %s; %s ended (the earlier report in %s, if any, is left as it "
+                         "was)\n", stop_signal_name(sig), sc.c_str(), o.output.c_str());
+    return stop_exit_code(sig);
+  }
+  if (!WIFEXITED(status))
+    throw RuntimeError(fmt::format("report: {} was killed (signal {}) reading {}", sc, WTERMSIG(status),
+                                   fmt::join(o.inputs, ", ")));
   const int rc = WEXITSTATUS(status);
   return rc == 0 || rc == 2 || rc == 4 ? rc : 1;
 }

@@ -135,6 +135,8 @@ struct ToolCommands::Impl {
   ReplayOptions replay;
   CompareOptions compare;
   ReportOptions report;
+  TraceSummaryOptions trace_summary;
+  CLI::App* trace_summary_cmd = nullptr;
   CLI::App* bench_cmd = nullptr;
   CLI::App* replay_cmd = nullptr;
   CLI::App* compare_cmd = nullptr;
@@ -146,12 +148,14 @@ ToolCommands::ToolCommands(CLI::App& app) : impl_(std::make_unique<Impl>()) {
   impl_->replay_cmd = add_replay_command(app, impl_->replay);
   impl_->compare_cmd = add_compare_command(app, impl_->compare);
   impl_->report_cmd = add_report_command(app, impl_->report);
+  impl_->trace_summary_cmd = add_trace_summary_command(app, impl_->trace_summary);
 }
 
 ToolCommands::~ToolCommands() = default;
 
 bool ToolCommands::selected() const {
-  for (CLI::App* s : {impl_->bench_cmd, impl_->replay_cmd, impl_->compare_cmd, impl_->report_cmd})
+  for (CLI::App* s :
+       {impl_->bench_cmd, impl_->replay_cmd, impl_->compare_cmd, impl_->report_cmd, impl_->trace_summary_cmd})
     if (s && s->parsed()) return true;
   return false;
 }
@@ -161,6 +165,8 @@ int ToolCommands::run() {
   if (impl_->replay_cmd && impl_->replay_cmd->parsed()) return replay_command(impl_->replay);
   if (impl_->compare_cmd && impl_->compare_cmd->parsed()) return compare_command(impl_->compare);
   if (impl_->report_cmd && impl_->report_cmd->parsed()) return report_command(impl_->report);
+  if (impl_->trace_summary_cmd && impl_->trace_summary_cmd->parsed())
+    return trace_summary_command(impl_->trace_summary);
   return 0;
 }
 

@@ -63,7 +63,7 @@ std::vector<std::string> split_list(const std::string& text);
 /// ISO 8601 UTC time now, e.g. 2025-01-01T12:00:00Z.
 std::string utc_time_now();
 
-/// Registers bench, replay, compare and report on `app`; after parsing, `selected()` says
+/// Registers bench, replay, compare, report and trace-summary on `app`; after parsing, `selected()` says
 /// whether one of them was chosen and `run()` runs it (throwing InputError / RuntimeError
 /// like the other commands) and returns its exit code.
 class ToolCommands {
@@ -72,7 +72,7 @@ class ToolCommands {
   ~ToolCommands();
   ToolCommands(const ToolCommands&) = delete;
   ToolCommands& operator=(const ToolCommands&) = delete;
-  /// Whether bench, replay, compare or report was given on the command line.
+  /// Whether bench, replay, compare, report or trace-summary was given on the command line.
   bool selected() const;
   /// Runs the selected command; returns its exit code.
   int run();
@@ -231,5 +231,17 @@ struct ReportOptions {
 };
 CLI::App* add_report_command(CLI::App& app, ReportOptions& o);
 int report_command(const ReportOptions& o);
+
+/// `octocd trace-summary` options (cli/report.cpp).
+struct TraceSummaryOptions {
+  std::string trace;  ///< the trace (.h5)
+  bool json = false;  ///< --json: one JSON object on stdout (else a few lines of text)
+};
+/// `octocd trace-summary [--json] TRACE`: what the report generator reads of a trace, read
+/// through octocd::TraceReader (the hardened reader): root attributes, the complete rows of
+/// /frames (at most committed_frames) and its columns. An InputError (exit 2) names the
+/// file and dataset for a trace it refuses.
+CLI::App* add_trace_summary_command(CLI::App& app, TraceSummaryOptions& o);
+int trace_summary_command(const TraceSummaryOptions& o);
 
 }  // namespace octocd::cli

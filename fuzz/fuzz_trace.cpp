@@ -1,6 +1,7 @@
-// libFuzzer target: the trace readers (issues 10 and 22). The input is written as a file
-// and every reader below opens it: read_trace_summary and the XDMF sidecar, and the trace
-// reader of `octocd compare` and `octocd replay` (TraceReader, read the way they read it).
+// libFuzzer target: the trace readers (issues 10, 22 and 36). The input is written as a file
+// and every reader below opens it: read_trace_summary and the XDMF sidecar, the trace
+// reader of `octocd compare` and `octocd replay` (TraceReader, read the way they read it),
+// and TraceReader as octocd.Trace (Python) and `octocd trace-summary` (the report) read it.
 // The commands themselves have their own targets (fuzz_compare, fuzz_replay), and so has
 // the external-trace reader of `validate --trace-in` (fuzz_external). A file that
 // is not a readable trace must end in InputError (exit 2) or RuntimeError (exit 1);
@@ -17,6 +18,7 @@
 #include <fstream>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "octocd/error.hpp"
 #include "octocd/trace.hpp"
@@ -53,6 +55,39 @@ const Reader kReaders[] = {
        if (t.has_dataset("/contacts/offsets")) {
          const std::int64_t c = t.complete_rows("/contacts");
          (void)t.read_i64("/contacts/offsets", c + 1);
+       }
+     }},
+    // What octocd.Trace (the Python module's TraceFile) and `octocd trace-summary` (the
+    // report's input) read: every documented root attribute, every /frames column, the
+    // states and the contacts of the first and last frame, row by row.
+    {"TraceFile",
+     [](const std::string& p) {
+       const octocd::TraceReader t(p);
+       for (const char* a : {"format", "version", "scene_name", "engine", "body_count", "dt", "state_every",
+                             "committed_frames", "committed_states", "stage_names", "gravity", "mu",
+                             "friction_combine", "contact_margin"})
+         if (t.has_attribute(a)) (void)t.attribute(a);
+       const std::int64_t rows = t.has_dataset("/frames/frame") ? t.complete_rows("/frames") : 0;
+       for (const std::string& c : octocd::TraceReader::frame_columns()) {
+         const std::string d = "/frames/" + c;
+         if (!t.has_dataset(d)) continue;
+         if (t.element_kind(d) == "integer") (void)t.read_i64_rows(d, 0, rows);
+         else (void)t.read_f64_rows(d, 0, rows);
+       }
+       if (t.has_dataset("/states/position")) {
+         const std::int64_t s = t.complete_rows("/states");
+         if (t.has_dataset("/states/frame")) (void)t.read_i64_rows("/states/frame", 0, s);
+         for (const char* d : {"/states/position", "/states/velocity", "/states/orientation"})
+           if (s > 0 && t.has_dataset(d)) (void)t.read_f32_rows(d, s - 1, 1);
+       }
+       if (t.has_dataset("/contacts/offsets")) {
+         const auto off = t.shape("/contacts/offsets");
+         if (!off.empty() && off[0] >= 2) {
+           const std::vector<std::int64_t> o = t.read_i64_rows("/contacts/offsets", 0, 2);
+           if (o[0] >= 0 && o[1] >= o[0])
+             for (const char* d : {"/contacts/pair", "/contacts/normal", "/contacts/depth", "/contacts/point"})
+               if (t.has_dataset(d)) (void)t.read_f64_rows(d, o[0], o[1] - o[0]);
+         }
        }
      }},
 };

@@ -11,19 +11,29 @@ decides on the repetitions with a one-sided Mann-Whitney U test (docs/bench-form
 "Performance gate"). `--csv DIR` writes the data as CSV (per point and repetition, plus a
 summary row). Exit codes: 0 ok, 2 bad input (a file of another format or version, duplicate
 points, shards of different builds, a baseline of another sweep or machine, a forged
-summary, too few repetitions to decide: one line, never a traceback), 4 the gate failed (a
-point slower, or a baseline point missing, failed or unmeasured in the new run), 1 anything
-else.
-Needs Debian's python3-matplotlib and python3-numpy (python3-h5py for traces).
+summary, too few repetitions to decide, a trace the hardened reader refuses, an output
+folder that is a file, a device, a link or read-only: one line, never a traceback), 4 the
+gate failed (a point slower, or a baseline point missing, failed or unmeasured in the new
+run), 1 anything else (a full disk: the earlier report in OUT is left as it was).
+
+Traces are untrusted input: their numbers come from `octocd trace-summary --json` (octocd's
+hardened trace reader, `--octocd PATH` or the `octocd` on PATH), never from h5py here.
+Every output file is written to a temporary file beside it and renamed into place once
+all of them are written, so a failed run never truncates an earlier report.
+Needs Debian's python3-matplotlib and python3-numpy.
 """
 import argparse
 import csv
 import datetime
+import errno
 import html
 import io
 import json
 import math
 import os
+import shutil
+import stat
+import subprocess
 import sys
 
 PAPER = json.load(open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "paper_tables.json")))
@@ -55,7 +65,22 @@ plt.rcParams.update({"svg.fonttype": "none", "font.family": "sans-serif", "font.
 
 # ---- input -----------------------------------------------------------------------------------
 
+def regular_file(path):
+    """Refuses a FIFO, a device or a folder before it is opened (open() on a FIFO blocks)."""
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        fail(f"{path}: cannot open ({errno.errorcode.get(e.errno, e.errno)}: {e.strerror}); allowed: result files "
+             "of `octocd bench` (.json) and traces (.h5)")
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device" \
+            if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "not a plain file"
+        fail(f"{path}: not a regular file ({kind}); allowed: result files of `octocd bench` (.json) and traces "
+             "(.h5) stored in regular files")
+
+
 def load(path):
+    regular_file(path)
     with open(path, "rb") as f:
         head = f.read(8)
     if head == b"\x89HDF\r\n\x1a\n":
@@ -250,8 +275,64 @@ def load_mark(m, *points):
     return "⚠ " if any(p is not None and point_load(p, m) for p in points) else ""
 
 
+def output_dir(path, option):
+    """Exit 2 naming `option` unless `path` is a writable folder or can be made one: not a
+    file, a device, a symbolic link (e.g. to /etc) or a read-only folder."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        parent = os.path.dirname(os.path.abspath(path))
+        while not os.path.exists(parent):
+            parent = os.path.dirname(parent)
+        if not os.path.isdir(parent) or not os.access(parent, os.W_OK) or not os.stat(parent).st_mode & 0o222:
+            fail(f"{option} {path}: cannot be created in {parent} (not a writable folder); allowed: a folder octocd "
+                 "may write in")
+        return
+    if stat.S_ISLNK(st.st_mode):
+        fail(f"{option} {path}: a symbolic link (to {os.readlink(path)}); allowed: a folder path that is not a link")
+    if not stat.S_ISDIR(st.st_mode):
+        kind = "a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device" \
+            if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "a file"
+        fail(f"{option} {path}: {kind}, not a folder; allowed: a folder (created when missing)")
+    if not os.access(path, os.W_OK) or not st.st_mode & 0o222:
+        fail(f"{option} {path}: a read-only folder; allowed: a folder octocd may write in")
+
+
+class Outputs:
+    """Every file of one report, kept in memory until commit(): then each is written to a
+    temporary file beside its destination, and only when all are written are they renamed
+    into place (a full disk or a size limit leaves the earlier report as it was)."""
+
+    def __init__(self):
+        self.files = {}  # path -> text
+
+    def put(self, path, text):
+        self.files[path] = text
+
+    def commit(self):
+        temps = []
+        try:
+            for path, text in self.files.items():
+                os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+                tmp = os.path.join(os.path.dirname(path), f".{os.path.basename(path)}.tmp.{os.getpid()}")
+                temps.append((tmp, path))
+                with open(tmp, "w", newline="") as f:
+                    f.write(text)
+                    f.flush()
+                    os.fsync(f.fileno())
+            for tmp, path in temps:
+                os.replace(tmp, path)
+        except BaseException:
+            for tmp, _ in temps:
+                try:
+                    os.unlink(tmp)
+                except OSError:
+                    pass
+            raise
+
+
 class Doc:
-    """One report, written both as HTML and as Markdown."""
+    """One report, written both as HTML and as Markdown (files committed by write())."""
 
     def __init__(self, out, csv_dir=None):
         self.out = out
@@ -260,9 +341,7 @@ class Doc:
         self.ncsv = 0
         self.section = "report"
         self.csv_dir = csv_dir
-        if csv_dir:
-            os.makedirs(csv_dir, exist_ok=True)
-        os.makedirs(os.path.join(out, "plots"), exist_ok=True)
+        self.files = Outputs()
 
     def h(self, level, text, anchor=None):
         a = f' id="{anchor}"' if anchor else ""
@@ -296,8 +375,7 @@ class Doc:
         fig.savefig(buf, format="svg", bbox_inches="tight")
         plt.close(fig)
         svg = buf.getvalue()
-        with open(os.path.join(self.out, "plots", fname), "w") as f:
-            f.write(svg)
+        self.files.put(os.path.join(self.out, "plots", fname), svg)
         body = svg[svg.find("<svg"):]
         self.html.append(f'<figure>{body}<figcaption>{html.escape(caption)}</figcaption></figure>')
         self.md.append(f"![{caption}](plots/{fname})\n\n*{caption}*\n")
@@ -315,10 +393,9 @@ table.compact{font-size:.72em}table.compact th,table.compact td{padding:.15em .3
         page = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
                 f"<title>{html.escape(title)}</title><style>{css}</style></head><body>",
                 f"<h1>{html.escape(title)}</h1>"] + self.html + ["</body></html>"]
-        with open(os.path.join(self.out, "index.html"), "w") as f:
-            f.write("\n".join(page) + "\n")
-        with open(os.path.join(self.out, "report.md"), "w") as f:
-            f.write(f"# {title}\n\n" + "\n".join(self.md) + "\n")
+        self.files.put(os.path.join(self.out, "index.html"), "\n".join(page) + "\n")
+        self.files.put(os.path.join(self.out, "report.md"), f"# {title}\n\n" + "\n".join(self.md) + "\n")
+        self.files.commit()
 
 
 # ---- sections ----------------------------------------------------------------------------------
@@ -993,33 +1070,43 @@ def section_generic(doc, g):
 TRACE_COLORS = ["#4e79a7", "#e15759", "#59a14f", "#f28e2b", "#76b7b2", "#b07aa1", "#9c755f", "#edc948"]
 
 
+TRACE_COLUMNS = ("frame", "step_ms", "contacts", "aabb_pairs", "kinetic_energy", "penetration_mean",
+                 "penetration_max")
+
+
 def read_trace(path):
-    """The /frames columns of one trace and its attributes."""
-    try:
-        import h5py
-    except ImportError:
-        print("octocd report: runtime failure: traces need python3-h5py", file=sys.stderr)
+    """The /frames columns of one trace (its complete rows: at most committed_frames) and its
+    attributes, from `octocd trace-summary --json` (octocd's hardened reader: external
+    links, external storage, virtual datasets, FIFOs and corrupt files are refused, exit 2
+    naming the file and dataset)."""
+    octocd = OCTOCD[0]
+    if not octocd:
+        print("octocd report: runtime failure: traces are read by the octocd binary (`octocd trace-summary`): give "
+              "--octocd PATH or put octocd on PATH", file=sys.stderr)
         sys.exit(1)
     try:
-        f = h5py.File(path, "r", swmr=True)
+        r = subprocess.run([octocd, "trace-summary", "--json", "--", path], capture_output=True, text=True)
     except OSError as e:
-        fail(f"{path}: unreadable HDF5 ({e})")
-    with f:
-        fmt, ver = f.attrs.get("format"), f.attrs.get("version")
-        if fmt != "octocd-trace" or ver != 1:
-            fail(f"{path}: format: {fmt!r} version {ver!r}; allowed: octocd-trace version 1")
-        if "frames" not in f:
-            fail(f"{path}: /frames: missing; allowed: an octocd trace")
-        fr = f["frames"]
-        n = min(d.shape[0] for d in fr.values())
-        cols = {k: np.asarray(fr[k][:n], dtype=float) for k in ("frame", "step_ms", "contacts", "aabb_pairs",
-                                                                  "kinetic_energy", "penetration_mean",
-                                                                  "penetration_max") if k in fr}
-        for k in ("frame", "step_ms", "contacts", "aabb_pairs", "kinetic_energy", "penetration_mean",
-                  "penetration_max"):
-            cols.setdefault(k, np.zeros(n))
-        attrs = {k: f.attrs.get(k) for k in ("scene_name", "engine", "broadphase", "midphase", "body_count",
-                                               "device", "build_id", "start_time")}
+        print(f"octocd report: runtime failure: cannot run {octocd} ({e.strerror})", file=sys.stderr)
+        sys.exit(1)
+    if r.returncode == 2:
+        msg = r.stderr.strip().splitlines()[-1] if r.stderr.strip() else f"{path}: refused"
+        for prefix in ("octocd: error: ", "error: "):
+            msg = msg[len(prefix):] if msg.startswith(prefix) else msg
+        fail(msg if path in msg else f"{path}: {msg}")
+    if r.returncode != 0:
+        why = f"killed by signal {-r.returncode}" if r.returncode < 0 else f"exit {r.returncode}"
+        print(f"octocd report: runtime failure: {path}: `octocd trace-summary` {why}: {r.stderr.strip()[-500:]}",
+              file=sys.stderr)
+        sys.exit(1)
+    j = json.loads(r.stdout)
+    n = int(j["frames"])
+    cols = {}
+    for k in TRACE_COLUMNS:
+        v = j["columns"].get(k)
+        cols[k] = np.array([np.nan if x is None else x for x in v], dtype=float) if v is not None else np.zeros(n)
+    attrs = {k: j["attributes"].get(k) for k in ("scene_name", "engine", "broadphase", "midphase", "body_count",
+                                                 "device", "build_id", "start_time")}
     return {"path": path, "n": n, "cols": cols, "attrs": attrs}
 
 
@@ -1390,7 +1477,7 @@ def section_gate(doc, base, new, threshold, alpha, across, timing="auto"):
           + (f", FAILED {len(res['broken'])}" if res["broken"] else "") + "." if counts or res["broken"]
           else "No point measured in both runs.")
     if doc.csv_dir:
-        gate_csv(os.path.join(doc.csv_dir, "gate.csv"), res)
+        gate_csv(doc, os.path.join(doc.csv_dir, "gate.csv"), res)
         doc.ncsv += 1
     return res
 
@@ -1428,7 +1515,7 @@ def csv_number(v):
     return repr(float(v)) if isinstance(v, (int, float)) and not isinstance(v, bool) else ""
 
 
-def sweep_csv(path, g):
+def sweep_csv(doc, path, g):
     """One sweep as data: per point and window one row per repetition (kind rep, repetition
     0..n-1) and one summary row (kind summary: the median over the repetitions); numbers only,
     the unit of each figure in its header (`steps_per_s [1/s]`); a point without figures
@@ -1444,7 +1531,8 @@ def sweep_csv(path, g):
         [f"axis.{a}" for a in axes] + ["window", "first_frame", "last_frame", "kind", "repetition"] + \
         [f"{k} [{CSV_UNITS.get(k.split('.')[0], '1')}]" for k in figs]
     name = g["first"]["sweep"]["name"]
-    with open(path, "w", newline="") as f:
+    f = io.StringIO(newline="")
+    if True:
         w = csv.writer(f)
         w.writerow(head)
         for p in pts:
@@ -1467,6 +1555,7 @@ def sweep_csv(path, g):
                                                     r < len(cols[k]["values"]) else "" for k in figs])
                 w.writerow(pre + ["summary", ""] + [csv_number(cols[k].get("median")) if k in cols else ""
                                                       for k in figs])
+    doc.files.put(path, f.getvalue())
 
 
 def gate_summary(res, threshold, alpha):
@@ -1491,10 +1580,11 @@ def gate_summary(res, threshold, alpha):
               f"(one-sided Mann-Whitney U, level {alpha:g})")
 
 
-def gate_csv(path, res):
+def gate_csv(doc, path, res):
     """The gate as data: per point and figure one row per side and repetition (kind rep) and
     one summary row (kind summary: both medians, ratio, interval, p, slower 0/1)."""
-    with open(path, "w", newline="") as f:
+    f = io.StringIO(newline="")
+    if True:
         w = csv.writer(f)
         w.writerow(["point", "figure", "kind", "side", "repetition", "value", "unit", "base_median", "new_median",
                     "ratio_time", "ratio_lo", "ratio_hi", "p_slower", "slower"])
@@ -1506,6 +1596,7 @@ def gate_csv(path, res):
             w.writerow([r["point"], r["figure"], "summary", "", "", "", unit, repr(r["base_median"]),
                         repr(r["new_median"]), repr(r["ratio"]), repr(r["lo"]), repr(r["hi"]), repr(r["p"]),
                         int(r["verdict"] == "SLOWER")])
+    doc.files.put(path, f.getvalue())
 
 
 SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table5),
@@ -1517,6 +1608,7 @@ SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table
 
 
 CURRENT = ["the inputs"]  # the file being read, for the one-line error of a malformed one
+OCTOCD = [None]  # the octocd binary that reads traces (--octocd)
 
 
 def main():
@@ -1531,8 +1623,14 @@ def main():
                     help="the gate's figure: steps per process CPU second (cpu), wall-clock steps/s (wall), or cpu "
                          "where both runs have it (auto)")
     ap.add_argument("--csv", help="write the data as CSV into this folder")
+    ap.add_argument("--octocd", default=shutil.which("octocd"),
+                    help="the octocd binary whose `trace-summary` reads traces (default: octocd on PATH)")
     ap.add_argument("inputs", nargs="+")
     a = ap.parse_args()
+    OCTOCD[0] = a.octocd
+    output_dir(a.output, "-o")
+    if a.csv:
+        output_dir(a.csv, "--csv")
     if not (0 <= a.threshold < 1000) or math.isnan(a.threshold):
         fail(f"--threshold: {a.threshold}; allowed: a percentage in [0, 1000)")
     if not (0 < a.level <= 0.25):
@@ -1560,7 +1658,6 @@ def main():
         if len(bg) != 1 or len(ng) != 1:
             fail(f"--baseline: {len(bg)} sweep(s) or machine(s) in the baseline, {len(ng)} in the new results; "
                  "allowed: one sweep (its shards) of one machine on each side")
-        os.makedirs(a.output, exist_ok=True)
         doc = Doc(a.output, a.csv)
         gate = section_gate(doc, bg[0], ng[0], a.threshold, a.level, a.across_machines, a.timing)
         if gate["few"] and not gate["broken"]:
@@ -1576,7 +1673,6 @@ def main():
     order = list(SECTIONS)
     groups.sort(key=lambda g: (order.index(g["first"]["sweep"]["name"]) if g["first"]["sweep"]["name"] in order
                                else len(order), g["first"]["sweep"]["name"]))
-    os.makedirs(a.output, exist_ok=True)
     doc = doc or Doc(a.output, a.csv)
     doc.p(f"Made by octocd report on {datetime.datetime.utcnow().strftime('%Y-%m-%d %H:%M UTC')} from "
           f"{len(results)} result file(s) and {len(traces)} trace(s). {NOISE_NOTE}", "note")
@@ -1596,7 +1692,7 @@ def main():
         fn(doc, g)
         skipped_block(doc, g)
         if doc.csv_dir:
-            sweep_csv(os.path.join(doc.csv_dir, file_slug(name) + ".csv"), g)
+            sweep_csv(doc, os.path.join(doc.csv_dir, file_slug(name) + ".csv"), g)
             doc.ncsv += 1
     if traces:
         doc.section = "trace"
@@ -1618,6 +1714,19 @@ if __name__ == "__main__":
         main()
     except SystemExit:
         raise
+    except KeyboardInterrupt:  # SIGINT (octocd report forwards it): nothing was committed
+        print("octocd report: stopped by SIGINT; the earlier report (if any) is left as it was", file=sys.stderr)
+        sys.exit(130)
+    except OSError as e:
+        # Writing the report: a full disk or a size limit is a runtime failure (exit 1), a
+        # path it may not write bad input (exit 2); the earlier report is left as it was.
+        where = e.filename or "the output"
+        code = errno.errorcode.get(e.errno, str(e.errno))
+        if e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO):
+            print(f"octocd report: runtime failure: {where}: {code}: {e.strerror}; the earlier report (if any) is "
+                  "left as it was", file=sys.stderr)
+            sys.exit(1)
+        fail(f"{where}: {code}: {e.strerror}; allowed: an output folder octocd may write in")
     except (KeyError, TypeError, ValueError, AttributeError, IndexError, ZeroDivisionError) as e:
         # A result that passed the format check but holds something else where a figure should be.
         fail(f"{CURRENT[0]}: malformed result ({type(e).__name__}: {e}); allowed: a result of octocd bench as "

@@ -71,6 +71,8 @@ TraceReader::~TraceReader() = default;
 TraceReader::TraceReader(TraceReader&&) noexcept = default;
 TraceReader& TraceReader::operator=(TraceReader&&) noexcept = default;
 
+const std::vector<std::string>& TraceReader::frame_columns() { return detail::trace_frame_columns(); }
+
 const std::string& TraceReader::path() const { return impl_->h5->path(); }
 
 int TraceReader::version() const { return impl_->version; }
@@ -133,6 +135,80 @@ std::vector<float> TraceReader::read_f32(const std::string& d, std::int64_t rows
 }
 std::vector<float> TraceReader::read_f32_rows(const std::string& d, std::int64_t first, std::int64_t count) const {
   return impl_->read_rows<float>(d, first, count, H5T_NATIVE_FLOAT);
+}
+
+std::vector<double> TraceReader::read_f64_rows(const std::string& d, std::int64_t first, std::int64_t count) const {
+  return impl_->read_rows<double>(d, first, count, H5T_NATIVE_DOUBLE);
+}
+std::vector<std::int64_t> TraceReader::read_i64_rows(const std::string& d, std::int64_t first,
+                                                     std::int64_t count) const {
+  return impl_->read_rows<std::int64_t>(d, first, count, H5T_NATIVE_INT64);
+}
+
+std::string TraceReader::element_kind(const std::string& d) const {
+  const detail::Hdf5Reader::Dataset ds = impl_->h5->open_dataset(d);
+  return ds.cls == H5T_INTEGER ? "integer" : ds.cls == H5T_FLOAT ? "float" : ds.cls == H5T_STRING ? "string" : "other";
+}
+
+TraceAttribute TraceReader::attribute(const std::string& name) const {
+  const std::string obj = "/ (root attribute " + name + ")";
+  detail::Hdf5Reader& h5 = *impl_->h5;
+  if (!h5.has_attribute(name)) impl_->fail(obj, "missing", "a root attribute of docs/trace-format.md");
+  TraceAttribute out;
+  hssize_t n = 0;
+  H5T_class_t cls = H5T_NO_CLASS;
+  bool vlen = false;
+  {
+    const detail::Hdf5Handle a(H5Aopen(h5.file(), name.c_str(), H5P_DEFAULT));
+    const detail::Hdf5Handle type(a.ok() ? H5Aget_type(a) : -1), space(a.ok() ? H5Aget_space(a) : -1);
+    if (!type.ok() || !space.ok()) impl_->fail(obj, "unreadable", "a readable attribute");
+    cls = H5Tget_class(type);
+    const H5S_class_t sc = H5Sget_simple_extent_type(space);
+    n = sc == H5S_SCALAR ? 1 : sc == H5S_SIMPLE ? H5Sget_simple_extent_npoints(space) : 0;
+    out.scalar = sc == H5S_SCALAR || n == 1;
+    if (n < 1 || n > 64)
+      impl_->fail(obj, sc == H5S_NULL ? "holds no value (null dataspace)" : fmt::format("{} values", n),
+                  "1 to 64 values");
+    vlen = cls == H5T_STRING && H5Tis_variable_str(type) > 0;
+    if (cls == H5T_STRING && !vlen && H5Tget_size(type) > trace_limits::kMaxStringBytes / 64)
+      impl_->fail(obj, fmt::format("strings of {} bytes", H5Tget_size(type)),
+                  fmt::format("at most {} bytes", trace_limits::kMaxStringBytes / 64));
+    if ((cls == H5T_INTEGER || cls == H5T_FLOAT) && H5Tget_size(type) > 16)
+      impl_->fail(obj, "a number wider than 128 bits", "a number (integer or float)");
+    if (cls == H5T_STRING && n > 1) {
+      // An array of strings (stage_names): read here, each bounded.
+      out.is_string = true;
+      if (vlen) {
+        detail::Hdf5Handle mem(H5Tcopy(H5T_C_S1));
+        H5Tset_size(mem, H5T_VARIABLE);
+        std::vector<char*> raw(static_cast<std::size_t>(n), nullptr);
+        if (H5Aread(a, mem, raw.data()) < 0) impl_->fail(obj, "unreadable strings (damaged file?)", "strings");
+        for (char* p : raw) {
+          out.strings.emplace_back(p ? std::string(p, ::strnlen(p, trace_limits::kMaxStringBytes / 64)) : "");
+          if (p) H5free_memory(p);
+        }
+      } else {
+        const std::size_t size = H5Tget_size(type);
+        std::vector<char> buf(static_cast<std::size_t>(n) * size);
+        if (H5Aread(a, type, buf.data()) < 0) impl_->fail(obj, "unreadable strings (damaged file?)", "strings");
+        for (hssize_t i = 0; i < n; ++i) {
+          const char* p = buf.data() + static_cast<std::size_t>(i) * size;
+          out.strings.emplace_back(p, ::strnlen(p, size));
+        }
+      }
+      return out;
+    }
+  }
+  if (cls == H5T_STRING) {
+    out.is_string = true;
+    out.strings.push_back(h5.string_attribute(name));
+  } else if (cls == H5T_INTEGER || cls == H5T_FLOAT) {
+    out.numbers = n == 1 ? std::vector<double>{h5.number_attribute(name)}
+                         : h5.number_attributes(name, static_cast<std::size_t>(n));
+  } else {
+    impl_->fail(obj, "neither a string nor numbers", "strings or numbers (docs/trace-format.md)");
+  }
+  return out;
 }
 
 std::vector<std::string> TraceReader::read_strings(const std::string& d) const { return impl_->h5->read_strings(d); }

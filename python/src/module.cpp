@@ -1,6 +1,6 @@
 // octocd._octocd: the compiled half of the `octocd` Python package (issue 21). The
 // package's public names, their docstrings and the small conveniences (scene dicts,
-// result objects) are in python/octocd/__init__.py; this file converts arrays and calls
+// result objects) are in python/octocd/*.py (one module per job); this file converts arrays and calls
 // the C++ API: build_model + the engines (octocd/engine.hpp), ExternalValidator and
 // validate_external_trace (octocd/external.hpp).
 //
@@ -11,18 +11,23 @@
 // arrays and plain sequences are converted (copied). Shapes are checked exactly and every
 // float must be finite. Arrays out are fresh copies the caller owns.
 //
-// The GIL is released while an engine steps and while frames are judged; an object
-// already busy in another thread raises RuntimeError instead of racing.
+// The GIL is released while an engine steps, while frames are judged and while a trace is
+// read; an object already busy in another thread raises RuntimeError instead of racing.
+// Long calls poll Python's signal handlers (PythonStop) so Ctrl-C raises KeyboardInterrupt
+// within a fraction of a second. Traces are read only through octocd::TraceReader, the
+// hardened reader of the CLI (docs/trace-format.md, "Security rules and limits").
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -37,6 +42,7 @@
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/shards.hpp"
+#include "octocd/trace_reader.hpp"
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
 #include "octocd/view.hpp"
@@ -356,6 +362,171 @@ class BusyGuard {
   std::atomic<bool>& flag_;
 };
 
+/// Ctrl-C for C++ work that runs without the GIL: poll() is the stop callback of the core's
+/// loops (ValidationOptions::stop, ExternalOptions::stop, validate_external_trace). At
+/// most every 20 ms it takes the GIL and runs Python's signal handlers
+/// (PyErr_CheckSignals); once one raised (KeyboardInterrupt from SIGINT), poll() returns
+/// true from then on and rethrow() raises that exception in the calling thread. Live on
+/// the stack of the call, with the GIL held at construction and at rethrow(). Thread-safe
+/// (the validators may poll from helper threads; Python runs handlers on the main thread
+/// only, which polls too).
+class PythonStop {
+ public:
+  bool poll() {
+    if (stopped_.load()) return true;
+    const std::lock_guard<std::mutex> lock(mutex_);
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last_ < std::chrono::milliseconds(20)) return false;
+    last_ = now;
+    const py::gil_scoped_acquire gil;
+    if (PyErr_CheckSignals() != 0) {
+      error_ = std::make_unique<py::error_already_set>();
+      stopped_ = true;
+    }
+    return stopped_.load();
+  }
+  std::function<bool()> callback() {
+    return [this] { return poll(); };
+  }
+  bool stopped() const { return stopped_.load(); }
+  /// Raises the exception a signal handler raised (the GIL held); no-op when none.
+  void rethrow() {
+    if (error_) {
+      error_->restore();
+      error_.reset();
+      throw py::error_already_set();
+    }
+  }
+
+ private:
+  std::mutex mutex_;
+  std::chrono::steady_clock::time_point last_{};
+  std::atomic<bool> stopped_{false};
+  std::unique_ptr<py::error_already_set> error_;
+};
+
+/// `arg` names a dict whose keys must be strings (refuses 1, b"mu", ...: a key that is not
+/// text would otherwise print like another one and silently win).
+void string_keys(const py::dict& d, const std::string& arg) {
+  for (auto item : d)
+    if (!py::isinstance<py::str>(item.first))
+      throw InputError(fmt::format("{}: key {} is a {}; allowed: string keys (each at most once)", arg,
+                                   std::string(py::repr(item.first)),
+                                   std::string(py::str(item.first.get_type().attr("__name__")))));
+}
+
+// ---- traces (octocd::TraceReader: the CLI's hardened reader) -------------------------
+
+/// One trace open read-only through octocd::TraceReader (what octocd.Trace reads with):
+/// regular files only; external links, external storage and virtual datasets refused;
+/// every dataset checked for type and declared size before it is read; rows honour the
+/// root attributes committed_frames / committed_states (complete_rows). Errors are
+/// InputError "PATH: DATASET: PROBLEM; allowed: ..." as the CLI's.
+class PyTraceFile {
+ public:
+  explicit PyTraceFile(const std::string& path) {
+    py::gil_scoped_release release;
+    reader_ = std::make_unique<TraceReader>(path);
+  }
+  int version() { return open().version(); }
+  const std::string& path() { return open().path(); }
+  bool has(const std::string& name) {
+    BusyGuard busy(busy_, "this Trace");
+    return open().has_dataset(name);
+  }
+  py::tuple shape(const std::string& name) {
+    BusyGuard busy(busy_, "this Trace");
+    return py::cast(open().shape(name));
+  }
+  std::string kind(const std::string& name) {
+    BusyGuard busy(busy_, "this Trace");
+    return open().element_kind(name);
+  }
+  std::int64_t complete_rows(const std::string& group) {
+    BusyGuard busy(busy_, "this Trace");
+    return open().complete_rows(group);
+  }
+  /// Rows [first, first + count) as a NumPy array of `dtype` ("f4", "f8" or "i8") of shape
+  /// (count, dims[1:]...).
+  py::array rows(const std::string& name, std::int64_t first, std::int64_t count, const std::string& dtype) {
+    BusyGuard busy(busy_, "this Trace");
+    TraceReader& r = open();
+    const std::vector<std::uint64_t> dims = r.shape(name);
+    if (dims.empty()) throw InputError(fmt::format("{}: {}: a scalar; allowed: a dataset of rank >= 1", r.path(), name));
+    std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(count)};
+    for (std::size_t k = 1; k < dims.size(); ++k) shape.push_back(static_cast<py::ssize_t>(dims[k]));
+    auto to_array = [&](auto&& v, auto tag) {
+      using T = decltype(tag);
+      py::array_t<T> a(shape);
+      if (!v.empty()) std::memcpy(a.mutable_data(), v.data(), v.size() * sizeof(T));
+      return py::array(a);
+    };
+    if (dtype == "f4") {
+      std::vector<float> v;
+      {
+        py::gil_scoped_release release;
+        v = r.read_f32_rows(name, first, count);
+      }
+      return to_array(v, float{});
+    }
+    if (dtype == "f8") {
+      std::vector<double> v;
+      {
+        py::gil_scoped_release release;
+        v = r.read_f64_rows(name, first, count);
+      }
+      return to_array(v, double{});
+    }
+    if (dtype == "i8") {
+      std::vector<std::int64_t> v;
+      {
+        py::gil_scoped_release release;
+        v = r.read_i64_rows(name, first, count);
+      }
+      return to_array(v, std::int64_t{});
+    }
+    throw InputError(fmt::format("dtype: '{}'; allowed: 'f4', 'f8' or 'i8'", dtype));
+  }
+  /// A root attribute as str, int (an integer-valued number), float or a list of them;
+  /// None when absent.
+  py::object attribute(const std::string& name) {
+    BusyGuard busy(busy_, "this Trace");
+    TraceReader& r = open();
+    if (!r.has_attribute(name)) return py::none();
+    const TraceAttribute a = r.attribute(name);
+    auto number = [](double x) -> py::object {
+      if (std::isfinite(x) && x == std::floor(x) && std::fabs(x) < 9007199254740992.0)
+        return py::int_(static_cast<long long>(x));
+      return py::float_(x);
+    };
+    if (a.is_string) {
+      if (a.scalar) return py::str(a.strings.front());
+      return py::cast(a.strings);
+    }
+    if (a.scalar) return number(a.numbers.front());
+    py::list l;
+    for (double x : a.numbers) l.append(number(x));
+    return l;
+  }
+  std::vector<std::string> strings(const std::string& name) {
+    BusyGuard busy(busy_, "this Trace");
+    return open().read_strings(name);
+  }
+  void close() {
+    BusyGuard busy(busy_, "this Trace");
+    reader_.reset();
+  }
+  bool closed() const { return !reader_; }
+
+ private:
+  TraceReader& open() {
+    if (!reader_) throw InputError("trace: closed; allowed: reading an open octocd.Trace (use it inside `with`)");
+    return *reader_;
+  }
+  std::unique_ptr<TraceReader> reader_;
+  std::atomic<bool> busy_{false};
+};
+
 // ---- scenes and engines --------------------------------------------------------------
 
 /// A loaded scene (shared: several engines can be built from one).
@@ -477,6 +648,18 @@ class PyEngine {
     BodyState s = engine_->state();
     s.x = vec3s(x, "positions", n, "positions (m)");
     s.v = vec3s(v, "velocities", n, "velocities (m/s)");
+    // The scene's limits (docs/scenes.md, "Limits"): the engines' float32 arithmetic
+    // stays finite and keeps the slop within them.
+    const auto bound = [](const std::vector<Vec3>& xs, const char* arg, double limit, const char* unit) {
+      for (std::size_t i = 0; i < xs.size(); ++i)
+        for (int k = 0; k < 3; ++k)
+          if (!(std::fabs(xs[i][k]) <= limit))
+            throw InputError(fmt::format("{}: row {} holds {}; allowed: |component| <= {:g} {} (docs/scenes.md, "
+                                         "Limits)",
+                                         arg, i, xs[i][k], limit, unit));
+    };
+    bound(s.x, "positions", limits::kMaxCoordinate, "m");
+    bound(s.v, "velocities", limits::kMaxSpeed, "m/s");
     BusyGuard busy(busy_, "this Engine");
     engine_->set_state(s);
   }
@@ -503,12 +686,17 @@ MaterialCombine parse_combine(const std::string& s) {
 /// PhysicsBodies from a dict (keys as the C++ member names).
 PhysicsBodies parse_physics(const py::dict& d, py::ssize_t n) {
   PhysicsBodies p;
+  string_keys(d, "physics");
   for (auto item : d) {
     const std::string key = py::str(item.first);
     const py::handle v = item.second;
     const std::string arg = "physics['" + key + "']";
     auto number = [&](double lo) {
       double x = 0;
+      if (py::isinstance<py::bool_>(v) || !(py::isinstance<py::float_>(v) || py::isinstance<py::int_>(v) ||
+                                            py::hasattr(v, "__float__")))
+        throw InputError(fmt::format("{}: {} ({}); allowed: a finite number >= {}", arg, std::string(py::repr(v)),
+                                     std::string(py::str(v.get_type().attr("__name__"))), lo));
       try {
         x = v.cast<double>();
       } catch (const py::cast_error&) {
@@ -517,6 +705,20 @@ PhysicsBodies parse_physics(const py::dict& d, py::ssize_t n) {
       if (!std::isfinite(x) || x < lo)
         throw InputError(fmt::format("{}: {}; allowed: a finite number >= {}", arg, x, lo));
       return x;
+    };
+    // True or False only (also NumPy's bool_): "yes", 2 or None are refused, not cast.
+    auto flag = [&]() {
+      const bool is_bool = py::isinstance<py::bool_>(v) || std::string(py::str(v.get_type().attr("__name__"))) == "bool_";
+      if (!is_bool)
+        throw InputError(fmt::format("{}: {} ({}); allowed: True or False", arg, std::string(py::repr(v)),
+                                     std::string(py::str(v.get_type().attr("__name__")))));
+      return v.cast<bool>();
+    };
+    auto text = [&]() {
+      if (!py::isinstance<py::str>(v))
+        throw InputError(fmt::format("{}: {} ({}); allowed: a string", arg, std::string(py::repr(v)),
+                                     std::string(py::str(v.get_type().attr("__name__")))));
+      return std::string(py::str(v));
     };
     if (key == "inertia") {
       auto a = take<float>(v, arg, {n, 3, 3}, {"n", "3", "3"}, "body-frame inertia tensor (kg m^2)");
@@ -535,13 +737,13 @@ PhysicsBodies parse_physics(const py::dict& d, py::ssize_t n) {
     } else if (key == "slop") {
       p.slop = number(0.0);
     } else if (key == "combine") {
-      p.combine = parse_combine(py::str(v));
+      p.combine = parse_combine(text());
     } else if (key == "theta_margin") {
-      p.theta_margin = v.cast<bool>();
+      p.theta_margin = flag();
     } else if (key == "broadphase_exact") {
-      p.broadphase_exact = v.cast<bool>();
+      p.broadphase_exact = flag();
     } else if (key == "contact_geometry") {
-      const std::string g = py::str(v);
+      const std::string g = text();
       if (g == "shape") p.contact_geometry = ContactGeometry::Shape;
       else if (g == "aabb") p.contact_geometry = ContactGeometry::Aabb;
       else throw InputError(fmt::format("{}: '{}'; allowed: 'shape' or 'aabb'", arg, g));
@@ -559,9 +761,13 @@ void apply_tolerances(ExternalOptions& o, const py::object& tolerances) {
   if (tolerances.is_none()) return;
   if (!py::isinstance<py::dict>(tolerances))
     throw InputError("tolerances: not a dict; allowed: {name: value} with names of octocd.tolerances()");
+  string_keys(py::reinterpret_borrow<py::dict>(tolerances), "tolerances");
   for (auto item : py::reinterpret_borrow<py::dict>(tolerances)) {
     const std::string name = py::str(item.first);
     double value = 0;
+    if (py::isinstance<py::bool_>(item.second) || py::isinstance<py::str>(item.second))
+      throw InputError(fmt::format("tolerances['{}']: {}; allowed: a finite number >= 0", name,
+                                   std::string(py::repr(item.second))));
     try {
       value = item.second.cast<double>();
     } catch (const py::cast_error&) {
@@ -579,6 +785,36 @@ void apply_tolerances(ExternalOptions& o, const py::object& tolerances) {
   }
 }
 
+/// A mesh given to Validator(meshes=...) that FCL can build: at least 3 vertices, at least
+/// one triangle, and at least one triangle of non-zero area (FCL's traversal reads past a
+/// mesh without triangles: SIGSEGV). `arg` names it ("meshes[3]").
+void check_mesh_argument(const Mesh& mesh, const std::string& arg) {
+  const std::string allowed =
+      "(V x 3 float vertices, V >= 3; T x 3 integer triangles, T >= 1, at least one of non-zero area)";
+  if (mesh.vertices.size() < 3)
+    throw InputError(fmt::format("{}[0]: {} vertices; allowed: a triangle mesh {}", arg, mesh.vertices.size(), allowed));
+  if (mesh.triangles.empty())
+    throw InputError(fmt::format("{}[1]: no triangles; allowed: a triangle mesh {}", arg, allowed));
+  for (const auto& t : mesh.triangles) {
+    const Vec3 a = mesh.vertices[t[0]], b = mesh.vertices[t[1]], c = mesh.vertices[t[2]];
+    if (length(cross(b - a, c - a)) > 0.0f) return;
+  }
+  throw InputError(fmt::format("{}: every triangle is degenerate (zero area: repeated or collinear vertices); "
+                               "allowed: a triangle mesh {}",
+                               arg, allowed));
+}
+
+/// Magnitudes the validators' float32 arithmetic stays finite with: the bounds of a
+/// trace's values (docs/trace-format.md, "Security rules and limits"), as the CLI's
+/// `validate --trace-in` checks them.
+void check_coordinates(const std::vector<Vec3>& xs, const char* arg, double limit, const char* what) {
+  for (std::size_t i = 0; i < xs.size(); ++i)
+    for (int k = 0; k < 3; ++k)
+      if (!(std::fabs(xs[i][k]) <= limit))
+        throw InputError(fmt::format("{}: row {} holds {}; allowed: {} with |component| <= {:g}", arg, i, xs[i][k],
+                                     what, limit));
+}
+
 class PyValidator {
  public:
   PyValidator(py::object local_boxes, py::object inverse_mass, const std::string& scene_json, float dt,
@@ -587,7 +823,18 @@ class PyValidator {
     ExternalBodies b;
     b.scene_json = scene_json;
     b.dt = dt;
-    if (!local_boxes.is_none()) b.local_boxes = boxes(local_boxes, "local_boxes", -1, "local box (m)");
+    if (!local_boxes.is_none()) {
+      if (py::hasattr(local_boxes, "__len__") && py::len(local_boxes) > trace_limits::kMaxBodies)
+        throw_body_cap("local_boxes", py::len(local_boxes));
+      b.local_boxes = boxes(local_boxes, "local_boxes", -1, "local box (m)");
+      for (std::size_t i = 0; i < b.local_boxes.size(); ++i)
+        for (int k = 0; k < 3; ++k)
+          for (const float c : {b.local_boxes[i].min[k], b.local_boxes[i].max[k]})
+            if (!(std::fabs(c) <= trace_limits::kMaxCoordinate))
+              throw InputError(fmt::format("local_boxes: row {} holds {}; allowed: local box corners (m) with "
+                                           "|component| <= {:g}",
+                                           i, c, trace_limits::kMaxCoordinate));
+    }
     const auto n = static_cast<py::ssize_t>(b.local_boxes.size());
     if (!inverse_mass.is_none())
       b.inverse_mass = floats(inverse_mass, "inverse_mass", b.local_boxes.empty() ? -1 : n, "inverse mass (1/kg)");
@@ -625,6 +872,12 @@ class PyValidator {
         const py::sequence t = py::reinterpret_borrow<py::sequence>(e);
         auto mesh = std::make_shared<Mesh>();
         mesh->name = arg;
+        if (py::hasattr(t[0], "__len__") && py::len(t[0]) > limits::kMaxMeshVertices)
+          throw InputError(fmt::format("{}[0]: {} vertices; allowed: at most {} (docs/scenes.md, Limits)", arg,
+                                       py::len(t[0]), limits::kMaxMeshVertices));
+        if (py::hasattr(t[1], "__len__") && py::len(t[1]) > limits::kMaxMeshFaces)
+          throw InputError(fmt::format("{}[1]: {} triangles; allowed: at most {} (docs/scenes.md, Limits)", arg,
+                                       py::len(t[1]), limits::kMaxMeshFaces));
         mesh->vertices = vec3s(t[0], arg + "[0]", -1, "vertex (m)");
         auto tri = take<std::uint32_t>(t[1], arg + "[1]", {-1, 3}, {"T", "3"}, "triangle (vertex indices)");
         mesh->triangles.resize(static_cast<std::size_t>(tri.shape(0)));
@@ -636,6 +889,7 @@ class PyValidator {
                                            idx, mesh->vertices.size()));
             mesh->triangles[k][c] = idx;
           }
+        check_mesh_argument(*mesh, arg);
         seen.emplace_back(e.ptr(), mesh);
         b.meshes.push_back(mesh);
       }
@@ -649,7 +903,24 @@ class PyValidator {
     o.against_fcl = against_fcl;
     o.spec6_response = spec6_response;
     apply_tolerances(o, tolerances);
-    validator_ = std::make_unique<ExternalValidator>(b, o);
+    o.stop = [slot = stop_] {
+      PythonStop* p = slot->load();
+      return p != nullptr && p->poll();
+    };
+    {
+      py::gil_scoped_release release;
+      validator_ = std::make_unique<ExternalValidator>(b, o);
+    }
+    if (validator_->body_count() > trace_limits::kMaxBodies)
+      throw_body_cap(scene_json.empty() ? "local_boxes" : "scene", validator_->body_count());
+  }
+
+  /// The CLI's cap (trace_limits::kMaxBodies: the most bodies of a trace `validate
+  /// --trace-in` reads; the reference pair set is exact_pairs, O(n log n + pairs)).
+  [[noreturn]] static void throw_body_cap(const char* arg, std::size_t n) {
+    throw InputError(fmt::format("{}: {} bodies; allowed: at most {} bodies to judge, as `octocd validate "
+                                 "--trace-in` (trace_limits::kMaxBodies)",
+                                 arg, n, trace_limits::kMaxBodies));
   }
 
   std::size_t bodies() const { return validator_->body_count(); }
@@ -726,9 +997,33 @@ class PyValidator {
         if (rec.has_points) r.point = point[i];
       }
     }
+    for (const std::vector<Vec3>* x : {&rec.x_pre, &rec.x_post, &rec.x_det})
+      check_coordinates(*x, x == &rec.x_det ? "x_det" : x == &rec.x_pre ? "x_pre" : "x_post",
+                        trace_limits::kMaxCoordinate, "positions (m)");
+    check_coordinates(rec.v_pre, "v_pre", trace_limits::kMaxSpeed, "velocities (m/s)");
+    check_coordinates(rec.v_post, "v_post", trace_limits::kMaxSpeed, "velocities (m/s)");
+    for (std::size_t i = 0; i < rec.aabbs.size(); ++i)
+      for (int k = 0; k < 3; ++k)
+        for (const float c : {rec.aabbs[i].min[k], rec.aabbs[i].max[k]})
+          if (!(std::fabs(c) <= trace_limits::kMaxCoordinate))
+            throw InputError(fmt::format("aabbs: row {} holds {}; allowed: world AABB corners (m) with |component| "
+                                         "<= {:g}",
+                                         i, c, trace_limits::kMaxCoordinate));
     BusyGuard busy(busy_, "this Validator");
-    py::gil_scoped_release release;
-    validator_->observe(std::move(rec), checked);
+    PythonStop stop;
+    stop_->store(&stop);
+    try {
+      py::gil_scoped_release release;
+      validator_->observe(std::move(rec), checked);
+    } catch (const ValidationStopped&) {
+      stop_->store(nullptr);
+      stop.rethrow();  // KeyboardInterrupt (the frame is partly judged)
+      throw RuntimeError("observe: stopped");
+    } catch (...) {
+      stop_->store(nullptr);
+      throw;
+    }
+    stop_->store(nullptr);
   }
 
   py::list results() {
@@ -739,6 +1034,9 @@ class PyValidator {
  private:
   std::unique_ptr<ExternalValidator> validator_;
   std::atomic<bool> busy_{false};
+  /// The PythonStop of the observe() in progress (nullptr between calls): the validators'
+  /// stop callback polls it.
+  std::shared_ptr<std::atomic<PythonStop*>> stop_ = std::make_shared<std::atomic<PythonStop*>>(nullptr);
 };
 
 ValidationResult result_from(const py::handle& r) {
@@ -777,7 +1075,7 @@ ValidationResult result_from(const py::handle& r) {
 }  // namespace
 
 PYBIND11_MODULE(_octocd, m) {
-  m.doc() = "octocd's compiled core; use the `octocd` package (python/octocd/__init__.py).";
+  m.doc() = "octocd's compiled core; use the `octocd` package (python/octocd/).";
 
   static py::exception<InputError> input_error(m, "InputError", PyExc_ValueError);
   static py::exception<RuntimeError> runtime_error(m, "RuntimeError", PyExc_RuntimeError);
@@ -869,6 +1167,23 @@ PYBIND11_MODULE(_octocd, m) {
       .def("results", &PyValidator::results)
       .def_property_readonly("body_count", &PyValidator::bodies);
 
+  py::class_<PyTraceFile>(m, "TraceFile",
+                          "A trace open through octocd's hardened reader (octocd.Trace reads with it).")
+      .def(py::init<const std::string&>(), py::arg("path"))
+      .def_property_readonly("version", &PyTraceFile::version)
+      .def_property_readonly("path", &PyTraceFile::path)
+      .def_property_readonly("closed", &PyTraceFile::closed)
+      .def("has", &PyTraceFile::has, py::arg("name"))
+      .def("shape", &PyTraceFile::shape, py::arg("name"))
+      .def("kind", &PyTraceFile::kind, py::arg("name"))
+      .def("complete_rows", &PyTraceFile::complete_rows, py::arg("group"))
+      .def("rows", &PyTraceFile::rows, py::arg("name"), py::arg("first"), py::arg("count"), py::arg("dtype"))
+      .def("attribute", &PyTraceFile::attribute, py::arg("name"))
+      .def("strings", &PyTraceFile::strings, py::arg("name"))
+      .def("close", &PyTraceFile::close);
+  m.attr("trace_frame_columns") = TraceReader::frame_columns();
+  m.attr("max_judged_bodies") = trace_limits::kMaxBodies;
+
   m.def(
       "validate_trace",
       [](const std::string& path, int every, std::int64_t max_frames, bool against_fcl, py::object tolerances,
@@ -885,9 +1200,14 @@ PYBIND11_MODULE(_octocd, m) {
             expect_json ? parse_expectations_text(*expect_json, expect_origin) : Expectations{};
         std::vector<ValidationResult> rs;
         ExternalTraceInfo info;
-        {
+        PythonStop stop;
+        o.stop = stop.callback();
+        try {
           py::gil_scoped_release release;
           rs = validate_external_trace(path, o, every, max_frames, &info);
+        } catch (const ValidationStopped&) {
+          stop.rethrow();  // KeyboardInterrupt
+          throw RuntimeError("validate_trace: stopped");
         }
         const ExpectationReport report = match_expectations(expect, trace_run(path), rs);
         // A shard's verdict as `validate --shard --json` writes it (merge_validations reads it).

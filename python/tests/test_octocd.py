@@ -160,17 +160,27 @@ def test_scene_errors_name_the_key():
         octocd.load_scene(3)
 
 
-def test_nan_in_the_state_is_a_runtime_error():
+def test_set_state_refuses_values_beyond_the_scene_limits():
+    # Issue 36: positions of 3e38 kept stepping (x + dt v overflows float32). The scene's
+    # limits (docs/scenes.md): |x| <= 1000 m, |v| <= 1e4 m/s; NaN refused too.
     eng = octocd.Engine(scene_path("box-stack"))
     x = eng.positions
     v = eng.velocities
-    x[-1] = [0.0, 3.4e38, 0.0]   # the top box: x + dt v = 3.4e38 + 3e35 overflows float32
-    v[-1] = [0.0, 3.0e38, 0.0]
-    eng.set_state(x, v)
-    with pytest.raises(octocd.RuntimeError, match=r"frame 1: body 4 .* non-finite position"):
-        eng.step()
+    big = x.copy()
+    big[-1] = [0.0, 3.0e38, 0.0]
+    with pytest.raises(octocd.InputError, match=r"positions: row 4 holds 3e\+38; allowed: \|component\| <= 1000 m"):
+        eng.set_state(big, v)
+    fast = v.copy()
+    fast[2] = [0.0, -2.0e4, 0.0]
+    with pytest.raises(octocd.InputError, match=r"velocities: row 2 holds -20000; allowed: \|component\| <= 10000 m/s"):
+        eng.set_state(x, fast)
     with pytest.raises(octocd.InputError, match=r"positions: row 0 holds nan"):
         eng.set_state(np.full_like(x, np.nan), v)
+    edge = x.copy()
+    edge[-1] = [0.0, 1000.0, 0.0]  # the limit itself is accepted and steps
+    eng.set_state(edge, v)
+    eng.step()
+    assert eng.frame == 1 and np.isfinite(eng.positions).all()
 
 
 def test_cuda_engine_or_the_reason_it_is_skipped():
@@ -446,7 +456,7 @@ def test_trace_helper_refuses_other_files_and_missing_frames(tmp_path):
     other = str(tmp_path / "other.h5")
     with h5py.File(other, "w") as f:
         f["x"] = np.zeros(3)
-    with pytest.raises(octocd.InputError, match=r"attribute format: None; allowed: 'octocd-trace'"):
+    with pytest.raises(octocd.InputError, match=r'other\.h5: format: missing root attribute; allowed: "octocd-trace"'):
         octocd.Trace(other)
     trace = cli_trace(tmp_path, scene_path("box-stack"), 10, contacts=False)
     with octocd.Trace(trace) as t:

@@ -180,7 +180,7 @@ def test_bad_version_2_input_names_dataset_frame_and_allowed(tmp_path):
         return p
 
     p = variant("v3.h5", lambda f: f.attrs.modify("version", 3))
-    with pytest.raises(octocd.InputError, match=r"v3\.h5: attribute version: 3; allowed: 1 or 2"):
+    with pytest.raises(octocd.InputError, match=r"v3\.h5: version: 3; allowed: 1 or 2"):
         octocd.Trace(p)
 
     def scale(f):

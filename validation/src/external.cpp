@@ -439,6 +439,8 @@ ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const Externa
         if (mesh) {
           if (mesh->vertices.empty())
             throw InputError(fmt::format("{}: meshes: body {}: no vertices; allowed: a triangle mesh", origin, i));
+          if (mesh->triangles.empty())  // FCL's traversal reads past a mesh without triangles
+            throw InputError(fmt::format("{}: meshes: body {}: no triangles; allowed: a triangle mesh", origin, i));
           const Aabb mb = mesh_bounds(*mesh);
           const float slack = 1e-5f * (1.0f + length(box.max - box.min));
           if (mb.min.x < box.min.x - slack || mb.min.y < box.min.y - slack || mb.min.z < box.min.z - slack ||
@@ -518,6 +520,7 @@ void ExternalValidator::observe(FrameRecord rec, bool checked) {
     vo.tol = s.options.tol;
     vo.overridden = s.options.overridden;
     vo.threads = s.options.threads;
+    vo.stop = s.options.stop;
     s.validators = std::make_unique<FrameValidators>(
         // Another engine's pairs are judged by the physics tier (broadphase completeness),
         // not against octocd's broadphases: none are compared here.

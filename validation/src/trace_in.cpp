@@ -6,6 +6,7 @@
 #include <future>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <type_traits>
@@ -707,16 +708,24 @@ FrameRecord ExternalTrace::frame(std::int64_t f) {
   return impl_->in.frame(f);
 }
 
-ExternalTraceInfo check_external_trace(const std::string& path) {
+namespace {
+// Every frame's values checked; `stop` (may be empty) polled between frames.
+ExternalTraceInfo check_frames(const std::string& path, const std::function<bool()>& stop) {
   TraceIn in(path, false);
-  for (std::int64_t f = 1; f <= in.info.frames; ++f) in.frame(f);
+  for (std::int64_t f = 1; f <= in.info.frames; ++f) {
+    if (stop && stop()) throw ValidationStopped();
+    in.frame(f);
+  }
   return in.info;
 }
+}  // namespace
+
+ExternalTraceInfo check_external_trace(const std::string& path) { return check_frames(path, {}); }
 
 std::vector<ValidationResult> validate_external_trace(const std::string& path, ExternalOptions options, int every,
                                                       std::int64_t max_frames, ExternalTraceInfo* info) {
   if (every < 1) throw InputError(fmt::format("--every: {}; allowed: >= 1", every));
-  const ExternalTraceInfo checked = check_external_trace(path);
+  const ExternalTraceInfo checked = check_frames(path, options.stop);
   TraceIn in(path);
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;
@@ -743,6 +752,7 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
     std::future<FrameRecord> next;
     if (first <= last) next = std::async(std::launch::async, [&in, f = first] { return in.frame(f); });
     for (std::int64_t f = first; f <= last; ++f) {
+      if (options.stop && options.stop()) throw ValidationStopped();
       const FrameRecord rec = next.get();
       if (f < last) next = std::async(std::launch::async, [&in, f] { return in.frame(f + 1); });
       made->observe(rec, f % every == 0);

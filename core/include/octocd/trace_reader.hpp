@@ -71,6 +71,14 @@ constexpr double kMaxInertia = 1e15;
 constexpr double kMaxImpulse = 1e9;
 }  // namespace trace_limits
 
+/// A root attribute of a trace read whatever its kind (TraceReader::attribute).
+struct TraceAttribute {
+  bool is_string = false;            ///< strings (else numbers)
+  bool scalar = true;                ///< stored as one value (a scalar or a 1-element array)
+  std::vector<std::string> strings;  ///< its strings, when is_string
+  std::vector<double> numbers;       ///< its numbers (integers converted), otherwise
+};
+
 /// One trace file, open read-only. Not thread-safe. Move-only.
 class TraceReader {
  public:
@@ -84,6 +92,10 @@ class TraceReader {
   TraceReader(TraceReader&&) noexcept;
   TraceReader& operator=(TraceReader&&) noexcept;
 
+  /// The /frames columns of format version 1, in the writer's order ("frame", "time",
+  /// "step_ms", the stage times, counters and figures, "momentum", "memory_bytes").
+  static const std::vector<std::string>& frame_columns();
+
   /// The file's path as given.
   const std::string& path() const;
   /// The root attribute `version`: 1 or 2.
@@ -95,6 +107,11 @@ class TraceReader {
   std::string string_attribute(const std::string& name) const;
   /// Root numeric attribute, converted to double (throws InputError when absent).
   double number_attribute(const std::string& name) const;
+
+  /// Root attribute `name`: strings or numbers (integer or float), at most 64 values, a
+  /// string at most trace_limits::kMaxStringBytes. Throws InputError naming it when it is
+  /// missing, of another type class (compound, reference, ...) or larger.
+  TraceAttribute attribute(const std::string& name) const;
 
   /// Whether the dataset at `dataset` (e.g. "/states/position") exists.
   bool has_dataset(const std::string& dataset) const;
@@ -120,6 +137,13 @@ class TraceReader {
   /// Rows [first, first + count) of a float dataset (e.g. one state of /states/position:
   /// count 1 gives bodies x 3 floats), row-major.
   std::vector<float> read_f32_rows(const std::string& dataset, std::int64_t first, std::int64_t count) const;
+  /// Rows [first, first + count) of a numeric dataset converted to double / int64,
+  /// row-major (as read_f32_rows).
+  std::vector<double> read_f64_rows(const std::string& dataset, std::int64_t first, std::int64_t count) const;
+  std::vector<std::int64_t> read_i64_rows(const std::string& dataset, std::int64_t first, std::int64_t count) const;
+  /// The type class of a dataset's elements: "integer", "float", "string" or "other"
+  /// (throws InputError when absent or refused: see the class comment).
+  std::string element_kind(const std::string& dataset) const;
   /// Every element of a 1-D string dataset (e.g. /bodies/group).
   std::vector<std::string> read_strings(const std::string& dataset) const;
 

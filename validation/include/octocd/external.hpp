@@ -41,6 +41,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -108,6 +109,11 @@ struct ExternalOptions {
   ShardSpec shard;
   /// Threads per frame (ValidationOptions::threads; 0: the hardware's).
   int threads = 0;
+  /// Polled inside the long loops of a frame's checks (as ValidationOptions::stop) and by
+  /// validate_external_trace between frames; when it returns true they throw
+  /// ValidationStopped (the frame in progress is then partly judged). May be empty (never
+  /// stops). The Python module polls Ctrl-C with it.
+  std::function<bool()> stop;
 };
 
 /// Names of a FrameRecord's fields in error messages (the C++ field names by default;
