@@ -110,7 +110,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   r["bodies"] = model->initial.x.size();
   std::unique_ptr<Engine> engine;
   try {
-    engine = make_engine(p.engine, model, cuda_settings_from(o.cuda));
+    engine = make_engine(p.engine, model, cuda_settings_from(o.cuda), bullet_settings_from(o.bullet));
   } catch (const std::exception& e) {
     r["status"] = "skipped";
     r["reason"] = e.what();
@@ -131,6 +131,11 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     }
     if (ignores) {
       r["ignores"][s.axes[a].name] = why;
+      // The point is labelled by what it ran (the registry's name of the engine's own
+      // broadphase, e.g. btDbvtBroadphase), not by the axis value it ignored.
+      const EngineInfo& info = engine_info(p.engine, "engines");
+      if (s.axes[a].key == "/broadphase/name" && !info.own_broadphase_class.empty())
+        r["params"]["labels"][s.axes[a].name] = info.own_broadphase_class;
       if (p.value[a] != 0) {
         r["status"] = "skipped";
         r["reason"] = why + fmt::format(": measured once, under {}={}", s.axes[a].name, value_text(s.axes[a].values[0]));
@@ -140,6 +145,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   }
   r["device"] = engine->device();
   r["engine_broadphase"] = engine->broadphase_name();
+  r["geometry"] = engine->collision_geometry();  // what the engine collided (SPEC 15)
   for (int st = 0; st < kStages; ++st)
     r["has_stage"][stage_name(static_cast<Stage>(st))] = engine->has_stage(static_cast<Stage>(st));
 
@@ -156,7 +162,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   for (int rep = 0; rep < repeat; ++rep) {
     if (rep > 0) {
       engine.reset();  // the last repetition's device memory back first: the memory check sees one engine
-      engine = make_engine(p.engine, model, cuda_settings_from(o.cuda));
+      engine = make_engine(p.engine, model, cuda_settings_from(o.cuda), bullet_settings_from(o.bullet));
     }
     std::unique_ptr<TraceWriter> trace;
     if (rep == 0 && ov.trace && !o.trace_dir.empty()) {

@@ -64,6 +64,7 @@ struct RunOptions {
   bool no_xdmf = false;
   bool rotation = false;  ///< --rotation: the scene's bodies rotate (engine bullet only)
   std::vector<std::string> cuda;  ///< --cuda KEY=VALUE items (CudaSettings)
+  std::vector<std::string> bullet;  ///< --bullet KEY=VALUE items (BulletSettings)
 };
 
 /// Running sums for the summary table.
@@ -163,6 +164,7 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
              world.shapes().size());
   fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", engine, world.broadphase_name(),
              world.midphase_name(), world.device());
+  fmt::print("geometry     {}\n", world.collision_geometry());
   fmt::print("set-up       {:.2f} s (scene and bodies {:.2f} s, engine {:.2f} s)\n", t.model_s + t.engine_s,
              t.model_s, t.engine_s);
   fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
@@ -221,6 +223,7 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   j["engine"] = engine;
   j["broadphase"] = world.broadphase_name();
   j["midphase"] = world.midphase_name();
+  j["geometry"] = world.collision_geometry();
   j["frames"] = t.frames;
   j["wall_s"] = wall_s;
   // Set-up before the first step: scene file, meshes and bodies; the engine.
@@ -325,12 +328,13 @@ int run_command(const RunOptions& o) {
   eo.midphase = o.midphase;
   eo.rotation = o.rotation;
   eo.cuda = octocd::cli::cuda_settings_from(o.cuda);
+  eo.bullet = octocd::cli::bullet_settings_from(o.bullet);
   octocd::apply_engine_options(scene, octocd::engine_info(o.engine, "--engine"), eo, octocd::cli_argument_names());
 
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   loading.reset();  // from here on the loop polls the signal, flushes and reports
   const auto t_model = Clock::now();
-  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model, eo.cuda);
+  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model, eo.cuda, eo.bullet);
   octocd::Engine& world = *engine;
   Totals totals;
   totals.model_s = std::chrono::duration<double>(t_model - t_setup).count();
@@ -412,6 +416,7 @@ struct ValidateOptions {
   bool no_xdmf = false;
   bool rotation = false;      ///< --rotation: the scene's bodies rotate (engine bullet only)
   std::vector<std::string> cuda;  ///< --cuda KEY=VALUE items (CudaSettings)
+  std::vector<std::string> bullet;  ///< --bullet KEY=VALUE items (BulletSettings)
   bool engine_given = false;  ///< --engine was on the command line
   std::string expect;         ///< --expect FILE.json: known failures (SPEC 14b)
   std::string write_expect;   ///< --write-expect FILE.json: record the current failures
@@ -561,8 +566,8 @@ int validate_merge(const ValidateOptions& o) {
 
 int validate_scene_command(ValidateOptions& o, Clock::time_point t0);
 
-/// `octocd validate SCENE --engine bullet --rotation` (or a rotating scene): Bullet with
-/// rotation runs `--frames` steps into a version 2 trace (`--trace FILE`, else a
+/// `octocd validate SCENE --engine bullet` (hull mode, or with rotation): Bullet
+/// runs `--frames` steps into a version 2 trace (`--trace FILE`, else a
 /// temporary file, removed afterwards) with every state and contact, which is then judged
 /// as `--trace-in` judges it (validate_trace_in).
 int validate_bullet_rotation(ValidateOptions& o, const octocd::ValidationOptions& vo,
@@ -572,9 +577,13 @@ int validate_bullet_rotation(ValidateOptions& o, const octocd::ValidationOptions
   const std::string path =
       temporary ? (fs::temp_directory_path() / fmt::format("octocd-validate-bullet-{}.h5", ::getpid())).string()
                 : o.trace;
+  const std::string what = o.engine + (octocd::scene_rotates(model->scene) ? " (rotation)" : " (translation only)");
+  std::string geometry;
   {
-    const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model);
+    const std::unique_ptr<octocd::Engine> engine =
+        make_engine(o.engine, model, {}, octocd::cli::bullet_settings_from(o.bullet));
     octocd::Engine& world = *engine;
+    geometry = world.collision_geometry();
     octocd::TraceOptions topt;
     topt.state_every = 1;
     topt.contacts = true;
@@ -615,23 +624,23 @@ int validate_bullet_rotation(ValidateOptions& o, const octocd::ValidationOptions
   if (!o.junit.empty())
     octocd::write_junit(o.junit, model->scene.name, octocd::cli::with_views_in_details(results, o.views, o.junit),
                         std::chrono::duration<double>(Clock::now() - t0).count(),
-                        {{"engine", "bullet (rotation)"},
+                        {{"engine", what},
                          {"frames", std::to_string(info.frames)},
                          {"every", std::to_string(o.every)},
                          {"against", o.against},
                          {"scene_file", o.scene},
                          {"build_id", octocd::build_id()}},
                         "", &report);
-  fmt::print("validate {} (engine bullet with rotation, judged as a version 2 external trace{}: {} bodies, {} "
-             "frames, checks every {}, against: {})\n\n",
-             model->scene.name, temporary ? "" : " " + path, info.bodies, info.frames, o.every, o.against);
+  fmt::print("validate {} (engine {}, judged as a version 2 external trace{}: {} bodies, {} "
+             "frames, checks every {}, against: {})\n\ngeometry: {}\n\n",
+             model->scene.name, what, temporary ? "" : " " + path, info.bodies, info.frames, o.every, o.against, geometry);
   fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
   if (const int sig = octocd::stop_signal()) {
     report_stop(sig, "validate", info.frames, o.frames, o.trace);
     return octocd::stop_exit_code(sig);
   }
   return conclude_validate(o, run, results, report,
-                           {{"engine", "bullet (rotation)"}, {"frames", info.frames}, {"every", o.every},
+                           {{"engine", what}, {"geometry", geometry}, {"frames", info.frames}, {"every", o.every},
                             {"against", o.against}, {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
 }
 
@@ -766,10 +775,11 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   building.reset();
   if (!octocd::engine_info(o.engine, "--engine").records_every_step) {
-    if (!octocd::scene_rotates(scene))
+    // It is judged through its trace when it records (Bullet: hull mode or rotation).
+    if (!make_engine(o.engine, model, {}, octocd::cli::bullet_settings_from(o.bullet))->can_record())
       throw octocd::InputError(fmt::format(
-          "--engine: {} without rotation cannot be validated (no per-frame record); allowed: cpu, cuda, or "
-          "{} with --rotation (or a scene with rotation: true)",
+          "--engine: {} with boxes equal to the AABBs and no rotation cannot be validated (no per-frame record); "
+          "allowed: cpu, cuda, or {} with --bullet shape=hull (the default) or --rotation",
           o.engine, o.engine));
     return validate_bullet_rotation(o, vo, model, t0);
   }
@@ -800,7 +810,9 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   std::int64_t stopped_in = 0;  // the frame a signal stopped the checks in (0: none)
   try {
     const octocd::CudaSettings cuda = octocd::cli::cuda_settings_from(o.cuda);
-    results = octocd::validate_engine([&] { return make_engine(o.engine, model, cuda); }, vo, &stopped_in);
+    const octocd::BulletSettings bullet = octocd::cli::bullet_settings_from(o.bullet);
+    results =
+        octocd::validate_engine([&] { return make_engine(o.engine, model, cuda, bullet); }, vo, &stopped_in);
   } catch (const octocd::RuntimeError&) {
     close_after_failure(trace, o.trace, o.no_xdmf);
     throw;
@@ -929,6 +941,7 @@ int main(int argc, char** argv) {
                     "angular motion, boxes and convex hulls; --trace writes format version 2 (orientation, "
                     "angular velocity, inertia; with --contacts manifold rows with points, /pairs, /aabbs)");
   octocd::cli::add_cuda_settings_option(run_cmd, run.cuda);
+  octocd::cli::add_bullet_settings_option(run_cmd, run.bullet);
 
   ValidateOptions val;
   CLI::App* val_cmd = app.add_subcommand(
@@ -958,6 +971,7 @@ int main(int argc, char** argv) {
   val_cmd->add_flag("--rotation", val.rotation,
                     "The bodies rotate (as the scene key rotation: true); needs --engine bullet");
   octocd::cli::add_cuda_settings_option(val_cmd, val.cuda);
+  octocd::cli::add_bullet_settings_option(val_cmd, val.bullet);
   {
     std::string names;
     for (const auto& e : octocd::tolerance_table())

@@ -36,6 +36,21 @@ CudaSettings cuda_settings_from(const std::vector<std::string>& items) {
   return s;
 }
 
+void add_bullet_settings_option(CLI::App* command, std::vector<std::string>& items) {
+  std::string keys;
+  for (const std::string& k : bullet_setting_names()) keys += (keys.empty() ? "" : ", ") + k;
+  command->add_option("--bullet", items,
+                      "A setting of the bullet engine, KEY=VALUE, repeatable (docs/settings.md); keys: " + keys +
+                          " (shape=hull: convex hulls of dynamic meshes, triangle meshes of static ones, the "
+                          "default; shape=box: boxes equal to the AABBs)");
+}
+
+BulletSettings bullet_settings_from(const std::vector<std::string>& items) {
+  BulletSettings s;
+  apply_bullet_settings(s, items, "--bullet");
+  return s;
+}
+
 nlohmann::json spread(const std::vector<double>& values) {
   nlohmann::json j;
   j["n"] = values.size();

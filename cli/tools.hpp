@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/atomic_file.hpp"
+#include "octocd/bullet_settings.hpp"
 #include "octocd/cuda_settings.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/engines.hpp"
@@ -34,6 +35,14 @@ void add_cuda_settings_option(CLI::App* command, std::vector<std::string>& items
 
 /// CudaSettings from `--cuda` items (apply_cuda_settings). Throws InputError "--cuda: ...".
 CudaSettings cuda_settings_from(const std::vector<std::string>& items);
+
+/// Adds the repeatable `--bullet KEY=VALUE` option (BulletSettings, docs/settings.md) to
+/// `command`, filling `items`.
+void add_bullet_settings_option(CLI::App* command, std::vector<std::string>& items);
+
+/// BulletSettings from `--bullet` items (apply_bullet_settings). Throws InputError
+/// "--bullet: ...".
+BulletSettings bullet_settings_from(const std::vector<std::string>& items);
 
 
 /// Median, minimum, maximum, mean and sample standard deviation of repeated measurements,
@@ -166,6 +175,7 @@ struct BenchOptions {
   std::string data_dir;           ///< meshes (as load_scene's data_dir)
   std::string trace_dir;          ///< write one trace per steps point here
   std::vector<std::string> cuda;  ///< --cuda KEY=VALUE items (CudaSettings)
+  std::vector<std::string> bullet;  ///< --bullet KEY=VALUE items (BulletSettings)
 };
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o);
 int bench_command(const BenchOptions& o);

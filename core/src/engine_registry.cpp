@@ -34,7 +34,9 @@ const std::vector<EngineInfo>& engine_infos() {
     bullet.rotates = true;
     bullet.own_broadphase = "bullet-dbvt";
     bullet.own_broadphase_class = "btDbvtBroadphase";
-    bullet.no_midphase_reason = "Bullet's box-box narrow phase runs on the AABB boxes";
+    bullet.no_midphase_reason =
+        "Bullet runs its own narrow phase: GJK/EPA on convex hulls and triangle meshes, or btBoxBoxDetector on the "
+        "AABB boxes (--bullet shape=box)";
     return std::vector<EngineInfo>{cpu, cuda, bullet};
   }();
   return infos;

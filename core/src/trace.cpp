@@ -202,7 +202,7 @@ struct Column {
   hsize_t rows = 0;          // rows on disk
   bool filtered = false;     // shuffle + deflate, one row a chunk (make_column)
 
-  hsize_t pending() const { return buf.size() / (elem * width); }
+  hsize_t pending() const { return elem * width == 0 ? 0 : buf.size() / (elem * width); }  // 0: never created
 
   template <class T>
   void push(const T* p, std::size_t count) {
@@ -435,7 +435,7 @@ struct TraceWriter::Impl {
     static_assert(sizeof(Vec3) == 3 * sizeof(float), "Vec3 must be three packed floats");
     s_pos.push(reinterpret_cast<const float*>(st.x.data()), 3 * bodies);
     s_vel.push(reinterpret_cast<const float*>(st.v.data()), 3 * bodies);
-    if (opt.v2) push_rotation(st);
+    if (opt.v2 && opt.v2->rotates) push_rotation(st);
   }
 };
 
@@ -633,7 +633,8 @@ void TraceWriter::create_v2_layout() {
               path);
   attr_scalar(root, "broadphase_exact", H5T_STD_I32LE, H5T_NATIVE_INT, t.broadphase_exact ? 1 : 0, path);
   attr_string(root, "contact_geometry", t.contact_geometry, path);
-  if (!t.collision_shape.empty()) attr_string(root, "collision_shape", t.collision_shape, path);
+  if (!t.collision_shape.empty() && t.body_collision_shape.empty())
+    attr_string(root, "collision_shape", t.collision_shape, path);
   {
     const hsize_t three = 3;
     Handle space(check(H5Screate_simple(1, &three, nullptr), path, "H5Screate_simple"));
@@ -649,12 +650,14 @@ void TraceWriter::create_v2_layout() {
   };
   {
     Handle g(check(H5Gopen2(root, "bodies", H5P_DEFAULT), path, "open group /bodies"));
-    if (t.inertia.size() != n)
+    if (t.rotates && t.inertia.size() != n)
       throw RuntimeError("trace '" + path + "': inertia has " + std::to_string(t.inertia.size()) +
                          " tensors, the trace has " + std::to_string(n) + " bodies");
-    std::vector<float> inertia(9 * n);
-    for (std::size_t i = 0; i < n; ++i) std::copy(t.inertia[i].begin(), t.inertia[i].end(), inertia.begin() + 9 * i);
-    fixed_dataset(g, "inertia", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3, 3}, inertia.data(), path);
+    if (t.rotates) {  // a translation-only trace has no inertia (its bodies never turn)
+      std::vector<float> inertia(9 * n);
+      for (std::size_t i = 0; i < n; ++i) std::copy(t.inertia[i].begin(), t.inertia[i].end(), inertia.begin() + 9 * i);
+      fixed_dataset(g, "inertia", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3, 3}, inertia.data(), path);
+    }
     if (!t.body_friction.empty()) {
       per_body(t.body_friction, "body_friction");
       fixed_dataset(g, "friction", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n}, t.body_friction.data(), path);
@@ -663,8 +666,15 @@ void TraceWriter::create_v2_layout() {
       per_body(t.body_restitution, "body_restitution");
       fixed_dataset(g, "restitution", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n}, t.body_restitution.data(), path);
     }
+    if (!t.body_collision_shape.empty()) {
+      if (t.body_collision_shape.size() != n)
+        throw RuntimeError("trace '" + path + "': body_collision_shape has " +
+                           std::to_string(t.body_collision_shape.size()) + " values, the trace has " +
+                           std::to_string(n) + " bodies");
+      string_dataset(g, "collision_shape", t.body_collision_shape, path);
+    }
   }
-  {
+  if (t.rotates) {
     Handle g(check(H5Gopen2(root, "states", H5P_DEFAULT), path, "open group /states"));
     m.s_orient = make_column(g, "/states", "orientation", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 4}, 1, 2, path);
     m.s_angvel = make_column(g, "/states", "angular_velocity", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {n, 3}, 1, 2, path);
@@ -847,6 +857,7 @@ TraceMetadata trace_metadata(const Engine& engine, int state_every) {
                      {"octree_depth", s.broadphase.octree_depth},
                      {"cell_size", s.broadphase.cell_size}};
   p["midphase"] = engine.midphase_name();
+  p["geometry"] = engine.collision_geometry();  // what the engine collided (SPEC 15)
   p["mesh_octree_depth"] = s.mesh_octree_depth;
   meta.parameters_json = p.dump();
   meta.engine = engine.name();

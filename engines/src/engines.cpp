@@ -17,7 +17,8 @@ namespace octocd {
 
 namespace {
 
-using Factory = std::unique_ptr<Engine> (*)(const std::shared_ptr<const Model>&, const CudaSettings&);
+using Factory = std::unique_ptr<Engine> (*)(const std::shared_ptr<const Model>&, const CudaSettings&,
+                                             const BulletSettings&);
 
 /// One engine of engine_infos(): how it is built and whether this build has it.
 struct Registered {
@@ -26,16 +27,19 @@ struct Registered {
   bool built;
 };
 
-std::unique_ptr<Engine> make_cpu(const std::shared_ptr<const Model>& model, const CudaSettings&) {
+std::unique_ptr<Engine> make_cpu(const std::shared_ptr<const Model>& model, const CudaSettings&,
+                                 const BulletSettings&) {
   return std::make_unique<World>(model, make_any_broadphase(model->scene.broadphase, model->scene.domain));
 }
 
-std::unique_ptr<Engine> make_cuda(const std::shared_ptr<const Model>& model, const CudaSettings& cuda) {
+std::unique_ptr<Engine> make_cuda(const std::shared_ptr<const Model>& model, const CudaSettings& cuda,
+                                  const BulletSettings&) {
   return make_cuda_engine(model, model->scene.broadphase.name, cuda);
 }
 
-std::unique_ptr<Engine> make_bullet(const std::shared_ptr<const Model>& model, const CudaSettings&) {
-  return std::make_unique<BulletWorld>(model, model->initial);
+std::unique_ptr<Engine> make_bullet(const std::shared_ptr<const Model>& model, const CudaSettings&,
+                                    const BulletSettings& bullet) {
+  return std::make_unique<BulletWorld>(model, model->initial, BulletOptions(), bullet);
 }
 
 /// The factories, by the names of engine_infos().
@@ -152,9 +156,9 @@ std::vector<std::string> built_engine_names() {
 }
 
 std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
-                                    const CudaSettings& cuda) {
+                                    const CudaSettings& cuda, const BulletSettings& bullet) {
   const EngineInfo& info = engine_info(name, "--engine");
-  return registered(info).make(model, cuda);
+  return registered(info).make(model, cuda, bullet);
 }
 
 }  // namespace octocd

@@ -68,7 +68,7 @@ class FrameRecord:
 class Engine:
     """One of octocd's engines stepping a scene (octocd/engine.hpp).
 
-    Engine(scene, engine="cpu", broadphase=None, midphase=None, record=True, cuda=None)
+    Engine(scene, engine="cpu", broadphase=None, midphase=None, record=True, cuda=None, bullet=None)
 
     scene: an octocd.Scene, a scene path or a dict (load_scene).
     engine: "cpu", "cuda" or "bullet" (octocd.engines lists those built).
@@ -80,6 +80,8 @@ class Engine:
     cuda: settings of the "cuda" engine as keyword arguments, e.g. {"graph": False,
         "stage_times": False} (CudaSettings; docs/settings.md lists the keys); ignored by
         the other engines.
+    bullet: settings of the "bullet" engine, e.g. {"shape": "box"} (BulletSettings;
+        docs/settings.md: shape "hull" or "box"); ignored by the others.
 
     Raises InputError for a bad scene or argument and for an engine not built ("cuda"
     without CUDA), RuntimeError for "cuda" without a usable device.
@@ -88,10 +90,11 @@ class Engine:
 
     def __init__(self, scene: Union[Scene, str, Dict[str, Any]], engine: str = "cpu",
                  broadphase: Optional[str] = None, midphase: Optional[str] = None, record: bool = True,
-                 cuda: Optional[Dict[str, Any]] = None):
+                 cuda: Optional[Dict[str, Any]] = None, bullet: Optional[Dict[str, Any]] = None):
         self.scene = load_scene(scene)
         items = [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in (cuda or {}).items()]
-        self._e = _octocd.Engine(self.scene, engine, broadphase, midphase, bool(record), items)
+        bullet_items = [f"{k}={v}" for k, v in (bullet or {}).items()]
+        self._e = _octocd.Engine(self.scene, engine, broadphase, midphase, bool(record), items, bullet_items)
 
     def step(self, n: int = 1) -> Dict[str, Any]:
         """Runs n steps (SPEC 4) with the GIL released; Ctrl-C stops between steps.

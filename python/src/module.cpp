@@ -549,7 +549,8 @@ std::string join(const std::vector<std::string>& v, const char* sep = ", ") {
 class PyEngine {
  public:
   PyEngine(const PyScene& scene, const std::string& engine, const std::optional<std::string>& broadphase,
-           const std::optional<std::string>& midphase, bool record, const std::vector<std::string>& cuda) {
+           const std::optional<std::string>& midphase, bool record, const std::vector<std::string>& cuda,
+           const std::vector<std::string>& bullet) {
     const EngineInfo* info = find_engine_info(engine);
     const std::vector<std::string>& names = built_engines();
     if (info == nullptr)
@@ -563,6 +564,7 @@ class PyEngine {
     options.midphase = midphase.value_or("");
     apply_cuda_settings(options.cuda, cuda, "cuda");  // checked whatever the engine: a bad key is an input error
     check_cuda_settings(options.cuda, "cuda");
+    apply_bullet_settings(options.bullet, bullet, "bullet");  // likewise
     Scene sc = *scene.scene;
     apply_engine_options(sc, *info, options, python_argument_names());
     if (const std::string why = engine_unavailable(*info); !why.empty()) {
@@ -573,7 +575,7 @@ class PyEngine {
                                      join(others, " or ")));
     }
     model_ = build_model(sc);
-    engine_ = make_engine(engine, model_, options.cuda);
+    engine_ = make_engine(engine, model_, options.cuda, options.bullet);
     if (record && engine_->can_record()) engine_->set_recording(true);
     recording_ = record && engine_->can_record();
   }
@@ -1133,9 +1135,10 @@ PYBIND11_MODULE(_octocd, m) {
 
   py::class_<PyEngine>(m, "Engine")
       .def(py::init<const PyScene&, const std::string&, const std::optional<std::string>&,
-                    const std::optional<std::string>&, bool, const std::vector<std::string>&>(),
+                    const std::optional<std::string>&, bool, const std::vector<std::string>&,
+                    const std::vector<std::string>&>(),
            py::arg("scene"), py::arg("engine"), py::arg("broadphase"), py::arg("midphase"), py::arg("record"),
-           py::arg("cuda") = std::vector<std::string>{})
+           py::arg("cuda") = std::vector<std::string>{}, py::arg("bullet") = std::vector<std::string>{})
       .def("step", &PyEngine::step, py::arg("n"))
       .def("last_frame", &PyEngine::last_frame)
       .def("set_state", &PyEngine::set_state)

@@ -46,3 +46,14 @@ def test_cuda_without_a_device_says_why():
     with pytest.raises(octocd.RuntimeError, match=r"engine 'cuda': no CUDA device: .*; allowed: engine='cpu' or "
                                                   r"'bullet' on this machine"):
         octocd.Engine(BOX_STACK, engine="cuda", cuda={"graph": False})
+
+
+def test_bullet_settings_choose_the_geometry():
+    # bullet={"shape": ...} (BulletSettings): hull (the default) records every step, box
+    # (boxes equal to the AABBs) records nothing; anything else is an InputError.
+    with pytest.raises(octocd.InputError, match=r"bullet: shape='sphere' is not allowed; allowed: hull"):
+        octocd.Engine(BOX_STACK, engine="bullet", bullet={"shape": "sphere"})
+    with pytest.raises(octocd.InputError, match=r"bullet: unknown bullet setting 'margin'; allowed: shape"):
+        octocd.Engine(BOX_STACK, engine="cpu", bullet={"margin": 0})
+    assert octocd.Engine(BOX_STACK, engine="bullet").recording
+    assert not octocd.Engine(BOX_STACK, engine="bullet", bullet={"shape": "box"}).recording

@@ -128,7 +128,8 @@ def test_two_engines_in_two_threads_match_sequential_runs():
 
 
 def test_bullet_engine_runs_without_a_record():
-    eng = octocd.Engine(scene_path("box-stack"), engine="bullet")
+    # Box mode records nothing (the default hull mode records).
+    eng = octocd.Engine(scene_path("box-stack"), engine="bullet", bullet={"shape": "box"})
     assert not eng.recording
     eng.step(10)
     rec = eng.last_frame()

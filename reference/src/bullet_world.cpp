@@ -551,13 +551,21 @@ struct BulletWorld::Impl {
   std::unique_ptr<TimedDynamicsWorld> world;
   std::vector<float> w;                 // inverse mass per body (0 = static)
   std::uint64_t static_static = 0;      // static_static_pairs(model), constant
-  std::vector<std::unique_ptr<btCollisionShape>> shapes;  // one per octocd shape
+  std::vector<std::unique_ptr<btCollisionShape>> shapes;  // one per octocd shape (dynamic bodies)
+  // Hull mode: a static body of a mesh shape collides as its triangles (one per shape).
+  std::vector<std::unique_ptr<btTriangleMesh>> triangle_meshes;
+  std::vector<std::unique_ptr<btCollisionShape>> static_shapes;  // per octocd shape; null: shapes[k]
   std::vector<std::unique_ptr<btRigidBody>> bodies;  // index = body id
   BodyState state;
   FrameMetrics metrics;
   std::int64_t frame = 0;
   // Rotation mode (bullet_world.hpp).
   bool rotation = false;
+  // The shapes are the declared geometry (hull mode, or rotation): margins 0, checked
+  // narrow phase, absolute breaking threshold, FrameRecord and version 2 traces.
+  bool exact = false;
+  BulletSettings settings;
+  std::string geometry;  // collision_geometry()
   bool recording = false;
   Vec3 gravity;
   RotationTraits traits;
@@ -650,7 +658,7 @@ void BulletWorld::Impl::fill_record() {
       auto point_velocity = [&](std::uint32_t i) {
         Vec3 v = r.v_pre[i];
         if (w[i] > 0.0f) v += static_cast<float>(dt) * gravity;
-        return v + cross(r.w_pre[i], c.point - r.x_pre[i]);
+        return r.w_pre.size() > i ? v + cross(r.w_pre[i], c.point - r.x_pre[i]) : v;
       };
       const Vec3 v_rel = point_velocity(ia) - point_velocity(ib);
       const Vec3 v_t = v_rel - dot(v_rel, c.normal) * c.normal;
@@ -680,9 +688,11 @@ void BulletWorld::Impl::fill_record() {
   r.has_points = true;
 }
 
-BulletWorld::BulletWorld(const World& src) : BulletWorld(src.shared_model(), src.state()) {}
+BulletWorld::BulletWorld(const World& src, const BulletSettings& settings)
+    : BulletWorld(src.shared_model(), src.state(), BulletOptions(), settings) {}
 
-BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& initial, const BulletOptions& options)
+BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& initial, const BulletOptions& options,
+                         const BulletSettings& settings)
     : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   const Model& src = *model_;
@@ -705,19 +715,40 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
   info.m_splitImpulsePenetrationThreshold = 0;
 
   m.rotation = scene_rotates(scene);
-  m.solver->project = m.rotation && options.coulomb_friction;
-  m.world->prune_stale = m.rotation && options.prune_stale_normals;
+  m.settings = settings;
+  m.exact = m.rotation || settings.shape == BulletShape::Hull;
+  m.solver->project = m.exact && options.coulomb_friction;
+  m.world->prune_stale = m.exact && options.prune_stale_normals;
   m.gravity = scene.gravity;
-  for (const Shape& s : src.shapes) {
+  const std::size_t n_bodies = initial.size();
+  // Shapes a static body uses (hull mode: a static mesh is Bullet's triangle-mesh shape).
+  std::vector<char> used_static(src.shapes.size(), 0);
+  for (std::size_t i = 0; i < n_bodies; ++i)
+    if (!(initial.w[i] > 0.0f)) used_static[src.bodies[i].shape] = 1;
+  for (std::size_t k = 0; k < src.shapes.size(); ++k) {
+    const Shape& s = src.shapes[k];
+    const bool mesh = s.mesh && s.mesh->vertices.size() >= 4 && !s.mesh->triangles.empty();
+    if (settings.shape == BulletShape::Hull && mesh && used_static[k]) {
+      // Its triangles (btTriangleMesh copies them), a BVH over them; margin 0 (btConcaveShape's).
+      auto tm = std::make_unique<btTriangleMesh>();
+      const std::vector<Vec3>& v = s.mesh->vertices;
+      for (const auto& t : s.mesh->triangles) tm->addTriangle(to_bt(v[t[0]]), to_bt(v[t[1]]), to_bt(v[t[2]]));
+      auto shape = std::make_unique<btBvhTriangleMeshShape>(tm.get(), true);
+      shape->setMargin(0);
+      m.triangle_meshes.push_back(std::move(tm));
+      m.static_shapes.push_back(std::move(shape));
+    } else {
+      m.static_shapes.push_back(nullptr);
+    }
     const Vec3 he = 0.5f * (s.local.max - s.local.min);
-    if (m.rotation && s.mesh && s.mesh->vertices.size() >= 4) {
+    if (m.exact && mesh) {
       // A mesh rotates as the convex hull of its vertices, margin 0 (see bullet_world.hpp).
       btConvexHullComputer hull;
       static_assert(sizeof(Vec3) == 3 * sizeof(float), "Vec3 must be three packed floats");
       hull.compute(reinterpret_cast<const float*>(s.mesh->vertices.data()), static_cast<int>(sizeof(Vec3)),
                    static_cast<int>(s.mesh->vertices.size()), 0, 0);
       auto shape = std::make_unique<btConvexHullShape>();
-      for (int k = 0; k < hull.vertices.size(); ++k) shape->addPoint(hull.vertices[k], false);
+      for (int h = 0; h < hull.vertices.size(); ++h) shape->addPoint(hull.vertices[h], false);
       shape->setMargin(0);
       shape->recalcLocalAabb();
       m.polytopes.emplace(shape.get(), hull_polytope(hull));
@@ -725,7 +756,7 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
       continue;
     }
     auto box = std::make_unique<btBoxShape>(to_bt(he));  // default margin 0.04, inside the box
-    if (m.rotation) {
+    if (m.exact) {
       box->setMargin(0);  // GJK would round the box's edges and corners by it
       m.polytopes.emplace(box.get(), box_polytope(to_bt(he)));
     }
@@ -736,7 +767,27 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
   const btScalar friction = std::sqrt(scene.response.mu_kinetic);
   const btScalar restitution = std::sqrt(scene.response.restitution);
 
-  if (m.rotation) {
+  // What each body collides as (trace attribute /bodies/collision_shape, summaries).
+  bool dynamic_mesh = false, static_mesh = false;
+  for (std::size_t i = 0; i < n_bodies; ++i) {
+    const bool is_static = !(initial.w[i] > 0.0f);
+    const Shape& s = src.shapes[src.bodies[i].shape];
+    const bool mesh = s.mesh != nullptr;
+    (is_static ? static_mesh : dynamic_mesh) |= mesh;
+    if (m.exact) m.traits.body_collision_shape.push_back(m.static_shapes[src.bodies[i].shape] && is_static ? "mesh"
+                                                                                                             : "convex_hull");
+  }
+  if (!m.exact) {
+    m.geometry = "bullet boxes equal to the AABBs (shape=box)";
+  } else {
+    m.geometry = "bullet";
+    if (dynamic_mesh) m.geometry += " convex hulls (dynamic meshes),";
+    if (static_mesh)
+      m.geometry += settings.shape == BulletShape::Hull ? " triangle mesh (static meshes)," : " convex hulls (static meshes),";
+    m.geometry += m.rotation ? " boxes (box shapes)" : " boxes (box shapes); translation only (angular factor 0)";
+  }
+
+  if (m.exact) {
     // One absolute breaking threshold for every pair (see bullet_world.hpp).
     m.dispatcher->setDispatcherFlags(m.dispatcher->getDispatcherFlags() &
                                      ~btCollisionDispatcher::CD_USE_RELATIVE_CONTACT_BREAKING_THRESHOLD);
@@ -748,7 +799,9 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
     // sqrt(2) x the threshold apart; + 1 mm for the float32 distances.
     m.traits.contact_margin = static_cast<float>(std::sqrt(2.0) * gContactBreakingThreshold) + 0.001f;
     m.traits.jt3 = true;  // fill_record gives every row its friction impulse vector
-    m.traits.collision_shape = "convex_hull";  // a mesh rotates as its hull, a box as itself
+    m.traits.rotates = m.rotation;  // translation-only: no orientations, angular velocities, inertia
+    // A dynamic mesh is its hull, a box itself, a static mesh (hull mode) its triangles:
+    // per body in /bodies/collision_shape (body_collision_shape, set above).
     // Box-hull and hull-hull pairs: Bullet's convex-convex algorithm with the checked
     // contacts (CheckedConvexAlgorithm). Box-box pairs keep btBoxBoxDetector.
     m.convex_convex.pd = &m.epa;
@@ -770,8 +823,10 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
   }
   m.bodies.reserve(n);
   for (std::size_t i = 0; i < n; ++i) {
-    btCollisionShape* shape = m.shapes[src.bodies[i].shape].get();
     const float w = s0.w[i];
+    btCollisionShape* shape = !(w > 0.0f) && m.static_shapes[src.bodies[i].shape]
+                                  ? m.static_shapes[src.bodies[i].shape].get()
+                                  : m.shapes[src.bodies[i].shape].get();
     const btScalar mass = w > 0.0f ? btScalar(1.0f / w) : btScalar(0);
     btTransform t;
     t.setIdentity();
@@ -779,12 +834,13 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
     // Rotation mode: x is the body frame's origin (the local AABB centre), q its turn.
     t.setOrigin(to_bt(s0.x[i]));
     btVector3 inertia(0, 0, 0);
-    if (m.rotation) {
-      t.setRotation(to_bt(m.state.q[i]));
-      if (mass > 0) shape->calculateLocalInertia(mass, inertia);
+    if (m.exact) {
+      // Translation-only: identity, zero inertia (with angular factor 0: never turns).
+      if (m.rotation) t.setRotation(to_bt(m.state.q[i]));
+      if (mass > 0 && m.rotation) shape->calculateLocalInertia(mass, inertia);
       std::array<float, 9> tensor{};
       for (int k = 0; k < 3; ++k) tensor[static_cast<std::size_t>(4 * k)] = static_cast<float>(inertia[k]);
-      m.traits.inertia.push_back(tensor);
+      if (m.rotation) m.traits.inertia.push_back(tensor);  // translation-only: none (traits.rotates false)
       m.traits.body_friction.push_back(static_cast<float>(friction));
       m.traits.body_restitution.push_back(static_cast<float>(restitution));
     }
@@ -813,7 +869,7 @@ BulletWorld::~BulletWorld() = default;
 const FrameMetrics& BulletWorld::step() {
   Impl& m = *impl_;
   m.world->reset_times();
-  if (m.rotation && m.recording) {
+  if (m.exact && m.recording) {
     m.record.frame = m.frame + 1;
     m.record.x_pre = m.state.x;
     m.record.v_pre = m.state.v;
@@ -857,7 +913,7 @@ const FrameMetrics& BulletWorld::step() {
   fm.dynamic_pairs = exact;
   fm.aabb_pairs = exact + m.static_static;
   m.read_state();
-  if (m.rotation && m.recording) {
+  if (m.exact && m.recording) {
     FrameRecord& r = m.record;
     r.x_post = m.state.x;
     r.v_post = m.state.v;
@@ -937,22 +993,24 @@ BulletNarrowphaseCounts BulletWorld::narrowphase_counts() const {
   c.pruned = impl_->world->pruned;
   return c;
 }
-const RotationTraits* BulletWorld::rotation_traits() const { return impl_->rotation ? &impl_->traits : nullptr; }
-bool BulletWorld::can_record() const { return impl_->rotation; }
-void BulletWorld::set_recording(bool on) { impl_->recording = impl_->rotation && on; }
+const RotationTraits* BulletWorld::rotation_traits() const { return impl_->exact ? &impl_->traits : nullptr; }
+bool BulletWorld::can_record() const { return impl_->exact; }
+void BulletWorld::set_recording(bool on) { impl_->recording = impl_->exact && on; }
+const BulletSettings& BulletWorld::settings() const { return impl_->settings; }
+std::string BulletWorld::collision_geometry() const { return impl_->geometry; }
 const FrameRecord& BulletWorld::record() const { return impl_->record; }
 const std::vector<ContactRecord>& BulletWorld::contacts() const {
-  return impl_->rotation && impl_->recording ? impl_->record.contacts : impl_->no_contacts;
+  return impl_->exact && impl_->recording ? impl_->record.contacts : impl_->no_contacts;
 }
-std::string BulletWorld::midphase_name() const { return impl_->rotation ? "bullet-convex" : "bullet-box-box"; }
+std::string BulletWorld::midphase_name() const { return impl_->exact ? "bullet-convex" : "bullet-box-box"; }
 const FrameMetrics& BulletWorld::last_metrics() const { return impl_->metrics; }
 std::int64_t BulletWorld::frame() const { return impl_->frame; }
 std::string BulletWorld::device() const { return cpu_description(); }
 std::string BulletWorld::notes() const {
-  if (impl_->rotation) {
+  if (impl_->exact) {
     const BulletNarrowphaseCounts c = narrowphase_counts();
     return fmt::format(
-        "rotation mode: btRigidBody with angular motion (boxes, convex hulls of meshes); broadphase\n"
+        "{}: {}; broadphase\n"
         "candidates are Bullet's pair cache (AABBs fattened by the 0.02 m contact threshold and the\n"
         "step's motion; no static-static pairs); AABB and dynamic pairs are those of the cache whose\n"
         "exact boxes at the pre-step pose overlap. midphase = Bullet's narrow phase (box-box detector,\n"
@@ -960,7 +1018,7 @@ std::string BulletWorld::notes() const {
         "separating-axis contact, {} added where GJK found the shapes apart; {} manifold points with a\n"
         "stale normal dropped); contacts = manifolds with points, penetration over manifold points;\n"
         "kinetic energy includes rotation.",
-        c.checked, c.replaced, c.added, c.pruned);
+        impl_->rotation ? "rotation mode" : "translation only (angular factor 0)", impl_->geometry, c.checked, c.replaced, c.added, c.pruned);
   }
   return "broadphase candidates are Bullet's pair cache (AABBs fattened by the 0.02 m contact\n"
          "threshold, the step's motion and the dbvt margin, kept until they separate; no static-static\n"

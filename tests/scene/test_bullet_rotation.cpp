@@ -337,12 +337,15 @@ TEST(BulletRotation, TraceVersion2HasEveryDataset) {
     H5Fclose(f);
   }
   EXPECT_GT(rows, 0u) << "bodies placed near the floor must touch it within 30 frames";
-  // Translation-only: version 1, none of the version 2 datasets.
+  // Translation-only in box mode (shape=box; hull mode records and writes version 2):
+  // version 1, none of the version 2 datasets.
   {
     scene.rotation = false;
     for (GroupSpec& g : scene.groups) g.orientation = Quat{};
     const auto flat_model = build_model(scene);
-    BulletWorld bw(flat_model, flat_model->initial);
+    BulletSettings boxes;
+    boxes.shape = BulletShape::Box;
+    BulletWorld bw(flat_model, flat_model->initial, BulletOptions(), boxes);
     EXPECT_FALSE(bw.rotating());
     write_trace(bw, path, 3);
     const hid_t f = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
@@ -447,15 +450,31 @@ TEST(BulletRotation, SceneKeysAndRefusals) {
   EXPECT_THROW(World(load_scene(scene_path("rot-slope"))), InputError);
 }
 
-// Translation-only Bullet is as before: no rotation traits, no records, no orientations,
-// its midphase name, and a scene without rotation keys builds no orientations.
+// Translation-only Bullet in box mode (shape=box, asked for explicitly: the default hull
+// mode records) is as before: no rotation traits, no records, no orientations, its
+// midphase name, and a scene without rotation keys builds no orientations. In hull mode
+// it records, with traits that say the bodies do not rotate, and still no orientations.
 TEST(BulletRotation, TranslationOnlyModeUnchanged) {
   const Scene scene = load_scene(scene_path("box-stack"));
   EXPECT_FALSE(scene_rotates(scene));
   const auto model = build_model(scene);
   EXPECT_TRUE(model->initial.q.empty());
   EXPECT_TRUE(model->initial.omega.empty());
-  BulletWorld bw(model, model->initial);
+  {
+    BulletWorld hull(model, model->initial);
+    EXPECT_FALSE(hull.rotating());
+    EXPECT_TRUE(hull.can_record());
+    ASSERT_NE(hull.rotation_traits(), nullptr);
+    EXPECT_FALSE(hull.rotation_traits()->rotates);
+    EXPECT_EQ(hull.midphase_name(), "bullet-convex");
+    hull.set_recording(true);
+    for (int f = 0; f < 50; ++f) hull.step();
+    EXPECT_TRUE(hull.state().q.empty());
+    EXPECT_TRUE(hull.record().q_pre.empty());
+  }
+  BulletSettings boxes;
+  boxes.shape = BulletShape::Box;
+  BulletWorld bw(model, model->initial, BulletOptions(), boxes);
   EXPECT_FALSE(bw.rotating());
   EXPECT_FALSE(bw.can_record());
   EXPECT_EQ(bw.rotation_traits(), nullptr);

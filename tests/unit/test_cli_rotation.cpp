@@ -48,9 +48,12 @@ TEST(CliRotation, RotationFlagNeedsBullet) {
   const Result r = run_octocd("run " + scene("box-stack") + " --rotation --quiet --frames 2");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--rotation: engine cpu translates only"), std::string::npos) << r.output;
-  const Result v = run_octocd("validate " + scene("box-stack") + " --engine bullet --frames 2");
+  // Box mode records nothing (the default hull mode records and is validated).
+  const Result v = run_octocd("validate " + scene("box-stack") + " --engine bullet --bullet shape=box --frames 2");
   EXPECT_EQ(v.code, 2) << v.output;
-  EXPECT_NE(v.output.find("bullet without rotation cannot be validated"), std::string::npos) << v.output;
+  EXPECT_NE(v.output.find("bullet with boxes equal to the AABBs and no rotation cannot be validated"),
+            std::string::npos)
+      << v.output;
 }
 
 TEST(CliRotation, BulletWritesVersion2AndTranslationOnlyVersion1) {
@@ -61,8 +64,9 @@ TEST(CliRotation, BulletWritesVersion2AndTranslationOnlyVersion1) {
                         " --state-every 1 --contacts --no-xdmf");
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(trace_version(v2), 2);
-  r = run_octocd("run " + scene("box-stack") + " --engine bullet --quiet --frames 20 --trace " + v1 +
-                 " --state-every 1 --contacts --no-xdmf");
+  // Box mode: version 1 (hull mode, the default, writes version 2 without orientations).
+  r = run_octocd("run " + scene("box-stack") + " --engine bullet --bullet shape=box --quiet --frames 20 --trace " +
+                 v1 + " --state-every 1 --contacts --no-xdmf");
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(trace_version(v1), 1);
   r = run_octocd("run " + scene("rot-slope") + " --engine bullet --quiet --frames 20");

@@ -369,9 +369,9 @@ TEST_F(CliUser, CommandLineCheckedLikeSceneFile) {
   r = octocd_cmd("run " + ok + " --engine bullet --broadphase fcl-naive --quiet");
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--broadphase: engine bullet"), std::string::npos) << r.output;
-  // ... and its trace records what it ran.
+  // ... and its trace records what it ran (box mode: btBoxBoxDetector on the AABB boxes).
   const std::string trace = (dir_ / "bullet.h5").string();
-  r = octocd_cmd("run " + ok + " --engine bullet --quiet --trace " + trace);
+  r = octocd_cmd("run " + ok + " --engine bullet --bullet shape=box --quiet --trace " + trace);
   ASSERT_EQ(r.code, 0) << r.output;
   {
     H5File f(trace);
@@ -503,8 +503,10 @@ TEST_F(CliUser, BulletStagesAndPairsCompare) {
   for (const char* engine : {"cpu", "bullet"}) {
     const std::string json = (dir_ / (std::string(engine) + ".json")).string();
     const std::string trace = (dir_ / (std::string(engine) + ".h5")).string();
-    const Result r = octocd_cmd("run " + path + " --engine " + engine + " --trace " + trace + " --summary-json " + json +
-                            " 2>/dev/null");
+    // Bullet in box mode (boxes equal to the AABBs): the scene's boxes either way, named so.
+    const std::string settings = std::string(engine) == "bullet" ? " --bullet shape=box" : "";
+    const Result r = octocd_cmd("run " + path + " --engine " + engine + settings + " --trace " + trace +
+                                " --summary-json " + json + " 2>/dev/null");
     ASSERT_EQ(r.code, 0) << r.output;
     summary[engine] = nlohmann::json::parse(slurp(json));
     cols[engine] = read_columns(trace);

@@ -55,7 +55,12 @@ TEST(EngineRegistry, CapabilitiesAreWhatTheEnginesDo) {
       EXPECT_EQ(e->broadphase_name(), info.own_broadphase);
     }
     EXPECT_EQ(e->midphase_name() == scene.midphase.to_string(), info.has_midphase) << e->midphase_name();
-    EXPECT_EQ(e->can_record(), info.records_every_step) << "a translation-only scene";
+    // records_every_step: judged in process. Bullet records in hull mode (its default)
+    // too, but is judged through its trace; in box mode it records nothing.
+    BulletSettings boxes;
+    boxes.shape = BulletShape::Box;
+    EXPECT_EQ(make_engine(info.name, model, {}, boxes)->can_record(), info.records_every_step)
+        << "a translation-only scene";
     EXPECT_EQ(info.octocd_contacts, writes_octocd_contacts(info.name));
   }
   // The engines this build has: cpu and bullet always; each of them names a factory.
@@ -77,11 +82,13 @@ TEST(EngineRegistry, OptionsAnEngineCannotRunAreRefusedInTheCallersSpelling) {
   mid.midphase = "1,2";
   EXPECT_EQ(refusal("cpu", mid, cli_argument_names()), "");
   EXPECT_EQ(refusal("bullet", mid, cli_argument_names()),
-            "--midphase: engine bullet has no octree midphase (Bullet's box-box narrow phase runs on the AABB "
-            "boxes); allowed: no --midphase with --engine bullet");
+            "--midphase: engine bullet has no octree midphase (Bullet runs its own narrow phase: "
+            "GJK/EPA on convex hulls and triangle meshes, or btBoxBoxDetector on the AABB boxes (--bullet shape=box)); "
+            "allowed: no --midphase with --engine bullet");
   EXPECT_EQ(refusal("bullet", mid, python_argument_names()),
-            "midphase: engine bullet has no octree midphase (Bullet's box-box narrow phase runs on the AABB "
-            "boxes); allowed: None with engine='bullet'");
+            "midphase: engine bullet has no octree midphase (Bullet runs its own narrow phase: "
+            "GJK/EPA on convex hulls and triangle meshes, or btBoxBoxDetector on the AABB boxes (--bullet shape=box)); "
+            "allowed: None with engine='bullet'");
   EngineOptions bp;
   bp.broadphase = "octree";
   EXPECT_EQ(refusal("bullet", bp, cli_argument_names()),

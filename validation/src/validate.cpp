@@ -298,7 +298,11 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
                           fmt::format("compared kinds: resting stack, pile, bounce, slide; this scene is of kind '{}'",
                                       scene_kind_name(kind)));
   std::shared_ptr<const Model> shared(&model, [](const Model*) {});  // outlives `bullet`
-  BulletWorld bullet(shared, engine.state());
+  // Box mode: octocd's translation-only response puts its contacts on the world AABBs, so
+  // Bullet's boxes equal to the AABBs settle where octocd's bodies must (SPEC 7.8).
+  BulletSettings boxes;
+  boxes.shape = BulletShape::Box;
+  BulletWorld bullet(shared, engine.state(), BulletOptions(), boxes);
   ValidationResult r;
   r.name = name;
   // Settling compares the state after `frames` steps; trajectories at every frame.

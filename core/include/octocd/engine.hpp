@@ -213,8 +213,17 @@ struct RotationTraits {
   std::string contact_geometry = "shape";
   /// What every body is collided as, written as the root attribute `collision_shape`
   /// ("mesh", "convex_hull", "box", "sphere"; SPEC 13b.10); empty: not written (each body
-  /// as its shape). Bullet with rotation: "convex_hull" (a mesh is its hull, a box itself).
+  /// as its shape).
   std::string collision_shape;
+  /// The same per body, written as /bodies/collision_shape instead of the root attribute
+  /// (one of the four names each; empty: not written). Bullet's hull mode: "convex_hull"
+  /// (a dynamic mesh is its hull, a box itself), "mesh" (a static triangle mesh).
+  std::vector<std::string> body_collision_shape;
+  /// The bodies rotate. false (a translation-only engine that records, e.g. Bullet's hull
+  /// mode without rotation): the version 2 trace has no /states/orientation,
+  /// /states/angular_velocity or /bodies/inertia (readers take the bodies as never
+  /// turning), `inertia` may be empty and records carry no q or w.
+  bool rotates = true;
   /// Every record carries FrameRecord::jt3 (the tangential impulse vectors): the trace
   /// writes /contacts/jt3.
   bool jt3 = false;
@@ -252,6 +261,13 @@ class Engine {
   /// Contacts resolved in the last step, in (a, b) order (empty for engines without
   /// per-contact records, and for `cuda` unless recording).
   virtual const std::vector<ContactRecord>& contacts() const = 0;
+
+  /// What geometry the engine collides, in words, for summaries, bench results and
+  /// traces (SPEC 15): octocd's engines collide the scene's meshes and boxes themselves;
+  /// `bullet` says hulls, triangle mesh or boxes (BulletSettings::shape).
+  virtual std::string collision_geometry() const {
+    return "octocd meshes (octree midphase on the mesh vertices, contacts on the world AABBs), boxes";
+  }
 
   /// What a reader must know to compare this engine's metrics with the `cpu` engine's
   /// (printed under the run summary); "" when they mean exactly what FrameMetrics says.

@@ -39,8 +39,8 @@ struct EngineInfo {
   /// it is the host's pipeline buffers.
   std::string memory_kind;
   /// It fills a FrameRecord every step of a translation-only scene, so `validate` judges
-  /// it in process (cpu, cuda); false: only a rotating run records (bullet), judged as a
-  /// version 2 external trace.
+  /// it in process (cpu, cuda); false: judged as a version 2 external trace when it
+  /// records (bullet: hull mode, its default, or rotation; box mode records nothing).
   bool records_every_step = false;
   /// Traces it writes follow octocd's contact conventions (contacts on the world AABBs,
   /// the pair's theta as contact margin, an exact AABB broadphase: octocd_physics_bodies).

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "octocd/bullet_settings.hpp"
 #include "octocd/cuda_settings.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/engine_registry.hpp"
@@ -37,6 +38,7 @@ struct EngineOptions {
   std::string midphase;    ///< replaces the scene's midphase.levels ("1,2", "aabb-only"); "": the scene's
   bool rotation = false;   ///< the bodies rotate (as the scene key rotation: true)
   CudaSettings cuda;       ///< settings of the cuda engine (docs/settings.md); other engines ignore them
+  BulletSettings bullet;   ///< settings of the bullet engine (docs/settings.md); other engines ignore them
 };
 
 /// Applies `options` to `scene` for the engine `info` and checks them as strictly as the
@@ -61,11 +63,11 @@ std::vector<std::string> built_engine_names();
 
 /// Builds the engine `name` from `model` (shared, not copied) with the model's broadphase
 /// (checked by apply_engine_options when it came from a caller), `cuda` for the cuda
-/// engine. Throws InputError for an unknown name ("--engine: unknown engine ...") or a
+/// engine, `bullet` for the bullet engine (the others ignore what is not theirs). Throws InputError for an unknown name ("--engine: unknown engine ...") or a
 /// broadphase the engine does not have, RuntimeError when the engine cannot start (no
 /// CUDA device, a build without CUDA, too little device memory).
 std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
-                                    const CudaSettings& cuda = {});
+                                    const CudaSettings& cuda = {}, const BulletSettings& bullet = {});
 
 /// Every broadphase name of some engine, in a stable order: all_broadphase_names() (cpu;
 /// cuda has those too) then cuda_only_broadphase_names() (lbvh).

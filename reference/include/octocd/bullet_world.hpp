@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <memory>
 
+#include "octocd/bullet_settings.hpp"
 #include "octocd/world.hpp"
 
 namespace octocd {
@@ -16,11 +17,24 @@ namespace octocd {
 /// btDbvtBroadphase, btSequentialImpulseConstraintSolver). Bullet is the float build
 /// (btScalar = float, as pkg-config `bullet` gives).
 ///
-/// Bodies:
+/// Geometry (BulletSettings::shape, SPEC 15; collision_geometry() says it in words):
+/// - hull (the default): a dynamic mesh body is a btConvexHullShape of its mesh's convex
+///   hull (btConvexHullComputer), a static mesh body a btBvhTriangleMeshShape of its
+///   triangles (btTriangleMesh, quantized BVH), a box shape a btBoxShape; every margin 0.
+///   Without rotation the bodies keep angular factor 0 and zero inertia. Everything the
+///   rotation mode below says about margins, the checked narrow phase, the breaking
+///   threshold, the solver and recording holds in this mode too (translation-only: q
+///   stays the identity, w 0), so a hull run records and writes version 2 traces
+///   declaring /bodies/collision_shape ("convex_hull"; "mesh" for a static triangle mesh).
+///   Hull-triangle pairs go through Bullet's btConvexConcaveCollisionAlgorithm unchecked.
+/// - box: what follows (the box mode, SPEC 7.8's "box shapes equal to the AABBs").
+///
+/// Bodies (box mode without rotation):
 /// - every body is a btRigidBody with a btBoxShape of its shape's local AABB half extents
 ///   (mesh bodies too: SPEC 7.8 compares against "box shapes equal to the AABBs"), centred
 ///   on the AABB centre, so Bullet's centre of mass is octocd's x. Box-box pairs use
-///   Bullet's dedicated btBoxBoxCollisionAlgorithm (btBoxBoxDetector).
+///   Bullet's dedicated btBoxBoxCollisionAlgorithm (btBoxBoxDetector). Nothing is
+///   recorded (can_record() false): summaries and trace parameters say "boxes".
 /// - collision margin: Bullet's default 0.04 m, which btBoxShape keeps INSIDE the given
 ///   half extents (the box's outer surface is the AABB). The box-box detector works on
 ///   the full extents (getHalfExtentsWithMargin), so the margin does not change the
@@ -133,10 +147,10 @@ struct BulletNarrowphaseCounts {
 class BulletWorld : public Engine {
  public:
   /// The scene, shapes and bodies of `world` (its model, shared) and its current state.
-  explicit BulletWorld(const World& world);
+  explicit BulletWorld(const World& world, const BulletSettings& settings = BulletSettings());
   /// From a model (shared, not copied) and the state to start from (x, v, w per body).
   BulletWorld(std::shared_ptr<const Model> model, const BodyState& initial,
-              const BulletOptions& options = BulletOptions());
+              const BulletOptions& options = BulletOptions(), const BulletSettings& settings = BulletSettings());
   ~BulletWorld();
   BulletWorld(const BulletWorld&) = delete;
   BulletWorld& operator=(const BulletWorld&) = delete;
@@ -182,17 +196,23 @@ class BulletWorld : public Engine {
   const std::vector<ContactRecord>& contacts() const override;
   /// True in rotation mode.
   bool rotating() const;
+  /// The settings it was built with.
+  const BulletSettings& settings() const;
+  /// What Bullet collides, e.g. "bullet convex hulls (dynamic meshes, angular factor 0),
+  /// triangle mesh (static meshes), boxes (box shapes)" or "bullet boxes equal to the
+  /// AABBs (shape=box)".
+  std::string collision_geometry() const override;
   /// Friction rows brought back to the Coulomb cone so far (BulletOptions::
   /// coulomb_friction; 0 without rotation or with stock Bullet).
   std::int64_t friction_projections() const;
   /// What the narrow-phase checks did so far (all 0 without rotation or with them off).
   BulletNarrowphaseCounts narrowphase_counts() const;
-  /// In rotation mode: Bullet's local inertia, the per-body materials (product rule), the
+  /// In rotation mode and hull mode: Bullet's local inertia (zero without rotation), the per-body materials (product rule), the
   /// contact margin (sqrt(2) x the 0.02 m breaking threshold + 1 mm),
   /// detection "pre-step", a conservative broadphase, contacts on the shapes. nullptr
   /// without rotation.
   const RotationTraits* rotation_traits() const override;
-  /// True in rotation mode (false without rotation: translation-only Bullet records nothing).
+  /// True in rotation mode and hull mode (false in box mode without rotation).
   bool can_record() const override;
   /// Turns the per-step FrameRecord on or off (rotation mode; ignored otherwise).
   void set_recording(bool on) override;
@@ -222,8 +242,9 @@ class BulletWorld : public Engine {
   bool has_stage(Stage s) const override;
   /// How Bullet's figures differ from octocd's (see step()).
   std::string notes() const override;
-  /// "bullet-box-box": Bullet's btBoxBoxDetector on the AABB boxes, not a level list;
-  /// rotation mode: "bullet-convex" (btBoxBoxDetector for box pairs, GJK/EPA otherwise).
+  /// "bullet-box-box" (box mode): Bullet's btBoxBoxDetector on the AABB boxes, not a
+  /// level list; hull or rotation mode: "bullet-convex" (btBoxBoxDetector for box pairs,
+  /// GJK/EPA otherwise, btConvexConcaveCollisionAlgorithm against triangle meshes).
   std::string midphase_name() const override;
 
  private:

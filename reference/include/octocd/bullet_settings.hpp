@@ -1,0 +1,53 @@
+#pragma once
+/// \file bullet_settings.hpp
+/// The settings of the Bullet engine (`bullet`, SPEC 15): what geometry Bullet collides.
+/// docs/settings.md lists them with the ways to set them: C++ (`make_engine("bullet",
+/// model, {}, settings)` or BulletWorld's constructor), the CLI (`--bullet KEY=VALUE`,
+/// repeatable) and Python (`Engine(..., bullet={KEY: VALUE})`).
+
+#include <string>
+#include <vector>
+
+namespace octocd {
+
+/// What Bullet collides a body as.
+enum class BulletShape {
+  /// The same meshes as octocd (SPEC 15, the default): a dynamic mesh is a
+  /// btConvexHullShape of its mesh's convex hull (translation-only: the same hull with
+  /// angular factor 0); a static mesh is a btBvhTriangleMeshShape of its triangles; a box
+  /// shape is a btBoxShape. Collision margins 0: the shapes are exactly those declared
+  /// in traces (collision_shape "convex_hull" / "mesh").
+  Hull,
+  /// Boxes equal to the shapes' local AABBs (SPEC 7.8's "box shapes equal to the
+  /// AABBs"): every body, mesh or box, is a btBoxShape; box-box pairs through
+  /// btBoxBoxDetector. Declared as collision_shape "box". With rotation, meshes are
+  /// hulls whatever this setting (a rotating body is never its AABB).
+  Box,
+};
+
+/// "hull" or "box".
+const char* bullet_shape_name(BulletShape s);
+
+/// The bullet engine's settings. The defaults are what `octocd run --engine bullet` runs.
+struct BulletSettings {
+  /// What Bullet collides each body as (BulletShape); key `shape`, values hull | box.
+  /// Default hull: the same geometry octocd's mesh narrow phase works on, so speed and
+  /// accuracy compare like with like.
+  BulletShape shape = BulletShape::Hull;
+};
+
+/// The keys set_bullet_setting takes, in the struct's order: the field names.
+std::vector<std::string> bullet_setting_names();
+
+/// Sets the field `key` (a name of bullet_setting_names()) of `settings` from text
+/// (shape: hull or box). Throws InputError "<where>: ..." naming the key, the value and
+/// what is allowed.
+void set_bullet_setting(BulletSettings& settings, const std::string& key, const std::string& value,
+                        const std::string& where);
+
+/// Applies "KEY=VALUE" items (the CLI's repeated `--bullet KEY=VALUE`) in order with
+/// set_bullet_setting. Throws InputError naming `where` and the item for text without '='.
+void apply_bullet_settings(BulletSettings& settings, const std::vector<std::string>& items,
+                           const std::string& where);
+
+}  // namespace octocd

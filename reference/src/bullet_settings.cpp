@@ -1,0 +1,40 @@
+// BulletSettings: the KEY=VALUE parser the CLI and Python share (bullet_settings.hpp).
+#include "octocd/bullet_settings.hpp"
+
+#include <fmt/format.h>
+
+#include "octocd/error.hpp"
+
+namespace octocd {
+
+const char* bullet_shape_name(BulletShape s) { return s == BulletShape::Box ? "box" : "hull"; }
+
+std::vector<std::string> bullet_setting_names() { return {"shape"}; }
+
+void set_bullet_setting(BulletSettings& s, const std::string& key, const std::string& value,
+                        const std::string& where) {
+  if (key == "shape") {
+    if (value == "hull") s.shape = BulletShape::Hull;
+    else if (value == "box") s.shape = BulletShape::Box;
+    else
+      throw InputError(fmt::format("{}: shape='{}' is not allowed; allowed: hull (convex hulls of dynamic meshes, "
+                                   "triangle meshes of static ones), box (boxes equal to the AABBs)",
+                                   where, value));
+    return;
+  }
+  std::string names;
+  for (const std::string& n : bullet_setting_names()) names += (names.empty() ? "" : ", ") + n;
+  throw InputError(fmt::format("{}: unknown bullet setting '{}'; allowed: {} (docs/settings.md)", where, key, names));
+}
+
+void apply_bullet_settings(BulletSettings& s, const std::vector<std::string>& items, const std::string& where) {
+  for (const std::string& item : items) {
+    const std::size_t eq = item.find('=');
+    if (eq == std::string::npos)
+      throw InputError(fmt::format("{}: '{}' is not KEY=VALUE; allowed: e.g. shape=box (docs/settings.md)", where,
+                                   item));
+    set_bullet_setting(s, item.substr(0, eq), item.substr(eq + 1), where);
+  }
+}
+
+}  // namespace octocd
