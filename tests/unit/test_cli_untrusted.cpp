@@ -871,7 +871,7 @@ TEST_F(UntrustedV3, ValidateRunsARotatingSceneOnBulletWithoutEngine) {
                          << R"( "layout": {"type": "grid", "min": [-0.5, 0.3, -0.5], "max": [0.5, 1.0, 0.5]}}]})";
     const Result r = run("timeout -k 5 60 " + bin() + " validate " + scene + " --frames 3 --against none");
     EXPECT_NE(r.code, 2) << r.output;
-    EXPECT_NE(r.output.find("(engine bullet with rotation, judged as a version 2 external trace"), std::string::npos)
+    EXPECT_NE(r.output.find("(engine bullet (rotation), judged as a version 2 external trace"), std::string::npos)
         << r.output;
   }
 }
