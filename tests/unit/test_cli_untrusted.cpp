@@ -463,29 +463,6 @@ namespace {
 /// (`grid` false) each box overlaps 2 neighbours; in a cubic grid (`grid` true) it overlaps
 /// 26, so a frame holds about 13 n penetrating pairs for FCL to judge.
 void write_line_trace(const std::string& path, hsize_t n, hsize_t frames, bool grid = false) {
-  const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-  const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
-  H5Pset_create_intermediate_group(lcpl, 1);
-  const auto put = [&](const char* name, std::vector<hsize_t> dims, const std::vector<float>& v) {
-    const hid_t s = H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr);
-    const hid_t d = H5Dcreate2(f, name, H5T_IEEE_F32LE, s, lcpl, H5P_DEFAULT, H5P_DEFAULT);
-    H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
-    H5Dclose(d);
-    H5Sclose(s);
-  };
-  const hid_t t = H5Tcopy(H5T_C_S1);
-  H5Tset_size(t, H5T_VARIABLE);
-  const hid_t sc = H5Screate(H5S_SCALAR);
-  const char* fmt_ = "octocd-trace";
-  const hid_t a = H5Acreate2(f, "format", t, sc, H5P_DEFAULT, H5P_DEFAULT);
-  H5Awrite(a, t, &fmt_);
-  H5Aclose(a);
-  const int one = 1;
-  const hid_t v = H5Acreate2(f, "version", H5T_STD_I32LE, sc, H5P_DEFAULT, H5P_DEFAULT);
-  H5Awrite(v, H5T_NATIVE_INT, &one);
-  H5Aclose(v);
-  H5Sclose(sc);
-  H5Tclose(t);
   std::vector<float> lo(n * 3, -0.1f), hi(n * 3, 0.1f), w(n, 1.0f), amin, amax;
   amin.reserve(frames * n * 3);
   amax.reserve(frames * n * 3);
@@ -505,13 +482,11 @@ void write_line_trace(const std::string& path, hsize_t n, hsize_t frames, bool g
         amin.push_back(c - 0.1f);
         amax.push_back(c + 0.1f);
       }
-  put("/bodies/local_aabb_min", {n, 3}, lo);
-  put("/bodies/local_aabb_max", {n, 3}, hi);
-  put("/bodies/inverse_mass", {n}, w);
-  put("/aabbs/min", {frames, n, 3}, amin);
-  put("/aabbs/max", {frames, n, 3}, amax);
-  H5Pclose(lcpl);
-  H5Fclose(f);
+  octocd::test::write_minimal_trace(path, {{"/bodies/local_aabb_min", {n, 3}, &lo},
+                                           {"/bodies/local_aabb_max", {n, 3}, &hi},
+                                           {"/bodies/inverse_mass", {n}, &w},
+                                           {"/aabbs/min", {frames, n, 3}, &amin},
+                                           {"/aabbs/max", {frames, n, 3}, &amax}});
 }
 
 }  // namespace

@@ -18,6 +18,7 @@
 
 #include "unit/cli_run.hpp"
 #include "unit/external_trace.hpp"
+#include "unit/trace_edit.hpp"
 
 namespace fs = std::filesystem;
 using octocd::test::run_octocd;
@@ -192,38 +193,11 @@ TEST(CliView, MillionBodyTraceViewedAtAPairWritesABoundedPage) {
         x[(r * n + i) * 3 + 1] = 0.15f * static_cast<float>((i / side) % side);
         x[(r * n + i) * 3 + 2] = 0.15f * static_cast<float>(i / (side * side));
       }
-    const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-    ASSERT_GE(file, 0);
-    const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
-    H5Pset_create_intermediate_group(lcpl, 1);
-    auto put = [&](const char* name, std::vector<hsize_t> shape, const std::vector<float>& data) {
-      const hid_t space = H5Screate_simple(static_cast<int>(shape.size()), shape.data(), nullptr);
-      const hid_t d = H5Dcreate2(file, name, H5T_IEEE_F32LE, space, lcpl, H5P_DEFAULT, H5P_DEFAULT);
-      ASSERT_GE(d, 0) << name;
-      ASSERT_GE(H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), 0) << name;
-      H5Dclose(d);
-      H5Sclose(space);
-    };
-    const hid_t st = H5Tcopy(H5T_C_S1);
-    H5Tset_size(st, H5T_VARIABLE);
-    const hid_t scalar = H5Screate(H5S_SCALAR);
-    const char* format = "octocd-trace";
-    const hid_t fa = H5Acreate2(file, "format", st, scalar, H5P_DEFAULT, H5P_DEFAULT);
-    H5Awrite(fa, st, &format);
-    H5Aclose(fa);
-    const int version = 1;
-    const hid_t va = H5Acreate2(file, "version", H5T_STD_I32LE, scalar, H5P_DEFAULT, H5P_DEFAULT);
-    H5Awrite(va, H5T_NATIVE_INT, &version);
-    H5Aclose(va);
-    H5Sclose(scalar);
-    H5Tclose(st);
-    put("/bodies/local_aabb_min", {n, 3}, lo);
-    put("/bodies/local_aabb_max", {n, 3}, hi);
-    put("/bodies/inverse_mass", {n}, w);
-    put("/states/position", {2, n, 3}, x);
-    put("/states/velocity", {2, n, 3}, v);
-    H5Pclose(lcpl);
-    H5Fclose(file);
+    octocd::test::write_minimal_trace(path, {{"/bodies/local_aabb_min", {n, 3}, &lo},
+                                             {"/bodies/local_aabb_max", {n, 3}, &hi},
+                                             {"/bodies/inverse_mass", {n}, &w},
+                                             {"/states/position", {2, n, 3}, &x},
+                                             {"/states/velocity", {2, n, 3}, &v}});
   }
   // Bodies 505050 and 505051 are grid neighbours in the middle of the block.
   const auto r = run_octocd("view " + path + " --frame 1 --pair 505050,505051 -o " + dir + "/out");

@@ -64,4 +64,45 @@ inline void write(hid_t file, const std::string& name, const Data& d) {
   H5Dclose(ds);
 }
 
+/// One float32 dataset of a trace written by write_minimal_trace: its path, shape and
+/// row-major values (not owned: they outlive the call).
+struct FloatDataset {
+  std::string name;
+  std::vector<hsize_t> dims;
+  const std::vector<float>* values;
+};
+
+/// Writes a minimal external trace at `path` (docs/trace-format.md, version 1): the root
+/// attributes format "octocd-trace" and version 1, then each dataset as float32, groups
+/// created as needed. Fails the calling test on an HDF5 error.
+inline void write_minimal_trace(const std::string& path, const std::vector<FloatDataset>& datasets) {
+  const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  ASSERT_GE(f, 0) << path;
+  const hid_t t = H5Tcopy(H5T_C_S1);
+  H5Tset_size(t, H5T_VARIABLE);
+  const hid_t sc = H5Screate(H5S_SCALAR);
+  const char* format = "octocd-trace";
+  const hid_t a = H5Acreate2(f, "format", t, sc, H5P_DEFAULT, H5P_DEFAULT);
+  H5Awrite(a, t, &format);
+  H5Aclose(a);
+  const int one = 1;
+  const hid_t v = H5Acreate2(f, "version", H5T_STD_I32LE, sc, H5P_DEFAULT, H5P_DEFAULT);
+  H5Awrite(v, H5T_NATIVE_INT, &one);
+  H5Aclose(v);
+  H5Sclose(sc);
+  H5Tclose(t);
+  const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
+  H5Pset_create_intermediate_group(lcpl, 1);
+  for (const FloatDataset& ds : datasets) {
+    const hid_t s = H5Screate_simple(static_cast<int>(ds.dims.size()), ds.dims.data(), nullptr);
+    const hid_t d = H5Dcreate2(f, ds.name.c_str(), H5T_IEEE_F32LE, s, lcpl, H5P_DEFAULT, H5P_DEFAULT);
+    EXPECT_GE(d, 0) << ds.name;
+    EXPECT_GE(H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, ds.values->data()), 0) << ds.name;
+    H5Dclose(d);
+    H5Sclose(s);
+  }
+  H5Pclose(lcpl);
+  H5Fclose(f);
+}
+
 }  // namespace octocd::test
