@@ -22,6 +22,7 @@ import math
 import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 
 KIND = "speed-accuracy"
 STATUSES = ("ok", "diverged", "skipped", "failed")
@@ -145,6 +146,14 @@ def varies_iterations(pts):
     return {k: len(v) > 1 for k, v in seen.items()}
 
 
+def speed_bar(p):
+    """(median - min, max - median) of p's speed, each finite and >= 0 (else 0: no bar)."""
+    s, m = p["speed"], speed(p)
+    lo, hi = s.get("min"), s.get("max")
+    ok = lambda v: _number(v) and math.isfinite(v)
+    return (max(m - lo, 0.0) if ok(lo) else 0.0, max(hi - m, 0.0) if ok(hi) else 0.0)
+
+
 def is_reference(p):
     """Whether p is its line's reference: its dt is the reference dt, or its error is 0."""
     e, dt = p.get("error") or {}, dt_of(p)
@@ -223,6 +232,18 @@ def names(xs):
     return xs[0] if len(xs) == 1 else ", ".join(xs[:-1]) + " and " + xs[-1]
 
 
+def front_text(pts):
+    """Which engines the Pareto front holds, in a sentence."""
+    front = pareto_front(pts)
+    held = {}
+    for p in front:
+        held[label(p)] = held.get(label(p), 0) + 1
+    parts = [f"{n} of {e}" for e, n in sorted(held.items(), key=lambda x: -x[1])]
+    none = [e for e in dict.fromkeys(label(p) for p in pts) if e not in held]
+    return (f" The Pareto front holds {len(front)} point(s): {names(parts)}"
+            + (f"; none of {names(none)}." if none else "."))
+
+
 def reading(pts, h, machine):
     """One paragraph on a scene's points, generated from the data."""
     if not pts:
@@ -273,7 +294,7 @@ def reading(pts, h, machine):
         if missing:
             s += f"; {names(missing)} {'reaches' if len(missing) == 1 else 'reach'} no point under it"
         sentences.append(s + ".")
-    return " ".join(sentences) + dead_text + tail
+    return " ".join(sentences) + front_text(measured) + dead_text + tail
 
 
 # ---- the section ---------------------------------------------------------------------------------
@@ -311,8 +332,7 @@ def plot(doc, scene, pts, front, h):
         pos_pts = [p for p in mine if error(p) > 0]
         xs = [speed(p) for p in pos_pts]
         ys = [error(p) for p in pos_pts]
-        xerr = [[speed(p) - (p["speed"].get("min") or speed(p)) for p in pos_pts],
-                [(p["speed"].get("max") or speed(p)) - speed(p) for p in pos_pts]]
+        xerr = np.array([speed_bar(p) for p in pos_pts]).T.reshape(2, len(pos_pts))
         ax.errorbar(xs, ys, xerr=xerr, color=colour, marker=marker, linestyle=style, ms=5, capsize=2, lw=1.2,
                     label=name)
         for p in mine:

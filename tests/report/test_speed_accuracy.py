@@ -8,6 +8,8 @@ import os
 import re
 import sys
 
+import pytest
+
 SRC = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 _spec = importlib.util.spec_from_file_location("make_report_sa", os.path.join(SRC, "reports", "make_report.py"))
 MR = importlib.util.module_from_spec(_spec)
@@ -192,7 +194,20 @@ def test_reading_names_the_fastest_engine_and_its_ratio_at_separating_thresholds
     assert ("At consistency error <= 1e-2, the fastest is bullet (btDbvtBroadphase, hulls, rotation) at dt 1/240 s "
             "(6.00 simulated s per wall s, error 4e-3), 1.50x faster than cpu (octree, mesh)") in text
     assert "no clear winner" not in text  # the speeds' ranges are 1 % wide: apart
+    assert ("The Pareto front holds 6 point(s): 4 of cpu (octree, mesh) and 2 of bullet (btDbvtBroadphase, hulls, "
+            "rotation); none of cuda (lbvh, mesh).") in text
     assert "1 diverged" in text
+
+
+def test_at_most_four_thresholds_the_strictest_and_the_loosest_kept():
+    pts = []
+    for k in range(6):  # engine k: error 5e-(7-k), speed 2^k: each decade has a new fastest engine
+        p = sa_point("box-stack", "cpu", "mesh", False, 480, 2.0 ** k, 5 * 10.0 ** (k - 7))
+        p["engine_label"] = f"engine {k}"
+        pts.append(p)
+    ts = RSA.thresholds(pts)
+    assert [RSA.sci(x) for x, _, _ in ts] == ["1e-6", "1e-5", "1e-4", "1e-1"]
+    assert [order[0] for _, _, order in ts] == ["engine 0", "engine 1", "engine 2", "engine 5"]
 
 
 def test_reading_says_no_clear_winner_when_speed_ranges_overlap():
@@ -278,6 +293,15 @@ def test_a_malformed_point_is_refused_naming_file_and_key(tmp_path):
     pts[1]["status"] = "exploded"
     rc, md, page, out = run_main(tmp_path, result(pts))
     assert rc == 2 and "points[1].status: 'exploded'; allowed: ok, diverged, skipped, failed" in out, out
+
+
+def test_odd_speed_ranges_draw_no_bar_instead_of_failing():
+    pts = box_stack()
+    pts[1]["speed"].update(min=2.0, max=float("inf"))  # min above the median, max not finite
+    pts[2]["speed"].update(min=None, max=None)
+    assert RSA.speed_bar(pts[1]) == (0.0, 0.0) and RSA.speed_bar(pts[2]) == (0.0, 0.0)
+    assert RSA.speed_bar(pts[3]) == pytest.approx((0.04, 0.04))
+    assert len(section(pts).figs) == 1
 
 
 # ---- the whole report: shards merged, one plot per scene ----------------------------------------
