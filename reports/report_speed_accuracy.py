@@ -40,9 +40,10 @@ INTRO = ("Every engine runs each scene over a ladder of time steps (and Bullet's
          "a log axis cannot draw 0, so references are drawn apart at the bottom edge and left out of the Pareto "
          "front. The front (black staircase, ringed points) is, over all engines, the lowest error reached at each "
          "speed or faster. The reading names, at thresholds X on the error, the fastest engine with a point under "
-         "X and its speed-up over the next engine's best point under X; X runs over the powers of ten between the "
-         "scene's smallest and largest nonzero errors, and a threshold is named where the fastest engine, or the "
-         "set of engines reaching it, changes from the next stricter one (the strictest reached first).")
+         "X and its speed-up over the next engine's best point under X; X runs over 1, 2 and 5 times the powers of "
+         "ten between the scene's smallest and largest nonzero errors, and a threshold is named where the fastest engine, or the "
+         "set of engines reaching it, changes from the next stricter one (at most four: the strictest reached, the "
+         "first that every engine reaches, then those where the fastest engine changes).")
 
 
 # ---- input -------------------------------------------------------------------------------------
@@ -195,17 +196,17 @@ def best_under(pts, x):
 
 def thresholds(pts):
     """[(X, {label: best point}, labels fastest first)] at the thresholds that separate the
-    engines: X over the powers of ten from the one at or below the smallest error > 0 to the
-    one at or above the largest; an X is kept where the fastest engine under it, or the set of
-    engines with a point under it, differs from the previous kept one. At most MAX_THRESHOLDS:
-    the strictest, those where the fastest changes, then the loosest."""
+    engines: X over 1, 2 and 5 times the powers of ten from the one at or below the smallest
+    error > 0 to the one above the largest; an X is kept where the fastest engine under it, or the set of
+    engines with a point under it, differs from the previous kept one. At most MAX_THRESHOLDS,
+    by priority: the strictest, the first that every engine reaches, those where the fastest
+    engine changes, the loosest."""
     errs = [error(p) for p in pts if error(p) and speed(p) is not None]
     if not errs:
         return []
     lo, hi = math.floor(math.log10(min(errs)) + 1e-9), math.ceil(math.log10(max(errs)) - 1e-9)
     out, prev = [], None
-    for k in range(lo, hi + 1):
-        x = 10.0 ** k
+    for x in [float(f"{m}e{k}") for k in range(lo, hi + 1) for m in (1, 2, 5)]:
         best = best_under(pts, x)
         if not best:
             continue
@@ -214,10 +215,14 @@ def thresholds(pts):
         if sig != prev:
             out.append((x, best, order))
             prev = sig
-    if len(out) > MAX_THRESHOLDS:
+    if len(out) > MAX_THRESHOLDS:  # by priority: strictest, first reached by all, fastest changes, loosest
+        every = frozenset(label(p) for p in pts if error(p) and speed(p) is not None)
         changes = [t for a, t in zip(out, out[1:]) if t[2][0] != a[2][0]]
-        keep = [out[0]] + [t for t in changes if t is not out[-1]][:MAX_THRESHOLDS - 2] + [out[-1]]
-        out = sorted(keep, key=lambda t: t[0])
+        keep = []
+        for t in [out[0]] + [t for t in out if frozenset(t[1]) == every][:1] + changes + [out[-1]]:
+            if t not in keep:
+                keep.append(t)
+        out = sorted(keep[:MAX_THRESHOLDS], key=lambda t: t[0])
     return out
 
 
@@ -315,7 +320,7 @@ def plot(doc, scene, pts, front, h):
     ax.set_xscale("log")
     ax.set_yscale("log")
     if pos:
-        top, bottom = 10 ** math.ceil(math.log10(max(pos)) + 0.05), 10 ** (math.floor(math.log10(min(pos))) - 1)
+        top, bottom = 4.0 * max(pos), 10 ** (math.floor(math.log10(min(pos))) - 1)
     else:
         top, bottom = 1.0, 1e-6
     ax.set_ylim(bottom, top)

@@ -182,8 +182,11 @@ def test_reading_names_the_fastest_engine_and_its_ratio_at_separating_thresholds
     doc = section(box_stack())
     text = next(t for t in doc.texts if "At consistency error" in t)
     sentences = re.findall(r"At consistency error <= (\S+),", text)
-    # Decades 1e-4 .. 1e-1; 1e-1 answers as 1e-2 does (bullet fastest, all three reach it): not repeated.
-    assert sentences == ["1e-4", "1e-3", "1e-2"], text
+    # 1, 2, 5 x 1e-4 .. 1e-1; a threshold answering as the stricter one before it is not repeated
+    # (2e-4: cpu alone; 2e-3: cpu fastest, all three; 1e-2: bullet fastest, all three). Six differ:
+    # 1e-4 (cpu alone), 5e-4 (cpu, cuda), 1e-3 (cpu, all three), 5e-3 (bullet), 2e-2 (cpu), 5e-2
+    # (bullet); four are named: the strictest, the first all reach, then where the fastest changes.
+    assert sentences == ["1e-4", "1e-3", "5e-3", "2e-2"], text
     assert ("At consistency error <= 1e-4, only cpu (octree, mesh) has a point: dt 1/480 s (1.00 simulated s per "
             "wall s, error 1e-4); bullet (btDbvtBroadphase, hulls, rotation) and cuda (lbvh, mesh) reach no point "
             "under it.") in text
@@ -191,7 +194,7 @@ def test_reading_names_the_fastest_engine_and_its_ratio_at_separating_thresholds
             "wall s, error 6e-4), 1.33x faster than bullet (btDbvtBroadphase, hulls, rotation) at its best point "
             "under that error, dt 1/480 s (3.00 simulated s per wall s, error 8e-4); then cuda (lbvh, mesh) 5.00x "
             "slower.") in text
-    assert ("At consistency error <= 1e-2, the fastest is bullet (btDbvtBroadphase, hulls, rotation) at dt 1/240 s "
+    assert ("At consistency error <= 5e-3, the fastest is bullet (btDbvtBroadphase, hulls, rotation) at dt 1/240 s "
             "(6.00 simulated s per wall s, error 4e-3), 1.50x faster than cpu (octree, mesh)") in text
     assert "no clear winner" not in text  # the speeds' ranges are 1 % wide: apart
     assert ("The Pareto front holds 6 point(s): 4 of cpu (octree, mesh) and 2 of bullet (btDbvtBroadphase, hulls, "
@@ -201,12 +204,12 @@ def test_reading_names_the_fastest_engine_and_its_ratio_at_separating_thresholds
 
 def test_at_most_four_thresholds_the_strictest_and_the_loosest_kept():
     pts = []
-    for k in range(6):  # engine k: error 5e-(7-k), speed 2^k: each decade has a new fastest engine
+    for k in range(6):  # engine k: error 5e-(7-k), speed 2^k: each decade has a new fastest engine (6 changes)
         p = sa_point("box-stack", "cpu", "mesh", False, 480, 2.0 ** k, 5 * 10.0 ** (k - 7))
         p["engine_label"] = f"engine {k}"
         pts.append(p)
     ts = RSA.thresholds(pts)
-    assert [RSA.sci(x) for x, _, _ in ts] == ["1e-6", "1e-5", "1e-4", "1e-1"]
+    assert [RSA.sci(x) for x, _, _ in ts] == ["5e-7", "5e-6", "5e-5", "5e-2"]
     assert [order[0] for _, _, order in ts] == ["engine 0", "engine 1", "engine 2", "engine 5"]
 
 
