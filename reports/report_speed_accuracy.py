@@ -90,18 +90,23 @@ def check_point(where, p, fail):
 
 # ---- the figures of a point --------------------------------------------------------------------
 
+def drawable(v):
+    """Whether v can sit on a log axis (and 4x it, a tenth of it): finite in [1e-300, 1e300]."""
+    return _number(v) and 1e-300 <= v <= 1e300
+
+
 def speed(p):
-    """Median simulated seconds per wall second, or None where not measured or not finite > 0."""
+    """Median simulated seconds per wall second, or None where not measured or not drawable."""
     s = p.get("speed") if p.get("status") == "ok" else None
     v = s.get("median") if isinstance(s, dict) else None
-    return float(v) if _number(v) and math.isfinite(v) and v > 0 else None
+    return float(v) if drawable(v) else None
 
 
 def error(p):
-    """The consistency error, or None where not measured or not finite."""
+    """The consistency error (0 or drawable), or None where not measured or out of range."""
     e = p.get("error") if p.get("status") == "ok" else None
     v = e.get("consistency") if isinstance(e, dict) else None
-    return float(v) if _number(v) and math.isfinite(v) else None
+    return float(v) if _number(v) and (v == 0 or drawable(v)) else None
 
 
 def dt_of(p):
@@ -117,8 +122,8 @@ def dt_of(p):
 def dt_text(dt, unit=True):
     """A time step as the ladder names it: '1/240 s' where 1/dt is within 0.2 % of an integer
     (a stored 0.004166 is 1/240), else '0.003 s'."""
-    if dt is None or not dt > 0:
-        return "-"
+    if dt is None or not drawable(dt):
+        return "-" if dt is None else f"{dt:g}" + (" s" if unit else "")
     n = round(1.0 / dt)
     text = f"1/{n}" if n >= 1 and abs(1.0 / dt - n) <= 2e-3 * n else f"{dt:g}"
     return text + (" s" if unit else "")
@@ -128,8 +133,8 @@ def sci(v):
     """An error as 4.2e-4 (0 as 0)."""
     if v is None:
         return "-"
-    if v == 0:
-        return "0"
+    if v == 0 or not math.isfinite(v):
+        return f"{v:g}"
     m, e = f"{v:.1e}".split("e")
     return f"{float(m):g}e{int(e)}"
 
@@ -148,11 +153,18 @@ def varies_iterations(pts):
 
 
 def speed_bar(p):
-    """(median - min, max - median) of p's speed, each finite and >= 0 (else 0: no bar)."""
+    """(median - min, max - median) of p's speed, each >= 0; 0 (no bar) where min or max is
+    not drawable."""
     s, m = p["speed"], speed(p)
     lo, hi = s.get("min"), s.get("max")
-    ok = lambda v: _number(v) and math.isfinite(v)
-    return (max(m - lo, 0.0) if ok(lo) else 0.0, max(hi - m, 0.0) if ok(hi) else 0.0)
+    return (max(m - lo, 0.0) if drawable(lo) else 0.0, max(hi - m, 0.0) if drawable(hi) else 0.0)
+
+
+def speed_range(p):
+    """p's speed as a spread for make_report's overlap(): n, and min and max from speed_bar."""
+    lo, hi = speed_bar(p)
+    n = p["speed"].get("n")
+    return {"n": n if isinstance(n, int) else 1, "min": speed(p) - lo, "max": speed(p) + hi}
 
 
 def is_reference(p):
@@ -291,7 +303,7 @@ def reading(pts, h, machine):
             s = (f"{mark}At consistency error <= {sci(x)}, the fastest is {order[0]} at "
                  f"{point_text(win, vary, h)}, {h.speedup_text(speed(win) / speed(run))} faster than {order[1]} at "
                  f"its best point under that error, {point_text(run, vary, h)}")
-            if h.overlap(win["speed"], run["speed"]):
+            if h.overlap(speed_range(win), speed_range(run)):
                 s += " (the two speeds' min–max ranges overlap, or one repetition: no clear winner)"
             if len(order) > 2:
                 s += "; then " + ", ".join(f"{e} {h.speedup_text(speed(win) / speed(best[e]))} slower"

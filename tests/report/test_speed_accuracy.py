@@ -307,6 +307,18 @@ def test_odd_speed_ranges_draw_no_bar_instead_of_failing():
     assert len(section(pts).figs) == 1
 
 
+def test_values_a_log_axis_cannot_draw_leave_the_plot_not_the_report(tmp_path):
+    pts = box_stack()
+    pts[2]["error"]["energy_drift"] = float("nan")  # JSON NaN: Python's json reads it
+    pts[3]["error"]["consistency"] = 1e308  # 4x above it overflows
+    pts[4]["dt"] = 1e-305  # 1/dt overflows
+    pts[6]["speed"].update(min=None)
+    pts[7]["speed"].update(median=float("inf"))
+    rc, md, page, out = run_main(tmp_path, result(pts))
+    assert rc == 0, out
+    assert page.count("<svg") == 1 and "| nan |" in md and "| 1e-305\u00a0s |" in md
+
+
 # ---- the whole report: shards merged, one plot per scene ----------------------------------------
 
 def test_report_has_one_plot_per_measured_scene_and_markdown(tmp_path):
