@@ -14,8 +14,8 @@ tools for model-based robotics", ICRA 2015): results of `octocd bench` sweeps of
 
 Called by make_report.py (`section(doc, g, h)`, `check_point(where, p, fail)`): `doc` is the
 report's Doc (p, h, table, figure: HTML and Markdown at once), `g` a merged sweep (shards of
-one sweep merged by make_report.merge), `h` the module holding the report's shared helpers
-(num, spread_text, log_ticks, speedup_text, overlap, load_mark).
+one sweep merged by make_report.merge), `h` the report's shared helpers (num, spread_text,
+log_ticks, speedup_text, overlap, load_mark) as attributes.
 """
 import math
 
