@@ -35,6 +35,7 @@ import shutil
 import stat
 import subprocess
 import sys
+import types
 
 PAPER = json.load(open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "paper_tables.json")))
 STAGES = ["integrate", "aabbs", "broadphase", "midphase", "response", "metrics"]
@@ -58,6 +59,9 @@ except ImportError as e:  # exit 1: a missing dependency is not bad input
     print(f"octocd report: runtime failure: {e}; install Debian's python3-matplotlib and python3-numpy",
           file=sys.stderr)
     sys.exit(1)
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the report_*.py section modules
+import report_speed_accuracy as RSA  # noqa: E402  (sweeps of kind speed-accuracy, SPEC 15)
 
 plt.rcParams.update({"svg.fonttype": "none", "font.family": "sans-serif", "font.size": 9,
                      "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100})
@@ -111,6 +115,9 @@ def check_points(path, j):
             fail(f"{where}: not an object; allowed: a point object")
         if not isinstance(p.get("id"), str):
             fail(f"{where}.id: {p.get('id')!r}; allowed: a string")
+        if j["sweep"].get("kind") == RSA.KIND:
+            RSA.check_point(where, p, fail)
+            continue
         if p.get("status") != "ok":
             continue
         if not isinstance(p.get("params"), dict):
@@ -419,8 +426,9 @@ def engines_ran_text(g):
     if not seen:
         return ""
     return "Engines ran: " + "; ".join(
-        f"{e}: broadphase {', '.join(d['broadphase']) or '?'}"
-        + (f", geometry {' | '.join(d['geometry'])}" if d["geometry"] else "") for e, d in seen.items())
+        f"{e}: " + ", ".join(([f"broadphase {', '.join(d['broadphase'])}"] if d["broadphase"] else [])
+                             + ([f"geometry {' | '.join(d['geometry'])}"] if d["geometry"] else [])) or "?"
+        for e, d in seen.items())
 
 
 def machine_block(doc, g):
@@ -439,8 +447,8 @@ def machine_block(doc, g):
              + (f", {', '.join(f'{x:.1f}' for x in m['load_average_end'])} at the end"
                 if m.get("load_average_end") else "")
              + (f"; CPU engine on {m['omp_threads']} OpenMP threads" if m.get("omp_threads") else ""),
-             f"Settings: engines {', '.join(s.get('engines', []))}; {s.get('repeat')} repetitions per point; "
-             f"{s.get('frames')} frames per run (warm-up {s.get('warmup')})"
+             f"Settings: engines {', '.join(s.get('engines', []))}; {s.get('repeat')} repetitions per point"
+             + (f"; {s.get('frames')} frames per run (warm-up {s.get('warmup')})" if "frames" in s else "")
              + (f", {s.get('warm_replays')} untimed replay(s) first" if "warm_replays" in s else "")
              + (f", each timed repetition at least {s.get('min_time_ms')} ms" if "min_time_ms" in s else "")
              + f"; files: {', '.join(os.path.basename(f) for f in g['files'])}",
@@ -1487,7 +1495,7 @@ def section_gate(doc, base, new, threshold, alpha, across, timing="auto"):
 CSV_UNITS = {"steps_per_s": "1/s", "cpu_steps_per_s": "1/s", "step_ms": "ms", "stage_ms": "ms", "pairs": "1/frame",
              "cell_candidates": "1/frame", "box_pairs": "1/frame", "vertex_tests": "1/frame", "contacts": "1/frame",
              "memory_bytes": "B", "penetration_mean": "m", "penetration_max": "m",
-             "penetration_share_above_slop": "1", "wall_s": "s", "ms_per_frame": "ms"}
+             "penetration_share_above_slop": "1", "wall_s": "s", "ms_per_frame": "ms", "speed": "s/s"}
 
 
 def file_slug(name):
@@ -1599,6 +1607,12 @@ def gate_csv(doc, path, res):
     doc.files.put(path, f.getvalue())
 
 
+def section_speed_accuracy(doc, g):
+    """Per scene error against speed, the Pareto front and a reading (reports/report_speed_accuracy.py)."""
+    RSA.section(doc, g, types.SimpleNamespace(num=num, spread_text=spread_text, log_ticks=log_ticks, overlap=overlap,
+                                              speedup_text=speedup_text, load_mark=load_mark))
+
+
 SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table5),
             "table6": ("Table 6: Level 0 (AABB only) vs hierarchical C", section_table6),
             "tableA1": ("Table A1: spatial hash vs octree, early and late phases", section_tableA1),
@@ -1684,13 +1698,16 @@ def main():
             title, fn = (f"Sweep {name}: broadphase replay", section_scaling)
         if g["first"]["sweep"].get("kind") == "max-instances" and name not in SECTIONS:
             title, fn = (f"Sweep {name}: most instances at the target steps/s", section_max_instances)
+        if g["first"]["sweep"].get("kind") == RSA.KIND:  # its own table of unmeasured points per scene
+            title, fn = (f"Sweep {name}: speed against accuracy", section_speed_accuracy)
         nav.append((f"s{i}", title))
         doc.section = name
         CURRENT[0] = ", ".join(g["files"])
         doc.h(2, title, f"s{i}")
         machine_block(doc, g)
         fn(doc, g)
-        skipped_block(doc, g)
+        if g["first"]["sweep"].get("kind") != RSA.KIND:
+            skipped_block(doc, g)
         if doc.csv_dir:
             sweep_csv(doc, os.path.join(doc.csv_dir, file_slug(name) + ".csv"), g)
             doc.ncsv += 1
