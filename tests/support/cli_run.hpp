@@ -2,7 +2,7 @@
 /// \file cli_run.hpp
 /// Running the `octocd` command from a test: the binary under test, the source tree, and
 /// a shell command's exit code with its merged stdout and stderr. Shared by the
-/// tests/unit/test_cli*.cpp files (each needs OCTOCD_TEST_BIN defined by CMake).
+/// test_cli*.cpp files (tests/cli, tests/scene) (each needs OCTOCD_TEST_BIN defined by CMake).
 #include <sys/wait.h>
 
 #include <cstdio>

@@ -16,7 +16,7 @@
 #include "octocd/trace.hpp"
 #include "faults/planted_faults.hpp"
 #include "octocd/validation.hpp"
-#include "unit/test_scenes.hpp"
+#include "support/test_scenes.hpp"
 
 using namespace octocd;
 using octocd::test::FaultyWorld;

@@ -27,7 +27,7 @@
 #include "octocd/cuda_world.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/scene.hpp"
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;

@@ -22,7 +22,7 @@
 
 #include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
 
 namespace fs = std::filesystem;
 

@@ -20,8 +20,8 @@
 #include <string>
 #include <vector>
 
-#include "cli_run.hpp"
-#include "trace_edit.hpp"
+#include "support/cli_run.hpp"
+#include "support/trace_edit.hpp"
 #include "octocd/error.hpp"
 #include "octocd/mesh.hpp"
 #include "octocd/scene.hpp"

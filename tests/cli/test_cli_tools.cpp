@@ -25,7 +25,7 @@
 
 #include "octocd/trace.hpp"
 #include "octocd/trace_reader.hpp"
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;

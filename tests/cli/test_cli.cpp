@@ -14,7 +14,7 @@
 #include <thread>
 
 #include "octocd/trace.hpp"
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
 
 namespace fs = std::filesystem;
 
