@@ -11,10 +11,10 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <thread>
 
 #include "octocd/trace.hpp"
 #include "support/cli_run.hpp"
+#include "support/wait_event.hpp"
 
 namespace fs = std::filesystem;
 
@@ -165,16 +165,18 @@ TEST_F(Cli, TraceOfKilledRunIsReadable) {
           static_cast<char*>(nullptr));
     _exit(127);
   }
-  // Wait until some frames are on disk, then kill without warning.
+  // Wait until some frames are on disk (checked after each write to the folder), then kill
+  // without warning.
   std::int64_t seen = 0;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (seen < 500 && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    try {
-      seen = octocd::read_trace_summary(trace).frames;
-    } catch (const std::exception&) {
-    }
-  }
+  octocd::test::wait_until(
+      [&] {
+        try {
+          seen = octocd::read_trace_summary(trace).frames;
+        } catch (const std::exception&) {
+        }
+        return seen >= 500;
+      },
+      {dir_}, std::chrono::seconds(60));
   kill(pid, SIGKILL);
   int status = 0;
   waitpid(pid, &status, 0);
