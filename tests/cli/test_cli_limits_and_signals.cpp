@@ -367,15 +367,7 @@ TEST_F(Hardening, HugeMeshFileIsRejectedBeforeParsing) {
 /// Waits until `trace` holds at least `frames` flushed frames (true) or 60 s pass; checked
 /// after each write to the trace's folder.
 bool wait_for_frames(const std::string& trace, std::int64_t frames) {
-  return octocd::test::wait_until(
-      [&] {
-        try {
-          return octocd::read_trace_summary(trace).frames >= frames;
-        } catch (const std::exception&) {
-          return false;
-        }
-      },
-      {fs::path(trace).parent_path()}, std::chrono::seconds(60));
+  return octocd::test::wait_for_trace_frames(trace, frames, std::chrono::seconds(60)) >= frames;
 }
 
 /// The N of "after frame N of" in a stop message, -1 when absent.

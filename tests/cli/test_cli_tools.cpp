@@ -537,28 +537,7 @@ TEST_F(Tools, CompareFailsATruncatedTraceOfAKilledRun) {
   const std::string scene = write("long.json", std::string(kPile).replace(std::string(kPile).find("\"frames\": 60"),
                                                                            12, "\"frames\": 100000000"));
   const std::string killed = (dir_ / "killed.h5").string();
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const std::string b = bin();
-    execl(b.c_str(), b.c_str(), "run", scene.c_str(), "--trace", killed.c_str(), "--quiet",
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  std::int64_t seen = 0;
-  octocd::test::wait_until(
-      [&] {
-        try {
-          seen = octocd::read_trace_summary(killed).frames;
-        } catch (const std::exception&) {
-        }
-        return seen >= 100;
-      },
-      {dir_}, std::chrono::seconds(60));
-  kill(pid, SIGKILL);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFSIGNALED(status)) << "the run ended before the kill";
+  ASSERT_TRUE(octocd::test::run_killed_after(scene, killed, 100).killed) << "the run ended before the kill";
   const std::int64_t kept = octocd::read_trace_summary(killed).frames;
   ASSERT_GE(kept, 100);
   // The golden run: the same scene, 50 frames further than the killed one got.

@@ -15,9 +15,13 @@
 #include <cerrno>
 #include <chrono>
 #include <cstdint>
+#include <exception>
 #include <filesystem>
 #include <functional>
+#include <string>
 #include <vector>
+
+#include "octocd/trace.hpp"
 
 namespace octocd::test {
 
@@ -83,6 +87,24 @@ inline bool wait_until(const std::function<bool()>& ready, const std::vector<std
   }
   ::close(fd);
   return held;
+}
+
+/// Waits until the trace `trace` holds at least `frames` flushed frames (read_trace_summary,
+/// checked after each change in its folder), for at most `limit`. Returns the frames it held
+/// at the last check (0 while it is missing or unreadable): >= `frames` unless the limit passed.
+inline std::int64_t wait_for_trace_frames(const std::string& trace, std::int64_t frames,
+                                          std::chrono::milliseconds limit) {
+  std::int64_t seen = 0;
+  wait_until(
+      [&] {
+        try {
+          seen = read_trace_summary(trace).frames;
+        } catch (const std::exception&) {
+        }
+        return seen >= frames;
+      },
+      {std::filesystem::path(trace).parent_path()}, limit);
+  return seen;
 }
 
 }  // namespace octocd::test
