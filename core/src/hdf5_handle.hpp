@@ -1,7 +1,7 @@
 #pragma once
-// HDF5 C API helpers shared by the trace writer (trace.cpp), the trace reader
-// (trace_reader.cpp: replay, compare), read_trace_summary and the XDMF sidecar
-// (trace.cpp) and the external-trace reader (validation/src/trace_in.cpp). Private to the
+// HDF5 C API helpers shared by the trace writer (trace_writer.cpp), the trace reader
+// (trace_reader.cpp: replay, compare), read_trace_summary (trace_summary.cpp), the XDMF
+// sidecar (trace_xdmf.cpp) and the external-trace reader (validation/src/trace_in.cpp). Private to the
 // build (not installed): it needs HDF5's C headers.
 //
 // Every trace is untrusted input (issue 22): Hdf5Reader is the one way octocd opens and
@@ -183,7 +183,7 @@ class Hdf5Reader {
   void check_vlen_lengths(const Dataset& d) const;
 };
 
-/// The /frames columns of trace format version 1, in the writer's order (trace.cpp).
+/// The /frames columns of trace format version 1, in the writer's order (trace_writer.cpp).
 const std::vector<std::string>& trace_frame_columns();
 
 /// Walks every global heap collection of `path` the way libhdf5 1.10 does and throws

@@ -4,7 +4,7 @@
 /// self-tests ("a validator that cannot fail is a defect"; ARCHITECTURE "The reference
 /// step stays plain"). FaultyWorld runs World's stages (octocd/stages.hpp) in World's
 /// order and changes, between or instead of them, only what a planted fault names; with
-/// no fault planted it reproduces World bit for bit (tests/unit/test_planted_faults.cpp).
+/// no fault planted it reproduces World bit for bit (tests/core/test_planted_faults.cpp).
 /// The product (octocd_core, `octocd`, Python) holds no fault.
 
 #include <cstdint>
@@ -20,7 +20,7 @@ namespace octocd {
 namespace test {
 
 /// Deliberate faults, all off by default. Each one is caught by a validator in
-/// tests/unit/test_validation.cpp, test_applied_state.cpp, test_applied_state_passes.cpp
+/// tests/validation/test_validation.cpp, test_applied_state.cpp, test_applied_state_iterations.cpp
 /// or test_external.cpp.
 struct PlantedFaults {
   bool eq12_weights = false;     ///< split corrections with the paper's Eq. 12 (swapped) weights

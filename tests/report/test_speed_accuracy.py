@@ -16,7 +16,7 @@ MR = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(MR)
 RSA = MR.RSA
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import test_report_fixes as FIXES  # noqa: E402  (its run_main: make_report's main on generated inputs)
+import test_report_comparisons as FIXES  # noqa: E402  (its run_main: make_report's main on generated inputs)
 
 LABELS = {("cpu", "mesh", False): "cpu (octree, mesh)", ("cuda", "mesh", False): "cuda (lbvh, mesh)",
           ("bullet", "hull", True): "bullet (btDbvtBroadphase, hulls, rotation)",
@@ -135,7 +135,7 @@ def section(points):
 
 
 def run_main(tmp_path, *inputs):
-    """make_report's main on the inputs (test_report_fixes.run_main): (exit code, report.md,
+    """make_report's main on the inputs (test_report_comparisons.run_main): (exit code, report.md,
     index.html, output)."""
     tmp_path.mkdir(parents=True, exist_ok=True)
     rc, md, out = FIXES.run_main(tmp_path, *inputs)

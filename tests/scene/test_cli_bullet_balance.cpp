@@ -24,8 +24,8 @@
 #include <string>
 #include <vector>
 
-#include "unit/cli_run.hpp"
-#include "unit/trace_edit.hpp"
+#include "support/cli_run.hpp"
+#include "support/trace_edit.hpp"
 
 namespace fs = std::filesystem;
 using octocd::test::Result;

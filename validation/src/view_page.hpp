@@ -5,7 +5,7 @@
 // numbers of the trace) and draws it with three.js (inlined before it). It records every
 // error (window.onerror, console.error) in <pre id="octocd-errors"> and sets
 // <body data-status="drawn"> once the first frame is rendered, so a headless browser
-// (tests/view/test_view_chromium.py) can tell a page that drew from one that failed.
+// (tests/cli/test_view_chromium.py) can tell a page that drew from one that failed.
 #include <string>
 
 namespace octocd::detail {

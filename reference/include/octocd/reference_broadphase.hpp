@@ -9,7 +9,7 @@
 /// unique. The wrapped library only proposes candidates; each candidate then goes through
 /// octocd::overlaps() as the exact test, and the result is sorted and de-duplicated. This
 /// is exact as long as the library reports a superset of the overlapping pairs, which the
-/// unit test (tests/unit/test_reference_broadphase.cpp) checks against `flat`.
+/// unit test (tests/reference/test_reference_broadphase.cpp) checks against `flat`.
 ///
 /// Units: metres (AABBs as given; Bullet runs in float, FCL in double).
 /// State: every reference but fcl-sap is incremental. The library's proxies / objects are created on

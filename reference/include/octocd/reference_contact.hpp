@@ -14,7 +14,7 @@
 /// do not are reported as penetrating: the reference is defined on the hulls.)
 ///
 /// Observed conventions (FCL 0.7.0, libccd 2.x double; pinned by
-/// tests/unit/test_reference_contact.cpp):
+/// tests/reference/test_reference_contact.cpp):
 ///  - fcl::distance(o1, o2, ...) with enable_nearest_points: DistanceResult::nearest_points[0]
 ///    lies on o1 and nearest_points[1] on o2, both in the WORLD frame (FCL >= 0.6; 0.5 gave
 ///    them in each object's local frame). We call it with o1 = A, o2 = B, so

@@ -174,7 +174,7 @@ struct Tolerances {
   double bullet_trajectory_m = 0.03;
 
   // ---- Physics tier (SPEC 13, octocd/physics.hpp). Measured on octocd's CPU engine
-  // (octocd_physics_bodies; tests/unit/test_physics.cpp, every 10th frame checked) over
+  // (octocd_physics_bodies; tests/validation/test_physics.cpp, every 10th frame checked) over
   // 1500 frames of box-stack, bunny-stack-50, bunny-random-400 and dragon-random-250, and
   // on the hand-made rotated records of that test. Bullet with rotation is measured by
   // its own tests; its figures belong here too once they land.

@@ -17,11 +17,13 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iterator>
 #include <string>
 #include <vector>
 
-#include "cli_run.hpp"
-#include "trace_edit.hpp"
+#include "support/cli_run.hpp"
+#include "support/trace_edit.hpp"
+#include "support/wait_event.hpp"
 #include "octocd/error.hpp"
 #include "octocd/mesh.hpp"
 #include "octocd/scene.hpp"
@@ -507,19 +509,41 @@ TEST_F(Untrusted, ATraceOfOneHundredThousandBodiesIsJudged) {
 // Before: validate --trace-in ignored SIGINT and SIGTERM (no loop polled the flag).
 // The trace is a cubic grid of 20,000 penetrating boxes, about 260,000 pairs a frame for
 // FCL, 60 frames: about 20 s of checks on the 2-core development VM. The signal follows an
-// event: the process has the trace open (/proc/PID/fd), which it does only inside the
-// checks, so the signal lands there on any machine.
+// event: the process has the trace open (/proc/PID/fd, checked after each open of the
+// file), which it does only inside the checks, so the signal lands there on any machine.
 TEST_F(Untrusted, SigtermEndsValidateTraceInAtOnce) {
-  const std::string p = (dir_ / "long.h5").string();
-  write_line_trace(p, 20000, 60, /*grid=*/true);
-  const Result r = run("sh -c '" + bin() + " validate --trace-in " + p +
-                       " & pid=$!; i=0; until ls -l /proc/$pid/fd 2>/dev/null | grep -q \"" + p +
-                       "\" || [ $i -ge 3000 ]; do sleep 0.02; i=$((i+1)); done; kill -TERM $pid; wait $pid; echo rc=$?'");
-  EXPECT_NE(r.output.find("rc=143"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("octocd: stopped by SIGTERM while checking the trace; nothing was written"),
-            std::string::npos)
-      << r.output;
-  EXPECT_EQ(r.output.find("VALIDATION"), std::string::npos) << "the checks ran to the end: " << r.output;
+  const fs::path p = dir_ / "long.h5";
+  write_line_trace(p.string(), 20000, 60, /*grid=*/true);
+  const fs::path out = dir_ / "validate.txt";
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    std::freopen(out.c_str(), "w", stdout);
+    ::dup2(::fileno(stdout), 2);
+    const std::string b = bin();
+    ::execl(b.c_str(), b.c_str(), "validate", "--trace-in", p.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const fs::path fd_dir = fs::path("/proc") / std::to_string(pid) / "fd", real = fs::canonical(p);
+  const bool open = octocd::test::wait_until(
+      [&] {
+        std::error_code ec;
+        for (const auto& e : fs::directory_iterator(fd_dir, ec))
+          if (fs::read_symlink(e.path(), ec) == real) return true;
+        return false;
+      },
+      {p}, std::chrono::seconds(60), IN_OPEN);
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  if (!octocd::test::wait_child(pid, status, std::chrono::seconds(120))) ::kill(pid, SIGKILL), ::waitpid(pid, &status, 0);
+  std::ifstream in(out);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_TRUE(open) << "validate never opened the trace: " << text;
+  ASSERT_TRUE(WIFEXITED(status)) << text;
+  EXPECT_EQ(WEXITSTATUS(status), 143) << text;
+  EXPECT_NE(text.find("octocd: stopped by SIGTERM while checking the trace; nothing was written"), std::string::npos)
+      << text;
+  EXPECT_EQ(text.find("VALIDATION"), std::string::npos) << "the checks ran to the end: " << text;
 }
 
 // Before: `bench -o` left o.json.tmp.PID behind on a full disk and named no errno. A file

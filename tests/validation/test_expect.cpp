@@ -1,6 +1,7 @@
 // Expectations (SPEC 14b) and the causes of a row (SPEC 13b.13): octocd/expect.hpp.
 // Results are built by hand, so each outcome (expected, new, grown, fixed, strict) is
-// planted exactly; the CLI's use of them is tested in test_cli_expect.cpp.
+// planted exactly; the CLI's use of them is tested in tests/cli/test_cli_usage.cpp
+// (CliUser.ValidateExpectationsGateOnNewAndGrownFailures).
 
 #include <gtest/gtest.h>
 

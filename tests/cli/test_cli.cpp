@@ -11,10 +11,9 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <thread>
 
 #include "octocd/trace.hpp"
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
 
 namespace fs = std::filesystem;
 
@@ -157,32 +156,13 @@ TEST_F(Cli, TraceOfKilledRunIsReadable) {
                         R"(, "layout": {"type": "grid", "min": [-0.5, 0.1, -0.5], "max": [0.5, 1.5, 0.5]})",
                         kDomain, R"({"box": [0.1, 0.1, 0.1]})", "100000000"));
   const std::string trace = (dir_ / "killed.h5").string();
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const std::string b = bin();
-    execl(b.c_str(), b.c_str(), "run", path.c_str(), "--trace", trace.c_str(), "--quiet",
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  // Wait until some frames are on disk, then kill without warning.
-  std::int64_t seen = 0;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (seen < 500 && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    try {
-      seen = octocd::read_trace_summary(trace).frames;
-    } catch (const std::exception&) {
-    }
-  }
-  kill(pid, SIGKILL);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFSIGNALED(status)) << "the run ended before the kill";
-  ASSERT_GE(seen, 500) << "no frames flushed within 60 s";
+  // Killed without warning once some frames are on disk.
+  const octocd::test::KilledRun k = octocd::test::run_killed_after(path, trace, 500);
+  ASSERT_TRUE(k.killed) << "the run ended before the kill";
+  ASSERT_GE(k.frames, 500) << "no frames flushed within 60 s";
   const octocd::TraceSummary s = octocd::read_trace_summary(trace);
   EXPECT_EQ(s.format, "octocd-trace");
-  EXPECT_GE(s.frames, seen);
+  EXPECT_GE(s.frames, k.frames);
   EXPECT_EQ(s.last_frame, s.frames);  // rows are frames 1..N with none missing
   EXPECT_GE(s.state_rows, 1);
 }

@@ -20,7 +20,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;

@@ -19,13 +19,13 @@
 #include <set>
 #include <sstream>
 #include <string>
-#include <thread>
 
 #include <nlohmann/json.hpp>
 
 #include "octocd/trace.hpp"
 #include "octocd/trace_reader.hpp"
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
+#include "support/wait_event.hpp"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
@@ -373,10 +373,9 @@ TEST_F(Tools, BenchKilledMidwayLeavesItsFinishedPointsAndResumes) {
           static_cast<char*>(nullptr));
     _exit(127);
   }
-  // The result appears after the first finished point; kill the sweep right then.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (!fs::exists(out) && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  // The result appears (renamed into place) after the first finished point; kill the sweep
+  // right then.
+  octocd::test::wait_until([&] { return fs::exists(out); }, {dir_}, std::chrono::seconds(60));
   kill(pid, SIGKILL);
   int status = 0;
   waitpid(pid, &status, 0);
@@ -413,28 +412,25 @@ TEST_F(Tools, BenchStopsOnSigtermMidPointAndKeepsFinishedPoints) {
           "--quiet", static_cast<char*>(nullptr));
     _exit(127);
   }
-  bool inside = false;
-  for (const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-       !inside && std::chrono::steady_clock::now() < until;) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(traces, ec)) {
-      if (e.path().extension() != ".h5") continue;
-      try {
-        inside = inside || octocd::read_trace_summary(e.path().string()).frames > 0;
-      } catch (const std::exception&) {
-      }
-    }
-  }
+  // Checked after each change in dir_ and in traces/ (watched once bench creates it).
+  const bool inside = octocd::test::wait_until(
+      [&] {
+        std::error_code ec;
+        for (const auto& e : fs::directory_iterator(traces, ec)) {
+          if (e.path().extension() != ".h5") continue;
+          try {
+            if (octocd::read_trace_summary(e.path().string()).frames > 0) return true;
+          } catch (const std::exception&) {
+          }
+        }
+        return false;
+      },
+      {dir_, traces}, std::chrono::seconds(60));
   ASSERT_TRUE(inside) << "no frame of the first point flushed within 60 s";
   kill(pid, SIGTERM);
   int status = 0;
   // Bounded wait (a functional bound: the point itself would take hours).
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  pid_t done = 0;
-  while ((done = waitpid(pid, &status, WNOHANG)) == 0 && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  if (done == 0) {
+  if (!octocd::test::wait_child(pid, status, std::chrono::seconds(30))) {
     kill(pid, SIGKILL);
     waitpid(pid, &status, 0);
     FAIL() << "bench did not stop on SIGTERM within 30 s";
@@ -541,27 +537,7 @@ TEST_F(Tools, CompareFailsATruncatedTraceOfAKilledRun) {
   const std::string scene = write("long.json", std::string(kPile).replace(std::string(kPile).find("\"frames\": 60"),
                                                                            12, "\"frames\": 100000000"));
   const std::string killed = (dir_ / "killed.h5").string();
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const std::string b = bin();
-    execl(b.c_str(), b.c_str(), "run", scene.c_str(), "--trace", killed.c_str(), "--quiet",
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  std::int64_t seen = 0;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (seen < 100 && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    try {
-      seen = octocd::read_trace_summary(killed).frames;
-    } catch (const std::exception&) {
-    }
-  }
-  kill(pid, SIGKILL);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFSIGNALED(status)) << "the run ended before the kill";
+  ASSERT_TRUE(octocd::test::run_killed_after(scene, killed, 100).killed) << "the run ended before the kill";
   const std::int64_t kept = octocd::read_trace_summary(killed).frames;
   ASSERT_GE(kept, 100);
   // The golden run: the same scene, 50 frames further than the killed one got.

@@ -30,7 +30,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
 
 namespace fs = std::filesystem;
 

@@ -32,7 +32,7 @@
 #include <string>
 #include <vector>
 
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/reference_contact.hpp"
 #include "octocd/scene.hpp"

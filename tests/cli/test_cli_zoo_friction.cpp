@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/pose.hpp"
 #include "octocd/scene.hpp"

@@ -20,14 +20,14 @@
 #include <set>
 #include <sstream>
 #include <string>
-#include <thread>
 
 #include <nlohmann/json.hpp>
 
 #include "octocd/cuda_world.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/scene.hpp"
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
+#include "support/wait_event.hpp"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
@@ -289,17 +289,17 @@ TEST_F(MaxInstances, SigtermKeepsTheProbesAndResumeGoesOn) {
     execl(b.c_str(), b.c_str(), "bench", sw.c_str(), "-o", o.c_str(), "--quiet", static_cast<char*>(nullptr));
     _exit(127);
   }
-  // Wait for two finished probes (the later ones take longer), then SIGTERM.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  for (;;) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    bool two = false;
-    try {
-      two = fs::exists(out) && read_json(out)["points"].size() >= 2;
-    } catch (const std::exception&) {
-    }
-    if (two || std::chrono::steady_clock::now() > deadline) break;
-  }
+  // Wait for two finished probes (the later ones take longer; the result is renamed into
+  // dir_ after each), then SIGTERM.
+  octocd::test::wait_until(
+      [&] {
+        try {
+          return fs::exists(out) && read_json(out)["points"].size() >= 2;
+        } catch (const std::exception&) {
+          return false;
+        }
+      },
+      {dir_}, std::chrono::seconds(60));
   kill(pid, SIGTERM);
   int status = 0;
   waitpid(pid, &status, 0);

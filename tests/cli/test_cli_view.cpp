@@ -16,9 +16,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "unit/cli_run.hpp"
-#include "unit/external_trace.hpp"
-#include "unit/trace_edit.hpp"
+#include "support/cli_run.hpp"
+#include "support/external_trace.hpp"
+#include "support/trace_edit.hpp"
 
 namespace fs = std::filesystem;
 using octocd::test::run_octocd;

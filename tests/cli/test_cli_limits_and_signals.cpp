@@ -17,12 +17,12 @@
 #include <regex>
 #include <sstream>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
-#include "cli_run.hpp"
+#include "support/cli_run.hpp"
+#include "support/wait_event.hpp"
 
 namespace fs = std::filesystem;
 
@@ -93,23 +93,19 @@ class Child {
   /// wait(), but for at most `seconds`: a child still running then is killed (SIGKILL)
   /// and `ended` is false. A functional bound, not a timing assertion.
   Result wait_within(double seconds, bool& ended) {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-    ended = false;
-    while (std::chrono::steady_clock::now() < deadline) {
-      int status = 0;
-      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-        ended = true;
-        Result r;
-        if (WIFEXITED(status)) r.code = WEXITSTATUS(status);
-        if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
-        r.out = slurp(out_);
-        r.err = slurp(err_);
-        return r;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    int status = 0;
+    ended = octocd::test::wait_child(
+        pid_, status, std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::duration<double>(seconds)));
+    if (!ended) {
+      ::kill(pid_, SIGKILL);
+      return wait();
     }
-    ::kill(pid_, SIGKILL);
-    return wait();
+    Result r;
+    if (WIFEXITED(status)) r.code = WEXITSTATUS(status);
+    if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
+    r.out = slurp(out_);
+    r.err = slurp(err_);
+    return r;
   }
 
  private:
@@ -368,17 +364,10 @@ TEST_F(Hardening, HugeMeshFileIsRejectedBeforeParsing) {
 
 // ---- signals -----------------------------------------------------------------------
 
-/// Waits until `trace` holds at least `frames` flushed frames (true) or 60 s pass.
+/// Waits until `trace` holds at least `frames` flushed frames (true) or 60 s pass; checked
+/// after each write to the trace's folder.
 bool wait_for_frames(const std::string& trace, std::int64_t frames) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    try {
-      if (octocd::read_trace_summary(trace).frames >= frames) return true;
-    } catch (const std::exception&) {
-    }
-  }
-  return false;
+  return octocd::test::wait_for_trace_frames(trace, frames, std::chrono::seconds(60)) >= frames;
 }
 
 /// The N of "after frame N of" in a stop message, -1 when absent.
@@ -504,12 +493,9 @@ TEST(StopWithin, ASignalEndsAStepThatOutlastsTheGrace) {
       ::_exit(0);  // not reached: the grace ends the process
     }
     int status = 0;
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    pid_t got = 0;
-    while ((got = ::waitpid(child, &status, WNOHANG)) == 0 && std::chrono::steady_clock::now() < deadline)
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    if (got == 0) ::kill(child, SIGKILL), ::waitpid(child, &status, 0);
-    ASSERT_EQ(got, child) << "the step was not ended within 60 s";
+    const bool ended = octocd::test::wait_child(child, status, std::chrono::seconds(60));
+    if (!ended) ::kill(child, SIGKILL), ::waitpid(child, &status, 0);
+    ASSERT_TRUE(ended) << "the step was not ended within 60 s";
     ASSERT_TRUE(WIFEXITED(status));
     EXPECT_EQ(WEXITSTATUS(status), 128 + sig);
     const std::string text = slurp(err);
@@ -543,9 +529,7 @@ TEST(StopWithin, ASignalEndsAStepThatOutlastsTheGrace) {
 TEST_F(Hardening, RunStopsInsideALongStep) {
   const std::string trace = (dir_ / "r.h5").string();
   Child c(dir_, {"run", grid_scene(dir_), "--trace", trace, "--quiet"});
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (!fs::exists(trace) && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  octocd::test::wait_until([&] { return fs::exists(trace); }, {dir_}, std::chrono::seconds(60));
   ASSERT_TRUE(fs::exists(trace)) << "no trace within 60 s";
   ::kill(c.pid(), SIGTERM);
   bool ended = false;
@@ -675,11 +659,9 @@ TEST(StopOnSignals, TheDeadlineEndsAStopThatOutlastsIt) {
   }
   const auto t0 = std::chrono::steady_clock::now();
   int status = 0;
-  pid_t got = 0;
-  while ((got = ::waitpid(child, &status, WNOHANG)) == 0 && seconds_since(t0) < 60)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  if (got == 0) ::kill(child, SIGKILL), ::waitpid(child, &status, 0);
-  ASSERT_EQ(got, child) << "not ended within 60 s";
+  const bool ended = octocd::test::wait_child(child, status, std::chrono::seconds(60));
+  if (!ended) ::kill(child, SIGKILL), ::waitpid(child, &status, 0);
+  ASSERT_TRUE(ended) << "not ended within 60 s";
   EXPECT_LT(seconds_since(t0), 5.0);
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 143);

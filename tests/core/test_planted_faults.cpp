@@ -14,7 +14,7 @@
 
 #include "faults/planted_faults.hpp"
 #include "octocd/world.hpp"
-#include "unit/test_scenes.hpp"
+#include "support/test_scenes.hpp"
 
 using namespace octocd;
 using octocd::test::FaultyWorld;

@@ -9,7 +9,6 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <chrono>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -17,7 +16,6 @@
 #include <fstream>
 #include <iterator>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "octocd/error.hpp"
@@ -439,10 +437,14 @@ TEST(Trace, SigkillLeavesReadableFileWithFlushedFrames) {
   const std::string path = (temp_dir() / "killed.h5").string();
   fs::remove(path);
   const std::size_t nb = 16;
+  int ready[2];
+  ASSERT_EQ(::pipe(ready), 0);
   const pid_t child = ::fork();
   ASSERT_GE(child, 0);
   if (child == 0) {
-    // Child: write forever (until killed), flushing every 10 frames.
+    // Child: 35 frames, flushed every 10 (frames 31..35 appended, not flushed), then it
+    // says so on the pipe and waits to be killed with the writer open.
+    ::close(ready[0]);
     try {
       TraceOptions opt;
       opt.state_every = 5;
@@ -450,45 +452,30 @@ TEST(Trace, SigkillLeavesReadableFileWithFlushedFrames) {
       opt.contacts = true;
       TraceWriter w(path, make_meta(), make_bodies(nb), opt);
       w.append_state(0, make_state(0, nb));
-      for (std::int64_t fr = 1;; ++fr) {
-        w.append_frame(make_metrics(fr), make_state(fr, nb), make_contacts(fr));
-        ::usleep(2000);
-      }
+      for (std::int64_t fr = 1; fr <= 35; ++fr) w.append_frame(make_metrics(fr), make_state(fr, nb), make_contacts(fr));
+      const char done = 'w';
+      if (::write(ready[1], &done, 1) == 1)
+        for (;;) ::pause();
     } catch (...) {
     }
     ::_exit(3);
   }
 
-  // Parent: wait until at least 30 frames are flushed, then kill the writer.
-  TraceSummary s;
-  bool ready = false;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (std::chrono::steady_clock::now() < deadline) {
-    int status = 0;
-    if (::waitpid(child, &status, WNOHANG) == child) FAIL() << "writer exited early";
-    try {
-      if (fs::exists(path)) {
-        s = read_trace_summary(path);
-        if (s.frames >= 30) {
-          ready = true;
-          break;
-        }
-      }
-    } catch (const RuntimeError&) {
-      // The file may be between creation and the start of SWMR writing.
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  // Parent: wait for the child's word (the pipe reads end of file if it exits instead),
+  // then kill the writer.
+  ::close(ready[1]);
+  char word = 0;
+  const bool wrote = ::read(ready[0], &word, 1) == 1;
+  ::close(ready[0]);
   ::kill(child, SIGKILL);
   int status = 0;
   ::waitpid(child, &status, 0);
-  ASSERT_TRUE(ready) << "writer never flushed 30 frames";
+  ASSERT_TRUE(wrote) << "the writer ended before its 35 frames";
   EXPECT_TRUE(WIFSIGNALED(status));
 
-  s = read_trace_summary(path);
+  TraceSummary s = read_trace_summary(path);
   EXPECT_EQ(s.format, "octocd-trace");
-  EXPECT_GE(s.frames, 30);
-  EXPECT_EQ(s.frames % 10, 0) << "only whole flushes reach the file";
+  EXPECT_EQ(s.frames, 30) << "only whole flushes reach the file: frames 31..35 were never flushed";
   EXPECT_EQ(s.last_frame, s.frames);
   EXPECT_EQ(s.bodies, static_cast<std::int64_t>(nb));
   EXPECT_GE(s.state_rows, s.frames / 5 + 1 - 2);

@@ -17,8 +17,8 @@
 #include <string>
 #include <vector>
 
-#include "cli_run.hpp"
-#include "unit/external_trace.hpp"
+#include "support/cli_run.hpp"
+#include "support/external_trace.hpp"
 
 namespace fs = std::filesystem;
 

@@ -4,11 +4,12 @@
 
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <string>
-#include <thread>
 
 #include <unistd.h>
 
@@ -16,7 +17,7 @@
 #include "octocd/trace.hpp"
 #include "faults/planted_faults.hpp"
 #include "octocd/validation.hpp"
-#include "unit/test_scenes.hpp"
+#include "support/test_scenes.hpp"
 
 using namespace octocd;
 using octocd::test::FaultyWorld;
@@ -201,7 +202,10 @@ TEST(Validators, ResultsGoToTheTrace) {
 
 namespace {
 
-std::atomic<bool> g_slow_started{false}, g_slow_release{false};
+std::atomic<bool> g_slow_started{false};
+std::mutex g_slow_mutex;
+std::condition_variable g_slow_released;
+bool g_slow_release = false;  // guarded by g_slow_mutex
 
 /// A broadphase whose find_pairs does not return until released (up to 2 minutes): one
 /// call of an O(n^2) broadphase on 10^5 bodies, which polls nothing.
@@ -210,9 +214,8 @@ class EndlessBroadPhase : public BroadPhase {
   std::string name() const override { return "endless"; }
   void find_pairs(const std::vector<Aabb>&, std::vector<Pair>& out, BroadPhaseStats&) override {
     g_slow_started = true;
-    const auto until = std::chrono::steady_clock::now() + std::chrono::minutes(2);
-    while (!g_slow_release && std::chrono::steady_clock::now() < until)
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    std::unique_lock<std::mutex> lock(g_slow_mutex);
+    g_slow_released.wait_for(lock, std::chrono::minutes(2), [] { return g_slow_release; });
     out.clear();
   }
 };
@@ -236,7 +239,11 @@ TEST(Validators, AStopEndsACheckWhoseBroadphaseCallPollsNothing) {
   world.step();
   // Without the stop inside the check, observe would wait the 2 minutes and return.
   EXPECT_THROW(v.observe(world, true), ValidationStopped);
-  g_slow_release = true;  // the helper thread ends
+  {
+    const std::lock_guard<std::mutex> lock(g_slow_mutex);
+    g_slow_release = true;
+  }
+  g_slow_released.notify_all();  // the helper thread ends
   const std::vector<ValidationResult> rs = v.results();
   EXPECT_EQ(rs.size(), 14u);
   for (const ValidationResult& r : rs) EXPECT_GE(r.seconds, 0.0) << r.name;

@@ -17,8 +17,8 @@
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
 #include "octocd/world.hpp"
-#include "unit/external_trace.hpp"
-#include "unit/test_scenes.hpp"
+#include "support/external_trace.hpp"
+#include "support/test_scenes.hpp"
 
 using namespace octocd;
 

@@ -11,7 +11,7 @@
 #include "faults/planted_faults.hpp"
 #include "octocd/error.hpp"
 #include "octocd/validation.hpp"
-#include "unit/test_scenes.hpp"
+#include "support/test_scenes.hpp"
 
 using namespace octocd;
 using octocd::test::FaultyWorld;

@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <string>
 
-#include "unit/cli_run.hpp"
+#include "support/cli_run.hpp"
 
 using octocd::test::Result;
 using octocd::test::run_octocd;
@@ -38,7 +38,7 @@ TEST(CliRotation, CpuRefusesARotatingSceneNamingTheKey) {
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("rot-slope.json: rotation: engine cpu translates only"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("--engine bullet"), std::string::npos) << r.output;
-  // validate without --engine runs a rotating scene on Bullet (test_cli_untrusted); cpu asked for is refused.
+  // validate without --engine runs a rotating scene on Bullet (test_cli_hostile_input); cpu asked for is refused.
   const Result v = run_octocd("validate " + scene("rot-stack-10") + " --engine cpu --frames 2");
   EXPECT_EQ(v.code, 2) << v.output;
   EXPECT_NE(v.output.find("rotation: engine cpu"), std::string::npos) << v.output;

@@ -1,4 +1,6 @@
-// HDF5 traces (SPEC section 8). Layout: docs/trace-format.md.
+// The HDF5 trace writer (SPEC section 8; layout: docs/trace-format.md) and the metadata
+// and body tables it takes from an engine. The summary of a trace read back is in
+// trace_summary.cpp, the XDMF sidecar in trace_xdmf.cpp.
 //
 // The file is created with the latest format, every group, dataset and attribute is
 // created up front, then SWMR writing starts. Rows are buffered in memory and written in
@@ -19,8 +21,6 @@
 #include <cstring>
 #include <ctime>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -28,14 +28,13 @@
 #include "octocd/error.hpp"
 #include "octocd/stop.hpp"
 #include "octocd/version.hpp"
-#include "octocd/xml.hpp"
 #include "hdf5_handle.hpp"
+#include "trace_detail.hpp"
 
 namespace octocd {
 
 namespace {
 
-constexpr const char* kFormat = "octocd-trace";
 constexpr int kVersion = 1;
 constexpr int kStageCount = static_cast<int>(Stage::Count);
 constexpr const char* kCounterColumns[] = {"cell_candidates", "aabb_pairs", "dynamic_pairs", "box_tests",
@@ -496,7 +495,7 @@ void TraceWriter::create_layout(const TraceMetadata& meta, const TraceBodies& bo
 
   // ---- root attributes
   const hid_t root = m.file;
-  attr_string(root, "format", kFormat, path);
+  attr_string(root, "format", detail::kTraceFormat, path);
   attr_scalar(root, "version", H5T_STD_I32LE, H5T_NATIVE_INT, m.opt.v2 ? 2 : kVersion, path);
   attr_string(root, "scene_name", meta.scene_name, path);
   attr_string(root, "scene", meta.scene_json, path);
@@ -884,168 +883,6 @@ TraceBodies trace_bodies(const Engine& engine) {
   }
   for (const Shape& sh : shapes) tb.shape_names.push_back(sh.name);
   return tb;
-}
-
-// ---------------------------------------------------------------------------------------
-
-namespace {
-
-// Rows (first dimension) of a dataset of rank >= 1.
-std::int64_t dataset_rows(const detail::Hdf5Reader& h5, const std::string& name) {
-  const detail::Hdf5Reader::Dataset d = h5.open_dataset(name);
-  if (d.dims.empty()) h5.fail(name, "a scalar", "a dataset of rank >= 1 (docs/trace-format.md)");
-  return static_cast<std::int64_t>(d.dims[0]);
-}
-
-// The committed-rows root attribute (committed_frames, committed_states), -1 when absent
-// (a trace written before it existed).
-std::int64_t committed_rows(const detail::Hdf5Reader& h5, const char* name) {
-  if (!h5.has_attribute(name)) return -1;
-  const double v = h5.number_attribute(name);
-  if (!(v >= 0.0 && v <= static_cast<double>(trace_limits::kMaxFrames)))
-    h5.fail(std::string("/ (root attribute ") + name + ")", fmt::format("{}", v),
-            fmt::format("a row count in [0, {}]", trace_limits::kMaxFrames));
-  return static_cast<std::int64_t>(v);
-}
-
-TraceSummary summary_of(const detail::Hdf5Reader& h5) {
-  const std::string& path = h5.path();
-  TraceSummary s;
-  if (!h5.has_attribute("format"))
-    throw RuntimeError("trace '" + path + "': not an octocd trace (no root attribute 'format')");
-  s.format = h5.string_attribute("format");
-  if (s.format != kFormat)
-    throw RuntimeError("trace '" + path + "': not an octocd trace (format '" + s.format + "')");
-  const double version = static_cast<double>(h5.integer_attribute("version"));
-  if (!(version >= 0.0 && version <= 1000.0))
-    h5.fail("/ (root attribute version)", fmt::format("{}", version), "1");
-  s.version = static_cast<int>(version);
-  // Every /frames column of format version 1, opened by name; the shortest gives the
-  // complete rows (docs/trace-format.md), and at most committed_frames. Not listed by
-  // index: libhdf5 1.10 frees uninitialised pointers (SIGSEGV) when a corrupt group's link
-  // table fails to load (H5Lget_name_by_idx -> H5G__link_release_table; found by fuzz_trace).
-  std::int64_t rows = -1;
-  for (const std::string& name : frame_column_names()) {
-    const std::int64_t r = dataset_rows(h5, "/frames/" + name);
-    rows = rows < 0 ? r : std::min(rows, r);
-  }
-  const std::int64_t cf = committed_rows(h5, "committed_frames");
-  if (cf >= 0) rows = std::min(rows, cf);
-  s.frames = std::max<std::int64_t>(rows, 0);
-  s.state_rows = std::min({dataset_rows(h5, "/states/frame"), dataset_rows(h5, "/states/position"),
-                           dataset_rows(h5, "/states/velocity")});
-  const std::int64_t cs = committed_rows(h5, "committed_states");
-  if (cs >= 0) s.state_rows = std::min(s.state_rows, cs);
-  s.bodies = dataset_rows(h5, "/bodies/shape_id");
-  if (s.frames > 0) {
-    const detail::Hdf5Reader::Dataset d = h5.open_numeric("/frames/frame", 1);
-    h5.read_rows(d, static_cast<hsize_t>(s.frames - 1), 1, H5T_NATIVE_INT64, &s.last_frame);
-  }
-  return s;
-}
-
-}  // namespace
-
-TraceSummary read_trace_summary(const std::string& path) {
-  try {
-    const detail::Hdf5Reader h5(path, "an octocd trace");
-    return summary_of(h5);
-  } catch (const InputError& e) {  // a trace read back: a runtime failure of its writer's command
-    throw RuntimeError(std::string("trace ") + e.what());
-  }
-}
-
-// ---------------------------------------------------------------------------------------
-
-static std::string write_xdmf(const detail::Hdf5Reader& h5, const TraceSummary& sum);
-
-std::string write_xdmf_sidecar(const std::string& trace_path) {
-  const std::string& path = trace_path;
-  try {
-    const detail::Hdf5Reader h5(path, "an octocd trace");
-    return write_xdmf(h5, summary_of(h5));  // summary_of checks it is a trace
-  } catch (const InputError& e) {
-    throw RuntimeError(std::string("trace ") + e.what());
-  }
-}
-
-static std::string write_xdmf(const detail::Hdf5Reader& h5, const TraceSummary& sum) {
-  const std::string& path = h5.path();
-  const double dt = h5.number_attribute("dt");
-  const auto rows = static_cast<std::size_t>(sum.state_rows);
-  std::vector<std::int64_t> frames(rows);
-  if (rows > 0) h5.read_rows(h5.open_numeric("/states/frame", 1), 0, rows, H5T_NATIVE_INT64, frames.data());
-  const std::int64_t disk_rows = dataset_rows(h5, "/states/position");
-  const std::size_t nb = static_cast<std::size_t>(sum.bodies);
-  // The trace's file name, XML-escaped.
-  const std::string name = xml_escape(std::filesystem::path(path).filename().string());
-  // /bodies/half_extents and /bodies/group_id appeared after the first traces: older
-  // files get the sidecar without them.
-  const bool has_half = h5.exists("/bodies/half_extents");
-  const bool has_group = h5.exists("/bodies/group_id");
-  const std::string xmf = path + ".xmf";
-
-  std::ostringstream o;
-  o.precision(15);
-  const std::string all = std::to_string(disk_rows) + " " + std::to_string(nb) + " 3";
-  // Row r of a (rows x bodies x 3) dataset as an (bodies x 3) item, in XDMF 3's HDF5
-  // hyperslab notation "file:/dataset|start:stride:count:dataset dimensions" (one value per
-  // dimension in each group). ParaView's Xdmf3 readers read it; they do not read the older
-  // ItemType="HyperSlab" wrapper (its array stays untyped: "unrecognized array type [None]").
-  auto slab = [&](std::size_t r, const char* dataset) {
-    o << "          <DataItem Dimensions=\"" << nb << " 3\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">"
-      << name << ":" << dataset << "|" << r << " 0 0:1 1 1:1 " << nb << " 3:" << all << "</DataItem>\n";
-  };
-  o << "<?xml version=\"1.0\" ?>\n"
-    << "<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n"
-    << "<!-- octocd trace sidecar: open in ParaView with the XDMF Reader (Xdmf3) -->\n"
-    << "<Xdmf Version=\"3.0\">\n  <Domain>\n"
-    << "    <Grid Name=\"states\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
-  for (std::size_t r = 0; r < rows; ++r) {
-    o << "      <Grid Name=\"frame " << frames[r] << "\" GridType=\"Uniform\">\n"
-      // Shortest text that reads back as the same float32 time (dt is float32 in octocd).
-      << "        <Time Value=\"" << fmt::format("{}", static_cast<float>(static_cast<double>(frames[r]) * dt))
-      << "\"/>\n"
-      << "        <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"" << nb
-      << "\" NodesPerElement=\"1\"/>\n"
-      << "        <Geometry GeometryType=\"XYZ\">\n";
-    slab(r, "/states/position");
-    o << "        </Geometry>\n"
-      << "        <Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">\n";
-    slab(r, "/states/velocity");
-    o << "        </Attribute>\n"
-      << "        <Attribute Name=\"shape_id\" AttributeType=\"Scalar\" Center=\"Node\">\n"
-      << "          <DataItem Dimensions=\"" << nb
-      << "\" NumberType=\"UInt\" Precision=\"4\" Format=\"HDF\">" << name
-      << ":/bodies/shape_id</DataItem>\n"
-      << "        </Attribute>\n"
-      << "        <Attribute Name=\"inverse_mass\" AttributeType=\"Scalar\" Center=\"Node\">\n"
-      << "          <DataItem Dimensions=\"" << nb
-      << "\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << name
-      << ":/bodies/inverse_mass</DataItem>\n"
-      << "        </Attribute>\n";
-    if (has_half)
-      o << "        <Attribute Name=\"half_extents\" AttributeType=\"Vector\" Center=\"Node\">\n"
-        << "          <DataItem Dimensions=\"" << nb
-        << " 3\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << name
-        << ":/bodies/half_extents</DataItem>\n"
-        << "        </Attribute>\n";
-    if (has_group)
-      o << "        <Attribute Name=\"group_id\" AttributeType=\"Scalar\" Center=\"Node\">\n"
-        << "          <DataItem Dimensions=\"" << nb
-        << "\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">" << name
-        << ":/bodies/group_id</DataItem>\n"
-        << "        </Attribute>\n";
-    o << "      </Grid>\n";
-  }
-  o << "    </Grid>\n  </Domain>\n</Xdmf>\n";
-
-  std::ofstream out(xmf, std::ios::binary | std::ios::trunc);
-  if (!out) throw RuntimeError("trace '" + path + "': cannot write the XDMF sidecar '" + xmf + "'");
-  out << o.str();
-  out.close();
-  if (!out) throw RuntimeError("trace '" + path + "': writing the XDMF sidecar '" + xmf + "' failed");
-  return xmf;
 }
 
 }  // namespace octocd

@@ -15,8 +15,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "unit/cli_run.hpp"
-#include "unit/trace_edit.hpp"
+#include "support/cli_run.hpp"
+#include "support/trace_edit.hpp"
 
 namespace fs = std::filesystem;
 

@@ -1,0 +1,132 @@
+"""What every part of octocd's report shares (reports/make_report.py is the entry point): the
+one-line error (exit 2), numpy and matplotlib (exit 1 without them), the paper's tables, the
+stage and engine colours, the file being read (CURRENT, for the error of a malformed one) and
+the octocd binary that reads traces (OCTOCD), number formatting and the marks of points
+measured under load."""
+
+import json
+import math
+import os
+import sys
+
+
+PAPER = json.load(open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "paper_tables.json")))
+STAGES = ["integrate", "aabbs", "broadphase", "midphase", "response", "metrics"]
+STAGE_COLORS = ["#4e79a7", "#a0cbe8", "#f28e2b", "#e15759", "#59a14f", "#b6992d"]
+ENGINE_COLORS = {"cpu": "#4e79a7", "cuda": "#59a14f", "bullet": "#e15759"}
+NOISE_NOTE = ("Timings on a shared machine move with its load (other processes, builds): compare figures "
+              "taken in one run; spreads are min-max over the repetitions.")
+
+
+def fail(msg):
+    """Bad input: one line naming the file and what is allowed, exit 2 (never a traceback)."""
+    print(f"octocd report: error: {msg}", file=sys.stderr)
+    sys.exit(2)
+
+
+try:
+    import numpy as np  # noqa: F401  (the other report_*.py modules take np from here)
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+except ImportError as e:  # exit 1: a missing dependency is not bad input
+    print(f"octocd report: runtime failure: {e}; install Debian's python3-matplotlib and python3-numpy",
+          file=sys.stderr)
+    sys.exit(1)
+
+plt.rcParams.update({"svg.fonttype": "none", "font.family": "sans-serif", "font.size": 9,
+                     "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100})
+
+
+CURRENT = ["the inputs"]  # the file being read, for the one-line error of a malformed one
+OCTOCD = [None]  # the octocd binary that reads traces (--octocd)
+
+
+def num(v, digits=3):
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    a = abs(v)
+    if a >= 1000:
+        return f"{v:,.0f}"
+    if a >= 100:
+        return f"{v:.1f}"
+    if a == 0:
+        return "0"
+    return f"{v:.{max(digits - 1 - int(math.floor(math.log10(a))), 0)}f}"
+
+
+def med(s):
+    return s.get("median") if isinstance(s, dict) else None
+
+
+def spread_text(s, digits=3):
+    """median (min–max, n=N); '(1 rep.)' when there was one repetition: no spread to judge by."""
+    if not isinstance(s, dict) or "median" not in s:
+        return "-"
+    n = s.get("n", 1)
+    if n > 1:
+        return f"{num(s['median'], digits)} ({num(s['min'], digits)}–{num(s['max'], digits)}, n={n})"
+    return f"{num(s['median'], digits)} (1 rep.)"
+
+
+def overlap(a, b):
+    """Whether two spreads' min-max ranges overlap (or either has one repetition): no verdict then."""
+    if min(a.get("n", 1), b.get("n", 1)) < 2:
+        return True
+    return not (a["max"] < b["min"] or b["max"] < a["min"])
+
+
+def load_warning(m):
+    """Why timings of this machine description are suspect (OpenMP threads oversubscribing the
+    cores, or a load at the start or end above them), or ''. A run-level note; verdicts are
+    marked per point (point_load)."""
+    threads, omp = m.get("threads") or 0, m.get("omp_threads") or 1
+    why = []
+    if threads and omp > threads:
+        why.append(f"{omp} OpenMP threads on {threads} cores")
+    # At the start the load is the others'; at the end it includes the bench's own threads.
+    for key, when, own in (("load_average", "start", omp), ("load_average_end", "end", 0)):
+        la = m.get(key)
+        if threads and isinstance(la, list) and la and isinstance(la[0], (int, float)) and la[0] + own > threads + 1:
+            why.append(f"load {la[0]:.1f} at the {when} leaves {max(threads - la[0], 0):.1f} of {threads} cores free "
+                       f"for {omp} OpenMP thread(s)" + (" (its own included)" if when == "end" else ""))
+    return "; ".join(why)
+
+
+def own_threads(p, m):
+    """The threads the bench itself ran while measuring point p: the CPU engine's OpenMP
+    threads, one for any other engine (cuda's host thread, Bullet)."""
+    return (m.get("omp_threads") or 1) if p.get("params", {}).get("engine") == "cpu" else 1
+
+
+def point_load(p, m):
+    """Why point p's timing is suspect, or '': the load of the other processes exceeded the
+    cores left free for the bench's own threads while it ran. Read from the point's load
+    average (recorded at its end, the bench's own threads included: others = load - own);
+    a point without one is judged by the run's load at the start (others') and end."""
+    threads = m.get("threads") or 0
+    if not threads:
+        return ""
+    own = own_threads(p, m)
+    if own > threads:
+        return f"{own} threads on {threads} cores"
+    la = p.get("load_average")
+    if isinstance(la, list) and la and isinstance(la[0], (int, float)):
+        others = [(max(la[0] - own, 0.0), "during the point")]
+    else:
+        others = []
+        for key, sub in (("load_average", 0), ("load_average_end", own)):
+            x = m.get(key)
+            if isinstance(x, list) and x and isinstance(x[0], (int, float)):
+                others.append((max(x[0] - sub, 0.0), "at the run's " + ("start" if sub == 0 else "end")))
+    for load, when in others:
+        free = threads - load
+        if own > free + 1e-9:
+            return f"load of other processes {load:.1f} {when} left {max(free, 0):.1f} of {threads} cores free for " \
+                   f"{own} thread(s)"
+    return ""
+
+
+def load_mark(m, *points):
+    """'⚠ ' when one of the points a verdict compares was measured under load (point_load)."""
+    return "⚠ " if any(p is not None and point_load(p, m) for p in points) else ""

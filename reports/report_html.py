@@ -1,0 +1,133 @@
+"""The report's output (reports/make_report.py): the output folder checked, one document
+written as HTML (plots inline as SVG) and Markdown (plots as plots/*.svg), every file
+renamed into place only once all are written."""
+
+import html
+import io
+import os
+import stat
+
+from report_common import fail, plt
+
+
+def output_dir(path, option):
+    """Exit 2 naming `option` unless `path` is a writable folder or can be made one: not a
+    file, a device, a symbolic link (e.g. to /etc) or a read-only folder."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        parent = os.path.dirname(os.path.abspath(path))
+        while not os.path.exists(parent):
+            parent = os.path.dirname(parent)
+        if not os.path.isdir(parent) or not os.access(parent, os.W_OK) or not os.stat(parent).st_mode & 0o222:
+            fail(f"{option} {path}: cannot be created in {parent} (not a writable folder); allowed: a folder octocd "
+                 "may write in")
+        return
+    if stat.S_ISLNK(st.st_mode):
+        fail(f"{option} {path}: a symbolic link (to {os.readlink(path)}); allowed: a folder path that is not a link")
+    if not stat.S_ISDIR(st.st_mode):
+        kind = "a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device" \
+            if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "a file"
+        fail(f"{option} {path}: {kind}, not a folder; allowed: a folder (created when missing)")
+    if not os.access(path, os.W_OK) or not st.st_mode & 0o222:
+        fail(f"{option} {path}: a read-only folder; allowed: a folder octocd may write in")
+
+
+class Outputs:
+    """Every file of one report, kept in memory until commit(): then each is written to a
+    temporary file beside its destination, and only when all are written are they renamed
+    into place (a full disk or a size limit leaves the earlier report as it was)."""
+
+    def __init__(self):
+        self.files = {}  # path -> text
+
+    def put(self, path, text):
+        self.files[path] = text
+
+    def commit(self):
+        temps = []
+        try:
+            for path, text in self.files.items():
+                os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+                tmp = os.path.join(os.path.dirname(path), f".{os.path.basename(path)}.tmp.{os.getpid()}")
+                temps.append((tmp, path))
+                with open(tmp, "w", newline="") as f:
+                    f.write(text)
+                    f.flush()
+                    os.fsync(f.fileno())
+            for tmp, path in temps:
+                os.replace(tmp, path)
+        except BaseException:
+            for tmp, _ in temps:
+                try:
+                    os.unlink(tmp)
+                except OSError:
+                    pass
+            raise
+
+
+class Doc:
+    """One report, written both as HTML and as Markdown (files committed by write())."""
+
+    def __init__(self, out, csv_dir=None):
+        self.out = out
+        self.html, self.md = [], []
+        self.nplot = 0
+        self.ncsv = 0
+        self.section = "report"
+        self.csv_dir = csv_dir
+        self.files = Outputs()
+
+    def h(self, level, text, anchor=None):
+        a = f' id="{anchor}"' if anchor else ""
+        self.html.append(f"<h{level}{a}>{html.escape(text)}</h{level}>")
+        self.md.append("#" * level + " " + text + "\n")
+
+    def p(self, text, cls=None):
+        c = f' class="{cls}"' if cls else ""
+        self.html.append(f"<p{c}>{html.escape(text)}</p>")
+        self.md.append(text + "\n")
+
+    def table(self, header, rows, note=None, name="table"):
+        cls = ' class="compact"' if len(header) > 9 else ""
+        t = [f'<div class="wide"><table{cls}><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
+        for r in rows:
+            t.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>")
+        t.append("</tbody></table></div>")
+        self.html.append("".join(t))
+        self.md.append("| " + " | ".join(str(x) for x in header) + " |")
+        self.md.append("|" + "|".join("---" for _ in header) + "|")
+        for r in rows:
+            self.md.append("| " + " | ".join(str(x).replace("|", "\\|") for x in r) + " |")
+        self.md.append("")
+        if note:
+            self.p(note, "note")
+
+    def figure(self, fig, name, caption):
+        self.nplot += 1
+        fname = f"{self.nplot:02d}-{name}.svg"
+        buf = io.StringIO()
+        fig.savefig(buf, format="svg", bbox_inches="tight")
+        plt.close(fig)
+        svg = buf.getvalue()
+        self.files.put(os.path.join(self.out, "plots", fname), svg)
+        body = svg[svg.find("<svg"):]
+        self.html.append(f'<figure>{body}<figcaption>{html.escape(caption)}</figcaption></figure>')
+        self.md.append(f"![{caption}](plots/{fname})\n\n*{caption}*\n")
+
+    def write(self, title):
+        css = """body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1180px;margin:2em auto;
+padding:0 1em;color:#222;line-height:1.45}h1{border-bottom:2px solid #4e79a7;padding-bottom:.2em}
+h2{margin-top:2em;border-bottom:1px solid #ccc}table{border-collapse:collapse;margin:.8em 0;font-size:.86em}
+th,td{border:1px solid #ccc;padding:.25em .55em;text-align:right}th{background:#eef3f8}
+td:first-child,th:first-child{text-align:left}tbody tr:nth-child(even){background:#fafafa}
+figure{margin:1em 0}figure svg{max-width:100%;height:auto}figcaption{font-size:.85em;color:#555}
+.note{font-size:.85em;color:#555}.meta{font-size:.85em;background:#f6f6f6;padding:.5em .8em;border-left:3px solid #4e79a7}
+nav a{margin-right:1em}.wide{overflow-x:auto;max-width:100%}
+table.compact{font-size:.72em}table.compact th,table.compact td{padding:.15em .3em}"""
+        page = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
+                f"<title>{html.escape(title)}</title><style>{css}</style></head><body>",
+                f"<h1>{html.escape(title)}</h1>"] + self.html + ["</body></html>"]
+        self.files.put(os.path.join(self.out, "index.html"), "\n".join(page) + "\n")
+        self.files.put(os.path.join(self.out, "report.md"), f"# {title}\n\n" + "\n".join(self.md) + "\n")
+        self.files.commit()

@@ -1,0 +1,184 @@
+"""The report's plots (reports/make_report.py): steps/s bars per scene and configuration
+(log axis, the paper's figures on their own axis, speed-ups printed) and stage shares, with
+the labels of points and engines."""
+
+from report_common import ENGINE_COLORS, STAGES, STAGE_COLORS, med, np, num, plt
+
+
+def steps_points(g):
+    return [p for p in g["points_list"] if p.get("status") == "ok" and "windows" in p]
+
+
+def axis_label(p, axis):
+    lab = p.get("params", {}).get("labels", {}).get(axis)
+    val = p.get("params", {}).get("axes", {}).get(axis)
+    return lab if lab is not None else str(val)
+
+
+# The engine registry's own broadphases (core/src/engine_registry.cpp: EngineInfo::own_broadphase
+# -> own_broadphase_class), for results whose points record only `engine_broadphase`; a test
+# (tests/report/test_report_comparisons.py) keeps this in step with the registry.
+OWN_BROADPHASE_CLASS = {"bullet-dbvt": "btDbvtBroadphase"}
+
+
+def point_label(p, axis):
+    """What point p ran on `axis`: the axis label, or for an axis its engine ignores what the
+    engine ran instead (its own broadphase by the registry's class name, "no midphase")."""
+    ignores = p.get("ignores")
+    if axis and isinstance(ignores, dict) and axis in ignores:
+        if axis == "broadphase":
+            eb = p.get("engine_broadphase") or ""
+            return OWN_BROADPHASE_CLASS.get(eb, eb or "own broadphase")
+        if axis == "midphase":
+            return "no midphase"
+    return axis_label(p, axis) if axis else ""
+
+
+def engines_of(g):
+    return g["first"]["settings"].get("engines", [])
+
+
+def first_window(p):
+    return next(iter(p["windows"].values()))
+
+
+HATCHES = ["", "///", "...", "xxx", "\\\\\\", "ooo", "+++"]
+
+
+def log_ticks(ax, axis="y"):
+    """Readable log ticks: 1, 2, 5 per decade, written as plain numbers (200, 1,000, 0.05)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    a = ax.yaxis if axis == "y" else ax.xaxis
+    a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    def text(v, _):
+        if v <= 0:
+            return ""
+        if v >= 1e6:
+            return f"{v / 1e6:g}M"
+        if v >= 1e4:
+            return f"{v / 1e3:g}k"
+        return f"{v:,.0f}" if v >= 1 else f"{v:g}"
+    a.set_major_formatter(FuncFormatter(text))
+    a.set_minor_formatter(NullFormatter())
+
+
+def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"], paper=None):
+    """steps/s bars per scene (or xkey): one colour per engine, a hatch per group_axis value,
+    each bar after an engine's first value of group_axis labelled with its speed-up over that
+    one ("1.8x"); `paper` {(scene, label): FPS} draws the paper's figures (FPS of a whole Unity
+    application) in a panel of their own beside ours, never on our steps/s axis."""
+    scenes = list(dict.fromkeys(xkey(p) for p in pts))
+    vals = list(dict.fromkeys(point_label(p, group_axis) for p in pts))
+    engines = list(dict.fromkeys(p["params"]["engine"] for p in pts))
+    combos = [(v, e) for e in engines for v in vals
+              if any(p["params"]["engine"] == e and point_label(p, group_axis) == v for p in pts)]
+    if not scenes or not combos:
+        return
+    fpts = {}  # (scene, engine) -> {value: steps/s spread}
+    for p in pts:
+        fpts.setdefault((xkey(p), p["params"]["engine"]), {})[point_label(p, group_axis)] = \
+            first_window(p)["steps_per_s"]
+    width_in = min(11, max(6, 1.4 * len(scenes) + 0.22 * len(combos) * len(scenes)))
+    paper_vals = sorted({v for (sc, v) in paper if sc in scenes},
+                        key=lambda v: vals.index(v) if v in vals else len(vals)) if paper else []
+    if paper_vals:
+        fig, (ax, pax) = plt.subplots(1, 2, figsize=(min(14, width_in + 4), 4.2),
+                                      gridspec_kw={"width_ratios": [max(width_in, 1), 4]})
+    else:
+        fig, ax = plt.subplots(figsize=(width_in, 4.2))
+    width = 0.8 / len(combos)
+    for k, (val, eng) in enumerate(combos):
+        ys, lo, hi = [], [], []
+        for sc in scenes:
+            s = fpts.get((sc, eng), {}).get(val)
+            ys.append(s["median"] if s else np.nan)
+            lo.append(s["median"] - s["min"] if s else 0)
+            hi.append(s["max"] - s["median"] if s else 0)
+        xs = np.arange(len(scenes)) + (k - (len(combos) - 1) / 2) * width
+        colour = ENGINE_COLORS.get(eng, "#777")
+        shade = 1.0 - 0.35 * (vals.index(val) / max(len(vals) - 1, 1))  # lighter for later values
+        ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=f"{eng} {val}".strip(), color=colour, alpha=shade,
+               hatch=HATCHES[vals.index(val) % len(HATCHES)], edgecolor="#222", linewidth=0.6)
+        # The speed-up over the engine's first value on this axis, printed over the bar.
+        for i, sc in enumerate(scenes):
+            mine = fpts.get((sc, eng), {})
+            ref_val = next((v for v in vals if v in mine), None)
+            if ref_val is None or ref_val == val or val not in mine or not med(mine[ref_val]) or not med(mine[val]):
+                continue
+            ax.annotate(speedup_text(med(mine[val]) / med(mine[ref_val])), (xs[i], mine[val]["max"]),
+                        xytext=(0, 2), textcoords="offset points", ha="center", va="bottom", fontsize=7,
+                        rotation=90 if len(combos) > 4 else 0)
+    ax.set_xticks(np.arange(len(scenes)))
+    ax.set_xticklabels(scenes, rotation=0)
+    ax.set_yscale("log")
+    log_ticks(ax)
+    ax.margins(y=0.15)
+    ax.set_ylabel("octocd steps/s (median, bars min–max)")
+    ax.set_title("octocd" + (f" (Nx: speed-up over the engine's first {group_axis})" if group_axis else ""),
+                 fontsize=9)
+    fig.suptitle(title, fontsize=10)
+    ax.legend(fontsize=9, ncol=min(len(combos), 4), loc="upper center", bbox_to_anchor=(0.5, -0.1))
+    if paper_vals:
+        pw = 0.8 / len(paper_vals)
+        for k, val in enumerate(paper_vals):
+            ys = [paper.get((sc, val), np.nan) for sc in scenes]
+            xs = np.arange(len(scenes)) + (k - (len(paper_vals) - 1) / 2) * pw
+            pax.bar(xs, ys, pw, color="#bbb", edgecolor="#222", linewidth=0.6,
+                    hatch=HATCHES[(vals.index(val) if val in vals else k) % len(HATCHES)], label=f"paper {val}")
+            for x, y in zip(xs, ys):
+                if not np.isnan(y):
+                    pax.annotate(f"{y:g}", (x, y), xytext=(0, 2), textcoords="offset points", ha="center",
+                                 va="bottom", fontsize=6, rotation=90)
+        pax.set_xticks(np.arange(len(scenes)))
+        pax.set_xticklabels(scenes, rotation=30, ha="right", fontsize=7)
+        pax.margins(y=0.2)
+        pax.set_ylabel("paper FPS (Unity, whole application)")
+        pax.set_title("the paper's FPS (its own axis)", fontsize=9)
+        pax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=len(paper_vals))
+    doc.figure(fig, name, title + ("; the paper's FPS in the right-hand panel, on its own axis" if paper_vals else ""))
+
+
+def speedup_text(r):
+    """A speed-up as printed on plots and in tables: 1.84x, 0.52x."""
+    return f"{num(r)}x"
+
+
+def stage_shares(doc, pts, group_axis, title, name):
+    """Per point the share of each stage in the step (bars, %) with the stage's time in ms printed
+    in its segment and the step's total ms at the bar's end; the same as a table (ms and %)."""
+    rows = [p for p in pts if p.get("has_stage", {}).get("midphase", True)]
+    if not rows:
+        return
+    labels, shares, times = [], [], []
+    for p in rows:
+        w = first_window(p)
+        st = [med(w["stage_ms"].get(s, {})) or 0.0 for s in STAGES]
+        tot = sum(st) or 1.0
+        shares.append([100.0 * x / tot for x in st])
+        times.append(st)
+        labels.append(f"{p['params']['scene']} {point_label(p, group_axis)} {p['params']['engine']}")
+    fig, ax = plt.subplots(figsize=(9, 0.26 * len(rows) + 1.3))
+    left = np.zeros(len(rows))
+    arr = np.array(shares)
+    for k, s in enumerate(STAGES):
+        ax.barh(np.arange(len(rows)), arr[:, k], left=left, color=STAGE_COLORS[k], label=s)
+        for i in range(len(rows)):
+            if arr[i, k] >= 9.0:  # room for the figure inside the segment
+                ax.text(left[i] + arr[i, k] / 2, i, num(times[i][k], 2), ha="center", va="center", fontsize=6,
+                        color="black")
+        left += arr[:, k]
+    for i in range(len(rows)):
+        ax.text(101, i, f"{num(sum(times[i]), 3)} ms", ha="left", va="center", fontsize=7)
+    ax.set_yticks(np.arange(len(rows)))
+    ax.set_yticklabels(labels, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlim(0, 100)
+    ax.set_xlabel("share of the step (%); in the segments: the stage's median ms per frame; right: the step's ms")
+    ax.set_title(title)
+    ax.legend(fontsize=9, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.12 - 1.0 / max(len(rows), 4)))
+    doc.figure(fig, name, title + " (ms per frame printed in each segment and at the bar's end)")
+    doc.table(["point"] + [f"{s} ms (%)" for s in STAGES] + ["sum ms"],
+              [[lab] + [f"{num(t, 3)} ({num(sh, 2)}%)" for t, sh in zip(ts, shs)] + [num(sum(ts), 3)]
+               for lab, ts, shs in zip(labels, times, shares)],
+              "Median ms per frame of each stage over the repetitions, its share of their sum in brackets.",
+              name=name)
