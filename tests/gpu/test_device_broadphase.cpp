@@ -21,6 +21,11 @@
 // find() makes no allocation and no host synchronisation: it is captured into a CUDA
 // graph, which then runs on two different sets of boxes (same n) and gives each one's set.
 //
+// `octree` with its pair cache (broadphase_coherent.cu): on a coherent motion every settled
+// call's keys are flat's in flat's order (Plain, Build and Hit; a jump makes a Rerun), from
+// one CUDA graph per plan too, and incoherent input backs off to the one-shot octree; the
+// host planner (coherent_plan.hpp) is checked verdict by verdict without a device.
+//
 // Without a usable CUDA device the device tests are SKIPPED with the reason; the error
 // paths, a check of the AABB sets themselves and the host model of `lbvh` (its tree
 // checked node by node and its pairs against `flat` on every set, a planted fault caught)
