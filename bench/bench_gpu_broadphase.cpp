@@ -32,9 +32,18 @@
 // body per doubling of n against the previous size, ((t2/n2) / (t1/n1))^(1/log2(n2/n1)),
 // pairs, exact AABB tests, device bytes; the machine; issue 8's targets met or not.
 //
+// Coherent motion (issue 33 item 4): the same boxes moving at constant velocity for
+// --motion-steps steps (reflected at the centres' cube); per step the one-shot `octree` and
+// `octree` with its pair cache (broadphase_coherent.cu: a Build, a Hit, or after a miss a
+// rerun, all timed) on the same boxes; their keys compared bit for bit every step and with
+// the CPU oracle every --motion-oracle-every steps; per margin of the fattened boxes: mean,
+// median, min and max ms a step, the mean of Build and of Hit steps, the plans and reruns.
+//
 // Usage: bench_gpu_broadphase [--sizes 1e4,1e5,1e6,4e6] [--reps 20] [--warmup 3]
 //          [--only octree,octree-strict,spatial-hash,lbvh] [--cell-size 0.24] [--depth -1]
 //          [--seed 1] [--flat-max 10000] [--oracle-max 4000000] [--graph] [--json FILE]
+//          [--motion-steps 100] [--motion-sizes 1e6] [--motion-margins 0.125,0.25]
+//          [--motion-speed 1] [--motion-dt 0.001] [--motion-oracle-every 1]
 // --graph times one CUDA graph launch of find() + sort (captured once; the engine replays
 // its step from a graph) instead of the launches on the stream.
 // Exit: 0 all checks passed; 1 runtime error (no CUDA device, CUDA error); 2 bad
@@ -44,6 +53,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <ctime>
 #include <exception>
 #include <fstream>
@@ -53,6 +63,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -286,6 +297,13 @@ struct Options {
   std::uint32_t cpu_flat_max = 20000;
   bool graph = false;
   std::string json_path;
+  // The coherent-motion sequence (`octree` with its pair cache against the one-shot `octree`).
+  std::vector<std::uint32_t> motion_sizes{1000000};
+  int motion_steps = 100;
+  std::vector<float> motion_margins{0.125f};
+  float motion_speed = 1.0f;   ///< largest speed (m/s)
+  float motion_dt = 0.001f;    ///< step (s)
+  int motion_oracle_every = 1; ///< CPU oracle every this many steps (0: never)
 };
 
 struct Result {
@@ -658,6 +676,288 @@ std::vector<Target> evaluate_targets(const std::vector<Result>& rs, const Option
   return ts;
 }
 
+// ---- the coherent-motion sequence ------------------------------------------------------------
+
+/// One sequence: per step the time of `octree` with its pair cache (every find() of the
+/// step, reruns included) and of the one-shot `octree`, on the same boxes.
+struct MotionResult {
+  std::uint32_t n = 0;
+  float margin = 0.0f;  ///< margin fraction of the median body size
+  bool ok = false;
+  std::string error;
+  std::vector<double> coherent_ms, oneshot_ms;  ///< per step
+  std::vector<int> plans;                       ///< per step: the plan of the valid find()
+  int reruns = 0, regrows = 0, oracle_checks = 0;
+  std::uint64_t pairs_first = 0, pairs_last = 0;
+  std::string check = "identical";
+  bool check_ok = true;
+};
+
+double mean(const std::vector<double>& v) {
+  double t = 0.0;
+  for (double x : v) t += x;
+  return v.empty() ? 0.0 : t / static_cast<double>(v.size());
+}
+
+/// Mean of v over the steps whose plan is `plan` (0 when none).
+double mean_of_plan(const std::vector<double>& v, const std::vector<int>& plans, int plan) {
+  double t = 0.0;
+  int k = 0;
+  for (std::size_t i = 0; i < v.size(); ++i)
+    if (plans[i] == plan) {
+      t += v[i];
+      ++k;
+    }
+  return k ? t / k : 0.0;
+}
+
+/// The bench's boxes moving at constant velocity (a random direction, speed uniform in
+/// [0, --motion-speed)), reflected at the centres' cube; the oracle (CPU `flat` up to
+/// --cpu-flat-max bodies, else the CPU `octree`, one instance over the sequence) every
+/// --motion-oracle-every steps; the two device sets compared every step. Each broadphase
+/// is replayed from CUDA graphs with --graph (the coherent one: a graph per plan).
+MotionResult run_motion(std::uint32_t n, float fraction, const Options& o, cudaStream_t stream) {
+  MotionResult r;
+  r.n = n;
+  r.margin = fraction;
+  std::vector<Aabb> boxes = make_boxes(n, o.seed);
+  const Aabb domain = domain_for(n);
+  const float h = static_cast<float>(cube_side(n) / 2.0);
+  std::vector<float> c(3 * static_cast<std::size_t>(n)), v(3 * static_cast<std::size_t>(n));
+  octocd::SplitMix64 rng(o.seed + 0x5bd1e995ull);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    float d[3];
+    float len = 0.0f;
+    do {
+      for (float& x : d) x = rng.uniform(-1.0f, 1.0f);
+      len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    } while (len > 1.0f || len < 1e-3f);
+    const float speed = o.motion_speed * rng.unit();
+    for (int a = 0; a < 3; ++a) v[3 * i + a] = speed * d[a] / len;
+    c[3 * i] = 0.5f * (boxes[i].min.x + boxes[i].max.x);
+    c[3 * i + 1] = 0.5f * (boxes[i].min.y + boxes[i].max.y);
+    c[3 * i + 2] = 0.5f * (boxes[i].min.z + boxes[i].max.z);
+  }
+  BroadPhaseConfig cfg;
+  cfg.name = "octree";
+  cfg.octree_depth = o.depth;
+  auto coherent = octocd::gpu::make_device_coherent_octree(cfg, domain, fraction);
+  auto oneshot = octocd::gpu::make_device_broadphase(cfg, domain);
+  BroadPhaseConfig ocfg;
+  ocfg.name = n <= o.cpu_flat_max ? "flat" : "octree";
+  ocfg.octree_depth = -1;
+  auto cpu = octocd::make_broadphase(ocfg, domain);
+  const int shift = octocd::gpu::key_bits(n);
+  DeviceBuffer<Aabb> d_boxes("motion AABBs");
+  octocd::gpu::upload(d_boxes, boxes, stream);
+  coherent->reserve(n, stream);
+  oneshot->reserve(n, stream);
+  std::size_t cap = 2 * static_cast<std::size_t>(n) + 64;
+  DeviceBuffer<unsigned long long> keys_c("coherent keys"), scratch_c("coherent scratch"), keys_o("one-shot keys"),
+      scratch_o("one-shot scratch");
+  DeviceBuffer<std::uint32_t> total("pair total");
+  DeviceBuffer<unsigned long long> candidates("exact tests");
+  total.reset(1);
+  candidates.reset(1);
+  for (auto* b : {&keys_c, &scratch_c, &keys_o, &scratch_o}) b->reset(cap);
+  HostCounters host;
+  Event start, stop;
+  Graph g_oneshot;
+  Graph g_plan[octocd::gpu::kBroadPhasePlans];
+  auto drop_graphs = [&] {
+    for (Graph* g : {&g_oneshot, &g_plan[0], &g_plan[1], &g_plan[2]}) {
+      if (g->exec) (void)cudaGraphExecDestroy(g->exec);
+      if (g->graph) (void)cudaGraphDestroy(g->graph);
+      g->exec = nullptr;
+      g->graph = nullptr;
+    }
+  };
+  auto out_for = [&](DeviceBuffer<unsigned long long>& k, DeviceBuffer<unsigned long long>& sc) {
+    octocd::gpu::PairOutput out;
+    out.keys = k.get();
+    out.scratch = sc.get();
+    out.capacity = static_cast<std::uint32_t>(cap);
+    out.total = total.get();
+    out.candidates = candidates.get();
+    out.shift = shift;
+    return out;
+  };
+  // Enqueues bp's find() (from its graph with --graph, captured on first use); returns
+  // the GPU time between events around it and the total it reports.
+  auto timed_find = [&](DeviceBroadPhase& bp, Graph& g, const octocd::gpu::PairOutput& out) {
+    if (o.graph && !g.exec) {
+      check(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal), "cudaStreamBeginCapture (motion)");
+      bp.find(d_boxes.get(), n, out, stream);
+      check(cudaStreamEndCapture(stream, &g.graph), "cudaStreamEndCapture (motion)");
+      check(cudaGraphInstantiate(&g.exec, g.graph, 0), "cudaGraphInstantiate (motion)");
+    }
+    check(cudaEventRecord(start.e, stream), "cudaEventRecord");
+    if (o.graph)
+      check(cudaGraphLaunch(g.exec, stream), "cudaGraphLaunch (motion)");
+    else
+      bp.find(d_boxes.get(), n, out, stream);
+    check(cudaEventRecord(stop.e, stream), "cudaEventRecord");
+    check(cudaMemcpyAsync(host.total, total.get(), sizeof(std::uint32_t), cudaMemcpyDeviceToHost, stream),
+          "cudaMemcpyAsync (motion total)");
+    check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (motion)");
+    float ms = 0.0f;
+    check(cudaEventElapsedTime(&ms, start.e, stop.e), "cudaEventElapsedTime");
+    return std::make_pair(static_cast<double>(ms), *host.total);
+  };
+  auto grow = [&](std::uint32_t needed) {
+    cap = grown(needed, cap);
+    for (auto* b : {&keys_c, &scratch_c, &keys_o, &scratch_o}) b->reset(cap);
+    drop_graphs();
+  };
+  std::vector<unsigned long long> hc, ho, oracle;
+  std::vector<octocd::Pair> cpu_pairs;
+  for (int step = 0; step < o.motion_steps; ++step) {
+    // The one-shot octree (its pairs sorted given the scratch).
+    std::pair<double, std::uint32_t> t1 = timed_find(*oneshot, g_oneshot, out_for(keys_o, scratch_o));
+    while (t1.second > cap) {
+      grow(t1.second);
+      t1 = timed_find(*oneshot, g_oneshot, out_for(keys_o, scratch_o));
+    }
+    // The pair cache: every find() of the step is timed, reruns included.
+    double ms = 0.0;
+    std::uint32_t pairs = 0;
+    int plan = 0;
+    for (int attempt = 0;; ++attempt) {
+      if (attempt > 8) throw octocd::RuntimeError("the pair cache did not settle in 8 calls");
+      plan = coherent->plan();
+      const auto t2 = timed_find(*coherent, g_plan[plan], out_for(keys_c, scratch_c));
+      ms += t2.first;
+      const octocd::gpu::Settled verdict = coherent->settle();
+      if (verdict == octocd::gpu::Settled::Regrow) {
+        ++r.regrows;
+        coherent->reserve(n, stream);
+        drop_graphs();
+        continue;
+      }
+      if (verdict == octocd::gpu::Settled::Rerun) {
+        ++r.reruns;
+        continue;
+      }
+      if (t2.second > cap) {
+        grow(t2.second);
+        continue;
+      }
+      pairs = t2.second;
+      break;
+    }
+    r.coherent_ms.push_back(ms);
+    r.oneshot_ms.push_back(t1.first);
+    r.plans.push_back(plan);
+    if (step == 0) r.pairs_first = pairs;
+    r.pairs_last = pairs;
+    // The checks: the two device sets bit for bit (keys and order), the CPU oracle.
+    hc.resize(pairs);
+    ho.resize(t1.second);
+    if (pairs > 0)
+      check(cudaMemcpyAsync(hc.data(), keys_c.get(), pairs * 8ull, cudaMemcpyDeviceToHost, stream), "download");
+    if (t1.second > 0)
+      check(cudaMemcpyAsync(ho.data(), keys_o.get(), t1.second * 8ull, cudaMemcpyDeviceToHost, stream), "download");
+    check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (motion download)");
+    if (r.check_ok && hc != ho) {
+      r.check_ok = false;
+      r.check = fmt::format("step {}: the pair cache's {} keys differ from the one-shot octree's {}", step, hc.size(),
+                            ho.size());
+    }
+    if (r.check_ok && o.motion_oracle_every > 0 && step % o.motion_oracle_every == 0) {
+      octocd::BroadPhaseStats stats;
+      cpu->find_pairs(boxes, cpu_pairs, stats);
+      oracle.clear();
+      for (const octocd::Pair& p : cpu_pairs) oracle.push_back((static_cast<unsigned long long>(p.a) << shift) | p.b);
+      ++r.oracle_checks;
+      if (oracle != hc) {
+        r.check_ok = false;
+        r.check = fmt::format("step {}: the pair cache's {} keys differ from CPU `{}`'s {}", step, hc.size(),
+                              ocfg.name, oracle.size());
+      }
+    }
+    // Move: x += v dt, velocities reflected at the cube's faces.
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const float e = (i % 2 == 0) ? kHalfLarge : kHalfSmall;
+      for (int a = 0; a < 3; ++a) {
+        float& x = c[3 * i + a];
+        x += v[3 * i + a] * o.motion_dt;
+        if (x < -h || x > h) v[3 * i + a] = -v[3 * i + a];
+      }
+      boxes[i] = {{c[3 * i] - e, c[3 * i + 1] - e, c[3 * i + 2] - e}, {c[3 * i] + e, c[3 * i + 1] + e, c[3 * i + 2] + e}};
+    }
+    octocd::gpu::upload(d_boxes, boxes, stream, false);
+  }
+  drop_graphs();
+  r.ok = true;
+  return r;
+}
+
+std::string plan_counts(const MotionResult& r) {
+  int k[3] = {};
+  for (int p : r.plans) ++k[p];
+  return fmt::format("{} / {} / {}", k[0], k[1], k[2]);
+}
+
+void print_motion(std::ostream& os, const Options& o, const std::vector<MotionResult>& ms) {
+  if (ms.empty()) return;
+  os << "\n## Coherent motion: `octree` with its pair cache against the one-shot `octree`\n\n";
+  os << fmt::format(
+      "- the boxes above moving {} steps of {} s at constant velocity (random direction, speed uniform in [0, {}) "
+      "m/s), reflected at the centres' cube; per step, on the same boxes: the one-shot `octree` (sorted keys) and "
+      "the pair cache (every find() of the step, a rerun after a miss included), {}, CUDA events\n",
+      o.motion_steps, o.motion_dt, o.motion_speed,
+      o.graph ? "each replayed from CUDA graphs (one per plan)" : "launched");
+  os << "- margin: the fattened boxes' margin as a fraction of the median body size; plans: steps whose valid "
+        "find() was Plain / Build / Hit\n\n";
+  os << "| n | margin | cache mean ms | median | min | max | one-shot mean ms | median | speed-up (means) | "
+        "Build ms | Hit ms | plans P/B/H | reruns | pairs (first, last) | check |\n";
+  os << "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---|---|\n";
+  for (const MotionResult& r : ms) {
+    if (!r.ok) {
+      os << fmt::format("| {} | {} | failed: {} |||||||||||||\n", size_label(r.n), r.margin, r.error);
+      continue;
+    }
+    const auto mn = [](const std::vector<double>& v) { return *std::min_element(v.begin(), v.end()); };
+    const auto mx = [](const std::vector<double>& v) { return *std::max_element(v.begin(), v.end()); };
+    os << fmt::format(
+        "| {} | {} | {:.3f} | {:.3f} | {:.3f} | {:.3f} | {:.3f} | {:.3f} | {:.2f}x | {:.3f} | {:.3f} | {} | {} | {}, "
+        "{} | {} ({} oracle checks) |\n",
+        size_label(r.n), r.margin, mean(r.coherent_ms), median(r.coherent_ms), mn(r.coherent_ms), mx(r.coherent_ms),
+        mean(r.oneshot_ms), median(r.oneshot_ms), mean(r.oneshot_ms) / std::max(mean(r.coherent_ms), 1e-9),
+        mean_of_plan(r.coherent_ms, r.plans, 1), mean_of_plan(r.coherent_ms, r.plans, 2), plan_counts(r), r.reruns,
+        r.pairs_first, r.pairs_last, r.check, r.oracle_checks);
+  }
+}
+
+Json motion_json(const std::vector<MotionResult>& ms) {
+  Json a = Json::array();
+  for (const MotionResult& r : ms) {
+    Json e = {{"n", r.n}, {"margin_fraction", decimal(r.margin)}, {"ok", r.ok}};
+    if (!r.ok) {
+      e["error"] = r.error;
+    } else {
+      e["coherent_mean_ms"] = mean(r.coherent_ms);
+      e["coherent_median_ms"] = median(r.coherent_ms);
+      e["oneshot_mean_ms"] = mean(r.oneshot_ms);
+      e["oneshot_median_ms"] = median(r.oneshot_ms);
+      e["build_mean_ms"] = mean_of_plan(r.coherent_ms, r.plans, 1);
+      e["hit_mean_ms"] = mean_of_plan(r.coherent_ms, r.plans, 2);
+      e["coherent_ms"] = r.coherent_ms;
+      e["oneshot_ms"] = r.oneshot_ms;
+      e["plans"] = r.plans;
+      e["reruns"] = r.reruns;
+      e["regrows"] = r.regrows;
+      e["pairs_first"] = r.pairs_first;
+      e["pairs_last"] = r.pairs_last;
+      e["oracle_checks"] = r.oracle_checks;
+    }
+    e["check"] = r.check;
+    e["check_ok"] = r.check_ok;
+    a.push_back(e);
+  }
+  return a;
+}
+
 // ---- output -----------------------------------------------------------------------------------
 
 std::string fmt_opt_growth(const std::optional<double>& g) { return g ? fmt::format("{:.2f}x", *g) : "-"; }
@@ -937,11 +1237,42 @@ int run(const Options& o) {
                           1.0 / std::log2(static_cast<double>(r.n) / prev->n));
   }
   const std::vector<Target> targets = evaluate_targets(results, o);
+  std::vector<MotionResult> motions;
+  if (o.motion_steps > 0) {
+    for (const std::uint32_t n : o.motion_sizes) {
+      for (const float margin : o.motion_margins) {
+        std::cerr << fmt::format("  coherent motion n = {}, margin {}, {} steps ...", n, margin, o.motion_steps)
+                  << std::flush;
+        MotionResult m;
+        try {
+          m = run_motion(n, margin, o, stream.s);
+          std::cerr << fmt::format(" cache {:.3f} ms, one-shot {:.3f} ms a step (means); {}\n", mean(m.coherent_ms),
+                                   mean(m.oneshot_ms), m.check);
+        } catch (const std::exception& ex) {
+          m = MotionResult{};
+          m.n = n;
+          m.margin = margin;
+          m.error = ex.what();
+          m.check_ok = false;
+          m.check = "failed";
+          (void)cudaGetLastError();
+          (void)cudaStreamSynchronize(stream.s);
+          (void)cudaGetLastError();
+          std::cerr << " failed: " << m.error << "\n";
+        }
+        all_ok = all_ok && m.check_ok;
+        motions.push_back(std::move(m));
+      }
+    }
+  }
   print_markdown(std::cout, machine, o, results, targets, notes, all_ok);
+  print_motion(std::cout, o, motions);
   std::cout.flush();
   if (!o.json_path.empty()) {
     std::ofstream f(o.json_path);
-    f << to_json(machine, o, results, targets, notes, all_ok).dump(2) << "\n";
+    Json j = to_json(machine, o, results, targets, notes, all_ok);
+    j["motion"] = motion_json(motions);
+    f << j.dump(2) << "\n";
     if (!f) {
       std::cerr << "bench_gpu_broadphase: cannot write " << o.json_path << "\n";
       return 1;
@@ -982,10 +1313,37 @@ int main(int argc, char** argv) {
                "time one CUDA graph launch of find() + sort (captured once, as the engine replays its step) "
                "instead of the launches on the stream");
   app.add_option("--json", o.json_path, "also write the results as JSON to this file");
+  std::string motion_sizes = "1000000", motion_margins = "0.125";
+  app.add_option("--motion-steps", o.motion_steps, "steps of the coherent-motion sequence (0: none)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100000));
+  app.add_option("--motion-sizes", motion_sizes, "body counts of the coherent-motion sequence")->capture_default_str();
+  app.add_option("--motion-margins", motion_margins,
+                 "margins of the pair cache's fattened boxes, fractions of the median body size, comma separated")
+      ->capture_default_str();
+  app.add_option("--motion-speed", o.motion_speed, "largest speed of the moving boxes (m/s)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0f, 1000.0f));
+  app.add_option("--motion-dt", o.motion_dt, "time step of the moving boxes (s)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0f, 1.0f));
+  app.add_option("--motion-oracle-every", o.motion_oracle_every,
+                 "check the pair cache against the CPU oracle every this many steps (0: never)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100000));
   try {
     app.parse(argc, argv);
     o.sizes = parse_sizes(sizes);
     o.broadphases = split_names(only);
+    o.motion_sizes = parse_sizes(motion_sizes);
+    o.motion_margins.clear();
+    for (const std::string& m : split_names(motion_margins)) {
+      char* end = nullptr;
+      const float f = std::strtof(m.c_str(), &end);
+      if (end == m.c_str() || *end != '\0' || !(f >= 0.0f && f <= 16.0f))
+        throw octocd::InputError(fmt::format("--motion-margins: '{}' is not a fraction in [0, 16]", m));
+      o.motion_margins.push_back(f);
+    }
     if (o.broadphases.empty()) throw octocd::InputError("--only: no broadphase given");
     for (const std::string& b : o.broadphases)
       if (b != "octree" && b != "octree-strict" && b != "spatial-hash" && b != "lbvh")

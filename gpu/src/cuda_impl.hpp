@@ -138,6 +138,10 @@ struct CudaWorld::Impl {
   // Capacities of the variable-size buffers (entries); prepare() sizes the buffers.
   std::size_t pair_cap = 1;
   std::size_t list_cap = 1;
+  /// Pairs the response's contact index covers (its radix sort sorts 2 x min(index_cap,
+  /// pair_cap) entries): grown like pair_cap when a step found more pairs (the step runs
+  /// again), so the sort covers about the pairs, not the pair buffer's capacity.
+  std::size_t index_cap = 1;
   bool prepared = false;
   std::uint64_t static_static = 0;  // static_static_pairs(model): constant over the run
 
@@ -184,11 +188,12 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
 
   gpu::StepStats* host = nullptr;  // pinned
-  // The per-stage step captured twice: plain (untimed steps) and with the stage events.
-  cudaGraph_t graph = nullptr;
-  cudaGraphExec_t graph_exec = nullptr;
-  cudaGraph_t timed_graph = nullptr;
-  cudaGraphExec_t timed_graph_exec = nullptr;
+  // The per-stage step captured per broadphase plan (DeviceBroadPhase::plan()), twice:
+  // plain (untimed steps) and with the stage events.
+  cudaGraph_t graph[gpu::kBroadPhasePlans] = {};
+  cudaGraphExec_t graph_exec[gpu::kBroadPhasePlans] = {};
+  cudaGraph_t timed_graph[gpu::kBroadPhasePlans] = {};
+  cudaGraphExec_t timed_graph_exec[gpu::kBroadPhasePlans] = {};
 
   ~Impl();
 
@@ -206,6 +211,7 @@ struct CudaWorld::Impl {
   std::uint32_t* counts() { return stats.get()->counts; }
   std::uint32_t pcap() const { return static_cast<std::uint32_t>(pair_cap); }
   std::uint32_t lcap() const { return static_cast<std::uint32_t>(list_cap); }
+  std::uint32_t icap() const { return static_cast<std::uint32_t>(std::min(index_cap, pair_cap)); }
   gpu::BodiesDesc bodies();
   gpu::ShapesDesc shapes_desc();
   /// The midphase lists' common fields (in / out are set per step): pairs from `keys`.
@@ -230,6 +236,10 @@ struct CudaWorld::Impl {
   /// True when a list overflowed its capacity; grows the capacities then (the state must
   /// be restored and the step run again).
   bool grow_if_needed();
+  /// After a step: true when it must run again (restored first): the broadphase's pairs
+  /// did not hold (DeviceBroadPhase::settle; a regrown broadphase drops the graphs), or a
+  /// list overflowed (grow_if_needed).
+  bool rerun_needed();
   void restore_state();
 
   // ---- step_small.cpp: the fused small step --------------------------------------------

@@ -74,7 +74,9 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   if (broadphase != "flat") {  // checked before the device: an unknown name is an input error anywhere
     BroadPhaseConfig cfg = model_->scene.broadphase;
     cfg.name = broadphase;
-    bp = gpu::make_device_broadphase(cfg, model_->scene.domain);
+    // `octree` keeps a pair cache across steps (broadphase_coherent.cu).
+    bp = broadphase == "octree" ? gpu::make_device_coherent_octree(cfg, model_->scene.domain)
+                                : gpu::make_device_broadphase(cfg, model_->scene.domain);
   }
   check_cuda_settings(settings, "cuda settings");  // input wherever it is read, device or not
   if (hooks.resident_idle_us < 0) throw InputError("CudaWorld::TestHooks: resident_idle_us < 0");
@@ -230,6 +232,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   // First guesses; a step that needs more grows them and runs again.
   d.pair_cap = static_cast<std::size_t>(gpu::footprint::initial_pair_capacity(n));
   d.list_cap = static_cast<std::size_t>(gpu::footprint::initial_list_capacity(n));
+  d.index_cap = n / 8 + 64;  // a first guess (about 1 pair per 8 bodies); grown like pair_cap
   d.static_static = static_static_pairs(m);
   d.launched(gpu::launch_aabbs(d.bodies(), d.stream), "aabbs");
   check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize");
@@ -301,6 +304,7 @@ void CudaWorld::reset_capacities(std::size_t capacity) {
   for (BufferBase* b : d.scratch_buffers()) b->reset(capacity);
   d.pair_cap = capacity;
   d.list_cap = capacity;
+  d.index_cap = capacity;
   d.prepared = false;
 }
 
@@ -353,7 +357,7 @@ const FrameMetrics& CudaWorld::step() {
   // The step, run again from the saved state with larger buffers while a list overflows.
   d.begin_step(m.frame);
   d.run_step(scene, recording_);
-  while (d.grow_if_needed()) {
+  while (d.rerun_needed()) {
     d.restore_state();
     d.run_step(scene, recording_);
   }

@@ -59,6 +59,18 @@ struct PairOutput {
   unsigned long long* scratch = nullptr;
 };
 
+/// What the caller does after a find() once its stream has synchronised (settle()).
+enum class Settled {
+  Valid,  ///< the pairs find() wrote are the contract's
+  Rerun,  ///< they are not (a pair cache that missed): run find() again on the same boxes
+  /// They are not and the broadphase needs larger buffers: call reserve(n) (outside any
+  /// capture; buffer addresses change, so a captured graph must be dropped), then find().
+  Regrow
+};
+
+/// Plans a broadphase may enqueue (plan() is in [0, kBroadPhasePlans)).
+constexpr int kBroadPhasePlans = 3;
+
 /// A broadphase on the device; owns its scratch buffers (released by the destructor).
 class DeviceBroadPhase {
  public:
@@ -75,6 +87,15 @@ class DeviceBroadPhase {
   virtual bool sorts_pairs() const { return false; }
   /// Device bytes held by the scratch.
   virtual std::uint64_t device_bytes() const = 0;
+  /// Which work the next find() enqueues, in [0, kBroadPhasePlans), decided on the host
+  /// from earlier find()s (a broadphase with state across calls: a pair cache); a caller
+  /// that captures find() into CUDA graphs keeps one graph per plan. Default 0 (always
+  /// the same work).
+  virtual int plan() const { return 0; }
+  /// Called once after every find() (or replay of a captured find()), when its stream has
+  /// synchronised: whether its pairs hold (Settled); may change plan(). Stateless
+  /// broadphases: always Valid.
+  virtual Settled settle() { return Settled::Valid; }
 };
 
 /// The device broadphase named config.name over the scene's `domain` (m): `octree`,
@@ -92,6 +113,17 @@ enum class LooseOctreeQuery { Auto, Warp, Thread };
 /// config.octree_depth (-1 = auto), query kernel `query`. broadphase_octree.cu.
 std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain,
                                                            LooseOctreeQuery query = LooseOctreeQuery::Auto);
+/// `octree` with a pair cache across calls (temporal coherence; broadphase_coherent.cu):
+/// the pairs of the bodies' fattened boxes (each AABB grown on every side by
+/// `margin_fraction` x the median body size) are found by the one-shot `octree` and kept;
+/// while every AABB stays inside its fattened box, a find() tests only the kept pairs on
+/// the AABBs (sorted, so its keys come in ascending order whether or not a scratch is
+/// given). A find() on a cache that a body left writes an incomplete set and its settle()
+/// says Rerun; plan() then rebuilds. The first call, and 2, 4, .. 64 calls after a cache
+/// that served no call, run the one-shot `octree` on the AABBs. Exact: the pair set is
+/// always `flat`'s once settle() says Valid. Name "octree".
+std::unique_ptr<DeviceBroadPhase> make_device_coherent_octree(const BroadPhaseConfig& config, const Aabb& domain,
+                                                              float margin_fraction = 0.125f);
 /// `octree-strict` (SPEC 5.1, the paper's octree read literally, as
 /// core/src/broadphase_octree_strict.cpp), depth config.octree_depth (-1 = auto).
 /// broadphase_strict.cu.

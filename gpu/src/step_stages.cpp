@@ -46,8 +46,10 @@ void destroy_graph(cudaGraph_t& graph, cudaGraphExec_t& exec) {
 }  // namespace
 
 void CudaWorld::Impl::drop_graph() {
-  destroy_graph(graph, graph_exec);
-  destroy_graph(timed_graph, timed_graph_exec);
+  for (int p = 0; p < gpu::kBroadPhasePlans; ++p) {
+    destroy_graph(graph[p], graph_exec[p]);
+    destroy_graph(timed_graph[p], timed_graph_exec[p]);
+  }
 }
 
 std::vector<BufferBase*> CudaWorld::Impl::all_buffers() {
@@ -285,9 +287,10 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
   }
   record_event(4, with_events);
   // 5. Response (SPEC 6): body-major index of the confirmed contacts (stable sort by
-  // body keeps (a, b) order per body), `iterations` passes, then the clamp (Eq. 23).
-  const std::uint32_t entries = 2 * pcap();
-  launched(gpu::launch_contact_entries(pairs.get(), confirmed.get(), counts(), pcap(), n, keys_in.get(),
+  // body keeps (a, b) order per body) over the first icap() pairs (a step with more runs
+  // again: grow_if_needed), `iterations` passes, then the clamp (Eq. 23).
+  const std::uint32_t entries = 2 * icap();
+  launched(gpu::launch_contact_entries(pairs.get(), confirmed.get(), counts(), icap(), n, keys_in.get(),
                                        vals_in.get(), stream),
            "contact_entries");
   bytes = temp.capacity();
@@ -314,9 +317,11 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
 
 void CudaWorld::Impl::run_stages(const Scene& scene, bool recording) {
   if (use_graph && !sync_each_launch && !recording) {
-    // Two graphs of the same step: without events (untimed steps) and with them.
-    cudaGraph_t& g = timed ? timed_graph : graph;
-    cudaGraphExec_t& exec = timed ? timed_graph_exec : graph_exec;
+    // Per broadphase plan, two graphs of the same step: without events (untimed steps) and
+    // with them.
+    const int plan = bp ? bp->plan() : 0;
+    cudaGraph_t& g = timed ? timed_graph[plan] : graph[plan];
+    cudaGraphExec_t& exec = timed ? timed_graph_exec[plan] : graph_exec[plan];
     if (!exec) {
       capturing = true;
       check(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal), "cudaStreamBeginCapture");
@@ -353,11 +358,34 @@ bool CudaWorld::Impl::grow_if_needed() {
     list_cap = grown(items, list_cap);
     grow = true;
   }
+  // The contact index left pairs out: a larger sort, captured anew (no buffer changes).
+  bool index_grown = false;
+  if (!small && pairs_found > index_cap && index_cap < pair_cap) {
+    index_cap = grown(pairs_found, index_cap);
+    drop_graph();
+    index_grown = true;
+  }
   if (grow) {
     prepared = false;
     stop_resident();  // before restore_state and prepare()
   }
-  return grow;
+  return grow || index_grown;
+}
+
+bool CudaWorld::Impl::rerun_needed() {
+  if (bp && !small) {
+    switch (bp->settle()) {
+      case gpu::Settled::Valid:
+        break;
+      case gpu::Settled::Rerun:
+        return true;
+      case gpu::Settled::Regrow:
+        prepared = false;  // prepare() drops the graphs and calls bp->reserve(n)
+        stop_resident();
+        return true;
+    }
+  }
+  return grow_if_needed();
 }
 
 void CudaWorld::Impl::restore_state() {

@@ -21,6 +21,11 @@
 // find() makes no allocation and no host synchronisation: it is captured into a CUDA
 // graph, which then runs on two different sets of boxes (same n) and gives each one's set.
 //
+// `octree` with its pair cache (broadphase_coherent.cu): on a coherent motion every settled
+// call's keys are flat's in flat's order (Plain, Build and Hit; a jump makes a Rerun), from
+// one CUDA graph per plan too, and incoherent input backs off to the one-shot octree; the
+// host planner (coherent_plan.hpp) is checked verdict by verdict without a device.
+//
 // Without a usable CUDA device the device tests are SKIPPED with the reason; the error
 // paths, a check of the AABB sets themselves and the host model of `lbvh` (its tree
 // checked node by node and its pairs against `flat` on every set, a planted fault caught)
@@ -52,6 +57,7 @@
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
 #include "device_footprint.hpp"
+#include "coherent_plan.hpp"
 #include "lbvh.hpp"
 #include "loose_blocks.hpp"
 #include "octocd/broadphase.hpp"
@@ -1550,6 +1556,284 @@ TEST(DeviceOctreeRoot, CandidatesEqualTheCountOfItsRoot) {
     ASSERT_TRUE(to_pairs(r.keys, n, pairs, r.shift));
     EXPECT_TRUE(same_pairs(pairs, flat, boxes));
     EXPECT_EQ(r.candidates, count_loose_tests_snapped(boxes, domain).tests);
+  }
+}
+
+// ---- `octree` with a pair cache (broadphase_coherent.cu, coherent_plan.hpp) -----------------
+
+/// Boxes moving at constant velocity, reflected at the faces of `region` (a coherent
+/// motion: each call moves every box by at most vmax x dt per axis).
+struct Motion {
+  Aabb region;
+  std::vector<Vec3> c, h, v;
+
+  Motion(std::size_t n, unsigned seed, const Aabb& r, float hmin, float hmax, float vmax) : region(r) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> ux(r.min.x, r.max.x), uy(r.min.y, r.max.y), uz(r.min.z, r.max.z),
+        uh(hmin, hmax), uv(-vmax, vmax);
+    for (std::size_t i = 0; i < n; ++i) {
+      c.push_back({ux(rng), uy(rng), uz(rng)});
+      h.push_back({uh(rng), uh(rng), uh(rng)});
+      v.push_back({uv(rng), uv(rng), uv(rng)});
+    }
+  }
+  std::vector<Aabb> boxes() const {
+    std::vector<Aabb> out;
+    for (std::size_t i = 0; i < c.size(); ++i) out.push_back(box_at(c[i], h[i]));
+    return out;
+  }
+  void step(float dt) {
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      float* p[3] = {&c[i].x, &c[i].y, &c[i].z};
+      float* w[3] = {&v[i].x, &v[i].y, &v[i].z};
+      const float lo[3] = {region.min.x, region.min.y, region.min.z}, hi[3] = {region.max.x, region.max.y, region.max.z};
+      for (int a = 0; a < 3; ++a) {
+        *p[a] += *w[a] * dt;
+        if (*p[a] < lo[a] || *p[a] > hi[a]) *w[a] = -*w[a];
+      }
+    }
+  }
+};
+
+/// flat's pairs as the keys (a << shift) | b, ascending.
+std::vector<unsigned long long> flat_keys(const std::vector<Aabb>& boxes, const Aabb& domain, int shift) {
+  std::vector<unsigned long long> keys;
+  for (const Pair p : flat_pairs(boxes, domain)) keys.push_back((static_cast<unsigned long long>(p.a) << shift) | p.b);
+  return keys;
+}
+
+/// What settled_find saw: the result, and the verdicts before it was Valid.
+struct SettledFind {
+  FindResult r;
+  int plan = 0;       ///< the plan of the valid find()
+  int reruns = 0;     ///< Rerun verdicts
+  int regrows = 0;    ///< Regrow verdicts
+};
+
+/// find() as the engine runs it (`capacity` keys of output and a scratch of as many, so
+/// the keys come sorted): settle() after each; Rerun runs it again, Regrow reserves first
+/// (at most 4 tries).
+SettledFind settled_find(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, std::uint32_t n, std::uint32_t capacity,
+                     cudaStream_t s, int shift) {
+  SettledFind out;
+  DeviceBuffer<unsigned long long> scratch("test scratch");
+  scratch.reset(std::max<std::uint32_t>(capacity, 1));
+  for (int attempt = 0; attempt < 4; ++attempt) {
+    out.plan = bp.plan();
+    Output o(capacity, s, shift);
+    gpu::PairOutput po = o.pair_output();
+    po.scratch = scratch.get();
+    bp.find(boxes.get(), n, po, s);
+    out.r = o.read(s);
+    const gpu::Settled v = bp.settle();
+    if (v == gpu::Settled::Valid) return out;
+    if (v == gpu::Settled::Regrow) {
+      ++out.regrows;
+      bp.reserve(n, s);
+    } else {
+      ++out.reruns;
+    }
+  }
+  ADD_FAILURE() << "find() did not settle in 4 tries";
+  return out;
+}
+
+// The planner on its own (no device): Plain first, then Build, then Hits; a Hit that found
+// an escaped body is a Rerun with a Build next, or, when the cache served no call, Plain
+// for 2, then 4 calls (the back-off), reset by a cache that served; a Build that did not fit
+// is a Regrow to 1.25 x its pairs + 64; the predictor builds before the displacement
+// reaches the margin.
+TEST(CoherencePlanner, PlansFollowTheVerdicts) {
+  using gpu::CoherentPlan;
+  using gpu::CoherentStatus;
+  gpu::CoherencePlanner p;
+  auto slack = [](float s) {
+    CoherentStatus st;
+    std::memcpy(&st.min_slack_bits, &s, sizeof s);
+    return st;
+  };
+  CoherentStatus built;
+  built.margin = 1.0f;
+  built.cache_total = 100;
+  EXPECT_EQ(p.plan(), CoherentPlan::Plain);
+  EXPECT_EQ(p.settle(CoherentPlan::Plain, {}, 1000), gpu::Settled::Valid);
+  ASSERT_EQ(p.plan(), CoherentPlan::Build);
+  CoherentStatus too_many = built;
+  too_many.cache_total = 2000;
+  EXPECT_EQ(p.settle(CoherentPlan::Build, too_many, 1000), gpu::Settled::Regrow);
+  EXPECT_EQ(p.needed_capacity(), 2000u + 500u + 64u);
+  ASSERT_EQ(p.plan(), CoherentPlan::Build);
+  EXPECT_EQ(p.settle(CoherentPlan::Build, built, 3000), gpu::Settled::Valid);
+  ASSERT_EQ(p.plan(), CoherentPlan::Hit);
+  // 0.1 used per call: after 0.7, 0.7 + 2 x 0.1 < 1 hits on; after 0.8 it builds.
+  for (int k = 1; k <= 7; ++k) {
+    EXPECT_EQ(p.settle(CoherentPlan::Hit, slack(1.0f - 0.1f * static_cast<float>(k)), 3000), gpu::Settled::Valid);
+    EXPECT_EQ(p.plan(), CoherentPlan::Hit) << "after " << k << " hits";
+  }
+  EXPECT_EQ(p.settle(CoherentPlan::Hit, slack(0.2f), 3000), gpu::Settled::Valid);
+  EXPECT_EQ(p.plan(), CoherentPlan::Build) << "0.8 used at 0.1 a call: the predictor builds";
+  EXPECT_EQ(p.settle(CoherentPlan::Build, built, 3000), gpu::Settled::Valid);
+  // A jump: Rerun, then Build (the cache had served 0 calls: back-off).
+  CoherentStatus escaped;
+  escaped.escaped = 3;
+  EXPECT_EQ(p.settle(CoherentPlan::Hit, escaped, 3000), gpu::Settled::Rerun);
+  for (int round : {2, 4}) {
+    for (int k = 0; k < round; ++k) {
+      ASSERT_EQ(p.plan(), CoherentPlan::Plain) << "back-off round " << round << ", call " << k;
+      EXPECT_EQ(p.settle(CoherentPlan::Plain, {}, 3000), gpu::Settled::Valid);
+    }
+    ASSERT_EQ(p.plan(), CoherentPlan::Build);
+    EXPECT_EQ(p.settle(CoherentPlan::Build, built, 3000), gpu::Settled::Valid);
+    ASSERT_EQ(p.plan(), CoherentPlan::Hit);
+    EXPECT_EQ(p.settle(CoherentPlan::Hit, escaped, 3000), gpu::Settled::Rerun);
+  }
+  for (int k = 0; k < 8; ++k) EXPECT_EQ(p.settle(p.plan(), built, 3000), gpu::Settled::Valid);  // 8 Plain
+  ASSERT_EQ(p.plan(), CoherentPlan::Build);
+  EXPECT_EQ(p.settle(CoherentPlan::Build, built, 3000), gpu::Settled::Valid);
+  EXPECT_EQ(p.settle(CoherentPlan::Hit, slack(1.0f), 3000), gpu::Settled::Valid);  // the cache served
+  EXPECT_EQ(p.settle(CoherentPlan::Hit, escaped, 3000), gpu::Settled::Rerun);
+  EXPECT_EQ(p.plan(), CoherentPlan::Build) << "a cache that served resets the back-off";
+  EXPECT_EQ(p.misses(), 4u);
+  // Nothing moves with a margin 0 (points): the cache serves, no predicted build.
+  gpu::CoherencePlanner q;
+  CoherentStatus zero = built;
+  zero.margin = 0.0f;
+  EXPECT_EQ(q.settle(q.plan(), {}, 10), gpu::Settled::Valid);
+  EXPECT_EQ(q.settle(q.plan(), zero, 1000), gpu::Settled::Valid);
+  for (int k = 0; k < 3; ++k) {
+    ASSERT_EQ(q.plan(), CoherentPlan::Hit);
+    EXPECT_EQ(q.settle(CoherentPlan::Hit, slack(0.0f), 1000), gpu::Settled::Valid);
+  }
+}
+
+// A coherent motion of 3000 boxes over 120 calls (a scratch given, as the engine gives): every
+// settled call's keys are flat's, in flat's order (ascending (a, b), what the engine's pair list and the CPU octree's cache
+// give), at the engine's key shift and at 32 on alternate calls; Builds and Hits both
+// occur, with few reruns; a body that jumps makes a Rerun and the set stays exact; an
+// output smaller than the cache gives the total and the first keys, nothing past it.
+TEST(DeviceCoherentOctree, PairsEqualFlatInOrderOnEveryCallOfACoherentMotion) {
+  REQUIRE_CUDA_DEVICE();
+  Stream stream;
+  const Aabb region = cube(-1.0f, 1.0f);
+  const Aabb domain = cube(-1.2f, 1.2f);
+  Motion m(3000, 11, region, 0.02f, 0.06f, 1.0f);
+  BroadPhaseConfig c;
+  c.name = "octree";
+  c.octree_depth = -1;
+  auto bp = gpu::make_device_coherent_octree(c, domain);
+  EXPECT_EQ(bp->name(), "octree");
+  EXPECT_TRUE(bp->sorts_pairs());
+  const auto n = static_cast<std::uint32_t>(m.c.size());
+  bp->reserve(n, stream.s);
+  DeviceBuffer<Aabb> boxes("test boxes");
+  int plans[gpu::kBroadPhasePlans] = {};
+  int reruns = 0, regrows = 0;
+  for (int call = 0; call < 120; ++call) {
+    SCOPED_TRACE(fmt::format("call {}", call));
+    if (call == 60) m.c[7] = {0.9f, -0.9f, 0.9f};  // a jump
+    const std::vector<Aabb> host = m.boxes();
+    gpu::upload(boxes, host, stream.s, call == 0);
+    const int shift = call % 2 == 0 ? gpu::key_bits(n) : 32;
+    const std::vector<unsigned long long> want = flat_keys(host, domain, shift);
+    const auto cap = static_cast<std::uint32_t>(want.size() + 5);
+    const SettledFind got = settled_find(*bp, boxes, n, cap, stream.s, shift);
+    ++plans[got.plan];
+    reruns += got.reruns;
+    regrows += got.regrows;
+    ASSERT_EQ(got.r.total, want.size());
+    EXPECT_FALSE(got.r.wrote_past_capacity);
+    EXPECT_TRUE(got.r.keys == want) << "the keys are not flat's in flat's order (plan " << got.plan << ")";
+    EXPECT_GE(got.r.candidates, static_cast<unsigned long long>(got.r.total));
+    if (call == 90) {  // a small output: the total, the first keys (the copy through the selection)
+      const SettledFind small = settled_find(*bp, boxes, n, static_cast<std::uint32_t>(want.size() / 3), stream.s, shift);
+      EXPECT_EQ(small.r.total, want.size());
+      EXPECT_FALSE(small.r.wrote_past_capacity);
+      EXPECT_TRUE(std::equal(small.r.keys.begin(), small.r.keys.end(), want.begin()));
+    }
+    m.step(0.001f);
+  }
+  std::cout << fmt::format("[ info ] plans Plain {} Build {} Hit {}; reruns {}, regrows {}\n", plans[0], plans[1],
+                           plans[2], reruns, regrows);
+  EXPECT_EQ(plans[0], 1) << "only the first call runs the one-shot octree on the boxes";
+  EXPECT_GE(plans[1], 2);
+  EXPECT_GE(plans[2], 60) << "the cache must serve most calls of a coherent motion";
+  EXPECT_GE(reruns, 1) << "the jump must miss";
+  EXPECT_LE(reruns, 5);
+}
+
+// The engine's use: one CUDA graph per plan, captured when the plan first comes, replayed
+// on moving boxes (the boxes' buffer rewritten in place) with a scratch given; each replay
+// settled; flat's keys in order every call. Incoherent input (new random boxes every call) stays exact and backs
+// off to the one-shot octree.
+TEST(DeviceCoherentOctree, GraphsPerPlanReplayAndIncoherentInputStaysExact) {
+  REQUIRE_CUDA_DEVICE();
+  Stream stream;
+  const Aabb region = cube(-1.0f, 1.0f);
+  const Aabb domain = cube(-1.2f, 1.2f);
+  BroadPhaseConfig c;
+  c.name = "octree";
+  c.octree_depth = -1;
+  for (const bool coherent : {true, false}) {
+    SCOPED_TRACE(coherent ? "coherent motion" : "new boxes every call");
+    Motion m(2000, 5, region, 0.02f, 0.06f, coherent ? 1.0f : 0.0f);
+    auto bp = gpu::make_device_coherent_octree(c, domain);
+    const auto n = static_cast<std::uint32_t>(m.c.size());
+    const int shift = gpu::key_bits(n);
+    bp->reserve(n, stream.s);
+    DeviceBuffer<Aabb> boxes("test boxes");
+    gpu::upload(boxes, m.boxes(), stream.s);
+    Output out(4 * n, stream.s, shift);
+    DeviceBuffer<unsigned long long> scratch("test scratch");
+    scratch.reset(4 * static_cast<std::size_t>(n));
+    gpu::PairOutput po = out.pair_output();
+    po.scratch = scratch.get();  // the engine's: the keys come sorted on every plan
+    cudaGraphExec_t exec[gpu::kBroadPhasePlans] = {};
+    cudaGraph_t graph[gpu::kBroadPhasePlans] = {};
+    int plans[gpu::kBroadPhasePlans] = {};
+    for (int call = 0; call < 40; ++call) {
+      SCOPED_TRACE(fmt::format("call {}", call));
+      const std::vector<Aabb> host =
+          coherent ? m.boxes() : random_boxes(n, 100 + static_cast<unsigned>(call), region, 0.02f, 0.06f);
+      gpu::upload(boxes, host, stream.s, false);
+      const std::vector<unsigned long long> want = flat_keys(host, domain, shift);
+      ASSERT_LE(want.size(), out.capacity);
+      for (int attempt = 0;; ++attempt) {
+        ASSERT_LT(attempt, 3) << "no valid find in 3 tries";
+        const int p = bp->plan();
+        ASSERT_GE(p, 0);
+        ASSERT_LT(p, gpu::kBroadPhasePlans);
+        if (!exec[p]) {
+          gpu::check(cudaStreamSynchronize(stream.s), "cudaStreamSynchronize");
+          gpu::check(cudaStreamBeginCapture(stream.s, cudaStreamCaptureModeThreadLocal), "cudaStreamBeginCapture");
+          bp->find(boxes.get(), n, po, stream.s);
+          ASSERT_EQ(cudaStreamEndCapture(stream.s, &graph[p]), cudaSuccess) << "plan " << p << " is not capturable";
+          gpu::check(cudaGraphInstantiate(&exec[p], graph[p], 0), "cudaGraphInstantiate");
+        }
+        out.clear(stream.s);
+        gpu::check(cudaGraphLaunch(exec[p], stream.s), "cudaGraphLaunch");
+        const FindResult r = out.read(stream.s);
+        const gpu::Settled v = bp->settle();
+        ASSERT_NE(v, gpu::Settled::Regrow) << "the first cache (2 n + 64 keys) holds these boxes' pairs";
+        if (v == gpu::Settled::Rerun) continue;
+        ++plans[p];
+        ASSERT_EQ(r.total, want.size()) << "plan " << p;
+        EXPECT_TRUE(r.keys == want) << "plan " << p << ": not flat's keys in order";
+        break;
+      }
+      m.step(0.001f);
+    }
+    for (int p = 0; p < gpu::kBroadPhasePlans; ++p) {
+      if (exec[p]) (void)cudaGraphExecDestroy(exec[p]);
+      if (graph[p]) (void)cudaGraphDestroy(graph[p]);
+    }
+    std::cout << fmt::format("[ info ] {}: plans Plain {} Build {} Hit {}\n", coherent ? "coherent" : "incoherent",
+                             plans[0], plans[1], plans[2]);
+    if (coherent) {
+      EXPECT_GE(plans[2], 30);
+    } else {
+      EXPECT_GE(plans[0], 30) << "incoherent input backs off to the one-shot octree";
+      EXPECT_EQ(plans[2], 0);
+    }
   }
 }
 
