@@ -131,7 +131,7 @@ done
 cp -r "$repo/datasets/scenes" "$stage/datasets/"
 if [[ -d "$repo/datasets/cache" ]]; then
   mkdir -p "$stage/datasets/cache"
-  find "$repo/datasets/cache" -maxdepth 1 -type f -exec cp {} "$stage/datasets/cache/" \;
+  find -L "$repo/datasets/cache" -maxdepth 1 -type f -exec cp {} "$stage/datasets/cache/" \;
 else
   echo "gpu-bundle.sh: warning: datasets/cache is missing (run datasets/fetch.sh): mesh scenes will not load" >&2
 fi
