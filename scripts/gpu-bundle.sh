@@ -23,7 +23,7 @@
 #   ./run-gpu-broadphase-bench.sh [OUTDIR] # bench_gpu_broadphase: OUTDIR/gpu-broadphase-scaling.{md,json}
 #
 # Layout: bin/ (octocd, test_*, bench_*, bench_gpu_broadphase among them; RPATH
-# $ORIGIN/lib), bin/lib/ (shared libraries, RPATH $ORIGIN), datasets/scenes, datasets/cache, tests/data; everything stripped. The
+# $ORIGIN/lib), bin/lib/ (shared libraries, RPATH $ORIGIN), datasets/scenes, datasets/cache, tests/data, bench/sweeps; everything stripped. The
 # CUDA runtime is linked statically; libcuda comes from the driver. glibc (libc, libm,
 # libpthread, libdl, librt, libresolv, ld-linux, ...) is the target's own.
 set -euo pipefail
@@ -136,6 +136,7 @@ else
   echo "gpu-bundle.sh: warning: datasets/cache is missing (run datasets/fetch.sh): mesh scenes will not load" >&2
 fi
 cp -r "$repo/tests/data" "$stage/tests/"
+mkdir -p "$stage/bench" && cp -r "$repo/bench/sweeps" "$stage/bench/"  # the named sweeps of octocd bench
 
 cat > "$stage/run-gpu-tests.sh" <<'EOF'
 #!/usr/bin/env bash
