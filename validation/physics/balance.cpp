@@ -219,7 +219,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       if (dpl > 0) test_dir((1.0 / dpl) * dp);
       for (const Disc& dc : discs[i]) test_dir(dc.n);
       if (discs[i].empty()) ratio = dpl / float_bound;
-      balance_lin.check(ratio <= 1.0, ratio, Where{frame, body_name(i)}, [&] {
+      balance_lin.check(ratio <= 1.0, ratio, Where::of_body(frame, i), [&] {
         return fmt::format("frame {}: body {}: m (v' - v) - m g dt = ({:.4g}, {:.4g}, {:.4g}) kg m/s but its {} "
                            "contact rows' impulses sum to ({:.4g}, {:.4g}, {:.4g}): off by {:.4g} ({:.3g} of the "
                            "bound: rounding {:.3g}, friction the record leaves open {:.3g})",
@@ -254,7 +254,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
           with_term = true;
         }
       }
-      balance_ang.check(dll <= ang_bound, dll / ang_bound, Where{frame, body_name(i)}, [&] {
+      balance_ang.check(dll <= ang_bound, dll / ang_bound, Where::of_body(frame, i), [&] {
         return fmt::format("frame {}: body {}: I_w (w' - w){} = ({:.4g}, {:.4g}, {:.4g}) kg m^2/s but its {} "
                            "contact rows' torques (p - x) x J sum to ({:.4g}, {:.4g}, {:.4g}): off by {:.4g} "
                            "(bound {:.3g})",
@@ -268,7 +268,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     const D3 dv = unlocked(v1 - v0, i, 0);
     const double v_bound = 4.0 * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + 1e-12;
     const double dvl = len3(dv);
-    free_vel.check(dvl <= v_bound, dvl, Where{frame, body_name(i)}, [&] {
+    free_vel.check(dvl <= v_bound, dvl, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: v' = ({:.6g}, {:.6g}, {:.6g}) m/s, v + g dt = "
                          "({:.6g}, {:.6g}, {:.6g}): off by {:.4g} m/s (bound {:.3g})",
                          frame, i, v1[0], v1[1], v1[2], v0[0], v0[1], v0[2], dvl, v_bound);
@@ -281,7 +281,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
                                                                                   : std::min(d_semi, d_expl);
     const double x_bound =
         4.0 * kEps32 * (len3(x0) + len3(x1) + dt * (len3(v1) + len3(d3(rec.v_pre[i])))) + 1e-12;
-    free_pos.check(dx <= x_bound, dx, Where{frame, body_name(i)}, [&] {
+    free_pos.check(dx <= x_bound, dx, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: x' = ({:.6g}, {:.6g}, {:.6g}) m is {:.4g} m from x + "
                          "dt v{} (integrator {}; bound {:.3g})",
                          frame, i, x1[0], x1[1], x1[2], dx,
@@ -294,7 +294,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     const D3 dw = unlocked(w1 - w0 - dw_expected, i, 3);
     const double w_bound = 4.0 * kEps32 * (len3(w0) + len3(w1)) + tol.gyroscopic_rel * len3(dw_expected) + 1e-9;
     const double dwl = len3(dw);
-    free_w.check(dwl <= w_bound, dwl, Where{frame, body_name(i)}, [&] {
+    free_w.check(dwl <= w_bound, dwl, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: w' = ({:.6g}, {:.6g}, {:.6g}) rad/s, w{} = "
                          "({:.6g}, {:.6g}, {:.6g}): off by {:.4g} rad/s (bound {:.3g})",
                          frame, i, w1[0], w1[1], w1[2], bodies.gyroscopic ? " - dt I_w^-1 (w x I_w w)" : "",
@@ -308,7 +308,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
                                                                                      : std::min(a_semi, a_expl);
     const double wdt = std::max(len3(w0), len3(w1)) * dt;
     const double q_bound = tol.free_flight_angle_rad + wdt * wdt;
-    free_q.check(angle <= q_bound, angle * 180.0 / kPi, Where{frame, body_name(i)}, [&] {
+    free_q.check(angle <= q_bound, angle * 180.0 / kPi, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: q' is {:.4g} deg from q advanced by w{} dt (|w| dt "
                          "{:.3g} rad; bound {:.3g} deg)",
                          frame, i, angle * 180.0 / kPi,

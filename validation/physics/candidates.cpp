@@ -31,7 +31,9 @@ void compute_truth(const ReferenceGeometry& ref, const std::vector<Pose>& det, c
 }  // namespace
 
 const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p) const {
-  ContactTruth& t = f.truth[key(p)];
+  const std::size_t k = f.find(p);
+  if (k < f.truth.size()) return f.truth[k];
+  ContactTruth& t = f.extra[key(p)];
   if (!t.have) compute_truth(*ref, *f.det, sat_settings, p, t);
   return t;
 }
@@ -94,15 +96,14 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
     std::vector<Pair> todo;
     for (std::size_t i = 0; i < cand.size(); ++i)
       if (hit[i]) todo.push_back(cand[i]);
-    std::vector<Pair> all;
+    std::vector<Pair>& all = f.truth_pairs;
     std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
+    std::sort(all.begin(), all.end());
     all.erase(std::unique(all.begin(), all.end()), all.end());
-    std::vector<ContactTruth> computed(all.size());
+    f.truth.resize(all.size());
     parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned) {
-      compute_truth(*ref, det, sat_settings, all[i], computed[i]);
+      compute_truth(*ref, det, sat_settings, all[i], f.truth[i]);
     });
-    for (std::size_t i = 0; i < all.size(); ++i)
-      f.truth.emplace_hint(f.truth.end(), key(all[i]), std::move(computed[i]));
   }
   std::vector<Pair>& required = f.required;
   for (std::size_t i = 0; i < cand.size(); ++i) {
@@ -135,7 +136,7 @@ void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
     for (const Pair& p : f.required) {
       const bool found = std::binary_search(rec.pairs.begin(), rec.pairs.end(), p);
       const ReferenceNormal& g = full_truth(f, p).g;
-      broad.check(found, g.penetrating ? g.depth : -g.distance, Where{frame, pair_name(p)}, [&] {
+      broad.check(found, g.penetrating ? g.depth : -g.distance, Where{frame, p}, [&] {
         return fmt::format("frame {}: {} misses {} whose shapes are {} {:.3g} m (margin {} m)", frame, label,
                            pair_name(p), g.penetrating ? "penetrating by" : "apart by",
                            g.penetrating ? g.depth : g.distance, tol.broadphase_margin_m);

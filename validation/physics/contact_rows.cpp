@@ -3,6 +3,7 @@
 // contact geometry (normal angle, depth, points against SAT or FCL).
 #include "physics_impl.hpp"
 
+#include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
 
 #include <algorithm>
@@ -21,23 +22,38 @@ void PhysicsValidators::Impl::judge_completeness(CheckedFrame& f) {
   const double slack = tol.geometry_slack_m;
   StopPoll poll(stop);
   // 2. Contact completeness: penetrating pairs need a contact; contacts need closeness.
-  for (const Pair& p : f.cand) {
-    auto it = f.truth.find(std::make_pair(p.a, p.b));
-    if (it == f.truth.end() || !it->second.have || !it->second.g.penetrating) continue;
-    const ReferenceNormal& g = it->second.g;
-    if (!(g.depth > tol.contact_depth_m)) continue;
-    const bool found = std::binary_search(f.contact_pairs.begin(), f.contact_pairs.end(), p);
-    complete.check(found, g.depth, Where{frame, pair_name(p)}, [&] {
+  // The look-ups (each candidate's truth and whether it has rows, each contact pair's
+  // truth) on `threads` threads into per-item slots; the tallies then in item order.
+  const std::vector<Pair>& cand = f.cand;
+  const std::size_t none = f.truth.size();
+  std::vector<std::size_t> cand_truth(cand.size(), none);
+  std::vector<char> cand_found(cand.size(), 0);
+  parallel_items(cand.size(), threads, stop, [&](std::size_t i, unsigned) {
+    const std::size_t t = f.find(cand[i]);
+    if (t == none || !f.truth[t].have || !f.truth[t].g.penetrating || !(f.truth[t].g.depth > tol.contact_depth_m))
+      return;
+    cand_truth[i] = t;
+    cand_found[i] = std::binary_search(f.contact_pairs.begin(), f.contact_pairs.end(), cand[i]) ? 1 : 0;
+  });
+  for (std::size_t i = 0; i < cand.size(); ++i) {
+    if (cand_truth[i] == none) continue;
+    const Pair p = cand[i];
+    const ReferenceNormal& g = f.truth[cand_truth[i]].g;
+    complete.check(cand_found[i] != 0, g.depth, Where{frame, p}, [&] {
       return fmt::format("frame {}: {} penetrates by {:.4g} m{} and has no contact", frame, pair_name(p), g.depth,
                          g.depth_upper_bound ? " (upper bound: non-convex mesh)" : "");
     });
   }
-  for (const Pair& p : f.contact_pairs) {
+  const std::vector<Pair>& pairs = f.contact_pairs;
+  std::vector<std::size_t> pair_truth(pairs.size());
+  parallel_items(pairs.size(), threads, stop, [&](std::size_t i, unsigned) { pair_truth[i] = f.find(pairs[i]); });
+  for (std::size_t i = 0; i < pairs.size(); ++i) {
     poll();
-    const ReferenceNormal& g = full_truth(f, p).g;
+    const Pair p = pairs[i];
+    const ReferenceNormal& g = pair_truth[i] < none ? f.truth[pair_truth[i]].g : full_truth(f, p).g;
     const double bound = pair_margin(p) + slack;
     const double d = g.signed_distance();
-    false_contact.check(d <= bound, d - bound, Where{frame, pair_name(p)}, [&] {
+    false_contact.check(d <= bound, d - bound, Where{frame, p}, [&] {
       return fmt::format("frame {}: false contact on {}: shapes {:.4g} m apart (margin {:.4g} m)", frame,
                          pair_name(p), d, pair_margin(p));
     });
@@ -51,13 +67,53 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
   const std::int64_t frame = rec.frame;
   StopPoll poll(stop);
   // 3. Contact geometry, per row: normal angle, the pair's deepest row's depth, points.
+  // The figures (the reference a pair is judged on, each row's reference normal and
+  // angle, its point's distance to both surfaces, FCL's angle to SAT's axes) on `threads`
+  // threads, each pair writing its own slots; then the tallies in record order, so the
+  // verdict, causes and examples are those of a serial run.
   const double deg = 180.0 / kPi;
-  for (const PairRows& pr : f.rows) {
-    poll();
+  const bool aabb = bodies.contact_geometry == ContactGeometry::Aabb;
+  std::vector<const ContactTruth*> truth_of(f.rows.size());
+  for (std::size_t i = 0; i < f.rows.size(); ++i) truth_of[i] = &full_truth(f, f.rows[i].p);
+  struct PairFigures {
+    ReferenceNormal r;       // the reference judging the pair
+    double fcl_angle = 0;    // by SAT: FCL's normal to SAT's nearest accepted axis (deg)
+    double fcl_minimum = 0;  // by SAT: FCL's normal to SAT's minimum (deg)
+  };
+  struct RowFigures {
+    RowReference ref;
+    double da = 0, db = 0;  // the point's distance to A's and B's surfaces (has_points)
+  };
+  std::vector<PairFigures> pair_fig(f.rows.size());
+  std::vector<RowFigures> row_fig(rec.contacts.size());
+  parallel_items(f.rows.size(), threads, stop, [&](std::size_t i, unsigned) {
+    const PairRows& pr = f.rows[i];
     const Pair p = pr.p;
-    const ContactTruth& shape_truth = full_truth(f, p);
+    const ContactTruth& t = *truth_of[i];
+    const bool by_sat = !aabb && t.sat;
+    PairFigures& pf = pair_fig[i];
+    if (by_sat) {
+      pf.fcl_angle = sat_angle_to_accepted(t.sat_result, d3(t.fcl.normal)) * 180.0 / kPi;
+      pf.fcl_minimum = angle_between(t.fcl.normal, t.g.normal) * 180.0 / kPi;
+    }
+    pf.r = aabb ? ReferenceGeometry::aabb_pair(rec.aabbs[p.a], rec.aabbs[p.b]) : t.g;
+    if (!pf.r.valid) return;
+    for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
+      const ContactRecord& c = rec.contacts[k];
+      RowFigures& rf = row_fig[k];
+      rf.ref = row_reference(t, pf.r, by_sat, c.normal);
+      if (rec.has_points) {
+        rf.da = ref->surface_distance(p.a, det[p.a], c.point);
+        rf.db = ref->surface_distance(p.b, det[p.b], c.point);
+      }
+    }
+  });
+  for (std::size_t i = 0; i < f.rows.size(); ++i) {
+    poll();
+    const PairRows& pr = f.rows[i];
+    const Pair p = pr.p;
+    const ContactTruth& shape_truth = *truth_of[i];
     const ReferenceNormal& shape_ref = shape_truth.g;
-    const bool aabb = bodies.contact_geometry == ContactGeometry::Aabb;
     // The reference that judges this pair: the separating-axis test (every near-minimal
     // axis accepted) or FCL (box-box, EPA, or the BVH bound of non-convex meshes).
     const bool by_sat = !aabb && shape_truth.sat;
@@ -65,9 +121,9 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
     if (by_sat) {
       ++sat_pairs;
       // The second opinion: FCL's normal outside SAT's accepted axes is a figure.
-      const double fcl_angle = sat_angle_to_accepted(shape_truth.sat_result, d3(shape_truth.fcl.normal)) * 180.0 / kPi;
+      const double fcl_angle = pair_fig[i].fcl_angle;
       const double fcl_excess = shape_truth.fcl.depth - shape_truth.g.depth;
-      if (angle_between(shape_truth.fcl.normal, shape_truth.g.normal) * 180.0 / kPi > 1.0) {
+      if (pair_fig[i].fcl_minimum > 1.0) {
         ++sat_fcl_other;
         if (fcl_excess > sat_fcl_other_excess) sat_fcl_other_excess = fcl_excess;
       }
@@ -85,7 +141,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
     } else if (!aabb) {
       ++fcl_pairs;
     }
-    const ReferenceNormal r = aabb ? ReferenceGeometry::aabb_pair(rec.aabbs[p.a], rec.aabbs[p.b]) : shape_ref;
+    const ReferenceNormal& r = pair_fig[i].r;
     if (!r.valid) {
       rows_unjudged += pr.count;
       continue;
@@ -104,7 +160,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
     const bool engine_places_depth = rec.contacts[deepest].depth > tol.geometry_slack_m;
     for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
       const ContactRecord& c = rec.contacts[k];
-      const RowReference row_ref = row_reference(shape_truth, r, by_sat, c.normal);
+      const RowReference& row_ref = row_fig[k].ref;
       const double angle = row_ref.angle * deg;
       const Vec3 ref_normal = row_ref.normal;
       ++sign_rows;
@@ -131,7 +187,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
         // judged: a normal pointing from A to B pushes the bodies into each other.
         ++aabb_angle_rows;
         aabb_angle_worst = std::max(aabb_angle_worst, angle);
-        normal_angle.check(angle < 90.0, angle, Where{frame, pair_name(p)}, [&] {
+        normal_angle.check(angle < 90.0, angle, Where{frame, p}, [&] {
           return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) points against the world AABBs' "
                              "minimum translation ({:.3f}, {:.3f}, {:.3f}): {:.1f} deg (sign judged only: the engine "
                              "resolves on world AABBs)",
@@ -139,7 +195,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
                              r.normal.y, r.normal.z, angle);
         });
       } else {
-        normal_angle.check(angle <= tol.normal_angle_deg, angle, Where{frame, pair_name(p)}, [&] {
+        normal_angle.check(angle <= tol.normal_angle_deg, angle, Where{frame, p}, [&] {
           return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from {}'s "
                              "({:.3f}, {:.3f}, {:.3f}) ({}){}",
                              frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle, judge,
@@ -168,10 +224,9 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
         // row) of each; a point placed with a wrong orientation leaves at least one.
         const double reach_p =
             std::max({r.penetrating ? r.depth : r.distance, double(c.depth), pair_margin(p)});
-        const double da = ref->surface_distance(p.a, det[p.a], c.point);
-        const double db = ref->surface_distance(p.b, det[p.b], c.point);
+        const double da = row_fig[k].da, db = row_fig[k].db;
         const double off = std::max(da, db) - reach_p;
-        points.check(off <= tol.depth_m, off, Where{frame, pair_name(p)}, [&] {
+        points.check(off <= tol.depth_m, off, Where{frame, p}, [&] {
           return fmt::format("frame {}: {} row {}: point ({:.4f}, {:.4f}, {:.4f}) is {:.4g} m from body {} "
                              "and {:.4g} m from body {} (depth or distance {:.4g} m)",
                              frame, pair_name(p), k - pr.first, c.point.x, c.point.y, c.point.z, da, p.a, db, p.b,
@@ -183,7 +238,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
     const double want = r.penetrating ? r.depth : 0.0;
     // An upper bound (non-convex meshes) judges one side only: the engine may be shallower.
     const double diff = r.depth_upper_bound ? double(c.depth) - want : std::fabs(double(c.depth) - want);
-    depth.check(diff <= tol.depth_m, diff, Where{frame, pair_name(p)}, [&] {
+    depth.check(diff <= tol.depth_m, diff, Where{frame, p}, [&] {
       return fmt::format("frame {}: {} deepest row depth {:.4g} m, {} {:.4g} m{} [reference: {}]", frame,
                          pair_name(p), c.depth, by_sat ? "SAT minimum" : "FCL", want,
                          r.depth_upper_bound ? " (upper bound)" : "", judge);

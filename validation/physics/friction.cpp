@@ -102,7 +102,7 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
   const double along = std::min({along0, alongn, along1});
   const double allowance = (len3(after.wa) + len3(after.wb)) * gap;
   const std::int64_t frame = rec.frame;
-  dissipation.check(along <= tol.friction_speed + allowance, along, Where{frame, pair_name(p)}, [&] {
+  dissipation.check(along <= tol.friction_speed + allowance, along, Where{frame, p}, [&] {
     return fmt::format("frame {}: {} ({} rows): the friction impulse (sum jt3 ({:.4g}, {:.4g}, {:.4g}) kg m/s) "
                        "pushes the contact points along their sliding: {:.4g} m/s along the impulses before the "
                        "step, {:.4g} with the normal impulses, {:.4g} after it (largest tangential speed at a row "
@@ -154,7 +154,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
     const double limit = mu * jn_sum + rounding + (vector_friction ? 0.0 : tol.friction_cone_abs);
     const double excess = jt_sum - limit;
     (vector_friction ? ++cone_jt3_pairs : ++cone_scalar_pairs);
-    cone.check(excess <= 0, excess, Where{frame, pair_name(pr)}, [&] {
+    cone.check(excess <= 0, excess, Where{frame, pr}, [&] {
       return fmt::format("frame {}: {} |{}| {:.6g} > mu {:.4g} x jn {:.6g} ({:.4g} x the cone){} [rule: {}]", frame,
                          pair_name(pr), vector_friction ? "sum jt3" : "jt", jt_sum, mu, jn_sum,
                          mu * jn_sum > 0 ? jt_sum / (mu * jn_sum) : std::numeric_limits<double>::infinity(),
@@ -260,7 +260,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
       const double after = tangential_speed(va1, wa1, vb1, wb1);
       if (!coupled) {
         const double rise = after - std::max(before, with_normal);
-        dissipation.check(rise <= tol.friction_speed, rise, Where{frame, pair_name(p)}, [&] {
+        dissipation.check(rise <= tol.friction_speed, rise, Where{frame, p}, [&] {
           return fmt::format("frame {}: {} row {}: tangential speed at the {} {:.6g} -> {:.6g} m/s", frame,
                              pair_name(p), k - k0, rec.has_points ? "contact point" : "centres", before, after);
         });
@@ -302,7 +302,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
                                                          ref->surface_distance(p.b, det[p.b], c.point));
         allowance += (len3(wa1) + len3(wb1)) * gap;
       }
-      dissipation.check(along <= tol.friction_speed + allowance, along, Where{frame, pair_name(p)}, [&] {
+      dissipation.check(along <= tol.friction_speed + allowance, along, Where{frame, p}, [&] {
         return fmt::format(
             "frame {}: {} row {}: the friction impulse ({:.4g} kg m/s, from the momentum change) pushes the contact "
             "point along its sliding: {:.4g} m/s along the impulse after the step (tangential speed at the contact "

@@ -17,6 +17,7 @@
 ///  - balance.cpp: rows 7 (momentum balance per body) and 8 (free flight);
 ///  - physics_table.cpp: results(), the rows' verdicts and details.
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -60,10 +61,29 @@ std::string body_name(std::size_t i);
 std::string group_name(const std::vector<std::uint32_t>& members);
 
 /// Where a judged item is: its frame and its name as expectations write it ("pair (A, B)",
-/// "body I", "group (I, J, K)").
+/// "body I", "group (I, J, K)"). A pair's or a body's name is written only when a Tally
+/// needs it (a failure): most items pass, and a frame judges 10^5 - 10^6 of them.
 struct Where {
+  enum class Kind { Text, Pair, Body };
   std::int64_t frame = -1;
-  std::string item;
+  Kind kind = Kind::Text;
+  std::string text;  ///< Kind::Text: the name ("" for none)
+  Pair pair{};       ///< Kind::Pair
+  std::size_t body = 0;  ///< Kind::Body
+  Where() = default;
+  Where(std::int64_t f, std::string name) : frame(f), text(std::move(name)) {}
+  Where(std::int64_t f, Pair p) : frame(f), kind(Kind::Pair), pair(p) {}
+  static Where of_body(std::int64_t f, std::size_t i) {
+    Where w;
+    w.frame = f;
+    w.kind = Kind::Body;
+    w.body = i;
+    return w;
+  }
+  /// The item's name: "pair (A, B)", "body I" or the text.
+  std::string name() const {
+    return kind == Kind::Pair ? pair_name(pair) : kind == Kind::Body ? body_name(body) : text;
+  }
 };
 
 /// One cause of a row (SPEC 13b.13): judged items, failures, the worst judged figure with
@@ -92,12 +112,13 @@ struct Tally {
     if (ok) return;
     if (failures == 0) first = what;
     ++failures;
-    ValidationExample e{where.frame, where.item, figure, what};
+    const std::string item = where.name();
+    ValidationExample e{where.frame, item, figure, what};
     if (failures == 1 || figure > worst_failure.figure) worst_failure = e;
     if (examples.size() < ValidationCause::kMaxExamples) examples.push_back(std::move(e));
-    if (!where.item.empty()) {
-      if (items.size() < ValidationCause::kMaxItems || items.count(where.item))
-        items.insert(where.item);
+    if (!item.empty()) {
+      if (items.size() < ValidationCause::kMaxItems || items.count(item))
+        items.insert(item);
       else
         items_complete = false;
     }
@@ -138,8 +159,17 @@ struct CheckedFrame {
   std::vector<Pair> cand;  ///< candidates: grown exact posed boxes overlap, a body dynamic (sorted)
   std::vector<char> hit;   ///< per candidate: the shapes intersect (all 1 with a broadphase margin)
   /// The reference geometry of every candidate that intersects (or, with a broadphase
-  /// margin, every candidate) and every contact pair, by pair.
-  std::map<std::pair<std::uint32_t, std::uint32_t>, ContactTruth> truth;
+  /// margin, every candidate) and every contact pair: truth[k] is truth_pairs[k]'s
+  /// (sorted, distinct). Every pair a row asks about is among them.
+  std::vector<Pair> truth_pairs;
+  std::vector<ContactTruth> truth;
+  /// Pairs asked about beyond truth_pairs (none by construction; computed on demand).
+  std::map<std::pair<std::uint32_t, std::uint32_t>, ContactTruth> extra;
+  /// Pair p's index in truth_pairs, or truth_pairs.size() when absent.
+  std::size_t find(Pair p) const {
+    const auto it = std::lower_bound(truth_pairs.begin(), truth_pairs.end(), p);
+    return it != truth_pairs.end() && *it == p ? std::size_t(it - truth_pairs.begin()) : truth_pairs.size();
+  }
   std::vector<PairRows> rows;       ///< the record's rows grouped by pair, in record order
   std::vector<Pair> contact_pairs;  ///< the pairs of rows (sorted)
   std::vector<Pair> required;       ///< candidates whose shapes are within the broadphase margin
