@@ -40,25 +40,9 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
 
   // 6. Conservation on isolated dynamic groups: components of the contact graph with at
   // least 2 dynamic bodies and no static body among their contacts.
-  std::vector<std::uint32_t> parent(n);
-  for (std::size_t i = 0; i < n; ++i) parent[i] = static_cast<std::uint32_t>(i);
-  auto find = [&](std::uint32_t i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  };
-  // The contact graph: the contact rows' pairs and the engine's confirmed pairs (octocd's
-  // later relaxation passes may resolve a confirmed pair that the first pass's Eq. 9
-  // discarded, so its impulses are in the state but not in the rows).
-  std::vector<Pair> linked;
-  for (const ContactRecord& c : rec.contacts) linked.push_back(c.pair);
-  linked.insert(linked.end(), rec.confirmed.begin(), rec.confirmed.end());
-  std::vector<std::uint8_t> touched(n, 0), statics(n, 0);
-  for (const Pair& q : linked) {
-    parent[find(q.a)] = find(q.b);
-    touched[q.a] = touched[q.b] = 1;
-  }
-  for (const Pair& q : linked)
-    if (!dynamic(q.a) || !dynamic(q.b)) statics[find(q.a)] = 1;
+  ContactGraph graph = contact_graph(rec);
+  auto find = [&](std::uint32_t i) { return graph.find(i); };
+  const std::vector<std::uint8_t>& statics = graph.statics;
   // An engine may apply a row's impulse at two witness points (Bullet: one on each
   // body), apart along the normal by the depth or distance: the friction part then turns
   // the pair by up to that lever times |jt|. Summed per group, it joins the bound.
@@ -66,10 +50,7 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   for (const ContactRecord& c : rec.contacts)
     if (dynamic(c.pair.a) && dynamic(c.pair.b))
       witness_torque[find(c.pair.a)] += (double(c.depth) + pair_margin(c.pair)) * std::fabs(double(c.jt));
-  std::map<std::uint32_t, std::vector<std::uint32_t>> groups_of;
-  for (std::size_t i = 0; i < n; ++i)
-    if (touched[i] && dynamic(static_cast<std::uint32_t>(i))) groups_of[find(static_cast<std::uint32_t>(i))].push_back(
-        static_cast<std::uint32_t>(i));
+  const std::map<std::uint32_t, std::vector<std::uint32_t>>& groups_of = graph.groups;
   for (auto& group : groups_of) {
     poll();
     // Not a structured binding: lambdas below capture it (clang 14, the fuzz preset's
@@ -187,11 +168,58 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
                          frame, members.size(), members.front(), dl, lexchanged, lbound);
     });
   }
-  if (bodies.contact_model == PhysicsBodies::ContactModel::Soft && restitution_le_1) {
-    std::vector<Component> components;  // this step's, with their dynamic bodies
-    for (const auto& group : groups_of) components.push_back({group.second, !statics[group.first]});
-    soft_episodes(rec, components);
+  if (tracks_episodes()) soft_episodes(rec, components(graph));
+}
+
+std::uint32_t PhysicsValidators::Impl::ContactGraph::find(std::uint32_t i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
+
+PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(const FrameRecord& rec) const {
+  const std::size_t n = model->bodies.size();
+  ContactGraph graph;
+  std::vector<std::uint32_t>& parent = graph.parent;
+  parent.resize(n);
+  for (std::size_t i = 0; i < n; ++i) parent[i] = static_cast<std::uint32_t>(i);
+  auto find = [&](std::uint32_t i) { return graph.find(i); };
+  // The contact graph: the contact rows' pairs and the engine's confirmed pairs (octocd's
+  // later relaxation passes may resolve a confirmed pair that the first pass's Eq. 9
+  // discarded, so its impulses are in the state but not in the rows).
+  std::vector<Pair> linked;
+  for (const ContactRecord& c : rec.contacts) linked.push_back(c.pair);
+  linked.insert(linked.end(), rec.confirmed.begin(), rec.confirmed.end());
+  std::vector<std::uint8_t> touched(n, 0);
+  graph.statics.assign(n, 0);
+  for (const Pair& q : linked) {
+    parent[find(q.a)] = find(q.b);
+    touched[q.a] = touched[q.b] = 1;
   }
+  for (const Pair& q : linked)
+    if (!dynamic(q.a) || !dynamic(q.b)) graph.statics[find(q.a)] = 1;
+  for (std::size_t i = 0; i < n; ++i)
+    if (touched[i] && dynamic(static_cast<std::uint32_t>(i)))
+      graph.groups[find(static_cast<std::uint32_t>(i))].push_back(static_cast<std::uint32_t>(i));
+  return graph;
+}
+
+std::vector<PhysicsValidators::Impl::Component> PhysicsValidators::Impl::components(const ContactGraph& graph) const {
+  std::vector<Component> out;  // this step's, with their dynamic bodies
+  for (const auto& group : graph.groups) out.push_back({group.second, !graph.statics[group.first]});
+  return out;
+}
+
+void PhysicsValidators::Impl::advance_episodes(const FrameRecord& rec) {
+  if (!tracks_episodes()) return;
+  const std::size_t n = model->bodies.size();
+  const bool states = rec.x_pre.size() == n && rec.v_pre.size() == n && rec.x_post.size() == n &&
+                      rec.v_post.size() == n;
+  if (!states) {
+    for (auto& e : episodes) e.spoiled = true;  // as conservation(): the episode is not seen whole
+    return;
+  }
+  const ContactGraph graph = contact_graph(rec);
+  soft_episodes(rec, components(graph));
 }
 
 double PhysicsValidators::Impl::mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const {
@@ -224,7 +252,9 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
       continue;
     }
     const Episode& ep = *it;
-    if (ep.spoiled) {
+    if (!owned(ep.start)) {
+      // Begun outside this validator's frames (a shard's): judged where it began.
+    } else if (ep.spoiled) {
       ++episodes_unjudged;
     } else {
       double e1 = 0, masses = 0;

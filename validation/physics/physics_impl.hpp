@@ -268,6 +268,16 @@ struct PhysicsValidators::Impl {
   void conservation(const FrameRecord& rec);
   /// Rows 7-8 on frames with states (balance.cpp).
   void balance(const FrameRecord& rec, const std::vector<Pose>& det);
+  /// A step's contact graph: the contact rows' and confirmed pairs joined (find), per
+  /// root whether a member touches a static body, and per root its dynamic bodies in
+  /// contact (sorted).
+  struct ContactGraph {
+    std::vector<std::uint32_t> parent;
+    std::vector<std::uint8_t> statics;
+    std::map<std::uint32_t, std::vector<std::uint32_t>> groups;
+    std::uint32_t find(std::uint32_t i);
+  };
+  ContactGraph contact_graph(const FrameRecord& rec) const;
   /// Mechanical energy of body i (kinetic + rotational - m g . x), before or after the step.
   double mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const;
   /// A step's component of the contact graph: its dynamic bodies (sorted) and whether it
@@ -279,6 +289,22 @@ struct PhysicsValidators::Impl {
   /// contact_model soft: opens, grows, spoils and closes (judging energy) the contact
   /// episodes of isolated groups; `components`: this step's components with a dynamic body.
   void soft_episodes(const FrameRecord& rec, const std::vector<Component>& components);
+  /// The graph's components with a dynamic body.
+  std::vector<Component> components(const ContactGraph& graph) const;
+  /// A frame outside the judged ones: the episodes only (PhysicsValidators::observe_episodes).
+  void advance_episodes(const FrameRecord& rec);
+  /// Energy is judged per contact episode (contact_model soft, restitution <= 1).
+  bool tracks_episodes() const {
+    return bodies.contact_model == PhysicsBodies::ContactModel::Soft && restitution_le_1;
+  }
+  /// Episodes judged here: those begun in [episode_first, episode_last] (set_episode_frames).
+  std::int64_t episode_first = std::numeric_limits<std::int64_t>::min();
+  std::int64_t episode_last = std::numeric_limits<std::int64_t>::max();
+  bool owned(std::int64_t start) const { return start >= episode_first && start <= episode_last; }
+  /// Open episodes judged here.
+  std::size_t owned_open() const {
+    return std::size_t(std::count_if(episodes.begin(), episodes.end(), [&](const Episode& e) { return owned(e.start); }));
+  }
   /// A contact episode of an isolated group (contact_model soft): its dynamic bodies
   /// (sorted), from its first contact step until none of them touches another; energy and
   /// kinetic energy at the start (a body joining later: at the step it joins).

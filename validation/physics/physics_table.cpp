@@ -301,8 +301,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                               "from its first contact until none of its bodies touches another ({} episodes judged, "
                               "{} of them of 3 or more bodies; {} not judged: a body touched a static one, a step "
                               "had no states, or still in contact at the end ({} open)), not on {} group-steps",
-                              s.episodes_judged, s.episodes_judged_groups, s.episodes_unjudged + s.episodes.size(),
-                              s.episodes.size(), s.energy_soft_steps);
+                              s.episodes_judged, s.episodes_judged_groups, s.episodes_unjudged + s.owned_open(),
+                              s.owned_open(), s.energy_soft_steps);
     if (s.groups_locked)
       r.detail += fmt::format("; {} group-frames with a body whose axes are locked (locked_dofs): momentum along "
                               "locked translation axes not judged; {} with a rotation locked: angular momentum not "

@@ -234,6 +234,15 @@ void PhysicsValidators::set_stop(std::function<bool()> stop) { impl_->stop = std
 
 void PhysicsValidators::set_threads(int threads) { impl_->threads = threads; }
 
+void PhysicsValidators::set_episode_frames(std::int64_t first, std::int64_t last) {
+  impl_->episode_first = first;
+  impl_->episode_last = last;
+}
+
+void PhysicsValidators::observe_episodes(const FrameRecord& rec) { impl_->advance_episodes(rec); }
+
+bool PhysicsValidators::episodes_pending() const { return impl_->owned_open() > 0; }
+
 void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   Impl& s = *impl_;
   const std::size_t n = s.model->bodies.size();
