@@ -1,5 +1,6 @@
 // `octocd validate --trace-in T --shard i/N --json` and `validate --merge` (issue 33 item
-// 6), and `validate --threads` (the verdict does not depend on it): a Bullet run with rotation (a correct engine that is not octocd) and the same trace
+// 6), and `validate --threads` (the verdict does not depend on it): a Bullet run with
+// rotation (a correct engine that is not octocd) and the same trace
 // with every contact normal flipped (planted: failing rows with counts, figures, examples
 // and items in every shard) are judged whole and in 3 shards; the merged verdict equals
 // the whole run's row for row (tier, name, figure, measured, bound, verdict, judged,

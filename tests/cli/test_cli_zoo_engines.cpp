@@ -681,12 +681,14 @@ TEST_F(ZooEngines, SoftEpisodesAcrossShardBordersMergeToTheWholeVerdict) {
       ASSERT_TRUE(r.code == 0 || r.code == 3) << r.output;
       files += " " + out.string();
     }
-    const Result merged = run_octocd("validate --merge" + files + " --json " + (dir_ / (tag + ".merged.json")).string());
+    const Result merged =
+        run_octocd("validate --merge" + files + " --json " + (dir_ / (tag + ".merged.json")).string());
     EXPECT_EQ(merged.code, whole.code) << merged.output;
     const nlohmann::json a = load(dir_ / (tag + ".whole.json")), b = load(dir_ / (tag + ".merged.json"));
     ASSERT_EQ(a["rows"].size(), b["rows"].size());
+    const char* keys[] = {"tier", "name", "figure", "measured", "bound", "verdict", "judged", "tolerances", "causes"};
     for (std::size_t r = 0; r < a["rows"].size(); ++r)
-      for (const char* key : {"tier", "name", "figure", "measured", "bound", "verdict", "judged", "tolerances", "causes"})
+      for (const char* key : keys)
         EXPECT_EQ(a["rows"][r][key], b["rows"][r][key]) << tag << ": row " << a["rows"][r]["name"] << ", " << key;
     EXPECT_NE(whole.output.find("2 episodes judged"), std::string::npos) << whole.output;
     // Every episode judged once, by one shard: the shards' episode counts (judged, of 3

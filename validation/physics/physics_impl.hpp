@@ -303,7 +303,8 @@ struct PhysicsValidators::Impl {
   bool owned(std::int64_t start) const { return start >= episode_first && start <= episode_last; }
   /// Open episodes judged here.
   std::size_t owned_open() const {
-    return std::size_t(std::count_if(episodes.begin(), episodes.end(), [&](const Episode& e) { return owned(e.start); }));
+    return std::size_t(
+        std::count_if(episodes.begin(), episodes.end(), [&](const Episode& e) { return owned(e.start); }));
   }
   /// A contact episode of an isolated group (contact_model soft): its dynamic bodies
   /// (sorted), from its first contact step until none of them touches another; energy and
