@@ -12,10 +12,14 @@
 // own density: every group's count times N / N0, the domain and every layout box times
 // (N / N0)^(1/3). The CPU engine runs --warmup frames (not timed) and records the next one;
 // each repetition judges that record on fresh validators. Reported: median, min and max
-// over --reps repetitions, the threads (OpenMP) and the 1-minute load average.
+// over --reps repetitions, the contact rows of the frame, the validators' threads
+// (--threads: a list, 0 the hardware's) and the 1-minute load average.
+// --lattice instead judges a contact-heavy frame: N boxes (half extent 0.1 m) on a cubic
+// grid of spacing 0.19 m, no gravity, so every box overlaps its 26 neighbours by 1 cm
+// (about 13 contact pairs a body); the engine's first step is recorded (--warmup 0).
 //
 // Usage: bench_validation [SCENE.json] [--bodies 20000,100000] [--reps 5] [--warmup 20]
-//                         [--only physics,full,pairs] [--rows]
+//                         [--only physics,full,pairs] [--rows] [--threads 1,2] [--lattice]
 #include <thread>
 
 #include <algorithm>
@@ -80,6 +84,29 @@ octocd::Scene scaled_scene(const std::string& path, long bodies) {
   return octocd::parse_scene(j.dump(), path);
 }
 
+/// `bodies` boxes (half extent 0.1 m) on a cubic grid of spacing 0.19 m: each overlaps its
+/// 26 neighbours by 0.01 m on every axis. No gravity, no walls.
+octocd::Scene lattice_scene(long bodies) {
+  const long side = std::lround(std::ceil(std::cbrt(double(bodies)) - 1e-9));
+  const double s = 0.19, half = 0.5 * double(side - 1) * s + 0.1;
+  nlohmann::json j = {{"name", fmt::format("box-lattice-{}", bodies)},
+                      {"domain", {{"min", {-half - 0.5, -half - 0.5, -half - 0.5}},
+                                  {"max", {half + 0.5, half + 0.5, half + 0.5}}}},
+                      {"gravity", {0.0, 0.0, 0.0}},
+                      {"walls", "none"},
+                      {"groups",
+                       {{{"name", "lattice"},
+                         {"shape", {{"box", {0.1, 0.1, 0.1}}}},
+                         {"count", bodies},
+                         {"mass", 1.0},
+                         {"layout",
+                          {{"type", "grid"},
+                           {"min", {-half, -half, -half}},
+                           {"max", {half + 1e-3, half + 1e-3, half + 1e-3}},
+                           {"spacing", s}}}}}}};
+  return octocd::parse_scene(j.dump(), "lattice");
+}
+
 struct Stats {
   double median, min, max;
 };
@@ -96,6 +123,8 @@ int main(int argc, char** argv) {
   int reps = 5, warmup = 20;
   std::string only = "physics,full,pairs";
   bool rows_shown = false;  // --rows: each row's own seconds on the last repetition
+  bool lattice = false;     // --lattice: the contact-heavy box lattice instead of SCENE
+  std::vector<long> thread_counts{0};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -110,36 +139,45 @@ int main(int argc, char** argv) {
     else if (a == "--warmup") warmup = std::stoi(next());
     else if (a == "--only") only = next();
     else if (a == "--rows") rows_shown = true;
+    else if (a == "--lattice") lattice = true;
+    else if (a == "--threads") thread_counts = parse_list(next());
     else if (!a.empty() && a[0] != '-') scene_path = a;
     else {
-      std::fprintf(stderr, "usage: bench_validation [SCENE.json] [--bodies N,..] [--reps R] [--warmup W] [--only ...]\n");
+      std::fprintf(stderr, "usage: bench_validation [SCENE.json] [--bodies N,..] [--reps R] [--warmup W] [--only ...] "
+                           "[--rows] [--threads T,..] [--lattice]\n");
       return 2;
     }
   }
   auto wanted = [&](const char* what) { return ("," + only + ",").find(std::string(",") + what + ",") != std::string::npos; };
   fmt::print("bench_validation: {} hardware threads, load average {:.2f} at start, {} repetitions\n",
              std::thread::hardware_concurrency(), load_average(), reps);
-  fmt::print("{:<10} {:>8} {:>9} {:>10} {:>10} {:>10} {:>14} {:>8}\n", "what", "bodies", "pairs", "median s",
-             "min s", "max s", "us/body-frame", "load");
+  fmt::print("{:<10} {:>8} {:>9} {:>9} {:>7} {:>10} {:>10} {:>10} {:>14} {:>8}\n", "what", "bodies", "pairs",
+             "contacts", "threads", "median s", "min s", "max s", "us/body-frame", "load");
   for (long target : sizes) {
-    const octocd::Scene scene = scaled_scene(scene_path, target);
+    const octocd::Scene scene = lattice ? lattice_scene(target) : scaled_scene(scene_path, target);
     const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
     octocd::World world(model, octocd::make_any_broadphase(scene.broadphase, scene.domain));
     world.set_recording(true);
-    for (int f = 0; f <= warmup; ++f) world.step();
+    for (int f = 0; f <= (lattice ? 0 : warmup); ++f) world.step();
     const octocd::FrameRecord rec = world.record();
     const long n = long(rec.aabbs.size());
     std::vector<octocd::Pair> pairs;
     octocd::exact_pairs(rec.aabbs, pairs);
+    long threads = 0;
     auto row = [&](const char* what, const std::vector<double>& t) {
       const Stats st = stats(t);
-      fmt::print("{:<10} {:>8} {:>9} {:>10.4f} {:>10.4f} {:>10.4f} {:>14.3f} {:>8.2f}\n", what, n, pairs.size(),
-                 st.median, st.min, st.max, 1e6 * st.median / double(n), load_average());
+      fmt::print("{:<10} {:>8} {:>9} {:>9} {:>7} {:>10.4f} {:>10.4f} {:>10.4f} {:>14.3f} {:>8.2f}\n", what, n,
+                 pairs.size(), rec.contacts.size(),
+                 threads > 0 ? threads : long(std::thread::hardware_concurrency()), st.median, st.min, st.max,
+                 1e6 * st.median / double(n), load_average());
       std::fflush(stdout);
     };
     octocd::ValidationOptions vo;
     vo.against_fcl = false;
     vo.against_bullet = false;
+    for (long th : thread_counts) {
+    threads = th;
+    vo.threads = int(th);
     if (wanted("physics")) {
       std::vector<double> t;
       for (int r = 0; r < reps; ++r) {
@@ -168,6 +206,7 @@ int main(int argc, char** argv) {
         }
       }
       row("full", t);
+    }
     }
     if (wanted("pairs")) {
       std::vector<double> t, tf;

@@ -1,5 +1,6 @@
 // `octocd validate --trace-in T --shard i/N --json` and `validate --merge` (issue 33 item
-// 6): a Bullet run with rotation (a correct engine that is not octocd) and the same trace
+// 6), and `validate --threads` (the verdict does not depend on it): a Bullet run with
+// rotation (a correct engine that is not octocd) and the same trace
 // with every contact normal flipped (planted: failing rows with counts, figures, examples
 // and items in every shard) are judged whole and in 3 shards; the merged verdict equals
 // the whole run's row for row (tier, name, figure, measured, bound, verdict, judged,
@@ -149,6 +150,61 @@ TEST_F(Shards, BadShardsExitTwoNamingTheFile) {
 }  // namespace
 
 namespace {
+
+// The geometric rows (contact-completeness, contact-geometry, penetration) judge their
+// pairs and rows on threads. A Bullet run of 216 cubes stacked touching (about 8,000
+// contact rows a checked frame), every normal flipped (planted) and judged with
+// tolerances tight enough that contact-geometry and penetration fail far more items than
+// they keep examples of, gives the same rows (verdicts, counts, worst and first examples,
+// items, details) with 1 and with 2 threads.
+TEST(ValidateThreads, GeometricRowsOnThreadsGiveTheSerialVerdict) {
+  const fs::path dir = fs::temp_directory_path() / ("octocd-geometry-threads-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path scene = dir / "stack.json";
+  std::ofstream(scene) << R"({
+    "name": "threads-stack", "rotation": true, "dt": 0.002, "frames": 40,
+    "domain": {"min": [-0.5, 0, -0.5], "max": [0.5, 1.0, 0.5]}, "walls": "open-box",
+    "groups": [{"name": "cubes", "shape": {"box": [0.05, 0.05, 0.05]}, "count": 216, "mass": 1,
+      "layout": {"type": "grid", "min": [-0.3, 0.0499, -0.3], "max": [0.3, 0.7, 0.3], "spacing": 0.0999}}]})";
+  const std::string trace = (dir / "stack.h5").string();
+  const Result run = run_octocd("run " + scene.string() + " --engine bullet --rotation --frames 40 --trace " + trace +
+                                " --state-every 1 --contacts --no-xdmf --quiet");
+  ASSERT_EQ(run.code, 0) << run.output;
+  {  // planted: every contact normal flipped
+    const hid_t f = H5Fopen(trace.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    ASSERT_GE(f, 0);
+    octocd::test::Data n = octocd::test::read(f, "/contacts/normal");
+    ASSERT_GT(n.rows(), 20000u) << "the stack holds thousands of contact rows a frame";
+    for (double& x : n.v) x = -x;
+    octocd::test::write(f, "/contacts/normal", n);
+    H5Fclose(f);
+  }
+  auto rows = [&](const std::string& threads) {
+    const fs::path out = dir / ("t" + threads + ".json");
+    const Result r = run_octocd("validate --trace-in " + trace +
+                                " --every 10 --tolerance penetration_slops=0.02 --tolerance depth_m=1e-6 "
+                                "--tolerance geometry_slack_m=0 --tolerance contact_depth_m=1e-6 --threads " +
+                                threads + " --json " + out.string());
+    EXPECT_EQ(r.code, 3) << r.output;
+    nlohmann::json j = load(out);
+    for (auto& row : j["rows"]) row.erase("seconds");
+    return j["rows"];
+  };
+  const nlohmann::json serial = rows("1"), threaded = rows("2");
+  ASSERT_EQ(serial.size(), threaded.size());
+  int crowded = 0;  // causes of the geometric rows failing more items than they keep examples of
+  for (std::size_t k = 0; k < serial.size(); ++k) {
+    EXPECT_EQ(serial[k], threaded[k]) << serial[k]["name"];
+    const std::string name = serial[k]["name"];
+    if (name == "contact-geometry" || name == "penetration" || name == "contact-completeness") {
+      EXPECT_GT(serial[k]["judged"].get<std::uint64_t>(), 1000u) << name;
+      for (const auto& c : serial[k]["causes"]) crowded += c["count"].get<std::size_t>() > 100;
+    }
+  }
+  EXPECT_GE(crowded, 2) << "the comparison covers failing geometric rows beyond their examples";
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+}
 
 // Threads (per frame: reference geometry, the reference pair set) and the pipeline (frame f
 // judged while the engine runs f + 1) change no verdict: a settling pile with contacts

@@ -32,6 +32,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "support/cli_run.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/reference_contact.hpp"
@@ -621,6 +623,104 @@ TEST_F(ZooEngines, SoftContactsThreeBodyEpisodeIsJudged) {
     EXPECT_TRUE(std::regex_search(r.output, std::regex(std::string("(^|\n)physics +") + row + " +[^ ]+ +[^ ]+ +pass")))
         << row << "\n" << r.output;
   std::cout << "3-body episode: one group at frame " << together << "\n" << r.output.substr(0, r.output.find("\nmodel")) << "\n";
+}
+
+// Shards of a soft-contact run (`validate --trace-in T --shard i/N`, then `--merge`): the
+// energy is judged over each isolated group's contact episode, and here a shard border
+// falls inside both episodes (boxes 0-1 and the chain 3-4-5). The shard holding an
+// episode's first contact step judges it (following the episodes through the frames
+// before its own and reading on past its last frame): the merged rows equal the whole
+// run's, clean (every row passes, both episodes judged) and with the chain's springs
+// feeding energy in (conservation fails on group (3, 4, 5), once).
+TEST_F(ZooEngines, SoftEpisodesAcrossShardBordersMergeToTheWholeVerdict) {
+  auto load = [](const fs::path& p) {
+    std::ifstream in(p);
+    return nlohmann::json::parse(in);
+  };
+  for (const double chain_c : {50.0, -50.0}) {
+    const Zoo z = soft_engine(60, chain_c);
+    const int frames = static_cast<int>(z.rows.size());
+    // Each episode's first and last step with a row.
+    auto span = [&](std::vector<int> bodies) {
+      int first = -1, last = -1;
+      for (int f = 0; f < frames; ++f)
+        for (const Row& r : z.rows[std::size_t(f)])
+          if (std::count(bodies.begin(), bodies.end(), r.a) && std::count(bodies.begin(), bodies.end(), r.b)) {
+            if (first < 0) first = f + 1;
+            last = f + 1;
+          }
+      return std::make_pair(first, last);
+    };
+    const auto pair = span({0, 1}), chain = span({3, 4, 5});
+    ASSERT_GT(pair.first, 0);
+    ASSERT_GT(chain.first, 0);
+    // The fewest shards with a border (after frame floor(k F / N)) inside both episodes.
+    int count = 0;
+    for (int n = 2; n <= frames && count == 0; ++n) {
+      bool in_pair = false, in_chain = false;
+      for (int k = 1; k < n; ++k) {
+        const int border = k * frames / n;
+        in_pair = in_pair || (border >= pair.first && border < pair.second);
+        in_chain = in_chain || (border >= chain.first && border < chain.second);
+      }
+      if (in_pair && in_chain) count = n;
+    }
+    ASSERT_GT(count, 1) << "episodes at frames " << pair.first << ".." << pair.second << " and " << chain.first
+                        << ".." << chain.second;
+    const std::string tag = chain_c > 0 ? "clean" : "gain";
+    const fs::path trace = dir_ / (tag + ".h5");
+    z.write(trace.string());
+    const Result whole = run_octocd("validate --trace-in " + trace.string() + " --json " +
+                                    (dir_ / (tag + ".whole.json")).string());
+    ASSERT_EQ(whole.code, chain_c > 0 ? 0 : 3) << whole.output;
+    std::string files;
+    for (int i = 0; i < count; ++i) {
+      const fs::path out = dir_ / (tag + ".s" + std::to_string(i) + ".json");
+      const Result r = run_octocd("validate --trace-in " + trace.string() + " --shard " + std::to_string(i) + "/" +
+                                  std::to_string(count) + " --json " + out.string());
+      ASSERT_TRUE(r.code == 0 || r.code == 3) << r.output;
+      files += " " + out.string();
+    }
+    const Result merged =
+        run_octocd("validate --merge" + files + " --json " + (dir_ / (tag + ".merged.json")).string());
+    EXPECT_EQ(merged.code, whole.code) << merged.output;
+    const nlohmann::json a = load(dir_ / (tag + ".whole.json")), b = load(dir_ / (tag + ".merged.json"));
+    ASSERT_EQ(a["rows"].size(), b["rows"].size());
+    const char* keys[] = {"tier", "name", "figure", "measured", "bound", "verdict", "judged", "tolerances", "causes"};
+    for (std::size_t r = 0; r < a["rows"].size(); ++r)
+      for (const char* key : keys)
+        EXPECT_EQ(a["rows"][r][key], b["rows"][r][key]) << tag << ": row " << a["rows"][r]["name"] << ", " << key;
+    EXPECT_NE(whole.output.find("2 episodes judged"), std::string::npos) << whole.output;
+    // Every episode judged once, by one shard: the shards' episode counts (judged, of 3
+    // or more bodies, not judged) sum to the whole run's.
+    auto episodes = [&](const fs::path& json) {
+      std::array<int, 3> n{};
+      const nlohmann::json doc = load(json);
+      for (const auto& row : doc["rows"]) {
+        std::smatch m;
+        const std::string detail = row["detail"];
+        if (row["name"] == "conservation" &&
+            std::regex_search(detail, m, std::regex("\\((\\d+) episodes judged, (\\d+) of them of 3 or more "
+                                                    "bodies; (\\d+) not judged")))
+          n = {std::stoi(m[1]), std::stoi(m[2]), std::stoi(m[3])};
+      }
+      return n;
+    };
+    std::array<int, 3> sum{};
+    for (int i = 0; i < count; ++i) {
+      const std::array<int, 3> n = episodes(dir_ / (tag + ".s" + std::to_string(i) + ".json"));
+      for (int k = 0; k < 3; ++k) sum[static_cast<std::size_t>(k)] += n[static_cast<std::size_t>(k)];
+    }
+    EXPECT_EQ(sum, episodes(dir_ / (tag + ".whole.json"))) << tag;
+    EXPECT_EQ(sum[0], 2) << tag;
+    if (chain_c < 0) {
+      EXPECT_NE(merged.output.find("group (3, 4, 5) of 3 bodies (soft contacts) over its contact episode"),
+                std::string::npos)
+          << merged.output;
+    }
+    std::cout << tag << ": " << count << " shards; episodes at frames " << pair.first << ".." << pair.second << " and "
+              << chain.first << ".." << chain.second << "\n";
+  }
 }
 
 TEST_F(ZooEngines, SoftContactsEditedVelocityAndWrongBodyAreCaught) {

@@ -458,6 +458,8 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
   }
 }
 
+PhysicsValidators& FrameValidators::physics() { return *impl_->physics; }
+
 std::vector<ValidationResult> FrameValidators::results() const {
   const Impl& s = *impl_;
   // The physics tier first: it judges any engine.

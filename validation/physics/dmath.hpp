@@ -1,7 +1,7 @@
 #pragma once
 /// \file dmath.hpp
 /// Double-precision 3-vectors and row-major 3x3 matrices of the physics tier's judges
-/// (physics_validators.cpp, sat.cpp): they recompute in double what engines did in float32.
+/// (the row files physics_impl.hpp lists, sat.cpp): they recompute in double what engines did in float32.
 /// Internal to validation/physics.
 
 #include <array>

@@ -3,6 +3,8 @@
 // FrameValidators that judge octocd's engines.
 #include "octocd/external.hpp"
 
+#include "octocd/physics.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -369,6 +371,11 @@ struct ExternalValidator::Impl {
   std::shared_ptr<Model> model;
   bool domain_given = false;
   std::unique_ptr<FrameValidators> validators;
+  std::int64_t episode_first = std::numeric_limits<std::int64_t>::min();
+  std::int64_t episode_last = std::numeric_limits<std::int64_t>::max();
+  /// Checks `rec`, completes its AABBs and confirmed pairs, and builds the validators on
+  /// the first frame (the domain around its AABBs unless given).
+  void prepare(FrameRecord& rec);
 };
 
 ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const ExternalOptions& options)
@@ -478,16 +485,40 @@ std::size_t ExternalValidator::body_count() const { return impl_->model->bodies.
 const Model& ExternalValidator::model() const { return *impl_->model; }
 
 void ExternalValidator::observe(FrameRecord rec, bool checked) {
-  Impl& s = *impl_;
-  const Model& model = *s.model;
-  const std::size_t n = model.bodies.size();
+  impl_->prepare(rec);
+  impl_->validators->observe(rec, checked);
+}
+
+void ExternalValidator::set_episode_frames(std::int64_t first, std::int64_t last) {
+  impl_->episode_first = first;
+  impl_->episode_last = last;
+  if (impl_->validators) impl_->validators->physics().set_episode_frames(first, last);
+}
+
+void ExternalValidator::observe_episodes(FrameRecord rec) {
+  impl_->prepare(rec);
+  impl_->validators->physics().observe_episodes(rec);
+}
+
+bool ExternalValidator::episodes_pending() const {
+  return impl_->validators && impl_->validators->physics().episodes_pending();
+}
+
+bool ExternalValidator::judges_episodes() const {
+  return !impl_->options.octocd_engine && impl_->physics.contact_model == PhysicsBodies::ContactModel::Soft;
+}
+
+void ExternalValidator::Impl::prepare(FrameRecord& rec) {
+  Impl& s = *this;
+  const Model& m = *s.model;
+  const std::size_t n = m.bodies.size();
   check_frame_record(rec, n, s.options.engine);
   if (rec.aabbs.empty() && !rec.x_det.empty()) {
     // A rotating engine's record (SPEC 13): the exact world AABBs at its detection pose.
     rec.aabbs.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
       const Pose pose{rec.x_det[i], rec.q_det.empty() ? Quat{} : rec.q_det[i]};
-      const Shape& shape = model.shapes[model.bodies[i].shape];
+      const Shape& shape = m.shapes[m.bodies[i].shape];
       rec.aabbs[i] = shape.mesh ? posed_mesh_aabb(*shape.mesh, pose) : posed_box_aabb(shape.local, pose);
     }
   } else if (rec.aabbs.empty()) {
@@ -495,8 +526,8 @@ void ExternalValidator::observe(FrameRecord rec, bool checked) {
     rec.aabbs.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
       Vec3 x = rec.x_pre[i], v = rec.v_pre[i];
-      integrate(x, v, model.initial.w[i], model.scene.gravity, Vec3{}, model.scene.dt);
-      rec.aabbs[i] = translated(model.local_box(i), x);
+      integrate(x, v, m.initial.w[i], m.scene.gravity, Vec3{}, m.scene.dt);
+      rec.aabbs[i] = translated(m.local_box(i), x);
     }
   }
   rec.has_contact_terms = false;
@@ -524,13 +555,13 @@ void ExternalValidator::observe(FrameRecord rec, bool checked) {
     s.validators = std::make_unique<FrameValidators>(
         // Another engine's pairs are judged by the physics tier (broadphase completeness),
         // not against octocd's broadphases: none are compared here.
-        model, vo, std::vector<std::unique_ptr<BroadPhase>>{},
+        m, vo, std::vector<std::unique_ptr<BroadPhase>>{},
         FrameValidators::Source{fmt::format("engine '{}'", s.options.engine), false, s.options.spec6_response,
                                 std::make_shared<PhysicsBodies>(s.options.octocd_engine
-                                                                    ? octocd_physics_bodies(model)
+                                                                    ? octocd_physics_bodies(m)
                                                                     : s.physics)});
+    s.validators->physics().set_episode_frames(s.episode_first, s.episode_last);
   }
-  s.validators->observe(rec, checked);
 }
 
 std::vector<ValidationResult> ExternalValidator::results() const {

@@ -229,14 +229,21 @@ MergedValidation merge_validation_docs(const std::vector<json>& docs, const std:
         it->count += c.value("count", std::uint64_t(0));
         it->worst = std::max(it->worst, number(c["worst"]));
         for (const json& x : c["examples"])
-          if (it->examples.size() < ValidationCause::kMaxExamples)
-            it->examples.push_back({x.value("frame", std::int64_t(-1)), x.value("item", ""), number(x["figure"]),
-                                    x.value("text", "")});
+          it->examples.push_back({x.value("frame", std::int64_t(-1)), x.value("item", ""), number(x["figure"]),
+                                  x.value("text", "")});
         for (const json& s : c["items"]) its.insert(s.get<std::string>());
         if (!c.value("items_complete", true)) it->items_complete = false;
       }
     }
     for (std::size_t k = 0; k < causes.size(); ++k) {
+      // The first examples of the whole run: a shard's examples are in frame order, but a
+      // soft-contact episode begun in a shard is judged (an example) at the frame it
+      // closes, which may lie in the next shard's frames: by frame, then shard order.
+      std::vector<ValidationExample>& ex = causes[k].examples;
+      if (std::all_of(ex.begin(), ex.end(), [](const ValidationExample& e) { return e.frame >= 0; }))
+        std::stable_sort(ex.begin(), ex.end(),
+                         [](const ValidationExample& a, const ValidationExample& b) { return a.frame < b.frame; });
+      if (ex.size() > ValidationCause::kMaxExamples) ex.resize(ValidationCause::kMaxExamples);
       for (const std::string& s : items[k]) {
         if (causes[k].items.size() == ValidationCause::kMaxItems) {
           causes[k].items_complete = false;

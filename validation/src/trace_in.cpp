@@ -749,6 +749,20 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
     // Frame f + 1 is read (HDF5, on a second thread: the only one that calls HDF5 meanwhile)
     // while frame f is judged.
     const auto [first, last] = shard_frames(options.shard, frames);
+    // A shard of soft contacts: the energy of an isolated group is judged over its contact
+    // episode, which may cross the shard's borders. The shard judges the episodes that
+    // begin in its frames: it follows the episodes through the frames before its own
+    // (those open at its first frame began in an earlier shard, which judges them) and
+    // reads on past its last frame until its own episodes have closed, so the merged
+    // verdict equals the whole run's.
+    const bool episodes = options.shard.count > 1 && made->judges_episodes() && first <= last;
+    if (episodes) {
+      made->set_episode_frames(first, last);
+      for (std::int64_t f = 1; f < first; ++f) {
+        if (options.stop && options.stop()) throw ValidationStopped();
+        made->observe_episodes(in.frame(f));
+      }
+    }
     std::future<FrameRecord> next;
     if (first <= last) next = std::async(std::launch::async, [&in, f = first] { return in.frame(f); });
     for (std::int64_t f = first; f <= last; ++f) {
@@ -756,6 +770,10 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
       const FrameRecord rec = next.get();
       if (f < last) next = std::async(std::launch::async, [&in, f] { return in.frame(f + 1); });
       made->observe(rec, f % every == 0);
+    }
+    for (std::int64_t f = last + 1; episodes && f <= frames && made->episodes_pending(); ++f) {
+      if (options.stop && options.stop()) throw ValidationStopped();
+      made->observe_episodes(in.frame(f));
     }
   } catch (const InputError& e) {
     named(e);

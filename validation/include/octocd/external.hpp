@@ -209,6 +209,18 @@ class ExternalValidator {
   /// (check_frame_record, origin = options.engine) before judging anything of the frame.
   void observe(FrameRecord rec, bool checked = true);
 
+  /// Shards: the soft-contact episodes judged are those begun in frames [first, last]
+  /// (PhysicsValidators::set_episode_frames; default: all).
+  void set_episode_frames(std::int64_t first, std::int64_t last);
+  /// A frame outside the judged ones, checked as observe checks it: only the soft-contact
+  /// episodes advance (PhysicsValidators::observe_episodes).
+  void observe_episodes(FrameRecord rec);
+  /// An episode begun in the episode frames is still open (PhysicsValidators::episodes_pending).
+  bool episodes_pending() const;
+  /// The energy of these bodies is judged per contact episode (PhysicsBodies::contact_model
+  /// soft declared): a shard needs the frames around its own (set_episode_frames).
+  bool judges_episodes() const;
+
   /// Every row of the `octocd validate` table so far: validators 1-6 and 9, then
   /// `analytic` and `bullet-dynamics` (n/a: they step an engine).
   std::vector<ValidationResult> results() const;

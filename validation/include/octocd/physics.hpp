@@ -263,6 +263,26 @@ class PhysicsValidators {
   /// ValidationOptions::threads (0: the hardware's). Verdicts do not depend on it.
   void set_threads(int threads);
 
+  /// Shards (`validate --trace-in T --shard i/N`): with contact_model soft, the energy of
+  /// an isolated group is judged over its contact episode, which may begin in one shard's
+  /// frames and end in the next's. This validator then judges only the episodes whose
+  /// first contact step lies in [first, last] (frame numbers; default: every episode).
+  /// For the verdict of the whole run, feed it every frame before `first` with
+  /// observe_episodes (so it knows which episodes are open when its frames begin: judged
+  /// by an earlier shard), its frames with observe, then frames after `last` with
+  /// observe_episodes while episodes_pending().
+  void set_episode_frames(std::int64_t first, std::int64_t last);
+
+  /// A frame outside the judged ones: only the soft-contact episodes advance (opened,
+  /// grown, spoiled, closed; closed ones begun in the episode frames are judged); no row
+  /// counts it. Nothing when the energy is not judged per episode (contact_model rigid, a
+  /// restitution above 1).
+  void observe_episodes(const FrameRecord& rec);
+
+  /// True while an episode begun in the episode frames is still open (its bodies still in
+  /// contact): a shard reads on past its last frame until this is false or the trace ends.
+  bool episodes_pending() const;
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;

@@ -24,6 +24,8 @@
 
 namespace octocd {
 
+class PhysicsValidators;
+
 struct PhysicsBodies;  // octocd/physics.hpp
 struct ExpectationReport;  // octocd/expect.hpp
 
@@ -369,6 +371,10 @@ class FrameValidators {
 
   /// Results of validators 1-6 and 9 so far.
   std::vector<ValidationResult> results() const;
+
+  /// The physics tier these validators run (owned by them): for its shard settings
+  /// (PhysicsValidators::set_episode_frames, observe_episodes).
+  PhysicsValidators& physics();
 
  private:
   struct Impl;

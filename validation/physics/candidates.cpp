@@ -1,0 +1,185 @@
+// The physics tier's checked frames (physics_impl.hpp): the candidate pairs through the
+// exact posed world AABBs, their reference geometry (SAT, FCL) on threads, and row 1,
+// broadphase completeness.
+#include "physics_impl.hpp"
+
+#include "../src/parallel.hpp"
+#include "../src/row_clock.hpp"
+
+#include <algorithm>
+#include <iterator>
+
+#include "octocd/exact_pairs.hpp"
+#include "octocd/reference_contact.hpp"
+
+namespace octocd {
+
+using namespace dmath;
+using namespace physics_detail;
+
+namespace {
+std::pair<std::uint32_t, std::uint32_t> key(Pair p) { return std::make_pair(p.a, p.b); }
+
+/// Pair p's truth at poses `det` (thread-safe: ReferenceGeometry's queries build their
+/// FCL objects locally).
+void compute_truth(const ReferenceGeometry& ref, const std::vector<Pose>& det, const SatSettings& sat, Pair p,
+                   ContactTruth& t) {
+  static_cast<PairReference&>(t) = pair_reference(ref, p.a, p.b, det[p.a], det[p.b], sat);
+  t.have = true;
+  t.intersects = t.g.penetrating;
+}
+}  // namespace
+
+const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p) const {
+  const std::size_t k = f.find(p);
+  if (k < f.truth.size()) return f.truth[k];
+  ContactTruth& t = f.extra[key(p)];
+  if (!t.have) compute_truth(*ref, *f.det, sat_settings, p, t);
+  return t;
+}
+
+CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::vector<Pose>& det) const {
+  const std::size_t n = model->bodies.size();
+  const double slack = tol.geometry_slack_m;
+  StopPoll poll(stop);
+  CheckedFrame f;
+  f.rec = &rec;
+  f.det = &det;
+  // Candidates: exact posed world AABBs, each grown by half the largest distance any row
+  // asks about, through exact_pairs (flat's set in O(n log n + pairs), independent of
+  // octocd's broadphases): every pair whose shapes are that close has overlapping grown
+  // boxes (the AABB gap is at most the shapes' distance).
+  const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
+  std::vector<Aabb> grown(n);
+  for (std::size_t i = 0; i < n; ++i)
+    grown[i] = expanded(ref->world_aabb(static_cast<std::uint32_t>(i), det[i]), static_cast<float>(0.5 * reach));
+  ExactPairsSettings pair_threads;
+  pair_threads.threads = threads;
+  exact_pairs(grown, f.cand, pair_threads);
+  f.cand.erase(std::remove_if(f.cand.begin(), f.cand.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }),
+               f.cand.end());
+
+  // Truth per pair: intersect() for every candidate, posed() where a row needs the depth
+  // or the distance.
+  // Two convex shapes (boxes, convex meshes) that penetrate get the exact minimum
+  // translation of the separating-axis test (SPEC 13b.9: FCL's box-box keeps a face axis
+  // up to 5% deeper than an edge-edge one, so its depth and normal are not the minimum
+  // there); FCL's answer stays beside it as the second opinion.
+  const bool need_distance = tol.broadphase_margin_m - slack > 0;
+
+  // Contact rows per pair (rows of a pair are consecutive).
+  std::vector<PairRows>& rows = f.rows;
+  for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
+    const Pair p = rec.contacts[k].pair;
+    if (!rows.empty() && rows.back().p == p && rows.back().first + rows.back().count == k) {
+      ++rows.back().count;
+    } else {
+      rows.push_back({p, k, 1});
+    }
+  }
+  std::vector<Pair>& contact_pairs = f.contact_pairs;
+  for (const PairRows& r : rows) contact_pairs.push_back(r.p);
+  std::sort(contact_pairs.begin(), contact_pairs.end());
+
+  // The truth the rows below read, on `threads` threads (parallel_items): every candidate
+  // that intersects (or, with a broadphase margin, every candidate) and every contact
+  // pair; the rows then read it in their own order, so their verdicts, causes and
+  // examples are those of a serial run.
+  const std::vector<Pair>& cand = f.cand;
+  std::vector<char>& hit = f.hit;
+  hit.assign(cand.size(), 1);
+  if (!need_distance)
+    parallel_items(cand.size(), threads, stop, [&](std::size_t i, unsigned) {
+      hit[i] = ref->intersect(cand[i].a, cand[i].b, det[cand[i].a], det[cand[i].b]) ? 1 : 0;
+    });
+  {
+    std::vector<Pair> todo;
+    for (std::size_t i = 0; i < cand.size(); ++i)
+      if (hit[i]) todo.push_back(cand[i]);
+    std::vector<Pair>& all = f.truth_pairs;
+    std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
+    std::sort(all.begin(), all.end());
+    all.erase(std::unique(all.begin(), all.end()), all.end());
+    f.truth.resize(all.size());
+    parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned) {
+      compute_truth(*ref, det, sat_settings, all[i], f.truth[i]);
+    });
+  }
+  std::vector<Pair>& required = f.required;
+  for (std::size_t i = 0; i < cand.size(); ++i) {
+    const Pair p = cand[i];
+    poll();
+    bool close = false;
+    if (need_distance) {
+      close = full_truth(f, p).g.signed_distance() < tol.broadphase_margin_m - slack;
+    } else if (hit[i]) {
+      const ReferenceNormal& g = full_truth(f, p).g;
+      close = g.penetrating && -g.depth < tol.broadphase_margin_m - slack;
+    }
+    if (close) required.push_back(p);
+  }
+  return f;
+}
+
+// ---- Row 1: broadphase completeness ------------------------------------------------
+void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
+  const FrameRecord& rec = *f.rec;
+  const std::int64_t frame = rec.frame;
+  ExactPairsSettings pair_threads;
+  pair_threads.threads = threads;
+  if (!rec.has_pairs) {
+    ++broad_no_pairs;
+  } else {
+    ++broad_frames;
+    broad_candidates += rec.pairs.size();
+    broad_true += f.required.size();
+    for (const Pair& p : f.required) {
+      const bool found = std::binary_search(rec.pairs.begin(), rec.pairs.end(), p);
+      const ReferenceNormal& g = full_truth(f, p).g;
+      broad.check(found, g.penetrating ? g.depth : -g.distance, Where{frame, p}, [&] {
+        return fmt::format("frame {}: {} misses {} whose shapes are {} {:.3g} m (margin {} m)", frame, label,
+                           pair_name(p), g.penetrating ? "penetrating by" : "apart by",
+                           g.penetrating ? g.depth : g.distance, tol.broadphase_margin_m);
+      });
+    }
+    if (bodies.broadphase_exact) {
+      // Set equality with `flat` on the engine's own world AABBs, static-static dropped:
+      // flat's set through exact_pairs (O(n log n + pairs); tests/unit/test_exact_pairs).
+      std::vector<Pair> want, got;
+      exact_pairs(rec.aabbs, want, pair_threads);
+      auto dyn = [&](Pair p) { return dynamic(p.a) || dynamic(p.b); };
+      std::copy_if(want.begin(), want.end(), std::back_inserter(got), dyn);
+      want.swap(got);
+      got.clear();
+      std::copy_if(rec.pairs.begin(), rec.pairs.end(), std::back_inserter(got), dyn);
+      std::vector<Pair> missing, extra;
+      std::set_difference(want.begin(), want.end(), got.begin(), got.end(), std::back_inserter(missing));
+      std::set_difference(got.begin(), got.end(), want.begin(), want.end(), std::back_inserter(extra));
+      const bool same = missing.empty() && extra.empty();
+      const Pair first_diff = !missing.empty() ? missing.front() : !extra.empty() ? extra.front() : Pair{};
+      broad_exact.check(same, double(missing.size() + extra.size()),
+                        Where{frame, same ? std::string() : pair_name(first_diff)}, [&] {
+        if (same) return fmt::format("frame {}: equal to flat", frame);
+        const Pair q = !missing.empty() ? missing.front() : extra.front();
+        // Pairs whose boxes only touch (zero overlap on an axis) are pairs under the
+        // inclusive rule of Eq. 6; an engine with a strict test misses exactly those.
+        const bool all_touch = !missing.empty() && std::all_of(missing.begin(), missing.end(), [&](Pair mp) {
+          for (int k = 0; k < 3; ++k)
+            if (std::min(rec.aabbs[mp.a].max[k], rec.aabbs[mp.b].max[k]) ==
+                std::max(rec.aabbs[mp.a].min[k], rec.aabbs[mp.b].min[k]))
+              return true;
+          return false;
+        });
+        return fmt::format("frame {}: {} declares an exact AABB broadphase but {} {} of flat on its world "
+                           "AABBs ({} missing, {} extra){}",
+                           frame, label, missing.empty() ? "adds" : "misses", pair_name(q), missing.size(),
+                           extra.size(),
+                           all_touch ? "; the missing pairs only touch (zero overlap on an axis): overlap is "
+                                       "inclusive (Eq. 6), min_A <= max_B and max_A >= min_B"
+                                     : "");
+      });
+    }
+  }
+}
+
+}  // namespace octocd

@@ -1,0 +1,249 @@
+// The physics tier's contact rows on checked frames (physics_impl.hpp): row 2, contact
+// completeness (penetrating pairs need a contact; contacts need closeness), and row 3,
+// contact geometry (normal angle, depth, points against SAT or FCL).
+#include "physics_impl.hpp"
+
+#include "../src/parallel.hpp"
+#include "../src/row_clock.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "octocd/reference_contact.hpp"
+
+namespace octocd {
+
+using namespace dmath;
+using namespace physics_detail;
+
+// ---- Row 2: contact completeness -----------------------------------------------------
+void PhysicsValidators::Impl::judge_completeness(CheckedFrame& f) {
+  const std::int64_t frame = f.rec->frame;
+  const double slack = tol.geometry_slack_m;
+  StopPoll poll(stop);
+  // 2. Contact completeness: penetrating pairs need a contact; contacts need closeness.
+  // The look-ups (each candidate's truth and whether it has rows, each contact pair's
+  // truth) on `threads` threads into per-item slots; the tallies then in item order.
+  const std::vector<Pair>& cand = f.cand;
+  const std::size_t none = f.truth.size();
+  std::vector<std::size_t> cand_truth(cand.size(), none);
+  std::vector<char> cand_found(cand.size(), 0);
+  parallel_items(cand.size(), threads, stop, [&](std::size_t i, unsigned) {
+    const std::size_t t = f.find(cand[i]);
+    if (t == none || !f.truth[t].have || !f.truth[t].g.penetrating || !(f.truth[t].g.depth > tol.contact_depth_m))
+      return;
+    cand_truth[i] = t;
+    cand_found[i] = std::binary_search(f.contact_pairs.begin(), f.contact_pairs.end(), cand[i]) ? 1 : 0;
+  });
+  for (std::size_t i = 0; i < cand.size(); ++i) {
+    if (cand_truth[i] == none) continue;
+    const Pair p = cand[i];
+    const ReferenceNormal& g = f.truth[cand_truth[i]].g;
+    complete.check(cand_found[i] != 0, g.depth, Where{frame, p}, [&] {
+      return fmt::format("frame {}: {} penetrates by {:.4g} m{} and has no contact", frame, pair_name(p), g.depth,
+                         g.depth_upper_bound ? " (upper bound: non-convex mesh)" : "");
+    });
+  }
+  const std::vector<Pair>& pairs = f.contact_pairs;
+  std::vector<std::size_t> pair_truth(pairs.size());
+  parallel_items(pairs.size(), threads, stop, [&](std::size_t i, unsigned) { pair_truth[i] = f.find(pairs[i]); });
+  for (std::size_t i = 0; i < pairs.size(); ++i) {
+    poll();
+    const Pair p = pairs[i];
+    const ReferenceNormal& g = pair_truth[i] < none ? f.truth[pair_truth[i]].g : full_truth(f, p).g;
+    const double bound = pair_margin(p) + slack;
+    const double d = g.signed_distance();
+    false_contact.check(d <= bound, d - bound, Where{frame, p}, [&] {
+      return fmt::format("frame {}: false contact on {}: shapes {:.4g} m apart (margin {:.4g} m)", frame,
+                         pair_name(p), d, pair_margin(p));
+    });
+  }
+}
+
+// ---- Row 3: contact geometry -------------------------------------------------------
+void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
+  const FrameRecord& rec = *f.rec;
+  const std::vector<Pose>& det = *f.det;
+  const std::int64_t frame = rec.frame;
+  StopPoll poll(stop);
+  // 3. Contact geometry, per row: normal angle, the pair's deepest row's depth, points.
+  // The figures (the reference a pair is judged on, each row's reference normal and
+  // angle, its point's distance to both surfaces, FCL's angle to SAT's axes) on `threads`
+  // threads, each pair writing its own slots; then the tallies in record order, so the
+  // verdict, causes and examples are those of a serial run.
+  const double deg = 180.0 / kPi;
+  const bool aabb = bodies.contact_geometry == ContactGeometry::Aabb;
+  std::vector<const ContactTruth*> truth_of(f.rows.size());
+  for (std::size_t i = 0; i < f.rows.size(); ++i) truth_of[i] = &full_truth(f, f.rows[i].p);
+  struct PairFigures {
+    ReferenceNormal r;       // the reference judging the pair
+    double fcl_angle = 0;    // by SAT: FCL's normal to SAT's nearest accepted axis (deg)
+    double fcl_minimum = 0;  // by SAT: FCL's normal to SAT's minimum (deg)
+  };
+  struct RowFigures {
+    RowReference ref;
+    double da = 0, db = 0;  // the point's distance to A's and B's surfaces (has_points)
+  };
+  std::vector<PairFigures> pair_fig(f.rows.size());
+  std::vector<RowFigures> row_fig(rec.contacts.size());
+  parallel_items(f.rows.size(), threads, stop, [&](std::size_t i, unsigned) {
+    const PairRows& pr = f.rows[i];
+    const Pair p = pr.p;
+    const ContactTruth& t = *truth_of[i];
+    const bool by_sat = !aabb && t.sat;
+    PairFigures& pf = pair_fig[i];
+    if (by_sat) {
+      pf.fcl_angle = sat_angle_to_accepted(t.sat_result, d3(t.fcl.normal)) * 180.0 / kPi;
+      pf.fcl_minimum = angle_between(t.fcl.normal, t.g.normal) * 180.0 / kPi;
+    }
+    pf.r = aabb ? ReferenceGeometry::aabb_pair(rec.aabbs[p.a], rec.aabbs[p.b]) : t.g;
+    if (!pf.r.valid) return;
+    for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
+      const ContactRecord& c = rec.contacts[k];
+      RowFigures& rf = row_fig[k];
+      rf.ref = row_reference(t, pf.r, by_sat, c.normal);
+      if (rec.has_points) {
+        rf.da = ref->surface_distance(p.a, det[p.a], c.point);
+        rf.db = ref->surface_distance(p.b, det[p.b], c.point);
+      }
+    }
+  });
+  for (std::size_t i = 0; i < f.rows.size(); ++i) {
+    poll();
+    const PairRows& pr = f.rows[i];
+    const Pair p = pr.p;
+    const ContactTruth& shape_truth = *truth_of[i];
+    const ReferenceNormal& shape_ref = shape_truth.g;
+    // The reference that judges this pair: the separating-axis test (every near-minimal
+    // axis accepted) or FCL (box-box, EPA, or the BVH bound of non-convex meshes).
+    const bool by_sat = !aabb && shape_truth.sat;
+    const char* judge = by_sat ? "SAT" : "FCL";
+    if (by_sat) {
+      ++sat_pairs;
+      // The second opinion: FCL's normal outside SAT's accepted axes is a figure.
+      const double fcl_angle = pair_fig[i].fcl_angle;
+      const double fcl_excess = shape_truth.fcl.depth - shape_truth.g.depth;
+      if (pair_fig[i].fcl_minimum > 1.0) {
+        ++sat_fcl_other;
+        if (fcl_excess > sat_fcl_other_excess) sat_fcl_other_excess = fcl_excess;
+      }
+      if (fcl_angle > 1.0) {
+        ++sat_fcl_disagree;
+        if (fcl_excess > sat_fcl_worst_excess) {
+          sat_fcl_worst_excess = fcl_excess;
+          sat_fcl_what = fmt::format("frame {}: {} FCL {:.4g} m along ({:.3f}, {:.3f}, {:.3f}), {:.1f} deg from "
+                                     "SAT's accepted axes, minimum {:.4g} m",
+                                     frame, pair_name(p), shape_truth.fcl.depth, shape_truth.fcl.normal.x,
+                                     shape_truth.fcl.normal.y, shape_truth.fcl.normal.z, fcl_angle,
+                                     shape_truth.g.depth);
+        }
+      }
+    } else if (!aabb) {
+      ++fcl_pairs;
+    }
+    const ReferenceNormal& r = pair_fig[i].r;
+    if (!r.valid) {
+      rows_unjudged += pr.count;
+      continue;
+    }
+    if (r.depth_upper_bound) ++upper_bound_pairs;
+    std::size_t deepest = pr.first;
+    for (std::size_t k = pr.first; k < pr.first + pr.count; ++k)
+      if (rec.contacts[k].depth > rec.contacts[deepest].depth) deepest = k;
+    // The engine places the pair's penetration in some rows of its manifold: a row of
+    // depth 0 (or within geometry_slack_m) beside a deeper one is a point the manifold
+    // keeps at or out of contact (a persistent manifold keeps a point, with the normal it
+    // was found with, while the bodies turn, until it drifts beyond the breaking
+    // threshold: Bullet on rot-pile-1000 kept a row 73 deg off for a cube pair that
+    // penetrated 0.05 mm at another row, and one 41.5 deg off at depth 4.8e-6 m beside a
+    // fresh row of 0.53 mm on the minimum translation).
+    const bool engine_places_depth = rec.contacts[deepest].depth > tol.geometry_slack_m;
+    for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
+      const ContactRecord& c = rec.contacts[k];
+      const RowReference& row_ref = row_fig[k].ref;
+      const double angle = row_ref.angle * deg;
+      const Vec3 ref_normal = row_ref.normal;
+      ++sign_rows;
+      if (dot(c.normal, r.normal) > 0.0f) ++sign_agree;
+      // A row the engine places at depth 0 on a pair that penetrates less than
+      // contact_depth_m (which needs no contact at all, item 2) is a touching contact:
+      // two boxes grazing edge on edge by 30 um have a minimum translation 60 deg from
+      // the face normal Bullet's detector keeps at depth 0 (rot-pile-1000).
+      const bool touching = c.depth <= 0.0f && r.depth <= tol.contact_depth_m;
+      if (!r.penetrating || r.depth <= tol.geometry_slack_m || touching ||
+          (engine_places_depth && c.depth <= tol.geometry_slack_m)) {
+        // A row on shapes that do not penetrate (or out of contact, above): the
+        // nearest-points direction of two shapes that (nearly) touch at an edge or a
+        // corner is no contact normal, and a persistent manifold (Bullet) keeps the normal
+        // a point was found with while the bodies turn. Its angle is a figure; the normal
+        // is judged where the shapes penetrate (the minimum translation, which a correct
+        // engine's normal follows).
+        ++speculative_rows;
+        speculative_worst = std::max(speculative_worst, angle);
+      } else if (aabb) {
+        // The engine's normal is an axis of the two world AABBs (Eq. 10): compared with
+        // FCL box-box on the same boxes its angle says nothing about the shapes (a
+        // figure; the angle to the posed shapes is the other figure, below). Its sign is
+        // judged: a normal pointing from A to B pushes the bodies into each other.
+        ++aabb_angle_rows;
+        aabb_angle_worst = std::max(aabb_angle_worst, angle);
+        normal_angle.check(angle < 90.0, angle, Where{frame, p}, [&] {
+          return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) points against the world AABBs' "
+                             "minimum translation ({:.3f}, {:.3f}, {:.3f}): {:.1f} deg (sign judged only: the engine "
+                             "resolves on world AABBs)",
+                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, r.normal.x,
+                             r.normal.y, r.normal.z, angle);
+        });
+      } else {
+        normal_angle.check(angle <= tol.normal_angle_deg, angle, Where{frame, p}, [&] {
+          return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from {}'s "
+                             "({:.3f}, {:.3f}, {:.3f}) ({}){}",
+                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle, judge,
+                             ref_normal.x, ref_normal.y, ref_normal.z,
+                             aabb     ? "box-box on the world AABBs, minimum translation"
+                             : by_sat ? fmt::format("the nearest of {} axes within {:.3g} m of the minimum "
+                                                    "translation {:.4g} m",
+                                                    shape_truth.sat_result.accepted.size(),
+                                                    shape_truth.sat_result.epsilon, r.depth)
+                                      : std::string("minimum translation"),
+                             by_sat ? " [reference: SAT]" : " [reference: FCL]");
+        });
+      }
+      if (aabb && shape_ref.valid) {
+        ++shape_angle_rows;
+        shape_angles.push_back(angle_between(c.normal, shape_ref.normal) * deg);
+      }
+      if (rec.has_points) {
+        // A row's point lies on one of the two surfaces (a witness point), or between
+        // them (a midpoint: within the pair's depth or distance of each, since any point
+        // of the intersection is within the depth of both surfaces; a persistent
+        // manifold's row may be up to the contact margin apart, its midpoint half of it
+        // from each). So the nearer surface is at most that far.
+        // Both surfaces: a point is where the two bodies meet, so it lies within the
+        // pair's depth or distance (or the contact margin, for a persistent manifold's
+        // row) of each; a point placed with a wrong orientation leaves at least one.
+        const double reach_p =
+            std::max({r.penetrating ? r.depth : r.distance, double(c.depth), pair_margin(p)});
+        const double da = row_fig[k].da, db = row_fig[k].db;
+        const double off = std::max(da, db) - reach_p;
+        points.check(off <= tol.depth_m, off, Where{frame, p}, [&] {
+          return fmt::format("frame {}: {} row {}: point ({:.4f}, {:.4f}, {:.4f}) is {:.4g} m from body {} "
+                             "and {:.4g} m from body {} (depth or distance {:.4g} m)",
+                             frame, pair_name(p), k - pr.first, c.point.x, c.point.y, c.point.z, da, p.a, db, p.b,
+                             reach_p);
+        });
+      }
+    }
+    const ContactRecord& c = rec.contacts[deepest];
+    const double want = r.penetrating ? r.depth : 0.0;
+    // An upper bound (non-convex meshes) judges one side only: the engine may be shallower.
+    const double diff = r.depth_upper_bound ? double(c.depth) - want : std::fabs(double(c.depth) - want);
+    depth.check(diff <= tol.depth_m, diff, Where{frame, p}, [&] {
+      return fmt::format("frame {}: {} deepest row depth {:.4g} m, {} {:.4g} m{} [reference: {}]", frame,
+                         pair_name(p), c.depth, by_sat ? "SAT minimum" : "FCL", want,
+                         r.depth_upper_bound ? " (upper bound)" : "", judge);
+    });
+  }
+}
+
+}  // namespace octocd

@@ -1,0 +1,63 @@
+// The physics tier's row 4, penetration (physics_impl.hpp): the largest true penetration
+// of the checked frames after the settling window, exact depths judged, non-convex upper
+// bounds a figure.
+#include "physics_impl.hpp"
+
+#include "../src/parallel.hpp"
+
+#include <vector>
+
+namespace octocd {
+
+using namespace physics_detail;
+
+void PhysicsValidators::Impl::judge_penetration(CheckedFrame& f) {
+  const std::int64_t frame = f.rec->frame;
+  // 4. Penetration: the largest true penetration after the settling window.
+  if (double(frame) >= tol.penetration_settle_frames) {
+    const double pen_bound = tol.penetration_slops * bodies.slop;
+    // Each pair's kind and depth on `threads` threads (the truth is large; its few
+    // figures are read in parallel), then the tallies in pair order.
+    enum Kind : char { kNone, kApart, kUpper, kExact };
+    std::vector<char> kind(f.truth.size(), kNone);
+    std::vector<double> depth_of(f.truth.size(), 0.0);
+    parallel_items(f.truth.size(), threads, stop, [&](std::size_t i, unsigned) {
+      const ContactTruth& t = f.truth[i];
+      if (!t.have) return;
+      kind[i] = !t.g.penetrating ? kApart : t.g.depth_upper_bound ? kUpper : kExact;
+      depth_of[i] = t.g.depth;
+    });
+    for (std::size_t i = 0; i < f.truth.size(); ++i) {
+      if (kind[i] == kNone) continue;
+      const Pair p = f.truth_pairs[i];
+      if (kind[i] == kApart) {  // exactly apart (or touching): judged at depth 0
+        pen.check(true, 0.0, Where{frame, p}, [] { return std::string(); });
+        continue;
+      }
+      ++pen_pairs;
+      const double d = depth_of[i];
+      // A non-convex pair's depth is an upper bound (the least separating translation
+      // over 8 directions): it cannot prove a penetration beyond the bound, so it is a
+      // figure; exact depths (boxes, convex shapes) are judged.
+      if (kind[i] == kUpper) {
+        if (d > pen_upper_max) {
+          pen_upper_max = d;
+          pen_upper_what = fmt::format("frame {}: pair ({}, {}) {:.4g} m", frame, p.a, p.b, d);
+        }
+        if (d > pen_bound) ++pen_upper_over;
+        ++pen_upper_pairs;
+        continue;
+      }
+      if (d > pen_max) {
+        pen_max = d;
+        pen_what = fmt::format("frame {}: pair ({}, {}) penetrates by {:.4g} m", frame, p.a, p.b, d);
+      }
+      pen.check(d <= pen_bound, d, Where{frame, p}, [&] {
+        return fmt::format("frame {}: {} penetrates by {:.4g} m (bound {:.4g} m)", frame, pair_name(p), d,
+                           pen_bound);
+      });
+    }
+  }
+}
+
+}  // namespace octocd

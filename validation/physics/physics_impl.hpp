@@ -1,0 +1,323 @@
+#pragma once
+/// \file physics_impl.hpp
+/// The physics tier's state (PhysicsValidators::Impl) and what its rows share: the
+/// tallies of judged items (Tally), the names of judged items, the checked frame's
+/// candidate pairs and reference geometry (CheckedFrame). Internal to validation/physics.
+///
+/// The rows live in files per family:
+///  - physics_validators.cpp: the settings' names, the constructor and the frame driver
+///    (observe: detection poses, then rows 1-4 on checked frames, 5-8 on every frame);
+///  - candidates.cpp: a checked frame's candidate pairs and their reference geometry,
+///    row 1 (broadphase completeness);
+///  - contact_rows.cpp: rows 2 (contact completeness) and 3 (contact geometry);
+///  - penetration.cpp: row 4;
+///  - friction.cpp: row 5 (the cone and dissipation);
+///  - conservation.cpp: row 6 (momentum, angular momentum, energy of isolated groups;
+///    the soft-contact episodes);
+///  - balance.cpp: rows 7 (momentum balance per body) and 8 (free flight);
+///  - physics_table.cpp: results(), the rows' verdicts and details.
+
+#include <algorithm>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "octocd/physics.hpp"
+#include "dmath.hpp"
+#include "reference.hpp"
+#include "sat.hpp"
+
+namespace octocd {
+
+namespace physics_detail {
+
+using dmath::D3;
+using dmath::M3;
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23
+/// A relative sliding speed (m/s) below which v_t has no direction: jt is then J_t's
+/// magnitude (the trace convention; octocd's Bullet adapter uses the same threshold).
+constexpr double kNoSliding = 1e-6;
+
+/// R M R^T.
+M3 conjugated(const M3& r, const M3& m);
+/// Inverse of a symmetric positive definite 3x3 (zeros when singular).
+M3 inverse(const M3& m);
+
+/// "pair (A, B)".
+std::string pair_name(Pair p);
+/// "body I".
+std::string body_name(std::size_t i);
+/// "group (I, J, K)": an isolated group by its first bodies (up to 3, then "...").
+std::string group_name(const std::vector<std::uint32_t>& members);
+
+/// Where a judged item is: its frame and its name as expectations write it ("pair (A, B)",
+/// "body I", "group (I, J, K)"). A pair's or a body's name is written only when a Tally
+/// needs it (a failure): most items pass, and a frame judges 10^5 - 10^6 of them.
+struct Where {
+  enum class Kind { Text, Pair, Body };
+  std::int64_t frame = -1;
+  Kind kind = Kind::Text;
+  std::string text;  ///< Kind::Text: the name ("" for none)
+  Pair pair{};       ///< Kind::Pair
+  std::size_t body = 0;  ///< Kind::Body
+  Where() = default;
+  Where(std::int64_t f, std::string name) : frame(f), text(std::move(name)) {}
+  Where(std::int64_t f, Pair p) : frame(f), kind(Kind::Pair), pair(p) {}
+  static Where of_body(std::int64_t f, std::size_t i) {
+    Where w;
+    w.frame = f;
+    w.kind = Kind::Body;
+    w.body = i;
+    return w;
+  }
+  /// The item's name: "pair (A, B)", "body I" or the text.
+  std::string name() const {
+    return kind == Kind::Pair ? pair_name(pair) : kind == Kind::Body ? body_name(body) : text;
+  }
+};
+
+/// One cause of a row (SPEC 13b.13): judged items, failures, the worst judged figure with
+/// its description (pass details), the first failing examples (at most
+/// ValidationCause::kMaxExamples) with frame, item and figure, the worst failure, and the
+/// distinct failing items (at most ValidationCause::kMaxItems).
+struct Tally {
+  std::uint64_t checks = 0;
+  std::uint64_t failures = 0;
+  double worst = -std::numeric_limits<double>::infinity();
+  std::string worst_what, first;
+  std::vector<ValidationExample> examples;
+  ValidationExample worst_failure;
+  std::set<std::string> items;
+  bool items_complete = true;
+  template <class F>
+  void check(bool ok, double figure, const Where& where, F&& describe) {
+    ++checks;
+    const bool new_worst = figure > worst;
+    if (ok && !new_worst) return;
+    const std::string what = describe();
+    if (new_worst) {
+      worst = figure;
+      worst_what = what;
+    }
+    if (ok) return;
+    if (failures == 0) first = what;
+    ++failures;
+    const std::string item = where.name();
+    ValidationExample e{where.frame, item, figure, what};
+    if (failures == 1 || figure > worst_failure.figure) worst_failure = e;
+    if (examples.size() < ValidationCause::kMaxExamples) examples.push_back(std::move(e));
+    if (!item.empty()) {
+      if (items.size() < ValidationCause::kMaxItems || items.count(item))
+        items.insert(item);
+      else
+        items_complete = false;
+    }
+  }
+  /// The same without a named item (the frame and item then come from the text only).
+  template <class F>
+  void check(bool ok, double figure, F&& describe) {
+    check(ok, figure, Where{}, std::forward<F>(describe));
+  }
+  /// A judged item that cannot fail, with figure 0.
+  void judged() {
+    ++checks;
+    worst = std::max(worst, 0.0);
+  }
+  double worst_or(double none) const { return checks ? worst : none; }
+  /// This tally as a ValidationCause named `name` with figures in `unit`.
+  ValidationCause cause(const char* name, const char* unit) const;
+  /// "NAME N of M NOUN (worst W UNIT, frame F ITEM: TEXT[; first: TEXT])", or "NAME 0 of M NOUN".
+  std::string summary(const char* name, const char* noun, const char* unit) const;
+};
+
+/// A candidate pair's reference geometry (reference.hpp: g, sat, sat_result, fcl):
+/// `have` once computed, `intersects` when the shapes penetrate.
+struct ContactTruth : PairReference {
+  bool intersects = false, have = false;
+};
+
+/// A pair's contact rows [first, first + count) (rows of a pair are consecutive).
+struct PairRows {
+  Pair p;
+  std::size_t first = 0, count = 0;
+};
+
+/// One checked frame as rows 1-4 read it (PhysicsValidators::Impl::checked_frame).
+struct CheckedFrame {
+  const FrameRecord* rec = nullptr;
+  const std::vector<Pose>* det = nullptr;  ///< detection poses, one per body
+  std::vector<Pair> cand;  ///< candidates: grown exact posed boxes overlap, a body dynamic (sorted)
+  std::vector<char> hit;   ///< per candidate: the shapes intersect (all 1 with a broadphase margin)
+  /// The reference geometry of every candidate that intersects (or, with a broadphase
+  /// margin, every candidate) and every contact pair: truth[k] is truth_pairs[k]'s
+  /// (sorted, distinct). Every pair a row asks about is among them.
+  std::vector<Pair> truth_pairs;
+  std::vector<ContactTruth> truth;
+  /// Pairs asked about beyond truth_pairs (none by construction; computed on demand).
+  std::map<std::pair<std::uint32_t, std::uint32_t>, ContactTruth> extra;
+  /// Pair p's index in truth_pairs, or truth_pairs.size() when absent.
+  std::size_t find(Pair p) const {
+    const auto it = std::lower_bound(truth_pairs.begin(), truth_pairs.end(), p);
+    return it != truth_pairs.end() && *it == p ? std::size_t(it - truth_pairs.begin()) : truth_pairs.size();
+  }
+  std::vector<PairRows> rows;       ///< the record's rows grouped by pair, in record order
+  std::vector<Pair> contact_pairs;  ///< the pairs of rows (sorted)
+  std::vector<Pair> required;       ///< candidates whose shapes are within the broadphase margin
+};
+
+}  // namespace physics_detail
+
+struct PhysicsValidators::Impl {
+  using D3 = dmath::D3;
+  using M3 = dmath::M3;
+  using Tally = physics_detail::Tally;
+
+  const Model* model = nullptr;
+  PhysicsBodies bodies;
+  Tolerances tol;
+  std::string label;
+  std::unique_ptr<ReferenceGeometry> ref;
+  std::vector<M3> inertia;  // body frame
+  std::vector<double> mass;  // 0 for static bodies
+  double max_margin = 0;
+  bool restitution_le_1 = true;
+
+  // Rows.
+  Tally broad, broad_exact, complete, false_contact, normal_angle, depth, points, pen, cone, dissipation;
+  Tally momentum, angular, energy;
+  Tally balance_lin, balance_ang, free_vel, free_pos, free_w, free_q;
+  std::uint64_t balance_clamped = 0, balance_no_rows = 0, balance_locked = 0, free_locked = 0, balance_rot_locked = 0;
+  double t_balance = 0;
+  std::uint64_t broad_frames = 0, broad_candidates = 0, broad_true = 0, broad_no_pairs = 0;
+  std::uint64_t checked_frames = 0, rows_unjudged = 0, upper_bound_pairs = 0;
+  std::uint64_t sign_rows = 0, sign_agree = 0, shape_angle_rows = 0;
+  std::vector<double> shape_angles;  // Aabb geometry: angle to the posed shapes (figure)
+  std::uint64_t aabb_angle_rows = 0;  // Aabb geometry: rows compared with box-box on the AABBs (figure)
+  double aabb_angle_worst = 0;
+  std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
+  // Contact geometry's references: pairs judged by the separating-axis test and by FCL;
+  // where FCL's normal lies outside SAT's accepted axes (figure: FCL's box-box keeps a
+  // face axis up to 5% deeper than the minimum).
+  std::uint64_t sat_pairs = 0, fcl_pairs = 0, sat_fcl_other = 0, sat_fcl_disagree = 0;
+  double sat_fcl_worst_excess = 0, sat_fcl_other_excess = 0;
+  std::string sat_fcl_what;
+  SatSettings sat_settings;
+  // Declared collision shapes other than the body's own (figure): bodies per kind and the
+  // largest gap between the declared shape and the true one (m).
+  std::map<std::string, std::pair<std::uint64_t, double>> declared;
+  double speculative_worst = 0;
+  // Friction rules: pairs judged on jt3 (vectors) and on the scalar jt.
+  std::uint64_t cone_jt3_pairs = 0, cone_scalar_pairs = 0, dissipation_jt3_pairs = 0, dissipation_small = 0;
+  std::uint64_t dissipation_cone_only = 0, groups = 0, groups_rotating = 0, state_frames = 0, groups_clamped = 0;
+  double pen_max = 0, pen_upper_max = 0;
+  std::string pen_what, pen_upper_what;
+  std::uint64_t pen_upper_over = 0;
+  std::uint64_t pen_pairs = 0, pen_upper_pairs = 0;
+  std::int64_t last_frame = 0;
+  std::function<bool()> stop;  // polled inside the long loops (set_stop)
+  int threads = 0;              // set_threads (0: the hardware's)
+  // Each row's own time (s): RowClock around its work; shared work goes to the first row
+  // that needs it (the candidates and FCL truth of every pair: broadphase-completeness).
+  double t_broad = 0, t_complete = 0, t_geometry = 0, t_pen = 0, t_friction = 0, t_conservation = 0;
+
+  double pair_margin(Pair p) const {
+    if (!bodies.theta_margin) return bodies.contact_margin;
+    return model->theta(model->bodies[p.a].shape, model->bodies[p.b].shape);
+  }
+  double pair_mu(Pair p) const {
+    if (bodies.body_friction.empty()) return bodies.mu;
+    return combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
+  }
+  bool dynamic(std::uint32_t i) const { return mass[i] > 0; }
+
+  // ---- Rows 1-4 (checked frames with poses) --------------------------------------
+  /// Rows 1-4 of a checked frame, each on its own clock.
+  void geometry(const FrameRecord& rec, const std::vector<Pose>& det);
+  /// The frame's candidates, their reference geometry (on `threads` threads) and the
+  /// pairs row 1 requires (candidates.cpp).
+  physics_detail::CheckedFrame checked_frame(const FrameRecord& rec, const std::vector<Pose>& det) const;
+  /// Pair p's reference geometry, computed into f.truth when missing.
+  const physics_detail::ContactTruth& full_truth(physics_detail::CheckedFrame& f, Pair p) const;
+  /// Row 1: broadphase completeness (candidates.cpp).
+  void judge_broadphase(physics_detail::CheckedFrame& f);
+  /// Row 2: contact completeness (contact_rows.cpp).
+  void judge_completeness(physics_detail::CheckedFrame& f);
+  /// Row 3: contact geometry (contact_rows.cpp).
+  void judge_contact_geometry(physics_detail::CheckedFrame& f);
+  /// Row 4: penetration (penetration.cpp).
+  void judge_penetration(physics_detail::CheckedFrame& f);
+
+  // ---- Rows 5-8 (every frame) -------------------------------------------------------
+  /// Row 5: the cone on every frame, dissipation on frames with states (friction.cpp).
+  void friction(const FrameRecord& rec, const std::vector<Pose>& det);
+  /// Dissipation of pair p's rows [k0, k1) from their tangential impulse vectors (jt3).
+  void judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p, std::size_t k0,
+                           std::size_t k1);
+  /// Row 6 on frames with states: isolated groups' momentum, energy, angular momentum;
+  /// soft contacts' episodes (conservation.cpp).
+  void conservation(const FrameRecord& rec);
+  /// Rows 7-8 on frames with states (balance.cpp).
+  void balance(const FrameRecord& rec, const std::vector<Pose>& det);
+  /// A step's contact graph: the contact rows' and confirmed pairs joined (find), per
+  /// root whether a member touches a static body, and per root its dynamic bodies in
+  /// contact (sorted).
+  struct ContactGraph {
+    std::vector<std::uint32_t> parent;
+    std::vector<std::uint8_t> statics;
+    std::map<std::uint32_t, std::vector<std::uint32_t>> groups;
+    std::uint32_t find(std::uint32_t i);
+  };
+  ContactGraph contact_graph(const FrameRecord& rec) const;
+  /// Mechanical energy of body i (kinetic + rotational - m g . x), before or after the step.
+  double mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const;
+  /// A step's component of the contact graph: its dynamic bodies (sorted) and whether it
+  /// touches no static body.
+  struct Component {
+    std::vector<std::uint32_t> members;
+    bool isolated = false;
+  };
+  /// contact_model soft: opens, grows, spoils and closes (judging energy) the contact
+  /// episodes of isolated groups; `components`: this step's components with a dynamic body.
+  void soft_episodes(const FrameRecord& rec, const std::vector<Component>& components);
+  /// The graph's components with a dynamic body.
+  std::vector<Component> components(const ContactGraph& graph) const;
+  /// A frame outside the judged ones: the episodes only (PhysicsValidators::observe_episodes).
+  void advance_episodes(const FrameRecord& rec);
+  /// Energy is judged per contact episode (contact_model soft, restitution <= 1).
+  bool tracks_episodes() const {
+    return bodies.contact_model == PhysicsBodies::ContactModel::Soft && restitution_le_1;
+  }
+  /// Episodes judged here: those begun in [episode_first, episode_last] (set_episode_frames).
+  std::int64_t episode_first = std::numeric_limits<std::int64_t>::min();
+  std::int64_t episode_last = std::numeric_limits<std::int64_t>::max();
+  bool owned(std::int64_t start) const { return start >= episode_first && start <= episode_last; }
+  /// Open episodes judged here.
+  std::size_t owned_open() const {
+    return std::size_t(
+        std::count_if(episodes.begin(), episodes.end(), [&](const Episode& e) { return owned(e.start); }));
+  }
+  /// A contact episode of an isolated group (contact_model soft): its dynamic bodies
+  /// (sorted), from its first contact step until none of them touches another; energy and
+  /// kinetic energy at the start (a body joining later: at the step it joins).
+  struct Episode {
+    std::int64_t start = 0;
+    std::vector<std::uint32_t> bodies;
+    double e0 = 0, ke0 = 0, scale = 0;
+    bool spoiled = false;
+  };
+  std::vector<Episode> episodes;  // contact_model soft: open episodes
+  std::uint64_t episodes_judged = 0, episodes_judged_groups = 0, episodes_unjudged = 0, energy_soft_steps = 0;
+  std::uint64_t groups_locked = 0, groups_rotation_locked = 0;
+};
+
+}  // namespace octocd

@@ -1,0 +1,398 @@
+// The physics tier's table (physics_impl.hpp): results(), each row's verdict, figure,
+// detail and causes from the tallies the rows filled.
+#include "physics_impl.hpp"
+
+#include <algorithm>
+#include <initializer_list>
+
+namespace octocd {
+
+using namespace physics_detail;
+
+namespace {
+
+/// The row's failures by cause (causes with failures only), its judged count, its verdict
+/// and n/a when it judged nothing: the detail gets "; causes: ..." listing every cause.
+struct CauseSpec {
+  const Tally* tally;
+  const char* name;
+  const char* noun;
+  const char* unit;
+};
+void fill_causes(ValidationResult& r, std::initializer_list<CauseSpec> causes) {
+  std::string list;
+  std::uint64_t failing = 0, judged = 0;
+  for (const CauseSpec& c : causes) {
+    judged += c.tally->checks;
+    if (c.tally->failures) {
+      r.causes.push_back(c.tally->cause(c.name, c.unit));
+      ++failing;
+    }
+    list += (list.empty() ? "" : "; ") + c.tally->summary(c.name, c.noun, c.unit);
+  }
+  r.judged = judged;
+  if (failing) {
+    r.pass = false;
+    r.detail += "; causes: " + list;
+  }
+}
+
+}  // namespace
+
+std::vector<ValidationResult> PhysicsValidators::results() const {
+  const Impl& s = *impl_;
+  std::vector<ValidationResult> out;
+  auto row = [](const char* name, const char* figure, const char* tolerances) {
+    ValidationResult r;
+    r.tier = Tier::Physics;
+    r.name = name;
+    r.figure = figure;
+    r.tolerances = tolerances;
+    return r;
+  };
+  const std::string no_checked = "no checked frame with poses (AABBs or detection poses)";
+
+  // 1. Broadphase completeness.
+  {
+    ValidationResult r = row("broadphase-completeness", "required pairs missing from the engine's candidates",
+                             "broadphase_margin_m,geometry_slack_m");
+    r.measured = double(s.broad.failures + s.broad_exact.failures);
+    r.bound = 0;
+    r.pass = r.measured == 0;
+    if (s.broad_frames > 0 && s.broad.checks + s.broad_exact.checks == 0) {
+      r.applicable = false;
+      r.detail = fmt::format("no pair required on {} checked frames (no shapes within the margin) and no exact "
+                             "broadphase declared: nothing judged ({:.3g} candidates per frame)",
+                             s.broad_frames, double(s.broad_candidates) / double(s.broad_frames));
+    } else if (s.broad_frames == 0) {
+      r.applicable = false;
+      r.detail = s.broad_no_pairs ? "the engine gave no candidate pairs (has_pairs false)" : no_checked;
+    } else if (s.broad.failures) {
+      r.detail = s.broad.first + fmt::format(" ({} of {} required pairs missing)", s.broad.failures, s.broad.checks);
+    } else if (s.broad_exact.failures) {
+      r.detail = s.broad_exact.first;
+    } else {
+      r.detail = fmt::format("{} required pairs over {} frames, all candidates; {:.3g} candidates per true pair{}",
+                             s.broad.checks, s.broad_frames,
+                             s.broad_true ? double(s.broad_candidates) / double(s.broad_true) : 0.0,
+                             s.bodies.broadphase_exact ? "; equal to flat on the engine's AABBs (static-static "
+                                                         "pairs dropped)"
+                                                       : "");
+    }
+    if (r.applicable)
+      fill_causes(r, {{&s.broad, "missing-pair", "required pairs", "m"},
+                      {&s.broad_exact, "not-flat", "frames", "pairs"}});
+    out.push_back(r);
+  }
+  // 2. Contact completeness.
+  {
+    ValidationResult r = row("contact-completeness", "penetrating pairs without a contact + false contacts",
+                             "contact_depth_m,geometry_slack_m");
+    r.measured = double(s.complete.failures + s.false_contact.failures);
+    r.pass = r.measured == 0;
+    r.applicable = s.checked_frames > 0 && (s.complete.checks + s.false_contact.checks) > 0;
+    const std::string margin =
+        s.bodies.theta_margin ? std::string("the pair's theta") : fmt::format("{} m", s.bodies.contact_margin);
+    if (s.complete.failures) {
+      r.detail = s.complete.first + fmt::format(" ({} such pairs)", s.complete.failures);
+    } else if (s.false_contact.failures) {
+      r.detail = s.false_contact.first + fmt::format(" ({} false contacts)", s.false_contact.failures);
+    } else if (!r.applicable) {
+      r.detail = s.checked_frames ? "no pair penetrated deeper than contact_depth_m and no contact" : no_checked;
+    } else {
+      r.detail = fmt::format("{} penetrating pairs all with contacts; {} contact pairs all within {} (farthest "
+                             "{:.3g} m beyond it)",
+                             s.complete.checks, s.false_contact.checks, margin, s.false_contact.worst_or(0.0));
+    }
+    if (r.applicable)
+      fill_causes(r, {{&s.complete, "missing-contact", "penetrating pairs", "m"},
+                      {&s.false_contact, "false-contact", "contact pairs", "m"}});
+    out.push_back(r);
+  }
+  // 3. Contact geometry.
+  {
+    ValidationResult r = row("contact-geometry", "worst normal angle to the reference's (deg; SAT or FCL)",
+                             "normal_angle_deg,depth_m,sat_accept_rel");
+    r.measured = s.normal_angle.worst_or(0.0);
+    r.bound = s.tol.normal_angle_deg;
+    r.pass = s.normal_angle.failures == 0 && s.depth.failures == 0 && s.points.failures == 0;
+    r.applicable = s.normal_angle.checks + s.depth.checks + s.points.checks > 0;
+    const bool aabb = s.bodies.contact_geometry == ContactGeometry::Aabb;
+    if (aabb) {
+      r.figure = "worst normal angle to FCL box-box on the world AABBs (deg; its sign judged)";
+      r.bound = 90.0;
+    }
+    std::string stats;
+    if (aabb && !s.shape_angles.empty()) {
+      std::vector<double> a = s.shape_angles;
+      std::sort(a.begin(), a.end());
+      double mean = 0;
+      for (double x : a) mean += x;
+      mean /= double(a.size());
+      stats = fmt::format("; against the posed shapes (figure, not judged: the engine resolves on world AABBs): "
+                          "mean {:.1f} deg, median {:.1f}, p95 {:.1f}, max {:.1f}",
+                          mean, a[a.size() / 2], a[a.size() * 95 / 100], a.back());
+    }
+    const std::string sign =
+        fmt::format("sign agreement {:.4f} of {} rows", s.sign_rows ? double(s.sign_agree) / double(s.sign_rows) : 1.0,
+                    s.sign_rows);
+    if (!r.applicable) {
+      r.detail = s.checked_frames ? "no contact rows on checked frames" : no_checked;
+    } else if (s.normal_angle.failures) {
+      r.detail = s.normal_angle.worst_what + fmt::format(" ({} of {} rows beyond {} deg; {})", s.normal_angle.failures,
+                                                         s.normal_angle.checks, aabb ? 90.0 : s.tol.normal_angle_deg, sign);
+      if (s.sign_rows > 0 && 2 * s.sign_agree < s.sign_rows)
+        r.detail += "; most normals point from A to B: the convention is from B to A (SPEC 2)";
+    } else if (s.depth.failures) {
+      r.detail = s.depth.worst_what + fmt::format(" (depth off by more than {} m on {} of {} pairs)", s.tol.depth_m,
+                                                  s.depth.failures, s.depth.checks);
+    } else if (s.points.failures) {
+      r.detail = s.points.worst_what + fmt::format(" (points off the shapes by more than {} m on {} of {} rows)",
+                                                   s.tol.depth_m, s.points.failures, s.points.checks);
+    } else if (aabb) {
+      r.detail = fmt::format("normal angle n/a: the engine resolves contacts on world AABBs (its normal is an AABB "
+                             "axis; its angle to FCL box-box on the same boxes judges nothing about the shapes: worst "
+                             "{:.3g} deg over {} rows, a figure; its sign is judged on {} rows); depth of {} pairs "
+                             "judged against FCL box-box on the world AABBs: worst difference {:.3g} m; {}{}",
+                             s.aabb_angle_worst, s.aabb_angle_rows, s.normal_angle.checks, s.depth.checks,
+                             s.depth.worst_or(0.0), sign, stats);
+    } else {
+      r.detail = fmt::format("{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}",
+                             s.normal_angle.checks, aabb ? " on the world AABBs" : "",
+                             aabb ? std::string("FCL box-box")
+                                  : fmt::format("reference: SAT on {} convex pair-frames, FCL (box-box, EPA or the "
+                                                "non-convex BVH bound) on {}",
+                                                s.sat_pairs, s.fcl_pairs),
+                             s.normal_angle.worst_or(0.0),
+                             s.depth.worst_or(0.0),
+                             s.points.checks ? fmt::format(", {} points, worst {:.3g} m beyond the depth",
+                                                           s.points.checks, s.points.worst_or(0.0))
+                                             : "",
+                             s.rows_unjudged ? fmt::format("; {} rows not judged (FCL gave no normal)", s.rows_unjudged)
+                                             : "",
+                             sign, stats);
+      if (s.speculative_rows)
+        r.detail += fmt::format("; {} rows on shapes that do not penetrate, or of depth 0 beside a penetrating "
+                                "row of their pair, not judged on the normal (worst angle {:.3g} deg to FCL's "
+                                "direction)",
+                                s.speculative_rows, s.speculative_worst);
+      if (s.upper_bound_pairs)
+        r.detail += fmt::format("; {} non-convex mesh pairs: depth judged one-sided against an upper bound",
+                                s.upper_bound_pairs);
+      for (const auto& [kind, figure] : s.declared)
+        r.detail += fmt::format("; {} bodies collided as declared \"{}\" (judged on it; its surface lies up to "
+                                "{:.3g} m from the true shape: a figure)",
+                                figure.first, kind, figure.second);
+      if (s.sat_fcl_other)
+        r.detail += fmt::format("; second opinion: FCL's normal on another axis than the minimum on {} pair-frames "
+                                "(figure; FCL up to {:.3g} m deeper)",
+                                s.sat_fcl_other, s.sat_fcl_other_excess);
+      if (s.sat_fcl_disagree)
+        r.detail += fmt::format("; FCL's normal outside SAT's accepted axes on {} pair-frames "
+                                "(figure; largest depth excess {}: {:.3g} m)",
+                                s.sat_fcl_disagree, s.sat_fcl_what, s.sat_fcl_worst_excess);
+    }
+    if (r.applicable)
+      fill_causes(r, {{&s.normal_angle, "normal-angle", "rows", "deg"},
+                      {&s.depth, "depth", "pairs", "m"},
+                      {&s.points, "point-off-shape", "points", "m"}});
+    out.push_back(r);
+  }
+  // 4. Penetration.
+  {
+    ValidationResult r = row("penetration", "largest true penetration (m)",
+                             "penetration_slops,penetration_settle_frames");
+    r.measured = s.pen_max;
+    r.bound = s.tol.penetration_slops * s.bodies.slop;
+    r.pass = r.measured <= r.bound;
+    // Judged: pair-frames with an exact depth. Where every penetrating pair-frame was a
+    // non-convex pair's upper bound, the row proved no penetration: n/a.
+    r.applicable = s.checked_frames > 0 && s.pen.checks > 0 && !(s.pen_upper_pairs > 0 && s.pen_upper_pairs == s.pen_pairs);
+    if (s.checked_frames == 0) {
+      r.detail = no_checked;
+    } else if (!r.applicable) {
+      r.detail = s.pen_upper_max > 0
+                     ? fmt::format("no exact depth: every penetrating pair is a non-convex mesh pair, whose depth is "
+                                   "an upper bound only (the least separating translation over 8 directions: a "
+                                   "figure, not judged): largest {}, {} pair-frames above the bound {} m",
+                                   s.pen_upper_what, s.pen_upper_over, fmt::format("{:.3g}", r.bound))
+                     : fmt::format("no pair-frame with an exact depth from frame {} on",
+                                   s.tol.penetration_settle_frames);
+    } else if (s.pen_pairs == 0) {
+      r.detail = fmt::format("no penetrating pair on the checked frames from frame {} on",
+                             s.tol.penetration_settle_frames);
+    } else {
+      r.detail = (s.pen_what.empty() ? std::string("no exact depth (convex shapes)") : s.pen_what) +
+                 fmt::format(" (largest of {} penetrating pair-frames; bound {} x slop {} m)", s.pen_pairs,
+                             s.tol.penetration_slops, s.bodies.slop);
+      if (s.pen_upper_max > 0)
+        r.detail += fmt::format("; non-convex meshes, upper bounds only (the least separating translation over 8 "
+                                "directions: a figure, not judged): largest {}, {} pair-frames above the bound",
+                                s.pen_upper_what, s.pen_upper_over);
+    }
+    if (r.applicable) fill_causes(r, {{&s.pen, "penetration", "pair-frames", "m"}});
+    out.push_back(r);
+  }
+  // 5. Friction.
+  {
+    ValidationResult r = row("friction", "contacts outside the cone or rows raising the tangential speed",
+                             "friction_cone_abs,friction_speed");
+    r.measured = double(s.cone.failures + s.dissipation.failures);
+    r.pass = r.measured == 0;
+    r.applicable = s.cone.checks > 0;
+    if (s.cone.failures) {
+      r.detail = s.cone.first + fmt::format(" ({} of {} contacts outside the cone)", s.cone.failures, s.cone.checks);
+    } else if (s.dissipation.failures) {
+      r.detail = s.dissipation.first + fmt::format(" ({} of {} rows where friction raises the sliding)",
+                                                   s.dissipation.failures, s.dissipation.checks);
+    } else if (!r.applicable) {
+      r.detail = "no contact rows";
+    } else {
+      r.detail = fmt::format("{} contacts in the cone (worst {:.3g} kg m/s inside; rule jt3 on {} pairs, scalar jt on "
+                             "{}); dissipation on {} rows or pairs (worst {:.3g} m/s; {} pairs on jt3); {} rows judged "
+                             "on the cone only (scalar jt: the pair is not its bodies' only one, or no states)",
+                             s.cone.checks, -s.cone.worst_or(0.0), s.cone_jt3_pairs, s.cone_scalar_pairs,
+                             s.dissipation.checks, s.dissipation.worst_or(0.0), s.dissipation_jt3_pairs,
+                             s.dissipation_cone_only);
+      if (s.dissipation_small)
+        r.detail += fmt::format("; {} pairs with a friction impulse up to friction_cone_abs not judged on its "
+                                "direction",
+                                s.dissipation_small);
+    }
+    if (r.applicable)
+      fill_causes(r, {{&s.cone, "cone", "contacts", "kg m/s"}, {&s.dissipation, "dissipation", "rows", "m/s"}});
+    out.push_back(r);
+  }
+  // 6. Conservation.
+  {
+    ValidationResult r = row("conservation", "isolated groups breaking momentum, angular momentum or energy",
+                             "momentum_rel,angular_momentum_rel,energy_rel");
+    r.measured = double(s.momentum.failures + s.angular.failures + s.energy.failures);
+    r.pass = r.measured == 0;
+    r.applicable = s.groups > 0;
+    if (s.momentum.failures) {
+      r.detail = s.momentum.first;
+    } else if (s.energy.failures) {
+      r.detail = s.energy.first;
+    } else if (s.angular.failures) {
+      r.detail = s.angular.first;
+    } else if (!r.applicable) {
+      r.detail = s.state_frames ? "no isolated dynamic group (2+ dynamic bodies in contact, no static contact)"
+                                : "no states";
+    } else {
+      r.detail = fmt::format("{} isolated group-frames: worst momentum change {:.3g} of its bound; energy {}; "
+                             "angular momentum {}",
+                             s.groups, s.momentum.worst_or(0.0),
+                             s.restitution_le_1 ? fmt::format("worst rise {:.3g} of KE", s.energy.worst_or(0.0))
+                                                : std::string("not judged (a restitution above 1)"),
+                             s.groups_rotating
+                                 ? fmt::format("{} groups, worst change {:.3g} of its bound", s.groups_rotating,
+                                               s.angular.worst_or(0.0))
+                             : s.groups_rotation_locked
+                                 ? std::string("n/a: every group has a body whose rotation is locked (locked_dofs)")
+                                 : std::string("n/a: translation-only records (no orientation or angular "
+                                               "velocity), contact torques are not modelled"));
+    }
+    if (s.groups_clamped)
+      r.detail += fmt::format("; {} group-frames not judged (a body at the declared velocity clamp {} m/s)",
+                              s.groups_clamped, s.bodies.velocity_clamp);
+    if (s.bodies.contact_model == PhysicsBodies::ContactModel::Soft)
+      r.detail += fmt::format("; contact_model soft: energy judged per contact episode of an isolated group, "
+                              "from its first contact until none of its bodies touches another ({} episodes judged, "
+                              "{} of them of 3 or more bodies; {} not judged: a body touched a static one, a step "
+                              "had no states, or still in contact at the end ({} open)), not on {} group-steps",
+                              s.episodes_judged, s.episodes_judged_groups, s.episodes_unjudged + s.owned_open(),
+                              s.owned_open(), s.energy_soft_steps);
+    if (s.groups_locked)
+      r.detail += fmt::format("; {} group-frames with a body whose axes are locked (locked_dofs): momentum along "
+                              "locked translation axes not judged; {} with a rotation locked: angular momentum not "
+                              "judged",
+                              s.groups_locked, s.groups_rotation_locked);
+    if (r.applicable) {
+      fill_causes(r, {{&s.momentum, "momentum", "group-frames", "of bound"},
+                      {&s.angular, "angular-momentum", "group-frames", "of bound"},
+                      {&s.energy, "energy", "group-frames", "rel"}});
+      r.judged = s.groups;
+    }
+    out.push_back(r);
+  }
+  // 7. Momentum balance per body.
+  {
+    ValidationResult r = row("momentum-balance", "bodies whose velocity change is not their rows' impulses",
+                             "balance_ulps,gyroscopic_rel,friction_direction_speed");
+    r.measured = double(s.balance_lin.failures + s.balance_ang.failures);
+    r.pass = r.measured == 0;
+    r.applicable = s.balance_lin.checks + s.balance_ang.checks > 0;
+    const std::string extras =
+        (s.balance_locked ? fmt::format("; {} body-steps with locked axes (those components n/a: a joint's impulses "
+                                        "are not in the rows)",
+                                        s.balance_locked)
+                          : std::string()) +
+        (s.balance_no_rows ? fmt::format("; {} body-steps in a confirmed pair without rows, not judged",
+                                         s.balance_no_rows)
+                           : std::string()) +
+        (s.balance_clamped ? fmt::format("; {} body-steps at the declared velocity clamp, not judged",
+                                         s.balance_clamped)
+                           : std::string());
+    if (!s.bodies.impulses_complete) {
+      r.applicable = false;
+      r.detail = fmt::format("n/a: the record holds the impulses of the first of response.iterations = {} "
+                             "relaxation passes (octocd's ContactRecord); the later passes apply more impulses on the "
+                             "same pairs, so the rows are not the step's impulses",
+                             s.model->scene.response.iterations);
+    } else if (!r.applicable) {
+      r.detail = s.state_frames ? "no dynamic body with contact rows in a step with states" : "no states";
+    } else {
+      r.detail = fmt::format("{} body-steps: linear worst {:.3g} of its bound; angular {}", s.balance_lin.checks,
+                             s.balance_lin.worst_or(0.0),
+                             s.balance_ang.checks
+                                 ? fmt::format("{} body-steps, worst {:.3g} of its bound{}", s.balance_ang.checks,
+                                               s.balance_ang.worst_or(0.0),
+                                               s.bodies.gyroscopic ? " (gyroscopic term declared)" : "")
+                                 : s.balance_rot_locked
+                                       ? fmt::format("n/a: rotation locked (locked_dofs) on all {} body-steps with "
+                                                     "rotation and points",
+                                                     s.balance_rot_locked)
+                                       : std::string("n/a: no rotation or no contact points (torques unknown)"));
+      r.detail += extras;
+      fill_causes(r, {{&s.balance_lin, "linear", "body-steps", "of bound"},
+                      {&s.balance_ang, "angular", "body-steps", "of bound"}});
+      r.judged = s.balance_lin.checks;
+    }
+    out.push_back(r);
+  }
+  // 8. Free flight.
+  {
+    ValidationResult r = row("free-flight", "bodies without contacts not following gravity and their spin",
+                             "free_flight_angle_rad,gyroscopic_rel");
+    r.measured = double(s.free_vel.failures + s.free_pos.failures + s.free_w.failures + s.free_q.failures);
+    r.pass = r.measured == 0;
+    r.applicable = s.free_vel.checks > 0;
+    if (!r.applicable) {
+      r.detail = s.state_frames ? "no dynamic body without contacts in a step with states" : "no states";
+    } else {
+      r.detail = fmt::format(
+          "{} body-steps (integrator {}): worst velocity {:.3g} m/s, position {:.3g} m{}{}", s.free_vel.checks,
+          integrator_name(s.bodies.integrator), s.free_vel.worst_or(0.0), s.free_pos.worst_or(0.0),
+          s.free_w.checks ? fmt::format(", angular velocity {:.3g} rad/s{} over {}, orientation {:.3g} deg over {}",
+                                        s.free_w.worst_or(0.0), s.bodies.gyroscopic ? " (gyroscopic term declared)" : "",
+                                        s.free_w.checks, s.free_q.worst_or(0.0), s.free_q.checks)
+                          : std::string("; rotation n/a (translation-only records)"),
+          s.free_locked ? fmt::format("; {} body-steps with locked axes (those components n/a)", s.free_locked)
+                        : std::string());
+      fill_causes(r, {{&s.free_vel, "velocity", "body-steps", "m/s"},
+                      {&s.free_pos, "position", "body-steps", "m"},
+                      {&s.free_w, "angular-velocity", "body-steps", "rad/s"},
+                      {&s.free_q, "orientation", "body-steps", "deg"}});
+      r.judged = s.free_vel.checks;
+    }
+    out.push_back(r);
+  }
+  // Free flight's work is charged to momentum-balance (one pass over the bodies).
+  const double seconds[] = {s.t_broad, s.t_complete, s.t_geometry, s.t_pen, s.t_friction, s.t_conservation,
+                            s.t_balance, 0.0};
+  for (std::size_t i = 0; i < out.size() && i < 8; ++i) out[i].seconds = seconds[i];
+  return out;
+}
+
+}  // namespace octocd
