@@ -144,7 +144,7 @@ void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
     }
     if (bodies.broadphase_exact) {
       // Set equality with `flat` on the engine's own world AABBs, static-static dropped:
-      // flat's set through exact_pairs (O(n log n + pairs); tests/unit/test_exact_pairs).
+      // flat's set through exact_pairs (O(n log n + pairs); tests/validation/test_exact_pairs).
       std::vector<Pair> want, got;
       exact_pairs(rec.aabbs, want, pair_threads);
       auto dyn = [&](Pair p) { return dynamic(p.a) || dynamic(p.b); };
