@@ -875,6 +875,7 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
   // the Baumgarte recovery of shallow penetrations into the velocity): see the header.
   info.m_splitImpulse = 1;
   info.m_splitImpulsePenetrationThreshold = 0;
+  info.m_numIterations = settings.solver_iterations;
 
   m.rotation = scene_rotates(scene);
   m.settings = settings;
