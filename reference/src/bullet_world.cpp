@@ -402,14 +402,17 @@ class PosedPair {
 
   /// True when a face normal of either polytope separates them (a cheap proof that they do
   /// not penetrate).
-  bool face_axis_separates() const {
-    for (const btVector3& n : a_.face_normals) {
-      const auto [plus, minus] = separations(ta_.getBasis() * n);
-      if (plus > 0 || minus > 0) return true;
-    }
-    for (const btVector3& n : b_.face_normals) {
-      const auto [plus, minus] = separations(tb_.getBasis() * n);
-      if (plus > 0 || minus > 0) return true;
+  /// `axis` (optional) receives the separating axis u found (A on u's side: separation(u) > 0).
+  bool face_axis_separates(btVector3* axis = nullptr) const {
+    for (const Polytope* p : {&a_, &b_}) {
+      const btMatrix3x3& basis = (p == &a_ ? ta_ : tb_).getBasis();
+      for (const btVector3& n : p->face_normals) {
+        const btVector3 u = basis * n;
+        const auto [plus, minus] = separations(u);
+        if (!(plus > 0) && !(minus > 0)) continue;
+        if (axis) *axis = plus > 0 ? u : -u;
+        return true;
+      }
     }
     return false;
   }
@@ -449,9 +452,11 @@ class PosedPair {
     // Edge-edge axes (Gregorius, "The Separating Axis Test between Convex Polyhedra",
     // GDC 2013): only edge pairs that build a face of the Minkowski difference A - B give
     // a candidate axis: their arcs on the Gauss map (between the two faces' outward
-    // normals; B's negated) cross. An edge-edge axis beats the best face axis only where
-    // the two edges lie within |best| of each other, so edges farther than that (+ kReach)
-    // from the other shape's box are skipped (a hull-hull pair has 480 x 480 edges).
+    // normals; B's negated) cross. The edges that support a minimum translation, or a
+    // contact within the margin, lie where the shapes meet: only edges within |best| +
+    // kReach of the other shape's box are crossed (a hull-hull pair of bunnies has 948 x
+    // 948 edges). (|best| alone is not enough: shapes that only an edge-edge axis
+    // separates have best < 0 from the faces.)
     const btScalar grow = std::max(-best, btScalar(0)) + kReach;
     const btVector3 centre_a = ta_ * a_.centroid;
     std::vector<EdgeArc> arcs_a, arcs_b;
@@ -631,11 +636,21 @@ class CheckedConvexAlgorithm : public btConvexConvexAlgorithm {
     out->setPersistentManifold(manifold);
     if (checked.added || manifold == nullptr) return;
     const btScalar threshold = manifold->getContactBreakingThreshold();
-    if (pair.far_apart(threshold) || pair.face_axis_separates()) return;
+    if (pair.far_apart(threshold)) return;
+    // The axis that separated the pair last time first (the bodies moved little since).
+    if (has_separating_axis_ && pair.separation(separating_axis_) > 0) return;
+    if (pair.face_axis_separates(&separating_axis_)) {
+      has_separating_axis_ = true;
+      return;
+    }
     btVector3 normal, point;
     btScalar distance = 0;
     pair.exact(normal, point, distance);
-    if (distance > 0) return;  // apart (the separation is a lower bound of the distance)
+    has_separating_axis_ = distance > 0;
+    if (distance > 0) {  // apart (the separation is a lower bound of the distance)
+      separating_axis_ = normal;
+      return;
+    }
     ++counts_.added;
     checked.add_unchecked(normal, point, distance);
   }
@@ -694,6 +709,10 @@ class CheckedConvexAlgorithm : public btConvexConvexAlgorithm {
 
   const Registry& registry_;
   BulletNarrowphaseCounts& counts_;
+  /// A world axis u that separated the pair (A on u's side) when GJK last found no
+  /// contact: tried first next time (frame-to-frame coherence), one separation each.
+  btVector3 separating_axis_{0, 1, 0};
+  bool has_separating_axis_ = false;
 };
 
 }  // namespace
