@@ -200,10 +200,6 @@ int bench_command(const BenchOptions& o) {
       throw InputError(fmt::format("--target, --max-instances, --resolution, --search-time: {} is of kind "
                                    "'speed-accuracy'; allowed: only for sweeps of kind max-instances",
                                    origin));
-    if (o.resume)
-      throw InputError(fmt::format("--resume: {} is of kind speed-accuracy; allowed: a new run (its consistency "
-                                   "errors need every line's reference run in the same process)",
-                                   origin));
     if (!o.trace_dir.empty())
       throw InputError(fmt::format("--trace-dir: {} is of kind speed-accuracy; allowed: only for steps sweeps", origin));
     const auto [shard, shards] = parse_shard(o.shard);

@@ -244,10 +244,31 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
   settings["shard_by"] = "line";
   json result = new_result(s, origin, def, settings, points.size());
   {
+    // --resume keeps a finished result of the same sweep and settings (nothing to run); an
+    // unfinished one cannot go on: its consistency errors need every line's reference run
+    // in one process.
     std::error_code ec;
-    if (fs::exists(o.output, ec))
-      throw InputError(fmt::format("{}: exists; allowed: a new result file (kind speed-accuracy has no --resume)",
-                                   o.output));
+    if (fs::exists(o.output, ec)) {
+      if (!o.resume)
+        throw InputError(fmt::format("{}: exists; allowed: a new result file, or --resume for a finished run of the "
+                                     "same sweep",
+                                     o.output));
+      json old;
+      try {
+        std::ifstream in(o.output);
+        old = json::parse(in);
+      } catch (const json::exception& e) {
+        throw InputError(fmt::format("{}: not JSON ({}); allowed: a result of {} to --resume", o.output, e.what(), origin));
+      }
+      if (!old.is_object() || old.value("complete", false) != true || !old.contains("sweep") ||
+          old["sweep"].value("definition", json()) != def || old.value("settings", json()) != settings)
+        throw InputError(fmt::format("{}: --resume: not a finished result of {} with these settings; allowed: a "
+                                     "finished one (kept as it is), else delete it and run again (a speed-accuracy "
+                                     "run cannot go on midway: its errors need each line's reference run)",
+                                     o.output, origin));
+      if (!o.quiet) fmt::print(stderr, "bench {}: {} is finished; kept as it is\n", s.name, o.output);
+      return 0;
+    }
     const fs::path parent = fs::path(o.output).parent_path();
     if (!parent.empty()) fs::create_directories(parent, ec);
   }

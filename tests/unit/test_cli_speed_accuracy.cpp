@@ -128,6 +128,16 @@ TEST_F(SpeedAccuracy, ConsistencyIsZeroAtTheReferenceAndLinearInDt) {
   int rows = 0;
   while (std::getline(csv, row)) ++rows;
   EXPECT_EQ(rows, 27);
+  // --resume keeps the finished result as it is; without it an existing file is refused.
+  const Result again = run_octocd("bench " + data("bench-small-speed-accuracy.json") + " --repeat 1 -o " +
+                                  (dir_ / "r.json").string() + " --quiet --resume");
+  EXPECT_EQ(again.code, 0) << again.output;
+  std::ifstream in(dir_ / "r.json");
+  EXPECT_EQ(json::parse(in)["started"], r["started"]);
+  bench(data("bench-small-speed-accuracy.json"), "--repeat 1", 2);
+  EXPECT_NE(last_.find("exists"), std::string::npos) << last_;
+  bench(data("bench-small-speed-accuracy.json"), "--repeat 2 --resume", 2);  // other settings
+  EXPECT_NE(last_.find("not a finished result"), std::string::npos) << last_;
 }
 
 TEST_F(SpeedAccuracy, ARunLeavingTheDomainIsADivergedPointNotACrash) {
