@@ -55,7 +55,7 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
   CLI::App* c = app.add_subcommand(
       "bench",
       "Run a benchmark sweep (the paper's Tables 5, 6, A1, Fig. A2, broadphase scaling, the most instances at 30 "
-      "steps/s) on every engine this octocd has, side by side; results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
+      "steps/s, speed against accuracy over a ladder of time steps) on every engine this octocd has, side by side; results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
   c->add_option("sweep", o.sweep, "A named sweep (" + named_list() + ") or a sweep JSON file");
   c->add_option("-o,--output", o.output, "Result file (JSON), rewritten after every finished point");
   c->add_option("--engines", o.engines, "Comma-separated engines, overrides the sweep's: cpu, cuda, bullet");
@@ -101,6 +101,9 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
                 "Folder of the scenes named in sweeps (default: datasets/scenes of octocd's shared files: "
                 "PREFIX/share/octocd when installed, else the source tree; $OCTOCD_SOURCE_DIR overrides, docs/install.md)");
   c->add_option("--data-dir", o.data_dir, "Folder of the dataset meshes (default as for `run`)");
+  c->add_option("--csv", o.csv,
+                "speed-accuracy: also write the points as CSV to this file (default: the result's name with .csv, "
+                "beside it)");
   c->add_option("--trace-dir", o.trace_dir,
                 "Also write the first repetition of every steps point as a trace (.h5) into this folder");
   return c;
@@ -174,6 +177,35 @@ int bench_command(const BenchOptions& o) {
     s.repeat = o.repeat;
     s.probe_repeat = std::min(s.probe_repeat, s.repeat);
   }
+  // Every scene of the sweep is a file (bad input before anything runs).
+  const auto check_scenes = [&] {
+    for (const auto& sc : s.scenes) {
+      std::error_code ec;
+      if (!fs::is_regular_file(sc, ec))
+        throw InputError(fmt::format("{}: scenes: '{}' not found; allowed: a scene name under {} (--scene-dir) or a "
+                                     "scene file",
+                                     origin, sc, scene_dir));
+    }
+  };
+  if (!o.csv.empty() && s.kind != "speed-accuracy")
+    throw InputError(fmt::format("--csv: {} is of kind '{}'; allowed: only for sweeps of kind speed-accuracy (others: "
+                                 "octocd report --csv DIR)",
+                                 origin, s.kind));
+  if (s.kind == "speed-accuracy") {
+    if (o.frames > 0 || o.warmup >= 0)
+      throw InputError(fmt::format("--frames, --warmup: {} is of kind speed-accuracy; allowed: sim_seconds in the sweep "
+                                   "file (every point runs the same simulated time)",
+                                   origin));
+    if (o.target > 0 || o.max_instances > 0 || o.resolution >= 0 || o.search_time_s >= 0)
+      throw InputError(fmt::format("--target, --max-instances, --resolution, --search-time: {} is of kind "
+                                   "'speed-accuracy'; allowed: only for sweeps of kind max-instances",
+                                   origin));
+    if (!o.trace_dir.empty())
+      throw InputError(fmt::format("--trace-dir: {} is of kind speed-accuracy; allowed: only for steps sweeps", origin));
+    const auto [shard, shards] = parse_shard(o.shard);
+    check_scenes();
+    return run_speed_accuracy(s, origin, def, o, shard, shards, !o.engines.empty());
+  }
   if (o.warmup >= 0) {
     if (s.kind == "broadphase") {
       s.warmup = o.warmup;
@@ -210,13 +242,7 @@ int bench_command(const BenchOptions& o) {
     }
   }
   const auto [shard, shards] = parse_shard(o.shard);
-  for (const auto& sc : s.scenes) {
-    std::error_code ec;
-    if (!fs::is_regular_file(sc, ec))
-      throw InputError(fmt::format("{}: scenes: '{}' not found; allowed: a scene name under {} (--scene-dir) or a "
-                                   "scene file",
-                                   origin, sc, scene_dir));
-  }
+  check_scenes();
   const std::vector<Point> points = expand(s);
 
   const json settings = result_settings(s, shard, shards);

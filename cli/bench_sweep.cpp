@@ -99,6 +99,76 @@ std::string resolve_scene(const std::string& entry, const std::string& scene_dir
   return p.is_absolute() || sweep_dir.empty() ? entry : (fs::path(sweep_dir) / p).string();
 }
 
+/// The keys of a speed-accuracy sweep: dts (> 0, each dividing the largest), sim_seconds
+/// (a multiple of the largest dt), iterations, geometries, rotation.
+void parse_speed_accuracy(const json& j, const std::string& origin, Sweep& s) {
+  if (!j.contains("dts") || !j.at("dts").is_array() || j.at("dts").empty())
+    bad(origin, "dts", "missing or not a non-empty array", "an array of time steps in seconds, each > 0");
+  for (std::size_t i = 0; i < j.at("dts").size(); ++i) {
+    const json& v = j.at("dts")[i];
+    if (!v.is_number() || !std::isfinite(v.get<double>()) || !(v.get<double>() > 0.0) || v.get<double>() > 0.1)
+      bad(origin, fmt::format("dts[{}]", i), v.dump() + " is not a time step", "a number in (0, 0.1] (seconds, as a scene's dt)");
+    const double dt = v.get<double>();
+    if (std::find(s.dts.begin(), s.dts.end(), dt) != s.dts.end())
+      bad(origin, fmt::format("dts[{}]", i), v.dump() + " is listed twice", "each time step once");
+    s.dts.push_back(dt);
+  }
+  const double largest = *std::max_element(s.dts.begin(), s.dts.end());
+  for (std::size_t i = 0; i < s.dts.size(); ++i) {
+    const double r = largest / s.dts[i];
+    if (std::abs(r - std::round(r)) > 1e-6 * r)
+      bad(origin, fmt::format("dts[{}]", i),
+          fmt::format("{} does not divide the largest time step {} (ratio {})", s.dts[i], largest, r),
+          "time steps that divide the largest one (e.g. 1/60 s x 1, 1/2, 1/4, 1/8, 1/16): positions are compared at "
+          "its multiples");
+  }
+  if (j.contains("sim_seconds")) {
+    const json& v = j.at("sim_seconds");
+    if (!v.is_number() || !std::isfinite(v.get<double>()) || !(v.get<double>() > 0.0) || v.get<double>() > 1e6)
+      bad(origin, "sim_seconds", v.dump() + " is out of range", "a number of seconds in (0, 1e6]");
+    s.sim_seconds = v.get<double>();
+  }
+  const double k = s.sim_seconds / largest;
+  if (k < 1.0 - 1e-9 || std::abs(k - std::round(k)) > 1e-6 * k)
+    bad(origin, "sim_seconds", fmt::format("{} s is not a multiple of the largest time step {} s", s.sim_seconds, largest),
+        "a multiple of the largest dt (every point ends at the same time)");
+  if (j.contains("diverge_beyond_m")) {
+    const json& v = j.at("diverge_beyond_m");
+    if (!v.is_number() || !(v.get<double>() >= 0.0) || !std::isfinite(v.get<double>()))
+      bad(origin, "diverge_beyond_m", v.dump() + " is out of range", "a finite number of metres >= 0");
+    s.diverge_beyond_m = v.get<double>();
+  }
+  if (j.contains("iterations")) {
+    const json& a = j.at("iterations");
+    if (!a.is_array() || a.empty()) bad(origin, "iterations", "not a non-empty array", "an array of integers in [1, 10000]");
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      if (!a[i].is_number_integer() || a[i].get<long long>() < 1 || a[i].get<long long>() > 10000)
+        bad(origin, fmt::format("iterations[{}]", i), a[i].dump() + " is out of range", "an integer in [1, 10000]");
+      s.iterations.push_back(a[i].get<int>());
+    }
+  } else {
+    s.iterations = {10};
+  }
+  if (j.contains("geometries")) {
+    for (const auto& g : string_list(j, "geometries", origin)) {
+      if (g != "box" && g != "hull") bad(origin, "geometries", "'" + g + "'", "\"box\", \"hull\" (Bullet's shape setting)");
+      s.geometries.push_back(g);
+    }
+  } else {
+    s.geometries = {"hull", "box"};
+  }
+  if (j.contains("rotation")) {
+    const json& a = j.at("rotation");
+    if (!a.is_array() || a.empty()) bad(origin, "rotation", "not a non-empty array", "an array of false, true");
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      if (!a[i].is_boolean()) bad(origin, fmt::format("rotation[{}]", i), a[i].dump() + " is not a boolean", "false, true");
+      s.rotations.push_back(a[i].get<bool>());
+    }
+  } else {
+    s.rotations = {false, true};
+  }
+}
+
 }  // namespace
 
 Sweep parse_sweep(const json& j, const std::string& origin, const std::string& scene_dir, const std::string& sweep_dir) {
@@ -117,9 +187,17 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   s.kind = optional_string(j, "kind", origin, "steps");
   static const std::set<std::string> mi{"scenes", "set",          "target_steps_per_s", "max_instances",
                                         "resolution", "paper", "probe_repeat", "search_time_s"};
-  if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances")
-    bad(origin, "kind", "'" + s.kind + "'", "\"steps\", \"broadphase\", \"max-instances\"");
-  const auto& extra = s.kind == "steps" ? steps : s.kind == "broadphase" ? bp : mi;
+  static const std::set<std::string> sa{"scenes",     "set",      "dts",         "sim_seconds",
+                                        "iterations", "geometries", "rotation", "diverge_beyond_m"};
+  if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances" && s.kind != "speed-accuracy")
+    bad(origin, "kind", "'" + s.kind + "'", "\"steps\", \"broadphase\", \"max-instances\", \"speed-accuracy\"");
+  const auto& extra = s.kind == "steps" ? steps : s.kind == "broadphase" ? bp : s.kind == "max-instances" ? mi : sa;
+  if (s.kind == "speed-accuracy")
+    for (const char* k : {"frames", "warmup"})
+      if (j.contains(k))
+        bad(origin, k, "not a key of kind 'speed-accuracy' (every point runs sim_seconds)",
+            "name, kind, description, engines, repeat, scenes, set, dts, sim_seconds, iterations, geometries, rotation, "
+            "diverge_beyond_m");
   for (auto it = j.begin(); it != j.end(); ++it) {
     if (!common.count(it.key()) && !extra.count(it.key())) {
       std::string keys;
@@ -179,6 +257,10 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
     s.windows.push_back(Window{"settled", s.warmup + 1, s.warmup + s.frames});
     s.frames = s.warmup + s.frames;  // steps to run
+  } else if (s.kind == "speed-accuracy") {
+    parse_speed_accuracy(j, origin, s);
+    if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
+    for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
   } else if (s.kind == "steps") {
     s.frames = get_int(j, "frames", origin, 1, 100000000, 300);
     s.warmup = get_int(j, "warmup", origin, 0, 100000000, 30);

@@ -74,6 +74,13 @@ struct Sweep {
   int probe_repeat = 1;             ///< repetitions of a probe (the bracket's ends get `repeat`)
   int search_time_s = 0;            ///< > 0: no new count is measured once a search has run this long
   json paper = json::object();      ///< scene stem -> {"count", "source"}
+  // speed-accuracy (docs/bench-format.md)
+  std::vector<double> dts;              ///< the ladder of time steps (s), each dividing the largest
+  double sim_seconds = 1.0;             ///< simulated time of every point (a multiple of the largest dt)
+  std::vector<int> iterations;          ///< Bullet's solver iterations (one line each)
+  std::vector<std::string> geometries;  ///< Bullet's shape settings: "box", "hull"
+  std::vector<bool> rotations;          ///< false, true: without and with rotation (where the engine rotates)
+  double diverge_beyond_m = 1e6;        ///< a body this far outside the domain (m) makes its run diverged
 };
 
 /// The largest instance count a max-instances sweep may search to (the scene format's body
@@ -266,6 +273,17 @@ struct MaxInstancesRun {
 /// Every probe is appended to run.result["points"] and the file rewritten. Returns the
 /// summary stored in result["searches"]; throws BenchStopped on a signal.
 json search_max_instances(MaxInstancesRun& run, std::size_t sc, const std::string& engine, std::size_t search);
+
+// ---- speed-accuracy (bench_speed_accuracy.cpp) ---------------------------------------------
+
+/// Runs a sweep of kind speed-accuracy (docs/bench-format.md): every line (scene, engine,
+/// geometry, rotation, iterations) over the ladder of time steps, the same simulated time
+/// each, repetitions round-robin; consistency error against the line's smallest dt.
+/// `engines_given`: --engines named the engines (an engine that cannot start, or cannot run
+/// a scene at all, is then bad input). Writes o.output (and the CSV); returns the exit
+/// code (0, or 1 when a point failed). Throws InputError (exit 2) for bad input.
+int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& def, const BenchOptions& o,
+                       int shard, int shards, bool engines_given);
 
 // ---- the result file (bench_result.cpp) -----------------------------------------------------
 

@@ -176,6 +176,7 @@ struct BenchOptions {
   std::string trace_dir;          ///< write one trace per steps point here
   std::vector<std::string> cuda;  ///< --cuda KEY=VALUE items (CudaSettings)
   std::vector<std::string> bullet;  ///< --bullet KEY=VALUE items (BulletSettings)
+  std::string csv;                ///< speed-accuracy: the CSV file (default RESULT.csv beside -o)
 };
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o);
 int bench_command(const BenchOptions& o);

@@ -3,13 +3,15 @@
 
 #include <fmt/format.h>
 
+#include <string>
+
 #include "octocd/error.hpp"
 
 namespace octocd {
 
 const char* bullet_shape_name(BulletShape s) { return s == BulletShape::Box ? "box" : "hull"; }
 
-std::vector<std::string> bullet_setting_names() { return {"shape"}; }
+std::vector<std::string> bullet_setting_names() { return {"shape", "iterations"}; }
 
 void set_bullet_setting(BulletSettings& s, const std::string& key, const std::string& value,
                         const std::string& where) {
@@ -20,6 +22,21 @@ void set_bullet_setting(BulletSettings& s, const std::string& key, const std::st
       throw InputError(fmt::format("{}: shape='{}' is not allowed; allowed: hull (convex hulls of dynamic meshes, "
                                    "triangle meshes of static ones), box (boxes equal to the AABBs)",
                                    where, value));
+    return;
+  }
+  if (key == "iterations") {
+    std::size_t used = 0;
+    long n = -1;
+    try {
+      n = std::stol(value, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != value.size() || value.empty() || n < 1 || n > 10000)
+      throw InputError(fmt::format("{}: iterations='{}' is not allowed; allowed: an integer in [1, 10000] (the "
+                                   "sequential-impulse solver's iterations per step; Bullet's default 10)",
+                                   where, value));
+    s.solver_iterations = static_cast<int>(n);
     return;
   }
   std::string names;

@@ -166,12 +166,64 @@ struct Polytope {
   std::vector<btVector3> vertices;      ///< m, body frame
   std::vector<btVector3> face_normals;  ///< unit, one per face (the sign does not matter)
   std::vector<std::pair<int, int>> edges;  ///< vertex indices of each edge, once
+  /// Per edge, the outward unit normals of its two faces (body frame): the edge's arc on
+  /// the Gauss map, for the Minkowski-face test of the edge-edge axes (PosedPair::exact).
+  std::vector<std::pair<btVector3, btVector3>> edge_faces;
+  std::vector<btVector3> outward;        ///< outward unit normal of every face (body frame)
+  std::vector<btScalar> outward_offset;  ///< per face: max n.v over the vertices (its plane, m)
+  btVector3 centroid{0, 0, 0};           ///< mean of the vertices: inside the polytope
   std::vector<btScalar> plus, minus;    ///< per face normal n: max n.v and max -n.v (m)
   btScalar radius = 0;                  ///< largest |v| (m): the bounding sphere about the origin
 
-  /// Fills plus, minus and radius from vertices and face_normals.
+  /// The neighbours of vertex k along the edges: adjacent[adjacent_start[k] ..
+  /// adjacent_start[k + 1]), for support() (CSR layout).
+  std::vector<int> adjacent_start, adjacent;
+
+  /// max over the vertices of d.v (body frame) by hill climbing on the edge graph from
+  /// vertex `start` (in: where to begin, e.g. the last answer; out: the vertex found).
+  /// On a convex polytope a vertex none of whose neighbours is higher along d is a highest
+  /// one, so this is exact, in O(path length x degree) instead of O(vertices).
+  btScalar support(const btVector3& d, int& start) const {
+    int at = start >= 0 && static_cast<std::size_t>(start) < vertices.size() ? start : 0;
+    btScalar best = d.dot(vertices[static_cast<std::size_t>(at)]);
+    for (bool moved = true; moved;) {
+      moved = false;
+      for (int k = adjacent_start[static_cast<std::size_t>(at)]; k < adjacent_start[static_cast<std::size_t>(at) + 1]; ++k) {
+        const int nb = adjacent[static_cast<std::size_t>(k)];
+        const btScalar h = d.dot(vertices[static_cast<std::size_t>(nb)]);
+        if (h > best) {
+          best = h;
+          at = nb;
+          moved = true;
+        }
+      }
+    }
+    start = at;
+    return best;
+  }
+
+  /// Fills plus, minus, radius and the adjacency from vertices, edges and face_normals.
   void finish() {
-    for (const btVector3& v : vertices) radius = std::max(radius, v.length());
+    std::vector<std::vector<int>> nb(vertices.size());
+    for (const auto& [i, j] : edges) {
+      nb[static_cast<std::size_t>(i)].push_back(j);
+      nb[static_cast<std::size_t>(j)].push_back(i);
+    }
+    adjacent_start.assign(1, 0);
+    for (const auto& list : nb) {
+      adjacent.insert(adjacent.end(), list.begin(), list.end());
+      adjacent_start.push_back(static_cast<int>(adjacent.size()));
+    }
+    for (const btVector3& v : vertices) {
+      radius = std::max(radius, v.length());
+      centroid += v;
+    }
+    if (!vertices.empty()) centroid /= btScalar(vertices.size());
+    for (const btVector3& n : outward) {
+      btScalar h = -std::numeric_limits<btScalar>::infinity();
+      for (const btVector3& v : vertices) h = std::max(h, n.dot(v));
+      outward_offset.push_back(h);
+    }
     for (const btVector3& n : face_normals) {
       btScalar hp = -std::numeric_limits<btScalar>::infinity(), hm = hp;
       for (const btVector3& v : vertices) {
@@ -203,8 +255,23 @@ Polytope box_polytope(const btVector3& he) {
     btVector3 axis(0, 0, 0);
     axis[k] = 1;
     p.face_normals.push_back(axis);
-    for (int v = 0; v < 8; ++v)
-      if (!(v & (1 << k))) p.edges.emplace_back(v, v | (1 << k));
+    p.outward.push_back(axis);
+    p.outward.push_back(-axis);
+    for (int v = 0; v < 8; ++v) {
+      if (v & (1 << k)) continue;
+      p.edges.emplace_back(v, v | (1 << k));
+      // The edge along axis k at corner v: its faces are those of the two other axes, on
+      // the sides of v's coordinates.
+      btVector3 n[2];
+      int m = 0;
+      for (int j = 0; j < 3; ++j) {
+        if (j == k) continue;
+        n[m] = btVector3(0, 0, 0);
+        n[m][j] = (v & (1 << j)) ? 1 : -1;
+        ++m;
+      }
+      p.edge_faces.emplace_back(n[0], n[1]);
+    }
   }
   p.finish();
   return p;
@@ -213,7 +280,15 @@ Polytope box_polytope(const btVector3& he) {
 /// A convex hull (btConvexHullComputer's vertices, faces and edges) as a polytope.
 Polytope hull_polytope(const btConvexHullComputer& hc) {
   Polytope p;
-  for (int k = 0; k < hc.vertices.size(); ++k) p.vertices.push_back(hc.vertices[k]);
+  btVector3 centroid(0, 0, 0);  // of the vertices: inside the hull
+  for (int k = 0; k < hc.vertices.size(); ++k) {
+    p.vertices.push_back(hc.vertices[k]);
+    centroid += hc.vertices[k];
+  }
+  if (hc.vertices.size() > 0) centroid /= btScalar(hc.vertices.size());
+  // The face of every half-edge and each face's outward unit normal.
+  std::vector<int> face_of(static_cast<std::size_t>(hc.edges.size()), -1);
+  std::vector<btVector3>& outward = p.outward;
   for (int f = 0; f < hc.faces.size(); ++f) {
     const btConvexHullComputer::Edge* first = &hc.edges[hc.faces[f]];
     const btConvexHullComputer::Edge* e = first;
@@ -223,13 +298,23 @@ Polytope hull_polytope(const btConvexHullComputer& hc) {
       const btVector3& b = hc.vertices[e->getTargetVertex()];
       normal += btVector3((a.y() - b.y()) * (a.z() + b.z()), (a.z() - b.z()) * (a.x() + b.x()),
                           (a.x() - b.x()) * (a.y() + b.y()));
+      face_of[static_cast<std::size_t>(e - &hc.edges[0])] = f;
       e = e->getNextEdgeOfFace();
     } while (e != first);
     add_direction(p.face_normals, normal);
+    const btScalar len = normal.length();
+    btVector3 n = len > btScalar(1e-12) ? normal / len : btVector3(0, 0, 0);
+    if (n.dot(hc.vertices[first->getTargetVertex()] - centroid) < 0) n = -n;
+    outward.push_back(n);
   }
   for (int k = 0; k < hc.edges.size(); ++k) {  // each edge once: its half-edge with source < target
     const btConvexHullComputer::Edge& e = hc.edges[k];
-    if (e.getSourceVertex() < e.getTargetVertex()) p.edges.emplace_back(e.getSourceVertex(), e.getTargetVertex());
+    if (e.getSourceVertex() >= e.getTargetVertex()) continue;
+    p.edges.emplace_back(e.getSourceVertex(), e.getTargetVertex());
+    const int f0 = face_of[static_cast<std::size_t>(k)];
+    const int f1 = face_of[static_cast<std::size_t>(e.getReverseEdge() - &hc.edges[0])];
+    p.edge_faces.emplace_back(f0 >= 0 ? outward[static_cast<std::size_t>(f0)] : btVector3(0, 0, 0),
+                              f1 >= 0 ? outward[static_cast<std::size_t>(f1)] : btVector3(0, 0, 0));
   }
   p.finish();
   return p;
@@ -282,12 +367,22 @@ class PosedPair {
 
   /// Separation (m) of A from B along the unit axis u (A on u's side): min_A u.a -
   /// max_B u.b; negative = the overlap A must move along u to leave B.
+  /// Both extremes by Polytope::support in the body frames, each climb starting where
+  /// the last one ended (nearby axes have nearby extreme vertices).
   btScalar separation(const btVector3& u) const {
-    btScalar max_b = -std::numeric_limits<btScalar>::infinity();
-    btScalar min_a = std::numeric_limits<btScalar>::infinity();
-    for (const btVector3& x : world_b()) max_b = std::max(max_b, u.dot(x));
-    for (const btVector3& x : world_a()) min_a = std::min(min_a, u.dot(x));
+    const btScalar max_b = b_.support(u * tb_.getBasis(), start_[0]) + u.dot(tb_.getOrigin());
+    const btScalar min_a = -a_.support(-(u * ta_.getBasis()), start_[1]) + u.dot(ta_.getOrigin());
     return min_a - max_b;
+  }
+
+  /// separation(u) and separation(-u) together; the climbs toward -u start where the
+  /// last ones toward -u ended (an axis and its opposite have extreme vertices far apart).
+  std::pair<btScalar, btScalar> separations(const btVector3& u) const {
+    const btVector3 ua = u * ta_.getBasis(), ub = u * tb_.getBasis();
+    const btScalar oa = u.dot(ta_.getOrigin()), ob = u.dot(tb_.getOrigin());
+    const btScalar max_b = b_.support(ub, start_[0]) + ob, min_a = -a_.support(-ua, start_[1]) + oa;
+    const btScalar min_b = -b_.support(-ub, start_[2]) + ob, max_a = a_.support(ua, start_[3]) + oa;
+    return {min_a - max_b, min_b - max_a};
   }
 
   /// Signed distance estimate (m) of world point p to A (`on_a`) or B: the largest
@@ -307,14 +402,17 @@ class PosedPair {
 
   /// True when a face normal of either polytope separates them (a cheap proof that they do
   /// not penetrate).
-  bool face_axis_separates() const {
-    for (const btVector3& n : a_.face_normals) {
-      const btVector3 u = ta_.getBasis() * n;
-      if (separation(u) > 0 || separation(-u) > 0) return true;
-    }
-    for (const btVector3& n : b_.face_normals) {
-      const btVector3 u = tb_.getBasis() * n;
-      if (separation(u) > 0 || separation(-u) > 0) return true;
+  /// `axis` (optional) receives the separating axis u found (A on u's side: separation(u) > 0).
+  bool face_axis_separates(btVector3* axis = nullptr) const {
+    for (const Polytope* p : {&a_, &b_}) {
+      const btMatrix3x3& basis = (p == &a_ ? ta_ : tb_).getBasis();
+      for (const btVector3& n : p->face_normals) {
+        const btVector3 u = basis * n;
+        const auto [plus, minus] = separations(u);
+        if (!(plus > 0) && !(minus > 0)) continue;
+        if (axis) *axis = plus > 0 ? u : -u;
+        return true;
+      }
     }
     return false;
   }
@@ -332,28 +430,58 @@ class PosedPair {
   void exact(btVector3& normal_on_b, btVector3& point_on_b, btScalar& distance) const {
     btScalar best = -std::numeric_limits<btScalar>::infinity();
     btVector3 best_u(0, 1, 0);
-    auto consider = [&](const btVector3& u) {
-      for (const btScalar sign : {btScalar(1), btScalar(-1)}) {
-        const btScalar d = separation(sign * u);
+    // Face axes: the outward normal n of a face of A separates by min_B n.b - A's plane
+    // (u = -n); one of B, min_A m.a - B's plane (u = m). One support climb each.
+    const btVector3 oa = ta_.getOrigin(), ob = tb_.getOrigin();
+    for (std::size_t k = 0; k < a_.outward.size(); ++k) {
+      const btVector3 n = ta_.getBasis() * a_.outward[k];
+      const btScalar d = -b_.support(-(n * tb_.getBasis()), start_[0]) + n.dot(ob) - (a_.outward_offset[k] + n.dot(oa));
+      if (d > best) {
+        best = d;
+        best_u = -n;
+      }
+    }
+    for (std::size_t k = 0; k < b_.outward.size(); ++k) {
+      const btVector3 m = tb_.getBasis() * b_.outward[k];
+      const btScalar d = -a_.support(-(m * ta_.getBasis()), start_[1]) + m.dot(oa) - (b_.outward_offset[k] + m.dot(ob));
+      if (d > best) {
+        best = d;
+        best_u = m;
+      }
+    }
+    // Edge-edge axes (Gregorius, "The Separating Axis Test between Convex Polyhedra",
+    // GDC 2013): only edge pairs that build a face of the Minkowski difference A - B give
+    // a candidate axis: their arcs on the Gauss map (between the two faces' outward
+    // normals; B's negated) cross. The edges that support a minimum translation, or a
+    // contact within the margin, lie where the shapes meet: only edges within |best| +
+    // kReach of the other shape's box are crossed (a hull-hull pair of bunnies has 948 x
+    // 948 edges). (|best| alone is not enough: shapes that only an edge-edge axis
+    // separates have best < 0 from the faces.)
+    const btScalar grow = std::max(-best, btScalar(0)) + kReach;
+    const btVector3 centre_a = ta_ * a_.centroid;
+    std::vector<EdgeArc> arcs_a, arcs_b;
+    edge_arcs(a_, world_a(), ta_, box_of(world_b()), grow, false, arcs_a);
+    edge_arcs(b_, world_b(), tb_, box_of(world_a()), grow, true, arcs_b);
+    constexpr btScalar kArcTolerance = btScalar(1e-6);  // a superset of the crossing arcs is harmless
+    for (const EdgeArc& ea : arcs_a) {
+      for (const EdgeArc& eb : arcs_b) {
+        const btScalar cba = eb.n0.dot(ea.axis), dba = eb.n1.dot(ea.axis);
+        if (cba * dba > kArcTolerance) continue;
+        const btScalar adc = ea.n0.dot(eb.axis), bdc = ea.n1.dot(eb.axis);
+        if (adc * bdc > kArcTolerance || cba * bdc < -kArcTolerance) continue;
+        btVector3 u = ea.dir.cross(eb.dir);
+        const btScalar len = u.length();
+        if (!(len > btScalar(1e-6))) continue;
+        // Oriented out of A at its edge (Gregorius): N from A toward B, u = -N; the other
+        // sign is no Minkowski-face axis (and any axis gives a lower bound only).
+        u /= len;
+        if (u.dot(ea.point - centre_a) < 0) u = -u;
+        const btScalar d = -b_.support(-(u * tb_.getBasis()), start_[2]) + u.dot(ob) -
+                           (a_.support(u * ta_.getBasis(), start_[3]) + u.dot(oa));
         if (d > best) {
           best = d;
-          best_u = sign * u;
+          best_u = -u;
         }
-      }
-    };
-    for (const btVector3& n : a_.face_normals) consider(ta_.getBasis() * n);
-    for (const btVector3& n : b_.face_normals) consider(tb_.getBasis() * n);
-    // Edge-edge axes: the edges that support a minimum translation lie where the shapes
-    // meet, so only edges with an end within the other's bounding sphere (grown by
-    // kReach) are crossed (a hull-hull pair has 480 x 480 edges otherwise).
-    std::vector<btVector3> dirs_a, dirs_b;
-    near_edges(a_, world_a(), ta_, tb_.getOrigin(), b_.radius + kReach, dirs_a);
-    near_edges(b_, world_b(), tb_, ta_.getOrigin(), a_.radius + kReach, dirs_b);
-    for (const btVector3& ea : dirs_a) {
-      for (const btVector3& eb : dirs_b) {
-        const btVector3 u = ea.cross(eb);
-        const btScalar len = u.length();
-        if (len > btScalar(1e-6)) consider(u / len);
       }
     }
     // Witnesses: the extreme vertices of A along -u and of B along +u (within the
@@ -395,15 +523,51 @@ class PosedPair {
   }
 
  private:
-  /// Unit world directions (parallel ones once) of the edges of `p` (world vertices `w`,
-  /// pose `t`) with an end within `reach` of `centre`.
-  static void near_edges(const Polytope& p, const std::vector<btVector3>& w, const btTransform& t,
-                         const btVector3& centre, btScalar reach, std::vector<btVector3>& dirs) {
-    const btScalar r2 = reach * reach;
-    for (const auto& [i, j] : p.edges) {
-      const auto ui = static_cast<std::size_t>(i), uj = static_cast<std::size_t>(j);
-      if ((w[ui] - centre).length2() > r2 && (w[uj] - centre).length2() > r2) continue;
-      add_direction(dirs, t.getBasis() * (p.vertices[uj] - p.vertices[ui]));
+  /// An edge in world space with its Gauss-map arc: unit direction, the outward normals of
+  /// its two faces (n0, n1; negated for B, the Minkowski difference A - B) and n1 x n0.
+  struct EdgeArc {
+    btVector3 dir, n0, n1, axis;
+    btVector3 point;  ///< a world point of the edge (its first vertex)
+  };
+
+  /// The world AABB of the points `w`.
+  static std::pair<btVector3, btVector3> box_of(const std::vector<btVector3>& w) {
+    btVector3 lo(std::numeric_limits<btScalar>::infinity(), std::numeric_limits<btScalar>::infinity(),
+                 std::numeric_limits<btScalar>::infinity());
+    btVector3 hi = -lo;
+    for (const btVector3& x : w) {
+      lo.setMin(x);
+      hi.setMax(x);
+    }
+    return {lo, hi};
+  }
+
+  /// The edges of `p` (world vertices `w`, pose `t`) whose segment's box comes within
+  /// `grow` of box `other`, as EdgeArc (faces' normals negated when `negate`).
+  static void edge_arcs(const Polytope& p, const std::vector<btVector3>& w, const btTransform& t,
+                        const std::pair<btVector3, btVector3>& other, btScalar grow, bool negate,
+                        std::vector<EdgeArc>& arcs) {
+    const btVector3 lo = other.first - btVector3(grow, grow, grow), hi = other.second + btVector3(grow, grow, grow);
+    const btScalar sign = negate ? btScalar(-1) : btScalar(1);
+    for (std::size_t k = 0; k < p.edges.size(); ++k) {
+      const btVector3& x0 = w[static_cast<std::size_t>(p.edges[k].first)];
+      const btVector3& x1 = w[static_cast<std::size_t>(p.edges[k].second)];
+      btVector3 elo = x0, ehi = x0;
+      elo.setMin(x1);
+      ehi.setMax(x1);
+      if (elo.x() > hi.x() || elo.y() > hi.y() || elo.z() > hi.z() || ehi.x() < lo.x() || ehi.y() < lo.y() ||
+          ehi.z() < lo.z())
+        continue;
+      btVector3 d = x1 - x0;
+      const btScalar len = d.length();
+      if (!(len > btScalar(1e-12))) continue;
+      EdgeArc a;
+      a.dir = d / len;
+      a.n0 = sign * (t.getBasis() * p.edge_faces[k].first);
+      a.n1 = sign * (t.getBasis() * p.edge_faces[k].second);
+      a.axis = a.n1.cross(a.n0);
+      a.point = x0;
+      arcs.push_back(a);
     }
   }
 
@@ -422,6 +586,9 @@ class PosedPair {
   const std::vector<btVector3>& world_b() const { return posed(b_, tb_, wb_); }
 
   mutable std::vector<btVector3> wa_, wb_;  ///< world vertices, filled on first use
+  /// Where the next support climbs start: B along +u, A along -u (separation), B along
+  /// -u, A along +u (the opposite axis in separations()).
+  mutable std::array<int, 4> start_{};
 };
 
 
@@ -469,11 +636,21 @@ class CheckedConvexAlgorithm : public btConvexConvexAlgorithm {
     out->setPersistentManifold(manifold);
     if (checked.added || manifold == nullptr) return;
     const btScalar threshold = manifold->getContactBreakingThreshold();
-    if (pair.far_apart(threshold) || pair.face_axis_separates()) return;
+    if (pair.far_apart(threshold)) return;
+    // The axis that separated the pair last time first (the bodies moved little since).
+    if (has_separating_axis_ && pair.separation(separating_axis_) > 0) return;
+    if (pair.face_axis_separates(&separating_axis_)) {
+      has_separating_axis_ = true;
+      return;
+    }
     btVector3 normal, point;
     btScalar distance = 0;
     pair.exact(normal, point, distance);
-    if (distance > 0) return;  // apart (the separation is a lower bound of the distance)
+    has_separating_axis_ = distance > 0;
+    if (distance > 0) {  // apart (the separation is a lower bound of the distance)
+      separating_axis_ = normal;
+      return;
+    }
     ++counts_.added;
     checked.add_unchecked(normal, point, distance);
   }
@@ -532,6 +709,10 @@ class CheckedConvexAlgorithm : public btConvexConvexAlgorithm {
 
   const Registry& registry_;
   BulletNarrowphaseCounts& counts_;
+  /// A world axis u that separated the pair (A on u's side) when GJK last found no
+  /// contact: tried first next time (frame-to-frame coherence), one separation each.
+  btVector3 separating_axis_{0, 1, 0};
+  bool has_separating_axis_ = false;
 };
 
 }  // namespace
@@ -713,6 +894,7 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
   // the Baumgarte recovery of shallow penetrations into the velocity): see the header.
   info.m_splitImpulse = 1;
   info.m_splitImpulsePenetrationThreshold = 0;
+  info.m_numIterations = settings.solver_iterations;
 
   m.rotation = scene_rotates(scene);
   m.settings = settings;

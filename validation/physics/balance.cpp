@@ -292,7 +292,10 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     // w' = w, less the declared gyroscopic term: I_w (w' - w) = -dt w x I_w w.
     const D3 dw_expected = bodies.gyroscopic ? -1.0 * mul(inverse(iw), gyro) : D3{};
     const D3 dw = unlocked(w1 - w0 - dw_expected, i, 3);
-    const double w_bound = 4.0 * kEps32 * (len3(w0) + len3(w1)) + tol.gyroscopic_rel * len3(dw_expected) + 1e-9;
+    // 8 eps32 per |w|: a float engine's free step may turn w into the body frame and back
+    // (Bullet's implicit gyroscopic step: two quatRotate, each two quaternion products);
+    // Bullet on rot-pile-1000 measured 8.04 eps32 |w| (3.02e-05 rad/s at 31.6 rad/s).
+    const double w_bound = 8.0 * kEps32 * (len3(w0) + len3(w1)) + tol.gyroscopic_rel * len3(dw_expected) + 1e-9;
     const double dwl = len3(dw);
     free_w.check(dwl <= w_bound, dwl, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: w' = ({:.6g}, {:.6g}, {:.6g}) rad/s, w{} = "

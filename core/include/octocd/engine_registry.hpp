@@ -47,6 +47,13 @@ struct EngineInfo {
   /// Trace readers map a trace's root attribute `engine` to this through
   /// writes_octocd_contacts(): traces of octocd's own engines declare nothing else.
   bool octocd_contacts = false;
+  /// What it can collide a body as, one per setting it has (the speed-accuracy sweep's
+  /// `geometry`): {"mesh"} for octocd's narrow phase on the meshes; {"hull", "box"} for an
+  /// engine with a shape setting (bullet: BulletSettings::shape).
+  std::vector<std::string> geometries{"mesh"};
+  /// It has a solver iteration count as a setting (bullet: BulletSettings::solver_iterations,
+  /// `--bullet iterations=N`): the speed-accuracy sweep's second axis.
+  bool has_solver_iterations = false;
 };
 
 /// Every engine, built in this octocd or not, in a stable order: cpu, cuda, bullet.

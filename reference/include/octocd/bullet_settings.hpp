@@ -34,13 +34,17 @@ struct BulletSettings {
   /// Default hull: the same geometry octocd's mesh narrow phase works on, so speed and
   /// accuracy compare like with like.
   BulletShape shape = BulletShape::Hull;
+  /// Iterations of the sequential-impulse solver per step (btContactSolverInfo::
+  /// m_numIterations); key `iterations`, an integer in [1, 10000]. Default 10, Bullet's.
+  /// The speed-accuracy sweep's second axis (docs/bench-format.md).
+  int solver_iterations = 10;
 };
 
 /// The keys set_bullet_setting takes, in the struct's order: the field names.
 std::vector<std::string> bullet_setting_names();
 
 /// Sets the field `key` (a name of bullet_setting_names()) of `settings` from text
-/// (shape: hull or box). Throws InputError "<where>: ..." naming the key, the value and
+/// (shape: hull or box; iterations: an integer in [1, 10000]). Throws InputError "<where>: ..." naming the key, the value and
 /// what is allowed.
 void set_bullet_setting(BulletSettings& settings, const std::string& key, const std::string& value,
                         const std::string& where);

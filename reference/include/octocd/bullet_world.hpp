@@ -54,7 +54,7 @@ namespace octocd {
 /// Bullet has one friction coefficient (no static/kinetic split): mu_k is used, mu_s has
 /// no Bullet counterpart.
 ///
-/// Solver (btContactSolverInfo): Bullet's defaults (10 iterations, SOR 1, erp2 0.2, warm
+/// Solver (btContactSolverInfo): Bullet's defaults (10 iterations: BulletSettings::solver_iterations, SOR 1, erp2 0.2, warm
 /// starting 0.85, SOLVER_SIMD, linear slop 0), except
 /// - m_restitutionVelocityThreshold = scene.response.restitution_threshold (v_th: Bullet
 ///   zeroes restitution below it, like Eq. 17; Bullet's default is 0.2 m/s);
