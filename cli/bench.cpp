@@ -26,6 +26,12 @@ namespace {
 using namespace bench;
 namespace fs = std::filesystem;
 
+/// `bench`: from a SIGINT or SIGTERM to the end of the process, at most this long (s): a
+/// step gets the 0.5 s grace (bench_points.cpp), building a point's model or closing its
+/// trace is cut short at the bound; the result file keeps every point finished before
+/// (rewritten atomically after each, so the bound never loses one).
+constexpr double kBenchStopBound = 0.95;
+
 std::pair<int, int> parse_shard(const std::string& text) {
   if (text.empty()) return {0, 1};
   const auto slash = text.find('/');
@@ -272,6 +278,9 @@ int bench_command(const BenchOptions& o) {
   auto write = [&] {
     result["updated"] = utc_time_now();
     write_file_atomically(o.output, result.dump(1) + "\n");
+    // What a process ended at once (a second signal, the 1 s bound) keeps: this file.
+    octocd::set_stop_kept(fmt::format("the result {} keeps the {} point(s) finished before (--resume goes on)",
+                                      o.output, result["points"].size()));
   };
   record_hygiene(result, s, o.quiet);
   if (!o.quiet && s.kind == "max-instances")
@@ -290,7 +299,9 @@ int bench_command(const BenchOptions& o) {
   }
   if (s.kind == "max-instances")
     for (const auto& [id, pt] : kept) result["points"].push_back(pt);
-  octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, keep the finished points
+  // SIGINT/SIGTERM: stop between frames, keep the finished points, within kBenchStopBound.
+  octocd::StopOnSignals stop_on_signals(kBenchStopBound);
+  octocd::set_stop_kept(fmt::format("the result {} keeps the points finished before (--resume goes on)", o.output));
   const auto stopped = [&](int sig) {
     result["stopped"] = octocd::stop_signal_name(sig);
     std::sort(result["points"].begin(), result["points"].end(),

@@ -185,9 +185,8 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
       // A step of a big scene may take seconds: a signal it does not answer within the
       // grace ends the bench there (the result file keeps the points finished before).
       std::optional<octocd::StopWithin> within(
-          std::in_place, fmt::format("bench point {} stepped frame {} of {} (a step longer than the 0.5 s grace); "
-                                     "the result {} keeps the points finished before it (--resume goes on)",
-                                     p.id, f, total, o.output));
+          std::in_place, fmt::format("bench point {} stepped frame {} of {} (a step longer than the 0.5 s grace)",
+                                     p.id, f, total));  // then set_stop_kept's text: what the result keeps
       const double cpu0 = host_engine ? process_cpu_ms() : 0.0;
       const FrameMetrics& m = engine->step();
       const double cpu = host_engine ? process_cpu_ms() - cpu0 : 0.0;

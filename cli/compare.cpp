@@ -740,7 +740,8 @@ std::vector<std::string> body_differences(const Side& a, const Side& b) {
     const auto va = a.t->read_f32(d, a.bodies), vb = b.t->read_f32(d, b.bodies);
     for (std::uint64_t i = 0; i < n; ++i)
       if (std::memcmp(&va[i * k], &vb[i * k], k * sizeof(float)) != 0) {
-        const auto text = [&](const std::vector<float>& v) {
+        const std::uint64_t width = k;  // a structured binding is not captured before C++20 (clang)
+        const auto text = [&, k = width](const std::vector<float>& v) {
           return k == 1 ? fmt::format("{}", v[i]) : fmt::format("({})", fmt::join(v.begin() + static_cast<std::ptrdiff_t>(i * k), v.begin() + static_cast<std::ptrdiff_t>((i + 1) * k), ", "));
         };
         out.push_back(fmt::format("{}: body {}: {} vs {}", d, i, text(va), text(vb)));

@@ -16,6 +16,10 @@
 #include <vector>
 
 #include <climits>
+#include <condition_variable>
+#include <exception>
+#include <mutex>
+#include <thread>
 #include <filesystem>
 
 #include <CLI/CLI.hpp>
@@ -698,8 +702,87 @@ int validate_command(ValidateOptions& o) {
   }
 }
 
+/// `validate SCENE`'s stop bound (s): from a SIGINT or SIGTERM to the end of the
+/// process; past it the process ends saying what it keeps (StopOnSignals' deadline).
+constexpr double kValidateStopBound = 0.95;
+/// How long the main thread waits for the judging worker to stop after a signal before
+/// it reports the frames judged so far without it (the rest of the bound writes them).
+constexpr std::chrono::milliseconds kValidateStopGrace{450};
+
+/// The verdict of the frames judged so far (ValidationOptions::on_judged's latest rows),
+/// kept by the judging worker, read by the main thread when a step outlasts the grace.
+class JudgedSoFar {
+ public:
+  void keep(const std::vector<octocd::ValidationResult>& rows, std::int64_t judged) {
+    const std::lock_guard<std::mutex> lock(m_);
+    rows_ = rows;
+    judged_ = judged;
+  }
+  std::pair<std::vector<octocd::ValidationResult>, std::int64_t> get() const {
+    const std::lock_guard<std::mutex> lock(m_);
+    return {rows_, judged_};
+  }
+
+ private:
+  mutable std::mutex m_;
+  std::vector<octocd::ValidationResult> rows_;
+  std::int64_t judged_ = 0;
+};
+
+/// Waits until `done` (set under `m`, `cv` notified) and returns true, or returns false
+/// once a signal has waited kValidateStopGrace for it, or at once on a second signal.
+bool wait_for_worker(std::mutex& m, std::condition_variable& cv, const bool& done) {
+  std::unique_lock<std::mutex> lock(m);
+  std::optional<Clock::time_point> first;
+  for (;;) {
+    if (cv.wait_for(lock, std::chrono::milliseconds(10), [&] { return done; })) return true;
+    if (octocd::stop_signal() == 0) continue;
+    const auto now = Clock::now();
+    if (!first) first = now;
+    if (octocd::stop_signal_count() > 1 || now - *first >= kValidateStopGrace) return false;
+  }
+}
+
+/// The end of `validate SCENE`: JUnit (with `stopped`, the incomplete verdict's status,
+/// when a signal stopped it), the table, then either the STOPPED line and 130/143 or
+/// conclude_validate's outcome and exit code.
+int validate_verdict(const ValidateOptions& o, const std::string& name,
+                     const std::vector<octocd::ValidationResult>& results, const std::vector<std::string>& overridden,
+                     const std::string& stopped, std::int64_t done, Clock::time_point t0) {
+  const octocd::RunName run{name, ""};
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
+  if (!o.junit.empty())
+    octocd::write_junit(o.junit, name, octocd::cli::with_views_in_details(results, o.views, o.junit),
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", o.engine},
+                         {"frames", std::to_string(o.frames)},
+                         {"every", std::to_string(o.every)},
+                         {"against", o.against},
+                         {"scene_file", o.scene},
+                         {"build_id", octocd::build_id()}},
+                        stopped, &report);
+  fmt::print("validate {} (engine {}, {} frames, checks every {}, against: {})\n\n", name, o.engine,
+             o.frames, o.every, o.against);
+  fmt::print("{}", octocd::format_results(results, overridden, &report));
+  if (const int sig = octocd::stop_signal()) {
+    // (A signal after the JUnit was written: the whole table, stopped at its end.)
+    fmt::print("\nSTOPPED: {}\n", stopped.empty() ? fmt::format("the table covers frames 1..{} of {}; stopped by {}",
+                                                                done, o.frames, octocd::stop_signal_name(sig))
+                                                  : stopped);
+    std::fflush(stdout);
+    report_stop(sig, "validate", done, o.frames, o.trace);
+    return octocd::stop_exit_code(sig);
+  }
+  return conclude_validate(o, run, results, report,
+                           {{"engine", o.engine}, {"frames", o.frames}, {"every", o.every}, {"against", o.against},
+                            {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
+}
+
+
 int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
-  octocd::StopOnSignals stop_on_signals;  // SIGINT/SIGTERM: stop between frames, flush, 130/143
+  // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kValidateStopBound; a
+  // second signal ends the wait for the judging worker (the verdict so far is reported).
+  octocd::StopOnSignals stop_on_signals(kValidateStopBound, octocd::SecondSignal::Recorded);
   octocd::Scene scene;
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
     const octocd::StopAtOnce loading("loading the scene and its meshes");
@@ -808,56 +891,76 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   };
   std::vector<octocd::ValidationResult> results;
   std::int64_t stopped_in = 0;  // the frame a signal stopped the checks in (0: none)
-  try {
-    const octocd::CudaSettings cuda = octocd::cli::cuda_settings_from(o.cuda);
-    const octocd::BulletSettings bullet = octocd::cli::bullet_settings_from(o.bullet);
-    results =
-        octocd::validate_engine([&] { return make_engine(o.engine, model, cuda, bullet); }, vo, &stopped_in);
-  } catch (const octocd::RuntimeError&) {
-    close_after_failure(trace, o.trace, o.no_xdmf);
-    throw;
+  // The engine runs and is judged on a worker thread, so this thread answers a signal
+  // within kValidateStopGrace even when a step of a big scene takes seconds: the worker
+  // normally stops at its next poll; if not, the verdict of the frames judged so far
+  // (on_judged's latest snapshot) is reported and the process ends without it.
+  JudgedSoFar so_far;
+  vo.on_judged = [&so_far](const std::vector<octocd::ValidationResult>& rows, std::int64_t judged) {
+    so_far.keep(rows, judged);
+  };
+  std::mutex worker_m;
+  std::condition_variable worker_cv;
+  bool worker_done = false;
+  std::exception_ptr worker_error;
+  octocd::set_stop_kept("no verdict written (the stop bound passed first)");
+  std::thread worker([&] {
+    try {
+      const octocd::CudaSettings cuda = octocd::cli::cuda_settings_from(o.cuda);
+      const octocd::BulletSettings bullet = octocd::cli::bullet_settings_from(o.bullet);
+      results =
+          octocd::validate_engine([&] { return make_engine(o.engine, model, cuda, bullet); }, vo, &stopped_in);
+    } catch (...) {
+      worker_error = std::current_exception();
+    }
+    const std::lock_guard<std::mutex> lock(worker_m);
+    worker_done = true;
+    worker_cv.notify_all();
+  });
+  if (!wait_for_worker(worker_m, worker_cv, worker_done)) {
+    // A step or check outlasting the grace, or a second signal: the incomplete verdict of
+    // the frames judged so far, then the process ends (the worker is not waited for).
+    const int sig = octocd::stop_signal();
+    auto [rows, judged] = so_far.get();
+    const std::string stopped =
+        fmt::format("the table covers frames 1..{} of {} (an incomplete verdict); stopped by {}{}; frame {} "
+                    "was cut short",
+                    judged, o.frames, octocd::stop_signal_name(sig),
+                    octocd::stop_signal_count() > 1 ? " twice" : "", judged + 1);
+    const int code = validate_verdict(o, scene.name, rows, vo.overridden, stopped, judged, t0);
+    std::fflush(stdout);
+    std::fflush(stderr);
+    std::_Exit(code);
   }
+  worker.join();
+  if (worker_error) {
+    try {
+      std::rethrow_exception(worker_error);
+    } catch (const octocd::RuntimeError&) {
+      close_after_failure(trace, o.trace, o.no_xdmf);
+      throw;
+    }
+  }
+  const bool signalled = octocd::stop_signal() != 0;
   if (trace) {
     trace->close();
     octocd::write_validation(o.trace, results);
-    write_sidecar(o.trace, o.no_xdmf);
-    if (!o.view.empty()) o.views = octocd::cli::write_failure_views(o.trace, results, o.view);
+    // A stopped run has a second: the sidecar and the pages re-read the trace, so they are left out.
+    if (!signalled) write_sidecar(o.trace, o.no_xdmf);
+    if (!o.view.empty() && !signalled) o.views = octocd::cli::write_failure_views(o.trace, results, o.view);
   }
   // Where a signal stopped the checks: the table covers the frames judged so far.
   std::string stopped;
-  if (const int sig = octocd::stop_signal())
-    stopped = fmt::format("the table covers frames 1..{} of {}; stopped by {}{}", done, o.frames,
-                          octocd::stop_signal_name(sig),
-                          done == o.frames     ? " in the analytic or Bullet rerun (n/a)"
-                          : stopped_in > done ? fmt::format(" inside the checks of frame {} (partly judged)", stopped_in)
-                                              : std::string());
-  const octocd::RunName run{scene.name, ""};
-  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
-  if (!o.junit.empty())
-    octocd::write_junit(o.junit, scene.name, octocd::cli::with_views_in_details(results, o.views, o.junit),
-                        std::chrono::duration<double>(Clock::now() - t0).count(),
-                        {{"engine", o.engine},
-                         {"frames", std::to_string(o.frames)},
-                         {"every", std::to_string(o.every)},
-                         {"against", o.against},
-                         {"scene_file", o.scene},
-                         {"build_id", octocd::build_id()}},
-                        stopped, &report);
-  fmt::print("validate {} (engine {}, {} frames, checks every {}, against: {})\n\n", scene.name, o.engine,
-             o.frames, o.every, o.against);
-  fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
   if (const int sig = octocd::stop_signal()) {
-    // (A signal after the JUnit was written: the whole table, stopped at its end.)
-    fmt::print("\nSTOPPED: {}\n", stopped.empty() ? fmt::format("the table covers frames 1..{} of {}; stopped by {}",
-                                                                done, o.frames, octocd::stop_signal_name(sig))
-                                                  : stopped);
-    std::fflush(stdout);
-    report_stop(sig, "validate", done, o.frames, o.trace);
-    return octocd::stop_exit_code(sig);
+    // Frames whose checks are complete (a pipelined run has stepped one more).
+    const std::int64_t judged = so_far.get().second;
+    stopped = fmt::format("the table covers frames 1..{} of {} (an incomplete verdict); stopped by {}{}", judged,
+                          o.frames, octocd::stop_signal_name(sig),
+                          judged == o.frames     ? " in the analytic or Bullet rerun (n/a)"
+                          : stopped_in > judged ? fmt::format(" inside the checks of frame {} (partly judged)", stopped_in)
+                                                : std::string());
   }
-  return conclude_validate(o, run, results, report,
-                           {{"engine", o.engine}, {"frames", o.frames}, {"every", o.every}, {"against", o.against},
-                            {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
+  return validate_verdict(o, scene.name, results, vo.overridden, stopped, done, t0);
 }
 
 /// An integer option in [1, 2147483647], with the message in the project's form
@@ -892,9 +995,10 @@ int main(int argc, char** argv) {
       "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
       "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a check failed (validate, compare, replay),\n"
       "4 the performance gate failed (report --baseline: a point slower, or missing or failed in the new run),\n"
-      "130/143 stopped by SIGINT/SIGTERM (run and validate\n"
+      "130/143 stopped by SIGINT/SIGTERM, within 1 s (run and validate\n"
       "stop between frames and close the trace, validate inside a frame's checks too; a step still\n"
-      "running 0.5 s after the signal is cut short; bench keeps its finished points).",
+      "running 0.5 s after the signal is cut short; validate then reports the frames judged so far as an\n"
+      "incomplete verdict, its JUnit with a 'stopped' error case; bench keeps its finished points).",
       "octocd"};  // a fixed name: `--help` reads the same whatever path ran it (docs/cli.md)
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);

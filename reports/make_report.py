@@ -104,7 +104,8 @@ def main():
     for p in a.baseline + [x[0] for x in results]:
         CURRENT[0] = p
         check_points(p, dict(results).get(p) or load(p)[2])
-    CURRENT[0] = "the inputs"
+    # What a malformed result found later is blamed on (run()): the one input, or all of them.
+    CURRENT[0] = a.inputs[0] if len(a.inputs) == 1 else "one of " + ", ".join(a.inputs)
     gate = None
     doc = None
     if a.baseline:
@@ -172,7 +173,9 @@ def main():
         if gate["broken"] or gate["slower"]:
             sys.exit(4)
 
-if __name__ == "__main__":
+def run():
+    """main() as `octocd report` runs it: every failure one line and an exit code (0, 1, 2, 4,
+    130), never a traceback (scripts/fuzz_report_json.py fuzzes it so)."""
     try:
         main()
     except SystemExit:
@@ -194,3 +197,7 @@ if __name__ == "__main__":
         # A result that passed the format check but holds something else where a figure should be.
         fail(f"{CURRENT[0]}: malformed result ({type(e).__name__}: {e}); allowed: a result of octocd bench as "
              "docs/bench-format.md describes it")
+
+
+if __name__ == "__main__":
+    run()

@@ -324,8 +324,16 @@ def section_figA2(doc, g):
 
 def slope(xs, ys):
     """Least-squares slope of log2(time) against log2(bodies): time ~ n^slope, x2 per doubling = 2^slope."""
-    lx, ly = np.log2(xs), np.log2(ys)
-    return float(np.polyfit(lx, ly, 1)[0]) if len(xs) >= 2 else float("nan")
+    with np.errstate(all="ignore"):
+        lx, ly = np.log2(np.asarray(xs, float)), np.log2(np.asarray(ys, float))
+    ok = np.isfinite(lx) & np.isfinite(ly)  # a 0, negative or 1e308 figure has no log (fuzzed results)
+    lx, ly = lx[ok], ly[ok]
+    if len(lx) < 2 or np.ptp(lx) == 0:
+        return float("nan")
+    try:
+        return float(np.polyfit(lx, ly, 1)[0])
+    except (np.linalg.LinAlgError, ValueError):
+        return float("nan")
 
 
 def section_scaling(doc, g):

@@ -2,10 +2,16 @@
 # Fuzz octocd's loaders with libFuzzer (issues 10, 22): the scene loader, the mesh loader
 # (OFF/OBJ/PLY through assimp and octocd's checks), the trace readers (summary, XDMF,
 # TraceReader), `compare` and `replay` (the commands, on the fuzzed trace) and the
-# external-trace reader of `validate --trace-in` (check and 3 frames judged).
+# external-trace reader of `validate --trace-in` (check and 3 frames judged), and (issue 36)
+# the report's inputs and the Python reader: report (a trace through `trace-summary --json`,
+# the report's only way to read one, its JSON checked as make_report.py takes it), pytrace
+# (octocd.Trace's calls through the C++ functions the module binds, fuzz/fuzz_pytrace.cpp
+# says why), report-json (the bench-result JSON make_report.py reads: a Python driver,
+# scripts/fuzz_report_json.py, in /usr/bin/python3: no sanitizer applies to Python).
 #
 #   scripts/fuzz.sh [SECONDS] [TARGET...]
-#       TARGET: scene mesh trace compare replay external (default: all six)
+#       TARGET: scene mesh trace compare replay external report pytrace report-json
+#               (default: all nine)
 #
 # Builds build-fuzz/ (CMake preset "fuzz": clang, ASan + UBSan, -fsanitize=fuzzer), makes
 # a seed corpus from the shipped files (datasets/scenes, tests/data, fuzz/regressions, a
@@ -22,19 +28,22 @@ cd "$(dirname "$0")/.."
 seconds=${1:-600}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -eq 0 ] && targets=(scene mesh trace compare replay external)
+[ ${#targets[@]} -eq 0 ] && targets=(scene mesh trace compare replay external report pytrace report-json)
+libfuzzer=()
+for t in "${targets[@]}"; do [ "$t" != report-json ] && libfuzzer+=("$t"); done
 
 command -v clang++ >/dev/null || { echo "fuzz.sh: clang++ not found; apt-get install clang" >&2; exit 2; }
 
 cmake --preset fuzz >/dev/null
-nice -n 10 cmake --build build-fuzz -j2 --target "${targets[@]/#/fuzz_}"
+[ ${#libfuzzer[@]} -gt 0 ] && nice -n 10 cmake --build build-fuzz -j2 --target "${libfuzzer[@]/#/fuzz_}"
 
 work=fuzz/work
 for t in "${targets[@]}"; do
   mkdir -p "$work/$t/corpus" "$work/$t/artifacts"
   cp -n fuzz/regressions/"$t"/* "$work/$t/corpus/" 2>/dev/null || true
   case $t in
-    compare|replay|external) cp -n fuzz/regressions/trace/* "$work/$t/corpus/" ;;
+    compare|replay|external|report|pytrace) cp -n fuzz/regressions/trace/* "$work/$t/corpus/" ;;
+    report-json) cp -n tests/data/bench-small-*.json tests/data/gate-*.json "$work/$t/corpus/" ;;
   esac
 done
 # Seeds from the shipped files.
@@ -42,7 +51,8 @@ for t in "${targets[@]}"; do
   case $t in
     scene) cp -n datasets/scenes/*.json tests/data/*.json "$work/scene/corpus/" ;;
     mesh)  cp -n tests/data/*.obj "$work/mesh/corpus/" ;;
-    trace|compare|replay|external)
+    report-json) ;;
+    trace|compare|replay|external|report|pytrace)
            if [ ! -f "$work/$t/corpus/box-stack-20.h5" ]; then
              [ -x build/octocd ] || { echo "fuzz.sh: build/octocd is needed for the trace seeds" >&2; exit 2; }
              ./build/octocd run datasets/scenes/box-stack.json --frames 20 --state-every 5 --contacts \
@@ -55,18 +65,29 @@ for t in "${targets[@]}"; do
              /usr/bin/python3 examples/python/toy_engine.py "$work/$t/corpus/toy-v1.h5" >/dev/null || true
              /usr/bin/python3 examples/python/rotating_writer.py "$work/$t/corpus/rotating-v2.h5" >/dev/null || true
            fi ;;
-    *) echo "fuzz.sh: unknown target '$t'; allowed: scene mesh trace compare replay external" >&2; exit 2 ;;
+    *) echo "fuzz.sh: unknown target '$t'; allowed: scene mesh trace compare replay external report pytrace" \
+            "report-json" >&2; exit 2 ;;
   esac
 done
 
 status=0
 for t in "${targets[@]}"; do
   echo "== fuzz_$t: ${seconds} s"
+  if [ "$t" = report-json ]; then
+    [ -x build/octocd ] || { echo "fuzz.sh: build/octocd is needed for report-json" >&2; exit 2; }
+    if ! nice -n 15 /usr/bin/python3 scripts/fuzz_report_json.py "$seconds" "$work/$t" build/octocd \
+          "$work/$t"/corpus/* fuzz/regressions/report-json/* >"$work/$t/log.txt" 2>&1; then
+      status=1
+      echo "report-json found a crash:"; grep finding "$work/$t/log.txt" | head -5
+    fi
+    grep "stat::" "$work/$t/log.txt" || true
+    continue
+  fi
   dict=()
   [ "$t" = scene ] && dict=(-dict=fuzz/scene.dict)
   max_len=65536
   case $t in  # a trace is >= 200 KB (full chunks of /frames)
-    trace|compare|replay|external) max_len=300000 ;;
+    trace|compare|replay|external|report|pytrace) max_len=300000 ;;
   esac
   # assimp 5.2 and libhdf5 1.10.8 leak on some malformed files they reject (upstream; the
   # inputs are in fuzz/upstream/): leaks are not findings for the mesh and trace targets.

@@ -13,6 +13,7 @@
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
+#include "octocd/stop.hpp"
 
 namespace octocd {
 
@@ -25,6 +26,10 @@ void write_file_atomically(const std::string& path, const std::string& text, con
     const char* name = ::strerrorname_np(e);
     return fmt::format("{} ({})", std::strerror(e), name ? name : ("errno " + std::to_string(e)).c_str());
   };
+  set_stop_remove(tmp);  // a process ended at once by a signal removes it too
+  struct Forget {
+    ~Forget() { set_stop_remove(""); }
+  } forget;
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0)
     throw RuntimeError(fmt::format("{}: cannot create the temporary file {}: {}; {} is unchanged", who, tmp,

@@ -327,7 +327,59 @@ Hdf5Reader::Dataset Hdf5Reader::open_dataset(const std::string& name) const {
                      d.type_size, file_bytes_),
          fmt::format("at most {} x the file's size + 1 MiB of data (deflate compresses at most 1032:1)",
                      trace_limits::kMaxExpansion));
+  if (layout == H5D_CHUNKED && filters > 0) open_chunked(d, dcpl);
   return d;
+}
+
+void Hdf5Reader::open_chunked(Dataset& d, hid_t dcpl) const {
+  const int rank = static_cast<int>(d.dims.size());
+  std::vector<hsize_t> chunk(static_cast<std::size_t>(std::max(rank, 1)), 0);
+  if (rank < 1 || H5Pget_chunk(dcpl, rank, chunk.data()) != rank)
+    fail(d.name, "unreadable chunk dimensions", "a readable chunked dataset");
+  // Inflated bytes of one chunk and of the chunks one band of rows spans, in double.
+  double chunk_bytes = static_cast<double>(std::max<std::size_t>(d.type_size, 1)), band_chunks = 1;
+  for (int k = 0; k < rank; ++k) {
+    if (chunk[k] == 0) fail(d.name, "a chunk dimension of 0", "chunks of at least one element each way");
+    chunk_bytes *= static_cast<double>(chunk[k]);
+    if (k > 0) band_chunks *= static_cast<double>((d.dims[k] + chunk[k] - 1) / chunk[k]);
+  }
+  const double cap = static_cast<double>(trace_limits::kMaxChunkBytes);
+  if (chunk_bytes > cap)
+    fail(d.name,
+         fmt::format("compressed in chunks of {} x {} bytes ({:.0f} bytes inflated each)",
+                     shape_text(chunk), d.type_size, chunk_bytes),
+         fmt::format("compressed chunks of at most {} MiB each (every read inflates a whole chunk)",
+                     trace_limits::kMaxChunkBytes >> 20));
+  if (chunk_bytes * band_chunks > cap)
+    fail(d.name,
+         fmt::format("a row spans {:.0f} compressed chunks of {:.0f} bytes ({:.0f} bytes inflated per band of rows)",
+                     band_chunks, chunk_bytes, chunk_bytes * band_chunks),
+         fmt::format("compressed chunks whose band of rows holds at most {} MiB", trace_limits::kMaxChunkBytes >> 20));
+  d.chunk_rows = chunk[0];
+  d.band_bytes = static_cast<std::uint64_t>(chunk_bytes * band_chunks);
+  // A chunk a row (octocd's traces): a row read inflates its own chunks only.
+  if (d.chunk_rows == 1) return;
+  // Chunks of several rows: one open dataset per reader, its cache holding one band, so
+  // rows read in order inflate each chunk once however small the reads (before: every row
+  // read of a dataset whose chunks exceed HDF5's default 1 MiB cache, or reopened per
+  // read, inflated them again). Its shape is then the one seen first (no SWMR refresh).
+  auto found = chunked_.find(d.name);
+  if (found == chunked_.end()) {
+    Hdf5Handle dapl(H5Pcreate(H5P_DATASET_ACCESS));
+    // Slots: a band's chunks have consecutive indices, so as many slots as chunks in the
+    // band never collide (HDF5 hashes a chunk by its index modulo the slots).
+    const auto slots = static_cast<std::size_t>(std::min(band_chunks * 2 + 1, double(1 << 20)));
+    if (!dapl.ok() ||
+        H5Pset_chunk_cache(dapl, std::max<std::size_t>(slots, 521), d.band_bytes + (1u << 20), 1.0) < 0)
+      fail(d.name, "cannot set up its chunk cache", "a readable dataset");
+    // HDF5 shares one cache among the opens of a dataset, set up by the first: close ours.
+    d.id.reset();
+    Hdf5Handle id(H5Dopen2(file_, d.name.c_str(), dapl));
+    if (!id.ok()) fail(d.name, "cannot be opened as a dataset (damaged file?)", "a readable dataset");
+    found = chunked_.emplace(d.name, Cached{std::move(id), -1}).first;
+  }
+  if (H5Iinc_ref(found->second.id) < 0) fail(d.name, "cannot be shared", "a readable dataset");
+  d.id = Hdf5Handle(found->second.id.get());
 }
 
 Hdf5Reader::Dataset Hdf5Reader::open_numeric(const std::string& name, int rank) const {
@@ -346,9 +398,23 @@ void Hdf5Reader::read_rows(const Dataset& d, hsize_t first, hsize_t count, hid_t
     fail(d.name, fmt::format("rows {}..{} asked, it has {}", first, first + count, d.dims[0]),
          "rows below its length");
   if (count == 0 || d.per_row() == 0) return;
-  // The read budget: values stored (count x per_row x the stored element's size).
+  // The read budget: values stored (count x per_row x the stored element's size), or of
+  // a compressed chunked dataset the bands of chunks inflated when more (all but the one
+  // its cache holds: open_chunked).
   const std::uint64_t budget = trace_limits::kMaxReadExpansion * file_bytes_ + trace_limits::kReadSlackBytes;
-  read_bytes_ += count * d.per_row() * std::max<std::uint64_t>(d.type_size, 1);
+  std::uint64_t bytes = count * d.per_row() * std::max<std::uint64_t>(d.type_size, 1);
+  if (d.chunk_rows > 0) {
+    const auto b0 = static_cast<std::int64_t>(first / d.chunk_rows);
+    const auto b1 = static_cast<std::int64_t>((first + count - 1) / d.chunk_rows);
+    std::uint64_t bands = static_cast<std::uint64_t>(b1 - b0 + 1);
+    if (d.chunk_rows > 1) {
+      Cached& c = chunked_.at(d.name);
+      if (c.band >= b0 && c.band <= b1) --bands;  // its chunks come from the cache
+      c.band = b1;
+    }
+    bytes = std::max(bytes, bands * d.band_bytes);
+  }
+  read_bytes_ += bytes;
   if (read_bytes_ > budget)
     fail(d.name,
          fmt::format("reading rows {}..{} takes the values read from this {}-byte file past {} bytes (a compression "

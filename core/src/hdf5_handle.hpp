@@ -151,12 +151,19 @@ class Hdf5Reader {
     H5T_class_t cls = H5T_NO_CLASS;  ///< type class of the stored elements
     std::size_t type_size = 0;   ///< bytes per stored element
     std::vector<hsize_t> dims;   ///< dimensions (empty for a scalar)
+    /// Compressed chunked storage: rows per chunk and the inflated bytes of the band of
+    /// chunks that rows [k x chunk_rows, (k + 1) x chunk_rows) span; 0 otherwise.
+    hsize_t chunk_rows = 0;
+    std::uint64_t band_bytes = 0;
     /// Elements per row (product of dims[1..]).
     std::uint64_t per_row() const;
     /// Whether a dataset is held (an optional dataset that is absent holds none).
     bool present() const { return id.ok(); }
   };
   /// Opens dataset `name` (throws InputError when missing, not a dataset, or refused).
+  /// A compressed chunked dataset is opened once per reader, with a chunk cache holding
+  /// the chunks of one band of rows (Dataset::band_bytes); chunks above
+  /// trace_limits::kMaxChunkBytes, or a band above it, are refused.
   Dataset open_dataset(const std::string& name) const;
   /// As open_dataset, and checks the class (H5T_INTEGER or H5T_FLOAT: either is
   /// accepted when `numeric`) and rank.
@@ -166,7 +173,9 @@ class Hdf5Reader {
   /// hold count x per_row elements). Throws InputError for rows outside the dataset, a
   /// failed read (a missing filter, a type HDF5 cannot convert, a damaged file), or a read
   /// that takes the values read from this file past trace_limits::kMaxReadExpansion x its
-  /// size + kReadSlackBytes (a compression bomb).
+  /// size + kReadSlackBytes (a compression bomb). Of a compressed chunked dataset, the
+  /// bytes counted are the bands of chunks inflated (every band the rows touch except the
+  /// one the dataset's chunk cache holds), or the values read when more.
   void read_rows(const Dataset& d, hsize_t first, hsize_t count, hid_t mem_type, void* out) const;
   /// Every element of a 1-D string dataset (fixed or variable length).
   std::vector<std::string> read_strings(const std::string& name) const;
@@ -179,8 +188,16 @@ class Hdf5Reader {
   mutable std::uint64_t read_bytes_ = 0;  // values read so far (read_rows), against the read budget
   QuietHdf5 quiet_;  // declared before file_: outlives it
   Hdf5Handle file_;
+  /// Compressed chunked datasets, kept open with a chunk cache of one band (declared after
+  /// file_: closed before it), and the band of rows whose chunks that cache holds (-1: none).
+  struct Cached {
+    Hdf5Handle id;
+    std::int64_t band = -1;
+  };
+  mutable std::map<std::string, Cached> chunked_;
   Hdf5Handle attribute(const std::string& name, H5T_class_t cls, std::size_t count) const;
   void check_vlen_lengths(const Dataset& d) const;
+  void open_chunked(Dataset& d, hid_t dcpl) const;
 };
 
 /// The /frames columns of trace format version 1, in the writer's order (trace_writer.cpp).

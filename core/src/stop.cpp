@@ -32,6 +32,12 @@ std::atomic<long> g_grace_us{500000};        // its grace (microseconds)
 std::atomic<long> g_deadline_us{0};          // StopOnSignals' deadline (0: none)
 std::atomic<long long> g_signal_ns{0};       // CLOCK_MONOTONIC at the first signal
 std::atomic<bool> g_ticking{false};          // the 20 ms SIGALRM tick runs
+std::atomic<bool> g_second_ends{true};       // a second signal ends the process at once
+std::atomic<int> g_count{0};                 // signals received since StopOnSignals
+
+// set_stop_remove's path: unlinked by exit_now (a temporary file being written).
+char g_remove_text[4096];
+std::atomic<bool> g_remove{false};
 
 // set_stop_kept's text: a ring of buffers, so the handler never reads one being rewritten
 // (the text changes at most once a frame; a handler reads it within microseconds).
@@ -72,6 +78,7 @@ void put(const char* t) {
 // Async-signal-safe: write(2) and _exit(2) only. Prints "octocd: stopped by SIG...",
 // then `middle` and `what`, then "; <kept>" when set_stop_kept gave a text (else `tail`).
 [[noreturn]] void exit_now(int sig, const char* middle, const char* what, const char* tail) {
+  if (g_remove.load()) ::unlink(g_remove_text);  // unlink(2) is async-signal-safe
   put("octocd: stopped by ");
   put(sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal");
   put(middle);
@@ -99,11 +106,14 @@ extern "C" void tick(int) {
 
 extern "C" void record_signal(int sig) {
   if (const char* what = g_at_once.load()) exit_now(sig, " while ", what, "; nothing was written\n");
+  g_count.fetch_add(1);
   int expected = 0;
   if (!g_signal.compare_exchange_strong(expected, sig)) {
     // A second signal while stopping: the user insists; the process ends now, saying
-    // what it keeps (everything flushed before: a trace is readable at any instant).
-    exit_now(sig, " again", " while stopping", "\n");
+    // what it keeps (everything flushed before: a trace is readable at any instant),
+    // unless the command answers it itself (SecondSignal::Recorded; the deadline holds).
+    if (g_second_ends.load()) exit_now(sig, " again", " while stopping", "\n");
+    return;
   }
   g_signal_ns.store(now_ns());
   if (g_within.load() != nullptr || g_deadline_us.load() > 0) start_tick();
@@ -113,7 +123,16 @@ extern "C" void record_signal(int sig) {
 
 int stop_signal() { return g_signal.load(std::memory_order_relaxed); }
 
+int stop_signal_count() { return g_count.load(std::memory_order_relaxed); }
+
 int stop_exit_code(int sig) { return 128 + sig; }
+
+void set_stop_remove(const std::string& path) {
+  g_remove.store(false);
+  if (path.empty() || path.size() >= sizeof g_remove_text) return;
+  std::memcpy(g_remove_text, path.c_str(), path.size() + 1);
+  g_remove.store(true);
+}
 
 const char* stop_signal_name(int sig) {
   switch (sig) {
@@ -135,8 +154,10 @@ void set_stop_kept(const std::string& text) {
   g_kept.store(g_kept_text[slot]);
 }
 
-StopOnSignals::StopOnSignals(double deadline_s) {
+StopOnSignals::StopOnSignals(double deadline_s, SecondSignal second) {
   g_signal.store(0);
+  g_count.store(0);
+  g_second_ends.store(second == SecondSignal::EndsAtOnce);
   g_kept.store(nullptr);
   g_deadline_us.store(deadline_s > 0.0 ? std::max(1L, static_cast<long>(deadline_s * 1e6)) : 0L);
   struct sigaction sa {};
@@ -177,6 +198,7 @@ StopOnSignals::~StopOnSignals() {
   stop_tick();
   g_deadline_us.store(0);
   g_kept.store(nullptr);
+  g_second_ends.store(true);
   sigaction(SIGINT, &g_old_int, nullptr);
   sigaction(SIGTERM, &g_old_term, nullptr);
   sigaction(SIGALRM, &g_old_alrm, nullptr);

@@ -97,7 +97,9 @@ class Engine:
         self._e = _octocd.Engine(self.scene, engine, broadphase, midphase, bool(record), items, bullet_items)
 
     def step(self, n: int = 1) -> Dict[str, Any]:
-        """Runs n steps (SPEC 4) with the GIL released; Ctrl-C stops between steps.
+        """Runs n steps (SPEC 4) with the GIL released; Ctrl-C raises KeyboardInterrupt
+        between steps, within one step's time, leaving the engine at its last whole step
+        (frame, state and last_frame() as after that step; stepping may go on).
         Returns the last step's metrics dict (see FrameRecord.metrics). Raises
         RuntimeError naming the body and frame when the state becomes non-finite."""
         return self._e.step(int(n))
@@ -140,7 +142,8 @@ class Engine:
     device = property(lambda self: self._e.device, doc="The CPU model or GPU name it runs on.")
     broadphase = property(lambda self: self._e.broadphase, doc="The broadphase in use.")
     midphase = property(lambda self: self._e.midphase, doc="The midphase in use.")
-    frame = property(lambda self: self._e.frame, doc="Steps taken so far.")
+    frame = property(lambda self: self._e.frame,
+                     doc="Steps taken so far (whole steps; safe to read from another thread during step()).")
     body_count = property(lambda self: self._e.body_count, doc="Number of bodies n (walls included).")
     recording = property(lambda self: self._e.recording, doc="Whether last_frame() has the full record.")
     notes = property(lambda self: self._e.notes, doc="How this engine's metrics differ from cpu's.")

@@ -588,7 +588,9 @@ class PyEngine {
         py::gil_scoped_release release;
         engine_->step();
       }
-      if (PyErr_CheckSignals() != 0) throw py::error_already_set();  // Ctrl-C between steps
+      frames_.store(engine_->frame());  // `frame`: the whole steps done, readable from another thread
+      // Ctrl-C between steps: KeyboardInterrupt with the engine at its last whole step.
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
     }
     return out_metrics(engine_->last_metrics(), engine_.get());
   }
@@ -668,12 +670,16 @@ class PyEngine {
 
   const Engine& engine() const { return *engine_; }
   bool recording() const { return recording_; }
+  /// Steps done (Engine::frame() after the last whole step); safe to read while another
+  /// thread is inside step().
+  std::int64_t frames() const { return frames_.load(); }
 
  private:
   std::shared_ptr<const Model> model_;
   std::unique_ptr<Engine> engine_;
   bool recording_ = false;
   std::atomic<bool> busy_{false};
+  std::atomic<std::int64_t> frames_{0};
 };
 
 // ---- judging another engine ----------------------------------------------------------
@@ -1152,7 +1158,7 @@ PYBIND11_MODULE(_octocd, m) {
       .def_property_readonly("device", [](const PyEngine& e) { return e.engine().device(); })
       .def_property_readonly("broadphase", [](const PyEngine& e) { return e.engine().broadphase_name(); })
       .def_property_readonly("midphase", [](const PyEngine& e) { return e.engine().midphase_name(); })
-      .def_property_readonly("frame", [](const PyEngine& e) { return e.engine().frame(); })
+      .def_property_readonly("frame", &PyEngine::frames)
       .def_property_readonly("body_count", [](const PyEngine& e) { return e.engine().state().size(); })
       .def_property_readonly("notes", [](const PyEngine& e) { return e.engine().notes(); })
       .def_property_readonly("state_hash", [](const PyEngine& e) { return e.engine().state_hash(); });
@@ -1282,9 +1288,14 @@ PYBIND11_MODULE(_octocd, m) {
           vs.body = index("body", *body);
         }
         ViewPage page;
+        PythonStop stop;
+        vs.stop = stop.callback();
         try {
           py::gil_scoped_release release;
           page = write_view(trace, vs, out_dir);
+        } catch (const ValidationStopped&) {
+          stop.rethrow();  // KeyboardInterrupt (no page written)
+          throw RuntimeError("view: stopped");
         } catch (const InputError& e) {  // the CLI's option names as the keyword arguments
           std::string msg = e.what();
           for (const char* o : {"--frame", "--pair", "--body", "--window"})

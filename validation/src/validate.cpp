@@ -428,10 +428,22 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   const bool pipelined = options.pipeline && options.threads != 1;
   std::future<void> judging;
   int judging_frame = 0;
+  // The verdict a stop after frame `done` gives (the reruns n/a), for options.on_judged.
+  auto stopped_rows = [&] {
+    std::vector<ValidationResult> rows = validators.results();
+    const std::string why = fmt::format("not run: stopped after frame {} of {}", done, options.frames);
+    rows.push_back(not_applicable("analytic", "closed form of an analytic scene", why));
+    rows.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld", why));
+    return rows;
+  };
+  auto judged = [&] {
+    if (options.on_judged) options.on_judged(stopped_rows(), done);
+  };
   auto finish = [&] {  // waits for the frame in flight; rethrows its errors
     if (!judging.valid()) return;
     judging.get();
     done = judging_frame;
+    judged();
   };
   try {
     for (int f = 1; f <= options.frames; ++f) {
@@ -445,6 +457,7 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
         validators.observe(*engine, checked);  // polls options.stop inside
         if (options.on_step) options.on_step(*engine);
         done = f;
+        judged();
         continue;
       }
       const FrameRecord& live = engine->record();
@@ -462,14 +475,11 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   } catch (const ValidationStopped&) {
     stopped = inside = true;  // inside frame done + 1's checks: it is partly judged
   }
-  std::vector<ValidationResult> results = validators.results();
   if (stopped) {  // the validators that rerun the scene do not run
     if (stopped_in && inside) *stopped_in = done + 1;
-    const std::string why = fmt::format("not run: stopped after frame {} of {}", done, options.frames);
-    results.push_back(not_applicable("analytic", "closed form of an analytic scene", why));
-    results.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld", why));
-    return results;
+    return stopped_rows();
   }
+  std::vector<ValidationResult> results = validators.results();
   // Validators 7 and 8 rerun the scene on fresh engines (their time is their row's).
   auto rerun = [&](const char* name, const char* figure, auto judge) {
     const auto t0 = std::chrono::steady_clock::now();

@@ -263,7 +263,11 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
   const std::int64_t f1 = std::min<std::int64_t>(info.frames, frame + settings.window);
   Json frames = Json::array();
   bool pair_in_contact = false;
+  auto poll = [&] {
+    if (settings.stop && settings.stop()) throw ValidationStopped();
+  };
   for (std::int64_t f = f0; f <= f1; ++f) {
+    poll();
     if (f != frame) {
       rec = in->frame(f);
       det = detection_poses(model, rec);
@@ -314,6 +318,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
           }
         continue;
       }
+      poll();
       // The physics tier's reference for the pair (reference.hpp), as contact-geometry judges it.
       const PairReference t = pair_reference(ref, p.a, p.b, det[p.a], det[p.b], sat);
       const ReferenceNormal r =

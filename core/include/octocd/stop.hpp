@@ -25,6 +25,16 @@ int stop_signal();
 /// 128 + sig: the exit status of a command stopped by `sig` (130 SIGINT, 143 SIGTERM).
 int stop_exit_code(int sig);
 
+/// How many SIGINT/SIGTERM arrived since the handlers were installed (a second one while
+/// stopping: the user insists). Safe to call from any thread.
+int stop_signal_count();
+
+/// A temporary file being written (write_file_atomically's `path.tmp.PID`) that the
+/// process removes should it end at once (a second signal, a deadline, a grace), so no
+/// temporary file is left; "" clears it. Copied (paths of 4096 bytes or more are not
+/// kept). One at a time; call from the thread that writes it.
+void set_stop_remove(const std::string& path);
+
 /// "SIGINT", "SIGTERM" or "signal N".
 const char* stop_signal_name(int sig);
 
@@ -41,10 +51,17 @@ void set_stop_kept(const std::string& text);
 /// 128 + sig and one line "octocd: stopped by SIG...: stopping took longer than its
 /// bound; <set_stop_kept's text>" when the command has not returned by then (a 20 ms
 /// SIGALRM tick checks it, ITIMER_REAL). 0: no deadline.
+/// `second`: SecondSignal::EndsAtOnce (the default) ends the process at once on a second
+/// signal, saying what it keeps; SecondSignal::Recorded only counts it (stop_signal_count)
+/// for a command whose main thread stays responsive and writes what it keeps itself (e.g.
+/// `validate`, whose verdict of the frames judged so far must not be lost); the deadline
+/// still holds.
 /// One at a time per process (not nestable); not thread-safe to construct.
+enum class SecondSignal { EndsAtOnce, Recorded };
+
 class StopOnSignals {
  public:
-  explicit StopOnSignals(double deadline_s = 0.0);
+  explicit StopOnSignals(double deadline_s = 0.0, SecondSignal second = SecondSignal::EndsAtOnce);
   ~StopOnSignals();
   StopOnSignals(const StopOnSignals&) = delete;
   StopOnSignals& operator=(const StopOnSignals&) = delete;

@@ -45,7 +45,16 @@ constexpr std::uint64_t kSlackBytes = 1ull << 20;
 /// state row twice: 64 leaves a factor of 10 and bounds a bomb to seconds.
 constexpr std::uint64_t kMaxReadExpansion = 64;
 /// Bytes of values any reader may read beyond kMaxReadExpansion x the file's size: 64 MiB.
+/// For a compressed chunked dataset the bytes counted are those inflated: every chunk a
+/// read touches, whole, unless the reader's chunk cache holds it (the band of chunks of
+/// the last rows read of that dataset stays cached while the reader lives), so a file
+/// whose big chunks would be inflated again for each small row read is refused, not slow.
 constexpr std::uint64_t kReadSlackBytes = 64ull << 20;
+/// Largest chunk (bytes, inflated) of a compressed dataset, and largest band of chunks
+/// one row spans (the reader's chunk cache per dataset): 256 MiB. octocd's own traces
+/// chunk a row (a state row of 10^7 bodies: 120 MB); h5py's automatic chunks are below
+/// 1 MiB. A larger chunk is refused naming the dataset before anything is read.
+constexpr std::uint64_t kMaxChunkBytes = 256ull << 20;
 /// Largest |coordinate| (m) of a position, an AABB corner or a local extent, and of a
 /// position plus an extent: 10^6 m (a float32 step of 6 cm there), so that sums,
 /// differences and squares stay finite in float32.

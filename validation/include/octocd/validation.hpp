@@ -287,6 +287,12 @@ struct ValidationOptions {
   /// Also polled inside the long loops of a frame's checks (FrameValidators, the physics
   /// tier, the analytic and Bullet reruns), which then throw ValidationStopped.
   std::function<bool()> stop;
+  /// Called by validate_engine after every frame whose checks are complete, with the
+  /// results a stop right then would return (the per-frame rows over frames 1..`judged`;
+  /// analytic and bullet-dynamics `n/a`, "not run: stopped after frame N of M"), on the
+  /// thread that runs validate_engine. May be empty. `octocd validate` keeps the latest as
+  /// the incomplete verdict it reports when a step outlasts its stop bound.
+  std::function<void(const std::vector<ValidationResult>& results, std::int64_t judged)> on_judged;
   /// Threads that judge one frame's heavy loops (the physics tier's reference geometry
   /// per candidate pair, the reference pair set): 0 = the hardware's
   /// (std::thread::hardware_concurrency), 1 = serial. Results do not depend on it (items

@@ -23,6 +23,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 
 namespace octocd {
@@ -55,6 +56,10 @@ struct ViewSettings {
   /// the figure in its unit (never text taken from the trace).
   std::string row, cause, unit;
   double figure = 0;
+  /// Polled before every frame of the window is read and every pair reference computed;
+  /// when it returns true write_view throws ValidationStopped and writes nothing. May be
+  /// empty (never stops). `octocd.view` polls Ctrl-C (KeyboardInterrupt).
+  std::function<bool()> stop;
 };
 
 /// Largest ViewSettings::window.
