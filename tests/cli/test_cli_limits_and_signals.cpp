@@ -840,12 +840,10 @@ TEST_F(Hardening, BenchEndsWithinASecondOfSigintKeepingFinishedPoints) {
     "engines": ["cpu"], "warmup": 0, "frames": 3, "repeat": 1})";
   const fs::path out = dir_ / "r.json";
   Child c(dir_, {"bench", (dir_ / "sweep.json").string(), "-o", out.string(), "--scene-dir", dir_.string(), "--quiet"});
-  bool first = false;
-  for (const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-       !first && std::chrono::steady_clock::now() < until;) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    first = slurp(out).find("\"small | cpu\"") != std::string::npos;
-  }
+  // The result is written atomically after each point: wait for the first, checked after
+  // every change in its folder.
+  const bool first = octocd::test::wait_until(
+      [&] { return slurp(out).find("\"small | cpu\"") != std::string::npos; }, {dir_}, std::chrono::seconds(60));
   ASSERT_TRUE(first) << "the first point not in the result within 60 s";
   const auto t0 = std::chrono::steady_clock::now();
   ::kill(c.pid(), SIGINT);

@@ -297,7 +297,7 @@ sent = []
 def watch():
     # The event: the long call has run its first steps (eng.frame is safe to read meanwhile).
     while eng.frame < 3:
-        time.sleep(0.001)
+        os.sched_yield()  # a condition, not a timer: eng.step runs meanwhile (it releases the GIL)
     sent.append(time.monotonic())
     os.kill(os.getpid(), signal.SIGINT)
 threading.Thread(target=watch, daemon=True).start()
