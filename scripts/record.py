@@ -236,6 +236,9 @@ def main():
     readme += ["| file | what | build |", "|---|---|---|", "| `machine.txt` | the machine | |"]
     for name, what in made:
         readme.append(f"| `{name}` | {what} | {builds.get(name, a.build)} |")
+    if os.path.exists(os.path.join(a.output, "fuzz.md")):  # written by hand after scripts/fuzz.sh runs
+        readme.append("| [`fuzz.md`](fuzz.md) | 10-minute runs of the fuzz targets under ASan + UBSan (scripts/fuzz.sh) "
+                      "| named in the file |")
     if table5:
         readme += ["", "## Table 5 (paper section 4.1): steps/s", ""] + headline_table5(table5)
     if gbp_rows:
