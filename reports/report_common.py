@@ -119,9 +119,12 @@ def point_load(p, m):
             x = m.get(key)
             if isinstance(x, list) and x and isinstance(x[0], (int, float)):
                 others.append((max(x[0] - sub, 0.0), "at the run's " + ("start" if sub == 0 else "end")))
+    # The load average is a 1-minute mean that also counts the bench's own threads while they
+    # wait on I/O or the device: a point is marked only when other processes took at least one
+    # whole core the bench's threads needed (load 0.5 beside 16 threads on 16 cores is no mark).
     for load, when in others:
         free = threads - load
-        if own > free + 1e-9:
+        if own >= free + 1.0:
             return f"load of other processes {load:.1f} {when} left {max(free, 0):.1f} of {threads} cores free for " \
                    f"{own} thread(s)"
     return ""

@@ -286,6 +286,12 @@ def test_load_mark_without_point_loads_uses_the_run_start_and_end():
     rows = verdicts(j)
     # Others' 1.1 at the start leaves 14.9 cores for the cpu engine's 16 threads: cpu marked; cuda not.
     assert all(r[2].startswith("⚠ ") for r in rows) and not any("⚠" in r[3] for r in rows)
+    # Others' 0.5 leaves 15.5 cores for 16 threads: less than one core short, no mark (a
+    # 1-minute load average that also counts the bench's own waiting threads says no more).
+    j["machine"]["load_average"] = [0.5] * 3
+    j["machine"]["load_average_end"] = [16.6] * 3
+    assert not any("⚠" in str(c) for r in verdicts(j) for c in r)
+    j["machine"]["load_average"] = [1.1] * 3
     j["machine"]["omp_threads"] = 4
     assert not any("⚠" in str(c) for r in verdicts(j) for c in r)
 
