@@ -52,5 +52,8 @@ else
   rev=${OCTOCD_RECORD_BUILD:-$(cat "$in/VERSION" 2>/dev/null || echo "$rev")}
   note="From the output of scripts/gpu-run.sh on the $machine (${in##*/})."
 fi
+# The generated files are replaced; fuzz.md (written after scripts/fuzz.sh runs) is kept.
+keep=$(mktemp -d); [ -f "$out/fuzz.md" ] && cp "$out/fuzz.md" "$keep/"
 rm -rf "$out"; mkdir -p "$out"
+[ -f "$keep/fuzz.md" ] && cp "$keep/fuzz.md" "$out/"; rm -rf "$keep"
 /usr/bin/python3 "$root/scripts/record.py" "$machine" "$in" "$out" --build "$rev" --note "${OCTOCD_RECORD_NOTE:-$note}"
