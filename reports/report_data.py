@@ -130,6 +130,20 @@ def merge(results, pool=False):
     out = []
     for g in groups.values():
         g["points_list"] = sorted(g["points"].values(), key=lambda p: p.get("index", 0))
+        # Runs of the sweep with different engine sets (e.g. Bullet in a run of its own): each
+        # run's files (its shards), settings and point count; the engines are their union in
+        # the sweep definition's order.
+        runs = {}
+        for path in g["files"]:
+            j = g["json"][path]
+            key = tuple(j["settings"].get("engines", []))
+            runs.setdefault(key, {"files": [], "settings": j["settings"],
+                                  "total": j.get("points_total", len(j["points"]))})["files"].append(path)
+        g["runs"] = list(runs.values())
+        present = [e for key in runs for e in key]
+        order = [e for e in g["first"]["sweep"].get("definition", {}).get("engines", []) if e in present]
+        g["engines"] = order + [e for e in dict.fromkeys(present) if e not in order]
+        g["points_total"] = sum(r["total"] for r in g["runs"])
         out.append(g)
     return out
 

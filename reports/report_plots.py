@@ -35,7 +35,8 @@ def point_label(p, axis):
 
 
 def engines_of(g):
-    return g["first"]["settings"].get("engines", [])
+    """The engines of a group's runs (report_data.merge), in the sweep's order."""
+    return g.get("engines") or g["first"]["settings"].get("engines", [])
 
 
 def first_window(p):

@@ -36,12 +36,22 @@ def engines_ran_text(g):
         for e, d in seen.items())
 
 
+def settings_text(s, files):
+    """One run's settings (engines, repetitions, frames) and its files."""
+    return (f"engines {', '.join(s.get('engines', []))}: {s.get('repeat')} repetitions per point"
+            + (f", {s.get('frames')} frames per run (warm-up {s.get('warmup')})" if "frames" in s else "")
+            + (f", {s.get('warm_replays')} untimed replay(s) first" if "warm_replays" in s else "")
+            + (f", each timed repetition at least {s.get('min_time_ms')} ms" if "min_time_ms" in s else "")
+            + f" (files: {', '.join(os.path.basename(f) for f in files)})")
+
+
 def machine_block(doc, g):
     j = g["first"]
     m, b, s = j["machine"], j["build"], j["settings"]
     sw = j["sweep"]
     n_ok = sum(1 for p in g["points_list"] if p.get("status") == "ok")
-    total = j.get("points_total", len(g["points_list"]))
+    total = g.get("points_total", j.get("points_total", len(g["points_list"])))
+    runs = g.get("runs") or [{"files": g["files"], "settings": s}]
     parts = [f"Sweep `{sw['name']}` ({sw.get('kind')}): {sw.get('description', '')}",
              f"Machine: {m.get('cpu')}, host {m.get('hostname')}; GPU: {m.get('gpu')}"
              + (f"; driver: {m.get('driver')}" if m.get("driver") else ""),
@@ -52,17 +62,13 @@ def machine_block(doc, g):
              + (f", {', '.join(f'{x:.1f}' for x in m['load_average_end'])} at the end"
                 if m.get("load_average_end") else "")
              + (f"; CPU engine on {m['omp_threads']} OpenMP threads" if m.get("omp_threads") else ""),
-             f"Settings: engines {', '.join(s.get('engines', []))}; {s.get('repeat')} repetitions per point"
-             + (f"; {s.get('frames')} frames per run (warm-up {s.get('warmup')})" if "frames" in s else "")
-             + (f", {s.get('warm_replays')} untimed replay(s) first" if "warm_replays" in s else "")
-             + (f", each timed repetition at least {s.get('min_time_ms')} ms" if "min_time_ms" in s else "")
-             + f"; files: {', '.join(os.path.basename(f) for f in g['files'])}",
+             "Settings: " + "; ".join(settings_text(r["settings"], r["files"]) for r in runs),
              f"Points: {len(g['points_list'])} of {total} in these files ({n_ok} measured)"
              + ("" if len(g["points_list"]) >= total else " — incomplete: missing shards or an interrupted run")]
     ran = engines_ran_text(g)
     if ran:
         parts.append(ran)
-    if s.get("repeat") == 1:
+    if any(r["settings"].get("repeat") == 1 for r in runs):
         parts.append("1 repetition per point: the figures have no spread, and no verdict (fastest, slower) can be "
                      "taken from them.")
     lw = load_warning(m)

@@ -5,7 +5,8 @@
 
 IN_DIR holds what a run produced (scripts/record.sh makes it on this machine;
 scripts/gpu-run.sh on a GPU machine):
-  bench/<sweep>.json           `octocd bench` results (format octocd-bench)
+  bench/<sweep>.json           `octocd bench` results (format octocd-bench); the shards of
+                               one run, NAME-0.json .. NAME-<N-1>.json, become one NAME.csv
   validate*.txt                `octocd validate` tables (several runs in one file allowed)
   gpu-broadphase-scaling.json  `bench_gpu_broadphase --json` (optional)
   device.txt                   the machine (nvidia-smi, nproc, lscpu; optional)
@@ -60,6 +61,40 @@ def flatten_figures(prefix, d, row):
                     row[f"{name}_{sub}_{s}"] = x[s]
         elif isinstance(v, (int, float, str, bool)) or v is None:
             row[name] = v
+
+
+def merged_results(paths):
+    """(name, result) per input: the shards of one sweep run (files STEM-<i>.json whose
+    settings.shard.count > 1, one build, one engine set) become one result named STEM whose
+    points are the union, complete only when every shard is."""
+    groups = {}
+    for path in paths:
+        result = load_json(path)
+        if result.get("format") != "octocd-bench":
+            fail(f"{path}: not an octocd-bench result (format {result.get('format')!r})")
+        name = os.path.basename(path)[:-5]
+        shard = result.get("settings", {}).get("shard", {})
+        if shard.get("count", 1) > 1:
+            name = re.sub(r"-\d+$", "", name)
+            first = groups.get(name)
+            if first is not None:
+                key = lambda r: (r.get("sweep", {}).get("name"), r.get("build", {}).get("git_revision"),
+                                 r.get("settings", {}).get("engines"), r.get("settings", {}).get("shard", {}).get("count"))
+                if key(first) != key(result):
+                    fail(f"{path}: a shard of {name} from another sweep, build, engine set or shard count; "
+                         "allowed: the shards of one run")
+                first["points"] = sorted(first["points"] + result.get("points", []), key=lambda p: p.get("index", 0))
+                first["complete"] = first.get("complete") and result.get("complete")
+                first["shards_found"] += 1
+                continue
+            result["shards_found"] = 1
+        elif name in groups:
+            fail(f"{path}: {name} appears twice")
+        groups[name] = result
+    for name, result in groups.items():
+        if "shards_found" in result and result["shards_found"] < result["settings"]["shard"]["count"]:
+            result["complete"] = False
+        yield name, result
 
 
 def bench_rows(result):
@@ -169,7 +204,8 @@ def headline_table5(rows):
             vals.append(f"{fmt(r['steps_per_s_median'])} ({fmt(r['steps_per_s_min'])}-{fmt(r['steps_per_s_max'])})" if r else "")
         out.append(f"| {key[0]} | {key[1]} | " + " | ".join(vals) + " |")
     out += ["", "Median (min-max) over the repetitions of each point; per-stage times and counts are "
-            "in `table5.csv`; `octocd report` sets the paper's figures beside them."]
+            "in the table5 CSVs (an engine may come from its own run of the sweep, named in the file "
+            "table above); `octocd report` sets the paper's figures beside them."]
     return out
 
 
@@ -185,19 +221,18 @@ def main():
     made = []
     builds = {}
     table5 = []
-    for path in sorted(glob.glob(os.path.join(a.input, "bench", "*.json"))):
-        result = load_json(path)
-        if result.get("format") != "octocd-bench":
-            fail(f"{path}: not an octocd-bench result (format {result.get('format')!r})")
-        name = os.path.basename(path)[:-5]
+    for name, result in merged_results(sorted(glob.glob(os.path.join(a.input, "bench", "*.json")))):
         rows = write_csv(os.path.join(a.output, f"{name}.csv"), bench_rows(result))
-        made.append((f"{name}.csv", f"`octocd bench {result.get('sweep', {}).get('name', name)}`: "
+        sweep = result.get("sweep", {}).get("name", name)
+        shards = result.get("settings", {}).get("shard", {}).get("count", 1)
+        made.append((f"{name}.csv", f"`octocd bench {sweep}`: "
                      f"{len(rows)} rows, {'complete' if result.get('complete') else 'incomplete'}, "
                      f"engines {','.join(result.get('settings', {}).get('engines', []))}, "
-                     f"repeat {result.get('settings', {}).get('repeat', '?')}"))
+                     f"repeat {result.get('settings', {}).get('repeat', '?')}"
+                     + (f", {result['shards_found']} of {shards} shards" if shards > 1 else "")))
         builds[f"{name}.csv"] = result.get("build", {}).get("git_revision", "?")
-        if name == "table5":
-            table5 = rows
+        if sweep == "table5":  # the run named table5 first: its scenes and engines set the order
+            table5 = rows + table5 if name == "table5" else table5 + rows
     gbp = os.path.join(a.input, "gpu-broadphase-scaling.json")
     gbp_rows = []
     if os.path.exists(gbp):

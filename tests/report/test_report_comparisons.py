@@ -353,3 +353,30 @@ def test_gate_marks_only_points_measured_under_load(tmp_path):
     rows = [l for l in (tmp_path / "out" / "report.md").read_text().splitlines() if l.endswith("SLOWER |")]
     assert len(rows) == 4, rows
     assert [("⚠ SLOWER" in r) for r in rows] == [True, False, False, False], rows
+
+
+# ---- one sweep run per engine set (Bullet in a run of its own) ---------------------------------
+
+def test_runs_of_one_sweep_by_engine_set_give_every_engine_its_column(tmp_path):
+    full = table5()
+    ours = copy.deepcopy(full)
+    ours["points"] = [p for p in full["points"] if p["params"]["engine"] != "bullet"]
+    ours["settings"]["engines"], ours["points_total"] = ["cpu", "cuda"], len(ours["points"])
+    bullet = copy.deepcopy(full)
+    bullet["points"] = [p for p in full["points"] if p["params"]["engine"] == "bullet"]
+    bullet["settings"]["engines"], bullet["settings"]["repeat"] = ["bullet"], 5
+    bullet["points_total"] = len(bullet["points"])
+    for j in (ours, bullet):
+        j["sweep"]["definition"]["engines"] = ["cpu", "cuda", "bullet"]
+    g = MR.merge([("bullet.json", bullet), ("ours.json", ours)])[0]
+    assert g["engines"] == ["cpu", "cuda", "bullet"]  # the sweep's order, not the files'
+    assert g["points_total"] == len(full["points"])
+    rc, md, log = run_main(tmp_path, bullet, ours)
+    assert rc == 0, log
+    head = next(line for line in md.splitlines() if line.startswith("| scene (bodies) | config"))
+    assert head.endswith("| cpu steps/s | cuda steps/s | bullet steps/s |"), head
+    assert "engines bullet: 5 repetitions per point" in md and "engines cpu, cuda: 3 repetitions per point" in md
+    assert f"Points: {len(full['points'])} of {len(full['points'])} in these files" in md
+    # Without the Bullet run the table has no Bullet column and says the run is complete.
+    rc, md, log = run_main(tmp_path, ours)
+    assert rc == 0 and "bullet steps/s" not in md, log
