@@ -494,9 +494,34 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
   if (!o.shard.empty()) eo.shard = octocd::parse_shard(o.shard);
   octocd::ExternalTraceInfo info;
   const int every = o.every_given ? o.every : 1;
-  const std::vector<octocd::ValidationResult> results =
-      octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
-  if (!o.view.empty()) o.views = octocd::cli::write_failure_views(o.trace_in, results, o.view);
+  // SIGINT/SIGTERM: the checks poll it; the verdict of the frames judged so far is reported
+  // as incomplete (a signal while the trace is checked ends with no verdict).
+  eo.stop = [] { return octocd::stop_signal() != 0; };
+  eo.keep_on_stop = true;
+  octocd::set_stop_kept("no verdict written (the stop bound passed first)");
+  std::vector<octocd::ValidationResult> results;
+  try {
+    results = octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
+  } catch (const octocd::ValidationStopped&) {
+    const int sig = octocd::stop_signal();
+    std::fprintf(stderr, "octocd validate: stopped by %s while checking the trace %s; no frame judged, no verdict\n",
+                 octocd::stop_signal_name(sig), o.trace_in.c_str());
+    if (!o.junit.empty())
+      octocd::write_junit_error(o.junit, std::filesystem::path(o.trace_in).stem().string(), "stopped",
+                                fmt::format("stopped by {} while checking the trace; no frame judged",
+                                            octocd::stop_signal_name(sig)));
+    return octocd::stop_exit_code(sig);
+  }
+  std::string stopped;
+  if (info.stopped) {
+    const std::int64_t first = octocd::shard_frames(eo.shard, info.frames).first;
+    stopped = fmt::format(
+        "the table covers {} of {} (an incomplete verdict); stopped by {}{}",
+        info.judged_to >= first ? fmt::format("frames {}..{}", first, info.judged_to) : std::string("no whole frame"),
+        info.frames, octocd::stop_signal_name(octocd::stop_signal()),
+        info.stopped_in > 0 ? fmt::format(" inside the checks of frame {} (partly judged)", info.stopped_in) : "");
+  }
+  if (!o.view.empty() && !info.stopped) o.views = octocd::cli::write_failure_views(o.trace_in, results, o.view);
   const octocd::RunName run = octocd::trace_run(o.trace_in);
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   std::string share;
@@ -514,10 +539,19 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
                          {"against", o.against},
                          {"trace_file", o.trace_in},
                          {"build_id", octocd::build_id()}},
-                        "", &report);
+                        stopped, &report);
   fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {}{})\n\n",
              o.trace_in, info.engine, info.bodies, info.frames, every, o.against, share);
   fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
+  if (info.stopped) {
+    const int sig = octocd::stop_signal();
+    fmt::print("\nSTOPPED: {}\n", stopped);
+    std::fflush(stdout);
+    std::fprintf(stderr, "octocd validate: stopped by %s after frame %lld of %lld of the trace %s\n",
+                 octocd::stop_signal_name(sig), static_cast<long long>(info.judged_to),
+                 static_cast<long long>(info.frames), o.trace_in.c_str());
+    return octocd::stop_exit_code(sig);
+  }
   nlohmann::ordered_json meta = {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
                                  {"against", o.against}, {"build_id", octocd::build_id()}};
   if (!o.shard.empty()) {
@@ -850,9 +884,11 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
     vo.overridden.push_back(name);
   }
   if (!o.trace_in.empty()) {
-    // Checking and judging another engine's trace writes nothing: a signal ends it at once.
-    const octocd::StopAtOnce checking("checking the trace");
-    return validate_trace_in(o, vo, t0);
+    if (o.check_only) {  // checking writes nothing: a signal ends it at once
+      const octocd::StopAtOnce checking("checking the trace");
+      return validate_trace_in(o, vo, t0);
+    }
+    return validate_trace_in(o, vo, t0);  // polls the signal (an incomplete verdict)
   }
   std::optional<octocd::StopAtOnce> building(std::in_place, "building the model");
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);

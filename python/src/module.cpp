@@ -26,6 +26,8 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <future>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -583,11 +585,16 @@ class PyEngine {
   py::dict step(long n) {
     if (n < 0) throw InputError(fmt::format("n: {}; allowed: n >= 0 steps", n));
     BusyGuard busy(busy_, "this Engine");
+    settle();
     for (long i = 0; i < n; ++i) {
-      {
+      const auto t0 = std::chrono::steady_clock::now();
+      if (last_step_ms_ < kInlineStepMs) {
         py::gil_scoped_release release;
         engine_->step();
+      } else {
+        step_in_background();
       }
+      last_step_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
       frames_.store(engine_->frame());  // `frame`: the whole steps done, readable from another thread
       // Ctrl-C between steps: KeyboardInterrupt with the engine at its last whole step.
       if (PyErr_CheckSignals() != 0) throw py::error_already_set();
@@ -597,6 +604,7 @@ class PyEngine {
 
   py::dict last_frame() {
     BusyGuard busy(busy_, "this Engine");
+    settle();
     const Engine& e = *engine_;
     py::dict d;
     d["frame"] = e.frame();
@@ -624,11 +632,18 @@ class PyEngine {
 
   py::array_t<float> positions() {
     BusyGuard busy(busy_, "this Engine");
+    settle();
     return out_vec3(engine_->state().x);
   }
   py::array_t<float> velocities() {
     BusyGuard busy(busy_, "this Engine");
+    settle();
     return out_vec3(engine_->state().v);
+  }
+  std::uint64_t state_hash() {
+    BusyGuard busy(busy_, "this Engine");
+    settle();
+    return engine_->state_hash();
   }
   py::array_t<float> inverse_masses() const {
     const auto& w = engine_->state().w;
@@ -665,6 +680,7 @@ class PyEngine {
     bound(s.x, "positions", limits::kMaxCoordinate, "m");
     bound(s.v, "velocities", limits::kMaxSpeed, "m/s");
     BusyGuard busy(busy_, "this Engine");
+    settle();
     engine_->set_state(s);
   }
 
@@ -675,11 +691,56 @@ class PyEngine {
   std::int64_t frames() const { return frames_.load(); }
 
  private:
+  /// A step is run on a helper thread, the caller polling Ctrl-C every 20 ms, unless the
+  /// previous step took less than this (ms): the threshold keeps a small scene's steps
+  /// free of a thread start (tens of microseconds) while a step of a large one (10^6
+  /// bodies on the CPU: seconds) is cut short within a fraction of a second.
+  static constexpr double kInlineStepMs = 50.0;
+
+  /// One step on a helper thread; Ctrl-C raises KeyboardInterrupt at once and leaves the
+  /// step to complete in the background (inflight_): the engine stays at a whole step.
+  void step_in_background() {
+    std::future<void> step = std::async(std::launch::async, [this] {
+      engine_->step();
+      frames_.store(engine_->frame());
+    });
+    wait_interruptibly(step);
+    step.get();  // the step's error, if any, raised here
+  }
+  /// Waits for `f` with the GIL released, running Python's signal handlers every 20 ms;
+  /// when one raises (KeyboardInterrupt), `f` becomes inflight_ and the exception propagates.
+  void wait_interruptibly(std::future<void>& f) {
+    for (;;) {
+      bool ready = false;
+      {
+        py::gil_scoped_release release;
+        ready = f.wait_for(std::chrono::milliseconds(20)) == std::future_status::ready;
+      }
+      if (ready) return;
+      if (PyErr_CheckSignals() != 0) {
+        inflight_ = std::move(f);
+        throw py::error_already_set();
+      }
+    }
+  }
+  /// Before any call that reads or changes the engine: waits (Ctrl-C honoured) for a step
+  /// that an earlier Ctrl-C left completing in the background; raises its error, if any.
+  void settle() {
+    if (!inflight_.valid()) return;
+    std::future<void> f = std::move(inflight_);
+    wait_interruptibly(f);
+    f.get();
+  }
+
   std::shared_ptr<const Model> model_;
   std::unique_ptr<Engine> engine_;
   bool recording_ = false;
   std::atomic<bool> busy_{false};
   std::atomic<std::int64_t> frames_{0};
+  double last_step_ms_ = std::numeric_limits<double>::infinity();  // the first step runs on the helper
+  /// A step cut short by Ctrl-C, completing on its helper thread (declared after engine_:
+  /// destroyed first, its destructor waits for the step).
+  std::future<void> inflight_;
 };
 
 // ---- judging another engine ----------------------------------------------------------
@@ -1161,7 +1222,7 @@ PYBIND11_MODULE(_octocd, m) {
       .def_property_readonly("frame", &PyEngine::frames)
       .def_property_readonly("body_count", [](const PyEngine& e) { return e.engine().state().size(); })
       .def_property_readonly("notes", [](const PyEngine& e) { return e.engine().notes(); })
-      .def_property_readonly("state_hash", [](const PyEngine& e) { return e.engine().state_hash(); });
+      .def_property_readonly("state_hash", &PyEngine::state_hash);
 
   py::class_<PyValidator>(m, "Validator")
       .def(py::init<py::object, py::object, const std::string&, float, py::object, py::object, py::object, py::object,

@@ -4,6 +4,7 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/inotify.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -826,6 +827,76 @@ TEST_F(Hardening, ValidateEndsWithinASecondOfSigtermWithAnIncompleteVerdict) { v
 // A second signal never loses the verdict: it only cuts the wait for the step in progress
 // short (the table, JUnit and exit code are those of the first signal).
 TEST_F(Hardening, ValidateKeepsItsIncompleteVerdictOnASecondSignal) { validate_stops(dir_, {SIGINT, SIGTERM}); }
+
+/// Counts the opens of one file (inotify IN_OPEN), from construction on.
+class OpenCounter {
+ public:
+  explicit OpenCounter(const fs::path& path) : fd_(::inotify_init1(IN_CLOEXEC | IN_NONBLOCK)) {
+    if (fd_ >= 0) (void)::inotify_add_watch(fd_, path.c_str(), IN_OPEN);
+  }
+  ~OpenCounter() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  OpenCounter(const OpenCounter&) = delete;
+  OpenCounter& operator=(const OpenCounter&) = delete;
+  /// Waits until the file was opened `opens` times, for at most `limit`; false when the limit passed first.
+  bool wait(int opens, std::chrono::milliseconds limit) {
+    const auto deadline = std::chrono::steady_clock::now() + limit;
+    alignas(inotify_event) char buf[4096];
+    while (seen_ < opens && fd_ >= 0 && octocd::test::readable_before(fd_, deadline)) {
+      ssize_t n = 0;
+      while ((n = ::read(fd_, buf, sizeof buf)) > 0)
+        for (char* p = buf; p < buf + n; p += sizeof(inotify_event) + reinterpret_cast<inotify_event*>(p)->len)
+          if (reinterpret_cast<inotify_event*>(p)->mask & IN_OPEN) ++seen_;
+    }
+    return seen_ >= opens;
+  }
+
+ private:
+  int fd_;
+  int seen_ = 0;
+};
+
+// Before: `validate --trace-in` ended at once on a signal, with no verdict and no JUnit.
+// Now the checks poll the signal and the verdict of the frames judged so far is reported as
+// incomplete (table, STOPPED line, JUnit 'stopped' case, 128 + the signal). The signal
+// follows an event: the trace opened a fourth time, i.e. by the judge's reader after the
+// check's (the hardened reader opens a file three times: probe, HDF5, its driver), so it
+// lands once every frame was checked, while the judge starts (700 coincident boxes: about
+// a second a frame).
+TEST_F(Hardening, ValidateTraceInStoppedBySigintReportsAnIncompleteVerdict) {
+  const std::string trace = (dir_ / "dense.h5").string(), junit = (dir_ / "v.xml").string();
+  const fs::path scene = dense_scene(dir_, 700);
+  {
+    Child run(dir_, {"run", scene.string(), "--frames", "4", "--state-every", "1", "--contacts", "--quiet",
+                     "--trace", trace});
+    ASSERT_EQ(run.wait().code, 0);
+  }
+  OpenCounter opens(trace);  // in place before the child starts: no open is missed
+  Child c(dir_, {"validate", "--trace-in", trace, "--against", "none", "--threads", "1", "--junit", junit});
+  const bool judging = opens.wait(4, std::chrono::seconds(60));
+  if (!judging) ::kill(c.pid(), SIGKILL);
+  ASSERT_TRUE(judging) << "the judge's reader never opened the trace";
+  const auto t0 = std::chrono::steady_clock::now();
+  ::kill(c.pid(), SIGINT);
+  bool ended = false;
+  const Result r = c.wait_within(30, ended);
+  const double took = seconds_since(t0);
+  std::printf("validate --trace-in ended %.3f s after SIGINT\n", took);
+  ASSERT_TRUE(ended) << "still running 30 s after the signal";
+  EXPECT_LT(took, 5.0) << r.err;
+  ASSERT_EQ(r.signal, 0) << r.err;
+  EXPECT_EQ(r.code, 128 + SIGINT) << r.out << r.err;
+  // The judge's reader may still be opening the trace: then no frame is whole yet.
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("STOPPED: the table covers (frames 1\\.\\.[1-3]|no whole frame) of 4 "
+                                                  "\\(an incomplete verdict\\); stopped by SIGINT")))
+      << r.out << r.err;
+  EXPECT_NE(r.out.find("bullet-dynamics"), std::string::npos) << "the table of the frames judged: " << r.out;
+  EXPECT_NE(r.err.find("octocd validate: stopped by SIGINT after frame"), std::string::npos) << r.err;
+  const std::string xml = slurp(junit);
+  EXPECT_NE(xml.find("name=\"stopped\""), std::string::npos) << xml;
+  EXPECT_NE(xml.find("incomplete verdict"), std::string::npos) << xml;
+}
 
 // Before: `bench` had no stop bound. Now a signal inside a point of a big scene (its model
 // built, a step of a second) ends the sweep within a second; the result keeps the points

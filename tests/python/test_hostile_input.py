@@ -333,3 +333,56 @@ def test_ctrl_c_from_a_thread_leaves_step_at_its_last_whole_step(tmp_path):
     assert k >= 3 and finite == "True", (k, finite)
     assert after == k + 1 and same == "True", r.stdout
 
+
+
+LONG_STEP_CHILD = """
+import json, sys, threading, time, numpy as np, octocd
+sys.setswitchinterval(1000.0)   # the helper gets the GIL only when the call releases it
+scene = {{"name": "coincident", "domain": {{"min": [-2, -2, -2], "max": [2, 2, 2]}}, "gravity": [0, 0, 0],
+         "frames": 10, "groups": [{{"name": "b", "shape": {{"box": [0.3, 0.3, 0.3]}}, "count": 3000,
+         "layout": {{"type": "grid", "min": [-0.02, -0.02, -0.02], "max": [0.02, 0.02, 0.02], "spacing": 0.001}}}}]}}
+json.dump(scene, open("coincident.json", "w"))
+eng = octocd.Engine("coincident.json", record=False)
+go = threading.Event()
+def announce():
+    go.wait()
+    print("started", flush=True)
+threading.Thread(target=announce, daemon=True).start()
+go.set()
+try:
+    eng.step(1)
+    print("finished", flush=True)
+except KeyboardInterrupt:
+    print("KeyboardInterrupt", flush=True)
+    pos = eng.positions            # waits for the step completing in the background
+    fresh = octocd.Engine("coincident.json", record=False)
+    fresh.step(eng.frame)
+    print(eng.frame, bool(np.isfinite(pos).all()), eng.state_hash == fresh.state_hash, flush=True)
+"""
+
+
+def test_ctrl_c_inside_one_long_step_within_a_second(tmp_path):
+    # Before: Ctrl-C landed between steps only, so one step of 3,000 coincident boxes (4.5
+    # million overlapping pairs: seconds on the CPU) ran to its end first. Now a step runs
+    # on a helper thread while the caller polls Ctrl-C; the interrupted step completes in
+    # the background and the engine's next call waits for it: the engine is at a whole
+    # step, the one a fresh engine stepped as often reaches.
+    env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(octocd.__file__))))
+    p = subprocess.Popen([sys.executable, "-c", LONG_STEP_CHILD.format()], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, cwd=str(tmp_path), env=env)
+    try:
+        first = p.stdout.readline().strip()
+        assert first == "started", (first, p.stderr.read())
+        t0 = time.monotonic()
+        p.send_signal(signal.SIGINT)
+        second = p.stdout.readline().strip()
+        dt = time.monotonic() - t0
+        third = p.stdout.readline().split()
+        p.wait(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    print(f"KeyboardInterrupt {dt:.3f} s after SIGINT inside one step")
+    assert second == "KeyboardInterrupt" and dt < 1.0, (second, dt, p.stderr.read())
+    assert third == ["1", "True", "True"], third

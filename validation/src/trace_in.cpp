@@ -743,6 +743,8 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   };
   std::unique_ptr<ExternalValidator> made;
   const std::int64_t frames = max_frames > 0 ? std::min(max_frames, in.info.frames) : in.info.frames;
+  std::int64_t judged_to = 0, judging = 0;  // the last frame judged whole; the frame in its checks
+  bool stopped = false;
   try {
     made = std::make_unique<ExternalValidator>(in.bodies, options);
     // A shard judges its block of the run's frames; checked frames keep the run's numbering.
@@ -769,7 +771,10 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
       if (options.stop && options.stop()) throw ValidationStopped();
       const FrameRecord rec = next.get();
       if (f < last) next = std::async(std::launch::async, [&in, f] { return in.frame(f + 1); });
+      judging = f;
       made->observe(rec, f % every == 0);
+      judged_to = f;
+      judging = 0;
     }
     for (std::int64_t f = last + 1; episodes && f <= frames && made->episodes_pending(); ++f) {
       if (options.stop && options.stop()) throw ValidationStopped();
@@ -777,11 +782,17 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
     }
   } catch (const InputError& e) {
     named(e);
+  } catch (const ValidationStopped&) {
+    if (!options.keep_on_stop || !made) throw;
+    stopped = true;  // the verdict of the frames judged so far
   }
   ExternalValidator& validator = *made;
   if (info) {
     *info = checked;
     info->frames = frames;
+    info->judged_to = judged_to;
+    info->stopped_in = judging;
+    info->stopped = stopped;
   }
   return validator.results();
 }

@@ -114,6 +114,11 @@ struct ExternalOptions {
   /// ValidationStopped (the frame in progress is then partly judged). May be empty (never
   /// stops). The Python module polls Ctrl-C with it.
   std::function<bool()> stop;
+  /// With `stop`: once the judging of frames has begun, validate_external_trace returns the
+  /// verdict of the frames judged so far instead of throwing (ExternalTraceInfo::judged_to
+  /// and stopped_in say how far it got); a stop while the trace is checked still throws
+  /// ValidationStopped. `octocd validate --trace-in` sets it (an incomplete verdict on a signal).
+  bool keep_on_stop = false;
 };
 
 /// Names of a FrameRecord's fields in error messages (the C++ field names by default;
@@ -249,6 +254,12 @@ struct ExternalTraceInfo {
   bool has_rotation = false;        ///< v2: /states/orientation (and angular_velocity)
   bool has_points = false;          ///< v2: /contacts/point
   bool manifolds = false;           ///< v2: some pair has several contact rows in a frame
+  /// Filled by validate_external_trace: the last frame whose checks completed (0: none;
+  /// the run's or shard's last frame when not stopped), and with ExternalOptions::keep_on_stop the frame a stop
+  /// cut short inside its checks (partly in the verdict; 0: it stopped between frames).
+  std::int64_t judged_to = 0, stopped_in = 0;
+  /// Filled by validate_external_trace: true when `stop` ended the judging early.
+  bool stopped = false;
 };
 
 /// Checks an external trace (docs/trace-format.md, "External traces", versions 1 and 2):
