@@ -4,7 +4,7 @@ build of one sweep, gated pairwise (every choice of --runs-per-side k runs as th
 and k other runs as the new side; k = 1: every ordered pair of runs),
 as they are (false alarms: every flagged figure is one) and with the new run's steps/s
 repetitions divided by each --slowdown factor (a uniform slowdown: the share flagged is the
-gate's power). Uses reports/make_report.py's gate (same test, threshold and level).
+gate's power). Uses report/make_report.py's gate (same test, threshold and level).
 
     /usr/bin/python3 bench/gate_error_rates.py run-*.json [--threshold 10] [--level 0.05]
         [--slowdown 1.1 --slowdown 1.3] [--runs-per-side 2] [--timing auto|cpu|wall]
@@ -18,7 +18,7 @@ import os
 import sys
 
 spec = importlib.util.spec_from_file_location(
-    "make_report", os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "reports", "make_report.py"))
+    "make_report", os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "report", "make_report.py"))
 mr = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(mr)
 

@@ -1,4 +1,4 @@
-// `octocd report RESULT.json|TRACE.h5 ... -o DIR` (SPEC 12): runs reports/make_report.py
+// `octocd report RESULT.json|TRACE.h5 ... -o DIR` (SPEC 12): runs report/make_report.py
 // (matplotlib; Debian python3-matplotlib) on bench results and traces, which writes
 // DIR/index.html (self-contained: plots inline as SVG) and DIR/report.md (+ DIR/plots/);
 // with --baseline a performance gate (exit 4 on a slowdown shown by a one-sided Mann-Whitney U test
@@ -43,7 +43,7 @@ std::string python() {
 
 std::string script() {
   if (const char* p = std::getenv("OCTOCD_REPORT_SCRIPT"); p && *p) return p;
-  return (fs::path(shared_dir()) / "reports" / "make_report.py").string();
+  return (fs::path(shared_dir()) / "report" / "make_report.py").string();
 }
 
 // The script's process while it runs (0: none), and the signal forwarded to it.

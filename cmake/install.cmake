@@ -69,6 +69,6 @@ install(FILES ${CMAKE_SOURCE_DIR}/datasets/SHA256SUMS ${CMAKE_SOURCE_DIR}/datase
 install(DIRECTORY ${CMAKE_SOURCE_DIR}/bench/sweeps DESTINATION ${_octocd_share}/bench
   COMPONENT runtime FILES_MATCHING PATTERN "*.json")
 # The report: its entry point make_report.py and its modules report_*.py beside it.
-file(GLOB _octocd_report_py CONFIGURE_DEPENDS ${CMAKE_SOURCE_DIR}/reports/report_*.py)
-install(FILES ${CMAKE_SOURCE_DIR}/reports/make_report.py ${_octocd_report_py} ${CMAKE_SOURCE_DIR}/reports/paper_tables.json
-  DESTINATION ${_octocd_share}/reports COMPONENT runtime)
+file(GLOB _octocd_report_py CONFIGURE_DEPENDS ${CMAKE_SOURCE_DIR}/report/report_*.py)
+install(FILES ${CMAKE_SOURCE_DIR}/report/make_report.py ${_octocd_report_py} ${CMAKE_SOURCE_DIR}/report/paper_tables.json
+  DESTINATION ${_octocd_share}/report COMPONENT runtime)

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Fuzz the bench-result JSON that reports/make_report.py reads (issue 36, the report's input).
+"""Fuzz the bench-result JSON that report/make_report.py reads (issue 36, the report's input).
 
     /usr/bin/python3 scripts/fuzz_report_json.py SECONDS|runs=N WORK_DIR OCTOCD_BIN SEED.json...
 
@@ -27,7 +27,7 @@ import time
 import traceback
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.normpath(os.path.join(HERE, "..", "reports")))
+sys.path.insert(0, os.path.normpath(os.path.join(HERE, "..", "report")))
 import make_report  # noqa: E402  (matplotlib loaded once)
 
 MR = os.path.dirname(os.path.abspath(make_report.__file__))  # make_report.py and its report_*.py modules

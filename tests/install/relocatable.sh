@@ -6,7 +6,7 @@
 # both trees and, where a mount namespace can be made (unshare), the source tree hidden
 # under an empty tmpfs, runs from the copy:
 #   octocd bench table6 (cpu, 1 frame, 1 repetition)   its named sweep and scenes from share/octocd
-#   octocd report on that result                       reports/make_report.py and its
+#   octocd report on that result                       report/make_report.py and its
 #                                                      report_*.py modules from share/octocd
 #   octocd validate share/octocd/.../free-fall.json    an installed scene
 #   share/octocd/datasets/fetch.sh --help              the installed fetch script
@@ -40,14 +40,14 @@ rm -rf "$work/installed"
 prefix="$work/moved"
 share="$prefix/share/octocd"
 for f in bin/octocd share/octocd/bench/sweeps/table6.json share/octocd/datasets/scenes/bunny-random-400.json \
-         share/octocd/datasets/scenes/free-fall.json share/octocd/reports/make_report.py \
-         share/octocd/reports/paper_tables.json share/octocd/datasets/fetch.sh share/octocd/datasets/SHA256SUMS; do
+         share/octocd/datasets/scenes/free-fall.json share/octocd/report/make_report.py \
+         share/octocd/report/paper_tables.json share/octocd/datasets/fetch.sh share/octocd/datasets/SHA256SUMS; do
   [ -e "$prefix/$f" ] || { echo "not installed: $prefix/$f"; exit 1; }
 done
 [ -x "$share/datasets/fetch.sh" ] || { echo "$share/datasets/fetch.sh is not executable"; exit 1; }
-# Every module of the report (reports/report_*.py in the source tree) beside make_report.py.
-for m in "$src"/reports/report_*.py; do
-  [ -e "$share/reports/$(basename "$m")" ] || { echo "not installed: $share/reports/$(basename "$m")"; exit 1; }
+# Every module of the report (report/report_*.py in the source tree) beside make_report.py.
+for m in "$src"/report/report_*.py; do
+  [ -e "$share/report/$(basename "$m")" ] || { echo "not installed: $share/report/$(basename "$m")"; exit 1; }
 done
 
 data=$(realpath -m "${OCTOCD_DATA_DIR:-$src/datasets/cache}")

@@ -55,7 +55,7 @@ def scaled(j, factor, points=None):
 
 def _spec():
     import importlib.util
-    spec = importlib.util.spec_from_file_location("make_report", os.path.join(SRC, "reports", "make_report.py"))
+    spec = importlib.util.spec_from_file_location("make_report", os.path.join(SRC, "report", "make_report.py"))
     m = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(m)
     return m

@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 SRC = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-_spec = importlib.util.spec_from_file_location("make_report_fixes", os.path.join(SRC, "reports", "make_report.py"))
+_spec = importlib.util.spec_from_file_location("make_report_fixes", os.path.join(SRC, "report", "make_report.py"))
 MR = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(MR)
 

@@ -1,4 +1,4 @@
-"""The report's speed-accuracy section (issue 34 item 3; reports/report_speed_accuracy.py) on
+"""The report's speed-accuracy section (issue 34 item 3; report/report_speed_accuracy.py) on
 small generated results of kind `speed-accuracy` (no octocd run): the Pareto front of a known
 set, the reading's sentences (fastest engine and ratio) on known data, references, diverged
 and skipped points, two shards merged, one plot per scene. Run by ctest
@@ -11,7 +11,7 @@ import sys
 import pytest
 
 SRC = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-_spec = importlib.util.spec_from_file_location("make_report_sa", os.path.join(SRC, "reports", "make_report.py"))
+_spec = importlib.util.spec_from_file_location("make_report_sa", os.path.join(SRC, "report", "make_report.py"))
 MR = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(MR)
 RSA = MR.RSA

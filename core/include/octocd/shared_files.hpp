@@ -3,7 +3,7 @@
 /// Where octocd finds the files it ships beside its code, laid out as in the source tree:
 /// the scenes (datasets/scenes/), the dataset fetch script (datasets/fetch.sh with
 /// SHA256SUMS), the named bench sweeps (bench/sweeps/) and the report generator
-/// (reports/make_report.py, reports/paper_tables.json). `cmake --install` puts them under
+/// (report/make_report.py, report/paper_tables.json). `cmake --install` puts them under
 /// PREFIX/share/octocd/ (docs/install.md), so an installed octocd needs no source tree and
 /// its prefix may be moved.
 

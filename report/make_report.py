@@ -3,7 +3,7 @@
 OUT/index.html (self-contained: every plot inline as SVG, no network) and OUT/report.md
 (plots as OUT/plots/*.svg). Run by `octocd report` (cli/report.cpp); usable directly:
 
-    /usr/bin/python3 reports/make_report.py -o OUT RESULT.json [TRACE.h5 ...]
+    /usr/bin/python3 report/make_report.py -o OUT RESULT.json [TRACE.h5 ...]
 
 Shards of one sweep (same sweep definition, machine and build) are merged. Performance
 gate: `--baseline BASE.json [--threshold P] [--level A]` sets NEW beside BASE per point and
@@ -22,7 +22,7 @@ Every output file is written to a temporary file beside it and renamed into plac
 all of them are written, so a failed run never truncates an earlier report.
 Needs Debian's python3-matplotlib and python3-numpy.
 
-This file is the entry point (`octocd report` runs it; installed under share/octocd/reports
+This file is the entry point (`octocd report` runs it; installed under share/octocd/report
 with the modules beside it): the command line, the sweep sections by name (SECTIONS) and the
 exit codes. The parts are modules beside it: report_common.py (the one-line error, numbers,
 load marks), report_data.py (results and trace summaries in), report_html.py (the document,
@@ -58,7 +58,7 @@ from report_tables import (engines_ran_text, machine_block, section_figA2, secti
 
 
 def section_speed_accuracy(doc, g):
-    """Per scene error against speed, the Pareto front and a reading (reports/report_speed_accuracy.py)."""
+    """Per scene error against speed, the Pareto front and a reading (report/report_speed_accuracy.py)."""
     RSA.section(doc, g, types.SimpleNamespace(num=num, spread_text=spread_text, log_ticks=log_ticks, overlap=overlap,
                                               speedup_text=speedup_text, load_mark=load_mark))
 

@@ -1,4 +1,4 @@
-"""The report's section of traces (reports/make_report.py): one row per trace, the traces
+"""The report's section of traces (report/make_report.py): one row per trace, the traces
 overlaid on shared axes, and a sentence on each one's penetration."""
 
 import os

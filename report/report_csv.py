@@ -1,4 +1,4 @@
-"""The report's data as CSV (reports/make_report.py, --csv DIR): per point and repetition,
+"""The report's data as CSV (report/make_report.py, --csv DIR): per point and repetition,
 plus a summary row per figure."""
 
 import csv

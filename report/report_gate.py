@@ -1,4 +1,4 @@
-"""The report's performance gate (reports/make_report.py; docs/bench-format.md,
+"""The report's performance gate (report/make_report.py; docs/bench-format.md,
 "Performance gate"): NEW beside BASE per point, decided on the repetitions with a one-sided
 Mann-Whitney U test and a time-ratio interval; its section, summary lines and CSV."""
 

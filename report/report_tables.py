@@ -1,4 +1,4 @@
-"""The report's sections of bench sweeps (reports/make_report.py): the machine and settings
+"""The report's sections of bench sweeps (report/make_report.py): the machine and settings
 block, skipped points, the paper's tables (Table 5, Table 6, Table A1, Fig. A2), broadphase
 scaling, most instances at the target steps/s and any other sweep."""
 

@@ -1,4 +1,4 @@
-"""What every part of octocd's report shares (reports/make_report.py is the entry point): the
+"""What every part of octocd's report shares (report/make_report.py is the entry point): the
 one-line error (exit 2), numpy and matplotlib (exit 1 without them), the paper's tables, the
 stage and engine colours, the file being read (CURRENT, for the error of a malformed one) and
 the octocd binary that reads traces (OCTOCD), number formatting and the marks of points

@@ -1,4 +1,4 @@
-"""The report's inputs (reports/make_report.py): bench results (octocd-bench JSON) checked
+"""The report's inputs (report/make_report.py): bench results (octocd-bench JSON) checked
 and merged per sweep and machine, and traces read through `octocd trace-summary --json`
 (octocd's hardened reader; never h5py here)."""
 

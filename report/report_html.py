@@ -1,4 +1,4 @@
-"""The report's output (reports/make_report.py): the output folder checked, one document
+"""The report's output (report/make_report.py): the output folder checked, one document
 written as HTML (plots inline as SVG) and Markdown (plots as plots/*.svg), every file
 renamed into place only once all are written."""
 

@@ -1,4 +1,4 @@
-"""The report's plots (reports/make_report.py): steps/s bars per scene and configuration
+"""The report's plots (report/make_report.py): steps/s bars per scene and configuration
 (log axis, the paper's figures on their own axis, speed-ups printed) and stage shares, with
 the labels of points and engines."""
 
