@@ -547,9 +547,7 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
     const int sig = octocd::stop_signal();
     fmt::print("\nSTOPPED: {}\n", stopped);
     std::fflush(stdout);
-    std::fprintf(stderr, "octocd validate: stopped by %s after frame %lld of %lld of the trace %s\n",
-                 octocd::stop_signal_name(sig), static_cast<long long>(info.judged_to),
-                 static_cast<long long>(info.frames), o.trace_in.c_str());
+    report_stop(sig, "validate", info.judged_to, info.frames, "", fmt::format(" of the trace {}", o.trace_in));
     return octocd::stop_exit_code(sig);
   }
   nlohmann::ordered_json meta = {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
