@@ -240,7 +240,14 @@ except KeyboardInterrupt:
 def interrupt(setup, call, tmp_path):
     """Runs `call` in a child, sends SIGINT once it is inside the call; returns the child's
     lines and the seconds from the signal to its KeyboardInterrupt."""
-    code = CHILD.format(setup=setup, call=call)
+    second, dt, _ = interrupt_code(CHILD.format(setup=setup, call=call), tmp_path)
+    return second, dt
+
+
+def interrupt_code(code, tmp_path, more=0):
+    """Runs the child `code` (it prints "started" once inside the call, then "finished" or
+    "KeyboardInterrupt"), sends SIGINT after "started"; returns that next line, the seconds
+    from the signal to it and the words of the `more` lines after it."""
     env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(octocd.__file__))))
     p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          cwd=str(tmp_path), env=env)
@@ -251,12 +258,13 @@ def interrupt(setup, call, tmp_path):
         p.send_signal(signal.SIGINT)
         second = p.stdout.readline().strip()
         dt = time.monotonic() - t0
-        p.wait(timeout=60)
+        rest = [p.stdout.readline().split() for _ in range(more)]
+        p.wait(timeout=120)
     finally:
         if p.poll() is None:
             p.kill()
             p.wait()
-    return second, dt
+    return second, dt, rest
 
 
 SETUP_OBSERVE = """
@@ -367,22 +375,7 @@ def test_ctrl_c_inside_one_long_step_within_a_second(tmp_path):
     # on a helper thread while the caller polls Ctrl-C; the interrupted step completes in
     # the background and the engine's next call waits for it: the engine is at a whole
     # step, the one a fresh engine stepped as often reaches.
-    env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(octocd.__file__))))
-    p = subprocess.Popen([sys.executable, "-c", LONG_STEP_CHILD.format()], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, cwd=str(tmp_path), env=env)
-    try:
-        first = p.stdout.readline().strip()
-        assert first == "started", (first, p.stderr.read())
-        t0 = time.monotonic()
-        p.send_signal(signal.SIGINT)
-        second = p.stdout.readline().strip()
-        dt = time.monotonic() - t0
-        third = p.stdout.readline().split()
-        p.wait(timeout=120)
-    finally:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
+    second, dt, (third,) = interrupt_code(LONG_STEP_CHILD.format(), tmp_path, more=1)
     print(f"KeyboardInterrupt {dt:.3f} s after SIGINT inside one step")
-    assert second == "KeyboardInterrupt" and dt < 1.0, (second, dt, p.stderr.read())
+    assert second == "KeyboardInterrupt" and dt < 1.0, (second, dt)
     assert third == ["1", "True", "True"], third
