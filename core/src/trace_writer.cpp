@@ -17,7 +17,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <ctime>
 #include <filesystem>
@@ -477,13 +479,32 @@ TraceWriter::TraceWriter(const std::string& path, const TraceMetadata& meta,
   // dataset: RSS grew by 160 bytes a frame up to +19 MiB (issue 10's soak). (Set on the
   // file: a dataset access list given to H5Dcreate2 is not used for this in HDF5 1.10.)
   check(H5Pset_cache(fapl, 0, 101, 64 * 1024, 1.0), path, "H5Pset_cache");
+  // HDF5 locks a new file (flock) while it creates it and until SWMR writing starts; a
+  // reader in another process (h5py, a viewer, a wait on the trace) that opens it in that
+  // window makes the lock fail (EAGAIN: 140 of 300 runs with one reader in a loop). So a
+  // new trace, or one replacing a regular file, is made as PATH.tmp.PID and renamed onto
+  // PATH once SWMR writing started: readers never see it locked, and an earlier trace at
+  // PATH stays whole until then. Other paths (a device such as /dev/full, a FIFO, a
+  // symbolic link) are created in place as before.
+  struct stat st {};
+  const bool staged = ::lstat(path.c_str(), &st) != 0 ? errno == ENOENT : S_ISREG(st.st_mode);
+  const std::string made = staged ? path + ".tmp." + std::to_string(::getpid()) : path;
   try {
-    m.file = Handle(check(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl), path,
-                          "create file"));
-    create_layout(meta, bodies);
-  } catch (const Hdf5Failure& e) {
-    m.abandon();
-    throw RuntimeError(m.failure("creating the file", e.reason()));
+    try {
+      m.file = Handle(check(H5Fcreate(made.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl), path, "create file"));
+      create_layout(meta, bodies);
+    } catch (const Hdf5Failure& e) {
+      m.abandon();
+      throw RuntimeError(m.failure("creating the file", e.reason()));
+    }
+    if (staged && std::rename(made.c_str(), path.c_str()) != 0) {
+      const int e = errno;
+      m.abandon();
+      throw RuntimeError(m.failure("renaming " + made + " onto it", std::strerror(e)));
+    }
+  } catch (...) {
+    if (staged) ::unlink(made.c_str());
+    throw;
   }
 }
 
