@@ -485,9 +485,11 @@ TraceWriter::TraceWriter(const std::string& path, const TraceMetadata& meta,
   // new trace, or one replacing a regular file, is made as PATH.tmp.PID and renamed onto
   // PATH once SWMR writing started: readers never see it locked, and an earlier trace at
   // PATH stays whole until then. Other paths (a device such as /dev/full, a FIFO, a
-  // symbolic link) are created in place as before.
+  // symbolic link), and a file in a folder this process cannot write to (the temporary
+  // file could not be made there), are created in place as before.
   struct stat st {};
-  const bool staged = ::lstat(path.c_str(), &st) != 0 ? errno == ENOENT : S_ISREG(st.st_mode);
+  const bool staged = (::lstat(path.c_str(), &st) != 0 ? errno == ENOENT : S_ISREG(st.st_mode)) &&
+                      ::access(parent.empty() ? "." : parent.c_str(), W_OK) == 0;
   const std::string made = staged ? path + ".tmp." + std::to_string(::getpid()) : path;
   try {
     try {

@@ -255,8 +255,9 @@ struct ExternalTraceInfo {
   bool has_points = false;          ///< v2: /contacts/point
   bool manifolds = false;           ///< v2: some pair has several contact rows in a frame
   /// Filled by validate_external_trace: the last frame whose checks completed (0: none;
-  /// the run's or shard's last frame when not stopped), and with ExternalOptions::keep_on_stop the frame a stop
-  /// cut short inside its checks (partly in the verdict; 0: it stopped between frames).
+  /// the run's or shard's last frame when not stopped), and with
+  /// ExternalOptions::keep_on_stop the frame a stop cut short inside its checks (partly in
+  /// the verdict; 0: it stopped between frames).
   std::int64_t judged_to = 0, stopped_in = 0;
   /// Filled by validate_external_trace: true when `stop` ended the judging early.
   bool stopped = false;
