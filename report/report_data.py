@@ -102,7 +102,13 @@ def merge(results, pool=False):
     groups = {}
     for path, j in results:
         m = j["machine"]
-        key = (j["sweep"]["name"], json.dumps(j["sweep"]["definition"], sort_keys=True),
+        definition = j["sweep"]["definition"]
+        if j["sweep"].get("kind") == "speed-accuracy":
+            # Its lines stand alone (each judged against its own smallest dt), so runs with other
+            # engines or scenes (Bullet in a run of its own, a copy without a scene an engine
+            # cannot run) join one section when their ladder of time steps is the same.
+            definition = {k: j["settings"].get(k) for k in ("dts", "sim_seconds")}
+        key = (j["sweep"]["name"], json.dumps(definition, sort_keys=True),
                m.get("hostname"), m.get("cpu"), m.get("gpu"))
         g = groups.setdefault(key, {"files": [], "points": {}, "first": j, "origin": {}, "searches": [], "json": {},
                                     "pooled": {}})

@@ -42,7 +42,15 @@ def settings_text(s, files):
             + (f", {s.get('frames')} frames per run (warm-up {s.get('warmup')})" if "frames" in s else "")
             + (f", {s.get('warm_replays')} untimed replay(s) first" if "warm_replays" in s else "")
             + (f", each timed repetition at least {s.get('min_time_ms')} ms" if "min_time_ms" in s else "")
-            + f" (files: {', '.join(os.path.basename(f) for f in files)})")
+            + f" (files: {files_text(files)})")
+
+
+def files_text(files, shown=4):
+    """The files' names; of many (a run's shards), the first few, the count and the last."""
+    names = [os.path.basename(f) for f in files]
+    if len(names) <= shown + 2:
+        return ", ".join(names)
+    return f"{len(names)} files, {', '.join(names[:shown])}, ..., {names[-1]}"
 
 
 def machine_block(doc, g):

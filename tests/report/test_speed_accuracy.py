@@ -353,3 +353,40 @@ def test_two_shards_merge_into_the_report_of_one_run(tmp_path):
     parts[1]["points"].append(parts[0]["points"][0])
     rc, md, page, out = run_main(tmp_path / "dup", *parts)
     assert rc == 2 and "is also in" in out, out
+
+
+def test_runs_of_other_engines_and_scenes_join_one_section_per_ladder(tmp_path):
+    # cpu and cuda from a copy of the sweep without the rotating scene, Bullet from the shipped
+    # sweep in shards of its own (other repetitions): one section, every engine's line in the
+    # same scene's table and plot, as one run of all of them gives.
+    pts = box_stack() + mixed_pile()
+    mine = [p for p in pts if p["params"]["engine"] != "bullet"]
+    theirs = [p for p in pts if p["params"]["engine"] == "bullet"]
+    whole = result(pts)
+    ours = result(mine)
+    ours["sweep"]["definition"] = {"name": "speed-accuracy", "kind": "speed-accuracy", "engines": ["cpu", "cuda"],
+                                   "scenes": ["box-stack", "mixed-pile-1000"]}
+    ours["settings"]["engines"] = ["cpu", "cuda"]
+    bullet = [result([p for i, p in enumerate(theirs) if i % 2 == k], shard=(k, 2)) for k in (0, 1)]
+    for b in bullet:
+        b["settings"].update(engines=["bullet"], repeat=2)
+        b["sweep"]["definition"] = {"name": "speed-accuracy", "kind": "speed-accuracy",
+                                    "engines": ["cpu", "cuda", "bullet"],
+                                    "scenes": ["box-stack", "mixed-pile-1000", "rot-drop-220"]}
+        b["points_total"] = len(theirs)
+    rc, md_whole, _, out = run_main(tmp_path / "whole", whole)
+    assert rc == 0, out
+    rc, md, page, out = run_main(tmp_path / "runs", ours, *bullet)
+    assert rc == 0, out
+    assert md.count("Sweep speed-accuracy: speed against accuracy") == 1, md
+    assert "engines cpu, cuda: 3 repetitions per point" in md, md  # each run's settings
+    assert "engines bullet: 2 repetitions per point" in md, md
+    tables = lambda text: [ln for ln in text.splitlines() if ln.startswith("|")]
+    assert tables(md) == tables(md_whole)  # the same tables and readings' figures
+    assert md.count("speed-accuracy-box-stack") == md_whole.count("speed-accuracy-box-stack")
+    # Another ladder of time steps is another comparison: its own section.
+    for b in bullet:
+        b["settings"]["dts"] = [1 / 60, 1 / 120]
+    rc, md, page, out = run_main(tmp_path / "ladders", ours, *bullet)
+    assert rc == 0, out
+    assert md.count("Sweep speed-accuracy: speed against accuracy") == 2, md
