@@ -153,6 +153,26 @@ TEST(Expect, ExpectedWithinItsFigureGrownBeyondItNewWithoutOne) {
             std::string::npos);
   // Without expectations every failure is new.
   EXPECT_EQ(match_expectations(Expectations{}, run, {energy_row(0.006, {"g"})}).exit_code(false), 3);
+  // One cause of several gives its own figure and unit (the row's may be within its bound).
+  ValidationResult moving;
+  moving.name = "bullet-dynamics";
+  moving.figure = "settled centre-of-mass height difference / mean body height";
+  moving.measured = 0.0624;
+  moving.bound = 0.1;
+  moving.pass = false;
+  ValidationCause still;
+  still.name = "still-moving";
+  still.unit = "m/s";
+  still.count = 1;
+  still.worst = 0.199;
+  still.examples.push_back({3000, "", 0.199, "octocd's bodies still move"});
+  moving.causes.push_back(still);
+  const ExpectationReport m = match_expectations(Expectations{}, run, {moving});
+  ASSERT_EQ(m.outcomes.size(), 1u);
+  EXPECT_NE(m.outcomes[0].text.find("NEW FAILURE bullet-dynamics/still-moving: worst 0.199 m/s (1 item(s); the row's "
+                                    "settled centre-of-mass height difference / mean body height: 0.0624 of bound 0.1)"),
+            std::string::npos)
+      << m.outcomes[0].text;
 }
 
 TEST(Expect, ItemsOutsideTheListedOnesGrow) {
