@@ -52,6 +52,9 @@ struct SaPoint {
   double pen_max = 0.0;
   double e_first = std::numeric_limits<double>::quiet_NaN(), e_last = std::numeric_limits<double>::quiet_NaN();
   long bodies = 0;
+  /// The load average (1, 5, 15 min) at the end of the repetition whose 1-minute figure was
+  /// highest: how busy the machine was while this point was measured (report's load mark).
+  json load_average = json::array();
   bool finished = false;
 };
 
@@ -349,6 +352,12 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
     r["error"] = err;
     r["error_reasons"] = why;
     if (!p.started.empty()) r["repetition_start_s"] = p.started;
+    if (!p.load_average.empty()) {
+      r["load_average"] = p.load_average;
+      // More runnable threads than cores (the bench's own included) while it measured.
+      const long threads = result["machine"].value("threads", 0L);
+      r["under_load"] = threads > 0 && p.load_average[0].get<double>() > static_cast<double>(threads) + 1.0;
+    }
     return r;
   };
 
@@ -493,6 +502,8 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
       p.speed.push_back(wall > 0.0 ? sim / wall : std::numeric_limits<double>::infinity());
       p.sps.push_back(wall > 0.0 ? static_cast<double>(p.steps) / wall : std::numeric_limits<double>::infinity());
       p.pen_max = std::max(p.pen_max, pen);
+      if (const json la = load_average(); !la.empty() && (p.load_average.empty() || la[0] > p.load_average[0]))
+        p.load_average = la;
       if (rep == 0) {
         p.samples = std::move(samples);
         p.e_first = e_first;

@@ -84,6 +84,10 @@ TEST_F(SpeedAccuracy, ConsistencyIsZeroAtTheReferenceAndLinearInDt) {
     EXPECT_NEAR(p["steps"].get<double>() * p["dt"].get<double>(), 0.4, 1e-12);
     EXPECT_EQ(p["speed"]["n"], 1);
     EXPECT_GT(p["speed"]["median"].get<double>(), 0.0);
+    // How busy the machine was while the point ran (the report's load mark reads it).
+    ASSERT_TRUE(p.contains("load_average") && p["load_average"].size() == 3u) << p.dump();
+    EXPECT_GE(p["load_average"][0].get<double>(), 0.0);
+    EXPECT_TRUE(p["under_load"].is_boolean()) << p.dump();
     EXPECT_EQ(p["error"]["reference_dt"], 0.001);
     EXPECT_EQ(p["error"]["max_penetration_m"], 0.0);  // two boxes falling side by side never touch
     EXPECT_TRUE(p["error"]["momentum_residual"].is_null());
