@@ -45,11 +45,11 @@ std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
     const std::uint64_t temp = std::max({cub_sort_temp_bound(n, 4, 4), cub_scan_temp_bound(n1), std::uint64_t{1}});
     const std::uint64_t table = loose_cell_table_entries(n);
     // The pair cache (CoherentOctreeDevice::reserve, broadphase_coherent.cu): its status,
-    // the fattened boxes, the cache, its scratch and the filter's selection (first
+    // the fattened boxes, the cache, its scratch, the filter's selection and flags (first
     // capacity: initial_pair_capacity), the filter's CUB storage (a scan's bound).
     const std::uint64_t cap = initial_pair_capacity(n);
     const std::uint64_t cache = buf(1, 16) + buf(n, sizeof(Aabb)) + 3 * buf(cap, sizeof(std::uint64_t)) +
-                                buf(cub_scan_temp_bound(cap), 1);
+                                buf(cap, 1) + buf(cub_scan_temp_bound(cap), 1);
     // + the sorted mode's pair counts and segments (n + 1 each), long-segment list and count.
     return cache + buf(1, sizeof(float)) + 4 * buf(n, sizeof(std::uint32_t)) + 2 * buf(n1, sizeof(std::uint32_t)) +
            buf(n, sizeof(std::uint32_t)) + buf(1, sizeof(std::uint32_t)) +
