@@ -100,7 +100,8 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
   c->add_flag("--print", o.print, "Print the sweep's definition (JSON) and exit");
   c->add_option("--print-scene", o.print_scene,
                 "max-instances: print the scene each of the sweep's models runs at N instances (JSON, one per model "
-                "after a // SCENE line when there are several) and exit")
+                "after a // SCENE line when there are several) and exit; above 10000000 bodies (limits::kMaxBodies) "
+                "the scene is the bench's own: octocd run refuses it as a file")
       ->check(CLI::Range(1L, kMaxInstancesCap));
   c->add_flag("--quiet", o.quiet, "No progress output");
   c->add_option("--scene-dir", o.scene_dir,

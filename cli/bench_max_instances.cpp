@@ -107,6 +107,7 @@ Measured measure_count(MaxInstancesRun& run, std::size_t sc, const std::string& 
       ov.text = &text;
       ov.repeat = reps;
       ov.cut_below = s.target;
+      ov.max_bodies = limits::kMaxGeneratedBodies;  // memory, not the file limit, ends the search
       r = run_steps_point(s, p, run.models, run.o, run.progress, ov);
     } catch (const BenchStopped&) {
       throw;

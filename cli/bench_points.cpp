@@ -71,10 +71,10 @@ std::string file_safe(const std::string& id) {
 }  // namespace
 
 std::shared_ptr<const Model> ModelCache::get(const std::string& t, const std::string& origin,
-                                             const std::string& data_dir) {
+                                             const std::string& data_dir, std::size_t max_bodies) {
   if (t != text || !model) {
     model.reset();
-    model = build_model(parse_scene(t, origin, data_dir));
+    model = build_model(parse_scene(t, origin, data_dir, max_bodies));
     text = t;
   }
   return model;
@@ -95,7 +95,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   const std::string origin = s.scenes[p.scene];
   std::shared_ptr<const Model> model;
   try {
-    model = cache.get(text, origin, o.data_dir);
+    model = cache.get(text, origin, o.data_dir, ov.max_bodies);
   } catch (const InputError& e) {
     // A key the sweep sets that the scene file does not have, and the scene refuses: the
     // sweep's pointer is wrong, not the scene.

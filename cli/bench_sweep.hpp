@@ -85,7 +85,7 @@ struct Sweep {
 
 /// The largest instance count a max-instances sweep may search to (the scene format's body
 /// limit is far above; the CUDA engine's kCudaMaxBodies is 16,777,216).
-constexpr long kMaxInstancesCap = 16777216;
+constexpr long kMaxInstancesCap = static_cast<long>(limits::kMaxGeneratedBodies);
 
 /// The most points a sweep may expand to (docs/bench-format.md): a larger one is refused
 /// before anything runs.
@@ -210,9 +210,10 @@ struct BenchStopped {};
 struct ModelCache {
   std::string text;
   std::shared_ptr<const Model> model;
-  /// The model of scene text `t` (parse_scene with `origin` and `data_dir`); InputError as
-  /// parse_scene.
-  std::shared_ptr<const Model> get(const std::string& t, const std::string& origin, const std::string& data_dir);
+  /// The model of scene text `t` (parse_scene with `origin`, `data_dir` and `max_bodies`);
+  /// InputError as parse_scene.
+  std::shared_ptr<const Model> get(const std::string& t, const std::string& origin, const std::string& data_dir,
+                                   std::size_t max_bodies = limits::kMaxBodies);
 };
 
 /// The recorded broadphase input of the last scene (or body count) replayed.
@@ -231,6 +232,9 @@ struct StepsOverride {
   /// bound), and no more repetitions run once most of them were cut (the median is below).
   double cut_below = 0.0;
   bool trace = true;  ///< false: no trace even with --trace-dir (a later round-robin repetition)
+  /// The most bodies `text` may hold (parse_scene's max_bodies): limits::kMaxGeneratedBodies
+  /// for the scenes max-instances generates.
+  std::size_t max_bodies = limits::kMaxBodies;
 };
 
 /// Runs steps point `p` (its repetitions, windows, series; a trace with --trace-dir) and

@@ -51,6 +51,7 @@ inline std::string describe(const json& j) {
 /// Error reporting for one scene: every message is "<origin>: <key>: <problem>; allowed: <range>".
 struct Ctx {
   std::string origin;
+  std::size_t max_bodies = limits::kMaxBodies;  ///< parse_scene's max_bodies
 
   [[noreturn]] void fail(const std::string& key, const std::string& problem,
                          const std::string& allowed) const {

@@ -204,11 +204,11 @@ GroupSpec parse_group(const Ctx& c, const json& j, std::size_t index, const Aabb
   }
   if (!j.contains("shape")) c.fail(child(key, "shape"), "missing required key", "a shape object (mesh, box or icosphere)");
   g.shape = parse_shape(c, j["shape"], child(key, "shape"));
-  const std::string count_allowed = "integer in [1, " + std::to_string(limits::kMaxBodies) +
-                                    "] (bodies in the whole scene at most " + std::to_string(limits::kMaxBodies) + ")";
+  const std::string count_allowed = "integer in [1, " + std::to_string(c.max_bodies) +
+                                    "] (bodies in the whole scene at most " + std::to_string(c.max_bodies) + ")";
   if (!j.contains("count")) c.fail(child(key, "count"), "missing required key", count_allowed);
   g.count = static_cast<int>(c.integer(j["count"], child(key, "count"), 1,
-                                       static_cast<long long>(limits::kMaxBodies), count_allowed));
+                                       static_cast<long long>(c.max_bodies), count_allowed));
   if (j.contains("mass")) {
     const std::string allowed = "0 (static) or a number in [" + num(limits::kMinMass) + ", " +
                                 num(limits::kMaxMass) + "] (kg; the inverse mass must be a normal float32)";
@@ -385,8 +385,9 @@ std::size_t body_count(const Scene& scene) {
   return n;
 }
 
-Scene parse_scene(const std::string& text, const std::string& origin, const std::string& data_dir) {
-  const Ctx c{origin.empty() ? std::string("<scene>") : origin};
+Scene parse_scene(const std::string& text, const std::string& origin, const std::string& data_dir,
+                  std::size_t max_bodies) {
+  const Ctx c{origin.empty() ? std::string("<scene>") : origin, std::min(max_bodies, limits::kMaxGeneratedBodies)};
   if (text.size() > limits::kMaxSceneFileBytes)
     c.fail("", "scene text is " + std::to_string(text.size()) + " bytes",
            "a scene of at most " + std::to_string(limits::kMaxSceneFileBytes) + " bytes (64 MiB)");
@@ -546,9 +547,9 @@ Scene parse_scene(const std::string& text, const std::string& origin, const std:
              "names unique among groups (default \"group<i>\")");
     s.groups.push_back(std::move(g));
   }
-  if (body_count(s) > limits::kMaxBodies)
+  if (body_count(s) > c.max_bodies)
     c.fail("groups", "the groups' counts add up to " + std::to_string(body_count(s)) + " bodies",
-           "at most " + std::to_string(limits::kMaxBodies) + " bodies in a scene");
+           "at most " + std::to_string(c.max_bodies) + " bodies in a scene");
   for (auto& g : s.groups)
     if (g.shape.kind == ShapeSpec::Kind::Mesh)
       g.shape.mesh_path = resolve_mesh_path(s, g.shape.mesh, child(at("groups", static_cast<std::size_t>(g.index)), "shape.mesh"));

@@ -369,7 +369,7 @@ TEST_F(MaxInstances, BadInputExits2) {
     std::string sweep_extra, args, expect;
   };
   const std::vector<Case> cases{
-      {R"("max_instances": 0)", "", "max_instances: 0 is out of range; allowed: an integer in [1, 16777216]"},
+      {R"("max_instances": 0)", "", "max_instances: 0 is out of range; allowed: an integer in [1, 134217728]"},
       {R"("target_steps_per_s": -30)", "", "target_steps_per_s: -30 is out of range"},
       {R"("resolution": 1.5)", "", "resolution: 1.5 is out of range"},
       {R"("repeat": 2, "probe_repeat": 3)", "", "probe_repeat: 3 is above repeat (2)"},

@@ -123,6 +123,40 @@ TEST(Limits, SceneRangesKeepFloat32Meaningful) {
   expect_rejected(j, "groups[0].shape.icosphere.radius", "[0.0005, 1000]");
 }
 
+// A scene octocd generates itself (bench max-instances) may pass the file limit of 10^7
+// bodies up to limits::kMaxGeneratedBodies (2^27), where memory checks bound it; a larger
+// max_bodies is clamped to it, and any file keeps limits::kMaxBodies.
+TEST(Limits, GeneratedScenesPassTheFileBodyLimitUpToTheirOwn) {
+  json j = minimal();
+  j["groups"][0]["count"] = 10000001;
+  expect_rejected(j, "groups[0].count", "integer in [1, 10000000]");
+  const Scene s = parse_scene(j.dump(), "generated.json", "", limits::kMaxGeneratedBodies);
+  EXPECT_EQ(body_count(s), 10000001u);
+  j["groups"][0]["count"] = 134217728;
+  EXPECT_EQ(body_count(parse_scene(j.dump(), "generated.json", "", limits::kMaxGeneratedBodies)), 134217728u);
+  j["groups"][0]["count"] = 134217729;
+  for (const std::size_t cap : {limits::kMaxGeneratedBodies, std::size_t{1} << 31}) {
+    try {
+      (void)parse_scene(j.dump(), "generated.json", "", cap);
+      ADD_FAILURE() << "2^27 + 1 bodies accepted with max_bodies " << cap;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("groups[0].count: value 134217729 out of range; allowed: integer in [1, "
+                                           "134217728]"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  j["groups"][0]["count"] = 100000000;
+  j["groups"][1] = j["groups"][0];
+  j["groups"][1]["name"] = "second";
+  try {
+    (void)parse_scene(j.dump(), "generated.json", "", limits::kMaxGeneratedBodies);
+    ADD_FAILURE() << "2 x 10^8 bodies accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("at most 134217728 bodies in a scene"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Limits, NestingAndSceneSize) {
   std::string deep = "1";
   for (int i = 0; i < 64; ++i) deep = "[" + deep + "]";

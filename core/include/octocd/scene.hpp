@@ -50,6 +50,11 @@ constexpr double kMaxAngularSpeed = 1e3;
 /// Most bodies in a scene (sum of the groups' counts; walls excluded). Body indices are
 /// 32-bit; the CPU engine takes about 300 B a body (3 GB at 10^7).
 constexpr std::size_t kMaxBodies = 10000000;
+/// Most bodies in a scene that octocd generates itself (`octocd bench max-instances`, whose
+/// cap this is): not an untrusted file, so the engines' memory checks bound it (host memory:
+/// std::bad_alloc; device memory: the cuda engine's free-memory check before its first
+/// allocation) instead of kMaxBodies. 2^27 bunnies need about 110 GiB of device memory.
+constexpr std::size_t kMaxGeneratedBodies = std::size_t{1} << 27;
 /// Largest scene file (bytes): 64 MiB holds explicit positions for about 10^6 bodies.
 constexpr std::uintmax_t kMaxSceneFileBytes = 64ull << 20;
 /// Deepest JSON nesting (objects and arrays); a scene needs 5.
@@ -172,9 +177,11 @@ Scene load_scene(const std::string& path, const std::string& data_dir = "");
 /// Scene::path (relative mesh paths resolve against its folder; "" or a name without a
 /// folder means the current directory). The default data_dir is $OCTOCD_DATA_DIR, else
 /// the first existing folder of default_data_dirs(origin). Meshes are resolved and
-/// checked exactly as in load_scene.
+/// checked exactly as in load_scene. `max_bodies`: the most bodies the scene may hold
+/// (limits::kMaxBodies for any file; at most limits::kMaxGeneratedBodies for a scene
+/// octocd generates itself); larger values are clamped to kMaxGeneratedBodies.
 Scene parse_scene(const std::string& text, const std::string& origin,
-                  const std::string& data_dir = "");
+                  const std::string& data_dir = "", std::size_t max_bodies = limits::kMaxBodies);
 
 /// The data dirs tried, in order, when neither `--data-dir` nor $OCTOCD_DATA_DIR is
 /// given (docs/scenes.md, "Mesh resolution"): `<scene folder>/../cache` (the scene's
