@@ -181,7 +181,7 @@ struct Trace {
     if (!jt3.empty()) put("/contacts/jt3", F, FT, {jt3.size() / 3, 3}, jt3.data());
     if (!collision_shape.empty()) {
       std::vector<const char*> ptrs;
-      for (const std::string& c : collision_shape) ptrs.push_back(c.c_str());
+      for (const std::string& shape : collision_shape) ptrs.push_back(shape.c_str());
       const hid_t st = H5Tcopy(H5T_C_S1);
       H5Tset_size(st, H5T_VARIABLE);
       put("/bodies/collision_shape", st, st, {ptrs.size()}, ptrs.data());
