@@ -83,8 +83,9 @@ struct Sweep {
   double diverge_beyond_m = 1e6;        ///< a body this far outside the domain (m) makes its run diverged
 };
 
-/// The largest instance count a max-instances sweep may search to (the scene format's body
-/// limit is far above; the CUDA engine's kCudaMaxBodies is 16,777,216).
+/// The largest instance count a max-instances sweep may search to: limits::kMaxGeneratedBodies
+/// (2^27), the most bodies of the scenes it generates (a scene file stops at
+/// limits::kMaxBodies); device or host memory ends a search below it.
 constexpr long kMaxInstancesCap = static_cast<long>(limits::kMaxGeneratedBodies);
 
 /// The most points a sweep may expand to (docs/bench-format.md): a larger one is refused

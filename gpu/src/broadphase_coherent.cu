@@ -13,11 +13,11 @@
 //   (inclusive; a box with a NaN coordinate overlaps nothing and never counts as escaped),
 //   counts those that do not and keeps the smallest slack of a side (the predictor's
 //   input); then the filter.
-// The filter: a flag per cache key (coherent_flag_kernel: one thread per key, the key
+// The filter: a flag per cache key (coherent_flag_kernel: one thread per key, set for a key
 // below the cache's total whose AABBs overlap, Eq. 6), then cub::DeviceSelect::Flagged
-// keeps the flagged keys in the cache's ascending order, into the output (straight when the cache fits
-// the output's capacity, else through a buffer of the cache's size and a copy of the
-// first min(total, capacity) keys). Exact: when every AABB lies in its fattened box, two
+// keeps the flagged keys in the cache's ascending order, into the output (straight when
+// the cache fits the output's capacity, else through a buffer of the cache's size and a
+// copy of the first min(total, capacity) keys). Exact: when every AABB lies in its fattened box, two
 // overlapping AABBs have overlapping fattened boxes, so their pair is kept; a Hit that
 // found an escaped body says so (settle(): Rerun) and the caller runs find() again, then
 // a Build. The output is the sorted unique set `flat` gives, the order the CPU octree's
