@@ -88,6 +88,7 @@ struct CudaWorld::Impl {
   std::uint32_t shape_count = 0;
   hd::LevelList levels;
   int level_steps = 0;     // midphase steps (0: aabb-only, or no levels)
+  bool any_mesh = false;   // some shape is a mesh: a pair may need the level steps
   unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
   int mid_early_exit = 1;  // CudaSettings::midphase_early_exit (MidListDesc::early_exit)
 
@@ -138,9 +139,8 @@ struct CudaWorld::Impl {
   // Capacities of the variable-size buffers (entries); prepare() sizes the buffers.
   std::size_t pair_cap = 1;
   std::size_t list_cap = 1;
-  /// Pairs the response's contact index covers (its radix sort sorts 2 x min(index_cap,
-  /// pair_cap) entries): grown like pair_cap when a step found more pairs (the step runs
-  /// again), so the sort covers about the pairs, not the pair buffer's capacity.
+  /// Pairs the response's contact index covers (min(index_cap, pair_cap)): grown like
+  /// pair_cap when a step found more pairs (the step runs again).
   std::size_t index_cap = 1;
   bool prepared = false;
   std::uint64_t static_static = 0;  // static_static_pairs(model): constant over the run
@@ -179,11 +179,15 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<Vec3> dv_b{"contact dv_b"};
   gpu::DeviceBuffer<float> depth0{"contact depths"};
   gpu::DeviceBuffer<gpu::DeviceContact> records{"contact records"};
-  gpu::DeviceBuffer<std::uint32_t> keys_in{"contact index keys"};
-  gpu::DeviceBuffer<std::uint32_t> keys_out{"sorted contact index keys"};
-  gpu::DeviceBuffer<std::uint32_t> vals_in{"contact index entries"};
-  gpu::DeviceBuffer<std::uint32_t> vals_out{"sorted contact index entries"};
-  gpu::DeviceBuffer<std::uint32_t> body_begin{"body contact segments"};
+  // The per-stage path's contact index (response.cu, gpu::IndexDesc) and midphase start list.
+  gpu::DeviceBuffer<unsigned long long> index_offsets{"contact index offsets"};
+  gpu::DeviceBuffer<std::uint32_t> index_rank{"contact index ranks"};
+  gpu::DeviceBuffer<std::uint32_t> index_entries{"contact index entries"};
+  gpu::DeviceBuffer<std::uint32_t> index_long{"contact index long segments"};
+  gpu::DeviceBuffer<std::uint32_t> start_list{"midphase start list"};
+  // The small path's in-lists and their offsets.
+  gpu::DeviceBuffer<std::uint32_t> in_list{"small-step in-lists"};
+  gpu::DeviceBuffer<std::uint32_t> body_begin{"small-step in-list offsets"};
   gpu::DeviceBuffer<std::uint32_t> in_count{"small-step column counts"};  // small path only
   gpu::DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
 
@@ -212,6 +216,14 @@ struct CudaWorld::Impl {
   std::uint32_t pcap() const { return static_cast<std::uint32_t>(pair_cap); }
   std::uint32_t lcap() const { return static_cast<std::uint32_t>(list_cap); }
   std::uint32_t icap() const { return static_cast<std::uint32_t>(std::min(index_cap, pair_cap)); }
+  /// Bodies the contact index's long-segment list can hold: icap() / (kIndexShortSegment + 1) + 1.
+  std::size_t long_cap() const { return pair_cap / (gpu::kIndexShortSegment + 1) + 1; }
+  /// The contact index's descriptor (IndexDesc) over the first icap() pairs.
+  gpu::IndexDesc index_desc();
+  /// Blocks of the grid-stride kernels over the live pairs (classify, contact terms): two
+  /// per warp_grid block (8 per SM), fewer when the pair buffer is smaller. The live count
+  /// is known on the device only, and is often far below pair_cap.
+  unsigned pair_grid() const { return std::min(gpu::grid_for(pair_cap), 2 * warp_grid); }
   gpu::BodiesDesc bodies();
   gpu::ShapesDesc shapes_desc();
   /// The midphase lists' common fields (in / out are set per step): pairs from `keys`.
@@ -244,7 +256,7 @@ struct CudaWorld::Impl {
 
   // ---- step_small.cpp: the fused small step --------------------------------------------
   /// The fused small step's descriptor (small_step.cu): the same buffers as the per-stage
-  /// path; the in-lists live in keys_in, their offsets in body_begin.
+  /// path; the in-lists live in in_list, their offsets in body_begin.
   gpu::SmallStepDesc small_desc(const Scene& scene, bool recording);
   /// One fused step (resident or a launch), its statistics through mapped memory.
   void run_small(const Scene& scene, bool recording);

@@ -189,6 +189,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     if (s.octree) {
       const MeshOctree& t = *s.octree;
       ds.is_mesh = 1;
+      d.any_mesh = true;
       ds.depth = t.depth;
       ds.bounds = t.bounds;
       ds.vertex_offset = static_cast<std::uint32_t>(vertices.size());

@@ -104,18 +104,24 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
                                buf(sc.cells, sizeof(MeshOctreeCell)) + buf(sc.level_offsets, sizeof(std::uint32_t)) +
                                buf(sc.blocks, sizeof(Aabb)) + buf(sc.theta, sizeof(float)) + buf(1, kStepStatsBytes) +
                                buf(kMetricsPartials, kMetricsResultBytes);
-  // prepare() at the first capacities: bp_count, bp_offset, body_begin (n + 1 each); per
-  // candidate pair: pair keys (2), pairs, confirmed, hit, dx_a, dx_b, dv_a, dv_b, depth0,
-  // records; the contact index keys and values (in and out, 2 entries per pair); the two
-  // work lists; CUB's temporary storage (the largest of its three uses).
+  // prepare() at the first capacities: bp_count, bp_offset, body_begin (n + 1 each), the
+  // contact index's offsets (n + 1, 8 bytes); per candidate pair: pair keys (2), pairs,
+  // confirmed, hit, dx_a, dx_b, dv_a, dv_b, depth0, records, the midphase start list, the
+  // contact index's ranks and entries (or the small path's in-lists), its long-segment
+  // list (pcap / (kIndexShortSegment + 1) + 1 entries of 4 bytes, counted as a byte per
+  // pair plus 4: linear in pcap); the two work lists; CUB's temporary storage (the largest
+  // of its uses).
+  static_assert(kIndexShortSegment + 1 >= sizeof(std::uint32_t), "a byte per pair covers the long-segment list");
   const std::uint64_t pcap = initial_pair_capacity(n);
   const std::uint64_t lcap = initial_list_capacity(n);
-  const std::uint64_t temp = std::max({cub_sort_temp_bound(pcap, 8, 0), cub_sort_temp_bound(2 * pcap, 4, 4),
-                                       cub_scan_temp_bound(n1), std::uint64_t{1}});
-  const std::uint64_t step = 3 * buf(n1, sizeof(std::uint32_t)) + 2 * buf(pcap, sizeof(unsigned long long)) +
-                             buf(pcap, sizeof(Pair)) + 2 * buf(pcap, sizeof(std::uint8_t)) +
-                             4 * buf(pcap, sizeof(Vec3)) + buf(pcap, sizeof(float)) + buf(pcap, kDeviceContactBytes) +
-                             4 * buf(2 * pcap, sizeof(std::uint32_t)) + 2 * buf(lcap, kMidItemBytes) + buf(temp, 1);
+  const std::uint64_t temp = std::max({cub_sort_temp_bound(pcap, 8, 0), cub_scan_temp_bound(n1), std::uint64_t{1}});
+  const std::uint64_t step = 3 * buf(n1, sizeof(std::uint32_t)) + buf(n1, sizeof(unsigned long long)) +
+                             2 * buf(pcap, sizeof(unsigned long long)) + buf(pcap, sizeof(Pair)) +
+                             2 * buf(pcap, sizeof(std::uint8_t)) + 4 * buf(pcap, sizeof(Vec3)) +
+                             buf(pcap, sizeof(float)) + buf(pcap, kDeviceContactBytes) +
+                             3 * buf(pcap, sizeof(std::uint32_t)) +
+                             buf(pcap, 1) + sizeof(std::uint32_t) +
+                             2 * buf(lcap, kMidItemBytes) + buf(temp, 1);
   // The fused small step's column counts (n + 1), allocated when it runs (counted up to 32768
   // bodies, kMetricsOneBlockBodies: above the small path's kCudaSmallStepMaxBodies).
   const std::uint64_t small = n >= 1 && n <= 32768 ? buf(n1, sizeof(std::uint32_t)) : 0;

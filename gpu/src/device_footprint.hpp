@@ -23,11 +23,13 @@ constexpr std::uint64_t kDeviceShapeBytes = 52;
 constexpr std::uint64_t kMidItemBytes = 16;
 /// sizeof(gpu::DeviceContact) (kernels.hpp): one contact record.
 constexpr std::uint64_t kDeviceContactBytes = 104;
+/// gpu::kIndexShortSegment (kernels.hpp): the contact index lists one body per that many + 1 pairs.
+constexpr std::uint64_t kIndexShortSegment = 64;
 /// sizeof(gpu::StepStats) (kernels.hpp): what the host reads back after a step.
-constexpr std::uint64_t kStepStatsBytes = 152;
+constexpr std::uint64_t kStepStatsBytes = 160;
 /// sizeof(gpu::MetricsResult) (kernels.hpp); the engine holds kMetricsBlocks of them.
 constexpr std::uint64_t kMetricsResultBytes = 72;
-constexpr std::uint64_t kMetricsPartials = 128;
+constexpr std::uint64_t kMetricsPartials = 512;
 /// Entries of the loose octree's block table for n bodies: the smallest power of two >= 2 n
 /// (at least 2; at most n blocks, so at most half full); each entry 8 bytes, a block key
 /// and its first slot (loose_blocks.hpp, broadphase_octree.cu).

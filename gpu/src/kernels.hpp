@@ -33,7 +33,7 @@ constexpr int kBlockSize = 256;
 constexpr int kMetricsBlockSize = 512;
 /// Blocks of the metrics reduction's first pass when the scene has more than
 /// kMetricsOneBlockBodies bodies (a fixed number: the sums' order depends on n only).
-constexpr unsigned kMetricsBlocks = 128;
+constexpr unsigned kMetricsBlocks = 512;
 constexpr std::uint32_t kMetricsOneBlockBodies = 32768;
 
 /// Blocks of kBlockSize threads covering `count` elements (at least 1).
@@ -173,6 +173,12 @@ struct MidListDesc {
   const std::uint32_t* pair_count = nullptr;  ///< device: pairs found (live = min with capacity)
   std::uint32_t pair_capacity = 0;
   std::uint8_t* confirmed = nullptr;        ///< out: 1 = contact confirmed (start writes every pair)
+  /// classify: out, start: in (null: start takes every pair itself): the pairs classify
+  /// left to start's warps (pair_capacity entries; any order). Needed whenever a pair can
+  /// be left: a mesh shape and at least one level step (else every pair is decided:
+  /// aabb-only, box-box, or PairKind::Exhaustive without levels).
+  std::uint32_t* start_list = nullptr;
+  std::uint32_t* start_count = nullptr;  ///< device: entries of start_list (classify adds; zeroed by the step)
   unsigned long long* counters = nullptr;   ///< out (added): box tests, leaf box pairs, vertex tests
   int steps = 0;                            ///< level steps of the list (the last one: leaves)
   const MidItem* in = nullptr;              ///< expand / leaf: this step's items
@@ -238,8 +244,21 @@ struct ApplyDesc {
   Vec3* v = nullptr;
   const float* w = nullptr;
   std::uint32_t n = 0;
-  const std::uint32_t* body_begin = nullptr;  ///< n + 1 offsets into `entries`
-  const std::uint32_t* entries = nullptr;     ///< body-major: 2 k + side (0 = a, 1 = b)
+  /// The per-stage path's contact index (response.cu), n + 1 entries: the exclusive sums of
+  /// the bodies' counts, b-side entries in the low 32 bits, candidate pairs as a in the
+  /// high 32 bits. Body i's pairs (a, i), a < i, confirmed: entries[lo(offsets[i]) ..
+  /// lo(offsets[i + 1])); its pairs (i, b): the candidate pairs k in [hi(offsets[i]),
+  /// hi(offsets[i + 1])).
+  const unsigned long long* offsets = nullptr;
+  /// The b-side entries (pair k each), in k order within each body's segment once
+  /// sort_entries has run (the first pass sorts the segments of at most
+  /// kIndexShortSegment entries; the longer ones come sorted).
+  std::uint32_t* entries = nullptr;
+  int sort_entries = 0;
+  /// 1: Eq. 23 (clamp_velocity to max_velocity) on each dynamic body after the pass's
+  /// apply_contact_sums: the clamp stage fused into the last pass (same bits).
+  int clamp = 0;
+  float max_velocity = 0.0f;
   const std::uint8_t* hit = nullptr;
   const Vec3* dx_a = nullptr;
   const Vec3* dx_b = nullptr;
@@ -263,6 +282,8 @@ struct StepStats {
   MetricsResult metrics;
   unsigned long long counters[4];  ///< box tests, (unused), vertex tests, broadphase exact tests
   std::uint32_t counts[hd::kMidphaseMaxLevels + 1];  ///< [0] pairs found, [1 + i] items of step i
+  std::uint32_t start_pairs;  ///< pairs mid_classify left to mid_start (the per-stage path)
+  std::uint32_t index_long;   ///< bodies of the contact index's long segments (the per-stage path)
 };
 
 struct MetricsDesc {
@@ -310,7 +331,7 @@ struct SmallStepDesc {
   MidItem* lists[2] = {nullptr, nullptr};
   std::uint32_t list_capacity = 0;
   TermsDesc terms;      ///< depth0 and records: the first pass's (records may be null)
-  ApplyDesc apply;      ///< body_begin / entries unused (the small path's index is above)
+  ApplyDesc apply;      ///< offsets / entries unused (the small path's index is above); clamp 0
   MetricsDesc metrics;  ///< one block (n <= kMetricsOneBlockBodies)
   StepStats* stats = nullptr;       ///< device: counters and counts (zeroed by the step), metrics
   StepStats* host_stats = nullptr;  ///< mapped pinned host memory: a copy of *stats at the end (may be null)
@@ -407,8 +428,14 @@ cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint3
 
 // ---- broadphase_octree.cu ------------------------------------------------------------
 // ---- midphase.cu -----------------------------------------------------------------------
-/// Start: per live pair (one warp each) confirmed[k] for decided pairs, the step 0 items
-/// of mesh pairs into d.out. `grid` blocks of kBlockSize threads (grid-stride).
+/// Classify (before start, d.start_list set): per live pair (one thread each, up to
+/// d.pair_capacity) pairs[k], confirmed[k] for the pairs the set-up decides, the others
+/// listed in d.start_list (*d.start_count, zeroed by the caller).
+/// `grid` blocks of kBlockSize threads, grid-stride over the pairs.
+cudaError_t launch_mid_classify(const MidListDesc& d, unsigned grid, cudaStream_t stream);
+/// Start: the step 0 items of mesh pairs into d.out, one warp per pair (`grid` blocks of
+/// kBlockSize threads, grid-stride): of every live pair, with confirmed[k] for the decided
+/// ones (d.start_list null), or of the pairs classify listed (d.start_list set).
 cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t stream);
 /// Expand: the items of step `step` (d.in) to those of step + 1 (d.out).
 cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cudaStream_t stream);
@@ -416,19 +443,39 @@ cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cud
 cudaError_t launch_mid_leaf(const MidListDesc& d, unsigned grid, cudaStream_t stream);
 
 // ---- response.cu -----------------------------------------------------------------------
-/// Body-major index entries of the confirmed contacts, for every k < pair_capacity:
-/// keys[2k] = a and keys[2k+1] = b (n, sorting last, when not confirmed or not live);
-/// vals[e] = e.
-cudaError_t launch_contact_entries(const Pair* pairs, const std::uint8_t* confirmed, const std::uint32_t* pair_count,
-                                   std::uint32_t pair_capacity, std::uint32_t n, std::uint32_t* keys,
-                                   std::uint32_t* vals, cudaStream_t stream);
-/// body_begin[i] = first position of key i in the sorted keys (i in [0, n]).
-cudaError_t launch_body_segments(const std::uint32_t* sorted_keys, std::uint32_t entry_count, std::uint32_t n,
-                                 std::uint32_t* body_begin, cudaStream_t stream);
+/// Entries of a body's b-side segment up to which apply_sums' first pass sorts it (insertion
+/// sort by its thread); a longer segment is listed and sorted by index_long_kernel.
+constexpr std::uint32_t kIndexShortSegment = 64;
+
+/// What the contact index needs (response.cu): the candidate pairs (sorted by (a, b)) and
+/// their flags, the bodies' inverse masses, and its buffers.
+struct IndexDesc {
+  const Pair* pairs = nullptr;
+  const std::uint8_t* confirmed = nullptr;
+  const std::uint32_t* pair_count = nullptr;  ///< device: pairs found
+  std::uint32_t capacity = 0;                 ///< pairs the index covers (live = min with the count)
+  std::uint32_t n = 0;
+  const float* w = nullptr;
+  unsigned long long* offsets = nullptr;  ///< n + 1: zeroed, then counts, then (scanned) offsets
+  std::uint32_t* rank = nullptr;          ///< capacity: an entry's place in its segment (fill order)
+  std::uint32_t* entries = nullptr;       ///< capacity: the b-side entries (ApplyDesc::entries)
+  std::uint32_t* long_list = nullptr;     ///< capacity / (kIndexShortSegment + 1) + 1 bodies
+  std::uint32_t* long_count = nullptr;    ///< device: bodies listed (zeroed by the step)
+};
+
+/// Counts: per live pair k, 1 << 32 to offsets[a]; per confirmed pair with a dynamic b,
+/// 1 to offsets[b] (rank[k] = the count before); a body whose count passes
+/// kIndexShortSegment is listed in long_list.
+cudaError_t launch_index_count(const IndexDesc& d, unsigned grid, cudaStream_t stream);
+/// Fill (after the exclusive scan of offsets): entries[lo(offsets[b]) + rank[k]] = k.
+cudaError_t launch_index_fill(const IndexDesc& d, unsigned grid, cudaStream_t stream);
+/// The listed long segments rewritten in k order (a block per body scans the live pairs).
+cudaError_t launch_index_long(const IndexDesc& d, unsigned grid, cudaStream_t stream);
 /// contact_terms per confirmed pair.
-cudaError_t launch_contact_terms(const TermsDesc& d, cudaStream_t stream);
-/// Per dynamic body: sums of its kept contacts' terms in (a, b) order from zero, then
-/// apply_contact_sums.
+/// `grid` blocks of kBlockSize threads, grid-stride over the pairs.
+cudaError_t launch_contact_terms(const TermsDesc& d, unsigned grid, cudaStream_t stream);
+/// Per dynamic body: sums of its kept contacts' terms in (a, b) order from zero (its two
+/// runs of d.offsets), then apply_contact_sums (and Eq. 23 when d.clamp).
 cudaError_t launch_apply_sums(const ApplyDesc& d, cudaStream_t stream);
 
 // ---- metrics.cu -------------------------------------------------------------------------
@@ -457,6 +504,10 @@ cudaError_t launch_small_resident(const SmallStepDesc& s, const ResidentDesc& r,
 /// Exclusive prefix sum of `count` uint32. With temp == nullptr only sets temp_bytes.
 cudaError_t exclusive_scan_u32(void* temp, std::size_t& temp_bytes, const std::uint32_t* in, std::uint32_t* out,
                                std::uint32_t count, cudaStream_t stream);
+/// Exclusive prefix sum of `count` uint64 (in == out: in place). With temp == nullptr only
+/// sets temp_bytes.
+cudaError_t exclusive_scan_u64(void* temp, std::size_t& temp_bytes, const unsigned long long* in,
+                               unsigned long long* out, std::uint32_t count, cudaStream_t stream);
 /// Radix sort of uint64 keys by bits [0, end_bit). With temp == nullptr only sets
 /// temp_bytes.
 cudaError_t sort_keys_u64(void* temp, std::size_t& temp_bytes, const unsigned long long* keys_in,
@@ -464,11 +515,6 @@ cudaError_t sort_keys_u64(void* temp, std::size_t& temp_bytes, const unsigned lo
 /// Minimum of `count` floats into *out. With temp == nullptr only sets temp_bytes.
 cudaError_t min_f32(void* temp, std::size_t& temp_bytes, const float* in, float* out, std::uint32_t count,
                     cudaStream_t stream);
-/// Stable radix sort of (key, value) uint32 pairs by the key's bits [0, end_bit). With
-/// temp == nullptr only sets temp_bytes.
-cudaError_t sort_pairs_u32(void* temp, std::size_t& temp_bytes, const std::uint32_t* keys_in,
-                           std::uint32_t* keys_out, const std::uint32_t* vals_in, std::uint32_t* vals_out,
-                           std::uint32_t count, int end_bit, cudaStream_t stream);
 
 // ---- primitives.cu (CUB), for the device broadphases (broadphase_strict.cu, -_hash.cu) --
 /// Stable radix sort of (uint64 key, uint32 value) pairs by the key's bits [0, end_bit).

@@ -1,6 +1,6 @@
 // Device-wide primitives from CCCL's CUB (shipped with the CUDA toolkit): the exclusive
-// scan of the counting passes, the stable radix sorts (body-major contact index, loose
-// octree keys, pair keys; strict octree node keys and spatial-hash cell entries), a
+// scans of the counting passes (the contact index's too), the stable radix sorts (pair
+// keys; strict octree node keys and spatial-hash cell entries), a
 // minimum (the loose octree's auto depth) and sums (the strict octree's auto depth).
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_reduce.cuh>
@@ -16,11 +16,9 @@ cudaError_t exclusive_scan_u32(void* temp, std::size_t& temp_bytes, const std::u
   return cub::DeviceScan::ExclusiveSum(temp, temp_bytes, in, out, static_cast<int>(count), stream);
 }
 
-cudaError_t sort_pairs_u32(void* temp, std::size_t& temp_bytes, const std::uint32_t* keys_in,
-                           std::uint32_t* keys_out, const std::uint32_t* vals_in, std::uint32_t* vals_out,
-                           std::uint32_t count, int end_bit, cudaStream_t stream) {
-  return cub::DeviceRadixSort::SortPairs(temp, temp_bytes, keys_in, keys_out, vals_in, vals_out,
-                                         static_cast<int>(count), 0, end_bit, stream);
+cudaError_t exclusive_scan_u64(void* temp, std::size_t& temp_bytes, const unsigned long long* in,
+                               unsigned long long* out, std::uint32_t count, cudaStream_t stream) {
+  return cub::DeviceScan::ExclusiveSum(temp, temp_bytes, in, out, static_cast<int>(count), stream);
 }
 
 cudaError_t sort_keys_u64(void* temp, std::size_t& temp_bytes, const unsigned long long* keys_in,

@@ -49,6 +49,12 @@ __device__ inline void contact_terms_at(const TermsDesc& d, std::uint32_t k) {
   d.dv_b[k] = t.imp.dv_b;
 }
 
+/// Whether a and b hold the same bits (a clamp that changed nothing, NaN included).
+__device__ inline bool same_bits(const Vec3& a, const Vec3& b) {
+  return __float_as_uint(a.x) == __float_as_uint(b.x) && __float_as_uint(a.y) == __float_as_uint(b.y) &&
+         __float_as_uint(a.z) == __float_as_uint(b.z);
+}
+
 /// One body's sums over its kept contacts, added in the caller's order from zero, exactly
 /// as World accumulates dx_sum / dv_sum / contact_count.
 struct ContactSums {
@@ -69,13 +75,19 @@ struct ContactSums {
     ++count;
   }
 
-  /// apply_contact_sums on body i's state.
+  /// apply_contact_sums on body i's state, then clamp_velocity when d.clamp. Stores only
+  /// what changed: x and v of a body with kept contacts, v of one the clamp changed.
   __device__ void apply(const ApplyDesc& d, std::uint32_t i) const {
-    Vec3 x = d.x[i];
-    Vec3 v = d.v[i];
-    apply_contact_sums(x, v, dx, dv, count);
-    d.x[i] = x;
-    d.v[i] = v;
+    if (count == 0 && !d.clamp) return;  // apply_contact_sums changes nothing
+    const Vec3 v0 = d.v[i];
+    Vec3 v = v0;
+    if (count != 0) {
+      Vec3 x = d.x[i];
+      apply_contact_sums(x, v, dx, dv, count);
+      d.x[i] = x;
+    }
+    if (d.clamp) v = clamp_velocity(v, d.max_velocity);
+    if (count != 0 || !same_bits(v, v0)) d.v[i] = v;
   }
 };
 

@@ -29,7 +29,7 @@ gpu::SmallStepDesc CudaWorld::Impl::small_desc(const Scene& scene, bool recordin
   s.out_offset = bp_offset.get();
   s.in_count = in_count.get();
   s.in_offset = body_begin.get();
-  s.in_list = keys_in.get();
+  s.in_list = in_list.get();
   s.pair_keys = pair_keys.get();
   s.shift = gpu::key_bits(n);
   s.mid = mid_desc(pair_keys.get());  // the fill writes them in (a, b) order: no sort

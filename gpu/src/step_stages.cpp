@@ -26,6 +26,7 @@ namespace {
 static_assert(sizeof(gpu::DeviceShape) == gpu::footprint::kDeviceShapeBytes, "device_footprint.hpp: DeviceShape");
 static_assert(sizeof(gpu::MidItem) == gpu::footprint::kMidItemBytes, "device_footprint.hpp: MidItem");
 static_assert(sizeof(gpu::DeviceContact) == gpu::footprint::kDeviceContactBytes, "device_footprint.hpp: DeviceContact");
+static_assert(gpu::kIndexShortSegment == gpu::footprint::kIndexShortSegment, "device_footprint.hpp: kIndexShortSegment");
 static_assert(sizeof(gpu::StepStats) == gpu::footprint::kStepStatsBytes, "device_footprint.hpp: StepStats");
 static_assert(sizeof(gpu::MetricsResult) == gpu::footprint::kMetricsResultBytes, "device_footprint.hpp: MetricsResult");
 static_assert(gpu::kMetricsBlocks == gpu::footprint::kMetricsPartials, "device_footprint.hpp: kMetricsBlocks");
@@ -61,8 +62,8 @@ std::vector<BufferBase*> CudaWorld::Impl::all_buffers() {
 
 std::vector<BufferBase*> CudaWorld::Impl::scratch_buffers() {
   return {&bp_count, &bp_offset, &pair_keys, &pair_keys_sorted, &pairs, &confirmed, &items_a, &items_b,
-          &hit,      &dx_a,      &dx_b,      &dv_a,             &dv_b,  &depth0,    &records, &keys_in,
-          &keys_out, &vals_in,   &vals_out,  &body_begin,       &temp,  &in_count};
+          &hit,      &dx_a,      &dx_b,      &dv_a,             &dv_b,  &depth0,    &records, &in_list,
+          &body_begin, &in_count, &index_offsets, &index_rank, &index_entries, &index_long, &start_list, &temp};
 }
 
 void CudaWorld::Impl::launched(cudaError_t e, const char* kernel) {
@@ -145,14 +146,30 @@ gpu::ApplyDesc CudaWorld::Impl::apply_desc() {
   ad.v = v.get();
   ad.w = w.get();
   ad.n = n;
-  ad.body_begin = body_begin.get();
-  ad.entries = vals_out.get();
+  ad.offsets = index_offsets.get();
+  ad.entries = index_entries.get();
   ad.hit = hit.get();
   ad.dx_a = dx_a.get();
   ad.dx_b = dx_b.get();
   ad.dv_a = dv_a.get();
   ad.dv_b = dv_b.get();
   return ad;
+}
+
+gpu::IndexDesc CudaWorld::Impl::index_desc() {
+  gpu::IndexDesc id;
+  id.pairs = pairs.get();
+  id.confirmed = confirmed.get();
+  id.pair_count = counts();
+  id.capacity = icap();
+  id.n = n;
+  id.w = w.get();
+  id.offsets = index_offsets.get();
+  id.rank = index_rank.get();
+  id.entries = index_entries.get();
+  id.long_list = index_long.get();
+  id.long_count = &stats.get()->index_long;
+  return id;
 }
 
 gpu::MetricsDesc CudaWorld::Impl::metrics_desc(const ContactParams& params) {
@@ -182,19 +199,25 @@ void CudaWorld::Impl::prepare() {
   for (BufferBase* b : std::initializer_list<BufferBase*>{&pair_keys, &pair_keys_sorted, &pairs, &confirmed, &hit,
                                                            &dx_a, &dx_b, &dv_a, &dv_b, &depth0, &records})
     b->ensure(pair_cap);
-  for (BufferBase* b : std::initializer_list<BufferBase*>{&keys_in, &keys_out, &vals_in, &vals_out})
-    b->ensure(2 * pair_cap);
   items_a.ensure(list_cap);
   items_b.ensure(list_cap);
-  body_begin.ensure(n1);
-  if (small) in_count.ensure(n1);
+  if (small) {
+    in_list.ensure(pair_cap);
+    body_begin.ensure(n1);
+    in_count.ensure(n1);
+  } else {
+    index_offsets.ensure(n1);
+    index_rank.ensure(pair_cap);
+    index_entries.ensure(pair_cap);
+    index_long.ensure(long_cap());
+    if (any_mesh && level_steps > 0) start_list.ensure(pair_cap);
+  }
   std::size_t a = 0, b = 0, c = 0;
   check(gpu::sort_keys_u64(nullptr, a, pair_keys.get(), pair_keys_sorted.get(), pcap(), 2 * gpu::key_bits(n),
                            stream),
         "cub::DeviceRadixSort::SortKeys (size)");
-  check(gpu::sort_pairs_u32(nullptr, b, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(), 2 * pcap(),
-                            gpu::key_bits(n), stream),
-        "cub::DeviceRadixSort::SortPairs (size)");
+  check(gpu::exclusive_scan_u64(nullptr, b, index_offsets.get(), index_offsets.get(), n + 1, stream),
+        "cub::DeviceScan::ExclusiveSum (size)");
   check(gpu::exclusive_scan_u32(nullptr, c, bp_count.get(), bp_offset.get(), n + 1, stream),
         "cub::DeviceScan::ExclusiveSum (size)");
   temp.ensure(std::max({a, b, c, std::size_t{1}}));
@@ -231,16 +254,24 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
   record_event(2, with_events);
   // 3. Broadphase (SPEC 5.1): pair keys (padding sorts last), sorted, unpacked.
   static_assert(offsetof(gpu::StepStats, counts) ==
-                    offsetof(gpu::StepStats, counters) + sizeof(gpu::StepStats::counters),
-                "counters and counts are contiguous");
-  check(cudaMemsetAsync(counters(), 0, sizeof(gpu::StepStats::counters) + sizeof(gpu::StepStats::counts), stream),
+                        offsetof(gpu::StepStats, counters) + sizeof(gpu::StepStats::counters) &&
+                    offsetof(gpu::StepStats, start_pairs) ==
+                        offsetof(gpu::StepStats, counts) + sizeof(gpu::StepStats::counts) &&
+                    offsetof(gpu::StepStats, index_long) ==
+                        offsetof(gpu::StepStats, start_pairs) + sizeof(gpu::StepStats::start_pairs),
+                "counters, counts, start_pairs and index_long are contiguous");
+  check(cudaMemsetAsync(counters(), 0,
+                        sizeof(gpu::StepStats::counters) + sizeof(gpu::StepStats::counts) +
+                            sizeof(gpu::StepStats::start_pairs) + sizeof(gpu::StepStats::index_long),
+                        stream),
         "cudaMemset step counts");
   // A broadphase that sorts its own keys (`octree`) writes them straight into the sorted
-  // buffer (pair_keys as its scratch), after which the padding stays all ones.
+  // buffer (pair_keys as its scratch); nothing reads past the pairs found. Any other
+  // broadphase's keys are sorted here over the whole buffer: its padding is all ones.
   const bool self_sorts = bp && bp->sorts_pairs();
-  check(cudaMemsetAsync(self_sorts ? pair_keys_sorted.get() : pair_keys.get(), 0xff,
-                        pair_cap * sizeof(unsigned long long), stream),
-        "cudaMemset pair keys");
+  if (!self_sorts)
+    check(cudaMemsetAsync(pair_keys.get(), 0xff, pair_cap * sizeof(unsigned long long), stream),
+          "cudaMemset pair keys");
   if (bp) {
     gpu::PairOutput out;
     out.keys = self_sorts ? pair_keys_sorted.get() : pair_keys.get();
@@ -260,15 +291,23 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
     launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(),
                                 2 * gpu::key_bits(n), stream),
              "cub::DeviceRadixSort::SortKeys");
-  record_event(3, with_events);  // the pairs are unpacked from the sorted keys by mid_start
-  // 4. Midphase + narrow phase (SPEC 5.2-5.3) as per-level work lists.
+  record_event(3, with_events);  // the pairs are unpacked from the sorted keys by mid_classify
+  // 4. Midphase + narrow phase (SPEC 5.2-5.3): classify decides the pairs the set-up
+  // decides (a thread each) and lists the others, whose level steps run as per-level work
+  // lists (none without a mesh shape: every pair is then decided).
   gpu::MidListDesc md = mid_desc(pair_keys_sorted.get());
+  const bool lists_needed = any_mesh && level_steps > 0;
+  if (lists_needed) {
+    md.start_list = start_list.get();
+    md.start_count = &stats.get()->start_pairs;
+  }
+  launched(gpu::launch_mid_classify(md, pair_grid(), stream), "mid_classify");
   gpu::MidItem* lists[2] = {items_a.get(), items_b.get()};
   md.out = lists[0];
   md.out_count = counts() + 1;
   md.out_capacity = lcap();
-  launched(gpu::launch_mid_start(md, warp_grid, stream), "mid_start");
-  for (int i = 0; i + 1 < level_steps; ++i) {
+  if (lists_needed) launched(gpu::launch_mid_start(md, warp_grid, stream), "mid_start");
+  for (int i = 0; lists_needed && i + 1 < level_steps; ++i) {
     md.in = lists[i % 2];
     md.in_count = counts() + 1 + i;
     md.in_capacity = lcap();
@@ -276,7 +315,7 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
     md.out_count = counts() + 2 + i;
     launched(gpu::launch_mid_expand(md, i, warp_grid, stream), "mid_expand");
   }
-  if (level_steps > 0) {
+  if (lists_needed) {
     md.in = lists[(level_steps - 1) % 2];
     md.in_count = counts() + level_steps;
     md.in_capacity = lcap();
@@ -286,27 +325,30 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
     launched(gpu::launch_mid_leaf(md, warp_grid, stream), "mid_leaf");
   }
   record_event(4, with_events);
-  // 5. Response (SPEC 6): body-major index of the confirmed contacts (stable sort by
-  // body keeps (a, b) order per body) over the first icap() pairs (a step with more runs
-  // again: grow_if_needed), `iterations` passes, then the clamp (Eq. 23).
-  const std::uint32_t entries = 2 * icap();
-  launched(gpu::launch_contact_entries(pairs.get(), confirmed.get(), counts(), icap(), n, keys_in.get(),
-                                       vals_in.get(), stream),
-           "contact_entries");
+  // 5. Response (SPEC 6): the contact index (response.cu) of the first icap() pairs (a
+  // step with more runs again: grow_if_needed), `iterations` passes, the clamp (Eq. 23)
+  // fused into the last.
+  const gpu::IndexDesc id = index_desc();
+  check(cudaMemsetAsync(index_offsets.get(), 0, (static_cast<std::size_t>(n) + 1) * sizeof(unsigned long long), stream),
+        "cudaMemset contact index counts");
+  launched(gpu::launch_index_count(id, pair_grid(), stream), "index_count");
   bytes = temp.capacity();
-  launched(gpu::sort_pairs_u32(temp.get(), bytes, keys_in.get(), keys_out.get(), vals_in.get(), vals_out.get(),
-                               entries, gpu::key_bits(n), stream),
-           "cub::DeviceRadixSort::SortPairs");
-  launched(gpu::launch_body_segments(keys_out.get(), entries, n, body_begin.get(), stream), "body_segments");
+  launched(gpu::exclusive_scan_u64(temp.get(), bytes, index_offsets.get(), index_offsets.get(), n + 1, stream),
+           "cub::DeviceScan::ExclusiveSum (contact index)");
+  launched(gpu::launch_index_fill(id, pair_grid(), stream), "index_fill");
+  launched(gpu::launch_index_long(id, std::max(1u, warp_grid / 4), stream), "index_long");
   gpu::TermsDesc td = terms_desc(params);
-  const gpu::ApplyDesc ad = apply_desc();
+  gpu::ApplyDesc ad = apply_desc();
   for (int pass = 0; pass < params.iterations; ++pass) {
     td.depth0 = pass == 0 ? depth0.get() : nullptr;
     td.records = pass == 0 && recording ? records.get() : nullptr;
-    launched(gpu::launch_contact_terms(td, stream), "contact_terms");
+    launched(gpu::launch_contact_terms(td, pair_grid(), stream), "contact_terms");
+    ad.sort_entries = pass == 0 ? 1 : 0;
+    ad.clamp = pass + 1 == params.iterations ? 1 : 0;
+    ad.max_velocity = params.max_velocity;
     launched(gpu::launch_apply_sums(ad, stream), "apply_sums");
   }
-  launched(gpu::launch_clamp(b, params.max_velocity, stream), "clamp");
+  if (params.iterations <= 0) launched(gpu::launch_clamp(b, params.max_velocity, stream), "clamp");
   record_event(5, with_events);
   // 6. Metrics, and everything the host reads, in one place.
   launched(gpu::launch_metrics(metrics_desc(params), stream), "metrics");

@@ -1072,6 +1072,51 @@ TEST_P(CudaOctree, PairsEqualFlatAndStatesEqualCpuOctree) {
             << " pairs)\n";
 }
 
+// The per-stage path's contact index (response.cu): a body's b-side segment of more than
+// gpu::kIndexShortSegment entries is listed and sorted by a block that scans the pairs in
+// order (index_long), the shorter ones by the first apply pass. A dynamic plate pressed
+// onto a grid of 144 cubes on the floor: it is the last body, so it is the b of every
+// (cube, plate) pair and its segment is long; four passes read the sorted segments again.
+TEST(CudaContactIndex, LongSegmentsKeepTheCpuBits) {
+  REQUIRE_CUDA_DEVICE();
+  constexpr int kSide = 12;
+  std::string positions;
+  for (int i = 0; i < kSide; ++i)
+    for (int j = 0; j < kSide; ++j)
+      positions += fmt::format("{}[{}, 0.05, {}]", positions.empty() ? "" : ", ", -0.66 + 0.12 * i, -0.66 + 0.12 * j);
+  const std::string text = fmt::format(
+      R"({{"name": "plate-on-cubes", "domain": {{"min": [-1, 0, -1], "max": [1, 1, 1]}}, "dt": 0.001,
+          "frames": 100, "walls": "floor", "response": {{"iterations": 4}},
+          "groups": [{{"name": "cubes", "shape": {{"box": [0.05, 0.05, 0.05]}}, "count": {}, "mass": 1.0,
+                       "positions": [{}]}},
+                     {{"name": "plate", "shape": {{"box": [0.8, 0.02, 0.8]}}, "count": 1, "mass": 5.0,
+                       "positions": [[0.0, 0.118, 0.0]]}}]}})",
+      kSide * kSide, positions);
+  const auto model = build_model(parse_scene(text, "plate-on-cubes"));
+  const auto plate = static_cast<std::uint32_t>(model->initial.size() - 1);  // walls first, then the groups
+  auto cpu = cpu_flat(model);
+  CudaWorld gpu(model, "flat", path_settings("graph"));
+  ASSERT_EQ(gpu.step_path(), "graph");
+  for (int f = 1; f <= 100; ++f) {
+    const bool rec = f % 10 == 1;
+    cpu->set_recording(rec);
+    gpu.set_recording(rec);
+    const FrameMetrics mc = cpu->step();
+    const FrameMetrics mg = gpu.step();
+    const std::string what = fmt::format("plate-on-cubes frame {}", f);
+    if (f == 1) {
+      std::size_t as_b = 0;
+      for (const ContactRecord& c : cpu->contacts()) as_b += c.pair.b == plate ? 1u : 0u;
+      ASSERT_GT(as_b, gpu::kIndexShortSegment) << what << ": the plate's segment must be a long one";
+      ASSERT_NE(model->initial.w[plate], 0.0f) << what << ": the plate must be dynamic";
+    }
+    ASSERT_EQ(cpu->state_hash(), gpu.state_hash()) << what << ": " << first_difference(cpu->state(), gpu.state());
+    expect_cpu_cuda_counts(mc, mg, what);
+    if (rec) expect_same_record(cpu->record(), gpu.record(), what);
+    if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
+  }
+}
+
 // Issue 8, item 6: the equality tests at scale. The CPU side runs live with its loose
 // octree (flat would be O(n^2) per step); the device `octree` is the one tested equal to
 // `flat` above. Every step: equal state bits and counts; every 10th frame: equal pairs,
