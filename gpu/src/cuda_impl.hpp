@@ -179,12 +179,11 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<Vec3> dv_b{"contact dv_b"};
   gpu::DeviceBuffer<float> depth0{"contact depths"};
   gpu::DeviceBuffer<gpu::DeviceContact> records{"contact records"};
-  // The per-stage path's contact index (response.cu, gpu::IndexDesc) and midphase start list.
+  // The per-stage path's contact index (response.cu, gpu::IndexDesc).
   gpu::DeviceBuffer<unsigned long long> index_offsets{"contact index offsets"};
   gpu::DeviceBuffer<std::uint32_t> index_rank{"contact index ranks"};
   gpu::DeviceBuffer<std::uint32_t> index_entries{"contact index entries"};
   gpu::DeviceBuffer<std::uint32_t> index_long{"contact index long segments"};
-  gpu::DeviceBuffer<std::uint32_t> start_list{"midphase start list"};
   // The small path's in-lists and their offsets.
   gpu::DeviceBuffer<std::uint32_t> in_list{"small-step in-lists"};
   gpu::DeviceBuffer<std::uint32_t> body_begin{"small-step in-list offsets"};
@@ -220,7 +219,7 @@ struct CudaWorld::Impl {
   std::size_t long_cap() const { return pair_cap / (gpu::kIndexShortSegment + 1) + 1; }
   /// The contact index's descriptor (IndexDesc) over the first icap() pairs.
   gpu::IndexDesc index_desc();
-  /// Blocks of the grid-stride kernels over the live pairs (classify, contact terms): two
+  /// Blocks of the grid-stride kernels over the live pairs (decide, contact terms): two
   /// per warp_grid block (8 per SM), fewer when the pair buffer is smaller. The live count
   /// is known on the device only, and is often far below pair_cap.
   unsigned pair_grid() const { return std::min(gpu::grid_for(pair_cap), 2 * warp_grid); }

@@ -106,11 +106,10 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
                                buf(kMetricsPartials, kMetricsResultBytes);
   // prepare() at the first capacities: bp_count, bp_offset, body_begin (n + 1 each), the
   // contact index's offsets (n + 1, 8 bytes); per candidate pair: pair keys (2), pairs,
-  // confirmed, hit, dx_a, dx_b, dv_a, dv_b, depth0, records, the midphase start list, the
-  // contact index's ranks and entries (or the small path's in-lists), its long-segment
-  // list (pcap / (kIndexShortSegment + 1) + 1 entries of 4 bytes, counted as a byte per
-  // pair plus 4: linear in pcap); the two work lists; CUB's temporary storage (the largest
-  // of its uses).
+  // confirmed, hit, dx_a, dx_b, dv_a, dv_b, depth0, records, the contact index's ranks
+  // and entries (the small path holds its in-lists instead), its long-segment list (pcap /
+  // (kIndexShortSegment + 1) + 1 entries of 4 bytes, counted as a byte per pair plus 4:
+  // linear in pcap); the two work lists; CUB's temporary storage (the largest of its uses).
   static_assert(kIndexShortSegment + 1 >= sizeof(std::uint32_t), "a byte per pair covers the long-segment list");
   const std::uint64_t pcap = initial_pair_capacity(n);
   const std::uint64_t lcap = initial_list_capacity(n);
@@ -119,7 +118,7 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
                              2 * buf(pcap, sizeof(unsigned long long)) + buf(pcap, sizeof(Pair)) +
                              2 * buf(pcap, sizeof(std::uint8_t)) + 4 * buf(pcap, sizeof(Vec3)) +
                              buf(pcap, sizeof(float)) + buf(pcap, kDeviceContactBytes) +
-                             3 * buf(pcap, sizeof(std::uint32_t)) +
+                             2 * buf(pcap, sizeof(std::uint32_t)) +
                              buf(pcap, 1) + sizeof(std::uint32_t) +
                              2 * buf(lcap, kMidItemBytes) + buf(temp, 1);
   // The fused small step's column counts (n + 1), allocated when it runs (counted up to 32768

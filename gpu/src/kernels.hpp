@@ -172,13 +172,7 @@ struct MidListDesc {
   int pair_shift = 32;  ///< start: keys are (a << pair_shift) | b (PairOutput::shift)
   const std::uint32_t* pair_count = nullptr;  ///< device: pairs found (live = min with capacity)
   std::uint32_t pair_capacity = 0;
-  std::uint8_t* confirmed = nullptr;        ///< out: 1 = contact confirmed (start writes every pair)
-  /// classify: out, start: in (null: start takes every pair itself): the pairs classify
-  /// left to start's warps (pair_capacity entries; any order). Needed whenever a pair can
-  /// be left: a mesh shape and at least one level step (else every pair is decided:
-  /// aabb-only, box-box, or PairKind::Exhaustive without levels).
-  std::uint32_t* start_list = nullptr;
-  std::uint32_t* start_count = nullptr;  ///< device: entries of start_list (classify adds; zeroed by the step)
+  std::uint8_t* confirmed = nullptr;        ///< out: 1 = contact confirmed (start or decide writes every pair)
   unsigned long long* counters = nullptr;   ///< out (added): box tests, leaf box pairs, vertex tests
   int steps = 0;                            ///< level steps of the list (the last one: leaves)
   const MidItem* in = nullptr;              ///< expand / leaf: this step's items
@@ -282,8 +276,7 @@ struct StepStats {
   MetricsResult metrics;
   unsigned long long counters[4];  ///< box tests, (unused), vertex tests, broadphase exact tests
   std::uint32_t counts[hd::kMidphaseMaxLevels + 1];  ///< [0] pairs found, [1 + i] items of step i
-  std::uint32_t start_pairs;  ///< pairs mid_classify left to mid_start (the per-stage path)
-  std::uint32_t index_long;   ///< bodies of the contact index's long segments (the per-stage path)
+  std::uint32_t index_long;  ///< bodies of the contact index's long segments (the per-stage path)
 };
 
 struct MetricsDesc {
@@ -428,14 +421,12 @@ cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint3
 
 // ---- broadphase_octree.cu ------------------------------------------------------------
 // ---- midphase.cu -----------------------------------------------------------------------
-/// Classify (before start, d.start_list set): per live pair (one thread each, up to
-/// d.pair_capacity) pairs[k], confirmed[k] for the pairs the set-up decides, the others
-/// listed in d.start_list (*d.start_count, zeroed by the caller).
-/// `grid` blocks of kBlockSize threads, grid-stride over the pairs.
-cudaError_t launch_mid_classify(const MidListDesc& d, unsigned grid, cudaStream_t stream);
-/// Start: the step 0 items of mesh pairs into d.out, one warp per pair (`grid` blocks of
-/// kBlockSize threads, grid-stride): of every live pair, with confirmed[k] for the decided
-/// ones (d.start_list null), or of the pairs classify listed (d.start_list set).
+/// Decide (the per-stage path when no pair can need a level step: no mesh shape or no
+/// level): per live pair, one thread each, pairs[k] and confirmed[k], the answers start
+/// gives. `grid` blocks of kBlockSize threads, grid-stride over the pairs.
+cudaError_t launch_mid_decide(const MidListDesc& d, unsigned grid, cudaStream_t stream);
+/// Start: per live pair (one warp each) confirmed[k] for decided pairs, the step 0 items
+/// of mesh pairs into d.out. `grid` blocks of kBlockSize threads (grid-stride).
 cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t stream);
 /// Expand: the items of step `step` (d.in) to those of step + 1 (d.out).
 cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cudaStream_t stream);

@@ -11,15 +11,11 @@ namespace {
 // resident (66 without the bound: 3, and the 4th ran as a second wave; 28 bytes spilled).
 __global__ void __launch_bounds__(kBlockSize, 4) mid_start_kernel(MidListDesc d) { mid::mid_start_items(d); }
 
-__global__ void __launch_bounds__(kBlockSize, 4) mid_start_listed_kernel(MidListDesc d) {
-  mid::mid_start_listed_items(d);
-}
-
-__global__ void mid_classify_kernel(MidListDesc d) {
+__global__ void mid_decide_kernel(MidListDesc d) {
   const std::uint32_t stride = gridDim.x * blockDim.x;
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
   for (std::uint32_t k0 = (blockIdx.x * blockDim.x + threadIdx.x) & ~31u; k0 < np; k0 += stride)
-    mid::mid_classify_warp(d, k0);
+    mid::mid_decide_warp(d, k0);
 }
 
 __global__ void mid_expand_kernel(MidListDesc d, int step) { mid::mid_expand_items(d, step); }
@@ -41,15 +37,14 @@ __global__ void __launch_bounds__(kBlockSize, 4) mid_leaf_kernel(MidListDesc d) 
 
 }  // namespace
 
-cudaError_t launch_mid_classify(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
+cudaError_t launch_mid_decide(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
   if (d.pair_capacity == 0) return cudaSuccess;
-  mid_classify_kernel<<<grid, kBlockSize, 0, stream>>>(d);
+  mid_decide_kernel<<<grid, kBlockSize, 0, stream>>>(d);
   return cudaGetLastError();
 }
 
 cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
-  if (d.start_list) mid_start_listed_kernel<<<grid, kBlockSize, 0, stream>>>(d);
-  else mid_start_kernel<<<grid, kBlockSize, 0, stream>>>(d);
+  mid_start_kernel<<<grid, kBlockSize, 0, stream>>>(d);
   return cudaGetLastError();
 }
 

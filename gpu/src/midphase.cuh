@@ -6,10 +6,9 @@
 //   confirm_contact runs, decides aabb-only, box-box and early rejections (static-static
 //   pairs are skipped as in World::step); for a mesh pair the warp tests every cell pair
 //   of step 0 (levels la[0] x lb[0], or A's cells against the box) and appends the
-//   overlapping ones (pair, cell of A, cell of B) to the first list. The per-stage path
-//   splits it in two: classify (one thread per pair) decides what the set-up decides and
-//   lists the other pairs, and start_listed runs step 0 of the listed pairs, a warp each
-//   (a scene of boxes then spends a thread per pair, not a warp);
+//   overlapping ones (pair, cell of A, cell of B) to the first list. When no pair can
+//   need a level step (no mesh shape, or no level), the per-stage path runs decide
+//   instead: the same answers, a thread per pair (boxes spend a thread per pair, not a warp);
 // - expand (one warp per item of step i): the descendants at step i + 1 of both cells
 //   (hd::descendants), tested with the same boxes (hd::moved_grown), appended to the next
 //   list; the last expand step of the graph path (mid_expand_last_kernel) runs the
@@ -68,7 +67,7 @@
 // with hd::clamped_level, so no PlacedView is chosen by reference and no level array is
 // indexed at a run-time step: the per-item set-up stays in registers (no local memory).
 // This header holds the per-item device code; midphase.cu wraps it in its kernels
-// (mid_classify, mid_start, mid_expand, mid_leaf) and the fused small-scene step (small_step.cu) calls the
+// (mid_decide, mid_start, mid_expand, mid_leaf) and the fused small-scene step (small_step.cu) calls the
 // same functions between grid-wide barriers. Every loop over pairs is a grid-stride loop
 // over whole warps, every loop over expand items a contiguous share per warp (warp_range),
 // over leaf items a stride of the grid's warps; the item index and its bounds are
@@ -689,44 +688,22 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
   flush(d, t);
 }
 
-/// mid_classify's work (the per-stage path's first midphase kernel): one thread per live
-/// candidate pair k (whole warps; `k0` the warp's first pair, a multiple of 32): pairs[k]
-/// from its sorted key; a pair decided_alone gets confirmed[k] at once (the answer
-/// mid_start_items' lane 0 would write); every other pair gets confirmed[k] = 0 and its k
-/// appended to d.start_list (warp-aggregated, in an order that varies run to run) for
-/// mid_start_listed. A box-box pair thus takes one thread, not a warp.
-__device__ inline void mid_classify_warp(const MidListDesc& d, std::uint32_t k0) {
+/// mid_decide's work (the per-stage path's midphase when no pair can need a level step: no
+/// mesh shape, or no level): one thread per live candidate pair k (whole warps; `k0` the
+/// warp's first pair, a multiple of 32): pairs[k] from its sorted key and confirmed[k], the
+/// answer mid_start_items' lane 0 writes for a pair decided_alone; any other pair gets
+/// hd::exhaustive_contact, the answer every level list gives. A box pair thus takes one
+/// thread, not a warp.
+__device__ inline void mid_decide_warp(const MidListDesc& d, std::uint32_t k0) {
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
-  if (k0 >= np) return;  // warp-uniform
   const std::uint32_t k = k0 + lane_id();
-  bool left = false;
-  if (k < np) {
-    const Pair p = unpack_pair(d, d.pair_keys[k]);
-    d.pairs[k] = p;
-    const PairContext c = context(d, k, p);
-    bool hit = false;
-    left = !decided_alone(c, hit);
-    d.confirmed[k] = hit ? 1 : 0;
-  }
-  const unsigned mask = __ballot_sync(kFull, left);
-  if (mask == 0) return;
-  std::uint32_t base = 0;
-  if (lane_id() == 0) base = atomicAdd(d.start_count, static_cast<std::uint32_t>(__popc(mask)));
-  base = __shfl_sync(kFull, base, 0);
-  if (left) d.start_list[base + static_cast<std::uint32_t>(__popc(mask & ((1u << lane_id()) - 1u)))] = k;
-}
-
-/// mid_start_listed's work: step 0 of each pair mid_classify listed, one warp per pair
-/// (grid-stride); pairs[k] and confirmed[k] are mid_classify's.
-__device__ inline void mid_start_listed_items(const MidListDesc& d) {
-  const std::uint32_t count = *d.start_count;
-  Tally t;
-  for (std::uint32_t j = global_warp(); j < count; j += warp_count()) {
-    const std::uint32_t k = d.start_list[j];
-    const PairContext c = context(d, k, d.pairs[k]);
-    first_step(d, c, k, t);
-  }
-  flush(d, t);
+  if (k >= np) return;
+  const Pair p = unpack_pair(d, d.pair_keys[k]);
+  d.pairs[k] = p;
+  const PairContext c = context(d, k, p);
+  bool hit = false;
+  if (!decided_alone(c, hit)) hit = hd::exhaustive_contact(c.a, c.b, c.theta);
+  d.confirmed[k] = hit ? 1 : 0;
 }
 
 /// Whether the last expand step runs its leaves itself (test_cells' `leaves`): when the

@@ -63,7 +63,7 @@ std::vector<BufferBase*> CudaWorld::Impl::all_buffers() {
 std::vector<BufferBase*> CudaWorld::Impl::scratch_buffers() {
   return {&bp_count, &bp_offset, &pair_keys, &pair_keys_sorted, &pairs, &confirmed, &items_a, &items_b,
           &hit,      &dx_a,      &dx_b,      &dv_a,             &dv_b,  &depth0,    &records, &in_list,
-          &body_begin, &in_count, &index_offsets, &index_rank, &index_entries, &index_long, &start_list, &temp};
+          &body_begin, &in_count, &index_offsets, &index_rank, &index_entries, &index_long, &temp};
 }
 
 void CudaWorld::Impl::launched(cudaError_t e, const char* kernel) {
@@ -210,7 +210,6 @@ void CudaWorld::Impl::prepare() {
     index_rank.ensure(pair_cap);
     index_entries.ensure(pair_cap);
     index_long.ensure(long_cap());
-    if (any_mesh && level_steps > 0) start_list.ensure(pair_cap);
   }
   std::size_t a = 0, b = 0, c = 0;
   check(gpu::sort_keys_u64(nullptr, a, pair_keys.get(), pair_keys_sorted.get(), pcap(), 2 * gpu::key_bits(n),
@@ -255,14 +254,12 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
   // 3. Broadphase (SPEC 5.1): pair keys (padding sorts last), sorted, unpacked.
   static_assert(offsetof(gpu::StepStats, counts) ==
                         offsetof(gpu::StepStats, counters) + sizeof(gpu::StepStats::counters) &&
-                    offsetof(gpu::StepStats, start_pairs) ==
-                        offsetof(gpu::StepStats, counts) + sizeof(gpu::StepStats::counts) &&
                     offsetof(gpu::StepStats, index_long) ==
-                        offsetof(gpu::StepStats, start_pairs) + sizeof(gpu::StepStats::start_pairs),
-                "counters, counts, start_pairs and index_long are contiguous");
+                        offsetof(gpu::StepStats, counts) + sizeof(gpu::StepStats::counts),
+                "counters, counts and index_long are contiguous");
   check(cudaMemsetAsync(counters(), 0,
                         sizeof(gpu::StepStats::counters) + sizeof(gpu::StepStats::counts) +
-                            sizeof(gpu::StepStats::start_pairs) + sizeof(gpu::StepStats::index_long),
+                            sizeof(gpu::StepStats::index_long),
                         stream),
         "cudaMemset step counts");
   // A broadphase that sorts its own keys (`octree`) writes them straight into the sorted
@@ -291,22 +288,17 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
     launched(gpu::sort_keys_u64(temp.get(), bytes, pair_keys.get(), pair_keys_sorted.get(), pcap(),
                                 2 * gpu::key_bits(n), stream),
              "cub::DeviceRadixSort::SortKeys");
-  record_event(3, with_events);  // the pairs are unpacked from the sorted keys by mid_classify
-  // 4. Midphase + narrow phase (SPEC 5.2-5.3): classify decides the pairs the set-up
-  // decides (a thread each) and lists the others, whose level steps run as per-level work
-  // lists (none without a mesh shape: every pair is then decided).
+  record_event(3, with_events);  // the pairs are unpacked from the sorted keys by mid_start / mid_decide
+  // 4. Midphase + narrow phase (SPEC 5.2-5.3) as per-level work lists, or, when no pair
+  // can need a level step (no mesh shape, or no level), decide: a thread per pair.
   gpu::MidListDesc md = mid_desc(pair_keys_sorted.get());
   const bool lists_needed = any_mesh && level_steps > 0;
-  if (lists_needed) {
-    md.start_list = start_list.get();
-    md.start_count = &stats.get()->start_pairs;
-  }
-  launched(gpu::launch_mid_classify(md, pair_grid(), stream), "mid_classify");
   gpu::MidItem* lists[2] = {items_a.get(), items_b.get()};
   md.out = lists[0];
   md.out_count = counts() + 1;
   md.out_capacity = lcap();
   if (lists_needed) launched(gpu::launch_mid_start(md, warp_grid, stream), "mid_start");
+  else launched(gpu::launch_mid_decide(md, pair_grid(), stream), "mid_decide");
   for (int i = 0; lists_needed && i + 1 < level_steps; ++i) {
     md.in = lists[i % 2];
     md.in_count = counts() + 1 + i;
