@@ -646,17 +646,20 @@ __device__ inline Pair unpack_pair(const MidListDesc& d, unsigned long long key)
   return p;
 }
 
-/// Whether pair context c is decided without a level step (static-static, hd::setup_pair's
-/// PairKind::Decided, or PairKind::Exhaustive); `hit` is then the answer (one thread).
-__device__ inline bool decided_alone(const PairContext& c, bool& hit) {
-  if (!c.static_static && c.s.kind != hd::PairKind::Decided && c.s.kind != hd::PairKind::Exhaustive) return false;
-  hit = false;
-  if (!c.static_static)
-    hit = c.s.kind == hd::PairKind::Decided ? c.s.result : hd::exhaustive_contact(c.a, c.b, c.theta);
-  return true;
+/// Whether pair context c is decided without a level step: static-static, hd::setup_pair's
+/// PairKind::Decided, or PairKind::Exhaustive.
+__device__ inline bool decided_alone(const PairContext& c) {
+  return c.static_static || c.s.kind == hd::PairKind::Decided || c.s.kind == hd::PairKind::Exhaustive;
 }
 
-/// Step 0 of a pair that decided_alone left to the warp: the cell pairs of levels la[0] x
+/// The answer of a pair decided_alone (one thread): false for static-static, the set-up's
+/// result, or hd::exhaustive_contact (also the answer of any other pair, by every level list).
+__device__ inline bool alone_answer(const PairContext& c) {
+  if (c.static_static) return false;
+  return c.s.kind == hd::PairKind::Decided ? c.s.result : hd::exhaustive_contact(c.a, c.b, c.theta);
+}
+
+/// Step 0 of a pair not decided_alone, by the warp: the cell pairs of levels la[0] x
 /// lb[0] (or A's cells against the box), the overlapping ones appended (every lane calls it).
 __device__ inline void first_step(const MidListDesc& d, const PairContext& c, std::uint32_t k, Tally& t) {
   const hd::OctreeView& A = c.a.octree;
@@ -677,9 +680,8 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
     const Pair p = unpack_pair(d, d.pair_keys[k]);
     if (lane_id() == 0) d.pairs[k] = p;
     const PairContext c = context(d, k, p);
-    bool hit = false;
-    if (decided_alone(c, hit)) {
-      if (lane_id() == 0) d.confirmed[k] = hit ? 1 : 0;
+    if (decided_alone(c)) {
+      if (lane_id() == 0) d.confirmed[k] = alone_answer(c) ? 1 : 0;
       continue;
     }
     if (lane_id() == 0) d.confirmed[k] = 0;
@@ -691,8 +693,8 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
 /// mid_decide's work (the per-stage path's midphase when no pair can need a level step: no
 /// mesh shape, or no level): one thread per live candidate pair k (whole warps; `k0` the
 /// warp's first pair, a multiple of 32): pairs[k] from its sorted key and confirmed[k], the
-/// answer mid_start_items' lane 0 writes for a pair decided_alone; any other pair gets
-/// hd::exhaustive_contact, the answer every level list gives. A box pair thus takes one
+/// answer mid_start_items' lane 0 writes for a pair decided_alone (alone_answer, which any
+/// other pair gets too). A box pair thus takes one
 /// thread, not a warp.
 __device__ inline void mid_decide_warp(const MidListDesc& d, std::uint32_t k0) {
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
@@ -701,9 +703,7 @@ __device__ inline void mid_decide_warp(const MidListDesc& d, std::uint32_t k0) {
   const Pair p = unpack_pair(d, d.pair_keys[k]);
   d.pairs[k] = p;
   const PairContext c = context(d, k, p);
-  bool hit = false;
-  if (!decided_alone(c, hit)) hit = hd::exhaustive_contact(c.a, c.b, c.theta);
-  d.confirmed[k] = hit ? 1 : 0;
+  d.confirmed[k] = alone_answer(c) ? 1 : 0;
 }
 
 /// Whether the last expand step runs its leaves itself (test_cells' `leaves`): when the
