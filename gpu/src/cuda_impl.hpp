@@ -184,6 +184,13 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<std::uint32_t> index_rank{"contact index ranks"};
   gpu::DeviceBuffer<std::uint32_t> index_entries{"contact index entries"};
   gpu::DeviceBuffer<std::uint32_t> index_long{"contact index long segments"};
+  // The midphase's witness cache (gpu::WitnessDesc): this step's witnesses, the last
+  // step's keys and witnesses, per body the start of its run of keys, their count.
+  gpu::DeviceBuffer<unsigned long long> witness{"midphase witnesses"};
+  gpu::DeviceBuffer<unsigned long long> prev_keys{"midphase kept pair keys"};
+  gpu::DeviceBuffer<unsigned long long> prev_witness{"midphase kept witnesses"};
+  gpu::DeviceBuffer<std::uint32_t> prev_begin{"midphase kept key runs"};
+  gpu::DeviceBuffer<std::uint32_t> prev_count{"midphase kept key count"};
   // The small path's in-lists and their offsets.
   gpu::DeviceBuffer<std::uint32_t> in_list{"small-step in-lists"};
   gpu::DeviceBuffer<std::uint32_t> body_begin{"small-step in-list offsets"};

@@ -158,6 +158,26 @@ OCTOCD_HD inline void leaf_ranges(std::uint32_t item, std::uint32_t a_vertices, 
   a1 = a_vertices - a0 < kLeafAPart ? a_vertices : a0 + kLeafAPart;
 }
 
+/// The midphase's witness cache (midphase.cuh, "Witnesses"): per candidate pair the vertex
+/// pair that confirmed it, kept from one step to the next. Null `witness`: off.
+struct WitnessDesc {
+  /// Out, per pair k of this step: the confirming vertex pair as (A's vertex << 32) | B's
+  /// vertex (indices into each shape's octree vertices, A and B in hd::setup_pair's order;
+  /// B's is 0 for mesh-box), or kNoWitness (not confirmed by a vertex test, or the pair is
+  /// decided alone).
+  unsigned long long* witness = nullptr;
+  /// The last step's sorted pair keys and witnesses (prev_count entries; keep_witness copies
+  /// them at the end of a step) and, per body a, the first of those keys with a as its first
+  /// body (stale for a body with none: such an entry points at keys of other bodies).
+  unsigned long long* prev_keys = nullptr;
+  unsigned long long* prev_witness = nullptr;
+  std::uint32_t* prev_begin = nullptr;
+  std::uint32_t* prev_count = nullptr;  ///< device word
+};
+
+/// WitnessDesc::witness of a pair with none.
+constexpr unsigned long long kNoWitness = ~0ull;
+
 /// One launch of the midphase work lists (midphase.cu): start (pairs -> step 0 items),
 /// expand (step i items -> step i + 1 items) or leaf (last step items -> confirmed).
 struct MidListDesc {
@@ -196,6 +216,10 @@ struct MidListDesc {
   /// the early exit off the same counts too (they count the whole filtered ranges either
   /// way). 1 on every path; the small path's lean kernel compiles it as 0.
   int tile_filter = 1;
+  /// The witness cache (WitnessDesc; on with the early exit, on meshes with levels): a pair
+  /// that needs a level step is first tested at the vertex pair that confirmed it in the
+  /// last step; when that pair is still within theta the pair is confirmed without a descent.
+  WitnessDesc wit;
 };
 
 /// One contact of the first response pass, as the host's ContactRecord wants it.
@@ -432,6 +456,9 @@ cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t s
 cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cudaStream_t stream);
 /// Leaf: the narrow phase of the last step's items (d.in); sets confirmed[k] = 1 on a hit.
 cudaError_t launch_mid_leaf(const MidListDesc& d, unsigned grid, cudaStream_t stream);
+/// Keep: this step's sorted keys and witnesses for the next step's start (d.wit; nothing
+/// when the witness cache is off), after the leaves. `grid` blocks, grid-stride over the pairs.
+cudaError_t launch_mid_keep(const MidListDesc& d, unsigned grid, cudaStream_t stream);
 
 // ---- response.cu -----------------------------------------------------------------------
 /// Entries of a body's b-side segment up to which apply_sums' first pass sorts it (insertion

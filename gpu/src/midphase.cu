@@ -9,7 +9,7 @@ namespace {
 
 // The grid is 4 blocks per SM (cuda_world.cpp, warp_grid): at 64 registers all 4 are
 // resident (66 without the bound: 3, and the 4th ran as a second wave; 28 bytes spilled).
-__global__ void __launch_bounds__(kBlockSize, 4) mid_start_kernel(MidListDesc d) { mid::mid_start_items(d); }
+__global__ void __launch_bounds__(kBlockSize, 4) mid_start_kernel(MidListDesc d) { mid::mid_start_items<true>(d); }
 
 __global__ void mid_decide_kernel(MidListDesc d) {
   const std::uint32_t stride = gridDim.x * blockDim.x;
@@ -23,7 +23,7 @@ __global__ void mid_expand_kernel(MidListDesc d, int step) { mid::mid_expand_ite
 // The last expand step, which may run its items' leaves itself (mid::fuse_leaves); 128
 // registers (118 before the early exit and the tile culling): 2 of the grid's 4 blocks per SM at a time
 // (bounding it to 3 spilled > 200 bytes).
-__global__ void mid_expand_last_kernel(MidListDesc d, int step) {
+__global__ void __launch_bounds__(kBlockSize, 2) mid_expand_last_kernel(MidListDesc d, int step) {
   __shared__ mid::LeafTiles tiles;
   mid::mid_expand_items(d, step, &tiles);
 }
@@ -32,10 +32,24 @@ __global__ void mid_expand_last_kernel(MidListDesc d, int step) {
 // tile culling, 4 before; 68 without the bound).
 __global__ void __launch_bounds__(kBlockSize, 4) mid_leaf_kernel(MidListDesc d) {
   __shared__ mid::LeafTiles tiles;
-  mid::mid_leaf_items(d, tiles);
+  mid::mid_leaf_items<true>(d, tiles);
+}
+
+// The witness cache's copy of this step's keys and witnesses (grid-stride, a thread per pair).
+__global__ void mid_keep_kernel(MidListDesc d) {
+  const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
+  const std::uint32_t tid = blockIdx.x * blockDim.x + threadIdx.x;
+  for (std::uint32_t k = tid; k < np; k += gridDim.x * blockDim.x) mid::keep_witness(d, k);
+  if (tid == 0) mid::keep_witness_count(d);
 }
 
 }  // namespace
+
+cudaError_t launch_mid_keep(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
+  if (d.wit.witness == nullptr || d.pair_capacity == 0) return cudaSuccess;
+  mid_keep_kernel<<<grid, kBlockSize, 0, stream>>>(d);
+  return cudaGetLastError();
+}
 
 cudaError_t launch_mid_decide(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
   if (d.pair_capacity == 0) return cudaSuccess;

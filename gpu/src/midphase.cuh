@@ -62,6 +62,18 @@
 // tested and not culled, a mesh-box leaf's cell vertices), each <= the figure with the exit
 // off on the same state (box tests and box pairs > 0 exactly when they are), and dependent
 // on timing (run to run, grid, path).
+// Witnesses (MidListDesc::wit; the per-stage path with the early exit, for meshes with
+// levels; the fused small step keeps none): a leaf that
+// confirms pair k stores the vertex pair it found (A's vertex, B's vertex: indices into the
+// shapes' octree vertices; the tiles keep each staged vertex's index) as witness[k]; at the
+// end of the step keep_witness copies the sorted keys and witnesses; the next step's start
+// looks pair k's key up among them (prev_begin[a]: the run of a's pairs) and tests that
+// vertex pair first, with the vertex test of the leaves (hd::vertex_close or
+// vertex_box_close on hd::world_vertex). A pair within theta there is confirmed with no
+// descent: the answer of the descent, which confirms exactly when some vertex pair passes
+// that test (its pruning is conservative, midphase_hd.hpp). Which witness a pair keeps
+// (several leaves may confirm it) depends on timing; the answers do not. Counts: a
+// witness tested counts as one vertex test.
 // Each warp sums its counts in registers (Tally) and adds them once per launch.
 // Set-up: context() orders the pair (mesh first) on body indices and reads a step's levels
 // with hd::clamped_level, so no PlacedView is chosen by reference and no level array is
@@ -254,11 +266,13 @@ __device__ inline std::uint32_t count_inside(const Vec3* v, const Aabb* blocks, 
 }
 
 /// Appends to tile[fill ..] the world positions of the vertices of v[begin, end) inside
-/// `box`, in order, from vertex block `pos` on (blocks whose box misses `box` skipped, the
-/// lanes test a block's 32 vertices at once) until the blocks end or a further 32 might
-/// not fit; advances pos (a block index) and fill (warp-uniform).
+/// `box`, in order, and to ids[fill ..] their indices (ids may be null), from vertex block `pos` on (blocks
+/// whose box misses `box` skipped, the lanes test a block's 32 vertices at once) until the
+/// blocks end or a further 32 might not fit; advances pos (a block index) and fill
+/// (warp-uniform).
 __device__ inline void stage_tile(const Vec3* v, const Aabb* blocks, std::uint32_t begin, std::uint32_t end,
-                                  const Aabb& box, Vec3 position, Vec3* tile, std::uint32_t& pos, std::uint32_t& fill) {
+                                  const Aabb& box, Vec3 position, Vec3* tile, std::uint32_t* ids, std::uint32_t& pos,
+                                  std::uint32_t& fill) {
   const std::uint32_t lane = lane_id();
   const std::uint32_t g1 = block_end(end);
   while (pos < g1 && fill + 32 <= kLeafTile) {
@@ -273,8 +287,11 @@ __device__ inline void stage_tile(const Vec3* v, const Aabb* blocks, std::uint32
       m &= m - 1u;
       std::uint32_t j;
       const unsigned mask = block_inside(v, g, begin, end, box, j);
-      if ((mask >> lane) & 1u)
-        tile[fill + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)))] = hd::world_vertex(v[j], position);
+      if ((mask >> lane) & 1u) {
+        const std::uint32_t at = fill + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u)));
+        tile[at] = hd::world_vertex(v[j], position);
+        if (ids != nullptr) ids[at] = j;
+      }
       fill += static_cast<std::uint32_t>(__popc(mask));
     }
     pos = next;
@@ -295,6 +312,13 @@ __device__ inline bool confirmed_now(const MidListDesc& d, std::uint32_t k) {
 /// rest of its work can be skipped (warp-uniform: one load by lane 0); false with it off.
 __device__ inline bool skip_confirmed(const MidListDesc& d, std::uint32_t k) {
   return d.early_exit != 0 && confirmed_now(d, k);
+}
+
+/// Confirms pair k (one thread), found by the vertex pair `witness` (WitnessDesc::witness),
+/// kept when the witness cache is on.
+__device__ inline void confirm(const MidListDesc& d, std::uint32_t k, unsigned long long witness) {
+  d.confirmed[k] = 1;
+  if (d.wit.witness != nullptr) d.wit.witness[k] = witness;
 }
 
 /// Whether some vertex of tile_a[0, na) and some vertex of tile_b[0, nb) are closer than
@@ -334,6 +358,31 @@ __device__ inline bool tiles_close(const Vec3* tile_a, std::uint32_t na, const V
     }
   }
   return found;
+}
+
+/// The witness of two tiles that tiles_close found close (the whole warp; warp-uniform):
+/// the vertex ids (ids_a, ids_b: the staged vertices' indices) of the first close pair in
+/// B's tile order, then A's. Run once per confirming tile pair, so the scan of tiles_close
+/// keeps no positions.
+__device__ inline unsigned long long tiles_witness(const Vec3* tile_a, const std::uint32_t* ids_a, std::uint32_t na,
+                                                   const Vec3* tile_b, const std::uint32_t* ids_b, std::uint32_t nb,
+                                                   float theta2) {
+  for (std::uint32_t j0 = 0; j0 < nb; j0 += 32) {
+    const std::uint32_t j = j0 + lane_id();
+    std::uint32_t at = na;  // the first A vertex close to B vertex j
+    if (j < nb) {
+      const Vec3 wb = tile_b[j];
+      for (std::uint32_t i = 0; i < na && at == na; ++i)
+        if (hd::vertex_close(tile_a[i], wb, theta2)) at = i;
+    }
+    const unsigned close = __ballot_sync(kFull, at < na);
+    if (close != 0) {
+      const int l = __ffs(close) - 1;
+      const std::uint32_t ia = __shfl_sync(kFull, at, l);
+      return (static_cast<unsigned long long>(ids_a[ia]) << 32) | ids_b[j0 + static_cast<std::uint32_t>(l)];
+    }
+  }
+  return kNoWitness;  // (not reached after tiles_close)
 }
 
 /// The bounding box of the world vertices tile[0, n) (the whole warp; warp-uniform result;
@@ -399,8 +448,27 @@ __device__ inline bool box_empty(const Aabb& b) {
 
 /// Shared memory of mid_leaf_items and of the last mid_expand step when it runs the
 /// leaves itself: per warp of the block, a tile of B's and one of A's filtered world
-/// vertices.
-using LeafTiles = Vec3[kWarpsPerBlock][2][kLeafTile];
+/// vertices ([w][0]: B, [w][1]: A) and each one's vertex index (the witness).
+struct LeafTiles {
+  Vec3 v[kWarpsPerBlock][2][kLeafTile];
+  std::uint32_t id[kWarpsPerBlock][2][kLeafTile];
+};
+
+/// One warp's two tiles in LeafTiles.
+struct WarpTiles {
+  Vec3* a;
+  Vec3* b;
+  std::uint32_t* id_a;
+  std::uint32_t* id_b;
+};
+
+/// This warp's tiles of the block's LeafTiles; the vertex ids only when d keeps witnesses
+/// (else null: stage_tile then writes none).
+__device__ inline WarpTiles warp_tiles(const MidListDesc& d, LeafTiles& t) {
+  const std::uint32_t w = threadIdx.x >> 5;
+  const bool ids = d.wit.witness != nullptr;
+  return {t.v[w][1], t.v[w][0], ids ? t.id[w][1] : nullptr, ids ? t.id[w][0] : nullptr};
+}
 
 /// The narrow phase of one leaf item of pair k (the whole warp): mesh-box, A's cell `ca`
 /// against the box (as mesh_box_descend's last step); mesh-mesh, leaf item `chunk` of A's
@@ -413,10 +481,16 @@ using LeafTiles = Vec3[kWarpsPerBlock][2][kLeafTile];
 /// when the pair is already confirmed): mesh-box, the cell's vertex count; mesh-mesh,
 /// na x nb for every pair of tiles tested (a tile pair cut short by a hit counts in full),
 /// no count over the whole ranges is run, and the pair is checked before every tile of B
-/// and of A. `tile_a`, `tile_b`: the warp's kLeafTile-vertex tiles.
+/// and of A. `tiles`: the warp's kLeafTile-vertex tiles (warp_tiles). The leaf that
+/// confirms the pair stores the vertex pair it found (confirm: the witness) when kWitness
+/// and d keeps witnesses; !kWitness compiles the leaf without them (the fused small step).
+template <bool kWitness>
 __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t ca_index,
-                                 std::uint32_t cb_index, std::uint32_t chunk, Vec3* tile_a, Vec3* tile_b,
-                                 Tally& t) {
+                                 std::uint32_t cb_index, std::uint32_t chunk, const WarpTiles& tiles, Tally& t) {
+  Vec3* const tile_a = tiles.a;
+  Vec3* const tile_b = tiles.b;
+  std::uint32_t* const id_a = kWitness ? tiles.id_a : nullptr;
+  std::uint32_t* const id_b = kWitness ? tiles.id_b : nullptr;
   const std::uint32_t lane = lane_id();
   const hd::OctreeView& A = c.a.octree;
   const MeshOctreeCell ca = A.cells[ca_index];
@@ -431,17 +505,34 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
     // Only the blocks whose box overlaps box_local (the box in A's frame grown by
     // theta + tolerance, as the cell test) can hold a vertex within theta of the box.
     bool hit = false;
+    std::uint32_t hj = 0;  // this lane's vertex within theta, once `hit` (kWitness)
     const std::uint32_t g1 = block_end(a_end);
     for (std::uint32_t g0 = a_begin / kVertexBlock; g0 < g1; g0 += 32) {
       unsigned m = blocks_overlapping(c.blocks_a, g0, g1, c.s.box_local);
       while (m) {
         const std::uint32_t j = (g0 + static_cast<std::uint32_t>(__ffs(m) - 1)) * kVertexBlock + lane;
         m &= m - 1u;
-        hit = hit || (j >= a_begin && j < a_end &&
-                      hd::vertex_box_close(hd::world_vertex(A.vertices[j], pa), c.b.box, c.s.theta2));
+        if constexpr (kWitness) {
+          if (!hit && j >= a_begin && j < a_end &&
+              hd::vertex_box_close(hd::world_vertex(A.vertices[j], pa), c.b.box, c.s.theta2)) {
+            hit = true;
+            hj = j;
+          }
+        } else {
+          hit = hit || (j >= a_begin && j < a_end &&
+                        hd::vertex_box_close(hd::world_vertex(A.vertices[j], pa), c.b.box, c.s.theta2));
+        }
       }
     }
-    if (__any_sync(kFull, hit) && lane == 0) d.confirmed[k] = 1;
+    if constexpr (kWitness) {
+      const unsigned hits = __ballot_sync(kFull, hit);
+      if (hits != 0) {
+        const std::uint32_t w = __shfl_sync(kFull, hj, __ffs(hits) - 1);
+        if (lane == 0) confirm(d, k, static_cast<unsigned long long>(w) << 32);
+      }
+    } else {
+      if (__any_sync(kFull, hit) && lane == 0) d.confirmed[k] = 1;
+    }
     return;
   }
   // As mesh_mesh_leaf: B's vertices inside A's grown cell box (in B's frame) against
@@ -472,7 +563,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   std::uint32_t jb = b_begin / kVertexBlock;  // the next vertex block of B's range to stage
   const std::uint32_t jb_end = block_end(b_end);
   std::uint32_t nb = 0;
-  stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
+  stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, id_b, jb, nb);
   const std::uint32_t nbf =
       exit_early ? nb
                  : nb + (jb < jb_end ? count_inside(B.vertices, c.blocks_b, jb * kVertexBlock, b_end, a_in_b) : 0u);
@@ -481,7 +572,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   std::uint32_t ia_first = a_begin / kVertexBlock;  // A's next block after its first tile
   std::uint32_t na_first = 0;
   if (a_first) {
-    stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, ia_first, na_first);
+    stage_tile(A.vertices, c.blocks_a, a_begin, a_end, b_in_a, pa, tile_a, id_a, ia_first, na_first);
     const std::uint32_t naf =
         exit_early ? na_first
                    : na_first + (ia_first < ia_end
@@ -503,7 +594,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
     if (!b_staged) {
       if (jb >= jb_end) break;
       nb = 0;
-      stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, jb, nb);
+      stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, id_b, jb, nb);
     }
     if (nb == 0) break;  // (only at the range's end)
     const bool cull = d.tile_cull != 0;
@@ -531,7 +622,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
         if (ia >= ia_end) break;
         if (exit_early && confirmed_now(d, k)) break;
         na = 0;
-        stage_tile(A.vertices, c.blocks_a, a_begin, a_end, a_filter, pa, tile_a, ia, na);
+        stage_tile(A.vertices, c.blocks_a, a_begin, a_end, a_filter, pa, tile_a, id_a, ia, na);
       }
       a_staged = false;
       // A pair of tiles whose boxes are apart by theta on some axis has no close vertex
@@ -539,11 +630,21 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
       if (na > 0 && !(cull && tiles_apart(tile_box(tile_a, na), box_b, c.s.theta2))) {
         if (exit_early) t.vertex_tests += static_cast<unsigned long long>(na) * static_cast<unsigned long long>(nb);
         found = tiles_close(tile_a, na, tile_b, nb, c.s.theta2);
+        if constexpr (kWitness) {
+          if (found) {
+            const unsigned long long w = d.wit.witness != nullptr
+                                             ? tiles_witness(tile_a, id_a, na, tile_b, id_b, nb, c.s.theta2)
+                                             : kNoWitness;
+            if (lane == 0) confirm(d, k, w);
+          }
+        }
       }
       __syncwarp();
     }
   }
-  if (found && lane == 0) d.confirmed[k] = 1;
+  if constexpr (!kWitness) {
+    if (found && lane == 0) d.confirmed[k] = 1;
+  }
 }
 
 /// The last step's cell pairs of `mask` (bit l: lane l's `item` survived), run as leaves by
@@ -554,8 +655,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
 /// first (the likelier hits first; ties in lane order), else in lane order.
 __device__ inline void run_leaves(const MidListDesc& d, const PairContext& c, std::uint32_t k, unsigned mask,
                                   const MidItem& item, float depth, LeafTiles& tiles, Tally& t) {
-  Vec3* tile_b = tiles[threadIdx.x >> 5][0];
-  Vec3* tile_a = tiles[threadIdx.x >> 5][1];
+  const WarpTiles warp = warp_tiles(d, tiles);
   const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
   const bool deepest_first = d.early_exit != 0;
   const unsigned key = __float_as_uint(depth);  // depth >= +0: ordered as the floats
@@ -575,7 +675,7 @@ __device__ inline void run_leaves(const MidListDesc& d, const PairContext& c, st
         mesh_box ? 1u : leaf_items(c.a.octree.cells[ca].vertex_count, c.b.octree.cells[cb].vertex_count);
     for (std::uint32_t ch = 0; ch < chunks; ++ch) {
       if (skip_confirmed(d, k)) return;
-      leaf_item(d, c, k, ca, cb, ch, tile_a, tile_b, t);
+      leaf_item<true>(d, c, k, ca, cb, ch, warp, t);
     }
   }
 }
@@ -671,9 +771,47 @@ __device__ inline void first_step(const MidListDesc& d, const PairContext& c, st
              mesh_box ? 1u : B.level_end(lb0), d.steps == 1, t);
 }
 
+/// The last step's witness of the pair with sorted key `key` whose first body is `a`
+/// (the whole warp; warp-uniform): looked up among the kept keys from prev_begin[a], 32 at
+/// a time while they are a's and below `key`; kNoWitness when the pair was not a candidate
+/// then or had no witness.
+__device__ inline unsigned long long last_witness(const MidListDesc& d, std::uint32_t a, unsigned long long key) {
+  const WitnessDesc& w = d.wit;
+  const std::uint32_t count = *w.prev_count;
+  for (std::uint32_t j0 = w.prev_begin[a]; j0 < count; j0 += 32) {
+    const std::uint32_t j = j0 + lane_id();
+    const unsigned long long kept = j < count ? w.prev_keys[j] : ~0ull;
+    const unsigned same = __ballot_sync(kFull, kept == key);
+    if (same != 0) return w.prev_witness[j0 + static_cast<std::uint32_t>(__ffs(same) - 1)];
+    // Further keys of a's run follow only if all 32 are a's and below `key`.
+    if (__ballot_sync(kFull, kept < key && static_cast<std::uint32_t>(kept >> d.pair_shift) == a) != kFull) break;
+  }
+  return kNoWitness;
+}
+
+/// Whether vertex pair `witness` (WitnessDesc::witness) of pair context c (MeshBox or
+/// MeshMesh) is within theta now: the vertex test of the leaves on the same world vertices
+/// (hd::vertex_box_close or hd::vertex_close of hd::world_vertex), so true only when the
+/// descent would confirm the pair. False for kNoWitness or an index out of range.
+__device__ inline bool witness_close(const PairContext& c, unsigned long long witness) {
+  const std::uint32_t va = static_cast<std::uint32_t>(witness >> 32);
+  const std::uint32_t vb = static_cast<std::uint32_t>(witness);
+  if (va >= c.a.octree.vertex_count) return false;  // (kNoWitness too)
+  const Vec3 wa = hd::world_vertex(c.a.octree.vertices[va], c.a.position);
+  if (c.s.kind == hd::PairKind::MeshBox) return hd::vertex_box_close(wa, c.b.box, c.s.theta2);
+  if (vb >= c.b.octree.vertex_count) return false;
+  return hd::vertex_close(wa, hd::world_vertex(c.b.octree.vertices[vb], c.b.position), c.s.theta2);
+}
+
 /// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid).
+/// With the witness cache on, a pair that needs a level step is first tested at its last
+/// witness (last_witness, witness_close, by lane 0): a pair still within theta there is
+/// confirmed and keeps it, with no cell test. !kWitness: compiled without the cache (the
+/// fused small step).
+template <bool kWitness>
 __device__ inline void mid_start_items(const MidListDesc& d) {
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
+  const bool witnesses = kWitness && d.wit.witness != nullptr;
   Tally t;
   for (std::uint32_t k = global_warp(); k < np; k += warp_count()) {
     // The pair from its sorted key (the broadphase's output), kept for the later stages.
@@ -681,13 +819,48 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
     if (lane_id() == 0) d.pairs[k] = p;
     const PairContext c = context(d, k, p);
     if (decided_alone(c)) {
-      if (lane_id() == 0) d.confirmed[k] = alone_answer(c) ? 1 : 0;
+      if (lane_id() == 0) {
+        d.confirmed[k] = alone_answer(c) ? 1 : 0;
+        if (witnesses) d.wit.witness[k] = kNoWitness;
+      }
       continue;
     }
-    if (lane_id() == 0) d.confirmed[k] = 0;
+    if (witnesses) {
+      const unsigned long long w = last_witness(d, p.a, d.pair_keys[k]);
+      bool close = false;
+      if (w != kNoWitness) {
+        t.vertex_tests += 1;
+        close = __shfl_sync(kFull, lane_id() == 0 ? static_cast<int>(witness_close(c, w)) : 0, 0) != 0;
+      }
+      if (lane_id() == 0) {
+        d.confirmed[k] = close ? 1 : 0;
+        d.wit.witness[k] = close ? w : kNoWitness;
+      }
+      if (close) continue;
+    } else if (lane_id() == 0) {
+      d.confirmed[k] = 0;
+    }
     first_step(d, c, k, t);
   }
   flush(d, t);
+}
+
+/// Keeps pair k of this step's np for the next step's witness lookups (WitnessDesc): its
+/// key, its witness (kNoWitness unless confirmed by a vertex test) and, at the start of a
+/// body's run of keys, prev_begin of that body (one thread per pair; prev_count is written
+/// by keep_witness_count).
+__device__ inline void keep_witness(const MidListDesc& d, std::uint32_t k) {
+  const WitnessDesc& w = d.wit;
+  const unsigned long long key = d.pair_keys[k];
+  w.prev_keys[k] = key;
+  w.prev_witness[k] = d.confirmed[k] != 0 ? w.witness[k] : kNoWitness;
+  const std::uint32_t a = static_cast<std::uint32_t>(key >> d.pair_shift);
+  if (k == 0 || static_cast<std::uint32_t>(d.pair_keys[k - 1] >> d.pair_shift) != a) w.prev_begin[a] = k;
+}
+
+/// The number of pairs keep_witness keeps (one thread): this step's live pairs.
+__device__ inline void keep_witness_count(const MidListDesc& d) {
+  *d.wit.prev_count = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
 }
 
 /// mid_decide's work (the per-stage path's midphase when no pair can need a level step: no
@@ -762,10 +935,10 @@ __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTile
 /// the warp's own index on (a large cell pair's items are appended together, and those near
 /// its contact cost the most: striding spreads them over the warps where a contiguous share
 /// per warp put them on a few); `tiles` is the block's shared memory (blockDim.x ==
-/// kBlockSize).
+/// kBlockSize). kWitness: as leaf_item.
+template <bool kWitness>
 __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
-  Vec3* tile_b = tiles[threadIdx.x >> 5][0];
-  Vec3* tile_a = tiles[threadIdx.x >> 5][1];
+  const WarpTiles warp = warp_tiles(d, tiles);
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
   Tally t;
   for (std::uint32_t it = global_warp(); it < count; it += warp_count()) {
@@ -774,7 +947,7 @@ __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
     // Set up per item: keeping the set-up across a run of the same pair's items (as
     // mid_expand_items does) takes 89 registers here, or spills 352 bytes at 64.
     const PairContext c = context(d, item.k, d.pairs[item.k]);
-    leaf_item(d, c, item.k, item.ca, item.cb, item.chunk, tile_a, tile_b, t);
+    leaf_item<kWitness>(d, c, item.k, item.ca, item.cb, item.chunk, warp, t);
   }
   flush(d, t);
 }

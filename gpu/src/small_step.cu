@@ -269,6 +269,10 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   // 5. Midphase start (one warp per pair); the in-lists' a resolved to k, by the grid's
   // last threads (the first warps take the pairs).
   MidListDesc md = s.mid;
+  // No witness cache (midphase.cuh, "Witnesses"): its lookups and its copy of the keys cost
+  // the fused step more than the descents they spare on 5 of 6 shipped small scenes (H100,
+  // bench_step_paths: Table 5 with 1,2 -1 to -5%, bunny-stack-50 -2%; mixed-pile-1000 +8%).
+  md.wit = WitnessDesc{};
   if (kLean) {
     md.early_exit = 0;
     md.tile_cull = 0;
@@ -277,7 +281,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   md.out = s.lists[0];
   md.out_count = st->counts + 1;
   md.out_capacity = s.list_capacity;
-  mid::mid_start_items(md);
+  mid::mid_start_items<false>(md);
   {
     const std::uint32_t live = live_count(st->counts, cap);
     for (std::uint32_t i = threads - 1u - tid; i < n; i += threads) {
@@ -314,7 +318,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
     md.out = nullptr;
     md.out_count = nullptr;
     md.out_capacity = 0;
-    mid::mid_leaf_items(md, *reinterpret_cast<mid::LeafTiles*>(smem));
+    mid::mid_leaf_items<false>(md, *reinterpret_cast<mid::LeafTiles*>(smem));
     grid.sync();
   }
   stamp(profile, 7);

@@ -63,7 +63,8 @@ std::vector<BufferBase*> CudaWorld::Impl::all_buffers() {
 std::vector<BufferBase*> CudaWorld::Impl::scratch_buffers() {
   return {&bp_count, &bp_offset, &pair_keys, &pair_keys_sorted, &pairs, &confirmed, &items_a, &items_b,
           &hit,      &dx_a,      &dx_b,      &dv_a,             &dv_b,  &depth0,    &records, &in_list,
-          &body_begin, &in_count, &index_offsets, &index_rank, &index_entries, &index_long, &temp};
+          &body_begin, &in_count, &index_offsets, &index_rank, &index_entries, &index_long, &witness,
+          &prev_keys, &prev_witness, &prev_begin, &prev_count, &temp};
 }
 
 void CudaWorld::Impl::launched(cudaError_t e, const char* kernel) {
@@ -118,6 +119,13 @@ gpu::MidListDesc CudaWorld::Impl::mid_desc(const unsigned long long* keys) {
   md.counters = counters();
   md.steps = level_steps;
   md.early_exit = mid_early_exit;
+  if (mid_early_exit != 0 && any_mesh && level_steps > 0) {  // the witness cache
+    md.wit.witness = witness.get();
+    md.wit.prev_keys = prev_keys.get();
+    md.wit.prev_witness = prev_witness.get();
+    md.wit.prev_begin = prev_begin.get();
+    md.wit.prev_count = prev_count.get();
+  }
   return md;
 }
 
@@ -196,9 +204,16 @@ void CudaWorld::Impl::prepare() {
   const std::size_t n1 = static_cast<std::size_t>(n) + 1;
   bp_count.ensure(n1);
   bp_offset.ensure(n1);
-  for (BufferBase* b : std::initializer_list<BufferBase*>{&pair_keys, &pair_keys_sorted, &pairs, &confirmed, &hit,
-                                                           &dx_a, &dx_b, &dv_a, &dv_b, &depth0, &records})
+  for (BufferBase* b :
+       std::initializer_list<BufferBase*>{&pair_keys, &pair_keys_sorted, &pairs, &confirmed, &hit, &dx_a, &dx_b, &dv_a,
+                                          &dv_b, &depth0, &records, &witness, &prev_keys, &prev_witness})
     b->ensure(pair_cap);
+  // The witness cache starts empty whenever the buffers may have moved (its entries are
+  // hints, tested before use: an old one is harmless, a garbage count is not).
+  prev_begin.ensure(n1);
+  prev_count.ensure(1);
+  check(cudaMemsetAsync(prev_count.get(), 0, sizeof(std::uint32_t), stream), "cudaMemset witness count");
+  check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (witness count)");  // before the resident stream reads it
   items_a.ensure(list_cap);
   items_b.ensure(list_cap);
   if (small) {
@@ -315,6 +330,7 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
     md.out_count = nullptr;
     md.out_capacity = 0;
     launched(gpu::launch_mid_leaf(md, warp_grid, stream), "mid_leaf");
+    launched(gpu::launch_mid_keep(md, pair_grid(), stream), "mid_keep");
   }
   record_event(4, with_events);
   // 5. Response (SPEC 6): the contact index (response.cu) of the first icap() pairs (a

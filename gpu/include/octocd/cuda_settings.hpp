@@ -18,7 +18,10 @@ namespace octocd {
 struct CudaSettings {
   // ---- behaviour ------------------------------------------------------------------------
   /// Midphase early exit: once a pair is confirmed, the rest of its work (its expand and
-  /// leaf items, remaining cell tests and vertex tiles) is skipped. States, pairs and
+  /// leaf items, remaining cell tests and vertex tiles) is skipped, and on the per-stage
+  /// path a pair confirmed in the last step is first tested at the vertex pair that
+  /// confirmed it (its witness),
+  /// confirmed with no descent when that pair is still within theta. States, pairs and
   /// contacts are the same bits either way; off, the midphase counts (box tests, box
   /// pairs, vertex tests) are the deterministic work of the level lists, each >= the cpu
   /// engine's. Default true.
