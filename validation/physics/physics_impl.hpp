@@ -34,6 +34,7 @@
 #include "dmath.hpp"
 #include "reference.hpp"
 #include "sat.hpp"
+#include "seek.hpp"
 
 namespace octocd {
 
@@ -170,6 +171,11 @@ struct CheckedFrame {
     const auto it = std::lower_bound(truth_pairs.begin(), truth_pairs.end(), p);
     return it != truth_pairs.end() && *it == p ? std::size_t(it - truth_pairs.begin()) : truth_pairs.size();
   }
+  /// find() through seek(): for pairs asked in ascending order (any order is answered).
+  std::size_t find_after(Pair p, std::size_t& cursor) const {
+    const std::size_t k = seek(truth_pairs, p, cursor);
+    return k < truth_pairs.size() && truth_pairs[k] == p ? k : truth_pairs.size();
+  }
   std::vector<PairRows> rows;       ///< the record's rows grouped by pair, in record order
   std::vector<Pair> contact_pairs;  ///< the pairs of rows (sorted)
   std::vector<Pair> required;       ///< candidates whose shapes are within the broadphase margin
@@ -248,6 +254,12 @@ struct PhysicsValidators::Impl {
   physics_detail::CheckedFrame checked_frame(const FrameRecord& rec, const std::vector<Pose>& det) const;
   /// Pair p's reference geometry, computed into f.truth when missing.
   const physics_detail::ContactTruth& full_truth(physics_detail::CheckedFrame& f, Pair p) const;
+  /// full_truth() with the look-up through CheckedFrame::find_after (`cursor` as there).
+  const physics_detail::ContactTruth& truth_after(physics_detail::CheckedFrame& f, Pair p,
+                                                  std::size_t& cursor) const {
+    const std::size_t k = f.find_after(p, cursor);
+    return k < f.truth.size() ? f.truth[k] : full_truth(f, p);
+  }
   /// Row 1: broadphase completeness (candidates.cpp).
   void judge_broadphase(physics_detail::CheckedFrame& f);
   /// Row 2: contact completeness (contact_rows.cpp).
