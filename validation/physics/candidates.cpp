@@ -100,7 +100,7 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
     std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
     std::sort(all.begin(), all.end());
     all.erase(std::unique(all.begin(), all.end()), all.end());
-    f.truth.resize(all.size());
+    f.truth = FrameArray<ContactTruth>(all.size(), threads);
     parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned) {
       compute_truth(*ref, det, sat_settings, all[i], f.truth[i]);
     });

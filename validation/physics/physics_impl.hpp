@@ -33,6 +33,7 @@
 #include "octocd/physics.hpp"
 #include "dmath.hpp"
 #include "reference.hpp"
+#include "frame_array.hpp"
 #include "sat.hpp"
 #include "seek.hpp"
 
@@ -163,7 +164,7 @@ struct CheckedFrame {
   /// margin, every candidate) and every contact pair: truth[k] is truth_pairs[k]'s
   /// (sorted, distinct). Every pair a row asks about is among them.
   std::vector<Pair> truth_pairs;
-  std::vector<ContactTruth> truth;
+  FrameArray<ContactTruth> truth;
   /// Pairs asked about beyond truth_pairs (none by construction; computed on demand).
   std::map<std::pair<std::uint32_t, std::uint32_t>, ContactTruth> extra;
   /// Pair p's index in truth_pairs, or truth_pairs.size() when absent.
