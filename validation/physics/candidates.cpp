@@ -97,8 +97,8 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
     for (std::size_t i = 0; i < cand.size(); ++i)
       if (hit[i]) todo.push_back(cand[i]);
     std::vector<Pair>& all = f.truth_pairs;
+    // Both sorted, so their union is (a pair repeated in contact_pairs is kept once).
     std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
-    std::sort(all.begin(), all.end());
     all.erase(std::unique(all.begin(), all.end()), all.end());
     f.truth = FrameArray<ContactTruth>(all.size(), threads);
     parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned) {

@@ -135,7 +135,8 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
       for (std::int64_t y = c0c[1]; y <= c1c[1]; ++y)
         for (std::int64_t z = c0c[2]; z <= c1c[2]; ++z) entries[l].push_back({{x, y, z}, std::uint32_t(i)});
   }
-  for (auto& e : entries) std::sort(e.begin(), e.end(), entry_less);
+  const unsigned threads = thread_count(settings, n);
+  for (auto& e : entries) parallel_sort(e, threads, entry_less);
 
   // The cell of the lowest corner of two hulls' intersection, on `l`.
   auto reference_cell = [&](std::uint32_t a, std::uint32_t b, int l) {
@@ -143,7 +144,6 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     for (int k = 0; k < 3; ++k) c[k] = grid.index(std::max(hull[a].lo[k], hull[b].lo[k]), k, l);
     return c;
   };
-  const unsigned threads = thread_count(settings, n);
   std::vector<std::vector<Pair>> found(std::max(threads, 1u));
   auto emit = [&](unsigned worker, std::uint32_t a, std::uint32_t b) {
     found[worker].push_back(a < b ? Pair{a, b} : Pair{b, a});
@@ -222,7 +222,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
   for (const auto& f : found) total += f.size();
   out.reserve(total);
   for (const auto& f : found) out.insert(out.end(), f.begin(), f.end());
-  std::sort(out.begin(), out.end());
+  parallel_sort(out, threads, [](Pair p, Pair q) { return p < q; });
 }
 
 namespace {
