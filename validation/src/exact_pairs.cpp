@@ -23,7 +23,14 @@ struct Entry {
   std::uint32_t box;
 };
 
-bool entry_less(const Entry& x, const Entry& y) { return x.cell < y.cell || (x.cell == y.cell && x.box < y.box); }
+/// (cell, box) in lexicographic order, compared coordinate by coordinate (std::array's
+/// operators go through memcmp for == and a generic loop for <).
+bool entry_less(const Entry& x, const Entry& y) {
+  if (x.cell[0] != y.cell[0]) return x.cell[0] < y.cell[0];
+  if (x.cell[1] != y.cell[1]) return x.cell[1] < y.cell[1];
+  if (x.cell[2] != y.cell[2]) return x.cell[2] < y.cell[2];
+  return x.box < y.box;
+}
 
 /// Cell indices are clamped here: far boxes share the border cells (slower, never wrong:
 /// the clamp is monotone).
