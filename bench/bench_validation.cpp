@@ -17,9 +17,13 @@
 // --lattice instead judges a contact-heavy frame: N boxes (half extent 0.1 m) on a cubic
 // grid of spacing 0.19 m, no gravity, so every box overlaps its 26 neighbours by 1 cm
 // (about 13 contact pairs a body); the engine's first step is recorded (--warmup 0).
+// --json FILE writes the physics verdict of the last repetition (results_json, each row's
+// seconds set to 0) for every size and thread count, one document per line, so that a
+// change meant only for speed can be checked to leave the verdict unchanged (diff).
 //
 // Usage: bench_validation [SCENE.json] [--bodies 20000,100000] [--reps 5] [--warmup 20]
 //                         [--only physics,full,pairs] [--rows] [--threads 1,2] [--lattice]
+//                         [--json FILE]
 #include <thread>
 
 #include <algorithm>
@@ -36,6 +40,7 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/exact_pairs.hpp"
+#include "octocd/expect.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
@@ -125,6 +130,7 @@ int main(int argc, char** argv) {
   bool rows_shown = false;  // --rows: each row's own seconds on the last repetition
   bool lattice = false;     // --lattice: the contact-heavy box lattice instead of SCENE
   std::vector<long> thread_counts{0};
+  std::string json_path;    // --json FILE: the physics verdicts, one JSON document a line
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -141,10 +147,19 @@ int main(int argc, char** argv) {
     else if (a == "--rows") rows_shown = true;
     else if (a == "--lattice") lattice = true;
     else if (a == "--threads") thread_counts = parse_list(next());
+    else if (a == "--json") json_path = next();
     else if (!a.empty() && a[0] != '-') scene_path = a;
     else {
       std::fprintf(stderr, "usage: bench_validation [SCENE.json] [--bodies N,..] [--reps R] [--warmup W] [--only ...] "
-                           "[--rows] [--threads T,..] [--lattice]\n");
+                           "[--rows] [--threads T,..] [--lattice] [--json FILE]\n");
+      return 2;
+    }
+  }
+  std::ofstream json_out;
+  if (!json_path.empty()) {
+    json_out.open(json_path);
+    if (!json_out) {
+      std::fprintf(stderr, "--json: cannot write %s\n", json_path.c_str());
       return 2;
     }
   }
@@ -189,6 +204,12 @@ int main(int argc, char** argv) {
         if (r + 1 == reps && rows_shown) {
           for (const octocd::ValidationResult& x : v.results())
             if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
+        }
+        if (r + 1 == reps && json_out.is_open()) {
+          std::vector<octocd::ValidationResult> results = v.results();
+          for (octocd::ValidationResult& x : results) x.seconds = 0;  // the verdict only
+          json_out << octocd::results_json(results, octocd::RunName{scene.name, ""},
+                                           nullptr, {{"threads", th}}).dump() << "\n";
         }
       }
       row("physics", t);

@@ -14,6 +14,7 @@
 #include <fcl/math/bv/OBBRSS.h>
 #include <fcl/narrowphase/collision.h>
 #include <fcl/narrowphase/collision_object.h>
+#include <fcl/narrowphase/detail/primitive_shape_algorithm/box_box.h>
 #include <fcl/narrowphase/distance.h>
 
 #include <algorithm>
@@ -395,6 +396,39 @@ bool hull_penetration(const CcdObject& ca, const CcdObject& cb, ReferenceNormal&
   return true;
 }
 
+/// FCL's box-box test on boxes of sides side_a, side_b placed at ta, tb, as fcl::collide
+/// runs it for two fcl::Box (ShapeCollisionTraversalNode -> GJKSolver_libccd ->
+/// detail::boxBoxIntersect -> detail::boxBox2 with at most 4 contacts, all of them kept
+/// under CollisionRequest(8, true)), without the CollisionObjects, the shared geometry
+/// and the result vectors it builds per call. False when FCL reports no contact (r
+/// untouched); else r from its deepest contact (the first of equal depths), as box_box.
+bool box_contact(const V3& side_a, const fcl::Transform3<S>& ta, const V3& side_b, const fcl::Transform3<S>& tb,
+                 ReferenceNormal& r) {
+  thread_local std::vector<fcl::ContactPoint<S>> contacts;  // kept between calls
+  contacts.clear();
+  V3 normal;
+  S depth = 0;
+  int code = 0;
+  fcl::detail::boxBox2(side_a, ta, side_b, tb, normal, &depth, &code, 4, contacts);
+  if (code == 0 || contacts.empty()) return false;
+  r.penetrating = true;
+  std::size_t deepest = 0;
+  for (std::size_t k = 1; k < contacts.size(); ++k)
+    if (contacts[k].penetration_depth > contacts[deepest].penetration_depth) deepest = k;
+  const fcl::ContactPoint<S>& c = contacts[deepest];
+  // ContactPoint::normal points from A to B: B-to-A is its negation.
+  if (!unit(-c.normal, r.normal)) return true;
+  r.depth = std::max<S>(0, c.penetration_depth);
+  r.point_a = r.point_b = to_vec3(c.pos);
+  r.valid = std::isfinite(r.depth);
+  return true;
+}
+
+/// The fcl::Box of a geometry, or null.
+const fcl::Box<S>* as_box(const ShapeGeom& g) {
+  return g.exact && g.exact->getNodeType() == fcl::GEOM_BOX ? static_cast<const fcl::Box<S>*>(g.exact.get()) : nullptr;
+}
+
 /// Two posed boxes as boxes (or a declared sphere and a primitive): FCL's box-box test (ODE's dBoxBox, the separating axis of
 /// least penetration among the 15 candidates: the exact minimum translation of two
 /// boxes), its deepest contact; FCL distance when apart. (libccd's EPA on box corners can
@@ -402,6 +436,12 @@ bool hull_penetration(const CcdObject& ca, const CcdObject& cb, ReferenceNormal&
 ReferenceNormal box_box(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const ShapeGeom& gb,
                         const fcl::Transform3<S>& tb) {
   ReferenceNormal r;
+  const fcl::Box<S>* box_a = as_box(ga);
+  const fcl::Box<S>* box_b = as_box(gb);
+  if (box_a && box_b) {
+    if (!box_contact(box_a->side, ta, box_b->side, tb, r)) exact_distance(ga, ta, gb, tb, r);
+    return r;
+  }
   fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
   fcl::CollisionRequest<S> req(8, true);
   req.gjk_solver_type = fcl::GST_LIBCCD;
@@ -685,11 +725,17 @@ const HullFeatures& ReferenceGeometry::hull_features(std::uint32_t body) const {
 ReferenceNormal ReferenceGeometry::aabb_pair(const Aabb& a, const Aabb& b) {
   const fcl::Matrix3<S> id = fcl::Matrix3<S>::Identity();
   ShapeGeom ga, gb;
-  ga.exact = std::make_shared<fcl::Box<S>>(to_v3(a.max) - to_v3(a.min));
-  gb.exact = std::make_shared<fcl::Box<S>>(to_v3(b.max) - to_v3(b.min));
+  const V3 side_a = to_v3(a.max) - to_v3(a.min), side_b = to_v3(b.max) - to_v3(b.min);
   ga.offset = (to_v3(a.min) + to_v3(a.max)) * 0.5;
   gb.offset = (to_v3(b.min) + to_v3(b.max)) * 0.5;
-  return box_box(ga, geometry_transform(ga, id, V3::Zero()), gb, geometry_transform(gb, id, V3::Zero()));
+  const fcl::Transform3<S> ta = geometry_transform(ga, id, V3::Zero()), tb = geometry_transform(gb, id, V3::Zero());
+  ReferenceNormal r;
+  if (box_contact(side_a, ta, side_b, tb, r)) return r;
+  // Apart: FCL's distance needs the boxes as geometry.
+  ga.exact = std::make_shared<fcl::Box<S>>(side_a);
+  gb.exact = std::make_shared<fcl::Box<S>>(side_b);
+  exact_distance(ga, ta, gb, tb, r);
+  return r;
 }
 
 double angle_between(Vec3 u, Vec3 v) {

@@ -2,6 +2,7 @@
 // compared as sorted vectors, on random and adversarial boxes.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -9,6 +10,7 @@
 
 #include "octocd/broadphase.hpp"
 #include "octocd/exact_pairs.hpp"
+#include "../../validation/src/parallel.hpp"
 
 namespace octocd {
 namespace {
@@ -119,6 +121,42 @@ TEST(ExactPairs, AllPointsAndAllCoincident) {
   expect_same(same, "all coincident");
   expect_same({}, "none");
   expect_same({box(0, 0, 0, 1, 1, 1)}, "one");
+}
+
+// Enough boxes and pairs (over 4,096 cell entries and pairs) that their sorts run on
+// threads (parallel_sort): the same set as flat on 1, 2 and 3 threads.
+TEST(ExactPairs, ManyPairsSortedOnThreads) {
+  std::mt19937 rng(99);
+  std::uniform_real_distribution<float> pos(-4, 4), size(0.1f, 0.3f);
+  std::vector<Aabb> boxes;
+  for (int i = 0; i < 5000; ++i) {
+    const float h = size(rng);
+    boxes.push_back(box(pos(rng), pos(rng), pos(rng), h, h, h));
+  }
+  ASSERT_GT(flat_pairs(boxes).size(), 8192u);
+  expect_same(boxes, "many pairs");
+}
+
+// parallel_sort orders as std::sort on any thread count, below and above the size it
+// sorts on threads from, with and without repeated values.
+TEST(ParallelSort, SameOrderAsStdSort) {
+  std::mt19937 rng(5);
+  for (std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(4095), std::size_t(4096), std::size_t(10007),
+                        std::size_t(50000)}) {
+    for (std::uint32_t spread : {7u, 1000000u}) {
+      std::vector<Pair> v(n);
+      for (Pair& p : v) p = {std::uint32_t(rng() % spread), std::uint32_t(rng() % spread)};
+      std::vector<Pair> want = v;
+      std::sort(want.begin(), want.end());
+      for (unsigned threads : {1u, 2u, 3u, 5u, 8u}) {
+        std::vector<Pair> got = v;
+        parallel_sort(got, threads, [](Pair p, Pair q) { return p < q; });
+        ASSERT_EQ(got.size(), n);
+        EXPECT_TRUE(std::equal(got.begin(), got.end(), want.begin(), [](Pair p, Pair q) { return p == q; }))
+            << n << " pairs, values below " << spread << ", " << threads << " threads";
+      }
+    }
+  }
 }
 
 TEST(ExactPairs, BroadPhaseAdapterMatchesFlat) {

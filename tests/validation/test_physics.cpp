@@ -4,19 +4,24 @@
 // the frame and the pair or body, and octocd's own CPU engine passing every row.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <iostream>
+#include <random>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include "octocd/error.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/reference_contact.hpp"
 #include "octocd/validation.hpp"
 #include "../../validation/physics/sat.hpp"
+#include "../../validation/physics/seek.hpp"
 
 using namespace octocd;
 
@@ -1093,6 +1098,67 @@ TEST(SeparatingAxis, CrossedBoxesMinimumIsTheEdgeEdgeAxis) {
   far.position = far.position + float(s.depth + 1e-3) * v3(s.normal[0], s.normal[1], s.normal[2]);
   EXPECT_TRUE(sat_min_translation(ref.hull_features(0), far, ref.hull_features(1), c.pb).separated);
   EXPECT_FALSE(ref.posed(0, 1, far, c.pb).penetrating);
+}
+
+// The separating-axis test keeps its work space per thread between calls: a pair tested
+// after a larger one (a box against a 162-vertex icosphere) gets exactly the answer a
+// fresh thread gets.
+TEST(SeparatingAxis, ReusedWorkSpaceGivesTheFreshAnswer) {
+  CrossedBoxes c = crossed_boxes();
+  const std::string text = R"({"name": "ball", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]}, "walls": "none",
+    "groups": [{"name": "box", "shape": {"box": [0.1, 0.05, 0.08]}, "count": 1, "mass": 1, "positions": [[0, 0, 0]]},
+               {"name": "ball", "shape": {"icosphere": {"radius": 0.1, "subdivisions": 2}}, "count": 1, "mass": 1,
+                "positions": [[0, 1, 0]]}]})";
+  const auto model = build_model(parse_scene(text, "box and ball (test)"));
+  const ReferenceGeometry balls(*model), boxes(*c.model);
+  ASSERT_EQ(balls.hull_features(1).vertices.size(), 162u);
+  auto boxes_test = [&] { return sat_min_translation(boxes.hull_features(0), c.pa, boxes.hull_features(1), c.pb); };
+  SatResult fresh;
+  std::thread([&] { fresh = boxes_test(); }).join();
+  const SatResult big = sat_min_translation(balls.hull_features(0), c.pa, balls.hull_features(1), c.pb);
+  ASSERT_TRUE(big.tested && !big.separated);
+  EXPECT_GT(big.axes, 100u);
+  const SatResult again = boxes_test();
+  ASSERT_TRUE(fresh.tested && again.tested);
+  EXPECT_EQ(again.axes, fresh.axes);
+  EXPECT_EQ(again.depth, fresh.depth);
+  EXPECT_EQ(again.normal, fresh.normal);
+  EXPECT_EQ(again.epsilon, fresh.epsilon);
+  ASSERT_EQ(again.accepted.size(), fresh.accepted.size());
+  for (std::size_t k = 0; k < fresh.accepted.size(); ++k) {
+    EXPECT_EQ(again.accepted[k].normal, fresh.accepted[k].normal);
+    EXPECT_EQ(again.accepted[k].overlap, fresh.accepted[k].overlap);
+    EXPECT_EQ(again.accepted[k].kind, fresh.accepted[k].kind);
+  }
+}
+
+// The look-up of the physics tier's sorted pair lists from a cursor answers what
+// std::lower_bound answers, for pairs asked in ascending order (present, absent, repeated)
+// and in any order, and on an empty list.
+TEST(PhysicsLookups, SeekFromACursorIsLowerBound) {
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 20; ++trial) {
+    std::vector<Pair> v;
+    const std::uint32_t n = trial == 0 ? 0u : std::uint32_t(rng() % 400);
+    for (std::uint32_t k = 0; k < n; ++k) v.push_back({std::uint32_t(rng() % 50), std::uint32_t(rng() % 50)});
+    std::sort(v.begin(), v.end());
+    v.erase(std::unique(v.begin(), v.end()), v.end());
+    std::vector<Pair> asked;
+    for (int k = 0; k < 300; ++k) {
+      const bool present = !v.empty() && rng() % 2 == 0;
+      asked.push_back(present ? v[rng() % v.size()] : Pair{std::uint32_t(rng() % 52), std::uint32_t(rng() % 52)});
+    }
+    std::vector<Pair> ascending = asked;
+    std::sort(ascending.begin(), ascending.end());
+    for (const std::vector<Pair>* order : {&ascending, &asked}) {
+      std::size_t cursor = 0;
+      for (const Pair p : *order) {
+        const std::size_t want = std::size_t(std::lower_bound(v.begin(), v.end(), p) - v.begin());
+        ASSERT_EQ(physics_detail::seek(v, p, cursor), want) << "trial " << trial << " pair (" << p.a << ", " << p.b << ")";
+        EXPECT_EQ(cursor, want);
+      }
+    }
+  }
 }
 
 // An engine whose normal is the exact minimum (edge-edge) passed as a failure against

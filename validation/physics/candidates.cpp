@@ -97,23 +97,25 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
     for (std::size_t i = 0; i < cand.size(); ++i)
       if (hit[i]) todo.push_back(cand[i]);
     std::vector<Pair>& all = f.truth_pairs;
+    // Both sorted, so their union is (a pair repeated in contact_pairs is kept once).
     std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
-    std::sort(all.begin(), all.end());
     all.erase(std::unique(all.begin(), all.end()), all.end());
-    f.truth.resize(all.size());
+    f.truth = FrameArray<ContactTruth>(all.size(), threads);
     parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned) {
       compute_truth(*ref, det, sat_settings, all[i], f.truth[i]);
     });
   }
+  // The candidates are sorted: their truth is looked up onwards from the last one.
   std::vector<Pair>& required = f.required;
+  std::size_t cursor = 0;
   for (std::size_t i = 0; i < cand.size(); ++i) {
     const Pair p = cand[i];
     poll();
     bool close = false;
     if (need_distance) {
-      close = full_truth(f, p).g.signed_distance() < tol.broadphase_margin_m - slack;
+      close = truth_after(f, p, cursor).g.signed_distance() < tol.broadphase_margin_m - slack;
     } else if (hit[i]) {
-      const ReferenceNormal& g = full_truth(f, p).g;
+      const ReferenceNormal& g = truth_after(f, p, cursor).g;
       close = g.penetrating && -g.depth < tol.broadphase_margin_m - slack;
     }
     if (close) required.push_back(p);
@@ -133,9 +135,19 @@ void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
     ++broad_frames;
     broad_candidates += rec.pairs.size();
     broad_true += f.required.size();
+    // The required pairs are sorted, and so are the engine's (FrameRecord::pairs): both
+    // looked up onwards from the last answer (binary_search where the engine's are not).
+    const bool engine_sorted = std::is_sorted(rec.pairs.begin(), rec.pairs.end());
+    std::size_t engine_cursor = 0, truth_cursor = 0;
     for (const Pair& p : f.required) {
-      const bool found = std::binary_search(rec.pairs.begin(), rec.pairs.end(), p);
-      const ReferenceNormal& g = full_truth(f, p).g;
+      bool found;
+      if (engine_sorted) {
+        const std::size_t k = seek(rec.pairs, p, engine_cursor);
+        found = k < rec.pairs.size() && rec.pairs[k] == p;
+      } else {
+        found = std::binary_search(rec.pairs.begin(), rec.pairs.end(), p);
+      }
+      const ReferenceNormal& g = truth_after(f, p, truth_cursor).g;
       broad.check(found, g.penetrating ? g.depth : -g.distance, Where{frame, p}, [&] {
         return fmt::format("frame {}: {} misses {} whose shapes are {} {:.3g} m (margin {} m)", frame, label,
                            pair_name(p), g.penetrating ? "penetrating by" : "apart by",

@@ -74,7 +74,8 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
   const double deg = 180.0 / kPi;
   const bool aabb = bodies.contact_geometry == ContactGeometry::Aabb;
   std::vector<const ContactTruth*> truth_of(f.rows.size());
-  for (std::size_t i = 0; i < f.rows.size(); ++i) truth_of[i] = &full_truth(f, f.rows[i].p);
+  std::size_t cursor = 0;  // rows are mostly in pair order: looked up onwards from the last
+  for (std::size_t i = 0; i < f.rows.size(); ++i) truth_of[i] = &truth_after(f, f.rows[i].p, cursor);
   struct PairFigures {
     ReferenceNormal r;       // the reference judging the pair
     double fcl_angle = 0;    // by SAT: FCL's normal to SAT's nearest accepted axis (deg)

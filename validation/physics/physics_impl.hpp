@@ -33,7 +33,9 @@
 #include "octocd/physics.hpp"
 #include "dmath.hpp"
 #include "reference.hpp"
+#include "frame_array.hpp"
 #include "sat.hpp"
+#include "seek.hpp"
 
 namespace octocd {
 
@@ -162,13 +164,18 @@ struct CheckedFrame {
   /// margin, every candidate) and every contact pair: truth[k] is truth_pairs[k]'s
   /// (sorted, distinct). Every pair a row asks about is among them.
   std::vector<Pair> truth_pairs;
-  std::vector<ContactTruth> truth;
+  FrameArray<ContactTruth> truth;
   /// Pairs asked about beyond truth_pairs (none by construction; computed on demand).
   std::map<std::pair<std::uint32_t, std::uint32_t>, ContactTruth> extra;
   /// Pair p's index in truth_pairs, or truth_pairs.size() when absent.
   std::size_t find(Pair p) const {
     const auto it = std::lower_bound(truth_pairs.begin(), truth_pairs.end(), p);
     return it != truth_pairs.end() && *it == p ? std::size_t(it - truth_pairs.begin()) : truth_pairs.size();
+  }
+  /// find() through seek(): for pairs asked in ascending order (any order is answered).
+  std::size_t find_after(Pair p, std::size_t& cursor) const {
+    const std::size_t k = seek(truth_pairs, p, cursor);
+    return k < truth_pairs.size() && truth_pairs[k] == p ? k : truth_pairs.size();
   }
   std::vector<PairRows> rows;       ///< the record's rows grouped by pair, in record order
   std::vector<Pair> contact_pairs;  ///< the pairs of rows (sorted)
@@ -248,6 +255,12 @@ struct PhysicsValidators::Impl {
   physics_detail::CheckedFrame checked_frame(const FrameRecord& rec, const std::vector<Pose>& det) const;
   /// Pair p's reference geometry, computed into f.truth when missing.
   const physics_detail::ContactTruth& full_truth(physics_detail::CheckedFrame& f, Pair p) const;
+  /// full_truth() with the look-up through CheckedFrame::find_after (`cursor` as there).
+  const physics_detail::ContactTruth& truth_after(physics_detail::CheckedFrame& f, Pair p,
+                                                  std::size_t& cursor) const {
+    const std::size_t k = f.find_after(p, cursor);
+    return k < f.truth.size() ? f.truth[k] : full_truth(f, p);
+  }
   /// Row 1: broadphase completeness (candidates.cpp).
   void judge_broadphase(physics_detail::CheckedFrame& f);
   /// Row 2: contact completeness (contact_rows.cpp).

@@ -16,17 +16,34 @@ using namespace dmath;
 struct Placed {
   std::vector<D3> vertices, faces, edges;
 };
-Placed place(const HullFeatures& h, const Pose& p) {
+/// Hull h placed at pose p, written into `out` (its vectors cleared; their capacity kept).
+void place(const HullFeatures& h, const Pose& p, Placed& out) {
   const auto r = rotation(p.orientation);
   const D3 x{double(p.position.x), double(p.position.y), double(p.position.z)};
-  Placed out;
+  out.vertices.clear();
+  out.faces.clear();
+  out.edges.clear();
   for (const D3& v : h.vertices) {
     const D3 w = mul(r, v);
     out.vertices.push_back({w[0] + x[0], w[1] + x[1], w[2] + x[2]});
   }
   for (const D3& f : h.face_normals) out.faces.push_back(mul(r, f));
   for (const D3& e : h.edge_dirs) out.edges.push_back(mul(r, e));
-  return out;
+}
+
+/// Per-thread work space of sat_min_translation: both placed hulls and every tested axis.
+/// Kept between calls (thread_local), so a test allocates nothing but its accepted axes
+/// once these have grown to the largest hulls seen.
+/// Axes whose memory the scratch keeps between calls (two boxes test 15; a box against a
+/// 162-vertex icosphere ~1,500).
+constexpr std::size_t kKeptAxes = 4096;
+struct Scratch {
+  Placed a, b;
+  std::vector<SatAxis> all;
+};
+Scratch& scratch() {
+  thread_local Scratch s;
+  return s;
 }
 
 void project(const std::vector<D3>& vs, const D3& u, double& lo, double& hi) {
@@ -49,11 +66,15 @@ SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullF
                        double(a.edge_dirs.size()) * double(b.edge_dirs.size());
   if (naxes * double(a.vertices.size() + b.vertices.size()) > settings.max_work) return r;
   r.tested = true;
-  const Placed A = place(a, pa), B = place(b, pb);
+  Scratch& work = scratch();
+  const Placed& A = work.a;
+  const Placed& B = work.b;
+  place(a, pa, work.a);
+  place(b, pb, work.b);
 
-  // Every axis with its overlap; the minimum found as they come.
-  std::vector<SatAxis> all;
-  all.reserve(std::size_t(naxes));
+  // Every axis with its overlap, in the order tested.
+  std::vector<SatAxis>& all = work.all;
+  all.clear();
   auto test = [&](D3 u, int kind) {
     const double len = std::sqrt(dot3(u, u));
     if (!(len > 1e-9)) return;
@@ -88,9 +109,16 @@ SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullF
   r.normal = min_it->normal;
   r.separated = r.depth <= 0;
   r.epsilon = settings.abs_m + settings.rel * std::max(r.depth, 0.0);
-  if (!r.separated)
+  if (!r.separated) {
+    // Counted first, so that the result's vector is allocated once.
+    const double within = r.depth + r.epsilon;
+    r.accepted.reserve(std::size_t(
+        std::count_if(all.begin(), all.end(), [&](const SatAxis& ax) { return ax.overlap <= within; })));
     for (const SatAxis& ax : all)
-      if (ax.overlap <= r.depth + r.epsilon) r.accepted.push_back(ax);
+      if (ax.overlap <= within) r.accepted.push_back(ax);
+  }
+  // A large pair (up to SatSettings::max_work axes) does not keep its axes' memory.
+  if (all.capacity() > kKeptAxes) std::vector<SatAxis>().swap(all);
   return r;
 }
 

@@ -23,7 +23,14 @@ struct Entry {
   std::uint32_t box;
 };
 
-bool entry_less(const Entry& x, const Entry& y) { return x.cell < y.cell || (x.cell == y.cell && x.box < y.box); }
+/// (cell, box) in lexicographic order, compared coordinate by coordinate (std::array's
+/// operators go through memcmp for == and a generic loop for <).
+bool entry_less(const Entry& x, const Entry& y) {
+  if (x.cell[0] != y.cell[0]) return x.cell[0] < y.cell[0];
+  if (x.cell[1] != y.cell[1]) return x.cell[1] < y.cell[1];
+  if (x.cell[2] != y.cell[2]) return x.cell[2] < y.cell[2];
+  return x.box < y.box;
+}
 
 /// Cell indices are clamped here: far boxes share the border cells (slower, never wrong:
 /// the clamp is monotone).
@@ -135,7 +142,8 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
       for (std::int64_t y = c0c[1]; y <= c1c[1]; ++y)
         for (std::int64_t z = c0c[2]; z <= c1c[2]; ++z) entries[l].push_back({{x, y, z}, std::uint32_t(i)});
   }
-  for (auto& e : entries) std::sort(e.begin(), e.end(), entry_less);
+  const unsigned threads = thread_count(settings, n);
+  for (auto& e : entries) parallel_sort(e, threads, entry_less);
 
   // The cell of the lowest corner of two hulls' intersection, on `l`.
   auto reference_cell = [&](std::uint32_t a, std::uint32_t b, int l) {
@@ -143,7 +151,6 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     for (int k = 0; k < 3; ++k) c[k] = grid.index(std::max(hull[a].lo[k], hull[b].lo[k]), k, l);
     return c;
   };
-  const unsigned threads = thread_count(settings, n);
   std::vector<std::vector<Pair>> found(std::max(threads, 1u));
   auto emit = [&](unsigned worker, std::uint32_t a, std::uint32_t b) {
     found[worker].push_back(a < b ? Pair{a, b} : Pair{b, a});
@@ -222,7 +229,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
   for (const auto& f : found) total += f.size();
   out.reserve(total);
   for (const auto& f : found) out.insert(out.end(), f.begin(), f.end());
-  std::sort(out.begin(), out.end());
+  parallel_sort(out, threads, [](Pair p, Pair q) { return p < q; });
 }
 
 namespace {

@@ -1,0 +1,69 @@
+#pragma once
+/// \file frame_array.hpp
+/// A fixed number of elements built and destroyed on threads (parallel_items): a checked
+/// frame's truth (CheckedFrame::truth) holds one entry of ~220 bytes per pair, 10^5 - 10^6
+/// of them, whose fresh pages a std::vector's resize touches, and whose vectors its
+/// destructor frees, on one thread. Internal to validation/physics.
+
+#include <cstddef>
+#include <functional>
+#include <memory>
+#include <new>
+#include <type_traits>
+#include <utility>
+
+#include "../src/parallel.hpp"
+
+namespace octocd::physics_detail {
+
+template <class T>
+class FrameArray {
+  static_assert(std::is_nothrow_default_constructible_v<T> && std::is_nothrow_destructible_v<T>,
+                "built and destroyed on threads that cannot stop halfway");
+
+ public:
+  FrameArray() = default;
+  /// `n` value-initialised elements, built on `threads` threads (0: the hardware's), which
+  /// also destroy them.
+  FrameArray(std::size_t n, int threads) : threads_(threads) {
+    if (n == 0) return;
+    data_ = std::allocator<T>().allocate(n);
+    size_ = n;
+    T* data = data_;
+    parallel_items(n, threads_, std::function<bool()>(), [data](std::size_t i, unsigned) { ::new (static_cast<void*>(data + i)) T(); });
+  }
+  FrameArray(FrameArray&& o) noexcept
+      : data_(std::exchange(o.data_, nullptr)), size_(std::exchange(o.size_, 0)), threads_(o.threads_) {}
+  FrameArray& operator=(FrameArray&& o) noexcept {
+    if (this != &o) {
+      release();
+      data_ = std::exchange(o.data_, nullptr);
+      size_ = std::exchange(o.size_, 0);
+      threads_ = o.threads_;
+    }
+    return *this;
+  }
+  FrameArray(const FrameArray&) = delete;
+  FrameArray& operator=(const FrameArray&) = delete;
+  ~FrameArray() { release(); }
+
+  std::size_t size() const { return size_; }
+  T& operator[](std::size_t i) { return data_[i]; }
+  const T& operator[](std::size_t i) const { return data_[i]; }
+
+ private:
+  void release() noexcept {
+    if (!data_) return;
+    T* data = data_;
+    parallel_items(size_, threads_, std::function<bool()>(), [data](std::size_t i, unsigned) { data[i].~T(); });
+    std::allocator<T>().deallocate(data_, size_);
+    data_ = nullptr;
+    size_ = 0;
+  }
+
+  T* data_ = nullptr;
+  std::size_t size_ = 0;
+  int threads_ = 0;
+};
+
+}  // namespace octocd::physics_detail
