@@ -318,6 +318,27 @@ void expect_cpu_cuda_counts(const FrameMetrics& cpu, const FrameMetrics& gpu, co
   }
 }
 
+/// The engines the midphase tests compare on model m: the CPU engine (octree), a cuda
+/// engine with the early exit off (graph path) and the cuda engines with it on, by name
+/// (the graph path; a test may add others).
+struct ExitEngines {
+  static BroadPhaseConfig octree(const Model& m) {
+    BroadPhaseConfig cfg = m.scene.broadphase;
+    cfg.name = "octree";
+    return cfg;
+  }
+  explicit ExitEngines(const std::shared_ptr<const Model>& m)
+      : cpu(m, make_broadphase(octree(*m), m->scene.domain)) {
+    CudaSettings no_exit;
+    no_exit.midphase_early_exit = false;
+    off = std::make_unique<CudaWorld>(m, "octree", path_settings("graph", no_exit));
+    on.emplace_back("graph", std::make_unique<CudaWorld>(m, "octree", path_settings("graph")));
+  }
+  World cpu;
+  std::unique_ptr<CudaWorld> off;
+  std::vector<std::pair<std::string, std::unique_ptr<CudaWorld>>> on;
+};
+
 bool is_checkpoint(int frame, int frames) { return frame == 1 || frame == 10 || frame == 100 || frame == frames; }
 
 class CpuVsCuda : public ::testing::TestWithParam<SceneAndPath> {};
@@ -846,14 +867,10 @@ TEST(CudaMidphase, EarlyExitChangesNoBitAndOnlyLowersTheCounts) {
     auto model = std::make_shared<Model>(*load_model(cs.scene));
     if (cs.levels) model->scene.midphase = MidphaseConfig::parse(cs.levels);
     const std::shared_ptr<const Model> m = model;
-    BroadPhaseConfig cfg = m->scene.broadphase;
-    cfg.name = "octree";
-    World cpu(m, make_broadphase(cfg, m->scene.domain));
-    CudaSettings no_exit;
-    no_exit.midphase_early_exit = false;
-    const auto off = std::make_unique<CudaWorld>(m, "octree", path_settings("graph", no_exit));
-    std::vector<std::pair<std::string, std::unique_ptr<CudaWorld>>> on;
-    on.emplace_back("graph", std::make_unique<CudaWorld>(m, "octree", path_settings("graph")));
+    ExitEngines engines(m);
+    World& cpu = engines.cpu;
+    const std::unique_ptr<CudaWorld>& off = engines.off;
+    auto& on = engines.on;
     if (m->initial.size() <= kSmallPathMostBodies) {
       on.emplace_back("small", std::make_unique<CudaWorld>(m, "octree", path_settings("small")));
       ASSERT_EQ(on.back().second->step_path(), "small") << cs.scene;
@@ -935,15 +952,10 @@ TEST(CudaMidphase, WitnessesSkipTheDescentOfPersistentContacts) {
     int settle, frames;
   };
   for (const Case& cs : {Case{"bunny-stack-50", 200, 200}, Case{"bunny-pile-10k", 100, 100}}) {
-    const auto m = load_model(cs.scene);
-    BroadPhaseConfig cfg = m->scene.broadphase;
-    cfg.name = "octree";
-    World cpu(m, make_broadphase(cfg, m->scene.domain));
-    CudaSettings no_exit;
-    no_exit.midphase_early_exit = false;
-    const auto off = std::make_unique<CudaWorld>(m, "octree", path_settings("graph", no_exit));
-    std::vector<std::pair<std::string, std::unique_ptr<CudaWorld>>> on;
-    on.emplace_back("graph", std::make_unique<CudaWorld>(m, "octree", path_settings("graph")));
+    ExitEngines engines(load_model(cs.scene));
+    World& cpu = engines.cpu;
+    const std::unique_ptr<CudaWorld>& off = engines.off;
+    const auto& on = engines.on;
     std::uint64_t off_bt = 0, contacts = 0;
     std::vector<std::uint64_t> on_bt(on.size(), 0);
     for (int f = 1; f <= cs.settle + cs.frames; ++f) {
