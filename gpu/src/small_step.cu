@@ -268,19 +268,27 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
 
   // 5. Midphase start (one warp per pair); the in-lists' a resolved to k, by the grid's
   // last threads (the first warps take the pairs).
-  MidListDesc md = s.mid;
+  // The midphase's descriptor: one copy per block in shared memory, written by thread 0
+  // after a barrier that every thread of the block has passed, read by all after
+  // __syncthreads (a copy per thread is 304 bytes of local memory a thread and step).
   // No witness cache (midphase.cuh, "Witnesses"): its lookups and its copy of the keys cost
   // the fused step more than the descents they spare on 5 of 6 shipped small scenes (H100,
   // bench_step_paths: Table 5 with 1,2 -1 to -5%, bunny-stack-50 -2%; mixed-pile-1000 +8%).
-  md.wit = WitnessDesc{};
-  if (kLean) {
-    md.early_exit = 0;
-    md.tile_cull = 0;
-    md.tile_filter = 0;
+  __shared__ MidListDesc block_md;
+  const MidListDesc& md = block_md;
+  if (threadIdx.x == 0) {
+    block_md = s.mid;
+    block_md.wit = WitnessDesc{};
+    if (kLean) {
+      block_md.early_exit = 0;
+      block_md.tile_cull = 0;
+      block_md.tile_filter = 0;
+    }
+    block_md.out = s.lists[0];
+    block_md.out_count = st->counts + 1;
+    block_md.out_capacity = s.list_capacity;
   }
-  md.out = s.lists[0];
-  md.out_count = st->counts + 1;
-  md.out_capacity = s.list_capacity;
+  __syncthreads();
   mid::mid_start_items<false>(md);
   {
     const std::uint32_t live = live_count(st->counts, cap);
@@ -301,23 +309,30 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
 
   // 6. Midphase expand steps and leaves (as step_stages.cpp enqueues them; the leaves stay
   // in the leaf list: no expand step runs them itself here).
-  for (int i = 0; i + 1 < md.steps; ++i) {
-    md.in = s.lists[i % 2];
-    md.in_count = st->counts + 1 + i;
-    md.in_capacity = s.list_capacity;
-    md.out = s.lists[(i + 1) % 2];
-    md.out_count = st->counts + 2 + i;
+  const int steps = s.mid.steps;
+  for (int i = 0; i + 1 < steps; ++i) {
+    if (threadIdx.x == 0) {
+      block_md.in = s.lists[i % 2];
+      block_md.in_count = st->counts + 1 + i;
+      block_md.in_capacity = s.list_capacity;
+      block_md.out = s.lists[(i + 1) % 2];
+      block_md.out_count = st->counts + 2 + i;
+    }
+    __syncthreads();
     mid::mid_expand_items(md, i);
     grid.sync();
   }
   stamp(profile, 6);
-  if (md.steps > 0) {
-    md.in = s.lists[(md.steps - 1) % 2];
-    md.in_count = st->counts + md.steps;
-    md.in_capacity = s.list_capacity;
-    md.out = nullptr;
-    md.out_count = nullptr;
-    md.out_capacity = 0;
+  if (steps > 0) {
+    if (threadIdx.x == 0) {
+      block_md.in = s.lists[(steps - 1) % 2];
+      block_md.in_count = st->counts + steps;
+      block_md.in_capacity = s.list_capacity;
+      block_md.out = nullptr;
+      block_md.out_count = nullptr;
+      block_md.out_capacity = 0;
+    }
+    __syncthreads();
     mid::mid_leaf_items<false>(md, *reinterpret_cast<mid::LeafTiles*>(smem));
     grid.sync();
   }
@@ -330,7 +345,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   const std::uint32_t live = live_count(st->counts, cap);
   // The fused front's saved state becomes the new state unless the step is to be rerun.
   bool save = front && st->counts[0] <= cap;
-  for (int i = 0; i < md.steps; ++i) save = save && st->counts[1 + i] <= s.list_capacity;
+  for (int i = 0; i < steps; ++i) save = save && st->counts[1 + i] <= s.list_capacity;
   const bool one_block = live <= s.one_block_pairs;
   if (one_block && blockIdx.x != 0) return;  // uniform per block; no grid.sync follows then
   const std::uint32_t r_tid = one_block ? threadIdx.x : tid;
