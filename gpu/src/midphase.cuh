@@ -299,6 +299,23 @@ __device__ inline void stage_tile(const Vec3* v, const Aabb* blocks, std::uint32
   __syncwarp();
 }
 
+/// d's early exit, tile culling and tile filter (MidListDesc), all off with kLean: the fused
+/// step's lean kernel, where they are constants and their code is dropped.
+template <bool kLean>
+__device__ inline bool exit_on(const MidListDesc& d) {
+  return !kLean && d.early_exit != 0;
+}
+/// d's tile culling (exit_on).
+template <bool kLean>
+__device__ inline bool cull_on(const MidListDesc& d) {
+  return !kLean && d.tile_cull != 0;
+}
+/// d's tile filter (exit_on).
+template <bool kLean>
+__device__ inline bool filter_on(const MidListDesc& d) {
+  return !kLean && d.tile_filter != 0;
+}
+
 __device__ inline bool pair_confirmed(const MidListDesc& d, std::uint32_t k) {
   return *(volatile const std::uint8_t*)(d.confirmed + k) != 0;
 }
@@ -310,8 +327,9 @@ __device__ inline bool confirmed_now(const MidListDesc& d, std::uint32_t k) {
 
 /// With the early exit on (d.early_exit), whether pair k is already confirmed, so that the
 /// rest of its work can be skipped (warp-uniform: one load by lane 0); false with it off.
+template <bool kLean = false>
 __device__ inline bool skip_confirmed(const MidListDesc& d, std::uint32_t k) {
-  return d.early_exit != 0 && confirmed_now(d, k);
+  return exit_on<kLean>(d) && confirmed_now(d, k);
 }
 
 /// Confirms pair k (one thread), found by the vertex pair `witness` (WitnessDesc::witness),
@@ -483,8 +501,9 @@ __device__ inline WarpTiles warp_tiles(const MidListDesc& d, LeafTiles& t) {
 /// no count over the whole ranges is run, and the pair is checked before every tile of B
 /// and of A. `tiles`: the warp's kLeafTile-vertex tiles (warp_tiles). The leaf that
 /// confirms the pair stores the vertex pair it found (confirm: the witness) when kWitness
-/// and d keeps witnesses; !kWitness compiles the leaf without them (the fused small step).
-template <bool kWitness>
+/// and d keeps witnesses; !kWitness compiles the leaf without them (the fused small step);
+/// kLean: as exit_on.
+template <bool kWitness, bool kLean = false>
 __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t ca_index,
                                  std::uint32_t cb_index, std::uint32_t chunk, const WarpTiles& tiles, Tally& t) {
   Vec3* const tile_a = tiles.a;
@@ -497,7 +516,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   std::uint32_t a_begin = ca.first_vertex;  // mesh-mesh: this item's part of A's cell (below)
   std::uint32_t a_end = ca.first_vertex + ca.vertex_count;
   const Vec3 pa = c.a.position;
-  const bool exit_early = d.early_exit != 0;
+  const bool exit_early = exit_on<kLean>(d);
   if (c.s.kind == hd::PairKind::MeshBox) {  // as mesh_box_descend's last step
     t.vertex_tests += ca.vertex_count;
     // The answer is known: the tests would not change it (early exit on: checked already).
@@ -558,7 +577,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
   // filtered vertex: no vertex test, as mesh_mesh_leaf); with the tile filter as well
   // (d.tile_filter) A's first tile is not staged here: A's tiles are staged per tile of B,
   // only the vertices near it (near_tile).
-  const bool filter = d.tile_filter != 0;
+  const bool filter = filter_on<kLean>(d);
   const bool a_first = !(exit_early && filter);  // A's first tile staged before the tiles of B
   std::uint32_t jb = b_begin / kVertexBlock;  // the next vertex block of B's range to stage
   const std::uint32_t jb_end = block_end(b_end);
@@ -597,7 +616,7 @@ __device__ inline void leaf_item(const MidListDesc& d, const PairContext& c, std
       stage_tile(B.vertices, c.blocks_b, b_begin, b_end, a_in_b, pb, tile_b, id_b, jb, nb);
     }
     if (nb == 0) break;  // (only at the range's end)
-    const bool cull = d.tile_cull != 0;
+    const bool cull = cull_on<kLean>(d);
     Aabb box_b{};
     if (cull || filter) {
       box_b = tile_box(tile_b, nb);
@@ -697,6 +716,7 @@ __device__ inline float overlap_depth(const Aabb& a, const Aabb& b) {
 /// the surviving cell pairs are run here as leaves (run_leaves) instead of appended. Box
 /// tests are counted per 32 cell pairs tested; with the early exit on, the test stops before
 /// the next 32 once the pair is confirmed (the caller checked it before the first).
+template <bool kLean = false>
 __device__ inline void test_cells(const MidListDesc& d, const PairContext& c, std::uint32_t k, std::uint32_t a0,
                                   std::uint32_t a1, std::uint32_t b0, std::uint32_t b1, bool last, Tally& t,
                                   LeafTiles* leaves = nullptr) {
@@ -706,7 +726,7 @@ __device__ inline void test_cells(const MidListDesc& d, const PairContext& c, st
   const hd::OctreeView& A = c.a.octree;
   const hd::OctreeView& B = c.b.octree;
   for (std::uint32_t c0 = 0; c0 < total; c0 += 32) {
-    if (c0 > 0 && skip_confirmed(d, k)) break;
+    if (c0 > 0 && skip_confirmed<kLean>(d, k)) break;
     t.box_tests += total - c0 < 32u ? total - c0 : 32u;
     const std::uint32_t i = c0 + lane_id();
     bool keep = false;
@@ -722,7 +742,7 @@ __device__ inline void test_cells(const MidListDesc& d, const PairContext& c, st
       t.box_pairs += static_cast<unsigned long long>(__popc(mask));
       if (leaves != nullptr) {
         float depth = 0.0f;  // the order of the leaves with the early exit
-        if (keep && d.early_exit != 0)
+        if (keep && exit_on<kLean>(d))
           depth = mesh_box ? overlap_depth(A.cells[item.ca].box, c.s.box_local)
                            : overlap_depth(hd::moved_grown(A.cells[item.ca].box, c.s.d, c.s.margin),
                                            B.cells[item.cb].box);
@@ -761,13 +781,14 @@ __device__ inline bool alone_answer(const PairContext& c) {
 
 /// Step 0 of a pair not decided_alone, by the warp: the cell pairs of levels la[0] x
 /// lb[0] (or A's cells against the box), the overlapping ones appended (every lane calls it).
+template <bool kLean = false>
 __device__ inline void first_step(const MidListDesc& d, const PairContext& c, std::uint32_t k, Tally& t) {
   const hd::OctreeView& A = c.a.octree;
   const hd::OctreeView& B = c.b.octree;
   const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
   const int la0 = step_level(d, c, 0, false);
   const int lb0 = mesh_box ? 0 : step_level(d, c, 0, true);
-  test_cells(d, c, k, A.level_begin(la0), A.level_end(la0), mesh_box ? 0u : B.level_begin(lb0),
+  test_cells<kLean>(d, c, k, A.level_begin(la0), A.level_end(la0), mesh_box ? 0u : B.level_begin(lb0),
              mesh_box ? 1u : B.level_end(lb0), d.steps == 1, t);
 }
 
@@ -808,7 +829,7 @@ __device__ inline bool witness_close(const PairContext& c, unsigned long long wi
 /// witness (last_witness, witness_close, by lane 0): a pair still within theta there is
 /// confirmed and keeps it, with no cell test. !kWitness: compiled without the cache (the
 /// fused small step).
-template <bool kWitness>
+template <bool kWitness, bool kLean = false>
 __device__ inline void mid_start_items(const MidListDesc& d) {
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
   const bool witnesses = kWitness && d.wit.witness != nullptr;
@@ -840,7 +861,7 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
     } else if (lane_id() == 0) {
       d.confirmed[k] = 0;
     }
-    first_step(d, c, k, t);
+    first_step<kLean>(d, c, k, t);
   }
   flush(d, t);
 }
@@ -903,6 +924,7 @@ __device__ inline void warp_range(std::uint32_t count, std::uint32_t& begin, std
 /// mid_expand's work: one warp per item of step `step` (warp_range of the list).
 /// `tiles`: the block's LeafTiles (blockDim.x == kBlockSize) when the last step may run its
 /// leaves itself (fuse_leaves), or null (never).
+template <bool kLean = false>
 __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTiles* tiles = nullptr) {
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
   const bool last = step + 2 == d.steps;
@@ -915,7 +937,7 @@ __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTile
   std::uint32_t ck = 0;
   for (std::uint32_t it = begin; it < end; ++it) {
     const MidItem item = d.in[it];
-    if (skip_confirmed(d, item.k)) continue;  // early exit: neither set up nor counted
+    if (skip_confirmed<kLean>(d, item.k)) continue;  // early exit: neither set up nor counted
     if (!have || item.k != ck) {
       c = context(d, item.k, d.pairs[item.k]);
       ck = item.k;
@@ -926,7 +948,7 @@ __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTile
     hd::descendants(c.a.octree, item.ca, step_level(d, c, step, false), step_level(d, c, step + 1, false), a0, a1);
     if (!mesh_box)
       hd::descendants(c.b.octree, item.cb, step_level(d, c, step, true), step_level(d, c, step + 1, true), b0, b1);
-    test_cells(d, c, item.k, a0, a1, b0, b1, last, t, leaves);
+    test_cells<kLean>(d, c, item.k, a0, a1, b0, b1, last, t, leaves);
   }
   flush(d, t);
 }
@@ -936,18 +958,18 @@ __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTile
 /// its contact cost the most: striding spreads them over the warps where a contiguous share
 /// per warp put them on a few); `tiles` is the block's shared memory (blockDim.x ==
 /// kBlockSize). kWitness: as leaf_item.
-template <bool kWitness>
+template <bool kWitness, bool kLean = false>
 __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
   const WarpTiles warp = warp_tiles(d, tiles);
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
   Tally t;
   for (std::uint32_t it = global_warp(); it < count; it += warp_count()) {
     const MidItem item = d.in[it];
-    if (skip_confirmed(d, item.k)) continue;  // early exit: neither set up nor counted
+    if (skip_confirmed<kLean>(d, item.k)) continue;  // early exit: neither set up nor counted
     // Set up per item: keeping the set-up across a run of the same pair's items (as
     // mid_expand_items does) takes 89 registers here, or spills 352 bytes at 64.
     const PairContext c = context(d, item.k, d.pairs[item.k]);
-    leaf_item<kWitness>(d, c, item.k, item.ca, item.cb, item.chunk, warp, t);
+    leaf_item<kWitness, kLean>(d, c, item.k, item.ca, item.cb, item.chunk, warp, t);
   }
   flush(d, t);
 }

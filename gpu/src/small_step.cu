@@ -289,7 +289,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
     block_md.out_capacity = s.list_capacity;
   }
   __syncthreads();
-  mid::mid_start_items<false>(md);
+  mid::mid_start_items<false, kLean>(md);
   {
     const std::uint32_t live = live_count(st->counts, cap);
     for (std::uint32_t i = threads - 1u - tid; i < n; i += threads) {
@@ -319,7 +319,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
       block_md.out_count = st->counts + 2 + i;
     }
     __syncthreads();
-    mid::mid_expand_items(md, i);
+    mid::mid_expand_items<kLean>(md, i);
     grid.sync();
   }
   stamp(profile, 6);
@@ -333,7 +333,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
       block_md.out_capacity = 0;
     }
     __syncthreads();
-    mid::mid_leaf_items<false>(md, *reinterpret_cast<mid::LeafTiles*>(smem));
+    mid::mid_leaf_items<false, kLean>(md, *reinterpret_cast<mid::LeafTiles*>(smem));
     grid.sync();
   }
   stamp(profile, 7);
