@@ -810,24 +810,48 @@ __device__ inline unsigned long long last_witness(const MidListDesc& d, std::uin
   return kNoWitness;
 }
 
-/// Whether vertex pair `witness` (WitnessDesc::witness) of pair context c (MeshBox or
-/// MeshMesh) is within theta now: the vertex test of the leaves on the same world vertices
-/// (hd::vertex_box_close or hd::vertex_close of hd::world_vertex), so true only when the
-/// descent would confirm the pair. False for kNoWitness or an index out of range.
-__device__ inline bool witness_close(const PairContext& c, unsigned long long witness) {
-  const std::uint32_t va = static_cast<std::uint32_t>(witness >> 32);
-  const std::uint32_t vb = static_cast<std::uint32_t>(witness);
-  if (va >= c.a.octree.vertex_count) return false;  // (kNoWitness too)
-  const Vec3 wa = hd::world_vertex(c.a.octree.vertices[va], c.a.position);
-  if (c.s.kind == hd::PairKind::MeshBox) return hd::vertex_box_close(wa, c.b.box, c.s.theta2);
-  if (vb >= c.b.octree.vertex_count) return false;
-  return hd::vertex_close(wa, hd::world_vertex(c.b.octree.vertices[vb], c.b.position), c.s.theta2);
+/// Whether pair p (sorted key `key`) is confirmed at its last witness (last_witness; the
+/// whole warp, warp-uniform; lane 0 tests it), before and without its set-up: the leaves'
+/// vertex test (hd::vertex_close, or hd::vertex_box_close against the box's world AABB) on
+/// the same world vertices, A the mesh when one of the two is a box (context()'s order),
+/// theta^2 as hd::setup_pair computes it. True only when the descent would confirm the
+/// pair: it confirms exactly when some vertex pair passes that test, and such a pair is not
+/// decided by the set-up (its early rejection's margin covers theta; aabb-only and
+/// level-less models keep no witnesses). False for a static-static pair (never confirmed),
+/// no witness, a box-box pair or an index out of range. `t` counts a tested witness as one
+/// vertex test; *w is the witness.
+__device__ inline bool witness_first(const MidListDesc& d, const Pair& p, unsigned long long key, Tally& t,
+                                     unsigned long long& w) {
+  w = last_witness(d, p.a, key);
+  if (w == kNoWitness) return false;
+  t.vertex_tests += 1;
+  int close = 0;
+  if (lane_id() == 0 && !(d.w[p.a] == 0.0f && d.w[p.b] == 0.0f)) {
+    const std::uint32_t sa = d.shape[p.a];
+    const std::uint32_t sb = d.shape[p.b];
+    const bool swap = d.shapes.shapes[sa].is_mesh == 0;  // as context()
+    const std::uint32_t ia = swap ? p.b : p.a;
+    const std::uint32_t ib = swap ? p.a : p.b;
+    const DeviceShape& A = d.shapes.shapes[swap ? sb : sa];
+    const DeviceShape& B = d.shapes.shapes[swap ? sa : sb];
+    const float theta = pair_theta(d.shapes.theta[sa], d.shapes.theta[sb]);
+    const float theta2 = theta * theta;
+    const std::uint32_t va = static_cast<std::uint32_t>(w >> 32);
+    const std::uint32_t vb = static_cast<std::uint32_t>(w);
+    if (A.is_mesh != 0 && va < A.vertex_count) {
+      const Vec3 wa = hd::world_vertex(d.shapes.vertices[A.vertex_offset + va], d.x[ia]);
+      if (B.is_mesh == 0) close = hd::vertex_box_close(wa, d.aabb[ib], theta2) ? 1 : 0;
+      else if (vb < B.vertex_count)
+        close = hd::vertex_close(wa, hd::world_vertex(d.shapes.vertices[B.vertex_offset + vb], d.x[ib]), theta2) ? 1 : 0;
+    }
+  }
+  return __shfl_sync(kFull, close, 0) != 0;
 }
 
 /// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid).
-/// With the witness cache on, a pair that needs a level step is first tested at its last
-/// witness (last_witness, witness_close, by lane 0): a pair still within theta there is
-/// confirmed and keeps it, with no cell test. !kWitness: compiled without the cache (the
+/// With the witness cache on, a pair is first tested at its last witness (witness_first,
+/// before its set-up): a pair still within theta there is confirmed and keeps it, with no
+/// set-up and no cell test. !kWitness: compiled without the cache (the
 /// fused small step).
 template <bool kWitness, bool kLean = false>
 __device__ inline void mid_start_items(const MidListDesc& d) {
@@ -838,6 +862,16 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
     // The pair from its sorted key (the broadphase's output), kept for the later stages.
     const Pair p = unpack_pair(d, d.pair_keys[k]);
     if (lane_id() == 0) d.pairs[k] = p;
+    if (witnesses) {
+      unsigned long long w;
+      if (witness_first(d, p, d.pair_keys[k], t, w)) {
+        if (lane_id() == 0) {
+          d.confirmed[k] = 1;
+          d.wit.witness[k] = w;
+        }
+        continue;
+      }
+    }
     const PairContext c = context(d, k, p);
     if (decided_alone(c)) {
       if (lane_id() == 0) {
@@ -846,20 +880,9 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
       }
       continue;
     }
-    if (witnesses) {
-      const unsigned long long w = last_witness(d, p.a, d.pair_keys[k]);
-      bool close = false;
-      if (w != kNoWitness) {
-        t.vertex_tests += 1;
-        close = __shfl_sync(kFull, lane_id() == 0 ? static_cast<int>(witness_close(c, w)) : 0, 0) != 0;
-      }
-      if (lane_id() == 0) {
-        d.confirmed[k] = close ? 1 : 0;
-        d.wit.witness[k] = close ? w : kNoWitness;
-      }
-      if (close) continue;
-    } else if (lane_id() == 0) {
+    if (lane_id() == 0) {
       d.confirmed[k] = 0;
+      if (witnesses) d.wit.witness[k] = kNoWitness;
     }
     first_step<kLean>(d, c, k, t);
   }
