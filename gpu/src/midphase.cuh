@@ -68,10 +68,11 @@
 // shapes' octree vertices; the tiles keep each staged vertex's index) as witness[k]; at the
 // end of the step keep_witness copies the sorted keys and witnesses; the next step's start
 // looks pair k's key up among them (prev_begin[a]: the run of a's pairs) and tests that
-// vertex pair first, with the vertex test of the leaves (hd::vertex_close or
-// vertex_box_close on hd::world_vertex). A pair within theta there is confirmed with no
-// descent: the answer of the descent, which confirms exactly when some vertex pair passes
-// that test (its pruning is conservative, midphase_hd.hpp). Which witness a pair keeps
+// vertex pair first, before the pair's set-up (witness_first), with the vertex test of the
+// leaves (hd::vertex_close or vertex_box_close on hd::world_vertex). A pair within theta
+// there is confirmed with no set-up and no descent: the answer of the descent, which
+// confirms exactly when some vertex pair passes that test (its pruning, the set-up's early
+// rejection included, is conservative, midphase_hd.hpp). Which witness a pair keeps
 // (several leaves may confirm it) depends on timing; the answers do not. Counts: a
 // witness tested counts as one vertex test.
 // Each warp sums its counts in registers (Tally) and adds them once per launch.
