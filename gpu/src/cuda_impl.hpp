@@ -229,6 +229,10 @@ struct CudaWorld::Impl {
   /// Blocks of the grid-stride kernels over the live pairs (decide, contact terms): two
   /// per warp_grid block (8 per SM), fewer when the pair buffer is smaller. The live count
   /// is known on the device only, and is often far below pair_cap.
+  /// Whether the midphase keeps witnesses (gpu::WitnessDesc): the per-stage path with the
+  /// early exit, on a model with meshes and levels (the fused small step keeps none); only
+  /// then are the witness buffers allocated.
+  bool witnesses() const { return mid_early_exit != 0 && any_mesh && level_steps > 0 && !small; }
   unsigned pair_grid() const { return std::min(gpu::grid_for(pair_cap), 2 * warp_grid); }
   gpu::BodiesDesc bodies();
   gpu::ShapesDesc shapes_desc();

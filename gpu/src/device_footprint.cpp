@@ -109,19 +109,22 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
   // confirmed, hit, dx_a, dx_b, dv_a, dv_b, depth0, records, the contact index's ranks
   // and entries (the small path holds its in-lists instead), its long-segment list (pcap /
   // (kIndexShortSegment + 1) + 1 entries of 4 bytes, counted as a byte per pair plus 4:
-  // linear in pcap); the midphase's witness cache (3 x 8 bytes per pair, prev_begin n + 1,
-  // its count); the two work lists; CUB's temporary storage (the largest of its uses).
+  // linear in pcap); the midphase's witness cache on a model with meshes (3 x 8 bytes per
+  // pair, prev_begin n + 1, its count); the two work lists; CUB's temporary storage (the
+  // largest of its uses).
   static_assert(kIndexShortSegment + 1 >= sizeof(std::uint32_t), "a byte per pair covers the long-segment list");
   const std::uint64_t pcap = initial_pair_capacity(n);
   const std::uint64_t lcap = initial_list_capacity(n);
   const std::uint64_t temp = std::max({cub_sort_temp_bound(pcap, 8, 0), cub_scan_temp_bound(n1), std::uint64_t{1}});
+  const std::uint64_t witness_cache = sc.vertices > 0 ? 3 * buf(pcap, sizeof(unsigned long long)) +
+                                                            buf(n1, sizeof(std::uint32_t)) + buf(1, sizeof(std::uint32_t))
+                                                      : 0;
   const std::uint64_t step = 3 * buf(n1, sizeof(std::uint32_t)) + buf(n1, sizeof(unsigned long long)) +
                              2 * buf(pcap, sizeof(unsigned long long)) + buf(pcap, sizeof(Pair)) +
                              2 * buf(pcap, sizeof(std::uint8_t)) + 4 * buf(pcap, sizeof(Vec3)) +
                              buf(pcap, sizeof(float)) + buf(pcap, kDeviceContactBytes) +
                              2 * buf(pcap, sizeof(std::uint32_t)) +
-                             buf(pcap, 1) + sizeof(std::uint32_t) + 3 * buf(pcap, sizeof(unsigned long long)) +
-                             buf(n1, sizeof(std::uint32_t)) + buf(1, sizeof(std::uint32_t)) +
+                             buf(pcap, 1) + sizeof(std::uint32_t) + witness_cache +
                              2 * buf(lcap, kMidItemBytes) + buf(temp, 1);
   // The fused small step's column counts (n + 1), allocated when it runs (counted up to 32768
   // bodies, kMetricsOneBlockBodies: above the small path's kCudaSmallStepMaxBodies).

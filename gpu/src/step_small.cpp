@@ -33,7 +33,6 @@ gpu::SmallStepDesc CudaWorld::Impl::small_desc(const Scene& scene, bool recordin
   s.pair_keys = pair_keys.get();
   s.shift = gpu::key_bits(n);
   s.mid = mid_desc(pair_keys.get());  // the fill writes them in (a, b) order: no sort
-  s.mid.wit = gpu::WitnessDesc{};     // the fused step keeps no witnesses (small_step.cu)
   s.lists[0] = items_a.get();
   s.lists[1] = items_b.get();
   s.list_capacity = lcap();

@@ -119,7 +119,7 @@ gpu::MidListDesc CudaWorld::Impl::mid_desc(const unsigned long long* keys) {
   md.counters = counters();
   md.steps = level_steps;
   md.early_exit = mid_early_exit;
-  if (mid_early_exit != 0 && any_mesh && level_steps > 0) {  // the witness cache
+  if (witnesses()) {
     md.wit.witness = witness.get();
     md.wit.prev_keys = prev_keys.get();
     md.wit.prev_witness = prev_witness.get();
@@ -206,14 +206,16 @@ void CudaWorld::Impl::prepare() {
   bp_offset.ensure(n1);
   for (BufferBase* b :
        std::initializer_list<BufferBase*>{&pair_keys, &pair_keys_sorted, &pairs, &confirmed, &hit, &dx_a, &dx_b, &dv_a,
-                                          &dv_b, &depth0, &records, &witness, &prev_keys, &prev_witness})
+                                          &dv_b, &depth0, &records})
     b->ensure(pair_cap);
-  // The witness cache starts empty whenever the buffers may have moved (its entries are
-  // hints, tested before use: an old one is harmless, a garbage count is not).
-  prev_begin.ensure(n1);
-  prev_count.ensure(1);
-  check(cudaMemsetAsync(prev_count.get(), 0, sizeof(std::uint32_t), stream), "cudaMemset witness count");
-  check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (witness count)");  // before the resident stream reads it
+  if (witnesses()) {
+    for (BufferBase* b : std::initializer_list<BufferBase*>{&witness, &prev_keys, &prev_witness}) b->ensure(pair_cap);
+    prev_begin.ensure(n1);
+    prev_count.ensure(1);
+    // The cache starts empty whenever the buffers may have moved (its entries are hints,
+    // tested before use: an old one is harmless, a garbage count is not).
+    check(cudaMemsetAsync(prev_count.get(), 0, sizeof(std::uint32_t), stream), "cudaMemset witness count");
+  }
   items_a.ensure(list_cap);
   items_b.ensure(list_cap);
   if (small) {
