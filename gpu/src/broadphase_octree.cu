@@ -3,15 +3,16 @@
 // driver (core/src/broadphase_octree.cpp) uses. Steps (orchestrated by cuda_world.cpp):
 // 1. keys: D_w (the scene's, or `auto` from the smallest body extent: a block minimum,
 //    then one atomicMin per block on the float's bits),
-//    then per body loose_place_unit -> (level, Morton cell) key, the overflow key, or the
+//    then per body loose_place_unit -> (level, Morton cell) key, the overflow key, a stray
+//    key (a body outside the root cube: see "Stray bodies" at loose_keys_kernel), or the
 //    NaN key (the query recomputes its unit box in fixed point, loose_q_min / loose_q_max,
 //    from the slot's AABB);
 // 2. a stable radix sort by key: slot order = (key, body), so every occupied cell is a
 //    contiguous run of slots and the levels follow each other in key order (with a fixed
-//    D_w the overflow and NaN keys follow level D_w's cells, so the sort covers only the
-//    bits they need);
-// 3. a level table (first slot of every level, of the overflow list and of the NaN
-//    bodies) and a hash table of the occupied blocks (aligned 2 x 2 x 2 groups of cells,
+//    D_w the overflow, stray and NaN keys follow level D_w's cells, so the sort covers only
+//    the bits they need);
+// 3. a level table (first slot of every level, of the overflow list, of the stray bodies
+//    of each level by size and of the NaN bodies) and a hash table of the occupied blocks (aligned 2 x 2 x 2 groups of cells,
 //    whose slots are one run: loose_blocks.hpp; one 64-bit entry per block, its key and
 //    its first slot, open addressing with linear probing, at most half full) and the
 //    occupancy map (a byte per block in key order, a bit per occupied cell, for the levels
@@ -27,12 +28,17 @@
 //      slot, a lane per cell (its run found through its block); at m = l it keeps only
 //      slots after its own (a block or cell whose keys all precede its own is not even
 //      looked up), at m < l every body;
-//    - an overflow body tests the overflow bodies after it;
+//      a body in a cell also tests the stray bodies of the levels above its own;
+//    - an overflow body tests the overflow and stray bodies after it; a stray body tests
+//      the stray bodies after it (with the thread query: loose_lists_kernel, a warp per
+//      slot) and, as a body of its level by size would, the cells of the levels up to it
+//      that its box meets (none when it is far outside);
 //    then the exact AABB test (octocd::overlaps, Eq. 6). A second kernel, one thread per
 //    in-tree slot, tests it against every overflow body (walls: a handful, each of which
 //    would otherwise scan all n slots with one warp). Each overlapping pair is met exactly
 //    once (same level: by the smaller slot; across levels: by the finer body; with the
-//    overflow list: by the in-tree body, or the smaller overflow slot), because a body's
+//    overflow list: by the in-tree body, or the smaller overflow slot; with a stray body:
+//    by the finer one, or the smaller slot), because a body's
 //    box lies in its cell's loose box and the query ranges are exact;
 // 4. the pairs are appended as keys (a << shift) | b (PairOutput::shift) with one atomic
 //    per group of threads that append together (their order varies; the set does not;
@@ -116,19 +122,22 @@ struct LooseDesc {
   /// boxes at 10^4 .. 4x10^6); the keys and the queries then use its grid and depth instead
   /// of `grid` and `depth`. nullptr: a fixed depth.
   LooseRoot* root = nullptr;
-  /// The sort keys of overflow and NaN bodies: kLooseOverflowKey and kLooseNoKey with
-  /// depth `auto`; with a fixed D_w the two values after level D_w's last cell key
-  /// (loose_level_base(D_w + 1) and + 1), so the key sort covers only the bits they need
-  /// (D_w = 2: 7 bits, one radix pass instead of four).
-  std::uint32_t overflow_key = kLooseOverflowKey;
-  std::uint32_t nan_key = kLooseNoKey;
-  std::uint32_t* key = nullptr;    ///< per body: cell key, overflow_key or nan_key
+  /// The sort keys after the cells': overflow_key (the overflow list), then the stray
+  /// bodies' stray_key(d, l) = overflow_key + 1 + l (l in [0, 10]: the level by size), then
+  /// nan_key = overflow_key + kLooseMaxDepth + 2; overflow_key is the first key after level
+  /// D_w's cells (loose_level_base(D_w + 1); kLooseKeysEnd for D_w = 10 and depth `auto`), so the key sort
+  /// covers only the bits they need (D_w = 2: 7 bits, one radix pass instead of four).
+  std::uint32_t overflow_key = 0;
+  std::uint32_t nan_key = 0;
+  std::uint32_t* key = nullptr;    ///< per body: cell key, overflow_key, a stray key or nan_key
   std::uint32_t* body = nullptr;   ///< per body: its index (the sort's values)
   const std::uint32_t* sorted_key = nullptr;   ///< per slot: key, ascending
   const std::uint32_t* slot_body = nullptr;    ///< per slot: body (stable: body order per cell)
   Aabb* slot_box = nullptr;        ///< per slot: the body's AABB
-  /// Per level m in [0, kLooseMaxDepth + 1]: the first slot whose key is >= level m's base
-  /// (entry kLooseMaxDepth + 1: the first overflow slot); then the first NaN slot.
+  /// The level table (kLevelTable entries): per level m in [0, kLooseMaxDepth] the first
+  /// slot whose key is >= level m's base; then (kOverflowEntry) the first overflow slot; per
+  /// stray level l (kStrayEntry + l) the first stray slot of level l or above; then
+  /// (kNanEntry) the first NaN slot.
   std::uint32_t* level_begin = nullptr;
   /// The block table, cell_mask + 1 entries (loose_blocks.hpp): loose_block_entry(block
   /// key, first slot), kLooseBlockEmpty where empty.
@@ -179,6 +188,34 @@ __global__ void loose_root_kernel(LooseDesc d) {
 /// The root cube of this find(): the snapped one when LooseDesc::root is given.
 __device__ inline LooseGrid loose_call_grid(const LooseDesc& d) { return d.root ? d.root->grid : d.grid; }
 
+/// The first key after level kLooseMaxDepth's cells, (8^11 - 1) / 7 (loose_level_base(11)
+/// would shift past 32 bits): LooseDesc::overflow_key with D_w = 10 or `auto`.
+constexpr std::uint32_t kLooseKeysEnd =
+    static_cast<std::uint32_t>(((1ull << (3 * (kLooseMaxDepth + 1))) - 1ull) / 7ull);
+static_assert(kLooseKeysEnd == 1227133513u, "loose_octree.hpp: the largest cell key is 1227133512");
+
+/// The sort key of a stray body whose level by size is l (LooseDesc::overflow_key).
+__device__ inline std::uint32_t stray_key(const LooseDesc& d, int l) {
+  return d.overflow_key + 1u + static_cast<std::uint32_t>(l);
+}
+
+/// Stray bodies (the keys between overflow_key and nan_key): a body whose box fits a
+/// level by size (loose_level_for_extent) but not the loose box of its cell there (its
+/// centre lies outside the root cube: a body that left the domain) climbs in the CPU's
+/// octree to a coarser level, or to the overflow list, where every query of its level's
+/// cells (at the coarse levels: every body) tests it. On the device it is kept out of the
+/// cells and sorted by its level by size l; the pairs with it are met once each:
+/// - a body of a cell of level m <= l: by the stray body, which queries the cells of
+///   levels 0 .. l whose loose boxes meet its box (loose_query_axis_q: clamped to the
+///   grid, at most 4 per axis as for a body of level l; none when the box is beyond the
+///   loose boxes of the grid's edge), every slot of those cells;
+/// - a body of a cell of level m > l: by that body, which tests the stray bodies of
+///   levels < m (a run of the stray keys);
+/// - an overflow body: by the overflow body (it tests every slot after its own);
+///   another stray body: by the smaller slot.
+/// Exact as the cells are: a body's box lies in its cell's loose box, so a stray box
+/// that overlaps it meets that loose box. 100,005-body pile, frame 2700: bodies thrown
+/// above the domain made the queries test 1.4 x 10^8 slots a step.
 __global__ void loose_keys_kernel(LooseDesc d) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   const int depth = d.root ? d.root->depth : d.depth;
@@ -196,15 +233,22 @@ __global__ void loose_keys_kernel(LooseDesc d) {
   }
   const Vec3 lo = loose_unit(grid, b.min);
   const Vec3 hi = loose_unit(grid, b.max);
-  const std::uint32_t key = loose_place_key(loose_place_unit(lo, hi, depth));
-  d.key[i] = key == kLooseOverflowKey ? d.overflow_key : key;
+  const LoosePlace p = loose_place_unit(lo, hi, depth);
+  const int by_size = loose_level_for_extent(loose_unit_extent(lo, hi), depth);
+  if (by_size >= 0 && p.level < by_size) d.key[i] = stray_key(d, by_size);  // climbed (or overflow)
+  else d.key[i] = p.level == kLooseOverflowLevel ? d.overflow_key : loose_place_key(p);
 }
 
 /// First slot in [lo, hi) whose key is >= key.
 __device__ std::uint32_t lower_bound(const std::uint32_t* keys, std::uint32_t lo, std::uint32_t hi,
                                      std::uint32_t key);
 
-constexpr int kLevelTable = kLooseMaxDepth + 3;  // levels 0..10, overflow, NaN
+/// Level table entries (LooseDesc::level_begin): levels 0..10, overflow, stray levels
+/// 0..10, NaN.
+constexpr int kOverflowEntry = kLooseMaxDepth + 1;
+constexpr int kStrayEntry = kLooseMaxDepth + 2;
+constexpr int kNanEntry = 2 * kLooseMaxDepth + 3;
+constexpr int kLevelTable = kNanEntry + 1;
 static_assert(kLevelTable == static_cast<int>(footprint::kLooseLevelTable), "device_footprint.hpp: level table");
 
 __global__ void loose_gather_kernel(LooseDesc d) {
@@ -213,7 +257,7 @@ __global__ void loose_gather_kernel(LooseDesc d) {
     // Levels deeper than D_w hold no body: their entries are the overflow list's start.
     const std::uint32_t base = s <= static_cast<std::uint32_t>(kLooseMaxDepth)
                                    ? min(loose_level_base(static_cast<int>(s)), d.overflow_key)
-                                   : (s == kLooseMaxDepth + 1 ? d.overflow_key : d.nan_key);
+                                   : d.overflow_key + (s - static_cast<std::uint32_t>(kOverflowEntry));
     d.level_begin[s] = lower_bound(d.sorted_key, 0, d.n, base);
   }
   if (s >= d.n) return;
@@ -344,11 +388,17 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
     const std::uint32_t key = d.sorted_key[s];
     e.body_s = d.slot_body[s];
     e.box_s = d.slot_box[s];
-    if (key == d.overflow_key) {
-      e.range(s + 1, d.level_begin[kLooseMaxDepth + 2]);  // the overflow bodies after it
-    } else if (key != d.nan_key) {                        // a NaN box overlaps nothing
-      const int level = loose_cell_key_level(key);
+    if (key >= d.overflow_key && key < d.nan_key) {
+      e.range(s + 1, d.level_begin[kNanEntry]);  // the overflow and stray bodies after it
+    }
+    if (key != d.overflow_key && key != d.nan_key) {  // a cell's body or a stray one (a NaN box overlaps nothing)
+      const bool stray = key > d.overflow_key;
+      // Stray: its level by size, no own cell (every slot of the cells it meets).
+      const int level = stray ? static_cast<int>(key - d.overflow_key - 1u) : loose_cell_key_level(key);
+      const int own = stray ? -1 : level;
       const LooseQBox q = loose_qbox(loose_call_grid(d), e.box_s);
+      // A cell's body: the stray bodies of the levels above its own.
+      if (!stray) e.range(d.level_begin[kStrayEntry], d.level_begin[kStrayEntry + level]);
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
@@ -366,11 +416,11 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
                                                     static_cast<std::uint32_t>(iz));
             // Same level: only the slots after s, so no cell before s's own (its slots all
             // come before s in key order) is looked up.
-            if (m != level || ck >= key) {
+            if (m != own || ck >= key) {
               loose_cell_run(
                   d.sorted_key, d.n, ck, m, [&](std::uint32_t bk) { return find_block(d, bk); },
                   [&](std::uint32_t bk) { return block_octants(d, bk); }, &t0, &t1);
-              if (m == level && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;
+              if (m == own && t0 <= s) t0 = s + 1 < t1 ? s + 1 : t1;
             }
           }
           e.runs(t0, t1);
@@ -379,16 +429,6 @@ __global__ void loose_query_warp_kernel(LooseDesc d) {
     }
   }
   bp::block_add(d.candidates, lane == 0 ? e.tests : 0ull);
-}
-
-/// Tests slots [t0, t1) against the query box (body `body`), emitting overlapping pairs.
-__device__ inline void test_run(const LooseDesc& d, const Aabb& box, std::uint32_t body, std::uint32_t t0,
-                                std::uint32_t t1, unsigned long long& tests) {
-  if (t0 >= t1) return;
-  tests += t1 - t0;
-  const PairOutput out{d.pair_keys, d.shift, d.capacity, d.total, nullptr};
-  for (std::uint32_t t = t0; t < t1; ++t)
-    if (overlaps(box, d.slot_box[t])) append_pair(d, out, bp::pair_key(body, d.slot_body[t], d.shift));
 }
 
 /// One thread per slot: the loose octree query of the file comment. At each level that
@@ -408,18 +448,27 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
     const std::uint32_t key = d.sorted_key[s];
     const std::uint32_t body = d.slot_body[s];
     const Aabb box = d.slot_box[s];
-    if (key == d.overflow_key) {
-      test_run(d, box, body, s + 1, d.level_begin[kLooseMaxDepth + 2], tests);  // the overflow bodies after it
-    } else if (key != d.nan_key) {  // a NaN box overlaps nothing
-      const int level = loose_cell_key_level(key);
+    // The overflow and stray bodies after an overflow or stray slot: loose_lists_kernel.
+    if (key != d.overflow_key && key != d.nan_key) {  // a cell's body or a stray one (a NaN box overlaps nothing)
+      const bool stray = key > d.overflow_key;
+      // Stray: its level by size, no own cell (every slot of the cells it meets).
+      const int level = stray ? static_cast<int>(key - d.overflow_key - 1u) : loose_cell_key_level(key);
+      const int own = stray ? -1 : level;
       const LooseQBox q = loose_qbox(loose_call_grid(d), box);
+      // A cell's body: the stray bodies of the levels above its own.
+      if (!stray) {
+        const std::uint32_t e0 = d.level_begin[kStrayEntry], e1 = d.level_begin[kStrayEntry + level];
+        tests += e1 > e0 ? e1 - e0 : 0u;
+        for (std::uint32_t t = e0; t < e1; ++t)
+          if (overlaps(box, d.slot_box[t])) pairs.add(out, bp::pair_key(body, d.slot_body[t], d.shift), counted);
+      }
       for (int m = 0; m <= level; ++m) {
         if (d.level_begin[m] == d.level_begin[m + 1]) continue;  // no body at this level
         const LooseRange rx = loose_query_axis_q(q.lo[0], q.hi[0], m);
         const LooseRange ry = loose_query_axis_q(q.lo[1], q.hi[1], m);
         const LooseRange rz = loose_query_axis_q(q.lo[2], q.hi[2], m);
         loose_block_query(
-            d.sorted_key, d.n, s, key, level, m, rx, ry, rz, [&](std::uint32_t bk) { return find_block(d, bk); },
+            d.sorted_key, d.n, s, key, own, m, rx, ry, rz, [&](std::uint32_t bk) { return find_block(d, bk); },
             [&](std::uint32_t bk) { return block_octants(d, bk); },
             [&](std::uint32_t t) {
               ++tests;
@@ -432,13 +481,33 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
   bp::block_add(d.candidates, tests);
 }
 
+/// Blocks of loose_lists_kernel (at most; grid-stride over the overflow and stray slots).
+constexpr unsigned kListsBlocks = 1024;
+
+/// With the thread query: one warp per overflow or stray slot s (grid-stride over those
+/// slots), its lanes testing the overflow and stray slots after s 32 at a time. (In the
+/// thread query one thread ran that whole range alone: 2,800 bodies thrown out of
+/// bunny-pile-100k made one thread's chain of loads the kernel's length.)
+__global__ void loose_lists_kernel(LooseDesc d) {
+  const std::uint32_t lane = threadIdx.x & 31u;
+  const std::uint32_t first = d.level_begin[kOverflowEntry], end = d.level_begin[kNanEntry];
+  const std::uint32_t warps = (gridDim.x * blockDim.x) >> 5;
+  WarpEmitter e{d, lane};
+  for (std::uint32_t s = first + ((blockIdx.x * blockDim.x + threadIdx.x) >> 5); s < end; s += warps) {
+    e.body_s = d.slot_body[s];
+    e.box_s = d.slot_box[s];
+    e.range(s + 1, end);
+  }
+  bp::block_add(d.candidates, lane == 0 ? e.tests : 0ull);
+}
+
 /// One thread per in-tree slot t: the overflow bodies (slots [overflow_begin, used)) that
 /// overlap it. Every thread of a warp walks the same overflow slots (one ballot per
 /// overflow body that hits any of them).
 __global__ void loose_overflow_kernel(LooseDesc d) {
   const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
-  const std::uint32_t ov_begin = d.level_begin[kLooseMaxDepth + 1];
-  const std::uint32_t ov_end = d.level_begin[kLooseMaxDepth + 2];
+  const std::uint32_t ov_begin = d.level_begin[kOverflowEntry];
+  const std::uint32_t ov_end = d.level_begin[kStrayEntry];
   const bool mine = t < ov_begin;
   unsigned long long tests = 0;
   if (ov_begin < ov_end && (blockIdx.x * blockDim.x) < ov_begin) {  // block-uniform
@@ -571,11 +640,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
  public:
   LooseOctreeDevice(int depth, const Aabb& domain, LooseOctreeQuery query)
       : depth_(depth), grid_(loose_grid(domain)), query_(query) {
-    if (depth_ >= 0 && depth_ < kLooseMaxDepth) {
-      overflow_key_ = loose_level_base(depth_ + 1);
-      key_bits_ = 1;
-      while ((overflow_key_ + 1) >> key_bits_ != 0) ++key_bits_;  // bits of the NaN key
-    }
+    overflow_key_ = depth_ >= 0 && depth_ < kLooseMaxDepth ? loose_level_base(depth_ + 1) : kLooseKeysEnd;
+    key_bits_ = 1;
+    while (nan_key() >> key_bits_ != 0) ++key_bits_;  // bits of the NaN key
   }
 
   std::string name() const override { return "octree"; }
@@ -626,7 +693,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.grid = grid_;
     d.depth = depth_;
     d.overflow_key = overflow_key_;
-    d.nan_key = overflow_key_ == kLooseOverflowKey ? kLooseNoKey : overflow_key_ + 1;
+    d.nan_key = nan_key();
     d.min_extent = min_.get();
     d.root = depth_ < 0 ? root_.get() : nullptr;
     d.key = key_.get();
@@ -671,6 +738,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
       loose_query_warp_kernel<<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(d);
     } else {
       loose_query_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(d);
+      bp::launched(cudaGetLastError(), "loose_query");
+      loose_lists_kernel<<<std::min(bp::warp_grid_for(n), kListsBlocks), kBlockSize, 0, stream>>>(d);
     }
     bp::launched(cudaGetLastError(), "loose_query");
     loose_overflow_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(d);
@@ -719,8 +788,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   LooseGrid grid_;
   using Query = LooseOctreeQuery;
   Query query_ = Query::Auto;
-  std::uint32_t overflow_key_ = kLooseOverflowKey;  // see LooseDesc::overflow_key
-  int key_bits_ = 32;                               // the key sort's end bit
+  std::uint32_t overflow_key_ = 0;  // see LooseDesc::overflow_key
+  int key_bits_ = 32;               // the key sort's end bit
+  std::uint32_t nan_key() const { return overflow_key_ + kLooseMaxDepth + 2; }
   static constexpr std::uint32_t kNotReserved = 0xffffffffu;
   std::uint32_t n_ = kNotReserved;
   DeviceBuffer<float> min_{"octree smallest extent"};

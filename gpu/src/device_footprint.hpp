@@ -51,8 +51,9 @@ constexpr std::uint64_t loose_occupancy_blocks(std::uint64_t n) {
   if (b > all) b = all;
   return (b + 3) / 4 * 4;
 }
-/// Entries of the loose octree's level table: levels 0 .. kLooseMaxDepth, overflow, NaN.
-constexpr std::uint32_t kLooseLevelTable = kLooseMaxDepth + 3;
+/// Entries of the loose octree's level table: levels 0 .. kLooseMaxDepth, overflow, escape
+/// levels 0 .. kLooseMaxDepth, NaN.
+constexpr std::uint32_t kLooseLevelTable = 2 * kLooseMaxDepth + 4;
 /// sizeof(LbvhNode) (lbvh.hpp): an internal node of `lbvh`.
 constexpr std::uint64_t kLbvhNodeBytes = 12;
 /// The spatial hash's entry budget per body (E = kHashEntriesPerBody x n slots).

@@ -205,7 +205,8 @@ std::vector<Pair> flat_pairs(const std::vector<Aabb>& boxes, const Aabb& domain)
 const std::vector<std::string>& box_set_names() {
   static const std::vector<std::string> names = {
       "empty",    "single", "uniform-1000", "uniform-10000", "touching-lattice", "outside-domain", "huge-and-infinite",
-      "nan", "degenerate", "one-cell", "nested-levels", "long-segments", "boxes-random-10000-frame-100"};
+      "nan", "degenerate", "one-cell", "nested-levels", "long-segments", "boxes-random-10000-frame-100",
+      "thrown-out"};
   return names;
 }
 
@@ -254,6 +255,17 @@ BoxSet make_box_set(const std::string& name) {
     s.boxes = random_boxes(6000, 8, unit, 0.002f, 0.02f);
     s.boxes[0] = cube(-1.0f, 1.0f);
     s.boxes[1] = cube(-0.6f, 0.0f);
+  } else if (name == "thrown-out") {
+    // A pile in the domain and bodies thrown out of it (stray bodies of the device octree):
+    // small and large ones just past the top face (overlapping the pile's top, each other
+    // and boxes whose cells lie deeper than their level by size), a column far above, and
+    // a few past a side face.
+    s.boxes = random_boxes(4000, 9, cube(-1.0f, 1.0f), 0.01f, 0.05f);
+    const auto small = random_boxes(600, 10, {{-1.0f, 0.9f, -1.0f}, {1.0f, 1.6f, 1.0f}}, 0.005f, 0.02f);
+    const auto large = random_boxes(200, 11, {{-1.0f, 0.95f, -1.0f}, {1.0f, 1.4f, 1.0f}}, 0.05f, 0.12f);
+    const auto far = random_boxes(300, 12, {{-0.2f, 3.0f, -0.2f}, {0.2f, 40.0f, 0.2f}}, 0.01f, 0.05f);
+    const auto side = random_boxes(100, 13, {{1.0f, -1.0f, -1.0f}, {1.3f, 1.0f, 1.0f}}, 0.01f, 0.05f);
+    for (const auto* v : {&small, &large, &far, &side}) s.boxes.insert(s.boxes.end(), v->begin(), v->end());
   } else if (name == "boxes-random-10000-frame-100") {
     s.boxes = scene_frame("boxes-random-10000", 100, s.domain);
   } else {
@@ -1057,6 +1069,23 @@ struct HostLooseBlocks {
   std::string broken;                    ///< "" when every check holds, else the first failure
 };
 
+/// The host model's sort keys after the cells' (broadphase_octree.cu's LooseDesc with
+/// D_w = 10): the overflow list, the stray bodies by their level by size, NaN boxes.
+constexpr std::uint32_t kHostOverflowKey = 1227133513u;  // (8^11 - 1) / 7: the first key after level 10
+constexpr std::uint32_t kHostNanKey = kHostOverflowKey + kLooseMaxDepth + 2;
+/// An stray body's key, its level by size `l` (loose_keys_kernel's stray_key).
+constexpr std::uint32_t host_stray_key(int l) { return kHostOverflowKey + 1u + static_cast<std::uint32_t>(l); }
+
+/// loose_keys_kernel's key of a box with no NaN coordinate: its cell's, the overflow
+/// list's, or, when it climbed above its level by size (it left the root cube), an
+/// stray key.
+std::uint32_t host_loose_key(const Vec3& lo, const Vec3& hi, int depth) {
+  const LoosePlace p = loose_place_unit(lo, hi, depth);
+  const int by_size = loose_level_for_extent(loose_unit_extent(lo, hi), depth);
+  if (by_size >= 0 && p.level < by_size) return host_stray_key(by_size);
+  return p.level == kLooseOverflowLevel ? kHostOverflowKey : loose_place_key(p);
+}
+
 HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& domain, int depth,
                                   BlockFault fault = BlockFault::None) {
   HostLooseBlocks h;
@@ -1078,10 +1107,10 @@ HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& do
   std::vector<std::array<std::int32_t, 6>> q(n);
   for (std::uint32_t i = 0; i < n; ++i) {
     const Aabb& b = boxes[i];
-    std::uint32_t k = kLooseNoKey;
+    std::uint32_t k = kHostNanKey;
     if (!loose_has_nan(b)) {
       const Vec3 lo = loose_unit(grid, b.min), hi = loose_unit(grid, b.max);
-      k = loose_place_key(loose_place_unit(lo, hi, depth));
+      k = host_loose_key(lo, hi, depth);
       q[i] = {loose_q_min(lo.x), loose_q_min(lo.y), loose_q_min(lo.z),
               loose_q_max(hi.x), loose_q_max(hi.y), loose_q_max(hi.z)};
     }
@@ -1097,7 +1126,7 @@ HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& do
   h.table.assign(static_cast<std::size_t>(mask) + 1, gpu::kLooseBlockEmpty);
   std::uint32_t blocks = 0;
   for (std::uint32_t s = 0; s < n; ++s) {
-    if (h.key[s] >= kLooseOverflowKey) continue;
+    if (h.key[s] >= kHostOverflowKey) continue;
     const int level = loose_key_level(h.key[s]);
     const std::uint32_t bk = gpu::loose_block_key(h.key[s], level);
     if (h.key[s] - bk >= gpu::loose_block_span(level)) fail(fmt::format("slot {}: key {} outside its block {}", s, h.key[s], bk));
@@ -1117,7 +1146,7 @@ HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& do
   if (words > h.occupancy.size()) fail(fmt::format("{} words to clear in a map of {}", words, h.occupancy.size()));
   std::fill(h.occupancy.begin(), h.occupancy.begin() + std::min<std::size_t>(words, h.occupancy.size()), 0u);
   for (std::uint32_t s = 0; s < n; ++s) {
-    if (h.key[s] >= kLooseOverflowKey || (s > 0 && h.key[s - 1] == h.key[s])) continue;
+    if (h.key[s] >= kHostOverflowKey || (s > 0 && h.key[s - 1] == h.key[s])) continue;
     const int level = loose_key_level(h.key[s]);
     std::uint32_t w = 0;
     const std::uint32_t bit = gpu::loose_occupancy_bit(h.key[s], level, h.occupancy_blocks, &w);
@@ -1140,11 +1169,24 @@ HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& do
     if (overlaps(boxes[h.slot_body[s]], boxes[h.slot_body[t]]))
       h.pairs.push_back({std::min(h.slot_body[s], h.slot_body[t]), std::max(h.slot_body[s], h.slot_body[t])});
   };
-  // The in-tree query, against the per-cell query.
-  for (std::uint32_t s = 0; s < n && h.key[s] < kLooseOverflowKey; ++s) {
+  auto first_slot = [&](std::uint32_t key) {
+    return static_cast<std::uint32_t>(std::lower_bound(h.key.begin(), h.key.end(), key) - h.key.begin());
+  };
+  const std::uint32_t stray_begin = first_slot(host_stray_key(0)), nan_begin = first_slot(kHostNanKey);
+  // The query of a cell's body and of an stray body (no own cell: every slot of the
+  // cells it meets at the levels up to its level by size), against the per-cell query.
+  for (std::uint32_t s = 0; s < n; ++s) {
     const std::uint32_t key = h.key[s];
-    const int level = loose_key_level(key);
+    if (key == kHostOverflowKey || key >= kHostNanKey) continue;
+    const bool stray = key > kHostOverflowKey;
+    const int level = stray ? static_cast<int>(key - kHostOverflowKey - 1u) : loose_key_level(key);
+    const int own = stray ? -1 : level;
     const auto& qb = q[h.slot_body[s]];
+    if (stray) {
+      for (std::uint32_t t = s + 1; t < nan_begin; ++t) emit(s, t);  // the stray bodies after it
+    } else {
+      for (std::uint32_t t = stray_begin; t < first_slot(host_stray_key(level)); ++t) emit(s, t);  // stray above
+    }
     for (int m = 0; m <= level; ++m) {
       LooseRange rx = loose_query_axis_q(qb[0], qb[3], m);
       const LooseRange ry = loose_query_axis_q(qb[1], qb[4], m);
@@ -1164,14 +1206,14 @@ HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& do
             if ((t0 == t1) ? r0 != r1 : (r0 != t0 || r1 != t1))
               fail(fmt::format("slot {}: cell {} holds slots [{}, {}), its run through the block table is [{}, {})", s,
                                ck, t0, t1, r0, r1));
-            if (m == level && ck < key) continue;
+            if (m == own && ck < key) continue;
             ++h.cell_probes;
-            if (m == level) t0 = std::max(t0, s + 1);
+            if (m == own) t0 = std::max(t0, s + 1);
             for (std::uint32_t t = t0; t < t1; ++t) want.push_back(t);
           }
       if (fault == BlockFault::NarrowWindow && rx.hi > rx.lo) --rx.hi;
       std::vector<std::uint32_t> got;
-      gpu::loose_block_query(h.key.data(), n, s, key, level, m, rx, ry, rz, find, octants,
+      gpu::loose_block_query(h.key.data(), n, s, key, own, m, rx, ry, rz, find, octants,
                              [&](std::uint32_t t) { got.push_back(t); });
       std::sort(want.begin(), want.end());
       std::sort(got.begin(), got.end());
@@ -1181,13 +1223,11 @@ HostLooseBlocks host_loose_blocks(const std::vector<Aabb>& boxes, const Aabb& do
       for (const std::uint32_t t : got) emit(s, t);
     }
   }
-  // The overflow list (loose_query_kernel's overflow slots, loose_overflow_kernel).
-  const auto ov_begin = static_cast<std::uint32_t>(
-      std::lower_bound(h.key.begin(), h.key.end(), kLooseOverflowKey) - h.key.begin());
-  const auto ov_end =
-      static_cast<std::uint32_t>(std::lower_bound(h.key.begin(), h.key.end(), kLooseNoKey) - h.key.begin());
-  for (std::uint32_t o = ov_begin; o < ov_end; ++o) {
-    for (std::uint32_t t = o + 1; t < ov_end; ++t) emit(o, t);
+  // The overflow list (loose_query_kernel's overflow slots: the overflow and stray
+  // bodies after each; loose_overflow_kernel: every cell's body).
+  const std::uint32_t ov_begin = first_slot(kHostOverflowKey);
+  for (std::uint32_t o = ov_begin; o < stray_begin; ++o) {
+    for (std::uint32_t t = o + 1; t < nan_begin; ++t) emit(o, t);
     for (std::uint32_t t = 0; t < ov_begin; ++t) emit(t, o);
   }
   std::sort(h.pairs.begin(), h.pairs.end());
@@ -1233,7 +1273,7 @@ TEST(LooseBlockHostModel, FewerProbesThanCells) {
     for (const bool map : {false, true}) {
       std::uint64_t& probes = map ? map_probes : block_probes;
       std::uint64_t& visited = map ? map_visits : visits;
-      for (std::uint32_t s = 0; s < n && m.key[s] < kLooseOverflowKey; ++s) {
+      for (std::uint32_t s = 0; s < n && m.key[s] < kHostOverflowKey; ++s) {
         const Aabb& b = boxes[m.slot_body[s]];
         const Vec3 lo = loose_unit(grid, b.min), hi = loose_unit(grid, b.max);
         const int level = loose_key_level(m.key[s]);
@@ -1323,7 +1363,7 @@ TEST(LooseBlockHostModel, PlantedFaultsAreCaught) {
 struct LooseTestCount {
   int depth = 0;                            ///< D_w used (auto resolved)
   std::uint64_t tests = 0;                  ///< exact tests
-  std::array<std::uint32_t, kLooseMaxDepth + 2> per_level{};  ///< bodies per level, [11] = overflow
+  std::array<std::uint32_t, kLooseMaxDepth + 2> per_level{};  ///< bodies per level, [11] = overflow and stray
 };
 
 /// The smallest unit extent of `boxes` on `grid` (loose_extent_kernel's minimum).
@@ -1345,12 +1385,20 @@ LooseTestCount count_loose_tests_on(const std::vector<Aabb>& boxes, const LooseG
   std::vector<std::uint32_t> key(n);
   std::unordered_map<std::uint32_t, std::uint32_t> cell;
   cell.reserve(n);
-  std::uint64_t overflow = 0, tree = 0;
+  std::uint64_t overflow = 0, tree = 0, strays = 0;
+  std::array<std::uint64_t, kLooseMaxDepth + 2> stray_below{};  // [l]: stray bodies of levels < l
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3 lo = loose_unit(grid, boxes[i].min), hi = loose_unit(grid, boxes[i].max);
-    key[i] = loose_has_nan(boxes[i]) ? kLooseNoKey : loose_place_key(loose_place_unit(lo, hi, depth));
-    if (key[i] == kLooseNoKey) continue;
-    if (key[i] >= kLooseOverflowKey) {
+    key[i] = loose_has_nan(boxes[i]) ? kHostNanKey : host_loose_key(lo, hi, depth);
+    if (key[i] == kHostNanKey) continue;
+    if (key[i] > kHostOverflowKey) {
+      ++strays;
+      ++r.per_level[kLooseMaxDepth + 1];
+      for (int l = static_cast<int>(key[i] - kHostOverflowKey - 1u) + 1; l <= kLooseMaxDepth + 1; ++l)
+        ++stray_below[static_cast<std::size_t>(l)];
+      continue;
+    }
+    if (key[i] == kHostOverflowKey) {
       ++overflow;
       ++r.per_level[kLooseMaxDepth + 1];
       continue;
@@ -1361,8 +1409,11 @@ LooseTestCount count_loose_tests_on(const std::vector<Aabb>& boxes, const LooseG
   }
   for (const auto& [k, c] : cell) r.tests += static_cast<std::uint64_t>(c) * (c - 1) / 2;
   for (std::size_t i = 0; i < n; ++i) {
-    if (key[i] >= kLooseOverflowKey) continue;
-    const int level = loose_key_level(key[i]);
+    if (key[i] == kHostOverflowKey || key[i] >= kHostNanKey) continue;
+    const bool stray = key[i] > kHostOverflowKey;
+    const int level = stray ? static_cast<int>(key[i] - kHostOverflowKey - 1u) : loose_key_level(key[i]);
+    const int own = stray ? -1 : level;
+    if (!stray) r.tests += stray_below[static_cast<std::size_t>(level)];
     const Vec3 lo = loose_unit(grid, boxes[i].min), hi = loose_unit(grid, boxes[i].max);
     for (int m = 0; m <= level; ++m) {
       if (r.per_level[m] == 0) continue;
@@ -1374,13 +1425,14 @@ LooseTestCount count_loose_tests_on(const std::vector<Aabb>& boxes, const LooseG
           for (int ix = rx.lo; ix <= rx.hi; ++ix) {
             const std::uint32_t ck = loose_cell_key(m, static_cast<std::uint32_t>(ix), static_cast<std::uint32_t>(iy),
                                                     static_cast<std::uint32_t>(iz));
-            if (m == level && ck <= key[i]) continue;
+            if (m == own && ck <= key[i]) continue;
             const auto it = cell.find(ck);
             if (it != cell.end()) r.tests += it->second;
           }
     }
   }
-  r.tests += overflow * (overflow - 1) / 2 + overflow * tree;
+  const std::uint64_t lists = overflow + strays;  // each tests the ones after it
+  r.tests += (lists > 0 ? lists * (lists - 1) / 2 : 0) + overflow * tree;
   return r;
 }
 
@@ -1639,7 +1691,7 @@ SettledFind settled_find(DeviceBroadPhase& bp, const DeviceBuffer<Aabb>& boxes, 
 }
 
 // The planner on its own (no device): Plain first, then Build, then Hits; a Hit that found
-// an escaped body is a Rerun with a Build next, or, when the cache served no call, Plain
+// an stray body is a Rerun with a Build next, or, when the cache served no call, Plain
 // for 2, then 4 calls (the back-off), reset by a cache that served; a Build that did not fit
 // is a Regrow to 1.25 x its pairs + 64; the predictor builds before the displacement
 // reaches the margin.
