@@ -51,9 +51,11 @@
 //    exclusive scan of the n counts gives each a's segment of the output; each pair goes
 //    to its segment (one atomicSub: any order within it); then each segment is sorted on
 //    its own: one thread per body for at most kLocalSortMax keys (insertion sort in
-//    place), else one block (CUB block radix sorts of kBlockSortMax keys, then for longer
-//    segments each key's rank from binary searches in the other chunks: a body that
-//    overlaps thousands of bodies of larger index). Pairs that do not fit the output are
+//    place), one block for at most kBlockSortMax (a CUB block radix sort), else (a huge
+//    segment: a body that overlaps thousands of bodies of larger index, as the floor of a
+//    pile) its chunks of kBlockSortMax keys spread over the blocks: a block radix sort each,
+//    then each key's rank from binary searches in the other chunks, then the copy back (one
+//    block per segment took 0.5 ms a step on bunny-pile-1m's floor). Pairs that do not fit the output are
 //    copied from the scratch as they are (keys [0, capacity), any order; the caller grows
 //    the output and runs find() again).
 #include <cstdlib>
@@ -529,7 +531,8 @@ constexpr std::uint32_t kLocalSortMax = 64;
 constexpr int kBlockSortItems = 16;
 /// Segments of at most this many keys are sorted by one block's radix sort in shared memory.
 constexpr std::uint32_t kBlockSortMax = static_cast<std::uint32_t>(kBlockSize * kBlockSortItems);
-/// Blocks of loose_long_sort_kernel (each takes long segments one after another).
+/// Blocks of loose_long_sort_kernel (each takes long segments one after another) and of the
+/// huge segments' kernels (each takes chunks one after another).
 constexpr unsigned kLongSortBlocks = 264;
 
 /// What the sorting kernels of the sorted mode read and write (device pointers).
@@ -539,8 +542,10 @@ struct LooseSortDesc {
   unsigned long long* keys = nullptr;           ///< out: PairOutput::keys
   std::uint32_t* count = nullptr;               ///< per body a: its pairs (consumed by the scatter)
   const std::uint32_t* offset = nullptr;        ///< n + 1: exclusive scan of the counts
-  std::uint32_t* long_list = nullptr;           ///< bodies whose segment is longer than kLocalSortMax
-  std::uint32_t* long_count = nullptr;          ///< one word, zeroed before
+  /// n entries: from the front the bodies whose segment is longer than kLocalSortMax (at
+  /// most kBlockSortMax: long), from the back those with a longer one (huge).
+  std::uint32_t* long_list = nullptr;
+  std::uint32_t* long_count = nullptr;          ///< two words, zeroed before: long, huge
   const std::uint32_t* total = nullptr;         ///< the pairs found
   std::uint32_t capacity = 0;
   std::uint32_t n = 0;
@@ -574,8 +579,12 @@ __global__ void loose_segment_sort_kernel(LooseSortDesc d) {
   const std::uint32_t b0 = d.offset[a];
   const std::uint32_t len = d.offset[a + 1] - b0;
   if (len < 2) return;
+  if (len > kBlockSortMax) {
+    d.long_list[d.n - 1u - atomicAdd(&d.long_count[1], 1u)] = a;
+    return;
+  }
   if (len > kLocalSortMax) {
-    d.long_list[atomicAdd(d.long_count, 1u)] = a;
+    d.long_list[atomicAdd(&d.long_count[0], 1u)] = a;
     return;
   }
   unsigned long long* seg = d.keys + b0;  // this thread's alone
@@ -587,51 +596,93 @@ __global__ void loose_segment_sort_kernel(LooseSortDesc d) {
   }
 }
 
-/// Sorted mode, 3: the listed segments, one block each (kLongSortBlocks blocks take them
-/// in turn): each chunk of kBlockSortMax keys by a block radix sort over the key bits
-/// [0, 2 shift); a segment of several chunks then puts each key at its rank (its index in
-/// its chunk plus, per other chunk, a binary search: the keys are distinct) in the scratch
-/// and copies the segment back.
+/// Sorts keys [c0, c0 + clen) of `seg` (clen <= kBlockSortMax) with one block's radix sort
+/// over the key bits [0, 2 shift) (the whole block calls it).
+template <class Sort>
+__device__ inline void block_sort_chunk(typename Sort::TempStorage& storage, unsigned long long* seg,
+                                        std::uint32_t c0, std::uint32_t clen, int shift) {
+  unsigned long long v[kBlockSortItems];
+  for (int k = 0; k < kBlockSortItems; ++k) {
+    const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
+    v[k] = i < clen ? seg[c0 + i] : ~0ull;  // padding: all ones, after every key
+  }
+  Sort(storage).Sort(v, 0, 2 * shift);
+  for (int k = 0; k < kBlockSortItems; ++k) {
+    const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
+    if (i < clen) seg[c0 + i] = v[k];
+  }
+  __syncthreads();  // the shared storage is reused by the next chunk
+}
+
+using LongSort = cub::BlockRadixSort<unsigned long long, kBlockSize, kBlockSortItems>;
+
+
+/// Chunk g of the huge segments (length > kBlockSortMax; the chunks of kBlockSortMax keys of
+/// each, in list order): its body a, its segment's first key b0 and length len, its first
+/// key c0 within the segment; false past the last chunk. Walks the huge list (at most
+/// total / kBlockSortMax entries).
+__device__ inline bool huge_chunk(const LooseSortDesc& d, std::uint32_t g, std::uint32_t& b0, std::uint32_t& len,
+                                  std::uint32_t& c0) {
+  const std::uint32_t huge = d.long_count[1];
+  for (std::uint32_t j = 0; j < huge; ++j) {
+    const std::uint32_t a = d.long_list[d.n - 1u - j];
+    b0 = d.offset[a];
+    len = d.offset[a + 1] - b0;
+    const std::uint32_t chunks = (len + kBlockSortMax - 1) / kBlockSortMax;
+    if (g < chunks) {
+      c0 = g * kBlockSortMax;
+      return true;
+    }
+    g -= chunks;
+  }
+  return false;
+}
+
+/// Sorted mode, 3: a block radix sort of each long segment (kLocalSortMax < length <=
+/// kBlockSortMax) and of each chunk of the huge ones (the kLongSortBlocks blocks take them in
+/// turn, so a huge segment's chunks spread over blocks).
 __global__ void __launch_bounds__(kBlockSize) loose_long_sort_kernel(LooseSortDesc d) {
-  using Sort = cub::BlockRadixSort<unsigned long long, kBlockSize, kBlockSortItems>;
-  __shared__ typename Sort::TempStorage storage;
+  __shared__ typename LongSort::TempStorage storage;
   if (*d.total > d.capacity) return;
-  const std::uint32_t lists = *d.long_count;
+  const std::uint32_t lists = d.long_count[0];
   for (std::uint32_t j = blockIdx.x; j < lists; j += gridDim.x) {
     const std::uint32_t a = d.long_list[j];
     const std::uint32_t b0 = d.offset[a];
-    const std::uint32_t len = d.offset[a + 1] - b0;
-    unsigned long long* seg = d.keys + b0;
-    for (std::uint32_t c0 = 0; c0 < len; c0 += kBlockSortMax) {
-      const std::uint32_t clen = len - c0 < kBlockSortMax ? len - c0 : kBlockSortMax;
-      unsigned long long v[kBlockSortItems];
-      for (int k = 0; k < kBlockSortItems; ++k) {
-        const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
-        v[k] = i < clen ? seg[c0 + i] : ~0ull;  // padding: all ones, after every key
+    block_sort_chunk<LongSort>(storage, d.keys + b0, 0, d.offset[a + 1] - b0, d.shift);
+  }
+  std::uint32_t b0 = 0, len = 0, c0 = 0;
+  for (std::uint32_t g = blockIdx.x; huge_chunk(d, g, b0, len, c0); g += gridDim.x)
+    block_sort_chunk<LongSort>(storage, d.keys + b0, c0, len - c0 < kBlockSortMax ? len - c0 : kBlockSortMax, d.shift);
+}
+
+/// Sorted mode, 4 (huge segments, after 3): 4a, each key of a huge segment to its rank in the scratch: its index in its sorted
+/// chunk plus, per other chunk, a binary search (the keys are distinct).
+__global__ void __launch_bounds__(kBlockSize) loose_huge_rank_kernel(LooseSortDesc d) {
+  if (*d.total > d.capacity) return;
+  std::uint32_t b0 = 0, len = 0, own = 0;
+  for (std::uint32_t g = blockIdx.x; huge_chunk(d, g, b0, len, own); g += gridDim.x) {
+    const unsigned long long* seg = d.keys + b0;
+    const std::uint32_t end = len - own < kBlockSortMax ? len : own + kBlockSortMax;
+    for (std::uint32_t i = own + threadIdx.x; i < end; i += blockDim.x) {
+      const unsigned long long k = seg[i];
+      std::uint32_t rank = i - own;
+      for (std::uint32_t c0 = 0; c0 < len; c0 += kBlockSortMax) {
+        if (c0 == own) continue;
+        const std::uint32_t c1 = len - c0 < kBlockSortMax ? len : c0 + kBlockSortMax;
+        rank += bp::lower_bound_u64(seg, c0, c1, k) - c0;
       }
-      Sort(storage).Sort(v, 0, 2 * d.shift);
-      for (int k = 0; k < kBlockSortItems; ++k) {
-        const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
-        if (i < clen) seg[c0 + i] = v[k];
-      }
-      __syncthreads();  // the shared storage is reused by the next chunk
+      d.scratch_rw[b0 + rank] = k;
     }
-    if (len > kBlockSortMax) {
-      for (std::uint32_t i = threadIdx.x; i < len; i += blockDim.x) {
-        const unsigned long long k = seg[i];
-        const std::uint32_t own = i / kBlockSortMax * kBlockSortMax;
-        std::uint32_t rank = i - own;
-        for (std::uint32_t c0 = 0; c0 < len; c0 += kBlockSortMax) {
-          if (c0 == own) continue;
-          const std::uint32_t c1 = len - c0 < kBlockSortMax ? len : c0 + kBlockSortMax;
-          rank += bp::lower_bound_u64(seg, c0, c1, k) - c0;
-        }
-        d.scratch_rw[b0 + rank] = k;
-      }
-      __syncthreads();
-      for (std::uint32_t i = threadIdx.x; i < len; i += blockDim.x) seg[i] = d.scratch_rw[b0 + i];
-      __syncthreads();  // the segment is final before the block moves on
-    }
+  }
+}
+
+/// 4b: the huge segments back from the scratch, in order.
+__global__ void __launch_bounds__(kBlockSize) loose_huge_copy_kernel(LooseSortDesc d) {
+  if (*d.total > d.capacity) return;
+  std::uint32_t b0 = 0, len = 0, c0 = 0;
+  for (std::uint32_t g = blockIdx.x; huge_chunk(d, g, b0, len, c0); g += gridDim.x) {
+    const std::uint32_t end = len - c0 < kBlockSortMax ? len : c0 + kBlockSortMax;
+    for (std::uint32_t i = c0 + threadIdx.x; i < end; i += blockDim.x) d.keys[b0 + i] = d.scratch_rw[b0 + i];
   }
 }
 
@@ -667,7 +718,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     pair_count_.ensure(n1);
     pair_offset_.ensure(n1);
     long_list_.ensure(std::max<std::size_t>(n, 1));
-    long_count_.ensure(1);
+    long_count_.ensure(2);
     std::size_t a = 0, c = 0;
     check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
                                           static_cast<int>(n), 0, 32),
@@ -685,7 +736,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     if (out.scratch) {
       check(cudaMemsetAsync(pair_count_.get(), 0, (static_cast<std::size_t>(n) + 1) * sizeof(std::uint32_t), stream),
             "cudaMemset octree pair counts");
-      check(cudaMemsetAsync(long_count_.get(), 0, sizeof(std::uint32_t), stream), "cudaMemset octree long segments");
+      check(cudaMemsetAsync(long_count_.get(), 0, 2 * sizeof(std::uint32_t), stream), "cudaMemset octree long segments");
     }
     LooseDesc d;
     d.aabb = aabb;
@@ -771,6 +822,10 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     bp::launched(cudaGetLastError(), "loose_segment_sort");
     loose_long_sort_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
     bp::launched(cudaGetLastError(), "loose_long_sort");
+    loose_huge_rank_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
+    bp::launched(cudaGetLastError(), "loose_huge_rank");
+    loose_huge_copy_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
+    bp::launched(cudaGetLastError(), "loose_huge_copy");
   }
 
   std::uint64_t device_bytes() const override {

@@ -50,9 +50,10 @@ std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
     const std::uint64_t cap = initial_pair_capacity(n);
     const std::uint64_t cache = buf(1, 16) + buf(n, sizeof(Aabb)) + 3 * buf(cap, sizeof(std::uint64_t)) +
                                 buf(cap, 1) + buf(cub_scan_temp_bound(cap), 1);
-    // + the sorted mode's pair counts and segments (n + 1 each), long-segment list and count.
+    // + the sorted mode's pair counts and segments (n + 1 each), long-segment list and its
+    // two counts.
     return cache + buf(1, sizeof(float)) + 4 * buf(n, sizeof(std::uint32_t)) + 2 * buf(n1, sizeof(std::uint32_t)) +
-           buf(n, sizeof(std::uint32_t)) + buf(1, sizeof(std::uint32_t)) +
+           buf(n, sizeof(std::uint32_t)) + buf(2, sizeof(std::uint32_t)) +
            buf(n, sizeof(Aabb)) + buf(kLooseLevelTable, sizeof(std::uint32_t)) +
            buf(table, sizeof(std::uint64_t)) + buf(loose_occupancy_blocks(n) / 4, sizeof(std::uint32_t)) +
            buf(temp, 1);
