@@ -216,8 +216,9 @@ __device__ inline std::uint32_t stray_key(const LooseDesc& d, int l) {
 /// - an overflow body: by the overflow body (it tests every slot after its own);
 ///   another stray body: by the smaller slot.
 /// Exact as the cells are: a body's box lies in its cell's loose box, so a stray box
-/// that overlaps it meets that loose box. 100,005-body pile, frame 2700: bodies thrown
-/// above the domain made the queries test 1.4 x 10^8 slots a step.
+/// that overlaps it meets that loose box. (Climbing, the 2,800 bunnies bunny-pile-100k
+/// throws over its walls by frame 2700 would make the queries test 1.5 x 10^8 slots a step;
+/// kept apart, 5.4 x 10^6.)
 __global__ void loose_keys_kernel(LooseDesc d) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   const int depth = d.root ? d.root->depth : d.depth;
@@ -318,12 +319,6 @@ __device__ inline void warp_emit(const LooseDesc& d, bool hit, unsigned long lon
     if (idx < d.capacity) d.pair_keys[idx] = key;
     if (d.pair_count) atomicAdd(&d.pair_count[key >> d.shift], 1u);
   }
-}
-
-/// Appends one pair's key (bp::append_key) and, in sorted mode, counts it for its body a.
-__device__ inline void append_pair(const LooseDesc& d, const PairOutput& out, unsigned long long key) {
-  bp::append_key(out, key);
-  if (d.pair_count) atomicAdd(&d.pair_count[key >> d.shift], 1u);
 }
 
 /// One warp's query for slot s: the lanes test candidate slots 32 at a time and append
@@ -487,9 +482,9 @@ __global__ void __launch_bounds__(kBlockSize, 5) loose_query_kernel(LooseDesc d)
 constexpr unsigned kListsBlocks = 1024;
 
 /// With the thread query: one warp per overflow or stray slot s (grid-stride over those
-/// slots), its lanes testing the overflow and stray slots after s 32 at a time. (In the
-/// thread query one thread ran that whole range alone: 2,800 bodies thrown out of
-/// bunny-pile-100k made one thread's chain of loads the kernel's length.)
+/// slots), its lanes testing the overflow and stray slots after s 32 at a time (a thread
+/// running such a range alone would set the query's length: bunny-pile-100k throws 2,800
+/// bunnies out of its box).
 __global__ void loose_lists_kernel(LooseDesc d) {
   const std::uint32_t lane = threadIdx.x & 31u;
   const std::uint32_t first = d.level_begin[kOverflowEntry], end = d.level_begin[kNanEntry];
