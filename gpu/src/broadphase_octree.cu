@@ -12,8 +12,8 @@
 //    D_w the overflow, stray and NaN keys follow level D_w's cells, so the sort covers only
 //    the bits they need);
 // 3. a level table (first slot of every level, of the overflow list, of the stray bodies
-//    of each level by size and of the NaN bodies) and a hash table of the occupied blocks (aligned 2 x 2 x 2 groups of cells,
-//    whose slots are one run: loose_blocks.hpp; one 64-bit entry per block, its key and
+//    of each level by size and of the NaN bodies) and a hash table of the occupied blocks
+//    (aligned 2 x 2 x 2 groups of cells, whose slots are one run: loose_blocks.hpp; one 64-bit entry per block, its key and
 //    its first slot, open addressing with linear probing, at most half full) and the
 //    occupancy map (a byte per block in key order, a bit per occupied cell, for the levels
 //    that fit footprint::loose_occupancy_blocks: loose_blocks.hpp), then a query per slot:
@@ -55,8 +55,8 @@
 //    segment: a body that overlaps thousands of bodies of larger index, as the floor of a
 //    pile) its chunks of kBlockSortMax keys spread over the blocks: a block radix sort each,
 //    then each key's rank from binary searches in the other chunks, then the copy back (one
-//    block per segment took 0.5 ms a step on bunny-pile-1m's floor). Pairs that do not fit the output are
-//    copied from the scratch as they are (keys [0, capacity), any order; the caller grows
+//    block per segment took 0.5 ms a step on bunny-pile-1m's floor). Pairs that do not fit
+//    the output are copied from the scratch as they are (keys [0, capacity), any order; the caller grows
 //    the output and runs find() again).
 #include <cstdlib>
 #include <string>
@@ -127,8 +127,9 @@ struct LooseDesc {
   /// The sort keys after the cells': overflow_key (the overflow list), then the stray
   /// bodies' stray_key(d, l) = overflow_key + 1 + l (l in [0, 10]: the level by size), then
   /// nan_key = overflow_key + kLooseMaxDepth + 2; overflow_key is the first key after level
-  /// D_w's cells (loose_level_base(D_w + 1); kLooseKeysEnd for D_w = 10 and depth `auto`), so the key sort
-  /// covers only the bits they need (D_w = 2: 7 bits, one radix pass instead of four).
+  /// D_w's cells (loose_level_base(D_w + 1); kLooseKeysEnd for D_w = 10 and depth `auto`),
+  /// so the key sort covers only the bits they need (D_w = 2: 7 bits, one radix pass instead
+  /// of four).
   std::uint32_t overflow_key = 0;
   std::uint32_t nan_key = 0;
   std::uint32_t* key = nullptr;    ///< per body: cell key, overflow_key, a stray key or nan_key
@@ -650,8 +651,9 @@ __global__ void __launch_bounds__(kBlockSize) loose_long_sort_kernel(LooseSortDe
     block_sort_chunk<LongSort>(storage, d.keys + b0, c0, len - c0 < kBlockSortMax ? len - c0 : kBlockSortMax, d.shift);
 }
 
-/// Sorted mode, 4 (huge segments, after 3): 4a, each key of a huge segment to its rank in the scratch: its index in its sorted
-/// chunk plus, per other chunk, a binary search (the keys are distinct).
+/// Sorted mode, 4 (huge segments, after 3): 4a, each key of a huge segment to its rank in
+/// the scratch: its index in its sorted chunk plus, per other chunk, a binary search (the
+/// keys are distinct).
 __global__ void __launch_bounds__(kBlockSize) loose_huge_rank_kernel(LooseSortDesc d) {
   if (*d.total > d.capacity) return;
   std::uint32_t b0 = 0, len = 0, own = 0;
@@ -731,7 +733,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     if (out.scratch) {
       check(cudaMemsetAsync(pair_count_.get(), 0, (static_cast<std::size_t>(n) + 1) * sizeof(std::uint32_t), stream),
             "cudaMemset octree pair counts");
-      check(cudaMemsetAsync(long_count_.get(), 0, 2 * sizeof(std::uint32_t), stream), "cudaMemset octree long segments");
+      check(cudaMemsetAsync(long_count_.get(), 0, 2 * sizeof(std::uint32_t), stream),
+            "cudaMemset octree long segments");
     }
     LooseDesc d;
     d.aabb = aabb;

@@ -906,8 +906,10 @@ TEST(DeviceBroadPhaseSets, EverySetHoldsWhatItsNameSays) {  // the fixtures, on 
       EXPECT_GE(s.boxes.size(), 10000u);
     }
     if (name == "thrown-out") {  // centres outside the domain, near it and far (strays), overlapping the pile
-      const auto outside = std::count_if(s.boxes.begin(), s.boxes.end(),
-                                         [&](const Aabb& b) { const Vec3 c = center(b); return !contains(s.domain, Aabb{c, c}); });
+      const auto outside = std::count_if(s.boxes.begin(), s.boxes.end(), [&](const Aabb& b) {
+        const Vec3 c = center(b);
+        return !contains(s.domain, Aabb{c, c});
+      });
       const auto far = std::count_if(s.boxes.begin(), s.boxes.end(), [](const Aabb& b) { return b.min.y > 10.0f; });
       EXPECT_GT(outside, 500);
       EXPECT_GT(far, 100);
