@@ -191,12 +191,6 @@ __global__ void loose_root_kernel(LooseDesc d) {
 /// The root cube of this find(): the snapped one when LooseDesc::root is given.
 __device__ inline LooseGrid loose_call_grid(const LooseDesc& d) { return d.root ? d.root->grid : d.grid; }
 
-/// The first key after level kLooseMaxDepth's cells, (8^11 - 1) / 7 (loose_level_base(11)
-/// would shift past 32 bits): LooseDesc::overflow_key with D_w = 10 or `auto`.
-constexpr std::uint32_t kLooseKeysEnd =
-    static_cast<std::uint32_t>(((1ull << (3 * (kLooseMaxDepth + 1))) - 1ull) / 7ull);
-static_assert(kLooseKeysEnd == 1227133513u, "loose_octree.hpp: the largest cell key is 1227133512");
-
 /// The sort key of a stray body whose level by size is l (LooseDesc::overflow_key).
 __device__ inline std::uint32_t stray_key(const LooseDesc& d, int l) {
   return d.overflow_key + 1u + static_cast<std::uint32_t>(l);

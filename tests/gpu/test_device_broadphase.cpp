@@ -1081,7 +1081,7 @@ struct HostLooseBlocks {
 
 /// The host model's sort keys after the cells' (broadphase_octree.cu's LooseDesc with
 /// D_w = 10): the overflow list, the stray bodies by their level by size, NaN boxes.
-constexpr std::uint32_t kHostOverflowKey = 1227133513u;  // (8^11 - 1) / 7: the first key after level 10
+constexpr std::uint32_t kHostOverflowKey = kLooseKeysEnd;
 constexpr std::uint32_t kHostNanKey = kHostOverflowKey + kLooseMaxDepth + 2;
 /// An stray body's key, its level by size `l` (loose_keys_kernel's stray_key).
 constexpr std::uint32_t host_stray_key(int l) { return kHostOverflowKey + 1u + static_cast<std::uint32_t>(l); }

@@ -184,10 +184,17 @@ OCTOCD_HD inline LoosePlace loose_place(const LooseGrid& g, const Aabb& b, int m
 }
 
 /// First key of `level` in [0, 10]: (8^level - 1) / 7, the number of cells of all
-/// coarser levels.
+/// coarser levels. (Level 11 would shift past 32 bits: its base is kLooseKeysEnd.)
 OCTOCD_HD inline std::uint32_t loose_level_base(int level) {
   return ((1u << (3u * static_cast<unsigned>(level))) - 1u) / 7u;
 }
+
+/// The first key after every cell key of levels 0 .. kLooseMaxDepth: (8^11 - 1) / 7 (the
+/// largest cell key is one less). Sort keys after the cells' (the device octree's overflow,
+/// stray and NaN keys) start here.
+constexpr std::uint32_t kLooseKeysEnd =
+    static_cast<std::uint32_t>(((1ull << (3 * (kLooseMaxDepth + 1))) - 1ull) / 7ull);
+static_assert(kLooseKeysEnd == 1227133513u, "the largest cell key is 1227133512");
 
 /// Key of cell (ix, iy, iz) of `level` (each index < 2^level): loose_level_base(level) +
 /// morton3(ix, iy, iz). Orders cells by (level, Morton code).
