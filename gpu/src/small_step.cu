@@ -177,21 +177,24 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
     __syncthreads();
     stamp(profile, 1);
     // Body i's row (j > i, overlaps(box_i, box_j)) and column (a < i, overlaps(box_a,
-    // box_i)), counted over the block's threads one body pair (i, j), i < j, at a time from
-    // the shared boxes (the tests of flat_row; integer counts, so the order of the shared
-    // atomics changes nothing). One thread per body counting both serially took 11.2 us of
-    // a 38.6 us bunny-stack-50 step on an H100, a warp per body 4.4 us (reports/h100/perf-v5, dev5, dev6).
+    // box_i)), counted from the shared boxes by the block's warps, a row each (rows i,
+    // i + 8, ..: about n^2 / 512 rounds of 32 tests a warp): the row's count from the
+    // ballots, each hit added to its column j (one lane per j: no two lanes of a warp add
+    // to one count; integer counts, so the order of the shared atomics changes nothing).
+    // The tests are those of flat_row. A thread per body pair (i, j) over all n^2 (an
+    // integer division each, half of them i >= j) took 4.1 us of a dragon-random-250 step
+    // on an H100; one thread per body counting both serially 11.2 us of a 38.6 us
+    // bunny-stack-50 step (reports/h100/perf-v5, dev5, dev6).
     for (std::uint32_t i = threadIdx.x; i <= n; i += blockDim.x) {
       f.out_count[i] = 0;
       f.in_count[i] = 0;
     }
     __syncthreads();
-    for (std::uint32_t q = threadIdx.x; q < n * n; q += blockDim.x) {
-      const std::uint32_t i = q / n, j = q - i * n;
-      if (i < j && overlaps(f.aabb[i], f.aabb[j])) {
-        atomicAdd(&f.out_count[i], 1u);
+    for (std::uint32_t i = threadIdx.x >> 5; i < n; i += blockDim.x >> 5) {
+      const std::uint32_t found = flat_row<true>(f.aabb, f.aabb[i], i + 1, n, [&](std::uint32_t, std::uint32_t j) {
         atomicAdd(&f.in_count[j], 1u);
-      }
+      });
+      if (lane == 0) f.out_count[i] = found;
     }
     __syncthreads();
     stamp(profile, 2);
