@@ -176,6 +176,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     }
     for (auto& w : sums) w.emplace_back();
     for (auto& b : series) b.emplace_back();
+    if (!trace) engine->plan_steps(total);  // nothing but the metrics is read between the steps
     const auto t0 = Clock::now();
     for (int f = 1; f <= total; ++f) {
       if (octocd::stop_signal() != 0) {

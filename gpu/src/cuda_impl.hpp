@@ -126,6 +126,7 @@ struct CudaWorld::Impl {
   long resident_timeout_ms = 60000;  // CudaSettings::resident_timeout_ms
   unsigned long long epoch = 0;      // launches so far; the last one's number
   std::uint64_t resident_launches = 0;
+  std::uint64_t resident_requests = 0;  // step requests written (a batch counts once)
   cudaStream_t resident_stream = nullptr;
   // Pinned: [0] the request (host writes), [8] the exit mark (kernel writes); apart, so the
   // two sides write different cache lines.
@@ -133,6 +134,15 @@ struct CudaWorld::Impl {
   static constexpr int kExitedWord = 8;
   unsigned long long* resident_host = nullptr;
   unsigned long long* resident_dev = nullptr;  // the same, mapped
+  // Pinned: the resident kernel's statistics, gpu::kResidentStatsSlots of them (slot:
+  // sequence % slots), and the same, mapped.
+  gpu::StepStats* ring_host = nullptr;
+  gpu::StepStats* ring_dev = nullptr;
+  // Running ahead (Engine::plan_steps): the step() calls promised (the one under way
+  // included), and the last sequence an earlier request's batch runs with no other request
+  // (ahead_last > sequence: the device is ahead of the host's frame).
+  std::int64_t promised = 0;
+  unsigned long long ahead_last = 0;
   gpu::DeviceBuffer<unsigned long long> resident_control{"resident step control"};
 
   // ---- buffers (step_stages.cpp sizes them) ---------------------------------------------
@@ -276,7 +286,17 @@ struct CudaWorld::Impl {
   unsigned long long done_mark() const;
   void write_request(unsigned long long value);
   void launch_resident(const Scene& scene);
+  /// The steps after this one that its request asks for (ResidentDesc): at most
+  /// kResidentAheadMax, promised - 1, and the steps to the next timed one (a batch ends at
+  /// its timed step, the one its request stamps); 0 under small_profile.
+  unsigned long long steps_ahead() const;
+  /// Waits for this step from the resident kernel (asking for it, and for the steps ahead
+  /// the promise allows, unless an earlier batch covers it) and copies its statistics to `host`.
   void resident_step(const Scene& scene, bool recording);
+  /// Throws RuntimeError naming `call` while the device has run, or runs, steps ahead of
+  /// the host's frame (ahead_last > sequence): state, recording and buffers are then not
+  /// the frame's.
+  void refuse_ahead(const char* call) const;
   /// Ends the resident kernel (when one runs) and waits for it: before anything frees or
   /// reallocates device memory, and in the destructor. Throws RuntimeError (and marks the
   /// engine hung: its memory is then never freed) when the kernel does not end within
@@ -287,6 +307,9 @@ struct CudaWorld::Impl {
   /// Decides whether step `frame` (1-based) is timed: frames 1, 1 + k, 1 + 2k, ... with
   /// k = stage_time_every, while stage times are on.
   void begin_step(std::int64_t frame);
+  /// Whether step `frame` is timed (begin_step's rule).
+  bool timed_frame(std::int64_t frame) const;
+  std::int64_t step_frame = 0;  // the frame begin_step was given
   /// Records stage event `i` on the stream (only while enqueueing a timed step).
   void record_event(int i, bool with_events);
   /// The phase stamps of the fused kernel for this step, or null (untimed, no profile).

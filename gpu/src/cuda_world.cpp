@@ -42,6 +42,7 @@ CudaWorld::Impl::~Impl() {
   if (host) (void)cudaFreeHost(host);
   if (small_host) (void)cudaFreeHost(small_host);
   if (resident_host) (void)cudaFreeHost(resident_host);
+  if (ring_host) (void)cudaFreeHost(ring_host);
   for (cudaEvent_t& e : events)
     if (e) (void)cudaEventDestroy(e);
   if (stream) (void)cudaStreamDestroy(stream);
@@ -143,9 +144,15 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
       check(cudaMallocHost(reinterpret_cast<void**>(&d.resident_host), sizeof(unsigned long long) * 16),
             "cudaMallocHost (resident step request)");
       for (int i = 0; i < 16; ++i) d.resident_host[i] = 0;
+      check(cudaMallocHost(reinterpret_cast<void**>(&d.ring_host), sizeof(gpu::StepStats) * gpu::kResidentStatsSlots),
+            "cudaMallocHost (resident step statistics)");
+      for (std::uint32_t i = 0; i < gpu::kResidentStatsSlots; ++i) d.ring_host[i] = gpu::StepStats{};
       void* mapped_request = nullptr;
-      if (cudaHostGetDevicePointer(&mapped_request, d.resident_host, 0) == cudaSuccess) {
+      void* mapped_ring = nullptr;
+      if (cudaHostGetDevicePointer(&mapped_request, d.resident_host, 0) == cudaSuccess &&
+          cudaHostGetDevicePointer(&mapped_ring, d.ring_host, 0) == cudaSuccess) {
         d.resident_dev = static_cast<unsigned long long*>(mapped_request);
+        d.ring_dev = static_cast<gpu::StepStats*>(mapped_ring);
       } else {
         (void)cudaGetLastError();
         d.resident_possible = false;
@@ -282,13 +289,17 @@ std::string CudaWorld::notes() const {
 
 bool CudaWorld::persistent() const { return impl_->persistent; }
 
+void CudaWorld::plan_steps(std::int64_t steps) { impl_->promised = steps > 0 ? steps : 0; }
+
 void CudaWorld::set_persistent(bool on) {
   Impl& d = *impl_;
+  d.refuse_ahead("set_persistent");
   if (!on) d.stop_resident();
   d.persistent = on && d.resident_possible;
 }
 
 std::uint64_t CudaWorld::resident_launches() const { return impl_->resident_launches; }
+std::uint64_t CudaWorld::resident_requests() const { return impl_->resident_requests; }
 
 std::uint64_t CudaWorld::device_bytes() const {
   std::uint64_t total = 0;
@@ -300,6 +311,7 @@ std::uint64_t CudaWorld::device_bytes() const {
 void CudaWorld::reset_capacities(std::size_t capacity) {
   if (capacity < 1) capacity = 1;
   Impl& d = *impl_;
+  d.refuse_ahead("reset_capacities");
   d.stop_resident();  // before any cudaFree
   d.drop_graph();
   for (BufferBase* b : d.scratch_buffers()) b->reset(capacity);
@@ -311,6 +323,7 @@ void CudaWorld::reset_capacities(std::size_t capacity) {
 
 void CudaWorld::set_state(const BodyState& s) {
   Impl& d = *impl_;
+  d.refuse_ahead("set_state");
   if (s.x.size() != d.n || s.v.size() != d.n || s.w.size() != d.n)
     throw InputError(fmt::format("CudaWorld::set_state: expected {} bodies, got x {}, v {}, w {}", d.n, s.x.size(),
                                  s.v.size(), s.w.size()));
@@ -325,9 +338,15 @@ void CudaWorld::set_state(const BodyState& s) {
   state_frame_ = frame_;
 }
 
+void CudaWorld::set_recording(bool on) {
+  if (on != recording_) impl_->refuse_ahead("set_recording");
+  recording_ = on;
+}
+
 const BodyState& CudaWorld::state() const {
   if (state_frame_ != frame_) {
     Impl& d = *impl_;
+    d.refuse_ahead("state");
     download(state_.x, d.x, d.n, d.stream);
     download(state_.v, d.v, d.n, d.stream);
     download(state_.w, d.w, d.n, d.stream);
@@ -374,7 +393,11 @@ const FrameMetrics& CudaWorld::step() {
 
   // The state on the device is now this frame's; the host copy is stale.
   state_frame_ = -1;
+  if (d.promised > 0) --d.promised;
   if (r.first_non_finite < n) {
+    // The resident kernel's batch stopped at this step: nothing runs ahead.
+    d.ahead_last = d.sequence;
+    d.promised = 0;
     const std::uint32_t i = r.first_non_finite;
     Vec3 x, v;
     // The polled wait may return before the kernel has exited; the default stream's copies

@@ -351,7 +351,11 @@ struct SmallStepDesc {
   ApplyDesc apply;      ///< offsets / entries unused (the small path's index is above); clamp 0
   MetricsDesc metrics;  ///< one block (n <= kMetricsOneBlockBodies)
   StepStats* stats = nullptr;       ///< device: counters and counts (zeroed by the step), metrics
-  StepStats* host_stats = nullptr;  ///< mapped pinned host memory: a copy of *stats at the end (may be null)
+  /// Mapped pinned host memory (may be null): host_slots StepStats; a step copies *stats
+  /// into slot sequence % host_slots at its end (the resident kernel's steps run ahead of the
+  /// host by up to kResidentAheadMax, each into its own slot).
+  StepStats* host_stats = nullptr;
+  std::uint32_t host_slots = 1;
   /// The response passes, the clamp and the metrics run in block 0 alone (__syncthreads
   /// instead of grid-wide barriers; the other blocks are done after the midphase) when the
   /// step's pair count is at most this (0: never). Same per-element code, same bits.
@@ -391,15 +395,20 @@ constexpr std::uint32_t kSmallFrontMaxBodies = 512;
 /// The resident (persistent) small step (small_step.cu, launch_small_resident): one
 /// cooperative launch that runs step after step. Block 0's thread 0 polls `request` in
 /// mapped pinned host memory (system-scope acquire loads, __nanosleep backoff) and forwards
-/// each new value to the other blocks through `control` in device memory; a request is
-/// (sequence << kResidentShift) | flags: kResidentRecord (the first pass writes `records`),
-/// kResidentStamp (stamp the phases into SmallStepDesc::profile), kResidentExit (end the
-/// kernel). Each step runs the per-step kernel's code with that
-/// sequence, so it ends by writing the sequence to SmallStepDesc::done. The kernel also ends
+/// each step's command to the other blocks through `control` in device memory. A request is
+/// (sequence << kResidentShift) | (ahead << kResidentAheadShift) | flags: run the steps
+/// sequence .. sequence + ahead (ahead <= kResidentAheadMax) back to back, with no request
+/// between them, while each step leaves every list within its capacity and every body
+/// finite (a step that does not is the batch's last: the host reruns it or throws); flags:
+/// kResidentRecord (the first step's first pass writes `records`; the host asks no steps
+/// ahead then), kResidentStamp (stamp the phases of the batch's last step into
+/// SmallStepDesc::profile), kResidentExit (end the kernel, after the batch under way).
+/// Each step runs the per-step kernel's code with its sequence, so it ends by writing its
+/// statistics to its slot and its sequence to SmallStepDesc::done. The kernel also ends
 /// by itself after idle_ns without a new request (so that nothing else on the device waits
 /// on an idle resident kernel for long); on every exit it writes `epoch` to `exited`
 /// (mapped), after its last step's `done`. The host tells the two apart: a request is
-/// either run (done == its sequence) or left (exited == epoch and done older).
+/// either run (done >= its sequence) or left (exited == epoch and done older).
 struct ResidentDesc {
   unsigned long long* request = nullptr;  ///< mapped pinned host memory, written by the host
   unsigned long long* exited = nullptr;   ///< mapped pinned host memory, written at exit
@@ -410,7 +419,11 @@ struct ResidentDesc {
   DeviceContact* records = nullptr;       ///< the first pass's records of a recorded step
   int stall = 0;  ///< test hook (CudaWorld::TestHooks::resident_ignores_requests): ignore step requests, honour exit
 };
-constexpr int kResidentShift = 3;
+constexpr int kResidentShift = 9;
+constexpr int kResidentAheadShift = 3;
+/// The most steps a request asks for after its first (the stats slots hold one more).
+constexpr unsigned long long kResidentAheadMax = 63;
+constexpr std::uint32_t kResidentStatsSlots = kResidentAheadMax + 1;
 constexpr unsigned long long kResidentRecord = 1;
 constexpr unsigned long long kResidentExit = 2;
 constexpr unsigned long long kResidentStamp = 4;

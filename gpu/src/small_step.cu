@@ -35,8 +35,8 @@
 // the rows from there; block 0 stores the integrated state and the boxes. The last response
 // pass copies the new state into x_saved / v_saved (not when a list overflowed: the host
 // then restores the state from them and reruns).
-// Resident kernel (small_resident_kernel): the same step in a loop, one step per request
-// the host writes into mapped memory (ResidentDesc in kernels.hpp).
+// Resident kernel (small_resident_kernel): the same step in a loop, one batch of steps per
+// request the host writes into mapped memory (ResidentDesc in kernels.hpp).
 // Overflow: a pair list or midphase list that passes its capacity is counted in full and
 // the host regrows and reruns the step, as on the graph path. Every thread reaches every
 // grid.sync (no early return); loops over warps have warp-uniform bounds.
@@ -135,8 +135,11 @@ __device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { retu
 /// the end, `records` (may be null) gets the first pass's contacts, `profile` (may be null)
 /// the phase stamps; smem: kSharedBytes. kLean (s.lean, tiny scenes): the midphase's early
 /// exit, tile culling and tile filter read as off, constants the compiler folds away.
+/// Returns, to thread 0 of block 0 (false elsewhere), whether the next step may follow
+/// without the host: every list within its capacity (the host's regrow test,
+/// CudaWorld::Impl::grow_if_needed) and every body finite.
 template <bool kLean>
-__device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned long long sequence,
+__device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned long long sequence,
                                                 DeviceContact* records, unsigned long long* profile,
                                                 unsigned char* smem) {
   cg::grid_group grid = cg::this_grid();
@@ -350,7 +353,7 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   bool save = front && st->counts[0] <= cap;
   for (int i = 0; i < steps; ++i) save = save && st->counts[1 + i] <= s.list_capacity;
   const bool one_block = live <= s.one_block_pairs;
-  if (one_block && blockIdx.x != 0) return;  // uniform per block; no grid.sync follows then
+  if (one_block && blockIdx.x != 0) return false;  // uniform per block; no grid.sync follows then
   const std::uint32_t r_tid = one_block ? threadIdx.x : tid;
   const std::uint32_t r_threads = one_block ? blockDim.x : threads;
   for (int pass = 0; pass < s.iterations; ++pass) {
@@ -388,23 +391,27 @@ __device__ __forceinline__ void small_step_body(const SmallStepDesc& s, unsigned
   stamp(profile, 8);
 
   // 8. Block 0: the metrics, then everything the host reads, then the step's number.
+  bool goes_on = false;
   if (blockIdx.x == 0) {
     metrics::metrics_block(s.metrics, reinterpret_cast<metrics::Acc*>(smem), 0, 1, &st->metrics);
     if (threadIdx.x == 0) {
       stamp(profile, 9);
-      if (s.host_stats) *s.host_stats = *st;
+      if (s.host_stats) s.host_stats[sequence % s.host_slots] = *st;
       if (s.done) {
         __threadfence_system();  // the statistics (and stamps) before the step's number
         *s.done = sequence;
       }
+      goes_on = st->counts[0] <= cap && st->metrics.first_non_finite >= n;
+      for (int i = 0; i < steps; ++i) goes_on = goes_on && st->counts[1 + i] <= s.list_capacity;
     }
   }
+  return goes_on;
 }
 
 template <bool kLean>
 __global__ void __launch_bounds__(kBlockSize) small_step_kernel(const __grid_constant__ SmallStepDesc s) {
   __shared__ alignas(16) unsigned char smem[kSharedBytes];
-  small_step_body<kLean>(s, s.sequence, s.terms.records, s.profile, smem);
+  (void)small_step_body<kLean>(s, s.sequence, s.terms.records, s.profile, smem);
 }
 
 /// The command that ends the resident kernel (never a request: those have a sequence
@@ -432,12 +439,14 @@ __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long 
   }
 }
 
-/// Steps on request (ResidentDesc). Block 0 takes each request and publishes it as the
-/// next command (control[1], then control[0] = the next ticket, release); the other blocks
-/// wait for the ticket (acquire). Every block reads the first ticket before a grid-wide
-/// barrier, so none can miss the first command. After a step's last phase (block 0: the
-/// metrics and *done) block 0 waits for the next request; a block done earlier (the
-/// one-block response) waits for the next ticket.
+/// Steps on request (ResidentDesc). Block 0 takes each request and publishes each step's
+/// command, (sequence << kResidentShift) | flags (control[1], then control[0] = the next
+/// ticket, release); the other blocks wait for the ticket (acquire). Every block reads the
+/// first ticket before a grid-wide barrier, so none can miss the first command. After a
+/// step's last phase (block 0: the metrics and *done) block 0 publishes the batch's next
+/// step when the request asked for it and the step went on (small_step_body), else waits
+/// for the next request; a block done earlier (the one-block response) waits for the next
+/// ticket.
 template <bool kLean>
 __global__ void __launch_bounds__(kBlockSize)
     small_resident_kernel(const __grid_constant__ SmallStepDesc s, const __grid_constant__ ResidentDesc r) {
@@ -448,12 +457,28 @@ __global__ void __launch_bounds__(kBlockSize)
   unsigned long long my_ticket = 0;
   if (threadIdx.x == 0) my_ticket = ticket.load(cuda::std::memory_order_relaxed);
   cg::this_grid().sync();
-  unsigned long long handled = r.handled;
+  // Block 0, thread 0: the last request taken, and its batch: the next step's sequence
+  // (0: none left), its last step's, whether that one is stamped.
+  unsigned long long taken = r.handled;
+  unsigned long long next = 0, last = 0;
+  bool stamp_last = false;
   for (;;) {
     if (threadIdx.x == 0) {
       unsigned long long cmd;
       if (blockIdx.x == 0) {
-        cmd = wait_request(r, handled);
+        if (next != 0 && next <= last) {
+          cmd = (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull);
+        } else {
+          cmd = wait_request(r, taken);
+          if (cmd != kExitCommand) {
+            taken = cmd;
+            next = cmd >> kResidentShift;
+            last = next + ((cmd >> kResidentAheadShift) & kResidentAheadMax);
+            stamp_last = (cmd & kResidentStamp) != 0;
+            cmd = (next << kResidentShift) | (cmd & kResidentRecord) |
+                  (next == last && stamp_last ? kResidentStamp : 0ull);
+          }
+        }
         published.store(cmd, cuda::std::memory_order_relaxed);
         ticket.store(my_ticket + 1, cuda::std::memory_order_release);
       } else {
@@ -473,9 +498,10 @@ __global__ void __launch_bounds__(kBlockSize)
     const unsigned long long cmd = command;
     __syncthreads();  // every thread has read it before thread 0 writes the next one
     if (cmd == kExitCommand) break;
-    handled = cmd;
-    small_step_body<kLean>(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr,
-                           (cmd & kResidentStamp) != 0 ? s.profile : nullptr, smem);
+    const bool goes_on =
+        small_step_body<kLean>(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr,
+                               (cmd & kResidentStamp) != 0 ? s.profile : nullptr, smem);
+    if (blockIdx.x == 0 && threadIdx.x == 0) next = goes_on ? next + 1 : 0;
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) {
     __threadfence_system();  // the last step's writes before the exit's mark

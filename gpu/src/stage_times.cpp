@@ -24,8 +24,13 @@ constexpr int kStageEndSlot[kStages] = {1, 1, 4, 7, 8, 9};
 
 }  // namespace
 
+bool CudaWorld::Impl::timed_frame(std::int64_t frame) const {
+  return stage_times && (frame - 1) % stage_time_every == 0;
+}
+
 void CudaWorld::Impl::begin_step(std::int64_t frame) {
-  timed = stage_times && (frame - 1) % stage_time_every == 0;
+  step_frame = frame;
+  timed = timed_frame(frame);
 }
 
 void CudaWorld::Impl::record_event(int i, bool with_events) {

@@ -1,7 +1,10 @@
 // The fused small step of the cuda engine (small_step.cu) from the host: its descriptor,
 // one cooperative launch per step with a polled wait on mapped memory, and the resident
-// kernel that stays launched and steps on request (CudaWorld's class comment).
+// kernel that stays launched and steps on request, several steps a request when the caller
+// promised them (Engine::plan_steps; CudaWorld's class comment).
+#include <algorithm>
 #include <chrono>
+#include <cstring>
 
 #include <fmt/format.h>
 
@@ -109,6 +112,8 @@ void CudaWorld::Impl::launch_resident(const Scene& scene) {
   r.stall = resident_stall ? 1 : 0;
   gpu::SmallStepDesc s = small_desc(scene, false);
   s.profile = small_dev + 1;  // stamped on the requests that carry kResidentStamp
+  s.host_stats = ring_dev;
+  s.host_slots = gpu::kResidentStatsSlots;
   const cudaError_t e = gpu::launch_small_resident(s, r, resident_grid, resident_stream);
   if (e != cudaSuccess) {
     (void)cudaGetLastError();
@@ -118,18 +123,48 @@ void CudaWorld::Impl::launch_resident(const Scene& scene) {
   ++resident_launches;
 }
 
+unsigned long long CudaWorld::Impl::steps_ahead() const {
+  if (promised <= 1 || small_profile || timed) return 0;
+  std::int64_t extra = std::min<std::int64_t>(promised - 1, static_cast<std::int64_t>(gpu::kResidentAheadMax));
+  if (stage_times) {  // up to the next timed step (frames 1, 1 + k, ..), stamped as the batch's last
+    const std::int64_t k = stage_time_every;
+    extra = std::min<std::int64_t>(extra, k - (step_frame - 1) % k);
+  }
+  return static_cast<unsigned long long>(extra);
+}
+
+void CudaWorld::Impl::refuse_ahead(const char* call) const {
+  if (ahead_last <= sequence) return;
+  throw RuntimeError(fmt::format(
+      "CudaWorld::{}: refused while the resident small-step kernel runs {} step(s) ahead of the last step() "
+      "(Engine::plan_steps promised them with nothing read or changed in between); call step() through them first",
+      call, ahead_last - sequence));
+}
+
 void CudaWorld::Impl::resident_step(const Scene& scene, bool recording) {
-  if (resident_alive && exited_mark() == epoch) stop_resident();  // it ended itself, idle
-  write_request((sequence << gpu::kResidentShift) | (recording ? gpu::kResidentRecord : 0ull) |
-                (stamps() ? gpu::kResidentStamp : 0ull));
-  if (!resident_alive) launch_resident(scene);
+  const bool covered = sequence <= ahead_last;  // an earlier request's batch runs this step
+  if (!covered) {
+    if (resident_alive && exited_mark() == epoch) stop_resident();  // it ended itself, idle
+    const unsigned long long extra = recording ? 0 : steps_ahead();
+    const bool stamp = small_profile || timed_frame(step_frame + static_cast<std::int64_t>(extra));
+    ahead_last = sequence + extra;
+    ++resident_requests;
+    write_request((sequence << gpu::kResidentShift) | (extra << gpu::kResidentAheadShift) |
+                  (recording ? gpu::kResidentRecord : 0ull) | (stamp && small_dev ? gpu::kResidentStamp : 0ull));
+    if (!resident_alive) launch_resident(scene);
+  }
   const auto t0 = Clock::now();
   for (unsigned spins = 1;; ++spins) {
-    if (done_mark() == sequence) return;
+    if (done_mark() >= sequence) break;
     if (exited_mark() == epoch) {
-      if (done_mark() == sequence) return;  // it ran the step, then ended idle
-      resident_alive = false;               // it ended without taking the request
-      launch_resident(scene);
+      if (done_mark() >= sequence) break;  // it ran the step, then ended idle
+      resident_alive = false;
+      // A batch stops early only after a step the host reruns (stop_resident) or throws on
+      // (ahead_last reset): its later steps are never waited for.
+      if (covered)
+        throw RuntimeError(fmt::format("the resident small-step kernel ended before step {} of its batch (to {})",
+                                       sequence, ahead_last));
+      launch_resident(scene);  // it ended without taking the request
       continue;
     }
     if ((spins & 1023u) != 0) continue;
@@ -146,6 +181,8 @@ void CudaWorld::Impl::resident_step(const Scene& scene, bool recording) {
           sequence, resident_timeout_ms, epoch,
           resident_stall ? ", the test hook resident_ignores_requests makes it ignore requests" : ""));
   }
+  std::memcpy(static_cast<void*>(host), static_cast<const void*>(ring_host + sequence % gpu::kResidentStatsSlots),
+              sizeof(gpu::StepStats));
 }
 
 void CudaWorld::Impl::stop_resident() {
@@ -171,6 +208,7 @@ void CudaWorld::Impl::stop_resident() {
     }
   }
   resident_alive = false;
+  ahead_last = 0;  // no batch runs on
   check(cudaStreamSynchronize(resident_stream), "cudaStreamSynchronize (resident kernel's end)");
 }
 

@@ -1449,6 +1449,133 @@ TEST(CudaPersistent, IdleExitAndRelaunchKeepTheCpuBits) {
   EXPECT_GT(gpu.resident_launches(), 1u) << "the cpu's steps between take longer than 1 us: relaunches";
 }
 
+// Engine::plan_steps: the resident kernel runs the promised steps in batches (up to 64 a
+// request, each ending at the next timed step) and every step() still returns its own
+// step's metrics: per frame the cpu's counts, and the kinetic energy of the other planned
+// engine (the same kernel's metrics); after the last step the cpu's state. Stage times
+// (every 16th step) come from the batches' last steps: held between, new at most samples. An engine shrunk to capacity 1
+// regrows inside batches (a batch stops at the step that overflowed; the host reruns it).
+// While steps run ahead, state(), set_state(), set_recording(), reset_capacities() and
+// set_persistent() are refused; after the last promised step they work again (a recorded
+// step from a set state: the cpu's record). The engines run one after the other: two
+// resident kernels need not fit on the device at once. bunny-stack-50 (the fused front,
+// lean kernel), bunny-random-400 (neither) and box-stack (the one-block response).
+TEST(CudaPersistent, PlannedStepsRunAheadWithTheCpuBits) {
+  REQUIRE_CUDA_DEVICE();
+  for (const char* scene : {"bunny-stack-50", "bunny-random-400", "box-stack"}) {
+    const auto model = with_levels(load_model(scene), "1,2");
+    const int frames = std::string(scene) == "bunny-random-400" ? 150 : 300;
+    auto cpu = cpu_flat(model);
+    std::vector<FrameMetrics> ref;
+    for (int f = 1; f <= frames; ++f) ref.push_back(cpu->step());
+    const std::uint64_t hash = cpu->state_hash();
+    const BodyState end = cpu->state();
+    cpu->set_recording(true);
+    const FrameMetrics after = cpu->step();
+    const FrameRecord after_record = cpu->record();
+    std::vector<double> energy[2];
+    for (int which = 0; which < 2; ++which) {
+      const bool planned = which == 0;
+      CudaSettings settings = path_settings("small");
+      settings.stage_times = planned;
+      settings.stage_time_every = 16;
+      CudaWorld g(model, "flat", settings, idle_after(600000000L));
+      ASSERT_TRUE(g.persistent()) << scene;
+      if (!planned) g.reset_capacities(1);
+      g.plan_steps(frames);
+      std::array<double, static_cast<std::size_t>(Stage::Count)> held{};
+      int samples = 0, fresh = 0;
+      for (int f = 1; f <= frames; ++f) {
+        const FrameMetrics mg = g.step();
+        const std::string what = fmt::format("{} frame {} ({})", scene, f, planned ? "planned" : "tiny");
+        expect_cpu_cuda_counts(ref[static_cast<std::size_t>(f - 1)], mg, what);
+        energy[which].push_back(mg.kinetic_energy);
+        if (planned) {
+          if ((f - 1) % 16 == 0) {
+            if (mg.stage_ms != held) ++fresh;  // %globaltimer ticks 32 ns: two samples may be equal
+            ++samples;
+          } else {
+            EXPECT_EQ(mg.stage_ms, held) << what << ": an untimed step reports the last sample";
+          }
+          held = mg.stage_ms;
+        }
+        if (planned && f == 2) {
+          EXPECT_THROW((void)g.state(), RuntimeError) << scene << ": the kernel runs ahead of frame 2";
+          EXPECT_THROW(g.set_state(end), RuntimeError) << scene;
+          EXPECT_THROW(g.set_recording(true), RuntimeError) << scene;
+          EXPECT_THROW(g.reset_capacities(1), RuntimeError) << scene;
+          EXPECT_THROW(g.set_persistent(false), RuntimeError) << scene;
+          try {
+            (void)g.state();
+          } catch (const RuntimeError& e) {
+            EXPECT_NE(std::string(e.what()).find("plan_steps"), std::string::npos) << e.what();
+          }
+        }
+        if (::testing::Test::HasFailure()) FAIL() << what;
+      }
+      ASSERT_EQ(hash, g.state_hash()) << scene << ": " << first_difference(end, g.state());
+      if (planned) {
+        EXPECT_EQ(samples, (frames - 1) / 16 + 1) << scene;
+        EXPECT_GE(2 * fresh, samples) << scene << ": most timed steps bring a new sample (stale stamps: none)";
+        EXPECT_EQ(g.resident_launches(), 1u) << scene;
+        // Batches end at each timed step: frame 1 alone, then 16 steps a request.
+        EXPECT_EQ(g.resident_requests(), static_cast<std::uint64_t>(1 + (frames - 1 + 15) / 16)) << scene;
+        // The promise is kept: state, recording and set_state work again.
+        g.set_recording(true);
+        g.set_state(end);
+        const FrameMetrics mg = g.step();
+        expect_cpu_cuda_counts(after, mg, std::string(scene) + " after the plan, recorded");
+        expect_same_record(after_record, g.record(), std::string(scene) + " after the plan");
+        EXPECT_EQ(cpu->state_hash(), g.state_hash()) << scene;
+      } else {
+        EXPECT_LT(g.resident_requests(), static_cast<std::uint64_t>(frames / 4))
+            << scene << ": stage times off: up to 64 steps a request, plus one per regrow";
+        EXPECT_GT(g.resident_launches(), 1u) << scene << ": the regrows end the kernel";
+      }
+      std::cout << "[ info ] " << scene << ": " << frames << " planned steps equal to the cpu ("
+                << (planned ? "stage times every 16" : "from capacity 1") << "): " << g.resident_requests()
+                << " requests, " << g.resident_launches() << " launches\n";
+    }
+    EXPECT_EQ(energy[0], energy[1]) << scene << ": the same steps' metrics from the same kernel";
+  }
+}
+
+// A body that turns non-finite stops the batch at its step: step() throws the cpu's
+// message, and so does the next step() (a new request, not a wait for a batch that
+// stopped), with stage times off (batches of 64) and a short host timeout.
+TEST(CudaPersistent, NonFiniteStopsThePlannedBatch) {
+  REQUIRE_CUDA_DEVICE();
+  auto base = load_model("free-fall");
+  auto model = std::make_shared<Model>(*base);
+  std::size_t body = 0;
+  while (body < model->initial.size() && model->initial.w[body] == 0.0f) ++body;
+  ASSERT_LT(body, model->initial.size());
+  model->initial.v[body].y = std::numeric_limits<float>::quiet_NaN();
+  std::string cpu_msg;
+  try {
+    cpu_flat(model)->step();
+  } catch (const RuntimeError& e) {
+    cpu_msg = e.what();
+  }
+  ASSERT_FALSE(cpu_msg.empty());
+  CudaSettings settings = path_settings("small");
+  settings.resident_timeout_ms = 3000;
+  CudaWorld gpu(model, "flat", settings);
+  ASSERT_TRUE(gpu.persistent());
+  gpu.plan_steps(200);
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    std::string gpu_msg;
+    try {
+      gpu.step();
+    } catch (const RuntimeError& e) {
+      gpu_msg = e.what();
+    }
+    EXPECT_EQ(gpu_msg, cpu_msg) << "attempt " << attempt;
+    EXPECT_EQ(gpu.frame(), 0);
+  }
+  EXPECT_EQ(gpu.resident_requests(), 2u);
+}
+
 // Stage times cost the step nothing and change no bit (issue 33 item 1): by default one step
 // in CudaSettings::stage_time_every is timed (%globaltimer stamps of the fused kernel on the
 // small path, the graph captured with events on the per-stage path) and the others report

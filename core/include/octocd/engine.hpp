@@ -252,6 +252,14 @@ class Engine {
   /// Runs one step (SPEC 4) and returns its metrics. Throws RuntimeError naming the body
   /// and frame when a position or velocity becomes non-finite.
   virtual const FrameMetrics& step() = 0;
+  /// A promise: the caller's next `steps` calls are step(), with nothing but step()'s
+  /// metrics, last_metrics() and frame() read in between (no state(), contacts(),
+  /// record(), set_state() or set_recording()). An engine may then run ahead of the calls
+  /// (`cuda`'s resident small step runs up to 64 steps per host round trip); each step()
+  /// still returns its own step's metrics, and the results are the same bits. A call the
+  /// promise rules out may throw RuntimeError until the steps run ahead are taken. A later
+  /// call replaces the count (0: no more ahead). Engines that cannot run ahead ignore it.
+  virtual void plan_steps(std::int64_t steps) { (void)steps; }
   /// Hot state after the last step (host copy; for `cuda`, downloaded on demand).
   virtual const BodyState& state() const = 0;
   /// Metrics of the last step.

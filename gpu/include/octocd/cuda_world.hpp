@@ -151,8 +151,9 @@ struct CudaTestHooks {
 /// per warp (the same leaf items, so the same bits and counts).
 /// Persistent (resident) kernel: on the small path the kernel is launched once, on a
 /// stream of its own, and stays resident (set_persistent(false): a launch per step): it
-/// waits on a request word in mapped host memory, runs a step per request and writes the
-/// step's number back, so a step costs no launch. Between steps it touches no state, so
+/// waits on a request word in mapped host memory, runs a step per request (or, after
+/// plan_steps, a batch of steps per request) and writes each step's number back, so a step
+/// costs no launch. Between requests it touches no state, so
 /// state(), set_state() and the recording's copies run beside it (on the engine's
 /// stream); reset_capacities(), a buffer regrow (the step's rerun), set_persistent(false)
 /// and the destructor end it first (cudaFree waits for every kernel). It ends itself after
@@ -210,8 +211,19 @@ class CudaWorld : public Engine {
   const std::vector<ContactRecord>& contacts() const override;
   bool can_record() const override { return true; }
   /// Recording copies x_pre, v_pre, AABBs, pairs, confirmed pairs, contacts, x_post and
-  /// v_post back every step (as World fills them).
-  void set_recording(bool on) override { recording_ = on; }
+  /// v_post back every step (as World fills them). Throws RuntimeError when it changes
+  /// while the resident kernel runs ahead (plan_steps).
+  void set_recording(bool on) override;
+  /// On the small path with the resident kernel: a request asks for this step and up to
+  /// gpu::kResidentAheadMax (63) more of the `steps` promised, to the next timed step
+  /// (stage_time_every), so those run back to back with no host round trip between them
+  /// (a batch stops early after a step whose lists overflow or whose body turns
+  /// non-finite: the host then reruns it or throws, as without a plan). Each step()
+  /// still waits for its own step and returns its metrics. While the device is ahead of
+  /// the last step(), state() (a download), set_state(), set_recording(), reset_capacities()
+  /// and set_persistent() throw RuntimeError. Elsewhere (other paths, recording,
+  /// small_profile) a no-op.
+  void plan_steps(std::int64_t steps) override;
   const FrameRecord& record() const override { return record_; }
 
   /// Replaces the hot state (positions, velocities, inverse masses; sizes must equal the
@@ -249,6 +261,9 @@ class CudaWorld : public Engine {
   /// Launches of the resident kernel so far: one, plus one per regrow, per
   /// set_persistent(false) / (true) and per idle exit.
   std::uint64_t resident_launches() const;
+  /// Requests written to the resident kernel so far: one per step, or one per batch of
+  /// steps after plan_steps.
+  std::uint64_t resident_requests() const;
   /// With stage times on (CudaSettings::stage_times), every stage but, on the small path,
   /// Aabbs (built in the integration's phase, whose time includes them); off, none.
   bool has_stage(Stage s) const override;
