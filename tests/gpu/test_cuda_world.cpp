@@ -400,13 +400,13 @@ TEST(CudaDevice, EngineSurface) {
   EXPECT_TRUE(e->contacts().empty()) << "contacts stay on the device unless recording";
 }
 
-TEST(CudaDevice, NonFiniteStateGivesTheCpuMessage) {
-  REQUIRE_CUDA_DEVICE();
-  auto base = load_model("free-fall");
-  auto model = std::make_shared<Model>(*base);
+/// free-fall with a NaN velocity on its first dynamic body (null when it has none), and the
+/// message of the cpu engine's first step on it (World::step's non-finite error).
+static std::pair<std::shared_ptr<const Model>, std::string> nan_free_fall() {
+  auto model = std::make_shared<Model>(*load_model("free-fall"));
   std::size_t body = 0;
   while (body < model->initial.size() && model->initial.w[body] == 0.0f) ++body;
-  ASSERT_LT(body, model->initial.size()) << "free-fall has a dynamic body";
+  if (body == model->initial.size()) return {nullptr, ""};
   model->initial.v[body].y = std::numeric_limits<float>::quiet_NaN();
   std::string cpu_msg;
   try {
@@ -414,6 +414,13 @@ TEST(CudaDevice, NonFiniteStateGivesTheCpuMessage) {
   } catch (const RuntimeError& e) {
     cpu_msg = e.what();
   }
+  return {model, cpu_msg};
+}
+
+TEST(CudaDevice, NonFiniteStateGivesTheCpuMessage) {
+  REQUIRE_CUDA_DEVICE();
+  const auto [model, cpu_msg] = nan_free_fall();
+  ASSERT_TRUE(model) << "free-fall has a dynamic body";
   EXPECT_FALSE(cpu_msg.empty());
   for (const std::string& path : kPaths) {
     CudaWorld gpu(model, "flat", path_settings(path));
@@ -1545,18 +1552,8 @@ TEST(CudaPersistent, PlannedStepsRunAheadWithTheCpuBits) {
 // stopped), with stage times off (batches of 64) and a short host timeout.
 TEST(CudaPersistent, NonFiniteStopsThePlannedBatch) {
   REQUIRE_CUDA_DEVICE();
-  auto base = load_model("free-fall");
-  auto model = std::make_shared<Model>(*base);
-  std::size_t body = 0;
-  while (body < model->initial.size() && model->initial.w[body] == 0.0f) ++body;
-  ASSERT_LT(body, model->initial.size());
-  model->initial.v[body].y = std::numeric_limits<float>::quiet_NaN();
-  std::string cpu_msg;
-  try {
-    cpu_flat(model)->step();
-  } catch (const RuntimeError& e) {
-    cpu_msg = e.what();
-  }
+  const auto [model, cpu_msg] = nan_free_fall();
+  ASSERT_TRUE(model) << "free-fall has a dynamic body";
   ASSERT_FALSE(cpu_msg.empty());
   CudaSettings settings = path_settings("small");
   settings.resident_timeout_ms = 3000;
