@@ -184,10 +184,10 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     // i + 8, ..: about n^2 / 512 rounds of 32 tests a warp): the row's count from the
     // ballots, each hit added to its column j (one lane per j: no two lanes of a warp add
     // to one count; integer counts, so the order of the shared atomics changes nothing).
-    // The tests are those of flat_row. A thread per body pair (i, j) over all n^2 (an
-    // integer division each, half of them i >= j) took 4.1 us of a dragon-random-250 step
-    // on an H100; one thread per body counting both serially 11.2 us of a 38.6 us
-    // bunny-stack-50 step (reports/h100/perf-v5, dev5, dev6).
+    // The tests are those of flat_row. On an H100 this phase takes 2.91 us of a
+    // bunny-stack-50 step; a thread per body pair (i, j) over all n^2 (an integer division
+    // each, half of them i >= j) took 3.20 us, one thread per body counting both serially
+    // 11.2 us of a 38.6 us step (reports/h100/perf-v5, dev5, dev6).
     for (std::uint32_t i = threadIdx.x; i <= n; i += blockDim.x) {
       f.out_count[i] = 0;
       f.in_count[i] = 0;
@@ -350,8 +350,11 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   td.records = records;
   const std::uint32_t live = live_count(st->counts, cap);
   // The fused front's saved state becomes the new state unless the step is to be rerun.
-  bool save = front && st->counts[0] <= cap;
-  for (int i = 0; i < steps; ++i) save = save && st->counts[1 + i] <= s.list_capacity;
+  // Every list within its capacity (the host's regrow test, grow_if_needed): else the host
+  // reruns the step from x_saved / v_saved.
+  bool fits = st->counts[0] <= cap;
+  for (int i = 0; i < steps; ++i) fits = fits && st->counts[1 + i] <= s.list_capacity;
+  const bool save = front && fits;
   const bool one_block = live <= s.one_block_pairs;
   if (one_block && blockIdx.x != 0) return false;  // uniform per block; no grid.sync follows then
   const std::uint32_t r_tid = one_block ? threadIdx.x : tid;
@@ -401,8 +404,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
         __threadfence_system();  // the statistics (and stamps) before the step's number
         *s.done = sequence;
       }
-      goes_on = st->counts[0] <= cap && st->metrics.first_non_finite >= n;
-      for (int i = 0; i < steps; ++i) goes_on = goes_on && st->counts[1 + i] <= s.list_capacity;
+      goes_on = fits && st->metrics.first_non_finite >= n;
     }
   }
   return goes_on;
