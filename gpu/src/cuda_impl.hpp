@@ -74,6 +74,13 @@ constexpr long kResidentIdleUs = 2000;
 /// grid-wide barrier (SmallStepDesc::front_bodies; at most gpu::kSmallFrontMaxBodies).
 constexpr std::uint32_t kSmallFrontBodies = 64;
 
+/// Bodies up to which the fused small step integrates into every block's shared memory and
+/// runs its broadphase from there (SmallStepDesc::shared_boxes_bodies; at most
+/// gpu::kSmallFrontMaxBodies).
+constexpr std::uint32_t kSmallSharedBoxesBodies = 1024;
+static_assert(kSmallFrontBodies <= kSmallFrontMaxBodies && kSmallSharedBoxesBodies <= kSmallFrontMaxBodies,
+              "the fused front's and the shared boxes' bodies fit the block's shared memory (FrontShared)");
+
 }  // namespace gpu
 
 struct CudaWorld::Impl {

@@ -376,6 +376,14 @@ struct SmallStepDesc {
   /// the step's start: the host uploads both, and the step's clamp copies the new state into
   /// them unless a list overflowed (the host then restores x from x_saved and reruns).
   std::uint32_t front_bodies = 0;
+  /// Shared boxes: when front_bodies < n <= shared_boxes_bodies (at most
+  /// kSmallFrontMaxBodies), every block integrates every body into its shared memory as the
+  /// fused front does (block 0 stores the state; the same x_saved / v_saved contract), the
+  /// grid's warps count a row and a column each from those boxes, then one grid-wide
+  /// barrier, and every block scans the counts and fills its rows from its boxes: two
+  /// grid-wide barriers before the midphase (else three), and no body box read from global
+  /// memory by the broadphase.
+  std::uint32_t shared_boxes_bodies = 0;
   /// Run the kernel compiled without the midphase's early exit, tile culling and tile
   /// filter (their switches read as off: small_step.cu's kLean instantiation); the host sets it for
   /// scenes of at most kSmallLeanBodies bodies. States, pairs and contacts are the same either
@@ -388,9 +396,9 @@ struct SmallStepDesc {
 /// they save (bunny-stack-50, 55 bodies, on the H100: reports/h100/perf-v5).
 constexpr std::uint32_t kSmallLeanBodies = 64;
 
-/// The most bodies of the fused front (SmallStepDesc::front_bodies): its shared memory holds
-/// their boxes, counts and offsets.
-constexpr std::uint32_t kSmallFrontMaxBodies = 512;
+/// The most bodies of the fused front and of the shared boxes (SmallStepDesc::front_bodies,
+/// shared_boxes_bodies): the block's shared memory holds their boxes, counts and offsets.
+constexpr std::uint32_t kSmallFrontMaxBodies = 1024;
 
 /// The resident (persistent) small step (small_step.cu, launch_small_resident): one
 /// cooperative launch that runs step after step. Block 0's thread 0 polls `request` in

@@ -35,6 +35,11 @@
 // the rows from there; block 0 stores the integrated state and the boxes. The last response
 // pass copies the new state into x_saved / v_saved (not when a list overflowed: the host
 // then restores the state from them and reruns).
+// Shared boxes (front_bodies < n <= SmallStepDesc::shared_boxes_bodies): every block
+// integrates every body into its shared memory as the fused front does, the grid's warps
+// count a row and a column each from those boxes (phase 2's code), one grid-wide barrier,
+// then every block scans both counts and fills its rows from its boxes: no barrier after
+// the integration, and the broadphase reads no body box from global memory.
 // Resident kernel (small_resident_kernel): the same step in a loop, one batch of steps per
 // request the host writes into mapped memory (ResidentDesc in kernels.hpp).
 // Overflow: a pair list or midphase list that passes its capacity is counted in full and
@@ -77,8 +82,9 @@ struct ScanShared {
   std::uint32_t in_offset[kSharedScanBodies + 1];
 };
 
-/// The fused front's shared memory (n <= kSmallFrontMaxBodies): the integrated boxes, both
-/// counts and both offsets (n + 1 entries each), CUB's storage.
+/// The shared memory of the fused front and of the shared boxes (n <= kSmallFrontMaxBodies):
+/// the integrated boxes, both counts (the fused front's) and both offsets (n + 1 entries
+/// each), CUB's storage.
 struct FrontShared {
   typename BlockScan::TempStorage storage;
   Aabb aabb[kSmallFrontMaxBodies];
@@ -161,10 +167,11 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     s.out_count[n] = 0;
     s.in_count[n] = 0;
   }
-  const bool front = n <= s.front_bodies;  // uniform
-  if (front) {
-    // 1-4 fused: every block integrates every body from the saved state (== the state at
-    // the step's start) into its shared memory; block 0 stores the result.
+  const bool front = n <= s.front_bodies;                          // uniform
+  const bool shared_boxes = front || n <= s.shared_boxes_bodies;  // uniform
+  if (shared_boxes) {
+    // Every block integrates every body from the saved state (== the state at the step's
+    // start) into its shared memory; block 0 stores the result.
     FrontShared& f = *reinterpret_cast<FrontShared*>(smem);
     for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) {
       Vec3 x, v;
@@ -179,32 +186,47 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     }
     __syncthreads();
     stamp(profile, 1);
-    // Body i's row (j > i, overlaps(box_i, box_j)) and column (a < i, overlaps(box_a,
-    // box_i)), counted from the shared boxes by the block's warps, a row each (rows i,
-    // i + 8, ..: about n^2 / 512 rounds of 32 tests a warp): the row's count from the
-    // ballots, each hit added to its column j (one lane per j: no two lanes of a warp add
-    // to one count; integer counts, so the order of the shared atomics changes nothing).
-    // The tests are those of flat_row. On an H100 this phase takes 2.91 us of a
-    // bunny-stack-50 step; a thread per body pair (i, j) over all n^2 (an integer division
-    // each, half of them i >= j) took 3.20 us, one thread per body counting both serially
-    // 11.2 us of a 38.6 us step (reports/h100/perf-v5, dev5, dev6).
-    for (std::uint32_t i = threadIdx.x; i <= n; i += blockDim.x) {
-      f.out_count[i] = 0;
-      f.in_count[i] = 0;
-    }
-    __syncthreads();
-    for (std::uint32_t i = threadIdx.x >> 5; i < n; i += blockDim.x >> 5) {
-      const std::uint32_t found = flat_row<true>(f.aabb, f.aabb[i], i + 1, n, [&](std::uint32_t, std::uint32_t j) {
-        atomicAdd(&f.in_count[j], 1u);
-      });
-      if (lane == 0) f.out_count[i] = found;
-    }
-    __syncthreads();
-    stamp(profile, 2);
     std::uint32_t* g_out = blockIdx.x == 0 ? s.out_offset : nullptr;
     std::uint32_t* g_in = blockIdx.x == 0 ? s.in_offset : nullptr;
-    const std::uint32_t total = block_exclusive_scan(f.out_count, f.out_offset, n + 1, f.storage, g_out);
-    (void)block_exclusive_scan(f.in_count, f.in_offset, n + 1, f.storage, g_in);
+    std::uint32_t total = 0;
+    if (front) {
+      // Body i's row (j > i, overlaps(box_i, box_j)) and column (a < i, overlaps(box_a,
+      // box_i)), counted from the shared boxes by the block's warps, a row each (rows i,
+      // i + 8, ..: about n^2 / 512 rounds of 32 tests a warp): the row's count from the
+      // ballots, each hit added to its column j (one lane per j: no two lanes of a warp add
+      // to one count; integer counts, so the order of the shared atomics changes nothing).
+      // The tests are those of flat_row. On an H100 this phase takes 2.91 us of a
+      // bunny-stack-50 step; a thread per body pair (i, j) over all n^2 (an integer division
+      // each, half of them i >= j) took 3.20 us, one thread per body counting both serially
+      // 11.2 us of a 38.6 us step (reports/h100/perf-v5, dev5, dev6).
+      for (std::uint32_t i = threadIdx.x; i <= n; i += blockDim.x) {
+        f.out_count[i] = 0;
+        f.in_count[i] = 0;
+      }
+      __syncthreads();
+      for (std::uint32_t i = threadIdx.x >> 5; i < n; i += blockDim.x >> 5) {
+        const std::uint32_t found = flat_row<true>(f.aabb, f.aabb[i], i + 1, n, [&](std::uint32_t, std::uint32_t j) {
+          atomicAdd(&f.in_count[j], 1u);
+        });
+        if (lane == 0) f.out_count[i] = found;
+      }
+      __syncthreads();
+      stamp(profile, 2);
+      total = block_exclusive_scan(f.out_count, f.out_offset, n + 1, f.storage, g_out);
+      (void)block_exclusive_scan(f.in_count, f.in_offset, n + 1, f.storage, g_in);
+    } else {
+      // The grid's warps count the rows and columns (a body each, as phase 2 below) from
+      // the block's shared boxes, then one grid-wide barrier.
+      for (std::uint32_t i = warp; i < n; i += warps) {
+        flat_pairs_of(f.aabb, n, i, s.out_count, nullptr, nullptr, 0, s.shift);
+        const std::uint32_t in = flat_row<false>(f.aabb, f.aabb[i], 0u, i, [](std::uint32_t, std::uint32_t) {});
+        if (lane == 0) s.in_count[i] = in;
+      }
+      grid.sync();
+      stamp(profile, 2);
+      total = block_exclusive_scan(s.out_count, f.out_offset, n + 1, f.storage, g_out);
+      (void)block_exclusive_scan(s.in_count, f.in_offset, n + 1, f.storage, g_in);
+    }
     if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
     stamp(profile, 3);
     for (std::uint32_t i = warp; i < n; i += warps) {
@@ -270,7 +292,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     }
     grid.sync();
     stamp(profile, 4);
-  }  // not fused
+  }  // not from shared boxes
 
   // 5. Midphase start (one warp per pair); the in-lists' a resolved to k, by the grid's
   // last threads (the first warps take the pairs).
@@ -354,7 +376,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   // reruns the step from x_saved / v_saved.
   bool fits = st->counts[0] <= cap;
   for (int i = 0; i < steps; ++i) fits = fits && st->counts[1 + i] <= s.list_capacity;
-  const bool save = front && fits;
+  const bool save = shared_boxes && fits;
   const bool one_block = live <= s.one_block_pairs;
   if (one_block && blockIdx.x != 0) return false;  // uniform per block; no grid.sync follows then
   const std::uint32_t r_tid = one_block ? threadIdx.x : tid;
