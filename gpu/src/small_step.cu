@@ -390,8 +390,14 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     if (one_block) __syncthreads();
     else grid.sync();
     const bool last = pass + 1 == s.iterations;
+    // Body i: its sums, then ContactSums::apply and (last pass) clamp_body on the state
+    // loaded before the lists are walked and kept in registers (the same operations in the
+    // same order; what changed is stored, and the saved state from the registers).
     for (std::uint32_t i = r_tid; i < n; i += r_threads) {
-      if (b.w[i] != 0.0f) {
+      const float w = b.w[i];
+      Vec3 x = b.x[i];
+      Vec3 v = b.v[i];
+      if (w != 0.0f) {
         ContactSums sums;
         const std::uint32_t e1 = min_u32(s.in_offset[i + 1], cap);
         for (std::uint32_t e = s.in_offset[i]; e < e1; ++e) {
@@ -400,14 +406,17 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
         }
         const std::uint32_t k1 = min_u32(s.out_offset[i + 1], live);
         for (std::uint32_t k = s.out_offset[i]; k < k1; ++k) sums.add(s.apply, k, false);
-        sums.apply(s.apply, i);
-      }
-      if (last) {
-        clamp_body(b, i, s.max_velocity);
-        if (save) {
-          b.x_saved[i] = b.x[i];
-          b.v_saved[i] = b.v[i];
+        const Vec3 v0 = v;
+        if (sums.count != 0) {
+          apply_contact_sums(x, v, sums.dx, sums.dv, sums.count);
+          b.x[i] = x;
         }
+        if (last) v = clamp_velocity(v, s.max_velocity);
+        if (sums.count != 0 || !same_bits(v, v0)) b.v[i] = v;
+      }
+      if (last && save) {
+        b.x_saved[i] = x;
+        b.v_saved[i] = v;
       }
     }
     if (one_block) __syncthreads();
