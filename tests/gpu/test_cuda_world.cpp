@@ -803,6 +803,55 @@ TEST(CudaSmallStep, SmallPathGivesTheGraphPathsBits) {
   }
 }
 
+// The fused small step's three broadphases at their body counts' edges, against the cpu every
+// step (states, counts; pairs and contact terms every 5th frame): the fused front (n <= 64;
+// a 4 x 4 x 4 cluster in which every box overlaps every other, so every row and column is
+// full), the shared boxes (65 .. 1024) and the grid's rows from global memory (1025). Cubes of half extent 0.1 m on a grid, random velocities, no
+// gravity, no walls; one engine whose lists start at capacity 1 (regrow and rerun).
+TEST(CudaSmallStep, BroadphaseAtEveryBodyCountEdgeKeepsTheCpuBits) {
+  REQUIRE_CUDA_DEVICE();
+  for (const int n : {1, 2, 63, 64, 65, 1024, 1025}) {
+    const double spacing = n <= 64 ? 0.05 : 0.15;  // dense: every pair; else the 26 neighbours
+    const int side = static_cast<int>(std::ceil(std::cbrt(static_cast<double>(n)) - 1e-9));
+    std::string positions;
+    for (int i = 0; i < n; ++i) {
+      const int ix = i % side, iy = i / side % side, iz = i / (side * side);
+      positions += fmt::format("{}[{}, {}, {}]", positions.empty() ? "" : ", ", spacing * ix, spacing * iy, spacing * iz);
+    }
+    const std::string text = fmt::format(
+        R"({{"name": "cubes-{0}", "domain": {{"min": [-4, -4, -4], "max": [6, 6, 6]}}, "dt": 0.001,
+            "gravity": [0, 0, 0], "frames": 40, "walls": "none",
+            "groups": [{{"name": "cubes", "shape": {{"box": [0.1, 0.1, 0.1]}}, "count": {0}, "mass": 1.0,
+                         "positions": [{1}], "velocity": {{"type": "random", "max": 1.0, "seed": 3}}}}]}})",
+        n, positions);
+    const auto model = build_model(parse_scene(text, fmt::format("cubes-{}", n)));
+    ASSERT_EQ(model->initial.size(), static_cast<std::size_t>(n));
+    auto cpu = cpu_flat(model);
+    CudaWorld gpu(model, "flat", path_settings("small"));
+    CudaWorld tiny(model, "flat", path_settings("small"));
+    tiny.reset_capacities(1);
+    ASSERT_EQ(gpu.step_path(), "small");
+    for (int f = 1; f <= 40; ++f) {
+      const bool rec = f % 5 == 1;
+      cpu->set_recording(rec);
+      gpu.set_recording(rec);
+      tiny.set_recording(rec);
+      const FrameMetrics mc = cpu->step();
+      const std::string what = fmt::format("{} cubes, frame {}", n, f);
+      if (f == 1 && n <= 64) {
+        ASSERT_EQ(mc.aabb_pairs, static_cast<std::uint64_t>(n) * (n - 1) / 2) << what << ": every pair must overlap";
+      }
+      for (CudaWorld* e : {&gpu, &tiny}) {
+        const FrameMetrics mg = e->step();
+        ASSERT_EQ(cpu->state_hash(), e->state_hash()) << what << ": " << first_difference(cpu->state(), e->state());
+        expect_cpu_cuda_counts(mc, mg, what);
+        if (rec) expect_same_record(cpu->record(), e->record(), what);
+      }
+      if (::testing::Test::HasFailure()) FAIL() << what << ": stopping at the first frame with a difference";
+    }
+  }
+}
+
 // The leaf items of a mesh-mesh cell pair (gpu/src/kernels.hpp, leaf_items / leaf_ranges:
 // chunks of B's cell's vertices against parts of A's) cover every pair of the two cells'
 // vertices exactly once, each item's ranges non-empty and inside the cells, so the leaves
