@@ -137,6 +137,33 @@ __device__ inline void stamp(unsigned long long* profile, int slot) {
 
 __device__ inline std::uint32_t min_u32(std::uint32_t a, std::uint32_t b) { return a < b ? a : b; }
 
+/// The `flat` broadphase's counts from `boxes` (n of them), a body per warp of the grid:
+/// body i's row (j > i) into s.out_count[i], its column (a < i) into s.in_count[i].
+__device__ __forceinline__ void count_rows(const SmallStepDesc& s, const Aabb* boxes, std::uint32_t n,
+                                           std::uint32_t warp, std::uint32_t warps) {
+  for (std::uint32_t i = warp; i < n; i += warps) {
+    flat_pairs_of(boxes, n, i, s.out_count, nullptr, nullptr, 0, s.shift);
+    const std::uint32_t in = flat_row<false>(boxes, boxes[i], 0u, i, [](std::uint32_t, std::uint32_t) {});
+    if ((threadIdx.x & 31u) == 0) s.in_count[i] = in;
+  }
+}
+
+/// The `flat` broadphase's fill from `boxes`, a body per warp of the grid: body i's keys
+/// (i << shift) | j in j order at out_offset[i], its in-list (a ascending) at in_offset[i],
+/// each below the pair capacity.
+__device__ __forceinline__ void fill_rows(const SmallStepDesc& s, const Aabb* boxes, std::uint32_t n,
+                                          const std::uint32_t* out_offset, const std::uint32_t* in_offset,
+                                          std::uint32_t warp, std::uint32_t warps) {
+  const std::uint32_t cap = s.mid.pair_capacity;
+  for (std::uint32_t i = warp; i < n; i += warps) {
+    flat_pairs_of(boxes, n, i, nullptr, out_offset, s.pair_keys, cap, s.shift);
+    const std::uint32_t o = in_offset[i];
+    (void)flat_row<false>(boxes, boxes[i], 0u, i, [&](std::uint32_t r, std::uint32_t a) {
+      if (o + r < cap) s.in_list[o + r] = a;
+    });
+  }
+}
+
 /// One whole step (every thread of the grid calls it): `sequence` is written to *s.done at
 /// the end, `records` (may be null) gets the first pass's contacts, `profile` (may be null)
 /// the phase stamps; smem: kSharedBytes. kLean (s.lean, tiny scenes): the midphase's early
@@ -217,11 +244,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     } else {
       // The grid's warps count the rows and columns (a body each, as phase 2 below) from
       // the block's shared boxes, then one grid-wide barrier.
-      for (std::uint32_t i = warp; i < n; i += warps) {
-        flat_pairs_of(f.aabb, n, i, s.out_count, nullptr, nullptr, 0, s.shift);
-        const std::uint32_t in = flat_row<false>(f.aabb, f.aabb[i], 0u, i, [](std::uint32_t, std::uint32_t) {});
-        if (lane == 0) s.in_count[i] = in;
-      }
+      count_rows(s, f.aabb, n, warp, warps);
       grid.sync();
       stamp(profile, 2);
       total = block_exclusive_scan(s.out_count, f.out_offset, n + 1, f.storage, g_out);
@@ -229,13 +252,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     }
     if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
     stamp(profile, 3);
-    for (std::uint32_t i = warp; i < n; i += warps) {
-      flat_pairs_of(f.aabb, n, i, nullptr, f.out_offset, s.pair_keys, cap, s.shift);
-      const std::uint32_t o = f.in_offset[i];
-      (void)flat_row<false>(f.aabb, f.aabb[i], 0u, i, [&](std::uint32_t r, std::uint32_t a) {
-        if (o + r < cap) s.in_list[o + r] = a;
-      });
-    }
+    fill_rows(s, f.aabb, n, f.out_offset, f.in_offset, warp, warps);
     grid.sync();
     stamp(profile, 4);
   } else {
@@ -247,11 +264,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     stamp(profile, 1);
 
     // 2. Broadphase `flat`, counting: body i's row (j > i) and column (a < i).
-    for (std::uint32_t i = warp; i < n; i += warps) {
-      flat_pairs_of(b.aabb, n, i, s.out_count, nullptr, nullptr, 0, s.shift);
-      const std::uint32_t in = flat_row<false>(b.aabb, b.aabb[i], 0u, i, [](std::uint32_t, std::uint32_t) {});
-      if (lane == 0) s.in_count[i] = in;
-    }
+    count_rows(s, b.aabb, n, warp, warps);
     grid.sync();
     stamp(profile, 2);
 
@@ -283,13 +296,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     }
 
     // 4. Fill: the pair keys in (a, b) order and the in-lists in a order (below the capacity).
-    for (std::uint32_t i = warp; i < n; i += warps) {
-      flat_pairs_of(b.aabb, n, i, nullptr, out_offset, s.pair_keys, cap, s.shift);
-      const std::uint32_t o = in_offset[i];
-      (void)flat_row<false>(b.aabb, b.aabb[i], 0u, i, [&](std::uint32_t r, std::uint32_t a) {
-        if (o + r < cap) s.in_list[o + r] = a;
-      });
-    }
+    fill_rows(s, b.aabb, n, out_offset, in_offset, warp, warps);
     grid.sync();
     stamp(profile, 4);
   }  // not from shared boxes
