@@ -76,9 +76,9 @@ constexpr std::uint32_t kSmallFrontBodies = 64;
 
 /// Bodies up to which the fused small step integrates into every block's shared memory and
 /// runs its broadphase from there (SmallStepDesc::shared_boxes_bodies; at most
-/// gpu::kSmallFrontMaxBodies).
+/// gpu::kSmallSharedBoxesMaxBodies).
 constexpr std::uint32_t kSmallSharedBoxesBodies = 1024;
-static_assert(kSmallFrontBodies <= kSmallFrontMaxBodies && kSmallSharedBoxesBodies <= kSmallFrontMaxBodies,
+static_assert(kSmallFrontBodies <= kSmallFrontMaxBodies && kSmallSharedBoxesBodies <= kSmallSharedBoxesMaxBodies,
               "the fused front's and the shared boxes' bodies fit the block's shared memory (FrontShared)");
 
 }  // namespace gpu

@@ -377,7 +377,7 @@ struct SmallStepDesc {
   /// them unless a list overflowed (the host then restores x from x_saved and reruns).
   std::uint32_t front_bodies = 0;
   /// Shared boxes: when front_bodies < n <= shared_boxes_bodies (at most
-  /// kSmallFrontMaxBodies), every block integrates every body into its shared memory as the
+  /// kSmallSharedBoxesMaxBodies), every block integrates every body into its shared memory as the
   /// fused front does (block 0 stores the state; the same x_saved / v_saved contract), the
   /// grid's warps count a row and a column each from those boxes, then one grid-wide
   /// barrier, and every block scans the counts and fills its rows from its boxes: two
@@ -396,9 +396,13 @@ struct SmallStepDesc {
 /// they save (bunny-stack-50, 55 bodies, on the H100: reports/h100/perf-v5).
 constexpr std::uint32_t kSmallLeanBodies = 64;
 
-/// The most bodies of the fused front and of the shared boxes (SmallStepDesc::front_bodies,
-/// shared_boxes_bodies): the block's shared memory holds their boxes, counts and offsets.
-constexpr std::uint32_t kSmallFrontMaxBodies = 1024;
+/// The most bodies of the fused front (SmallStepDesc::front_bodies): the block's shared
+/// memory holds their counts (and, as for the shared boxes, their boxes and offsets).
+constexpr std::uint32_t kSmallFrontMaxBodies = 64;
+
+/// The most bodies of the shared boxes (SmallStepDesc::shared_boxes_bodies): the block's
+/// shared memory holds their boxes and offsets.
+constexpr std::uint32_t kSmallSharedBoxesMaxBodies = 1024;
 
 /// The resident (persistent) small step (small_step.cu, launch_small_resident): one
 /// cooperative launch that runs step after step. Block 0's thread 0 polls `request` in

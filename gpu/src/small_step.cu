@@ -82,16 +82,17 @@ struct ScanShared {
   std::uint32_t in_offset[kSharedScanBodies + 1];
 };
 
-/// The shared memory of the fused front and of the shared boxes (n <= kSmallFrontMaxBodies):
-/// the integrated boxes, both counts (the fused front's) and both offsets (n + 1 entries
-/// each), CUB's storage.
+/// The shared memory of the shared boxes (n <= kSmallSharedBoxesMaxBodies) and of the
+/// fused front (n <= kSmallFrontMaxBodies): the integrated boxes, both offsets (n + 1
+/// entries each), CUB's storage; the fused front's counts (the shared boxes count into
+/// global memory).
 struct FrontShared {
   typename BlockScan::TempStorage storage;
-  Aabb aabb[kSmallFrontMaxBodies];
+  Aabb aabb[kSmallSharedBoxesMaxBodies];
+  std::uint32_t out_offset[kSmallSharedBoxesMaxBodies + 1];
+  std::uint32_t in_offset[kSmallSharedBoxesMaxBodies + 1];
   std::uint32_t out_count[kSmallFrontMaxBodies + 1];
   std::uint32_t in_count[kSmallFrontMaxBodies + 1];
-  std::uint32_t out_offset[kSmallFrontMaxBodies + 1];
-  std::uint32_t in_offset[kSmallFrontMaxBodies + 1];
 };
 
 constexpr std::size_t max2(std::size_t a, std::size_t b) { return a > b ? a : b; }

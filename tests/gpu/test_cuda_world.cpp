@@ -806,8 +806,9 @@ TEST(CudaSmallStep, SmallPathGivesTheGraphPathsBits) {
 // The fused small step's three broadphases at their body counts' edges, against the cpu every
 // step (states, counts; pairs and contact terms every 5th frame): the fused front (n <= 64;
 // a 4 x 4 x 4 cluster in which every box overlaps every other, so every row and column is
-// full), the shared boxes (65 .. 1024) and the grid's rows from global memory (1025). Cubes of half extent 0.1 m on a grid, random velocities, no
-// gravity, no walls; one engine whose lists start at capacity 1 (regrow and rerun).
+// full), the shared boxes (65 .. 1024) and the grid's rows from global memory (1025). Cubes
+// of half extent 0.1 m on a grid, random velocities, no gravity, no walls; one engine whose
+// lists start at capacity 1 (regrow and rerun).
 TEST(CudaSmallStep, BroadphaseAtEveryBodyCountEdgeKeepsTheCpuBits) {
   REQUIRE_CUDA_DEVICE();
   for (const int n : {1, 2, 63, 64, 65, 1024, 1025}) {
