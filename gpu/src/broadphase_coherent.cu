@@ -292,8 +292,6 @@ class CoherentOctreeDevice final : public DeviceBroadPhase {
     return t;
   }
 
-  const CoherencePlanner& planner() const { return planner_; }
-
  private:
   /// The planner's plan; Plain for no body.
   CoherentPlan current_plan() const { return n_ == 0 || n_ == kNotReserved ? CoherentPlan::Plain : planner_.plan(); }
