@@ -111,13 +111,24 @@ MeshOctree build_mesh_octree(const Mesh& mesh, int depth) {
   t.bounds = tight_bounds(mesh.vertices);
   const std::size_t n = mesh.vertices.size();
 
-  // Algorithm A1: Morton code of each vertex's depth-D cell, stable sort.
+  // Algorithm A1: vertices sorted by the Morton code of their depth-D cell. The sort key is
+  // the code of the depth-kMaxDepth cell (whose top 3 D bits are the depth-D code: the
+  // prefix property of cell_coord), stable on ties, so the vertices of a leaf cell follow
+  // one another in Morton order too: a block of kVertexBlock consecutive vertices
+  // (vertex_blocks.hpp) is then a compact patch whose box the leaves' filters can skip
+  // (asian-dragon's mean block diagonal 0.12 -> 0.036 of the mesh's). A cell's vertex set,
+  // and so every answer of the midphase, is the same either way.
+  std::vector<std::uint32_t> fine(n);
   std::vector<std::uint32_t> code(n);
-  for (std::size_t i = 0; i < n; ++i) code[i] = vertex_code(mesh.vertices[i], t.bounds, depth);
+  const int shift = 3 * (kMaxDepth - depth);
+  for (std::size_t i = 0; i < n; ++i) {
+    fine[i] = vertex_code(mesh.vertices[i], t.bounds, kMaxDepth);
+    code[i] = fine[i] >> shift;
+  }
   t.original_index.resize(n);
   std::iota(t.original_index.begin(), t.original_index.end(), 0u);
   std::stable_sort(t.original_index.begin(), t.original_index.end(),
-                   [&](std::uint32_t a, std::uint32_t b) { return code[a] < code[b]; });
+                   [&](std::uint32_t a, std::uint32_t b) { return fine[a] < fine[b]; });
   t.vertices.resize(n);
   for (std::size_t i = 0; i < n; ++i) t.vertices[i] = mesh.vertices[t.original_index[i]];
 

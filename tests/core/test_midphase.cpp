@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <random>
 #include <string>
 #include <vector>
@@ -90,6 +91,32 @@ TEST(MeshOctree, ValidOnRandomCloudsAllDepths) {
       }
     }
   }
+}
+
+// The vertices follow the depth-10 Morton order at every depth (a leaf cell's vertices too,
+// so that its blocks of kVertexBlock vertices are compact patches): the order of a depth-D
+// octree is the one of the depth-10 octree, whose cells hold one code each.
+TEST(MeshOctree, VertexOrderIsTheDepth10MortonOrderAtEveryDepth) {
+  std::mt19937 rng(3);
+  const Mesh m = random_cloud(rng, 2000, {0.7f, 0.4f, 0.5f});
+  const MeshOctree finest = octocd::build_mesh_octree(m, 10);
+  ASSERT_EQ(finest.validate(), "");
+  for (int d = 0; d < 10; ++d) {
+    const MeshOctree t = octocd::build_mesh_octree(m, d);
+    ASSERT_EQ(t.validate(), "") << "depth " << d;
+    EXPECT_EQ(t.original_index, finest.original_index) << "depth " << d;
+  }
+  // A planted fault: the depth-D order with ties kept in input order (a stable sort by the
+  // depth-2 code alone) differs from it.
+  std::vector<std::uint32_t> coarse(m.vertices.size());
+  std::iota(coarse.begin(), coarse.end(), 0u);
+  const MeshOctree two = octocd::build_mesh_octree(m, 2);
+  std::vector<std::uint32_t> cell_of(m.vertices.size());
+  for (std::uint32_t c = two.level_begin(2); c < two.level_end(2); ++c)
+    for (std::uint32_t v = two.cells[c].first_vertex; v < two.cells[c].first_vertex + two.cells[c].vertex_count; ++v)
+      cell_of[two.original_index[v]] = two.cells[c].morton;
+  std::stable_sort(coarse.begin(), coarse.end(), [&](std::uint32_t a, std::uint32_t b) { return cell_of[a] < cell_of[b]; });
+  EXPECT_NE(coarse, finest.original_index);
 }
 
 TEST(MeshOctree, DegenerateClouds) {

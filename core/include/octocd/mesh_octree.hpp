@@ -33,7 +33,11 @@ struct MeshOctreeCell {
 struct MeshOctree {
   int depth = 0;                          ///< D_m, deepest level, in [0, 10]
   Aabb bounds;                            ///< local AABB of the mesh (level-0 cell bounds)
-  std::vector<Vec3> vertices;             ///< Morton-sorted copy of the mesh's vertices
+  /// The mesh's vertices sorted by the Morton code of their depth-10 cell, ties in input
+  /// order: sorted by their depth-`depth` cell (Algorithm A1: a cell's vertices are a
+  /// contiguous range) and, inside a leaf cell, in Morton order too (compact blocks of
+  /// kVertexBlock vertices, vertex_blocks.hpp). The order is the same at every depth.
+  std::vector<Vec3> vertices;
   std::vector<std::uint32_t> original_index;  ///< vertices[i] == mesh.vertices[original_index[i]]
   std::vector<MeshOctreeCell> cells;      ///< occupied cells, level by level, Morton order
   std::vector<std::uint32_t> level_offset;  ///< size depth + 2
