@@ -11,8 +11,9 @@
 //  2. broadphase `flat`, one warp per body i: count its pairs (i, j), j > i (the row of
 //     broadphase_flat.cu) and the pairs (a, i), a < i (the same tests, overlaps(aabb[a],
 //     aabb[i]), read by column);
-//  3. one block: exclusive scans of both counts (cub::BlockScan, tile by tile; integers, so
-//     the offsets are those of cub::DeviceScan); the pair total into counts[0];
+//  3. one block: exclusive scans of both counts, one cub::BlockScan of the packed counts
+//     (out << 32) | in, tile by tile (integers, so the offsets are those of cub::DeviceScan);
+//     the pair total into counts[0];
 //  4. fill, one warp per body: the keys (i << shift) | j at out_offset[i] in j order: the
 //     keys come out sorted by (a, b), so no key sort is needed (the graph path sorts the
 //     same unique set into the same order); the in-list of body i (a ascending) at
@@ -65,7 +66,10 @@ namespace {
 
 namespace cg = cooperative_groups;
 
-using BlockScan = cub::BlockScan<std::uint32_t, kBlockSize>;
+/// Both counts' scans as one: cub::BlockScan of the packed values (out << 32) | in.
+using BlockScan = cub::BlockScan<unsigned long long, kBlockSize>;
+/// Counts per thread and tile of block_exclusive_scan2 (a tile of kBlockSize * kScanItems).
+constexpr std::uint32_t kScanItems = 4;
 
 constexpr std::size_t max3(std::size_t a, std::size_t b, std::size_t c) {
   return a > b ? (a > c ? a : c) : (b > c ? b : c);
@@ -103,25 +107,45 @@ constexpr std::size_t kSharedBytes = max2(
     max3(sizeof(ScanShared), sizeof(mid::LeafTiles), sizeof(metrics::Acc) * kMetricsBlockSize), sizeof(FrontShared));
 static_assert(kSharedBytes <= 48 * 1024, "static shared memory of the fused step");
 
-/// Exclusive prefix sum of in[0 .. count) into out (and into out2 when not null) by one
-/// block (every thread calls it); returns the total.
-__device__ std::uint32_t block_exclusive_scan(const std::uint32_t* in, std::uint32_t* out, std::uint32_t count,
-                                              typename BlockScan::TempStorage& storage,
-                                              std::uint32_t* out2 = nullptr) {
-  std::uint32_t carry = 0;
-  for (std::uint32_t base = 0; base < count; base += kBlockSize) {
-    const std::uint32_t idx = base + threadIdx.x;
-    const std::uint32_t v = idx < count ? in[idx] : 0u;
-    std::uint32_t excl = 0, tile_total = 0;
-    BlockScan(storage).ExclusiveSum(v, excl, tile_total);
-    if (idx < count) {
-      out[idx] = carry + excl;
-      if (out2) out2[idx] = carry + excl;
+/// Exclusive prefix sums of a[0 .. count) into a_out and of b[0 .. count) into b_out (and
+/// into a_out2 / b_out2 when not null) by one block (every thread calls it): one scan of the
+/// packed values (a << 32) | b, kScanItems consecutive counts a thread (b's total, the pair
+/// total, is below 2^32, so no carry reaches a's half; integers, so the offsets are those of
+/// two cub::DeviceScan runs); returns a's total.
+__device__ std::uint32_t block_exclusive_scan2(const std::uint32_t* a, const std::uint32_t* b, std::uint32_t* a_out,
+                                               std::uint32_t* b_out, std::uint32_t count,
+                                               typename BlockScan::TempStorage& storage,
+                                               std::uint32_t* a_out2 = nullptr, std::uint32_t* b_out2 = nullptr) {
+  unsigned long long carry = 0;
+  for (std::uint32_t base = 0; base < count; base += kBlockSize * kScanItems) {
+    const std::uint32_t first = base + threadIdx.x * kScanItems;
+    unsigned long long v[kScanItems];
+#pragma unroll
+    for (std::uint32_t q = 0; q < kScanItems; ++q) {
+      const std::uint32_t idx = first + q;
+      v[q] = idx < count ? (static_cast<unsigned long long>(a[idx]) << 32) | b[idx] : 0ull;
+    }
+    unsigned long long tile_total = 0;
+    BlockScan(storage).ExclusiveSum(v, v, tile_total);
+#pragma unroll
+    for (std::uint32_t q = 0; q < kScanItems; ++q) {
+      const std::uint32_t idx = first + q;
+      if (idx < count) {
+        const unsigned long long e = carry + v[q];
+        const std::uint32_t ea = static_cast<std::uint32_t>(e >> 32);
+        const std::uint32_t eb = static_cast<std::uint32_t>(e);
+        a_out[idx] = ea;
+        b_out[idx] = eb;
+        if (a_out2) {
+          a_out2[idx] = ea;
+          b_out2[idx] = eb;
+        }
+      }
     }
     carry += tile_total;
     __syncthreads();  // the storage is reused by the next tile
   }
-  return carry;
+  return static_cast<std::uint32_t>(carry >> 32);
 }
 
 /// %globaltimer (ns).
@@ -240,16 +264,14 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       }
       __syncthreads();
       stamp(profile, 2);
-      total = block_exclusive_scan(f.out_count, f.out_offset, n + 1, f.storage, g_out);
-      (void)block_exclusive_scan(f.in_count, f.in_offset, n + 1, f.storage, g_in);
+      total = block_exclusive_scan2(f.out_count, f.in_count, f.out_offset, f.in_offset, n + 1, f.storage, g_out, g_in);
     } else {
       // The grid's warps count the rows and columns (a body each, as phase 2 below) from
       // the block's shared boxes, then one grid-wide barrier.
       count_rows(s, f.aabb, n, warp, warps);
       grid.sync();
       stamp(profile, 2);
-      total = block_exclusive_scan(s.out_count, f.out_offset, n + 1, f.storage, g_out);
-      (void)block_exclusive_scan(s.in_count, f.in_offset, n + 1, f.storage, g_in);
+      total = block_exclusive_scan2(s.out_count, s.in_count, f.out_offset, f.in_offset, n + 1, f.storage, g_out, g_in);
     }
     if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
     stamp(profile, 3);
@@ -279,8 +301,8 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       ScanShared& sh = *reinterpret_cast<ScanShared*>(smem);
       std::uint32_t* g_out = blockIdx.x == 0 ? s.out_offset : nullptr;
       std::uint32_t* g_in = blockIdx.x == 0 ? s.in_offset : nullptr;
-      const std::uint32_t total = block_exclusive_scan(s.out_count, sh.out_offset, n + 1, sh.storage, g_out);
-      (void)block_exclusive_scan(s.in_count, sh.in_offset, n + 1, sh.storage, g_in);
+      const std::uint32_t total =
+          block_exclusive_scan2(s.out_count, s.in_count, sh.out_offset, sh.in_offset, n + 1, sh.storage, g_out, g_in);
       if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
       out_offset = sh.out_offset;
       in_offset = sh.in_offset;
@@ -288,8 +310,8 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     } else {
       if (blockIdx.x == 0) {
         auto& storage = *reinterpret_cast<typename BlockScan::TempStorage*>(smem);
-        const std::uint32_t total = block_exclusive_scan(s.out_count, s.out_offset, n + 1, storage);
-        (void)block_exclusive_scan(s.in_count, s.in_offset, n + 1, storage);
+        const std::uint32_t total =
+            block_exclusive_scan2(s.out_count, s.in_count, s.out_offset, s.in_offset, n + 1, storage);
         if (threadIdx.x == 0) st->counts[0] = total;
       }
       grid.sync();

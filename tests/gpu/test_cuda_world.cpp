@@ -806,12 +806,13 @@ TEST(CudaSmallStep, SmallPathGivesTheGraphPathsBits) {
 // The fused small step's three broadphases at their body counts' edges, against the cpu every
 // step (states, counts; pairs and contact terms every 5th frame): the fused front (n <= 64;
 // a 4 x 4 x 4 cluster in which every box overlaps every other, so every row and column is
-// full), the shared boxes (65 .. 1024) and the grid's rows from global memory (1025). Cubes
+// full), the shared boxes (65 .. 1024) and the grid's rows from global memory (1025, and
+// 2048, the small path's largest: the counts' scan in three tiles of 1024). Cubes
 // of half extent 0.1 m on a grid, random velocities, no gravity, no walls; one engine whose
 // lists start at capacity 1 (regrow and rerun).
 TEST(CudaSmallStep, BroadphaseAtEveryBodyCountEdgeKeepsTheCpuBits) {
   REQUIRE_CUDA_DEVICE();
-  for (const int n : {1, 2, 63, 64, 65, 1024, 1025}) {
+  for (const int n : {1, 2, 63, 64, 65, 1024, 1025, 2048}) {
     const double spacing = n <= 64 ? 0.05 : 0.15;  // dense: every pair; else the 26 neighbours
     const int side = static_cast<int>(std::ceil(std::cbrt(static_cast<double>(n)) - 1e-9));
     std::string positions;
