@@ -189,37 +189,63 @@ __device__ inline void append(const MidListDesc& d, bool keep, const MidItem& it
 
 /// Warp-aggregated append of `cnt` copies of this lane's item, with chunk = 0 .. cnt - 1
 /// (every lane calls it): lane l's copies at base + (the counts of lanes < l) + chunk. The
-/// whole warp writes them, 32 at a time (copy i: the first lane whose inclusive count
-/// exceeds i, found by a binary search over the lanes), not each lane its own in turn (a
-/// lane with a large cell pair's leaf items would write them alone).
+/// whole warp writes them, 32 at a time, not each lane its own in turn (a lane with a large
+/// cell pair's leaf items would write them alone): a lane of at least 32 copies has them
+/// written by the warp a round of 32 each, lane after lane; the copies of the other lanes
+/// are spread over the lanes together (copy i: the first such lane whose inclusive count of
+/// those copies exceeds i, found by a binary search over the lanes), so neither a few lanes
+/// of many copies nor many lanes of a few take a search per 32 copies or a round per lane.
 __device__ inline void append_chunks(const MidListDesc& d, std::uint32_t cnt, const MidItem& item) {
   if (__all_sync(kFull, cnt <= 1u)) {  // at most one copy per lane (small cells): as append
     append(d, cnt == 1u, item);         // (item.chunk is 0)
     return;
   }
   const std::uint32_t lane = lane_id();
-  std::uint32_t incl = cnt;
+  const bool big = cnt >= 32u;
+  const std::uint32_t few = big ? 0u : cnt;  // the copies spread over the lanes together
+  std::uint32_t incl = cnt;                  // inclusive counts over the lanes: all copies, and `few`
+  std::uint32_t incl_few = few;
   for (int o = 1; o < 32; o <<= 1) {
     const std::uint32_t y = __shfl_up_sync(kFull, incl, o);
-    if (lane >= static_cast<std::uint32_t>(o)) incl += y;
+    const std::uint32_t z = __shfl_up_sync(kFull, incl_few, o);
+    if (lane >= static_cast<std::uint32_t>(o)) {
+      incl += y;
+      incl_few += z;
+    }
   }
   const std::uint32_t total = __shfl_sync(kFull, incl, 31);
   if (total == 0) return;
   std::uint32_t base = 0;
   if (lane == 0) base = atomicAdd(d.out_count, total);
   base = __shfl_sync(kFull, base, 0);
-  const std::uint32_t excl = incl - cnt;
-  for (std::uint32_t i0 = 0; i0 < total; i0 += 32) {
-    const std::uint32_t i = i0 + lane;
-    int owner = 0;  // lanes whose inclusive count is <= i (incl is non-decreasing over lanes)
-    for (int step = 16; step > 0; step >>= 1)
-      if (__shfl_sync(kFull, incl, owner + step - 1) <= i) owner += step;
+  const std::uint32_t excl = incl - cnt;  // this lane's first copy, from base
+  for (unsigned many = __ballot_sync(kFull, big); many != 0u; many &= many - 1u) {
+    const int owner = __ffs(many) - 1;
     MidItem copy;
     copy.k = __shfl_sync(kFull, item.k, owner);
     copy.ca = __shfl_sync(kFull, item.ca, owner);
     copy.cb = __shfl_sync(kFull, item.cb, owner);
-    copy.chunk = i - __shfl_sync(kFull, excl, owner);
-    if (i < total && base + i < d.out_capacity) d.out[base + i] = copy;
+    const std::uint32_t n_copies = __shfl_sync(kFull, cnt, owner);
+    const std::uint32_t at = base + __shfl_sync(kFull, excl, owner);
+    for (std::uint32_t c = lane; c < n_copies; c += 32) {
+      copy.chunk = c;
+      if (at + c < d.out_capacity) d.out[at + c] = copy;
+    }
+  }
+  const std::uint32_t total_few = __shfl_sync(kFull, incl_few, 31);
+  const std::uint32_t excl_few = incl_few - few;
+  for (std::uint32_t i0 = 0; i0 < total_few; i0 += 32) {
+    const std::uint32_t i = i0 + lane;
+    int owner = 0;  // lanes whose inclusive count of `few` is <= i (non-decreasing over lanes)
+    for (int step = 16; step > 0; step >>= 1)
+      if (__shfl_sync(kFull, incl_few, owner + step - 1) <= i) owner += step;
+    MidItem copy;
+    copy.k = __shfl_sync(kFull, item.k, owner);
+    copy.ca = __shfl_sync(kFull, item.ca, owner);
+    copy.cb = __shfl_sync(kFull, item.cb, owner);
+    copy.chunk = i - __shfl_sync(kFull, excl_few, owner);
+    const std::uint32_t at = base + __shfl_sync(kFull, excl, owner) + copy.chunk;
+    if (i < total_few && at < d.out_capacity) d.out[at] = copy;
   }
 }
 
