@@ -106,9 +106,14 @@ struct MidItem {
 /// two parts of A's cell: leaf_b_chunk): a large cell pair becomes several items, so its
 /// vertex tests spread over several warps (one warp's items were the critical path of a
 /// Table 5 step on the H100), while B's chunk grows with A's cell, so a cell pair's items
-/// grow about as B's cell, not as the product (the sizes are the fastest measured there on
-/// the Table 5 mesh scenes: reports/h100/perf-v6).
-constexpr std::uint32_t kLeafAPart = 1024;
+/// grow about as B's cell, not as the product. With the vertices in depth-10 Morton order
+/// (compact vertex blocks, build_mesh_octree) an item's filters skip the blocks of A's cell
+/// far from B's tile, so A's part no longer needs to be small: on the H100
+/// (bench_step_paths, 3000 frames, --midphase 1,2) kLeafAPart 1024 -> 8192 took
+/// asian-dragon-random-60 (cells of about 4,000 vertices) from 17,384 to 21,890 steps/s,
+/// dragon-random-250 from 20,170 to 21,340; 4096 gave 20,100 and 21,330, 65536 the same
+/// as 8192. kLeafChunk 32 or 128 was slower on the Table 5 scenes at each.
+constexpr std::uint32_t kLeafAPart = 8192;
 constexpr std::uint32_t kLeafChunk = 64;
 /// A cell pair of at most this many vertex pairs stays one leaf item (small cells, a
 /// bunny's: on the H100 bunny-stack-50 ran 1.1% behind the code before the split with them

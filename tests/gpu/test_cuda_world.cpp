@@ -869,23 +869,32 @@ TEST(CudaMidphase, LeafItemsCoverEveryVertexPairOnce) {
     for (const std::uint32_t nb : counts) {
       const std::uint32_t items = octocd::gpu::leaf_items(na, nb);
       ASSERT_GE(items, 1u);
-      std::vector<std::uint32_t> covered(static_cast<std::size_t>(na) * nb, 0);
+      // Each item is the rectangle [a0, a1) x [b0, b1) of vertex pairs, inside the cells: they
+      // cover every pair once when no two overlap and their areas add up to na x nb.
+      struct Rect {
+        std::uint32_t a0, a1, b0, b1;
+      };
+      std::vector<Rect> rects;
+      std::uint64_t area = 0;
       for (std::uint32_t it = 0; it < items; ++it) {
-        std::uint32_t a0 = 0, a1 = 0, b0 = 0, b1 = 0;
-        octocd::gpu::leaf_ranges(it, na, nb, a0, a1, b0, b1);
-        ASSERT_TRUE(a0 < a1 && a1 <= na && b0 < b1 && b1 <= nb)
-            << "cells of " << na << " and " << nb << " vertices, item " << it << ": A [" << a0 << ", " << a1
-            << "), B [" << b0 << ", " << b1 << ")";
+        Rect r{};
+        octocd::gpu::leaf_ranges(it, na, nb, r.a0, r.a1, r.b0, r.b1);
+        ASSERT_TRUE(r.a0 < r.a1 && r.a1 <= na && r.b0 < r.b1 && r.b1 <= nb)
+            << "cells of " << na << " and " << nb << " vertices, item " << it << ": A [" << r.a0 << ", " << r.a1
+            << "), B [" << r.b0 << ", " << r.b1 << ")";
         if (items > 1) {
-          EXPECT_LE(a1 - a0, kLeafAPart);
-          EXPECT_LE(b1 - b0, octocd::gpu::leaf_b_chunk(na));
+          EXPECT_LE(r.a1 - r.a0, kLeafAPart);
+          EXPECT_LE(r.b1 - r.b0, octocd::gpu::leaf_b_chunk(na));
         }
-        for (std::uint32_t i = a0; i < a1; ++i)
-          for (std::uint32_t j = b0; j < b1; ++j) ++covered[static_cast<std::size_t>(i) * nb + j];
+        for (std::size_t q = 0; q < rects.size(); ++q) {
+          const Rect& o = rects[q];
+          ASSERT_FALSE(r.a0 < o.a1 && o.a0 < r.a1 && r.b0 < o.b1 && o.b0 < r.b1)
+              << "cells of " << na << " and " << nb << " vertices: items " << q << " and " << it << " overlap";
+        }
+        rects.push_back(r);
+        area += static_cast<std::uint64_t>(r.a1 - r.a0) * (r.b1 - r.b0);
       }
-      const auto bad = std::find_if(covered.begin(), covered.end(), [](std::uint32_t c) { return c != 1; });
-      ASSERT_TRUE(bad == covered.end()) << "cells of " << na << " and " << nb << " vertices: vertex pair "
-                                        << (bad - covered.begin()) << " covered " << *bad << " times";
+      ASSERT_EQ(area, static_cast<std::uint64_t>(na) * nb) << "cells of " << na << " and " << nb << " vertices";
     }
   }
   // A cell of up to kLeafAPart vertices is one part: only B is chunked, as before the parts.
