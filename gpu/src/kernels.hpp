@@ -112,7 +112,7 @@ struct MidItem {
 /// (bench_step_paths, 3000 frames, --midphase 1,2) kLeafAPart 1024 -> 8192 took
 /// asian-dragon-random-60 (cells of about 4,000 vertices) from 17,384 to 21,890 steps/s,
 /// dragon-random-250 from 20,170 to 21,340; 4096 gave 20,100 and 21,330, 65536 the same
-/// as 8192. kLeafChunk 32 or 128 was slower on the Table 5 scenes at each.
+/// as 8192. With parts of 4096, kLeafChunk 32 or 128 was slower on the Table 5 scenes.
 constexpr std::uint32_t kLeafAPart = 8192;
 constexpr std::uint32_t kLeafChunk = 64;
 /// A cell pair of at most this many vertex pairs stays one leaf item (small cells, a

@@ -115,7 +115,8 @@ TEST(MeshOctree, VertexOrderIsTheDepth10MortonOrderAtEveryDepth) {
   for (std::uint32_t c = two.level_begin(2); c < two.level_end(2); ++c)
     for (std::uint32_t v = two.cells[c].first_vertex; v < two.cells[c].first_vertex + two.cells[c].vertex_count; ++v)
       cell_of[two.original_index[v]] = two.cells[c].morton;
-  std::stable_sort(coarse.begin(), coarse.end(), [&](std::uint32_t a, std::uint32_t b) { return cell_of[a] < cell_of[b]; });
+  std::stable_sort(coarse.begin(), coarse.end(),
+                   [&](std::uint32_t a, std::uint32_t b) { return cell_of[a] < cell_of[b]; });
   EXPECT_NE(coarse, finest.original_index);
 }
 
