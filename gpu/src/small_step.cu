@@ -68,7 +68,7 @@ namespace cg = cooperative_groups;
 
 /// Both counts' scans as one: cub::BlockScan of the packed values (out << 32) | in.
 using BlockScan = cub::BlockScan<unsigned long long, kBlockSize>;
-/// Counts per thread and tile of block_exclusive_scan2 (a tile of kBlockSize * kScanItems).
+/// Counts per thread and tile of block_exclusive_scans (a tile of kBlockSize * kScanItems).
 constexpr std::uint32_t kScanItems = 4;
 
 constexpr std::size_t max3(std::size_t a, std::size_t b, std::size_t c) {
@@ -113,7 +113,7 @@ static_assert(kSharedBytes <= 48 * 1024, "static shared memory of the fused step
 /// total, is below 2^32, so no carry reaches a's half; integers, so the offsets are those of
 /// two cub::DeviceScan runs); returns a's total.
 template <std::uint32_t kItems = kScanItems>
-__device__ std::uint32_t block_exclusive_scan2(const std::uint32_t* a, const std::uint32_t* b, std::uint32_t* a_out,
+__device__ std::uint32_t block_exclusive_scans(const std::uint32_t* a, const std::uint32_t* b, std::uint32_t* a_out,
                                                std::uint32_t* b_out, std::uint32_t count,
                                                typename BlockScan::TempStorage& storage,
                                                std::uint32_t* a_out2 = nullptr, std::uint32_t* b_out2 = nullptr) {
@@ -268,7 +268,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       // At most kSmallFrontMaxBodies + 1 counts: one a thread, one tile (on an H100 the
       // resident kernel ran bunny-stack-50 0.6% faster than with four a thread).
       static_assert(kSmallFrontMaxBodies + 1 <= kBlockSize, "the fused front's counts in one tile");
-      total = block_exclusive_scan2<1>(f.out_count, f.in_count, f.out_offset, f.in_offset, n + 1, f.storage, g_out,
+      total = block_exclusive_scans<1>(f.out_count, f.in_count, f.out_offset, f.in_offset, n + 1, f.storage, g_out,
                                        g_in);
     } else {
       // The grid's warps count the rows and columns (a body each, as phase 2 below) from
@@ -276,7 +276,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       count_rows(s, f.aabb, n, warp, warps);
       grid.sync();
       stamp(profile, 2);
-      total = block_exclusive_scan2(s.out_count, s.in_count, f.out_offset, f.in_offset, n + 1, f.storage, g_out, g_in);
+      total = block_exclusive_scans(s.out_count, s.in_count, f.out_offset, f.in_offset, n + 1, f.storage, g_out, g_in);
     }
     if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
     stamp(profile, 3);
@@ -307,7 +307,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       std::uint32_t* g_out = blockIdx.x == 0 ? s.out_offset : nullptr;
       std::uint32_t* g_in = blockIdx.x == 0 ? s.in_offset : nullptr;
       const std::uint32_t total =
-          block_exclusive_scan2(s.out_count, s.in_count, sh.out_offset, sh.in_offset, n + 1, sh.storage, g_out, g_in);
+          block_exclusive_scans(s.out_count, s.in_count, sh.out_offset, sh.in_offset, n + 1, sh.storage, g_out, g_in);
       if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
       out_offset = sh.out_offset;
       in_offset = sh.in_offset;
@@ -316,7 +316,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       if (blockIdx.x == 0) {
         auto& storage = *reinterpret_cast<typename BlockScan::TempStorage*>(smem);
         const std::uint32_t total =
-            block_exclusive_scan2(s.out_count, s.in_count, s.out_offset, s.in_offset, n + 1, storage);
+            block_exclusive_scans(s.out_count, s.in_count, s.out_offset, s.in_offset, n + 1, storage);
         if (threadIdx.x == 0) st->counts[0] = total;
       }
       grid.sync();
