@@ -296,7 +296,7 @@ struct CudaWorld::Impl {
   /// The steps after this one that its request asks for (ResidentDesc): at most
   /// kResidentAheadMax, promised - 1, and the steps to the next timed one (a batch ends at
   /// its timed step, the one its request stamps); 0 under small_profile.
-  unsigned long long steps_ahead() const;
+  unsigned long long batch_extra() const;
   /// Waits for this step from the resident kernel (asking for it, and for the steps ahead
   /// the promise allows, unless an earlier batch covers it) and copies its statistics to `host`.
   void resident_step(const Scene& scene, bool recording);

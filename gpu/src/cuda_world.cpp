@@ -291,6 +291,11 @@ bool CudaWorld::persistent() const { return impl_->persistent; }
 
 void CudaWorld::plan_steps(std::int64_t steps) { impl_->promised = steps > 0 ? steps : 0; }
 
+std::int64_t CudaWorld::steps_ahead() const {
+  const Impl& d = *impl_;
+  return d.ahead_last > d.sequence ? static_cast<std::int64_t>(d.ahead_last - d.sequence) : 0;
+}
+
 void CudaWorld::set_persistent(bool on) {
   Impl& d = *impl_;
   d.refuse_ahead("set_persistent");

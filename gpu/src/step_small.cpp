@@ -124,7 +124,7 @@ void CudaWorld::Impl::launch_resident(const Scene& scene) {
   ++resident_launches;
 }
 
-unsigned long long CudaWorld::Impl::steps_ahead() const {
+unsigned long long CudaWorld::Impl::batch_extra() const {
   if (promised <= 1 || small_profile || timed) return 0;
   std::int64_t extra = std::min<std::int64_t>(promised - 1, static_cast<std::int64_t>(gpu::kResidentAheadMax));
   if (stage_times) {  // up to the next timed step (frames 1, 1 + k, ..), stamped as the batch's last
@@ -146,7 +146,7 @@ void CudaWorld::Impl::resident_step(const Scene& scene, bool recording) {
   const bool covered = sequence <= ahead_last;  // an earlier request's batch runs this step
   if (!covered) {
     if (resident_alive && exited_mark() == epoch) stop_resident();  // it ended itself, idle
-    const unsigned long long extra = recording ? 0 : steps_ahead();
+    const unsigned long long extra = recording ? 0 : batch_extra();
     const bool stamp = small_profile || timed_frame(step_frame + static_cast<std::int64_t>(extra));
     ahead_last = sequence + extra;
     ++resident_requests;

@@ -99,7 +99,10 @@ class Engine:
     def step(self, n: int = 1) -> Dict[str, Any]:
         """Runs n steps (SPEC 4) with the GIL released; Ctrl-C raises KeyboardInterrupt
         between steps, within one step's time, leaving the engine at its last whole step
-        (frame, state and last_frame() as after that step; stepping may go on).
+        (frame, state and last_frame() as after that step; stepping may go on). Without
+        recording, the steps are promised to the engine (Engine::plan_steps): the cuda
+        engine's resident small step runs up to 64 of them a host round trip, and an
+        interrupt first takes the steps it already ran (frame() counts them).
         Returns the last step's metrics dict (see FrameRecord.metrics). Raises
         RuntimeError naming the body and frame when the state becomes non-finite."""
         return self._e.step(int(n))

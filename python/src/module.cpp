@@ -586,19 +586,43 @@ class PyEngine {
     if (n < 0) throw InputError(fmt::format("n: {}; allowed: n >= 0 steps", n));
     BusyGuard busy(busy_, "this Engine");
     settle();
-    for (long i = 0; i < n; ++i) {
-      const auto t0 = std::chrono::steady_clock::now();
-      if (last_step_ms_ < kInlineStepMs) {
-        py::gil_scoped_release release;
-        engine_->step();
-      } else {
-        step_in_background();
+    // Nothing but step() and frame() runs between the steps below, so when they run inline
+    // they are promised (Engine::plan_steps: the cuda engine's resident small step then runs
+    // up to 64 a host round trip). A plan ends (end_plan) when a step turns slow (the next
+    // ones may run on the helper thread), on an error or interrupt, and at the end.
+    bool planned = false;
+    auto end_plan = [&] {
+      if (!planned) return;
+      planned = false;
+      engine_->plan_steps(0);
+      py::gil_scoped_release release;
+      while (engine_->steps_ahead() > 0) engine_->step();  // already run: no new work
+      frames_.store(engine_->frame());
+    };
+    try {
+      for (long i = 0; i < n; ++i) {
+        if (!planned && !recording_ && n - i > 1 && last_step_ms_ < kInlineStepMs) {
+          engine_->plan_steps(n - i);
+          planned = true;
+        }
+        const auto t0 = std::chrono::steady_clock::now();
+        if (planned || last_step_ms_ < kInlineStepMs) {
+          py::gil_scoped_release release;
+          engine_->step();
+        } else {
+          step_in_background();
+        }
+        last_step_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        frames_.store(engine_->frame());  // `frame`: the whole steps done, readable from another thread
+        if (last_step_ms_ >= kInlineStepMs) end_plan();
+        // Ctrl-C between steps: KeyboardInterrupt with the engine at its last whole step.
+        if (PyErr_CheckSignals() != 0) throw py::error_already_set();
       }
-      last_step_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-      frames_.store(engine_->frame());  // `frame`: the whole steps done, readable from another thread
-      // Ctrl-C between steps: KeyboardInterrupt with the engine at its last whole step.
-      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    } catch (...) {
+      end_plan();
+      throw;
     }
+    end_plan();
     return out_metrics(engine_->last_metrics(), engine_.get());
   }
 

@@ -1607,6 +1607,42 @@ TEST(CudaPersistent, PlannedStepsRunAheadWithTheCpuBits) {
   }
 }
 
+// Engine::steps_ahead: a caller that stops inside a plan (Python's Engine.step(n) on an
+// interrupt) ends it with plan_steps(0) and takes the steps the resident kernel already ran
+// (steps_ahead() of them, with no new request); the engine is then at a whole step whose
+// state is the cpu's of that frame, and state() works again. Without a plan nothing runs
+// ahead. bunny-stack-50, stage times off: a batch of up to 64 steps a request.
+TEST(CudaPersistent, AnInterruptedPlanTakesTheStepsRunAhead) {
+  REQUIRE_CUDA_DEVICE();
+  const auto model = with_levels(load_model("bunny-stack-50"), "1,2");
+  CudaSettings settings = path_settings("small");
+  settings.stage_times = false;
+  CudaWorld g(model, "flat", settings, idle_after(600000000L));
+  ASSERT_TRUE(g.persistent());
+  (void)g.step();
+  EXPECT_EQ(g.steps_ahead(), 0) << "no plan: one step a request";
+  g.plan_steps(200);
+  (void)g.step();
+  (void)g.step();
+  const std::int64_t ahead = g.steps_ahead();
+  EXPECT_GT(ahead, 0) << "the batch of frame 2 runs frames 3 .. 65";
+  EXPECT_LE(ahead, 62);
+  EXPECT_THROW((void)g.state(), RuntimeError);
+  g.plan_steps(0);
+  const std::uint64_t requests = g.resident_requests();
+  for (std::int64_t i = 0; i < ahead; ++i) (void)g.step();
+  EXPECT_EQ(g.steps_ahead(), 0);
+  EXPECT_EQ(g.resident_requests(), requests) << "the steps taken were run by the batch already requested";
+  const std::int64_t frame = g.frame();
+  EXPECT_EQ(frame, 3 + ahead);
+  auto cpu = cpu_flat(model);
+  for (std::int64_t f = 1; f <= frame; ++f) (void)cpu->step();
+  EXPECT_EQ(cpu->state_hash(), g.state_hash()) << first_difference(cpu->state(), g.state());
+  (void)g.step();  // no plan: the next step is requested alone
+  EXPECT_EQ(g.steps_ahead(), 0);
+  EXPECT_EQ(g.resident_requests(), requests + 1);
+}
+
 // A body that turns non-finite stops the batch at its step: step() throws the cpu's
 // message, and so does the next step() (a new request, not a wait for a batch that
 // stopped), with stage times off (batches of 64) and a short host timeout.

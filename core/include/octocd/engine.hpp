@@ -260,6 +260,11 @@ class Engine {
   /// promise rules out may throw RuntimeError until the steps run ahead are taken. A later
   /// call replaces the count (0: no more ahead). Engines that cannot run ahead ignore it.
   virtual void plan_steps(std::int64_t steps) { (void)steps; }
+  /// Steps run ahead of frame() under plan_steps: the next steps_ahead() calls of step()
+  /// return them (they wait for no new work), and until they are taken the calls the
+  /// promise rules out may throw. A caller that stops early (an interrupt) calls
+  /// plan_steps(0), then step() that many times. 0 for engines that never run ahead.
+  virtual std::int64_t steps_ahead() const { return 0; }
   /// Hot state after the last step (host copy; for `cuda`, downloaded on demand).
   virtual const BodyState& state() const = 0;
   /// Metrics of the last step.

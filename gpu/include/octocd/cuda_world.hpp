@@ -224,6 +224,9 @@ class CudaWorld : public Engine {
   /// and set_persistent() throw RuntimeError. Elsewhere (other paths, recording,
   /// small_profile) a no-op.
   void plan_steps(std::int64_t steps) override;
+  /// The steps of the resident kernel's batch beyond the last step() (0 when none runs
+  /// ahead: other paths, no plan, or the batch taken).
+  std::int64_t steps_ahead() const override;
   const FrameRecord& record() const override { return record_; }
 
   /// Replaces the hot state (positions, velocities, inverse masses; sizes must equal the
