@@ -20,11 +20,22 @@ __global__ void mid_decide_kernel(MidListDesc d) {
 
 __global__ void mid_expand_kernel(MidListDesc d, int step) { mid::mid_expand_items(d, step); }
 
+// The last expand step when it does not run its leaves itself (mid::fuse_leaves false):
+// it appends them to the leaf list (mid_leaf_kernel runs them); launched beside
+// mid_expand_last_kernel, exactly one of the two does the step.
+__global__ void mid_expand_append_kernel(MidListDesc d, int step) {
+  const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
+  if (mid::fuse_leaves(count)) return;
+  mid::mid_expand_items(d, step);
+}
+
 // The last expand step, which may run its items' leaves itself (mid::fuse_leaves); 128
 // registers (118 before the early exit and the tile culling): 2 of the grid's 4 blocks per SM at a time
 // (bounding it to 3 spilled > 200 bytes).
 __global__ void __launch_bounds__(kBlockSize, 2) mid_expand_last_kernel(MidListDesc d, int step) {
   __shared__ mid::LeafTiles tiles;
+  const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
+  if (!mid::fuse_leaves(count)) return;  // mid_expand_append_kernel does the step
   mid::mid_expand_items(d, step, &tiles);
 }
 
@@ -63,8 +74,12 @@ cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t s
 }
 
 cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cudaStream_t stream) {
-  if (step + 2 == d.steps) mid_expand_last_kernel<<<grid, kBlockSize, 0, stream>>>(d, step);
-  else mid_expand_kernel<<<grid, kBlockSize, 0, stream>>>(d, step);
+  if (step + 2 == d.steps) {
+    mid_expand_append_kernel<<<grid, kBlockSize, 0, stream>>>(d, step);
+    mid_expand_last_kernel<<<grid, kBlockSize, 0, stream>>>(d, step);
+  } else {
+    mid_expand_kernel<<<grid, kBlockSize, 0, stream>>>(d, step);
+  }
   return cudaGetLastError();
 }
 

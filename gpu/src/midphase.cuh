@@ -15,7 +15,8 @@
 //   surviving leaf cell pairs of its item itself, in lane order, as the leaf items the list
 //   would have held (leaf_item, the same code mid_leaf runs), when the step has at least
 //   kFuseItemsPerWarp items per warp (fuse_leaves): no leaf item is written, read or set up
-//   again, and the leaf list stays empty;
+//   again, and the leaf list stays empty (mid_expand_append_kernel, launched beside it, does
+//   the step otherwise);
 // - leaf (one warp per item of the last step): the narrow phase of hd::mesh_mesh_leaf /
 //   mesh_box_descend on that cell pair, lanes over B's vertices, A's vertices in order.
 //   The vertex filters scan whole blocks of 32 vertices (vertex_blocks.hpp) and skip a
@@ -950,13 +951,20 @@ __device__ inline void mid_decide_warp(const MidListDesc& d, std::uint32_t k0) {
   d.confirmed[k] = alone_answer(c) ? 1 : 0;
 }
 
-/// Whether the last expand step runs its leaves itself (test_cells' `leaves`): when the
-/// step has at least kFuseItemsPerWarp items per warp of the grid (then the leaves of an
-/// item on one warp still leave every warp busy; with fewer items the leaf list spreads a
-/// pair's chunks over more warps; fusing them always made the Table 5 scenes 1.3-13x slower
-/// on an H100). Grid-uniform. Where the leaves run changes neither a result nor a count (the
-/// same leaf items either way).
-constexpr std::uint32_t kFuseItemsPerWarp = 2;
+/// Whether the last expand step runs its leaves itself (test_cells' `leaves`;
+/// mid_expand_last_kernel, else mid_expand_append_kernel appends them for mid_leaf_kernel):
+/// when the step has at least kFuseItemsPerWarp items per warp of the grid. The leaf list
+/// spreads a pair's leaves over more warps, and the appending expand and the leaf kernel
+/// run at 64 registers (4 blocks per SM) where the fused kernel needs 128 (2): with fewer
+/// items the list wins (fusing always made the Table 5 scenes 1.3-13x slower); with very
+/// many it is written and read from memory beyond the L2. H100, 512 against 2 (the build
+/// before, same state hashes, one call): bunny-pile-100k 858 -> 978 steps/s (3000 frames),
+/// bunny-pile-1m 139 -> 134 (1500 frames; never fusing: 127), the max-instances scenes at
+/// 10^6 armadillos 189 -> 228, dragons 144 -> 158, 262,144 asian dragons 158 -> 210 and
+/// 2,097,152 bunnies 181 -> 222 (frames 301-400); at 128 the 2,097,152 bunnies still fused
+/// (177). Grid-uniform. Where the leaves run changes neither a result nor a count (the same
+/// leaf items either way).
+constexpr std::uint32_t kFuseItemsPerWarp = 512;
 __device__ inline bool fuse_leaves(std::uint32_t count) { return count >= kFuseItemsPerWarp * warp_count(); }
 
 /// This warp's share of `count` list items: the contiguous range [begin, end), an equal
