@@ -961,10 +961,13 @@ __device__ inline void mid_decide_warp(const MidListDesc& d, std::uint32_t k0) {
 /// before, same state hashes, one call): bunny-pile-100k 858 -> 978 steps/s (3000 frames),
 /// bunny-pile-1m 139 -> 134 (1500 frames; never fusing: 127), the max-instances scenes at
 /// 10^6 armadillos 189 -> 228, dragons 144 -> 158, 262,144 asian dragons 158 -> 210 and
-/// 2,097,152 bunnies 181 -> 222 (frames 301-400); at 128 the 2,097,152 bunnies still fused
-/// (177). Grid-uniform. Where the leaves run changes neither a result nor a count (the same
+/// 2,097,152 bunnies 181 -> 222 (frames 301-400; at 128 they still fused: 177); but
+/// 5,242,880 dragons 32 -> 28 and 1,835,008 asian dragons 31 -> 29 (the max-instances
+/// maxima). 256 (one call, frames 301-400): those dragons 32, asian dragons 29, 2,097,152
+/// bunnies 175, 10^6 dragons 157, bunny-pile-100k 967: no count per warp suits every
+/// scene (the leaf list's size, which decides, depends on the meshes too). Grid-uniform. Where the leaves run changes neither a result nor a count (the same
 /// leaf items either way).
-constexpr std::uint32_t kFuseItemsPerWarp = 512;
+constexpr std::uint32_t kFuseItemsPerWarp = 256;
 __device__ inline bool fuse_leaves(std::uint32_t count) { return count >= kFuseItemsPerWarp * warp_count(); }
 
 /// This warp's share of `count` list items: the contiguous range [begin, end), an equal

@@ -147,7 +147,7 @@ struct CudaTestHooks {
 /// stage_time_every, by CUDA events from a second graph captured with them on the
 /// per-stage path, by %globaltimer stamps in the fused kernel; the other steps run untimed
 /// and report the last timed step's times; neither changes a bit. On the graph path the
-/// last midphase expand step runs its items' leaves itself when it has at least 512 items
+/// last midphase expand step runs its items' leaves itself when it has at least 256 items
 /// per warp (the same leaf items, so the same bits and counts).
 /// Persistent (resident) kernel: on the small path the kernel is launched once, on a
 /// stream of its own, and stays resident (set_persistent(false): a launch per step): it
