@@ -98,6 +98,7 @@ struct CudaWorld::Impl {
   bool any_mesh = false;   // some shape is a mesh: a pair may need the level steps
   unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
   int mid_early_exit = 1;  // CudaSettings::midphase_early_exit (MidListDesc::early_exit)
+  std::uint32_t mid_fuse_min_items = 0;  // CudaTestHooks::fuse_min_items (MidListDesc)
 
   // ---- stage times (stage_times.cpp) ---------------------------------------------------
   bool stage_times = true;        // CudaSettings::stage_times

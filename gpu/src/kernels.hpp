@@ -211,6 +211,9 @@ struct MidListDesc {
   /// skipped (counts: the work done, timing-dependent); 0, every item of the lists runs and
   /// every leaf counts its whole filtered work (deterministic counts). Same results either way.
   int early_exit = 1;
+  /// > 0: the last expand step runs its leaves itself from this many items on (midphase.cuh
+  /// fuse_leaves; CudaTestHooks::fuse_min_items); 0: from kFuseItemsPerWarp per warp.
+  std::uint32_t fuse_min_items = 0;
   /// A leaf skips a pair of vertex tiles whose boxes are more than theta apart on an axis
   /// (midphase.cuh, tiles_apart): the same results. 1 on every path; the small path's lean
   /// kernel compiles it as 0.

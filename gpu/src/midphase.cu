@@ -25,7 +25,7 @@ __global__ void mid_expand_kernel(MidListDesc d, int step) { mid::mid_expand_ite
 // mid_expand_last_kernel, exactly one of the two does the step.
 __global__ void mid_expand_append_kernel(MidListDesc d, int step) {
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
-  if (mid::fuse_leaves(count)) return;
+  if (mid::fuse_leaves(d, count)) return;
   mid::mid_expand_items(d, step);
 }
 
@@ -35,7 +35,7 @@ __global__ void mid_expand_append_kernel(MidListDesc d, int step) {
 __global__ void __launch_bounds__(kBlockSize, 2) mid_expand_last_kernel(MidListDesc d, int step) {
   __shared__ mid::LeafTiles tiles;
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
-  if (!mid::fuse_leaves(count)) return;  // mid_expand_append_kernel does the step
+  if (!mid::fuse_leaves(d, count)) return;  // mid_expand_append_kernel does the step
   mid::mid_expand_items(d, step, &tiles);
 }
 

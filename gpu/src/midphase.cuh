@@ -968,7 +968,9 @@ __device__ inline void mid_decide_warp(const MidListDesc& d, std::uint32_t k0) {
 /// scene (the leaf list's size, which decides, depends on the meshes too). Grid-uniform. Where the leaves run changes neither a result nor a count (the same
 /// leaf items either way).
 constexpr std::uint32_t kFuseItemsPerWarp = 256;
-__device__ inline bool fuse_leaves(std::uint32_t count) { return count >= kFuseItemsPerWarp * warp_count(); }
+__device__ inline bool fuse_leaves(const MidListDesc& d, std::uint32_t count) {
+  return count >= (d.fuse_min_items > 0 ? d.fuse_min_items : kFuseItemsPerWarp * warp_count());
+}
 
 /// This warp's share of `count` list items: the contiguous range [begin, end), an equal
 /// share per warp of the grid. A warp (start or expand) appends the items of one pair
@@ -989,7 +991,7 @@ template <bool kLean = false>
 __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTiles* tiles = nullptr) {
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
   const bool last = step + 2 == d.steps;
-  LeafTiles* leaves = last && tiles != nullptr && fuse_leaves(count) ? tiles : nullptr;
+  LeafTiles* leaves = last && tiles != nullptr && fuse_leaves(d, count) ? tiles : nullptr;
   Tally t;
   std::uint32_t begin, end;
   warp_range(count, begin, end);

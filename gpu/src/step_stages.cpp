@@ -119,6 +119,7 @@ gpu::MidListDesc CudaWorld::Impl::mid_desc(const unsigned long long* keys) {
   md.counters = counters();
   md.steps = level_steps;
   md.early_exit = mid_early_exit;
+  md.fuse_min_items = mid_fuse_min_items;
   if (witnesses()) {
     md.wit.witness = witness.get();
     md.wit.prev_keys = prev_keys.get();

@@ -116,6 +116,11 @@ struct CudaTestHooks {
   /// > 0: the resident kernel ends itself after this many microseconds without a request
   /// instead of 2000 (tests of the idle exit and of the launch count).
   long resident_idle_us = 0;
+  /// > 0: the graph path's last midphase expand step runs its leaves itself (the fused
+  /// kernel) from this many items on instead of kFuseItemsPerWarp per warp of the grid
+  /// (gpu/src/midphase.cuh, fuse_leaves): 1 fuses every step, so tests reach that kernel on
+  /// small scenes.
+  std::uint32_t fuse_min_items = 0;
 };
 
 /// The CUDA engine. Owns its device buffers (released by the destructor) and a CUDA
