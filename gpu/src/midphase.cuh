@@ -965,8 +965,9 @@ __device__ inline void mid_decide_warp(const MidListDesc& d, std::uint32_t k0) {
 /// 5,242,880 dragons 32 -> 28 and 1,835,008 asian dragons 31 -> 29 (the max-instances
 /// maxima). 256 (one call, frames 301-400): those dragons 32, asian dragons 29, 2,097,152
 /// bunnies 175, 10^6 dragons 157, bunny-pile-100k 967: no count per warp suits every
-/// scene (the leaf list's size, which decides, depends on the meshes too). Grid-uniform. Where the leaves run changes neither a result nor a count (the same
-/// leaf items either way).
+/// scene (the leaf list's size, which decides, depends on the meshes too). Grid-uniform.
+/// Where the leaves run changes neither a result nor a count (the same leaf items either
+/// way). d.fuse_min_items (tests) replaces the threshold by an item count.
 constexpr std::uint32_t kFuseItemsPerWarp = 256;
 __device__ inline bool fuse_leaves(const MidListDesc& d, std::uint32_t count) {
   return count >= (d.fuse_min_items > 0 ? d.fuse_min_items : kFuseItemsPerWarp * warp_count());
