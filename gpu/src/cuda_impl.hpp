@@ -99,6 +99,7 @@ struct CudaWorld::Impl {
   unsigned warp_grid = 1;  // blocks of the warp-per-item midphase kernels
   int mid_early_exit = 1;  // CudaSettings::midphase_early_exit (MidListDesc::early_exit)
   std::uint32_t mid_fuse_min_items = 0;  // CudaTestHooks::fuse_min_items (MidListDesc)
+  std::uint32_t mid_witness_pass_min_pairs = 0;  // CudaTestHooks::witness_pass_min_pairs
 
   // ---- stage times (stage_times.cpp) ---------------------------------------------------
   bool stage_times = true;        // CudaSettings::stage_times

@@ -92,6 +92,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.device = gpu::describe_current_device();
   d.mid_early_exit = settings.midphase_early_exit ? 1 : 0;
   d.mid_fuse_min_items = hooks.fuse_min_items;
+  d.mid_witness_pass_min_pairs = hooks.witness_pass_min_pairs;
   d.sync_each_launch = settings.sync_each_launch;
   d.use_graph = settings.graph;
   d.stage_times = settings.stage_times;

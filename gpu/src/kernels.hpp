@@ -183,6 +183,12 @@ struct WitnessDesc {
 /// WitnessDesc::witness of a pair with none.
 constexpr unsigned long long kNoWitness = ~0ull;
 
+/// Live pairs per warp of mid_start's grid from which the witness pass (a thread per pair,
+/// launch_mid_witness) tests the witnesses instead of mid_start's warps (MidListDesc::
+/// witness_pass_pairs): with many pairs per warp the start's warps run their pairs' lookups
+/// one after another, with few the pass's launch and its own chain of loads cost more.
+constexpr std::uint32_t kWitnessPassPairsPerWarp = 4;
+
 /// One launch of the midphase work lists (midphase.cu): start (pairs -> step 0 items),
 /// expand (step i items -> step i + 1 items) or leaf (last step items -> confirmed).
 struct MidListDesc {
@@ -214,6 +220,11 @@ struct MidListDesc {
   /// > 0: the last expand step runs its leaves itself from this many items on (midphase.cuh
   /// fuse_leaves; CudaTestHooks::fuse_min_items); 0: from kFuseItemsPerWarp per warp.
   std::uint32_t fuse_min_items = 0;
+  /// The least live pairs from which the witness pass (launch_mid_witness, a thread per
+  /// pair) tests the pairs' witnesses; below, mid_start tests them (a warp per pair). Set
+  /// by the host: kWitnessPassPairsPerWarp per warp of mid_start's grid, or
+  /// CudaTestHooks::witness_pass_min_pairs.
+  std::uint32_t witness_pass_pairs = 0;
   /// A leaf skips a pair of vertex tiles whose boxes are more than theta apart on an axis
   /// (midphase.cuh, tiles_apart): the same results. 1 on every path; the small path's lean
   /// kernel compiles it as 0.
@@ -482,8 +493,13 @@ cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint3
 /// level): per live pair, one thread each, pairs[k] and confirmed[k], the answers start
 /// gives. `grid` blocks of kBlockSize threads, grid-stride over the pairs.
 cudaError_t launch_mid_decide(const MidListDesc& d, unsigned grid, cudaStream_t stream);
-/// Start: per live pair (one warp each) confirmed[k] for decided pairs, the step 0 items
-/// of mesh pairs into d.out. `grid` blocks of kBlockSize threads (grid-stride).
+/// Witnesses (before start; nothing when the witness cache is off, d.wit.witness null): per
+/// live pair (one thread each) pairs[k], and confirmed[k] = 1 when the pair is still within
+/// theta at its last witness, else 0. `grid` blocks of kBlockSize threads (grid-stride).
+cudaError_t launch_mid_witness(const MidListDesc& d, unsigned grid, cudaStream_t stream);
+/// Start: per live pair (one warp each; those launch_mid_witness confirmed skipped)
+/// confirmed[k] for decided pairs, the step 0 items of mesh pairs into d.out. `grid` blocks
+/// of kBlockSize threads (grid-stride).
 cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t stream);
 /// Expand: the items of step `step` (d.in) to those of step + 1 (d.out).
 cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cudaStream_t stream);

@@ -11,6 +11,8 @@ namespace {
 // resident (66 without the bound: 3, and the 4th ran as a second wave; 28 bytes spilled).
 __global__ void __launch_bounds__(kBlockSize, 4) mid_start_kernel(MidListDesc d) { mid::mid_start_items<true>(d); }
 
+__global__ void mid_witness_kernel(MidListDesc d) { mid::mid_witness_items(d); }
+
 __global__ void mid_decide_kernel(MidListDesc d) {
   const std::uint32_t stride = gridDim.x * blockDim.x;
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
@@ -65,6 +67,12 @@ cudaError_t launch_mid_keep(const MidListDesc& d, unsigned grid, cudaStream_t st
 cudaError_t launch_mid_decide(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
   if (d.pair_capacity == 0) return cudaSuccess;
   mid_decide_kernel<<<grid, kBlockSize, 0, stream>>>(d);
+  return cudaGetLastError();
+}
+
+cudaError_t launch_mid_witness(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
+  if (d.wit.witness == nullptr) return cudaSuccess;
+  mid_witness_kernel<<<grid, kBlockSize, 0, stream>>>(d);
   return cudaGetLastError();
 }
 

@@ -67,10 +67,11 @@
 // levels; the fused small step keeps none): a leaf that
 // confirms pair k stores the vertex pair it found (A's vertex, B's vertex: indices into the
 // shapes' octree vertices; the tiles keep each staged vertex's index) as witness[k]; at the
-// end of the step keep_witness copies the sorted keys and witnesses; the next step's start
-// looks pair k's key up among them (prev_begin[a]: the run of a's pairs) and tests that
-// vertex pair first, before the pair's set-up (witness_first), with the vertex test of the
-// leaves (hd::vertex_close or vertex_box_close on hd::world_vertex). A pair within theta
+// end of the step keep_witness copies the sorted keys and witnesses; the next step looks
+// pair k's key up among them (prev_begin[a]: the run of a's pairs) and tests that vertex
+// pair first, before the pair's set-up (mid_witness, a thread per pair, before mid_start:
+// witness_close), with the vertex test of the leaves (hd::vertex_close or
+// vertex_box_close on hd::world_vertex). A pair within theta
 // there is confirmed with no set-up and no descent: the answer of the descent, which
 // confirms exactly when some vertex pair passes that test (its pruning, the set-up's early
 // rejection included, is conservative, midphase_hd.hpp). Which witness a pair keeps
@@ -820,84 +821,126 @@ __device__ inline void first_step(const MidListDesc& d, const PairContext& c, st
              mesh_box ? 1u : B.level_end(lb0), d.steps == 1, t);
 }
 
-/// The last step's witness of the pair with sorted key `key` whose first body is `a`
-/// (the whole warp; warp-uniform): looked up among the kept keys from prev_begin[a], 32 at
-/// a time while they are a's and below `key`; kNoWitness when the pair was not a candidate
-/// then or had no witness.
+/// The last step's witness of the pair with sorted key `key` whose first body is `a` (one
+/// thread): the first kept key >= `key` from prev_begin[a] (a galloping search: a body's
+/// run is short but a wall's holds thousands), kNoWitness unless it is `key` (the pair was
+/// not a candidate then, or had no witness). A stale prev_begin[a] (a had no pairs then)
+/// cannot find `key`.
 __device__ inline unsigned long long last_witness(const MidListDesc& d, std::uint32_t a, unsigned long long key) {
   const WitnessDesc& w = d.wit;
   const std::uint32_t count = *w.prev_count;
-  for (std::uint32_t j0 = w.prev_begin[a]; j0 < count; j0 += 32) {
-    const std::uint32_t j = j0 + lane_id();
-    const unsigned long long kept = j < count ? w.prev_keys[j] : ~0ull;
-    const unsigned same = __ballot_sync(kFull, kept == key);
-    if (same != 0) return w.prev_witness[j0 + static_cast<std::uint32_t>(__ffs(same) - 1)];
-    // Further keys of a's run follow only if all 32 are a's and below `key`.
-    if (__ballot_sync(kFull, kept < key && static_cast<std::uint32_t>(kept >> d.pair_shift) == a) != kFull) break;
+  std::uint32_t lo = w.prev_begin[a];
+  std::uint32_t hi = count;
+  // Every kept key in [prev_begin[a], lo) is below `key`; probes at lo, lo + 1, lo + 3, ...
+  for (std::uint32_t span = 1; lo < count; span *= 2) {
+    const std::uint32_t probe = count - lo > span - 1 ? lo + span - 1 : count - 1;
+    if (w.prev_keys[probe] >= key) {
+      hi = probe;
+      break;
+    }
+    lo = probe + 1;
   }
-  return kNoWitness;
+  while (lo < hi) {  // the first key >= `key` in [lo, hi], hi's (when < count) is
+    const std::uint32_t mid = lo + (hi - lo) / 2;
+    if (w.prev_keys[mid] < key) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo < count && w.prev_keys[lo] == key ? w.prev_witness[lo] : kNoWitness;
 }
 
-/// Whether pair p (sorted key `key`) is confirmed at its last witness (last_witness; the
-/// whole warp, warp-uniform; lane 0 tests it), before and without its set-up: the leaves'
-/// vertex test (hd::vertex_close, or hd::vertex_box_close against the box's world AABB) on
-/// the same world vertices, A the mesh when one of the two is a box (context()'s order),
-/// theta^2 as hd::setup_pair computes it. True only when the descent would confirm the
-/// pair: it confirms exactly when some vertex pair passes that test, and such a pair is not
-/// decided by the set-up (its early rejection's margin covers theta; aabb-only and
-/// level-less models keep no witnesses). False for a static-static pair (never confirmed),
-/// no witness, a box-box pair or an index out of range. `t` counts a tested witness as one
-/// vertex test; *w is the witness.
-__device__ inline bool witness_first(const MidListDesc& d, const Pair& p, unsigned long long key, Tally& t,
-                                     unsigned long long& w) {
+/// Whether pair p (sorted key `key`) is confirmed at its last witness (last_witness; one
+/// thread), before and without its set-up: the leaves' vertex test (hd::vertex_close, or
+/// hd::vertex_box_close against the box's world AABB) on the same world vertices, A the
+/// mesh when one of the two is a box (context()'s order), theta^2 as hd::setup_pair
+/// computes it. True only when the descent would confirm the pair: it confirms exactly
+/// when some vertex pair passes that test, and such a pair is not decided by the set-up
+/// (its early rejection's margin covers theta; aabb-only and level-less models keep no
+/// witnesses). False for a static-static pair (never confirmed), no witness, a box-box
+/// pair or an index out of range. A tested witness counts as one vertex test (`tests`);
+/// *w is the witness.
+__device__ inline bool witness_close(const MidListDesc& d, const Pair& p, unsigned long long key,
+                                     std::uint32_t& tests, unsigned long long& w) {
   w = last_witness(d, p.a, key);
   if (w == kNoWitness) return false;
-  t.vertex_tests += 1;
-  int close = 0;
-  if (lane_id() == 0 && !(d.w[p.a] == 0.0f && d.w[p.b] == 0.0f)) {
-    const std::uint32_t sa = d.shape[p.a];
-    const std::uint32_t sb = d.shape[p.b];
-    const bool swap = d.shapes.shapes[sa].is_mesh == 0;  // as context()
-    const std::uint32_t ia = swap ? p.b : p.a;
-    const std::uint32_t ib = swap ? p.a : p.b;
-    const DeviceShape& A = d.shapes.shapes[swap ? sb : sa];
-    const DeviceShape& B = d.shapes.shapes[swap ? sa : sb];
-    const float theta = pair_theta(d.shapes.theta[sa], d.shapes.theta[sb]);
-    const float theta2 = theta * theta;
-    const std::uint32_t va = static_cast<std::uint32_t>(w >> 32);
-    const std::uint32_t vb = static_cast<std::uint32_t>(w);
-    if (A.is_mesh != 0 && va < A.vertex_count) {
-      const Vec3 wa = hd::world_vertex(d.shapes.vertices[A.vertex_offset + va], d.x[ia]);
-      if (B.is_mesh == 0) close = hd::vertex_box_close(wa, d.aabb[ib], theta2) ? 1 : 0;
-      else if (vb < B.vertex_count)
-        close = hd::vertex_close(wa, hd::world_vertex(d.shapes.vertices[B.vertex_offset + vb], d.x[ib]), theta2) ? 1 : 0;
-    }
+  tests += 1;
+  if (d.w[p.a] == 0.0f && d.w[p.b] == 0.0f) return false;
+  const std::uint32_t sa = d.shape[p.a];
+  const std::uint32_t sb = d.shape[p.b];
+  const bool swap = d.shapes.shapes[sa].is_mesh == 0;  // as context()
+  const std::uint32_t ia = swap ? p.b : p.a;
+  const std::uint32_t ib = swap ? p.a : p.b;
+  const DeviceShape& A = d.shapes.shapes[swap ? sb : sa];
+  const DeviceShape& B = d.shapes.shapes[swap ? sa : sb];
+  const float theta = pair_theta(d.shapes.theta[sa], d.shapes.theta[sb]);
+  const float theta2 = theta * theta;
+  const std::uint32_t va = static_cast<std::uint32_t>(w >> 32);
+  const std::uint32_t vb = static_cast<std::uint32_t>(w);
+  if (A.is_mesh == 0 || va >= A.vertex_count) return false;
+  const Vec3 wa = hd::world_vertex(d.shapes.vertices[A.vertex_offset + va], d.x[ia]);
+  if (B.is_mesh == 0) return hd::vertex_box_close(wa, d.aabb[ib], theta2);
+  return vb < B.vertex_count &&
+         hd::vertex_close(wa, hd::world_vertex(d.shapes.vertices[B.vertex_offset + vb], d.x[ib]), theta2);
+}
+
+/// Whether the witness pass tests this step's witnesses (np live pairs; grid-uniform):
+/// from d.witness_pass_pairs on (kWitnessPassPairsPerWarp per warp of mid_start's grid);
+/// below, mid_start does.
+__device__ inline bool witness_pass(const MidListDesc& d, std::uint32_t np) { return np >= d.witness_pass_pairs; }
+
+/// mid_witness's work (before mid_start, with the witness cache on; nothing unless
+/// witness_pass): one thread per live candidate pair k (grid-stride), pairs[k] from its
+/// sorted key, and confirmed[k] = 1 with witness[k] its last witness when the pair is still
+/// within theta there (witness_close), else confirmed[k] = 0 and witness[k] = kNoWitness
+/// (mid_start then sets the pair up). A thread per pair keeps every pair's chain of
+/// dependent loads (the lookup, the shapes, the two vertices) in flight at once.
+__device__ inline void mid_witness_items(const MidListDesc& d) {
+  const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
+  if (!witness_pass(d, np)) return;
+  std::uint32_t tests = 0;
+  for (std::uint32_t k = blockIdx.x * blockDim.x + threadIdx.x; k < np; k += gridDim.x * blockDim.x) {
+    const unsigned long long key = d.pair_keys[k];
+    const Pair p = unpack_pair(d, key);
+    d.pairs[k] = p;
+    unsigned long long w;
+    const bool close = witness_close(d, p, key, tests, w);
+    d.confirmed[k] = close ? 1 : 0;
+    d.wit.witness[k] = close ? w : kNoWitness;
   }
-  return __shfl_sync(kFull, close, 0) != 0;
+  Tally t;
+  t.vertex_tests = __reduce_add_sync(kFull, tests);
+  flush(d, t);
 }
 
 /// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid).
-/// With the witness cache on, a pair is first tested at its last witness (witness_first,
-/// before its set-up): a pair still within theta there is confirmed and keeps it, with no
-/// set-up and no cell test. !kWitness: compiled without the cache (the
-/// fused small step).
+/// With the witness cache on, a pair is first tested at its last witness (witness_close,
+/// before its set-up; by mid_witness_items when witness_pass, else here by lane 0): a pair
+/// still within theta there is confirmed and keeps it, with no set-up and no cell test.
+/// !kWitness: compiled without the cache (the fused small step).
 template <bool kWitness, bool kLean = false>
 __device__ inline void mid_start_items(const MidListDesc& d) {
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
   const bool witnesses = kWitness && d.wit.witness != nullptr;
+  const bool passed = witnesses && witness_pass(d, np);  // pairs[k] and confirmed[k] written
   Tally t;
   for (std::uint32_t k = global_warp(); k < np; k += warp_count()) {
+    if (passed && d.confirmed[k] != 0) continue;  // confirmed at its witness (mid_witness)
     // The pair from its sorted key (the broadphase's output), kept for the later stages.
-    const Pair p = unpack_pair(d, d.pair_keys[k]);
-    if (lane_id() == 0) d.pairs[k] = p;
-    if (witnesses) {
-      unsigned long long w;
-      if (witness_first(d, p, d.pair_keys[k], t, w)) {
-        if (lane_id() == 0) {
-          d.confirmed[k] = 1;
-          d.wit.witness[k] = w;
+    const unsigned long long key = d.pair_keys[k];
+    const Pair p = unpack_pair(d, key);
+    if (!passed) {
+      if (lane_id() == 0) d.pairs[k] = p;
+      if (witnesses) {
+        std::uint32_t tests = 0;
+        unsigned long long w = kNoWitness;
+        const bool close = lane_id() == 0 && witness_close(d, p, key, tests, w);
+        t.vertex_tests += tests;  // lane 0's tally is the warp's
+        if (__shfl_sync(kFull, close ? 1 : 0, 0) != 0) {
+          if (lane_id() == 0) {
+            d.confirmed[k] = 1;
+            d.wit.witness[k] = w;
+          }
+          continue;
         }
-        continue;
       }
     }
     const PairContext c = context(d, k, p);

@@ -120,6 +120,9 @@ gpu::MidListDesc CudaWorld::Impl::mid_desc(const unsigned long long* keys) {
   md.steps = level_steps;
   md.early_exit = mid_early_exit;
   md.fuse_min_items = mid_fuse_min_items;
+  md.witness_pass_pairs = mid_witness_pass_min_pairs > 0
+                              ? mid_witness_pass_min_pairs
+                              : gpu::kWitnessPassPairsPerWarp * warp_grid * (gpu::kBlockSize / 32u);
   if (witnesses()) {
     md.wit.witness = witness.get();
     md.wit.prev_keys = prev_keys.get();
@@ -315,8 +318,12 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
   md.out = lists[0];
   md.out_count = counts() + 1;
   md.out_capacity = lcap();
-  if (lists_needed) launched(gpu::launch_mid_start(md, warp_grid, stream), "mid_start");
-  else launched(gpu::launch_mid_decide(md, pair_grid(), stream), "mid_decide");
+  if (lists_needed) {
+    launched(gpu::launch_mid_witness(md, pair_grid(), stream), "mid_witness");
+    launched(gpu::launch_mid_start(md, warp_grid, stream), "mid_start");
+  } else {
+    launched(gpu::launch_mid_decide(md, pair_grid(), stream), "mid_decide");
+  }
   for (int i = 0; lists_needed && i + 1 < level_steps; ++i) {
     md.in = lists[i % 2];
     md.in_count = counts() + 1 + i;

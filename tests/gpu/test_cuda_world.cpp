@@ -320,8 +320,9 @@ void expect_cpu_cuda_counts(const FrameMetrics& cpu, const FrameMetrics& gpu, co
 
 /// The engines the midphase tests compare on model m: the CPU engine (octree), a cuda
 /// engine with the early exit off (graph path) and the cuda engines with it on, by name
-/// (the graph path, and the graph path whose last expand step runs its leaves itself every
-/// step: CudaTestHooks::fuse_min_items; a test may add others).
+/// (the graph path, and the graph path whose last expand step runs its leaves itself and
+/// whose witness pass runs every step: CudaTestHooks::fuse_min_items and
+/// witness_pass_min_pairs; a test may add others).
 struct ExitEngines {
   static BroadPhaseConfig octree(const Model& m) {
     BroadPhaseConfig cfg = m.scene.broadphase;
@@ -334,9 +335,13 @@ struct ExitEngines {
     no_exit.midphase_early_exit = false;
     off = std::make_unique<CudaWorld>(m, "octree", path_settings("graph", no_exit));
     on.emplace_back("graph", std::make_unique<CudaWorld>(m, "octree", path_settings("graph")));
-    CudaWorld::TestHooks fuse;  // the last expand step runs its leaves itself every step
+    // The last expand step runs its leaves itself, and the witness pass tests the
+    // witnesses, every step.
+    CudaWorld::TestHooks fuse;
     fuse.fuse_min_items = 1;
-    on.emplace_back("graph, fused leaves", std::make_unique<CudaWorld>(m, "octree", path_settings("graph"), fuse));
+    fuse.witness_pass_min_pairs = 1;
+    on.emplace_back("graph, fused leaves, witness pass",
+                    std::make_unique<CudaWorld>(m, "octree", path_settings("graph"), fuse));
   }
   World cpu;
   std::unique_ptr<CudaWorld> off;

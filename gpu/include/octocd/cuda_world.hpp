@@ -121,6 +121,10 @@ struct CudaTestHooks {
   /// (gpu/src/midphase.cuh, fuse_leaves): 1 fuses every step, so tests reach that kernel on
   /// small scenes.
   std::uint32_t fuse_min_items = 0;
+  /// > 0: the graph path's witness pass (a thread per pair, before the midphase start)
+  /// runs from this many live pairs on instead of kWitnessPassPairsPerWarp per warp of the
+  /// start's grid (gpu/src/kernels.hpp): 1 runs it every step.
+  std::uint32_t witness_pass_min_pairs = 0;
 };
 
 /// The CUDA engine. Owns its device buffers (released by the destructor) and a CUDA
