@@ -51,7 +51,8 @@
 //    exclusive scan of the n counts gives each a's segment of the output; each pair goes
 //    to its segment (one atomicSub: any order within it); then each segment is sorted on
 //    its own: one thread per body for at most kLocalSortMax keys (insertion sort in
-//    place), one block for at most kBlockSortMax (a CUB block radix sort), else (a huge
+//    place), one block for at most kBlockSortMax (a CUB block radix sort of the keys'
+//    low words over the bits of b: a segment shares its a), else (a huge
 //    segment: a body that overlaps thousands of bodies of larger index, as the floor of a
 //    pile) its chunks of kBlockSortMax keys spread over the blocks: a block radix sort each,
 //    then each key's rank from binary searches in the other chunks, then the copy back (one
@@ -517,8 +518,9 @@ __global__ void loose_overflow_kernel(LooseDesc d) {
 /// Segments of at most this many keys are sorted by one thread (insertion sort in place:
 /// at most 64 x 63 / 2 moves; a body of a dense pile has a few dozen partners at most).
 constexpr std::uint32_t kLocalSortMax = 64;
-/// Keys per thread of the block radix sort of longer segments.
-constexpr int kBlockSortItems = 16;
+/// Keys per thread of the block radix sort of longer segments (the keys' low words: a
+/// segment shares its body a; 32 KB of shared memory for the block's exchange).
+constexpr int kBlockSortItems = 32;
 /// Segments of at most this many keys are sorted by one block's radix sort in shared memory.
 constexpr std::uint32_t kBlockSortMax = static_cast<std::uint32_t>(kBlockSize * kBlockSortItems);
 /// Blocks of loose_long_sort_kernel (each takes long segments one after another) and of the
@@ -586,25 +588,29 @@ __global__ void loose_segment_sort_kernel(LooseSortDesc d) {
   }
 }
 
-/// Sorts keys [c0, c0 + clen) of `seg` (clen <= kBlockSortMax) with one block's radix sort
-/// over the key bits [0, 2 shift) (the whole block calls it).
+/// Sorts keys [c0, c0 + clen) of `seg` (clen <= kBlockSortMax; every key of a segment has
+/// its body a above bit `shift`) with one block's radix sort of their low words over bits
+/// [0, shift), the body b (the whole block calls it).
 template <class Sort>
 __device__ inline void block_sort_chunk(typename Sort::TempStorage& storage, unsigned long long* seg,
                                         std::uint32_t c0, std::uint32_t clen, int shift) {
-  unsigned long long v[kBlockSortItems];
+  const unsigned long long high = (seg[c0] >> shift) << shift;
+  const unsigned long long low_mask = (1ull << shift) - 1ull;
+  std::uint32_t v[kBlockSortItems];
   for (int k = 0; k < kBlockSortItems; ++k) {
     const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
-    v[k] = i < clen ? seg[c0 + i] : ~0ull;  // padding: all ones, after every key
+    // Padding: all ones, after every body index (ties keep it after: the sort is stable).
+    v[k] = i < clen ? static_cast<std::uint32_t>(seg[c0 + i] & low_mask) : 0xffffffffu;
   }
-  Sort(storage).Sort(v, 0, 2 * shift);
+  Sort(storage).Sort(v, 0, shift);
   for (int k = 0; k < kBlockSortItems; ++k) {
     const std::uint32_t i = threadIdx.x * kBlockSortItems + static_cast<std::uint32_t>(k);
-    if (i < clen) seg[c0 + i] = v[k];
+    if (i < clen) seg[c0 + i] = high | v[k];
   }
   __syncthreads();  // the shared storage is reused by the next chunk
 }
 
-using LongSort = cub::BlockRadixSort<unsigned long long, kBlockSize, kBlockSortItems>;
+using LongSort = cub::BlockRadixSort<std::uint32_t, kBlockSize, kBlockSortItems>;
 
 
 /// Chunk g of the huge segments (length > kBlockSortMax; the chunks of kBlockSortMax keys of

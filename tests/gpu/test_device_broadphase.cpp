@@ -249,8 +249,8 @@ BoxSet make_box_set(const std::string& name) {
   } else if (name == "nested-levels") {
     s.boxes = nested_levels();
   } else if (name == "long-segments") {
-    // Body 0 meets every other body (a segment of 8999 pairs (0, b): three chunks of the
-    // octree's sorted mode, whose block radix sorts take 4096 each, spread over blocks),
+    // Body 0 meets every other body (a segment of 8999 pairs (0, b): two chunks of the
+    // octree's sorted mode, whose block radix sorts take 8192 each, spread over blocks),
     // body 1 about 300 (one block's sort: over 64), the rest a handful each (one thread's).
     s.boxes = random_boxes(9000, 8, unit, 0.002f, 0.02f);
     s.boxes[0] = cube(-1.0f, 1.0f);
