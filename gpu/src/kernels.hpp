@@ -183,6 +183,12 @@ struct WitnessDesc {
 /// WitnessDesc::witness of a pair with none.
 constexpr unsigned long long kNoWitness = ~0ull;
 
+/// Most vertex tests a candidate pair's witness costs in a step beyond its descent: its
+/// last witness (one test) and, when that fails, each of its two vertices against the
+/// 32-vertex block of the other mesh's vertices that holds the other (midphase.cuh,
+/// witness_block_close).
+constexpr std::uint32_t kWitnessVertexTests = 1 + 2 * 32;
+
 /// Live pairs per warp of mid_start's grid from which the witness pass (a thread per pair,
 /// launch_mid_witness) tests the witnesses instead of mid_start's warps (MidListDesc::
 /// witness_pass_pairs): with many pairs per warp the start's warps run their pairs' lookups

@@ -75,8 +75,11 @@
 // there is confirmed with no set-up and no descent: the answer of the descent, which
 // confirms exactly when some vertex pair passes that test (its pruning, the set-up's early
 // rejection included, is conservative, midphase_hd.hpp). Which witness a pair keeps
-// (several leaves may confirm it) depends on timing; the answers do not. Counts: a
-// witness tested counts as one vertex test.
+// (several leaves may confirm it) depends on timing; the answers do not. A witness that
+// fails is followed by the 32-vertex blocks beside its two vertices (witness_block_close,
+// mid_start's warp): a contact that slid keeps a close vertex pair there. Counts: each
+// vertex pair a witness test compares counts as a vertex test (at most kWitnessVertexTests
+// a pair).
 // Each warp sums its counts in registers (Tally) and adds them once per launch.
 // Set-up: context() orders the pair (mesh first) on body indices and reads a step's levels
 // with hd::clamped_level, so no PlacedView is chosen by reference and no level array is
@@ -882,6 +885,60 @@ __device__ inline bool witness_close(const MidListDesc& d, const Pair& p, unsign
          hd::vertex_close(wa, hd::world_vertex(d.shapes.vertices[B.vertex_offset + vb], d.x[ib]), theta2);
 }
 
+/// Whether some vertex pair beside pair p's last witness w (which failed witness_close) is
+/// within theta (the whole warp, a lane per vertex; warp-uniform): A's witness vertex
+/// against the 32-vertex block of B's vertices that holds B's, and B's against A's block
+/// (mesh-box: A's block against the box). The vertices are in Morton order, so a block is
+/// a compact patch: a contact that slid keeps a close pair there. Confirms only as the
+/// descent would (any vertex pair that passes the leaves' test confirms the pair); *found
+/// is the pair found. The vertex tests run are counted in t.
+__device__ inline bool witness_block_close(const MidListDesc& d, const Pair& p, unsigned long long w, Tally& t,
+                                           unsigned long long& found) {
+  if (d.w[p.a] == 0.0f && d.w[p.b] == 0.0f) return false;  // static-static: never confirmed
+  const std::uint32_t sa = d.shape[p.a];
+  const std::uint32_t sb = d.shape[p.b];
+  const bool swap = d.shapes.shapes[sa].is_mesh == 0;  // as context()
+  const std::uint32_t ia = swap ? p.b : p.a;
+  const std::uint32_t ib = swap ? p.a : p.b;
+  const DeviceShape& A = d.shapes.shapes[swap ? sb : sa];
+  const DeviceShape& B = d.shapes.shapes[swap ? sa : sb];
+  const float theta = pair_theta(d.shapes.theta[sa], d.shapes.theta[sb]);
+  const float theta2 = theta * theta;
+  const std::uint32_t va = static_cast<std::uint32_t>(w >> 32);
+  const std::uint32_t vb = static_cast<std::uint32_t>(w);
+  if (A.is_mesh == 0 || va >= A.vertex_count || (B.is_mesh != 0 && vb >= B.vertex_count)) return false;
+  const std::uint32_t ja = (va & ~31u) + lane_id();
+  const bool a_in = ja < A.vertex_count;
+  bool close = false;
+  unsigned long long mine = 0;
+  if (B.is_mesh == 0) {
+    t.vertex_tests += static_cast<unsigned long long>(__popc(__ballot_sync(kFull, a_in)));
+    if (a_in) {
+      close = hd::vertex_box_close(hd::world_vertex(d.shapes.vertices[A.vertex_offset + ja], d.x[ia]), d.aabb[ib], theta2);
+      mine = static_cast<unsigned long long>(ja) << 32;
+    }
+  } else {
+    const std::uint32_t jb = (vb & ~31u) + lane_id();
+    const bool b_in = jb < B.vertex_count;
+    t.vertex_tests += static_cast<unsigned long long>(__popc(__ballot_sync(kFull, a_in)) +
+                                                      __popc(__ballot_sync(kFull, b_in)));
+    const Vec3 wa = hd::world_vertex(d.shapes.vertices[A.vertex_offset + va], d.x[ia]);
+    const Vec3 wb = hd::world_vertex(d.shapes.vertices[B.vertex_offset + vb], d.x[ib]);
+    if (b_in && hd::vertex_close(wa, hd::world_vertex(d.shapes.vertices[B.vertex_offset + jb], d.x[ib]), theta2)) {
+      close = true;
+      mine = (static_cast<unsigned long long>(va) << 32) | jb;
+    } else if (a_in &&
+               hd::vertex_close(hd::world_vertex(d.shapes.vertices[A.vertex_offset + ja], d.x[ia]), wb, theta2)) {
+      close = true;
+      mine = (static_cast<unsigned long long>(ja) << 32) | vb;
+    }
+  }
+  const unsigned m = __ballot_sync(kFull, close);
+  if (m == 0) return false;
+  found = __shfl_sync(kFull, mine, __ffs(m) - 1);
+  return true;
+}
+
 /// Whether the witness pass tests this step's witnesses (np live pairs; grid-uniform):
 /// from d.witness_pass_pairs on (kWitnessPassPairsPerWarp per warp of mid_start's grid);
 /// below, mid_start does.
@@ -890,8 +947,8 @@ __device__ inline bool witness_pass(const MidListDesc& d, std::uint32_t np) { re
 /// mid_witness's work (before mid_start, with the witness cache on; nothing unless
 /// witness_pass): one thread per live candidate pair k (grid-stride), pairs[k] from its
 /// sorted key, and confirmed[k] = 1 with witness[k] its last witness when the pair is still
-/// within theta there (witness_close), else confirmed[k] = 0 and witness[k] = kNoWitness
-/// (mid_start then sets the pair up). A thread per pair keeps every pair's chain of
+/// within theta there (witness_close), else confirmed[k] = 0 and witness[k] the failed
+/// witness or kNoWitness (mid_start then tests the blocks beside it, or sets the pair up). A thread per pair keeps every pair's chain of
 /// dependent loads (the lookup, the shapes, the two vertices) in flight at once.
 __device__ inline void mid_witness_items(const MidListDesc& d) {
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
@@ -904,7 +961,7 @@ __device__ inline void mid_witness_items(const MidListDesc& d) {
     unsigned long long w;
     const bool close = witness_close(d, p, key, tests, w);
     d.confirmed[k] = close ? 1 : 0;
-    d.wit.witness[k] = close ? w : kNoWitness;
+    d.wit.witness[k] = w;  // a failed one for mid_start's block test (witness_block_close)
   }
   Tally t;
   t.vertex_tests = __reduce_add_sync(kFull, tests);
@@ -913,8 +970,10 @@ __device__ inline void mid_witness_items(const MidListDesc& d) {
 
 /// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid).
 /// With the witness cache on, a pair is first tested at its last witness (witness_close,
-/// before its set-up; by mid_witness_items when witness_pass, else here by lane 0): a pair
-/// still within theta there is confirmed and keeps it, with no set-up and no cell test.
+/// before its set-up; by mid_witness_items when witness_pass, else here by lane 0), then,
+/// when that fails, at the vertex blocks beside it (witness_block_close): a pair still
+/// within theta there is confirmed and keeps the vertex pair found, with no set-up and no
+/// cell test.
 /// !kWitness: compiled without the cache (the fused small step).
 template <bool kWitness, bool kLean = false>
 __device__ inline void mid_start_items(const MidListDesc& d) {
@@ -927,13 +986,16 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
     // The pair from its sorted key (the broadphase's output), kept for the later stages.
     const unsigned long long key = d.pair_keys[k];
     const Pair p = unpack_pair(d, key);
-    if (!passed) {
-      if (lane_id() == 0) d.pairs[k] = p;
-      if (witnesses) {
+    if (!passed && lane_id() == 0) d.pairs[k] = p;
+    if (witnesses) {
+      unsigned long long w = kNoWitness;  // the last witness, tested and failed (or none)
+      if (passed) {
+        w = d.wit.witness[k];
+      } else {
         std::uint32_t tests = 0;
-        unsigned long long w = kNoWitness;
         const bool close = lane_id() == 0 && witness_close(d, p, key, tests, w);
         t.vertex_tests += tests;  // lane 0's tally is the warp's
+        w = __shfl_sync(kFull, w, 0);
         if (__shfl_sync(kFull, close ? 1 : 0, 0) != 0) {
           if (lane_id() == 0) {
             d.confirmed[k] = 1;
@@ -941,6 +1003,14 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
           }
           continue;
         }
+      }
+      unsigned long long found = kNoWitness;
+      if (w != kNoWitness && witness_block_close(d, p, w, t, found)) {
+        if (lane_id() == 0) {
+          d.confirmed[k] = 1;
+          d.wit.witness[k] = found;
+        }
+        continue;
       }
     }
     const PairContext c = context(d, k, p);
