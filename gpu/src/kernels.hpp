@@ -184,10 +184,9 @@ struct WitnessDesc {
 constexpr unsigned long long kNoWitness = ~0ull;
 
 /// Most vertex tests a candidate pair's witness costs in a step beyond its descent: its
-/// last witness (one test) and, when that fails, each of its two vertices against the
-/// 32-vertex block of the other mesh's vertices that holds the other (midphase.cuh,
-/// witness_block_close).
-constexpr std::uint32_t kWitnessVertexTests = 1 + 2 * 32;
+/// last witness (one test) and, when that fails, the 32 x 32 pairs of the two 32-vertex
+/// blocks that hold its vertices (midphase.cuh, witness_block_close).
+constexpr std::uint32_t kWitnessVertexTests = 1 + 32 * 32;
 
 /// Live pairs per warp of mid_start's grid from which the witness pass (a thread per pair,
 /// launch_mid_witness) tests the witnesses instead of mid_start's warps (MidListDesc::

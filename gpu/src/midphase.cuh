@@ -76,8 +76,9 @@
 // confirms exactly when some vertex pair passes that test (its pruning, the set-up's early
 // rejection included, is conservative, midphase_hd.hpp). Which witness a pair keeps
 // (several leaves may confirm it) depends on timing; the answers do not. A witness that
-// fails is followed by the 32-vertex blocks beside its two vertices (witness_block_close,
-// mid_start's warp): a contact that slid keeps a close vertex pair there. Counts: each
+// fails is followed by the pairs of the two 32-vertex blocks that hold its vertices
+// (witness_block_close, mid_start's warp): a contact that slid keeps a close vertex pair
+// there. Counts: each
 // vertex pair a witness test compares counts as a vertex test (at most kWitnessVertexTests
 // a pair).
 // Each warp sums its counts in registers (Tally) and adds them once per launch.
@@ -886,10 +887,11 @@ __device__ inline bool witness_close(const MidListDesc& d, const Pair& p, unsign
 }
 
 /// Whether some vertex pair beside pair p's last witness w (which failed witness_close) is
-/// within theta (the whole warp, a lane per vertex; warp-uniform): A's witness vertex
-/// against the 32-vertex block of B's vertices that holds B's, and B's against A's block
-/// (mesh-box: A's block against the box). The vertices are in Morton order, so a block is
-/// a compact patch: a contact that slid keeps a close pair there. Confirms only as the
+/// within theta (the whole warp; warp-uniform): the 32 x 32 pairs of the 32-vertex blocks
+/// of A's and B's vertices that hold the witness's two vertices, a lane per B vertex, A's
+/// block broadcast by shuffles (mesh-box: A's block against the box). The vertices are in
+/// Morton order, so a block is a compact patch: a contact that slid keeps a close pair
+/// there. Confirms only as the
 /// descent would (any vertex pair that passes the leaves' test confirms the pair); *found
 /// is the pair found. The vertex tests run are counted in t.
 __device__ inline bool witness_block_close(const MidListDesc& d, const Pair& p, unsigned long long w, Tally& t,
@@ -920,17 +922,22 @@ __device__ inline bool witness_block_close(const MidListDesc& d, const Pair& p, 
   } else {
     const std::uint32_t jb = (vb & ~31u) + lane_id();
     const bool b_in = jb < B.vertex_count;
-    t.vertex_tests += static_cast<unsigned long long>(__popc(__ballot_sync(kFull, a_in)) +
-                                                      __popc(__ballot_sync(kFull, b_in)));
-    const Vec3 wa = hd::world_vertex(d.shapes.vertices[A.vertex_offset + va], d.x[ia]);
-    const Vec3 wb = hd::world_vertex(d.shapes.vertices[B.vertex_offset + vb], d.x[ib]);
-    if (b_in && hd::vertex_close(wa, hd::world_vertex(d.shapes.vertices[B.vertex_offset + jb], d.x[ib]), theta2)) {
+    const unsigned a_mask = __ballot_sync(kFull, a_in);
+    t.vertex_tests += static_cast<unsigned long long>(__popc(a_mask)) *
+                      static_cast<unsigned long long>(__popc(__ballot_sync(kFull, b_in)));
+    const Vec3 wa = a_in ? hd::world_vertex(d.shapes.vertices[A.vertex_offset + ja], d.x[ia]) : Vec3{};
+    const Vec3 wb = b_in ? hd::world_vertex(d.shapes.vertices[B.vertex_offset + jb], d.x[ib]) : Vec3{};
+    int first = -1;  // the first of A's block within theta of this lane's B vertex
+    for (int i = 0; i < 32; ++i) {
+      Vec3 ai;
+      ai.x = __shfl_sync(kFull, wa.x, i);
+      ai.y = __shfl_sync(kFull, wa.y, i);
+      ai.z = __shfl_sync(kFull, wa.z, i);
+      if (first < 0 && b_in && ((a_mask >> i) & 1u) != 0 && hd::vertex_close(ai, wb, theta2)) first = i;
+    }
+    if (first >= 0) {
       close = true;
-      mine = (static_cast<unsigned long long>(va) << 32) | jb;
-    } else if (a_in &&
-               hd::vertex_close(hd::world_vertex(d.shapes.vertices[A.vertex_offset + ja], d.x[ia]), wb, theta2)) {
-      close = true;
-      mine = (static_cast<unsigned long long>(ja) << 32) | vb;
+      mine = (static_cast<unsigned long long>((va & ~31u) + static_cast<std::uint32_t>(first)) << 32) | jb;
     }
   }
   const unsigned m = __ballot_sync(kFull, close);
