@@ -210,6 +210,7 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<unsigned long long> prev_witness{"midphase kept witnesses"};
   gpu::DeviceBuffer<std::uint32_t> prev_begin{"midphase kept key runs"};
   gpu::DeviceBuffer<std::uint32_t> prev_count{"midphase kept key count"};
+  gpu::DeviceBuffer<unsigned long long> leaf_items{"midphase leaf items"};  // MidListDesc::leaf_items
   // The small path's in-lists and their offsets.
   gpu::DeviceBuffer<std::uint32_t> in_list{"small-step in-lists"};
   gpu::DeviceBuffer<std::uint32_t> body_begin{"small-step in-list offsets"};

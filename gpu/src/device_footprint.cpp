@@ -111,8 +111,8 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
   // and entries (the small path holds its in-lists instead), its long-segment list (pcap /
   // (kIndexShortSegment + 1) + 1 entries of 4 bytes, counted as a byte per pair plus 4:
   // linear in pcap); the midphase's witness cache on a model with meshes (3 x 8 bytes per
-  // pair, prev_begin n + 1, its count); the two work lists; CUB's temporary storage (the
-  // largest of its uses).
+  // pair, prev_begin n + 1, its count); the midphase's two leaf item words; the two work
+  // lists; CUB's temporary storage (the largest of its uses).
   static_assert(kIndexShortSegment + 1 >= sizeof(std::uint32_t), "a byte per pair covers the long-segment list");
   const std::uint64_t pcap = initial_pair_capacity(n);
   const std::uint64_t lcap = initial_list_capacity(n);
@@ -125,7 +125,7 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
                              2 * buf(pcap, sizeof(std::uint8_t)) + 4 * buf(pcap, sizeof(Vec3)) +
                              buf(pcap, sizeof(float)) + buf(pcap, kDeviceContactBytes) +
                              2 * buf(pcap, sizeof(std::uint32_t)) +
-                             buf(pcap, 1) + sizeof(std::uint32_t) + witness_cache +
+                             buf(pcap, 1) + sizeof(std::uint32_t) + witness_cache + buf(2, sizeof(unsigned long long)) +
                              2 * buf(lcap, kMidItemBytes) + buf(temp, 1);
   // The fused small step's column counts (n + 1), allocated when it runs (counted up to 32768
   // bodies, kMetricsOneBlockBodies: above the small path's kCudaSmallStepMaxBodies).

@@ -230,6 +230,10 @@ struct MidListDesc {
   /// by the host: kWitnessPassPairsPerWarp per warp of mid_start's grid, or
   /// CudaTestHooks::witness_pass_min_pairs.
   std::uint32_t witness_pass_pairs = 0;
+  /// Two device words (or null: the small path): [0] the last step's leaf items, which
+  /// the fuse decision reads (midphase.cuh, fuse_leaves), [1] this step's, summed by the
+  /// last expand step's kernels and moved to [0] by mid_keep.
+  unsigned long long* leaf_items = nullptr;
   /// A leaf skips a pair of vertex tiles whose boxes are more than theta apart on an axis
   /// (midphase.cuh, tiles_apart): the same results. 1 on every path; the small path's lean
   /// kernel compiles it as 0.
@@ -322,7 +326,7 @@ struct MetricsResult {
 /// Everything the host reads back after a step, in one device struct (one copy).
 struct StepStats {
   MetricsResult metrics;
-  unsigned long long counters[4];  ///< box tests, (unused), vertex tests, broadphase exact tests
+  unsigned long long counters[4];  ///< box tests, leaf box pairs, vertex tests, broadphase exact tests
   std::uint32_t counts[hd::kMidphaseMaxLevels + 1];  ///< [0] pairs found, [1 + i] items of step i
   std::uint32_t index_long;  ///< bodies of the contact index's long segments (the per-stage path)
 };
@@ -510,8 +514,9 @@ cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t s
 cudaError_t launch_mid_expand(const MidListDesc& d, int step, unsigned grid, cudaStream_t stream);
 /// Leaf: the narrow phase of the last step's items (d.in); sets confirmed[k] = 1 on a hit.
 cudaError_t launch_mid_leaf(const MidListDesc& d, unsigned grid, cudaStream_t stream);
-/// Keep: this step's sorted keys and witnesses for the next step's start (d.wit; nothing
-/// when the witness cache is off), after the leaves. `grid` blocks, grid-stride over the pairs.
+/// Keep: this step's sorted keys and witnesses for the next step's start (d.wit; none
+/// when the witness cache is off) and its leaf items for the next fuse decision
+/// (d.leaf_items), after the leaves. `grid` blocks, grid-stride over the pairs.
 cudaError_t launch_mid_keep(const MidListDesc& d, unsigned grid, cudaStream_t stream);
 
 // ---- response.cu -----------------------------------------------------------------------

@@ -48,18 +48,25 @@ __global__ void __launch_bounds__(kBlockSize, 4) mid_leaf_kernel(MidListDesc d) 
   mid::mid_leaf_items<true>(d, tiles);
 }
 
-// The witness cache's copy of this step's keys and witnesses (grid-stride, a thread per pair).
+// The witness cache's copy of this step's keys and witnesses (grid-stride, a thread per pair),
+// and this step's leaf items moved to the last step's (fuse_leaves).
 __global__ void mid_keep_kernel(MidListDesc d) {
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
   const std::uint32_t tid = blockIdx.x * blockDim.x + threadIdx.x;
-  for (std::uint32_t k = tid; k < np; k += gridDim.x * blockDim.x) mid::keep_witness(d, k);
-  if (tid == 0) mid::keep_witness_count(d);
+  if (d.wit.witness != nullptr) {
+    for (std::uint32_t k = tid; k < np; k += gridDim.x * blockDim.x) mid::keep_witness(d, k);
+    if (tid == 0) mid::keep_witness_count(d);
+  }
+  if (tid == 0 && d.leaf_items != nullptr) {  // this step's leaf items become the last step's
+    d.leaf_items[0] = d.leaf_items[1];
+    d.leaf_items[1] = 0;
+  }
 }
 
 }  // namespace
 
 cudaError_t launch_mid_keep(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
-  if (d.wit.witness == nullptr || d.pair_capacity == 0) return cudaSuccess;
+  if ((d.wit.witness == nullptr && d.leaf_items == nullptr) || d.pair_capacity == 0) return cudaSuccess;
   mid_keep_kernel<<<grid, kBlockSize, 0, stream>>>(d);
   return cudaGetLastError();
 }

@@ -36,6 +36,7 @@ gpu::SmallStepDesc CudaWorld::Impl::small_desc(const Scene& scene, bool recordin
   s.pair_keys = pair_keys.get();
   s.shift = gpu::key_bits(n);
   s.mid = mid_desc(pair_keys.get());  // the fill writes them in (a, b) order: no sort
+  s.mid.leaf_items = nullptr;  // the small path's leaves are never fused by count
   s.lists[0] = items_a.get();
   s.lists[1] = items_b.get();
   s.list_capacity = lcap();

@@ -64,7 +64,7 @@ std::vector<BufferBase*> CudaWorld::Impl::scratch_buffers() {
   return {&bp_count, &bp_offset, &pair_keys, &pair_keys_sorted, &pairs, &confirmed, &items_a, &items_b,
           &hit,      &dx_a,      &dx_b,      &dv_a,             &dv_b,  &depth0,    &records, &in_list,
           &body_begin, &in_count, &index_offsets, &index_rank, &index_entries, &index_long, &witness,
-          &prev_keys, &prev_witness, &prev_begin, &prev_count, &temp};
+          &prev_keys, &prev_witness, &prev_begin, &prev_count, &leaf_items, &temp};
 }
 
 void CudaWorld::Impl::launched(cudaError_t e, const char* kernel) {
@@ -120,6 +120,7 @@ gpu::MidListDesc CudaWorld::Impl::mid_desc(const unsigned long long* keys) {
   md.steps = level_steps;
   md.early_exit = mid_early_exit;
   md.fuse_min_items = mid_fuse_min_items;
+  md.leaf_items = leaf_items.get();
   md.witness_pass_pairs = mid_witness_pass_min_pairs > 0
                               ? mid_witness_pass_min_pairs
                               : gpu::kWitnessPassPairsPerWarp * warp_grid * (gpu::kBlockSize / 32u);
@@ -222,6 +223,10 @@ void CudaWorld::Impl::prepare() {
   }
   items_a.ensure(list_cap);
   items_b.ensure(list_cap);
+  if (!leaf_items.get()) {  // the fuse decision's words (MidListDesc::leaf_items), kept across regrows
+    leaf_items.ensure(2);
+    check(cudaMemsetAsync(leaf_items.get(), 0, 2 * sizeof(unsigned long long), stream), "cudaMemset leaf items");
+  }
   if (small) {
     in_list.ensure(pair_cap);
     body_begin.ensure(n1);
