@@ -860,6 +860,32 @@ __device__ inline unsigned long long last_witness(const MidListDesc& d, std::uin
   return lo < count && w.prev_keys[lo] == key ? w.prev_witness[lo] : kNoWitness;
 }
 
+/// Pair p in context()'s order (A the mesh when one of the two is a box) as its witness
+/// tests need it: the bodies, the shapes, theta^2 as hd::setup_pair computes it, and
+/// witness w's vertex indices (A's, B's: indices into each shape's octree vertices).
+struct WitnessSides {
+  std::uint32_t ia, ib;      ///< bodies A and B
+  const DeviceShape* A;
+  const DeviceShape* B;
+  float theta2;              ///< m^2
+  std::uint32_t va, vb;      ///< w's vertices of A and B
+};
+
+/// Pair p's WitnessSides for witness w (w's vertices are not range-checked here).
+__device__ inline WitnessSides witness_sides(const MidListDesc& d, const Pair& p, unsigned long long w) {
+  const std::uint32_t sa = d.shape[p.a];
+  const std::uint32_t sb = d.shape[p.b];
+  const bool swap = d.shapes.shapes[sa].is_mesh == 0;  // as context()
+  const float theta = pair_theta(d.shapes.theta[sa], d.shapes.theta[sb]);
+  return {swap ? p.b : p.a,
+          swap ? p.a : p.b,
+          &d.shapes.shapes[swap ? sb : sa],
+          &d.shapes.shapes[swap ? sa : sb],
+          theta * theta,
+          static_cast<std::uint32_t>(w >> 32),
+          static_cast<std::uint32_t>(w)};
+}
+
 /// Whether pair p (sorted key `key`) is confirmed at its last witness (last_witness; one
 /// thread), before and without its set-up: the leaves' vertex test (hd::vertex_close, or
 /// hd::vertex_box_close against the box's world AABB) on the same world vertices, A the
@@ -876,17 +902,11 @@ __device__ inline bool witness_close(const MidListDesc& d, const Pair& p, unsign
   if (w == kNoWitness) return false;
   tests += 1;
   if (d.w[p.a] == 0.0f && d.w[p.b] == 0.0f) return false;
-  const std::uint32_t sa = d.shape[p.a];
-  const std::uint32_t sb = d.shape[p.b];
-  const bool swap = d.shapes.shapes[sa].is_mesh == 0;  // as context()
-  const std::uint32_t ia = swap ? p.b : p.a;
-  const std::uint32_t ib = swap ? p.a : p.b;
-  const DeviceShape& A = d.shapes.shapes[swap ? sb : sa];
-  const DeviceShape& B = d.shapes.shapes[swap ? sa : sb];
-  const float theta = pair_theta(d.shapes.theta[sa], d.shapes.theta[sb]);
-  const float theta2 = theta * theta;
-  const std::uint32_t va = static_cast<std::uint32_t>(w >> 32);
-  const std::uint32_t vb = static_cast<std::uint32_t>(w);
+  const WitnessSides ws = witness_sides(d, p, w);
+  const std::uint32_t ia = ws.ia, ib = ws.ib, va = ws.va, vb = ws.vb;
+  const DeviceShape& A = *ws.A;
+  const DeviceShape& B = *ws.B;
+  const float theta2 = ws.theta2;
   if (A.is_mesh == 0 || va >= A.vertex_count) return false;
   const Vec3 wa = hd::world_vertex(d.shapes.vertices[A.vertex_offset + va], d.x[ia]);
   if (B.is_mesh == 0) return hd::vertex_box_close(wa, d.aabb[ib], theta2);
@@ -899,23 +919,16 @@ __device__ inline bool witness_close(const MidListDesc& d, const Pair& p, unsign
 /// of A's and B's vertices that hold the witness's two vertices, a lane per B vertex, A's
 /// block broadcast by shuffles (mesh-box: A's block against the box). The vertices are in
 /// Morton order, so a block is a compact patch: a contact that slid keeps a close pair
-/// there. Confirms only as the
-/// descent would (any vertex pair that passes the leaves' test confirms the pair); *found
-/// is the pair found. The vertex tests run are counted in t.
+/// there. Confirms only as the descent would (any vertex pair that passes the leaves' test
+/// confirms the pair); *found is the pair found. The vertex tests run are counted in t.
 __device__ inline bool witness_block_close(const MidListDesc& d, const Pair& p, unsigned long long w, Tally& t,
                                            unsigned long long& found) {
   if (d.w[p.a] == 0.0f && d.w[p.b] == 0.0f) return false;  // static-static: never confirmed
-  const std::uint32_t sa = d.shape[p.a];
-  const std::uint32_t sb = d.shape[p.b];
-  const bool swap = d.shapes.shapes[sa].is_mesh == 0;  // as context()
-  const std::uint32_t ia = swap ? p.b : p.a;
-  const std::uint32_t ib = swap ? p.a : p.b;
-  const DeviceShape& A = d.shapes.shapes[swap ? sb : sa];
-  const DeviceShape& B = d.shapes.shapes[swap ? sa : sb];
-  const float theta = pair_theta(d.shapes.theta[sa], d.shapes.theta[sb]);
-  const float theta2 = theta * theta;
-  const std::uint32_t va = static_cast<std::uint32_t>(w >> 32);
-  const std::uint32_t vb = static_cast<std::uint32_t>(w);
+  const WitnessSides ws = witness_sides(d, p, w);
+  const std::uint32_t ia = ws.ia, ib = ws.ib, va = ws.va, vb = ws.vb;
+  const DeviceShape& A = *ws.A;
+  const DeviceShape& B = *ws.B;
+  const float theta2 = ws.theta2;
   if (A.is_mesh == 0 || va >= A.vertex_count || (B.is_mesh != 0 && vb >= B.vertex_count)) return false;
   const std::uint32_t ja = (va & ~31u) + lane_id();
   const bool a_in = ja < A.vertex_count;
