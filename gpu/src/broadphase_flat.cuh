@@ -19,10 +19,11 @@ template <bool box_first, class Emit>
 __device__ inline std::uint32_t flat_row(const Aabb* aabb, const Aabb& box, std::uint32_t j0, std::uint32_t j1,
                                          Emit&& emit) {
   const std::uint32_t lane = threadIdx.x & 31u;
+  const Aabb own = box;  // in registers: `emit` may write memory that `box` could alias
   std::uint32_t found = 0;
   for (std::uint32_t b = j0; b < j1; b += 32) {
     const std::uint32_t j = b + lane;
-    const bool hit = j < j1 && (box_first ? overlaps(box, aabb[j]) : overlaps(aabb[j], box));
+    const bool hit = j < j1 && (box_first ? overlaps(own, aabb[j]) : overlaps(aabb[j], own));
     const unsigned mask = __ballot_sync(bp::kFullMask, hit);
     if (hit) emit(found + static_cast<std::uint32_t>(__popc(mask & ((1u << lane) - 1u))), j);
     found += static_cast<std::uint32_t>(__popc(mask));
