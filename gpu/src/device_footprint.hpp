@@ -62,8 +62,21 @@ constexpr std::uint32_t kHashEntriesPerBody = 8;
 /// Candidate pairs the engine has room for before its first step, for n bodies; a step that
 /// finds more grows the pair buffers and runs again.
 constexpr std::uint64_t initial_pair_capacity(std::uint64_t n) { return 2 * n + 64; }
-/// Items per midphase work list before the first step, for n bodies (grown likewise).
-constexpr std::uint64_t initial_list_capacity(std::uint64_t n) { return 4 * n + 256; }
+/// gpu::kSmallLeanBodies (kernels.hpp): the fused small step's lean kernel runs up to that
+/// many bodies.
+constexpr std::uint64_t kSmallLeanBodies = 64;
+/// gpu::kBlockPairSegments (kernels.hpp): the lean kernel's segments of each work list.
+constexpr std::uint64_t kBlockPairSegments = 128;
+/// Items per segment before the first step on the lean kernel's scenes (a pair's items of
+/// one list).
+constexpr std::uint64_t kBlockPairSegmentItems = 256;
+/// Items per midphase work list before the first step, for n bodies (grown likewise): on
+/// the lean kernel's scenes (n <= kSmallLeanBodies) kBlockPairSegmentItems a segment.
+constexpr std::uint64_t initial_list_capacity(std::uint64_t n) {
+  return n <= kSmallLeanBodies && 4 * n + 256 < kBlockPairSegments * kBlockPairSegmentItems
+             ? kBlockPairSegments * kBlockPairSegmentItems
+             : 4 * n + 256;
+}
 
 /// Fixed part of the CUB bounds below: onesweep's bins and counters (at most 16 portions
 /// of 2^28 items x 8 passes x 256 digits x 4 bytes = 128 KiB below 2^32 items) and the

@@ -327,7 +327,9 @@ struct MetricsResult {
 struct StepStats {
   MetricsResult metrics;
   unsigned long long counters[4];  ///< box tests, leaf box pairs, vertex tests, broadphase exact tests
-  std::uint32_t counts[hd::kMidphaseMaxLevels + 1];  ///< [0] pairs found, [1 + i] items of step i
+  /// [0] pairs found, [1 + i] items of step i (the lean kernel: the most items of step i a
+  /// pair had, times kBlockPairSegments): above the list capacity, the lists are grown.
+  std::uint32_t counts[hd::kMidphaseMaxLevels + 1];
   std::uint32_t index_long;  ///< bodies of the contact index's long segments (the per-stage path)
 };
 
@@ -423,6 +425,12 @@ struct SmallStepDesc {
 /// that little midphase work the early exit's and the tile culling's code cost more than
 /// they save (bunny-stack-50, 55 bodies, on the H100: reports/h100/perf-v5).
 constexpr std::uint32_t kSmallLeanBodies = 64;
+
+/// The segments of each midphase list in the lean kernel, whose midphase runs a block per
+/// pair (midphase.cuh, mid_block_pairs): block b uses segment b (list_capacity /
+/// kBlockPairSegments items), so a grid of more blocks runs the grid's lists instead.
+/// StepStats::counts[1 + i] is then the most items of list i any pair had times this.
+constexpr std::uint32_t kBlockPairSegments = 128;
 
 /// The most bodies of the fused front (SmallStepDesc::front_bodies): the block's shared
 /// memory holds their counts (and, as for the shared boxes, their boxes and offsets).

@@ -996,6 +996,26 @@ __device__ inline void mid_witness_items(const MidListDesc& d) {
   flush(d, t);
 }
 
+/// Pair k's start (set up as c), by the warp: a pair decided_alone gets its answer
+/// (lane 0), any other confirmed[k] = 0 and its first step's cell pairs appended
+/// (first_step); with `witnesses`, witness[k] = kNoWitness either way.
+template <bool kLean = false>
+__device__ inline void start_pair(const MidListDesc& d, std::uint32_t k, const PairContext& c, bool witnesses,
+                                  Tally& t) {
+  if (decided_alone(c)) {
+    if (lane_id() == 0) {
+      d.confirmed[k] = alone_answer(c) ? 1 : 0;
+      if (witnesses) d.wit.witness[k] = kNoWitness;
+    }
+    return;
+  }
+  if (lane_id() == 0) {
+    d.confirmed[k] = 0;
+    if (witnesses) d.wit.witness[k] = kNoWitness;
+  }
+  first_step<kLean>(d, c, k, t);
+}
+
 /// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid).
 /// With the witness cache on, a pair is first tested at its last witness (witness_close,
 /// before its set-up; by mid_witness_items when witness_pass, else here by lane 0), then,
@@ -1041,19 +1061,7 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
         continue;
       }
     }
-    const PairContext c = context(d, k, p);
-    if (decided_alone(c)) {
-      if (lane_id() == 0) {
-        d.confirmed[k] = alone_answer(c) ? 1 : 0;
-        if (witnesses) d.wit.witness[k] = kNoWitness;
-      }
-      continue;
-    }
-    if (lane_id() == 0) {
-      d.confirmed[k] = 0;
-      if (witnesses) d.wit.witness[k] = kNoWitness;
-    }
-    first_step<kLean>(d, c, k, t);
+    start_pair<kLean>(d, k, context(d, k, p), witnesses, t);
   }
   flush(d, t);
 }
@@ -1136,6 +1144,20 @@ __device__ inline void warp_range(std::uint32_t count, std::uint32_t& begin, std
   end = e < count ? static_cast<std::uint32_t>(e) : count;
 }
 
+/// Expand step `step` of `item` (pair item.k, set up as c), by the warp: the descendants of
+/// its cells at the next step, tested and appended (test_cells; `last`: the step before the
+/// leaves, whose leaves run here when `leaves` is not null).
+template <bool kLean = false>
+__device__ inline void expand_item(const MidListDesc& d, const PairContext& c, const MidItem& item, int step,
+                                   bool last, Tally& t, LeafTiles* leaves) {
+  const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
+  std::uint32_t a0, a1, b0 = 0, b1 = 1;
+  hd::descendants(c.a.octree, item.ca, step_level(d, c, step, false), step_level(d, c, step + 1, false), a0, a1);
+  if (!mesh_box)
+    hd::descendants(c.b.octree, item.cb, step_level(d, c, step, true), step_level(d, c, step + 1, true), b0, b1);
+  test_cells<kLean>(d, c, item.k, a0, a1, b0, b1, last, t, leaves);
+}
+
 /// mid_expand's work: one warp per item of step `step` (warp_range of the list).
 /// `tiles`: the block's LeafTiles (blockDim.x == kBlockSize) when the last step may run its
 /// leaves itself (fuse_leaves), or null (never).
@@ -1158,12 +1180,7 @@ __device__ inline void mid_expand_items(const MidListDesc& d, int step, LeafTile
       ck = item.k;
       have = true;
     }
-    const bool mesh_box = c.s.kind == hd::PairKind::MeshBox;
-    std::uint32_t a0, a1, b0 = 0, b1 = 1;
-    hd::descendants(c.a.octree, item.ca, step_level(d, c, step, false), step_level(d, c, step + 1, false), a0, a1);
-    if (!mesh_box)
-      hd::descendants(c.b.octree, item.cb, step_level(d, c, step, true), step_level(d, c, step + 1, true), b0, b1);
-    test_cells<kLean>(d, c, item.k, a0, a1, b0, b1, last, t, leaves);
+    expand_item<kLean>(d, c, item, step, last, t, leaves);
   }
   flush(d, t);
 }
@@ -1185,6 +1202,75 @@ __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
     // mid_expand_items does) takes 89 registers here, or spills 352 bytes at 64.
     const PairContext c = context(d, item.k, d.pairs[item.k]);
     leaf_item<kWitness, kLean>(d, c, item.k, item.ca, item.cb, item.chunk, warp, t);
+  }
+  flush(d, t);
+}
+
+/// The midphase of the fused small step's lean kernel, a block per pair: pairs k =
+/// blockIdx.x, blockIdx.x + gridDim.x, ... of the live pairs; for each, warp 0 sets the
+/// pair up and runs its start, then each step's items are shared by the block's warps
+/// (items w, w + warps, ... to warp w), the steps and the leaves apart by __syncthreads: no
+/// grid-wide barrier between the start, the expand steps and the leaves. The block's lists
+/// are its own segments of the two lists (`capacity` items each from blockIdx.x *
+/// capacity on, blockIdx.x < kBlockPairSegments; their counts `counts`, steps entries of
+/// the block's shared memory), which hold one pair's items at a time: the same items, the
+/// same tests and counts as the grid's lists. st_counts[1 + i] gets, by atomicMax, each
+/// pair's count of list i times kBlockPairSegments: a segment that overflowed then reads
+/// above the lists' capacity, the host's regrow test (grow_if_needed), and the regrown
+/// segments hold it. `md` is the block's descriptor in shared memory, whose lists thread 0
+/// sets; `tiles` the block's leaf tiles. Every thread of the block calls it (block-uniform
+/// loops).
+template <bool kLean>
+__device__ inline void mid_block_pairs(MidListDesc& md, MidItem* const* lists, std::uint32_t capacity,
+                                       std::uint32_t* counts, std::uint32_t* st_counts, LeafTiles& tiles) {
+  const MidListDesc& d = md;
+  const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
+  const std::uint32_t warp = threadIdx.x >> 5;
+  const std::uint32_t warps = blockDim.x >> 5;
+  const int steps = d.steps;
+  const std::size_t base = static_cast<std::size_t>(blockIdx.x) * capacity;
+  const WarpTiles leaf_tiles = warp_tiles(d, tiles);
+  Tally t;
+  for (std::uint32_t k = blockIdx.x; k < np; k += gridDim.x) {
+    if (threadIdx.x == 0) {
+      for (int i = 0; i < steps; ++i) counts[i] = 0;
+      md.out = lists[0] + base;
+      md.out_count = counts;
+      md.out_capacity = capacity;
+    }
+    __syncthreads();
+    const Pair p = unpack_pair(d, d.pair_keys[k]);
+    const PairContext c = context(d, k, p);  // every warp's, set up while warp 0 starts
+    if (warp == 0) {
+      if (lane_id() == 0) d.pairs[k] = p;
+      start_pair<kLean>(d, k, c, false, t);
+    }
+    __syncthreads();
+    if (counts[0] == 0) continue;  // decided alone, or no cell pair: done
+    for (int i = 0; i < steps; ++i) {
+      const bool leaves = i + 1 == steps;
+      if (threadIdx.x == 0) {
+        md.in = lists[i % 2] + base;
+        md.in_count = counts + i;
+        md.in_capacity = capacity;
+        md.out = leaves ? nullptr : lists[(i + 1) % 2] + base;
+        md.out_count = leaves ? nullptr : counts + i + 1;
+      }
+      __syncthreads();
+      const std::uint32_t count = counts[i] < capacity ? counts[i] : capacity;
+      for (std::uint32_t it = warp; it < count; it += warps) {
+        const MidItem item = d.in[it];
+        if (leaves) leaf_item<false, kLean>(d, c, k, item.ca, item.cb, item.chunk, leaf_tiles, t);
+        else expand_item<kLean>(d, c, item, i, i + 2 == steps, t, nullptr);
+      }
+      __syncthreads();
+    }
+    if (threadIdx.x == 0) {
+      for (int i = 0; i < steps; ++i) {
+        const unsigned long long scaled = static_cast<unsigned long long>(counts[i]) * kBlockPairSegments;
+        atomicMax(st_counts + 1 + i, scaled < 0xffffffffull ? static_cast<std::uint32_t>(scaled) : 0xffffffffu);
+      }
+    }
   }
   flush(d, t);
 }

@@ -20,7 +20,9 @@
 //     in_offset[i];
 //  5. mid_start (one warp per pair: pairs[k], confirmed[k], step 0 items); the in-lists'
 //     entries a resolved to their pair index k (binary search in a's key segment);
-//  6. mid_expand per level step, mid_leaf (the midphase's work lists, warp per item);
+//  6. mid_expand per level step, mid_leaf (the midphase's work lists, warp per item); the
+//     lean kernel runs 5 and 6 a block per pair instead (midphase.cuh, mid_block_pairs:
+//     its steps apart by __syncthreads, one grid-wide barrier after them all);
 //  7. per response pass: contact_terms per pair, then per dynamic body the sums of its kept
 //     contacts in the order the graph path's stable sort by body gives and World::step
 //     adds them: the pairs (a, i), a < i, in increasing a (its in-list), then the pairs
@@ -190,6 +192,26 @@ __device__ __forceinline__ void fill_rows(const SmallStepDesc& s, const Aabb* bo
   }
 }
 
+/// The in-lists' entries a resolved to their pair's index k (kNoPair when the pair did not
+/// fit the capacity), a body per thread from the grid's last thread down (the first warps
+/// take the midphase's pairs): a binary search in a's key segment.
+__device__ __forceinline__ void resolve_in_lists(const SmallStepDesc& s, std::uint32_t tid, std::uint32_t threads) {
+  const std::uint32_t cap = s.mid.pair_capacity;
+  const std::uint32_t n = s.bodies.n;
+  const std::uint32_t live = live_count(s.stats->counts, cap);
+  for (std::uint32_t i = threads - 1u - tid; i < n; i += threads) {
+    const std::uint32_t e1 = min_u32(s.in_offset[i + 1], cap);
+    for (std::uint32_t e = s.in_offset[i]; e < e1; ++e) {
+      const std::uint32_t a = s.in_list[e];
+      const std::uint32_t lo = s.out_offset[a];
+      const std::uint32_t hi = min_u32(s.out_offset[a + 1], live);
+      const unsigned long long key = bp::pair_key(a, i, s.shift);
+      const std::uint32_t k = lo < hi ? bp::lower_bound_u64(s.pair_keys, lo, hi, key) : hi;
+      s.in_list[e] = k < hi && s.pair_keys[k] == key ? k : kNoPair;
+    }
+  }
+}
+
 /// One whole step (every thread of the grid calls it): `sequence` is written to *s.done at
 /// the end, `records` (may be null) gets the first pass's contacts, `profile` (may be null)
 /// the phase stamps; smem: kSharedBytes. kLean (s.lean, tiny scenes): the midphase's early
@@ -352,52 +374,51 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     block_md.out_capacity = s.list_capacity;
   }
   __syncthreads();
-  mid::mid_start_items<false, kLean>(md);
-  {
-    const std::uint32_t live = live_count(st->counts, cap);
-    for (std::uint32_t i = threads - 1u - tid; i < n; i += threads) {
-      const std::uint32_t e1 = min_u32(s.in_offset[i + 1], cap);
-      for (std::uint32_t e = s.in_offset[i]; e < e1; ++e) {
-        const std::uint32_t a = s.in_list[e];
-        const std::uint32_t lo = s.out_offset[a];
-        const std::uint32_t hi = min_u32(s.out_offset[a + 1], live);
-        const unsigned long long key = bp::pair_key(a, i, s.shift);
-        const std::uint32_t k = lo < hi ? bp::lower_bound_u64(s.pair_keys, lo, hi, key) : hi;
-        s.in_list[e] = k < hi && s.pair_keys[k] == key ? k : kNoPair;
-      }
-    }
-  }
-  grid.sync();
-  stamp(profile, 5);
-
-  // 6. Midphase expand steps and leaves (as step_stages.cpp enqueues them; the leaves stay
-  // in the leaf list: no expand step runs them itself here).
   const int steps = s.mid.steps;
-  for (int i = 0; i + 1 < steps; ++i) {
-    if (threadIdx.x == 0) {
-      block_md.in = s.lists[i % 2];
-      block_md.in_count = st->counts + 1 + i;
-      block_md.in_capacity = s.list_capacity;
-      block_md.out = s.lists[(i + 1) % 2];
-      block_md.out_count = st->counts + 2 + i;
-    }
-    __syncthreads();
-    mid::mid_expand_items<kLean>(md, i);
+  if (kLean && gridDim.x <= kBlockPairSegments) {
+    // 5-6. The in-lists resolved, then the midphase a block per pair: start, expand steps
+    // and leaves in the block's segments of the lists, one grid-wide barrier after them.
+    __shared__ std::uint32_t block_counts[hd::kMidphaseMaxLevels];
+    resolve_in_lists(s, tid, threads);
+    mid::mid_block_pairs<kLean>(block_md, s.lists, s.list_capacity / kBlockPairSegments, block_counts,
+                                st->counts, *reinterpret_cast<mid::LeafTiles*>(smem));
     grid.sync();
-  }
-  stamp(profile, 6);
-  if (steps > 0) {
-    if (threadIdx.x == 0) {
-      block_md.in = s.lists[(steps - 1) % 2];
-      block_md.in_count = st->counts + steps;
-      block_md.in_capacity = s.list_capacity;
-      block_md.out = nullptr;
-      block_md.out_count = nullptr;
-      block_md.out_capacity = 0;
-    }
-    __syncthreads();
-    mid::mid_leaf_items<false, kLean>(md, *reinterpret_cast<mid::LeafTiles*>(smem));
+    stamp(profile, 5);
+    stamp(profile, 6);
+  } else {
+    mid::mid_start_items<false, kLean>(md);
+    resolve_in_lists(s, tid, threads);
     grid.sync();
+    stamp(profile, 5);
+
+    // 6. Midphase expand steps and leaves (as step_stages.cpp enqueues them; the leaves stay
+    // in the leaf list: no expand step runs them itself here).
+    for (int i = 0; i + 1 < steps; ++i) {
+      if (threadIdx.x == 0) {
+        block_md.in = s.lists[i % 2];
+        block_md.in_count = st->counts + 1 + i;
+        block_md.in_capacity = s.list_capacity;
+        block_md.out = s.lists[(i + 1) % 2];
+        block_md.out_count = st->counts + 2 + i;
+      }
+      __syncthreads();
+      mid::mid_expand_items<kLean>(md, i);
+      grid.sync();
+    }
+    stamp(profile, 6);
+    if (steps > 0) {
+      if (threadIdx.x == 0) {
+        block_md.in = s.lists[(steps - 1) % 2];
+        block_md.in_count = st->counts + steps;
+        block_md.in_capacity = s.list_capacity;
+        block_md.out = nullptr;
+        block_md.out_count = nullptr;
+        block_md.out_capacity = 0;
+      }
+      __syncthreads();
+      mid::mid_leaf_items<false, kLean>(md, *reinterpret_cast<mid::LeafTiles*>(smem));
+      grid.sync();
+    }
   }
   stamp(profile, 7);
 
