@@ -1207,7 +1207,8 @@ __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
 }
 
 /// The midphase of the fused small step's lean kernel, a block per pair: pairs k =
-/// blockIdx.x, blockIdx.x + gridDim.x, ... of the live pairs; for each, warp 0 sets the
+/// blockIdx.x, blockIdx.x + gridDim.x, ... of the np live pairs (pair k: pair_of(k), a
+/// block-local look-up, so the sorted keys need not be visible yet); for each, warp 0 sets the
 /// pair up and runs its start, then each step's items are shared by the block's warps
 /// (items w, w + warps, ... to warp w), the steps and the leaves apart by __syncthreads: no
 /// grid-wide barrier between the start, the expand steps and the leaves. The block's lists
@@ -1220,11 +1221,11 @@ __device__ inline void mid_leaf_items(const MidListDesc& d, LeafTiles& tiles) {
 /// segments hold it. `md` is the block's descriptor in shared memory, whose lists thread 0
 /// sets; `tiles` the block's leaf tiles. Every thread of the block calls it (block-uniform
 /// loops).
-template <bool kLean>
-__device__ inline void mid_block_pairs(MidListDesc& md, MidItem* const* lists, std::uint32_t capacity,
-                                       std::uint32_t* counts, std::uint32_t* st_counts, LeafTiles& tiles) {
+template <bool kLean, class PairOf>
+__device__ inline void mid_block_pairs(MidListDesc& md, std::uint32_t np, PairOf&& pair_of, MidItem* const* lists,
+                                       std::uint32_t capacity, std::uint32_t* counts, std::uint32_t* st_counts,
+                                       LeafTiles& tiles) {
   const MidListDesc& d = md;
-  const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
   const std::uint32_t warp = threadIdx.x >> 5;
   const std::uint32_t warps = blockDim.x >> 5;
   const int steps = d.steps;
@@ -1239,7 +1240,7 @@ __device__ inline void mid_block_pairs(MidListDesc& md, MidItem* const* lists, s
       md.out_capacity = capacity;
     }
     __syncthreads();
-    const Pair p = unpack_pair(d, d.pair_keys[k]);
+    const Pair p = pair_of(k);
     const PairContext c = context(d, k, p);  // every warp's, set up while warp 0 starts
     if (warp == 0) {
       if (lane_id() == 0) d.pairs[k] = p;

@@ -192,6 +192,67 @@ __device__ __forceinline__ void fill_rows(const SmallStepDesc& s, const Aabb* bo
   }
 }
 
+/// The fused front's overlap masks (n <= kSmallFrontMaxBodies <= 64), kept in shared memory
+/// apart from the phases' union for the whole step: bit j of mask[i] (j != i): the pair of
+/// i and j overlaps, tested as the row of min(i, j) tests it (overlaps(box_min, box_max));
+/// the pairs' offsets of the rows (out_offset, n + 1 entries) and of the columns (in_offset).
+struct FrontMasks {
+  unsigned long long mask[kSmallFrontMaxBodies];
+  std::uint32_t out_offset[kSmallFrontMaxBodies + 1];
+  std::uint32_t in_offset[kSmallFrontMaxBodies + 1];
+};
+static_assert(kSmallFrontMaxBodies <= 64, "one 64-bit overlap mask a body");
+
+/// The bits of positions below `i` (0 <= i <= 64).
+__device__ inline unsigned long long bits_below(std::uint32_t i) { return i >= 64 ? ~0ull : (1ull << i) - 1ull; }
+
+/// The rank of pair (a, j), a < j, in row a: its index k is out_offset[a] + that.
+__device__ inline std::uint32_t row_rank(const FrontMasks& fm, std::uint32_t a, std::uint32_t j) {
+  return static_cast<std::uint32_t>(__popcll(fm.mask[a] & bits_below(j) & ~bits_below(a + 1)));
+}
+
+/// Pair k of the fused front (k below its pair count): row a (the last whose offset is <=
+/// k), and the (k - out_offset[a])-th set bit above a in a's mask.
+__device__ inline Pair front_pair(const FrontMasks& fm, std::uint32_t n, std::uint32_t k) {
+  std::uint32_t lo = 0, hi = n;  // out_offset[lo] <= k < out_offset[hi]
+  while (hi - lo > 1) {
+    const std::uint32_t mid = (lo + hi) / 2;
+    if (fm.out_offset[mid] <= k) lo = mid;
+    else hi = mid;
+  }
+  const unsigned long long row = fm.mask[lo] & ~bits_below(lo + 1);
+  const int r = static_cast<int>(k - fm.out_offset[lo]);  // 0-based: the (r + 1)-th set bit
+  const unsigned low = static_cast<unsigned>(row);
+  const int in_low = __popc(low);
+  const std::uint32_t j = r < in_low ? __fns(low, 0, r + 1) : 32u + __fns(static_cast<unsigned>(row >> 32), 0, r - in_low + 1);
+  return Pair{lo, j};
+}
+
+/// The fused front's fill from the masks, a body per warp of the grid: body i's keys (i <<
+/// shift) | j, j > i in j order, at out_offset[i], and its in-list (a < i in increasing a)
+/// at in_offset[i] as the pairs' indices k = out_offset[a] + row_rank(a, i) (kNoPair from
+/// the pair capacity on), each below the capacity: the keys and the resolved in-lists of
+/// fill_rows and resolve_in_lists, with no key read back.
+__device__ __forceinline__ void fill_front(const SmallStepDesc& s, const FrontMasks& fm, std::uint32_t n,
+                                           std::uint32_t warp, std::uint32_t warps) {
+  const std::uint32_t cap = s.mid.pair_capacity;
+  const std::uint32_t lane = threadIdx.x & 31u;
+  for (std::uint32_t i = warp; i < n; i += warps) {
+    const unsigned long long m = fm.mask[i];
+    for (std::uint32_t j = lane; j < n; j += 32) {
+      if (((m >> j) & 1ull) == 0) continue;
+      if (j > i) {
+        const std::uint32_t k = fm.out_offset[i] + row_rank(fm, i, j);
+        if (k < cap) s.pair_keys[k] = bp::pair_key(i, j, s.shift);
+      } else {
+        const std::uint32_t e = fm.in_offset[i] + static_cast<std::uint32_t>(__popcll(m & bits_below(j)));
+        const std::uint32_t k = fm.out_offset[j] + row_rank(fm, j, i);
+        if (e < cap) s.in_list[e] = k < cap ? k : kNoPair;
+      }
+    }
+  }
+}
+
 /// The in-lists' entries a resolved to their pair's index k (kNoPair when the pair did not
 /// fit the capacity), a body per thread from the grid's last thread down (the first warps
 /// take the midphase's pairs): a binary search in a's key segment.
@@ -244,6 +305,10 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   }
   const bool front = n <= s.front_bodies;                          // uniform
   const bool shared_boxes = front || n <= s.shared_boxes_bodies;  // uniform
+  // The lean kernel's midphase a block per pair (mid_block_pairs), with the front's masks.
+  const bool block_pairs = kLean && front && gridDim.x <= kBlockPairSegments;  // uniform
+  __shared__ FrontMasks fm;
+  std::uint32_t front_pairs = 0;  // the fused front's pair count (every block's own scan)
   if (shared_boxes) {
     // Every block integrates every body from the saved state (== the state at the step's
     // start) into its shared memory; block 0 stores the result.
@@ -265,32 +330,31 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     std::uint32_t* g_in = blockIdx.x == 0 ? s.in_offset : nullptr;
     std::uint32_t total = 0;
     if (front) {
-      // Body i's row (j > i, overlaps(box_i, box_j)) and column (a < i, overlaps(box_a,
-      // box_i)), counted from the shared boxes by the block's warps, a row each (rows i,
-      // i + 8, ..: about n^2 / 512 rounds of 32 tests a warp): the row's count from the
-      // ballots, each hit added to its column j (one lane per j: no two lanes of a warp add
-      // to one count; integer counts, so the order of the shared atomics changes nothing).
-      // The tests are those of flat_row. On an H100 this phase takes 2.91 us of a
-      // bunny-stack-50 step; a thread per body pair (i, j) over all n^2 (an integer division
-      // each, half of them i >= j) took 3.20 us, one thread per body counting both serially
-      // 11.2 us of a 38.6 us step (reports/h100/perf-v5, dev5, dev6).
-      for (std::uint32_t i = threadIdx.x; i <= n; i += blockDim.x) {
-        f.out_count[i] = 0;
-        f.in_count[i] = 0;
+      // Body i's overlap mask from the shared boxes, a row a warp of the block (rows i,
+      // i + 8, ..), lanes over j (two ballots): the tests of flat_row (the smaller index's
+      // box first); then its row's count (the bits above i) and its column's (below i).
+      for (std::uint32_t i = threadIdx.x >> 5; i < n; i += blockDim.x >> 5) {
+        const Aabb bi = f.aabb[i];
+        unsigned long long m = 0;
+        for (std::uint32_t half = 0; half < 2; ++half) {
+          const std::uint32_t j = half * 32 + lane;
+          const bool hit = j < n && j != i && (j > i ? overlaps(bi, f.aabb[j]) : overlaps(f.aabb[j], bi));
+          m |= static_cast<unsigned long long>(__ballot_sync(0xffffffffu, hit)) << (32 * half);
+        }
+        if (lane == 0) fm.mask[i] = m;
       }
       __syncthreads();
-      for (std::uint32_t i = threadIdx.x >> 5; i < n; i += blockDim.x >> 5) {
-        const std::uint32_t found = flat_row<true>(f.aabb, f.aabb[i], i + 1, n, [&](std::uint32_t, std::uint32_t j) {
-          atomicAdd(&f.in_count[j], 1u);
-        });
-        if (lane == 0) f.out_count[i] = found;
+      for (std::uint32_t i = threadIdx.x; i <= n; i += blockDim.x) {
+        const unsigned long long m = i < n ? fm.mask[i] : 0ull;
+        f.out_count[i] = static_cast<std::uint32_t>(__popcll(m & ~bits_below(i + 1)));
+        f.in_count[i] = static_cast<std::uint32_t>(__popcll(m & bits_below(i)));
       }
       __syncthreads();
       stamp(profile, 2);
       // At most kSmallFrontMaxBodies + 1 counts: one a thread, one tile (on an H100 the
       // resident kernel ran bunny-stack-50 0.6% faster than with four a thread).
       static_assert(kSmallFrontMaxBodies + 1 <= kBlockSize, "the fused front's counts in one tile");
-      total = block_exclusive_scans<1>(f.out_count, f.in_count, f.out_offset, f.in_offset, n + 1, f.storage, g_out,
+      total = block_exclusive_scans<1>(f.out_count, f.in_count, fm.out_offset, fm.in_offset, n + 1, f.storage, g_out,
                                        g_in);
     } else {
       // The grid's warps count the rows and columns (a body each, as phase 2 below) from
@@ -301,9 +365,17 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       total = block_exclusive_scans(s.out_count, s.in_count, f.out_offset, f.in_offset, n + 1, f.storage, g_out, g_in);
     }
     if (blockIdx.x == 0 && threadIdx.x == 0) st->counts[0] = total;
+    front_pairs = total;
     stamp(profile, 3);
-    fill_rows(s, f.aabb, n, f.out_offset, f.in_offset, warp, warps);
-    grid.sync();
+    if (front) {
+      // The keys and resolved in-lists, read again only after the midphase's barrier when
+      // it runs a block per pair (each block finds its pairs in the masks).
+      fill_front(s, fm, n, warp, warps);
+      if (!block_pairs) grid.sync();
+    } else {
+      fill_rows(s, f.aabb, n, f.out_offset, f.in_offset, warp, warps);
+      grid.sync();
+    }
     stamp(profile, 4);
   } else {
     for (std::uint32_t i = tid; i < n; i += threads) {
@@ -375,19 +447,20 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   }
   __syncthreads();
   const int steps = s.mid.steps;
-  if (kLean && gridDim.x <= kBlockPairSegments) {
-    // 5-6. The in-lists resolved, then the midphase a block per pair: start, expand steps
-    // and leaves in the block's segments of the lists, one grid-wide barrier after them.
+  if (block_pairs) {
+    // 5-6. The midphase a block per pair (pairs from the front's masks): start, expand
+    // steps and leaves in the block's segments of the lists, one grid-wide barrier after
+    // them (the front's fill had none).
     __shared__ std::uint32_t block_counts[hd::kMidphaseMaxLevels];
-    resolve_in_lists(s, tid, threads);
-    mid::mid_block_pairs<kLean>(block_md, s.lists, s.list_capacity / kBlockPairSegments, block_counts,
-                                st->counts, *reinterpret_cast<mid::LeafTiles*>(smem));
+    mid::mid_block_pairs<kLean>(
+        block_md, min_u32(front_pairs, cap), [&](std::uint32_t k) { return front_pair(fm, n, k); }, s.lists,
+        s.list_capacity / kBlockPairSegments, block_counts, st->counts, *reinterpret_cast<mid::LeafTiles*>(smem));
     grid.sync();
     stamp(profile, 5);
     stamp(profile, 6);
   } else {
     mid::mid_start_items<false, kLean>(md);
-    resolve_in_lists(s, tid, threads);
+    if (!front) resolve_in_lists(s, tid, threads);  // the front's fill resolved them
     grid.sync();
     stamp(profile, 5);
 
