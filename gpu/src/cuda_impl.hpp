@@ -58,10 +58,6 @@ constexpr int kStageEvents = static_cast<int>(Stage::Count) + 1;
 /// each grid-wide barrier waits for as few blocks as possible.
 constexpr int kSmallStepBlocksPerSm = 1;
 
-/// Bodies up to which the fused small step's grid is half that (one block per two SMs):
-/// its phases then have little work, and fewer blocks meet at each grid-wide barrier.
-constexpr std::size_t kSmallHalfGridBodies = 64;
-
 /// Pairs up to which the fused small step runs its response passes, clamp and metrics in
 /// one block (SmallStepDesc::one_block_pairs).
 constexpr std::uint32_t kSmallOneBlockPairs = 512;

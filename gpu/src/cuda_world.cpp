@@ -113,7 +113,6 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
     }
     if (wanted && coop && per_sm > 0) {
       int blocks = std::min(per_sm, gpu::kSmallStepBlocksPerSm) * std::max(1, sms);
-      if (bodies <= gpu::kSmallHalfGridBodies) blocks = (blocks + 1) / 2;
       d.small = true;
       d.small_grid = static_cast<unsigned>(blocks);
       // The resident kernel: the same grid where it fits (it may need more registers).

@@ -66,7 +66,7 @@ constexpr std::uint64_t initial_pair_capacity(std::uint64_t n) { return 2 * n + 
 /// many bodies.
 constexpr std::uint64_t kSmallLeanBodies = 64;
 /// gpu::kBlockPairSegments (kernels.hpp): the lean kernel's segments of each work list.
-constexpr std::uint64_t kBlockPairSegments = 128;
+constexpr std::uint64_t kBlockPairSegments = 256;
 /// Items per segment before the first step on the lean kernel's scenes (a pair's items of
 /// one list).
 constexpr std::uint64_t kBlockPairSegmentItems = 256;

@@ -430,7 +430,7 @@ constexpr std::uint32_t kSmallLeanBodies = 64;
 /// pair (midphase.cuh, mid_block_pairs): block b uses segment b (list_capacity /
 /// kBlockPairSegments items), so a grid of more blocks runs the grid's lists instead.
 /// StepStats::counts[1 + i] is then the most items of list i any pair had times this.
-constexpr std::uint32_t kBlockPairSegments = 128;
+constexpr std::uint32_t kBlockPairSegments = 256;
 
 /// The most bodies of the fused front (SmallStepDesc::front_bodies): the block's shared
 /// memory holds their counts (and, as for the shared boxes, their boxes and offsets).
