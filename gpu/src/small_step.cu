@@ -224,7 +224,8 @@ __device__ inline Pair front_pair(const FrontMasks& fm, std::uint32_t n, std::ui
   const int r = static_cast<int>(k - fm.out_offset[lo]);  // 0-based: the (r + 1)-th set bit
   const unsigned low = static_cast<unsigned>(row);
   const int in_low = __popc(low);
-  const std::uint32_t j = r < in_low ? __fns(low, 0, r + 1) : 32u + __fns(static_cast<unsigned>(row >> 32), 0, r - in_low + 1);
+  const unsigned high = static_cast<unsigned>(row >> 32);
+  const std::uint32_t j = r < in_low ? __fns(low, 0, r + 1) : 32u + __fns(high, 0, r - in_low + 1);
   return Pair{lo, j};
 }
 
