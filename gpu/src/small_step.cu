@@ -275,13 +275,14 @@ __device__ __forceinline__ void resolve_in_lists(const SmallStepDesc& s, std::ui
 }
 
 /// One whole step (every thread of the grid calls it): `sequence` is written to *s.done at
-/// the end, `records` (may be null) gets the first pass's contacts, `profile` (may be null)
-/// the phase stamps; smem: kSharedBytes. kLean (s.lean, tiny scenes): the midphase's early
-/// exit, tile culling and tile filter read as off, constants the compiler folds away.
+/// the end (kDeferDone: by the caller, behind __threadfence_system), `records` (may be
+/// null) gets the first pass's contacts, `profile` (may be null) the phase stamps; smem:
+/// kSharedBytes. kLean (s.lean, tiny scenes): the midphase's early exit, tile culling and
+/// tile filter read as off, constants the compiler folds away.
 /// Returns, to thread 0 of block 0 (false elsewhere), whether the next step may follow
 /// without the host: every list within its capacity (the host's regrow test,
 /// CudaWorld::Impl::grow_if_needed) and every body finite.
-template <bool kLean>
+template <bool kLean, bool kDeferDone = false>
 __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned long long sequence,
                                                 DeviceContact* records, unsigned long long* profile,
                                                 unsigned char* smem) {
@@ -561,7 +562,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     if (threadIdx.x == 0) {
       stamp(profile, 9);
       if (s.host_stats) s.host_stats[sequence % s.host_slots] = *st;
-      if (s.done) {
+      if (s.done && !kDeferDone) {
         __threadfence_system();  // the statistics (and stamps) before the step's number
         *s.done = sequence;
       }
@@ -606,10 +607,11 @@ __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long 
 /// command, (sequence << kResidentShift) | flags (control[1], then control[0] = the next
 /// ticket, release); the other blocks wait for the ticket (acquire). Every block reads the
 /// first ticket before a grid-wide barrier, so none can miss the first command. After a
-/// step's last phase (block 0: the metrics and *done) block 0 publishes the batch's next
-/// step when the request asked for it and the step went on (small_step_body), else waits
-/// for the next request; a block done earlier (the one-block response) waits for the next
-/// ticket. Launch bounds of one block per multiprocessor (its grid: kSmallStepBlocksPerSm):
+/// step's last phase (block 0: the metrics and the statistics) block 0 publishes the
+/// batch's next step when the request asked for it and the step went on (small_step_body),
+/// then writes the step's *done (behind __threadfence_system: the other blocks need not
+/// wait for the system-scope fence), else writes *done and waits for the next request; a
+/// block done earlier (the one-block response) waits for the next ticket. Launch bounds of one block per multiprocessor (its grid: kSmallStepBlocksPerSm):
 /// ptxas then gives the lean kernel about 118 registers, where it chose 80 and spilled.
 template <bool kLean>
 __global__ void __launch_bounds__(kBlockSize, 1)
@@ -625,14 +627,24 @@ __global__ void __launch_bounds__(kBlockSize, 1)
   // (0: none left), its last step's, whether that one is stamped.
   unsigned long long taken = r.handled;
   unsigned long long next = 0, last = 0;
+  unsigned long long ran = 0;  // the last step run, whose *done is still to be written (0: none)
   bool stamp_last = false;
   for (;;) {
     if (threadIdx.x == 0) {
       unsigned long long cmd;
       if (blockIdx.x == 0) {
-        if (next != 0 && next <= last) {
+        const bool more = next != 0 && next <= last;
+        if (more) {
           cmd = (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull);
-        } else {
+          published.store(cmd, cuda::std::memory_order_relaxed);
+          ticket.store(my_ticket + 1, cuda::std::memory_order_release);
+        }
+        if (ran != 0 && s.done) {
+          __threadfence_system();  // the statistics (and stamps) before the step's number
+          *s.done = ran;
+        }
+        ran = 0;
+        if (!more) {
           cmd = wait_request(r, taken);
           if (cmd != kExitCommand) {
             taken = cmd;
@@ -642,9 +654,9 @@ __global__ void __launch_bounds__(kBlockSize, 1)
             cmd = (next << kResidentShift) | (cmd & kResidentRecord) |
                   (next == last && stamp_last ? kResidentStamp : 0ull);
           }
+          published.store(cmd, cuda::std::memory_order_relaxed);
+          ticket.store(my_ticket + 1, cuda::std::memory_order_release);
         }
-        published.store(cmd, cuda::std::memory_order_relaxed);
-        ticket.store(my_ticket + 1, cuda::std::memory_order_release);
       } else {
         unsigned sleep_ns = 0;
         for (unsigned spins = 0; ticket.load(cuda::std::memory_order_acquire) == my_ticket; ++spins) {
@@ -662,10 +674,13 @@ __global__ void __launch_bounds__(kBlockSize, 1)
     const unsigned long long cmd = command;
     __syncthreads();  // every thread has read it before thread 0 writes the next one
     if (cmd == kExitCommand) break;
-    const bool goes_on =
-        small_step_body<kLean>(s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr,
-                               (cmd & kResidentStamp) != 0 ? s.profile : nullptr, smem);
-    if (blockIdx.x == 0 && threadIdx.x == 0) next = goes_on ? next + 1 : 0;
+    const bool goes_on = small_step_body<kLean, true>(s, cmd >> kResidentShift,
+                                                      (cmd & kResidentRecord) != 0 ? r.records : nullptr,
+                                                      (cmd & kResidentStamp) != 0 ? s.profile : nullptr, smem);
+    if (blockIdx.x == 0 && threadIdx.x == 0) {
+      next = goes_on ? next + 1 : 0;
+      ran = cmd >> kResidentShift;
+    }
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) {
     __threadfence_system();  // the last step's writes before the exit's mark
