@@ -254,6 +254,13 @@ __device__ __forceinline__ void fill_front(const SmallStepDesc& s, const FrontMa
   }
 }
 
+/// Zeroes the step's counters and counts (one thread; counts[0], the pair total, is
+/// assigned by every step's scan).
+__device__ inline void zero_step_counts(StepStats& st) {
+  for (int c = 0; c < 4; ++c) st.counters[c] = 0;
+  for (int c = 0; c < hd::kMidphaseMaxLevels + 1; ++c) st.counts[c] = 0;
+}
+
 /// The in-lists' entries a resolved to their pair's index k (kNoPair when the pair did not
 /// fit the capacity), a body per thread from the grid's last thread down (the first warps
 /// take the midphase's pairs): a binary search in a's key segment.
@@ -275,14 +282,17 @@ __device__ __forceinline__ void resolve_in_lists(const SmallStepDesc& s, std::ui
 }
 
 /// One whole step (every thread of the grid calls it): `sequence` is written to *s.done at
-/// the end (kDeferDone: by the caller, behind __threadfence_system), `records` (may be
-/// null) gets the first pass's contacts, `profile` (may be null) the phase stamps; smem:
+/// the end, `records` (may be null) gets the first pass's contacts, `profile` (may be
+/// null) the phase stamps. kResident (the resident kernel): the caller zeroes the step's
+/// counters before it hands the step to the grid (zero_step_counts) and writes *done (behind
+/// __threadfence_system), so no grid-wide barrier need order the zeroing before the
+/// blocks' atomics (the block midphase follows the front's fill without one); smem:
 /// kSharedBytes. kLean (s.lean, tiny scenes): the midphase's early exit, tile culling and
 /// tile filter read as off, constants the compiler folds away.
 /// Returns, to thread 0 of block 0 (false elsewhere), whether the next step may follow
 /// without the host: every list within its capacity (the host's regrow test,
 /// CudaWorld::Impl::grow_if_needed) and every body finite.
-template <bool kLean, bool kDeferDone = false>
+template <bool kLean, bool kResident = false>
 __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned long long sequence,
                                                 DeviceContact* records, unsigned long long* profile,
                                                 unsigned char* smem) {
@@ -298,10 +308,9 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   StepStats* st = s.stats;
   stamp(profile, 0);
 
-  // 1. Integrate and world AABBs; the step's counts from zero.
+  // 1. Integrate and world AABBs; the step's counts from zero (kResident: zeroed already).
   if (tid == 0) {
-    for (int c = 0; c < 4; ++c) st->counters[c] = 0;
-    for (int c = 0; c < hd::kMidphaseMaxLevels + 1; ++c) st->counts[c] = 0;
+    if (!kResident) zero_step_counts(*st);
     s.out_count[n] = 0;
     s.in_count[n] = 0;
   }
@@ -371,9 +380,11 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     stamp(profile, 3);
     if (front) {
       // The keys and resolved in-lists, read again only after the midphase's barrier when
-      // it runs a block per pair (each block finds its pairs in the masks).
+      // it runs a block per pair (each block finds its pairs in the masks). The launch per
+      // step keeps the barrier: it orders block 0's zeroing of the counts before the
+      // midphase's atomics (the resident kernel zeroes them before the step is handed over).
       fill_front(s, fm, n, warp, warps);
-      if (!block_pairs) grid.sync();
+      if (!(block_pairs && kResident)) grid.sync();
     } else {
       fill_rows(s, f.aabb, n, f.out_offset, f.in_offset, warp, warps);
       grid.sync();
@@ -562,7 +573,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     if (threadIdx.x == 0) {
       stamp(profile, 9);
       if (s.host_stats) s.host_stats[sequence % s.host_slots] = *st;
-      if (s.done && !kDeferDone) {
+      if (s.done && !kResident) {
         __threadfence_system();  // the statistics (and stamps) before the step's number
         *s.done = sequence;
       }
@@ -636,6 +647,7 @@ __global__ void __launch_bounds__(kBlockSize, 1)
         const bool more = next != 0 && next <= last;
         if (more) {
           cmd = (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull);
+          zero_step_counts(*s.stats);  // released with the ticket (small_step_body's kResident)
           published.store(cmd, cuda::std::memory_order_relaxed);
           ticket.store(my_ticket + 1, cuda::std::memory_order_release);
         }
@@ -653,6 +665,7 @@ __global__ void __launch_bounds__(kBlockSize, 1)
             stamp_last = (cmd & kResidentStamp) != 0;
             cmd = (next << kResidentShift) | (cmd & kResidentRecord) |
                   (next == last && stamp_last ? kResidentStamp : 0ull);
+            zero_step_counts(*s.stats);
           }
           published.store(cmd, cuda::std::memory_order_relaxed);
           ticket.store(my_ticket + 1, cuda::std::memory_order_release);
