@@ -192,11 +192,16 @@ __device__ __forceinline__ void fill_rows(const SmallStepDesc& s, const Aabb* bo
   }
 }
 
-/// The fused front's overlap masks (n <= kSmallFrontMaxBodies <= 64), kept in shared memory
-/// apart from the phases' union for the whole step: bit j of mask[i] (j != i): the pair of
-/// i and j overlaps, tested as the row of min(i, j) tests it (overlaps(box_min, box_max));
-/// the pairs' offsets of the rows (out_offset, n + 1 entries) and of the columns (in_offset).
+/// The fused front's state (n <= kSmallFrontMaxBodies <= 64), kept in shared memory apart
+/// from the phases' union for the whole step: every body's integrated position and world
+/// AABB (the block's own copy of what block 0 stores: the block midphase sets its pairs up
+/// from these, as no grid-wide barrier orders block 0's stores before it); bit j of
+/// mask[i] (j != i): the pair of i and j overlaps, tested as the row of min(i, j) tests it
+/// (overlaps(box_min, box_max)); the pairs' offsets of the rows (out_offset, n + 1 entries)
+/// and of the columns (in_offset).
 struct FrontMasks {
+  Vec3 x[kSmallFrontMaxBodies];
+  Aabb aabb[kSmallFrontMaxBodies];
   unsigned long long mask[kSmallFrontMaxBodies];
   std::uint32_t out_offset[kSmallFrontMaxBodies + 1];
   std::uint32_t in_offset[kSmallFrontMaxBodies + 1];
@@ -318,17 +323,20 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   const bool shared_boxes = front || n <= s.shared_boxes_bodies;  // uniform
   // The lean kernel's midphase a block per pair (mid_block_pairs), with the front's masks.
   const bool block_pairs = kLean && front && gridDim.x <= kBlockPairSegments;  // uniform
-  __shared__ FrontMasks fm;
+  __shared__ alignas(16) unsigned char fm_bytes[sizeof(FrontMasks)];  // Vec3 and Aabb initialise their members
+  FrontMasks& fm = *reinterpret_cast<FrontMasks*>(fm_bytes);
   std::uint32_t front_pairs = 0;  // the fused front's pair count (every block's own scan)
   if (shared_boxes) {
     // Every block integrates every body from the saved state (== the state at the step's
     // start) into its shared memory; block 0 stores the result.
     FrontShared& f = *reinterpret_cast<FrontShared*>(smem);
+    Aabb* const boxes = front ? fm.aabb : f.aabb;
     for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) {
       Vec3 x, v;
       integrated(b, i, b.x_saved[i], b.v_saved[i], s.gravity, s.dt, x, v);
       const Aabb box = translated(b.local[i], x);
-      f.aabb[i] = box;
+      boxes[i] = box;
+      if (front) fm.x[i] = x;
       if (blockIdx.x == 0) {
         b.x[i] = x;
         b.v[i] = v;
@@ -345,11 +353,11 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       // i + 8, ..), lanes over j (two ballots): the tests of flat_row (the smaller index's
       // box first); then its row's count (the bits above i) and its column's (below i).
       for (std::uint32_t i = threadIdx.x >> 5; i < n; i += blockDim.x >> 5) {
-        const Aabb bi = f.aabb[i];
+        const Aabb bi = fm.aabb[i];
         unsigned long long m = 0;
         for (std::uint32_t half = 0; half < 2; ++half) {
           const std::uint32_t j = half * 32 + lane;
-          const bool hit = j < n && j != i && (j > i ? overlaps(bi, f.aabb[j]) : overlaps(f.aabb[j], bi));
+          const bool hit = j < n && j != i && (j > i ? overlaps(bi, fm.aabb[j]) : overlaps(fm.aabb[j], bi));
           m |= static_cast<unsigned long long>(__ballot_sync(0xffffffffu, hit)) << (32 * half);
         }
         if (lane == 0) fm.mask[i] = m;
@@ -457,6 +465,10 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     block_md.out = s.lists[0];
     block_md.out_count = st->counts + 1;
     block_md.out_capacity = s.list_capacity;
+    if (block_pairs) {  // the block's own integrated state (see FrontMasks)
+      block_md.x = fm.x;
+      block_md.aabb = fm.aabb;
+    }
   }
   __syncthreads();
   const int steps = s.mid.steps;
