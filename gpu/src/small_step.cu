@@ -259,11 +259,11 @@ __device__ __forceinline__ void fill_front(const SmallStepDesc& s, const FrontMa
   }
 }
 
-/// Zeroes the step's counters and counts (one thread; counts[0], the pair total, is
-/// assigned by every step's scan).
+/// Zeroes the step's counters and list counts (one thread); counts[0], the pair total, is
+/// assigned by every step's scan (and the last step's metrics may still read it).
 __device__ inline void zero_step_counts(StepStats& st) {
   for (int c = 0; c < 4; ++c) st.counters[c] = 0;
-  for (int c = 0; c < hd::kMidphaseMaxLevels + 1; ++c) st.counts[c] = 0;
+  for (int c = 1; c < hd::kMidphaseMaxLevels + 1; ++c) st.counts[c] = 0;
 }
 
 /// The in-lists' entries a resolved to their pair's index k (kNoPair when the pair did not
@@ -286,21 +286,30 @@ __device__ __forceinline__ void resolve_in_lists(const SmallStepDesc& s, std::ui
   }
 }
 
+/// What small_step_body calls to hand the next step over early: nothing (the launch per step).
+struct NoHandOver {
+  __device__ void operator()(bool) const {}
+};
+
 /// One whole step (every thread of the grid calls it): `sequence` is written to *s.done at
 /// the end, `records` (may be null) gets the first pass's contacts, `profile` (may be
 /// null) the phase stamps. kResident (the resident kernel): the caller zeroes the step's
 /// counters before it hands the step to the grid (zero_step_counts) and writes *done (behind
 /// __threadfence_system), so no grid-wide barrier need order the zeroing before the
-/// blocks' atomics (the block midphase follows the front's fill without one); smem:
+/// blocks' atomics (the block midphase follows the front's fill without one); with the
+/// response in block 0 alone and the bodies' boxes shared (only block 0 stores the state),
+/// block 0's thread 0 calls hand_over(goes_on) right after the response, before the
+/// metrics (the next step's other blocks write nothing the metrics read), having copied
+/// the counts to host memory; the metrics follow into the same slot. smem:
 /// kSharedBytes. kLean (s.lean, tiny scenes): the midphase's early exit, tile culling and
 /// tile filter read as off, constants the compiler folds away.
 /// Returns, to thread 0 of block 0 (false elsewhere), whether the next step may follow
 /// without the host: every list within its capacity (the host's regrow test,
 /// CudaWorld::Impl::grow_if_needed) and every body finite.
-template <bool kLean, bool kResident = false>
+template <bool kLean, bool kResident = false, class HandOver = NoHandOver>
 __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned long long sequence,
                                                 DeviceContact* records, unsigned long long* profile,
-                                                unsigned char* smem) {
+                                                unsigned char* smem, HandOver&& hand_over = HandOver{}) {
   cg::grid_group grid = cg::this_grid();
   const BodiesDesc& b = s.bodies;
   const std::uint32_t n = b.n;
@@ -533,6 +542,11 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   const bool save = shared_boxes && fits;
   const bool one_block = live <= s.one_block_pairs;
   if (one_block && blockIdx.x != 0) return false;  // uniform per block; no grid.sync follows then
+  // The early hand-over (kResident): the smallest dynamic body left non-finite by the last
+  // pass, as the metrics find it (metrics_block's first_bad), from the state in registers.
+  const bool early = kResident && one_block && shared_boxes;  // uniform
+  __shared__ std::uint32_t first_bad;
+  if (early && threadIdx.x == 0) first_bad = n;
   const std::uint32_t r_tid = one_block ? threadIdx.x : tid;
   const std::uint32_t r_threads = one_block ? blockDim.x : threads;
   for (int pass = 0; pass < s.iterations; ++pass) {
@@ -567,6 +581,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
         }
         if (last) v = clamp_velocity(v, s.max_velocity);
         if (sums.count != 0 || !same_bits(v, v0)) b.v[i] = v;
+        if (early && last && (!is_finite(x) || !is_finite(v))) atomicMin(&first_bad, i);
       }
       if (last && save) {
         b.x_saved[i] = x;
@@ -581,15 +596,30 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   // 8. Block 0: the metrics, then everything the host reads, then the step's number.
   bool goes_on = false;
   if (blockIdx.x == 0) {
+    StepStats* host = s.host_stats ? s.host_stats + sequence % s.host_slots : nullptr;
+    if (early && threadIdx.x == 0) {
+      // The counts are final: to host memory, then the next step handed over (its counts
+      // zeroed), then the metrics of this step's state (block 0 stores the next one later).
+      if (host) {
+        for (int c = 0; c < 4; ++c) host->counters[c] = st->counters[c];
+        for (int c = 0; c < hd::kMidphaseMaxLevels + 1; ++c) host->counts[c] = st->counts[c];
+        host->index_long = st->index_long;
+      }
+      goes_on = fits && first_bad >= n;
+      hand_over(goes_on);
+    }
     metrics::metrics_block(s.metrics, reinterpret_cast<metrics::Acc*>(smem), 0, 1, &st->metrics);
     if (threadIdx.x == 0) {
       stamp(profile, 9);
-      if (s.host_stats) s.host_stats[sequence % s.host_slots] = *st;
+      if (host) {
+        if (early) host->metrics = st->metrics;
+        else *host = *st;
+      }
       if (s.done && !kResident) {
         __threadfence_system();  // the statistics (and stamps) before the step's number
         *s.done = sequence;
       }
-      goes_on = fits && st->metrics.first_non_finite >= n;
+      if (!early) goes_on = fits && st->metrics.first_non_finite >= n;
     }
   }
   return goes_on;
@@ -629,13 +659,16 @@ __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long 
 /// Steps on request (ResidentDesc). Block 0 takes each request and publishes each step's
 /// command, (sequence << kResidentShift) | flags (control[1], then control[0] = the next
 /// ticket, release); the other blocks wait for the ticket (acquire). Every block reads the
-/// first ticket before a grid-wide barrier, so none can miss the first command. After a
-/// step's last phase (block 0: the metrics and the statistics) block 0 publishes the
-/// batch's next step when the request asked for it and the step went on (small_step_body),
-/// then writes the step's *done (behind __threadfence_system: the other blocks need not
-/// wait for the system-scope fence), else writes *done and waits for the next request; a
-/// block done earlier (the one-block response) waits for the next ticket. Launch bounds of one block per multiprocessor (its grid: kSmallStepBlocksPerSm):
-/// ptxas then gives the lean kernel about 118 registers, where it chose 80 and spilled.
+/// first ticket before a grid-wide barrier, so none can miss the first command. Block 0
+/// publishes the batch's next step (its counts zeroed first) when the request asked for it
+/// and the step went on: right after a one-block response when the bodies' boxes are
+/// shared (small_step_body's hand_over: the metrics and statistics then overlap the next
+/// step's start in the other blocks), else after the step's last phase; then it writes the
+/// step's *done (behind __threadfence_system: the other blocks need not wait for the
+/// system-scope fence); at a batch's end it writes *done and waits for the next request. A
+/// block done earlier (the one-block response) waits for the next ticket. Launch bounds of
+/// one block per multiprocessor (its grid: kSmallStepBlocksPerSm): ptxas then gives the
+/// lean kernel about 118 registers, where it chose 80 and spilled.
 template <bool kLean>
 __global__ void __launch_bounds__(kBlockSize, 1)
     small_resident_kernel(const __grid_constant__ SmallStepDesc s, const __grid_constant__ ResidentDesc r) {
@@ -651,18 +684,34 @@ __global__ void __launch_bounds__(kBlockSize, 1)
   unsigned long long taken = r.handled;
   unsigned long long next = 0, last = 0;
   unsigned long long ran = 0;  // the last step run, whose *done is still to be written (0: none)
+  unsigned long long handed = 0;  // the command published by the early hand-over (0: none)
   bool stamp_last = false;
+  // Block 0, thread 0: publishes the batch's next step, its counts zeroed first (released
+  // with the ticket: small_step_body's kResident), when the request asked for it and the
+  // step went on; returns the command (0: none).
+  const auto publish_next = [&](bool goes_on) -> unsigned long long {
+    next = goes_on ? next + 1 : 0;
+    if (next == 0 || next > last) return 0;
+    const unsigned long long cmd = (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull);
+    zero_step_counts(*s.stats);
+    published.store(cmd, cuda::std::memory_order_relaxed);
+    ticket.store(my_ticket + 1, cuda::std::memory_order_release);
+    return cmd;
+  };
   for (;;) {
     if (threadIdx.x == 0) {
       unsigned long long cmd;
       if (blockIdx.x == 0) {
-        const bool more = next != 0 && next <= last;
-        if (more) {
+        const bool more = handed != 0 || (next != 0 && next <= last);
+        if (handed != 0) {
+          cmd = handed;  // published during the last step
+        } else if (more) {
           cmd = (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull);
           zero_step_counts(*s.stats);  // released with the ticket (small_step_body's kResident)
           published.store(cmd, cuda::std::memory_order_relaxed);
           ticket.store(my_ticket + 1, cuda::std::memory_order_release);
         }
+        handed = 0;
         if (ran != 0 && s.done) {
           __threadfence_system();  // the statistics (and stamps) before the step's number
           *s.done = ran;
@@ -699,11 +748,15 @@ __global__ void __launch_bounds__(kBlockSize, 1)
     const unsigned long long cmd = command;
     __syncthreads();  // every thread has read it before thread 0 writes the next one
     if (cmd == kExitCommand) break;
-    const bool goes_on = small_step_body<kLean, true>(s, cmd >> kResidentShift,
-                                                      (cmd & kResidentRecord) != 0 ? r.records : nullptr,
-                                                      (cmd & kResidentStamp) != 0 ? s.profile : nullptr, smem);
+    bool early = false;  // block 0, thread 0: the step handed the next one over itself
+    const bool goes_on = small_step_body<kLean, true>(
+        s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr,
+        (cmd & kResidentStamp) != 0 ? s.profile : nullptr, smem, [&](bool on) {
+          early = true;
+          handed = publish_next(on);
+        });
     if (blockIdx.x == 0 && threadIdx.x == 0) {
-      next = goes_on ? next + 1 : 0;
+      if (!early) next = goes_on ? next + 1 : 0;
       ran = cmd >> kResidentShift;
     }
   }
