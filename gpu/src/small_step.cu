@@ -686,16 +686,22 @@ __global__ void __launch_bounds__(kBlockSize, 1)
   unsigned long long ran = 0;  // the last step run, whose *done is still to be written (0: none)
   unsigned long long handed = 0;  // the command published by the early hand-over (0: none)
   bool stamp_last = false;
-  // Block 0, thread 0: publishes the batch's next step, its counts zeroed first (released
-  // with the ticket: small_step_body's kResident), when the request asked for it and the
-  // step went on; returns the command (0: none).
+  // Block 0, thread 0: the batch's next step's command; publishing a command (a step's
+  // counts zeroed first, released with the ticket: small_step_body's kResident); the next
+  // step published when the request asked for it and the step went on (0: none).
+  const auto next_command = [&]() -> unsigned long long {
+    return (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull);
+  };
+  const auto publish = [&](unsigned long long cmd) {
+    if (cmd != kExitCommand) zero_step_counts(*s.stats);
+    published.store(cmd, cuda::std::memory_order_relaxed);
+    ticket.store(my_ticket + 1, cuda::std::memory_order_release);
+  };
   const auto publish_next = [&](bool goes_on) -> unsigned long long {
     next = goes_on ? next + 1 : 0;
     if (next == 0 || next > last) return 0;
-    const unsigned long long cmd = (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull);
-    zero_step_counts(*s.stats);
-    published.store(cmd, cuda::std::memory_order_relaxed);
-    ticket.store(my_ticket + 1, cuda::std::memory_order_release);
+    const unsigned long long cmd = next_command();
+    publish(cmd);
     return cmd;
   };
   for (;;) {
@@ -706,10 +712,8 @@ __global__ void __launch_bounds__(kBlockSize, 1)
         if (handed != 0) {
           cmd = handed;  // published during the last step
         } else if (more) {
-          cmd = (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull);
-          zero_step_counts(*s.stats);  // released with the ticket (small_step_body's kResident)
-          published.store(cmd, cuda::std::memory_order_relaxed);
-          ticket.store(my_ticket + 1, cuda::std::memory_order_release);
+          cmd = next_command();
+          publish(cmd);
         }
         handed = 0;
         if (ran != 0 && s.done) {
@@ -724,12 +728,9 @@ __global__ void __launch_bounds__(kBlockSize, 1)
             next = cmd >> kResidentShift;
             last = next + ((cmd >> kResidentAheadShift) & kResidentAheadMax);
             stamp_last = (cmd & kResidentStamp) != 0;
-            cmd = (next << kResidentShift) | (cmd & kResidentRecord) |
-                  (next == last && stamp_last ? kResidentStamp : 0ull);
-            zero_step_counts(*s.stats);
+            cmd = next_command() | (cmd & kResidentRecord);
           }
-          published.store(cmd, cuda::std::memory_order_relaxed);
-          ticket.store(my_ticket + 1, cuda::std::memory_order_release);
+          publish(cmd);
         }
       } else {
         unsigned sleep_ns = 0;
