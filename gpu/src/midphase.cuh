@@ -87,7 +87,8 @@
 // indexed at a run-time step: the per-item set-up stays in registers (no local memory).
 // This header holds the per-item device code; midphase.cu wraps it in its kernels
 // (mid_decide, mid_start, mid_expand, mid_leaf) and the fused small-scene step (small_step.cu) calls the
-// same functions between grid-wide barriers. Every loop over pairs is a grid-stride loop
+// same functions between grid-wide barriers (its lean kernel: a block per pair,
+// mid_block_pairs, the steps apart by __syncthreads). Every loop over pairs is a grid-stride loop
 // over whole warps, every loop over expand items a contiguous share per warp (warp_range),
 // over leaf items a stride of the grid's warps; the item index and its bounds are
 // warp-uniform, so the warp collectives (__ballot_sync / __shfl_sync with the full mask) see

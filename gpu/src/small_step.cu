@@ -33,10 +33,12 @@
 //     (no separate device-to-host copy).
 // Fused front (n <= SmallStepDesc::front_bodies): phases 1-4 without a grid-wide barrier:
 // every block integrates every body from x_saved / v_saved (equal to x / v at a step's
-// start) into its shared memory, with the boxes, counts (one thread per body: its row and its
-// column, the same overlap tests as the warp rows), scans both counts and fills its share of
-// the rows from there; block 0 stores the integrated state and the boxes. The last response
-// pass copies the new state into x_saved / v_saved (not when a list overflowed: the host
+// start) into its shared memory (FrontState: positions, boxes), builds a 64-bit overlap mask
+// per body (the same overlap tests as the warp rows), takes both counts from the masks,
+// scans them and fills its share of the rows and the resolved in-lists from there; block 0
+// stores the integrated state and the boxes. The lean kernel's block midphase then follows
+// with no barrier (the resident kernel zeroes the counts before the hand-over). The last
+// response pass copies the new state into x_saved / v_saved (not when a list overflowed: the host
 // then restores the state from them and reruns).
 // Shared boxes (front_bodies < n <= SmallStepDesc::shared_boxes_bodies): every block
 // integrates every body into its shared memory as the fused front does, the grid's warps
@@ -89,9 +91,9 @@ struct ScanShared {
 };
 
 /// The shared memory of the shared boxes (n <= kSmallSharedBoxesMaxBodies) and of the
-/// fused front (n <= kSmallFrontMaxBodies): the integrated boxes, both offsets (n + 1
-/// entries each), CUB's storage; the fused front's counts (the shared boxes count into
-/// global memory).
+/// fused front (n <= kSmallFrontMaxBodies): the integrated boxes and both offsets (n + 1
+/// entries each) of the shared boxes (the front keeps its own in FrontState), CUB's
+/// storage; the fused front's counts (the shared boxes count into global memory).
 struct FrontShared {
   typename BlockScan::TempStorage storage;
   Aabb aabb[kSmallSharedBoxesMaxBodies];
@@ -199,7 +201,7 @@ __device__ __forceinline__ void fill_rows(const SmallStepDesc& s, const Aabb* bo
 /// mask[i] (j != i): the pair of i and j overlaps, tested as the row of min(i, j) tests it
 /// (overlaps(box_min, box_max)); the pairs' offsets of the rows (out_offset, n + 1 entries)
 /// and of the columns (in_offset).
-struct FrontMasks {
+struct FrontState {
   Vec3 x[kSmallFrontMaxBodies];
   Aabb aabb[kSmallFrontMaxBodies];
   unsigned long long mask[kSmallFrontMaxBodies];
@@ -212,21 +214,21 @@ static_assert(kSmallFrontMaxBodies <= 64, "one 64-bit overlap mask a body");
 __device__ inline unsigned long long bits_below(std::uint32_t i) { return i >= 64 ? ~0ull : (1ull << i) - 1ull; }
 
 /// The rank of pair (a, j), a < j, in row a: its index k is out_offset[a] + that.
-__device__ inline std::uint32_t row_rank(const FrontMasks& fm, std::uint32_t a, std::uint32_t j) {
-  return static_cast<std::uint32_t>(__popcll(fm.mask[a] & bits_below(j) & ~bits_below(a + 1)));
+__device__ inline std::uint32_t row_rank(const FrontState& fs, std::uint32_t a, std::uint32_t j) {
+  return static_cast<std::uint32_t>(__popcll(fs.mask[a] & bits_below(j) & ~bits_below(a + 1)));
 }
 
 /// Pair k of the fused front (k below its pair count): row a (the last whose offset is <=
 /// k), and the (k - out_offset[a])-th set bit above a in a's mask.
-__device__ inline Pair front_pair(const FrontMasks& fm, std::uint32_t n, std::uint32_t k) {
+__device__ inline Pair front_pair(const FrontState& fs, std::uint32_t n, std::uint32_t k) {
   std::uint32_t lo = 0, hi = n;  // out_offset[lo] <= k < out_offset[hi]
   while (hi - lo > 1) {
     const std::uint32_t mid = (lo + hi) / 2;
-    if (fm.out_offset[mid] <= k) lo = mid;
+    if (fs.out_offset[mid] <= k) lo = mid;
     else hi = mid;
   }
-  const unsigned long long row = fm.mask[lo] & ~bits_below(lo + 1);
-  const int r = static_cast<int>(k - fm.out_offset[lo]);  // 0-based: the (r + 1)-th set bit
+  const unsigned long long row = fs.mask[lo] & ~bits_below(lo + 1);
+  const int r = static_cast<int>(k - fs.out_offset[lo]);  // 0-based: the (r + 1)-th set bit
   const unsigned low = static_cast<unsigned>(row);
   const int in_low = __popc(low);
   const unsigned high = static_cast<unsigned>(row >> 32);
@@ -239,20 +241,20 @@ __device__ inline Pair front_pair(const FrontMasks& fm, std::uint32_t n, std::ui
 /// at in_offset[i] as the pairs' indices k = out_offset[a] + row_rank(a, i) (kNoPair from
 /// the pair capacity on), each below the capacity: the keys and the resolved in-lists of
 /// fill_rows and resolve_in_lists, with no key read back.
-__device__ __forceinline__ void fill_front(const SmallStepDesc& s, const FrontMasks& fm, std::uint32_t n,
+__device__ __forceinline__ void fill_front(const SmallStepDesc& s, const FrontState& fs, std::uint32_t n,
                                            std::uint32_t warp, std::uint32_t warps) {
   const std::uint32_t cap = s.mid.pair_capacity;
   const std::uint32_t lane = threadIdx.x & 31u;
   for (std::uint32_t i = warp; i < n; i += warps) {
-    const unsigned long long m = fm.mask[i];
+    const unsigned long long m = fs.mask[i];
     for (std::uint32_t j = lane; j < n; j += 32) {
       if (((m >> j) & 1ull) == 0) continue;
       if (j > i) {
-        const std::uint32_t k = fm.out_offset[i] + row_rank(fm, i, j);
+        const std::uint32_t k = fs.out_offset[i] + row_rank(fs, i, j);
         if (k < cap) s.pair_keys[k] = bp::pair_key(i, j, s.shift);
       } else {
-        const std::uint32_t e = fm.in_offset[i] + static_cast<std::uint32_t>(__popcll(m & bits_below(j)));
-        const std::uint32_t k = fm.out_offset[j] + row_rank(fm, j, i);
+        const std::uint32_t e = fs.in_offset[i] + static_cast<std::uint32_t>(__popcll(m & bits_below(j)));
+        const std::uint32_t k = fs.out_offset[j] + row_rank(fs, j, i);
         if (e < cap) s.in_list[e] = k < cap ? k : kNoPair;
       }
     }
@@ -332,20 +334,20 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   const bool shared_boxes = front || n <= s.shared_boxes_bodies;  // uniform
   // The lean kernel's midphase a block per pair (mid_block_pairs), with the front's masks.
   const bool block_pairs = kLean && front && gridDim.x <= kBlockPairSegments;  // uniform
-  __shared__ alignas(16) unsigned char fm_bytes[sizeof(FrontMasks)];  // Vec3 and Aabb initialise their members
-  FrontMasks& fm = *reinterpret_cast<FrontMasks*>(fm_bytes);
+  __shared__ alignas(16) unsigned char fs_bytes[sizeof(FrontState)];  // Vec3 and Aabb initialise their members
+  FrontState& fs = *reinterpret_cast<FrontState*>(fs_bytes);
   std::uint32_t front_pairs = 0;  // the fused front's pair count (every block's own scan)
   if (shared_boxes) {
     // Every block integrates every body from the saved state (== the state at the step's
     // start) into its shared memory; block 0 stores the result.
     FrontShared& f = *reinterpret_cast<FrontShared*>(smem);
-    Aabb* const boxes = front ? fm.aabb : f.aabb;
+    Aabb* const boxes = front ? fs.aabb : f.aabb;
     for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) {
       Vec3 x, v;
       integrated(b, i, b.x_saved[i], b.v_saved[i], s.gravity, s.dt, x, v);
       const Aabb box = translated(b.local[i], x);
       boxes[i] = box;
-      if (front) fm.x[i] = x;
+      if (front) fs.x[i] = x;
       if (blockIdx.x == 0) {
         b.x[i] = x;
         b.v[i] = v;
@@ -362,18 +364,18 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       // i + 8, ..), lanes over j (two ballots): the tests of flat_row (the smaller index's
       // box first); then its row's count (the bits above i) and its column's (below i).
       for (std::uint32_t i = threadIdx.x >> 5; i < n; i += blockDim.x >> 5) {
-        const Aabb bi = fm.aabb[i];
+        const Aabb bi = fs.aabb[i];
         unsigned long long m = 0;
         for (std::uint32_t half = 0; half < 2; ++half) {
           const std::uint32_t j = half * 32 + lane;
-          const bool hit = j < n && j != i && (j > i ? overlaps(bi, fm.aabb[j]) : overlaps(fm.aabb[j], bi));
+          const bool hit = j < n && j != i && (j > i ? overlaps(bi, fs.aabb[j]) : overlaps(fs.aabb[j], bi));
           m |= static_cast<unsigned long long>(__ballot_sync(0xffffffffu, hit)) << (32 * half);
         }
-        if (lane == 0) fm.mask[i] = m;
+        if (lane == 0) fs.mask[i] = m;
       }
       __syncthreads();
       for (std::uint32_t i = threadIdx.x; i <= n; i += blockDim.x) {
-        const unsigned long long m = i < n ? fm.mask[i] : 0ull;
+        const unsigned long long m = i < n ? fs.mask[i] : 0ull;
         f.out_count[i] = static_cast<std::uint32_t>(__popcll(m & ~bits_below(i + 1)));
         f.in_count[i] = static_cast<std::uint32_t>(__popcll(m & bits_below(i)));
       }
@@ -382,7 +384,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       // At most kSmallFrontMaxBodies + 1 counts: one a thread, one tile (on an H100 the
       // resident kernel ran bunny-stack-50 0.6% faster than with four a thread).
       static_assert(kSmallFrontMaxBodies + 1 <= kBlockSize, "the fused front's counts in one tile");
-      total = block_exclusive_scans<1>(f.out_count, f.in_count, fm.out_offset, fm.in_offset, n + 1, f.storage, g_out,
+      total = block_exclusive_scans<1>(f.out_count, f.in_count, fs.out_offset, fs.in_offset, n + 1, f.storage, g_out,
                                        g_in);
     } else {
       // The grid's warps count the rows and columns (a body each, as phase 2 below) from
@@ -400,7 +402,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       // it runs a block per pair (each block finds its pairs in the masks). The launch per
       // step keeps the barrier: it orders block 0's zeroing of the counts before the
       // midphase's atomics (the resident kernel zeroes them before the step is handed over).
-      fill_front(s, fm, n, warp, warps);
+      fill_front(s, fs, n, warp, warps);
       if (!(block_pairs && kResident)) grid.sync();
     } else {
       fill_rows(s, f.aabb, n, f.out_offset, f.in_offset, warp, warps);
@@ -474,9 +476,9 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     block_md.out = s.lists[0];
     block_md.out_count = st->counts + 1;
     block_md.out_capacity = s.list_capacity;
-    if (block_pairs) {  // the block's own integrated state (see FrontMasks)
-      block_md.x = fm.x;
-      block_md.aabb = fm.aabb;
+    if (block_pairs) {  // the block's own integrated state (see FrontState)
+      block_md.x = fs.x;
+      block_md.aabb = fs.aabb;
     }
   }
   __syncthreads();
@@ -487,7 +489,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     // them (the front's fill had none).
     __shared__ std::uint32_t block_counts[hd::kMidphaseMaxLevels];
     mid::mid_block_pairs<kLean>(
-        block_md, min_u32(front_pairs, cap), [&](std::uint32_t k) { return front_pair(fm, n, k); }, s.lists,
+        block_md, min_u32(front_pairs, cap), [&](std::uint32_t k) { return front_pair(fs, n, k); }, s.lists,
         s.list_capacity / kBlockPairSegments, block_counts, st->counts, *reinterpret_cast<mid::LeafTiles*>(smem));
     grid.sync();
     stamp(profile, 5);
