@@ -184,6 +184,11 @@ def fmt(x, digits=3):
     return f"{x:,}" if isinstance(x, int) else str(x)
 
 
+def spread(r):
+    """A point's steps/s as median (min-max), or "" for no point."""
+    return f"{fmt(r['steps_per_s_median'])} ({fmt(r['steps_per_s_min'])}-{fmt(r['steps_per_s_max'])})" if r else ""
+
+
 def headline_table5(rows):
     """Table 5's steps/s medians: a row per scene and midphase, a column per engine."""
     engines, cells, keys = [], {}, []
@@ -198,10 +203,7 @@ def headline_table5(rows):
         cells[key + (r["engine"],)] = r
     out = ["| scene | midphase | " + " | ".join(engines) + " |", "|---|---|" + "---|" * len(engines)]
     for key in keys:
-        vals = []
-        for e in engines:
-            r = cells.get(key + (e,))
-            vals.append(f"{fmt(r['steps_per_s_median'])} ({fmt(r['steps_per_s_min'])}-{fmt(r['steps_per_s_max'])})" if r else "")
+        vals = [spread(cells.get(key + (e,))) for e in engines]
         out.append(f"| {key[0]} | {key[1]} | " + " | ".join(vals) + " |")
     out += ["", "Median (min-max) over the repetitions of each point; per-stage times and counts are "
             "in the table5 CSVs (an engine may come from its own run of the sweep, named in the file "
@@ -222,13 +224,9 @@ def headline_small(rows):
         cells[(r["scene"], r["engine"])] = r
     out = ["| scene | bodies | cpu | cuda | cuda / cpu |", "|---|---|---|---|---|"]
     for s in scenes:
-        vals = []
-        for e in ("cpu", "cuda"):
-            r = cells.get((s, e))
-            vals.append(f"{fmt(r['steps_per_s_median'])} ({fmt(r['steps_per_s_min'])}-{fmt(r['steps_per_s_max'])})" if r else "")
         cpu, cuda = cells.get((s, "cpu")), cells.get((s, "cuda"))
         ratio = f"{cuda['steps_per_s_median'] / cpu['steps_per_s_median']:.2f}x" if cpu and cuda else ""
-        out.append(f"| {s} | {fmt(bodies.get(s, ''))} | " + " | ".join(vals) + f" | {ratio} |")
+        out.append(f"| {s} | {fmt(bodies.get(s, ''))} | {spread(cpu)} | {spread(cuda)} | {ratio} |")
     out += ["", "Median (min-max) over the repetitions of each point (the ratio of the medians); the "
             "targets of [docs/gpu.md](../../docs/gpu.md): cuda >= 2x the same host's cpu engine on all "
             "its threads on every scene, bunny-stack-50 >= 60,000 steps/s."]
