@@ -657,6 +657,9 @@ void TraceWriter::create_v2_layout() {
   attr_string(root, "contact_geometry", t.contact_geometry, path);
   if (!t.collision_shape.empty() && t.body_collision_shape.empty())
     attr_string(root, "collision_shape", t.collision_shape, path);
+  if (!t.contact_model.empty()) attr_string(root, "contact_model", t.contact_model, path);
+  if (!t.integrator.empty()) attr_string(root, "integrator", t.integrator, path);
+  if (!t.gyroscopic.empty()) attr_string(root, "gyroscopic", t.gyroscopic, path);
   {
     const hsize_t three = 3;
     Handle space(check(H5Screate_simple(1, &three, nullptr), path, "H5Screate_simple"));

@@ -227,6 +227,17 @@ struct RotationTraits {
   /// Every record carries FrameRecord::jt3 (the tangential impulse vectors): the trace
   /// writes /contacts/jt3.
   bool jt3 = false;
+  // ---- Declarations (docs/validate-your-engine.md, "Declarations"): engine facts the
+  // physics tier's rules read; "" = not declared (the root attribute is not written and a
+  // reader takes its documented default).
+  /// Root attribute `contact_model`: "rigid" or "soft" (contacts as springs, e.g. MuJoCo).
+  std::string contact_model;
+  /// Root attribute `integrator`: "semi-implicit" (x += dt v'), "explicit" (x += dt v) or
+  /// "any".
+  std::string integrator;
+  /// Root attribute `gyroscopic`: "true" when the engine integrates the gyroscopic term
+  /// dt w x I_w w (Bullet's implicit step), "false" when it does not.
+  std::string gyroscopic;
 };
 
 /// One simulation engine: `cpu` (World), `cuda` (CudaWorld), `bullet` (BulletWorld).
