@@ -127,7 +127,7 @@ struct Tolerances {
   /// caught by both rules. There is no relative slack: the 25% the cone once allowed
   /// covered Bullet's rows that kept friction after their normal impulse fell to 0
   /// (13% above mu times the final normal impulses on 4-row box-floor manifolds); Bullet's
-  /// adapter now projects those rows back (CoulombSolver, reference/src/bullet_world.cpp),
+  /// adapter now projects those rows back (CoulombSolver, reference/bullet/bullet_world.cpp),
   /// and the per-pair sum passes on rot-slope, rot-stack-10, rot-drop-220 and
   /// rot-pile-1000 with rounding alone, on both rules.
   double friction_cone_abs = 1e-3;
