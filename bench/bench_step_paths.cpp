@@ -90,11 +90,13 @@ const Run& run_named(const std::string& label) {
 std::unique_ptr<Engine> make(const std::string& label, const std::shared_ptr<const Model>& model, bool profile,
                              long every) {
   const Run& run = run_named(label);
-  CudaSettings settings;
-  settings.stage_times = run.stage_times;
-  settings.stage_time_every = run.every_step ? 1 : every;
-  settings.small_path = run.small_path;
-  settings.small_profile = profile;
+  // The line's CudaSettings as the registry's items (the cpu line ignores them).
+  const auto flag = [](bool b) { return b ? "true" : "false"; };
+  EngineSettingItems settings;
+  settings["cuda"] = {fmt::format("stage_times={}", flag(run.stage_times)),
+                      fmt::format("stage_time_every={}", run.every_step ? 1 : every),
+                      fmt::format("small_path={}", flag(run.small_path)),
+                      fmt::format("small_profile={}", flag(profile))};
   std::unique_ptr<Engine> e = make_engine(run.engine, model, settings);
   if (auto* c = dynamic_cast<CudaWorld*>(e.get())) c->set_persistent(run.resident);
   return e;

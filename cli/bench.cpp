@@ -65,8 +65,7 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
   c->add_option("sweep", o.sweep, "A named sweep (" + named_list() + ") or a sweep JSON file");
   c->add_option("-o,--output", o.output, "Result file (JSON), rewritten after every finished point");
   c->add_option("--engines", o.engines, "Comma-separated engines, overrides the sweep's: cpu, cuda, bullet");
-  add_cuda_settings_option(c, o.cuda);
-  add_bullet_settings_option(c, o.bullet);
+  add_engine_settings_options(c, o.settings);
   c->add_option("--repeat", o.repeat, "Repetitions of every point, overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
   c->add_option("--frames", o.frames,
@@ -117,8 +116,7 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
 }
 
 int bench_command(const BenchOptions& o) {
-  (void)cuda_settings_from(o.cuda);  // bad --cuda items are input errors before any point runs
-  (void)bullet_settings_from(o.bullet);
+  check_engine_settings(o.settings, cli_argument_names());  // bad items are input errors before any point runs
   const std::vector<std::string> named = named_sweeps();
   if (o.list) {
     for (const auto& n : named) {

@@ -110,7 +110,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   r["bodies"] = model->initial.x.size();
   std::unique_ptr<Engine> engine;
   try {
-    engine = make_engine(p.engine, model, cuda_settings_from(o.cuda), bullet_settings_from(o.bullet));
+    engine = make_engine(p.engine, model, o.settings);
   } catch (const std::exception& e) {
     r["status"] = "skipped";
     r["reason"] = e.what();
@@ -162,7 +162,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   for (int rep = 0; rep < repeat; ++rep) {
     if (rep > 0) {
       engine.reset();  // the last repetition's device memory back first: the memory check sees one engine
-      engine = make_engine(p.engine, model, cuda_settings_from(o.cuda), bullet_settings_from(o.bullet));
+      engine = make_engine(p.engine, model, o.settings);
     }
     std::unique_ptr<TraceWriter> trace;
     if (rep == 0 && ov.trace && !o.trace_dir.empty()) {

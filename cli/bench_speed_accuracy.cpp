@@ -115,8 +115,15 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
   const double dt_max = *std::max_element(s.dts.begin(), s.dts.end());
   const double dt_ref = *std::min_element(s.dts.begin(), s.dts.end());
   const long matched = std::lround(s.sim_seconds / dt_max);  // matched times per point
-  const CudaSettings cuda = cuda_settings_from(o.cuda);
-  const BulletSettings bullet0 = bullet_settings_from(o.bullet);
+  check_engine_settings(o.settings, cli_argument_names());
+  // A line's settings: the command's items, then its geometry and iteration count.
+  auto line_settings = [&](const EngineInfo& info, const std::string& geometry, std::optional<int> iterations) {
+    EngineSettingItems items = o.settings;
+    if (!info.geometry_setting.empty()) items[info.name].push_back(info.geometry_setting + "=" + geometry);
+    if (iterations && !info.iterations_setting.empty())
+      items[info.name].push_back(fmt::format("{}={}", info.iterations_setting, *iterations));
+    return items;
+  };
 
   // Engines named on the command line must run here.
   for (const std::string& e : s.engines) {
@@ -146,7 +153,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
         for (const bool rot : s.rotations) {
           if (rot && !info.rotates) continue;  // lines an engine can have
           const std::vector<std::optional<int>> its =
-              info.has_solver_iterations ? std::vector<std::optional<int>>(s.iterations.begin(), s.iterations.end())
+              !info.iterations_setting.empty() ? std::vector<std::optional<int>>(s.iterations.begin(), s.iterations.end())
                         : std::vector<std::optional<int>>{std::nullopt};
           for (const auto& it : its) {
             Line l;
@@ -174,10 +181,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
                 l.skip = "with rotation Bullet collides meshes as convex hulls whatever shape=box says: the run of "
                          "the hull line";
               } else {
-                BulletSettings b = bullet0;
-                b.shape = geo == "box" ? BulletShape::Box : BulletShape::Hull;
-                if (it) b.solver_iterations = *it;
-                (void)make_engine(e, model, cuda, b);
+                (void)make_engine(e, model, line_settings(info, geo, it));
               }
             } catch (const std::exception& ex) {
               l.skip = fmt::format("engine {} cannot run scene {}: {}", e, scene, ex.what());
@@ -436,10 +440,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
       std::unique_ptr<Engine> engine;
       try {
         model = models.get(point_scene(s, l.scene, p.dt, p.steps, l.rotation), s.scenes[l.scene], o.data_dir);
-        BulletSettings b = bullet0;
-        b.shape = l.geometry == "box" ? BulletShape::Box : BulletShape::Hull;
-        if (l.iterations) b.solver_iterations = *l.iterations;
-        engine = make_engine(l.engine, model, cuda, b);
+        engine = make_engine(l.engine, model, line_settings(engine_info(l.engine, "engines"), l.geometry, l.iterations));
       } catch (const std::exception& e) {
         p.status = "skipped";
         p.reason = fmt::format("engine {} cannot run scene {}: {}", l.engine, stem(s.scenes[l.scene]), e.what());

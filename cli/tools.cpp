@@ -22,33 +22,11 @@
 
 namespace octocd::cli {
 
-void add_cuda_settings_option(CLI::App* command, std::vector<std::string>& items) {
-  std::string keys;
-  for (const std::string& k : cuda_setting_names()) keys += (keys.empty() ? "" : ", ") + k;
-  command->add_option("--cuda", items,
-                      "A setting of the cuda engine, KEY=VALUE, repeatable (docs/settings.md); keys: " + keys);
-}
-
-CudaSettings cuda_settings_from(const std::vector<std::string>& items) {
-  CudaSettings s;
-  apply_cuda_settings(s, items, "--cuda");
-  check_cuda_settings(s, "--cuda");
-  return s;
-}
-
-void add_bullet_settings_option(CLI::App* command, std::vector<std::string>& items) {
-  std::string keys;
-  for (const std::string& k : bullet_setting_names()) keys += (keys.empty() ? "" : ", ") + k;
-  command->add_option("--bullet", items,
-                      "A setting of the bullet engine, KEY=VALUE, repeatable (docs/settings.md); keys: " + keys +
-                          " (shape=hull: convex hulls of dynamic meshes, triangle meshes of static ones, the "
-                          "default; shape=box: boxes equal to the AABBs)");
-}
-
-BulletSettings bullet_settings_from(const std::vector<std::string>& items) {
-  BulletSettings s;
-  apply_bullet_settings(s, items, "--bullet");
-  return s;
+void add_engine_settings_options(CLI::App* command, EngineSettingItems& items) {
+  for (const EngineInfo& info : engine_infos()) {
+    const std::string help = engine_settings_help(info);
+    if (!help.empty()) command->add_option("--" + info.name, items[info.name], help);
+  }
 }
 
 nlohmann::json spread(const std::vector<double>& values) {
@@ -141,48 +119,6 @@ std::string utc_time_now() {
   char buf[32];
   std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
   return buf;
-}
-
-// ---- registration ------------------------------------------------------------------------
-
-struct ToolCommands::Impl {
-  BenchOptions bench;
-  ReplayOptions replay;
-  CompareOptions compare;
-  ReportOptions report;
-  TraceSummaryOptions trace_summary;
-  CLI::App* trace_summary_cmd = nullptr;
-  CLI::App* bench_cmd = nullptr;
-  CLI::App* replay_cmd = nullptr;
-  CLI::App* compare_cmd = nullptr;
-  CLI::App* report_cmd = nullptr;
-};
-
-ToolCommands::ToolCommands(CLI::App& app) : impl_(std::make_unique<Impl>()) {
-  impl_->bench_cmd = add_bench_command(app, impl_->bench);
-  impl_->replay_cmd = add_replay_command(app, impl_->replay);
-  impl_->compare_cmd = add_compare_command(app, impl_->compare);
-  impl_->report_cmd = add_report_command(app, impl_->report);
-  impl_->trace_summary_cmd = add_trace_summary_command(app, impl_->trace_summary);
-}
-
-ToolCommands::~ToolCommands() = default;
-
-bool ToolCommands::selected() const {
-  for (CLI::App* s :
-       {impl_->bench_cmd, impl_->replay_cmd, impl_->compare_cmd, impl_->report_cmd, impl_->trace_summary_cmd})
-    if (s && s->parsed()) return true;
-  return false;
-}
-
-int ToolCommands::run() {
-  if (impl_->bench_cmd && impl_->bench_cmd->parsed()) return bench_command(impl_->bench);
-  if (impl_->replay_cmd && impl_->replay_cmd->parsed()) return replay_command(impl_->replay);
-  if (impl_->compare_cmd && impl_->compare_cmd->parsed()) return compare_command(impl_->compare);
-  if (impl_->report_cmd && impl_->report_cmd->parsed()) return report_command(impl_->report);
-  if (impl_->trace_summary_cmd && impl_->trace_summary_cmd->parsed())
-    return trace_summary_command(impl_->trace_summary);
-  return 0;
 }
 
 }  // namespace octocd::cli

@@ -22,28 +22,16 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/atomic_file.hpp"
-#include "octocd/bullet_settings.hpp"
-#include "octocd/cuda_settings.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/engines.hpp"
 
 namespace octocd::cli {
 
-/// Adds the repeatable `--cuda KEY=VALUE` option (CudaSettings, docs/settings.md) to
-/// `command`, collecting its items into `items`.
-void add_cuda_settings_option(CLI::App* command, std::vector<std::string>& items);
-
-/// CudaSettings from `--cuda` items (apply_cuda_settings). Throws InputError "--cuda: ...".
-CudaSettings cuda_settings_from(const std::vector<std::string>& items);
-
-/// Adds the repeatable `--bullet KEY=VALUE` option (BulletSettings, docs/settings.md) to
-/// `command`, filling `items`.
-void add_bullet_settings_option(CLI::App* command, std::vector<std::string>& items);
-
-/// BulletSettings from `--bullet` items (apply_bullet_settings). Throws InputError
-/// "--bullet: ...".
-BulletSettings bullet_settings_from(const std::vector<std::string>& items);
-
+/// Adds a repeatable `--ENGINE KEY=VALUE` option to `command` for every engine of the
+/// registry that has settings (engine_setting_names; help from engine_settings_help),
+/// collecting each engine's items into `items[ENGINE]` (docs/settings.md). The items are
+/// checked by check_engine_settings.
+void add_engine_settings_options(CLI::App* command, EngineSettingItems& items);
 
 /// Median, minimum, maximum, mean and sample standard deviation of repeated measurements,
 /// as stored in bench results: {"median", "min", "max", "mean", "stdev", "n", "values"}.
@@ -72,24 +60,6 @@ std::vector<std::string> split_list(const std::string& text);
 /// ISO 8601 UTC time now, e.g. 2025-01-01T12:00:00Z.
 std::string utc_time_now();
 
-/// Registers bench, replay, compare, report and trace-summary on `app`; after parsing, `selected()` says
-/// whether one of them was chosen and `run()` runs it (throwing InputError / RuntimeError
-/// like the other commands) and returns its exit code.
-class ToolCommands {
- public:
-  explicit ToolCommands(CLI::App& app);
-  ~ToolCommands();
-  ToolCommands(const ToolCommands&) = delete;
-  ToolCommands& operator=(const ToolCommands&) = delete;
-  /// Whether bench, replay, compare, report or trace-summary was given on the command line.
-  bool selected() const;
-  /// Runs the selected command; returns its exit code.
-  int run();
-
- private:
-  struct Impl;
-  std::unique_ptr<Impl> impl_;
-};
 
 // ---- replaying recorded broadphase input (cli/replay.cpp; `replay` and bench sweeps) ----
 
@@ -174,8 +144,7 @@ struct BenchOptions {
   std::string scene_dir;          ///< where named sweeps find their scenes
   std::string data_dir;           ///< meshes (as load_scene's data_dir)
   std::string trace_dir;          ///< write one trace per steps point here
-  std::vector<std::string> cuda;  ///< --cuda KEY=VALUE items (CudaSettings)
-  std::vector<std::string> bullet;  ///< --bullet KEY=VALUE items (BulletSettings)
+  EngineSettingItems settings;  ///< --ENGINE KEY=VALUE items by engine (add_engine_settings_options)
   std::string csv;                ///< speed-accuracy: the CSV file (default RESULT.csv beside -o)
 };
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o);

@@ -35,7 +35,8 @@ const std::vector<EngineInfo>& engine_infos() {
     bullet.own_broadphase = "bullet-dbvt";
     bullet.own_broadphase_class = "btDbvtBroadphase";
     bullet.geometries = {"hull", "box"};
-    bullet.has_solver_iterations = true;
+    bullet.geometry_setting = "shape";
+    bullet.iterations_setting = "iterations";
     bullet.no_midphase_reason =
         "Bullet runs its own narrow phase: GJK/EPA on convex hulls and triangle meshes, or btBoxBoxDetector on the "
         "AABB boxes (--bullet shape=box)";

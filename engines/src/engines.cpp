@@ -7,7 +7,9 @@
 #include <fmt/format.h>
 
 #include "octocd/broadphase.hpp"
+#include "octocd/bullet_settings.hpp"
 #include "octocd/bullet_world.hpp"
+#include "octocd/cuda_settings.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -17,35 +19,72 @@ namespace octocd {
 
 namespace {
 
-using Factory = std::unique_ptr<Engine> (*)(const std::shared_ptr<const Model>&, const CudaSettings&,
-                                             const BulletSettings&);
+using Items = std::vector<std::string>;
+/// Builds the engine from a model and its own settings items (`where` names them in errors).
+using Factory = std::unique_ptr<Engine> (*)(const std::shared_ptr<const Model>&, const Items&, const std::string&);
 
-/// One engine of engine_infos(): how it is built and whether this build has it.
+/// One engine of engine_infos(): how it is built, whether this build has it, and its
+/// settings (the keys of its struct, a help line, and a check of items that throws as the
+/// factory would).
 struct Registered {
   const char* name;
   Factory make;
   bool built;
+  std::vector<std::string> (*setting_names)();
+  const char* settings_help;
+  void (*check_settings)(const Items&, const std::string&);
 };
 
-std::unique_ptr<Engine> make_cpu(const std::shared_ptr<const Model>& model, const CudaSettings&,
-                                 const BulletSettings&) {
+std::vector<std::string> no_settings() { return {}; }
+
+void check_none(const Items& items, const std::string& where) {
+  if (!items.empty())
+    throw InputError(fmt::format("{}: '{}': this engine has no settings; allowed: none", where, items.front()));
+}
+
+std::unique_ptr<Engine> make_cpu(const std::shared_ptr<const Model>& model, const Items& items,
+                                 const std::string& where) {
+  check_none(items, where);
   return std::make_unique<World>(model, make_any_broadphase(model->scene.broadphase, model->scene.domain));
 }
 
-std::unique_ptr<Engine> make_cuda(const std::shared_ptr<const Model>& model, const CudaSettings& cuda,
-                                  const BulletSettings&) {
-  return make_cuda_engine(model, model->scene.broadphase.name, cuda);
+CudaSettings cuda_settings(const Items& items, const std::string& where) {
+  CudaSettings s;
+  apply_cuda_settings(s, items, where);
+  check_cuda_settings(s, where);
+  return s;
 }
 
-std::unique_ptr<Engine> make_bullet(const std::shared_ptr<const Model>& model, const CudaSettings&,
-                                    const BulletSettings& bullet) {
-  return std::make_unique<BulletWorld>(model, model->initial, BulletOptions(), bullet);
+void check_cuda(const Items& items, const std::string& where) { (void)cuda_settings(items, where); }
+
+std::unique_ptr<Engine> make_cuda(const std::shared_ptr<const Model>& model, const Items& items,
+                                  const std::string& where) {
+  return make_cuda_engine(model, model->scene.broadphase.name, cuda_settings(items, where));
 }
 
-/// The factories, by the names of engine_infos().
+BulletSettings bullet_settings(const Items& items, const std::string& where) {
+  BulletSettings s;
+  apply_bullet_settings(s, items, where);
+  return s;
+}
+
+void check_bullet(const Items& items, const std::string& where) { (void)bullet_settings(items, where); }
+
+std::unique_ptr<Engine> make_bullet(const std::shared_ptr<const Model>& model, const Items& items,
+                                    const std::string& where) {
+  return std::make_unique<BulletWorld>(model, model->initial, BulletOptions(), bullet_settings(items, where));
+}
+
+/// The engines, one entry each, by the names of engine_infos().
 const std::vector<Registered>& registered() {
   static const std::vector<Registered> r{
-      {"cpu", &make_cpu, true}, {"cuda", &make_cuda, OCTOCD_HAVE_CUDA != 0}, {"bullet", &make_bullet, true}};
+      {"cpu", &make_cpu, true, &no_settings, "", &check_none},
+      {"cuda", &make_cuda, OCTOCD_HAVE_CUDA != 0, &cuda_setting_names, "", &check_cuda},
+      {"bullet", &make_bullet, true, &bullet_setting_names,
+       "shape=hull: convex hulls of dynamic meshes, triangle meshes of static ones, the default; shape=box: boxes "
+       "equal to the AABBs",
+       &check_bullet},
+  };
   return r;
 }
 
@@ -80,6 +119,7 @@ ArgumentNames python_argument_names() {
   n.rotation = "rotation";
   n.choose = "engine='{}'";
   n.omit = "None";
+  n.settings = "{}";
   return n;
 }
 
@@ -155,10 +195,35 @@ std::vector<std::string> built_engine_names() {
   return names;
 }
 
+std::vector<std::string> engine_setting_names(const EngineInfo& info) { return registered(info).setting_names(); }
+
+std::string engine_settings_help(const EngineInfo& info) {
+  const Registered& r = registered(info);
+  const std::vector<std::string> keys = r.setting_names();
+  if (keys.empty()) return "";
+  std::string text = fmt::format("A setting of the {} engine, KEY=VALUE, repeatable (docs/settings.md); keys: {}",
+                                 info.name, join(keys, ", "));
+  if (*r.settings_help) text += fmt::format(" ({})", r.settings_help);
+  return text;
+}
+
+void check_engine_settings(const EngineSettingItems& settings, const ArgumentNames& names) {
+  for (const auto& [engine, items] : settings) {
+    const std::string where = fmt::format(fmt::runtime(names.settings), engine);
+    const EngineInfo* info = find_engine_info(engine);
+    if (info == nullptr)
+      throw InputError(fmt::format("{}: unknown engine '{}'; allowed: {}", where, engine, join(engine_names(), ", ")));
+    registered(*info).check_settings(items, where);
+  }
+}
+
 std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
-                                    const CudaSettings& cuda, const BulletSettings& bullet) {
+                                    const EngineSettingItems& settings) {
   const EngineInfo& info = engine_info(name, "--engine");
-  return registered(info).make(model, cuda, bullet);
+  const auto it = settings.find(name);
+  static const Items kNone;
+  return registered(info).make(model, it == settings.end() ? kNone : it->second,
+                               fmt::format(fmt::runtime(cli_argument_names().settings), name));
 }
 
 }  // namespace octocd

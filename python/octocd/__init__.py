@@ -65,7 +65,8 @@ def cuda_device_status() -> str:
 
 
 def broadphases() -> List[str]:
-    """Every broadphase name an engine accepts (octocd's and the Bullet/FCL references)."""
+    """Every broadphase name some engine accepts: octocd's, the Bullet/FCL references, then
+    the device-only ones (lbvh: engine "cuda" only), as `octocd run --broadphase` lists them."""
     return list(_octocd.broadphases())
 
 

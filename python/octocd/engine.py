@@ -68,7 +68,7 @@ class FrameRecord:
 class Engine:
     """One of octocd's engines stepping a scene (octocd/engine.hpp).
 
-    Engine(scene, engine="cpu", broadphase=None, midphase=None, record=True, cuda=None, bullet=None)
+    Engine(scene, engine="cpu", broadphase=None, midphase=None, record=True, **settings)
 
     scene: an octocd.Scene, a scene path or a dict (load_scene).
     engine: "cpu", "cuda" or "bullet" (octocd.engines lists those built).
@@ -77,11 +77,11 @@ class Engine:
     midphase: overrides midphase.levels ("aabb-only", "2", "1,2", ...); not with "bullet".
     record: keep each step's FrameRecord for last_frame() (copies per step; the stepping
         itself is unchanged, bit for bit). False: last_frame() has metrics and states only.
-    cuda: settings of the "cuda" engine as keyword arguments, e.g. {"graph": False,
-        "stage_times": False} (CudaSettings; docs/settings.md lists the keys); ignored by
-        the other engines.
-    bullet: settings of the "bullet" engine, e.g. {"shape": "box"} (BulletSettings;
-        docs/settings.md: shape "hull" or "box"); ignored by the others.
+    **settings: an engine's settings as a keyword named after the engine, a dict of KEY:
+        VALUE, e.g. cuda={"graph": False, "stage_times": False} (CudaSettings) or
+        bullet={"shape": "box"} (BulletSettings); docs/settings.md lists each engine's
+        keys. Every engine's settings are checked (a bad key raises InputError); an engine
+        reads only its own.
 
     Raises InputError for a bad scene or argument and for an engine not built ("cuda"
     without CUDA), RuntimeError for "cuda" without a usable device.
@@ -90,11 +90,17 @@ class Engine:
 
     def __init__(self, scene: Union[Scene, str, Dict[str, Any]], engine: str = "cpu",
                  broadphase: Optional[str] = None, midphase: Optional[str] = None, record: bool = True,
-                 cuda: Optional[Dict[str, Any]] = None, bullet: Optional[Dict[str, Any]] = None):
+                 **settings: Optional[Dict[str, Any]]):
         self.scene = load_scene(scene)
-        items = [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in (cuda or {}).items()]
-        bullet_items = [f"{k}={v}" for k, v in (bullet or {}).items()]
-        self._e = _octocd.Engine(self.scene, engine, broadphase, midphase, bool(record), items, bullet_items)
+        items: Dict[str, List[str]] = {}
+        for name, values in settings.items():
+            if values is None:
+                continue
+            if not isinstance(values, dict):
+                raise _octocd.InputError(f"{name}: {type(values).__name__}; allowed: a dict of the {name} engine's "
+                                 f"settings, e.g. {name}={{KEY: VALUE}} (docs/settings.md)")
+            items[name] = [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in values.items()]
+        self._e = _octocd.Engine(self.scene, engine, broadphase, midphase, bool(record), items)
 
     def step(self, n: int = 1) -> Dict[str, Any]:
         """Runs n steps (SPEC 4) with the GIL released; Ctrl-C raises KeyboardInterrupt

@@ -551,8 +551,7 @@ std::string join(const std::vector<std::string>& v, const char* sep = ", ") {
 class PyEngine {
  public:
   PyEngine(const PyScene& scene, const std::string& engine, const std::optional<std::string>& broadphase,
-           const std::optional<std::string>& midphase, bool record, const std::vector<std::string>& cuda,
-           const std::vector<std::string>& bullet) {
+           const std::optional<std::string>& midphase, bool record, const EngineSettingItems& settings) {
     const EngineInfo* info = find_engine_info(engine);
     const std::vector<std::string>& names = built_engines();
     if (info == nullptr)
@@ -564,9 +563,9 @@ class PyEngine {
     EngineOptions options;
     options.broadphase = broadphase.value_or("");
     options.midphase = midphase.value_or("");
-    apply_cuda_settings(options.cuda, cuda, "cuda");  // checked whatever the engine: a bad key is an input error
-    check_cuda_settings(options.cuda, "cuda");
-    apply_bullet_settings(options.bullet, bullet, "bullet");  // likewise
+    // Every engine's items are checked whatever the engine runs: a bad key is an input error.
+    check_engine_settings(settings, python_argument_names());
+    options.settings = settings;
     Scene sc = *scene.scene;
     apply_engine_options(sc, *info, options, python_argument_names());
     if (const std::string why = engine_unavailable(*info); !why.empty()) {
@@ -577,7 +576,7 @@ class PyEngine {
                                      join(others, " or ")));
     }
     model_ = build_model(sc);
-    engine_ = make_engine(engine, model_, options.cuda, options.bullet);
+    engine_ = make_engine(engine, model_, options.settings);
     if (record && engine_->can_record()) engine_->set_recording(true);
     recording_ = record && engine_->can_record();
   }
@@ -1185,7 +1184,7 @@ PYBIND11_MODULE(_octocd, m) {
   m.attr("build_id") = build_id();
   m.attr("engines") = built_engines();
   m.def("cuda_device_status", &cuda_device_status);
-  m.def("broadphases", &all_broadphase_names);
+  m.def("broadphases", &any_engine_broadphase_names);
   m.def("tolerances", [] {
     py::dict d;
     const Tolerances def;
@@ -1226,10 +1225,9 @@ PYBIND11_MODULE(_octocd, m) {
 
   py::class_<PyEngine>(m, "Engine")
       .def(py::init<const PyScene&, const std::string&, const std::optional<std::string>&,
-                    const std::optional<std::string>&, bool, const std::vector<std::string>&,
-                    const std::vector<std::string>&>(),
+                    const std::optional<std::string>&, bool, const EngineSettingItems&>(),
            py::arg("scene"), py::arg("engine"), py::arg("broadphase"), py::arg("midphase"), py::arg("record"),
-           py::arg("cuda") = std::vector<std::string>{}, py::arg("bullet") = std::vector<std::string>{})
+           py::arg("settings") = EngineSettingItems{})
       .def("step", &PyEngine::step, py::arg("n"))
       .def("last_frame", &PyEngine::last_frame)
       .def("set_state", &PyEngine::set_state)

@@ -57,9 +57,7 @@ TEST(EngineRegistry, CapabilitiesAreWhatTheEnginesDo) {
     EXPECT_EQ(e->midphase_name() == scene.midphase.to_string(), info.has_midphase) << e->midphase_name();
     // records_every_step: judged in process. Bullet records in hull mode (its default)
     // too, but is judged through its trace; in box mode it records nothing.
-    BulletSettings boxes;
-    boxes.shape = BulletShape::Box;
-    EXPECT_EQ(make_engine(info.name, model, {}, boxes)->can_record(), info.records_every_step)
+    EXPECT_EQ(make_engine(info.name, model, {{"bullet", {"shape=box"}}})->can_record(), info.records_every_step)
         << "a translation-only scene";
     EXPECT_EQ(info.octocd_contacts, writes_octocd_contacts(info.name));
   }

@@ -16,3 +16,14 @@ if(NOT _hits STREQUAL "")
     "capability instead (core/include/octocd/engine_registry.hpp):\n${_hits}")
 endif()
 message(STATUS "engine_names: ${_files_seen} files, no branch on an engine's name")
+
+# Engine settings go through the registry (engines/include/octocd/engines.hpp:
+# EngineSettingItems, each engine's entry parses its own items): no per-engine settings
+# code under cli/ or python/src/ (a settings struct, its parser or a *_settings_from).
+house_scan(_hits _files_seen "[A-Za-z]+_settings_from|apply_[a-z]+_settings|(Cuda|Bullet|Mujoco|Ode|Dart)Settings"
+  cli python/src)
+if(NOT _hits STREQUAL "")
+  message(FATAL_ERROR "per-engine settings code outside the registry; pass EngineSettingItems to make_engine "
+    "(engines/include/octocd/engines.hpp):\n${_hits}")
+endif()
+message(STATUS "engine_names: no per-engine settings code in cli/ or python/src/")

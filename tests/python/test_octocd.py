@@ -494,3 +494,28 @@ def test_validate_trace_with_expectations_and_causes(tmp_path):
     assert fixed.exit_code == 3 and fixed.outcomes[0].outcome == "fixed"
     with pytest.raises(octocd.InputError, match=r"expect: expectations\[0\] \(worst\): -1 is out of range"):
         octocd.validate_trace(trace, expect={"expectations": [dict(entry, worst=-1)]})
+
+
+def test_broadphases_are_the_cli_list():
+    # One table of broadphase names: Python lists every name `octocd run --broadphase`
+    # lists, the device-only lbvh included.
+    names = octocd.broadphases()
+    assert "lbvh" in names and "octree" in names and "flat" in names
+    out = subprocess.run([BIN, "run", "--help"], capture_output=True, text=True, check=True).stdout
+    help_line = " ".join(out.split())
+    start = help_line.index("broadphase.name:") + len("broadphase.name:")
+    listed = help_line[start:].split("(")[0].split()
+    assert listed == names
+
+
+def test_engine_settings_are_checked_through_the_registry():
+    scene = octocd.load_scene(scene_path("box-stack"))
+    with pytest.raises(octocd.InputError, match="bullet: unknown bullet setting 'colour'"):
+        octocd.Engine(scene, engine="cpu", bullet={"colour": "red"})
+    with pytest.raises(octocd.InputError, match="no-such-engine: unknown engine"):
+        octocd.Engine(scene, engine="cpu", **{"no-such-engine": {"k": 1}})
+    with pytest.raises(octocd.InputError, match="allowed: a dict"):
+        octocd.Engine(scene, engine="bullet", bullet="shape=box")
+    # The engine reads its own items: shape=box records nothing (can_record false).
+    e = octocd.Engine(scene, engine="bullet", bullet={"shape": "box"})
+    e.step(2)

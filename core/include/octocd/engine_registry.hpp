@@ -51,9 +51,13 @@ struct EngineInfo {
   /// `geometry`): {"mesh"} for octocd's narrow phase on the meshes; {"hull", "box"} for an
   /// engine with a shape setting (bullet: BulletSettings::shape).
   std::vector<std::string> geometries{"mesh"};
-  /// It has a solver iteration count as a setting (bullet: BulletSettings::solver_iterations,
-  /// `--bullet iterations=N`): the speed-accuracy sweep's second axis.
-  bool has_solver_iterations = false;
+  /// The setting key that chooses among `geometries` (bullet: "shape", BulletSettings::
+  /// shape), "" when it has one geometry: the speed-accuracy sweep passes "KEY=GEOMETRY".
+  std::string geometry_setting;
+  /// The setting key of its solver iteration count (bullet: "iterations",
+  /// BulletSettings::solver_iterations), "" when it has none: the speed-accuracy sweep's
+  /// second axis passes "KEY=N".
+  std::string iterations_setting;
 };
 
 /// Every engine, built in this octocd or not, in a stable order: cpu, cuda, bullet.

@@ -5,12 +5,11 @@
 /// links the three engines' libraries (core's World, reference's BulletWorld, gpu's cuda
 /// engine or its stub), so nothing above it names an engine's class or branches on a name.
 
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include "octocd/bullet_settings.hpp"
-#include "octocd/cuda_settings.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/scene.hpp"
@@ -26,7 +25,30 @@ struct ArgumentNames {
   std::string choose = "--engine {}";
   /// How leaving an option out reads, "{}" for the option: "no {}" or "None".
   std::string omit = "no {}";
+  /// How an engine's settings are named, "{}" for the engine: "--{}" (`--bullet
+  /// shape=box`) or "{}" (Python's `bullet={'shape': 'box'}`).
+  std::string settings = "--{}";
 };
+
+/// Settings of engines as "KEY=VALUE" items, by engine name, each engine's items in the
+/// order given (the CLI's repeated `--ENGINE KEY=VALUE`, Python's `ENGINE={KEY: VALUE}`).
+/// An engine reads only its own items; each engine's registry entry parses them onto its
+/// documented settings struct (docs/settings.md: CudaSettings, BulletSettings, ...).
+using EngineSettingItems = std::map<std::string, std::vector<std::string>>;
+
+/// The keys of the settings of the engine `info` (the field names of its settings struct,
+/// in the struct's order); empty for an engine without settings (cpu).
+std::vector<std::string> engine_setting_names(const EngineInfo& info);
+
+/// One line on the settings of the engine `info` for help texts: what the items are, their
+/// keys and, where it helps, what the values mean; "" for an engine without settings.
+std::string engine_settings_help(const EngineInfo& info);
+
+/// Checks every engine's items in `settings` as its registry entry parses them, whatever
+/// the engine a caller runs (a bad item is an input error before anything runs). Throws
+/// InputError "<names.settings for the engine>: ..." naming the key, the value and what is
+/// allowed, or naming an engine that has no settings or no such name.
+void check_engine_settings(const EngineSettingItems& settings, const ArgumentNames& names);
 
 /// The CLI's spelling (the defaults) and Python's (broadphase=, engine='bullet', None).
 ArgumentNames cli_argument_names();
@@ -37,8 +59,8 @@ struct EngineOptions {
   std::string broadphase;  ///< replaces the scene's broadphase.name; "": the scene's
   std::string midphase;    ///< replaces the scene's midphase.levels ("1,2", "aabb-only"); "": the scene's
   bool rotation = false;   ///< the bodies rotate (as the scene key rotation: true)
-  CudaSettings cuda;       ///< settings of the cuda engine (docs/settings.md); other engines ignore them
-  BulletSettings bullet;   ///< settings of the bullet engine (docs/settings.md); other engines ignore them
+  /// Settings items by engine (docs/settings.md); an engine reads only its own.
+  EngineSettingItems settings;
 };
 
 /// Applies `options` to `scene` for the engine `info` and checks them as strictly as the
@@ -62,12 +84,14 @@ std::string engine_unavailable(const EngineInfo& info);
 std::vector<std::string> built_engine_names();
 
 /// Builds the engine `name` from `model` (shared, not copied) with the model's broadphase
-/// (checked by apply_engine_options when it came from a caller), `cuda` for the cuda
-/// engine, `bullet` for the bullet engine (the others ignore what is not theirs). Throws InputError for an unknown name ("--engine: unknown engine ...") or a
-/// broadphase the engine does not have, RuntimeError when the engine cannot start (no
-/// CUDA device, a build without CUDA, too little device memory).
+/// (checked by apply_engine_options when it came from a caller) and its own items of
+/// `settings` parsed onto its settings struct by its registry entry (items of other engines
+/// are ignored). Throws InputError for an unknown name ("--engine: unknown engine ..."), a
+/// bad setting item ("--ENGINE: ...") or a broadphase the engine does not have,
+/// RuntimeError when the engine cannot start (no CUDA device, a build without CUDA or
+/// without the engine's library, too little device memory).
 std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
-                                    const CudaSettings& cuda = {}, const BulletSettings& bullet = {});
+                                    const EngineSettingItems& settings = {});
 
 /// Every broadphase name of some engine, in a stable order: all_broadphase_names() (cpu;
 /// cuda has those too) then cuda_only_broadphase_names() (lbvh).
