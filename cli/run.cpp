@@ -1,0 +1,408 @@
+// `octocd run SCENE`: an engine steps a scene, with a progress bar, a summary and an
+// optional trace (docs/cli.md, "run").
+#include <signal.h>
+#include <unistd.h>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <new>
+#include <optional>
+#include <string>
+#include <vector>
+#include <climits>
+#include <condition_variable>
+#include <exception>
+#include <mutex>
+#include <thread>
+#include <filesystem>
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include "octocd/broadphase.hpp"
+#include "octocd/bullet_world.hpp"
+#include "octocd/error.hpp"
+#include "octocd/expect.hpp"
+#include "octocd/shards.hpp"
+#include "octocd/external.hpp"
+#include "octocd/midphase.hpp"
+#include "octocd/reference_broadphase.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/atomic_file.hpp"
+#include "octocd/stop.hpp"
+#include "octocd/trace.hpp"
+#include "octocd/validation.hpp"
+#include "octocd/version.hpp"
+#include "octocd/world.hpp"
+#include "octocd/cuda_world.hpp"
+#include "octocd/engines.hpp"
+#include "commands.hpp"
+#include "tools.hpp"
+#include "view.hpp"
+
+namespace octocd::cli {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr int kStages = static_cast<int>(octocd::Stage::Count);
+
+using octocd::make_engine;  // engines/include/octocd/engines.hpp
+
+struct RunOptions {
+  std::string scene;
+  std::string engine = "cpu";
+  std::string broadphase;
+  std::string midphase;
+  int frames = 0;
+  std::string trace;
+  int state_every = 10;
+  bool contacts = false;
+  bool quiet = false;
+  std::string summary_json;
+  std::string data_dir;
+  bool no_xdmf = false;
+  bool rotation = false;  ///< --rotation: the scene's bodies rotate (engine bullet only)
+  octocd::EngineSettingItems settings;  ///< --ENGINE KEY=VALUE items by engine
+};
+
+/// Running sums for the summary table.
+struct Totals {
+  std::int64_t frames = 0;
+  double step_ms = 0.0;
+  std::array<double, kStages> stage_ms{};
+  double pairs = 0.0, dynamic_pairs = 0.0, candidates = 0.0, contacts = 0.0, box_pairs = 0.0,
+         vertex_tests = 0.0;
+  std::uint64_t max_pairs = 0, max_dynamic_pairs = 0, max_candidates = 0, max_contacts = 0,
+                max_box_pairs = 0, max_vertex_tests = 0, max_memory_bytes = 0;
+  double pen_mean_sum = 0.0, pen_max = 0.0;
+  std::int64_t frames_with_contacts = 0;
+  double energy_sum = 0.0, energy_max = 0.0;
+  double model_s = 0.0;   ///< set-up: scene file, meshes, bodies (build_model), s
+  double engine_s = 0.0;  ///< set-up: the engine (cuda: device buffers and upload), s
+  octocd::FrameMetrics last;  ///< the last frame's row (the "last" column)
+
+  void add(const octocd::FrameMetrics& m) {
+    ++frames;
+    step_ms += m.step_ms;
+    for (int s = 0; s < kStages; ++s) stage_ms[s] += m.stage_ms[s];
+    pairs += static_cast<double>(m.aabb_pairs);
+    dynamic_pairs += static_cast<double>(m.dynamic_pairs);
+    candidates += static_cast<double>(m.cell_candidates);
+    contacts += static_cast<double>(m.contacts);
+    box_pairs += static_cast<double>(m.box_pairs);
+    vertex_tests += static_cast<double>(m.vertex_tests);
+    max_pairs = std::max(max_pairs, m.aabb_pairs);
+    max_dynamic_pairs = std::max(max_dynamic_pairs, m.dynamic_pairs);
+    max_candidates = std::max(max_candidates, m.cell_candidates);
+    max_contacts = std::max(max_contacts, m.contacts);
+    max_box_pairs = std::max(max_box_pairs, m.box_pairs);
+    max_vertex_tests = std::max(max_vertex_tests, m.vertex_tests);
+    max_memory_bytes = std::max(max_memory_bytes, m.memory_bytes);
+    if (m.contacts > 0) {
+      ++frames_with_contacts;
+      pen_mean_sum += m.penetration_mean;
+    }
+    pen_max = std::max(pen_max, m.penetration_max);
+    energy_sum += m.kinetic_energy;
+    energy_max = frames == 1 ? m.kinetic_energy : std::max(energy_max, m.kinetic_energy);
+    last = m;
+  }
+};
+
+/// Progress on a terminal: one line rewritten in place; otherwise a plain line per 10%.
+class Progress {
+ public:
+  Progress(std::int64_t total, bool enabled)
+      : total_(total), enabled_(enabled), tty_(isatty(fileno(stderr)) != 0) {}
+
+  void update(const octocd::FrameMetrics& m, const Totals& t) {
+    if (!enabled_) return;
+    const auto now = Clock::now();
+    const bool last = m.frame == total_;
+    if (tty_) {
+      if (!last && now - last_draw_ < std::chrono::milliseconds(100)) return;
+      last_draw_ = now;
+      constexpr int kWidth = 30;
+      const int filled = static_cast<int>(kWidth * m.frame / std::max<std::int64_t>(total_, 1));
+      std::fprintf(stderr, "\r[%s%s] frame %lld/%lld  %8.1f steps/s  pairs %llu  contacts %llu ",
+                   std::string(static_cast<std::size_t>(filled), '#').c_str(),
+                   std::string(static_cast<std::size_t>(kWidth - filled), ' ').c_str(),
+                   static_cast<long long>(m.frame), static_cast<long long>(total_),
+                   rate(t), static_cast<unsigned long long>(m.aabb_pairs),
+                   static_cast<unsigned long long>(m.contacts));
+      if (last) std::fprintf(stderr, "\n");
+      std::fflush(stderr);
+    } else {
+      const std::int64_t step = std::max<std::int64_t>(total_ / 10, 1);
+      if (m.frame % step != 0 && !last) return;
+      std::fprintf(stderr, "frame %lld/%lld  %.1f steps/s  pairs %llu  contacts %llu\n",
+                   static_cast<long long>(m.frame), static_cast<long long>(total_), rate(t),
+                   static_cast<unsigned long long>(m.aabb_pairs),
+                   static_cast<unsigned long long>(m.contacts));
+    }
+  }
+
+ private:
+  static double rate(const Totals& t) {
+    return t.step_ms > 0.0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0;
+  }
+  std::int64_t total_;
+  bool enabled_;
+  bool tty_;
+  Clock::time_point last_draw_{};
+};
+
+void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
+                   const std::string& trace, const std::string& xdmf) {
+  const std::string engine = world.name();
+  const std::string memory_kind = octocd::engine_info(engine, "engine").memory_kind;
+  const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
+  const octocd::Scene& s = world.scene();
+  fmt::print("\nscene        {} ({} bodies, {} shapes)\n", s.name, world.bodies().size(),
+             world.shapes().size());
+  fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", engine, world.broadphase_name(),
+             world.midphase_name(), world.device());
+  fmt::print("geometry     {}\n", world.collision_geometry());
+  fmt::print("set-up       {:.2f} s (scene and bodies {:.2f} s, engine {:.2f} s)\n", t.model_s + t.engine_s,
+             t.model_s, t.engine_s);
+  fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
+             static_cast<double>(t.frames) * s.dt, wall_s);
+  fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n",
+             t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0,
+             t.step_ms / n);
+  if (t.max_memory_bytes > 0)  // engines that report it (cuda: device memory)
+    fmt::print("memory       {:.1f} MiB held by the pipeline's buffers (largest over frames{})\n",
+               static_cast<double>(t.max_memory_bytes) / 1048576.0, memory_kind.empty() ? "" : ", " + memory_kind);
+  fmt::print("\n");
+  fmt::print("{:<12} {:>10} {:>8}\n", "stage", "mean ms", "share");
+  for (int st = 0; st < kStages; ++st) {
+    const auto stage = static_cast<octocd::Stage>(st);
+    if (!world.has_stage(stage)) {
+      fmt::print("{:<12} {:>10} {:>8}\n", octocd::stage_name(stage), "n/a", "");
+      continue;
+    }
+    fmt::print("{:<12} {:>10.4f} {:>7.1f}%\n", octocd::stage_name(stage), t.stage_ms[st] / n,
+               t.step_ms > 0 ? 100.0 * t.stage_ms[st] / t.step_ms : 0.0);
+  }
+  // Every row: the mean over frames, the largest frame value, the last frame's value.
+  fmt::print("\n{:<24} {:>14} {:>14} {:>14}\n", "per frame", "mean", "max", "last");
+  auto row = [](const char* name, double sum_over_n, std::uint64_t max, std::uint64_t last) {
+    fmt::print("{:<24} {:>14.1f} {:>14} {:>14}\n", name, sum_over_n, max, last);
+  };
+  row("broadphase candidates", t.candidates / n, t.max_candidates, t.last.cell_candidates);
+  row("AABB pairs", t.pairs / n, t.max_pairs, t.last.aabb_pairs);
+  row("  dynamic pairs", t.dynamic_pairs / n, t.max_dynamic_pairs, t.last.dynamic_pairs);
+  row("midphase box pairs", t.box_pairs / n, t.max_box_pairs, t.last.box_pairs);
+  row("vertex tests", t.vertex_tests / n, t.max_vertex_tests, t.last.vertex_tests);
+  row("contacts", t.contacts / n, t.max_contacts, t.last.contacts);
+  const double pen_mean =
+      t.frames_with_contacts > 0 ? t.pen_mean_sum / static_cast<double>(t.frames_with_contacts) : 0.0;
+  fmt::print("{:<24} {:>14.6f} {:>14.6f} {:>14.6f}\n", "penetration (m)", pen_mean, t.pen_max,
+             t.last.penetration_max);
+  fmt::print("{:<24} {:>14.4f} {:>14.4f} {:>14.4f}\n", "kinetic energy (J)", t.energy_sum / n, t.energy_max,
+             t.last.kinetic_energy);
+  fmt::print("\n(penetration: mean over frames with contacts of the frame mean; max and last are the "
+             "largest d_p.\n AABB pairs include static-static pairs (walls touching walls); dynamic pairs "
+             "are the ones\n that can produce a contact; broadphase candidates are the pairs tested before "
+             "the exact AABB test.)\n");
+  const std::string notes = world.notes();
+  if (!notes.empty()) fmt::print("\nengine {}: {}\n", engine, notes);
+  if (!trace.empty()) fmt::print("\ntrace        {}\n", trace);
+  if (!xdmf.empty()) fmt::print("xdmf         {} (ParaView, Xdmf3 reader)\n", xdmf);
+}
+
+void write_summary_json(const std::string& path, const octocd::Engine& world, const Totals& t,
+                        double wall_s) {
+  const std::string engine = world.name();
+  const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
+  nlohmann::json j;
+  j["scene"] = world.scene().name;
+  j["bodies"] = world.bodies().size();
+  j["engine"] = engine;
+  j["broadphase"] = world.broadphase_name();
+  j["midphase"] = world.midphase_name();
+  j["geometry"] = world.collision_geometry();
+  j["frames"] = t.frames;
+  j["wall_s"] = wall_s;
+  // Set-up before the first step: scene file, meshes and bodies; the engine.
+  j["setup_s"] = {{"model", t.model_s}, {"engine", t.engine_s}};
+  j["steps_per_s"] = t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0;
+  j["mean_step_ms"] = t.step_ms / n;
+  for (int st = 0; st < kStages; ++st) {
+    const auto stage = static_cast<octocd::Stage>(st);
+    // null: the engine has no such stage (not 0 ms).
+    j["stage_ms"][octocd::stage_name(stage)] =
+        world.has_stage(stage) ? nlohmann::json(t.stage_ms[st] / n) : nlohmann::json(nullptr);
+  }
+  j["mean_cell_candidates"] = t.candidates / n;
+  j["mean_pairs"] = t.pairs / n;
+  j["max_pairs"] = t.max_pairs;
+  j["mean_dynamic_pairs"] = t.dynamic_pairs / n;
+  j["max_dynamic_pairs"] = t.max_dynamic_pairs;
+  j["mean_contacts"] = t.contacts / n;
+  j["max_contacts"] = t.max_contacts;
+  j["mean_box_pairs"] = t.box_pairs / n;
+  j["mean_vertex_tests"] = t.vertex_tests / n;
+  j["penetration_max"] = t.pen_max;
+  // Bytes held by the pipeline's buffers, largest over frames (cuda: device memory).
+  j["memory_bytes"] = t.max_memory_bytes;
+  // Kinetic energy (J, dynamic bodies): mean over frames, largest, last frame's.
+  j["kinetic_energy"] = {{"mean", t.energy_sum / n}, {"max", t.energy_max}, {"last", t.last.kinetic_energy}};
+  j["device"] = world.device();
+  j["build_id"] = octocd::build_id();
+  octocd::write_file_atomically(path, j.dump(2) + "\n", "--summary-json");
+}
+
+/// What `run` keeps should it end at once (a second signal, the 1 s bound): the trace's
+/// frames as of its last flush (trace.hpp: readable at any instant).
+std::string run_kept(const octocd::TraceWriter* trace, const std::string& path) {
+  if (!trace) return "";
+  return trace->flushed_frames() > 0
+             ? fmt::format("the trace {} holds frames 1..{} (its last flush), no sidecar", path, trace->flushed_frames())
+             : fmt::format("the trace {} holds no frame (none flushed yet), no sidecar", path);
+}
+
+/// `run`: from a SIGINT or SIGTERM to the end of the process, at most this long (s): the
+/// step in progress gets the 0.5 s grace, the trace's last flush is bounded by
+/// TraceOptions::flush_bytes; past it the process ends keeping the flushed frames.
+constexpr double kRunStopBound = 0.95;
+
+int run_command(const RunOptions& o) {
+  // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kRunStopBound.
+  octocd::StopOnSignals stop_on_signals(kRunStopBound);
+  const auto t_setup = Clock::now();
+  std::optional<octocd::StopAtOnce> loading(std::in_place, "loading the scene and its meshes");
+  octocd::Scene scene = load_scene_for(o.scene, o.data_dir);
+  if (o.frames > 0) scene.frames = o.frames;
+  octocd::EngineOptions eo;
+  eo.broadphase = o.broadphase;
+  eo.midphase = o.midphase;
+  eo.rotation = o.rotation;
+  octocd::check_engine_settings(o.settings, octocd::cli_argument_names());
+  eo.settings = o.settings;
+  octocd::apply_engine_options(scene, octocd::engine_info(o.engine, "--engine"), eo, octocd::cli_argument_names());
+
+  const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
+  loading.reset();  // from here on the loop polls the signal, flushes and reports
+  const auto t_model = Clock::now();
+  const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model, eo.settings);
+  octocd::Engine& world = *engine;
+  Totals totals;
+  totals.model_s = std::chrono::duration<double>(t_model - t_setup).count();
+  totals.engine_s = std::chrono::duration<double>(Clock::now() - t_model).count();
+  std::unique_ptr<octocd::TraceWriter> trace;
+  if (!o.trace.empty()) {
+    octocd::TraceOptions topt;
+    topt.state_every = o.state_every;
+    topt.contacts = o.contacts && world.can_record();
+    if (topt.contacts) world.set_recording(true);  // the GPU copies contacts back only then
+    if (const octocd::RotationTraits* traits = world.rotation_traits()) {  // a rotating engine: version 2
+      topt.v2 = *traits;
+      topt.gravity = scene.gravity;
+    }
+    octocd::TraceMetadata meta = octocd::trace_metadata(world, o.state_every);
+    meta.start_time = octocd::cli::utc_time_now();
+    trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(world), topt);
+    trace->append_state(0, world.state());
+    octocd::set_stop_kept(run_kept(trace.get(), o.trace));
+  }
+
+  Progress progress(scene.frames, !o.quiet);
+  // Without a trace nothing but the metrics is read between the steps: the engine may run
+  // ahead of the calls (the summary reads no state).
+  if (!trace) world.plan_steps(scene.frames);
+  const auto t0 = Clock::now();
+  try {
+    for (int f = 0; f < scene.frames && octocd::stop_signal() == 0; ++f) {
+      // A step of a big scene may take seconds: a signal it does not answer within the
+      // grace ends the run there, with the trace's flushed frames (SWMR, trace.hpp).
+      std::optional<octocd::StopWithin> within(
+          std::in_place,
+          fmt::format("run stepped frame {} of {} (a step longer than the 0.5 s grace)", f + 1, scene.frames));
+      const octocd::FrameMetrics& m = world.step();
+      within.reset();
+      totals.add(m);
+      const std::int64_t flushed = trace ? trace->flushed_frames() : 0;
+      if (trace && world.rotation_traits() && world.can_record())
+        trace->append_frame_v2(m, world.state(), world.record());
+      else if (trace)
+        trace->append_frame(m, world.state(), world.contacts());
+      if (trace && trace->flushed_frames() != flushed) octocd::set_stop_kept(run_kept(trace.get(), o.trace));
+      progress.update(m, totals);
+    }
+  } catch (const octocd::RuntimeError&) {
+    close_after_failure(trace, o.trace, o.no_xdmf);
+    throw;
+  }
+  std::string xdmf;
+  if (trace) {
+    trace->close();
+    // A stopped run has a second: the sidecar re-reads the whole trace (the hardened
+    // reader walks its heaps: 1 s for 200 MB), so it is left out.
+    if (octocd::stop_signal() == 0) xdmf = write_sidecar(o.trace, o.no_xdmf);
+    octocd::set_stop_kept(fmt::format("the trace {} holds frames 1..{}, closed", o.trace, totals.frames));
+  }
+  const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  if (!o.quiet) print_summary(world, totals, wall_s, o.trace, xdmf);
+  if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s);
+  if (const int sig = octocd::stop_signal()) {
+    report_stop(sig, "run", totals.frames, scene.frames, o.trace,
+                o.trace.empty() || o.no_xdmf ? "" : "; no XDMF sidecar (a stopped run writes none)");
+    return octocd::stop_exit_code(sig);
+  }
+  return 0;
+}
+
+}  // namespace
+
+Command add_run_command(CLI::App& app) {
+  const auto options = std::make_shared<RunOptions>();
+  RunOptions& run = *options;
+  CLI::App* run_cmd = app.add_subcommand("run", "Run a scene through the pipeline and print a summary");
+  run_cmd->add_option("scene", run.scene, "Scene file (JSON, see docs/scenes.md)")->required();
+  run_cmd->add_option("--engine", run.engine, engines_help())
+      ->check(CLI::IsMember(octocd::engine_names()))
+      ->default_val("cpu");
+  std::string bp_help = "Broadphase, overrides the scene's broadphase.name:";
+  for (const auto& name : octocd::all_broadphase_names()) bp_help += " " + name;
+  for (const auto& name : octocd::cuda_only_broadphase_names()) bp_help += " " + name;
+  for (const EngineInfo& e : engine_infos())
+    if (!e.uses_scene_broadphase) bp_help += fmt::format(" (with --engine {}: {} only)", e.name, e.own_broadphase);
+  bp_help += fmt::format(" (lbvh, a Karras 2012 linear BVH: with {} only)",
+                         engines_with([](const EngineInfo& e) { return e.device_broadphases; }));
+  run_cmd->add_option("--broadphase", run.broadphase, bp_help);
+  run_cmd->add_option("--midphase", run.midphase,
+                      "Midphase levels, overrides the scene's midphase.levels: aabb-only | 2 | 1,2 | "
+                      "0,1,2 | any ascending list of levels in [0, midphase.depth] (with " +
+                          engines_with([](const EngineInfo& e) { return e.has_midphase; }) + ")");
+  run_cmd->add_option("--frames", run.frames, "Number of steps, overrides the scene (>= 1)")
+      ->check(at_least_one());
+  run_cmd->add_option("--trace", run.trace, "Write an HDF5 trace (docs/trace-format.md)");
+  run_cmd->add_option("--state-every", run.state_every,
+                      "Record positions and velocities every K-th frame in the trace (>= 1)")
+      ->check(at_least_one())
+      ->default_val(10);
+  run_cmd->add_flag("--contacts", run.contacts, "Record every contact (/contacts) in the trace");
+  run_cmd->add_flag("--quiet", run.quiet, "No progress and no summary table");
+  run_cmd->add_option("--summary-json", run.summary_json,
+                      "Also write the summary (steps/s, stage ms, counts, kinetic energy) as JSON to "
+                      "this file");
+  run_cmd->add_option("--data-dir", run.data_dir, data_dir_help());
+  run_cmd->add_flag("--no-xdmf", run.no_xdmf,
+                    "With --trace: do not write the XDMF sidecar FILE.h5.xmf (ParaView) beside it");
+  run_cmd->add_flag("--rotation", run.rotation,
+                    "The bodies rotate (as the scene key rotation: true; with " +
+                        engines_with([](const EngineInfo& e) { return e.rotates; }) +
+                        "); --trace writes format version 2 (orientation, angular velocity, inertia; with "
+                        "--contacts manifold rows with points, /pairs, /aabbs)");
+  add_engine_settings_options(run_cmd, run.settings);
+
+  return {[run_cmd] { return run_cmd->parsed(); }, [options] { return run_command(*options); }};
+}
+
+}  // namespace octocd::cli

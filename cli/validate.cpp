@@ -1,0 +1,751 @@
+// `octocd validate`: the validators judge an engine's run of a scene or another engine's
+// trace (docs/validation.md, docs/cli.md "validate").
+#include <signal.h>
+#include <unistd.h>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <new>
+#include <optional>
+#include <string>
+#include <vector>
+#include <climits>
+#include <condition_variable>
+#include <exception>
+#include <mutex>
+#include <thread>
+#include <filesystem>
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include "octocd/broadphase.hpp"
+#include "octocd/bullet_world.hpp"
+#include "octocd/error.hpp"
+#include "octocd/expect.hpp"
+#include "octocd/shards.hpp"
+#include "octocd/external.hpp"
+#include "octocd/midphase.hpp"
+#include "octocd/reference_broadphase.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/atomic_file.hpp"
+#include "octocd/stop.hpp"
+#include "octocd/trace.hpp"
+#include "octocd/validation.hpp"
+#include "octocd/version.hpp"
+#include "octocd/world.hpp"
+#include "octocd/cuda_world.hpp"
+#include "octocd/engines.hpp"
+#include "commands.hpp"
+#include "tools.hpp"
+#include "view.hpp"
+
+namespace octocd::cli {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr int kStages = static_cast<int>(octocd::Stage::Count);
+
+using octocd::make_engine;  // engines/include/octocd/engines.hpp
+
+
+struct ValidateOptions {
+  std::string scene;
+  std::string engine = "cpu";
+  std::vector<std::string> tolerances;
+  std::string against = "bullet,fcl";
+  int frames = 300;
+  int every = 10;
+  std::string trace;
+  std::string trace_in;       ///< --trace-in: judge another engine's trace instead of a scene
+  bool check_only = false;    ///< --check-only: only check the --trace-in file's structure
+  bool frames_given = false;  ///< --frames on the command line (--trace-in: else every frame)
+  bool every_given = false;   ///< --every on the command line (--trace-in: else 1)
+  std::string data_dir;
+  std::string junit;
+  bool no_xdmf = false;
+  bool rotation = false;      ///< --rotation: the scene's bodies rotate (engine bullet only)
+  octocd::EngineSettingItems settings;  ///< --ENGINE KEY=VALUE items by engine
+  bool engine_given = false;  ///< --engine was on the command line
+  std::string expect;         ///< --expect FILE.json: known failures (SPEC 14b)
+  std::string write_expect;   ///< --write-expect FILE.json: record the current failures
+  bool strict = false;        ///< --strict: an expected failure that no longer fails is exit 3
+  std::string json;           ///< --json FILE: every row, cause and item as JSON
+  std::string view;           ///< --view DIR: a page per failing example (cli/view.hpp)
+  octocd::cli::FailureViews views;  ///< the pages --view wrote (linked from the table, JSON, JUnit)
+  std::string shard;          ///< --shard i/N: judge only this share of the trace's frames
+  std::vector<std::string> merge;  ///< --merge A.json B.json ...: join shards' verdicts
+  int threads = 0;            ///< --threads: threads per frame (0: the hardware's)
+  octocd::Expectations expectations;  ///< --expect's file, read before the run
+};
+
+/// The end of every `validate` path: matches `results` of `run` against --expect, writes
+/// --json and --write-expect, prints the outcome lines (plain text) and the verdict line;
+/// returns the exit code: 0 when every failure is expected (or none), 3 when one is new or
+/// grown (or, with --strict, an expectation is fixed); 0 after --write-expect.
+/// `print_table` prints the table (it needs the report for its verdicts) before them.
+int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
+                      const std::vector<octocd::ValidationResult>& results,
+                      const octocd::ExpectationReport& report, const nlohmann::ordered_json& meta) {
+  using Kind = octocd::ExpectationOutcome::Kind;
+  if (!o.views.summary.empty()) fmt::print("\n{}", octocd::cli::format_views(o.views));
+  if (!o.json.empty()) {
+    nlohmann::ordered_json doc = octocd::results_json(results, run, &report, meta);
+    octocd::cli::add_views_to_json(doc, o.views, o.json);
+    octocd::write_json_file(o.json, doc, "--json");
+  }
+  if (!report.outcomes.empty()) fmt::print("\n");
+  for (const octocd::ExpectationOutcome& x : report.outcomes) fmt::print("{}\n", x.text);
+  if (!o.write_expect.empty()) {
+    const std::vector<octocd::Expectation> entries = octocd::expectations_from(run, results);
+    octocd::write_expectations(o.write_expect, run, entries);
+    fmt::print("\nwrote {} expectation(s) of {} {} to {} (edit each reason)\n", entries.size(),
+               run.scene.empty() ? "trace" : "scene", run.scene.empty() ? run.trace : run.scene, o.write_expect);
+    return 0;
+  }
+  const int code = report.exit_code(o.strict);
+  const std::size_t expected = report.count(Kind::Expected), fixed = report.count(Kind::Fixed);
+  const std::size_t failing = report.count(Kind::New) + report.count(Kind::Grown);
+  if (failing == 0 && expected == 0) {
+    fmt::print("\n{}\n", fixed > 0 && o.strict ? "VALIDATION FAILED: an expected failure no longer fails (--strict)"
+                                                 : "all validators pass");
+  } else if (failing == 0) {
+    fmt::print("\nall validators pass or fail as expected ({} expected failure(s), {} fixed; {}){}\n", expected,
+               fixed, report.file, fixed > 0 && o.strict ? "; VALIDATION FAILED: --strict and a fixed expectation" : "");
+  } else {
+    fmt::print("\nVALIDATION FAILED: {} new or grown failure(s){}\n", failing,
+               expected > 0 ? fmt::format(", {} expected", expected) : std::string());
+  }
+  return code;
+}
+
+/// `octocd validate --trace-in FILE.h5`: another engine's trace judged frame by frame
+/// (octocd/external.hpp); exit 0 all pass, 3 any fails, 2 a malformed trace.
+int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, Clock::time_point t0) {
+  if (o.check_only) {
+    const octocd::ExternalTraceInfo info = octocd::check_external_trace(o.trace_in);
+    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames, version {}; {}{}{}{}{}{}{}{}\n",
+               o.trace_in, info.engine, info.bodies, info.frames, info.version, info.has_states ? "states " : "",
+               info.has_rotation ? "rotation " : "", info.has_aabbs ? "aabbs " : "", info.has_pairs ? "pairs " : "",
+               info.has_contacts ? "contacts " : "", info.has_points ? "points " : "",
+               info.manifolds ? "manifolds " : "", info.has_scene ? "scene" : "");
+    return 0;
+  }
+  octocd::ExternalOptions eo;
+  eo.against_fcl = vo.against_fcl;
+  eo.tol = vo.tol;
+  eo.overridden = vo.overridden;
+  eo.threads = o.threads;
+  if (!o.shard.empty()) eo.shard = octocd::parse_shard(o.shard);
+  octocd::ExternalTraceInfo info;
+  const int every = o.every_given ? o.every : 1;
+  // SIGINT/SIGTERM: the checks poll it; the verdict of the frames judged so far is reported
+  // as incomplete (a signal while the trace is checked ends with no verdict).
+  eo.stop = [] { return octocd::stop_signal() != 0; };
+  eo.keep_on_stop = true;
+  octocd::set_stop_kept("no verdict written (the stop bound passed first)");
+  std::vector<octocd::ValidationResult> results;
+  try {
+    results = octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
+  } catch (const octocd::ValidationStopped&) {
+    const int sig = octocd::stop_signal();
+    std::fprintf(stderr, "octocd validate: stopped by %s while checking the trace %s; no frame judged, no verdict\n",
+                 octocd::stop_signal_name(sig), o.trace_in.c_str());
+    if (!o.junit.empty())
+      octocd::write_junit_error(o.junit, std::filesystem::path(o.trace_in).stem().string(), "stopped",
+                                fmt::format("stopped by {} while checking the trace; no frame judged",
+                                            octocd::stop_signal_name(sig)));
+    return octocd::stop_exit_code(sig);
+  }
+  std::string stopped;
+  if (info.stopped) {
+    const std::int64_t first = octocd::shard_frames(eo.shard, info.frames).first;
+    stopped = fmt::format(
+        "the table covers {} of {} (an incomplete verdict); stopped by {}{}",
+        info.judged_to >= first ? fmt::format("frames {}..{}", first, info.judged_to) : std::string("no whole frame"),
+        info.frames, octocd::stop_signal_name(octocd::stop_signal()),
+        info.stopped_in > 0 ? fmt::format(" inside the checks of frame {} (partly judged)", info.stopped_in) : "");
+  }
+  if (!o.view.empty() && !info.stopped) o.views = octocd::cli::write_failure_views(o.trace_in, results, o.view);
+  const octocd::RunName run = octocd::trace_run(o.trace_in);
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
+  std::string share;
+  if (!o.shard.empty()) {
+    const auto [first, last] = octocd::shard_frames(eo.shard, info.frames);
+    share = fmt::format(", shard {}/{}: frames {}..{}", eo.shard.index, eo.shard.count, first, last);
+  }
+  if (!o.junit.empty())
+    octocd::write_junit(o.junit, std::filesystem::path(o.trace_in).stem().string(),
+                        octocd::cli::with_views_in_details(results, o.views, o.junit),
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", info.engine},
+                         {"frames", std::to_string(info.frames)},
+                         {"every", std::to_string(every)},
+                         {"against", o.against},
+                         {"trace_file", o.trace_in},
+                         {"build_id", octocd::build_id()}},
+                        stopped, &report);
+  fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {}{})\n\n",
+             o.trace_in, info.engine, info.bodies, info.frames, every, o.against, share);
+  fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
+  if (info.stopped) {
+    const int sig = octocd::stop_signal();
+    fmt::print("\nSTOPPED: {}\n", stopped);
+    std::fflush(stdout);
+    report_stop(sig, "validate", info.judged_to, info.frames, "", fmt::format(" of the trace {}", o.trace_in));
+    return octocd::stop_exit_code(sig);
+  }
+  nlohmann::ordered_json meta = {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
+                                 {"against", o.against}, {"build_id", octocd::build_id()}};
+  if (!o.shard.empty()) {
+    octocd::ShardIdentity id;
+    id.trace = run.trace;
+    std::error_code ec;
+    id.trace_bytes = std::filesystem::file_size(o.trace_in, ec);
+    id.engine = info.engine;
+    id.bodies = info.bodies;
+    id.frames = info.frames;
+    id.every = every;
+    id.against = vo.against_fcl ? "fcl" : "none";  // what --against changes for a trace
+    id.tol = vo.tol;
+    meta["shard"] = octocd::shard_json(eo.shard, id);
+  }
+  return conclude_validate(o, run, results, report, meta);
+}
+
+/// `octocd validate --merge A.json B.json ...`: the shards' verdicts joined into the
+/// unsharded run's (octocd/shards.hpp); exit as `validate`, 2 for bad shards.
+int validate_merge(const ValidateOptions& o) {
+  const octocd::MergedValidation m = octocd::merge_validations(o.merge);
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, m.run, m.results);
+  std::vector<std::string> overridden;
+  const octocd::Tolerances defaults;
+  for (const octocd::ToleranceEntry& e : octocd::tolerance_table())
+    if (m.identity.tol.*(e.member) != defaults.*(e.member)) overridden.push_back(e.name);
+  fmt::print("validate external trace {} merged from {} shards (engine '{}', {} bodies, {} frames, checks every {}, "
+             "against: {})\n\n",
+             m.identity.trace, m.files.size(), m.identity.engine, m.identity.bodies, m.identity.frames,
+             m.identity.every, m.identity.against);
+  fmt::print("{}", octocd::format_results(m.results, overridden, &report));
+  if (!o.junit.empty()) {
+    double seconds = 0;
+    for (const octocd::ValidationResult& r : m.results) seconds += r.seconds;
+    octocd::write_junit(o.junit, std::filesystem::path(m.identity.trace).stem().string(), m.results, seconds,
+                        {{"engine", m.identity.engine},
+                         {"frames", std::to_string(m.identity.frames)},
+                         {"shards", std::to_string(m.files.size())}},
+                        "", &report);
+  }
+  nlohmann::ordered_json files = nlohmann::ordered_json::array();
+  for (const std::string& f : m.files) files.push_back(f);
+  return conclude_validate(o, m.run, m.results, report,
+                           {{"engine", m.identity.engine}, {"frames", m.identity.frames}, {"every", m.identity.every},
+                            {"against", m.identity.against}, {"build_id", octocd::build_id()},
+                            {"merged_from", files}});
+}
+
+
+int validate_scene_command(ValidateOptions& o, Clock::time_point t0);
+
+/// `octocd validate SCENE --engine bullet` (hull mode, or with rotation): Bullet
+/// runs `--frames` steps into a version 2 trace (`--trace FILE`, else a
+/// temporary file, removed afterwards) with every state and contact, which is then judged
+/// as `--trace-in` judges it (validate_trace_in).
+int validate_bullet_rotation(ValidateOptions& o, const octocd::ValidationOptions& vo,
+                             const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
+  namespace fs = std::filesystem;
+  const bool temporary = o.trace.empty();
+  const std::string path =
+      temporary ? (fs::temp_directory_path() / fmt::format("octocd-validate-bullet-{}.h5", ::getpid())).string()
+                : o.trace;
+  const std::string what = o.engine + (octocd::scene_rotates(model->scene) ? " (rotation)" : " (translation only)");
+  std::string geometry;
+  {
+    const std::unique_ptr<octocd::Engine> engine =
+        make_engine(o.engine, model, o.settings);
+    octocd::Engine& world = *engine;
+    geometry = world.collision_geometry();
+    octocd::TraceOptions topt;
+    topt.state_every = 1;
+    topt.contacts = true;
+    topt.v2 = *world.rotation_traits();
+    topt.gravity = model->scene.gravity;
+    world.set_recording(true);
+    octocd::TraceMetadata meta = octocd::trace_metadata(world, 1);
+    meta.start_time = octocd::cli::utc_time_now();
+    octocd::TraceWriter trace(path, meta, octocd::trace_bodies(world), topt);
+    trace.append_state(0, world.state());
+    for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
+      const octocd::FrameMetrics& m = world.step();
+      trace.append_frame_v2(m, world.state(), world.record());
+    }
+    trace.close();
+  }
+  octocd::ExternalOptions eo;
+  eo.against_fcl = vo.against_fcl;
+  eo.tol = vo.tol;
+  eo.overridden = vo.overridden;
+  octocd::ExternalTraceInfo info;
+  std::vector<octocd::ValidationResult> results;
+  try {
+    // Judging the written trace polls no flag: a signal ends it at once (no table).
+    const octocd::StopAtOnce judging(temporary ? "judging Bullet's trace (a temporary file left in the temp folder)"
+                                               : "judging Bullet's trace, which stays on disk");
+    results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
+    if (!o.view.empty()) o.views = octocd::cli::write_failure_views(path, results, o.view);
+  } catch (...) {
+    std::error_code ec;
+    if (temporary) fs::remove(path, ec);
+    throw;
+  }
+  std::error_code ec;
+  if (temporary) fs::remove(path, ec);
+  const octocd::RunName run{model->scene.name, ""};
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
+  if (!o.junit.empty())
+    octocd::write_junit(o.junit, model->scene.name, octocd::cli::with_views_in_details(results, o.views, o.junit),
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", what},
+                         {"frames", std::to_string(info.frames)},
+                         {"every", std::to_string(o.every)},
+                         {"against", o.against},
+                         {"scene_file", o.scene},
+                         {"build_id", octocd::build_id()}},
+                        "", &report);
+  fmt::print("validate {} (engine {}, judged as a version 2 external trace{}: {} bodies, {} "
+             "frames, checks every {}, against: {})\n\ngeometry: {}\n\n",
+             model->scene.name, what, temporary ? "" : " " + path, info.bodies, info.frames, o.every, o.against, geometry);
+  fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
+  if (const int sig = octocd::stop_signal()) {
+    report_stop(sig, "validate", info.frames, o.frames, o.trace);
+    return octocd::stop_exit_code(sig);
+  }
+  return conclude_validate(o, run, results, report,
+                           {{"engine", what}, {"geometry", geometry}, {"frames", info.frames}, {"every", o.every},
+                            {"against", o.against}, {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
+}
+
+/// `octocd validate`: exit 0 when every validator passes, 3 when any fails. With
+/// `--junit`, the report is written in every case that gets past the command line:
+/// results (failures included), or one errored case when the scene is bad input or the
+/// run fails.
+int validate_command(ValidateOptions& o) {
+  if (!o.expect.empty()) o.expectations = octocd::load_expectations(o.expect);  // bad input before the run
+  if (!o.merge.empty()) {
+    if (!o.scene.empty() || !o.trace_in.empty() || !o.shard.empty() || o.check_only)
+      throw octocd::InputError("--merge: joins shards' JSON verdicts; allowed without SCENE, --trace-in, --shard and "
+                               "--check-only");
+    return validate_merge(o);
+  }
+  if (!o.shard.empty() && (o.trace_in.empty() || o.check_only))
+    throw octocd::InputError("--shard: splits the frames of a judged trace; allowed with --trace-in FILE.h5 (not "
+                             "--check-only); a scene's run is judged whole");
+  if (!o.write_expect.empty() && o.check_only)
+    throw octocd::InputError("--write-expect: records a judged run's failures; allowed without --check-only");
+  if (o.scene.empty() == o.trace_in.empty())
+    throw octocd::InputError("validate: give either SCENE.json or --trace-in FILE.h5 (not both)");
+  if (o.check_only && o.trace_in.empty())
+    throw octocd::InputError("--check-only: needs --trace-in FILE.h5");
+  if (!o.trace_in.empty() && (!o.trace.empty() || o.engine_given))
+    throw octocd::InputError("--trace-in: judges a trace another engine wrote; allowed without --trace and --engine");
+  if (!o.view.empty() && o.check_only)
+    throw octocd::InputError("--view: draws a judged run's failures; allowed without --check-only");
+  if (!o.view.empty() && o.trace_in.empty() && o.trace.empty()) {
+    // The pages are drawn from a trace: without --trace, DIR/SCENE-trace.h5 (kept beside them).
+    std::error_code ec;
+    std::filesystem::create_directories(o.view, ec);
+    o.trace = (std::filesystem::path(o.view) / (std::filesystem::path(o.scene).stem().string() + "-trace.h5")).string();
+  }
+  const auto t0 = Clock::now();
+  // The report of a scene that could not be validated; the original error is what the
+  // caller sees (and its exit code), even when the report cannot be written.
+  auto junit_error = [&](const char* kind, const char* message) {
+    if (o.junit.empty()) return;
+    try {
+      octocd::write_junit_error(o.junit, std::filesystem::path(o.trace_in.empty() ? o.scene : o.trace_in).stem().string(),
+                                kind, message);
+    } catch (const std::exception& w) {
+      std::fprintf(stderr, "octocd: warning: %s\n", w.what());
+    }
+  };
+  try {
+    return validate_scene_command(o, t0);
+  } catch (const octocd::InputError& e) {
+    junit_error("bad-input", e.what());
+    throw;
+  } catch (const octocd::RuntimeError& e) {
+    junit_error("runtime-failure", e.what());
+    throw;
+  }
+}
+
+/// `validate SCENE`'s stop bound (s): from a SIGINT or SIGTERM to the end of the
+/// process; past it the process ends saying what it keeps (StopOnSignals' deadline).
+constexpr double kValidateStopBound = 0.95;
+/// How long the main thread waits for the judging worker to stop after a signal before
+/// it reports the frames judged so far without it (the rest of the bound writes them).
+constexpr std::chrono::milliseconds kValidateStopGrace{450};
+
+/// The verdict of the frames judged so far (ValidationOptions::on_judged's latest rows),
+/// kept by the judging worker, read by the main thread when a step outlasts the grace.
+class JudgedSoFar {
+ public:
+  void keep(const std::vector<octocd::ValidationResult>& rows, std::int64_t judged) {
+    const std::lock_guard<std::mutex> lock(m_);
+    rows_ = rows;
+    judged_ = judged;
+  }
+  std::pair<std::vector<octocd::ValidationResult>, std::int64_t> get() const {
+    const std::lock_guard<std::mutex> lock(m_);
+    return {rows_, judged_};
+  }
+
+ private:
+  mutable std::mutex m_;
+  std::vector<octocd::ValidationResult> rows_;
+  std::int64_t judged_ = 0;
+};
+
+/// Waits until `done` (set under `m`, `cv` notified) and returns true, or returns false
+/// once a signal has waited kValidateStopGrace for it, or at once on a second signal.
+bool wait_for_worker(std::mutex& m, std::condition_variable& cv, const bool& done) {
+  std::unique_lock<std::mutex> lock(m);
+  std::optional<Clock::time_point> first;
+  for (;;) {
+    if (cv.wait_for(lock, std::chrono::milliseconds(10), [&] { return done; })) return true;
+    if (octocd::stop_signal() == 0) continue;
+    const auto now = Clock::now();
+    if (!first) first = now;
+    if (octocd::stop_signal_count() > 1 || now - *first >= kValidateStopGrace) return false;
+  }
+}
+
+/// The end of `validate SCENE`: JUnit (with `stopped`, the incomplete verdict's status,
+/// when a signal stopped it), the table, then either the STOPPED line and 130/143 or
+/// conclude_validate's outcome and exit code.
+int validate_verdict(const ValidateOptions& o, const std::string& name,
+                     const std::vector<octocd::ValidationResult>& results, const std::vector<std::string>& overridden,
+                     const std::string& stopped, std::int64_t done, Clock::time_point t0) {
+  const octocd::RunName run{name, ""};
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
+  if (!o.junit.empty())
+    octocd::write_junit(o.junit, name, octocd::cli::with_views_in_details(results, o.views, o.junit),
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", o.engine},
+                         {"frames", std::to_string(o.frames)},
+                         {"every", std::to_string(o.every)},
+                         {"against", o.against},
+                         {"scene_file", o.scene},
+                         {"build_id", octocd::build_id()}},
+                        stopped, &report);
+  fmt::print("validate {} (engine {}, {} frames, checks every {}, against: {})\n\n", name, o.engine,
+             o.frames, o.every, o.against);
+  fmt::print("{}", octocd::format_results(results, overridden, &report));
+  if (const int sig = octocd::stop_signal()) {
+    // (A signal after the JUnit was written: the whole table, stopped at its end.)
+    fmt::print("\nSTOPPED: {}\n", stopped.empty() ? fmt::format("the table covers frames 1..{} of {}; stopped by {}",
+                                                                done, o.frames, octocd::stop_signal_name(sig))
+                                                  : stopped);
+    std::fflush(stdout);
+    report_stop(sig, "validate", done, o.frames, o.trace);
+    return octocd::stop_exit_code(sig);
+  }
+  return conclude_validate(o, run, results, report,
+                           {{"engine", o.engine}, {"frames", o.frames}, {"every", o.every}, {"against", o.against},
+                            {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
+}
+
+
+int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
+  // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kValidateStopBound; a
+  // second signal ends the wait for the judging worker (the verdict so far is reported).
+  octocd::StopOnSignals stop_on_signals(kValidateStopBound, octocd::SecondSignal::Recorded);
+  octocd::Scene scene;
+  if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
+    const octocd::StopAtOnce loading("loading the scene and its meshes");
+    scene = load_scene_for(o.scene, o.data_dir);
+    // Without --engine, a rotating scene (rotation: true, an orientation or an angular
+    // velocity) is validated on the registry's first engine that rotates (bullet).
+    if (!o.engine_given && octocd::scene_rotates(scene)) {
+      for (const octocd::EngineInfo& e : octocd::engine_infos())
+        if (e.rotates) {
+          o.engine = e.name;
+          break;
+        }
+      o.rotation = true;
+    }
+    octocd::EngineOptions eo;
+    eo.rotation = o.rotation;
+    const octocd::EngineInfo& info = octocd::engine_info(o.engine, "--engine");
+    octocd::apply_engine_options(scene, info, eo, octocd::cli_argument_names());
+    if (!info.records_every_step) scene.frames = o.frames;  // it is judged through its trace
+  }
+  octocd::ValidationOptions vo;
+  vo.frames = o.frames;
+  vo.every = o.every;
+  vo.threads = o.threads;
+  // Frames judged while the engine runs the next ones, unless a trace is written (its
+  // frames then stay those judged when a signal stops the checks of a frame).
+  vo.pipeline = o.trace.empty();
+  vo.against_bullet = vo.against_fcl = false;
+  std::string rest = o.against;
+  while (!rest.empty()) {
+    const auto comma = rest.find(',');
+    const std::string item = rest.substr(0, comma);
+    rest = comma == std::string::npos ? "" : rest.substr(comma + 1);
+    const std::map<std::string, bool*> references{{"bullet", &vo.against_bullet}, {"fcl", &vo.against_fcl}};
+    if (const auto ref = references.find(item); ref != references.end()) {
+      *ref->second = true;
+    } else if (item != "none" && !item.empty()) {
+      throw octocd::InputError(fmt::format(
+          "--against: unknown reference '{}'; allowed: a comma-separated list of bullet, fcl, or none",
+          item));
+    }
+  }
+  std::map<std::string, std::string> given;  // --tolerance NAME: the item that set it
+  for (const std::string& item : o.tolerances) {
+    const auto eq = item.find('=');
+    std::string names;
+    for (const auto& e : octocd::tolerance_table()) names += (names.empty() ? "" : ", ") + std::string(e.name);
+    if (eq == std::string::npos || eq == 0)
+      throw octocd::InputError(fmt::format("--tolerance: '{}' is not NAME=VALUE; allowed names: {}", item, names));
+    const std::string name = item.substr(0, eq), text = item.substr(eq + 1);
+    if (const auto before = given.find(name); before != given.end())
+      throw octocd::InputError(fmt::format("--tolerance: {} given twice ('{}' and '{}'); allowed: each tolerance once",
+                                           name, before->second, item));
+    given[name] = item;
+    double value = 0.0;
+    std::size_t used = 0;
+    // Decimal only: std::stod also reads "0x10" (16), "inf" and "nan".
+    const bool decimal = !text.empty() && text.find_first_not_of("0123456789+-.eE") == std::string::npos;
+    try {
+      if (decimal) value = std::stod(text, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != text.size())
+      throw octocd::InputError(fmt::format(
+          "--tolerance: {}: '{}' is not a decimal number; allowed: a finite number >= 0 (decimal, e.g. 0.01 or 1e-3)",
+          name, text));
+    octocd::set_tolerance(vo.tol, name, value);
+    vo.overridden.push_back(name);
+  }
+  if (!o.trace_in.empty()) {
+    if (o.check_only) {  // checking writes nothing: a signal ends it at once
+      const octocd::StopAtOnce checking("checking the trace");
+      return validate_trace_in(o, vo, t0);
+    }
+    return validate_trace_in(o, vo, t0);  // polls the signal (an incomplete verdict)
+  }
+  std::optional<octocd::StopAtOnce> building(std::in_place, "building the model");
+  const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
+  building.reset();
+  if (!octocd::engine_info(o.engine, "--engine").records_every_step) {
+    // It is judged through its trace when it records (Bullet: hull mode or rotation).
+    if (!make_engine(o.engine, model, o.settings)->can_record())
+      throw octocd::InputError(fmt::format(
+          "--engine: {} with boxes equal to the AABBs and no rotation cannot be validated (no per-frame record); "
+          "allowed: cpu, cuda, or {} with --bullet shape=hull (the default) or --rotation",
+          o.engine, o.engine));
+    return validate_bullet_rotation(o, vo, model, t0);
+  }
+  std::unique_ptr<octocd::TraceWriter> trace;
+  std::int64_t done = 0;  // frames of the validated engine
+  vo.stop = [] { return octocd::stop_signal() != 0; };
+  vo.on_step = [&](const octocd::Engine& w) {
+    ++done;
+    if (!o.trace.empty()) {
+      if (!trace) {
+        // --view draws frames from the trace: every state (the initial one first) and contact.
+        const bool every = !o.view.empty();
+        octocd::TraceMetadata meta = octocd::trace_metadata(w, every ? 1 : 10);
+        meta.start_time = octocd::cli::utc_time_now();
+        octocd::TraceOptions topt;
+        topt.flush_every = 1;  // every checked frame on disk: a stopped or killed run keeps them all
+        if (every) {
+          topt.state_every = 1;
+          topt.contacts = true;
+        }
+        trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(w), topt);
+        if (every) trace->append_state(0, model->initial);
+      }
+      trace->append_frame(w.last_metrics(), w.state(), w.contacts());
+    }
+  };
+  std::vector<octocd::ValidationResult> results;
+  std::int64_t stopped_in = 0;  // the frame a signal stopped the checks in (0: none)
+  // The engine runs and is judged on a worker thread, so this thread answers a signal
+  // within kValidateStopGrace even when a step of a big scene takes seconds: the worker
+  // normally stops at its next poll; if not, the verdict of the frames judged so far
+  // (on_judged's latest snapshot) is reported and the process ends without it.
+  JudgedSoFar so_far;
+  vo.on_judged = [&so_far](const std::vector<octocd::ValidationResult>& rows, std::int64_t judged) {
+    so_far.keep(rows, judged);
+  };
+  std::mutex worker_m;
+  std::condition_variable worker_cv;
+  bool worker_done = false;
+  std::exception_ptr worker_error;
+  octocd::set_stop_kept("no verdict written (the stop bound passed first)");
+  std::thread worker([&] {
+    try {
+      octocd::check_engine_settings(o.settings, octocd::cli_argument_names());
+      results = octocd::validate_engine([&] { return make_engine(o.engine, model, o.settings); }, vo, &stopped_in);
+    } catch (...) {
+      worker_error = std::current_exception();
+    }
+    const std::lock_guard<std::mutex> lock(worker_m);
+    worker_done = true;
+    worker_cv.notify_all();
+  });
+  if (!wait_for_worker(worker_m, worker_cv, worker_done)) {
+    // A step or check outlasting the grace, or a second signal: the incomplete verdict of
+    // the frames judged so far, then the process ends (the worker is not waited for).
+    const int sig = octocd::stop_signal();
+    auto [rows, judged] = so_far.get();
+    const std::string stopped =
+        fmt::format("the table covers frames 1..{} of {} (an incomplete verdict); stopped by {}{}; frame {} "
+                    "was cut short",
+                    judged, o.frames, octocd::stop_signal_name(sig),
+                    octocd::stop_signal_count() > 1 ? " twice" : "", judged + 1);
+    const int code = validate_verdict(o, scene.name, rows, vo.overridden, stopped, judged, t0);
+    std::fflush(stdout);
+    std::fflush(stderr);
+    std::_Exit(code);
+  }
+  worker.join();
+  if (worker_error) {
+    try {
+      std::rethrow_exception(worker_error);
+    } catch (const octocd::RuntimeError&) {
+      close_after_failure(trace, o.trace, o.no_xdmf);
+      throw;
+    }
+  }
+  const bool signalled = octocd::stop_signal() != 0;
+  if (trace) {
+    trace->close();
+    octocd::write_validation(o.trace, results);
+    // A stopped run has a second: the sidecar and the pages re-read the trace, so they are left out.
+    if (!signalled) write_sidecar(o.trace, o.no_xdmf);
+    if (!o.view.empty() && !signalled) o.views = octocd::cli::write_failure_views(o.trace, results, o.view);
+  }
+  // Where a signal stopped the checks: the table covers the frames judged so far.
+  std::string stopped;
+  if (const int sig = octocd::stop_signal()) {
+    // Frames whose checks are complete (a pipelined run has stepped one more).
+    const std::int64_t judged = so_far.get().second;
+    stopped = fmt::format("the table covers frames 1..{} of {} (an incomplete verdict); stopped by {}{}", judged,
+                          o.frames, octocd::stop_signal_name(sig),
+                          judged == o.frames     ? " in the analytic or Bullet rerun (n/a)"
+                          : stopped_in > judged ? fmt::format(" inside the checks of frame {} (partly judged)", stopped_in)
+                                                : std::string());
+  }
+  return validate_verdict(o, scene.name, results, vo.overridden, stopped, done, t0);
+}
+
+
+}  // namespace
+
+Command add_validate_command(CLI::App& app) {
+  const auto options = std::make_shared<ValidateOptions>();
+  ValidateOptions& val = *options;
+  CLI::App* val_cmd = app.add_subcommand(
+      "validate", "Run the validators of SPEC 7 on a scene; exit 0 all pass (or fail as --expect expects), 3 a "
+                  "new or grown failure, 2 bad input");
+  val_cmd->add_option("scene", val.scene, "Scene file (JSON, see docs/scenes.md); or give --trace-in");
+  val_cmd->add_option("--against", val.against,
+                      "References: comma-separated bullet, fcl (Bullet/FCL broadphases, FCL "
+                      "normals, Bullet dynamics), or none")
+      ->default_val("bullet,fcl");
+  val_cmd->add_option("--frames", val.frames,
+                      "Steps to run (>= 1); every validator, the analytic and Bullet ones included, "
+                      "uses this many")
+      ->check(at_least_one())
+      ->default_val(300);
+  val_cmd->add_option("--every", val.every,
+                      "Check candidate sets, midphase and normals every K-th frame (>= 1)")
+      ->check(at_least_one())
+      ->default_val(10);
+  val_cmd->add_option("--engine", val.engine,
+                      engines_help() +
+                          ". An engine that records every step (cpu, cuda) is judged in process, the others "
+                          "through their version 2 trace (--trace keeps it). Default: cpu, or the first engine "
+                          "that rotates for a rotating scene (rotation: true, an orientation or an angular velocity)")
+      ->check(CLI::IsMember(octocd::engine_names()))
+      ->default_val("cpu");
+  val_cmd->add_flag("--rotation", val.rotation,
+                    "The bodies rotate (as the scene key rotation: true); needs " +
+                        engines_with([](const EngineInfo& e) { return e.rotates; }));
+  add_engine_settings_options(val_cmd, val.settings);
+  {
+    std::string names;
+    for (const auto& e : octocd::tolerance_table())
+      names += (names.empty() ? "" : ", ") + std::string(e.name) + " (" + e.unit + ")";
+    val_cmd->add_option("--tolerance", val.tolerances,
+                        "Override a validator bound, NAME=VALUE, repeatable; marked '*' in the table. "
+                        "Names: " + names);
+  }
+  val_cmd->add_option("--trace", val.trace,
+                      "Write the validated run as a trace with the results under /validation "
+                      "(and its XDMF sidecar FILE.h5.xmf)");
+  val_cmd->add_flag("--no-xdmf", val.no_xdmf, "With --trace: do not write the XDMF sidecar");
+  val_cmd->add_option("--data-dir", val.data_dir, data_dir_help());
+  val_cmd->add_option("--junit", val.junit,
+                      "Also write a JUnit XML report: one test case per validator row (classname = "
+                      "SCENE.TIER) with its own time, failures with the measured value against the bound and "
+                      "the detail line; written when validators fail too, and when a signal stops the run");
+  val_cmd->add_option(
+      "--trace-in", val.trace_in,
+      "Judge another engine's trace (docs/trace-format.md, External traces) instead of a scene, frame by "
+      "frame; --frames limits the frames (default all), --every defaults to 1");
+  val_cmd->add_option("--expect", val.expect,
+                      "Known failures (JSON, docs/validation-output.md): per scene or trace, row, cause, optional "
+                      "items, the worst figure allowed and a reason. Exit 0 when every failure is expected and "
+                      "within its figure; 3 naming each new or grown one; an expectation that no longer fails "
+                      "is reported as fixed");
+  val_cmd->add_option("--write-expect", val.write_expect,
+                      "Record this run's failures (worst figures, items, a placeholder reason to edit) in FILE.json, "
+                      "replacing this scene's or trace's entries and keeping the others; exits 0");
+  val_cmd->add_flag("--strict", val.strict, "With --expect: an expected failure that no longer fails is exit 3");
+  val_cmd->add_option("--json", val.json,
+                      "Also write every row (verdict pass|fail|n/a|expected, figures, judged, seconds) with its causes, "
+                      "examples and failing items, and the expectation outcomes, as JSON (docs/validation-output.md)");
+  val_cmd->add_option("--view", val.view,
+                      "Also write a page per failing example (octocd view: the frame, the pair or body, the engine's "
+                      "contacts beside the reference; at most 20 pages) into DIR, linked from the table, --json and "
+                      "--junit by relative paths; without --trace or --trace-in the run's trace goes to "
+                      "DIR/SCENE-trace.h5 (docs/debugging.md)");
+  val_cmd->add_option("--shard", val.shard,
+                      "With --trace-in: judge only shard i of N (i/N, 0 <= i < N): the contiguous block of frames "
+                      "floor(iF/N)+1 .. floor((i+1)F/N); write its --json for --merge (a Slurm job array: "
+                      "--shard $SLURM_ARRAY_TASK_ID/N)");
+  val_cmd->add_option("--merge", val.merge,
+                      "Join the --json files of every shard of one --trace-in run into its verdict (table, --json, "
+                      "--junit, --expect as an unsharded run); exit 2 naming a file for overlapping, missing or "
+                      "foreign shards")
+      ->expected(1, -1);
+  val_cmd->add_option("--threads", val.threads,
+                      "Threads judging one frame's heavy loops (reference geometry per pair, the reference pair set); "
+                      "0 = the hardware's (default), 1 = serial; a scene's frame is judged while the engine runs the "
+                      "next (not with --trace, not with 1); verdicts do not depend on it")
+      ->check(CLI::Range(0, 4096))
+      ->default_val(0);
+  val_cmd->add_flag("--check-only", val.check_only,
+                    "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not)");
+
+  return {[val_cmd] { return val_cmd->parsed(); },
+          [options, val_cmd] {
+            options->frames_given = val_cmd->get_option("--frames")->count() > 0;
+            options->every_given = val_cmd->get_option("--every")->count() > 0;
+            options->engine_given = val_cmd->get_option("--engine")->count() > 0;
+            return validate_command(*options);
+          }};
+}
+
+}  // namespace octocd::cli
