@@ -39,6 +39,7 @@ std::vector<Command> add_commands(CLI::App& app) {
   commands.push_back(command<TraceSummaryOptions>(app, &add_trace_summary_command, &trace_summary_command));
   const auto view = std::make_shared<ViewCommand>(app);
   commands.push_back({[view] { return view->selected(); }, [view] { return view->run(); }});
+  commands.push_back(add_engines_command(app));
   return commands;
 }
 

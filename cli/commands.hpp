@@ -33,8 +33,11 @@ Command add_run_command(CLI::App& app);
 /// Registers `validate` on `app` (validate.cpp).
 Command add_validate_command(CLI::App& app);
 
+/// Registers `engines` on `app` (engines.cpp).
+Command add_engines_command(CLI::App& app);
+
 /// Registers every subcommand on `app` in help order: run, validate, bench, replay,
-/// compare, report, trace-summary, view.
+/// compare, report, trace-summary, view, engines.
 std::vector<Command> add_commands(CLI::App& app);
 
 /// The help of `--engine` (run, validate), from the registry: each engine's name and

@@ -17,7 +17,7 @@
 # Usage: scripts/nightly.sh [--build DIR] [--scenes SET] [--frames N] [--every K]
 #                           [--tolerance NAME=VALUE]... [--timeout S] [--against LIST]
 #                           [--out DIR] [--data-dir DIR] [--expect FILE|none]
-#                           [--write-expect FILE] [--strict] [SCENE.json ...]
+#                           [--write-expect FILE] [--strict] [--matrix SET] [SCENE.json ...]
 #   --build DIR     build folder holding `octocd` (default: build); $OCTOCD_BIN, when
 #                   set, names the binary itself and wins
 #   --scenes SET    default: the scenes that fit the nightly budget (15 minutes on a
@@ -25,8 +25,8 @@
 #                   scenes and the three 10^4-body scenes; measured 5-9 minutes on a 2-core
 #                   VM under load 6-11, docs/validation.md); large: the 5x10^4..10^6-body scenes
 #                   (hours: one check of boxes-uniform-100k takes ~12 minutes; give them a
-#                   job of their own, with a larger --every); all: both. SCENE.json
-#                   arguments replace the set.
+#                   job of their own, with a larger --every); all: both; none: no scene
+#                   (the engine matrix alone). SCENE.json arguments replace the set.
 #   --frames N      steps per scene (default: per scene: 1000 for the analytic scenes,
 #                   2000 for box-stack, 3000 for the mesh scenes, 100 for the box and pile
 #                   scenes of 10^4 bodies and more)
@@ -45,6 +45,16 @@
 #   --write-expect FILE  record every scene's current failures in FILE (entries of other
 #                   scenes kept; edit each reason); the scenes then count as passed
 #   --strict        an expected failure that no longer fails is a failure (exit 3)
+#   --matrix SET    the engine matrix (docs/engines.md, "The engine matrix"): every
+#                   reference engine available here (`octocd engines --available`:
+#                   bullet, mujoco, ode, dart) runs each scene it can express with
+#                   rotation (`octocd run --trace --contacts --state-every 1`), and the
+#                   physics tier judges its trace (`validate --trace-in`, the same
+#                   expectations file, keyed by the trace's name ENGINE--SCENE.h5):
+#                   full (default: rot-stack-10, rot-slope, rot-drop-220, rot-pile-1000,
+#                   bunny-stack-50 with rotation, rot-spin-free over hundreds of frames),
+#                   quick (the same scenes over short windows, CI's ctest `corpus`
+#                   label), none. Traces go to DIR/matrix/ (--out).
 #   SCENE.json ...  scenes to validate instead of the set
 set -uo pipefail
 
@@ -64,6 +74,7 @@ scenes=()
 expect="$root/scripts/nightly-expect.json"
 write_expect=""
 strict=()
+matrix="full"
 is_uint() { [[ "$1" =~ ^[0-9]+$ ]] && [ "$1" -ge 1 ]; }
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -79,6 +90,7 @@ while [ $# -gt 0 ]; do
     --expect) expect="${2:?--expect needs a file or none}"; shift 2 ;;
     --write-expect) write_expect="${2:?--write-expect needs a file}"; shift 2 ;;
     --strict) strict=(--strict); shift ;;
+    --matrix) matrix="${2:?--matrix needs full, quick or none}"; shift 2 ;;
     -h|--help) usage 0 ;;
     -*) echo "nightly: unknown option '$1'" >&2; usage 2 ;;
     *) scenes+=("$1"); shift ;;
@@ -86,6 +98,7 @@ while [ $# -gt 0 ]; do
 done
 if [ -n "$frames" ] && ! is_uint "$frames"; then echo "nightly: --frames '$frames'; allowed: an integer >= 1" >&2; exit 2; fi
 if ! is_uint "$every"; then echo "nightly: --every '$every'; allowed: an integer >= 1" >&2; exit 2; fi
+case "$matrix" in full|quick|none) ;; *) echo "nightly: --matrix '$matrix'; allowed: full, quick, none" >&2; exit 2 ;; esac
 if ! is_uint "$timeout_s"; then echo "nightly: --timeout '$timeout_s'; allowed: seconds, an integer >= 1" >&2; exit 2; fi
 bin="${OCTOCD_BIN:-$build/octocd}"
 if [ ! -x "$bin" ]; then
@@ -100,9 +113,10 @@ if [ ${#scenes[@]} -eq 0 ]; then
     default) names=("${default_set[@]}") ;;
     large) names=("${large_set[@]}") ;;
     all) names=("${default_set[@]}" "${large_set[@]}") ;;
-    *) echo "nightly: --scenes '$set_name'; allowed: default, large, all (or SCENE.json arguments)" >&2; exit 2 ;;
+    none) names=() ;;
+    *) echo "nightly: --scenes '$set_name'; allowed: default, large, all, none (or SCENE.json arguments)" >&2; exit 2 ;;
   esac
-  for n in "${names[@]}"; do scenes+=("$root/datasets/scenes/$n.json"); done
+  for n in "${names[@]+"${names[@]}"}"; do scenes+=("$root/datasets/scenes/$n.json"); done
 fi
 # Frames per scene when --frames is not given (docs/validation.md, "Nightly validation").
 frames_of() {
@@ -126,6 +140,11 @@ if [ "$expect" != "none" ]; then
   extra+=(--expect "$expect" "${strict[@]}")
 fi
 if [ -n "$write_expect" ]; then extra+=(--write-expect "$write_expect"); fi
+# The matrix's runs take the data folder; its judged traces the expectations.
+extra_run=()
+if [ -n "$data_dir" ]; then extra_run+=(--data-dir "$data_dir"); fi
+extra_trace=("${extra[@]}")
+if [ -n "$data_dir" ]; then extra_trace=("${extra[@]:2}"); fi
 
 passed=0 failed=0 broken=0 bad=0 expected=0
 failed_list=() broken_list=() bad_list=()
@@ -138,18 +157,11 @@ stop() {  # a signal to the nightly stops the scene running now (octocd stops wi
 }
 trap stop INT TERM
 started_all=$(date +%s.%N)
-for scene in "${scenes[@]}"; do
-  name="$(basename "$scene" .json)"
-  log="$out/$name.log"
-  n_frames="$(frames_of "$name")"
-  t0=$(date +%s.%N)
-  timeout --signal=TERM --kill-after=10 "$timeout_s" \
-    "$bin" validate "$scene" --frames "$n_frames" --every "$every" --against "$against" \
-    --junit "$out/junit/$name.xml" "${tolerances[@]}" "${extra[@]}" >"$log" 2>&1 &
-  child=$!
-  wait "$child"
-  rc=$?
-  child=0
+# The outcome of one case (a scene, or an engine's run of a scene in the matrix): its
+# JUnit report (an errored case when octocd wrote none or timed out), its line on stdout,
+# the counts. Arguments: name, log, rc, t0, frames.
+judge_case() {
+  local name="$1" log="$2" rc="$3" t0="$4" n_frames="$5"
   secs=$(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN { printf "%.1f", b - a }')
   if [ $rc -eq 124 ] || [ $rc -eq 137 ]; then
     # --timeout: octocd was stopped (its partial report, if any, is replaced by the error).
@@ -200,6 +212,60 @@ EOF2
     2) bad=$((bad + 1)); bad_list+=("$name"); echo "BAD      $name (bad input: $log)"; tail -n 3 "$log" | sed 's/^/         /' ;;
     *) broken=$((broken + 1)); broken_list+=("$name"); echo "ERROR    $name (exit $rc: $log)"; tail -n 3 "$log" | sed 's/^/         /' ;;
   esac
+}
+
+for scene in "${scenes[@]+"${scenes[@]}"}"; do
+  name="$(basename "$scene" .json)"
+  log="$out/$name.log"
+  n_frames="$(frames_of "$name")"
+  t0=$(date +%s.%N)
+  timeout --signal=TERM --kill-after=10 "$timeout_s" \
+    "$bin" validate "$scene" --frames "$n_frames" --every "$every" --against "$against" \
+    --junit "$out/junit/$name.xml" "${tolerances[@]}" "${extra[@]}" >"$log" 2>&1 &
+  child=$!
+  wait "$child"
+  rc=$?
+  child=0
+  judge_case "$name" "$log" "$rc" "$t0" "$n_frames"
+done
+
+# The engine matrix: ENGINE--SCENE cases, each a run with rotation and its judged trace.
+matrix_scenes() {  # "scene frames every" per line: full or quick windows
+  if [ "$matrix" = "full" ]; then
+    printf '%s\n' "rot-stack-10 600 10" "rot-slope 600 10" "rot-drop-220 400 10" "rot-pile-1000 150 25" \
+      "bunny-stack-50 600 10" "rot-spin-free 600 10"
+  else
+    printf '%s\n' "rot-stack-10 120 5" "rot-slope 120 5" "rot-drop-220 60 5" "rot-pile-1000 12 4" \
+      "bunny-stack-50 80 5" "rot-spin-free 120 5"
+  fi
+}
+matrix_engines=()
+if [ "$matrix" != "none" ]; then
+  available="$("$bin" engines --available 2>/dev/null)"
+  for e in bullet mujoco ode dart; do
+    if grep -qx "$e" <<<"$available"; then matrix_engines+=("$e"); else echo "matrix   $e: not available here ($("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//'))"; fi
+  done
+  mkdir -p "$out/matrix" || exit 2
+fi
+for e in "${matrix_engines[@]+"${matrix_engines[@]}"}"; do
+  while read -r sc n_frames m_every; do
+    [ -r "$root/datasets/scenes/$sc.json" ] || { echo "matrix   $e--$sc: no scene $sc.json, skipped"; continue; }
+    name="$e--$sc"
+    log="$out/$name.log"
+    trace="$out/matrix/$name.h5"
+    t0=$(date +%s.%N)
+    (
+      timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" run "$root/datasets/scenes/$sc.json" --engine "$e" --rotation --frames "$n_frames" --state-every 1 \
+        --contacts --trace "$trace" --no-xdmf --quiet "${extra_run[@]}" || exit $?
+      timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" validate --trace-in "$trace" --every "$m_every" --against "$against" --junit "$out/junit/$name.xml" \
+        "${tolerances[@]}" "${extra_trace[@]}"
+    ) >"$log" 2>&1 &
+    child=$!
+    wait "$child"
+    rc=$?
+    child=0
+    judge_case "$name" "$log" "$rc" "$t0" "$n_frames"
+  done < <(matrix_scenes)
 done
 
 # One report over every scene: the <testsuite> elements of each file under one root
@@ -223,7 +289,7 @@ merged="$out/junit.xml"
 } >"$merged"
 
 echo
-echo "nightly: ${#scenes[@]} scenes in $total_s s: $passed passed ($expected expected failure(s), ${expect##*/}), $failed failed, $broken errors, $bad bad input (JUnit: $merged)"
+echo "nightly: ${#scenes[@]} scenes and $((passed + failed + broken + bad - ${#scenes[@]})) matrix cases in $total_s s: $passed passed ($expected expected failure(s), ${expect##*/}), $failed failed, $broken errors, $bad bad input (JUnit: $merged)"
 [ -n "$write_expect" ] && echo "nightly: wrote the current failures to $write_expect (edit each reason)"
 [ $failed -gt 0 ] && echo "nightly: validators failed on: ${failed_list[*]}"
 [ $broken -gt 0 ] && echo "nightly: runs failed on: ${broken_list[*]}"

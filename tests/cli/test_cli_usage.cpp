@@ -30,6 +30,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "octocd/engine_registry.hpp"
 #include "support/cli_run.hpp"
 
 namespace fs = std::filesystem;
@@ -987,5 +988,31 @@ TEST_F(CliUser, CliDocMatchesHelp) {
     ASSERT_EQ(help.code, 0);
     EXPECT_EQ(doc.substr(b + begin.size(), e - b - begin.size()), help.output)
         << "docs/cli.md differs from `" << label << "`: run scripts/cli-doc.sh BUILD_DIR";
+  }
+}
+
+// `octocd engines` lists every engine of the registry, each available or unavailable with
+// its reason; `--available` prints the available ones, which `run --engine` accepts.
+TEST(CliEngines, ListsTheRegistryWithAvailability) {
+  const Result all = run(bin() + " engines");
+  ASSERT_EQ(all.code, 0) << all.output;
+  const Result avail = run(bin() + " engines --available");
+  ASSERT_EQ(avail.code, 0) << avail.output;
+  std::set<std::string> available;
+  std::istringstream lines(avail.output);
+  for (std::string line; std::getline(lines, line);)
+    if (!line.empty()) available.insert(line);
+  EXPECT_TRUE(available.count("cpu")) << avail.output;  // the reference is always built
+  for (const octocd::EngineInfo& e : octocd::engine_infos()) {
+    const std::regex row("(^|\n)" + e.name + " +(available|unavailable: [^\n]+)\n");
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(all.output, m, row)) << e.name << " not listed:\n" << all.output;
+    EXPECT_EQ(m[2] == "available", available.count(e.name) == 1) << e.name;
+    if (available.count(e.name) == 0) {
+      // An engine that cannot run here is refused by `run`, saying why.
+      const Result r = run(bin() + " run " + octocd::test::source_dir() +
+                           "/datasets/scenes/free-fall.json --frames 1 --quiet --engine " + e.name);
+      EXPECT_NE(r.code, 0) << e.name;
+    }
   }
 }
