@@ -9,7 +9,8 @@
 //  (a) soft contacts: a damped penalty spring lets two boxes penetrate by ~4 mm and
 //      pushes them apart over ~10 steps (contact_model "soft");
 //  (c) a gyroscopic term: a flat box spinning about a non-principal axis bounces off the
-//      floor, another spins alone (gyroscopic "true");
+//      floor, another spins alone (gyroscopic "true"; judged by the invariants of free
+//      rotation, it passes undeclared too and fails declared "false");
 //  (d) joints locking rotation: a box sliding on the floor on a 4-row manifold and two
 //      boxes colliding off-centre in the air keep w = 0 (/bodies/locked_dofs = 0x38);
 //  (f) convex hulls of concave meshes: an L-shaped bar lands turning on the hull of a
@@ -742,7 +743,10 @@ TEST_F(ZooEngines, SoftContactsEditedVelocityAndWrongBodyAreCaught) {
   }
 }
 
-TEST_F(ZooEngines, GyroscopicTermPassesDeclaredAndFailsUndeclared) {
+// The term is judged by the invariants of free rotation (L = R I R^T w kept to second
+// order, the rotational energy not rising), so the run passes declared "true" and
+// undeclared alike; declared "false" (w' = w), the lone body's precession fails.
+TEST_F(ZooEngines, GyroscopicTermPassesDeclaredOrUndeclaredAndFailsDeclaredAbsent) {
   const Zoo z = gyroscopic_engine();
   ASSERT_GT(first_impulse(z, 0, 1), 0);
   const Result ok = judge(z, "gyro");
@@ -750,7 +754,13 @@ TEST_F(ZooEngines, GyroscopicTermPassesDeclaredAndFailsUndeclared) {
   EXPECT_NE(ok.output.find("gyroscopic term declared"), std::string::npos) << ok.output;
   Zoo plain = z;
   plain.text.erase("gyroscopic");
-  expect_caught(judge(plain, "undeclared"), {"free-flight", "frame 1: body 1 without contacts: w'", "angular-velocity"});
+  const Result undeclared = judge(plain, "undeclared");
+  expect_clean(undeclared);
+  EXPECT_NE(undeclared.output.find("gyroscopic term undeclared"), std::string::npos) << undeclared.output;
+  Zoo absent = z;
+  absent.text["gyroscopic"] = "false";
+  expect_caught(judge(absent, "absent"),
+                {"free-flight", "frame 1: body 1 without contacts: w'", "angular-velocity", "gyroscopic term false"});
 }
 
 TEST_F(ZooEngines, GyroscopicLoneSpinEditsAreCaught) {

@@ -945,8 +945,9 @@ TEST(PhysicsDeclarations, LockedRotationIsNotApplicableAndCounted) {
 
 // A gyroscopic term (explicit: w' = w - dt I_w^-1 (w x I_w w), q advanced by w' dt) on two
 // bodies of unequal principal moments that collide through their centres (no contact
-// torque): momentum-balance and conservation pass, declared or not; twice the term fails
-// the angular balance of both bodies either way.
+// torque): momentum-balance and conservation pass, declared or not (their L = R I R^T w
+// is kept to second order); twice the term fails the angular balance of both bodies
+// either way, and so does the term itself where the trace declares none.
 TEST(PhysicsDeclarations, GyroscopicTermDeclaredInAnIsolatedCollision) {
   const auto model = build_model(four_bodies("[0, 0, 0]"));
   const std::array<double, 9> tensor{0.004, 0, 0, 0, 0.008, 0, 0, 0, 0.011};
@@ -997,20 +998,24 @@ TEST(PhysicsDeclarations, GyroscopicTermDeclaredInAnIsolatedCollision) {
   c.point = v3(0.0995, 0.5, 0);
   c.jn = float(j);
   rec.contacts.push_back(c);
-  b.gyroscopic = true;
+  b.gyroscopic = PhysicsBodies::Gyroscopic::Integrated;
   const auto declared = judge(*model, rec, b);
   for (const char* name : {"momentum-balance", "conservation"})
     EXPECT_TRUE(row_of(declared, name).pass) << name << ": " << row_of(declared, name).detail;
   EXPECT_NE(row_of(declared, "momentum-balance").detail.find("gyroscopic term declared"), std::string::npos);
-  // Undeclared, a body in contact may carry the term or not (an engine may apply it only
-  // to the bodies its solver sees, as Bullet does); free-flight judges free bodies.
-  b.gyroscopic = false;
+  // Undeclared, a body in contact may carry the term or not (Bullet applies it only to the
+  // bodies of a solver batch with contacts).
+  b.gyroscopic = PhysicsBodies::Gyroscopic::Undeclared;
   EXPECT_TRUE(row_of(judge(*model, rec, b), "momentum-balance").pass);
+  // Declared absent, the term is a fault: w' - w is not the (zero) contact torque.
+  b.gyroscopic = PhysicsBodies::Gyroscopic::Absent;
+  expect_caught(judge(*model, rec, b), "momentum-balance", {"frame 12: body 2", "I_w (w' - w)", "angular 2 of 2"});
+  b.gyroscopic = PhysicsBodies::Gyroscopic::Undeclared;
   // Twice the term is neither: caught declared and undeclared.
   FrameRecord twice = rec;
   for (std::size_t i = 2; i < 4; ++i) twice.w_post[i] = rec.w_post[i] + (rec.w_post[i] - rec.w_pre[i]);
   expect_caught(judge(*model, twice, b), "momentum-balance", {"frame 12: body 2", "angular 2 of 2"});
-  b.gyroscopic = true;
+  b.gyroscopic = PhysicsBodies::Gyroscopic::Integrated;
   expect_caught(judge(*model, twice, b), "momentum-balance", {"frame 12: body 2", "angular 2 of 2"});
 }
 

@@ -157,7 +157,7 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
       // One with the term (declared gyroscopic) keeps L to second order in |w| dt: its
       // explicit or implicit form differs from the exact rotation by (|w| dt)^2 |I w|.
       gyro += dt * len3(cross3(w1, mul(i1, w1)));
-      if (bodies.gyroscopic) gyro += dt * dt * dot3(w1, w1) * len3(mul(i1, w1));
+      if (bodies.gyroscopic == PhysicsBodies::Gyroscopic::Integrated) gyro += dt * dt * dot3(w1, w1) * len3(mul(i1, w1));
     }
     const double dl = len3(l1 - l0);
     const double lbound =

@@ -45,4 +45,25 @@ inline M3 rotation(Quat q) {
           2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
 }
 
+/// The smallest and largest eigenvalues of a symmetric 3x3 (the principal moments of an
+/// inertia tensor), by the trigonometric closed form of the characteristic cubic
+/// (O. K. Smith, Comm. ACM 4(4), 1961), in double.
+inline std::array<double, 2> sym_eigen_range(const M3& a) {
+  const double p1 = a[1] * a[1] + a[2] * a[2] + a[5] * a[5];
+  if (p1 == 0.0) {
+    const double lo = std::fmin(a[0], std::fmin(a[4], a[8])), hi = std::fmax(a[0], std::fmax(a[4], a[8]));
+    return {lo, hi};
+  }
+  const double q = (a[0] + a[4] + a[8]) / 3.0;
+  const double p2 = (a[0] - q) * (a[0] - q) + (a[4] - q) * (a[4] - q) + (a[8] - q) * (a[8] - q) + 2.0 * p1;
+  const double p = std::sqrt(p2 / 6.0);
+  const M3 b{(a[0] - q) / p, a[1] / p, a[2] / p, a[3] / p, (a[4] - q) / p, a[5] / p, a[6] / p, a[7] / p, (a[8] - q) / p};
+  const double det = b[0] * (b[4] * b[8] - b[5] * b[7]) - b[1] * (b[3] * b[8] - b[5] * b[6]) +
+                     b[2] * (b[3] * b[7] - b[4] * b[6]);
+  const double r = std::fmax(-1.0, std::fmin(1.0, det / 2.0));
+  const double phi = std::acos(r) / 3.0;
+  constexpr double kThird = 2.0943951023931954923;  // 2 pi / 3
+  return {q + 2.0 * p * std::cos(phi + kThird), q + 2.0 * p * std::cos(phi)};
+}
+
 }  // namespace octocd::dmath

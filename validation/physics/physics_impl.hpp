@@ -195,6 +195,9 @@ struct PhysicsValidators::Impl {
   std::string label;
   std::unique_ptr<ReferenceGeometry> ref;
   std::vector<M3> inertia;  // body frame
+  /// Per body its smallest and largest principal moment (I1, I3; kg m^2): the spin bounds
+  /// of free rotation (balance.cpp).
+  std::vector<std::array<double, 2>> principal;
   std::vector<double> mass;  // 0 for static bodies
   double max_margin = 0;
   bool restitution_le_1 = true;
@@ -204,6 +207,9 @@ struct PhysicsValidators::Impl {
   Tally momentum, angular, energy;
   Tally balance_lin, balance_ang, free_vel, free_pos, free_w, free_q;
   std::uint64_t balance_clamped = 0, balance_no_rows = 0, balance_locked = 0, free_locked = 0, balance_rot_locked = 0;
+  // Gyroscopic term undeclared: body-steps whose spin met the invariants (the term) and
+  // those that kept w (no term) (figures of free-flight and momentum-balance).
+  std::uint64_t free_spin_invariant = 0, free_spin_kept = 0, balance_ang_invariant = 0, balance_ang_plain = 0;
   double t_balance = 0;
   std::uint64_t broad_frames = 0, broad_candidates = 0, broad_true = 0, broad_no_pairs = 0;
   std::uint64_t checked_frames = 0, rows_unjudged = 0, upper_bound_pairs = 0;

@@ -70,6 +70,15 @@ const char* contact_model_name(PhysicsBodies::ContactModel m) {
   return m == PhysicsBodies::ContactModel::Soft ? "soft" : "rigid";
 }
 
+const char* gyroscopic_name(PhysicsBodies::Gyroscopic g) {
+  switch (g) {
+    case PhysicsBodies::Gyroscopic::Integrated: return "true";
+    case PhysicsBodies::Gyroscopic::Absent: return "false";
+    case PhysicsBodies::Gyroscopic::Undeclared: break;
+  }
+  return "undeclared";
+}
+
 const char* integrator_name(PhysicsBodies::Integrator i) {
   switch (i) {
     case PhysicsBodies::Integrator::SemiImplicit: return "semi-implicit";
@@ -192,6 +201,8 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
       s.inertia[i] = M3{k * (bb * bb + c * c), 0, 0, 0, k * (a * a + c * c), 0, 0, 0, k * (a * a + bb * bb)};
     }
   }
+  s.principal.assign(n, {0.0, 0.0});
+  for (std::size_t i = 0; i < n; ++i) s.principal[i] = dmath::sym_eigen_range(s.inertia[i]);
   if (bodies.body_restitution.empty()) {
     s.restitution_le_1 = bodies.restitution <= 1.0;
   } else {

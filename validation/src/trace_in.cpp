@@ -428,7 +428,7 @@ class TraceIn {
       }
       if (text != "true" && text != "false")
         bad("/ (root attribute gyroscopic)", fmt::format("'{}' unknown", text), allowed);
-      p.gyroscopic = text == "true";
+      p.gyroscopic = text == "true" ? PhysicsBodies::Gyroscopic::Integrated : PhysicsBodies::Gyroscopic::Absent;
     }
     Dataset locked = open("/bodies/locked_dofs", H5T_INTEGER, 1, false);
     if (locked.present()) {

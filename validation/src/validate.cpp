@@ -445,7 +445,6 @@ const std::vector<ToleranceEntry>& tolerance_table() {
       {"energy_rel", &Tolerances::energy_rel, "relative"},
       {"balance_ulps", &Tolerances::balance_ulps, "x 2^-23 of the magnitudes"},
       {"free_flight_angle_rad", &Tolerances::free_flight_angle_rad, "rad"},
-      {"gyroscopic_rel", &Tolerances::gyroscopic_rel, "relative"},
       {"friction_direction_speed", &Tolerances::friction_direction_speed, "m/s"},
   };
   return table;

@@ -81,14 +81,18 @@
 ///     the momentum along them nor, rotation locked, the angular momentum (counted).
 ///  7. `momentum-balance` (every frame with states; SPEC 13b.7): per dynamic body with
 ///     contact rows, m (v' - v) - m g dt = sum of its rows' J = jn n + J_t (J_t: jt along
-///     -v_t, or +t for octocd's records), and with rotation and points I_w (w' - w)
-///     (+ dt w x I_w w when gyroscopic) = sum (p - x) x J; bound: balance_ulps x 2^-23 x
+///     -v_t, or +t for octocd's records), and with rotation and points the torques
+///     sum (p - x) x J = I_w (w' - w) (no gyroscopic term) or = L' - L, L = R I R^T w
+///     before and after the step, within its first-order bound (the term; undeclared:
+///     either, PhysicsBodies::gyroscopic); bound: balance_ulps x 2^-23 x
 ///     (rows + 2) x the magnitudes, plus what a scalar jt leaves open (discs in each row's
 ///     tangent plane; docs/validate-your-engine.md derives it). n/a when the rows are not
 ///     the step's impulses (impulses_complete false).
 ///  8. `free-flight` (every frame with states; SPEC 13b.8): per dynamic body without a
 ///     contact row (or confirmed pair): v' = v + g dt, x' by the declared integrator,
-///     w' = w (less the declared gyroscopic term), q' = q advanced by w dt within
+///     the spin by the invariants (L = R I R^T w kept to second order in |w| dt and the
+///     rotational energy not rising, or w' = w for an engine without the gyroscopic term;
+///     docs/validation.md, "Free rotation: the invariants"), q' = q advanced by w dt within
 ///     free_flight_angle_rad + (|w| dt)^2. Locked axes are not judged (counted).
 /// Reporting (SPEC 13b.13): every row fills ValidationResult::judged and ::causes (per
 /// cause its count, worst figure, first examples with frame and item "pair (A, B)",
@@ -186,11 +190,23 @@ struct PhysicsBodies {
   /// each pair's contact episode (first step with a row to the first without), not per step.
   enum class ContactModel { Rigid, Soft };
   ContactModel contact_model = ContactModel::Rigid;
-  /// `gyroscopic`: the engine integrates the gyroscopic term (w x I w) of free rotation.
-  /// momentum-balance then expects I_w (w' - w) + dt w x I_w w = the contact torques and
-  /// free-flight w' = w - dt I_w^-1 (w x I_w w) (each within `gyroscopic_rel` of the term:
-  /// implicit and explicit forms differ at second order); false: w' = w without contacts.
-  bool gyroscopic = false;
+  /// `gyroscopic`: how the engine treats the gyroscopic term (w x I w) of free rotation
+  /// (docs/validation.md, "Free rotation: the invariants").
+  enum class Gyroscopic {
+    /// Not declared: a torque-free body may keep w (no term) or keep its angular momentum
+    /// L = R I R^T w and not gain rotational energy (the term, in any first-order form);
+    /// precession is never a failure. Bullet applies its implicit term only to bodies in a
+    /// solver batch with contacts, so one trace holds both.
+    Undeclared,
+    /// Declared "true": every body carries the term. free-flight holds L and the
+    /// rotational energy to the integrator's order; momentum-balance judges the change of
+    /// L against the contact torques.
+    Integrated,
+    /// Declared "false": no term. free-flight expects w' = w; momentum-balance
+    /// I_w (w' - w) = the contact torques.
+    Absent,
+  };
+  Gyroscopic gyroscopic = Gyroscopic::Undeclared;
   /// `integrator`: how a free body's position advances: semi-implicit Euler x' = x + dt v'
   /// (SPEC 4.1, octocd's engines, Bullet), explicit x' = x + dt v, or either.
   enum class Integrator { SemiImplicit, Explicit, Any };
@@ -220,6 +236,8 @@ struct PhysicsBodies {
 
 /// "rigid" or "soft".
 const char* contact_model_name(PhysicsBodies::ContactModel m);
+/// "undeclared", "true" or "false".
+const char* gyroscopic_name(PhysicsBodies::Gyroscopic g);
 /// "semi-implicit", "explicit" or "any".
 const char* integrator_name(PhysicsBodies::Integrator i);
 

@@ -267,10 +267,6 @@ struct Tolerances {
   /// normalised first-order update) and float32 rounding of the quaternion (~1e-7 rad).
   /// A body turned by 30 deg (0.52 rad) in one step is caught.
   double free_flight_angle_rad = 1e-4;
-  /// Declared gyroscopic term: the engine's term may differ from the explicit
-  /// dt w x I_w w by this share of it (implicit forms, Bullet's
-  /// computeGyroscopicImpulseImplicit_Body, differ at second order in |w| dt).
-  double gyroscopic_rel = 0.5;
   /// Momentum balance with a scalar `jt`: below this relative sliding speed at a row
   /// before the step (m/s), the friction impulse's direction is the engine's choice
   /// (Bullet: below sqrt(FLT_EPSILON) = 3.45e-4 m/s it takes btPlaneSpace1's axis), so the
