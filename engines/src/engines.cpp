@@ -12,6 +12,9 @@
 #include "octocd/error.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/world.hpp"
+#if OCTOCD_HAVE_ODE
+#include "octocd/ode_world.hpp"
+#endif
 
 namespace octocd {
 
@@ -42,10 +45,20 @@ std::unique_ptr<Engine> make_bullet(const std::shared_ptr<const Model>& model, c
   return std::make_unique<BulletWorld>(model, model->initial, BulletOptions(), bullet);
 }
 
+std::unique_ptr<Engine> make_ode(const std::shared_ptr<const Model>& model, const CudaSettings&, const BulletSettings&) {
+#if OCTOCD_HAVE_ODE
+  return std::make_unique<OdeWorld>(model, model->initial, OdeSettings());
+#else
+  (void)model;
+  throw RuntimeError("engine 'ode' is not built in this octocd");
+#endif
+}
+
 /// The factories, by the names of engine_infos().
 const std::vector<Registered>& registered() {
   static const std::vector<Registered> r{
-      {"cpu", &make_cpu, true}, {"cuda", &make_cuda, OCTOCD_HAVE_CUDA != 0}, {"bullet", &make_bullet, true}};
+      {"cpu", &make_cpu, true}, {"cuda", &make_cuda, OCTOCD_HAVE_CUDA != 0}, {"bullet", &make_bullet, true},
+      {"ode", &make_ode, OCTOCD_HAVE_ODE != 0}};
   return r;
 }
 
