@@ -40,7 +40,16 @@ const std::vector<EngineInfo>& engine_infos() {
     bullet.no_midphase_reason =
         "Bullet runs its own narrow phase: GJK/EPA on convex hulls and triangle meshes, or btBoxBoxDetector on the "
         "AABB boxes (--bullet shape=box)";
-    return std::vector<EngineInfo>{cpu, cuda, bullet};
+    EngineInfo ode;
+    ode.name = "ode";
+    ode.description = "the same scene in the Open Dynamics Engine (dWorld, rotating boxes and hulls)";
+    ode.rotates = true;
+    ode.own_broadphase = "ode-hash";
+    ode.own_broadphase_class = "dHashSpace";
+    ode.geometries = {"hull"};
+    ode.no_midphase_reason =
+        "ODE runs its own narrow phase: dCollide (dBoxBox, libccd MPR on convex hulls, trimesh colliders)";
+    return std::vector<EngineInfo>{cpu, cuda, bullet, ode};
   }();
   return infos;
 }

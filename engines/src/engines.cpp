@@ -14,6 +14,12 @@
 #include "octocd/error.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/world.hpp"
+#if OCTOCD_HAVE_MUJOCO
+#include "octocd/mujoco_world.hpp"
+#endif
+#if OCTOCD_HAVE_ODE
+#include "octocd/ode_world.hpp"
+#endif
 
 namespace octocd {
 
@@ -75,6 +81,49 @@ std::unique_ptr<Engine> make_bullet(const std::shared_ptr<const Model>& model, c
   return std::make_unique<BulletWorld>(model, model->initial, BulletOptions(), bullet_settings(items, where));
 }
 
+/// A reference engine whose adapter may be absent from this build (its package not found):
+/// its settings are parsed when built; when absent, its setting keys are none and building
+/// it is a RuntimeError.
+#if OCTOCD_HAVE_ODE
+OdeSettings ode_settings(const Items& items, const std::string& where) {
+  OdeSettings s;
+  apply_ode_settings(s, items, where);
+  return s;
+}
+void check_ode(const Items& items, const std::string& where) { (void)ode_settings(items, where); }
+std::vector<std::string> ode_keys() { return ode_setting_names(); }
+std::unique_ptr<Engine> make_ode(const std::shared_ptr<const Model>& model, const Items& items,
+                                 const std::string& where) {
+  return std::make_unique<OdeWorld>(model, model->initial, ode_settings(items, where));
+}
+#else
+void check_ode(const Items& items, const std::string& where) { check_none(items, where); }
+std::vector<std::string> ode_keys() { return {}; }
+std::unique_ptr<Engine> make_ode(const std::shared_ptr<const Model>&, const Items&, const std::string&) {
+  throw RuntimeError("engine 'ode' is not built in this octocd (configured without libode-dev)");
+}
+#endif
+
+#if OCTOCD_HAVE_MUJOCO
+MujocoSettings mujoco_settings(const Items& items, const std::string& where) {
+  MujocoSettings s;
+  apply_mujoco_settings(s, items, where);
+  return s;
+}
+void check_mujoco(const Items& items, const std::string& where) { (void)mujoco_settings(items, where); }
+std::vector<std::string> mujoco_keys() { return mujoco_setting_names(); }
+std::unique_ptr<Engine> make_mujoco(const std::shared_ptr<const Model>& model, const Items& items,
+                                    const std::string& where) {
+  return std::make_unique<MujocoWorld>(model, model->initial, mujoco_settings(items, where));
+}
+#else
+void check_mujoco(const Items& items, const std::string& where) { check_none(items, where); }
+std::vector<std::string> mujoco_keys() { return {}; }
+std::unique_ptr<Engine> make_mujoco(const std::shared_ptr<const Model>&, const Items&, const std::string&) {
+  throw RuntimeError("engine 'mujoco' is not built in this octocd (configured without libmujoco-dev)");
+}
+#endif
+
 /// The engines, one entry each, by the names of engine_infos().
 const std::vector<Registered>& registered() {
   static const std::vector<Registered> r{
@@ -84,6 +133,8 @@ const std::vector<Registered>& registered() {
        "shape=hull: convex hulls of dynamic meshes, triangle meshes of static ones, the default; shape=box: boxes "
        "equal to the AABBs",
        &check_bullet},
+      {"mujoco", &make_mujoco, OCTOCD_HAVE_MUJOCO != 0, &mujoco_keys, "", &check_mujoco},
+      {"ode", &make_ode, OCTOCD_HAVE_ODE != 0, &ode_keys, "", &check_ode},
   };
   return r;
 }

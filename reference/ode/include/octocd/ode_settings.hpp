@@ -1,0 +1,90 @@
+#pragma once
+/// \file ode_settings.hpp
+/// The settings of the ODE engine (`ode`): which ODE stepper runs, its constraint
+/// parameters, how many contacts a pair may get and how friction is bounded. Set from
+/// C++ (OdeWorld's constructor) or as KEY=VALUE items (apply_ode_settings); docs/engines.md,
+/// "ode", lists them with the ODE parameter each one sets.
+
+#include <string>
+#include <vector>
+
+namespace octocd {
+
+/// Which of ODE's steppers advances the world.
+enum class OdeStepper {
+  /// dWorldStep: every island's constraints as one LCP, solved by ODE's Dantzig solver
+  /// (exact up to rounding; cost grows with the cube of an island's rows).
+  Step,
+  /// dWorldQuickStep: projected Gauss-Seidel (SOR) over the rows, OdeSettings::iterations
+  /// sweeps (linear cost; the constraints are met only as well as the sweeps converge).
+  QuickStep,
+};
+
+/// How a contact's two friction directions are bounded (ODE's dContactApprox1: the
+/// friction pyramid, each direction's force within mu_dir times the contact's normal force).
+enum class OdeFriction {
+  /// mu_dir = mu / sqrt(2) in both directions: the pyramid inscribed in the Coulomb cone,
+  /// so the friction vector never leaves the cone (sliding along one direction: 0.707 mu).
+  Inscribed,
+  /// mu_dir = mu in both directions (ODE's usual set-up): sliding along a direction
+  /// gets mu, but along the pyramid's diagonal up to sqrt(2) mu, outside the cone.
+  Pyramid,
+};
+
+/// "step" or "quickstep".
+const char* ode_stepper_name(OdeStepper s);
+/// "inscribed" or "pyramid".
+const char* ode_friction_name(OdeFriction f);
+
+/// The ode engine's settings. The defaults are what `octocd run --engine ode` runs:
+/// ODE's own defaults (double precision) where ODE has one.
+struct OdeSettings {
+  /// The stepper (OdeStepper); key `stepper`, values step | quickstep. Default step
+  /// (dWorldStep, the exact LCP solve).
+  OdeStepper stepper = OdeStepper::Step;
+  /// Gauss-Seidel sweeps per step of dWorldQuickStep (dWorldSetQuickStepNumIterations);
+  /// key `iterations`, an integer in [1, 10000]. Default 20, ODE's. Read only by the
+  /// quickstep stepper.
+  int iterations = 20;
+  /// Error reduction parameter (dWorldSetERP): the share of a contact's depth the next
+  /// step's constraint velocity removes (target normal velocity erp * depth / dt); key
+  /// `erp`, a number in [0, 1]. Default 0.2, ODE's.
+  double erp = 0.2;
+  /// Constraint force mixing (dWorldSetCFM, m s^2/kg per row: how soft every contact
+  /// row is); key `cfm`, a number in [0, 1]. Default 1e-10, ODE's in double precision.
+  double cfm = 1e-10;
+  /// Most contacts dCollide may return for one pair per step (the low 16 bits of its
+  /// flags); key `contacts`, an integer in [1, 64]. Default 8 (dBoxBox gives at most 4;
+  /// triangle meshes more).
+  int max_contacts = 8;
+  /// The friction bound (OdeFriction); key `friction`, values inscribed | pyramid.
+  /// Default inscribed (the friction vector stays in the Coulomb cone).
+  OdeFriction friction = OdeFriction::Inscribed;
+  /// ODE's gyroscopic term (dBodySetGyroscopicMode on every dynamic body: the implicit
+  /// step of Lacoursiere 2006 that ODE 0.16 applies); key `gyroscopic`, true | false.
+  /// Default true, ODE's.
+  bool gyroscopic = true;
+};
+
+/// ERP, CFM and QuickStep iterations of a freshly created dWorld (dWorldGetERP,
+/// dWorldGetCFM, dWorldGetQuickStepNumIterations) and the gyroscopic mode of a fresh
+/// body (dBodyGetGyroscopicMode), the other fields as OdeSettings: the linked ODE's own
+/// defaults, which OdeSettings' defaults claim to be.
+OdeSettings ode_library_defaults();
+
+/// The keys set_ode_setting takes, in the struct's order: stepper, iterations, erp, cfm,
+/// contacts, friction, gyroscopic.
+std::vector<std::string> ode_setting_names();
+
+/// Sets the field `key` (a name of ode_setting_names()) of `settings` from text (stepper:
+/// step or quickstep; iterations: an integer in [1, 10000]; erp, cfm: a decimal number in
+/// [0, 1]; contacts: an integer in [1, 64]; friction: inscribed or pyramid; gyroscopic:
+/// true or false). Throws InputError "<where>: ..." naming the key, the value and what is
+/// allowed.
+void set_ode_setting(OdeSettings& settings, const std::string& key, const std::string& value, const std::string& where);
+
+/// Applies "KEY=VALUE" items in order with set_ode_setting. Throws InputError naming
+/// `where` and the item for text without '='.
+void apply_ode_settings(OdeSettings& settings, const std::vector<std::string>& items, const std::string& where);
+
+}  // namespace octocd

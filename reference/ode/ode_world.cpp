@@ -1,0 +1,535 @@
+// octocd::OdeWorld: the scene in ODE's dWorld (see ode_world.hpp for every setting and why).
+#include "octocd/ode_world.hpp"
+
+#include <fmt/format.h>
+#include <ode/ode.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <mutex>
+#include <utility>
+
+#include "octocd/convex_hull.hpp"
+#include "octocd/error.hpp"
+#include "octocd/version.hpp"
+
+#if !defined(dDOUBLE)
+#error "octocd's ODE adapter needs ODE's double-precision build (dDOUBLE)"
+#endif
+
+namespace octocd {
+
+namespace {
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+Vec3 to_vec3(const dReal* v) { return {static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2])}; }
+
+/// A double bound rounded to the float at or beyond it (down for a minimum, up for a maximum).
+float float_below(double d) {
+  float f = static_cast<float>(d);
+  if (static_cast<double>(f) > d) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+  return f;
+}
+float float_above(double d) {
+  float f = static_cast<float>(d);
+  if (static_cast<double>(f) < d) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
+
+/// ODE's library-wide set-up, once per process (dInitODE2; never closed: other worlds
+/// may live until exit), and its per-thread collision data for the calling thread.
+void init_ode_for_this_thread() {
+  static std::once_flag once;
+  std::call_once(once, [] { dInitODE2(0); });
+  dAllocateODEDataForThread(dAllocateMaskAll);
+}
+
+/// Category bits: static geoms collide only with dynamic ones (no static-static pairs).
+constexpr unsigned long kDynamicCategory = 1, kStaticCategory = 2;
+
+}  // namespace
+
+struct OdeWorld::Impl {
+  /// One octocd shape as ODE takes it: a box's sides, or a hull's planes, points and
+  /// polygons (dCreateConvex keeps pointers to them), or a triangle mesh's data.
+  struct ShapeData {
+    bool box = true;
+    dReal sides[3] = {0, 0, 0};                     ///< box: full side lengths (m)
+    ConvexHull hull;                                 ///< mesh: its convex hull (shape frame)
+    std::vector<dReal> planes, points;               ///< dCreateConvex's arrays
+    std::vector<unsigned int> polygons;              ///< count, then indices, per face
+    HullMassProperties mass;                         ///< mesh: the hull's, density 1
+    std::vector<float> tri_vertices;                 ///< static mesh: vertices (shape frame)
+    std::vector<dTriIndex> tri_indices;              ///< static mesh: triangles
+    dTriMeshDataID tri = nullptr;                    ///< static mesh: ODE's data (built once)
+  };
+
+  /// One contact of the near callback, before its joint exists.
+  struct Row {
+    std::uint32_t i1 = 0, i2 = 0;  ///< bodies of geom 1 and geom 2
+    dContactGeom geom{};
+  };
+
+  OdeSettings settings;
+  double dt = 0.001;
+  Vec3 gravity;
+  float slop = 0.001f;
+  float mu = 0.0f, restitution = 0.0f, restitution_threshold = 0.0f;
+  dWorldID world = nullptr;
+  dSpaceID space = nullptr;
+  dJointGroupID joints = nullptr;
+  std::vector<ShapeData> shapes;
+  std::vector<dBodyID> bodies;  // index = body id; nullptr for a static body
+  std::vector<dGeomID> geoms;   // index = body id
+  std::vector<std::array<double, 9>> inertia;  // body frame, about x (kg m^2)
+  std::vector<float> w;
+  std::uint64_t static_static = 0;
+  BodyState state;
+  FrameMetrics metrics;
+  std::int64_t frame = 0;
+  bool recording = false;
+  RotationTraits traits;
+  FrameRecord record;
+  std::vector<ContactRecord> no_contacts;
+  std::string geometry;
+
+  // Per step: the callback's pairs and contact rows, the joints' feedback.
+  std::vector<Pair> pairs;
+  std::vector<Row> rows;
+  std::vector<dContactGeom> buffer;
+  std::vector<dJointFeedback> feedback;
+  double narrow_ms = 0.0;
+
+  ~Impl() {
+    if (joints) dJointGroupDestroy(joints);
+    for (dGeomID g : geoms)
+      if (g) dGeomDestroy(g);
+    if (space) dSpaceDestroy(space);
+    if (world) dWorldDestroy(world);  // its bodies with it
+    for (ShapeData& s : shapes)
+      if (s.tri) dGeomTriMeshDataDestroy(s.tri);
+  }
+
+  static std::uint32_t index_of(dGeomID g) {
+    return static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(dGeomGetData(g)));
+  }
+
+  static void near_callback(void* data, dGeomID o1, dGeomID o2) {
+    Impl& m = *static_cast<Impl*>(data);
+    const std::uint32_t i1 = index_of(o1), i2 = index_of(o2);
+    m.pairs.push_back(i1 < i2 ? Pair{i1, i2} : Pair{i2, i1});
+    const auto t0 = std::chrono::steady_clock::now();
+    const int n = dCollide(o1, o2, m.settings.max_contacts, m.buffer.data(), static_cast<int>(sizeof(dContactGeom)));
+    m.narrow_ms += ms_since(t0);
+    for (int k = 0; k < n; ++k) m.rows.push_back({i1, i2, m.buffer[static_cast<std::size_t>(k)]});
+  }
+
+  void read_state() {
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      const dBodyID b = bodies[i];
+      if (!b) continue;
+      state.x[i] = to_vec3(dBodyGetPosition(b));
+      state.v[i] = to_vec3(dBodyGetLinearVel(b));
+      const dReal* q = dBodyGetQuaternion(b);  // (w, x, y, z), as octocd's Quat
+      state.q[i] = {static_cast<float>(q[0]), static_cast<float>(q[1]), static_cast<float>(q[2]), static_cast<float>(q[3])};
+      state.omega[i] = to_vec3(dBodyGetAngularVel(b));
+    }
+  }
+
+  void fill_record();
+};
+
+void OdeWorld::Impl::fill_record() {
+  FrameRecord& r = record;
+  const std::size_t n = geoms.size();
+  r.aabbs.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    dReal b[6];
+    dGeomGetAABB(geoms[i], b);  // (minx, maxx, miny, maxy, minz, maxz) at the detection pose
+    r.aabbs[i] = {{float_below(b[0]), float_below(b[2]), float_below(b[4])},
+                  {float_above(b[1]), float_above(b[3]), float_above(b[5])}};
+  }
+  r.pairs = pairs;
+  std::sort(r.pairs.begin(), r.pairs.end());
+  r.pairs.erase(std::unique(r.pairs.begin(), r.pairs.end()), r.pairs.end());
+  r.has_pairs = true;
+
+  r.contacts.clear();
+  std::vector<Vec3> jt3;
+  const double h = dt;
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    const Row& row = rows[k];
+    const dJointFeedback& fb = feedback[k];
+    // The joint's node 0 is geom 1's body, or geom 2's when geom 1 is static (ODE then
+    // reverses the attachment); fb.f1 is the force on node 0. Force on geom 1's body:
+    const bool g1_dynamic = bodies[row.i1] != nullptr;
+    const double s1 = g1_dynamic ? 1.0 : -1.0;
+    const double f1[3] = {s1 * fb.f1[0], s1 * fb.f1[1], s1 * fb.f1[2]};
+    const bool swap = row.i1 > row.i2;  // A is geom 2's body
+    const double sa = swap ? -1.0 : 1.0;
+    // dContactGeom's normal points from geom 2 into geom 1: from B to A when A is geom 1.
+    const double nrm[3] = {sa * row.geom.normal[0], sa * row.geom.normal[1], sa * row.geom.normal[2]};
+    const double j_a[3] = {sa * f1[0] * h, sa * f1[1] * h, sa * f1[2] * h};
+    // ODE's normal row has lo = 0, so its impulse is >= 0; projecting the summed force
+    // (friction rows orthogonal to the normal) back on the normal may round below it.
+    const double jn = std::max(0.0, j_a[0] * nrm[0] + j_a[1] * nrm[1] + j_a[2] * nrm[2]);
+    const double jt_d[3] = {j_a[0] - jn * nrm[0], j_a[1] - jn * nrm[1], j_a[2] - jn * nrm[2]};
+    ContactRecord c;
+    c.pair = swap ? Pair{row.i2, row.i1} : Pair{row.i1, row.i2};
+    c.normal = {static_cast<float>(nrm[0]), static_cast<float>(nrm[1]), static_cast<float>(nrm[2])};
+    c.depth = static_cast<float>(std::max<dReal>(0, row.geom.depth));
+    c.point = to_vec3(row.geom.pos);
+    c.jn = static_cast<float>(jn);
+    const Vec3 j_t{static_cast<float>(jt_d[0]), static_cast<float>(jt_d[1]), static_cast<float>(jt_d[2])};
+    // v_t: A's velocity relative to B's at the point before the solver (v_pre + dt g on
+    // dynamic bodies, w_pre), its part orthogonal to the normal.
+    auto point_velocity = [&](std::uint32_t i) {
+      Vec3 v = r.v_pre[i];
+      if (w[i] > 0.0f) v += static_cast<float>(dt) * gravity;
+      return v + cross(r.w_pre[i], c.point - r.x_pre[i]);
+    };
+    const Vec3 v_rel = point_velocity(c.pair.a) - point_velocity(c.pair.b);
+    const Vec3 v_t = v_rel - dot(v_rel, c.normal) * c.normal;
+    const float vt_len = length(v_t);
+    c.jt = vt_len > 1e-6f ? dot(j_t, -(1.0f / vt_len) * v_t) : length(j_t);
+    r.contacts.push_back(c);
+    jt3.push_back(j_t);
+  }
+  std::vector<std::size_t> order(r.contacts.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t x, std::size_t y) { return r.contacts[x].pair < r.contacts[y].pair; });
+  std::vector<ContactRecord> sorted;
+  sorted.reserve(order.size());
+  r.jt3.clear();
+  for (std::size_t k : order) {
+    sorted.push_back(r.contacts[k]);
+    r.jt3.push_back(jt3[k]);
+  }
+  r.contacts.swap(sorted);
+  r.confirmed.clear();
+  for (const ContactRecord& c : r.contacts)
+    if (r.confirmed.empty() || !(r.confirmed.back() == c.pair)) r.confirmed.push_back(c.pair);
+  r.has_contact_terms = false;
+  r.manifolds = true;
+  r.has_points = true;
+}
+
+OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial, const OdeSettings& settings)
+    : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
+  init_ode_for_this_thread();
+  Impl& m = *impl_;
+  const Model& src = *model_;
+  const Scene& scene = src.scene;
+  m.settings = settings;
+  m.dt = scene.dt;
+  m.gravity = scene.gravity;
+  m.slop = scene.response.slop;
+  m.mu = scene.response.mu_kinetic;
+  m.restitution = scene.response.restitution;
+  m.restitution_threshold = scene.response.restitution_threshold;
+  m.static_static = static_static_pairs(src);
+  m.buffer.resize(static_cast<std::size_t>(settings.max_contacts));
+
+  m.world = dWorldCreate();
+  dWorldSetGravity(m.world, scene.gravity.x, scene.gravity.y, scene.gravity.z);
+  dWorldSetERP(m.world, settings.erp);
+  dWorldSetCFM(m.world, settings.cfm);
+  dWorldSetQuickStepNumIterations(m.world, settings.iterations);
+  dWorldSetAutoDisableFlag(m.world, 0);
+  m.space = dHashSpaceCreate(nullptr);
+  m.joints = dJointGroupCreate(0);
+
+  const std::size_t n = initial.size();
+  m.state = initial;
+  m.state.q.resize(n);      // identity where the model has none
+  m.state.omega.resize(n);  // zero where the model has none
+  m.w = initial.w;
+
+  // Which shapes a static body uses as a triangle mesh, and which as a hull or box.
+  std::vector<char> static_mesh(src.shapes.size(), 0), dynamic_use(src.shapes.size(), 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint32_t s = src.bodies[i].shape;
+    const bool is_static = !(initial.w[i] > 0.0f);
+    if (is_static && src.shapes[s].mesh) static_mesh[s] = 1;
+    if (!is_static) dynamic_use[s] = 1;
+  }
+  m.shapes.resize(src.shapes.size());
+  for (std::size_t k = 0; k < src.shapes.size(); ++k) {
+    const Shape& s = src.shapes[k];
+    Impl::ShapeData& d = m.shapes[k];
+    const Vec3 centre = 0.5f * (s.local.min + s.local.max);  // the body origin in the shape frame
+    const Vec3 side = s.local.max - s.local.min;
+    for (int a = 0; a < 3; ++a) d.sides[a] = side[a];
+    if (!s.mesh) continue;
+    d.box = false;
+    if (dynamic_use[k]) {
+      std::vector<Vec3> pts(s.mesh->vertices);
+      for (Vec3& p : pts) p -= centre;
+      d.hull = convex_hull(pts, s.name);
+      d.mass = hull_mass_properties(d.hull);
+      for (const auto& v : d.hull.vertices) d.points.insert(d.points.end(), v.begin(), v.end());
+      for (std::size_t f = 0; f < d.hull.faces.size(); ++f) {
+        d.planes.insert(d.planes.end(), d.hull.planes[f].begin(), d.hull.planes[f].end());
+        d.polygons.push_back(static_cast<unsigned int>(d.hull.faces[f].size()));
+        d.polygons.insert(d.polygons.end(), d.hull.faces[f].begin(), d.hull.faces[f].end());
+      }
+    }
+    if (static_mesh[k]) {
+      for (const Vec3& p : s.mesh->vertices) {
+        const Vec3 q = p - centre;
+        d.tri_vertices.insert(d.tri_vertices.end(), {q.x, q.y, q.z});
+      }
+      for (const auto& t : s.mesh->triangles) d.tri_indices.insert(d.tri_indices.end(), {t[0], t[1], t[2]});
+      d.tri = dGeomTriMeshDataCreate();
+      dGeomTriMeshDataBuildSingle(d.tri, d.tri_vertices.data(), static_cast<int>(3 * sizeof(float)),
+                                  static_cast<int>(s.mesh->vertices.size()), d.tri_indices.data(),
+                                  static_cast<int>(d.tri_indices.size()), static_cast<int>(3 * sizeof(dTriIndex)));
+    }
+  }
+
+  bool has_box = false, has_hull = false, has_trimesh = false;
+  m.bodies.assign(n, nullptr);
+  m.geoms.assign(n, nullptr);
+  m.inertia.assign(n, {});
+  for (std::size_t i = 0; i < n; ++i) {
+    const Impl::ShapeData& d = m.shapes[src.bodies[i].shape];
+    const bool is_static = !(initial.w[i] > 0.0f);
+    dGeomID g = nullptr;
+    std::string declared;
+    if (d.box) {
+      g = dCreateBox(m.space, d.sides[0], d.sides[1], d.sides[2]);
+      declared = "box";
+      has_box = true;
+    } else if (is_static) {
+      g = dCreateTriMesh(m.space, d.tri, nullptr, nullptr, nullptr);
+      declared = "mesh";
+      has_trimesh = true;
+    } else {
+      g = dCreateConvex(m.space, d.planes.data(), static_cast<unsigned int>(d.hull.planes.size()), d.points.data(),
+                        static_cast<unsigned int>(d.hull.vertices.size()), d.polygons.data());
+      declared = "convex_hull";
+      has_hull = true;
+    }
+    m.geoms[i] = g;
+    dGeomSetData(g, reinterpret_cast<void*>(static_cast<std::uintptr_t>(i)));
+    const Quat q = normalized(m.state.q[i]);
+    const dQuaternion dq = {q.w, q.x, q.y, q.z};
+    const Vec3 x = m.state.x[i];
+    m.traits.body_collision_shape.push_back(declared);
+    m.traits.body_friction.push_back(m.mu);
+    m.traits.body_restitution.push_back(m.restitution);
+    if (is_static) {
+      dGeomSetCategoryBits(g, kStaticCategory);
+      dGeomSetCollideBits(g, kDynamicCategory);
+      dGeomSetPosition(g, x.x, x.y, x.z);
+      dGeomSetQuaternion(g, dq);
+      m.traits.inertia.push_back({});
+      continue;
+    }
+    dGeomSetCategoryBits(g, kDynamicCategory);
+    dGeomSetCollideBits(g, kDynamicCategory | kStaticCategory);
+    const double mass = 1.0 / static_cast<double>(initial.w[i]);
+    dMass dm;
+    std::array<double, 9> tensor{};
+    if (d.box) {
+      dMassSetBoxTotal(&dm, mass, d.sides[0], d.sides[1], d.sides[2]);
+    } else {
+      const double density = mass / d.mass.volume;
+      const auto& I = d.mass.inertia_origin;
+      dMassSetParameters(&dm, mass, 0, 0, 0, density * I[0], density * I[4], density * I[8], density * I[1],
+                         density * I[2], density * I[5]);
+    }
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) tensor[static_cast<std::size_t>(3 * r + c)] = dm.I[4 * r + c];
+    if (!dMassCheck(&dm))
+      throw RuntimeError(fmt::format("body {} ({}): ODE refuses its mass properties (dMassCheck): mass {} kg, inertia "
+                                     "diagonal ({}, {}, {}) kg m^2",
+                                     i, src.shapes[src.bodies[i].shape].name, mass, tensor[0], tensor[4], tensor[8]));
+    m.inertia[i] = tensor;
+    std::array<float, 9> tf{};
+    for (std::size_t k = 0; k < 9; ++k) tf[k] = static_cast<float>(tensor[k]);
+    m.traits.inertia.push_back(tf);
+    dBodyID b = dBodyCreate(m.world);
+    dBodySetMass(b, &dm);
+    dBodySetPosition(b, x.x, x.y, x.z);
+    dBodySetQuaternion(b, dq);
+    dBodySetLinearVel(b, m.state.v[i].x, m.state.v[i].y, m.state.v[i].z);
+    dBodySetAngularVel(b, m.state.omega[i].x, m.state.omega[i].y, m.state.omega[i].z);
+    dBodySetAutoDisableFlag(b, 0);
+    dBodySetGyroscopicMode(b, settings.gyroscopic ? 1 : 0);
+    dGeomSetBody(g, b);
+    m.bodies[i] = b;
+  }
+  m.read_state();  // the state as ODE holds it (normalised quaternions)
+
+  m.geometry = "ode";
+  if (has_box) m.geometry += " boxes (dBox),";
+  if (has_hull) m.geometry += " convex hulls (dynamic meshes, dConvex),";
+  if (has_trimesh) m.geometry += " triangle meshes (static meshes, dTriMesh),";
+  if (m.geometry.back() == ',') m.geometry.pop_back();
+
+  RotationTraits& t = m.traits;
+  t.mu = m.mu;
+  t.restitution = m.restitution;
+  t.friction_combine = "min";
+  t.restitution_combine = "min";
+  t.contact_margin = 1e-4f;
+  t.detection = "pre-step";
+  t.broadphase_exact = false;
+  t.contact_geometry = "shape";
+  t.rotates = true;
+  t.jt3 = true;
+  t.contact_model = "rigid";
+  t.integrator = "semi-implicit";
+  t.gyroscopic = settings.gyroscopic ? "true" : "false";
+}
+
+OdeWorld::~OdeWorld() = default;
+
+const FrameMetrics& OdeWorld::step() {
+  init_ode_for_this_thread();
+  Impl& m = *impl_;
+  if (m.recording) {
+    m.record.frame = m.frame + 1;
+    m.record.x_pre = m.state.x;
+    m.record.v_pre = m.state.v;
+    m.record.q_pre = m.state.q;
+    m.record.w_pre = m.state.omega;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  m.pairs.clear();
+  m.rows.clear();
+  m.narrow_ms = 0.0;
+  dSpaceCollide(m.space, &m, &Impl::near_callback);
+  const double collide_ms = ms_since(t0);
+
+  const auto t1 = std::chrono::steady_clock::now();
+  m.feedback.assign(m.rows.size(), dJointFeedback{});
+  const dReal mu_dir = m.settings.friction == OdeFriction::Inscribed ? m.mu / std::sqrt(2.0) : m.mu;
+  for (std::size_t k = 0; k < m.rows.size(); ++k) {
+    const Impl::Row& row = m.rows[k];
+    dContact c{};
+    c.geom = row.geom;
+    c.surface.mode = dContactApprox1;
+    c.surface.mu = mu_dir;
+    if (m.restitution > 0.0f) {
+      c.surface.mode |= dContactBounce;
+      c.surface.bounce = m.restitution;
+      c.surface.bounce_vel = m.restitution_threshold;
+    }
+    dJointID j = dJointCreateContact(m.world, m.joints, &c);
+    dJointAttach(j, m.bodies[row.i1], m.bodies[row.i2]);
+    dJointSetFeedback(j, &m.feedback[k]);
+  }
+  const int ok = m.settings.stepper == OdeStepper::QuickStep ? dWorldQuickStep(m.world, m.dt) : dWorldStep(m.world, m.dt);
+  const double response_ms = ms_since(t1);
+  if (!ok) throw RuntimeError(fmt::format("frame {}: ODE's step failed (out of memory in its work area)", m.frame + 1));
+
+  const auto t2 = std::chrono::steady_clock::now();
+  FrameMetrics fm;
+  fm.frame = ++m.frame;
+  fm.time = static_cast<double>(m.frame) * m.dt;
+  m.read_state();
+  for (std::size_t i = 0; i < m.bodies.size(); ++i)
+    if (m.bodies[i] && !(is_finite(m.state.x[i]) && is_finite(m.state.v[i]) && is_finite(m.state.omega[i])))
+      throw RuntimeError(fmt::format("frame {}: body {} has a non-finite state after ODE's step (x ({}, {}, {}), v "
+                                     "({}, {}, {}))",
+                                     m.frame, i, m.state.x[i].x, m.state.x[i].y, m.state.x[i].z, m.state.v[i].x,
+                                     m.state.v[i].y, m.state.v[i].z));
+  if (m.recording) {
+    FrameRecord& r = m.record;
+    r.x_post = m.state.x;
+    r.v_post = m.state.v;
+    r.q_post = m.state.q;
+    r.w_post = m.state.omega;
+    r.x_det = r.x_pre;  // ODE collides before it steps
+    r.q_det = r.q_pre;
+    m.fill_record();
+  }
+  std::vector<Pair> unique_pairs = m.pairs;
+  fm.cell_candidates = unique_pairs.size();
+  fm.dynamic_pairs = unique_pairs.size();
+  fm.aabb_pairs = unique_pairs.size() + m.static_static;
+  fm.contacts = m.rows.size();
+  std::uint64_t above = 0;
+  double pen_sum = 0.0, pen_max = 0.0;
+  for (const Impl::Row& row : m.rows) {
+    const double d = std::max<dReal>(0, row.geom.depth);
+    pen_sum += d;
+    pen_max = std::max(pen_max, d);
+    if (d > static_cast<double>(m.slop)) ++above;
+  }
+  if (!m.rows.empty()) {
+    fm.penetration_mean = pen_sum / static_cast<double>(m.rows.size());
+    fm.penetration_max = pen_max;
+    fm.penetration_share_above_slop = static_cast<double>(above) / static_cast<double>(m.rows.size());
+  }
+  double ke = 0.0, px = 0.0, py = 0.0, pz = 0.0;
+  for (std::size_t i = 0; i < m.bodies.size(); ++i) {
+    const dBodyID b = m.bodies[i];
+    if (!b) continue;
+    const double mass = 1.0 / static_cast<double>(m.w[i]);
+    const dReal* v = dBodyGetLinearVel(b);
+    ke += 0.5 * mass * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    px += mass * v[0];
+    py += mass * v[1];
+    pz += mass * v[2];
+    // + 0.5 w_l . (I w_l), w_l = R^T w in the body frame (dBodyGetRotation: 3x4, row-major).
+    const dReal* R = dBodyGetRotation(b);
+    const dReal* wv = dBodyGetAngularVel(b);
+    double wl[3];
+    for (int k = 0; k < 3; ++k) wl[k] = R[0 * 4 + k] * wv[0] + R[1 * 4 + k] * wv[1] + R[2 * 4 + k] * wv[2];
+    const std::array<double, 9>& I = m.inertia[i];
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) ke += 0.5 * wl[r] * I[static_cast<std::size_t>(3 * r + c)] * wl[c];
+  }
+  fm.kinetic_energy = ke;
+  fm.momentum = {px, py, pz};
+  dJointGroupEmpty(m.joints);
+  fm.stage_ms[static_cast<int>(Stage::Broadphase)] = std::max(0.0, collide_ms - m.narrow_ms);
+  fm.stage_ms[static_cast<int>(Stage::Midphase)] = m.narrow_ms;
+  fm.stage_ms[static_cast<int>(Stage::Response)] = response_ms;
+  fm.stage_ms[static_cast<int>(Stage::Metrics)] = ms_since(t2);
+  fm.step_ms = ms_since(t0);
+  m.metrics = fm;
+  return m.metrics;
+}
+
+const BodyState& OdeWorld::state() const { return impl_->state; }
+const FrameMetrics& OdeWorld::last_metrics() const { return impl_->metrics; }
+std::int64_t OdeWorld::frame() const { return impl_->frame; }
+std::string OdeWorld::device() const { return cpu_description(); }
+const std::vector<ContactRecord>& OdeWorld::contacts() const {
+  return impl_->recording ? impl_->record.contacts : impl_->no_contacts;
+}
+std::string OdeWorld::collision_geometry() const { return impl_->geometry; }
+const RotationTraits* OdeWorld::rotation_traits() const { return &impl_->traits; }
+void OdeWorld::set_recording(bool on) { impl_->recording = on; }
+const FrameRecord& OdeWorld::record() const { return impl_->record; }
+const OdeSettings& OdeWorld::settings() const { return impl_->settings; }
+
+bool OdeWorld::has_stage(Stage s) const { return s != Stage::Aabbs && s != Stage::Integrate; }
+
+std::string OdeWorld::notes() const {
+  const OdeSettings& s = impl_->settings;
+  return fmt::format(
+      "{}; {} (erp {}, cfm {}{}), friction {} (dContactApprox1), up to {} contacts per pair,\n"
+      "gyroscopic term {}. broadphase candidates = AABB pairs = dynamic pairs = the pairs dHashSpace hands the\n"
+      "near callback (ODE's own AABBs at the pre-step pose: a hull's are tighter than its posed local box;\n"
+      "no static-static pairs); midphase = ODE's dCollide (dBoxBox, libccd MPR for hulls: one point per\n"
+      "pair, trimesh colliders); response = contact joints + the ODE step, which also integrates (aabbs and\n"
+      "integrate n/a). contacts = contact rows, penetration over their depths; kinetic energy includes rotation.",
+      impl_->geometry, s.stepper == OdeStepper::QuickStep ? "dWorldQuickStep" : "dWorldStep", s.erp, s.cfm,
+      s.stepper == OdeStepper::QuickStep ? fmt::format(", {} iterations", s.iterations) : std::string(),
+      ode_friction_name(s.friction), s.max_contacts, s.gyroscopic ? "on" : "off");
+}
+
+}  // namespace octocd

@@ -1,0 +1,497 @@
+// octocd::OdeWorld (`--engine ode`, reference/ode/): its settings against ODE's own
+// defaults, the shared convex hull helper against closed forms, free fall against ODE's
+// semi-implicit Euler, a free spin against angular momentum, a resting box against m g dt
+// read from ODE's joint feedback, the sign of its contact normals, a recorded stack and a
+// box on a static triangle mesh judged by the physics tier, and ODE's Dantzig friction
+// exceeding the Coulomb bound of its final normal force (a witness from ODE's own API).
+// Skipped when this octocd is built without ODE.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+#include "octocd/convex_hull.hpp"
+#include "octocd/error.hpp"
+#include "octocd/external.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/trace.hpp"
+#if OCTOCD_HAVE_ODE
+#include <ode/ode.h>
+
+#include "octocd/ode_world.hpp"
+#endif
+
+using namespace octocd;
+
+// ---- The convex hull helper (reference/common), needed by every hull adapter ----------
+
+namespace {
+
+/// A box mesh of half extents (a, b, c) centred on `centre`: 8 vertices, 12 triangles.
+Mesh box_mesh(double a, double b, double c, Vec3 centre = {}) {
+  Mesh m;
+  m.name = "box-mesh";
+  for (int i = 0; i < 8; ++i)
+    m.vertices.push_back(Vec3{static_cast<float>((i & 1) ? a : -a), static_cast<float>((i & 2) ? b : -b),
+                              static_cast<float>((i & 4) ? c : -c)} +
+                         centre);
+  m.triangles = {{0, 1, 3}, {0, 3, 2}, {4, 6, 7}, {4, 7, 5}, {0, 4, 5}, {0, 5, 1},
+                 {2, 3, 7}, {2, 7, 6}, {0, 2, 6}, {0, 6, 4}, {1, 5, 7}, {1, 7, 3}};
+  return m;
+}
+
+}  // namespace
+
+// The hull of a box's 8 corners plus an interior point: 8 vertices (the interior one
+// dropped), faces whose planes are the box's 6 sides with outward unit normals (every
+// vertex on or below every plane), counter-clockwise winding (Newell normal outward); the
+// volume 8abc and the inertia about the origin 8abc/3 (b^2 + c^2, ...) of the solid box,
+// and about an off-centre origin the parallel-axis shift.
+TEST(ConvexHull, BoxHullHasTheBoxPlanesVolumeAndInertia) {
+  const double a = 0.3, b = 0.1, c = 0.05;
+  Mesh m = box_mesh(a, b, c);
+  m.vertices.push_back({0.01f, 0.02f, -0.01f});  // inside: not a hull vertex
+  const ConvexHull h = convex_hull(m);
+  EXPECT_EQ(h.vertices.size(), 8u);
+  ASSERT_EQ(h.faces.size(), h.planes.size());
+  ASSERT_GE(h.faces.size(), 6u);
+  for (std::size_t f = 0; f < h.faces.size(); ++f) {
+    const auto& p = h.planes[f];
+    EXPECT_NEAR(p[0] * p[0] + p[1] * p[1] + p[2] * p[2], 1.0, 1e-12);
+    // A side of the box: one axis, offset the half extent along it.
+    const double half[3] = {a, b, c};
+    int axis = 0;
+    for (int k = 1; k < 3; ++k)
+      if (std::fabs(p[static_cast<std::size_t>(k)]) > std::fabs(p[static_cast<std::size_t>(axis)])) axis = k;
+    EXPECT_NEAR(std::fabs(p[static_cast<std::size_t>(axis)]), 1.0, 1e-6);
+    EXPECT_NEAR(p[3], half[axis], 1e-6) << "face " << f;
+    for (const auto& v : h.vertices) EXPECT_LE(p[0] * v[0] + p[1] * v[1] + p[2] * v[2], p[3] + 1e-9);
+    // Counter-clockwise seen from outside: (v1 - v0) x (v2 - v0) along the outward normal.
+    const auto& v0 = h.vertices[h.faces[f][0]];
+    const auto& v1 = h.vertices[h.faces[f][1]];
+    const auto& v2 = h.vertices[h.faces[f][2]];
+    const double e1[3] = {v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2]};
+    const double e2[3] = {v2[0] - v0[0], v2[1] - v0[1], v2[2] - v0[2]};
+    const double nx = e1[1] * e2[2] - e1[2] * e2[1], ny = e1[2] * e2[0] - e1[0] * e2[2], nz = e1[0] * e2[1] - e1[1] * e2[0];
+    EXPECT_GT(nx * p[0] + ny * p[1] + nz * p[2], 0.0) << "face " << f;
+  }
+  const HullMassProperties mp = hull_mass_properties(h);
+  const double vol = 8 * a * b * c;
+  EXPECT_NEAR(mp.volume, vol, 1e-9);
+  for (double x : mp.centroid) EXPECT_NEAR(x, 0.0, 1e-9);
+  EXPECT_NEAR(mp.inertia_origin[0], vol / 3 * (b * b + c * c), 1e-9);
+  EXPECT_NEAR(mp.inertia_origin[4], vol / 3 * (a * a + c * c), 1e-9);
+  EXPECT_NEAR(mp.inertia_origin[8], vol / 3 * (a * a + b * b), 1e-9);
+  for (std::size_t k : {1u, 2u, 3u, 5u, 6u, 7u}) EXPECT_NEAR(mp.inertia_origin[k], 0.0, 1e-9);
+
+  // The same box centred on d: about the origin, I = I_c + V (|d|^2 E - d d^T).
+  const Vec3 d{0.2f, -0.1f, 0.05f};
+  const HullMassProperties off = hull_mass_properties(convex_hull(box_mesh(a, b, c, d)));
+  const double dd[3] = {d.x, d.y, d.z}, d2 = dd[0] * dd[0] + dd[1] * dd[1] + dd[2] * dd[2];
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_NEAR(off.centroid[i], dd[i], 1e-7);
+    for (std::size_t j = 0; j < 3; ++j) {
+      const double expect = mp.inertia_origin[3 * i + j] + vol * ((i == j ? d2 : 0.0) - dd[i] * dd[j]);
+      EXPECT_NEAR(off.inertia_origin[3 * i + j], expect, 1e-8) << i << "," << j;
+    }
+  }
+}
+
+// Points in one plane span no volume: InputError naming what and how many points.
+TEST(ConvexHull, FlatPointsAreRefused) {
+  const std::vector<Vec3> flat{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
+  try {
+    (void)convex_hull(flat, "flat-thing");
+    ADD_FAILURE() << "a flat point set was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("flat-thing: the convex hull of its 4 vertices"), std::string::npos) << e.what();
+  }
+}
+
+#if OCTOCD_HAVE_ODE
+
+namespace {
+
+std::string scene_path(const std::string& name) {
+  const char* root = std::getenv("OCTOCD_SOURCE_DIR");
+  return std::string(root ? root : ".") + "/datasets/scenes/" + name + ".json";
+}
+
+/// World angular momentum R I_b R^T w (I_b row-major, body frame).
+std::array<double, 3> angular_momentum(const Quat& q, const Vec3& w, const std::array<float, 9>& ib) {
+  const double qw = q.w, x = q.x, y = q.y, z = q.z;
+  const double r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - qw * z), 2 * (x * z + qw * y)},
+                          {2 * (x * y + qw * z), 1 - 2 * (x * x + z * z), 2 * (y * z - qw * x)},
+                          {2 * (x * z - qw * y), 2 * (y * z + qw * x), 1 - 2 * (x * x + y * y)}};
+  const double wv[3] = {w.x, w.y, w.z};
+  double wl[3], lb[3];
+  for (int i = 0; i < 3; ++i) wl[i] = r[0][i] * wv[0] + r[1][i] * wv[1] + r[2][i] * wv[2];  // R^T w
+  for (int i = 0; i < 3; ++i) lb[i] = ib[3 * i] * wl[0] + ib[3 * i + 1] * wl[1] + ib[3 * i + 2] * wl[2];
+  std::array<double, 3> l{};
+  for (int i = 0; i < 3; ++i) l[i] = r[i][0] * lb[0] + r[i][1] * lb[1] + r[i][2] * lb[2];
+  return l;
+}
+
+double norm3(const std::array<double, 3>& a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); }
+
+/// A box (half extents 0.1 m, 1 kg) at height `y` above a static floor (4 x 0.2 x 4 m,
+/// top at y = 0). `box_first`: the box is body 0 and the floor body 1; otherwise the
+/// scene's generated floor wall is body 0 and the box body 1.
+Scene box_on_floor(bool box_first, float y, float vx = 0.0f) {
+  const std::string box = R"({"name": "box", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 1.0,
+      "positions": [[0.0, )" + std::to_string(y) + R"(, 0.0]], "velocity": {"type": "fixed", "value": [)" +
+                          std::to_string(vx) + R"(, 0.0, 0.0]}})";
+  const std::string floor = R"({"name": "ground", "shape": {"box": [2.0, 0.1, 2.0]}, "count": 1, "mass": 0,
+      "positions": [[0.0, -0.1, 0.0]]})";
+  const std::string text = R"({"name": "box-on-floor", "domain": {"min": [-2, 0, -2], "max": [2, 2, 2]},
+    "rotation": true, "walls": )" + std::string(box_first ? "\"none\"" : "\"floor\"") + R"(,
+    "wall_thickness": 0.2, "response": {"mu_kinetic": 0.3, "restitution": 0.0},
+    "groups": [)" + box + (box_first ? ", " + floor : std::string()) + "]}";
+  return parse_scene(text, "box-on-floor (test)");
+}
+
+/// Runs `frames` steps of `engine` into a version 2 trace at `path`, as `octocd run
+/// --trace PATH --state-every 1 --contacts` does; returns the contact rows written.
+std::uint64_t write_trace(Engine& engine, const std::string& path, int frames) {
+  std::uint64_t rows = 0;
+  TraceOptions topt;
+  topt.state_every = 1;
+  topt.contacts = true;
+  engine.set_recording(true);
+  topt.v2 = *engine.rotation_traits();
+  topt.gravity = engine.scene().gravity;
+  TraceWriter trace(path, trace_metadata(engine, 1), trace_bodies(engine), topt);
+  trace.append_state(0, engine.state());
+  for (int f = 0; f < frames; ++f) {
+    const FrameMetrics& m = engine.step();
+    trace.append_frame_v2(m, engine.state(), engine.record());
+    rows += engine.record().contacts.size();
+  }
+  trace.close();
+  return rows;
+}
+
+/// The physics tier's verdict on a trace: the names of its failing physics rows ("" all
+/// pass), each with its detail.
+std::string physics_failures(const std::string& path) {
+  ExternalOptions eo;
+  eo.threads = 1;
+  std::string failed;
+  for (const ValidationResult& r : validate_external_trace(path, eo))
+    if (r.tier == Tier::Physics && !r.pass) failed += r.name + ": " + r.detail + "\n";
+  return failed;
+}
+
+/// `x` with 3 significant digits, for RecordProperty.
+std::string sci(double x) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g", x);
+  return buf;
+}
+
+std::string temp_trace(const std::string& stem) {
+  return (std::filesystem::temp_directory_path() / (stem + "-" + std::to_string(::getpid()) + ".h5")).string();
+}
+
+}  // namespace
+
+// OdeSettings' defaults are the linked ODE's own (read from a fresh dWorld and dBody);
+// the parser names the key, the value and the allowed range.
+TEST(OdeSettings, DefaultsAreOdesAndBadValuesAreNamed) {
+  const OdeSettings ours, odes = ode_library_defaults();
+  EXPECT_EQ(ours.erp, odes.erp);
+  EXPECT_EQ(ours.cfm, odes.cfm);
+  EXPECT_EQ(ours.iterations, odes.iterations);
+  EXPECT_EQ(ours.gyroscopic, odes.gyroscopic);
+  OdeSettings s;
+  apply_ode_settings(s, {"stepper=quickstep", "iterations=50", "erp=0.5", "cfm=1e-6", "contacts=4",
+                         "friction=pyramid", "gyroscopic=false"},
+                     "--ode");
+  EXPECT_EQ(s.stepper, OdeStepper::QuickStep);
+  EXPECT_EQ(s.iterations, 50);
+  EXPECT_EQ(s.erp, 0.5);
+  EXPECT_EQ(s.cfm, 1e-6);
+  EXPECT_EQ(s.max_contacts, 4);
+  EXPECT_EQ(s.friction, OdeFriction::Pyramid);
+  EXPECT_FALSE(s.gyroscopic);
+  auto error = [](const std::string& item) {
+    OdeSettings t;
+    try {
+      apply_ode_settings(t, {item}, "--ode");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(error("erp=1.5"), "--ode: erp='1.5' is not allowed; allowed: a decimal number in [0, 1] (dWorldSetERP; "
+                              "ODE's default 0.2)");
+  EXPECT_NE(error("iterations=0").find("iterations='0' is not allowed; allowed: an integer in [1, 10000]"),
+            std::string::npos);
+  EXPECT_NE(error("cfm=nan").find("cfm='nan' is not allowed"), std::string::npos);
+  EXPECT_NE(error("contacts=65").find("allowed: an integer in [1, 64]"), std::string::npos);
+  EXPECT_NE(error("stepper=dantzig").find("allowed: step (dWorldStep"), std::string::npos);
+  EXPECT_EQ(error("solver=pgs"), "--ode: unknown ode setting 'solver'; allowed: stepper, iterations, erp, cfm, "
+                                 "contacts, friction, gyroscopic (docs/engines.md)");
+  EXPECT_NE(error("erp").find("'erp' is not KEY=VALUE"), std::string::npos);
+}
+
+// A lone box falling with an initial velocity follows ODE's semi-implicit Euler exactly:
+// v_n = v_0 + n g dt, x_n = x_0 + n dt v_0 + g dt^2 n (n + 1) / 2 (x += dt v after v +=
+// dt g), to float32 rounding of the stored state (positions up to 5 m: 1e-6 m); the
+// explicit form (n (n - 1) / 2) is 4.9 mm away after 1000 steps.
+TEST(OdeWorld, FreeFallFollowsSemiImplicitEuler) {
+  const Scene scene = parse_scene(R"({"name": "fall", "domain": {"min": [-10, -10, -10], "max": [10, 10, 10]},
+    "walls": "none", "rotation": true,
+    "groups": [{"name": "b", "shape": {"box": [0.1, 0.2, 0.3]}, "count": 1, "mass": 2.0,
+                "positions": [[0.5, 1.0, -0.5]], "velocity": {"type": "fixed", "value": [0.3, 2.0, -0.1]}}]})",
+                                  "fall (test)");
+  const auto model = build_model(scene);
+  OdeWorld ode(model, model->initial);
+  const double dt = scene.dt, g = scene.gravity.y;
+  const int steps = 1000;
+  double worst = 0.0;
+  for (int n = 1; n <= steps; ++n) {
+    ode.step();
+    const Vec3 x = ode.state().x[0], v = ode.state().v[0];
+    const double xn[3] = {0.5 + n * dt * 0.3, 1.0 + n * dt * 2.0 + g * dt * dt * n * (n + 1) / 2.0, -0.5 - n * dt * 0.1};
+    const double vn[3] = {0.3, 2.0 + n * g * dt, -0.1};
+    for (int k = 0; k < 3; ++k) {
+      worst = std::max(worst, std::fabs(x[k] - xn[k]));
+      ASSERT_NEAR(v[k], vn[k], 2e-6) << "step " << n << " axis " << k;
+    }
+    ASSERT_EQ(ode.last_metrics().contacts, 0u);
+  }
+  EXPECT_LT(worst, 1e-6) << "worst position error " << worst << " m";
+  const double explicit_gap = std::fabs(g) * dt * dt * steps;  // n(n+1)/2 - n(n-1)/2 = n
+  EXPECT_GT(explicit_gap, 1000 * worst);
+  RecordProperty("worst_position_error_m", sci(worst));
+}
+
+// Torque-free spin of a box with three different moments of inertia (no gravity, no
+// contact), spun mostly about y with small x, z parts so it tumbles: ODE's implicit
+// gyroscopic step (Lacoursiere 2006, first order) keeps the world angular momentum
+// R I R^T w within 1% over 2 s (measured 0.45%), and its rotational energy does not rise.
+// With the gyroscopic term off ODE keeps w constant while R turns: the same momentum then
+// drifts by more than twice the bound (measured 5.8%), so the check can fail. The body's
+// inertia is ODE's dMassSetBoxTotal: m/12 (b^2 + c^2), ...
+TEST(OdeWorld, FreeSpinKeepsAngularMomentum) {
+  const Scene scene = parse_scene(R"({"name": "spin", "domain": {"min": [-1, -1, -1], "max": [1, 1, 1]},
+    "gravity": [0, 0, 0], "walls": "none", "rotation": true,
+    "groups": [{"name": "brick", "shape": {"box": [0.3, 0.1, 0.05]}, "count": 1, "mass": 2.0,
+                "positions": [[0, 0, 0]], "angular_velocity": [0.2, 6.0, 0.1]}]})",
+                                  "spin (test)");
+  const auto model = build_model(scene);
+  auto drift = [&](bool gyroscopic, double* energy_rise) {
+    OdeSettings s;
+    s.gyroscopic = gyroscopic;
+    OdeWorld ode(model, model->initial, s);
+    const std::array<float, 9> inertia = ode.rotation_traits()->inertia[0];
+    EXPECT_NEAR(inertia[0], 2.0 / 12 * (0.2 * 0.2 + 0.1 * 0.1), 1e-7);
+    EXPECT_NEAR(inertia[4], 2.0 / 12 * (0.6 * 0.6 + 0.1 * 0.1), 1e-7);
+    EXPECT_NEAR(inertia[8], 2.0 / 12 * (0.6 * 0.6 + 0.2 * 0.2), 1e-7);
+    const std::array<double, 3> l0 = angular_momentum(ode.state().q[0], ode.state().omega[0], inertia);
+    double worst = 0.0, e0 = -1.0, e_max = 0.0, w_change = 0.0;
+    for (int f = 1; f <= 2000; ++f) {
+      const FrameMetrics& m = ode.step();
+      if (e0 < 0) e0 = m.kinetic_energy;
+      e_max = std::max(e_max, m.kinetic_energy);
+      const std::array<double, 3> l = angular_momentum(ode.state().q[0], ode.state().omega[0], inertia);
+      worst = std::max(worst, norm3({l[0] - l0[0], l[1] - l0[1], l[2] - l0[2]}) / norm3(l0));
+      const Vec3 w = ode.state().omega[0];
+      w_change = std::max(w_change, double(length(Vec3{w.x - 0.2f, w.y - 6.0f, w.z - 0.1f})));
+    }
+    if (gyroscopic) {
+      EXPECT_GT(w_change, 1.0) << "the body must tumble for the test to mean something";
+    }
+    if (energy_rise) *energy_rise = (e_max - e0) / e0;
+    return worst;
+  };
+  double rise = 0.0;
+  const double with_term = drift(true, &rise);
+  const double without = drift(false, nullptr);
+  EXPECT_LT(with_term, 0.01);
+  EXPECT_LT(rise, 1e-6);
+  EXPECT_GT(without, 0.02);
+  RecordProperty("angular_momentum_drift", sci(with_term));
+  RecordProperty("angular_momentum_drift_without_gyroscopic", sci(without));
+}
+
+// A box set down on a static floor (its bottom 0.5 mm above) settles: after 0.5 s its
+// speed is below 1e-5 m/s, it sinks at most 1e-4 m into the floor (ERP 0.2 holds the depth
+// near g dt^2 / erp = 4.9e-5 m), it stays upright, and every step's contact rows carry
+// sum jn = m |g| dt within 1e-4 of it: jn is ODE's own joint feedback (dJointFeedback,
+// the constraint force it applied) times dt. Every row's normal points from the floor
+// (B) to the box (A) when the box is body 0, from the box to the floor when the floor is.
+TEST(OdeWorld, RestingBoxSettlesAndItsRowsCarryItsWeight) {
+  for (bool box_first : {true, false}) {
+    SCOPED_TRACE(box_first ? "box is body 0" : "floor is body 0");
+    const auto model = build_model(box_on_floor(box_first, 0.1005f));
+    OdeWorld ode(model, model->initial);
+    ode.set_recording(true);
+    const std::size_t box = box_first ? 0 : 1, floor = 1 - box;
+    const double m = 1.0, g = 9.81, dt = model->scene.dt;
+    double worst_balance = 0.0;
+    for (int f = 1; f <= 1000; ++f) {
+      ode.step();
+      const FrameRecord& r = ode.record();
+      double jn = 0.0;
+      for (const ContactRecord& c : r.contacts) {
+        ASSERT_EQ(c.pair, (Pair{0, 1}));
+        // From B to A: +y when A is the box, -y when A is the floor.
+        const float up = c.pair.a == box ? 1.0f : -1.0f;
+        ASSERT_NEAR(c.normal.y, up, 1e-6f) << "frame " << f;
+        ASSERT_GE(c.jn, 0.0f);
+        jn += c.jn;
+      }
+      if (f > 500) {
+        ASSERT_FALSE(r.contacts.empty()) << "frame " << f;
+        worst_balance = std::max(worst_balance, std::fabs(jn - m * g * dt) / (m * g * dt));
+      }
+    }
+    const Vec3 x = ode.state().x[box], v = ode.state().v[box];
+    const Quat q = ode.state().q[box];
+    EXPECT_LT(length(v), 1e-5f);
+    EXPECT_GT(x.y - 0.1f, -1e-4f) << "sank " << 0.1f - x.y << " m";
+    EXPECT_NEAR(std::fabs(q.w), 1.0f, 1e-6f);
+    EXPECT_LT(worst_balance, 1e-4);
+    EXPECT_EQ(ode.state().x[floor].y, -0.1f);
+    RecordProperty(box_first ? "balance_box_first" : "balance_floor_first", sci(worst_balance));
+  }
+}
+
+// A recorded stack of ten boxes (rot-stack-10, 300 frames, dWorldStep: the stack settles
+// under ODE's four-point box-box manifolds) and a tilted box dropped onto a static
+// icosphere collided as its triangle mesh (dTriMesh, declared "mesh"; dWorldQuickStep)
+// pass every row of the physics tier that judges something.
+TEST(OdeWorld, RecordedRunsPassThePhysicsTier) {
+  {
+    const Scene scene = load_scene(scene_path("rot-stack-10"));
+    const auto model = build_model(scene);
+    OdeWorld ode(model, model->initial);
+    EXPECT_EQ(ode.rotation_traits()->body_collision_shape[1], "box");
+    const std::string path = temp_trace("ode-stack");
+    EXPECT_GT(write_trace(ode, path, 300), 3000u);
+    EXPECT_EQ(ode.record().contacts.size(), 40u);  // 10 box-box and box-floor pairs, 4 points each
+    EXPECT_EQ(physics_failures(path), "");
+    std::filesystem::remove(path);
+  }
+  {
+    const Scene scene = parse_scene(R"({"name": "box-on-ball", "domain": {"min": [-1, -1, -1], "max": [1, 2, 1]},
+      "walls": "none", "rotation": true, "response": {"mu_kinetic": 0.5, "restitution": 0.2},
+      "groups": [{"name": "ball", "shape": {"icosphere": {"radius": 0.3, "subdivisions": 2}}, "count": 1,
+                  "mass": 0, "positions": [[0, 0, 0]]},
+                 {"name": "box", "shape": {"box": [0.05, 0.05, 0.05]}, "count": 1, "mass": 1.0,
+                  "positions": [[0.05, 0.4, 0.02]], "orientation": {"axis": [1, 0, 1], "angle_deg": 30}}]})",
+                                    "box-on-ball (test)");
+    const auto model = build_model(scene);
+    // dWorldQuickStep with 100 sweeps: dWorldStep's Dantzig friction leaves the cone on
+    // this landing (OdeEngineFault below), which is not what this part is about.
+    OdeSettings quick;
+    quick.stepper = OdeStepper::QuickStep;
+    quick.iterations = 100;
+    OdeWorld ode(model, model->initial, quick);
+    EXPECT_EQ(ode.rotation_traits()->body_collision_shape[0], "mesh");
+    const std::string path = temp_trace("ode-mesh");
+    EXPECT_GT(write_trace(ode, path, 400), 100u);
+    EXPECT_NE(ode.collision_geometry().find("triangle meshes"), std::string::npos) << ode.collision_geometry();
+    EXPECT_EQ(physics_failures(path), "");
+    std::filesystem::remove(path);
+  }
+}
+
+// ODE's Dantzig LCP (dWorldStep) bounds a contact's friction rows (dContactApprox1:
+// |f_t| <= mu f_n per direction) with the normal forces it has solved when it reaches the
+// first friction row (ODE 0.16's dSolveLCP: "we have to compute the lo and hi values
+// based on the values of x already computed"); solving the friction rows then changes the
+// normal forces, and the bounds are not revisited. So ODE's own applied forces, read back
+// with dJointFeedback, break the Coulomb bound of the final normal force: a cube tilted 30
+// degrees about (0, 1, 1) set down on the floor while sliding at 1.2 m/s gets, on one
+// contact, friction along a pyramid direction 3.3 x mu_dir times that contact's normal
+// force, and the pair's friction vector 1.65 x the cone mu sum f_n (measured; 184 of 300
+// steps have a row over its bound by more than 1%). Plain ODE calls, no octocd code: the
+// engine, not the adapter. The physics tier's friction row fails ODE's dWorldStep runs on
+// it (rot-drop-220, bunny-stack-50 with rotation: docs/engines.md, "ode").
+TEST(OdeEngineFault, DantzigFrictionExceedsTheFinalNormalForce) {
+  dInitODE2(0);
+  const double mu = 0.5, mu_dir = mu / std::sqrt(2.0), dt = 0.001;
+  dWorldID w = dWorldCreate();
+  dWorldSetGravity(w, 0, -9.81, 0);
+  dSpaceID s = dSimpleSpaceCreate(nullptr);
+  dGeomID floor = dCreateBox(s, 4, 0.2, 4);
+  dGeomSetPosition(floor, 0, -0.1, 0);
+  dGeomID box = dCreateBox(s, 0.1, 0.1, 0.1);
+  dBodyID b = dBodyCreate(w);
+  dMass m;
+  dMassSetBoxTotal(&m, 1.0, 0.1, 0.1, 0.1);
+  dBodySetMass(b, &m);
+  dQuaternion q;
+  dQFromAxisAndAngle(q, 0, 1, 1, 30 * M_PI / 180);
+  dBodySetQuaternion(b, q);
+  dGeomSetBody(box, b);
+  dReal aabb[6];
+  dGeomGetAABB(box, aabb);
+  dBodySetPosition(b, 0, -aabb[2] - 0.0005, 0);  // the lowest corner 0.5 mm below the floor's top
+  dBodySetLinearVel(b, 1.0, -0.5, 0.7);
+  dJointGroupID group = dJointGroupCreate(0);
+  double worst_row = 0.0, worst_pair = 0.0;
+  int steps_over = 0;
+  for (int step = 1; step <= 300; ++step) {
+    dContactGeom cg[8];
+    const int n = dCollide(box, floor, 8, cg, sizeof(dContactGeom));
+    dJointFeedback fb[8];
+    for (int k = 0; k < n; ++k) {
+      dContact c{};
+      c.geom = cg[k];
+      c.surface.mode = dContactApprox1;
+      c.surface.mu = mu_dir;
+      dJointID j = dJointCreateContact(w, group, &c);
+      dJointAttach(j, b, nullptr);
+      dJointSetFeedback(j, &fb[k]);
+    }
+    ASSERT_EQ(dWorldStep(w, dt), 1);
+    double fn_sum = 0.0, ft_sum[3] = {0, 0, 0};
+    bool over = false;
+    for (int k = 0; k < n; ++k) {
+      // The normal points from the floor (geom 2) into the box (geom 1); f1 is the force
+      // on the box. t1, t2: the friction directions ODE took (dPlaneSpace of the normal).
+      dVector3 t1, t2;
+      dPlaneSpace(cg[k].normal, t1, t2);
+      const double fn = dCalcVectorDot3(fb[k].f1, cg[k].normal);
+      const double f1 = dCalcVectorDot3(fb[k].f1, t1), f2 = dCalcVectorDot3(fb[k].f1, t2);
+      ASSERT_GE(fn, -1e-9);
+      fn_sum += fn;
+      for (int a = 0; a < 3; ++a) ft_sum[a] += f1 * t1[a] + f2 * t2[a];
+      if (fn > 0) {
+        const double ratio = std::max(std::fabs(f1), std::fabs(f2)) / (mu_dir * fn);
+        worst_row = std::max(worst_row, ratio);
+        over = over || ratio > 1.01;
+      }
+    }
+    if (fn_sum > 0)
+      worst_pair = std::max(worst_pair, std::sqrt(ft_sum[0] * ft_sum[0] + ft_sum[1] * ft_sum[1] + ft_sum[2] * ft_sum[2]) /
+                                            (mu * fn_sum));
+    steps_over += over ? 1 : 0;
+    dJointGroupEmpty(group);
+  }
+  dJointGroupDestroy(group);
+  dSpaceDestroy(s);
+  dWorldDestroy(w);
+  EXPECT_GT(worst_row, 2.0) << "a row's friction over mu_dir times its own final normal force";
+  EXPECT_GT(worst_pair, 1.2) << "the pair's friction vector over mu times its total normal force";
+  EXPECT_GT(steps_over, 10);
+  RecordProperty("worst_row_ratio", sci(worst_row));
+  RecordProperty("worst_pair_cone_ratio", sci(worst_pair));
+  RecordProperty("steps_over", sci(steps_over));
+}
+
+#else
+
+TEST(OdeWorld, NotBuilt) { GTEST_SKIP() << "this octocd is built without ODE (pkg-config found no 'ode')"; }
+
+#endif
