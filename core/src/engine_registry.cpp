@@ -39,7 +39,16 @@ const std::vector<EngineInfo>& engine_infos() {
     bullet.no_midphase_reason =
         "Bullet runs its own narrow phase: GJK/EPA on convex hulls and triangle meshes, or btBoxBoxDetector on the "
         "AABB boxes (--bullet shape=box)";
-    return std::vector<EngineInfo>{cpu, cuda, bullet};
+    EngineInfo mujoco;
+    mujoco.name = "mujoco";
+    mujoco.description = "the same scene in MuJoCo (soft contacts, convex hulls, rotating bodies)";
+    mujoco.rotates = true;
+    mujoco.own_broadphase = "mujoco-sap";
+    mujoco.own_broadphase_class = "MuJoCo's mj_collision (sweep and prune)";
+    mujoco.geometries = {"hull"};
+    mujoco.no_midphase_reason =
+        "MuJoCo runs its own narrow phase: mjc_BoxBox on box pairs, MPR (libccd) on the convex hulls of meshes";
+    return std::vector<EngineInfo>{cpu, cuda, bullet, mujoco};
   }();
   return infos;
 }

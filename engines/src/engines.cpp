@@ -12,6 +12,9 @@
 #include "octocd/error.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/world.hpp"
+#if OCTOCD_HAVE_MUJOCO
+#include "octocd/mujoco_world.hpp"
+#endif
 
 namespace octocd {
 
@@ -42,10 +45,21 @@ std::unique_ptr<Engine> make_bullet(const std::shared_ptr<const Model>& model, c
   return std::make_unique<BulletWorld>(model, model->initial, BulletOptions(), bullet);
 }
 
+std::unique_ptr<Engine> make_mujoco(const std::shared_ptr<const Model>& model, const CudaSettings&,
+                                    const BulletSettings&) {
+#if OCTOCD_HAVE_MUJOCO
+  return std::make_unique<MujocoWorld>(model, model->initial);
+#else
+  (void)model;
+  throw RuntimeError("engine 'mujoco' is not built in this octocd");
+#endif
+}
+
 /// The factories, by the names of engine_infos().
 const std::vector<Registered>& registered() {
   static const std::vector<Registered> r{
-      {"cpu", &make_cpu, true}, {"cuda", &make_cuda, OCTOCD_HAVE_CUDA != 0}, {"bullet", &make_bullet, true}};
+      {"cpu", &make_cpu, true}, {"cuda", &make_cuda, OCTOCD_HAVE_CUDA != 0}, {"bullet", &make_bullet, true},
+      {"mujoco", &make_mujoco, OCTOCD_HAVE_MUJOCO != 0}};
   return r;
 }
 
