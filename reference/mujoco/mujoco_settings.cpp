@@ -29,7 +29,7 @@ bool parse_decimal(const std::string& value, double& out) {
 
 const char* mujoco_cone_name(MujocoCone c) { return c == MujocoCone::Pyramidal ? "pyramidal" : "elliptic"; }
 
-std::vector<std::string> mujoco_setting_names() { return {"iterations", "cone", "timeconst", "margin", "multiccd"}; }
+std::vector<std::string> mujoco_setting_names() { return {"iterations", "cone", "timeconst", "margin", "multiccd", "max_contacts"}; }
 
 void set_mujoco_setting(MujocoSettings& s, const std::string& key, const std::string& value,
                         const std::string& where) {
@@ -46,6 +46,21 @@ void set_mujoco_setting(MujocoSettings& s, const std::string& key, const std::st
                                    "main solver iterations per step; its default 100)",
                                    where, value));
     s.iterations = static_cast<int>(n);
+    return;
+  }
+  if (key == "max_contacts") {
+    std::size_t used = 0;
+    long n = -1;
+    try {
+      n = std::stol(value, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != value.size() || value.empty() || n < 0 || n > 1000000)
+      throw InputError(fmt::format("{}: max_contacts='{}' is not allowed; allowed: an integer in [0, 1000000] (MuJoCo's "
+                                   "contact capacity; 0: 6 per dynamic body, at least 256)",
+                                   where, value));
+    s.max_contacts = static_cast<int>(n);
     return;
   }
   if (key == "cone") {

@@ -89,6 +89,7 @@ struct MujocoWorld::Impl {
   mjModel* m = nullptr;
   mjData* d = nullptr;
   double dt = 0.001;
+  double timeconst = 0.002;  // solref[0] of every geom (s)
   float slop = 0.001f;
   Vec3 gravity;
   std::vector<float> w;                // inverse mass per body (0 = static)
@@ -146,7 +147,7 @@ void MujocoWorld::Impl::check_step() {
   }
   static const char* const kWhat[mjNWARNING] = {
       "(near) singular inertia matrix",
-      "contact buffer full: contacts were dropped (raise the contact capacity: MujocoWorld sizes it from the bodies)",
+      "contact buffer full: contacts were dropped (raise MujocoSettings::max_contacts, key max_contacts)",
       "constraint buffer full: contacts were left out of the solver",
       "visual geom buffer full",
       "bad number in qpos: MuJoCo reset the state",
@@ -265,14 +266,17 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
   // ---- The MJCF text.
   const double mu = scene.response.mu_kinetic;
   const double e = scene.response.restitution;
-  const double timeconst = settings.timeconst > 0.0 ? settings.timeconst : 2.0 * im.dt;
   const double zeta = damping_ratio(e);
+  const double timeconst = settings.timeconst > 0.0 ? settings.timeconst : 2.0 * im.dt / zeta;
+  im.timeconst = timeconst;
   std::size_t dynamic = 0;
   for (std::size_t i = 0; i < n; ++i) dynamic += initial.w[i] > 0.0f ? 1 : 0;
-  // Contact capacity: 16 rows per dynamic body (a box resting on a face and touched on
-  // others), at least 256; constraint rows 3 per elliptic contact (condim 3), 4 per
-  // pyramidal one. MuJoCo 2.2 allocates its constraint arrays at these sizes.
-  const int nconmax = static_cast<int>(std::max<std::size_t>(256, 16 * dynamic));
+  // Contact capacity: MujocoSettings::max_contacts, or 6 per dynamic body (a box resting
+  // on a face has 4), at least 256; constraint rows 3 per elliptic contact (condim 3), 4
+  // per pyramidal one. MuJoCo 2.2 allocates its constraint arrays at these sizes, some
+  // (J M^-1 J' + R) quadratic in the rows: 12 bytes x rows^2.
+  const int nconmax = settings.max_contacts > 0 ? settings.max_contacts
+                                                : static_cast<int>(std::max<std::size_t>(256, 6 * dynamic));
   const int njmax = nconmax * (settings.cone == MujocoCone::Elliptic ? 3 : 4);
   std::string x;
   x.reserve(4096);
@@ -538,7 +542,7 @@ std::string MujocoWorld::notes() const {
       "integrate = mj_Euler; aabbs and broadphase are not timed apart. contacts = MuJoCo's contact\n"
       "rows; kinetic energy includes rotation.",
       mujoco_version(), impl_->geometry,
-      num(impl_->settings.timeconst > 0.0 ? impl_->settings.timeconst : 2.0 * impl_->dt),
+      num(impl_->timeconst),
       mujoco_cone_name(impl_->settings.cone));
 }
 

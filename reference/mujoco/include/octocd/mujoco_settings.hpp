@@ -32,9 +32,12 @@ struct MujocoSettings {
   /// Friction cone (mjOption::cone); key `cone`, values elliptic | pyramidal.
   MujocoCone cone = MujocoCone::Elliptic;
   /// Time constant of every contact's spring-damper (s): the first number of each geom's
-  /// `solref` (timeconst, dampratio); key `timeconst`, a number in [0, 1]. 0 (the
-  /// default): 2 dt, the smallest MuJoCo keeps (mjDSBL_REFSAFE off: it raises any smaller
-  /// value to 2 dt), i.e. the stiffest contact MuJoCo integrates stably; MuJoCo's own
+  /// `solref` (timeconst, dampratio); key `timeconst`, a decimal number in [0, 1]. 0 (the
+  /// default): 2 dt / dampratio, so the contact spring's natural frequency
+  /// 1 / (timeconst dampratio) is 1 / (2 dt) whatever the restitution (a stiffer spring
+  /// is not integrated stably by the explicit step: box-stack at e = 0.5 with
+  /// timeconst = 2 dt flew apart); with e = 0 (dampratio 1) that is 2 dt, the smallest
+  /// value MuJoCo keeps (mjDSBL_REFSAFE off: it raises smaller ones to 2 dt). MuJoCo's own
   /// default is 0.02 s.
   double timeconst = 0.0;
   /// Contact margin (m): every geom's `margin`, with `gap` equal to it, so pairs up to
@@ -46,6 +49,12 @@ struct MujocoSettings {
   /// hull or box resting on a face gets several contact points instead of MPR's one;
   /// key `multiccd`, values on | off. Default on.
   bool multiccd = true;
+  /// Contact capacity (`<size nconmax>`; the constraint rows njmax follow: 3 per contact
+  /// with the elliptic cone, 4 with the pyramidal one); key `max_contacts`, an integer in
+  /// [0, 1000000]. 0 (the default): 6 per dynamic body, at least 256. MuJoCo 2.2
+  /// allocates arrays quadratic in the rows (about 12 bytes x njmax^2); a step that finds
+  /// more contacts throws RuntimeError naming this key (MuJoCo would drop them).
+  int max_contacts = 0;
 };
 
 /// The keys set_mujoco_setting takes, in the struct's order: the field names.
@@ -53,7 +62,8 @@ std::vector<std::string> mujoco_setting_names();
 
 /// Sets the field `key` (a name of mujoco_setting_names()) of `settings` from text
 /// (iterations: an integer in [1, 10000]; cone: elliptic or pyramidal; timeconst: a
-/// decimal number in [0, 1]; margin: a decimal number in [0, 0.1]; multiccd: on or off).
+/// decimal number in [0, 1]; margin: a decimal number in [0, 0.1]; multiccd: on or off;
+/// max_contacts: an integer in [0, 1000000]).
 /// Throws InputError "<where>: ..." naming the key, the value and what is allowed.
 void set_mujoco_setting(MujocoSettings& settings, const std::string& key, const std::string& value,
                         const std::string& where);

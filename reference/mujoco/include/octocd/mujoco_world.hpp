@@ -38,7 +38,7 @@ namespace octocd {
 ///   directions; MuJoCo takes the larger of two geoms' friction, so mu_k for every pair);
 ///   restitution through each geom's solref (timeconst, dampratio): the damping ratio of
 ///   a spring-damper whose rebound is e, dampratio = -ln e / sqrt(pi^2 + ln^2 e) (1 for
-///   e = 0: critically damped); timeconst MujocoSettings::timeconst (0: 2 dt); solimp
+///   e = 0: critically damped); timeconst MujocoSettings::timeconst (0: 2 dt / dampratio); solimp
 ///   MuJoCo's default (0.9, 0.95, 0.001);
 /// - options: timestep = scene.dt, gravity = scene.gravity, integrator Euler
 ///   (semi-implicit: v += dt a, then x += dt v), cone MujocoSettings::cone, iterations
