@@ -49,7 +49,17 @@ const std::vector<EngineInfo>& engine_infos() {
     ode.geometries = {"hull"};
     ode.no_midphase_reason =
         "ODE runs its own narrow phase: dCollide (dBoxBox, libccd MPR on convex hulls, trimesh colliders)";
-    return std::vector<EngineInfo>{cpu, cuda, bullet, ode};
+
+    EngineInfo mujoco;
+    mujoco.name = "mujoco";
+    mujoco.description = "the same scene in MuJoCo (soft contacts, convex hulls, rotating bodies)";
+    mujoco.rotates = true;
+    mujoco.own_broadphase = "mujoco-sap";
+    mujoco.own_broadphase_class = "MuJoCo's mj_collision (sweep and prune)";
+    mujoco.geometries = {"hull"};
+    mujoco.no_midphase_reason =
+        "MuJoCo runs its own narrow phase: mjc_BoxBox on box pairs, MPR (libccd) on the convex hulls of meshes";
+    return std::vector<EngineInfo>{cpu, cuda, bullet, mujoco, ode};
   }();
   return infos;
 }

@@ -712,7 +712,7 @@ void TraceWriter::create_v2_layout() {
     if (t.jt3)
       m.c_jt3 = make_column(g, "/contacts", "jt3", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {3}, kChunk, 0, path);
   }
-  {
+  if (t.candidate_pairs) {
     Handle g(check(H5Gcreate2(root, "pairs", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), path, "create group /pairs"));
     m.p_offsets = make_column(g, "/pairs", "offsets", H5T_STD_I64LE, H5T_NATIVE_INT64, {}, 1024, 0, path);
     m.p_pair = make_column(g, "/pairs", "pair", H5T_STD_U32LE, H5T_NATIVE_UINT32, {2}, kChunk, 0, path);
@@ -739,12 +739,14 @@ void TraceWriter::append_frame_v2(const FrameMetrics& fm, const BodyState& state
       m.a_min.push(&b.min.x, 3);
       m.a_max.push(&b.max.x, 3);
     }
-    for (const Pair& p : rec.pairs) {
-      m.p_pair.push1(p.a);
-      m.p_pair.push1(p.b);
+    if (m.opt.v2->candidate_pairs) {
+      for (const Pair& p : rec.pairs) {
+        m.p_pair.push1(p.a);
+        m.p_pair.push1(p.b);
+      }
+      m.pair_total += static_cast<std::int64_t>(rec.pairs.size());
+      m.p_offsets.push1(m.pair_total);
     }
-    m.pair_total += static_cast<std::int64_t>(rec.pairs.size());
-    m.p_offsets.push1(m.pair_total);
     for (const ContactRecord& c : rec.contacts) m.c_point.push(&c.point.x, 3);
     if (m.opt.v2->jt3) {
       if (rec.jt3.size() != rec.contacts.size())

@@ -224,6 +224,10 @@ struct RotationTraits {
   /// /states/angular_velocity or /bodies/inertia (readers take the bodies as never
   /// turning), `inertia` may be empty and records carry no q or w.
   bool rotates = true;
+  /// Every record carries the engine's candidate pairs (FrameRecord::has_pairs): the
+  /// trace writes /pairs. false (an engine that does not expose its broadphase, e.g.
+  /// MuJoCo): no /pairs, and readers judge no candidate set.
+  bool candidate_pairs = true;
   /// Every record carries FrameRecord::jt3 (the tangential impulse vectors): the trace
   /// writes /contacts/jt3.
   bool jt3 = false;

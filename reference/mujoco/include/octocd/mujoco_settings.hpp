@@ -1,0 +1,76 @@
+#pragma once
+/// \file mujoco_settings.hpp
+/// The settings of the MuJoCo engine (`mujoco`): the constraint solver's iterations, the
+/// friction cone, the contact spring's time constant, the contact margin and multi-point
+/// convex collisions. Set in C++ (MujocoWorld's constructor) or as KEY=VALUE items
+/// (apply_mujoco_settings), like the Bullet engine's (bullet_settings.hpp);
+/// docs/engines.md ("mujoco") says what each maps to in MuJoCo.
+
+#include <string>
+#include <vector>
+
+namespace octocd {
+
+/// MuJoCo's friction cone (mjOption::cone).
+enum class MujocoCone {
+  /// mjCONE_ELLIPTIC (the default here): |f_t| <= mu f_n exactly, the Coulomb cone the
+  /// physics tier judges.
+  Elliptic,
+  /// mjCONE_PYRAMIDAL (MuJoCo's own default): 2 (condim - 1) = 4 edge directions
+  /// mu-scaled; mj_contactForce converts the pyramid's forces back to the contact frame.
+  Pyramidal,
+};
+
+/// "elliptic" or "pyramidal".
+const char* mujoco_cone_name(MujocoCone c);
+
+/// The mujoco engine's settings. The defaults are what `octocd run --engine mujoco` runs.
+struct MujocoSettings {
+  /// Main solver iterations per step (mjOption::iterations, `<option iterations>`); key
+  /// `iterations`, an integer in [1, 10000]. Default 100, MuJoCo's.
+  int iterations = 100;
+  /// Friction cone (mjOption::cone); key `cone`, values elliptic | pyramidal.
+  MujocoCone cone = MujocoCone::Elliptic;
+  /// Time constant of every contact's spring-damper (s): the first number of each geom's
+  /// `solref` (timeconst, dampratio); key `timeconst`, a decimal number in [0, 1]. 0 (the
+  /// default): 2 dt / dampratio, so the contact spring's natural frequency
+  /// 1 / (timeconst dampratio) is 1 / (2 dt) whatever the restitution (a stiffer spring
+  /// is not integrated stably by the explicit step: box-stack at e = 0.5 with
+  /// timeconst = 2 dt flew apart); with e = 0 (dampratio 1) that is 2 dt, the smallest
+  /// value MuJoCo keeps (mjDSBL_REFSAFE off: it raises smaller ones to 2 dt). MuJoCo's own
+  /// default is 0.02 s.
+  double timeconst = 0.0;
+  /// Contact margin (m): every geom's `margin`, with `gap` equal to it, so pairs up to
+  /// this distance apart are reported as contact rows (excluded from the solver: no
+  /// force) and only penetrating rows act; key `margin`, a number in [0, 0.1]. Default 0:
+  /// only penetrating contacts.
+  double margin = 0.0;
+  /// Multi-point convex collisions (mjENBL_MULTICCD, `<flag multiccd="enable"/>`): a
+  /// hull or box resting on a face gets several contact points instead of MPR's one;
+  /// key `multiccd`, values on | off. Default on.
+  bool multiccd = true;
+  /// Contact capacity (`<size nconmax>`; the constraint rows njmax follow: 3 per contact
+  /// with the elliptic cone, 4 with the pyramidal one); key `max_contacts`, an integer in
+  /// [0, 1000000]. 0 (the default): 6 per dynamic body, at least 256. MuJoCo 2.2
+  /// allocates arrays quadratic in the rows (about 12 bytes x njmax^2); a step that finds
+  /// more contacts throws RuntimeError naming this key (MuJoCo would drop them).
+  int max_contacts = 0;
+};
+
+/// The keys set_mujoco_setting takes, in the struct's order: the field names.
+std::vector<std::string> mujoco_setting_names();
+
+/// Sets the field `key` (a name of mujoco_setting_names()) of `settings` from text
+/// (iterations: an integer in [1, 10000]; cone: elliptic or pyramidal; timeconst: a
+/// decimal number in [0, 1]; margin: a decimal number in [0, 0.1]; multiccd: on or off;
+/// max_contacts: an integer in [0, 1000000]).
+/// Throws InputError "<where>: ..." naming the key, the value and what is allowed.
+void set_mujoco_setting(MujocoSettings& settings, const std::string& key, const std::string& value,
+                        const std::string& where);
+
+/// Applies "KEY=VALUE" items in order with set_mujoco_setting. Throws InputError naming
+/// `where` and the item for text without '='.
+void apply_mujoco_settings(MujocoSettings& settings, const std::vector<std::string>& items,
+                           const std::string& where);
+
+}  // namespace octocd

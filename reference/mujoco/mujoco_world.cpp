@@ -1,0 +1,549 @@
+/// \file mujoco_world.cpp
+/// octocd::MujocoWorld: the scene in MuJoCo 2.2 (see mujoco_world.hpp for every setting
+/// and why).
+
+#include "octocd/mujoco_world.hpp"
+
+#include <fmt/format.h>
+#include <mujoco/mujoco.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "octocd/error.hpp"
+#include "octocd/pose.hpp"
+#include "octocd/version.hpp"
+
+namespace octocd {
+
+namespace {
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+/// MuJoCo's error handler while a MuJoCo call runs (MujocoCall): MuJoCo's default prints,
+/// appends to MUJOCO_LOG.TXT in the working directory and exits the process.
+[[noreturn]] void throw_mujoco_error(const char* msg) { throw RuntimeError(std::string("MuJoCo error: ") + msg); }
+
+/// The last warning MuJoCo issued during a MujocoCall (the counts are in mjData::warning).
+thread_local std::string g_last_warning;
+void keep_mujoco_warning(const char* msg) { g_last_warning = msg; }
+
+/// Installs octocd's MuJoCo error and warning handlers for the lifetime of the object
+/// and puts the previous ones back: MuJoCo's handlers are process-wide function pointers
+/// (mju_user_error, mju_user_warning), so they are set only while octocd calls MuJoCo.
+class MujocoCall {
+ public:
+  MujocoCall() : error_(mju_user_error), warning_(mju_user_warning) {
+    mju_user_error = &throw_mujoco_error;
+    mju_user_warning = &keep_mujoco_warning;
+  }
+  ~MujocoCall() {
+    mju_user_error = error_;
+    mju_user_warning = warning_;
+  }
+  MujocoCall(const MujocoCall&) = delete;
+  MujocoCall& operator=(const MujocoCall&) = delete;
+
+ private:
+  void (*error_)(const char*);
+  void (*warning_)(const char*);
+};
+
+/// A float as decimal text that reads back to the same float ("%.9g").
+std::string num(double v) { return fmt::format("{:.9g}", v); }
+std::string vec(Vec3 v) { return fmt::format("{:.9g} {:.9g} {:.9g}", v.x, v.y, v.z); }
+/// MJCF quaternions are (w, x, y, z), as octocd's Quat.
+std::string quat(Quat q) { return fmt::format("{:.9g} {:.9g} {:.9g} {:.9g}", q.w, q.x, q.y, q.z); }
+
+/// The damping ratio of a linear spring-damper contact whose rebound velocity is e times
+/// the approach velocity: e = exp(-pi z / sqrt(1 - z^2)) solved for z; 1 (critical
+/// damping, no rebound) for e = 0; at least 1e-3 (e -> 1 would need z = 0, an infinitely
+/// stiff spring in MuJoCo's parametrisation).
+double damping_ratio(double e) {
+  constexpr double kPi = 3.14159265358979323846;
+  if (!(e > 0.0)) return 1.0;
+  const double l = std::log(std::min(e, 1.0));
+  return std::max(1e-3, -l / std::sqrt(kPi * kPi + l * l));
+}
+
+/// The solid box of half extents h at mass m: its diagonal inertia (kg m^2).
+std::array<double, 3> solid_box_inertia(Vec3 h, double m) {
+  const double a = 2.0 * h.x, b = 2.0 * h.y, c = 2.0 * h.z;
+  return {m / 12.0 * (b * b + c * c), m / 12.0 * (a * a + c * c), m / 12.0 * (a * a + b * b)};
+}
+
+}  // namespace
+
+struct MujocoWorld::Impl {
+  MujocoSettings settings;
+  std::string xml;
+  mjModel* m = nullptr;
+  mjData* d = nullptr;
+  double dt = 0.001;
+  double timeconst = 0.002;  // solref[0] of every geom (s)
+  float slop = 0.001f;
+  Vec3 gravity;
+  std::vector<float> w;                // inverse mass per body (0 = static)
+  std::vector<int> qpos_adr, dof_adr;  // per octocd body: free joint addresses (-1: static)
+  std::vector<std::uint32_t> geom_body;  // per MuJoCo geom: the octocd body
+  std::vector<std::array<double, 3>> inertia;  // per body, diagonal, body frame (0: static)
+  std::uint64_t static_static = 0;
+  BodyState state;
+  FrameMetrics metrics;
+  std::int64_t frame = 0;
+  bool recording = false;
+  RotationTraits traits;
+  FrameRecord record;
+  std::vector<ContactRecord> no_contacts;
+  std::array<int, mjNWARNING> warnings{};  // mjData::warning counts seen so far
+  std::string geometry;
+
+  ~Impl() {
+    if (d) mj_deleteData(d);
+    if (m) mj_deleteModel(m);
+  }
+
+  void read_state();
+  void check_step();
+  void fill_record();
+  std::uint64_t overlapping_pairs() const;
+};
+
+void MujocoWorld::Impl::read_state() {
+  for (std::size_t i = 0; i < w.size(); ++i) {
+    if (qpos_adr[i] < 0) continue;  // static: as given
+    const mjtNum* qp = d->qpos + qpos_adr[i];
+    const mjtNum* qv = d->qvel + dof_adr[i];
+    state.x[i] = {static_cast<float>(qp[0]), static_cast<float>(qp[1]), static_cast<float>(qp[2])};
+    state.q[i] = {static_cast<float>(qp[3]), static_cast<float>(qp[4]), static_cast<float>(qp[5]),
+                  static_cast<float>(qp[6])};
+    state.v[i] = {static_cast<float>(qv[0]), static_cast<float>(qv[1]), static_cast<float>(qv[2])};
+    mjtNum wb[3] = {qv[3], qv[4], qv[5]}, ww[3];
+    mju_rotVecQuat(ww, wb, qp + 3);  // the free joint's angular velocity is in the body frame
+    state.omega[i] = {static_cast<float>(ww[0]), static_cast<float>(ww[1]), static_cast<float>(ww[2])};
+  }
+}
+
+/// After a step: a non-finite state names its body; a MuJoCo warning (buffers full:
+/// contacts or constraints dropped; a bad qpos, qvel or qacc: the state reset) throws.
+void MujocoWorld::Impl::check_step() {
+  for (std::size_t i = 0; i < w.size(); ++i) {
+    if (qpos_adr[i] < 0) continue;
+    bool finite = true;
+    for (int k = 0; k < 7; ++k) finite = finite && std::isfinite(d->qpos[qpos_adr[i] + k]);
+    for (int k = 0; k < 6; ++k) finite = finite && std::isfinite(d->qvel[dof_adr[i] + k]);
+    if (!finite)
+      throw RuntimeError(fmt::format("mujoco: body {} has a non-finite position, orientation or velocity after frame {}",
+                                     i, frame));
+  }
+  static const char* const kWhat[mjNWARNING] = {
+      "(near) singular inertia matrix",
+      "contact buffer full: contacts were dropped (raise MujocoSettings::max_contacts, key max_contacts)",
+      "constraint buffer full: contacts were left out of the solver",
+      "visual geom buffer full",
+      "bad number in qpos: MuJoCo reset the state",
+      "bad number in qvel: MuJoCo reset the state",
+      "bad number in qacc: MuJoCo reset the state",
+      "bad number in ctrl"};
+  for (int k = 0; k < mjNWARNING; ++k) {
+    if (d->warning[k].number == warnings[static_cast<std::size_t>(k)]) continue;
+    warnings[static_cast<std::size_t>(k)] = d->warning[k].number;
+    if (k == mjWARN_VGEOMFULL || k == mjWARN_BADCTRL) continue;  // nothing octocd uses
+    throw RuntimeError(fmt::format("mujoco: frame {}: MuJoCo warning: {} ({})", frame,
+                                   k < 8 ? kWhat[k] : "unknown", g_last_warning));
+  }
+}
+
+/// Pairs with a dynamic body whose exact world AABBs at the pre-step pose overlap (Eq. 6,
+/// inclusive): sort by min x, sweep.
+std::uint64_t MujocoWorld::Impl::overlapping_pairs() const {
+  const std::vector<Aabb>& boxes = record.aabbs;
+  std::vector<std::uint32_t> order(boxes.size());
+  for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return boxes[a].min.x < boxes[b].min.x; });
+  std::uint64_t n = 0;
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    const Aabb& a = boxes[order[k]];
+    for (std::size_t j = k + 1; j < order.size() && boxes[order[j]].min.x <= a.max.x; ++j) {
+      const Aabb& b = boxes[order[j]];
+      if (!(w[order[k]] > 0.0f) && !(w[order[j]] > 0.0f)) continue;
+      if (a.min.y <= b.max.y && b.min.y <= a.max.y && a.min.z <= b.max.z && b.min.z <= a.max.z) ++n;
+    }
+  }
+  return n;
+}
+
+void MujocoWorld::Impl::fill_record() {
+  FrameRecord& r = record;
+  r.has_pairs = false;
+  r.pairs.clear();
+  r.contacts.clear();
+  r.jt3.clear();
+  std::vector<ContactRecord> rows;
+  std::vector<Vec3> jt3;
+  for (int k = 0; k < d->ncon; ++k) {
+    const mjContact& con = d->contact[k];
+    if (con.exclude != 0 && con.exclude != 1) continue;  // fused, equality, no dofs: not a contact of the scene
+    const std::uint32_t g1 = geom_body[static_cast<std::size_t>(con.geom1)];
+    const std::uint32_t g2 = geom_body[static_cast<std::size_t>(con.geom2)];
+    if (g1 == g2) continue;
+    mjtNum f[6] = {0, 0, 0, 0, 0, 0};
+    if (con.efc_address >= 0) mj_contactForce(m, d, k, f);  // contact frame, the force on geom2
+    const mjtNum* fr = con.frame;
+    // World force on geom2's body: normal along frame row 0, friction along rows 1 and 2.
+    mjtNum ft[3];
+    for (int c = 0; c < 3; ++c) ft[c] = f[1] * fr[3 + c] + f[2] * fr[6 + c];
+    const bool a_is_geom1 = g1 < g2;  // then the normal (geom1 -> geom2) points from A to B
+    ContactRecord row;
+    row.pair = {std::min(g1, g2), std::max(g1, g2)};
+    const float s = a_is_geom1 ? -1.0f : 1.0f;  // geom1 -> geom2 as seen from B to A
+    row.normal = {s * static_cast<float>(fr[0]), s * static_cast<float>(fr[1]), s * static_cast<float>(fr[2])};
+    row.depth = static_cast<float>(std::max(0.0, -con.dist));
+    row.point = {static_cast<float>(con.pos[0]), static_cast<float>(con.pos[1]), static_cast<float>(con.pos[2])};
+    row.jn = static_cast<float>(f[0] * dt);
+    // The tangential impulse on A: geom2 gets +ft, geom1 -ft.
+    const double sa = a_is_geom1 ? -dt : dt;
+    const Vec3 j_a{static_cast<float>(sa * ft[0]), static_cast<float>(sa * ft[1]), static_cast<float>(sa * ft[2])};
+    // v_t: A's velocity relative to B's at the point before the solver (v_pre + dt g on
+    // dynamic bodies, w_pre), tangential part (docs/trace-format.md, "The sign of jt").
+    auto point_velocity = [&](std::uint32_t i) {
+      Vec3 v = r.v_pre[i];
+      if (w[i] > 0.0f) v += static_cast<float>(dt) * gravity;
+      return v + cross(r.w_pre[i], row.point - r.x_pre[i]);
+    };
+    const Vec3 v_rel = point_velocity(row.pair.a) - point_velocity(row.pair.b);
+    const Vec3 v_t = v_rel - dot(v_rel, row.normal) * row.normal;
+    const float vt_len = length(v_t);
+    row.jt = vt_len > 1e-6f ? dot(j_a, -(1.0f / vt_len) * v_t) : length(j_a);
+    rows.push_back(row);
+    jt3.push_back(j_a);
+  }
+  std::vector<std::size_t> order(rows.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) { return rows[x].pair < rows[y].pair; });
+  r.contacts.reserve(order.size());
+  r.jt3.reserve(order.size());
+  for (std::size_t k : order) {
+    r.contacts.push_back(rows[k]);
+    r.jt3.push_back(jt3[k]);
+  }
+  r.confirmed.clear();
+  for (const ContactRecord& c : r.contacts)
+    if (r.confirmed.empty() || !(r.confirmed.back() == c.pair)) r.confirmed.push_back(c.pair);
+  r.has_contact_terms = false;
+  r.manifolds = true;
+  r.has_points = true;
+}
+
+MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& initial, const MujocoSettings& settings)
+    : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
+  Impl& im = *impl_;
+  const Model& src = *model_;
+  const Scene& scene = src.scene;
+  const std::size_t n = initial.size();
+  if (src.bodies.size() != n)
+    throw InputError(fmt::format("mujoco: the initial state has {} bodies, the model {}", n, src.bodies.size()));
+  im.settings = settings;
+  im.dt = scene.dt;
+  im.slop = scene.response.slop;
+  im.gravity = scene.gravity;
+  im.w = initial.w;
+  im.static_static = static_static_pairs(src);
+  im.state = initial;
+  im.state.q.resize(n);      // identity where the model has none
+  im.state.omega.resize(n);  // zero where the model has none
+  for (std::size_t i = 0; i < n; ++i) im.state.q[i] = normalized(im.state.q[i]);
+
+  // ---- The MJCF text.
+  const double mu = scene.response.mu_kinetic;
+  const double e = scene.response.restitution;
+  const double zeta = damping_ratio(e);
+  const double timeconst = settings.timeconst > 0.0 ? settings.timeconst : 2.0 * im.dt / zeta;
+  im.timeconst = timeconst;
+  std::size_t dynamic = 0;
+  for (std::size_t i = 0; i < n; ++i) dynamic += initial.w[i] > 0.0f ? 1 : 0;
+  // Contact capacity: MujocoSettings::max_contacts, or 6 per dynamic body (a box resting
+  // on a face has 4), at least 256; constraint rows 3 per elliptic contact (condim 3), 4
+  // per pyramidal one. MuJoCo 2.2 allocates its constraint arrays at these sizes, some
+  // (J M^-1 J' + R) quadratic in the rows: 12 bytes x rows^2.
+  const int nconmax = settings.max_contacts > 0 ? settings.max_contacts
+                                                : static_cast<int>(std::max<std::size_t>(256, 6 * dynamic));
+  const int njmax = nconmax * (settings.cone == MujocoCone::Elliptic ? 3 : 4);
+  std::string x;
+  x.reserve(4096);
+  x += "<mujoco model=\"octocd\">\n";
+  x += "  <compiler inertiafromgeom=\"false\" angle=\"radian\"/>\n";
+  x += fmt::format(
+      "  <option timestep=\"{}\" gravity=\"{}\" integrator=\"Euler\" cone=\"{}\" iterations=\"{}\" solver=\"Newton\" "
+      "impratio=\"1\" density=\"0\" viscosity=\"0\">\n    <flag multiccd=\"{}\"/>\n  </option>\n",
+      num(im.dt), vec(scene.gravity), mujoco_cone_name(settings.cone), settings.iterations,
+      settings.multiccd ? "enable" : "disable");
+  x += fmt::format("  <size nconmax=\"{}\" njmax=\"{}\"/>\n", nconmax, njmax);
+  x += fmt::format(
+      "  <default>\n    <geom condim=\"3\" friction=\"{} 0 0\" solref=\"{} {}\" margin=\"{}\" gap=\"{}\"/>\n  "
+      "</default>\n",
+      num(mu), num(timeconst), num(zeta), num(settings.margin), num(settings.margin));
+  // Meshes: one asset per shape with a mesh, its vertices (MuJoCo takes their hull).
+  std::vector<char> shape_used(src.shapes.size(), 0);
+  for (std::size_t i = 0; i < n; ++i) shape_used[src.bodies[i].shape] = 1;
+  bool any_mesh = false;
+  for (std::size_t k = 0; k < src.shapes.size(); ++k) {
+    const Shape& s = src.shapes[k];
+    if (!shape_used[k] || !s.mesh) continue;
+    if (!any_mesh) x += "  <asset>\n";
+    any_mesh = true;
+    x += fmt::format("    <mesh name=\"s{}\" vertex=\"", k);
+    for (const Vec3& v : s.mesh->vertices) {
+      x += vec(v);
+      x += ' ';
+    }
+    x += "\"/>\n";
+  }
+  if (any_mesh) x += "  </asset>\n";
+  auto geom = [&](std::size_t i, const std::string& pose) {
+    const Shape& s = src.shapes[src.bodies[i].shape];
+    if (s.mesh) return fmt::format("<geom name=\"g{}\" type=\"mesh\" mesh=\"s{}\"{}/>", i, src.bodies[i].shape, pose);
+    const Vec3 h = 0.5f * (s.local.max - s.local.min);
+    return fmt::format("<geom name=\"g{}\" type=\"box\" size=\"{}\"{}/>", i, vec(h), pose);
+  };
+  x += "  <worldbody>\n";
+  for (std::size_t i = 0; i < n; ++i) {
+    if (initial.w[i] > 0.0f) continue;
+    // A static body: its geom in the world body at its pose (box centred on the local box).
+    const Shape& s = src.shapes[src.bodies[i].shape];
+    const Pose pose{im.state.x[i], im.state.q[i]};
+    const Vec3 at = s.mesh ? pose.position : to_world(pose, center(s.local));
+    x += "    " + geom(i, fmt::format(" pos=\"{}\" quat=\"{}\"", vec(at), quat(pose.orientation))) + "\n";
+  }
+  im.inertia.assign(n, {0.0, 0.0, 0.0});
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(initial.w[i] > 0.0f)) continue;
+    const Shape& s = src.shapes[src.bodies[i].shape];
+    const double mass = 1.0 / static_cast<double>(initial.w[i]);
+    im.inertia[i] = solid_box_inertia(0.5f * (s.local.max - s.local.min), mass);
+    const std::string at = s.mesh ? "" : fmt::format(" pos=\"{}\"", vec(center(s.local)));
+    x += fmt::format(
+        "    <body name=\"b{}\" pos=\"{}\" quat=\"{}\">\n      <freejoint name=\"j{}\"/>\n"
+        "      <inertial pos=\"0 0 0\" mass=\"{}\" diaginertia=\"{} {} {}\"/>\n      {}\n    </body>\n",
+        i, vec(im.state.x[i]), quat(im.state.q[i]), i, num(mass), num(im.inertia[i][0]), num(im.inertia[i][1]),
+        num(im.inertia[i][2]), geom(i, at));
+  }
+  x += "  </worldbody>\n</mujoco>\n";
+  im.xml = std::move(x);
+
+  // ---- Load it from MuJoCo's virtual file system.
+  {
+    const MujocoCall call;
+    auto vfs = std::make_unique<mjVFS>();
+    mj_defaultVFS(vfs.get());
+    const char* file = "octocd-scene.xml";
+    if (mj_makeEmptyFileVFS(vfs.get(), file, static_cast<int>(im.xml.size())) != 0)
+      throw RuntimeError("mujoco: cannot add the scene to MuJoCo's virtual file system");
+    const int at = mj_findFileVFS(vfs.get(), file);
+    std::memcpy(vfs->filedata[at], im.xml.data(), im.xml.size());
+    char error[1024] = "";
+    im.m = mj_loadXML(file, vfs.get(), error, static_cast<int>(sizeof(error)));
+    mj_deleteVFS(vfs.get());
+    if (!im.m) throw RuntimeError(fmt::format("mujoco: MuJoCo refused the scene '{}': {}", scene.name, error));
+    im.d = mj_makeData(im.m);
+    if (!im.d) throw RuntimeError("mujoco: mj_makeData failed (out of memory?)");
+  }
+
+  // ---- Ids, addresses, the initial state in double precision.
+  im.qpos_adr.assign(n, -1);
+  im.dof_adr.assign(n, -1);
+  im.geom_body.assign(static_cast<std::size_t>(im.m->ngeom), 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const int g = mj_name2id(im.m, mjOBJ_GEOM, fmt::format("g{}", i).c_str());
+    if (g < 0) throw RuntimeError(fmt::format("mujoco: geom g{} missing from the loaded model", i));
+    im.geom_body[static_cast<std::size_t>(g)] = static_cast<std::uint32_t>(i);
+    if (!(initial.w[i] > 0.0f)) continue;
+    const int j = mj_name2id(im.m, mjOBJ_JOINT, fmt::format("j{}", i).c_str());
+    if (j < 0) throw RuntimeError(fmt::format("mujoco: joint j{} missing from the loaded model", i));
+    im.qpos_adr[i] = im.m->jnt_qposadr[j];
+    im.dof_adr[i] = im.m->jnt_dofadr[j];
+    mjtNum* qp = im.d->qpos + im.qpos_adr[i];
+    mjtNum* qv = im.d->qvel + im.dof_adr[i];
+    const Vec3 p = initial.x[i], v = initial.v[i];
+    const Quat q = im.state.q[i];
+    const Vec3 wv = im.state.omega[i];
+    qp[0] = p.x, qp[1] = p.y, qp[2] = p.z;
+    mjtNum qd[4] = {q.w, q.x, q.y, q.z};
+    mju_normalize4(qd);
+    for (int k = 0; k < 4; ++k) qp[3 + k] = qd[k];
+    qv[0] = v.x, qv[1] = v.y, qv[2] = v.z;
+    // MuJoCo keeps a free joint's angular velocity in the body frame: R^T w.
+    mjtNum neg[4], ww[3] = {wv.x, wv.y, wv.z};
+    mju_negQuat(neg, qd);
+    mju_rotVecQuat(qv + 3, ww, neg);
+  }
+  im.state.x = initial.x;
+  im.state.v = initial.v;
+  im.read_state();
+
+  // ---- What the physics tier is told (version 2 root attributes and /bodies).
+  RotationTraits& t = im.traits;
+  t.rotates = true;
+  t.mu = static_cast<float>(mu);
+  t.restitution = static_cast<float>(e);
+  t.friction_combine = "max";      // MuJoCo: the larger friction of the two geoms
+  t.restitution_combine = "max";   // one solref for every geom: every pair has e
+  t.contact_margin = static_cast<float>(settings.margin);
+  t.detection = "pre-step";
+  t.broadphase_exact = false;
+  t.candidate_pairs = false;  // MuJoCo's broadphase pairs are not exposed: no /pairs
+  t.contact_geometry = "shape";
+  t.jt3 = true;
+  t.contact_model = "soft";
+  t.integrator = "semi-implicit";
+  t.gyroscopic = "true";
+  for (std::size_t i = 0; i < n; ++i) {
+    std::array<float, 9> tensor{};
+    for (int k = 0; k < 3; ++k) tensor[static_cast<std::size_t>(4 * k)] = static_cast<float>(im.inertia[i][static_cast<std::size_t>(k)]);
+    t.inertia.push_back(tensor);
+    t.body_friction.push_back(static_cast<float>(mu));
+    t.body_restitution.push_back(static_cast<float>(e));
+    t.body_collision_shape.push_back("convex_hull");
+  }
+  bool meshes = false;
+  for (std::size_t i = 0; i < n; ++i) meshes = meshes || src.shapes[src.bodies[i].shape].mesh != nullptr;
+  im.geometry = meshes ? "mujoco convex hulls (meshes, static ones too), boxes" : "mujoco boxes";
+}
+
+MujocoWorld::~MujocoWorld() = default;
+
+const FrameMetrics& MujocoWorld::step() {
+  Impl& im = *impl_;
+  const std::size_t n = im.w.size();
+  FrameRecord& r = im.record;
+  r.frame = im.frame + 1;
+  r.x_pre = im.state.x;
+  r.v_pre = im.state.v;
+  r.q_pre = im.state.q;
+  r.w_pre = im.state.omega;
+  FrameMetrics fm;
+  const auto t0 = std::chrono::steady_clock::now();
+  double detect_ms = 0.0, solve_ms = 0.0, integrate_ms = 0.0;
+  {
+    // mj_step's sequence (Euler integrator, no sensors, no control callback), in parts.
+    const MujocoCall call;
+    mjModel* m = im.m;
+    mjData* d = im.d;
+    mj_checkPos(m, d);
+    mj_checkVel(m, d);
+    auto t = std::chrono::steady_clock::now();
+    mj_fwdPosition(m, d);
+    detect_ms = ms_since(t);
+    t = std::chrono::steady_clock::now();
+    mj_fwdVelocity(m, d);
+    mj_fwdActuation(m, d);
+    mj_fwdAcceleration(m, d);
+    mj_fwdConstraint(m, d);
+    mj_checkAcc(m, d);
+    solve_ms = ms_since(t);
+    t = std::chrono::steady_clock::now();
+    mj_Euler(m, d);
+    integrate_ms = ms_since(t);
+  }
+  const auto t1 = std::chrono::steady_clock::now();
+  fm.frame = ++im.frame;
+  fm.time = static_cast<double>(im.frame) * im.dt;
+  im.check_step();
+  im.read_state();
+  // The world AABBs at the detection pose (the pre-step state): the record's and the pair count's.
+  r.aabbs.resize(n);
+  for (std::size_t i = 0; i < n; ++i) r.aabbs[i] = posed_box_aabb(model_->local_box(i), {r.x_pre[i], r.q_pre[i]});
+  fm.dynamic_pairs = im.overlapping_pairs();
+  fm.aabb_pairs = fm.dynamic_pairs + im.static_static;
+  if (im.recording) {
+    r.x_post = im.state.x;
+    r.v_post = im.state.v;
+    r.q_post = im.state.q;
+    r.w_post = im.state.omega;
+    r.x_det = r.x_pre;  // mj_fwdPosition detects at the state before mj_Euler
+    r.q_det = r.q_pre;
+    im.fill_record();
+  }
+  std::uint64_t rows = 0, pen = 0, above = 0;
+  double pen_sum = 0.0, pen_max = 0.0;
+  for (int k = 0; k < im.d->ncon; ++k) {
+    const mjContact& con = im.d->contact[k];
+    if (con.exclude != 0 && con.exclude != 1) continue;
+    ++rows;
+    if (con.dist < 0.0) {
+      ++pen;
+      pen_sum += -con.dist;
+      pen_max = std::max(pen_max, -con.dist);
+      if (-con.dist > static_cast<double>(im.slop)) ++above;
+    }
+  }
+  fm.contacts = rows;
+  if (pen > 0) {
+    fm.penetration_mean = pen_sum / static_cast<double>(pen);
+    fm.penetration_max = pen_max;
+    fm.penetration_share_above_slop = static_cast<double>(above) / static_cast<double>(pen);
+  }
+  double ke = 0.0, px = 0.0, py = 0.0, pz = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (im.qpos_adr[i] < 0) continue;
+    const double mass = 1.0 / static_cast<double>(im.w[i]);
+    const mjtNum* qv = im.d->qvel + im.dof_adr[i];
+    ke += 0.5 * mass * (qv[0] * qv[0] + qv[1] * qv[1] + qv[2] * qv[2]);
+    for (int k = 0; k < 3; ++k) ke += 0.5 * im.inertia[i][static_cast<std::size_t>(k)] * qv[3 + k] * qv[3 + k];
+    px += mass * qv[0];
+    py += mass * qv[1];
+    pz += mass * qv[2];
+  }
+  fm.kinetic_energy = ke;
+  fm.momentum = {px, py, pz};
+  fm.stage_ms[static_cast<int>(Stage::Midphase)] = detect_ms;
+  fm.stage_ms[static_cast<int>(Stage::Response)] = solve_ms;
+  fm.stage_ms[static_cast<int>(Stage::Integrate)] = integrate_ms;
+  fm.stage_ms[static_cast<int>(Stage::Metrics)] = ms_since(t1);
+  fm.step_ms = ms_since(t0);
+  im.metrics = fm;
+  return im.metrics;
+}
+
+const BodyState& MujocoWorld::state() const { return impl_->state; }
+const FrameMetrics& MujocoWorld::last_metrics() const { return impl_->metrics; }
+std::int64_t MujocoWorld::frame() const { return impl_->frame; }
+std::string MujocoWorld::device() const { return cpu_description(); }
+const std::vector<ContactRecord>& MujocoWorld::contacts() const {
+  return impl_->recording ? impl_->record.contacts : impl_->no_contacts;
+}
+std::string MujocoWorld::collision_geometry() const { return impl_->geometry; }
+const RotationTraits* MujocoWorld::rotation_traits() const { return &impl_->traits; }
+void MujocoWorld::set_recording(bool on) { impl_->recording = on; }
+const FrameRecord& MujocoWorld::record() const { return impl_->record; }
+const MujocoSettings& MujocoWorld::settings() const { return impl_->settings; }
+const std::string& MujocoWorld::xml() const { return impl_->xml; }
+std::string MujocoWorld::mujoco_version() { return mj_versionString(); }
+
+bool MujocoWorld::has_stage(Stage s) const {
+  return s == Stage::Integrate || s == Stage::Midphase || s == Stage::Response || s == Stage::Metrics;
+}
+
+std::string MujocoWorld::notes() const {
+  return fmt::format(
+      "MuJoCo {}: {}; soft contacts (solref timeconst {} s, dampratio from e), {} cone, semi-implicit\n"
+      "Euler. broadphase candidates are not exposed (0); AABB and dynamic pairs are the exact boxes\n"
+      "at the pre-step pose that overlap. midphase = mj_fwdPosition (kinematics, MuJoCo's broadphase\n"
+      "and narrow phase, constraint set-up), response = bias forces and the constraint solver,\n"
+      "integrate = mj_Euler; aabbs and broadphase are not timed apart. contacts = MuJoCo's contact\n"
+      "rows; kinetic energy includes rotation.",
+      mujoco_version(), impl_->geometry,
+      num(impl_->timeconst),
+      mujoco_cone_name(impl_->settings.cone));
+}
+
+}  // namespace octocd

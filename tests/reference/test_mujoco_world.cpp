@@ -1,0 +1,557 @@
+// octocd::MujocoWorld (`--engine mujoco`, reference/mujoco/): its step is mj_step, the
+// closed forms of its integrator (free fall, torque-free spin with MuJoCo's explicit
+// gyroscopic term), a box resting on a floor, the sign conventions of its contact rows,
+// a trace the physics tier passes, its settings, and three faults of MuJoCo 2.2 that the
+// physics tier reports, each shown with a witness computed from MuJoCo's own data.
+// Skipped (GTEST_SKIP) when octocd is built without MuJoCo.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "octocd/error.hpp"
+#include "octocd/external.hpp"
+#include "octocd/scene.hpp"
+#include "octocd/trace.hpp"
+
+#if OCTOCD_HAVE_MUJOCO
+#include <mujoco/mujoco.h>
+
+#include "octocd/mujoco_world.hpp"
+#endif
+
+using namespace octocd;
+
+#if !OCTOCD_HAVE_MUJOCO
+TEST(MujocoWorld, NotBuilt) { GTEST_SKIP() << "octocd is built without MuJoCo (libmujoco-dev not found)"; }
+#else
+
+namespace {
+
+std::string scene_path(const std::string& name) {
+  const char* root = std::getenv("OCTOCD_SOURCE_DIR");
+  return std::string(root ? root : ".") + "/datasets/scenes/" + name + ".json";
+}
+
+/// The same MJCF loaded into a MuJoCo model of the test's own, with the engine's initial
+/// state (the adapter's recipe: x, the normalised q, v, and R^T w in the body frame),
+/// stepped with mj_step: the oracle for what MuJoCo itself does.
+struct RawMujoco {
+  mjModel* m = nullptr;
+  mjData* d = nullptr;
+  std::vector<int> qadr, dadr, geom;  // per octocd body (-1: static)
+
+  RawMujoco(const MujocoWorld& w, const BodyState& s0) {
+    const std::string& xml = w.xml();
+    auto vfs = std::make_unique<mjVFS>();
+    mj_defaultVFS(vfs.get());
+    mj_makeEmptyFileVFS(vfs.get(), "t.xml", static_cast<int>(xml.size()));
+    std::memcpy(vfs->filedata[mj_findFileVFS(vfs.get(), "t.xml")], xml.data(), xml.size());
+    char err[1000] = "";
+    m = mj_loadXML("t.xml", vfs.get(), err, sizeof err);
+    mj_deleteVFS(vfs.get());
+    EXPECT_NE(m, nullptr) << err;
+    d = mj_makeData(m);
+    for (std::size_t i = 0; i < s0.size(); ++i) {
+      geom.push_back(mj_name2id(m, mjOBJ_GEOM, ("g" + std::to_string(i)).c_str()));
+      const int j = mj_name2id(m, mjOBJ_JOINT, ("j" + std::to_string(i)).c_str());
+      qadr.push_back(j < 0 ? -1 : m->jnt_qposadr[j]);
+      dadr.push_back(j < 0 ? -1 : m->jnt_dofadr[j]);
+      if (j < 0) continue;
+      mjtNum* qp = d->qpos + qadr.back();
+      mjtNum* qv = d->qvel + dadr.back();
+      const Quat q = s0.q.empty() ? Quat{} : normalized(s0.q[i]);
+      const Vec3 om = s0.omega.empty() ? Vec3{} : s0.omega[i];
+      qp[0] = s0.x[i].x, qp[1] = s0.x[i].y, qp[2] = s0.x[i].z;
+      mjtNum qd[4] = {q.w, q.x, q.y, q.z};
+      mju_normalize4(qd);
+      std::copy(qd, qd + 4, qp + 3);
+      qv[0] = s0.v[i].x, qv[1] = s0.v[i].y, qv[2] = s0.v[i].z;
+      mjtNum neg[4], wv[3] = {om.x, om.y, om.z};
+      mju_negQuat(neg, qd);
+      mju_rotVecQuat(qv + 3, wv, neg);
+    }
+  }
+  ~RawMujoco() {
+    mj_deleteData(d);
+    mj_deleteModel(m);
+  }
+  RawMujoco(const RawMujoco&) = delete;
+  RawMujoco& operator=(const RawMujoco&) = delete;
+
+  /// Velocity (world) of body i's material point at world point p: v + w x (p - x).
+  std::array<double, 3> point_velocity(std::size_t i, const mjtNum* p) const {
+    if (qadr[i] < 0) return {0, 0, 0};
+    const mjtNum* qp = d->qpos + qadr[i];
+    const mjtNum* qv = d->qvel + dadr[i];
+    mjtNum w[3];
+    mju_rotVecQuat(w, qv + 3, qp + 3);
+    const double r[3] = {p[0] - qp[0], p[1] - qp[1], p[2] - qp[2]};
+    return {qv[0] + w[1] * r[2] - w[2] * r[1], qv[1] + w[2] * r[0] - w[0] * r[2], qv[2] + w[0] * r[1] - w[1] * r[0]};
+  }
+  /// The contacts between the geoms of bodies a and b (indices into d->contact).
+  std::vector<int> contacts(std::size_t a, std::size_t b) const {
+    std::vector<int> out;
+    for (int c = 0; c < d->ncon; ++c) {
+      const int g1 = d->contact[c].geom1, g2 = d->contact[c].geom2;
+      if ((g1 == geom[a] && g2 == geom[b]) || (g1 == geom[b] && g2 == geom[a])) out.push_back(c);
+    }
+    return out;
+  }
+  /// How far world point p lies outside box geom g (m; negative: inside, by the least
+  /// depth to a face), from MuJoCo's geom_xpos, geom_xmat and geom_size.
+  double outside_box(int g, const mjtNum* p) const {
+    mjtNum r[3], l[3];
+    for (int k = 0; k < 3; ++k) r[k] = p[k] - d->geom_xpos[3 * g + k];
+    mju_mulMatTVec(l, d->geom_xmat + 9 * g, r, 3, 3);
+    double out2 = 0.0, in = -1e300;
+    for (int k = 0; k < 3; ++k) {
+      const double e = std::fabs(l[k]) - m->geom_size[3 * g + k];
+      if (e > 0) out2 += e * e;
+      in = std::max(in, e);
+    }
+    return out2 > 0 ? std::sqrt(out2) : in;
+  }
+};
+
+/// A scene with one group per entry of `groups` (JSON objects), no walls unless `walls`.
+Scene scene_of(const std::string& groups, const std::string& extra = "", const std::string& walls = "none") {
+  return parse_scene(R"({"name": "mj", "domain": {"min": [-3, 0, -3], "max": [3, 4, 3]}, "rotation": true,
+    "walls": ")" + walls + R"(", "wall_thickness": 0.2)" + extra + R"(, "groups": [)" + groups + "]}",
+                     "mujoco (test)");
+}
+
+/// Steps `engine` `frames` times into a version 2 trace at `path`, as `octocd run --trace
+/// PATH --state-every 1 --contacts` does.
+void write_trace(Engine& engine, const std::string& path, int frames) {
+  TraceOptions topt;
+  topt.state_every = 1;
+  topt.contacts = true;
+  engine.set_recording(true);
+  topt.v2 = *engine.rotation_traits();
+  topt.gravity = engine.scene().gravity;
+  TraceWriter trace(path, trace_metadata(engine, 1), trace_bodies(engine), topt);
+  trace.append_state(0, engine.state());
+  for (int f = 0; f < frames; ++f) {
+    const FrameMetrics& m = engine.step();
+    trace.append_frame_v2(m, engine.state(), engine.record());
+  }
+  trace.close();
+}
+
+}  // namespace
+
+// The engine calls mj_step's parts itself (to time them): after 500 steps of three boxes
+// tumbling onto a floor (contacts, spin, friction) its state is mj_step's, bit for bit.
+TEST(MujocoWorld, StepIsMjStep) {
+  const auto model = build_model(scene_of(
+      R"({"name": "b", "shape": {"box": [0.1, 0.05, 0.08]}, "count": 3, "mass": 1.5,
+          "positions": [[0, 0.15, 0], [0.05, 0.4, 0.02], [-0.04, 0.65, 0]],
+          "orientation": {"axis": [1, 0.3, 0.2], "angle_deg": 25}, "angular_velocity": [1, 3, -2]})",
+      R"(, "response": {"mu_kinetic": 0.4, "restitution": 0.3})", "floor"));
+  MujocoWorld w(model, model->initial);
+  RawMujoco raw(w, model->initial);
+  std::size_t contacts = 0;
+  for (int f = 0; f < 500; ++f) {
+    w.step();
+    mj_step(raw.m, raw.d);
+    contacts += static_cast<std::size_t>(raw.d->ncon);
+    for (std::size_t i = 0; i < raw.qadr.size(); ++i) {
+      if (raw.qadr[i] < 0) continue;
+      const mjtNum* qp = raw.d->qpos + raw.qadr[i];
+      ASSERT_EQ(w.state().x[i].y, static_cast<float>(qp[1])) << "frame " << f + 1 << " body " << i;
+      ASSERT_EQ(w.state().q[i].x, static_cast<float>(qp[4])) << "frame " << f + 1 << " body " << i;
+      ASSERT_EQ(w.state().v[i].x, static_cast<float>(raw.d->qvel[raw.dadr[i]])) << "frame " << f + 1 << " body " << i;
+    }
+  }
+  EXPECT_GT(contacts, 100u) << "the boxes must land for the comparison to cover contacts";
+}
+
+// Free fall under MuJoCo's Euler integrator, semi-implicit: v_n = v0 + n g dt,
+// x_n = x0 + n dt v0 + g dt^2 n (n + 1) / 2. The float32 state stays within 2e-6 m of it
+// over 400 steps (MuJoCo works in double); explicit Euler (x += dt v before v += dt g)
+// would be n dt^2 |g| = 3.9e-3 m off.
+TEST(MujocoWorld, FreeFallFollowsSemiImplicitEuler) {
+  const auto model = build_model(scene_of(
+      R"({"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 2,
+          "positions": [[0.1, 2.0, -0.2]], "velocity": {"type": "fixed", "value": [1.0, 2.0, 0.5]}})"));
+  MujocoWorld w(model, model->initial);
+  const double dt = model->scene.dt;
+  const Vec3 g = model->scene.gravity, x0 = model->initial.x[0], v0 = model->initial.v[0];
+  double worst = 0.0;
+  for (int n = 1; n <= 400; ++n) {
+    w.step();
+    for (int k = 0; k < 3; ++k) {
+      const double x = x0[k] + n * dt * v0[k] + g[k] * dt * dt * n * (n + 1) / 2.0;
+      const double v = v0[k] + static_cast<double>(n) * g[k] * dt;
+      worst = std::max(worst, std::fabs(w.state().x[0][k] - x));
+      ASSERT_NEAR(w.state().v[0][k], v, 2e-6) << "step " << n;
+    }
+    ASSERT_EQ(w.last_metrics().contacts, 0u);
+  }
+  EXPECT_LT(worst, 2e-6);
+  EXPECT_LT(worst, 0.01 * 400 * dt * dt * 9.81) << "indistinguishable from explicit Euler";
+}
+
+// Torque-free spin of a box with three different moments of inertia: MuJoCo's free joint
+// integrates I dw_b/dt = -w_b x I w_b explicitly (qfrc_bias), so every step satisfies
+// I_w (w' - w) + dt w x I_w w = 0 (the declared gyroscopic term) to rounding, and the
+// world angular momentum R I R^T w drifts only at the integrator's first order: measured
+// below 1 % over 2 s while a body without the gyroscopic term (w held constant) would be
+// off by more than twice that.
+TEST(MujocoWorld, FreeSpinHasTheGyroscopicTerm) {
+  const auto model = build_model(scene_of(
+      R"({"name": "brick", "shape": {"box": [0.3, 0.1, 0.05]}, "count": 1, "mass": 2.0,
+          "positions": [[0, 0, 0]], "angular_velocity": [0.2, 6.0, 0.1]})",
+      R"(, "gravity": [0, 0, 0])"));
+  MujocoWorld w(model, model->initial);
+  const std::array<float, 9> I = w.rotation_traits()->inertia[0];
+  EXPECT_NEAR(I[0], 2.0 / 12 * (0.2 * 0.2 + 0.1 * 0.1), 1e-7);
+  auto world_L = [&](const Quat& q, const Vec3& om) {  // R I R^T w
+    const Vec3 wl = rotate(conjugate(q), om);
+    return rotate(q, Vec3{I[0] * wl.x, I[4] * wl.y, I[8] * wl.z});
+  };
+  const Vec3 w0 = w.state().omega[0];
+  const Quat q0 = w.state().q[0];
+  const Vec3 L0 = world_L(q0, w0);
+  double worst_step = 0.0, worst_L = 0.0, worst_no_gyro = 0.0, w_change = 0.0;
+  const double dt = model->scene.dt;
+  for (int f = 1; f <= 2000; ++f) {
+    const Quat q = w.state().q[0];
+    const Vec3 om = w.state().omega[0];
+    w.step();
+    const Vec3 om1 = w.state().omega[0];
+    // I_w (w' - w) + dt w x I_w w, relative to |I_w w|.
+    const Vec3 Iw = world_L(q, om);
+    const Vec3 r = world_L(q, om1 - om) + static_cast<float>(dt) * cross(om, Iw);
+    worst_step = std::max(worst_step, static_cast<double>(length(r) / length(Iw)));
+    worst_L = std::max(worst_L, static_cast<double>(length(world_L(w.state().q[0], om1) - L0) / length(L0)));
+    const Quat turned = axis_angle((1.0f / length(w0)) * w0, length(w0) * static_cast<float>(f * dt)) * q0;
+    worst_no_gyro = std::max(worst_no_gyro, static_cast<double>(length(world_L(turned, w0) - L0) / length(L0)));
+    w_change = std::max(w_change, static_cast<double>(length(om1 - w0)));
+  }
+  EXPECT_GT(w_change, 0.1) << "the body must tumble for the test to mean something";
+  EXPECT_LT(worst_step, 1e-5) << "the step is not w' = w - dt I^-1 (w x I w)";
+  EXPECT_GT(worst_no_gyro, 0.02);
+  EXPECT_LT(worst_L, 0.01);
+  RecordProperty("angular_momentum_relative_change", std::to_string(worst_L));
+}
+
+// A box (2 kg) resting on a static floor settles: after 0.5 s its speed is below 1e-3 m/s,
+// it has sunk less than 0.1 mm (soft contact: the spring's static deflection at
+// timeconst 2 dt is a few micrometres), and the normal impulses of its rows sum to
+// m |g| dt within 0.1 %, the rows' jn being MuJoCo's own mj_contactForce x dt (checked
+// against the test's own MuJoCo data).
+TEST(MujocoWorld, RestingBoxSettlesAndCarriesItsWeight) {
+  const auto model = build_model(scene_of(
+      R"({"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 2, "positions": [[0, 0.1, 0]]})",
+      R"(, "response": {"restitution": 0.0})", "floor"));
+  MujocoWorld w(model, model->initial);
+  RawMujoco raw(w, model->initial);
+  w.set_recording(true);
+  const std::size_t box = 1;  // the generated floor is body 0
+  const double m = 2.0, g = 9.81, dt = model->scene.dt;
+  for (int f = 1; f <= 600; ++f) {
+    w.step();
+    mj_step(raw.m, raw.d);
+    if (f < 500) continue;
+    double jn = 0.0, jn_raw = 0.0;
+    for (const ContactRecord& c : w.record().contacts) {
+      EXPECT_EQ(c.pair.a, 0u);
+      EXPECT_EQ(c.pair.b, box);
+      jn += c.jn;
+    }
+    for (int c : raw.contacts(0, box)) {
+      mjtNum f6[6];
+      mj_contactForce(raw.m, raw.d, c, f6);
+      jn_raw += f6[0] * dt;
+    }
+    EXPECT_EQ(w.record().contacts.size(), raw.contacts(0, box).size());
+    EXPECT_NEAR(jn, jn_raw, 1e-6 * jn_raw);
+    EXPECT_NEAR(jn, m * g * dt, 1e-3 * m * g * dt) << "frame " << f;
+    EXPECT_LT(length(w.state().v[box]), 1e-3f) << "frame " << f;
+    EXPECT_GT(w.state().x[box].y, 0.1f - 1e-4f) << "frame " << f;
+  }
+}
+
+// The conventions of the rows (docs/trace-format.md, "Version 2"): a box sliding at
+// +0.3 m/s along x on a static floor (it hops a little: docs/engines.md, "mujoco"). Box as body 0 (A): normal (0, 1, 0), from the floor
+// (B) to A; floor as body 0 (A): normal (0, -1, 0). Either way jt > 0 (friction opposes
+// A's sliding relative to B), jt3 is the friction impulse on A (along -x when A is the
+// box), orthogonal to the normal, and the box's momentum change along x is its rows'
+// friction impulses.
+TEST(MujocoWorld, NormalPointsFromBToAAndJtOpposesSliding) {
+  for (const bool box_first : {true, false}) {
+    SCOPED_TRACE(box_first ? "box is body 0" : "floor is body 0");
+    const std::string box = R"({"name": "box", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 1.0,
+        "positions": [[0.0, 0.1, 0.0]], "velocity": {"type": "fixed", "value": [0.3, 0.0, 0.0]}})";
+    const std::string floor = R"({"name": "ground", "shape": {"box": [2.0, 0.1, 2.0]}, "count": 1, "mass": 0,
+        "positions": [[0.0, -0.1, 0.0]]})";
+    const auto model = build_model(scene_of(box_first ? box + ", " + floor : floor + ", " + box,
+                                            R"(, "response": {"mu_kinetic": 0.3, "restitution": 0.0})"));
+    MujocoWorld w(model, model->initial);
+    w.set_recording(true);
+    const std::size_t b = box_first ? 0 : 1;
+    int rows = 0;
+    for (int f = 0; f < 200; ++f) {
+      const float vx = w.state().v[b].x;
+      w.step();
+      const FrameRecord& r = w.record();
+      ASSERT_EQ(r.contacts.size(), r.jt3.size());
+      double fx = 0.0;
+      for (std::size_t k = 0; k < r.contacts.size(); ++k) {
+        const ContactRecord& c = r.contacts[k];
+        EXPECT_EQ(c.pair.a, 0u);
+        EXPECT_EQ(c.pair.b, 1u);
+        EXPECT_NEAR(c.normal.y, box_first ? 1.0f : -1.0f, 1e-6f);
+        EXPECT_NEAR(dot(r.jt3[k], c.normal), 0.0f, 1e-6f);
+        if (c.jn > 0.0f && std::fabs(vx) > 0.01f) {  // sliding (at rest MuJoCo's soft friction creeps either way)
+          EXPECT_GT(c.jt, 0.0f) << "frame " << f + 1;
+          EXPECT_LT(r.jt3[k].x * (box_first ? 1.0f : -1.0f), 0.0f);
+        }
+        fx += box_first ? r.jt3[k].x : -r.jt3[k].x;  // the impulse on the box
+        ++rows;
+      }
+      EXPECT_NEAR(w.state().v[b].x - vx, fx, 1e-5) << "frame " << f + 1;
+    }
+    EXPECT_GT(rows, 50);
+  }
+}
+
+// rot-stack-10 (ten boxes stacked on a floor, each 0.5 mm above the next), 1000 frames,
+// written as `octocd run --trace --contacts --state-every 1` writes it: every
+// physics-tier row of `octocd validate --trace-in` passes or is n/a (the broadphase rows:
+// no candidate pairs in the trace), and momentum-balance and free-flight judge something.
+// (Three such boxes are thrown apart at frame 183 by a wrong box-box contact:
+// MujocoFaults.AlignedBoxesGetAContactTenCentimetresDeep; a stack sliding as it lands
+// fails friction's dissipation rule: MujocoFaults.SoftFrictionPushesAlongTheSliding.)
+TEST(MujocoWorld, StackOfTenTracePassesThePhysicsTier) {
+  const auto model = build_model(load_scene(scene_path("rot-stack-10")));
+  MujocoWorld w(model, model->initial);
+  const std::string path = (std::filesystem::temp_directory_path() / "octocd-test-mujoco-stack.h5").string();
+  write_trace(w, path, 1000);
+  ExternalOptions eo;
+  const std::vector<ValidationResult> results = validate_external_trace(path, eo);
+  std::filesystem::remove(path);
+  bool balance = false, flight = false;
+  for (const ValidationResult& r : results) {
+    if (r.tier != Tier::Physics) continue;
+    SCOPED_TRACE(r.name);
+    EXPECT_TRUE(r.pass) << r.detail;
+    if (r.name == "momentum-balance") balance = r.applicable && r.judged > 0;
+    if (r.name == "free-flight") flight = r.applicable && r.judged > 0;
+    if (r.name == "broadphase-completeness") {
+      EXPECT_FALSE(r.applicable) << "the trace holds no candidate pairs";
+    }
+  }
+  EXPECT_TRUE(balance);
+  EXPECT_TRUE(flight);
+}
+
+TEST(MujocoSettings, KeysValuesAndErrors) {
+  MujocoSettings s;
+  apply_mujoco_settings(s, {"iterations=20", "cone=pyramidal", "timeconst=0.01", "margin=0.002", "multiccd=off",
+                            "max_contacts=500"},
+                        "--mujoco");
+  EXPECT_EQ(s.iterations, 20);
+  EXPECT_EQ(s.cone, MujocoCone::Pyramidal);
+  EXPECT_DOUBLE_EQ(s.timeconst, 0.01);
+  EXPECT_DOUBLE_EQ(s.margin, 0.002);
+  EXPECT_FALSE(s.multiccd);
+  EXPECT_EQ(s.max_contacts, 500);
+  auto error = [](const std::string& item) {
+    MujocoSettings t;
+    try {
+      apply_mujoco_settings(t, {item}, "--mujoco");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(error("iterations=0"),
+            "--mujoco: iterations='0' is not allowed; allowed: an integer in [1, 10000] (MuJoCo's main solver "
+            "iterations per step; its default 100)");
+  EXPECT_NE(error("cone=round").find("cone='round' is not allowed; allowed: elliptic"), std::string::npos);
+  EXPECT_NE(error("timeconst=inf").find("timeconst='inf' is not allowed"), std::string::npos);
+  EXPECT_NE(error("margin=0.5").find("margin='0.5' is not allowed; allowed: a decimal number of metres in [0, 0.1]"),
+            std::string::npos);
+  EXPECT_NE(error("multiccd=yes").find("multiccd='yes'"), std::string::npos);
+  EXPECT_NE(error("max_contacts=-1").find("max_contacts='-1'"), std::string::npos);
+  EXPECT_NE(error("solver=pgs").find("unknown mujoco setting 'solver'; allowed: iterations, cone, timeconst, margin, "
+                                     "multiccd, max_contacts"),
+            std::string::npos);
+  EXPECT_NE(error("cone").find("'cone' is not KEY=VALUE"), std::string::npos);
+  // The settings reach the model: the loaded option and sizes.
+  const auto model = build_model(scene_of(R"({"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1,
+      "mass": 1, "positions": [[0, 1, 0]]})"));
+  MujocoWorld w(model, model->initial, s);
+  RawMujoco raw(w, model->initial);
+  EXPECT_EQ(raw.m->opt.iterations, 20);
+  EXPECT_EQ(raw.m->opt.cone, mjCONE_PYRAMIDAL);
+  EXPECT_EQ(raw.m->opt.enableflags & mjENBL_MULTICCD, 0);
+  EXPECT_EQ(raw.m->nconmax, 500);
+  EXPECT_DOUBLE_EQ(raw.m->geom_solref[2 * raw.geom[0]], 0.01);
+  EXPECT_DOUBLE_EQ(raw.m->geom_margin[raw.geom[0]], 0.002);
+  EXPECT_FLOAT_EQ(w.rotation_traits()->contact_margin, 0.002f);
+}
+
+// ---- MuJoCo 2.2 faults the physics tier reports (docs/engines.md, "mujoco"), each shown
+// on MuJoCo's own data: its contacts (mjData::contact), forces (mj_contactForce), geom
+// poses (geom_xpos, geom_xmat, geom_size) and velocities (qvel).
+
+// rot-drop-220, frame 1: a bar (half extents 0.1 x 0.05 x 0.05, turned 60 deg about
+// (1, 0, 1)) placed 14.9 mm into the +x wall. mjc_BoxBox reports one contact with
+// dist = -7.44 mm: half the depth of the bar's deepest corner below the wall's face,
+// computed from MuJoCo's own geom poses and sizes (contact-geometry fails `depth`: SAT
+// 14.88 mm).
+TEST(MujocoFaults, BoxBoxReportsHalfTheDepthOfAVertexInAFace) {
+  const auto model = build_model(scene_of(
+      R"({"name": "wall", "shape": {"box": [0.05, 1.5, 1.1]}, "count": 1, "mass": 0, "positions": [[1.05, 1.5, 0]]},
+         {"name": "bar", "shape": {"box": [0.1, 0.05, 0.05]}, "count": 1, "mass": 1,
+          "positions": [[0.896762848, 2.77780581, -0.744058728]],
+          "orientation": {"axis": [1, 0, 1], "angle_deg": 60}})"));
+  MujocoWorld w(model, model->initial);
+  RawMujoco raw(w, model->initial);
+  mj_forward(raw.m, raw.d);
+  const std::vector<int> cs = raw.contacts(0, 1);
+  ASSERT_EQ(cs.size(), 1u);
+  const mjContact& c = raw.d->contact[cs[0]];
+  // The deepest corner of the bar beyond the wall's inner face (x = 1.0), along the
+  // contact normal, from MuJoCo's geom data.
+  const int gb = raw.geom[1];
+  double deepest = -1e300;
+  for (int k = 0; k < 8; ++k) {
+    mjtNum local[3], world[3];
+    for (int a = 0; a < 3; ++a) local[a] = ((k >> a) & 1 ? 1 : -1) * raw.m->geom_size[3 * gb + a];
+    mju_mulMatVec(world, raw.d->geom_xmat + 9 * gb, local, 3, 3);
+    for (int a = 0; a < 3; ++a) world[a] += raw.d->geom_xpos[3 * gb + a];
+    deepest = std::max(deepest, -raw.outside_box(raw.geom[0], world));
+  }
+  EXPECT_NEAR(deepest, 0.01488, 1e-4) << "the bar's corner inside the wall";
+  EXPECT_NEAR(-c.dist, 0.5 * deepest, 1e-6) << "MuJoCo's dist is half the corner's depth";
+  RecordProperty("corner_depth_m", std::to_string(deepest));
+  RecordProperty("mujoco_dist_m", std::to_string(c.dist));
+}
+
+// rot-drop-220, frame 29: two cubes (half extents 0.05, the same orientation, 30 deg
+// about (1, 1, 0)) meeting face to face 0.33 mm deep. mjc_BoxBox's face clipping returns
+// five points, one of them 0.1126 m outside the first cube (0 from the second), with a
+// normal force of 1 N: a point on neither contact face (contact-geometry fails
+// `point-off-shape`).
+TEST(MujocoFaults, BoxBoxFaceContactHasAPointOffTheFirstBox) {
+  const auto model = build_model(scene_of(
+      R"({"name": "c", "shape": {"box": [0.05, 0.05, 0.05]}, "count": 2, "mass": 1,
+          "positions": [[-0.317502577, 0.437426082, 0.238953312], [-0.188754643, 0.477100788, 0.30524964]],
+          "orientation": {"axis": [1, 1, 0], "angle_deg": 30}})",
+      R"(, "gravity": [0, 0, 0])"));
+  MujocoWorld w(model, model->initial);
+  RawMujoco raw(w, model->initial);
+  mj_forward(raw.m, raw.d);
+  const std::vector<int> cs = raw.contacts(0, 1);
+  ASSERT_GE(cs.size(), 2u);
+  double worst = 0.0, force = 0.0;
+  for (int k : cs) {
+    const mjContact& c = raw.d->contact[k];
+    const double off = std::max(raw.outside_box(c.geom1, c.pos), raw.outside_box(c.geom2, c.pos));
+    if (off > worst) {
+      worst = off;
+      mjtNum f6[6];
+      mj_contactForce(raw.m, raw.d, k, f6);
+      force = f6[0];
+    }
+  }
+  EXPECT_GT(worst, 0.1) << "a contact point 10 cm off a box of half extent 5 cm";
+  EXPECT_GT(force, 0.0) << "and MuJoCo pushes there";
+  RecordProperty("point_off_box_m", std::to_string(worst));
+}
+
+// Three boxes (half extents 0.1 m, 1 kg) stacked on a floor, each 0.5 mm above the
+// next, settle; at frame 183 the two lower ones, face to face and turned against each
+// other by 1e-7 rad, get five contacts from mjc_BoxBox: four at the face's corners
+// 7.8 micrometres deep and one at an inner point with dist = -0.107 m. MuJoCo's own geom
+// poses put the point 3.9 micrometres inside both boxes and the boxes' overlap along the
+// normal at 7.8 micrometres; the solver answers the 10.7 cm with 34.8 kN over the step
+// and the upper boxes leave at 17 m/s (contact-geometry fails `depth`: SAT 7.81e-6 m).
+TEST(MujocoFaults, AlignedBoxesGetAContactTenCentimetresDeep) {
+  const auto model = build_model(scene_of(
+      R"({"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 3, "mass": 1,
+          "positions": [[0, 0.1005, 0], [0, 0.301, 0], [0, 0.5015, 0]]})",
+      R"(, "response": {"mu_kinetic": 0.5, "restitution": 0.0})", "floor"));
+  MujocoWorld w(model, model->initial);
+  RawMujoco raw(w, model->initial);
+  for (int f = 1; f < 183; ++f) mj_step(raw.m, raw.d);
+  mj_forward(raw.m, raw.d);
+  const std::vector<int> cs = raw.contacts(1, 2);
+  ASSERT_FALSE(cs.empty());
+  const int g1 = raw.geom[1], g2 = raw.geom[2];
+  // The overlap of the two boxes along y (their faces are within 1e-7 rad of y).
+  const double overlap = (raw.d->geom_xpos[3 * g1 + 1] + raw.m->geom_size[3 * g1 + 1]) -
+                         (raw.d->geom_xpos[3 * g2 + 1] - raw.m->geom_size[3 * g2 + 1]);
+  EXPECT_LT(overlap, 1e-5);
+  double deepest = 0.0, inside = 0.0;
+  for (int k : cs) {
+    const mjContact& c = raw.d->contact[k];
+    if (-c.dist > deepest) {
+      deepest = -c.dist;
+      inside = std::max(raw.outside_box(g1, c.pos), raw.outside_box(g2, c.pos));
+    }
+  }
+  EXPECT_GT(deepest, 0.1) << "MuJoCo's deepest contact";
+  EXPECT_LT(std::fabs(inside), 1e-5) << "its point lies on both surfaces";
+  mj_Euler(raw.m, raw.d);
+  EXPECT_GT(raw.d->qvel[raw.dadr[2] + 1], 10.0) << "the middle box is thrown up";
+  RecordProperty("mujoco_depth_m", std::to_string(deepest));
+  RecordProperty("overlap_m", std::to_string(overlap));
+}
+
+// rot-drop-220, frame 130: cube 70 lands on a corner on the floor while sliding. MuJoCo's
+// soft friction is a damper toward its reference acceleration aref = -b v_t (b =
+// 2 / (dmax timeconst)), not Coulomb's maximal dissipation: after the corner's normal
+// impulse has slowed the point's sliding below the reference, the friction force pushes
+// the point along its sliding. Witness from MuJoCo's own data: the friction force of
+// mj_contactForce (world) has positive power on the point's tangential velocity both
+// before the step and after it (qvel) (friction fails `dissipation`, 3 rows).
+TEST(MujocoFaults, SoftFrictionPushesAlongTheSliding) {
+  const Scene scene = load_scene(scene_path("rot-drop-220"));
+  const auto model = build_model(scene);
+  MujocoWorld w(model, model->initial);
+  RawMujoco raw(w, model->initial);
+  for (int f = 1; f < 130; ++f) mj_step(raw.m, raw.d);
+  mj_forward(raw.m, raw.d);  // frame 130's contacts at its pre-step state (mj_step repeats it)
+  const std::vector<int> cs = raw.contacts(0, 70);
+  ASSERT_EQ(cs.size(), 1u);
+  const mjContact c = raw.d->contact[cs[0]];
+  mjtNum f6[6];
+  mj_contactForce(raw.m, raw.d, cs[0], f6);
+  double ft[3];  // the friction force on geom2 (world)
+  for (int k = 0; k < 3; ++k) ft[k] = f6[1] * c.frame[3 + k] + f6[2] * c.frame[6 + k];
+  // geom2's point velocity relative to geom1's, tangential part.
+  auto sliding = [&](double out[3]) {
+    const std::size_t b1 = c.geom1 == raw.geom[0] ? 0 : 70, b2 = b1 == 0 ? 70 : 0;
+    const std::array<double, 3> v2 = raw.point_velocity(b2, c.pos), v1 = raw.point_velocity(b1, c.pos);
+    double vn = 0.0;
+    for (int k = 0; k < 3; ++k) vn += (v2[k] - v1[k]) * c.frame[k];
+    for (int k = 0; k < 3; ++k) out[k] = v2[k] - v1[k] - vn * c.frame[k];
+  };
+  double before[3], after[3];
+  sliding(before);
+  mj_Euler(raw.m, raw.d);  // the rest of mj_step
+  sliding(after);
+  const double p_before = ft[0] * before[0] + ft[1] * before[1] + ft[2] * before[2];
+  const double p_after = ft[0] * after[0] + ft[1] * after[1] + ft[2] * after[2];
+  const double speed_after = std::sqrt(after[0] * after[0] + after[1] * after[1] + after[2] * after[2]);
+  EXPECT_GT(f6[0], 0.0);
+  EXPECT_GT(p_before, 0.0) << "friction power on the sliding before the step (W)";
+  EXPECT_GT(p_after, 0.0) << "friction power on the sliding after the step (W)";
+  EXPECT_GT(speed_after, 0.1) << "the point still slides at 0.15 m/s";
+  RecordProperty("friction_power_after_W", std::to_string(p_after));
+}
+
+#endif  // OCTOCD_HAVE_MUJOCO
