@@ -1,4 +1,4 @@
-// Side-by-side broadphase timing on identical recorded frames (issue 3 item 6b, SPEC 9's
+// Side-by-side broadphase timing on identical recorded frames (issue 3 item 6b, design.md section 9's
 // `replay` idea, as Broadmark does): a scene is run once with the CPU reference, the world
 // AABBs of `--frames` consecutive frames (after `--warmup` frames) are recorded, and every
 // broadphase (octocd's and the Bullet/FCL references) replays exactly those frames.

@@ -1,4 +1,4 @@
-// `octocd bench NAME|SWEEP.json` (SPEC 12): the paper's experiments redone side by side on
+// `octocd bench NAME|SWEEP.json` (design.md section 12): the paper's experiments redone side by side on
 // every engine this octocd has. A sweep expands to points (scene x axis values x engine,
 // or bodies x broadphase x engine); each point is run `repeat` times and every figure is
 // stored with its median and spread. The result file is rewritten (atomically) after every
@@ -409,7 +409,7 @@ int bench_command(const BenchOptions& o) {
     if (!kept.count(p->id)) todo.push_back(p);
   if (s.kind == "steps") {
     // Round-robin: repetition r of every point, then repetition r + 1 of every point, so a
-    // load burst on the machine hits every point's repetitions alike (SPEC 14b). A point
+    // load burst on the machine hits every point's repetitions alike (design.md section 14b). A point
     // is stored once its last repetition ran (a stop before that drops its repetitions).
     std::vector<std::vector<json>> reps(todo.size());
     std::vector<std::vector<double>> started(todo.size());  // each repetition's start, s after t0

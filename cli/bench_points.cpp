@@ -145,7 +145,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   }
   r["device"] = engine->device();
   r["engine_broadphase"] = engine->broadphase_name();
-  r["geometry"] = engine->collision_geometry();  // what the engine collided (SPEC 15)
+  r["geometry"] = engine->collision_geometry();  // what the engine collided (design.md section 15)
   for (int st = 0; st < kStages; ++st)
     r["has_stage"][stage_name(static_cast<Stage>(st))] = engine->has_stage(static_cast<Stage>(st));
 

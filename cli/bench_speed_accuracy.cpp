@@ -1,4 +1,4 @@
-// `octocd bench` sweeps of kind speed-accuracy (SPEC 15, after Erez, Tassa and Todorov,
+// `octocd bench` sweeps of kind speed-accuracy (design.md section 15, after Erez, Tassa and Todorov,
 // ICRA 2015): every engine on identical scenes over a ladder of time steps, the same
 // simulated time each; accuracy as the consistency error against the same line's smallest
 // time step, speed as simulated seconds per wall second. Format: docs/bench-format.md.

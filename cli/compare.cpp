@@ -1,4 +1,4 @@
-// `octocd compare A.h5 B.h5` (SPEC 12, 14): golden-trace regression. First the structure:
+// `octocd compare A.h5 B.h5` (design.md sections 12, 14): golden-trace regression. First the structure:
 // frame count, state rows and their frames, body count, scene name and scene parameters
 // (naming every key that differs); then per quantity, with its own absolute and relative
 // tolerance, the largest difference (frame, body, both values) and the first frame and

@@ -1,4 +1,4 @@
-// `octocd replay` (SPEC 12): recorded world AABBs through several broadphases, each fed
+// `octocd replay` (design.md section 12): recorded world AABBs through several broadphases, each fed
 // exactly the same input (the Broadmark method), checked against each other and against
 // the recorded pair counts, and timed. The replay core here also serves the
 // broadphase-scaling sweeps of `octocd bench` (cli/bench.cpp).
@@ -68,7 +68,7 @@ Vec3 vec3_of(const nlohmann::json& j) {
 
 ReplayInput replay_input_from_trace(const std::string& path, int every, int max_frames) {
   TraceReader tr(path);
-  // Version 2 (a rotating engine, SPEC 13): replay's input is each state advanced by
+  // Version 2 (a rotating engine, design.md section 13): replay's input is each state advanced by
   // octocd's translation-only Eq. 2-3 and the local box translated there; a rotating body's
   // world AABB is the bounds of its rotated shape, and such an engine detects at the
   // pre-step pose: these would not be the AABBs its broadphase saw (docs/trace-format.md).

@@ -1,4 +1,4 @@
-// `octocd report RESULT.json|TRACE.h5 ... -o DIR` (SPEC 12): runs report/make_report.py
+// `octocd report RESULT.json|TRACE.h5 ... -o DIR` (design.md section 12): runs report/make_report.py
 // (matplotlib; Debian python3-matplotlib) on bench results and traces, which writes
 // DIR/index.html (self-contained: plots inline as SVG) and DIR/report.md (+ DIR/plots/);
 // with --baseline a performance gate (exit 4 on a slowdown shown by a one-sided Mann-Whitney U test

@@ -1,6 +1,6 @@
 #pragma once
 /// \file tools.hpp
-/// The `octocd` subcommands of SPEC 12 beside `run` and `validate`: `bench` (sweeps,
+/// The `octocd` subcommands of design.md section 12 beside `run` and `validate`: `bench` (sweeps,
 /// cli/bench.cpp), `replay` (recorded AABBs through several broadphases, cli/replay.cpp),
 /// `compare` (two traces, cli/compare.cpp) and `report` (HTML + Markdown with plots,
 /// cli/report.cpp), plus what they share (cli/tools.cpp): the engine factory, statistics

@@ -72,7 +72,7 @@ struct ValidateOptions {
   bool rotation = false;      ///< --rotation: the scene's bodies rotate (engine bullet only)
   octocd::EngineSettingItems settings;  ///< --ENGINE KEY=VALUE items by engine
   bool engine_given = false;  ///< --engine was on the command line
-  std::string expect;         ///< --expect FILE.json: known failures (SPEC 14b)
+  std::string expect;         ///< --expect FILE.json: known failures (design.md section 14b)
   std::string write_expect;   ///< --write-expect FILE.json: record the current failures
   bool strict = false;        ///< --strict: an expected failure that no longer fails is exit 3
   std::string json;           ///< --json FILE: every row, cause and item as JSON
@@ -656,7 +656,7 @@ Command add_validate_command(CLI::App& app) {
   const auto options = std::make_shared<ValidateOptions>();
   ValidateOptions& val = *options;
   CLI::App* val_cmd = app.add_subcommand(
-      "validate", "Run the validators of SPEC 7 on a scene; exit 0 all pass (or fail as --expect expects), 3 a "
+      "validate", "Run the validators of design.md section 7 on a scene; exit 0 all pass (or fail as --expect expects), 3 a "
                   "new or grown failure, 2 bad input");
   val_cmd->add_option("scene", val.scene, "Scene file (JSON, see docs/scenes.md); or give --trace-in");
   val_cmd->add_option("--against", val.against,

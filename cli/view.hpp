@@ -1,6 +1,6 @@
 #pragma once
 /// \file view.hpp
-/// `octocd view TRACE.h5 [--frame F] [--pair A,B | --body I] [--window K] -o DIR` (SPEC 16,
+/// `octocd view TRACE.h5 [--frame F] [--pair A,B | --body I] [--window K] -o DIR` (design.md section 16,
 /// octocd/view.hpp) and what `octocd validate --view DIR` shares with it: a page per
 /// failing example of a judged trace.
 #include <cstdint>

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Fetches, verifies (SHA-256) and caches the octocd mesh datasets (SPEC section 10).
+# Fetches, verifies (SHA-256) and caches the octocd mesh datasets (design.md section 10).
 #
 #   datasets/fetch.sh                 # all datasets
 #   datasets/fetch.sh --only bunny    # a subset: bunny armadillo dragon asian-dragon

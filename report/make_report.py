@@ -48,7 +48,7 @@ from report_html import Doc, output_dir  # noqa: E402
 from report_plots import OWN_BROADPHASE_CLASS  # noqa: E402,F401
 from report_csv import file_slug, sweep_csv  # noqa: E402
 from report_gate import GATE_MIN_REPS, gate_summary, section_gate  # noqa: E402
-import report_speed_accuracy as RSA  # noqa: E402  (sweeps of kind speed-accuracy, SPEC 15)
+import report_speed_accuracy as RSA  # noqa: E402  (sweeps of kind speed-accuracy, design.md section 15)
 from report_common import load_mark, num, overlap, spread_text  # noqa: E402
 from report_plots import log_ticks, speedup_text  # noqa: E402
 from report_traces import penetration_comment, section_traces  # noqa: E402,F401

@@ -10,7 +10,7 @@ import subprocess
 import sys
 
 from report_common import OCTOCD, fail, np
-import report_speed_accuracy as RSA  # sweeps of kind speed-accuracy (SPEC 15)
+import report_speed_accuracy as RSA  # sweeps of kind speed-accuracy (design.md section 15)
 
 
 def regular_file(path):

@@ -1,4 +1,4 @@
-"""The report's speed-accuracy section (SPEC 15; after Erez, Tassa and Todorov, "Simulation
+"""The report's speed-accuracy section (design.md section 15; after Erez, Tassa and Todorov, "Simulation
 tools for model-based robotics", ICRA 2015): results of `octocd bench` sweeps of kind
 `speed-accuracy` (docs/bench-format.md), per scene
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Nightly validation (docs/validation.md, "Nightly validation";
 # docs/validation-output.md): `octocd
-# validate` on a scene set against a committed expectations file of known failures (SPEC
+# validate` on a scene set against a committed expectations file of known failures (design.md section
 # 14b), one JUnit report per scene plus one merged report, and an exit code a CI job can
 # trust:
 #   0  every validator of every scene passed, or failed only as expected (within the

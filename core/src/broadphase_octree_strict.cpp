@@ -1,6 +1,6 @@
 /// \file broadphase_octree_strict.cpp
 /// `octree-strict`: the paper's world-space octree read literally (paper section 3.2,
-/// Algorithms 1-2; SPEC 5.1; called `octree` in SPEC revision 1). The default `octree` is
+/// Algorithms 1-2; design.md section 5.1). The default `octree` is
 /// the loose octree of broadphase_octree.cpp.
 ///
 /// Node math (grid, node keys, subtree ranges) lives in octocd/strict_octree.hpp, shared
@@ -29,7 +29,7 @@
 /// involved); it is kept sorted by min.x (a merge). Pairs inside a node: sweep and prune
 /// on x; pairs with ancestors: a two-list sweep on x of the own bodies against the
 /// candidate list. Every related pair is met once, then goes
-/// through Eq. 6. `cell_candidates` counts all pairs in related nodes (SPEC 5.1), i.e.
+/// through Eq. 6. `cell_candidates` counts all pairs in related nodes (design.md section 5.1), i.e.
 /// before this culling.
 ///
 /// Incremental use: the sorted order of the previous call is kept and re-sorted by

@@ -1,7 +1,7 @@
 #pragma once
 /// \file broadphase_octree_tree.hpp
 /// The tree of the `octree` broadphase (private to core/src): the loose octree of
-/// SPEC 5.1 built over one call's boxes and queried for their overlapping pairs, steps 1-5
+/// design.md section 5.1 built over one call's boxes and queried for their overlapping pairs, steps 1-5
 /// of broadphase_octree.cpp's description (keys, order, tables, queries, sorted pairs),
 /// implemented in broadphase_octree_tree.cpp. The pair cache across calls (steps 6-7) is
 /// the BroadPhase of broadphase_octree.cpp, which holds one tree (as Jolt's

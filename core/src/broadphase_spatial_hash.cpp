@@ -1,6 +1,6 @@
 /// \file broadphase_spatial_hash.cpp
 /// `spatial-hash`: uniform grid of cell size h, hashed by integer cell coordinates
-/// (paper section 4.2; SPEC 5.1), with coarser grids for bodies much larger than h.
+/// (paper section 4.2; design.md section 5.1), with coarser grids for bodies much larger than h.
 ///
 /// The "hash" is a sorted array of (cell key, body) entries, the cell key packing a grid
 /// level (4 bits) and the three integer cell coordinates (20 bits each), which is

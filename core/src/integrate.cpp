@@ -1,4 +1,4 @@
-// Per-body stages of the CPU step (SPEC 4.1, 4.2, Eq. 23): integrate, world AABBs, clamp.
+// Per-body stages of the CPU step (design.md sections 4.1, 4.2, Eq. 23): integrate, world AABBs, clamp.
 // The CUDA engine's gpu/src/integrate.cu runs the same OCTOCD_HD functions per thread.
 #include "octocd/stages.hpp"
 

@@ -1,5 +1,5 @@
 /// \file mesh.cpp
-/// Mesh loading (assimp), welding, normalisation (SPEC 3) and procedural shapes.
+/// Mesh loading (assimp), welding, normalisation (design.md section 3) and procedural shapes.
 
 #include "octocd/mesh.hpp"
 

@@ -1,5 +1,5 @@
 /// \file mesh_octree.cpp
-/// Per-mesh octree of the midphase (SPEC 5.2, paper Algorithm A1).
+/// Per-mesh octree of the midphase (design.md section 5.2, paper Algorithm A1).
 
 #include "octocd/mesh_octree.hpp"
 #include "octocd/vertex_blocks.hpp"
@@ -15,7 +15,7 @@ namespace octocd {
 namespace {
 
 constexpr int kMaxDepth = 10;       // 10 bits per axis, 30-bit Morton codes
-constexpr int kAutoMaxDepth = 8;    // SPEC 5.2: `auto` goes at most 8 deep
+constexpr int kAutoMaxDepth = 8;    // design.md section 5.2: `auto` goes at most 8 deep
 constexpr std::uint32_t kAutoLeafLimit = 64;
 
 Aabb tight_bounds(const std::vector<Vec3>& v) {

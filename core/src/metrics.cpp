@@ -1,4 +1,4 @@
-// The metrics stage of the CPU step (SPEC 8 fields of FrameMetrics) and the non-finite
+// The metrics stage of the CPU step (design.md section 8 fields of FrameMetrics) and the non-finite
 // guard; gpu/src/metrics.cu computes the same fields on the device.
 #include "octocd/stages.hpp"
 

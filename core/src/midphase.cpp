@@ -1,6 +1,6 @@
 /// \file midphase.cpp
-/// Midphase over per-mesh octree levels (SPEC 5.2) and the vertex-proximity narrow phase
-/// (paper Eq. 7-8, Algorithm A2; SPEC 5.3), and the step's midphase stage (confirm_pairs:
+/// Midphase over per-mesh octree levels (design.md section 5.2) and the vertex-proximity narrow phase
+/// (paper Eq. 7-8, Algorithm A2; design.md section 5.3), and the step's midphase stage (confirm_pairs:
 /// every broadphase pair of a frame; gpu/src/midphase.cu is the CUDA engine's).
 ///
 /// The per-pair tests themselves live in octocd/midphase_hd.hpp (OCTOCD_HD functions that

@@ -1,4 +1,4 @@
-// The model every engine is built from (SPEC 3): shapes, walls, bodies, theta.
+// The model every engine is built from (design.md section 3): shapes, walls, bodies, theta.
 #include <algorithm>
 #include <cstring>
 #include <map>
@@ -21,7 +21,7 @@ struct WallBox {
   Vec3 half;
 };
 
-/// SPEC 3 "static walls on/off": boxes of thickness t lying outside the domain and
+/// design.md section 3 "static walls on/off": boxes of thickness t lying outside the domain and
 /// touching it; side walls and the ceiling overlap at the edges so no body slips out.
 std::vector<WallBox> make_walls(const Scene& s) {
   std::vector<WallBox> walls;
@@ -53,7 +53,7 @@ std::shared_ptr<const Model> build_model(const Scene& scene) {
 
   const int depth_setting = sc.mesh_octree_depth;
   const int needed = sc.midphase.aabb_only ? 0 : sc.midphase.max_level();
-  // Rotating scenes (SPEC 13, `--engine bullet` only) also carry every body's initial
+  // Rotating scenes (design.md section 13, `--engine bullet` only) also carry every body's initial
   // orientation and angular velocity; translation-only scenes leave them empty.
   const bool rotates = scene_rotates(sc);
   auto add_body = [&](std::uint32_t shape, const std::string& group, Vec3 x, Vec3 v, float w, Quat q = {},
@@ -140,7 +140,7 @@ std::shared_ptr<const Model> build_model(const Scene& scene) {
                w > 0.0f ? vs[static_cast<std::size_t>(i)] : Vec3{}, w, g.orientation,
                w > 0.0f ? g.angular_velocity : Vec3{});
   }
-  // theta per shape pair (SPEC 6): the scene's value, or `auto` = the larger mean edge.
+  // theta per shape pair (design.md section 6): the scene's value, or `auto` = the larger mean edge.
   model->theta_shape.resize(shapes.size());
   for (std::size_t a = 0; a < shapes.size(); ++a) model->theta_shape[a] = sc.theta ? *sc.theta : shapes[a].mean_edge;
   return model;

@@ -1,4 +1,4 @@
-// The response stage of the CPU step (SPEC 6), Jacobi style: every contact of a pass reads
+// The response stage of the CPU step (design.md section 6), Jacobi style: every contact of a pass reads
 // the state the previous pass left (the first: the integrated state); per body, position
 // corrections are averaged over its contacts and velocity changes summed, in (a, b)
 // order. The CUDA engine's gpu/src/response.cu runs the same terms (octocd::contact_terms)

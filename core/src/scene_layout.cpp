@@ -1,5 +1,5 @@
 /// \file scene_layout.cpp
-/// The deterministic body generators of a scene's groups (SPEC section 3): grid and
+/// The deterministic body generators of a scene's groups (design.md section 3): grid and
 /// random layouts of the bodies' centres, fixed and random initial velocities
 /// (SplitMix64 streams, the same on every platform).
 

@@ -1,4 +1,4 @@
-// The HDF5 trace writer (SPEC section 8; layout: docs/trace-format.md) and the metadata
+// The HDF5 trace writer (design.md section 8; layout: docs/trace-format.md) and the metadata
 // and body tables it takes from an engine. The summary of a trace read back is in
 // trace_summary.cpp, the XDMF sidecar in trace_xdmf.cpp.
 //
@@ -884,7 +884,7 @@ TraceMetadata trace_metadata(const Engine& engine, int state_every) {
                      {"octree_depth", s.broadphase.octree_depth},
                      {"cell_size", s.broadphase.cell_size}};
   p["midphase"] = engine.midphase_name();
-  p["geometry"] = engine.collision_geometry();  // what the engine collided (SPEC 15)
+  p["geometry"] = engine.collision_geometry();  // what the engine collided (design.md section 15)
   p["mesh_octree_depth"] = s.mesh_octree_depth;
   meta.parameters_json = p.dump();
   meta.engine = engine.name();

@@ -1,5 +1,5 @@
 // The CPU reference engine: World::step runs the stages of octocd/stages.hpp in order
-// (SPEC 4), times each and records the frame.
+// (design.md section 4), times each and records the frame.
 #include "octocd/world.hpp"
 
 #include <chrono>
@@ -41,7 +41,7 @@ World::World(const Scene& scene, std::unique_ptr<BroadPhase> broadphase)
 World::World(std::shared_ptr<const Model> model, std::unique_ptr<BroadPhase> broadphase)
     : model_(std::move(model)), state_(model_->initial), broadphase_(std::move(broadphase)) {
   if (!broadphase_) throw InputError("World: no broadphase given");
-  require_translation_only(model_->scene, "cpu");  // SPEC 3: octocd's engines translate only
+  require_translation_only(model_->scene, "cpu");  // design.md section 3: octocd's engines translate only
   aabbs_.resize(state_.size());
   update_world_aabbs(*model_, state_.x, aabbs_);
 }
@@ -67,12 +67,12 @@ const FrameMetrics& World::step() {
   integrate_bodies(state_, scene.gravity, scene.dt);
   stage_ms(Stage::Integrate) = ms_since(t0);
 
-  // 2. World AABBs (SPEC 4.2; integrate.cpp).
+  // 2. World AABBs (design.md section 4.2; integrate.cpp).
   t0 = Clock::now();
   update_world_aabbs(model, state_.x, aabbs_);
   stage_ms(Stage::Aabbs) = ms_since(t0);
 
-  // 3. Broadphase (SPEC 5.1; broadphase_*.cpp).
+  // 3. Broadphase (design.md section 5.1; broadphase_*.cpp).
   t0 = Clock::now();
   BroadPhaseStats bp;
   broadphase_->find_pairs(aabbs_, pairs_, bp);
@@ -80,12 +80,12 @@ const FrameMetrics& World::step() {
   m.aabb_pairs = pairs_.size();
   stage_ms(Stage::Broadphase) = ms_since(t0);
 
-  // 4. Midphase + narrow phase (SPEC 5.2-5.3; midphase.cpp).
+  // 4. Midphase + narrow phase (design.md sections 5.2-5.3; midphase.cpp).
   t0 = Clock::now();
   confirm_pairs(model, state_, aabbs_, pairs_, confirmed_, m);
   stage_ms(Stage::Midphase) = ms_since(t0);
 
-  // 5. Response (SPEC 6; response.cpp), then the clamp (Eq. 23; integrate.cpp).
+  // 5. Response (design.md section 6; response.cpp), then the clamp (Eq. 23; integrate.cpp).
   t0 = Clock::now();
   respond(model, state_, aabbs_, pairs_, confirmed_, scene.response, response_, contacts_);
   clamp_velocities(state_, scene.response.max_velocity);

@@ -220,7 +220,7 @@ void apply_engine_options(Scene& scene, const EngineInfo& info, const EngineOpti
           names.midphase, scene.midphase.max_level(), depth, file, depth));
   }
   if (o.rotation && !info.rotates)
-    throw InputError(fmt::format("{}: engine {} translates only (SPEC 3); allowed: {} with {}", names.rotation,
+    throw InputError(fmt::format("{}: engine {} translates only (design.md section 3); allowed: {} with {}", names.rotation,
                                  info.name, names.rotation,
                                  choose_engine(names, [](const EngineInfo& e) { return e.rotates; })));
   if (o.rotation) scene.rotation = true;

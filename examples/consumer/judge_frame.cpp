@@ -5,7 +5,7 @@
 //    broadphase-completeness holds it to flat's set and says octocd's rule is inclusive
 //    (Eq. 6). (A touching pair is not a penetrating one: without the declaration a
 //    conservative broadphase may leave it out.)
-// 2. A rotating engine (SPEC 13): two boxes, one turned 45 degrees about y and spinning,
+// 2. A rotating engine (design.md section 13): two boxes, one turned 45 degrees about y and spinning,
 //    with orientations, angular velocities, its pre-step detection pose and a two-row
 //    contact manifold with world points, judged the same way.
 // Prints each verdicts table (every row names its tier: physics or model); exit 0 when

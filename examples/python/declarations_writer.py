@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""An engine that declares what it is (docs/trace-format.md, "Declarations"; SPEC 13b.12):
+"""An engine that declares what it is (docs/trace-format.md, "Declarations"; design.md section 13b.12):
 explicit Euler (`integrator`), a gyroscopic term (`gyroscopic`), compliant contacts
 (`contact_model`) and joints locking rotation (`/bodies/locked_dofs`). Body 0: a static
 floor; body 1: a flat box (0.4 x 0.2 x 0.1 m, 1 kg) spinning alone in the air about a
@@ -69,7 +69,7 @@ for f in range(F):
 with h5py.File(sys.argv[1], "w") as f:
     f.attrs.update(format="octocd-trace", version=2, engine="declared", dt=DT, gravity=G, mu=MU,
                    restitution=0.0, contact_margin=0.005)
-    # The declarations (SPEC 13b.12): strings; gyroscopic may also be the integer 1 / 0
+    # The declarations (design.md section 13b.12): strings; gyroscopic may also be the integer 1 / 0
     # (not a numpy/Python bool, which HDF5 stores as an enum).
     f.attrs["integrator"] = "explicit"      # x' = x + dt v, q' = q advanced by w dt
     f.attrs["gyroscopic"] = "true"          # w' = w - dt I_w^-1 (w x I_w w) without contacts

@@ -4,7 +4,7 @@
 
 Seven axis-aligned boxes: a static floor (body 0), a box falling onto it (1), a stack of
 two boxes resting on it (2, 3), a box flying sideways (4) and two boxes colliding in
-mid-air (5, 6). Each step follows SPEC 4's order: semi-implicit Euler, world AABBs, all
+mid-air (5, 6). Each step follows design.md section 4's order: semi-implicit Euler, world AABBs, all
 pairs with overlapping AABBs (inclusive, Eq. 6), one contact per pair (least-overlap
 axis, normal from B to A), position correction down to the slop and an inelastic normal
 impulse, Jacobi style. No friction.
@@ -23,7 +23,7 @@ import numpy as np
 F32 = np.float32
 DT = F32(0.01)
 GRAVITY = np.array([0.0, -9.81, 0.0], dtype=F32)
-SLOP = F32(0.001)  # delta of SPEC 6 (the scene-less default the validators use)
+SLOP = F32(0.001)  # delta of design.md section 6 (the scene-less default the validators use)
 FRAMES = 20
 PLANTED_FRAME, PLANTED_PAIR = 7, (2, 3)
 

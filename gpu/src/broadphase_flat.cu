@@ -1,4 +1,4 @@
-// Broadphase `flat` on the device (SPEC 5.1, the device oracle): every pair (i, j), i < j,
+// Broadphase `flat` on the device (design.md section 5.1, the device oracle): every pair (i, j), i < j,
 // tested with the inclusive AABB overlap of Eq. 6 (octocd::overlaps). Counting pass, then
 // an exclusive scan and a fill pass: body i writes its pair keys in j order at its scanned
 // offset (those that fit the capacity; the total tells the host to regrow and rerun).

@@ -1,5 +1,5 @@
 #pragma once
-// The per-warp row of broadphase `flat` (SPEC 5.1, Eq. 6), shared by broadphase_flat.cu's
+// The per-warp row of broadphase `flat` (design.md section 5.1, Eq. 6), shared by broadphase_flat.cu's
 // counting and fill kernels and by the fused small-scene step (small_step.cu), which also
 // walks the rows "backwards" (the bodies a < i meeting body i) to build its body-major
 // contact index without a sort. CUDA only (nvcc).

@@ -1,4 +1,4 @@
-// Broadphase `spatial-hash` on the device (paper section 4.2; SPEC 5.1): the uniform grid
+// Broadphase `spatial-hash` on the device (paper section 4.2; design.md section 5.1): the uniform grid
 // of cell size h of the CPU's core/src/broadphase_spatial_hash.cpp, with every cell
 // decision from octocd/spatial_hash.hpp (the header the CPU uses): a body's cells
 // (hash_span), cell keys packing the integer cell coordinates (hash_cell_key), sorted

@@ -1,4 +1,4 @@
-// Broadphase `octree` on the device: the loose octree of SPEC 5.1 (Ulrich 2000, looseness
+// Broadphase `octree` on the device: the loose octree of design.md section 5.1 (Ulrich 2000, looseness
 // 2) with every cell and level decision from octocd/loose_octree.hpp, the header the CPU
 // driver (core/src/broadphase_octree.cpp) uses. Steps (orchestrated by cuda_world.cpp):
 // 1. keys: D_w (the scene's, or `auto` from the smallest body extent: a block minimum,

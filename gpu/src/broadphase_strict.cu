@@ -1,4 +1,4 @@
-// Broadphase `octree-strict` on the device (SPEC 5.1: the paper's world octree read
+// Broadphase `octree-strict` on the device (design.md section 5.1: the paper's world octree read
 // literally, paper section 3.2, Algorithms 1-2), the same structure as the CPU's
 // core/src/broadphase_octree_strict.cpp, with every node decision from
 // octocd/strict_octree.hpp (the header the CPU uses). Enqueued on one stream, with no host
@@ -25,7 +25,7 @@
 // The exact tests made are exactly the pairs in related nodes, which is the CPU's
 // BroadPhaseStats::cell_candidates for `octree-strict` (before its subtree-bounds culling
 // and sweep): *out.candidates gets the same number as the CPU reports.
-// Cost: like the CPU's (SPEC 5.1) a body that straddles a split plane near the root is
+// Cost: like the CPU's (design.md section 5.1) a body that straddles a split plane near the root is
 // tested against its whole subtree; the warp per slot spreads that work over 32 lanes.
 #include "broadphase_common.cuh"
 #include "octocd/broadphase.hpp"

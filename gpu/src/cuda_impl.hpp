@@ -262,7 +262,7 @@ struct CudaWorld::Impl {
   /// Sizes every buffer for the current capacities (outside any capture); a change drops
   /// the captured graphs.
   void prepare();
-  /// Broadphase `flat` (SPEC 5.1): count, exclusive scan over n + 1, fill the keys that fit.
+  /// Broadphase `flat` (design.md section 5.1): count, exclusive scan over n + 1, fill the keys that fit.
   void flat_broadphase();
   /// Enqueues one whole step on the stream: no allocation, no host synchronisation (it
   /// may be captured into a graph). `recording`: the first pass writes contact records;

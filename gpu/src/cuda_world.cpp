@@ -1,4 +1,4 @@
-// The CUDA engine (SPEC 11): construction (the device, its memory check, the shapes'
+// The CUDA engine (design.md section 11): construction (the device, its memory check, the shapes'
 // packed octrees and the bodies uploaded once), CudaWorld's methods, and one step: the path
 // fixed at construction (step_stages.cpp or step_small.cpp), a rerun with larger buffers
 // while a list overflows, then the metrics, stage times (stage_times.cpp) and recording read
@@ -67,7 +67,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
                      const CudaSettings& settings, const TestHooks& hooks)
     : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
   if (!model_) throw InputError("CudaWorld: no model given");
-  require_translation_only(model_->scene, "cuda");  // SPEC 3: octocd's engines translate only
+  require_translation_only(model_->scene, "cuda");  // design.md section 3: octocd's engines translate only
   // Needs no device; throws InputError for more than kCudaMaxBodies bodies and for a
   // broadphase the device does not have, before anything is sized from the body count.
   const std::uint64_t needed = cuda_device_bytes_needed(*model_, broadphase);
@@ -178,7 +178,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   const std::size_t n = m.initial.size();  // <= kCudaMaxBodies (checked above)
   d.n = static_cast<std::uint32_t>(n);
 
-  // Midphase level list (SPEC 5.2), as the CPU's confirm_contact converts it.
+  // Midphase level list (design.md section 5.2), as the CPU's confirm_contact converts it.
   const MidphaseConfig& mc = m.scene.midphase;
   d.levels.aabb_only = mc.aabb_only;
   d.levels.count = static_cast<int>(std::min<std::size_t>(mc.levels.size(), hd::kMidphaseMaxLevels));

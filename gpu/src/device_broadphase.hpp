@@ -1,7 +1,7 @@
 #pragma once
 /// \file device_broadphase.hpp
 /// The seam between the CUDA engine's step (cuda_world.cpp) and its device broadphases
-/// (SPEC 5.1 on the GPU): `octree` (loose), `octree-strict`, `spatial-hash`, and `lbvh`
+/// (design.md section 5.1 on the GPU): `octree` (loose), `octree-strict`, `spatial-hash`, and `lbvh`
 /// (a Karras 2012 linear BVH: the field's standard GPU baseline, on the device only);
 /// `flat` stays inside cuda_world.cpp as the device oracle.
 ///
@@ -109,7 +109,7 @@ std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig&
 /// sets). The pair set is the same.
 enum class LooseOctreeQuery { Auto, Warp, Thread };
 
-/// `octree` (SPEC 5.1, Ulrich's loose octree, cell math of loose_octree.hpp), depth
+/// `octree` (design.md section 5.1, Ulrich's loose octree, cell math of loose_octree.hpp), depth
 /// config.octree_depth (-1 = auto), query kernel `query`. broadphase_octree.cu.
 std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain,
                                                            LooseOctreeQuery query = LooseOctreeQuery::Auto);
@@ -124,11 +124,11 @@ std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfi
 /// always `flat`'s once settle() says Valid. Name "octree".
 std::unique_ptr<DeviceBroadPhase> make_device_coherent_octree(const BroadPhaseConfig& config, const Aabb& domain,
                                                               float margin_fraction = 0.125f);
-/// `octree-strict` (SPEC 5.1, the paper's octree read literally, as
+/// `octree-strict` (design.md section 5.1, the paper's octree read literally, as
 /// core/src/broadphase_octree_strict.cpp), depth config.octree_depth (-1 = auto).
 /// broadphase_strict.cu.
 std::unique_ptr<DeviceBroadPhase> make_device_strict_octree(const BroadPhaseConfig& config, const Aabb& domain);
-/// `spatial-hash` (paper section 4.2; SPEC 5.1, as core/src/broadphase_spatial_hash.cpp),
+/// `spatial-hash` (paper section 4.2; design.md section 5.1, as core/src/broadphase_spatial_hash.cpp),
 /// cell size config.cell_size. broadphase_hash.cu.
 std::unique_ptr<DeviceBroadPhase> make_device_spatial_hash(const BroadPhaseConfig& config);
 /// `lbvh`: a linear BVH (Karras 2012) rebuilt on every find() from a CUB radix sort of the

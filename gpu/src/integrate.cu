@@ -1,4 +1,4 @@
-// Per-body stages of the CUDA step (SPEC 4.1, 4.2, Eq. 23): integrate, world AABBs, clamp.
+// Per-body stages of the CUDA step (design.md sections 4.1, 4.2, Eq. 23): integrate, world AABBs, clamp.
 // Each thread calls the same OCTOCD_HD function World::step calls for its body, through
 // the per-body functions of integrate.cuh (which the fused small step calls too).
 #include "integrate.cuh"

@@ -1,5 +1,5 @@
 #pragma once
-// Per-body device code of integrate.cu (SPEC 4.1, 4.2, Eq. 23): one call per body, shared
+// Per-body device code of integrate.cu (design.md sections 4.1, 4.2, Eq. 23): one call per body, shared
 // by the per-stage kernels (integrate.cu) and the fused small-scene step (small_step.cu).
 // Each calls the same OCTOCD_HD function World::step calls for its body. CUDA only (nvcc).
 #include "kernels.hpp"

@@ -1,11 +1,11 @@
-// Frame metrics on the device (SPEC 8 fields of FrameMetrics) and the non-finite guard:
+// Frame metrics on the device (design.md section 8 fields of FrameMetrics) and the non-finite guard:
 // G blocks of B = kMetricsBlockSize threads (G = 1 up to kMetricsOneBlockBodies bodies,
 // else kMetricsBlocks); thread t of block g accumulates elements gB + t, gB + t + GB, ...
 // in order, then a fixed shared-memory tree combines the threads of a block; with G > 1
 // a second one-block pass combines the G partial results in the same tree. Same n, same
 // order:
 // the doubles are reproducible run to run (they may differ from the CPU's sequential sums
-// in the last bits, which SPEC 11 allows; the float32 state never depends on them).
+// in the last bits, which design.md section 11 allows; the float32 state never depends on them).
 #include "kernels.hpp"
 #include "metrics.cuh"
 

@@ -1,4 +1,4 @@
-// Midphase + narrow phase on the device (SPEC 5.2-5.3): the kernels over the per-item
+// Midphase + narrow phase on the device (design.md sections 5.2-5.3): the kernels over the per-item
 // device code of midphase.cuh (see there for the work lists, the counts and the order).
 #include "kernels.hpp"
 #include "midphase.cuh"

@@ -1,5 +1,5 @@
 #pragma once
-// Device code of the midphase + narrow phase (SPEC 5.2-5.3) as per-level work lists of box
+// Device code of the midphase + narrow phase (design.md sections 5.2-5.3) as per-level work lists of box
 // pairs, so a pair whose meshes overlap deeply spreads over many warps instead of one
 // thread:
 // - start (one warp per candidate pair): hd::setup_pair, the set-up the CPU's

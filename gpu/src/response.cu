@@ -1,4 +1,4 @@
-// Response on the device (SPEC 6), the same Jacobi pass World::step runs:
+// Response on the device (design.md section 6), the same Jacobi pass World::step runs:
 // - contact index: body i's confirmed contacts in k order are its pairs (a, i), a < i,
 //   then its pairs (i, b), since the pairs are sorted by (a, b). The second are a run of
 //   the candidate pairs; the first are the b-side entries of i. One 64-bit count per body

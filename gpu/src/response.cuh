@@ -1,5 +1,5 @@
 #pragma once
-// Per-contact and per-body device code of the response (SPEC 6), shared by response.cu's
+// Per-contact and per-body device code of the response (design.md section 6), shared by response.cu's
 // kernels and the fused small-scene step (small_step.cu): the terms of one candidate pair
 // (octocd::contact_terms) and a body's sequential reduction of its kept contacts' terms
 // (no float atomics) followed by apply_contact_sums. The caller decides the order in which

@@ -1,4 +1,4 @@
-// The per-stage path of the cuda engine (SPEC 11): the step's stages in World::step's
+// The per-stage path of the cuda engine (design.md section 11): the step's stages in World::step's
 // order as separate kernels (integrate.cu, the broadphases, midphase.cu, response.cu,
 // metrics.cu), enqueued on one stream with no host synchronisation inside a step, replayed
 // from a CUDA graph while the buffer capacities do not change; the buffers' sizes, the
@@ -279,7 +279,7 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
   // 2. World AABBs.
   launched(gpu::launch_aabbs(b, stream), "aabbs");
   record_event(2, with_events);
-  // 3. Broadphase (SPEC 5.1): pair keys (padding sorts last), sorted, unpacked.
+  // 3. Broadphase (design.md section 5.1): pair keys (padding sorts last), sorted, unpacked.
   static_assert(offsetof(gpu::StepStats, counts) ==
                         offsetof(gpu::StepStats, counters) + sizeof(gpu::StepStats::counters) &&
                     offsetof(gpu::StepStats, index_long) ==
@@ -317,7 +317,7 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
                                 2 * gpu::key_bits(n), stream),
              "cub::DeviceRadixSort::SortKeys");
   record_event(3, with_events);  // the pairs are unpacked from the sorted keys by mid_start / mid_decide
-  // 4. Midphase + narrow phase (SPEC 5.2-5.3) as per-level work lists, or, when no pair
+  // 4. Midphase + narrow phase (design.md sections 5.2-5.3) as per-level work lists, or, when no pair
   // can need a level step (no mesh shape, or no level), decide: a thread per pair.
   gpu::MidListDesc md = mid_desc(pair_keys_sorted.get());
   const bool lists_needed = any_mesh && level_steps > 0;
@@ -350,7 +350,7 @@ void CudaWorld::Impl::enqueue_step(const Scene& scene, bool recording, bool with
     launched(gpu::launch_mid_keep(md, pair_grid(), stream), "mid_keep");
   }
   record_event(4, with_events);
-  // 5. Response (SPEC 6): the contact index (response.cu) of the first icap() pairs (a
+  // 5. Response (design.md section 6): the contact index (response.cu) of the first icap() pairs (a
   // step with more runs again: grow_if_needed), `iterations` passes, the clamp (Eq. 23)
   // fused into the last.
   const gpu::IndexDesc id = index_desc();

@@ -1,5 +1,5 @@
 """octocd from Python: run octocd's engines, read what each step did as NumPy arrays, and
-judge another engine's frames with octocd's validators (SPEC 7, SPEC 13).
+judge another engine's frames with octocd's validators (design.md section 7, design.md section 13).
 
     import octocd
     scene = octocd.load_scene("datasets/scenes/box-stack.json")
@@ -9,7 +9,7 @@ judge another engine's frames with octocd's validators (SPEC 7, SPEC 13).
     rec = eng.last_frame()             # octocd.FrameRecord: pairs, contacts, stage times
     results = octocd.validate_frame(local_boxes=..., x_pre=..., ...)   # another engine
 
-Units: metres, seconds, kilograms; states are float32 (SPEC 2).
+Units: metres, seconds, kilograms; states are float32 (design.md section 2).
 
 Arrays given to octocd: float arguments take float32 as is and round other float dtypes
 (float64, float16) to float32, as `octocd validate --trace-in` does with float64 datasets;

@@ -103,7 +103,7 @@ class Engine:
         self._e = _octocd.Engine(self.scene, engine, broadphase, midphase, bool(record), items)
 
     def step(self, n: int = 1) -> Dict[str, Any]:
-        """Runs n steps (SPEC 4) with the GIL released; Ctrl-C raises KeyboardInterrupt
+        """Runs n steps (design.md section 4) with the GIL released; Ctrl-C raises KeyboardInterrupt
         between steps, within one step's time, leaving the engine at its last whole step
         (frame, state and last_frame() as after that step; stepping may go on). Without
         recording, the steps are promised to the engine (Engine::plan_steps): the cuda

@@ -15,7 +15,7 @@ InputError = _octocd.InputError
 
 @dataclass
 class ValidationExample:
-    """One judged item of a failing cause (SPEC 13b.13): frame (step; -1 when not a
+    """One judged item of a failing cause (design.md section 13b.13): frame (step; -1 when not a
     frame's item), item ("pair (A, B)", "body I", "group (I, J, K)", "" for the run),
     figure (in its cause's unit) and one line of text."""
     frame: int
@@ -43,7 +43,7 @@ class ValidationCause:
 class ValidationResult:
     """One validator's verdict (one row of the `octocd validate` table).
 
-    tier: "physics" (any engine, judged on the posed shapes) or "model" (octocd's SPEC 6
+    tier: "physics" (any engine, judged on the posed shapes) or "model" (octocd's design.md section 6
     response); name: e.g. "candidate-sets"; figure: what `measured` is, with its unit;
     measured, bound: the figure and the bound it is held to; passed: within the bound;
     applicable: False when there was nothing to judge (n/a, counts as a pass); verdict:
@@ -78,7 +78,7 @@ class ValidationResult:
 
 @dataclass
 class ExpectationOutcome:
-    """What became of one failing cause or one expectation (SPEC 14b): outcome is
+    """What became of one failing cause or one expectation (design.md section 14b): outcome is
     "expected" (within its figure and items), "new" (no expectation), "grown" (beyond its
     figure, or items outside the listed ones: `outside`) or "fixed" (expected, no longer
     failing); worst: the measured figure, allowed: the expectation's (new: the row's
@@ -146,7 +146,7 @@ class Validator:
           broadphase_exact, contact_geometry ("shape" or "aabb"), slop (m).
     Options: engine (names it in verdicts), against_fcl (Bullet/FCL broadphases beside
     `flat`, FCL normals), spec6_response (also judge the applied state against octocd's
-    SPEC 6 response), tolerances ({name: value}, see octocd.tolerances()).
+    design.md section 6 response), tolerances ({name: value}, see octocd.tolerances()).
 
     Raises InputError naming the argument for inconsistent bodies.
     """
@@ -177,7 +177,7 @@ class Validator:
 
         frame: the step's number (1-based), named in verdicts.
         aabbs: (n, 2, 3) world AABBs its collision detection used (m); None: derived
-            from x_pre, v_pre by SPEC 4.1 (semi-implicit Euler) for non-rotating bodies.
+            from x_pre, v_pre by design.md section 4.1 (semi-implicit Euler) for non-rotating bodies.
         pairs: (P, 2) int candidate pairs (a < b < n, sorted, unique); None: the engine
             has no candidate set (candidate-sets is then not judged on this frame).
         contacts: dict pair (C, 2) int, normal (C, 3) (unit, from B to A), depth (C,)
@@ -232,7 +232,7 @@ def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max
     Raises InputError "PATH: DATASET: [frame F: ]PROBLEM; allowed: ..." for a missing,
     unreadable or malformed trace. The GIL is released while judging.
 
-    expect: known failures (SPEC 14b; docs/validation-output.md), a path to an
+    expect: known failures (design.md section 14b; docs/validation-output.md), a path to an
     expectations file or the same as a dict ({"expectations": [...]}); entries name the
     trace by its file name ("trace": "run.h5"). Rows whose every failure is expected read
     verdict "expected"; the returned list's `outcomes` and `exit_code` (3 for a new or

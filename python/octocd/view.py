@@ -1,4 +1,4 @@
-"""octocd.view: the page of `octocd view` (SPEC 16; docs/debugging.md) from Python."""
+"""octocd.view: the page of `octocd view` (design.md section 16; docs/debugging.md) from Python."""
 from __future__ import annotations
 
 import os as _os
@@ -12,7 +12,7 @@ InputError = _octocd.InputError
 def view(trace: Union[str, "_os.PathLike[str]"], *, frame: int = 1, pair: Optional[Sequence[int]] = None,
          body: Optional[int] = None, window: int = 5, out_dir: Union[str, "_os.PathLike[str]"] = ".") -> Dict[str, Any]:
     """Writes the page `octocd view TRACE --frame F [--pair A,B | --body I] --window K -o
-    OUT_DIR` writes (SPEC 16; docs/debugging.md): one self-contained HTML file drawing the
+    OUT_DIR` writes (design.md section 16; docs/debugging.md): one self-contained HTML file drawing the
     frame's posed shapes near the pair or body, their AABBs, the engine's contacts and the
     physics tier's reference (SAT or FCL), with a frame slider over frame +- window. The
     trace (octocd's with every state, or an external trace v1/v2) is read through the

@@ -1054,7 +1054,7 @@ class PyValidator {
         throw InputError("contacts: not a dict; allowed: {'pair': (C, 2), 'normal': (C, 3), 'depth': (C,), 'jn': "
                          "(C,), 'jt': (C,)[, 'point': (C, 3)]}");
       const py::dict c = py::reinterpret_borrow<py::dict>(contacts);
-      // octocd's own FrameRecord.contacts adds the SPEC 6 terms: accepted and ignored (the
+      // octocd's own FrameRecord.contacts adds the design.md section 6 terms: accepted and ignored (the
       // validators derive them from the states), so an octocd record can be fed back.
       static const char* const kKeys[] = {"pair", "normal", "depth", "jn", "jt", "point", "axis",
                                           "v_a", "v_b", "dx_a", "dx_b", "dv_a", "dv_b"};
@@ -1062,7 +1062,7 @@ class PyValidator {
         const std::string k = py::str(item.first);
         if (std::find(std::begin(kKeys), std::end(kKeys), k) == std::end(kKeys))
           throw InputError(fmt::format("contacts: unknown key '{}'; allowed: pair, normal, depth, jn, jt, point "
-                                       "(and, ignored, the SPEC 6 terms of octocd's records: axis, v_a, v_b, dx_a, "
+                                       "(and, ignored, the design.md section 6 terms of octocd's records: axis, v_a, v_b, dx_a, "
                                        "dx_b, dv_a, dv_b)",
                                        k));
       }
@@ -1347,7 +1347,7 @@ PYBIND11_MODULE(_octocd, m) {
     return format_results(rs, overridden);
   });
 
-  // octocd.view (SPEC 16): the page of `octocd view`, by the same code (octocd/view.hpp).
+  // octocd.view (design.md section 16): the page of `octocd view`, by the same code (octocd/view.hpp).
   m.def(
       "view",
       [](const std::string& trace, std::int64_t frame, const std::optional<std::pair<std::int64_t, std::int64_t>>& pair,

@@ -1,6 +1,6 @@
 /// \file bullet_broadphase.cpp
 /// Bullet reference broadphases `bullet-dbvt` (btDbvtBroadphase) and `bullet-sap`
-/// (bt32BitAxisSweep3) behind octocd::BroadPhase (SPEC 5.1).
+/// (bt32BitAxisSweep3) behind octocd::BroadPhase (design.md section 5.1).
 ///
 /// Both are used incrementally, as Bullet's own world uses them: one proxy per body is
 /// created on the first call (user pointer = address of the body's index in a vector we

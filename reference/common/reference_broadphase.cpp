@@ -1,6 +1,6 @@
 /// \file reference_broadphase.cpp
 /// Registry of the reference broadphases (Bullet, FCL) and the combined registry over
-/// core and references (SPEC 5.1).
+/// core and references (design.md section 5.1).
 
 #include "octocd/reference_broadphase.hpp"
 

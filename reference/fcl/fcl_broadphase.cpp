@@ -1,5 +1,5 @@
 /// \file fcl_broadphase.cpp
-/// FCL 0.7 reference broadphases behind octocd::BroadPhase (SPEC 5.1):
+/// FCL 0.7 reference broadphases behind octocd::BroadPhase (design.md section 5.1):
 /// `fcl-dynamic-aabb-tree`, `fcl-sap`, `fcl-interval-tree`, `fcl-spatial-hash`,
 /// `fcl-naive`, all with S = double. All but fcl-sap are incremental (see below).
 ///

@@ -1,5 +1,5 @@
 /// \file reference_contact.cpp
-/// Reference contact normals from FCL 0.7 / libccd (SPEC 7 validator 3); see
+/// Reference contact normals from FCL 0.7 / libccd (design.md section 7 validator 3); see
 /// reference_contact.hpp for the conventions.
 
 #include "octocd/reference_contact.hpp"

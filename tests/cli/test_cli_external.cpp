@@ -176,7 +176,7 @@ TEST_F(TraceIn, SceneAndTraceInAreExclusive) {
   EXPECT_EQ(run(bin() + " validate --trace-in " + (dir_ / "missing.h5").string()).code, 2);
 }
 
-// ---- External traces version 2 (SPEC 13, issue 17): rotation, inertia, manifolds with
+// ---- External traces version 2 (design.md section 13, issue 17): rotation, inertia, manifolds with
 // points, materials. Every problem exits 2 with and without --check-only, naming the
 // dataset (or attribute), the frame (or body) and the allowed values.
 
@@ -369,7 +369,7 @@ TEST_F(TraceIn, PythonRotatingWriterIsAValidVersion2Trace) {
   EXPECT_TRUE(r.code == 0 || r.code == 3) << r.output;  // judged, never refused as input
 }
 
-// /contacts/jt3 (SPEC 13b.11): the tangential impulse vectors; each must lie in its row's
+// /contacts/jt3 (design.md section 13b.11): the tangential impulse vectors; each must lie in its row's
 // contact plane (within kJt3MaxAngleDeg = 1 deg), one per contact row.
 TEST_F(TraceIn, Version2Jt3InTheContactPlane) {
   auto v = [&](const Trace& t) { return [&, t](const std::string& extra) { return validate(t, extra); }; };
@@ -392,7 +392,7 @@ TEST_F(TraceIn, Version2Jt3InTheContactPlane) {
   expect_bad(validate(v1), {"/contacts/jt3", "present in a version 1 file"});
 }
 
-// Declared collision shapes (SPEC 13b.10): the root attribute or one string per body;
+// Declared collision shapes (design.md section 13b.10): the root attribute or one string per body;
 // an unknown value, a sphere on a box, both forms at once, a wrong count: exit 2 naming
 // the file, the dataset or attribute, the body and the allowed values.
 TEST_F(TraceIn, Version2CollisionShapes) {

@@ -1,4 +1,4 @@
-// `octocd run|validate --rotation` and rotating scenes on the command line (SPEC 13):
+// `octocd run|validate --rotation` and rotating scenes on the command line (design.md section 13):
 // cpu refuses them with exit 2 naming the key, `--rotation` needs `--engine bullet`, and
 // Bullet with rotation writes a version 2 trace.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// `octocd bench` sweeps of kind speed-accuracy (SPEC 15, docs/bench-format.md) on the test
+// `octocd bench` sweeps of kind speed-accuracy (design.md section 15, docs/bench-format.md) on the test
 // sweeps tests/data/bench-small-speed-accuracy*.json (two free-falling boxes, three time
 // steps, cpu and bullet). Oracle: the closed form of semi-implicit Euler in free fall,
 // x_n = x0 + g t^2 / 2 + g t dt / 2, so two runs of one line differ by g t (dt - dt_ref) / 2

@@ -1,4 +1,4 @@
-// `octocd bench`, `replay`, `compare` and `report` (SPEC 12): exit codes, a tiny sweep end
+// `octocd bench`, `replay`, `compare` and `report` (design.md section 12): exit codes, a tiny sweep end
 // to end (shards, resume after a kill), a planted one-bit difference found at its frame and
 // body, replayed pair counts against the recorded ones, and a report from a committed result.
 #include <gtest/gtest.h>
@@ -337,7 +337,7 @@ TEST_F(Tools, BenchRefusesMissingKeysAllSkippedAndOversizedSweeps) {
   EXPECT_FALSE(fs::exists(dir_ / "h.json"));
 }
 
-// Round-robin (SPEC 14b): repetition r of every point runs before repetition r + 1 of any,
+// Round-robin (design.md section 14b): repetition r of every point runs before repetition r + 1 of any,
 // so a load burst hits every point alike; each point's repetitions are all in its spreads.
 TEST_F(Tools, BenchRunsRepetitionsRoundRobinOverThePoints) {
   const std::string sweep = tiny_sweep(20);  // 2 midphases on the cpu engine
@@ -629,7 +629,7 @@ TEST_F(Tools, CompareToleranceIsPerQuantityAbsoluteOrRelative) {
   // Relative: one bit of a float32 is ~6e-8 of it.
   EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=rel:1e-6").code, 0);
   EXPECT_EQ(run_octocd("compare " + a + " " + b + " --tolerance positions=rel:1e-9").code, 3);
-  // SPEC 14's comma form; one quantity given twice is refused (before: the later silently won).
+  // design.md section 14's comma form; one quantity given twice is refused (before: the later silently won).
   r = run_octocd("compare " + a + " " + b + " --tolerance positions=1e-6,velocities=1e-5 --json " +
                  (dir_ / "d.json").string());
   EXPECT_EQ(r.code, 0) << r.output;

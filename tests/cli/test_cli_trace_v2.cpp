@@ -1,4 +1,4 @@
-// `octocd compare` and `octocd replay` on traces of format version 2 (issue 17, SPEC 13;
+// `octocd compare` and `octocd replay` on traces of format version 2 (issue 17, design.md section 13;
 // docs/trace-format.md): the rotating Bullet engine's own traces and external traces,
 // versions mixed. Oracles: a trace against itself and against an independent run of the
 // same deterministic engine (same), one planted difference (a quaternion turned by a known

@@ -754,7 +754,7 @@ TEST_F(CliUser, ValidateWritesJUnit) {
 
 // ---- 2. the nightly script: non-zero on any failure, 2 on bad input ------------------
 
-// ---- expectations (SPEC 14b) and --json: box-in-box fails non-penetration-eq14 (4 contacts)
+// ---- expectations (design.md section 14b) and --json: box-in-box fails non-penetration-eq14 (4 contacts)
 TEST_F(CliUser, ValidateExpectationsGateOnNewAndGrownFailures) {
   const std::string fail = scene("box-in-box", kFailingScene);
   const std::string args = " --frames 20 --every 5 --against none";
@@ -896,7 +896,7 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   EXPECT_EQ(run("bash " + quote(script) + " --timeout -5").code, 2);
 }
 
-// The nightly's gate (SPEC 14b): green on a healthy build whose only failure is expected,
+// The nightly's gate (design.md section 14b): green on a healthy build whose only failure is expected,
 // red on a planted regression. box-in-box's non-penetration-eq14 failure (a box inside a
 // box: the paper's AABB response cannot separate them, 4 contacts) stands for a known
 // finding like the Jacobi energy rise. Two regressions are planted the only ways a test

@@ -1,4 +1,4 @@
-// `octocd view` (SPEC 16, octocd/view.hpp) and `octocd validate --view`: the page's
+// `octocd view` (design.md section 16, octocd/view.hpp) and `octocd validate --view`: the page's
 // embedded data holds the engine's contact and the physics tier's reference for a planted
 // fault, bad input exits 2 naming the argument, the page embeds only the trace's numbers,
 // and a page of a 10^6-body trace viewed at a pair stays as small as one of 3 bodies.

@@ -1,4 +1,4 @@
-// A zoo of engines unlike octocd's (issue 30 item 7, SPEC 13b.12): small plain programs
+// A zoo of engines unlike octocd's (issue 30 item 7, design.md section 13b.12): small plain programs
 // that step their own bodies and write a version 2 external trace, judged by `octocd
 // validate --trace-in` at default tolerances. Each clean run passes every physics row
 // (exit 0) once it declares what it is; the same run undeclared fails the row the
@@ -102,7 +102,7 @@ V f32(V a) { return {f32(a[0]), f32(a[1]), f32(a[2])}; }
 Q f32(Q q) { return {f32(q[0]), f32(q[1]), f32(q[2]), f32(q[3])}; }
 
 /// One body of a zoo engine: a box of half extents `h`, mass m (0: static), its locked
-/// degrees of freedom (SPEC 13b.12 bits).
+/// degrees of freedom (design.md section 13b.12 bits).
 struct Body {
   V h{0.1, 0.1, 0.1};
   double m = 1.0;
@@ -603,7 +603,7 @@ TEST_F(ZooEngines, SoftContactsPassDeclaredAndFailPerStepEnergyUndeclared) {
   expect_caught(judge(rigid, "rigid"), {"kinetic energy", "group (0, 1)", "group (3, 4, 5)"});
 }
 
-// SPEC 13b.12 for episodes of 3 or more bodies: the row's energy is judged over the
+// design.md section 13b.12 for episodes of 3 or more bodies: the row's energy is judged over the
 // isolated group's whole episode. The chain 3-4-5 passes with damped springs; springs
 // with negative damping (c = -50 N s/m: each step's impulses still balance momentum)
 // gain energy over the episode and fail it, naming the group.

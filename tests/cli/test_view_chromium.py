@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""`octocd view`'s page in headless Chromium (SPEC 16): it loads without a console error
+"""`octocd view`'s page in headless Chromium (design.md section 16): it loads without a console error
 and draws (a screenshot that is not blank).
 
 Usage: test_view_chromium.py OCTOCD_BIN SOURCE_DIR WORK_DIR

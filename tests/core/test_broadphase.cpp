@@ -1,4 +1,4 @@
-// Broadphase (SPEC 5.1): every implementation returns exactly the pairs of `flat`.
+// Broadphase (design.md section 5.1): every implementation returns exactly the pairs of `flat`.
 
 #include <gtest/gtest.h>
 

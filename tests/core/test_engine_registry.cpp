@@ -112,6 +112,6 @@ TEST(EngineRegistry, OptionsAnEngineCannotRunAreRefusedInTheCallersSpelling) {
   EngineOptions rot;
   rot.rotation = true;
   EXPECT_EQ(refusal("cpu", rot, cli_argument_names()),
-            "--rotation: engine cpu translates only (SPEC 3); allowed: --rotation with --engine bullet");
+            "--rotation: engine cpu translates only (design.md section 3); allowed: --rotation with --engine bullet");
   EXPECT_EQ(refusal("bullet", rot, cli_argument_names()), "");
 }

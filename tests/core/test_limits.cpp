@@ -202,7 +202,7 @@ TEST(Limits, RandomLayoutEqualsExhaustiveRejection) {
     g.layout.seed = 11;
     const Aabb local{{-half, -2 * half, -half}, {half, 2 * half, half}};
     const std::vector<Vec3> got = group_positions(g, local, "r.json");
-    // Reference: the exhaustive rejection sampling of SPEC 3 / docs/scenes.md.
+    // Reference: the exhaustive rejection sampling of design.md section 3 / docs/scenes.md.
     SplitMix64 rng(g.layout.seed);
     std::vector<Aabb> placed;
     std::vector<Vec3> want;

@@ -1,4 +1,4 @@
-// Unit tests of the per-mesh octree (SPEC 5.2) and the midphase / narrow phase (SPEC 5.3).
+// Unit tests of the per-mesh octree (design.md section 5.2) and the midphase / narrow phase (design.md section 5.3).
 // Meshes are built by hand (point clouds, Fibonacci spheres): the midphase only uses vertices.
 
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Response formulas (paper Eq. 9-23, SPEC 6) against hand-computed values.
+// Response formulas (paper Eq. 9-23, design.md section 6) against hand-computed values.
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -1,4 +1,4 @@
-// Scene files (SPEC section 3): parsing, validation, mesh resolution, generators.
+// Scene files (design.md section 3): parsing, validation, mesh resolution, generators.
 
 #include <gtest/gtest.h>
 
@@ -246,7 +246,7 @@ TEST(Scene, ResponseRanges) {
   EXPECT_NO_THROW(parse_scene(j.dump(), "ok.json"));
 }
 
-// SPEC 6 revision 2: response.overlap and response.iterations.
+// design.md section 6: response.overlap and response.iterations.
 TEST(Scene, OverlapAndIterations) {
   json j = minimal();
   j["response"] = {{"overlap", "paper"}, {"iterations", 8}};

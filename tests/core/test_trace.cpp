@@ -1,4 +1,4 @@
-// Tests of the HDF5 trace writer (SPEC section 8, docs/trace-format.md). Traces are
+// Tests of the HDF5 trace writer (design.md section 8, docs/trace-format.md). Traces are
 // written from hand-made tables and read back with the HDF5 C API.
 
 

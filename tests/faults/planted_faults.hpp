@@ -38,7 +38,7 @@ struct PlantedFaults {
   bool jmin_first_pass_only = false;   ///< the J_min floor (Eq. 18) only in the first pass
   bool one_pass_fewer = false;         ///< response.iterations - 1 passes (at least 1)
   bool last_pass_no_corrections = false;  ///< the last pass's position corrections dropped
-  /// Not a fault: a SPEC 6 engine that rounds differently (contact_impulse_other_rounding),
+  /// Not a fault: a design.md section 6 engine that rounds differently (contact_impulse_other_rounding),
   /// so near-ties of the relaxation passes go other ways than in octocd's engines; the
   /// validators must pass it.
   bool other_rounding = false;

@@ -1,4 +1,4 @@
-// The CUDA engine against the CPU engine (SPEC 11, issue 7): on every shipped scene the
+// The CUDA engine against the CPU engine (design.md section 11, issue 7): on every shipped scene the
 // two engines, both with broadphase `flat`, step side by side and their states must be
 // equal bit for bit after every step (state hashes; asserted at least at frames 1, 10,
 // 100 and N), with equal pair sets, confirmed-contact sets and contact terms on every
@@ -84,7 +84,7 @@ bool is_scale_scene(const std::string& name) {
          (name.rfind("boxes-uniform-", 0) == 0 && (name.back() == 'k' || name.back() == 'm'));
 }
 
-/// The rotating scenes (rot-*, `rotation: true`): only `--engine bullet` runs them (SPEC 13).
+/// The rotating scenes (rot-*, `rotation: true`): only `--engine bullet` runs them (design.md section 13).
 bool is_rotating_scene(const std::string& name) { return name.rfind("rot-", 0) == 0; }
 
 /// Every shipped scene except the ones too slow on the CPU side.

@@ -1,4 +1,4 @@
-// The device broadphases behind DeviceBroadPhase (gpu/src/device_broadphase.hpp; SPEC 5.1,
+// The device broadphases behind DeviceBroadPhase (gpu/src/device_broadphase.hpp; design.md section 5.1,
 // 11) against the CPU oracle `flat`: `octree-strict` at depths 0..10 and auto,
 // `spatial-hash` at cell sizes from 1e-6 m (every body out of cell range) to 1000 m (one
 // cell), `octree` (loose) when gpu/src/broadphase_octree.cu has make_device_loose_octree,

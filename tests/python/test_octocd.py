@@ -197,7 +197,7 @@ def test_cuda_engine_or_the_reason_it_is_skipped():
     gpu, cpu = octocd.Engine(scene, engine="cuda"), octocd.Engine(scene, engine="cpu")
     gpu.step(100)
     cpu.step(100)
-    assert np.array_equal(bits(gpu.positions), bits(cpu.positions))  # SPEC 11: bit-identical
+    assert np.array_equal(bits(gpu.positions), bits(cpu.positions))  # design.md section 11: bit-identical
 
 
 # ---- judging a toy NumPy engine --------------------------------------------------------
@@ -238,7 +238,7 @@ def row(results, name):
 def test_toy_engine_judged_frame_by_frame_clean_run_passes_candidate_sets():
     results = judge(*toy_run(plant=False))
     assert all(r.tier in ("physics", "model") for r in results)
-    # Another engine's pairs are judged by the physics tier (SPEC 13); the model tier's
+    # Another engine's pairs are judged by the physics tier (design.md section 13); the model tier's
     # candidate-sets is n/a for it.
     assert not row(results, "candidate-sets").applicable
     cs = row(results, "broadphase-completeness")
@@ -469,7 +469,7 @@ def test_trace_helper_refuses_other_files_and_missing_frames(tmp_path):
 
 
 def test_validate_trace_with_expectations_and_causes(tmp_path):
-    # A bound of 0 slops makes the resting stack's penetration a failure (SPEC 14b).
+    # A bound of 0 slops makes the resting stack's penetration a failure (design.md section 14b).
     trace = cli_trace(tmp_path, scene_path("box-stack"), 50)
     tol = {"penetration_slops": 0.0}
     plain = octocd.validate_trace(trace, every=5, tolerances=tol)

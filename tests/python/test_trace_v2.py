@@ -1,4 +1,4 @@
-"""octocd.Trace on traces of format version 2 (issue 17, SPEC 13; docs/trace-format.md,
+"""octocd.Trace on traces of format version 2 (issue 17, design.md section 13; docs/trace-format.md,
 "External traces, version 2"): orientations, angular velocities, inertia, materials and
 manifold contacts with points, as NumPy arrays.
 

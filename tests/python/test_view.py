@@ -1,4 +1,4 @@
-"""octocd.view (SPEC 16; docs/debugging.md): the page `octocd view` writes, by the same C++
+"""octocd.view (design.md section 16; docs/debugging.md): the page `octocd view` writes, by the same C++
 code. Oracles: the CLI's page for the same arguments (byte for byte), a normal planted
 flipped in Bullet's trace (the page shows it beside the reference, which still points the
 other way), and bad input raising InputError naming the keyword argument.

@@ -1,4 +1,4 @@
-// Reference broadphases (SPEC 5.1, reference/): every Bullet and FCL reference returns
+// Reference broadphases (design.md section 5.1, reference/): every Bullet and FCL reference returns
 // exactly the pairs of `flat`, on the first call and incrementally after every body moved.
 // Parameterised over (name, body count) in the style of FCL's test_fcl_broadphase_collision,
 // but comparing whole sorted pair vectors (not just counts) against octocd's oracle, with

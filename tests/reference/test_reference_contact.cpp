@@ -1,4 +1,4 @@
-// Reference contact normals from FCL / libccd (SPEC 7 validator 3): sign conventions,
+// Reference contact normals from FCL / libccd (design.md section 7 validator 3): sign conventions,
 // distances and depths on scenes with known answers.
 //
 // Conventions pinned here (see reference_contact.hpp):

@@ -1,4 +1,4 @@
-"""The performance gate (`octocd report --baseline`, SPEC 14b) on the committed small results
+"""The performance gate (`octocd report --baseline`, design.md section 14b) on the committed small results
 (tests/data/gate-*.json) and copies of them with planted faults: every refusal and exit code.
 Run by ctest (`report.gate`): OCTOCD_BIN is the octocd binary."""
 import contextlib

@@ -1,4 +1,4 @@
-// Analytic scenes against closed forms (issue 2 item 7, SPEC 7.7), and determinism.
+// Analytic scenes against closed forms (issue 2 item 7, design.md section 7.7), and determinism.
 #include <gtest/gtest.h>
 
 #include <omp.h>
@@ -93,9 +93,9 @@ TEST(AnalyticScenes, SlideStopsAtCoulombDistance) {
 }
 
 // A resting column of boxes stays within the slop delta of rest for 2000 frames.
-// Started exactly touching, the column first settles: SPEC 6's Jacobi reduction averages
+// Started exactly touching, the column first settles: design.md section 6's Jacobi reduction averages
 // the opposing corrections of a box between two contacts, so each contact keeps a
-// penetration of a few delta (checked below: at most 3 delta per contact, SPEC 7.4's
+// penetration of a few delta (checked below: at most 3 delta per contact, design.md section 7.4's
 // per-frame statistics). Once settled (frame 200) no box moves by more than delta.
 TEST(AnalyticScenes, BoxStackStaysWithinSlopOfRest) {
   const Scene scene = load_scene(scene_path("box-stack"));

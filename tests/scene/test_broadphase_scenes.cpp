@@ -1,5 +1,5 @@
 // Every broadphase returns exactly the `flat` pair set on frames of the dataset scenes
-// (issue 2 item 7, SPEC 7.1): the world AABBs of recorded frames are replayed through each.
+// (issue 2 item 7, design.md section 7.1): the world AABBs of recorded frames are replayed through each.
 // Both octrees (`octree`, the loose one, and `octree-strict`) at several depths and
 // `auto`; also on the 10,000-box benchmark scene (issue 6 item 5).
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// octocd::BulletWorld in rotation mode (SPEC 13: octocd's own rotating reference):
+// octocd::BulletWorld in rotation mode (design.md section 13: octocd's own rotating reference):
 // closed forms (a block sliding down a slope, a free spinning body), a stack of ten, the
 // sign conventions of its manifold rows (normal from B to A, jt along -v_t), the version 2
 // trace it writes, the scene keys that ask for rotation, and the translation-only mode

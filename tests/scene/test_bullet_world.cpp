@@ -1,4 +1,4 @@
-// octocd::BulletWorld (SPEC 7 item 8): the analytic scenes run in Bullet's
+// octocd::BulletWorld (design.md section 7 item 8): the analytic scenes run in Bullet's
 // btDiscreteDynamicsWorld, against the same closed forms as octocd's own pipeline.
 #include <gtest/gtest.h>
 
@@ -34,7 +34,7 @@ std::size_t first_dynamic(const BodyState& s) {
 }  // namespace
 
 // Bullet integrates semi-implicit Euler (btRigidBody::integrateVelocities then
-// btTransformUtil::integrateTransform with the new velocity), the same as SPEC 4.1, so
+// btTransformUtil::integrateTransform with the new velocity), the same as design.md section 4.1, so
 // the closed form is octocd's: v_n = v0 + n g dt, x_n = x0 + n dt v0 + g dt^2 n (n+1)/2.
 // Tolerances: v within 1e-5 (1 + |v|) (float rounding of n additions); x within
 // 2e-6 n (1 + |x|) (float32 state, error grows like n ulp(|x|)); and, the sharp check,
@@ -162,7 +162,7 @@ TEST(BulletWorld, BoxStackSettles) {
   RecordProperty("settled_heights", heights);
 }
 
-// ---- BulletSettings::shape (SPEC 15): the same meshes, or boxes ------------------------
+// ---- BulletSettings::shape (design.md section 15): the same meshes, or boxes -----------
 
 namespace {
 

@@ -1,4 +1,4 @@
-// Momentum balance per body and free flight (SPEC 13b.7, 13b.8) on Bullet with rotation,
+// Momentum balance per body and free flight (design.md sections 13b.7, 13b.8) on Bullet with rotation,
 // the correct rotating engine (issue 30 item 7): its version 2 traces of the shipped
 // rotating scenes pass both rows, and faults planted into a copy of each trace (edited
 // in place) are caught with exit 3 and a detail naming the frame and the body: an edited
@@ -7,7 +7,7 @@
 // 1 cm, a lone spinning body's angular velocity x1.5, a lone body's orientation turned
 // by 30 deg. The bodies are found in the trace (no contact row in the step), never
 // pinned by number. Few frames each, the geometric rows on a few frames only.
-// BulletFriction plants the friction faults of SPEC 13b.11 on rot-stack-10, rot-drop-220
+// BulletFriction plants the friction faults of design.md section 13b.11 on rot-stack-10, rot-drop-220
 // and rot-pile-1000 (rot-slope's are in test_cli_rotation_faults.cpp).
 #include <gtest/gtest.h>
 #include <hdf5.h>
@@ -266,7 +266,7 @@ INSTANTIATE_TEST_SUITE_P(Scenes, BulletBalance,
                            return s;
                          });
 
-/// Friction faults (SPEC 13b.11) planted on Bullet's traces of rot-stack-10, rot-drop-220
+/// Friction faults (design.md section 13b.11) planted on Bullet's traces of rot-stack-10, rot-drop-220
 /// and rot-pile-1000, one scene each: on the manifold pair with the largest normal
 /// impulse, its friction set to 1.2x the cone and to an unscaled pyramid (each row mu jn
 /// along two tangents: sqrt(2) mu jn); friction reversed on a manifold; a row carrying

@@ -1,6 +1,6 @@
 // Issue 17 item 4: planted faults in a rotating engine's trace, judged by the physics tier
 // through `octocd validate --trace-in`. The engine is Bullet with rotation (octocd's own
-// rotating reference, SPEC 13): a small drop of boxes and meshes into an open box,
+// rotating reference, design.md section 13): a small drop of boxes and meshes into an open box,
 // written as an external trace version 2. The untouched trace passes (its broadphase is
 // Bullet's conservative fattened-AABB pair cache: extras allowed); each fault is planted
 // in a copy of the file and must exit 3 with a detail naming the frame and the pair or
@@ -216,8 +216,8 @@ TEST_F(RotationFaults, TheCorrectRotatingEnginePassesEveryPhysicsRow) {
     EXPECT_EQ(verdict(base_result_, row), "pass") << row << "\n" << base_result_.output;
   // Bullet's pair cache is conservative (fattened AABBs): extras are counted, not failed.
   EXPECT_NE(base_result_.output.find("candidates per true pair"), std::string::npos) << base_result_.output;
-  // The model tier is n/a for an engine that does not claim SPEC 6.
-  EXPECT_NE(base_result_.output.find("does not claim SPEC 6"), std::string::npos) << base_result_.output;
+  // The model tier is n/a for an engine that does not claim design.md section 6.
+  EXPECT_NE(base_result_.output.find("does not claim design.md section 6"), std::string::npos) << base_result_.output;
 }
 
 /// Removes pair (a, b) from step f's candidate pairs; with `static_pairs`, every frame
@@ -387,7 +387,7 @@ TEST_F(RotationFaults, AFrictionImpulseOutsideTheConeFails) {
   EXPECT_TRUE(names(res, f, base_.a(best), base_.b(best)));
 }
 
-// SPEC 13b.11: friction 1.2x the cone on a pair (its rows' friction vectors all along one
+// design.md section 13b.11: friction 1.2x the cone on a pair (its rows' friction vectors all along one
 // tangent, each 1.2 mu jn of its row) is caught: the per-pair cone has no relative slack.
 TEST_F(RotationFaults, AFrictionImpulseOfOnePointTwoTimesTheConeFails) {
   // The pair with the largest summed normal impulse.
@@ -532,7 +532,7 @@ TEST_F(RotationFaults, AnOrientationNotAppliedToContactPointsFails) {
 
 }  // namespace
 
-// SPEC 13b.10: Bullet with rotation collides a mesh as its convex hull and declares it
+// design.md section 13b.10: Bullet with rotation collides a mesh as its convex hull and declares it
 // (root attribute collision_shape = "convex_hull"): four bunnies dropped in a column pass
 // every physics row. The same trace without the declaration is judged on the concave
 // bunny, where the hulls' contacts are 7 mm deeper than the meshes' overlap (a false
@@ -570,7 +570,7 @@ TEST(DeclaredCollisionShapes, BulletsBunnyHullsPassDeclaredAndFailAsMeshes) {
   fs::remove_all(dir, ec);
 }
 
-// SPEC 13b.11 on Bullet's rot-slope (a box sliding down a slope on a 4-row manifold):
+// design.md section 13b.11 on Bullet's rot-slope (a box sliding down a slope on a 4-row manifold):
 // the clean trace passes the friction row on jt3; friction reversed (every row's jt3
 // negated) is caught, naming the frame and the pair.
 TEST(FrictionOnManifolds, BulletsSlopeReversedFrictionIsCaught) {

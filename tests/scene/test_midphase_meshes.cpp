@@ -1,4 +1,4 @@
-// Midphase on real meshes (SPEC 5.2-5.3): every level list confirms exactly the contacts of
+// Midphase on real meshes (design.md sections 5.2-5.3): every level list confirms exactly the contacts of
 // the exhaustive vertex test, on bunny-bunny, armadillo-bunny and dragon-dragon pairs at
 // many random placements near contact. Needs the fetched datasets ($OCTOCD_DATA_DIR);
 // skipped without them.

@@ -2,7 +2,7 @@
 /// \file external_trace.hpp
 /// An external trace (docs/trace-format.md, "External traces") written with the HDF5 C
 /// API from arrays a test may break before writing: version 1 as octocd's own tests
-/// always wrote it, and version 2 (SPEC 13: rotation, inertia, manifolds with points,
+/// always wrote it, and version 2 (design.md section 13: rotation, inertia, manifolds with points,
 /// materials) through Trace::make_v2(). Shared by test_external and test_cli_external.
 #include <gtest/gtest.h>
 #include <hdf5.h>

@@ -1,4 +1,4 @@
-// SPEC 7 item 9 and revision 2 of SPEC 6 (issue 6): the validators judge the state the
+// design.md section 7 item 9 and design.md section 6 (issue 6): the validators judge the state the
 // engine applied, each planted fault in the response, integration, clamp, broadphase and
 // midphase is caught; response.overlap and response.iterations; analytic scenes are
 // recognised by content.
@@ -88,7 +88,7 @@ TEST(AppliedState, PredictionMatchesTheCpuEngine) {
   for (const Scene& scene : {jammed(), head_on()}) {
     const auto rs = validate_with(scene, PlantedFaults{});
     for (const auto& x : rs) {
-      // SPEC 6's Jacobi sums add energy in a jammed start (frame 1: 2.61 -> 3.13 J): the
+      // design.md section 6's Jacobi sums add energy in a jammed start (frame 1: 2.61 -> 3.13 J): the
       // physics tier's energy check reports the model, not a fault (test_validation.cpp).
       if (x.tier == Tier::Physics && x.name == "conservation" && !x.pass) {
         EXPECT_NE(x.detail.find("kinetic energy"), std::string::npos) << x.detail;
@@ -160,7 +160,7 @@ TEST(AppliedState, ValidatorsRefuseAnEngineThatDoesNotRecord) {
   EXPECT_THROW(v.observe(world, true), RuntimeError);
 }
 
-// SPEC 6 response.overlap: a small box inside a bigger box separates in one step with
+// design.md section 6 response.overlap: a small box inside a bigger box separates in one step with
 // `separating`, not with `paper` (Eq. 9 gives the inner box's width).
 TEST(ResponseOverlap, ContainedBoxSeparatesOnlyWithSeparating) {
   for (const char* mode : {"separating", "paper"}) {
@@ -207,7 +207,7 @@ TEST(ResponseOverlap, PlanarQuadRestsOnTheFloor) {
   }
 }
 
-// SPEC 6 relaxation passes: box-stack with 8 passes stays within a slop of its rest
+// design.md section 6 relaxation passes: box-stack with 8 passes stays within a slop of its rest
 // heights for 2000 frames (the analytic resting-stack validator).
 TEST(ResponseIterations, BoxStackRestsWithEightPasses) {
   Scene scene = load_scene(source_dir() + "/datasets/scenes/box-stack.json");

@@ -1,5 +1,5 @@
-// Issue 18, SPEC 7 item 9 under relaxation passes (response.iterations > 1): the
-// applied-state validator gives no false alarm on piles (near-ties of SPEC 6 explored as
+// Issue 18, design.md section 7 item 9 under relaxation passes (response.iterations > 1): the
+// applied-state validator gives no false alarm on piles (near-ties of design.md section 6 explored as
 // branches), judges at least 90% of the dynamic body-frames, and still catches every
 // planted fault of the response on the same scenes. Figures over 2000 frames are in
 // reports/cpu/validation.csv (scripts/record.sh cpu); these tests run fewer frames.

@@ -1,4 +1,4 @@
-// Expectations (SPEC 14b) and the causes of a row (SPEC 13b.13): octocd/expect.hpp.
+// Expectations (design.md section 14b) and the causes of a row (design.md section 13b.13): octocd/expect.hpp.
 // Results are built by hand, so each outcome (expected, new, grown, fixed, strict) is
 // planted exactly; the CLI's use of them is tested in tests/cli/test_cli_usage.cpp
 // (CliUser.ValidateExpectationsGateOnNewAndGrownFailures).

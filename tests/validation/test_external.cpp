@@ -61,7 +61,7 @@ TEST(External, AFrameThatKeepsTheConventionsPasses) {
   EXPECT_TRUE(find(rs, "contact-geometry").applicable);
   // Another engine is judged by the physics tier; the model tier is n/a with the reason.
   EXPECT_FALSE(find(rs, "candidate-sets").applicable);
-  EXPECT_NE(find(rs, "non-penetration-eq14").detail.find("does not claim SPEC 6"), std::string::npos);
+  EXPECT_NE(find(rs, "non-penetration-eq14").detail.find("does not claim design.md section 6"), std::string::npos);
 }
 
 TEST(External, MissingAndExtraPairsAreNamed) {
@@ -70,7 +70,7 @@ TEST(External, MissingAndExtraPairsAreNamed) {
   ValidationResult r = find(validate_frame(t.bodies, t.rec), "broadphase-completeness");
   EXPECT_FALSE(r.pass);
   EXPECT_NE(r.detail.find("frame 4: engine 'external' misses pair (1, 2)"), std::string::npos) << r.detail;
-  // An extra pair (a conservative broadphase) is counted, not failed (SPEC 13.1).
+  // An extra pair (a conservative broadphase) is counted, not failed (design.md section 13.1).
   t.rec.pairs = {{0, 1}, {1, 2}};
   r = find(validate_frame(t.bodies, t.rec), "broadphase-completeness");
   EXPECT_TRUE(r.pass) << r.detail;
@@ -166,7 +166,7 @@ TEST(External, TheCpuEnginesFramesPassAndAPlantedLossFails) {
         reported.normal = c.normal;
         reported.depth = c.depth;
         reported.jn = c.jn;
-        reported.jt = -c.jt;  // the trace convention: along -v_t (octocd's J_t is along +t, SPEC 6)
+        reported.jt = -c.jt;  // the trace convention: along -v_t (octocd's J_t is along +t, design.md section 6)
         c = reported;
       }
       v.observe(rec, f % 5 == 0);
@@ -185,7 +185,7 @@ TEST(External, TheCpuEnginesFramesPassAndAPlantedLossFails) {
   }
 }
 
-// ---- External traces version 2 (SPEC 13, issue 17) through the C++ API ------------------
+// ---- External traces version 2 (design.md section 13, issue 17) through the C++ API -----
 
 namespace {
 
@@ -292,7 +292,7 @@ TEST(ExternalV2, RoundTripEveryField) {
 }
 
 // Defaults: inertia derived as a solid box of the local AABB (static: zeros), materials and
-// slop from the scene's response; detection "integrated" gives SPEC 4.1's pose.
+// slop from the scene's response; detection "integrated" gives design.md section 4.1's pose.
 TEST(ExternalV2, DefaultsAndTheIntegratedDetectionPose) {
   octocd::test::Trace t = octocd::test::Trace::make_v2();
   t.inertia.clear();

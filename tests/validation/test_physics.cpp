@@ -1,4 +1,4 @@
-// The physics tier (SPEC 13, octocd/physics.hpp): posed FCL queries pinned against closed
+// The physics tier (design.md section 13, octocd/physics.hpp): posed FCL queries pinned against closed
 // forms (rotated boxes, a non-convex mesh), the six rows on hand-made records of rotated
 // bodies whose truth is known, each planted fault caught by its row with a detail naming
 // the frame and the pair or body, and octocd's own CPU engine passing every row.
@@ -716,7 +716,7 @@ TEST(PosedReference, SeparatedMeshAboveFloorNormal) {
   }
 }
 
-// ---- Reporting (SPEC 13b.13): every cause counted, first examples named --------------
+// ---- Reporting (design.md section 13b.13): every cause counted, first examples named ---
 
 // Three faults in one row: two turned normals on different pairs and a depth off on a
 // third pair. Each cause is counted with its own examples and items; the second normal
@@ -779,7 +779,7 @@ TEST(PhysicsReporting, RowsThatJudgedNothingAreNotApplicable) {
   }
 }
 
-// ---- Momentum balance per body (SPEC 13b.7) -------------------------------------------
+// ---- Momentum balance per body (design.md section 13b.7) ------------------------------
 
 TEST(PhysicsBalance, ConsistentRecordsPassEveryBody) {
   const auto model = build_model(four_bodies());
@@ -825,7 +825,7 @@ TEST(PhysicsBalance, DroppedRowEditedVelocityAndWrongBodyAreCaught) {
   }
 }
 
-// ---- Free flight (SPEC 13b.8) ----------------------------------------------------------
+// ---- Free flight (design.md section 13b.8) ---------------------------------------------
 
 /// The diamond (turned) and the cube fly apart above the floor, spinning, without
 /// contacts: v' = v + g dt, x' = x + dt v' (semi-implicit), w' = w, q' = q advanced by
@@ -917,7 +917,7 @@ TEST(PhysicsFreeFlight, EditedLoneBodiesAreCaughtByCause) {
   }
 }
 
-// ---- Declarations (SPEC 13b.12) ----------------------------------------------------------
+// ---- Declarations (design.md section 13b.12) ---------------------------------------------
 
 // Joints lock the diamond's rotation: its angular velocity stays 0 although the contact
 // torque would turn it. Undeclared, momentum-balance (angular) and conservation (angular
@@ -1019,7 +1019,7 @@ TEST(PhysicsDeclarations, GyroscopicTermDeclaredInAnIsolatedCollision) {
   expect_caught(judge(*model, twice, b), "momentum-balance", {"frame 12: body 2", "angular 2 of 2"});
 }
 
-// ---- Exact reference geometry: the separating-axis test (SPEC 13b.9) -----------------
+// ---- Exact reference geometry: the separating-axis test (design.md section 13b.9) ----
 
 namespace {
 
@@ -1216,7 +1216,7 @@ TEST(SeparatingAxis, ExactMinimumPassesTurnedNormalCaught) {
   }
 }
 
-// Declared collision shapes (SPEC 13b.10): the dumbbell collided as its convex hull, its
+// Declared collision shapes (design.md section 13b.10): the dumbbell collided as its convex hull, its
 // local box or a sphere; a small box in its gap then penetrates what was collided. The
 // gap to the true mesh is a figure: the hull's top face centre (0, 0.5, 0) lies 0.5 m
 // from the nearest cube edge.

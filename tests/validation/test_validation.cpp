@@ -1,4 +1,4 @@
-// Every validator of SPEC 7 passes on the correct pipeline and catches a planted fault
+// Every validator of design.md section 7 passes on the correct pipeline and catches a planted fault
 // (issue 3 item 3: "a validator that cannot fail is a defect").
 #include <gtest/gtest.h>
 
@@ -86,7 +86,7 @@ TEST(Validators, AllPassOnTheCorrectPipeline) {
   for (const auto& r : rs) {
     EXPECT_TRUE(r.applicable) << r.name << ": " << r.detail;
     // The physics tier's energy check is the one row the paper's model itself breaks
-    // here: SPEC 6 sums each body's impulses computed from the same pre-response state
+    // here: design.md section 6 sums each body's impulses computed from the same pre-response state
     // (Jacobi), which overshoots where a body is squeezed between others (frame 201: an
     // isolated group of 4 boxes goes from 17.9 to 69.3 J). That is a finding about the
     // model (docs/validation.md, "Validate your own engine"), not a validator fault; momentum and
@@ -220,7 +220,7 @@ bool has_cause(const ValidationResult& r, const std::string& name) {
 
 }  // namespace
 
-// SPEC 7.8 compares settled heights: a pile still falling has none. 24 boxes let go at rest
+// design.md section 7.8 compares settled heights: a pile still falling has none. 24 boxes let go at rest
 // in the air are a pile; after 30 frames they fall in Bullet too: n/a, naming Bullet's
 // speed. After 3000 frames both rest and the heights are compared. Before: the heights of
 // two falling piles were compared (mixed-pile-1000 passed at 300 frames while falling at

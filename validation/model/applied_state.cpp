@@ -1,5 +1,5 @@
-// SPEC 7 item 9: an independent re-derivation of SPEC 4.1 and SPEC 6 in double precision,
-// written from the SPEC text. It shares nothing with the engines' response code (no
+// design.md section 7 item 9: an independent re-derivation of design.md section 4.1 and design.md section 6 in double precision,
+// written from the text of docs/design.md. It shares nothing with the engines' response code (no
 // math.hpp formula is called here): it reads only the model (scene, local boxes, inverse
 // masses) and one FrameRecord, and predicts the state the engine should have applied.
 //
@@ -8,7 +8,7 @@
 // branch; the branches of an island (dynamic bodies joined by confirmed contacts) are
 // explored breadth-first by the number of outcomes that differ from the proposal, within
 // the bounds of applied_state.hpp. A float32 evaluation of the same formulas, in the
-// order the SPEC writes them, runs beside the double one and proposes each near-tie's
+// order docs/design.md writes them, runs beside the double one and proposes each near-tie's
 // outcome; it never decides a verdict: an outcome is only taken where the double value
 // allows it (within the rounding margin), and the engine's state is compared with the
 // double re-derivation.
@@ -116,7 +116,7 @@ struct AppliedStateJudge::Impl {
     return i;
   }
 
-  /// Runs SPEC 6's passes over `is` with the first forced.size() near-ties taking the
+  /// Runs design.md section 6's passes over `is` with the first forced.size() near-ties taking the
   /// outcomes given, the rest the float32 proposal (where consistent).
   void run(const Island& is, const std::vector<std::uint8_t>& forced, Run& r) const;
   /// Compares the run's prediction of the island's dynamic bodies with the engine's.
@@ -345,7 +345,7 @@ void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8
         dx_sum[b][k] += dxb[k];
         dv_sum[a][k] += dva[k];
         dv_sum[b][k] += dvb[k];
-        // float32: the same terms, in the SPEC's order.
+        // float32: the same terms, in docs/design.md's order.
         const float fcc = fcorr * fn[k];
         const float fimp = fjn * fn[k] + fjt * ft[k];
         const float sa = fwsum > 0.0f ? w[a] / fwsum : 0.0f, sb = fwsum > 0.0f ? w[b] / fwsum : 0.0f;
@@ -529,7 +529,7 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   s.rec = &rec;
   s.any_response = s.any_response || judge_response;
 
-  // SPEC 4.1, semi-implicit Euler: v <- v + dt g; x <- x + dt v (static bodies stay); in
+  // design.md section 4.1, semi-implicit Euler: v <- v + dt g; x <- x + dt v (static bodies stay); in
   // double for the prediction and in float32 for the proposal.
   const double dt = sc.dt;
   s.x_int.resize(n);
@@ -621,12 +621,12 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
         const double ratio = std::fabs(got - want) / tolerance;
         if ((ratio <= worst || std::isnan(worst)) && !what.empty()) return;
         worst = std::isnan(ratio) ? std::numeric_limits<double>::infinity() : ratio;
-        what = fmt::format("frame {}: body {} {}.{} = {:.9g}, SPEC 6 gives {:.9g} (tolerance {:.3g}; {} contacts)",
+        what = fmt::format("frame {}: body {} {}.{} = {:.9g}, design.md section 6 gives {:.9g} (tolerance {:.3g}; {} contacts)",
                            frame, i, quantity, "xyz"[k], got, want, tolerance, r.count0[l]);
       };
       const Aabb& local = model.local_box(i);
       for (int k = 0; k < 3; ++k) {
-        // The world AABB the engine used is its integrated position's box (SPEC 4.2); the
+        // The world AABB the engine used is its integrated position's box (design.md section 4.2); the
         // float32 sum local + x rounds at the scale of both.
         const double box_scale = std::max(std::fabs(local.min[k]), std::fabs(local.max[k]));
         judge("aabb.min", k, rec.aabbs[i].min[k], static_cast<double>(local.min[k]) + s.x_int[i][k],
@@ -715,7 +715,7 @@ ValidationResult AppliedStateJudge::result() const {
   ValidationResult r;
   r.tier = Tier::Model;
   r.name = "applied-state";
-  r.figure = "bodies off the SPEC 6 re-derivation";
+  r.figure = "bodies off the design.md section 6 re-derivation";
   r.measured = static_cast<double>(s.bodies.failures);
   r.bound = 0;
   r.pass = s.bodies.failures == 0;

@@ -1,12 +1,12 @@
 #pragma once
 /// \file applied_state.hpp
-/// SPEC 7 item 9 (private to validation/): the applied-state judge. An independent
-/// re-derivation of SPEC 4.1 and SPEC 6 in double precision predicts every body's
+/// design.md section 7 item 9 (private to validation/): the applied-state judge. An independent
+/// re-derivation of design.md section 4.1 and design.md section 6 in double precision predicts every body's
 /// post-step x and v from a FrameRecord's pre-step state and confirmed contacts; the
 /// engine's state must match within a float32 tolerance. Momentum and the mass-weighted
 /// centre are measured on the applied state of isolated dynamic groups.
 ///
-/// Relaxation passes (response.iterations > 1) make SPEC 6 discontinuous at decisions
+/// Relaxation passes (response.iterations > 1) make design.md section 6 discontinuous at decisions
 /// that float32 rounding can tip either way (v_n near 0, |v_n| near v_th, stick or slip,
 /// an overlap near 0, two overlaps or a centre offset near a tie, the fixed-axis
 /// distance): the outcome feeds the next pass of every neighbour. Each such near-tie is a
@@ -49,8 +49,8 @@ class AppliedStateJudge {
 
   /// Judges one step. `rec` holds x_pre, v_pre, x_post, v_post (one entry per body; the
   /// call does nothing when they are empty), aabbs and the sorted confirmed pairs.
-  /// `judge_response`: compare every dynamic body with the SPEC 6 re-derivation (octocd's
-  /// engines, or another engine that claims SPEC 6); false: only the isolated groups,
+  /// `judge_response`: compare every dynamic body with the design.md section 6 re-derivation (octocd's
+  /// engines, or another engine that claims design.md section 6); false: only the isolated groups,
   /// with the position after integration taken from the engine's world AABBs.
   void observe(const FrameRecord& rec, bool judge_response);
 

@@ -1,9 +1,9 @@
 // The per-frame validators, fed one FrameRecord at a time: from an octocd engine, from
 // another engine through the C++ API (external.cpp) or from an external trace. The
-// physics tier (SPEC 13: any engine, posed shapes, FCL) lives in validation/physics/ and
-// is called from here; this file holds the model tier's per-frame rows (SPEC 7 items 1,
+// physics tier (design.md section 13: any engine, posed shapes, FCL) lives in validation/physics/ and
+// is called from here; this file holds the model tier's per-frame rows (design.md section 7 items 1,
 // 2, 4-6 and 9 as the paper's model defines them), judged for octocd's engines and for
-// another engine only when it claims SPEC 6.
+// another engine only when it claims design.md section 6.
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
@@ -56,7 +56,7 @@ std::vector<Vec3> candidates(const PlacedShape& s, const Aabb& other, float marg
   return out;
 }
 
-/// The exhaustive vertex test (SPEC 5.3) over candidate vertices only: a vertex farther
+/// The exhaustive vertex test (design.md section 5.3) over candidate vertices only: a vertex farther
 /// than theta from the other body's AABB cannot be within theta of any of its vertices,
 /// so dropping it changes nothing; the remaining pairs are all tested, with no pruning.
 bool exhaustive_oracle(const PlacedShape& a_in, const PlacedShape& b_in, float theta) {
@@ -181,7 +181,7 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   pair_threads.threads = options.threads;
   s.flat = make_exact_pairs_broadphase(pair_threads);
   for (auto& bp : broadphases) s.broadphases.push_back(std::move(bp));
-  // The paper's configurations A, B, C and the scene's own (SPEC 5.2).
+  // The paper's configurations A, B, C and the scene's own (design.md section 5.2).
   for (const char* text : {"2", "1,2", "0,1,2"}) s.configs.push_back(MidphaseConfig::parse(text));
   if (!scene.midphase.aabb_only &&
       std::none_of(s.configs.begin(), s.configs.end(), [&](const MidphaseConfig& c) {
@@ -226,7 +226,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
   const std::vector<float>& w = model.initial.w;
   const ContactParams& p = s.params;
   const Tolerances& tol = s.options.tol;
-  // The position the engine's collision detection used (after integration, SPEC 4.1).
+  // The position the engine's collision detection used (after integration, design.md section 4.1).
   // octocd's engines: the same float32 integrate() they run (math.hpp), bit for bit; the
   // world AABB minus the local box would be off by an ulp, enough to flip a vertex test
   // sitting exactly at theta. Records without states: from the AABB.
@@ -265,7 +265,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
     }
   }
 
-  // 9. Applied state (SPEC 7.9): the engine's post-step state against the independent
+  // 9. Applied state (design.md section 7.9): the engine's post-step state against the independent
   // re-derivation, every frame; momentum and centre on isolated dynamic groups.
   if (has_states) {
     const RowClock clock(s.t_applied);
@@ -274,7 +274,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
 
   if (checked && s.source.octocd_pipeline) {
     // 1. Candidate sets: octocd's (and the reference) broadphases equal `flat` as sets
-    // (SPEC 7.1). Another engine's pairs are judged by the physics tier's broadphase
+    // (design.md section 7.1). Another engine's pairs are judged by the physics tier's broadphase
     // completeness (extras allowed), never against octocd's exact AABB rule.
     std::optional<RowClock> clock(std::in_place, s.t_candidates);
     find_pairs_stoppable(s.flat, boxes, s.expected, s.options.stop);
@@ -307,14 +307,14 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
       }
       s.candidates.check(same, same ? 0.0 : 1.0, what);
     };
-    // The pairs the engine itself used this frame (SPEC 7.9), then fresh instances.
+    // The pairs the engine itself used this frame (design.md section 7.9), then fresh instances.
     if (rec.has_pairs) compare(rec.pairs, s.source.label, true);
     for (auto& bp : s.broadphases) {
       find_pairs_stoppable(bp, boxes, s.got, s.options.stop);
       compare(s.got, bp->name(), false);
     }
 
-    // 2. Midphase completeness: every level list equals the exhaustive test (SPEC 7.2).
+    // 2. Midphase completeness: every level list equals the exhaustive test (design.md section 7.2).
     {
       clock.emplace(s.t_midphase);
       for (const Pair& q : s.expected) {
@@ -355,7 +355,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
     // Another engine reports pair, normal, depth and impulses only. Where every dynamic
     // body of the pair has this one contact in the frame, its state change is this
     // contact's own: corrections from the world AABBs (the position after integration)
-    // to x_post, velocity changes from the integrated v_pre (SPEC 4.1) to v_post.
+    // to x_post, velocity changes from the integrated v_pre (design.md section 4.1) to v_post.
     ContactRecord c = given;
     bool terms = rec.has_contact_terms;
     if (!terms && has_states &&
@@ -486,7 +486,7 @@ std::vector<ValidationResult> FrameValidators::results() const {
     r.detail = why;
     out.push_back(r);
   };
-  const char* no_spec6 = "another engine that does not claim SPEC 6 (response_model \"spec6\"): the paper's "
+  const char* no_spec6 = "another engine that does not claim design.md section 6 (response_model \"spec6\"): the paper's "
                          "response model is not judged; the physics tier judges its physics";
   auto tally = [](const char* name, const char* figure, const Tally& t, const std::string& ok_note) {
     ValidationResult r;
@@ -518,13 +518,13 @@ std::vector<ValidationResult> FrameValidators::results() const {
                 "another engine: octocd's exact AABB rule (Eq. 6) is not required of it; its pairs are judged by "
                 "broadphase-completeness (physics)");
     not_claimed("midphase-completeness", "pair x level lists differing from exhaustive",
-                "another engine: its contacts are not octocd's vertex-proximity test (SPEC 5.3)");
+                "another engine: its contacts are not octocd's vertex-proximity test (design.md section 5.3)");
   }
   if (!judge_response) {
     not_claimed("non-penetration-eq14", "contacts violating Eq. 14 contraction", no_spec6);
     not_claimed("friction-monotonicity", "contacts raising |v_t| or leaving the cone (Eq. 21-22)", no_spec6);
     not_claimed("impulse-conservation", "contacts and isolated groups breaking momentum or centre", no_spec6);
-    not_claimed("applied-state", "bodies off the SPEC 6 re-derivation", no_spec6);
+    not_claimed("applied-state", "bodies off the design.md section 6 re-derivation", no_spec6);
     return timed(out);
   }
   out.push_back(tally("non-penetration-eq14", "contacts violating Eq. 14 contraction", s.contraction,

@@ -1,5 +1,5 @@
 /// \file expect.cpp
-/// Causes, expectations and `validate --json` (octocd/expect.hpp; SPEC 13b.13, 14b).
+/// Causes, expectations and `validate --json` (octocd/expect.hpp; design.md sections 13b.13, 14b).
 
 #include "octocd/expect.hpp"
 
@@ -20,7 +20,7 @@
 namespace octocd {
 namespace {
 
-/// Each row and its documented causes (SPEC 13b.13); rows without causes do not split.
+/// Each row and its documented causes (design.md section 13b.13); rows without causes do not split.
 const std::vector<std::pair<std::string, std::vector<std::string>>>& row_table() {
   static const std::vector<std::pair<std::string, std::vector<std::string>>> rows = {
       // physics tier

@@ -70,7 +70,7 @@ void write_junit(const std::string& path, const std::string& suite,
     if (!r.applicable) {
       o << ">\n      <skipped message=\"" << xml_escape("n/a: " + r.detail) << "\"/>\n    </testcase>\n";
     } else if (row_verdict(r, report) == "expected") {
-      // Every failing cause within its expectation (SPEC 14b): skipped, with its figures.
+      // Every failing cause within its expectation (design.md section 14b): skipped, with its figures.
       std::string message = "expected:";
       for (const ExpectationOutcome& x : report->outcomes)
         if (x.row == r.name && x.kind == ExpectationOutcome::Kind::Expected)

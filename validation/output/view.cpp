@@ -1,4 +1,4 @@
-// A viewer of a frame (SPEC 16, octocd/view.hpp): a trace read through the hardened
+// A viewer of a frame (design.md section 16, octocd/view.hpp): a trace read through the hardened
 // external-trace reader, the bodies near an item, the engine's contacts and the physics
 // tier's reference for them, written as one self-contained HTML page.
 #include "octocd/view.hpp"

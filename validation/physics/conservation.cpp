@@ -120,9 +120,9 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
                            "(+{:.3g} of it){}",
                            frame, members.size(), members.front(), ke0, ke1, ke0 > 0 ? (ke1 - ke0) / ke0 : 0.0,
                            bodies.jacobi_response
-                               ? ": a property of the paper's model (SPEC 6's Jacobi response sums each body's "
+                               ? ": a property of the paper's model (design.md section 6's Jacobi response sums each body's "
                                  "impulses computed from one pre-response state, which overshoots on chains; "
-                                 "SPEC 13b.13: reported, not loosened)"
+                                 "design.md section 13b.13: reported, not loosened)"
                                : "");
       });
     }

@@ -196,7 +196,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
     const Pair p = rec.contacts[k0].pair;
     std::size_t k1 = k0;
     while (k1 < rec.contacts.size() && rec.contacts[k1].pair == p) ++k1;
-    // "Where the contact is the only one on its dynamic bodies" (SPEC 13.5): a manifold
+    // "Where the contact is the only one on its dynamic bodies" (design.md section 13.5): a manifold
     // row is a contact; with several rows, friction at one row turns the bodies and so
     // moves the tangential velocity at the others (Bullet: a 4-row box pair raised one
     // row's speed from 1.05 to 1.12 m/s while dissipating): judged on the cone only.

@@ -88,7 +88,7 @@ struct Where {
   }
 };
 
-/// One cause of a row (SPEC 13b.13): judged items, failures, the worst judged figure with
+/// One cause of a row (design.md section 13b.13): judged items, failures, the worst judged figure with
 /// its description (pass details), the first failing examples (at most
 /// ValidationCause::kMaxExamples) with frame, item and figure, the worst failure, and the
 /// distinct failing items (at most ValidationCause::kMaxItems).

@@ -154,7 +154,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail = s.normal_angle.worst_what + fmt::format(" ({} of {} rows beyond {} deg; {})", s.normal_angle.failures,
                                                          s.normal_angle.checks, aabb ? 90.0 : s.tol.normal_angle_deg, sign);
       if (s.sign_rows > 0 && 2 * s.sign_agree < s.sign_rows)
-        r.detail += "; most normals point from A to B: the convention is from B to A (SPEC 2)";
+        r.detail += "; most normals point from A to B: the convention is from B to A (design.md section 2)";
     } else if (s.depth.failures) {
       r.detail = s.depth.worst_what + fmt::format(" (depth off by more than {} m on {} of {} pairs)", s.tol.depth_m,
                                                   s.depth.failures, s.depth.checks);

@@ -1,4 +1,4 @@
-// The physics tier (SPEC 13): any engine judged on its posed shapes with FCL, never on
+// The physics tier (design.md section 13): any engine judged on its posed shapes with FCL, never on
 // octocd's own response model (that is validation/model/). This file: the settings'
 // names, the constructor, and the frame driver (observe); the rows live in files per
 // family (physics_impl.hpp lists them).
@@ -59,7 +59,7 @@ PhysicsBodies octocd_physics_bodies(const Model& model) {
   b.contact_geometry = ContactGeometry::Aabb;
   b.slop = p.slop;
   b.velocity_clamp = p.max_velocity;
-  b.integrator = PhysicsBodies::Integrator::SemiImplicit;  // SPEC 4.1: v += dt g, then x += dt v
+  b.integrator = PhysicsBodies::Integrator::SemiImplicit;  // design.md section 4.1: v += dt g, then x += dt v
   b.jt_along_sliding = true;
   b.impulses_complete = p.iterations <= 1;
   b.jacobi_response = true;

@@ -1,7 +1,7 @@
 #pragma once
 /// \file reference.hpp
 /// The reference contact geometry of one pair, as the physics tier's `contact-geometry`
-/// row judges it (octocd/physics.hpp, row 3; SPEC 13b.9): shared by the validators
+/// row judges it (octocd/physics.hpp, row 3; design.md section 13b.9): shared by the validators
 /// (contact_rows.cpp) and `octocd view` (validation/output/view.cpp), so a page draws
 /// exactly the normal a row was judged against. Internal to validation/.
 ///
@@ -9,7 +9,7 @@
 /// the separating-axis test (sat.hpp) gives the depth and the normal of the minimum
 /// translation, and every axis within its epsilon is an accepted normal; FCL's answer is
 /// kept beside it (the second opinion). Other shapes: FCL / libccd (ReferenceGeometry::
-/// posed). Units: metres; normals unit, from B to A (SPEC 2).
+/// posed). Units: metres; normals unit, from B to A (design.md section 2).
 
 #include <cstdint>
 

@@ -1,6 +1,6 @@
 #pragma once
 /// \file sat.hpp
-/// Exact reference geometry of two convex polytopes by the separating-axis test (SPEC
+/// Exact reference geometry of two convex polytopes by the separating-axis test (design.md section
 /// 13b.9): the physics tier's `contact-geometry` row judges box-box and convex-polytope
 /// pairs against it; FCL stays the reference for other shapes and the second opinion.
 ///
@@ -15,7 +15,7 @@
 /// unit axis u the shapes' projections [a0, a1] and [b0, b1] overlap by
 /// min(b1 - a0, a1 - b0): the translation of A along +u (b1 - a0) or -u (a1 - b0) that
 /// separates them along u. The minimum translation (penetration depth) is the least
-/// overlap over the axes, and its direction (from B to A, SPEC 2) is the contact normal.
+/// overlap over the axes, and its direction (from B to A, design.md section 2) is the contact normal.
 /// An overlap <= 0 on any axis: the shapes are separated (or touch).
 ///
 /// Accepted normals: every axis whose overlap is within epsilon of the minimum,

@@ -112,7 +112,7 @@ std::array<double, 3> leading_minors(const std::array<double, 9>& m) {
               m[2] * (m[3] * m[7] - m[4] * m[6])};
 }
 
-/// The exact world AABB of a mesh at `pose`: the bounds of its posed vertices (SPEC 13).
+/// The exact world AABB of a mesh at `pose`: the bounds of its posed vertices (design.md section 13).
 Aabb posed_mesh_aabb(const Mesh& mesh, const Pose& pose) {
   Aabb out{to_world(pose, mesh.vertices.front()), to_world(pose, mesh.vertices.front())};
   for (const Vec3& v : mesh.vertices) {
@@ -123,7 +123,7 @@ Aabb posed_mesh_aabb(const Mesh& mesh, const Pose& pose) {
   return out;
 }
 
-/// With a scene: each body's local box must be the scene's, or (SPEC 13: the body frame's
+/// With a scene: each body's local box must be the scene's, or (design.md section 13: the body frame's
 /// origin is the centre of mass) the scene's translated, same size within 1e-5 relative.
 /// A translated box gets a shape of its own (one per scene shape and offset) whose mesh
 /// is moved by the offset, so the shape's bounds are the given local box.
@@ -514,7 +514,7 @@ void ExternalValidator::Impl::prepare(FrameRecord& rec) {
   const std::size_t n = m.bodies.size();
   check_frame_record(rec, n, s.options.engine);
   if (rec.aabbs.empty() && !rec.x_det.empty()) {
-    // A rotating engine's record (SPEC 13): the exact world AABBs at its detection pose.
+    // A rotating engine's record (design.md section 13): the exact world AABBs at its detection pose.
     rec.aabbs.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
       const Pose pose{rec.x_det[i], rec.q_det.empty() ? Quat{} : rec.q_det[i]};
@@ -522,7 +522,7 @@ void ExternalValidator::Impl::prepare(FrameRecord& rec) {
       rec.aabbs[i] = shape.mesh ? posed_mesh_aabb(*shape.mesh, pose) : posed_box_aabb(shape.local, pose);
     }
   } else if (rec.aabbs.empty()) {
-    // SPEC 4.1 then 4.2, with the same float32 operations as octocd's engines.
+    // design.md sections 4.1 then 4.2, with the same float32 operations as octocd's engines.
     rec.aabbs.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
       Vec3 x = rec.x_pre[i], v = rec.v_pre[i];

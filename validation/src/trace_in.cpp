@@ -58,7 +58,7 @@ class TraceIn {
       const std::string model = string_attr("response_model");
       if (model != "spec6")
         bad("/ (root attribute response_model)", fmt::format("'{}' unknown", model),
-            "\"spec6\" (the engine claims octocd's response, SPEC 6), or no attribute (no claim)");
+            "\"spec6\" (the engine claims octocd's response, design.md section 6), or no attribute (no claim)");
       info.spec6_response = true;
     }
     if (has_attr("dt")) {  // one check for --check-only and the judged run (0, -0 and 1e-300 included)
@@ -251,7 +251,7 @@ class TraceIn {
   }
 
  private:
-  // ---- Version 2 (SPEC 13; docs/trace-format.md, "Version 2"): kept apart from the v1
+  // ---- Version 2 (design.md section 13; docs/trace-format.md, "Version 2"): kept apart from the v1
   // reading above.
 
   /// The datasets version 2 adds: an error in a version 1 file.
@@ -367,7 +367,7 @@ class TraceIn {
     }
   }
 
-  /// What the engine collided each body as (SPEC 13b.10): the root attribute
+  /// What the engine collided each body as (design.md section 13b.10): the root attribute
   /// `collision_shape` (every body) or `/bodies/collision_shape` (one string per body),
   /// each "mesh", "convex_hull", "box" or "sphere"; absent: every body as its shape.
   void read_collision_shapes(PhysicsBodies& p) const {
@@ -399,7 +399,7 @@ class TraceIn {
     }
   }
 
-  /// The declarations of SPEC 13b.12 (docs/trace-format.md, "Declarations"): root
+  /// The declarations of design.md section 13b.12 (docs/trace-format.md, "Declarations"): root
   /// attributes `contact_model`, `gyroscopic`, `integrator` and /bodies/locked_dofs.
   void read_declarations(PhysicsBodies& p) {
     p.contact_model = choice_attr("contact_model", {"rigid", "soft"}, "rigid") == "soft"
@@ -461,7 +461,7 @@ class TraceIn {
       // Where collision detection ran; never inferred from /aabbs.
       rec.x_det = rec.x_pre;
       rec.q_det = rec.q_pre;
-      if (integrated_)  // SPEC 4.1: v + dt g, then x + dt v (float32, as octocd's engines)
+      if (integrated_)  // design.md section 4.1: v + dt g, then x + dt v (float32, as octocd's engines)
         for (std::size_t i = 0; i < rec.x_det.size(); ++i) {
           Vec3 v = rec.v_pre[i];
           integrate(rec.x_det[i], v, bodies.inverse_mass[i], det_gravity_, Vec3{}, det_dt_);

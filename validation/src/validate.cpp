@@ -239,7 +239,7 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
     }
   } else if (kind == SceneKind::RestingStack) {
     // Distance from rest: each body's rest height is its initial (touching) height lowered
-    // by one slop per contact below it, since SPEC 6 leaves each contact's first delta of
+    // by one slop per contact below it, since design.md section 6 leaves each contact's first delta of
     // penetration uncorrected. From frame 200 on (settling) every body stays within
     // stack_slops slops of it.
     r.figure = "resting stack: max |y - rest height| once settled (200 steps) / slop";
@@ -314,7 +314,7 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
                                       scene_kind_name(kind)));
   std::shared_ptr<const Model> shared(&model, [](const Model*) {});  // outlives `bullet`
   // Box mode: octocd's translation-only response puts its contacts on the world AABBs, so
-  // Bullet's boxes equal to the AABBs settle where octocd's bodies must (SPEC 7.8).
+  // Bullet's boxes equal to the AABBs settle where octocd's bodies must (design.md section 7.8).
   BulletSettings boxes;
   boxes.shape = BulletShape::Box;
   BulletWorld bullet(shared, engine.state(), BulletOptions(), boxes);
@@ -600,7 +600,7 @@ std::string format_results(const std::vector<ValidationResult>& results,
     out += fmt::format("{:<8} {:<24} {:>12.6g} {:>10} {:<8}  {}\n", tier_name(r.tier), r.name, r.measured,
                        fmt::format("{:.4g}{}", r.bound, marked(r) ? "*" : " "), verdict, r.figure);
     out += fmt::format("{:<8} {:<24} {:>12} {:>10}  {:<8}  {}\n", "", "", "", "", "", r.detail);
-    // Each failing cause: its count and worst figure, then its first examples (SPEC 13b.13).
+    // Each failing cause: its count and worst figure, then its first examples (design.md section 13b.13).
     const std::vector<ValidationCause> causes = failure_causes(r);
     const bool own = causes.size() == 1 && causes.front().name == r.name && r.causes.empty();
     if (own) continue;  // the row's detail line is its only example

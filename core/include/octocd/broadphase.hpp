@@ -1,6 +1,6 @@
 #pragma once
 /// \file broadphase.hpp
-/// The object-level broadphase (paper section 3.2, Algorithms 1-2, section 4.2; SPEC 5.1).
+/// The object-level broadphase (paper section 3.2, Algorithms 1-2, section 4.2; design.md section 5.1).
 ///
 /// Every implementation returns the same set: all unordered pairs (a, b), a < b, whose
 /// world AABBs overlap under the inclusive rule of Eq. 6, sorted and unique. They differ
@@ -9,7 +9,7 @@
 /// octocd's own broadphases (make_broadphase; Bullet's and FCL's are in
 /// octocd/reference_broadphase.hpp):
 /// - `flat`: all n(n-1)/2 pairs through Eq. 6 (broadphase.cpp).
-/// - `octree` (default): the loose octree (SPEC 5.1; Ulrich 2000, looseness 2): each body
+/// - `octree` (default): the loose octree (design.md section 5.1; Ulrich 2000, looseness 2): each body
 ///   in the cell of its AABB centre at the deepest level whose cell side is >= its
 ///   largest side, queried against the <= 3x3x3 cells of its own and every coarser level
 ///   whose loose boxes (cells grown by half a side) meet it; bodies fitting no loose box
@@ -19,7 +19,7 @@
 ///   while every box stays inside its grown box, only re-tests those pairs; a few bodies
 ///   leaving theirs are re-queried alone (same answer, far less work for coherent
 ///   motion).
-/// - `octree-strict`: the paper's octree read literally (SPEC 5.1, paper Algorithms 1-2):
+/// - `octree-strict`: the paper's octree read literally (design.md section 5.1, paper Algorithms 1-2):
 ///   each body in the deepest node fully containing it, pairs in nodes that are equal or
 ///   ancestor and descendant (broadphase_octree_strict.cpp).
 /// - `spatial-hash`: uniform grid of cell size h (paper section 4.2), with coarser grids
@@ -41,10 +41,10 @@ struct Pair {
 };
 /// Equality of both indices.
 inline bool operator==(Pair p, Pair q) { return p.a == q.a && p.b == q.b; }
-/// Lexicographic order on (a, b): the order contacts are processed in (SPEC 6).
+/// Lexicographic order on (a, b): the order contacts are processed in (design.md section 6).
 inline bool operator<(Pair p, Pair q) { return p.a < q.a || (p.a == q.a && p.b < q.b); }
 
-/// Per-call counts (SPEC 5.1: "report per frame").
+/// Per-call counts (design.md section 5.1: "report per frame").
 struct BroadPhaseStats {
   /// Cell-level candidates: pairs considered before the exact AABB test (for `flat`,
   /// n(n-1)/2; for `octree`, the pairs of bodies in queried cells that reach the exact
@@ -99,14 +99,14 @@ std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, cons
 /// spatial-hash.
 std::vector<std::string> broadphase_names();
 
-/// Depth that `octree-strict` uses for `auto` (SPEC 5.1, "from body count and size"):
+/// Depth that `octree-strict` uses for `auto` (design.md section 5.1, "from body count and size"):
 /// the deepest level whose cells (side = longest domain side / 2^level, m) are still at
 /// least twice the mean body extent (mean over bodies of the longest AABB side; bodies
 /// with a non-finite or negative side left out), in [1, 8]. `boxes` (world AABBs, m) may
 /// be empty (gives 2).
 int auto_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain);
 
-/// Depth that `octree` (the loose octree) uses for `auto` (SPEC 5.1): the level whose
+/// Depth that `octree` (the loose octree) uses for `auto` (design.md section 5.1): the level whose
 /// cell side is the smallest body extent, i.e. the deepest level l in [0, 10] with
 /// S / 2^l >= the smallest largest-AABB-side over `boxes` (S = the longest domain side;
 /// computed in the unit coordinates of octocd/loose_octree.hpp), so the smallest body

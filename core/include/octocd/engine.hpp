@@ -28,9 +28,9 @@ namespace octocd {
 enum class Stage : int {
   Integrate = 0,   ///< Eq. 1-3
   Aabbs,           ///< world AABBs from positions
-  Broadphase,      ///< SPEC 5.1
-  Midphase,        ///< SPEC 5.2-5.3: per-mesh octree levels + vertex proximity
-  Response,        ///< SPEC 6: corrections, impulses, friction, clamp
+  Broadphase,      ///< design.md section 5.1
+  Midphase,        ///< design.md sections 5.2-5.3: per-mesh octree levels + vertex proximity
+  Response,        ///< design.md section 6: corrections, impulses, friction, clamp
   Metrics,         ///< energy, momentum, penetration statistics
   Count
 };
@@ -68,7 +68,7 @@ struct FrameMetrics {
   std::uint64_t memory_bytes = 0;  ///< bytes held by the pipeline's buffers
 };
 
-/// One contact as resolved by the response's first pass (SPEC 6): optional /contacts in
+/// One contact as resolved by the response's first pass (design.md section 6): optional /contacts in
 /// traces; the per-contact validators (contraction, friction) read these terms.
 struct ContactRecord {
   Pair pair;            ///< (a, b), a < b
@@ -95,12 +95,12 @@ struct Shape {
   float mean_edge = 0.0f;                    ///< mean edge length (m), 0 for boxes
 };
 
-/// Hot body state in structure-of-arrays form (SPEC 3), float32. Index = body id.
+/// Hot body state in structure-of-arrays form (design.md section 3), float32. Index = body id.
 struct BodyState {
   std::vector<Vec3> x;   ///< positions: centre of the world AABB (m)
   std::vector<Vec3> v;   ///< velocities (m/s)
   std::vector<float> w;  ///< inverse masses (1/kg); 0 = static
-  /// Rotating engines only (SPEC 13: `bullet` with rotation): orientations (unit
+  /// Rotating engines only (design.md section 13: `bullet` with rotation): orientations (unit
   /// quaternions, body to world) and angular velocities (rad/s, world frame), one per
   /// body; x is then the origin of the body frame (the centre of the shape's local AABB,
   /// Bullet's centre of mass). Empty for octocd's engines, which translate only
@@ -117,7 +117,7 @@ struct BodyInfo {
   std::string group;        ///< scene group name ("walls" for generated walls)
 };
 
-/// What every engine is built from (SPEC 3): the scene, its shapes and its bodies with
+/// What every engine is built from (design.md section 3): the scene, its shapes and its bodies with
 /// their initial state. Walls come first, then the groups' bodies in order.
 struct Model {
   Scene scene;                  ///< the validated scene
@@ -128,7 +128,7 @@ struct Model {
   /// is the larger of its two shapes' values (pair_theta). O(shapes), not O(shapes^2).
   std::vector<float> theta_shape;
 
-  /// theta (m) for a pair of shapes: the scene's value or `auto` (SPEC 6).
+  /// theta (m) for a pair of shapes: the scene's value or `auto` (design.md section 6).
   float theta(std::uint32_t shape_a, std::uint32_t shape_b) const {
     return pair_theta(theta_shape[shape_a], theta_shape[shape_b]);
   }
@@ -163,7 +163,7 @@ struct FrameRecord {
   bool has_pairs = true;          ///< `pairs` is the engine's candidate set for this step
   bool has_contact_terms = true;  ///< contacts carry axis, v_a/v_b, dx_a/dx_b, dv_a/dv_b
 
-  // ---- Rotating engines (SPEC 13, external traces v2). All empty for octocd's engines,
+  // ---- Rotating engines (design.md section 13, external traces v2). All empty for octocd's engines,
   // which translate only: orientation = identity, angular velocity = 0.
   /// Orientations before / after the step (unit quaternions, body to world); empty: the
   /// identity for every body.
@@ -172,7 +172,7 @@ struct FrameRecord {
   std::vector<Vec3> w_pre, w_post;
   /// The pose at which the step's collision detection ran (the AABBs, pairs and contacts
   /// refer to it): positions (m) and orientations. Empty: octocd's rule, the position
-  /// after integration (world AABB minus local box, SPEC 4.1-4.2) with the identity
+  /// after integration (world AABB minus local box, design.md sections 4.1-4.2) with the identity
   /// orientation. Engines that detect before integrating (Bullet, PhysX) give x_pre/q_pre.
   std::vector<Vec3> x_det;
   std::vector<Quat> q_det;
@@ -189,7 +189,7 @@ struct FrameRecord {
   std::vector<Vec3> jt3;
 };
 
-/// What a rotating engine states about its bodies and contacts beyond the Model (SPEC 13):
+/// What a rotating engine states about its bodies and contacts beyond the Model (design.md section 13):
 /// the root attributes and /bodies tables of a version-2 trace (docs/trace-format.md,
 /// "Version 2"), so octocd's physics-tier validators judge it with the engine's own
 /// inertia, materials and contact margin. Engines that translate only have none.
@@ -212,7 +212,7 @@ struct RotationTraits {
   /// "shape" (contacts computed on the posed shapes) or "aabb".
   std::string contact_geometry = "shape";
   /// What every body is collided as, written as the root attribute `collision_shape`
-  /// ("mesh", "convex_hull", "box", "sphere"; SPEC 13b.10); empty: not written (each body
+  /// ("mesh", "convex_hull", "box", "sphere"; design.md section 13b.10); empty: not written (each body
   /// as its shape).
   std::string collision_shape;
   /// The same per body, written as /bodies/collision_shape instead of the root attribute
@@ -264,7 +264,7 @@ class Engine {
   /// the engine did not run.
   virtual std::string midphase_name() const { return model().scene.midphase.to_string(); }
 
-  /// Runs one step (SPEC 4) and returns its metrics. Throws RuntimeError naming the body
+  /// Runs one step (design.md section 4) and returns its metrics. Throws RuntimeError naming the body
   /// and frame when a position or velocity becomes non-finite.
   virtual const FrameMetrics& step() = 0;
   /// A promise: the caller's next `steps` calls are step(), with nothing but step()'s
@@ -291,7 +291,7 @@ class Engine {
   virtual const std::vector<ContactRecord>& contacts() const = 0;
 
   /// What geometry the engine collides, in words, for summaries, bench results and
-  /// traces (SPEC 15): octocd's engines collide the scene's meshes and boxes themselves;
+  /// traces (design.md section 15): octocd's engines collide the scene's meshes and boxes themselves;
   /// `bullet` says hulls, triangle mesh or boxes (BulletSettings::shape).
   virtual std::string collision_geometry() const {
     return "octocd meshes (octree midphase on the mesh vertices, contacts on the world AABBs), boxes";
@@ -331,7 +331,7 @@ class Engine {
   const std::vector<Shape>& shapes() const { return model().shapes; }
   /// Cold per-body data.
   const std::vector<BodyInfo>& bodies() const { return model().bodies; }
-  /// theta (m) for a pair of shapes (SPEC 6).
+  /// theta (m) for a pair of shapes (design.md section 6).
   float theta(std::uint32_t shape_a, std::uint32_t shape_b) const {
     return model().theta(shape_a, shape_b);
   }

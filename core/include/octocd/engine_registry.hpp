@@ -18,9 +18,9 @@ struct EngineInfo {
   std::string name;         ///< as in `--engine`: "cpu", "cuda", "bullet"
   std::string description;  ///< one line for help texts
   /// Its bodies may rotate (a scene with rotation: true, `--rotation`); false: it
-  /// translates only and refuses a rotating scene (SPEC 3, require_translation_only).
+  /// translates only and refuses a rotating scene (design.md section 3, require_translation_only).
   bool rotates = false;
-  /// It runs the scene's midphase level list (SPEC 5.2); false: `--midphase` is refused.
+  /// It runs the scene's midphase level list (design.md section 5.2); false: `--midphase` is refused.
   bool has_midphase = false;
   /// It runs the broadphase the scene or `--broadphase` names; false: it runs its own
   /// (own_broadphase) and refuses any other name.

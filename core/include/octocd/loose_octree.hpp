@@ -1,6 +1,6 @@
 #pragma once
 /// \file loose_octree.hpp
-/// Cell and level math of the loose octree broadphase `octree` (SPEC 5.1; Ulrich, "Loose
+/// Cell and level math of the loose octree broadphase `octree` (design.md section 5.1; Ulrich, "Loose
 /// Octrees", Game Programming Gems 2000, looseness k = 2), shared by the CPU reference
 /// (core/src/broadphase_octree.cpp) and the CUDA engine.
 ///
@@ -79,7 +79,7 @@ OCTOCD_HD inline float loose_cells_per_axis(int level) {
   return static_cast<float>(1u << static_cast<unsigned>(level));
 }
 
-/// The level of a body by size (SPEC 5.1): the deepest l in [0, max_depth] whose cell
+/// The level of a body by size (design.md section 5.1): the deepest l in [0, max_depth] whose cell
 /// side s_l = S / 2^l is >= the body's largest AABB side, given as `extent_u` = that side
 /// / S (unit coordinates: the largest of u(max) - u(min) over the axes). Returns -1
 /// (overflow) when extent_u > 1 (the body is bigger than the root cell) or is NaN.
@@ -167,7 +167,7 @@ OCTOCD_HD inline LoosePlace loose_place_unit(Vec3 lo, Vec3 hi, int max_depth) {
 }
 
 /// Places a body with world AABB `b` (m) in a loose octree of depth `max_depth` in
-/// [0, 10] (SPEC 5.1): level by size (loose_level_for_extent), cell holding the AABB's
+/// [0, 10] (design.md section 5.1): level by size (loose_level_for_extent), cell holding the AABB's
 /// centre (clamped to the grid), then the loose-box containment is checked in unit
 /// coordinates and the body climbs one level at a time until it holds (it always holds
 /// at the chosen level for a centre inside the root cube, up to rounding). A body that
@@ -316,7 +316,7 @@ OCTOCD_HD inline Aabb loose_cell_box(const LooseGrid& g, int level, std::uint32_
           {g.origin.x + (fx + 1.5f) * s, g.origin.y + (fy + 1.5f) * s, g.origin.z + (fz + 1.5f) * s}};
 }
 
-/// D_w for `auto` (SPEC 5.1): the level whose cell side is the smallest body extent,
+/// D_w for `auto` (design.md section 5.1): the level whose cell side is the smallest body extent,
 /// i.e. loose_level_for_extent(min_extent_u, 10) where `min_extent_u` is the smallest
 /// largest-AABB-side over the bodies in unit coordinates (so the smallest body sits at
 /// level D_w). 0 when min_extent_u > 1 or is NaN (no body fits below the root).

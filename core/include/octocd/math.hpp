@@ -5,7 +5,7 @@
 /// Every function here is `OCTOCD_HD` (`__host__ __device__` under nvcc, nothing
 /// otherwise), takes and returns plain values, allocates nothing and throws nothing,
 /// so the CPU pipeline and the kernels run literally the same formulas.
-/// Units: metres, seconds, kilograms (SPEC section 2). State is float32.
+/// Units: metres, seconds, kilograms (design.md section 2). State is float32.
 
 #include <cmath>
 #include <cstdint>
@@ -71,7 +71,7 @@ struct Aabb {
 /// Centre of an AABB.
 OCTOCD_HD inline Vec3 center(const Aabb& b) { return 0.5f * (b.min + b.max); }
 
-/// The local box translated by x: the world AABB of a body at position x (SPEC 4.2).
+/// The local box translated by x: the world AABB of a body at position x (design.md section 4.2).
 OCTOCD_HD inline Aabb translated(const Aabb& local, Vec3 x) { return {local.min + x, local.max + x}; }
 
 /// The box grown by m on every side (m may be 0).
@@ -79,7 +79,7 @@ OCTOCD_HD inline Aabb expanded(const Aabb& b, float m) {
   return {{b.min.x - m, b.min.y - m, b.min.z - m}, {b.max.x + m, b.max.y + m, b.max.z + m}};
 }
 
-/// theta (m) of a shape pair (SPEC 6) from the two shapes' values (`theta_shape`: the
+/// theta (m) of a shape pair (design.md section 6) from the two shapes' values (`theta_shape`: the
 /// scene's theta, or with `auto` each shape's mean edge): the larger, as std::max gives it.
 OCTOCD_HD inline float pair_theta(float theta_a, float theta_b) { return (theta_a < theta_b) ? theta_b : theta_a; }
 
@@ -107,7 +107,7 @@ OCTOCD_HD inline bool contains(const Aabb& outer, const Aabb& inner) {
 }
 
 /// Squared distance from point p to box b; 0 when p is inside or on b.
-/// Used by the mesh-box narrow phase (SPEC 5.3).
+/// Used by the mesh-box narrow phase (design.md section 5.3).
 OCTOCD_HD inline float distance2_point_aabb(Vec3 p, const Aabb& b) {
   float d2 = 0.0f;
   for (int i = 0; i < 3; ++i) {
@@ -119,7 +119,7 @@ OCTOCD_HD inline float distance2_point_aabb(Vec3 p, const Aabb& b) {
 }
 
 /// Spreads the low 10 bits of v so that bit i lands on bit 3i: one axis of a 30-bit
-/// Morton code (Algorithm A1; SPEC 5.1-5.2). Bits above 9 are dropped.
+/// Morton code (Algorithm A1; design.md sections 5.1-5.2). Bits above 9 are dropped.
 OCTOCD_HD inline std::uint32_t morton_spread3(std::uint32_t v) {
   v &= 0x3ffu;
   v = (v | (v << 16)) & 0x030000ffu;
@@ -132,13 +132,13 @@ OCTOCD_HD inline std::uint32_t morton_spread3(std::uint32_t v) {
 /// 30-bit Morton code of integer cell coordinates (x, y, z), each in [0, 2^10) (higher
 /// bits are dropped): bit 3i holds bit i of x, bit 3i+1 bit i of y, bit 3i+2 bit i of z
 /// (x in the low bit of each triple). The one bit order of the project: the per-mesh
-/// octree (SPEC 5.2, Algorithm A1) and the world octrees (SPEC 5.1) both use it. The
+/// octree (design.md section 5.2, Algorithm A1) and the world octrees (design.md section 5.1) both use it. The
 /// code of a cell at depth d is the code of any of its depth-(d+k) descendants >> 3k.
 OCTOCD_HD inline std::uint32_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
   return morton_spread3(x) | (morton_spread3(y) << 1) | (morton_spread3(z) << 2);
 }
 
-/// How the per-axis overlap of Eq. 9 is read (SPEC 6, `response.overlap`).
+/// How the per-axis overlap of Eq. 9 is read (design.md section 6, `response.overlap`).
 enum class OverlapMode : int {
   /// p_i = min(max_A,i - min_B,i, max_B,i - min_A,i): the distance that separates the
   /// boxes along axis i (default). Equal to `Paper` unless one box contains the other
@@ -150,7 +150,7 @@ enum class OverlapMode : int {
 };
 
 /// Response parameters, paper Table 1 and section 3.3 (defaults are the paper's), plus
-/// SPEC 6's `overlap` and `iterations`. Constraints (section 3.3.3) are checked by the
+/// design.md section 6's `overlap` and `iterations`. Constraints (section 3.3.3) are checked by the
 /// scene loader, not here.
 struct ContactParams {
   float slop = 0.001f;          ///< delta: tolerated penetration (m), > 0.
@@ -163,8 +163,8 @@ struct ContactParams {
   float mu_kinetic = 0.5f;      ///< mu_k, kinetic friction coefficient (Eq. 21), >= 0.
   float max_velocity = 50.0f;   ///< v_max (m/s), per-component clamp (Eq. 23), finite > 0.
   float epsilon = 1e-6f;        ///< centre distance (m) below which n = +y (section 3.3 (3)).
-  OverlapMode overlap = OverlapMode::Separating;  ///< Eq. 9 reading (SPEC 6)
-  int iterations = 1;           ///< relaxation passes per step, in [1, 1000] (SPEC 6)
+  OverlapMode overlap = OverlapMode::Separating;  ///< Eq. 9 reading (design.md section 6)
+  int iterations = 1;           ///< relaxation passes per step, in [1, 1000] (design.md section 6)
 };
 
 /// Result of the AABB penetration test (Eq. 9-10).
@@ -175,7 +175,7 @@ struct Penetration {
   Vec3 normal{0.0f, 1.0f, 0.0f};  ///< unit normal along `axis`, pointing from B to A
 };
 
-/// Paper Eq. 9-10 and the "fixed axis" safeguard (SPEC 6): overlaps per axis of the
+/// Paper Eq. 9-10 and the "fixed axis" safeguard (design.md section 6): overlaps per axis of the
 /// world AABBs of A and B, read as `mode` says; any overlap <= 0 means no contact (hit =
 /// false). The normal is the axis of least overlap, signed so it points from B's AABB
 /// centre to A's; when the centres are closer than `epsilon` (m) the normal is +y (the
@@ -216,7 +216,7 @@ OCTOCD_HD inline Vec3 position_correction(const Penetration& pen, const ContactP
   return (p.alpha * p.beta * excess) * pen.normal;
 }
 
-/// Algorithm 3, lines 7-8 (not Eq. 12, which swaps the weights; SPEC 6): the share of the
+/// Algorithm 3, lines 7-8 (not Eq. 12, which swaps the weights; design.md section 6): the share of the
 /// correction applied to body A is w_A/(w_A+w_B) (positive direction), to B
 /// w_B/(w_A+w_B) (negative direction). w are inverse masses (1/kg), 0 = static.
 /// Returns 0 when both are static.
@@ -237,7 +237,7 @@ struct ContactImpulse {
   Vec3 dv_b{0.0f, 0.0f, 0.0f};    ///< velocity change of B (m/s)
 };
 
-/// Paper Eq. 16-22 as fixed by SPEC 6, for one contact from the pre-response velocities:
+/// Paper Eq. 16-22 as fixed by design.md section 6, for one contact from the pre-response velocities:
 /// - v_rel = v_A - v_B, v_n = v_rel . n, v_t = v_rel - v_n n (Eq. 16);
 /// - if v_n < 0: e_eff = 0 when |v_n| < v_th else e (Eq. 17);
 ///   J_n = max(-(1 + e_eff) v_n / (w_A + w_B), J_min) (Eq. 17-18); else J_n = 0;
@@ -282,7 +282,7 @@ OCTOCD_HD inline Vec3 clamp_velocity(Vec3 v, float v_max) {
           fminf(fmaxf(v.z, -v_max), v_max)};
 }
 
-/// The response terms of one contact in one pass (SPEC 6): penetration (Eq. 9-10), the
+/// The response terms of one contact in one pass (design.md section 6): penetration (Eq. 9-10), the
 /// correction split by Algorithm 3's weights (Eq. 11, 13), and the impulses (Eq. 16-22),
 /// all from the current world AABBs and velocities of A and B. `pen.hit` false: Eq. 9
 /// discards the contact and every term is zero.
@@ -308,7 +308,7 @@ OCTOCD_HD inline ContactTerms contact_terms(const Aabb& box_a, const Aabb& box_b
   return t;
 }
 
-/// Applies one pass's reduced terms to a dynamic body (SPEC 6 parallel semantics):
+/// Applies one pass's reduced terms to a dynamic body (design.md section 6 parallel semantics):
 /// x += dx_sum / count (corrections averaged over the body's `count` contacts),
 /// v += dv_sum (velocity changes summed). count = 0: nothing changes. dx_sum and dv_sum
 /// are sums over the body's contacts in (a, b) order, starting from zero.
@@ -319,7 +319,7 @@ OCTOCD_HD inline void apply_contact_sums(Vec3& x, Vec3& v, Vec3 dx_sum, Vec3 dv_
   v += dv_sum;
 }
 
-/// Paper Eq. 2-3 (semi-implicit "explicit" Euler, SPEC 4.1): v += dt (g + w F);
+/// Paper Eq. 2-3 (semi-implicit "explicit" Euler, design.md section 4.1): v += dt (g + w F);
 /// x += dt v. Static bodies (w = 0) do not move. `force` is in N.
 OCTOCD_HD inline void integrate(Vec3& x, Vec3& v, float w, Vec3 gravity, Vec3 force, float dt) {
   if (w == 0.0f) return;

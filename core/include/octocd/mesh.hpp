@@ -1,7 +1,7 @@
 #pragma once
 /// \file mesh.hpp
 /// Triangle meshes: loading through assimp, welding, recentring and normalising
-/// (SPEC section 3), and procedural shapes for tests (boxes, icospheres).
+/// (design.md section 3), and procedural shapes for tests (boxes, icospheres).
 
 #include <array>
 #include <cstdint>
@@ -65,7 +65,7 @@ Mesh load_mesh(const std::string& path);
 /// deterministic. Unreferenced vertices are kept.
 void weld_mesh(Mesh& mesh);
 
-/// SPEC 3: moves the mesh so the centre of its local AABB is the origin, then scales it
+/// design.md section 3: moves the mesh so the centre of its local AABB is the origin, then scales it
 /// uniformly so the longest side of that AABB is 1 m. Throws InputError when the mesh
 /// is empty or flat in all axes (longest side 0).
 void normalize_mesh(Mesh& mesh);
@@ -77,7 +77,7 @@ void scale_mesh(Mesh& mesh, float s);
 Aabb mesh_bounds(const Mesh& mesh);
 
 /// Mean length of the mesh's unique edges (m): the paper's mesh resolution that sets
-/// theta `auto` (SPEC 6). 0 for a mesh without triangles.
+/// theta `auto` (design.md section 6). 0 for a mesh without triangles.
 float mean_edge_length(const Mesh& mesh);
 
 /// A closed box mesh centred on the origin with the given half extents (m): 8 vertices,

@@ -1,6 +1,6 @@
 #pragma once
 /// \file mesh_octree.hpp
-/// The per-mesh octree of the midphase (paper Fig. 1, 4, A1, Algorithms A1-A2; SPEC 5.2).
+/// The per-mesh octree of the midphase (paper Fig. 1, 4, A1, Algorithms A1-A2; design.md section 5.2).
 ///
 /// Built once per shape in the mesh's local frame. Level 0 is the mesh's local AABB;
 /// level l splits it into 2^l cells per axis, down to depth D_m. Vertices are sorted by
@@ -54,11 +54,11 @@ struct MeshOctree {
 };
 
 /// Builds the octree of `mesh` down to `depth` in [0, 10]; `depth` = -1 picks `auto`
-/// (SPEC 5.2, see `auto_mesh_octree_depth`).
+/// (design.md section 5.2, see `auto_mesh_octree_depth`).
 /// Throws InputError when the mesh has no vertices or depth is out of range.
 MeshOctree build_mesh_octree(const Mesh& mesh, int depth);
 
-/// The depth `auto` picks for `mesh` (SPEC 5.2: "the deepest level whose occupied leaves
+/// The depth `auto` picks for `mesh` (design.md section 5.2: "the deepest level whose occupied leaves
 /// hold <= 64 vertices, at most 8"), read as: subdivide until every occupied leaf holds
 /// <= 64 vertices, i.e. the smallest depth D in [0, 8] whose largest occupied depth-D cell
 /// holds <= 64 vertices; 8 when even depth 8 has a larger cell (many coincident vertices).

@@ -1,7 +1,7 @@
 #pragma once
 /// \file midphase.hpp
-/// Midphase (per-mesh octree levels; SPEC 5.2) and vertex-proximity narrow phase
-/// (paper Eq. 7-8, Algorithm A2; SPEC 5.3).
+/// Midphase (per-mesh octree levels; design.md section 5.2) and vertex-proximity narrow phase
+/// (paper Eq. 7-8, Algorithm A2; design.md section 5.3).
 
 #include <cstdint>
 #include <string>
@@ -43,7 +43,7 @@ struct PlacedShape {
   Aabb box;                            ///< world AABB (for meshes: translated bounds)
 };
 
-/// Confirms or rejects contact between two placed shapes (SPEC 5.3):
+/// Confirms or rejects contact between two placed shapes (design.md section 5.3):
 /// - mesh-mesh: some vertex of A and some vertex of B closer than theta (Eq. 7), found
 ///   through the level list of `config` with cell boxes expanded by theta/2;
 /// - mesh-box: some vertex of the mesh within theta of (or inside) the box;

@@ -1,7 +1,7 @@
 #pragma once
 /// \file midphase_hd.hpp
-/// The per-pair midphase (per-mesh octree levels; SPEC 5.2) and vertex-proximity narrow
-/// phase (paper Eq. 7-8, Algorithm A2; SPEC 5.3) as `OCTOCD_HD` functions: the one copy
+/// The per-pair midphase (per-mesh octree levels; design.md section 5.2) and vertex-proximity narrow
+/// phase (paper Eq. 7-8, Algorithm A2; design.md section 5.3) as `OCTOCD_HD` functions: the one copy
 /// both engines run. The CPU's confirm_contact / exhaustive_contact (midphase.cpp) runs the
 /// depth-first descent below; the CUDA engine's level work lists (gpu/src/midphase.cu)
 /// run the same set-up (setup_pair), the same cell boxes (moved_grown, moved_back_grown,
@@ -83,7 +83,7 @@ OCTOCD_HD inline bool vertex_close(Vec3 wa, Vec3 wb, float theta2) {
   return dx * dx + dy * dy + dz * dz < theta2;
 }
 
-/// SPEC 5.3 mesh-box: world vertex wa within theta of (or inside) the world box.
+/// design.md section 5.3 mesh-box: world vertex wa within theta of (or inside) the world box.
 OCTOCD_HD inline bool vertex_box_close(Vec3 wa, const Aabb& box, float theta2) {
   return distance2_point_aabb(wa, box) < theta2;
 }
@@ -239,7 +239,7 @@ OCTOCD_HD inline bool mesh_mesh_leaf(const OctreeView& A, const OctreeView& B, V
   return false;
 }
 
-/// Level-list descent for mesh A against mesh B (SPEC 5.2): at level step i, every cell
+/// Level-list descent for mesh A against mesh B (design.md section 5.2): at level step i, every cell
 /// of A's range against every cell of B's range at levels la[i], lb[i] (A's cell box moved
 /// into B's frame and grown by the whole margin); an overlapping pair descends to both
 /// cells' descendants at step i + 1; at the last step (k - 1) it goes to the narrow phase.
@@ -305,7 +305,7 @@ OCTOCD_HD inline bool mesh_mesh_descend(const OctreeView& A, const OctreeView& B
 
 // ---- mesh-box ------------------------------------------------------------------------------
 
-/// Level-list descent for mesh A against a static box (SPEC 5.2-5.3): A's cells of each
+/// Level-list descent for mesh A against a static box (design.md sections 5.2-5.3): A's cells of each
 /// step are tested against the box in A's frame grown by theta + tol (`box_local`); the
 /// surviving deepest cells test their vertices against the world box. Depth-first in
 /// cell order with an explicit stack, stopping at the first vertex within theta.
@@ -357,7 +357,7 @@ enum class PairKind : int {
   Exhaustive = 3,  ///< no levels to prune with: exhaustive_contact
 };
 
-/// The set-up of one contact test (SPEC 5.3), shared by confirm_contact and the CUDA
+/// The set-up of one contact test (design.md section 5.3), shared by confirm_contact and the CUDA
 /// engine's level work lists: which test, the order (`swap`: the given pair is (box,
 /// mesh), so A = the second shape), and the frame of the descent.
 struct PairSetup {
@@ -397,7 +397,7 @@ OCTOCD_HD inline void setup_ordered(PairSetup& s, const PlacedView& a, const Pla
   const float tol = midphase_tolerance(
       theta, max_abs(a.position) + max_abs(b.position) + max_abs(A.bounds) + max_abs(B.bounds));
   s.margin = theta + tol;
-  // Early rejection (SPEC 5.3): the two bounds, each grown by theta/2, must overlap.
+  // Early rejection (design.md section 5.3): the two bounds, each grown by theta/2, must overlap.
   const Aabb e{A.bounds.min + s.d, A.bounds.max + s.d};
   if (!overlaps_margin(e, B.bounds, s.margin)) return;
   s.k = clamp_levels(config, A.depth, s.la);
@@ -421,7 +421,7 @@ OCTOCD_HD inline PairSetup setup_pair(const PlacedView& a_in, const PlacedView& 
   return s;
 }
 
-/// Confirms or rejects contact between two placed shapes (SPEC 5.3):
+/// Confirms or rejects contact between two placed shapes (design.md section 5.3):
 /// - mesh-mesh: some vertex of A and some vertex of B closer than theta (Eq. 7), found
 ///   through the level list `config` with cell boxes expanded by theta/2;
 /// - mesh-box: some vertex of the mesh within theta of (or inside) the box;

@@ -1,10 +1,10 @@
 #pragma once
 /// \file pose.hpp
-/// Rigid-body poses for engines that rotate (SPEC 13): a unit quaternion (w, x, y, z),
+/// Rigid-body poses for engines that rotate (design.md section 13): a unit quaternion (w, x, y, z),
 /// body to world, a 3x3 matrix, and a `Pose` (position + orientation) that feeds every
 /// geometric query of the physics-tier validators and the world AABB of a rotated body.
 ///
-/// octocd's own engines translate only (SPEC 3): their poses have the identity
+/// octocd's own engines translate only (design.md section 3): their poses have the identity
 /// orientation. Every function is `OCTOCD_HD`, allocates nothing and throws nothing.
 /// Units: metres, radians, seconds.
 
@@ -13,7 +13,7 @@
 namespace octocd {
 
 /// A quaternion w + x i + y j + z k (float32). A rotation is a unit quaternion; it maps
-/// body-frame vectors to the world frame (SPEC 13: `/states/orientation`, body to world).
+/// body-frame vectors to the world frame (design.md section 13: `/states/orientation`, body to world).
 struct Quat {
   float w = 1.0f;
   float x = 0.0f;
@@ -86,7 +86,7 @@ OCTOCD_HD inline Mat3 to_matrix(Quat q) {
 
 /// Where a body is: the world position of its body frame's origin (m) and its
 /// orientation (body to world). octocd's engines: the identity orientation and the
-/// centre of the world AABB (SPEC 3).
+/// centre of the world AABB (design.md section 3).
 struct Pose {
   Vec3 position;
   Quat orientation;
@@ -96,7 +96,7 @@ struct Pose {
 OCTOCD_HD inline Vec3 to_world(const Pose& pose, Vec3 p) { return rotate(pose.orientation, p) + pose.position; }
 
 /// The exact world AABB of a box given in the body frame (`local`, min <= max) at
-/// `pose`: the bounds of its 8 rotated corners (SPEC 13: "the bounds of its rotated
+/// `pose`: the bounds of its 8 rotated corners (design.md section 13: "the bounds of its rotated
 /// corners, not the rotated local box"), computed as centre +- |R| half extents.
 /// For the identity orientation this is `translated(local, pose.position)` up to rounding.
 OCTOCD_HD inline Aabb posed_box_aabb(const Aabb& local, const Pose& pose) {

@@ -1,6 +1,6 @@
 #pragma once
 /// \file scene.hpp
-/// Scenes (SPEC section 3): a JSON file describing the domain, gravity, time step, walls,
+/// Scenes (design.md section 3): a JSON file describing the domain, gravity, time step, walls,
 /// groups of bodies, response parameters, broadphase and midphase. The full key list
 /// with ranges is in docs/scenes.md. The same scene and seeds give the same bodies on
 /// every engine.
@@ -22,7 +22,7 @@ namespace octocd {
 
 /// Limits checked when a scene is loaded (docs/scenes.md, "Limits"); a value outside is an
 /// InputError (exit code 2). They keep float32 arithmetic meaningful: body state is
-/// float32 (SPEC 2), whose spacing at |x| = 1000 m is 2^-14 m = 6.1e-5 m, 1/16 of the
+/// float32 (design.md section 2), whose spacing at |x| = 1000 m is 2^-14 m = 6.1e-5 m, 1/16 of the
 /// default slop (1 mm); further out, the slop, theta and a step's displacement dt*v drown
 /// in rounding.
 namespace limits {
@@ -112,7 +112,7 @@ struct GroupSpec {
   std::vector<Vec3> positions;  ///< explicit centres (m), overrides layout when non-empty
   /// Initial orientation of every body of the group (unit quaternion, body to world;
   /// scene key `orientation`: [w, x, y, z] or {"axis": [x, y, z], "angle_deg": A}).
-  /// Identity by default. Only `--engine bullet` rotates (SPEC 13); cpu and cuda refuse a
+  /// Identity by default. Only `--engine bullet` rotates (design.md section 13); cpu and cuda refuse a
   /// non-identity value (require_translation_only).
   Quat orientation;
   /// Initial angular velocity (rad/s, world frame) of every dynamic body of the group
@@ -139,12 +139,12 @@ struct Scene {
   float wall_thickness = 0.1f;  ///< m, > 0; walls lie outside the domain, touching it
   std::vector<GroupSpec> groups;  ///< non-empty, names unique
   ContactParams response;    ///< Table 1 parameters
-  std::optional<float> theta;   ///< m, > 0; empty = `auto` (SPEC 6)
+  std::optional<float> theta;   ///< m, > 0; empty = `auto` (design.md section 6)
   BroadPhaseConfig broadphase;  ///< name not validated here (make_broadphase does it)
   MidphaseConfig midphase;      ///< "midphase.levels"
   int mesh_octree_depth = 2;    ///< D_m in [0, 10]; -1 = `auto`
   std::string data_dir;      ///< where dataset meshes are looked up
-  /// Scene key `rotation` (default false): the bodies rotate (SPEC 13). Only
+  /// Scene key `rotation` (default false): the bodies rotate (design.md section 13). Only
   /// `--engine bullet` runs such a scene (BulletWorld's rotation mode); `octocd run
   /// --rotation` sets it on the loaded scene.
   bool rotation = false;
@@ -154,9 +154,9 @@ struct Scene {
 /// non-identity `orientation` or a non-zero `angular_velocity`.
 bool scene_rotates(const Scene& scene);
 
-/// Refuses a rotating scene (scene_rotates) for an engine that translates only (SPEC 3:
+/// Refuses a rotating scene (scene_rotates) for an engine that translates only (design.md section 3:
 /// `cpu`, `cuda`): throws InputError "<scene file>: KEY: engine ENGINE translates only
-/// (SPEC 3) ...; allowed: ..., or --engine bullet" naming the first key that asks for
+/// (design.md section 3) ...; allowed: ..., or --engine bullet" naming the first key that asks for
 /// rotation (`rotation`, `groups[i].orientation` or `groups[i].angular_velocity`).
 void require_translation_only(const Scene& scene, const std::string& engine);
 
@@ -244,7 +244,7 @@ class SplitMix64 {
 ///   already placed, by this group or in `placed_before`; at most 1000 tries per body,
 ///   else InputError (region too small). Time O(count + placed_before.size()): the
 ///   placed boxes are binned in a grid of cells wider than the largest of them.
-/// `body_local_aabb` is the local AABB of one body (centred on the origin, SPEC 3).
+/// `body_local_aabb` is the local AABB of one body (centred on the origin, design.md section 3).
 /// `placed_before`: world AABBs (m) a random layout keeps apart from (build_model passes
 /// the bodies of the earlier groups, not the walls); ignored by the grid layout.
 std::vector<Vec3> group_positions(const GroupSpec& g, const Aabb& body_local_aabb,

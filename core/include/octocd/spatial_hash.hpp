@@ -1,6 +1,6 @@
 #pragma once
 /// \file spatial_hash.hpp
-/// Cell math of the `spatial-hash` broadphase (paper section 4.2; SPEC 5.1: a uniform grid
+/// Cell math of the `spatial-hash` broadphase (paper section 4.2; design.md section 5.1: a uniform grid
 /// of cell size h), shared by the CPU reference (core/src/broadphase_spatial_hash.cpp)
 /// and the CUDA engine (gpu/src/broadphase_hash.cu), so both put every body in the same
 /// cells and de-duplicate pairs by the same cell. Which bodies skip the grid for the

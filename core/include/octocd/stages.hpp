@@ -1,6 +1,6 @@
 #pragma once
 /// \file stages.hpp
-/// The stages of the CPU reference step (SPEC 4), one file each, mirroring gpu/src:
+/// The stages of the CPU reference step (design.md section 4), one file each, mirroring gpu/src:
 ///
 ///     stage            CPU (core/src/)                       CUDA (gpu/src/)
 ///     integrate        integrate.cpp  integrate_bodies       integrate.cu
@@ -29,7 +29,7 @@ namespace octocd {
 /// v += dt g, x += dt v; static bodies (w = 0) do not move. dt in s, gravity in m/s^2.
 void integrate_bodies(BodyState& state, Vec3 gravity, float dt);
 
-/// SPEC 4.2: boxes[i] = model.local_box(i) translated to x[i] (m), for every body.
+/// design.md section 4.2: boxes[i] = model.local_box(i) translated to x[i] (m), for every body.
 /// `boxes` must already hold x.size() entries (it is overwritten, not resized).
 void update_world_aabbs(const Model& model, const std::vector<Vec3>& x, std::vector<Aabb>& boxes);
 
@@ -37,7 +37,7 @@ void update_world_aabbs(const Model& model, const std::vector<Vec3>& x, std::vec
 /// component clamped to [-v_max, v_max] (m/s).
 void clamp_velocities(BodyState& state, float v_max);
 
-/// Midphase and narrow phase of the step (SPEC 5.2-5.3) over the broadphase's pairs:
+/// Midphase and narrow phase of the step (design.md sections 5.2-5.3) over the broadphase's pairs:
 /// confirmed[k] = 1 when confirm_contact accepts pairs[k] (the shapes placed at state.x
 /// with world AABBs `boxes`, theta of their shapes, the scene's midphase), else 0;
 /// static-static pairs are 0 and not tested. Pairs run in parallel (OpenMP, from 64
@@ -59,7 +59,7 @@ struct ResponseScratch {
   std::uint64_t memory_bytes() const;
 };
 
-/// One pass's per-contact terms (SPEC 6; octocd::contact_terms, Eq. 9-22): terms[k] for
+/// One pass's per-contact terms (design.md section 6; octocd::contact_terms, Eq. 9-22): terms[k] for
 /// each confirmed pair k from the world AABBs `boxes` and the velocities state.v; an
 /// unconfirmed pair gets empty terms (pen.hit false), as does one Eq. 9 discards.
 /// `terms` is resized to pairs.size().
@@ -67,7 +67,7 @@ void pass_contact_terms(const std::vector<Aabb>& boxes, const BodyState& state, 
                         const std::vector<std::uint8_t>& confirmed, const ContactParams& params,
                         std::vector<ContactTerms>& terms);
 
-/// The per-body reduction of one pass (SPEC 6 Jacobi, ARCHITECTURE "one written order"):
+/// The per-body reduction of one pass (design.md section 6 Jacobi, ARCHITECTURE "one written order"):
 /// from zero, for every kept contact (terms[k].pen.hit) in pair order, dx_sum[a] += dx_a,
 /// dx_sum[b] += dx_b, dv_sum[a] += dv_a, dv_sum[b] += dv_b and both counts + 1. The sums
 /// hold as many entries as there are bodies (sized by the caller).
@@ -84,7 +84,7 @@ void apply_contact_sums(BodyState& state, const ResponseScratch& sums);
 void contact_records(const std::vector<Pair>& pairs, const std::vector<ContactTerms>& terms,
                      const BodyState& state, std::vector<ContactRecord>& out);
 
-/// The response stage (SPEC 6): params.iterations Jacobi passes over the confirmed pairs.
+/// The response stage (design.md section 6): params.iterations Jacobi passes over the confirmed pairs.
 /// Pass 0 reads `boxes` (the Aabbs stage's), later passes the world AABBs of the state
 /// the previous pass left; each pass computes every contact's terms, sums them per body
 /// and applies them. contacts = the first pass's records (cleared first). No clamp.
@@ -92,7 +92,7 @@ void respond(const Model& model, BodyState& state, const std::vector<Aabb>& boxe
              const std::vector<std::uint8_t>& confirmed, const ContactParams& params, ResponseScratch& scratch,
              std::vector<ContactRecord>& contacts);
 
-/// The state's part of the frame metrics (SPEC 8): penetration mean, max and share above
+/// The state's part of the frame metrics (design.md section 8): penetration mean, max and share above
 /// `slop` over `contacts` (the first pass's records), kinetic energy and momentum of the
 /// dynamic bodies (accumulated in double, in body order). Throws RuntimeError naming the
 /// frame (m.frame), body and group when a dynamic body's position or velocity is not

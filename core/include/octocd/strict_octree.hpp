@@ -1,6 +1,6 @@
 #pragma once
 /// \file strict_octree.hpp
-/// Node and level math of the `octree-strict` broadphase (SPEC 5.1: the paper's world
+/// Node and level math of the `octree-strict` broadphase (design.md section 5.1: the paper's world
 /// octree read literally, paper section 3.2, Algorithms 1-2), shared by the CPU reference
 /// (core/src/broadphase_octree_strict.cpp, auto depth in core/src/broadphase.cpp) and the
 /// CUDA engine (gpu/src/broadphase_strict.cu), so both put every body in the same node.
@@ -123,7 +123,7 @@ OCTOCD_HD inline double strict_auto_extent(const Aabb& b) {
 /// True when a body's strict_auto_extent enters the mean: finite and >= 0.
 OCTOCD_HD inline bool strict_auto_counts(double extent) { return strict_isfinite(extent) && extent >= 0.0; }
 
-/// The `auto` depth of `octree-strict` (SPEC 5.1) from the sum and the number of the
+/// The `auto` depth of `octree-strict` (design.md section 5.1) from the sum and the number of the
 /// counted body extents (strict_auto_extent, strict_auto_counts): the deepest level in
 /// [1, 8] whose cells (side = longest domain side / 2^level, m) are still at least twice
 /// the mean extent; 2 when no body counts.

@@ -1,6 +1,6 @@
 #pragma once
 /// \file trace.hpp
-/// HDF5 traces (SPEC section 8; layout in docs/trace-format.md, format "octocd-trace"
+/// HDF5 traces (design.md section 8; layout in docs/trace-format.md, format "octocd-trace"
 /// version 1). The file is written in SWMR mode and flushed every `flush_every` frames,
 /// so a process killed with SIGKILL leaves a readable file holding every flushed frame.
 

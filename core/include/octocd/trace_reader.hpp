@@ -1,6 +1,6 @@
 #pragma once
 /// \file trace_reader.hpp
-/// Reads traces back (SPEC section 8; layout in docs/trace-format.md, format
+/// Reads traces back (design.md section 8; layout in docs/trace-format.md, format
 /// "octocd-trace" versions 1 and 2) for `octocd replay` and `octocd compare`: root attributes,
 /// whole 1-D columns, and single rows of the per-body arrays of /states, without loading
 /// the whole file. Opened read-only with the SWMR-read flag, so a trace still being

@@ -1,6 +1,6 @@
 #pragma once
 /// \file world.hpp
-/// The CPU reference pipeline (SPEC section 4): bodies in structure-of-arrays hot state,
+/// The CPU reference pipeline (design.md section 4): bodies in structure-of-arrays hot state,
 /// shapes with their per-mesh octrees, and one step of named, timed stages (the stage
 /// functions of octocd/stages.hpp, called in order).
 
@@ -21,13 +21,13 @@
 
 namespace octocd {
 
-/// The CPU reference engine (`cpu`, SPEC 4): owns its hot state and the chosen
+/// The CPU reference engine (`cpu`, design.md section 4): owns its hot state and the chosen
 /// broadphase; shares the Model (shapes, bodies) it was built from.
 class World : public Engine {
  public:
   /// Builds the model (build_model) and the scene's broadphase. Throws InputError for
   /// unreadable meshes, an unknown broadphase, or a rotating scene (scene_rotates: the
-  /// cpu engine translates only, SPEC 3; require_translation_only names the key).
+  /// cpu engine translates only, design.md section 3; require_translation_only names the key).
   explicit World(const Scene& scene);
 
   /// Same, with a broadphase made by the caller (e.g. a Bullet or FCL reference from
@@ -42,7 +42,7 @@ class World : public Engine {
   std::string device() const override;
   std::string broadphase_name() const override { return broadphase_->name(); }
   const Model& model() const override { return *model_; }
-  /// Runs one step (SPEC 4) and returns its metrics. Throws RuntimeError naming the body
+  /// Runs one step (design.md section 4) and returns its metrics. Throws RuntimeError naming the body
   /// and frame when a position or velocity becomes non-finite.
   const FrameMetrics& step() override;
   const BodyState& state() const override { return state_; }
@@ -79,7 +79,7 @@ class World : public Engine {
   std::int64_t frame_ = 0;
   bool recording_ = false;
   FrameRecord record_;
-  ResponseScratch response_;  // the response stage's buffers (SPEC 6 Jacobi reduction)
+  ResponseScratch response_;  // the response stage's buffers (design.md section 6 Jacobi reduction)
 };
 
 }  // namespace octocd

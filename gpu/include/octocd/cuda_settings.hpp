@@ -1,6 +1,6 @@
 #pragma once
 /// \file cuda_settings.hpp
-/// The settings of the CUDA engine (`cuda`, SPEC 11): every knob the engine has, in one
+/// The settings of the CUDA engine (`cuda`, design.md section 11): every knob the engine has, in one
 /// struct, read once by the CudaWorld constructor. docs/settings.md lists them with the
 /// ways to set them: C++ (`make_engine("cuda", model, options)` or make_cuda_engine),
 /// the CLI (`--cuda KEY=VALUE`, repeatable) and Python (`Engine(..., cuda={KEY: VALUE})`).

@@ -1,6 +1,6 @@
 #pragma once
 /// \file cuda_world.hpp
-/// The CUDA engine (`cuda`, SPEC 11): the CPU reference step (World::step, SPEC 4) on the
+/// The CUDA engine (`cuda`, design.md section 11): the CPU reference step (World::step, design.md section 4) on the
 /// device, stage by stage, bit-identical to the CPU engine (same float32 operations in the
 /// same order, from the same OCTOCD_HD headers: math.hpp, midphase_hd.hpp).
 ///
@@ -136,7 +136,7 @@ struct CudaTestHooks {
 /// (vertices, cells, level offsets, per-shape offsets) and the per-shape theta.
 ///
 /// Step: integrate; world AABBs; broadphase (`flat`: brute force, the device oracle;
-/// `octree`: the loose octree of SPEC 5.1 with the cell math of loose_octree.hpp;
+/// `octree`: the loose octree of design.md section 5.1 with the cell math of loose_octree.hpp;
 /// `octree-strict` and `spatial-hash` with the cell math of strict_octree.hpp and
 /// spatial_hash.hpp; `lbvh`: a Karras 2012 linear BVH rebuilt every step, gpu/src/lbvh.hpp;
 /// each appends pair keys that are then radix-sorted: the sorted unique set of `flat`); midphase + narrow phase as per-level work lists of box pairs (one warp
@@ -194,7 +194,7 @@ class CudaWorld : public Engine {
   /// state, shapes and octrees. `broadphase` as in `--broadphase` ("flat", "octree",
   /// "octree-strict", "spatial-hash" or "lbvh"). `model` must not be null (InputError); a
   /// rotating scene is refused (InputError naming the key, require_translation_only: the
-  /// cuda engine translates only, SPEC 3). `settings` as in CudaSettings (InputError when
+  /// cuda engine translates only, design.md section 3). `settings` as in CudaSettings (InputError when
   /// out of range, check_cuda_settings); `hooks` for tests only.
   CudaWorld(std::shared_ptr<const Model> model, const std::string& broadphase, const CudaSettings& settings = {},
             const TestHooks& hooks = {});
@@ -207,7 +207,7 @@ class CudaWorld : public Engine {
   std::string device() const override;
   std::string broadphase_name() const override;
   const Model& model() const override { return *model_; }
-  /// Runs one step (SPEC 4) on the device and returns its metrics (stage times in ms: this
+  /// Runs one step (design.md section 4) on the device and returns its metrics (stage times in ms: this
   /// step's when it is timed, else the last timed step's; see the class comment).
   /// Synchronises once, for the metrics (and again only when a buffer had to grow).
   const FrameMetrics& step() override;

@@ -1,6 +1,6 @@
 #pragma once
 /// \file expect.hpp
-/// Verdicts that gate a CI (SPEC 14b, 13b.13): a row's failures by cause, expectations
+/// Verdicts that gate a CI (design.md sections 14b, 13b.13): a row's failures by cause, expectations
 /// (known failures, `octocd validate --expect FILE.json`) matched against a run's results,
 /// and the machine-readable output of `octocd validate --json`.
 ///
@@ -8,7 +8,7 @@
 ///
 ///     {"expectations": [
 ///       {"scene": "bunny-stack-50", "row": "conservation", "cause": "energy",
-///        "worst": 0.01, "reason": "Jacobi-averaged passes raise KE (SPEC 13b.13)"},
+///        "worst": 0.01, "reason": "Jacobi-averaged passes raise KE (design.md section 13b.13)"},
 ///       {"trace": "run.h5", "row": "penetration", "cause": "penetration",
 ///        "items": ["pair (3, 7)"], "worst": 0.03, "reason": "..."}]}
 ///
@@ -37,7 +37,7 @@ std::vector<ValidationCause> failure_causes(const ValidationResult& r);
 /// Every row name the validators produce (physics tier, then model tier).
 const std::vector<std::string>& validation_row_names();
 
-/// The documented causes of `row` (SPEC 13b.13), without the row-named fallback; empty
+/// The documented causes of `row` (design.md section 13b.13), without the row-named fallback; empty
 /// for a row that does not split its failures.
 std::vector<std::string> documented_causes(const std::string& row);
 

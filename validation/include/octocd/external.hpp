@@ -1,20 +1,20 @@
 #pragma once
 /// \file external.hpp
-/// Validate your own engine (issue 11): octocd's validators (SPEC 7) judge the frames that
+/// Validate your own engine (issue 11): octocd's validators (design.md section 7) judge the frames that
 /// another engine computed, given through this C++ API or in an external trace
 /// (docs/trace-format.md, "External traces"; `octocd validate --trace-in FILE.h5`).
 ///
 /// The same FrameValidators that judge octocd's engines judge these frames: each frame is
-/// a FrameRecord (octocd/engine.hpp) that another program filled. What is judged (SPEC 13,
+/// a FrameRecord (octocd/engine.hpp) that another program filled. What is judged (design.md section 13,
 /// docs/validation.md, "Which rows judge what"): the physics tier (octocd/physics.hpp: broadphase and
 /// contact completeness, contact geometry against FCL on the posed shapes, penetration,
 /// friction, conservation) for any engine, with ExternalBodies::physics; the model tier
 /// (the paper's response: Eq. 14, friction monotonicity, impulse conservation, the
-/// applied state) only for an engine that claims SPEC 6 (ExternalOptions::spec6_response),
+/// applied state) only for an engine that claims design.md section 6 (ExternalOptions::spec6_response),
 /// n/a with the reason otherwise. Midphase completeness, the analytic scenes and the
 /// Bullet dynamics comparison need octocd's own pipeline or an engine to step: n/a.
 ///
-/// Conventions a caller must follow (SPEC 2). Units: m, s, kg; float32 state.
+/// Conventions a caller must follow (design.md section 2). Units: m, s, kg; float32 state.
 /// - Pairs are body indices (a, b) with a < b < bodies, sorted by (a, b), unique.
 /// - One contact per pair in (a, b) order, or with manifolds = true several consecutive
 ///   rows per pair; the normal is unit and points from B to A (+n applied to A separates
@@ -24,10 +24,10 @@
 /// - AABB overlap is inclusive (Eq. 6): boxes that only touch are a pair.
 /// - A body's world AABB is its local box translated by its position (with rotation: the
 ///   bounds of its posed shape at the detection pose).
-/// - States follow SPEC 4's order: x_pre, v_pre before the step; the world AABBs after
-///   integration (semi-implicit Euler, SPEC 4.1) unless x_det gives the detection pose;
+/// - States follow design.md section 4's order: x_pre, v_pre before the step; the world AABBs after
+///   integration (semi-implicit Euler, design.md section 4.1) unless x_det gives the detection pose;
 ///   x_post, v_post after the response.
-/// Rotating engines (SPEC 13; external traces version 2) fill q_pre/q_post, w_pre/w_post
+/// Rotating engines (design.md section 13; external traces version 2) fill q_pre/q_post, w_pre/w_post
 /// (empty: identity, zero), the detection pose x_det/q_det (the pose their collision
 /// detection ran at; Bullet, PhysX: the pre-step pose), and may give manifolds (several
 /// consecutive rows per pair, manifolds = true) with world contact points
@@ -80,7 +80,7 @@ struct ExternalBodies {
   /// Domain box for octocd's octree and hash broadphases (m). Empty: the scene's domain,
   /// else the bounding box of the first frame's AABBs. Bodies outside are never lost.
   std::optional<Aabb> domain;
-  /// What the physics tier needs beyond the bodies (SPEC 13, external traces v2):
+  /// What the physics tier needs beyond the bodies (design.md section 13, external traces v2):
   /// inertia, materials, the contact margin, and what the engine declares of itself
   /// (exact AABB broadphase, the geometry its contacts are computed on).
   PhysicsBodies physics;
@@ -93,7 +93,7 @@ struct ExternalOptions {
   /// Compare Bullet's and FCL's broadphases with `flat` beside the engine's pairs, and
   /// judge normals against FCL/libccd.
   bool against_fcl = true;
-  /// Also judge the applied state against the SPEC 6 re-derivation (SPEC 7.9,
+  /// Also judge the applied state against the design.md section 6 re-derivation (design.md section 7.9,
   /// validation/model/applied_state.hpp): for an engine that implements octocd's response.
   bool spec6_response = false;
   /// The frames are octocd's own cpu or cuda engine's (a trace whose root attribute
@@ -128,10 +128,10 @@ struct RecordFieldNames {
               contact_normal = "contacts.normal", contact_depth = "contacts.depth",
               contact_jn = "contacts.jn", contact_jt = "contacts.jt", x_pre = "x_pre", v_pre = "v_pre",
               x_post = "x_post", v_post = "v_post";
-  // Rotating engines (SPEC 13).
+  // Rotating engines (design.md section 13).
   std::string q_pre = "q_pre", q_post = "q_post", w_pre = "w_pre", w_post = "w_post", x_det = "x_det",
               q_det = "q_det", contact_point = "contacts.point";
-  /// The tangential impulse vectors (SPEC 13b.11; traces: /contacts/jt3).
+  /// The tangential impulse vectors (design.md section 13b.11; traces: /contacts/jt3).
   std::string contact_jt3 = "contacts.jt3";
 };
 
@@ -153,7 +153,7 @@ inline constexpr double kJt3MaxAngleDeg = 1.0;
 /// finite and unit (|n| within 1e-3 of 1); depth finite >= 0; J_n finite >= 0; J_t finite;
 /// with rec.has_points every contact point finite (m); rec.jt3 empty or one finite vector
 /// per contact within kJt3MaxAngleDeg of its contact plane.
-/// Rotation (SPEC 13): q_pre, q_post, w_pre, w_post all empty (no rotation) or all one per
+/// Rotation (design.md section 13): q_pre, q_post, w_pre, w_post all empty (no rotation) or all one per
 /// body, and then the states too; quaternions finite with | |q| - 1 | <= 1e-3; angular
 /// velocities finite (rad/s). Detection pose: x_det empty or one finite position per
 /// body; q_det empty or one unit quaternion per body, only with x_det. Throws InputError
@@ -170,13 +170,13 @@ struct PhysicsFieldNames {
               slop = "physics.slop", locked_dofs = "physics.locked_dofs";
 };
 
-/// Checks what the physics tier is told of the bodies (SPEC 13) for `inverse_mass.size()`
+/// Checks what the physics tier is told of the bodies (design.md section 13) for `inverse_mass.size()`
 /// bodies: `inertia` empty or one per body, finite, symmetric (|I_rc - I_cr| <= 1e-4
 /// max |I|) and positive definite (Sylvester: leading minors > 0) for every dynamic body
 /// (static bodies: anything finite, zeros allowed); `body_friction` empty or one finite
 /// value >= 0 per body; `body_restitution` empty or one per body in [0, 1]; `mu` finite
 /// >= 0; `restitution` in [0, 1]; `contact_margin` finite >= 0; `slop` finite > 0;
-/// `locked_dofs` empty or one value in 0 .. 63 per body (SPEC 13b.12).
+/// `locked_dofs` empty or one value in 0 .. 63 per body (design.md section 13b.12).
 /// Throws InputError "ORIGIN: FIELD: [body I: ]PROBLEM; allowed: RANGE".
 void check_physics_bodies(const PhysicsBodies& physics, const std::vector<float>& inverse_mass,
                           const std::string& origin, const PhysicsFieldNames& names = {});
@@ -205,7 +205,7 @@ class ExternalValidator {
 
   /// Judges one step. Fill `rec.frame` (named in verdicts), `aabbs` (the world AABBs the
   /// engine's collision detection used; leave empty to derive them: the exact bounds of
-  /// each shape at x_det/q_det when given, else from x_pre, v_pre by SPEC 4.1), `pairs` (or
+  /// each shape at x_det/q_det when given, else from x_pre, v_pre by design.md section 4.1), `pairs` (or
   /// set has_pairs = false), `contacts` (pair, normal, depth, jn, jt, and `point` with
   /// has_points; the other ContactRecord fields are ignored) and optionally the four
   /// states, with rotation q_pre/q_post/w_pre/w_post and the detection pose.
@@ -273,9 +273,9 @@ ExternalTraceInfo check_external_trace(const std::string& path);
 
 /// An external trace opened for reading, frame by frame (what `octocd validate
 /// --trace-in` reads). Version 1: positions, velocities, world AABBs, pairs, one contact
-/// per pair. Version 2 (SPEC 13) also: orientations and angular velocities (q_pre/q_post,
+/// per pair. Version 2 (design.md section 13) also: orientations and angular velocities (q_pre/q_post,
 /// w_pre/w_post), the detection pose (x_det/q_det = row f-1 of /states for detection
-/// "pre-step"; for "integrated", x_det = SPEC 4.1's integrated position from row f-1 and
+/// "pre-step"; for "integrated", x_det = design.md section 4.1's integrated position from row f-1 and
 /// q_det = row f-1's orientation), manifold contacts (manifolds = true) with their
 /// points, and ExternalBodies::physics (inertia given or derived with box_inertia,
 /// materials, contact margin, broadphase_exact, contact geometry, the scene's slop or

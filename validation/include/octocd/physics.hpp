@@ -1,6 +1,6 @@
 #pragma once
 /// \file physics.hpp
-/// The physics tier of the validators (SPEC 13, ARCHITECTURE.md seam 3): judges any
+/// The physics tier of the validators (design.md section 13, ARCHITECTURE.md seam 3): judges any
 /// engine, rotating or not, with any solver and any broadphase, on the true geometry of
 /// its posed shapes (FCL), never on octocd's own response model. The model tier
 /// (validation.hpp: Eq. 14 contraction, averaged corrections, the applied-state
@@ -79,7 +79,7 @@
 ///     when every restitution <= 1 (contact_model soft: per pair contact episode instead,
 ///     PhysicsBodies::contact_model). Groups with locked axes (locked_dofs) do not judge
 ///     the momentum along them nor, rotation locked, the angular momentum (counted).
-///  7. `momentum-balance` (every frame with states; SPEC 13b.7): per dynamic body with
+///  7. `momentum-balance` (every frame with states; design.md section 13b.7): per dynamic body with
 ///     contact rows, m (v' - v) - m g dt = sum of its rows' J = jn n + J_t (J_t: jt along
 ///     -v_t, or +t for octocd's records), and with rotation and points the torques
 ///     sum (p - x) x J = I_w (w' - w) (no gyroscopic term) or = L' - L, L = R I R^T w
@@ -88,13 +88,13 @@
 ///     (rows + 2) x the magnitudes, plus what a scalar jt leaves open (discs in each row's
 ///     tangent plane; docs/validate-your-engine.md derives it). n/a when the rows are not
 ///     the step's impulses (impulses_complete false).
-///  8. `free-flight` (every frame with states; SPEC 13b.8): per dynamic body without a
+///  8. `free-flight` (every frame with states; design.md section 13b.8): per dynamic body without a
 ///     contact row (or confirmed pair): v' = v + g dt, x' by the declared integrator,
 ///     the spin by the invariants (L = R I R^T w kept to second order in |w| dt and the
 ///     rotational energy not rising, or w' = w for an engine without the gyroscopic term;
 ///     docs/validation.md, "Free rotation: the invariants"), q' = q advanced by w dt within
 ///     free_flight_angle_rad + (|w| dt)^2. Locked axes are not judged (counted).
-/// Reporting (SPEC 13b.13): every row fills ValidationResult::judged and ::causes (per
+/// Reporting (design.md section 13b.13): every row fills ValidationResult::judged and ::causes (per
 /// cause its count, worst figure, first examples with frame and item "pair (A, B)",
 /// "body I" or "group (I, J, K)", and the failing items) and lists every cause in its
 /// detail; a row that judged nothing is n/a with its reason.
@@ -133,7 +133,7 @@ double combine_material(MaterialCombine c, double a, double b);
 enum class ContactGeometry {
   /// The posed shapes themselves (meshes, boxes): any engine's default.
   Shape,
-  /// The bodies' world AABBs: octocd's SPEC 6 response resolves every contact on the
+  /// The bodies' world AABBs: octocd's design.md section 6 response resolves every contact on the
   /// two world AABBs (Eq. 9-10), so its normal is an AABB axis. The angle to the posed
   /// shapes' normal is then reported as a figure, not judged.
   Aabb,
@@ -159,7 +159,7 @@ struct PhysicsBodies {
   /// Contact margin (m, >= 0): contacts are expected up to this distance (Bullet's
   /// contact breaking threshold, PhysX's contact offset); a contact on a pair farther
   /// apart is a false contact. octocd's engines: the pair's theta (vertex proximity,
-  /// SPEC 5.3), given by `theta_margin`.
+  /// design.md section 5.3), given by `theta_margin`.
   double contact_margin = 0.02;
   /// Use the model's pair theta (Model::theta) as the contact margin (octocd's engines).
   bool theta_margin = false;
@@ -168,12 +168,12 @@ struct PhysicsBodies {
   bool broadphase_exact = false;
   /// What the engine's contact normals and depths are computed on.
   ContactGeometry contact_geometry = ContactGeometry::Shape;
-  /// What the engine collided each body as (SPEC 13b.10): empty, every body as its shape
+  /// What the engine collided each body as (design.md section 13b.10): empty, every body as its shape
   /// (a box, or a mesh's triangles); else one per body. The geometric rows (broadphase
   /// and contact completeness, contact geometry, penetration) judge the declared shape;
   /// its gap to the true shape is a figure. `Sphere` on a box shape is an InputError.
   std::vector<CollisionShape> collision_shape;
-  /// The scene's slop (m, SPEC 6 delta): the penetration bound is a multiple of it.
+  /// The scene's slop (m, design.md section 6 delta): the penetration bound is a multiple of it.
   double slop = 0.001;
   /// A velocity clamp the engine declares (m/s, per component; 0 = none): octocd's Eq. 23
   /// v_max, PhysX's maxLinearVelocity. A clamp removes momentum by design, so an isolated
@@ -181,7 +181,7 @@ struct PhysicsBodies {
   /// row counts such groups).
   double velocity_clamp = 0.0;
 
-  // ---- Declarations (SPEC 13b.12; external traces v2: root attributes and
+  // ---- Declarations (design.md section 13b.12; external traces v2: root attributes and
   // /bodies/locked_dofs; docs/trace-format.md, "Declarations").
   /// `contact_model`: how the engine's contacts act. Rigid: impulses resolve a contact
   /// within the step, so an isolated group's kinetic energy never rises in a step. Soft
@@ -208,7 +208,7 @@ struct PhysicsBodies {
   };
   Gyroscopic gyroscopic = Gyroscopic::Undeclared;
   /// `integrator`: how a free body's position advances: semi-implicit Euler x' = x + dt v'
-  /// (SPEC 4.1, octocd's engines, Bullet), explicit x' = x + dt v, or either.
+  /// (design.md section 4.1, octocd's engines, Bullet), explicit x' = x + dt v, or either.
   enum class Integrator { SemiImplicit, Explicit, Any };
   Integrator integrator = Integrator::SemiImplicit;
   /// Per body (empty: none locked): bits 0-2 translation along world x, y, z, bits 3-5
@@ -220,7 +220,7 @@ struct PhysicsBodies {
   std::vector<std::uint8_t> locked_dofs;
 
   // ---- What octocd's own records mean (set by octocd_physics_bodies).
-  /// The rows' `jt` is SPEC 6's J_t along t = v_t / |v_t| (negative when friction opposes
+  /// The rows' `jt` is design.md section 6's J_t along t = v_t / |v_t| (negative when friction opposes
   /// the sliding: octocd's ContactRecord), not the trace convention's impulse along
   /// -v_t / |v_t|.
   bool jt_along_sliding = false;
@@ -228,7 +228,7 @@ struct PhysicsBodies {
   /// records the first relaxation pass only (its later passes apply more impulses on the
   /// same pairs): momentum-balance is then n/a with that reason.
   bool impulses_complete = true;
-  /// The engine is SPEC 6's Jacobi response (octocd's cpu and cuda): an energy failure of
+  /// The engine is design.md section 6's Jacobi response (octocd's cpu and cuda): an energy failure of
   /// an isolated group is reported as the model's property (its Jacobi-summed impulses
   /// computed from one pre-response state overshoot on chains), not as an engine fault.
   bool jacobi_response = false;
@@ -243,8 +243,8 @@ const char* integrator_name(PhysicsBodies::Integrator i);
 
 /// What octocd's own cpu and cuda engines declare: mu = the scene's mu_static (the
 /// cone of Eq. 21), restitution = the scene's e, the pair's theta as contact margin
-/// (vertex proximity, SPEC 5.3), an exact AABB broadphase, contacts on the world AABBs
-/// (SPEC 6), slop = delta, semi-implicit Euler (SPEC 4.1), jt along the sliding (SPEC 6's
+/// (vertex proximity, design.md section 5.3), an exact AABB broadphase, contacts on the world AABBs
+/// (design.md section 6), slop = delta, semi-implicit Euler (design.md section 4.1), jt along the sliding (design.md section 6's
 /// J_t), impulses complete only with response.iterations = 1 (the record holds the first
 /// pass), the Jacobi response. Bodies translate only: inertia is not needed.
 PhysicsBodies octocd_physics_bodies(const Model& model);

@@ -1,6 +1,6 @@
 #pragma once
 /// \file validation.hpp
-/// The validators of SPEC section 7 and `octocd validate`.
+/// The validators of design.md section 7 and `octocd validate`.
 ///
 /// Each validator returns a named result: the measured figure, the bound it is held to,
 /// pass/fail and a detail line (the first offending frame/pair when it fails). Every
@@ -29,20 +29,20 @@ class PhysicsValidators;
 struct PhysicsBodies;  // octocd/physics.hpp
 struct ExpectationReport;  // octocd/expect.hpp
 
-/// Which judge a row belongs to (SPEC 13, ARCHITECTURE.md seam 3).
+/// Which judge a row belongs to (design.md section 13, ARCHITECTURE.md seam 3).
 enum class Tier {
   /// Physics: any engine (rotation, any solver, any broadphase), judged on the posed
   /// shapes with FCL (validation/physics/).
   Physics,
-  /// Model: the paper's SPEC 6 response (Eq. 14, averaged corrections, the applied-state
+  /// Model: the paper's design.md section 6 response (Eq. 14, averaged corrections, the applied-state
   /// re-derivation, midphase completeness, analytic scenes, Bullet dynamics); n/a with
-  /// the reason for an engine that does not claim SPEC 6 (validation/model/).
+  /// the reason for an engine that does not claim design.md section 6 (validation/model/).
   Model,
 };
 /// "physics" or "model" (the table's tier column, JUnit, the trace's /validation/tier).
 const char* tier_name(Tier tier);
 
-/// One judged item of a row: where, and its figure (SPEC 13b.13).
+/// One judged item of a row: where, and its figure (design.md section 13b.13).
 struct ValidationExample {
   std::int64_t frame = -1;  ///< the frame (step number) it was judged on; -1: not a frame's item
   /// What was judged, in the form expectations name it: "pair (A, B)", "body I",
@@ -52,7 +52,7 @@ struct ValidationExample {
   std::string text;         ///< one line: what was measured against what, with the bound
 };
 
-/// One cause of a row's failures (SPEC 13b.13): e.g. row `contact-completeness` has the
+/// One cause of a row's failures (design.md section 13b.13): e.g. row `contact-completeness` has the
 /// causes `missing-contact` and `false-contact`. A second fault never hides behind the
 /// first: every cause is counted, and each keeps its first examples.
 struct ValidationCause {
@@ -151,10 +151,10 @@ struct Tolerances {
   double slide_rel = 0.02;
   /// Resting stack: from frame 200 on (or on the last frame of a shorter run), every body
   /// stays within this many slops of its rest height (its initial height lowered by one
-  /// slop per contact below it: SPEC 6 leaves each contact's first delta of penetration
+  /// slop per contact below it: design.md section 6 leaves each contact's first delta of penetration
   /// uncorrected).
   double stack_slops = 1.0;
-  /// Applied state (SPEC 7.9): engine vs the double re-derivation, per component,
+  /// Applied state (design.md section 7.9): engine vs the double re-derivation, per component,
   /// |diff| <= this x 2^-23 x (iterations + 2) x (the magnitudes that entered the value:
   /// |x| + the corrections + the largest AABB coordinate of its contacts; |v| + |g dt| +
   /// the velocity changes + the largest velocity of its contacts' bodies). A few float32
@@ -185,7 +185,7 @@ struct Tolerances {
   /// per contact point; the contact timing differs by a step).
   double bullet_trajectory_m = 0.03;
 
-  // ---- Physics tier (SPEC 13, octocd/physics.hpp). Measured on octocd's CPU engine
+  // ---- Physics tier (design.md section 13, octocd/physics.hpp). Measured on octocd's CPU engine
   // (octocd_physics_bodies; tests/validation/test_physics.cpp, every 10th frame checked) over
   // 1500 frames of box-stack, bunny-stack-50, bunny-random-400 and dragon-random-250, and
   // on the hand-made rotated records of that test. Bullet with rotation is measured by
@@ -200,7 +200,7 @@ struct Tolerances {
   /// pair: 2.2 (bunny-stack-50), 7.6 (bunny-random-400).
   double broadphase_margin_m = 0.0;
   /// Contact completeness: a pair penetrating deeper than this (m) needs a contact: one
-  /// slop of SPEC 6 (below it a resting engine may leave a pair untouched). octocd: every
+  /// slop of design.md section 6 (below it a resting engine may leave a pair untouched). octocd: every
   /// such pair has a contact (2769 on bunny-stack-50, 589 on bunny-random-400).
   double contact_depth_m = 1e-3;
   /// Contact geometry: largest angle between the engine's normal and FCL's minimum
@@ -215,7 +215,7 @@ struct Tolerances {
   /// normals deviate by p95 28-30 deg, max 57 deg (bunny-stack-50) and 115 deg
   /// (bunny-random-400).
   double normal_angle_deg = 40.0;
-  /// Contact geometry of two convex polytopes (boxes, convex meshes; SPEC 13b.9): the
+  /// Contact geometry of two convex polytopes (boxes, convex meshes; design.md section 13b.9): the
   /// separating-axis test accepts as a normal every axis whose overlap is within
   /// geometry_slack_m + this fraction of the minimum translation (validation/physics/
   /// sat.hpp). 0.05: ODE's box-box test (FCL's, Bullet's btBoxBoxDetector) keeps a face
@@ -234,7 +234,7 @@ struct Tolerances {
   /// frames bunny-random-400 7.1 mm; over 1500 frames octocd's own model FAILS it on the
   /// random mesh scenes: bunny-random-400 26 mm (frame 880), dragon-random-250 24 mm
   /// (frame 1030); these are upper bounds (non-convex meshes: the least separating
-  /// translation over 8 directions), the AABB response (SPEC 6) does not push along the
+  /// translation over 8 directions), the AABB response (design.md section 6) does not push along the
   /// surfaces' normal, so thin parts pass into each other.
   double penetration_slops = 20.0;
   /// Penetration: frames before this one are not judged (settling), 0 = all.
@@ -250,10 +250,10 @@ struct Tolerances {
   /// every restitution <= 1. octocd: worst rise 1.2e-7 of KE on bunny-stack-50, 6.1e-4
   /// on bunny-random-400 (Eq. 18's impulse floor J_min on grazing contacts); octocd's
   /// own model FAILS it on dragon-random-250 over 1500 frames: +25.8% (0.165 -> 0.207 J,
-  /// frame 584, a group of 3 bodies): SPEC 6 sums the impulses of a body's contacts
+  /// frame 584, a group of 3 bodies): design.md section 6 sums the impulses of a body's contacts
   /// computed from the same pre-response state (Jacobi), which overshoots on chains.
   double energy_rel = 1e-3;
-  /// Momentum balance per body (SPEC 13b.7) and free flight (13b.8): rounding allowance
+  /// Momentum balance per body (design.md section 13b.7) and free flight (13b.8): rounding allowance
   /// in units of 2^-23 of the magnitudes that entered the compared values (docs/
   /// validate-your-engine.md, "momentum-balance", derives it). A float32 velocity update
   /// v' = v + sum of k terms rounds at most k + 1 times by 2^-24 of the running sum; an
@@ -324,7 +324,7 @@ const std::vector<ToleranceEntry>& tolerance_table();
 /// the name and the allowed names or range.
 void set_tolerance(Tolerances& tol, const std::string& name, double value);
 
-/// Per-frame validators (SPEC 7 items 1-6 and 9), fed one FrameRecord at a time. They
+/// Per-frame validators (design.md section 7 items 1-6 and 9), fed one FrameRecord at a time. They
 /// read only the record and the model, so the same code judges octocd's engines (the
 /// Engine overloads), another engine's frames given through the C++ API
 /// (octocd/external.hpp) and external traces (`octocd validate --trace-in`). Hooks let
@@ -342,7 +342,7 @@ class FrameValidators {
     /// state). False for another engine: the physics tier only, and the model tier's
     /// response rows when `spec6_response`; the others are n/a with the reason.
     bool octocd_pipeline = true;
-    /// For another engine: it claims octocd's response (SPEC 6, trace attribute
+    /// For another engine: it claims octocd's response (design.md section 6, trace attribute
     /// `response_model = "spec6"`): the model tier's response rows are judged too.
     bool spec6_response = false;
     /// What the physics tier knows of the bodies (inertia, materials, contact margin,
@@ -398,7 +398,7 @@ class FrameValidators {
 /// configured like `scene.broadphase` on `scene.domain`.
 std::vector<std::unique_ptr<BroadPhase>> compared_broadphases(const Scene& scene, bool with_references);
 
-/// What a scene is, recognised by its content (SPEC 7.7), never by its name.
+/// What a scene is, recognised by its content (design.md section 7.7), never by its name.
 enum class SceneKind {
   FreeFall,      ///< one dynamic body, gravity, nothing under it: Eq. 2-3 closed form
   Bounce,        ///< one dynamic body at rest above a static support, impact above v_th
@@ -412,7 +412,7 @@ SceneKind classify_scene(const Model& model);
 /// "free fall", "bounce", "slide", "resting stack", "pile", "other".
 const char* scene_kind_name(SceneKind kind);
 
-/// Validator 7 (SPEC 7.7): the analytic scene kinds (classify_scene) run in `engine`
+/// Validator 7 (design.md section 7.7): the analytic scene kinds (classify_scene) run in `engine`
 /// against their closed forms: free fall, bounce, slide, resting stack. Not applicable
 /// (n/a) only to the other kinds. Steps `engine` itself, exactly `frames` steps at most
 /// (never more): an event the run does not reach fails, saying so (a bounce after the
@@ -423,7 +423,7 @@ const char* scene_kind_name(SceneKind kind);
 ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances& tol,
                                    const std::function<bool()>& stop = {});
 
-/// Validator 8 (SPEC 7.8): `engine` against Bullet's btDiscreteDynamicsWorld built from
+/// Validator 8 (design.md section 7.8): `engine` against Bullet's btDiscreteDynamicsWorld built from
 /// the same model: settled centre-of-mass height (resting stacks and piles) or the
 /// centre-of-mass trajectory (bounce, slide) over `frames` steps. Not applicable to other
 /// kinds, nor to a stack or pile that Bullet has not brought to rest by the last frame
@@ -487,7 +487,7 @@ void write_junit(const std::string& path, const std::string& suite,
 void write_junit_error(const std::string& path, const std::string& suite, const std::string& name,
                        const std::string& message);
 
-/// Appends `/validation` to an existing trace (SPEC 8): one row per result with name,
+/// Appends `/validation` to an existing trace (design.md section 8): one row per result with name,
 /// figure, measured, bound, pass, applicable, detail. Throws RuntimeError naming the path.
 void write_validation(const std::string& trace_path, const std::vector<ValidationResult>& results);
 

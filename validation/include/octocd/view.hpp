@@ -1,6 +1,6 @@
 #pragma once
 /// \file view.hpp
-/// A viewer of a frame (SPEC 16; `octocd view`, `octocd validate --view`, Python
+/// A viewer of a frame (design.md section 16; `octocd view`, `octocd validate --view`, Python
 /// `octocd.view`): one self-contained HTML page that draws the posed shapes of the bodies
 /// near an item (a pair or a body) of a trace, their world AABBs, the engine's contact
 /// points and normals (arrows scaled by depth), the reference's normal and points (the

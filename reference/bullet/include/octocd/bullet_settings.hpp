@@ -1,6 +1,6 @@
 #pragma once
 /// \file bullet_settings.hpp
-/// The settings of the Bullet engine (`bullet`, SPEC 15): what geometry Bullet collides.
+/// The settings of the Bullet engine (`bullet`, design.md section 15): what geometry Bullet collides.
 /// docs/settings.md lists them with the ways to set them: C++ (`make_engine("bullet",
 /// model, {}, settings)` or BulletWorld's constructor), the CLI (`--bullet KEY=VALUE`,
 /// repeatable) and Python (`Engine(..., bullet={KEY: VALUE})`).
@@ -12,13 +12,13 @@ namespace octocd {
 
 /// What Bullet collides a body as.
 enum class BulletShape {
-  /// The same meshes as octocd (SPEC 15, the default): a dynamic mesh is a
+  /// The same meshes as octocd (design.md section 15, the default): a dynamic mesh is a
   /// btConvexHullShape of its mesh's convex hull (translation-only: the same hull with
   /// angular factor 0); a static mesh is a btBvhTriangleMeshShape of its triangles; a box
   /// shape is a btBoxShape. Collision margins 0: the shapes are exactly those declared
   /// in traces (collision_shape "convex_hull" / "mesh").
   Hull,
-  /// Boxes equal to the shapes' local AABBs (SPEC 7.8's "box shapes equal to the
+  /// Boxes equal to the shapes' local AABBs (design.md section 7.8's "box shapes equal to the
   /// AABBs"): every body, mesh or box, is a btBoxShape; box-box pairs through
   /// btBoxBoxDetector. Declared as collision_shape "box". With rotation, meshes are
   /// hulls whatever this setting (a rotating body is never its AABB).

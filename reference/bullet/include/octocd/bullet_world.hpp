@@ -1,6 +1,6 @@
 #pragma once
 /// \file bullet_world.hpp
-/// The same scene in Bullet's btDiscreteDynamicsWorld (SPEC 7 item 8): a dynamics
+/// The same scene in Bullet's btDiscreteDynamicsWorld (design.md section 7 item 8): a dynamics
 /// reference for `octocd run --engine bullet`, so validators can compare settled heights
 /// and centre-of-mass trajectories with octocd's own pipeline.
 
@@ -17,7 +17,7 @@ namespace octocd {
 /// btDbvtBroadphase, btSequentialImpulseConstraintSolver). Bullet is the float build
 /// (btScalar = float, as pkg-config `bullet` gives).
 ///
-/// Geometry (BulletSettings::shape, SPEC 15; collision_geometry() says it in words):
+/// Geometry (BulletSettings::shape, design.md section 15; collision_geometry() says it in words):
 /// - hull (the default): a dynamic mesh body is a btConvexHullShape of its mesh's convex
 ///   hull (btConvexHullComputer), a static mesh body a btBvhTriangleMeshShape of its
 ///   triangles (btTriangleMesh, quantized BVH), a box shape a btBoxShape; every margin 0.
@@ -27,11 +27,11 @@ namespace octocd {
 ///   stays the identity, w 0), so a hull run records and writes version 2 traces
 ///   declaring /bodies/collision_shape ("convex_hull"; "mesh" for a static triangle mesh).
 ///   Hull-triangle pairs go through Bullet's btConvexConcaveCollisionAlgorithm unchecked.
-/// - box: what follows (the box mode, SPEC 7.8's "box shapes equal to the AABBs").
+/// - box: what follows (the box mode, design.md section 7.8's "box shapes equal to the AABBs").
 ///
 /// Bodies (box mode without rotation):
 /// - every body is a btRigidBody with a btBoxShape of its shape's local AABB half extents
-///   (mesh bodies too: SPEC 7.8 compares against "box shapes equal to the AABBs"), centred
+///   (mesh bodies too: design.md section 7.8 compares against "box shapes equal to the AABBs"), centred
 ///   on the AABB centre, so Bullet's centre of mass is octocd's x. Box-box pairs use
 ///   Bullet's dedicated btBoxBoxCollisionAlgorithm (btBoxBoxDetector). Nothing is
 ///   recorded (can_record() false): summaries and trace parameters say "boxes".
@@ -63,16 +63,16 @@ namespace octocd {
 ///   "push" velocity, not into the body's velocity. With the default, penetrations under
 ///   4 cm (all of them here) are fixed through the velocity and add erp2 * depth / dt to
 ///   rebounds (bounce.json measured 0.543 instead of 0.498 for e = 0.5). octocd also
-///   corrects positions apart from velocities (SPEC 6), so this is the comparable setting.
+///   corrects positions apart from velocities (design.md section 6), so this is the comparable setting.
 /// octocd's delta, beta, alpha, J_min, mu_s and v_max have no Bullet counterpart and are
 /// not used (no velocity clamp).
 ///
 /// Stepping: gravity = scene.gravity; step() calls stepSimulation(dt, 0): exactly one
 /// internal step of dt per frame, no sub-stepping and no interpolation. Bullet's
-/// integrator is semi-implicit Euler like SPEC 4.1 (v += dt g, then x += dt v), so free
+/// integrator is semi-implicit Euler like design.md section 4.1 (v += dt g, then x += dt v), so free
 /// fall follows the same closed form as octocd.
 ///
-/// Rotation mode (SPEC 13: octocd's own rotating reference). On when scene_rotates(scene):
+/// Rotation mode (design.md section 13: octocd's own rotating reference). On when scene_rotates(scene):
 /// the scene key `rotation: true` (`octocd run --engine bullet --rotation` sets it), or a
 /// group with an `orientation` or `angular_velocity`. Everything above holds except:
 /// - angular motion: no setAngularFactor(0); inertia = btCollisionShape::
@@ -216,7 +216,7 @@ class BulletWorld : public Engine {
   bool can_record() const override;
   /// Turns the per-step FrameRecord on or off (rotation mode; ignored otherwise).
   void set_recording(bool on) override;
-  /// The last step's record (rotation mode, recording on), SPEC 13 / external trace v2:
+  /// The last step's record (rotation mode, recording on), design.md section 13 / external trace v2:
   /// - x_pre, v_pre, q_pre, w_pre: the state before the step; x_post, ...: after it;
   ///   x_det, q_det = x_pre, q_pre (Bullet detects collisions before it integrates);
   /// - aabbs: the boxes Bullet's broadphase was given this step (each proxy's AABB:

@@ -1,7 +1,7 @@
 #pragma once
 /// \file reference_broadphase.hpp
 /// Reference broadphases from Bullet and FCL behind octocd's BroadPhase interface
-/// (SPEC 5.1, "References"). They exist to compare octocd's own broadphases against
+/// (design.md section 5.1, "References"). They exist to compare octocd's own broadphases against
 /// well-known libraries, in results (tests) and in cost (benchmarks).
 ///
 /// Every reference returns exactly what `flat` returns: the pairs (a < b) whose world

@@ -1,10 +1,10 @@
 #pragma once
 /// \file reference_contact.hpp
-/// Reference contact normals from FCL / libccd for SPEC 7 validator 3 ("Contact normals":
+/// Reference contact normals from FCL / libccd for design.md section 7 validator 3 ("Contact normals":
 /// the response normal against a reference normal; distance query nearest points for
 /// separated pairs, libccd GJK/EPA on the convex hulls for penetrating pairs).
 ///
-/// Bodies only translate (SPEC 3), so every query uses identity rotations and the
+/// Bodies only translate (design.md section 3), so every query uses identity rotations and the
 /// translations x_a, x_b (BodyState::x, the world position of the shape's local frame).
 ///
 /// Which path a pair takes is decided on the convex hulls: libccd ccdGJKIntersect on the
@@ -33,7 +33,7 @@
 ///    fcl_collide_normal() for comparison and used as a fallback when EPA fails.
 ///  - FCL mesh-mesh (BVH-BVH) contacts are per triangle and are never used.
 ///
-/// Posed queries (SPEC 13, the physics tier): the same queries for bodies that rotate,
+/// Posed queries (design.md section 13, the physics tier): the same queries for bodies that rotate,
 /// each body at a `Pose` (body-frame origin + orientation, body to world). The shape is
 /// in the body frame as the Model gives it: a box fills its local AABB; a mesh is placed
 /// so that its vertex bounds are the shape's local AABB (octocd's meshes are centred on
@@ -72,7 +72,7 @@ namespace octocd {
 struct ReferenceNormal {
   bool valid = false;        ///< false when FCL/libccd gave no usable answer (e.g. degenerate)
   bool penetrating = false;  ///< true: convex hulls intersect (GJK/EPA); false: separated (distance query)
-  Vec3 normal;               ///< unit, pointing from B to A (SPEC 2)
+  Vec3 normal;               ///< unit, pointing from B to A (design.md section 2)
   double distance = 0;       ///< m, >= 0, separated pairs (mesh-mesh BVH distance)
   double depth = 0;          ///< m, >= 0, penetrating pairs (EPA depth on the hulls)
   Vec3 point_a, point_b;     ///< nearest points (separated) or contact point (penetrating; a == b), world frame
@@ -83,7 +83,7 @@ struct ReferenceNormal {
   double signed_distance() const { return penetrating ? -depth : distance; }
 };
 
-/// What an engine collided a body as (SPEC 13b.10; external traces v2:
+/// What an engine collided a body as (design.md section 13b.10; external traces v2:
 /// `/bodies/collision_shape` or the root attribute `collision_shape`). The physics tier's
 /// geometric rows judge this shape; its gap to the true shape is a figure.
 enum class CollisionShape {
@@ -148,7 +148,7 @@ class ReferenceGeometry {
   /// For comparison and fallback; normal() is the reference.
   ReferenceNormal fcl_collide_normal(std::uint32_t a, std::uint32_t b, Vec3 xa, Vec3 xb) const;
 
-  /// Contact geometry of bodies a, b at poses pa, pb (SPEC 13; see the file comment for
+  /// Contact geometry of bodies a, b at poses pa, pb (design.md section 13; see the file comment for
   /// non-convex meshes). Penetrating: normal from B to A (the direction to translate A
   /// to separate), depth >= 0, point_a = point_b = the EPA contact point. Separated:
   /// distance > 0, point_a on A, point_b on B (FCL distance on the boxes / BVH models),
@@ -164,7 +164,7 @@ class ReferenceGeometry {
   /// (box: its faces, also from inside; mesh: its triangles, FCL sphere-BVH distance).
   double surface_distance(std::uint32_t body, const Pose& pose, Vec3 p) const;
 
-  /// The exact world AABB of body `body` at `pose` (SPEC 13): a box's posed_box_aabb, a
+  /// The exact world AABB of body `body` at `pose` (design.md section 13): a box's posed_box_aabb, a
   /// mesh's bounds of its rotated hull vertices (double, rounded outward to float).
   Aabb world_aabb(std::uint32_t body, const Pose& pose) const;
 
@@ -184,7 +184,7 @@ class ReferenceGeometry {
 
   /// Box-box geometry of two axis-aligned boxes given in the world (FCL's box-box test;
   /// FCL distance when apart): what an engine that resolves contacts on world AABBs
-  /// (octocd's SPEC 6) should find. Same conventions as posed().
+  /// (octocd's design.md section 6) should find. Same conventions as posed().
   static ReferenceNormal aabb_pair(const Aabb& a, const Aabb& b);
 
  private:
