@@ -12,6 +12,9 @@ PACKAGES=(
   # the field's libraries
   libbullet-dev libfcl-dev libccd-dev libeigen3-dev libassimp-dev
   libhdf5-dev hdf5-tools nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
+  # the reference engines beyond Bullet (reference/mujoco, reference/ode; docs/engines.md):
+  # 6.5 MB installed with their libraries (qhull, tinyxml2, lodepng), seconds of apt
+  libmujoco-dev libode-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev libxml2-dev
   # reports (Debian's /usr/bin/python3) and the dataset split

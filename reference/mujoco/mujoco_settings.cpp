@@ -58,7 +58,7 @@ void set_mujoco_setting(MujocoSettings& s, const std::string& key, const std::st
     }
     if (used != value.size() || value.empty() || n < 0 || n > 1000000)
       throw InputError(fmt::format("{}: max_contacts='{}' is not allowed; allowed: an integer in [0, 1000000] (MuJoCo's "
-                                   "contact capacity; 0: 6 per dynamic body, at least 256)",
+                                   "contact capacity; 0: 6 per dynamic body, at least 256, at most 1500)",
                                    where, value));
     s.max_contacts = static_cast<int>(n);
     return;

@@ -272,11 +272,14 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
   std::size_t dynamic = 0;
   for (std::size_t i = 0; i < n; ++i) dynamic += initial.w[i] > 0.0f ? 1 : 0;
   // Contact capacity: MujocoSettings::max_contacts, or 6 per dynamic body (a box resting
-  // on a face has 4), at least 256; constraint rows 3 per elliptic contact (condim 3), 4
-  // per pyramidal one. MuJoCo 2.2 allocates its constraint arrays at these sizes, some
-  // (J M^-1 J' + R) quadratic in the rows: 12 bytes x rows^2.
-  const int nconmax = settings.max_contacts > 0 ? settings.max_contacts
-                                                : static_cast<int>(std::max<std::size_t>(256, 6 * dynamic));
+  // on a face has 4), at least 256 and at most kMostDefaultContacts; constraint rows 3 per
+  // elliptic contact (condim 3), 4 per pyramidal one. MuJoCo 2.2 allocates its constraint
+  // arrays at these sizes, some (J M^-1 J' + R) quadratic in the rows: 12 bytes x rows^2
+  // (1500 contacts: about 1 GB; rot-pile-1000's 6000 could not be allocated).
+  constexpr std::size_t kMostDefaultContacts = 1500;
+  const int nconmax = settings.max_contacts > 0
+                          ? settings.max_contacts
+                          : static_cast<int>(std::min(kMostDefaultContacts, std::max<std::size_t>(256, 6 * dynamic)));
   const int njmax = nconmax * (settings.cone == MujocoCone::Elliptic ? 3 : 4);
   std::string x;
   x.reserve(4096);
