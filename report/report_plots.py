@@ -18,7 +18,8 @@ def axis_label(p, axis):
 # The engine registry's own broadphases (core/src/engine_registry.cpp: EngineInfo::own_broadphase
 # -> own_broadphase_class), for results whose points record only `engine_broadphase`; a test
 # (tests/report/test_report_comparisons.py) keeps this in step with the registry.
-OWN_BROADPHASE_CLASS = {"bullet-dbvt": "btDbvtBroadphase"}
+OWN_BROADPHASE_CLASS = {"bullet-dbvt": "btDbvtBroadphase", "mujoco-sap": "MuJoCo's mj_collision (sweep and prune)",
+                        "ode-hash": "dHashSpace"}
 
 
 def point_label(p, axis):

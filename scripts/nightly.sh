@@ -54,7 +54,8 @@
 #                   full (default: rot-stack-10, rot-slope, rot-drop-220, rot-pile-1000,
 #                   bunny-stack-50 with rotation, rot-spin-free over hundreds of frames),
 #                   quick (the same scenes over short windows, CI's ctest `corpus`
-#                   label), none. Traces go to DIR/matrix/ (--out).
+#                   label; traces ENGINE--SCENE--quick.h5), none (the default with SCENE.json
+#                   arguments). Traces go to DIR/matrix/ (--out).
 #   SCENE.json ...  scenes to validate instead of the set
 set -uo pipefail
 
@@ -74,7 +75,7 @@ scenes=()
 expect="$root/scripts/nightly-expect.json"
 write_expect=""
 strict=()
-matrix="full"
+matrix=""
 is_uint() { [[ "$1" =~ ^[0-9]+$ ]] && [ "$1" -ge 1 ]; }
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -98,6 +99,8 @@ while [ $# -gt 0 ]; do
 done
 if [ -n "$frames" ] && ! is_uint "$frames"; then echo "nightly: --frames '$frames'; allowed: an integer >= 1" >&2; exit 2; fi
 if ! is_uint "$every"; then echo "nightly: --every '$every'; allowed: an integer >= 1" >&2; exit 2; fi
+# SCENE.json arguments replace the whole set, the matrix too, unless --matrix is given.
+if [ -z "$matrix" ]; then if [ ${#scenes[@]} -gt 0 ]; then matrix=none; else matrix=full; fi; fi
 case "$matrix" in full|quick|none) ;; *) echo "nightly: --matrix '$matrix'; allowed: full, quick, none" >&2; exit 2 ;; esac
 if ! is_uint "$timeout_s"; then echo "nightly: --timeout '$timeout_s'; allowed: seconds, an integer >= 1" >&2; exit 2; fi
 bin="${OCTOCD_BIN:-$build/octocd}"
@@ -243,7 +246,12 @@ matrix_engines=()
 if [ "$matrix" != "none" ]; then
   available="$("$bin" engines --available 2>/dev/null)"
   for e in bullet mujoco ode dart; do
-    if grep -qx "$e" <<<"$available"; then matrix_engines+=("$e"); else echo "matrix   $e: not available here ($("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//'))"; fi
+    if grep -qx "$e" <<<"$available"; then
+      matrix_engines+=("$e")
+    else
+      why="$("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//')"
+      echo "matrix   $e: not available here (${why:-not an engine of this octocd})"
+    fi
   done
   mkdir -p "$out/matrix" || exit 2
 fi
@@ -251,6 +259,7 @@ for e in "${matrix_engines[@]+"${matrix_engines[@]}"}"; do
   while read -r sc n_frames m_every; do
     [ -r "$root/datasets/scenes/$sc.json" ] || { echo "matrix   $e--$sc: no scene $sc.json, skipped"; continue; }
     name="$e--$sc"
+    [ "$matrix" = "quick" ] && name="$e--$sc--quick"
     log="$out/$name.log"
     trace="$out/matrix/$name.h5"
     t0=$(date +%s.%N)

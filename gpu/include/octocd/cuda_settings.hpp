@@ -2,7 +2,7 @@
 /// \file cuda_settings.hpp
 /// The settings of the CUDA engine (`cuda`, design.md section 11): every knob the engine has, in one
 /// struct, read once by the CudaWorld constructor. docs/settings.md lists them with the
-/// ways to set them: C++ (`make_engine("cuda", model, options)` or make_cuda_engine),
+/// ways to set them: C++ (make_cuda_engine, or `make_engine("cuda", model, {{"cuda", {"graph=false"}}})`),
 /// the CLI (`--cuda KEY=VALUE`, repeatable) and Python (`Engine(..., cuda={KEY: VALUE})`).
 ///
 /// Plain C++: including this header needs no CUDA toolkit; the functions exist in builds

@@ -2,7 +2,7 @@
 /// \file bullet_settings.hpp
 /// The settings of the Bullet engine (`bullet`, design.md section 15): what geometry Bullet collides.
 /// docs/settings.md lists them with the ways to set them: C++ (`make_engine("bullet",
-/// model, {}, settings)` or BulletWorld's constructor), the CLI (`--bullet KEY=VALUE`,
+/// model, {{"bullet", {"shape=box"}}})` or BulletWorld's constructor), the CLI (`--bullet KEY=VALUE`,
 /// repeatable) and Python (`Engine(..., bullet={KEY: VALUE})`).
 
 #include <string>
