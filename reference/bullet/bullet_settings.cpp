@@ -1,5 +1,6 @@
 // BulletSettings: the KEY=VALUE parser the CLI and Python share (bullet_settings.hpp).
 #include "octocd/bullet_settings.hpp"
+#include "octocd/adapter_rows.hpp"
 
 #include <fmt/format.h>
 
@@ -45,13 +46,8 @@ void set_bullet_setting(BulletSettings& s, const std::string& key, const std::st
 }
 
 void apply_bullet_settings(BulletSettings& s, const std::vector<std::string>& items, const std::string& where) {
-  for (const std::string& item : items) {
-    const std::size_t eq = item.find('=');
-    if (eq == std::string::npos)
-      throw InputError(fmt::format("{}: '{}' is not KEY=VALUE; allowed: e.g. shape=box (docs/settings.md)", where,
-                                   item));
-    set_bullet_setting(s, item.substr(0, eq), item.substr(eq + 1), where);
-  }
+  apply_setting_items(items, where, "shape=box",
+                      [&](const std::string& k, const std::string& v) { set_bullet_setting(s, k, v, where); });
 }
 
 }  // namespace octocd

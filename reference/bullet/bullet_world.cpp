@@ -3,6 +3,7 @@
 /// every setting and why).
 
 #include "octocd/bullet_world.hpp"
+#include "octocd/adapter_rows.hpp"
 #include "octocd/version.hpp"
 
 #include <fmt/format.h>
@@ -842,31 +843,14 @@ void BulletWorld::Impl::fill_record() {
         return r.w_pre.size() > i ? v + cross(r.w_pre[i], c.point - r.x_pre[i]) : v;
       };
       const Vec3 v_rel = point_velocity(ia) - point_velocity(ib);
-      const Vec3 v_t = v_rel - dot(v_rel, c.normal) * c.normal;
-      const float vt_len = length(v_t);
-      c.jt = vt_len > 1e-6f ? dot(j_a, -(1.0f / vt_len) * v_t) : length(j_a);
+      c.jt = scalar_jt(j_a, v_rel, c.normal);
       r.contacts.push_back(c);
       jt3.push_back(j_a);
     }
   }
-  std::vector<std::size_t> order(r.contacts.size());
-  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::size_t x, std::size_t y) { return r.contacts[x].pair < r.contacts[y].pair; });
-  std::vector<ContactRecord> sorted;
-  sorted.reserve(order.size());
-  r.jt3.clear();
-  for (std::size_t k : order) {
-    sorted.push_back(r.contacts[k]);
-    r.jt3.push_back(jt3[k]);
-  }
-  r.contacts.swap(sorted);
-  r.confirmed.clear();
-  for (const ContactRecord& c : r.contacts)
-    if (r.confirmed.empty() || !(r.confirmed.back() == c.pair)) r.confirmed.push_back(c.pair);
-  r.has_contact_terms = false;
-  r.manifolds = true;
-  r.has_points = true;
+  std::vector<ContactRecord> rows;
+  rows.swap(r.contacts);
+  finish_manifold_record(r, rows, jt3);
 }
 
 BulletWorld::BulletWorld(const World& src, const BulletSettings& settings)

@@ -1,5 +1,6 @@
 // MujocoSettings: the KEY=VALUE parser (mujoco_settings.hpp).
 #include "octocd/mujoco_settings.hpp"
+#include "octocd/adapter_rows.hpp"
 
 #include <fmt/format.h>
 
@@ -105,13 +106,8 @@ void set_mujoco_setting(MujocoSettings& s, const std::string& key, const std::st
 }
 
 void apply_mujoco_settings(MujocoSettings& s, const std::vector<std::string>& items, const std::string& where) {
-  for (const std::string& item : items) {
-    const std::size_t eq = item.find('=');
-    if (eq == std::string::npos)
-      throw InputError(fmt::format("{}: '{}' is not KEY=VALUE; allowed: e.g. cone=pyramidal (docs/engines.md)", where,
-                                   item));
-    set_mujoco_setting(s, item.substr(0, eq), item.substr(eq + 1), where);
-  }
+  apply_setting_items(items, where, "cone=pyramidal",
+                      [&](const std::string& k, const std::string& v) { set_mujoco_setting(s, k, v, where); });
 }
 
 }  // namespace octocd

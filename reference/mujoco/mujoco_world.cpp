@@ -3,6 +3,7 @@
 /// and why).
 
 #include "octocd/mujoco_world.hpp"
+#include "octocd/adapter_rows.hpp"
 
 #include <fmt/format.h>
 #include <mujoco/mujoco.h>
@@ -221,27 +222,11 @@ void MujocoWorld::Impl::fill_record() {
       return v + cross(r.w_pre[i], row.point - r.x_pre[i]);
     };
     const Vec3 v_rel = point_velocity(row.pair.a) - point_velocity(row.pair.b);
-    const Vec3 v_t = v_rel - dot(v_rel, row.normal) * row.normal;
-    const float vt_len = length(v_t);
-    row.jt = vt_len > 1e-6f ? dot(j_a, -(1.0f / vt_len) * v_t) : length(j_a);
+    row.jt = scalar_jt(j_a, v_rel, row.normal);
     rows.push_back(row);
     jt3.push_back(j_a);
   }
-  std::vector<std::size_t> order(rows.size());
-  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) { return rows[x].pair < rows[y].pair; });
-  r.contacts.reserve(order.size());
-  r.jt3.reserve(order.size());
-  for (std::size_t k : order) {
-    r.contacts.push_back(rows[k]);
-    r.jt3.push_back(jt3[k]);
-  }
-  r.confirmed.clear();
-  for (const ContactRecord& c : r.contacts)
-    if (r.confirmed.empty() || !(r.confirmed.back() == c.pair)) r.confirmed.push_back(c.pair);
-  r.has_contact_terms = false;
-  r.manifolds = true;
-  r.has_points = true;
+  finish_manifold_record(r, rows, jt3);
 }
 
 MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& initial, const MujocoSettings& settings)

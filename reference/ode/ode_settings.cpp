@@ -1,5 +1,6 @@
 // OdeSettings: the KEY=VALUE parser (ode_settings.hpp) and ODE's own defaults.
 #include "octocd/ode_settings.hpp"
+#include "octocd/adapter_rows.hpp"
 
 #include <fmt/format.h>
 #include <ode/ode.h>
@@ -123,13 +124,8 @@ void set_ode_setting(OdeSettings& s, const std::string& key, const std::string& 
 }
 
 void apply_ode_settings(OdeSettings& s, const std::vector<std::string>& items, const std::string& where) {
-  for (const std::string& item : items) {
-    const std::size_t eq = item.find('=');
-    if (eq == std::string::npos)
-      throw InputError(
-          fmt::format("{}: '{}' is not KEY=VALUE; allowed: e.g. stepper=quickstep (docs/engines.md)", where, item));
-    set_ode_setting(s, item.substr(0, eq), item.substr(eq + 1), where);
-  }
+  apply_setting_items(items, where, "stepper=quickstep",
+                      [&](const std::string& k, const std::string& v) { set_ode_setting(s, k, v, where); });
 }
 
 }  // namespace octocd

@@ -1,5 +1,6 @@
 // octocd::OdeWorld: the scene in ODE's dWorld (see ode_world.hpp for every setting and why).
 #include "octocd/ode_world.hpp"
+#include "octocd/adapter_rows.hpp"
 
 #include <fmt/format.h>
 #include <ode/ode.h>
@@ -196,30 +197,13 @@ void OdeWorld::Impl::fill_record() {
       return v + cross(r.w_pre[i], c.point - r.x_pre[i]);
     };
     const Vec3 v_rel = point_velocity(c.pair.a) - point_velocity(c.pair.b);
-    const Vec3 v_t = v_rel - dot(v_rel, c.normal) * c.normal;
-    const float vt_len = length(v_t);
-    c.jt = vt_len > 1e-6f ? dot(j_t, -(1.0f / vt_len) * v_t) : length(j_t);
+    c.jt = scalar_jt(j_t, v_rel, c.normal);
     r.contacts.push_back(c);
     jt3.push_back(j_t);
   }
-  std::vector<std::size_t> order(r.contacts.size());
-  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::size_t x, std::size_t y) { return r.contacts[x].pair < r.contacts[y].pair; });
-  std::vector<ContactRecord> sorted;
-  sorted.reserve(order.size());
-  r.jt3.clear();
-  for (std::size_t k : order) {
-    sorted.push_back(r.contacts[k]);
-    r.jt3.push_back(jt3[k]);
-  }
-  r.contacts.swap(sorted);
-  r.confirmed.clear();
-  for (const ContactRecord& c : r.contacts)
-    if (r.confirmed.empty() || !(r.confirmed.back() == c.pair)) r.confirmed.push_back(c.pair);
-  r.has_contact_terms = false;
-  r.manifolds = true;
-  r.has_points = true;
+  std::vector<ContactRecord> unsorted;
+  unsorted.swap(r.contacts);
+  finish_manifold_record(r, unsorted, jt3);
 }
 
 OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial, const OdeSettings& settings)

@@ -3,6 +3,7 @@
 // bodies whose truth is known, each planted fault caught by its row with a detail naming
 // the frame and the pair or body, and octocd's own CPU engine passing every row.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -167,7 +168,8 @@ void expect_caught(const std::vector<ValidationResult>& rs, const std::string& n
 /// A non-convex mesh: two unit cubes side by side along x with a unit gap (x in
 /// [-1.5, -0.5] and [0.5, 1.5]), written as OBJ; "scale": 3 keeps its units.
 std::string dumbbell_obj() {
-  const std::string path = testing::TempDir() + "octocd_physics_dumbbell.obj";
+  // One file per process: ctest runs the tests that write it in parallel processes.
+  const std::string path = testing::TempDir() + "octocd_physics_dumbbell-" + std::to_string(::getpid()) + ".obj";
   std::ofstream f(path);
   int base = 0;
   for (double cx : {-1.0, 1.0}) {

@@ -1,0 +1,54 @@
+// What the reference-engine adapters share when they fill a FrameRecord and parse their
+// settings (adapter_rows.hpp).
+#include "octocd/adapter_rows.hpp"
+
+#include <algorithm>
+#include <numeric>
+
+#include <fmt/format.h>
+
+#include "octocd/error.hpp"
+
+namespace octocd {
+
+float scalar_jt(const Vec3& j_t, const Vec3& v_rel, const Vec3& normal) {
+  const Vec3 v_t = v_rel - dot(v_rel, normal) * normal;
+  const float vt_len = length(v_t);
+  return vt_len > 1e-6f ? dot(j_t, -(1.0f / vt_len) * v_t) : length(j_t);
+}
+
+void finish_manifold_record(FrameRecord& r, std::vector<ContactRecord>& rows, std::vector<Vec3>& jt3) {
+  std::vector<std::size_t> order(rows.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t x, std::size_t y) { return rows[x].pair < rows[y].pair; });
+  r.contacts.clear();
+  r.jt3.clear();
+  r.contacts.reserve(order.size());
+  r.jt3.reserve(order.size());
+  for (std::size_t k : order) {
+    r.contacts.push_back(rows[k]);
+    r.jt3.push_back(jt3[k]);
+  }
+  rows.clear();
+  jt3.clear();
+  r.confirmed.clear();
+  for (const ContactRecord& c : r.contacts)
+    if (r.confirmed.empty() || !(r.confirmed.back() == c.pair)) r.confirmed.push_back(c.pair);
+  r.has_contact_terms = false;
+  r.manifolds = true;
+  r.has_points = true;
+}
+
+void apply_setting_items(const std::vector<std::string>& items, const std::string& where, const std::string& example,
+                         const std::function<void(const std::string& key, const std::string& value)>& set) {
+  for (const std::string& item : items) {
+    const std::size_t eq = item.find('=');
+    if (eq == std::string::npos)
+      throw InputError(
+          fmt::format("{}: '{}' is not KEY=VALUE; allowed: e.g. {} (docs/settings.md)", where, item, example));
+    set(item.substr(0, eq), item.substr(eq + 1));
+  }
+}
+
+}  // namespace octocd
