@@ -64,7 +64,8 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
       "steps/s, speed against accuracy over a ladder of time steps) on every engine this octocd has, side by side; results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
   c->add_option("sweep", o.sweep, "A named sweep (" + named_list() + ") or a sweep JSON file");
   c->add_option("-o,--output", o.output, "Result file (JSON), rewritten after every finished point");
-  c->add_option("--engines", o.engines, "Comma-separated engines, overrides the sweep's: cpu, cuda, bullet");
+  c->add_option("--engines", o.engines,
+                "Comma-separated engines, overrides the sweep's: " + fmt::format("{}", fmt::join(engine_names(), ", ")));
   add_engine_settings_options(c, o.settings);
   c->add_option("--repeat", o.repeat, "Repetitions of every point, overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
@@ -175,8 +176,9 @@ int bench_command(const BenchOptions& o) {
     s.engines = split_list(o.engines);
     for (const auto& e : s.engines)
       if (std::find(engine_names().begin(), engine_names().end(), e) == engine_names().end())
-        throw InputError(fmt::format("--engines: unknown engine '{}'; allowed: cpu, cuda, bullet", e));
-    if (s.engines.empty()) throw InputError("--engines: empty; allowed: a comma-separated list of cpu, cuda, bullet");
+        throw InputError(fmt::format("--engines: unknown engine '{}'; allowed: {}", e, fmt::join(engine_names(), ", ")));
+    if (s.engines.empty())
+      throw InputError(fmt::format("--engines: empty; allowed: a comma-separated list of {}", fmt::join(engine_names(), ", ")));
   }
   if (o.repeat > 0) {
     s.repeat = o.repeat;

@@ -213,7 +213,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   s.engines = j.contains("engines") ? string_list(j, "engines", origin) : engine_names();
   for (std::size_t i = 0; i < s.engines.size(); ++i)
     if (std::find(engine_names().begin(), engine_names().end(), s.engines[i]) == engine_names().end())
-      bad(origin, fmt::format("engines[{}]", i), "'" + s.engines[i] + "'", "cpu, cuda, bullet");
+      bad(origin, fmt::format("engines[{}]", i), "'" + s.engines[i] + "'", fmt::format("{}", fmt::join(engine_names(), ", ")));
   s.repeat = get_int(j, "repeat", origin, 1, 1000, 5);
   if (j.contains("set")) {
     if (!j.at("set").is_object()) bad(origin, "set", "not an object", "an object of JSON pointer -> value");

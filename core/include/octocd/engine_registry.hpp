@@ -60,7 +60,7 @@ struct EngineInfo {
   std::string iterations_setting;
 };
 
-/// Every engine, built in this octocd or not, in a stable order: cpu, cuda, bullet.
+/// Every engine, built in this octocd or not, in a stable order: cpu, cuda, bullet, mujoco, ode.
 const std::vector<EngineInfo>& engine_infos();
 
 /// The names of engine_infos(), in its order.
