@@ -181,6 +181,19 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
         // engine's normal follows).
         ++speculative_rows;
         speculative_worst = std::max(speculative_worst, angle);
+        // Its sign is judged where the shapes are apart (design.md section 13c.2): the
+        // engine claims the normal, and one pointing against the separation direction (the
+        // nearest points, from B to A: SAT's axis or FCL's distance query) would push the
+        // bodies into each other, whatever the row's depth or impulse.
+        if (!r.penetrating && r.distance > tol.geometry_slack_m) {
+          normal_angle.check(angle < 90.0, angle, Where{frame, p}, [&] {
+            return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) points against the separation "
+                               "direction ({:.3f}, {:.3f}, {:.3f}) of shapes {:.4g} m apart: {:.1f} deg (a row on "
+                               "shapes that do not penetrate is judged by its sign)",
+                               frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, ref_normal.x,
+                               ref_normal.y, ref_normal.z, r.distance, angle);
+          });
+        }
       } else if (aabb) {
         // The engine's normal is an axis of the two world AABBs (Eq. 10): compared with
         // FCL box-box on the same boxes its angle says nothing about the shapes (a
