@@ -26,18 +26,9 @@ void set_bullet_setting(BulletSettings& s, const std::string& key, const std::st
     return;
   }
   if (key == "iterations") {
-    std::size_t used = 0;
-    long n = -1;
-    try {
-      n = std::stol(value, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used != value.size() || value.empty() || n < 1 || n > 10000)
-      throw InputError(fmt::format("{}: iterations='{}' is not allowed; allowed: an integer in [1, 10000] (the "
-                                   "sequential-impulse solver's iterations per step; Bullet's default 10)",
-                                   where, value));
-    s.solver_iterations = static_cast<int>(n);
+    s.solver_iterations = setting_integer(key, value, 1, 10000, where,
+                                          "an integer in [1, 10000] (the sequential-impulse solver's iterations per "
+                                          "step; Bullet's default 10)");
     return;
   }
   std::string names;

@@ -3,6 +3,7 @@
 #include "octocd/adapter_rows.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 
 #include <fmt/format.h>
@@ -49,6 +50,35 @@ void apply_setting_items(const std::vector<std::string>& items, const std::strin
           fmt::format("{}: '{}' is not KEY=VALUE; allowed: e.g. {} (docs/settings.md)", where, item, example));
     set(item.substr(0, eq), item.substr(eq + 1));
   }
+}
+
+int setting_integer(const std::string& key, const std::string& value, long lo, long hi, const std::string& where,
+                    const std::string& allowed) {
+  std::size_t used = 0;
+  long n = lo - 1;
+  try {
+    n = std::stol(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (value.empty() || used != value.size() || n < lo || n > hi)
+    throw InputError(fmt::format("{}: {}='{}' is not allowed; allowed: {}", where, key, value, allowed));
+  return static_cast<int>(n);
+}
+
+double setting_number(const std::string& key, const std::string& value, double lo, double hi,
+                      const std::string& where, const std::string& allowed) {
+  std::size_t used = 0;
+  double x = std::nan("");
+  const bool decimal = !value.empty() && value.find_first_not_of("0123456789+-.eE") == std::string::npos;
+  try {
+    if (decimal) x = std::stod(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (!decimal || used != value.size() || !(x >= lo && x <= hi))
+    throw InputError(fmt::format("{}: {}='{}' is not allowed; allowed: {}", where, key, value, allowed));
+  return x;
 }
 
 }  // namespace octocd

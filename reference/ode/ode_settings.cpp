@@ -16,41 +16,6 @@
 
 namespace octocd {
 
-namespace {
-
-/// An integer in [lo, hi] from the whole of `value`, else InputError with `allowed`.
-int parse_int(const std::string& key, const std::string& value, long lo, long hi, const std::string& where,
-              const char* allowed) {
-  std::size_t used = 0;
-  long n = lo - 1;
-  try {
-    n = std::stol(value, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (value.empty() || used != value.size() || n < lo || n > hi)
-    throw InputError(fmt::format("{}: {}='{}' is not allowed; allowed: {}", where, key, value, allowed));
-  return static_cast<int>(n);
-}
-
-/// A decimal number in [lo, hi] from the whole of `value` (no hex, inf or nan), else
-/// InputError with `allowed`.
-double parse_number(const std::string& key, const std::string& value, double lo, double hi, const std::string& where,
-                    const char* allowed) {
-  std::size_t used = 0;
-  double x = std::nan("");
-  const bool decimal = !value.empty() && value.find_first_not_of("0123456789+-.eE") == std::string::npos;
-  try {
-    if (decimal) x = std::stod(value, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (!decimal || used != value.size() || !(x >= lo && x <= hi))
-    throw InputError(fmt::format("{}: {}='{}' is not allowed; allowed: {}", where, key, value, allowed));
-  return x;
-}
-
-}  // namespace
 
 const char* ode_stepper_name(OdeStepper s) { return s == OdeStepper::QuickStep ? "quickstep" : "step"; }
 const char* ode_friction_name(OdeFriction f) { return f == OdeFriction::Pyramid ? "pyramid" : "inscribed"; }
@@ -83,21 +48,21 @@ void set_ode_setting(OdeSettings& s, const std::string& key, const std::string& 
     return;
   }
   if (key == "iterations") {
-    s.iterations = parse_int(key, value, 1, 10000, where,
+    s.iterations = setting_integer(key, value, 1, 10000, where,
                              "an integer in [1, 10000] (dWorldQuickStep's sweeps per step; ODE's default 20)");
     return;
   }
   if (key == "erp") {
-    s.erp = parse_number(key, value, 0.0, 1.0, where, "a decimal number in [0, 1] (dWorldSetERP; ODE's default 0.2)");
+    s.erp = setting_number(key, value, 0.0, 1.0, where, "a decimal number in [0, 1] (dWorldSetERP; ODE's default 0.2)");
     return;
   }
   if (key == "cfm") {
-    s.cfm = parse_number(key, value, 0.0, 1.0, where,
+    s.cfm = setting_number(key, value, 0.0, 1.0, where,
                          "a decimal number in [0, 1] (dWorldSetCFM; ODE's default 1e-10 in double precision)");
     return;
   }
   if (key == "contacts") {
-    s.max_contacts = parse_int(key, value, 1, 64, where, "an integer in [1, 64] (dCollide's contacts per pair)");
+    s.max_contacts = setting_integer(key, value, 1, 64, where, "an integer in [1, 64] (dCollide's contacts per pair)");
     return;
   }
   if (key == "friction") {

@@ -31,4 +31,15 @@ void finish_manifold_record(FrameRecord& r, std::vector<ContactRecord>& rows, st
 void apply_setting_items(const std::vector<std::string>& items, const std::string& where, const std::string& example,
                          const std::function<void(const std::string& key, const std::string& value)>& set);
 
+/// An integer in [lo, hi] from the whole of `value` (a setting's text). Throws InputError
+/// "<where>: KEY='VALUE' is not allowed; allowed: <allowed>" otherwise.
+int setting_integer(const std::string& key, const std::string& value, long lo, long hi, const std::string& where,
+                    const std::string& allowed);
+
+/// A decimal number in [lo, hi] from the whole of `value` (digits, sign, point and exponent
+/// only: no hex, inf or nan). Throws InputError "<where>: KEY='VALUE' is not allowed;
+/// allowed: <allowed>" otherwise.
+double setting_number(const std::string& key, const std::string& value, double lo, double hi,
+                      const std::string& where, const std::string& allowed);
+
 }  // namespace octocd
