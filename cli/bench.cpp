@@ -60,8 +60,8 @@ std::string default_scene_dir() { return (fs::path(shared_dir()) / "datasets" / 
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
   CLI::App* c = app.add_subcommand(
       "bench",
-      "Run a benchmark sweep (the paper's Tables 5, 6, A1, Fig. A2, broadphase scaling, the most instances at 30 "
-      "steps/s, speed against accuracy over a ladder of time steps) on every engine this octocd has, side by side; results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
+      "Run a benchmark sweep on every engine this octocd has, side by side (the paper's Tables 5, 6, A1, Fig. A2, "
+      "broadphase scaling, the most instances at 30 steps/s, speed against accuracy over a ladder of time steps); results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
   c->add_option("sweep", o.sweep, "A named sweep (" + named_list() + ") or a sweep JSON file");
   c->add_option("-o,--output", o.output, "Result file (JSON), rewritten after every finished point");
   c->add_option("--engines", o.engines,

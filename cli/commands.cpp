@@ -2,8 +2,11 @@
 // (commands.hpp).
 #include "commands.hpp"
 
+#include <algorithm>
 #include <climits>
 #include <filesystem>
+#include <memory>
+#include <sstream>
 #include <string>
 #include <system_error>
 
@@ -28,7 +31,27 @@ Command command(CLI::App& app, CLI::App* (*add)(CLI::App&, Options&), int (*run)
 
 }  // namespace
 
+namespace {
+
+/// `octocd --help`'s list of subcommands: one line each, the description's first clause
+/// (up to ". ", "; ", ": " or " ("); `octocd CMD --help` prints the whole description.
+class CommandListFormatter : public CLI::Formatter {
+ public:
+  std::string make_subcommand(const CLI::App* sub) const override {
+    const std::string& text = sub->get_description();
+    std::size_t end = text.size();
+    for (const char* stop : {". ", "; ", ": ", " ("}) end = std::min(end, text.find(stop));
+    std::stringstream out;
+    CLI::detail::format_help(out, sub->get_display_name(true), text.substr(0, end), get_column_width());
+    return out.str();
+  }
+};
+
+}  // namespace
+
 std::vector<Command> add_commands(CLI::App& app) {
+  app.formatter(std::make_shared<CommandListFormatter>());
+  app.footer("Run `octocd COMMAND --help` for a command's arguments, options and exit codes (docs/cli.md).");
   std::vector<Command> commands;
   commands.push_back(add_run_command(app));
   commands.push_back(add_validate_command(app));

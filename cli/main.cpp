@@ -21,13 +21,11 @@ int main(int argc, char** argv) {
   // write past the limit fails with EFBIG and the writer says which file and what it kept.
   ::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{
-      "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference).\n"
+      "octocd: GPU hierarchical Octree-AABB collision detection and response (CPU reference), reference\n"
+      "engines on the same scenes, and validators that judge any engine's run.\n"
       "Exit codes: 0 ok, 1 runtime failure, 2 bad input, 3 a check failed (validate, compare, replay),\n"
-      "4 the performance gate failed (report --baseline: a point slower, or missing or failed in the new run),\n"
-      "130/143 stopped by SIGINT/SIGTERM, within 1 s (run and validate\n"
-      "stop between frames and close the trace, validate inside a frame's checks too; a step still\n"
-      "running 0.5 s after the signal is cut short; validate then reports the frames judged so far as an\n"
-      "incomplete verdict, its JUnit with a 'stopped' error case; bench keeps its finished points).",
+      "4 the performance gate failed (report --baseline), 130/143 stopped by SIGINT/SIGTERM (what\n"
+      "was finished is kept: a trace's frames, validate's verdict of the frames judged, bench's points).",
       "octocd"};  // a fixed name: `--help` reads the same whatever path ran it (docs/cli.md)
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);

@@ -656,7 +656,7 @@ Command add_validate_command(CLI::App& app) {
   const auto options = std::make_shared<ValidateOptions>();
   ValidateOptions& val = *options;
   CLI::App* val_cmd = app.add_subcommand(
-      "validate", "Run the validators of design.md section 7 on a scene; exit 0 all pass (or fail as --expect expects), 3 a "
+      "validate", "Judge a scene's run, or an engine's trace (--trace-in), with the validators of design.md section 7; exit 0 all pass (or fail as --expect expects), 3 a "
                   "new or grown failure, 2 bad input");
   val_cmd->add_option("scene", val.scene, "Scene file (JSON, see docs/scenes.md); or give --trace-in");
   val_cmd->add_option("--against", val.against,

@@ -45,14 +45,14 @@ ViewCommand::ViewCommand(CLI::App& app) : impl_(std::make_unique<Impl>()) {
   Impl& s = *impl_;
   s.cmd = app.add_subcommand(
       "view",
-      "Write one self-contained HTML page (three.js inlined; no network, no server) drawing a frame of a trace: the "
-      "posed shapes near a pair or a body, their world AABBs, the engine's contact points and normals beside the "
+      "Draw a frame of a trace on one self-contained HTML page (three.js inlined; no network, no server): the posed "
+      "shapes near a pair or a body, their world AABBs, the engine's contact points and normals beside the "
       "physics tier's reference (SAT or FCL), with a frame slider (docs/debugging.md)");
   s.cmd->add_option("trace", s.trace,
-                    "Trace (HDF5): octocd's (version 1, every state: --state-every 1) or an external trace (versions "
-                    "1 and 2), read through the hardened reader")
+                    "Trace (HDF5): octocd's (any --state-every: a frame without its own state is drawn at the "
+                    "nearest recorded one) or an external trace (versions 1 and 2), read through the hardened reader")
       ->required();
-  s.cmd->add_option("--frame", s.frame, "The frame shown first (1 .. the trace's frames; default 1)");
+  s.cmd->add_option("--frame", s.frame, "The frame shown first (1 .. the trace's frames; default: the first frame with a contact, else 1)");
   s.cmd->add_option("--pair", s.pair, "The item: a pair of bodies A,B (drawn with the bodies near it)");
   s.cmd->add_option("--body", s.body, "The item: one body I (drawn with the bodies near it)");
   s.cmd->add_option("--window", s.window,

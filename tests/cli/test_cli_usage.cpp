@@ -991,6 +991,37 @@ TEST_F(CliUser, CliDocMatchesHelp) {
   }
 }
 
+// `octocd --help` fits a screen: one line per subcommand (at most 100 columns), 40 lines in
+// all; each subcommand's own --help keeps its whole description.
+TEST_F(CliUser, TopHelpListsOneLinePerSubcommand) {
+  const Result top = octocd_cmd("--help");
+  ASSERT_EQ(top.code, 0);
+  std::size_t lines_total = 0, listed = 0;
+  bool in_list = false;
+  std::istringstream lines(top.output);
+  for (std::string line; std::getline(lines, line);) {
+    ++lines_total;
+    EXPECT_LE(line.size(), 100u) << line;
+    if (line == "Subcommands:") {
+      in_list = true;
+      continue;
+    }
+    if (!in_list) continue;
+    if (line.empty()) break;
+    std::istringstream w(line);
+    std::string name, first_word;
+    ASSERT_TRUE(w >> name >> first_word) << "a subcommand without its line: '" << line << "'";
+    ++listed;
+    const Result own = octocd_cmd(name + " --help");
+    ASSERT_EQ(own.code, 0) << name;
+    const std::string summary = line.substr(line.find(first_word));
+    EXPECT_EQ(own.output.rfind(summary, 0), 0u) << name << ": its own help opens with the line the list gives";
+    EXPECT_GT(own.output.find('\n'), summary.size() - 1) << name;
+  }
+  EXPECT_GE(listed, 9u) << top.output;
+  EXPECT_LE(lines_total, 40u) << top.output;
+}
+
 // `octocd engines` lists every engine of the registry, each available or unavailable with
 // its reason; `--available` prints the available ones, which `run --engine` accepts.
 TEST(CliEngines, ListsTheRegistryWithAvailability) {

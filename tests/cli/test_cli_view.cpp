@@ -277,3 +277,90 @@ TEST(CliView, VersionTwoTraceKeepsOrientationsAndManifoldPoints) {
   EXPECT_TRUE(ref["judged"]["valid"].get<bool>());
   fs::remove_all(dir);
 }
+
+namespace {
+
+/// Rows [0, rows) of an integer or float dataset of `file`, as doubles (empty when absent).
+std::vector<double> read_column(const std::string& file, const char* name) {
+  std::vector<double> out;
+  const hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  if (f < 0) return out;
+  const hid_t d = H5Dopen2(f, name, H5P_DEFAULT);
+  if (d >= 0) {
+    const hid_t space = H5Dget_space(d);
+    hsize_t dims[3] = {0, 1, 1};
+    const int rank = H5Sget_simple_extent_dims(space, dims, nullptr);
+    hsize_t count = 1;
+    for (int k = 0; k < rank; ++k) count *= dims[k];
+    out.resize(count);
+    H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data());
+    H5Sclose(space);
+    H5Dclose(d);
+  }
+  H5Fclose(f);
+  return out;
+}
+
+}  // namespace
+
+// README's main job writes its trace with octocd run's defaults: a state every 10 frames
+// and no contact rows. `octocd view` on it opens at the first frame the run counted a
+// contact in; a frame without a state is drawn at the nearest recorded one, named; the
+// slider steps over recorded states.
+TEST(CliView, MainJobTraceWithSparseStatesOpens) {
+  const std::string dir = scratch("sparse");
+  const std::string trace = dir + "/bunny-stack-50.h5";
+  const std::string scene = (fs::path(octocd::test::source_dir()) / "datasets" / "scenes" / "bunny-stack-50.json").string();
+  auto r = run_octocd("run " + scene + " --frames 400 --trace " + trace);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::vector<double> state_frames = read_column(trace, "/states/frame");
+  ASSERT_GT(state_frames.size(), 2u);
+  ASSERT_EQ(state_frames[1], 10.0) << "the main job's default --state-every";
+  const std::vector<double> frame = read_column(trace, "/frames/frame"), contacts = read_column(trace, "/frames/contacts");
+  ASSERT_EQ(frame.size(), contacts.size());
+  std::int64_t first_contact = 0;
+  for (std::size_t k = 0; k < frame.size() && first_contact == 0; ++k)
+    if (contacts[k] > 0) first_contact = static_cast<std::int64_t>(frame[k]);
+  ASSERT_GT(first_contact, 1) << "the bunnies fall before they touch";
+
+  r = run_octocd("view " + trace + " -o " + dir + "/out");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string page = dir + "/out/view-f" + std::to_string(first_contact) + "-all.html";
+  ASSERT_TRUE(fs::exists(page)) << r.output;
+  const nlohmann::json data = page_data(slurp(page));
+  ASSERT_TRUE(data.is_object());
+  EXPECT_EQ(data["frame"], first_contact);
+  EXPECT_NE(data["note"].get<std::string>().find("nearest recorded state"), std::string::npos);
+  // Recorded states and the frame asked for on the slider; each frame's state is the
+  // recorded one nearest to it, and a recorded frame's positions are its /states row.
+  const std::vector<double> position = read_column(trace, "/states/position");
+  const std::size_t n = data["bodies_in_trace"].get<std::size_t>();
+  bool asked = false;
+  for (const auto& f : data["frames"]) {
+    const std::int64_t fr = f["frame"], shown = f["state_frame"];
+    asked = asked || fr == first_contact;
+    EXPECT_EQ(shown % 10, 0) << fr;
+    EXPECT_LE(std::llabs(shown - fr), 5) << fr;
+    EXPECT_TRUE(fr == first_contact || fr == shown) << fr << ": only recorded states and the frame asked for";
+    const std::size_t row = static_cast<std::size_t>(shown / 10);
+    for (int k = 0; k < 3; ++k)  // body 0's x as drawn is its recorded state
+      EXPECT_NEAR(f["x"][0][k].get<double>(), position[(row * n + 0) * 3 + k], 1e-5) << fr;
+  }
+  EXPECT_TRUE(asked);
+  if (first_contact > 60) EXPECT_EQ(data["frames"].size(), 11u) << "5 recorded states each side, and the frame";
+
+  // --frame 7 --window 2: frame 7 is drawn at frame 10's state, beside frames 10 and 20
+  // (frame 0's state, before it, is the initial one, not a step).
+  r = run_octocd("view " + trace + " --frame 7 --window 2 -o " + dir + "/out");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const nlohmann::json seven = page_data(slurp(dir + "/out/view-f7-all.html"));
+  ASSERT_TRUE(seven.is_object());
+  std::vector<std::int64_t> slider, shown;
+  for (const auto& f : seven["frames"]) {
+    slider.push_back(f["frame"]);
+    shown.push_back(f["state_frame"]);
+  }
+  EXPECT_EQ(slider, (std::vector<std::int64_t>{7, 10, 20}));
+  EXPECT_EQ(shown, (std::vector<std::int64_t>{10, 10, 20}));
+  fs::remove_all(dir);
+}

@@ -87,11 +87,15 @@ Aabb merged(const Aabb& a, const Aabb& b) {
 
 /// The pose each body had when the engine detected contacts (physics tier's rule), with
 /// octocd's integration of x_pre when a record gives neither detection poses nor AABBs.
-std::vector<Pose> detection_poses(const Model& model, const FrameRecord& rec) {
+/// `recorded`: the frame has no state of its own (sparse states); the bodies are drawn at
+/// the recorded state the reader gave (x_post, q_post).
+std::vector<Pose> detection_poses(const Model& model, const FrameRecord& rec, bool recorded) {
   const std::size_t n = model.bodies.size();
   std::vector<Pose> out(n);
   for (std::size_t i = 0; i < n; ++i) {
-    if (!rec.x_det.empty() || rec.aabbs.size() == n) {
+    if (recorded && rec.x_post.size() == n) {
+      out[i] = Pose{rec.x_post[i], rec.q_post.size() == n ? rec.q_post[i] : Quat{}};
+    } else if (!rec.x_det.empty() || rec.aabbs.size() == n) {
       out[i] = detection_pose(model, rec, i);
     } else {
       Vec3 x = rec.x_pre[i], v = rec.v_pre[i];
@@ -165,13 +169,16 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
   // The hardened reader: every dataset, shape and range checked before it is used.
   std::unique_ptr<ExternalTrace> in;
   try {
-    in = std::make_unique<ExternalTrace>(trace);
+    in = std::make_unique<ExternalTrace>(trace, TraceStates::Sparse);
   } catch (const RuntimeError& e) {  // not HDF5 at all: bad input for a viewer
     throw InputError(fmt::format("TRACE: {}", e.what()));
   }
   const ExternalTraceInfo& info = in->info();
   const std::size_t n = info.bodies;
-  const std::int64_t frame = settings.frame == 0 ? 1 : settings.frame;
+  // Without --frame: the first frame with a contact row, else frame 1.
+  const std::int64_t first_contact = in->first_contact_frame();
+  const std::int64_t frame = settings.frame != 0 ? settings.frame : first_contact > 0 ? first_contact : 1;
+  const bool sparse = in->sparse_states();
   if (frame < 1 || frame > info.frames)
     throw InputError(fmt::format("--frame: {}: outside the trace {} ({} frames); allowed: 1 .. {}", settings.frame,
                                  trace, info.frames, info.frames));
@@ -196,6 +203,9 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
   eo.octocd_engine = writes_octocd_contacts(info.engine);
   const ExternalValidator holder(in->bodies(), eo);
   const Model& model = holder.model();
+  auto poses_of = [&](std::int64_t f, const FrameRecord& r) {
+    return detection_poses(model, r, sparse && in->state_frame(f) != f);
+  };
   const PhysicsBodies physics = eo.octocd_engine ? octocd_physics_bodies(model) : in->bodies().physics;
   const ReferenceGeometry ref(model, physics.collision_shape);
   const bool aabb_geometry = physics.contact_geometry == ContactGeometry::Aabb;
@@ -206,7 +216,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
 
   // The bodies drawn: chosen at the frame shown first, kept over the window.
   FrameRecord rec = in->frame(frame);
-  std::vector<Pose> det = detection_poses(model, rec);
+  std::vector<Pose> det = poses_of(frame, rec);
   FrameRecord shown = rec;  // kept for its turn in the window
   std::vector<Pose> shown_det = det;
   auto world_box = [&](const FrameRecord& r, const std::vector<Pose>& poses, std::uint32_t i) {
@@ -258,19 +268,35 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
     bodies.push_back(Json{{"id", i}, {"shape", it->second}, {"static", !(model.initial.w[i] > 0.0f)}, {"item", item}});
   }
 
-  // The frames of the window.
-  const std::int64_t f0 = std::max<std::int64_t>(1, frame - settings.window);
-  const std::int64_t f1 = std::min<std::int64_t>(info.frames, frame + settings.window);
+  // The frames of the window: `window` frames each side of the frame asked for; with
+  // sparse states, `window` recorded states each side (and the frame asked for).
+  std::vector<std::int64_t> window;
+  if (sparse) {
+    const std::vector<std::int64_t>& recorded = in->state_frames();
+    const auto at = std::lower_bound(recorded.begin(), recorded.end(), frame) - recorded.begin();
+    const std::ptrdiff_t size = static_cast<std::ptrdiff_t>(recorded.size());
+    const std::ptrdiff_t after = at < size && recorded[at] == frame ? settings.window + 1 : settings.window;
+    for (std::ptrdiff_t k = std::max<std::ptrdiff_t>(0, at - settings.window);
+         k < std::min<std::ptrdiff_t>(size, at + after); ++k)
+      if (recorded[k] >= 1) window.push_back(recorded[k]);
+    window.push_back(frame);
+    std::sort(window.begin(), window.end());
+    window.erase(std::unique(window.begin(), window.end()), window.end());
+  } else {
+    for (std::int64_t f = std::max<std::int64_t>(1, frame - settings.window);
+         f <= std::min<std::int64_t>(info.frames, frame + settings.window); ++f)
+      window.push_back(f);
+  }
   Json frames = Json::array();
   bool pair_in_contact = false;
   auto poll = [&] {
     if (settings.stop && settings.stop()) throw ValidationStopped();
   };
-  for (std::int64_t f = f0; f <= f1; ++f) {
+  for (const std::int64_t f : window) {
     poll();
     if (f != frame) {
       rec = in->frame(f);
-      det = detection_poses(model, rec);
+      det = poses_of(f, rec);
     } else {
       rec = std::move(shown);
       det = std::move(shown_det);
@@ -352,7 +378,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
                                 {"angle_deg", num(rr.angle * 180.0 / 3.14159265358979323846)}});
       }
     }
-    Json fr{{"frame", f}, {"x", std::move(x)}, {"q", std::move(q)}, {"aabbs", std::move(boxes)},
+    Json fr{{"frame", f}, {"state_frame", in->state_frame(f)}, {"x", std::move(x)}, {"q", std::move(q)}, {"aabbs", std::move(boxes)},
             {"contacts", std::move(contacts)}, {"references", std::move(refs)}};
     if (rows_left > 0) fr["rows_not_drawn"] = rows_left;
     if (refs_left > 0) fr["pairs_without_reference"] = refs_left;
@@ -364,6 +390,13 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
                                        "reference for its shapes",
                                        a, b, frame);
     note = note.empty() ? no : no + "; " + note;
+  }
+
+  if (sparse) {
+    const std::string states =
+        "the trace records the states of some frames only (e.g. octocd run --state-every K): a frame without its "
+        "own is drawn at the nearest recorded state, named beside the frame number";
+    note = note.empty() ? states : note + "; " + states;
   }
 
   Json item = settings.has_pair   ? Json{{"kind", "pair"}, {"a", a}, {"b", b}}
@@ -412,7 +445,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
   result.path = path.string();
   result.bytes = page.size();
   result.bodies = drawn.size();
-  result.frames = static_cast<std::size_t>(f1 - f0 + 1);
+  result.frames = window.size();
   result.frame = frame;
   result.note = note;
   return result;

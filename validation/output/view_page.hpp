@@ -181,7 +181,8 @@ function isItem(c) { return item.kind === 'pair' ? (c.a === item.a && c.b === it
 
 function show(fi, keep) {
   var f = D.frames[fi];
-  $('frame-label').textContent = f.frame + (f.frame === D.frame ? (D.failure ? ' (the failing frame)' : ' (the frame asked for)') : '');
+  $('frame-label').textContent = f.frame + (f.state_frame !== undefined && f.state_frame !== f.frame ?
+    ' (drawn at the recorded state of frame ' + f.state_frame + ')' : '') + (f.frame === D.frame ? (D.failure ? ' (the failing frame)' : ' (the frame asked for)') : '');
   D.bodies.forEach(function (b, k) {
     var o = bodies[k];
     o.mesh.position.copy(v3(f.x[k]));

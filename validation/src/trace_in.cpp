@@ -36,7 +36,11 @@ class TraceIn {
   /// Opens and checks `path`. `with_scene`: the root attribute `scene` is parsed for the
   /// physics defaults (its response's mu_s, e and slop; dt and gravity of the "integrated"
   /// detection pose); false (--check-only) leaves the scene to the validator, as in v1.
-  explicit TraceIn(const std::string& path, bool with_scene = true) : path_(path) {
+  /// `sparse`: /states/frame may skip frames (strictly increasing from 0, as `octocd run
+  /// --state-every K` writes); frame f's states are then the recorded row nearest to f
+  /// (state_frame(f) names it). Otherwise every frame's state is required.
+  explicit TraceIn(const std::string& path, bool with_scene = true, bool sparse = false)
+      : path_(path), sparse_(sparse) {
     // Opened and read under docs/trace-format.md, "Security rules and limits".
     h5_ = std::make_unique<detail::Hdf5Reader>(path, "an external trace");
 
@@ -140,10 +144,21 @@ class TraceIn {
       if (frame.present()) {
         expect(frame, {position_.dims[0]}, fmt::format("{} values, one per state row", position_.dims[0]));
         const std::vector<std::int64_t> f = read<std::int64_t>(frame, 0, position_.dims[0]);
-        for (std::size_t r = 0; r < f.size(); ++r)
-          if (f[r] != static_cast<std::int64_t>(r))
-            bad(frame.name, fmt::format("row {} is frame {}", r, f[r]),
-                "every frame: 0, 1, 2, ... (write every state, e.g. octocd run --state-every 1)");
+        if (sparse_) {
+          for (std::size_t r = 0; r < f.size(); ++r)
+            if (r == 0 ? f[r] != 0 : !(f[r] > f[r - 1] && f[r] <= static_cast<std::int64_t>(trace_limits::kMaxFrames)))
+              bad(frame.name, fmt::format("row {} is frame {}", r, f[r]),
+                  fmt::format("frame 0 first, then strictly increasing frames <= {}", trace_limits::kMaxFrames));
+          if (f.back() != static_cast<std::int64_t>(f.size()) - 1) {
+            state_frames_ = f;
+            frames_ = f.back();
+          }
+        } else {
+          for (std::size_t r = 0; r < f.size(); ++r)
+            if (f[r] != static_cast<std::int64_t>(r))
+              bad(frame.name, fmt::format("row {} is frame {}", r, f[r]),
+                  "every frame: 0, 1, 2, ... (write every state, e.g. octocd run --state-every 1)");
+        }
       }
     }
     if (info.has_aabbs) {
@@ -212,10 +227,11 @@ class TraceIn {
         rec.aabbs[i] = {{lo[3 * i], lo[3 * i + 1], lo[3 * i + 2]}, {hi[3 * i], hi[3 * i + 1], hi[3 * i + 2]}};
     }
     if (info.has_states) {
-      rec.x_pre = vectors(read<float>(position_, r - 1, 1));
-      rec.v_pre = vectors(read<float>(velocity_, r - 1, 1));
-      rec.x_post = vectors(read<float>(position_, r, 1));
-      rec.v_post = vectors(read<float>(velocity_, r, 1));
+      const auto [pre, post] = state_rows(f);
+      rec.x_pre = vectors(read<float>(position_, pre, 1));
+      rec.v_pre = vectors(read<float>(velocity_, pre, 1));
+      rec.x_post = vectors(read<float>(position_, post, 1));
+      rec.v_post = vectors(read<float>(velocity_, post, 1));
     }
     rec.has_pairs = info.has_pairs;
     if (info.has_pairs) rec.pairs = pairs(pairs_, pair_offsets_, f);
@@ -452,10 +468,11 @@ class TraceIn {
     names.x_det = "/states/position";
     names.contact_point = "/contacts/point";
     if (info.has_rotation) {
-      rec.q_pre = quats(read<float>(orientation_, r - 1, 1));
-      rec.q_post = quats(read<float>(orientation_, r, 1));
-      rec.w_pre = vectors(read<float>(angular_, r - 1, 1));
-      rec.w_post = vectors(read<float>(angular_, r, 1));
+      const auto [pre, post] = state_rows(f);
+      rec.q_pre = quats(read<float>(orientation_, pre, 1));
+      rec.q_post = quats(read<float>(orientation_, post, 1));
+      rec.w_pre = vectors(read<float>(angular_, pre, 1));
+      rec.w_post = vectors(read<float>(angular_, post, 1));
     }
     if (info.has_states) {
       // Where collision detection ran; never inferred from /aabbs.
@@ -675,7 +692,48 @@ class TraceIn {
     return out;
   }
 
+  /// The state rows of frame f: (f - 1, f) when every frame has its state; with sparse
+  /// states both are the row nearest to f (state_frame(f)).
+  std::pair<hsize_t, hsize_t> state_rows(std::int64_t f) const {
+    if (state_frames_.empty()) return {static_cast<hsize_t>(f - 1), static_cast<hsize_t>(f)};
+    const hsize_t r = nearest_row(f);
+    return {r, r};
+  }
+
+  hsize_t nearest_row(std::int64_t f) const {
+    const auto at = std::lower_bound(state_frames_.begin(), state_frames_.end(), f);
+    if (at == state_frames_.end()) return static_cast<hsize_t>(state_frames_.size() - 1);
+    if (at == state_frames_.begin() || *at - f <= f - *(at - 1)) return static_cast<hsize_t>(at - state_frames_.begin());
+    return static_cast<hsize_t>(at - state_frames_.begin() - 1);
+  }
+
+ public:
+  /// The frame whose recorded state frame(f) carries: f itself unless states are sparse.
+  std::int64_t state_frame(std::int64_t f) const {
+    return state_frames_.empty() ? f : state_frames_[nearest_row(f)];
+  }
+  /// The first frame with a contact row (0: none). Without /contacts, octocd's own
+  /// per-frame counts (/frames/frame, /frames/contacts) when the trace has them.
+  std::int64_t first_contact_frame() const {
+    for (std::size_t f = 1; f < contact_offsets_.size(); ++f)
+      if (contact_offsets_[f] > contact_offsets_[f - 1]) return static_cast<std::int64_t>(f);
+    if (info.has_contacts || !exists("/frames/frame") || !exists("/frames/contacts")) return 0;
+    Dataset frame = open("/frames/frame", H5T_INTEGER, 1, false), count = open("/frames/contacts", H5T_INTEGER, 1, false);
+    const hsize_t rows = std::min({frame.dims[0], count.dims[0], static_cast<hsize_t>(frames_)});
+    const std::vector<std::int64_t> f = read<std::int64_t>(frame, 0, rows), c = read<std::int64_t>(count, 0, rows);
+    for (hsize_t r = 0; r < rows; ++r)
+      if (c[r] > 0 && f[r] >= 1 && f[r] <= frames_) return f[r];
+    return 0;
+  }
+  /// With sparse states: the recorded state frames (/states/frame); else empty.
+  const std::vector<std::int64_t>& state_frames() const { return state_frames_; }
+  /// True when /states/frame skips frames (read with `sparse`).
+  bool sparse_states() const { return !state_frames_.empty(); }
+
+ private:
   std::string path_;
+  bool sparse_ = false;                     // /states/frame may skip frames
+  std::vector<std::int64_t> state_frames_;  // with sparse states: /states/frame; else empty
   std::unique_ptr<detail::Hdf5Reader> h5_;  // quiets HDF5's error printing while it lives
   bool committed_ = false;                  // the trace has committed_states (octocd's own)
   hsize_t n_ = 0;
@@ -692,12 +750,18 @@ class TraceIn {
 }  // namespace
 
 struct ExternalTrace::Impl {
-  explicit Impl(const std::string& file) : in(file), path(file) {}
+  Impl(const std::string& file, TraceStates states)
+      : in(file, true, states == TraceStates::Sparse), path(file) {}
   TraceIn in;
   std::string path;
 };
 
-ExternalTrace::ExternalTrace(const std::string& path) : impl_(std::make_unique<Impl>(path)) {}
+ExternalTrace::ExternalTrace(const std::string& path, TraceStates states)
+    : impl_(std::make_unique<Impl>(path, states)) {}
+std::int64_t ExternalTrace::state_frame(std::int64_t f) const { return impl_->in.state_frame(f); }
+std::int64_t ExternalTrace::first_contact_frame() const { return impl_->in.first_contact_frame(); }
+bool ExternalTrace::sparse_states() const { return impl_->in.sparse_states(); }
+const std::vector<std::int64_t>& ExternalTrace::state_frames() const { return impl_->in.state_frames(); }
 ExternalTrace::~ExternalTrace() = default;
 const ExternalTraceInfo& ExternalTrace::info() const { return impl_->in.info; }
 const ExternalBodies& ExternalTrace::bodies() const { return impl_->in.bodies; }

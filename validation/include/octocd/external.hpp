@@ -280,11 +280,21 @@ ExternalTraceInfo check_external_trace(const std::string& path);
 /// points, and ExternalBodies::physics (inertia given or derived with box_inertia,
 /// materials, contact margin, broadphase_exact, contact geometry, the scene's slop or
 /// 0.001). Positions are never inferred from /aabbs in version 2.
+/// Which states a trace must carry to be read (ExternalTrace).
+enum class TraceStates {
+  EveryFrame,  ///< /states/frame = 0, 1, ..., F: what the validators need
+  Sparse,      ///< frame 0, then any strictly increasing frames (`octocd run --state-every K`):
+               ///< a frame without a state reads the nearest recorded one (what `view` draws)
+};
+
 class ExternalTrace {
  public:
   /// Opens `path` and checks everything but the per-frame values (as
   /// check_external_trace). Throws InputError / RuntimeError as check_external_trace.
-  explicit ExternalTrace(const std::string& path);
+  /// With TraceStates::Sparse a trace whose /states/frame skips frames is read: F is its
+  /// last state frame and frame(f)'s pre- and post-step states (x, v, q, w, and the
+  /// detection pose) are all the recorded state nearest to f (ties: the earlier one).
+  explicit ExternalTrace(const std::string& path, TraceStates states = TraceStates::EveryFrame);
   ~ExternalTrace();
   ExternalTrace(const ExternalTrace&) = delete;
   ExternalTrace& operator=(const ExternalTrace&) = delete;
@@ -297,6 +307,17 @@ class ExternalTrace {
   /// InputError "PATH: DATASET: frame F: PROBLEM; allowed: ..." on a bad value, and for
   /// f out of range.
   FrameRecord frame(std::int64_t f);
+  /// The frame whose recorded state frame(f) carries: f, unless sparse_states().
+  std::int64_t state_frame(std::int64_t f) const;
+  /// The first frame with a row in /contacts (0: none); for a trace without /contacts,
+  /// the first frame octocd's per-frame counts (/frames/frame, /frames/contacts) give
+  /// contacts in, when it has them.
+  std::int64_t first_contact_frame() const;
+  /// True when the trace was read with TraceStates::Sparse and /states/frame skips frames.
+  bool sparse_states() const;
+  /// With sparse_states(): the frames that have a recorded state (0 first, increasing);
+  /// otherwise empty.
+  const std::vector<std::int64_t>& state_frames() const;
 
  private:
   struct Impl;

@@ -8,15 +8,18 @@
 /// validation/physics/reference.hpp), with a frame slider over a window around the frame.
 ///
 /// Input: an octocd trace (version 1) or an external trace (versions 1 and 2), read only
-/// through the hardened external-trace reader (octocd/external.hpp ExternalTrace), which
-/// needs every frame's state (`octocd run --state-every 1`). The page embeds the trace's
+/// through the hardened external-trace reader (octocd/external.hpp ExternalTrace) with
+/// TraceStates::Sparse: a trace that records the state of some frames only (`octocd run`'s
+/// default `--state-every 10`) draws a frame without its own state at the nearest recorded
+/// one, and the page names it beside the frame number. The page embeds the trace's
 /// numbers only (positions, orientations, boxes, meshes of the shapes, contacts, the
 /// reference's figures) as JSON in a `<script type="application/json">` block, and three.js
 /// (Debian's libjs-three: three.min.js, OrbitControls.js, ConvexHull.js, ConvexGeometry.js)
 /// inlined: it opens from a file, with no network and no server.
 ///
 /// Size: at most ViewSettings::max_bodies bodies near an item (max_bodies_all without one),
-/// at most 2 x window + 1 frames, at most kMaxContactRows rows and kMaxReferencePairs
+/// at most 2 x window + 1 frames (sparse states: the frame asked for and `window` recorded
+/// states each side), at most kMaxContactRows rows and kMaxReferencePairs
 /// references a frame: a page of a 10^6-body trace viewed at a pair is as large as one of
 /// 10 bodies (three.js, about 0.9 MB, plus the shapes of the bodies drawn). The trace is
 /// read in O(bodies) per frame of the window.
@@ -30,8 +33,9 @@ namespace octocd {
 
 /// What a page shows and where its parts come from.
 struct ViewSettings {
-  /// The frame shown first (1 .. the trace's frames; 0: frame 1). InputError "--frame"
-  /// outside the trace.
+  /// The frame shown first (1 .. the trace's frames; 0: the first frame with a contact,
+  /// ExternalTrace::first_contact_frame, else frame 1). InputError "--frame" outside the
+  /// trace.
   std::int64_t frame = 0;
   /// The item: a pair (pair_a, pair_b; either order, two different bodies) or a body;
   /// neither: every body up to max_bodies_all. InputError "--pair" / "--body" for a body
@@ -40,7 +44,8 @@ struct ViewSettings {
   std::uint32_t pair_a = 0, pair_b = 0;
   bool has_body = false;
   std::uint32_t body = 0;
-  /// Frames each side of `frame` on the slider (0 .. kMaxWindow).
+  /// Frames each side of `frame` on the slider (0 .. kMaxWindow); with sparse states,
+  /// recorded states each side.
   int window = 5;
   /// Most bodies drawn around an item: the item's, then the nearest others whose world
   /// AABB lies within the item's size of the item's box (>= 2).
