@@ -124,6 +124,49 @@ int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
   return code;
 }
 
+/// How long the main thread of `validate` waits for the judging worker to stop after a
+/// signal before it reports the verdict of the frames judged so far without it. The bound
+/// cuts the judging, never the writing of what was judged: the verdict is then written
+/// whatever time that takes (no process deadline).
+constexpr std::chrono::milliseconds kValidateStopGrace{450};
+/// The verdict of the frames judged so far (ValidationOptions::on_judged's latest rows),
+/// kept by the judging worker, read by the main thread when a step outlasts the grace.
+class JudgedSoFar {
+ public:
+  void keep(const std::vector<octocd::ValidationResult>& rows, std::int64_t judged) {
+    const std::lock_guard<std::mutex> lock(m_);
+    rows_ = rows;
+    judged_ = judged;
+  }
+  std::pair<std::vector<octocd::ValidationResult>, std::int64_t> get() const {
+    const std::lock_guard<std::mutex> lock(m_);
+    return {rows_, judged_};
+  }
+
+ private:
+  mutable std::mutex m_;
+  std::vector<octocd::ValidationResult> rows_;
+  std::int64_t judged_ = 0;
+};
+
+/// Waits until `done` (set under `m`, `cv` notified) and returns true, or returns false
+/// once a signal has waited kValidateStopGrace for it, or at once on a second signal.
+bool wait_for_worker(std::mutex& m, std::condition_variable& cv, const bool& done) {
+  std::unique_lock<std::mutex> lock(m);
+  std::optional<Clock::time_point> first;
+  for (;;) {
+    if (cv.wait_for(lock, std::chrono::milliseconds(10), [&] { return done; })) return true;
+    if (octocd::stop_signal() == 0) continue;
+    const auto now = Clock::now();
+    if (!first) first = now;
+    if (octocd::stop_signal_count() > 1 || now - *first >= kValidateStopGrace) return false;
+  }
+}
+
+int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, const octocd::ExternalOptions& eo,
+                     const octocd::ExternalTraceInfo& info, const std::vector<octocd::ValidationResult>& results,
+                     int every, Clock::time_point t0, const std::string& cut);
+
 /// `octocd validate --trace-in FILE.h5`: another engine's trace judged frame by frame
 /// (octocd/external.hpp); exit 0 all pass, 3 any fails, 2 a malformed trace.
 int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, Clock::time_point t0) {
@@ -145,15 +188,37 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
   octocd::ExternalTraceInfo info;
   const int every = o.every_given ? o.every : 1;
   // SIGINT/SIGTERM: the checks poll it; the verdict of the frames judged so far is reported
-  // as incomplete (a signal while the trace is checked ends with no verdict).
+  // as incomplete (a signal while the trace is checked ends with no verdict). The judging
+  // runs on a worker thread so that a check which polls late cannot delay the verdict past
+  // kValidateStopGrace: the main thread then reports the worker's latest snapshot.
   eo.stop = [] { return octocd::stop_signal() != 0; };
   eo.keep_on_stop = true;
-  octocd::set_stop_kept("no verdict written (the stop bound passed first)");
+  JudgedSoFar so_far;
+  octocd::ExternalTraceInfo so_far_info;  // under so_far's snapshot (its own mutex below)
+  std::mutex info_m;
+  eo.on_judged = [&](const std::vector<octocd::ValidationResult>& rows, const octocd::ExternalTraceInfo& i) {
+    {
+      const std::lock_guard<std::mutex> lock(info_m);
+      so_far_info = i;
+    }
+    so_far.keep(rows, i.judged_to);
+  };
   std::vector<octocd::ValidationResult> results;
-  try {
-    results = octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
-  } catch (const octocd::ValidationStopped&) {
-    const int sig = octocd::stop_signal();
+  std::mutex worker_m;
+  std::condition_variable worker_cv;
+  bool worker_done = false;
+  std::exception_ptr worker_error;
+  std::thread worker([&] {
+    try {
+      results = octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
+    } catch (...) {
+      worker_error = std::current_exception();
+    }
+    const std::lock_guard<std::mutex> lock(worker_m);
+    worker_done = true;
+    worker_cv.notify_all();
+  });
+  const auto stopped_checking = [&](int sig) {
     std::fprintf(stderr, "octocd validate: stopped by %s while checking the trace %s; no frame judged, no verdict\n",
                  octocd::stop_signal_name(sig), o.trace_in.c_str());
     if (!o.junit.empty())
@@ -161,7 +226,47 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
                                 fmt::format("stopped by {} while checking the trace; no frame judged",
                                             octocd::stop_signal_name(sig)));
     return octocd::stop_exit_code(sig);
+  };
+  if (!wait_for_worker(worker_m, worker_cv, worker_done)) {
+    // A check outlasting the grace, or a second signal: the verdict of the frames judged so
+    // far (the worker's latest snapshot) is written, then the process ends without the worker.
+    const int sig = octocd::stop_signal();
+    auto [rows, judged] = so_far.get();
+    int code = 0;
+    if (rows.empty()) {
+      code = stopped_checking(sig);
+    } else {
+      octocd::ExternalTraceInfo i;
+      {
+        const std::lock_guard<std::mutex> lock(info_m);
+        i = so_far_info;
+      }
+      i.stopped = true;
+      i.judged_to = judged;
+      i.stopped_in = judged + 1;
+      code = trace_in_verdict(o, vo, eo, i, rows, every, t0, " (a check outlasted the stop's grace)");
+    }
+    std::fflush(stdout);
+    std::fflush(stderr);
+    std::_Exit(code);
   }
+  worker.join();
+  if (worker_error) {
+    try {
+      std::rethrow_exception(worker_error);
+    } catch (const octocd::ValidationStopped&) {
+      return stopped_checking(octocd::stop_signal());
+    }
+  }
+  return trace_in_verdict(o, vo, eo, info, results, every, t0, "");
+}
+
+/// The verdict of `validate --trace-in`: views, JUnit, the table, and the STOPPED line with
+/// 128 + the signal when `info.stopped`, else conclude_validate's outcome. `cut`: appended to
+/// the STOPPED line (why the frame in progress is missing).
+int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, const octocd::ExternalOptions& eo,
+                     const octocd::ExternalTraceInfo& info, const std::vector<octocd::ValidationResult>& results,
+                     int every, Clock::time_point t0, const std::string& cut) {
   std::string stopped;
   if (info.stopped) {
     const std::int64_t first = octocd::shard_frames(eo.shard, info.frames).first;
@@ -169,7 +274,9 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
         "the table covers {} of {} (an incomplete verdict); stopped by {}{}",
         info.judged_to >= first ? fmt::format("frames {}..{}", first, info.judged_to) : std::string("no whole frame"),
         info.frames, octocd::stop_signal_name(octocd::stop_signal()),
-        info.stopped_in > 0 ? fmt::format(" inside the checks of frame {} (partly judged)", info.stopped_in) : "");
+        !cut.empty()          ? fmt::format("; frame {} was cut short{}", info.stopped_in, cut)
+        : info.stopped_in > 0 ? fmt::format(" inside the checks of frame {} (partly judged)", info.stopped_in)
+                              : std::string());
   }
   if (!o.view.empty() && !info.stopped) o.views = octocd::cli::write_failure_views(o.trace_in, results, o.view);
   const octocd::RunName run = octocd::trace_run(o.trace_in);
@@ -384,47 +491,6 @@ int validate_command(ValidateOptions& o) {
   }
 }
 
-/// `validate SCENE`'s stop bound (s): from a SIGINT or SIGTERM to the end of the
-/// process; past it the process ends saying what it keeps (StopOnSignals' deadline).
-constexpr double kValidateStopBound = 0.95;
-/// How long the main thread waits for the judging worker to stop after a signal before
-/// it reports the frames judged so far without it (the rest of the bound writes them).
-constexpr std::chrono::milliseconds kValidateStopGrace{450};
-
-/// The verdict of the frames judged so far (ValidationOptions::on_judged's latest rows),
-/// kept by the judging worker, read by the main thread when a step outlasts the grace.
-class JudgedSoFar {
- public:
-  void keep(const std::vector<octocd::ValidationResult>& rows, std::int64_t judged) {
-    const std::lock_guard<std::mutex> lock(m_);
-    rows_ = rows;
-    judged_ = judged;
-  }
-  std::pair<std::vector<octocd::ValidationResult>, std::int64_t> get() const {
-    const std::lock_guard<std::mutex> lock(m_);
-    return {rows_, judged_};
-  }
-
- private:
-  mutable std::mutex m_;
-  std::vector<octocd::ValidationResult> rows_;
-  std::int64_t judged_ = 0;
-};
-
-/// Waits until `done` (set under `m`, `cv` notified) and returns true, or returns false
-/// once a signal has waited kValidateStopGrace for it, or at once on a second signal.
-bool wait_for_worker(std::mutex& m, std::condition_variable& cv, const bool& done) {
-  std::unique_lock<std::mutex> lock(m);
-  std::optional<Clock::time_point> first;
-  for (;;) {
-    if (cv.wait_for(lock, std::chrono::milliseconds(10), [&] { return done; })) return true;
-    if (octocd::stop_signal() == 0) continue;
-    const auto now = Clock::now();
-    if (!first) first = now;
-    if (octocd::stop_signal_count() > 1 || now - *first >= kValidateStopGrace) return false;
-  }
-}
-
 /// The end of `validate SCENE`: JUnit (with `stopped`, the incomplete verdict's status,
 /// when a signal stopped it), the table, then either the STOPPED line and 130/143 or
 /// conclude_validate's outcome and exit code.
@@ -462,9 +528,10 @@ int validate_verdict(const ValidateOptions& o, const std::string& name,
 
 
 int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
-  // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kValidateStopBound; a
-  // second signal ends the wait for the judging worker (the verdict so far is reported).
-  octocd::StopOnSignals stop_on_signals(kValidateStopBound, octocd::SecondSignal::Recorded);
+  // SIGINT/SIGTERM: stop between frames, flush, 130/143; the judging worker is waited for
+  // kValidateStopGrace (a second signal ends the wait), then the verdict of the frames
+  // judged so far is written, whatever that takes: no deadline cuts the writing.
+  octocd::StopOnSignals stop_on_signals(0.0, octocd::SecondSignal::Recorded);
   octocd::Scene scene;
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
     const octocd::StopAtOnce loading("loading the scene and its meshes");
@@ -591,7 +658,6 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   std::condition_variable worker_cv;
   bool worker_done = false;
   std::exception_ptr worker_error;
-  octocd::set_stop_kept("no verdict written (the stop bound passed first)");
   std::thread worker([&] {
     try {
       octocd::check_engine_settings(o.settings, octocd::cli_argument_names());

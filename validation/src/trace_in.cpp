@@ -3,6 +3,7 @@
 #include <hdf5.h>
 
 #include <algorithm>
+#include <chrono>
 #include <future>
 #include <cmath>
 #include <cstdint>
@@ -808,6 +809,8 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   std::unique_ptr<ExternalValidator> made;
   const std::int64_t frames = max_frames > 0 ? std::min(max_frames, in.info.frames) : in.info.frames;
   std::int64_t judged_to = 0, judging = 0;  // the last frame judged whole; the frame in its checks
+  constexpr std::chrono::milliseconds kSnapshotEvery{20};  // options.on_judged's pace
+  std::chrono::steady_clock::time_point last_snapshot{};
   bool stopped = false;
   try {
     made = std::make_unique<ExternalValidator>(in.bodies, options);
@@ -839,6 +842,13 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
       made->observe(rec, f % every == 0);
       judged_to = f;
       judging = 0;
+      if (options.on_judged && (f == first || std::chrono::steady_clock::now() - last_snapshot >= kSnapshotEvery)) {
+        ExternalTraceInfo now = checked;
+        now.frames = frames;
+        now.judged_to = judged_to;
+        options.on_judged(made->results(), now);
+        last_snapshot = std::chrono::steady_clock::now();
+      }
     }
     for (std::int64_t f = last + 1; episodes && f <= frames && made->episodes_pending(); ++f) {
       if (options.stop && options.stop()) throw ValidationStopped();
