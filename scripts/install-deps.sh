@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Installs octocd's build, test and report dependencies from Debian 12's packages.
-# Idempotent: apt-get skips what is already installed. Runs apt-get through sudo when
-# not root. `--list` prints the package list and exits.
+# Installs octocd's dependencies from Debian 12's packages: what building `octocd`, its
+# reports and its Python package need; with `--tests`, also what only the test suite runs
+# (a headless browser, DART, a single-node Slurm). Idempotent: apt-get skips what is
+# already installed. Runs apt-get through sudo when not root. `--list` prints the package
+# list (with `--tests`: both sets) and exits.
 set -euo pipefail
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
@@ -21,13 +23,29 @@ PACKAGES=(
   python3 python3-numpy python3-h5py python3-matplotlib python3-scipy
   # the Python package `import octocd` (python/, OCTOCD_PYTHON) and its pytest tests
   python3-dev python3-pybind11 python3-pytest
-  # `octocd view` (three.js, inlined in its pages) and its headless-browser test (PIL reads
-  # the screenshot)
-  libjs-three chromium python3-pil
+  # `octocd view` (three.js, inlined in its pages)
+  libjs-three
   # `pip install --no-build-isolation .` (pyproject.toml, setup.py; docs/install.md)
   python3-pip python3-setuptools python3-wheel
 )
-if [ "${1:-}" = "--list" ]; then echo "${PACKAGES[@]}"; exit 0; fi
+# Only the test command's (README): each is large or a service, and nothing but a test uses it.
+TEST_PACKAGES=(
+  # `octocd view`'s headless-browser test (PIL reads the screenshot): chromium is ~300 MB
+  chromium python3-pil
+  # the reference engine DART (reference/dart; docs/engines.md): libdart-dev pulls in Boost
+  libdart-dev
+  # the single-node Slurm of the cluster test (scripts/slurm; docs/cluster.md)
+  slurm-wlm munge
+)
+LIST=0
+for arg in "$@"; do
+  case "$arg" in
+    --list) LIST=1 ;;
+    --tests) PACKAGES+=("${TEST_PACKAGES[@]}") ;;
+    *) echo "install-deps: unknown argument '$arg'; allowed: --tests, --list" >&2; exit 2 ;;
+  esac
+done
+if [ "$LIST" = 1 ]; then echo "${PACKAGES[@]}"; exit 0; fi
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -37,7 +37,7 @@ def fail(reason):
 def main():
     octocd, source, work = sys.argv[1], sys.argv[2], sys.argv[3]
     if not os.access(CHROMIUM, os.X_OK):
-        skip(f"{CHROMIUM} is absent (apt-get install chromium; scripts/install-deps.sh installs it)")
+        skip(f"{CHROMIUM} is absent (apt-get install chromium; scripts/install-deps.sh --tests installs it)")
     try:
         from PIL import Image
     except ImportError:
