@@ -161,6 +161,12 @@ SlurmdDebug=info
 NodeName=$host NodeAddr=127.0.0.1$node State=UNKNOWN
 PartitionName=debug Nodes=$host Default=YES MaxTime=INFINITE State=UP
 EOF
+# slurmd 22.05 loads a cgroup plugin whatever the plugins above use (autodetect by default:
+# cgroup/v2 on a cgroup v2 host, which then wants systemd over dbus, or stops on a mixed
+# hierarchy; a container has neither systemd nor a writable /sys/fs/cgroup). cgroup/v1's
+# init touches nothing: the cgroups are created only for a plugin that asks (proctrack/cgroup,
+# task/cgroup, jobacct_gather/cgroup), and none here does.
+echo "CgroupPlugin=cgroup/v1" >"$tmp/cgroup.conf"
 export SLURM_CONF="$tmp/slurm.conf"
 # Nothing of an enclosing Slurm job (were the test run inside one) reaches these commands.
 for v in $(compgen -e | grep '^SLURM_' | grep -v '^SLURM_CONF$'); do unset "$v"; done
