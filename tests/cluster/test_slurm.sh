@@ -309,8 +309,8 @@ join_fails() {  # CASE PATTERN: the join on folder CASE exits 1, naming PATTERN,
 fresh() { rm -rf "$tmp/$1"; cp -r "$tmp/sweep" "$tmp/$1" && rm -rf "$tmp/$1/report" "$tmp/$1/status/join.rc"; }
 fresh no-status && rm "$tmp/no-status/status/1.rc"
 join_fails no-status "shard 1/4 (array task 4242_1, Slurm state .*did not finish"
-fresh bad-status && echo 2 >"$tmp/bad-status/status/0.rc"
-join_fails bad-status "shard 0/4 (array task 4242_0): octocd exited with status 2"
+fresh bad-status && echo 134 >"$tmp/bad-status/status/0.rc"
+join_fails bad-status "shard 0/4 (array task 4242_0): octocd exited with status 134"
 fresh unfinished && "$py" -c '
 import json, sys
 p = sys.argv[1]; d = json.load(open(p)); d["complete"] = False; d["stopped"] = "SIGTERM"; d["points"] = d["points"][:1]
@@ -323,7 +323,24 @@ import json, sys
 p = sys.argv[1]; d = json.load(open(p)); d["points"] = d["points"][1:]
 json.dump(d, open(p, "w"))' "$tmp/lost-point/shards/part-2.json"
 join_fails lost-point "the shards hold 5 point(s) of the sweep's 6: point 2 (of shard 2/4) missing"
-note "the join refuses a missing status, a bad status, an unfinished, a foreign and a short shard"
+# bench exits 2 when every point of its shard is skipped (after writing its result): the
+# join takes such a shard, and refuses status 2 beside measured points.
+fresh skipped-shard && "$py" -c '
+import json, sys
+p = sys.argv[1]; d = json.load(open(p))
+for pt in d["points"]:  # as bench writes a skipped point: no measurements, a reason
+    for k in ("windows", "series", "wall_s", "has_stage", "device", "engine_broadphase", "repetition_start_s"):
+        pt.pop(k, None)
+    pt.update({"status": "skipped", "reason": "planted: engine not available"})
+json.dump(d, open(p, "w"))' "$tmp/skipped-shard/shards/part-3.json"
+echo 2 >"$tmp/skipped-shard/status/3.rc"
+cp -r "$tmp/skipped-shard" "$tmp/status2-measured"
+cp "$tmp/sweep/shards/part-3.json" "$tmp/status2-measured/shards/part-3.json"
+join_fails status2-measured "shard 3/4 (.*part-3.json): octocd exited with status 2 (bad input), its result holds measured points"
+bash "$join" sweep "$tmp/skipped-shard" 4 4242 "$octocd" >"$tmp/skipped-shard.out" 2>&1 \
+  || fail "join with an all-skipped shard 3 (status 2) exited $?: $(cat "$tmp/skipped-shard.out")"
+[ -s "$tmp/skipped-shard/report/index.html" ] || fail "join with an all-skipped shard wrote no report"
+note "the join refuses a missing status, a bad status, an unfinished, a foreign and a short shard; takes an all-skipped one"
 
 elapsed=$((SECONDS - t_start))
 echo "PASS: sharded sweep and validation through Slurm equal the unsharded runs; a cancelled shard fails the join ($elapsed s)"
