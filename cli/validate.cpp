@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <ctime>
 #include <fstream>
 #include <map>
@@ -359,17 +361,29 @@ int validate_merge(const ValidateOptions& o) {
 
 int validate_scene_command(ValidateOptions& o, Clock::time_point t0);
 
-/// `octocd validate SCENE --engine bullet` (hull mode, or with rotation): Bullet
-/// runs `--frames` steps into a version 2 trace (`--trace FILE`, else a
-/// temporary file, removed afterwards) with every state and contact, which is then judged
-/// as `--trace-in` judges it (validate_trace_in).
-int validate_bullet_rotation(ValidateOptions& o, const octocd::ValidationOptions& vo,
-                             const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
+/// A new empty file in the temp folder, "octocd-validate-ENGINE-XXXXXX.h5" with an
+/// unpredictable suffix, created with O_EXCL (mkstemps): nothing planted at its name is
+/// followed. RuntimeError when it cannot be created.
+std::string temporary_trace(const std::string& engine) {
+  std::string name =
+      (std::filesystem::temp_directory_path() / fmt::format("octocd-validate-{}-XXXXXX.h5", engine)).string();
+  const int fd = ::mkstemps(name.data(), 3);
+  if (fd < 0)
+    throw octocd::RuntimeError(fmt::format("validate: {}: a temporary trace cannot be created ({})", name,
+                                           std::strerror(errno)));
+  ::close(fd);
+  return name;
+}
+
+/// `octocd validate SCENE --engine E` for a reference engine (EngineInfo::records_every_step
+/// false: Bullet, MuJoCo, ODE): the engine runs `--frames` steps into a version 2 trace
+/// (`--trace FILE`, else a temporary file, removed afterwards) with every state and contact,
+/// which is then judged as `--trace-in` judges it (validate_trace_in).
+int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& vo,
+                           const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
   namespace fs = std::filesystem;
   const bool temporary = o.trace.empty();
-  const std::string path =
-      temporary ? (fs::temp_directory_path() / fmt::format("octocd-validate-bullet-{}.h5", ::getpid())).string()
-                : o.trace;
+  const std::string path = temporary ? temporary_trace(o.engine) : o.trace;
   const std::string what = o.engine + (octocd::scene_rotates(model->scene) ? " (rotation)" : " (translation only)");
   std::string geometry;
   {
@@ -401,15 +415,20 @@ int validate_bullet_rotation(ValidateOptions& o, const octocd::ValidationOptions
   std::vector<octocd::ValidationResult> results;
   try {
     // Judging the written trace polls no flag: a signal ends it at once (no table).
-    const octocd::StopAtOnce judging(temporary ? "judging Bullet's trace (a temporary file left in the temp folder)"
-                                               : "judging Bullet's trace, which stays on disk");
+    const std::string judging_what =
+        fmt::format(temporary ? "judging {}'s trace (its temporary file removed)" : "judging {}'s trace, which stays on disk",
+                    o.engine);
+    if (temporary) octocd::set_stop_remove(path);
+    const octocd::StopAtOnce judging(judging_what.c_str());
     results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
     if (!o.view.empty()) o.views = octocd::cli::write_failure_views(path, results, o.view);
   } catch (...) {
+    octocd::set_stop_remove("");
     std::error_code ec;
     if (temporary) fs::remove(path, ec);
     throw;
   }
+  octocd::set_stop_remove("");
   std::error_code ec;
   if (temporary) fs::remove(path, ec);
   const octocd::RunName run{model->scene.name, ""};
@@ -619,7 +638,7 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
           "--engine: {} with boxes equal to the AABBs and no rotation cannot be validated (no per-frame record); "
           "allowed: cpu, cuda, or {} with --bullet shape=hull (the default) or --rotation",
           o.engine, o.engine));
-    return validate_bullet_rotation(o, vo, model, t0);
+    return validate_through_trace(o, vo, model, t0);
   }
   std::unique_ptr<octocd::TraceWriter> trace;
   std::int64_t done = 0;  // frames of the validated engine
