@@ -550,6 +550,8 @@ void TraceWriter::create_layout(const TraceMetadata& meta, const TraceBodies& bo
       attr_scalar(root, "velocity_clamp", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, d.velocity_clamp, path);
     if (d.impulses_complete >= 0)
       attr_scalar(root, "impulses_complete", H5T_STD_I32LE, H5T_NATIVE_INT, d.impulses_complete, path);
+    if (d.friction_directions >= 0)
+      attr_scalar(root, "friction_directions", H5T_STD_I32LE, H5T_NATIVE_INT, d.friction_directions, path);
   }
   attr_scalar(root, "state_every", H5T_STD_I32LE, H5T_NATIVE_INT, m.opt.state_every, path);
   attr_scalar(root, "flush_every", H5T_STD_I32LE, H5T_NATIVE_INT, m.opt.flush_every, path);
@@ -936,6 +938,7 @@ TraceDeclarations octocd_trace_declarations(const Model& model) {
   d.integrator = "semi-implicit";
   d.contact_model = "rigid";
   d.deactivation = "off";
+  d.friction_directions = 1;  // design.md section 6: J_t along t, one direction
   return d;
 }
 

@@ -69,10 +69,19 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
             "nothing: the trace declares impulses_complete = 0 (its rows hold part of the step's impulses)");
       part(info.has_rotation && info.has_points,
            fmt::format("{} and /contacts/point for the angular balance", kRotation));
+      // Version 1's jt is along the sliding by its contract; version 2's scalar jt is the
+      // component along -v_t, all of the friction only for an engine with one direction.
+      needs(info.has_jt3 || info.version == 1 || info.octocd_conventions || p.friction_directions == 1,
+            "/contacts/jt3 (each row's friction impulse vector), or the root attribute friction_directions = 1 "
+            "where each row's friction lies along its sliding: the scalar jt of an engine with two friction "
+            "directions leaves the second out");
       part(info.has_jt3 || info.version == 1,
            "/contacts/jt3 (version 2): the scalar jt leaves each slow row's friction direction open (a disc)");
     } else if (name == "free-flight") {
       needs(info.has_states, kStates);
+      needs(info.has_contacts, fmt::format("{}: a body is free in a step without a row (a run without contacts "
+                                           "writes /contacts/offsets of zeros and empty rows)",
+                                           kContacts));
       part(info.has_rotation, fmt::format("{} for the spin and the orientation", kRotation));
     } else if (name == "candidate-sets" || name == "midphase-completeness") {
       needs(false, "nothing a trace can add: the row judges octocd's own broadphases and midphase (design.md "

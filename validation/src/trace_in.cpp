@@ -428,12 +428,21 @@ class TraceIn {
             "1 (default: the contact rows carry every impulse of the step) or 0 (they do not: momentum-balance n/a)");
       p.impulses_complete = c == 1.0;
     }
+    if (has_attr("friction_directions")) {
+      const double d = number_attr("friction_directions", 0.0);
+      if (d != 1.0 && d != 2.0)
+        bad("/ (root attribute friction_directions)", fmt::format("{}", d),
+            "1 (each row's friction along its sliding: the scalar jt is all of it) or 2 (two friction directions: "
+            "write /contacts/jt3)");
+      p.friction_directions = static_cast<int>(d);
+    }
     p.jacobi_response = choice_attr("response_scheme", {"sequential", "jacobi"}, "sequential") == "jacobi";
     const std::string deactivation = choice_attr("deactivation", {"undeclared", "off", "on"}, "undeclared");
     p.deactivation = deactivation == "off"  ? PhysicsBodies::Deactivation::Off
                      : deactivation == "on" ? PhysicsBodies::Deactivation::Flagged
                                             : PhysicsBodies::Deactivation::Undeclared;
     const bool declares = has_attr("contact_geometry") || has_attr("jt_direction") || has_attr("contact_margin_rule") ||
+                          has_attr("friction_directions") ||
                           has_attr("response_scheme") || has_attr("deactivation");
     info.octocd_conventions = info.version == 1 && !declares && has_attr("parameters") && exists("/frames");
     p.contact_model = choice_attr("contact_model", {"rigid", "soft"}, "rigid") == "soft"

@@ -32,6 +32,7 @@ struct TraceDeclarations {
   std::string integrator;           ///< `integrator`: "semi-implicit", "explicit" or "any"
   std::string contact_model;        ///< `contact_model`: "rigid" or "soft"
   std::string deactivation;         ///< `deactivation`: "off" (the engine never deactivates a body)
+  int friction_directions = -1;     ///< `friction_directions`: 1 = each row's friction along its sliding (the scalar jt is all of it)
 };
 
 /// The declarations of octocd's own cpu and cuda engines for `model`: contacts on the

@@ -234,6 +234,11 @@ struct PhysicsBodies {
     Flagged,
   };
   Deactivation deactivation = Deactivation::Undeclared;
+  /// `friction_directions` (external traces v2 without /contacts/jt3): 1 = each row's
+  /// friction impulse lies along its sliding (-v_t), so the scalar jt is the whole of it;
+  /// 2 = two friction directions (jt is only its component along -v_t); 0 = undeclared.
+  /// Read by the row plan (plan_trace_rows): momentum-balance needs jt3 or 1.
+  int friction_directions = 0;
 
   // ---- What octocd's own records mean (set by octocd_physics_bodies).
   /// The rows' `jt` is design.md section 6's J_t along t = v_t / |v_t| (negative when friction opposes
