@@ -179,6 +179,18 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
                info.has_rotation ? "rotation " : "", info.has_aabbs ? "aabbs " : "", info.has_pairs ? "pairs " : "",
                info.has_contacts ? "contacts " : "", info.has_points ? "points " : "",
                info.manifolds ? "manifolds " : "", info.has_scene ? "scene" : "");
+    // Per row, without judging: judged (the trace carries what it needs) or n/a with what
+    // to add (docs/validate-your-engine.md, "What a trace must carry").
+    const octocd::ExternalTrace trace(o.trace_in);
+    fmt::print("\nrows (judged: the trace carries what the row needs; n/a: what to add to judge it):\n");
+    for (const octocd::TraceRowPlan& r : octocd::plan_trace_rows(info, trace.bodies())) {
+      const char* tier = r.tier == octocd::Tier::Physics ? "physics" : "model";
+      if (r.judged)
+        fmt::print("{:<8} {:<24} judged{}\n", tier, r.name,
+                   r.partial.empty() ? std::string() : "; partly: add " + r.partial);
+      else
+        fmt::print("{:<8} {:<24} n/a    {}{}\n", tier, r.name, r.add.rfind("nothing", 0) == 0 ? "" : "add ", r.add);
+    }
     return 0;
   }
   octocd::ExternalOptions eo;
@@ -822,7 +834,7 @@ Command add_validate_command(CLI::App& app) {
       ->check(CLI::Range(0, 4096))
       ->default_val(0);
   val_cmd->add_flag("--check-only", val.check_only,
-                    "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not)");
+                    "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not) and list per row judged, or n/a with the dataset or attribute to add, without judging");
 
   return {[val_cmd] { return val_cmd->parsed(); },
           [options, val_cmd] {

@@ -9,6 +9,7 @@
 
 
 #include "octocd/trace.hpp"
+#include "octocd/engine_registry.hpp"
 
 #include <fcntl.h>
 #include <hdf5.h>
@@ -530,6 +531,28 @@ void TraceWriter::create_layout(const TraceMetadata& meta, const TraceBodies& bo
   attr_string(root, "device", meta.device, path);
   attr_string(root, "start_time", meta.start_time, path);
   attr_scalar(root, "dt", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, meta.dt, path);
+  {  // declarations (docs/trace-format.md, "Declarations"): only those the engine makes
+    const TraceDeclarations& d = meta.declarations;
+    const std::pair<const char*, const std::string*> text[] = {
+        {"contact_margin_rule", &d.contact_margin_rule}, {"jt_direction", &d.jt_direction},
+        {"response_scheme", &d.response_scheme},         {"deactivation", &d.deactivation}};
+    for (const auto& [name, value] : text)
+      if (!value->empty()) attr_string(root, name, *value, path);
+    // Those a version 2 trace states through RotationTraits are written there.
+    if (!m.opt.v2) {
+      if (!d.contact_geometry.empty()) attr_string(root, "contact_geometry", d.contact_geometry, path);
+      if (d.broadphase_exact >= 0)
+        attr_scalar(root, "broadphase_exact", H5T_STD_I32LE, H5T_NATIVE_INT, d.broadphase_exact, path);
+      if (!d.integrator.empty()) attr_string(root, "integrator", d.integrator, path);
+      if (!d.contact_model.empty()) attr_string(root, "contact_model", d.contact_model, path);
+    }
+    if (d.velocity_clamp >= 0.0)
+      attr_scalar(root, "velocity_clamp", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, d.velocity_clamp, path);
+    if (d.impulses_complete >= 0)
+      attr_scalar(root, "impulses_complete", H5T_STD_I32LE, H5T_NATIVE_INT, d.impulses_complete, path);
+    if (d.friction_directions >= 0)
+      attr_scalar(root, "friction_directions", H5T_STD_I32LE, H5T_NATIVE_INT, d.friction_directions, path);
+  }
   attr_scalar(root, "state_every", H5T_STD_I32LE, H5T_NATIVE_INT, m.opt.state_every, path);
   attr_scalar(root, "flush_every", H5T_STD_I32LE, H5T_NATIVE_INT, m.opt.flush_every, path);
   attr_scalar(root, "body_count", H5T_STD_I64LE, H5T_NATIVE_INT64,
@@ -660,6 +683,7 @@ void TraceWriter::create_v2_layout() {
   if (!t.contact_model.empty()) attr_string(root, "contact_model", t.contact_model, path);
   if (!t.integrator.empty()) attr_string(root, "integrator", t.integrator, path);
   if (!t.gyroscopic.empty()) attr_string(root, "gyroscopic", t.gyroscopic, path);
+  if (!t.deactivation.empty()) attr_string(root, "deactivation", t.deactivation, path);
   {
     const hsize_t three = 3;
     Handle space(check(H5Screate_simple(1, &three, nullptr), path, "H5Screate_simple"));
@@ -895,7 +919,27 @@ TraceMetadata trace_metadata(const Engine& engine, int state_every) {
   meta.start_time = iso_utc_now();
   meta.dt = s.dt;
   meta.state_every = state_every;
+  // The registry says which engines follow octocd's contact conventions; the trace
+  // declares them, so readers never judge by the engine's name.
+  if (writes_octocd_contacts(engine.name())) meta.declarations = octocd_trace_declarations(engine.model());
   return meta;
+}
+
+TraceDeclarations octocd_trace_declarations(const Model& model) {
+  const ContactParams& r = model.scene.response;
+  TraceDeclarations d;
+  d.contact_geometry = "aabb";
+  d.broadphase_exact = 1;
+  d.contact_margin_rule = "theta";
+  d.jt_direction = "along-sliding";
+  d.velocity_clamp = r.max_velocity;
+  d.impulses_complete = r.iterations <= 1 ? 1 : 0;
+  d.response_scheme = "jacobi";
+  d.integrator = "semi-implicit";
+  d.contact_model = "rigid";
+  d.deactivation = "off";
+  d.friction_directions = 1;  // design.md section 6: J_t along t, one direction
+  return d;
 }
 
 TraceBodies trace_bodies(const Engine& engine) {

@@ -74,6 +74,7 @@ with h5py.File(sys.argv[1], "w") as f:
     f.attrs["integrator"] = "explicit"      # x' = x + dt v, q' = q advanced by w dt
     f.attrs["gyroscopic"] = "true"          # w' = w - dt I_w^-1 (w x I_w w) without contacts
     f.attrs["contact_model"] = "soft"       # energy judged per contact episode, not per step
+    f.attrs["friction_directions"] = np.int32(1)  # one friction impulse per row, along -v_t: jt is all of it
     f["bodies/locked_dofs"] = np.uint8([0, 0, 0b111000])  # body 2: rotation about x, y, z locked
     f["bodies/local_aabb_min"] = np.float32(-H)
     f["bodies/local_aabb_max"] = np.float32(H)

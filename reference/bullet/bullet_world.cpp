@@ -965,6 +965,9 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
     // sqrt(2) x the threshold apart; + 1 mm for the float32 distances.
     m.traits.contact_margin = static_cast<float>(std::sqrt(2.0) * gContactBreakingThreshold) + 0.001f;
     m.traits.jt3 = true;  // fill_record gives every row its friction impulse vector
+    // Every dynamic body has setActivationState(DISABLE_DEACTIVATION): Bullet never puts
+    // one to sleep (its velocities zeroed, its pose frozen), so every body is judged awake.
+    m.traits.deactivation = "off";
     m.traits.rotates = m.rotation;  // translation-only: no orientations, angular velocities, inertia
     // A dynamic mesh is its hull, a box itself, a static mesh (hull mode) its triangles:
     // per body in /bodies/collision_shape (body_collision_shape, set above).

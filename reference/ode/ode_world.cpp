@@ -374,6 +374,7 @@ OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial,
   t.contact_model = "rigid";
   t.integrator = "semi-implicit";
   t.gyroscopic = settings.gyroscopic ? "true" : "false";
+  t.deactivation = "off";  // dWorldSetAutoDisableFlag(world, 0) and per body: no body is ever disabled
 }
 
 OdeWorld::~OdeWorld() = default;

@@ -133,7 +133,9 @@ struct Zoo {
   std::vector<State> states;
   std::vector<std::vector<Row>> rows;
   std::map<std::string, std::string> text;
-  std::map<std::string, double> numbers{{"mu", 0.5}, {"restitution", 0.5}, {"contact_margin", 0.005}};
+  // Each zoo engine's friction is one impulse along -v_t per row (jt, no jt3): declared.
+  std::map<std::string, double> numbers{
+      {"mu", 0.5}, {"restitution", 0.5}, {"contact_margin", 0.005}, {"friction_directions", 1}};
   bool write_locked = true;
   std::size_t hull_vertices = 0;  // (f): the L's hull vertex count
 

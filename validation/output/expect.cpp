@@ -31,7 +31,7 @@ const std::vector<std::pair<std::string, std::vector<std::string>>>& row_table()
       {"friction", {"cone", "dissipation"}},
       {"conservation", {"momentum", "angular-momentum", "energy"}},
       {"momentum-balance", {"linear", "angular"}},
-      {"free-flight", {"velocity", "position", "angular-velocity", "orientation"}},
+      {"free-flight", {"velocity", "position", "angular-velocity", "orientation", "sleeping"}},
       // model tier
       {"candidate-sets", {}},
       {"midphase-completeness", {}},

@@ -18,7 +18,6 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
 #include "octocd/physics.hpp"
@@ -200,7 +199,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
   // declared collision shapes, the separating-axis settings of the contact-geometry row.
   ExternalOptions eo;
   eo.engine = info.engine;
-  eo.octocd_engine = writes_octocd_contacts(info.engine);
+  eo.octocd_engine = info.octocd_conventions;  // declared by the trace, never by its engine name
   const ExternalValidator holder(in->bodies(), eo);
   const Model& model = holder.model();
   auto poses_of = [&](std::int64_t f, const FrameRecord& r) {

@@ -212,6 +212,35 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     const D3 w0 = w_of(rec.w_pre, i), w1 = w_of(rec.w_post, i);
     const M3 iw = rotating ? conjugated(rotation(det[i].orientation), inertia[i]) : M3{};
     const double locked_count = double(locked(i) != 0);
+    if (asleep(rec.asleep_post, static_cast<std::uint32_t>(i))) {
+      if (!asleep(rec.asleep_pre, static_cast<std::uint32_t>(i))) {
+        ++fell_asleep;  // the engine zeroed its velocity: not a contact impulse, not free flight
+        continue;
+      }
+      // Asleep through the step: the engine does not move it. Position, velocity,
+      // orientation (q or -q) and angular velocity are kept within one float32 rounding
+      // of each (2 x 2^-23 of the two values' magnitudes).
+      const D3 x0 = d3(rec.x_pre[i]), x1 = d3(rec.x_post[i]), vb = d3(rec.v_pre[i]);
+      double ratio = len3(x1 - x0) / (2.0 * kEps32 * (len3(x0) + len3(x1)) + 1e-12);
+      ratio = std::max(ratio, len3(v1 - vb) / (2.0 * kEps32 * (len3(vb) + len3(v1)) + 1e-12));
+      if (rotating) {
+        ratio = std::max(ratio, len3(w1 - w0) / (2.0 * kEps32 * (len3(w0) + len3(w1)) + 1e-12));
+        const Quat a = rec.q_pre[i], b = rec.q_post[i];
+        const double dm = std::sqrt(double(a.w - b.w) * (a.w - b.w) + double(a.x - b.x) * (a.x - b.x) +
+                                    double(a.y - b.y) * (a.y - b.y) + double(a.z - b.z) * (a.z - b.z));
+        const double dp = std::sqrt(double(a.w + b.w) * (a.w + b.w) + double(a.x + b.x) * (a.x + b.x) +
+                                    double(a.y + b.y) * (a.y + b.y) + double(a.z + b.z) * (a.z + b.z));
+        ratio = std::max(ratio, std::min(dm, dp) / (4.0 * kEps32));
+      }
+      free_sleep.check(ratio <= 1.0, ratio, Where::of_body(frame, i), [&] {
+        return fmt::format("frame {}: body {} asleep before and after the step (/states/sleeping) moved: x' - x = "
+                           "({:.4g}, {:.4g}, {:.4g}) m, v' - v = ({:.4g}, {:.4g}, {:.4g}) m/s ({:.3g} of one "
+                           "rounding); a sleeping body keeps its pose and velocity",
+                           frame, i, x1[0] - x0[0], x1[1] - x0[1], x1[2] - x0[2], v1[0] - vb[0], v1[1] - vb[1],
+                           v1[2] - vb[2], ratio);
+      });
+      continue;
+    }
     if (clamped(i)) {
       ++balance_clamped;
       continue;

@@ -148,6 +148,10 @@ void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
         found = std::binary_search(rec.pairs.begin(), rec.pairs.end(), p);
       }
       const ReferenceNormal& g = truth_after(f, p, truth_cursor).g;
+      if (!found && pair_asleep(rec, p)) {  // a pair of sleeping bodies need not be a candidate
+        ++broad_asleep;
+        continue;
+      }
       broad.check(found, g.penetrating ? g.depth : -g.distance, Where{frame, p}, [&] {
         return fmt::format("frame {}: {} misses {} whose shapes are {} {:.3g} m (margin {} m)", frame, label,
                            pair_name(p), g.penetrating ? "penetrating by" : "apart by",

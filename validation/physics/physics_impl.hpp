@@ -206,6 +206,12 @@ struct PhysicsValidators::Impl {
   Tally broad, broad_exact, complete, false_contact, normal_angle, depth, points, pen, cone, dissipation;
   Tally momentum, angular, energy;
   Tally balance_lin, balance_ang, free_vel, free_pos, free_w, free_q;
+  /// Sleeping bodies (PhysicsBodies::Deactivation::Flagged): free-flight's `sleeping` cause
+  /// (asleep through the step, must not move); body-steps that fell asleep (not judged);
+  /// groups with a sleeping body (not judged on conservation); pairs of sleeping bodies not
+  /// required among the candidates or the contacts.
+  Tally free_sleep;
+  std::uint64_t fell_asleep = 0, groups_asleep = 0, broad_asleep = 0, complete_asleep = 0;
   std::uint64_t balance_clamped = 0, balance_no_rows = 0, balance_locked = 0, free_locked = 0, balance_rot_locked = 0;
   // Gyroscopic term undeclared: body-steps whose spin met the invariants (the term) and
   // those that kept w (no term) (figures of free-flight and momentum-balance).
@@ -252,6 +258,15 @@ struct PhysicsValidators::Impl {
     return combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
   }
   bool dynamic(std::uint32_t i) const { return mass[i] > 0; }
+  /// Body i asleep in the state before (pre) or after the step (FrameRecord::asleep_pre /
+  /// asleep_post; PhysicsBodies::Deactivation).
+  static bool asleep(const std::vector<std::uint8_t>& flags, std::uint32_t i) { return !flags.empty() && flags[i]; }
+  /// Every dynamic body of p was asleep before the step: the engine need not collide it.
+  bool pair_asleep(const FrameRecord& rec, Pair p) const {
+    if (rec.asleep_pre.empty()) return false;
+    const bool a = !dynamic(p.a) || asleep(rec.asleep_pre, p.a), b = !dynamic(p.b) || asleep(rec.asleep_pre, p.b);
+    return a && b && (dynamic(p.a) || dynamic(p.b));
+  }
 
   // ---- Rows 1-4 (checked frames with poses) --------------------------------------
   /// Rows 1-4 of a checked frame, each on its own clock.

@@ -62,7 +62,9 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     r.tolerances = tolerances;
     return r;
   };
-  const std::string no_checked = "no checked frame with poses (AABBs or detection poses)";
+  const std::string no_checked =
+      "no checked frame with poses (AABBs or detection poses; a trace: add /states/position and /states/velocity, or "
+      "/aabbs/min and /aabbs/max)";
 
   // 1. Broadphase completeness.
   {
@@ -78,7 +80,9 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                              s.broad_frames, double(s.broad_candidates) / double(s.broad_frames));
     } else if (s.broad_frames == 0) {
       r.applicable = false;
-      r.detail = s.broad_no_pairs ? "the engine gave no candidate pairs (has_pairs false)" : no_checked;
+      r.detail = s.broad_no_pairs ? "the engine gave no candidate pairs (has_pairs false; a trace: add /pairs/offsets "
+                                    "and /pairs/pair)"
+                                  : no_checked;
     } else if (s.broad.failures) {
       r.detail = s.broad.first + fmt::format(" ({} of {} required pairs missing)", s.broad.failures, s.broad.checks);
     } else if (s.broad_exact.failures) {
@@ -91,6 +95,9 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                                          "pairs dropped)"
                                                        : "");
     }
+    if (s.broad_asleep)
+      r.detail += fmt::format("; {} pair-frames of bodies asleep before the step (/states/sleeping) not required",
+                              s.broad_asleep);
     if (r.applicable)
       fill_causes(r, {{&s.broad, "missing-pair", "required pairs", "m"},
                       {&s.broad_exact, "not-flat", "frames", "pairs"}});
@@ -116,6 +123,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                              "{:.3g} m beyond it)",
                              s.complete.checks, s.false_contact.checks, margin, s.false_contact.worst_or(0.0));
     }
+    if (s.complete_asleep)
+      r.detail += fmt::format("; {} penetrating pair-frames of bodies asleep before the step (/states/sleeping) "
+                              "without a row, not required",
+                              s.complete_asleep);
     if (r.applicable)
       fill_causes(r, {{&s.complete, "missing-contact", "penetrating pairs", "m"},
                       {&s.false_contact, "false-contact", "contact pairs", "m"}});
@@ -290,7 +301,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail = s.angular.first;
     } else if (!r.applicable) {
       r.detail = s.state_frames ? "no isolated dynamic group (2+ dynamic bodies in contact, no static contact)"
-                                : "no states";
+                                : "no states (a trace: add /states/position and /states/velocity)";
     } else {
       r.detail = fmt::format("{} isolated group-frames: worst momentum change {:.3g} of its bound; energy {}; "
                              "angular momentum {}",
@@ -308,6 +319,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     if (s.groups_clamped)
       r.detail += fmt::format("; {} group-frames not judged (a body at the declared velocity clamp {} m/s)",
                               s.groups_clamped, s.bodies.velocity_clamp);
+    if (s.groups_asleep)
+      r.detail += fmt::format("; {} group-frames not judged (a body asleep before or after the step: "
+                              "/states/sleeping)",
+                              s.groups_asleep);
     if (s.bodies.contact_model == PhysicsBodies::ContactModel::Soft)
       r.detail += fmt::format("; contact_model soft: energy judged per contact episode of an isolated group, "
                               "from its first contact until none of its bodies touches another ({} episodes judged, "
@@ -345,7 +360,11 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                            : std::string()) +
         (s.balance_clamped ? fmt::format("; {} body-steps at the declared velocity clamp, not judged",
                                          s.balance_clamped)
-                           : std::string());
+                           : std::string()) +
+        (s.fell_asleep ? fmt::format("; {} body-steps falling asleep (/states/sleeping: the engine zeroed the "
+                                     "velocity), not judged",
+                                     s.fell_asleep)
+                       : std::string());
     if (!s.bodies.impulses_complete) {
       r.applicable = false;
       r.detail = fmt::format("n/a: the record holds the impulses of the first of response.iterations = {} "
@@ -353,7 +372,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                              "same pairs, so the rows are not the step's impulses",
                              s.model->scene.response.iterations);
     } else if (!r.applicable) {
-      r.detail = s.state_frames ? "no dynamic body with contact rows in a step with states" : "no states";
+      r.detail = s.state_frames ? "no dynamic body with contact rows in a step with states"
+                                : "no states (a trace: add /states/position and /states/velocity)";
     } else {
       r.detail = fmt::format("{} body-steps: linear worst {:.3g} of its bound; angular {}", s.balance_lin.checks,
                              s.balance_lin.worst_or(0.0),
@@ -377,11 +397,16 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
   {
     ValidationResult r = row("free-flight", "bodies without contacts not following gravity and their spin",
                              "free_flight_angle_rad");
-    r.measured = double(s.free_vel.failures + s.free_pos.failures + s.free_w.failures + s.free_q.failures);
+    r.measured = double(s.free_vel.failures + s.free_pos.failures + s.free_w.failures + s.free_q.failures +
+                        s.free_sleep.failures);
     r.pass = r.measured == 0;
-    r.applicable = s.free_vel.checks > 0;
+    r.applicable = s.free_vel.checks + s.free_sleep.checks > 0;
     if (!r.applicable) {
-      r.detail = s.state_frames ? "no dynamic body without contacts in a step with states" : "no states";
+      r.detail = s.state_frames ? "no dynamic body without contacts in a step with states"
+                                : "no states (a trace: add /states/position and /states/velocity)";
+    } else if (s.free_vel.checks == 0) {
+      r.detail = fmt::format("no body-step in free flight; {} asleep body-steps (/states/sleeping)",
+                             s.free_sleep.checks);
     } else {
       r.detail = fmt::format(
           "{} body-steps (integrator {}): worst velocity {:.3g} m/s, position {:.3g} m{}{}", s.free_vel.checks,
@@ -393,11 +418,18 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                           : std::string("; rotation n/a (translation-only records)"),
           s.free_locked ? fmt::format("; {} body-steps with locked axes (those components n/a)", s.free_locked)
                         : std::string());
+    }
+    if (r.applicable) {
+      if (s.free_sleep.checks + s.fell_asleep)
+        r.detail += fmt::format("; {} body-steps asleep through the step judged not to move (worst {:.3g} of one "
+                                "rounding), {} falling asleep not judged (/states/sleeping)",
+                                s.free_sleep.checks, s.free_sleep.worst_or(0.0), s.fell_asleep);
       fill_causes(r, {{&s.free_vel, "velocity", "body-steps", "m/s"},
                       {&s.free_pos, "position", "body-steps", "m"},
                       {&s.free_w, "angular-velocity", "body-steps", "of bound"},
-                      {&s.free_q, "orientation", "body-steps", "deg"}});
-      r.judged = s.free_vel.checks;
+                      {&s.free_q, "orientation", "body-steps", "deg"},
+                      {&s.free_sleep, "sleeping", "body-steps", "of rounding"}});
+      r.judged = s.free_vel.checks + s.free_sleep.checks;
     }
     out.push_back(r);
   }

@@ -15,7 +15,6 @@
 
 #include <fmt/format.h>
 
-#include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
 #include "octocd/shards.hpp"
@@ -206,6 +205,7 @@ class TraceIn {
     det_dt_ = bodies.dt;
     det_gravity_ = bodies.gravity;
     if (with_scene && info.has_scene) scene_defaults();
+    read_declarations(bodies.physics);
     if (info.version == 2)
       read_v2();
     else
@@ -276,7 +276,7 @@ class TraceIn {
                                                 "/bodies/inertia",     "/contacts/point",
                                                 "/bodies/friction",    "/bodies/restitution",
                                                 "/contacts/jt3",       "/bodies/collision_shape",
-                                                "/bodies/locked_dofs"};
+                                                "/bodies/locked_dofs", "/states/sleeping"};
 
   void reject_v2_datasets() const {
     for (const char* name : kV2Datasets)
@@ -320,16 +320,7 @@ class TraceIn {
     p.combine = combine_attr("friction_combine", combines);
     p.restitution_combine = combine_attr("restitution_combine", combines);
     if (has_attr("contact_margin")) p.contact_margin = number_attr("contact_margin", 0.0);
-    if (has_attr("broadphase_exact")) {
-      const double exact = number_attr("broadphase_exact", 0.0);
-      if (exact != 0.0 && exact != 1.0)
-        bad("/ (root attribute broadphase_exact)", fmt::format("{}", exact),
-            "0 (default: any broadphase, extras allowed) or 1 (exactly the overlapping world AABBs)");
-      p.broadphase_exact = exact == 1.0;
-    }
-    p.contact_geometry = choice_attr("contact_geometry", {"shape", "aabb"}, "shape") == "aabb" ? ContactGeometry::Aabb
-                                                                                               : ContactGeometry::Shape;
-    read_declarations(p);
+    read_locked_dofs(p);
 
     // Per-body tables.
     Dataset inertia = open("/bodies/inertia", H5T_FLOAT, 3, false);
@@ -376,6 +367,7 @@ class TraceIn {
       info.has_points = true;
     }
     c_jt3_ = open("/contacts/jt3", H5T_FLOAT, 2, false);
+    info.has_jt3 = c_jt3_.present();
     if (c_jt3_.present()) {
       if (!info.has_contacts) bad(c_jt3_.name, "without /contacts/pair", "tangential impulse vectors with /contacts");
       expect(c_jt3_, {c_pair_.dims[0], 3},
@@ -416,9 +408,60 @@ class TraceIn {
     }
   }
 
-  /// The declarations of design.md section 13b.12 (docs/trace-format.md, "Declarations"): root
-  /// attributes `contact_model`, `gyroscopic`, `integrator` and /bodies/locked_dofs.
+  /// The declarations of design.md section 13b.12 (docs/trace-format.md, "Declarations"),
+  /// root attributes of either version: `contact_model`, `gyroscopic`, `integrator`,
+  /// `contact_geometry`, `broadphase_exact`, `contact_margin_rule`, `jt_direction`,
+  /// `velocity_clamp`, `impulses_complete`, `response_scheme`, `deactivation` (with
+  /// /states/sleeping). A version 1 trace of octocd's TraceWriter that declares none of
+  /// them (written before they existed: /frames and the root attribute `parameters`) is
+  /// read as declaring octocd's conventions (ExternalTraceInfo::octocd_conventions).
   void read_declarations(PhysicsBodies& p) {
+    if (has_attr("broadphase_exact")) {
+      const double exact = number_attr("broadphase_exact", 0.0);
+      if (exact != 0.0 && exact != 1.0)
+        bad("/ (root attribute broadphase_exact)", fmt::format("{}", exact),
+            "0 (default: any broadphase, extras allowed) or 1 (exactly the overlapping world AABBs)");
+      p.broadphase_exact = exact == 1.0;
+    }
+    p.contact_geometry = choice_attr("contact_geometry", {"shape", "aabb"}, "shape") == "aabb" ? ContactGeometry::Aabb
+                                                                                               : ContactGeometry::Shape;
+    p.theta_margin = choice_attr("contact_margin_rule", {"fixed", "theta"}, "fixed") == "theta";
+    if (p.theta_margin && !info.has_scene)
+      bad("/ (root attribute contact_margin_rule)", "\"theta\" without the root attribute scene",
+          "\"theta\" with a scene (each pair's theta comes from its shapes, design.md section 5.3), or \"fixed\"");
+    p.jt_along_sliding =
+        choice_attr("jt_direction", {"against-sliding", "along-sliding"}, "against-sliding") == "along-sliding";
+    if (has_attr("velocity_clamp")) {
+      const double c = number_attr("velocity_clamp", 0.0);
+      if (!(c >= 0.0 && c <= trace_limits::kMaxSpeed))
+        bad("/ (root attribute velocity_clamp)", fmt::format("{}", c),
+            fmt::format("a speed per component in [0, {:g}] m/s (0: no clamp)", trace_limits::kMaxSpeed));
+      p.velocity_clamp = c;
+    }
+    if (has_attr("impulses_complete")) {
+      const double c = number_attr("impulses_complete", 1.0);
+      if (c != 0.0 && c != 1.0)
+        bad("/ (root attribute impulses_complete)", fmt::format("{}", c),
+            "1 (default: the contact rows carry every impulse of the step) or 0 (they do not: momentum-balance n/a)");
+      p.impulses_complete = c == 1.0;
+    }
+    if (has_attr("friction_directions")) {
+      const double d = number_attr("friction_directions", 0.0);
+      if (d != 1.0 && d != 2.0)
+        bad("/ (root attribute friction_directions)", fmt::format("{}", d),
+            "1 (each row's friction along its sliding: the scalar jt is all of it) or 2 (two friction directions: "
+            "write /contacts/jt3)");
+      p.friction_directions = static_cast<int>(d);
+    }
+    p.jacobi_response = choice_attr("response_scheme", {"sequential", "jacobi"}, "sequential") == "jacobi";
+    const std::string deactivation = choice_attr("deactivation", {"undeclared", "off", "on"}, "undeclared");
+    p.deactivation = deactivation == "off"  ? PhysicsBodies::Deactivation::Off
+                     : deactivation == "on" ? PhysicsBodies::Deactivation::Flagged
+                                            : PhysicsBodies::Deactivation::Undeclared;
+    const bool declares = has_attr("contact_geometry") || has_attr("jt_direction") || has_attr("contact_margin_rule") ||
+                          has_attr("friction_directions") ||
+                          has_attr("response_scheme") || has_attr("deactivation");
+    info.octocd_conventions = info.version == 1 && !declares && has_attr("parameters") && exists("/frames");
     p.contact_model = choice_attr("contact_model", {"rigid", "soft"}, "rigid") == "soft"
                           ? PhysicsBodies::ContactModel::Soft
                           : PhysicsBodies::ContactModel::Rigid;
@@ -446,6 +489,25 @@ class TraceIn {
       if (text != "true" && text != "false")
         bad("/ (root attribute gyroscopic)", fmt::format("'{}' unknown", text), allowed);
       p.gyroscopic = text == "true" ? PhysicsBodies::Gyroscopic::Integrated : PhysicsBodies::Gyroscopic::Absent;
+    }
+  }
+
+  /// /bodies/locked_dofs (version 2) and /states/sleeping (version 2, with /states).
+  void read_locked_dofs(PhysicsBodies& p) {
+    sleeping_ = open("/states/sleeping", H5T_INTEGER, 2, false);
+    if (sleeping_.present()) {
+      if (!info.has_states) bad(sleeping_.name, "without /states/position", "sleeping flags with /states");
+      expect(sleeping_, {position_.dims[0], n_},
+             fmt::format("{} x {}: one flag per state row and body, as /states/position", position_.dims[0], n_));
+      if (p.deactivation == PhysicsBodies::Deactivation::Off)
+        bad(sleeping_.name, "given with the root attribute deactivation = \"off\"",
+            "deactivation \"off\" (no body ever sleeps) without /states/sleeping, or the flags with deactivation "
+            "\"on\" or undeclared");
+      p.deactivation = PhysicsBodies::Deactivation::Flagged;
+      info.has_sleeping = true;
+    } else if (p.deactivation == PhysicsBodies::Deactivation::Flagged) {
+      bad("/states/sleeping", "missing (root attribute deactivation = \"on\")",
+          "the flags of the bodies the engine deactivated, S x n (0 awake, 1 asleep), with deactivation \"on\"");
     }
     Dataset locked = open("/bodies/locked_dofs", H5T_INTEGER, 1, false);
     if (locked.present()) {
@@ -475,6 +537,9 @@ class TraceIn {
       rec.w_pre = vectors(read<float>(angular_, pre, 1));
       rec.w_post = vectors(read<float>(angular_, post, 1));
     }
+    if (info.has_sleeping) {
+      read_sleeping(rec, f);
+    }
     if (info.has_states) {
       // Where collision detection ran; never inferred from /aabbs.
       rec.x_det = rec.x_pre;
@@ -501,6 +566,22 @@ class TraceIn {
         names.contact_jt3 = "/contacts/jt3";
       }
     }
+  }
+
+  /// Rows f - 1 and f of /states/sleeping: 0 awake, 1 asleep (any other value exits 2).
+  void read_sleeping(FrameRecord& rec, std::int64_t f) const {
+    const hsize_t r = static_cast<hsize_t>(f);
+    const std::vector<std::int64_t> flags = read<std::int64_t>(sleeping_, r - 1, 2);
+    rec.asleep_pre.resize(n_);
+    rec.asleep_post.resize(n_);
+    for (hsize_t i = 0; i < n_; ++i)
+      for (int k = 0; k < 2; ++k) {
+        const std::int64_t v = flags[static_cast<std::size_t>(k) * n_ + i];
+        if (v != 0 && v != 1)
+          bad(sleeping_.name, fmt::format("frame {}: body {}: {}", f - 1 + k, i, v),
+              "0 (awake) or 1 (the engine deactivated the body: asleep in that state)");
+        (k == 0 ? rec.asleep_pre : rec.asleep_post)[i] = static_cast<std::uint8_t>(v);
+      }
   }
 
   static std::vector<Quat> quats(const std::vector<float>& wxyz) {
@@ -741,7 +822,7 @@ class TraceIn {
   std::int64_t frames_ = 0;
   Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_, c_jt3_;
   // Version 2.
-  Dataset orientation_, angular_, c_point_;
+  Dataset orientation_, angular_, c_point_, sleeping_;
   bool integrated_ = false;  ///< root attribute detection = "integrated"
   float det_dt_ = 0.001f;    ///< dt and gravity of the "integrated" detection pose
   Vec3 det_gravity_{};
@@ -794,7 +875,7 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   TraceIn in(path);
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;
-  options.octocd_engine = writes_octocd_contacts(in.info.engine);  // the registry's one mapping of a trace's engine
+  options.octocd_engine = in.info.octocd_conventions;  // declared by the trace's layout, never by its engine name
   // With a scene, the bodies come from it and the trace's tables must match it.
   // The bodies' declarations are checked against the scene's shapes where the validators
   // are built: an error about them names the file and its dataset.
@@ -861,6 +942,8 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
     stopped = true;  // the verdict of the frames judged so far
   }
   ExternalValidator& validator = *made;
+  std::vector<ValidationResult> results = validator.results();
+  apply_trace_plan(results, plan_trace_rows(checked, in.bodies));
   if (info) {
     *info = checked;
     info->frames = frames;
@@ -868,7 +951,7 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
     info->stopped_in = judging;
     info->stopped = stopped;
   }
-  return validator.results();
+  return results;
 }
 
 }  // namespace octocd

@@ -187,6 +187,11 @@ struct FrameRecord {
   /// its friction directions summed as a vector). Empty when the engine gives none: the
   /// physics tier then judges the scalar ContactRecord::jt.
   std::vector<Vec3> jt3;
+  /// Bodies the engine had deactivated (put to sleep) in the state before / after the
+  /// step: one flag per body, 1 = asleep (external traces v2: `/states/sleeping`). Empty:
+  /// every body awake. A body asleep in both is judged not to move; one that fell asleep
+  /// in the step (its velocity zeroed by the engine) is not judged on that step.
+  std::vector<std::uint8_t> asleep_pre, asleep_post;
 };
 
 /// What a rotating engine states about its bodies and contacts beyond the Model (design.md section 13):
@@ -242,6 +247,9 @@ struct RotationTraits {
   /// Root attribute `gyroscopic`: "true" when the engine integrates the gyroscopic term
   /// dt w x I_w w (Bullet's implicit step), "false" when it does not.
   std::string gyroscopic;
+  /// Root attribute `deactivation`: "off" when the engine never deactivates (puts to
+  /// sleep) a body, so every body is judged awake; "" = undeclared.
+  std::string deactivation;
 };
 
 /// One simulation engine: `cpu` (World), `cuda` (CudaWorld), `bullet` (BulletWorld).

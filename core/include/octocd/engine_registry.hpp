@@ -43,9 +43,9 @@ struct EngineInfo {
   /// records (bullet: hull mode, its default, or rotation; box mode records nothing).
   bool records_every_step = false;
   /// Traces it writes follow octocd's contact conventions (contacts on the world AABBs,
-  /// the pair's theta as contact margin, an exact AABB broadphase: octocd_physics_bodies).
-  /// Trace readers map a trace's root attribute `engine` to this through
-  /// writes_octocd_contacts(): traces of octocd's own engines declare nothing else.
+  /// the pair's theta as contact margin, an exact AABB broadphase: octocd_physics_bodies),
+  /// and say so: trace_metadata writes octocd_trace_declarations (trace.hpp) as root
+  /// attributes. Readers read those declarations, never the engine's name.
   bool octocd_contacts = false;
   /// What it can collide a body as, one per setting it has (the speed-accuracy sweep's
   /// `geometry`): {"mesh"} for octocd's narrow phase on the meshes; {"hull", "box"} for an
@@ -73,10 +73,10 @@ const EngineInfo* find_engine_info(const std::string& name);
 /// cuda, bullet" for any other name.
 const EngineInfo& engine_info(const std::string& name, const std::string& where);
 
-/// Whether a trace whose root attribute `engine` is `engine` follows octocd's contact
-/// conventions (EngineInfo::octocd_contacts): true for traces of `cpu` and `cuda`, false for
-/// any other engine, known or not. The one place a trace's engine name decides how it is
-/// judged.
+/// Whether the engine `engine` follows octocd's contact conventions
+/// (EngineInfo::octocd_contacts): true for `cpu` and `cuda`, false for any other engine,
+/// known or not. Its one caller, trace_metadata, then writes those conventions into the
+/// trace as declarations (docs/trace-format.md, "Declarations"); no reader asks it.
 bool writes_octocd_contacts(const std::string& engine);
 
 }  // namespace octocd

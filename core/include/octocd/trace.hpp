@@ -15,6 +15,34 @@
 
 namespace octocd {
 
+/// What an engine declares of its contacts in a trace's root attributes (docs/trace-format.md,
+/// "Declarations"; docs/validate-your-engine.md lists each): the facts the physics tier's
+/// rules read instead of an engine's name. Empty strings and negative numbers are not
+/// written (a reader then takes the documented default). octocd's cpu and cuda engines
+/// declare all of them (octocd_trace_declarations); a rotating engine states its own in
+/// RotationTraits.
+struct TraceDeclarations {
+  std::string contact_geometry;     ///< `contact_geometry`: "aabb" (design.md section 6: contacts on the world AABBs) or "shape"
+  int broadphase_exact = -1;        ///< `broadphase_exact`: 1 = the candidate pairs are exactly the overlapping world AABBs
+  std::string contact_margin_rule;  ///< `contact_margin_rule`: "theta" (each pair's vertex-proximity theta, design.md section 5.3) or "fixed"
+  std::string jt_direction;         ///< `jt_direction`: "along-sliding" (design.md section 6's J_t along +v_t) or "against-sliding"
+  double velocity_clamp = -1.0;     ///< `velocity_clamp` (m/s per component, 0 = none): design.md section 6's Eq. 23 v_max
+  int impulses_complete = -1;       ///< `impulses_complete`: 0 = the contact rows hold only the first relaxation pass's impulses
+  std::string response_scheme;      ///< `response_scheme`: "jacobi" (design.md section 6: impulses summed from one pre-response state) or "sequential"
+  std::string integrator;           ///< `integrator`: "semi-implicit", "explicit" or "any"
+  std::string contact_model;        ///< `contact_model`: "rigid" or "soft"
+  std::string deactivation;         ///< `deactivation`: "off" (the engine never deactivates a body)
+  int friction_directions = -1;     ///< `friction_directions`: 1 = each row's friction along its sliding (the scalar jt is all of it)
+};
+
+/// The declarations of octocd's own cpu and cuda engines for `model`: contacts on the
+/// world AABBs, an exact AABB broadphase, each pair's theta as contact margin, J_t along
+/// the sliding, the scene's velocity clamp (response.max_velocity), impulses complete only
+/// with response.iterations = 1, the Jacobi response, semi-implicit Euler (design.md
+/// section 4.1), rigid contacts, no deactivation. The writer-side twin of the validators'
+/// octocd_physics_bodies.
+TraceDeclarations octocd_trace_declarations(const Model& model);
+
 /// Root attributes of a trace.
 struct TraceMetadata {
   std::string scene_name;
@@ -29,6 +57,9 @@ struct TraceMetadata {
   double dt = 0.0;            ///< s
   int state_every = 10;       ///< informational: the file's `state_every` attribute is
                               ///< TraceOptions::state_every, the value actually used
+  /// Declarations written as root attributes (trace_metadata: octocd_trace_declarations
+  /// for an engine whose EngineInfo::octocd_contacts is set, none otherwise).
+  TraceDeclarations declarations;
 };
 
 /// Per-body constant data for /bodies.
@@ -58,7 +89,7 @@ struct TraceOptions {
   /// /states/orientation and angular_velocity beside every state row; with `contacts`,
   /// /contacts/point (and /contacts/jt3 when RotationTraits::jt3), /pairs (offsets, pair)
   /// and /aabbs (min, max) from append_frame_v2.
-  /// Unset: version 1, byte for byte as before.
+  /// Unset: version 1 (with TraceMetadata::declarations as root attributes).
   std::optional<RotationTraits> v2;
   /// Version 2: gravity (m/s^2) for the root attribute `gravity`.
   Vec3 gravity{0.0f, -9.81f, 0.0f};

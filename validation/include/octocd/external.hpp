@@ -98,10 +98,11 @@ struct ExternalOptions {
   /// Also judge the applied state against the design.md section 6 re-derivation (design.md section 7.9,
   /// validation/model/applied_state.hpp): for an engine that implements octocd's response.
   bool spec6_response = false;
-  /// The frames are octocd's own cpu or cuda engine's (a trace whose root attribute
-  /// `engine` is "cpu" or "cuda"): the physics tier takes what those engines declare
-  /// (octocd_physics_bodies: contacts on the world AABBs, the pair's theta as contact
-  /// margin, an exact AABB broadphase) instead of ExternalBodies::physics.
+  /// The frames follow octocd's own conventions without declaring them (a version 1 trace
+  /// of octocd's TraceWriter written before the declarations: ExternalTraceInfo::
+  /// octocd_conventions): the physics tier takes octocd_physics_bodies (contacts on the
+  /// world AABBs, the pair's theta as contact margin, an exact AABB broadphase, J_t along
+  /// the sliding) instead of ExternalBodies::physics. Never set from an engine's name.
   bool octocd_engine = false;
   /// Bounds (validation.hpp); names in `overridden` are marked in format_results.
   Tolerances tol;
@@ -262,6 +263,12 @@ struct ExternalTraceInfo {
   bool has_rotation = false;        ///< v2: /states/orientation (and angular_velocity)
   bool has_points = false;          ///< v2: /contacts/point
   bool manifolds = false;           ///< v2: some pair has several contact rows in a frame
+  bool has_jt3 = false;             ///< v2: /contacts/jt3 (friction impulse vectors)
+  bool has_sleeping = false;        ///< v2: /states/sleeping (the bodies the engine deactivated)
+  /// A version 1 trace of octocd's TraceWriter (/frames and the root attribute
+  /// `parameters`) that declares none of the declarations (written before they existed):
+  /// read as declaring octocd's conventions (octocd_physics_bodies), as it was judged then.
+  bool octocd_conventions = false;
   /// Filled by validate_external_trace: the last frame whose checks completed (0: none;
   /// the run's or shard's last frame when not stopped), and with
   /// ExternalOptions::keep_on_stop the frame a stop cut short inside its checks (partly in
@@ -332,9 +339,34 @@ class ExternalTrace {
   std::unique_ptr<Impl> impl_;
 };
 
+/// What one row of `validate --trace-in` needs of a trace, from what the trace holds and
+/// declares (docs/validate-your-engine.md, "What a trace must carry"): the check-only
+/// listing, and the n/a a row gets when the trace lacks what it needs.
+struct TraceRowPlan {
+  Tier tier = Tier::Physics;
+  std::string name;     ///< as validation_row_names() (octocd/expect.hpp), in its order
+  bool judged = true;   ///< the trace carries what the row needs (it may still find nothing to judge)
+  /// Not judged: what to add (datasets or root attributes), or "nothing ..." with the
+  /// reason when no trace can give it (rows that step an engine).
+  std::string add;
+  /// Judged, but a part of the row needs more: what to add for it ("" when nothing).
+  std::string partial;
+};
+
+/// The plan of every row (validation_row_names()) for a trace holding `info` with the
+/// bodies and declarations `bodies` (ExternalTrace::bodies()). Reads nothing.
+std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const ExternalBodies& bodies);
+
+/// Rows of `results` that `plan` says the trace cannot judge become n/a, their detail
+/// naming what to add ("n/a: the trace lacks what this row needs; to judge it, add
+/// /contacts ..."): a trace is never failed for an omission. Rows nothing can be added to
+/// keep their reason, with the plan's appended.
+void apply_trace_plan(std::vector<ValidationResult>& results, const std::vector<TraceRowPlan>& plan);
+
 /// Checks the trace (check_external_trace), then judges it frame by frame with an
 /// ExternalValidator: the costly validators on every `every`-th frame (>= 1), at most
 /// `max_frames` frames (0 = all). options.engine and spec6_response come from the trace.
+/// Rows the trace cannot judge are n/a naming what to add (apply_trace_plan).
 /// `info`, when not null, receives what the trace holds.
 std::vector<ValidationResult> validate_external_trace(const std::string& path, ExternalOptions options,
                                                       int every = 1, std::int64_t max_frames = 0,

@@ -218,6 +218,27 @@ struct PhysicsBodies {
   /// not judge the angular momentum (rotation locked) or the momentum along a locked axis
   /// (translation locked) of a group with such a body.
   std::vector<std::uint8_t> locked_dofs;
+  /// `deactivation` (with /states/sleeping): whether the engine puts bodies to sleep.
+  enum class Deactivation {
+    /// Not declared: every body is judged awake (a body an engine froze fails free-flight).
+    Undeclared,
+    /// Declared "off": the engine never deactivates a body.
+    Off,
+    /// Declared "on", or /states/sleeping given: FrameRecord::asleep_pre / asleep_post
+    /// flag the bodies asleep. A body asleep before and after a step must not move (x, q,
+    /// v, w kept: free-flight's `sleeping` cause) and is not judged as free-flying or on
+    /// momentum balance; one that fell asleep in the step is not judged on it (its
+    /// velocity zeroed by the engine); a group with a sleeping body is not judged on
+    /// conservation; a pair whose dynamic bodies were all asleep before the step needs no
+    /// candidate pair or contact row (engines do not collide sleeping bodies). Counted.
+    Flagged,
+  };
+  Deactivation deactivation = Deactivation::Undeclared;
+  /// `friction_directions` (external traces v2 without /contacts/jt3): 1 = each row's
+  /// friction impulse lies along its sliding (-v_t), so the scalar jt is the whole of it;
+  /// 2 = two friction directions (jt is only its component along -v_t); 0 = undeclared.
+  /// Read by the row plan (plan_trace_rows): momentum-balance needs jt3 or 1.
+  int friction_directions = 0;
 
   // ---- What octocd's own records mean (set by octocd_physics_bodies).
   /// The rows' `jt` is design.md section 6's J_t along t = v_t / |v_t| (negative when friction opposes

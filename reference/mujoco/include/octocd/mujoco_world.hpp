@@ -103,7 +103,7 @@ class MujocoWorld : public Engine {
   /// geoms; e is one per scene), contact_margin = MujocoSettings::margin, detection
   /// "pre-step", contact_geometry "shape", per body collision_shape "convex_hull" (boxes
   /// and meshes alike: MuJoCo 2.2 collides every mesh, static ones too, as its hull),
-  /// jt3 true, contact_model "soft", integrator "semi-implicit", gyroscopic "true"
+  /// jt3 true, contact_model "soft", integrator "semi-implicit", gyroscopic "true", deactivation "off"
   /// (MuJoCo's bias force qfrc_bias carries w x I w on every free body).
   const RotationTraits* rotation_traits() const override;
   /// True.

@@ -119,6 +119,7 @@ class OdeWorld : public Engine {
   ///   for a hull are tighter than the posed local box); contact_geometry "shape";
   /// - body_collision_shape "box" (box shapes), "convex_hull" (dynamic meshes), "mesh"
   ///   (static meshes as triangle meshes); rotates, jt3;
+  /// - deactivation "off" (auto-disable off for the world and every body);
   /// - contact_model "rigid" (contact rows are constraints: CFM 1e-10 by default),
   ///   integrator "semi-implicit", gyroscopic "true" / "false" per OdeSettings::gyroscopic.
   const RotationTraits* rotation_traits() const override;

@@ -1,0 +1,127 @@
+// What each row of `validate --trace-in` needs of a trace (plan_trace_rows), and the n/a
+// that a row needing a quantity the trace lacks gets instead of a verdict
+// (apply_trace_plan): docs/validate-your-engine.md, "What a trace must carry".
+#include <fmt/format.h>
+
+#include "octocd/error.hpp"
+#include "octocd/expect.hpp"
+#include "octocd/external.hpp"
+#include "octocd/scene.hpp"
+
+namespace octocd {
+
+namespace {
+
+const char* const kStates = "/states/position and /states/velocity";
+const char* const kContacts = "/contacts (offsets, pair, normal, depth, jn, jt)";
+const char* const kRotation = "/states/orientation and /states/angular_velocity (version 2)";
+
+/// The scene's response.iterations, for a trace read as octocd's conventions (1 without a
+/// readable scene: the check-only listing does not judge the scene).
+int scene_iterations(const ExternalBodies& bodies) {
+  if (bodies.scene_json.empty()) return 1;
+  try {
+    return parse_scene(bodies.scene_json, "scene").response.iterations;
+  } catch (const InputError&) {
+    return 1;
+  }
+}
+
+}  // namespace
+
+std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const ExternalBodies& bodies) {
+  const PhysicsBodies& p = bodies.physics;
+  const bool impulses_complete = info.octocd_conventions ? scene_iterations(bodies) <= 1 : p.impulses_complete;
+  std::vector<TraceRowPlan> out;
+  for (const std::string& name : validation_row_names()) {
+    TraceRowPlan r;
+    r.name = name;
+    r.tier = out.size() < 8 ? Tier::Physics : Tier::Model;
+    auto needs = [&](bool have, const std::string& what) {
+      if (!have && r.judged) {
+        r.judged = false;
+        r.add = what;
+      }
+    };
+    auto part = [&](bool have, const std::string& what) {
+      if (!have && r.judged) r.partial += (r.partial.empty() ? "" : "; ") + what;
+    };
+    if (name == "broadphase-completeness") {
+      needs(info.has_pairs, "/pairs/offsets and /pairs/pair (the engine's candidate pairs of each step)");
+    } else if (name == "contact-completeness" || name == "contact-geometry") {
+      needs(info.has_contacts, kContacts);
+      if (name == "contact-geometry")
+        part(info.has_points, "/contacts/point (version 2) for the check that each row's point lies on both shapes");
+    } else if (name == "penetration") {
+      // Poses: a trace holds states or AABBs (checked).
+    } else if (name == "friction") {
+      needs(info.has_contacts, kContacts);
+      part(info.has_jt3 || info.version == 1,
+           "/contacts/jt3 (version 2) for the vector rule [rule: jt3]; judged on the scalar jt [rule: scalar]");
+    } else if (name == "conservation") {
+      needs(info.has_states, kStates);
+      needs(info.has_contacts, fmt::format("{} (isolated groups are bodies in contact)", kContacts));
+      part(info.has_rotation, fmt::format("{} for the angular momentum", kRotation));
+    } else if (name == "momentum-balance") {
+      needs(info.has_states, kStates);
+      needs(info.has_contacts, kContacts);
+      needs(impulses_complete,
+            "nothing: the trace declares impulses_complete = 0 (its rows hold part of the step's impulses)");
+      part(info.has_rotation && info.has_points,
+           fmt::format("{} and /contacts/point for the angular balance", kRotation));
+      // Version 1's jt is along the sliding by its contract; version 2's scalar jt is the
+      // component along -v_t, all of the friction only for an engine with one direction.
+      needs(info.has_jt3 || info.version == 1 || info.octocd_conventions || p.friction_directions == 1,
+            "/contacts/jt3 (each row's friction impulse vector), or the root attribute friction_directions = 1 "
+            "where each row's friction lies along its sliding: the scalar jt of an engine with two friction "
+            "directions leaves the second out");
+      part(info.has_jt3 || info.version == 1,
+           "/contacts/jt3 (version 2): the scalar jt leaves each slow row's friction direction open (a disc)");
+    } else if (name == "free-flight") {
+      needs(info.has_states, kStates);
+      needs(info.has_contacts, fmt::format("{}: a body is free in a step without a row (a run without contacts "
+                                           "writes /contacts/offsets of zeros and empty rows)",
+                                           kContacts));
+      part(info.has_rotation, fmt::format("{} for the spin and the orientation", kRotation));
+    } else if (name == "candidate-sets" || name == "midphase-completeness") {
+      needs(false, "nothing a trace can add: the row judges octocd's own broadphases and midphase (design.md "
+                   "section 5); another engine's pairs are judged by broadphase-completeness");
+    } else if (name == "analytic" || name == "bullet-dynamics") {
+      needs(false, "nothing a trace can add: the row steps an engine (octocd validate SCENE.json)");
+    } else {  // the model tier's response rows (design.md section 6)
+      needs(info.spec6_response,
+            "the root attribute response_model = \"spec6\" (only for an engine that implements design.md section "
+            "6's response)");
+      needs(info.has_contacts || name == "applied-state", kContacts);
+      needs(info.has_states || name != "applied-state", kStates);
+    }
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
+void apply_trace_plan(std::vector<ValidationResult>& results, const std::vector<TraceRowPlan>& plan) {
+  for (ValidationResult& r : results)
+    for (const TraceRowPlan& p : plan) {
+      if (p.name != r.name || p.judged) continue;
+      if (p.add.rfind("nothing", 0) == 0) break;  // nothing to add: the row's own reason stands
+      if (r.applicable) {
+        // Never a verdict on an omission: whatever the row computed without the quantity.
+        r.applicable = false;
+        r.pass = true;
+        r.measured = 0;
+        r.judged = 0;
+        r.causes.clear();
+        r.detail = "n/a: the trace lacks what this row needs; to judge it, add " + p.add;
+        break;
+      }
+      // Already n/a: its detail names what to add (the dataset, or the attribute's name).
+      const std::string attribute = "the root attribute ";
+      std::string key = p.add.rfind(attribute, 0) == 0 ? p.add.substr(attribute.size()) : p.add;
+      key = key.substr(0, key.find(' '));
+      if (r.detail.find(key) == std::string::npos) r.detail += "; to judge it, add " + p.add;
+      break;
+    }
+}
+
+}  // namespace octocd
