@@ -683,10 +683,11 @@ class CheckedConvexAlgorithm : public btConvexConvexAlgorithm {
       ++counts_.checked;
       const btScalar tol = PosedPair::kTolerance + btScalar(1e-3) * std::abs(distance);
       const btScalar along = pair_.separation(normal);
-      const bool good = distance > 0 ? along > -tol  // apart: no overlap along the normal
-                                     : std::abs(along - distance) <= tol &&
-                                           std::abs(pair_.surface_distance(false, point)) <= tol &&
-                                           std::abs(pair_.surface_distance(true, point + distance * normal)) <= tol;
+      // Apart: no overlap along the normal; penetrating: the separation along it is the
+      // distance. Either way the witness points lie on their shapes' surfaces.
+      const bool good = (distance > 0 ? along > -tol : std::abs(along - distance) <= tol) &&
+                        std::abs(pair_.surface_distance(false, point)) <= tol &&
+                        std::abs(pair_.surface_distance(true, point + distance * normal)) <= tol;
       if (good) {
         add_unchecked(normal, point, distance);
         return;
@@ -694,6 +695,15 @@ class CheckedConvexAlgorithm : public btConvexConvexAlgorithm {
       btVector3 n, p;
       btScalar d = 0;
       pair_.exact(n, p, d);
+      // Apart, the separating axis's separation is a lower bound of the distance, and its
+      // witness points are the closest points only where they lie on both surfaces (a
+      // vertex or edge over a face, edge against edge); otherwise no contact is added (an
+      // apart contact is optional: the manifold keeps its earlier points).
+      if (d > 0 && !(std::abs(pair_.surface_distance(false, p)) <= tol &&
+                     std::abs(pair_.surface_distance(true, p + d * n)) <= tol)) {
+        ++counts_.dropped;
+        return;
+      }
       ++counts_.replaced;
       add_unchecked(n, p, d);
     }
@@ -1185,9 +1195,9 @@ std::string BulletWorld::notes() const {
         "exact boxes at the pre-step pose overlap. midphase = Bullet's narrow phase (box-box detector,\n"
         "GJK/EPA checked on the polytopes: {} box/hull contacts checked, {} replaced by the\n"
         "separating-axis contact, {} added where GJK found the shapes apart; {} manifold points with a\n"
-        "stale normal dropped); contacts = manifolds with points, penetration over manifold points;\n"
+        "stale normal dropped; {} apart contacts not added: off the surfaces); contacts = manifolds with points, penetration over manifold points;\n"
         "kinetic energy includes rotation.",
-        impl_->rotation ? "rotation mode" : "translation only (angular factor 0)", impl_->geometry, c.checked, c.replaced, c.added, c.pruned);
+        impl_->rotation ? "rotation mode" : "translation only (angular factor 0)", impl_->geometry, c.checked, c.replaced, c.added, c.pruned, c.dropped);
   }
   return "broadphase candidates are Bullet's pair cache (AABBs fattened by the 0.02 m contact\n"
          "threshold, the step's motion and the dbvt margin, kept until they separate; no static-static\n"

@@ -224,6 +224,7 @@ struct PhysicsValidators::Impl {
   std::uint64_t aabb_angle_rows = 0;  // Aabb geometry: rows compared with box-box on the AABBs (figure)
   double aabb_angle_worst = 0;
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
+  std::uint64_t sign_uncertain_rows = 0;  // of them, on hulls FCL calls apart along no separating axis
   // Contact geometry's references: pairs judged by the separating-axis test and by FCL;
   // where FCL's normal lies outside SAT's accepted axes (figure: FCL's box-box keeps a
   // face axis up to 5% deeper than the minimum).

@@ -199,6 +199,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                 "row of their pair, not judged on the normal (worst angle {:.3g} deg to FCL's "
                                 "direction)",
                                 s.speculative_rows, s.speculative_worst);
+      if (s.sign_uncertain_rows)
+        r.detail += fmt::format("; {} rows on convex hulls that FCL calls apart along an axis that does not "
+                                "separate them: sign not judged",
+                                s.sign_uncertain_rows);
       if (s.upper_bound_pairs)
         r.detail += fmt::format("; {} non-convex mesh pairs: depth judged one-sided against an upper bound",
                                 s.upper_bound_pairs);

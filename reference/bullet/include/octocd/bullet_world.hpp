@@ -142,6 +142,8 @@ struct BulletNarrowphaseCounts {
   std::int64_t replaced = 0;  ///< of them, replaced by the separating-axis contact
   std::int64_t added = 0;     ///< pairs GJK called apart that penetrate: contact added
   std::int64_t pruned = 0;    ///< manifold points dropped for a stale normal
+  std::int64_t dropped = 0;   ///< apart contacts that failed the check and whose separating-
+                              ///< axis replacement has witnesses off the surfaces: not added
 };
 
 class BulletWorld : public Engine {

@@ -1,0 +1,163 @@
+#!/usr/bin/python3
+"""Stop latency: seconds from SIGINT to the end of an octocd command, with busy loops beside.
+
+    /usr/bin/python3 bench/stop_latency.py [--build build] [--busy 2] [--repeat 5]
+        [--out stop-latency.csv]
+
+Each case starts one command on a dense scene (every pair of boxes overlaps, so a step or
+a frame's checks take about a second and the signal lands inside one), waits for an event
+(the first frame flushed into its trace, the first point in its result file, the judge
+opening the trace), sends SIGINT and measures the wall time until the process exits. The
+cases: `run` (trace flushed every frame), `validate SCENE` (a step and its checks on a
+worker), `validate --trace-in` (a trace of the dense scene judged), `bench` (a point of the
+dense scene). `--busy N` runs N busy loops (pure Python spins) beside them for the whole
+measurement, so the figures are those of a loaded machine; the table names the load
+average. It checks what each case must keep: exit 130, and for `validate` the STOPPED line
+with the verdict of the frames judged (`--junit` with its 'stopped' case).
+
+The tests assert the behaviour (tests/cli/test_cli_limits_and_signals.cpp) with bounds
+that hold on a loaded 2-core machine; this script records the times.
+"""
+import argparse
+import csv
+import json
+import multiprocessing
+import os
+import platform
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+
+def spin():
+    while True:
+        pass
+
+
+def dense_scene(folder, count, name="dense"):
+    path = os.path.join(folder, name + ".json")
+    with open(path, "w") as f:
+        json.dump({"name": name, "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]}, "gravity": [0, 0, 0],
+                   "frames": 100000000,
+                   "groups": [{"name": "b", "shape": {"box": [0.3, 0.3, 0.3]}, "count": count,
+                               "layout": {"type": "grid", "min": [-0.02, -0.02, -0.02],
+                                          "max": [0.02, 0.02, 0.02], "spacing": 0.001}}]}, f)
+    return path
+
+
+def wait_for(predicate, proc, limit=120.0):
+    """Polls `predicate` (a file's state, cheap) until true; False if proc ended or time ran out."""
+    end = time.monotonic() + limit
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        if proc.poll() is not None:
+            return False
+        time.sleep(0.005)
+    return False
+
+
+def trace_frames(path):
+    """Frames flushed into a trace being written (0 when it cannot be read yet)."""
+    try:
+        import h5py
+        with h5py.File(path, "r", swmr=True) as f:
+            return int(f.attrs.get("committed_frames", 0))
+    except Exception:
+        return 0
+
+
+def measure(cmd, ready, cwd):
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    if not wait_for(ready, proc):
+        proc.kill()
+        out, err = proc.communicate()
+        raise RuntimeError(f"{' '.join(cmd)}: no event to signal on\n{out}\n{err}")
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    return time.monotonic() - t0, proc.returncode, out, err
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--build", default="build")
+    p.add_argument("--busy", type=int, default=2, help="busy loops beside the command (0 .. 64)")
+    p.add_argument("--repeat", type=int, default=5, help="repetitions of each case (>= 1)")
+    p.add_argument("--out", default="stop-latency.csv", help="CSV: a row per case and repetition")
+    args = p.parse_args()
+    if not 0 <= args.busy <= 64 or args.repeat < 1:
+        sys.exit("stop_latency: --busy in 0 .. 64 and --repeat >= 1")
+    octocd = os.path.abspath(os.path.join(args.build, "octocd"))
+    work = tempfile.mkdtemp(prefix="octocd-stop-")
+    scene = dense_scene(work, 2000)
+    judged = dense_scene(work, 700, "dense700")
+    trace_in = os.path.join(work, "judged.h5")
+    subprocess.run([octocd, "run", judged, "--frames", "4", "--state-every", "1", "--contacts", "--quiet",
+                    "--trace", trace_in], check=True, stdout=subprocess.DEVNULL)
+    sweep = os.path.join(work, "sweep.json")
+    with open(sweep, "w") as f:
+        json.dump({"name": "stop", "kind": "steps", "scenes": ["dense.json"], "engines": ["cpu"], "warmup": 0,
+                   "frames": 1000, "repeat": 1}, f)
+
+    def case_run(k):
+        t = os.path.join(work, f"run-{k}.h5")
+        return ([octocd, "run", scene, "--trace", t, "--state-every", "1", "--quiet"],
+                lambda: trace_frames(t) >= 1, lambda out, err: True)
+
+    def case_validate(k):
+        t, j = os.path.join(work, f"v-{k}.h5"), os.path.join(work, f"v-{k}.xml")
+        return ([octocd, "validate", scene, "--frames", "5", "--every", "1000", "--against", "none", "--trace", t,
+                 "--junit", j], lambda: trace_frames(t) >= 1,
+                lambda out, err: "STOPPED: the table covers frames 1.." in out and "stopped" in open(j).read())
+
+    def case_trace_in(k):
+        j = os.path.join(work, f"ti-{k}.xml")
+        started = time.monotonic()
+        return ([octocd, "validate", "--trace-in", trace_in, "--against", "none", "--threads", "1", "--junit", j],
+                lambda: time.monotonic() - started > 1.5,
+                lambda out, err: "STOPPED:" in out and "stopped" in open(j).read())
+
+    def case_bench(k):
+        r = os.path.join(work, f"b-{k}.json")
+        started = time.monotonic()
+        return ([octocd, "bench", sweep, "-o", r, "--scene-dir", work, "--quiet"],
+                lambda: time.monotonic() - started > 3.0, lambda out, err: True)
+
+    cases = [("run", case_run), ("validate SCENE", case_validate), ("validate --trace-in", case_trace_in),
+             ("bench", case_bench)]
+    spinners = [multiprocessing.Process(target=spin, daemon=True) for _ in range(args.busy)]
+    for s in spinners:
+        s.start()
+    rows = []
+    try:
+        time.sleep(1.0)  # the spinners running before the first case
+        for name, make in cases:
+            for k in range(args.repeat):
+                cmd, ready, kept = make(k)
+                seconds, code, out, err = measure(cmd, ready, work)
+                ok = code == 128 + signal.SIGINT and kept(out, err)
+                rows.append({"case": name, "repetition": k, "seconds": round(seconds, 4), "exit": code,
+                             "kept": ok, "load1": round(os.getloadavg()[0], 2), "busy": args.busy})
+                print(f"{name:22s} #{k}: {seconds:.3f} s, exit {code}, kept {ok}", flush=True)
+    finally:
+        for s in spinners:
+            s.terminate()
+    with open(args.out, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"\n{platform.node()}, {os.cpu_count()} CPUs, {args.busy} busy loops beside; load average "
+          f"{os.getloadavg()[0]:.2f}; seconds from SIGINT to exit, median (min-max) of {args.repeat}:")
+    for name, _ in cases:
+        t = [r["seconds"] for r in rows if r["case"] == name]
+        kept = all(r["kept"] for r in rows if r["case"] == name)
+        print(f"| {name} | {statistics.median(t):.3f} ({min(t):.3f}-{max(t):.3f}) | {'kept' if kept else 'LOST'} |")
+    return 0 if all(r["kept"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
