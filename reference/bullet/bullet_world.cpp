@@ -352,6 +352,77 @@ void closest_on_segments(const btVector3& p0, const btVector3& p1, const btVecto
   cb = q0 + t * d2;
 }
 
+/// A convex set in a plane (2D): its hull's vertices counter-clockwise (1 point, 2 for a
+/// segment, >= 3 for a polygon).
+using Plane2 = std::vector<btVector3>;  // (x, y, 0)
+
+/// The convex hull (counter-clockwise, Andrew's monotone chain) of planar points; a point
+/// or a segment when they are (nearly) one.
+Plane2 hull2(std::vector<btVector3> pts) {
+  std::sort(pts.begin(), pts.end(), [](const btVector3& a, const btVector3& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  auto turn = [](const btVector3& o, const btVector3& a, const btVector3& b) {
+    return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
+  };
+  Plane2 h(2 * pts.size() + 1);
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    while (k >= 2 && turn(h[k - 2], h[k - 1], pts[i]) <= 0) --k;
+    h[k++] = pts[i];
+  }
+  for (std::size_t i = pts.size() - 1, t = k + 1; i-- > 0;) {
+    while (k >= t && turn(h[k - 2], h[k - 1], pts[i]) <= 0) --k;
+    h[k++] = pts[i];
+  }
+  h.resize(pts.size() <= 1 ? pts.size() : k - 1);
+  if (h.size() == 2 && (h[0] - h[1]).length2() == 0) h.resize(1);
+  return h;
+}
+
+/// `subject` (a point, a segment or a polygon) clipped to the convex polygon `clip`
+/// (counter-clockwise, >= 3 vertices): Sutherland-Hodgman over clip's edges.
+Plane2 clip2(Plane2 subject, const Plane2& clip) {
+  for (std::size_t e = 0; e < clip.size() && !subject.empty(); ++e) {
+    const btVector3 a = clip[e], b = clip[(e + 1) % clip.size()];
+    auto inside = [&](const btVector3& p) { return (b.x() - a.x()) * (p.y() - a.y()) - (b.y() - a.y()) * (p.x() - a.x()) >= 0; };
+    auto cut = [&](const btVector3& p, const btVector3& q) {
+      const btScalar dp = (b.x() - a.x()) * (p.y() - a.y()) - (b.y() - a.y()) * (p.x() - a.x());
+      const btScalar dq = (b.x() - a.x()) * (q.y() - a.y()) - (b.y() - a.y()) * (q.x() - a.x());
+      return p + (q - p) * (dp / (dp - dq));
+    };
+    Plane2 out;
+    const std::size_t n = subject.size();
+    const std::size_t edges = n == 1 ? 0 : n == 2 ? 1 : n;
+    if (n == 1) {
+      if (inside(subject[0])) out.push_back(subject[0]);
+    }
+    for (std::size_t i = 0; i < edges; ++i) {
+      const btVector3 p = subject[i], q = subject[(i + 1) % n];
+      const bool ip = inside(p), iq = inside(q);
+      if (ip) out.push_back(p);
+      if (ip != iq) out.push_back(cut(p, q));
+      if (n == 2 && iq) out.push_back(q);
+    }
+    subject = std::move(out);
+  }
+  return subject;
+}
+
+/// The point of the convex set `h` (hull2's form) nearest to p (both planar).
+btVector3 nearest2(const Plane2& h, const btVector3& p) {
+  if (h.size() == 1) return h[0];
+  if (h.size() >= 3 && clip2({p}, h).size() == 1) return p;
+  btVector3 best = h[0];
+  const std::size_t edges = h.size() == 2 ? 1 : h.size();
+  for (std::size_t i = 0; i < edges; ++i) {
+    btVector3 ca, cb;
+    closest_on_segments(p, p, h[i], h[(i + 1) % h.size()], ca, cb);
+    if ((cb - p).length2() < (best - p).length2()) best = cb;
+  }
+  return best;
+}
+
 /// Two posed polytopes: separations along axes and the exact separating-axis contact.
 class PosedPair {
  public:
@@ -518,9 +589,36 @@ class PosedPair {
       point_on_b = ca - best * best_u;
       return;
     }
+    // The contact's middle: where the two extreme features overlap seen along u (the
+    // centroid of their overlap, clipped in the plane normal to u), or, where they do not
+    // overlap, the point of B's feature nearest to A's; on B's support plane. A feature
+    // seen beside the other (a vertex of A past B's face) would otherwise give a point off
+    // B's surface.
+    btVector3 e1, e2;
+    btPlaneSpace1(best_u, e1, e2);
+    auto flat = [&](const std::vector<btVector3>& set) {
+      std::vector<btVector3> q;
+      for (const btVector3& x : set) q.emplace_back(e1.dot(x), e2.dot(x), btScalar(0));
+      return hull2(std::move(q));
+    };
+    const Plane2 fa = flat(set_a), fb = flat(set_b);
+    Plane2 overlap = fb.size() >= 3 ? clip2(fa, fb) : fa.size() >= 3 ? clip2(fb, fa) : Plane2{};
+    btVector3 c(0, 0, 0);
+    if (!overlap.empty()) {
+      for (const btVector3& x : overlap) c += x;
+      c /= btScalar(overlap.size());
+    } else {
+      btVector3 ma(0, 0, 0);
+      for (const btVector3& x : fa) ma += x;
+      c = nearest2(fb, ma / btScalar(fa.size()));
+    }
+    btScalar top_b = -std::numeric_limits<btScalar>::infinity();
+    for (const btVector3& x : set_b) top_b = std::max(top_b, best_u.dot(x));
     normal_on_b = best_u;
     distance = best;
-    point_on_b = extent_a <= extent_b ? mean_a - best * best_u : mean_b;
+    point_on_b = c.x() * e1 + c.y() * e2 + top_b * best_u;
+    (void)extent_a;
+    (void)extent_b;
   }
 
  private:
@@ -684,10 +782,12 @@ class CheckedConvexAlgorithm : public btConvexConvexAlgorithm {
       const btScalar tol = PosedPair::kTolerance + btScalar(1e-3) * std::abs(distance);
       const btScalar along = pair_.separation(normal);
       // Apart: no overlap along the normal; penetrating: the separation along it is the
-      // distance. Either way the witness points lie on their shapes' surfaces.
+      // distance. Either way the witness points lie on their shapes' surfaces (apart:
+      // within the distance they report, GJK's witnesses being that far from exact).
+      const btScalar on = tol + std::max(distance, btScalar(0));
       const bool good = (distance > 0 ? along > -tol : std::abs(along - distance) <= tol) &&
-                        std::abs(pair_.surface_distance(false, point)) <= tol &&
-                        std::abs(pair_.surface_distance(true, point + distance * normal)) <= tol;
+                        std::abs(pair_.surface_distance(false, point)) <= on &&
+                        std::abs(pair_.surface_distance(true, point + distance * normal)) <= on;
       if (good) {
         add_unchecked(normal, point, distance);
         return;
@@ -699,8 +799,8 @@ class CheckedConvexAlgorithm : public btConvexConvexAlgorithm {
       // witness points are the closest points only where they lie on both surfaces (a
       // vertex or edge over a face, edge against edge); otherwise no contact is added (an
       // apart contact is optional: the manifold keeps its earlier points).
-      if (d > 0 && !(std::abs(pair_.surface_distance(false, p)) <= tol &&
-                     std::abs(pair_.surface_distance(true, p + d * n)) <= tol)) {
+      if (d > 0 && !(std::abs(pair_.surface_distance(false, p)) <= tol + d &&
+                     std::abs(pair_.surface_distance(true, p + d * n)) <= tol + d)) {
         ++counts_.dropped;
         return;
       }
