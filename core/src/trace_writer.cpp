@@ -684,6 +684,7 @@ void TraceWriter::create_v2_layout() {
   if (!t.integrator.empty()) attr_string(root, "integrator", t.integrator, path);
   if (!t.gyroscopic.empty()) attr_string(root, "gyroscopic", t.gyroscopic, path);
   if (!t.deactivation.empty()) attr_string(root, "deactivation", t.deactivation, path);
+  if (!t.impulse_points.empty()) attr_string(root, "impulse_points", t.impulse_points, path);
   {
     const hsize_t three = 3;
     Handle space(check(H5Screate_simple(1, &three, nullptr), path, "H5Screate_simple"));

@@ -1078,6 +1078,10 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
     // Every dynamic body has setActivationState(DISABLE_DEACTIVATION): Bullet never puts
     // one to sleep (its velocities zeroed, its pose frozen), so every body is judged awake.
     m.traits.deactivation = "off";
+    // Bullet's solver applies a manifold point's impulse at getPositionWorldOnA on body0 and
+    // getPositionWorldOnB on body1 (btSequentialImpulseConstraintSolver::
+    // setupContactConstraint), which refreshContactPoints lets drift apart across the normal.
+    m.traits.impulse_points = "witness-pair";
     m.traits.rotates = m.rotation;  // translation-only: no orientations, angular velocities, inertia
     // A dynamic mesh is its hull, a box itself, a static mesh (hull mode) its triangles:
     // per body in /bodies/collision_shape (body_collision_shape, set above).

@@ -45,11 +45,16 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   const std::vector<std::uint8_t>& statics = graph.statics;
   // An engine may apply a row's impulse at two witness points (Bullet: one on each
   // body), apart along the normal by the depth or distance: the friction part then turns
-  // the pair by up to that lever times |jt|. Summed per group, it joins the bound.
+  // the pair by up to that lever times |jt|. Where the engine declares `impulse_points`
+  // "witness-pair" the two points may also lie apart across the normal (a persistent
+  // manifold's drift), and the lever applies to the whole impulse (jn and jt). Summed per
+  // group, it joins the bound.
   std::map<std::uint32_t, double> witness_torque;
   for (const ContactRecord& c : rec.contacts)
-    if (dynamic(c.pair.a) && dynamic(c.pair.b))
-      witness_torque[find(c.pair.a)] += (double(c.depth) + pair_margin(c.pair)) * std::fabs(double(c.jt));
+    if (dynamic(c.pair.a) && dynamic(c.pair.b)) {
+      const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), double(c.jt)) : std::fabs(double(c.jt));
+      witness_torque[find(c.pair.a)] += (double(c.depth) + pair_margin(c.pair)) * j;
+    }
   const std::map<std::uint32_t, std::vector<std::uint32_t>>& groups_of = graph.groups;
   for (auto& group : groups_of) {
     poll();

@@ -454,6 +454,7 @@ class TraceIn {
       p.friction_directions = static_cast<int>(d);
     }
     p.jacobi_response = choice_attr("response_scheme", {"sequential", "jacobi"}, "sequential") == "jacobi";
+    p.witness_pair_impulses = choice_attr("impulse_points", {"one", "witness-pair"}, "one") == "witness-pair";
     const std::string deactivation = choice_attr("deactivation", {"undeclared", "off", "on"}, "undeclared");
     p.deactivation = deactivation == "off"  ? PhysicsBodies::Deactivation::Off
                      : deactivation == "on" ? PhysicsBodies::Deactivation::Flagged
@@ -895,6 +896,12 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   bool stopped = false;
   try {
     made = std::make_unique<ExternalValidator>(in.bodies, options);
+    if (options.on_judged) {  // judging begins: the verdict of no whole frame
+      ExternalTraceInfo now = checked;
+      now.frames = frames;
+      now.judged_to = 0;
+      options.on_judged(made->results(), now);
+    }
     // A shard judges its block of the run's frames; checked frames keep the run's numbering.
     // Frame f + 1 is read (HDF5, on a second thread: the only one that calls HDF5 meanwhile)
     // while frame f is judged.

@@ -250,6 +250,12 @@ struct RotationTraits {
   /// Root attribute `deactivation`: "off" when the engine never deactivates (puts to
   /// sleep) a body, so every body is judged awake; "" = undeclared.
   std::string deactivation;
+  /// Root attribute `impulse_points`: "witness-pair" when each body takes a row's impulse
+  /// at its own witness point and the two may lie apart across the normal (a persistent
+  /// manifold's points drift: Bullet keeps a point while the drift is within its breaking
+  /// threshold), so a row turns its pair by up to (depth + contact margin) x |J|; "" =
+  /// undeclared ("one": one point, or two apart along the normal only).
+  std::string impulse_points;
 };
 
 /// One simulation engine: `cpu` (World), `cuda` (CudaWorld), `bullet` (BulletWorld).

@@ -122,8 +122,9 @@ struct ExternalOptions {
   /// and stopped_in say how far it got); a stop while the trace is checked still throws
   /// ValidationStopped. `octocd validate --trace-in` sets it (an incomplete verdict on a signal).
   bool keep_on_stop = false;
-  /// Called by validate_external_trace on its thread after a frame whose checks are
-  /// complete, at most every 20 ms (and after the first), with the verdict a stop right then
+  /// Called by validate_external_trace on its thread when the judging begins (judged_to
+  /// 0) and after a frame whose checks are complete, at most every 20 ms (and after the
+  /// first), with the verdict a stop right then
   /// would return and what the trace holds (ExternalTraceInfo::judged_to the last frame
   /// judged whole). May be empty. `octocd validate --trace-in` keeps the latest as the
   /// incomplete verdict it reports when a check outlasts its stop grace.

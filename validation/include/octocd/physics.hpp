@@ -234,6 +234,11 @@ struct PhysicsBodies {
     Flagged,
   };
   Deactivation deactivation = Deactivation::Undeclared;
+  /// `impulse_points` "witness-pair": each body takes a row's impulse at its own witness
+  /// point, the two up to the row's depth + contact margin apart in any direction, so
+  /// conservation's angular momentum allows that lever times |J| (jn and jt) per row;
+  /// otherwise ("one", the default) the lever applies to the friction part only.
+  bool witness_pair_impulses = false;
   /// `friction_directions` (external traces v2 without /contacts/jt3): 1 = each row's
   /// friction impulse lies along its sliding (-v_t), so the scalar jt is the whole of it;
   /// 2 = two friction directions (jt is only its component along -v_t); 0 = undeclared.
