@@ -19,7 +19,7 @@ def axis_label(p, axis):
 # -> own_broadphase_class), for results whose points record only `engine_broadphase`; a test
 # (tests/report/test_report_comparisons.py) keeps this in step with the registry.
 OWN_BROADPHASE_CLASS = {"bullet-dbvt": "btDbvtBroadphase", "mujoco-sap": "MuJoCo's mj_collision (sweep and prune)",
-                        "ode-hash": "dHashSpace"}
+                        "ode-hash": "dHashSpace", "dart-fcl": "FCL's dynamic AABB tree in DART's FCLCollisionGroup"}
 
 
 def point_label(p, axis):

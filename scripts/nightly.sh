@@ -242,6 +242,13 @@ matrix_scenes() {  # "scene frames every" per line: full or quick windows
       "bunny-stack-50 80 5" "rot-spin-free 120 5"
   fi
 }
+# A case the full matrix leaves out, with the reason (docs/engines.md, "dart"): the
+# engine expresses the scene but cannot run its window within --timeout.
+matrix_skip() {  # engine scene
+  if [ "$matrix" = "full" ] && [ "$1--$2" = "dart--bunny-stack-50" ]; then
+    echo "DART's FCL collides each bunny hull as a BVH of its triangles: ~2200 contact rows once the bunnies land, 1 to 4 steps/s; the quick window runs"
+  fi
+}
 matrix_engines=()
 if [ "$matrix" != "none" ]; then
   available="$("$bin" engines --available 2>/dev/null)"
@@ -258,6 +265,8 @@ fi
 for e in "${matrix_engines[@]+"${matrix_engines[@]}"}"; do
   while read -r sc n_frames m_every; do
     [ -r "$root/datasets/scenes/$sc.json" ] || { echo "matrix   $e--$sc: no scene $sc.json, skipped"; continue; }
+    why_skip="$(matrix_skip "$e" "$sc")"
+    [ -z "$why_skip" ] || { echo "matrix   $e--$sc: skipped ($why_skip)"; continue; }
     name="$e--$sc"
     [ "$matrix" = "quick" ] && name="$e--$sc--quick"
     log="$out/$name.log"

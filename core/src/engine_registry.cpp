@@ -59,7 +59,18 @@ const std::vector<EngineInfo>& engine_infos() {
     mujoco.geometries = {"hull"};
     mujoco.no_midphase_reason =
         "MuJoCo runs its own narrow phase: mjc_BoxBox on box pairs, MPR (libccd) on the convex hulls of meshes";
-    return std::vector<EngineInfo>{cpu, cuda, bullet, mujoco, ode};
+
+    EngineInfo dart;
+    dart.name = "dart";
+    dart.description = "the same scene in DART (World, FCL collision, boxed LCP; rotating boxes and hulls)";
+    dart.rotates = true;
+    dart.own_broadphase = "dart-fcl";
+    dart.own_broadphase_class = "FCL's dynamic AABB tree in DART's FCLCollisionGroup";
+    dart.geometries = {"hull"};
+    dart.no_midphase_reason =
+        "DART runs its own narrow phase: FCL's (box-box, BVH triangle meshes for hulls and static meshes) with DART's "
+        "contact post-processing";
+    return std::vector<EngineInfo>{cpu, cuda, bullet, mujoco, ode, dart};
   }();
   return infos;
 }

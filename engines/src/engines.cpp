@@ -20,6 +20,9 @@
 #if OCTOCD_HAVE_ODE
 #include "octocd/ode_world.hpp"
 #endif
+#if OCTOCD_HAVE_DART
+#include "octocd/dart_world.hpp"
+#endif
 
 namespace octocd {
 
@@ -124,6 +127,26 @@ std::unique_ptr<Engine> make_mujoco(const std::shared_ptr<const Model>&, const I
 }
 #endif
 
+#if OCTOCD_HAVE_DART
+DartSettings dart_settings(const Items& items, const std::string& where) {
+  DartSettings s;
+  apply_dart_settings(s, items, where);
+  return s;
+}
+void check_dart(const Items& items, const std::string& where) { (void)dart_settings(items, where); }
+std::vector<std::string> dart_keys() { return dart_setting_names(); }
+std::unique_ptr<Engine> make_dart(const std::shared_ptr<const Model>& model, const Items& items,
+                                  const std::string& where) {
+  return std::make_unique<DartWorld>(model, model->initial, dart_settings(items, where));
+}
+#else
+void check_dart(const Items& items, const std::string& where) { check_none(items, where); }
+std::vector<std::string> dart_keys() { return {}; }
+std::unique_ptr<Engine> make_dart(const std::shared_ptr<const Model>&, const Items&, const std::string&) {
+  throw RuntimeError("engine 'dart' is not built in this octocd (configured without libdart-dev)");
+}
+#endif
+
 /// The engines, one entry each, by the names of engine_infos().
 const std::vector<Registered>& registered() {
   static const std::vector<Registered> r{
@@ -135,6 +158,7 @@ const std::vector<Registered>& registered() {
        &check_bullet},
       {"mujoco", &make_mujoco, OCTOCD_HAVE_MUJOCO != 0, &mujoco_keys, "", &check_mujoco},
       {"ode", &make_ode, OCTOCD_HAVE_ODE != 0, &ode_keys, "", &check_ode},
+      {"dart", &make_dart, OCTOCD_HAVE_DART != 0, &dart_keys, "", &check_dart},
   };
   return r;
 }

@@ -40,7 +40,7 @@ std::string refusal(const std::string& engine, const EngineOptions& o, const Arg
 }  // namespace
 
 TEST(EngineRegistry, CapabilitiesAreWhatTheEnginesDo) {
-  ASSERT_EQ(engine_names(), (std::vector<std::string>{"cpu", "cuda", "bullet", "mujoco", "ode"}));
+  ASSERT_EQ(engine_names(), (std::vector<std::string>{"cpu", "cuda", "bullet", "mujoco", "ode", "dart"}));
   for (const EngineInfo& info : engine_infos()) {
     SCOPED_TRACE(info.name);
     if (!engine_unavailable(info).empty()) continue;  // cuda without a device
@@ -79,7 +79,7 @@ TEST(EngineRegistry, CapabilitiesAreWhatTheEnginesDo) {
     (void)engine_info("physx", "--engine");
     ADD_FAILURE() << "an unknown engine was accepted";
   } catch (const InputError& e) {
-    EXPECT_STREQ(e.what(), "--engine: unknown engine 'physx'; allowed: cpu, cuda, bullet, mujoco, ode");
+    EXPECT_STREQ(e.what(), "--engine: unknown engine 'physx'; allowed: cpu, cuda, bullet, mujoco, ode, dart");
   }
 }
 

@@ -162,6 +162,9 @@ ENGINE_FAULTS = {
     # ODE's Dantzig LCP fixes each friction bound from the normal force before it solves
     # friction (OdeEngineFault.DantzigFrictionExceedsTheFinalNormalForce).
     "ode": {("friction", "cone")},
+    # DART's default solver is ODE's Dantzig LCP with the same findex friction bounds
+    # (DartEngineFault.DantzigFrictionExceedsTheFinalNormalForce).
+    "dart": {("friction", "cone")},
 }
 
 

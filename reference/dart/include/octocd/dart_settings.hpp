@@ -1,0 +1,122 @@
+#pragma once
+/// \file dart_settings.hpp
+/// The settings of the DART engine (`dart`): which of DART's collision detectors finds the
+/// contacts, how FCL takes boxes, which boxed LCP solver DART's constraint solver runs, its
+/// contact constraint parameters and how friction is bounded. Set from C++ (DartWorld's
+/// constructor) or as KEY=VALUE items (apply_dart_settings); docs/engines.md, "dart", and
+/// docs/settings.md list them with the DART parameter each one sets. Plain data: no DART
+/// header is needed to use it.
+
+#include <string>
+#include <vector>
+
+namespace octocd {
+
+/// Which DART collision detector finds the contacts (ConstraintSolver::setCollisionDetector).
+enum class DartCollision {
+  /// dart::collision::FCLCollisionDetector: boxes, triangle meshes (MeshShape as an FCL
+  /// BVH of its triangles), so every octocd scene is expressible.
+  Fcl,
+  /// dart::collision::DARTCollisionDetector: DART's own detector (boxes: ODE's dBoxBox
+  /// port, up to 4 points); it has no mesh shape, so a scene with a mesh is refused.
+  Dart,
+};
+
+/// How FCLCollisionDetector takes a BoxShape (FCLCollisionDetector::setPrimitiveShapeType).
+enum class DartFclBoxes {
+  /// PRIMITIVE: fcl::Box with FCL's analytic box-box test (several points per pair).
+  Primitive,
+  /// MESH: a 12-triangle BVH of the box (DART's own default), collided as a mesh.
+  Mesh,
+};
+
+/// Which boxed LCP solver BoxedLcpConstraintSolver runs.
+enum class DartLcp {
+  /// DantzigBoxedLcpSolver (ODE's Dantzig pivoting solver) with PgsBoxedLcpSolver as the
+  /// fallback when it fails: the constraint solver DART's World creates.
+  Dantzig,
+  /// PgsBoxedLcpSolver alone (projected Gauss-Seidel, DartSettings::iterations sweeps),
+  /// no secondary solver.
+  Pgs,
+};
+
+/// How a contact's two friction directions are bounded. DART's ContactConstraint gives
+/// each direction the box |lambda_t| <= mu_shape lambda_n (a friction pyramid, findex),
+/// mu_shape the smaller of the two shapes' DynamicsAspect friction coefficients.
+enum class DartFriction {
+  /// mu_shape = mu / sqrt(2): the pyramid inscribed in the Coulomb cone.
+  Inscribed,
+  /// mu_shape = mu: up to sqrt(2) mu along the pyramid's diagonal.
+  Pyramid,
+};
+
+/// "fcl" or "dart".
+const char* dart_collision_name(DartCollision c);
+/// "primitive" or "mesh".
+const char* dart_fcl_boxes_name(DartFclBoxes b);
+/// "dantzig" or "pgs".
+const char* dart_lcp_name(DartLcp l);
+/// "inscribed" or "pyramid".
+const char* dart_friction_name(DartFriction f);
+
+/// The dart engine's settings. The defaults are what `octocd run --engine dart` runs:
+/// DART's own defaults where DART has one, except `boxes` and `contacts` (below).
+struct DartSettings {
+  /// The collision detector (DartCollision); key `collision`, values fcl | dart.
+  /// Default fcl (DART's World default; the one that takes meshes).
+  DartCollision collision = DartCollision::Fcl;
+  /// How FCL takes boxes (DartFclBoxes); key `boxes`, values primitive | mesh. Default
+  /// primitive (DART's own default is mesh: a box collided as 12 triangles gets contacts
+  /// on its triangles' intersections, not on its faces). Read only with collision=fcl.
+  DartFclBoxes boxes = DartFclBoxes::Primitive;
+  /// The boxed LCP solver (DartLcp); key `lcp`, values dantzig | pgs. Default dantzig
+  /// (DART's World default, with PGS as its fallback).
+  DartLcp lcp = DartLcp::Dantzig;
+  /// Sweeps of the PGS solver (PgsBoxedLcpSolver::Option::mMaxIteration); key
+  /// `iterations`, an integer in [1, 10000]. Default 30, DART's. Read by lcp=pgs and by
+  /// the Dantzig solver's PGS fallback.
+  int iterations = 30;
+  /// Error reduction parameter (ContactConstraint::setErrorReductionParameter): the
+  /// share of a contact's depth the next step's target velocity removes, erp depth / dt,
+  /// capped at max_erv; key `erp`, a number in [0, 1]. Default 0.01, DART's.
+  double erp = 0.01;
+  /// The cap of that correction velocity (ContactConstraint::setMaxErrorReductionVelocity,
+  /// m/s); key `max_erv`, a number in [0, 100]. Default 1e-3, DART's.
+  double max_erv = 1e-3;
+  /// Constraint force mixing (ContactConstraint::setConstraintForceMixing: every row's
+  /// diagonal times 1 + cfm); key `cfm`, a number in [1e-9, 1]. Default 1e-5, DART's.
+  double cfm = 1e-5;
+  /// The friction bound (DartFriction); key `friction`, values inscribed | pyramid.
+  /// Default inscribed (the friction vector stays in the Coulomb cone).
+  DartFriction friction = DartFriction::Inscribed;
+  /// Most contacts one step's collision detection may report
+  /// (CollisionOption::maxNumContacts); key `contacts`, an integer in [1, 10000000].
+  /// Default 200000 (DART's World asks for 1000 and silently drops the rest: a pile of
+  /// 1000 bodies has more). A step that reaches the bound throws RuntimeError naming it.
+  int max_contacts = 200000;
+};
+
+/// ERP, the correction velocity cap and CFM as the linked DART's ContactConstraint holds
+/// them before anything sets them, and the PGS sweeps of a fresh PgsBoxedLcpSolver::Option;
+/// the other fields as DartSettings: the library's defaults, which DartSettings' defaults
+/// claim to be. (DART keeps ERP, the cap and CFM in process-wide statics; DartWorld sets
+/// them for the duration of each step and puts the previous values back.)
+DartSettings dart_library_defaults();
+
+/// The keys set_dart_setting takes, in the struct's order: collision, boxes, lcp,
+/// iterations, erp, max_erv, cfm, friction, contacts.
+std::vector<std::string> dart_setting_names();
+
+/// Sets the field `key` (a name of dart_setting_names()) of `settings` from text
+/// (collision: fcl or dart; boxes: primitive or mesh; lcp: dantzig or pgs; iterations: an
+/// integer in [1, 10000]; erp: a decimal number in [0, 1]; max_erv: in [0, 100]; cfm: in
+/// [1e-9, 1]; friction: inscribed or pyramid; contacts: an integer in [1, 10000000]).
+/// Throws InputError "<where>: ..." naming the key, the value and what is allowed.
+void set_dart_setting(DartSettings& settings, const std::string& key, const std::string& value,
+                      const std::string& where);
+
+/// Applies "KEY=VALUE" items in order with set_dart_setting. Throws InputError naming
+/// `where` and the item for text without '='.
+void apply_dart_settings(DartSettings& settings, const std::vector<std::string>& items, const std::string& where);
+
+}  // namespace octocd
