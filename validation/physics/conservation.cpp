@@ -166,8 +166,13 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
       // integrating the orientation explicitly (no gyroscopic term) misses dt w x (I w).
       // One with the term (declared gyroscopic) keeps L to second order in |w| dt: its
       // explicit or implicit form differs from the exact rotation by (|w| dt)^2 |I w|.
-      gyro += dt * len3(cross3(w1, mul(i1, w1)));
-      if (bodies.gyroscopic == PhysicsBodies::Gyroscopic::Integrated) gyro += dt * dt * dot3(w1, w1) * len3(mul(i1, w1));
+      // Either term may be taken at the step's start (ODE and DART: the torque before the
+      // contact impulses) or its end (implicit forms): where the impulses change w within
+      // the step, the larger of the two bounds it.
+      const D3 iw0 = mul(i0, w0), iw1 = mul(i1, w1);
+      gyro += dt * std::max(len3(cross3(w0, iw0)), len3(cross3(w1, iw1)));
+      if (bodies.gyroscopic == PhysicsBodies::Gyroscopic::Integrated)
+        gyro += dt * dt * std::max(dot3(w0, w0) * len3(iw0), dot3(w1, w1) * len3(iw1));
     }
     const double dl = len3(l1 - l0);
     const double lbound =
