@@ -117,6 +117,10 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
 }
 
 int bench_command(const BenchOptions& o) {
+  // Output paths before any work (atomic_file.hpp); -o's folder is created when missing.
+  if (!o.output.empty()) check_output_file(o.output, "-o", true);
+  if (!o.csv.empty()) check_output_file(o.csv, "--csv", true);
+  if (!o.trace_dir.empty()) check_output_folder(o.trace_dir, "--trace-dir", false);
   check_engine_settings(o.settings, cli_argument_names());  // bad items are input errors before any point runs
   const std::vector<std::string> named = named_sweeps();
   if (o.list) {
@@ -278,7 +282,7 @@ int bench_command(const BenchOptions& o) {
   bool any_failed = false;
   auto write = [&] {
     result["updated"] = utc_time_now();
-    write_file_atomically(o.output, result.dump(1) + "\n");
+    write_file_atomically(o.output, result.dump(1) + "\n", "-o");
     // What a process ended at once (a second signal, the 1 s bound) keeps: this file.
     octocd::set_stop_kept(fmt::format("the result {} keeps the {} point(s) finished before (--resume goes on)",
                                       o.output, result["points"].size()));

@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "bench_sweep.hpp"
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/json_strict.hpp"
 
@@ -65,10 +66,8 @@ std::map<std::string, json> resumed_points(const BenchOptions& o, const Sweep& s
                                  o.output));
   json old;
   {
-    std::ifstream in(o.output);
-    std::stringstream text;
-    text << in.rdbuf();
-    old = octocd::parse_json_strict(text.str(), o.output);  // a second "points" key refused, not silently won
+    const std::string text = octocd::read_input_file(o.output, "-o", "a bench result of the same sweep to --resume");
+    old = octocd::parse_json_strict(text, o.output);  // a second "points" key refused, not silently won
   }
   if (old.value("format", "") != "octocd-bench" || old.value("version", 0) != 1)
     throw InputError(fmt::format("{}: format: {} version {}; allowed: octocd-bench version 1", o.output,

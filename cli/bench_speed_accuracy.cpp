@@ -14,6 +14,7 @@
 #include <fmt/format.h>
 
 #include "bench_sweep.hpp"
+#include "octocd/atomic_file.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
@@ -262,8 +263,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
                                      o.output));
       json old;
       try {
-        std::ifstream in(o.output);
-        old = json::parse(in);
+        old = json::parse(octocd::read_input_file(o.output, "-o", "a finished result of the same sweep to --resume"));
       } catch (const json::exception& e) {
         throw InputError(fmt::format("{}: not JSON ({}); allowed: a result of {} to --resume", o.output, e.what(), origin));
       }
@@ -371,7 +371,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
     for (const std::size_t k : mine)
       if (points[k].finished) out["points"].push_back(point_json(points[k]));
     out["updated"] = utc_time_now();
-    write_file_atomically(o.output, out.dump(1) + "\n");
+    write_file_atomically(o.output, out.dump(1) + "\n", "-o");
     // The CSV: one row per finished point, the fields flattened.
     std::ostringstream csv;
     csv << "sweep,index,id,line,scene,engine,engine_label,geometry,rotation,iterations,dt,steps,sim_seconds,status,"
@@ -398,7 +398,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
         csv << ',' << num(r["error"][k]);
       csv << '\n';
     }
-    write_file_atomically(csv_path, csv.str());
+    write_file_atomically(csv_path, csv.str(), "--csv");
   };
 
   SweepProgress progress(mine.size(), !o.quiet);

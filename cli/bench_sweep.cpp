@@ -13,6 +13,8 @@
 
 #include "bench_sweep.hpp"
 #include "octocd/engine_registry.hpp"
+#include "octocd/atomic_file.hpp"
+#include "octocd/scene.hpp"
 #include "octocd/error.hpp"
 #include "octocd/json_strict.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -45,10 +47,9 @@ std::string named_list() {
 }
 
 json read_sweep_file(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return octocd::parse_json_strict(ss.str(), path);  // duplicate keys and NUL bytes refused
+  // A regular file of at most 64 MiB, checked before it is read (a FIFO never blocks).
+  const std::string text = octocd::read_input_file(path, "", "a sweep file (JSON, docs/bench-format.md)");
+  return octocd::parse_json_strict(text, path);  // duplicate keys and NUL bytes refused
 }
 
 namespace {
@@ -448,14 +449,12 @@ std::vector<Point> expand(const Sweep& s) {
 
 std::string scene_text(const Sweep& s, const Point& p, std::vector<std::string>* added) {
   const std::string& file = s.scenes[p.scene];
-  std::ifstream in(file);
-  if (!in) bad(s.origin, "scenes", "cannot read scene file '" + file + "'",
-               "a scene name under the scene folder (--scene-dir) or a readable file");
-  std::stringstream ss;
-  ss << in.rdbuf();
+  const std::string text = octocd::read_input_file(
+      file, s.origin + ": scenes", "a scene name under the scene folder (--scene-dir) or a readable scene file",
+      octocd::limits::kMaxSceneFileBytes);
   json j;
   try {
-    j = json::parse(ss.str());
+    j = json::parse(text);
   } catch (const json::exception& e) {
     throw InputError(fmt::format("{}: not JSON ({}); allowed: a scene file (docs/scenes.md)", file, e.what()));
   }

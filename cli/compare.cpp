@@ -27,6 +27,7 @@
 #include <fmt/ranges.h>
 
 #include "octocd/error.hpp"
+#include "octocd/text.hpp"
 #include "octocd/external.hpp"
 #include "octocd/trace_reader.hpp"
 #include "tools.hpp"
@@ -819,6 +820,7 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
 }
 
 int compare_command(const CompareOptions& o) {
+  if (!o.json.empty()) check_output_file(o.json, "--json");  // before any work (atomic_file.hpp)
   const std::map<std::string, Tolerance> tols = parse_tolerances(o.tolerance);
   const char* kQuantityAllowed =
       "positions, velocities, orientations, angular_velocities, contacts, pairs, energy";
@@ -919,8 +921,10 @@ int compare_command(const CompareOptions& o) {
     return fmt::format("{}, {}, {}{}", attr(*s.t, "engine"), attr(*s.t, "broadphase"), attr(*s.t, "build_id"),
                        s.version == 1 ? "" : fmt::format(", version {}", s.version));
   };
-  fmt::print("compare {} ({})\n   with {} ({})\n", o.a, header(a), o.b, header(b));
-  fmt::print("scene {}, {} bodies; tolerances:", a.scene_known ? sa : sb, na);
+  // The traces' text reaches the terminal with its control characters escaped (\xNN).
+  fmt::print("compare {} ({})\n   with {} ({})\n", printable(o.a), printable(header(a)), printable(o.b),
+             printable(header(b)));
+  fmt::print("scene {}, {} bodies; tolerances:", printable(a.scene_known ? sa : sb), na);
   for (const auto& q : qs) fmt::print(" {}={}", q, tols.at(q).text());
   fmt::print("\n");
   if (a.version != b.version || a.rotation != b.rotation)
@@ -930,7 +934,7 @@ int compare_command(const CompareOptions& o) {
   fmt::print("\n");
   if (!structure.empty()) {
     fmt::print("structure differs ({} key{}):\n", structure.size(), structure.size() == 1 ? "" : "s");
-    for (const auto& d : structure) fmt::print("  {}\n", d);
+    for (const auto& d : structure) fmt::print("  {}\n", printable(d));
     fmt::print("\n");
   }
   if (!ignored.empty()) {
@@ -1039,7 +1043,7 @@ int compare_command(const CompareOptions& o) {
            {"compared_any", compared_any},
            {"quantities", jq}};
     if (first) j["first"] = {{"frame", first->frame}, {"body", first->body}, {"quantity", first->name}};
-    write_file_atomically(o.json, j.dump(1) + "\n");
+    write_file_atomically(o.json, j.dump(1, ' ', false, json::error_handler_t::replace) + "\n", "--json");
   }
   if (!compared_any) {
     // Nothing requested could be compared: not "same" (exit 2, naming what each trace lacks).

@@ -12,6 +12,7 @@
 
 #include "commands.hpp"
 #include "octocd/error.hpp"
+#include "octocd/text.hpp"
 #include "octocd/version.hpp"
 
 
@@ -44,17 +45,17 @@ int main(int argc, char** argv) {
     for (const octocd::cli::Command& c : commands)
       if (c.selected()) return c.run();
   } catch (const octocd::InputError& e) {
-    std::fprintf(stderr, "octocd: error: %s\n", e.what());
+    std::fprintf(stderr, "octocd: error: %s\n", octocd::printable(e.what()).c_str());
     return 2;
   } catch (const octocd::RuntimeError& e) {
-    std::fprintf(stderr, "octocd: runtime failure: %s\n", e.what());
+    std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable(e.what()).c_str());
     return 1;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "octocd: runtime failure: out of memory (the scene needs more than this "
                          "process may allocate)\n");
     return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "octocd: runtime failure: %s\n", e.what());
+    std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable(e.what()).c_str());
     return 1;
   }
   return 0;

@@ -405,6 +405,7 @@ CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o) {
 }
 
 int replay_command(const ReplayOptions& o) {
+  if (!o.json.empty()) check_output_file(o.json, "--json");  // before any work (atomic_file.hpp)
   const std::vector<std::string> bps = split_list(o.broadphases);
   if (bps.empty()) throw InputError("--broadphase: empty; allowed: a comma-separated list of broadphase names");
   const auto known = any_engine_broadphase_names();
@@ -478,7 +479,7 @@ int replay_command(const ReplayOptions& o) {
                      {"machine", machine_description()},
                      {"build", build_description()},
                      {"runs", jr}};
-    write_file_atomically(o.json, j.dump(1) + "\n");
+    write_file_atomically(o.json, j.dump(1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n", "--json");
   }
   return all_ok ? 0 : 3;
 }

@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/error.hpp"
+#include "octocd/text.hpp"
 #include "octocd/shared_files.hpp"
 #include "octocd/stop.hpp"
 #include "octocd/trace_reader.hpp"
@@ -79,32 +80,6 @@ class ForwardSignals {
  private:
   struct sigaction old_int_ {}, old_term_ {};
 };
-
-/// An output folder (-o, --csv): a folder, or a path that can become one. Refuses a file,
-/// a FIFO, a device (/dev/null), a symbolic link (e.g. to /etc) and a read-only folder
-/// (no write bit: refused even for root), naming the option.
-void check_output_folder(const std::string& path, const char* option) {
-  struct stat st {};
-  if (::lstat(path.c_str(), &st) != 0) {
-    if (errno != ENOENT)
-      throw InputError(fmt::format("{} {}: cannot be examined ({}); allowed: a folder octocd may write in", option,
-                                   path, std::strerror(errno)));
-    return;  // created by the script (its parents must be writable: it says so otherwise)
-  }
-  if (S_ISLNK(st.st_mode)) {
-    std::error_code ec;
-    const fs::path to = fs::read_symlink(path, ec);
-    throw InputError(fmt::format("{} {}: a symbolic link (to {}); allowed: a folder path that is not a link", option,
-                                 path, ec ? "?" : to.string()));
-  }
-  if (!S_ISDIR(st.st_mode))
-    throw InputError(fmt::format("{} {}: {}, not a folder; allowed: a folder (created when missing)", option, path,
-                                 S_ISFIFO(st.st_mode)                        ? "a FIFO"
-                                 : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
-                                                                              : "a file"));
-  if ((st.st_mode & 0222) == 0 || ::access(path.c_str(), W_OK) != 0)
-    throw InputError(fmt::format("{} {}: a read-only folder; allowed: a folder octocd may write in", option, path));
-}
 
 /// An input of the report: a regular file (a FIFO would block the script forever).
 void check_input(const std::string& path, const char* what) {
@@ -181,9 +156,12 @@ int trace_summary_command(const TraceSummaryOptions& o) {
     fmt::print("{}\n", j.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace));
     return 0;
   }
-  fmt::print("{}: octocd-trace version {}, {} complete frames\n", o.trace, r.version(), frames);
+  // The trace's text reaches the terminal with its control characters escaped (\xNN).
+  fmt::print("{}: octocd-trace version {}, {} complete frames\n", printable(o.trace), r.version(), frames);
   for (const auto& [k, v] : attrs.items())
-    fmt::print("  {}: {}\n", k, v.is_string() ? v.get<std::string>() : v.dump());
+    fmt::print("  {}: {}\n", printable(k),
+               printable(v.is_string() ? v.get<std::string>()
+                                       : v.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace)));
   return 0;
 }
 
@@ -231,8 +209,8 @@ int report_command(const ReportOptions& o) {
   for (const auto& in : o.baseline)
     check_input(in, "a result file of `octocd bench` (.json) for --baseline");
   for (const auto& in : o.inputs) check_input(in, "result files of `octocd bench` (.json) and traces (.h5)");
-  check_output_folder(o.output, "-o");
-  if (!o.csv.empty()) check_output_folder(o.csv, "--csv");
+  check_output_folder(o.output, "-o", true);
+  if (!o.csv.empty()) check_output_folder(o.csv, "--csv", true);
   const std::string py = python(), sc = script();
   if (!fs::is_regular_file(sc, ec))
     throw RuntimeError(fmt::format("report script {} not found (an octocd installed without its share/octocd? set "

@@ -275,6 +275,9 @@ constexpr double kRunStopBound = 0.95;
 int run_command(const RunOptions& o) {
   // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kRunStopBound.
   octocd::StopOnSignals stop_on_signals(kRunStopBound);
+  // Output paths before any work: absent or a regular file (atomic_file.hpp).
+  if (!o.trace.empty()) octocd::check_output_file(o.trace, "--trace");
+  if (!o.summary_json.empty()) octocd::check_output_file(o.summary_json, "--summary-json");
   const auto t_setup = Clock::now();
   std::optional<octocd::StopAtOnce> loading(std::in_place, "loading the scene and its meshes");
   octocd::Scene scene = load_scene_for(o.scene, o.data_dir);

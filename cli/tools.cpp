@@ -2,9 +2,11 @@
 #include "tools.hpp"
 
 #include <omp.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
 #include <cmath>
 #include <cstdio>
@@ -119,6 +121,29 @@ std::string utc_time_now() {
   char buf[32];
   std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
   return buf;
+}
+
+void check_output_folder(const std::string& path, const char* option, bool writable) {
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) != 0) {
+    if (errno != ENOENT)
+      throw InputError(fmt::format("{} {}: cannot be examined ({}); allowed: a folder octocd may write in", option,
+                                   path, std::strerror(errno)));
+    return;  // created by the script (its parents must be writable: it says so otherwise)
+  }
+  if (S_ISLNK(st.st_mode)) {
+    std::error_code ec;
+    const std::filesystem::path to = std::filesystem::read_symlink(path, ec);
+    throw InputError(fmt::format("{} {}: a symbolic link (to {}); allowed: a folder path that is not a link", option,
+                                 path, ec ? "?" : to.string()));
+  }
+  if (!S_ISDIR(st.st_mode))
+    throw InputError(fmt::format("{} {}: {}, not a folder; allowed: a folder (created when missing)", option, path,
+                                 S_ISFIFO(st.st_mode)                        ? "a FIFO"
+                                 : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
+                                                                              : "a file"));
+  if (writable && ((st.st_mode & 0222) == 0 || ::access(path.c_str(), W_OK) != 0))
+    throw InputError(fmt::format("{} {}: a read-only folder; allowed: a folder octocd may write in", option, path));
 }
 
 }  // namespace octocd::cli

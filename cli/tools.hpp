@@ -53,6 +53,14 @@ nlohmann::json build_description();
 
 /// Atomic result files (octocd/atomic_file.hpp), as the subcommands call them.
 using octocd::write_file_atomically;
+/// Output paths checked before any work (octocd/atomic_file.hpp).
+using octocd::check_output_file;
+
+/// An output folder (`report -o`, `--csv`, `view -o`, `validate --view`, `bench
+/// --trace-dir`): a folder, or a path that can become one. Refuses a file, a FIFO, a device
+/// (/dev/null) and a symbolic link (e.g. to /etc), naming the option and the type; with
+/// `writable`, also a read-only folder (no write bit: refused even for root). InputError.
+void check_output_folder(const std::string& path, const char* option, bool writable);
 
 /// Splits "a,b,c" into {"a", "b", "c"} (empty items dropped).
 std::vector<std::string> split_list(const std::string& text);

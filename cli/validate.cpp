@@ -36,6 +36,7 @@
 #include "octocd/scene.hpp"
 #include "octocd/atomic_file.hpp"
 #include "octocd/stop.hpp"
+#include "octocd/text.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
@@ -79,6 +80,7 @@ struct ValidateOptions {
   bool strict = false;        ///< --strict: an expected failure that no longer fails is exit 3
   std::string json;           ///< --json FILE: every row, cause and item as JSON
   std::string view;           ///< --view DIR: a page per failing example (cli/view.hpp)
+  std::string mesh_dir;       ///< --mesh-dir DIR: where a judged trace's scene may name meshes
   octocd::cli::FailureViews views;  ///< the pages --view wrote (linked from the table, JSON, JUnit)
   std::string shard;          ///< --shard i/N: judge only this share of the trace's frames
   std::vector<std::string> merge;  ///< --merge A.json B.json ...: join shards' verdicts
@@ -86,10 +88,20 @@ struct ValidateOptions {
   octocd::Expectations expectations;  ///< --expect's file, read before the run
 };
 
+/// Whether --view's pages could not be written (FailureViews::write_error): then says so
+/// on stderr, after the verdict (which stands), and `validate` exits 1.
+bool views_failed(const ValidateOptions& o) {
+  if (o.views.write_error.empty()) return false;
+  std::fflush(stdout);
+  std::fprintf(stderr, "octocd: %s\n", o.views.write_error.c_str());
+  return true;
+}
+
 /// The end of every `validate` path: matches `results` of `run` against --expect, writes
 /// --json and --write-expect, prints the outcome lines (plain text) and the verdict line;
 /// returns the exit code: 0 when every failure is expected (or none), 3 when one is new or
-/// grown (or, with --strict, an expectation is fixed); 0 after --write-expect.
+/// grown (or, with --strict, an expectation is fixed); 0 after --write-expect; 1 when
+/// --view's pages could not be written (views_failed).
 /// `print_table` prints the table (it needs the report for its verdicts) before them.
 int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
                       const std::vector<octocd::ValidationResult>& results,
@@ -108,9 +120,9 @@ int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
     octocd::write_expectations(o.write_expect, run, entries);
     fmt::print("\nwrote {} expectation(s) of {} {} to {} (edit each reason)\n", entries.size(),
                run.scene.empty() ? "trace" : "scene", run.scene.empty() ? run.trace : run.scene, o.write_expect);
-    return 0;
+    return views_failed(o) ? 1 : 0;
   }
-  const int code = report.exit_code(o.strict);
+  int code = report.exit_code(o.strict);
   const std::size_t expected = report.count(Kind::Expected), fixed = report.count(Kind::Fixed);
   const std::size_t failing = report.count(Kind::New) + report.count(Kind::Grown);
   if (failing == 0 && expected == 0) {
@@ -123,7 +135,7 @@ int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
     fmt::print("\nVALIDATION FAILED: {} new or grown failure(s){}\n", failing,
                expected > 0 ? fmt::format(", {} expected", expected) : std::string());
   }
-  return code;
+  return views_failed(o) ? 1 : code;
 }
 
 /// How long the main thread of `validate` waits for the judging worker to stop after a
@@ -198,6 +210,7 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
   eo.tol = vo.tol;
   eo.overridden = vo.overridden;
   eo.threads = o.threads;
+  eo.mesh_dir = o.mesh_dir;
   if (!o.shard.empty()) eo.shard = octocd::parse_shard(o.shard);
   octocd::ExternalTraceInfo info;
   const int every = o.every_given ? o.every : 1;
@@ -292,7 +305,7 @@ int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, co
         : info.stopped_in > 0 ? fmt::format(" inside the checks of frame {} (partly judged)", info.stopped_in)
                               : std::string());
   }
-  if (!o.view.empty() && !info.stopped) o.views = octocd::cli::write_failure_views(o.trace_in, results, o.view);
+  if (!o.view.empty() && !info.stopped) o.views = octocd::cli::write_failure_views(o.trace_in, results, o.view, o.mesh_dir);
   const octocd::RunName run = octocd::trace_run(o.trace_in);
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   std::string share;
@@ -312,7 +325,8 @@ int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, co
                          {"build_id", octocd::build_id()}},
                         stopped, &report);
   fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {}{})\n\n",
-             o.trace_in, info.engine, info.bodies, info.frames, every, o.against, share);
+             octocd::printable(o.trace_in), octocd::printable(info.engine), info.bodies, info.frames, every, o.against,
+             share);
   fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
   if (info.stopped) {
     const int sig = octocd::stop_signal();
@@ -473,6 +487,14 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
 /// results (failures included), or one errored case when the scene is bad input or the
 /// run fails.
 int validate_command(ValidateOptions& o) {
+  // Output paths before any work: files absent or regular, folders not a file, FIFO,
+  // device or link (atomic_file.hpp); --view DIR/SCENE-trace.h5 is checked as a trace.
+  for (const auto& [path, option] : {std::pair<const std::string&, const char*>{o.junit, "--junit"},
+                                     {o.json, "--json"},
+                                     {o.write_expect, "--write-expect"},
+                                     {o.trace, "--trace"}})
+    if (!path.empty()) check_output_file(path, option);
+  if (!o.view.empty()) check_output_folder(o.view, "--view", false);
   if (!o.expect.empty()) o.expectations = octocd::load_expectations(o.expect);  // bad input before the run
   if (!o.merge.empty()) {
     if (!o.scene.empty() || !o.trace_in.empty() || !o.shard.empty() || o.check_only)
@@ -491,6 +513,9 @@ int validate_command(ValidateOptions& o) {
     throw octocd::InputError("--check-only: needs --trace-in FILE.h5");
   if (!o.trace_in.empty() && (!o.trace.empty() || o.engine_given))
     throw octocd::InputError("--trace-in: judges a trace another engine wrote; allowed without --trace and --engine");
+  if (!o.mesh_dir.empty() && o.trace_in.empty())
+    throw octocd::InputError("--mesh-dir: where a judged trace's scene finds its meshes; allowed with --trace-in "
+                             "FILE.h5 (a scene file names its own)");
   if (!o.view.empty() && o.check_only)
     throw octocd::InputError("--view: draws a judged run's failures; allowed without --check-only");
   if (!o.view.empty() && o.trace_in.empty() && o.trace.empty()) {
@@ -818,6 +843,9 @@ Command add_validate_command(CLI::App& app) {
                       "contacts beside the reference; at most 20 pages) into DIR, linked from the table, --json and "
                       "--junit by relative paths; without --trace or --trace-in the run's trace goes to "
                       "DIR/SCENE-trace.h5 (docs/debugging.md)");
+  val_cmd->add_option("--mesh-dir", val.mesh_dir,
+                      "With --trace-in: the only folder (besides the data dir) where the mesh files named by the "
+                      "trace's scene are looked up (default: the trace's folder); a mesh named elsewhere is refused");
   val_cmd->add_option("--shard", val.shard,
                       "With --trace-in: judge only shard i of N (i/N, 0 <= i < N): the contiguous block of frames "
                       "floor(iF/N)+1 .. floor((i+1)F/N); write its --json for --merge (a Slurm job array: "

@@ -1,5 +1,6 @@
 // `octocd view` and `validate --view` (cli/view.hpp; the page itself: octocd/view.hpp).
 #include "view.hpp"
+#include "tools.hpp"
 
 #include <cstdio>
 #include <filesystem>
@@ -35,7 +36,7 @@ void parse_pair(const std::string& text, ViewSettings& s) {
 
 struct ViewCommand::Impl {
   CLI::App* cmd = nullptr;
-  std::string trace, pair, out;
+  std::string trace, pair, out, mesh_dir;
   std::int64_t frame = 0;
   std::int64_t body = -1;
   int window = 5;
@@ -59,6 +60,9 @@ ViewCommand::ViewCommand(CLI::App& app) : impl_(std::make_unique<Impl>()) {
                     fmt::format("Frames each side of --frame on the slider (0 .. {})", kMaxWindow))
       ->default_val(5);
   s.cmd->add_option("-o,--out", s.out, "Folder the page is written into (created when absent)")->required();
+  s.cmd->add_option("--mesh-dir", s.mesh_dir,
+                    "The only folder (besides the data dir) where the mesh files named by the trace's scene are looked "
+                    "up (default: the trace's folder)");
 }
 
 ViewCommand::~ViewCommand() = default;
@@ -72,6 +76,7 @@ int ViewCommand::run() {
     throw InputError(fmt::format("--frame: {}: outside the trace; allowed: 1 .. the trace's frames", s.frame));
   vs.frame = s.frame;
   vs.window = s.window;
+  vs.mesh_dir = s.mesh_dir;
   if (!s.pair.empty()) parse_pair(s.pair, vs);
   if (s.cmd->get_option("--body")->count() > 0) {
     if (s.body < 0 || s.body > 0xffffffffll)
@@ -79,6 +84,7 @@ int ViewCommand::run() {
     vs.has_body = true;
     vs.body = static_cast<std::uint32_t>(s.body);
   }
+  check_output_folder(s.out, "-o", false);  // before the trace is read
   const ViewPage page = write_view(s.trace, vs, s.out);
   fmt::print("wrote {} ({} bytes): frame {}, {} bodies, {} frames on the slider{}\n", page.path, page.bytes,
              page.frame, page.bodies, page.frames, page.note.empty() ? "" : "; note: " + page.note);
@@ -86,16 +92,16 @@ int ViewCommand::run() {
 }
 
 FailureViews write_failure_views(const std::string& trace, const std::vector<ValidationResult>& results,
-                                 const std::string& dir) {
+                                 const std::string& dir, const std::string& mesh_dir) {
   static const std::regex pair_item(R"(^pair \((\d+), (\d+)\)$)"), body_item(R"(^body (\d+)$)");
   FailureViews out;
   std::size_t over_cap = 0, undrawable = 0;
   std::set<std::string> names;
   std::string first_error;
-  for (std::size_t ri = 0; ri < results.size(); ++ri) {
+  for (std::size_t ri = 0; ri < results.size() && out.write_error.empty(); ++ri) {
     const ValidationResult& r = results[ri];
     for (const ValidationCause& c : failure_causes(r)) {
-      for (std::size_t xi = 0; xi < c.examples.size(); ++xi) {
+      for (std::size_t xi = 0; xi < c.examples.size() && out.write_error.empty(); ++xi) {
         const ValidationExample& x = c.examples[xi];
         std::smatch m;
         ViewSettings vs;
@@ -120,14 +126,23 @@ FailureViews write_failure_views(const std::string& trace, const std::vector<Val
         }
         names.insert(name);
         vs.frame = x.frame;
+        vs.mesh_dir = mesh_dir;
         vs.row = r.name;
         vs.cause = c.name;
         vs.unit = c.unit;
         vs.figure = x.figure;
         vs.file_name = name;
         try {
+          const std::string planted = output_path_kind((std::filesystem::path(dir) / name).string());
+          if (!planted.empty())
+            throw RuntimeError(fmt::format("view: {}: {}, not a regular file", (std::filesystem::path(dir) / name).string(),
+                                           planted));
           const ViewPage page = write_view(trace, vs, dir);
           out.links.push_back(ViewLink{ri, r.name, c.name, xi, x.item, x.frame, page.path});
+        } catch (const RuntimeError& e) {  // writing it failed: no page is tried after it
+          out.write_error = fmt::format("--view {}: a page cannot be written ({}); the verdict is complete without "
+                                        "its pages",
+                                        dir, e.what());
         } catch (const InputError& e) {
           ++undrawable;
           if (first_error.empty()) first_error = e.what();

@@ -54,14 +54,21 @@ struct ViewLink {
 struct FailureViews {
   std::vector<ViewLink> links;
   std::string summary;
+  /// The first page that could not be written (the folder refused it: EACCES, ENOSPC, a
+  /// target that is not a regular file): the reason, naming the folder; "" when none. No
+  /// page is tried after it. The verdict is still printed and written (--json, --junit),
+  /// and `validate` then exits 1 with this line.
+  std::string write_error;
 };
 
 /// `validate --view DIR`: for each failing row's causes (failure_causes), each example
 /// that names a frame and a pair or a body gets the page of `trace` at that frame and item
 /// in `dir` (row order, at most kMaxViewPages; one per row, cause and item). An example
-/// whose page cannot be drawn is counted in the summary, with the first reason.
+/// whose page cannot be drawn is counted in the summary, with the first reason; a page that
+/// cannot be written ends the pages (FailureViews::write_error) without throwing. `mesh_dir`:
+/// ViewSettings::mesh_dir.
 FailureViews write_failure_views(const std::string& trace, const std::vector<ValidationResult>& results,
-                                 const std::string& dir);
+                                 const std::string& dir, const std::string& mesh_dir = "");
 
 /// The table's lines of the pages (after format_results): "  ROW/CAUSE frame F ITEM: PATH".
 std::string format_views(const FailureViews& views);

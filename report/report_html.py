@@ -5,7 +5,9 @@ renamed into place only once all are written."""
 import html
 import io
 import os
+import re
 import stat
+import tempfile
 
 from report_common import fail, plt
 
@@ -33,6 +35,46 @@ def output_dir(path, option):
         fail(f"{option} {path}: a read-only folder; allowed: a folder octocd may write in")
 
 
+def current_umask():
+    """The process's umask without changing it (/proc/self/status; 0o022 when unknown)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except OSError:
+        pass
+    return 0o022
+
+
+def refuse_non_regular(path):
+    """A report file's path must be absent or a regular file: a link, FIFO, device or folder
+    planted at it is refused (exit 2), never replaced or written through."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if stat.S_ISREG(st.st_mode):
+        return
+    kind = "a symbolic link" if stat.S_ISLNK(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode) \
+        else "a folder" if stat.S_ISDIR(st.st_mode) else "a device" \
+        if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "not a plain file"
+    fail(f"{path}: {kind}, not a regular file; allowed: a new file or a regular file (replaced by rename)")
+
+
+_MD_SPECIAL = re.compile(r"[\\`*_\[\]|]|<(?=[A-Za-z/!?])|^\s*[#>+-]")
+
+
+def md_escape(text):
+    """`text` as literal Markdown: its characters that make markup escaped with a backslash
+    (backslash, backtick, *, _, brackets, |; < before a tag or an autolink; #, >, +, - that
+    would start a heading, quote or list) and line breaks made spaces, so that an engine's,
+    a scene's or a file's name from a bench result or a trace cannot add links, images,
+    HTML, headings or table cells to report.md."""
+    flat = str(text).replace("\r", " ").replace("\n", " ")
+    return _MD_SPECIAL.sub(lambda m: m.group(0)[:-1] + "\\" + m.group(0)[-1], flat)
+
+
 class Outputs:
     """Every file of one report, kept in memory until commit(): then each is written to a
     temporary file beside its destination, and only when all are written are they renamed
@@ -49,13 +91,18 @@ class Outputs:
         try:
             for path, text in self.files.items():
                 os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-                tmp = os.path.join(os.path.dirname(path), f".{os.path.basename(path)}.tmp.{os.getpid()}")
+                refuse_non_regular(path)
+                # An unpredictable name created O_EXCL (mkstemp): a link planted at a
+                # temporary name is never followed.
+                fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path) or ".", prefix=f".{os.path.basename(path)}.tmp.")
                 temps.append((tmp, path))
-                with open(tmp, "w", newline="") as f:
+                os.fchmod(fd, 0o666 & ~current_umask())
+                with os.fdopen(fd, "w", newline="") as f:
                     f.write(text)
                     f.flush()
                     os.fsync(f.fileno())
             for tmp, path in temps:
+                refuse_non_regular(path)
                 os.replace(tmp, path)
         except BaseException:
             for tmp, _ in temps:
@@ -81,12 +128,12 @@ class Doc:
     def h(self, level, text, anchor=None):
         a = f' id="{anchor}"' if anchor else ""
         self.html.append(f"<h{level}{a}>{html.escape(text)}</h{level}>")
-        self.md.append("#" * level + " " + text + "\n")
+        self.md.append("#" * level + " " + md_escape(text) + "\n")
 
     def p(self, text, cls=None):
         c = f' class="{cls}"' if cls else ""
         self.html.append(f"<p{c}>{html.escape(text)}</p>")
-        self.md.append(text + "\n")
+        self.md.append(md_escape(text) + "\n")
 
     def table(self, header, rows, note=None, name="table"):
         cls = ' class="compact"' if len(header) > 9 else ""
@@ -95,10 +142,10 @@ class Doc:
             t.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>")
         t.append("</tbody></table></div>")
         self.html.append("".join(t))
-        self.md.append("| " + " | ".join(str(x) for x in header) + " |")
+        self.md.append("| " + " | ".join(md_escape(x) for x in header) + " |")
         self.md.append("|" + "|".join("---" for _ in header) + "|")
         for r in rows:
-            self.md.append("| " + " | ".join(str(x).replace("|", "\\|") for x in r) + " |")
+            self.md.append("| " + " | ".join(md_escape(x) for x in r) + " |")
         self.md.append("")
         if note:
             self.p(note, "note")
@@ -113,7 +160,7 @@ class Doc:
         self.files.put(os.path.join(self.out, "plots", fname), svg)
         body = svg[svg.find("<svg"):]
         self.html.append(f'<figure>{body}<figcaption>{html.escape(caption)}</figcaption></figure>')
-        self.md.append(f"![{caption}](plots/{fname})\n\n*{caption}*\n")
+        self.md.append(f"![{md_escape(caption)}](plots/{fname})\n\n*{md_escape(caption)}*\n")
 
     def write(self, title):
         css = """body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1180px;margin:2em auto;

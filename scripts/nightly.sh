@@ -77,21 +77,23 @@ write_expect=""
 strict=()
 matrix=""
 is_uint() { [[ "$1" =~ ^[0-9]+$ ]] && [ "$1" -ge 1 ]; }
+# An option's value: "$2" present and not empty, else exit 2 naming the option.
+need() { if [ -z "${2-}" ]; then echo "nightly: $1: missing value; allowed: $3" >&2; exit 2; fi; }
 while [ $# -gt 0 ]; do
   case "$1" in
-    --build) build="${2:?--build needs a folder}"; shift 2 ;;
-    --scenes) set_name="${2:?--scenes needs default, large or all}"; shift 2 ;;
-    --frames) frames="${2:?--frames needs a number}"; shift 2 ;;
-    --every) every="${2:?--every needs a number}"; shift 2 ;;
-    --tolerance) tolerances+=(--tolerance "${2:?--tolerance needs NAME=VALUE}"); shift 2 ;;
-    --timeout) timeout_s="${2:?--timeout needs seconds}"; shift 2 ;;
-    --against) against="${2:?--against needs a list}"; shift 2 ;;
-    --out) out="${2:?--out needs a folder}"; shift 2 ;;
-    --data-dir) data_dir="${2:?--data-dir needs a folder}"; shift 2 ;;
-    --expect) expect="${2:?--expect needs a file or none}"; shift 2 ;;
-    --write-expect) write_expect="${2:?--write-expect needs a file}"; shift 2 ;;
+    --build) need "$1" "${2-}" "a folder"; build="$2"; shift 2 ;;
+    --scenes) need "$1" "${2-}" "default, large or all"; set_name="$2"; shift 2 ;;
+    --frames) need "$1" "${2-}" "a number"; frames="$2"; shift 2 ;;
+    --every) need "$1" "${2-}" "a number"; every="$2"; shift 2 ;;
+    --tolerance) need "$1" "${2-}" "NAME=VALUE"; tolerances+=(--tolerance "$2"); shift 2 ;;
+    --timeout) need "$1" "${2-}" "seconds"; timeout_s="$2"; shift 2 ;;
+    --against) need "$1" "${2-}" "a list"; against="$2"; shift 2 ;;
+    --out) need "$1" "${2-}" "a folder"; out="$2"; shift 2 ;;
+    --data-dir) need "$1" "${2-}" "a folder"; data_dir="$2"; shift 2 ;;
+    --expect) need "$1" "${2-}" "a file or none"; expect="$2"; shift 2 ;;
+    --write-expect) need "$1" "${2-}" "a file"; write_expect="$2"; shift 2 ;;
     --strict) strict=(--strict); shift ;;
-    --matrix) matrix="${2:?--matrix needs full, quick or none}"; shift 2 ;;
+    --matrix) need "$1" "${2-}" "full, quick or none"; matrix="$2"; shift 2 ;;
     -h|--help) usage 0 ;;
     -*) echo "nightly: unknown option '$1'" >&2; usage 2 ;;
     *) scenes+=("$1"); shift ;;

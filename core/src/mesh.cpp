@@ -3,6 +3,7 @@
 
 #include "octocd/mesh.hpp"
 
+#include <assimp/DefaultIOSystem.h>
 #include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
@@ -25,6 +26,23 @@ namespace octocd {
 namespace {
 
 namespace fs = std::filesystem;
+
+/// assimp's file access for one mesh file: the file itself opens, every other name (an
+/// OBJ's `mtllib` material file, a texture, a file named by any importer) is absent. A
+/// mesh file is read as geometry alone: the files it names could be anywhere (/etc/...,
+/// a FIFO that blocks the open forever, /dev/zero), and octocd uses no material.
+class OnlyThisFile : public Assimp::DefaultIOSystem {
+ public:
+  explicit OnlyThisFile(std::string path) : path_(std::move(path)) {}
+  bool Exists(const char* file) const override { return file != nullptr && path_ == file && DefaultIOSystem::Exists(file); }
+  Assimp::IOStream* Open(const char* file, const char* mode) override {
+    if (file == nullptr || path_ != file || mode == nullptr || std::strchr(mode, 'w') != nullptr) return nullptr;
+    return DefaultIOSystem::Open(file, mode);
+  }
+
+ private:
+  std::string path_;
+};
 
 using Tri = std::array<std::uint32_t, 3>;
 
@@ -250,6 +268,33 @@ void check_ply_lists(const std::string& path, std::istream& in, const std::strin
 /// (OBJ has no header) are checked after parsing. A header without `end_header` in its
 /// first 1000 lines is rejected: assimp 5.2's PLY reader never returns on one (found by
 /// fuzz_mesh).
+/// The body of a PLY file holds every element its header declares: each element takes at
+/// least its fixed properties' bytes plus each list's count (binary) or two characters per
+/// property, a digit and a separator (ASCII). A header declaring more than the bytes after
+/// it can hold (a 166-byte file declaring 9,999,999 vertices) is refused before assimp
+/// allocates the declared arrays.
+void check_ply_body_size(const std::string& path, std::istream& in, const std::string& format,
+                         const std::vector<PlyElement>& elements) {
+  const std::streampos here = in.tellg();
+  in.seekg(0, std::ios::end);
+  const std::streampos end = in.tellg();
+  in.seekg(here);
+  if (here < 0 || end < here) return;
+  const auto body = static_cast<std::uint64_t>(end - here);
+  std::uint64_t need = 0;
+  for (const PlyElement& e : elements) {
+    std::uint64_t least = 0;  // bytes of one element at the least
+    for (const PlyProperty& p : e.properties)
+      least += format == "ascii" ? 2 : (p.list ? p.count_size : p.item_size);
+    if (least == 0) continue;
+    if (e.count > body / least || need > body - e.count * least)
+      fail(path, "the PLY header declares " + std::to_string(e.count) + " " + e.name + " elements of at least " +
+                     std::to_string(least) + " bytes each, but only " + std::to_string(body) +
+                     " bytes follow the header (expected a body holding every declared element)");
+    need += e.count * least;
+  }
+}
+
 void check_ply_header(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, "cannot open (expected a readable file)");
@@ -258,6 +303,7 @@ void check_ply_header(const std::string& path) {
   for (int n = 0; n < 1000 && std::getline(in, line); ++n) {
     while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) line.pop_back();
     if (line == "end_header") {
+      check_ply_body_size(path, in, format, elements);
       check_ply_lists(path, in, format, elements);
       return;
     }
@@ -374,6 +420,7 @@ Mesh load_mesh(const std::string& path) {
   if (ext == ".ply") check_ply_header(path);
 
   Assimp::Importer importer;
+  importer.SetIOHandler(new OnlyThisFile(path));  // owned by the importer: no material file is opened
   // Read without post-processing first, so polygon counts can be compared with the OFF
   // header, then triangulate and join identical vertices.
   const aiScene* scene = importer.ReadFile(path, 0);

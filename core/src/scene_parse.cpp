@@ -13,6 +13,7 @@
 #include <sstream>
 #include <utility>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/mesh.hpp"
 #include "octocd/scene.hpp"
@@ -385,8 +386,12 @@ std::size_t body_count(const Scene& scene) {
   return n;
 }
 
-Scene parse_scene(const std::string& text, const std::string& origin, const std::string& data_dir,
-                  std::size_t max_bodies) {
+namespace {
+
+/// parse_scene and parse_embedded_scene: `embedded` confines the meshes to `mesh_dir`
+/// (none resolved when it is empty).
+Scene parse_scene_text(const std::string& text, const std::string& origin, const std::string& data_dir,
+                       std::size_t max_bodies, bool embedded, const std::string& mesh_dir) {
   const Ctx c{origin.empty() ? std::string("<scene>") : origin, std::min(max_bodies, limits::kMaxGeneratedBodies)};
   if (text.size() > limits::kMaxSceneFileBytes)
     c.fail("", "scene text is " + std::to_string(text.size()) + " bytes",
@@ -398,7 +403,10 @@ Scene parse_scene(const std::string& text, const std::string& origin, const std:
   Scene s;
   s.path = origin;
   s.json = text;
-  s.data_dir = choose_data_dir(origin, data_dir);
+  // An embedded scene's default data dir is never found beside the file that holds it.
+  s.data_dir = choose_data_dir(embedded ? std::string() : origin, data_dir);
+  s.embedded = embedded;
+  s.mesh_dir = mesh_dir;
 
   if (!j.contains("name")) c.fail("name", "missing required key", "a non-empty string");
   s.name = c.string(j["name"], "name", "a non-empty string");
@@ -551,9 +559,21 @@ Scene parse_scene(const std::string& text, const std::string& origin, const std:
     c.fail("groups", "the groups' counts add up to " + std::to_string(body_count(s)) + " bodies",
            "at most " + std::to_string(c.max_bodies) + " bodies in a scene");
   for (auto& g : s.groups)
-    if (g.shape.kind == ShapeSpec::Kind::Mesh)
+    if (g.shape.kind == ShapeSpec::Kind::Mesh && !(embedded && mesh_dir.empty()))
       g.shape.mesh_path = resolve_mesh_path(s, g.shape.mesh, child(at("groups", static_cast<std::size_t>(g.index)), "shape.mesh"));
   return s;
+}
+
+}  // namespace
+
+Scene parse_scene(const std::string& text, const std::string& origin, const std::string& data_dir,
+                  std::size_t max_bodies) {
+  return parse_scene_text(text, origin, data_dir, max_bodies, false, "");
+}
+
+Scene parse_embedded_scene(const std::string& text, const std::string& origin, const std::string& mesh_dir,
+                           const std::string& data_dir) {
+  return parse_scene_text(text, origin, data_dir, limits::kMaxBodies, true, mesh_dir);
 }
 
 Scene load_scene(const std::string& path, const std::string& data_dir) {
@@ -565,12 +585,9 @@ Scene load_scene(const std::string& path, const std::string& data_dir) {
   if (!ec && bytes > limits::kMaxSceneFileBytes)
     c.fail("", "scene file is " + std::to_string(bytes) + " bytes",
            "a scene file of at most " + std::to_string(limits::kMaxSceneFileBytes) + " bytes (64 MiB)");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) c.fail("", "cannot open the scene file", "a readable JSON scene file");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) c.fail("", "error reading the scene file", "a readable JSON scene file");
-  return parse_scene(ss.str(), path, data_dir);
+  // Checked again on the open descriptor (a FIFO put there since never blocks).
+  return parse_scene(read_input_file(path, "", "a readable JSON scene file", limits::kMaxSceneFileBytes), path,
+                     data_dir);
 }
 
 }  // namespace octocd

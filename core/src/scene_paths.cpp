@@ -52,6 +52,22 @@ std::string file_type_text(fs::file_type t) {
   }
 }
 
+/// Whether `p` (symbolic links resolved as far as it exists) lies inside folder `root`.
+bool lies_inside(const fs::path& p, const fs::path& root) {
+  if (root.empty()) return false;
+  std::error_code ec;
+  const fs::path a = fs::weakly_canonical(fs::absolute(p, ec), ec);
+  if (ec) return false;
+  const fs::path r = fs::weakly_canonical(fs::absolute(root, ec), ec);
+  if (ec) return false;
+  auto ai = a.begin();
+  for (auto ri = r.begin(); ri != r.end(); ++ri, ++ai) {
+    if (ri->empty()) continue;  // a trailing separator
+    if (ai == a.end() || *ai != *ri) return false;
+  }
+  return true;
+}
+
 /// True when `mesh` is spelled as a file (has a folder or an extension), not a dataset name.
 bool looks_like_file(const std::string& mesh) {
   const fs::path m(mesh);
@@ -87,11 +103,26 @@ std::string resolve_mesh_path(const Scene& scene, const std::string& mesh, const
   const bool file_like = looks_like_file(mesh);
   std::vector<fs::path> searched;
   const fs::path m(mesh);
-  searched.push_back(m.is_absolute() ? m : scene_folder(scene.path) / m);
+  const fs::path base = scene.embedded ? fs::path(scene.mesh_dir) : scene_folder(scene.path);
+  searched.push_back(m.is_absolute() ? m : base / m);
   // A dataset name is looked up in the data dir; a file path (with a folder or an
   // extension) is not: "meshes/bunny.obj" must not become ".../bunny.obj.obj".
   if (!scene.data_dir.empty() && !file_like)
     for (const char* ext : {".obj", ".off", ".ply"}) searched.push_back(fs::path(scene.data_dir) / (mesh + ext));
+  if (scene.embedded) {
+    // A scene found inside a trace names files for whoever wrote the trace: only those
+    // inside --mesh-dir or the data dir are looked at (symbolic links resolved), so the
+    // trace cannot make octocd read, stat or draw any other file.
+    std::vector<fs::path> inside;
+    for (const fs::path& p : searched)
+      if (lies_inside(p, scene.mesh_dir) || lies_inside(p, scene.data_dir)) inside.push_back(p);
+    if (inside.empty())
+      c.fail(key, "mesh \"" + mesh + "\" named by the scene inside the trace lies outside --mesh-dir " +
+                      scene.mesh_dir + " and the data dir " + scene.data_dir,
+             "a dataset name (found in the data dir: --data-dir, $OCTOCD_DATA_DIR), or a mesh file inside the folder "
+             "given by --mesh-dir DIR (default: the trace's folder), named relative to it");
+    searched = std::move(inside);
+  }
   // stat only, never open here: opening a FIFO blocks, a device never ends. The first
   // regular file wins; when there is none, a place that exists as something else (a
   // folder, FIFO, device, socket) is named with its type rather than "not found".

@@ -9,6 +9,7 @@
 
 
 #include "octocd/trace.hpp"
+#include "octocd/atomic_file.hpp"
 #include "octocd/engine_registry.hpp"
 
 #include <fcntl.h>
@@ -482,31 +483,43 @@ TraceWriter::TraceWriter(const std::string& path, const TraceMetadata& meta,
   check(H5Pset_cache(fapl, 0, 101, 64 * 1024, 1.0), path, "H5Pset_cache");
   // HDF5 locks a new file (flock) while it creates it and until SWMR writing starts; a
   // reader in another process (h5py, a viewer, a wait on the trace) that opens it in that
-  // window makes the lock fail (EAGAIN: 140 of 300 runs with one reader in a loop). So a
-  // new trace, or one replacing a regular file, is made as PATH.tmp.PID and renamed onto
-  // PATH once SWMR writing started: readers never see it locked, and an earlier trace at
-  // PATH stays whole until then. Other paths (a device such as /dev/full, a FIFO, a
-  // symbolic link), and a file in a folder this process cannot write to (the temporary
-  // file could not be made there), are created in place as before.
-  struct stat st {};
-  const bool staged = (::lstat(path.c_str(), &st) != 0 ? errno == ENOENT : S_ISREG(st.st_mode)) &&
-                      ::access(parent.empty() ? "." : parent.c_str(), W_OK) == 0;
-  const std::string made = staged ? path + ".tmp." + std::to_string(::getpid()) : path;
+  // window makes the lock fail (EAGAIN: 140 of 300 runs with one reader in a loop). So the
+  // trace is made as PATH.tmp.XXXXXX beside PATH (mkstemp: an unpredictable name created
+  // O_EXCL, so nothing planted there is followed) and renamed onto PATH once SWMR writing
+  // started: readers never see it locked, and an earlier trace at PATH stays whole until
+  // then. PATH must be absent or a regular file: a device (/dev/full), a FIFO, a folder or
+  // a symbolic link there is InputError, never written through (atomic_file.hpp).
+  const TemporaryFile tmp = create_temporary_beside(path, "trace");
+  const std::string& made = tmp.path;
+  struct stat made_st {};
+  int made_fd = tmp.fd;  // open until HDF5 has the file, so that its inode cannot be reused
+  const bool stat_ok = ::fstat(made_fd, &made_st) == 0;
   try {
     try {
       m.file = Handle(check(H5Fcreate(made.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl), path, "create file"));
+      // The file HDF5 opened by name is the one mkstemp created (not one swapped in since).
+      void* handle = nullptr;
+      struct stat opened {};
+      if (H5Fget_vfd_handle(m.file, H5P_DEFAULT, &handle) < 0 || handle == nullptr ||
+          ::fstat(*static_cast<int*>(handle), &opened) != 0 || !stat_ok || opened.st_ino != made_st.st_ino ||
+          opened.st_dev != made_st.st_dev)
+        throw Hdf5Failure(path, "create file", "the temporary file " + made + " was replaced while it was opened");
+      ::close(made_fd);
+      made_fd = -1;
       create_layout(meta, bodies);
     } catch (const Hdf5Failure& e) {
       m.abandon();
       throw RuntimeError(m.failure("creating the file", e.reason()));
     }
-    if (staged && std::rename(made.c_str(), path.c_str()) != 0) {
-      const int e = errno;
+    try {
+      rename_over(made, path, "trace");
+    } catch (...) {
       m.abandon();
-      throw RuntimeError(m.failure("renaming " + made + " onto it", std::strerror(e)));
+      throw;
     }
   } catch (...) {
-    if (staged) ::unlink(made.c_str());
+    if (made_fd >= 0) ::close(made_fd);
+    ::unlink(made.c_str());
     throw;
   }
 }

@@ -12,6 +12,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/xml.hpp"
@@ -94,11 +95,11 @@ std::string write_xdmf(const detail::Hdf5Reader& h5, const TraceSummary& sum) {
   }
   o << "    </Grid>\n  </Domain>\n</Xdmf>\n";
 
-  std::ofstream out(xmf, std::ios::binary | std::ios::trunc);
-  if (!out) throw RuntimeError("trace '" + path + "': cannot write the XDMF sidecar '" + xmf + "'");
-  out << o.str();
-  out.close();
-  if (!out) throw RuntimeError("trace '" + path + "': writing the XDMF sidecar '" + xmf + "' failed");
+  try {  // beside it under an unpredictable name, then renamed (atomic_file.hpp)
+    write_file_atomically(xmf, o.str(), "XDMF sidecar");
+  } catch (const std::runtime_error& e) {
+    throw RuntimeError("trace '" + path + "': " + e.what());
+  }
   return xmf;
 }
 

@@ -1317,7 +1317,8 @@ PYBIND11_MODULE(_octocd, m) {
           id.tol = o.tol;
           nlohmann::ordered_json meta = {{"engine", info.engine}, {"frames", info.frames}, {"every", every}};
           meta["shard"] = shard_json(o.shard, id);
-          doc = results_json(rs, trace_run(path), &report, meta).dump();
+          doc = results_json(rs, trace_run(path), &report, meta)
+                    .dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
         }
         return py::make_tuple(out_results(rs, expect_json ? &report : nullptr), out_outcomes(report),
                               report.exit_code(strict), doc);

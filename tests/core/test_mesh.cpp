@@ -2,8 +2,12 @@
 // (errors included) and, when the dataset cache exists, the fetched datasets.
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -372,4 +376,57 @@ TEST(LoadMesh, APlyListLongerThanTheCornerLimitIsRefusedBeforeAssimp) {
     expect_load_error(write_temp(little ? "huge-list-le.ply" : "huge-list-be.ply", f),
                       "PLY face 0 declares a list of " + std::to_string(c) + " items");
   }
+}
+
+// Issue 57. Before: assimp allocated and parsed the arrays a PLY header declares, whatever
+// the file holds: a 166-byte file declaring 9,999,999 vertices took seconds and hundreds of
+// MB. Now the header's counts are checked against the bytes after it first.
+TEST(LoadMesh, APlyHeaderDeclaringMoreThanItsBodyHoldsIsRefusedAtOnce) {
+  const std::string text =
+      "ply\nformat ascii 1.0\nelement vertex 9999999\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  const std::string path = write_temp("declares-ten-million.ply", text);
+  const auto t0 = std::chrono::steady_clock::now();
+  expect_load_error(path, "declares 9999999 vertex elements of at least 6 bytes each, but only 26 bytes follow");
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 0.5);
+  // Binary: 12 bytes a vertex; the same 3 vertices with 9,999,999 declared.
+  std::string bin = "ply\nformat binary_little_endian 1.0\nelement vertex 9999999\nproperty float x\nproperty float y\n"
+                    "property float z\nend_header\n";
+  bin += std::string(36, '\0');
+  expect_load_error(write_temp("declares-ten-million-binary.ply", bin),
+                    "declares 9999999 vertex elements of at least 12 bytes each, but only 36 bytes follow");
+  // A body holding every declared element is read as before.
+  const std::string fine =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  EXPECT_EQ(octocd::load_mesh(write_temp("three.ply", fine)).triangles.size(), 1u);
+}
+
+// Issue 57. Before: an OBJ's `mtllib` was opened by assimp wherever it pointed: a FIFO
+// there blocked the load forever (a device or /etc/... would be read). Now assimp opens
+// the mesh file alone, so the FIFO is never opened and the geometry loads. The load runs in
+// a child that an alarm ends, so the test fails rather than hangs.
+TEST(LoadMesh, AnObjMaterialFileIsNeverOpened) {
+  const std::string obj = write_temp("with-mtllib.obj", "mtllib blocks.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                                          "v 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n");
+  const std::string fifo = (fs::path(obj).parent_path() / "blocks.mtl").string();
+  fs::remove(fifo);
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    ::alarm(20);
+    try {
+      const Mesh m = octocd::load_mesh(obj);
+      ::_exit(m.triangles.size() == 4 ? 0 : 3);
+    } catch (...) {
+      ::_exit(4);
+    }
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  fs::remove(fifo);
+  ASSERT_FALSE(WIFSIGNALED(status)) << "the load blocked on the FIFO named by mtllib (signal " << WTERMSIG(status)
+                                    << ")";
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "3: not the 4 triangles; 4: an exception";
 }

@@ -153,3 +153,38 @@ def test_a_signal_to_octocd_ends_the_report_script_too(tmp_path, sig, code):
         if p.poll() is None:
             p.kill()
             p.wait()
+
+
+def test_markdown_in_a_trace_and_links_planted_at_report_files(tmp_path):
+    """Issue 57. Before: a trace's scene name went into report.md as written (a Markdown link,
+    an image, a table cell break), and each report file was staged as .NAME.tmp.PID: a link
+    planted there (or at the file) was followed. Now the text is escaped and the temporary
+    name is unpredictable (mkstemp); a link at a report file's own path is exit 2."""
+    t = trace(tmp_path)
+    with h5py.File(t, "r+") as f:
+        f.attrs["scene_name"] = "evil](http://x.invalid/) ![i](http://x.invalid/p.png) | cell <b>"
+    out = tmp_path / "out"
+    r = report(t, "-o", out)
+    assert r.returncode == 0, r.stderr
+    md = (out / "report.md").read_text()
+    for text in ("](http://x.invalid/", "[i]", "<b>", "| cell"):  # no link, image, tag or cell from the trace
+        assert md.count(text) == md.count("\\" + text), (text, md)
+    assert r"evil\](http://x.invalid/) !\[i\](http://x.invalid/p.png) \| cell \<b>" in md, md
+    # A rerun with links planted at the old predictable temporary names follows none of them.
+    victim = tmp_path / "victim"
+    victim.write_text("precious\n")
+    script = (f"for f in index.html report.md; do ln -s {victim} {out}/.$f.tmp.$$; done; "
+              f"exec {BIN} report {t} -o {out}")
+    r = subprocess.run(["sh", "-c", script], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert victim.read_text() == "precious\n"
+    # A link at report.md itself is refused, naming it; the link and its target stay.
+    for name in os.listdir(out):
+        if os.path.islink(out / name):
+            os.unlink(out / name)
+    os.unlink(out / "report.md")
+    os.symlink(victim, out / "report.md")
+    r = report(t, "-o", out)
+    one_line_error(r)
+    assert f"{out}/report.md: a symbolic link, not a regular file" in r.stderr, r.stderr
+    assert victim.read_text() == "precious\n" and os.path.islink(out / "report.md")

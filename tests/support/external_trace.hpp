@@ -137,7 +137,7 @@ struct Trace {
       H5Sclose(space);
     };
     str_attr("format", "octocd-trace");
-    str_attr("engine", "test-engine");
+    if (!string_attrs.count("engine")) str_attr("engine", "test-engine");
     for (const auto& [name, value] : string_attrs) str_attr(name.c_str(), value.c_str());
     for (const auto& [name, value] : number_attrs) num_attr(name.c_str(), value);
     {

@@ -182,11 +182,8 @@ Expectations parse_expectations_text(const std::string& text, const std::string&
 }
 
 Expectations load_expectations(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(fmt::format("--expect: cannot read '{}'; allowed: an expectations file (JSON)", path));
-  std::ostringstream s;
-  s << in.rdbuf();
-  return parse_expectations_text(s.str(), path);
+  // A regular file of at most 64 MiB, checked before it is read (a FIFO never blocks).
+  return parse_expectations_text(read_input_file(path, "--expect", "an expectations file (JSON)"), path);
 }
 
 bool RunName::matches(const Expectation& e) const {
@@ -346,11 +343,12 @@ void write_expectations(const std::string& path, const RunName& run, const std::
   std::vector<Expectation> all;
   std::string comment;
   std::error_code ec;
-  if (std::filesystem::exists(path, ec)) {
-    for (Expectation& e : load_expectations(path).entries)
+  if (std::filesystem::exists(std::filesystem::symlink_status(path, ec))) {
+    check_output_file(path, "--write-expect");  // a regular file: a FIFO is never opened
+    const std::string text = read_input_file(path, "--write-expect", "an expectations file (JSON) to add to");
+    for (Expectation& e : parse_expectations_text(text, path).entries)
       if (!run.matches(e)) all.push_back(std::move(e));
-    std::ifstream in(path, std::ios::binary);
-    const nlohmann::json old = nlohmann::json::parse(in, nullptr, false);
+    const nlohmann::json old = nlohmann::json::parse(text, nullptr, false);
     if (old.is_object() && old.contains("comment") && old["comment"].is_string()) comment = old["comment"];
   }
   all.insert(all.end(), entries.begin(), entries.end());
@@ -422,7 +420,8 @@ nlohmann::ordered_json results_json(const std::vector<ValidationResult>& results
 }
 
 void write_json_file(const std::string& path, const nlohmann::ordered_json& doc, const std::string& what) {
-  write_file_atomically(path, doc.dump(2) + "\n", what);  // no half or 0-byte file on a full disk
+  // Text from a trace (an engine's name, a file name) may hold bytes that are not UTF-8.
+  write_file_atomically(path, doc.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n", what);  // no half or 0-byte file on a full disk
 }
 
 }  // namespace octocd

@@ -11,6 +11,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 
 namespace octocd {
@@ -70,11 +71,10 @@ nlohmann::ordered_json shard_json(ShardSpec s, const ShardIdentity& id) {
 MergedValidation merge_validations(const std::vector<std::string>& files) {
   std::vector<json> docs;
   for (const std::string& f : files) {
-    std::ifstream in(f, std::ios::binary);
-    if (!in) throw InputError(fmt::format("--merge: cannot read '{}'; allowed: JSON files written by `validate "
-                                          "--trace-in ... --shard i/N --json FILE`",
-                                          f));
-    json d = json::parse(in, nullptr, false);
+    // A regular file of at most 64 MiB, checked before it is read (a FIFO never blocks).
+    const std::string text = read_input_file(
+        f, "--merge", "JSON files written by `validate --trace-in ... --shard i/N --json FILE`");
+    json d = json::parse(text, nullptr, false);
     if (d.is_discarded())
       throw InputError(fmt::format("--merge: {}: not JSON; allowed: the --json file of `validate --shard`", f));
     docs.push_back(std::move(d));

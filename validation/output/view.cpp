@@ -18,6 +18,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
 #include "octocd/physics.hpp"
@@ -199,6 +200,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
   // declared collision shapes, the separating-axis settings of the contact-geometry row.
   ExternalOptions eo;
   eo.engine = info.engine;
+  eo.mesh_dir = settings.mesh_dir;
   eo.octocd_engine = info.octocd_conventions;  // declared by the trace, never by its engine name
   const ExternalValidator holder(in->bodies(), eo);
   const Model& model = holder.model();
@@ -428,18 +430,14 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
       settings.has_pair   ? fmt::format("octocd view: frame {}, pair ({}, {})", frame, a, b)
       : settings.has_body ? fmt::format("octocd view: frame {}, body {}", frame, settings.body)
                           : fmt::format("octocd view: frame {}", frame);
-  const std::string page = detail::view_page_html(title, json_safe(data.dump()), js);
+  const std::string page = detail::view_page_html(title, json_safe(data.dump(-1, ' ', false, Json::error_handler_t::replace)), js);
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   const fs::path path = fs::path(out_dir) / name;
-  {
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    out << page;
-    out.close();
-    if (!out)
-      throw RuntimeError(fmt::format("view: {}: cannot be written{}", path.string(),
-                                     ec ? fmt::format(" ({})", ec.message()) : std::string()));
-  }
+  if (ec)
+    throw RuntimeError(fmt::format("view: {}: the folder cannot be created ({})", out_dir, ec.message()));
+  // Beside its name under an unpredictable one, then renamed: never written in place.
+  write_file_atomically(path.string(), page, "view");
   ViewPage result;
   result.path = path.string();
   result.bytes = page.size();

@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <limits>
 #include <map>
 #include <tuple>
@@ -386,7 +387,14 @@ ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const Externa
   const std::string& origin = options.engine;
   auto model = std::make_shared<Model>();
   if (!bodies.scene_json.empty()) {
-    *model = *build_model(parse_scene(bodies.scene_json, origin + " scene"));
+    // A trace's scene: its meshes only from --mesh-dir (default: the trace's folder) or the data dir.
+    const std::string mesh_dir =
+        !options.mesh_dir.empty() ? options.mesh_dir
+                                  : std::filesystem::absolute(bodies.scene_file).parent_path().string();
+    *model = *build_model(bodies.scene_file.empty()
+                              ? parse_scene(bodies.scene_json, origin + " scene")
+                              : parse_embedded_scene(bodies.scene_json,
+                                                     bodies.scene_file + ": / (root attribute scene)", mesh_dir));
     s.domain_given = true;
     const std::size_t n = model->bodies.size();
     if (!bodies.local_boxes.empty() && bodies.local_boxes.size() != n)

@@ -21,7 +21,7 @@ const char* const kRotation = "/states/orientation and /states/angular_velocity 
 int scene_iterations(const ExternalBodies& bodies) {
   if (bodies.scene_json.empty()) return 1;
   try {
-    return parse_scene(bodies.scene_json, "scene").response.iterations;
+    return parse_embedded_scene(bodies.scene_json, "scene", "").response.iterations;  // no mesh looked up
   } catch (const InputError&) {
     return 1;
   }

@@ -18,6 +18,7 @@
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
 #include "octocd/shards.hpp"
+#include "octocd/text.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/scene.hpp"
 #include "hdf5_handle.hpp"  // core/src (private include)
@@ -55,8 +56,9 @@ class TraceIn {
           "1 or 2 (docs/trace-format.md, External traces)");
     info.version = static_cast<int>(version);
     const std::string engine = string_attr("engine");
-    if (!engine.empty()) info.engine = engine;
+    if (!engine.empty()) info.engine = printable(engine);  // shown and stored: control bytes as \xNN
     bodies.scene_json = string_attr("scene");
+    bodies.scene_file = path_;  // untrusted: its meshes confined (parse_embedded_scene)
     info.has_scene = !bodies.scene_json.empty();
     if (has_attr("response_model")) {
       const std::string model = string_attr("response_model");
@@ -289,7 +291,8 @@ class TraceIn {
   /// (the root attributes and /bodies tables of version 2 override them); its dt and
   /// gravity for the "integrated" detection pose.
   void scene_defaults() {
-    const Scene scene = parse_scene(bodies.scene_json, path_ + ": / (root attribute scene)");
+    // The numbers only: no mesh named by the trace is looked up here.
+    const Scene scene = parse_embedded_scene(bodies.scene_json, path_ + ": / (root attribute scene)", "");
     bodies.physics.mu = scene.response.mu_static;
     bodies.physics.restitution = scene.response.restitution;
     bodies.physics.slop = scene.response.slop;
@@ -675,7 +678,8 @@ class TraceIn {
 
   /// Values that arithmetic must not overflow (docs/trace-format.md, "Security rules and
   /// limits"): every position, position + local extent and AABB corner within
-  /// trace_limits::kMaxCoordinate, every velocity within kMaxSpeed; checked before FCL or
+  /// trace_limits::kMaxCoordinate, every velocity within kMaxSpeed, every angular velocity
+  /// within kMaxAngularSpeed; checked before FCL or
   /// any tree is built from them.
   void check_magnitudes(const FrameRecord& rec) const {
     const auto coord = [&](const std::vector<Vec3>& xs, const char* name, bool with_extent) {
@@ -698,6 +702,12 @@ class TraceIn {
           if (!(std::fabs((*v)[i][k]) <= trace_limits::kMaxSpeed))
             bad("/states/velocity", fmt::format("frame {}: body {}: {}", rec.frame, i, (*v)[i][k]),
                 fmt::format("|velocity| <= {:g} m/s per axis", trace_limits::kMaxSpeed));
+    for (const auto* w : {&rec.w_pre, &rec.w_post})
+      for (std::size_t i = 0; i < w->size(); ++i)
+        for (int k = 0; k < 3; ++k)
+          if (!(std::fabs((*w)[i][k]) <= trace_limits::kMaxAngularSpeed))
+            bad("/states/angular_velocity", fmt::format("frame {}: body {}: {}", rec.frame, i, (*w)[i][k]),
+                fmt::format("|angular velocity| <= {:g} rad/s per axis", trace_limits::kMaxAngularSpeed));
     const std::string impulse_allowed =
         fmt::format("|impulse| <= {:g} N s (trace_limits::kMaxImpulse)", trace_limits::kMaxImpulse);
     for (std::size_t k = 0; k < rec.contacts.size(); ++k) {

@@ -144,6 +144,11 @@ struct Scene {
   MidphaseConfig midphase;      ///< "midphase.levels"
   int mesh_octree_depth = 2;    ///< D_m in [0, 10]; -1 = `auto`
   std::string data_dir;      ///< where dataset meshes are looked up
+  /// A scene found inside another file (parse_embedded_scene: a trace's `scene` attribute,
+  /// untrusted): its meshes resolve only to files inside `mesh_dir` or `data_dir`, never
+  /// elsewhere (resolve_mesh_path). False for a scene file or text the caller gives.
+  bool embedded = false;
+  std::string mesh_dir;      ///< embedded: the folder its mesh files may lie in (besides data_dir)
   /// Scene key `rotation` (default false): the bodies rotate (design.md section 13). Only
   /// `--engine bullet` runs such a scene (BulletWorld's rotation mode); `octocd run
   /// --rotation` sets it on the loaded scene.
@@ -183,6 +188,17 @@ Scene load_scene(const std::string& path, const std::string& data_dir = "");
 Scene parse_scene(const std::string& text, const std::string& origin,
                   const std::string& data_dir = "", std::size_t max_bodies = limits::kMaxBodies);
 
+/// A scene found inside an untrusted file (a trace's root attribute `scene`), parsed and
+/// checked as parse_scene with Scene::embedded set: the files its meshes name are looked up
+/// only inside `mesh_dir` (relative names resolve against it; absolute ones must lie in
+/// it) and, for dataset names, in the data dir; a name that resolves elsewhere (an absolute
+/// path, `..`, a symbolic link leading out; symbolic links resolved) is InputError naming
+/// the key, the file and `--mesh-dir` (docs/robustness.md, "Untrusted traces"). An empty
+/// `mesh_dir` resolves no mesh at all (Mesh groups keep an empty mesh_path): for callers
+/// that need the scene's numbers only, never its geometry.
+Scene parse_embedded_scene(const std::string& text, const std::string& origin, const std::string& mesh_dir,
+                           const std::string& data_dir = "");
+
 /// The data dirs tried, in order, when neither `--data-dir` nor $OCTOCD_DATA_DIR is
 /// given (docs/scenes.md, "Mesh resolution"): `<scene folder>/../cache` (the scene's
 /// folder made absolute; omitted when `origin` is "") and the `datasets/cache` of the
@@ -191,7 +207,8 @@ Scene parse_scene(const std::string& text, const std::string& origin,
 std::vector<std::string> default_data_dirs(const std::string& origin);
 
 /// Resolves a group's mesh name to a file: an existing regular file (absolute, or
-/// relative to the folder of Scene::path), else, when `mesh` has no folder and no
+/// relative to the folder of Scene::path; for an embedded scene relative to
+/// Scene::mesh_dir and inside it or the data dir only), else, when `mesh` has no folder and no
 /// extension (a dataset name), DATA_DIR/NAME.obj, NAME.off, NAME.ply (first found;
 /// DATA_DIR = Scene::data_dir). Throws InputError naming `key` and the places searched,
 /// with advice that fits (run datasets/fetch.sh only for a shipped dataset name or a

@@ -61,6 +61,10 @@ constexpr std::uint64_t kMaxChunkBytes = 256ull << 20;
 constexpr double kMaxCoordinate = 1e6;
 /// Largest |velocity component| (m/s) and |gravity component| (m/s^2).
 constexpr double kMaxSpeed = 1e6;
+/// Largest |angular velocity component| (rad/s): 10^6 (a bead spinning at 160 kHz; scenes
+/// allow 10^3), so that omega dt, omega x r and I omega stay finite in float32: 3e38 rad/s
+/// made the integrated orientation and the energy infinite.
+constexpr double kMaxAngularSpeed = 1e6;
 /// Largest time step dt (s).
 constexpr double kMaxDt = 10.0;
 /// Smallest time step dt (s): 10^-7 s, ten times below the microsecond steps of stiff

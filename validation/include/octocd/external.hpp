@@ -73,6 +73,11 @@ struct ExternalBodies {
   /// then each group's bodies in order) with their meshes become the bodies, and
   /// `local_boxes` / `inverse_mass`, when also given, must match them.
   std::string scene_json;
+  /// The file `scene_json` was read from (a trace's root attribute `scene`): an untrusted
+  /// scene, parsed with parse_embedded_scene so that its meshes are looked up only inside
+  /// ExternalOptions::mesh_dir (default: this file's folder) and the data dir. Empty when
+  /// the caller gives the scene itself (its meshes resolve as parse_scene's).
+  std::string scene_file;
   /// Without a scene: time step (s, > 0) and gravity (m/s^2) used to integrate x_pre,
   /// v_pre when a frame gives states but no AABBs, and for the derived velocity changes.
   float dt = 0.001f;
@@ -92,6 +97,9 @@ struct ExternalTraceInfo;  // below: what a trace holds
 struct ExternalOptions {
   /// Names the engine in verdicts ("engine 'NAME' misses pair ...") and errors.
   std::string engine = "external";
+  /// `--mesh-dir`: the only folder (besides the data dir) where the meshes named by a
+  /// trace's scene (ExternalBodies::scene_file) are looked up; "" = the trace's folder.
+  std::string mesh_dir;
   /// Compare Bullet's and FCL's broadphases with `flat` beside the engine's pairs, and
   /// judge normals against FCL/libccd.
   bool against_fcl = true;

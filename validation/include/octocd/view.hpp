@@ -52,6 +52,9 @@ struct ViewSettings {
   std::size_t max_bodies = 64;
   /// Most bodies drawn without an item (the first bodies by index; the page says so).
   std::size_t max_bodies_all = 500;
+  /// `--mesh-dir`: where the meshes named by the trace's scene may lie (ExternalOptions::
+  /// mesh_dir; "" = the trace's folder).
+  std::string mesh_dir;
   /// Debian's libjs-three folder (three.min.js; examples/js/...).
   std::string three_dir = "/usr/share/javascript/three";
   /// The file written in the output folder; "": view-fF-pair-A-B.html, view-fF-body-I.html
@@ -89,7 +92,8 @@ struct ViewPage {
 /// refuses (its message: file, dataset, problem, allowed), `--frame` outside the trace,
 /// `--pair` / `--body` naming a body that does not exist (or a pair of one body),
 /// `--window` out of range; RuntimeError when libjs-three is missing under
-/// settings.three_dir or the page cannot be written. A pair without a contact row in the
+/// settings.three_dir or the page cannot be written (it is written beside its name
+/// and renamed, atomic_file.hpp; a FIFO, device, folder or link at its name is InputError). A pair without a contact row in the
 /// frame is drawn, with a note on the page and in ViewPage::note.
 ViewPage write_view(const std::string& trace, const ViewSettings& settings, const std::string& out_dir);
 
