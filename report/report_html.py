@@ -63,16 +63,18 @@ def refuse_non_regular(path):
 
 
 _MD_SPECIAL = re.compile(r"[\\`*_\[\]|]|<(?=[A-Za-z/!?])|^\s*[#>+-]")
+_MD_SPECIAL_CELL = re.compile(r"[\\`*_\[\]|]|<(?=[A-Za-z/!?])")
 
 
-def md_escape(text):
+def md_escape(text, cell=False):
     """`text` as literal Markdown: its characters that make markup escaped with a backslash
     (backslash, backtick, *, _, brackets, |; < before a tag or an autolink; #, >, +, - that
     would start a heading, quote or list) and line breaks made spaces, so that an engine's,
     a scene's or a file's name from a bench result or a trace cannot add links, images,
-    HTML, headings or table cells to report.md."""
+    HTML, headings or table cells to report.md. `cell`: a table cell's text, which starts
+    no line (a leading #, >, +, - stays as it is)."""
     flat = str(text).replace("\r", " ").replace("\n", " ")
-    return _MD_SPECIAL.sub(lambda m: m.group(0)[:-1] + "\\" + m.group(0)[-1], flat)
+    return (_MD_SPECIAL_CELL if cell else _MD_SPECIAL).sub(lambda m: m.group(0)[:-1] + "\\" + m.group(0)[-1], flat)
 
 
 class Outputs:
@@ -142,10 +144,10 @@ class Doc:
             t.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>")
         t.append("</tbody></table></div>")
         self.html.append("".join(t))
-        self.md.append("| " + " | ".join(md_escape(x) for x in header) + " |")
+        self.md.append("| " + " | ".join(md_escape(x, cell=True) for x in header) + " |")
         self.md.append("|" + "|".join("---" for _ in header) + "|")
         for r in rows:
-            self.md.append("| " + " | ".join(md_escape(x) for x in r) + " |")
+            self.md.append("| " + " | ".join(md_escape(x, cell=True) for x in r) + " |")
         self.md.append("")
         if note:
             self.p(note, "note")

@@ -388,9 +388,10 @@ ExternalValidator::ExternalValidator(const ExternalBodies& bodies, const Externa
   auto model = std::make_shared<Model>();
   if (!bodies.scene_json.empty()) {
     // A trace's scene: its meshes only from --mesh-dir (default: the trace's folder) or the data dir.
-    const std::string mesh_dir =
-        !options.mesh_dir.empty() ? options.mesh_dir
-                                  : std::filesystem::absolute(bodies.scene_file).parent_path().string();
+    const std::string mesh_dir = !options.mesh_dir.empty() ? options.mesh_dir
+                                 : bodies.scene_file.empty()
+                                     ? std::string()
+                                     : std::filesystem::absolute(bodies.scene_file).parent_path().string();
     *model = *build_model(bodies.scene_file.empty()
                               ? parse_scene(bodies.scene_json, origin + " scene")
                               : parse_embedded_scene(bodies.scene_json,
