@@ -945,15 +945,7 @@ void BulletWorld::Impl::fill_record() {
       c.point = 0.5f * (p0 + p1);
       c.jn = cp.m_appliedImpulse;
       const Vec3 j_a = swap ? -friction : friction;  // friction impulse on A
-      // v_t: A's velocity relative to B's at the point, before the solver (v_pre + dt g
-      // on dynamic bodies, w_pre), tangential part w.r.t. the normal.
-      auto point_velocity = [&](std::uint32_t i) {
-        Vec3 v = r.v_pre[i];
-        if (w[i] > 0.0f) v += static_cast<float>(dt) * gravity;
-        return r.w_pre.size() > i ? v + cross(r.w_pre[i], c.point - r.x_pre[i]) : v;
-      };
-      const Vec3 v_rel = point_velocity(ia) - point_velocity(ib);
-      c.jt = scalar_jt(j_a, v_rel, c.normal);
+      c.jt = row_scalar_jt(r, c, j_a, w, dt, gravity);
       r.contacts.push_back(c);
       jt3.push_back(j_a);
     }

@@ -18,6 +18,16 @@ float scalar_jt(const Vec3& j_t, const Vec3& v_rel, const Vec3& normal) {
   return vt_len > 1e-6f ? dot(j_t, -(1.0f / vt_len) * v_t) : length(j_t);
 }
 
+float row_scalar_jt(const FrameRecord& r, const ContactRecord& c, const Vec3& j_a, const std::vector<float>& w,
+                    double dt, const Vec3& gravity) {
+  auto point_velocity = [&](std::uint32_t i) {
+    Vec3 v = r.v_pre[i];
+    if (w[i] > 0.0f) v += static_cast<float>(dt) * gravity;
+    return r.w_pre.size() > i ? v + cross(r.w_pre[i], c.point - r.x_pre[i]) : v;
+  };
+  return scalar_jt(j_a, point_velocity(c.pair.a) - point_velocity(c.pair.b), c.normal);
+}
+
 void finish_manifold_record(FrameRecord& r, std::vector<ContactRecord>& rows, std::vector<Vec3>& jt3) {
   std::vector<std::size_t> order(rows.size());
   std::iota(order.begin(), order.end(), std::size_t{0});

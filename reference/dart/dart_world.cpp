@@ -203,15 +203,7 @@ void DartWorld::Impl::fill_record() {
     c.point = to_vec3(ct.point);
     c.jn = static_cast<float>(jn);
     const Vec3 jt_a = to_vec3(j_t);
-    // v_t: A's velocity relative to B's at the point before the solver (v_pre + dt g on
-    // dynamic bodies, w_pre), tangential part (docs/trace-format.md, "The sign of jt").
-    auto point_velocity = [&](std::uint32_t i) {
-      Vec3 v = r.v_pre[i];
-      if (dynamic(i)) v += static_cast<float>(dt) * gravity;
-      return v + cross(r.w_pre[i], c.point - r.x_pre[i]);
-    };
-    const Vec3 v_rel = point_velocity(c.pair.a) - point_velocity(c.pair.b);
-    c.jt = scalar_jt(jt_a, v_rel, c.normal);
+    c.jt = row_scalar_jt(r, c, jt_a, w, dt, gravity);
     rows.push_back(c);
     jt3.push_back(jt_a);
   }

@@ -214,15 +214,7 @@ void MujocoWorld::Impl::fill_record() {
     // The tangential impulse on A: geom2 gets +ft, geom1 -ft.
     const double sa = a_is_geom1 ? -dt : dt;
     const Vec3 j_a{static_cast<float>(sa * ft[0]), static_cast<float>(sa * ft[1]), static_cast<float>(sa * ft[2])};
-    // v_t: A's velocity relative to B's at the point before the solver (v_pre + dt g on
-    // dynamic bodies, w_pre), tangential part (docs/trace-format.md, "The sign of jt").
-    auto point_velocity = [&](std::uint32_t i) {
-      Vec3 v = r.v_pre[i];
-      if (w[i] > 0.0f) v += static_cast<float>(dt) * gravity;
-      return v + cross(r.w_pre[i], row.point - r.x_pre[i]);
-    };
-    const Vec3 v_rel = point_velocity(row.pair.a) - point_velocity(row.pair.b);
-    row.jt = scalar_jt(j_a, v_rel, row.normal);
+    row.jt = row_scalar_jt(r, row, j_a, w, dt, gravity);
     rows.push_back(row);
     jt3.push_back(j_a);
   }

@@ -189,15 +189,7 @@ void OdeWorld::Impl::fill_record() {
     c.point = to_vec3(row.geom.pos);
     c.jn = static_cast<float>(jn);
     const Vec3 j_t{static_cast<float>(jt_d[0]), static_cast<float>(jt_d[1]), static_cast<float>(jt_d[2])};
-    // v_t: A's velocity relative to B's at the point before the solver (v_pre + dt g on
-    // dynamic bodies, w_pre), its part orthogonal to the normal.
-    auto point_velocity = [&](std::uint32_t i) {
-      Vec3 v = r.v_pre[i];
-      if (w[i] > 0.0f) v += static_cast<float>(dt) * gravity;
-      return v + cross(r.w_pre[i], c.point - r.x_pre[i]);
-    };
-    const Vec3 v_rel = point_velocity(c.pair.a) - point_velocity(c.pair.b);
-    c.jt = scalar_jt(j_t, v_rel, c.normal);
+    c.jt = row_scalar_jt(r, c, j_t, w, dt, gravity);
     r.contacts.push_back(c);
     jt3.push_back(j_t);
   }

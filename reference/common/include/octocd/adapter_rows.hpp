@@ -18,6 +18,13 @@ namespace octocd {
 /// the point, `v_rel` (m/s); |j_t| when |v_t| <= 1e-6 m/s. >= 0 when friction opposes sliding.
 float scalar_jt(const Vec3& j_t, const Vec3& v_rel, const Vec3& normal);
 
+/// scalar_jt of row `c` of record `r`, from the tangential impulse on A `j_a` (N s,
+/// world): v_rel is A's velocity relative to B's at c.point before the solver, each body's
+/// r.v_pre plus dt `gravity` where its inverse mass `w[i]` (1/kg) is > 0, plus
+/// r.w_pre x (c.point - r.x_pre) where the record has angular velocities. `dt` in s.
+float row_scalar_jt(const FrameRecord& r, const ContactRecord& c, const Vec3& j_a, const std::vector<float>& w,
+                    double dt, const Vec3& gravity);
+
 /// Finishes a manifold record: `rows` (one per engine contact, pair (a, b) with a < b) and
 /// their tangential impulse vectors `jt3` (same order, same size) go to `r.contacts` and
 /// `r.jt3`, sorted by pair with a stable sort (a pair's rows consecutive, in the engine's
