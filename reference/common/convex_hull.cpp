@@ -42,10 +42,23 @@ ConvexHull convex_hull(const std::vector<Vec3>& points, const std::string& what)
       h.vertices.push_back({hc.vertices[i].x(), hc.vertices[i].y(), hc.vertices[i].z()});
     }
   }
-  D3 centroid{0, 0, 0};
+  D3 centroid{0, 0, 0}, lo{HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
   for (const D3& v : h.vertices)
-    for (int k = 0; k < 3; ++k) centroid[static_cast<std::size_t>(k)] += v[static_cast<std::size_t>(k)];
+    for (std::size_t k = 0; k < 3; ++k) {
+      centroid[k] += v[k];
+      lo[k] = std::min(lo[k], v[k]);
+      hi[k] = std::max(hi[k], v[k]);
+    }
   for (double& c : centroid) c /= static_cast<double>(std::max<std::size_t>(h.vertices.size(), 1));
+  // btConvexHullComputer finds the hull on a grid of 1/10216 of the points' range
+  // (btConvexHullInternal::compute), so in the input's coordinates its merged faces are
+  // planar only to about a grid step, and among ~2,000 faces of a scanned mesh it returns a
+  // few slivers of collinear corners (asian-dragon: 3), whose Newell normal is rounding
+  // noise (their planes cut 20-37% of the hull's diagonal into it). A face thinner (twice
+  // its area over its longest chord) than kSliver times the hull's bounding-box diagonal
+  // is left out; its neighbours' planes bound the hull there.
+  constexpr double kSliver = 1e-6;
+  const double sliver = kSliver * std::sqrt(dot3(sub(hi, lo), sub(hi, lo)));
   for (int f = 0; f < hc.faces.size(); ++f) {
     std::vector<std::uint32_t> idx;
     const btConvexHullComputer::Edge* first = &hc.edges[hc.faces[f]];
@@ -64,8 +77,10 @@ ConvexHull convex_hull(const std::vector<Vec3>& points, const std::string& what)
       const D3 c = cross3(p, q);
       for (int j = 0; j < 3; ++j) n[static_cast<std::size_t>(j)] += c[static_cast<std::size_t>(j)];
     }
-    const double len = std::sqrt(dot3(n, n));
-    if (!(len > 0.0)) continue;
+    const double len = std::sqrt(dot3(n, n));  // twice the face's area
+    double chord = 0.0;                         // the longest chord from the first corner
+    for (std::uint32_t v : idx) chord = std::max(chord, std::sqrt(dot3(sub(h.vertices[v], h.vertices[idx[0]]), sub(h.vertices[v], h.vertices[idx[0]]))));
+    if (!(len > 0.0) || !(chord > 0.0) || len / chord <= sliver) continue;
     for (double& c : n) c /= len;
     if (dot3(n, sub(h.vertices[idx[0]], centroid)) < 0.0) {
       std::reverse(idx.begin(), idx.end());
@@ -73,6 +88,20 @@ ConvexHull convex_hull(const std::vector<Vec3>& points, const std::string& what)
     }
     double d = -HUGE_VAL;
     for (std::uint32_t v : idx) d = std::max(d, dot3(n, h.vertices[v]));
+    // Start the polygon at the corner whose next two make the widest turn, so that its
+    // first three corners alone give the winding (ODE's dConvex checks those three).
+    std::size_t best = 0;
+    double best_turn = -HUGE_VAL;
+    for (std::size_t k = 0; k < idx.size(); ++k) {
+      const D3& a = h.vertices[idx[k]];
+      const double turn = dot3(n, cross3(sub(h.vertices[idx[(k + 1) % idx.size()]], a),
+                                         sub(h.vertices[idx[(k + 2) % idx.size()]], a)));
+      if (turn > best_turn) {
+        best_turn = turn;
+        best = k;
+      }
+    }
+    std::rotate(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(best), idx.end());
     h.faces.push_back(std::move(idx));
     h.planes.push_back({n[0], n[1], n[2], d});
   }
