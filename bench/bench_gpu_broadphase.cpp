@@ -34,7 +34,7 @@
 //
 // Coherent motion (issue 33 item 4): the same boxes moving at constant velocity for
 // --motion-steps steps (reflected at the centres' cube); per step the one-shot `octree` and
-// `octree` with its pair cache (broadphase_coherent.cu: a Build, a Hit, or after a miss a
+// `octree` with its pair cache (broadphase_octree_cache.cu: a Build, a Hit, or after a miss a
 // rerun, all timed) on the same boxes; their keys compared bit for bit every step and with
 // the CPU oracle every --motion-oracle-every steps; per margin of the fattened boxes: mean,
 // median, min and max ms a step, the mean of Build and of Hit steps, the plans and reruns.

@@ -15,7 +15,7 @@ def axis_label(p, axis):
     return lab if lab is not None else str(val)
 
 
-# The engine registry's own broadphases (core/src/engine_registry.cpp: EngineInfo::own_broadphase
+# The engine registry's own broadphases (engines/src/engines.cpp: EngineInfo::own_broadphase
 # -> own_broadphase_class), for results whose points record only `engine_broadphase`; a test
 # (tests/report/test_report_comparisons.py) keeps this in step with the registry.
 OWN_BROADPHASE_CLASS = {"bullet-dbvt": "btDbvtBroadphase", "mujoco-sap": "MuJoCo's mj_collision (sweep and prune)",

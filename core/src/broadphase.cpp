@@ -1,6 +1,6 @@
 /// \file broadphase.cpp
 /// Broadphase factory, `auto` octree depths, the shared pair sort and the `flat` oracle
-/// (design.md section 5.1). `octree` (loose) is in broadphase_octree.cpp, `octree-strict` in
+/// (design.md section 5.1). `octree` (loose) is in broadphase_octree_cache.cpp, `octree-strict` in
 /// broadphase_octree_strict.cpp, `spatial-hash` in broadphase_spatial_hash.cpp.
 
 #include "octocd/broadphase.hpp"

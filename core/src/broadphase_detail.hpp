@@ -9,7 +9,7 @@
 
 namespace octocd::detail {
 
-/// `octree`, the loose octree broadphase (broadphase_octree.cpp); depth -1 = auto.
+/// `octree`, the loose octree broadphase (broadphase_octree_cache.cpp); depth -1 = auto.
 std::unique_ptr<BroadPhase> make_octree_broadphase(int depth, const Aabb& domain);
 /// `octree-strict`, the paper's octree read literally (broadphase_octree_strict.cpp);
 /// depth -1 = auto.

@@ -1,10 +1,10 @@
 /// \file broadphase_octree_strict.cpp
 /// `octree-strict`: the paper's world-space octree read literally (paper section 3.2,
 /// Algorithms 1-2; design.md section 5.1). The default `octree` is
-/// the loose octree of broadphase_octree.cpp.
+/// the loose octree of broadphase_octree_cache.cpp.
 ///
 /// Node math (grid, node keys, subtree ranges) lives in octocd/strict_octree.hpp, shared
-/// with the CUDA engine's gpu/src/broadphase_strict.cu.
+/// with the CUDA engine's gpu/src/broadphase_octree_strict.cu.
 ///
 /// Structure. The root is the bounding cube of the domain (centred on the domain centre,
 /// side = longest domain side), split D_w times. Coordinates are mapped monotonically to

@@ -1,6 +1,6 @@
 /// \file broadphase_octree_tree.cpp
 /// The tree of the `octree` broadphase (broadphase_octree_tree.hpp): steps 1-5 of the
-/// description in broadphase_octree.cpp (keys, order, tables, queries, sorted pairs) and
+/// description in broadphase_octree_cache.cpp (keys, order, tables, queries, sorted pairs) and
 /// the query of every occupied level that the pair cache's updates use. The tree is a
 /// class of this file only (so the compiler sees every call of its per-cell functions);
 /// LooseOctreeTree forwards to it.

@@ -2,9 +2,9 @@
 /// \file broadphase_octree_tree.hpp
 /// The tree of the `octree` broadphase (private to core/src): the loose octree of
 /// design.md section 5.1 built over one call's boxes and queried for their overlapping pairs, steps 1-5
-/// of broadphase_octree.cpp's description (keys, order, tables, queries, sorted pairs),
+/// of broadphase_octree_cache.cpp's description (keys, order, tables, queries, sorted pairs),
 /// implemented in broadphase_octree_tree.cpp. The pair cache across calls (steps 6-7) is
-/// the BroadPhase of broadphase_octree.cpp, which holds one tree (as Jolt's
+/// the BroadPhase of broadphase_octree_cache.cpp, which holds one tree (as Jolt's
 /// BroadPhaseQuadTree holds its QuadTree). The cell and level math is
 /// octocd/loose_octree.hpp's, shared with the CUDA engine.
 

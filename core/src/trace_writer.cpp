@@ -10,7 +10,6 @@
 
 #include "octocd/trace.hpp"
 #include "octocd/atomic_file.hpp"
-#include "octocd/engine_registry.hpp"
 
 #include <fcntl.h>
 #include <hdf5.h>
@@ -933,9 +932,9 @@ TraceMetadata trace_metadata(const Engine& engine, int state_every) {
   meta.start_time = iso_utc_now();
   meta.dt = s.dt;
   meta.state_every = state_every;
-  // The registry says which engines follow octocd's contact conventions; the trace
-  // declares them, so readers never judge by the engine's name.
-  if (writes_octocd_contacts(engine.name())) meta.declarations = octocd_trace_declarations(engine.model());
+  // The engine says whether it follows octocd's contact conventions; the trace declares
+  // them, so readers never judge by the engine's name.
+  if (engine.octocd_contacts()) meta.declarations = octocd_trace_declarations(engine.model());
   return meta;
 }
 

@@ -1,5 +1,6 @@
-// Building octocd's engines by name (engines.hpp): the factories of the registry's
-// engines and the checks of what a caller overrides.
+// The engine registry (engine_registry.hpp, engines.hpp): one entry per engine, its
+// EngineInfo (what it can do) beside its factory and its settings parser, and the checks of
+// what a caller overrides.
 #include "octocd/engines.hpp"
 
 #include <algorithm>
@@ -32,11 +33,11 @@ using Items = std::vector<std::string>;
 /// Builds the engine from a model and its own settings items (`where` names them in errors).
 using Factory = std::unique_ptr<Engine> (*)(const std::shared_ptr<const Model>&, const Items&, const std::string&);
 
-/// One engine of engine_infos(): how it is built, whether this build has it, and its
+/// One engine: what it can do, how it is built, whether this build has it, and its
 /// settings (the keys of its struct, a help line, and a check of items that throws as the
 /// factory would).
 struct Registered {
-  const char* name;
+  EngineInfo info;
   Factory make;
   bool built;
   std::vector<std::string> (*setting_names)();
@@ -51,10 +52,33 @@ void check_none(const Items& items, const std::string& where) {
     throw InputError(fmt::format("{}: '{}': this engine has no settings; allowed: none", where, items.front()));
 }
 
+EngineInfo cpu_info() {
+  EngineInfo cpu;
+  cpu.name = "cpu";
+  cpu.description = "octocd's CPU reference pipeline";
+  cpu.has_midphase = true;
+  cpu.uses_scene_broadphase = true;
+  cpu.records_every_step = true;
+  return cpu;
+}
+
 std::unique_ptr<Engine> make_cpu(const std::shared_ptr<const Model>& model, const Items& items,
                                  const std::string& where) {
   check_none(items, where);
   return std::make_unique<World>(model, make_any_broadphase(model->scene.broadphase, model->scene.domain));
+}
+
+EngineInfo cuda_info() {
+  EngineInfo cuda;
+  cuda.name = "cuda";
+  cuda.description = "the GPU engine (needs a CUDA build and device)";
+  cuda.has_midphase = true;
+  cuda.uses_scene_broadphase = true;
+  cuda.device_broadphases = true;
+  cuda.device = true;
+  cuda.memory_kind = "device memory";
+  cuda.records_every_step = true;
+  return cuda;
 }
 
 CudaSettings cuda_settings(const Items& items, const std::string& where) {
@@ -69,6 +93,22 @@ void check_cuda(const Items& items, const std::string& where) { (void)cuda_setti
 std::unique_ptr<Engine> make_cuda(const std::shared_ptr<const Model>& model, const Items& items,
                                   const std::string& where) {
   return make_cuda_engine(model, model->scene.broadphase.name, cuda_settings(items, where));
+}
+
+EngineInfo bullet_info() {
+  EngineInfo bullet;
+  bullet.name = "bullet";
+  bullet.description = "the same scene in Bullet's btDiscreteDynamicsWorld";
+  bullet.rotates = true;
+  bullet.own_broadphase = "bullet-dbvt";
+  bullet.own_broadphase_class = "btDbvtBroadphase";
+  bullet.geometries = {"hull", "box"};
+  bullet.geometry_setting = "shape";
+  bullet.iterations_setting = "iterations";
+  bullet.no_midphase_reason =
+      "Bullet runs its own narrow phase: GJK/EPA on convex hulls and triangle meshes, or btBoxBoxDetector on the "
+      "AABB boxes (--bullet shape=box)";
+  return bullet;
 }
 
 BulletSettings bullet_settings(const Items& items, const std::string& where) {
@@ -86,7 +126,20 @@ std::unique_ptr<Engine> make_bullet(const std::shared_ptr<const Model>& model, c
 
 /// A reference engine whose adapter may be absent from this build (its package not found):
 /// its settings are parsed when built; when absent, its setting keys are none and building
-/// it is a RuntimeError.
+/// it is a RuntimeError. Its EngineInfo is the same either way.
+EngineInfo ode_info() {
+  EngineInfo ode;
+  ode.name = "ode";
+  ode.description = "the same scene in the Open Dynamics Engine (dWorld, rotating boxes and hulls)";
+  ode.rotates = true;
+  ode.own_broadphase = "ode-hash";
+  ode.own_broadphase_class = "dHashSpace";
+  ode.geometries = {"hull"};
+  ode.no_midphase_reason =
+      "ODE runs its own narrow phase: dCollide (dBoxBox, libccd MPR on convex hulls, trimesh colliders)";
+  return ode;
+}
+
 #if OCTOCD_HAVE_ODE
 OdeSettings ode_settings(const Items& items, const std::string& where) {
   OdeSettings s;
@@ -106,6 +159,19 @@ std::unique_ptr<Engine> make_ode(const std::shared_ptr<const Model>&, const Item
   throw RuntimeError("engine 'ode' is not built in this octocd (configured without libode-dev)");
 }
 #endif
+
+EngineInfo mujoco_info() {
+  EngineInfo mujoco;
+  mujoco.name = "mujoco";
+  mujoco.description = "the same scene in MuJoCo (soft contacts, convex hulls, rotating bodies)";
+  mujoco.rotates = true;
+  mujoco.own_broadphase = "mujoco-sap";
+  mujoco.own_broadphase_class = "MuJoCo's mj_collision (sweep and prune)";
+  mujoco.geometries = {"hull"};
+  mujoco.no_midphase_reason =
+      "MuJoCo runs its own narrow phase: mjc_BoxBox on box pairs, MPR (libccd) on the convex hulls of meshes";
+  return mujoco;
+}
 
 #if OCTOCD_HAVE_MUJOCO
 MujocoSettings mujoco_settings(const Items& items, const std::string& where) {
@@ -127,6 +193,20 @@ std::unique_ptr<Engine> make_mujoco(const std::shared_ptr<const Model>&, const I
 }
 #endif
 
+EngineInfo dart_info() {
+  EngineInfo dart;
+  dart.name = "dart";
+  dart.description = "the same scene in DART (World, FCL collision, boxed LCP; rotating boxes and hulls)";
+  dart.rotates = true;
+  dart.own_broadphase = "dart-fcl";
+  dart.own_broadphase_class = "FCL's dynamic AABB tree in DART's FCLCollisionGroup";
+  dart.geometries = {"hull"};
+  dart.no_midphase_reason =
+      "DART runs its own narrow phase: FCL's (box-box, BVH triangle meshes for hulls and static meshes) with DART's "
+      "contact post-processing";
+  return dart;
+}
+
 #if OCTOCD_HAVE_DART
 DartSettings dart_settings(const Items& items, const std::string& where) {
   DartSettings s;
@@ -147,26 +227,27 @@ std::unique_ptr<Engine> make_dart(const std::shared_ptr<const Model>&, const Ite
 }
 #endif
 
-/// The engines, one entry each, by the names of engine_infos().
+/// The engines, one entry each, in engine_infos()' order.
 const std::vector<Registered>& registered() {
   static const std::vector<Registered> r{
-      {"cpu", &make_cpu, true, &no_settings, "", &check_none},
-      {"cuda", &make_cuda, OCTOCD_HAVE_CUDA != 0, &cuda_setting_names, "", &check_cuda},
-      {"bullet", &make_bullet, true, &bullet_setting_names,
+      {cpu_info(), &make_cpu, true, &no_settings, "", &check_none},
+      {cuda_info(), &make_cuda, OCTOCD_HAVE_CUDA != 0, &cuda_setting_names, "", &check_cuda},
+      {bullet_info(), &make_bullet, true, &bullet_setting_names,
        "shape=hull: convex hulls of dynamic meshes, triangle meshes of static ones, the default; shape=box: boxes "
        "equal to the AABBs",
        &check_bullet},
-      {"mujoco", &make_mujoco, OCTOCD_HAVE_MUJOCO != 0, &mujoco_keys, "", &check_mujoco},
-      {"ode", &make_ode, OCTOCD_HAVE_ODE != 0, &ode_keys, "", &check_ode},
-      {"dart", &make_dart, OCTOCD_HAVE_DART != 0, &dart_keys, "", &check_dart},
+      {mujoco_info(), &make_mujoco, OCTOCD_HAVE_MUJOCO != 0, &mujoco_keys, "", &check_mujoco},
+      {ode_info(), &make_ode, OCTOCD_HAVE_ODE != 0, &ode_keys, "", &check_ode},
+      {dart_info(), &make_dart, OCTOCD_HAVE_DART != 0, &dart_keys, "", &check_dart},
   };
   return r;
 }
 
+/// The entry of `info` (an EngineInfo of engine_infos(), a copy of the entry's).
 const Registered& registered(const EngineInfo& info) {
   for (const Registered& r : registered())
-    if (info.name == r.name) return r;
-  throw RuntimeError(fmt::format("engine '{}' is in engine_infos() but has no factory (engines.cpp)", info.name));
+    if (info.name == r.info.name) return r;
+  throw RuntimeError(fmt::format("engine '{}' is not in the registry (engines.cpp)", info.name));
 }
 
 std::string join(const std::vector<std::string>& v, const char* sep) {
@@ -184,6 +265,35 @@ std::string choose_engine(const ArgumentNames& names, Has has) {
 }
 
 }  // namespace
+
+const std::vector<EngineInfo>& engine_infos() {
+  static const std::vector<EngineInfo> infos = [] {
+    std::vector<EngineInfo> v;
+    for (const Registered& r : registered()) v.push_back(r.info);
+    return v;
+  }();
+  return infos;
+}
+
+const std::vector<std::string>& engine_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v;
+    for (const EngineInfo& e : engine_infos()) v.push_back(e.name);
+    return v;
+  }();
+  return names;
+}
+
+const EngineInfo* find_engine_info(const std::string& name) {
+  for (const EngineInfo& e : engine_infos())
+    if (e.name == name) return &e;
+  return nullptr;
+}
+
+const EngineInfo& engine_info(const std::string& name, const std::string& where) {
+  if (const EngineInfo* e = find_engine_info(name)) return *e;
+  throw InputError(fmt::format("{}: unknown engine '{}'; allowed: {}", where, name, join(engine_names(), ", ")));
+}
 
 ArgumentNames cli_argument_names() { return ArgumentNames{}; }
 

@@ -1,6 +1,6 @@
 #pragma once
 // Device helpers shared by the device broadphases (broadphase_flat.cu, and behind
-// DeviceBroadPhase broadphase_octree.cu, broadphase_strict.cu, broadphase_hash.cu,
+// DeviceBroadPhase broadphase_octree_tree.cu, broadphase_octree_strict.cu, broadphase_spatial_hash.cu,
 // broadphase_lbvh.cu): the pair key, a binary search on sorted 64-bit keys, the
 // per-block sum of the exact-test counter, a warp's ordered writer into PairOutput::keys
 // (count pass: counts only; fill pass: writes where the index is below the capacity),

@@ -1,7 +1,7 @@
 #pragma once
 /// \file coherent_plan.hpp
 /// The host-side decisions of the device `octree` with a pair cache
-/// (broadphase_coherent.cu): which work each find() enqueues (CoherentPlan) and, from what
+/// (broadphase_octree_cache.cu): which work each find() enqueues (CoherentPlan) and, from what
 /// that find() wrote into CoherentStatus, whether its pairs hold (Settled). Plain C++
 /// (compiled by the host compiler and nvcc; tested without a device).
 ///

@@ -2,14 +2,14 @@
 /// \file cuda_impl.hpp
 /// CudaWorld::Impl: the CUDA engine's device state (buffers, stream, graphs, the resident
 /// kernel's control words) and the host side of its step, split by job over
-///   cuda_world.cpp    construction, CudaWorld's methods, one step's dispatch and metrics;
-///   device_status.cpp the device's description and the free-memory check;
-///   step_stages.cpp   the per-stage path: buffer sizes, descriptors, the stages in
-///                     World::step's order, the CUDA graph, regrow and rerun;
-///   step_small.cpp    the fused small step: its descriptor, the launch per step and the
-///                     resident kernel;
-///   stage_times.cpp   the stage times: which steps are timed, CUDA events on the per-stage
-///                     path, %globaltimer stamps of the fused kernel.
+///   cuda_world.cpp      construction, CudaWorld's methods, one step's dispatch and metrics;
+///   device_status.cpp   the device's description and the free-memory check;
+///   step_stages.cpp     the per-stage path: buffer sizes, descriptors, the stages in
+///                       World::step's order, the CUDA graph, regrow and rerun;
+///   small_step_host.cpp the fused small step (small_step.cu) from the host: its
+///                       descriptor, the launch per step and the resident kernel;
+///   stage_times.cpp     the stage times: which steps are timed, CUDA events on the
+///                       per-stage path, %globaltimer stamps of the fused kernel.
 /// Plain C++ over the CUDA runtime API; the kernels are behind kernels.hpp. Internal to gpu/.
 
 #include <array>
@@ -106,7 +106,7 @@ struct CudaWorld::Impl {
   std::array<double, static_cast<std::size_t>(Stage::Count)> held_ms{};
   std::uint64_t timed_steps = 0;
 
-  // ---- the fused small step (step_small.cpp) -------------------------------------------
+  // ---- the fused small step (small_step_host.cpp) --------------------------------------
   bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
   unsigned small_grid = 1;  // its blocks (co-resident)
   gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null
@@ -280,7 +280,7 @@ struct CudaWorld::Impl {
   bool rerun_needed();
   void restore_state();
 
-  // ---- step_small.cpp: the fused small step --------------------------------------------
+  // ---- small_step_host.cpp: the fused small step ---------------------------------------
   /// The fused small step's descriptor (small_step.cu): the same buffers as the per-stage
   /// path; the in-lists live in in_list, their offsets in body_begin.
   gpu::SmallStepDesc small_desc(const Scene& scene, bool recording);

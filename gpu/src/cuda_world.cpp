@@ -1,6 +1,6 @@
 // The CUDA engine (design.md section 11): construction (the device, its memory check, the shapes'
 // packed octrees and the bodies uploaded once), CudaWorld's methods, and one step: the path
-// fixed at construction (step_stages.cpp or step_small.cpp), a rerun with larger buffers
+// fixed at construction (step_stages.cpp or small_step_host.cpp), a rerun with larger buffers
 // while a list overflows, then the metrics, stage times (stage_times.cpp) and recording read
 // back. This file holds no float formula of the step.
 #include "octocd/cuda_world.hpp"
@@ -75,7 +75,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   if (broadphase != "flat") {  // checked before the device: an unknown name is an input error anywhere
     BroadPhaseConfig cfg = model_->scene.broadphase;
     cfg.name = broadphase;
-    // `octree` keeps a pair cache across steps (broadphase_coherent.cu).
+    // `octree` keeps a pair cache across steps (broadphase_octree_cache.cu).
     bp = broadphase == "octree" ? gpu::make_device_coherent_octree(cfg, model_->scene.domain)
                                 : gpu::make_device_broadphase(cfg, model_->scene.domain);
   }

@@ -110,10 +110,10 @@ std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig&
 enum class LooseOctreeQuery { Auto, Warp, Thread };
 
 /// `octree` (design.md section 5.1, Ulrich's loose octree, cell math of loose_octree.hpp), depth
-/// config.octree_depth (-1 = auto), query kernel `query`. broadphase_octree.cu.
+/// config.octree_depth (-1 = auto), query kernel `query`. broadphase_octree_tree.cu.
 std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain,
                                                            LooseOctreeQuery query = LooseOctreeQuery::Auto);
-/// `octree` with a pair cache across calls (temporal coherence; broadphase_coherent.cu):
+/// `octree` with a pair cache across calls (temporal coherence; broadphase_octree_cache.cu):
 /// the pairs of the bodies' fattened boxes (each AABB grown on every side by
 /// `margin_fraction` x the median body size) are found by the one-shot `octree` and kept;
 /// while every AABB stays inside its fattened box, a find() tests only the kept pairs on
@@ -126,10 +126,10 @@ std::unique_ptr<DeviceBroadPhase> make_device_coherent_octree(const BroadPhaseCo
                                                               float margin_fraction = 0.125f);
 /// `octree-strict` (design.md section 5.1, the paper's octree read literally, as
 /// core/src/broadphase_octree_strict.cpp), depth config.octree_depth (-1 = auto).
-/// broadphase_strict.cu.
+/// broadphase_octree_strict.cu.
 std::unique_ptr<DeviceBroadPhase> make_device_strict_octree(const BroadPhaseConfig& config, const Aabb& domain);
 /// `spatial-hash` (paper section 4.2; design.md section 5.1, as core/src/broadphase_spatial_hash.cpp),
-/// cell size config.cell_size. broadphase_hash.cu.
+/// cell size config.cell_size. broadphase_spatial_hash.cu.
 std::unique_ptr<DeviceBroadPhase> make_device_spatial_hash(const BroadPhaseConfig& config);
 /// `lbvh`: a linear BVH (Karras 2012) rebuilt on every find() from a CUB radix sort of the
 /// bodies' Morton codes (the centres' level-10 cells in the loose octree's root cube of

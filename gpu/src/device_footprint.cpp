@@ -41,10 +41,10 @@ struct ShapeCounts {
 std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
   const std::uint64_t n1 = n + 1;
   if (cfg.name == "flat") return 0;
-  if (cfg.name == "octree") {  // LooseOctreeDevice::reserve (broadphase_octree.cu)
+  if (cfg.name == "octree") {  // LooseOctreeDevice::reserve (broadphase_octree_tree.cu)
     const std::uint64_t temp = std::max({cub_sort_temp_bound(n, 4, 4), cub_scan_temp_bound(n1), std::uint64_t{1}});
     const std::uint64_t table = loose_cell_table_entries(n);
-    // The pair cache (CoherentOctreeDevice::reserve, broadphase_coherent.cu): its status,
+    // The pair cache (CoherentOctreeDevice::reserve, broadphase_octree_cache.cu): its status,
     // the fattened boxes, the cache, its scratch, the filter's selection and flags (first
     // capacity: initial_pair_capacity), the filter's CUB storage (a scan's bound).
     const std::uint64_t cap = initial_pair_capacity(n);
@@ -58,7 +58,7 @@ std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
            buf(table, sizeof(std::uint64_t)) + buf(loose_occupancy_blocks(n) / 4, sizeof(std::uint32_t)) +
            buf(temp, 1);
   }
-  if (cfg.name == "octree-strict") {  // StrictOctreeDevice::reserve (broadphase_strict.cu)
+  if (cfg.name == "octree-strict") {  // StrictOctreeDevice::reserve (broadphase_octree_strict.cu)
     const bool auto_depth = cfg.octree_depth < 0;
     std::uint64_t temp = std::max(cub_sort_temp_bound(n, 8, 4), cub_scan_temp_bound(n1));
     if (auto_depth) temp = std::max(temp, cub_scan_temp_bound(n));
@@ -68,7 +68,7 @@ std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
     if (auto_depth) b += buf(n, sizeof(double)) + buf(n, sizeof(std::uint32_t));
     return b;
   }
-  if (cfg.name == "spatial-hash") {  // SpatialHashDevice::reserve (broadphase_hash.cu)
+  if (cfg.name == "spatial-hash") {  // SpatialHashDevice::reserve (broadphase_spatial_hash.cu)
     const std::uint64_t entries = std::uint64_t{kHashEntriesPerBody} * n;
     const std::uint64_t counts = entries + n + 1;
     const std::uint64_t temp =

@@ -32,7 +32,7 @@ constexpr std::uint64_t kMetricsResultBytes = 72;
 constexpr std::uint64_t kMetricsPartials = 512;
 /// Entries of the loose octree's block table for n bodies: the smallest power of two >= 2 n
 /// (at least 2; at most n blocks, so at most half full); each entry 8 bytes, a block key
-/// and its first slot (loose_blocks.hpp, broadphase_octree.cu).
+/// and its first slot (loose_blocks.hpp, broadphase_octree_tree.cu).
 constexpr std::uint64_t loose_cell_table_entries(std::uint64_t n) {
   std::uint64_t t = 2;
   while (t < 2 * (n > 0 ? n : 1)) t <<= 1;

@@ -504,7 +504,7 @@ cudaError_t launch_flat_count(const Aabb* aabb, std::uint32_t n, std::uint32_t* 
 cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint32_t* offset,
                              unsigned long long* keys, std::uint32_t capacity, int shift, cudaStream_t stream);
 
-// ---- broadphase_octree.cu ------------------------------------------------------------
+// ---- broadphase_octree_tree.cu -------------------------------------------------------
 // ---- midphase.cu -----------------------------------------------------------------------
 /// Decide (the per-stage path when no pair can need a level step: no mesh shape or no
 /// level): per live pair, one thread each, pairs[k] and confirmed[k], the answers start
@@ -601,7 +601,7 @@ cudaError_t sort_keys_u64(void* temp, std::size_t& temp_bytes, const unsigned lo
 cudaError_t min_f32(void* temp, std::size_t& temp_bytes, const float* in, float* out, std::uint32_t count,
                     cudaStream_t stream);
 
-// ---- primitives.cu (CUB), for the device broadphases (broadphase_strict.cu, -_hash.cu) --
+// ---- primitives.cu (CUB), for broadphase_octree_strict.cu and broadphase_spatial_hash.cu --
 /// Stable radix sort of (uint64 key, uint32 value) pairs by the key's bits [0, end_bit).
 /// With temp == nullptr only sets temp_bytes.
 cudaError_t sort_pairs_u64_u32(void* temp, std::size_t& temp_bytes, const unsigned long long* keys_in,

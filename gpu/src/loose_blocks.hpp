@@ -1,6 +1,6 @@
 #pragma once
 /// \file loose_blocks.hpp
-/// Block math of the device broadphase `octree` (broadphase_octree.cu): its cell table
+/// Block math of the device broadphase `octree` (broadphase_octree_tree.cu): its cell table
 /// holds blocks, not cells. Every function is `OCTOCD_HD` (host and device), takes plain
 /// values and pointers, allocates nothing and throws nothing, so the host tests run the
 /// very code of the kernels (tests/gpu/test_device_broadphase.cpp, LooseBlockHostModel).

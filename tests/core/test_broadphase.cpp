@@ -779,7 +779,7 @@ TEST(BroadPhase, LooseOctreeThreadCountDoesNotChangeTheAnswer) {
 #endif
 }
 
-// ---- the loose octree's pair cache (broadphase_octree.cpp, steps 6-7) -----------
+// ---- the loose octree's pair cache (broadphase_octree_cache.cpp, steps 6-7) -----
 
 /// Host model of the cache's fattened boxes: every box grown by 1/8 of the median largest
 /// side (finite, > 0) of at most 1023 bodies spaced evenly in body order.

@@ -1,4 +1,4 @@
-// The engine registry (core/include/octocd/engine_registry.hpp, engines/include/octocd/
+// The engine registry (engines/include/octocd/engine_registry.hpp, engines/include/octocd/
 // engines.hpp) against the engines it builds: every capability an EngineInfo states is
 // checked on the engine itself (broadphase and midphase it runs, recording, rotation), on
 // box-stack; apply_engine_options refuses what an engine cannot run, with the caller's
@@ -14,6 +14,7 @@
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/trace.hpp"
 
 using namespace octocd;
 
@@ -62,7 +63,10 @@ TEST(EngineRegistry, CapabilitiesAreWhatTheEnginesDo) {
     const std::unique_ptr<Engine> boxed = make_engine(info.name, model, {{"bullet", {"shape=box"}}});
     EXPECT_EQ(boxed->can_record() && boxed->rotation_traits() == nullptr, info.records_every_step)
         << "a translation-only scene";
-    EXPECT_EQ(info.octocd_contacts, writes_octocd_contacts(info.name));
+    // octocd's own engines write its contact conventions into their traces
+    // (trace_metadata); every other engine declares its own.
+    EXPECT_EQ(e->octocd_contacts(), info.name == "cpu" || info.name == "cuda");
+    EXPECT_EQ(trace_metadata(*e, 1).declarations.contact_geometry, e->octocd_contacts() ? "aabb" : "");
   }
   // The engines this build has: cpu and bullet always; each of them names a factory.
   const std::vector<std::string> built = built_engine_names();
@@ -73,8 +77,6 @@ TEST(EngineRegistry, CapabilitiesAreWhatTheEnginesDo) {
     apply_engine_options(scene, engine_info("bullet", "engine"), {}, cli_argument_names());
     EXPECT_FALSE(make_engine("bullet", build_model(scene), {{"bullet", {"shape=box"}}})->can_record());
   }
-  EXPECT_FALSE(writes_octocd_contacts("external"));
-  EXPECT_FALSE(writes_octocd_contacts("mujoco"));
   try {
     (void)engine_info("physx", "--engine");
     ADD_FAILURE() << "an unknown engine was accepted";

@@ -73,6 +73,7 @@ class FaultyWorld : public Engine {
   const FrameMetrics& last_metrics() const override { return metrics_; }
   std::int64_t frame() const override { return frame_; }
   const std::vector<ContactRecord>& contacts() const override { return contacts_; }
+  bool octocd_contacts() const override { return true; }
   bool can_record() const override { return true; }
   void set_recording(bool on) override { recording_ = on; }
   const FrameRecord& record() const override { return record_; }

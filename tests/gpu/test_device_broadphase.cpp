@@ -1,7 +1,7 @@
 // The device broadphases behind DeviceBroadPhase (gpu/src/device_broadphase.hpp; design.md section 5.1,
 // 11) against the CPU oracle `flat`: `octree-strict` at depths 0..10 and auto,
 // `spatial-hash` at cell sizes from 1e-6 m (every body out of cell range) to 1000 m (one
-// cell), `octree` (loose) when gpu/src/broadphase_octree.cu has make_device_loose_octree,
+// cell), `octree` (loose) when gpu/src/broadphase_octree_tree.cu has make_device_loose_octree,
 // and `lbvh` (Karras 2012 linear BVH, broadphase_lbvh.cu).
 //
 // Oracles and properties, on every AABB set (random 1k and 10k, touching lattices with
@@ -21,7 +21,7 @@
 // find() makes no allocation and no host synchronisation: it is captured into a CUDA
 // graph, which then runs on two different sets of boxes (same n) and gives each one's set.
 //
-// `octree` with its pair cache (broadphase_coherent.cu): on a coherent motion every settled
+// `octree` with its pair cache (broadphase_octree_cache.cu): on a coherent motion every settled
 // call's keys are flat's in flat's order (Plain, Build and Hit; a jump makes a Rerun), from
 // one CUDA graph per plan too, and incoherent input backs off to the one-shot octree; the
 // host planner (coherent_plan.hpp) is checked verdict by verdict without a device.
@@ -1059,7 +1059,7 @@ enum class BlockFault {
   DropOctant,     ///< the occupancy map misses the bit of every octant-0 cell
 };
 
-/// broadphase_octree.cu on the host, slot after slot, with the functions of
+/// broadphase_octree_tree.cu on the host, slot after slot, with the functions of
 /// loose_blocks.hpp: the keys of loose_keys_kernel (D_w fixed, or `auto` from the smallest
 /// extent), the stable (key, body) sort, the block table of loose_gather_kernel (inserted
 /// in slot order, as one of the device's insertion orders), the block query of
@@ -1079,7 +1079,7 @@ struct HostLooseBlocks {
   std::string broken;                    ///< "" when every check holds, else the first failure
 };
 
-/// The host model's sort keys after the cells' (broadphase_octree.cu's LooseDesc with
+/// The host model's sort keys after the cells' (broadphase_octree_tree.cu's LooseDesc with
 /// D_w = 10): the overflow list, the stray bodies by their level by size, NaN boxes.
 constexpr std::uint32_t kHostOverflowKey = kLooseKeysEnd;
 constexpr std::uint32_t kHostNanKey = kHostOverflowKey + kLooseMaxDepth + 2;
@@ -1453,7 +1453,7 @@ LooseTestCount count_loose_tests(const std::vector<Aabb>& boxes, const Aabb& dom
 }
 
 /// The exact tests of the device octree with depth `auto` and the snapped root
-/// (loose_snapped_grid of the smallest extent, broadphase_octree.cu's kLooseSnapRoot).
+/// (loose_snapped_grid of the smallest extent, broadphase_octree_tree.cu's kLooseSnapRoot).
 LooseTestCount count_loose_tests_snapped(const std::vector<Aabb>& boxes, const Aabb& domain) {
   const LooseGrid grid = loose_grid(domain);
   int depth = 0;
@@ -1621,7 +1621,7 @@ TEST(DeviceOctreeRoot, CandidatesEqualTheCountOfItsRoot) {
   }
 }
 
-// ---- `octree` with a pair cache (broadphase_coherent.cu, coherent_plan.hpp) -----------------
+// ---- `octree` with a pair cache (broadphase_octree_cache.cu, coherent_plan.hpp) -------------
 
 /// Boxes moving at constant velocity, reflected at the faces of `region` (a coherent
 /// motion: each call moves every box by at most vmax x dt per axis).

@@ -1,5 +1,5 @@
 # No branch on an engine's name outside the registry (ARCHITECTURE "One engine registry";
-# core/include/octocd/engine_registry.hpp, engines/include/octocd/engines.hpp): fails when a
+# engines/include/octocd/engine_registry.hpp, engines/include/octocd/engines.hpp): fails when a
 # C++ or CUDA source under cli/, python/src/, bench/ or validation/ compares a string with
 # "cpu", "cuda" or "bullet" (== or !=, either side). Callers ask EngineInfo instead.
 # Run: cmake -DSRC=<source dir> -P tests/house/engine_names.cmake
@@ -13,7 +13,7 @@ if(_files_seen EQUAL 0)
 endif()
 if(NOT _hits STREQUAL "")
   message(FATAL_ERROR "a branch on an engine's name outside the registry; ask octocd::engine_info(name) for the "
-    "capability instead (core/include/octocd/engine_registry.hpp):\n${_hits}")
+    "capability instead (engines/include/octocd/engine_registry.hpp):\n${_hits}")
 endif()
 message(STATUS "engine_names: ${_files_seen} files, no branch on an engine's name")
 

@@ -1,5 +1,6 @@
-# The project explains itself (docs/design.md): no source, script, scene or document of the
-# tree cites a file outside the repository (../shared/) or a numbered section of an outside
+# The project explains itself (docs/design.md): no source, script, scene, document or
+# per-machine record (reports/<machine>/: its tables carry validators' figures) of the tree
+# cites a file outside the repository (../shared/) or a numbered section of an outside
 # specification ("SPEC 6"); citations name docs/design.md's sections.
 # Run: cmake -DSRC=<source dir> -P tests/house/self_contained.cmake
 if(NOT SRC)
@@ -8,10 +9,10 @@ endif()
 set(hits "")
 set(seen 0)
 foreach(dir core gpu engines reference validation cli python bench report scripts tests docs datasets/scenes examples
-    cmake fuzz)
+    cmake fuzz reports)
   file(GLOB_RECURSE files ${SRC}/${dir}/*.cpp ${SRC}/${dir}/*.hpp ${SRC}/${dir}/*.cu ${SRC}/${dir}/*.cuh
     ${SRC}/${dir}/*.py ${SRC}/${dir}/*.sh ${SRC}/${dir}/*.md ${SRC}/${dir}/*.json ${SRC}/${dir}/*.cmake
-    ${SRC}/${dir}/CMakeLists.txt)
+    ${SRC}/${dir}/*.csv ${SRC}/${dir}/*.txt ${SRC}/${dir}/CMakeLists.txt)
   foreach(f IN LISTS files)
     if(f MATCHES "/tests/house/self_contained.cmake$")
       continue()

@@ -224,7 +224,7 @@ def test_what_each_engine_ran_is_named():
 
 def test_registry_mirror_matches_engine_registry():
     """OWN_BROADPHASE_CLASS holds every engine's own broadphase -> class of the registry."""
-    src = open(os.path.join(SRC, "core", "src", "engine_registry.cpp")).read()
+    src = open(os.path.join(SRC, "engines", "src", "engines.cpp")).read()
     pairs = dict(zip(re.findall(r'own_broadphase = "([^"]+)"', src),
                      re.findall(r'own_broadphase_class = "([^"]+)"', src)))
     assert pairs and pairs == MR.OWN_BROADPHASE_CLASS

@@ -16,6 +16,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/expect.hpp"
+#include "octocd/validation_rows.hpp"
 
 namespace octocd {
 namespace {
@@ -67,6 +68,36 @@ std::string error_of(const std::string& text) {
     return e.what();
   }
   return "";
+}
+
+TEST(Expect, TheRowTableIsInRowIdOrderWithUniqueNamesAndCauses) {
+  const std::vector<RowInfo>& rows = validation_rows();
+  ASSERT_EQ(rows.size(), static_cast<std::size_t>(RowId::BulletDynamics) + 1);
+  std::vector<std::string> names;
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    const RowInfo& row = rows[k];
+    EXPECT_EQ(static_cast<std::size_t>(row.id), k) << row.name;
+    EXPECT_EQ(&row_info(row.id), &row);
+    EXPECT_EQ(find_row_info(row.name), &row);
+    // The physics tier first, then the model tier (the order of `validate`'s table).
+    if (k > 0 && rows[k - 1].tier == Tier::Model) EXPECT_EQ(row.tier, Tier::Model) << row.name;
+    for (const std::string& n : names) EXPECT_NE(n, row.name);
+    names.push_back(row.name);
+    std::vector<std::string> causes;
+    for (const RowCause& c : row.causes) {
+      for (const std::string& other : causes) EXPECT_NE(other, c.name) << row.name;
+      causes.push_back(c.name);
+      EXPECT_STRNE(c.unit, "") << row.name << "/" << c.name;
+    }
+    EXPECT_EQ(documented_causes(row.name), causes);
+  }
+  EXPECT_EQ(validation_row_names(), names);
+  EXPECT_EQ(rows.front().tier, Tier::Physics);
+  EXPECT_EQ(find_row_info("no-such-row"), nullptr);
+  EXPECT_TRUE(documented_causes("no-such-row").empty());
+  // The rows whose figure is the largest judged merge by the maximum, the counts by the sum.
+  EXPECT_EQ(row_info(RowId::Penetration).merge, RowMerge::Max);
+  EXPECT_EQ(row_info(RowId::Friction).merge, RowMerge::Sum);
 }
 
 TEST(Expect, FailureCausesGiveAModelRowOneCauseNamedLikeIt) {

@@ -18,6 +18,7 @@
 #include "octocd/trace.hpp"
 #include "faults/planted_faults.hpp"
 #include "octocd/validation.hpp"
+#include "octocd/validation_rows.hpp"
 #include "support/test_scenes.hpp"
 
 using namespace octocd;
@@ -96,6 +97,18 @@ TEST(Validators, AllPassOnTheCorrectPipeline) {
       continue;
     }
     EXPECT_TRUE(r.pass) << r.name << ": " << r.detail;
+  }
+}
+
+TEST(Validators, AScenesRowsAreTheRowTablesInItsOrderAndTiers) {
+  ValidationOptions o;
+  o.frames = 20;
+  const std::vector<ValidationResult> rs = validate_scene(mixed_boxes(), o);
+  const std::vector<RowInfo>& rows = validation_rows();
+  ASSERT_EQ(rs.size(), rows.size());
+  for (std::size_t k = 0; k < rs.size(); ++k) {
+    EXPECT_EQ(rs[k].name, rows[k].name);
+    EXPECT_EQ(rs[k].tier, rows[k].tier) << rs[k].name;
   }
 }
 

@@ -25,6 +25,8 @@
 
 #include <fmt/format.h>
 
+#include "octocd/validation_rows.hpp"
+
 namespace octocd {
 
 namespace {
@@ -713,8 +715,8 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
 ValidationResult AppliedStateJudge::result() const {
   const Impl& s = *impl_;
   ValidationResult r;
-  r.tier = Tier::Model;
-  r.name = "applied-state";
+  r.tier = row_info(RowId::AppliedState).tier;
+  r.name = row_info(RowId::AppliedState).name;
   r.figure = "bodies off the design.md section 6 re-derivation";
   r.measured = static_cast<double>(s.bodies.failures);
   r.bound = 0;

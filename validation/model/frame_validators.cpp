@@ -24,6 +24,7 @@
 #include "octocd/physics.hpp"
 #include "octocd/reference_contact.hpp"
 #include "octocd/validation.hpp"
+#include "octocd/validation_rows.hpp"
 
 #include "applied_state.hpp"
 #include "../src/row_clock.hpp"
@@ -467,20 +468,20 @@ std::vector<ValidationResult> FrameValidators::results() const {
   const bool judge_response = s.source.octocd_pipeline || s.source.spec6_response;
   // Each model row's own time (RowClock), set on the rows of the tier when they are done.
   auto timed = [&](std::vector<ValidationResult>& rows) {
-    const std::pair<const char*, double> seconds[] = {
-        {"candidate-sets", s.t_candidates},          {"midphase-completeness", s.t_midphase},
-        {"non-penetration-eq14", s.t_contraction},   {"friction-monotonicity", s.t_friction},
-        {"impulse-conservation", s.t_conservation}, {"applied-state", s.t_applied}};
+    const std::pair<RowId, double> seconds[] = {
+        {RowId::CandidateSets, s.t_candidates},          {RowId::MidphaseCompleteness, s.t_midphase},
+        {RowId::NonPenetrationEq14, s.t_contraction},   {RowId::FrictionMonotonicity, s.t_friction},
+        {RowId::ImpulseConservation, s.t_conservation}, {RowId::AppliedState, s.t_applied}};
     for (ValidationResult& r : rows)
-      for (const auto& [name, t] : seconds)
-        if (r.tier == Tier::Model && r.name == name) r.seconds = t;
+      for (const auto& [id, t] : seconds)
+        if (r.tier == Tier::Model && r.name == row_info(id).name) r.seconds = t;
     return rows;
   };
   // Model-tier rows for another engine: n/a with the reason, never a FAIL.
-  auto not_claimed = [&](const char* name, const char* figure, const char* why) {
+  auto not_claimed = [&](RowId id, const char* figure, const char* why) {
     ValidationResult r;
-    r.tier = Tier::Model;
-    r.name = name;
+    r.tier = row_info(id).tier;
+    r.name = row_info(id).name;
     r.figure = figure;
     r.applicable = false;
     r.detail = why;
@@ -488,10 +489,10 @@ std::vector<ValidationResult> FrameValidators::results() const {
   };
   const char* no_spec6 = "another engine that does not claim design.md section 6 (response_model \"spec6\"): the paper's "
                          "response model is not judged; the physics tier judges its physics";
-  auto tally = [](const char* name, const char* figure, const Tally& t, const std::string& ok_note) {
+  auto tally = [](RowId id, const char* figure, const Tally& t, const std::string& ok_note) {
     ValidationResult r;
-    r.tier = Tier::Model;
-    r.name = name;
+    r.tier = row_info(id).tier;
+    r.name = row_info(id).name;
     r.figure = figure;
     r.measured = static_cast<double>(t.failures);
     r.bound = 0;
@@ -503,7 +504,7 @@ std::vector<ValidationResult> FrameValidators::results() const {
   if (s.source.octocd_pipeline) {
     std::string names = "flat's pair set (exact-grid) vs";
     for (const auto& bp : s.broadphases) names += " " + bp->name();
-    out.push_back(tally("candidate-sets", "frames x broadphases differing from flat", s.candidates,
+    out.push_back(tally(RowId::CandidateSets, "frames x broadphases differing from flat", s.candidates,
                         fmt::format("{} frames, the engine's own pairs and {}", s.candidate_frames, names)));
     if (s.missing_pairs > 0 && s.missing_touching == s.missing_pairs)
       out.back().detail += fmt::format("; all {} missing pairs only touch (zero overlap on an axis): overlap is "
@@ -511,28 +512,28 @@ std::vector<ValidationResult> FrameValidators::results() const {
                                        s.missing_pairs);
     std::string cfgs;
     for (const auto& c : s.configs) cfgs += (cfgs.empty() ? "" : " ") + std::string("[") + c.to_string() + "]";
-    out.push_back(tally("midphase-completeness", "pair x level lists differing from exhaustive",
+    out.push_back(tally(RowId::MidphaseCompleteness, "pair x level lists differing from exhaustive",
                         s.midphase, fmt::format("{} pairs, lists {}", s.midphase_pairs, cfgs)));
   } else {
-    not_claimed("candidate-sets", "frames x broadphases differing from flat",
+    not_claimed(RowId::CandidateSets, "frames x broadphases differing from flat",
                 "another engine: octocd's exact AABB rule (Eq. 6) is not required of it; its pairs are judged by "
                 "broadphase-completeness (physics)");
-    not_claimed("midphase-completeness", "pair x level lists differing from exhaustive",
+    not_claimed(RowId::MidphaseCompleteness, "pair x level lists differing from exhaustive",
                 "another engine: its contacts are not octocd's vertex-proximity test (design.md section 5.3)");
   }
   if (!judge_response) {
-    not_claimed("non-penetration-eq14", "contacts violating Eq. 14 contraction", no_spec6);
-    not_claimed("friction-monotonicity", "contacts raising |v_t| or leaving the cone (Eq. 21-22)", no_spec6);
-    not_claimed("impulse-conservation", "contacts and isolated groups breaking momentum or centre", no_spec6);
-    not_claimed("applied-state", "bodies off the design.md section 6 re-derivation", no_spec6);
+    not_claimed(RowId::NonPenetrationEq14, "contacts violating Eq. 14 contraction", no_spec6);
+    not_claimed(RowId::FrictionMonotonicity, "contacts raising |v_t| or leaving the cone (Eq. 21-22)", no_spec6);
+    not_claimed(RowId::ImpulseConservation, "contacts and isolated groups breaking momentum or centre", no_spec6);
+    not_claimed(RowId::AppliedState, "bodies off the design.md section 6 re-derivation", no_spec6);
     return timed(out);
   }
-  out.push_back(tally("non-penetration-eq14", "contacts violating Eq. 14 contraction", s.contraction,
+  out.push_back(tally(RowId::NonPenetrationEq14, "contacts violating Eq. 14 contraction", s.contraction,
                       fmt::format("worst excess {:.3g} m; AABB penetration max {:.4g} m, share above "
                                   "slop up to {:.2f}",
                                   s.contraction.worst, s.pen_max, s.share_above_max)));
   out.back().tolerances = "contraction_m";
-  out.push_back(tally("friction-monotonicity", "contacts raising |v_t| or leaving the cone (Eq. 21-22)",
+  out.push_back(tally(RowId::FrictionMonotonicity, "contacts raising |v_t| or leaving the cone (Eq. 21-22)",
                       s.friction, fmt::format("worst excess {:.3g}", s.friction.worst)));
   if (s.contacts_unjudged > 0) {
     // Another engine's contacts on a dynamic body with several contacts: only the cone.
@@ -545,7 +546,7 @@ std::vector<ValidationResult> FrameValidators::results() const {
   }
   out.back().tolerances = "friction_speed,friction_cone_rel";
   {
-    ValidationResult r = tally("impulse-conservation", "contacts and isolated groups breaking momentum or centre",
+    ValidationResult r = tally(RowId::ImpulseConservation, "contacts and isolated groups breaking momentum or centre",
                                Tally{}, "");
     // Worst figures are residual / bound over the items judged, so a pass shows <= 1.
     const AppliedStateJudge::Groups g = s.applied->groups();

@@ -16,34 +16,10 @@
 #include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/json_strict.hpp"
+#include "octocd/validation_rows.hpp"
 
 namespace octocd {
 namespace {
-
-/// Each row and its documented causes (design.md section 13b.13); rows without causes do not split.
-const std::vector<std::pair<std::string, std::vector<std::string>>>& row_table() {
-  static const std::vector<std::pair<std::string, std::vector<std::string>>> rows = {
-      // physics tier
-      {"broadphase-completeness", {"missing-pair", "not-flat"}},
-      {"contact-completeness", {"missing-contact", "false-contact"}},
-      {"contact-geometry", {"normal-angle", "depth", "point-off-shape"}},
-      {"penetration", {"penetration"}},
-      {"friction", {"cone", "dissipation"}},
-      {"conservation", {"momentum", "angular-momentum", "energy"}},
-      {"momentum-balance", {"linear", "angular"}},
-      {"free-flight", {"velocity", "position", "angular-velocity", "orientation", "sleeping"}},
-      // model tier
-      {"candidate-sets", {}},
-      {"midphase-completeness", {}},
-      {"non-penetration-eq14", {}},
-      {"friction-monotonicity", {}},
-      {"impulse-conservation", {}},
-      {"applied-state", {}},
-      {"analytic", {}},
-      {"bullet-dynamics", {"height", "still-moving"}},
-  };
-  return rows;
-}
 
 std::string join(const std::vector<std::string>& v) {
   std::string s;
@@ -91,16 +67,17 @@ std::vector<ValidationCause> failure_causes(const ValidationResult& r) {
 const std::vector<std::string>& validation_row_names() {
   static const std::vector<std::string> names = [] {
     std::vector<std::string> v;
-    for (const auto& [row, causes] : row_table()) v.push_back(row);
+    for (const RowInfo& row : validation_rows()) v.push_back(row.name);
     return v;
   }();
   return names;
 }
 
 std::vector<std::string> documented_causes(const std::string& row) {
-  for (const auto& [name, causes] : row_table())
-    if (name == row) return causes;
-  return {};
+  std::vector<std::string> out;
+  if (const RowInfo* info = find_row_info(row))
+    for (const RowCause& c : info->causes) out.push_back(c.name);
+  return out;
 }
 
 std::string Expectation::label() const {

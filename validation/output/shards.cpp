@@ -13,6 +13,7 @@
 
 #include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
+#include "octocd/validation_rows.hpp"
 
 namespace octocd {
 
@@ -23,12 +24,11 @@ using json = nlohmann::json;
 /// A JSON number (null: NaN, as results_json writes non-finite figures).
 double number(const json& v) { return v.is_number() ? v.get<double>() : std::numeric_limits<double>::quiet_NaN(); }
 
-/// Rows whose `measured` is the largest figure judged (the worst normal angle, the
-/// deepest penetration, a rerun's worst error): merged by the maximum. Every other row
-/// measures a count of failing items: merged by the sum.
+/// Whether `row`'s `measured` merges by the maximum (RowMerge::Max, octocd/validation_rows.hpp);
+/// every other row, and a row this build does not know, by the sum.
 bool measures_largest(const std::string& row) {
-  static const std::set<std::string> rows = {"contact-geometry", "penetration", "analytic", "bullet-dynamics"};
-  return rows.count(row) > 0;
+  const RowInfo* info = find_row_info(row);
+  return info != nullptr && info->merge == RowMerge::Max;
 }
 
 }  // namespace

@@ -4,6 +4,9 @@
 
 #include <algorithm>
 #include <initializer_list>
+#include <stdexcept>
+
+#include "octocd/validation_rows.hpp"
 
 namespace octocd {
 
@@ -13,22 +16,22 @@ namespace {
 
 /// The row's failures by cause (causes with failures only), its judged count, its verdict
 /// and n/a when it judged nothing: the detail gets "; causes: ..." listing every cause.
-struct CauseSpec {
-  const Tally* tally;
-  const char* name;
-  const char* noun;
-  const char* unit;
-};
-void fill_causes(ValidationResult& r, std::initializer_list<CauseSpec> causes) {
+/// `tallies` are the tallies of `row`'s causes (validation_rows.hpp), in their order.
+void fill_causes(ValidationResult& r, const RowInfo& row, std::initializer_list<const Tally*> tallies) {
+  if (tallies.size() != row.causes.size())
+    throw std::logic_error(fmt::format("physics table: row {} has {} causes, given {} tallies", row.name,
+                                       row.causes.size(), tallies.size()));
   std::string list;
   std::uint64_t failing = 0, judged = 0;
-  for (const CauseSpec& c : causes) {
-    judged += c.tally->checks;
-    if (c.tally->failures) {
-      r.causes.push_back(c.tally->cause(c.name, c.unit));
+  const RowCause* c = row.causes.data();
+  for (const Tally* t : tallies) {
+    judged += t->checks;
+    if (t->failures) {
+      r.causes.push_back(t->cause(c->name, c->unit));
       ++failing;
     }
-    list += (list.empty() ? "" : "; ") + c.tally->summary(c.name, c.noun, c.unit);
+    list += (list.empty() ? "" : "; ") + t->summary(c->name, c->items, c->unit);
+    ++c;
   }
   r.judged = judged;
   if (failing) {
@@ -54,10 +57,10 @@ std::string spin_note(PhysicsBodies::Gyroscopic g, std::uint64_t kept, std::uint
 std::vector<ValidationResult> PhysicsValidators::results() const {
   const Impl& s = *impl_;
   std::vector<ValidationResult> out;
-  auto row = [](const char* name, const char* figure, const char* tolerances) {
+  auto row = [](const RowInfo& info, const char* figure, const char* tolerances) {
     ValidationResult r;
-    r.tier = Tier::Physics;
-    r.name = name;
+    r.tier = info.tier;
+    r.name = info.name;
     r.figure = figure;
     r.tolerances = tolerances;
     return r;
@@ -68,7 +71,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
 
   // 1. Broadphase completeness.
   {
-    ValidationResult r = row("broadphase-completeness", "required pairs missing from the engine's candidates",
+    const RowInfo& info = row_info(RowId::BroadphaseCompleteness);
+    ValidationResult r = row(info, "required pairs missing from the engine's candidates",
                              "broadphase_margin_m,geometry_slack_m");
     r.measured = double(s.broad.failures + s.broad_exact.failures);
     r.bound = 0;
@@ -99,13 +103,13 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail += fmt::format("; {} pair-frames of bodies asleep before the step (/states/sleeping) not required",
                               s.broad_asleep);
     if (r.applicable)
-      fill_causes(r, {{&s.broad, "missing-pair", "required pairs", "m"},
-                      {&s.broad_exact, "not-flat", "frames", "pairs"}});
+      fill_causes(r, info, {&s.broad, &s.broad_exact});
     out.push_back(r);
   }
   // 2. Contact completeness.
   {
-    ValidationResult r = row("contact-completeness", "penetrating pairs without a contact + false contacts",
+    const RowInfo& info = row_info(RowId::ContactCompleteness);
+    ValidationResult r = row(info, "penetrating pairs without a contact + false contacts",
                              "contact_depth_m,geometry_slack_m");
     r.measured = double(s.complete.failures + s.false_contact.failures);
     r.pass = r.measured == 0;
@@ -128,13 +132,13 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                               "without a row, not required",
                               s.complete_asleep);
     if (r.applicable)
-      fill_causes(r, {{&s.complete, "missing-contact", "penetrating pairs", "m"},
-                      {&s.false_contact, "false-contact", "contact pairs", "m"}});
+      fill_causes(r, info, {&s.complete, &s.false_contact});
     out.push_back(r);
   }
   // 3. Contact geometry.
   {
-    ValidationResult r = row("contact-geometry", "worst normal angle to the reference's (deg; SAT or FCL)",
+    const RowInfo& info = row_info(RowId::ContactGeometry);
+    ValidationResult r = row(info, "worst normal angle to the reference's (deg; SAT or FCL)",
                              "normal_angle_deg,depth_m,sat_accept_rel");
     r.measured = s.normal_angle.worst_or(0.0);
     r.bound = s.tol.normal_angle_deg;
@@ -220,14 +224,13 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                 s.sat_fcl_disagree, s.sat_fcl_what, s.sat_fcl_worst_excess);
     }
     if (r.applicable)
-      fill_causes(r, {{&s.normal_angle, "normal-angle", "rows", "deg"},
-                      {&s.depth, "depth", "pairs", "m"},
-                      {&s.points, "point-off-shape", "points", "m"}});
+      fill_causes(r, info, {&s.normal_angle, &s.depth, &s.points});
     out.push_back(r);
   }
   // 4. Penetration.
   {
-    ValidationResult r = row("penetration", "largest true penetration (m)",
+    const RowInfo& info = row_info(RowId::Penetration);
+    ValidationResult r = row(info, "largest true penetration (m)",
                              "penetration_slops,penetration_settle_frames");
     r.measured = s.pen_max;
     r.bound = s.tol.penetration_slops * s.bodies.slop;
@@ -257,12 +260,13 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                 "directions: a figure, not judged): largest {}, {} pair-frames above the bound",
                                 s.pen_upper_what, s.pen_upper_over);
     }
-    if (r.applicable) fill_causes(r, {{&s.pen, "penetration", "pair-frames", "m"}});
+    if (r.applicable) fill_causes(r, info, {&s.pen});
     out.push_back(r);
   }
   // 5. Friction.
   {
-    ValidationResult r = row("friction", "contacts outside the cone or rows raising the tangential speed",
+    const RowInfo& info = row_info(RowId::Friction);
+    ValidationResult r = row(info, "contacts outside the cone or rows raising the tangential speed",
                              "friction_cone_abs,friction_speed");
     r.measured = double(s.cone.failures + s.dissipation.failures);
     r.pass = r.measured == 0;
@@ -287,12 +291,13 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                 s.dissipation_small);
     }
     if (r.applicable)
-      fill_causes(r, {{&s.cone, "cone", "contacts", "kg m/s"}, {&s.dissipation, "dissipation", "rows", "m/s"}});
+      fill_causes(r, info, {&s.cone, &s.dissipation});
     out.push_back(r);
   }
   // 6. Conservation.
   {
-    ValidationResult r = row("conservation", "isolated groups breaking momentum, angular momentum or energy",
+    const RowInfo& info = row_info(RowId::Conservation);
+    ValidationResult r = row(info, "isolated groups breaking momentum, angular momentum or energy",
                              "momentum_rel,angular_momentum_rel,energy_rel");
     r.measured = double(s.momentum.failures + s.angular.failures + s.energy.failures);
     r.pass = r.measured == 0;
@@ -340,16 +345,15 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                               "judged",
                               s.groups_locked, s.groups_rotation_locked);
     if (r.applicable) {
-      fill_causes(r, {{&s.momentum, "momentum", "group-frames", "of bound"},
-                      {&s.angular, "angular-momentum", "group-frames", "of bound"},
-                      {&s.energy, "energy", "group-frames", "rel"}});
+      fill_causes(r, info, {&s.momentum, &s.angular, &s.energy});
       r.judged = s.groups;
     }
     out.push_back(r);
   }
   // 7. Momentum balance per body.
   {
-    ValidationResult r = row("momentum-balance", "bodies whose velocity change is not their rows' impulses",
+    const RowInfo& info = row_info(RowId::MomentumBalance);
+    ValidationResult r = row(info, "bodies whose velocity change is not their rows' impulses",
                              "balance_ulps,friction_direction_speed");
     r.measured = double(s.balance_lin.failures + s.balance_ang.failures);
     r.pass = r.measured == 0;
@@ -391,15 +395,15 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                                      s.balance_rot_locked)
                                        : std::string("n/a: no rotation or no contact points (torques unknown)"));
       r.detail += extras;
-      fill_causes(r, {{&s.balance_lin, "linear", "body-steps", "of bound"},
-                      {&s.balance_ang, "angular", "body-steps", "of bound"}});
+      fill_causes(r, info, {&s.balance_lin, &s.balance_ang});
       r.judged = s.balance_lin.checks;
     }
     out.push_back(r);
   }
   // 8. Free flight.
   {
-    ValidationResult r = row("free-flight", "bodies without contacts not following gravity and their spin",
+    const RowInfo& info = row_info(RowId::FreeFlight);
+    ValidationResult r = row(info, "bodies without contacts not following gravity and their spin",
                              "free_flight_angle_rad");
     r.measured = double(s.free_vel.failures + s.free_pos.failures + s.free_w.failures + s.free_q.failures +
                         s.free_sleep.failures);
@@ -428,11 +432,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
         r.detail += fmt::format("; {} body-steps asleep through the step judged not to move (worst {:.3g} of one "
                                 "rounding), {} falling asleep not judged (/states/sleeping)",
                                 s.free_sleep.checks, s.free_sleep.worst_or(0.0), s.fell_asleep);
-      fill_causes(r, {{&s.free_vel, "velocity", "body-steps", "m/s"},
-                      {&s.free_pos, "position", "body-steps", "m"},
-                      {&s.free_w, "angular-velocity", "body-steps", "of bound"},
-                      {&s.free_q, "orientation", "body-steps", "deg"},
-                      {&s.free_sleep, "sleeping", "body-steps", "of rounding"}});
+      fill_causes(r, info, {&s.free_vel, &s.free_pos, &s.free_w, &s.free_q, &s.free_sleep});
       r.judged = s.free_vel.checks + s.free_sleep.checks;
     }
     out.push_back(r);

@@ -20,6 +20,7 @@
 #include "octocd/error.hpp"
 #include "octocd/mesh_octree.hpp"
 #include "octocd/trace_reader.hpp"
+#include "octocd/validation_rows.hpp"
 
 namespace octocd {
 
@@ -576,16 +577,17 @@ void ExternalValidator::Impl::prepare(FrameRecord& rec) {
 std::vector<ValidationResult> ExternalValidator::results() const {
   std::vector<ValidationResult> out;
   if (impl_->validators) out = impl_->validators->results();
-  auto na = [&](const char* name, const char* figure) {
+  auto na = [&](RowId id, const char* figure) {
     ValidationResult r;
-    r.name = name;
+    r.tier = row_info(id).tier;
+    r.name = row_info(id).name;
     r.figure = figure;
     r.applicable = false;
     r.detail = "another engine's frames: this validator steps an engine (octocd validate SCENE.json)";
     out.push_back(r);
   };
-  na("analytic", "closed form of an analytic scene");
-  na("bullet-dynamics", "comparison with btDiscreteDynamicsWorld");
+  na(RowId::Analytic, "closed form of an analytic scene");
+  na(RowId::BulletDynamics, "comparison with btDiscreteDynamicsWorld");
   return out;
 }
 

@@ -4,9 +4,9 @@
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
-#include "octocd/expect.hpp"
 #include "octocd/external.hpp"
 #include "octocd/scene.hpp"
+#include "octocd/validation_rows.hpp"
 
 namespace octocd {
 
@@ -33,10 +33,10 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
   const PhysicsBodies& p = bodies.physics;
   const bool impulses_complete = info.octocd_conventions ? scene_iterations(bodies) <= 1 : p.impulses_complete;
   std::vector<TraceRowPlan> out;
-  for (const std::string& name : validation_row_names()) {
+  for (const RowInfo& row : validation_rows()) {
     TraceRowPlan r;
-    r.name = name;
-    r.tier = out.size() < 8 ? Tier::Physics : Tier::Model;
+    r.name = row.name;
+    r.tier = row.tier;
     auto needs = [&](bool have, const std::string& what) {
       if (!have && r.judged) {
         r.judged = false;
@@ -46,54 +46,71 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
     auto part = [&](bool have, const std::string& what) {
       if (!have && r.judged) r.partial += (r.partial.empty() ? "" : "; ") + what;
     };
-    if (name == "broadphase-completeness") {
-      needs(info.has_pairs, "/pairs/offsets and /pairs/pair (the engine's candidate pairs of each step)");
-    } else if (name == "contact-completeness" || name == "contact-geometry") {
-      needs(info.has_contacts, kContacts);
-      if (name == "contact-geometry")
-        part(info.has_points, "/contacts/point (version 2) for the check that each row's point lies on both shapes");
-    } else if (name == "penetration") {
-      // Poses: a trace holds states or AABBs (checked).
-    } else if (name == "friction") {
-      needs(info.has_contacts, kContacts);
-      part(info.has_jt3 || info.version == 1,
-           "/contacts/jt3 (version 2) for the vector rule [rule: jt3]; judged on the scalar jt [rule: scalar]");
-    } else if (name == "conservation") {
-      needs(info.has_states, kStates);
-      needs(info.has_contacts, fmt::format("{} (isolated groups are bodies in contact)", kContacts));
-      part(info.has_rotation, fmt::format("{} for the angular momentum", kRotation));
-    } else if (name == "momentum-balance") {
-      needs(info.has_states, kStates);
-      needs(info.has_contacts, kContacts);
-      needs(impulses_complete,
-            "nothing: the trace declares impulses_complete = 0 (its rows hold part of the step's impulses)");
-      part(info.has_rotation && info.has_points,
-           fmt::format("{} and /contacts/point for the angular balance", kRotation));
-      // Version 1's jt is along the sliding by its contract; version 2's scalar jt is the
-      // component along -v_t, all of the friction only for an engine with one direction.
-      needs(info.has_jt3 || info.version == 1 || info.octocd_conventions || p.friction_directions == 1,
-            "/contacts/jt3 (each row's friction impulse vector), or the root attribute friction_directions = 1 "
-            "where each row's friction lies along its sliding: the scalar jt of an engine with two friction "
-            "directions leaves the second out");
-      part(info.has_jt3 || info.version == 1,
-           "/contacts/jt3 (version 2): the scalar jt leaves each slow row's friction direction open (a disc)");
-    } else if (name == "free-flight") {
-      needs(info.has_states, kStates);
-      needs(info.has_contacts, fmt::format("{}: a body is free in a step without a row (a run without contacts "
-                                           "writes /contacts/offsets of zeros and empty rows)",
-                                           kContacts));
-      part(info.has_rotation, fmt::format("{} for the spin and the orientation", kRotation));
-    } else if (name == "candidate-sets" || name == "midphase-completeness") {
-      needs(false, "nothing a trace can add: the row judges octocd's own broadphases and midphase (design.md "
-                   "section 5); another engine's pairs are judged by broadphase-completeness");
-    } else if (name == "analytic" || name == "bullet-dynamics") {
-      needs(false, "nothing a trace can add: the row steps an engine (octocd validate SCENE.json)");
-    } else {  // the model tier's response rows (design.md section 6)
-      needs(info.spec6_response,
-            "the root attribute response_model = \"spec6\" (only for an engine that implements design.md section "
-            "6's response)");
-      needs(info.has_contacts || name == "applied-state", kContacts);
-      needs(info.has_states || name != "applied-state", kStates);
+    switch (row.id) {
+      case RowId::BroadphaseCompleteness:
+        needs(info.has_pairs, "/pairs/offsets and /pairs/pair (the engine's candidate pairs of each step)");
+        break;
+      case RowId::ContactCompleteness:
+      case RowId::ContactGeometry:
+        needs(info.has_contacts, kContacts);
+        if (row.id == RowId::ContactGeometry)
+          part(info.has_points, "/contacts/point (version 2) for the check that each row's point lies on both shapes");
+        break;
+      case RowId::Penetration:
+        // Poses: a trace holds states or AABBs (checked).
+        break;
+      case RowId::Friction:
+        needs(info.has_contacts, kContacts);
+        part(info.has_jt3 || info.version == 1,
+             "/contacts/jt3 (version 2) for the vector rule [rule: jt3]; judged on the scalar jt [rule: scalar]");
+        break;
+      case RowId::Conservation:
+        needs(info.has_states, kStates);
+        needs(info.has_contacts, fmt::format("{} (isolated groups are bodies in contact)", kContacts));
+        part(info.has_rotation, fmt::format("{} for the angular momentum", kRotation));
+        break;
+      case RowId::MomentumBalance:
+        needs(info.has_states, kStates);
+        needs(info.has_contacts, kContacts);
+        needs(impulses_complete,
+              "nothing: the trace declares impulses_complete = 0 (its rows hold part of the step's impulses)");
+        part(info.has_rotation && info.has_points,
+             fmt::format("{} and /contacts/point for the angular balance", kRotation));
+        // Version 1's jt is along the sliding by its contract; version 2's scalar jt is the
+        // component along -v_t, all of the friction only for an engine with one direction.
+        needs(info.has_jt3 || info.version == 1 || info.octocd_conventions || p.friction_directions == 1,
+              "/contacts/jt3 (each row's friction impulse vector), or the root attribute friction_directions = 1 "
+              "where each row's friction lies along its sliding: the scalar jt of an engine with two friction "
+              "directions leaves the second out");
+        part(info.has_jt3 || info.version == 1,
+             "/contacts/jt3 (version 2): the scalar jt leaves each slow row's friction direction open (a disc)");
+        break;
+      case RowId::FreeFlight:
+        needs(info.has_states, kStates);
+        needs(info.has_contacts, fmt::format("{}: a body is free in a step without a row (a run without contacts "
+                                             "writes /contacts/offsets of zeros and empty rows)",
+                                             kContacts));
+        part(info.has_rotation, fmt::format("{} for the spin and the orientation", kRotation));
+        break;
+      case RowId::CandidateSets:
+      case RowId::MidphaseCompleteness:
+        needs(false, "nothing a trace can add: the row judges octocd's own broadphases and midphase (design.md "
+                     "section 5); another engine's pairs are judged by broadphase-completeness");
+        break;
+      case RowId::Analytic:
+      case RowId::BulletDynamics:
+        needs(false, "nothing a trace can add: the row steps an engine (octocd validate SCENE.json)");
+        break;
+      case RowId::NonPenetrationEq14:  // the model tier's response rows (design.md section 6)
+      case RowId::FrictionMonotonicity:
+      case RowId::ImpulseConservation:
+      case RowId::AppliedState:
+        needs(info.spec6_response,
+              "the root attribute response_model = \"spec6\" (only for an engine that implements design.md section "
+              "6's response)");
+        needs(info.has_contacts || row.id == RowId::AppliedState, kContacts);
+        needs(info.has_states || row.id != RowId::AppliedState, kStates);
+        break;
     }
     out.push_back(std::move(r));
   }

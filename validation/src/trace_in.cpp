@@ -7,9 +7,11 @@
 #include <future>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <memory>
 #include <string>
+#include <tuple>
 #include <type_traits>
 #include <vector>
 
@@ -820,6 +822,21 @@ class TraceIn {
   }
   /// With sparse states: the recorded state frames (/states/frame); else empty.
   const std::vector<std::int64_t>& state_frames() const { return state_frames_; }
+  /// What frame(f) depends on beyond the file: whether states may be sparse, and the
+  /// "integrated" detection pose's dt and gravity (the scene's when read with it).
+  struct RecordSettings {
+    bool sparse = false, integrated = false;
+    float dt = 0.0f;
+    Vec3 gravity{};
+  };
+  RecordSettings record_settings() const { return {sparse_, integrated_, det_dt_, det_gravity_}; }
+  /// True when frame(f) of a reader of the same file with `other` settings gives this
+  /// reader's record: the same state rows and the same detection pose.
+  bool same_records(const RecordSettings& other) const {
+    const auto same_bits = [](const auto& a, const auto& b) { return std::memcmp(&a, &b, sizeof a) == 0; };
+    return sparse_ == other.sparse && integrated_ == other.integrated &&
+           (!integrated_ || (same_bits(det_dt_, other.dt) && same_bits(det_gravity_, other.gravity)));
+  }
   /// True when /states/frame skips frames (read with `sparse`).
   bool sparse_states() const { return !state_frames_.empty(); }
 
@@ -866,15 +883,61 @@ FrameRecord ExternalTrace::frame(std::int64_t f) {
 }
 
 namespace {
-// Every frame's values checked; `stop` (may be empty) polled between frames.
-ExternalTraceInfo check_frames(const std::string& path, const std::function<bool()>& stop) {
+
+/// The bytes a decoded record holds in its arrays (the check pass's budget for the frames
+/// it keeps).
+std::size_t record_bytes(const FrameRecord& r) {
+  return sizeof(FrameRecord) +
+         (r.x_pre.size() + r.v_pre.size() + r.x_post.size() + r.v_post.size() + r.w_pre.size() + r.w_post.size() +
+          r.x_det.size() + r.jt3.size()) *
+             sizeof(Vec3) +
+         (r.q_pre.size() + r.q_post.size() + r.q_det.size()) * sizeof(Quat) + r.aabbs.size() * sizeof(Aabb) +
+         (r.pairs.size() + r.confirmed.size()) * sizeof(Pair) + r.contacts.size() * sizeof(ContactRecord) +
+         r.asleep_pre.size() + r.asleep_post.size();
+}
+
+/// At most this many bytes of decoded frames are kept from the check pass for the judging
+/// (the frames beyond are decoded a second time, as the judging reaches them).
+constexpr std::size_t kKeptFrameBytes = std::size_t(256) << 20;
+
+/// The frames the check pass decoded that the judging takes instead of decoding them again:
+/// frames first .. first + records.size() - 1, each taken once.
+struct KeptFrames {
+  std::int64_t max_frames = 0;  ///< the frames judged: 1 .. max_frames (0: all) ...
+  ShardSpec shard;              ///< ... this shard's block of them, which is kept
+  std::int64_t first = 1;
+  std::vector<FrameRecord> records;
+  TraceIn::RecordSettings settings;  ///< what the records were read with
+  bool has(std::int64_t f) const { return f >= first && f - first < static_cast<std::int64_t>(records.size()); }
+  FrameRecord take(std::int64_t f) { return std::move(records[static_cast<std::size_t>(f - first)]); }
+};
+
+/// Every frame's values checked with a reader that does not parse the scene (as
+/// --check-only); `stop` (may be empty) polled between frames. With `keep`: the frames its
+/// run judges are kept as decoded, from the first on, up to kKeptFrameBytes, and
+/// `keep->settings` says what they were read with. The reader is closed on return.
+ExternalTraceInfo check_frames(const std::string& path, const std::function<bool()>& stop,
+                               KeptFrames* keep = nullptr) {
   TraceIn in(path, false);
+  std::int64_t last = 0;
+  if (keep) {
+    const std::int64_t run = keep->max_frames > 0 ? std::min(keep->max_frames, in.info.frames) : in.info.frames;
+    std::tie(keep->first, last) = shard_frames(keep->shard, run);
+  }
+  std::size_t bytes = 0;
+  bool keeping = keep != nullptr;
   for (std::int64_t f = 1; f <= in.info.frames; ++f) {
     if (stop && stop()) throw ValidationStopped();
-    in.frame(f);
+    FrameRecord rec = in.frame(f);
+    if (!keeping || f < keep->first) continue;
+    bytes += record_bytes(rec);
+    keeping = f <= last && bytes <= kKeptFrameBytes;
+    if (keeping) keep->records.push_back(std::move(rec));
   }
+  if (keep) keep->settings = in.record_settings();
   return in.info;
 }
+
 }  // namespace
 
 ExternalTraceInfo check_external_trace(const std::string& path) { return check_frames(path, {}); }
@@ -882,8 +945,15 @@ ExternalTraceInfo check_external_trace(const std::string& path) { return check_f
 std::vector<ValidationResult> validate_external_trace(const std::string& path, ExternalOptions options, int every,
                                                       std::int64_t max_frames, ExternalTraceInfo* info) {
   if (every < 1) throw InputError(fmt::format("--every: {}; allowed: >= 1", every));
-  const ExternalTraceInfo checked = check_frames(path, options.stop);
+  // The trace is decoded once: the check pass (every frame's values, before any verdict)
+  // keeps the frames this run judges (the shard's block, or frames 1 .. --frames), up to
+  // kKeptFrameBytes, and the judging takes them instead of reading them again.
+  KeptFrames kept;
+  kept.max_frames = max_frames;
+  kept.shard = options.shard;
+  const ExternalTraceInfo checked = check_frames(path, options.stop, &kept);
   TraceIn in(path);
+  if (!in.same_records(kept.settings)) kept.records.clear();  // an "integrated" pose from the scene's dt and gravity
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;
   options.octocd_engine = in.info.octocd_conventions;  // declared by the trace's layout, never by its engine name
@@ -930,12 +1000,17 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
         made->observe_episodes(in.frame(f));
       }
     }
+    // A frame the check pass kept is taken as it is; another is read on the second thread.
+    auto fetch = [&in, &kept](std::int64_t f) {
+      if (kept.has(f)) return std::async(std::launch::deferred, [&kept, f] { return kept.take(f); });
+      return std::async(std::launch::async, [&in, f] { return in.frame(f); });
+    };
     std::future<FrameRecord> next;
-    if (first <= last) next = std::async(std::launch::async, [&in, f = first] { return in.frame(f); });
+    if (first <= last) next = fetch(first);
     for (std::int64_t f = first; f <= last; ++f) {
       if (options.stop && options.stop()) throw ValidationStopped();
       const FrameRecord rec = next.get();
-      if (f < last) next = std::async(std::launch::async, [&in, f] { return in.frame(f + 1); });
+      if (f < last) next = fetch(f + 1);
       judging = f;
       made->observe(rec, f % every == 0);
       judged_to = f;

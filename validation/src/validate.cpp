@@ -19,14 +19,16 @@
 #include "octocd/expect.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/validation.hpp"
+#include "octocd/validation_rows.hpp"
 
 namespace octocd {
 
 namespace {
 
-ValidationResult not_applicable(const char* name, const char* figure, const std::string& why) {
+ValidationResult not_applicable(RowId id, const char* figure, const std::string& why) {
   ValidationResult r;
-  r.name = name;
+  r.tier = row_info(id).tier;
+  r.name = row_info(id).name;
   r.figure = figure;
   r.applicable = false;
   r.detail = why;
@@ -164,10 +166,11 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
   };
   const Model& model = engine.model();
   const Scene& sc = model.scene;
-  const char* name = "analytic";
+  const RowId row = RowId::Analytic;
   const SceneKind kind = classify_scene(model);
   ValidationResult r;
-  r.name = name;
+  r.tier = row_info(row).tier;
+  r.name = row_info(row).name;
   const std::vector<std::size_t> dyn = dynamic_bodies(model);
   const int n_frames = std::max(frames, 1);
   if (kind == SceneKind::FreeFall) {
@@ -291,7 +294,7 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
                                             total, kSettle, kSettle + 1)
                               : fmt::format("; frames {}..{} judged", from, total);
   } else {
-    return not_applicable(name, "closed form of an analytic scene",
+    return not_applicable(row, "closed form of an analytic scene",
                           fmt::format("scene content is of kind '{}': not free fall, bounce, slide or a "
                                       "resting stack",
                                       scene_kind_name(kind)));
@@ -304,12 +307,12 @@ ValidationResult validate_analytic(Engine& engine, int frames, const Tolerances&
 ValidationResult validate_against_bullet(Engine& engine, int frames, const Tolerances& tol,
                                          const std::function<bool()>& stop) {
   const Model& model = engine.model();
-  const char* name = "bullet-dynamics";
+  const RowId row = RowId::BulletDynamics;
   const SceneKind kind = classify_scene(model);
   const bool settle = kind == SceneKind::RestingStack || kind == SceneKind::Pile;
   const bool trajectory = kind == SceneKind::Bounce || kind == SceneKind::Slide;
   if (!settle && !trajectory)
-    return not_applicable(name, "comparison with btDiscreteDynamicsWorld",
+    return not_applicable(row, "comparison with btDiscreteDynamicsWorld",
                           fmt::format("compared kinds: resting stack, pile, bounce, slide; this scene is of kind '{}'",
                                       scene_kind_name(kind)));
   std::shared_ptr<const Model> shared(&model, [](const Model*) {});  // outlives `bullet`
@@ -319,7 +322,8 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
   boxes.shape = BulletShape::Box;
   BulletWorld bullet(shared, engine.state(), BulletOptions(), boxes);
   ValidationResult r;
-  r.name = name;
+  r.tier = row_info(row).tier;
+  r.name = row_info(row).name;
   // Settling compares the state after `frames` steps, and how far the bodies moved over the
   // last tenth of them (1 to 100 frames); trajectories at every frame.
   const int n = std::max(frames, 1);
@@ -371,7 +375,7 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
     const char* figure = "settled centre-of-mass height difference / mean body height";
     if (theirs_v > rest)
       return not_applicable(
-          name, figure,
+          row, figure,
           fmt::format("Bullet has not come to rest after {} frames ({}): its bodies moved {:.3g} m/s on average over "
                       "the last {} frames, at rest below {:.3g} m/s ({} x sqrt(g h), body height {:.3f} m); no "
                       "settled height to compare: validate with more --frames",
@@ -388,10 +392,10 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
     r.judged = 1;
     r.pass = r.measured <= r.bound && ours_v <= rest;
     // Each failure is a cause of its own (a wrong height never hides a run that keeps moving).
-    auto cause = [&](const char* cause_name, const char* unit, double figure_value, std::string text) {
+    auto cause = [&](const RowCause& documented, double figure_value, std::string text) {
       ValidationCause c;
-      c.name = cause_name;
-      c.unit = unit;
+      c.name = documented.name;
+      c.unit = documented.unit;
       c.count = 1;
       c.worst = figure_value;
       c.examples.push_back({n, "", figure_value, std::move(text)});
@@ -399,12 +403,12 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
     };
     if (!r.pass) {
       if (r.measured > r.bound)
-        cause("height", "rel", r.measured,
+        cause(row_info(row).causes[0], r.measured,  // height
               fmt::format("settled centre-of-mass heights differ by {:.3g} body heights (bound {:.3g}): octocd "
                           "{:.4f} m, Bullet {:.4f} m",
                           r.measured, r.bound, ours, theirs));
       if (ours_v > rest)
-        cause("still-moving", "m/s", ours_v,
+        cause(row_info(row).causes[1], ours_v,  // still-moving
               fmt::format("octocd's bodies still move ({:.3g} m/s on average over the last {} frames) where "
                           "Bullet's rest ({:.3g} m/s; at rest below {:.3g} m/s)",
                           ours_v, window, theirs_v, rest));
@@ -497,8 +501,8 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   auto stopped_rows = [&] {
     std::vector<ValidationResult> rows = validators.results();
     const std::string why = fmt::format("not run: stopped after frame {} of {}", done, options.frames);
-    rows.push_back(not_applicable("analytic", "closed form of an analytic scene", why));
-    rows.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld", why));
+    rows.push_back(not_applicable(RowId::Analytic, "closed form of an analytic scene", why));
+    rows.push_back(not_applicable(RowId::BulletDynamics, "comparison with btDiscreteDynamicsWorld", why));
     return rows;
   };
   auto judged = [&] {
@@ -546,29 +550,29 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
   }
   std::vector<ValidationResult> results = validators.results();
   // Validators 7 and 8 rerun the scene on fresh engines (their time is their row's).
-  auto rerun = [&](const char* name, const char* figure, auto judge) {
+  auto rerun = [&](RowId row, const char* figure, auto judge) {
     const auto t0 = std::chrono::steady_clock::now();
     try {
       std::unique_ptr<Engine> fresh = make();
       results.push_back(judge(*fresh));
     } catch (const ValidationStopped&) {
       stopped = true;
-      results.push_back(not_applicable(name, figure, "not run to its end: stopped by a signal"));
+      results.push_back(not_applicable(row, figure, "not run to its end: stopped by a signal"));
     }
     results.back().seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
-  rerun("analytic", "closed form of an analytic scene",
+  rerun(RowId::Analytic, "closed form of an analytic scene",
         [&](Engine& e) { return validate_analytic(e, options.frames, options.tol, options.stop); });
   if (stopped) {
-    results.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld",
+    results.push_back(not_applicable(RowId::BulletDynamics, "comparison with btDiscreteDynamicsWorld",
                                      "not run: stopped by a signal"));
     return results;
   }
   if (options.against_bullet) {
-    rerun("bullet-dynamics", "comparison with btDiscreteDynamicsWorld",
+    rerun(RowId::BulletDynamics, "comparison with btDiscreteDynamicsWorld",
           [&](Engine& e) { return validate_against_bullet(e, options.frames, options.tol, options.stop); });
   } else {
-    results.push_back(not_applicable("bullet-dynamics", "comparison with btDiscreteDynamicsWorld",
+    results.push_back(not_applicable(RowId::BulletDynamics, "comparison with btDiscreteDynamicsWorld",
                                      "Bullet not requested (--against)"));
   }
   return results;

@@ -13,7 +13,7 @@
 ///   in the cell of its AABB centre at the deepest level whose cell side is >= its
 ///   largest side, queried against the <= 3x3x3 cells of its own and every coarser level
 ///   whose loose boxes (cells grown by half a side) meet it; bodies fitting no loose box
-///   in an overflow list tested against every body (broadphase_octree.cpp; cell math in
+///   in an overflow list tested against every body (broadphase_octree_cache.cpp; cell math in
 ///   octocd/loose_octree.hpp, shared with the CUDA engine). Across calls on one instance
 ///   it keeps the pairs of the boxes grown by an eighth of the median body size and,
 ///   while every box stays inside its grown box, only re-tests those pairs; a few bodies
@@ -50,7 +50,7 @@ struct BroadPhaseStats {
   /// n(n-1)/2; for `octree`, the pairs of bodies in queried cells that reach the exact
   /// test, overflow pairs included, on the instance's first call; on later calls the
   /// kept pairs re-tested, plus the tests on grown boxes when the tree is rebuilt or
-  /// bodies are re-queried (broadphase_octree.cpp); for `octree-strict`, pairs in
+  /// bodies are re-queried (broadphase_octree_cache.cpp); for `octree-strict`, pairs in
   /// related nodes; for `spatial-hash`, pairs sharing a cell, before de-duplication).
   std::uint64_t cell_candidates = 0;
   /// Pairs returned (after the exact test and de-duplication).

@@ -320,6 +320,13 @@ class Engine {
   /// (the default) for engines that translate only.
   virtual const RotationTraits* rotation_traits() const { return nullptr; }
 
+  /// Whether this engine follows octocd's contact conventions (contacts on the world
+  /// AABBs, the pair's theta as contact margin, an exact AABB broadphase:
+  /// octocd_physics_bodies): trace_metadata then writes octocd_trace_declarations
+  /// (trace.hpp) into its traces as root attributes, and readers read those declarations,
+  /// never the engine's name. true for octocd's own engines (`cpu`, `cuda`).
+  virtual bool octocd_contacts() const { return false; }
+
   /// Whether this engine can fill FrameRecord (false for `bullet` without rotation).
   virtual bool can_record() const { return false; }
   /// Turns the per-step FrameRecord on or off (off by default: it costs copies).

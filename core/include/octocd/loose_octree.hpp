@@ -2,7 +2,8 @@
 /// \file loose_octree.hpp
 /// Cell and level math of the loose octree broadphase `octree` (design.md section 5.1; Ulrich, "Loose
 /// Octrees", Game Programming Gems 2000, looseness k = 2), shared by the CPU reference
-/// (core/src/broadphase_octree.cpp) and the CUDA engine.
+/// (core/src/broadphase_octree_tree.cpp, broadphase_octree_cache.cpp) and the CUDA engine
+/// (gpu/src/broadphase_octree_tree.cu, broadphase_octree_cache.cu).
 ///
 /// Like math.hpp, every function is `OCTOCD_HD`, takes and returns plain values,
 /// allocates nothing and throws nothing.

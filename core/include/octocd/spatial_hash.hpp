@@ -2,7 +2,7 @@
 /// \file spatial_hash.hpp
 /// Cell math of the `spatial-hash` broadphase (paper section 4.2; design.md section 5.1: a uniform grid
 /// of cell size h), shared by the CPU reference (core/src/broadphase_spatial_hash.cpp)
-/// and the CUDA engine (gpu/src/broadphase_hash.cu), so both put every body in the same
+/// and the CUDA engine (gpu/src/broadphase_spatial_hash.cu), so both put every body in the same
 /// cells and de-duplicate pairs by the same cell. Which bodies skip the grid for the
 /// oversize list (`max_cells`) is each driver's policy; the pair set does not depend on it.
 ///

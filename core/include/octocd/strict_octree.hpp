@@ -3,7 +3,7 @@
 /// Node and level math of the `octree-strict` broadphase (design.md section 5.1: the paper's world
 /// octree read literally, paper section 3.2, Algorithms 1-2), shared by the CPU reference
 /// (core/src/broadphase_octree_strict.cpp, auto depth in core/src/broadphase.cpp) and the
-/// CUDA engine (gpu/src/broadphase_strict.cu), so both put every body in the same node.
+/// CUDA engine (gpu/src/broadphase_octree_strict.cu), so both put every body in the same node.
 ///
 /// Like math.hpp, every function is `OCTOCD_HD`, takes and returns plain values,
 /// allocates nothing and throws nothing.

@@ -58,7 +58,7 @@ struct TraceMetadata {
   int state_every = 10;       ///< informational: the file's `state_every` attribute is
                               ///< TraceOptions::state_every, the value actually used
   /// Declarations written as root attributes (trace_metadata: octocd_trace_declarations
-  /// for an engine whose EngineInfo::octocd_contacts is set, none otherwise).
+  /// for an engine whose Engine::octocd_contacts() is true, none otherwise).
   TraceDeclarations declarations;
 };
 

@@ -50,6 +50,7 @@ class World : public Engine {
   std::int64_t frame() const override { return frame_; }
   /// Contacts of the last step's first response pass, in (a, b) order, with their impulses.
   const std::vector<ContactRecord>& contacts() const override { return contacts_; }
+  bool octocd_contacts() const override { return true; }
   bool can_record() const override { return true; }
   void set_recording(bool on) override { recording_ = on; }
   const FrameRecord& record() const override { return record_; }

@@ -218,6 +218,7 @@ class CudaWorld : public Engine {
   /// Contacts of the last step's first response pass, in (a, b) order; empty unless
   /// recording (they stay on the device otherwise).
   const std::vector<ContactRecord>& contacts() const override;
+  bool octocd_contacts() const override { return true; }
   bool can_record() const override { return true; }
   /// Recording copies x_pre, v_pre, AABBs, pairs, confirmed pairs, contacts, x_post and
   /// v_post back every step (as World fills them). Throws RuntimeError when it changes

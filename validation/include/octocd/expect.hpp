@@ -34,11 +34,13 @@ namespace octocd {
 /// passed or is n/a. Causes with count 0 are left out.
 std::vector<ValidationCause> failure_causes(const ValidationResult& r);
 
-/// Every row name the validators produce (physics tier, then model tier).
+/// Every row name the validators produce (physics tier, then model tier): the names of
+/// validation_rows() (octocd/validation_rows.hpp).
 const std::vector<std::string>& validation_row_names();
 
-/// The documented causes of `row` (design.md section 13b.13), without the row-named fallback; empty
-/// for a row that does not split its failures.
+/// The documented causes of `row` (design.md section 13b.13; its RowInfo::causes in
+/// octocd/validation_rows.hpp), without the row-named fallback; empty for a row that does
+/// not split its failures, or a name no row has.
 std::vector<std::string> documented_causes(const std::string& row);
 
 /// One known failure (an entry of an expectations file).

@@ -353,7 +353,7 @@ class ExternalTrace {
 /// listing, and the n/a a row gets when the trace lacks what it needs.
 struct TraceRowPlan {
   Tier tier = Tier::Physics;
-  std::string name;     ///< as validation_row_names() (octocd/expect.hpp), in its order
+  std::string name;     ///< a row of validation_rows() (octocd/validation_rows.hpp), in its order
   bool judged = true;   ///< the trace carries what the row needs (it may still find nothing to judge)
   /// Not judged: what to add (datasets or root attributes), or "nothing ..." with the
   /// reason when no trace can give it (rows that step an engine).
@@ -362,7 +362,7 @@ struct TraceRowPlan {
   std::string partial;
 };
 
-/// The plan of every row (validation_row_names()) for a trace holding `info` with the
+/// The plan of every row (validation_rows()) for a trace holding `info` with the
 /// bodies and declarations `bodies` (ExternalTrace::bodies()). Reads nothing.
 std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const ExternalBodies& bodies);
 

@@ -1,12 +1,11 @@
 #pragma once
 /// \file engine_registry.hpp
-/// The engines octocd has (`cpu`, `cuda`, `bullet`) and what each can do: the one place
-/// that knows an engine by its name. Callers (CLI, Python, bench, trace readers) ask an
-/// EngineInfo for a capability instead of comparing names (a ctest grep keeps it so).
-///
-/// Pure data in core: building an engine needs the libraries that hold them (the cuda
-/// engine in gpu/, Bullet in reference/), so `make_engine` lives in the small library
-/// octocd_engines (engines/include/octocd/engines.hpp) that links all three.
+/// The engines octocd has (`cpu`, `cuda`, `bullet`, `mujoco`, `ode`, `dart`) and what each
+/// can do: the one place that knows an engine by its name. Callers (CLI, Python, bench)
+/// ask an EngineInfo for a capability instead of comparing names (a ctest grep keeps it
+/// so). Each engine is one entry of engines/src/engines.cpp: its EngineInfo beside its
+/// factory and settings parser (`make_engine`, octocd/engines.hpp), in the library
+/// octocd_engines that links every engine's own.
 
 #include <string>
 #include <vector>
@@ -42,11 +41,6 @@ struct EngineInfo {
   /// it in process (cpu, cuda); false: judged as a version 2 external trace when it
   /// records (bullet: hull mode, its default, or rotation; box mode records nothing).
   bool records_every_step = false;
-  /// Traces it writes follow octocd's contact conventions (contacts on the world AABBs,
-  /// the pair's theta as contact margin, an exact AABB broadphase: octocd_physics_bodies),
-  /// and say so: trace_metadata writes octocd_trace_declarations (trace.hpp) as root
-  /// attributes. Readers read those declarations, never the engine's name.
-  bool octocd_contacts = false;
   /// What it can collide a body as, one per setting it has (the speed-accuracy sweep's
   /// `geometry`): {"mesh"} for octocd's narrow phase on the meshes; {"hull", "box"} for an
   /// engine with a shape setting (bullet: BulletSettings::shape).
@@ -60,7 +54,8 @@ struct EngineInfo {
   std::string iterations_setting;
 };
 
-/// Every engine, built in this octocd or not, in a stable order: cpu, cuda, bullet, mujoco, ode.
+/// Every engine, built in this octocd or not, in a stable order: cpu, cuda, bullet, mujoco,
+/// ode, dart.
 const std::vector<EngineInfo>& engine_infos();
 
 /// The names of engine_infos(), in its order.
@@ -70,13 +65,7 @@ const std::vector<std::string>& engine_names();
 const EngineInfo* find_engine_info(const std::string& name);
 
 /// The engine `name`; throws InputError "<where>: unknown engine 'NAME'; allowed: cpu,
-/// cuda, bullet" for any other name.
+/// cuda, bullet, ..." for any other name.
 const EngineInfo& engine_info(const std::string& name, const std::string& where);
-
-/// Whether the engine `engine` follows octocd's contact conventions
-/// (EngineInfo::octocd_contacts): true for `cpu` and `cuda`, false for any other engine,
-/// known or not. Its one caller, trace_metadata, then writes those conventions into the
-/// trace as declarations (docs/trace-format.md, "Declarations"); no reader asks it.
-bool writes_octocd_contacts(const std::string& engine);
 
 }  // namespace octocd

@@ -1,4 +1,4 @@
-/// \file broadphase_octree.cpp
+/// \file broadphase_octree_cache.cpp
 /// `octree` (the default): the loose octree broadphase (design.md section 5.1; Ulrich, "Loose
 /// Octrees", Game Programming Gems 2000, looseness k = 2), the form of the paper's world
 /// octree (section 3.2, Algorithms 1-2) whose cost scales. The literal reading is

@@ -1,7 +1,7 @@
 // Broadphase `octree` on the device with a pair cache across calls (temporal coherence):
-// the CPU octree's step 6 (core/src/broadphase_octree.cpp, the "fat AABB" idea of
+// the CPU octree's step 6 (core/src/broadphase_octree_cache.cpp, the "fat AABB" idea of
 // Bullet's dbvt; a Verlet list in molecular dynamics) over the one-shot device `octree`
-// (broadphase_octree.cu). The host decides each call's plan (coherent_plan.hpp):
+// (broadphase_octree_tree.cu). The host decides each call's plan (coherent_plan.hpp):
 // - Plain: the one-shot `octree` on the AABBs (the first call; backing off after a cache
 //   that served no call);
 // - Build: d = margin_fraction x the median largest side of at most 1023 bodies spaced

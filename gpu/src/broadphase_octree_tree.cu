@@ -1,6 +1,6 @@
 // Broadphase `octree` on the device: the loose octree of design.md section 5.1 (Ulrich 2000, looseness
 // 2) with every cell and level decision from octocd/loose_octree.hpp, the header the CPU
-// driver (core/src/broadphase_octree.cpp) uses. Steps (orchestrated by cuda_world.cpp):
+// tree (core/src/broadphase_octree_tree.cpp) uses. Steps (orchestrated by cuda_world.cpp):
 // 1. keys: D_w (the scene's, or `auto` from the smallest body extent: a block minimum,
 //    then one atomicMin per block on the float's bits),
 //    then per body loose_place_unit -> (level, Morton cell) key, the overflow key, a stray

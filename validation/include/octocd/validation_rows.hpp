@@ -1,0 +1,71 @@
+#pragma once
+/// \file validation_rows.hpp
+/// Every validator row's identity, in one table (design.md sections 7, 13b.13): its name,
+/// its tier, its documented causes (the names an expectation's "cause" takes, the items
+/// each counts and its unit) and how `validate --merge` joins its figure across shards.
+/// The physics tier's table, the model tier, expectations (octocd/expect.hpp), the trace
+/// plan (octocd/external.hpp) and the merge (octocd/shards.hpp) all read it; a row is added
+/// here once. What a row measures, its figure and its tolerances stay with its judge.
+
+#include <string>
+#include <vector>
+
+#include "octocd/validation.hpp"
+
+namespace octocd {
+
+/// The rows, in the order `validate` reports them: the physics tier, then the model tier.
+enum class RowId {
+  BroadphaseCompleteness,
+  ContactCompleteness,
+  ContactGeometry,
+  Penetration,
+  Friction,
+  Conservation,
+  MomentumBalance,
+  FreeFlight,
+  CandidateSets,
+  MidphaseCompleteness,
+  NonPenetrationEq14,
+  FrictionMonotonicity,
+  ImpulseConservation,
+  AppliedState,
+  Analytic,
+  BulletDynamics,
+};
+
+/// How `validate --merge` joins a row's `measured` over the shards of one run.
+enum class RowMerge {
+  /// `measured` counts failing items (bound 0): the shards' counts add up.
+  Sum,
+  /// `measured` is the largest figure judged (the worst normal angle, the deepest
+  /// penetration, a rerun's worst error): the largest of the shards'.
+  Max,
+};
+
+/// One documented cause of a row's failures (design.md section 13b.13).
+struct RowCause {
+  const char* name;   ///< kebab-case, unique within its row: an expectation's "cause"
+  const char* items;  ///< what its judged count counts, for the row's detail ("required pairs"); "" when unnamed
+  const char* unit;   ///< the unit of its figures ("m", "deg", "of bound", ...)
+};
+
+/// One row's identity.
+struct RowInfo {
+  RowId id;                     ///< its place in validation_rows()
+  const char* name;             ///< e.g. "contact-geometry": ValidationResult::name, an expectation's "row"
+  Tier tier;                    ///< the judge it belongs to
+  RowMerge merge;               ///< how shards' figures join
+  std::vector<RowCause> causes; ///< its causes in their documented order; empty: it does not split its failures
+};
+
+/// Every row, in RowId order (physics tier, then model tier).
+const std::vector<RowInfo>& validation_rows();
+
+/// The row `id`.
+const RowInfo& row_info(RowId id);
+
+/// The row named `name`, or nullptr for a name no row has (a shard file of another build).
+const RowInfo* find_row_info(const std::string& name);
+
+}  // namespace octocd
