@@ -777,7 +777,7 @@ TEST_F(Hardening, FileSizeLimitIsAnErrorNeverSigxfszAndOldFilesStayIntact) {
     EXPECT_NE(r.err.find("File too large"), std::string::npos) << r.err;
   }
   const std::string old = "{\"old\": true}\n";
-  for (const std::string& what : {"--summary-json", "--junit"}) {
+  for (const std::string what : {"--summary-json", "--junit"}) {
     SCOPED_TRACE(what);
     const std::string file = write(what == "--junit" ? "old.xml" : "old.json", old);
     const std::vector<std::string> args =

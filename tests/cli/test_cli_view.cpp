@@ -347,7 +347,9 @@ TEST(CliView, MainJobTraceWithSparseStatesOpens) {
       EXPECT_NEAR(f["x"][0][k].get<double>(), position[(row * n + 0) * 3 + k], 1e-5) << fr;
   }
   EXPECT_TRUE(asked);
-  if (first_contact > 60) EXPECT_EQ(data["frames"].size(), 11u) << "5 recorded states each side, and the frame";
+  if (first_contact > 60) {
+    EXPECT_EQ(data["frames"].size(), 11u) << "5 recorded states each side, and the frame";
+  }
 
   // --frame 7 --window 2: frame 7 is drawn at frame 10's state, beside frames 10 and 20
   // (frame 0's state, before it, is the initial one, not a step).

@@ -80,7 +80,9 @@ TEST(Expect, TheRowTableIsInRowIdOrderWithUniqueNamesAndCauses) {
     EXPECT_EQ(&row_info(row.id), &row);
     EXPECT_EQ(find_row_info(row.name), &row);
     // The physics tier first, then the model tier (the order of `validate`'s table).
-    if (k > 0 && rows[k - 1].tier == Tier::Model) EXPECT_EQ(row.tier, Tier::Model) << row.name;
+    if (k > 0 && rows[k - 1].tier == Tier::Model) {
+      EXPECT_EQ(row.tier, Tier::Model) << row.name;
+    }
     for (const std::string& n : names) EXPECT_NE(n, row.name);
     names.push_back(row.name);
     std::vector<std::string> causes;
