@@ -339,12 +339,12 @@ def check_points(path, j):
 
 def run_identity(j):
     """What names one run of octocd bench (a shard of it): host, start time (kept by --resume),
-    shard and settings (engines, repetitions); None for a result without a start time."""
+    shard, settings (engines, repetitions) and build; None for a result without a start time."""
     if not isinstance(j.get("started"), str):
         return None
     sh = j["settings"].get("shard") if isinstance(j["settings"].get("shard"), dict) else {}
     return (j["machine"].get("hostname"), j["started"], sh.get("index", 0), sh.get("count", 1),
-            json.dumps(j["settings"], sort_keys=True))
+            json.dumps(j["settings"], sort_keys=True), j["build"].get("build_id"))
 
 
 def merge(results, pool=False):
