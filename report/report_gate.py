@@ -15,7 +15,7 @@ from report_common import fail, load_mark, load_warning, np, num, printable
 
 
 GATE_MIN_REPS = 5
-LEVEL_RANGE = (1e-9, 0.25)  # --level: below 1e-9 no sweep's repetitions are worth the test's tail
+LEVEL_RANGE = (1e-6, 0.25)  # --level, as `octocd report --level` takes it (1e-6: 12 repetitions a side)
 EXACT_COST = 1 << 18  # min(m, n) * m * n at most: U's exact null distribution (0.03 s of Python at 64 a side, cached)
 SMALL_PAIRS = 4096  # m * n at most: U and the pairwise ratios in plain Python (cheaper than numpy per call)
 DIRECT_PAIRS = 1 << 22  # m * n at most: the pairwise log ratios held at once (32 MiB); beyond, found by bisection

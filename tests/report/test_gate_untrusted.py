@@ -163,9 +163,9 @@ def test_a_level_five_repetitions_cannot_reach_says_how_many_are_needed(tmp_path
     # The default level with 5 a side (and a 30 % slowdown) stays decidable.
     rc, out, err = gate(tmp_path, scaled(BASE, 1.3), BASE)
     assert rc == 4 and out.count("gate: SLOWER") == 4, out + err
-    # Outside [1e-9, 0.25] is refused whatever the repetitions.
+    # Outside [1e-6, 0.25] is refused whatever the repetitions.
     rc, out, err = gate(tmp_path, BASE, BASE, "--level", "1e-12")
-    assert rc == 2 and "--level: 1e-12; allowed: a significance level in [1e-09, 0.25]" in err, err
+    assert rc == 2 and "--level: 1e-12; allowed: a significance level in [1e-06, 0.25]" in err, err
 
 
 def test_repetitions_count_once_per_file_and_run(tmp_path):
