@@ -11,6 +11,7 @@
 #include "bench_sweep.hpp"
 #include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
+#include "octocd/json_fields.hpp"
 #include "octocd/json_strict.hpp"
 
 namespace octocd::cli::bench {
@@ -54,109 +55,174 @@ json new_result(const Sweep& s, const std::string& origin, const json& def, cons
   return result;
 }
 
-std::map<std::string, json> resumed_points(const BenchOptions& o, const Sweep& s, const std::string& origin,
-                                           const json& def, const std::vector<Point>& points, json& result) {
-  std::map<std::string, json> kept;
-  std::error_code ec;
-  if (!fs::exists(o.output, ec)) return kept;
-  const json settings = result["settings"];
-  if (!o.resume)
-    throw InputError(fmt::format("{}: exists; allowed: a new file, or --resume to continue it (remove it to start "
-                                 "over)",
-                                 o.output));
-  json old;
-  {
-    const std::string text = octocd::read_input_file(o.output, "-o", "a bench result of the same sweep to --resume");
-    old = octocd::parse_json_strict(text, o.output);  // a second "points" key refused, not silently won
+namespace {
+
+constexpr std::size_t kMaxName = 4096;      ///< bytes of an id, a host or CPU name in a result
+constexpr std::size_t kMaxRepeat = 1000;    ///< repetitions of a spread (a sweep's repeat is at most 1000)
+
+/// Checks a spread {n, median, min, max, values, ...} of a kept point (`at` names it).
+void check_spread(const JsonFields& f, const json& v, const std::string& at) {
+  f.object(v, at);
+  f.count(f.member(v, at, "n", "a spread {n, median, min, max, values} (docs/bench-format.md)"), at + ".n", kMaxRepeat);
+  for (const char* k : {"median", "min", "max", "mean", "stdev"})
+    if (v.contains(k)) (void)f.number_or_null(v[k], at + "." + k, -1e300, 1e300);
+  if (v.contains("values")) {
+    const json& vals = f.array(v["values"], at + ".values", kMaxRepeat);
+    for (std::size_t i = 0; i < vals.size(); ++i)
+      (void)f.number_or_null(vals[i], fmt::format("{}.values[{}]", at, i), -1e300, 1e300);
   }
-  if (old.value("format", "") != "octocd-bench" || old.value("version", 0) != 1)
-    throw InputError(fmt::format("{}: format: {} version {}; allowed: octocd-bench version 1", o.output,
-                                 old.value("format", "?"), old.value("version", 0)));
-  if (old["sweep"]["definition"] != def)
+}
+
+}  // namespace
+
+std::map<std::string, json> resumable_points(const json& old, const std::string& path, const Sweep& s,
+                                             const std::string& origin, const json& def,
+                                             const std::vector<Point>& points, json& result) {
+  std::map<std::string, json> kept;
+  const JsonFields f(path);
+  const json& settings = result["settings"];
+  if (!old.is_object()) f.fail("(the document)", json_type_text(old) + ", not an object", "a result of octocd bench");
+  const std::string allowed = "a result of octocd bench (docs/bench-format.md) to resume";
+  const auto key = [&](const char* k) -> const json& { return f.member(old, "", k, allowed); };
+  const json& format = key("format");
+  const json& version = key("version");
+  if (format != "octocd-bench" || version != 1)
+    throw InputError(fmt::format("{}: format: {} version {}; allowed: octocd-bench version 1", path,
+                                 format.dump().substr(0, 60), version.dump().substr(0, 20)));
+  const json& sweep = f.object(key("sweep"), "sweep");
+  if (f.member(sweep, "sweep", "definition", allowed) != def)
     throw InputError(fmt::format("{}: sweep.definition: another sweep ('{}'); allowed: a result of the same sweep "
                                  "definition to resume",
-                                 o.output, old["sweep"].value("name", "?")));
-  if (old["settings"] != settings)
-    throw InputError(fmt::format("{}: settings: {}; allowed: the same engines, repeat and shard as now ({})",
-                                 o.output, old["settings"].dump(), settings.dump()));
-  for (const char* k : {"hostname", "cpu", "gpu"})
-    if (old["machine"].value(k, "") != result["machine"].value(k, ""))
+                                 path, sweep.contains("name") ? f.text(sweep["name"], "sweep.name", kMaxName) : "?"));
+  if (key("settings") != settings)
+    throw InputError(fmt::format("{}: settings: {}; allowed: the same engines, repeat and shard as now ({})", path,
+                                 old["settings"].dump().substr(0, 400), settings.dump()));
+  const json& machine = f.object(key("machine"), "machine");
+  for (const char* k : {"hostname", "cpu", "gpu"}) {
+    const std::string mine = result["machine"].value(k, "");
+    const std::string theirs =
+        machine.contains(k) ? f.text(machine[k], std::string("machine.") + k, kMaxName) : std::string();
+    if (theirs != mine)
       throw InputError(fmt::format("{}: machine.{}: '{}'; allowed: a result measured on this machine ('{}') to "
                                    "resume",
-                                   o.output, k, old["machine"].value(k, ""), result["machine"].value(k, "")));
-  result["started"] = old.value("started", result["started"].get<std::string>());
-  if (!old.contains("points") || !old["points"].is_array())
-    throw InputError(fmt::format("{}: points: not an array; allowed: a result file of octocd bench to resume",
-                                 o.output));
+                                   path, k, theirs, mine));
+  }
+  if (old.contains("started")) result["started"] = f.text(old["started"], "started", 64);
+  const json& pts = f.array(key("points"), "points", kMaxPoints);
   std::map<std::string, const Point*> by_id;
   for (const auto& p : points) by_id[p.id] = &p;
-  for (std::size_t i = 0; i < old["points"].size(); ++i) {
-    const json& pt = old["points"][i];
-    const std::string key = fmt::format("points[{}]", i);
-    const auto refuse = [&](const std::string& k, const std::string& problem, const std::string& allowed) {
-      throw InputError(fmt::format("{}: {}{}: {} (sweep {}); allowed: {}", o.output, key, k, problem, origin, allowed));
+  const std::vector<std::string> windows = [&] {
+    std::vector<std::string> w;
+    for (const auto& x : s.windows) w.push_back(x.name);
+    return w;
+  }();
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const json& pt = pts[i];
+    const std::string at = fmt::format("points[{}]", i);
+    const auto refuse = [&](const std::string& k, const std::string& problem, const std::string& ok) {
+      throw InputError(fmt::format("{}: {}{}: {} (sweep {}); allowed: {}", path, at, k, problem, origin, ok));
     };
-    if (!pt.is_object()) refuse("", "not an object", "a point of the sweep");
-    if (!pt.contains("id") || !pt["id"].is_string()) refuse(".id", "missing or not a string", "a point id");
-    const std::string id = pt["id"];
+    f.object(pt, at);
+    const std::string id = f.text(f.member(pt, at, "id", "a point id"), at + ".id", kMaxName);
+    const std::string status = f.one_of(f.member(pt, at, "status", "ok, skipped, failed"), at + ".status",
+                                        {"ok", "skipped", "failed"});
+    if (pt.contains("reason")) (void)f.text(pt["reason"], at + ".reason", std::size_t(1) << 20);
     if (s.kind == "max-instances") {
       // "SCENE | instances=N | ENGINE" or "... | confirm", N in [1, max_instances].
-      const json* n_json = nullptr;
-      if (pt.contains("params") && pt["params"].is_object() && pt["params"].contains("axes") &&
-          pt["params"]["axes"].is_object() && pt["params"]["axes"].contains("instances"))
-        n_json = &pt["params"]["axes"]["instances"];
-      const long n = n_json && n_json->is_number_integer() ? n_json->get<long>() : 0;
+      const std::string axes_allowed =
+          fmt::format("params.axes.instances = N in [1, {}] (a probe of the sweep)", s.max_instances);
+      const json& params = f.object(f.member(pt, at, "params", axes_allowed), at + ".params");
+      const json& axes = f.object(f.member(params, at + ".params", "axes", axes_allowed), at + ".params.axes");
+      const long n = static_cast<long>(f.integer(f.member(axes, at + ".params.axes", "instances", axes_allowed),
+                                                 at + ".params.axes.instances", 1, s.max_instances));
       bool known = false;
       for (const auto& sc : s.scenes)
         for (const auto& e : s.engines)
           for (const char* tail : {"", " | confirm"})
-            known = known || (n >= 1 && n <= s.max_instances &&
-                              id == fmt::format("{} | instances={} | {}{}", stem(sc), n, e, tail));
+            known = known || id == fmt::format("{} | instances={} | {}{}", stem(sc), n, e, tail);
       if (!known)
         refuse(".id", "'" + id + "' is not a probe of the sweep",
                fmt::format("'SCENE | instances=N | ENGINE[ | confirm]' with params.axes.instances = N in [1, {}]",
                            s.max_instances));
-      if (!pt.contains("index") || !pt["index"].is_number_integer() || pt["index"].get<long long>() < 0)
-        refuse(".index", pt.contains("index") ? pt["index"].dump() : "missing", "an integer >= 0");
-      const std::string v = pt.value("verdict", "");
-      if (v != "pass" && v != "below" && v != "limit" && v != "skipped" && v != "failed")
-        refuse(".verdict", "'" + v + "'", "pass, below, limit, skipped, failed");
+      (void)f.integer(f.member(pt, at, "index", "an integer >= 0"), at + ".index", 0,
+                      static_cast<std::int64_t>(kMaxPoints));
+      const std::string v = f.one_of(f.member(pt, at, "verdict", "pass, below, limit, skipped, failed"),
+                                     at + ".verdict", {"pass", "below", "limit", "skipped", "failed"});
+      const bool fits = status == "ok" ? (v == "pass" || v == "below")
+                                       : status == "skipped" ? (v == "skipped" || v == "limit") : v == "failed";
+      if (!fits)
+        refuse(".verdict", "'" + v + "' with status '" + status + "'",
+               "pass or below (ok), skipped or limit (skipped), failed (failed)");
+      if (pt.contains("cut"))
+        (void)f.integer(f.member(f.object(pt["cut"], at + ".cut"), at + ".cut", "repetitions_cut", "an integer >= 0"),
+                        at + ".cut.repetitions_cut", 0, static_cast<std::int64_t>(kMaxRepeat));
     } else {
       const auto it = by_id.find(id);
       if (it == by_id.end()) refuse(".id", "'" + id + "' is not a point of the sweep", "the ids the sweep expands to");
-      if (!pt.contains("index") || !pt["index"].is_number_integer() || pt["index"].get<long long>() != it->second->index)
-        refuse(".index", pt.contains("index") ? pt["index"].dump() : "missing",
-               fmt::format("{} (the index of '{}' among the sweep's {} points)", it->second->index, id,
-                           points.size()));
+      const auto want = static_cast<std::int64_t>(it->second->index);
+      const json* index = pt.contains("index") ? &pt["index"] : nullptr;
+      const bool same = index && (index->is_number_unsigned()  ? index->get<std::uint64_t>() == std::uint64_t(want)
+                                  : index->is_number_integer() ? index->get<std::int64_t>() == want
+                                                               : false);
+      if (!same)
+        refuse(".index", index ? index->dump().substr(0, 60) : "missing",
+               fmt::format("{} (the index of '{}' among the sweep's {} points)", want, id, points.size()));
     }
     if (kept.count(id)) refuse(".id", "'" + id + "' twice", "each point once");
-    const std::string status = pt.value("status", "");
     if (status == "ok") {
       bool shaped = true;
       if (s.kind != "broadphase") {
-        shaped = pt.contains("windows") && pt["windows"].is_object() && pt["windows"].size() == s.windows.size();
-        for (const auto& w : s.windows)
-          shaped = shaped && pt["windows"].contains(w.name) && pt["windows"][w.name].is_object() &&
-                   pt["windows"][w.name].contains("steps_per_s") && pt["windows"][w.name]["steps_per_s"].is_object();
+        shaped = pt.contains("windows") && pt["windows"].is_object() && pt["windows"].size() == windows.size();
+        for (const auto& w : windows)
+          shaped = shaped && pt["windows"].contains(w) && pt["windows"][w].is_object() &&
+                   pt["windows"][w].contains("steps_per_s") && pt["windows"][w]["steps_per_s"].is_object();
       } else {
         shaped = pt.contains("ms_per_frame") && pt["ms_per_frame"].is_object();
       }
-      if (!shaped)
+      if (!shaped) {
+        std::string names;
+        for (const auto& w : windows) names += (names.empty() ? "" : ", ") + w;
         refuse(s.kind != "broadphase" ? ".windows" : ".ms_per_frame", "a point of another shape",
-               s.kind != "broadphase" ? "windows {" + [&] {
-                 std::string names;
-                 for (const auto& w : s.windows) names += (names.empty() ? "" : ", ") + w.name;
-                 return names;
-               }() + "} each with steps_per_s (docs/bench-format.md)"
-                                 : std::string("a ms_per_frame spread (docs/bench-format.md)"));
+               s.kind != "broadphase" ? "windows {" + names + "} each with steps_per_s (docs/bench-format.md)"
+                                      : std::string("a ms_per_frame spread (docs/bench-format.md)"));
+      }
+      // The figures the run reads back (a max-instances search: the median and n of steps/s).
+      if (s.kind != "broadphase")
+        for (const auto& w : windows)
+          check_spread(f, pt["windows"][w]["steps_per_s"], at + ".windows." + w + ".steps_per_s");
+      else
+        check_spread(f, pt["ms_per_frame"], at + ".ms_per_frame");
       kept[id] = pt;
     } else if (status == "skipped") {
       kept[id] = pt;
-    } else if (status != "failed") {
-      refuse(".status", "'" + status + "'", "ok, skipped, failed");
     }
   }
   return kept;
+}
+
+std::map<std::string, json> resumed_points(const BenchOptions& o, const Sweep& s, const std::string& origin,
+                                           const json& def, const std::vector<Point>& points, json& result) {
+  std::error_code ec;
+  if (!fs::exists(o.output, ec)) return {};
+  if (!o.resume)
+    throw InputError(fmt::format("{}: exists; allowed: a new file, or --resume to continue it (remove it to start "
+                                 "over)",
+                                 o.output));
+  const std::string text = octocd::read_input_file(o.output, "-o", "a bench result of the same sweep to --resume");
+  const json old = octocd::parse_json_strict(text, o.output);  // a second "points" key refused, not silently won
+  return resumable_points(old, o.output, s, origin, def, points, result);
+}
+
+bool finished_result_matches(const json& old, const std::string& path, const json& def, const json& settings) {
+  const JsonFields f(path);
+  if (!old.is_object()) f.fail("(the document)", json_type_text(old) + ", not an object", "a result of octocd bench");
+  const std::string allowed = "a finished result of the same sweep (docs/bench-format.md)";
+  if (f.member(old, "", "format", allowed) != "octocd-bench" || f.member(old, "", "version", allowed) != 1)
+    f.fail("format", "not octocd-bench version 1", "octocd-bench version 1");
+  if (!old.contains("complete") || !f.boolean(old["complete"], "complete")) return false;
+  const json& sweep = f.object(f.member(old, "", "sweep", allowed), "sweep");
+  return sweep.contains("definition") && sweep["definition"] == def && old.contains("settings") &&
+         old["settings"] == settings;
 }
 
 void record_hygiene(json& result, const Sweep& s, bool quiet) {

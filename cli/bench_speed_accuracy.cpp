@@ -18,6 +18,7 @@
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
+#include "octocd/json_strict.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/stop.hpp"
 
@@ -261,14 +262,10 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
         throw InputError(fmt::format("{}: exists; allowed: a new result file, or --resume for a finished run of the "
                                      "same sweep",
                                      o.output));
-      json old;
-      try {
-        old = json::parse(octocd::read_input_file(o.output, "-o", "a finished result of the same sweep to --resume"));
-      } catch (const json::exception& e) {
-        throw InputError(fmt::format("{}: not JSON ({}); allowed: a result of {} to --resume", o.output, e.what(), origin));
-      }
-      if (!old.is_object() || old.value("complete", false) != true || !old.contains("sweep") ||
-          old["sweep"].value("definition", json()) != def || old.value("settings", json()) != settings)
+      // Strict (a key twice, a NUL byte, > 64 levels refused); every field read checked by type.
+      const json old = octocd::parse_json_strict(
+          octocd::read_input_file(o.output, "-o", "a finished result of the same sweep to --resume"), o.output);
+      if (!finished_result_matches(old, o.output, def, settings))
         throw InputError(fmt::format("{}: --resume: not a finished result of {} with these settings; allowed: a "
                                      "finished one (kept as it is), else delete it and run again (a speed-accuracy "
                                      "run cannot go on midway: its errors need each line's reference run)",

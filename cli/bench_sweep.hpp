@@ -308,6 +308,22 @@ json new_result(const Sweep& s, const std::string& origin, const json& def, cons
 std::map<std::string, json> resumed_points(const BenchOptions& o, const Sweep& s, const std::string& origin,
                                            const json& def, const std::vector<Point>& points, json& result);
 
+/// resumed_points' checks of `old`, the parsed result file at `path`: its format, sweep
+/// definition, settings and machine equal those of this run (`def`, result["settings"],
+/// result["machine"]), and each of its points by presence, type and range (id, index,
+/// status, verdict, params, windows and their steps/s spreads; docs/bench-format.md).
+/// Returns the finished (ok or skipped) points by id and keeps the start time in
+/// `result`. Throws InputError naming `path` and the field for anything else.
+std::map<std::string, json> resumable_points(const json& old, const std::string& path, const Sweep& s,
+                                             const std::string& origin, const json& def,
+                                             const std::vector<Point>& points, json& result);
+
+/// Whether `old` (the parsed result file at `path`) is a finished result (complete: true)
+/// of sweep definition `def` with `settings`: what `bench --resume` of a speed-accuracy
+/// sweep keeps as it is. Throws InputError naming `path` and the field when it is not a
+/// result (not an object, another format, `complete` not a boolean, `sweep` not an object).
+bool finished_result_matches(const json& old, const std::string& path, const json& def, const json& settings);
+
 /// Records result["hygiene"] (threads, OpenMP threads, load average, warnings) and prints
 /// its warnings: a loaded machine or oversubscribed threads make timings noisy.
 void record_hygiene(json& result, const Sweep& s, bool quiet);

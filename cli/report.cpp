@@ -189,7 +189,9 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
       ->allow_extra_args(false);
   c->add_option("--threshold", o.threshold, "Slowdown in percent that fails the gate (default 10: on a shared 2-core machine the same build twice differs by up to 30 % between runs; docs/bench-format.md, error rates)")
       ->check(CLI::Range(0.0, 999.0));
-  c->add_option("--level", o.level, "The gate's significance level, one-sided (default 0.05)")
+  c->add_option("--level", o.level,
+                "The gate's significance level, one-sided (default 0.05); the repetitions must be able to reach it "
+                "(5 a side: p >= 1/252 = 0.00397), else exit 2 naming the repetitions needed")
       ->check(CLI::Range(1e-6, 0.25));
   c->add_option("--timing", o.timing,
                 "The gate's figure: cpu (steps per process CPU second, recorded for host engines: another process's "

@@ -364,8 +364,8 @@ int validate_merge(const ValidateOptions& o) {
     if (m.identity.tol.*(e.member) != defaults.*(e.member)) overridden.push_back(e.name);
   fmt::print("validate external trace {} merged from {} shards (engine '{}', {} bodies, {} frames, checks every {}, "
              "against: {})\n\n",
-             m.identity.trace, m.files.size(), m.identity.engine, m.identity.bodies, m.identity.frames,
-             m.identity.every, m.identity.against);
+             octocd::printable(m.identity.trace), m.files.size(), octocd::printable(m.identity.engine),
+             m.identity.bodies, m.identity.frames, m.identity.every, m.identity.against);
   fmt::print("{}", octocd::format_results(m.results, overridden, &report));
   if (!o.junit.empty()) {
     double seconds = 0;

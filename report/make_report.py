@@ -43,13 +43,13 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the report_*.p
 
 # The report's parts (tests reach them through this module too).
 from report_common import CURRENT, NOISE_NOTE, OCTOCD, PAPER, fail, load_warning, np, plt  # noqa: E402,F401
-from report_data import check_points, load, merge, read_trace  # noqa: E402,F401
+from report_data import LOADED, check_points, load, merge, read_trace  # noqa: E402,F401
 from report_html import Doc, output_dir  # noqa: E402
 from report_plots import OWN_BROADPHASE_CLASS  # noqa: E402,F401
 from report_csv import file_slug, sweep_csv  # noqa: E402
-from report_gate import GATE_MIN_REPS, gate_summary, section_gate  # noqa: E402
+from report_gate import GATE_MIN_REPS, LEVEL_RANGE, gate_summary, reps_needed, section_gate  # noqa: E402
 import report_speed_accuracy as RSA  # noqa: E402  (sweeps of kind speed-accuracy, design.md section 15)
-from report_common import load_mark, num, overlap, spread_text  # noqa: E402
+from report_common import load_mark, num, overlap, printable, spread_text  # noqa: E402
 from report_plots import log_ticks, speedup_text  # noqa: E402
 from report_traces import penetration_comment, section_traces  # noqa: E402,F401
 from report_tables import (engines_ran_text, machine_block, section_figA2, section_generic,  # noqa: E402,F401
@@ -88,13 +88,15 @@ def main():
     ap.add_argument("inputs", nargs="+")
     a = ap.parse_args()
     OCTOCD[0] = a.octocd
+    LOADED.clear()  # each file read and checked once per report
     output_dir(a.output, "-o")
     if a.csv:
         output_dir(a.csv, "--csv")
     if not (0 <= a.threshold < 1000) or math.isnan(a.threshold):
         fail(f"--threshold: {a.threshold}; allowed: a percentage in [0, 1000)")
-    if not (0 < a.level <= 0.25):
-        fail(f"--level: {a.level}; allowed: a significance level in (0, 0.25]")
+    if not (LEVEL_RANGE[0] <= a.level <= LEVEL_RANGE[1]):
+        fail(f"--level: {a.level}; allowed: a significance level in [{LEVEL_RANGE[0]:g}, {LEVEL_RANGE[1]:g}] (and "
+             "one the repetitions can reach: 0.00397 or above with 5 a side)")
     loaded = []
     for p in a.inputs:
         CURRENT[0] = p
@@ -122,10 +124,17 @@ def main():
         doc = Doc(a.output, a.csv)
         gate = section_gate(doc, bg[0], ng[0], a.threshold, a.level, a.across_machines, a.timing)
         if gate["few"] and not gate["broken"]:
-            pid, label, nb, nn = gate["few"][0]
-            fail(f"too few repetitions to decide: '{pid}' {label} has {nb} in the baseline and {nn} in the new run"
-                 + (f" (and {len(gate['few']) - 1} more figure(s))" if len(gate["few"]) > 1 else "")
-                 + f"; allowed: >= {GATE_MIN_REPS} repetitions a side (octocd bench --repeat {GATE_MIN_REPS})")
+            pid, label, nb, nn, least = gate["few"][0]
+            more = f" (and {len(gate['few']) - 1} more figure(s))" if len(gate["few"]) > 1 else ""
+            if least is None:
+                fail(f"too few repetitions to decide: '{pid}' {label} has {nb} in the baseline and {nn} in the new run"
+                     + more + f"; allowed: >= {GATE_MIN_REPS} repetitions a side (octocd bench --repeat "
+                     f"{GATE_MIN_REPS})")
+            k = reps_needed(a.level)
+            fail(f"too few repetitions for --level {a.level:g}: '{pid}' {label} has {nb} in the baseline and {nn} in "
+                 f"the new run, whose smallest one-sided Mann-Whitney U p is {least:.3g} (every new time above every "
+                 f"baseline time), not below the level: no slowdown could be shown{more}; allowed: >= {k} repetitions "
+                 f"a side at this level (octocd bench --repeat {k}), or --level above {least:.3g}")
         if gate["broken"]:
             # A failed new run: its sections are not drawn (their figures are what failed).
             results = []
@@ -193,10 +202,20 @@ def run():
                   "left as it was", file=sys.stderr)
             sys.exit(1)
         fail(f"{where}: {code}: {e.strerror}; allowed: an output folder octocd may write in")
-    except (KeyError, TypeError, ValueError, AttributeError, IndexError, ZeroDivisionError) as e:
-        # A result that passed the format check but holds something else where a figure should be.
+    except MemoryError:
+        print("octocd report: runtime failure: out of memory; the earlier report (if any) is left as it was",
+              file=sys.stderr)
+        sys.exit(1)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, ZeroDivisionError, OverflowError,
+            RecursionError) as e:
+        # A result that passed the checks of report_data.py but holds something else where a
+        # figure should be (the checks name the field; this names the file).
         fail(f"{CURRENT[0]}: malformed result ({type(e).__name__}: {e}); allowed: a result of octocd bench as "
              "docs/bench-format.md describes it")
+    except Exception as e:  # noqa: BLE001  (never a traceback: one line, exit 1)
+        print(f"octocd report: runtime failure: {type(e).__name__}: {printable(e)}; the earlier report (if any) is "
+              "left as it was", file=sys.stderr)
+        sys.exit(1)
 
 
 if __name__ == "__main__":

@@ -18,9 +18,27 @@ NOISE_NOTE = ("Timings on a shared machine move with its load (other processes, 
               "taken in one run; spreads are min-max over the repetitions.")
 
 
+MAX_MESSAGE = 2000  # characters of an error line; text from a file beyond it is cut (a MB-long name)
+
+
+def printable(text, limit=MAX_MESSAGE):
+    """`text` safe for one line of a terminal: control characters, lone surrogates (JSON's
+    "\\ud800") and other code points a UTF-8 stream cannot take written as escapes
+    (\\xNN, \\udNNN), cut to `limit` characters with the number left out said."""
+    text = str(text)
+    cut = len(text) - limit
+    if cut > 0:
+        text = text[:limit]
+    out = "".join(c if c.isprintable() or c == " " else
+                  (f"\\x{ord(c):02x}" if ord(c) < 0x100 else c.encode("unicode_escape").decode("ascii"))
+                  for c in text)
+    return out + (f"... ({cut} more characters)" if cut > 0 else "")
+
+
 def fail(msg):
-    """Bad input: one line naming the file and what is allowed, exit 2 (never a traceback)."""
-    print(f"octocd report: error: {msg}", file=sys.stderr)
+    """Bad input: one line naming the file and what is allowed, exit 2 (never a traceback).
+    The line is printable(): text from a hostile file cannot break it or the terminal."""
+    print(f"octocd report: error: {printable(msg)}", file=sys.stderr)
     sys.exit(2)
 
 

@@ -2,16 +2,37 @@
 "Performance gate"): NEW beside BASE per point, decided on the repetitions with a one-sided
 Mann-Whitney U test and a time-ratio interval; its section, summary lines and CSV."""
 
+import collections
 import csv
+import functools
 import io
 import json
 import math
 import os
+import statistics
 
-from report_common import fail, load_mark, load_warning, np, num
+from report_common import fail, load_mark, load_warning, np, num, printable
 
 
 GATE_MIN_REPS = 5
+LEVEL_RANGE = (1e-6, 0.25)  # --level, as `octocd report --level` takes it (1e-6: 12 repetitions a side)
+EXACT_COST = 1 << 18  # min(m, n) * m * n at most: U's exact null distribution (0.03 s of Python at 64 a side, cached)
+SMALL_PAIRS = 4096  # m * n at most: U and the pairwise ratios in plain Python (cheaper than numpy per call)
+DIRECT_PAIRS = 1 << 22  # m * n at most: the pairwise log ratios held at once (32 MiB); beyond, found by bisection
+
+
+def median(v):
+    """The median of a list of numbers as numpy's (the mean of the two middle values when
+    even), without numpy's overhead on a few values."""
+    s = sorted(v)
+    k = len(s) // 2
+    return float(s[k]) if len(s) % 2 else (s[k - 1] + s[k]) / 2.0
+
+
+def exact_is_cheap(m, n):
+    """Whether U's exact null distribution is used for samples of m and n (its cost grows as
+    min(m, n) * m * n; scipy's exact method asked for 12 GiB at 200 a side)."""
+    return min(m, n) * m * n <= EXACT_COST
 
 
 def u_null_sf_counts(m, n):
@@ -26,36 +47,151 @@ def u_null_sf_counts(m, n):
     return c
 
 
-def u_critical(m, n, alpha):
-    """The smallest c with P(U >= c) <= alpha under H0, or None when no c is (too few repetitions)."""
+@functools.lru_cache(maxsize=64)
+def u_null_sf(m, n):
+    """P(U >= k) for k = 0 .. m*n + 1 under H0 (no ties), exact (integer counts, each
+    probability correctly rounded); U's distribution for (m, n) is that for (n, m)."""
+    m, n = min(m, n), max(m, n)
     counts = u_null_sf_counts(m, n)
     total, tail = sum(counts), 0
-    for c in range(m * n, -1, -1):
-        if (tail + counts[c]) / total > alpha:
-            return c + 1 if c + 1 <= m * n else None
-        tail += counts[c]
-    return 0
+    sf = [0.0] * (m * n + 2)
+    for k in range(m * n, -1, -1):
+        tail += counts[k]
+        sf[k] = tail / total
+    return tuple(sf)
+
+
+def u_statistic(x, y):
+    """(U, tie term) of sample x against y: U = pairs x_i > y_j, ties counted a half (the
+    rank-sum U of scipy.stats.mannwhitneyu); the tie term sum(t^3 - t) over the groups of
+    equal values of x and y together (the normal approximation's tie correction)."""
+    m, n = len(x), len(y)
+    if m * n <= SMALL_PAIRS:
+        u = 0.0
+        for a in x:
+            for b in y:
+                u += 1.0 if a > b else 0.5 if a == b else 0.0
+        counts = collections.Counter(x)
+        counts.update(y)
+        return u, float(sum(t ** 3 - t for t in counts.values() if t > 1))
+    from scipy.stats import rankdata
+    z = np.concatenate([np.asarray(x, dtype=float), np.asarray(y, dtype=float)])
+    u = float(rankdata(z)[:m].sum()) - m * (m + 1) / 2.0
+    t = np.unique(z, return_counts=True)[1].astype(float)
+    return u, float((t ** 3 - t).sum())
+
+
+def u_sf(u, m, n, tie=0.0):
+    """P(U >= u) under H0 ("no difference"), the one-sided p of U = u: exact where cheap
+    (exact_is_cheap; as scipy's method "exact", U rounded down and ties not corrected), else
+    the normal approximation with continuity and tie correction (scipy's "asymptotic")."""
+    if exact_is_cheap(m, n):
+        return u_null_sf(m, n)[max(0, min(int(u), m * n + 1))]
+    return u_sf_normal(u, m, n, tie)
+
+
+def u_sf_normal(u, m, n, tie=0.0):
+    """u_sf's normal approximation (any m, n): z = (U - mn/2 - 1/2) / sigma, sigma^2 =
+    mn/12 ((N + 1) - tie / (N (N - 1))), N = m + n; p = P(Z >= z)."""
+    big_n = m + n
+    s = math.sqrt(m * n / 12.0 * ((big_n + 1) - tie / (big_n * (big_n - 1))))
+    num = u - m * n / 2.0 - 0.5
+    if not s > 0:  # every value equal: U = mn/2
+        return 1.0 if num <= 0 else 0.0
+    return 0.5 * math.erfc(num / s / math.sqrt(2.0))
+
+
+def min_p(m, n):
+    """The smallest p the one-sided test can give samples of m and n (every new time above
+    every baseline time): 1 / C(m+n, m) exactly, or its normal approximation."""
+    if exact_is_cheap(m, n):
+        return 1 / math.comb(m + n, m)
+    return u_sf_normal(m * n, m, n)
+
+
+def reps_needed(alpha):
+    """The repetitions a side (>= GATE_MIN_REPS) whose smallest p is below alpha (monotone in
+    the count for levels in LEVEL_RANGE)."""
+    k = GATE_MIN_REPS
+    while k < 100000 and not min_p(k, k) < alpha:
+        k += 1
+    return k
+
+
+def u_critical(m, n, alpha):
+    """The smallest c with P(U >= c) <= alpha under H0 (no ties), or None when no c is (too
+    few repetitions): exact where cheap, else from the normal approximation."""
+    if exact_is_cheap(m, n):
+        sf = u_null_sf(m, n)
+        if sf[m * n] > alpha:
+            return None
+        lo, hi = 0, m * n  # sf decreases: the first c with sf[c] <= alpha
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if sf[mid] <= alpha:
+                hi = mid
+            else:
+                lo = mid + 1
+        return lo
+    z = -statistics.NormalDist().inv_cdf(alpha)
+    c = math.ceil(m * n / 2.0 + 0.5 + z * math.sqrt(m * n * (m + n + 1) / 12.0))
+    return c if c <= m * n else None
+
+
+def pairwise_order_stats(a, b, ks):
+    """The k-th smallest (1-based) of the m*n differences a_i - b_j for each k of ks: all of
+    them sorted or partitioned while m*n <= DIRECT_PAIRS, else by bisection on the value with
+    pair counts from the sorted samples (to 1e-13 absolute: ratios to 1e-13 relative)."""
+    m, n = len(a), len(b)
+    if m * n <= SMALL_PAIRS:
+        d = sorted(x - y for x in a for y in b)
+        return [d[k - 1] for k in ks]
+    if m * n <= DIRECT_PAIRS:
+        d = np.subtract.outer(np.asarray(a, dtype=float), np.asarray(b, dtype=float)).ravel()
+        part = np.partition(d, sorted({k - 1 for k in ks}))
+        return [float(part[k - 1]) for k in ks]
+    sa, sb = np.sort(np.asarray(a, dtype=float)), np.sort(np.asarray(b, dtype=float))
+    out = []
+    for k in ks:
+        lo, hi = float(sa[0] - sb[-1]) - 1.0, float(sa[-1] - sb[0])  # count(lo) < k <= count(hi)
+        while hi - lo > 1e-13:
+            mid = 0.5 * (lo + hi)
+            if mid <= lo or mid >= hi:
+                break
+            below = int(n * m - np.searchsorted(sb, sa - mid, side="left").sum())  # pairs with a_i - b_j <= mid
+            if below >= k:
+                hi = mid
+            else:
+                lo = mid
+        out.append(hi)
+    return out
 
 
 def ratio_interval(new_t, base_t, alpha):
     """Hodges-Lehmann ratio new/base with its 1 - 2 alpha interval (from U's critical value)."""
-    d = sorted(math.log(x) - math.log(y) for x in new_t for y in base_t)
-    mn = len(d)
+    ln = [math.log(x) for x in new_t]
+    lb = [math.log(y) for y in base_t]
+    mn = len(ln) * len(lb)
     c = u_critical(len(new_t), len(base_t), alpha)
-    est = math.exp(float(np.median(d)))
+    mid = [(mn + 1) // 2] if mn % 2 else [mn // 2, mn // 2 + 1]
+    ks = mid + ([mn - c + 1, c] if c is not None else [])
+    q = pairwise_order_stats(ln, lb, ks)
+    est = math.exp(sum(q[:len(mid)]) / len(mid))
     if c is None:
         return est, 0.0, math.inf
-    return est, math.exp(d[mn - c]), math.exp(d[c - 1])
+    return est, math.exp(q[len(mid)]), math.exp(q[len(mid) + 1])
 
 
 def gate_test(new_t, base_t, threshold, alpha):
     """One figure: (verdict, p_slower, ratio, lo, hi). p_slower: one-sided Mann-Whitney U of
-    new times against baseline times x (1 + threshold/100)."""
-    from scipy.stats import mannwhitneyu
+    new times against baseline times x (1 + threshold/100) (u_sf: exact where cheap, the
+    normal approximation with tie correction beyond)."""
     f = 1.0 + threshold / 100.0
-    scaled = [y * f for y in base_t]
-    p_slow = float(mannwhitneyu(new_t, scaled, alternative="greater", method="exact").pvalue)
-    p_fast = float(mannwhitneyu([x * f for x in new_t], base_t, alternative="less", method="exact").pvalue)
+    m, n = len(new_t), len(base_t)
+    u, tie = u_statistic(new_t, [y * f for y in base_t])
+    p_slow = u_sf(u, m, n, tie)
+    u, tie = u_statistic([x * f for x in new_t], base_t)
+    p_fast = u_sf(m * n - u, m, n, tie)  # the mirrored test: U of the baseline's side
     ratio, lo, hi = ratio_interval(new_t, base_t, alpha)
     if p_slow < alpha:
         verdict = "SLOWER"
@@ -107,7 +243,7 @@ def repetitions(spread, where, side_file):
     vals = spread["values"]
     nums = [v for v in vals if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)]
     if len(nums) == len(vals) and vals:
-        expect = {"n": len(vals), "median": float(np.median(vals)), "min": min(vals), "max": max(vals)}
+        expect = {"n": len(vals), "median": median(vals), "min": min(vals), "max": max(vals)}
         for k, e in expect.items():
             got = spread.get(k)
             if not isinstance(got, (int, float)) or isinstance(got, bool) or \
@@ -174,6 +310,7 @@ def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
     if not base_ok:
         fail(f"--baseline {base['files'][0]}: no measured point (every point failed or skipped); allowed: a baseline "
              "with measured points")
+    index_of = {x["id"]: k for k, x in enumerate(base["points_list"])}
     for q in base_ok:
         pid = q["id"]
         bfile = base["origin"][pid]
@@ -199,7 +336,7 @@ def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
             out["broken"].append((pid, f"the new run ({nfile}) has figures {[x[0] for x in nt]}, the baseline "
                                        f"{[x[0] for x in bt]}"))
             continue
-        i = next(k for k, x in enumerate(base["points_list"]) if x["id"] == pid)
+        i = index_of[pid]
         for k, ((label, bs, hib), (_, ns, _)) in enumerate(zip(bt, nt)):
             key = ("cpu_steps_per_s" if label.startswith("CPU") else "steps_per_s") if hib else "ms_per_frame"
             # Every run of a side: its repetitions pooled (each run's summary checked).
@@ -222,13 +359,16 @@ def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
                                               "and > 0" if bad_n else "no repetitions")))
                 continue
             if min(len(bv), len(nv)) < GATE_MIN_REPS:
-                out["few"].append((pid, label, len(bv), len(nv)))
+                out["few"].append((pid, label, len(bv), len(nv), None))
+                continue
+            if not min_p(len(nv), len(bv)) < alpha:  # no slowdown could be shown at this level
+                out["few"].append((pid, label, len(bv), len(nv), min_p(len(nv), len(bv))))
                 continue
             bt_s = [1.0 / v for v in bv] if hib else list(bv)
             nt_s = [1.0 / v for v in nv] if hib else list(nv)
             verdict, pval, ratio, lo, hi = gate_test(nt_s, bt_s, threshold, alpha)
-            row = {"point": pid, "figure": label, "key": key, "base": bv, "new": nv, "base_median": float(np.median(bv)),
-                   "new_median": float(np.median(nv)), "ratio": ratio, "lo": lo, "hi": hi, "p": pval,
+            row = {"point": pid, "figure": label, "key": key, "base": bv, "new": nv, "base_median": median(bv),
+                   "new_median": median(nv), "ratio": ratio, "lo": lo, "hi": hi, "p": pval,
                    "verdict": verdict}
             out["rows"].append(row)
             if verdict == "SLOWER":
@@ -291,9 +431,9 @@ def gate_summary(res, threshold, alpha):
     """The gate's verdict on stdout: every failed and every slower point named."""
     conf = 100.0 * (1.0 - 2.0 * alpha)
     for pid, why in res["broken"]:
-        print(f"octocd report: gate: FAILED: {pid}: {why}")
+        print(printable(f"octocd report: gate: FAILED: {pid}: {why}"))
     for r in res["slower"]:
-        print(f"octocd report: gate: SLOWER: {r['point']}: {r['figure']}: time ratio {r['ratio']:.3f} "
+        print(f"octocd report: gate: SLOWER: {printable(r['point'])}: {r['figure']}: time ratio {r['ratio']:.3f} "
               f"({conf:g} % interval {r['lo']:.3f}-{r['hi']:.3f}; Mann-Whitney U p = {r['p']:.3g} against "
               f"{1 + threshold / 100:g}x)")
     n = len(res["rows"])

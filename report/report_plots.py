@@ -4,6 +4,8 @@ the labels of points and engines."""
 
 from report_common import ENGINE_COLORS, STAGES, STAGE_COLORS, med, np, num, plt
 
+MAX_BARS = 400  # bars a plot draws at most (10,000 took matplotlib 100 s); beyond, the tables hold the figures
+
 
 def steps_points(g):
     return [p for p in g["points_list"] if p.get("status") == "ok" and "windows" in p]
@@ -75,6 +77,10 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
     combos = [(v, e) for e in engines for v in vals
               if any(p["params"]["engine"] == e and point_label(p, group_axis) == v for p in pts)]
     if not scenes or not combos:
+        return
+    if len(scenes) * len(combos) > MAX_BARS:
+        doc.p(f"{title}: not drawn: {len(scenes) * len(combos)} bars (a plot holds at most {MAX_BARS}); the table "
+              "and the CSV (--csv) hold every figure.", "note")
         return
     fpts = {}  # (scene, engine) -> {value: steps/s spread}
     for p in pts:
@@ -152,13 +158,28 @@ def stage_shares(doc, pts, group_axis, title, name):
     if not rows:
         return
     labels, shares, times = [], [], []
+    drawn = len(rows) <= MAX_BARS
     for p in rows:
         w = first_window(p)
-        st = [med(w["stage_ms"].get(s, {})) or 0.0 for s in STAGES]
+        st = [med(w.get("stage_ms", {}).get(s, {})) or 0.0 for s in STAGES]
         tot = sum(st) or 1.0
         shares.append([100.0 * x / tot for x in st])
         times.append(st)
         labels.append(f"{p['params']['scene']} {point_label(p, group_axis)} {p['params']['engine']}")
+    if not drawn:
+        doc.p(f"{title}: not drawn: {len(rows)} bars (a plot holds at most {MAX_BARS}); the table below holds every "
+              "figure.", "note")
+    else:
+        stage_bars(doc, rows, labels, shares, times, title, name)
+    doc.table(["point"] + [f"{s} ms (%)" for s in STAGES] + ["sum ms"],
+              [[lab] + [f"{num(t, 3)} ({num(sh, 2)}%)" for t, sh in zip(ts, shs)] + [num(sum(ts), 3)]
+               for lab, ts, shs in zip(labels, times, shares)],
+              "Median ms per frame of each stage over the repetitions, its share of their sum in brackets.",
+              name=name)
+
+
+def stage_bars(doc, rows, labels, shares, times, title, name):
+    """stage_shares' plot: a bar per point, a segment per stage."""
     fig, ax = plt.subplots(figsize=(9, 0.26 * len(rows) + 1.3))
     left = np.zeros(len(rows))
     arr = np.array(shares)
@@ -179,8 +200,3 @@ def stage_shares(doc, pts, group_axis, title, name):
     ax.set_title(title)
     ax.legend(fontsize=9, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.12 - 1.0 / max(len(rows), 4)))
     doc.figure(fig, name, title + " (ms per frame printed in each segment and at the bar's end)")
-    doc.table(["point"] + [f"{s} ms (%)" for s in STAGES] + ["sum ms"],
-              [[lab] + [f"{num(t, 3)} ({num(sh, 2)}%)" for t, sh in zip(ts, shs)] + [num(sum(ts), 3)]
-               for lab, ts, shs in zip(labels, times, shares)],
-              "Median ms per frame of each stage over the repetitions, its share of their sum in brackets.",
-              name=name)

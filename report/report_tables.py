@@ -511,8 +511,10 @@ def section_generic(doc, g):
             continue
         if "windows" in p:
             for wn, w in p["windows"].items():
-                rows.append([p["id"], wn, spread_text(w["steps_per_s"]), num(med(w["step_ms"]), 4), num(med(w["pairs"])),
-                             num(med(w["contacts"])), num(med(w["penetration_mean"]) * 1e3)])
+                pen = med(w.get("penetration_mean"))
+                rows.append([p["id"], wn, spread_text(w["steps_per_s"]), num(med(w.get("step_ms")), 4),
+                             num(med(w.get("pairs"))), num(med(w.get("contacts"))),
+                             num(pen * 1e3 if isinstance(pen, (int, float)) else None)])
         elif "ms_per_frame" in p:
             rows.append([p["id"], "replay", "-", spread_text(p["ms_per_frame"]), num(p.get("pairs")), "-", "-"])
     doc.table(["point", "window", "steps/s", "step ms", "pairs", "contacts", "mean d_p (mm)"], rows)

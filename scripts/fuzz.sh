@@ -7,11 +7,13 @@
 # the report's only way to read one, its JSON checked as make_report.py takes it), pytrace
 # (octocd.Trace's calls through the C++ functions the module binds, fuzz/fuzz_pytrace.cpp
 # says why), report-json (the bench-result JSON make_report.py reads: a Python driver,
-# scripts/fuzz_report_json.py, in /usr/bin/python3: no sanitizer applies to Python).
+# scripts/fuzz_report_json.py, in /usr/bin/python3: no sanitizer applies to Python), and
+# (issue 57) the JSON readers of octocd: expect (the --expect reader), shards (the shard
+# reader of validate --merge), bench_result (the result reader of bench --resume).
 #
 #   scripts/fuzz.sh [SECONDS] [TARGET...]
-#       TARGET: scene mesh trace compare replay external report pytrace report-json
-#               (default: all nine)
+#       TARGET: scene mesh trace compare replay external report pytrace report-json expect
+#               shards bench_result (default: all twelve)
 #
 # Builds build-fuzz/ (CMake preset "fuzz": clang, ASan + UBSan, -fsanitize=fuzzer), makes
 # a seed corpus from the shipped files (datasets/scenes, tests/data, fuzz/regressions, a
@@ -28,7 +30,8 @@ cd "$(dirname "$0")/.."
 seconds=${1:-600}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -eq 0 ] && targets=(scene mesh trace compare replay external report pytrace report-json)
+[ ${#targets[@]} -eq 0 ] && targets=(scene mesh trace compare replay external report pytrace report-json expect shards
+                                     bench_result)
 libfuzzer=()
 for t in "${targets[@]}"; do [ "$t" != report-json ] && libfuzzer+=("$t"); done
 
@@ -44,6 +47,7 @@ for t in "${targets[@]}"; do
   case $t in
     compare|replay|external|report|pytrace) cp -n fuzz/regressions/trace/* "$work/$t/corpus/" ;;
     report-json) cp -n tests/data/bench-small-*.json tests/data/gate-*.json "$work/$t/corpus/" ;;
+    expect) cp -n scripts/nightly-expect.json "$work/$t/corpus/" ;;
   esac
 done
 # Seeds from the shipped files.
@@ -51,7 +55,7 @@ for t in "${targets[@]}"; do
   case $t in
     scene) cp -n datasets/scenes/*.json tests/data/*.json "$work/scene/corpus/" ;;
     mesh)  cp -n tests/data/*.obj "$work/mesh/corpus/" ;;
-    report-json) ;;
+    report-json|expect|shards|bench_result) ;;  # seeds: fuzz/regressions/<t>/ (scripts/fuzz_json_seeds.py)
     trace|compare|replay|external|report|pytrace)
            if [ ! -f "$work/$t/corpus/box-stack-20.h5" ]; then
              [ -x build/octocd ] || { echo "fuzz.sh: build/octocd is needed for the trace seeds" >&2; exit 2; }
@@ -66,7 +70,7 @@ for t in "${targets[@]}"; do
              /usr/bin/python3 examples/python/rotating_writer.py "$work/$t/corpus/rotating-v2.h5" >/dev/null || true
            fi ;;
     *) echo "fuzz.sh: unknown target '$t'; allowed: scene mesh trace compare replay external report pytrace" \
-            "report-json" >&2; exit 2 ;;
+            "report-json expect shards bench_result" >&2; exit 2 ;;
   esac
 done
 
@@ -85,14 +89,15 @@ for t in "${targets[@]}"; do
   fi
   dict=()
   [ "$t" = scene ] && dict=(-dict=fuzz/scene.dict)
+  [ "$t" = mesh ] && dict=(-dict=fuzz/mesh.dict)
   max_len=65536
   case $t in  # a trace is >= 200 KB (full chunks of /frames)
     trace|compare|replay|external|report|pytrace) max_len=300000 ;;
   esac
   # assimp 5.2 and libhdf5 1.10.8 leak on some malformed files they reject (upstream; the
   # inputs are in fuzz/upstream/): leaks are not findings for the mesh and trace targets.
-  leaks=1
-  [ "$t" != scene ] && leaks=0
+  leaks=0
+  case $t in scene|expect|shards|bench_result) leaks=1 ;; esac  # octocd's own code only: a leak is a finding
   if ! ASAN_OPTIONS="detect_leaks=$leaks" nice -n 15 ./build-fuzz/fuzz_"$t" "$work/$t/corpus" "${dict[@]}" \
         -max_total_time="$seconds" -timeout=20 -rss_limit_mb=4096 -max_len="$max_len" \
         -artifact_prefix="$work/$t/artifacts/" -print_final_stats=1 -close_fd_mask=1 2>"$work/$t/log.txt"; then

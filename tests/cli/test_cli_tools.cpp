@@ -303,6 +303,61 @@ TEST_F(Tools, BenchResumeRefusesPointsThatAreNotTheSweeps) {
   EXPECT_EQ(run_octocd("bench " + sweep + " --engines cpu -o " + out.string() + " --resume --quiet").code, 0);
 }
 
+// Issue 57 item 4: every field --resume reads from the existing result is checked by type
+// and range, exit 2 naming the file and field. Before: a wrongly typed machine.hostname,
+// started or status was nlohmann's type_error (exit 1, no file named), a steps/s spread of
+// strings was kept as finished work, and a speed-accuracy result with "complete": "yes"
+// ended in a type_error too.
+TEST_F(Tools, BenchResumeChecksTheTypeAndRangeOfWhatItReads) {
+  const std::string sweep = tiny_sweep(5);
+  const fs::path out = dir_ / "typed.json";
+  ASSERT_EQ(run_octocd("bench " + sweep + " --engines cpu -o " + out.string() + " --quiet").code, 0);
+  const json good = read_json(out);
+  const auto resume = [&](const std::function<void(json&)>& plant) {
+    json j = good;
+    plant(j);
+    j["complete"] = false;
+    std::ofstream(out) << j.dump(1);
+    return run_octocd("bench " + sweep + " --engines cpu -o " + out.string() + " --resume --quiet");
+  };
+  const std::vector<std::pair<std::function<void(json&)>, std::string>> cases = {
+      {[](json& j) { j["machine"]["hostname"] = 5; }, "machine.hostname: an integer 5; allowed: a string"},
+      {[](json& j) { j["started"] = json::array(); }, "started: an array []; allowed: a string"},
+      {[](json& j) { j["points"][0]["status"] = 3; }, "points[0].status: an integer 3; allowed: ok, skipped, failed"},
+      {[](json& j) { j["points"][0]["id"] = json::object(); }, "points[0].id: an object {}; allowed: a string"},
+      {[](json& j) { j["points"][1]["windows"]["all"]["steps_per_s"]["n"] = "5"; },
+       "points[1].windows.all.steps_per_s.n: a string \"5\"; allowed: an integer in [0, 1000]"},
+      {[](json& j) { j["points"][1]["windows"]["all"]["steps_per_s"]["n"] = 18446744073709551615ULL; },
+       "points[1].windows.all.steps_per_s.n: 18446744073709551615 is out of range"},
+      {[](json& j) { j["points"][1]["windows"]["all"]["steps_per_s"]["values"][0] = "fast"; },
+       "points[1].windows.all.steps_per_s.values[0]: a string \"fast\"; allowed: null or a number"},
+      {[](json& j) { j["points"][0]["reason"] = 7; }, "points[0].reason: an integer 7; allowed: a string"},
+      {[](json& j) { j["points"] = json::object(); }, "points: an object {}; allowed: an array"},
+      {[](json& j) { j.erase("machine"); }, "machine: missing"},
+      {[](json& j) { j["sweep"] = 3; }, "sweep: an integer 3; allowed: an object"},
+  };
+  for (const auto& [plant, want] : cases) {
+    const Result r = resume(plant);
+    EXPECT_EQ(r.code, 2) << want << ": " << r.output;
+    EXPECT_NE(r.output.find(out.string() + ": " + want), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("json.exception"), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  }
+  // A speed-accuracy sweep keeps only a finished result: a wrongly typed one is refused.
+  const std::string sa = source_dir() + "/tests/data/bench-small-speed-accuracy.json";
+  const fs::path sa_out = dir_ / "sa.json";
+  std::ofstream(sa_out) << R"({"format": "octocd-bench", "version": 1, "complete": "yes", "sweep": {}})";
+  Result r = run_octocd("bench " + sa + " -o " + sa_out.string() + " --resume --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(sa_out.string() + ": complete: a string \"yes\"; allowed: true or false"), std::string::npos)
+      << r.output;
+  std::ofstream(sa_out) << R"({"format": "octocd-bench", "version": 1, "complete": true, "sweep": [],
+                               "complete": true})";
+  r = run_octocd("bench " + sa + " -o " + sa_out.string() + " --resume --quiet");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("complete: duplicate key"), std::string::npos) << r.output;
+}
+
 TEST_F(Tools, BenchRefusesMissingKeysAllSkippedAndOversizedSweeps) {
   write("pile.json", kPile);
   // A pointer to a key the scene does not have (and refuses): the sweep's key is named.

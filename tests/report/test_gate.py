@@ -320,9 +320,11 @@ def test_several_runs_a_side_are_pooled(tmp_path):
     """--baseline R1 --baseline R2 NEW1 NEW2: runs of one build, the same points: their
     repetitions pooled (10 a side here); a point failed in one new run fails the gate."""
     paths = {}
-    for name, j in (("b1", BASE), ("b2", scaled(BASE, 1.0)), ("n1", scaled(BASE, 1.3)), ("n2", scaled(BASE, 1.3))):
+    for k, (name, j) in enumerate((("b1", BASE), ("b2", scaled(BASE, 1.0)), ("n1", scaled(BASE, 1.3)),
+                                   ("n2", scaled(BASE, 1.3)))):
         j = copy.deepcopy(j)
         j["build"]["build_id"] = "base" if name[0] == "b" else "new"
+        j["started"] = f"2026-11-22T0{k}:00:00Z"  # four runs (a copy of one run is refused: counted once)
         paths[name] = tmp_path / f"{name}.json"
         paths[name].write_text(json.dumps(j))
     args = ["--baseline", str(paths["b1"]), "--baseline", str(paths["b2"]), "--csv", str(tmp_path / "csv"),
