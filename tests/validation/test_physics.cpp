@@ -405,6 +405,47 @@ TEST(PhysicsRows, DepthZeroRowsOnAGrazingPairAreFigures) {
   }
 }
 
+// Rows on shapes apart (the cube moved 3 mm away from the diamond, its rows at depth 0
+// without impulse: speculative rows) are judged by their sign against the separation
+// direction (-x, from the cube to the diamond): along it or perpendicular to it (a normal
+// that pushes the bodies neither together nor apart, cosine exactly 0) passes; flipped
+// (+x) fails naming the frame, pair and row.
+TEST(PhysicsRows, SpeculativeRowsAreJudgedByTheirSign) {
+  const auto model = build_model(four_bodies());
+  struct Case {
+    const char* what;
+    Vec3 normal;
+    bool caught;
+  };
+  for (const Case& k : {Case{"along", v3(-1, 0, 0), false}, Case{"perpendicular (y)", v3(0, 1, 0), false},
+                        Case{"perpendicular (z)", v3(0, 0, 1), false}, Case{"flipped", v3(1, 0, 0), true}}) {
+    SCOPED_TRACE(k.what);
+    RestingRecord r = resting(*model);
+    const double shift = kDepth + 0.003;
+    for (Vec3* x : {&r.rec.x_det[3], &r.rec.x_pre[3], &r.rec.x_post[3]}) x->x += float(shift);
+    r.rec.aabbs[3] = posed_box_aabb(model->local_box(3), Pose{r.rec.x_det[3], r.rec.q_det[3]});
+    for (ContactRecord& c : r.rec.contacts) {
+      if (c.pair.a == 0 && c.pair.b == 3) c.point.x += float(shift);
+      if (c.pair.a == 2 && c.pair.b == 3) {
+        c.depth = 0.0f;
+        c.jn = 0.0f;
+        c.normal = k.normal;
+      }
+    }
+    const auto rs = judge(*model, r.rec, rotating_engine());
+    const ValidationResult& g = row_of(rs, "contact-geometry");
+    std::uint64_t wrong = 0;  // rows failed for their normal (cause normal-angle)
+    for (const ValidationCause& c : g.causes)
+      if (c.name == "normal-angle") wrong = c.count;
+    if (k.caught) {
+      expect_caught(rs, "contact-geometry", {"frame 7", "pair (2, 3) row 0", "points against the separation direction"});
+    } else {
+      EXPECT_EQ(wrong, 0u) << g.detail;
+      EXPECT_NE(g.detail.find("sign agreement"), std::string::npos) << g.detail;
+    }
+  }
+}
+
 TEST(PhysicsRows, ContactRemovedFromPenetratingPair) {
   const auto model = build_model(four_bodies());
   RestingRecord r = resting(*model);
