@@ -88,20 +88,6 @@ ConvexHull convex_hull(const std::vector<Vec3>& points, const std::string& what)
     }
     double d = -HUGE_VAL;
     for (std::uint32_t v : idx) d = std::max(d, dot3(n, h.vertices[v]));
-    // Start the polygon at the corner whose next two make the widest turn, so that its
-    // first three corners alone give the winding (ODE's dConvex checks those three).
-    std::size_t best = 0;
-    double best_turn = -HUGE_VAL;
-    for (std::size_t k = 0; k < idx.size(); ++k) {
-      const D3& a = h.vertices[idx[k]];
-      const double turn = dot3(n, cross3(sub(h.vertices[idx[(k + 1) % idx.size()]], a),
-                                         sub(h.vertices[idx[(k + 2) % idx.size()]], a)));
-      if (turn > best_turn) {
-        best_turn = turn;
-        best = k;
-      }
-    }
-    std::rotate(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(best), idx.end());
     h.faces.push_back(std::move(idx));
     h.planes.push_back({n[0], n[1], n[2], d});
   }

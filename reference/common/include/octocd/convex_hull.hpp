@@ -21,9 +21,7 @@ struct ConvexHull {
   /// The hull's vertices (each one of the input points, converted to double).
   std::vector<std::array<double, 3>> vertices;
   /// Per face, the indices into `vertices` of its corners, counter-clockwise seen from
-  /// outside (right-hand rule: the outward normal). At least 3 per face, starting at the
-  /// corner whose next two turn widest, so the first three corners give the winding.
-  /// Faces thinner than 1e-6 of the hull's bounding-box diagonal (slivers of collinear
+  /// outside (right-hand rule: the outward normal). At least 3 per face. Faces thinner than 1e-6 of the hull's bounding-box diagonal (slivers of collinear
   /// corners, whose normal is rounding noise) are left out. The hull is Bullet's, found on
   /// a grid of 1/10216 of the points' range: a thin face's plane may tilt so that hull
   /// vertices lie beyond it by up to about 2% of the diagonal (asian-dragon: 1.7%).
