@@ -67,6 +67,11 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
   c->add_option("--engines", o.engines,
                 "Comma-separated engines, overrides the sweep's: " + fmt::format("{}", fmt::join(engine_names(), ", ")));
   add_engine_settings_options(c, o.settings);
+  c->add_option("--traced", o.traced,
+                "Steps sweeps: comma-separated trace modes, each point run once per mode, overrides the sweep's "
+                "(default off): off (no trace), states (a trace with the state every 10 frames, as run --trace), "
+                "contacts (and every contact row, run --contacts); a traced point's steps/s counts the step, the "
+                "copy-back and the trace write");
   c->add_option("--repeat", o.repeat, "Repetitions of every point, overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
   c->add_option("--frames", o.frames,
@@ -183,6 +188,12 @@ int bench_command(const BenchOptions& o) {
         throw InputError(fmt::format("--engines: unknown engine '{}'; allowed: {}", e, fmt::join(engine_names(), ", ")));
     if (s.engines.empty())
       throw InputError(fmt::format("--engines: empty; allowed: a comma-separated list of {}", fmt::join(engine_names(), ", ")));
+  }
+  if (!o.traced.empty()) {
+    if (s.kind != "steps")
+      throw InputError(fmt::format("--traced: sweep '{}' is of kind '{}'; allowed: a steps sweep (table5, small-scenes, ...)",
+                                   s.name, s.kind));
+    s.traced = checked_trace_modes(split_list(o.traced), "--traced");
   }
   if (o.repeat > 0) {
     s.repeat = o.repeat;

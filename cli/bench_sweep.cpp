@@ -82,6 +82,27 @@ std::string optional_string(const json& j, const std::string& key, const std::st
   return j.at(key).get<std::string>();
 }
 
+}  // namespace
+
+const std::vector<std::string>& trace_modes() {
+  static const std::vector<std::string> modes{"off", "states", "contacts"};
+  return modes;
+}
+
+std::vector<std::string> checked_trace_modes(const std::vector<std::string>& modes, const std::string& what) {
+  const std::string allowed = "a non-empty list of off, states, contacts, each once";
+  if (modes.empty()) throw InputError(fmt::format("{}: empty; allowed: {}", what, allowed));
+  for (std::size_t i = 0; i < modes.size(); ++i) {
+    if (std::find(trace_modes().begin(), trace_modes().end(), modes[i]) == trace_modes().end())
+      throw InputError(fmt::format("{}: '{}' is not a trace mode; allowed: {}", what, modes[i], allowed));
+    if (std::find(modes.begin(), modes.begin() + static_cast<long>(i), modes[i]) != modes.begin() + static_cast<long>(i))
+      throw InputError(fmt::format("{}: '{}' is listed twice; allowed: {}", what, modes[i], allowed));
+  }
+  return modes;
+}
+
+namespace {
+
 /// The scene key a known axis name sets.
 std::string axis_key(const std::string& name) {
   static const std::map<std::string, std::string> keys{
@@ -179,7 +200,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   if (!j.is_object()) bad(origin, "(top level)", "not a JSON object", "an object with name, kind, ...");
   static const std::set<std::string> common{"name",  "kind",   "description", "engines", "frames",
                                             "warmup", "repeat", "format",      "version"};
-  static const std::set<std::string> steps{"scenes", "axes", "set", "windows", "series_every"};
+  static const std::set<std::string> steps{"scenes", "axes", "set", "windows", "series_every", "traced"};
   static const std::set<std::string> bp{"bodies",       "scenes", "broadphases", "max_bodies",
                                         "warm_replays", "set",    "min_time_ms"};
   if (!j.contains("name") || !j.at("name").is_string() || j.at("name").get<std::string>().empty())
@@ -266,6 +287,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     s.frames = get_int(j, "frames", origin, 1, 100000000, 300);
     s.warmup = get_int(j, "warmup", origin, 0, 100000000, 30);
     s.series_every = get_int(j, "series_every", origin, 0, 100000000, 0);
+    if (j.contains("traced")) s.traced = checked_trace_modes(string_list(j, "traced", origin), origin + ": traced");
     if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
     for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
     if (j.contains("axes")) {
@@ -385,6 +407,7 @@ std::vector<Point> expand(const Sweep& s) {
     const auto times = [&](std::size_t k) { n = (k != 0 && n > kMaxPoints / k) ? kMaxPoints + 1 : n * k; };
     if (s.kind == "steps") {
       times(s.scenes.size());
+      times(s.traced.size());
       for (const auto& a : s.axes) times(a.values.size());
     } else {
       times(s.bodies.empty() ? s.scenes.size() : s.bodies.size());
@@ -415,18 +438,21 @@ std::vector<Point> expand(const Sweep& s) {
           idx[a] = rest % s.axes[a].values.size();
           rest /= s.axes[a].values.size();
         }
-        for (const auto& e : s.engines) {
-          Point p;
-          p.index = static_cast<int>(pts.size());
-          p.engine = e;
-          p.scene = sc;
-          p.value = idx;
-          p.id = stem(s.scenes[sc]);
-          for (std::size_t a = 0; a < s.axes.size(); ++a)
-            p.id += " | " + s.axes[a].name + "=" + value_text(s.axes[a].values[idx[a]]);
-          p.id += " | " + e;
-          pts.push_back(p);
-        }
+        for (const auto& e : s.engines)
+          for (const auto& mode : s.traced) {
+            Point p;
+            p.index = static_cast<int>(pts.size());
+            p.engine = e;
+            p.scene = sc;
+            p.value = idx;
+            p.traced = mode;
+            p.id = stem(s.scenes[sc]);
+            for (std::size_t a = 0; a < s.axes.size(); ++a)
+              p.id += " | " + s.axes[a].name + "=" + value_text(s.axes[a].values[idx[a]]);
+            p.id += " | " + e;
+            if (mode != "off") p.id += " | traced=" + mode;  // untraced ids as before
+            pts.push_back(p);
+          }
       }
     }
   } else {

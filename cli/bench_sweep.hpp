@@ -60,6 +60,11 @@ struct Sweep {
   std::vector<std::string> scenes;  ///< resolved files
   std::vector<std::string> engines;
   std::vector<Axis> axes;
+  /// steps: how each point's run is traced (every point runs once per mode): "off" (no
+  /// trace, the engine may run ahead), "states" (a trace with the state every 10 frames,
+  /// as `octocd run --trace`), "contacts" (and every contact row, `--contacts`); a traced
+  /// point's steps/s counts the whole frame: the step, the copy-back and the trace write.
+  std::vector<std::string> traced{"off"};
   json set = json::object();
   int frames = 300, warmup = 30, repeat = 3, series_every = 0, warm_replays = 1;
   double min_time_ms = 50.0;
@@ -127,8 +132,15 @@ struct Point {
   std::size_t scene = 0;           ///< steps: index into Sweep::scenes
   std::vector<std::size_t> value;  ///< steps: value index per axis
   long bodies = 0;                 ///< broadphase: body count (bodies) or -1 (scenes)
+  std::string traced = "off";      ///< steps: the trace mode (Sweep::traced)
   std::string broadphase;          ///< broadphase kind
 };
+
+/// The trace modes of a steps sweep (Sweep::traced), in order.
+const std::vector<std::string>& trace_modes();
+/// `modes` when each is a trace mode, listed once, and there is at least one; else
+/// InputError "<what>: ...; allowed: ...".
+std::vector<std::string> checked_trace_modes(const std::vector<std::string>& modes, const std::string& what);
 
 /// The file name of `path` without its folder and extension.
 std::string stem(const std::string& path);

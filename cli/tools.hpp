@@ -135,6 +135,7 @@ std::string first_set_difference(const ReplayInput& input, const std::vector<std
 struct BenchOptions {
   std::string sweep;              ///< a named sweep or a sweep JSON file
   std::string engines;            ///< comma-separated, overrides the sweep's
+  std::string traced;             ///< comma-separated trace modes (off, states, contacts), overrides a steps sweep's
   int repeat = 0;                 ///< > 0 overrides the sweep's repetitions
   int frames = 0;                 ///< > 0 overrides the sweep's timed (or recorded) frames
   int warmup = -1;                ///< >= 0 overrides the sweep's untimed frames first

@@ -806,11 +806,27 @@ TraceWriter::~TraceWriter() {
 
 void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState& state,
                                const std::vector<ContactRecord>& contacts) {
+  append_frame(fm, &state, contacts);
+}
+
+bool TraceWriter::state_due(std::int64_t frame) const { return frame % impl_->opt.state_every == 0; }
+
+std::int64_t TraceWriter::steps_to_next_state(std::int64_t frame) const {
+  const std::int64_t every = impl_->opt.state_every;
+  return every - ((frame % every) + every) % every;
+}
+
+void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState* state,
+                               const std::vector<ContactRecord>& contacts) {
   Impl& m = *impl_;
   if (m.closed) throw RuntimeError("trace '" + m.path + "': append_frame after close");
+  const bool due = fm.frame % m.opt.state_every == 0;
+  if (due && state == nullptr)
+    throw RuntimeError("trace '" + m.path + "': frame " + std::to_string(fm.frame) +
+                       " writes a state (state_every " + std::to_string(m.opt.state_every) + ") but none was given");
   m.last_appended = fm.frame;
   QuietHdf5 quiet;
-  if (fm.frame % m.opt.state_every == 0) m.push_state(fm.frame, state);
+  if (due) m.push_state(fm.frame, *state);
 
   std::size_t i = 0;
   m.frames[i++].push1(fm.frame);

@@ -169,6 +169,9 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<Aabb> local{"body local boxes"};
   gpu::DeviceBuffer<std::uint32_t> shape{"body shapes"};
   gpu::DeviceBuffer<Aabb> aabb{"world AABBs"};
+  // Recording only (CudaWorld::set_recording): the state at the last step's start.
+  gpu::DeviceBuffer<Vec3> x_pre{"recorded positions before the step"};
+  gpu::DeviceBuffer<Vec3> v_pre{"recorded velocities before the step"};
   // Shapes, packed once.
   gpu::DeviceBuffer<gpu::DeviceShape> shapes{"shapes"};
   gpu::DeviceBuffer<Vec3> vertices{"octree vertices"};

@@ -347,6 +347,24 @@ void CudaWorld::set_state(const BodyState& s) {
 void CudaWorld::set_recording(bool on) {
   if (on != recording_) impl_->refuse_ahead("set_recording");
   recording_ = on;
+  if (on) {  // kept once made: a run records from its start to its end
+    impl_->x_pre.ensure(impl_->n);
+    impl_->v_pre.ensure(impl_->n);
+  }
+}
+
+const FrameRecord& CudaWorld::record() const {
+  if (!record_whole_) {
+    const Impl& d = *impl_;
+    download(record_.x_pre, d.x_pre, d.n, d.stream);
+    download(record_.v_pre, d.v_pre, d.n, d.stream);
+    download(record_.aabbs, d.aabb, d.n, d.stream);
+    const BodyState& s = state();
+    record_.x_post = s.x;
+    record_.v_post = s.v;
+    record_whole_ = true;
+  }
+  return record_;
 }
 
 const BodyState& CudaWorld::state() const {
@@ -375,10 +393,14 @@ const FrameMetrics& CudaWorld::step() {
   m.frame = frame_ + 1;
   m.time = static_cast<double>(m.frame) * static_cast<double>(scene.dt);
   if (recording_) {
-    const BodyState& s = state();
+    // The state at the step's start stays on the device until record() asks for it.
+    const std::size_t bytes = sizeof(Vec3) * n;
+    if (n > 0) {
+      check(cudaMemcpyAsync(d.x_pre.get(), d.x.get(), bytes, cudaMemcpyDeviceToDevice, d.stream), "cudaMemcpy x_pre");
+      check(cudaMemcpyAsync(d.v_pre.get(), d.v.get(), bytes, cudaMemcpyDeviceToDevice, d.stream), "cudaMemcpy v_pre");
+    }
     record_.frame = m.frame;
-    record_.x_pre = s.x;
-    record_.v_pre = s.v;
+    record_whole_ = false;
   }
   // The step, run again from the saved state with larger buffers while a list overflows.
   d.begin_step(m.frame);
@@ -434,7 +456,6 @@ const FrameMetrics& CudaWorld::step() {
 
   frame_ = m.frame;
   if (recording_) {
-    download(record_.aabbs, d.aabb, n, d.stream);
     download(record_.pairs, d.pairs, np, d.stream);
     std::vector<std::uint8_t> confirmed;
     download(confirmed, d.confirmed, np, d.stream);
@@ -463,9 +484,6 @@ const FrameMetrics& CudaWorld::step() {
       rec.dv_b = c.dv_b;
       record_.contacts.push_back(rec);
     }
-    const BodyState& s = state();
-    record_.x_post = s.x;
-    record_.v_post = s.v;
   }
   m.step_ms = ms_since(t_step);
   metrics_ = m;

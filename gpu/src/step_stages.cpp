@@ -56,7 +56,7 @@ void CudaWorld::Impl::drop_graph() {
 }
 
 std::vector<BufferBase*> CudaWorld::Impl::all_buffers() {
-  std::vector<BufferBase*> all{&x, &v, &x_saved, &v_saved, &w, &local, &shape, &aabb, &shapes, &vertices, &cells,
+  std::vector<BufferBase*> all{&x, &v, &x_saved, &v_saved, &w, &local, &shape, &aabb, &x_pre, &v_pre, &shapes, &vertices, &cells,
                                &level_offsets, &blocks, &theta, &stats, &metric_partials};
   for (BufferBase* b : scratch_buffers()) all.push_back(b);
   return all;

@@ -229,6 +229,50 @@ TEST_F(Tools, BenchTinySweepEndToEnd) {
   EXPECT_NE(again.output.find("--resume"), std::string::npos) << again.output;
 }
 
+// --traced runs each point once per trace mode: the untraced point keeps its id, the
+// traced ones say their mode in the id and params; a traced point writes its traces in a
+// private folder of $TMPDIR that is gone afterwards; the cpu engine is deterministic, so
+// every mode steps the same contacts; a mode that is not one, or --traced on a sweep of
+// another kind, is exit 2 naming the option.
+TEST_F(Tools, BenchTracedRunsEachPointOncePerTraceMode) {
+  const std::string sweep = tiny_sweep();
+  const fs::path out = dir_ / "traced.json";
+  const fs::path tmp = dir_ / "tmp";
+  fs::create_directories(tmp);
+  const Result r = octocd::test::run("TMPDIR=" + tmp.string() + " " + bin() + " bench " + sweep +
+                       " --engines cpu --traced off,states,contacts --repeat 1 -o " + out.string() + " --quiet");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json j = read_json(out);
+  ASSERT_EQ(j["points"].size(), 6u);  // 2 midphases x 3 modes
+  std::set<std::string> ids;
+  std::vector<double> contacts;
+  for (const auto& p : j["points"]) {
+    ASSERT_EQ(p["status"], "ok") << p.dump();
+    const std::string id = p["id"];
+    ids.insert(id);
+    const std::string mode = p["params"].value("traced", "off");
+    if (mode == "off") {
+      EXPECT_EQ(id.find("traced"), std::string::npos) << id;
+    } else {
+      EXPECT_NE(id.find(" | traced=" + mode), std::string::npos) << id;
+    }
+    if (p["params"]["axes"]["midphase"] == "1,2") contacts.push_back(p["windows"]["all"]["contacts"]["median"]);
+  }
+  EXPECT_EQ(ids.size(), 6u);
+  ASSERT_EQ(contacts.size(), 3u);
+  EXPECT_GT(contacts[0], 0.0);
+  EXPECT_EQ(contacts[0], contacts[1]);
+  EXPECT_EQ(contacts[0], contacts[2]);
+  EXPECT_TRUE(fs::is_empty(tmp)) << "a traced point left files in $TMPDIR";
+
+  const Result bad = run_octocd("bench " + sweep + " --traced off,sometimes -o " + (dir_ / "bad.json").string());
+  EXPECT_EQ(bad.code, 2) << bad.output;
+  EXPECT_NE(bad.output.find("--traced: 'sometimes' is not a trace mode"), std::string::npos) << bad.output;
+  const Result kind = run_octocd("bench speed-accuracy --traced states -o " + (dir_ / "bad2.json").string());
+  EXPECT_EQ(kind.code, 2) << kind.output;
+  EXPECT_NE(kind.output.find("--traced"), std::string::npos) << kind.output;
+}
+
 TEST_F(Tools, BenchShardsSplitThePointsAndResumeKeepsFinishedOnes) {
   const std::string sweep = tiny_sweep(5);
   std::set<int> seen;

@@ -427,6 +427,49 @@ TEST(Trace, FlushMakesRowsVisibleBeforeClose) {
   EXPECT_EQ(read_trace_summary(path).frames, 6);
 }
 
+// A caller may give the state only on the frames whose state is written (a device engine
+// then copies nothing back between them): with state_every 3 over frames 1..7 the states
+// of 0, 3 and 6 are on disk, equal to what was given; a missing state on a due frame
+// throws naming the frame; steps_to_next_state counts to the next due frame.
+TEST(Trace, StateGivenOnlyOnTheFramesWhoseStateIsWritten) {
+  const std::string path = (temp_dir() / "due.h5").string();
+  TraceOptions opt;
+  opt.state_every = 3;
+  {
+    TraceWriter w(path, make_meta(), make_bodies(2), opt);
+    EXPECT_EQ(w.steps_to_next_state(0), 3);
+    EXPECT_EQ(w.steps_to_next_state(1), 2);
+    EXPECT_EQ(w.steps_to_next_state(2), 1);
+    EXPECT_EQ(w.steps_to_next_state(3), 3);
+    w.append_state(0, make_state(0, 2));
+    for (std::int64_t fr = 1; fr <= 7; ++fr) {
+      EXPECT_EQ(w.state_due(fr), fr % 3 == 0) << fr;
+      const BodyState s = make_state(fr, 2);
+      w.append_frame(make_metrics(fr), w.state_due(fr) ? &s : nullptr, {});
+    }
+    try {
+      w.append_frame(make_metrics(9), static_cast<const BodyState*>(nullptr), {});
+      ADD_FAILURE() << "a due frame without a state was accepted";
+    } catch (const RuntimeError& e) {
+      EXPECT_NE(std::string(e.what()).find("frame 9"), std::string::npos) << e.what();
+    }
+  }
+  H5File f(path);
+  ASSERT_GE(f.id, 0);
+  EXPECT_EQ(read_all<std::int64_t>(f.id, "/states/frame", H5T_NATIVE_INT64), (std::vector<std::int64_t>{0, 3, 6}));
+  const auto pos = read_all<float>(f.id, "/states/position", H5T_NATIVE_FLOAT);
+  ASSERT_EQ(pos.size(), 3u * 2u * 3u);
+  for (std::size_t r = 0; r < 3; ++r) {
+    const BodyState s = make_state(static_cast<std::int64_t>(3 * r), 2);
+    for (std::size_t i = 0; i < 2; ++i) {
+      EXPECT_EQ(pos[(r * 2 + i) * 3 + 0], s.x[i].x);
+      EXPECT_EQ(pos[(r * 2 + i) * 3 + 1], s.x[i].y);
+      EXPECT_EQ(pos[(r * 2 + i) * 3 + 2], s.x[i].z);
+    }
+  }
+  EXPECT_EQ(read_all<std::int64_t>(f.id, "/frames/frame", H5T_NATIVE_INT64).size(), 7u);
+}
+
 TEST(Trace, WrongStateSizeThrows) {
   const std::string path = (temp_dir() / "size.h5").string();
   TraceWriter w(path, make_meta(), make_bodies(3), TraceOptions{});

@@ -117,6 +117,17 @@ class TraceWriter {
   /// hold `flush_bytes`.
   void append_frame(const FrameMetrics& m, const BodyState& state,
                     const std::vector<ContactRecord>& contacts);
+  /// As above with the state given only where it is written: `state` may be null on a
+  /// frame with !state_due(m.frame) (a device engine then copies no state back for the
+  /// frames between); a null state on a due frame throws RuntimeError naming the frame.
+  void append_frame(const FrameMetrics& m, const BodyState* state,
+                    const std::vector<ContactRecord>& contacts);
+  /// True when append_frame writes the state of `frame` (frame % state_every == 0).
+  bool state_due(std::int64_t frame) const;
+  /// The steps from `frame` to the next frame whose state is written (1 .. state_every):
+  /// what a caller may let an engine run ahead (Engine::plan_steps) when it reads nothing
+  /// else between the steps.
+  std::int64_t steps_to_next_state(std::int64_t frame) const;
   /// Appends a state row for `frame` (used for the initial state, frame 0). Version 2:
   /// also the row of /states/orientation and /states/angular_velocity (state.q, omega;
   /// identity and zero when empty).

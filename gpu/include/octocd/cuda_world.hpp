@@ -220,9 +220,12 @@ class CudaWorld : public Engine {
   const std::vector<ContactRecord>& contacts() const override;
   bool octocd_contacts() const override { return true; }
   bool can_record() const override { return true; }
-  /// Recording copies x_pre, v_pre, AABBs, pairs, confirmed pairs, contacts, x_post and
-  /// v_post back every step (as World fills them). Throws RuntimeError when it changes
-  /// while the resident kernel runs ahead (plan_steps).
+  /// Recording copies the candidate pairs, the confirmed pairs and the contacts back every
+  /// step (contacts() reads them; one download each) and keeps x_pre / v_pre on the device
+  /// (a device-to-device copy at the step's start); record() copies x_pre, v_pre, the
+  /// AABBs, x_post and v_post back on its first call after a step, so a caller that reads
+  /// contacts() alone (a trace of contact rows) pays for those alone. Throws RuntimeError
+  /// when it changes while the resident kernel runs ahead (plan_steps).
   void set_recording(bool on) override;
   /// On the small path with the resident kernel: a request asks for this step and up to
   /// gpu::kResidentAheadMax (63) more of the `steps` promised, to the next timed step
@@ -237,7 +240,9 @@ class CudaWorld : public Engine {
   /// The steps of the resident kernel's batch beyond the last step() (0 when none runs
   /// ahead: other paths, no plan, or the batch taken).
   std::int64_t steps_ahead() const override;
-  const FrameRecord& record() const override { return record_; }
+  /// The last step's record (recording only): completed from the device on the first
+  /// call after a step (see set_recording).
+  const FrameRecord& record() const override;
 
   /// Replaces the hot state (positions, velocities, inverse masses; sizes must equal the
   /// body count, else InputError): tests set up states with it, as with
@@ -293,7 +298,8 @@ class CudaWorld : public Engine {
   FrameMetrics metrics_;
   std::int64_t frame_ = 0;
   bool recording_ = false;
-  FrameRecord record_;
+  mutable FrameRecord record_;
+  mutable bool record_whole_ = true;  // false: x_pre, v_pre, aabbs, x_post, v_post not yet copied back
   mutable BodyState state_;
   mutable std::int64_t state_frame_ = -1;  // frame whose state state_ holds
 };
