@@ -773,8 +773,9 @@ TEST_F(ZooEngines, SoftEpisodesAcrossShardBordersMergeToTheWholeVerdict) {
 // A soft pair's isolated episode that begins in contact is not judged: the pair's spring
 // was loaded while box 1 still touched the static wall, so its stored energy is not in the
 // bodies' mechanical energy at the episode's first step, and its release (+14% of the
-// kinetic energy, a damped spring) would read as a gain (MuJoCo's rot-drop-220 pair
-// (15, 42) and bunny-stack-50 pair (6, 15) failed so). The same pair meeting in free flight
+// kinetic energy, a damped spring) would read as a gain (as MuJoCo's rot-drop-220 pair
+// (15, 42) and bunny-stack-50 pair (6, 15) are released from the floor: docs/engines.md,
+// "mujoco"). The same pair meeting in free flight
 // is judged from its first contact: it passes with a damped spring and fails with negative
 // damping (c = -50 N s/m), naming the pair.
 TEST_F(ZooEngines, SoftEpisodeBegunInContactIsNotJudged) {
