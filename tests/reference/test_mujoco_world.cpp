@@ -1,7 +1,7 @@
 // octocd::MujocoWorld (`--engine mujoco`, reference/mujoco/): its step is mj_step, the
 // closed forms of its integrator (free fall, torque-free spin with MuJoCo's explicit
 // gyroscopic term), a box resting on a floor, the sign conventions of its contact rows,
-// a trace the physics tier passes, its settings, and three faults of MuJoCo 2.2 that the
+// a trace the physics tier passes, its settings, and the faults of MuJoCo 2.2 that the
 // physics tier reports, each shown with a witness computed from MuJoCo's own data.
 // Skipped (GTEST_SKIP) when octocd is built without MuJoCo.
 #include <gtest/gtest.h>
@@ -552,6 +552,87 @@ TEST(MujocoFaults, SoftFrictionPushesAlongTheSliding) {
   EXPECT_GT(p_after, 0.0) << "friction power on the sliding after the step (W)";
   EXPECT_GT(speed_after, 0.1) << "the point still slides at 0.15 m/s";
   RecordProperty("friction_power_after_W", std::to_string(p_after));
+}
+
+// bunny-stack-50 with rotation, frame 570: bunny 8 comes down on the floor (a box, top at
+// y = 0, 1.4 x 1.4 m) spinning at 10 rad/s. Its whole hull lies over the floor's top face,
+// its lowest vertex 1.075 mm below it (MuJoCo's own mesh_vert, geom_xpos, geom_xmat), so
+// lifting it by 1.075 mm along the face's normal separates the two. MuJoCo 2.2's convex
+// collider (libccd's MPR, which searches along the line between the geoms' centres; the
+// floor's centre is 0.36 m away sideways) reports one contact whose normal is 46.1 deg off
+// the face's normal, tilted toward the bunny's side, with dist = -1.550 mm: the depth
+// along that tilted normal (1.075 mm / cos 46.1 deg), not the minimum translation. The
+// solver pushes along it: 767 N, 553 N of it sideways on a bunny that only needs lifting
+// (contact-geometry fails `normal-angle`: 46.1 deg from SAT's axis, the floor's normal).
+TEST(MujocoFaults, ConvexColliderTiltsAFloorNormalTowardTheFloorsCentreLine) {
+  Scene scene = load_scene(scene_path("bunny-stack-50"));
+  scene.rotation = true;
+  const auto model = build_model(scene);
+  MujocoWorld w(model, model->initial);
+  RawMujoco raw(w, model->initial);
+  for (int f = 1; f < 570; ++f) mj_step(raw.m, raw.d);
+  mj_forward(raw.m, raw.d);  // frame 570's contacts at its pre-step state
+  const std::vector<int> cs = raw.contacts(0, 8);
+  ASSERT_EQ(cs.size(), 1u);
+  const mjContact& c = raw.d->contact[cs[0]];
+  const int gf = raw.geom[0], gb = raw.geom[8];
+  ASSERT_EQ(c.geom1, gf);
+  // The floor's top face: its normal (geom_xmat's y column) and height.
+  const double up[3] = {raw.d->geom_xmat[9 * gf + 1], raw.d->geom_xmat[9 * gf + 4], raw.d->geom_xmat[9 * gf + 7]};
+  double top = 0.0;
+  for (int k = 0; k < 3; ++k) top += up[k] * raw.d->geom_xpos[3 * gf + k];
+  top += raw.m->geom_size[3 * gf + 1];
+  // The bunny's vertices (MuJoCo's mesh, in the geom's frame) in the world: the deepest
+  // below the top face, and whether all lie over it.
+  const int mesh = raw.m->geom_dataid[gb];
+  double sunk = -1e300;
+  bool over_the_face = true;
+  for (int v = 0; v < raw.m->mesh_vertnum[mesh]; ++v) {
+    const float* p = raw.m->mesh_vert + 3 * (raw.m->mesh_vertadr[mesh] + v);
+    const mjtNum local[3] = {p[0], p[1], p[2]};
+    mjtNum world[3];
+    mju_mulMatVec(world, raw.d->geom_xmat + 9 * gb, local, 3, 3);
+    for (int k = 0; k < 3; ++k) world[k] += raw.d->geom_xpos[3 * gb + k];
+    double height = 0.0;
+    for (int k = 0; k < 3; ++k) height += up[k] * world[k];
+    sunk = std::max(sunk, top - height);
+    over_the_face = over_the_face && std::fabs(world[0] - raw.d->geom_xpos[3 * gf]) < raw.m->geom_size[3 * gf] &&
+                    std::fabs(world[2] - raw.d->geom_xpos[3 * gf + 2]) < raw.m->geom_size[3 * gf + 2];
+  }
+  const double cos_tilt = c.frame[0] * up[0] + c.frame[1] * up[1] + c.frame[2] * up[2];
+  const double tilt_deg = std::acos(std::min(1.0, cos_tilt)) * 180.0 / M_PI;
+  // The tilt's direction against the line from the floor's centre to the bunny's, both
+  // projected on the face.
+  double tilt_dir[3], centres[3], dot = 0.0, nt = 0.0, nc = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    tilt_dir[k] = c.frame[k] - cos_tilt * up[k];
+    centres[k] = raw.d->geom_xpos[3 * gb + k] - raw.d->geom_xpos[3 * gf + k];
+  }
+  const double along = centres[0] * up[0] + centres[1] * up[1] + centres[2] * up[2];
+  for (int k = 0; k < 3; ++k) {
+    centres[k] -= along * up[k];
+    dot += tilt_dir[k] * centres[k];
+    nt += tilt_dir[k] * tilt_dir[k];
+    nc += centres[k] * centres[k];
+  }
+  const double toward_centre_line = dot / std::sqrt(nt * nc);
+  mjtNum f6[6];
+  mj_contactForce(raw.m, raw.d, cs[0], f6);
+  const double sideways = f6[0] * std::sqrt(std::max(0.0, 1.0 - cos_tilt * cos_tilt));
+  EXPECT_TRUE(over_the_face) << "the bunny lies over the floor's top face";
+  EXPECT_GT(sunk, 0.0005);
+  EXPECT_LT(sunk, 0.002) << "a 1 mm overlap: lifting the bunny by it separates the two";
+  EXPECT_GT(tilt_deg, 40.0) << "MuJoCo's normal against the floor's face normal";
+  EXPECT_GT(toward_centre_line, 0.9) << "tilted along the floor's centre-to-bunny line";
+  EXPECT_NEAR(-c.dist, sunk / cos_tilt, 0.01 * sunk / cos_tilt) << "the depth along the tilted normal";
+  EXPECT_GT(-c.dist, 1.3 * sunk) << "deeper than the minimum translation";
+  EXPECT_GT(sideways, 0.5 * f6[0]) << "the normal force pushes the bunny sideways";
+  RecordProperty("tilt_deg", std::to_string(tilt_deg));
+  RecordProperty("tilt_cos_to_centre_line", std::to_string(toward_centre_line));
+  RecordProperty("lowest_vertex_depth_m", std::to_string(sunk));
+  RecordProperty("mujoco_dist_m", std::to_string(c.dist));
+  RecordProperty("normal_force_N", std::to_string(f6[0]));
+  RecordProperty("sideways_force_N", std::to_string(sideways));
 }
 
 #endif  // OCTOCD_HAVE_MUJOCO

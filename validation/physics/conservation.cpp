@@ -258,6 +258,16 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
   };
   std::set<std::uint32_t> busy;  // dynamic bodies in contact this step
   for (const Component& c : components) busy.insert(c.members.begin(), c.members.end());
+  // This step's pairs of dynamic bodies in contact, and whether the previous step's are
+  // known (seen by this function: a step without states leaves them unknown).
+  std::vector<Pair> pairs;
+  for (const ContactRecord& c : rec.contacts)
+    if (dynamic(c.pair.a) && dynamic(c.pair.b)) pairs.push_back(c.pair);
+  for (const Pair& q : rec.confirmed)
+    if (dynamic(q.a) && dynamic(q.b)) pairs.push_back(q);
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  const bool before_known = pairs_frame == frame - 1;
   // Close the episodes none of whose bodies is in contact this step: judged on the state
   // before it (the state after the episode's last step). Between contacts a member flies
   // free (free-flight judges it), so the group's energy is judged over the whole episode.
@@ -271,6 +281,7 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
       // Begun outside this validator's frames (a shard's): judged where it began.
     } else if (ep.spoiled) {
       ++episodes_unjudged;
+      if (ep.began_in_contact) ++episodes_begun_in_contact;
     } else {
       double e1 = 0, masses = 0;
       for (std::uint32_t i : ep.bodies) {
@@ -323,6 +334,7 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
       merged.ke0 += ep.ke0;
       merged.scale += ep.scale;
       merged.spoiled = merged.spoiled || ep.spoiled;
+      merged.began_in_contact = merged.began_in_contact || ep.began_in_contact;
     }
     for (std::uint32_t i : c.members) {
       if (std::find(merged.bodies.begin(), merged.bodies.end(), i) != merged.bodies.end()) continue;
@@ -332,10 +344,29 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
       merged.ke0 += ke;
       merged.scale += std::fabs(e) + ke;
     }
+    // The episode starts from the state before its first contact row: a pair of this step
+    // that already touched in the previous step, while its group was not isolated (a body
+    // on a static one) or outside the open episodes, carries the energy its soft contact
+    // stored then, which the bodies' mechanical energy does not hold; releasing it would
+    // read as a gain. Such an episode began in contact and is not judged.
+    for (const Pair& q : pairs) {
+      if (!std::binary_search(c.members.begin(), c.members.end(), q.a)) continue;
+      const bool tracked = std::any_of(hit.begin(), hit.end(), [&](std::size_t e) {
+        return std::binary_search(episodes[e].bodies.begin(), episodes[e].bodies.end(), q.a) &&
+               std::binary_search(episodes[e].bodies.begin(), episodes[e].bodies.end(), q.b);
+      });
+      if (tracked) continue;
+      if (!before_known || std::binary_search(pairs_before.begin(), pairs_before.end(), q)) {
+        merged.spoiled = true;
+        merged.began_in_contact = true;
+      }
+    }
     std::sort(merged.bodies.begin(), merged.bodies.end());
     for (auto e = hit.rbegin(); e != hit.rend(); ++e) episodes.erase(episodes.begin() + static_cast<std::ptrdiff_t>(*e));
     episodes.push_back(std::move(merged));
   }
+  pairs_before = std::move(pairs);
+  pairs_frame = frame;
 }
 
 }  // namespace octocd

@@ -349,9 +349,15 @@ struct PhysicsValidators::Impl {
     std::vector<std::uint32_t> bodies;
     double e0 = 0, ke0 = 0, scale = 0;
     bool spoiled = false;
+    bool began_in_contact = false;  ///< a pair of it touched in the step before it opened
   };
   std::vector<Episode> episodes;  // contact_model soft: open episodes
+  /// The pairs of dynamic bodies with a contact row in frame `pairs_frame` (the last frame
+  /// soft_episodes saw; 0: none yet, the state before frame 1), sorted.
+  std::vector<Pair> pairs_before;
+  std::int64_t pairs_frame = 0;
   std::uint64_t episodes_judged = 0, episodes_judged_groups = 0, episodes_unjudged = 0, energy_soft_steps = 0;
+  std::uint64_t episodes_begun_in_contact = 0;
   std::uint64_t groups_locked = 0, groups_rotation_locked = 0;
 };
 

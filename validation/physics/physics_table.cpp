@@ -335,10 +335,12 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     if (s.bodies.contact_model == PhysicsBodies::ContactModel::Soft)
       r.detail += fmt::format("; contact_model soft: energy judged per contact episode of an isolated group, "
                               "from its first contact until none of its bodies touches another ({} episodes judged, "
-                              "{} of them of 3 or more bodies; {} not judged: a body touched a static one, a step "
-                              "had no states, or still in contact at the end ({} open)), not on {} group-steps",
+                              "{} of them of 3 or more bodies; {} not judged: a body touched a static one, it began "
+                              "in contact ({}: a pair touching in the step before, its soft contact's stored energy "
+                              "unseen), a step had no states, or still in contact at the end ({} open)), not on {} "
+                              "group-steps",
                               s.episodes_judged, s.episodes_judged_groups, s.episodes_unjudged + s.owned_open(),
-                              s.owned_open(), s.energy_soft_steps);
+                              s.episodes_begun_in_contact, s.owned_open(), s.energy_soft_steps);
     if (s.groups_locked)
       r.detail += fmt::format("; {} group-frames with a body whose axes are locked (locked_dofs): momentum along "
                               "locked translation axes not judged; {} with a rotation locked: angular momentum not "
