@@ -6,6 +6,11 @@
 // created up front, then SWMR writing starts. Rows are buffered in memory and written in
 // batches at each flush (every `flush_every` frames), followed by H5Fflush: a process
 // killed between flushes leaves a file that SWMR readers open, holding every flushed row.
+// The flushes that appending frames triggers run on a writer thread of their own (HDF5's
+// writes, deflate and H5Fflush beside the caller's next steps): the rows of one flush are
+// handed over whole, the next waits for it, so at most two batches are held; a failure on
+// that thread is thrown by the next call that appends, flushes or closes. flush() and
+// close() write on the caller's thread once the writer thread is idle.
 
 
 #include "octocd/trace.hpp"
@@ -18,12 +23,16 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <cstring>
 #include <ctime>
 #include <filesystem>
+#include <mutex>
+#include <thread>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -200,11 +209,21 @@ struct Column {
   std::size_t elem = 0;      // bytes per element
   std::vector<hsize_t> tail; // dimensions after the row dimension
   std::size_t width = 1;     // elements per row
-  std::vector<unsigned char> buf;
+  std::vector<unsigned char> buf;  // rows appended since the last stage()
+  std::vector<unsigned char> out;  // rows staged for the next write
   hsize_t rows = 0;          // rows on disk
   bool filtered = false;     // shuffle + deflate, one row a chunk (make_column)
 
-  hsize_t pending() const { return elem * width == 0 ? 0 : buf.size() / (elem * width); }  // 0: never created
+  hsize_t pending() const { return elem * width == 0 ? 0 : out.size() / (elem * width); }  // 0: never created
+
+  /// Moves the appended rows behind the staged ones.
+  void stage() {
+    if (out.empty())
+      out.swap(buf);
+    else
+      out.insert(out.end(), buf.begin(), buf.end());
+    buf.clear();
+  }
 
   template <class T>
   void push(const T* p, std::size_t count) {
@@ -221,6 +240,13 @@ struct Column {
   /// HDF5 1.10.2+ reads them), so the last flush of a stopped run costs a copy, not
   /// deflate (0.4 s a frame of 10^6 bodies' positions and velocities on a slow core).
   void write(const std::string& path, bool raw = false) {
+    stage();
+    write_staged(path, raw);
+  }
+
+  /// Appends the staged rows (write() without stage(): the writer thread's, while the
+  /// caller appends to buf).
+  void write_staged(const std::string& path, bool raw = false) {
     const hsize_t n = pending();
     if (n == 0) return;
     std::vector<hsize_t> size{rows + n}, start{rows}, count{n};
@@ -238,11 +264,11 @@ struct Column {
       for (hsize_t r = 0; r < n; ++r) {
         offset[0] = rows + r;
         check(H5Dwrite_chunk(dset, H5P_DEFAULT, kSkipShuffleAndDeflate, offset.data(), row_bytes,
-                             buf.data() + r * row_bytes),
+                             out.data() + r * row_bytes),
               path, "write rows of " + name);
       }
       rows += n;
-      buf.clear();
+      out.clear();
       return;
     }
     Handle fspace(check(H5Dget_space(dset), path, "H5Dget_space " + name));
@@ -250,10 +276,10 @@ struct Column {
                               nullptr),
           path, "select rows of " + name);
     Handle mspace(check(H5Screate_simple(rank, count.data(), nullptr), path, "H5Screate_simple"));
-    check(H5Dwrite(dset, mem_type, mspace, fspace, H5P_DEFAULT, buf.data()), path,
+    check(H5Dwrite(dset, mem_type, mspace, fspace, H5P_DEFAULT, out.data()), path,
           "write rows of " + name);
     rows += n;
-    buf.clear();
+    out.clear();
   }
 };
 
@@ -318,9 +344,91 @@ struct TraceWriter::Impl {
   bool closed = false;
   bool failed = false;               // a write failed: the file was abandoned
   std::int64_t last_appended = 0;    // frame of the last append_frame
-  std::int64_t flushed_rows = 0;     // /frames rows on disk after the last good flush
+  std::atomic<std::int64_t> flushed_rows{0};  // /frames rows on disk after the last good flush
   std::int64_t last_flushed = 0;     // frame of the last of them
   std::vector<float> scratch;
+
+  // The writer thread (started by the first flush handed over): one job at a time.
+  std::thread writer;
+  std::mutex mu;
+  std::condition_variable cv;
+  bool job = false;                  // a flush handed over, not yet done
+  bool quit = false;
+  std::string job_when;              // the job's "writing frame N" for a failure's message
+  std::int64_t job_last = 0;         // last_appended when it was handed over
+  bool job_failed = false;
+  std::string job_reason;            // the HDF5 failure's reason
+
+  ~Impl() { stop_writer(); }
+
+  void stop_writer() noexcept {
+    if (!writer.joinable()) return;
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      quit = true;
+    }
+    cv.notify_all();
+    writer.join();
+  }
+
+  void writer_loop() {
+    QuietHdf5 quiet;  // per thread: HDF5's error stacks are
+    std::unique_lock<std::mutex> lock(mu);
+    for (;;) {
+      cv.wait(lock, [&] { return job || quit; });
+      if (!job) return;  // quit with nothing handed over
+      lock.unlock();
+      bool ok = true;
+      std::string reason;
+      try {
+        write_staged_and_flush();
+      } catch (const Hdf5Failure& e) {
+        ok = false;
+        reason = e.reason();
+      }
+      lock.lock();
+      if (ok) {
+        flushed_rows = frames.empty() ? 0 : static_cast<std::int64_t>(frames[0].rows);
+        last_flushed = job_last;
+      } else {
+        job_failed = true;
+        job_reason = reason;
+      }
+      job = false;
+      cv.notify_all();
+      if (!ok) return;  // nothing more is written to an abandoned file
+    }
+  }
+
+  // Waits until no flush is in flight; after a failed one abandons the file and throws
+  // its message.
+  void wait_writer() {
+    if (!writer.joinable()) return;
+    std::unique_lock<std::mutex> lock(mu);
+    cv.wait(lock, [&] { return !job; });
+    if (job_failed) {
+      lock.unlock();
+      stop_writer();
+      const std::string when = job_when, reason = job_reason;
+      abandon();
+      throw RuntimeError(failure(when, reason));
+    }
+  }
+
+  // Hands the appended rows to the writer thread (after the previous flush is done).
+  void flush_behind(const std::string& when) {
+    wait_writer();
+    for (Column* c : columns()) c->stage();
+    since_flush = 0;
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      job = true;
+      job_when = when;
+      job_last = last_appended;
+    }
+    if (!writer.joinable()) writer = std::thread([this] { writer_loop(); });
+    cv.notify_all();
+  }
 
   // Every column, for abandon().
   std::vector<Column*> columns() {
@@ -341,6 +449,7 @@ struct TraceWriter::Impl {
     for (Column* c : columns()) {
       c->dset.release();
       std::vector<unsigned char>().swap(c->buf);
+      std::vector<unsigned char>().swap(c->out);
     }
     file.release();
   }
@@ -363,13 +472,10 @@ struct TraceWriter::Impl {
   // attributes still give the rows written in full. On failure abandons the file and
   // throws; the message gives the rows the attributes on disk vouch for.
   void write_and_flush(const std::string& when) {
+    wait_writer();
     try {
-      // After SIGINT/SIGTERM the process has a second to end: rows stored uncompressed.
-      write_all(stop_signal() != 0);
-      check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "flush");
-      write_committed(static_cast<std::int64_t>(frames.empty() ? 0 : frames[0].rows),
-                      static_cast<std::int64_t>(s_frame.rows));
-      check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "flush");
+      for (Column* c : columns()) c->stage();
+      write_staged_and_flush();
     } catch (const Hdf5Failure& e) {
       abandon();
       throw RuntimeError(failure(when, e.reason()));
@@ -379,13 +485,24 @@ struct TraceWriter::Impl {
     last_flushed = last_appended;
   }
 
+  // Writes the staged rows, flushes, records committed_frames / committed_states and
+  // flushes again (write_and_flush); throws Hdf5Failure. Touches no column's buf.
+  void write_staged_and_flush() {
+    // After SIGINT/SIGTERM the process has a second to end: rows stored uncompressed.
+    write_all(stop_signal() != 0);
+    check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "flush");
+    write_committed(static_cast<std::int64_t>(frames.empty() ? 0 : frames[0].rows),
+                    static_cast<std::int64_t>(s_frame.rows));
+    check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "flush");
+  }
+
   // Version 2 columns, written before the version 1 ones they accompany.
   void write_v2(bool raw) {
     if (!opt.v2) return;
-    s_orient.write(path, raw);
-    s_angvel.write(path, raw);
+    s_orient.write_staged(path, raw);
+    s_angvel.write_staged(path, raw);
     if (opt.contacts)
-      for (Column* c : {&c_point, &c_jt3, &a_min, &a_max, &p_pair, &p_offsets}) c->write(path, raw);
+      for (Column* c : {&c_point, &c_jt3, &a_min, &a_max, &p_pair, &p_offsets}) c->write_staged(path, raw);
   }
 
   // Version 2: the orientation and angular velocity rows of a state row.
@@ -417,14 +534,14 @@ struct TraceWriter::Impl {
     write_v2(raw);
     // States before their frame column, contact arrays before offsets, /frames/frame
     // last: readers clip every group to the shortest column (docs/trace-format.md).
-    s_pos.write(path, raw);
-    s_vel.write(path, raw);
-    s_frame.write(path);
+    s_pos.write_staged(path, raw);
+    s_vel.write_staged(path, raw);
+    s_frame.write_staged(path);
     if (opt.contacts) {
       for (Column* c : {&c_pair, &c_normal, &c_depth, &c_jn, &c_jt, &c_frame, &c_offsets})
-        c->write(path);
+        c->write_staged(path);
     }
-    for (std::size_t i = frames.size(); i-- > 0;) frames[i].write(path);
+    for (std::size_t i = frames.size(); i-- > 0;) frames[i].write_staged(path);
   }
 
   void push_state(std::int64_t frame, const BodyState& st) {
@@ -861,7 +978,7 @@ void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState* state,
   std::size_t buffered = 0;
   for (Column* c : m.columns()) buffered += c->buf.size();
   if (++m.since_flush >= m.opt.flush_every || buffered >= m.opt.flush_bytes) {
-    m.write_and_flush("writing frame " + std::to_string(fm.frame));
+    m.flush_behind("writing frame " + std::to_string(fm.frame));
   }
 }
 
@@ -876,6 +993,12 @@ void TraceWriter::flush() {
   if (m.closed) return;
   QuietHdf5 quiet;
   m.write_and_flush("flushing after frame " + std::to_string(m.last_appended));
+}
+
+void TraceWriter::wait_for_flush() {
+  Impl& m = *impl_;
+  if (m.closed) return;
+  m.wait_writer();
 }
 
 void TraceWriter::close() {

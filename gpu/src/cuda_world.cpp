@@ -398,6 +398,9 @@ const FrameMetrics& CudaWorld::step() {
     if (n > 0) {
       check(cudaMemcpyAsync(d.x_pre.get(), d.x.get(), bytes, cudaMemcpyDeviceToDevice, d.stream), "cudaMemcpy x_pre");
       check(cudaMemcpyAsync(d.v_pre.get(), d.v.get(), bytes, cudaMemcpyDeviceToDevice, d.stream), "cudaMemcpy v_pre");
+      // Done before the step starts: the small path's resident kernel runs on a stream of
+      // its own and would overwrite x and v under copies still queued on this one.
+      check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize (x_pre, v_pre)");
     }
     record_.frame = m.frame;
     record_whole_ = false;

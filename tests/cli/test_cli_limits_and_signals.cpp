@@ -747,6 +747,7 @@ TEST_F(Hardening, TraceFlushesOnceItsBufferedRowsHoldFlushBytes) {
     octocd::FrameMetrics m;
     m.frame = f;
     w.append_frame(m, st, {});
+    w.wait_for_flush();  // a flush append_frame started runs on the writer thread
     if (w.flushed_frames() > 0) first_flush = f;
   }
   EXPECT_GE(first_flush, 3);

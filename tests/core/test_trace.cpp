@@ -485,8 +485,9 @@ TEST(Trace, SigkillLeavesReadableFileWithFlushedFrames) {
   const pid_t child = ::fork();
   ASSERT_GE(child, 0);
   if (child == 0) {
-    // Child: 35 frames, flushed every 10 (frames 31..35 appended, not flushed), then it
-    // says so on the pipe and waits to be killed with the writer open.
+    // Child: 35 frames, flushed every 10 (frames 31..35 appended, not flushed); once the
+    // writer thread has the flush of frame 30 on disk it says so on the pipe and waits to
+    // be killed with the writer open.
     ::close(ready[0]);
     try {
       TraceOptions opt;
@@ -496,6 +497,7 @@ TEST(Trace, SigkillLeavesReadableFileWithFlushedFrames) {
       TraceWriter w(path, make_meta(), make_bodies(nb), opt);
       w.append_state(0, make_state(0, nb));
       for (std::int64_t fr = 1; fr <= 35; ++fr) w.append_frame(make_metrics(fr), make_state(fr, nb), make_contacts(fr));
+      w.wait_for_flush();
       const char done = 'w';
       if (::write(ready[1], &done, 1) == 1)
         for (;;) ::pause();

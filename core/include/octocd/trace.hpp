@@ -140,13 +140,18 @@ class TraceWriter {
   void append_frame_v2(const FrameMetrics& m, const BodyState& state, const FrameRecord& rec);
   /// Flushes everything written so far to disk.
   void flush();
+  /// Waits until the rows a flush handed to the writer thread are on disk (the flushes
+  /// append_frame starts run there, beside the caller's next steps); flushed_frames() then
+  /// counts them. Throws RuntimeError as append_frame does when that flush failed.
+  void wait_for_flush();
   /// Flushes and closes the file (idempotent; the destructor calls it).
   void close();
   /// Path of the file.
   const std::string& path() const;
   /// True after a write failed and the file was abandoned.
   bool failed() const;
-  /// Rows of /frames on disk after the last successful flush.
+  /// Rows of /frames on disk after the last successful flush (one on the writer thread
+  /// counts once it has ended: wait_for_flush).
   std::int64_t flushed_frames() const;
 
  private:
