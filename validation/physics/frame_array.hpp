@@ -55,7 +55,8 @@ class FrameArray {
   void release() noexcept {
     if (!data_) return;
     T* data = data_;
-    parallel_items(size_, threads_, std::function<bool()>(), [data](std::size_t i, unsigned) { data[i].~T(); });
+    if constexpr (!std::is_trivially_destructible_v<T>)
+      parallel_items(size_, threads_, std::function<bool()>(), [data](std::size_t i, unsigned) { data[i].~T(); });
     std::allocator<T>().deallocate(data_, size_);
     data_ = nullptr;
     size_ = 0;
