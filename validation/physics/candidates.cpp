@@ -73,7 +73,7 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
   }
   std::vector<Pair>& contact_pairs = f.contact_pairs;
   for (const PairRows& r : rows) contact_pairs.push_back(r.p);
-  std::sort(contact_pairs.begin(), contact_pairs.end());
+  if (!std::is_sorted(contact_pairs.begin(), contact_pairs.end())) std::sort(contact_pairs.begin(), contact_pairs.end());
 
   // The truth the rows below read, on `threads` threads (parallel_items): every candidate
   // that intersects (or, with a broadphase margin, every candidate) and every contact
@@ -98,9 +98,9 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
     // Row 3's figures of each pair's groups of rows come from the same pass, while the
     // pair's SAT axes are at hand: groups listed per truth entry (counting sort).
     const std::size_t groups = rows.size();
-    f.pair_fig.assign(groups, PairFigures{});
-    f.row_fig.assign(rec.contacts.size(), RowFigures{});
-    if (bodies.contact_geometry == ContactGeometry::Aabb) f.aabb_ref.assign(groups, ReferenceNormal{});
+    f.pair_fig = FrameArray<PairFigures>(groups, threads);
+    f.row_fig = FrameArray<RowFigures>(rec.contacts.size(), threads);
+    if (bodies.contact_geometry == ContactGeometry::Aabb) f.aabb_ref = FrameArray<ReferenceNormal>(groups, threads);
     std::vector<std::uint32_t> group_begin(all.size() + 1, 0), group_list(groups);
     {
       std::vector<std::size_t> group_truth(groups);

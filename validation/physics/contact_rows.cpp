@@ -151,8 +151,8 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
       pair_figures(f, i, *truth_of[i], scratch.accepted);
     }
   }
-  const std::vector<PairFigures>& pair_fig = f.pair_fig;
-  const std::vector<RowFigures>& row_fig = f.row_fig;
+  const FrameArray<PairFigures>& pair_fig = f.pair_fig;
+  const FrameArray<RowFigures>& row_fig = f.row_fig;
   for (std::size_t i = 0; i < f.rows.size(); ++i) {
     poll();
     const PairRows& pr = f.rows[i];

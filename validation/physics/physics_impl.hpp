@@ -212,9 +212,9 @@ struct CheckedFrame {
   std::vector<Pair> contact_pairs;  ///< the pairs of rows (sorted)
   std::vector<Pair> required;       ///< candidates whose shapes are within the broadphase margin
   // Row 3's figures, computed in the truth's pass (each pair's SAT axes read while at hand).
-  std::vector<PairFigures> pair_fig;   ///< per group of rows
-  std::vector<ReferenceNormal> aabb_ref;  ///< per group: box-box on the world AABBs (Aabb geometry only)
-  std::vector<RowFigures> row_fig;     ///< per record row
+  FrameArray<PairFigures> pair_fig;      ///< per group of rows
+  FrameArray<ReferenceNormal> aabb_ref;  ///< per group: box-box on the world AABBs (Aabb geometry only)
+  FrameArray<RowFigures> row_fig;        ///< per record row
 };
 
 }  // namespace physics_detail
