@@ -55,39 +55,35 @@ void PhysicsValidators::Impl::judge_completeness(CheckedFrame& f) {
   const double slack = tol.geometry_slack_m;
   StopPoll poll(stop);
   // 2. Contact completeness: penetrating pairs need a contact; contacts need closeness.
-  // The look-ups (each candidate's truth and whether it has rows, each contact pair's
-  // truth) on `threads` threads into per-item slots; the tallies then in item order.
+  // The candidates, the truth's pairs and the contact pairs are sorted: each candidate's
+  // truth and whether it has rows are looked up onwards from the last answer (seek).
   const std::vector<Pair>& cand = f.cand;
   const std::size_t none = f.truth.size();
-  std::vector<std::size_t> cand_truth(cand.size(), none);
-  std::vector<char> cand_found(cand.size(), 0);
-  parallel_items(cand.size(), threads, stop, [&](std::size_t i, unsigned) {
-    const std::size_t t = f.find(cand[i]);
-    if (t == none || !f.truth[t].have || !f.truth[t].g.penetrating || !(f.truth[t].g.depth > tol.contact_depth_m))
-      return;
-    cand_truth[i] = t;
-    cand_found[i] = std::binary_search(f.contact_pairs.begin(), f.contact_pairs.end(), cand[i]) ? 1 : 0;
-  });
+  std::size_t truth_cursor = 0, contact_cursor = 0;
   for (std::size_t i = 0; i < cand.size(); ++i) {
-    if (cand_truth[i] == none) continue;
+    poll();
     const Pair p = cand[i];
-    if (cand_found[i] == 0 && pair_asleep(*f.rec, p)) {  // engines do not collide sleeping bodies
+    const std::size_t t = f.find_after(p, truth_cursor);
+    if (t == none || !f.truth[t].have || !f.truth[t].g.penetrating || !(f.truth[t].g.depth > tol.contact_depth_m))
+      continue;
+    const std::size_t c = seek(f.contact_pairs, p, contact_cursor);
+    const bool found = c < f.contact_pairs.size() && f.contact_pairs[c] == p;
+    if (!found && pair_asleep(*f.rec, p)) {  // engines do not collide sleeping bodies
       ++complete_asleep;
       continue;
     }
-    const ReferenceNormal& g = f.truth[cand_truth[i]].g;
-    complete.check(cand_found[i] != 0, g.depth, Where{frame, p}, [&] {
+    const ReferenceNormal& g = f.truth[t].g;
+    complete.check(found, g.depth, Where{frame, p}, [&] {
       return fmt::format("frame {}: {} penetrates by {:.4g} m{} and has no contact", frame, pair_name(p), g.depth,
                          g.depth_upper_bound ? " (upper bound: non-convex mesh)" : "");
     });
   }
   const std::vector<Pair>& pairs = f.contact_pairs;
-  std::vector<std::size_t> pair_truth(pairs.size());
-  parallel_items(pairs.size(), threads, stop, [&](std::size_t i, unsigned) { pair_truth[i] = f.find(pairs[i]); });
+  truth_cursor = 0;
   for (std::size_t i = 0; i < pairs.size(); ++i) {
     poll();
     const Pair p = pairs[i];
-    const ReferenceNormal& g = pair_truth[i] < none ? f.truth[pair_truth[i]].g : full_truth(f, p).g;
+    const ReferenceNormal& g = truth_after(f, p, truth_cursor).g;
     const double bound = pair_margin(p) + slack;
     const double d = g.signed_distance();
     false_contact.check(d <= bound, d - bound, Where{frame, p}, [&] {
