@@ -1,6 +1,6 @@
 // The physics tier's checked frames (physics_impl.hpp): the candidate pairs through the
-// exact posed world AABBs, their reference geometry (SAT, FCL) on threads, and row 1,
-// broadphase completeness.
+// exact posed world AABBs, their reference geometry (SAT, FCL) and row 3's figures in one
+// pass on threads, and row 1, broadphase completeness.
 #include "physics_impl.hpp"
 
 #include "../src/parallel.hpp"

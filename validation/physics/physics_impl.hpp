@@ -282,7 +282,8 @@ struct PhysicsValidators::Impl {
   std::function<bool()> stop;  // polled inside the long loops (set_stop)
   int threads = 0;              // set_threads (0: the hardware's)
   // Each row's own time (s): RowClock around its work; shared work goes to the first row
-  // that needs it (the candidates and FCL truth of every pair: broadphase-completeness).
+  // that needs it (the candidates, the FCL/SAT truth of every pair and row 3's figures
+  // computed beside it: broadphase-completeness).
   double t_broad = 0, t_complete = 0, t_geometry = 0, t_pen = 0, t_friction = 0, t_conservation = 0;
 
   double pair_margin(Pair p) const {
