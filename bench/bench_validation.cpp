@@ -13,7 +13,9 @@
 // (N / N0)^(1/3). The CPU engine runs --warmup frames (not timed) and records the next one;
 // each repetition judges that record on fresh validators. Reported: median, min and max
 // over --reps repetitions, the contact rows of the frame, the validators' threads
-// (--threads: a list, 0 the hardware's) and the 1-minute load average.
+// (--threads: a list, 0 the hardware's), the median CPU time of the process over the
+// same span (user + system, every thread: steadier than the wall time on a shared
+// machine) and the 1-minute load average.
 // --lattice instead judges a contact-heavy frame: N boxes (half extent 0.1 m) on a cubic
 // grid of spacing 0.19 m, no gravity, so every box overlaps its 26 neighbours by 1 cm
 // (about 13 contact pairs a body); the engine's first step is recorded (--warmup 0).
@@ -25,6 +27,8 @@
 //                         [--only physics,full,pairs] [--rows] [--threads 1,2] [--lattice]
 //                         [--json FILE]
 #include <thread>
+
+#include <time.h>
 
 #include <algorithm>
 #include <chrono>
@@ -50,6 +54,13 @@
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+/// The process's CPU time (s): user + system, every thread.
+double cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+}
 
 double load_average() {
   std::ifstream in("/proc/loadavg");
@@ -166,8 +177,8 @@ int main(int argc, char** argv) {
   auto wanted = [&](const char* what) { return ("," + only + ",").find(std::string(",") + what + ",") != std::string::npos; };
   fmt::print("bench_validation: {} hardware threads, load average {:.2f} at start, {} repetitions\n",
              std::thread::hardware_concurrency(), load_average(), reps);
-  fmt::print("{:<10} {:>8} {:>9} {:>9} {:>7} {:>10} {:>10} {:>10} {:>14} {:>8}\n", "what", "bodies", "pairs",
-             "contacts", "threads", "median s", "min s", "max s", "us/body-frame", "load");
+  fmt::print("{:<10} {:>8} {:>9} {:>9} {:>7} {:>10} {:>10} {:>10} {:>14} {:>9} {:>8}\n", "what", "bodies", "pairs",
+             "contacts", "threads", "median s", "min s", "max s", "us/body-frame", "cpu s", "load");
   for (long target : sizes) {
     const octocd::Scene scene = lattice ? lattice_scene(target) : scaled_scene(scene_path, target);
     const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
@@ -179,12 +190,15 @@ int main(int argc, char** argv) {
     std::vector<octocd::Pair> pairs;
     octocd::exact_pairs(rec.aabbs, pairs);
     long threads = 0;
+    // Per repetition: wall seconds (t) and process CPU seconds (cpu) of the timed span.
+    std::vector<double> cpu;
     auto row = [&](const char* what, const std::vector<double>& t) {
       const Stats st = stats(t);
-      fmt::print("{:<10} {:>8} {:>9} {:>9} {:>7} {:>10.4f} {:>10.4f} {:>10.4f} {:>14.3f} {:>8.2f}\n", what, n,
-                 pairs.size(), rec.contacts.size(),
+      fmt::print("{:<10} {:>8} {:>9} {:>9} {:>7} {:>10.4f} {:>10.4f} {:>10.4f} {:>14.3f} {:>9.4f} {:>8.2f}\n", what,
+                 n, pairs.size(), rec.contacts.size(),
                  threads > 0 ? threads : long(std::thread::hardware_concurrency()), st.median, st.min, st.max,
-                 1e6 * st.median / double(n), load_average());
+                 1e6 * st.median / double(n), cpu.empty() ? 0.0 : stats(cpu).median, load_average());
+      cpu.clear();
       std::fflush(stdout);
     };
     octocd::ValidationOptions vo;
@@ -198,9 +212,11 @@ int main(int argc, char** argv) {
       for (int r = 0; r < reps; ++r) {
         octocd::FrameValidators v(*model, vo, {},
                                   octocd::FrameValidators::Source{"engine 'bench'", false, false, nullptr});
+        const double c0 = cpu_seconds();
         const auto t0 = Clock::now();
         v.observe(rec, true);
         t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+        cpu.push_back(cpu_seconds() - c0);
         if (r + 1 == reps && rows_shown) {
           for (const octocd::ValidationResult& x : v.results())
             if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
@@ -218,9 +234,11 @@ int main(int argc, char** argv) {
       std::vector<double> t;
       for (int r = 0; r < reps; ++r) {
         octocd::FrameValidators v(world, vo, octocd::compared_broadphases(scene, false));
+        const double c0 = cpu_seconds();
         const auto t0 = Clock::now();
         v.observe(rec, true);
         t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+        cpu.push_back(cpu_seconds() - c0);
         if (r + 1 == reps && rows_shown) {
           for (const octocd::ValidationResult& x : v.results())
             if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
@@ -233,9 +251,11 @@ int main(int argc, char** argv) {
       std::vector<double> t, tf;
       std::vector<octocd::Pair> out;
       for (int r = 0; r < reps; ++r) {
+        const double c0 = cpu_seconds();
         const auto t0 = Clock::now();
         octocd::exact_pairs(rec.aabbs, out);
         t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+        cpu.push_back(cpu_seconds() - c0);
       }
       row("exact", t);
       if (n <= 25000) {
@@ -244,9 +264,11 @@ int main(int argc, char** argv) {
         auto flat = octocd::make_broadphase(cfg, scene.domain);
         octocd::BroadPhaseStats bs;
         for (int r = 0; r < reps; ++r) {
+          const double c0 = cpu_seconds();
           const auto t0 = Clock::now();
           flat->find_pairs(rec.aabbs, out, bs);
           tf.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+          cpu.push_back(cpu_seconds() - c0);
         }
         row("flat", tf);
       }

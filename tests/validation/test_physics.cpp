@@ -2,6 +2,7 @@
 // forms (rotated boxes, a non-convex mesh), the six rows on hand-made records of rotated
 // bodies whose truth is known, each planted fault caught by its row with a detail naming
 // the frame and the pair or body, and octocd's own CPU engine passing every row.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -21,6 +22,7 @@
 #include "octocd/physics.hpp"
 #include "octocd/reference_contact.hpp"
 #include "octocd/validation.hpp"
+#include "../../validation/physics/reference.hpp"
 #include "../../validation/physics/sat.hpp"
 #include "../../validation/physics/seek.hpp"
 
@@ -1178,6 +1180,73 @@ TEST(SeparatingAxis, ReusedWorkSpaceGivesTheFreshAnswer) {
     EXPECT_EQ(again.accepted[k].overlap, fresh.accepted[k].overlap);
     EXPECT_EQ(again.accepted[k].kind, fresh.accepted[k].kind);
   }
+}
+
+// The physics tier's truth pass: pair_reference_into with one work space over a frame's
+// pairs (sorted, so body a's placed hull is reused) gives what pair_reference gives for
+// each pair alone, bit for bit (the reference, SAT's figures and accepted axes, each
+// row's reference), on boxes of three sizes and convex meshes (icospheres) at random
+// poses close enough that most pairs penetrate.
+TEST(SeparatingAxis, SharedWorkSpaceGivesTheDirectAnswer) {
+  const std::string text = R"({"name": "mix", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]}, "walls": "none",
+    "groups": [{"name": "box", "shape": {"box": [0.1, 0.05, 0.08]}, "count": 4, "mass": 1,
+                "positions": [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]]},
+               {"name": "cube", "shape": {"box": [0.07, 0.07, 0.07]}, "count": 3, "mass": 1,
+                "positions": [[0, 0, 0], [0, 0, 0], [0, 0, 0]]},
+               {"name": "ball", "shape": {"icosphere": {"radius": 0.08, "subdivisions": 1}}, "count": 3, "mass": 1,
+                "positions": [[0, 0, 0], [0, 0, 0], [0, 0, 0]]}]})";
+  const auto model = build_model(parse_scene(text, "mixed convex shapes (test)"));
+  const ReferenceGeometry ref(*model);
+  const std::uint32_t n = std::uint32_t(model->bodies.size());
+  ASSERT_EQ(n, 10u);
+  ASSERT_TRUE(ref.convex(9));
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> at(-0.09f, 0.09f), unit(-1.0f, 1.0f);
+  SatSettings settings;
+  std::size_t by_sat = 0, pairs = 0;
+  for (int frame = 0; frame < 20; ++frame) {
+    std::vector<Pose> det(n);
+    for (Pose& p : det) {
+      p.position = Vec3{at(rng), at(rng), at(rng)};
+      Quat q{unit(rng), unit(rng), unit(rng), unit(rng)};
+      const float len = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
+      p.orientation = Quat{q.w / len, q.x / len, q.y / len, q.z / len};
+    }
+    PairReferenceScratch scratch;  // one per frame's poses, as the truth pass keeps one per thread
+    for (std::uint32_t a = 0; a < n; ++a)
+      for (std::uint32_t b = a + 1; b < n; ++b) {
+        const PairReference want = pair_reference(ref, a, b, det[a], det[b], settings);
+        const PairReference got = pair_reference_into(ref, a, b, det[a], det[b], settings, scratch);
+        ++pairs;
+        SCOPED_TRACE(fmt::format("frame {} pair ({}, {})", frame, a, b));
+        ASSERT_EQ(got.sat, want.sat);
+        EXPECT_EQ(got.g.penetrating, want.g.penetrating);
+        EXPECT_EQ(got.g.valid, want.g.valid);
+        EXPECT_EQ(got.g.depth, want.g.depth);
+        EXPECT_EQ(got.g.distance, want.g.distance);
+        EXPECT_EQ(got.g.normal, want.g.normal);
+        EXPECT_EQ(got.fcl.depth, want.fcl.depth);
+        EXPECT_EQ(got.fcl.normal, want.fcl.normal);
+        EXPECT_TRUE(got.sat_result.accepted.empty());
+        if (!want.sat) continue;
+        ++by_sat;
+        EXPECT_EQ(got.sat_result.depth, want.sat_result.depth);
+        EXPECT_EQ(got.sat_result.epsilon, want.sat_result.epsilon);
+        EXPECT_EQ(got.sat_result.axes, want.sat_result.axes);
+        ASSERT_EQ(scratch.accepted.size(), want.sat_result.accepted.size());
+        for (std::size_t k = 0; k < scratch.accepted.size(); ++k) {
+          EXPECT_EQ(scratch.accepted[k].normal, want.sat_result.accepted[k].normal);
+          EXPECT_EQ(scratch.accepted[k].overlap, want.sat_result.accepted[k].overlap);
+        }
+        const Vec3 row_normal{unit(rng), unit(rng), unit(rng)};
+        const RowReference rw = row_reference(want, want.g, true, row_normal);
+        const RowReference rg = row_reference(scratch.accepted, got.g, true, row_normal);
+        EXPECT_EQ(rg.angle, rw.angle);
+        EXPECT_EQ(rg.normal, rw.normal);
+      }
+  }
+  EXPECT_EQ(pairs, 900u);
+  EXPECT_GT(by_sat, pairs / 2);  // most pairs penetrate and are judged by SAT
 }
 
 // The look-up of the physics tier's sorted pair lists from a cursor answers what

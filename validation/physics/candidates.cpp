@@ -1,6 +1,6 @@
 // The physics tier's checked frames (physics_impl.hpp): the candidate pairs through the
-// exact posed world AABBs, their reference geometry (SAT, FCL) on threads, and row 1,
-// broadphase completeness.
+// exact posed world AABBs, their reference geometry (SAT, FCL) and row 3's figures in one
+// pass on threads, and row 1, broadphase completeness.
 #include "physics_impl.hpp"
 
 #include "../src/parallel.hpp"
@@ -19,22 +19,16 @@ using namespace physics_detail;
 
 namespace {
 std::pair<std::uint32_t, std::uint32_t> key(Pair p) { return std::make_pair(p.a, p.b); }
-
-/// Pair p's truth at poses `det` (thread-safe: ReferenceGeometry's queries build their
-/// FCL objects locally).
-void compute_truth(const ReferenceGeometry& ref, const std::vector<Pose>& det, const SatSettings& sat, Pair p,
-                   ContactTruth& t) {
-  static_cast<PairReference&>(t) = pair_reference(ref, p.a, p.b, det[p.a], det[p.b], sat);
-  t.have = true;
-  t.intersects = t.g.penetrating;
-}
 }  // namespace
 
 const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p) const {
   const std::size_t k = f.find(p);
   if (k < f.truth.size()) return f.truth[k];
   ContactTruth& t = f.extra[key(p)];
-  if (!t.have) compute_truth(*ref, *f.det, sat_settings, p, t);
+  if (!t.have) {
+    PairReferenceScratch scratch;
+    t.assign(pair_reference_into(*ref, p.a, p.b, (*f.det)[p.a], (*f.det)[p.b], sat_settings, scratch));
+  }
   return t;
 }
 
@@ -79,7 +73,7 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
   }
   std::vector<Pair>& contact_pairs = f.contact_pairs;
   for (const PairRows& r : rows) contact_pairs.push_back(r.p);
-  std::sort(contact_pairs.begin(), contact_pairs.end());
+  if (!std::is_sorted(contact_pairs.begin(), contact_pairs.end())) std::sort(contact_pairs.begin(), contact_pairs.end());
 
   // The truth the rows below read, on `threads` threads (parallel_items): every candidate
   // that intersects (or, with a broadphase margin, every candidate) and every contact
@@ -101,8 +95,34 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
     std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
     all.erase(std::unique(all.begin(), all.end()), all.end());
     f.truth = FrameArray<ContactTruth>(all.size(), threads);
-    parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned) {
-      compute_truth(*ref, det, sat_settings, all[i], f.truth[i]);
+    // Row 3's figures of each pair's groups of rows come from the same pass, while the
+    // pair's SAT axes are at hand: groups listed per truth entry (counting sort).
+    const std::size_t groups = rows.size();
+    f.pair_fig = FrameArray<PairFigures>(groups, threads);
+    f.row_fig = FrameArray<RowFigures>(rec.contacts.size(), threads);
+    if (bodies.contact_geometry == ContactGeometry::Aabb) f.aabb_ref = FrameArray<ReferenceNormal>(groups, threads);
+    std::vector<std::uint32_t> group_begin(all.size() + 1, 0), group_list(groups);
+    {
+      std::vector<std::size_t> group_truth(groups);
+      std::size_t cursor = 0;
+      for (std::size_t g = 0; g < groups; ++g) {
+        group_truth[g] = f.find_after(rows[g].p, cursor);
+        if (group_truth[g] < all.size()) ++group_begin[group_truth[g] + 1];
+      }
+      for (std::size_t i = 0; i < all.size(); ++i) group_begin[i + 1] += group_begin[i];
+      std::vector<std::uint32_t> fill(group_begin.begin(), group_begin.end() - 1);
+      for (std::size_t g = 0; g < groups; ++g)
+        if (group_truth[g] < all.size()) group_list[fill[group_truth[g]]++] = static_cast<std::uint32_t>(g);
+    }
+    // Per worker: the placed hulls and accepted axes of its last pair (pairs in a chunk
+    // share their first body, placed once).
+    std::vector<PairReferenceScratch> scratch(loop_threads(threads, all.size()));
+    parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned worker) {
+      PairReferenceScratch& s = scratch[worker];
+      const Pair p = all[i];
+      ContactTruth& t = f.truth[i];
+      t.assign(pair_reference_into(*ref, p.a, p.b, det[p.a], det[p.b], sat_settings, s));
+      for (std::uint32_t k = group_begin[i]; k < group_begin[i + 1]; ++k) pair_figures(f, group_list[k], t, s.accepted);
     });
   }
   // The candidates are sorted: their truth is looked up onwards from the last one.

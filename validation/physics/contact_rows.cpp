@@ -55,39 +55,35 @@ void PhysicsValidators::Impl::judge_completeness(CheckedFrame& f) {
   const double slack = tol.geometry_slack_m;
   StopPoll poll(stop);
   // 2. Contact completeness: penetrating pairs need a contact; contacts need closeness.
-  // The look-ups (each candidate's truth and whether it has rows, each contact pair's
-  // truth) on `threads` threads into per-item slots; the tallies then in item order.
+  // The candidates, the truth's pairs and the contact pairs are sorted: each candidate's
+  // truth and whether it has rows are looked up onwards from the last answer (seek).
   const std::vector<Pair>& cand = f.cand;
   const std::size_t none = f.truth.size();
-  std::vector<std::size_t> cand_truth(cand.size(), none);
-  std::vector<char> cand_found(cand.size(), 0);
-  parallel_items(cand.size(), threads, stop, [&](std::size_t i, unsigned) {
-    const std::size_t t = f.find(cand[i]);
-    if (t == none || !f.truth[t].have || !f.truth[t].g.penetrating || !(f.truth[t].g.depth > tol.contact_depth_m))
-      return;
-    cand_truth[i] = t;
-    cand_found[i] = std::binary_search(f.contact_pairs.begin(), f.contact_pairs.end(), cand[i]) ? 1 : 0;
-  });
+  std::size_t truth_cursor = 0, contact_cursor = 0;
   for (std::size_t i = 0; i < cand.size(); ++i) {
-    if (cand_truth[i] == none) continue;
+    poll();
     const Pair p = cand[i];
-    if (cand_found[i] == 0 && pair_asleep(*f.rec, p)) {  // engines do not collide sleeping bodies
+    const std::size_t t = f.find_after(p, truth_cursor);
+    if (t == none || !f.truth[t].have || !f.truth[t].g.penetrating || !(f.truth[t].g.depth > tol.contact_depth_m))
+      continue;
+    const std::size_t c = seek(f.contact_pairs, p, contact_cursor);
+    const bool found = c < f.contact_pairs.size() && f.contact_pairs[c] == p;
+    if (!found && pair_asleep(*f.rec, p)) {  // engines do not collide sleeping bodies
       ++complete_asleep;
       continue;
     }
-    const ReferenceNormal& g = f.truth[cand_truth[i]].g;
-    complete.check(cand_found[i] != 0, g.depth, Where{frame, p}, [&] {
+    const ReferenceNormal& g = f.truth[t].g;
+    complete.check(found, g.depth, Where{frame, p}, [&] {
       return fmt::format("frame {}: {} penetrates by {:.4g} m{} and has no contact", frame, pair_name(p), g.depth,
                          g.depth_upper_bound ? " (upper bound: non-convex mesh)" : "");
     });
   }
   const std::vector<Pair>& pairs = f.contact_pairs;
-  std::vector<std::size_t> pair_truth(pairs.size());
-  parallel_items(pairs.size(), threads, stop, [&](std::size_t i, unsigned) { pair_truth[i] = f.find(pairs[i]); });
+  truth_cursor = 0;
   for (std::size_t i = 0; i < pairs.size(); ++i) {
     poll();
     const Pair p = pairs[i];
-    const ReferenceNormal& g = pair_truth[i] < none ? f.truth[pair_truth[i]].g : full_truth(f, p).g;
+    const ReferenceNormal& g = truth_after(f, p, truth_cursor).g;
     const double bound = pair_margin(p) + slack;
     const double d = g.signed_distance();
     false_contact.check(d <= bound, d - bound, Where{frame, p}, [&] {
@@ -98,54 +94,61 @@ void PhysicsValidators::Impl::judge_completeness(CheckedFrame& f) {
 }
 
 // ---- Row 3: contact geometry -------------------------------------------------------
+void PhysicsValidators::Impl::pair_figures(CheckedFrame& f, std::size_t i, const ContactTruth& t,
+                                           const std::vector<SatAxis>& accepted) const {
+  // The figures of group i (the reference a pair is judged on, each row's reference normal
+  // and angle, its point's distance to both surfaces, FCL's angle to SAT's axes): each
+  // group writes its own slots.
+  const FrameRecord& rec = *f.rec;
+  const std::vector<Pose>& det = *f.det;
+  const bool aabb = bodies.contact_geometry == ContactGeometry::Aabb;
+  const PairRows& pr = f.rows[i];
+  const Pair p = pr.p;
+  const bool by_sat = !aabb && t.sat;
+  PairFigures& pf = f.pair_fig[i];
+  pf.done = true;
+  if (by_sat) {
+    pf.fcl_angle = sat_angle_to_accepted(accepted, d3(t.fcl_normal)) * 180.0 / kPi;
+    pf.fcl_minimum = angle_between(t.fcl_normal, t.g.normal) * 180.0 / kPi;
+  }
+  if (aabb) f.aabb_ref[i] = ReferenceGeometry::aabb_pair(rec.aabbs[p.a], rec.aabbs[p.b]);
+  const ReferenceNormal& r = aabb ? f.aabb_ref[i] : t.g;
+  if (!r.valid) return;
+  for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
+    const ContactRecord& c = rec.contacts[k];
+    RowFigures& rf = f.row_fig[k];
+    rf.ref = row_reference(accepted, r, by_sat, c.normal);
+    if (rec.has_points) {
+      rf.da = ref->surface_distance(p.a, det[p.a], c.point);
+      rf.db = ref->surface_distance(p.b, det[p.b], c.point);
+    }
+  }
+}
+
 void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
   const FrameRecord& rec = *f.rec;
   const std::vector<Pose>& det = *f.det;
   const std::int64_t frame = rec.frame;
   StopPoll poll(stop);
   // 3. Contact geometry, per row: normal angle, the pair's deepest row's depth, points.
-  // The figures (the reference a pair is judged on, each row's reference normal and
-  // angle, its point's distance to both surfaces, FCL's angle to SAT's axes) on `threads`
-  // threads, each pair writing its own slots; then the tallies in record order, so the
-  // verdict, causes and examples are those of a serial run.
+  // The figures come from the truth's pass (pair_figures); the tallies here in record
+  // order, so the verdict, causes and examples are those of a serial run.
   const double deg = 180.0 / kPi;
   const bool aabb = bodies.contact_geometry == ContactGeometry::Aabb;
   std::vector<const ContactTruth*> truth_of(f.rows.size());
   std::size_t cursor = 0;  // rows are mostly in pair order: looked up onwards from the last
-  for (std::size_t i = 0; i < f.rows.size(); ++i) truth_of[i] = &truth_after(f, f.rows[i].p, cursor);
-  struct PairFigures {
-    ReferenceNormal r;       // the reference judging the pair
-    double fcl_angle = 0;    // by SAT: FCL's normal to SAT's nearest accepted axis (deg)
-    double fcl_minimum = 0;  // by SAT: FCL's normal to SAT's minimum (deg)
-  };
-  struct RowFigures {
-    RowReference ref;
-    double da = 0, db = 0;  // the point's distance to A's and B's surfaces (has_points)
-  };
-  std::vector<PairFigures> pair_fig(f.rows.size());
-  std::vector<RowFigures> row_fig(rec.contacts.size());
-  parallel_items(f.rows.size(), threads, stop, [&](std::size_t i, unsigned) {
-    const PairRows& pr = f.rows[i];
-    const Pair p = pr.p;
-    const ContactTruth& t = *truth_of[i];
-    const bool by_sat = !aabb && t.sat;
-    PairFigures& pf = pair_fig[i];
-    if (by_sat) {
-      pf.fcl_angle = sat_angle_to_accepted(t.sat_result, d3(t.fcl.normal)) * 180.0 / kPi;
-      pf.fcl_minimum = angle_between(t.fcl.normal, t.g.normal) * 180.0 / kPi;
+  for (std::size_t i = 0; i < f.rows.size(); ++i) {
+    truth_of[i] = &truth_after(f, f.rows[i].p, cursor);
+    if (!f.pair_fig[i].done) {
+      // A pair outside the truth's table (none by construction): its figures now.
+      PairReferenceScratch scratch;
+      pair_reference_into(*ref, f.rows[i].p.a, f.rows[i].p.b, det[f.rows[i].p.a], det[f.rows[i].p.b], sat_settings,
+                          scratch);
+      pair_figures(f, i, *truth_of[i], scratch.accepted);
     }
-    pf.r = aabb ? ReferenceGeometry::aabb_pair(rec.aabbs[p.a], rec.aabbs[p.b]) : t.g;
-    if (!pf.r.valid) return;
-    for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
-      const ContactRecord& c = rec.contacts[k];
-      RowFigures& rf = row_fig[k];
-      rf.ref = row_reference(t, pf.r, by_sat, c.normal);
-      if (rec.has_points) {
-        rf.da = ref->surface_distance(p.a, det[p.a], c.point);
-        rf.db = ref->surface_distance(p.b, det[p.b], c.point);
-      }
-    }
-  });
+  }
+  const FrameArray<PairFigures>& pair_fig = f.pair_fig;
+  const FrameArray<RowFigures>& row_fig = f.row_fig;
   for (std::size_t i = 0; i < f.rows.size(); ++i) {
     poll();
     const PairRows& pr = f.rows[i];
@@ -160,7 +163,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
       ++sat_pairs;
       // The second opinion: FCL's normal outside SAT's accepted axes is a figure.
       const double fcl_angle = pair_fig[i].fcl_angle;
-      const double fcl_excess = shape_truth.fcl.depth - shape_truth.g.depth;
+      const double fcl_excess = shape_truth.fcl_depth - shape_truth.g.depth;
       if (pair_fig[i].fcl_minimum > 1.0) {
         ++sat_fcl_other;
         if (fcl_excess > sat_fcl_other_excess) sat_fcl_other_excess = fcl_excess;
@@ -171,15 +174,15 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
           sat_fcl_worst_excess = fcl_excess;
           sat_fcl_what = fmt::format("frame {}: {} FCL {:.4g} m along ({:.3f}, {:.3f}, {:.3f}), {:.1f} deg from "
                                      "SAT's accepted axes, minimum {:.4g} m",
-                                     frame, pair_name(p), shape_truth.fcl.depth, shape_truth.fcl.normal.x,
-                                     shape_truth.fcl.normal.y, shape_truth.fcl.normal.z, fcl_angle,
+                                     frame, pair_name(p), shape_truth.fcl_depth, shape_truth.fcl_normal.x,
+                                     shape_truth.fcl_normal.y, shape_truth.fcl_normal.z, fcl_angle,
                                      shape_truth.g.depth);
         }
       }
     } else if (!aabb) {
       ++fcl_pairs;
     }
-    const ReferenceNormal& r = pair_fig[i].r;
+    const ReferenceNormal& r = aabb ? f.aabb_ref[i] : shape_ref;
     if (!r.valid) {
       rows_unjudged += pr.count;
       continue;
@@ -265,8 +268,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
                              aabb     ? "box-box on the world AABBs, minimum translation"
                              : by_sat ? fmt::format("the nearest of {} axes within {:.3g} m of the minimum "
                                                     "translation {:.4g} m",
-                                                    shape_truth.sat_result.accepted.size(),
-                                                    shape_truth.sat_result.epsilon, r.depth)
+                                                    shape_truth.sat_accepted, shape_truth.sat_epsilon, r.depth)
                                       : std::string("minimum translation"),
                              by_sat ? " [reference: SAT]" : " [reference: FCL]");
         });

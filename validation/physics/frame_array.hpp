@@ -1,9 +1,10 @@
 #pragma once
 /// \file frame_array.hpp
 /// A fixed number of elements built and destroyed on threads (parallel_items): a checked
-/// frame's truth (CheckedFrame::truth) holds one entry of ~220 bytes per pair, 10^5 - 10^6
-/// of them, whose fresh pages a std::vector's resize touches, and whose vectors its
-/// destructor frees, on one thread. Internal to validation/physics.
+/// frame's truth (CheckedFrame::truth) holds one entry of ~100 bytes per pair, 10^5 - 10^6
+/// of them, and its row figures one per contact row, whose fresh pages a std::vector's
+/// resize touches on one thread. Elements without a destructor are not visited when the
+/// array is freed. Internal to validation/physics.
 
 #include <cstddef>
 #include <functional>
@@ -55,7 +56,8 @@ class FrameArray {
   void release() noexcept {
     if (!data_) return;
     T* data = data_;
-    parallel_items(size_, threads_, std::function<bool()>(), [data](std::size_t i, unsigned) { data[i].~T(); });
+    if constexpr (!std::is_trivially_destructible_v<T>)
+      parallel_items(size_, threads_, std::function<bool()>(), [data](std::size_t i, unsigned) { data[i].~T(); });
     std::allocator<T>().deallocate(data_, size_);
     data_ = nullptr;
     size_ = 0;

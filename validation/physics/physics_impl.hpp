@@ -142,16 +142,47 @@ struct Tally {
   std::string summary(const char* name, const char* noun, const char* unit) const;
 };
 
-/// A candidate pair's reference geometry (reference.hpp: g, sat, sat_result, fcl):
-/// `have` once computed, `intersects` when the shapes penetrate.
-struct ContactTruth : PairReference {
+/// A pair's reference geometry as the rows read it (reference.hpp, PairReference, without
+/// SAT's accepted axes: the figures of row 3 that need them are computed beside it,
+/// RowFigures and PairFigures): `have` once computed, `intersects` when the shapes
+/// penetrate.
+struct ContactTruth {
+  ReferenceNormal g;          ///< PairReference::g: FCL's answer, SAT's depth and normal where `sat`
+  bool sat = false;           ///< PairReference::sat
   bool intersects = false, have = false;
+  Vec3 fcl_normal;            ///< PairReference::fcl.normal (the second opinion where `sat`)
+  double fcl_depth = 0;       ///< PairReference::fcl.depth
+  std::uint32_t sat_accepted = 0;  ///< where `sat`: SAT's accepted axes (sat_result.accepted.size())
+  double sat_epsilon = 0;     ///< where `sat`: sat_result.epsilon (m)
+  /// The rows' fields of `t`.
+  void assign(const PairReference& t) {
+    g = t.g;
+    sat = t.sat;
+    fcl_normal = t.fcl.normal;
+    fcl_depth = t.fcl.depth;
+    sat_accepted = static_cast<std::uint32_t>(t.sat ? t.sat_result.accepted.size() : 0);
+    sat_epsilon = t.sat_result.epsilon;
+    have = true;
+    intersects = g.penetrating;
+  }
 };
 
 /// A pair's contact rows [first, first + count) (rows of a pair are consecutive).
 struct PairRows {
   Pair p;
   std::size_t first = 0, count = 0;
+};
+
+/// Row 3's figures of one group of a pair's rows (CheckedFrame::rows), from its truth.
+struct PairFigures {
+  double fcl_angle = 0;    ///< by SAT: FCL's normal to SAT's nearest accepted axis (deg)
+  double fcl_minimum = 0;  ///< by SAT: FCL's normal to SAT's minimum (deg)
+  bool done = false;       ///< computed (with the row figures of the group)
+};
+/// Row 3's figures of one contact row.
+struct RowFigures {
+  RowReference ref;       ///< the reference normal the row is judged against, and its angle
+  double da = 0, db = 0;  ///< the point's distance to A's and B's surfaces (m; has_points)
 };
 
 /// One checked frame as rows 1-4 read it (PhysicsValidators::Impl::checked_frame).
@@ -180,6 +211,10 @@ struct CheckedFrame {
   std::vector<PairRows> rows;       ///< the record's rows grouped by pair, in record order
   std::vector<Pair> contact_pairs;  ///< the pairs of rows (sorted)
   std::vector<Pair> required;       ///< candidates whose shapes are within the broadphase margin
+  // Row 3's figures, computed in the truth's pass (each pair's SAT axes read while at hand).
+  FrameArray<PairFigures> pair_fig;      ///< per group of rows
+  FrameArray<ReferenceNormal> aabb_ref;  ///< per group: box-box on the world AABBs (Aabb geometry only)
+  FrameArray<RowFigures> row_fig;        ///< per record row
 };
 
 }  // namespace physics_detail
@@ -247,7 +282,8 @@ struct PhysicsValidators::Impl {
   std::function<bool()> stop;  // polled inside the long loops (set_stop)
   int threads = 0;              // set_threads (0: the hardware's)
   // Each row's own time (s): RowClock around its work; shared work goes to the first row
-  // that needs it (the candidates and FCL truth of every pair: broadphase-completeness).
+  // that needs it (the candidates, the FCL/SAT truth of every pair and row 3's figures
+  // computed beside it: broadphase-completeness).
   double t_broad = 0, t_complete = 0, t_geometry = 0, t_pen = 0, t_friction = 0, t_conservation = 0;
 
   double pair_margin(Pair p) const {
@@ -283,6 +319,10 @@ struct PhysicsValidators::Impl {
     const std::size_t k = f.find_after(p, cursor);
     return k < f.truth.size() ? f.truth[k] : full_truth(f, p);
   }
+  /// Row 3's figures of group `i` of f.rows (PairFigures, RowFigures, CheckedFrame::aabb_ref)
+  /// from its truth `t` and SAT's accepted axes (contact_rows.cpp). Thread-safe across groups.
+  void pair_figures(physics_detail::CheckedFrame& f, std::size_t i, const physics_detail::ContactTruth& t,
+                    const std::vector<SatAxis>& accepted) const;
   /// Row 1: broadphase completeness (candidates.cpp).
   void judge_broadphase(physics_detail::CheckedFrame& f);
   /// Row 2: contact completeness (contact_rows.cpp).

@@ -7,11 +7,25 @@ namespace octocd {
 
 PairReference pair_reference(const ReferenceGeometry& ref, std::uint32_t a, std::uint32_t b, const Pose& pa,
                              const Pose& pb, const SatSettings& settings) {
+  PairReferenceScratch scratch;
+  PairReference t = pair_reference_into(ref, a, b, pa, pb, settings, scratch);
+  t.sat_result.accepted = std::move(scratch.accepted);
+  return t;
+}
+
+PairReference pair_reference_into(const ReferenceGeometry& ref, std::uint32_t a, std::uint32_t b, const Pose& pa,
+                                  const Pose& pb, const SatSettings& settings, PairReferenceScratch& scratch) {
   PairReference t;
+  scratch.accepted.clear();
   t.g = ref.posed(a, b, pa, pb);
   t.fcl = t.g;
   if (t.g.penetrating && t.g.valid && ref.convex(a) && ref.convex(b)) {
-    t.sat_result = sat_min_translation(ref.hull_features(a), pa, ref.hull_features(b), pb, settings);
+    if (scratch.placed_a != a) {
+      place_hull(ref.hull_features(a), pa, scratch.a);
+      scratch.placed_a = a;
+    }
+    place_hull(ref.hull_features(b), pb, scratch.b);
+    t.sat_result = sat_min_translation_placed(scratch.a, scratch.b, settings, scratch.accepted);
     if (t.sat_result.tested && !t.sat_result.separated) {
       t.sat = true;
       t.g.depth = t.sat_result.depth;
@@ -24,11 +38,15 @@ PairReference pair_reference(const ReferenceGeometry& ref, std::uint32_t a, std:
 }
 
 RowReference row_reference(const PairReference& t, const ReferenceNormal& r, bool by_sat, Vec3 n) {
+  return row_reference(t.sat_result.accepted, r, by_sat, n);
+}
+
+RowReference row_reference(const std::vector<SatAxis>& accepted, const ReferenceNormal& r, bool by_sat, Vec3 n) {
   RowReference out;
-  if (by_sat && !t.sat_result.accepted.empty()) {
+  if (by_sat && !accepted.empty()) {
     std::size_t nearest = 0;
-    out.angle = sat_angle_to_accepted(t.sat_result, dmath::d3(n), &nearest);
-    const auto& u = t.sat_result.accepted[nearest].normal;
+    out.angle = sat_angle_to_accepted(accepted, dmath::d3(n), &nearest);
+    const auto& u = accepted[nearest].normal;
     out.normal = Vec3{float(u[0]), float(u[1]), float(u[2])};
   } else {
     out.angle = angle_between(n, r.normal);

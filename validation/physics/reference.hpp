@@ -12,6 +12,7 @@
 /// posed). Units: metres; normals unit, from B to A (design.md section 2).
 
 #include <cstdint>
+#include <vector>
 
 #include "octocd/math.hpp"
 #include "octocd/pose.hpp"
@@ -38,6 +39,22 @@ struct PairReference {
 PairReference pair_reference(const ReferenceGeometry& ref, std::uint32_t a, std::uint32_t b, const Pose& pa,
                              const Pose& pb, const SatSettings& settings);
 
+/// Work space of pair_reference_into for one frame's poses: the hulls placed for the
+/// separating-axis test (hull a kept while the next pair has the same first body) and the
+/// accepted axes of the last pair.
+struct PairReferenceScratch {
+  PlacedHull a, b;
+  std::uint32_t placed_a = 0xffffffffu;  ///< the body whose hull `a` holds (none: 2^32 - 1)
+  std::vector<SatAxis> accepted;         ///< the last pair's accepted axes (where `sat`)
+};
+
+/// pair_reference for callers that judge many pairs at one set of poses: the same figures
+/// bit for bit, with SAT's accepted axes left in scratch.accepted (the result's
+/// sat_result.accepted stays empty) until the next call, and body a's placed hull reused
+/// while a repeats. `scratch` serves one set of poses only (a new frame: a new scratch).
+PairReference pair_reference_into(const ReferenceGeometry& ref, std::uint32_t a, std::uint32_t b, const Pose& pa,
+                                  const Pose& pb, const SatSettings& settings, PairReferenceScratch& scratch);
+
 /// The normal one contact row is judged against, and its angle.
 struct RowReference {
   Vec3 normal;         ///< unit, B to A: SAT's nearest accepted axis, or `r`'s normal
@@ -48,5 +65,7 @@ struct RowReference {
 /// n (sat_angle_to_accepted); otherwise r.normal (the FCL answer, or box-box on the world
 /// AABBs for an engine that resolves on them) and angle_between(n, r.normal).
 RowReference row_reference(const PairReference& t, const ReferenceNormal& r, bool by_sat, Vec3 n);
+/// The same with SAT's accepted axes given apart (as pair_reference_into leaves them).
+RowReference row_reference(const std::vector<SatAxis>& accepted, const ReferenceNormal& r, bool by_sat, Vec3 n);
 
 }  // namespace octocd

@@ -12,33 +12,15 @@ namespace {
 
 using namespace dmath;
 
-/// A hull in the world frame.
-struct Placed {
-  std::vector<D3> vertices, faces, edges;
-};
-/// Hull h placed at pose p, written into `out` (its vectors cleared; their capacity kept).
-void place(const HullFeatures& h, const Pose& p, Placed& out) {
-  const auto r = rotation(p.orientation);
-  const D3 x{double(p.position.x), double(p.position.y), double(p.position.z)};
-  out.vertices.clear();
-  out.faces.clear();
-  out.edges.clear();
-  for (const D3& v : h.vertices) {
-    const D3 w = mul(r, v);
-    out.vertices.push_back({w[0] + x[0], w[1] + x[1], w[2] + x[2]});
-  }
-  for (const D3& f : h.face_normals) out.faces.push_back(mul(r, f));
-  for (const D3& e : h.edge_dirs) out.edges.push_back(mul(r, e));
-}
-
-/// Per-thread work space of sat_min_translation: both placed hulls and every tested axis.
-/// Kept between calls (thread_local), so a test allocates nothing but its accepted axes
-/// once these have grown to the largest hulls seen.
+/// Per-thread work space of sat_min_translation: both placed hulls, and of
+/// sat_min_translation_placed: every tested axis. Kept between calls (thread_local), so a
+/// test allocates nothing but its accepted axes once these have grown to the largest hulls
+/// seen.
 /// Axes whose memory the scratch keeps between calls (two boxes test 15; a box against a
 /// 162-vertex icosphere ~1,500).
 constexpr std::size_t kKeptAxes = 4096;
 struct Scratch {
-  Placed a, b;
+  PlacedHull a, b;
   std::vector<SatAxis> all;
 };
 Scratch& scratch() {
@@ -58,19 +40,41 @@ void project(const std::vector<D3>& vs, const D3& u, double& lo, double& hi) {
 
 }  // namespace
 
+void place_hull(const HullFeatures& h, const Pose& p, PlacedHull& out) {
+  const auto r = rotation(p.orientation);
+  const D3 x{double(p.position.x), double(p.position.y), double(p.position.z)};
+  out.vertices.clear();
+  out.faces.clear();
+  out.edges.clear();
+  for (const D3& v : h.vertices) {
+    const D3 w = mul(r, v);
+    out.vertices.push_back({w[0] + x[0], w[1] + x[1], w[2] + x[2]});
+  }
+  for (const D3& f : h.face_normals) out.faces.push_back(mul(r, f));
+  for (const D3& e : h.edge_dirs) out.edges.push_back(mul(r, e));
+}
+
 SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullFeatures& b, const Pose& pb,
                               const SatSettings& settings) {
+  Scratch& work = scratch();
+  place_hull(a, pa, work.a);
+  place_hull(b, pb, work.b);
+  std::vector<SatAxis> accepted;
+  SatResult r = sat_min_translation_placed(work.a, work.b, settings, accepted);
+  r.accepted = std::move(accepted);
+  return r;
+}
+
+SatResult sat_min_translation_placed(const PlacedHull& A, const PlacedHull& B, const SatSettings& settings,
+                                     std::vector<SatAxis>& accepted) {
   SatResult r;
-  if (a.vertices.empty() || b.vertices.empty()) return r;
-  const double naxes = double(a.face_normals.size() + b.face_normals.size()) +
-                       double(a.edge_dirs.size()) * double(b.edge_dirs.size());
-  if (naxes * double(a.vertices.size() + b.vertices.size()) > settings.max_work) return r;
+  accepted.clear();
+  if (A.vertices.empty() || B.vertices.empty()) return r;
+  const double naxes =
+      double(A.faces.size() + B.faces.size()) + double(A.edges.size()) * double(B.edges.size());
+  if (naxes * double(A.vertices.size() + B.vertices.size()) > settings.max_work) return r;
   r.tested = true;
   Scratch& work = scratch();
-  const Placed& A = work.a;
-  const Placed& B = work.b;
-  place(a, pa, work.a);
-  place(b, pb, work.b);
 
   // Every axis with its overlap, in the order tested.
   std::vector<SatAxis>& all = work.all;
@@ -110,12 +114,9 @@ SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullF
   r.separated = r.depth <= 0;
   r.epsilon = settings.abs_m + settings.rel * std::max(r.depth, 0.0);
   if (!r.separated) {
-    // Counted first, so that the result's vector is allocated once.
     const double within = r.depth + r.epsilon;
-    r.accepted.reserve(std::size_t(
-        std::count_if(all.begin(), all.end(), [&](const SatAxis& ax) { return ax.overlap <= within; })));
     for (const SatAxis& ax : all)
-      if (ax.overlap <= within) r.accepted.push_back(ax);
+      if (ax.overlap <= within) accepted.push_back(ax);
   }
   // A large pair (up to SatSettings::max_work axes) does not keep its axes' memory.
   if (all.capacity() > kKeptAxes) std::vector<SatAxis>().swap(all);
@@ -123,9 +124,14 @@ SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullF
 }
 
 double sat_angle_to_accepted(const SatResult& r, const std::array<double, 3>& n, std::size_t* nearest) {
+  return sat_angle_to_accepted(r.accepted, n, nearest);
+}
+
+double sat_angle_to_accepted(const std::vector<SatAxis>& accepted, const std::array<double, 3>& n,
+                             std::size_t* nearest) {
   double best = 3.14159265358979323846;
-  for (std::size_t k = 0; k < r.accepted.size(); ++k) {
-    const D3& u = r.accepted[k].normal;
+  for (std::size_t k = 0; k < accepted.size(); ++k) {
+    const D3& u = accepted[k].normal;
     const D3 c = cross3(n, u);
     const double angle = std::atan2(std::sqrt(dot3(c, c)), dot3(n, u));
     if (angle < best) {

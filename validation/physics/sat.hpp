@@ -80,8 +80,29 @@ struct SatResult {
 SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullFeatures& b, const Pose& pb,
                               const SatSettings& settings = SatSettings{});
 
+/// A hull placed in the world frame (place_hull): its vertices (m), unit face normals and
+/// unit edge directions, as sat_min_translation places them.
+struct PlacedHull {
+  std::vector<std::array<double, 3>> vertices, faces, edges;
+};
+
+/// Hull `h` at pose `p` (body to world), written into `out` (its vectors cleared, their
+/// capacity kept). Throws nothing beyond std::bad_alloc.
+void place_hull(const HullFeatures& h, const Pose& p, PlacedHull& out);
+
+/// sat_min_translation on hulls already placed (place_hull), with the accepted axes written
+/// into `accepted` (cleared first, its capacity kept) instead of the result's vector (left
+/// empty): a caller that places a body once for its many pairs and reads the axes before
+/// its next test allocates nothing per pair. The same figures as sat_min_translation, bit
+/// for bit. Throws nothing beyond std::bad_alloc.
+SatResult sat_min_translation_placed(const PlacedHull& a, const PlacedHull& b, const SatSettings& settings,
+                                     std::vector<SatAxis>& accepted);
+
 /// The smallest angle (radians, [0, pi]) between the unit vector `n` and an accepted axis
 /// of `r` (each taken with its orientation, B to A); pi when none is accepted.
 double sat_angle_to_accepted(const SatResult& r, const std::array<double, 3>& n, std::size_t* nearest = nullptr);
+/// The same over the axes `accepted` (as sat_min_translation_placed leaves them).
+double sat_angle_to_accepted(const std::vector<SatAxis>& accepted, const std::array<double, 3>& n,
+                             std::size_t* nearest = nullptr);
 
 }  // namespace octocd
