@@ -169,14 +169,9 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<Aabb> local{"body local boxes"};
   gpu::DeviceBuffer<std::uint32_t> shape{"body shapes"};
   gpu::DeviceBuffer<Aabb> aabb{"world AABBs"};
-  // Recording only (CudaWorld::set_recording): the state at the last step's start, and
-  // pinned host copies of what contacts() reads (pairs, confirmed flags, contact records),
-  // copied back together with one synchronisation a step.
+  // Recording only (CudaWorld::set_recording): the state at the last step's start.
   gpu::DeviceBuffer<Vec3> x_pre{"recorded positions before the step"};
   gpu::DeviceBuffer<Vec3> v_pre{"recorded velocities before the step"};
-  gpu::PinnedBuffer<Pair> pairs_host{"recorded candidate pairs (host)"};
-  gpu::PinnedBuffer<std::uint8_t> confirmed_host{"recorded confirmed flags (host)"};
-  gpu::PinnedBuffer<gpu::DeviceContact> records_host{"recorded contact records (host)"};
   // Shapes, packed once.
   gpu::DeviceBuffer<gpu::DeviceShape> shapes{"shapes"};
   gpu::DeviceBuffer<Vec3> vertices{"octree vertices"};

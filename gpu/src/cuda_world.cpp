@@ -459,14 +459,11 @@ const FrameMetrics& CudaWorld::step() {
 
   frame_ = m.frame;
   if (recording_) {
-    // Three copies into pinned memory, one wait.
-    download_async(d.pairs_host, d.pairs, np, d.stream);
-    download_async(d.confirmed_host, d.confirmed, np, d.stream);
-    download_async(d.records_host, d.records, np, d.stream);
-    check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize (recorded pairs and contacts)");
-    const std::uint8_t* confirmed = d.confirmed_host.get();
-    const gpu::DeviceContact* recs = d.records_host.get();
-    record_.pairs.assign(d.pairs_host.get(), d.pairs_host.get() + np);
+    download(record_.pairs, d.pairs, np, d.stream);
+    std::vector<std::uint8_t> confirmed;
+    download(confirmed, d.confirmed, np, d.stream);
+    std::vector<gpu::DeviceContact> recs;
+    download(recs, d.records, np, d.stream);
     record_.confirmed.clear();
     record_.contacts.clear();
     for (std::size_t k = 0; k < np; ++k) {

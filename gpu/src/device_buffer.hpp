@@ -94,47 +94,6 @@ class DeviceBuffer : public BufferBase {
   T* get() const { return static_cast<T*>(ptr_); }
 };
 
-/// Page-locked host memory (cudaMallocHost) of `T`s, for copies from the device that run
-/// asynchronously on a stream (a pageable destination makes each copy wait). Grows to
-/// max(count, 2 x capacity); contents are lost when it grows. RuntimeError naming the
-/// buffer when the allocation fails.
-template <class T>
-class PinnedBuffer {
- public:
-  explicit PinnedBuffer(const char* name) : name_(name) {}
-  ~PinnedBuffer() {
-    if (ptr_) (void)cudaFreeHost(ptr_);
-  }
-  PinnedBuffer(const PinnedBuffer&) = delete;
-  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
-  void ensure(std::size_t count) {
-    if (count <= cap_ && ptr_) return;
-    const std::size_t want = std::max<std::size_t>({count, 2 * cap_, 1});
-    if (ptr_) (void)cudaFreeHost(ptr_);
-    ptr_ = nullptr;
-    cap_ = 0;
-    check(cudaMallocHost(reinterpret_cast<void**>(&ptr_), want * sizeof(T)),
-          fmt::format("cudaMallocHost of {} bytes for '{}'", want * sizeof(T), name_).c_str());
-    cap_ = want;
-  }
-  T* get() const { return ptr_; }
-
- private:
-  const char* name_;
-  T* ptr_ = nullptr;
-  std::size_t cap_ = 0;
-};
-
-/// Queues a copy of `count` elements of a device buffer into pinned host memory on
-/// `stream` (grown to fit); the caller synchronises the stream once for several.
-template <class T>
-inline void download_async(PinnedBuffer<T>& host, const DeviceBuffer<T>& buf, std::size_t count, cudaStream_t stream) {
-  host.ensure(count);
-  if (count == 0) return;
-  check(cudaMemcpyAsync(host.get(), buf.get(), count * sizeof(T), cudaMemcpyDeviceToHost, stream),
-        fmt::format("cudaMemcpy from '{}'", buf.name()).c_str());
-}
-
 /// Copies a host vector into a device buffer on `stream` and waits for it. With
 /// `allocate`, the buffer is first reallocated to the vector's size.
 template <class T>
