@@ -191,7 +191,11 @@ class Validator:
         checked: run the costly validators (candidate sets, normals) on this frame.
 
         Raises InputError naming the argument (shape, dtype, a non-finite value, an
-        unsorted pair ...) before anything of the frame is judged. Returns self.
+        unsorted pair ...) before anything of the frame is judged, and "frame F: N bodies'
+        boxes crowd together: ..." for a checked frame whose boxes overlap in more than 64
+        pairs a body (coincident bodies), before any pair is judged. Ctrl-C raises
+        KeyboardInterrupt at once (the frame is judged on a helper thread; one cut short
+        ends in the background and the next call waits for it). Returns self.
         """
         self._v.observe(int(frame), aabbs, pairs, contacts, x_pre, v_pre, x_post, v_post, q_pre, q_post,
                         w_pre, w_post, x_det, q_det, bool(manifolds), bool(checked))
