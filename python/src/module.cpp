@@ -1308,11 +1308,12 @@ PYBIND11_MODULE(_octocd, m) {
       "validate_trace",
       [](const std::string& path, int every, std::int64_t max_frames, bool against_fcl, py::object tolerances,
          const std::optional<std::string>& expect_json, const std::string& expect_origin, bool strict,
-         const std::optional<std::string>& shard) {
+         const std::optional<std::string>& shard, const std::string& mesh_dir) {
         if (every < 1) throw InputError(fmt::format("every: {}; allowed: >= 1", every));
         if (max_frames < 0) throw InputError(fmt::format("max_frames: {}; allowed: >= 0 (0 = all)", max_frames));
         ExternalOptions o;  // engine name and response model: from the trace
         o.against_fcl = against_fcl;
+        o.mesh_dir = mesh_dir;  // "" = the trace's folder (`validate --trace-in --mesh-dir`)
         apply_tolerances(o, tolerances);
         if (shard) o.shard = parse_shard(*shard);
         // Expectations are read (and refused) before the trace is judged.
@@ -1352,7 +1353,7 @@ PYBIND11_MODULE(_octocd, m) {
                               report.exit_code(strict), doc);
       },
       py::arg("path"), py::arg("every"), py::arg("max_frames"), py::arg("against_fcl"), py::arg("tolerances"),
-      py::arg("expect_json"), py::arg("expect_origin"), py::arg("strict"), py::arg("shard"));
+      py::arg("expect_json"), py::arg("expect_origin"), py::arg("strict"), py::arg("shard"), py::arg("mesh_dir"));
 
   m.def(
       "merge_validations",

@@ -75,6 +75,53 @@ def test_external_storage_is_refused_naming_file_and_dataset(tmp_path):
         assert r.returncode == 2 and "ext.h5: /states/velocity: external storage" in r.stderr
 
 
+TETRA = "v 0 0 0\nv 0.2 0 0\nv 0 0.2 0\nv 0 0 0.2\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+
+
+def trace_naming(path, mesh):
+    """An external trace of 3 bodies (a static floor and two dynamic ones) whose `scene`
+    attribute names `mesh` for its shapes (as test_cli_hostile_files' trace)."""
+    scene = ('{"name": "m", "domain": {"min": [-1, -2, -1], "max": [1, 1, 1]}, "walls": "none", '
+             '"gravity": [0, 0, 0], "groups": [{"name": "floor", "shape": {"mesh": "%s", "scale": 0.2}, '
+             '"count": 1, "mass": 0}, {"name": "g", "shape": {"mesh": "%s", "scale": 0.2}, "count": 2, '
+             '"layout": {"type": "grid", "spacing": 0.5}}]}') % (mesh, mesh)
+    x = np.tile(np.array([[0, -1, 0], [0, 0, 0], [0.199, 0, 0]], np.float32), (4, 1, 1))
+
+    def extra(f):
+        f.attrs["scene"] = scene
+        f["bodies/inverse_mass"][...] = np.array([0, 1, 1], np.float32)
+        f["bodies/local_aabb_min"][...] = np.full((3, 3), -0.1, np.float32)
+        f["bodies/local_aabb_max"][...] = np.full((3, 3), 0.1, np.float32)
+    return external_trace(path, n=3, frames=3, position=x, extra=extra)
+
+
+def test_validate_trace_takes_meshes_only_from_mesh_dir(tmp_path):
+    # Before: validate_trace had no mesh_dir: a trace whose meshes lie elsewhere could not be
+    # judged from Python at all (the CLI has --mesh-dir). Now mesh_dir says where they are,
+    # the default is the trace's folder, and a mesh named anywhere else is refused naming
+    # the key, as `validate --trace-in` does.
+    (tmp_path / "secret").mkdir()
+    (tmp_path / "traces").mkdir()
+    (tmp_path / "secret" / "private.obj").write_text(TETRA)
+    for mesh in (str(tmp_path / "secret" / "private.obj"), "../secret/private.obj"):
+        p = trace_naming(str(tmp_path / "traces" / "outside.h5"), mesh)
+        with pytest.raises(octocd.InputError, match=re.escape(f'groups[0].shape.mesh: mesh "{mesh}" named by the '
+                                                              "scene inside the trace lies outside --mesh-dir "
+                                                              + str(tmp_path / "traces"))):
+            octocd.validate_trace(p)
+        with pytest.raises(octocd.InputError, match="lies outside --mesh-dir " + re.escape(str(tmp_path / "traces"))):
+            octocd.validate_trace(p, mesh_dir=tmp_path / "traces")
+        rows = octocd.validate_trace(p, mesh_dir=tmp_path / "secret")
+        assert rows and rows.exit_code in (0, 3), rows
+    # A link beside the trace that leads out of its folder is outside too.
+    (tmp_path / "traces" / "link.obj").symlink_to(tmp_path / "secret" / "private.obj")
+    with pytest.raises(octocd.InputError, match="lies outside --mesh-dir " + re.escape(str(tmp_path / "traces"))):
+        octocd.validate_trace(trace_naming(str(tmp_path / "traces" / "link.h5"), "link.obj"))
+    # A mesh beside the trace is found there by default.
+    (tmp_path / "traces" / "beside.obj").write_text(TETRA)
+    assert octocd.validate_trace(trace_naming(str(tmp_path / "traces" / "beside.h5"), "beside.obj")).exit_code in (0, 3)
+
+
 def test_external_links_and_virtual_datasets_are_refused(tmp_path):
     other = external_trace(str(tmp_path / "other.h5"))
 
