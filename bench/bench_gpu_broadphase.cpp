@@ -74,6 +74,7 @@
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
 #include "kernels.hpp"
+#include "octocd/atomic_file.hpp"
 #include "octocd/broadphase.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
@@ -1269,13 +1270,15 @@ int run(const Options& o) {
   print_motion(std::cout, o, motions);
   std::cout.flush();
   if (!o.json_path.empty()) {
-    std::ofstream f(o.json_path);
+    // As every octocd output (octocd/atomic_file.hpp): a temporary beside the file,
+    // renamed over it; never written in place.
     Json j = to_json(machine, o, results, targets, notes, all_ok);
     j["motion"] = motion_json(motions);
-    f << j.dump(2) << "\n";
-    if (!f) {
-      std::cerr << "bench_gpu_broadphase: cannot write " << o.json_path << "\n";
-      return 1;
+    try {
+      octocd::write_file_atomically(o.json_path, j.dump(2) + "\n", "--json");
+    } catch (const std::exception& e) {
+      std::cerr << "bench_gpu_broadphase: " << e.what() << "\n";
+      return dynamic_cast<const octocd::InputError*>(&e) ? 2 : 1;
     }
   }
   std::cerr << fmt::format("bench_gpu_broadphase: {:.1f} s, {}\n",
@@ -1353,6 +1356,8 @@ int main(int argc, char** argv) {
             b));
     if (!(o.cell_size > 0.0f) || !std::isfinite(o.cell_size))
       throw octocd::InputError("--cell-size: must be finite and > 0");
+    // Before any work: a FIFO, device, folder or link at --json is exit 2.
+    if (!o.json_path.empty()) octocd::check_output_file(o.json_path, "--json");
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   } catch (const octocd::InputError& e) {

@@ -21,7 +21,9 @@
 // (about 13 contact pairs a body); the engine's first step is recorded (--warmup 0).
 // --json FILE writes the physics verdict of the last repetition (results_json, each row's
 // seconds set to 0) for every size and thread count, one document per line, so that a
-// change meant only for speed can be checked to leave the verdict unchanged (diff).
+// change meant only for speed can be checked to leave the verdict unchanged (diff). The
+// file is written at the end through octocd/atomic_file.hpp (a temporary beside it renamed
+// over a regular file; a FIFO, device, folder or link there is exit 2 before any work).
 //
 // Usage: bench_validation [SCENE.json] [--bodies 20000,100000] [--reps 5] [--warmup 20]
 //                         [--only physics,full,pairs] [--rows] [--threads 1,2] [--lattice]
@@ -43,6 +45,8 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "octocd/atomic_file.hpp"
+#include "octocd/error.hpp"
 #include "octocd/exact_pairs.hpp"
 #include "octocd/expect.hpp"
 #include "octocd/physics.hpp"
@@ -166,11 +170,14 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  std::ofstream json_out;
+  // --json: checked before any work, written once at the end as every octocd output is
+  // (octocd/atomic_file.hpp: a temporary beside it renamed over a regular file only).
+  std::string json_text;
   if (!json_path.empty()) {
-    json_out.open(json_path);
-    if (!json_out) {
-      std::fprintf(stderr, "--json: cannot write %s\n", json_path.c_str());
+    try {
+      octocd::check_output_file(json_path, "--json");
+    } catch (const octocd::InputError& e) {
+      std::fprintf(stderr, "bench_validation: %s\n", e.what());
       return 2;
     }
   }
@@ -221,11 +228,11 @@ int main(int argc, char** argv) {
           for (const octocd::ValidationResult& x : v.results())
             if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
         }
-        if (r + 1 == reps && json_out.is_open()) {
+        if (r + 1 == reps && !json_path.empty()) {
           std::vector<octocd::ValidationResult> results = v.results();
           for (octocd::ValidationResult& x : results) x.seconds = 0;  // the verdict only
-          json_out << octocd::results_json(results, octocd::RunName{scene.name, ""},
-                                           nullptr, {{"threads", th}}).dump() << "\n";
+          json_text += octocd::results_json(results, octocd::RunName{scene.name, ""},
+                                            nullptr, {{"threads", th}}).dump() + "\n";
         }
       }
       row("physics", t);
@@ -272,6 +279,14 @@ int main(int argc, char** argv) {
         }
         row("flat", tf);
       }
+    }
+  }
+  if (!json_path.empty()) {
+    try {
+      octocd::write_file_atomically(json_path, json_text, "--json");
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "bench_validation: %s\n", e.what());
+      return dynamic_cast<const octocd::InputError*>(&e) ? 2 : 1;
     }
   }
   return 0;

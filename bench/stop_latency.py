@@ -9,8 +9,9 @@ a frame's checks take about a second and the signal lands inside one), waits for
 (the first frame flushed into its trace, the first point in its result file, the judge
 opening the trace), sends SIGINT and measures the wall time until the process exits. The
 cases: `run` (trace flushed every frame), `validate SCENE` (a step and its checks on a
-worker), `validate --trace-in` (a trace of the dense scene judged), `bench` (a point of the
-dense scene). `--busy N` runs N busy loops (pure Python spins) beside them for the whole
+worker), `validate --trace-in` (a trace of a lattice of 15,625 boxes touching their 26
+neighbours judged: the validators refuse coincident boxes), `bench` (a point of the dense
+scene). `--busy N` runs N busy loops (pure Python spins) beside them for the whole
 measurement, so the figures are those of a loaded machine; the table names the load
 average. It checks what each case must keep: exit 130, and for `validate` the STOPPED line
 with the verdict of the frames judged (`--junit` with its 'stopped' case).
@@ -35,6 +36,20 @@ import time
 def spin():
     while True:
         pass
+
+
+def lattice_scene(folder, per_axis, name="lattice"):
+    """per_axis^3 boxes of half 0.3 m on a cubic lattice of spacing 0.55 m: each overlaps its
+    26 neighbours (13 pairs a body), a frame as dense as the validators accept (coincident
+    boxes are refused: limits::kMaxPairsPerBody in octocd/exact_pairs.hpp)."""
+    h = 0.55 * (per_axis - 1) / 2
+    path = os.path.join(folder, name + ".json")
+    with open(path, "w") as f:
+        json.dump({"name": name, "domain": {"min": [-h - 2] * 3, "max": [h + 2] * 3}, "gravity": [0, 0, 0],
+                   "frames": 100000000,
+                   "groups": [{"name": "b", "shape": {"box": [0.3, 0.3, 0.3]}, "count": per_axis ** 3,
+                               "layout": {"type": "grid", "min": [-h] * 3, "max": [h] * 3, "spacing": 0.55}}]}, f)
+    return path
 
 
 def dense_scene(folder, count, name="dense"):
@@ -94,7 +109,7 @@ def main():
     octocd = os.path.abspath(os.path.join(args.build, "octocd"))
     work = tempfile.mkdtemp(prefix="octocd-stop-")
     scene = dense_scene(work, 2000)
-    judged = dense_scene(work, 700, "dense700")
+    judged = lattice_scene(work, 25)
     trace_in = os.path.join(work, "judged.h5")
     subprocess.run([octocd, "run", judged, "--frames", "4", "--state-every", "1", "--contacts", "--quiet",
                     "--trace", trace_in], check=True, stdout=subprocess.DEVNULL)

@@ -16,6 +16,7 @@
 #include "octocd/atomic_file.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/error.hpp"
+#include "octocd/json_fields.hpp"
 #include "octocd/json_strict.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/shared_files.hpp"
@@ -54,12 +55,11 @@ json read_sweep_file(const std::string& path) {
 
 namespace {
 
+/// An integer of the sweep in [lo, hi] through JsonFields (checked before it is converted:
+/// a huge unsigned value never wraps into range), `def` when absent.
 int get_int(const json& j, const std::string& key, const std::string& origin, int lo, int hi, int def) {
   if (!j.contains(key)) return def;
-  const json& v = j.at(key);
-  if (!v.is_number_integer() || v.get<long long>() < lo || v.get<long long>() > hi)
-    bad(origin, key, fmt::format("{} is not an integer in range", v.dump()), fmt::format("an integer in [{}, {}]", lo, hi));
-  return v.get<int>();
+  return static_cast<int>(JsonFields(origin).integer(j.at(key), key, lo, hi));
 }
 
 std::vector<std::string> string_list(const json& j, const std::string& key, const std::string& origin) {
@@ -163,11 +163,8 @@ void parse_speed_accuracy(const json& j, const std::string& origin, Sweep& s) {
   if (j.contains("iterations")) {
     const json& a = j.at("iterations");
     if (!a.is_array() || a.empty()) bad(origin, "iterations", "not a non-empty array", "an array of integers in [1, 10000]");
-    for (std::size_t i = 0; i < a.size(); ++i) {
-      if (!a[i].is_number_integer() || a[i].get<long long>() < 1 || a[i].get<long long>() > 10000)
-        bad(origin, fmt::format("iterations[{}]", i), a[i].dump() + " is out of range", "an integer in [1, 10000]");
-      s.iterations.push_back(a[i].get<int>());
-    }
+    for (std::size_t i = 0; i < a.size(); ++i)
+      s.iterations.push_back(static_cast<int>(JsonFields(origin).integer(a[i], fmt::format("iterations[{}]", i), 1, 10000)));
   } else {
     s.iterations = {10};
   }
@@ -258,12 +255,9 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
         bad(origin, "target_steps_per_s", v.dump() + " is out of range", "a number in (0, 1e9] (steps/s)");
       s.target = v.get<double>();
     }
-    if (j.contains("max_instances")) {
-      const json& v = j.at("max_instances");
-      if (!v.is_number_integer() || v.get<long long>() < 1 || v.get<long long>() > kMaxInstancesCap)
-        bad(origin, "max_instances", v.dump() + " is out of range", fmt::format("an integer in [1, {}]", kMaxInstancesCap));
-      s.max_instances = v.get<long>();
-    }
+    if (j.contains("max_instances"))
+      s.max_instances = static_cast<long>(JsonFields(origin).integer(j.at("max_instances"), "max_instances", 1,
+                                                                     kMaxInstancesCap));
     if (j.contains("resolution")) {
       const json& v = j.at("resolution");
       if (!v.is_number() || !(v.get<double>() >= 0.0) || !(v.get<double>() < 1.0))
@@ -352,13 +346,12 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     if (has_bodies == has_scenes) bad(origin, "bodies", "give exactly one of bodies and scenes", "bodies or scenes");
     if (has_bodies) {
       if (!j.at("bodies").is_array() || j.at("bodies").empty())
-        bad(origin, "bodies", "not a non-empty array", "an array of integers in [2, 16777216]");
-      for (std::size_t i = 0; i < j.at("bodies").size(); ++i) {
-        const json& v = j.at("bodies")[i];
-        if (!v.is_number_integer() || v.get<long>() < 2 || v.get<long>() > 16777216)
-          bad(origin, fmt::format("bodies[{}]", i), v.dump(), "an integer in [2, 16777216]");
-        s.bodies.push_back(v.get<long>());
-      }
+        bad(origin, "bodies", "not a non-empty array", fmt::format("an array of integers in [2, {}]", kMaxSweepBodies));
+      // Each count read through JsonFields: checked before it is converted (a huge unsigned
+      // value never wraps).
+      for (std::size_t i = 0; i < j.at("bodies").size(); ++i)
+        s.bodies.push_back(static_cast<long>(
+            JsonFields(origin).integer(j.at("bodies")[i], fmt::format("bodies[{}]", i), 2, kMaxSweepBodies)));
     } else {
       for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
     }
@@ -376,11 +369,9 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     }
     if (j.contains("max_bodies")) {
       if (!j.at("max_bodies").is_object()) bad(origin, "max_bodies", "not an object", "{\"NAME\" or \"ENGINE:NAME\": N}");
-      for (auto it = j.at("max_bodies").begin(); it != j.at("max_bodies").end(); ++it) {
-        if (!it.value().is_number_integer() || it.value().get<long>() < 0)
-          bad(origin, "max_bodies." + it.key(), it.value().dump(), "an integer >= 0");
-        s.max_bodies[it.key()] = it.value().get<long>();
-      }
+      for (auto it = j.at("max_bodies").begin(); it != j.at("max_bodies").end(); ++it)
+        s.max_bodies[it.key()] =
+            static_cast<long>(JsonFields(origin).integer(it.value(), "max_bodies." + it.key(), 0, kMaxSweepBodies));
     }
   }
   return s;

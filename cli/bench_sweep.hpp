@@ -93,6 +93,10 @@ struct Sweep {
 /// limits::kMaxBodies); device or host memory ends a search below it.
 constexpr long kMaxInstancesCap = static_cast<long>(limits::kMaxGeneratedBodies);
 
+/// The most bodies of a broadphase sweep's lattice (`bodies`) and the largest `max_bodies`
+/// cap: 2^24 (a larger cap would skip nothing).
+constexpr long kMaxSweepBodies = 16777216;
+
 /// The most points a sweep may expand to (docs/bench-format.md): a larger one is refused
 /// before anything runs.
 constexpr std::size_t kMaxPoints = 100000;

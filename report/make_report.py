@@ -50,7 +50,7 @@ from report_csv import file_slug, sweep_csv  # noqa: E402
 from report_gate import GATE_MIN_REPS, LEVEL_RANGE, gate_summary, reps_needed, section_gate  # noqa: E402
 import report_speed_accuracy as RSA  # noqa: E402  (sweeps of kind speed-accuracy, design.md section 15)
 from report_common import load_mark, num, overlap, printable, spread_text  # noqa: E402
-from report_plots import log_ticks, speedup_text  # noqa: E402
+from report_plots import log_ticks, speedup_text, too_many_to_draw  # noqa: E402
 from report_traces import penetration_comment, section_traces  # noqa: E402,F401
 from report_tables import (engines_ran_text, machine_block, section_figA2, section_generic,  # noqa: E402,F401
                            section_max_instances, section_scaling, section_table5, section_table6,
@@ -60,7 +60,8 @@ from report_tables import (engines_ran_text, machine_block, section_figA2, secti
 def section_speed_accuracy(doc, g):
     """Per scene error against speed, the Pareto front and a reading (report/report_speed_accuracy.py)."""
     RSA.section(doc, g, types.SimpleNamespace(num=num, spread_text=spread_text, log_ticks=log_ticks, overlap=overlap,
-                                              speedup_text=speedup_text, load_mark=load_mark))
+                                              speedup_text=speedup_text, load_mark=load_mark,
+                                              too_many_to_draw=too_many_to_draw))
 
 
 SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table5),

@@ -7,6 +7,17 @@ from report_common import ENGINE_COLORS, STAGES, STAGE_COLORS, med, np, num, plt
 MAX_BARS = 400  # bars a plot draws at most (10,000 took matplotlib 100 s); beyond, the tables hold the figures
 
 
+def too_many_to_draw(doc, title, count, what="bars"):
+    """True, with a note in the report, when a plot would draw more than MAX_BARS items
+    (bars, points, cells): it is left out and the section's tables hold every figure, as for
+    the gate's plots (report_gate.py); matplotlib would spend minutes on 10^4 of them."""
+    if count <= MAX_BARS:
+        return False
+    doc.p(f"{title}: not drawn: {count} {what} (a plot holds at most {MAX_BARS}); the tables and the CSV (--csv) "
+          "hold every figure.", "note")
+    return True
+
+
 def steps_points(g):
     return [p for p in g["points_list"] if p.get("status") == "ok" and "windows" in p]
 

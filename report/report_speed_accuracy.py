@@ -15,7 +15,7 @@ tools for model-based robotics", ICRA 2015): results of `octocd bench` sweeps of
 Called by make_report.py (`section(doc, g, h)`, `check_point(where, p, fail)`): `doc` is the
 report's Doc (p, h, table, figure: HTML and Markdown at once), `g` a merged sweep (shards of
 one sweep merged by make_report.merge), `h` the report's shared helpers (num, spread_text,
-log_ticks, speedup_text, overlap, load_mark) as attributes.
+log_ticks, speedup_text, overlap, load_mark, too_many_to_draw) as attributes.
 """
 import math
 
@@ -437,12 +437,15 @@ def section(doc, g, h):
     machine = g["first"]["machine"]
     doc.p(INTRO)
     scenes = list(dict.fromkeys(p.get("params", {}).get("scene", "?") for p in pts))
+    # At most MAX_BARS points drawn in the section's plots (one a scene), as for every plot.
+    drawn = not h.too_many_to_draw(doc, "Speed against accuracy", len(pts), "points")
     for sc in scenes:
         mine = [p for p in pts if p.get("params", {}).get("scene", "?") == sc]
         front = pareto_front(mine)
         doc.h(3, f"{sc}: speed against accuracy")
         doc.p(reading(mine, h, machine))
-        plot(doc, sc, mine, front, h)
+        if drawn:
+            plot(doc, sc, mine, front, h)
         if any(p.get("status") == "ok" for p in mine):
             points_table(doc, mine, front, h)
         lost_table(doc, mine)

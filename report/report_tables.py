@@ -9,7 +9,7 @@ import os
 from report_common import (ENGINE_COLORS, PAPER, load_mark, load_warning, med, np, num, overlap, plt,
     point_load, spread_text)
 from report_plots import (OWN_BROADPHASE_CLASS, axis_label, engines_of, first_window, log_ticks, point_label,
-    stage_shares, steps_bars, steps_points)
+    stage_shares, steps_bars, steps_points, too_many_to_draw)
 
 
 def engines_ran_text(g):
@@ -299,7 +299,8 @@ def section_figA2(doc, g):
         return
     figs = [("penetration_mean", "mean d_p (mm)", 1e3), ("penetration_max", "max d_p (mm)", 1e3),
             ("penetration_share_above_slop", "share of contacts with d_p > delta (%)", 100.0)]
-    for e in engines:
+    drawn = not too_many_to_draw(doc, "Fig. A2", len(engines) * len(betas) * len(deltas), "heat-map cells")
+    for e in engines if drawn else []:
         fig, axes = plt.subplots(1, 3, figsize=(12, 3.3))
         for ax, (key, lab, scale) in zip(axes, figs):
             grid = np.full((len(betas), len(deltas)), np.nan)
@@ -362,7 +363,8 @@ def section_scaling(doc, g):
         series.setdefault(key, []).append(p)
     if not series:
         return
-    fig, ax = plt.subplots(figsize=(8, 5))
+    drawn = not too_many_to_draw(doc, "Broadphase scaling", len(pts), "points")
+    fig, ax = plt.subplots(figsize=(8, 5)) if drawn else (None, None)
     cmap = plt.get_cmap("tab20")
     rows = []
     sizes = sorted({p["bodies"] for p in pts})
@@ -372,8 +374,9 @@ def section_scaling(doc, g):
         ys = np.array([med(p["ms_per_frame"]) for p in ps], dtype=float)
         lo = ys - np.array([p["ms_per_frame"]["min"] for p in ps])
         hi = np.array([p["ms_per_frame"]["max"] for p in ps]) - ys
-        ax.errorbar(xs, ys, yerr=[lo, hi], marker="o", ms=3, capsize=2, label=f"{key[0]} {key[1]}",
-                    color=cmap(k % 20), linestyle="-" if key[0] == "cpu" else "--")
+        if drawn:
+            ax.errorbar(xs, ys, yerr=[lo, hi], marker="o", ms=3, capsize=2, label=f"{key[0]} {key[1]}",
+                        color=cmap(k % 20), linestyle="-" if key[0] == "cpu" else "--")
         good = ys > 0
         sl = slope(xs[good], ys[good]) if good.sum() >= 2 else float("nan")
         ns = [p["params"].get("bodies", p["bodies"]) for p in ps]  # lattice sizes asked (walls apart)
@@ -382,15 +385,16 @@ def section_scaling(doc, g):
         rows.append([key[0], key[1]] + [num(med(by[s]["ms_per_frame"]), 3) if s in by else "-" for s in sizes]
                     + [f"{sl:.2f}" if not math.isnan(sl) else "-", f"{last:.2f}" if not math.isnan(last) else "-",
                        "yes" if all(p.get("matches_recorded", True) for p in ps) else "NO"])
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    log_ticks(ax, "x")
-    log_ticks(ax, "y")
-    ax.set_xlabel("bodies")
-    ax.set_ylabel("broadphase ms per frame")
-    ax.set_title("Broadphase scaling on identical recorded AABBs (solid: cpu, dashed: cuda)")
-    ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    doc.figure(fig, "scaling", "Broadphase scaling, log-log: ms per frame against bodies")
+    if drawn:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        log_ticks(ax, "x")
+        log_ticks(ax, "y")
+        ax.set_xlabel("bodies")
+        ax.set_ylabel("broadphase ms per frame")
+        ax.set_title("Broadphase scaling on identical recorded AABBs (solid: cpu, dashed: cuda)")
+        ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        doc.figure(fig, "scaling", "Broadphase scaling, log-log: ms per frame against bodies")
     doc.table(["engine", "broadphase"] + [f"{s:,}" for s in sizes] + ["slope k", "last doubling", "pairs = recorded"],
               rows, "ms per frame, median over repetitions; '-' = not measured (skipped: see below).")
     # Per doubling: log2 of the time ratio between consecutive sizes (1.0 = linear).
@@ -475,7 +479,7 @@ def section_max_instances(doc, g):
               name="searches")
     pts = [p for p in g["points_list"] if p.get("status") == "ok" and "windows" in p
            and "instances" in p.get("params", {}).get("axes", {})]
-    if pts:
+    if pts and not too_many_to_draw(doc, "max-instances: the probes of the search", len(pts), "points"):
         fig, ax = plt.subplots(figsize=(8, 4.6))
         cmap = plt.get_cmap("tab10")
         keys = list(dict.fromkeys((p["params"]["scene"], p["params"]["engine"]) for p in pts))

@@ -69,7 +69,9 @@ std::int64_t JsonFields::integer(const nlohmann::json& v, const std::string& fie
   const std::string allowed = fmt::format("an integer in [{}, {}]", lo, hi);
   if (v.is_number_unsigned()) {
     const std::uint64_t u = v.get<std::uint64_t>();
-    if (hi < 0 || u > static_cast<std::uint64_t>(hi)) fail(field, fmt::format("{} is out of range", u), allowed);
+    // nlohmann reads every integer >= 0 as unsigned: both ends are checked here too.
+    if (hi < 0 || u > static_cast<std::uint64_t>(hi) || (lo > 0 && u < static_cast<std::uint64_t>(lo)))
+      fail(field, fmt::format("{} is out of range", u), allowed);
     return static_cast<std::int64_t>(u);
   }
   if (v.is_number_integer()) {

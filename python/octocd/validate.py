@@ -191,7 +191,11 @@ class Validator:
         checked: run the costly validators (candidate sets, normals) on this frame.
 
         Raises InputError naming the argument (shape, dtype, a non-finite value, an
-        unsorted pair ...) before anything of the frame is judged. Returns self.
+        unsorted pair ...) before anything of the frame is judged, and "frame F: N bodies'
+        boxes crowd together: ..." for a checked frame whose boxes overlap in more than 64
+        pairs a body (coincident bodies), before any pair is judged. Ctrl-C raises
+        KeyboardInterrupt at once (the frame is judged on a helper thread; one cut short
+        ends in the background and the next call waits for it). Returns self.
         """
         self._v.observe(int(frame), aabbs, pairs, contacts, x_pre, v_pre, x_post, v_post, q_pre, q_post,
                         w_pre, w_post, x_det, q_det, bool(manifolds), bool(checked))
@@ -225,7 +229,8 @@ def validate_frame(scene=None, *, frame: int = 1, aabbs=None, pairs=None, contac
 def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max_frames: int = 0,
                    against_fcl: bool = True, tolerances: Optional[Dict[str, float]] = None,
                    expect: Union[None, str, "_os.PathLike[str]", Dict[str, Any]] = None,
-                   strict: bool = False, shard: Optional[Tuple[int, int]] = None) -> ValidationResults:
+                   strict: bool = False, shard: Optional[Tuple[int, int]] = None,
+                   mesh_dir: Union[None, str, "_os.PathLike[str]"] = None) -> ValidationResults:
     """Judges an external trace (docs/trace-format.md, "External traces"; what `octocd
     validate --trace-in PATH` does): the costly validators every `every`-th frame, at most
     max_frames frames (0 = all). A trace of `octocd run --state-every 1 --contacts` is one.
@@ -241,7 +246,13 @@ def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max
 
     shard: (i, n) judges only shard i of n (`validate --shard i/n`: the contiguous block of
     frames floor(i F / n) + 1 .. floor((i + 1) F / n)); the result's `shard_json` is the
-    verdict as `validate --shard --json` writes it, for merge_validations."""
+    verdict as `validate --shard --json` writes it, for merge_validations.
+
+    mesh_dir: where the mesh files named by the trace's `scene` attribute are looked up
+    (`validate --trace-in --mesh-dir DIR`): dataset names in the data dir, files only inside
+    this folder (default None: the trace's folder), symbolic links resolved; a mesh named
+    anywhere else raises InputError naming the scene key and --mesh-dir, before any frame is
+    judged (a trace cannot make octocd read another file)."""
     text, origin = None, ""
     if isinstance(expect, dict):
         text, origin = _json.dumps(expect), "expect"
@@ -254,7 +265,8 @@ def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max
             raise InputError(f"expect: cannot read '{origin}' ({e.strerror}); allowed: an expectations file (JSON)")
     share = None if shard is None else f"{int(shard[0])}/{int(shard[1])}"
     rows, outcomes, code, doc = _octocd.validate_trace(_os.fspath(path), int(every), int(max_frames),
-                                                      bool(against_fcl), tolerances, text, origin, bool(strict), share)
+                                                      bool(against_fcl), tolerances, text, origin, bool(strict), share,
+                                                      "" if mesh_dir is None else _os.fspath(mesh_dir))
     out = ValidationResults(_results(rows), [ExpectationOutcome(**o) for o in outcomes], code)
     out.shard_json = _json.loads(doc) if doc else None
     return out

@@ -13,7 +13,8 @@
 //
 // The GIL is released while an engine steps, while frames are judged and while a trace is
 // read; an object already busy in another thread raises RuntimeError instead of racing.
-// Long calls poll Python's signal handlers (PythonStop) so Ctrl-C raises KeyboardInterrupt
+// Long calls poll Python's signal handlers (PythonStop), or run on a helper thread while the
+// caller does (Validator.observe, a long Engine.step), so Ctrl-C raises KeyboardInterrupt
 // within a fraction of a second. Traces are read only through octocd::TraceReader, the
 // hardened reader of the CLI (docs/trace-format.md, "Security rules and limits").
 #include <pybind11/numpy.h>
@@ -995,10 +996,7 @@ class PyValidator {
     o.against_fcl = against_fcl;
     o.spec6_response = spec6_response;
     apply_tolerances(o, tolerances);
-    o.stop = [slot = stop_] {
-      PythonStop* p = slot->load();
-      return p != nullptr && p->poll();
-    };
+    o.stop = [flag = interrupted_] { return flag->load(); };
     {
       py::gil_scoped_release release;
       validator_ = std::make_unique<ExternalValidator>(b, o);
@@ -1102,33 +1100,63 @@ class PyValidator {
                                          "<= {:g}",
                                          i, c, trace_limits::kMaxCoordinate));
     BusyGuard busy(busy_, "this Validator");
-    PythonStop stop;
-    stop_->store(&stop);
-    try {
-      py::gil_scoped_release release;
-      validator_->observe(std::move(rec), checked);
-    } catch (const ValidationStopped&) {
-      stop_->store(nullptr);
-      stop.rethrow();  // KeyboardInterrupt (the frame is partly judged)
-      throw RuntimeError("observe: stopped");
-    } catch (...) {
-      stop_->store(nullptr);
-      throw;
-    }
-    stop_->store(nullptr);
+    settle();
+    interrupted_->store(false);
+    // The frame is judged on a helper thread while this one runs Python's signal handlers
+    // every 20 ms: Ctrl-C raises KeyboardInterrupt at once, whatever loop the judging is in.
+    std::future<void> judging = std::async(std::launch::async, [this, r = std::move(rec), checked]() mutable {
+      try {
+        validator_->observe(std::move(r), checked);
+      } catch (const ValidationStopped&) {
+        // Stopped by the Ctrl-C already raised (the frame is partly judged).
+      }
+    });
+    wait_interruptibly(judging);
+    judging.get();  // the judging's error (InputError, ...), if any, raised here
   }
 
   py::list results() {
     BusyGuard busy(busy_, "this Validator");
+    settle();
     return out_results(validator_->results());
   }
 
  private:
+  /// Waits for `f` with the GIL released, running Python's signal handlers every 20 ms;
+  /// when one raises (KeyboardInterrupt), the validators' stop flag is set (the judging
+  /// ends at its next poll), `f` becomes inflight_ and the exception propagates.
+  void wait_interruptibly(std::future<void>& f) {
+    for (;;) {
+      bool ready = false;
+      {
+        py::gil_scoped_release release;
+        ready = f.wait_for(std::chrono::milliseconds(20)) == std::future_status::ready;
+      }
+      if (ready) return;
+      if (PyErr_CheckSignals() != 0) {
+        interrupted_->store(true);
+        inflight_ = std::move(f);
+        throw py::error_already_set();
+      }
+    }
+  }
+  /// Before any call that reads or changes the validator: waits (Ctrl-C honoured) for a
+  /// judging that an earlier Ctrl-C left ending in the background; raises its error, if any.
+  void settle() {
+    if (!inflight_.valid()) return;
+    std::future<void> f = std::move(inflight_);
+    wait_interruptibly(f);
+    f.get();
+  }
+
   std::unique_ptr<ExternalValidator> validator_;
   std::atomic<bool> busy_{false};
-  /// The PythonStop of the observe() in progress (nullptr between calls): the validators'
-  /// stop callback polls it.
-  std::shared_ptr<std::atomic<PythonStop*>> stop_ = std::make_shared<std::atomic<PythonStop*>>(nullptr);
+  /// Set by Ctrl-C during observe() (cleared when the next one begins): the validators'
+  /// stop callback reads it, so a judging cut short ends at its next poll.
+  std::shared_ptr<std::atomic<bool>> interrupted_ = std::make_shared<std::atomic<bool>>(false);
+  /// A judging cut short by Ctrl-C, ending on its helper thread (declared after
+  /// validator_: destroyed first, its destructor waits for the judging).
+  std::future<void> inflight_;
 };
 
 ValidationResult result_from(const py::handle& r) {
@@ -1280,11 +1308,12 @@ PYBIND11_MODULE(_octocd, m) {
       "validate_trace",
       [](const std::string& path, int every, std::int64_t max_frames, bool against_fcl, py::object tolerances,
          const std::optional<std::string>& expect_json, const std::string& expect_origin, bool strict,
-         const std::optional<std::string>& shard) {
+         const std::optional<std::string>& shard, const std::string& mesh_dir) {
         if (every < 1) throw InputError(fmt::format("every: {}; allowed: >= 1", every));
         if (max_frames < 0) throw InputError(fmt::format("max_frames: {}; allowed: >= 0 (0 = all)", max_frames));
         ExternalOptions o;  // engine name and response model: from the trace
         o.against_fcl = against_fcl;
+        o.mesh_dir = mesh_dir;  // "" = the trace's folder (`validate --trace-in --mesh-dir`)
         apply_tolerances(o, tolerances);
         if (shard) o.shard = parse_shard(*shard);
         // Expectations are read (and refused) before the trace is judged.
@@ -1324,7 +1353,7 @@ PYBIND11_MODULE(_octocd, m) {
                               report.exit_code(strict), doc);
       },
       py::arg("path"), py::arg("every"), py::arg("max_frames"), py::arg("against_fcl"), py::arg("tolerances"),
-      py::arg("expect_json"), py::arg("expect_origin"), py::arg("strict"), py::arg("shard"));
+      py::arg("expect_json"), py::arg("expect_origin"), py::arg("strict"), py::arg("shard"), py::arg("mesh_dir"));
 
   m.def(
       "merge_validations",

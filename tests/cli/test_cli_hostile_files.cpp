@@ -13,6 +13,7 @@
 #include <sys/sysmacros.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <map>
@@ -195,6 +196,38 @@ TEST_F(HostileFiles, TheViewPageIsNeverWrittenInPlace) {
   r = run(bin() + " view " + trace + " --frame 1 -o " + at("pages-link"));
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("-o " + at("pages-link") + ": a symbolic link"), std::string::npos) << r.output;
+}
+
+// Before: bench_validation --json opened its file in place (std::ofstream): a symbolic link
+// there was followed and its target overwritten, a FIFO blocked it forever. Now the file is
+// checked before any work (exit 2 naming it) and written at the end as every octocd output
+// (octocd/atomic_file.hpp: a temporary beside it renamed over a regular file).
+// (bench_gpu_broadphase --json does the same; it needs a CUDA device, so it is not run here.)
+TEST_F(HostileFiles, BenchValidationWritesItsJsonAsEveryOutput) {
+  const std::string tool = OCTOCD_TEST_BENCH_VALIDATION;
+  const std::string args = " --lattice --bodies 64 --reps 1 --only physics --json ";
+  spit(at("victim"), "precious\n");
+  fs::create_symlink(at("victim"), at("link.json"));
+  Result r = run("timeout -k 5 60 " + tool + args + at("link.json"));
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("--json: " + at("link.json") + ": a symbolic link"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("physics "), std::string::npos) << "refused before any work: " << r.output;
+  EXPECT_EQ(slurp(at("victim")), "precious\n");
+  ASSERT_EQ(::mkfifo(at("fifo.json").c_str(), 0600), 0);
+  r = run("timeout -k 5 60 " + tool + args + at("fifo.json"));
+  EXPECT_EQ(r.code, 2) << r.output;  // before: 124, blocked in open() until the timeout
+  EXPECT_NE(r.output.find("--json: " + at("fifo.json") + ": a FIFO"), std::string::npos) << r.output;
+  // A regular file is replaced whole: one verdict document, no temporary left beside it.
+  spit(at("out.json"), "old\n");
+  r = run("timeout -k 5 120 " + tool + args + at("out.json"));
+  EXPECT_EQ(r.code, 0) << r.output;
+  const std::string text = slurp(at("out.json"));
+  ASSERT_FALSE(text.empty());
+  EXPECT_EQ(text.find("old"), std::string::npos) << text;
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 1) << text;
+  EXPECT_NO_THROW((void)nlohmann::json::parse(text)) << text;
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos) << e.path();
 }
 
 // Before: --expect and --merge opened their files with std::ifstream: a FIFO blocked

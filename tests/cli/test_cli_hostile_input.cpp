@@ -863,6 +863,38 @@ TEST_F(UntrustedV3, JsonAndOptionsAcceptedAlthoughWrongAreRefused) {
   EXPECT_NE(ct.output.find("positions given twice"), std::string::npos) << ct.output;
 }
 
+// Before: the sweep reader converted counts with get<long>() before checking them, so a
+// huge unsigned `max_bodies` wrapped to -1 and was refused as "18446744073709551615;
+// allowed: an integer >= 0" (a value that is >= 0), and `bodies` and `iterations` leaned on
+// the same wrap. Now every count goes through JsonFields: exit 2 naming the file, the field
+// and its range, and the value as written.
+TEST_F(UntrustedV3, SweepCountsAreCheckedBeforeTheyAreConverted) {
+  const std::string sweep = (dir_ / "sweep.json").string();
+  const std::string huge = "18446744073709551615";  // 2^64 - 1: a JSON unsigned integer
+  struct Case {
+    std::string text, names;
+  };
+  for (const Case& c : std::vector<Case>{
+           {R"({"name": "x", "kind": "broadphase", "bodies": [100], "max_bodies": {"flat": )" + huge + "}}",
+            "max_bodies.flat: " + huge + " is out of range; allowed: an integer in [0, 16777216]"},
+           {R"({"name": "x", "kind": "broadphase", "bodies": [)" + huge + "]}",
+            "bodies[0]: " + huge + " is out of range; allowed: an integer in [2, 16777216]"},
+           {R"({"name": "x", "kind": "broadphase", "bodies": [100, 9223372036854775808]})",
+            "bodies[1]: 9223372036854775808 is out of range; allowed: an integer in [2, 16777216]"},
+           {R"({"name": "x", "kind": "broadphase", "bodies": [100], "frames": 4294967297})",
+            "frames: 4294967297 is out of range; allowed: an integer in [1, 100000]"},
+           {R"({"name": "x", "kind": "broadphase", "bodies": [1]})",  // JSON reads 1 as unsigned: lo checked too
+            "bodies[0]: 1 is out of range; allowed: an integer in [2, 16777216]"},
+           {R"({"name": "x", "kind": "broadphase", "bodies": [1e3]})",
+            "bodies[0]: a number 1000.0; allowed: an integer in [2, 16777216]"}}) {
+    std::ofstream(sweep) << c.text;
+    const Result r = run("timeout -k 5 60 " + bin() + " bench " + sweep + " -o " + (dir_ / "o.json").string() + " --quiet");
+    EXPECT_EQ(r.code, 2) << c.text << "\n" << r.output;
+    EXPECT_NE(r.output.find(sweep + ": " + c.names), std::string::npos) << c.text << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(dir_ / "o.json")) << "refused before any point ran";
+  }
+}
+
 // Before: scripts/nightly.sh found Bullet's scenes with grep '"rotation": *true', so
 // `"rotation" : true` or an angular velocity alone was "BAD input". Now octocd decides:
 // without --engine, validate runs a rotating scene on Bullet with rotation.

@@ -812,6 +812,41 @@ std::string dense_scene(const fs::path& dir, int count, const std::string& name 
   return p.string();
 }
 
+/// `per_axis`^3 boxes of half 0.3 m on a cubic lattice of spacing 0.55 m: each overlaps its
+/// 26 neighbours (13 pairs a body, as bench_validation --lattice), a frame as dense as the
+/// validators accept (limits::kMaxPairsPerBody; coincident boxes are refused): 25^3 = 15,625
+/// bodies and 200,000 pairs, about 0.7 s of checks a frame on one thread of the 2-core VM.
+std::string lattice_scene(const fs::path& dir, int per_axis, const std::string& name = "lattice") {
+  const fs::path p = dir / (name + ".json");
+  const double h = 0.55 * (per_axis - 1) / 2;
+  std::ofstream(p) << R"({"name": ")" << name << R"(", "domain": {"min": [)" << -h - 2 << ", " << -h - 2 << ", "
+                   << -h - 2 << R"(], "max": [)" << h + 2 << ", " << h + 2 << ", " << h + 2 << R"(]},
+    "gravity": [0, 0, 0], "frames": 100000000,
+    "groups": [{"name": "b", "shape": {"box": [0.3, 0.3, 0.3]}, "count": )"
+                   << per_axis * per_axis * per_axis << R"(, "layout": {"type": "grid", "min": [)" << -h << ", " << -h
+                   << ", " << -h << R"(], "max": [)" << h << ", " << h << ", " << h << R"(], "spacing": 0.55}}]})";
+  return p.string();
+}
+
+// Before: `validate` of 5,000 coincident boxes stepped them (28 s, 6.7 GB for one frame on the
+// 2-core VM) before its first checked frame, whose 12.5 million pairs the validators then
+// judged. Now a run with a checked frame refuses bodies whose boxes crowd beyond 64 pairs a
+// body before the first step: exit 2 naming the scene, frame 0, the count and the limit.
+TEST_F(Hardening, ValidateRefusesCoincidentBodiesBeforeAnyStep) {
+  const std::string trace = (dir_ / "d.h5").string();
+  Child c(dir_, {"validate", dense_scene(dir_, 5000), "--frames", "10", "--against", "none", "--trace", trace});
+  bool ended = false;
+  const Result r = c.wait_within(120, ended);
+  ASSERT_TRUE(ended) << "still running after 120 s";
+  EXPECT_EQ(r.code, 2) << r.out << r.err;
+  EXPECT_TRUE(std::regex_search(r.err, std::regex("scene 'dense': frame 0 \\(the initial state, before any step\\): "
+                                                  "5001 bodies' boxes crowd together: [0-9]+ candidate pair tests "
+                                                  "\\(boxes sharing a grid cell\\), more than the limit 2560512 "
+                                                  "\\(8 tests for each of 64 pairs a body\\)")))
+      << r.err;
+  EXPECT_FALSE(fs::exists(trace)) << "refused before the run began";
+}
+
 /// No `path.tmp.PID` left anywhere under `dir` (write_file_atomically's temporary files).
 void expect_no_temporary_file(const fs::path& dir) {
   for (const auto& e : fs::recursive_directory_iterator(dir))
@@ -907,11 +942,11 @@ class OpenCounter {
 // incomplete (table, STOPPED line, JUnit 'stopped' case, 128 + the signal). The signal
 // follows an event: the trace opened a fourth time, i.e. by the judge's reader after the
 // check's (the hardened reader opens a file three times: probe, HDF5, its driver), so it
-// lands once every frame was checked, while the judge starts (700 coincident boxes: about
-// a second a frame).
+// lands once every frame was checked, while the judge starts (a lattice of 15,625 boxes
+// touching their 26 neighbours: about 0.7 s a frame on one thread).
 TEST_F(Hardening, ValidateTraceInStoppedBySigintReportsAnIncompleteVerdict) {
   const std::string trace = (dir_ / "dense.h5").string(), junit = (dir_ / "v.xml").string();
-  const fs::path scene = dense_scene(dir_, 700);
+  const fs::path scene = lattice_scene(dir_, 25);
   {
     Child run(dir_, {"run", scene.string(), "--frames", "4", "--state-every", "1", "--contacts", "--quiet",
                      "--trace", trace});

@@ -13,6 +13,7 @@
 Every input is generated here, small.
 """
 import os
+import re
 import signal
 import stat
 import subprocess
@@ -72,6 +73,53 @@ def test_external_storage_is_refused_naming_file_and_dataset(tmp_path):
     if os.access(BIN, os.X_OK):
         r = subprocess.run([BIN, "validate", "--trace-in", p], capture_output=True, text=True)
         assert r.returncode == 2 and "ext.h5: /states/velocity: external storage" in r.stderr
+
+
+TETRA = "v 0 0 0\nv 0.2 0 0\nv 0 0.2 0\nv 0 0 0.2\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+
+
+def trace_naming(path, mesh):
+    """An external trace of 3 bodies (a static floor and two dynamic ones) whose `scene`
+    attribute names `mesh` for its shapes (as test_cli_hostile_files' trace)."""
+    scene = ('{"name": "m", "domain": {"min": [-1, -2, -1], "max": [1, 1, 1]}, "walls": "none", '
+             '"gravity": [0, 0, 0], "groups": [{"name": "floor", "shape": {"mesh": "%s", "scale": 0.2}, '
+             '"count": 1, "mass": 0}, {"name": "g", "shape": {"mesh": "%s", "scale": 0.2}, "count": 2, '
+             '"layout": {"type": "grid", "spacing": 0.5}}]}') % (mesh, mesh)
+    x = np.tile(np.array([[0, -1, 0], [0, 0, 0], [0.199, 0, 0]], np.float32), (4, 1, 1))
+
+    def extra(f):
+        f.attrs["scene"] = scene
+        f["bodies/inverse_mass"][...] = np.array([0, 1, 1], np.float32)
+        f["bodies/local_aabb_min"][...] = np.full((3, 3), -0.1, np.float32)
+        f["bodies/local_aabb_max"][...] = np.full((3, 3), 0.1, np.float32)
+    return external_trace(path, n=3, frames=3, position=x, extra=extra)
+
+
+def test_validate_trace_takes_meshes_only_from_mesh_dir(tmp_path):
+    # Before: validate_trace had no mesh_dir: a trace whose meshes lie elsewhere could not be
+    # judged from Python at all (the CLI has --mesh-dir). Now mesh_dir says where they are,
+    # the default is the trace's folder, and a mesh named anywhere else is refused naming
+    # the key, as `validate --trace-in` does.
+    (tmp_path / "secret").mkdir()
+    (tmp_path / "traces").mkdir()
+    (tmp_path / "secret" / "private.obj").write_text(TETRA)
+    for mesh in (str(tmp_path / "secret" / "private.obj"), "../secret/private.obj"):
+        p = trace_naming(str(tmp_path / "traces" / "outside.h5"), mesh)
+        with pytest.raises(octocd.InputError, match=re.escape(f'groups[0].shape.mesh: mesh "{mesh}" named by the '
+                                                              "scene inside the trace lies outside --mesh-dir "
+                                                              + str(tmp_path / "traces"))):
+            octocd.validate_trace(p)
+        with pytest.raises(octocd.InputError, match="lies outside --mesh-dir " + re.escape(str(tmp_path / "traces"))):
+            octocd.validate_trace(p, mesh_dir=tmp_path / "traces")
+        rows = octocd.validate_trace(p, mesh_dir=tmp_path / "secret")
+        assert rows and rows.exit_code in (0, 3), rows
+    # A link beside the trace that leads out of its folder is outside too.
+    (tmp_path / "traces" / "link.obj").symlink_to(tmp_path / "secret" / "private.obj")
+    with pytest.raises(octocd.InputError, match="lies outside --mesh-dir " + re.escape(str(tmp_path / "traces"))):
+        octocd.validate_trace(trace_naming(str(tmp_path / "traces" / "link.h5"), "link.obj"))
+    # A mesh beside the trace is found there by default.
+    (tmp_path / "traces" / "beside.obj").write_text(TETRA)
+    assert octocd.validate_trace(trace_naming(str(tmp_path / "traces" / "beside.h5"), "beside.obj")).exit_code in (0, 3)
 
 
 def test_external_links_and_virtual_datasets_are_refused(tmp_path):
@@ -268,17 +316,104 @@ def interrupt_code(code, tmp_path, more=0):
 
 
 SETUP_OBSERVE = """
-n = 2000   # coincident boxes: every pair overlaps and is judged (about 20 s uninterrupted)
+# A large legitimate frame: 100,000 unit boxes on a cubic lattice of spacing 0.9 m, each
+# overlapping its 26 neighbours (13 pairs a body, as bench_validation --lattice), every pair
+# judged (about 6 s uninterrupted on the 2-core VM).
+n, k = 100000, 47
+i = np.arange(n)
+x = (0.9 * np.stack([i % k, (i // k) % k, i // (k * k)], axis=1)).astype(np.float32)
 lb = np.tile(np.array([[[-0.5] * 3, [0.5] * 3]], np.float32), (n, 1, 1))
 val = octocd.Validator(local_boxes=lb, gravity=(0, 0, 0))
-x = np.zeros((n, 3), np.float32)
+z = np.zeros((n, 3), np.float32)
 """
 
 
 def test_ctrl_c_ends_observe_within_a_second(tmp_path):
-    line, dt = interrupt(SETUP_OBSERVE, "val.observe(1, x_pre=x, v_pre=x, x_post=x, v_post=x)", tmp_path)
+    # observe judges on a helper thread while the caller runs Python's signal handlers every
+    # 20 ms: Ctrl-C lands at once whatever loop the judging is in (before: only where the
+    # validators polled, so a loop without a poll, such as the reference pair set of 30,000
+    # coincident boxes, ignored it for minutes).
+    line, dt = interrupt(SETUP_OBSERVE, "val.observe(1, x_pre=x, v_pre=z, x_post=x, v_post=z)", tmp_path)
     print(f"KeyboardInterrupt {dt:.3f} s after SIGINT")
     assert line == "KeyboardInterrupt" and dt < 1.0, (line, dt)
+
+
+AFTER_INTERRUPT = """
+import os, signal, sys, threading, numpy as np, octocd
+sys.setswitchinterval(1000.0)
+{setup}
+go = threading.Event()
+def interrupt():  # runs once the call releases the GIL (the switch interval hands it over never)
+    go.wait()
+    os.kill(os.getpid(), signal.SIGINT)
+threading.Thread(target=interrupt, daemon=True).start()
+go.set()
+try:
+    val.observe(1, x_pre=x, v_pre=z, x_post=x, v_post=z)
+    print("finished", flush=True)
+except KeyboardInterrupt:
+    print("KeyboardInterrupt", flush=True)
+# The interrupted judging ends in the background; the validator then answers and judges on.
+rows = val.results()
+val.observe(2, x_pre=x, v_pre=z, x_post=x, v_post=z, checked=False)
+print("results", len(rows) > 0, len(val.results()) == len(rows), flush=True)
+"""
+
+
+def test_a_validator_interrupted_by_ctrl_c_answers_and_judges_on(tmp_path):
+    env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(octocd.__file__))))
+    r = subprocess.run([sys.executable, "-c", AFTER_INTERRUPT.format(setup=SETUP_OBSERVE)], capture_output=True,
+                       text=True, cwd=str(tmp_path), env=env, timeout=300)
+    assert r.stdout.split() == ["KeyboardInterrupt", "results", "True", "True"], (r.stdout, r.stderr)
+
+
+COINCIDENT = """
+import sys, numpy as np, octocd
+for n in (30000, 300000):
+    lb = np.tile(np.array([[[-0.5] * 3, [0.5] * 3]], np.float32), (n, 1, 1))
+    val = octocd.Validator(local_boxes=lb, gravity=(0, 0, 0))
+    x = np.zeros((n, 3), np.float32)
+    try:
+        val.observe(1, x_pre=x, v_pre=x, x_post=x, v_post=x)
+        print("judged", n, flush=True)
+    except octocd.InputError as e:
+        print(str(e), flush=True)
+"""
+
+
+def test_coincident_boxes_are_refused_before_the_per_pair_work(tmp_path):
+    # Before: observe of 30,000 coincident boxes (450 million pairs) computed the reference
+    # pair set without end, ignoring Ctrl-C, its memory growing past the machine's. Now a
+    # frame whose boxes crowd beyond 64 overlapping pairs a body is InputError at once,
+    # counted before any pair is tested (octocd/exact_pairs.hpp, limits::kMaxPairsPerBody).
+    env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(octocd.__file__))))
+    r = subprocess.run([sys.executable, "-c", COINCIDENT], capture_output=True, text=True, cwd=str(tmp_path),
+                       env=env, timeout=120)
+    lines = r.stdout.splitlines()
+    assert len(lines) == 2, (r.stdout, r.stderr)
+    for line, n in zip(lines, (30000, 300000)):
+        m = re.fullmatch(rf"frame 1: {n} bodies' boxes crowd together: (\d+) candidate pair tests \(boxes sharing "
+                         rf"a grid cell\), more than the limit {8 * 64 * n} \(8 tests for each of 64 pairs a body\); "
+                         r"allowed: at most 64 overlapping pairs a body \(coincident or piled-up bodies are "
+                         r"refused\)", line)
+        assert m and int(m.group(1)) >= n * (n - 1) // 2, line
+
+
+def test_a_coincident_trace_is_refused_naming_trace_frame_count_and_limit(tmp_path):
+    # Before: `validate --trace-in` of 5,000 coincident boxes (a 25 KB trace) ran 44-75 s and
+    # reached 9.2 GB (12.5 million pairs judged); under a 1 GB address-space limit it ended in
+    # "out of memory" (exit 1). Now exit 2 at once, within that limit, and validate_trace says
+    # the same.
+    n = 5000
+    p = external_trace(str(tmp_path / "coincident.h5"), n=n, frames=1, position=np.zeros((2, n, 3), np.float32))
+    want = (rf"{re.escape(p)}: frame 1: 5000 bodies' boxes crowd together: \d+ candidate pair tests \(boxes "
+            r"sharing a grid cell\), more than the limit 2560000 \(8 tests for each of 64 pairs a body\)")
+    with pytest.raises(octocd.InputError, match=want):
+        octocd.validate_trace(p)
+    if os.access(BIN, os.X_OK):
+        r = subprocess.run(["bash", "-c", 'ulimit -v 1000000 && exec "$0" validate --trace-in "$1"', BIN, p],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and re.search(want, r.stderr), (r.returncode, r.stderr[-2000:])
 
 
 def test_ctrl_c_ends_validate_trace_within_a_second(tmp_path):

@@ -159,6 +159,80 @@ TEST(ParallelSort, SameOrderAsStdSort) {
   }
 }
 
+// ---- the validators' limit (ExactPairsSettings::max_pairs_per_body) ---------------------
+
+/// n unit boxes at the origin: every pair overlaps, each in the same 8 cells of the grid.
+std::vector<Aabb> coincident(std::size_t n) { return std::vector<Aabb>(n, Aabb{{-0.5f, -0.5f, -0.5f}, {0.5f, 0.5f, 0.5f}}); }
+
+ExactPairsSettings limited() {
+  ExactPairsSettings s;
+  s.max_pairs_per_body = limits::kMaxPairsPerBody;
+  return s;
+}
+
+// Coincident boxes are refused from their cells' occupancy, before any pair is tested or
+// kept: 129 boxes make 8,256 pairs (64 a body, the limit) and 8 x 8,256 tests; 130 make
+// 8,385 pairs, 67,080 tests, above 8 x 64 x 130 = 66,560.
+TEST(ExactPairs, TheLimitRefusesCrowdedBoxesFromTheirCellCounts) {
+  std::vector<Pair> out;
+  exact_pairs(coincident(129), out, limited());
+  EXPECT_EQ(out.size(), 129u * 128u / 2u);
+  try {
+    exact_pairs(coincident(130), out, limited());
+    FAIL() << "130 coincident boxes accepted";
+  } catch (const PairLimitError& e) {
+    EXPECT_TRUE(e.tests);
+    EXPECT_EQ(e.count, 8u * 130u * 129u / 2u);
+    EXPECT_EQ(e.limit, 8u * 64u * 130u);
+    EXPECT_EQ(e.bodies, 130u);
+    EXPECT_STREQ(e.what(), "130 bodies' boxes crowd together: 67080 candidate pair tests (boxes sharing a grid "
+                           "cell), more than the limit 66560 (8 tests for each of 64 pairs a body); allowed: at "
+                           "most 64 overlapping pairs a body (coincident or piled-up bodies are refused)");
+  }
+  // 300,000 coincident boxes: 3.6e11 tests counted, none made (the grid's 2.4 million
+  // cell entries are all that is allocated).
+  EXPECT_THROW(exact_pairs(coincident(300000), out, limited()), PairLimitError);
+  // Without a limit (the default), every pair.
+  exact_pairs(coincident(200), out);
+  EXPECT_EQ(out.size(), 200u * 199u / 2u);
+}
+
+// Boxes of another level count too: many small boxes inside one large box each meet the
+// large ones through their lookups (step 2), so 300 large boxes over 3,000 small ones
+// (900,000 pairs, 273 a body) are refused as well.
+TEST(ExactPairs, TheLimitCountsPairsAcrossLevels) {
+  std::vector<Aabb> boxes;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-4.0f, 4.0f);
+  for (int i = 0; i < 3000; ++i) {
+    const Vec3 c{u(rng), u(rng), u(rng)};
+    boxes.push_back({c - Vec3{0.05f, 0.05f, 0.05f}, c + Vec3{0.05f, 0.05f, 0.05f}});
+  }
+  for (int i = 0; i < 300; ++i) boxes.push_back({{-5, -5, -5}, {5, 5, 5}});
+  std::vector<Pair> out;
+  EXPECT_THROW(exact_pairs(boxes, out, limited()), PairLimitError);
+  // 10 large boxes (30,045 pairs, 9 a body) are within it, and the set is flat's.
+  boxes.resize(3010);
+  exact_pairs(boxes, out, limited());
+  EXPECT_EQ(out, flat_pairs(boxes));
+}
+
+// A frame as dense as real runs get (bench_validation --lattice: every box overlaps its 26
+// neighbours, 13 pairs a body) is far within the limit, and the set is flat's.
+TEST(ExactPairs, ALatticeOfTouchingBoxesIsWithinTheLimit) {
+  std::vector<Aabb> boxes;
+  for (int x = 0; x < 12; ++x)
+    for (int y = 0; y < 12; ++y)
+      for (int z = 0; z < 12; ++z) {
+        const Vec3 c{0.19f * float(x), 0.19f * float(y), 0.19f * float(z)};
+        boxes.push_back({c - Vec3{0.1f, 0.1f, 0.1f}, c + Vec3{0.1f, 0.1f, 0.1f}});
+      }
+  std::vector<Pair> out;
+  exact_pairs(boxes, out, limited());
+  EXPECT_EQ(out, flat_pairs(boxes));
+  EXPECT_GT(out.size(), 10u * boxes.size());  // 26 neighbours inside, fewer on the faces
+}
+
 TEST(ExactPairs, BroadPhaseAdapterMatchesFlat) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> pos(-3, 3);

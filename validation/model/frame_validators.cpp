@@ -180,6 +180,7 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   // `flat`'s pair set without its n(n-1)/2 tests (octocd/exact_pairs.hpp).
   ExactPairsSettings pair_threads;
   pair_threads.threads = options.threads;
+  pair_threads.max_pairs_per_body = limits::kMaxPairsPerBody;
   s.flat = make_exact_pairs_broadphase(pair_threads);
   for (auto& bp : broadphases) s.broadphases.push_back(std::move(bp));
   // The paper's configurations A, B, C and the scene's own (design.md section 5.2).
@@ -212,7 +213,7 @@ void FrameValidators::observe(const Engine& world, bool checked) {
   observe(rec, checked);
 }
 
-void FrameValidators::observe(const FrameRecord& rec, bool checked) {
+void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
   Impl& s = *impl_;
   const Model& model = *s.model;
   const std::int64_t frame = rec.frame;
@@ -457,6 +458,8 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) {
       check_pair(s.centre, c.dx_a, c.dx_b, tol.centre_rel, slack_x, "mass-weighted centre");
     }
   }
+} catch (const PairLimitError& e) {
+  throw PairLimitError(fmt::format("frame {}: {}", rec.frame, e.what()), e);
 }
 
 PhysicsValidators& FrameValidators::physics() { return *impl_->physics; }

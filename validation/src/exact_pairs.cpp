@@ -9,6 +9,8 @@
 #include <functional>
 #include <string>
 
+#include <fmt/format.h>
+
 #include "parallel.hpp"
 
 namespace octocd {
@@ -59,7 +61,39 @@ unsigned thread_count(const ExactPairsSettings& s, std::size_t n) {
   return loop_threads(0, n, kSerialBelow);
 }
 
+/// a + b, saturating at UINT64_MAX.
+std::uint64_t add_saturating(std::uint64_t a, std::uint64_t b) { return a > UINT64_MAX - b ? UINT64_MAX : a + b; }
+
+/// k (k - 1) / 2, saturating.
+std::uint64_t pairs_of(std::uint64_t k) {
+  if (k < 2) return 0;
+  const std::uint64_t x = k % 2 == 0 ? k / 2 : k, y = k % 2 == 0 ? k - 1 : (k - 1) / 2;
+  return y != 0 && x > UINT64_MAX / y ? UINT64_MAX : x * y;
+}
+
+std::string limit_message(std::uint64_t count, bool tests, std::uint64_t limit, std::size_t bodies) {
+  const std::uint64_t pairs = bodies == 0 ? 0 : limit / (tests ? limits::kCandidateTestsPerPair : 1) / bodies;
+  if (tests)
+    return fmt::format("{} bodies' boxes crowd together: {} candidate pair tests (boxes sharing a grid cell), more "
+                       "than the limit {} ({} tests for each of {} pairs a body); allowed: at most {} overlapping "
+                       "pairs a body (coincident or piled-up bodies are refused)",
+                       bodies, count, limit, limits::kCandidateTestsPerPair, pairs, pairs);
+  return fmt::format("{} bodies' boxes overlap in {} pairs, more than the limit {} ({} pairs a body); allowed: at "
+                     "most {} overlapping pairs a body (coincident or piled-up bodies are refused)",
+                     bodies, count, limit, pairs, pairs);
+}
+
 }  // namespace
+
+PairLimitError::PairLimitError(std::uint64_t count_, bool tests_, std::uint64_t limit_, std::size_t bodies_)
+    : InputError(limit_message(count_, tests_, limit_, bodies_)),
+      count(count_),
+      tests(tests_),
+      limit(limit_),
+      bodies(bodies_) {}
+
+PairLimitError::PairLimitError(const std::string& message, const PairLimitError& from)
+    : InputError(message), count(from.count), tests(from.tests), limit(from.limit), bodies(from.bodies) {}
 
 void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings) {
   out.clear();
@@ -172,6 +206,64 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
       k = j;
     }
   }
+
+  int finest_used = levels;
+  for (int l = levels - 1; l >= 0; --l)
+    if (used[l]) finest_used = l;
+  bool coarser = false;
+  for (int l = finest_used + 1; l < levels; ++l) coarser = coarser || used[l];
+  // A box's range of cells on level l.
+  auto cell_range = [&](std::uint32_t a, int l, Cell& lo, Cell& hi) {
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = grid.index(hull[a].lo[k], k, l);
+      hi[k] = grid.index(hull[a].hi[k], k, l);
+    }
+  };
+  auto cell_less = [](const Entry& en, const Cell& key) { return en.cell < key; };
+
+  // The limit: the candidate tests counted before any test (O(n log n): run lengths and
+  // the lookups of step 2, never a pair), the pairs found after.
+  const std::uint64_t max_pairs =
+      settings.max_pairs_per_body == 0
+          ? 0
+          : (settings.max_pairs_per_body > UINT64_MAX / n ? UINT64_MAX : settings.max_pairs_per_body * n);
+  if (max_pairs > 0) {
+    const std::uint64_t max_tests = max_pairs > UINT64_MAX / limits::kCandidateTestsPerPair
+                                        ? UINT64_MAX
+                                        : max_pairs * limits::kCandidateTestsPerPair;
+    std::uint64_t tests = 0;
+    for (const Run& run : runs) tests = add_saturating(tests, pairs_of(run.last - run.first));
+    tests = add_saturating(tests, pairs_of(unbounded.size()));
+    const std::uint64_t rest = n - unbounded.size();
+    tests = add_saturating(tests, unbounded.size() > 0 && rest > UINT64_MAX / unbounded.size()
+                                      ? UINT64_MAX
+                                      : std::uint64_t(unbounded.size()) * rest);
+    if (tests > max_tests) throw PairLimitError(tests, true, max_tests, n);
+    if (coarser) {
+      // Step 2's lookups, counting each cell's boxes (std::equal_range), stopped once past the limit.
+      for (std::size_t i = 0; i < n && tests <= max_tests; ++i) {
+        const std::uint32_t a = std::uint32_t(i);
+        if (level[a] < 0) continue;
+        for (int l = level[a] + 1; l < levels; ++l) {
+          if (!used[l]) continue;
+          const std::vector<Entry>& e = entries[l];
+          Cell lo, hi;
+          cell_range(a, l, lo, hi);
+          for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
+            for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+              for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
+                const Cell c{x, y, z};
+                const auto first = std::lower_bound(e.begin(), e.end(), c, cell_less);
+                auto last = first;
+                while (last != e.end() && last->cell == c) ++last;
+                tests = add_saturating(tests, std::uint64_t(last - first));
+              }
+        }
+      }
+      if (tests > max_tests) throw PairLimitError(tests, true, max_tests, n);
+    }
+  }
+
   parallel_items_on(runs.size(), std::min<unsigned>(threads, unsigned(std::max<std::size_t>(runs.size(), 1))), never,
                     [&](std::size_t r, unsigned worker) {
     const Run& run = runs[r];
@@ -184,11 +276,6 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
   });
 
   // 2. A box against the boxes of every coarser level, in its own range of their cells.
-  int finest_used = levels;
-  for (int l = levels - 1; l >= 0; --l)
-    if (used[l]) finest_used = l;
-  bool coarser = false;
-  for (int l = finest_used + 1; l < levels; ++l) coarser = coarser || used[l];
   if (coarser)
     parallel_items_on(n, threads, never, [&](std::size_t i, unsigned worker) {
       const std::uint32_t a = std::uint32_t(i);
@@ -197,16 +284,12 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
         if (!used[l]) continue;
         const std::vector<Entry>& e = entries[l];
         Cell lo, hi;
-        for (int k = 0; k < 3; ++k) {
-          lo[k] = grid.index(hull[a].lo[k], k, l);
-          hi[k] = grid.index(hull[a].hi[k], k, l);
-        }
+        cell_range(a, l, lo, hi);
         for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
           for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
             for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
               const Cell c{x, y, z};
-              auto it = std::lower_bound(e.begin(), e.end(), c,
-                                         [](const Entry& en, const Cell& key) { return en.cell < key; });
+              auto it = std::lower_bound(e.begin(), e.end(), c, cell_less);
               for (; it != e.end() && it->cell == c; ++it) {
                 const std::uint32_t b = it->box;
                 if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, l) == c) emit(worker, a, b);
@@ -227,6 +310,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
 
   std::size_t total = 0;
   for (const auto& f : found) total += f.size();
+  if (max_pairs > 0 && total > max_pairs) throw PairLimitError(total, false, max_pairs, n);
   out.reserve(total);
   for (const auto& f : found) out.insert(out.end(), f.begin(), f.end());
   parallel_sort(out, threads, [](Pair p, Pair q) { return p < q; });

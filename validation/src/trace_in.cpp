@@ -18,6 +18,7 @@
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
+#include "octocd/exact_pairs.hpp"
 #include "octocd/external.hpp"
 #include "octocd/shards.hpp"
 #include "octocd/text.hpp"
@@ -1027,6 +1028,8 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
       if (options.stop && options.stop()) throw ValidationStopped();
       made->observe_episodes(in.frame(f));
     }
+  } catch (const PairLimitError& e) {
+    throw PairLimitError(fmt::format("{}: {}", path, e.what()), e);  // "T: frame F: ..."
   } catch (const InputError& e) {
     named(e);
   } catch (const ValidationStopped&) {

@@ -5,19 +5,58 @@
 /// octocd/math.hpp: inclusive float comparisons), without testing every pair.
 
 #include <cstddef>
+#include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "octocd/broadphase.hpp"
+#include "octocd/error.hpp"
 #include "octocd/math.hpp"
 
 namespace octocd {
+
+namespace limits {
+/// Most reference pairs the validators judge in one frame, per body: a frame of n bodies
+/// whose (grown) boxes overlap in more than 64 n pairs is refused, since every pair costs
+/// the validators about 0.7 KiB and 3.5 us (SAT, FCL, the rows' truth). Real runs stay far
+/// below: the box lattice of bench_validation --lattice has 13 a body, the shipped scenes
+/// fewer; only piled-up (coincident) bodies come near, n / 2 a body.
+constexpr std::uint64_t kMaxPairsPerBody = 64;
+/// Candidate tests (two boxes sharing a grid cell) exact_pairs allows per allowed pair:
+/// two boxes of one level share at most 8 cells (2 per axis), so a frame within
+/// kMaxPairsPerBody makes about as many tests as pairs times 8 at most (the shipped
+/// scenes: 2 to 3 a pair).
+constexpr std::uint64_t kCandidateTestsPerPair = 8;
+}  // namespace limits
 
 /// Knobs of exact_pairs (defaults are what the validators use).
 struct ExactPairsSettings {
   /// Threads for the cell scan; 0: one below 4096 boxes, else the hardware's threads
   /// (std::thread::hardware_concurrency). The result does not depend on it.
   int threads = 0;
+  /// Most pairs per box; 0: no limit. With a limit, L = max_pairs_per_body x the boxes:
+  /// exact_pairs counts the candidate tests of its grid (boxes sharing a cell, O(n log n),
+  /// before any test or per-pair allocation) and throws PairLimitError when they exceed
+  /// limits::kCandidateTestsPerPair x L, or when the tests find more than L pairs (its
+  /// memory stays within the tests: 8 bytes each). The validators pass
+  /// limits::kMaxPairsPerBody.
+  std::uint64_t max_pairs_per_body = 0;
+};
+
+/// exact_pairs' refusal of boxes crowded beyond ExactPairsSettings::max_pairs_per_body (an
+/// InputError: exit 2). `count` is the candidate tests (`tests` true, counted before any
+/// test) or the pairs found (`tests` false); `limit` the number it exceeded.
+class PairLimitError : public InputError {
+ public:
+  /// The message: the count, what it counts, the bodies and the limit.
+  PairLimitError(std::uint64_t count, bool tests, std::uint64_t limit, std::size_t bodies);
+  /// The same figures under another message (a caller adds the frame, the file).
+  PairLimitError(const std::string& message, const PairLimitError& from);
+  std::uint64_t count = 0;  ///< candidate tests or pairs, as `tests` says
+  bool tests = false;       ///< count is candidate tests (true) or pairs found (false)
+  std::uint64_t limit = 0;  ///< the limit `count` exceeded
+  std::size_t bodies = 0;   ///< the boxes given
 };
 
 /// Every pair (a, b), a < b, of `boxes` (world AABBs, m, one per body) for which
@@ -42,12 +81,14 @@ struct ExactPairsSettings {
 /// Cost: O(n log n) for the grid plus the candidates that share a cell (for bodies of
 /// similar size spread through a scene, a few per body) plus n x the unbounded boxes;
 /// memory: 8 cell entries per box (32 bytes each) plus the pairs (8 bytes each). Many
-/// boxes crowded into one cell (all coincident) make it quadratic, as their pairs are.
+/// boxes crowded into one cell (all coincident) make it quadratic, as their pairs are;
+/// ExactPairsSettings::max_pairs_per_body refuses them before that work (PairLimitError).
 void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings = {});
 
 /// exact_pairs as a BroadPhase named "exact-grid" (the validators' reference where
 /// `flat`'s n(n-1)/2 tests cost too much). Stateless; stats.pairs and
-/// stats.cell_candidates are the pairs found.
+/// stats.cell_candidates are the pairs found; settings.max_pairs_per_body applies to
+/// each call (PairLimitError).
 std::unique_ptr<BroadPhase> make_exact_pairs_broadphase(const ExactPairsSettings& settings = {});
 
 }  // namespace octocd

@@ -375,6 +375,9 @@ class FrameValidators {
   /// (candidate sets, midphase completeness, normals) for this frame; the per-contact
   /// and applied-state checks run on every frame. The record is trusted: callers with
   /// data from outside octocd check it first (check_frame_record, octocd/external.hpp).
+  /// A checked frame whose boxes overlap in more than limits::kMaxPairsPerBody pairs a
+  /// body (octocd/exact_pairs.hpp; counted before the per-pair work) throws
+  /// PairLimitError, "frame F: ...".
   void observe(const FrameRecord& rec, bool checked);
 
   /// Checks the frame the engine just stepped (its record()). Throws RuntimeError when
