@@ -114,7 +114,8 @@ struct MujocoWorld::Impl {
   }
 
   void read_state();
-  void check_step();
+  void check_step(const Model& model);
+  std::string body_of_index(const Model& model, int k, int index) const;
   void fill_record();
   std::uint64_t overlapping_pairs() const;
 };
@@ -134,9 +135,23 @@ void MujocoWorld::Impl::read_state() {
   }
 }
 
+/// The octocd body whose free joint holds index `index` of qpos (warning k =
+/// mjWARN_BADQPOS) or of qvel/qacc (the others: a DOF), as ": DOF 9 is body 6 (group
+/// g)"; empty when no body holds it.
+std::string MujocoWorld::Impl::body_of_index(const Model& model, int k, int index) const {
+  const bool qpos = k == mjWARN_BADQPOS;
+  const std::vector<int>& adr = qpos ? qpos_adr : dof_adr;
+  const int width = qpos ? 7 : 6;
+  for (std::size_t i = 0; i < adr.size(); ++i)
+    if (adr[i] >= 0 && adr[i] <= index && index < adr[i] + width)
+      return fmt::format(": {} {} is body {} (group {})", qpos ? "qpos index" : "DOF", index, i, model.bodies[i].group);
+  return "";
+}
+
 /// After a step: a non-finite state names its body; a MuJoCo warning (buffers full:
-/// contacts or constraints dropped; a bad qpos, qvel or qacc: the state reset) throws.
-void MujocoWorld::Impl::check_step() {
+/// contacts or constraints dropped; a bad qpos, qvel or qacc: the state reset, named
+/// with the octocd body of MuJoCo's index) throws.
+void MujocoWorld::Impl::check_step(const Model& model) {
   for (std::size_t i = 0; i < w.size(); ++i) {
     if (qpos_adr[i] < 0) continue;
     bool finite = true;
@@ -159,8 +174,9 @@ void MujocoWorld::Impl::check_step() {
     if (d->warning[k].number == warnings[static_cast<std::size_t>(k)]) continue;
     warnings[static_cast<std::size_t>(k)] = d->warning[k].number;
     if (k == mjWARN_VGEOMFULL || k == mjWARN_BADCTRL) continue;  // nothing octocd uses
-    throw RuntimeError(fmt::format("mujoco: frame {}: MuJoCo warning: {} ({})", frame,
-                                   k < 8 ? kWhat[k] : "unknown", g_last_warning));
+    const bool bad_state = k == mjWARN_BADQPOS || k == mjWARN_BADQVEL || k == mjWARN_BADQACC;
+    throw RuntimeError(fmt::format("mujoco: frame {}: MuJoCo warning: {} ({}){}", frame, k < 8 ? kWhat[k] : "unknown",
+                                   g_last_warning, bad_state ? body_of_index(model, k, d->warning[k].lastinfo) : ""));
   }
 }
 
@@ -438,7 +454,7 @@ const FrameMetrics& MujocoWorld::step() {
   const auto t1 = std::chrono::steady_clock::now();
   fm.frame = ++im.frame;
   fm.time = static_cast<double>(im.frame) * im.dt;
-  im.check_step();
+  im.check_step(*model_);
   im.read_state();
   // The world AABBs at the detection pose (the pre-step state): the record's and the pair count's.
   r.aabbs.resize(n);

@@ -2,7 +2,8 @@
 // closed forms of its integrator (free fall, torque-free spin with MuJoCo's explicit
 // gyroscopic term), a box resting on a floor, the sign conventions of its contact rows,
 // a trace the physics tier passes, its settings, and the faults of MuJoCo 2.2 that the
-// physics tier reports, each shown with a witness computed from MuJoCo's own data.
+// physics tier reports or that stop a run, each shown with a witness computed from
+// MuJoCo's own data.
 // Skipped (GTEST_SKIP) when octocd is built without MuJoCo.
 #include <gtest/gtest.h>
 
@@ -38,6 +39,12 @@ namespace {
 std::string scene_path(const std::string& name) {
   const char* root = std::getenv("OCTOCD_SOURCE_DIR");
   return std::string(root ? root : ".") + "/datasets/scenes/" + name + ".json";
+}
+
+/// True when datasets/fetch.sh has put `file` into datasets/cache.
+bool have_dataset_mesh(const std::string& file) {
+  const char* root = std::getenv("OCTOCD_SOURCE_DIR");
+  return std::filesystem::exists(std::string(root ? root : ".") + "/datasets/cache/" + file);
 }
 
 /// The same MJCF loaded into a MuJoCo model of the test's own, with the engine's initial
@@ -355,6 +362,30 @@ TEST(MujocoWorld, StackOfTenTracePassesThePhysicsTier) {
   EXPECT_TRUE(flight);
 }
 
+// A brick spun at 1000 rad/s about its middle axis, alone (|w| dt = 1 rad a step):
+// MuJoCo's explicit gyroscopic term diverges (the fate of mixed-pile-1000's dragon 584,
+// docs/engines.md "mujoco") and mj_checkAcc resets the state at frame 102. The error names
+// the frame, MuJoCo's DOF and the octocd body that holds it: DOF 9 is the second free
+// joint's (DOFs 6-11), body 1 of the scene.
+TEST(MujocoWorld, BadAccelerationNamesTheBody) {
+  const auto model = build_model(scene_of(
+      R"({"name": "calm", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 1, "positions": [[-1, 2, 0]]},
+         {"name": "spinner", "shape": {"box": [0.2, 0.1, 0.05]}, "count": 1, "mass": 1, "positions": [[1, 2, 0]],
+          "angular_velocity": [10, 1000, 10]})",
+      R"(, "gravity": [0, 0, 0])"));
+  MujocoWorld w(model, model->initial);
+  std::string what;
+  int frames = 0;
+  try {
+    for (; frames < 1000; ++frames) w.step();
+  } catch (const RuntimeError& e) {
+    what = e.what();
+  }
+  EXPECT_EQ(frames, 101) << "steps before the failing one";
+  EXPECT_NE(what.find("mujoco: frame 102: MuJoCo warning: bad number in qacc"), std::string::npos) << what;
+  EXPECT_NE(what.find("): DOF 9 is body 1 (group spinner)"), std::string::npos) << what;
+}
+
 TEST(MujocoSettings, KeysValuesAndErrors) {
   MujocoSettings s;
   apply_mujoco_settings(s, {"iterations=20", "cone=pyramidal", "timeconst=0.01", "margin=0.002", "multiccd=off",
@@ -633,6 +664,113 @@ TEST(MujocoFaults, ConvexColliderTiltsAFloorNormalTowardTheFloorsCentreLine) {
   RecordProperty("mujoco_dist_m", std::to_string(c.dist));
   RecordProperty("normal_force_N", std::to_string(f6[0]));
   RecordProperty("sideways_force_N", std::to_string(sideways));
+}
+
+// mixed-pile-1000 under MuJoCo (`octocd run` stops at frame 631: "bad number in qacc"),
+// its first step, frame 476 of MuJoCo's own run: bunny 94 lies at the foot of the +z wall,
+// its hull 2.2 mm past the wall's inner face and 1.0 mm above the floor. MuJoCo 2.2
+// collides a hull with a box by MPR (libccd), whose search starts on the line between the
+// two geoms' centres; the wall's centre is 2 m above the bunny, and the one contact it
+// reports points down along the wall, 85.5 deg from the face's normal (4.4 deg from that
+// line), with dist = -28.7 mm: the solver pushes the bunny into the floor with 2.36 kN.
+// Witness, the bunny alone at that pose in the same open box, from MuJoCo's own data: the
+// hull's vertices (mesh_vert placed by geom_xpos and geom_xmat) against the wall's box
+// (geom_xpos, geom_xmat, geom_size). Moving the hull by its overlap with the box along one
+// of the box's axes separates them, so the least such overlap (2.24 mm) bounds the
+// penetration depth; MuJoCo's depth is more than ten times it. (In the pile the floor's
+// contact, MPR again, is then 0.106 m deep along the floor's length with the hull 14.7 mm
+// below its top, and the bunny leaves at 96 m/s spinning at 1618 rad/s; docs/engines.md,
+// "mujoco".)
+TEST(MujocoFaults, HullAtTheFootOfAWallGetsAContactAlongTheWall) {
+  if (!have_dataset_mesh("bunny.obj")) GTEST_SKIP() << "datasets not fetched (run datasets/fetch.sh)";
+  const Scene scene = parse_scene(
+      R"({"name": "corner", "domain": {"min": [-1, 0, -1], "max": [1, 4, 1]}, "dt": 0.001, "walls": "open-box",
+          "groups": [{"name": "bunny", "shape": {"mesh": "bunny", "scale": 0.12}, "count": 1, "mass": 1.1,
+                      "positions": [[0.131268734, 0.0336819256, 0.952305129]],
+                      "orientation": [0.358527071, -0.672032727, 0.584547757, 0.279525084]}]})",
+      scene_path("corner"));
+  const auto model = build_model(scene);
+  ASSERT_EQ(model->bodies.size(), 6u);  // floor, -x, +x, -z, +z walls, the bunny
+  MujocoWorld w(model, model->initial);
+  RawMujoco raw(w, model->initial);
+  mj_forward(raw.m, raw.d);
+  const int gw = raw.geom[4], gb = raw.geom[5];
+  const int mesh = raw.m->geom_dataid[gb];
+  ASSERT_GE(mesh, 0);
+  // Hull vertex v in the world: mesh_vert (float, the mesh's inertial frame) placed by the geom.
+  auto hull_vertex = [&](int v, mjtNum world[3]) {
+    mjtNum local[3];
+    for (int k = 0; k < 3; ++k) local[k] = raw.m->mesh_vert[3 * (raw.m->mesh_vertadr[mesh] + v) + k];
+    mju_mulMatVec(world, raw.d->geom_xmat + 9 * gb, local, 3, 3);
+    for (int k = 0; k < 3; ++k) world[k] += raw.d->geom_xpos[3 * gb + k];
+  };
+  // The hull lies where octocd puts the mesh: the world AABB of MuJoCo's vertices (moved
+  // into the mesh's inertial frame, placed by geom_xpos/geom_xmat) is the posed mesh's.
+  {
+    const Shape& shape = model->shapes[model->bodies[5].shape];
+    ASSERT_TRUE(shape.mesh);
+    const Pose pose{model->initial.x[5], normalized(model->initial.q[5])};
+    for (int a = 0; a < 3; ++a) {
+      double lo = 1e300, hi = -1e300, mlo = 1e300, mhi = -1e300;
+      for (const Vec3& v : shape.mesh->vertices) {
+        const double p = static_cast<double>(to_world(pose, v)[a]);
+        lo = std::min(lo, p), hi = std::max(hi, p);
+      }
+      for (int v = 0; v < raw.m->mesh_vertnum[mesh]; ++v) {
+        mjtNum world[3];
+        hull_vertex(v, world);
+        mlo = std::min(mlo, world[a]), mhi = std::max(mhi, world[a]);
+      }
+      EXPECT_NEAR(mlo, lo, 2e-6) << "axis " << a;
+      EXPECT_NEAR(mhi, hi, 2e-6) << "axis " << a;
+    }
+  }
+  // The hull's overlap with the wall's box along each of the box's axes; the least bounds
+  // the penetration depth.
+  double bound = 1e300, lowest = 1e300;
+  int bound_axis = -1;
+  for (int a = 0; a < 3; ++a) {
+    const mjtNum* r = raw.d->geom_xmat + 9 * gw;  // row-major: the box's axis a is column a
+    const mjtNum axis[3] = {r[a], r[3 + a], r[6 + a]};
+    double lo = 1e300, hi = -1e300;
+    for (int v = 0; v < raw.m->mesh_vertnum[mesh]; ++v) {
+      mjtNum world[3];
+      hull_vertex(v, world);
+      const double p = mju_dot3(world, axis);
+      lo = std::min(lo, p), hi = std::max(hi, p);
+      lowest = std::min(lowest, static_cast<double>(world[1]));
+    }
+    const double c = mju_dot3(raw.d->geom_xpos + 3 * gw, axis), h = raw.m->geom_size[3 * gw + a];
+    const double overlap = std::min(hi - (c - h), (c + h) - lo);
+    if (overlap < bound) bound = overlap, bound_axis = a;
+  }
+  EXPECT_EQ(bound_axis, 2) << "the least overlap is across the wall (its z axis)";
+  EXPECT_GT(bound, 0.0) << "the hull reaches into the wall";
+  EXPECT_LT(bound, 0.003) << "by 2.2 mm";
+  EXPECT_GT(lowest, 0.0) << "the hull is above the floor";
+  EXPECT_TRUE(raw.contacts(0, 5).empty()) << "and has no contact with it";
+  const std::vector<int> cs = raw.contacts(4, 5);
+  ASSERT_EQ(cs.size(), 1u);
+  const mjContact& c = raw.d->contact[cs[0]];
+  ASSERT_EQ(c.geom1, gw) << "the normal points from the wall to the bunny";
+  const mjtNum face[3] = {raw.d->geom_xmat[9 * gw + 2], raw.d->geom_xmat[9 * gw + 5], raw.d->geom_xmat[9 * gw + 8]};
+  const double angle_deg = std::acos(std::min(1.0, std::fabs(mju_dot3(c.frame, face)))) * 180.0 / 3.14159265358979;
+  mjtNum centres[3];
+  mju_sub3(centres, raw.d->geom_xpos + 3 * gb, raw.d->geom_xpos + 3 * gw);
+  mju_normalize3(centres);
+  const double to_centres_deg = std::acos(std::min(1.0, mju_dot3(c.frame, centres))) * 180.0 / 3.14159265358979;
+  mjtNum f6[6];
+  mj_contactForce(raw.m, raw.d, cs[0], f6);
+  EXPECT_GT(-c.dist, 10.0 * bound) << "MuJoCo's depth against the bound";
+  EXPECT_GT(angle_deg, 80.0) << "the normal against the wall's face normal (deg)";
+  EXPECT_LT(to_centres_deg, 10.0) << "the normal against the line between the geoms' centres (deg)";
+  EXPECT_LT(c.frame[1], -0.99) << "the normal points down along the wall";
+  EXPECT_GT(f6[0], 0.0) << "and MuJoCo pushes the bunny along it, into the floor";
+  RecordProperty("depth_bound_m", std::to_string(bound));
+  RecordProperty("mujoco_dist_m", std::to_string(c.dist));
+  RecordProperty("normal_to_face_deg", std::to_string(angle_deg));
+  RecordProperty("normal_to_centres_deg", std::to_string(to_centres_deg));
+  RecordProperty("normal_force_N", std::to_string(f6[0]));
 }
 
 #endif  // OCTOCD_HAVE_MUJOCO

@@ -53,7 +53,8 @@ namespace octocd {
 /// before the step ("pre-step"). MuJoCo's errors (mju_error) are turned into
 /// RuntimeError while a call is in MuJoCo; its warnings (contact or constraint buffer
 /// full, a bad qpos, qvel or qacc, which MuJoCo answers by dropping contacts or
-/// resetting the state) throw RuntimeError naming the warning and frame.
+/// resetting the state) throw RuntimeError naming the warning and frame, and for a bad
+/// qpos, qvel or qacc the octocd body whose free joint holds MuJoCo's index.
 class MujocoWorld : public Engine {
  public:
   /// From a model (shared, not copied) and the state to start from (x, v, w per body;
