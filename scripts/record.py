@@ -109,6 +109,7 @@ def bench_rows(result):
             "scene": params.get("scene", ""),
             "engine": params.get("engine", ""),
             "broadphase": p.get("engine_broadphase", params.get("broadphase", "")),
+            "traced": params.get("traced", "off"),
         }
         for axis, value in sorted(params.get("axes", {}).items()):
             base[f"axis_{axis}"] = value
@@ -193,7 +194,7 @@ def headline_table5(rows):
     """Table 5's steps/s medians: a row per scene and midphase, a column per engine."""
     engines, cells, keys = [], {}, []
     for r in rows:
-        if r.get("status") != "ok" or "steps_per_s_median" not in r:
+        if r.get("status") != "ok" or "steps_per_s_median" not in r or r.get("traced", "off") != "off":
             continue
         key = (r["scene"], r.get("axis_midphase", ""))
         if key not in keys:
@@ -215,7 +216,7 @@ def headline_small(rows):
     """small-scenes' steps/s medians: a row per scene, cpu and cuda, and cuda / cpu."""
     cells, scenes, bodies = {}, [], {}
     for r in rows:
-        if r.get("status") != "ok" or "steps_per_s_median" not in r:
+        if r.get("status") != "ok" or "steps_per_s_median" not in r or r.get("traced", "off") != "off":
             continue
         if r["scene"] not in scenes:
             scenes.append(r["scene"])
@@ -230,6 +231,41 @@ def headline_small(rows):
     out += ["", "Median (min-max) over the repetitions of each point (the ratio of the medians); the "
             "targets of [docs/gpu.md](../../docs/gpu.md): cuda >= 2x the same host's cpu engine on all "
             "its threads on every scene, bunny-stack-50 >= 60,000 steps/s."]
+    return out
+
+
+def headline_traced(rows):
+    """Traced points (`bench --traced`): a row per scene (and midphase), a column per engine
+    and trace mode, each traced figure with its ratio to the same engine's untraced one."""
+    cells, keys, cols = {}, [], []
+    for r in rows:
+        if r.get("status") != "ok" or "steps_per_s_median" not in r:
+            continue
+        key = (r["scene"], r.get("axis_midphase", ""))
+        if key not in keys:
+            keys.append(key)
+        col = (r["engine"], r.get("traced", "off"))
+        if col not in cols:
+            cols.append(col)
+        cells[key + col] = r
+    mid = any(k[1] for k in keys)
+    head = "| scene | " + ("midphase | " if mid else "") + " | ".join(
+        e if t == "off" else f"{e} {t}" for e, t in cols) + " |"
+    out = [head, "|---|" + ("---|" if mid else "") + "---|" * len(cols)]
+    for key in keys:
+        vals = []
+        for e, t in cols:
+            r = cells.get(key + (e, t))
+            base = cells.get(key + (e, "off"))
+            v = spread(r)
+            if r and base and t != "off":
+                v += f" {r['steps_per_s_median'] / base['steps_per_s_median']:.2f}x"
+            vals.append(v)
+        out.append(f"| {key[0]} | " + (f"{key[1]} | " if mid else "") + " | ".join(vals) + " |")
+    out += ["", "Median (min-max) over the repetitions; a traced point's steps/s counts the whole frame (the "
+            "step, the copy-back of what the trace records, the write), `states`: a trace with the state "
+            "every 10 frames, `contacts`: with every contact row; x: the ratio to the same engine untraced "
+            "(docs/gpu.md, \"Traced runs\")."]
     return out
 
 
@@ -248,6 +284,8 @@ def main():
     small = []
     for name, result in merged_results(sorted(glob.glob(os.path.join(a.input, "bench", "*.json")))):
         rows = write_csv(os.path.join(a.output, f"{name}.csv"), bench_rows(result))
+        for r in rows:
+            r["_file"] = name  # after the CSV is written: which run a headline reads
         sweep = result.get("sweep", {}).get("name", name)
         shards = result.get("settings", {}).get("shard", {}).get("count", 1)
         made.append((f"{name}.csv", f"`octocd bench {sweep}`: "
@@ -305,6 +343,12 @@ def main():
         readme += ["", "## Table 5 (paper section 4.1): steps/s", ""] + headline_table5(table5)
     if small:
         readme += ["", "## Small scenes (50 to 2048 bodies): steps/s", ""] + headline_small(small)
+    for name, group in (("Small scenes", small), ("Table 5", table5)):
+        traced = [r for r in group if r.get("traced", "off") != "off"]
+        if traced:
+            scenes = {r["scene"] for r in traced}
+            same = [r for r in group if r["_file"] == traced[0]["_file"]]
+            readme += ["", f"## {name}, traced (`bench --traced`): steps/s", ""] + headline_traced(same)
     if gbp_rows:
         readme += ["", "## GPU broadphase: ms to the sorted pair set", "",
                    "| broadphase | bodies | median ms (min-max) |", "|---|---|---|"]
