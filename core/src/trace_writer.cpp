@@ -10,7 +10,8 @@
 // writes, deflate and H5Fflush beside the caller's next steps): the rows of one flush are
 // handed over whole, the next waits for it, so at most two batches are held; a failure on
 // that thread is thrown by the next call that appends, flushes or closes. flush() and
-// close() write on the caller's thread once the writer thread is idle.
+// close() write on the caller's thread once the writer thread is idle. With an HDF5 built
+// without thread safety every flush runs on the caller's thread.
 
 
 #include "octocd/trace.hpp"
@@ -415,8 +416,18 @@ struct TraceWriter::Impl {
     }
   }
 
-  // Hands the appended rows to the writer thread (after the previous flush is done).
+  // Hands the appended rows to the writer thread (after the previous flush is done). An
+  // HDF5 built without thread safety (not Debian's) is called from one thread only: the
+  // flush then runs here.
   void flush_behind(const std::string& when) {
+    static const bool threadsafe = [] {
+      hbool_t ts = 0;
+      return H5is_library_threadsafe(&ts) >= 0 && ts;
+    }();
+    if (!threadsafe) {
+      write_and_flush(when);
+      return;
+    }
     wait_writer();
     for (Column* c : columns()) c->stage();
     since_flush = 0;
