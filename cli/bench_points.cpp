@@ -3,10 +3,7 @@
 // a broadphase point (recorded AABBs replayed through one broadphase of one engine).
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
 #include <cmath>
-#include <cstdlib>
-#include <cstring>
 #include <ctime>
 #include <filesystem>
 #include <limits>
@@ -39,24 +36,12 @@ double process_cpu_ms() {
   return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 
-/// A folder of its own in the temp folder ($TMPDIR), "PREFIX-XXXXXX" (mkdtemp: an
-/// unpredictable name, mode 0700), removed with what it holds when this goes; empty `path`
-/// when default-constructed. RuntimeError when it cannot be made.
-struct PrivateFolder {
+/// Removes the file at `path` (if any) when it goes.
+struct RemovedAtEnd {
   std::string path;
-  PrivateFolder() = default;
-  explicit PrivateFolder(const std::string& prefix) {
-    std::string name = (fs::temp_directory_path() / (prefix + "-XXXXXX")).string();
-    if (::mkdtemp(name.data()) == nullptr)
-      throw RuntimeError(fmt::format("bench: {}: a temporary folder cannot be made ({})", name, std::strerror(errno)));
-    path = name;
-  }
-  PrivateFolder(const PrivateFolder&) = delete;
-  PrivateFolder& operator=(const PrivateFolder&) = delete;
-  PrivateFolder(PrivateFolder&& o) noexcept : path(std::move(o.path)) { o.path.clear(); }
-  ~PrivateFolder() {
+  ~RemovedAtEnd() {
     std::error_code ec;
-    if (!path.empty()) fs::remove_all(path, ec);
+    if (!path.empty()) fs::remove(path, ec);
   }
 };
 
@@ -184,10 +169,10 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   std::vector<double> energy_series(static_cast<std::size_t>(buckets), 0.0);
   std::vector<double> wall;
   int cut = 0;
-  // A traced point writes every repetition's trace (into a private folder in $TMPDIR,
-  // removed with the point) unless --trace-dir keeps its first.
+  // A traced point writes every repetition's trace (a temporary file in $TMPDIR, removed
+  // with the point) unless --trace-dir keeps its first.
   const bool traced = p.traced != "off";
-  const PrivateFolder scratch = traced ? PrivateFolder("octocd-bench-trace") : PrivateFolder();
+  const RemovedAtEnd scratch{traced ? temporary_trace("bench") : std::string()};
   for (int rep = 0; rep < repeat; ++rep) {
     if (rep > 0) {
       engine.reset();  // the last repetition's device memory back first: the memory check sees one engine
@@ -195,10 +180,9 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     }
     std::unique_ptr<TraceWriter> trace;
     const bool kept = rep == 0 && ov.trace && !o.trace_dir.empty();
-    bool states_only = true;  // nothing read between the state frames: the engine may run ahead
-    bool v2 = false;
+    TraceFeed feed{false, true};  // an untraced point's kept trace: version 1, states only
     if (kept || traced) {
-      std::string path = (fs::path(scratch.path) / "trace.h5").string();
+      std::string path = scratch.path;
       if (kept) {
         fs::create_directories(o.trace_dir);
         path = (fs::path(o.trace_dir) / (file_safe(p.id) + ".h5")).string();
@@ -213,16 +197,16 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
       if (const RotationTraits* rt = engine->rotation_traits(); rt && traced) {  // as `run --trace` writes it
         topt.v2 = *rt;
         topt.gravity = model->scene.gravity;
-        v2 = engine->can_record();
       }
-      states_only = !topt.contacts && !v2;
+      if (traced) feed = TraceFeed::of(*engine, topt.contacts);
       trace = std::make_unique<TraceWriter>(path, meta, trace_bodies(*engine), topt);
       trace->append_state(0, engine->state());
     }
     for (auto& w : sums) w.emplace_back();
     for (auto& b : series) b.emplace_back();
     if (!trace) engine->plan_steps(total);  // nothing but the metrics is read between the steps
-    else if (states_only) engine->plan_steps(std::min<std::int64_t>(trace->steps_to_next_state(0), total));
+    else feed.start(*trace, *engine, total);
+    FrameMetrics timed;  // a traced point's frame: the step's metrics with the whole frame's time
     const auto t0 = Clock::now();
     for (int f = 1; f <= total; ++f) {
       if (octocd::stop_signal() != 0) {
@@ -236,17 +220,16 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
                                      p.id, f, total));  // then set_stop_kept's text: what the result keeps
       const double cpu0 = host_engine ? process_cpu_ms() : 0.0;
       const auto t_frame = Clock::now();
-      FrameMetrics m = engine->step();
+      const FrameMetrics& stepped = engine->step();
       if (trace) {
-        const bool due = trace->state_due(m.frame);
-        if (v2)
-          trace->append_frame_v2(m, engine->state(), engine->record());
-        else
-          trace->append_frame(m, due ? &engine->state() : nullptr, engine->contacts());
-        if (states_only && due) engine->plan_steps(std::min<std::int64_t>(trace->steps_to_next_state(m.frame), total - f));
+        feed.append(*trace, *engine, stepped, total - f);
         // A traced point's step is the whole frame: the step, the copy-back and the write.
-        if (traced) m.step_ms = std::chrono::duration<double, std::milli>(Clock::now() - t_frame).count();
+        if (traced) {
+          timed = stepped;
+          timed.step_ms = std::chrono::duration<double, std::milli>(Clock::now() - t_frame).count();
+        }
       }
+      const FrameMetrics& m = traced ? timed : stepped;
       const double cpu = host_engine ? process_cpu_ms() - cpu0 : 0.0;
       within.reset();
       for (std::size_t w = 0; w < s.windows.size(); ++w)

@@ -318,11 +318,10 @@ int run_command(const RunOptions& o) {
   Progress progress(scene.frames, !o.quiet);
   // Without a trace nothing but the metrics is read between the steps: the engine may run
   // ahead of the calls (the summary reads no state).
-  // With a trace of states only (no contact rows, version 1), the engine may run ahead to
-  // the next frame whose state the trace writes: nothing else is read in between.
-  const bool states_only = trace && !world.rotation_traits() && !(o.contacts && world.can_record());
+  // With a trace of states only the engine may run ahead to the next state frame (TraceFeed).
+  const octocd::cli::TraceFeed feed = octocd::cli::TraceFeed::of(world, o.contacts);
   if (!trace) world.plan_steps(scene.frames);
-  else if (states_only) world.plan_steps(std::min<std::int64_t>(trace->steps_to_next_state(0), scene.frames));
+  else feed.start(*trace, world, scene.frames);
   const auto t0 = Clock::now();
   try {
     for (int f = 0; f < scene.frames && octocd::stop_signal() == 0; ++f) {
@@ -335,14 +334,7 @@ int run_command(const RunOptions& o) {
       within.reset();
       totals.add(m);
       const std::int64_t flushed = trace ? trace->flushed_frames() : 0;
-      if (trace && world.rotation_traits() && world.can_record())
-        trace->append_frame_v2(m, world.state(), world.record());
-      else if (trace) {
-        const bool due = trace->state_due(m.frame);
-        trace->append_frame(m, due ? &world.state() : nullptr, world.contacts());
-        if (states_only && due)
-          world.plan_steps(std::min<std::int64_t>(trace->steps_to_next_state(m.frame), scene.frames - (f + 1)));
-      }
+      if (trace) feed.append(*trace, world, m, scene.frames - (f + 1));
       if (trace && trace->flushed_frames() != flushed) octocd::set_stop_kept(run_kept(trace.get(), o.trace));
       progress.update(m, totals);
     }

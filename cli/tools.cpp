@@ -114,6 +114,36 @@ std::vector<std::string> split_list(const std::string& text) {
   return out;
 }
 
+TraceFeed TraceFeed::of(const Engine& engine, bool contacts) {
+  TraceFeed f;
+  f.v2 = engine.rotation_traits() != nullptr && engine.can_record();
+  f.states_only = !f.v2 && !(contacts && engine.can_record());
+  return f;
+}
+
+void TraceFeed::start(const TraceWriter& trace, Engine& engine, std::int64_t steps) const {
+  if (states_only) engine.plan_steps(std::min<std::int64_t>(trace.steps_to_next_state(0), steps));
+}
+
+void TraceFeed::append(TraceWriter& trace, Engine& engine, const FrameMetrics& m, std::int64_t remaining) const {
+  if (v2) {
+    trace.append_frame_v2(m, engine.state(), engine.record());
+    return;
+  }
+  const bool due = trace.state_due(m.frame);
+  trace.append_frame(m, due ? &engine.state() : nullptr, engine.contacts());
+  if (states_only && due) engine.plan_steps(std::min<std::int64_t>(trace.steps_to_next_state(m.frame), remaining));
+}
+
+std::string temporary_trace(const std::string& what) {
+  std::string name = (std::filesystem::temp_directory_path() / fmt::format("octocd-{}-XXXXXX.h5", what)).string();
+  const int fd = ::mkstemps(name.data(), 3);
+  if (fd < 0)
+    throw RuntimeError(fmt::format("{}: a temporary trace cannot be created ({})", name, std::strerror(errno)));
+  ::close(fd);
+  return name;
+}
+
 std::string utc_time_now() {
   const std::time_t t = std::time(nullptr);
   std::tm tm{};

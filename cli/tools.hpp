@@ -24,6 +24,7 @@
 #include "octocd/atomic_file.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/engines.hpp"
+#include "octocd/trace.hpp"
 
 namespace octocd::cli {
 
@@ -67,6 +68,30 @@ std::vector<std::string> split_list(const std::string& text);
 
 /// ISO 8601 UTC time now, e.g. 2025-01-01T12:00:00Z.
 std::string utc_time_now();
+
+/// How a run's steps reach its trace (`run --trace`, `bench --traced`): a rotating engine
+/// that records writes version 2 records; otherwise version 1 rows, the state given only on
+/// the frames whose state the trace writes, and with no contact rows the engine may run
+/// ahead to the next such frame (Engine::plan_steps; nothing else is read in between).
+struct TraceFeed {
+  bool v2 = false;           ///< append_frame_v2 with the engine's record
+  bool states_only = false;  ///< no contact rows and not v2: the engine runs ahead between state frames
+
+  /// The feed of `engine` into a trace that records contact rows or not.
+  static TraceFeed of(const Engine& engine, bool contacts);
+  /// Promises the steps to the first state frame (at most `steps`, the run's); call before
+  /// the first step.
+  void start(const TraceWriter& trace, Engine& engine, std::int64_t steps) const;
+  /// Appends the step `m` just taken and, at a state frame of a states-only feed, promises
+  /// the steps to the next one (at most `remaining`, the run's steps left). Throws what
+  /// TraceWriter throws.
+  void append(TraceWriter& trace, Engine& engine, const FrameMetrics& m, std::int64_t remaining) const;
+};
+
+/// A new empty file in the temp folder ($TMPDIR), "octocd-WHAT-XXXXXX.h5" with an
+/// unpredictable suffix, created with O_EXCL (mkstemps): nothing planted at its name is
+/// followed; the caller removes it. RuntimeError naming it when it cannot be created.
+std::string temporary_trace(const std::string& what);
 
 
 // ---- replaying recorded broadphase input (cli/replay.cpp; `replay` and bench sweeps) ----

@@ -387,19 +387,6 @@ int validate_merge(const ValidateOptions& o) {
 
 int validate_scene_command(ValidateOptions& o, Clock::time_point t0);
 
-/// A new empty file in the temp folder, "octocd-validate-ENGINE-XXXXXX.h5" with an
-/// unpredictable suffix, created with O_EXCL (mkstemps): nothing planted at its name is
-/// followed. RuntimeError when it cannot be created.
-std::string temporary_trace(const std::string& engine) {
-  std::string name =
-      (std::filesystem::temp_directory_path() / fmt::format("octocd-validate-{}-XXXXXX.h5", engine)).string();
-  const int fd = ::mkstemps(name.data(), 3);
-  if (fd < 0)
-    throw octocd::RuntimeError(fmt::format("validate: {}: a temporary trace cannot be created ({})", name,
-                                           std::strerror(errno)));
-  ::close(fd);
-  return name;
-}
 
 /// `octocd validate SCENE --engine E` for a reference engine (EngineInfo::records_every_step
 /// false: Bullet, MuJoCo, ODE): the engine runs `--frames` steps into a version 2 trace
@@ -409,7 +396,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
                            const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
   namespace fs = std::filesystem;
   const bool temporary = o.trace.empty();
-  const std::string path = temporary ? temporary_trace(o.engine) : o.trace;
+  const std::string path = temporary ? octocd::cli::temporary_trace("validate-" + o.engine) : o.trace;
   const std::string what = o.engine + (octocd::scene_rotates(model->scene) ? " (rotation)" : " (translation only)");
   std::string geometry;
   {

@@ -23,66 +23,16 @@
 #include "octocd/expect.hpp"
 #include "octocd/json_strict.hpp"
 #include "octocd/shards.hpp"
+#include "support/shard_rows.hpp"
 
 namespace {
 
 using json = nlohmann::json;
 
-/// The rows of shard `index` (penetration: merged by the maximum; contact-completeness:
-/// by the sum).
-std::vector<octocd::ValidationResult> rows_of(int index) {
-  octocd::ValidationResult pen;
-  pen.tier = octocd::Tier::Physics;
-  pen.name = "penetration";
-  pen.figure = "deepest penetration (m)";
-  pen.measured = 0.001 * (index + 1);
-  pen.bound = 0.0005;
-  pen.pass = false;
-  pen.judged = 10;
-  pen.seconds = 0.5;
-  pen.detail = "frame 1: pair (0, 1)";
-  pen.tolerances = "penetration_slops";
-  octocd::ValidationCause c;
-  c.name = "penetration";
-  c.unit = "m";
-  c.count = 3;
-  c.worst = pen.measured;
-  c.examples.push_back({index * 45 + 1, "pair (0, 1)", pen.measured, "too deep"});
-  c.items = {"pair (0, 1)", "pair (" + std::to_string(index) + ", 2)"};
-  pen.causes.push_back(c);
-  octocd::ValidationResult cc;
-  cc.tier = octocd::Tier::Physics;
-  cc.name = "contact-completeness";
-  cc.figure = "contacts missing or false";
-  cc.measured = 2;
-  cc.bound = 0;
-  cc.pass = false;
-  cc.judged = 20;
-  cc.detail = "frame 3: pair (1, 2)";
-  octocd::ValidationCause m;
-  m.name = "missing-contact";
-  m.unit = "m";
-  m.count = 2;
-  m.worst = 0.01;
-  m.examples.push_back({index * 45 + 3, "pair (1, 2)", 0.01, "missing"});
-  m.items = {"pair (1, 2)"};
-  cc.causes.push_back(m);
-  return {pen, cc};
-}
-
-/// Shard 0 of the input's run: rows_of(0) with the input's "shard" object (index 0, its
+/// Shard 0 of the input's run: shard_rows(0, 1) with the input's "shard" object (index 0, its
 /// first and last frame), or a run of 2 shards of t.h5 when the input has none.
 std::string shard0_text(const std::string& input) {
-  octocd::ShardIdentity id;
-  id.trace = "t.h5";
-  id.trace_bytes = 12345;
-  id.engine = "bullet";
-  id.bodies = 8;
-  id.frames = 90;
-  id.every = 3;
-  id.against = "none";
-  nlohmann::ordered_json meta = {{"engine", "bullet"}, {"frames", 90}, {"every", 3}, {"against", "none"}};
-  meta["shard"] = octocd::shard_json({0, 2}, id);
+  nlohmann::ordered_json meta = octocd::test::shard_meta(0, 2);
   json in;
   try {
     in = octocd::parse_json_strict(input, "input");  // at most 64 levels, as the merge reads it
@@ -100,7 +50,7 @@ std::string shard0_text(const std::string& input) {
       meta["shard"]["last_frame"] = fr.second;
     }
   }
-  return octocd::results_json(rows_of(0), octocd::RunName{"", "t.h5"}, nullptr, meta).dump(1);
+  return octocd::results_json(octocd::test::shard_rows(0, 1), octocd::RunName{"", "t.h5"}, nullptr, meta).dump(1);
 }
 
 [[noreturn]] void finding(const std::string& what) {

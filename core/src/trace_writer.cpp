@@ -948,7 +948,7 @@ void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState* state,
                                const std::vector<ContactRecord>& contacts) {
   Impl& m = *impl_;
   if (m.closed) throw RuntimeError("trace '" + m.path + "': append_frame after close");
-  const bool due = fm.frame % m.opt.state_every == 0;
+  const bool due = state_due(fm.frame);
   if (due && state == nullptr)
     throw RuntimeError("trace '" + m.path + "': frame " + std::to_string(fm.frame) +
                        " writes a state (state_every " + std::to_string(m.opt.state_every) + ") but none was given");

@@ -21,67 +21,18 @@
 #include "octocd/error.hpp"
 #include "octocd/expect.hpp"
 #include "octocd/shards.hpp"
+#include "support/shard_rows.hpp"
 
 namespace octocd {
 namespace {
 
 using json = nlohmann::json;
 
-/// Row `penetration` (merged by the maximum) and `contact-completeness` (by the sum) of
-/// shard `index`: failing items "pair (index, k)".
-std::vector<ValidationResult> rows_of(int index) {
-  ValidationResult pen;
-  pen.tier = Tier::Physics;
-  pen.name = "penetration";
-  pen.figure = "deepest penetration (m)";
-  pen.measured = 0.001 * (index + 1);
-  pen.bound = 0.0005;
-  pen.pass = false;
-  pen.judged = 10;
-  pen.seconds = 0.5;
-  pen.detail = "frame " + std::to_string(index * 10 + 1) + ": pair (0, 1)";
-  pen.tolerances = "penetration_slops";
-  ValidationCause c;
-  c.name = "penetration";
-  c.unit = "m";
-  c.count = 3;
-  c.worst = pen.measured;
-  c.examples.push_back({index * 10 + 1, "pair (0, 1)", pen.measured, "too deep"});
-  c.items = {"pair (0, 1)", "pair (" + std::to_string(index) + ", 2)"};
-  pen.causes.push_back(c);
-  ValidationResult cc;
-  cc.tier = Tier::Physics;
-  cc.name = "contact-completeness";
-  cc.figure = "contacts missing or false";
-  cc.measured = 2;
-  cc.bound = 0;
-  cc.pass = false;
-  cc.judged = 20;
-  cc.detail = "frame 3: pair (1, 2)";
-  ValidationCause m;
-  m.name = "missing-contact";
-  m.unit = "m";
-  m.count = 2;
-  m.worst = 0.01;
-  m.examples.push_back({3, "pair (1, 2)", 0.01, "missing"});
-  m.items = {"pair (1, 2)"};
-  cc.causes.push_back(m);
-  return {pen, cc};
-}
-
 /// Shard `index` of `count` as `validate --trace-in t.h5 --shard index/count --json` writes it.
 json shard_doc(int index, int count) {
-  ShardIdentity id;
-  id.trace = "t.h5";
-  id.trace_bytes = 12345;
-  id.engine = "bullet";
-  id.bodies = 8;
-  id.frames = 90;
-  id.every = 3;
-  id.against = "none";
-  nlohmann::ordered_json meta = {{"engine", "bullet"}, {"frames", 90}, {"every", 3}, {"against", "none"}};
-  meta["shard"] = shard_json({index, count}, id);
-  return json::parse(results_json(rows_of(index), RunName{"", "t.h5"}, nullptr, meta).dump());
+  return json::parse(
+      results_json(test::shard_rows(index, index * 45 + 1), RunName{"", "t.h5"}, nullptr, test::shard_meta(index, count))
+          .dump());
 }
 
 std::vector<json> two_shards() { return {shard_doc(0, 2), shard_doc(1, 2)}; }

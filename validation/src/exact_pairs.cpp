@@ -220,6 +220,25 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     }
   };
   auto cell_less = [](const Entry& en, const Cell& key) { return en.cell < key; };
+  // Step 2's lookups of box a: visit(l, cell, first, last) for every cell of every coarser
+  // used level in a's range, [first, last) the entries of that cell.
+  auto each_coarser_cell = [&](std::uint32_t a, auto&& visit) {
+    for (int l = level[a] + 1; l < levels; ++l) {
+      if (!used[l]) continue;
+      const std::vector<Entry>& e = entries[l];
+      Cell lo, hi;
+      cell_range(a, l, lo, hi);
+      for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
+        for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+          for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
+            const Cell c{x, y, z};
+            const auto first = std::lower_bound(e.begin(), e.end(), c, cell_less);
+            auto last = first;
+            while (last != e.end() && last->cell == c) ++last;
+            visit(l, c, first, last);
+          }
+    }
+  };
 
   // The limit: the candidate tests counted before any test (O(n log n): run lengths and
   // the lookups of step 2, never a pair), the pairs found after.
@@ -244,21 +263,9 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
       for (std::size_t i = 0; i < n && tests <= max_tests; ++i) {
         const std::uint32_t a = std::uint32_t(i);
         if (level[a] < 0) continue;
-        for (int l = level[a] + 1; l < levels; ++l) {
-          if (!used[l]) continue;
-          const std::vector<Entry>& e = entries[l];
-          Cell lo, hi;
-          cell_range(a, l, lo, hi);
-          for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
-            for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
-              for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
-                const Cell c{x, y, z};
-                const auto first = std::lower_bound(e.begin(), e.end(), c, cell_less);
-                auto last = first;
-                while (last != e.end() && last->cell == c) ++last;
-                tests = add_saturating(tests, std::uint64_t(last - first));
-              }
-        }
+        each_coarser_cell(a, [&](int, const Cell&, auto first, auto last) {
+          tests = add_saturating(tests, std::uint64_t(last - first));
+        });
       }
       if (tests > max_tests) throw PairLimitError(tests, true, max_tests, n);
     }
@@ -280,22 +287,12 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     parallel_items_on(n, threads, never, [&](std::size_t i, unsigned worker) {
       const std::uint32_t a = std::uint32_t(i);
       if (level[a] < 0) return;
-      for (int l = level[a] + 1; l < levels; ++l) {
-        if (!used[l]) continue;
-        const std::vector<Entry>& e = entries[l];
-        Cell lo, hi;
-        cell_range(a, l, lo, hi);
-        for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
-          for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
-            for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
-              const Cell c{x, y, z};
-              auto it = std::lower_bound(e.begin(), e.end(), c, cell_less);
-              for (; it != e.end() && it->cell == c; ++it) {
-                const std::uint32_t b = it->box;
-                if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, l) == c) emit(worker, a, b);
-              }
-            }
-      }
+      each_coarser_cell(a, [&](int l, const Cell& c, auto first, auto last) {
+        for (auto it = first; it != last; ++it) {
+          const std::uint32_t b = it->box;
+          if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, l) == c) emit(worker, a, b);
+        }
+      });
     });
 
   // 3. Unbounded boxes against every other box (pairs of two unbounded boxes once).
