@@ -16,6 +16,7 @@
 #include "octocd/error.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/math.hpp"
+#include "octocd/mesh.hpp"
 #include "octocd/scene.hpp"
 
 namespace fs = std::filesystem;
@@ -679,7 +680,8 @@ std::vector<fs::path> scene_files() {
 TEST(SceneFiles, AllLoadWithStandInMeshesAndFitTheirDomain) {
   // Every dataset name resolves to a non-empty stand-in file, so every scene is fully
   // validated without the dataset cache; bodies are taken as cubes of side `scale`
-  // (a normalised mesh's AABB is at most that).
+  // (a normalised mesh's AABB is at most that), except a mesh the scene names as a file
+  // beside it (rods-150's datasets/scenes/meshes), placed by its own normalised bounds.
   const fs::path data = temp_dir("standin");
   for (const char* name : {"bunny", "armadillo", "dragon", "asian-dragon"})
     write_file(data / (std::string(name) + ".obj"), "v 0 0 0\n");
@@ -695,6 +697,13 @@ TEST(SceneFiles, AllLoadWithStandInMeshesAndFitTheirDomain) {
       Aabb local;
       if (g.shape.kind == ShapeSpec::Kind::Box) {
         local = {-g.shape.half_extents, g.shape.half_extents};
+      } else if (g.shape.kind == ShapeSpec::Kind::Mesh && g.shape.mesh.find('/') != std::string::npos) {
+        Mesh mesh = load_mesh(resolve_mesh_path(s, g.shape.mesh, "shape.mesh"));
+        normalize_mesh(mesh);
+        scale_mesh(mesh, g.shape.scale);
+        const Aabb b = mesh_bounds(mesh);
+        const Vec3 h = 0.5f * (b.max - b.min);
+        local = {-h, h};
       } else {
         const float h = 0.5f * (g.shape.kind == ShapeSpec::Kind::Mesh ? g.shape.scale : 2 * g.shape.radius);
         local = {{-h, -h, -h}, {h, h, h}};
