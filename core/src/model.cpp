@@ -159,6 +159,20 @@ std::uint64_t static_static_pairs(const Model& model) {
   return n;
 }
 
+double largest_mean_leaf_vertices(const Model& model) {
+  const MidphaseConfig& mc = model.scene.midphase;
+  if (mc.aabb_only || mc.levels.empty()) return 0.0;
+  const int level = mc.levels.back();
+  double largest = 0.0;
+  for (const Shape& s : model.shapes) {
+    if (!s.octree || level > s.octree->depth) continue;
+    const std::uint32_t cells = s.octree->level_end(level) - s.octree->level_begin(level);
+    if (cells == 0) continue;
+    largest = std::max(largest, static_cast<double>(s.octree->vertices.size()) / static_cast<double>(cells));
+  }
+  return largest;
+}
+
 const char* stage_name(Stage s) {
   switch (s) {
     case Stage::Integrate: return "integrate";

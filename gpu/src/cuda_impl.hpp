@@ -107,6 +107,8 @@ struct CudaWorld::Impl {
   std::uint64_t timed_steps = 0;
 
   // ---- the fused small step (small_step_host.cpp) --------------------------------------
+  bool small_lean = false;  // the small step's lean kernel (gpu::small_lean_kernel), fixed at construction
+  double leaf_vertices = 0.0;  // largest_mean_leaf_vertices of the model
   bool small = false;       // the fused small-scene step (small_step.cu), fixed at construction
   unsigned small_grid = 1;  // its blocks (co-resident)
   gpu::StepStats* host_dev = nullptr;  // `host` as the device addresses it (mapped), or null

@@ -184,6 +184,8 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.levels.count = static_cast<int>(std::min<std::size_t>(mc.levels.size(), hd::kMidphaseMaxLevels));
   for (int i = 0; i < d.levels.count; ++i) d.levels.levels[i] = mc.levels[static_cast<std::size_t>(i)];
   d.level_steps = d.levels.aabb_only ? 0 : d.levels.count;
+  d.leaf_vertices = largest_mean_leaf_vertices(m);
+  d.small_lean = gpu::small_lean_kernel(d.leaf_vertices);
 
   // Shapes: every octree packed once.
   std::vector<gpu::DeviceShape> shapes;
@@ -283,9 +285,11 @@ std::string CudaWorld::notes() const {
   return fmt::format(
       "each step is one fused cooperative kernel ({} bodies: the small-scene path, up to {}; small_path=false runs "
       "the per-stage kernels){}: its broadphase is the all-pairs test whatever the broadphase named ('{}'; the same "
-      "pairs), so 'broadphase candidates' is n(n-1)/2; {}",
+      "pairs), so 'broadphase candidates' is n(n-1)/2; its {} kernel (the largest mean leaf cell holds {:.0f} "
+      "vertices, the lean kernel up to {:.0f}){}; {}",
       d.n, kCudaSmallStepMaxBodies, d.persistent ? ", run by a resident kernel that steps on request" : "",
-      d.broadphase, d.stage_times_note());
+      d.broadphase, d.small_lean ? "lean" : "plain", d.leaf_vertices, gpu::kSmallLeanLeafVertices,
+      d.small_lean && d.n <= gpu::kSmallFrontBodies ? ", its midphase a block per pair" : "", d.stage_times_note());
 }
 
 bool CudaWorld::persistent() const { return impl_->persistent; }

@@ -62,18 +62,18 @@ constexpr std::uint32_t kHashEntriesPerBody = 8;
 /// Candidate pairs the engine has room for before its first step, for n bodies; a step that
 /// finds more grows the pair buffers and runs again.
 constexpr std::uint64_t initial_pair_capacity(std::uint64_t n) { return 2 * n + 64; }
-/// gpu::kSmallLeanBodies (kernels.hpp): the fused small step's lean kernel runs up to that
-/// many bodies.
-constexpr std::uint64_t kSmallLeanBodies = 64;
+/// gpu::kSmallFrontBodies (cuda_impl.hpp): up to that many bodies the fused small step's
+/// lean kernel runs its midphase a block per pair, in segments of the work lists.
+constexpr std::uint64_t kSmallBlockPairBodies = 64;
 /// gpu::kBlockPairSegments (kernels.hpp): the lean kernel's segments of each work list.
 constexpr std::uint64_t kBlockPairSegments = 256;
 /// Items per segment before the first step on the lean kernel's scenes (a pair's items of
 /// one list).
 constexpr std::uint64_t kBlockPairSegmentItems = 256;
 /// Items per midphase work list before the first step, for n bodies (grown likewise): on
-/// the lean kernel's scenes (n <= kSmallLeanBodies) kBlockPairSegmentItems a segment.
+/// the scenes of a block per pair (n <= kSmallBlockPairBodies) kBlockPairSegmentItems a segment.
 constexpr std::uint64_t initial_list_capacity(std::uint64_t n) {
-  return n <= kSmallLeanBodies && 4 * n + 256 < kBlockPairSegments * kBlockPairSegmentItems
+  return n <= kSmallBlockPairBodies && 4 * n + 256 < kBlockPairSegments * kBlockPairSegmentItems
              ? kBlockPairSegments * kBlockPairSegmentItems
              : 4 * n + 256;
 }

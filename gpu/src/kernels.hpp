@@ -415,16 +415,34 @@ struct SmallStepDesc {
   /// memory by the broadphase.
   std::uint32_t shared_boxes_bodies = 0;
   /// Run the kernel compiled without the midphase's early exit, tile culling and tile
-  /// filter (their switches read as off: small_step.cu's kLean instantiation); the host sets it for
-  /// scenes of at most kSmallLeanBodies bodies. States, pairs and contacts are the same either
-  /// way; the midphase counts are then those of midphase_early_exit off (deterministic).
+  /// filter (their switches read as off: small_step.cu's kLean instantiation); the host sets it
+  /// from the scene's meshes (small_lean_kernel). With the fused front the lean kernel runs
+  /// the midphase a block per pair. States, pairs and contacts are the same either way; the
+  /// midphase counts are then those of midphase_early_exit off (deterministic).
   int lean = 0;
 };
 
-/// Bodies up to which the fused small step runs its lean kernel (SmallStepDesc::lean): with
-/// that little midphase work the early exit's and the tile culling's code cost more than
-/// they save (bunny-stack-50, 55 bodies, on the H100: reports/h100/perf-v5).
-constexpr std::uint32_t kSmallLeanBodies = 64;
+/// The fused small step runs its lean kernel (SmallStepDesc::lean) when no shape of the
+/// scene holds more than this many vertices per occupied cell of the midphase's deepest
+/// level on average (small_lean_kernel). With leaves that small a pair's leaf work is short:
+/// the early exit's and the tile culling's code cost more than they save, and a block per
+/// pair (the fused front) finishes with the grid's other blocks. With larger leaves the
+/// pair with the most leaf work holds a block-per-pair midphase back, and culling saves more
+/// than it costs. H100, resident kernel, 2000 frames, 5 repetitions, steps/s lean -> plain
+/// (build f999213 with the kernel forced; the largest mean leaf in vertices, levels 1,2):
+/// bunny-stack-50 54,916 -> 36,348 (bunny, 41); bunny-random-400 29,311 -> 28,286 (41);
+/// rods-150 27,066 -> 23,491 (rod, 12); obstacle-mixed-50 19,814 -> 31,284 (dragon, 727);
+/// armadillo-stack-50 12,078 -> 25,043 (armadillo, 565); dragon-stack-50 17,804 -> 26,109
+/// (727); armadillo-random-250 18,346 -> 26,290; dragon-random-250 13,916 -> 23,546;
+/// asian-dragon-random-60 5,660 -> 23,800 (2,908); mixed-pile-1000 6,095 -> 7,840;
+/// sizes-50x-214 (ten armadillos among bunnies) 35,133 -> 33,895, the one scene the rule
+/// misses, by 3.5%. The threshold lies between the bunny's 41 and the armadillo's 565.
+constexpr double kSmallLeanLeafVertices = 128.0;
+
+/// Whether the fused small step runs its lean kernel for a scene whose largest mean number
+/// of vertices per occupied leaf cell (over its mesh shapes, at the midphase's deepest
+/// level) is `leaf_vertices` (0: no mesh, or an AABB-only midphase).
+constexpr bool small_lean_kernel(double leaf_vertices) { return leaf_vertices <= kSmallLeanLeafVertices; }
 
 /// The segments of each midphase list in the lean kernel, whose midphase runs a block per
 /// pair (midphase.cuh, mid_block_pairs): block b uses segment b (list_capacity /

@@ -303,7 +303,7 @@ struct NoHandOver {
 /// block 0's thread 0 calls hand_over(goes_on) right after the response, before the
 /// metrics (the next step's other blocks write nothing the metrics read), having copied
 /// the counts to host memory; the metrics follow into the same slot. smem:
-/// kSharedBytes. kLean (s.lean, tiny scenes): the midphase's early exit, tile culling and
+/// kSharedBytes. kLean (s.lean: scenes of small leaf cells, small_lean_kernel): the midphase's early exit, tile culling and
 /// tile filter read as off, constants the compiler folds away.
 /// Returns, to thread 0 of block 0 (false elsewhere), whether the next step may follow
 /// without the host: every list within its capacity (the host's regrow test,

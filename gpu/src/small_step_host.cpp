@@ -50,7 +50,7 @@ gpu::SmallStepDesc CudaWorld::Impl::small_desc(const Scene& scene, bool recordin
   s.one_block_pairs = gpu::kSmallOneBlockPairs;
   s.front_bodies = gpu::kSmallFrontBodies;
   s.shared_boxes_bodies = gpu::kSmallSharedBoxesBodies;
-  s.lean = n <= gpu::kSmallLeanBodies ? 1 : 0;
+  s.lean = small_lean ? 1 : 0;
   if (small_dev) {
     s.done = small_dev;
     s.sequence = sequence;

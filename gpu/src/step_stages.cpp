@@ -27,7 +27,8 @@ static_assert(sizeof(gpu::DeviceShape) == gpu::footprint::kDeviceShapeBytes, "de
 static_assert(sizeof(gpu::MidItem) == gpu::footprint::kMidItemBytes, "device_footprint.hpp: MidItem");
 static_assert(sizeof(gpu::DeviceContact) == gpu::footprint::kDeviceContactBytes, "device_footprint.hpp: DeviceContact");
 static_assert(gpu::kIndexShortSegment == gpu::footprint::kIndexShortSegment, "device_footprint.hpp: kIndexShortSegment");
-static_assert(gpu::kSmallLeanBodies == gpu::footprint::kSmallLeanBodies, "device_footprint.hpp: kSmallLeanBodies");
+static_assert(gpu::kSmallFrontBodies == gpu::footprint::kSmallBlockPairBodies,
+              "device_footprint.hpp: kSmallBlockPairBodies");
 static_assert(gpu::kBlockPairSegments == gpu::footprint::kBlockPairSegments, "device_footprint.hpp: kBlockPairSegments");
 static_assert(sizeof(gpu::StepStats) == gpu::footprint::kStepStatsBytes, "device_footprint.hpp: StepStats");
 static_assert(sizeof(gpu::MetricsResult) == gpu::footprint::kMetricsResultBytes, "device_footprint.hpp: MetricsResult");

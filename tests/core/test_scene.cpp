@@ -814,6 +814,39 @@ TEST(Model, ThetaIsPerShapeAndAPairTakesTheLarger) {
   EXPECT_EQ(f->theta(0, static_cast<std::uint32_t>(f->shapes.size() - 1)), 0.002f);
 }
 
+// largest_mean_leaf_vertices (the cuda engine's choice of its small-scene kernel): a mesh's
+// vertices over its occupied cells at the midphase's deepest level, the largest over the
+// shapes; 0 without a mesh or with an AABB-only midphase. Icospheres of 642 and 42 vertices
+// (subdivisions 3 and 1): at level 0 one cell holds them all; at level L the mean lies
+// between the vertices over 8^L and the vertices, and it grows from level 2 to level 1 (a
+// level-1 cell holds the vertices of its occupied children); two shapes give the larger.
+TEST(Model, LargestMeanLeafVerticesIsTheLargestShapesMeanAtTheDeepestLevel) {
+  const auto value = [](const std::vector<int>& subdivisions, const std::string& levels) {
+    json j = minimal();
+    j["walls"] = "none";
+    j["midphase"] = {{"levels", levels}, {"depth", 2}};
+    j["groups"] = json::array();
+    for (std::size_t g = 0; g < subdivisions.size(); ++g)
+      j["groups"].push_back({{"shape", {{"icosphere", {{"radius", 0.1}, {"subdivisions", subdivisions[g]}}}}},
+                             {"count", 1},
+                             {"positions", {{0.5 * static_cast<double>(g) - 0.5, 1.0, 0.0}}}});
+    return largest_mean_leaf_vertices(*build_model(parse_scene(j.dump(), "leaf.json")));
+  };
+  EXPECT_EQ(largest_mean_leaf_vertices(*build_model(parse_scene(minimal().dump(), "boxes.json"))), 0.0);
+  EXPECT_EQ(value({3}, "aabb-only"), 0.0);
+  EXPECT_EQ(value({3}, "0"), 642.0);
+  EXPECT_EQ(value({1}, "0"), 42.0);
+  const double big2 = value({3}, "1,2"), big1 = value({3}, "1"), small2 = value({1}, "1,2");
+  EXPECT_GE(big2, 642.0 / 64.0);
+  EXPECT_LT(big2, 642.0);
+  EXPECT_GT(big1, big2);
+  EXPECT_LE(big1, 642.0);
+  EXPECT_GE(small2, 42.0 / 64.0);
+  EXPECT_LT(small2, big2);
+  EXPECT_EQ(value({1, 3}, "1,2"), big2);
+  EXPECT_EQ(value({3, 1}, "1,2"), big2);
+}
+
 // Issue 22: a random layout whose region has min == max on an axis (e.g. [0, 1, 0] to
 // [1, 1, 1]) put drawn centres in grid cell 0 by rounding, and the -1 neighbour read
 // outside the grid's head array (crashed in 5 of 6 runs; ASan reports it in every run).

@@ -1536,7 +1536,8 @@ TEST(CudaPersistent, IdleExitAndRelaunchKeepTheCpuBits) {
 // set_persistent() are refused; after the last promised step they work again (a recorded
 // step from a set state: the cpu's record). The engines run one after the other: two
 // resident kernels need not fit on the device at once. bunny-stack-50 (the fused front,
-// lean kernel), bunny-random-400 (neither) and box-stack (the one-block response).
+// lean kernel), bunny-random-400 (the lean kernel without the front) and box-stack (the
+// one-block response).
 TEST(CudaPersistent, PlannedStepsRunAheadWithTheCpuBits) {
   REQUIRE_CUDA_DEVICE();
   for (const char* scene : {"bunny-stack-50", "bunny-random-400", "box-stack"}) {

@@ -146,6 +146,14 @@ std::shared_ptr<const Model> build_model(const Scene& scene);
 /// broadphase has no per-pair loop on the host report dynamic_pairs = aabb_pairs - this.
 std::uint64_t static_static_pairs(const Model& model);
 
+/// The largest mean number of vertices per occupied cell of the midphase's deepest level
+/// (MidphaseConfig::levels' last) over the model's mesh shapes: a shape's vertex count over
+/// its occupied cells at that level (MeshOctree::level_begin .. level_end). 0 when the
+/// model has no mesh or its midphase is AABB-only. A measure of the work of one leaf cell
+/// pair in the vertex narrow phase; the cuda engine picks its small-scene kernel by it
+/// (docs/gpu.md, "Small scenes: the kernel's shape").
+double largest_mean_leaf_vertices(const Model& model);
+
 /// What an engine did in one step, engine-neutral (ARCHITECTURE.md seam 2). Filled only
 /// while recording is on (Engine::set_recording); the validators read only this.
 struct FrameRecord {
