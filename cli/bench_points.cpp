@@ -192,6 +192,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
       meta.start_time = utc_time_now();
       TraceOptions topt;
       topt.state_every = 10;
+      topt.flush_interval_s = kTraceFlushIntervalS;
       topt.contacts = p.traced == "contacts" && engine->can_record();
       if (topt.contacts) engine->set_recording(true);
       if (const RotationTraits* rt = engine->rotation_traits(); rt && traced) {  // as `run --trace` writes it

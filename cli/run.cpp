@@ -302,6 +302,7 @@ int run_command(const RunOptions& o) {
   if (!o.trace.empty()) {
     octocd::TraceOptions topt;
     topt.state_every = o.state_every;
+    topt.flush_interval_s = octocd::cli::kTraceFlushIntervalS;
     topt.contacts = o.contacts && world.can_record();
     if (topt.contacts) world.set_recording(true);  // the GPU copies contacts back only then
     if (const octocd::RotationTraits* traits = world.rotation_traits()) {  // a rotating engine: version 2

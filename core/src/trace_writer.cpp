@@ -4,7 +4,8 @@
 //
 // The file is created with the latest format, every group, dataset and attribute is
 // created up front, then SWMR writing starts. Rows are buffered in memory and written in
-// batches at each flush (every `flush_every` frames), followed by H5Fflush: a process
+// batches at each flush (every `flush_every` frames, no sooner than `flush_interval_s` after the
+// previous one; or once `flush_bytes` are buffered), followed by H5Fflush: a process
 // killed between flushes leaves a file that SWMR readers open, holding every flushed row.
 // The flushes that appending frames triggers run on a writer thread of their own (HDF5's
 // writes, deflate and H5Fflush beside the caller's next steps): the rows of one flush are
@@ -27,6 +28,7 @@
 #include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <cstring>
@@ -342,6 +344,7 @@ struct TraceWriter::Impl {
   Column s_orient, s_angvel, c_point, c_jt3, p_offsets, p_pair, a_min, a_max;
   std::int64_t pair_total = 0;
   int since_flush = 0;
+  std::chrono::steady_clock::time_point last_flush_start = std::chrono::steady_clock::now();
   bool closed = false;
   bool failed = false;               // a write failed: the file was abandoned
   std::int64_t last_appended = 0;    // frame of the last append_frame
@@ -431,6 +434,7 @@ struct TraceWriter::Impl {
     wait_writer();
     for (Column* c : columns()) c->stage();
     since_flush = 0;
+    last_flush_start = std::chrono::steady_clock::now();
     {
       std::lock_guard<std::mutex> lock(mu);
       job = true;
@@ -492,6 +496,7 @@ struct TraceWriter::Impl {
       throw RuntimeError(failure(when, e.reason()));
     }
     since_flush = 0;
+    last_flush_start = std::chrono::steady_clock::now();
     flushed_rows = frames.empty() ? 0 : static_cast<std::int64_t>(frames[0].rows);
     last_flushed = last_appended;
   }
@@ -582,6 +587,9 @@ TraceWriter::TraceWriter(const std::string& path, const TraceMetadata& meta,
     throw RuntimeError("trace '" + path + "': flush_every must be >= 1, got " +
                        std::to_string(m.opt.flush_every));
   if (m.opt.flush_bytes < 1) throw RuntimeError("trace '" + path + "': flush_bytes must be >= 1, got 0");
+  if (!(m.opt.flush_interval_s >= 0.0) || !std::isfinite(m.opt.flush_interval_s))
+    throw RuntimeError("trace '" + path + "': flush_interval_s must be a finite number >= 0, got " +
+                       std::to_string(m.opt.flush_interval_s));
   const std::size_t n = bodies.shape_id.size();
   if (bodies.inverse_mass.size() != n || bodies.local_aabb.size() != n || bodies.group.size() != n)
     throw RuntimeError("trace '" + path + "': body tables differ in length (shape_id " +
@@ -988,7 +996,12 @@ void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState* state,
 
   std::size_t buffered = 0;
   for (Column* c : m.columns()) buffered += c->buf.size();
-  if (++m.since_flush >= m.opt.flush_every || buffered >= m.opt.flush_bytes) {
+  const bool frames_due =
+      ++m.since_flush >= m.opt.flush_every &&
+      (m.opt.flush_interval_s <= 0.0 ||
+       std::chrono::duration<double>(std::chrono::steady_clock::now() - m.last_flush_start).count() >=
+           m.opt.flush_interval_s);
+  if (frames_due || buffered >= m.opt.flush_bytes) {
     m.flush_behind("writing frame " + std::to_string(fm.frame));
   }
 }

@@ -219,6 +219,22 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
 
   gpu::StepStats* host = nullptr;  // pinned
+
+  // Pinned host staging of the small path's copy-backs, allocated once at construction (no
+  // pinned allocation or free while a resident kernel runs: cudaFreeHost waits for it): the
+  // state (x, v, w of the n bodies; state()) and a recorded step's pairs, confirmed flags
+  // and contact records up to kStagedRecordPairs pairs (step(); more: pageable copies).
+  // Each copy-back is then its copies queued on the stream and one synchronisation.
+  static constexpr std::size_t kStagedRecordPairs = 8192;
+  unsigned char* staging = nullptr;
+  Vec3* staged_x = nullptr;
+  Vec3* staged_v = nullptr;
+  float* staged_w = nullptr;
+  Pair* staged_pairs = nullptr;
+  std::uint8_t* staged_confirmed = nullptr;
+  gpu::DeviceContact* staged_records = nullptr;
+  /// Allocates `staging` for n bodies and carves the arrays above from it.
+  void allocate_staging();
   // The per-stage step captured per broadphase plan (DeviceBroadPhase::plan()), twice:
   // plain (untimed steps) and with the stage events.
   cudaGraph_t graph[gpu::kBroadPhasePlans] = {};

@@ -43,10 +43,33 @@ CudaWorld::Impl::~Impl() {
   if (small_host) (void)cudaFreeHost(small_host);
   if (resident_host) (void)cudaFreeHost(resident_host);
   if (ring_host) (void)cudaFreeHost(ring_host);
+  if (staging) (void)cudaFreeHost(staging);
   for (cudaEvent_t& e : events)
     if (e) (void)cudaEventDestroy(e);
   if (stream) (void)cudaStreamDestroy(stream);
   if (resident_stream) (void)cudaStreamDestroy(resident_stream);
+}
+
+void CudaWorld::Impl::allocate_staging() {
+  const auto rounded = [](std::size_t bytes) { return (bytes + 63) / 64 * 64; };
+  const std::size_t vec = rounded(sizeof(Vec3) * n), w_bytes = rounded(sizeof(float) * n);
+  const std::size_t pair_bytes = rounded(sizeof(Pair) * kStagedRecordPairs);
+  const std::size_t flag_bytes = rounded(sizeof(std::uint8_t) * kStagedRecordPairs);
+  const std::size_t record_bytes = rounded(sizeof(gpu::DeviceContact) * kStagedRecordPairs);
+  check(cudaMallocHost(reinterpret_cast<void**>(&staging), 2 * vec + w_bytes + pair_bytes + flag_bytes + record_bytes),
+        "cudaMallocHost (state and record staging)");
+  unsigned char* p = staging;
+  const auto take = [&p](std::size_t bytes) {
+    unsigned char* at = p;
+    p += bytes;
+    return at;
+  };
+  staged_x = reinterpret_cast<Vec3*>(take(vec));
+  staged_v = reinterpret_cast<Vec3*>(take(vec));
+  staged_w = reinterpret_cast<float*>(take(w_bytes));
+  staged_pairs = reinterpret_cast<Pair*>(take(pair_bytes));
+  staged_confirmed = take(flag_bytes);
+  staged_records = reinterpret_cast<gpu::DeviceContact*>(take(record_bytes));
 }
 
 void CudaWorld::Impl::run_step(const Scene& scene, bool recording) {
@@ -245,6 +268,7 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.list_cap = static_cast<std::size_t>(gpu::footprint::initial_list_capacity(n));
   d.index_cap = n / 8 + 64;  // a first guess (about 1 pair per 8 bodies); grown like pair_cap
   d.static_static = static_static_pairs(m);
+  if (d.small && n > 0) d.allocate_staging();
   d.launched(gpu::launch_aabbs(d.bodies(), d.stream), "aabbs");
   check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize");
   state_ = m.initial;
@@ -375,9 +399,23 @@ const BodyState& CudaWorld::state() const {
   if (state_frame_ != frame_) {
     Impl& d = *impl_;
     d.refuse_ahead("state");
-    download(state_.x, d.x, d.n, d.stream);
-    download(state_.v, d.v, d.n, d.stream);
-    download(state_.w, d.w, d.n, d.stream);
+    if (d.staging) {
+      const std::size_t n = d.n;
+      check(cudaMemcpyAsync(d.staged_x, d.x.get(), sizeof(Vec3) * n, cudaMemcpyDeviceToHost, d.stream),
+            "cudaMemcpy from 'body positions'");
+      check(cudaMemcpyAsync(d.staged_v, d.v.get(), sizeof(Vec3) * n, cudaMemcpyDeviceToHost, d.stream),
+            "cudaMemcpy from 'body velocities'");
+      check(cudaMemcpyAsync(d.staged_w, d.w.get(), sizeof(float) * n, cudaMemcpyDeviceToHost, d.stream),
+            "cudaMemcpy from 'body inverse masses'");
+      check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize (state)");
+      state_.x.assign(d.staged_x, d.staged_x + n);
+      state_.v.assign(d.staged_v, d.staged_v + n);
+      state_.w.assign(d.staged_w, d.staged_w + n);
+    } else {
+      download(state_.x, d.x, d.n, d.stream);
+      download(state_.v, d.v, d.n, d.stream);
+      download(state_.w, d.w, d.n, d.stream);
+    }
     state_frame_ = frame_;
   }
   return state_;
@@ -463,11 +501,31 @@ const FrameMetrics& CudaWorld::step() {
 
   frame_ = m.frame;
   if (recording_) {
-    download(record_.pairs, d.pairs, np, d.stream);
-    std::vector<std::uint8_t> confirmed;
-    download(confirmed, d.confirmed, np, d.stream);
-    std::vector<gpu::DeviceContact> recs;
-    download(recs, d.records, np, d.stream);
+    std::vector<std::uint8_t> confirmed_pageable;
+    std::vector<gpu::DeviceContact> records_pageable;
+    const std::uint8_t* confirmed = nullptr;
+    const gpu::DeviceContact* recs = nullptr;
+    if (d.staging && np <= Impl::kStagedRecordPairs) {
+      if (np > 0) {
+        check(cudaMemcpyAsync(d.staged_pairs, d.pairs.get(), sizeof(Pair) * np, cudaMemcpyDeviceToHost, d.stream),
+              "cudaMemcpy from 'candidate pairs'");
+        check(cudaMemcpyAsync(d.staged_confirmed, d.confirmed.get(), np, cudaMemcpyDeviceToHost, d.stream),
+              "cudaMemcpy from 'confirmed flags'");
+        check(cudaMemcpyAsync(d.staged_records, d.records.get(), sizeof(gpu::DeviceContact) * np,
+                              cudaMemcpyDeviceToHost, d.stream),
+              "cudaMemcpy from 'contact records'");
+        check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize (record)");
+      }
+      record_.pairs.assign(d.staged_pairs, d.staged_pairs + np);
+      confirmed = d.staged_confirmed;
+      recs = d.staged_records;
+    } else {
+      download(record_.pairs, d.pairs, np, d.stream);
+      download(confirmed_pageable, d.confirmed, np, d.stream);
+      download(records_pageable, d.records, np, d.stream);
+      confirmed = confirmed_pageable.data();
+      recs = records_pageable.data();
+    }
     record_.confirmed.clear();
     record_.contacts.clear();
     for (std::size_t k = 0; k < np; ++k) {

@@ -9,12 +9,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -591,6 +593,54 @@ TEST(Trace, InvalidOptionsThrow) {
   opt.state_every = 1;
   opt.flush_every = 0;
   EXPECT_THROW(TraceWriter(path, make_meta(), make_bodies(1), opt), RuntimeError);
+  opt.flush_every = 1;
+  for (double bad : {-1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    opt.flush_interval_s = bad;
+    try {
+      TraceWriter w(path, make_meta(), make_bodies(1), opt);
+      ADD_FAILURE() << "flush_interval_s " << bad << " accepted";
+    } catch (const RuntimeError& e) {
+      EXPECT_NE(std::string(e.what()).find("flush_interval_s"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// TraceOptions::flush_interval_s: the flushes flush_every frames call for wait until that
+// long after the previous one began (an hour: none within the test), while flush_bytes
+// still flushes at once; an interval already passed (1 ns) leaves flush_every's flushes
+// where they were (frames 5, 10, ..).
+TEST(Trace, FlushIntervalDefersFrameFlushesButNotByteFlushes) {
+  const std::size_t nb = 4;
+  const auto run = [&](double interval, std::size_t flush_bytes, int frames) {
+    const std::string path = (temp_dir() / "interval.h5").string();
+    TraceOptions opt;
+    opt.state_every = 1;
+    opt.flush_every = 5;
+    opt.flush_interval_s = interval;
+    opt.flush_bytes = flush_bytes;
+    TraceWriter w(path, make_meta(), make_bodies(nb), opt);
+    w.append_state(0, make_state(0, nb));
+    std::vector<std::int64_t> flushed;
+    for (std::int64_t f = 1; f <= frames; ++f) {
+      w.append_frame(make_metrics(f), make_state(f, nb), {});
+      w.wait_for_flush();
+      flushed.push_back(w.flushed_frames());
+    }
+    w.close();
+    EXPECT_EQ(read_trace_summary(path).frames, frames) << "close writes every frame";
+    return flushed;
+  };
+  const std::size_t no_limit = std::size_t{1} << 30;
+  const std::vector<std::int64_t> hour = run(3600.0, no_limit, 12);
+  EXPECT_EQ(hour.back(), 0) << "a frame-count flush within the hour";
+  const std::vector<std::int64_t> ns = run(1e-9, no_limit, 12);
+  EXPECT_EQ(ns[3], 0);
+  EXPECT_EQ(ns[4], 5);
+  EXPECT_EQ(ns[9], 10);
+  EXPECT_EQ(ns[11], 10);
+  // A state row of 4 bodies is 96 bytes: a flush_bytes of 1 flushes every frame.
+  const std::vector<std::int64_t> bytes = run(3600.0, 1, 12);
+  for (std::size_t i = 0; i < bytes.size(); ++i) EXPECT_EQ(bytes[i], static_cast<std::int64_t>(i + 1)) << i;
 }
 
 TEST(Trace, XdmfSidecarReferencesEveryStateRow) {

@@ -76,6 +76,15 @@ struct TraceOptions {
   int state_every = 10;     ///< record positions/velocities every k-th frame (k >= 1)
   bool contacts = false;    ///< record /contacts
   int flush_every = 50;     ///< flush to disk every this many frames (>= 1)
+  /// With a value > 0, a flush that flush_every frames call for waits until at least this
+  /// many seconds (>= 0) have passed since the previous flush began (the frames stay
+  /// buffered; flush_bytes still flushes at once). A flush writes every dataset and calls
+  /// H5Fflush twice, about 1 ms whatever the rows: on a small scene stepping at 50,000 steps/s
+  /// a flush every 50 frames kept the writer thread busy and the caller waiting on it
+  /// (octocd's cuda engine on bunny-stack-50, H100: 17 us a frame in append_frame). 0 (the
+  /// default): every flush_every frames. `run --trace` and `bench --traced` use 0.1 s
+  /// (cli/tools.hpp, kTraceFlushIntervalS).
+  double flush_interval_s = 0.0;
   /// Also flush once the rows buffered since the last flush hold this many bytes (>= 1):
   /// a stopped or failed run then writes at most about this much (or one frame) at its
   /// end, so it ends within a second (deflate runs at about 60 MB/s on a slow core), and
