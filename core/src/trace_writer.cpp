@@ -428,6 +428,7 @@ struct TraceWriter::Impl {
       return H5is_library_threadsafe(&ts) >= 0 && ts;
     }();
     if (!threadsafe) {
+      QuietHdf5 quiet;
       write_and_flush(when);
       return;
     }
@@ -961,7 +962,8 @@ void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState* state,
     throw RuntimeError("trace '" + m.path + "': frame " + std::to_string(fm.frame) +
                        " writes a state (state_every " + std::to_string(m.opt.state_every) + ") but none was given");
   m.last_appended = fm.frame;
-  QuietHdf5 quiet;
+  // No HDF5 call here but a flush's: with a thread-safe HDF5 every call takes its global
+  // lock, which the writer thread holds through each dataset's write and deflate.
   if (due) m.push_state(fm.frame, *state);
 
   std::size_t i = 0;
