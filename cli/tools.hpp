@@ -70,10 +70,11 @@ std::vector<std::string> split_list(const std::string& text);
 std::string utc_time_now();
 
 /// TraceOptions::flush_interval_s of the run traces the commands write (`run --trace`, `bench
-/// --traced`; `validate` flushes every checked frame): flushes at most every 0.1 s (and every flush_every frames
-/// when the frames are slower), so a process killed at any instant keeps every frame but
-/// those of about its last 0.1 s. Traced cuda runs, H100, bunny-stack-50 (50 bodies, state
-/// every 10th frame): a flush every 50 frames held the caller 17 us a frame on average.
+/// --traced`; `validate` flushes every checked frame): batches under kFlushIntervalBytes
+/// (64 KiB) flush at most every 0.1 s, larger ones every flush_every frames, so a process
+/// killed at any instant keeps every frame but those of about its last 0.1 s or 64 KiB.
+/// Traced cuda runs, H100, bunny-stack-50 (50 bodies, state every 10th frame): a flush
+/// every 50 frames held the caller 17 us a frame on average.
 constexpr double kTraceFlushIntervalS = 0.1;
 
 /// How a run's steps reach its trace (`run --trace`, `bench --traced`): a rotating engine

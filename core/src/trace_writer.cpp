@@ -4,8 +4,9 @@
 //
 // The file is created with the latest format, every group, dataset and attribute is
 // created up front, then SWMR writing starts. Rows are buffered in memory and written in
-// batches at each flush (every `flush_every` frames, no sooner than `flush_interval_s` after the
-// previous one; or once `flush_bytes` are buffered), followed by H5Fflush: a process
+// batches at each flush (every `flush_every` frames, for small batches no sooner than
+// `flush_interval_s` after the previous one; or once `flush_bytes` are buffered), followed
+// by H5Fflush: a process
 // killed between flushes leaves a file that SWMR readers open, holding every flushed row.
 // The flushes that appending frames triggers run on a writer thread of their own (HDF5's
 // writes, deflate and H5Fflush beside the caller's next steps): the rows of one flush are
@@ -1000,7 +1001,7 @@ void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState* state,
   for (Column* c : m.columns()) buffered += c->buf.size();
   const bool frames_due =
       ++m.since_flush >= m.opt.flush_every &&
-      (m.opt.flush_interval_s <= 0.0 ||
+      (m.opt.flush_interval_s <= 0.0 || buffered >= kFlushIntervalBytes ||
        std::chrono::duration<double>(std::chrono::steady_clock::now() - m.last_flush_start).count() >=
            m.opt.flush_interval_s);
   if (frames_due || buffered >= m.opt.flush_bytes) {

@@ -606,11 +606,12 @@ TEST(Trace, InvalidOptionsThrow) {
 }
 
 // TraceOptions::flush_interval_s: the flushes flush_every frames call for wait until that
-// long after the previous one began (an hour: none within the test), while flush_bytes
-// still flushes at once; an interval already passed (1 ns) leaves flush_every's flushes
+// long after the previous one began (an hour: none within the test) while the buffered rows
+// hold under kFlushIntervalBytes, while flush_bytes still flushes at once; an interval
+// already passed (1 ns), or rows of kFlushIntervalBytes a frame, leave flush_every's flushes
 // where they were (frames 5, 10, ..).
 TEST(Trace, FlushIntervalDefersFrameFlushesButNotByteFlushes) {
-  const std::size_t nb = 4;
+  std::size_t nb = 4;
   const auto run = [&](double interval, std::size_t flush_bytes, int frames) {
     const std::string path = (temp_dir() / "interval.h5").string();
     TraceOptions opt;
@@ -641,6 +642,11 @@ TEST(Trace, FlushIntervalDefersFrameFlushesButNotByteFlushes) {
   // A state row of 4 bodies is 96 bytes: a flush_bytes of 1 flushes every frame.
   const std::vector<std::int64_t> bytes = run(3600.0, 1, 12);
   for (std::size_t i = 0; i < bytes.size(); ++i) EXPECT_EQ(bytes[i], static_cast<std::int64_t>(i + 1)) << i;
+  nb = kFlushIntervalBytes / 24 + 1;  // a state row (24 bytes a body) past kFlushIntervalBytes
+  const std::vector<std::int64_t> big = run(3600.0, no_limit, 12);
+  EXPECT_EQ(big[3], 0);
+  EXPECT_EQ(big[4], 5);
+  EXPECT_EQ(big[9], 10);
 }
 
 TEST(Trace, XdmfSidecarReferencesEveryStateRow) {

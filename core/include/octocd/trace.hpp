@@ -71,18 +71,24 @@ struct TraceBodies {
   std::vector<std::string> group;        ///< per body
 };
 
+/// The buffered rows from which TraceOptions::flush_interval_s no longer defers a flush
+/// (bytes): 64 KiB, about 200 frames of a 50-body trace with the state every 10th frame.
+constexpr std::size_t kFlushIntervalBytes = std::size_t{64} << 10;
+
 /// Writer options.
 struct TraceOptions {
   int state_every = 10;     ///< record positions/velocities every k-th frame (k >= 1)
   bool contacts = false;    ///< record /contacts
   int flush_every = 50;     ///< flush to disk every this many frames (>= 1)
-  /// With a value > 0, a flush that flush_every frames call for waits until at least this
-  /// many seconds (>= 0) have passed since the previous flush began (the frames stay
-  /// buffered; flush_bytes still flushes at once). A flush writes every dataset and calls
-  /// H5Fflush twice, about 1 ms whatever the rows: on a small scene stepping at 50,000 steps/s
-  /// a flush every 50 frames kept the writer thread busy and the caller waiting on it
-  /// (octocd's cuda engine on bunny-stack-50, H100: 17 us a frame in append_frame). 0 (the
-  /// default): every flush_every frames. `run --trace` and `bench --traced` use 0.1 s
+  /// With a value > 0, a flush that flush_every frames call for waits, while the rows
+  /// buffered since the last flush hold under kFlushIntervalBytes, until at least this many
+  /// seconds (>= 0) have passed since the previous flush began (the frames stay buffered;
+  /// flush_bytes still flushes at once). A flush writes every dataset and calls H5Fflush
+  /// twice, about 1 ms however few its rows: on a small scene stepping at 50,000 steps/s a
+  /// flush every 50 frames kept the writer thread busy and the caller waiting on it
+  /// (octocd's cuda engine on bunny-stack-50, H100: 17 us a frame in append_frame); batches
+  /// of kFlushIntervalBytes or more flush every flush_every frames as before, so a full disk
+  /// still keeps the frames written before it. 0 (the default): every flush_every frames. `run --trace` and `bench --traced` use 0.1 s
   /// (cli/tools.hpp, kTraceFlushIntervalS).
   double flush_interval_s = 0.0;
   /// Also flush once the rows buffered since the last flush hold this many bytes (>= 1):
