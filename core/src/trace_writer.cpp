@@ -405,6 +405,13 @@ struct TraceWriter::Impl {
     }
   }
 
+  // Whether a flush handed to the writer thread is still in flight.
+  bool writer_busy() {
+    if (!writer.joinable()) return false;
+    std::lock_guard<std::mutex> lock(mu);
+    return job;
+  }
+
   // Waits until no flush is in flight; after a failed one abandons the file and throws
   // its message.
   void wait_writer() {
@@ -999,11 +1006,15 @@ void TraceWriter::append_frame(const FrameMetrics& fm, const BodyState* state,
 
   std::size_t buffered = 0;
   for (Column* c : m.columns()) buffered += c->buf.size();
+  // With an interval, a flush_every flush also waits for the writer thread to be idle
+  // (the frames stay buffered; flush_bytes bounds them): the caller never waits for it.
   const bool frames_due =
       ++m.since_flush >= m.opt.flush_every &&
-      (m.opt.flush_interval_s <= 0.0 || buffered >= kFlushIntervalBytes ||
-       std::chrono::duration<double>(std::chrono::steady_clock::now() - m.last_flush_start).count() >=
-           m.opt.flush_interval_s);
+      (m.opt.flush_interval_s <= 0.0 ||
+       ((buffered >= kFlushIntervalBytes ||
+         std::chrono::duration<double>(std::chrono::steady_clock::now() - m.last_flush_start).count() >=
+             m.opt.flush_interval_s) &&
+        !m.writer_busy()));
   if (frames_due || buffered >= m.opt.flush_bytes) {
     m.flush_behind("writing frame " + std::to_string(fm.frame));
   }

@@ -88,7 +88,11 @@ struct TraceOptions {
   /// flush every 50 frames kept the writer thread busy and the caller waiting on it
   /// (octocd's cuda engine on bunny-stack-50, H100: 17 us a frame in append_frame); batches
   /// of kFlushIntervalBytes or more flush every flush_every frames as before, so a full disk
-  /// still keeps the frames written before it. 0 (the default): every flush_every frames. `run --trace` and `bench --traced` use 0.1 s
+  /// still keeps the frames written before it. With an interval, a flush_every flush also
+  /// waits (buffering) while the writer thread still writes the previous batch, so the
+  /// caller never waits for it (bunny-random-400 with the state every 10th frame flushes
+  /// about 1.3 KB a frame: every 50 frames the writer fell behind and append_frame took 8 us
+  /// a frame). 0 (the default): every flush_every frames, waiting for the previous flush. `run --trace` and `bench --traced` use 0.1 s
   /// (cli/tools.hpp, kTraceFlushIntervalS).
   double flush_interval_s = 0.0;
   /// Also flush once the rows buffered since the last flush hold this many bytes (>= 1):
