@@ -268,7 +268,11 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.list_cap = static_cast<std::size_t>(gpu::footprint::initial_list_capacity(n));
   d.index_cap = n / 8 + 64;  // a first guess (about 1 pair per 8 bodies); grown like pair_cap
   d.static_static = static_static_pairs(m);
-  if (d.small && n > 0) d.allocate_staging();
+  if (d.small && n > 0) {
+    d.allocate_staging();
+    d.x_pre.ensure(n);  // the recorded steps' state at their start, written by the kernel
+    d.v_pre.ensure(n);
+  }
   d.launched(gpu::launch_aabbs(d.bodies(), d.stream), "aabbs");
   check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize");
   state_ = m.initial;
@@ -435,13 +439,12 @@ const FrameMetrics& CudaWorld::step() {
   m.frame = frame_ + 1;
   m.time = static_cast<double>(m.frame) * static_cast<double>(scene.dt);
   if (recording_) {
-    // The state at the step's start stays on the device until record() asks for it.
+    // The state at the step's start stays on the device until record() asks for it; on the
+    // small path the recorded step's kernel copies it (SmallStepDesc::x_pre).
     const std::size_t bytes = sizeof(Vec3) * n;
-    if (n > 0) {
+    if (n > 0 && !d.small) {
       check(cudaMemcpyAsync(d.x_pre.get(), d.x.get(), bytes, cudaMemcpyDeviceToDevice, d.stream), "cudaMemcpy x_pre");
       check(cudaMemcpyAsync(d.v_pre.get(), d.v.get(), bytes, cudaMemcpyDeviceToDevice, d.stream), "cudaMemcpy v_pre");
-      // Done before the step starts: the small path's resident kernel runs on a stream of
-      // its own and would overwrite x and v under copies still queued on this one.
       check(cudaStreamSynchronize(d.stream), "cudaStreamSynchronize (x_pre, v_pre)");
     }
     record_.frame = m.frame;

@@ -414,6 +414,12 @@ struct SmallStepDesc {
   /// grid-wide barriers before the midphase (else three), and no body box read from global
   /// memory by the broadphase.
   std::uint32_t shared_boxes_bodies = 0;
+  /// A recorded step (its records given) first copies the state at its start here, n of
+  /// each, the thread that integrates body i (block 0 with the shared boxes, from x_saved /
+  /// v_saved, equal to x / v then): CudaWorld::record's x_pre and v_pre with no copy and
+  /// wait on the host before the step. Null: not written.
+  Vec3* x_pre = nullptr;
+  Vec3* v_pre = nullptr;
   /// Run the kernel compiled without the midphase's early exit, tile culling and tile
   /// filter (their switches read as off: small_step.cu's kLean instantiation); the host sets it
   /// from the scene's meshes (small_lean_kernel). With the fused front the lean kernel runs

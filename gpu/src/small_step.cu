@@ -6,7 +6,8 @@
 // grid-wide barriers (cooperative_groups grid.sync). Every phase calls the per-element device
 // code of the per-stage kernels (integrate.cuh, broadphase_flat.cuh, midphase.cuh,
 // response.cuh, metrics.cuh); the formulas are those of core's OCTOCD_HD headers. Phases:
-//  1. integrate (Eq. 1-3, keeping x_saved / v_saved for a rerun) and world AABBs, per body;
+//  1. integrate (Eq. 1-3, keeping x_saved / v_saved for a rerun; a recorded step first copies
+//     the state at its start into x_pre / v_pre) and world AABBs, per body;
 //     zero the step's counters and counts;
 //  2. broadphase `flat`, one warp per body i: count its pairs (i, j), j > i (the row of
 //     broadphase_flat.cu) and the pairs (a, i), a < i (the same tests, overlaps(aabb[a],
@@ -342,8 +343,13 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     // start) into its shared memory; block 0 stores the result.
     FrontShared& f = *reinterpret_cast<FrontShared*>(smem);
     Aabb* const boxes = front ? fs.aabb : f.aabb;
+    const bool keep_pre = records != nullptr && s.x_pre != nullptr && blockIdx.x == 0;  // uniform per block
     for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) {
       Vec3 x, v;
+      if (keep_pre) {
+        s.x_pre[i] = b.x_saved[i];
+        s.v_pre[i] = b.v_saved[i];
+      }
       integrated(b, i, b.x_saved[i], b.v_saved[i], s.gravity, s.dt, x, v);
       const Aabb box = translated(b.local[i], x);
       boxes[i] = box;
@@ -410,7 +416,12 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
     }
     stamp(profile, 4);
   } else {
+    const bool keep_pre = records != nullptr && s.x_pre != nullptr;  // uniform
     for (std::uint32_t i = tid; i < n; i += threads) {
+      if (keep_pre) {
+        s.x_pre[i] = b.x[i];
+        s.v_pre[i] = b.v[i];
+      }
       integrate_body(b, i, s.gravity, s.dt);
       aabb_body(b, i);
     }

@@ -51,6 +51,8 @@ gpu::SmallStepDesc CudaWorld::Impl::small_desc(const Scene& scene, bool recordin
   s.front_bodies = gpu::kSmallFrontBodies;
   s.shared_boxes_bodies = gpu::kSmallSharedBoxesBodies;
   s.lean = small_lean ? 1 : 0;
+  s.x_pre = x_pre.get();  // allocated at construction on the small path: a resident kernel keeps the pointers
+  s.v_pre = v_pre.get();
   if (small_dev) {
     s.done = small_dev;
     s.sequence = sequence;
