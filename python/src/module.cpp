@@ -27,6 +27,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <future>
 #include <limits>
 #include <memory>
@@ -363,6 +364,49 @@ class BusyGuard {
 
  private:
   std::atomic<bool>& flag_;
+};
+
+/// Work run on a helper thread while the calling thread, the GIL released, runs Python's
+/// signal handlers every 20 ms: Ctrl-C raises KeyboardInterrupt at once, whatever loop the
+/// work is in. Work a Ctrl-C cut short stays in flight (it completes on its thread) and
+/// settle() waits for it before the object is used again. Declare it after what the work
+/// uses: destroyed first, the in-flight future's destructor waits for the work.
+class InterruptibleWork {
+ public:
+  /// `on_interrupt` (may be empty) runs when a signal handler raised, before the exception
+  /// propagates (e.g. a stop flag the work polls).
+  explicit InterruptibleWork(std::function<void()> on_interrupt = {}) : on_interrupt_(std::move(on_interrupt)) {}
+
+  /// Waits for `f`; when a signal handler raises, `f` becomes the work in flight and the
+  /// exception (py::error_already_set) propagates. The caller then calls f.get().
+  void wait(std::future<void>& f) {
+    for (;;) {
+      bool ready = false;
+      {
+        py::gil_scoped_release release;
+        ready = f.wait_for(std::chrono::milliseconds(20)) == std::future_status::ready;
+      }
+      if (ready) return;
+      if (PyErr_CheckSignals() != 0) {
+        if (on_interrupt_) on_interrupt_();
+        inflight_ = std::move(f);
+        throw py::error_already_set();
+      }
+    }
+  }
+
+  /// Waits (Ctrl-C honoured) for work an earlier Ctrl-C left in flight; raises its error,
+  /// if any.
+  void settle() {
+    if (!inflight_.valid()) return;
+    std::future<void> f = std::move(inflight_);
+    wait(f);
+    f.get();
+  }
+
+ private:
+  std::function<void()> on_interrupt_;
+  std::future<void> inflight_;
 };
 
 /// Ctrl-C for C++ work that runs without the GIL: poll() is the stop callback of the core's
@@ -722,39 +766,18 @@ class PyEngine {
   static constexpr double kInlineStepMs = 50.0;
 
   /// One step on a helper thread; Ctrl-C raises KeyboardInterrupt at once and leaves the
-  /// step to complete in the background (inflight_): the engine stays at a whole step.
+  /// step to complete in the background (work_): the engine stays at a whole step.
   void step_in_background() {
     std::future<void> step = std::async(std::launch::async, [this] {
       engine_->step();
       frames_.store(engine_->frame());
     });
-    wait_interruptibly(step);
+    work_.wait(step);
     step.get();  // the step's error, if any, raised here
   }
-  /// Waits for `f` with the GIL released, running Python's signal handlers every 20 ms;
-  /// when one raises (KeyboardInterrupt), `f` becomes inflight_ and the exception propagates.
-  void wait_interruptibly(std::future<void>& f) {
-    for (;;) {
-      bool ready = false;
-      {
-        py::gil_scoped_release release;
-        ready = f.wait_for(std::chrono::milliseconds(20)) == std::future_status::ready;
-      }
-      if (ready) return;
-      if (PyErr_CheckSignals() != 0) {
-        inflight_ = std::move(f);
-        throw py::error_already_set();
-      }
-    }
-  }
-  /// Before any call that reads or changes the engine: waits (Ctrl-C honoured) for a step
-  /// that an earlier Ctrl-C left completing in the background; raises its error, if any.
-  void settle() {
-    if (!inflight_.valid()) return;
-    std::future<void> f = std::move(inflight_);
-    wait_interruptibly(f);
-    f.get();
-  }
+  /// Before any call that reads or changes the engine: a step an earlier Ctrl-C left
+  /// completing in the background ends first (InterruptibleWork::settle).
+  void settle() { work_.settle(); }
 
   std::shared_ptr<const Model> model_;
   std::unique_ptr<Engine> engine_;
@@ -762,9 +785,9 @@ class PyEngine {
   std::atomic<bool> busy_{false};
   std::atomic<std::int64_t> frames_{0};
   double last_step_ms_ = std::numeric_limits<double>::infinity();  // the first step runs on the helper
-  /// A step cut short by Ctrl-C, completing on its helper thread (declared after engine_:
-  /// destroyed first, its destructor waits for the step).
-  std::future<void> inflight_;
+  /// The steps run on a helper thread, one cut short by Ctrl-C completing there (declared
+  /// after engine_: destroyed first, it waits for the step).
+  InterruptibleWork work_;
 };
 
 // ---- judging another engine ----------------------------------------------------------
@@ -1111,7 +1134,7 @@ class PyValidator {
         // Stopped by the Ctrl-C already raised (the frame is partly judged).
       }
     });
-    wait_interruptibly(judging);
+    work_.wait(judging);
     judging.get();  // the judging's error (InputError, ...), if any, raised here
   }
 
@@ -1122,41 +1145,19 @@ class PyValidator {
   }
 
  private:
-  /// Waits for `f` with the GIL released, running Python's signal handlers every 20 ms;
-  /// when one raises (KeyboardInterrupt), the validators' stop flag is set (the judging
-  /// ends at its next poll), `f` becomes inflight_ and the exception propagates.
-  void wait_interruptibly(std::future<void>& f) {
-    for (;;) {
-      bool ready = false;
-      {
-        py::gil_scoped_release release;
-        ready = f.wait_for(std::chrono::milliseconds(20)) == std::future_status::ready;
-      }
-      if (ready) return;
-      if (PyErr_CheckSignals() != 0) {
-        interrupted_->store(true);
-        inflight_ = std::move(f);
-        throw py::error_already_set();
-      }
-    }
-  }
-  /// Before any call that reads or changes the validator: waits (Ctrl-C honoured) for a
-  /// judging that an earlier Ctrl-C left ending in the background; raises its error, if any.
-  void settle() {
-    if (!inflight_.valid()) return;
-    std::future<void> f = std::move(inflight_);
-    wait_interruptibly(f);
-    f.get();
-  }
+  /// Before any call that reads or changes the validator: a judging an earlier Ctrl-C left
+  /// ending in the background ends first (InterruptibleWork::settle).
+  void settle() { work_.settle(); }
 
   std::unique_ptr<ExternalValidator> validator_;
   std::atomic<bool> busy_{false};
   /// Set by Ctrl-C during observe() (cleared when the next one begins): the validators'
   /// stop callback reads it, so a judging cut short ends at its next poll.
   std::shared_ptr<std::atomic<bool>> interrupted_ = std::make_shared<std::atomic<bool>>(false);
-  /// A judging cut short by Ctrl-C, ending on its helper thread (declared after
-  /// validator_: destroyed first, its destructor waits for the judging).
-  std::future<void> inflight_;
+  /// The judging runs on a helper thread; a Ctrl-C sets interrupted_ (the judging ends at
+  /// its next poll) and leaves it ending there (declared after validator_ and interrupted_:
+  /// destroyed first, it waits for the judging).
+  InterruptibleWork work_{[flag = interrupted_] { flag->store(true); }};
 };
 
 ValidationResult result_from(const py::handle& r) {
