@@ -319,6 +319,28 @@ State initial(const Zoo& z, const std::vector<V>& x, const std::vector<V>& v, co
   return s;
 }
 
+/// A damped penalty spring along x between boxes a and b (half extent 0.1 along x, b on
+/// a's +x side, equal y and z), found at the pre-step pose `s`: depth d = 0.2 - (x_b - x_a),
+/// impulse jn = max(0, (k d + c v_close) dt) with v_close from `free` (the velocities after
+/// gravity); the row's normal -x, its point midway between the faces. Applies jn to `t` (1 kg
+/// each; a static a is not moved) and appends the row; nothing when the boxes are apart.
+void x_spring(const Zoo& z, const State& s, const State& free, State& t, int a, int b, double k, double c,
+              std::vector<Row>& rows) {
+  const double d = 0.2 - (s.x[b][0] - s.x[a][0]);
+  if (!(d > 0)) return;
+  Row r;
+  r.a = a;
+  r.b = b;
+  r.n = {-1, 0, 0};
+  r.depth = f32(d);
+  r.p = f32(V{0.5 * (s.x[a][0] + 0.1 + s.x[b][0] - 0.1), s.x[b][1], s.x[b][2]});
+  const double closing = free.v[a][0] - free.v[b][0];
+  r.jn = f32(std::max(0.0, (k * d + c * closing) * z.dt));
+  if (z.bodies[a].m > 0) t.v[a] = t.v[a] + r.jn * r.n;
+  t.v[b] = t.v[b] - r.jn * r.n;
+  rows.push_back(r);
+}
+
 /// (a) Soft contacts: boxes 0 and 1 (1 kg) meet head-on in the air at 2 m/s and a
 /// damped penalty spring (k = 125 kN/m, c = 50 N s/m) pushes them apart: ~4 mm deep, over
 /// ~12 steps, its kinetic energy rising in the steps that release the penetration; body 2
@@ -341,21 +363,7 @@ Zoo soft_engine(int frames = 60, double chain_c = 50) {
   const std::vector<std::array<int, 2>> springs{{0, 1}, {3, 4}, {4, 5}};
   z.run(frames, false, [&](const State& s, State& t, std::vector<Row>& rows) {
     const State after_gravity = t;
-    for (const auto& [a, b] : springs) {
-      const double d = 0.2 - (s.x[b][0] - s.x[a][0]);
-      if (!(d > 0)) continue;
-      Row r;
-      r.a = a;
-      r.b = b;
-      r.n = {-1, 0, 0};
-      r.depth = f32(d);
-      r.p = f32(V{0.5 * (s.x[a][0] + 0.1 + s.x[b][0] - 0.1), 0.5 * (s.x[a][1] + s.x[b][1]), s.x[a][2]});
-      const double closing = after_gravity.v[a][0] - after_gravity.v[b][0];
-      r.jn = f32(std::max(0.0, (k * d + (a == 0 ? c : chain_c) * closing) * z.dt));
-      t.v[a] = t.v[a] + r.jn * r.n;  // 1 kg each
-      t.v[b] = t.v[b] - r.jn * r.n;
-      rows.push_back(r);
-    }
+    for (const auto& [a, b] : springs) x_spring(z, s, after_gravity, t, a, b, k, a == 0 ? c : chain_c, rows);
   });
   return z;
 }
@@ -385,21 +393,8 @@ Zoo soft_released_engine(bool from_wall, double c, int frames = 40) {
   z.states.push_back(initial(z, x, v, {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}}, {{1, 0, 0, 0}, {1, 0, 0, 0}, {1, 0, 0, 0}}));
   z.run(frames, false, [&](const State& s, State& t, std::vector<Row>& rows) {
     const State free = t;
-    for (const auto& [a, b] : std::vector<std::array<int, 2>>{{0, 1}, {1, 2}}) {
-      const double d = 0.2 - (s.x[b][0] - s.x[a][0]);
-      if (!(d > 0)) continue;
-      Row r;
-      r.a = a;
-      r.b = b;
-      r.n = {-1, 0, 0};
-      r.depth = f32(d);
-      r.p = f32(V{0.5 * (s.x[a][0] + 0.1 + s.x[b][0] - 0.1), s.x[b][1], s.x[b][2]});
-      const double closing = free.v[a][0] - free.v[b][0];
-      r.jn = f32(std::max(0.0, (k * d + (a == 0 ? 50 : c) * closing) * z.dt));
-      if (z.bodies[a].m > 0) t.v[a] = t.v[a] + r.jn * r.n;
-      t.v[b] = t.v[b] - r.jn * r.n;
-      rows.push_back(r);
-    }
+    for (const auto& [a, b] : std::vector<std::array<int, 2>>{{0, 1}, {1, 2}})
+      x_spring(z, s, free, t, a, b, k, a == 0 ? 50 : c, rows);
   });
   return z;
 }
