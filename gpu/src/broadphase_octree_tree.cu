@@ -82,9 +82,8 @@ namespace {
 
 
 /// Below this many bodies the query runs one warp per slot, from it one thread per slot
-/// (bench_gpu_broadphase on the H100 with the occupancy map and the warp's pair append,
-/// reports/h100/perf-v7/r3: warp / thread 0.128 / 0.146 ms at 10^4, 0.156 / 0.160 at
-/// 3x10^4, 0.202 / 0.167 at 6x10^4, 0.249 / 0.171 at 10^5).
+/// (where the thread query overtakes the warp's in bench_gpu_broadphase on the H100:
+/// reports/h100/README.md, "Experiments and A/B results", "Broadphases").
 constexpr std::uint32_t kWarpQueryBodies = 32768;
 
 /// A body's unit box in the fixed point of loose_q_min / loose_q_max.
