@@ -1,9 +1,9 @@
 """A process engine's run request (format "octocd-run-request", version 1; docs/engines.md,
 "Rapier" and "Jolt") built from octocd's own scene set-up: `octocd run SCENE --engine bullet
 --rotation --frames 1` gives the bodies in octocd's order (/bodies: local boxes, inverse mass,
-inertia, friction, restitution) and state 0; meshes are placed in the body frame as the trace
-format does (their bounds centred on the local box). Used by tests/reference/test_process_js.py
-until octocd writes requests itself.
+inertia) and state 0; every body gets the scene's material (mu_static, restitution); meshes
+are placed in the body frame as the trace format does (their bounds centred on the local
+box). Used by tests/reference/test_process_js.py until octocd writes requests itself.
 
     process_request.py OCTOCD SCENE.json FRAMES TRACE REQUEST [KEY=VALUE ...]
 """
@@ -89,7 +89,6 @@ def _request(f, frames, trace, settings, source_dir):
     sid, group = f["bodies/shape_id"][:], f["bodies/group"].asstr()[:]
     lo, hi = f["bodies/local_aabb_min"][:].astype(float), f["bodies/local_aabb_max"][:].astype(float)
     im, inertia = f["bodies/inverse_mass"][:], f["bodies/inertia"][:].astype(float)
-    fr, re = f["bodies/friction"][:], f["bodies/restitution"][:]
     pos, vel = f["states/position"][0], f["states/velocity"][0]
     q, w = f["states/orientation"][0], f["states/angular_velocity"][0]
     meshes, mesh_of, bodies = [], {}, []
@@ -100,7 +99,9 @@ def _request(f, frames, trace, settings, source_dir):
              "local_aabb_min": lo[i].tolist(), "local_aabb_max": hi[i].tolist(),
              "position": pos[i].astype(float).tolist(), "orientation": q[i].astype(float).tolist(),
              "velocity": vel[i].astype(float).tolist(), "angular_velocity": w[i].astype(float).tolist(),
-             "friction": float(fr[i]), "restitution": float(re[i])}
+             # the scene's material itself: each process engine combines two bodies' values by
+             # its own rule and declares it (Bullet's trace holds sqrt(mu) for its product rule)
+             "friction": float(f.attrs["mu"]), "restitution": float(f.attrs["restitution"])}
         if "box" in shape:
             b.update(shape="box", half_extents=((hi[i] - lo[i]) / 2).tolist())
         else:
@@ -115,7 +116,8 @@ def _request(f, frames, trace, settings, source_dir):
                             p = os.path.join(source_dir, d, shape["mesh"] + ext)
                             file = p if os.path.exists(p) else file
                     v, t = load_mesh(file)
-                    v = v * shape.get("scale", 1.0)
+                # octocd sizes a dataset mesh to its `scale` (longest side); the local box has that size
+                v = v * ((hi[i] - lo[i]).max() / (v.max(0) - v.min(0)).max())
                 v = v - (v.min(0) + v.max(0)) / 2 + (lo[i] + hi[i]) / 2
                 mesh_of[name] = len(meshes)
                 meshes.append({"name": name, "file": file, "vertices": v.tolist(), "triangles": t.tolist()})
