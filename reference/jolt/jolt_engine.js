@@ -18,8 +18,8 @@ const settingsSpec = {
   iterations: { def: 10, parse: intIn(1, 255), allowed: "an integer in [1, 255] (Jolt's mNumVelocitySteps)" },
   // PhysicsSettings::mNumPositionSteps (Jolt's default 2).
   position_iterations: { def: 2, parse: intIn(0, 255), allowed: "an integer in [0, 255] (Jolt's mNumPositionSteps)" },
-  // JoltInterface::Step's inCollisionSteps: sub-steps of dt / n, each a full detect-solve-integrate.
-  collision_steps: { def: 1, parse: intIn(1, 64), allowed: "an integer in [1, 64] (Step's collision steps)" },
+  // Sub-steps of dt / n per frame, each a full Jolt step (detect, solve, integrate).
+  collision_steps: { def: 1, parse: intIn(1, 64), allowed: "an integer in [1, 64] (Jolt steps of dt / n a frame)" },
   // "v4": the declarations of the physics tier's fourth round; "v3": only those an older reader knows.
   declarations: { def: "v4", parse: oneOf("v4", "v3"), allowed: '"v4" or "v3"' },
 };
@@ -188,6 +188,7 @@ class JoltWorld {
     const listener = new J.ContactListenerJS();
     listener.OnContactValidate = () => J.ValidateResult_AcceptAllContactsForThisBodyPair;
     const record = (b1p, b2p, mp) => {
+      if (!this.recording) return;
       const b1 = J.wrapPointer(b1p, J.Body), b2 = J.wrapPointer(b2p, J.Body);
       const m = J.wrapPointer(mp, J.ContactManifold);
       const i1 = this.indexOfBody.get(b1.GetID().GetIndexAndSequenceNumber());
@@ -214,7 +215,15 @@ class JoltWorld {
     this.listener = listener;
   }
 
-  step() { this.jolt.Step(this.req.dt, this.collisionSteps); }
+  // n Jolt steps of dt / n; the rows are those of the first, detected at the pre-step pose.
+  step() {
+    const n = this.collisionSteps;
+    this.recording = true;
+    for (let k = 0; k < n; ++k) {
+      this.jolt.Step(this.req.dt / n, 1);
+      this.recording = false;
+    }
+  }
 
   readState(pos, vel, quat, angvel) {
     for (let i = 0; i < this.n; ++i) {

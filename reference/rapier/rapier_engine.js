@@ -97,6 +97,7 @@ class RapierWorld {
     };
     this.bodyData = { collision_shape: { strings: shapes } };
     this.jt3 = false;
+    this.matchWorst = 0;  // the largest distance between a solver contact and its tracked point's midpoint (m)
     this.staleDropped = 0;  // solver contacts beyond the prediction distance without impulse, not written
     this.tangentSeen = 0;  // rows whose tangent impulse Rapier reported non-zero (a witness)
   }
@@ -158,6 +159,7 @@ class RapierWorld {
             }
             if (best < 0) throw new Error(`pair (${i}, ${j}): solver contact ${s} has no tracked point`);
             used.add(best);
+            this.matchWorst = Math.max(this.matchWorst, bestD);
             const t = tracked[best];
             const w1 = toWorld(x1, q1, t.la), w2 = toWorld(x2, q2, t.lb);
             const dist = dot(sub(w2, w1), n1);
@@ -180,7 +182,8 @@ class RapierWorld {
   }
 
   endAttrs() {
-    return { rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped) };
+    return { rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
+             rapier_solver_match_worst_m: f64(this.matchWorst) };
   }
 
   free() { this.world.free(); }
