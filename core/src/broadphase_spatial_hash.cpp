@@ -51,7 +51,7 @@ class SpatialHashBroadPhase final : public BroadPhase {
  public:
   explicit SpatialHashBroadPhase(float cell_size) : h_(cell_size) {}
 
-  std::string name() const override { return "spatial-hash"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::spatial_hash); }
 
   void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
                   BroadPhaseStats& stats) override {
@@ -220,8 +220,8 @@ class SpatialHashBroadPhase final : public BroadPhase {
 
 namespace detail {
 
-std::unique_ptr<BroadPhase> make_spatial_hash_broadphase(float cell_size) {
-  return std::make_unique<SpatialHashBroadPhase>(cell_size);
+std::unique_ptr<BroadPhase> make_host_spatial_hash(const BroadPhaseConfig& config, const Aabb&) {
+  return std::make_unique<SpatialHashBroadPhase>(config.cell_size);
 }
 
 }  // namespace detail

@@ -155,7 +155,7 @@ inline void launched(cudaError_t e, const char* kernel) {
 
 /// Throws RuntimeError (a programming error of the caller) when find() gets a body count
 /// that reserve() did not size the scratch for.
-inline void check_reserved(bool reserved, std::uint32_t reserved_n, std::uint32_t n, const char* name) {
+inline void check_reserved(bool reserved, std::uint32_t reserved_n, std::uint32_t n, const std::string& name) {
   if (!reserved || reserved_n != n)
     throw RuntimeError(fmt::format("device broadphase '{}': find() with {} bodies but reserve() sized it for {}; "
                                    "call reserve(n) first (outside graph capture)",

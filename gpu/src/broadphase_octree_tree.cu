@@ -692,7 +692,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     while (nan_key() >> key_bits_ != 0) ++key_bits_;  // bits of the NaN key
   }
 
-  std::string name() const override { return "octree"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::octree); }
   bool sorts_pairs() const override { return true; }
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
@@ -726,7 +726,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(n_ != kNotReserved, n_, n, "octree");
+    bp::check_reserved(n_ != kNotReserved, n_, n, broadphase_name(BroadPhaseId::octree));
     check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
     if (n == 0) return;
     if (out.scratch) {
@@ -869,19 +869,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
 std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain,
                                                            LooseOctreeQuery query) {
   return std::make_unique<LooseOctreeDevice>(config.octree_depth, domain, query);
-}
-
-std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain) {
-  if (config.name == "lbvh") return make_device_lbvh(domain);  // device only, no parameter
-  // The parameter checks of make_broadphase (throws InputError naming the field).
-  (void)make_broadphase(config, domain);
-  if (config.name == "octree") return make_device_loose_octree(config, domain);
-  if (config.name == "octree-strict") return make_device_strict_octree(config, domain);
-  if (config.name == "spatial-hash") return make_device_spatial_hash(config);
-  std::string names;
-  for (const std::string& nm : cuda_broadphase_names()) names += (names.empty() ? "" : ", ") + nm;
-  throw InputError(
-      fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: {}", config.name, names));
 }
 
 }  // namespace gpu
