@@ -43,6 +43,7 @@
 #include "octocd/world.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engines.hpp"
+#include "octocd/process_engines.hpp"
 #include "commands.hpp"
 #include "tools.hpp"
 #include "view.hpp"
@@ -396,29 +397,43 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
                            const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
   namespace fs = std::filesystem;
   const bool temporary = o.trace.empty();
-  const std::string path = temporary ? octocd::cli::temporary_trace("validate-" + o.engine) : o.trace;
+  // A temporary trace is made once the engine has stepped: a process engine stopped by a
+  // signal ends octocd at once (process_engines.hpp), with nothing of its own left.
+  std::string path = o.trace;
   const std::string what = o.engine + (octocd::scene_rotates(model->scene) ? " (rotation)" : " (translation only)");
   std::string geometry;
-  {
+  try {
     const std::unique_ptr<octocd::Engine> engine =
         make_engine(o.engine, model, o.settings);
     octocd::Engine& world = *engine;
     geometry = world.collision_geometry();
-    octocd::TraceOptions topt;
-    topt.state_every = 1;
-    topt.contacts = true;
-    topt.v2 = *world.rotation_traits();
-    topt.gravity = model->scene.gravity;
-    world.set_recording(true);
-    octocd::TraceMetadata meta = octocd::trace_metadata(world, 1);
-    meta.start_time = octocd::cli::utc_time_now();
-    octocd::TraceWriter trace(path, meta, octocd::trace_bodies(world), topt);
-    trace.append_state(0, world.state());
-    for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
-      const octocd::FrameMetrics& m = world.step();
-      trace.append_frame_v2(m, world.state(), world.record());
+    if (world.writes_own_trace()) {  // a process engine: its own trace is judged, as written
+      world.plan_steps(o.frames);
+      world.step();  // its process runs every frame; the trace is checked against the request
+      if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
+      octocd::copy_own_trace(world, path, temporary ? "validate" : "--trace");
+    } else {
+      if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
+      octocd::TraceOptions topt;
+      topt.state_every = 1;
+      topt.contacts = true;
+      topt.v2 = *world.rotation_traits();
+      topt.gravity = model->scene.gravity;
+      world.set_recording(true);
+      octocd::TraceMetadata meta = octocd::trace_metadata(world, 1);
+      meta.start_time = octocd::cli::utc_time_now();
+      octocd::TraceWriter trace(path, meta, octocd::trace_bodies(world), topt);
+      trace.append_state(0, world.state());
+      for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
+        const octocd::FrameMetrics& m = world.step();
+        trace.append_frame_v2(m, world.state(), world.record());
+      }
+      trace.close();
     }
-    trace.close();
+  } catch (...) {  // the engine failed: its temporary trace goes (a --trace keeps the frames written)
+    std::error_code ec;
+    if (temporary && !path.empty()) fs::remove(path, ec);
+    throw;
   }
   octocd::ExternalOptions eo;
   eo.against_fcl = vo.against_fcl;
