@@ -675,8 +675,8 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
     if (!make_engine(o.engine, model, o.settings)->can_record())
       throw octocd::InputError(fmt::format(
           "--engine: {} with boxes equal to the AABBs and no rotation cannot be validated (no per-frame record); "
-          "allowed: cpu, cuda, or {} with --bullet shape=hull (the default) or --rotation",
-          o.engine, o.engine));
+          "allowed: {}, or {} with --bullet shape=hull (the default) or --rotation",
+          o.engine, engines_with([](const EngineInfo& e) { return e.records_every_step; }), o.engine));
     return validate_through_trace(o, vo, model, t0);
   }
   std::unique_ptr<octocd::TraceWriter> trace;
@@ -798,8 +798,10 @@ Command add_validate_command(CLI::App& app) {
       ->default_val(10);
   val_cmd->add_option("--engine", val.engine,
                       engines_help() +
-                          ". An engine that records every step (cpu, cuda) is judged in process, the others "
-                          "through their version 2 trace (--trace keeps it). Default: cpu, or the first engine "
+                          ". An engine that records every step (" +
+                          engines_with([](const EngineInfo& e) { return e.records_every_step; }) +
+                          ") is judged in process, the others through their version 2 trace (--trace keeps it; a "
+                          "process engine's own trace, docs/bring-your-engine.md). Default: cpu, or the first engine "
                           "that rotates for a rotating scene (rotation: true, an orientation or an angular velocity)")
       ->check(CLI::IsMember(octocd::engine_names()))
       ->default_val("cpu");

@@ -23,6 +23,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "octocd/trace_reader.hpp"
 #include "support/cli_run.hpp"
 #include "support/wait_event.hpp"
 
@@ -125,9 +126,24 @@ TEST_F(ProcessEngines, RunGivesTheTraceAndBenchTheStepsPerSecondOfItsTiming) {
   const nlohmann::json s = nlohmann::json::parse(in);
   EXPECT_EQ(s.at("frames"), 80);
   EXPECT_EQ(s.at("engine"), "pyboxes");
-  EXPECT_GT(s.at("steps_per_s").get<double>(), 0.0);  // from wall_step_seconds
+  // steps/s: the frames over the process's own timing (its trace's wall_step_seconds).
+  const double wall = octocd::TraceReader(trace).number_attribute("wall_step_seconds");
+  ASSERT_GT(wall, 0.0);
+  EXPECT_NEAR(s.at("steps_per_s").get<double>(), 80.0 / wall, 1e-6 * 80.0 / wall);
   // The falling box (body 3, 2 kg) after 80 steps of semi-implicit Euler: v = -9.81 * 0.08.
   EXPECT_NEAR(s.at("kinetic_energy").at("last").get<double>(), 0.5 * 2.0 * std::pow(9.81 * 0.08, 2), 1e-3);
+  EXPECT_TRUE(tmp_empty());
+
+  // bench: a sweep naming the process engine reports its steps/s from the same timing.
+  const std::string result = path("bench.json");
+  const Result b = octocd("bench " + data("bench.json") + " --scene-dir " + data("") + " --quiet -o " + result);
+  ASSERT_EQ(b.code, 0) << b.output;
+  std::ifstream bin(result);
+  const nlohmann::json bench = nlohmann::json::parse(bin);
+  const nlohmann::json& point = bench.at("points").at(0);
+  EXPECT_EQ(point.at("status"), "ok");
+  EXPECT_GT(point.at("windows").at("all").at("steps_per_s").at("median").get<double>(), 0.0);
+  EXPECT_FALSE(point.at("windows").at("all").contains("cpu_steps_per_s"));  // octocd's CPU time is not the engine's
   EXPECT_TRUE(tmp_empty());
 }
 
