@@ -86,7 +86,7 @@ configure_file(${CMAKE_SOURCE_DIR}/reference/engines.json.in ${CMAKE_BINARY_DIR}
 install(FILES ${CMAKE_BINARY_DIR}/install-share/engines.json DESTINATION ${_octocd_share} COMPONENT runtime)
 install(FILES ${CMAKE_SOURCE_DIR}/reference/package.json ${CMAKE_SOURCE_DIR}/reference/package-lock.json
   DESTINATION ${_octocd_share}/reference COMPONENT runtime OPTIONAL)
-foreach(_octocd_js_engine rapier jolt)
+foreach(_octocd_js_engine rapier jolt js-common)
   file(GLOB _octocd_js CONFIGURE_DEPENDS ${CMAKE_SOURCE_DIR}/reference/${_octocd_js_engine}/*.js)
   if(_octocd_js)
     install(FILES ${_octocd_js} DESTINATION ${_octocd_share}/reference/${_octocd_js_engine} COMPONENT runtime)
