@@ -37,10 +37,11 @@ void keep_tail(std::string& tail, const char* data, std::size_t n) {
   if (tail.size() > 2 * kTailBytes) tail.erase(0, tail.size() - kTailBytes);
 }
 
-/// Reads what `fd` holds now (non-blocking) into `tail`; false at EOF or error.
-bool drain(int fd, std::string& tail, std::uint64_t& total) {
+/// Reads what `fd` holds now (non-blocking) into `tail`, at most `reads` reads of 16 KiB;
+/// false at EOF or error.
+bool drain(int fd, std::string& tail, std::uint64_t& total, int reads = 64) {
   char buf[16384];
-  for (;;) {
+  for (int k = 0; k < reads; ++k) {
     const ssize_t n = ::read(fd, buf, sizeof buf);
     if (n > 0) {
       keep_tail(tail, buf, static_cast<std::size_t>(n));
@@ -51,6 +52,7 @@ bool drain(int fd, std::string& tail, std::uint64_t& total) {
     if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) return true;
     return false;  // EOF or error
   }
+  return true;
 }
 
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }

@@ -120,6 +120,9 @@ class ProcessEngine final : public Engine {
 
   /// Runs the process for frames_ steps and opens its trace.
   void run() {
+    // A missing runtime (its program, a file of its command, its check) is said as such.
+    if (const std::string why = process_engine_unavailable(spec_); !why.empty())
+      throw RuntimeError(fmt::format("engine '{}' ({}) is unavailable here: {}", spec_.info.name, spec_.file, why));
     frames_ = planned_ > 0 ? planned_ : model_->scene.frames;
     const char* tmp = std::getenv("TMPDIR");
     std::string templ = (fs::path(tmp && *tmp ? tmp : "/tmp") / ("octocd-" + spec_.info.name + "-XXXXXX")).string();

@@ -165,7 +165,9 @@ TEST_F(ProcessEngines, EveryFaultIsAClearRuntimeFailureNamingTheEngine) {
       {"pybig", "engine 'pybig' .* wrote a trace beyond its max_trace_bytes 1000"},
       {"pyhostile", "engine 'pyhostile' .* exited with code 1 .*its stderr ended \\(the last [0-9]+ of 1048[0-9]+ "
                     "bytes\\): .*last line \\\\x1b\\[0m"},
-      {"pymissing", "engine 'pymissing' .* could not be started: 'no-such-runtime-octocd' is not found on PATH"},
+      {"pymissing", "engine 'pymissing' .* is unavailable here: command 'no-such-runtime-octocd' not found on PATH"},
+      {"pycheckfails", "engine 'pycheckfails' .* is unavailable here: its check .* exited with code 4 .*no module "
+                       "named rapier"},
   };
   for (const Fault& f : faults) {
     for (const char* command : {"validate", "run"}) {
