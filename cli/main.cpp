@@ -49,9 +49,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   app.add_option("--engines-file", engines_file,
-                 "An engines file (JSON) of process engines, read after the shipped one (PREFIX/share/octocd/"
-                 "engines.json) and the user's ($XDG_CONFIG_HOME/octocd/engines.json); give it before the command "
-                 "(docs/bring-your-engine.md)");
+                 "An engines file of process engines (docs/bring-your-engine.md)");
   std::vector<octocd::cli::Command> commands;
   try {
     commands = octocd::cli::add_commands(app);

@@ -100,6 +100,33 @@ TEST_F(ProcessEngines, ListedBesideTheBuiltInOnesWithTheirAvailability) {
   EXPECT_EQ(doc.at("engines_files").back(), data("engines.json"));
 }
 
+TEST_F(ProcessEngines, TheUsersEnginesFileIsReadAndTheOptionsFileReplacesItsEntries) {
+  // $XDG_CONFIG_HOME/octocd/engines.json: read after the shipped file, before --engines-file.
+  fs::create_directories(dir_ / "config" / "octocd");
+  std::ofstream(dir_ / "config" / "octocd" / "engines.json")
+      << R"({"format": "octocd-engines", "version": 1, "engines": [
+           {"name": "mine", "description": "the user's", "command": ["/usr/bin/python3", "-c", "pass"]},
+           {"name": "pyboxes", "description": "replaced by --engines-file", "command": ["/usr/bin/python3"]}]})";
+  const Result r = octocd::test::run("XDG_CONFIG_HOME=" + (dir_ / "config").string() + " " + octocd::test::bin() +
+                                     " --engines-file " + data("engines.json") + " engines --json");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const nlohmann::json doc = nlohmann::json::parse(r.output);
+  const std::vector<std::string> files = doc.at("engines_files");
+  ASSERT_EQ(files.size(), 3u) << r.output;  // the build tree's, the user's, the option's
+  EXPECT_EQ(files[1], (dir_ / "config" / "octocd" / "engines.json").string());
+  EXPECT_EQ(files[2], data("engines.json"));
+  int mine = 0, pyboxes = 0;
+  for (const auto& e : doc.at("engines")) {
+    if (e.at("name") == "mine") ++mine;
+    if (e.at("name") == "pyboxes") {
+      ++pyboxes;
+      EXPECT_NE(e.at("description"), "replaced by --engines-file");
+    }
+  }
+  EXPECT_EQ(mine, 1);
+  EXPECT_EQ(pyboxes, 1);
+}
+
 TEST_F(ProcessEngines, TheCorrectEngineIsJudgedCleanThroughItsOwnTrace) {
   const std::string trace = path("pyboxes.h5");
   const Result r = octocd("validate " + data("boxes.json") + " --engine pyboxes --frames 120 --trace " + trace);
