@@ -54,6 +54,10 @@ int engines_json() {
     j["geometries"] = e.geometries;
     j["settings"] = engine_setting_names(e);
     j["description"] = e.description;
+    if (!e.own_broadphase.empty()) {
+      j["own_broadphase"] = e.own_broadphase;
+      j["own_broadphase_class"] = e.own_broadphase_class;
+    }
     if (!e.command.empty()) {
       j["command"] = e.command;
       if (const ProcessEngineSpec* p = find_process_engine(e.name)) j["engines_file"] = p->file;
@@ -96,8 +100,8 @@ Command add_engines_command(CLI::App& app) {
   cmd->add_flag("--available", options->available, "Print only the names of the engines that run here, one a line");
   cmd->add_flag("--json", options->json,
                 "Print the registry as JSON: per engine name, kind (builtin or process), available, why, rotates, "
-                "geometries, settings, description (a process engine also: command, engines_file), and the engines "
-                "files read");
+                "geometries, settings, description, own_broadphase and its class where it runs its own (a process "
+                "engine also: command, engines_file), and the engines files read");
   return {[cmd] { return cmd->parsed(); }, [options] { return engines_command(*options); }};
 }
 
