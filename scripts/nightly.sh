@@ -46,8 +46,10 @@
 #                   scenes kept; edit each reason); the scenes then count as passed
 #   --strict        an expected failure that no longer fails is a failure (exit 3)
 #   --matrix SET    the engine matrix (docs/engines.md, "The engine matrix"): every
-#                   reference engine available here (`octocd engines --available`:
-#                   bullet, mujoco, ode, dart) runs each scene it can express with
+#                   engine of the registry that rotates (`octocd engines --json`: the
+#                   reference engines bullet, mujoco, ode, dart and the process engines of
+#                   the engines files, rapier and jolt shipped; docs/bring-your-engine.md),
+#                   available here (`octocd engines --available`), runs each scene it can express with
 #                   rotation (`octocd run --trace --contacts --state-every 1`), and the
 #                   physics tier judges its trace (`validate --trace-in`, the same
 #                   expectations file, keyed by the trace's name ENGINE--SCENE.h5):
@@ -254,7 +256,10 @@ matrix_skip() {  # engine scene
 matrix_engines=()
 if [ "$matrix" != "none" ]; then
   available="$("$bin" engines --available 2>/dev/null)"
-  for e in bullet mujoco ode dart; do
+  # The registry's rotating engines, built in or process engines (`octocd engines --json`).
+  rotating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
+print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if e["rotates"]))')"
+  for e in $rotating; do
     if grep -qx "$e" <<<"$available"; then
       matrix_engines+=("$e")
     else

@@ -13,6 +13,7 @@
 #include "octocd/cuda_settings.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/world.hpp"
 #if OCTOCD_HAVE_MUJOCO
@@ -266,10 +267,17 @@ std::string choose_engine(const ArgumentNames& names, Has has) {
 
 }  // namespace
 
+std::vector<std::string> builtin_engine_names() {
+  std::vector<std::string> names;
+  for (const Registered& r : registered()) names.push_back(r.info.name);
+  return names;
+}
+
 const std::vector<EngineInfo>& engine_infos() {
   static const std::vector<EngineInfo> infos = [] {
     std::vector<EngineInfo> v;
     for (const Registered& r : registered()) v.push_back(r.info);
+    for (const ProcessEngineSpec& p : process_engines(builtin_engine_names())) v.push_back(p.info);
     return v;
   }();
   return infos;
@@ -357,10 +365,11 @@ void apply_engine_options(Scene& scene, const EngineInfo& info, const EngineOpti
   if (!info.rotates) require_translation_only(scene, info.name);
 }
 
-bool engine_built(const EngineInfo& info) { return registered(info).built; }
+bool engine_built(const EngineInfo& info) { return !info.command.empty() || registered(info).built; }
 
 std::string engine_unavailable(const EngineInfo& info) {
   try {
+    if (!info.command.empty()) return process_engine_unavailable(*find_process_engine(info.name));
     if (!engine_built(info)) return fmt::format("engine '{}' is not built in this octocd", info.name);
     if (info.device && !cuda_device_available()) return cuda_device_status();
   } catch (const std::exception& e) {
@@ -376,9 +385,18 @@ std::vector<std::string> built_engine_names() {
   return names;
 }
 
-std::vector<std::string> engine_setting_names(const EngineInfo& info) { return registered(info).setting_names(); }
+std::vector<std::string> engine_setting_names(const EngineInfo& info) {
+  if (!info.command.empty()) return find_process_engine(info.name)->settings;
+  return registered(info).setting_names();
+}
 
 std::string engine_settings_help(const EngineInfo& info) {
+  if (!info.command.empty()) {
+    const std::vector<std::string> keys = engine_setting_names(info);
+    return keys.empty() ? "" : fmt::format("A setting of the process engine {}, KEY=VALUE, repeatable, passed to its "
+                                           "process as a string; keys: {}",
+                                           info.name, join(keys, ", "));
+  }
   const Registered& r = registered(info);
   const std::vector<std::string> keys = r.setting_names();
   if (keys.empty()) return "";
@@ -394,7 +412,8 @@ void check_engine_settings(const EngineSettingItems& settings, const ArgumentNam
     const EngineInfo* info = find_engine_info(engine);
     if (info == nullptr)
       throw InputError(fmt::format("{}: unknown engine '{}'; allowed: {}", where, engine, join(engine_names(), ", ")));
-    registered(*info).check_settings(items, where);
+    if (!info->command.empty()) check_process_settings(*find_process_engine(engine), items, where);
+    else registered(*info).check_settings(items, where);
   }
 }
 
@@ -403,8 +422,10 @@ std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_p
   const EngineInfo& info = engine_info(name, "--engine");
   const auto it = settings.find(name);
   static const Items kNone;
-  return registered(info).make(model, it == settings.end() ? kNone : it->second,
-                               fmt::format(fmt::runtime(cli_argument_names().settings), name));
+  const std::string where = fmt::format(fmt::runtime(cli_argument_names().settings), name);
+  if (!info.command.empty())
+    return make_process_engine(*find_process_engine(name), model, it == settings.end() ? kNone : it->second, where);
+  return registered(info).make(model, it == settings.end() ? kNone : it->second, where);
 }
 
 }  // namespace octocd
