@@ -51,7 +51,7 @@ from report_html import Outputs
 
 MIN_SEGMENT = 3         # nights on each side of a split
 MAX_RAMP = 30          # nights on either side of a change point a ramp may span
-MERGE_GAP = 8           # change points of one direction with fewer nights than this between them: one window
+MERGE_GAP = 10          # change points of one direction with fewer nights than this between them: one window
 MAX_CHANGES = 64        # change points per series (a search stops there)
 MAX_FILE_BYTES = 64 << 20
 MAX_FILES = 100000
@@ -310,23 +310,23 @@ def change_points(x, alpha, m=MIN_SEGMENT):
     return sorted(found)
 
 
-def ramp(x, a, t, b, A, B, reach=MAX_RAMP):
+def ramp(x, a, t1, t2, b, A, B, reach=MAX_RAMP):
     """(s1, s2): the nights over which x[a:b] moves from level A to level B around the change
-    point t: the model A before s1, a straight line from A to B over s1..s2-1, B from s2, fitted
-    by least squares over s1 in [t - reach, t], s2 in [t, t + reach]; a ramp (s2 > s1 + 1) only
-    where it beats the best step by the Bayesian information criterion (one parameter more:
-    n log(SSE_step / SSE_ramp) > log n), else the best step (s, s))."""
+    points t1 <= t2: the model A before s1, a straight line from A to B over s1..s2-1, B from
+    s2, fitted by least squares over s1 in [t1 - reach, t2], s2 in [t1, t2 + reach]; a ramp
+    (s2 > s1) only where it beats the best step by the Bayesian information criterion (one
+    parameter more: n log(SSE_step / SSE_ramp) > log n), else the best step (s, s)."""
     y = x[a:b]
     n = len(y)
     i = np.arange(n, dtype=float)
-    lo, hi = max(1, t - a - reach), min(n - 1, t - a + reach)
-    best_step, best_ramp = (math.inf, t - a, t - a), (math.inf, t - a, t - a)
-    for s1 in range(lo, t - a + 1):
-        for s2 in range(max(s1, t - a), hi + 1):
+    lo, hi = max(1, t1 - a - reach), min(n - 1, t2 - a + reach)
+    best_step, best_ramp = (math.inf, t1 - a, t1 - a), (math.inf, t1 - a, t1 - a)
+    for s1 in range(lo, t2 - a + 1):
+        for s2 in range(max(s1, t1 - a), hi + 1):
             if s2 == s1:
                 m = np.where(i < s1, A, B)
             else:
-                m = np.clip(A + (B - A) * (i - s1 + 1) / (s2 - s1 + 1), min(A, B), max(A, B))
+                m = A + (B - A) * (i - s1 + 1) / (s2 - s1 + 1)
                 m = np.where(i < s1, A, np.where(i >= s2, B, m))
             sse = float(np.sum((y - m) ** 2))
             if s2 == s1 and sse < best_step[0]:
@@ -340,9 +340,10 @@ def ramp(x, a, t, b, A, B, reach=MAX_RAMP):
 
 def changes(x, alpha, m=MIN_SEGMENT):
     """The change points of x (log values) as changes: [{first, last, before, after, ratio,
-    p}], first..last the indices of the nights the level moved on (first == last: a step at
-    night first; a ramp from ramp()), before/after the medians (log) of the segments around.
-    Change points of one direction fewer than MERGE_GAP nights apart are one change."""
+    p}]. Change points of one direction fewer than MERGE_GAP nights apart are one change
+    (a creep is often found as several); first..last are the indices of the nights its level
+    moved on (first == last: a step at night first; else a ramp, from ramp()), before/after
+    the medians (log) of the segments around it."""
     cps = change_points(x, alpha, m)
     if not cps:
         return []
@@ -351,17 +352,17 @@ def changes(x, alpha, m=MIN_SEGMENT):
     groups = []
     for i, (t, p) in enumerate(cps):
         sign = 1 if levels[i + 1] > levels[i] else -1
-        s1, s2 = ramp(x, bounds[i], t, bounds[i + 2], levels[i], levels[i + 1])
-        first, last = s1, max(s1, s2 - 1)
-        if groups and groups[-1]["sign"] == sign and first - groups[-1]["last"] < MERGE_GAP:
+        if groups and groups[-1]["sign"] == sign and t - groups[-1]["t2"] < MERGE_GAP:
             g = groups[-1]
-            g["last"], g["p"], g["seg_after"] = max(g["last"], last), min(g["p"], p), i + 1
-            g["first"] = min(g["first"], first)
+            g["t2"], g["p"], g["seg_after"] = t, min(g["p"], p), i + 1
         else:
-            groups.append({"first": first, "last": last, "p": p, "sign": sign, "seg_before": i, "seg_after": i + 1})
+            groups.append({"t1": t, "t2": t, "p": p, "sign": sign, "seg_before": i, "seg_after": i + 1})
     for g in groups:
         g["before"], g["after"] = levels[g["seg_before"]], levels[g["seg_after"]]
         g["ratio"] = math.exp(g["after"] - g["before"])
+        s1, s2 = ramp(x, bounds[g["seg_before"]], g["t1"], g["t2"], bounds[g["seg_after"] + 1], g["before"],
+                      g["after"])
+        g["first"], g["last"] = s1, max(s1, s2 - 1)
     return groups
 
 
