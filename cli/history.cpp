@@ -218,6 +218,10 @@ CLI::App* add_history_append_command(CLI::App& app, HistoryAppendOptions& o) {
   c->add_option("--validation", o.validation,
                 "Verdicts of `octocd validate --json` (.json) to add (repeatable; a matrix trace ENGINE--SCENE.h5 "
                 "gives its engine and scene)");
+  c->add_option("--errored", o.errored,
+                "Cases that gave no verdict (a run that crashed, timed out or was bad input), named as scripts/nightly.sh "
+                "names them: SCENE (engine cpu) or ENGINE--SCENE[--quick]; each is one row `run` of status error "
+                "(repeatable)");
   c->add_option("--kind", o.kind, "What made the run: nightly (default) or bench")
       ->check(CLI::IsMember({"nightly", "bench"}));
   return c;
@@ -234,6 +238,11 @@ int history_append_command(const HistoryAppendOptions& o) {
   }
   for (const auto& p : o.validation)
     for (auto& row : history_verdicts(p)) verdicts.push_back(std::move(row));
+  for (const auto& name : o.errored) {
+    const auto [engine, scene] = engine_scene_of_trace(name + ".h5", "cpu");
+    verdicts.push_back({{"engine", bounded(engine, kMaxName)}, {"scene", bounded(scene, kMaxName)}, {"row", "run"},
+                        {"verdict", "error"}, {"status", "error"}});
+  }
   const std::size_t rows = verdicts.size();
   const std::string path = append_history(o.dir, o.kind, std::move(bench), std::move(verdicts), "history-append");
   fmt::print("octocd history-append: wrote {} ({} bench result(s), {} verdict row(s))\n", printable(path),

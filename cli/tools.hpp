@@ -262,6 +262,7 @@ struct HistoryAppendOptions {
   std::string dir;                      ///< the history folder
   std::vector<std::string> bench;       ///< --bench: results of `octocd bench`
   std::vector<std::string> validation;  ///< --validation: verdicts of `octocd validate --json`
+  std::vector<std::string> errored;     ///< --errored: cases without a verdict (SCENE or ENGINE--SCENE)
   std::string kind = "nightly";         ///< --kind: nightly or bench
 };
 CLI::App* add_history_append_command(CLI::App& app, HistoryAppendOptions& o);

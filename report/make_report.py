@@ -100,8 +100,10 @@ def main():
         if not os.path.isdir(a.history):
             fail(f"--history {a.history}: not a folder; allowed: a history folder (docs/regression.md)")
         output_dir(a.output, "-o")
+        if a.csv:
+            output_dir(a.csv, "--csv")
         import report_history
-        report_history.run(a.history, a.output, a.change_level, a.title)
+        report_history.run(a.history, a.output, a.change_level, a.title, csv_dir=a.csv)
         return
     if not a.inputs:
         fail("no inputs; allowed: result files of octocd bench (.json) and traces (.h5), or --history DIR")

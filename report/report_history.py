@@ -57,11 +57,12 @@ MAX_FILE_BYTES = 64 << 20
 MAX_FILES = 100000
 MAX_TEXT_SHOWN = 200    # characters of a name, reason, machine or commit on the page and in CSV
 MAX_GRID_ROWS = 300     # rows of a verdict grid drawn (every row is in the CSV)
-STATUSES = ["pass", "expected", "new", "fixed", "n/a"]
+STATUSES = ["pass", "expected", "new", "fixed", "n/a", "error"]
 # Okabe-Ito (colour-blind safe): pass bluish green, expected yellow, new vermillion, fixed
-# blue, n/a grey; white where a run has no such row.
+# blue, n/a grey, error (the case gave no verdict: crashed, timed out) black; white where a
+# run has no such row.
 STATUS_COLORS = {"pass": "#009E73", "expected": "#F0E442", "new": "#D55E00", "fixed": "#0072B2",
-                 "n/a": "#BBBBBB", "": "#FFFFFF"}
+                 "n/a": "#BBBBBB", "error": "#000000", "": "#FFFFFF"}
 
 
 class Skip(Exception):
@@ -390,10 +391,22 @@ def smallest_step(sigma, n, t, alpha, m=MIN_SEGMENT):
 # ---------------------------------------------------------------- the page
 
 def _png(fig):
+    """The figure as base64 PNG, reduced to a 64-colour palette where PIL is there (Debian's
+    python3-matplotlib depends on python3-pil): 2.5x smaller than RGBA for these line plots,
+    so 100 series stay well under the page's 10 MB."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=72)
     plt.close(fig)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
+    data = buf.getvalue()
+    try:
+        from PIL import Image
+        im = Image.open(io.BytesIO(data)).convert("RGB").quantize(colors=64, method=Image.Quantize.MEDIANCUT)
+        out = io.BytesIO()
+        im.save(out, format="PNG", optimize=True)
+        data = out.getvalue() if len(out.getvalue()) < len(data) else data
+    except (ImportError, OSError, AttributeError, ValueError):
+        pass
+    return base64.b64encode(data).decode("ascii")
 
 
 def series_plot(key, nights, s, found, labels):
@@ -467,7 +480,7 @@ def fmt_pct(r):
     return "-" if r is None else f"{100 * r:.1f} %"
 
 
-def run(folder, out, level, title=None, workers=None):
+def run(folder, out, level, title=None, workers=None, csv_dir=None):
     if workers is None:
         workers = min(4, os.cpu_count() or 1)
     entries, skipped = read_folder(folder, workers)
@@ -582,17 +595,18 @@ def run(folder, out, level, title=None, workers=None):
                 page.append(f"<figure><img alt='verdicts of the engine matrix over nights' src='@@PLOT{len(tasks) - 1}@@'>"
                             "<figcaption>Each row an engine · scene · row, each column a night: pass, expected "
                             "(a known failure within its expectation), new (a failure no expectation covers, or "
-                            "grown), fixed (an expectation that no longer fails), n/a; white: not run that night."
+                            "grown), fixed (an expectation that no longer fails), n/a, error (black: the case gave no "
+                            "verdict, a run that crashed or timed out); white: not run that night."
                             "</figcaption></figure>")
             # ---- the first night of each current failure
             last = len(vruns) - 1
             cur = []
             for i, k in enumerate(vkeys):
                 st = STATUSES[M[i, last] - 1] if M[i, last] else ""
-                if st not in ("new", "expected"):
+                if st not in ("new", "expected", "error"):
                     continue
                 j = last
-                while j > 0 and M[i, j - 1] in (code["new"], code["expected"]):
+                while j > 0 and M[i, j - 1] in (code["new"], code["expected"], code["error"]):
                     j -= 1
                 first_new = next((q for q in range(j, last + 1) if M[i, q] == code["new"]), None)
                 reason = vruns[last]["verdicts"][k][1]
@@ -605,7 +619,7 @@ def run(folder, out, level, title=None, workers=None):
                             "<th>scene</th><th>row</th><th>now</th><th>failing since (night, commit)</th>"
                             "<th>nights</th><th>first new in this run of nights</th><th>reason</th></tr>" +
                             "".join(f"<tr><td>{E(short(k[0]))}</td><td>{E(short(k[1]))}</td><td>{E(short(k[2]))}</td>"
-                                    f"<td class={'slow' if st == 'new' else 'exp'}>{st}</td>"
+                                    f"<td class={'exp' if st == 'expected' else 'slow'}>{st}</td>"
                                     f"<td>{E(vruns[j]['date'][:10])} <code>{E(short(vruns[j]['commit'], 40))}</code></td>"
                                     f"<td>{last - j + 1}</td><td>" +
                                     (f"{E(vruns[q]['date'][:10])} <code>{E(short(vruns[q]['commit'], 40))}</code>"
@@ -633,21 +647,22 @@ def run(folder, out, level, title=None, workers=None):
            "document.body.setAttribute('data-drawn',ok+'/'+im.length);});</script></body></html>\n")
     o = Outputs()
     o.put(os.path.join(out, "index.html"), doc)
-    o.put(os.path.join(out, "history-points.csv"),
+    out_csv = csv_dir or out
+    o.put(os.path.join(out_csv, "history-points.csv"),
           csv_text(["machine", "sweep", "point", "window", "run", "date", "commit", "steps_per_s_median [1/s]",
                     "steps_per_s_min [1/s]", "steps_per_s_max [1/s]", "repetitions"], pts_rows))
-    o.put(os.path.join(out, "history-changes.csv"),
+    o.put(os.path.join(out_csv, "history-changes.csv"),
           csv_text(["machine", "sweep", "point", "window", "first_date", "first_commit", "last_date", "last_commit",
                     "runs", "before_steps_per_s [1/s]", "after_steps_per_s [1/s]", "ratio", "p"], chg_rows))
-    o.put(os.path.join(out, "history-verdicts.csv"),
+    o.put(os.path.join(out_csv, "history-verdicts.csv"),
           csv_text(["machine", "engine", "scene", "row", "status", "from_date", "from_commit", "to_date", "to_commit",
                     "nights"], ver_rows))
-    o.put(os.path.join(out, "history-failures.csv"),
+    o.put(os.path.join(out_csv, "history-failures.csv"),
           csv_text(["machine", "engine", "scene", "row", "status", "since_date", "since_commit", "nights",
                     "first_new_date", "first_new_commit", "reason"], first_rows))
-    o.put(os.path.join(out, "history-skipped.csv"), csv_text(["file", "why"], skipped))
+    o.put(os.path.join(out_csv, "history-skipped.csv"), csv_text(["file", "why"], skipped))
     o.commit()
     print(f"octocd report: wrote {os.path.join(out, 'index.html')} ({len(pngs)} plots, {len(doc) / 1e6:.2f} MB; "
-          f"{len(entries)} runs, {len(skipped)} skipped, {len(chg_rows)} change(s)) and 5 CSV files")
+          f"{len(entries)} runs, {len(skipped)} skipped, {len(chg_rows)} change(s)) and 5 CSV files in {out_csv}")
     return {"entries": len(entries), "skipped": skipped, "changes": chg_rows, "failures": first_rows,
             "plots": len(pngs), "bytes": len(doc)}

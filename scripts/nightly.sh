@@ -324,6 +324,9 @@ echo "nightly: ${#scenes[@]} scenes and $((passed + failed + broken + bad - ${#s
 if [ -n "$history" ]; then
   jsons=()
   for f in "$out"/json/*.json; do [ -e "$f" ] && jsons+=(--validation "$f"); done
+  for n in "${broken_list[@]+"${broken_list[@]}"}" "${bad_list[@]+"${bad_list[@]}"}"; do
+    [ -e "$out/json/$n.json" ] || jsons+=(--errored "$n")  # no verdict: an error row
+  done
   "$bin" history-append "$history" --kind nightly "${jsons[@]+"${jsons[@]}"}" || echo "nightly: --history '$history': adding this night failed (above)" >&2
 fi
 if [ $bad -gt 0 ]; then exit 2; fi

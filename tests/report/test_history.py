@@ -215,7 +215,8 @@ def test_history_append_writes_new_files_only(tmp_path):
     kept = None
     for _ in range(2):
         r = subprocess.run([BIN, "history-append", str(hist), "--validation", str(tmp_path / "v.json"),
-                            "--validation", str(tmp_path / "m.json")], capture_output=True, text=True)
+                            "--validation", str(tmp_path / "m.json"), "--errored", "dart--bunny-stack-50"],
+                           capture_output=True, text=True)
         assert r.returncode == 0, r.stderr
         if kept is None:
             kept = {f: open(hist / f, "rb").read() for f in os.listdir(hist)}
@@ -232,6 +233,7 @@ def test_history_append_writes_new_files_only(tmp_path):
     assert st[("cpu", "bunny-stack-50", "friction")] == "fixed"
     assert st[("cpu", "bunny-stack-50", "candidate-sets")] == "n/a"
     assert st[("ode", "rot-slope--quick", "penetration")] == "new"
+    assert st[("dart", "bunny-stack-50", "run")] == "error"  # a case without a verdict (crashed, timed out)
     before = {f: open(hist / f, "rb").read() for f in files}
     # a damaged verdict is bad input naming it, and the folder is left as it was
     (tmp_path / "bad.json").write_text('{"engine": "cpu", "rows": 3}')
@@ -243,7 +245,9 @@ def test_history_append_writes_new_files_only(tmp_path):
     r = subprocess.run([BIN, "report", "--history", str(hist), "-o", str(out)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     f = rows(str(out / "history-failures.csv"))
-    assert {x["row"] for x in f} == {"conservation", "penetration"}
+    assert {(x["engine"], x["row"], x["status"]) for x in f} == {
+        ("cpu", "conservation", "expected"), ("cpu", "penetration", "new"), ("ode", "conservation", "expected"),
+        ("ode", "penetration", "new"), ("dart", "run", "error")}
     assert any(x["reason"].startswith("'=cmd") for x in f)
     r = subprocess.run([BIN, "report", "--history", str(hist), str(hist / files[0]), "-o", str(out)],
                        capture_output=True, text=True)
