@@ -228,6 +228,7 @@ CLI::App* add_history_append_command(CLI::App& app, HistoryAppendOptions& o) {
 }
 
 int history_append_command(const HistoryAppendOptions& o) {
+  check_output_folder(o.dir, "history-append", true);  // before any input is read
   json bench = json::array(), verdicts = json::array();
   for (const auto& p : o.bench) {
     json r = parse_json_strict(read_input_file(p, "--bench", "a result of `octocd bench` (.json)"), p);

@@ -241,6 +241,15 @@ def test_history_append_writes_new_files_only(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2 and "bad.json" in r.stderr, r.stderr
     assert {f: open(hist / f, "rb").read() for f in os.listdir(hist)} == before
+    # a FIFO as a verdict is refused without blocking; a file where the folder should be too
+    os.mkfifo(tmp_path / "fifo.json")
+    r = subprocess.run([BIN, "history-append", str(hist), "--validation", str(tmp_path / "fifo.json")],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "fifo.json" in r.stderr and "FIFO" in r.stderr, r.stderr
+    r = subprocess.run([BIN, "history-append", str(tmp_path / "v.json"), "--validation", str(tmp_path / "v.json")],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "v.json" in r.stderr and "a file, not a folder" in r.stderr, r.stderr
+    assert {f: open(hist / f, "rb").read() for f in os.listdir(hist)} == before
     out = tmp_path / "out"
     r = subprocess.run([BIN, "report", "--history", str(hist), "-o", str(out)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
