@@ -194,7 +194,7 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
                 "(5 a side: p >= 1/252 = 0.00397), else exit 2 naming the repetitions needed")
       ->check(CLI::Range(1e-6, 0.25));
   c->add_option("--timing", o.timing,
-                "The gate's figure: cpu (steps per process CPU second, recorded for host engines: another process's "
+                "The gate's figure (and --history's): cpu (steps per process CPU second, recorded for host engines: another process's "
                 "load on a shared machine hardly moves it), wall (wall-clock steps/s), or auto (default: cpu where "
                 "both runs have it, else wall)")
       ->check(CLI::IsMember({"auto", "cpu", "wall"}));
@@ -203,7 +203,8 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
   c->add_option("--history", o.history,
                 "Draw a history folder instead (docs/regression.md; written by `bench --history`, `scripts/nightly.sh "
                 "--history`, `history-append`): per machine, steps/s of every point over commits (median and "
-                "min-max of the repetitions) with the change points a rank test finds, the engine matrix's verdicts "
+                "min-max of the repetitions; --timing picks the figure, a CPU figure's window named WINDOW (cpu)) with the "
+                "change points a rank test finds, the engine matrix's verdicts "
                 "(pass, expected, new, fixed) per engine x scene x row against night, and the night each current "
                 "failure appeared; OUT/index.html (PNG plots inline) and OUT/*.csv. A damaged or foreign file in DIR "
                 "is named and skipped");

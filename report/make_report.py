@@ -103,7 +103,7 @@ def main():
         if a.csv:
             output_dir(a.csv, "--csv")
         import report_history
-        report_history.run(a.history, a.output, a.change_level, a.title, csv_dir=a.csv)
+        report_history.run(a.history, a.output, a.change_level, a.title, csv_dir=a.csv, timing=a.timing)
         return
     if not a.inputs:
         fail("no inputs; allowed: result files of octocd bench (.json) and traces (.h5), or --history DIR")

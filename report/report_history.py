@@ -126,10 +126,13 @@ def _spread(s):
     return med, lo, hi, n
 
 
-def read_entry(path, raw):
+def read_entry(path, raw, timing="wall"):
     """One history file's run: {date, commit, version, machine, series: {(sweep, point,
     window): (median, min, max, n)}, verdicts: {(engine, scene, row): (status, reason)}},
-    or Skip naming the file and the field."""
+    or Skip naming the file and the field. `timing`: wall (steps_per_s), cpu
+    (cpu_steps_per_s: steps per process CPU second, hardly moved by other processes' load;
+    points without it are left out) or auto (cpu where the point has it, else wall); a CPU
+    figure's window is named "WINDOW (cpu)", so the two never share a series."""
     j = _parse(path, raw, fail=_skip)
     if not isinstance(j, dict) or j.get("format") != "octocd-history":
         _skip(f"{path}: format: {str(j.get('format') if isinstance(j, dict) else type(j).__name__)[:60]!r}; "
@@ -164,9 +167,12 @@ def read_entry(path, raw):
             if not isinstance(p, dict) or p.get("status") != "ok" or not isinstance(p.get("windows"), dict):
                 continue
             for wname, w in p["windows"].items():
-                s = _spread(w.get("steps_per_s")) if isinstance(w, dict) else None
+                if not isinstance(w, dict):
+                    continue
+                use_cpu = timing == "cpu" or (timing == "auto" and "cpu_steps_per_s" in w)
+                s = _spread(w.get("cpu_steps_per_s" if use_cpu else "steps_per_s"))
                 if s is not None:
-                    series[(str(sweep), str(p.get("id", "?")), str(wname))] = s
+                    series[(str(sweep), str(p.get("id", "?")), str(wname) + (" (cpu)" if use_cpu else ""))] = s
     rows = {}
     for vi, v in enumerate(verdicts):
         if not isinstance(v, dict):
@@ -186,7 +192,7 @@ def read_entry(path, raw):
             "series": series, "verdicts": rows, "has_verdicts": bool(verdicts) or j.get("kind") == "nightly"}
 
 
-def read_folder(folder, workers=1):
+def read_folder(folder, workers=1, timing="wall"):
     """(entries sorted by date then name, skipped [(file, why)]); files read by `workers`
     processes."""
     entries, skipped = [], []
@@ -196,7 +202,8 @@ def read_folder(folder, workers=1):
         fail(f"--history {folder}: cannot be read ({e.strerror}); allowed: a history folder (docs/regression.md)")
     if len(names) > MAX_FILES:
         fail(f"--history {folder}: {len(names)} files; allowed: at most {MAX_FILES}")
-    results = map_tasks(_read_one, [os.path.join(folder, n) for n in names], workers)
+    results = map_tasks(functools.partial(_read_one, timing=timing), [os.path.join(folder, n) for n in names],
+                        workers)
     for name, (entry, why) in zip(names, results):
         if entry is not None:
             entries.append(entry)
@@ -208,7 +215,7 @@ def read_folder(folder, workers=1):
     return entries, skipped
 
 
-def _read_one(path):
+def _read_one(path, timing="wall"):
     """(entry, None) or (None, why) for one file of the folder (never raises: a worker's answer)."""
     name = os.path.basename(path)
     try:
@@ -227,7 +234,7 @@ def _read_one(path):
             if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_FILE_BYTES:
                 raise Skip(f"{path}: not a regular file of at most {MAX_FILE_BYTES} bytes")
             raw = f.read(MAX_FILE_BYTES + 1)
-        return read_entry(path, raw), None
+        return read_entry(path, raw, timing), None
     except Skip as e:
         return None, str(e)
     except (OSError, RecursionError, MemoryError) as e:
@@ -480,10 +487,10 @@ def fmt_pct(r):
     return "-" if r is None else f"{100 * r:.1f} %"
 
 
-def run(folder, out, level, title=None, workers=None, csv_dir=None):
+def run(folder, out, level, title=None, workers=None, csv_dir=None, timing="auto"):
     if workers is None:
         workers = min(4, os.cpu_count() or 1)
-    entries, skipped = read_folder(folder, workers)
+    entries, skipped = read_folder(folder, workers, timing)
     E = html.escape
     page = []
     files = {}

@@ -277,3 +277,26 @@ def test_bench_history_adds_the_result(tmp_path):
     j = json.load(open(hist / files[0]))
     assert j["kind"] == "bench" and j["bench"][0]["points"][0]["status"] == "ok"
     assert j["bench"][0] == json.load(open(tmp_path / "r.json"))
+
+
+def test_timing_cpu_figure_is_its_own_series(tmp_path):
+    """A step in wall-clock steps/s only (another process's load from night 40 on), with the
+    CPU figure steady: --timing auto (the default) draws the CPU figure, window 'all (cpu)',
+    and finds no change; --timing wall finds the step."""
+    h = tmp_path / "h"
+    make_history(str(h), nights=80, points=1, seed=9, step=(40, 0.75), step_points=(0,))
+    for night, name in enumerate(sorted(os.listdir(h))):
+        j = json.load(open(h / name))
+        w = j["bench"][0]["points"][0]["windows"]["all"]
+        c = dict(w["steps_per_s"])
+        for k in ("median", "min", "max"):
+            c[k] = c[k] / (0.75 if night >= 40 else 1.0)
+        w["cpu_steps_per_s"] = c
+        json.dump(j, open(h / name, "w"))
+    report(str(h), str(tmp_path / "auto"))
+    pts = rows(str(tmp_path / "auto" / "history-points.csv"))
+    assert {p["window"] for p in pts} == {"all (cpu)"}
+    assert rows(str(tmp_path / "auto" / "history-changes.csv")) == []
+    report(str(h), str(tmp_path / "wall"), "--timing", "wall")
+    c = rows(str(tmp_path / "wall" / "history-changes.csv"))
+    assert len(c) == 1 and c[0]["window"] == "all" and night_date(37) <= c[0]["first_date"] <= night_date(43), c
