@@ -27,7 +27,9 @@ with the modules beside it): the command line, the sweep sections by name (SECTI
 exit codes. The parts are modules beside it: report_common.py (the one-line error, numbers,
 load marks), report_data.py (results and trace summaries in), report_html.py (the document,
 HTML and Markdown, written atomically), report_plots.py, report_tables.py (the sweep
-sections), report_traces.py, report_gate.py (the performance gate) and report_csv.py.
+sections), report_traces.py, report_gate.py (the performance gate), report_csv.py and
+report_history.py (`--history DIR`: a history folder of nightly runs over commits on one
+page, with change points and the verdicts over time; docs/regression.md).
 """
 import argparse
 import datetime
