@@ -48,6 +48,7 @@ import sys
 from report_common import fail, np, plt, printable
 from report_data import _parse
 from report_html import Outputs
+from report_plots import log_ticks
 
 MIN_SEGMENT = 3         # nights on each side of a split
 MAX_RAMP = 30          # nights on either side of a change point a ramp may span
@@ -428,6 +429,12 @@ def series_plot(key, nights, s, found, labels):
             ax.axvspan(x[g["first"]] - 0.5, x[g["last"]] - 0.5, color=color, alpha=0.3, linewidth=0)
         ax.axvline(x[g["first"]] - 0.5, color=color, linewidth=1.2)
     ax.set_yscale("log")
+    # Plain numbers on the log axis (report_plots.log_ticks; no mathtext, which cost most of the
+    # drawing time); a range under 3x gets about 4 ticks inside it instead of 1, 2, 5 per decade.
+    log_ticks(ax)
+    if np.nanmax(s[:, 2]) < 3 * np.nanmin(s[:, 1]):
+        from matplotlib.ticker import MaxNLocator
+        ax.yaxis.set_major_locator(MaxNLocator(4))
     ax.set_ylabel("steps/s (log)")
     ax.set_xlabel("night (run of this machine)")
     ax.set_title(short(" | ".join(key), 120), fontsize=9, loc="left")
