@@ -398,7 +398,7 @@ def smallest_step(sigma, n, t, alpha, m=MIN_SEGMENT):
 
 # ---------------------------------------------------------------- the page
 
-def _png(fig):
+def _png(fig, quantize=True):
     """The figure as base64 PNG, reduced to a 64-colour palette where PIL is there (Debian's
     python3-matplotlib depends on python3-pil): 2.5x smaller than RGBA for these line plots,
     so 100 series stay well under the page's 10 MB."""
@@ -406,6 +406,8 @@ def _png(fig):
     fig.savefig(buf, format="png", dpi=72)
     plt.close(fig)
     data = buf.getvalue()
+    if not quantize:  # the verdict grid: its status colours kept exact
+        return base64.b64encode(data).decode("ascii")
     try:
         from PIL import Image
         im = Image.open(io.BytesIO(data)).convert("RGB").quantize(colors=64, method=Image.Quantize.MEDIANCUT)
@@ -466,7 +468,7 @@ def verdict_grid(keys, runs, matrix):
     ax.legend(handles=[Patch(color=STATUS_COLORS[s], label=s) for s in STATUSES], loc="upper left",
               bbox_to_anchor=(1.0, 1.0), fontsize=7)
     fig.tight_layout()
-    return _png(fig)
+    return _png(fig, quantize=False)
 
 
 def render(task):
