@@ -16,6 +16,9 @@
 //  (f) convex hulls of concave meshes: an L-shaped bar lands turning on the hull of a
 //      U-shaped channel, across its hollow (collision_shape "convex_hull"); declared as
 //      the meshes, its rows are false contacts.
+//  (g) substeps: n semi-implicit substeps per step (integrator "substepped", `substeps` n):
+//      a free body advances by x + dt v + (n + 1) / (2n) g dt^2; a flat box bounces on the
+//      floor turning (its rows' normal and points turn within the step).
 #include <gtest/gtest.h>
 #include <hdf5.h>
 #include <unistd.h>
@@ -164,18 +167,45 @@ struct Zoo {
     t.q[i] = f32(angle > 0 ? qnorm(qmul(axis_angle(t.w[i], angle), s.q[i])) : s.q[i]);
   }
 
+  /// Substeps per step (0: one update per step, as above). With n > 0 the step is the
+  /// contacts' impulses at its start (found at the pre-step pose), then n semi-implicit
+  /// substeps of dt / n: v += g h, w less the gyroscopic term h I_w^-1 (w x I_w w) when
+  /// `gyroscopic`, x += h v, q advanced by w h (Rapier's, PhysX TGS's scheme).
+  int substeps = 0;
+  void substep(int i, const State& s, State& t, bool gyroscopic) const {
+    if (bodies[i].m == 0) return;
+    const double h = dt / substeps;
+    V v = t.v[i] - dt * g, w = t.w[i], x = s.x[i];  // t: after gravity (dt) and the contacts
+    Q q = s.q[i];
+    const M body = bodies[i].inertia();
+    for (int k = 0; k < substeps; ++k) {
+      v = v + h * g;
+      if (gyroscopic) {
+        const M r = rotation(q), iw = conj(r, body), inv = conj(r, diag({1 / body[0], 1 / body[4], 1 / body[8]}));
+        w = w - h * mul(inv, cross(w, mul(iw, w)));
+      }
+      x = x + h * v;
+      const double angle = norm(w) * h;
+      if (angle > 0) q = qnorm(qmul(axis_angle(w, angle), q));
+    }
+    t.v[i] = f32(v);
+    t.w[i] = f32(w);
+    t.x[i] = f32(x);
+    t.q[i] = f32(q);
+  }
+
   /// Steps the run `frames` times from its last state: gravity (and the gyroscopic term
   /// when `gyroscopic`) on every body, then `contacts(s, t, rows)` (s the state before the
-  /// step, t the state being stepped, the step's rows), then the positions.
+  /// step, t the state being stepped, the step's rows), then the positions (or `substeps`).
   void run(int frames, bool gyroscopic,
            const std::function<void(const State&, State&, std::vector<Row>&)>& contacts) {
     for (int f = 1; f <= frames; ++f) {
       const State s = states.back();
       State t = s;
       std::vector<Row> step;
-      for (int i = 0; i < n(); ++i) integrate_velocity(i, s, t, gyroscopic);
+      for (int i = 0; i < n(); ++i) integrate_velocity(i, s, t, gyroscopic && substeps == 0);
       contacts(s, t, step);
-      for (int i = 0; i < n(); ++i) integrate_position(i, s, t);
+      for (int i = 0; i < n(); ++i) substeps > 0 ? substep(i, s, t, gyroscopic) : integrate_position(i, s, t);
       states.push_back(t);
       rows.push_back(step);
     }
@@ -460,6 +490,35 @@ Zoo gyroscopic_engine(int frames = 200) {
   z.run(frames, true, [&](const State& s, State& t, std::vector<Row>& rows) {
     floor_corners(z, 1, s, t, rows, 0.5);
     floor_corners(z, 2, s, t, rows, 0.5);
+  });
+  return z;
+}
+
+/// (g) Substeps: `n` semi-implicit substeps per step of `dt` (Zoo::substep), declared
+/// integrator "substepped" with `substeps` n and the gyroscopic term. `floor`: a flat box
+/// (body 1) falls turning onto the floor (body 0) and bounces on its corner rows (a small
+/// pile), else body 1 falls free too; bodies 2 (spinning about a non-principal axis) and 3
+/// (not spinning) fall free. A free body advances by x + dt v + (n + 1) / (2n) g dt^2.
+Zoo substepped_engine(int n, double dt, int frames, bool floor) {
+  Zoo z;
+  z.engine = "zoo-substepped";
+  z.dt = dt;
+  z.substeps = n;
+  Body ground;
+  ground.h = {2, 0.1, 2};
+  ground.m = 0;
+  Body flat;
+  flat.h = {0.2, 0.1, 0.05};
+  z.bodies = {ground, flat, flat, Body{}};
+  z.text["gyroscopic"] = "true";
+  z.text["integrator"] = "substepped";
+  z.numbers["substeps"] = n;
+  const double up = floor ? 0.0 : 3.0;  // a free fall of 1 s stays above the floor
+  z.states.push_back(initial(z, {{0, -0.1, 0}, {0, floor ? 0.22 : 6.0, 0}, {1.2, 3.5 + up, 0.5}, {-1.2, 3.0 + up, 0.5}},
+                             {{0, 0, 0}, {0, 0, 0}, {0, 1, 0}, {0.3, 0.5, 0}}, {{0, 0, 0}, {2, 5, 1}, {3, 6, 2}, {0, 0, 0}},
+                             {{1, 0, 0, 0}, axis_angle({1, 1, 0}, 0.5), axis_angle({0, 1, 1}, 0.2), {1, 0, 0, 0}}));
+  z.run(frames, true, [&](const State& s, State& t, std::vector<Row>& rows) {
+    if (floor) floor_corners(z, 1, s, t, rows, 0.5);
   });
   return z;
 }
@@ -966,6 +1025,56 @@ TEST_F(ZooEngines, ConvexHullEngineFaultsAreCaught) {
   }
 }
 
+TEST_F(ZooEngines, SubsteppedFreeFallAndPilePassAtEveryN) {
+  for (int n : {1, 2, 4, 8}) {
+    const Zoo z = substepped_engine(n, 0.001, 200, true);
+    ASSERT_GT(first_impulse(z, 0, 1), 0) << n;
+    const Result ok = judge(z, "substepped-" + std::to_string(n));
+    expect_clean(ok);
+    for (const char* row : {"momentum-balance", "free-flight"})  // judged, not n/a
+      EXPECT_TRUE(std::regex_search(ok.output, std::regex(std::string("(^|\n)physics +") + row + " +[^ ]+ +[^ ]+ +pass")))
+          << row << "\n" << ok.output;
+    Zoo undeclared = z;  // every admissible integrator: a in [0, 1]
+    undeclared.text.erase("integrator");
+    undeclared.numbers.erase("substeps");
+    expect_clean(judge(undeclared, "undeclared-" + std::to_string(n)));
+    const Zoo fall = substepped_engine(n, 1.0 / 60, 60, false);  // a free fall at dt 1/60
+    expect_clean(judge(fall, "fall-" + std::to_string(n)));
+    if (n == 1) continue;
+    // Declared one update per step, the free bodies are (1 - a) g dt^2 off (1.02 mm at n = 4).
+    Zoo semi = fall;
+    semi.text["integrator"] = "semi-implicit";
+    semi.numbers.erase("substeps");
+    expect_caught(judge(semi, "semi-" + std::to_string(n)), {"free-flight", "without contacts: x'", "x + dt v'"});
+  }
+}
+
+TEST_F(ZooEngines, SubsteppedFaultsAreCaughtDeclaredAndUndeclared) {
+  for (double dt : {1.0 / 60, 0.001}) {
+    const Zoo base = substepped_engine(4, dt, 60, false);
+    for (bool declared : {true, false}) {
+      auto planted = [&](const std::function<void(Zoo&)>& edit, const std::vector<std::string>& fragments) {
+        Zoo z = base;
+        if (!declared) {
+          z.text.erase("integrator");
+          z.numbers.erase("substeps");
+        }
+        edit(z);
+        expect_caught(judge(z, "planted"), fragments);
+      };
+      SCOPED_TRACE(std::to_string(dt) + (declared ? " declared" : " undeclared"));
+      planted([](Zoo& z) { z.states[30].x[3][0] = f32(z.states[30].x[3][0] + 0.01); },
+              {"frame 30: body 3 without contacts: x'", "position"});
+      planted([](Zoo& z) { z.states[30].x[3][1] = f32(z.states[30].x[3][1] - 0.01); },  // along g
+              {"frame 30: body 3 without contacts: x'", "position"});
+      planted([](Zoo& z) { z.states[40].v[3] = f32(1.5 * z.states[40].v[3]); },
+              {"free-flight", "frame 40: body 3 without contacts: v'"});
+      planted([](Zoo& z) { z.states[50].w[2] = f32(1.5 * z.states[50].w[2]); },
+              {"frame 50: body 2 without contacts: w'", "angular-velocity"});
+    }
+  }
+}
+
 TEST_F(ZooEngines, BadDeclarationsExitTwoNamingTheAttribute) {
   Zoo z = soft_engine(5);
   z.text["contact_model"] = "squishy";
@@ -977,8 +1086,21 @@ TEST_F(ZooEngines, BadDeclarationsExitTwoNamingTheAttribute) {
   z.text["integrator"] = "verlet";
   r = judge(z, "bad-integrator");
   EXPECT_EQ(r.code, 2) << r.output;
-  EXPECT_NE(r.output.find("\"semi-implicit\", \"explicit\", \"any\""), std::string::npos) << r.output;
-  z.text.erase("integrator");
+  EXPECT_NE(r.output.find("\"semi-implicit\", \"explicit\", \"any\", \"substepped\""), std::string::npos)
+      << r.output;
+  z.text["integrator"] = "substepped";  // without `substeps`
+  r = judge(z, "bad-substeps");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("root attribute substeps"), std::string::npos) << r.output;
+  z.numbers["substeps"] = 2.5;
+  r = judge(z, "bad-substeps-value");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("an integer n in [1, 1000000]"), std::string::npos) << r.output;
+  z.text.erase("integrator");  // `substeps` alone
+  r = judge(z, "substeps-alone");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("given without integrator"), std::string::npos) << r.output;
+  z.numbers.erase("substeps");
   z.text["gyroscopic"] = "yes";
   r = judge(z, "bad-gyro");
   EXPECT_EQ(r.code, 2) << r.output;

@@ -925,6 +925,9 @@ TEST(PhysicsFreeFlight, FreeBodiesFollowGravityAndTheirSpin) {
   b.integrator = PhysicsBodies::Integrator::Any;
   EXPECT_TRUE(row_of(judge(*model, ex, b), "free-flight").pass);
   EXPECT_TRUE(row_of(judge(*model, free_flight(*model), b), "free-flight").pass);
+  b.integrator = PhysicsBodies::Integrator::Undeclared;  // every a in [0, 1]: both pass
+  EXPECT_TRUE(row_of(judge(*model, ex, b), "free-flight").pass);
+  EXPECT_TRUE(row_of(judge(*model, free_flight(*model), b), "free-flight").pass);
 }
 
 TEST(PhysicsFreeFlight, EditedLoneBodiesAreCaughtByCause) {

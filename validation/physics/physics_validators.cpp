@@ -84,6 +84,8 @@ const char* integrator_name(PhysicsBodies::Integrator i) {
     case PhysicsBodies::Integrator::SemiImplicit: return "semi-implicit";
     case PhysicsBodies::Integrator::Explicit: return "explicit";
     case PhysicsBodies::Integrator::Any: return "any";
+    case PhysicsBodies::Integrator::Substepped: return "substepped";
+    case PhysicsBodies::Integrator::Undeclared: return "undeclared";
   }
   return "semi-implicit";
 }

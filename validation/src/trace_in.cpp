@@ -472,10 +472,24 @@ class TraceIn {
     p.contact_model = choice_attr("contact_model", {"rigid", "soft"}, "rigid") == "soft"
                           ? PhysicsBodies::ContactModel::Soft
                           : PhysicsBodies::ContactModel::Rigid;
-    const std::string integrator = choice_attr("integrator", {"semi-implicit", "explicit", "any"}, "semi-implicit");
-    p.integrator = integrator == "explicit" ? PhysicsBodies::Integrator::Explicit
-                   : integrator == "any"    ? PhysicsBodies::Integrator::Any
-                                            : PhysicsBodies::Integrator::SemiImplicit;
+    const std::string integrator =
+        choice_attr("integrator", {"semi-implicit", "explicit", "any", "substepped"}, "undeclared");
+    p.integrator = integrator == "explicit"        ? PhysicsBodies::Integrator::Explicit
+                   : integrator == "any"           ? PhysicsBodies::Integrator::Any
+                   : integrator == "substepped"    ? PhysicsBodies::Integrator::Substepped
+                   : integrator == "semi-implicit" ? PhysicsBodies::Integrator::SemiImplicit
+                                                   : PhysicsBodies::Integrator::Undeclared;
+    if (integrator == "substepped" || has_attr("substeps")) {
+      // An integer n >= 1: the semi-implicit substeps of dt / n the engine takes per step.
+      const double n = has_attr("substeps") ? number_attr("substeps", 0.0) : 0.0;
+      if (integrator != "substepped")
+        bad("/ (root attribute substeps)", "given without integrator = \"substepped\"",
+            "substeps with the root attribute integrator = \"substepped\" only");
+      if (!(n >= 1.0 && n <= 1e6 && n == std::floor(n)))
+        bad("/ (root attribute substeps)", has_attr("substeps") ? fmt::format("{}", n) : "missing",
+            "an integer n in [1, 1000000]: the substeps of dt / n per step (integrator \"substepped\")");
+      p.substeps = static_cast<int>(n);
+    }
     if (has_attr("gyroscopic")) {
       // A string "true" / "false", or an integer 0 / 1 (as broadphase_exact).
       const char* allowed = "\"true\" or \"false\" (a string), or the integer 1 or 0 (default \"false\")";

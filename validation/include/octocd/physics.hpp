@@ -207,10 +207,21 @@ struct PhysicsBodies {
     Absent,
   };
   Gyroscopic gyroscopic = Gyroscopic::Undeclared;
-  /// `integrator`: how a free body's position advances: semi-implicit Euler x' = x + dt v'
-  /// (design.md section 4.1, octocd's engines, Bullet), explicit x' = x + dt v, or either.
-  enum class Integrator { SemiImplicit, Explicit, Any };
+  /// `integrator`: how a free body's position advances over a step, x' = x + dt v + a g dt^2
+  /// with v the velocity before the step (docs/validation.md, "Free flight: any consistent
+  /// integrator"): semi-implicit Euler x' = x + dt v' (a = 1; design.md section 4.1,
+  /// octocd's engines), explicit x' = x + dt v (a = 0), `Any` (a in [0, 1] per step),
+  /// `Substepped` (n = `substeps` semi-implicit substeps of dt / n: a = (n + 1) / (2n);
+  /// Rapier, PhysX TGS, Box2D v3, XPBD), or `Undeclared` (every admissible value: a in
+  /// [0, 1] and the orientation of substepping, as `Any` with substepping's allowances).
+  enum class Integrator { SemiImplicit, Explicit, Any, Substepped, Undeclared };
   Integrator integrator = Integrator::SemiImplicit;
+  /// With Integrator::Substepped: the substep count n (>= 1; root attribute `substeps`).
+  int substeps = 1;
+  /// The integrator admits substepping (Substepped or Undeclared): the normal and the
+  /// impulse points may turn with the bodies within the step (momentum-balance), the spin
+  /// may change within it (free-flight's orientation).
+  bool may_substep() const { return integrator == Integrator::Substepped || integrator == Integrator::Undeclared; }
   /// Per body (empty: none locked): bits 0-2 translation along world x, y, z, bits 3-5
   /// rotation about world x, y, z locked by a joint (6 bits at most). Rows about a locked
   /// axis are n/a for that body and counted (a joint's impulses are not in the contact
@@ -264,7 +275,7 @@ struct PhysicsBodies {
 const char* contact_model_name(PhysicsBodies::ContactModel m);
 /// "undeclared", "true" or "false".
 const char* gyroscopic_name(PhysicsBodies::Gyroscopic g);
-/// "semi-implicit", "explicit" or "any".
+/// "semi-implicit", "explicit", "any", "substepped" or "undeclared".
 const char* integrator_name(PhysicsBodies::Integrator i);
 
 /// What octocd's own cpu and cuda engines declare: mu = the scene's mu_static (the
