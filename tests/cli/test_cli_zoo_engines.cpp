@@ -23,6 +23,7 @@
 #include <hdf5.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -1073,6 +1074,87 @@ TEST_F(ZooEngines, SubsteppedFaultsAreCaughtDeclaredAndUndeclared) {
               {"frame 50: body 2 without contacts: w'", "angular-velocity"});
     }
   }
+}
+
+/// (h) An engine whose API reports the normal impulses only (Rapier): zoo engine (d) with
+/// the friction the writer cannot see written as zeros, declared impulses "normal-only".
+Zoo normal_only_engine() {
+  Zoo z = locked_engine();
+  z.engine = "zoo-normal-only";
+  for (auto& step : z.rows)
+    for (Row& r : step) r.jt = 0;
+  z.text["impulses"] = "normal-only";
+  return z;
+}
+
+/// The row of `output`'s table for `row` (physics tier) has this verdict ("pass", "FAIL", "n/a").
+bool row_verdict(const std::string& output, const std::string& row, const std::string& verdict) {
+  return std::regex_search(output, std::regex("(^|\n)physics +" + row + " +[^ ]+ +[^ ]+ +" + verdict));
+}
+
+TEST_F(ZooEngines, NormalOnlyImpulsesAreJudgedWithinTheirCones) {
+  const Zoo z = normal_only_engine();
+  const Result ok = judge(z, "normal-only");
+  expect_clean(ok);
+  EXPECT_TRUE(row_verdict(ok.output, "momentum-balance", "pass")) << ok.output;
+  EXPECT_TRUE(row_verdict(ok.output, "friction", "n/a")) << ok.output;
+  EXPECT_NE(ok.output.find("impulses = \"normal-only\": its rows carry no friction impulse"), std::string::npos)
+      << ok.output;
+  // The same zeros read as complete impulses: the sliding box decelerates without friction.
+  Zoo complete = z;
+  complete.text.erase("impulses");
+  expect_caught(judge(complete, "complete"), {"momentum-balance", "body 1"});
+  {  // one row of box 1's 4-row floor manifold dropped in step 50
+    Zoo f = z;
+    f.rows[49].erase(f.rows[49].begin() + 2);
+    expect_caught(judge(f, "dropped"), {"momentum-balance", "frame 50: body 1"});
+  }
+  {  // the sliding box's velocity x1.5 in step 40 (in contact)
+    Zoo f = z;
+    f.states[40].v[1] = f32(1.5 * f.states[40].v[1]);
+    expect_caught(judge(f, "fast"), {"momentum-balance", "frame 40: body 1"});
+  }
+  {  // the lone body 4 teleported by 1 cm in step 60
+    Zoo f = z;
+    f.states[60].x[4][2] = f32(f.states[60].x[4][2] + 0.01);
+    expect_caught(judge(f, "teleport"), {"frame 60: body 4 without contacts: x'", "position"});
+  }
+}
+
+TEST_F(ZooEngines, NoImpulsesLeaveConservationToJudge) {
+  Zoo z = locked_engine();  // (i) an engine whose API reports no impulse (Jolt): zeros written
+  const int fc = first_impulse(z, 2, 3);
+  ASSERT_GT(fc, 0);
+  z.engine = "zoo-no-impulses";
+  for (auto& step : z.rows)
+    for (Row& r : step) r.jn = r.jt = 0;
+  z.text["impulses"] = "none";
+  const Result ok = judge(z, "none");
+  expect_clean(ok);
+  EXPECT_TRUE(row_verdict(ok.output, "momentum-balance", "n/a")) << ok.output;
+  EXPECT_TRUE(row_verdict(ok.output, "friction", "n/a")) << ok.output;
+  EXPECT_TRUE(row_verdict(ok.output, "conservation", "pass")) << ok.output;
+  EXPECT_NE(ok.output.find("impulses = \"none\" (the engine reports no impulse)"), std::string::npos) << ok.output;
+  {  // box 2's velocity x1.5 in the step it collides with box 3: the pair's momentum changes
+    Zoo f = z;
+    f.states[fc].v[2] = f32(1.5 * f.states[fc].v[2]);
+    expect_caught(judge(f, "fast"), {"conservation", "frame " + std::to_string(fc)});
+  }
+  {  // the collision's row dropped: boxes 2 and 3 change velocity in free flight
+    Zoo f = z;
+    auto& step = f.rows[fc - 1];
+    step.erase(std::remove_if(step.begin(), step.end(), [](const Row& r) { return r.a == 2; }), step.end());
+    expect_caught(judge(f, "dropped"), {"frame " + std::to_string(fc) + ": body 2 without contacts: v'"});
+  }
+  {  // the lone body 4 teleported by 1 cm in step 60
+    Zoo f = z;
+    f.states[60].x[4][2] = f32(f.states[60].x[4][2] + 0.01);
+    expect_caught(judge(f, "teleport"), {"frame 60: body 4 without contacts: x'", "position"});
+  }
+  z.text["impulses"] = "some";
+  const Result bad = judge(z, "bad");
+  EXPECT_EQ(bad.code, 2) << bad.output;
+  EXPECT_NE(bad.output.find("\"complete\", \"normal-only\", \"none\""), std::string::npos) << bad.output;
 }
 
 TEST_F(ZooEngines, BadDeclarationsExitTwoNamingTheAttribute) {

@@ -143,11 +143,16 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     const D3 rel = va - vb;
     const D3 vt = rel - dot3(rel, nrm) * nrm;
     const double vt_len = len3(vt);
-    const bool vector_friction = rec.jt3.size() == rec.contacts.size();
-    const double jt = vector_friction ? len3(d3(rec.jt3[k])) : std::fabs(double(c.jt));
+    const bool normal_only = bodies.impulses == PhysicsBodies::Impulses::NormalOnly;
+    const bool vector_friction = rec.jt3.size() == rec.contacts.size() && !normal_only;
+    const double jt = normal_only ? 0.0 : vector_friction ? len3(d3(rec.jt3[k])) : std::fabs(double(c.jt));
     D3 jt_vec{};
     double uncertain = 0;  // |J_t - jt_vec| at most this (kg m/s), in the tangent plane
-    if (vector_friction) {
+    if (normal_only) {
+      // The friction is not reported (jt, jt3 never read): J_t is anywhere in the row's
+      // cone, with the row cone margin below (a sequential solver's row whose jn moved).
+      uncertain = pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs;
+    } else if (vector_friction) {
       jt_vec = d3(rec.jt3[k]);  // /contacts/jt3: the friction impulse on A, nothing left open
     } else if (vt_len > tol.friction_direction_speed) {
       jt_vec = (bodies.jt_along_sliding ? double(c.jt) : -double(c.jt)) * ((1.0 / vt_len) * vt);
@@ -171,7 +176,6 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       // up to 13% above mu times the row's final jn; the friction row holds the pair's sum
       // to the cone itself). Never with jt3; what it leaves open is stated in
       // docs/validate-your-engine.md, "The row cone margin".
-      constexpr double kRowConeMargin = 0.25;
       uncertain = std::max(jt, pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs);
     } else {
       // No sliding: v_t has no direction; jt is the friction impulse's magnitude (the
@@ -266,7 +270,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
         ++balance_no_rows;  // a confirmed pair without rows (octocd's later passes)
         continue;
       }
-      if (!bodies.impulses_complete) continue;
+      if (!bodies.impulses_complete || bodies.impulses == PhysicsBodies::Impulses::None) continue;
       if (locked(i)) ++balance_locked;
       const D3 dp = unlocked(mi * (v1 - v0) - force[i], i, 0);
       const double float_bound =

@@ -52,7 +52,12 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   std::map<std::uint32_t, double> witness_torque;
   for (const ContactRecord& c : rec.contacts)
     if (dynamic(c.pair.a) && dynamic(c.pair.b)) {
-      const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), double(c.jt)) : std::fabs(double(c.jt));
+      // impulses "normal-only": |jt| unknown, at most mu jn (the row cone margin as in
+      // momentum-balance) + friction_cone_abs.
+      const double jt = bodies.impulses == PhysicsBodies::Impulses::NormalOnly
+                            ? pair_mu(c.pair) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs
+                            : std::fabs(double(c.jt));
+      const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
       witness_torque[find(c.pair.a)] += (double(c.depth) + pair_margin(c.pair)) * j;
     }
   const std::map<std::uint32_t, std::vector<std::uint32_t>>& groups_of = graph.groups;
@@ -140,6 +145,10 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
     if (!rotating) continue;
     if (group_locks >> 3) {
       ++groups_rotation_locked;
+      continue;
+    }
+    if (bodies.impulses == PhysicsBodies::Impulses::None) {  // the witness-point lever needs |J|
+      ++groups_angular_unreported;
       continue;
     }
     ++groups_rotating;

@@ -114,6 +114,9 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
 
 // ---- Row 5: friction, every frame (dissipation on frames with states) ----------------
 void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector<Pose>& det) {
+  // impulses "normal-only" or "none": the rows carry no friction impulse; whatever jt and
+  // jt3 hold (zeros, typically) is never judged (the row is n/a, named).
+  if (bodies.impulses != PhysicsBodies::Impulses::Complete) return;
   const Model& m = *model;
   const std::size_t n = m.bodies.size();
   const std::int64_t frame = rec.frame;

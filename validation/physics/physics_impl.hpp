@@ -49,6 +49,12 @@ constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23
 /// A relative sliding speed (m/s) below which v_t has no direction: jt is then J_t's
 /// magnitude (the trace convention; octocd's Bullet adapter uses the same threshold).
 constexpr double kNoSliding = 1e-6;
+/// The margin a sequential solver leaves on a row's own cone: a row whose normal impulse
+/// moved to the manifold's other rows after its friction was clamped (Bullet: up to 13%
+/// above mu times the row's final jn; the friction row holds the pair's sum to the cone
+/// itself). What it leaves open is stated in docs/validate-your-engine.md, "The row cone
+/// margin".
+constexpr double kRowConeMargin = 0.25;
 
 /// R M R^T.
 M3 conjugated(const M3& r, const M3& m);
@@ -399,6 +405,9 @@ struct PhysicsValidators::Impl {
   std::uint64_t episodes_judged = 0, episodes_judged_groups = 0, episodes_unjudged = 0, energy_soft_steps = 0;
   std::uint64_t episodes_begun_in_contact = 0;
   std::uint64_t groups_locked = 0, groups_rotation_locked = 0;
+  /// impulses "none": rotating groups whose angular momentum is not judged (the
+  /// witness-point lever of its rows needs their impulses).
+  std::uint64_t groups_angular_unreported = 0;
 };
 
 }  // namespace octocd

@@ -276,6 +276,14 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     } else if (s.dissipation.failures) {
       r.detail = s.dissipation.first + fmt::format(" ({} of {} rows where friction raises the sliding)",
                                                    s.dissipation.failures, s.dissipation.checks);
+    } else if (s.bodies.impulses != PhysicsBodies::Impulses::Complete) {
+      r.detail = fmt::format("n/a: the trace declares impulses = \"{}\": its rows carry no friction impulse, so the "
+                             "cone and dissipation are not judged (on the zeros a writer puts in jt, jt3 they would "
+                             "pass vacuously){}",
+                             impulses_name(s.bodies.impulses),
+                             s.bodies.impulses == PhysicsBodies::Impulses::NormalOnly
+                                 ? "; momentum-balance holds each body's residual within its rows' cones"
+                                 : "");
     } else if (!r.applicable) {
       r.detail = "no contact rows";
     } else {
@@ -325,6 +333,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                  : std::string("n/a: translation-only records (no orientation or angular "
                                                "velocity), contact torques are not modelled"));
     }
+    if (s.groups_angular_unreported)
+      r.detail += fmt::format("; angular momentum not judged on {} group-frames: the trace declares impulses = "
+                              "\"none\" (the witness-point lever of a row needs its impulse)",
+                              s.groups_angular_unreported);
     if (s.groups_clamped)
       r.detail += fmt::format("; {} group-frames not judged (a body at the declared velocity clamp {} m/s)",
                               s.groups_clamped, s.bodies.velocity_clamp);
@@ -375,7 +387,11 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                      "velocity), not judged",
                                      s.fell_asleep)
                        : std::string());
-    if (!s.bodies.impulses_complete) {
+    if (s.bodies.impulses == PhysicsBodies::Impulses::None) {
+      r.applicable = false;
+      r.detail = "n/a: the trace declares impulses = \"none\" (the engine reports no impulse): a body's velocity "
+                 "change cannot be held to its rows' impulses; conservation judges the isolated groups";
+    } else if (!s.bodies.impulses_complete) {
       r.applicable = false;
       r.detail = fmt::format("n/a: the record holds the impulses of the first of response.iterations = {} "
                              "relaxation passes (octocd's ContactRecord); the later passes apply more impulses on the "
@@ -397,6 +413,9 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                                      s.balance_rot_locked)
                                        : std::string("n/a: no rotation or no contact points (torques unknown)"));
       r.detail += extras;
+      if (s.bodies.impulses == PhysicsBodies::Impulses::NormalOnly)
+        r.detail += "; impulses \"normal-only\": each body's residual m (v' - v) - m g dt - sum jn n within the sum "
+                    "of its rows' cones (mu jn), jt and jt3 not read";
       fill_causes(r, info, {&s.balance_lin, &s.balance_ang});
       r.judged = s.balance_lin.checks;
     }

@@ -79,6 +79,15 @@ const char* gyroscopic_name(PhysicsBodies::Gyroscopic g) {
   return "undeclared";
 }
 
+const char* impulses_name(PhysicsBodies::Impulses i) {
+  switch (i) {
+    case PhysicsBodies::Impulses::Complete: return "complete";
+    case PhysicsBodies::Impulses::NormalOnly: return "normal-only";
+    case PhysicsBodies::Impulses::None: return "none";
+  }
+  return "complete";
+}
+
 const char* integrator_name(PhysicsBodies::Integrator i) {
   switch (i) {
     case PhysicsBodies::Integrator::SemiImplicit: return "semi-implicit";

@@ -61,6 +61,9 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
         break;
       case RowId::Friction:
         needs(info.has_contacts, kContacts);
+        needs(p.impulses == PhysicsBodies::Impulses::Complete,
+              fmt::format("nothing: the trace declares impulses = \"{}\" (its rows carry no friction impulse)",
+                          impulses_name(p.impulses)));
         part(info.has_jt3 || info.version == 1,
              "/contacts/jt3 (version 2) for the vector rule [rule: jt3]; judged on the scalar jt [rule: scalar]");
         break;
@@ -78,11 +81,14 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
              fmt::format("{} and /contacts/point for the angular balance", kRotation));
         // Version 1's jt is along the sliding by its contract; version 2's scalar jt is the
         // component along -v_t, all of the friction only for an engine with one direction.
-        needs(info.has_jt3 || info.version == 1 || info.octocd_conventions || p.friction_directions == 1,
+        needs(p.impulses != PhysicsBodies::Impulses::None,
+              "nothing: the trace declares impulses = \"none\" (the engine reports no impulse)");
+        needs(info.has_jt3 || info.version == 1 || info.octocd_conventions || p.friction_directions == 1 ||
+                  p.impulses == PhysicsBodies::Impulses::NormalOnly,
               "/contacts/jt3 (each row's friction impulse vector), or the root attribute friction_directions = 1 "
               "where each row's friction lies along its sliding: the scalar jt of an engine with two friction "
               "directions leaves the second out");
-        part(info.has_jt3 || info.version == 1,
+        part(info.has_jt3 || info.version == 1 || p.impulses == PhysicsBodies::Impulses::NormalOnly,
              "/contacts/jt3 (version 2): the scalar jt leaves each slow row's friction direction open (a disc)");
         break;
       case RowId::FreeFlight:

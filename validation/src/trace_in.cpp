@@ -451,6 +451,12 @@ class TraceIn {
             "1 (default: the contact rows carry every impulse of the step) or 0 (they do not: momentum-balance n/a)");
       p.impulses_complete = c == 1.0;
     }
+    {
+      const std::string impulses = choice_attr("impulses", {"complete", "normal-only", "none"}, "complete");
+      p.impulses = impulses == "none"          ? PhysicsBodies::Impulses::None
+                   : impulses == "normal-only" ? PhysicsBodies::Impulses::NormalOnly
+                                               : PhysicsBodies::Impulses::Complete;
+    }
     if (has_attr("friction_directions")) {
       const double d = number_attr("friction_directions", 0.0);
       if (d != 1.0 && d != 2.0)

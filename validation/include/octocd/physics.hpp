@@ -265,6 +265,21 @@ struct PhysicsBodies {
   /// records the first relaxation pass only (its later passes apply more impulses on the
   /// same pairs): momentum-balance is then n/a with that reason.
   bool impulses_complete = true;
+  /// `impulses`: what the contact rows' impulses hold (external traces: the root attribute
+  /// `impulses`; docs/validation.md, "What the impulses hold").
+  enum class Impulses {
+    /// jn and the friction (jt, jt3) are the step's impulses (default).
+    Complete,
+    /// jn is reported; the friction is not (jt, jt3 hold whatever the writer put there, never
+    /// read): `friction` is n/a, `momentum-balance` holds each body's residual
+    /// m (v' - v) - m g dt - sum jn n within the sum of its rows' cones (mu jn, a disc in
+    /// each row's tangent plane), conservation's witness-point lever takes mu jn for |jt|.
+    NormalOnly,
+    /// No impulse is reported: `friction` and `momentum-balance` n/a; conservation judges
+    /// momentum and energy, not the angular momentum (its witness-point lever needs |J|).
+    None,
+  };
+  Impulses impulses = Impulses::Complete;
   /// The engine is design.md section 6's Jacobi response (octocd's cpu and cuda): an energy failure of
   /// an isolated group is reported as the model's property (its Jacobi-summed impulses
   /// computed from one pre-response state overshoot on chains), not as an engine fault.
@@ -275,6 +290,8 @@ struct PhysicsBodies {
 const char* contact_model_name(PhysicsBodies::ContactModel m);
 /// "undeclared", "true" or "false".
 const char* gyroscopic_name(PhysicsBodies::Gyroscopic g);
+/// "complete", "normal-only" or "none".
+const char* impulses_name(PhysicsBodies::Impulses i);
 /// "semi-implicit", "explicit", "any", "substepped" or "undeclared".
 const char* integrator_name(PhysicsBodies::Integrator i);
 
