@@ -15,6 +15,9 @@ namespace {
 const char* const kStates = "/states/position and /states/velocity";
 const char* const kContacts = "/contacts (offsets, pair, normal, depth, jn, jt)";
 const char* const kRotation = "/states/orientation and /states/angular_velocity (version 2)";
+const char* const kEveryState =
+    "every state (/states/frame 0, 1, 2, ...: octocd run --state-every 1): the row needs each step's states before "
+    "and after it, and this trace records a state every few frames";
 
 /// The scene's response.iterations, for a trace read as octocd's conventions (1 without a
 /// readable scene: the check-only listing does not judge the scene).
@@ -61,6 +64,8 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
         break;
       case RowId::Friction:
         needs(info.has_contacts, kContacts);
+        part(!info.sparse_states, "every state (octocd run --state-every 1) for the dissipation; the cone is judged on "
+                                  "the steps whose pre-step state is recorded");
         needs(p.impulses == PhysicsBodies::Impulses::Complete,
               fmt::format("nothing: the trace declares impulses = \"{}\" (its rows carry no friction impulse)",
                           impulses_name(p.impulses)));
@@ -69,11 +74,13 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
         break;
       case RowId::Conservation:
         needs(info.has_states, kStates);
+        needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, fmt::format("{} (isolated groups are bodies in contact)", kContacts));
         part(info.has_rotation, fmt::format("{} for the angular momentum", kRotation));
         break;
       case RowId::MomentumBalance:
         needs(info.has_states, kStates);
+        needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, kContacts);
         needs(impulses_complete,
               "nothing: the trace declares impulses_complete = 0 (its rows hold part of the step's impulses)");
@@ -93,6 +100,7 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
         break;
       case RowId::FreeFlight:
         needs(info.has_states, kStates);
+        needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, fmt::format("{}: a body is free in a step without a row (a run without contacts "
                                              "writes /contacts/offsets of zeros and empty rows)",
                                              kContacts));
@@ -116,6 +124,7 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
               "6's response)");
         needs(info.has_contacts || row.id == RowId::AppliedState, kContacts);
         needs(info.has_states || row.id != RowId::AppliedState, kStates);
+        needs(!info.sparse_states, kEveryState);
         break;
     }
     out.push_back(std::move(r));
@@ -136,6 +145,10 @@ void apply_trace_plan(std::vector<ValidationResult>& results, const std::vector<
         r.judged = 0;
         r.causes.clear();
         r.detail = "n/a: the trace lacks what this row needs; to judge it, add " + p.add;
+        break;
+      }
+      if (p.add == kEveryState) {  // sparse states: the row's own "no states" would mislead
+        r.detail = std::string("n/a: the trace lacks what this row needs; to judge it, add ") + kEveryState;
         break;
       }
       // Already n/a: its detail names what to add (the dataset, or the attribute's name).

@@ -43,8 +43,9 @@ class TraceIn {
   /// `sparse`: /states/frame may skip frames (strictly increasing from 0, as `octocd run
   /// --state-every K` writes); frame f's states are then the recorded row nearest to f
   /// (state_frame(f) names it). Otherwise every frame's state is required.
-  explicit TraceIn(const std::string& path, bool with_scene = true, bool sparse = false)
-      : path_(path), sparse_(sparse) {
+  /// `recorded` (with `sparse`): TraceStates::Recorded, frames judged on what they carry.
+  explicit TraceIn(const std::string& path, bool with_scene = true, bool sparse = false, bool recorded = false)
+      : path_(path), sparse_(sparse), recorded_(recorded && sparse) {
     // Opened and read under docs/trace-format.md, "Security rules and limits".
     h5_ = std::make_unique<detail::Hdf5Reader>(path, "an external trace");
 
@@ -157,6 +158,7 @@ class TraceIn {
           if (f.back() != static_cast<std::int64_t>(f.size()) - 1) {
             state_frames_ = f;
             frames_ = f.back();
+            info.sparse_states = true;
           }
         } else {
           for (std::size_t r = 0; r < f.size(); ++r)
@@ -232,7 +234,22 @@ class TraceIn {
       for (hsize_t i = 0; i < n_; ++i)
         rec.aabbs[i] = {{lo[3 * i], lo[3 * i + 1], lo[3 * i + 2]}, {hi[3 * i], hi[3 * i + 1], hi[3 * i + 2]}};
     }
-    if (info.has_states) {
+    if (info.has_states && pose_only()) {
+      // TraceStates::Recorded: no states; the detection pose from the recorded state f - 1.
+      if (posed(f)) {
+        const hsize_t row = static_cast<hsize_t>(
+            std::lower_bound(state_frames_.begin(), state_frames_.end(), f - 1) - state_frames_.begin());
+        rec.x_det = vectors(read<float>(position_, row, 1));
+        if (info.version == 1 || integrated_) {  // design.md section 4.1: v + dt g, then x + dt v
+          const std::vector<Vec3> v = vectors(read<float>(velocity_, row, 1));
+          for (std::size_t i = 0; i < rec.x_det.size(); ++i) {
+            Vec3 vi = v[i];
+            integrate(rec.x_det[i], vi, bodies.inverse_mass[i], det_gravity_, Vec3{}, det_dt_);
+          }
+        }
+        if (info.has_rotation) rec.q_det = quats(read<float>(orientation_, row, 1));
+      }
+    } else if (info.has_states) {
       const auto [pre, post] = state_rows(f);
       rec.x_pre = vectors(read<float>(position_, pre, 1));
       rec.v_pre = vectors(read<float>(velocity_, pre, 1));
@@ -557,17 +574,17 @@ class TraceIn {
     names.w_pre = names.w_post = "/states/angular_velocity";
     names.x_det = "/states/position";
     names.contact_point = "/contacts/point";
-    if (info.has_rotation) {
+    if (info.has_rotation && !pose_only()) {
       const auto [pre, post] = state_rows(f);
       rec.q_pre = quats(read<float>(orientation_, pre, 1));
       rec.q_post = quats(read<float>(orientation_, post, 1));
       rec.w_pre = vectors(read<float>(angular_, pre, 1));
       rec.w_post = vectors(read<float>(angular_, post, 1));
     }
-    if (info.has_sleeping) {
+    if (info.has_sleeping && !pose_only()) {
       read_sleeping(rec, f);
     }
-    if (info.has_states) {
+    if (info.has_states && !pose_only()) {
       // Where collision detection ran; never inferred from /aabbs.
       rec.x_det = rec.x_pre;
       rec.q_det = rec.q_pre;
@@ -824,6 +841,15 @@ class TraceIn {
   }
 
  public:
+  /// TraceStates::Recorded with sparse states: records carry detection poses, no states.
+  bool pose_only() const { return recorded_ && !state_frames_.empty(); }
+  /// Step f can be judged on its pose: every step unless pose_only(), then the steps whose
+  /// pre-step state (frame f - 1) is recorded, or any step of a version 1 trace with
+  /// /aabbs (its poses are the boxes; version 2 never infers a pose from them).
+  bool posed(std::int64_t f) const {
+    return !pose_only() || (info.has_aabbs && info.version == 1) ||
+           std::binary_search(state_frames_.begin(), state_frames_.end(), f - 1);
+  }
   /// The frame whose recorded state frame(f) carries: f itself unless states are sparse.
   std::int64_t state_frame(std::int64_t f) const {
     return state_frames_.empty() ? f : state_frames_[nearest_row(f)];
@@ -849,14 +875,15 @@ class TraceIn {
     bool sparse = false, integrated = false;
     float dt = 0.0f;
     Vec3 gravity{};
+    bool recorded = false;
   };
-  RecordSettings record_settings() const { return {sparse_, integrated_, det_dt_, det_gravity_}; }
+  RecordSettings record_settings() const { return {sparse_, integrated_, det_dt_, det_gravity_, recorded_}; }
   /// True when frame(f) of a reader of the same file with `other` settings gives this
   /// reader's record: the same state rows and the same detection pose.
   bool same_records(const RecordSettings& other) const {
     const auto same_bits = [](const auto& a, const auto& b) { return std::memcmp(&a, &b, sizeof a) == 0; };
-    return sparse_ == other.sparse && integrated_ == other.integrated &&
-           (!integrated_ || (same_bits(det_dt_, other.dt) && same_bits(det_gravity_, other.gravity)));
+    return sparse_ == other.sparse && recorded_ == other.recorded && integrated_ == other.integrated &&
+           (!(integrated_ || recorded_) || (same_bits(det_dt_, other.dt) && same_bits(det_gravity_, other.gravity)));
   }
   /// True when /states/frame skips frames (read with `sparse`).
   bool sparse_states() const { return !state_frames_.empty(); }
@@ -864,6 +891,7 @@ class TraceIn {
  private:
   std::string path_;
   bool sparse_ = false;                     // /states/frame may skip frames
+  bool recorded_ = false;                   // TraceStates::Recorded (with sparse_)
   std::vector<std::int64_t> state_frames_;  // with sparse states: /states/frame; else empty
   std::unique_ptr<detail::Hdf5Reader> h5_;  // quiets HDF5's error printing while it lives
   bool committed_ = false;                  // the trace has committed_states (octocd's own)
@@ -882,7 +910,7 @@ class TraceIn {
 
 struct ExternalTrace::Impl {
   Impl(const std::string& file, TraceStates states)
-      : in(file, true, states == TraceStates::Sparse), path(file) {}
+      : in(file, true, states != TraceStates::EveryFrame, states == TraceStates::Recorded), path(file) {}
   TraceIn in;
   std::string path;
 };
@@ -938,8 +966,8 @@ struct KeptFrames {
 /// run judges are kept as decoded, from the first on, up to kKeptFrameBytes, and
 /// `keep->settings` says what they were read with. The reader is closed on return.
 ExternalTraceInfo check_frames(const std::string& path, const std::function<bool()>& stop,
-                               KeptFrames* keep = nullptr) {
-  TraceIn in(path, false);
+                               KeptFrames* keep = nullptr, bool recorded = false) {
+  TraceIn in(path, false, recorded, recorded);
   std::int64_t last = 0;
   if (keep) {
     const std::int64_t run = keep->max_frames > 0 ? std::min(keep->max_frames, in.info.frames) : in.info.frames;
@@ -949,6 +977,7 @@ ExternalTraceInfo check_frames(const std::string& path, const std::function<bool
   bool keeping = keep != nullptr;
   for (std::int64_t f = 1; f <= in.info.frames; ++f) {
     if (stop && stop()) throw ValidationStopped();
+    if (!in.posed(f)) continue;  // TraceStates::Recorded: a step without its pre-step state is not judged
     FrameRecord rec = in.frame(f);
     if (!keeping || f < keep->first) continue;
     bytes += record_bytes(rec);
@@ -961,7 +990,7 @@ ExternalTraceInfo check_frames(const std::string& path, const std::function<bool
 
 }  // namespace
 
-ExternalTraceInfo check_external_trace(const std::string& path) { return check_frames(path, {}); }
+ExternalTraceInfo check_external_trace(const std::string& path) { return check_frames(path, {}, nullptr, true); }
 
 std::vector<ValidationResult> validate_external_trace(const std::string& path, ExternalOptions options, int every,
                                                       std::int64_t max_frames, ExternalTraceInfo* info) {
@@ -972,8 +1001,10 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   KeptFrames kept;
   kept.max_frames = max_frames;
   kept.shard = options.shard;
-  const ExternalTraceInfo checked = check_frames(path, options.stop, &kept);
-  TraceIn in(path);
+  // States every K-th frame are read as recorded (TraceStates::Recorded): each step is
+  // judged on what it carries.
+  const ExternalTraceInfo checked = check_frames(path, options.stop, &kept, true);
+  TraceIn in(path, true, true, true);
   if (!in.same_records(kept.settings)) kept.records.clear();  // an "integrated" pose from the scene's dt and gravity
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;
@@ -1013,7 +1044,7 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
     // (those open at its first frame began in an earlier shard, which judges them) and
     // reads on past its last frame until its own episodes have closed, so the merged
     // verdict equals the whole run's.
-    const bool episodes = options.shard.count > 1 && made->judges_episodes() && first <= last;
+    const bool episodes = options.shard.count > 1 && made->judges_episodes() && first <= last && !in.pose_only();
     if (episodes) {
       made->set_episode_frames(first, last);
       for (std::int64_t f = 1; f < first; ++f) {
@@ -1026,24 +1057,35 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
       if (kept.has(f)) return std::async(std::launch::deferred, [&kept, f] { return kept.take(f); });
       return std::async(std::launch::async, [&in, f] { return in.frame(f); });
     };
+    // With sparse states only the steps whose pre-step state is recorded (each checked:
+    // they are already one in K).
+    auto next_posed = [&in, last](std::int64_t f) {
+      while (f <= last && !in.posed(f)) ++f;
+      return f;
+    };
     std::future<FrameRecord> next;
-    if (first <= last) next = fetch(first);
-    for (std::int64_t f = first; f <= last; ++f) {
+    std::int64_t f = next_posed(first);
+    if (f <= last) next = fetch(f);
+    for (; f <= last;) {
       if (options.stop && options.stop()) throw ValidationStopped();
       const FrameRecord rec = next.get();
-      if (f < last) next = fetch(f + 1);
+      const std::int64_t after = next_posed(f + 1);
+      if (after <= last) next = fetch(after);
       judging = f;
-      made->observe(rec, f % every == 0);
-      judged_to = f;
+      made->observe(rec, in.pose_only() || f % every == 0);
+      judged_to = std::min(after - 1, last);  // the steps skipped up to the next posed one are done
       judging = 0;
-      if (options.on_judged && (f == first || std::chrono::steady_clock::now() - last_snapshot >= kSnapshotEvery)) {
+      if (options.on_judged &&
+          (f == next_posed(first) || std::chrono::steady_clock::now() - last_snapshot >= kSnapshotEvery)) {
         ExternalTraceInfo now = checked;
         now.frames = frames;
         now.judged_to = judged_to;
         options.on_judged(made->results(), now);
         last_snapshot = std::chrono::steady_clock::now();
       }
+      f = after;
     }
+    if (first <= last && next_posed(first) > last) judged_to = last;
     for (std::int64_t f = last + 1; episodes && f <= frames && made->episodes_pending(); ++f) {
       if (options.stop && options.stop()) throw ValidationStopped();
       made->observe_episodes(in.frame(f));
