@@ -55,6 +55,11 @@ constexpr double kNoSliding = 1e-6;
 /// itself). What it leaves open is stated in docs/validate-your-engine.md, "The row cone
 /// margin".
 constexpr double kRowConeMargin = 0.25;
+/// An engine's friction floor: the smallest friction coefficient an engine may apply
+/// where the scene says less (MuJoCo turns mu 0 into mjMINMU = 1e-5). Every rule takes a
+/// pair's mu as at least this (docs/validation.md, "Floors"): a frictionless scene's
+/// friction of 1e-5 jn is never a cone failure.
+constexpr double kMuFloor = 1e-5;
 
 /// R M R^T.
 M3 conjugated(const M3& r, const M3& m);
@@ -296,9 +301,12 @@ struct PhysicsValidators::Impl {
     if (!bodies.theta_margin) return bodies.contact_margin;
     return model->theta(model->bodies[p.a].shape, model->bodies[p.b].shape);
   }
+  /// The pair's friction coefficient, at least physics_detail::kMuFloor.
   double pair_mu(Pair p) const {
-    if (bodies.body_friction.empty()) return bodies.mu;
-    return combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
+    const double mu = bodies.body_friction.empty()
+                          ? bodies.mu
+                          : combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
+    return std::max(mu, physics_detail::kMuFloor);
   }
   bool dynamic(std::uint32_t i) const { return mass[i] > 0; }
   /// Body i asleep in the state before (pre) or after the step (FrameRecord::asleep_pre /
