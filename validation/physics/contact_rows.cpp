@@ -15,6 +15,19 @@
 namespace octocd {
 
 namespace {
+/// What a row's normal was compared with where SAT judges the pair: the nearest of its
+/// accepted axes (those within `epsilon` m of the minimum translation `depth`), or the
+/// minimum translation itself when SAT kept no axis (row_reference).
+std::string sat_axes_text(std::uint32_t accepted, double epsilon, double depth) {
+  if (accepted == 0) return fmt::format("minimum translation {:.4g} m", depth);
+  if (accepted == 1)
+    return fmt::format("minimum translation {:.4g} m, the only axis within {:.3g} m of it", depth, epsilon);
+  return fmt::format("the nearest of {} axes within {:.3g} m of the minimum translation {:.4g} m", accepted, epsilon,
+                     depth);
+}
+}  // namespace
+
+namespace {
 
 /// A unit normal points against a direction when their cosine is below -kAgainstCos: a
 /// normal perpendicular to the direction pushes the bodies neither together nor apart, and
@@ -266,9 +279,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
                              frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle, judge,
                              ref_normal.x, ref_normal.y, ref_normal.z,
                              aabb     ? "box-box on the world AABBs, minimum translation"
-                             : by_sat ? fmt::format("the nearest of {} axes within {:.3g} m of the minimum "
-                                                    "translation {:.4g} m",
-                                                    shape_truth.sat_accepted, shape_truth.sat_epsilon, r.depth)
+                             : by_sat ? sat_axes_text(shape_truth.sat_accepted, shape_truth.sat_epsilon, r.depth)
                                       : std::string("minimum translation"),
                              by_sat ? " [reference: SAT]" : " [reference: FCL]");
         });
