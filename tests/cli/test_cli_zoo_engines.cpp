@@ -34,6 +34,7 @@
 #include <iostream>
 #include <map>
 #include <regex>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -698,7 +699,7 @@ void expect_caught(const Result& r, const std::vector<std::string>& fragments) {
   for (const std::string& f : fragments) EXPECT_NE(r.output.find(f), std::string::npos) << f << "\n" << r.output;
 }
 
-TEST_F(ZooEngines, SoftContactsPassDeclaredAndFailPerStepEnergyUndeclared) {
+TEST_F(ZooEngines, SoftContactsPassDeclaredOrUndeclaredAndFailDeclaredRigid) {
   const Zoo z = soft_engine();
   ASSERT_GT(first_impulse(z, 0, 1), 0);
   double deepest = 0;
@@ -710,8 +711,78 @@ TEST_F(ZooEngines, SoftContactsPassDeclaredAndFailPerStepEnergyUndeclared) {
   expect_clean(ok);
   EXPECT_NE(ok.output.find("2 episodes judged, 1 of them of 3 or more bodies"), std::string::npos) << ok.output;
   Zoo rigid = z;
-  rigid.text.erase("contact_model");
+  rigid.text["contact_model"] = "rigid";
   expect_caught(judge(rigid, "rigid"), {"kinetic energy", "group (0, 1)", "group (3, 4, 5)"});
+  // Undeclared: every admissible value; the steps that fail as rigid lie in episodes that
+  // pass as soft, so nothing fails, and the detail names the declaration.
+  Zoo undeclared = z;
+  undeclared.text.erase("contact_model");
+  const Result u = judge(undeclared, "undeclared");
+  expect_clean(u);
+  EXPECT_NE(u.output.find("contact_model undeclared: energy judged as rigid (per step) and as soft"),
+            std::string::npos)
+      << u.output;
+  EXPECT_NE(u.output.find("declare contact_model to sharpen the verdict"), std::string::npos) << u.output;
+  // The chain's springs feeding energy in fail both ways: caught undeclared, naming both.
+  Zoo gain = soft_engine(60, -50);
+  gain.text.erase("contact_model");
+  expect_caught(judge(gain, "gain-undeclared"),
+                {"conservation", "group (3, 4, 5) of 3 bodies (contact_model undeclared: judged soft)",
+                 "it fails both ways"});
+}
+
+/// "NEW FAILURE row/cause" of every failing cause in `output`.
+std::set<std::string> failing_causes(const std::string& output) {
+  std::set<std::string> out;
+  const std::regex re("(^|\n)NEW FAILURE ([a-z-]+/[a-z-]+):");
+  for (auto it = std::sregex_iterator(output.begin(), output.end(), re); it != std::sregex_iterator(); ++it)
+    out.insert((*it)[2]);
+  return out;
+}
+
+// design.md section 13d: an undeclared fact admits every value, so the undeclared verdict
+// is never stricter than a declared one: for each declaration, each zoo engine (clean and
+// with a planted fault) fails undeclared only causes it fails under every declared value.
+TEST_F(ZooEngines, UndeclaredIsNeverStricterThanAnyDeclaredValue) {
+  std::vector<std::pair<std::string, Zoo>> engines{{"soft", soft_engine()},
+                                                   {"soft-gain", soft_engine(60, -50)},
+                                                   {"gyroscopic", gyroscopic_engine()},
+                                                   {"joints", locked_engine()},
+                                                   {"substepped", substepped_engine(4, 0.001, 200, true)}};
+  {  // planted: a lone body's velocity x1.5, a dropped row
+    Zoo fast = locked_engine();
+    fast.states[40].v[4] = f32(1.5 * fast.states[40].v[4]);
+    engines.emplace_back("joints-fast", fast);
+    Zoo dropped = locked_engine();
+    dropped.rows[49].erase(dropped.rows[49].begin() + 2);
+    engines.emplace_back("joints-dropped", dropped);
+  }
+  const std::map<std::string, std::vector<std::string>> values{
+      {"gyroscopic", {"true", "false"}},
+      {"integrator", {"semi-implicit", "explicit", "any", "substepped"}},
+      {"contact_model", {"rigid", "soft"}}};
+  std::size_t judged = 0, undeclared_failures = 0;
+  for (const auto& [name, base] : engines)
+    for (const auto& [attribute, choices] : values) {
+      Zoo undeclared = base;
+      undeclared.text.erase(attribute);
+      if (attribute == "integrator") undeclared.numbers.erase("substeps");
+      const std::set<std::string> loose = failing_causes(judge(undeclared, name + "-undeclared").output);
+      undeclared_failures += loose.size();
+      for (const std::string& value : choices) {
+        Zoo declared = undeclared;
+        declared.text[attribute] = value;
+        if (value == "substepped") declared.numbers["substeps"] = name == "substepped" ? 4 : 1;
+        const Result r = judge(declared, name + "-" + attribute + "-" + value);
+        const std::set<std::string> strict = failing_causes(r.output);
+        ++judged;
+        for (const std::string& cause : loose)
+          EXPECT_TRUE(strict.count(cause)) << name << ": undeclared " << attribute << " fails " << cause
+                                           << " but declared \"" << value << "\" does not\n" << r.output;
+      }
+    }
+  EXPECT_EQ(judged, 7u * 8u);
+  EXPECT_GT(undeclared_failures, 0u);  // the planted faults fail undeclared too
 }
 
 // design.md section 13b.12 for episodes of 3 or more bodies: the row's energy is judged over the

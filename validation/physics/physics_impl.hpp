@@ -384,7 +384,7 @@ struct PhysicsValidators::Impl {
   void advance_episodes(const FrameRecord& rec);
   /// Energy is judged per contact episode (contact_model soft, restitution <= 1).
   bool tracks_episodes() const {
-    return bodies.contact_model == PhysicsBodies::ContactModel::Soft && restitution_le_1;
+    return bodies.contact_model != PhysicsBodies::ContactModel::Rigid && restitution_le_1;
   }
   /// Episodes judged here: those begun in [episode_first, episode_last] (set_episode_frames).
   std::int64_t episode_first = std::numeric_limits<std::int64_t>::min();
@@ -404,7 +404,24 @@ struct PhysicsValidators::Impl {
     double e0 = 0, ke0 = 0, scale = 0;
     bool spoiled = false;
     bool began_in_contact = false;  ///< a pair of it touched in the step before it opened
+    /// contact_model undeclared: its steps whose kinetic energy rose beyond the rigid
+    /// bound, and the first one's description.
+    std::uint64_t rigid_rises = 0;
+    std::string first_rise;
   };
+  /// contact_model undeclared: this step's isolated groups whose kinetic energy rose beyond
+  /// the rigid bound (their first body, the description), attached to their episodes.
+  std::vector<std::pair<std::uint32_t, std::string>> rigid_rises_now;
+  /// Of them, those in no episode judged to fail (a soft contact may return the energy):
+  /// not failures (counted).
+  std::uint64_t rigid_rises_spared = 0;
+  /// The rigid energy rule on an isolated group's step: its kinetic energy before (after
+  /// gravity) and after, the bound, and whether it rose beyond it.
+  struct StepEnergy {
+    double ke0 = 0, ke1 = 0, bound = 0;
+    bool rose = false;
+  };
+  StepEnergy step_energy(const FrameRecord& rec, const std::vector<std::uint32_t>& members) const;
   std::vector<Episode> episodes;  // contact_model soft: open episodes
   /// The pairs of dynamic bodies with a contact row in frame `pairs_frame` (the last frame
   /// soft_episodes saw; 0: none yet, the state before frame 1), sorted.

@@ -48,8 +48,9 @@ std::string spin_note(PhysicsBodies::Gyroscopic g, std::uint64_t kept, std::uint
     case PhysicsBodies::Gyroscopic::Absent: return " (no gyroscopic term declared)";
     case PhysicsBodies::Gyroscopic::Undeclared: break;
   }
-  return fmt::format(" (gyroscopic term undeclared: {} kept w, {} precessed keeping L and the energy)", kept,
-                     invariant);
+  return fmt::format(" (gyroscopic term undeclared: {} kept w, {} precessed keeping L and the energy; declare "
+                     "gyroscopic to sharpen the verdict)",
+                     kept, invariant);
 }
 
 }  // namespace
@@ -344,6 +345,12 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail += fmt::format("; {} group-frames not judged (a body asleep before or after the step: "
                               "/states/sleeping)",
                               s.groups_asleep);
+    if (s.bodies.contact_model == PhysicsBodies::ContactModel::Undeclared && s.restitution_le_1)
+      r.detail += fmt::format("; contact_model undeclared: energy judged as rigid (per step) and as soft (per contact "
+                              "episode: {} judged, {} not), a failure only where both fail ({} steps raising the "
+                              "kinetic energy spared: their episode's energy did not rise or was not judged); declare "
+                              "contact_model to sharpen the verdict",
+                              s.episodes_judged, s.episodes_unjudged + s.owned_open(), s.rigid_rises_spared);
     if (s.bodies.contact_model == PhysicsBodies::ContactModel::Soft)
       r.detail += fmt::format("; contact_model soft: energy judged per contact episode of an isolated group, "
                               "from its first contact until none of its bodies touches another ({} episodes judged, "
@@ -447,6 +454,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                           : std::string("; rotation n/a (translation-only records)"),
           s.free_locked ? fmt::format("; {} body-steps with locked axes (those components n/a)", s.free_locked)
                         : std::string());
+      if (s.bodies.integrator == PhysicsBodies::Integrator::Undeclared)
+        r.detail += "; integrator undeclared: x' = x + dt v + a g dt^2 for every a in [0, 1] and substepping's "
+                    "orientation, a failure only where every integrator fails (declare integrator, and substeps, to "
+                    "sharpen the verdict)";
     }
     if (r.applicable) {
       if (s.free_sleep.checks + s.fell_asleep)

@@ -67,7 +67,9 @@ PhysicsBodies octocd_physics_bodies(const Model& model) {
 }
 
 const char* contact_model_name(PhysicsBodies::ContactModel m) {
-  return m == PhysicsBodies::ContactModel::Soft ? "soft" : "rigid";
+  return m == PhysicsBodies::ContactModel::Soft         ? "soft"
+         : m == PhysicsBodies::ContactModel::Undeclared ? "undeclared"
+                                                        : "rigid";
 }
 
 const char* gyroscopic_name(PhysicsBodies::Gyroscopic g) {

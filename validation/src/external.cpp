@@ -516,7 +516,7 @@ bool ExternalValidator::episodes_pending() const {
 }
 
 bool ExternalValidator::judges_episodes() const {
-  return !impl_->options.octocd_engine && impl_->physics.contact_model == PhysicsBodies::ContactModel::Soft;
+  return !impl_->options.octocd_engine && impl_->physics.contact_model != PhysicsBodies::ContactModel::Rigid;
 }
 
 void ExternalValidator::Impl::prepare(FrameRecord& rec) {

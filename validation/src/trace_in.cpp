@@ -492,9 +492,10 @@ class TraceIn {
                           has_attr("friction_directions") ||
                           has_attr("response_scheme") || has_attr("deactivation");
     info.octocd_conventions = info.version == 1 && !declares && has_attr("parameters") && exists("/frames");
-    p.contact_model = choice_attr("contact_model", {"rigid", "soft"}, "rigid") == "soft"
-                          ? PhysicsBodies::ContactModel::Soft
-                          : PhysicsBodies::ContactModel::Rigid;
+    const std::string contact_model = choice_attr("contact_model", {"rigid", "soft"}, "undeclared");
+    p.contact_model = contact_model == "soft"    ? PhysicsBodies::ContactModel::Soft
+                      : contact_model == "rigid" ? PhysicsBodies::ContactModel::Rigid
+                                                 : PhysicsBodies::ContactModel::Undeclared;
     const std::string integrator =
         choice_attr("integrator", {"semi-implicit", "explicit", "any", "substepped"}, "undeclared");
     p.integrator = integrator == "explicit"        ? PhysicsBodies::Integrator::Explicit

@@ -188,7 +188,10 @@ struct PhysicsBodies {
   /// (compliant contacts: springs, soft constraints, XPBD compliance): a contact may store
   /// energy in its penetration and give it back in a later step, so energy is judged over
   /// each pair's contact episode (first step with a row to the first without), not per step.
-  enum class ContactModel { Rigid, Soft };
+  /// Undeclared (external traces without the attribute): every admissible value, so an
+  /// isolated group fails energy only where it fails both ways: a step raising its kinetic
+  /// energy (rigid) inside a contact episode whose mechanical energy rose (soft).
+  enum class ContactModel { Rigid, Soft, Undeclared };
   ContactModel contact_model = ContactModel::Rigid;
   /// `gyroscopic`: how the engine treats the gyroscopic term (w x I w) of free rotation
   /// (docs/validation.md, "Free rotation: the invariants").
@@ -286,7 +289,7 @@ struct PhysicsBodies {
   bool jacobi_response = false;
 };
 
-/// "rigid" or "soft".
+/// "rigid", "soft" or "undeclared".
 const char* contact_model_name(PhysicsBodies::ContactModel m);
 /// "undeclared", "true" or "false".
 const char* gyroscopic_name(PhysicsBodies::Gyroscopic g);
