@@ -319,6 +319,12 @@ struct PhysicsValidators::Impl {
     return a && b && (dynamic(p.a) || dynamic(p.b));
   }
 
+  /// `speculative`: how far pair p's shapes may approach within the step (m; infinity
+  /// without states): dt (|v_a - v_b| + |w_a| R_a + |w_b| R_b), the larger of before and after.
+  double speculative_reach(const FrameRecord& rec, Pair p) const;
+  std::uint64_t speculative_allowed = 0;  ///< contact pairs given a speculative reach
+  std::uint64_t points_persistent = 0;    ///< rows whose point check is not applied (persistent points)
+
   // ---- Rows 1-4 (checked frames with poses) --------------------------------------
   /// Rows 1-4 of a checked frame, each on its own clock.
   void geometry(const FrameRecord& rec, const std::vector<Pose>& det);

@@ -128,6 +128,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                              "{:.3g} m beyond it)",
                              s.complete.checks, s.false_contact.checks, margin, s.false_contact.worst_or(0.0));
     }
+    if (s.bodies.speculative)
+      r.detail += fmt::format("; speculative contacts declared: {} contact pair-frames allowed the pair's approach "
+                              "within the step beyond the margin",
+                              s.speculative_allowed);
     if (s.complete_asleep)
       r.detail += fmt::format("; {} penetrating pair-frames of bodies asleep before the step (/states/sleeping) "
                               "without a row, not required",
@@ -226,6 +230,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     }
     if (r.applicable)
       fill_causes(r, info, {&s.normal_angle, &s.depth, &s.points});
+    if (s.points_persistent)
+      r.detail += fmt::format("; manifold_points \"persistent\": {} row points not judged (they ride on each body "
+                              "and may drift off the shapes)",
+                              s.points_persistent);
     out.push_back(r);
   }
   // 4. Penetration.

@@ -15,6 +15,10 @@ namespace {
 const char* const kStates = "/states/position and /states/velocity";
 const char* const kContacts = "/contacts (offsets, pair, normal, depth, jn, jt)";
 const char* const kRotation = "/states/orientation and /states/angular_velocity (version 2)";
+const char* const kContactsComplete =
+    "the root attribute contacts_complete = 1 (every contact of every step has its rows): the trace declares 0, and "
+    "judging a body without rows as free, or a pair without rows as missing, would be a false alarm (read, not yet "
+    "used: design.md section 13d item 5b)";
 const char* const kEveryState =
     "every state (/states/frame 0, 1, 2, ...: octocd run --state-every 1): the row needs each step's states before "
     "and after it, and this trace records a state every few frames";
@@ -56,6 +60,7 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
       case RowId::ContactCompleteness:
       case RowId::ContactGeometry:
         needs(info.has_contacts, kContacts);
+        if (row.id == RowId::ContactCompleteness) needs(p.contacts_complete, kContactsComplete);
         if (row.id == RowId::ContactGeometry)
           part(info.has_points, "/contacts/point (version 2) for the check that each row's point lies on both shapes");
         break;
@@ -74,12 +79,14 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
         break;
       case RowId::Conservation:
         needs(info.has_states, kStates);
+        needs(p.contacts_complete, kContactsComplete);
         needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, fmt::format("{} (isolated groups are bodies in contact)", kContacts));
         part(info.has_rotation, fmt::format("{} for the angular momentum", kRotation));
         break;
       case RowId::MomentumBalance:
         needs(info.has_states, kStates);
+        needs(p.contacts_complete, kContactsComplete);
         needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, kContacts);
         needs(impulses_complete,
@@ -100,6 +107,7 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
         break;
       case RowId::FreeFlight:
         needs(info.has_states, kStates);
+        needs(p.contacts_complete, kContactsComplete);
         needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, fmt::format("{}: a body is free in a step without a row (a run without contacts "
                                              "writes /contacts/offsets of zeros and empty rows)",

@@ -344,6 +344,7 @@ class TraceIn {
     p.restitution_combine = combine_attr("restitution_combine", combines);
     if (has_attr("contact_margin")) p.contact_margin = number_attr("contact_margin", 0.0);
     read_locked_dofs(p);
+    read_shape_offsets();
 
     // Per-body tables.
     Dataset inertia = open("/bodies/inertia", H5T_FLOAT, 3, false);
@@ -474,6 +475,27 @@ class TraceIn {
                    : impulses == "normal-only" ? PhysicsBodies::Impulses::NormalOnly
                                                : PhysicsBodies::Impulses::Complete;
     }
+    // Fourth-round declarations (docs/trace-format.md, "Declarations").
+    if (has_attr("speculative")) {
+      const double v = number_attr("speculative", 0.0);
+      if (v != 0.0 && v != 1.0)
+        bad("/ (root attribute speculative)", fmt::format("{}", v),
+            "1 (rows may join shapes apart by the contact margin plus their approach within the step) or 0 (default)");
+      p.speculative = v == 1.0;
+    }
+    if (has_attr("contacts_complete")) {
+      const double v = number_attr("contacts_complete", 1.0);
+      if (v != 0.0 && v != 1.0)
+        bad("/ (root attribute contacts_complete)", fmt::format("{}", v),
+            "1 (default: every contact of every step has its rows) or 0 (the engine's API may drop rows)");
+      p.contacts_complete = v == 1.0;
+    }
+    p.persistent_points = choice_attr("manifold_points", {"fixed", "persistent"}, "fixed") == "persistent";
+    if (has_attr("depth_per") && string_attr("depth_per") == "unknown")
+      bad("/ (root attribute depth_per)", "\"unknown\": not yet judged (design.md section 13d item 5b)",
+          "\"point\" (default: each row's own depth) or \"manifold\" (each row its manifold's deepest depth); "
+          "an engine without depths cannot be judged yet");
+    p.depth_per_manifold = choice_attr("depth_per", {"point", "manifold"}, "point") == "manifold";
     if (has_attr("friction_directions")) {
       const double d = number_attr("friction_directions", 0.0);
       if (d != 1.0 && d != 2.0)
@@ -534,6 +556,32 @@ class TraceIn {
       if (text != "true" && text != "false")
         bad("/ (root attribute gyroscopic)", fmt::format("'{}' unknown", text), allowed);
       p.gyroscopic = text == "true" ? PhysicsBodies::Gyroscopic::Integrated : PhysicsBodies::Gyroscopic::Absent;
+    }
+  }
+
+  /// /bodies/convex_radius (n) and /bodies/com_offset (n x 3): read; only zeros are
+  /// judged yet (design.md section 13d items 4 and 5d): a rounded shape or a body origin
+  /// off its centre of mass is refused, naming the body, rather than judged wrongly.
+  void read_shape_offsets() {
+    Dataset radius = open("/bodies/convex_radius", H5T_FLOAT, 1, false);
+    if (radius.present()) {
+      expect(radius, {n_}, fmt::format("{} values, one per body (as /bodies/inverse_mass)", n_));
+      const std::vector<double> r = read<double>(radius, 0, n_);
+      for (hsize_t i = 0; i < n_; ++i)
+        if (r[i] != 0.0)
+          bad(radius.name, fmt::format("body {}: {}", i, r[i]),
+              "0 for every body: rounded shapes are not judged yet (design.md section 13d item 4); write the "
+              "radius into the shape the engine collided, or leave the dataset out");
+    }
+    Dataset com = open("/bodies/com_offset", H5T_FLOAT, 2, false);
+    if (com.present()) {
+      expect(com, {n_, 3}, fmt::format("{} x 3, one offset per body (m, body frame)", n_));
+      const std::vector<double> c = read<double>(com, 0, n_);
+      for (hsize_t i = 0; i < n_; ++i)
+        if (c[3 * i] != 0.0 || c[3 * i + 1] != 0.0 || c[3 * i + 2] != 0.0)
+          bad(com.name, fmt::format("body {}: ({}, {}, {})", i, c[3 * i], c[3 * i + 1], c[3 * i + 2]),
+              "(0, 0, 0) for every body: a position away from the centre of mass is not judged yet (design.md "
+              "section 13d item 5d); write the centre of mass's position, or re-centre the mesh");
     }
   }
 

@@ -283,6 +283,24 @@ struct PhysicsBodies {
     None,
   };
   Impulses impulses = Impulses::Complete;
+  /// `speculative` 1: contact rows may join shapes apart by up to the contact margin plus
+  /// their approach within the step; contact-completeness's false-contact bound adds
+  /// dt (|v_a - v_b| + |w_a| R_a + |w_b| R_b) (R: the body's reach from its origin,
+  /// velocities the larger of before and after the step; not judged without states).
+  bool speculative = false;
+  /// `contacts_complete` 0: the engine's API may drop contact rows (Havok). Read, not yet
+  /// used (design.md section 13d item 5b): the rows that take a body without rows as free
+  /// or need every row (contact-completeness, conservation, momentum-balance,
+  /// free-flight) are n/a, naming it.
+  bool contacts_complete = true;
+  /// `manifold_points` "persistent": a row's points ride on each body and may drift off
+  /// the shapes. Read, not yet used beyond this: contact-geometry's point check is not
+  /// applied (counted); normals and depths are judged.
+  bool persistent_points = false;
+  /// `depth_per` "manifold": each row carries its manifold's deepest depth. Judged as
+  /// "point": contact-geometry judges each pair's deepest row, and a row's point may lie
+  /// within its (larger) depth of the surfaces.
+  bool depth_per_manifold = false;
   /// The engine is design.md section 6's Jacobi response (octocd's cpu and cuda): an energy failure of
   /// an isolated group is reported as the model's property (its Jacobi-summed impulses
   /// computed from one pre-response state overshoot on chains), not as an engine fault.
