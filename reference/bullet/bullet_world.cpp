@@ -4,6 +4,7 @@
 
 #include "octocd/bullet_world.hpp"
 #include "octocd/adapter_rows.hpp"
+#include "octocd/reference_world.hpp"
 #include "octocd/version.hpp"
 
 #include <fmt/format.h>
@@ -36,11 +37,6 @@ btQuaternion to_bt(const Quat& q) { return btQuaternion(q.x, q.y, q.z, q.w); }
 Quat from_bt(const btQuaternion& q) {
   return {static_cast<float>(q.w()), static_cast<float>(q.x()), static_cast<float>(q.y()),
           static_cast<float>(q.z())};
-}
-
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-      .count();
 }
 
 /// btDiscreteDynamicsWorld with its step's phases timed, so the Bullet engine reports
