@@ -15,7 +15,6 @@ namespace octocd {
 const char* dart_collision_name(DartCollision c) { return c == DartCollision::Dart ? "dart" : "fcl"; }
 const char* dart_fcl_boxes_name(DartFclBoxes b) { return b == DartFclBoxes::Mesh ? "mesh" : "primitive"; }
 const char* dart_lcp_name(DartLcp l) { return l == DartLcp::Pgs ? "pgs" : "dantzig"; }
-const char* dart_friction_name(DartFriction f) { return f == DartFriction::Pyramid ? "pyramid" : "inscribed"; }
 
 DartSettings dart_library_defaults() {
   using dart::constraint::ContactConstraint;

@@ -18,7 +18,6 @@ namespace octocd {
 
 
 const char* ode_stepper_name(OdeStepper s) { return s == OdeStepper::QuickStep ? "quickstep" : "step"; }
-const char* ode_friction_name(OdeFriction f) { return f == OdeFriction::Pyramid ? "pyramid" : "inscribed"; }
 
 OdeSettings ode_library_defaults() {
   dInitODE2(0);
