@@ -223,10 +223,13 @@ def test_what_each_engine_ran_is_named():
 
 
 def test_registry_mirror_matches_engine_registry():
-    """OWN_BROADPHASE_CLASS holds every engine's own broadphase -> class of the registry."""
-    src = open(os.path.join(SRC, "engines", "src", "engines.cpp")).read()
-    pairs = dict(zip(re.findall(r'own_broadphase = "([^"]+)"', src),
-                     re.findall(r'own_broadphase_class = "([^"]+)"', src)))
+    """OWN_BROADPHASE_CLASS holds every built-in engine's own broadphase -> class, as the
+    registry gives them (`octocd engines --json`)."""
+    import subprocess
+    out = subprocess.run([os.environ.get("OCTOCD_BIN", os.path.join(SRC, "build", "octocd")), "engines", "--json"],
+                         capture_output=True, text=True, check=True).stdout
+    pairs = {e["own_broadphase"]: e["own_broadphase_class"] for e in json.loads(out)["engines"]
+             if e.get("kind") == "builtin" and e.get("own_broadphase")}
     assert pairs and pairs == MR.OWN_BROADPHASE_CLASS
 
 
