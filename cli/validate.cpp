@@ -29,6 +29,8 @@
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
 #include "octocd/expect.hpp"
+#include "octocd/junit.hpp"
+#include "octocd/results_table.hpp"
 #include "octocd/shards.hpp"
 #include "octocd/external.hpp"
 #include "octocd/midphase.hpp"

@@ -42,6 +42,8 @@
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
 #include "octocd/expect.hpp"
+#include "octocd/junit.hpp"
+#include "octocd/results_table.hpp"
 #include "octocd/external.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"

@@ -10,6 +10,7 @@
 
 #include "faults/planted_faults.hpp"
 #include "octocd/error.hpp"
+#include "octocd/results_table.hpp"
 #include "octocd/validation.hpp"
 #include "support/test_scenes.hpp"
 

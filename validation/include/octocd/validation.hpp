@@ -27,7 +27,6 @@ namespace octocd {
 class PhysicsValidators;
 
 struct PhysicsBodies;  // octocd/physics.hpp
-struct ExpectationReport;  // octocd/expect.hpp
 
 /// Which judge a row belongs to (design.md section 13, ARCHITECTURE.md seam 3).
 enum class Tier {
@@ -454,41 +453,6 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
 
 /// validate_engine with the CPU engine (World) on `scene`.
 std::vector<ValidationResult> validate_scene(const Scene& scene, const ValidationOptions& options);
-
-/// Prints results as a table (name, figure, measured, bound, verdict, detail); a bound
-/// that depends on an overridden tolerance is marked with '*'. Under a failing row, its
-/// causes (failure_causes, octocd/expect.hpp) with their counts and worst figures and the
-/// first examples (at most 3 per cause); a row that judged nothing reads `n/a`. With
-/// `report` (may be null), a row whose every failing cause is expected reads `expected`.
-std::string format_results(const std::vector<ValidationResult>& results,
-                           const std::vector<std::string>& overridden = {},
-                           const ExpectationReport* report = nullptr);
-
-/// Writes a JUnit XML report to `path` (`octocd validate --junit`): one <testsuite> named
-/// `suite` (the scene's name) inside <testsuites>, one <testcase> per result; a failed result carries
-/// <failure message="detail"> (text: figure, measured, bound, detail), an n/a result
-/// <skipped>, a pass its figures in <system-out>. A testcase's classname is "SUITE.TIER"
-/// (e.g. "box-stack.physics": CI servers show scene, tier and validator), its name the
-/// validator, its time the result's `seconds`; a failure's message starts with
-/// "measured X > bound Y". `seconds` is the suite's time; `properties` (engine,
-/// frames, ...) go to <properties>. `stopped` non-empty (a run stopped by a signal): one
-/// more testcase "stopped" with <error message="stopped">, so a CI server never reads a
-/// stopped run as passed. With `report` (octocd/expect.hpp; may be null) a row whose every
-/// failing cause is expected is <skipped message="expected: ..."> (one line per cause, its
-/// figure, allowance and reason), and a failing row's message names its new or grown
-/// causes. Text is XML-escaped. Throws RuntimeError naming the path when it cannot be
-/// written.
-void write_junit(const std::string& path, const std::string& suite,
-                 const std::vector<ValidationResult>& results, double seconds,
-                 const std::vector<std::pair<std::string, std::string>>& properties = {},
-                 const std::string& stopped = "", const ExpectationReport* report = nullptr);
-
-/// Writes a JUnit XML report with one errored test case (classname `suite`, name `name`,
-/// e.g. "bad-input" or "runtime-failure", <error message="message">): what `validate
-/// --junit` leaves when the scene cannot be loaded or the run stops, so a CI server sees
-/// the scene as broken rather than missing. Throws RuntimeError naming the path.
-void write_junit_error(const std::string& path, const std::string& suite, const std::string& name,
-                       const std::string& message);
 
 /// Appends `/validation` to an existing trace (design.md section 8): one row per result with name,
 /// figure, measured, bound, pass, applicable, detail. Throws RuntimeError naming the path.

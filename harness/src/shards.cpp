@@ -192,14 +192,6 @@ ShardSpec parse_shard(const std::string& text) {
   return s;
 }
 
-std::pair<std::int64_t, std::int64_t> shard_frames(ShardSpec s, std::int64_t frames) {
-  const auto edge = [&](std::int64_t k) {
-    // floor(k F / N): k F <= 10^5 x 10^8 (trace_limits::kMaxFrames) fits in 64 bits.
-    return k * frames / s.count;
-  };
-  return {edge(s.index) + 1, edge(s.index + 1)};
-}
-
 nlohmann::ordered_json shard_json(ShardSpec s, const ShardIdentity& id) {
   const auto [first, last] = shard_frames(s, id.frames);
   nlohmann::ordered_json tol = nlohmann::ordered_json::object();
