@@ -5,7 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
-#include "commands.hpp"
+#include "command.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
 

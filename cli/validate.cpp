@@ -45,7 +45,8 @@
 #include "octocd/world.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engines.hpp"
-#include "commands.hpp"
+#include "command.hpp"
+#include "command_support.hpp"
 #include "tools.hpp"
 #include "view.hpp"
 
