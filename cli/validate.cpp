@@ -28,6 +28,7 @@
 #include "octocd/broadphase.hpp"
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/setting_error.hpp"
 #include "octocd/expect.hpp"
 #include "octocd/junit.hpp"
 #include "octocd/results_table.hpp"
@@ -645,7 +646,11 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
       throw octocd::InputError(fmt::format(
           "--tolerance: {}: '{}' is not a decimal number; allowed: a finite number >= 0 (decimal, e.g. 0.01 or 1e-3)",
           name, text));
-    octocd::set_tolerance(vo.tol, name, value);
+    try {
+      octocd::set_tolerance(vo.tol, name, value);
+    } catch (const octocd::SettingError& e) {
+      throw octocd::InputError("--tolerance: " + e.describe());
+    }
     vo.overridden.push_back(name);
   }
   if (!o.trace_in.empty()) {

@@ -41,6 +41,7 @@
 #include "octocd/engine.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
+#include "octocd/setting_error.hpp"
 #include "octocd/expect.hpp"
 #include "octocd/junit.hpp"
 #include "octocd/results_table.hpp"
@@ -893,11 +894,8 @@ void apply_tolerances(ExternalOptions& o, const py::object& tolerances) {
     }
     try {
       set_tolerance(o.tol, name, value);
-    } catch (const InputError& e) {  // names the CLI's --tolerance: name the argument instead
-      std::string msg = e.what();
-      const std::string cli = "--tolerance";
-      if (msg.rfind(cli, 0) == 0) msg = fmt::format("tolerances['{}']", name) + msg.substr(cli.size());
-      throw InputError(msg);
+    } catch (const SettingError& e) {
+      throw InputError(fmt::format("tolerances['{}']: {}", name, e.describe()));
     }
     o.overridden.push_back(name);
   }

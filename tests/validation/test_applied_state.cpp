@@ -10,6 +10,7 @@
 
 #include "faults/planted_faults.hpp"
 #include "octocd/error.hpp"
+#include "octocd/setting_error.hpp"
 #include "octocd/results_table.hpp"
 #include "octocd/validation.hpp"
 #include "support/test_scenes.hpp"
@@ -269,8 +270,28 @@ TEST(Tolerances, OverridesByNameAndRejectsUnknownNames) {
   Tolerances t;
   set_tolerance(t, "contraction_m", 1e-3);
   EXPECT_EQ(t.contraction_m, 1e-3);
-  EXPECT_THROW(set_tolerance(t, "no_such_bound", 1.0), InputError);
-  EXPECT_THROW(set_tolerance(t, "contraction_m", -1.0), InputError);
+  // The error carries its fields and names no front end's option (the CLI and Python word it).
+  try {
+    set_tolerance(t, "no_such_bound", 1.0);
+    ADD_FAILURE() << "an unknown tolerance was accepted";
+  } catch (const SettingError& e) {
+    EXPECT_EQ(e.kind, "tolerance");
+    EXPECT_EQ(e.name, "no_such_bound");
+    EXPECT_FALSE(e.known);
+    EXPECT_NE(e.allowed.find("contraction_m"), std::string::npos) << e.allowed;
+    EXPECT_EQ(std::string(e.what()).find("--"), std::string::npos) << e.what();
+  }
+  try {
+    set_tolerance(t, "contraction_m", -1.0);
+    ADD_FAILURE() << "a negative tolerance was accepted";
+  } catch (const SettingError& e) {
+    EXPECT_EQ(e.name, "contraction_m");
+    EXPECT_EQ(e.value, "-1");
+    EXPECT_TRUE(e.known);
+    EXPECT_EQ(e.allowed, "a finite number >= 0 (m)");
+    EXPECT_EQ(e.describe(), "contraction_m=-1: out of range; allowed: a finite number >= 0 (m)");
+  }
+  EXPECT_EQ(t.contraction_m, 1e-3);
   std::vector<ValidationResult> rs(1);
   rs[0].name = "non-penetration-eq14";
   rs[0].tolerances = "contraction_m";

@@ -16,6 +16,7 @@
 
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/setting_error.hpp"
 #include "octocd/exact_pairs.hpp"
 #include "octocd/pose.hpp"
 #include "octocd/text.hpp"
@@ -485,12 +486,12 @@ void set_tolerance(Tolerances& tol, const std::string& name, double value) {
     names += (names.empty() ? "" : ", ") + std::string(e.name);
     if (name != e.name) continue;
     if (!std::isfinite(value) || value < 0.0)
-      throw InputError(fmt::format("--tolerance: {}={}: out of range; allowed: a finite number >= 0 ({})",
-                                   name, value, e.unit));
+      throw SettingError("tolerance", name, fmt::format("{}", value), true,
+                         fmt::format("a finite number >= 0 ({})", e.unit));
     tol.*(e.member) = value;
     return;
   }
-  throw InputError(fmt::format("--tolerance: unknown tolerance '{}'; allowed: {}", name, names));
+  throw SettingError("tolerance", name, "", false, names);
 }
 
 std::vector<std::unique_ptr<BroadPhase>> compared_broadphases(const Scene& scene, bool with_references) {

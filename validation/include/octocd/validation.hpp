@@ -319,8 +319,9 @@ struct ToleranceEntry {
 };
 /// Every tolerance, in declaration order.
 const std::vector<ToleranceEntry>& tolerance_table();
-/// Sets tolerance `name` to `value` (finite, >= 0). Throws InputError naming `--tolerance`,
-/// the name and the allowed names or range.
+/// Sets tolerance `name` to `value` (finite, >= 0). Throws SettingError (octocd/setting_error.hpp;
+/// kind "tolerance") with the name, the value and the allowed names or range, for the CLI
+/// and Python to word.
 void set_tolerance(Tolerances& tol, const std::string& name, double value);
 
 /// Per-frame validators (design.md section 7 items 1-6 and 9), fed one FrameRecord at a time. They
