@@ -1,13 +1,13 @@
 # No branch on an engine's name outside the registry (ARCHITECTURE "One engine registry";
 # engines/include/octocd/engine_registry.hpp, engines/include/octocd/engines.hpp): fails when a
-# C++ or CUDA source under cli/, python/src/, bench/ or validation/ compares a string with
+# C++ or CUDA source under cli/, python/src/, bench/, validation/ or harness/ compares a string with
 # "cpu", "cuda" or "bullet" (== or !=, either side). Callers ask EngineInfo instead.
 # Run: cmake -DSRC=<source dir> -P tests/house/engine_names.cmake
 if(NOT SRC)
   message(FATAL_ERROR "engine_names.cmake: pass -DSRC=<the source directory>")
 endif()
 include(${CMAKE_CURRENT_LIST_DIR}/scan_sources.cmake)
-house_scan(_hits _files_seen "[!=]=[ ]*\"(cpu|cuda|bullet)\"|\"(cpu|cuda|bullet)\"[ ]*[!=]=" cli python/src bench validation)
+house_scan(_hits _files_seen "[!=]=[ ]*\"(cpu|cuda|bullet)\"|\"(cpu|cuda|bullet)\"[ ]*[!=]=" cli python/src bench validation harness)
 if(_files_seen EQUAL 0)
   message(FATAL_ERROR "engine_names.cmake: no source found under ${SRC} (cli, python/src, bench, validation)")
 endif()
