@@ -200,7 +200,7 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
     const octocd::ExternalTrace trace(o.trace_in);
     fmt::print("\nrows (judged: the trace carries what the row needs; n/a: what to add to judge it):\n");
     for (const octocd::TraceRowPlan& r : octocd::plan_trace_rows(info, trace.bodies())) {
-      const char* tier = r.tier == octocd::Tier::Physics ? "physics" : "model";
+      const char* tier = octocd::tier_name(r.tier);
       if (r.judged)
         fmt::print("{:<8} {:<24} judged{}\n", tier, r.name,
                    r.partial.empty() ? std::string() : "; partly: add " + r.partial);

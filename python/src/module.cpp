@@ -1164,7 +1164,7 @@ ValidationResult result_from(const py::handle& r) {
   ValidationResult v;
   auto get = [&](const char* k) { return r.attr(k); };
   const std::string tier = py::str(get("tier"));
-  v.tier = tier == "physics" ? Tier::Physics : Tier::Model;
+  v.tier = find_tier(tier).value_or(Tier::Model);
   v.name = py::str(get("name"));
   v.figure = py::str(get("figure"));
   v.measured = get("measured").cast<double>();

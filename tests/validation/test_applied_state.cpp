@@ -6,7 +6,9 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <set>
 #include <string>
+#include <vector>
 
 #include "faults/planted_faults.hpp"
 #include "octocd/error.hpp"
@@ -264,6 +266,31 @@ TEST(AnalyticByContent, StackCatchesSinking) {
   f.eq12_weights = true;
   FaultyWorld world(scene, f);
   EXPECT_FALSE(validate_analytic(world, 1000, Tolerances{}).pass);
+}
+
+// The tolerance table (octocd/tolerances.def) is the struct: every member once, with its
+// default, a unit and a reason.
+TEST(Tolerances, TheTableHasEveryMemberOnceWithItsDefaultUnitAndReason) {
+  const Tolerances defaults;
+  std::set<std::string> names;
+  std::vector<double Tolerances::*> members;
+  for (const ToleranceEntry& e : tolerance_table()) {
+    EXPECT_TRUE(names.insert(e.name).second) << e.name << " twice";
+    for (double Tolerances::*m : members) EXPECT_NE(m, e.member) << e.name << ": a member twice";
+    members.push_back(e.member);
+    EXPECT_EQ(defaults.*(e.member), e.default_value) << e.name;
+    EXPECT_GT(std::string(e.unit).size(), 0u) << e.name;
+    EXPECT_GT(std::string(e.doc).size(), 20u) << e.name;
+  }
+  EXPECT_EQ(tolerance_table().size() * sizeof(double), sizeof(Tolerances));  // no member outside it
+}
+
+// The tiers' names are spelled once (tier_name); readers go back through find_tier.
+TEST(Tolerances, TierNamesReadBackToTheirTier) {
+  ASSERT_EQ(tier_names().size(), 2u);
+  for (const Tier t : {Tier::Physics, Tier::Model}) EXPECT_EQ(find_tier(tier_name(t)), t);
+  EXPECT_EQ(tier_names()[0], "physics");
+  EXPECT_FALSE(find_tier("Physics").has_value());
 }
 
 TEST(Tolerances, OverridesByNameAndRejectsUnknownNames) {

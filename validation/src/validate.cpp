@@ -447,35 +447,9 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
 
 const std::vector<ToleranceEntry>& tolerance_table() {
   static const std::vector<ToleranceEntry> table = {
-      {"contraction_m", &Tolerances::contraction_m, "m"},
-      {"friction_speed", &Tolerances::friction_speed, "m/s"},
-      {"friction_cone_rel", &Tolerances::friction_cone_rel, "relative"},
-      {"friction_cone_abs", &Tolerances::friction_cone_abs, "kg m/s"},
-      {"momentum_rel", &Tolerances::momentum_rel, "relative"},
-      {"centre_rel", &Tolerances::centre_rel, "relative"},
-      {"normal_sign_agreement", &Tolerances::normal_sign_agreement, "share in [0, 1]"},
-      {"freefall_rel_per_step", &Tolerances::freefall_rel_per_step, "relative per step"},
-      {"bounce_rel", &Tolerances::bounce_rel, "relative"},
-      {"slide_rel", &Tolerances::slide_rel, "relative"},
-      {"stack_slops", &Tolerances::stack_slops, "slops"},
-      {"bullet_height_rel", &Tolerances::bullet_height_rel, "share of body height"},
-      {"bullet_rest_speed_rel", &Tolerances::bullet_rest_speed_rel, "share of sqrt(g x body height)"},
-      {"bullet_trajectory_m", &Tolerances::bullet_trajectory_m, "m"},
-      {"applied_state_ulps", &Tolerances::applied_state_ulps, "float32 roundings"},
-      {"applied_conservation_rel", &Tolerances::applied_conservation_rel, "relative"},
-      {"geometry_slack_m", &Tolerances::geometry_slack_m, "m"},
-      {"broadphase_margin_m", &Tolerances::broadphase_margin_m, "m"},
-      {"contact_depth_m", &Tolerances::contact_depth_m, "m"},
-      {"normal_angle_deg", &Tolerances::normal_angle_deg, "degrees"},
-      {"sat_accept_rel", &Tolerances::sat_accept_rel, "relative (of the minimum translation)"},
-      {"depth_m", &Tolerances::depth_m, "m"},
-      {"penetration_slops", &Tolerances::penetration_slops, "slops"},
-      {"penetration_settle_frames", &Tolerances::penetration_settle_frames, "frames"},
-      {"angular_momentum_rel", &Tolerances::angular_momentum_rel, "relative"},
-      {"energy_rel", &Tolerances::energy_rel, "relative"},
-      {"balance_ulps", &Tolerances::balance_ulps, "x 2^-23 of the magnitudes"},
-      {"free_flight_angle_rad", &Tolerances::free_flight_angle_rad, "rad"},
-      {"friction_direction_speed", &Tolerances::friction_direction_speed, "m/s"},
+#define OCTOCD_TOLERANCE(name, value, unit, doc) {#name, &Tolerances::name, unit, doc, value},
+#include "octocd/tolerances.def"
+#undef OCTOCD_TOLERANCE
   };
   return table;
 }
@@ -616,6 +590,25 @@ std::vector<ValidationResult> validate_scene(const Scene& scene, const Validatio
 }
 
 const char* tier_name(Tier tier) { return tier == Tier::Physics ? "physics" : "model"; }
+
+namespace {
+constexpr Tier kTiers[] = {Tier::Physics, Tier::Model};
+}  // namespace
+
+std::optional<Tier> find_tier(const std::string& name) {
+  for (const Tier t : kTiers)
+    if (name == tier_name(t)) return t;
+  return std::nullopt;
+}
+
+const std::vector<std::string>& tier_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v;
+    for (const Tier t : kTiers) v.emplace_back(tier_name(t));
+    return v;
+  }();
+  return names;
+}
 
 void write_validation(const std::string& path, const std::vector<ValidationResult>& results) {
   H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
