@@ -84,6 +84,8 @@ namespace {
 
 using octocd::Aabb;
 using octocd::BroadPhaseConfig;
+using octocd::BroadPhaseId;
+using octocd::broadphase_name;
 using octocd::gpu::check;
 using octocd::gpu::DeviceBroadPhase;
 using octocd::gpu::DeviceBuffer;
@@ -253,7 +255,7 @@ struct Graph {
 /// capacity. The exact tests are n(n-1)/2; find() does not count them.
 class DeviceFlat final : public DeviceBroadPhase {
  public:
-  std::string name() const override { return "flat"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::flat); }
   void reserve(std::uint32_t n, cudaStream_t stream) override {
     const std::size_t n1 = static_cast<std::size_t>(n) + 1;
     count_.ensure(n1);
@@ -283,11 +285,18 @@ class DeviceFlat final : public DeviceBroadPhase {
   DeviceBuffer<unsigned char> temp_{"flat CUB temporary storage"};
 };
 
+/// The device broadphases behind the seam (the rows of octocd/broadphase_table.def with
+/// device `seam`), in the table's order: what `--only` accepts and its default.
+std::vector<std::string> seam_names() {
+  return octocd::broadphase_names_where(
+      [](const octocd::BroadPhaseInfo& b) { return b.device == octocd::BroadPhaseDevice::seam; });
+}
+
 // ---- one measurement --------------------------------------------------------------------------
 
 struct Options {
   std::vector<std::uint32_t> sizes{10000, 100000, 1000000, 4000000};
-  std::vector<std::string> broadphases{"octree", "octree-strict", "spatial-hash", "lbvh"};
+  std::vector<std::string> broadphases = seam_names();
   int reps = 20;
   int warmup = 3;
   float cell_size = 0.24f;
@@ -400,7 +409,7 @@ Result measure(std::unique_ptr<DeviceBroadPhase> bp, const DeviceBuffer<Aabb>& b
   }
   const std::uint32_t pairs = *host.total;
   r.pairs = pairs;
-  r.candidates = r.broadphase == "flat" ? static_cast<std::uint64_t>(n) * (n - 1) / 2 : *host.candidates;
+  r.candidates = r.broadphase == broadphase_name(BroadPhaseId::flat) ? static_cast<std::uint64_t>(n) * (n - 1) / 2 : *host.candidates;
   r.capacity = cap;
   std::size_t temp_bytes = 0;
   if (!self_sorts) {
@@ -605,10 +614,10 @@ std::vector<Target> evaluate_targets(const std::vector<Result>& rs, const Option
   // 2. `octree` at 10^6.
   {
     Target t{"`octree` at 10^6 boxes <= 1.2 ms", "not measured (octree or 10^6 missing)", std::nullopt, {}};
-    if (const Result* r = find_result(rs, "octree", 1000000)) {
+    if (const Result* r = find_result(rs, broadphase_name(BroadPhaseId::octree), 1000000)) {
       t.met = r->median_ms <= kOctreeTargetMs;
       t.value = fmt::format("{:.3f} ms", r->median_ms);
-      t.json = {{"broadphase", "octree"}, {"median_ms", r->median_ms}, {"limit_ms", kOctreeTargetMs}};
+      t.json = {{"broadphase", broadphase_name(BroadPhaseId::octree)}, {"median_ms", r->median_ms}, {"limit_ms", kOctreeTargetMs}};
     }
     t.json["met"] = t.met ? Json(*t.met) : Json(nullptr);
     ts.push_back(t);
@@ -622,8 +631,8 @@ std::vector<Target> evaluate_targets(const std::vector<Result>& rs, const Option
     std::string worst;
     double worst_ratio = 0.0;
     for (std::uint32_t n : o.sizes) {
-      const Result* oct = find_result(rs, "octree", n);
-      const Result* lbvh = find_result(rs, "lbvh", n);
+      const Result* oct = find_result(rs, broadphase_name(BroadPhaseId::octree), n);
+      const Result* lbvh = find_result(rs, broadphase_name(BroadPhaseId::lbvh), n);
       if (!oct || !lbvh) continue;
       const double ratio = oct->median_ms / lbvh->median_ms;
       all_faster = all_faster && ratio < 1.0;
@@ -740,12 +749,12 @@ MotionResult run_motion(std::uint32_t n, float fraction, const Options& o, cudaS
     c[3 * i + 2] = 0.5f * (boxes[i].min.z + boxes[i].max.z);
   }
   BroadPhaseConfig cfg;
-  cfg.name = "octree";
+  cfg.name = broadphase_name(BroadPhaseId::octree);
   cfg.octree_depth = o.depth;
   auto coherent = octocd::gpu::make_device_coherent_octree(cfg, domain, fraction);
   auto oneshot = octocd::gpu::make_device_broadphase(cfg, domain);
   BroadPhaseConfig ocfg;
-  ocfg.name = n <= o.cpu_flat_max ? "flat" : "octree";
+  ocfg.name = broadphase_name(n <= o.cpu_flat_max ? BroadPhaseId::flat : BroadPhaseId::octree);
   ocfg.octree_depth = -1;
   auto cpu = octocd::make_broadphase(ocfg, domain);
   const int shift = octocd::gpu::key_bits(n);
@@ -1123,7 +1132,7 @@ int run(const Options& o) {
     const std::size_t initial_capacity = 2 * static_cast<std::size_t>(n) + 64;  // the engine's first pair_cap
 
     std::vector<std::string> names;
-    if (n <= o.flat_max) names.push_back("flat");
+    if (n <= o.flat_max) names.push_back(broadphase_name(BroadPhaseId::flat));
     names.insert(names.end(), o.broadphases.begin(), o.broadphases.end());
 
     std::vector<Result> here;
@@ -1132,7 +1141,7 @@ int run(const Options& o) {
       Result r;
       try {
         std::unique_ptr<DeviceBroadPhase> bp;
-        if (name == "flat") {
+        if (name == broadphase_name(BroadPhaseId::flat)) {
           bp = std::make_unique<DeviceFlat>();
         } else {
           BroadPhaseConfig cfg;
@@ -1179,7 +1188,7 @@ int run(const Options& o) {
     std::string oracle_name;
     if (n <= o.oracle_max) {
       BroadPhaseConfig cfg;
-      cfg.name = n <= o.cpu_flat_max ? "flat" : "octree";
+      cfg.name = broadphase_name(n <= o.cpu_flat_max ? BroadPhaseId::flat : BroadPhaseId::octree);
       cfg.octree_depth = -1;
       oracle_name = "CPU `" + cfg.name + "`";
       std::cerr << fmt::format("  oracle {} n = {} ...", oracle_name, n) << std::flush;
@@ -1297,7 +1306,7 @@ int main(int argc, char** argv) {
                "bench_gpu_broadphase"};
   app.add_option("--sizes", sizes, "body counts, comma separated (1e5 and 4e6 are accepted)")
       ->capture_default_str();
-  app.add_option("--only", only, "device broadphases: octree, octree-strict, spatial-hash, lbvh")
+  app.add_option("--only", only, "device broadphases: " + octocd::join_broadphase_names(seam_names()))
       ->capture_default_str();
   app.add_option("--reps", o.reps, "timed repetitions per broadphase and size")
       ->capture_default_str()
@@ -1349,11 +1358,11 @@ int main(int argc, char** argv) {
     }
     if (o.broadphases.empty()) throw octocd::InputError("--only: no broadphase given");
     for (const std::string& b : o.broadphases)
-      if (b != "octree" && b != "octree-strict" && b != "spatial-hash" && b != "lbvh")
+      if (const octocd::BroadPhaseInfo* info = octocd::find_broadphase_info(b);
+          !info || info->device != octocd::BroadPhaseDevice::seam)
         throw octocd::InputError(fmt::format(
-            "--only: '{}' is not a device broadphase behind the seam (octree, octree-strict, spatial-hash, lbvh; "
-            "`flat` runs by itself up to --flat-max)",
-            b));
+            "--only: '{}' is not a device broadphase behind the seam ({}; `{}` runs by itself up to --flat-max)", b,
+            octocd::join_broadphase_names(seam_names()), broadphase_name(BroadPhaseId::flat)));
     if (!(o.cell_size > 0.0f) || !std::isfinite(o.cell_size))
       throw octocd::InputError("--cell-size: must be finite and > 0");
     // Before any work: a FIFO, device, folder or link at --json is exit 2.

@@ -267,7 +267,7 @@ int main(int argc, char** argv) {
       row("exact", t);
       if (n <= 25000) {
         octocd::BroadPhaseConfig cfg;
-        cfg.name = "flat";
+        cfg.name = octocd::broadphase_name(octocd::BroadPhaseId::flat);
         auto flat = octocd::make_broadphase(cfg, scene.domain);
         octocd::BroadPhaseStats bs;
         for (int r = 0; r < reps; ++r) {
@@ -277,7 +277,7 @@ int main(int argc, char** argv) {
           tf.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
           cpu.push_back(cpu_seconds() - c0);
         }
-        row("flat", tf);
+        row(cfg.name.c_str(), tf);
       }
     }
   }

@@ -400,7 +400,7 @@ json run_broadphase_point(const Sweep& s, const Point& p, InputCache& cache, con
       const Scene scene = p.bodies > 0 ? parse_scene(lattice_scene(p.bodies), "", o.data_dir)
                                        : load_scene(s.scenes[p.scene], o.data_dir);
       Scene sc = scene;
-      sc.broadphase.name = "octree";
+      sc.broadphase.name = broadphase_name(BroadPhaseId::octree);
       cache.input = std::make_unique<ReplayInput>(replay_input_from_scene(sc, s.warmup, s.frames));
     } catch (const InputError& e) {
       cache.error = e.what();

@@ -560,7 +560,7 @@ std::string lattice_scene(long n) {
          {"dt", 0.001},
          {"frames", 1000},
          {"walls", "closed-box"},
-         {"broadphase", {{"name", "octree"}, {"depth", "auto"}}},
+         {"broadphase", {{"name", broadphase_name(BroadPhaseId::octree)}, {"depth", "auto"}}},
          {"midphase", {{"levels", "aabb-only"}}},
          {"groups",
           {{{"name", "boxes"},

@@ -36,12 +36,16 @@ TEST_PACKAGES=(
   libdart-dev
   # the single-node Slurm of the cluster test (scripts/slurm; docs/cluster.md)
   slurm-wlm munge
+  # the process engines Rapier and Jolt (reference/rapier, reference/jolt; docs/engines.md):
+  # Node.js runs them; their npm packages are pinned in reference/package-lock.json
+  nodejs
 )
 LIST=0
+TESTS=0
 for arg in "$@"; do
   case "$arg" in
     --list) LIST=1 ;;
-    --tests) PACKAGES+=("${TEST_PACKAGES[@]}") ;;
+    --tests) PACKAGES+=("${TEST_PACKAGES[@]}"); TESTS=1 ;;
     *) echo "install-deps: unknown argument '$arg'; allowed: --tests, --list" >&2; exit 2 ;;
   esac
 done
@@ -58,4 +62,15 @@ if [ "${#missing[@]}" -gt 0 ]; then
   $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
 else
   echo "install-deps: all packages present"
+fi
+# The process engines' npm packages (reference/package-lock.json, into reference/node_modules),
+# installed here and never at run time: skipped while both engines' --check passes.
+if [ "$TESTS" = 1 ]; then
+  ref="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/reference"
+  if node "$ref/rapier/rapier_engine.js" --check >/dev/null 2>&1 && node "$ref/jolt/jolt_engine.js" --check >/dev/null 2>&1; then
+    echo "install-deps: reference/node_modules present"
+  else
+    echo "install-deps: npm ci --prefix reference"
+    npm ci --prefix "$ref" --no-audit --no-fund
+  fi
 fi

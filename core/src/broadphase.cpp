@@ -1,7 +1,8 @@
 /// \file broadphase.cpp
-/// Broadphase factory, `auto` octree depths, the shared pair sort and the `flat` oracle
-/// (design.md section 5.1). `octree` (loose) is in broadphase_octree_cache.cpp, `octree-strict` in
-/// broadphase_octree_strict.cpp, `spatial-hash` in broadphase_spatial_hash.cpp.
+/// Broadphase factory (the core rows of octocd/broadphase_table.def), `auto` octree depths,
+/// the shared pair sort and the `flat` oracle (design.md section 5.1). `octree` (loose) is in
+/// broadphase_octree_cache.cpp, `octree-strict` in broadphase_octree_strict.cpp,
+/// `spatial-hash` in broadphase_spatial_hash.cpp.
 
 #include "octocd/broadphase.hpp"
 
@@ -49,7 +50,7 @@ namespace {
 /// (a, b) order directly.
 class FlatBroadPhase final : public BroadPhase {
  public:
-  std::string name() const override { return "flat"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::flat); }
 
   void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
                   BroadPhaseStats& stats) override {
@@ -69,13 +70,36 @@ class FlatBroadPhase final : public BroadPhase {
   }
 };
 
+/// A CPU factory of a row of octocd/broadphase_table.def.
+using HostFactory = std::unique_ptr<BroadPhase> (*)(const BroadPhaseConfig&, const Aabb&);
+
+/// The core factory of every row, in the table's order (nullptr where another library or
+/// no CPU builds it).
+#define OCTOCD_CORE_FACTORY_core(ID) &detail::make_host_##ID
+#define OCTOCD_CORE_FACTORY_bullet(ID) nullptr
+#define OCTOCD_CORE_FACTORY_fcl(ID) nullptr
+#define OCTOCD_CORE_FACTORY_none(ID) nullptr
+constexpr HostFactory kCoreFactories[] = {
+#define OCTOCD_BROADPHASE(ID, NAME, HOST, DEVICE, PAIRS, COST, SUMMARY) OCTOCD_CORE_FACTORY_##HOST(ID),
+#include "octocd/broadphase_table.def"
+#undef OCTOCD_BROADPHASE
+};
+
 }  // namespace
 
-std::vector<std::string> broadphase_names() {
-  return {"flat", "octree", "octree-strict", "spatial-hash"};
+namespace detail {
+
+std::unique_ptr<BroadPhase> make_host_flat(const BroadPhaseConfig&, const Aabb&) {
+  return std::make_unique<FlatBroadPhase>();
 }
 
-std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, const Aabb& domain) {
+}  // namespace detail
+
+std::vector<std::string> broadphase_names() {
+  return broadphase_names_where([](const BroadPhaseInfo& b) { return b.host == BroadPhaseHost::core; });
+}
+
+void check_broadphase_parameters(const BroadPhaseConfig& config) {
   if (config.octree_depth < -1 || config.octree_depth > 10) {
     std::ostringstream msg;
     msg << "broadphase.depth: " << config.octree_depth
@@ -88,16 +112,15 @@ std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, cons
         << " is out of range (expected a finite number > 0, in m)";
     throw InputError(msg.str());
   }
-  if (config.name == "flat") return std::make_unique<FlatBroadPhase>();
-  if (config.name == "octree") return detail::make_octree_broadphase(config.octree_depth, domain);
-  if (config.name == "octree-strict") {
-    return detail::make_strict_octree_broadphase(config.octree_depth, domain);
+}
+
+std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, const Aabb& domain) {
+  check_broadphase_parameters(config);
+  if (const BroadPhaseInfo* info = find_broadphase_info(config.name)) {
+    if (const HostFactory make = kCoreFactories[static_cast<std::size_t>(info->id)]) return make(config, domain);
   }
-  if (config.name == "spatial-hash") return detail::make_spatial_hash_broadphase(config.cell_size);
-  std::string names;
-  for (const std::string& s : broadphase_names()) names += (names.empty() ? "" : ", ") + s;
   throw InputError("broadphase.name: unknown broadphase '" + config.name +
-                   "'; allowed: " + names);
+                   "'; allowed: " + join_broadphase_names(broadphase_names()));
 }
 
 int auto_octree_depth(const std::vector<Aabb>& boxes, const Aabb& domain) {

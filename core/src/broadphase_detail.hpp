@@ -9,13 +9,23 @@
 
 namespace octocd::detail {
 
-/// `octree`, the loose octree broadphase (broadphase_octree_cache.cpp); depth -1 = auto.
-std::unique_ptr<BroadPhase> make_octree_broadphase(int depth, const Aabb& domain);
-/// `octree-strict`, the paper's octree read literally (broadphase_octree_strict.cpp);
-/// depth -1 = auto.
-std::unique_ptr<BroadPhase> make_strict_octree_broadphase(int depth, const Aabb& domain);
-/// The uniform-grid spatial hash (broadphase_spatial_hash.cpp); cell size in m.
-std::unique_ptr<BroadPhase> make_spatial_hash_broadphase(float cell_size);
+/// The CPU factory of every row of octocd/broadphase_table.def with host `core`:
+/// make_host_ID(config, domain), defined beside its broadphase (make_host_flat in
+/// broadphase.cpp, make_host_octree in broadphase_octree_cache.cpp, make_host_octree_strict
+/// in broadphase_octree_strict.cpp, make_host_spatial_hash in broadphase_spatial_hash.cpp).
+/// `config`'s parameters are checked (make_broadphase) before it is called.
+#define OCTOCD_HOST_FACTORY_core(ID) \
+  std::unique_ptr<BroadPhase> make_host_##ID(const BroadPhaseConfig& config, const Aabb& domain);
+#define OCTOCD_HOST_FACTORY_bullet(ID)
+#define OCTOCD_HOST_FACTORY_fcl(ID)
+#define OCTOCD_HOST_FACTORY_none(ID)
+#define OCTOCD_BROADPHASE(ID, NAME, HOST, DEVICE, PAIRS, COST, SUMMARY) OCTOCD_HOST_FACTORY_##HOST(ID)
+#include "octocd/broadphase_table.def"
+#undef OCTOCD_BROADPHASE
+#undef OCTOCD_HOST_FACTORY_core
+#undef OCTOCD_HOST_FACTORY_bullet
+#undef OCTOCD_HOST_FACTORY_fcl
+#undef OCTOCD_HOST_FACTORY_none
 
 /// Sorts `pairs` (each with a < b < n, no duplicates required) ascending by (a, b) with a
 /// two-pass stable counting sort (O(n + pairs)); `tmp` and `count` are scratch buffers

@@ -100,7 +100,7 @@ class LooseOctreeBroadPhase final : public BroadPhase {
  public:
   LooseOctreeBroadPhase(int depth, const Aabb& domain) : tree_(depth, domain) {}
 
-  std::string name() const override { return "octree"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::octree); }
 
   void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
                   BroadPhaseStats& stats) override {
@@ -353,8 +353,8 @@ class LooseOctreeBroadPhase final : public BroadPhase {
 
 namespace detail {
 
-std::unique_ptr<BroadPhase> make_octree_broadphase(int depth, const Aabb& domain) {
-  return std::make_unique<LooseOctreeBroadPhase>(depth, domain);
+std::unique_ptr<BroadPhase> make_host_octree(const BroadPhaseConfig& config, const Aabb& domain) {
+  return std::make_unique<LooseOctreeBroadPhase>(config.octree_depth, domain);
 }
 
 }  // namespace detail

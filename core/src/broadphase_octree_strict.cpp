@@ -97,7 +97,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
  public:
   StrictOctreeBroadPhase(int depth, const Aabb& domain) : depth_cfg_(depth), domain_(domain) {}
 
-  std::string name() const override { return "octree-strict"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::octree_strict); }
 
   void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
                   BroadPhaseStats& stats) override {
@@ -336,8 +336,8 @@ class StrictOctreeBroadPhase final : public BroadPhase {
 
 namespace detail {
 
-std::unique_ptr<BroadPhase> make_strict_octree_broadphase(int depth, const Aabb& domain) {
-  return std::make_unique<StrictOctreeBroadPhase>(depth, domain);
+std::unique_ptr<BroadPhase> make_host_octree_strict(const BroadPhaseConfig& config, const Aabb& domain) {
+  return std::make_unique<StrictOctreeBroadPhase>(config.octree_depth, domain);
 }
 
 }  // namespace detail

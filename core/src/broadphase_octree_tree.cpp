@@ -367,8 +367,8 @@ class Tree {
         const std::size_t size = side * side * side + side * side + side + 8;
         dense_[static_cast<std::size_t>(l)].assign(size, 0u);
         // A word per row (side^2 rows); the 3 x 3 x 3 block from the last row reads up to
-        // two planes and two rows past it: side^2 + 2 side + 2 words (one plane was
-        // reserved before issue 10: AddressSanitizer caught the read past the end).
+        // two planes and two rows past it: side^2 + 2 side + 2 words (one plane is too
+        // few: AddressSanitizer catches the read past its end).
         bits_[static_cast<std::size_t>(l)].assign(side * side + 2 * side + 4, 0u);
       }
     }

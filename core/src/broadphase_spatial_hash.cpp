@@ -10,9 +10,9 @@
 /// touches at most kMaxCells cells, cells [floor(min/h_k), floor(max/h_k)] per axis (a
 /// monotone mapping, so touching boxes share a cell), within +-2^19 cells; it is entered
 /// in every cell it touches there. With the paper's h (bodies about h in size) every body
-/// sits at level 0 and this is the plain spatial hash. Before the levels (issue 10), a
-/// body over 4096 cells was tested against every body: a small h made every body
-/// oversize and the broadphase O(n^2) (220 ms/frame on boxes-random-10000).
+/// sits at level 0 and this is the plain spatial hash. The levels keep a small h from
+/// making every body oversize (tested against every body) and the broadphase O(n^2)
+/// (220 ms/frame on boxes-random-10000 with a single level).
 /// Only a body with an infinite coordinate, or beyond every level's range, goes to an
 /// "oversize" list tested against every body. Bodies with a NaN coordinate never overlap
 /// anything (Eq. 6) and are left out.
@@ -51,7 +51,7 @@ class SpatialHashBroadPhase final : public BroadPhase {
  public:
   explicit SpatialHashBroadPhase(float cell_size) : h_(cell_size) {}
 
-  std::string name() const override { return "spatial-hash"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::spatial_hash); }
 
   void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
                   BroadPhaseStats& stats) override {
@@ -220,8 +220,8 @@ class SpatialHashBroadPhase final : public BroadPhase {
 
 namespace detail {
 
-std::unique_ptr<BroadPhase> make_spatial_hash_broadphase(float cell_size) {
-  return std::make_unique<SpatialHashBroadPhase>(cell_size);
+std::unique_ptr<BroadPhase> make_host_spatial_hash(const BroadPhaseConfig& config, const Aabb&) {
+  return std::make_unique<SpatialHashBroadPhase>(config.cell_size);
 }
 
 }  // namespace detail

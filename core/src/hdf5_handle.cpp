@@ -360,9 +360,9 @@ void Hdf5Reader::open_chunked(Dataset& d, hid_t dcpl) const {
   // A chunk a row (octocd's traces): a row read inflates its own chunks only.
   if (d.chunk_rows == 1) return;
   // Chunks of several rows: one open dataset per reader, its cache holding one band, so
-  // rows read in order inflate each chunk once however small the reads (before: every row
-  // read of a dataset whose chunks exceed HDF5's default 1 MiB cache, or reopened per
-  // read, inflated them again). Its shape is then the one seen first (no SWMR refresh).
+  // rows read in order inflate each chunk once however small the reads (otherwise every
+  // row read of a dataset whose chunks exceed HDF5's default 1 MiB cache, or reopened per
+  // read, inflates them again). Its shape is then the one seen first (no SWMR refresh).
   auto found = chunked_.find(d.name);
   if (found == chunked_.end()) {
     Hdf5Handle dapl(H5Pcreate(H5P_DATASET_ACCESS));

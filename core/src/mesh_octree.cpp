@@ -116,8 +116,10 @@ MeshOctree build_mesh_octree(const Mesh& mesh, int depth) {
   // prefix property of cell_coord), stable on ties, so the vertices of a leaf cell follow
   // one another in Morton order too: a block of kVertexBlock consecutive vertices
   // (vertex_blocks.hpp) is then a compact patch whose box the leaves' filters can skip
-  // (asian-dragon's mean block diagonal 0.12 -> 0.036 of the mesh's). A cell's vertex set,
-  // and so every answer of the midphase, is the same either way.
+  // (asian-dragon's mean block diagonal is 0.036 of the mesh's, 0.12 with a leaf cell's
+  // vertices in the file's order: reports/h100/README.md, "Experiments and A/B results",
+  // "Midphase"). A cell's vertex set, and so every answer of the midphase, is the same
+  // either way.
   std::vector<std::uint32_t> fine(n);
   std::vector<std::uint32_t> code(n);
   const int shift = 3 * (kMaxDepth - depth);

@@ -100,7 +100,7 @@ EngineInfo bullet_info() {
   bullet.name = "bullet";
   bullet.description = "the same scene in Bullet's btDiscreteDynamicsWorld";
   bullet.rotates = true;
-  bullet.own_broadphase = "bullet-dbvt";
+  bullet.own_broadphase = broadphase_name(BroadPhaseId::bullet_dbvt);
   bullet.own_broadphase_class = "btDbvtBroadphase";
   bullet.geometries = {"hull", "box"};
   bullet.geometry_setting = "shape";
@@ -308,11 +308,7 @@ ArgumentNames python_argument_names() {
   return n;
 }
 
-std::vector<std::string> any_engine_broadphase_names() {
-  std::vector<std::string> names = all_broadphase_names();
-  for (const std::string& n : cuda_only_broadphase_names()) names.push_back(n);
-  return names;
-}
+std::vector<std::string> any_engine_broadphase_names() { return every_broadphase_name(); }
 
 void apply_engine_options(Scene& scene, const EngineInfo& info, const EngineOptions& o, const ArgumentNames& names) {
   const std::string choose_this = fmt::format(fmt::runtime(names.choose), info.name);

@@ -94,16 +94,14 @@ __device__ inline void append_key(const PairOutput& out, unsigned long long key)
 /// Pairs a thread keeps in PairBuffer before it appends the rest one by one.
 constexpr int kPairBufferKeys = 8;
 
-/// A thread's pair keys, appended by its whole warp at once (one-thread-per-item queries:
-/// `octree`, `lbvh`). append_key from inside a thread's own traversal aggregates only the
-/// few lanes that meet a pair at the same moment, so at 10^6 bodies it was about one atomic
-/// on the one *out.total per pair, which bounded both queries (reports/h100/perf-v7). A
-/// thread keeps its first kPairBufferKeys keys here (the bench's boxes have 0.86 pairs per
-/// body) and appends those after with append_key; flush() then gives the warp's kept keys
-/// consecutive indices with one atomicAdd (octree 0.52 against 0.84 ms, lbvh 0.84 against
-/// 0.94 ms at 10^6 bench boxes on an H100, appending every key at once). The set of keys in
-/// out.keys[0 .. min(total, capacity)) is that of appending each key at once; their order
-/// varies.
+/// A thread's pair keys, appended by its whole warp at once (one-thread-per-item queries: `octree`,
+/// `lbvh`). append_key from inside a thread's own traversal aggregates only the few lanes that meet
+/// a pair at the same moment, so at 10^6 bodies it is about one atomic on the one *out.total per
+/// pair, which bounds both queries. A thread keeps its first kPairBufferKeys keys here (the bench's
+/// boxes have 0.86 pairs per body) and appends those after with append_key; flush() then gives the
+/// warp's kept keys consecutive indices with one atomicAdd (reports/h100/README.md, "Experiments
+/// and A/B results", "Broadphases"). The set of keys in out.keys[0 .. min(total, capacity)) is that
+/// of appending each key at once; their order varies.
 struct PairBuffer {
   unsigned long long key[kPairBufferKeys];
   int count = 0;
@@ -157,7 +155,7 @@ inline void launched(cudaError_t e, const char* kernel) {
 
 /// Throws RuntimeError (a programming error of the caller) when find() gets a body count
 /// that reserve() did not size the scratch for.
-inline void check_reserved(bool reserved, std::uint32_t reserved_n, std::uint32_t n, const char* name) {
+inline void check_reserved(bool reserved, std::uint32_t reserved_n, std::uint32_t n, const std::string& name) {
   if (!reserved || reserved_n != n)
     throw RuntimeError(fmt::format("device broadphase '{}': find() with {} bodies but reserve() sized it for {}; "
                                    "call reserve(n) first (outside graph capture)",

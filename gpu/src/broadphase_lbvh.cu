@@ -130,12 +130,12 @@ class LbvhDevice final : public DeviceBroadPhase {
  public:
   explicit LbvhDevice(const Aabb& domain) : grid_(loose_grid(domain)) {}
 
-  std::string name() const override { return "lbvh"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::lbvh); }
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
     (void)stream;
     if (n > 0x7fffffffu)
-      throw RuntimeError(fmt::format("device broadphase 'lbvh': {} bodies; it takes at most 2^31 - 1", n));
+      throw RuntimeError(fmt::format("device broadphase '{}': {} bodies; it takes at most 2^31 - 1", name(), n));
     // n - 1 internal nodes; n entries keep every buffer (and the host estimate,
     // device_footprint.cpp) linear in n.
     const std::size_t inner = n;
@@ -159,7 +159,7 @@ class LbvhDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(reserved_, n_, n, "lbvh");
+    bp::check_reserved(reserved_, n_, n, broadphase_name(BroadPhaseId::lbvh));
     check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
     if (n < 2) return;  // no pair, no exact test
     LbvhDesc d;
@@ -221,6 +221,10 @@ class LbvhDevice final : public DeviceBroadPhase {
 }  // namespace
 
 std::unique_ptr<DeviceBroadPhase> make_device_lbvh(const Aabb& domain) { return std::make_unique<LbvhDevice>(domain); }
+
+std::unique_ptr<DeviceBroadPhase> make_device_broadphase_lbvh(const BroadPhaseConfig&, const Aabb& domain, DeviceUse) {
+  return make_device_lbvh(domain);  // no parameter
+}
 
 }  // namespace gpu
 }  // namespace octocd

@@ -225,7 +225,7 @@ class CoherentOctreeDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(n_ != kNotReserved, n_, n, "octree");
+    bp::check_reserved(n_ != kNotReserved, n_, n, broadphase_name(BroadPhaseId::octree));
     const CoherentPlan p = current_plan();
     if (p == CoherentPlan::Plain) {
       octree_->find(aabb, n, out, stream);
@@ -321,6 +321,14 @@ std::unique_ptr<DeviceBroadPhase> make_device_coherent_octree(const BroadPhaseCo
                                  margin_fraction));
   (void)make_broadphase(config, domain);  // the parameter checks of make_broadphase (InputError)
   return std::make_unique<CoherentOctreeDevice>(make_device_loose_octree(config, domain), margin_fraction);
+}
+
+std::unique_ptr<DeviceBroadPhase> make_device_broadphase_octree(const BroadPhaseConfig& config, const Aabb& domain,
+                                                                DeviceUse use) {
+  // The engine's steps keep the pair cache; one-shot calls run the loose octree alone.
+  if (use == DeviceUse::Steps) return make_device_coherent_octree(config, domain);
+  check_broadphase_parameters(config);
+  return make_device_loose_octree(config, domain);
 }
 
 }  // namespace gpu

@@ -139,7 +139,7 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
     end_bit_ = bits + 1;
   }
 
-  std::string name() const override { return "octree-strict"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::octree_strict); }
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
     const std::size_t n1 = static_cast<std::size_t>(n) + 1;
@@ -180,7 +180,7 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(reserved_, reserved_n_, n, "octree-strict");
+    bp::check_reserved(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::octree_strict));
     if (n == 0) {
       check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
       return;
@@ -271,12 +271,13 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
 }  // namespace
 
 std::unique_ptr<DeviceBroadPhase> make_device_strict_octree(const BroadPhaseConfig& config, const Aabb& domain) {
-  // The parameters are checked exactly as make_broadphase checks them (same errors):
-  // building the CPU's parameter-free `flat` runs those checks and nothing else.
-  BroadPhaseConfig checked = config;
-  checked.name = "flat";
-  (void)make_broadphase(checked, domain);
+  check_broadphase_parameters(config);  // the checks of make_broadphase (same errors)
   return std::make_unique<StrictOctreeDevice>(config.octree_depth, domain);
+}
+
+std::unique_ptr<DeviceBroadPhase> make_device_broadphase_octree_strict(const BroadPhaseConfig& config,
+                                                                       const Aabb& domain, DeviceUse) {
+  return make_device_strict_octree(config, domain);
 }
 
 }  // namespace gpu

@@ -82,9 +82,8 @@ namespace {
 
 
 /// Below this many bodies the query runs one warp per slot, from it one thread per slot
-/// (bench_gpu_broadphase on the H100 with the occupancy map and the warp's pair append,
-/// reports/h100/perf-v7/r3: warp / thread 0.128 / 0.146 ms at 10^4, 0.156 / 0.160 at
-/// 3x10^4, 0.202 / 0.167 at 6x10^4, 0.249 / 0.171 at 10^5).
+/// (where the thread query overtakes the warp's in bench_gpu_broadphase on the H100:
+/// reports/h100/README.md, "Experiments and A/B results", "Broadphases").
 constexpr std::uint32_t kWarpQueryBodies = 32768;
 
 /// A body's unit box in the fixed point of loose_q_min / loose_q_max.
@@ -693,7 +692,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     while (nan_key() >> key_bits_ != 0) ++key_bits_;  // bits of the NaN key
   }
 
-  std::string name() const override { return "octree"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::octree); }
   bool sorts_pairs() const override { return true; }
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
@@ -727,7 +726,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(n_ != kNotReserved, n_, n, "octree");
+    bp::check_reserved(n_ != kNotReserved, n_, n, broadphase_name(BroadPhaseId::octree));
     check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
     if (n == 0) return;
     if (out.scratch) {
@@ -870,19 +869,6 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
 std::unique_ptr<DeviceBroadPhase> make_device_loose_octree(const BroadPhaseConfig& config, const Aabb& domain,
                                                            LooseOctreeQuery query) {
   return std::make_unique<LooseOctreeDevice>(config.octree_depth, domain, query);
-}
-
-std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain) {
-  if (config.name == "lbvh") return make_device_lbvh(domain);  // device only, no parameter
-  // The parameter checks of make_broadphase (throws InputError naming the field).
-  (void)make_broadphase(config, domain);
-  if (config.name == "octree") return make_device_loose_octree(config, domain);
-  if (config.name == "octree-strict") return make_device_strict_octree(config, domain);
-  if (config.name == "spatial-hash") return make_device_spatial_hash(config);
-  std::string names;
-  for (const std::string& nm : cuda_broadphase_names()) names += (names.empty() ? "" : ", ") + nm;
-  throw InputError(
-      fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: {}", config.name, names));
 }
 
 }  // namespace gpu

@@ -197,16 +197,16 @@ class SpatialHashDevice final : public DeviceBroadPhase {
  public:
   explicit SpatialHashDevice(float cell_size) : inv_h_(hash_inv_cell_size(cell_size)) {}
 
-  std::string name() const override { return "spatial-hash"; }
+  std::string name() const override { return broadphase_name(BroadPhaseId::spatial_hash); }
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
     const std::size_t entries = static_cast<std::size_t>(kEntriesPerBody) * n;
     const std::size_t counts = entries + n + 1;
     // 32-bit offsets: the counts (E + n + 1) and the large bodies' cells (<= kMaxCells n).
     if (counts > 0xffffffffu || static_cast<std::uint64_t>(kMaxCells) * n > 0xffffffffu)
-      throw RuntimeError(fmt::format("device broadphase 'spatial-hash': {} bodies are more than its 32-bit "
+      throw RuntimeError(fmt::format("device broadphase '{}': {} bodies are more than its 32-bit "
                                      "entry offsets hold (at most {})",
-                                     n, 0xffffffffu / static_cast<std::uint32_t>(kMaxCells)));
+                                     name(), n, 0xffffffffu / static_cast<std::uint32_t>(kMaxCells)));
     const std::size_t n1 = static_cast<std::size_t>(n) + 1;
     kind_.ensure(n);
     cell0_.ensure(3 * static_cast<std::size_t>(n));
@@ -239,7 +239,7 @@ class SpatialHashDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(reserved_, reserved_n_, n, "spatial-hash");
+    bp::check_reserved(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::spatial_hash));
     if (n == 0) {
       check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
       return;
@@ -331,12 +331,13 @@ class SpatialHashDevice final : public DeviceBroadPhase {
 }  // namespace
 
 std::unique_ptr<DeviceBroadPhase> make_device_spatial_hash(const BroadPhaseConfig& config) {
-  // The parameters are checked exactly as make_broadphase checks them (same errors):
-  // building the CPU's parameter-free `flat` runs those checks and nothing else.
-  BroadPhaseConfig checked = config;
-  checked.name = "flat";
-  (void)make_broadphase(checked, Aabb{});
+  check_broadphase_parameters(config);  // the checks of make_broadphase (same errors)
   return std::make_unique<SpatialHashDevice>(config.cell_size);
+}
+
+std::unique_ptr<DeviceBroadPhase> make_device_broadphase_spatial_hash(const BroadPhaseConfig& config, const Aabb&,
+                                                                      DeviceUse) {
+  return make_device_spatial_hash(config);
 }
 
 }  // namespace gpu

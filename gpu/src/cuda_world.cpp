@@ -95,12 +95,12 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   // broadphase the device does not have, before anything is sized from the body count.
   const std::uint64_t needed = cuda_device_bytes_needed(*model_, broadphase);
   std::unique_ptr<gpu::DeviceBroadPhase> bp;
-  if (broadphase != "flat") {  // checked before the device: an unknown name is an input error anywhere
+  // Made before the device is asked for: a parameter out of range is an input error
+  // anywhere. A row whose device is `step` (flat) runs in the step itself, with no bp.
+  if (find_broadphase_info(broadphase)->device == BroadPhaseDevice::seam) {  // known: checked above
     BroadPhaseConfig cfg = model_->scene.broadphase;
     cfg.name = broadphase;
-    // `octree` keeps a pair cache across steps (broadphase_octree_cache.cu).
-    bp = broadphase == "octree" ? gpu::make_device_coherent_octree(cfg, model_->scene.domain)
-                                : gpu::make_device_broadphase(cfg, model_->scene.domain);
+    bp = gpu::make_device_broadphase(cfg, model_->scene.domain, gpu::DeviceUse::Steps);
   }
   check_cuda_settings(settings, "cuda settings");  // input wherever it is read, device or not
   if (hooks.resident_idle_us < 0) throw InputError("CudaWorld::TestHooks: resident_idle_us < 0");

@@ -1,9 +1,10 @@
 #pragma once
 /// \file device_broadphase.hpp
 /// The seam between the CUDA engine's step (cuda_world.cpp) and its device broadphases
-/// (design.md section 5.1 on the GPU): `octree` (loose), `octree-strict`, `spatial-hash`, and `lbvh`
-/// (a Karras 2012 linear BVH: the field's standard GPU baseline, on the device only);
-/// `flat` stays inside cuda_world.cpp as the device oracle.
+/// (design.md section 5.1 on the GPU): the rows of octocd/broadphase_table.def with device
+/// `seam`: `octree` (loose), `octree-strict`, `spatial-hash`, and `lbvh` (a Karras 2012
+/// linear BVH: the field's standard GPU baseline, on the device only); `flat` (device
+/// `step`) stays inside cuda_world.cpp as the device oracle.
 ///
 /// Contract of DeviceBroadPhase::find:
 /// - input: n world AABBs on the device (m), the same array the CPU broadphase gets;
@@ -98,11 +99,37 @@ class DeviceBroadPhase {
   virtual Settled settle() { return Settled::Valid; }
 };
 
-/// The device broadphase named config.name over the scene's `domain` (m): `octree`,
-/// `octree-strict` or `spatial-hash`, with the parameters of BroadPhaseConfig (checked as
-/// make_broadphase checks them), or `lbvh` (no parameter). Throws InputError for any other
-/// name, naming `broadphase.name` and the names the device has (cuda_broadphase_names).
-std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain);
+/// What a device broadphase is made for.
+enum class DeviceUse {
+  OneShot,  ///< each find() on boxes of their own (benchmarks, tests)
+  Steps     ///< the engine's steps, one find() a step: it may keep state across them (`octree`'s pair cache)
+};
+
+/// The device factory of every row of octocd/broadphase_table.def with device `seam`:
+/// make_device_broadphase_ID(config, domain, use), defined beside its broadphase
+/// (broadphase_octree_cache.cu, broadphase_octree_strict.cu, broadphase_spatial_hash.cu,
+/// broadphase_lbvh.cu). Each checks the parameters it reads as make_broadphase checks
+/// them (InputError naming the field).
+#define OCTOCD_DEVICE_FACTORY_none(ID)
+#define OCTOCD_DEVICE_FACTORY_step(ID)
+#define OCTOCD_DEVICE_FACTORY_seam(ID)                                                                 \
+  std::unique_ptr<DeviceBroadPhase> make_device_broadphase_##ID(const BroadPhaseConfig& config, const Aabb& domain, \
+                                                                DeviceUse use);
+#define OCTOCD_BROADPHASE(ID, NAME, HOST, DEVICE, PAIRS, COST, SUMMARY) OCTOCD_DEVICE_FACTORY_##DEVICE(ID)
+#include "octocd/broadphase_table.def"
+#undef OCTOCD_BROADPHASE
+#undef OCTOCD_DEVICE_FACTORY_none
+#undef OCTOCD_DEVICE_FACTORY_step
+#undef OCTOCD_DEVICE_FACTORY_seam
+
+/// The device broadphase named config.name over the scene's `domain` (m), made for `use`:
+/// the factory of its row (device `seam`): `octree`, `octree-strict` or `spatial-hash`,
+/// with the parameters of BroadPhaseConfig (checked as make_broadphase checks them), or
+/// `lbvh` (no parameter). Throws InputError for any other name, naming
+/// `broadphase.name` and the names the device has (cuda_broadphase_names).
+/// device_broadphase.cu.
+std::unique_ptr<DeviceBroadPhase> make_device_broadphase(const BroadPhaseConfig& config, const Aabb& domain,
+                                                         DeviceUse use = DeviceUse::OneShot);
 
 /// Which query kernel the device `octree` runs: Auto (a warp per body below 32768 bodies,
 /// a thread per body from there), or one of them forced (its tests run both on small box

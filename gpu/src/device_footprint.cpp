@@ -5,6 +5,7 @@
 // device_footprint.hpp. Plain C++: compiled in builds with and without CUDA, and needs no
 // device.
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -12,6 +13,7 @@
 #include <fmt/format.h>
 
 #include "device_footprint.hpp"
+#include "octocd/broadphase_registry.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
 #include "octocd/vertex_blocks.hpp"
@@ -37,57 +39,87 @@ struct ShapeCounts {
   std::uint64_t theta = 0;
 };
 
-/// The device broadphase's reserve(n) buffers (0 for `flat`, which has none).
-std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
+/// The device broadphase's reserve(n) buffers of each row of octocd/broadphase_table.def
+/// whose device is `step` or `seam`: device_bytes_ID(n, cfg).
+
+/// `flat` runs in the engine's step: no buffers of its own.
+std::uint64_t device_bytes_flat(std::uint64_t, const BroadPhaseConfig&) { return 0; }
+
+/// LooseOctreeDevice::reserve (broadphase_octree_tree.cu) and its pair cache.
+std::uint64_t device_bytes_octree(std::uint64_t n, const BroadPhaseConfig&) {
   const std::uint64_t n1 = n + 1;
-  if (cfg.name == "flat") return 0;
-  if (cfg.name == "octree") {  // LooseOctreeDevice::reserve (broadphase_octree_tree.cu)
-    const std::uint64_t temp = std::max({cub_sort_temp_bound(n, 4, 4), cub_scan_temp_bound(n1), std::uint64_t{1}});
-    const std::uint64_t table = loose_cell_table_entries(n);
-    // The pair cache (CoherentOctreeDevice::reserve, broadphase_octree_cache.cu): its status,
-    // the fattened boxes, the cache, its scratch, the filter's selection and flags (first
-    // capacity: initial_pair_capacity), the filter's CUB storage (a scan's bound).
-    const std::uint64_t cap = initial_pair_capacity(n);
-    const std::uint64_t cache = buf(1, 16) + buf(n, sizeof(Aabb)) + 3 * buf(cap, sizeof(std::uint64_t)) +
-                                buf(cap, 1) + buf(cub_scan_temp_bound(cap), 1);
-    // + the sorted mode's pair counts and segments (n + 1 each), long-segment list and its
-    // two counts.
-    return cache + buf(1, sizeof(float)) + 4 * buf(n, sizeof(std::uint32_t)) + 2 * buf(n1, sizeof(std::uint32_t)) +
-           buf(n, sizeof(std::uint32_t)) + buf(2, sizeof(std::uint32_t)) +
-           buf(n, sizeof(Aabb)) + buf(kLooseLevelTable, sizeof(std::uint32_t)) +
-           buf(table, sizeof(std::uint64_t)) + buf(loose_occupancy_blocks(n) / 4, sizeof(std::uint32_t)) +
-           buf(temp, 1);
+  const std::uint64_t temp = std::max({cub_sort_temp_bound(n, 4, 4), cub_scan_temp_bound(n1), std::uint64_t{1}});
+  const std::uint64_t table = loose_cell_table_entries(n);
+  // The pair cache (CoherentOctreeDevice::reserve, broadphase_octree_cache.cu): its status,
+  // the fattened boxes, the cache, its scratch, the filter's selection and flags (first
+  // capacity: initial_pair_capacity), the filter's CUB storage (a scan's bound).
+  const std::uint64_t cap = initial_pair_capacity(n);
+  const std::uint64_t cache = buf(1, 16) + buf(n, sizeof(Aabb)) + 3 * buf(cap, sizeof(std::uint64_t)) +
+                              buf(cap, 1) + buf(cub_scan_temp_bound(cap), 1);
+  // + the sorted mode's pair counts and segments (n + 1 each), long-segment list and its
+  // two counts.
+  return cache + buf(1, sizeof(float)) + 4 * buf(n, sizeof(std::uint32_t)) + 2 * buf(n1, sizeof(std::uint32_t)) +
+         buf(n, sizeof(std::uint32_t)) + buf(2, sizeof(std::uint32_t)) +
+         buf(n, sizeof(Aabb)) + buf(kLooseLevelTable, sizeof(std::uint32_t)) +
+         buf(table, sizeof(std::uint64_t)) + buf(loose_occupancy_blocks(n) / 4, sizeof(std::uint32_t)) +
+         buf(temp, 1);
+}
+
+/// StrictOctreeDevice::reserve (broadphase_octree_strict.cu).
+std::uint64_t device_bytes_octree_strict(std::uint64_t n, const BroadPhaseConfig& cfg) {
+  const std::uint64_t n1 = n + 1;
+  const bool auto_depth = cfg.octree_depth < 0;
+  std::uint64_t temp = std::max(cub_sort_temp_bound(n, 8, 4), cub_scan_temp_bound(n1));
+  if (auto_depth) temp = std::max(temp, cub_scan_temp_bound(n));
+  std::uint64_t b = 2 * buf(n, sizeof(std::uint64_t)) + 2 * buf(n, sizeof(std::uint32_t)) + buf(n, sizeof(Aabb)) +
+                    2 * buf(n1, sizeof(std::uint32_t)) + buf(1, sizeof(double)) + buf(1, sizeof(std::uint32_t)) +
+                    buf(1, sizeof(int)) + buf(temp, 1);
+  if (auto_depth) b += buf(n, sizeof(double)) + buf(n, sizeof(std::uint32_t));
+  return b;
+}
+
+/// SpatialHashDevice::reserve (broadphase_spatial_hash.cu).
+std::uint64_t device_bytes_spatial_hash(std::uint64_t n, const BroadPhaseConfig&) {
+  const std::uint64_t n1 = n + 1;
+  const std::uint64_t entries = std::uint64_t{kHashEntriesPerBody} * n;
+  const std::uint64_t counts = entries + n + 1;
+  const std::uint64_t temp =
+      std::max({cub_sort_temp_bound(entries, 8, 4), cub_scan_temp_bound(counts), cub_scan_temp_bound(n1)});
+  return buf(n, sizeof(std::uint8_t)) + buf(3 * n, sizeof(std::int32_t)) + 4 * buf(n1, sizeof(std::uint32_t)) +
+         2 * buf(entries, sizeof(std::uint64_t)) + 2 * buf(entries, sizeof(std::uint32_t)) +
+         2 * buf(counts, sizeof(std::uint32_t)) + buf(temp, 1);
+}
+
+/// LbvhDevice::reserve (broadphase_lbvh.cu).
+std::uint64_t device_bytes_lbvh(std::uint64_t n, const BroadPhaseConfig&) {
+  const std::uint64_t inner = n;  // n - 1 internal nodes, sized n
+  // Per body: code, index, sorted code, slot body, leaf parent; the slot boxes. Per
+  // internal node: the node, its box, its parent and refit flag.
+  return 5 * buf(n, sizeof(std::uint32_t)) + buf(n, sizeof(Aabb)) + buf(inner, kLbvhNodeBytes) + buf(inner, sizeof(Aabb)) +
+         2 * buf(inner, sizeof(std::uint32_t)) + buf(std::max(cub_sort_temp_bound(n, 4, 4), std::uint64_t{1}), 1);
+}
+
+/// A footprint of a row of octocd/broadphase_table.def.
+using Footprint = std::uint64_t (*)(std::uint64_t, const BroadPhaseConfig&);
+
+/// The footprint of every row, in the table's order (nullptr where the device has none).
+#define OCTOCD_FOOTPRINT_none(ID) nullptr
+#define OCTOCD_FOOTPRINT_step(ID) &device_bytes_##ID
+#define OCTOCD_FOOTPRINT_seam(ID) &device_bytes_##ID
+constexpr Footprint kFootprints[] = {
+#define OCTOCD_BROADPHASE(ID, NAME, HOST, DEVICE, PAIRS, COST, SUMMARY) OCTOCD_FOOTPRINT_##DEVICE(ID),
+#include "octocd/broadphase_table.def"
+#undef OCTOCD_BROADPHASE
+};
+
+/// The device broadphase's reserve(n) buffers; throws InputError for a broadphase the
+/// device does not have.
+std::uint64_t broadphase_bytes(std::uint64_t n, const BroadPhaseConfig& cfg) {
+  if (const BroadPhaseInfo* info = find_broadphase_info(cfg.name)) {
+    if (const Footprint bytes = kFootprints[static_cast<std::size_t>(info->id)]) return bytes(n, cfg);
   }
-  if (cfg.name == "octree-strict") {  // StrictOctreeDevice::reserve (broadphase_octree_strict.cu)
-    const bool auto_depth = cfg.octree_depth < 0;
-    std::uint64_t temp = std::max(cub_sort_temp_bound(n, 8, 4), cub_scan_temp_bound(n1));
-    if (auto_depth) temp = std::max(temp, cub_scan_temp_bound(n));
-    std::uint64_t b = 2 * buf(n, sizeof(std::uint64_t)) + 2 * buf(n, sizeof(std::uint32_t)) + buf(n, sizeof(Aabb)) +
-                      2 * buf(n1, sizeof(std::uint32_t)) + buf(1, sizeof(double)) + buf(1, sizeof(std::uint32_t)) +
-                      buf(1, sizeof(int)) + buf(temp, 1);
-    if (auto_depth) b += buf(n, sizeof(double)) + buf(n, sizeof(std::uint32_t));
-    return b;
-  }
-  if (cfg.name == "spatial-hash") {  // SpatialHashDevice::reserve (broadphase_spatial_hash.cu)
-    const std::uint64_t entries = std::uint64_t{kHashEntriesPerBody} * n;
-    const std::uint64_t counts = entries + n + 1;
-    const std::uint64_t temp =
-        std::max({cub_sort_temp_bound(entries, 8, 4), cub_scan_temp_bound(counts), cub_scan_temp_bound(n1)});
-    return buf(n, sizeof(std::uint8_t)) + buf(3 * n, sizeof(std::int32_t)) + 4 * buf(n1, sizeof(std::uint32_t)) +
-           2 * buf(entries, sizeof(std::uint64_t)) + 2 * buf(entries, sizeof(std::uint32_t)) +
-           2 * buf(counts, sizeof(std::uint32_t)) + buf(temp, 1);
-  }
-  if (cfg.name == "lbvh") {  // LbvhDevice::reserve (broadphase_lbvh.cu)
-    const std::uint64_t inner = n;  // n - 1 internal nodes, sized n
-    // Per body: code, index, sorted code, slot body, leaf parent; the slot boxes. Per
-    // internal node: the node, its box, its parent and refit flag.
-    return 5 * buf(n, sizeof(std::uint32_t)) + buf(n, sizeof(Aabb)) + buf(inner, kLbvhNodeBytes) + buf(inner, sizeof(Aabb)) +
-           2 * buf(inner, sizeof(std::uint32_t)) + buf(std::max(cub_sort_temp_bound(n, 4, 4), std::uint64_t{1}), 1);
-  }
-  std::string names;
-  for (const std::string& nm : cuda_broadphase_names()) names += (names.empty() ? "" : ", ") + nm;
-  throw InputError(
-      fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: {}", cfg.name, names));
+  throw InputError(fmt::format("broadphase.name: '{}' is not available on the cuda engine; allowed there: {}",
+                               cfg.name, join_broadphase_names(cuda_broadphase_names())));
 }
 
 std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const ShapeCounts& sc) {
@@ -135,9 +167,13 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
 
 }  // namespace
 
-std::vector<std::string> cuda_broadphase_names() { return {"flat", "octree", "octree-strict", "spatial-hash", "lbvh"}; }
+std::vector<std::string> cuda_broadphase_names() {
+  return broadphase_names_where([](const BroadPhaseInfo& b) { return b.on_device(); });
+}
 
-std::vector<std::string> cuda_only_broadphase_names() { return {"lbvh"}; }
+std::vector<std::string> cuda_only_broadphase_names() {
+  return broadphase_names_where([](const BroadPhaseInfo& b) { return b.device_only(); });
+}
 
 std::uint64_t cuda_device_bytes_needed(std::uint64_t bodies, const BroadPhaseConfig& broadphase) {
   return engine_bytes(bodies, broadphase, ShapeCounts{});

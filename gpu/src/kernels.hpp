@@ -104,20 +104,17 @@ struct MidItem {
 
 /// A's vertices per leaf work item of a mesh-mesh cell pair, and B's (kLeafChunk for every
 /// two parts of A's cell: leaf_b_chunk): a large cell pair becomes several items, so its
-/// vertex tests spread over several warps (one warp's items were the critical path of a
-/// Table 5 step on the H100), while B's chunk grows with A's cell, so a cell pair's items
-/// grow about as B's cell, not as the product. With the vertices in depth-10 Morton order
-/// (compact vertex blocks, build_mesh_octree) an item's filters skip the blocks of A's cell
-/// far from B's tile, so A's part no longer needs to be small: on the H100
-/// (bench_step_paths, 3000 frames, --midphase 1,2) kLeafAPart 1024 -> 8192 took
-/// asian-dragon-random-60 (cells of about 4,000 vertices) from 17,384 to 21,890 steps/s,
-/// dragon-random-250 from 20,170 to 21,340; 4096 gave 20,100 and 21,330, 65536 the same
-/// as 8192. With parts of 4096, kLeafChunk 32 or 128 was slower on the Table 5 scenes.
+/// vertex tests spread over several warps instead of making one warp's items the critical
+/// path of a step, while B's chunk grows with A's cell, so a cell pair's items grow about
+/// as B's cell, not as the product. With the vertices in depth-10 Morton order (compact
+/// vertex blocks, build_mesh_octree) an item's filters skip the blocks of A's cell far from
+/// B's tile, so A's part can be large. The sizes are the fastest measured on the H100's
+/// Table 5 scenes (reports/h100/README.md, "Experiments and A/B results", "Midphase").
 constexpr std::uint32_t kLeafAPart = 8192;
 constexpr std::uint32_t kLeafChunk = 64;
-/// A cell pair of at most this many vertex pairs stays one leaf item (small cells, a
-/// bunny's: on the H100 bunny-stack-50 ran 1.1% behind the code before the split with them
-/// split into kLeafChunk chunks, 0.8% with them whole: reports/h100/perf-v6).
+/// A cell pair of at most this many vertex pairs stays one leaf item (small cells, a bunny's:
+/// splitting them costs more than it spreads; reports/h100/README.md, "Experiments and A/B
+/// results", "The small path (fused step)").
 constexpr std::uint64_t kLeafWholePairs = 32768;
 
 /// Whether a cell pair whose cells hold `a_vertices` and `b_vertices` is one leaf item.
@@ -431,18 +428,12 @@ struct SmallStepDesc {
 /// The fused small step runs its lean kernel (SmallStepDesc::lean) when no shape of the
 /// scene holds more than this many vertices per occupied cell of the midphase's deepest
 /// level on average (small_lean_kernel). With leaves that small a pair's leaf work is short:
-/// the early exit's and the tile culling's code cost more than they save, and a block per
-/// pair (the fused front) finishes with the grid's other blocks. With larger leaves the
-/// pair with the most leaf work holds a block-per-pair midphase back, and culling saves more
-/// than it costs. H100, resident kernel, 2000 frames, 5 repetitions, steps/s lean -> plain
-/// (build f999213 with the kernel forced; the largest mean leaf in vertices, levels 1,2):
-/// bunny-stack-50 54,916 -> 36,348 (bunny, 41); bunny-random-400 29,311 -> 28,286 (41);
-/// rods-150 27,066 -> 23,491 (rod, 12); obstacle-mixed-50 19,814 -> 31,284 (dragon, 727);
-/// armadillo-stack-50 12,078 -> 25,043 (armadillo, 565); dragon-stack-50 17,804 -> 26,109
-/// (727); armadillo-random-250 18,346 -> 26,290; dragon-random-250 13,916 -> 23,546;
-/// asian-dragon-random-60 5,660 -> 23,800 (2,908); mixed-pile-1000 6,095 -> 7,840;
-/// sizes-50x-214 (ten armadillos among bunnies) 35,133 -> 33,895, the one scene the rule
-/// misses, by 3.5%. The threshold lies between the bunny's 41 and the armadillo's 565.
+/// the early exit's and the tile culling's code cost more than they save, and a block per pair (the
+/// fused front) finishes with the grid's other blocks. With larger leaves the pair with the most
+/// leaf work holds a block-per-pair midphase back, and culling saves more than it costs. The
+/// threshold lies between the bunny's 41 and the armadillo's 565 (both kernels forced on every
+/// small scene: reports/h100/README.md, "Experiments and A/B results", "Small scenes: the kernel's
+/// shape").
 constexpr double kSmallLeanLeafVertices = 128.0;
 
 /// Whether the fused small step runs its lean kernel for a scene whose largest mean number

@@ -101,7 +101,7 @@ OCTOCD_HD inline std::uint32_t loose_block_find(const unsigned long long* table,
 /// occupied (loose_block_octants: 0xff), so the query probes it as without a map. The
 /// query intersects a block's window mask with its byte and probes the block table only
 /// for a block with an occupied cell in the window (most of a window's blocks are empty at
-/// 10^6 bodies: each such probe was a miss of 2.5 entries on average, at a random address
+/// 10^6 bodies: each such probe is a miss of 2.5 entries on average, at a random address
 /// of a table of 16-64 MiB), and stops walking a block's run after its last wanted octant.
 OCTOCD_HD inline std::uint32_t loose_block_index(std::uint32_t block_key) { return (block_key + 7u) >> 3; }
 

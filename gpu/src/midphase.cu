@@ -32,8 +32,7 @@ __global__ void mid_expand_append_kernel(MidListDesc d, int step) {
 }
 
 // The last expand step, which may run its items' leaves itself (mid::fuse_leaves); 128
-// registers (118 before the early exit and the tile culling): 2 of the grid's 4 blocks per SM at a time
-// (bounding it to 3 spilled > 200 bytes).
+// registers: 2 of the grid's 4 blocks per SM at a time (bounding it to 3 spills > 200 bytes).
 __global__ void __launch_bounds__(kBlockSize, 2) mid_expand_last_kernel(MidListDesc d, int step) {
   __shared__ mid::LeafTiles tiles;
   const std::uint32_t count = *d.in_count < d.in_capacity ? *d.in_count : d.in_capacity;
@@ -41,8 +40,7 @@ __global__ void __launch_bounds__(kBlockSize, 2) mid_expand_last_kernel(MidListD
   mid::mid_expand_items(d, step, &tiles);
 }
 
-// Four blocks per SM (64 registers; ptxas spills 20 bytes for it with the early exit and the
-// tile culling, 4 before; 68 without the bound).
+// Four blocks per SM (64 registers; ptxas spills 20 bytes for it; 68 without the bound).
 __global__ void __launch_bounds__(kBlockSize, 4) mid_leaf_kernel(MidListDesc d) {
   __shared__ mid::LeafTiles tiles;
   mid::mid_leaf_items<true>(d, tiles);

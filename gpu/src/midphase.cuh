@@ -51,7 +51,7 @@
 // Tile filter (MidListDesc::tile_filter: on, except in the lean kernel): for
 // each staged tile of B a leaf stages only A's vertices near it (near_tile: the tile's box
 // in A's frame grown by the margin, within b_in_a; whole vertex blocks skipped by their
-// boxes), so a large leaf no longer rescans and stages A's whole filtered cell per tile of
+// boxes), so a large leaf does not rescan and stage A's whole filtered cell per tile of
 // B; with the exit on A's first tile is then not staged ahead of B's tiles.
 // Counts, early exit off: box tests = every cell pair tested, box pairs = surviving leaf
 // cell pairs, vertex tests = per leaf (A's filtered vertices) x (B's filtered vertices) or
@@ -1102,30 +1102,19 @@ __device__ inline void mid_decide_warp(const MidListDesc& d, std::uint32_t k0) {
 }
 
 /// Whether the last expand step runs its leaves itself (test_cells' `leaves`;
-/// mid_expand_last_kernel, else mid_expand_append_kernel appends them for mid_leaf_kernel):
-/// when the step has at least kFuseItemsPerWarp items per warp of the grid. The leaf list
-/// spreads a pair's leaves over more warps, and the appending expand and the leaf kernel
-/// run at 64 registers (4 blocks per SM) where the fused kernel needs 128 (2): with fewer
-/// items the list wins (fusing always made the Table 5 scenes 1.3-13x slower); with very
-/// many it is written and read from memory beyond the L2. H100, 512 against 2 (the build
-/// before, same state hashes, one call): bunny-pile-100k 858 -> 978 steps/s (3000 frames),
-/// bunny-pile-1m 139 -> 134 (1500 frames; never fusing: 127), the max-instances scenes at
-/// 10^6 armadillos 189 -> 228, dragons 144 -> 158, 262,144 asian dragons 158 -> 210 and
-/// 2,097,152 bunnies 181 -> 222 (frames 301-400; at 128 they still fused: 177); but
-/// 5,242,880 dragons 32 -> 28 and 1,835,008 asian dragons 31 -> 29 (the max-instances
-/// maxima). 256 (one call, frames 301-400): those dragons 32, asian dragons 29, 2,097,152
-/// bunnies 175, 10^6 dragons 157, bunny-pile-100k 967: no count per warp suits every
-/// scene (the leaf list's size, which decides, depends on the meshes too). Grid-uniform.
-/// Where the leaves run changes neither a result nor a count (the same leaf items either
-/// way). d.fuse_min_items (tests) replaces the threshold by an item count.
-/// Since the witness pass and the block test, fusing also needs the last step's leaf items
-/// (MidListDesc::leaf_items[0], counted whether the leaves were fused or appended) at
-/// kFuseLeafItems or more: bunny-pile-1m (about 3 million leaf box pairs of one item each)
-/// runs faster appending, the 5,242,880 dragons (about as many leaf box pairs of about ten
-/// items) fused. H100, frames 301-400 and bunny-pile-1m's 1500, against 256 items per warp
-/// alone (one call, same state hashes): 2^24 items: bunny-pile-1m 185 -> 196 steps/s,
-/// 2,097,152 bunnies 184 -> 227, 5,242,880 dragons 33 -> 32; 2^22: 184, 227, 32 (the pile
-/// still fused); 2^26: 196, 227, 29 (the dragons appended).
+/// mid_expand_last_kernel, else mid_expand_append_kernel appends them for mid_leaf_kernel): when
+/// the step has at least kFuseItemsPerWarp items per warp of the grid. The leaf list spreads a
+/// pair's leaves over more warps, and the appending expand and the leaf kernel run at 64 registers
+/// (4 blocks per SM) where the fused kernel needs 128 (2): with fewer items the list wins (fused,
+/// the Table 5 scenes run slower); with very many it is written and read from memory beyond the L2.
+/// No count per warp suits every scene (the leaf list's size, which decides, depends on the meshes
+/// too), so fusing also needs the last step's leaf items (MidListDesc::leaf_items[0], counted
+/// whether the leaves were fused or appended) at kFuseLeafItems or more: bunny-pile-1m (about 3
+/// million leaf box pairs of one item each) runs faster appending, 5,242,880 dragons (about as many
+/// leaf box pairs of about ten items) fused. Both thresholds are the H100's best over the piles and
+/// the max-instances scenes (reports/h100/README.md, "Experiments and A/B results", "Midphase").
+/// Grid-uniform. Where the leaves run changes neither a result nor a count (the same leaf items
+/// either way). d.fuse_min_items (tests) replaces the threshold by an item count.
 constexpr std::uint32_t kFuseItemsPerWarp = 256;
 constexpr unsigned long long kFuseLeafItems = 1ull << 24;
 __device__ inline bool fuse_leaves(const MidListDesc& d, std::uint32_t count) {

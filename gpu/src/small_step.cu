@@ -387,8 +387,8 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
       }
       __syncthreads();
       stamp(profile, 2);
-      // At most kSmallFrontMaxBodies + 1 counts: one a thread, one tile (on an H100 the
-      // resident kernel ran bunny-stack-50 0.6% faster than with four a thread).
+      // At most kSmallFrontMaxBodies + 1 counts: one a thread, one tile (faster than four a
+      // thread on the H100: reports/h100/README.md, "Experiments and A/B results").
       static_assert(kSmallFrontMaxBodies + 1 <= kBlockSize, "the fused front's counts in one tile");
       total = block_exclusive_scans<1>(f.out_count, f.in_count, fs.out_offset, fs.in_offset, n + 1, f.storage, g_out,
                                        g_in);
@@ -472,8 +472,8 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   // after a barrier that every thread of the block has passed, read by all after
   // __syncthreads (a copy per thread is 304 bytes of local memory a thread and step).
   // No witness cache (midphase.cuh, "Witnesses"): its lookups and its copy of the keys cost
-  // the fused step more than the descents they spare on 5 of 6 shipped small scenes (H100,
-  // bench_step_paths: Table 5 with 1,2 -1 to -5%, bunny-stack-50 -2%; mixed-pile-1000 +8%).
+  // the fused step more than the descents they spare on 5 of 6 shipped small scenes (H100:
+  // reports/h100/README.md, "Experiments and A/B results").
   __shared__ MidListDesc block_md;
   const MidListDesc& md = block_md;
   if (threadIdx.x == 0) {

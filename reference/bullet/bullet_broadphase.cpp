@@ -58,7 +58,8 @@ btVector3 to_bt(const Vec3& v) { return btVector3(v.x, v.y, v.z); }
 /// collision algorithms of removed pairs; we never create any) and the proxies.
 class BulletBroadPhase final : public BroadPhase {
  public:
-  BulletBroadPhase(std::string name, const Aabb& domain) : name_(std::move(name)), domain_(domain) {}
+  BulletBroadPhase(BroadPhaseId id, const Aabb& domain)
+      : dbvt_(id == BroadPhaseId::bullet_dbvt), name_(broadphase_name(id)), domain_(domain) {}
 
   ~BulletBroadPhase() override {
     if (!broadphase_) return;
@@ -75,7 +76,7 @@ class BulletBroadPhase final : public BroadPhase {
     // The sweep and prune owns its handles (freed with it); removing them one by one
     // re-sorts its edge lists each time (proxies^2). The dbvt's proxies are its own
     // allocations: destroy them (a tree removal each, now that no pair is left).
-    if (name_ == "bullet-dbvt")
+    if (dbvt_)
       for (btBroadphaseProxy* p : proxies_) broadphase_->destroyProxy(p, dispatcher_.get());
   }
 
@@ -109,7 +110,7 @@ class BulletBroadPhase final : public BroadPhase {
     stats.pairs = out.size();
     // Approximate: proxies, tree nodes (2 per leaf) or sweep edges, the pair cache.
     const std::uint64_t per_proxy =
-        name_ == "bullet-dbvt" ? sizeof(btDbvtProxy) + 2 * sizeof(btDbvtNode)
+        dbvt_ ? sizeof(btDbvtProxy) + 2 * sizeof(btDbvtNode)
                                : sizeof(bt32BitAxisSweep3::Handle) + 6 * 2 * sizeof(unsigned int);
     stats.memory_bytes = proxies_.size() * (per_proxy + sizeof(std::uint32_t)) +
                          static_cast<std::uint64_t>(arr.capacity()) * sizeof(btBroadphasePair) +
@@ -120,7 +121,7 @@ class BulletBroadPhase final : public BroadPhase {
   void create(const std::vector<Aabb>& boxes) {
     config_ = std::make_unique<btDefaultCollisionConfiguration>();
     dispatcher_ = std::make_unique<btCollisionDispatcher>(config_.get());
-    if (name_ == "bullet-dbvt") {
+    if (dbvt_) {
       broadphase_ = std::make_unique<btDbvtBroadphase>();
     } else {
       // World box: cube about the domain centre, 64 x the longest domain side (>= 1 m).
@@ -146,6 +147,7 @@ class BulletBroadPhase final : public BroadPhase {
     }
   }
 
+  bool dbvt_;  // btDbvtBroadphase (bullet-dbvt); else bt32BitAxisSweep3 (bullet-sap)
   std::string name_;
   Aabb domain_;
   std::unique_ptr<btDefaultCollisionConfiguration> config_;
@@ -158,8 +160,8 @@ class BulletBroadPhase final : public BroadPhase {
 
 }  // namespace
 
-std::unique_ptr<BroadPhase> make_bullet_broadphase(const std::string& name, const Aabb& domain) {
-  return std::make_unique<BulletBroadPhase>(name, domain);
+std::unique_ptr<BroadPhase> make_bullet_broadphase(BroadPhaseId id, const Aabb& domain) {
+  return std::make_unique<BulletBroadPhase>(id, domain);
 }
 
 }  // namespace octocd::reference_detail

@@ -39,9 +39,9 @@ inline void check_count(const std::string& name, std::size_t expected, std::size
   }
 }
 
-// Defined in bullet_broadphase.cpp and fcl_broadphase.cpp. `name` is one of their names.
-std::unique_ptr<BroadPhase> make_bullet_broadphase(const std::string& name, const Aabb& domain);
-std::unique_ptr<BroadPhase> make_fcl_broadphase(const std::string& name, float cell_size,
-                                                const Aabb& domain);
+// Defined in bullet_broadphase.cpp and fcl_broadphase.cpp: the CPU factories of the rows
+// of octocd/broadphase_table.def with host `bullet` and `fcl`. `id` is one of their rows.
+std::unique_ptr<BroadPhase> make_bullet_broadphase(BroadPhaseId id, const Aabb& domain);
+std::unique_ptr<BroadPhase> make_fcl_broadphase(BroadPhaseId id, float cell_size, const Aabb& domain);
 
 }  // namespace octocd::reference_detail

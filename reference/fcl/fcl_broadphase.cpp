@@ -60,8 +60,8 @@ bool collect(fcl::CollisionObject<S>* o1, fcl::CollisionObject<S>* o2, void* cda
 
 class FclBroadPhase final : public BroadPhase {
  public:
-  FclBroadPhase(std::string name, float cell_size, const Aabb& domain)
-      : name_(std::move(name)), cell_size_(cell_size), domain_(domain) {}
+  FclBroadPhase(BroadPhaseId id, float cell_size, const Aabb& domain)
+      : id_(id), name_(broadphase_name(id)), cell_size_(cell_size), domain_(domain) {}
 
   std::string name() const override { return name_; }
 
@@ -72,7 +72,7 @@ class FclBroadPhase final : public BroadPhase {
     } else {
       check_count(name_, objects_.size(), boxes.size());
       for (std::size_t i = 0; i < boxes.size(); ++i) place(i, boxes[i]);
-      if (name_ == "fcl-sap") {
+      if (id_ == BroadPhaseId::fcl_sap) {
         // FCL 0.7's SaPCollisionManager::update() (update_) loops forever on our moved
         // test sets (observed with 100 bodies: the endpoint lists get corrupted), so
         // fcl-sap is rebuilt every call instead of updated: not incremental.
@@ -109,13 +109,13 @@ class FclBroadPhase final : public BroadPhase {
   }
 
   void create(const std::vector<Aabb>& boxes) {
-    if (name_ == "fcl-dynamic-aabb-tree") {
+    if (id_ == BroadPhaseId::fcl_dynamic_aabb_tree) {
       manager_ = std::make_unique<fcl::DynamicAABBTreeCollisionManager<S>>();
-    } else if (name_ == "fcl-sap") {
+    } else if (id_ == BroadPhaseId::fcl_sap) {
       manager_ = std::make_unique<fcl::SaPCollisionManager<S>>();
-    } else if (name_ == "fcl-interval-tree") {
+    } else if (id_ == BroadPhaseId::fcl_interval_tree) {
       manager_ = std::make_unique<fcl::IntervalTreeCollisionManager<S>>();
-    } else if (name_ == "fcl-spatial-hash") {
+    } else if (id_ == BroadPhaseId::fcl_spatial_hash) {
       manager_ = std::make_unique<fcl::SpatialHashingCollisionManager<S>>(
           S(cell_size_), fcl::Vector3<S>(domain_.min.x, domain_.min.y, domain_.min.z),
           fcl::Vector3<S>(domain_.max.x, domain_.max.y, domain_.max.z),
@@ -141,6 +141,7 @@ class FclBroadPhase final : public BroadPhase {
     manager_->setup();
   }
 
+  BroadPhaseId id_;
   std::string name_;
   float cell_size_;
   Aabb domain_;
@@ -155,9 +156,8 @@ class FclBroadPhase final : public BroadPhase {
 
 }  // namespace
 
-std::unique_ptr<BroadPhase> make_fcl_broadphase(const std::string& name, float cell_size,
-                                                const Aabb& domain) {
-  return std::make_unique<FclBroadPhase>(name, cell_size, domain);
+std::unique_ptr<BroadPhase> make_fcl_broadphase(BroadPhaseId id, float cell_size, const Aabb& domain) {
+  return std::make_unique<FclBroadPhase>(id, cell_size, domain);
 }
 
 }  // namespace octocd::reference_detail

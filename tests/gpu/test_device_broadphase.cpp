@@ -474,20 +474,27 @@ std::vector<Variant> variants() {
   BroadPhaseConfig lbvh;
   lbvh.name = "lbvh";
   v.push_back({"lbvh", lbvh});
+  // Every other device broadphase of the registry (device `seam`), with its default parameters.
+  for (const BroadPhaseInfo& info : broadphase_infos()) {
+    if (info.device != BroadPhaseDevice::seam) continue;
+    if (std::any_of(v.begin(), v.end(), [&](const Variant& x) { return x.config.name == info.name; })) continue;
+    BroadPhaseConfig c;
+    c.name = info.name;
+    std::string label = info.name;
+    std::replace(label.begin(), label.end(), '-', '_');
+    v.push_back({label, c});
+  }
   return v;
 }
 
-/// The device broadphase of `c`; `octree` with the query kernel `query`.
+/// The device broadphase of `c` (one-shot); `octree` with the query kernel `query`.
 std::unique_ptr<DeviceBroadPhase> make_device(const BroadPhaseConfig& c, const Aabb& domain,
                                               gpu::LooseOctreeQuery query = gpu::LooseOctreeQuery::Auto) {
-  if (c.name == "lbvh") return gpu::make_device_lbvh(domain);
-  if (c.name == "octree-strict") return gpu::make_device_strict_octree(c, domain);
-  if (c.name == "spatial-hash") return gpu::make_device_spatial_hash(c);
 #if defined(OCTOCD_HAVE_DEVICE_LOOSE_OCTREE)
   if (c.name == "octree") return gpu::make_device_loose_octree(c, domain, query);
 #endif
   (void)query;
-  throw std::runtime_error("no device broadphase " + c.name);
+  return gpu::make_device_broadphase(c, domain);  // the registry's device factory, one-shot
 }
 
 /// make_device with the variant's octree query.

@@ -7,7 +7,8 @@
 /// only in cost. `flat` is the oracle that all others are tested against.
 ///
 /// octocd's own broadphases (make_broadphase; Bullet's and FCL's are in
-/// octocd/reference_broadphase.hpp):
+/// octocd/reference_broadphase.hpp; the names and promises of all of them are the rows of
+/// octocd/broadphase_table.def, read through octocd/broadphase_registry.hpp):
 /// - `flat`: all n(n-1)/2 pairs through Eq. 6 (broadphase.cpp).
 /// - `octree` (default): the loose octree (design.md section 5.1; Ulrich 2000, looseness 2): each body
 ///   in the cell of its AABB centre at the deepest level whose cell side is >= its
@@ -30,6 +31,7 @@
 #include <string>
 #include <vector>
 
+#include "octocd/broadphase_registry.hpp"
 #include "octocd/math.hpp"
 
 namespace octocd {
@@ -62,8 +64,9 @@ struct BroadPhaseStats {
 /// Configuration of a broadphase, from the scene's "broadphase" object or
 /// `--broadphase NAME`.
 struct BroadPhaseConfig {
-  /// flat | octree | octree-strict | spatial-hash (references add more).
-  std::string name = "octree";
+  /// A name of broadphase_infos() (flat | octree | octree-strict | spatial-hash; references
+  /// add more); default `octree`.
+  std::string name = broadphase_name(BroadPhaseId::octree);
   /// D_w for `octree` and `octree-strict`, in [0, 10]; -1 = `auto` (auto_loose_octree_depth
   /// for `octree`, auto_octree_depth for `octree-strict`, computed on every call).
   int octree_depth = 2;
@@ -87,16 +90,21 @@ class BroadPhase {
                           BroadPhaseStats& stats) = 0;
 };
 
-/// Creates a broadphase by `config.name`: "flat", "octree", "octree-strict",
-/// "spatial-hash". `domain` is the scene's domain box (m; the octrees' root is its
+/// Creates a broadphase by `config.name`: a row of broadphase_infos() whose host is
+/// BroadPhaseHost::core (flat, octree, octree-strict, spatial-hash). `domain` is the scene's domain box (m; the octrees' root is its
 /// bounding cube: centred on it, side = its longest side). Throws InputError naming
 /// `broadphase.name` and the accepted names when unknown, or the field
 /// (`broadphase.depth`: -1 or [0, 10]; `broadphase.cell_size`: finite > 0) when a
 /// parameter is out of range (checked for every name).
 std::unique_ptr<BroadPhase> make_broadphase(const BroadPhaseConfig& config, const Aabb& domain);
 
-/// Names accepted by make_broadphase, in a stable order: flat, octree, octree-strict,
-/// spatial-hash.
+/// Throws InputError naming the field when a parameter of `config` is out of range
+/// (`broadphase.depth`: -1 or [0, 10]; `broadphase.cell_size`: finite > 0); the checks
+/// make_broadphase and the device broadphases run whatever the name.
+void check_broadphase_parameters(const BroadPhaseConfig& config);
+
+/// Names accepted by make_broadphase (the rows with host BroadPhaseHost::core), in the
+/// table's order: flat, octree, octree-strict, spatial-hash.
 std::vector<std::string> broadphase_names();
 
 /// Depth that `octree-strict` uses for `auto` (design.md section 5.1, "from body count and size"):

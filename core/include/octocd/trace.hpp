@@ -80,20 +80,19 @@ struct TraceOptions {
   int state_every = 10;     ///< record positions/velocities every k-th frame (k >= 1)
   bool contacts = false;    ///< record /contacts
   int flush_every = 50;     ///< flush to disk every this many frames (>= 1)
-  /// With a value > 0, a flush that flush_every frames call for waits, while the rows
-  /// buffered since the last flush hold under kFlushIntervalBytes, until at least this many
-  /// seconds (>= 0) have passed since the previous flush began (the frames stay buffered;
-  /// flush_bytes still flushes at once). A flush writes every dataset and calls H5Fflush
-  /// twice, about 1 ms however few its rows: on a small scene stepping at 50,000 steps/s a
-  /// flush every 50 frames kept the writer thread busy and the caller waiting on it
-  /// (octocd's cuda engine on bunny-stack-50, H100: 17 us a frame in append_frame); batches
-  /// of kFlushIntervalBytes or more flush every flush_every frames as before, so a full disk
-  /// still keeps the frames written before it. With an interval, a flush_every flush also
-  /// waits (buffering) while the writer thread still writes the previous batch, so the
-  /// caller never waits for it (bunny-random-400 with the state every 10th frame flushes
-  /// about 1.3 KB a frame: every 50 frames the writer fell behind and append_frame took 8 us
-  /// a frame). 0 (the default): every flush_every frames, waiting for the previous flush. `run --trace` and `bench --traced` use 0.1 s
-  /// (cli/tools.hpp, kTraceFlushIntervalS).
+  /// With a value > 0, a flush that flush_every frames call for waits, while the rows buffered
+  /// since the last flush hold under kFlushIntervalBytes, until at least this many seconds (>= 0)
+  /// have passed since the previous flush began (the frames stay buffered; flush_bytes still
+  /// flushes at once). A flush writes every dataset and calls H5Fflush twice, about 1 ms however
+  /// few its rows: on a small scene stepping at 50,000 steps/s a flush every 50 frames keeps the
+  /// writer thread busy and the caller waiting on it (reports/h100/README.md, "Experiments and A/B
+  /// results", "Traced runs"); batches of kFlushIntervalBytes or more flush every flush_every
+  /// frames, so a full disk still keeps the frames written before it. With an interval, a
+  /// flush_every flush also waits (buffering) while the writer thread still writes the previous
+  /// batch, so the caller never waits for it (bunny-random-400 with the state every 10th frame
+  /// flushes about 1.3 KB a frame, and the writer falls behind a flush every 50 frames).
+  /// 0 (the default): every flush_every frames, waiting for the previous flush. `run --trace`
+  /// and `bench --traced` use 0.1 s (cli/tools.hpp, kTraceFlushIntervalS).
   double flush_interval_s = 0.0;
   /// Also flush once the rows buffered since the last flush hold this many bytes (>= 1):
   /// a stopped or failed run then writes at most about this much (or one frame) at its

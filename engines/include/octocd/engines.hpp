@@ -93,7 +93,8 @@ std::vector<std::string> built_engine_names();
 std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
                                     const EngineSettingItems& settings = {});
 
-/// Every broadphase name of some engine, in a stable order: all_broadphase_names() (cpu;
+/// Every broadphase name of some engine, in the order of the broadphase table
+/// (every_broadphase_name(), octocd/broadphase_registry.hpp): all_broadphase_names() (cpu;
 /// cuda has those too) then cuda_only_broadphase_names() (lbvh).
 std::vector<std::string> any_engine_broadphase_names();
 

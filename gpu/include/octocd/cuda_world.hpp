@@ -41,12 +41,13 @@ constexpr std::uint64_t kCudaMaxBodies = 2147483647;
 /// cooperative kernels; its stage times come from %globaltimer stamps at the phase ends.
 constexpr std::uint64_t kCudaSmallStepMaxBodies = 2048;
 
-/// The broadphases the cuda engine has (`--broadphase` with `--engine cuda`), in a stable
-/// order: flat, octree, octree-strict, spatial-hash, lbvh. Exists in builds without CUDA.
+/// The broadphases the cuda engine has (`--broadphase` with `--engine cuda`): the rows of
+/// octocd/broadphase_table.def with a device side, in its order: flat, octree,
+/// octree-strict, spatial-hash, lbvh. Exists in builds without CUDA.
 std::vector<std::string> cuda_broadphase_names();
 
-/// The names among cuda_broadphase_names() that only the cuda engine has (neither
-/// make_broadphase nor the references know them): lbvh (a Karras 2012 linear BVH, the
+/// The names among cuda_broadphase_names() that only the cuda engine has (rows with no CPU
+/// side: neither make_broadphase nor the references know them): lbvh (a Karras 2012 linear BVH, the
 /// standard GPU baseline). Exists in builds without CUDA.
 std::vector<std::string> cuda_only_broadphase_names();
 

@@ -190,7 +190,7 @@ class BulletWorld : public Engine {
   /// The CPU model.
   std::string device() const override;
   /// "bullet-dbvt" (btDbvtBroadphase).
-  std::string broadphase_name() const override { return "bullet-dbvt"; }
+  std::string broadphase_name() const override { return octocd::broadphase_name(BroadPhaseId::bullet_dbvt); }
   /// The model it was built from.
   const Model& model() const override { return *model_; }
   /// Without rotation: always empty (no octocd contact records). In rotation mode while

@@ -30,7 +30,8 @@
 
 namespace octocd {
 
-/// Creates a reference broadphase by `config.name`:
+/// Creates a reference broadphase by `config.name` (a row of octocd/broadphase_table.def
+/// with host `bullet` or `fcl`):
 /// - "bullet-dbvt": Bullet's btDbvtBroadphase (two dynamic AABB trees with fattened
 ///   leaves and a hashed pair cache), updated with setAabb + calculateOverlappingPairs.
 /// - "bullet-sap": Bullet's bt32BitAxisSweep3 (incremental sweep and prune on quantised
@@ -55,7 +56,7 @@ namespace octocd {
 std::unique_ptr<BroadPhase> make_reference_broadphase(const BroadPhaseConfig& config,
                                                       const Aabb& domain);
 
-/// Names accepted by make_reference_broadphase, in a stable order (Bullet first).
+/// Names accepted by make_reference_broadphase, in the table's order (Bullet first).
 std::vector<std::string> reference_broadphase_names();
 
 /// The registry over core and references: make_broadphase() for core names (flat,
@@ -65,6 +66,7 @@ std::vector<std::string> reference_broadphase_names();
 std::unique_ptr<BroadPhase> make_any_broadphase(const BroadPhaseConfig& config,
                                                 const Aabb& domain);
 
+/// The names of every row with a CPU implementation, in the table's order:
 /// broadphase_names() followed by reference_broadphase_names().
 std::vector<std::string> all_broadphase_names();
 

@@ -1,0 +1,192 @@
+#!/usr/bin/env node
+// Rapier 0.21 (@dimforge/rapier3d-compat, WebAssembly) as an octocd process engine:
+//   node rapier_engine.js REQUEST.json   runs the request and writes its version 2 trace
+//   node rapier_engine.js --check        exits 0 when Node.js and the packages load
+// What maps exactly, approximately or not at all, and the traps of Rapier's contact API:
+// docs/engines.md, "Rapier".
+import RAPIER from "@dimforge/rapier3d-compat";
+import { main } from "../js-common/run.js";
+import { parseSettings, intIn, oneOf } from "../js-common/request.js";
+import { str, i32, f64 } from "../js-common/trace.js";
+import { principalAxes, rotate, toWorld, sub, dot } from "../js-common/math.js";
+
+const settingsSpec = {
+  // Rapier's numSolverIterations: the substeps of its TGS-soft solver (default 4).
+  iterations: { def: 4, parse: intIn(1, 64), allowed: "an integer in [1, 64] (Rapier's numSolverIterations)" },
+  // "v4": the declarations of the physics tier's fourth round (integrator "substepped",
+  // impulses "normal-only"); "v3": only those an older reader knows (integrator left
+  // undeclared, impulses_complete 0 for the missing tangent impulses).
+  declarations: { def: "v4", parse: oneOf("v4", "v3"), allowed: '"v4" or "v3"' },
+};
+
+const engine = {
+  script: "rapier_engine.js",
+  async load() { await RAPIER.init(); },
+  describe() { return `rapier ${RAPIER.version()}`; },
+  create(req) { return new RapierWorld(req, parseSettings(req, settingsSpec)); },
+};
+
+class RapierWorld {
+  constructor(req, settings) {
+    const R = RAPIER;
+    this.req = req;
+    this.n = req.bodies.length;
+    const world = new R.World({ x: req.gravity[0], y: req.gravity[1], z: req.gravity[2] });
+    world.timestep = req.dt;
+    world.numSolverIterations = settings.iterations;
+    this.world = world;
+    this.bodies = [];
+    this.colliders = [];
+    this.indexOfCollider = new Map();  // collider handle -> octocd body index
+    const hullCache = new Map();
+    const shapes = [];
+    req.bodies.forEach((b, i) => {
+      const q = { w: b.orientation[0], x: b.orientation[1], y: b.orientation[2], z: b.orientation[3] };
+      const desc = (b.static ? R.RigidBodyDesc.fixed() : R.RigidBodyDesc.dynamic())
+        .setTranslation(...b.position).setRotation(q).setCanSleep(false)
+        .setLinearDamping(0).setAngularDamping(0);
+      if (!b.static) desc.setLinvel(...b.velocity).setAngvel({ x: b.angular_velocity[0], y: b.angular_velocity[1], z: b.angular_velocity[2] });
+      const body = world.createRigidBody(desc);
+      let cd;
+      if (b.shape === "box") {
+        cd = R.ColliderDesc.cuboid(...b.half_extents);
+        shapes.push("mesh");
+      } else {
+        const m = req.meshes[b.mesh];
+        if (b.static) {
+          cd = R.ColliderDesc.trimesh(Float32Array.from(m.vertexArray), m.triangleArray);
+          shapes.push("mesh");
+        } else {
+          if (!hullCache.has(b.mesh)) hullCache.set(b.mesh, Float32Array.from(m.vertexArray));
+          cd = R.ColliderDesc.convexHull(hullCache.get(b.mesh));
+          if (!cd) throw new Error(`${req.file}: meshes[${b.mesh}]: Rapier cannot build its convex hull`);
+          shapes.push("convex_hull");
+        }
+      }
+      cd.setFriction(b.friction).setRestitution(b.restitution)
+        .setFrictionCombineRule(R.CoefficientCombineRule.Average)
+        .setRestitutionCombineRule(R.CoefficientCombineRule.Average);
+      if (b.static) {
+        cd.setDensity(0);
+      } else {
+        // The request's mass and inertia about the body origin (its centre of mass), as principal moments.
+        const p = principalAxes(b.inertia);
+        cd.setMassProperties(b.mass, { x: 0, y: 0, z: 0 }, { x: p.values[0], y: p.values[1], z: p.values[2] },
+                             { w: p.frame[0], x: p.frame[1], y: p.frame[2], z: p.frame[3] });
+      }
+      const c = world.createCollider(cd, body);
+      this.bodies.push(body);
+      this.colliders.push(c);
+      this.indexOfCollider.set(c.handle, i);
+    });
+    const ip = world.integrationParameters;
+    this.prediction = ip.normalizedPredictionDistance * ip.lengthUnit;
+    this.substeps = world.numSolverIterations;
+    this.name = `rapier ${R.version()}`;
+    const v4 = settings.declarations === "v4";
+    this.attrs = {
+      friction_combine: str("average"), restitution_combine: str("average"),
+      contact_margin: f64(this.prediction), deactivation: str("off"), broadphase_exact: i32(0),
+      impulse_points: str("one"), friction_directions: i32(2),
+      ...(v4 ? { integrator: str("substepped"), substeps: i32(this.substeps), impulses: str("normal-only"),
+                 speculative: i32(1), manifold_points: str("persistent"), depth_per: str("point") }
+             : { impulses_complete: i32(0) }),
+      parameters_rapier: str(JSON.stringify({ numSolverIterations: this.substeps,
+        numInternalPgsIterations: world.numInternalPgsIterations, predictionDistance: this.prediction,
+        lengthUnit: ip.lengthUnit, dt: world.timestep })),
+    };
+    this.bodyData = { collision_shape: { strings: shapes } };
+    this.jt3 = false;
+    this.matchWorst = 0;  // the largest distance between a solver contact and its tracked point's midpoint (m)
+    this.staleDropped = 0;  // solver contacts beyond the prediction distance without impulse, not written
+    this.tangentSeen = 0;  // rows whose tangent impulse Rapier reported non-zero (a witness)
+  }
+
+  step() { this.world.step(); }
+
+  readState(pos, vel, quat, angvel) {
+    for (let i = 0; i < this.n; ++i) {
+      const b = this.bodies[i];
+      const t = b.translation(), r = b.rotation(), v = b.linvel(), w = b.angvel();
+      pos[3 * i] = t.x; pos[3 * i + 1] = t.y; pos[3 * i + 2] = t.z;
+      quat[4 * i] = r.w; quat[4 * i + 1] = r.x; quat[4 * i + 2] = r.y; quat[4 * i + 3] = r.z;
+      vel[3 * i] = v.x; vel[3 * i + 1] = v.y; vel[3 * i + 2] = v.z;
+      angvel[3 * i] = w.x; angvel[3 * i + 1] = w.y; angvel[3 * i + 2] = w.z;
+    }
+    this.pos = pos;
+    this.quat = quat;
+  }
+
+  // The rows of the step just taken: each manifold's SOLVER contacts (the points the solver used
+  // this step; a tracked point it skipped keeps the impulse of the last step that solved it),
+  // each matched to its tracked point for the impulse; depth and point from the tracked local
+  // points at the detection pose (the pre-step state: contactDist stays frozen while Rapier
+  // reuses a manifold).
+  contacts(prePos, preQuat) {
+    const rows = [];
+    const world = this.world, np = world.narrowPhase;
+    const pose = (P, Q, i) => [[P[3 * i], P[3 * i + 1], P[3 * i + 2]], [Q[4 * i], Q[4 * i + 1], Q[4 * i + 2], Q[4 * i + 3]]];
+    for (let i = 0; i < this.n; ++i) {
+      const ci = this.colliders[i];
+      np.contactPairsWith(ci.handle, (h2) => {
+        const j = this.indexOfCollider.get(h2);
+        if (j === undefined || j <= i) return;
+        world.contactPair(ci, this.colliders[j], (m, flipped) => {
+          const ns = m.numSolverContacts();
+          if (ns === 0) return;
+          const s1 = flipped ? j : i, s2 = flipped ? i : j;  // the bodies of m's shape 1 and 2
+          const [x1, q1] = pose(prePos, preQuat, s1), [x2, q2] = pose(prePos, preQuat, s2);
+          const [y1, r1] = pose(this.pos, this.quat, s1), [y2, r2] = pose(this.pos, this.quat, s2);
+          const ln = m.localNormal1();
+          const n1 = rotate(q1, [ln.x, ln.y, ln.z]);  // from shape 1 to shape 2, detection pose
+          const nt = m.numContacts();
+          const tracked = [];
+          for (let k = 0; k < nt; ++k) {
+            const a = m.localContactPoint1(k), b = m.localContactPoint2(k);
+            const la = [a.x, a.y, a.z], lb = [b.x, b.y, b.z];
+            const cur1 = toWorld(y1, r1, la), cur2 = toWorld(y2, r2, lb);
+            tracked.push({ k, la, lb, mid: [(cur1[0] + cur2[0]) / 2, (cur1[1] + cur2[1]) / 2, (cur1[2] + cur2[2]) / 2] });
+          }
+          const used = new Set();
+          for (let s = 0; s < ns; ++s) {
+            const sp = m.solverContactPoint(s);
+            const spv = [sp.x, sp.y, sp.z];
+            let best = -1, bestD = Infinity;
+            for (const t of tracked) {
+              if (used.has(t.k)) continue;
+              const d = Math.hypot(...sub(t.mid, spv));
+              if (d < bestD) { bestD = d; best = t.k; }
+            }
+            if (best < 0) throw new Error(`pair (${i}, ${j}): solver contact ${s} has no tracked point`);
+            used.add(best);
+            this.matchWorst = Math.max(this.matchWorst, bestD);
+            const t = tracked[best];
+            const w1 = toWorld(x1, q1, t.la), w2 = toWorld(x2, q2, t.lb);
+            const dist = dot(sub(w2, w1), n1);
+            // octocd's normal points from B (the larger index) to A: +n1 when shape 1 is B.
+            const sign = s1 === j ? 1 : -1;
+            if (m.contactTangentImpulseX(best) !== 0 || m.contactTangentImpulseY(best) !== 0) this.tangentSeen += 1;
+            const jn = m.contactImpulse(best);
+            // A solver contact of a recycled manifold that lies beyond the prediction distance and
+            // carried no impulse is no contact (Rapier keeps them while a separating pair's manifold
+            // is reused): not a row, counted.
+            if (jn === 0 && dist > this.prediction) { this.staleDropped += 1; continue; }
+            rows.push({ a: i, b: j, n: [sign * n1[0], sign * n1[1], sign * n1[2]],
+                        p: [(w1[0] + w2[0]) / 2, (w1[1] + w2[1]) / 2, (w1[2] + w2[2]) / 2],
+                        depth: Math.max(0, -dist), jn, jt: 0 });
+          }
+        });
+      });
+    }
+    return rows;
+  }
+
+  endAttrs() {
+    return { rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
+             rapier_solver_match_worst_m: f64(this.matchWorst) };
+  }
+
+  free() { this.world.free(); }
+}
+
+await main(engine);
