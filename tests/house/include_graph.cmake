@@ -68,11 +68,6 @@ function(resolve out from text)
   set(${out} "" PARENT_SCOPE)
 endfunction()
 
-# Calls waived, as UNIT:NAME, each with its reason. core/src/broadphase.cpp holds both the
-# factory that makes every CPU broadphase and helpers that those broadphases call back:
-# the broadphase registry (ARCHITECTURE revision 6, "One table per identity") parts them.
-set(_waived core/broadphase:sort_pairs core/broadphase:auto_octree_depth)
-
 # Pass 1: each file's resolved includes (_inc_<id>), the free functions each header declares
 # (_decl_<id>), the names each file calls (_calls_<id>_<NAME>), the room graph and the rule
 # that the judges include nothing of the harness.
@@ -188,8 +183,7 @@ foreach(f IN LISTS _files)
         continue()  # this unit defines it too (an alternative: cuda_world.cpp and cuda_stub.cpp)
       endif()
       foreach(v IN LISTS _def_${idh}_${name})
-        list(FIND _waived "${v}:${name}" waived)
-        if(waived EQUAL -1)
+        if(NOT v STREQUAL uf)
           string(MAKE_C_IDENTIFIER "${v}" idv)
           list(APPEND _out_${idu} "${v}")
           if(NOT DEFINED _why_${idu}_${idv})
