@@ -53,6 +53,13 @@ std::pair<int, int> parse_shard(const std::string& text) {
   return {i, n};
 }
 
+/// --history: the finished result added to the history folder (cli/history.cpp).
+void add_to_history(const BenchOptions& o, const json& result) {
+  if (o.history.empty()) return;
+  const std::string path = append_history(o.history, "bench", json::array({result}), json::array(), "--history");
+  if (!o.quiet) fmt::print(stderr, "bench: added the result to the history: {}\n", path);
+}
+
 std::string default_scene_dir() { return (fs::path(shared_dir()) / "datasets" / "scenes").string(); }
 
 }  // namespace
@@ -118,6 +125,9 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
                 "beside it)");
   c->add_option("--trace-dir", o.trace_dir,
                 "Also write the first repetition of every steps point as a trace (.h5) into this folder");
+  c->add_option("--history", o.history,
+                "Also add the finished result to this history folder (a new file DATE-COMMIT-bench.json, never one "
+                "rewritten; `octocd report --history DIR` draws it: docs/regression.md)");
   return c;
 }
 
@@ -126,6 +136,7 @@ int bench_command(const BenchOptions& o) {
   if (!o.output.empty()) check_output_file(o.output, "-o", true);
   if (!o.csv.empty()) check_output_file(o.csv, "--csv", true);
   if (!o.trace_dir.empty()) check_output_folder(o.trace_dir, "--trace-dir", false);
+  if (!o.history.empty()) check_output_folder(o.history, "--history", true);
   check_engine_settings(o.settings, cli_argument_names());  // bad items are input errors before any point runs
   const std::vector<std::string> named = named_sweeps();
   if (o.list) {
@@ -224,6 +235,10 @@ int bench_command(const BenchOptions& o) {
                                    origin));
     if (!o.trace_dir.empty())
       throw InputError(fmt::format("--trace-dir: {} is of kind speed-accuracy; allowed: only for steps sweeps", origin));
+    if (!o.history.empty())
+      throw InputError(fmt::format("--history: {} is of kind speed-accuracy; allowed: steps, broadphase and "
+                                   "max-instances sweeps",
+                                   origin));
     const auto [shard, shards] = parse_shard(o.shard);
     check_scenes();
     return run_speed_accuracy(s, origin, def, o, shard, shards, !o.engines.empty());
@@ -374,6 +389,7 @@ int bench_command(const BenchOptions& o) {
                                    first.value("engine", "?"), first.value("reason", "?"), o.output));
     }
     if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", s.name, o.output);
+    add_to_history(o, result);
     const bool failed = run.any_failed || std::any_of(result["searches"].begin(), result["searches"].end(),
                                                       [](const json& x) { return x.value("status", "") == "failed"; });
     return failed ? 1 : 0;
@@ -493,6 +509,7 @@ int bench_command(const BenchOptions& o) {
                                  first.value("reason", "?"), o.output));
   }
   if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", s.name, o.output);
+  add_to_history(o, result);
   return any_failed ? 1 : 0;
 }
 

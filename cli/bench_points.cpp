@@ -162,7 +162,9 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   const int total = s.frames;
   // Engines that step on the host: their steps per process CPU second are a figure too (the
   // gate's, on a shared machine). A device engine's CPU time would miss its kernels.
-  const bool host_engine = !octocd::engine_info(p.engine, "engines").device;
+  // (Not a process engine: its steps run in another process, whose CPU time this one's is not.)
+  const EngineInfo& stepping = octocd::engine_info(p.engine, "engines");
+  const bool host_engine = !stepping.device && stepping.command.empty();
   std::vector<std::vector<WindowSums>> sums(s.windows.size());  // [window][rep]
   const int buckets = s.series_every > 0 ? (total + s.series_every - 1) / s.series_every : 0;
   std::vector<std::vector<WindowSums>> series(static_cast<std::size_t>(buckets));  // [bucket][rep]

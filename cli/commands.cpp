@@ -52,6 +52,7 @@ std::vector<Command> add_commands(CLI::App& app) {
   commands.push_back(command<CompareOptions>(app, &add_compare_command, &compare_command));
   commands.push_back(command<ReportOptions>(app, &add_report_command, &report_command));
   commands.push_back(command<TraceSummaryOptions>(app, &add_trace_summary_command, &trace_summary_command));
+  commands.push_back(command<HistoryAppendOptions>(app, &add_history_append_command, &history_append_command));
   const auto view = std::make_shared<ViewCommand>(app);
   commands.push_back({[view] { return view->selected(); }, [view] { return view->run(); }});
   commands.push_back(add_engines_command(app));

@@ -4,10 +4,13 @@
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
 #include "command.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
+#include "octocd/process_engines.hpp"
+#include "octocd/text.hpp"
 
 namespace octocd::cli {
 
@@ -16,7 +19,14 @@ namespace {
 /// Options of `octocd engines`.
 struct EnginesOptions {
   bool available = false;  ///< --available: only the names of the engines that run here
+  bool json = false;       ///< --json: the registry as JSON on stdout
 };
+
+std::string join(const std::vector<std::string>& v, const char* sep = ", ") {
+  std::string s;
+  for (const std::string& x : v) s += (s.empty() ? "" : sep) + x;
+  return s;
+}
 
 /// What the engine `e` can do, in words, for the table.
 std::string capabilities(const EngineInfo& e) {
@@ -24,18 +34,57 @@ std::string capabilities(const EngineInfo& e) {
   s += e.has_midphase ? ", octree midphase" : "";
   s += e.uses_scene_broadphase ? ", the scene's broadphase" : ", broadphase " + e.own_broadphase;
   s += e.records_every_step ? ", judged in process" : ", judged through its trace";
+  s += ", geometry " + join(e.geometries);
+  const std::vector<std::string> keys = engine_setting_names(e);
+  if (!keys.empty()) s += ", settings " + join(keys);
   return s;
 }
 
+/// The registry as JSON: one object per engine (docs/cli.md, "engines").
+int engines_json() {
+  nlohmann::ordered_json list = nlohmann::ordered_json::array();
+  for (const EngineInfo& e : engine_infos()) {
+    const std::string why = engine_unavailable(e);
+    nlohmann::ordered_json j;
+    j["name"] = e.name;
+    j["kind"] = e.command.empty() ? "builtin" : "process";
+    j["available"] = why.empty();
+    j["why"] = utf8_replaced(why);
+    j["rotates"] = e.rotates;
+    j["geometries"] = e.geometries;
+    j["settings"] = engine_setting_names(e);
+    j["description"] = e.description;
+    if (!e.own_broadphase.empty()) {
+      j["own_broadphase"] = e.own_broadphase;
+      j["own_broadphase_class"] = e.own_broadphase_class;
+    }
+    if (!e.command.empty()) {
+      j["command"] = e.command;
+      if (const ProcessEngineSpec* p = find_process_engine(e.name)) j["engines_file"] = p->file;
+    }
+    list.push_back(std::move(j));
+  }
+  nlohmann::ordered_json doc;
+  doc["engines"] = std::move(list);
+  doc["engines_files"] = engines_files_read();
+  fmt::print("{}\n", doc.dump(2));
+  return 0;
+}
+
 int engines_command(const EnginesOptions& o) {
+  if (o.json) return engines_json();
   for (const EngineInfo& e : engine_infos()) {
     const std::string why = engine_unavailable(e);
     if (o.available) {
       if (why.empty()) fmt::print("{}\n", e.name);
       continue;
     }
-    fmt::print("{:<8} {}\n", e.name, why.empty() ? "available" : "unavailable: " + why);
-    fmt::print("         {}\n         {}\n", e.description, capabilities(e));
+    fmt::print("{:<8} {}\n", e.name, printable(why.empty() ? "available" : "unavailable: " + why));
+    fmt::print("         {}\n         {}\n", printable(e.description), capabilities(e));
+    if (!e.command.empty()) {
+      const ProcessEngineSpec* p = find_process_engine(e.name);
+      fmt::print("         a process engine: {} (from {})\n", printable(join(e.command, " ")), p ? printable(p->file) : "");
+    }
   }
   return 0;
 }
@@ -45,9 +94,14 @@ int engines_command(const EnginesOptions& o) {
 Command add_engines_command(CLI::App& app) {
   const auto options = std::make_shared<EnginesOptions>();
   CLI::App* cmd = app.add_subcommand(
-      "engines", "List the engines of this octocd: available here, or unavailable with the reason (not built, no "
-                 "device), and what each can do (docs/engines.md)");
+      "engines", "List the engines of this octocd (built in, and the process engines of the engines files: "
+                 "docs/bring-your-engine.md): available here, or unavailable with the reason (not built, no device, "
+                 "its command or runtime missing), and what each can do (docs/engines.md)");
   cmd->add_flag("--available", options->available, "Print only the names of the engines that run here, one a line");
+  cmd->add_flag("--json", options->json,
+                "Print the registry as JSON: per engine name, kind (builtin or process), available, why, rotates, "
+                "geometries, settings, description, own_broadphase and its class where it runs its own (a process "
+                "engine also: command, engines_file), and the engines files read");
   return {[cmd] { return cmd->parsed(); }, [options] { return engines_command(*options); }};
 }
 

@@ -4,6 +4,7 @@
 #include <signal.h>
 
 #include <cstdio>
+#include <cstring>
 #include <new>
 #include <string>
 #include <vector>
@@ -12,6 +13,7 @@
 
 #include "commands.hpp"
 #include "octocd/error.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/text.hpp"
 #include "octocd/version.hpp"
 
@@ -31,7 +33,32 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("octocd ") + octocd::build_id());
   app.require_subcommand(1);
 
-  const std::vector<octocd::cli::Command> commands = octocd::cli::add_commands(app);
+  // --engines-file FILE (before the command): the registry, which the commands' help texts
+  // and name checks read, includes its process engines, so it is read before they are
+  // registered; a bad engines file is bad input (exit 2).
+  std::string engines_file;
+  for (int i = 1; i < argc && argv[i][0] == '-'; ++i) {
+    if (std::strcmp(argv[i], "--engines-file") == 0 && i + 1 < argc) engines_file = argv[++i];
+    else if (std::strncmp(argv[i], "--engines-file=", 15) == 0) engines_file = argv[i] + 15;
+  }
+  try {
+    octocd::set_engines_file(engines_file);
+    (void)octocd::engine_infos();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "octocd: error: %s\n", octocd::printable(e.what()).c_str());
+    return 2;
+  }
+  app.add_option("--engines-file", engines_file,
+                 "An engines file of process engines (docs/bring-your-engine.md)");
+  std::vector<octocd::cli::Command> commands;
+  try {
+    commands = octocd::cli::add_commands(app);
+  } catch (const CLI::ConstructionError& e) {
+    // A process engine's settings option --NAME that another option of a command has.
+    std::fprintf(stderr, "octocd: error: the engines files: %s; allowed: a process engine name that is no option of "
+                 "octocd (its settings option is --NAME)\n", octocd::printable(e.what()).c_str());
+    return 2;
+  }
 
 
   try {

@@ -16,6 +16,7 @@
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/trace_reader.hpp"
 #include "octocd/world.hpp"
+#include "command_support.hpp"
 #include "tools.hpp"
 
 namespace octocd::cli {
@@ -383,8 +384,15 @@ CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o) {
   c->add_option("--broadphase", o.broadphases,
                 "Comma-separated broadphases; the first is the reference the others must equal. Names: " + names)
       ->required();
-  c->add_option("--engine", o.engine, "cpu (octocd's and the Bullet/FCL broadphases) or cuda (the device's)")
-      ->check(CLI::IsMember({"cpu", "cuda"}))
+  // The engines that run the scene's broadphase take a recorded state (Engine::set_state).
+  std::vector<std::string> replaying;
+  for (const EngineInfo& e : engine_infos())
+    if (e.uses_scene_broadphase) replaying.push_back(e.name);
+  c->add_option("--engine", o.engine,
+                "An engine that runs the scene's broadphase: " +
+                    engines_with([](const EngineInfo& e) { return e.uses_scene_broadphase; }) +
+                    " (cpu: octocd's and the Bullet/FCL broadphases; cuda: the device's)")
+      ->check(CLI::IsMember(replaying))
       ->default_val("cpu");
   c->add_option("--repeat", o.repeat, "Timed passes over the frames (>= 1); the median and spread are shown")
       ->check(CLI::PositiveNumber)

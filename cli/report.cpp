@@ -175,7 +175,7 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
       "matplotlib), 2 bad input (one line naming the file and key, never a traceback; too few repetitions to "
       "decide), 4 the gate fails: a slowdown against --baseline, or a point of the baseline missing, failed or "
       "unmeasured in the new run");
-  c->add_option("inputs", o.inputs, "Result files of `octocd bench` (.json) and traces (.h5)")->required();
+  c->add_option("inputs", o.inputs, "Result files of `octocd bench` (.json) and traces (.h5); none with --history");
   c->add_option("-o,--output", o.output, "Output folder (created)")->required();
   c->add_option("--title", o.title, "Title of the report");
   c->add_option("--baseline", o.baseline,
@@ -194,12 +194,24 @@ CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
                 "(5 a side: p >= 1/252 = 0.00397), else exit 2 naming the repetitions needed")
       ->check(CLI::Range(1e-6, 0.25));
   c->add_option("--timing", o.timing,
-                "The gate's figure: cpu (steps per process CPU second, recorded for host engines: another process's "
+                "The gate's figure (and --history's): cpu (steps per process CPU second, recorded for host engines: another process's "
                 "load on a shared machine hardly moves it), wall (wall-clock steps/s), or auto (default: cpu where "
                 "both runs have it, else wall)")
       ->check(CLI::IsMember({"auto", "cpu", "wall"}));
   c->add_flag("--across-machines", o.across_machines,
               "Gate runs of two machines (without it a baseline of another host or CPU is exit 2)");
+  c->add_option("--history", o.history,
+                "Draw a history folder instead (docs/regression.md; written by `bench --history`, `scripts/nightly.sh "
+                "--history`, `history-append`): per machine, steps/s of every point over commits (median and "
+                "min-max of the repetitions; --timing picks the figure, a CPU figure's window named WINDOW (cpu)) with the "
+                "change points a rank test finds, the engine matrix's verdicts "
+                "(pass, expected, new, fixed) per engine x scene x row against night, and the night each current "
+                "failure appeared; OUT/index.html (PNG plots inline) and OUT/*.csv. A damaged or foreign file in DIR "
+                "is named and skipped");
+  c->add_option("--change-level", o.change_level,
+                "--history: the change-point test's level, family-wise over the series of one machine (default 0.05; "
+                "each series is tested at level / series)")
+      ->check(CLI::Range(1e-9, 0.5));
   c->add_option("--csv", o.csv,
                 "Also write the data as CSV into this folder: per sweep one row per point, window and repetition plus "
                 "a summary row per point (numbers only, units in the header); gate.csv with --baseline");
@@ -211,6 +223,19 @@ int report_command(const ReportOptions& o) {
   for (const auto& in : o.baseline)
     check_input(in, "a result file of `octocd bench` (.json) for --baseline");
   for (const auto& in : o.inputs) check_input(in, "result files of `octocd bench` (.json) and traces (.h5)");
+  if (o.history.empty() && o.inputs.empty())
+    throw InputError("report: no inputs; allowed: result files of `octocd bench` (.json) and traces (.h5), or "
+                     "--history DIR");
+  if (!o.history.empty() && (!o.inputs.empty() || !o.baseline.empty()))
+    throw InputError(fmt::format("--history {}: with inputs or --baseline; allowed: --history DIR alone (its files "
+                                 "are the inputs)",
+                                 o.history));
+  if (!o.history.empty()) {
+    struct stat st {};
+    if (::stat(o.history.c_str(), &st) != 0 || !S_ISDIR(st.st_mode))
+      throw InputError(fmt::format("--history: {}: not a folder; allowed: a history folder (docs/regression.md)",
+                                   o.history));
+  }
   check_output_folder(o.output, "-o", true);
   if (!o.csv.empty()) check_output_folder(o.csv, "--csv", true);
   const std::string py = python(), sc = script();
@@ -237,6 +262,12 @@ int report_command(const ReportOptions& o) {
   if (!o.csv.empty()) {
     args.push_back("--csv");
     args.push_back(o.csv);
+  }
+  if (!o.history.empty()) {
+    args.push_back("--history");
+    args.push_back(o.history);
+    args.push_back("--change-level");
+    args.push_back(fmt::format("{}", o.change_level));
   }
   args.push_back("--octocd");
   args.push_back(self_path());

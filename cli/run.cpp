@@ -40,6 +40,7 @@
 #include "octocd/world.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engines.hpp"
+#include "octocd/process_engines.hpp"
 #include "command.hpp"
 #include "command_support.hpp"
 #include "tools.hpp"
@@ -300,7 +301,8 @@ int run_command(const RunOptions& o) {
   totals.model_s = std::chrono::duration<double>(t_model - t_setup).count();
   totals.engine_s = std::chrono::duration<double>(Clock::now() - t_model).count();
   std::unique_ptr<octocd::TraceWriter> trace;
-  if (!o.trace.empty()) {
+  // An engine that writes its own trace (a process engine) gives it whole after the loop.
+  if (!o.trace.empty() && !world.writes_own_trace()) {
     octocd::TraceOptions topt;
     topt.state_every = o.state_every;
     topt.flush_interval_s = octocd::cli::kTraceFlushIntervalS;
@@ -345,6 +347,10 @@ int run_command(const RunOptions& o) {
     throw;
   }
   std::string xdmf;
+  if (!o.trace.empty() && world.writes_own_trace() && octocd::stop_signal() == 0) {
+    octocd::copy_own_trace(world, o.trace, "--trace");
+    xdmf = write_sidecar(o.trace, o.no_xdmf);
+  }
   if (trace) {
     trace->close();
     // A stopped run has a second: the sidecar re-reads the whole trace (the hardened

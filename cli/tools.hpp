@@ -188,6 +188,7 @@ struct BenchOptions {
   std::string trace_dir;          ///< write one trace per steps point here
   EngineSettingItems settings;  ///< --ENGINE KEY=VALUE items by engine (add_engine_settings_options)
   std::string csv;                ///< speed-accuracy: the CSV file (default RESULT.csv beside -o)
+  std::string history;            ///< --history DIR: add the finished result to this history folder (cli/history.cpp)
 };
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o);
 int bench_command(const BenchOptions& o);
@@ -250,9 +251,43 @@ struct ReportOptions {
   bool across_machines = false;       ///< --across-machines: gate runs of two machines
   std::string timing = "auto";        ///< --timing: the gate's figure, auto, cpu or wall
   std::string csv;                    ///< --csv DIR: the data as CSV (docs/bench-format.md)
+  std::string history;                ///< --history DIR: draw a history folder (docs/regression.md)
+  double change_level = 0.05;         ///< --change-level: family-wise level of the change-point test
 };
 CLI::App* add_report_command(CLI::App& app, ReportOptions& o);
 int report_command(const ReportOptions& o);
+
+/// `octocd history-append` options (cli/history.cpp; docs/regression.md).
+struct HistoryAppendOptions {
+  std::string dir;                      ///< the history folder
+  std::vector<std::string> bench;       ///< --bench: results of `octocd bench`
+  std::vector<std::string> validation;  ///< --validation: verdicts of `octocd validate --json`
+  std::vector<std::string> errored;     ///< --errored: cases without a verdict (SCENE or ENGINE--SCENE)
+  std::string kind = "nightly";         ///< --kind: nightly or bench
+};
+CLI::App* add_history_append_command(CLI::App& app, HistoryAppendOptions& o);
+int history_append_command(const HistoryAppendOptions& o);
+
+/// The build as a history file records it: build_description() plus "version" and
+/// "commit" (build_id()'s parts before and after its '+').
+nlohmann::json history_build();
+
+/// The rows of a verdict of `octocd validate --json` at `path` (read by octocd's strict
+/// reader) as history rows: {"engine", "scene", "row", "tier", "verdict" (pass, fail, n/a,
+/// expected), "status" (pass, expected, new, fixed, n/a), "expectations" [the row's
+/// outcomes: outcome, cause, worst, allowed, reason (cut to 2000 bytes)]}. A matrix trace
+/// ENGINE--SCENE[--quick].h5 gives the engine and scene. InputError naming the file and field.
+nlohmann::json history_verdicts(const std::string& path);
+
+/// Adds one run to the history folder `dir` (created; check_output_folder): the file
+/// DIR/YYYYMMDDTHHMMSSZ-COMMIT-KIND.json {"format": "octocd-history", "version": 1, "kind",
+/// "date", "build" (history_build), "machine" (machine_description), "bench" [results],
+/// "verdicts" [history_verdicts rows]}, written to a temporary file beside it, fsynced and
+/// hard-linked to its name, which is never an existing file (a name taken gets -2, -3,
+/// ...). Returns the path written. RuntimeError naming `label` and the path when writing
+/// fails (the folder is then left as it was).
+std::string append_history(const std::string& dir, const std::string& kind, nlohmann::json bench,
+                           nlohmann::json verdicts, const std::string& label);
 
 /// `octocd trace-summary` options (cli/report.cpp).
 struct TraceSummaryOptions {

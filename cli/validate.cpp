@@ -46,6 +46,7 @@
 #include "octocd/world.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engines.hpp"
+#include "octocd/process_engines.hpp"
 #include "command.hpp"
 #include "command_support.hpp"
 #include "tools.hpp"
@@ -400,29 +401,43 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
                            const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
   namespace fs = std::filesystem;
   const bool temporary = o.trace.empty();
-  const std::string path = temporary ? octocd::cli::temporary_trace("validate-" + o.engine) : o.trace;
+  // A temporary trace is made once the engine has stepped: a process engine stopped by a
+  // signal ends octocd at once (process_engines.hpp), with nothing of its own left.
+  std::string path = o.trace;
   const std::string what = o.engine + (octocd::scene_rotates(model->scene) ? " (rotation)" : " (translation only)");
   std::string geometry;
-  {
+  try {
     const std::unique_ptr<octocd::Engine> engine =
         make_engine(o.engine, model, o.settings);
     octocd::Engine& world = *engine;
     geometry = world.collision_geometry();
-    octocd::TraceOptions topt;
-    topt.state_every = 1;
-    topt.contacts = true;
-    topt.v2 = *world.rotation_traits();
-    topt.gravity = model->scene.gravity;
-    world.set_recording(true);
-    octocd::TraceMetadata meta = octocd::trace_metadata(world, 1);
-    meta.start_time = octocd::cli::utc_time_now();
-    octocd::TraceWriter trace(path, meta, octocd::trace_bodies(world), topt);
-    trace.append_state(0, world.state());
-    for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
-      const octocd::FrameMetrics& m = world.step();
-      trace.append_frame_v2(m, world.state(), world.record());
+    if (world.writes_own_trace()) {  // a process engine: its own trace is judged, as written
+      world.plan_steps(o.frames);
+      world.step();  // its process runs every frame; the trace is checked against the request
+      if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
+      octocd::copy_own_trace(world, path, temporary ? "validate" : "--trace");
+    } else {
+      if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
+      octocd::TraceOptions topt;
+      topt.state_every = 1;
+      topt.contacts = true;
+      topt.v2 = *world.rotation_traits();
+      topt.gravity = model->scene.gravity;
+      world.set_recording(true);
+      octocd::TraceMetadata meta = octocd::trace_metadata(world, 1);
+      meta.start_time = octocd::cli::utc_time_now();
+      octocd::TraceWriter trace(path, meta, octocd::trace_bodies(world), topt);
+      trace.append_state(0, world.state());
+      for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
+        const octocd::FrameMetrics& m = world.step();
+        trace.append_frame_v2(m, world.state(), world.record());
+      }
+      trace.close();
     }
-    trace.close();
+  } catch (...) {  // the engine failed: its temporary trace goes (a --trace keeps the frames written)
+    std::error_code ec;
+    if (temporary && !path.empty()) fs::remove(path, ec);
+    throw;
   }
   octocd::ExternalOptions eo;
   eo.against_fcl = vo.against_fcl;
@@ -668,8 +683,8 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
     if (!make_engine(o.engine, model, o.settings)->can_record())
       throw octocd::InputError(fmt::format(
           "--engine: {} with boxes equal to the AABBs and no rotation cannot be validated (no per-frame record); "
-          "allowed: cpu, cuda, or {} with --bullet shape=hull (the default) or --rotation",
-          o.engine, o.engine));
+          "allowed: {}, or {} with --bullet shape=hull (the default) or --rotation",
+          o.engine, engines_with([](const EngineInfo& e) { return e.records_every_step; }), o.engine));
     return validate_through_trace(o, vo, model, t0);
   }
   std::unique_ptr<octocd::TraceWriter> trace;
@@ -791,8 +806,10 @@ Command add_validate_command(CLI::App& app) {
       ->default_val(10);
   val_cmd->add_option("--engine", val.engine,
                       engines_help() +
-                          ". An engine that records every step (cpu, cuda) is judged in process, the others "
-                          "through their version 2 trace (--trace keeps it). Default: cpu, or the first engine "
+                          ". An engine that records every step (" +
+                          engines_with([](const EngineInfo& e) { return e.records_every_step; }) +
+                          ") is judged in process, the others through their version 2 trace (--trace keeps it; a "
+                          "process engine's own trace, docs/bring-your-engine.md). Default: cpu, or the first engine "
                           "that rotates for a rotating scene (rotation: true, an orientation or an angular velocity)")
       ->check(CLI::IsMember(octocd::engine_names()))
       ->default_val("cpu");

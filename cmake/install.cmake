@@ -77,3 +77,20 @@ install(DIRECTORY ${CMAKE_SOURCE_DIR}/bench/sweeps DESTINATION ${_octocd_share}/
 file(GLOB _octocd_report_py CONFIGURE_DEPENDS ${CMAKE_SOURCE_DIR}/report/report_*.py)
 install(FILES ${CMAKE_SOURCE_DIR}/report/make_report.py ${_octocd_report_py} ${CMAKE_SOURCE_DIR}/report/paper_tables.json
   DESTINATION ${_octocd_share}/report COMPONENT runtime)
+# The shipped process engines (docs/bring-your-engine.md): PREFIX/share/octocd/engines.json
+# naming the JavaScript engines installed beside it in reference/ (their npm packages are
+# installed there with `npm ci --prefix PREFIX/share/octocd/reference`; until then `octocd
+# engines` shows them unavailable with the reason). The build tree's own engines file
+# (engines/CMakeLists.txt) points into the source tree instead.
+set(OCTOCD_ENGINES_RAPIER_JS reference/rapier/rapier_engine.js)
+set(OCTOCD_ENGINES_JOLT_JS reference/jolt/jolt_engine.js)
+configure_file(${CMAKE_SOURCE_DIR}/reference/engines.json.in ${CMAKE_BINARY_DIR}/install-share/engines.json @ONLY)
+install(FILES ${CMAKE_BINARY_DIR}/install-share/engines.json DESTINATION ${_octocd_share} COMPONENT runtime)
+install(FILES ${CMAKE_SOURCE_DIR}/reference/package.json ${CMAKE_SOURCE_DIR}/reference/package-lock.json
+  DESTINATION ${_octocd_share}/reference COMPONENT runtime OPTIONAL)
+foreach(_octocd_js_engine rapier jolt js-common)
+  file(GLOB _octocd_js CONFIGURE_DEPENDS ${CMAKE_SOURCE_DIR}/reference/${_octocd_js_engine}/*.js)
+  if(_octocd_js)
+    install(FILES ${_octocd_js} DESTINATION ${_octocd_share}/reference/${_octocd_js_engine} COMPONENT runtime)
+  endif()
+endforeach()

@@ -27,7 +27,9 @@ with the modules beside it): the command line, the sweep sections by name (SECTI
 exit codes. The parts are modules beside it: report_common.py (the one-line error, numbers,
 load marks), report_data.py (results and trace summaries in), report_html.py (the document,
 HTML and Markdown, written atomically), report_plots.py, report_tables.py (the sweep
-sections), report_traces.py, report_gate.py (the performance gate) and report_csv.py.
+sections), report_traces.py, report_gate.py (the performance gate), report_csv.py and
+report_history.py (`--history DIR`: a history folder of nightly runs over commits on one
+page, with change points and the verdicts over time; docs/regression.md).
 """
 import argparse
 import datetime
@@ -45,7 +47,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the report_*.p
 from report_common import CURRENT, NOISE_NOTE, OCTOCD, PAPER, fail, load_warning, np, plt  # noqa: E402,F401
 from report_data import LOADED, check_points, load, merge, read_trace  # noqa: E402,F401
 from report_html import Doc, output_dir  # noqa: E402
-from report_plots import OWN_BROADPHASE_CLASS  # noqa: E402,F401
+from report_plots import OWN_BROADPHASE_CLASS, read_registry_broadphases  # noqa: E402,F401
 from report_csv import file_slug, sweep_csv  # noqa: E402
 from report_gate import GATE_MIN_REPS, LEVEL_RANGE, gate_summary, reps_needed, section_gate  # noqa: E402
 import report_speed_accuracy as RSA  # noqa: E402  (sweeps of kind speed-accuracy, design.md section 15)
@@ -75,7 +77,7 @@ SECTIONS = {"table5": ("Table 5: midphase configurations A, B, C", section_table
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("-o", "--output", required=True)
-    ap.add_argument("--title", default="octocd benchmark report")
+    ap.add_argument("--title", default=None)
     ap.add_argument("--baseline", action="append", default=[], help="baseline result file(s) (shards merged)")
     ap.add_argument("--threshold", type=float, default=10.0, help="slowdown in %% that fails the gate")
     ap.add_argument("--level", type=float, default=0.05, help="the gate's significance level")
@@ -86,9 +88,31 @@ def main():
     ap.add_argument("--csv", help="write the data as CSV into this folder")
     ap.add_argument("--octocd", default=shutil.which("octocd"),
                     help="the octocd binary whose `trace-summary` reads traces (default: octocd on PATH)")
-    ap.add_argument("inputs", nargs="+")
+    ap.add_argument("--history", help="draw this history folder (report/report_history.py, docs/regression.md)")
+    ap.add_argument("--change-level", type=float, default=0.05,
+                    help="--history: the change-point test's family-wise level per machine")
+    ap.add_argument("inputs", nargs="*")
     a = ap.parse_args()
     OCTOCD[0] = a.octocd
+    if a.history:
+        if a.inputs or a.baseline:
+            fail(f"--history {a.history}: with inputs or --baseline; allowed: --history DIR alone")
+        if not (1e-9 <= a.change_level <= 0.5):
+            fail(f"--change-level: {a.change_level}; allowed: a level in [1e-9, 0.5]")
+        if not os.path.isdir(a.history):
+            fail(f"--history {a.history}: not a folder; allowed: a history folder (docs/regression.md)")
+        output_dir(a.output, "-o")
+        if a.csv:
+            output_dir(a.csv, "--csv")
+        import report_history
+        report_history.run(a.history, a.output, a.change_level, a.title, csv_dir=a.csv, timing=a.timing)
+        return
+    if not a.inputs:
+        fail("no inputs; allowed: result files of octocd bench (.json) and traces (.h5), or --history DIR")
+    a.title = a.title or "octocd benchmark report"
+    OCTOCD[0] = a.octocd
+    if a.octocd:
+        read_registry_broadphases(a.octocd)  # the registry's own broadphases, process engines' too
     LOADED.clear()  # each file read and checked once per report
     output_dir(a.output, "-o")
     if a.csv:

@@ -73,7 +73,7 @@ def field_path(parts):
     return out
 
 
-def _walk(path, v, parts, surrogates):
+def _walk(path, v, parts, surrogates, fail=fail):
     """Checks every value of a result, naming its field: nesting within MAX_DEPTH, integers
     within int64/uint64, strings within MAX_TEXT characters and valid Unicode (no lone
     surrogate written as \\ud800: no UTF-8 file can hold one)."""
@@ -88,7 +88,7 @@ def _walk(path, v, parts, surrogates):
             if t is dict and (len(k) > MAX_TEXT or (surrogates and _has_surrogate(k))):
                 fail(f"{path}: {field_path(parts[:-1])}: a key of {len(k)} characters or not valid Unicode; allowed: "
                      f"keys of at most {MAX_TEXT} characters")
-            _walk(path, x, parts, surrogates)
+            _walk(path, x, parts, surrogates, fail)
             parts.pop()
     elif t is str:
         if len(v) > MAX_TEXT:
@@ -109,10 +109,11 @@ def _has_surrogate(text):
     return any("\ud800" <= c <= "\udfff" for c in text)
 
 
-def _parse(path, raw):
+def _parse(path, raw, fail=fail):
     """The JSON of a result file (bytes), parsed as octocd's strict reader parses: UTF-8, no
     key twice in one object, at most MAX_DEPTH levels, integers within 64 bits; every
-    refusal exit 2 naming the file (and the field where there is one)."""
+    refusal exit 2 naming the file (and the field where there is one), or `fail(message)`
+    when given (the history reader's: it raises, and the file is skipped)."""
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -130,7 +131,7 @@ def _parse(path, raw):
     except (json.JSONDecodeError, ValueError) as e:
         fail(f"{path}: neither an HDF5 trace nor JSON ({e}); allowed: octocd-bench results (.json), "
              "octocd-trace files (.h5)")
-    _walk(path, j, [], SURROGATE_ESCAPE.search(text) is not None)
+    _walk(path, j, [], SURROGATE_ESCAPE.search(text) is not None, fail)
     return j
 
 

@@ -35,6 +35,30 @@ OWN_BROADPHASE_CLASS = {"bullet-dbvt": "btDbvtBroadphase", "mujoco-sap": "MuJoCo
                         "ode-hash": "dHashSpace", "dart-fcl": "FCL's dynamic AABB tree in DART's FCLCollisionGroup"}
 
 
+# The registry's own broadphases as `octocd engines --json` gives them (process engines
+# included: docs/bring-your-engine.md), read by read_registry_broadphases.
+REGISTRY_BROADPHASE_CLASS = {}
+
+
+def broadphase_class(eb, default):
+    """The class name of the own broadphase `eb`: the registry's, else the built-in mirror's, else `default`."""
+    return REGISTRY_BROADPHASE_CLASS.get(eb) or OWN_BROADPHASE_CLASS.get(eb, default)
+
+
+def read_registry_broadphases(octocd):
+    """Fills REGISTRY_BROADPHASE_CLASS from `octocd engines --json`; left empty (the built-in
+    mirror above answers) when octocd cannot be run or answers otherwise."""
+    import json
+    import subprocess
+    try:
+        out = subprocess.run([octocd, "engines", "--json"], capture_output=True, text=True, timeout=300).stdout
+        for e in json.loads(out).get("engines", []):
+            if isinstance(e, dict) and e.get("own_broadphase") and e.get("own_broadphase_class"):
+                REGISTRY_BROADPHASE_CLASS[str(e["own_broadphase"])] = str(e["own_broadphase_class"])
+    except (OSError, ValueError, subprocess.SubprocessError):
+        pass
+
+
 def point_label(p, axis):
     """What point p ran on `axis`: the axis label, or for an axis its engine ignores what the
     engine ran instead (its own broadphase by the registry's class name, "no midphase")."""
@@ -42,7 +66,7 @@ def point_label(p, axis):
     if axis and isinstance(ignores, dict) and axis in ignores:
         if axis == "broadphase":
             eb = p.get("engine_broadphase") or ""
-            return OWN_BROADPHASE_CLASS.get(eb, eb or "own broadphase")
+            return broadphase_class(eb, eb or "own broadphase")
         if axis == "midphase":
             return "no midphase"
     return axis_label(p, axis) if axis else ""

@@ -8,7 +8,7 @@ import os
 
 from report_common import (ENGINE_COLORS, PAPER, load_mark, load_warning, med, np, num, overlap, plt,
     point_load, spread_text)
-from report_plots import (OWN_BROADPHASE_CLASS, axis_label, engines_of, first_window, log_ticks, point_label,
+from report_plots import (axis_label, broadphase_class, engines_of, first_window, log_ticks, point_label,
     stage_shares, steps_bars, steps_points, too_many_to_draw)
 
 
@@ -23,7 +23,7 @@ def engines_ran_text(g):
         bp = p.get("engine_broadphase")
         d = seen.setdefault(e, {"broadphase": [], "geometry": []})
         if bp:
-            label = OWN_BROADPHASE_CLASS.get(bp, bp)
+            label = broadphase_class(bp, bp)
             if label not in d["broadphase"]:
                 d["broadphase"].append(label)
         if p.get("geometry") and p["geometry"] not in d["geometry"]:

@@ -12,7 +12,7 @@ PACKAGES=(
   # toolchain
   cmake ninja-build g++ pkg-config git xz-utils ca-certificates
   # the field's libraries
-  libbullet-dev libfcl-dev libccd-dev libeigen3-dev libassimp-dev
+  libbullet-dev libfcl-dev libccd-dev libeigen3-dev libassimp-dev libqhull-dev
   libhdf5-dev hdf5-tools nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
   # the reference engines beyond Bullet (reference/mujoco, reference/ode; docs/engines.md):
   # 6.5 MB installed with their libraries (qhull, tinyxml2, lodepng), seconds of apt

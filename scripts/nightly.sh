@@ -17,7 +17,8 @@
 # Usage: scripts/nightly.sh [--build DIR] [--scenes SET] [--frames N] [--every K]
 #                           [--tolerance NAME=VALUE]... [--timeout S] [--against LIST]
 #                           [--out DIR] [--data-dir DIR] [--expect FILE|none]
-#                           [--write-expect FILE] [--strict] [--matrix SET] [SCENE.json ...]
+#                           [--write-expect FILE] [--strict] [--matrix SET] [--history DIR]
+#                           [SCENE.json ...]
 #   --build DIR     build folder holding `octocd` (default: build); $OCTOCD_BIN, when
 #                   set, names the binary itself and wins
 #   --scenes SET    default: the scenes that fit the nightly budget (15 minutes on a
@@ -46,8 +47,10 @@
 #                   scenes kept; edit each reason); the scenes then count as passed
 #   --strict        an expected failure that no longer fails is a failure (exit 3)
 #   --matrix SET    the engine matrix (docs/engines.md, "The engine matrix"): every
-#                   reference engine available here (`octocd engines --available`:
-#                   bullet, mujoco, ode, dart) runs each scene it can express with
+#                   engine of the registry that rotates (`octocd engines --json`: the
+#                   reference engines bullet, mujoco, ode, dart and the process engines of
+#                   the engines files, rapier and jolt shipped; docs/bring-your-engine.md),
+#                   available here (`octocd engines --available`), runs each scene it can express with
 #                   rotation (`octocd run --trace --contacts --state-every 1`), and the
 #                   physics tier judges its trace (`validate --trace-in`, the same
 #                   expectations file, keyed by the trace's name ENGINE--SCENE.h5):
@@ -56,6 +59,10 @@
 #                   quick (the same scenes over short windows, CI's ctest `corpus`
 #                   label; traces ENGINE--SCENE--quick.h5), none (the default with SCENE.json
 #                   arguments). Traces go to DIR/matrix/ (--out).
+#   --history DIR   also add this night's verdicts (every case's `validate --json`, kept
+#                   in DIR/json/ of --out) with the machine, build and date to the history
+#                   folder DIR (`octocd history-append`: a new file, none rewritten);
+#                   `octocd report --history DIR` draws it (docs/regression.md)
 #   SCENE.json ...  scenes to validate instead of the set
 set -uo pipefail
 
@@ -76,6 +83,7 @@ expect="$root/scripts/nightly-expect.json"
 write_expect=""
 strict=()
 matrix=""
+history=""
 is_uint() { [[ "$1" =~ ^[0-9]+$ ]] && [ "$1" -ge 1 ]; }
 # An option's value: "$2" present and not empty, else exit 2 naming the option.
 need() { if [ -z "${2-}" ]; then echo "nightly: $1: missing value; allowed: $3" >&2; exit 2; fi; }
@@ -94,6 +102,7 @@ while [ $# -gt 0 ]; do
     --write-expect) need "$1" "${2-}" "a file"; write_expect="$2"; shift 2 ;;
     --strict) strict=(--strict); shift ;;
     --matrix) need "$1" "${2-}" "full, quick or none"; matrix="$2"; shift 2 ;;
+    --history) need "$1" "${2-}" "a folder"; history="$2"; shift 2 ;;
     -h|--help) usage 0 ;;
     -*) echo "nightly: unknown option '$1'" >&2; usage 2 ;;
     *) scenes+=("$1"); shift ;;
@@ -133,8 +142,8 @@ frames_of() {
     *) echo 3000 ;;                       # the mesh scenes: ten times CI's 300
   esac
 }
-mkdir -p "$out/junit" || exit 2
-rm -f "$out"/junit/*.xml  # this run's reports only
+mkdir -p "$out/junit" "$out/json" || exit 2
+rm -f "$out"/junit/*.xml "$out"/json/*.json  # this run's reports only
 
 xml_escape() { sed -e 's/&/\&amp;/g' -e 's/</\&lt;/g' -e 's/>/\&gt;/g' -e 's/"/\&quot;/g' <<<"$1"; }
 
@@ -226,7 +235,7 @@ for scene in "${scenes[@]+"${scenes[@]}"}"; do
   t0=$(date +%s.%N)
   timeout --signal=TERM --kill-after=10 "$timeout_s" \
     "$bin" validate "$scene" --frames "$n_frames" --every "$every" --against "$against" \
-    --junit "$out/junit/$name.xml" "${tolerances[@]}" "${extra[@]}" >"$log" 2>&1 &
+    --junit "$out/junit/$name.xml" --json "$out/json/$name.json" "${tolerances[@]}" "${extra[@]}" >"$log" 2>&1 &
   child=$!
   wait "$child"
   rc=$?
@@ -254,7 +263,10 @@ matrix_skip() {  # engine scene
 matrix_engines=()
 if [ "$matrix" != "none" ]; then
   available="$("$bin" engines --available 2>/dev/null)"
-  for e in bullet mujoco ode dart; do
+  # The registry's rotating engines, built in or process engines (`octocd engines --json`).
+  rotating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
+print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if e["rotates"]))')"
+  for e in $rotating; do
     if grep -qx "$e" <<<"$available"; then
       matrix_engines+=("$e")
     else
@@ -278,7 +290,7 @@ for e in "${matrix_engines[@]+"${matrix_engines[@]}"}"; do
       timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" run "$root/datasets/scenes/$sc.json" --engine "$e" --rotation --frames "$n_frames" --state-every 1 \
         --contacts --trace "$trace" --no-xdmf --quiet "${extra_run[@]}" || exit $?
       timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" validate --trace-in "$trace" --every "$m_every" --against "$against" --junit "$out/junit/$name.xml" \
-        "${tolerances[@]}" "${extra_trace[@]}"
+        --json "$out/json/$name.json" "${tolerances[@]}" "${extra_trace[@]}"
     ) >"$log" 2>&1 &
     child=$!
     wait "$child"
@@ -314,6 +326,14 @@ echo "nightly: ${#scenes[@]} scenes and $((passed + failed + broken + bad - ${#s
 [ $failed -gt 0 ] && echo "nightly: validators failed on: ${failed_list[*]}"
 [ $broken -gt 0 ] && echo "nightly: runs failed on: ${broken_list[*]}"
 [ $bad -gt 0 ] && echo "nightly: bad input: ${bad_list[*]}"
+if [ -n "$history" ]; then
+  jsons=()
+  for f in "$out"/json/*.json; do [ -e "$f" ] && jsons+=(--validation "$f"); done
+  for n in "${broken_list[@]+"${broken_list[@]}"}" "${bad_list[@]+"${bad_list[@]}"}"; do
+    [ -e "$out/json/$n.json" ] || jsons+=(--errored "$n")  # no verdict: an error row
+  done
+  "$bin" history-append "$history" --kind nightly "${jsons[@]+"${jsons[@]}"}" || echo "nightly: --history '$history': adding this night failed (above)" >&2
+fi
 if [ $bad -gt 0 ]; then exit 2; fi
 if [ $broken -gt 0 ]; then exit 1; fi
 if [ $failed -gt 0 ]; then exit 3; fi

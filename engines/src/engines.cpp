@@ -4,34 +4,28 @@
 #include "octocd/engines.hpp"
 
 #include <algorithm>
+#include <functional>
 
 #include <fmt/format.h>
 
+#include "engine_adapters.hpp"
+#include "engine_entry.hpp"
 #include "octocd/broadphase.hpp"
-#include "octocd/bullet_settings.hpp"
-#include "octocd/bullet_world.hpp"
 #include "octocd/cuda_settings.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/world.hpp"
-#if OCTOCD_HAVE_MUJOCO
-#include "octocd/mujoco_world.hpp"
-#endif
-#if OCTOCD_HAVE_ODE
-#include "octocd/ode_world.hpp"
-#endif
-#if OCTOCD_HAVE_DART
-#include "octocd/dart_world.hpp"
-#endif
 
 namespace octocd {
 
 namespace {
 
-using Items = std::vector<std::string>;
+using Items = EngineItems;
 /// Builds the engine from a model and its own settings items (`where` names them in errors).
-using Factory = std::unique_ptr<Engine> (*)(const std::shared_ptr<const Model>&, const Items&, const std::string&);
+using Factory =
+    std::function<std::unique_ptr<Engine>(const std::shared_ptr<const Model>&, const Items&, const std::string&)>;
 
 /// One engine: what it can do, how it is built, whether this build has it, and its
 /// settings (the keys of its struct, a help line, and a check of items that throws as the
@@ -111,22 +105,6 @@ EngineInfo bullet_info() {
   return bullet;
 }
 
-BulletSettings bullet_settings(const Items& items, const std::string& where) {
-  BulletSettings s;
-  apply_bullet_settings(s, items, where);
-  return s;
-}
-
-void check_bullet(const Items& items, const std::string& where) { (void)bullet_settings(items, where); }
-
-std::unique_ptr<Engine> make_bullet(const std::shared_ptr<const Model>& model, const Items& items,
-                                    const std::string& where) {
-  return std::make_unique<BulletWorld>(model, model->initial, BulletOptions(), bullet_settings(items, where));
-}
-
-/// A reference engine whose adapter may be absent from this build (its package not found):
-/// its settings are parsed when built; when absent, its setting keys are none and building
-/// it is a RuntimeError. Its EngineInfo is the same either way.
 EngineInfo ode_info() {
   EngineInfo ode;
   ode.name = "ode";
@@ -140,25 +118,6 @@ EngineInfo ode_info() {
   return ode;
 }
 
-#if OCTOCD_HAVE_ODE
-OdeSettings ode_settings(const Items& items, const std::string& where) {
-  OdeSettings s;
-  apply_ode_settings(s, items, where);
-  return s;
-}
-void check_ode(const Items& items, const std::string& where) { (void)ode_settings(items, where); }
-std::vector<std::string> ode_keys() { return ode_setting_names(); }
-std::unique_ptr<Engine> make_ode(const std::shared_ptr<const Model>& model, const Items& items,
-                                 const std::string& where) {
-  return std::make_unique<OdeWorld>(model, model->initial, ode_settings(items, where));
-}
-#else
-void check_ode(const Items& items, const std::string& where) { check_none(items, where); }
-std::vector<std::string> ode_keys() { return {}; }
-std::unique_ptr<Engine> make_ode(const std::shared_ptr<const Model>&, const Items&, const std::string&) {
-  throw RuntimeError("engine 'ode' is not built in this octocd (configured without libode-dev)");
-}
-#endif
 
 EngineInfo mujoco_info() {
   EngineInfo mujoco;
@@ -173,25 +132,6 @@ EngineInfo mujoco_info() {
   return mujoco;
 }
 
-#if OCTOCD_HAVE_MUJOCO
-MujocoSettings mujoco_settings(const Items& items, const std::string& where) {
-  MujocoSettings s;
-  apply_mujoco_settings(s, items, where);
-  return s;
-}
-void check_mujoco(const Items& items, const std::string& where) { (void)mujoco_settings(items, where); }
-std::vector<std::string> mujoco_keys() { return mujoco_setting_names(); }
-std::unique_ptr<Engine> make_mujoco(const std::shared_ptr<const Model>& model, const Items& items,
-                                    const std::string& where) {
-  return std::make_unique<MujocoWorld>(model, model->initial, mujoco_settings(items, where));
-}
-#else
-void check_mujoco(const Items& items, const std::string& where) { check_none(items, where); }
-std::vector<std::string> mujoco_keys() { return {}; }
-std::unique_ptr<Engine> make_mujoco(const std::shared_ptr<const Model>&, const Items&, const std::string&) {
-  throw RuntimeError("engine 'mujoco' is not built in this octocd (configured without libmujoco-dev)");
-}
-#endif
 
 EngineInfo dart_info() {
   EngineInfo dart;
@@ -207,38 +147,33 @@ EngineInfo dart_info() {
   return dart;
 }
 
-#if OCTOCD_HAVE_DART
-DartSettings dart_settings(const Items& items, const std::string& where) {
-  DartSettings s;
-  apply_dart_settings(s, items, where);
-  return s;
+
+/// A reference engine (an adapter folder that registers itself, engine_entry.hpp): its
+/// hooks when this build registered its adapter; otherwise it is listed as not built (no
+/// setting keys; building it is a RuntimeError naming the package it was configured
+/// without). Its EngineInfo is the same either way.
+Registered adapter_entry(EngineInfo info, const char* package) {
+  for (const auto& [name, hooks_of] : engine_adapters())
+    if (name == info.name) {
+      const EngineHooks h = hooks_of();
+      return {std::move(info), h.make, true, h.setting_names, h.settings_help, h.check_settings};
+    }
+  const std::string why = fmt::format("engine '{}' is not built in this octocd (configured without {})", info.name,
+                                      package);
+  const Factory missing = [why](const std::shared_ptr<const Model>&, const Items&,
+                                const std::string&) -> std::unique_ptr<Engine> { throw RuntimeError(why); };
+  return {std::move(info), missing, false, &no_settings, "", &check_none};
 }
-void check_dart(const Items& items, const std::string& where) { (void)dart_settings(items, where); }
-std::vector<std::string> dart_keys() { return dart_setting_names(); }
-std::unique_ptr<Engine> make_dart(const std::shared_ptr<const Model>& model, const Items& items,
-                                  const std::string& where) {
-  return std::make_unique<DartWorld>(model, model->initial, dart_settings(items, where));
-}
-#else
-void check_dart(const Items& items, const std::string& where) { check_none(items, where); }
-std::vector<std::string> dart_keys() { return {}; }
-std::unique_ptr<Engine> make_dart(const std::shared_ptr<const Model>&, const Items&, const std::string&) {
-  throw RuntimeError("engine 'dart' is not built in this octocd (configured without libdart-dev)");
-}
-#endif
 
 /// The engines, one entry each, in engine_infos()' order.
 const std::vector<Registered>& registered() {
   static const std::vector<Registered> r{
       {cpu_info(), &make_cpu, true, &no_settings, "", &check_none},
       {cuda_info(), &make_cuda, OCTOCD_HAVE_CUDA != 0, &cuda_setting_names, "", &check_cuda},
-      {bullet_info(), &make_bullet, true, &bullet_setting_names,
-       "shape=hull: convex hulls of dynamic meshes, triangle meshes of static ones, the default; shape=box: boxes "
-       "equal to the AABBs",
-       &check_bullet},
-      {mujoco_info(), &make_mujoco, OCTOCD_HAVE_MUJOCO != 0, &mujoco_keys, "", &check_mujoco},
-      {ode_info(), &make_ode, OCTOCD_HAVE_ODE != 0, &ode_keys, "", &check_ode},
-      {dart_info(), &make_dart, OCTOCD_HAVE_DART != 0, &dart_keys, "", &check_dart},
+      adapter_entry(bullet_info(), "libbullet-dev"),
+      adapter_entry(mujoco_info(), "libmujoco-dev"),
+      adapter_entry(ode_info(), "libode-dev"),
+      adapter_entry(dart_info(), "libdart-dev"),
   };
   return r;
 }
@@ -266,10 +201,17 @@ std::string choose_engine(const ArgumentNames& names, Has has) {
 
 }  // namespace
 
+std::vector<std::string> builtin_engine_names() {
+  std::vector<std::string> names;
+  for (const Registered& r : registered()) names.push_back(r.info.name);
+  return names;
+}
+
 const std::vector<EngineInfo>& engine_infos() {
   static const std::vector<EngineInfo> infos = [] {
     std::vector<EngineInfo> v;
     for (const Registered& r : registered()) v.push_back(r.info);
+    for (const ProcessEngineSpec& p : process_engines(builtin_engine_names())) v.push_back(p.info);
     return v;
   }();
   return infos;
@@ -357,10 +299,11 @@ void apply_engine_options(Scene& scene, const EngineInfo& info, const EngineOpti
   if (!info.rotates) require_translation_only(scene, info.name);
 }
 
-bool engine_built(const EngineInfo& info) { return registered(info).built; }
+bool engine_built(const EngineInfo& info) { return !info.command.empty() || registered(info).built; }
 
 std::string engine_unavailable(const EngineInfo& info) {
   try {
+    if (!info.command.empty()) return process_engine_unavailable(*find_process_engine(info.name));
     if (!engine_built(info)) return fmt::format("engine '{}' is not built in this octocd", info.name);
     if (info.device && !cuda_device_available()) return cuda_device_status();
   } catch (const std::exception& e) {
@@ -376,9 +319,18 @@ std::vector<std::string> built_engine_names() {
   return names;
 }
 
-std::vector<std::string> engine_setting_names(const EngineInfo& info) { return registered(info).setting_names(); }
+std::vector<std::string> engine_setting_names(const EngineInfo& info) {
+  if (!info.command.empty()) return find_process_engine(info.name)->settings;
+  return registered(info).setting_names();
+}
 
 std::string engine_settings_help(const EngineInfo& info) {
+  if (!info.command.empty()) {
+    const std::vector<std::string> keys = engine_setting_names(info);
+    return keys.empty() ? "" : fmt::format("A setting of the process engine {}, KEY=VALUE, repeatable, passed to its "
+                                           "process as a string; keys: {}",
+                                           info.name, join(keys, ", "));
+  }
   const Registered& r = registered(info);
   const std::vector<std::string> keys = r.setting_names();
   if (keys.empty()) return "";
@@ -394,7 +346,8 @@ void check_engine_settings(const EngineSettingItems& settings, const ArgumentNam
     const EngineInfo* info = find_engine_info(engine);
     if (info == nullptr)
       throw InputError(fmt::format("{}: unknown engine '{}'; allowed: {}", where, engine, join(engine_names(), ", ")));
-    registered(*info).check_settings(items, where);
+    if (!info->command.empty()) check_process_settings(*find_process_engine(engine), items, where);
+    else registered(*info).check_settings(items, where);
   }
 }
 
@@ -403,8 +356,10 @@ std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_p
   const EngineInfo& info = engine_info(name, "--engine");
   const auto it = settings.find(name);
   static const Items kNone;
-  return registered(info).make(model, it == settings.end() ? kNone : it->second,
-                               fmt::format(fmt::runtime(cli_argument_names().settings), name));
+  const std::string where = fmt::format(fmt::runtime(cli_argument_names().settings), name);
+  if (!info.command.empty())
+    return make_process_engine(*find_process_engine(name), model, it == settings.end() ? kNone : it->second, where);
+  return registered(info).make(model, it == settings.end() ? kNone : it->second, where);
 }
 
 }  // namespace octocd

@@ -17,7 +17,8 @@ _ROOT_ATTRIBUTES = (
     "device", "start_time", "dt", "state_every", "flush_every", "body_count", "committed_frames",
     "committed_states", "stage_names", "gravity", "response_model", "detection", "mu", "restitution",
     "friction_combine", "restitution_combine", "contact_margin", "broadphase_exact", "contact_geometry",
-    "collision_shape", "contact_model", "integrator", "gyroscopic")
+    "collision_shape", "contact_model", "integrator", "gyroscopic", "substeps", "impulses", "speculative",
+    "contacts_complete", "manifold_points", "depth_per")
 
 
 class Trace:

@@ -802,9 +802,19 @@ MaterialCombine parse_combine(const std::string& s) {
   throw InputError(fmt::format("physics['combine']: '{}'; allowed: product, min, max, average, geometric", s));
 }
 
+/// What an engine that declares nothing gets, as a trace without declarations: the
+/// integrator and the contact model undeclared (every admissible value,
+/// docs/validation.md, "Undeclared: every admissible value").
+PhysicsBodies undeclared_physics() {
+  PhysicsBodies p;
+  p.integrator = PhysicsBodies::Integrator::Undeclared;
+  p.contact_model = PhysicsBodies::ContactModel::Undeclared;
+  return p;
+}
+
 /// PhysicsBodies from a dict (keys as the C++ member names).
 PhysicsBodies parse_physics(const py::dict& d, py::ssize_t n) {
-  PhysicsBodies p;
+  PhysicsBodies p = undeclared_physics();
   string_keys(d, "physics");
   for (auto item : d) {
     const std::string key = py::str(item.first);
@@ -1010,6 +1020,7 @@ class PyValidator {
         b.meshes.push_back(mesh);
       }
     }
+    b.physics = undeclared_physics();
     if (!physics.is_none()) {
       if (!py::isinstance<py::dict>(physics)) throw InputError("physics: not a dict; allowed: a dict of PhysicsBodies fields");
       b.physics = parse_physics(py::reinterpret_borrow<py::dict>(physics), n > 0 ? n : -1);

@@ -4,6 +4,8 @@
 
 #include "octocd/bullet_world.hpp"
 #include "octocd/adapter_rows.hpp"
+#include "octocd/convex_hull.hpp"
+#include "octocd/reference_world.hpp"
 #include "octocd/version.hpp"
 
 #include <fmt/format.h>
@@ -11,13 +13,13 @@
 #include <btBulletDynamicsCommon.h>
 #include <BulletCollision/CollisionDispatch/btConvexConvexAlgorithm.h>
 #include <BulletCollision/NarrowPhaseCollision/btGjkEpaPenetrationDepthSolver.h>
-#include <LinearMath/btConvexHullComputer.h>
 
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <memory>
 #include <unordered_map>
 #include <utility>
@@ -36,11 +38,6 @@ btQuaternion to_bt(const Quat& q) { return btQuaternion(q.x, q.y, q.z, q.w); }
 Quat from_bt(const btQuaternion& q) {
   return {static_cast<float>(q.w()), static_cast<float>(q.x()), static_cast<float>(q.y()),
           static_cast<float>(q.z())};
-}
-
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-      .count();
 }
 
 /// btDiscreteDynamicsWorld with its step's phases timed, so the Bullet engine reports
@@ -278,44 +275,29 @@ Polytope box_polytope(const btVector3& he) {
   return p;
 }
 
-/// A convex hull (btConvexHullComputer's vertices, faces and edges) as a polytope.
-Polytope hull_polytope(const btConvexHullComputer& hc) {
+/// A convex hull (convex_hull.hpp: its vertices, faces and planes) as a polytope; each
+/// edge once, with the outward normals of the two faces that share it.
+Polytope hull_polytope(const ConvexHull& h) {
   Polytope p;
-  btVector3 centroid(0, 0, 0);  // of the vertices: inside the hull
-  for (int k = 0; k < hc.vertices.size(); ++k) {
-    p.vertices.push_back(hc.vertices[k]);
-    centroid += hc.vertices[k];
+  for (const auto& v : h.vertices) p.vertices.emplace_back(btScalar(v[0]), btScalar(v[1]), btScalar(v[2]));
+  std::map<std::pair<int, int>, std::pair<int, int>> faces_of_edge;  // (lower, higher vertex) -> its two faces
+  for (std::size_t f = 0; f < h.faces.size(); ++f) {
+    const btVector3 n(btScalar(h.planes[f][0]), btScalar(h.planes[f][1]), btScalar(h.planes[f][2]));
+    add_direction(p.face_normals, n);
+    p.outward.push_back(n);
+    const std::vector<std::uint32_t>& idx = h.faces[f];
+    for (std::size_t k = 0; k < idx.size(); ++k) {
+      const int a = static_cast<int>(idx[k]), b = static_cast<int>(idx[(k + 1) % idx.size()]);
+      const auto at = faces_of_edge.emplace(std::make_pair(std::min(a, b), std::max(a, b)),
+                                            std::make_pair(static_cast<int>(f), -1));
+      if (!at.second) at.first->second.second = static_cast<int>(f);
+    }
   }
-  if (hc.vertices.size() > 0) centroid /= btScalar(hc.vertices.size());
-  // The face of every half-edge and each face's outward unit normal.
-  std::vector<int> face_of(static_cast<std::size_t>(hc.edges.size()), -1);
-  std::vector<btVector3>& outward = p.outward;
-  for (int f = 0; f < hc.faces.size(); ++f) {
-    const btConvexHullComputer::Edge* first = &hc.edges[hc.faces[f]];
-    const btConvexHullComputer::Edge* e = first;
-    btVector3 normal(0, 0, 0);  // Newell's normal of the face's loop
-    do {
-      const btVector3& a = hc.vertices[e->getSourceVertex()];
-      const btVector3& b = hc.vertices[e->getTargetVertex()];
-      normal += btVector3((a.y() - b.y()) * (a.z() + b.z()), (a.z() - b.z()) * (a.x() + b.x()),
-                          (a.x() - b.x()) * (a.y() + b.y()));
-      face_of[static_cast<std::size_t>(e - &hc.edges[0])] = f;
-      e = e->getNextEdgeOfFace();
-    } while (e != first);
-    add_direction(p.face_normals, normal);
-    const btScalar len = normal.length();
-    btVector3 n = len > btScalar(1e-12) ? normal / len : btVector3(0, 0, 0);
-    if (n.dot(hc.vertices[first->getTargetVertex()] - centroid) < 0) n = -n;
-    outward.push_back(n);
-  }
-  for (int k = 0; k < hc.edges.size(); ++k) {  // each edge once: its half-edge with source < target
-    const btConvexHullComputer::Edge& e = hc.edges[k];
-    if (e.getSourceVertex() >= e.getTargetVertex()) continue;
-    p.edges.emplace_back(e.getSourceVertex(), e.getTargetVertex());
-    const int f0 = face_of[static_cast<std::size_t>(k)];
-    const int f1 = face_of[static_cast<std::size_t>(e.getReverseEdge() - &hc.edges[0])];
-    p.edge_faces.emplace_back(f0 >= 0 ? outward[static_cast<std::size_t>(f0)] : btVector3(0, 0, 0),
-                              f1 >= 0 ? outward[static_cast<std::size_t>(f1)] : btVector3(0, 0, 0));
+  for (const auto& e : faces_of_edge) {
+    p.edges.push_back(e.first);
+    const int f0 = e.second.first, f1 = e.second.second;
+    p.edge_faces.emplace_back(p.outward[static_cast<std::size_t>(f0)],
+                              f1 >= 0 ? p.outward[static_cast<std::size_t>(f1)] : btVector3(0, 0, 0));
   }
   p.finish();
   return p;
@@ -1011,12 +993,10 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
     const Vec3 he = 0.5f * (s.local.max - s.local.min);
     if (m.exact && mesh) {
       // A mesh rotates as the convex hull of its vertices, margin 0 (see bullet_world.hpp).
-      btConvexHullComputer hull;
-      static_assert(sizeof(Vec3) == 3 * sizeof(float), "Vec3 must be three packed floats");
-      hull.compute(reinterpret_cast<const float*>(s.mesh->vertices.data()), static_cast<int>(sizeof(Vec3)),
-                   static_cast<int>(s.mesh->vertices.size()), 0, 0);
+      const ConvexHull hull = convex_hull(s.mesh->vertices, s.name);
       auto shape = std::make_unique<btConvexHullShape>();
-      for (int h = 0; h < hull.vertices.size(); ++h) shape->addPoint(hull.vertices[h], false);
+      for (const auto& v : hull.vertices)
+        shape->addPoint(btVector3(btScalar(v[0]), btScalar(v[1]), btScalar(v[2])), false);
       shape->setMargin(0);
       shape->recalcLocalAabb();
       m.polytopes.emplace(shape.get(), hull_polytope(hull));

@@ -91,4 +91,15 @@ double setting_number(const std::string& key, const std::string& value, double l
   return x;
 }
 
+void SettingValue::not_allowed(const std::string& allowed) const {
+  throw InputError(fmt::format("{}: {}='{}' is not allowed; allowed: {}", where, key, value, allowed));
+}
+
+void throw_unknown_setting(const std::string& engine, const std::string& key, const std::vector<std::string>& names,
+                           const std::string& where, const std::string& doc) {
+  std::string list;
+  for (const std::string& n : names) list += (list.empty() ? "" : ", ") + n;
+  throw InputError(fmt::format("{}: unknown {} setting '{}'; allowed: {} ({})", where, engine, key, list, doc));
+}
+
 }  // namespace octocd

@@ -1,12 +1,15 @@
-// The convex hull of a mesh (convex_hull.hpp): btConvexHullComputer's faces, wound and
+// The convex hull of a mesh (convex_hull.hpp): qhull's facets (libqhull_r), wound and
 // given planes here, and the hull's mass properties.
 #include "octocd/convex_hull.hpp"
 
-#include <LinearMath/btConvexHullComputer.h>
 #include <fmt/format.h>
+
+#include <libqhull_r/qhull_ra.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 
 #include "octocd/error.hpp"
 
@@ -22,79 +25,80 @@ double dot3(const D3& a, const D3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] 
 }  // namespace
 
 ConvexHull convex_hull(const std::vector<Vec3>& points, const std::string& what) {
-  std::vector<double> coords;
+  auto refuse = [&](std::size_t faces, const std::string& why) {
+    return InputError(fmt::format("{}: the convex hull of its {} vertices has {} faces (they span no volume{}); "
+                                  "allowed: at least 4 vertices not in one plane",
+                                  what, points.size(), faces, why));
+  };
+  if (points.size() < 4) throw refuse(0, "");
+  std::vector<coordT> coords;
   coords.reserve(3 * points.size());
-  for (const Vec3& p : points) {
-    coords.push_back(p.x);
-    coords.push_back(p.y);
-    coords.push_back(p.z);
-  }
-  btConvexHullComputer hc;
-  if (!points.empty()) hc.compute(coords.data(), static_cast<int>(3 * sizeof(double)), static_cast<int>(points.size()), 0.0, 0.0);
+  for (const Vec3& p : points) coords.insert(coords.end(), {p.x, p.y, p.z});
+  // qhull's own messages go to a memory stream: the first line names a refusal.
+  char* message = nullptr;
+  std::size_t message_size = 0;
+  FILE* err = open_memstream(&message, &message_size);
+  qhT qh_state;
+  qhT* qh = &qh_state;
+  qh_zero(qh, err);
+  // Default options: the exact input in double, facets merged where qhull's roundoff
+  // bound cannot tell them apart (C-0, Qx off in 3-d); no triangulation (Qt), so a face
+  // is the merged polygon.
+  char flags[] = "qhull";
+  const int exit_code = qh_new_qhull(qh, 3, static_cast<int>(points.size()), coords.data(), False, flags, nullptr, err);
   ConvexHull h;
-  // Hull vertices: the input points they came from (exact), else Bullet's float copy.
-  for (int i = 0; i < hc.vertices.size(); ++i) {
-    const int o = hc.original_vertex_index[i];
-    if (o >= 0 && static_cast<std::size_t>(o) < points.size()) {
-      const Vec3& p = points[static_cast<std::size_t>(o)];
-      h.vertices.push_back({p.x, p.y, p.z});
-    } else {
-      h.vertices.push_back({hc.vertices[i].x(), hc.vertices[i].y(), hc.vertices[i].z()});
+  std::size_t faces = 0;
+  if (exit_code == 0) {
+    // Hull vertices: the input points qhull keeps, in input order.
+    std::vector<std::int64_t> hull_index(points.size(), -1);
+    vertexT* vertex;
+    FORALLvertices {
+      const int id = qh_pointid(qh, vertex->point);
+      if (id >= 0 && static_cast<std::size_t>(id) < points.size()) hull_index[static_cast<std::size_t>(id)] = 0;
     }
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      if (hull_index[k] < 0) continue;
+      hull_index[k] = static_cast<std::int64_t>(h.vertices.size());
+      h.vertices.push_back({points[k].x, points[k].y, points[k].z});
+    }
+    facetT* facet;
+    FORALLfacets {
+      if (facet->degenerate || facet->redundant) continue;
+      // qh_facet3vertex: the facet's vertices in order around it (3-d).
+      setT* loop = qh_facet3vertex(qh, facet);
+      std::vector<std::uint32_t> idx;
+      vertexT** vertexp;
+      FOREACHvertex_(loop) {
+        const int id = qh_pointid(qh, vertex->point);
+        if (id >= 0 && static_cast<std::size_t>(id) < points.size() && hull_index[static_cast<std::size_t>(id)] >= 0)
+          idx.push_back(static_cast<std::uint32_t>(hull_index[static_cast<std::size_t>(id)]));
+      }
+      qh_settempfree(qh, &loop);
+      if (idx.size() < 3) continue;
+      // qhull's outward unit normal (from the exact input points); the winding is made
+      // counter-clockwise seen from outside (Newell's normal along it).
+      const D3 n{facet->normal[0], facet->normal[1], facet->normal[2]};
+      D3 newell{0, 0, 0};
+      for (std::size_t k = 0; k < idx.size(); ++k) {
+        const D3 c = cross3(h.vertices[idx[k]], h.vertices[idx[(k + 1) % idx.size()]]);
+        for (std::size_t a = 0; a < 3; ++a) newell[a] += c[a];
+      }
+      if (dot3(newell, n) < 0.0) std::reverse(idx.begin(), idx.end());
+      double d = -HUGE_VAL;
+      for (std::uint32_t v : idx) d = std::max(d, dot3(n, h.vertices[v]));
+      h.faces.push_back(std::move(idx));
+      h.planes.push_back({n[0], n[1], n[2], d});
+    }
+    faces = h.faces.size();
   }
-  D3 centroid{0, 0, 0}, lo{HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-  for (const D3& v : h.vertices)
-    for (std::size_t k = 0; k < 3; ++k) {
-      centroid[k] += v[k];
-      lo[k] = std::min(lo[k], v[k]);
-      hi[k] = std::max(hi[k], v[k]);
-    }
-  for (double& c : centroid) c /= static_cast<double>(std::max<std::size_t>(h.vertices.size(), 1));
-  // btConvexHullComputer finds the hull on a grid of 1/10216 of the points' range
-  // (btConvexHullInternal::compute), so in the input's coordinates its merged faces are
-  // planar only to about a grid step, and among ~2,000 faces of a scanned mesh it returns a
-  // few slivers of collinear corners (asian-dragon: 3), whose Newell normal is rounding
-  // noise (their planes cut 20-37% of the hull's diagonal into it). A face thinner (twice
-  // its area over its longest chord) than kSliver times the hull's bounding-box diagonal
-  // is left out; its neighbours' planes bound the hull there.
-  constexpr double kSliver = 1e-6;
-  const double sliver = kSliver * std::sqrt(dot3(sub(hi, lo), sub(hi, lo)));
-  for (int f = 0; f < hc.faces.size(); ++f) {
-    std::vector<std::uint32_t> idx;
-    const btConvexHullComputer::Edge* first = &hc.edges[hc.faces[f]];
-    const btConvexHullComputer::Edge* e = first;
-    do {
-      idx.push_back(static_cast<std::uint32_t>(e->getSourceVertex()));
-      e = e->getNextEdgeOfFace();
-    } while (e != first && idx.size() <= static_cast<std::size_t>(hc.vertices.size()));
-    if (idx.size() < 3) continue;
-    // Newell's normal; the winding is made counter-clockwise seen from outside (the
-    // normal pointing away from the vertices' mean, an interior point).
-    D3 n{0, 0, 0};
-    for (std::size_t k = 0; k < idx.size(); ++k) {
-      const D3& p = h.vertices[idx[k]];
-      const D3& q = h.vertices[idx[(k + 1) % idx.size()]];
-      const D3 c = cross3(p, q);
-      for (int j = 0; j < 3; ++j) n[static_cast<std::size_t>(j)] += c[static_cast<std::size_t>(j)];
-    }
-    const double len = std::sqrt(dot3(n, n));  // twice the face's area
-    double chord = 0.0;                         // the longest chord from the first corner
-    for (std::uint32_t v : idx) chord = std::max(chord, std::sqrt(dot3(sub(h.vertices[v], h.vertices[idx[0]]), sub(h.vertices[v], h.vertices[idx[0]]))));
-    if (!(len > 0.0) || !(chord > 0.0) || len / chord <= sliver) continue;
-    for (double& c : n) c /= len;
-    if (dot3(n, sub(h.vertices[idx[0]], centroid)) < 0.0) {
-      std::reverse(idx.begin(), idx.end());
-      for (double& c : n) c = -c;
-    }
-    double d = -HUGE_VAL;
-    for (std::uint32_t v : idx) d = std::max(d, dot3(n, h.vertices[v]));
-    h.faces.push_back(std::move(idx));
-    h.planes.push_back({n[0], n[1], n[2], d});
-  }
-  if (h.faces.size() < 4)
-    throw InputError(fmt::format("{}: the convex hull of its {} vertices has {} faces (they span no volume); allowed: "
-                                 "at least 4 vertices not in one plane",
-                                 what, points.size(), h.faces.size()));
+  qh_freeqhull(qh, !qh_ALL);
+  int still_long = 0, still_total = 0;
+  qh_memfreeshort(qh, &still_long, &still_total);
+  std::fclose(err);
+  std::string first_line = message ? std::string(message, message_size) : std::string();
+  std::free(message);
+  first_line = first_line.substr(0, first_line.find('\n'));
+  if (exit_code != 0 || faces < 4) throw refuse(faces, first_line.empty() ? "" : ": qhull " + first_line);
   return h;
 }
 

@@ -42,10 +42,6 @@ namespace {
 
 using dart::constraint::ContactConstraint;
 
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
 Vec3 to_vec3(const Eigen::Vector3d& v) {
   return {static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())};
 }
@@ -115,27 +111,11 @@ class ContactParameters {
 
 }  // namespace
 
-struct DartWorld::Impl {
+struct DartWorld::Impl : ReferenceCore {
   DartSettings settings;
-  double dt = 0.001;
-  Vec3 gravity;
-  float slop = 0.001f;
-  std::vector<float> w;
   dart::simulation::WorldPtr world;
   std::vector<dart::dynamics::BodyNode*> nodes;  // index = body id; static ones too
   std::unordered_map<const dart::dynamics::ShapeFrame*, std::uint32_t> body_of;
-  std::vector<std::array<double, 9>> inertia;  // body frame, about x (kg m^2)
-  std::uint64_t static_static = 0;
-  BodyState state;
-  FrameMetrics metrics;
-  std::int64_t frame = 0;
-  bool recording = false;
-  RotationTraits traits;
-  FrameRecord record;
-  std::vector<ContactRecord> no_contacts;
-  std::string geometry;
-
-  bool dynamic(std::size_t i) const { return w[i] > 0.0f; }
 
   void read_state() {
     for (std::size_t i = 0; i < nodes.size(); ++i) {
@@ -155,25 +135,8 @@ struct DartWorld::Impl {
     return body_of.at(o->getShapeFrame());
   }
 
-  std::uint64_t overlapping_pairs() const;
   void fill_record();
 };
-
-std::uint64_t DartWorld::Impl::overlapping_pairs() const {
-  const std::vector<Aabb>& boxes = record.aabbs;
-  std::vector<std::uint32_t> order(boxes.size());
-  for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return boxes[a].min.x < boxes[b].min.x; });
-  std::uint64_t n = 0;
-  for (std::size_t k = 0; k < order.size(); ++k) {
-    const Aabb& a = boxes[order[k]];
-    for (std::size_t j = k + 1; j < order.size() && boxes[order[j]].min.x <= a.max.x; ++j) {
-      if (!dynamic(order[k]) && !dynamic(order[j])) continue;
-      if (overlaps(a, boxes[order[j]])) ++n;
-    }
-  }
-  return n;
-}
 
 void DartWorld::Impl::fill_record() {
   FrameRecord& r = record;
@@ -186,48 +149,24 @@ void DartWorld::Impl::fill_record() {
     const dart::collision::Contact& ct = result.getContact(k);
     const std::uint32_t i1 = index_of(ct.collisionObject1), i2 = index_of(ct.collisionObject2);
     if (!dynamic(i1) && !dynamic(i2)) continue;  // not a constraint (no static-static pair is collided)
-    const bool swap = i1 > i2;  // A is object 2's body
-    const double sa = swap ? -1.0 : 1.0;
     // Contact::normal points from object 2's body to object 1's; Contact::force acts on
-    // object 1's body: both as seen from A.
-    const Eigen::Vector3d nrm = sa * ct.normal;
-    const Eigen::Vector3d j_a = sa * dt * ct.force;
-    // DART's normal row has lo = 0, so its impulse is >= 0; projecting the summed impulse
-    // (friction rows orthogonal to the normal) back on the normal may round below it.
-    const double jn = std::max(0.0, j_a.dot(nrm));
-    const Eigen::Vector3d j_t = j_a - jn * nrm;
-    ContactRecord c;
-    c.pair = swap ? Pair{i2, i1} : Pair{i1, i2};
-    c.normal = to_vec3(nrm);
-    c.depth = static_cast<float>(std::max(0.0, ct.penetrationDepth));
-    c.point = to_vec3(ct.point);
-    c.jn = static_cast<float>(jn);
-    const Vec3 jt_a = to_vec3(j_t);
-    c.jt = row_scalar_jt(r, c, jt_a, w, dt, gravity);
-    rows.push_back(c);
-    jt3.push_back(jt_a);
+    // object 1's body.
+    const double n21[3] = {ct.normal.x(), ct.normal.y(), ct.normal.z()};
+    const double j1[3] = {dt * ct.force.x(), dt * ct.force.y(), dt * ct.force.z()};
+    rows.push_back(manifold_row(i1, i2, n21, j1, ct.penetrationDepth, to_vec3(ct.point), jt3));
   }
   finish_manifold_record(r, rows, jt3);
 }
 
 DartWorld::DartWorld(std::shared_ptr<const Model> model, const BodyState& initial, const DartSettings& settings)
-    : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
+    : ReferenceWorld(std::make_unique<Impl>()) {
   using namespace dart::dynamics;
-  Impl& m = *impl_;
-  const Model& src = *model_;
+  Impl& m = impl();
+  m.start(std::move(model), initial, "dart");
+  const Model& src = *m.model;
   const Scene& scene = src.scene;
   const std::size_t n = initial.size();
-  if (src.bodies.size() != n)
-    throw InputError(fmt::format("dart: the initial state has {} bodies, the model {}", n, src.bodies.size()));
   m.settings = settings;
-  m.dt = scene.dt;
-  m.gravity = scene.gravity;
-  m.slop = scene.response.slop;
-  m.w = initial.w;
-  m.static_static = static_static_pairs(src);
-  m.state = initial;
-  m.state.q.resize(n);      // identity where the model has none
-  m.state.omega.resize(n);  // zero where the model has none
 
   const bool fcl = settings.collision == DartCollision::Fcl;
   if (!fcl)
@@ -421,28 +360,20 @@ DartWorld::DartWorld(std::shared_ptr<const Model> model, const BodyState& initia
   t.friction_combine = "min";
   t.restitution_combine = "product";
   t.contact_margin = 1e-4f;
-  t.detection = "pre-step";
-  t.broadphase_exact = false;
   t.candidate_pairs = false;
-  t.contact_geometry = "shape";
-  t.rotates = true;
-  t.jt3 = true;
   t.contact_model = "rigid";
-  t.integrator = "semi-implicit";
   t.gyroscopic = "true";
 }
 
 DartWorld::~DartWorld() = default;
 
+DartWorld::Impl& DartWorld::impl() const { return static_cast<Impl&>(core()); }
+
 const FrameMetrics& DartWorld::step() {
-  Impl& m = *impl_;
+  Impl& m = impl();
   const std::size_t n = m.w.size();
   FrameRecord& r = m.record;
-  r.frame = m.frame + 1;
-  r.x_pre = m.state.x;
-  r.v_pre = m.state.v;
-  r.q_pre = m.state.q;
-  r.w_pre = m.state.omega;
+  m.save_pre_state();
   const auto t0 = std::chrono::steady_clock::now();
   {
     const ContactParameters params(m.settings);
@@ -451,100 +382,55 @@ const FrameMetrics& DartWorld::step() {
   const double step_ms = ms_since(t0);
 
   const auto t1 = std::chrono::steady_clock::now();
-  FrameMetrics fm;
-  fm.frame = ++m.frame;
-  fm.time = static_cast<double>(m.frame) * m.dt;
+  FrameMetrics fm = m.next_frame();
   m.read_state();
-  for (std::size_t i = 0; i < n; ++i)
-    if (m.dynamic(i) && !(is_finite(m.state.x[i]) && is_finite(m.state.v[i]) && is_finite(m.state.omega[i])))
-      throw RuntimeError(fmt::format("frame {}: body {} has a non-finite state after DART's step (x ({}, {}, {}), v "
-                                     "({}, {}, {}))",
-                                     m.frame, i, m.state.x[i].x, m.state.x[i].y, m.state.x[i].z, m.state.v[i].x,
-                                     m.state.v[i].y, m.state.v[i].z));
+  m.check_finite("DART's");
   const dart::collision::CollisionResult& result = m.world->getLastCollisionResult();
   if (result.getNumContacts() >= static_cast<std::size_t>(m.settings.max_contacts))
     throw RuntimeError(fmt::format("frame {}: DART's collision detection reached its bound of {} contacts and dropped "
                                    "the rest; raise it with --dart contacts=N",
                                    m.frame, m.settings.max_contacts));
-  r.aabbs.resize(n);
-  for (std::size_t i = 0; i < n; ++i) r.aabbs[i] = posed_box_aabb(model_->local_box(i), {r.x_pre[i], r.q_pre[i]});
-  fm.dynamic_pairs = m.overlapping_pairs();
+  fm.dynamic_pairs = m.posed_overlapping_pairs();
   fm.aabb_pairs = fm.dynamic_pairs + m.static_static;
   if (m.recording) {
-    r.x_post = m.state.x;
-    r.v_post = m.state.v;
-    r.q_post = m.state.q;
-    r.w_post = m.state.omega;
-    r.x_det = r.x_pre;  // DART collides inside World::step before the positions move
-    r.q_det = r.q_pre;
+    m.save_post_state();  // DART collides inside World::step before the positions move
     r.has_pairs = false;
     m.fill_record();
   }
-  std::uint64_t rows = 0, above = 0;
-  double pen_sum = 0.0, pen_max = 0.0;
-  for (std::size_t k = 0; k < result.getNumContacts(); ++k) {
-    const dart::collision::Contact& ct = result.getContact(k);
-    ++rows;
-    const double d = std::max(0.0, ct.penetrationDepth);
-    pen_sum += d;
-    pen_max = std::max(pen_max, d);
-    if (d > static_cast<double>(m.slop)) ++above;
-  }
-  fm.contacts = rows;
-  if (rows > 0) {
-    fm.penetration_mean = pen_sum / static_cast<double>(rows);
-    fm.penetration_max = pen_max;
-    fm.penetration_share_above_slop = static_cast<double>(above) / static_cast<double>(rows);
-  }
-  double ke = 0.0, px = 0.0, py = 0.0, pz = 0.0;
+  PenetrationSum pen;
+  for (std::size_t k = 0; k < result.getNumContacts(); ++k)
+    pen.add(std::max(0.0, result.getContact(k).penetrationDepth), m.slop);
+  fm.contacts = result.getNumContacts();
+  pen.finish(fm);
+  EnergySum energy;
   for (std::size_t i = 0; i < n; ++i) {
     if (!m.dynamic(i)) continue;
     const dart::dynamics::BodyNode* b = m.nodes[i];
-    const double mass = 1.0 / static_cast<double>(m.w[i]);
     const Eigen::Vector3d v = b->getLinearVelocity();
-    ke += 0.5 * mass * v.squaredNorm();
-    px += mass * v.x();
-    py += mass * v.y();
-    pz += mass * v.z();
-    // + 0.5 w_b . (I w_b), w_b = R^T w in the body frame.
+    energy.add_linear(1.0 / static_cast<double>(m.w[i]), v.data(), v.squaredNorm());
+    // w_b = R^T w in the body frame.
     const Eigen::Vector3d wb = b->getWorldTransform().linear().transpose() * b->getAngularVelocity();
-    const std::array<double, 9>& I = m.inertia[i];
-    for (int rr = 0; rr < 3; ++rr)
-      for (int c = 0; c < 3; ++c) ke += 0.5 * wb[rr] * I[static_cast<std::size_t>(3 * rr + c)] * wb[c];
+    energy.add_rotational(wb.data(), m.inertia[i]);
   }
-  fm.kinetic_energy = ke;
-  fm.momentum = {px, py, pz};
+  energy.finish(fm);
   fm.stage_ms[static_cast<int>(Stage::Response)] = step_ms;
   fm.stage_ms[static_cast<int>(Stage::Metrics)] = ms_since(t1);
-  fm.step_ms = ms_since(t0);
-  m.metrics = fm;
-  return m.metrics;
+  return m.finish_step(fm, t0);
 }
 
-const BodyState& DartWorld::state() const { return impl_->state; }
-const FrameMetrics& DartWorld::last_metrics() const { return impl_->metrics; }
-std::int64_t DartWorld::frame() const { return impl_->frame; }
-std::string DartWorld::device() const { return cpu_description(); }
 std::string DartWorld::broadphase_name() const {
-  return impl_->settings.collision == DartCollision::Fcl ? "dart-fcl" : "dart-all-pairs";
+  return impl().settings.collision == DartCollision::Fcl ? "dart-fcl" : "dart-all-pairs";
 }
 std::string DartWorld::midphase_name() const {
-  return impl_->settings.collision == DartCollision::Fcl ? "dart-fcl-collide" : "dart-collide";
+  return impl().settings.collision == DartCollision::Fcl ? "dart-fcl-collide" : "dart-collide";
 }
-const std::vector<ContactRecord>& DartWorld::contacts() const {
-  return impl_->recording ? impl_->record.contacts : impl_->no_contacts;
-}
-std::string DartWorld::collision_geometry() const { return impl_->geometry; }
-const RotationTraits* DartWorld::rotation_traits() const { return &impl_->traits; }
-void DartWorld::set_recording(bool on) { impl_->recording = on; }
-const FrameRecord& DartWorld::record() const { return impl_->record; }
-const DartSettings& DartWorld::settings() const { return impl_->settings; }
+const DartSettings& DartWorld::settings() const { return impl().settings; }
 std::string DartWorld::dart_version() { return DART_VERSION; }
 
 bool DartWorld::has_stage(Stage s) const { return s == Stage::Response || s == Stage::Metrics; }
 
 std::string DartWorld::notes() const {
-  const DartSettings& s = impl_->settings;
+  const DartSettings& s = impl().settings;
   return fmt::format(
       "DART {}: {}; {} boxed LCP{} (erp {}, max_erv {} m/s, cfm {}), friction {} (pyramid per contact),\n"
       "semi-implicit Euler, explicit gyroscopic term. broadphase candidates are not exposed (0); AABB and\n"
@@ -552,7 +438,7 @@ std::string DartWorld::notes() const {
       "detection, the constraint solve and the integration in one call: aabbs, broadphase, midphase and\n"
       "integrate n/a). contacts = DART's contact rows, penetration over their depths; kinetic energy includes\n"
       "rotation.",
-      dart_version(), impl_->geometry, dart_lcp_name(s.lcp),
+      dart_version(), impl().geometry, dart_lcp_name(s.lcp),
       s.lcp == DartLcp::Pgs ? fmt::format(", {} iterations", s.iterations) : std::string(" (PGS fallback)"), s.erp,
       s.max_erv, s.cfm, dart_friction_name(s.friction));
 }

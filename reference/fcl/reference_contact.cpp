@@ -4,7 +4,6 @@
 
 #include "octocd/reference_contact.hpp"
 
-#include <LinearMath/btConvexHullComputer.h>
 #include <ccd/ccd.h>
 #include <ccd/vec3.h>
 #include <fcl/geometry/bvh/BVH_model.h>
@@ -24,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "octocd/convex_hull.hpp"
 #include "octocd/error.hpp"
 
 namespace octocd {
@@ -185,67 +185,43 @@ ShapeGeom build_mesh(const Shape& shape) {
   g.exact = bvh;
   g.bvh = true;
 
-  // Convex hull (Bullet); hull vertices are mapped back to the exact mesh vertices.
-  std::vector<double> coords;
-  coords.reserve(pts.size() * 3);
-  for (const V3& p : pts) {
-    coords.push_back(p.x());
-    coords.push_back(p.y());
-    coords.push_back(p.z());
+  // The convex hull (convex_hull.hpp: qhull, the hull every adapter collides); its
+  // vertices are mesh vertices, exact. A flat mesh spans no hull: its support is all its
+  // vertices, its faces and edges the triangles'.
+  ConvexHull hull;
+  try {
+    hull = convex_hull(mesh.vertices, shape.name);
+  } catch (const InputError&) {
+    for (const V3& p : pts) hull.vertices.push_back({p.x(), p.y(), p.z()});
   }
-  btConvexHullComputer hc;
-  hc.compute(coords.data(), int(3 * sizeof(double)), int(pts.size()), 0.0, 0.0);
   auto verts = std::make_shared<std::vector<V3>>();
-  for (int i = 0; i < hc.vertices.size(); ++i) {
-    const int o = hc.original_vertex_index[i];
-    verts->push_back(o >= 0 && o < int(pts.size())
-                         ? pts[std::size_t(o)]
-                         : V3(hc.vertices[i].x(), hc.vertices[i].y(), hc.vertices[i].z()));
-  }
-  if (verts->empty()) verts->assign(pts.begin(), pts.end());  // degenerate: support on all
+  for (const auto& v : hull.vertices) verts->emplace_back(v[0], v[1], v[2]);
   g.hull_vertices = *verts;
   for (V3& v : g.hull_vertices) v += g.offset;  // body frame
   for (const V3& v : g.hull_vertices) g.features.vertices.push_back({v.x(), v.y(), v.z()});
-  V3 centroid = V3::Zero();
-  for (const V3& v : *verts) centroid += v;
-  centroid /= S(std::max<std::size_t>(verts->size(), 1));
   auto faces = std::make_shared<std::vector<int>>();
   std::vector<std::pair<V3, S>> planes;  // unit outward normal, offset
-  int num_faces = 0;
-  for (int f = 0; f < hc.faces.size(); ++f) {
-    std::vector<int> idx;
-    const btConvexHullComputer::Edge* first = &hc.edges[hc.faces[f]];
-    const btConvexHullComputer::Edge* e = first;
-    do {
-      idx.push_back(e->getSourceVertex());
-      e = e->getNextEdgeOfFace();
-    } while (e != first && idx.size() <= std::size_t(hc.vertices.size()));
-    if (idx.size() < 3) continue;
-    // Newell normal; FCL wants counter-clockwise seen from outside.
-    V3 n = V3::Zero();
-    for (std::size_t k = 0; k < idx.size(); ++k) {
-      const V3& p = (*verts)[std::size_t(idx[k])];
-      const V3& q = (*verts)[std::size_t(idx[(k + 1) % idx.size()])];
-      n += p.cross(q);
-    }
-    if (n.dot((*verts)[std::size_t(idx[0])] - centroid) < 0) {
-      std::reverse(idx.begin(), idx.end());
-    }
+  const int num_faces = static_cast<int>(hull.faces.size());
+  for (std::size_t f = 0; f < hull.faces.size(); ++f) {
+    const std::vector<std::uint32_t>& idx = hull.faces[f];  // counter-clockwise seen from outside, as FCL wants
     faces->push_back(int(idx.size()));
     faces->insert(faces->end(), idx.begin(), idx.end());
-    ++num_faces;
+    const V3 n(hull.planes[f][0], hull.planes[f][1], hull.planes[f][2]);
     add_direction(g.features.face_normals, n);
-    {
-      V3 c = V3::Zero();
-      for (int v : idx) c += (*verts)[std::size_t(v)];
-      g.surface_samples.push_back(c / S(idx.size()) + g.offset);
-    }
+    V3 c = V3::Zero();
+    for (std::uint32_t v : idx) c += (*verts)[v];
+    g.surface_samples.push_back(c / S(idx.size()) + g.offset);
     for (std::size_t k = 0; k < idx.size(); ++k)
-      add_direction(g.features.edge_dirs,
-                    (*verts)[std::size_t(idx[(k + 1) % idx.size()])] - (*verts)[std::size_t(idx[k])]);
-    const S nn = n.norm();
-    if (nn > 0) planes.emplace_back(n / nn, (n / nn).dot((*verts)[std::size_t(idx[0])]));
+      add_direction(g.features.edge_dirs, (*verts)[idx[(k + 1) % idx.size()]] - (*verts)[idx[k]]);
+    planes.emplace_back(n, hull.planes[f][3]);
   }
+  if (hull.faces.empty())
+    for (const auto& t : mesh.triangles) {
+      const V3 a = pts[t[0]], b = pts[t[1]], c = pts[t[2]];
+      add_direction(g.features.face_normals, (b - a).cross(c - a));
+      for (const V3& e : {V3(b - a), V3(c - b), V3(a - c)}) add_direction(g.features.edge_dirs, e);
+      g.surface_samples.push_back((a + b + c) / S(3) + g.offset);
+    }
   // Convex when every triangle lies in a face plane of the hull (within 1e-6 m, relative
   // to the mesh's size above 1 m): a vertex inside the hull, or a face across it (two
   // boxes side by side: every vertex on the hull, the facing sides inside), shows it is
@@ -268,6 +244,10 @@ ShapeGeom build_mesh(const Shape& shape) {
       g.convex = false;
       break;
     }
+  }
+  if (num_faces == 0) {  // flat: the triangles themselves
+    g.hull = g.exact;
+    return g;
   }
   auto convex = std::make_shared<fcl::Convex<S>>(verts, num_faces, faces, false);
   convex->computeLocalAABB();

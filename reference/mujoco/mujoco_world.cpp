@@ -26,10 +26,6 @@ namespace octocd {
 
 namespace {
 
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
 /// MuJoCo's error handler while a MuJoCo call runs (MujocoCall): MuJoCo's default prints,
 /// appends to MUJOCO_LOG.TXT in the working directory and exits the process.
 [[noreturn]] void throw_mujoco_error(const char* msg) { throw RuntimeError(std::string("MuJoCo error: ") + msg); }
@@ -84,40 +80,26 @@ std::array<double, 3> solid_box_inertia(Vec3 h, double m) {
 
 }  // namespace
 
-struct MujocoWorld::Impl {
+struct MujocoWorld::Impl : ReferenceCore {
   MujocoSettings settings;
   std::string xml;
   mjModel* m = nullptr;
   mjData* d = nullptr;
-  double dt = 0.001;
   double timeconst = 0.002;  // solref[0] of every geom (s)
-  float slop = 0.001f;
-  Vec3 gravity;
-  std::vector<float> w;                // inverse mass per body (0 = static)
   std::vector<int> qpos_adr, dof_adr;  // per octocd body: free joint addresses (-1: static)
   std::vector<std::uint32_t> geom_body;  // per MuJoCo geom: the octocd body
-  std::vector<std::array<double, 3>> inertia;  // per body, diagonal, body frame (0: static)
-  std::uint64_t static_static = 0;
-  BodyState state;
-  FrameMetrics metrics;
-  std::int64_t frame = 0;
-  bool recording = false;
-  RotationTraits traits;
-  FrameRecord record;
-  std::vector<ContactRecord> no_contacts;
+  std::vector<std::array<double, 3>> diag_inertia;  // per body, diagonal, body frame (0: static)
   std::array<int, mjNWARNING> warnings{};  // mjData::warning counts seen so far
-  std::string geometry;
 
-  ~Impl() {
+  ~Impl() override {
     if (d) mj_deleteData(d);
     if (m) mj_deleteModel(m);
   }
 
   void read_state();
-  void check_step(const Model& model);
-  std::string body_of_index(const Model& model, int k, int index) const;
+  void check_step();
+  std::string body_of_index(int k, int index) const;
   void fill_record();
-  std::uint64_t overlapping_pairs() const;
 };
 
 void MujocoWorld::Impl::read_state() {
@@ -138,20 +120,20 @@ void MujocoWorld::Impl::read_state() {
 /// The octocd body whose free joint holds index `index` of qpos (warning k =
 /// mjWARN_BADQPOS) or of qvel/qacc (the others: a DOF), as ": DOF 9 is body 6 (group
 /// g)"; empty when no body holds it.
-std::string MujocoWorld::Impl::body_of_index(const Model& model, int k, int index) const {
+std::string MujocoWorld::Impl::body_of_index(int k, int index) const {
   const bool qpos = k == mjWARN_BADQPOS;
   const std::vector<int>& adr = qpos ? qpos_adr : dof_adr;
   const int width = qpos ? 7 : 6;
   for (std::size_t i = 0; i < adr.size(); ++i)
     if (adr[i] >= 0 && adr[i] <= index && index < adr[i] + width)
-      return fmt::format(": {} {} is body {} (group {})", qpos ? "qpos index" : "DOF", index, i, model.bodies[i].group);
+      return fmt::format(": {} {} is body {} (group {})", qpos ? "qpos index" : "DOF", index, i, model->bodies[i].group);
   return "";
 }
 
 /// After a step: a non-finite state names its body; a MuJoCo warning (buffers full:
 /// contacts or constraints dropped; a bad qpos, qvel or qacc: the state reset, named
 /// with the octocd body of MuJoCo's index) throws.
-void MujocoWorld::Impl::check_step(const Model& model) {
+void MujocoWorld::Impl::check_step() {
   for (std::size_t i = 0; i < w.size(); ++i) {
     if (qpos_adr[i] < 0) continue;
     bool finite = true;
@@ -176,27 +158,8 @@ void MujocoWorld::Impl::check_step(const Model& model) {
     if (k == mjWARN_VGEOMFULL || k == mjWARN_BADCTRL) continue;  // nothing octocd uses
     const bool bad_state = k == mjWARN_BADQPOS || k == mjWARN_BADQVEL || k == mjWARN_BADQACC;
     throw RuntimeError(fmt::format("mujoco: frame {}: MuJoCo warning: {} ({}){}", frame, k < 8 ? kWhat[k] : "unknown",
-                                   g_last_warning, bad_state ? body_of_index(model, k, d->warning[k].lastinfo) : ""));
+                                   g_last_warning, bad_state ? body_of_index(k, d->warning[k].lastinfo) : ""));
   }
-}
-
-/// Pairs with a dynamic body whose exact world AABBs at the pre-step pose overlap (Eq. 6,
-/// inclusive): sort by min x, sweep.
-std::uint64_t MujocoWorld::Impl::overlapping_pairs() const {
-  const std::vector<Aabb>& boxes = record.aabbs;
-  std::vector<std::uint32_t> order(boxes.size());
-  for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return boxes[a].min.x < boxes[b].min.x; });
-  std::uint64_t n = 0;
-  for (std::size_t k = 0; k < order.size(); ++k) {
-    const Aabb& a = boxes[order[k]];
-    for (std::size_t j = k + 1; j < order.size() && boxes[order[j]].min.x <= a.max.x; ++j) {
-      const Aabb& b = boxes[order[j]];
-      if (!(w[order[k]] > 0.0f) && !(w[order[j]] > 0.0f)) continue;
-      if (a.min.y <= b.max.y && b.min.y <= a.max.y && a.min.z <= b.max.z && b.min.z <= a.max.z) ++n;
-    }
-  }
-  return n;
 }
 
 void MujocoWorld::Impl::fill_record() {
@@ -238,22 +201,13 @@ void MujocoWorld::Impl::fill_record() {
 }
 
 MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& initial, const MujocoSettings& settings)
-    : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
-  Impl& im = *impl_;
-  const Model& src = *model_;
+    : ReferenceWorld(std::make_unique<Impl>()) {
+  Impl& im = impl();
+  im.start(std::move(model), initial, "mujoco");
+  const Model& src = *im.model;
   const Scene& scene = src.scene;
   const std::size_t n = initial.size();
-  if (src.bodies.size() != n)
-    throw InputError(fmt::format("mujoco: the initial state has {} bodies, the model {}", n, src.bodies.size()));
   im.settings = settings;
-  im.dt = scene.dt;
-  im.slop = scene.response.slop;
-  im.gravity = scene.gravity;
-  im.w = initial.w;
-  im.static_static = static_static_pairs(src);
-  im.state = initial;
-  im.state.q.resize(n);      // identity where the model has none
-  im.state.omega.resize(n);  // zero where the model has none
   for (std::size_t i = 0; i < n; ++i) im.state.q[i] = normalized(im.state.q[i]);
 
   // ---- The MJCF text.
@@ -320,18 +274,18 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
     const Vec3 at = s.mesh ? pose.position : to_world(pose, center(s.local));
     x += "    " + geom(i, fmt::format(" pos=\"{}\" quat=\"{}\"", vec(at), quat(pose.orientation))) + "\n";
   }
-  im.inertia.assign(n, {0.0, 0.0, 0.0});
+  im.diag_inertia.assign(n, {0.0, 0.0, 0.0});
   for (std::size_t i = 0; i < n; ++i) {
     if (!(initial.w[i] > 0.0f)) continue;
     const Shape& s = src.shapes[src.bodies[i].shape];
     const double mass = 1.0 / static_cast<double>(initial.w[i]);
-    im.inertia[i] = solid_box_inertia(0.5f * (s.local.max - s.local.min), mass);
+    im.diag_inertia[i] = solid_box_inertia(0.5f * (s.local.max - s.local.min), mass);
     const std::string at = s.mesh ? "" : fmt::format(" pos=\"{}\"", vec(center(s.local)));
     x += fmt::format(
         "    <body name=\"b{}\" pos=\"{}\" quat=\"{}\">\n      <freejoint name=\"j{}\"/>\n"
         "      <inertial pos=\"0 0 0\" mass=\"{}\" diaginertia=\"{} {} {}\"/>\n      {}\n    </body>\n",
-        i, vec(im.state.x[i]), quat(im.state.q[i]), i, num(mass), num(im.inertia[i][0]), num(im.inertia[i][1]),
-        num(im.inertia[i][2]), geom(i, at));
+        i, vec(im.state.x[i]), quat(im.state.q[i]), i, num(mass), num(im.diag_inertia[i][0]), num(im.diag_inertia[i][1]),
+        num(im.diag_inertia[i][2]), geom(i, at));
   }
   x += "  </worldbody>\n</mujoco>\n";
   im.xml = std::move(x);
@@ -388,24 +342,18 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
 
   // ---- What the physics tier is told (version 2 root attributes and /bodies).
   RotationTraits& t = im.traits;
-  t.rotates = true;
   t.mu = static_cast<float>(mu);
   t.restitution = static_cast<float>(e);
   t.friction_combine = "max";      // MuJoCo: the larger friction of the two geoms
   t.restitution_combine = "max";   // one solref for every geom: every pair has e
   t.contact_margin = static_cast<float>(settings.margin);
-  t.detection = "pre-step";
-  t.broadphase_exact = false;
   t.candidate_pairs = false;  // MuJoCo's broadphase pairs are not exposed: no /pairs
-  t.contact_geometry = "shape";
-  t.jt3 = true;
   t.contact_model = "soft";
-  t.integrator = "semi-implicit";
   t.gyroscopic = "true";
   t.deactivation = "off";  // MuJoCo 2.x has no sleeping: mj_step integrates every body
   for (std::size_t i = 0; i < n; ++i) {
     std::array<float, 9> tensor{};
-    for (int k = 0; k < 3; ++k) tensor[static_cast<std::size_t>(4 * k)] = static_cast<float>(im.inertia[i][static_cast<std::size_t>(k)]);
+    for (int k = 0; k < 3; ++k) tensor[static_cast<std::size_t>(4 * k)] = static_cast<float>(im.diag_inertia[i][static_cast<std::size_t>(k)]);
     t.inertia.push_back(tensor);
     t.body_friction.push_back(static_cast<float>(mu));
     t.body_restitution.push_back(static_cast<float>(e));
@@ -418,16 +366,12 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
 
 MujocoWorld::~MujocoWorld() = default;
 
+MujocoWorld::Impl& MujocoWorld::impl() const { return static_cast<Impl&>(core()); }
+
 const FrameMetrics& MujocoWorld::step() {
-  Impl& im = *impl_;
+  Impl& im = impl();
   const std::size_t n = im.w.size();
-  FrameRecord& r = im.record;
-  r.frame = im.frame + 1;
-  r.x_pre = im.state.x;
-  r.v_pre = im.state.v;
-  r.q_pre = im.state.q;
-  r.w_pre = im.state.omega;
-  FrameMetrics fm;
+  im.save_pre_state();
   const auto t0 = std::chrono::steady_clock::now();
   double detect_ms = 0.0, solve_ms = 0.0, integrate_ms = 0.0;
   {
@@ -452,78 +396,45 @@ const FrameMetrics& MujocoWorld::step() {
     integrate_ms = ms_since(t);
   }
   const auto t1 = std::chrono::steady_clock::now();
-  fm.frame = ++im.frame;
-  fm.time = static_cast<double>(im.frame) * im.dt;
-  im.check_step(*model_);
+  FrameMetrics fm = im.next_frame();
+  im.check_step();
   im.read_state();
   // The world AABBs at the detection pose (the pre-step state): the record's and the pair count's.
-  r.aabbs.resize(n);
-  for (std::size_t i = 0; i < n; ++i) r.aabbs[i] = posed_box_aabb(model_->local_box(i), {r.x_pre[i], r.q_pre[i]});
-  fm.dynamic_pairs = im.overlapping_pairs();
+  fm.dynamic_pairs = im.posed_overlapping_pairs();
   fm.aabb_pairs = fm.dynamic_pairs + im.static_static;
   if (im.recording) {
-    r.x_post = im.state.x;
-    r.v_post = im.state.v;
-    r.q_post = im.state.q;
-    r.w_post = im.state.omega;
-    r.x_det = r.x_pre;  // mj_fwdPosition detects at the state before mj_Euler
-    r.q_det = r.q_pre;
+    im.save_post_state();  // mj_fwdPosition detects at the state before mj_Euler
     im.fill_record();
   }
-  std::uint64_t rows = 0, pen = 0, above = 0;
-  double pen_sum = 0.0, pen_max = 0.0;
+  std::uint64_t rows = 0;
+  PenetrationSum pen;
   for (int k = 0; k < im.d->ncon; ++k) {
     const mjContact& con = im.d->contact[k];
     if (con.exclude != 0 && con.exclude != 1) continue;
     ++rows;
-    if (con.dist < 0.0) {
-      ++pen;
-      pen_sum += -con.dist;
-      pen_max = std::max(pen_max, -con.dist);
-      if (-con.dist > static_cast<double>(im.slop)) ++above;
-    }
+    if (con.dist < 0.0) pen.add(-con.dist, im.slop);
   }
   fm.contacts = rows;
-  if (pen > 0) {
-    fm.penetration_mean = pen_sum / static_cast<double>(pen);
-    fm.penetration_max = pen_max;
-    fm.penetration_share_above_slop = static_cast<double>(above) / static_cast<double>(pen);
-  }
-  double ke = 0.0, px = 0.0, py = 0.0, pz = 0.0;
+  pen.finish(fm);
+  EnergySum energy;
   for (std::size_t i = 0; i < n; ++i) {
     if (im.qpos_adr[i] < 0) continue;
-    const double mass = 1.0 / static_cast<double>(im.w[i]);
     const mjtNum* qv = im.d->qvel + im.dof_adr[i];
-    ke += 0.5 * mass * (qv[0] * qv[0] + qv[1] * qv[1] + qv[2] * qv[2]);
-    for (int k = 0; k < 3; ++k) ke += 0.5 * im.inertia[i][static_cast<std::size_t>(k)] * qv[3 + k] * qv[3 + k];
-    px += mass * qv[0];
-    py += mass * qv[1];
-    pz += mass * qv[2];
+    // MuJoCo's free joint keeps the angular velocity in the body frame (qv[3..5]).
+    energy.add_linear(1.0 / static_cast<double>(im.w[i]), qv, qv[0] * qv[0] + qv[1] * qv[1] + qv[2] * qv[2]);
+    for (int k = 0; k < 3; ++k)
+      energy.ke += 0.5 * im.diag_inertia[i][static_cast<std::size_t>(k)] * qv[3 + k] * qv[3 + k];
   }
-  fm.kinetic_energy = ke;
-  fm.momentum = {px, py, pz};
+  energy.finish(fm);
   fm.stage_ms[static_cast<int>(Stage::Midphase)] = detect_ms;
   fm.stage_ms[static_cast<int>(Stage::Response)] = solve_ms;
   fm.stage_ms[static_cast<int>(Stage::Integrate)] = integrate_ms;
   fm.stage_ms[static_cast<int>(Stage::Metrics)] = ms_since(t1);
-  fm.step_ms = ms_since(t0);
-  im.metrics = fm;
-  return im.metrics;
+  return im.finish_step(fm, t0);
 }
 
-const BodyState& MujocoWorld::state() const { return impl_->state; }
-const FrameMetrics& MujocoWorld::last_metrics() const { return impl_->metrics; }
-std::int64_t MujocoWorld::frame() const { return impl_->frame; }
-std::string MujocoWorld::device() const { return cpu_description(); }
-const std::vector<ContactRecord>& MujocoWorld::contacts() const {
-  return impl_->recording ? impl_->record.contacts : impl_->no_contacts;
-}
-std::string MujocoWorld::collision_geometry() const { return impl_->geometry; }
-const RotationTraits* MujocoWorld::rotation_traits() const { return &impl_->traits; }
-void MujocoWorld::set_recording(bool on) { impl_->recording = on; }
-const FrameRecord& MujocoWorld::record() const { return impl_->record; }
-const MujocoSettings& MujocoWorld::settings() const { return impl_->settings; }
-const std::string& MujocoWorld::xml() const { return impl_->xml; }
+const MujocoSettings& MujocoWorld::settings() const { return impl().settings; }
+const std::string& MujocoWorld::xml() const { return impl().xml; }
 std::string MujocoWorld::mujoco_version() { return mj_versionString(); }
 
 bool MujocoWorld::has_stage(Stage s) const {
@@ -538,9 +449,9 @@ std::string MujocoWorld::notes() const {
       "and narrow phase, constraint set-up), response = bias forces and the constraint solver,\n"
       "integrate = mj_Euler; aabbs and broadphase are not timed apart. contacts = MuJoCo's contact\n"
       "rows; kinetic energy includes rotation.",
-      mujoco_version(), impl_->geometry,
-      num(impl_->timeconst),
-      mujoco_cone_name(impl_->settings.cone));
+      mujoco_version(), impl().geometry,
+      num(impl().timeconst),
+      mujoco_cone_name(impl().settings.cone));
 }
 
 }  // namespace octocd

@@ -18,7 +18,6 @@ namespace octocd {
 
 
 const char* ode_stepper_name(OdeStepper s) { return s == OdeStepper::QuickStep ? "quickstep" : "step"; }
-const char* ode_friction_name(OdeFriction f) { return f == OdeFriction::Pyramid ? "pyramid" : "inscribed"; }
 
 OdeSettings ode_library_defaults() {
   dInitODE2(0);
@@ -33,64 +32,45 @@ OdeSettings ode_library_defaults() {
   return s;
 }
 
-std::vector<std::string> ode_setting_names() {
-  return {"stepper", "iterations", "erp", "cfm", "contacts", "friction", "gyroscopic"};
+namespace {
+
+using T = SettingTable<OdeSettings>;
+
+/// The ode engine's settings, one row a key.
+const T& ode_table() {
+  static const T table{"ode", "docs/engines.md", "stepper=quickstep", {
+      {"stepper",
+       T::choice(
+           &OdeSettings::stepper, "step", OdeStepper::Step, "quickstep", OdeStepper::QuickStep,
+           "step (dWorldStep, the Dantzig LCP), quickstep (dWorldQuickStep, iterations Gauss-Seidel sweeps)")},
+      {"iterations", T::integer(&OdeSettings::iterations, 1, 10000,
+                                "an integer in [1, 10000] (dWorldQuickStep's sweeps per step; ODE's default 20)")},
+      {"erp",
+       T::number(&OdeSettings::erp, 0.0, 1.0, "a decimal number in [0, 1] (dWorldSetERP; ODE's default 0.2)")},
+      {"cfm", T::number(&OdeSettings::cfm, 0.0, 1.0,
+                        "a decimal number in [0, 1] (dWorldSetCFM; ODE's default 1e-10 in double precision)")},
+      {"contacts",
+       T::integer(&OdeSettings::max_contacts, 1, 64, "an integer in [1, 64] (dCollide's contacts per pair)")},
+      {"friction",
+       T::choice(
+           &OdeSettings::friction, "inscribed", OdeFriction::Inscribed, "pyramid", OdeFriction::Pyramid,
+           "inscribed (mu / sqrt 2 per friction direction: inside the Coulomb cone), pyramid (mu per direction)")},
+      {"gyroscopic",
+       T::choice(&OdeSettings::gyroscopic, "true", true, "false", false, "true, false (dBodySetGyroscopicMode)")},
+  }};
+  return table;
 }
 
+}  // namespace
+
+std::vector<std::string> ode_setting_names() { return ode_table().names(); }
+
 void set_ode_setting(OdeSettings& s, const std::string& key, const std::string& value, const std::string& where) {
-  if (key == "stepper") {
-    if (value == "step") s.stepper = OdeStepper::Step;
-    else if (value == "quickstep") s.stepper = OdeStepper::QuickStep;
-    else
-      throw InputError(fmt::format("{}: stepper='{}' is not allowed; allowed: step (dWorldStep, the Dantzig LCP), "
-                                   "quickstep (dWorldQuickStep, iterations Gauss-Seidel sweeps)",
-                                   where, value));
-    return;
-  }
-  if (key == "iterations") {
-    s.iterations = setting_integer(key, value, 1, 10000, where,
-                             "an integer in [1, 10000] (dWorldQuickStep's sweeps per step; ODE's default 20)");
-    return;
-  }
-  if (key == "erp") {
-    s.erp = setting_number(key, value, 0.0, 1.0, where, "a decimal number in [0, 1] (dWorldSetERP; ODE's default 0.2)");
-    return;
-  }
-  if (key == "cfm") {
-    s.cfm = setting_number(key, value, 0.0, 1.0, where,
-                         "a decimal number in [0, 1] (dWorldSetCFM; ODE's default 1e-10 in double precision)");
-    return;
-  }
-  if (key == "contacts") {
-    s.max_contacts = setting_integer(key, value, 1, 64, where, "an integer in [1, 64] (dCollide's contacts per pair)");
-    return;
-  }
-  if (key == "friction") {
-    if (value == "inscribed") s.friction = OdeFriction::Inscribed;
-    else if (value == "pyramid") s.friction = OdeFriction::Pyramid;
-    else
-      throw InputError(fmt::format("{}: friction='{}' is not allowed; allowed: inscribed (mu / sqrt 2 per friction "
-                                   "direction: inside the Coulomb cone), pyramid (mu per direction)",
-                                   where, value));
-    return;
-  }
-  if (key == "gyroscopic") {
-    if (value == "true") s.gyroscopic = true;
-    else if (value == "false") s.gyroscopic = false;
-    else
-      throw InputError(fmt::format("{}: gyroscopic='{}' is not allowed; allowed: true, false "
-                                   "(dBodySetGyroscopicMode)",
-                                   where, value));
-    return;
-  }
-  std::string names;
-  for (const std::string& n : ode_setting_names()) names += (names.empty() ? "" : ", ") + n;
-  throw InputError(fmt::format("{}: unknown ode setting '{}'; allowed: {} (docs/engines.md)", where, key, names));
+  ode_table().set(s, key, value, where);
 }
 
 void apply_ode_settings(OdeSettings& s, const std::vector<std::string>& items, const std::string& where) {
-  apply_setting_items(items, where, "stepper=quickstep",
-                      [&](const std::string& k, const std::string& v) { set_ode_setting(s, k, v, where); });
+  ode_table().apply(s, items, where);
 }
 
 }  // namespace octocd

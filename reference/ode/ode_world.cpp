@@ -26,10 +26,6 @@ namespace octocd {
 
 namespace {
 
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
 Vec3 to_vec3(const dReal* v) { return {static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2])}; }
 
 /// A double bound rounded to the float at or beyond it (down for a minimum, up for a maximum).
@@ -57,7 +53,7 @@ constexpr unsigned long kDynamicCategory = 1, kStaticCategory = 2;
 
 }  // namespace
 
-struct OdeWorld::Impl {
+struct OdeWorld::Impl : ReferenceCore {
   /// One octocd shape as ODE takes it: a box's sides, or a hull's planes, points and
   /// polygons (dCreateConvex keeps pointers to them), or a triangle mesh's data.
   struct ShapeData {
@@ -79,9 +75,6 @@ struct OdeWorld::Impl {
   };
 
   OdeSettings settings;
-  double dt = 0.001;
-  Vec3 gravity;
-  float slop = 0.001f;
   float mu = 0.0f, restitution = 0.0f, restitution_threshold = 0.0f;
   dWorldID world = nullptr;
   dSpaceID space = nullptr;
@@ -89,17 +82,6 @@ struct OdeWorld::Impl {
   std::vector<ShapeData> shapes;
   std::vector<dBodyID> bodies;  // index = body id; nullptr for a static body
   std::vector<dGeomID> geoms;   // index = body id
-  std::vector<std::array<double, 9>> inertia;  // body frame, about x (kg m^2)
-  std::vector<float> w;
-  std::uint64_t static_static = 0;
-  BodyState state;
-  FrameMetrics metrics;
-  std::int64_t frame = 0;
-  bool recording = false;
-  RotationTraits traits;
-  FrameRecord record;
-  std::vector<ContactRecord> no_contacts;
-  std::string geometry;
 
   // Per step: the callback's pairs and contact rows, the joints' feedback.
   std::vector<Pair> pairs;
@@ -108,7 +90,7 @@ struct OdeWorld::Impl {
   std::vector<dJointFeedback> feedback;
   double narrow_ms = 0.0;
 
-  ~Impl() {
+  ~Impl() override {
     if (joints) dJointGroupDestroy(joints);
     for (dGeomID g : geoms)
       if (g) dGeomDestroy(g);
@@ -162,56 +144,33 @@ void OdeWorld::Impl::fill_record() {
   r.pairs.erase(std::unique(r.pairs.begin(), r.pairs.end()), r.pairs.end());
   r.has_pairs = true;
 
-  r.contacts.clear();
+  std::vector<ContactRecord> unsorted;
   std::vector<Vec3> jt3;
-  const double h = dt;
   for (std::size_t k = 0; k < rows.size(); ++k) {
     const Row& row = rows[k];
     const dJointFeedback& fb = feedback[k];
     // The joint's node 0 is geom 1's body, or geom 2's when geom 1 is static (ODE then
-    // reverses the attachment); fb.f1 is the force on node 0. Force on geom 1's body:
-    const bool g1_dynamic = bodies[row.i1] != nullptr;
-    const double s1 = g1_dynamic ? 1.0 : -1.0;
-    const double f1[3] = {s1 * fb.f1[0], s1 * fb.f1[1], s1 * fb.f1[2]};
-    const bool swap = row.i1 > row.i2;  // A is geom 2's body
-    const double sa = swap ? -1.0 : 1.0;
-    // dContactGeom's normal points from geom 2 into geom 1: from B to A when A is geom 1.
-    const double nrm[3] = {sa * row.geom.normal[0], sa * row.geom.normal[1], sa * row.geom.normal[2]};
-    const double j_a[3] = {sa * f1[0] * h, sa * f1[1] * h, sa * f1[2] * h};
-    // ODE's normal row has lo = 0, so its impulse is >= 0; projecting the summed force
-    // (friction rows orthogonal to the normal) back on the normal may round below it.
-    const double jn = std::max(0.0, j_a[0] * nrm[0] + j_a[1] * nrm[1] + j_a[2] * nrm[2]);
-    const double jt_d[3] = {j_a[0] - jn * nrm[0], j_a[1] - jn * nrm[1], j_a[2] - jn * nrm[2]};
-    ContactRecord c;
-    c.pair = swap ? Pair{row.i2, row.i1} : Pair{row.i1, row.i2};
-    c.normal = {static_cast<float>(nrm[0]), static_cast<float>(nrm[1]), static_cast<float>(nrm[2])};
-    c.depth = static_cast<float>(std::max<dReal>(0, row.geom.depth));
-    c.point = to_vec3(row.geom.pos);
-    c.jn = static_cast<float>(jn);
-    const Vec3 j_t{static_cast<float>(jt_d[0]), static_cast<float>(jt_d[1]), static_cast<float>(jt_d[2])};
-    c.jt = row_scalar_jt(r, c, j_t, w, dt, gravity);
-    r.contacts.push_back(c);
-    jt3.push_back(j_t);
+    // reverses the attachment); fb.f1 is the force on node 0. Impulse on geom 1's body:
+    const double s1 = bodies[row.i1] != nullptr ? 1.0 : -1.0;
+    const double j1[3] = {s1 * fb.f1[0] * dt, s1 * fb.f1[1] * dt, s1 * fb.f1[2] * dt};
+    // dContactGeom's normal points from geom 2 into geom 1.
+    const double n21[3] = {row.geom.normal[0], row.geom.normal[1], row.geom.normal[2]};
+    unsorted.push_back(manifold_row(row.i1, row.i2, n21, j1, row.geom.depth, to_vec3(row.geom.pos), jt3));
   }
-  std::vector<ContactRecord> unsorted;
-  unsorted.swap(r.contacts);
   finish_manifold_record(r, unsorted, jt3);
 }
 
 OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial, const OdeSettings& settings)
-    : model_(std::move(model)), impl_(std::make_unique<Impl>()) {
+    : ReferenceWorld(std::make_unique<Impl>()) {
   init_ode_for_this_thread();
-  Impl& m = *impl_;
-  const Model& src = *model_;
+  Impl& m = impl();
+  m.start(std::move(model), initial, "ode");
+  const Model& src = *m.model;
   const Scene& scene = src.scene;
   m.settings = settings;
-  m.dt = scene.dt;
-  m.gravity = scene.gravity;
-  m.slop = scene.response.slop;
   m.mu = scene.response.mu_kinetic;
   m.restitution = scene.response.restitution;
   m.restitution_threshold = scene.response.restitution_threshold;
-  m.static_static = static_static_pairs(src);
   m.buffer.resize(static_cast<std::size_t>(settings.max_contacts));
 
   m.world = dWorldCreate();
@@ -224,10 +183,6 @@ OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial,
   m.joints = dJointGroupCreate(0);
 
   const std::size_t n = initial.size();
-  m.state = initial;
-  m.state.q.resize(n);      // identity where the model has none
-  m.state.omega.resize(n);  // zero where the model has none
-  m.w = initial.w;
 
   // Which shapes a static body uses as a triangle mesh, and which as a hull or box.
   std::vector<char> static_mesh(src.shapes.size(), 0), dynamic_use(src.shapes.size(), 0);
@@ -358,29 +313,19 @@ OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial,
   t.friction_combine = "min";
   t.restitution_combine = "min";
   t.contact_margin = 1e-4f;
-  t.detection = "pre-step";
-  t.broadphase_exact = false;
-  t.contact_geometry = "shape";
-  t.rotates = true;
-  t.jt3 = true;
   t.contact_model = "rigid";
-  t.integrator = "semi-implicit";
   t.gyroscopic = settings.gyroscopic ? "true" : "false";
   t.deactivation = "off";  // dWorldSetAutoDisableFlag(world, 0) and per body: no body is ever disabled
 }
 
 OdeWorld::~OdeWorld() = default;
 
+OdeWorld::Impl& OdeWorld::impl() const { return static_cast<Impl&>(core()); }
+
 const FrameMetrics& OdeWorld::step() {
   init_ode_for_this_thread();
-  Impl& m = *impl_;
-  if (m.recording) {
-    m.record.frame = m.frame + 1;
-    m.record.x_pre = m.state.x;
-    m.record.v_pre = m.state.v;
-    m.record.q_pre = m.state.q;
-    m.record.w_pre = m.state.omega;
-  }
+  Impl& m = impl();
+  if (m.recording) m.save_pre_state();
   const auto t0 = std::chrono::steady_clock::now();
   m.pairs.clear();
   m.rows.clear();
@@ -411,24 +356,11 @@ const FrameMetrics& OdeWorld::step() {
   if (!ok) throw RuntimeError(fmt::format("frame {}: ODE's step failed (out of memory in its work area)", m.frame + 1));
 
   const auto t2 = std::chrono::steady_clock::now();
-  FrameMetrics fm;
-  fm.frame = ++m.frame;
-  fm.time = static_cast<double>(m.frame) * m.dt;
+  FrameMetrics fm = m.next_frame();
   m.read_state();
-  for (std::size_t i = 0; i < m.bodies.size(); ++i)
-    if (m.bodies[i] && !(is_finite(m.state.x[i]) && is_finite(m.state.v[i]) && is_finite(m.state.omega[i])))
-      throw RuntimeError(fmt::format("frame {}: body {} has a non-finite state after ODE's step (x ({}, {}, {}), v "
-                                     "({}, {}, {}))",
-                                     m.frame, i, m.state.x[i].x, m.state.x[i].y, m.state.x[i].z, m.state.v[i].x,
-                                     m.state.v[i].y, m.state.v[i].z));
+  m.check_finite("ODE's");
   if (m.recording) {
-    FrameRecord& r = m.record;
-    r.x_post = m.state.x;
-    r.v_post = m.state.v;
-    r.q_post = m.state.q;
-    r.w_post = m.state.omega;
-    r.x_det = r.x_pre;  // ODE collides before it steps
-    r.q_det = r.q_pre;
+    m.save_post_state();  // ODE collides before it steps
     m.fill_record();
   }
   std::vector<Pair> unique_pairs = m.pairs;
@@ -436,67 +368,37 @@ const FrameMetrics& OdeWorld::step() {
   fm.dynamic_pairs = unique_pairs.size();
   fm.aabb_pairs = unique_pairs.size() + m.static_static;
   fm.contacts = m.rows.size();
-  std::uint64_t above = 0;
-  double pen_sum = 0.0, pen_max = 0.0;
-  for (const Impl::Row& row : m.rows) {
-    const double d = std::max<dReal>(0, row.geom.depth);
-    pen_sum += d;
-    pen_max = std::max(pen_max, d);
-    if (d > static_cast<double>(m.slop)) ++above;
-  }
-  if (!m.rows.empty()) {
-    fm.penetration_mean = pen_sum / static_cast<double>(m.rows.size());
-    fm.penetration_max = pen_max;
-    fm.penetration_share_above_slop = static_cast<double>(above) / static_cast<double>(m.rows.size());
-  }
-  double ke = 0.0, px = 0.0, py = 0.0, pz = 0.0;
+  PenetrationSum pen;
+  for (const Impl::Row& row : m.rows) pen.add(std::max<dReal>(0, row.geom.depth), m.slop);
+  pen.finish(fm);
+  EnergySum energy;
   for (std::size_t i = 0; i < m.bodies.size(); ++i) {
     const dBodyID b = m.bodies[i];
     if (!b) continue;
-    const double mass = 1.0 / static_cast<double>(m.w[i]);
     const dReal* v = dBodyGetLinearVel(b);
-    ke += 0.5 * mass * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-    px += mass * v[0];
-    py += mass * v[1];
-    pz += mass * v[2];
-    // + 0.5 w_l . (I w_l), w_l = R^T w in the body frame (dBodyGetRotation: 3x4, row-major).
+    energy.add_linear(1.0 / static_cast<double>(m.w[i]), v, v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    // w_l = R^T w in the body frame (dBodyGetRotation: 3x4, row-major).
     const dReal* R = dBodyGetRotation(b);
     const dReal* wv = dBodyGetAngularVel(b);
     double wl[3];
     for (int k = 0; k < 3; ++k) wl[k] = R[0 * 4 + k] * wv[0] + R[1 * 4 + k] * wv[1] + R[2 * 4 + k] * wv[2];
-    const std::array<double, 9>& I = m.inertia[i];
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) ke += 0.5 * wl[r] * I[static_cast<std::size_t>(3 * r + c)] * wl[c];
+    energy.add_rotational(wl, m.inertia[i]);
   }
-  fm.kinetic_energy = ke;
-  fm.momentum = {px, py, pz};
+  energy.finish(fm);
   dJointGroupEmpty(m.joints);
   fm.stage_ms[static_cast<int>(Stage::Broadphase)] = std::max(0.0, collide_ms - m.narrow_ms);
   fm.stage_ms[static_cast<int>(Stage::Midphase)] = m.narrow_ms;
   fm.stage_ms[static_cast<int>(Stage::Response)] = response_ms;
   fm.stage_ms[static_cast<int>(Stage::Metrics)] = ms_since(t2);
-  fm.step_ms = ms_since(t0);
-  m.metrics = fm;
-  return m.metrics;
+  return m.finish_step(fm, t0);
 }
 
-const BodyState& OdeWorld::state() const { return impl_->state; }
-const FrameMetrics& OdeWorld::last_metrics() const { return impl_->metrics; }
-std::int64_t OdeWorld::frame() const { return impl_->frame; }
-std::string OdeWorld::device() const { return cpu_description(); }
-const std::vector<ContactRecord>& OdeWorld::contacts() const {
-  return impl_->recording ? impl_->record.contacts : impl_->no_contacts;
-}
-std::string OdeWorld::collision_geometry() const { return impl_->geometry; }
-const RotationTraits* OdeWorld::rotation_traits() const { return &impl_->traits; }
-void OdeWorld::set_recording(bool on) { impl_->recording = on; }
-const FrameRecord& OdeWorld::record() const { return impl_->record; }
-const OdeSettings& OdeWorld::settings() const { return impl_->settings; }
+const OdeSettings& OdeWorld::settings() const { return impl().settings; }
 
 bool OdeWorld::has_stage(Stage s) const { return s != Stage::Aabbs && s != Stage::Integrate; }
 
 std::string OdeWorld::notes() const {
-  const OdeSettings& s = impl_->settings;
+  const OdeSettings& s = impl().settings;
   return fmt::format(
       "{}; {} (erp {}, cfm {}{}), friction {} (dContactApprox1), up to {} contacts per pair,\n"
       "gyroscopic term {}. broadphase candidates = AABB pairs = dynamic pairs = the pairs dHashSpace hands the\n"
@@ -504,7 +406,7 @@ std::string OdeWorld::notes() const {
       "no static-static pairs); midphase = ODE's dCollide (dBoxBox, libccd MPR for hulls: one point per\n"
       "pair, trimesh colliders); response = contact joints + the ODE step, which also integrates (aabbs and\n"
       "integrate n/a). contacts = contact rows, penetration over their depths; kinetic energy includes rotation.",
-      impl_->geometry, s.stepper == OdeStepper::QuickStep ? "dWorldQuickStep" : "dWorldStep", s.erp, s.cfm,
+      impl().geometry, s.stepper == OdeStepper::QuickStep ? "dWorldQuickStep" : "dWorldStep", s.erp, s.cfm,
       s.stepper == OdeStepper::QuickStep ? fmt::format(", {} iterations", s.iterations) : std::string(),
       ode_friction_name(s.friction), s.max_contacts, s.gyroscopic ? "on" : "off");
 }

@@ -10,8 +10,9 @@
 #   of V defines (a column-0 definition in a source that includes that header). So
 #   commands.cpp calling run.cpp's add_run_command while run.cpp calls commands.cpp's
 #   engines_help, both through commands.hpp, is a circle;
-# - a circle between rooms (the top-level folders: core, gpu, ..., cli, python, bench)
-#   through their includes;
+# - a circle between rooms (the top-level folders: core, gpu, ..., cli, python, bench;
+#   an adapter's registration file, compiled into octocd_engines, is in engines) through
+#   their includes;
 # - an include from validation/ (the judges) of a file under harness/.
 # Run: cmake -DSRC=<source dir> -P tests/house/include_graph.cmake
 if(NOT SRC)
@@ -38,8 +39,30 @@ function(unit_of out path)
   string(REGEX REPLACE "/src$" "" dir "${dir}")
   set(${out} "${dir}/${stem}" PARENT_SCOPE)
 endfunction()
-# room_of(OUT PATH): the top-level folder (python/src is the room python).
+# An adapter's registration file (reference/<engine>/<engine>_engine.cpp, named by
+# octocd_register_engine in reference's CMakeLists.txt files) is compiled into the registry's
+# library, octocd_engines: it stands in the room engines, wherever its folder is.
+file(GLOB_RECURSE _reference_lists ${SRC}/reference/CMakeLists.txt)
+set(_registered "")
+foreach(l IN LISTS _reference_lists)
+  get_filename_component(dir ${l} DIRECTORY)
+  file(RELATIVE_PATH dir ${SRC} ${dir})
+  file(STRINGS ${l} regs REGEX "octocd_register_engine\\(")
+  foreach(r IN LISTS regs)
+    if(r MATCHES "CMAKE_CURRENT_SOURCE_DIR}/([^ )]+)")
+      list(APPEND _registered "${dir}/${CMAKE_MATCH_1}")
+    endif()
+  endforeach()
+endforeach()
+
+# room_of(OUT PATH): the top-level folder (python/src is the room python; a registered
+# adapter file is in engines).
 function(room_of out path)
+  list(FIND _registered "${path}" at)
+  if(at GREATER -1)
+    set(${out} "engines" PARENT_SCOPE)
+    return()
+  endif()
   string(REGEX MATCH "^[^/]+" r "${path}")
   set(${out} "${r}" PARENT_SCOPE)
 endfunction()

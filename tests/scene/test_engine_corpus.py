@@ -261,3 +261,72 @@ def test_planted_faults_fail_naming_the_frame(workdir, engine, fault):
     assert r.returncode == 3, f"{engine}, {fault} at frame {frame} not caught:\n{r.stdout}"
     assert verdict(r.stdout, rows[fault]) == "FAIL", f"{engine}, {fault}: row {rows[fault]}\n{r.stdout}"
     assert f"frame {frame}" in r.stdout, f"{engine}, {fault}: frame {frame} not named\n{r.stdout}"
+
+
+def redeclared(trace, impulses):
+    """A copy of `trace` as an engine that reports less (docs/validation.md, "What the impulses
+    hold"): `impulses` "normal-only" (the friction impulses unknown: jt written as zeros, no
+    jt3) or "none" (jn zeroed too)."""
+    copy = trace.parent / f"{trace.stem}--impulses-{impulses}.h5"
+    shutil.copyfile(trace, copy)
+    with h5py.File(copy, "r+") as f:
+        f["/contacts/jt"][...] = 0.0
+        if "/contacts/jt3" in f:
+            del f["/contacts/jt3"]
+        if impulses == "none":
+            f["/contacts/jn"][...] = 0.0
+        f.attrs["impulses"] = impulses
+    return copy
+
+
+@pytest.mark.parametrize("impulses", ["normal-only", "none"])
+@pytest.mark.parametrize("engine", [engine_param(e) for e in REFERENCE_ENGINES])
+def test_partial_impulses_pass_clean_and_catch_planted_faults(workdir, engine, impulses):
+    """Each reference engine's clean drop, declared as reporting only normal impulses (Rapier)
+    or none (Jolt): no new failure; normal-only, a loaded row dropped or a body in contact
+    with its velocity x1.5 fails momentum-balance naming the frame; none, momentum-balance
+    and friction are n/a."""
+    trace = redeclared(base_trace(workdir, engine, DROP, 120), impulses)
+    r = judge(trace)
+    failures = set(re.findall(r"^NEW FAILURE ([a-z-]+)/([a-z-]+):", r.stdout, re.M))
+    assert r.returncode in (0, 3), r.stdout + r.stderr
+    assert failures <= ENGINE_FAULTS.get(engine, set()), f"{engine}, impulses {impulses}: {failures}\n{r.stdout}"
+    assert verdict(r.stdout, "friction") == "n/a", r.stdout
+    if impulses == "none":
+        assert verdict(r.stdout, "momentum-balance") == "n/a", r.stdout
+        assert 'impulses = "none"' in r.stdout, r.stdout
+        return
+    assert verdict(r.stdout, "momentum-balance") == "pass", r.stdout
+
+    def dropped(f):
+        frame, row = loaded_row(f, dynamic_pair=True, rows_in_pair=2)
+        f["/contacts/jn"][row] = 0.0
+        return frame
+
+    def fast(f):
+        # the body in contact whose momentum m |v'| most exceeds its rows' cones (mu jn)
+        w, vel = f["/bodies/inverse_mass"][...], f["/states/velocity"]
+        jn, pair, off = f["/contacts/jn"][...], f["/contacts/pair"][...], f["/contacts/offsets"][...]
+        best = None
+        for frame in range(2, len(off)):
+            cone = {}
+            for s in range(int(off[frame - 1]), int(off[frame])):
+                a, b = int(pair[s][0]), int(pair[s][1])
+                for i in (a, b):
+                    cone[i] = cone.get(i, 0.0) + pair_mu(f, a, b) * float(jn[s])
+            for i, c in cone.items():
+                if w[i] > 0:
+                    ratio = np.linalg.norm(vel[frame, i]) / w[i] / (c + 1e-9)
+                    if best is None or ratio > best[0]:
+                        best = (ratio, frame, i)
+        if best is None or best[0] < 4:
+            pytest.skip("no body in contact whose momentum exceeds its rows' cones 4 times")
+        _, frame, i = best
+        f["/states/velocity"][frame, i] = f["/states/velocity"][frame, i] * 1.5
+        return frame
+
+    for name, edit in (("dropped", dropped), ("fast", fast)):
+        out, frame = planted(trace, name, edit)
+        assert out.returncode == 3, f"{engine}, {name} at frame {frame} not caught:\n{out.stdout}"
+        assert verdict(out.stdout, "momentum-balance") == "FAIL", f"{engine}, {name}\n{out.stdout}"
+        assert f"frame {frame}" in out.stdout, f"{engine}, {name}: frame {frame} not named\n{out.stdout}"

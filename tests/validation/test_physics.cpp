@@ -494,6 +494,37 @@ TEST(PhysicsRows, FrictionImpulseOutsideTheCone) {
   expect_caught(judge(*model, q.rec, b), "friction", {"pair (0, 3)"});
 }
 
+TEST(PhysicsRows, FrictionFloorsKeepThePlantedFaults) {
+  // The jt3 rule (no relative slack): the friction of pair (0, 3) only, along +x.
+  const auto model = build_model(four_bodies());
+  auto with_jt3 = [&](double share, double mu, Vec3 v3_cube) {
+    RestingRecord r = resting(*model);
+    float jn_pair = 0.0f;
+    for (const ContactRecord& c : r.rec.contacts)
+      if (c.pair == Pair{0, 3}) jn_pair += c.jn;
+    r.rec.jt3.assign(r.rec.contacts.size(), v3(0, 0, 0));
+    r.rec.jt3[2] = v3(float(share * mu * jn_pair), 0, 0);  // row 2: the first of pair (0, 3)
+    r.rec.v_pre[3] = r.rec.v_post[3] = v3_cube;
+    PhysicsBodies b = rotating_engine();
+    b.mu = mu;
+    return row_of(judge(*model, r.rec, b), "friction");
+  };
+  // MuJoCo's floor: mu 0 in the scene, 1e-5 applied (mjMINMU): within the cone.
+  EXPECT_TRUE(with_jt3(0.99, 1e-5, v3(0, 0, 0)).pass);
+  const ValidationResult zero = with_jt3(0.99 * 1e-5 / 1e-9, 1e-9, v3(0, 0, 0));  // mu 1e-9 declared
+  EXPECT_TRUE(zero.pass) << zero.detail;
+  EXPECT_FALSE(with_jt3(3.0, 1e-5, v3(0, 0, 0)).pass);  // 3x the floor's cone: caught
+  // The stored states' floor: a 5 ppm excess on a cube (2 kg) sliding at 1 m/s is below what
+  // its velocity can show (4 x 2^-23 x 2 kg x 2 m/s = 1.9e-6 kg m/s) ...
+  EXPECT_TRUE(with_jt3(1.000005, 0.5, v3(1, 0, 0)).pass);
+  // ... at rest it is not (no floor from the states: 16 x 2^-23 of the impulses only) ...
+  EXPECT_FALSE(with_jt3(1.0005, 0.5, v3(0, 0, 0)).pass);
+  // ... and 1.2x the cone fails either way.
+  const ValidationResult fast = with_jt3(1.2, 0.5, v3(1, 0, 0));
+  EXPECT_FALSE(fast.pass);
+  EXPECT_NE(fast.detail.find("1.2 x the cone"), std::string::npos) << fast.detail;
+}
+
 TEST(PhysicsRows, OrientationNotAppliedToContactPoints) {
   const auto model = build_model(four_bodies());
   RestingRecord r = resting(*model);
@@ -924,6 +955,9 @@ TEST(PhysicsFreeFlight, FreeBodiesFollowGravityAndTheirSpin) {
   b.integrator = PhysicsBodies::Integrator::Explicit;
   EXPECT_TRUE(row_of(judge(*model, ex, b), "free-flight").pass);
   b.integrator = PhysicsBodies::Integrator::Any;
+  EXPECT_TRUE(row_of(judge(*model, ex, b), "free-flight").pass);
+  EXPECT_TRUE(row_of(judge(*model, free_flight(*model), b), "free-flight").pass);
+  b.integrator = PhysicsBodies::Integrator::Undeclared;  // every a in [0, 1]: both pass
   EXPECT_TRUE(row_of(judge(*model, ex, b), "free-flight").pass);
   EXPECT_TRUE(row_of(judge(*model, free_flight(*model), b), "free-flight").pass);
 }

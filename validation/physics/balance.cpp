@@ -114,7 +114,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
   // Each row's impulse J = jn n + J_t on A (and -J on B), summed per body with its torque
   // about the body's detection-pose position, and what the record leaves uncertain.
   std::vector<D3> force(n), torque(n);
-  std::vector<double> mag(n, 0.0), tmag(n, 0.0), tallow(n, 0.0);
+  std::vector<double> mag(n, 0.0), tmag(n, 0.0), tallow(n, 0.0), any_dir(n, 0.0);
   // Per body, what the record leaves open of its rows' friction: a disc of radius u in the
   // plane normal to n per row (direction and size of J_t beyond the scalar jt).
   struct Disc {
@@ -143,11 +143,16 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     const D3 rel = va - vb;
     const D3 vt = rel - dot3(rel, nrm) * nrm;
     const double vt_len = len3(vt);
-    const bool vector_friction = rec.jt3.size() == rec.contacts.size();
-    const double jt = vector_friction ? len3(d3(rec.jt3[k])) : std::fabs(double(c.jt));
+    const bool normal_only = bodies.impulses == PhysicsBodies::Impulses::NormalOnly;
+    const bool vector_friction = rec.jt3.size() == rec.contacts.size() && !normal_only;
+    const double jt = normal_only ? 0.0 : vector_friction ? len3(d3(rec.jt3[k])) : std::fabs(double(c.jt));
     D3 jt_vec{};
     double uncertain = 0;  // |J_t - jt_vec| at most this (kg m/s), in the tangent plane
-    if (vector_friction) {
+    if (normal_only) {
+      // The friction is not reported (jt, jt3 never read): J_t is anywhere in the row's
+      // cone, with the row cone margin below (a sequential solver's row whose jn moved).
+      uncertain = pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs;
+    } else if (vector_friction) {
       jt_vec = d3(rec.jt3[k]);  // /contacts/jt3: the friction impulse on A, nothing left open
     } else if (vt_len > tol.friction_direction_speed) {
       jt_vec = (bodies.jt_along_sliding ? double(c.jt) : -double(c.jt)) * ((1.0 / vt_len) * vt);
@@ -171,12 +176,26 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       // up to 13% above mu times the row's final jn; the friction row holds the pair's sum
       // to the cone itself). Never with jt3; what it leaves open is stated in
       // docs/validate-your-engine.md, "The row cone margin".
-      constexpr double kRowConeMargin = 0.25;
       uncertain = std::max(jt, pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs);
     } else {
       // No sliding: v_t has no direction; jt is the friction impulse's magnitude (the
       // convention, and octocd's Bullet adapter below 1e-6 m/s), its direction open.
       uncertain = jt;
+    }
+    // Substeps (declared or undeclared, rotating records): the engine applies the row's
+    // impulse in parts through the step, its normal and its points turning with the two
+    // bodies, by at most theta = (|w_a| + |w_b|) dt (the larger of |w|, |w'| each): jn n
+    // leaves n into the tangent plane by |jn| theta (a disc), J_t leaves the plane by
+    // |J_t| theta (any direction), and the lever of both turns by |r| |J| theta
+    // (docs/validation.md, "Free flight: any consistent integrator").
+    double theta = 0;
+    if (bodies.may_substep() && rotating) {
+      const double wa = std::max(len3(w_of(rec.w_pre, p.a)), len3(w_of(rec.w_post, p.a)));
+      const double wb = std::max(len3(w_of(rec.w_pre, p.b)), len3(w_of(rec.w_post, p.b)));
+      theta = std::min(2.0, (wa + wb) * dt);
+      uncertain += theta * std::fabs(double(c.jn));
+      any_dir[p.a] += theta * jt;
+      any_dir[p.b] += theta * jt;
     }
     const D3 j = double(c.jn) * nrm + jt_vec;
     force[p.a] = force[p.a] + j;
@@ -197,8 +216,8 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       // (which moves the normal part's lever): half of that from the recorded point.
       const double s = double(c.depth) + pair_margin(p);
       const double lever = s * (jt + uncertain) + 0.5 * s * std::fabs(double(c.jn));
-      tallow[p.a] += len3(ra) * uncertain + lever;
-      tallow[p.b] += len3(rb) * uncertain + lever;
+      tallow[p.a] += len3(ra) * (uncertain + theta * (std::fabs(double(c.jn)) + jt)) + lever;
+      tallow[p.b] += len3(rb) * (uncertain + theta * (std::fabs(double(c.jn)) + jt)) + lever;
       tmag[p.a] += len3(ra) * (len3(j) + uncertain);
       tmag[p.b] += len3(rb) * (len3(j) + uncertain);
     }
@@ -251,11 +270,12 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
         ++balance_no_rows;  // a confirmed pair without rows (octocd's later passes)
         continue;
       }
-      if (!bodies.impulses_complete) continue;
+      if (!bodies.impulses_complete || bodies.impulses == PhysicsBodies::Impulses::None) continue;
       if (locked(i)) ++balance_locked;
       const D3 dp = unlocked(mi * (v1 - v0) - force[i], i, 0);
       const double float_bound =
-          eps * double(rows_of[i] + 2) * (mi * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + mag[i]) + 1e-9;
+          eps * double(rows_of[i] + 2) * (mi * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + mag[i]) + 1e-9 +
+          any_dir[i];
       // The residual must lie in the sum of the rows' friction discs (plus rounding): its
       // component along a direction d is at most sum u |d x n| + the rounding bound. Tested
       // along the residual itself and along each row's normal (where a manifold's discs,
@@ -341,7 +361,12 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     // 8. Free flight: no contact row and no confirmed pair in this step.
     if (locked_count > 0) ++free_locked;
     const D3 dv = unlocked(v1 - v0, i, 0);
-    const double v_bound = 4.0 * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + 1e-12;
+    // Rounding: one float32 update of v (and of x below) per step, 4 eps32 of the
+    // magnitudes; a declared substepped engine rounds once per substep: n - 1 more
+    // (docs/validation.md, "Free flight: any consistent integrator").
+    const double updates =
+        bodies.integrator == PhysicsBodies::Integrator::Substepped ? 4.0 + double(bodies.substeps - 1) : 4.0;
+    const double v_bound = updates * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + 1e-12;
     const double dvl = len3(dv);
     free_vel.check(dvl <= v_bound, dvl, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: v' = ({:.6g}, {:.6g}, {:.6g}) m/s, v + g dt = "
@@ -349,19 +374,35 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
                          frame, i, v1[0], v1[1], v1[2], v0[0], v0[1], v0[2], dvl, v_bound);
     });
     const D3 x0 = d3(rec.x_pre[i]), x1 = d3(rec.x_post[i]);
+    // x' = x + dt v + a g dt^2 (v before the step): a = 1 semi-implicit (x + dt v'), 0
+    // explicit, (n + 1) / (2n) for n substeps, any a in [0, 1] for `any` and undeclared
+    // (the a nearest the record, clamped).
+    using I = PhysicsBodies::Integrator;
     const D3 semi = x0 + dt * v1, expl = x0 + dt * d3(rec.v_pre[i]);
     const double d_semi = len3(unlocked(x1 - semi, i, 0)), d_expl = len3(unlocked(x1 - expl, i, 0));
-    const double dx = bodies.integrator == PhysicsBodies::Integrator::SemiImplicit ? d_semi
-                      : bodies.integrator == PhysicsBodies::Integrator::Explicit ? d_expl
-                                                                                  : std::min(d_semi, d_expl);
+    const D3 gdt2 = unlocked((dt * dt) * g, i, 0), rx = unlocked(x1 - expl, i, 0);
+    const double g2 = dot3(gdt2, gdt2);
+    double a_fit = bodies.integrator == I::Substepped ? 0.5 * double(bodies.substeps + 1) / double(bodies.substeps)
+                   : g2 > 0                          ? std::clamp(dot3(rx, gdt2) / g2, 0.0, 1.0)
+                                                     : 1.0;
+    const double d_family = len3(rx - a_fit * gdt2);
+    const double dx = bodies.integrator == I::SemiImplicit ? d_semi
+                      : bodies.integrator == I::Explicit   ? d_expl
+                      : bodies.integrator == I::Substepped ? d_family
+                                                           : std::min({d_semi, d_expl, d_family});
     const double x_bound =
-        4.0 * kEps32 * (len3(x0) + len3(x1) + dt * (len3(v1) + len3(d3(rec.v_pre[i])))) + 1e-12;
+        updates * kEps32 * (len3(x0) + len3(x1) + dt * (len3(v1) + len3(d3(rec.v_pre[i])))) + 1e-12;
     free_pos.check(dx <= x_bound, dx, Where::of_body(frame, i), [&] {
-      return fmt::format("frame {}: body {} without contacts: x' = ({:.6g}, {:.6g}, {:.6g}) m is {:.4g} m from x + "
-                         "dt v{} (integrator {}; bound {:.3g})",
-                         frame, i, x1[0], x1[1], x1[2], dx,
-                         bodies.integrator == PhysicsBodies::Integrator::Explicit ? "" : "'",
-                         integrator_name(bodies.integrator), x_bound);
+      const std::string rule =
+          bodies.integrator == I::SemiImplicit ? std::string("x + dt v'")
+          : bodies.integrator == I::Explicit   ? std::string("x + dt v")
+          : bodies.integrator == I::Substepped
+              ? fmt::format("x + dt v + a g dt^2, a = (n + 1) / (2n) = {:.4g} for n = {} substeps", a_fit,
+                            bodies.substeps)
+              : fmt::format("x + dt v + a g dt^2 for every a in [0, 1] (nearest a = {:.4g})", a_fit);
+      return fmt::format("frame {}: body {} without contacts: x' = ({:.6g}, {:.6g}, {:.6g}) m is {:.4g} m from {} "
+                         "(integrator {}; bound {:.3g})",
+                         frame, i, x1[0], x1[1], x1[2], dx, rule, integrator_name(bodies.integrator), x_bound);
     });
     if (!rotating) continue;
     // The spin of a torque-free body (docs/validation.md, "Free rotation: the
@@ -415,7 +456,9 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
                          : bodies.integrator == PhysicsBodies::Integrator::Explicit ? a_expl
                                                                                      : std::min(a_semi, a_expl);
     const double wdt = std::max(len3(w0), len3(w1)) * dt;
-    const double q_bound = tol.free_flight_angle_rad + wdt * wdt;
+    // Substeps advance q by each substep's w, which lies between w and w' (the spin changes
+    // within the step by the gyroscopic term only): at most dt |w' - w| from either end.
+    const double q_bound = tol.free_flight_angle_rad + wdt * wdt + (bodies.may_substep() ? dt * len3(w1 - w0) : 0.0);
     free_q.check(angle <= q_bound, angle * 180.0 / kPi, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: q' is {:.4g} deg from q advanced by w{} dt (|w| dt "
                          "{:.3g} rad; bound {:.3g} deg)",

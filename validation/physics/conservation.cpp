@@ -52,7 +52,12 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   std::map<std::uint32_t, double> witness_torque;
   for (const ContactRecord& c : rec.contacts)
     if (dynamic(c.pair.a) && dynamic(c.pair.b)) {
-      const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), double(c.jt)) : std::fabs(double(c.jt));
+      // impulses "normal-only": |jt| unknown, at most mu jn (the row cone margin as in
+      // momentum-balance) + friction_cone_abs.
+      const double jt = bodies.impulses == PhysicsBodies::Impulses::NormalOnly
+                            ? pair_mu(c.pair) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs
+                            : std::fabs(double(c.jt));
+      const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
       witness_torque[find(c.pair.a)] += (double(c.depth) + pair_margin(c.pair)) * j;
     }
   const std::map<std::uint32_t, std::vector<std::uint32_t>>& groups_of = graph.groups;
@@ -110,21 +115,19 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
                          frame, members.size(), members.front(), dp, exchanged, pbound);
     });
     // Energy: KE' <= KE after gravity, translational + rotational.
-    double ke0 = 0, ke1 = 0;
-    for (std::uint32_t i : members) {
-      const D3 v0 = v_int(i), v1 = d3(rec.v_post[i]);
-      ke0 += 0.5 * mass[i] * dot3(v0, v0);
-      ke1 += 0.5 * mass[i] * dot3(v1, v1);
-      if (rotating) {
-        const D3 w0 = d3(rec.w_pre[i]), w1 = d3(rec.w_post[i]);
-        ke0 += 0.5 * dot3(w0, mul(conjugated(rotation(rec.q_pre[i]), inertia[i]), w0));
-        ke1 += 0.5 * dot3(w1, mul(conjugated(rotation(rec.q_post[i]), inertia[i]), w1));
-      }
-    }
-    if (restitution_le_1 && bodies.contact_model == PhysicsBodies::ContactModel::Soft) {
+    const StepEnergy se = step_energy(rec, members);
+    const double ke0 = se.ke0, ke1 = se.ke1;
+    using CM = PhysicsBodies::ContactModel;
+    if (restitution_le_1 && bodies.contact_model == CM::Soft) {
       ++energy_soft_steps;  // judged per contact episode (soft_episodes)
+    } else if (restitution_le_1 && bodies.contact_model == CM::Undeclared && se.rose) {
+      // Undeclared: a failure only where the soft rule fails too (its episode, soft_episodes).
+      rigid_rises_now.emplace_back(
+          members.front(), fmt::format("frame {}: isolated group of {} bodies (body {} ...): kinetic energy {:.6g} -> "
+                                       "{:.6g} J (+{:.3g} of it)",
+                                       frame, members.size(), members.front(), ke0, ke1, (ke1 - ke0) / ke0));
     } else if (restitution_le_1) {
-      const double ebound = ke0 * (1.0 + tol.energy_rel) + 16.0 * kEps32 * (ke0 + ke1) + 1e-12;
+      const double ebound = se.bound;
       energy.check(ke1 <= ebound, ke0 > 0 ? (ke1 - ke0) / ke0 : 0.0, Where{frame, group_name(members)}, [&] {
         return fmt::format("frame {}: isolated group of {} bodies (body {} ...): kinetic energy {:.6g} -> {:.6g} J "
                            "(+{:.3g} of it){}",
@@ -140,6 +143,10 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
     if (!rotating) continue;
     if (group_locks >> 3) {
       ++groups_rotation_locked;
+      continue;
+    }
+    if (bodies.impulses == PhysicsBodies::Impulses::None) {  // the witness-point lever needs |J|
+      ++groups_angular_unreported;
       continue;
     }
     ++groups_rotating;
@@ -171,7 +178,7 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
       // the step, the larger of the two bounds it.
       const D3 iw0 = mul(i0, w0), iw1 = mul(i1, w1);
       gyro += dt * std::max(len3(cross3(w0, iw0)), len3(cross3(w1, iw1)));
-      if (bodies.gyroscopic == PhysicsBodies::Gyroscopic::Integrated)
+      if (bodies.gyroscopic != PhysicsBodies::Gyroscopic::Absent)  // declared or admitted (undeclared)
         gyro += dt * dt * std::max(dot3(w0, w0) * len3(iw0), dot3(w1, w1) * len3(iw1));
     }
     const double dl = len3(l1 - l0);
@@ -184,6 +191,31 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
     });
   }
   if (tracks_episodes()) soft_episodes(rec, components(graph));
+  rigid_rises_spared += rigid_rises_now.size();  // in no episode (none tracked)
+  rigid_rises_now.clear();
+}
+
+PhysicsValidators::Impl::StepEnergy PhysicsValidators::Impl::step_energy(
+    const FrameRecord& rec, const std::vector<std::uint32_t>& members) const {
+  const std::size_t n = model->bodies.size();
+  const D3 g = d3(model->scene.gravity);
+  const double dt = model->scene.dt;
+  const bool rotating = rec.q_pre.size() == n && rec.q_post.size() == n && rec.w_pre.size() == n &&
+                        rec.w_post.size() == n;
+  StepEnergy s;
+  for (std::uint32_t i : members) {
+    const D3 v0 = d3(rec.v_pre[i]) + dt * g, v1 = d3(rec.v_post[i]);  // members are dynamic
+    s.ke0 += 0.5 * mass[i] * dot3(v0, v0);
+    s.ke1 += 0.5 * mass[i] * dot3(v1, v1);
+    if (rotating) {
+      const D3 w0 = d3(rec.w_pre[i]), w1 = d3(rec.w_post[i]);
+      s.ke0 += 0.5 * dot3(w0, mul(conjugated(rotation(rec.q_pre[i]), inertia[i]), w0));
+      s.ke1 += 0.5 * dot3(w1, mul(conjugated(rotation(rec.q_post[i]), inertia[i]), w1));
+    }
+  }
+  s.bound = s.ke0 * (1.0 + tol.energy_rel) + 16.0 * kEps32 * (s.ke0 + s.ke1) + 1e-12;
+  s.rose = !(s.ke1 <= s.bound);
+  return s;
 }
 
 std::uint32_t PhysicsValidators::Impl::ContactGraph::find(std::uint32_t i) {
@@ -234,7 +266,13 @@ void PhysicsValidators::Impl::advance_episodes(const FrameRecord& rec) {
     return;
   }
   const ContactGraph graph = contact_graph(rec);
-  soft_episodes(rec, components(graph));
+  const std::vector<Component> comps = components(graph);
+  if (bodies.contact_model == PhysicsBodies::ContactModel::Undeclared)  // as conservation() finds them
+    for (const Component& c : comps)
+      if (c.isolated && c.members.size() >= 2 && step_energy(rec, c.members).rose)
+        rigid_rises_now.emplace_back(c.members.front(), fmt::format("frame {}: kinetic energy rose", rec.frame));
+  soft_episodes(rec, comps);
+  rigid_rises_now.clear();
 }
 
 double PhysicsValidators::Impl::mechanical_energy(const FrameRecord& rec, std::uint32_t i, bool post) const {
@@ -280,6 +318,7 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
     if (!owned(ep.start)) {
       // Begun outside this validator's frames (a shard's): judged where it began.
     } else if (ep.spoiled) {
+      rigid_rises_spared += ep.rigid_rises;
       ++episodes_unjudged;
       if (ep.began_in_contact) ++episodes_begun_in_contact;
     } else {
@@ -297,13 +336,21 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
       const double rise = ep.ke0 > 0 ? (e1 - ep.e0) / ep.ke0 : 0.0;
       const std::string item = ep.bodies.size() == 2 ? pair_name(Pair{ep.bodies[0], ep.bodies[1]})
                                                      : group_name(ep.bodies);
-      energy.check(e1 <= bound, rise, Where{frame, item}, [&] {
-        return fmt::format("frame {}: {}{} (soft contacts) over its contact episode, frames {}..{}: mechanical "
+      const bool undeclared = bodies.contact_model == PhysicsBodies::ContactModel::Undeclared;
+      const bool fails = !(e1 <= bound) && (!undeclared || ep.rigid_rises > 0);
+      if (undeclared && !fails) rigid_rises_spared += ep.rigid_rises;
+      energy.check(!fails, rise, Where{frame, item}, [&] {
+        return fmt::format("frame {}: {}{} ({}) over its contact episode, frames {}..{}: mechanical "
                            "energy {:.6g} -> {:.6g} J (+{:.3g} of its kinetic energy {:.4g} J at the start; bound "
-                           "{:.6g})",
+                           "{:.6g}){}",
                            frame, item,
                            ep.bodies.size() == 2 ? std::string() : fmt::format(" of {} bodies", ep.bodies.size()),
-                           ep.start, frame - 1, ep.e0, e1, rise, ep.ke0, bound);
+                           undeclared ? "contact_model undeclared: judged soft" : "soft contacts", ep.start, frame - 1,
+                           ep.e0, e1, rise, ep.ke0, bound,
+                           undeclared ? fmt::format("; and rigid: {} of its steps raise the kinetic energy (first: {}); "
+                                                    "it fails both ways: declare contact_model to sharpen the verdict",
+                                                    ep.rigid_rises, ep.first_rise)
+                                      : std::string());
       });
       ++episodes_judged;
       if (ep.bodies.size() > 2) ++episodes_judged_groups;
@@ -335,6 +382,8 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
       merged.scale += ep.scale;
       merged.spoiled = merged.spoiled || ep.spoiled;
       merged.began_in_contact = merged.began_in_contact || ep.began_in_contact;
+      merged.rigid_rises += ep.rigid_rises;
+      if (merged.first_rise.empty()) merged.first_rise = ep.first_rise;
     }
     for (std::uint32_t i : c.members) {
       if (std::find(merged.bodies.begin(), merged.bodies.end(), i) != merged.bodies.end()) continue;
@@ -364,6 +413,18 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
     std::sort(merged.bodies.begin(), merged.bodies.end());
     for (auto e = hit.rbegin(); e != hit.rend(); ++e) episodes.erase(episodes.begin() + static_cast<std::ptrdiff_t>(*e));
     episodes.push_back(std::move(merged));
+  }
+  // contact_model undeclared: this step's rigid rises join the episodes of their groups.
+  for (auto it = rigid_rises_now.begin(); it != rigid_rises_now.end();) {
+    const auto ep = std::find_if(episodes.begin(), episodes.end(), [&](const Episode& e) {
+      return std::binary_search(e.bodies.begin(), e.bodies.end(), it->first);
+    });
+    if (ep == episodes.end()) {
+      ++it;
+      continue;
+    }
+    if (ep->rigid_rises++ == 0) ep->first_rise = it->second;
+    it = rigid_rises_now.erase(it);
   }
   pairs_before = std::move(pairs);
   pairs_frame = frame;

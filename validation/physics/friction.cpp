@@ -114,6 +114,9 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
 
 // ---- Row 5: friction, every frame (dissipation on frames with states) ----------------
 void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector<Pose>& det) {
+  // impulses "normal-only" or "none": the rows carry no friction impulse; whatever jt and
+  // jt3 hold (zeros, typically) is never judged (the row is n/a, named).
+  if (bodies.impulses != PhysicsBodies::Impulses::Complete) return;
   const Model& m = *model;
   const std::size_t n = m.bodies.size();
   const std::int64_t frame = rec.frame;
@@ -131,6 +134,18 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
   //    (16 x 2^-23 of sum |jt3_k| + mu sum jn, + 1e-12 kg m/s): no relative slack.
   //  - scalar jt (no jt3): sum |jt_k| <= mu sum jn + the same rounding + friction_cone_abs
   //    (a scalar along -v_t / |v_t| cannot show a second friction direction).
+  // Both with the floor of the stored states (docs/validation.md, "Floors"): an excess
+  // that changes no stored velocity of the pair's dynamic bodies by more than its float32
+  // precision, 4 x 2^-23 x sum m (|v| + |v'|), shows nothing a trace can hold (an
+  // iterative solver's ppm excess on a sliding body).
+  const bool have_states = rec.v_pre.size() == n && rec.v_post.size() == n;
+  auto momentum_floor = [&](Pair p) {
+    double s = 0;
+    if (have_states)
+      for (std::uint32_t i : {p.a, p.b})
+        if (dynamic(i)) s += mass[i] * (len3(d3(rec.v_pre[i])) + len3(d3(rec.v_post[i])));
+    return 4.0 * kEps32 * s;
+  };
   const bool vector_friction = !rec.jt3.empty();
   for (std::size_t k0 = 0; k0 < rec.contacts.size();) {
     poll();
@@ -150,7 +165,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
     jt_sum = vector_friction ? len3(jt_vec) : jt_abs;
     const double mu = pair_mu(pr);
     const std::size_t rows = k1 - k0;
-    const double rounding = 16.0 * kEps32 * (jt_abs + mu * jn_sum) + 1e-12;
+    const double rounding = 16.0 * kEps32 * (jt_abs + mu * jn_sum) + momentum_floor(pr) + 1e-12;
     const double limit = mu * jn_sum + rounding + (vector_friction ? 0.0 : tol.friction_cone_abs);
     const double excess = jt_sum - limit;
     (vector_friction ? ++cone_jt3_pairs : ++cone_scalar_pairs);

@@ -49,6 +49,17 @@ constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23
 /// A relative sliding speed (m/s) below which v_t has no direction: jt is then J_t's
 /// magnitude (the trace convention; octocd's Bullet adapter uses the same threshold).
 constexpr double kNoSliding = 1e-6;
+/// The margin a sequential solver leaves on a row's own cone: a row whose normal impulse
+/// moved to the manifold's other rows after its friction was clamped (Bullet: up to 13%
+/// above mu times the row's final jn; the friction row holds the pair's sum to the cone
+/// itself). What it leaves open is stated in docs/validate-your-engine.md, "The row cone
+/// margin".
+constexpr double kRowConeMargin = 0.25;
+/// An engine's friction floor: the smallest friction coefficient an engine may apply
+/// where the scene says less (MuJoCo turns mu 0 into mjMINMU = 1e-5). Every rule takes a
+/// pair's mu as at least this (docs/validation.md, "Floors"): a frictionless scene's
+/// friction of 1e-5 jn is never a cone failure.
+constexpr double kMuFloor = 1e-5;
 
 /// R M R^T.
 M3 conjugated(const M3& r, const M3& m);
@@ -290,9 +301,12 @@ struct PhysicsValidators::Impl {
     if (!bodies.theta_margin) return bodies.contact_margin;
     return model->theta(model->bodies[p.a].shape, model->bodies[p.b].shape);
   }
+  /// The pair's friction coefficient, at least physics_detail::kMuFloor.
   double pair_mu(Pair p) const {
-    if (bodies.body_friction.empty()) return bodies.mu;
-    return combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
+    const double mu = bodies.body_friction.empty()
+                          ? bodies.mu
+                          : combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
+    return std::max(mu, physics_detail::kMuFloor);
   }
   bool dynamic(std::uint32_t i) const { return mass[i] > 0; }
   /// Body i asleep in the state before (pre) or after the step (FrameRecord::asleep_pre /
@@ -304,6 +318,12 @@ struct PhysicsValidators::Impl {
     const bool a = !dynamic(p.a) || asleep(rec.asleep_pre, p.a), b = !dynamic(p.b) || asleep(rec.asleep_pre, p.b);
     return a && b && (dynamic(p.a) || dynamic(p.b));
   }
+
+  /// `speculative`: how far pair p's shapes may approach within the step (m; infinity
+  /// without states): dt (|v_a - v_b| + |w_a| R_a + |w_b| R_b), the larger of before and after.
+  double speculative_reach(const FrameRecord& rec, Pair p) const;
+  std::uint64_t speculative_allowed = 0;  ///< contact pairs given a speculative reach
+  std::uint64_t points_persistent = 0;    ///< rows whose point check is not applied (persistent points)
 
   // ---- Rows 1-4 (checked frames with poses) --------------------------------------
   /// Rows 1-4 of a checked frame, each on its own clock.
@@ -370,7 +390,7 @@ struct PhysicsValidators::Impl {
   void advance_episodes(const FrameRecord& rec);
   /// Energy is judged per contact episode (contact_model soft, restitution <= 1).
   bool tracks_episodes() const {
-    return bodies.contact_model == PhysicsBodies::ContactModel::Soft && restitution_le_1;
+    return bodies.contact_model != PhysicsBodies::ContactModel::Rigid && restitution_le_1;
   }
   /// Episodes judged here: those begun in [episode_first, episode_last] (set_episode_frames).
   std::int64_t episode_first = std::numeric_limits<std::int64_t>::min();
@@ -390,7 +410,24 @@ struct PhysicsValidators::Impl {
     double e0 = 0, ke0 = 0, scale = 0;
     bool spoiled = false;
     bool began_in_contact = false;  ///< a pair of it touched in the step before it opened
+    /// contact_model undeclared: its steps whose kinetic energy rose beyond the rigid
+    /// bound, and the first one's description.
+    std::uint64_t rigid_rises = 0;
+    std::string first_rise;
   };
+  /// contact_model undeclared: this step's isolated groups whose kinetic energy rose beyond
+  /// the rigid bound (their first body, the description), attached to their episodes.
+  std::vector<std::pair<std::uint32_t, std::string>> rigid_rises_now;
+  /// Of them, those in no episode judged to fail (a soft contact may return the energy):
+  /// not failures (counted).
+  std::uint64_t rigid_rises_spared = 0;
+  /// The rigid energy rule on an isolated group's step: its kinetic energy before (after
+  /// gravity) and after, the bound, and whether it rose beyond it.
+  struct StepEnergy {
+    double ke0 = 0, ke1 = 0, bound = 0;
+    bool rose = false;
+  };
+  StepEnergy step_energy(const FrameRecord& rec, const std::vector<std::uint32_t>& members) const;
   std::vector<Episode> episodes;  // contact_model soft: open episodes
   /// The pairs of dynamic bodies with a contact row in frame `pairs_frame` (the last frame
   /// soft_episodes saw; 0: none yet, the state before frame 1), sorted.
@@ -399,6 +436,9 @@ struct PhysicsValidators::Impl {
   std::uint64_t episodes_judged = 0, episodes_judged_groups = 0, episodes_unjudged = 0, energy_soft_steps = 0;
   std::uint64_t episodes_begun_in_contact = 0;
   std::uint64_t groups_locked = 0, groups_rotation_locked = 0;
+  /// impulses "none": rotating groups whose angular momentum is not judged (the
+  /// witness-point lever of its rows needs their impulses).
+  std::uint64_t groups_angular_unreported = 0;
 };
 
 }  // namespace octocd

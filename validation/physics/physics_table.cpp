@@ -48,8 +48,9 @@ std::string spin_note(PhysicsBodies::Gyroscopic g, std::uint64_t kept, std::uint
     case PhysicsBodies::Gyroscopic::Absent: return " (no gyroscopic term declared)";
     case PhysicsBodies::Gyroscopic::Undeclared: break;
   }
-  return fmt::format(" (gyroscopic term undeclared: {} kept w, {} precessed keeping L and the energy)", kept,
-                     invariant);
+  return fmt::format(" (gyroscopic term undeclared: {} kept w, {} precessed keeping L and the energy; declare "
+                     "gyroscopic to sharpen the verdict)",
+                     kept, invariant);
 }
 
 }  // namespace
@@ -127,6 +128,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                              "{:.3g} m beyond it)",
                              s.complete.checks, s.false_contact.checks, margin, s.false_contact.worst_or(0.0));
     }
+    if (s.bodies.speculative)
+      r.detail += fmt::format("; speculative contacts declared: {} contact pair-frames allowed the pair's approach "
+                              "within the step beyond the margin",
+                              s.speculative_allowed);
     if (s.complete_asleep)
       r.detail += fmt::format("; {} penetrating pair-frames of bodies asleep before the step (/states/sleeping) "
                               "without a row, not required",
@@ -225,6 +230,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     }
     if (r.applicable)
       fill_causes(r, info, {&s.normal_angle, &s.depth, &s.points});
+    if (s.points_persistent)
+      r.detail += fmt::format("; manifold_points \"persistent\": {} row points not judged (they ride on each body "
+                              "and may drift off the shapes)",
+                              s.points_persistent);
     out.push_back(r);
   }
   // 4. Penetration.
@@ -276,6 +285,14 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     } else if (s.dissipation.failures) {
       r.detail = s.dissipation.first + fmt::format(" ({} of {} rows where friction raises the sliding)",
                                                    s.dissipation.failures, s.dissipation.checks);
+    } else if (s.bodies.impulses != PhysicsBodies::Impulses::Complete) {
+      r.detail = fmt::format("n/a: the trace declares impulses = \"{}\": its rows carry no friction impulse, so the "
+                             "cone and dissipation are not judged (on the zeros a writer puts in jt, jt3 they would "
+                             "pass vacuously){}",
+                             impulses_name(s.bodies.impulses),
+                             s.bodies.impulses == PhysicsBodies::Impulses::NormalOnly
+                                 ? "; momentum-balance holds each body's residual within its rows' cones"
+                                 : "");
     } else if (!r.applicable) {
       r.detail = "no contact rows";
     } else {
@@ -325,6 +342,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                  : std::string("n/a: translation-only records (no orientation or angular "
                                                "velocity), contact torques are not modelled"));
     }
+    if (s.groups_angular_unreported)
+      r.detail += fmt::format("; angular momentum not judged on {} group-frames: the trace declares impulses = "
+                              "\"none\" (the witness-point lever of a row needs its impulse)",
+                              s.groups_angular_unreported);
     if (s.groups_clamped)
       r.detail += fmt::format("; {} group-frames not judged (a body at the declared velocity clamp {} m/s)",
                               s.groups_clamped, s.bodies.velocity_clamp);
@@ -332,6 +353,12 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail += fmt::format("; {} group-frames not judged (a body asleep before or after the step: "
                               "/states/sleeping)",
                               s.groups_asleep);
+    if (s.bodies.contact_model == PhysicsBodies::ContactModel::Undeclared && s.restitution_le_1)
+      r.detail += fmt::format("; contact_model undeclared: energy judged as rigid (per step) and as soft (per contact "
+                              "episode: {} judged, {} not), a failure only where both fail ({} steps raising the "
+                              "kinetic energy spared: their episode's energy did not rise or was not judged); declare "
+                              "contact_model to sharpen the verdict",
+                              s.episodes_judged, s.episodes_unjudged + s.owned_open(), s.rigid_rises_spared);
     if (s.bodies.contact_model == PhysicsBodies::ContactModel::Soft)
       r.detail += fmt::format("; contact_model soft: energy judged per contact episode of an isolated group, "
                               "from its first contact until none of its bodies touches another ({} episodes judged, "
@@ -375,7 +402,11 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                      "velocity), not judged",
                                      s.fell_asleep)
                        : std::string());
-    if (!s.bodies.impulses_complete) {
+    if (s.bodies.impulses == PhysicsBodies::Impulses::None) {
+      r.applicable = false;
+      r.detail = "n/a: the trace declares impulses = \"none\" (the engine reports no impulse): a body's velocity "
+                 "change cannot be held to its rows' impulses; conservation judges the isolated groups";
+    } else if (!s.bodies.impulses_complete) {
       r.applicable = false;
       r.detail = fmt::format("n/a: the record holds the impulses of the first of response.iterations = {} "
                              "relaxation passes (octocd's ContactRecord); the later passes apply more impulses on the "
@@ -397,6 +428,9 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                                      s.balance_rot_locked)
                                        : std::string("n/a: no rotation or no contact points (torques unknown)"));
       r.detail += extras;
+      if (s.bodies.impulses == PhysicsBodies::Impulses::NormalOnly)
+        r.detail += "; impulses \"normal-only\": each body's residual m (v' - v) - m g dt - sum jn n within the sum "
+                    "of its rows' cones (mu jn), jt and jt3 not read";
       fill_causes(r, info, {&s.balance_lin, &s.balance_ang});
       r.judged = s.balance_lin.checks;
     }
@@ -428,6 +462,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                           : std::string("; rotation n/a (translation-only records)"),
           s.free_locked ? fmt::format("; {} body-steps with locked axes (those components n/a)", s.free_locked)
                         : std::string());
+      if (s.bodies.integrator == PhysicsBodies::Integrator::Undeclared)
+        r.detail += "; integrator undeclared: x' = x + dt v + a g dt^2 for every a in [0, 1] and substepping's "
+                    "orientation, a failure only where every integrator fails (declare integrator, and substeps, to "
+                    "sharpen the verdict)";
     }
     if (r.applicable) {
       if (s.free_sleep.checks + s.fell_asleep)

@@ -67,7 +67,9 @@ PhysicsBodies octocd_physics_bodies(const Model& model) {
 }
 
 const char* contact_model_name(PhysicsBodies::ContactModel m) {
-  return m == PhysicsBodies::ContactModel::Soft ? "soft" : "rigid";
+  return m == PhysicsBodies::ContactModel::Soft         ? "soft"
+         : m == PhysicsBodies::ContactModel::Undeclared ? "undeclared"
+                                                        : "rigid";
 }
 
 const char* gyroscopic_name(PhysicsBodies::Gyroscopic g) {
@@ -79,11 +81,22 @@ const char* gyroscopic_name(PhysicsBodies::Gyroscopic g) {
   return "undeclared";
 }
 
+const char* impulses_name(PhysicsBodies::Impulses i) {
+  switch (i) {
+    case PhysicsBodies::Impulses::Complete: return "complete";
+    case PhysicsBodies::Impulses::NormalOnly: return "normal-only";
+    case PhysicsBodies::Impulses::None: return "none";
+  }
+  return "complete";
+}
+
 const char* integrator_name(PhysicsBodies::Integrator i) {
   switch (i) {
     case PhysicsBodies::Integrator::SemiImplicit: return "semi-implicit";
     case PhysicsBodies::Integrator::Explicit: return "explicit";
     case PhysicsBodies::Integrator::Any: return "any";
+    case PhysicsBodies::Integrator::Substepped: return "substepped";
+    case PhysicsBodies::Integrator::Undeclared: return "undeclared";
   }
   return "semi-implicit";
 }

@@ -264,8 +264,9 @@ void check_frame_record(const FrameRecord& rec, std::size_t n, const std::string
                         const RecordFieldNames& names) {
   const std::int64_t f = rec.frame;
   const bool states = !rec.x_pre.empty() || !rec.v_pre.empty() || !rec.x_post.empty() || !rec.v_post.empty();
-  if (rec.aabbs.empty() && !states)
-    fail(origin, names.aabbs, f, "no world AABBs and no states", "the AABBs, or x_pre, v_pre, x_post, v_post");
+  if (rec.aabbs.empty() && !states && rec.x_det.empty())
+    fail(origin, names.aabbs, f, "no world AABBs, no states and no detection pose",
+         "the AABBs, or x_pre, v_pre, x_post, v_post, or the detection pose x_det");
   if (!rec.aabbs.empty()) {
     if (rec.aabbs.size() != n)
       fail(origin, names.aabbs, f, fmt::format("{} boxes for {} bodies", rec.aabbs.size(), n), "one per body");
@@ -515,7 +516,7 @@ bool ExternalValidator::episodes_pending() const {
 }
 
 bool ExternalValidator::judges_episodes() const {
-  return !impl_->options.octocd_engine && impl_->physics.contact_model == PhysicsBodies::ContactModel::Soft;
+  return !impl_->options.octocd_engine && impl_->physics.contact_model != PhysicsBodies::ContactModel::Rigid;
 }
 
 void ExternalValidator::Impl::prepare(FrameRecord& rec) {

@@ -15,6 +15,13 @@ namespace {
 const char* const kStates = "/states/position and /states/velocity";
 const char* const kContacts = "/contacts (offsets, pair, normal, depth, jn, jt)";
 const char* const kRotation = "/states/orientation and /states/angular_velocity (version 2)";
+const char* const kContactsComplete =
+    "the root attribute contacts_complete = 1 (every contact of every step has its rows): the trace declares 0, and "
+    "judging a body without rows as free, or a pair without rows as missing, would be a false alarm (read, not yet "
+    "used: design.md section 13d item 5b)";
+const char* const kEveryState =
+    "every state (/states/frame 0, 1, 2, ...: octocd run --state-every 1): the row needs each step's states before "
+    "and after it, and this trace records a state every few frames";
 
 /// The scene's response.iterations, for a trace read as octocd's conventions (1 without a
 /// readable scene: the check-only listing does not judge the scene).
@@ -53,6 +60,7 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
       case RowId::ContactCompleteness:
       case RowId::ContactGeometry:
         needs(info.has_contacts, kContacts);
+        if (row.id == RowId::ContactCompleteness) needs(p.contacts_complete, kContactsComplete);
         if (row.id == RowId::ContactGeometry)
           part(info.has_points, "/contacts/point (version 2) for the check that each row's point lies on both shapes");
         break;
@@ -61,16 +69,25 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
         break;
       case RowId::Friction:
         needs(info.has_contacts, kContacts);
+        part(!info.sparse_states, "every state (octocd run --state-every 1) for the dissipation; the cone is judged on "
+                                  "the steps whose pre-step state is recorded");
+        needs(p.impulses == PhysicsBodies::Impulses::Complete,
+              fmt::format("nothing: the trace declares impulses = \"{}\" (its rows carry no friction impulse)",
+                          impulses_name(p.impulses)));
         part(info.has_jt3 || info.version == 1,
              "/contacts/jt3 (version 2) for the vector rule [rule: jt3]; judged on the scalar jt [rule: scalar]");
         break;
       case RowId::Conservation:
         needs(info.has_states, kStates);
+        needs(p.contacts_complete, kContactsComplete);
+        needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, fmt::format("{} (isolated groups are bodies in contact)", kContacts));
         part(info.has_rotation, fmt::format("{} for the angular momentum", kRotation));
         break;
       case RowId::MomentumBalance:
         needs(info.has_states, kStates);
+        needs(p.contacts_complete, kContactsComplete);
+        needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, kContacts);
         needs(impulses_complete,
               "nothing: the trace declares impulses_complete = 0 (its rows hold part of the step's impulses)");
@@ -78,15 +95,20 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
              fmt::format("{} and /contacts/point for the angular balance", kRotation));
         // Version 1's jt is along the sliding by its contract; version 2's scalar jt is the
         // component along -v_t, all of the friction only for an engine with one direction.
-        needs(info.has_jt3 || info.version == 1 || info.octocd_conventions || p.friction_directions == 1,
+        needs(p.impulses != PhysicsBodies::Impulses::None,
+              "nothing: the trace declares impulses = \"none\" (the engine reports no impulse)");
+        needs(info.has_jt3 || info.version == 1 || info.octocd_conventions || p.friction_directions == 1 ||
+                  p.impulses == PhysicsBodies::Impulses::NormalOnly,
               "/contacts/jt3 (each row's friction impulse vector), or the root attribute friction_directions = 1 "
               "where each row's friction lies along its sliding: the scalar jt of an engine with two friction "
               "directions leaves the second out");
-        part(info.has_jt3 || info.version == 1,
+        part(info.has_jt3 || info.version == 1 || p.impulses == PhysicsBodies::Impulses::NormalOnly,
              "/contacts/jt3 (version 2): the scalar jt leaves each slow row's friction direction open (a disc)");
         break;
       case RowId::FreeFlight:
         needs(info.has_states, kStates);
+        needs(p.contacts_complete, kContactsComplete);
+        needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, fmt::format("{}: a body is free in a step without a row (a run without contacts "
                                              "writes /contacts/offsets of zeros and empty rows)",
                                              kContacts));
@@ -110,6 +132,7 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
               "6's response)");
         needs(info.has_contacts || row.id == RowId::AppliedState, kContacts);
         needs(info.has_states || row.id != RowId::AppliedState, kStates);
+        needs(!info.sparse_states, kEveryState);
         break;
     }
     out.push_back(std::move(r));
@@ -130,6 +153,10 @@ void apply_trace_plan(std::vector<ValidationResult>& results, const std::vector<
         r.judged = 0;
         r.causes.clear();
         r.detail = "n/a: the trace lacks what this row needs; to judge it, add " + p.add;
+        break;
+      }
+      if (p.add == kEveryState) {  // sparse states: the row's own "no states" would mislead
+        r.detail = std::string("n/a: the trace lacks what this row needs; to judge it, add ") + kEveryState;
         break;
       }
       // Already n/a: its detail names what to add (the dataset, or the attribute's name).

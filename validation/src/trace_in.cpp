@@ -43,8 +43,9 @@ class TraceIn {
   /// `sparse`: /states/frame may skip frames (strictly increasing from 0, as `octocd run
   /// --state-every K` writes); frame f's states are then the recorded row nearest to f
   /// (state_frame(f) names it). Otherwise every frame's state is required.
-  explicit TraceIn(const std::string& path, bool with_scene = true, bool sparse = false)
-      : path_(path), sparse_(sparse) {
+  /// `recorded` (with `sparse`): TraceStates::Recorded, frames judged on what they carry.
+  explicit TraceIn(const std::string& path, bool with_scene = true, bool sparse = false, bool recorded = false)
+      : path_(path), sparse_(sparse), recorded_(recorded && sparse) {
     // Opened and read under docs/trace-format.md, "Security rules and limits".
     h5_ = std::make_unique<detail::Hdf5Reader>(path, "an external trace");
 
@@ -157,6 +158,7 @@ class TraceIn {
           if (f.back() != static_cast<std::int64_t>(f.size()) - 1) {
             state_frames_ = f;
             frames_ = f.back();
+            info.sparse_states = true;
           }
         } else {
           for (std::size_t r = 0; r < f.size(); ++r)
@@ -232,7 +234,22 @@ class TraceIn {
       for (hsize_t i = 0; i < n_; ++i)
         rec.aabbs[i] = {{lo[3 * i], lo[3 * i + 1], lo[3 * i + 2]}, {hi[3 * i], hi[3 * i + 1], hi[3 * i + 2]}};
     }
-    if (info.has_states) {
+    if (info.has_states && pose_only()) {
+      // TraceStates::Recorded: no states; the detection pose from the recorded state f - 1.
+      if (posed(f)) {
+        const hsize_t row = static_cast<hsize_t>(
+            std::lower_bound(state_frames_.begin(), state_frames_.end(), f - 1) - state_frames_.begin());
+        rec.x_det = vectors(read<float>(position_, row, 1));
+        if (info.version == 1 || integrated_) {  // design.md section 4.1: v + dt g, then x + dt v
+          const std::vector<Vec3> v = vectors(read<float>(velocity_, row, 1));
+          for (std::size_t i = 0; i < rec.x_det.size(); ++i) {
+            Vec3 vi = v[i];
+            integrate(rec.x_det[i], vi, bodies.inverse_mass[i], det_gravity_, Vec3{}, det_dt_);
+          }
+        }
+        if (info.has_rotation) rec.q_det = quats(read<float>(orientation_, row, 1));
+      }
+    } else if (info.has_states) {
       const auto [pre, post] = state_rows(f);
       rec.x_pre = vectors(read<float>(position_, pre, 1));
       rec.v_pre = vectors(read<float>(velocity_, pre, 1));
@@ -327,6 +344,7 @@ class TraceIn {
     p.restitution_combine = combine_attr("restitution_combine", combines);
     if (has_attr("contact_margin")) p.contact_margin = number_attr("contact_margin", 0.0);
     read_locked_dofs(p);
+    read_shape_offsets();
 
     // Per-body tables.
     Dataset inertia = open("/bodies/inertia", H5T_FLOAT, 3, false);
@@ -451,6 +469,33 @@ class TraceIn {
             "1 (default: the contact rows carry every impulse of the step) or 0 (they do not: momentum-balance n/a)");
       p.impulses_complete = c == 1.0;
     }
+    {
+      const std::string impulses = choice_attr("impulses", {"complete", "normal-only", "none"}, "complete");
+      p.impulses = impulses == "none"          ? PhysicsBodies::Impulses::None
+                   : impulses == "normal-only" ? PhysicsBodies::Impulses::NormalOnly
+                                               : PhysicsBodies::Impulses::Complete;
+    }
+    // Fourth-round declarations (docs/trace-format.md, "Declarations").
+    if (has_attr("speculative")) {
+      const double v = number_attr("speculative", 0.0);
+      if (v != 0.0 && v != 1.0)
+        bad("/ (root attribute speculative)", fmt::format("{}", v),
+            "1 (rows may join shapes apart by the contact margin plus their approach within the step) or 0 (default)");
+      p.speculative = v == 1.0;
+    }
+    if (has_attr("contacts_complete")) {
+      const double v = number_attr("contacts_complete", 1.0);
+      if (v != 0.0 && v != 1.0)
+        bad("/ (root attribute contacts_complete)", fmt::format("{}", v),
+            "1 (default: every contact of every step has its rows) or 0 (the engine's API may drop rows)");
+      p.contacts_complete = v == 1.0;
+    }
+    p.persistent_points = choice_attr("manifold_points", {"fixed", "persistent"}, "fixed") == "persistent";
+    if (has_attr("depth_per") && string_attr("depth_per") == "unknown")
+      bad("/ (root attribute depth_per)", "\"unknown\": not yet judged (design.md section 13d item 5b)",
+          "\"point\" (default: each row's own depth) or \"manifold\" (each row its manifold's deepest depth); "
+          "an engine without depths cannot be judged yet");
+    p.depth_per_manifold = choice_attr("depth_per", {"point", "manifold"}, "point") == "manifold";
     if (has_attr("friction_directions")) {
       const double d = number_attr("friction_directions", 0.0);
       if (d != 1.0 && d != 2.0)
@@ -469,13 +514,28 @@ class TraceIn {
                           has_attr("friction_directions") ||
                           has_attr("response_scheme") || has_attr("deactivation");
     info.octocd_conventions = info.version == 1 && !declares && has_attr("parameters") && exists("/frames");
-    p.contact_model = choice_attr("contact_model", {"rigid", "soft"}, "rigid") == "soft"
-                          ? PhysicsBodies::ContactModel::Soft
-                          : PhysicsBodies::ContactModel::Rigid;
-    const std::string integrator = choice_attr("integrator", {"semi-implicit", "explicit", "any"}, "semi-implicit");
-    p.integrator = integrator == "explicit" ? PhysicsBodies::Integrator::Explicit
-                   : integrator == "any"    ? PhysicsBodies::Integrator::Any
-                                            : PhysicsBodies::Integrator::SemiImplicit;
+    const std::string contact_model = choice_attr("contact_model", {"rigid", "soft"}, "undeclared");
+    p.contact_model = contact_model == "soft"    ? PhysicsBodies::ContactModel::Soft
+                      : contact_model == "rigid" ? PhysicsBodies::ContactModel::Rigid
+                                                 : PhysicsBodies::ContactModel::Undeclared;
+    const std::string integrator =
+        choice_attr("integrator", {"semi-implicit", "explicit", "any", "substepped"}, "undeclared");
+    p.integrator = integrator == "explicit"        ? PhysicsBodies::Integrator::Explicit
+                   : integrator == "any"           ? PhysicsBodies::Integrator::Any
+                   : integrator == "substepped"    ? PhysicsBodies::Integrator::Substepped
+                   : integrator == "semi-implicit" ? PhysicsBodies::Integrator::SemiImplicit
+                                                   : PhysicsBodies::Integrator::Undeclared;
+    if (integrator == "substepped" || has_attr("substeps")) {
+      // An integer n >= 1: the semi-implicit substeps of dt / n the engine takes per step.
+      const double n = has_attr("substeps") ? number_attr("substeps", 0.0) : 0.0;
+      if (integrator != "substepped")
+        bad("/ (root attribute substeps)", "given without integrator = \"substepped\"",
+            "substeps with the root attribute integrator = \"substepped\" only");
+      if (!(n >= 1.0 && n <= 1e6 && n == std::floor(n)))
+        bad("/ (root attribute substeps)", has_attr("substeps") ? fmt::format("{}", n) : "missing",
+            "an integer n in [1, 1000000]: the substeps of dt / n per step (integrator \"substepped\")");
+      p.substeps = static_cast<int>(n);
+    }
     if (has_attr("gyroscopic")) {
       // A string "true" / "false", or an integer 0 / 1 (as broadphase_exact).
       const char* allowed = "\"true\" or \"false\" (a string), or the integer 1 or 0 (default \"false\")";
@@ -496,6 +556,32 @@ class TraceIn {
       if (text != "true" && text != "false")
         bad("/ (root attribute gyroscopic)", fmt::format("'{}' unknown", text), allowed);
       p.gyroscopic = text == "true" ? PhysicsBodies::Gyroscopic::Integrated : PhysicsBodies::Gyroscopic::Absent;
+    }
+  }
+
+  /// /bodies/convex_radius (n) and /bodies/com_offset (n x 3): read; only zeros are
+  /// judged yet (design.md section 13d items 4 and 5d): a rounded shape or a body origin
+  /// off its centre of mass is refused, naming the body, rather than judged wrongly.
+  void read_shape_offsets() {
+    Dataset radius = open("/bodies/convex_radius", H5T_FLOAT, 1, false);
+    if (radius.present()) {
+      expect(radius, {n_}, fmt::format("{} values, one per body (as /bodies/inverse_mass)", n_));
+      const std::vector<double> r = read<double>(radius, 0, n_);
+      for (hsize_t i = 0; i < n_; ++i)
+        if (r[i] != 0.0)
+          bad(radius.name, fmt::format("body {}: {}", i, r[i]),
+              "0 for every body: rounded shapes are not judged yet (design.md section 13d item 4); write the "
+              "radius into the shape the engine collided, or leave the dataset out");
+    }
+    Dataset com = open("/bodies/com_offset", H5T_FLOAT, 2, false);
+    if (com.present()) {
+      expect(com, {n_, 3}, fmt::format("{} x 3, one offset per body (m, body frame)", n_));
+      const std::vector<double> c = read<double>(com, 0, n_);
+      for (hsize_t i = 0; i < n_; ++i)
+        if (c[3 * i] != 0.0 || c[3 * i + 1] != 0.0 || c[3 * i + 2] != 0.0)
+          bad(com.name, fmt::format("body {}: ({}, {}, {})", i, c[3 * i], c[3 * i + 1], c[3 * i + 2]),
+              "(0, 0, 0) for every body: a position away from the centre of mass is not judged yet (design.md "
+              "section 13d item 5d); write the centre of mass's position, or re-centre the mesh");
     }
   }
 
@@ -537,17 +623,17 @@ class TraceIn {
     names.w_pre = names.w_post = "/states/angular_velocity";
     names.x_det = "/states/position";
     names.contact_point = "/contacts/point";
-    if (info.has_rotation) {
+    if (info.has_rotation && !pose_only()) {
       const auto [pre, post] = state_rows(f);
       rec.q_pre = quats(read<float>(orientation_, pre, 1));
       rec.q_post = quats(read<float>(orientation_, post, 1));
       rec.w_pre = vectors(read<float>(angular_, pre, 1));
       rec.w_post = vectors(read<float>(angular_, post, 1));
     }
-    if (info.has_sleeping) {
+    if (info.has_sleeping && !pose_only()) {
       read_sleeping(rec, f);
     }
-    if (info.has_states) {
+    if (info.has_states && !pose_only()) {
       // Where collision detection ran; never inferred from /aabbs.
       rec.x_det = rec.x_pre;
       rec.q_det = rec.q_pre;
@@ -804,6 +890,15 @@ class TraceIn {
   }
 
  public:
+  /// TraceStates::Recorded with sparse states: records carry detection poses, no states.
+  bool pose_only() const { return recorded_ && !state_frames_.empty(); }
+  /// Step f can be judged on its pose: every step unless pose_only(), then the steps whose
+  /// pre-step state (frame f - 1) is recorded, or any step of a version 1 trace with
+  /// /aabbs (its poses are the boxes; version 2 never infers a pose from them).
+  bool posed(std::int64_t f) const {
+    return !pose_only() || (info.has_aabbs && info.version == 1) ||
+           std::binary_search(state_frames_.begin(), state_frames_.end(), f - 1);
+  }
   /// The frame whose recorded state frame(f) carries: f itself unless states are sparse.
   std::int64_t state_frame(std::int64_t f) const {
     return state_frames_.empty() ? f : state_frames_[nearest_row(f)];
@@ -829,14 +924,15 @@ class TraceIn {
     bool sparse = false, integrated = false;
     float dt = 0.0f;
     Vec3 gravity{};
+    bool recorded = false;
   };
-  RecordSettings record_settings() const { return {sparse_, integrated_, det_dt_, det_gravity_}; }
+  RecordSettings record_settings() const { return {sparse_, integrated_, det_dt_, det_gravity_, recorded_}; }
   /// True when frame(f) of a reader of the same file with `other` settings gives this
   /// reader's record: the same state rows and the same detection pose.
   bool same_records(const RecordSettings& other) const {
     const auto same_bits = [](const auto& a, const auto& b) { return std::memcmp(&a, &b, sizeof a) == 0; };
-    return sparse_ == other.sparse && integrated_ == other.integrated &&
-           (!integrated_ || (same_bits(det_dt_, other.dt) && same_bits(det_gravity_, other.gravity)));
+    return sparse_ == other.sparse && recorded_ == other.recorded && integrated_ == other.integrated &&
+           (!(integrated_ || recorded_) || (same_bits(det_dt_, other.dt) && same_bits(det_gravity_, other.gravity)));
   }
   /// True when /states/frame skips frames (read with `sparse`).
   bool sparse_states() const { return !state_frames_.empty(); }
@@ -844,6 +940,7 @@ class TraceIn {
  private:
   std::string path_;
   bool sparse_ = false;                     // /states/frame may skip frames
+  bool recorded_ = false;                   // TraceStates::Recorded (with sparse_)
   std::vector<std::int64_t> state_frames_;  // with sparse states: /states/frame; else empty
   std::unique_ptr<detail::Hdf5Reader> h5_;  // quiets HDF5's error printing while it lives
   bool committed_ = false;                  // the trace has committed_states (octocd's own)
@@ -862,7 +959,7 @@ class TraceIn {
 
 struct ExternalTrace::Impl {
   Impl(const std::string& file, TraceStates states)
-      : in(file, true, states == TraceStates::Sparse), path(file) {}
+      : in(file, true, states != TraceStates::EveryFrame, states == TraceStates::Recorded), path(file) {}
   TraceIn in;
   std::string path;
 };
@@ -918,8 +1015,8 @@ struct KeptFrames {
 /// run judges are kept as decoded, from the first on, up to kKeptFrameBytes, and
 /// `keep->settings` says what they were read with. The reader is closed on return.
 ExternalTraceInfo check_frames(const std::string& path, const std::function<bool()>& stop,
-                               KeptFrames* keep = nullptr) {
-  TraceIn in(path, false);
+                               KeptFrames* keep = nullptr, bool recorded = false) {
+  TraceIn in(path, false, recorded, recorded);
   std::int64_t last = 0;
   if (keep) {
     const std::int64_t run = keep->max_frames > 0 ? std::min(keep->max_frames, in.info.frames) : in.info.frames;
@@ -929,6 +1026,7 @@ ExternalTraceInfo check_frames(const std::string& path, const std::function<bool
   bool keeping = keep != nullptr;
   for (std::int64_t f = 1; f <= in.info.frames; ++f) {
     if (stop && stop()) throw ValidationStopped();
+    if (!in.posed(f)) continue;  // TraceStates::Recorded: a step without its pre-step state is not judged
     FrameRecord rec = in.frame(f);
     if (!keeping || f < keep->first) continue;
     bytes += record_bytes(rec);
@@ -941,7 +1039,7 @@ ExternalTraceInfo check_frames(const std::string& path, const std::function<bool
 
 }  // namespace
 
-ExternalTraceInfo check_external_trace(const std::string& path) { return check_frames(path, {}); }
+ExternalTraceInfo check_external_trace(const std::string& path) { return check_frames(path, {}, nullptr, true); }
 
 std::vector<ValidationResult> validate_external_trace(const std::string& path, ExternalOptions options, int every,
                                                       std::int64_t max_frames, ExternalTraceInfo* info) {
@@ -952,8 +1050,10 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
   KeptFrames kept;
   kept.max_frames = max_frames;
   kept.shard = options.shard;
-  const ExternalTraceInfo checked = check_frames(path, options.stop, &kept);
-  TraceIn in(path);
+  // States every K-th frame are read as recorded (TraceStates::Recorded): each step is
+  // judged on what it carries.
+  const ExternalTraceInfo checked = check_frames(path, options.stop, &kept, true);
+  TraceIn in(path, true, true, true);
   if (!in.same_records(kept.settings)) kept.records.clear();  // an "integrated" pose from the scene's dt and gravity
   options.engine = in.info.engine;
   options.spec6_response = in.info.spec6_response;
@@ -993,7 +1093,7 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
     // (those open at its first frame began in an earlier shard, which judges them) and
     // reads on past its last frame until its own episodes have closed, so the merged
     // verdict equals the whole run's.
-    const bool episodes = options.shard.count > 1 && made->judges_episodes() && first <= last;
+    const bool episodes = options.shard.count > 1 && made->judges_episodes() && first <= last && !in.pose_only();
     if (episodes) {
       made->set_episode_frames(first, last);
       for (std::int64_t f = 1; f < first; ++f) {
@@ -1006,24 +1106,35 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
       if (kept.has(f)) return std::async(std::launch::deferred, [&kept, f] { return kept.take(f); });
       return std::async(std::launch::async, [&in, f] { return in.frame(f); });
     };
+    // With sparse states only the steps whose pre-step state is recorded (each checked:
+    // they are already one in K).
+    auto next_posed = [&in, last](std::int64_t f) {
+      while (f <= last && !in.posed(f)) ++f;
+      return f;
+    };
     std::future<FrameRecord> next;
-    if (first <= last) next = fetch(first);
-    for (std::int64_t f = first; f <= last; ++f) {
+    std::int64_t f = next_posed(first);
+    if (f <= last) next = fetch(f);
+    for (; f <= last;) {
       if (options.stop && options.stop()) throw ValidationStopped();
       const FrameRecord rec = next.get();
-      if (f < last) next = fetch(f + 1);
+      const std::int64_t after = next_posed(f + 1);
+      if (after <= last) next = fetch(after);
       judging = f;
-      made->observe(rec, f % every == 0);
-      judged_to = f;
+      made->observe(rec, in.pose_only() || f % every == 0);
+      judged_to = std::min(after - 1, last);  // the steps skipped up to the next posed one are done
       judging = 0;
-      if (options.on_judged && (f == first || std::chrono::steady_clock::now() - last_snapshot >= kSnapshotEvery)) {
+      if (options.on_judged &&
+          (f == next_posed(first) || std::chrono::steady_clock::now() - last_snapshot >= kSnapshotEvery)) {
         ExternalTraceInfo now = checked;
         now.frames = frames;
         now.judged_to = judged_to;
         options.on_judged(made->results(), now);
         last_snapshot = std::chrono::steady_clock::now();
       }
+      f = after;
     }
+    if (first <= last && next_posed(first) > last) judged_to = last;
     for (std::int64_t f = last + 1; episodes && f <= frames && made->episodes_pending(); ++f) {
       if (options.stop && options.stop()) throw ValidationStopped();
       made->observe_episodes(in.frame(f));

@@ -335,6 +335,16 @@ class Engine {
   /// never the engine's name. true for octocd's own engines (`cpu`, `cuda`).
   virtual bool octocd_contacts() const { return false; }
 
+  /// Whether the engine's run is a version 2 trace it writes itself (a process engine,
+  /// engines/include/octocd/process_engines.hpp): a caller that keeps or judges a trace takes
+  /// own_trace() instead of writing one from state() and record(). false for octocd's engines
+  /// and the linked reference engines.
+  virtual bool writes_own_trace() const { return false; }
+  /// The trace the engine wrote itself (writes_own_trace): its path once the first step()
+  /// has run, valid while the engine lives (a temporary file it removes); "" before that and
+  /// for engines that write none.
+  virtual std::string own_trace() const { return ""; }
+
   /// Whether this engine can fill FrameRecord (false for `bullet` without rotation).
   virtual bool can_record() const { return false; }
   /// Turns the per-step FrameRecord on or off (off by default: it costs copies).

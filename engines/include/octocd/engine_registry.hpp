@@ -52,11 +52,19 @@ struct EngineInfo {
   /// BulletSettings::solver_iterations), "" when it has none: the speed-accuracy sweep's
   /// second axis passes "KEY=N".
   std::string iterations_setting;
+  /// A process engine's command (an argument vector, paths resolved; the request's path is
+  /// appended when it runs: octocd/process_engines.hpp), read from an engines file; empty
+  /// for the built-in engines, which this octocd links.
+  std::vector<std::string> command;
 };
 
 /// Every engine, built in this octocd or not, in a stable order: cpu, cuda, bullet, mujoco,
-/// ode, dart.
+/// ode, dart, then the process engines of the engines files (octocd/process_engines.hpp)
+/// in their files' order. Throws InputError for a bad engines file (on the first call).
 const std::vector<EngineInfo>& engine_infos();
+
+/// The names of the built-in engines (those of engine_infos() without a command), in order.
+std::vector<std::string> builtin_engine_names();
 
 /// The names of engine_infos(), in its order.
 const std::vector<std::string>& engine_names();

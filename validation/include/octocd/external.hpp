@@ -278,6 +278,11 @@ struct ExternalTraceInfo {
   /// `parameters`) that declares none of the declarations (written before they existed):
   /// read as declaring octocd's conventions (octocd_physics_bodies), as it was judged then.
   bool octocd_conventions = false;
+  /// /states/frame skips frames (`octocd run --state-every K`, K > 1), read by
+  /// validate_external_trace as TraceStates::Recorded: rows needing each step's states
+  /// before and after it are n/a (naming `--state-every 1`), the geometric rows and the
+  /// friction cone are judged on the steps whose pre-step state is recorded.
+  bool sparse_states = false;
   /// Filled by validate_external_trace: the last frame whose checks completed (0: none;
   /// the run's or shard's last frame when not stopped), and with
   /// ExternalOptions::keep_on_stop the frame a stop cut short inside its checks (partly in
@@ -309,6 +314,12 @@ enum class TraceStates {
   EveryFrame,  ///< /states/frame = 0, 1, ..., F: what the validators need
   Sparse,      ///< frame 0, then any strictly increasing frames (`octocd run --state-every K`):
                ///< a frame without a state reads the nearest recorded one (what `view` draws)
+  /// The same frames, judged on what they carry (validate --trace-in): with sparse states,
+  /// step f's record carries no states, only its detection pose from the recorded state
+  /// f - 1 (design.md section 4.1's integrated pose for version 1 and "integrated"
+  /// detection); a step whose pre-step state is not recorded has no pose (posed(f) false:
+  /// the validator skips it).
+  Recorded,
 };
 
 class ExternalTrace {

@@ -188,7 +188,10 @@ struct PhysicsBodies {
   /// (compliant contacts: springs, soft constraints, XPBD compliance): a contact may store
   /// energy in its penetration and give it back in a later step, so energy is judged over
   /// each pair's contact episode (first step with a row to the first without), not per step.
-  enum class ContactModel { Rigid, Soft };
+  /// Undeclared (external traces without the attribute): every admissible value, so an
+  /// isolated group fails energy only where it fails both ways: a step raising its kinetic
+  /// energy (rigid) inside a contact episode whose mechanical energy rose (soft).
+  enum class ContactModel { Rigid, Soft, Undeclared };
   ContactModel contact_model = ContactModel::Rigid;
   /// `gyroscopic`: how the engine treats the gyroscopic term (w x I w) of free rotation
   /// (docs/validation.md, "Free rotation: the invariants").
@@ -207,10 +210,21 @@ struct PhysicsBodies {
     Absent,
   };
   Gyroscopic gyroscopic = Gyroscopic::Undeclared;
-  /// `integrator`: how a free body's position advances: semi-implicit Euler x' = x + dt v'
-  /// (design.md section 4.1, octocd's engines, Bullet), explicit x' = x + dt v, or either.
-  enum class Integrator { SemiImplicit, Explicit, Any };
+  /// `integrator`: how a free body's position advances over a step, x' = x + dt v + a g dt^2
+  /// with v the velocity before the step (docs/validation.md, "Free flight: any consistent
+  /// integrator"): semi-implicit Euler x' = x + dt v' (a = 1; design.md section 4.1,
+  /// octocd's engines), explicit x' = x + dt v (a = 0), `Any` (a in [0, 1] per step),
+  /// `Substepped` (n = `substeps` semi-implicit substeps of dt / n: a = (n + 1) / (2n);
+  /// Rapier, PhysX TGS, Box2D v3, XPBD), or `Undeclared` (every admissible value: a in
+  /// [0, 1] and the orientation of substepping, as `Any` with substepping's allowances).
+  enum class Integrator { SemiImplicit, Explicit, Any, Substepped, Undeclared };
   Integrator integrator = Integrator::SemiImplicit;
+  /// With Integrator::Substepped: the substep count n (>= 1; root attribute `substeps`).
+  int substeps = 1;
+  /// The integrator admits substepping (Substepped or Undeclared): the normal and the
+  /// impulse points may turn with the bodies within the step (momentum-balance), the spin
+  /// may change within it (free-flight's orientation).
+  bool may_substep() const { return integrator == Integrator::Substepped || integrator == Integrator::Undeclared; }
   /// Per body (empty: none locked): bits 0-2 translation along world x, y, z, bits 3-5
   /// rotation about world x, y, z locked by a joint (6 bits at most). Rows about a locked
   /// axis are n/a for that body and counted (a joint's impulses are not in the contact
@@ -254,17 +268,52 @@ struct PhysicsBodies {
   /// records the first relaxation pass only (its later passes apply more impulses on the
   /// same pairs): momentum-balance is then n/a with that reason.
   bool impulses_complete = true;
+  /// `impulses`: what the contact rows' impulses hold (external traces: the root attribute
+  /// `impulses`; docs/validation.md, "What the impulses hold").
+  enum class Impulses {
+    /// jn and the friction (jt, jt3) are the step's impulses (default).
+    Complete,
+    /// jn is reported; the friction is not (jt, jt3 hold whatever the writer put there, never
+    /// read): `friction` is n/a, `momentum-balance` holds each body's residual
+    /// m (v' - v) - m g dt - sum jn n within the sum of its rows' cones (mu jn, a disc in
+    /// each row's tangent plane), conservation's witness-point lever takes mu jn for |jt|.
+    NormalOnly,
+    /// No impulse is reported: `friction` and `momentum-balance` n/a; conservation judges
+    /// momentum and energy, not the angular momentum (its witness-point lever needs |J|).
+    None,
+  };
+  Impulses impulses = Impulses::Complete;
+  /// `speculative` 1: contact rows may join shapes apart by up to the contact margin plus
+  /// their approach within the step; contact-completeness's false-contact bound adds
+  /// dt (|v_a - v_b| + |w_a| R_a + |w_b| R_b) (R: the body's reach from its origin,
+  /// velocities the larger of before and after the step; not judged without states).
+  bool speculative = false;
+  /// `contacts_complete` 0: the engine's API may drop contact rows (Havok). Read, not yet
+  /// used (design.md section 13d item 5b): the rows that take a body without rows as free
+  /// or need every row (contact-completeness, conservation, momentum-balance,
+  /// free-flight) are n/a, naming it.
+  bool contacts_complete = true;
+  /// `manifold_points` "persistent": a row's points ride on each body and may drift off
+  /// the shapes. Read, not yet used beyond this: contact-geometry's point check is not
+  /// applied (counted); normals and depths are judged.
+  bool persistent_points = false;
+  /// `depth_per` "manifold": each row carries its manifold's deepest depth. Judged as
+  /// "point": contact-geometry judges each pair's deepest row, and a row's point may lie
+  /// within its (larger) depth of the surfaces.
+  bool depth_per_manifold = false;
   /// The engine is design.md section 6's Jacobi response (octocd's cpu and cuda): an energy failure of
   /// an isolated group is reported as the model's property (its Jacobi-summed impulses
   /// computed from one pre-response state overshoot on chains), not as an engine fault.
   bool jacobi_response = false;
 };
 
-/// "rigid" or "soft".
+/// "rigid", "soft" or "undeclared".
 const char* contact_model_name(PhysicsBodies::ContactModel m);
 /// "undeclared", "true" or "false".
 const char* gyroscopic_name(PhysicsBodies::Gyroscopic g);
-/// "semi-implicit", "explicit" or "any".
+/// "complete", "normal-only" or "none".
+const char* impulses_name(PhysicsBodies::Impulses i);
+/// "semi-implicit", "explicit", "any", "substepped" or "undeclared".
 const char* integrator_name(PhysicsBodies::Integrator i);
 
 /// What octocd's own cpu and cuda engines declare: mu = the scene's mu_static (the

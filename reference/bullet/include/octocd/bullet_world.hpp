@@ -19,7 +19,7 @@ namespace octocd {
 ///
 /// Geometry (BulletSettings::shape, design.md section 15; collision_geometry() says it in words):
 /// - hull (the default): a dynamic mesh body is a btConvexHullShape of its mesh's convex
-///   hull (btConvexHullComputer), a static mesh body a btBvhTriangleMeshShape of its
+///   hull (convex_hull.hpp: qhull), a static mesh body a btBvhTriangleMeshShape of its
 ///   triangles (btTriangleMesh, quantized BVH), a box shape a btBoxShape; every margin 0.
 ///   Without rotation the bodies keep angular factor 0 and zero inertia. Everything the
 ///   rotation mode below says about margins, the checked narrow phase, the breaking
@@ -82,7 +82,7 @@ namespace octocd {
 ///   angular velocity from the model (BodyState::q, omega);
 /// - shapes: boxes stay btBoxShape (btBoxBoxDetector for box-box pairs, GJK/EPA against
 ///   hulls); meshes (and icospheres) are btConvexHullShape of the vertices of the mesh's
-///   convex hull (btConvexHullComputer). Every collision margin is 0, so the shapes are
+///   convex hull (convex_hull.hpp: qhull). Every collision margin is 0, so the shapes are
 ///   exactly the boxes and hulls FCL judges (with a margin GJK rounds a box's edges and
 ///   corners, and a hull's margin lies outside it; with 1 mm margins Bullet's GJK also
 ///   reported a cube corner 4.4 mm inside an icosphere as 0.5 mm apart). A concave mesh

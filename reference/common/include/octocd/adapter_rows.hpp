@@ -1,8 +1,8 @@
 #pragma once
 /// \file adapter_rows.hpp
 /// What every reference-engine adapter (reference/<engine>/) does alike when it fills a
-/// FrameRecord from its engine's contacts, and when it parses its settings: written once
-/// here so the adapters share it instead of copying it.
+/// FrameRecord from its engine's contacts, and when it parses its settings (SettingTable):
+/// written once here so the adapters share it instead of copying it.
 
 #include <functional>
 #include <string>
@@ -48,5 +48,88 @@ int setting_integer(const std::string& key, const std::string& value, long lo, l
 /// allowed: <allowed>" otherwise.
 double setting_number(const std::string& key, const std::string& value, double lo, double hi,
                       const std::string& where, const std::string& allowed);
+
+/// One engine setting's text as a setter reads it: KEY, VALUE and where it came from (an
+/// option such as "--ode", or a Python keyword), with the checked readers a setter uses.
+struct SettingValue {
+  const std::string& key;    ///< KEY of KEY=VALUE
+  const std::string& value;  ///< VALUE of KEY=VALUE
+  const std::string& where;  ///< what the messages name first
+  /// setting_integer(key, value, lo, hi, where, allowed).
+  int integer(long lo, long hi, const std::string& allowed) const {
+    return setting_integer(key, value, lo, hi, where, allowed);
+  }
+  /// setting_number(key, value, lo, hi, where, allowed).
+  double number(double lo, double hi, const std::string& allowed) const {
+    return setting_number(key, value, lo, hi, where, allowed);
+  }
+  /// `a` when VALUE is `name_a`, `b` when it is `name_b`; otherwise throws InputError
+  /// "<where>: KEY='VALUE' is not allowed; allowed: <allowed>".
+  template <class E>
+  E choice(const char* name_a, E a, const char* name_b, E b, const std::string& allowed) const {
+    if (value == name_a) return a;
+    if (value == name_b) return b;
+    not_allowed(allowed);
+  }
+  /// Throws InputError "<where>: KEY='VALUE' is not allowed; allowed: <allowed>".
+  [[noreturn]] void not_allowed(const std::string& allowed) const;
+};
+
+/// Throws InputError "<where>: unknown <engine> setting 'KEY'; allowed: <names, comma
+/// separated> (<doc>)".
+[[noreturn]] void throw_unknown_setting(const std::string& engine, const std::string& key,
+                                        const std::vector<std::string>& names, const std::string& where,
+                                        const std::string& doc);
+
+/// An engine's settings as one table: a row per key with the function that sets the
+/// settings struct `S` from its text (throwing InputError for a value out of range). The
+/// engine's public `<engine>_setting_names`, `set_<engine>_setting` and
+/// `apply_<engine>_settings` read it.
+template <class S>
+struct SettingTable {
+  /// Sets the settings struct from one value's text.
+  using Setter = std::function<void(S& s, const SettingValue& v)>;
+  /// One key and its setter.
+  struct Row {
+    const char* key;
+    Setter set;
+  };
+  /// A setter of an integer field in [lo, hi] (SettingValue::integer).
+  template <class T>
+  static Setter integer(T S::*field, long lo, long hi, std::string allowed) {
+    return [=](S& s, const SettingValue& v) { s.*field = static_cast<T>(v.integer(lo, hi, allowed)); };
+  }
+  /// A setter of a decimal field in [lo, hi] (SettingValue::number).
+  static Setter number(double S::*field, double lo, double hi, std::string allowed) {
+    return [=](S& s, const SettingValue& v) { s.*field = v.number(lo, hi, allowed); };
+  }
+  /// A setter of a field with two named values (SettingValue::choice).
+  template <class E>
+  static Setter choice(E S::*field, const char* name_a, E a, const char* name_b, E b, std::string allowed) {
+    return [=](S& s, const SettingValue& v) { s.*field = v.choice(name_a, a, name_b, b, allowed); };
+  }
+  const char* engine;   ///< the engine's name, as in messages ("ode")
+  const char* doc;      ///< the page that lists the keys ("docs/engines.md")
+  const char* example;  ///< an item shown when one is not KEY=VALUE ("stepper=quickstep")
+  std::vector<Row> rows;
+
+  /// The keys, in the table's order.
+  std::vector<std::string> names() const {
+    std::vector<std::string> out;
+    for (const Row& r : rows) out.emplace_back(r.key);
+    return out;
+  }
+  /// Sets `key` from `value`; throws InputError for an unknown key or a bad value.
+  void set(S& s, const std::string& key, const std::string& value, const std::string& where) const {
+    for (const Row& r : rows)
+      if (key == r.key) return r.set(s, SettingValue{key, value, where});
+    throw_unknown_setting(engine, key, names(), where, doc);
+  }
+  /// Applies "KEY=VALUE" items in order (apply_setting_items with set()).
+  void apply(S& s, const std::vector<std::string>& items, const std::string& where) const {
+    apply_setting_items(items, where, example,
+                        [&](const std::string& k, const std::string& v) { set(s, k, v, where); });
+  }
+};
 
 }  // namespace octocd

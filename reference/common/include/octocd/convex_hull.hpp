@@ -3,8 +3,10 @@
 /// The convex hull of a mesh as the engines' convex shapes take it (ODE's dGeomConvex,
 /// and any adapter that needs faces, planes or the hull's mass properties): vertices,
 /// polygonal faces wound counter-clockwise seen from outside, and one outward plane per
-/// face. Computed with Bullet's btConvexHullComputer on the mesh's vertices (exact
-/// integer arithmetic: every hull vertex is one of the mesh's vertices).
+/// face. Computed with qhull (libqhull_r, Debian's libqhull-dev) on the mesh's vertices in
+/// double precision: every hull vertex is one of the mesh's vertices, and every vertex lies
+/// on or below every face's plane up to double rounding. Every adapter (Bullet, ODE, DART)
+/// and the physics tier's reference geometry collide this one hull.
 
 #include <array>
 #include <cstdint>
@@ -21,20 +23,20 @@ struct ConvexHull {
   /// The hull's vertices (each one of the input points, converted to double).
   std::vector<std::array<double, 3>> vertices;
   /// Per face, the indices into `vertices` of its corners, counter-clockwise seen from
-  /// outside (right-hand rule: the outward normal). At least 3 per face. Faces thinner than 1e-6 of the hull's bounding-box diagonal (slivers of collinear
-  /// corners, whose normal is rounding noise) are left out. The hull is Bullet's, found on
-  /// a grid of 1/10216 of the points' range: a thin face's plane may tilt so that hull
-  /// vertices lie beyond it by up to about 2% of the diagonal (asian-dragon: 1.7%).
+  /// outside (right-hand rule: the outward normal). At least 3 per face: qhull's facets,
+  /// coplanar ones merged where qhull's roundoff bound cannot tell them apart (its default
+  /// options), otherwise triangles.
   std::vector<std::vector<std::uint32_t>> faces;
-  /// Per face, its plane (nx, ny, nz, d): unit outward normal n (Newell's normal of the
-  /// polygon) and offset d = max over the face's corners of n . v, so every vertex of
+  /// Per face, its plane (nx, ny, nz, d): unit outward normal n (qhull's facet normal) and
+  /// offset d = max over the face's corners of n . v, so every vertex of
   /// the hull satisfies n . v <= d (up to rounding) and the face lies on n . v = d.
   std::vector<std::array<double, 4>> planes;
 };
 
-/// The convex hull of `points` (m). Throws InputError "<what>: ..." when the points span
-/// no volume (fewer than 4 points not in one plane: btConvexHullComputer then returns a
-/// polygon or less), naming the number of points and the hull's face count.
+/// The convex hull of `points` (m). Throws InputError "<what>: the convex hull of its N
+/// vertices has F faces (they span no volume...)" when the points span no volume (fewer
+/// than 4 points, or all in one plane: qhull refuses them and its message's first line is
+/// added).
 ConvexHull convex_hull(const std::vector<Vec3>& points, const std::string& what);
 
 /// The convex hull of a mesh's vertices (Mesh::vertices; the triangles are not read).

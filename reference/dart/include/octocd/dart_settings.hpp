@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "octocd/pyramid_friction.hpp"
+
 namespace octocd {
 
 /// Which DART collision detector finds the contacts (ConstraintSolver::setCollisionDetector).
@@ -42,13 +44,9 @@ enum class DartLcp {
 
 /// How a contact's two friction directions are bounded. DART's ContactConstraint gives
 /// each direction the box |lambda_t| <= mu_shape lambda_n (a friction pyramid, findex),
-/// mu_shape the smaller of the two shapes' DynamicsAspect friction coefficients.
-enum class DartFriction {
-  /// mu_shape = mu / sqrt(2): the pyramid inscribed in the Coulomb cone.
-  Inscribed,
-  /// mu_shape = mu: up to sqrt(2) mu along the pyramid's diagonal.
-  Pyramid,
-};
+/// mu_shape the smaller of the two shapes' DynamicsAspect friction coefficients
+/// (mu_shape = mu_dir of PyramidFriction).
+using DartFriction = PyramidFriction;
 
 /// "fcl" or "dart".
 const char* dart_collision_name(DartCollision c);
@@ -57,7 +55,7 @@ const char* dart_fcl_boxes_name(DartFclBoxes b);
 /// "dantzig" or "pgs".
 const char* dart_lcp_name(DartLcp l);
 /// "inscribed" or "pyramid".
-const char* dart_friction_name(DartFriction f);
+inline const char* dart_friction_name(DartFriction f) { return pyramid_friction_name(f); }
 
 /// The dart engine's settings. The defaults are what `octocd run --engine dart` runs:
 /// DART's own defaults where DART has one, except `boxes` and `contacts` (below).

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "octocd/dart_settings.hpp"
-#include "octocd/engine.hpp"
+#include "octocd/reference_world.hpp"
 
 namespace octocd {
 
@@ -55,7 +55,41 @@ namespace octocd {
 /// x' = x + dt v', R' = R exp(dt w'_body) (FreeJoint::integratePositions). The Coriolis
 /// term c(v) of a free body carries w x I w at the pre-step velocity (gyroscopic,
 /// explicit).
-class DartWorld : public Engine {
+///
+/// state(): x (the body origin = centre of mass), v, q, omega (world frame) after the last step
+/// (BodyNode::getWorldTransform, getLinearVelocity, getAngularVelocity); static bodies
+/// as given.
+/// collision_geometry(): "dart fcl: boxes (BoxShape, fcl::Box), convex hulls (dynamic meshes, MeshShape of the
+/// hull), triangle meshes (static meshes, MeshShape)", naming only what the scene has.
+/// rotation_traits(): the traits a version 2 trace declares:
+/// - inertia: per body as described above (zeros for static bodies);
+/// - body_friction = mu_k with combine "min" (DART takes the smaller shape's value;
+///   the inscribed pyramid stays inside mu_k's cone); body_restitution = sqrt(e) with
+///   combine "product" (DART multiplies), so every pair has e;
+/// - contact_margin 1e-4 m (DART reports only overlapping shapes; the margin covers the
+///   float32 pose in the trace and FCL's tolerances);
+/// - detection "pre-step"; candidate_pairs false (no /pairs: the detector's pairs are
+///   not exposed); contact_geometry "shape";
+/// - body_collision_shape "box" (box shapes), "convex_hull" (dynamic meshes), "mesh"
+///   (static meshes); rotates, jt3;
+/// - contact_model "rigid", integrator "semi-implicit", gyroscopic "true".
+/// record(): the last step's record (recording on):
+/// - x_pre, v_pre, q_pre, w_pre: the state before the step; *_post after it; x_det,
+///   q_det = x_pre, q_pre (DART collides inside World::step before positions move);
+/// - aabbs: the exact world AABBs of the local boxes at the pre-step pose; has_pairs
+///   false;
+/// - contacts (manifolds, has_points; has_contact_terms false): one row per
+///   collision::Contact of World::getLastCollisionResult() between a dynamic body and
+///   another body; pair (a, b), a < b, of the two ShapeNodes' bodies; normal =
+///   Contact::normal (from object 2's body to object 1's), flipped so it points from B
+///   to A; depth = max(0, Contact::penetrationDepth); point = Contact::point;
+///   J_A = Contact::force (the force on object 1's body that ContactConstraint::
+///   applyImpulse stores: (n lambda_n + d1 lambda_1 + d2 lambda_2) / dt, the LCP's own
+///   impulses) times dt, negated when A is object 2's body; jn = J_A . normal; jt3 =
+///   J_A - jn normal; jt = jt3 along -v_t / |v_t| (v_t from v_pre + dt g on dynamic
+///   bodies and w_pre), |jt3| when |v_t| <= 1e-6 m/s; rows sorted by pair;
+/// - confirmed: the pairs with at least one row.
+class DartWorld : public ReferenceWorld {
  public:
   /// The model (shared, not copied) from the state `initial` (x, v, w per body; q and
   /// omega when given, else the identity and zero). Throws InputError when a mesh's hull
@@ -64,8 +98,6 @@ class DartWorld : public Engine {
   DartWorld(std::shared_ptr<const Model> model, const BodyState& initial,
             const DartSettings& settings = DartSettings());
   ~DartWorld() override;
-  DartWorld(const DartWorld&) = delete;
-  DartWorld& operator=(const DartWorld&) = delete;
 
   /// One World::step of dt. Metrics in octocd's layout:
   /// - stage_ms: response = World::step (collision detection, the constraint solve and
@@ -80,67 +112,16 @@ class DartWorld : public Engine {
   /// Throws RuntimeError naming the body and frame when its state becomes non-finite, and
   /// when the step's contacts reach DartSettings::max_contacts (DART drops the rest).
   const FrameMetrics& step() override;
-  /// x (the body origin = centre of mass), v, q, omega (world frame) after the last step
-  /// (BodyNode::getWorldTransform, getLinearVelocity, getAngularVelocity); static bodies
-  /// as given.
-  const BodyState& state() const override;
-  /// Metrics of the last step.
-  const FrameMetrics& last_metrics() const override;
-  /// Steps taken so far.
-  std::int64_t frame() const override;
   /// "dart".
   std::string name() const override { return "dart"; }
-  /// The CPU model.
-  std::string device() const override;
   /// "dart-fcl" (FCL's dynamic AABB tree inside FCLCollisionGroup) or "dart-all-pairs"
   /// (DARTCollisionGroup tests every pair's AABBs), per DartSettings::collision.
   std::string broadphase_name() const override;
   /// "dart-fcl-collide" (FCL's narrow phase and DART's contact post-processing) or
   /// "dart-collide" (DART's own box-box).
   std::string midphase_name() const override;
-  /// The model it was built from.
-  const Model& model() const override { return *model_; }
-  /// While recording: record().contacts; otherwise empty.
-  const std::vector<ContactRecord>& contacts() const override;
-  /// "dart fcl: boxes (BoxShape, fcl::Box), convex hulls (dynamic meshes, MeshShape of the
-  /// hull), triangle meshes (static meshes, MeshShape)", naming only what the scene has.
-  std::string collision_geometry() const override;
   /// How DART's figures differ from octocd's (see step()).
   std::string notes() const override;
-  /// The traits a version 2 trace declares:
-  /// - inertia: per body as described above (zeros for static bodies);
-  /// - body_friction = mu_k with combine "min" (DART takes the smaller shape's value;
-  ///   the inscribed pyramid stays inside mu_k's cone); body_restitution = sqrt(e) with
-  ///   combine "product" (DART multiplies), so every pair has e;
-  /// - contact_margin 1e-4 m (DART reports only overlapping shapes; the margin covers the
-  ///   float32 pose in the trace and FCL's tolerances);
-  /// - detection "pre-step"; candidate_pairs false (no /pairs: the detector's pairs are
-  ///   not exposed); contact_geometry "shape";
-  /// - body_collision_shape "box" (box shapes), "convex_hull" (dynamic meshes), "mesh"
-  ///   (static meshes); rotates, jt3;
-  /// - contact_model "rigid", integrator "semi-implicit", gyroscopic "true".
-  const RotationTraits* rotation_traits() const override;
-  /// Always true.
-  bool can_record() const override { return true; }
-  /// Turns the per-step FrameRecord on or off.
-  void set_recording(bool on) override;
-  /// The last step's record (recording on):
-  /// - x_pre, v_pre, q_pre, w_pre: the state before the step; *_post after it; x_det,
-  ///   q_det = x_pre, q_pre (DART collides inside World::step before positions move);
-  /// - aabbs: the exact world AABBs of the local boxes at the pre-step pose; has_pairs
-  ///   false;
-  /// - contacts (manifolds, has_points; has_contact_terms false): one row per
-  ///   collision::Contact of World::getLastCollisionResult() between a dynamic body and
-  ///   another body; pair (a, b), a < b, of the two ShapeNodes' bodies; normal =
-  ///   Contact::normal (from object 2's body to object 1's), flipped so it points from B
-  ///   to A; depth = max(0, Contact::penetrationDepth); point = Contact::point;
-  ///   J_A = Contact::force (the force on object 1's body that ContactConstraint::
-  ///   applyImpulse stores: (n lambda_n + d1 lambda_1 + d2 lambda_2) / dt, the LCP's own
-  ///   impulses) times dt, negated when A is object 2's body; jn = J_A . normal; jt3 =
-  ///   J_A - jn normal; jt = jt3 along -v_t / |v_t| (v_t from v_pre + dt g on dynamic
-  ///   bodies and w_pre), |jt3| when |v_t| <= 1e-6 m/s; rows sorted by pair;
-  /// - confirmed: the pairs with at least one row.
-  const FrameRecord& record() const override;
   /// Response and metrics are timed; aabbs, broadphase, midphase and integrate are not
   /// (they run inside World::step).
   bool has_stage(Stage s) const override;
@@ -150,9 +131,8 @@ class DartWorld : public Engine {
   static std::string dart_version();
 
  private:
-  std::shared_ptr<const Model> model_;
   struct Impl;
-  std::unique_ptr<Impl> impl_;
+  Impl& impl() const;
 };
 
 }  // namespace octocd

@@ -99,8 +99,10 @@ const char* collision_shape_name(CollisionShape c);
 
 /// A shape's convex hull in the body frame, as the separating-axis test needs it
 /// (validation/physics/sat.hpp): a box's 8 corners, 3 face axes and 3 edge axes; a mesh's
-/// convex hull (Bullet's btConvexHullComputer on its vertices, exact: hull vertices are
-/// mesh vertices) with its faces' unit outward normals and its edges' unit directions.
+/// convex hull (convex_hull.hpp: qhull on its vertices, the hull every adapter collides;
+/// hull vertices are mesh vertices) with its faces' unit outward normals and its edges'
+/// unit directions; a flat mesh (no hull with volume): its vertices, its triangles' normals
+/// and edges.
 /// Axes parallel or antiparallel to one already listed (|cross| < 1e-9) are dropped: the
 /// test projects on both orientations of an axis. Double precision, metres.
 struct HullFeatures {
@@ -111,7 +113,8 @@ struct HullFeatures {
 
 /// Per-shape FCL geometry of a World, built once: for meshes fcl::BVHModel<fcl::OBBRSS<double>>
 /// from Shape::mesh and fcl::Convex<double> from the convex hull of the mesh vertices
-/// (Bullet's btConvexHullComputer; hull vertices are the original mesh vertices, exact);
+/// (convex_hull.hpp: qhull; hull vertices are the original mesh vertices, exact; a flat
+/// mesh's hull is its BVH);
 /// for boxes fcl::Box<double> with the local AABB's sides. Not owned by the World; must
 /// not outlive it (it reads World::shapes() and World::bodies() at construction only, but
 /// body indices passed to normal() must be the World's). Queries are const and build

@@ -8,7 +8,7 @@
 #include <memory>
 #include <string>
 
-#include "octocd/engine.hpp"
+#include "octocd/reference_world.hpp"
 #include "octocd/mujoco_settings.hpp"
 
 namespace octocd {
@@ -55,7 +55,34 @@ namespace octocd {
 /// full, a bad qpos, qvel or qacc, which MuJoCo answers by dropping contacts or
 /// resetting the state) throw RuntimeError naming the warning and frame, and for a bad
 /// qpos, qvel or qacc the octocd body whose free joint holds MuJoCo's index.
-class MujocoWorld : public Engine {
+///
+/// state(): x = the free joint's position (the body origin, octocd's x), v its linear velocity,
+/// q its orientation, omega the angular velocity in the world frame (MuJoCo keeps it in
+/// the body frame: R qvel[3:6]); static bodies as given. Updated by step().
+/// collision_geometry(): "mujoco convex hulls (meshes), boxes".
+/// rotation_traits(): Inertia (body frame, the local AABB's solid box), per-body friction mu_k and
+/// restitution e with combine rule "max" (MuJoCo takes the larger friction of the two
+/// geoms; e is one per scene), contact_margin = MujocoSettings::margin, detection
+/// "pre-step", contact_geometry "shape", per body collision_shape "convex_hull" (boxes
+/// and meshes alike: MuJoCo 2.2 collides every mesh, static ones too, as its hull),
+/// jt3 true, contact_model "soft", integrator "semi-implicit", gyroscopic "true", deactivation "off"
+/// (MuJoCo's bias force qfrc_bias carries w x I w on every free body).
+/// record(): the last step's record (recording on), external trace version 2:
+/// - x_pre, v_pre, q_pre, w_pre: the state before the step; x_post ... after it;
+///   x_det, q_det = x_pre, q_pre (mj_fwdPosition detects at the state before mj_Euler);
+/// - aabbs: the exact world AABBs of the local boxes at the pre-step pose; has_pairs
+///   false (MuJoCo's candidate pairs are not exposed);
+/// - contacts (manifolds, has_points, has_contact_terms false): one row per
+///   mjData::contact entry that is in the solver or in the gap (exclude 0 or 1): pair
+///   (a, b), a < b, of the bodies of geom1 and geom2; normal = contact.frame[0..2]
+///   (from geom1 to geom2) flipped so it points from B to A; depth = max(0, -dist);
+///   point = contact.pos (MuJoCo's midpoint between the surfaces); jn = the normal
+///   force of mj_contactForce x dt; jt3 = the tangential force (two frame directions)
+///   on A x dt, world frame (MuJoCo's force acts on geom2, its negative on geom1);
+///   jt = jt3 along -v_t / |v_t| (docs/trace-format.md, "The sign of jt"), |jt3| when
+///   |v_t| <= 1e-6 m/s; rows sorted by pair;
+/// - confirmed: the pairs with at least one row.
+class MujocoWorld : public ReferenceWorld {
  public:
   /// From a model (shared, not copied) and the state to start from (x, v, w per body;
   /// q, omega where given, else the identity and zero). Throws RuntimeError with
@@ -63,8 +90,6 @@ class MujocoWorld : public Engine {
   MujocoWorld(std::shared_ptr<const Model> model, const BodyState& initial,
               const MujocoSettings& settings = MujocoSettings());
   ~MujocoWorld() override;
-  MujocoWorld(const MujocoWorld&) = delete;
-  MujocoWorld& operator=(const MujocoWorld&) = delete;
 
   /// One MuJoCo step; metrics in octocd's layout:
   /// - stage_ms: midphase = mj_fwdPosition (kinematics, MuJoCo's broadphase and narrow
@@ -80,53 +105,12 @@ class MujocoWorld : public Engine {
   /// - kinetic_energy = 0.5 m |v|^2 + 0.5 w_b . I w_b, momentum = sum m v (double).
   /// Throws RuntimeError naming the body and frame when a state becomes non-finite.
   const FrameMetrics& step() override;
-  /// x = the free joint's position (the body origin, octocd's x), v its linear velocity,
-  /// q its orientation, omega the angular velocity in the world frame (MuJoCo keeps it in
-  /// the body frame: R qvel[3:6]); static bodies as given. Updated by step().
-  const BodyState& state() const override;
-  const FrameMetrics& last_metrics() const override;
-  std::int64_t frame() const override;
   /// "mujoco".
   std::string name() const override { return "mujoco"; }
-  /// The CPU model.
-  std::string device() const override;
   /// "mujoco-sap" (mj_collision's sweep and prune over the bodies' bounding boxes).
   std::string broadphase_name() const override { return "mujoco-sap"; }
-  const Model& model() const override { return *model_; }
-  /// While recording: record().contacts; else empty.
-  const std::vector<ContactRecord>& contacts() const override;
-  /// "mujoco convex hulls (meshes), boxes".
-  std::string collision_geometry() const override;
   /// "mujoco-convex": mjc_BoxBox for box pairs, MPR (libccd) on the hulls otherwise.
   std::string midphase_name() const override { return "mujoco-convex"; }
-  /// Inertia (body frame, the local AABB's solid box), per-body friction mu_k and
-  /// restitution e with combine rule "max" (MuJoCo takes the larger friction of the two
-  /// geoms; e is one per scene), contact_margin = MujocoSettings::margin, detection
-  /// "pre-step", contact_geometry "shape", per body collision_shape "convex_hull" (boxes
-  /// and meshes alike: MuJoCo 2.2 collides every mesh, static ones too, as its hull),
-  /// jt3 true, contact_model "soft", integrator "semi-implicit", gyroscopic "true", deactivation "off"
-  /// (MuJoCo's bias force qfrc_bias carries w x I w on every free body).
-  const RotationTraits* rotation_traits() const override;
-  /// True.
-  bool can_record() const override { return true; }
-  /// Turns the per-step FrameRecord on or off.
-  void set_recording(bool on) override;
-  /// The last step's record (recording on), external trace version 2:
-  /// - x_pre, v_pre, q_pre, w_pre: the state before the step; x_post ... after it;
-  ///   x_det, q_det = x_pre, q_pre (mj_fwdPosition detects at the state before mj_Euler);
-  /// - aabbs: the exact world AABBs of the local boxes at the pre-step pose; has_pairs
-  ///   false (MuJoCo's candidate pairs are not exposed);
-  /// - contacts (manifolds, has_points, has_contact_terms false): one row per
-  ///   mjData::contact entry that is in the solver or in the gap (exclude 0 or 1): pair
-  ///   (a, b), a < b, of the bodies of geom1 and geom2; normal = contact.frame[0..2]
-  ///   (from geom1 to geom2) flipped so it points from B to A; depth = max(0, -dist);
-  ///   point = contact.pos (MuJoCo's midpoint between the surfaces); jn = the normal
-  ///   force of mj_contactForce x dt; jt3 = the tangential force (two frame directions)
-  ///   on A x dt, world frame (MuJoCo's force acts on geom2, its negative on geom1);
-  ///   jt = jt3 along -v_t / |v_t| (docs/trace-format.md, "The sign of jt"), |jt3| when
-  ///   |v_t| <= 1e-6 m/s; rows sorted by pair;
-  /// - confirmed: the pairs with at least one row.
-  const FrameRecord& record() const override;
   /// Integrate, midphase, response and metrics are timed; aabbs and broadphase are not.
   bool has_stage(Stage s) const override;
   /// How MuJoCo's figures differ from octocd's (see step()).
@@ -140,9 +124,8 @@ class MujocoWorld : public Engine {
   static std::string mujoco_version();
 
  private:
-  std::shared_ptr<const Model> model_;
   struct Impl;
-  std::unique_ptr<Impl> impl_;
+  Impl& impl() const;
 };
 
 }  // namespace octocd

@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "octocd/pyramid_friction.hpp"
+
 namespace octocd {
 
 /// Which of ODE's steppers advances the world.
@@ -21,20 +23,14 @@ enum class OdeStepper {
 };
 
 /// How a contact's two friction directions are bounded (ODE's dContactApprox1: the
-/// friction pyramid, each direction's force within mu_dir times the contact's normal force).
-enum class OdeFriction {
-  /// mu_dir = mu / sqrt(2) in both directions: the pyramid inscribed in the Coulomb cone,
-  /// so the friction vector never leaves the cone (sliding along one direction: 0.707 mu).
-  Inscribed,
-  /// mu_dir = mu in both directions (ODE's usual set-up): sliding along a direction
-  /// gets mu, but along the pyramid's diagonal up to sqrt(2) mu, outside the cone.
-  Pyramid,
-};
+/// friction pyramid, each direction's force within mu_dir times the contact's normal
+/// force); Pyramid is ODE's usual set-up.
+using OdeFriction = PyramidFriction;
 
 /// "step" or "quickstep".
 const char* ode_stepper_name(OdeStepper s);
 /// "inscribed" or "pyramid".
-const char* ode_friction_name(OdeFriction f);
+inline const char* ode_friction_name(OdeFriction f) { return pyramid_friction_name(f); }
 
 /// The ode engine's settings. The defaults are what `octocd run --engine ode` runs:
 /// ODE's own defaults (double precision) where ODE has one.

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "octocd/engine.hpp"
+#include "octocd/reference_world.hpp"
 #include "octocd/ode_settings.hpp"
 
 namespace octocd {
@@ -60,15 +60,45 @@ namespace octocd {
 /// frame, no sub-stepping. ODE's integrator is semi-implicit Euler: v' = v + dt (g +
 /// F_c / m), w' from the torques (gyroscopic term included), then x' = x + dt v' and
 /// q' = normalise(q + dt/2 w' q) (dxStepBody).
-class OdeWorld : public Engine {
+///
+/// state(): x (the body origin = local AABB centre), v, w, q, omega after the last step.
+/// collision_geometry(): "ode boxes (dBox), convex hulls (dynamic meshes, dConvex), triangle meshes (static
+/// meshes, dTriMesh)", naming only what the scene has.
+/// rotation_traits(): the traits a version 2 trace declares:
+/// - inertia: per body as described above (zeros for static bodies);
+/// - body_friction = mu_k, body_restitution = e on every body, combine "min" (ODE has
+///   no per-body material: the adapter gives every contact the scene's values);
+/// - contact_margin 1e-4 m: ODE reports only overlapping shapes at the detection pose;
+///   the margin covers the float32 pose in the trace and libccd MPR's 1e-6 tolerance;
+/// - detection "pre-step"; broadphase_exact false (pairs from ODE's own AABBs, which
+///   for a hull are tighter than the posed local box); contact_geometry "shape";
+/// - body_collision_shape "box" (box shapes), "convex_hull" (dynamic meshes), "mesh"
+///   (static meshes as triangle meshes); rotates, jt3;
+/// - deactivation "off" (auto-disable off for the world and every body);
+/// - contact_model "rigid" (contact rows are constraints: CFM 1e-10 by default),
+///   integrator "semi-implicit", gyroscopic "true" / "false" per OdeSettings::gyroscopic.
+/// record(): the last step's record (recording on):
+/// - x_pre, v_pre, q_pre, w_pre: the state before the step; *_post after it; x_det,
+///   q_det = x_pre, q_pre (ODE collides before it steps);
+/// - aabbs: each geom's ODE AABB at the detection pose (dGeomGetAABB), rounded outwards
+///   to float; pairs (has_pairs): the near callback's pairs (a, b), a < b, sorted;
+/// - contacts (manifolds, has_points; has_contact_terms false): one row per dContactGeom,
+///   pair (a, b) a < b (swapped, normal flipped, when geom 1 is the higher body);
+///   normal = dContactGeom::normal, which points from geom 2 into geom 1 (moving geom
+///   1 along it by depth separates them), so from B to A; depth = dContactGeom::depth;
+///   point = dContactGeom::pos; J_A = the joint feedback's force on A (dJointFeedback
+///   f1 / f2, the constraint force J^T lambda ODE applied in the step) times dt;
+///   jn = J_A . normal; jt3 = J_A - jn normal (on A, world); jt = jt3 projected on
+///   -v_t / |v_t| (v_t: A's velocity relative to B's at the point from v_pre + dt g on
+///   dynamic bodies and w_pre), |jt3| when |v_t| <= 1e-6 m/s; rows sorted by pair;
+/// - confirmed: the pairs with at least one row.
+class OdeWorld : public ReferenceWorld {
  public:
   /// The model (shared, not copied) from the state `initial` (x, v, w per body; q and
   /// omega when given, else the identity and zero). Throws InputError when a mesh's hull
   /// spans no volume, RuntimeError when ODE refuses a body's mass.
   OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial, const OdeSettings& settings = OdeSettings());
   ~OdeWorld() override;
-  OdeWorld(const OdeWorld&) = delete;
-  OdeWorld& operator=(const OdeWorld&) = delete;
 
   /// One step of dt: dSpaceCollide (near callback, dCollide, contact joints), then
   /// dWorldStep / dWorldQuickStep. Metrics in octocd's layout:
@@ -86,63 +116,14 @@ class OdeWorld : public Engine {
   /// Throws RuntimeError naming the body and frame when its state becomes non-finite,
   /// or when ODE's step fails (out of memory).
   const FrameMetrics& step() override;
-  /// x (the body origin = local AABB centre), v, w, q, omega after the last step.
-  const BodyState& state() const override;
-  /// Metrics of the last step.
-  const FrameMetrics& last_metrics() const override;
-  /// Steps taken so far.
-  std::int64_t frame() const override;
   /// "ode".
   std::string name() const override { return "ode"; }
-  /// The CPU model.
-  std::string device() const override;
   /// "ode-hash" (dHashSpace).
   std::string broadphase_name() const override { return "ode-hash"; }
   /// "ode-collide": ODE's dCollide (dBoxBox, libccd MPR, trimesh colliders).
   std::string midphase_name() const override { return "ode-collide"; }
-  /// The model it was built from.
-  const Model& model() const override { return *model_; }
-  /// While recording: record().contacts; otherwise empty.
-  const std::vector<ContactRecord>& contacts() const override;
-  /// "ode boxes (dBox), convex hulls (dynamic meshes, dConvex), triangle meshes (static
-  /// meshes, dTriMesh)", naming only what the scene has.
-  std::string collision_geometry() const override;
   /// How ODE's figures differ from octocd's (see step()).
   std::string notes() const override;
-  /// The traits a version 2 trace declares:
-  /// - inertia: per body as described above (zeros for static bodies);
-  /// - body_friction = mu_k, body_restitution = e on every body, combine "min" (ODE has
-  ///   no per-body material: the adapter gives every contact the scene's values);
-  /// - contact_margin 1e-4 m: ODE reports only overlapping shapes at the detection pose;
-  ///   the margin covers the float32 pose in the trace and libccd MPR's 1e-6 tolerance;
-  /// - detection "pre-step"; broadphase_exact false (pairs from ODE's own AABBs, which
-  ///   for a hull are tighter than the posed local box); contact_geometry "shape";
-  /// - body_collision_shape "box" (box shapes), "convex_hull" (dynamic meshes), "mesh"
-  ///   (static meshes as triangle meshes); rotates, jt3;
-  /// - deactivation "off" (auto-disable off for the world and every body);
-  /// - contact_model "rigid" (contact rows are constraints: CFM 1e-10 by default),
-  ///   integrator "semi-implicit", gyroscopic "true" / "false" per OdeSettings::gyroscopic.
-  const RotationTraits* rotation_traits() const override;
-  /// Always true.
-  bool can_record() const override { return true; }
-  /// Turns the per-step FrameRecord on or off.
-  void set_recording(bool on) override;
-  /// The last step's record (recording on):
-  /// - x_pre, v_pre, q_pre, w_pre: the state before the step; *_post after it; x_det,
-  ///   q_det = x_pre, q_pre (ODE collides before it steps);
-  /// - aabbs: each geom's ODE AABB at the detection pose (dGeomGetAABB), rounded outwards
-  ///   to float; pairs (has_pairs): the near callback's pairs (a, b), a < b, sorted;
-  /// - contacts (manifolds, has_points; has_contact_terms false): one row per dContactGeom,
-  ///   pair (a, b) a < b (swapped, normal flipped, when geom 1 is the higher body);
-  ///   normal = dContactGeom::normal, which points from geom 2 into geom 1 (moving geom
-  ///   1 along it by depth separates them), so from B to A; depth = dContactGeom::depth;
-  ///   point = dContactGeom::pos; J_A = the joint feedback's force on A (dJointFeedback
-  ///   f1 / f2, the constraint force J^T lambda ODE applied in the step) times dt;
-  ///   jn = J_A . normal; jt3 = J_A - jn normal (on A, world); jt = jt3 projected on
-  ///   -v_t / |v_t| (v_t: A's velocity relative to B's at the point from v_pre + dt g on
-  ///   dynamic bodies and w_pre), |jt3| when |v_t| <= 1e-6 m/s; rows sorted by pair;
-  /// - confirmed: the pairs with at least one row.
-  const FrameRecord& record() const override;
   /// broadphase, midphase, response and metrics are timed; aabbs and integrate are not
   /// (they run inside dSpaceCollide and dWorldStep).
   bool has_stage(Stage s) const override;
@@ -150,9 +131,8 @@ class OdeWorld : public Engine {
   const OdeSettings& settings() const;
 
  private:
-  std::shared_ptr<const Model> model_;
   struct Impl;
-  std::unique_ptr<Impl> impl_;
+  Impl& impl() const;
 };
 
 }  // namespace octocd

@@ -1,0 +1,110 @@
+#pragma once
+/// \file process_engines.hpp
+/// Engines as processes (docs/bring-your-engine.md): an engine registered in an engines
+/// file as a command (an argument vector, never a shell string) that reads a run request
+/// (JSON) and writes a version 2 trace (docs/trace-format.md). octocd starts it, bounds it
+/// (wall time, trace size, the tail of its output kept), reads its trace through the
+/// hardened reader (octocd/external.hpp) and replays the frames through the Engine
+/// interface, so `run`, `validate`, `bench` and the engine matrix take it by name like a
+/// built-in engine (engine_registry.hpp: EngineInfo::command is non-empty for it).
+///
+/// Engines files are read once, on the registry's first use, in this order (a later entry
+/// of the same name replaces an earlier one):
+///   1. the shipped file: shared_dir()/engines.json (an install: PREFIX/share/octocd/),
+///      else the build tree's share/octocd/engines.json (compiled in);
+///   2. $XDG_CONFIG_HOME/octocd/engines.json (else $HOME/.config/octocd/engines.json);
+///   3. the file of set_engines_file (`--engines-file FILE`).
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "octocd/engine.hpp"
+#include "octocd/engine_registry.hpp"
+
+namespace octocd {
+
+/// One engine of an engines file (docs/bring-your-engine.md, "The engines file").
+struct ProcessEngineSpec {
+  /// What it can do: name, description, rotates, geometries (records_every_step false: it is
+  /// judged through its trace); `command` holds the resolved argument vector.
+  EngineInfo info;
+  /// The argument vector run for a request (the request's path is appended): argv[0] is
+  /// looked up on PATH (or is a path); later items naming an existing file relative to the
+  /// engines file's folder are made absolute.
+  std::vector<std::string> command;
+  /// Optional availability check (resolved as `command`): exits 0 when the engine's runtime
+  /// and packages are present. Empty: none.
+  std::vector<std::string> check;
+  /// The keys of the KEY=VALUE settings items it accepts (passed through as strings).
+  std::vector<std::string> settings;
+  /// Wall-time bound of one run (s, > 0; default 600).
+  double timeout_s = 600.0;
+  /// Largest trace it may write (bytes; default 4 GiB): beyond it the process is stopped.
+  std::uint64_t max_trace_bytes = 4ull << 30;
+  /// The engines file it came from.
+  std::string file;
+};
+
+/// The engines file given by the user (`--engines-file FILE`, Python's engines_file=), read
+/// after the shipped and the user's; "" for none. Call before the registry is first read
+/// (main does, before registering the commands); a later call with another path throws
+/// RuntimeError (the registry is read once per process).
+void set_engines_file(const std::string& path);
+
+/// The engines files read, in look-up order (those that exist), for messages.
+std::vector<std::string> engines_files_read();
+
+/// Reads one engines file strictly. Throws InputError "FILE: FIELD: PROBLEM; allowed: ..."
+/// for unreadable or malformed JSON, an unknown field, a missing one, a value of the wrong
+/// type or range, a name not of [a-z0-9_-]{1,32} or among `builtin` (the built-in engines'
+/// names), a name twice in the file, or a command given as a string or whose first item
+/// reads as a shell command line.
+std::vector<ProcessEngineSpec> read_engines_file(const std::string& path, const std::vector<std::string>& builtin);
+
+/// The process engines of every engines file (look-up order above; later same names
+/// replace earlier), read on the first call with the built-in names `builtin`. Throws the
+/// InputError of read_engines_file. Thread-safe.
+const std::vector<ProcessEngineSpec>& process_engines(const std::vector<std::string>& builtin);
+
+/// The process engine `name` of process_engines (already read), or nullptr.
+const ProcessEngineSpec* find_process_engine(const std::string& name);
+
+/// "" when the process engine `spec` can run here, else why not: argv[0] not found on PATH,
+/// a file its command names missing, or its check command failing (exit code or signal,
+/// the sanitised tail of its output) or running past 30 s. Runs the check at most once
+/// per engine and process (cached). Never throws.
+std::string process_engine_unavailable(const ProcessEngineSpec& spec);
+
+/// Checks settings items "KEY=VALUE" for `spec`: each has '=' and a KEY of spec.settings.
+/// Throws InputError "<where>: 'ITEM' ...; allowed: <keys>".
+void check_process_settings(const ProcessEngineSpec& spec, const std::vector<std::string>& items,
+                            const std::string& where);
+
+/// The run request for `model` (docs/bring-your-engine.md, "The request"): bodies in
+/// octocd's order, meshes in the body frame, materials, the initial state, `frames` steps,
+/// the trace path `trace`, the settings items as {KEY: VALUE}. Pure.
+nlohmann::ordered_json process_request(const ProcessEngineSpec& spec, const Model& model, std::int64_t frames,
+                                       const std::string& trace, const std::vector<std::string>& items);
+
+/// The engine `spec` on `model` (shared) with its settings `items` (checked: InputError
+/// naming `where`). Cheap: the process runs at the first step(), for the frames of
+/// plan_steps when called before it, else the scene's frames; it then writes its own
+/// trace (Engine::own_trace), which is checked and replayed frame by frame. Every failure
+/// of the process is a RuntimeError "engine 'NAME': ..." naming what it did and the
+/// sanitised tail of its stderr; a SIGINT/SIGTERM (stop_signal) while it runs stops its
+/// process group (SIGTERM, then SIGKILL) and ends octocd with stop_exit_code, its
+/// temporary files removed.
+std::unique_ptr<Engine> make_process_engine(const ProcessEngineSpec& spec, const std::shared_ptr<const Model>& model,
+                                            const std::vector<std::string>& items, const std::string& where);
+
+/// Copies the trace `engine` wrote itself (Engine::own_trace, after its first step) to
+/// `path` atomically (a temporary file beside it, then a rename: `path` is never left half
+/// written). Throws InputError / RuntimeError naming `label` and `path` as
+/// write_file_atomically (octocd/atomic_file.hpp), RuntimeError when the engine has no trace.
+void copy_own_trace(const Engine& engine, const std::string& path, const std::string& label);
+
+}  // namespace octocd

@@ -1,0 +1,12 @@
+// The dart engine's registration (engine_entry.hpp): compiled into octocd_engines when
+// reference/dart is built (octocd_register_engine in this folder's CMakeLists.txt).
+#include "engine_entry.hpp"
+#include "octocd/dart_world.hpp"
+
+namespace octocd {
+
+EngineHooks dart_engine_hooks() {
+  return reference_engine_hooks<DartWorld, DartSettings, &apply_dart_settings, &dart_setting_names>();
+}
+
+}  // namespace octocd

@@ -1,0 +1,12 @@
+// The ode engine's registration (engine_entry.hpp): compiled into octocd_engines when
+// reference/ode is built (octocd_register_engine in this folder's CMakeLists.txt).
+#include "engine_entry.hpp"
+#include "octocd/ode_world.hpp"
+
+namespace octocd {
+
+EngineHooks ode_engine_hooks() {
+  return reference_engine_hooks<OdeWorld, OdeSettings, &apply_ode_settings, &ode_setting_names>();
+}
+
+}  // namespace octocd

@@ -1,0 +1,286 @@
+// Engines as processes (issue 66, docs/bring-your-engine.md): small Python engines
+// registered in tests/data/process_engines/engines.json (tests/support/process_engines/
+// boxes_engine.py) driven by `octocd` through `--engines-file`. The correct one (resting
+// and free-falling boxes) is judged clean by `validate SCENE --engine NAME`, `run --trace`
+// gives its trace and `bench` its steps/s; each planted fault (a non-zero exit, a signal,
+// a hang past timeout_s, a truncated trace, a wrong body or frame count, hostile output, a
+// missing timing attribute, a trace over max_trace_bytes) is exit 1 naming the engine and
+// what it did, with no terminal escape and no temporary file left; SIGINT to octocd stops
+// the child; a bad engines file is exit 2 naming the file and the field.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "octocd/trace_reader.hpp"
+#include "support/cli_run.hpp"
+#include "support/wait_event.hpp"
+
+namespace fs = std::filesystem;
+using octocd::test::Result;
+
+namespace {
+
+std::string data(const std::string& name) {
+  return (fs::path(octocd::test::source_dir()) / "tests/data/process_engines" / name).string();
+}
+
+/// A fresh folder for one test (its TMPDIR and outputs).
+class ProcessEngines : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() / (std::string("octocd-proc-") + info->name() + "-" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_ / "tmp");
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  /// `octocd --engines-file FILE ARGS` with TMPDIR = the test's tmp folder.
+  Result octocd(const std::string& args, const std::string& engines = data("engines.json")) const {
+    return octocd::test::run("TMPDIR=" + (dir_ / "tmp").string() + " " + octocd::test::bin() + " --engines-file " +
+                             engines + " " + args);
+  }
+  /// The test's TMPDIR holds nothing (every temporary file removed).
+  bool tmp_empty() const { return fs::is_empty(dir_ / "tmp"); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+
+  fs::path dir_;
+};
+
+TEST_F(ProcessEngines, ListedBesideTheBuiltInOnesWithTheirAvailability) {
+  const Result r = octocd("engines");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("bullet "), std::string::npos) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("pyboxes +available")));
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("pymissing +unavailable: command 'no-such-runtime-octocd' not "
+                                                     "found on PATH")))
+      << r.output;
+  // The check command's exit code and the tail of its stderr.
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("pycheckfails +unavailable: its check .* exited with code 4.*no "
+                                                     "module named rapier")))
+      << r.output;
+  // The shipped engines file's rapier and jolt are listed, available or not.
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("\\nrapier +(available|unavailable: .+)"))) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("\\njolt +(available|unavailable: .+)"))) << r.output;
+
+  const Result a = octocd("engines --available");
+  ASSERT_EQ(a.code, 0) << a.output;
+  EXPECT_TRUE(std::regex_search(a.output, std::regex("(^|\\n)pyboxes\\n")));
+  EXPECT_EQ(a.output.find("pymissing"), std::string::npos);
+
+  const Result j = octocd("engines --json");
+  ASSERT_EQ(j.code, 0) << j.output;
+  const nlohmann::json doc = nlohmann::json::parse(j.output);
+  std::map<std::string, nlohmann::json> by;
+  for (const auto& e : doc.at("engines")) by[e.at("name").get<std::string>()] = e;
+  ASSERT_TRUE(by.count("cpu") && by.count("bullet") && by.count("pyboxes") && by.count("rapier") && by.count("jolt"));
+  EXPECT_EQ(by["cpu"]["kind"], "builtin");
+  EXPECT_EQ(by["pyboxes"]["kind"], "process");
+  EXPECT_EQ(by["pyboxes"]["available"], true);
+  EXPECT_EQ(by["pyboxes"]["why"], "");
+  EXPECT_EQ(by["pyboxes"]["rotates"], true);
+  EXPECT_EQ(by["pyboxes"]["geometries"], nlohmann::json::array({"box"}));
+  EXPECT_EQ(by["pyboxes"]["settings"], nlohmann::json::array({"ready"}));
+  // Command items naming files are made absolute against the engines file's folder.
+  EXPECT_TRUE(fs::path(by["pyboxes"]["command"][1].get<std::string>()).is_absolute());
+  EXPECT_EQ(by["pymissing"]["available"], false);
+  EXPECT_NE(by["pymissing"]["why"].get<std::string>().find("not found on PATH"), std::string::npos);
+  EXPECT_EQ(doc.at("engines_files").back(), data("engines.json"));
+}
+
+TEST_F(ProcessEngines, TheUsersEnginesFileIsReadAndTheOptionsFileReplacesItsEntries) {
+  // $XDG_CONFIG_HOME/octocd/engines.json: read after the shipped file, before --engines-file.
+  fs::create_directories(dir_ / "config" / "octocd");
+  std::ofstream(dir_ / "config" / "octocd" / "engines.json")
+      << R"({"format": "octocd-engines", "version": 1, "engines": [
+           {"name": "mine", "description": "the user's", "command": ["/usr/bin/python3", "-c", "pass"]},
+           {"name": "pyboxes", "description": "replaced by --engines-file", "command": ["/usr/bin/python3"]}]})";
+  const Result r = octocd::test::run("XDG_CONFIG_HOME=" + (dir_ / "config").string() + " " + octocd::test::bin() +
+                                     " --engines-file " + data("engines.json") + " engines --json");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const nlohmann::json doc = nlohmann::json::parse(r.output);
+  const std::vector<std::string> files = doc.at("engines_files");
+  ASSERT_EQ(files.size(), 3u) << r.output;  // the build tree's, the user's, the option's
+  EXPECT_EQ(files[1], (dir_ / "config" / "octocd" / "engines.json").string());
+  EXPECT_EQ(files[2], data("engines.json"));
+  int mine = 0, pyboxes = 0;
+  for (const auto& e : doc.at("engines")) {
+    if (e.at("name") == "mine") ++mine;
+    if (e.at("name") == "pyboxes") {
+      ++pyboxes;
+      EXPECT_NE(e.at("description"), "replaced by --engines-file");
+    }
+  }
+  EXPECT_EQ(mine, 1);
+  EXPECT_EQ(pyboxes, 1);
+}
+
+TEST_F(ProcessEngines, TheCorrectEngineIsJudgedCleanThroughItsOwnTrace) {
+  const std::string trace = path("pyboxes.h5");
+  const Result r = octocd("validate " + data("boxes.json") + " --engine pyboxes --frames 120 --trace " + trace);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("engine pyboxes"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("all validators pass"), std::string::npos) << r.output;
+  // --trace keeps the process's own trace, as it wrote it (its engine attribute, its frames).
+  const Result check = octocd::test::run_octocd("validate --trace-in " + trace + " --check-only");
+  ASSERT_EQ(check.code, 0) << check.output;
+  EXPECT_NE(check.output.find("engine 'boxes_engine 1.0', 4 bodies, 120 frames, version 2"), std::string::npos)
+      << check.output;
+  EXPECT_TRUE(tmp_empty());
+}
+
+TEST_F(ProcessEngines, RunGivesTheTraceAndBenchTheStepsPerSecondOfItsTiming) {
+  const std::string trace = path("run.h5"), summary = path("summary.json");
+  const Result r = octocd("run " + data("boxes.json") + " --engine pyboxes --frames 80 --trace " + trace +
+                          " --no-xdmf --quiet --summary-json " + summary);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Result check = octocd::test::run_octocd("validate --trace-in " + trace + " --check-only");
+  ASSERT_EQ(check.code, 0) << check.output;
+  EXPECT_NE(check.output.find("80 frames"), std::string::npos) << check.output;
+  std::ifstream in(summary);
+  const nlohmann::json s = nlohmann::json::parse(in);
+  EXPECT_EQ(s.at("frames"), 80);
+  EXPECT_EQ(s.at("engine"), "pyboxes");
+  // steps/s: the frames over the process's own timing (its trace's wall_step_seconds).
+  const double wall = octocd::TraceReader(trace).number_attribute("wall_step_seconds");
+  ASSERT_GT(wall, 0.0);
+  EXPECT_NEAR(s.at("steps_per_s").get<double>(), 80.0 / wall, 1e-6 * 80.0 / wall);
+  // The falling box (body 3, 2 kg) after 80 steps of semi-implicit Euler: v = -9.81 * 0.08.
+  EXPECT_NEAR(s.at("kinetic_energy").at("last").get<double>(), 0.5 * 2.0 * std::pow(9.81 * 0.08, 2), 1e-3);
+  EXPECT_TRUE(tmp_empty());
+
+  // bench: a sweep naming the process engine reports its steps/s from the same timing.
+  const std::string result = path("bench.json");
+  const Result b = octocd("bench " + data("bench.json") + " --scene-dir " + data("") + " --quiet -o " + result);
+  ASSERT_EQ(b.code, 0) << b.output;
+  std::ifstream bin(result);
+  const nlohmann::json bench = nlohmann::json::parse(bin);
+  const nlohmann::json& point = bench.at("points").at(0);
+  EXPECT_EQ(point.at("status"), "ok");
+  EXPECT_GT(point.at("windows").at("all").at("steps_per_s").at("median").get<double>(), 0.0);
+  EXPECT_FALSE(point.at("windows").at("all").contains("cpu_steps_per_s"));  // octocd's CPU time is not the engine's
+  EXPECT_TRUE(tmp_empty());
+}
+
+struct Fault {
+  const char* engine;
+  const char* what;  // a regular expression the message must match
+};
+
+TEST_F(ProcessEngines, EveryFaultIsAClearRuntimeFailureNamingTheEngine) {
+  const std::vector<Fault> faults{
+      {"pycrash", "engine 'pycrash' \\(.*engines.json\\) exited with code 3 after .* s; its stderr ended: "
+                  "boxes_engine: planted crash"},
+      {"pysignal", "engine 'pysignal' .* was killed by signal 6 \\(SIGABRT\\)"},
+      {"pyhang", "engine 'pyhang' .* ran past its bound of 1\\.[0-9]+ s \\(timeout_s\\) and was stopped"},
+      {"pytruncated", "engine 'pytruncated' .* wrote a trace the hardened reader refuses: "},
+      {"pybodies", "engine 'pybodies' .* wrote a trace of 3 bodies; the request has 4"},
+      {"pyframes", "engine 'pyframes' .* wrote a trace of 29 frames; the request asked for 30"},
+      {"pynotiming", "engine 'pynotiming' .* wall_step_seconds: missing"},
+      {"pybig", "engine 'pybig' .* wrote a trace beyond its max_trace_bytes 1000"},
+      {"pyhostile", "engine 'pyhostile' .* exited with code 1 .*its stderr ended \\(the last [0-9]+ of 1048[0-9]+ "
+                    "bytes\\): .*last line \\\\x1b\\[0m"},
+      {"pymissing", "engine 'pymissing' .* is unavailable here: command 'no-such-runtime-octocd' not found on PATH"},
+      {"pycheckfails", "engine 'pycheckfails' .* is unavailable here: its check .* exited with code 4 .*no module "
+                       "named rapier"},
+  };
+  for (const Fault& f : faults) {
+    for (const char* command : {"validate", "run"}) {
+      SCOPED_TRACE(std::string(f.engine) + " " + command);
+      const Result r = octocd(std::string(command) + " " + data("boxes.json") + " --engine " + f.engine +
+                              " --frames 30" + (std::string(command) == "run" ? " --quiet" : ""));
+      EXPECT_EQ(r.code, 1) << r.output;
+      EXPECT_TRUE(std::regex_search(r.output, std::regex(std::string("runtime failure: ") + f.what))) << r.output;
+      // Nothing raw reaches the terminal: no escape, no BEL, no C1 control; a bounded message.
+      EXPECT_EQ(r.output.find('\x1b'), std::string::npos);
+      EXPECT_EQ(r.output.find('\x07'), std::string::npos);
+      EXPECT_EQ(r.output.find("\xc2\x9b"), std::string::npos);
+      EXPECT_LT(r.output.size(), 8000u);
+      EXPECT_TRUE(tmp_empty()) << "a temporary file is left in " << (dir_ / "tmp");
+    }
+  }
+}
+
+TEST_F(ProcessEngines, SigintToOctocdStopsTheChild) {
+  const std::string ready = path("ready");
+  const std::string tmp = "TMPDIR=" + (dir_ / "tmp").string();
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    ::setenv("TMPDIR", (dir_ / "tmp").c_str(), 1);
+    const std::string b = octocd::test::bin(), engines = data("engines.json"), scene = data("boxes.json"),
+                      item = "ready=" + ready;
+    ::execl(b.c_str(), b.c_str(), "--engines-file", engines.c_str(), "validate", scene.c_str(), "--engine", "pystop",
+            "--pystop", item.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  // The child engine writes its process id to `ready` once it has read the request.
+  const bool started = octocd::test::wait_until([&] { return fs::exists(ready); }, {dir_}, std::chrono::seconds(60));
+  ASSERT_TRUE(started);
+  pid_t engine = 0;
+  std::ifstream(ready) >> engine;
+  ASSERT_GT(engine, 0);
+  ASSERT_EQ(::kill(engine, 0), 0);  // running
+  ::kill(pid, SIGINT);
+  int status = 0;
+  ASSERT_TRUE(octocd::test::wait_child(pid, status, std::chrono::seconds(30)));
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  // octocd stopped and reaped it: no such process any more.
+  EXPECT_EQ(::kill(engine, 0), -1);
+  EXPECT_EQ(errno, ESRCH);
+  EXPECT_TRUE(tmp_empty());
+}
+
+TEST_F(ProcessEngines, ABadEnginesFileIsBadInputNamingTheFileAndTheField) {
+  struct Bad {
+    const char* json;
+    const char* what;
+  };
+  const std::vector<Bad> bad{
+      {R"({"format": "octocd-engines", "version": 1, "engines": [{"name": "x", "command": ["python3"], "colour": 1}]})",
+       "engines\\[0\\]\\.colour: an unknown field; allowed: name, description, command"},
+      {R"({"format": "octocd-engines", "version": 1, "engines": [{"name": "bullet", "command": ["python3"]}]})",
+       "engines\\[0\\]\\.name: 'bullet' is a built-in engine; allowed: a name no built-in engine has"},
+      {R"({"format": "octocd-engines", "version": 1, "engines": [{"name": "x", "command": "python3 x.py"}]})",
+       "engines\\[0\\]\\.command: a string .*: a shell command line is never run; allowed: an argument vector"},
+      {R"({"format": "octocd-engines", "version": 1, "engines": [{"name": "x", "command": ["python3 x.py | sh"]}]})",
+       "engines\\[0\\]\\.command\\[0\\]: 'python3 x.py \\| sh' reads as a shell command line"},
+      {R"({"format": "octocd-engines", "version": 1, "engines": [{"name": "X Y", "command": ["python3"]}]})",
+       "engines\\[0\\]\\.name: 'X Y'; allowed: a name of \\[a-z0-9_-\\]\\{1,32\\}"},
+      {R"({"format": "octocd-engines", "version": 2, "engines": []})", "version: .*allowed"},
+      {R"({"format": "octocd-engines", "version": 1, "engines": [{"name": "x", "command": ["python3"],
+           "timeout_s": -1}]})",
+       "engines\\[0\\]\\.timeout_s: "},
+  };
+  int k = 0;
+  for (const Bad& b : bad) {
+    SCOPED_TRACE(b.json);
+    const std::string file = path("bad" + std::to_string(k++) + ".json");
+    std::ofstream(file) << b.json;
+    const Result r = octocd("engines", file);
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_TRUE(std::regex_search(r.output, std::regex("octocd: error: " + std::regex_replace(file, std::regex("[.]"),
+                                                                                               "[.]") +
+                                                       ": " + b.what)))
+        << r.output;
+  }
+  // A missing engines file too.
+  const Result r = octocd("engines", path("absent.json"));
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("absent.json: not a readable file"), std::string::npos) << r.output;
+}
+
+}  // namespace
