@@ -1,19 +1,11 @@
-// The subcommands' registration in help order, and what `run` and `validate` share
-// (commands.hpp).
+// The subcommands' registration in help order (commands.hpp).
 #include "commands.hpp"
 
 #include <algorithm>
-#include <climits>
-#include <filesystem>
 #include <memory>
 #include <sstream>
 #include <string>
-#include <system_error>
 
-#include <fmt/format.h>
-
-#include "octocd/error.hpp"
-#include "octocd/stop.hpp"
 #include "tools.hpp"
 #include "view.hpp"
 
@@ -66,94 +58,5 @@ std::vector<Command> add_commands(CLI::App& app) {
   commands.push_back(add_engines_command(app));
   return commands;
 }
-
-std::string engines_help() {
-  std::string text;
-  for (const EngineInfo& e : engine_infos()) text += (text.empty() ? "" : "; ") + e.name + ": " + e.description;
-  return text + " (docs/engines.md)";
-}
-
-std::string engines_with(bool (*has)(const EngineInfo&)) {
-  std::string text;
-  for (const EngineInfo& e : engine_infos())
-    if (has(e)) text += (text.empty() ? "--engine " : ", --engine ") + e.name;
-  return text;
-}
-
-std::string data_dir_help() {
-  return
-         "Folder of the dataset meshes (NAME.obj|.off|.ply); default: $OCTOCD_DATA_DIR, else "
-         "<scene folder>/../cache, else the datasets/cache of the shared files (PREFIX/share/octocd when installed, else "
-         "the source tree; docs/scenes.md)";
-}
-
-/// The line a command stopped by SIGINT/SIGTERM prints on stderr: where it stopped and
-/// what it kept.
-void report_stop(int sig, const char* command, std::int64_t done, std::int64_t total,
-                 const std::string& trace, const std::string& note) {
-  std::string kept;
-  if (!trace.empty())
-    kept = done > 0 ? fmt::format("; the trace {} holds frames 1..{}", trace, done)
-                    : fmt::format("; the trace {} holds no frame", trace);
-  std::fprintf(stderr, "octocd %s: stopped by %s after frame %lld of %lld%s\n", command,
-               octocd::stop_signal_name(sig), static_cast<long long>(done),
-               static_cast<long long>(total), (kept + note).c_str());
-}
-
-/// Loads the scene for `run` and `validate`: `--data-dir` (checked to be a folder) or the
-/// default lookup of docs/scenes.md.
-octocd::Scene load_scene_for(const std::string& path, const std::string& data_dir) {
-  if (!data_dir.empty()) {
-    std::error_code ec;
-    if (!std::filesystem::is_directory(data_dir, ec))
-      throw octocd::InputError(fmt::format(
-          "--data-dir: '{}' is not a folder; allowed: a folder holding the dataset meshes (NAME.obj, "
-          "NAME.off or NAME.ply), e.g. datasets/cache",
-          data_dir));
-  }
-  return octocd::load_scene(path, data_dir);
-}
-
-/// Writes the XDMF sidecar of a finished (or stopped) trace unless `--no-xdmf`; returns
-/// its path ("" when not written).
-std::string write_sidecar(const std::string& trace, bool no_xdmf) {
-  if (trace.empty() || no_xdmf) return "";
-  return octocd::write_xdmf_sidecar(trace);
-}
-
-/// After a runtime failure: closes the trace and writes its sidecar as far as the disk
-/// allows. A failure here is dropped on purpose: the original error (e.g. the full disk
-/// that stopped the trace) is the one line the user must see.
-void close_after_failure(std::unique_ptr<octocd::TraceWriter>& trace, const std::string& path, bool no_xdmf) {
-  if (!trace) return;
-  try {
-    const bool failed = trace->failed();  // an abandoned file (full disk): no sidecar, no read-back
-    trace->close();                       // keep every frame written so far readable
-    if (!failed) write_sidecar(path, no_xdmf);
-  } catch (const std::exception&) {
-  }
-}
-
-/// An integer option in [1, 2147483647], with the message in the project's form
-/// ("--frames: 0 is out of range; allowed: an integer in [1, 2147483647]") instead of
-/// CLI11's PositiveNumber, which prints the range of a double.
-CLI::Validator at_least_one() {
-  return CLI::Validator(
-      [](std::string& text) -> std::string {
-        long long v = 0;
-        std::size_t used = 0;
-        try {
-          v = std::stoll(text, &used);
-        } catch (const std::exception&) {
-          used = 0;
-        }
-        if (used == 0 || used != text.size())
-          return "'" + text + "' is not an integer; allowed: an integer in [1, 2147483647]";
-        if (v < 1 || v > INT_MAX) return text + " is out of range; allowed: an integer in [1, 2147483647]";
-        return "";
-      },
-      "");  // the option's own help says ">= 1"
-}
-
 
 }  // namespace octocd::cli

@@ -6,7 +6,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "commands.hpp"
+#include "command.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/process_engines.hpp"

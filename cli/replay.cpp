@@ -16,7 +16,7 @@
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/trace_reader.hpp"
 #include "octocd/world.hpp"
-#include "commands.hpp"
+#include "command_support.hpp"
 #include "tools.hpp"
 
 namespace octocd::cli {

@@ -41,7 +41,8 @@
 #include "octocd/cuda_world.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/process_engines.hpp"
-#include "commands.hpp"
+#include "command.hpp"
+#include "command_support.hpp"
 #include "tools.hpp"
 #include "view.hpp"
 

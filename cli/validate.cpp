@@ -28,7 +28,10 @@
 #include "octocd/broadphase.hpp"
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/setting_error.hpp"
 #include "octocd/expect.hpp"
+#include "octocd/junit.hpp"
+#include "octocd/results_table.hpp"
 #include "octocd/shards.hpp"
 #include "octocd/external.hpp"
 #include "octocd/midphase.hpp"
@@ -44,7 +47,8 @@
 #include "octocd/cuda_world.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/process_engines.hpp"
-#include "commands.hpp"
+#include "command.hpp"
+#include "command_support.hpp"
 #include "tools.hpp"
 #include "view.hpp"
 
@@ -197,7 +201,7 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
     const octocd::ExternalTrace trace(o.trace_in);
     fmt::print("\nrows (judged: the trace carries what the row needs; n/a: what to add to judge it):\n");
     for (const octocd::TraceRowPlan& r : octocd::plan_trace_rows(info, trace.bodies())) {
-      const char* tier = r.tier == octocd::Tier::Physics ? "physics" : "model";
+      const char* tier = octocd::tier_name(r.tier);
       if (r.judged)
         fmt::print("{:<8} {:<24} judged{}\n", tier, r.name,
                    r.partial.empty() ? std::string() : "; partly: add " + r.partial);
@@ -657,7 +661,11 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
       throw octocd::InputError(fmt::format(
           "--tolerance: {}: '{}' is not a decimal number; allowed: a finite number >= 0 (decimal, e.g. 0.01 or 1e-3)",
           name, text));
-    octocd::set_tolerance(vo.tol, name, value);
+    try {
+      octocd::set_tolerance(vo.tol, name, value);
+    } catch (const octocd::SettingError& e) {
+      throw octocd::InputError("--tolerance: " + e.describe());
+    }
     vo.overridden.push_back(name);
   }
   if (!o.trace_in.empty()) {

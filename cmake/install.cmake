@@ -1,20 +1,22 @@
 # ---- install: headers, static libraries, the `octocd` command and the CMake package ----
 # (issue 11). `cmake --install build --prefix PREFIX` puts under PREFIX:
-#   include/octocd/*.hpp, lib/liboctocd_{core,reference,validation[,cuda]}.a, bin/octocd,
+#   include/octocd/*.hpp, lib/liboctocd_{core,reference,validation,harness[,cuda]}.a, bin/octocd,
 #   lib/cmake/octocd/{octocdConfig,octocdConfigVersion,octocdTargets}.cmake
-# with the exported targets octocd::core, octocd::reference, octocd::validation and,
+# with the exported targets octocd::core, octocd::reference, octocd::validation, octocd::harness and,
 # when OCTOCD_CUDA is on, octocd::cuda (in octocdCudaTargets.cmake, loaded only where the
 # consumer's machine has the CUDA toolkit). Included from the top-level CMakeLists.txt.
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
-set(_octocd_exported octocd_core octocd_reference octocd_validation)
+set(_octocd_exported octocd_core octocd_reference octocd_validation octocd_harness)
 set_target_properties(octocd_core PROPERTIES EXPORT_NAME core)
 set_target_properties(octocd_reference PROPERTIES EXPORT_NAME reference)
 set_target_properties(octocd_validation PROPERTIES EXPORT_NAME validation)
+set_target_properties(octocd_harness PROPERTIES EXPORT_NAME harness)
 add_library(octocd::core ALIAS octocd_core)
 add_library(octocd::reference ALIAS octocd_reference)
 add_library(octocd::validation ALIAS octocd_validation)
+add_library(octocd::harness ALIAS octocd_harness)
 if(OCTOCD_CUDA_ENABLED)
   # Without CUDA, octocd_cuda is a stub for the CLI only: not installed, not exported.
   set_target_properties(octocd_cuda PROPERTIES EXPORT_NAME cuda)
@@ -35,7 +37,7 @@ if(OCTOCD_CUDA_ENABLED)
     INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 endif()
 install(TARGETS octocd RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT runtime)
-foreach(dir core validation)
+foreach(dir core validation harness)
   install(DIRECTORY ${CMAKE_SOURCE_DIR}/${dir}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 endforeach()
 foreach(room IN LISTS OCTOCD_REFERENCE_ROOMS)  # reference/<room>/include (reference/CMakeLists.txt)

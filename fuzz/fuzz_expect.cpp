@@ -1,5 +1,5 @@
 // libFuzzer target: the expectations reader of `validate --expect` and `--write-expect`
-// (validation/output/expect.cpp; issue 57 item 6). The input is the text of an
+// (harness/src/expect.cpp; issue 57 item 6). The input is the text of an
 // expectations file: parse_expectations_text (strict JSON, every entry's keys, types,
 // rows, causes and figures checked). A file it accepts is matched against a fixed verdict
 // (a failing conservation row with causes and items, a failing model row) and written back

@@ -16,6 +16,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
+#include "octocd/results_table.hpp"
 
 using octocd::Aabb;
 using octocd::Pair;

@@ -41,7 +41,10 @@
 #include "octocd/engine.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
+#include "octocd/setting_error.hpp"
 #include "octocd/expect.hpp"
+#include "octocd/junit.hpp"
+#include "octocd/results_table.hpp"
 #include "octocd/external.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
@@ -901,11 +904,8 @@ void apply_tolerances(ExternalOptions& o, const py::object& tolerances) {
     }
     try {
       set_tolerance(o.tol, name, value);
-    } catch (const InputError& e) {  // names the CLI's --tolerance: name the argument instead
-      std::string msg = e.what();
-      const std::string cli = "--tolerance";
-      if (msg.rfind(cli, 0) == 0) msg = fmt::format("tolerances['{}']", name) + msg.substr(cli.size());
-      throw InputError(msg);
+    } catch (const SettingError& e) {
+      throw InputError(fmt::format("tolerances['{}']: {}", name, e.describe()));
     }
     o.overridden.push_back(name);
   }
@@ -1175,7 +1175,7 @@ ValidationResult result_from(const py::handle& r) {
   ValidationResult v;
   auto get = [&](const char* k) { return r.attr(k); };
   const std::string tier = py::str(get("tier"));
-  v.tier = tier == "physics" ? Tier::Physics : Tier::Model;
+  v.tier = find_tier(tier).value_or(Tier::Model);
   v.name = py::str(get("name"));
   v.figure = py::str(get("figure"));
   v.measured = get("measured").cast<double>();

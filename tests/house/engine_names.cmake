@@ -1,6 +1,6 @@
 # No branch on an engine's name outside the registry (ARCHITECTURE "One engine registry";
 # engines/include/octocd/engine_registry.hpp, engines/include/octocd/engines.hpp): fails when a
-# C++ or CUDA source under cli/, python/src/, bench/ or validation/ compares a string with
+# C++ or CUDA source under cli/, python/src/, bench/, validation/ or harness/ compares a string with
 # an engine's name (built in: cpu, cuda, bullet, mujoco, ode, dart; the shipped process
 # engines: rapier, jolt) (== or !=, either side). Callers ask EngineInfo instead.
 # Run: cmake -DSRC=<source dir> -P tests/house/engine_names.cmake
@@ -26,7 +26,7 @@ foreach(_required cpu cuda bullet mujoco ode dart rapier jolt)
   endif()
 endforeach()
 list(JOIN _names "|" _alt)
-house_scan(_hits _files_seen "[!=]=[ ]*\"(${_alt})\"|\"(${_alt})\"[ ]*[!=]=" cli python/src bench validation)
+house_scan(_hits _files_seen "[!=]=[ ]*\"(${_alt})\"|\"(${_alt})\"[ ]*[!=]=" cli python/src bench validation harness)
 if(_files_seen EQUAL 0)
   message(FATAL_ERROR "engine_names.cmake: no source found under ${SRC} (cli, python/src, bench, validation)")
 endif()

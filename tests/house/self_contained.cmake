@@ -8,11 +8,11 @@ if(NOT SRC)
 endif()
 set(hits "")
 set(seen 0)
-foreach(dir core gpu engines reference validation cli python bench report scripts tests docs datasets/scenes examples
+foreach(dir core gpu engines reference validation harness cli python bench report scripts tests docs datasets/scenes examples
     cmake fuzz reports)
   file(GLOB_RECURSE files ${SRC}/${dir}/*.cpp ${SRC}/${dir}/*.hpp ${SRC}/${dir}/*.cu ${SRC}/${dir}/*.cuh
     ${SRC}/${dir}/*.py ${SRC}/${dir}/*.sh ${SRC}/${dir}/*.md ${SRC}/${dir}/*.json ${SRC}/${dir}/*.cmake
-    ${SRC}/${dir}/*.csv ${SRC}/${dir}/*.txt ${SRC}/${dir}/CMakeLists.txt)
+    ${SRC}/${dir}/*.csv ${SRC}/${dir}/*.txt ${SRC}/${dir}/*.def ${SRC}/${dir}/CMakeLists.txt)
   foreach(f IN LISTS files)
     if(f MATCHES "/tests/house/self_contained.cmake$")
       continue()

@@ -18,7 +18,8 @@ rm -rf "$prefix" "$build/_consumer" "$build/_install_cpu_only" "$build/_consumer
 "$cmake_bin" --install "$build" --prefix "$prefix" >/dev/null
 for f in lib/cmake/octocd/octocdConfig.cmake lib/cmake/octocd/octocdConfigVersion.cmake \
          include/octocd/external.hpp include/octocd/engine.hpp include/octocd/pose.hpp \
-         include/octocd/physics.hpp lib/liboctocd_validation.a; do
+         include/octocd/physics.hpp lib/liboctocd_validation.a include/octocd/results_table.hpp \
+         lib/liboctocd_harness.a; do
   [ -e "$prefix/$f" ] || { echo "not installed: $prefix/$f"; exit 1; }
 done
 

@@ -16,6 +16,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/expect.hpp"
+#include "octocd/results_table.hpp"
 #include "octocd/validation_rows.hpp"
 
 namespace octocd {

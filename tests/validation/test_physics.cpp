@@ -21,6 +21,7 @@
 #include "octocd/error.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/reference_contact.hpp"
+#include "octocd/results_table.hpp"
 #include "octocd/validation.hpp"
 #include "../../validation/physics/reference.hpp"
 #include "../../validation/physics/sat.hpp"

@@ -2,7 +2,7 @@
 /// \file reference.hpp
 /// The reference contact geometry of one pair, as the physics tier's `contact-geometry`
 /// row judges it (octocd/physics.hpp, row 3; design.md section 13b.9): shared by the validators
-/// (contact_rows.cpp) and `octocd view` (validation/output/view.cpp), so a page draws
+/// (contact_rows.cpp) and `octocd view` (harness/src/view.cpp), so a page draws
 /// exactly the normal a row was judged against. Internal to validation/.
 ///
 /// Two convex polytopes (boxes, convex meshes, declared hulls and boxes) that penetrate:

@@ -20,7 +20,7 @@
 #include "octocd/error.hpp"
 #include "octocd/exact_pairs.hpp"
 #include "octocd/external.hpp"
-#include "octocd/shards.hpp"
+#include "octocd/shard_spec.hpp"
 #include "octocd/text.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/scene.hpp"

@@ -16,8 +16,8 @@
 
 #include "octocd/bullet_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/setting_error.hpp"
 #include "octocd/exact_pairs.hpp"
-#include "octocd/expect.hpp"
 #include "octocd/pose.hpp"
 #include "octocd/text.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -447,35 +447,9 @@ ValidationResult validate_against_bullet(Engine& engine, int frames, const Toler
 
 const std::vector<ToleranceEntry>& tolerance_table() {
   static const std::vector<ToleranceEntry> table = {
-      {"contraction_m", &Tolerances::contraction_m, "m"},
-      {"friction_speed", &Tolerances::friction_speed, "m/s"},
-      {"friction_cone_rel", &Tolerances::friction_cone_rel, "relative"},
-      {"friction_cone_abs", &Tolerances::friction_cone_abs, "kg m/s"},
-      {"momentum_rel", &Tolerances::momentum_rel, "relative"},
-      {"centre_rel", &Tolerances::centre_rel, "relative"},
-      {"normal_sign_agreement", &Tolerances::normal_sign_agreement, "share in [0, 1]"},
-      {"freefall_rel_per_step", &Tolerances::freefall_rel_per_step, "relative per step"},
-      {"bounce_rel", &Tolerances::bounce_rel, "relative"},
-      {"slide_rel", &Tolerances::slide_rel, "relative"},
-      {"stack_slops", &Tolerances::stack_slops, "slops"},
-      {"bullet_height_rel", &Tolerances::bullet_height_rel, "share of body height"},
-      {"bullet_rest_speed_rel", &Tolerances::bullet_rest_speed_rel, "share of sqrt(g x body height)"},
-      {"bullet_trajectory_m", &Tolerances::bullet_trajectory_m, "m"},
-      {"applied_state_ulps", &Tolerances::applied_state_ulps, "float32 roundings"},
-      {"applied_conservation_rel", &Tolerances::applied_conservation_rel, "relative"},
-      {"geometry_slack_m", &Tolerances::geometry_slack_m, "m"},
-      {"broadphase_margin_m", &Tolerances::broadphase_margin_m, "m"},
-      {"contact_depth_m", &Tolerances::contact_depth_m, "m"},
-      {"normal_angle_deg", &Tolerances::normal_angle_deg, "degrees"},
-      {"sat_accept_rel", &Tolerances::sat_accept_rel, "relative (of the minimum translation)"},
-      {"depth_m", &Tolerances::depth_m, "m"},
-      {"penetration_slops", &Tolerances::penetration_slops, "slops"},
-      {"penetration_settle_frames", &Tolerances::penetration_settle_frames, "frames"},
-      {"angular_momentum_rel", &Tolerances::angular_momentum_rel, "relative"},
-      {"energy_rel", &Tolerances::energy_rel, "relative"},
-      {"balance_ulps", &Tolerances::balance_ulps, "x 2^-23 of the magnitudes"},
-      {"free_flight_angle_rad", &Tolerances::free_flight_angle_rad, "rad"},
-      {"friction_direction_speed", &Tolerances::friction_direction_speed, "m/s"},
+#define OCTOCD_TOLERANCE(name, value, unit, doc) {#name, &Tolerances::name, unit, doc, value},
+#include "octocd/tolerances.def"
+#undef OCTOCD_TOLERANCE
   };
   return table;
 }
@@ -486,12 +460,12 @@ void set_tolerance(Tolerances& tol, const std::string& name, double value) {
     names += (names.empty() ? "" : ", ") + std::string(e.name);
     if (name != e.name) continue;
     if (!std::isfinite(value) || value < 0.0)
-      throw InputError(fmt::format("--tolerance: {}={}: out of range; allowed: a finite number >= 0 ({})",
-                                   name, value, e.unit));
+      throw SettingError("tolerance", name, fmt::format("{}", value), true,
+                         fmt::format("a finite number >= 0 ({})", e.unit));
     tol.*(e.member) = value;
     return;
   }
-  throw InputError(fmt::format("--tolerance: unknown tolerance '{}'; allowed: {}", name, names));
+  throw SettingError("tolerance", name, "", false, names);
 }
 
 std::vector<std::unique_ptr<BroadPhase>> compared_broadphases(const Scene& scene, bool with_references) {
@@ -617,40 +591,23 @@ std::vector<ValidationResult> validate_scene(const Scene& scene, const Validatio
 
 const char* tier_name(Tier tier) { return tier == Tier::Physics ? "physics" : "model"; }
 
-std::string format_results(const std::vector<ValidationResult>& results,
-                           const std::vector<std::string>& overridden, const ExpectationReport* report) {
-  auto marked = [&](const ValidationResult& r) {
-    for (const std::string& o : overridden)
-      if (("," + r.tolerances + ",").find("," + o + ",") != std::string::npos) return true;
-    return false;
-  };
-  std::string out = fmt::format("{:<8} {:<24} {:>12} {:>10}  {:<8}  {}\n", "tier", "validator", "measured",
-                                "bound", "", "figure / detail");
-  for (const ValidationResult& r : results) {
-    std::string verdict = row_verdict(r, report);
-    if (verdict == "fail") verdict = "FAIL";
-    out += fmt::format("{:<8} {:<24} {:>12.6g} {:>10} {:<8}  {}\n", tier_name(r.tier), r.name, r.measured,
-                       fmt::format("{:.4g}{}", r.bound, marked(r) ? "*" : " "), verdict, r.figure);
-    out += fmt::format("{:<8} {:<24} {:>12} {:>10}  {:<8}  {}\n", "", "", "", "", "", r.detail);
-    // Each failing cause: its count and worst figure, then its first examples (design.md section 13b.13).
-    const std::vector<ValidationCause> causes = failure_causes(r);
-    const bool own = causes.size() == 1 && causes.front().name == r.name && r.causes.empty();
-    if (own) continue;  // the row's detail line is its only example
-    for (const ValidationCause& c : causes) {
-      out += fmt::format("{:<58}  cause {}: {} item(s), worst {:.6g}{}{}\n", "", c.name, c.count, c.worst,
-                         c.unit.empty() ? "" : " ", c.unit);
-      constexpr std::size_t kShown = 3;
-      for (std::size_t i = 0; i < c.examples.size() && i < kShown; ++i) {
-        const ValidationExample& x = c.examples[i];
-        out += fmt::format("{:<58}    {}{}{}\n", "", x.frame >= 0 ? fmt::format("frame {} ", x.frame) : "",
-                           x.item.empty() ? "" : x.item + ": ", x.text);
-      }
-      if (c.count > std::min(c.examples.size(), kShown))
-        out += fmt::format("{:<58}    ... {} more\n", "", c.count - std::min(c.examples.size(), kShown));
-    }
-  }
-  if (!overridden.empty()) out += "* bound set with --tolerance\n";
-  return out;
+namespace {
+constexpr Tier kTiers[] = {Tier::Physics, Tier::Model};
+}  // namespace
+
+std::optional<Tier> find_tier(const std::string& name) {
+  for (const Tier t : kTiers)
+    if (name == tier_name(t)) return t;
+  return std::nullopt;
+}
+
+const std::vector<std::string>& tier_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v;
+    for (const Tier t : kTiers) v.emplace_back(tier_name(t));
+    return v;
+  }();
+  return names;
 }
 
 void write_validation(const std::string& path, const std::vector<ValidationResult>& results) {

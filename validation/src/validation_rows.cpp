@@ -1,44 +1,19 @@
 /// \file validation_rows.cpp
-/// The table of validator rows (octocd/validation_rows.hpp).
+/// The table of validator rows (octocd/validation_rows.hpp), from octocd/validation_rows.def.
 
 #include "octocd/validation_rows.hpp"
 
 namespace octocd {
 
+// OCTOCD_ROW_CAUSES (A, B): the causes A, B of a row as one braced list ({} for none).
+#define OCTOCD_ROW_CAUSES(...) {__VA_ARGS__}
+
 const std::vector<RowInfo>& validation_rows() {
-  using M = RowMerge;
-  constexpr Tier P = Tier::Physics, Mo = Tier::Model;
   static const std::vector<RowInfo> rows = {
-      // physics tier (validation/physics/)
-      {RowId::BroadphaseCompleteness, "broadphase-completeness", P, M::Sum,
-       {{"missing-pair", "required pairs", "m"}, {"not-flat", "frames", "pairs"}}},
-      {RowId::ContactCompleteness, "contact-completeness", P, M::Sum,
-       {{"missing-contact", "penetrating pairs", "m"}, {"false-contact", "contact pairs", "m"}}},
-      {RowId::ContactGeometry, "contact-geometry", P, M::Max,
-       {{"normal-angle", "rows", "deg"}, {"depth", "pairs", "m"}, {"point-off-shape", "points", "m"}}},
-      {RowId::Penetration, "penetration", P, M::Max, {{"penetration", "pair-frames", "m"}}},
-      {RowId::Friction, "friction", P, M::Sum, {{"cone", "contacts", "kg m/s"}, {"dissipation", "rows", "m/s"}}},
-      {RowId::Conservation, "conservation", P, M::Sum,
-       {{"momentum", "group-frames", "of bound"},
-        {"angular-momentum", "group-frames", "of bound"},
-        {"energy", "group-frames", "rel"}}},
-      {RowId::MomentumBalance, "momentum-balance", P, M::Sum,
-       {{"linear", "body-steps", "of bound"}, {"angular", "body-steps", "of bound"}}},
-      {RowId::FreeFlight, "free-flight", P, M::Sum,
-       {{"velocity", "body-steps", "m/s"},
-        {"position", "body-steps", "m"},
-        {"angular-velocity", "body-steps", "of bound"},
-        {"orientation", "body-steps", "deg"},
-        {"sleeping", "body-steps", "of rounding"}}},
-      // model tier (validation/model/, the scene rows of validation/src/validate.cpp)
-      {RowId::CandidateSets, "candidate-sets", Mo, M::Sum, {}},
-      {RowId::MidphaseCompleteness, "midphase-completeness", Mo, M::Sum, {}},
-      {RowId::NonPenetrationEq14, "non-penetration-eq14", Mo, M::Sum, {}},
-      {RowId::FrictionMonotonicity, "friction-monotonicity", Mo, M::Sum, {}},
-      {RowId::ImpulseConservation, "impulse-conservation", Mo, M::Sum, {}},
-      {RowId::AppliedState, "applied-state", Mo, M::Sum, {}},
-      {RowId::Analytic, "analytic", Mo, M::Max, {}},
-      {RowId::BulletDynamics, "bullet-dynamics", Mo, M::Max, {{"height", "", "rel"}, {"still-moving", "", "m/s"}}},
+#define OCTOCD_ROW(id, name, tier, merge, causes) \
+  {RowId::id, name, Tier::tier, RowMerge::merge, std::vector<RowCause> OCTOCD_ROW_CAUSES causes},
+#include "octocd/validation_rows.def"
+#undef OCTOCD_ROW
   };
   return rows;
 }

@@ -12,6 +12,7 @@
 #include <exception>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -27,7 +28,6 @@ namespace octocd {
 class PhysicsValidators;
 
 struct PhysicsBodies;  // octocd/physics.hpp
-struct ExpectationReport;  // octocd/expect.hpp
 
 /// Which judge a row belongs to (design.md section 13, ARCHITECTURE.md seam 3).
 enum class Tier {
@@ -39,8 +39,13 @@ enum class Tier {
   /// the reason for an engine that does not claim design.md section 6 (validation/model/).
   Model,
 };
-/// "physics" or "model" (the table's tier column, JUnit, the trace's /validation/tier).
+/// "physics" or "model" (the table's tier column, JUnit, the trace's /validation/tier): the
+/// one spelling of the tiers' names.
 const char* tier_name(Tier tier);
+/// The tier whose tier_name is `name`; empty for a name no tier has.
+std::optional<Tier> find_tier(const std::string& name);
+/// Every tier's name, in Tier order (what a reader of `validate --json` allows).
+const std::vector<std::string>& tier_names();
 
 /// One judged item of a row: where, and its figure (design.md section 13b.13).
 struct ValidationExample {
@@ -105,174 +110,12 @@ struct ValidationStopped : std::exception {
   const char* what() const noexcept override { return "validation stopped"; }
 };
 
-/// Every tolerance of the validators, with the reason for its value (issue 3: "stated in
-/// one place with the reason for each").
+/// Every tolerance of the validators, with the reason for its value: one member per entry of
+/// octocd/tolerances.def (its name, default, unit and reason), in that order.
 struct Tolerances {
-  /// Contraction (Eq. 14) slack in m: float32 positions of O(1) m round at ~1e-7 m per
-  /// operation; a correction is a handful of operations.
-  double contraction_m = 2e-6;
-  /// Friction: slack on |v_t'| <= |v_t| in m/s (float32 velocity rounding, |v| <= v_max).
-  double friction_speed = 1e-5;
-  /// Friction: relative slack on |J_t| <= mu_s J_n (float32 products).
-  double friction_cone_rel = 1e-5;
-  /// Physics-tier friction cone, scalar rule (traces without /contacts/jt3): absolute
-  /// slack (kg m/s) on a pair's sum |jt| <= mu sum jn; and the friction impulse up to
-  /// which the jt3 dissipation rule does not judge a pair's friction direction. A
-  /// sequential-impulse solver's leftovers (warm start, rows clamped while the normal
-  /// impulse fell to 0) are of this size: Bullet with rotation without its Coulomb
-  /// projection left up to 2.5e-4 kg m/s on pairs whose final jn is 0 (boxes of 0.2-1 kg
-  /// at dt 2 ms), and 4 landing pairs of rot-drop-220 / rot-pile-1000 carry 0.96e-3 -
-  /// 0.99e-3 kg m/s across their sliding. The jt3 cone has no such slack (rounding only:
-  /// 16 x 2^-23 of sum |jt3| + mu sum jn). A planted friction impulse 1.2x the cone is
-  /// caught by both rules. There is no relative slack: the 25% the cone once allowed
-  /// covered Bullet's rows that kept friction after their normal impulse fell to 0
-  /// (13% above mu times the final normal impulses on 4-row box-floor manifolds); Bullet's
-  /// adapter now projects those rows back (CoulombSolver, reference/bullet/bullet_world.cpp),
-  /// and the per-pair sum passes on rot-slope, rot-stack-10, rot-drop-220 and
-  /// rot-pile-1000 with rounding alone, on both rules.
-  double friction_cone_abs = 1e-3;
-  /// Momentum per impulse: |m_a dv_a + m_b dv_b| <= this x (|m_a dv_a| + |m_b dv_b|) + 1e-9.
-  /// float32 impulses carry ~6e-8 relative error; x 20 for the products and sums.
-  double momentum_rel = 1e-5;
-  /// Mass-weighted centre per correction, same reasoning as momentum.
-  double centre_rel = 1e-5;
-  /// Contact normals: minimum share of contacts whose AABB-axis normal has the same sign
-  /// as FCL's (dot > 0). The response normal is the AABB axis of least overlap (Eq. 10),
-  /// FCL's the geometric one; for meshes they can differ by up to 90 degrees on oblique
-  /// contacts, but a sign flip means the response pushes bodies into each other.
-  double normal_sign_agreement = 0.90;
-  /// Analytic free fall (Eq. 2-3): |x - closed form| <= this x n x (1 + |x|). Measured
-  /// float32 error: 2.5e-8; explicit Euler differs by |g| dt^2 per step (9.8e-6 m at
-  /// dt = 1 ms), i.e. >= 4.7e-7 for |x| < 20 m, so it fails this bound.
-  double freefall_rel_per_step = 1e-7;
-  /// Bounce: |v_out - e v_in| <= this x |v_in| (one float32 impulse).
-  double bounce_rel = 1e-4;
-  /// Slide: stopping distance within this share of v0^2/(2 mu_k g) (issue 2: 2%).
-  double slide_rel = 0.02;
-  /// Resting stack: from frame 200 on (or on the last frame of a shorter run), every body
-  /// stays within this many slops of its rest height (its initial height lowered by one
-  /// slop per contact below it: design.md section 6 leaves each contact's first delta of penetration
-  /// uncorrected).
-  double stack_slops = 1.0;
-  /// Applied state (design.md section 7.9): engine vs the double re-derivation, per component,
-  /// |diff| <= this x 2^-23 x (iterations + 2) x (the magnitudes that entered the value:
-  /// |x| + the corrections + the largest AABB coordinate of its contacts; |v| + |g dt| +
-  /// the velocity changes + the largest velocity of its contacts' bodies). A few float32
-  /// roundings per operation chain; explicit Euler (|g| dt^2 = 9.8e-6 m per step) and
-  /// summed instead of averaged corrections exceed it.
-  double applied_state_ulps = 4.0;
-  /// Applied-state momentum of an isolated dynamic group: |sum m v' - sum m v| <= this x
-  /// (sum m |dv|) + 1e-9 kg m/s; mass-weighted centre of an isolated pair likewise with
-  /// the position tolerance added.
-  double applied_conservation_rel = 1e-5;
-  /// Bullet comparison: settled centre-of-mass heights differ by at most this share of the
-  /// mean body height. Bullet uses box shapes equal to the AABBs and its own solver
-  /// (sequential impulses, split impulse), octocd a Jacobi AABB response: same physics,
-  /// different numerics.
-  double bullet_height_rel = 0.10;
-  /// Bullet comparison: a run is at rest when its dynamic bodies moved less than this share
-  /// of sqrt(g h) per second on average over the last tenth of the frames (1 to 100; h the
-  /// mean body height; sqrt(g h) is about the speed of a fall by one body height): 0.05 is
-  /// 0.05 m/s for 0.1 m bodies under 9.81 m/s^2. Displacement, not the state's velocity:
-  /// octocd's resting bodies keep a downward velocity that the position correction cancels
-  /// every step (bunny-stack-50 at rest: mean |v| 0.2 m/s, displacement 0.001 m/s). Heights
-  /// are compared only once Bullet's run is at rest (else the row is n/a: mixed-pile-1000
-  /// after 300 frames still falls at 2.6 m/s, and its heights say nothing of where it
-  /// settles); octocd's run then has to be at rest too.
-  double bullet_rest_speed_rel = 0.05;
-  /// Bullet comparison: centre-of-mass trajectories of `bounce` and `slide` differ by at
-  /// most this many metres at any frame (restitution and friction are combined by Bullet
-  /// per contact point; the contact timing differs by a step).
-  double bullet_trajectory_m = 0.03;
-
-  // ---- Physics tier (design.md section 13, octocd/physics.hpp). Measured on octocd's CPU engine
-  // (octocd_physics_bodies; tests/validation/test_physics.cpp, every 10th frame checked) over
-  // 1500 frames of box-stack, bunny-stack-50, bunny-random-400 and dragon-random-250, and
-  // on the hand-made rotated records of that test. Bullet with rotation is measured by
-  // its own tests; its figures belong here too once they land.
-  /// Geometric slack (m) of every FCL comparison: float32 poses of O(1-10) m round at
-  /// ~1e-6 m, FCL's GJK/EPA/bisection tolerances are 1e-6 m or finer. octocd: the closest
-  /// of its contact pairs to the false-contact bound is 1.1e-5 m inside it (box-stack).
-  double geometry_slack_m = 1e-5;
-  /// Broadphase completeness: pairs whose posed shapes are closer than this (m) must be
-  /// candidates (0: penetrating pairs, deeper than the slack). octocd: every required pair
-  /// found (3390 on bunny-stack-50, 3995 on bunny-random-400); its candidates per true
-  /// pair: 2.2 (bunny-stack-50), 7.6 (bunny-random-400).
-  double broadphase_margin_m = 0.0;
-  /// Contact completeness: a pair penetrating deeper than this (m) needs a contact: one
-  /// slop of design.md section 6 (below it a resting engine may leave a pair untouched). octocd: every
-  /// such pair has a contact (2769 on bunny-stack-50, 589 on bunny-random-400).
-  double contact_depth_m = 1e-3;
-  /// Contact geometry: largest angle between the engine's normal and FCL's minimum
-  /// translation, on rows of penetrating shapes (degrees). An engine resolving a contact
-  /// on the true geometry finds FCL's direction up to rounding (0.0 deg on the
-  /// rotated-box records); they part where two directions give nearly the same depth
-  /// (a box corner near a face's edge), where either separates: Bullet with rotation
-  /// (a trial merge with main: tests/scene/test_cli_rotation_faults.cpp's 24 boxes and
-  /// 4 bunnies, 300 frames) worst 31.6 deg, 3 of 643 judged rows above 30. 40 lets those
-  /// through and catches a normal turned by 45 deg (planted). octocd (contacts on world AABBs, judged against FCL box-box on them):
-  /// 0.0 deg on every row; against the posed shapes (a figure only) its AABB-axis
-  /// normals deviate by p95 28-30 deg, max 57 deg (bunny-stack-50) and 115 deg
-  /// (bunny-random-400).
-  double normal_angle_deg = 40.0;
-  /// Contact geometry of two convex polytopes (boxes, convex meshes; design.md section 13b.9): the
-  /// separating-axis test accepts as a normal every axis whose overlap is within
-  /// geometry_slack_m + this fraction of the minimum translation (validation/physics/
-  /// sat.hpp). 0.05: ODE's box-box test (FCL's, Bullet's btBoxBoxDetector) keeps a face
-  /// axis unless an edge-edge axis overlaps less than 1/1.05 of it (its fudge_factor), so
-  /// a face normal up to 5% deeper than the minimum is a deliberate choice of widely used
-  /// detectors; a normal 45 deg from every accepted axis is still caught.
-  double sat_accept_rel = 0.05;
-  /// Contact geometry: largest |engine depth - FCL depth| (m) of a pair's deepest row,
-  /// and how far beyond the pair's depth (or distance) a row's point may lie from either
-  /// surface. A solver's depth is measured at its own point of the manifold, FCL's is the
-  /// minimum translation: several slops. octocd: 0 m (AABB depths are Eq. 10 exactly).
-  /// The planted unrotated contact points lie 0.04 m off.
-  double depth_m = 5e-3;
-  /// Penetration: the largest true penetration is at most this many slops (2 cm at the
-  /// default slop of 1 mm). octocd: box-stack 1.02 mm; bunny-stack-50 5.3 mm; over 300
-  /// frames bunny-random-400 7.1 mm; over 1500 frames octocd's own model FAILS it on the
-  /// random mesh scenes: bunny-random-400 26 mm (frame 880), dragon-random-250 24 mm
-  /// (frame 1030); these are upper bounds (non-convex meshes: the least separating
-  /// translation over 8 directions), the AABB response (design.md section 6) does not push along the
-  /// surfaces' normal, so thin parts pass into each other.
-  double penetration_slops = 20.0;
-  /// Penetration: frames before this one are not judged (settling), 0 = all.
-  double penetration_settle_frames = 0.0;
-  /// Angular momentum of an isolated group: |dL| <= this x the exchanged angular
-  /// momentum (sum of the bodies' |dL_i|) + dt |w x I w| per body (an explicit
-  /// orientation update of a non-isotropic body misses the gyroscopic term) + (depth +
-  /// margin) |jt| per row (Bullet applies a row's impulse at a witness point on each
-  /// body, apart along the normal) + float32 slack. Exact to rounding on the off-centre collision record (impulses at the
-  /// detection pose); octocd's records are translation-only (n/a).
-  double angular_momentum_rel = 1e-3;
-  /// Energy of an isolated group: KE' <= KE (after gravity) x (1 + this) + slack, when
-  /// every restitution <= 1. octocd: worst rise 1.2e-7 of KE on bunny-stack-50, 6.1e-4
-  /// on bunny-random-400 (Eq. 18's impulse floor J_min on grazing contacts); octocd's
-  /// own model FAILS it on dragon-random-250 over 1500 frames: +25.8% (0.165 -> 0.207 J,
-  /// frame 584, a group of 3 bodies): design.md section 6 sums the impulses of a body's contacts
-  /// computed from the same pre-response state (Jacobi), which overshoots on chains.
-  double energy_rel = 1e-3;
-  /// Momentum balance per body (design.md section 13b.7) and free flight (13b.8): rounding allowance
-  /// in units of 2^-23 of the magnitudes that entered the compared values (docs/
-  /// validate-your-engine.md, "momentum-balance", derives it). A float32 velocity update
-  /// v' = v + sum of k terms rounds at most k + 1 times by 2^-24 of the running sum; an
-  /// iterative solver (Bullet: 10 iterations) adds every row's increment each iteration.
-  /// 16 x (rows + 2) covers 10 iterations of sums whose partial sums stay within the
-  /// magnitudes; a dropped row, an edited velocity or an impulse on the wrong body is
-  /// larger by orders of magnitude.
-  double balance_ulps = 16.0;
-  /// Free flight: angle (rad) between the engine's q' and q advanced by w dt, beyond
-  /// (|w| dt)^2 (the second-order difference between integrators: exponential map,
-  /// normalised first-order update) and float32 rounding of the quaternion (~1e-7 rad).
-  /// A body turned by 30 deg (0.52 rad) in one step is caught.
-  double free_flight_angle_rad = 1e-4;
-  /// Momentum balance with a scalar `jt`: below this relative sliding speed at a row
-  /// before the step (m/s), the friction impulse's direction is the engine's choice
-  /// (Bullet: below sqrt(FLT_EPSILON) = 3.45e-4 m/s it takes btPlaneSpace1's axis), so the
-  /// row's J_t is known only to lie in its cone; above it, J_t is jt along -v_t / |v_t|.
-  /// /contacts/jt3 (the vector) removes the question.
-  double friction_direction_speed = 1e-3;
+#define OCTOCD_TOLERANCE(name, value, unit, doc) double name = value;
+#include "octocd/tolerances.def"
+#undef OCTOCD_TOLERANCE
 };
 
 /// What `octocd validate` runs.
@@ -311,17 +154,21 @@ struct ValidationOptions {
   bool pipeline = false;
 };
 
-/// One entry of the tolerance table: its name (as in `--tolerance NAME=VALUE`), the
-/// Tolerances member, and the unit or meaning of the value.
+/// One entry of the tolerance table (octocd/tolerances.def): its name (as in `--tolerance
+/// NAME=VALUE`), the Tolerances member, the unit or meaning of the value, the reason for its
+/// value and its default.
 struct ToleranceEntry {
   const char* name;
   double Tolerances::*member;
   const char* unit;
+  const char* doc;
+  double default_value;
 };
-/// Every tolerance, in declaration order.
+/// Every tolerance, in the order of octocd/tolerances.def (Tolerances' member order).
 const std::vector<ToleranceEntry>& tolerance_table();
-/// Sets tolerance `name` to `value` (finite, >= 0). Throws InputError naming `--tolerance`,
-/// the name and the allowed names or range.
+/// Sets tolerance `name` to `value` (finite, >= 0). Throws SettingError (octocd/setting_error.hpp;
+/// kind "tolerance") with the name, the value and the allowed names or range, for the CLI
+/// and Python to word.
 void set_tolerance(Tolerances& tol, const std::string& name, double value);
 
 /// Per-frame validators (design.md section 7 items 1-6 and 9), fed one FrameRecord at a time. They
@@ -454,41 +301,6 @@ std::vector<ValidationResult> validate_engine(const EngineFactory& make, const V
 
 /// validate_engine with the CPU engine (World) on `scene`.
 std::vector<ValidationResult> validate_scene(const Scene& scene, const ValidationOptions& options);
-
-/// Prints results as a table (name, figure, measured, bound, verdict, detail); a bound
-/// that depends on an overridden tolerance is marked with '*'. Under a failing row, its
-/// causes (failure_causes, octocd/expect.hpp) with their counts and worst figures and the
-/// first examples (at most 3 per cause); a row that judged nothing reads `n/a`. With
-/// `report` (may be null), a row whose every failing cause is expected reads `expected`.
-std::string format_results(const std::vector<ValidationResult>& results,
-                           const std::vector<std::string>& overridden = {},
-                           const ExpectationReport* report = nullptr);
-
-/// Writes a JUnit XML report to `path` (`octocd validate --junit`): one <testsuite> named
-/// `suite` (the scene's name) inside <testsuites>, one <testcase> per result; a failed result carries
-/// <failure message="detail"> (text: figure, measured, bound, detail), an n/a result
-/// <skipped>, a pass its figures in <system-out>. A testcase's classname is "SUITE.TIER"
-/// (e.g. "box-stack.physics": CI servers show scene, tier and validator), its name the
-/// validator, its time the result's `seconds`; a failure's message starts with
-/// "measured X > bound Y". `seconds` is the suite's time; `properties` (engine,
-/// frames, ...) go to <properties>. `stopped` non-empty (a run stopped by a signal): one
-/// more testcase "stopped" with <error message="stopped">, so a CI server never reads a
-/// stopped run as passed. With `report` (octocd/expect.hpp; may be null) a row whose every
-/// failing cause is expected is <skipped message="expected: ..."> (one line per cause, its
-/// figure, allowance and reason), and a failing row's message names its new or grown
-/// causes. Text is XML-escaped. Throws RuntimeError naming the path when it cannot be
-/// written.
-void write_junit(const std::string& path, const std::string& suite,
-                 const std::vector<ValidationResult>& results, double seconds,
-                 const std::vector<std::pair<std::string, std::string>>& properties = {},
-                 const std::string& stopped = "", const ExpectationReport* report = nullptr);
-
-/// Writes a JUnit XML report with one errored test case (classname `suite`, name `name`,
-/// e.g. "bad-input" or "runtime-failure", <error message="message">): what `validate
-/// --junit` leaves when the scene cannot be loaded or the run stops, so a CI server sees
-/// the scene as broken rather than missing. Throws RuntimeError naming the path.
-void write_junit_error(const std::string& path, const std::string& suite, const std::string& name,
-                       const std::string& message);
 
 /// Appends `/validation` to an existing trace (design.md section 8): one row per result with name,
 /// figure, measured, bound, pass, applicable, detail. Throws RuntimeError naming the path.

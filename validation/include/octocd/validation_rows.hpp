@@ -1,11 +1,13 @@
 #pragma once
 /// \file validation_rows.hpp
-/// Every validator row's identity, in one table (design.md sections 7, 13b.13): its name,
-/// its tier, its documented causes (the names an expectation's "cause" takes, the items
-/// each counts and its unit) and how `validate --merge` joins its figure across shards.
+/// Every validator row's identity, in one table (octocd/validation_rows.def; design.md
+/// sections 7, 13b.13): its name, its tier, its documented causes (the names an
+/// expectation's "cause" takes, the items each counts and its unit) and how `validate
+/// --merge` joins its figure across shards; RowId is generated from the same table.
 /// The physics tier's table, the model tier, expectations (octocd/expect.hpp), the trace
 /// plan (octocd/external.hpp) and the merge (octocd/shards.hpp) all read it; a row is added
-/// here once. What a row measures, its figure and its tolerances stay with its judge.
+/// to validation_rows.def once. What a row measures, its figure and its tolerances stay
+/// with its judge.
 
 #include <string>
 #include <vector>
@@ -14,24 +16,12 @@
 
 namespace octocd {
 
-/// The rows, in the order `validate` reports them: the physics tier, then the model tier.
+/// The rows, in the order `validate` reports them: the physics tier, then the model tier;
+/// one per entry of octocd/validation_rows.def.
 enum class RowId {
-  BroadphaseCompleteness,
-  ContactCompleteness,
-  ContactGeometry,
-  Penetration,
-  Friction,
-  Conservation,
-  MomentumBalance,
-  FreeFlight,
-  CandidateSets,
-  MidphaseCompleteness,
-  NonPenetrationEq14,
-  FrictionMonotonicity,
-  ImpulseConservation,
-  AppliedState,
-  Analytic,
-  BulletDynamics,
+#define OCTOCD_ROW(id, name, tier, merge, causes) id,
+#include "octocd/validation_rows.def"
+#undef OCTOCD_ROW
 };
 
 /// How `validate --merge` joins a row's `measured` over the shards of one run.
@@ -59,7 +49,7 @@ struct RowInfo {
   std::vector<RowCause> causes; ///< its causes in their documented order; empty: it does not split its failures
 };
 
-/// Every row, in RowId order (physics tier, then model tier).
+/// Every row, in RowId order (physics tier, then model tier): validation_rows.def's entries.
 const std::vector<RowInfo>& validation_rows();
 
 /// The row `id`.

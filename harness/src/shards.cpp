@@ -72,7 +72,7 @@ RowIn read_row(const JsonFields& f, const json& row, const std::string& at) {
     return f.member(row, at, k, "every key `validate --json` writes (docs/validation-output.md)");
   };
   f.object(row, at);
-  r.tier = f.one_of(key("tier"), at + ".tier", {"physics", "model"});
+  r.tier = f.one_of(key("tier"), at + ".tier", tier_names());
   r.name = f.one_of(key("name"), at + ".name", validation_row_names());
   r.figure = f.text(key("figure"), at + ".figure", kMaxName);
   r.measured = f.number_or_null(key("measured"), at + ".measured", -kMaxFigure, kMaxFigure);
@@ -192,14 +192,6 @@ ShardSpec parse_shard(const std::string& text) {
   return s;
 }
 
-std::pair<std::int64_t, std::int64_t> shard_frames(ShardSpec s, std::int64_t frames) {
-  const auto edge = [&](std::int64_t k) {
-    // floor(k F / N): k F <= 10^5 x 10^8 (trace_limits::kMaxFrames) fits in 64 bits.
-    return k * frames / s.count;
-  };
-  return {edge(s.index) + 1, edge(s.index + 1)};
-}
-
 nlohmann::ordered_json shard_json(ShardSpec s, const ShardIdentity& id) {
   const auto [first, last] = shard_frames(s, id.frames);
   nlohmann::ordered_json tol = nlohmann::ordered_json::object();
@@ -292,7 +284,7 @@ MergedValidation merge_validation_docs(const std::vector<json>& docs, const std:
   for (std::size_t r = 0; r < rows0.size(); ++r) {
     ValidationResult out;
     const RowIn& first = rows0[r];
-    out.tier = first.tier == "physics" ? Tier::Physics : Tier::Model;
+    out.tier = *find_tier(first.tier);  // one of tier_names(), checked on reading
     out.name = first.name;
     out.figure = first.figure;
     out.bound = first.bound;

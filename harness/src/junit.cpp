@@ -9,6 +9,8 @@
 
 #include <fmt/format.h>
 
+#include "octocd/junit.hpp"
+
 #include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/expect.hpp"

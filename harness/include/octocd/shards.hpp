@@ -21,11 +21,6 @@ namespace octocd {
 /// InputError naming `--shard`, the text and the allowed form.
 ShardSpec parse_shard(const std::string& text);
 
-/// The frames shard `s` judges of a trace of `frames` frames (numbered 1 .. frames): the
-/// contiguous block floor(i F / N) + 1 .. floor((i + 1) F / N) (empty, first > last, when
-/// N > F). Blocks of consecutive shards touch and together cover every frame once.
-std::pair<std::int64_t, std::int64_t> shard_frames(ShardSpec s, std::int64_t frames);
-
 /// What identifies the run a shard belongs to; shards merge only when all of it is equal.
 struct ShardIdentity {
   std::string trace;          ///< the trace's file name

@@ -23,7 +23,7 @@
 #include "octocd/external.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/reference_contact.hpp"
-#include "../physics/reference.hpp"
+#include "physics/reference.hpp"  // validation/physics (private include of octocd_harness)
 #include "view_page.hpp"
 
 namespace octocd {
