@@ -6,17 +6,13 @@
 // docs/engines.md, "Rapier".
 import RAPIER from "@dimforge/rapier3d-compat";
 import { main } from "../js-common/run.js";
-import { parseSettings, intIn, oneOf } from "../js-common/request.js";
+import { parseSettings, intIn } from "../js-common/request.js";
 import { str, i32, f64 } from "../js-common/trace.js";
-import { principalAxes, rotate, toWorld, sub, dot } from "../js-common/math.js";
+import { principalAxes, toWorld, sub, dot } from "../js-common/math.js";
 
 const settingsSpec = {
   // Rapier's numSolverIterations: the substeps of its TGS-soft solver (default 4).
   iterations: { def: 4, parse: intIn(1, 64), allowed: "an integer in [1, 64] (Rapier's numSolverIterations)" },
-  // "v4": the declarations of the physics tier's fourth round (integrator "substepped",
-  // impulses "normal-only"); "v3": only those an older reader knows (integrator left
-  // undeclared, impulses_complete 0 for the missing tangent impulses).
-  declarations: { def: "v4", parse: oneOf("v4", "v3"), allowed: '"v4" or "v3"' },
 };
 
 const engine = {
@@ -83,14 +79,12 @@ class RapierWorld {
     this.prediction = ip.normalizedPredictionDistance * ip.lengthUnit;
     this.substeps = world.numSolverIterations;
     this.name = `rapier ${R.version()}`;
-    const v4 = settings.declarations === "v4";
     this.attrs = {
       friction_combine: str("average"), restitution_combine: str("average"),
       contact_margin: f64(this.prediction), deactivation: str("off"), broadphase_exact: i32(0),
       impulse_points: str("one"), friction_directions: i32(2),
-      ...(v4 ? { integrator: str("substepped"), substeps: i32(this.substeps), impulses: str("normal-only"),
-                 speculative: i32(1), manifold_points: str("persistent"), depth_per: str("point") }
-             : { impulses_complete: i32(0) }),
+      integrator: str("substepped"), substeps: i32(this.substeps), impulses: str("normal-only"),
+      speculative: i32(1), manifold_points: str("persistent"), depth_per: str("point"),
       parameters_rapier: str(JSON.stringify({ numSolverIterations: this.substeps,
         numInternalPgsIterations: world.numInternalPgsIterations, predictionDistance: this.prediction,
         lengthUnit: ip.lengthUnit, dt: world.timestep })),
@@ -99,10 +93,15 @@ class RapierWorld {
     this.jt3 = false;
     this.matchWorst = 0;  // the largest distance between a solver contact and its tracked point's midpoint (m)
     this.staleDropped = 0;  // solver contacts beyond the prediction distance without impulse, not written
+    this.frame = 0;
+    this.apartRows = 0;  // rows on pairs Rapier's own contactShape puts beyond the prediction distance
+    this.apartWorst = 0;  // their worst distance (m)
+    this.apartJn = 0;  // the largest summed impulse on such a pair in one step (N s), and where
+    this.apartJnAt = "";
     this.tangentSeen = 0;  // rows whose tangent impulse Rapier reported non-zero (a witness)
   }
 
-  step() { this.world.step(); }
+  step() { this.frame += 1; this.world.step(); }
 
   readState(pos, vel, quat, angvel) {
     for (let i = 0; i < this.n; ++i) {
@@ -137,8 +136,11 @@ class RapierWorld {
           const s1 = flipped ? j : i, s2 = flipped ? i : j;  // the bodies of m's shape 1 and 2
           const [x1, q1] = pose(prePos, preQuat, s1), [x2, q2] = pose(prePos, preQuat, s2);
           const [y1, r1] = pose(this.pos, this.quat, s1), [y2, r2] = pose(this.pos, this.quat, s2);
-          const ln = m.localNormal1();
-          const n1 = rotate(q1, [ln.x, ln.y, ln.z]);  // from shape 1 to shape 2, detection pose
+          // The world normal the solver applies the rows' impulses along, from shape 1 to shape 2
+          // (Rapier keeps it, with contactDist, while it reuses the manifold: not localNormal1
+          // turned with body 1).
+          const wn = m.normal();
+          const n1 = [wn.x, wn.y, wn.z];
           const nt = m.numContacts();
           const tracked = [];
           for (let k = 0; k < nt; ++k) {
@@ -148,6 +150,7 @@ class RapierWorld {
             tracked.push({ k, la, lb, mid: [(cur1[0] + cur2[0]) / 2, (cur1[1] + cur2[1]) / 2, (cur1[2] + cur2[2]) / 2] });
           }
           const used = new Set();
+          let written = 0, pairJn = 0;
           for (let s = 0; s < ns; ++s) {
             const sp = m.solverContactPoint(s);
             const spv = [sp.x, sp.y, sp.z];
@@ -171,18 +174,42 @@ class RapierWorld {
             // carried no impulse is no contact (Rapier keeps them while a separating pair's manifold
             // is reused): not a row, counted.
             if (jn === 0 && dist > this.prediction) { this.staleDropped += 1; continue; }
+            written += 1;
+            pairJn += jn;
             rows.push({ a: i, b: j, n: [sign * n1[0], sign * n1[1], sign * n1[2]],
                         p: [(w1[0] + w2[0]) / 2, (w1[1] + w2[1]) / 2, (w1[2] + w2[2]) / 2],
                         depth: Math.max(0, -dist), jn, jt: 0 });
           }
+          if (written > 0) this.witnessApart(i, j, prePos, preQuat, written, pairJn);
         });
       });
     }
     return rows;
   }
 
+  // A witness from Rapier's own geometry: the distance its exact query (Shape.contactShape, parry)
+  // gives between the pair's shapes at the detection pose; rows written on a pair that query puts
+  // beyond the prediction distance are counted, with the worst distance and the largest impulse
+  // Rapier's solver applied on such a pair in one step. Static triangle meshes are not queried.
+  witnessApart(i, j, P, Q, written, pairJn) {
+    const ci = this.colliders[i], cj = this.colliders[j];
+    if (this.req.bodies[i].shape === "mesh" && this.req.bodies[i].static) return;
+    if (this.req.bodies[j].shape === "mesh" && this.req.bodies[j].static) return;
+    const at = (k) => [{ x: P[3 * k], y: P[3 * k + 1], z: P[3 * k + 2] },
+                       { w: Q[4 * k], x: Q[4 * k + 1], y: Q[4 * k + 2], z: Q[4 * k + 3] }];
+    const [xi, qi] = at(i), [xj, qj] = at(j);
+    const c = ci.shape.contactShape(xi, qi, cj.shape, xj, qj, 1.0);
+    const d = c ? c.distance : Infinity;
+    if (d > this.prediction) {
+      this.apartRows += written;
+      this.apartWorst = Math.max(this.apartWorst, Math.min(d, 1.0));
+      if (pairJn > this.apartJn) { this.apartJn = pairJn; this.apartJnAt = `frame ${this.frame} pair (${i}, ${j})`; }
+    }
+  }
+
   endAttrs() {
-    return { rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
+    return { rapier_apart_rows: i32(this.apartRows), rapier_apart_worst_m: f64(this.apartWorst),
+             rapier_apart_worst_jn: f64(this.apartJn), rapier_apart_worst_jn_at: str(this.apartJnAt), rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
              rapier_solver_match_worst_m: f64(this.matchWorst) };
   }
 
