@@ -98,6 +98,9 @@ class RapierWorld {
     this.apartWorst = 0;  // their worst distance (m)
     this.apartJn = 0;  // the largest summed impulse on such a pair in one step (N s), and where
     this.apartJnAt = "";
+    this.duplicateTies = 0;  // solver contacts with coincident tracked points, told apart by a changed impulse
+    this.duplicateUnresolved = 0;  // ... where none changed nor read 0 (the nearest kept)
+    this.lastImpulse = new Map();  // pair -> manifold:point -> the impulse read the previous step
     this.tangentSeen = 0;  // rows whose tangent impulse Rapier reported non-zero (a witness)
   }
 
@@ -123,6 +126,7 @@ class RapierWorld {
   // reuses a manifold).
   contacts(prePos, preQuat) {
     const rows = [];
+    const nextImpulse = new Map();  // pair -> manifold:point -> the impulse read this step
     const world = this.world, np = world.narrowPhase;
     const pose = (P, Q, i) => [[P[3 * i], P[3 * i + 1], P[3 * i + 2]], [Q[4 * i], Q[4 * i + 1], Q[4 * i + 2], Q[4 * i + 3]]];
     for (let i = 0; i < this.n; ++i) {
@@ -130,9 +134,14 @@ class RapierWorld {
       np.contactPairsWith(ci.handle, (h2) => {
         const j = this.indexOfCollider.get(h2);
         if (j === undefined || j <= i) return;
+        const key = `${i},${j}`;
+        const prevImpulse = this.lastImpulse.get(key) || new Map();
+        const nowImpulse = new Map();
+        let manifoldIndex = 0;
         world.contactPair(ci, this.colliders[j], (m, flipped) => {
+          for (let k = 0; k < m.numContacts(); ++k) nowImpulse.set(`${manifoldIndex}:${k}`, m.contactImpulse(k));
           const ns = m.numSolverContacts();
-          if (ns === 0) return;
+          if (ns === 0) { manifoldIndex += 1; return; }
           const s1 = flipped ? j : i, s2 = flipped ? i : j;  // the bodies of m's shape 1 and 2
           const [x1, q1] = pose(prePos, preQuat, s1), [x2, q2] = pose(prePos, preQuat, s2);
           const [y1, r1] = pose(this.pos, this.quat, s1), [y2, r2] = pose(this.pos, this.quat, s2);
@@ -150,6 +159,7 @@ class RapierWorld {
             tracked.push({ k, la, lb, mid: [(cur1[0] + cur2[0]) / 2, (cur1[1] + cur2[1]) / 2, (cur1[2] + cur2[2]) / 2] });
           }
           const used = new Set();
+          const mi = manifoldIndex++;
           let written = 0, pairJn = 0;
           for (let s = 0; s < ns; ++s) {
             const sp = m.solverContactPoint(s);
@@ -159,6 +169,20 @@ class RapierWorld {
               if (used.has(t.k)) continue;
               const d = Math.hypot(...sub(t.mid, spv));
               if (d < bestD) { bestD = d; best = t.k; }
+            }
+            // Rapier may track the same point twice (same local points, same contactDist); the
+            // solver uses one of them, the other keeps the impulse of the last step that solved
+            // it, bit for bit. Among tracked points as near as the best (within 1e-7 m), one whose
+            // impulse changed since the previous step's read is one this step solved.
+            const ties = tracked.filter((t) => !used.has(t.k) && Math.hypot(...sub(t.mid, spv)) <= bestD + 1e-7);
+            if (ties.length > 1) {
+              this.duplicateTies += 1;
+              const fresh = ties.filter((t) => prevImpulse.get(`${mi}:${t.k}`) !== m.contactImpulse(t.k));
+              // None changed: a solved point whose impulse stays bit for bit is one that stays 0.
+              const zero = ties.filter((t) => m.contactImpulse(t.k) === 0);
+              if (fresh.length > 0) best = fresh[0].k;
+              else if (zero.length > 0) best = zero[0].k;
+              else this.duplicateUnresolved += 1;
             }
             if (best < 0) throw new Error(`pair (${i}, ${j}): solver contact ${s} has no tracked point`);
             used.add(best);
@@ -182,8 +206,10 @@ class RapierWorld {
           }
           if (written > 0) this.witnessApart(i, j, prePos, preQuat, written, pairJn);
         });
+        if (nowImpulse.size > 0) nextImpulse.set(key, nowImpulse);
       });
     }
+    this.lastImpulse = nextImpulse;
     return rows;
   }
 
@@ -210,7 +236,8 @@ class RapierWorld {
   endAttrs() {
     return { rapier_apart_rows: i32(this.apartRows), rapier_apart_worst_m: f64(this.apartWorst),
              rapier_apart_worst_jn: f64(this.apartJn), rapier_apart_worst_jn_at: str(this.apartJnAt), rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
-             rapier_solver_match_worst_m: f64(this.matchWorst) };
+             rapier_solver_match_worst_m: f64(this.matchWorst), rapier_duplicate_points: i32(this.duplicateTies),
+             rapier_duplicate_unresolved: i32(this.duplicateUnresolved) };
   }
 
   free() { this.world.free(); }
