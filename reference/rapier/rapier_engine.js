@@ -98,6 +98,12 @@ class RapierWorld {
     this.apartWorst = 0;  // their worst distance (m)
     this.apartJn = 0;  // the largest summed impulse on such a pair in one step (N s), and where
     this.apartJnAt = "";
+    this.apartLoaded = new Set();  // pairs "(i, j)" the solver loaded while apart
+    this.missedPairs = 0;  // pair-steps (every 5th frame) contactShape finds penetrating (> 0.1 mm) without solver contacts
+    this.missedWorst = 0;
+    this.missedAt = "";
+    this.depthGap = 0;  // the largest contactShape penetration beyond the pair's deepest row (m)
+    this.depthGapAt = "";
     this.duplicateTies = 0;  // solver contacts with coincident tracked points, told apart by a changed impulse
     this.duplicateUnresolved = 0;  // ... where none changed nor read 0 (the nearest kept)
     this.lastImpulse = new Map();  // pair -> manifold:point -> the impulse read the previous step
@@ -137,11 +143,12 @@ class RapierWorld {
         const key = `${i},${j}`;
         const prevImpulse = this.lastImpulse.get(key) || new Map();
         const nowImpulse = new Map();
-        let manifoldIndex = 0;
+        let manifoldIndex = 0, written = 0, pairJn = 0, deepest = 0, solverContacts = 0;
         world.contactPair(ci, this.colliders[j], (m, flipped) => {
           for (let k = 0; k < m.numContacts(); ++k) nowImpulse.set(`${manifoldIndex}:${k}`, m.contactImpulse(k));
           const ns = m.numSolverContacts();
           if (ns === 0) { manifoldIndex += 1; return; }
+          solverContacts += ns;
           const s1 = flipped ? j : i, s2 = flipped ? i : j;  // the bodies of m's shape 1 and 2
           const [x1, q1] = pose(prePos, preQuat, s1), [x2, q2] = pose(prePos, preQuat, s2);
           const [y1, r1] = pose(this.pos, this.quat, s1), [y2, r2] = pose(this.pos, this.quat, s2);
@@ -160,7 +167,7 @@ class RapierWorld {
           }
           const used = new Set();
           const mi = manifoldIndex++;
-          let written = 0, pairJn = 0;
+
           for (let s = 0; s < ns; ++s) {
             const sp = m.solverContactPoint(s);
             const spv = [sp.x, sp.y, sp.z];
@@ -200,12 +207,13 @@ class RapierWorld {
             if (jn === 0 && dist > this.prediction) { this.staleDropped += 1; continue; }
             written += 1;
             pairJn += jn;
+            deepest = Math.max(deepest, -dist);
             rows.push({ a: i, b: j, n: [sign * n1[0], sign * n1[1], sign * n1[2]],
                         p: [(w1[0] + w2[0]) / 2, (w1[1] + w2[1]) / 2, (w1[2] + w2[2]) / 2],
                         depth: Math.max(0, -dist), jn, jt: 0 });
           }
-          if (written > 0) this.witnessApart(i, j, prePos, preQuat, written, pairJn);
         });
+        this.witness(i, j, prePos, preQuat, written, pairJn, deepest, solverContacts);
         if (nowImpulse.size > 0) nextImpulse.set(key, nowImpulse);
       });
     }
@@ -213,29 +221,46 @@ class RapierWorld {
     return rows;
   }
 
-  // A witness from Rapier's own geometry: the distance its exact query (Shape.contactShape, parry)
-  // gives between the pair's shapes at the detection pose; rows written on a pair that query puts
-  // beyond the prediction distance are counted, with the worst distance and the largest impulse
-  // Rapier's solver applied on such a pair in one step. Static triangle meshes are not queried.
-  witnessApart(i, j, P, Q, written, pairJn) {
-    const ci = this.colliders[i], cj = this.colliders[j];
-    if (this.req.bodies[i].shape === "mesh" && this.req.bodies[i].static) return;
-    if (this.req.bodies[j].shape === "mesh" && this.req.bodies[j].static) return;
+  // Witnesses from Rapier's own geometry: the distance its exact query (Shape.contactShape,
+  // parry) gives between a contact pair's shapes at the detection pose. Counted: rows written on
+  // a pair it puts beyond the prediction distance (with the worst distance, the largest impulse
+  // the solver applied on such a pair in one step, and the pairs it loaded); pairs it finds
+  // penetrating whose manifolds hold no solver contact (every 5th frame: the query on every
+  // pair whose bounding boxes overlap costs more than the step); the largest amount by which its
+  // penetration exceeds the pair's deepest row. Static triangle meshes are not queried.
+  witness(i, j, P, Q, written, pairJn, deepest, solverContacts) {
+    if (written === 0 && (solverContacts > 0 || this.frame % 5 !== 0)) return;  // stale rows only; or not a 5th frame
+    const bi = this.req.bodies[i], bj = this.req.bodies[j];
+    if ((bi.shape === "mesh" && bi.static) || (bj.shape === "mesh" && bj.static)) return;
     const at = (k) => [{ x: P[3 * k], y: P[3 * k + 1], z: P[3 * k + 2] },
                        { w: Q[4 * k], x: Q[4 * k + 1], y: Q[4 * k + 2], z: Q[4 * k + 3] }];
     const [xi, qi] = at(i), [xj, qj] = at(j);
-    const c = ci.shape.contactShape(xi, qi, cj.shape, xj, qj, 1.0);
+    const c = this.colliders[i].shape.contactShape(xi, qi, this.colliders[j].shape, xj, qj, 1.0);
     const d = c ? c.distance : Infinity;
+    const where = `frame ${this.frame} pair (${i}, ${j})`;
+    if (written === 0) {
+      if (d < -1e-4) {
+        this.missedPairs += 1;
+        if (-d > this.missedWorst) { this.missedWorst = -d; this.missedAt = where; }
+      }
+      return;
+    }
     if (d > this.prediction) {
       this.apartRows += written;
       this.apartWorst = Math.max(this.apartWorst, Math.min(d, 1.0));
-      if (pairJn > this.apartJn) { this.apartJn = pairJn; this.apartJnAt = `frame ${this.frame} pair (${i}, ${j})`; }
+      if (pairJn > this.apartJn) { this.apartJn = pairJn; this.apartJnAt = where; }
+      if (pairJn > 0) this.apartLoaded.add(`(${i}, ${j})`);
     }
+    if (-d - deepest > this.depthGap) { this.depthGap = -d - deepest; this.depthGapAt = where; }
   }
 
   endAttrs() {
     return { rapier_apart_rows: i32(this.apartRows), rapier_apart_worst_m: f64(this.apartWorst),
-             rapier_apart_worst_jn: f64(this.apartJn), rapier_apart_worst_jn_at: str(this.apartJnAt), rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
+             rapier_apart_worst_jn: f64(this.apartJn), rapier_apart_worst_jn_at: str(this.apartJnAt),
+             rapier_apart_loaded_pairs: str([...this.apartLoaded].sort().join(" ")),
+             rapier_missed_pairs: i32(this.missedPairs), rapier_missed_worst_m: f64(this.missedWorst),
+             rapier_missed_worst_at: str(this.missedAt),
+             rapier_depth_gap_worst_m: f64(this.depthGap), rapier_depth_gap_worst_at: str(this.depthGapAt), rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
              rapier_solver_match_worst_m: f64(this.matchWorst), rapier_duplicate_points: i32(this.duplicateTies),
              rapier_duplicate_unresolved: i32(this.duplicateUnresolved) };
   }
