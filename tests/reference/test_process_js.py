@@ -201,3 +201,41 @@ def test_planted_faults_fail_naming_the_frame(workdir, engine, fault):
     assert verdict(r.stdout, FAULTS[fault]) == "FAIL", f"{engine}, {fault}: row {FAULTS[fault]}\n{r.stdout}"
     row = re.search(r"^physics +" + FAULTS[fault] + r" .*?(?=^physics|\Z)", r.stdout, re.M | re.S).group(0)
     assert any(it in row for it in item), f"{engine}, {fault}: {item} not named\n{row}"
+
+
+# Rapier's faults on the engine matrix's full windows (scripts/nightly.sh --matrix full;
+# scripts/nightly-expect.json names this test), each witnessed by Rapier's own exact query
+# (Shape.contactShape at the detection pose) that the engine writes as root attributes.
+RAPIER_MATRIX_WITNESSES = {
+    # reused manifolds: pair (11, 79) loaded with 0.2205 N s at frame 62 while the shapes are
+    # more than 2 cm apart (false contacts, its angular momentum); pair (162, 198) penetrating
+    # 7.0 mm beyond its deepest row's depth (a frozen contactDist: contact-geometry depth).
+    ("rot-drop-220", 400): {"rapier_apart_worst_jn_at": "frame 62 pair (11, 79)", "apart_jn": 0.2,
+                            "rapier_depth_gap_worst_at": "frame 289 pair (162, 198)", "depth_gap": 0.005},
+    # a pair penetrating 4.80 mm whose manifolds hold no solver contact (missing contact).
+    ("rot-pile-1000", 150): {"rapier_missed_worst_at": "frame 150 pair (719, 896)", "missed": 0.0045},
+}
+
+
+@pytest.mark.parametrize("scene,frames", list(RAPIER_MATRIX_WITNESSES))
+def test_rapier_matrix_faults_witnessed_from_its_own_query(workdir, scene, frames):
+    why = engine_ready("rapier")
+    if why:
+        pytest.skip(why)
+    trace = workdir / f"rapier--{scene}--matrix.h5"
+    r = octocd("run", os.path.join(SOURCE_DIR, "datasets", "scenes", scene + ".json"), "--engine", "rapier",
+               "--rotation", "--frames", str(frames), "--state-every", "1", "--contacts", "--trace", str(trace),
+               "--no-xdmf", "--quiet")
+    assert r.returncode == 0, r.stdout + r.stderr
+    w = RAPIER_MATRIX_WITNESSES[(scene, frames)]
+    with h5py.File(trace, "r") as f:
+        a = dict(f.attrs)
+    for key in ("rapier_apart_worst_jn_at", "rapier_depth_gap_worst_at", "rapier_missed_worst_at"):
+        if key in w:
+            assert a[key] == w[key], (key, a[key])
+    if "apart_jn" in w:
+        assert a["rapier_apart_worst_jn"] > w["apart_jn"] and a["rapier_apart_worst_m"] > a["contact_margin"]
+    if "depth_gap" in w:
+        assert a["rapier_depth_gap_worst_m"] > w["depth_gap"]
+    if "missed" in w:
+        assert a["rapier_missed_worst_m"] > w["missed"]
