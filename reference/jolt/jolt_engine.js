@@ -7,7 +7,7 @@
 import initJolt from "jolt-physics";
 import { createRequire } from "node:module";
 import { main } from "../js-common/run.js";
-import { parseSettings, intIn, oneOf } from "../js-common/request.js";
+import { parseSettings, intIn } from "../js-common/request.js";
 import { str, i32, f64 } from "../js-common/trace.js";
 
 const joltVersion = createRequire(import.meta.url)("jolt-physics/package.json").version;
@@ -20,8 +20,6 @@ const settingsSpec = {
   position_iterations: { def: 2, parse: intIn(0, 255), allowed: "an integer in [0, 255] (Jolt's mNumPositionSteps)" },
   // Sub-steps of dt / n per frame, each a full Jolt step (detect, solve, integrate).
   collision_steps: { def: 1, parse: intIn(1, 64), allowed: "an integer in [1, 64] (Jolt steps of dt / n a frame)" },
-  // "v4": the declarations of the physics tier's fourth round; "v3": only those an older reader knows.
-  declarations: { def: "v4", parse: oneOf("v4", "v3"), allowed: '"v4" or "v3"' },
 };
 
 const engine = {
@@ -118,17 +116,14 @@ class JoltWorld {
     this.pending = [];
     this.installListener();
     this.name = `jolt ${joltVersion}`;
-    const v4 = settings.declarations === "v4";
     const n = this.collisionSteps;
     this.attrs = {
       // Jolt combines friction as the geometric mean and restitution as the maximum (its defaults).
       friction_combine: str("geometric"), restitution_combine: str("max"),
       contact_margin: f64(this.margin), deactivation: str("off"), broadphase_exact: i32(0),
       impulse_points: str("witness-pair"), gyroscopic: str("false"),
-      ...(n === 1 ? { integrator: str("semi-implicit") } : {}),
-      ...(v4 ? { impulses: str("none"), speculative: i32(1), depth_per: str("point"),
-                 ...(n > 1 ? { integrator: str("substepped"), substeps: i32(n) } : {}) }
-             : { impulses_complete: i32(0) }),
+      impulses: str("none"), speculative: i32(1), depth_per: str("point"),
+      ...(n === 1 ? { integrator: str("semi-implicit") } : { integrator: str("substepped"), substeps: i32(n) }),
       parameters_jolt: str(JSON.stringify(this.physicsSettings)),
     };
     this.bodyData = { collision_shape: { strings: collisionShapes },

@@ -141,8 +141,3 @@ export function parseSettings(req, spec) {
 export function intIn(lo, hi) {
   return (v) => (/^-?\d+$/.test(v) && +v >= lo && +v <= hi ? +v : undefined);
 }
-
-/// A setting parser: one of the given words.
-export function oneOf(...words) {
-  return (v) => (words.includes(v) ? v : undefined);
-}

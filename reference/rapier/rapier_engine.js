@@ -6,17 +6,13 @@
 // docs/engines.md, "Rapier".
 import RAPIER from "@dimforge/rapier3d-compat";
 import { main } from "../js-common/run.js";
-import { parseSettings, intIn, oneOf } from "../js-common/request.js";
+import { parseSettings, intIn } from "../js-common/request.js";
 import { str, i32, f64 } from "../js-common/trace.js";
-import { principalAxes, rotate, toWorld, sub, dot } from "../js-common/math.js";
+import { principalAxes, toWorld, sub, dot } from "../js-common/math.js";
 
 const settingsSpec = {
   // Rapier's numSolverIterations: the substeps of its TGS-soft solver (default 4).
   iterations: { def: 4, parse: intIn(1, 64), allowed: "an integer in [1, 64] (Rapier's numSolverIterations)" },
-  // "v4": the declarations of the physics tier's fourth round (integrator "substepped",
-  // impulses "normal-only"); "v3": only those an older reader knows (integrator left
-  // undeclared, impulses_complete 0 for the missing tangent impulses).
-  declarations: { def: "v4", parse: oneOf("v4", "v3"), allowed: '"v4" or "v3"' },
 };
 
 const engine = {
@@ -83,14 +79,12 @@ class RapierWorld {
     this.prediction = ip.normalizedPredictionDistance * ip.lengthUnit;
     this.substeps = world.numSolverIterations;
     this.name = `rapier ${R.version()}`;
-    const v4 = settings.declarations === "v4";
     this.attrs = {
       friction_combine: str("average"), restitution_combine: str("average"),
       contact_margin: f64(this.prediction), deactivation: str("off"), broadphase_exact: i32(0),
       impulse_points: str("one"), friction_directions: i32(2),
-      ...(v4 ? { integrator: str("substepped"), substeps: i32(this.substeps), impulses: str("normal-only"),
-                 speculative: i32(1), manifold_points: str("persistent"), depth_per: str("point") }
-             : { impulses_complete: i32(0) }),
+      integrator: str("substepped"), substeps: i32(this.substeps), impulses: str("normal-only"),
+      speculative: i32(1), manifold_points: str("persistent"), depth_per: str("point"),
       parameters_rapier: str(JSON.stringify({ numSolverIterations: this.substeps,
         numInternalPgsIterations: world.numInternalPgsIterations, predictionDistance: this.prediction,
         lengthUnit: ip.lengthUnit, dt: world.timestep })),
@@ -99,10 +93,24 @@ class RapierWorld {
     this.jt3 = false;
     this.matchWorst = 0;  // the largest distance between a solver contact and its tracked point's midpoint (m)
     this.staleDropped = 0;  // solver contacts beyond the prediction distance without impulse, not written
+    this.frame = 0;
+    this.apartRows = 0;  // rows on pairs Rapier's own contactShape puts beyond the prediction distance
+    this.apartWorst = 0;  // their worst distance (m)
+    this.apartJn = 0;  // the largest summed impulse on such a pair in one step (N s), and where
+    this.apartJnAt = "";
+    this.apartLoaded = new Set();  // pairs "(i, j)" the solver loaded while apart
+    this.missedPairs = 0;  // pair-steps (every 5th frame) contactShape finds penetrating (> 0.1 mm) without solver contacts
+    this.missedWorst = 0;
+    this.missedAt = "";
+    this.depthGap = 0;  // the largest contactShape penetration beyond the pair's deepest row (m)
+    this.depthGapAt = "";
+    this.duplicateTies = 0;  // solver contacts with coincident tracked points, told apart by a changed impulse
+    this.duplicateUnresolved = 0;  // ... where none changed nor read 0 (the nearest kept)
+    this.lastImpulse = new Map();  // pair -> manifold:point -> the impulse read the previous step
     this.tangentSeen = 0;  // rows whose tangent impulse Rapier reported non-zero (a witness)
   }
 
-  step() { this.world.step(); }
+  step() { this.frame += 1; this.world.step(); }
 
   readState(pos, vel, quat, angvel) {
     for (let i = 0; i < this.n; ++i) {
@@ -124,6 +132,7 @@ class RapierWorld {
   // reuses a manifold).
   contacts(prePos, preQuat) {
     const rows = [];
+    const nextImpulse = new Map();  // pair -> manifold:point -> the impulse read this step
     const world = this.world, np = world.narrowPhase;
     const pose = (P, Q, i) => [[P[3 * i], P[3 * i + 1], P[3 * i + 2]], [Q[4 * i], Q[4 * i + 1], Q[4 * i + 2], Q[4 * i + 3]]];
     for (let i = 0; i < this.n; ++i) {
@@ -131,14 +140,23 @@ class RapierWorld {
       np.contactPairsWith(ci.handle, (h2) => {
         const j = this.indexOfCollider.get(h2);
         if (j === undefined || j <= i) return;
+        const key = `${i},${j}`;
+        const prevImpulse = this.lastImpulse.get(key) || new Map();
+        const nowImpulse = new Map();
+        let manifoldIndex = 0, written = 0, pairJn = 0, deepest = 0, solverContacts = 0;
         world.contactPair(ci, this.colliders[j], (m, flipped) => {
+          for (let k = 0; k < m.numContacts(); ++k) nowImpulse.set(`${manifoldIndex}:${k}`, m.contactImpulse(k));
           const ns = m.numSolverContacts();
-          if (ns === 0) return;
+          if (ns === 0) { manifoldIndex += 1; return; }
+          solverContacts += ns;
           const s1 = flipped ? j : i, s2 = flipped ? i : j;  // the bodies of m's shape 1 and 2
           const [x1, q1] = pose(prePos, preQuat, s1), [x2, q2] = pose(prePos, preQuat, s2);
           const [y1, r1] = pose(this.pos, this.quat, s1), [y2, r2] = pose(this.pos, this.quat, s2);
-          const ln = m.localNormal1();
-          const n1 = rotate(q1, [ln.x, ln.y, ln.z]);  // from shape 1 to shape 2, detection pose
+          // The world normal the solver applies the rows' impulses along, from shape 1 to shape 2
+          // (Rapier keeps it, with contactDist, while it reuses the manifold: not localNormal1
+          // turned with body 1).
+          const wn = m.normal();
+          const n1 = [wn.x, wn.y, wn.z];
           const nt = m.numContacts();
           const tracked = [];
           for (let k = 0; k < nt; ++k) {
@@ -148,6 +166,8 @@ class RapierWorld {
             tracked.push({ k, la, lb, mid: [(cur1[0] + cur2[0]) / 2, (cur1[1] + cur2[1]) / 2, (cur1[2] + cur2[2]) / 2] });
           }
           const used = new Set();
+          const mi = manifoldIndex++;
+
           for (let s = 0; s < ns; ++s) {
             const sp = m.solverContactPoint(s);
             const spv = [sp.x, sp.y, sp.z];
@@ -156,6 +176,20 @@ class RapierWorld {
               if (used.has(t.k)) continue;
               const d = Math.hypot(...sub(t.mid, spv));
               if (d < bestD) { bestD = d; best = t.k; }
+            }
+            // Rapier may track the same point twice (same local points, same contactDist); the
+            // solver uses one of them, the other keeps the impulse of the last step that solved
+            // it, bit for bit. Among tracked points as near as the best (within 1e-7 m), one whose
+            // impulse changed since the previous step's read is one this step solved.
+            const ties = tracked.filter((t) => !used.has(t.k) && Math.hypot(...sub(t.mid, spv)) <= bestD + 1e-7);
+            if (ties.length > 1) {
+              this.duplicateTies += 1;
+              const fresh = ties.filter((t) => prevImpulse.get(`${mi}:${t.k}`) !== m.contactImpulse(t.k));
+              // None changed: a solved point whose impulse stays bit for bit is one that stays 0.
+              const zero = ties.filter((t) => m.contactImpulse(t.k) === 0);
+              if (fresh.length > 0) best = fresh[0].k;
+              else if (zero.length > 0) best = zero[0].k;
+              else this.duplicateUnresolved += 1;
             }
             if (best < 0) throw new Error(`pair (${i}, ${j}): solver contact ${s} has no tracked point`);
             used.add(best);
@@ -171,19 +205,64 @@ class RapierWorld {
             // carried no impulse is no contact (Rapier keeps them while a separating pair's manifold
             // is reused): not a row, counted.
             if (jn === 0 && dist > this.prediction) { this.staleDropped += 1; continue; }
+            written += 1;
+            pairJn += jn;
+            deepest = Math.max(deepest, -dist);
             rows.push({ a: i, b: j, n: [sign * n1[0], sign * n1[1], sign * n1[2]],
                         p: [(w1[0] + w2[0]) / 2, (w1[1] + w2[1]) / 2, (w1[2] + w2[2]) / 2],
                         depth: Math.max(0, -dist), jn, jt: 0 });
           }
         });
+        this.witness(i, j, prePos, preQuat, written, pairJn, deepest, solverContacts);
+        if (nowImpulse.size > 0) nextImpulse.set(key, nowImpulse);
       });
     }
+    this.lastImpulse = nextImpulse;
     return rows;
   }
 
+  // Witnesses from Rapier's own geometry: the distance its exact query (Shape.contactShape,
+  // parry) gives between a contact pair's shapes at the detection pose. Counted: rows written on
+  // a pair it puts beyond the prediction distance (with the worst distance, the largest impulse
+  // the solver applied on such a pair in one step, and the pairs it loaded); pairs it finds
+  // penetrating whose manifolds hold no solver contact (every 5th frame: the query on every
+  // pair whose bounding boxes overlap costs more than the step); the largest amount by which its
+  // penetration exceeds the pair's deepest row. Static triangle meshes are not queried.
+  witness(i, j, P, Q, written, pairJn, deepest, solverContacts) {
+    if (written === 0 && (solverContacts > 0 || this.frame % 5 !== 0)) return;  // stale rows only; or not a 5th frame
+    const bi = this.req.bodies[i], bj = this.req.bodies[j];
+    if ((bi.shape === "mesh" && bi.static) || (bj.shape === "mesh" && bj.static)) return;
+    const at = (k) => [{ x: P[3 * k], y: P[3 * k + 1], z: P[3 * k + 2] },
+                       { w: Q[4 * k], x: Q[4 * k + 1], y: Q[4 * k + 2], z: Q[4 * k + 3] }];
+    const [xi, qi] = at(i), [xj, qj] = at(j);
+    const c = this.colliders[i].shape.contactShape(xi, qi, this.colliders[j].shape, xj, qj, 1.0);
+    const d = c ? c.distance : Infinity;
+    const where = `frame ${this.frame} pair (${i}, ${j})`;
+    if (written === 0) {
+      if (d < -1e-4) {
+        this.missedPairs += 1;
+        if (-d > this.missedWorst) { this.missedWorst = -d; this.missedAt = where; }
+      }
+      return;
+    }
+    if (d > this.prediction) {
+      this.apartRows += written;
+      this.apartWorst = Math.max(this.apartWorst, Math.min(d, 1.0));
+      if (pairJn > this.apartJn) { this.apartJn = pairJn; this.apartJnAt = where; }
+      if (pairJn > 0) this.apartLoaded.add(`(${i}, ${j})`);
+    }
+    if (-d - deepest > this.depthGap) { this.depthGap = -d - deepest; this.depthGapAt = where; }
+  }
+
   endAttrs() {
-    return { rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
-             rapier_solver_match_worst_m: f64(this.matchWorst) };
+    return { rapier_apart_rows: i32(this.apartRows), rapier_apart_worst_m: f64(this.apartWorst),
+             rapier_apart_worst_jn: f64(this.apartJn), rapier_apart_worst_jn_at: str(this.apartJnAt),
+             rapier_apart_loaded_pairs: str([...this.apartLoaded].sort().join(" ")),
+             rapier_missed_pairs: i32(this.missedPairs), rapier_missed_worst_m: f64(this.missedWorst),
+             rapier_missed_worst_at: str(this.missedAt),
+             rapier_depth_gap_worst_m: f64(this.depthGap), rapier_depth_gap_worst_at: str(this.depthGapAt), rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
+             rapier_solver_match_worst_m: f64(this.matchWorst), rapier_duplicate_points: i32(this.duplicateTies),
+             rapier_duplicate_unresolved: i32(this.duplicateUnresolved) };
   }
 
   free() { this.world.free(); }

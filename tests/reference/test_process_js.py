@@ -1,9 +1,9 @@
 """Rapier and Jolt as process engines (reference/rapier, reference/jolt; docs/engines.md) on
-short windows of box-stack and rot-drop-220: each engine writes its version 2 trace from a
-run request, `octocd validate --trace-in` judges it, the clean verdict holds only the expected
-failures (each a rule the physics tier has not yet restated, or an engine fault with its
-witness, docs/engines.md), and each planted fault edited into a copy of the trace fails its
-row naming the frame.
+short windows of box-stack and rot-drop-220: `octocd validate SCENE --engine NAME --trace T`
+writes the run request, runs the engine and judges its version 2 trace; the clean verdict
+holds only the expected failures (each an engine fault with its witness from the engine's own
+API, or a rule defect named with its issue item, docs/engines.md), and each planted fault
+edited into a copy of T fails its row naming the frame (`validate --trace-in`).
 
 Run by ctest (label `corpus`) with OCTOCD_BIN and OCTOCD_SOURCE_DIR set; skipped, saying why,
 where Node.js or reference/node_modules (scripts/install-deps.sh --tests) is missing.
@@ -19,8 +19,6 @@ import numpy as np
 import pytest
 
 h5py = pytest.importorskip("h5py", reason="python3-h5py is not installed")
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from process_request import make_request  # noqa: E402
 
 SOURCE_DIR = os.environ.get("OCTOCD_SOURCE_DIR", os.path.join(os.path.dirname(__file__), "..", ".."))
 BIN = os.environ.get("OCTOCD_BIN", os.path.join(SOURCE_DIR, "build", "octocd"))
@@ -52,30 +50,26 @@ def workdir(tmp_path_factory):
 _traces = {}
 
 
-def run_engine(workdir, engine, scene, frames, settings=None):
-    """(returncode, stderr, trace) of the engine on the scene's first `frames` steps."""
-    trace = workdir / f"{engine}--{scene}--{'-'.join(f'{k}{v}' for k, v in sorted((settings or {}).items()))}.h5"
-    req = make_request(BIN, os.path.join(SOURCE_DIR, "datasets", "scenes", scene + ".json"), frames, trace,
-                       settings, SOURCE_DIR)
-    path = workdir / (trace.stem + ".json")
-    path.write_text(json.dumps(req))
-    r = subprocess.run(["node", os.path.join(SOURCE_DIR, ENGINES[engine]), str(path)], capture_output=True, text=True,
-                       cwd=workdir, stdin=subprocess.DEVNULL)
-    return r.returncode, r.stderr, trace
+def run_engine(workdir, engine, scene, frames):
+    """(the validate run, its trace) of the engine on the scene's first `frames` steps."""
+    trace = workdir / f"{engine}--{scene}.h5"
+    r = octocd("validate", os.path.join(SOURCE_DIR, "datasets", "scenes", scene + ".json"), "--engine", engine,
+               "--frames", str(frames), "--trace", str(trace))
+    assert r.returncode in (0, 3), r.stdout + r.stderr
+    return r, trace
+
+
+def clean_run(workdir, engine, scene):
+    """(validate's output, the trace) of the engine's clean run, run once per module."""
+    key = (engine, scene)
+    if key not in _traces:
+        r, trace = run_engine(workdir, engine, scene, SCENES[scene])
+        _traces[key] = (r.stdout, trace)
+    return _traces[key]
 
 
 def clean_trace(workdir, engine, scene):
-    """The engine's trace, with the declarations the landed reader knows ("v4" if it reads them)."""
-    key = (engine, scene)
-    if key not in _traces:
-        rc, err, trace = run_engine(workdir, engine, scene, SCENES[scene])
-        assert rc == 0, err
-        check = octocd("validate", "--trace-in", str(trace), "--check-only")
-        if check.returncode == 2 and "unknown; allowed" in check.stdout + check.stderr:
-            rc, err, trace = run_engine(workdir, engine, scene, SCENES[scene], {"declarations": "v3"})
-            assert rc == 0, err
-        _traces[key] = trace
-    return _traces[key]
+    return clean_run(workdir, engine, scene)[1]
 
 
 def verdict(out, row):
@@ -87,37 +81,47 @@ def failing_rows(out):
     return {row for row in re.findall(r"^physics +([a-z-]+) +\S+ +\S+ +FAIL", out, re.M)}
 
 
-# The rows a clean run may fail today, each for a stated cause (docs/engines.md, "Rapier" and
-# "Jolt"): rules the physics tier's fourth round restates (substepped integration, speculative
-# and persistent manifold rows) and Rapier's recycled-manifold fault.
+# The rows a clean run may fail, each an engine fault witnessed from the engine's own API
+# (docs/engines.md, "Rapier" and "Jolt"; WITNESSES below checks the figure in the trace).
 EXPECTED = {
     ("rapier", "box-stack"): set(),
-    # free-flight: Rapier's 4 substeps (x' = x + dt v + 0.625 g dt^2) before `integrator`
-    # "substepped" is read; contact-completeness: rows of recycled manifolds beyond the 2 cm
-    # prediction distance (pair (11, 79) from frame 46, with impulse from frame 62);
-    # conservation: that pair's angular momentum at frame 62 (Rapier's fault, docs/engines.md).
-    ("rapier", "rot-drop-220"): {"free-flight", "contact-completeness", "conservation"},
+    # Rapier's reused manifold of pair (11, 79): solver contacts kept from frame 46 while the
+    # shapes separate beyond the 2 cm prediction distance (contact-completeness: false contacts,
+    # worst 3.096 cm apart at frame 80), and at frame 62 its solver applies 0.2205 N s on them
+    # at points that ride on each body, changing the pair's angular momentum (conservation).
+    ("rapier", "rot-drop-220"): {"contact-completeness", "conservation"},
     ("jolt", "box-stack"): set(),
-    # contact-completeness: Jolt's cached manifolds (body pair cache) up to 0.3 mm beyond its
-    # 2 cm speculative distance, before `speculative` is read.
-    ("jolt", "rot-drop-220"): {"contact-completeness"},
+    ("jolt", "rot-drop-220"): set(),
 }
+
+
+def witness_rapier_apart(f):
+    """Rapier's own exact query (Shape.contactShape, parry) at the detection pose, written by
+    the engine: rows on pairs it puts beyond the prediction distance, the worst distance and
+    the largest impulse its solver applied on such a pair in one step."""
+    assert f.attrs["rapier_apart_rows"] > 0
+    assert f.attrs["rapier_apart_worst_m"] > f.attrs["contact_margin"] + 0.01  # 3.096 cm at frame 80
+    assert f.attrs["rapier_apart_worst_jn_at"] == "frame 62 pair (11, 79)"
+    assert f.attrs["rapier_apart_worst_jn"] > 0.2  # N s on shapes more than 2 cm apart
+
+
+WITNESSES = {("rapier", "rot-drop-220"): witness_rapier_apart}
 
 
 @pytest.mark.parametrize("scene", list(SCENES))
 @pytest.mark.parametrize("engine", [engine_param(e) for e in ENGINES])
 def test_clean_run_fails_only_the_expected_rows(workdir, engine, scene):
-    trace = clean_trace(workdir, engine, scene)
+    out, trace = clean_run(workdir, engine, scene)
     with h5py.File(trace, "r") as f:
         assert f["states/position"].shape == (SCENES[scene] + 1, f.attrs["body_count"], 3)
         assert f.attrs["scene"] == json.loads(json.dumps(f.attrs["scene"]))
         assert f.attrs["wall_step_seconds"] > 0
         assert f.attrs["deactivation"] == "off"
-    r = octocd("validate", "--trace-in", str(trace))
-    assert r.returncode in (0, 3), r.stdout + r.stderr
-    assert failing_rows(r.stdout) <= EXPECTED[(engine, scene)], r.stdout
+        if (engine, scene) in WITNESSES:
+            WITNESSES[(engine, scene)](f)
+    assert failing_rows(out) == EXPECTED[(engine, scene)], out
     for row in ("contact-geometry", "penetration"):
-        assert verdict(r.stdout, row) == "pass", r.stdout
+        assert verdict(out, row) == "pass", out
 
 
 def test_request_errors_name_the_field(workdir):
@@ -197,3 +201,41 @@ def test_planted_faults_fail_naming_the_frame(workdir, engine, fault):
     assert verdict(r.stdout, FAULTS[fault]) == "FAIL", f"{engine}, {fault}: row {FAULTS[fault]}\n{r.stdout}"
     row = re.search(r"^physics +" + FAULTS[fault] + r" .*?(?=^physics|\Z)", r.stdout, re.M | re.S).group(0)
     assert any(it in row for it in item), f"{engine}, {fault}: {item} not named\n{row}"
+
+
+# Rapier's faults on the engine matrix's full windows (scripts/nightly.sh --matrix full;
+# scripts/nightly-expect.json names this test), each witnessed by Rapier's own exact query
+# (Shape.contactShape at the detection pose) that the engine writes as root attributes.
+RAPIER_MATRIX_WITNESSES = {
+    # reused manifolds: pair (11, 79) loaded with 0.2205 N s at frame 62 while the shapes are
+    # more than 2 cm apart (false contacts, its angular momentum); pair (162, 198) penetrating
+    # 7.0 mm beyond its deepest row's depth (a frozen contactDist: contact-geometry depth).
+    ("rot-drop-220", 400): {"rapier_apart_worst_jn_at": "frame 62 pair (11, 79)", "apart_jn": 0.2,
+                            "rapier_depth_gap_worst_at": "frame 289 pair (162, 198)", "depth_gap": 0.005},
+    # a pair penetrating 4.80 mm whose manifolds hold no solver contact (missing contact).
+    ("rot-pile-1000", 150): {"rapier_missed_worst_at": "frame 150 pair (719, 896)", "missed": 0.0045},
+}
+
+
+@pytest.mark.parametrize("scene,frames", list(RAPIER_MATRIX_WITNESSES))
+def test_rapier_matrix_faults_witnessed_from_its_own_query(workdir, scene, frames):
+    why = engine_ready("rapier")
+    if why:
+        pytest.skip(why)
+    trace = workdir / f"rapier--{scene}--matrix.h5"
+    r = octocd("run", os.path.join(SOURCE_DIR, "datasets", "scenes", scene + ".json"), "--engine", "rapier",
+               "--rotation", "--frames", str(frames), "--state-every", "1", "--contacts", "--trace", str(trace),
+               "--no-xdmf", "--quiet")
+    assert r.returncode == 0, r.stdout + r.stderr
+    w = RAPIER_MATRIX_WITNESSES[(scene, frames)]
+    with h5py.File(trace, "r") as f:
+        a = dict(f.attrs)
+    for key in ("rapier_apart_worst_jn_at", "rapier_depth_gap_worst_at", "rapier_missed_worst_at"):
+        if key in w:
+            assert a[key] == w[key], (key, a[key])
+    if "apart_jn" in w:
+        assert a["rapier_apart_worst_jn"] > w["apart_jn"] and a["rapier_apart_worst_m"] > a["contact_margin"]
+    if "depth_gap" in w:
+        assert a["rapier_depth_gap_worst_m"] > w["depth_gap"]
+    if "missed" in w:
+        assert a["rapier_missed_worst_m"] > w["missed"]
