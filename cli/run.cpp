@@ -348,8 +348,9 @@ int run_command(const RunOptions& o) {
   }
   std::string xdmf;
   if (!o.trace.empty() && world.writes_own_trace() && octocd::stop_signal() == 0) {
+    // The engine's own trace is another program's version 2 layout (docs/bring-your-engine.md),
+    // not octocd's, which the XDMF sidecar's hyperslabs describe: no sidecar for it.
     octocd::copy_own_trace(world, o.trace, "--trace");
-    xdmf = write_sidecar(o.trace, o.no_xdmf);
   }
   if (trace) {
     trace->close();
