@@ -703,6 +703,18 @@ struct MotionResult {
   bool check_ok = true;
 };
 
+/// Marks a Result or MotionResult failed with `ex`'s message, then clears CUDA's sticky
+/// error and waits for `stream` (clearing its error too) so the next point starts clean.
+template <class R>
+void mark_failed(R& r, const std::exception& ex, cudaStream_t stream) {
+  r.error = ex.what();
+  r.check_ok = false;
+  r.check = "failed";
+  (void)cudaGetLastError();
+  (void)cudaStreamSynchronize(stream);
+  (void)cudaGetLastError();
+}
+
 double mean(const std::vector<double>& v) {
   double t = 0.0;
   for (double x : v) t += x;
@@ -1156,12 +1168,7 @@ int run(const Options& o) {
         r.broadphase = name;
         r.n = n;
         r.ok = false;
-        r.error = ex.what();
-        r.check_ok = false;
-        r.check = "failed";
-        (void)cudaGetLastError();
-        (void)cudaStreamSynchronize(stream.s);
-        (void)cudaGetLastError();
+        mark_failed(r, ex, stream.s);
       }
       if (r.ok) {
         std::cerr << fmt::format(" {:.3f} ms (min {:.3f}, max {:.3f}), {} pairs\n", r.median_ms, r.min_ms, r.max_ms,
@@ -1262,12 +1269,7 @@ int run(const Options& o) {
           m = MotionResult{};
           m.n = n;
           m.margin = margin;
-          m.error = ex.what();
-          m.check_ok = false;
-          m.check = "failed";
-          (void)cudaGetLastError();
-          (void)cudaStreamSynchronize(stream.s);
-          (void)cudaGetLastError();
+          mark_failed(m, ex, stream.s);
           std::cerr << " failed: " << m.error << "\n";
         }
         all_ok = all_ok && m.check_ok;

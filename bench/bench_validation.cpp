@@ -214,11 +214,12 @@ int main(int argc, char** argv) {
     for (long th : thread_counts) {
     threads = th;
     vo.threads = int(th);
-    if (wanted("physics")) {
+    // Times `reps` observations of `rec` by fresh validators from `make`; after the last one
+    // prints the slow rows (rows_shown) and, with `verdict` and --json, appends the verdict.
+    auto time_observe = [&](const char* what, auto make, bool verdict) {
       std::vector<double> t;
       for (int r = 0; r < reps; ++r) {
-        octocd::FrameValidators v(*model, vo, {},
-                                  octocd::FrameValidators::Source{"engine 'bench'", false, false, nullptr});
+        octocd::FrameValidators v = make();
         const double c0 = cpu_seconds();
         const auto t0 = Clock::now();
         v.observe(rec, true);
@@ -228,31 +229,24 @@ int main(int argc, char** argv) {
           for (const octocd::ValidationResult& x : v.results())
             if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
         }
-        if (r + 1 == reps && !json_path.empty()) {
+        if (r + 1 == reps && verdict && !json_path.empty()) {
           std::vector<octocd::ValidationResult> results = v.results();
           for (octocd::ValidationResult& x : results) x.seconds = 0;  // the verdict only
           json_text += octocd::results_json(results, octocd::RunName{scene.name, ""},
                                             nullptr, {{"threads", th}}).dump() + "\n";
         }
       }
-      row("physics", t);
-    }
-    if (wanted("full")) {
-      std::vector<double> t;
-      for (int r = 0; r < reps; ++r) {
-        octocd::FrameValidators v(world, vo, octocd::compared_broadphases(scene, false));
-        const double c0 = cpu_seconds();
-        const auto t0 = Clock::now();
-        v.observe(rec, true);
-        t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
-        cpu.push_back(cpu_seconds() - c0);
-        if (r + 1 == reps && rows_shown) {
-          for (const octocd::ValidationResult& x : v.results())
-            if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
-        }
-      }
-      row("full", t);
-    }
+      row(what, t);
+    };
+    if (wanted("physics"))
+      time_observe("physics", [&] {
+        return octocd::FrameValidators(*model, vo, {},
+                                       octocd::FrameValidators::Source{"engine 'bench'", false, false, nullptr});
+      }, true);
+    if (wanted("full"))
+      time_observe("full", [&] {
+        return octocd::FrameValidators(world, vo, octocd::compared_broadphases(scene, false));
+      }, false);
     }
     if (wanted("pairs")) {
       std::vector<double> t, tf;

@@ -243,14 +243,18 @@ int bench_command(const BenchOptions& o) {
     check_scenes();
     return run_speed_accuracy(s, origin, def, o, shard, shards, !o.engines.empty());
   }
+  // --warmup and --frames move the frame range of a steps sweep only where it has no windows.
+  const auto refuse_windows = [&](const char* option) {
+    if (def.contains("windows"))
+      throw InputError(fmt::format("{}: {} has windows (fixed frame ranges); allowed: {} only for sweeps without "
+                                   "windows",
+                                   option, origin, option));
+  };
   if (o.warmup >= 0) {
     if (s.kind == "broadphase") {
       s.warmup = o.warmup;
-    } else if (def.contains("windows")) {
-      throw InputError(fmt::format("--warmup: {} has windows (fixed frame ranges); allowed: --warmup only for sweeps "
-                                   "without windows",
-                                   origin));
     } else {
+      refuse_windows("--warmup");
       const int timed = s.windows.front().last - s.windows.front().first + 1;
       s.warmup = o.warmup;
       s.windows.front().first = s.warmup + 1;
@@ -269,11 +273,8 @@ int bench_command(const BenchOptions& o) {
   if (o.frames > 0) {
     if (s.kind == "broadphase") {
       s.frames = o.frames;
-    } else if (def.contains("windows")) {
-      throw InputError(fmt::format("--frames: {} has windows (fixed frame ranges); allowed: --frames only for sweeps "
-                                   "without windows",
-                                   origin));
     } else {
+      refuse_windows("--frames");
       s.frames = s.warmup + o.frames;
       s.windows.front().last = s.frames;
     }

@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "bench_sweep.hpp"
+#include "frame_sums.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
@@ -46,24 +47,14 @@ struct RemovedAtEnd {
 };
 
 /// Sums over the frames of one window of one repetition.
-struct WindowSums {
-  std::int64_t frames = 0;
+struct WindowSums : FrameSums {
   std::int64_t bound_frames = 0;  // > 0: cut short; steps/s is then the bound bound_frames / step_ms
-  double step_ms = 0.0;
-  std::array<double, kStages> stage_ms{};
-  double pairs = 0, candidates = 0, box_pairs = 0, vertex_tests = 0, contacts = 0, memory = 0;
+  double memory = 0;
   double pen_weighted = 0, share_weighted = 0, pen_max = 0;
   double cpu_ms = 0.0;  // process CPU time (every thread) spent in the step calls
   void add(const FrameMetrics& m) {
-    ++frames;
-    step_ms += m.step_ms;
-    for (int s = 0; s < kStages; ++s) stage_ms[s] += m.stage_ms[s];
-    pairs += static_cast<double>(m.aabb_pairs);
-    candidates += static_cast<double>(m.cell_candidates);
-    box_pairs += static_cast<double>(m.box_pairs);
-    vertex_tests += static_cast<double>(m.vertex_tests);
+    FrameSums::add(m);
     const double c = static_cast<double>(m.contacts);
-    contacts += c;
     memory += static_cast<double>(m.memory_bytes);
     pen_weighted += c * m.penetration_mean;
     share_weighted += c * m.penetration_share_above_slop;

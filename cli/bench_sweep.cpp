@@ -418,6 +418,14 @@ std::vector<Point> expand(const Sweep& s) {
       bad(s.origin, fmt::format("scenes[{}]", i), "listed twice ('" + stem(s.scenes[i]) + "')",
           "each scene (file name) once");
   std::vector<Point> pts;
+  // A point numbered next in `pts`, of engine `e` and scene (or body-count) index `sc`.
+  const auto next_point = [&pts](const std::string& e, std::size_t sc) {
+    Point p;
+    p.index = static_cast<int>(pts.size());
+    p.engine = e;
+    p.scene = sc;
+    return p;
+  };
   if (s.kind == "steps") {
     std::size_t combos = 1;
     for (const auto& a : s.axes) combos *= a.values.size();
@@ -431,10 +439,7 @@ std::vector<Point> expand(const Sweep& s) {
         }
         for (const auto& e : s.engines)
           for (const auto& mode : s.traced) {
-            Point p;
-            p.index = static_cast<int>(pts.size());
-            p.engine = e;
-            p.scene = sc;
+            Point p = next_point(e, sc);
             p.value = idx;
             p.traced = mode;
             p.id = stem(s.scenes[sc]);
@@ -451,11 +456,8 @@ std::vector<Point> expand(const Sweep& s) {
     for (std::size_t k = 0; k < sizes; ++k)
       for (const auto& bp : s.broadphases)
         for (const auto& e : s.engines) {
-          Point p;
-          p.index = static_cast<int>(pts.size());
-          p.engine = e;
+          Point p = next_point(e, k);
           p.broadphase = bp;
-          p.scene = k;
           p.bodies = s.bodies.empty() ? -1 : s.bodies[k];
           p.id = (s.bodies.empty() ? stem(s.scenes[k]) : fmt::format("bodies={}", s.bodies[k])) + " | " + bp + " | " + e;
           pts.push_back(p);

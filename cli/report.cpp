@@ -21,6 +21,7 @@
 #include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/text.hpp"
 #include "octocd/shared_files.hpp"
@@ -87,12 +88,7 @@ void check_input(const std::string& path, const char* what) {
   if (::stat(path.c_str(), &st) != 0)
     throw InputError(fmt::format("{}: no such file; allowed: {}", path, what));
   if (!S_ISREG(st.st_mode))
-    throw InputError(fmt::format("{}: not a regular file ({}); allowed: {}", path,
-                                 S_ISDIR(st.st_mode)                          ? "a folder"
-                                 : S_ISFIFO(st.st_mode)                       ? "a FIFO"
-                                 : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
-                                                                              : "not a plain file",
-                                 what));
+    throw InputError(fmt::format("{}: not a regular file ({}); allowed: {}", path, file_type_word(st.st_mode), what));
 }
 
 /// This executable (the script runs its `trace-summary`).

@@ -43,6 +43,7 @@
 #include "octocd/process_engines.hpp"
 #include "command.hpp"
 #include "command_support.hpp"
+#include "frame_sums.hpp"
 #include "tools.hpp"
 #include "view.hpp"
 
@@ -73,12 +74,8 @@ struct RunOptions {
 };
 
 /// Running sums for the summary table.
-struct Totals {
-  std::int64_t frames = 0;
-  double step_ms = 0.0;
-  std::array<double, kStages> stage_ms{};
-  double pairs = 0.0, dynamic_pairs = 0.0, candidates = 0.0, contacts = 0.0, box_pairs = 0.0,
-         vertex_tests = 0.0;
+struct Totals : octocd::cli::FrameSums {
+  double dynamic_pairs = 0.0;
   std::uint64_t max_pairs = 0, max_dynamic_pairs = 0, max_candidates = 0, max_contacts = 0,
                 max_box_pairs = 0, max_vertex_tests = 0, max_memory_bytes = 0;
   double pen_mean_sum = 0.0, pen_max = 0.0;
@@ -89,15 +86,8 @@ struct Totals {
   octocd::FrameMetrics last;  ///< the last frame's row (the "last" column)
 
   void add(const octocd::FrameMetrics& m) {
-    ++frames;
-    step_ms += m.step_ms;
-    for (int s = 0; s < kStages; ++s) stage_ms[s] += m.stage_ms[s];
-    pairs += static_cast<double>(m.aabb_pairs);
+    FrameSums::add(m);
     dynamic_pairs += static_cast<double>(m.dynamic_pairs);
-    candidates += static_cast<double>(m.cell_candidates);
-    contacts += static_cast<double>(m.contacts);
-    box_pairs += static_cast<double>(m.box_pairs);
-    vertex_tests += static_cast<double>(m.vertex_tests);
     max_pairs = std::max(max_pairs, m.aabb_pairs);
     max_dynamic_pairs = std::max(max_dynamic_pairs, m.dynamic_pairs);
     max_candidates = std::max(max_candidates, m.cell_candidates);

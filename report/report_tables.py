@@ -122,10 +122,13 @@ def find(pts, **kw):
     return None
 
 
+def table_inputs(g, table):
+    """The steps points of sweep group g, the paper's figures of `table` (PAPER key) and the engines."""
+    return steps_points(g), PAPER[table], engines_of(g)
+
+
 def section_table5(doc, g):
-    pts = steps_points(g)
-    paper = PAPER["table5"]
-    engines = engines_of(g)
+    pts, paper, engines = table_inputs(g, "table5")
     doc.p("Ours: steps/s of the simulation step alone (median over repetitions, min–max in brackets); the paper's: "
           "FPS of the whole Unity application on its GPU. Absolute numbers do not compare; the order of A, B and C "
           "per scene does. " + paper["source"] + ". " + PAPER["hardware"] + ".")
@@ -185,9 +188,7 @@ def section_table5(doc, g):
 
 
 def section_table6(doc, g):
-    pts = steps_points(g)
-    paper = PAPER["table6"]
-    engines = engines_of(g)
+    pts, paper, engines = table_inputs(g, "table6")
     doc.p("Relative change ratio RCR = (C - L0) / L0 x 100 % as in the paper; 'inconclusive' when the two min-max "
           "ranges overlap (or one repetition), ⚠ when measured under load. " + paper["source"] + ".")
     rows = []
@@ -218,9 +219,7 @@ def section_table6(doc, g):
 
 
 def section_tableA1(doc, g):
-    pts = steps_points(g)
-    paper = PAPER["tableA1"]
-    engines = engines_of(g)
+    pts, paper, engines = table_inputs(g, "tableA1")
     doc.p("50 bodies fall and stack (bunny-stack-50; the other meshes in the same scene). Our early phase: frames "
           "1-300; late: 2701-3000 of 3000. RCR = (O-A - SH) / O-A x 100 %, as the paper's printed numbers are "
           "computed. " + paper["source"] + ".")

@@ -171,6 +171,23 @@ stop() {  # a signal to the nightly stops the scene running now (octocd stops wi
 }
 trap stop INT TERM
 started_all=$(date +%s.%N)
+# The JUnit report of case $1 when octocd wrote none: one errored test case of type $2 with
+# message $3, taking $secs seconds.
+junit_error() {
+  local n msg
+  n="$(xml_escape "$1")"
+  msg="$(xml_escape "$3")"
+  cat >"$out/junit/$1.xml" <<EOF2
+<?xml version="1.0" encoding="UTF-8"?>
+<testsuites name="octocd validate" tests="1" failures="0" errors="1" skipped="0" time="$secs">
+  <testsuite name="$n" tests="1" failures="0" errors="1" skipped="0" time="$secs">
+    <testcase classname="$n" name="octocd" time="$secs">
+      <error message="$msg" type="$2">$msg</error>
+    </testcase>
+  </testsuite>
+</testsuites>
+EOF2
+}
 # The outcome of one case (a scene, or an engine's run of a scene in the matrix): its
 # JUnit report (an errored case when octocd wrote none or timed out), its line on stdout,
 # the counts. Arguments: name, log, rc, t0, frames.
@@ -179,32 +196,11 @@ judge_case() {
   secs=$(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN { printf "%.1f", b - a }')
   if [ $rc -eq 124 ] || [ $rc -eq 137 ]; then
     # --timeout: octocd was stopped (its partial report, if any, is replaced by the error).
-    n="$(xml_escape "$name")"
-    msg="$(xml_escape "timed out after $timeout_s s (--timeout; $n_frames frames asked, see $log)")"
-    cat >"$out/junit/$name.xml" <<EOF2
-<?xml version="1.0" encoding="UTF-8"?>
-<testsuites name="octocd validate" tests="1" failures="0" errors="1" skipped="0" time="$secs">
-  <testsuite name="$n" tests="1" failures="0" errors="1" skipped="0" time="$secs">
-    <testcase classname="$n" name="octocd" time="$secs">
-      <error message="$msg" type="timeout">$msg</error>
-    </testcase>
-  </testsuite>
-</testsuites>
-EOF2
+    junit_error "$name" timeout "timed out after $timeout_s s (--timeout; $n_frames frames asked, see $log)"
     rc=124
   elif [ ! -s "$out/junit/$name.xml" ]; then
     # octocd wrote no report (it crashed, or the command line was refused): one errored case.
-    n="$(xml_escape "$name")" msg="$(xml_escape "octocd validate exited $rc without a report; see $log")"
-    cat >"$out/junit/$name.xml" <<EOF2
-<?xml version="1.0" encoding="UTF-8"?>
-<testsuites name="octocd validate" tests="1" failures="0" errors="1" skipped="0" time="$secs">
-  <testsuite name="$n" tests="1" failures="0" errors="1" skipped="0" time="$secs">
-    <testcase classname="$n" name="octocd" time="$secs">
-      <error message="$msg" type="exit-$rc">$msg</error>
-    </testcase>
-  </testsuite>
-</testsuites>
-EOF2
+    junit_error "$name" "exit-$rc" "octocd validate exited $rc without a report; see $log"
   fi
   # octocd's own plain-text outcome lines (validate's stdout): expected, NEW FAILURE,
   # GROWN, fixed (never the JUnit's XML-escaped messages).

@@ -33,16 +33,6 @@ std::string who(const std::string& label, const std::string& path) {
   return label.empty() ? path : label + ": " + path;
 }
 
-/// The type word of a stat mode that is not a regular file.
-const char* kind_of(mode_t mode) {
-  return S_ISDIR(mode)                     ? "a folder"
-         : S_ISFIFO(mode)                  ? "a FIFO"
-         : S_ISCHR(mode) || S_ISBLK(mode)  ? "a device"
-         : S_ISSOCK(mode)                  ? "a socket"
-         : S_ISLNK(mode)                   ? "a symbolic link"
-                                           : "not a plain file";
-}
-
 /// The process's umask, read without changing it (/proc/self/status "Umask:"; 022 when
 /// that cannot be read): umask(2) would set it, racing with other threads' creates.
 mode_t current_umask() {
@@ -55,6 +45,15 @@ mode_t current_umask() {
 
 }  // namespace
 
+const char* file_type_word(unsigned mode) {
+  return S_ISDIR(mode)                     ? "a folder"
+         : S_ISFIFO(mode)                  ? "a FIFO"
+         : S_ISCHR(mode) || S_ISBLK(mode)  ? "a device"
+         : S_ISSOCK(mode)                  ? "a socket"
+         : S_ISLNK(mode)                   ? "a symbolic link"
+                                           : "not a plain file";
+}
+
 std::string output_path_kind(const std::string& path) {
   struct stat st {};
   if (::lstat(path.c_str(), &st) != 0 || S_ISREG(st.st_mode)) return "";
@@ -63,7 +62,7 @@ std::string output_path_kind(const std::string& path) {
     const std::filesystem::path to = std::filesystem::read_symlink(path, ec);
     return fmt::format("a symbolic link (to {})", ec ? std::string("?") : to.string());
   }
-  return kind_of(st.st_mode);
+  return file_type_word(st.st_mode);
 }
 
 void check_output_file(const std::string& path, const std::string& label, bool folder_made_later) {
@@ -146,7 +145,7 @@ void check_input_file(const std::string& path, const std::string& label, const s
                                  allowed));
   }
   if (!S_ISREG(st.st_mode))
-    throw InputError(fmt::format("{}: not a regular file ({}); allowed: {}", who(label, path), kind_of(st.st_mode),
+    throw InputError(fmt::format("{}: not a regular file ({}); allowed: {}", who(label, path), file_type_word(st.st_mode),
                                  allowed));
 }
 
@@ -167,7 +166,7 @@ std::string read_input_file(const std::string& path, const std::string& label, c
   if (::fstat(fd, &st) != 0)
     throw InputError(fmt::format("{}: cannot be examined ({}); allowed: {}", who(label, path), reason(errno), allowed));
   if (!S_ISREG(st.st_mode))
-    throw InputError(fmt::format("{}: not a regular file ({}); allowed: {}", who(label, path), kind_of(st.st_mode),
+    throw InputError(fmt::format("{}: not a regular file ({}); allowed: {}", who(label, path), file_type_word(st.st_mode),
                                  allowed));
   if (static_cast<std::uint64_t>(st.st_size) > max_bytes)
     throw InputError(fmt::format("{}: {} bytes; allowed: {} of at most {} bytes", who(label, path), st.st_size,

@@ -39,23 +39,15 @@ constexpr std::size_t kParallelMinBodies = 4096;
 /// In-tree slots per task of the overflow tests when they run on several threads.
 constexpr std::uint32_t kOverflowChunk = 4096;
 
-/// The OpenMP threads the query may use (omp_get_max_threads; 1 without OpenMP).
-inline int max_threads() {
+// max_threads(): the OpenMP threads the query may use (omp_get_max_threads; 1 without OpenMP).
+// thread_num(): the calling thread's number in the current parallel region (0 outside one).
 #if defined(_OPENMP)
-  return omp_get_max_threads();
+inline int max_threads() { return omp_get_max_threads(); }
+inline int thread_num() { return omp_get_thread_num(); }
 #else
-  return 1;
+inline int max_threads() { return 1; }
+inline int thread_num() { return 0; }
 #endif
-}
-
-/// The calling thread's number in the current parallel region (0 outside one).
-inline int thread_num() {
-#if defined(_OPENMP)
-  return omp_get_thread_num();
-#else
-  return 0;
-#endif
-}
 
 /// The cells of level m whose loose boxes meet q, per axis (loose_query_axis_q); false
 /// when the range is empty on some axis.

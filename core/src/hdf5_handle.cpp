@@ -13,6 +13,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 
 namespace octocd {
@@ -127,11 +128,7 @@ Hdf5Reader::Hdf5Reader(const std::string& path, const std::string& what) : path_
   }
   if (!S_ISREG(st.st_mode))
     throw InputError(fmt::format("{}: not a regular file ({}); allowed: {} stored in a regular file", path,
-                                 S_ISDIR(st.st_mode)    ? "a folder"
-                                 : S_ISFIFO(st.st_mode) ? "a FIFO"
-                                 : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
-                                                                               : "not a plain file",
-                                 what));
+                                 file_type_word(st.st_mode), what));
   file_bytes_ = static_cast<std::uint64_t>(st.st_size);
   if (H5Fis_hdf5(path.c_str()) <= 0)
     throw InputError(fmt::format("{}: not an HDF5 file{}; allowed: {} (docs/trace-format.md)", path,

@@ -62,6 +62,18 @@ std::string lower(std::string s) {
   return s;
 }
 
+/// Fails when a mesh declares or holds more vertices or faces than the limits allow:
+/// "<says> N vertices (expected at most M)" (e.g. says = "the OFF header declares").
+void check_mesh_counts(const std::string& path, const std::string& says, std::uint64_t vertices,
+                       std::uint64_t faces) {
+  if (vertices > limits::kMaxMeshVertices)
+    fail(path, says + " " + std::to_string(vertices) + " vertices (expected at most " +
+                   std::to_string(limits::kMaxMeshVertices) + ")");
+  if (faces > limits::kMaxMeshFaces)
+    fail(path, says + " " + std::to_string(faces) + " faces (expected at most " +
+                   std::to_string(limits::kMaxMeshFaces) + ")");
+}
+
 /// A non-negative integer token of an OFF file, or a failure naming `what`.
 std::uint64_t off_count(const std::string& path, const std::string& token, const std::string& what) {
   try {
@@ -114,12 +126,7 @@ std::uint64_t check_off(const std::string& path) {
   if (header.size() < 3) fail(path, "truncated OFF header (expected vertex and face counts)");
   const std::uint64_t nv = off_count(path, header[1], "vertex count");
   const std::uint64_t nf = off_count(path, header[2], "face count");
-  if (nv > limits::kMaxMeshVertices)
-    fail(path, "the OFF header declares " + std::to_string(nv) + " vertices (expected at most " +
-                   std::to_string(limits::kMaxMeshVertices) + ")");
-  if (nf > limits::kMaxMeshFaces)
-    fail(path, "the OFF header declares " + std::to_string(nf) + " faces (expected at most " +
-                   std::to_string(limits::kMaxMeshFaces) + ")");
+  check_mesh_counts(path, "the OFF header declares", nv, nf);
   // The header line may hold the counts and the edge count; vertices start on the next line.
   // Vertex lines hold x y z (then optional colour or normal); assimp 5.2 reads past a
   // short line and crashes (found by fuzz_mesh), so each is checked here.
@@ -434,12 +441,7 @@ Mesh load_mesh(const std::string& path) {
     faces += scene->mMeshes[i]->mNumFaces;
     vertices += scene->mMeshes[i]->mNumVertices;
   }
-  if (vertices > limits::kMaxMeshVertices)
-    fail(path, "holds " + std::to_string(vertices) + " vertices (expected at most " +
-                   std::to_string(limits::kMaxMeshVertices) + ")");
-  if (faces > limits::kMaxMeshFaces)
-    fail(path, "holds " + std::to_string(faces) + " faces (expected at most " +
-                   std::to_string(limits::kMaxMeshFaces) + ")");
+  check_mesh_counts(path, "holds", vertices, faces);
   // Faces are checked before assimp's post-processing, which asserts (abort()) on a face
   // without indices (found by fuzz_mesh: an OFF face line cut by garbage).
   for (unsigned i = 0, first = 0; i < scene->mNumMeshes; first += scene->mMeshes[i]->mNumFaces, ++i) {

@@ -153,6 +153,15 @@ inline void launched(cudaError_t e, const char* kernel) {
   }
 }
 
+/// Grows `bytes` to the CUB temporary storage a size query asks for: `query(b)` runs the
+/// primitive with a null temporary buffer, which sets b; its error is check()ed as `what`.
+template <class Query>
+inline void need_temp(std::size_t& bytes, const char* what, Query query) {
+  std::size_t b = 0;
+  check(query(b), what);
+  bytes = std::max(bytes, b);
+}
+
 /// Throws RuntimeError (a programming error of the caller) when find() gets a body count
 /// that reserve() did not size the scratch for.
 inline void check_reserved(bool reserved, std::uint32_t reserved_n, std::uint32_t n, const std::string& name) {

@@ -193,12 +193,8 @@ class LbvhDevice final : public DeviceBroadPhase {
   }
 
   std::uint64_t device_bytes() const override {
-    std::uint64_t t = 0;
-    for (const BufferBase* b : std::initializer_list<const BufferBase*>{
-             &code_, &body_, &sorted_code_, &slot_body_, &slot_box_, &leaf_parent_, &nodes_, &node_box_,
-             &node_parent_, &flag_, &temp_})
-      t += b->bytes();
-    return t;
+    return total_bytes({&code_, &body_, &sorted_code_, &slot_body_, &slot_box_, &leaf_parent_, &nodes_, &node_box_,
+                        &node_parent_, &flag_, &temp_});
   }
 
  private:

@@ -285,11 +285,8 @@ class CoherentOctreeDevice final : public DeviceBroadPhase {
   }
 
   std::uint64_t device_bytes() const override {
-    std::uint64_t t = octree_->device_bytes();
-    for (const BufferBase* b :
-         std::initializer_list<const BufferBase*>{&status_, &fat_, &cache_, &cache_scratch_, &selected_, &flags_, &temp_})
-      t += b->bytes();
-    return t;
+    return octree_->device_bytes() +
+           total_bytes({&status_, &fat_, &cache_, &cache_scratch_, &selected_, &flags_, &temp_});
   }
 
  private:

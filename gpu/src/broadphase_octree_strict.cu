@@ -158,21 +158,18 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
       counted_.ensure(n);
     }
     // CUB temporary storage for every primitive find() runs on these sizes.
-    std::size_t bytes = 0, b = 0;
-    check(sort_pairs_u64_u32(nullptr, b, nullptr, nullptr, nullptr, nullptr, n, end_bit_, stream),
-          "cub::DeviceRadixSort::SortPairs (size)");
-    bytes = std::max(bytes, b);
-    b = 0;
-    check(exclusive_scan_u32(nullptr, b, nullptr, nullptr, static_cast<std::uint32_t>(n1), stream),
-          "cub::DeviceScan::ExclusiveSum (size)");
-    bytes = std::max(bytes, b);
+    std::size_t bytes = 0;
+    bp::need_temp(bytes, "cub::DeviceRadixSort::SortPairs (size)", [&](std::size_t& b) {
+      return sort_pairs_u64_u32(nullptr, b, nullptr, nullptr, nullptr, nullptr, n, end_bit_, stream);
+    });
+    bp::need_temp(bytes, "cub::DeviceScan::ExclusiveSum (size)", [&](std::size_t& b) {
+      return exclusive_scan_u32(nullptr, b, nullptr, nullptr, static_cast<std::uint32_t>(n1), stream);
+    });
     if (depth_ < 0) {
-      b = 0;
-      check(sum_f64(nullptr, b, nullptr, nullptr, n, stream), "cub::DeviceReduce::Sum (size)");
-      bytes = std::max(bytes, b);
-      b = 0;
-      check(sum_u32(nullptr, b, nullptr, nullptr, n, stream), "cub::DeviceReduce::Sum (size)");
-      bytes = std::max(bytes, b);
+      bp::need_temp(bytes, "cub::DeviceReduce::Sum (size)",
+                    [&](std::size_t& b) { return sum_f64(nullptr, b, nullptr, nullptr, n, stream); });
+      bp::need_temp(bytes, "cub::DeviceReduce::Sum (size)",
+                    [&](std::size_t& b) { return sum_u32(nullptr, b, nullptr, nullptr, n, stream); });
     }
     temp_.ensure(bytes);
     reserved_ = true;
@@ -236,9 +233,7 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
   }
 
   std::uint64_t device_bytes() const override {
-    std::uint64_t total = 0;
-    for (const BufferBase* b : buffers()) total += b->bytes();
-    return total;
+    return total_bytes(buffers());
   }
 
  private:

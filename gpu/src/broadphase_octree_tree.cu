@@ -826,13 +826,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   }
 
   std::uint64_t device_bytes() const override {
-    std::uint64_t t = 0;
-    for (const BufferBase* b : std::initializer_list<const BufferBase*>{
-             &min_, &key_, &body_, &sorted_key_, &slot_body_, &slot_box_,
-             &level_begin_, &cell_table_, &occupancy_, &pair_count_, &pair_offset_, &long_list_,
-             &long_count_, &temp_})
-      t += b->bytes();
-    return t;
+    return total_bytes({&min_, &key_, &body_, &sorted_key_, &slot_body_, &slot_box_, &level_begin_, &cell_table_,
+                        &occupancy_, &pair_count_, &pair_offset_, &long_list_, &long_count_, &temp_});
   }
 
  private:

@@ -220,19 +220,17 @@ class SpatialHashDevice final : public DeviceBroadPhase {
     slot_body_.ensure(entries);
     count_.ensure(counts);
     offset_.ensure(counts);
-    std::size_t bytes = 0, b = 0;
-    check(sort_pairs_u64_u32(nullptr, b, nullptr, nullptr, nullptr, nullptr, static_cast<std::uint32_t>(entries), 64,
-                             stream),
-          "cub::DeviceRadixSort::SortPairs (size)");
-    bytes = std::max(bytes, b);
-    b = 0;
-    check(exclusive_scan_u32(nullptr, b, nullptr, nullptr, static_cast<std::uint32_t>(counts), stream),
-          "cub::DeviceScan::ExclusiveSum (size)");
-    bytes = std::max(bytes, b);
-    b = 0;
-    check(exclusive_scan_u32(nullptr, b, nullptr, nullptr, static_cast<std::uint32_t>(n1), stream),
-          "cub::DeviceScan::ExclusiveSum (size)");
-    bytes = std::max(bytes, b);
+    std::size_t bytes = 0;
+    bp::need_temp(bytes, "cub::DeviceRadixSort::SortPairs (size)", [&](std::size_t& b) {
+      return sort_pairs_u64_u32(nullptr, b, nullptr, nullptr, nullptr, nullptr, static_cast<std::uint32_t>(entries),
+                                64, stream);
+    });
+    bp::need_temp(bytes, "cub::DeviceScan::ExclusiveSum (size)", [&](std::size_t& b) {
+      return exclusive_scan_u32(nullptr, b, nullptr, nullptr, static_cast<std::uint32_t>(counts), stream);
+    });
+    bp::need_temp(bytes, "cub::DeviceScan::ExclusiveSum (size)", [&](std::size_t& b) {
+      return exclusive_scan_u32(nullptr, b, nullptr, nullptr, static_cast<std::uint32_t>(n1), stream);
+    });
     temp_.ensure(bytes);
     reserved_ = true;
     reserved_n_ = n;
@@ -301,12 +299,8 @@ class SpatialHashDevice final : public DeviceBroadPhase {
   }
 
   std::uint64_t device_bytes() const override {
-    std::uint64_t total = 0;
-    for (const BufferBase* b : std::initializer_list<const BufferBase*>{
-             &kind_, &cell0_, &small_cells_, &large_cells_, &small_off_, &large_off_, &key_, &key_sorted_, &body_,
-             &slot_body_, &count_, &offset_, &temp_})
-      total += b->bytes();
-    return total;
+    return total_bytes({&kind_, &cell0_, &small_cells_, &large_cells_, &small_off_, &large_off_, &key_, &key_sorted_,
+                        &body_, &slot_body_, &count_, &offset_, &temp_});
   }
 
  private:

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <initializer_list>
 #include <string>
 #include <vector>
 
@@ -93,6 +94,19 @@ class DeviceBuffer : public BufferBase {
   explicit DeviceBuffer(const char* name) : BufferBase(name, sizeof(T)) {}
   T* get() const { return static_cast<T*>(ptr_); }
 };
+
+/// The device memory (bytes) the buffers of `buffers` hold together: BufferBase::bytes
+/// summed over any range of BufferBase pointers.
+template <class Range>
+inline std::uint64_t total_bytes(const Range& buffers) {
+  std::uint64_t total = 0;
+  for (const BufferBase* b : buffers) total += b->bytes();
+  return total;
+}
+/// total_bytes of a braced list of buffers: total_bytes({&a_, &b_}).
+inline std::uint64_t total_bytes(std::initializer_list<const BufferBase*> buffers) {
+  return total_bytes<std::initializer_list<const BufferBase*>>(buffers);
+}
 
 /// Copies a host vector into a device buffer on `stream` and waits for it. With
 /// `allocate`, the buffer is first reallocated to the vector's size.

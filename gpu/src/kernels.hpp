@@ -49,6 +49,15 @@ __device__ inline std::uint32_t live_count(const std::uint32_t* total, std::uint
   const std::uint32_t t = *total;
   return t < capacity ? t : capacity;
 }
+
+/// Launches the one-argument `kernel` on `grid` blocks of kBlockSize threads on `stream`
+/// when `run`; returns the launch's error (cudaGetLastError), cudaSuccess when not run.
+template <class Desc>
+inline cudaError_t launch_when(bool run, void (*kernel)(Desc), const Desc& d, unsigned grid, cudaStream_t stream) {
+  if (!run) return cudaSuccess;
+  kernel<<<grid, kBlockSize, 0, stream>>>(d);
+  return cudaGetLastError();
+}
 #endif
 
 /// Hot body state and per-body constants on the device (structure of arrays, n bodies).

@@ -64,21 +64,16 @@ __global__ void mid_keep_kernel(MidListDesc d) {
 }  // namespace
 
 cudaError_t launch_mid_keep(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
-  if ((d.wit.witness == nullptr && d.leaf_items == nullptr) || d.pair_capacity == 0) return cudaSuccess;
-  mid_keep_kernel<<<grid, kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
+  return launch_when((d.wit.witness != nullptr || d.leaf_items != nullptr) && d.pair_capacity != 0, mid_keep_kernel,
+                     d, grid, stream);
 }
 
 cudaError_t launch_mid_decide(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
-  if (d.pair_capacity == 0) return cudaSuccess;
-  mid_decide_kernel<<<grid, kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
+  return launch_when(d.pair_capacity != 0, mid_decide_kernel, d, grid, stream);
 }
 
 cudaError_t launch_mid_witness(const MidListDesc& d, unsigned grid, cudaStream_t stream) {
-  if (d.wit.witness == nullptr) return cudaSuccess;
-  mid_witness_kernel<<<grid, kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
+  return launch_when(d.wit.witness != nullptr, mid_witness_kernel, d, grid, stream);
 }
 
 cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t stream) {

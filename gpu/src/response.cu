@@ -120,33 +120,23 @@ __global__ void apply_sums_kernel(ApplyDesc d) {
 }  // namespace
 
 cudaError_t launch_index_count(const IndexDesc& d, unsigned grid, cudaStream_t stream) {
-  if (d.capacity == 0) return cudaSuccess;
-  index_count_kernel<<<grid, kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
+  return launch_when(d.capacity != 0, index_count_kernel, d, grid, stream);
 }
 
 cudaError_t launch_index_fill(const IndexDesc& d, unsigned grid, cudaStream_t stream) {
-  if (d.capacity == 0) return cudaSuccess;
-  index_fill_kernel<<<grid, kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
+  return launch_when(d.capacity != 0, index_fill_kernel, d, grid, stream);
 }
 
 cudaError_t launch_index_long(const IndexDesc& d, unsigned grid, cudaStream_t stream) {
-  if (d.capacity == 0) return cudaSuccess;
-  index_long_kernel<<<grid, kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
+  return launch_when(d.capacity != 0, index_long_kernel, d, grid, stream);
 }
 
 cudaError_t launch_contact_terms(const TermsDesc& d, unsigned grid, cudaStream_t stream) {
-  if (d.pair_capacity == 0) return cudaSuccess;
-  contact_terms_kernel<<<grid, kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
+  return launch_when(d.pair_capacity != 0, contact_terms_kernel, d, grid, stream);
 }
 
 cudaError_t launch_apply_sums(const ApplyDesc& d, cudaStream_t stream) {
-  if (d.n == 0) return cudaSuccess;
-  apply_sums_kernel<<<grid_for(d.n), kBlockSize, 0, stream>>>(d);
-  return cudaGetLastError();
+  return launch_when(d.n != 0, apply_sums_kernel, d, grid_for(d.n), stream);
 }
 
 }  // namespace gpu

@@ -56,10 +56,10 @@ btVector3 to_bt(const Vec3& v) { return btVector3(v.x, v.y, v.z); }
 
 /// Shared driver: owns the Bullet broadphase, a dispatcher (only used by Bullet to free
 /// collision algorithms of removed pairs; we never create any) and the proxies.
-class BulletBroadPhase final : public BroadPhase {
+class BulletBroadPhase final : public LibraryBroadPhase {
  public:
   BulletBroadPhase(BroadPhaseId id, const Aabb& domain)
-      : dbvt_(id == BroadPhaseId::bullet_dbvt), name_(broadphase_name(id)), domain_(domain) {}
+      : LibraryBroadPhase(id), dbvt_(id == BroadPhaseId::bullet_dbvt), domain_(domain) {}
 
   ~BulletBroadPhase() override {
     if (!broadphase_) return;
@@ -80,45 +80,38 @@ class BulletBroadPhase final : public BroadPhase {
       for (btBroadphaseProxy* p : proxies_) broadphase_->destroyProxy(p, dispatcher_.get());
   }
 
-  std::string name() const override { return name_; }
+ private:
+  bool built() const override { return broadphase_ != nullptr; }
+  std::size_t bodies() const override { return proxies_.size(); }
 
-  void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
-                  BroadPhaseStats& stats) override {
-    if (!broadphase_) {
-      create(boxes);
-    } else {
-      check_count(name_, proxies_.size(), boxes.size());
-      for (std::size_t i = 0; i < boxes.size(); ++i) {
-        broadphase_->setAabb(proxies_[i], to_bt(boxes[i].min), to_bt(boxes[i].max),
-                             dispatcher_.get());
-      }
-    }
+  void move(const std::vector<Aabb>& boxes) override {
+    for (std::size_t i = 0; i < boxes.size(); ++i)
+      broadphase_->setAabb(proxies_[i], to_bt(boxes[i].min), to_bt(boxes[i].max), dispatcher_.get());
+  }
+
+  void collect(std::vector<Pair>& candidates) override {
     broadphase_->calculateOverlappingPairs(dispatcher_.get());
-
-    btOverlappingPairCache* cache = broadphase_->getOverlappingPairCache();
-    const btBroadphasePairArray& arr = cache->getOverlappingPairArray();
-    candidates_.clear();
-    candidates_.reserve(static_cast<std::size_t>(arr.size()));
+    const btBroadphasePairArray& arr = broadphase_->getOverlappingPairCache()->getOverlappingPairArray();
+    candidates.reserve(static_cast<std::size_t>(arr.size()));
     for (int k = 0; k < arr.size(); ++k) {
       const btBroadphasePair& bp = arr[k];
       const auto a = *static_cast<const std::uint32_t*>(bp.m_pProxy0->m_clientObject);
       const auto b = *static_cast<const std::uint32_t*>(bp.m_pProxy1->m_clientObject);
-      candidates_.push_back({a, b});
+      candidates.push_back({a, b});
     }
-    stats.cell_candidates = candidates_.size();
-    finish_pairs(boxes, candidates_, out);
-    stats.pairs = out.size();
-    // Approximate: proxies, tree nodes (2 per leaf) or sweep edges, the pair cache.
-    const std::uint64_t per_proxy =
-        dbvt_ ? sizeof(btDbvtProxy) + 2 * sizeof(btDbvtNode)
-                               : sizeof(bt32BitAxisSweep3::Handle) + 6 * 2 * sizeof(unsigned int);
-    stats.memory_bytes = proxies_.size() * (per_proxy + sizeof(std::uint32_t)) +
-                         static_cast<std::uint64_t>(arr.capacity()) * sizeof(btBroadphasePair) +
-                         candidates_.capacity() * sizeof(Pair);
   }
 
- private:
-  void create(const std::vector<Aabb>& boxes) {
+  // Approximate: proxies, tree nodes (2 per leaf) or sweep edges, the pair cache.
+  std::uint64_t library_bytes() const override {
+    const std::uint64_t per_proxy =
+        dbvt_ ? sizeof(btDbvtProxy) + 2 * sizeof(btDbvtNode)
+              : sizeof(bt32BitAxisSweep3::Handle) + 6 * 2 * sizeof(unsigned int);
+    const btBroadphasePairArray& arr = broadphase_->getOverlappingPairCache()->getOverlappingPairArray();
+    return proxies_.size() * (per_proxy + sizeof(std::uint32_t)) +
+           static_cast<std::uint64_t>(arr.capacity()) * sizeof(btBroadphasePair);
+  }
+
+  void create(const std::vector<Aabb>& boxes) override {
     config_ = std::make_unique<btDefaultCollisionConfiguration>();
     dispatcher_ = std::make_unique<btCollisionDispatcher>(config_.get());
     if (dbvt_) {
@@ -148,14 +141,12 @@ class BulletBroadPhase final : public BroadPhase {
   }
 
   bool dbvt_;  // btDbvtBroadphase (bullet-dbvt); else bt32BitAxisSweep3 (bullet-sap)
-  std::string name_;
   Aabb domain_;
   std::unique_ptr<btDefaultCollisionConfiguration> config_;
   std::unique_ptr<btCollisionDispatcher> dispatcher_;
   std::unique_ptr<btBroadphaseInterface> broadphase_;
   std::vector<std::uint32_t> ids_;  // user pointers point here; never resized after create
   std::vector<btBroadphaseProxy*> proxies_;
-  std::vector<Pair> candidates_;
 };
 
 }  // namespace

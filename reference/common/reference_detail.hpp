@@ -39,6 +39,51 @@ inline void check_count(const std::string& name, std::size_t expected, std::size
   }
 }
 
+/// A library broadphase (Bullet's, FCL's) built on its first find_pairs and moved on the
+/// later ones. find_pairs builds it (create) or checks the body count (check_count) and
+/// moves every box (move), gathers the library's candidates (collect) and keeps the exact
+/// pairs (finish_pairs); stats: the candidates, the pairs and library_bytes() plus the
+/// candidate buffer.
+class LibraryBroadPhase : public BroadPhase {
+ public:
+  explicit LibraryBroadPhase(BroadPhaseId id) : name_(broadphase_name(id)) {}
+
+  std::string name() const override { return name_; }
+
+  void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, BroadPhaseStats& stats) final {
+    if (!built()) {
+      create(boxes);
+    } else {
+      check_count(name_, bodies(), boxes.size());
+      move(boxes);
+    }
+    candidates_.clear();
+    collect(candidates_);
+    stats.cell_candidates = candidates_.size();
+    finish_pairs(boxes, candidates_, out);
+    stats.pairs = out.size();
+    stats.memory_bytes = library_bytes() + candidates_.capacity() * sizeof(Pair);
+  }
+
+ protected:
+  /// Whether create() has run.
+  virtual bool built() const = 0;
+  /// The body count create() was given.
+  virtual std::size_t bodies() const = 0;
+  /// Builds the library's structure for `boxes` (body i is boxes[i]).
+  virtual void create(const std::vector<Aabb>& boxes) = 0;
+  /// Moves every body to its box in `boxes` (as many as create() was given).
+  virtual void move(const std::vector<Aabb>& boxes) = 0;
+  /// Appends the library's candidate pairs (any order, duplicates allowed) to `candidates`.
+  virtual void collect(std::vector<Pair>& candidates) = 0;
+  /// Approximate bytes of the library's structures and the adapter's own per-body data.
+  virtual std::uint64_t library_bytes() const = 0;
+
+ private:
+  std::string name_;
+  std::vector<Pair> candidates_;
+};
+
 // Defined in bullet_broadphase.cpp and fcl_broadphase.cpp: the CPU factories of the rows
 // of octocd/broadphase_table.def with host `bullet` and `fcl`. `id` is one of their rows.
 std::unique_ptr<BroadPhase> make_bullet_broadphase(BroadPhaseId id, const Aabb& domain);

@@ -50,7 +50,7 @@ using S = double;
 constexpr S kPad = 1e-7;
 
 /// Collect callback: records (a, b) from the objects' user data; never stops.
-bool collect(fcl::CollisionObject<S>* o1, fcl::CollisionObject<S>* o2, void* cdata) {
+bool collect_pair(fcl::CollisionObject<S>* o1, fcl::CollisionObject<S>* o2, void* cdata) {
   auto* cands = static_cast<std::vector<Pair>*>(cdata);
   const auto a = *static_cast<const std::uint32_t*>(o1->getUserData());
   const auto b = *static_cast<const std::uint32_t*>(o2->getUserData());
@@ -58,44 +58,36 @@ bool collect(fcl::CollisionObject<S>* o1, fcl::CollisionObject<S>* o2, void* cda
   return false;
 }
 
-class FclBroadPhase final : public BroadPhase {
+class FclBroadPhase final : public LibraryBroadPhase {
  public:
   FclBroadPhase(BroadPhaseId id, float cell_size, const Aabb& domain)
-      : id_(id), name_(broadphase_name(id)), cell_size_(cell_size), domain_(domain) {}
-
-  std::string name() const override { return name_; }
-
-  void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out,
-                  BroadPhaseStats& stats) override {
-    if (!manager_) {
-      create(boxes);
-    } else {
-      check_count(name_, objects_.size(), boxes.size());
-      for (std::size_t i = 0; i < boxes.size(); ++i) place(i, boxes[i]);
-      if (id_ == BroadPhaseId::fcl_sap) {
-        // FCL 0.7's SaPCollisionManager::update() (update_) loops forever on our moved
-        // test sets (observed with 100 bodies: the endpoint lists get corrupted), so
-        // fcl-sap is rebuilt every call instead of updated: not incremental.
-        manager_->clear();
-        manager_->registerObjects(raw_);
-        manager_->setup();
-      } else {
-        manager_->update();
-      }
-    }
-    candidates_.clear();
-    manager_->collide(&candidates_, &collect);
-    stats.cell_candidates = candidates_.size();
-    finish_pairs(boxes, candidates_, out);
-    stats.pairs = out.size();
-    // Approximate: our objects and shapes; the manager's own structures are not counted.
-    stats.memory_bytes =
-        objects_.size() * (sizeof(fcl::CollisionObject<S>) + sizeof(fcl::Box<S>) +
-                           sizeof(std::uint32_t)) +
-        candidates_.capacity() * sizeof(Pair);
-  }
+      : LibraryBroadPhase(id), id_(id), cell_size_(cell_size), domain_(domain) {}
 
  private:
+  bool built() const override { return manager_ != nullptr; }
+  std::size_t bodies() const override { return objects_.size(); }
+
+  void move(const std::vector<Aabb>& boxes) override {
+    for (std::size_t i = 0; i < boxes.size(); ++i) place(i, boxes[i]);
+    if (id_ == BroadPhaseId::fcl_sap) {
+      // FCL 0.7's SaPCollisionManager::update() (update_) loops forever on our moved
+      // test sets (observed with 100 bodies: the endpoint lists get corrupted), so
+      // fcl-sap is rebuilt every call instead of updated: not incremental.
+      manager_->clear();
+      manager_->registerObjects(raw_);
+      manager_->setup();
+    } else {
+      manager_->update();
+    }
+  }
+
+  void collect(std::vector<Pair>& candidates) override { manager_->collide(&candidates, &collect_pair); }
+
+  // Approximate: our objects and shapes; the manager's own structures are not counted.
+  std::uint64_t library_bytes() const override {
+    return objects_.size() * (sizeof(fcl::CollisionObject<S>) + sizeof(fcl::Box<S>) + sizeof(std::uint32_t));
+  }
+
   void place(std::size_t i, const Aabb& b) {
     fcl::Box<S>& box = *shapes_[i];
     box.side = fcl::Vector3<S>(S(b.max.x) - S(b.min.x) + 2 * kPad,
@@ -108,7 +100,7 @@ class FclBroadPhase final : public BroadPhase {
     objects_[i]->computeAABB();
   }
 
-  void create(const std::vector<Aabb>& boxes) {
+  void create(const std::vector<Aabb>& boxes) override {
     if (id_ == BroadPhaseId::fcl_dynamic_aabb_tree) {
       manager_ = std::make_unique<fcl::DynamicAABBTreeCollisionManager<S>>();
     } else if (id_ == BroadPhaseId::fcl_sap) {
@@ -142,7 +134,6 @@ class FclBroadPhase final : public BroadPhase {
   }
 
   BroadPhaseId id_;
-  std::string name_;
   float cell_size_;
   Aabb domain_;
   std::vector<std::uint32_t> ids_;  // user data points here; never resized after create
@@ -151,7 +142,6 @@ class FclBroadPhase final : public BroadPhase {
   std::vector<fcl::CollisionObject<S>*> raw_;  // objects_ as raw pointers, for FCL
   // Declared last so it is destroyed first, while the objects it refers to still exist.
   std::unique_ptr<fcl::BroadPhaseCollisionManager<S>> manager_;
-  std::vector<Pair> candidates_;
 };
 
 }  // namespace

@@ -14,6 +14,10 @@
 
 namespace octocd {
 
+/// The type word of a stat(2) `mode` that is not a regular file, for messages: "a folder",
+/// "a FIFO", "a device", "a socket", "a symbolic link" (lstat only) or "not a plain file".
+const char* file_type_word(unsigned mode);
+
 /// What is at `path` when it is there and is not a regular file, from lstat (a symbolic
 /// link is named as such, not followed): "a symbolic link (to T)", "a FIFO", "a device",
 /// "a folder", "a socket" or "not a plain file"; "" when `path` is absent or a regular file.
