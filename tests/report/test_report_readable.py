@@ -158,3 +158,19 @@ def test_wrap_label_breaks_at_dashes():
     assert RP.wrap_label("asian-dragon-random-60") == "asian-dragon-\nrandom-60"
     assert RP.wrap_label("rods-150") == "rods-150"
     assert all(len(x) <= 16 for x in RP.wrap_label("x" * 40).split("\n"))
+
+
+def test_log_axes_of_the_other_sections_are_labelled():
+    """Broadphase scaling, max-instances and Table 5's plots: every log axis says so."""
+    import test_report_plot_caps as CAPS
+    docs = [CAPS.run(MR.section_scaling, CAPS.scaling(2, 3)), CAPS.run(MR.section_max_instances, CAPS.max_instances(6)),
+            FIX.section(MR.section_table5, FIX.table5())]
+    seen = 0
+    for doc in docs:
+        for _, fig, _ in doc.figs:
+            for ax in fig.axes:
+                for scale, label in ((ax.get_xscale(), ax.get_xlabel()), (ax.get_yscale(), ax.get_ylabel())):
+                    if scale == "log":
+                        seen += 1
+                        assert "log" in label, label
+    assert seen >= 5
