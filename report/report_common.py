@@ -1,7 +1,7 @@
 """What every part of octocd's report shares (report/make_report.py is the entry point): the
 one-line error (exit 2), numpy and matplotlib (exit 1 without them), the paper's tables, the
-stage and engine colours, the file being read (CURRENT, for the error of a malformed one) and
-the octocd binary that reads traces (OCTOCD), number formatting and the marks of points
+stage colours (the engines' are report_plots.ENGINE_COLORS), the file being read (CURRENT, for
+the error of a malformed one) and the octocd binary that reads traces (OCTOCD), number formatting and the marks of points
 measured under load."""
 
 import json
@@ -13,7 +13,6 @@ import sys
 PAPER = json.load(open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "paper_tables.json")))
 STAGES = ["integrate", "aabbs", "broadphase", "midphase", "response", "metrics"]
 STAGE_COLORS = ["#4e79a7", "#a0cbe8", "#f28e2b", "#e15759", "#59a14f", "#b6992d"]
-ENGINE_COLORS = {"cpu": "#4e79a7", "cuda": "#59a14f", "bullet": "#e15759"}
 NOISE_NOTE = ("Timings on a shared machine move with its load (other processes, builds): compare figures "
               "taken in one run; spreads are min-max over the repetitions.")
 

@@ -2,9 +2,88 @@
 (log axis, the paper's figures on their own axis, speed-ups printed) and stage shares, with
 the labels of points and engines."""
 
-from report_common import ENGINE_COLORS, STAGES, STAGE_COLORS, med, np, num, plt
+import re
+import textwrap
+import zlib
+
+from report_common import STAGES, STAGE_COLORS, med, np, num, plt
 
 MAX_BARS = 400  # bars a plot draws at most (10,000 took matplotlib 100 s); beyond, the tables hold the figures
+
+
+# The one engine -> colour map of every plot and page of the report: the Okabe-Ito palette
+# (colour-blind safe: Okabe & Ito, "Color Universal Design", 2008), one colour per built-in or
+# shipped engine. Other engines (a user's process engine) take engine_colour's fallback.
+ENGINE_COLORS = {"cpu": "#0072B2", "cuda": "#009E73", "bullet": "#D55E00", "mujoco": "#E69F00",
+                 "ode": "#56B4E9", "dart": "#CC79A7", "rapier": "#F0E442", "jolt": "#000000"}
+# Paul Tol's "muted" palette (colour-blind safe, none of them an ENGINE_COLORS colour) for
+# engines the map above does not name.
+FALLBACK_COLORS = ["#332288", "#88CCEE", "#44AA99", "#117733", "#999933", "#DDCC77", "#CC6677", "#882255",
+                   "#AA4499", "#DDDDDD"]
+
+
+def engine_colour(engine):
+    """The colour of `engine` on every plot: ENGINE_COLORS's, else a FALLBACK_COLORS entry
+    chosen by the CRC-32 of the name (the same name gets the same colour on every run, plot and
+    page; two unknown engines can share one, 1 chance in 10)."""
+    name = str(engine)
+    if name in ENGINE_COLORS:
+        return ENGINE_COLORS[name]
+    return FALLBACK_COLORS[zlib.crc32(name.encode("utf-8")) % len(FALLBACK_COLORS)]
+
+
+def wrap_label(text, width=16):
+    """A category label wrapped onto lines of at most `width` characters, broken after '-',
+    '_' or ' ' where it can ("bunny-stack-50" / "asian-dragon-random-60")."""
+    text = str(text)
+    if len(text) <= width:
+        return text
+    parts = re.split(r"(?<=[-_ ])", text)
+    lines, cur = [], ""
+    for part in parts:
+        if cur and len(cur) + len(part) > width:
+            lines.append(cur)
+            cur = ""
+        cur += part
+    lines.append(cur)
+    return "\n".join(textwrap.fill(line, width) if len(line) > width else line for line in lines)
+
+
+def tick_label_overlaps(fig, ax, axis="x"):
+    """Pairs (i, j) of the axis' drawn tick labels (visible, inside the view limits) whose boxes
+    overlap (window extents from the figure's renderer)."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    labels = ax.get_xticklabels() if axis == "x" else ax.get_yticklabels()
+    lo, hi = sorted(ax.get_xlim() if axis == "x" else ax.get_ylim())
+    boxes = [t.get_window_extent(renderer) for t in labels if t.get_visible() and t.get_text()
+             and lo <= t.get_position()[0 if axis == "x" else 1] <= hi]  # ticks outside the view are not drawn
+    return [(i, j) for i in range(len(boxes)) for j in range(i + 1, len(boxes)) if boxes[i].overlaps(boxes[j])]
+
+
+def readable_xticks(fig, ax, labels, fontsize=8):
+    """Category labels on ax's x axis that never overlap: wrapped (wrap_label) and level, else
+    on one line turned 90 degrees, then drawn smaller, until tick_label_overlaps finds none.
+    (Slanted labels are not tried: their boxes, axis-aligned, overlap where the text does not.)"""
+    ax.set_xticks(np.arange(len(labels)))
+    ax.set_xticklabels([wrap_label(x) for x in labels], rotation=0, ha="center", fontsize=fontsize)
+    for size in (fontsize, 6, 4):
+        if not tick_label_overlaps(fig, ax):
+            return
+        ax.set_xticklabels([str(x) for x in labels], rotation=90, ha="center", fontsize=size)
+
+
+def legend_below_ticks(fig, ax, **kw):
+    """ax's legend centred under its x tick labels (wherever their wrapping or turning left
+    them), never over them."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    lo, hi = sorted(ax.get_xlim())
+    boxes = [t.get_window_extent(renderer) for t in ax.get_xticklabels()
+             if t.get_visible() and t.get_text() and lo <= t.get_position()[0] <= hi]
+    low = min([b.y0 for b in boxes] + [ax.get_window_extent(renderer).y0])
+    y = ax.transAxes.inverted().transform((0, low))[1]
+    return ax.legend(loc="upper center", bbox_to_anchor=(0.5, y - 0.02), **kw)
 
 
 def too_many_to_draw(doc, title, count, what="bars"):
@@ -138,7 +217,7 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
             lo.append(s["median"] - s["min"] if s else 0)
             hi.append(s["max"] - s["median"] if s else 0)
         xs = np.arange(len(scenes)) + (k - (len(combos) - 1) / 2) * width
-        colour = ENGINE_COLORS.get(eng, "#777")
+        colour = engine_colour(eng)
         shade = 1.0 - 0.35 * (vals.index(val) / max(len(vals) - 1, 1))  # lighter for later values
         ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=f"{eng} {val}".strip(), color=colour, alpha=shade,
                hatch=HATCHES[vals.index(val) % len(HATCHES)], edgecolor="#222", linewidth=0.6)
@@ -151,16 +230,14 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
             ax.annotate(speedup_text(med(mine[val]) / med(mine[ref_val])), (xs[i], mine[val]["max"]),
                         xytext=(0, 2), textcoords="offset points", ha="center", va="bottom", fontsize=7,
                         rotation=90 if len(combos) > 4 else 0)
-    ax.set_xticks(np.arange(len(scenes)))
-    ax.set_xticklabels(scenes, rotation=0)
     ax.set_yscale("log")
     log_ticks(ax)
     ax.margins(y=0.15)
-    ax.set_ylabel("octocd steps/s (median, bars min–max)")
+    ax.set_ylabel("octocd steps/s (median, bars min–max; log scale)")
     ax.set_title("octocd" + (f" (Nx: speed-up over the engine's first {group_axis})" if group_axis else ""),
                  fontsize=9)
     fig.suptitle(title, fontsize=10)
-    ax.legend(fontsize=9, ncol=min(len(combos), 4), loc="upper center", bbox_to_anchor=(0.5, -0.1))
+    readable_xticks(fig, ax, scenes)
     if paper_vals:
         pw = 0.8 / len(paper_vals)
         for k, val in enumerate(paper_vals):
@@ -172,12 +249,12 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
                 if not np.isnan(y):
                     pax.annotate(f"{y:g}", (x, y), xytext=(0, 2), textcoords="offset points", ha="center",
                                  va="bottom", fontsize=6, rotation=90)
-        pax.set_xticks(np.arange(len(scenes)))
-        pax.set_xticklabels(scenes, rotation=30, ha="right", fontsize=7)
+        readable_xticks(fig, pax, scenes, fontsize=7)
         pax.margins(y=0.2)
         pax.set_ylabel("paper FPS (Unity, whole application)")
         pax.set_title("the paper's FPS (its own axis)", fontsize=9)
-        pax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=len(paper_vals))
+        legend_below_ticks(fig, pax, fontsize=8, ncol=len(paper_vals))
+    legend_below_ticks(fig, ax, fontsize=9, ncol=min(len(combos), 4))
     doc.figure(fig, name, title + ("; the paper's FPS in the right-hand panel, on its own axis" if paper_vals else ""))
 
 

@@ -378,8 +378,8 @@ def plot(doc, scene, pts, front, h):
     ax.yaxis.set_major_locator(LogLocator(base=10))
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: sci(v) if v > bottom * 1.5 else ""))
     ax.yaxis.set_minor_formatter(NullFormatter())
-    ax.set_xlabel("speed: simulated seconds per wall second (median; bars min–max over the repetitions)")
-    ax.set_ylabel("consistency error (against the line's smallest dt)")
+    ax.set_xlabel("speed: simulated seconds per wall second (median; bars min–max over the repetitions; log scale)")
+    ax.set_ylabel("consistency error (against the line's smallest dt; log scale)")
     ax.set_title(f"{scene}: consistency error against speed (points labelled by dt in s)", fontsize=9)
     ax.legend(fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2)
     doc.figure(fig, f"speed-accuracy-{slug(scene)}",

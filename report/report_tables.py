@@ -6,10 +6,10 @@ import html
 import math
 import os
 
-from report_common import (ENGINE_COLORS, PAPER, load_mark, load_warning, med, np, num, overlap, plt,
+from report_common import (PAPER, load_mark, load_warning, med, np, num, overlap, plt,
     point_load, spread_text)
 from report_plots import (axis_label, broadphase_class, engines_of, first_window, log_ticks, point_label,
-    stage_shares, steps_bars, steps_points, too_many_to_draw)
+    engine_colour, stage_shares, steps_bars, steps_points, too_many_to_draw)
 
 
 def engines_ran_text(g):
@@ -259,13 +259,13 @@ def section_tableA1(doc, g):
                 s = p["series"]
                 bp = point_label(p, "broadphase")
                 ax.plot(s["last_frame"], s["steps_per_s"], label=f"{p['params']['engine']} {bp}",
-                        color=ENGINE_COLORS.get(p["params"]["engine"], "#333"),
+                        color=engine_colour(p["params"]["engine"]),
                         linestyle="-" if bp == "O-A" else "--")
             ax.set_title(mesh)
             ax.set_xlabel("frame")
             ax.set_yscale("log")
             log_ticks(ax)
-        axes[0][0].set_ylabel("steps/s per 100 frames")
+        axes[0][0].set_ylabel("steps/s per 100 frames (log scale)")
         h, l = axes[0][0].get_legend_handles_labels()
         fig.legend(h, l, fontsize=9, ncol=min(len(l), 6), loc="upper center", bbox_to_anchor=(0.5, -0.02))
         fig.tight_layout()
@@ -364,18 +364,20 @@ def section_scaling(doc, g):
         return
     drawn = not too_many_to_draw(doc, "Broadphase scaling", len(pts), "points")
     fig, ax = plt.subplots(figsize=(8, 5)) if drawn else (None, None)
-    cmap = plt.get_cmap("tab20")
     rows = []
     sizes = sorted({p["bodies"] for p in pts})
-    for k, (key, ps) in enumerate(sorted(series.items())):
+    styles = ["-", "--", ":", "-."]
+    bps = {}  # engine -> its broadphases in order: the line style and marker of each
+    for key, ps in sorted(series.items()):
+        nb = bps.setdefault(key[0], {}).setdefault(key[1], len(bps[key[0]]))
         ps = sorted(ps, key=lambda p: p["bodies"])
         xs = np.array([p["bodies"] for p in ps], dtype=float)
         ys = np.array([med(p["ms_per_frame"]) for p in ps], dtype=float)
         lo = ys - np.array([p["ms_per_frame"]["min"] for p in ps])
         hi = np.array([p["ms_per_frame"]["max"] for p in ps]) - ys
         if drawn:
-            ax.errorbar(xs, ys, yerr=[lo, hi], marker="o", ms=3, capsize=2, label=f"{key[0]} {key[1]}",
-                        color=cmap(k % 20), linestyle="-" if key[0] == "cpu" else "--")
+            ax.errorbar(xs, ys, yerr=[lo, hi], marker="osD^v<>"[nb % 7], ms=3, capsize=2, label=f"{key[0]} {key[1]}",
+                        color=engine_colour(key[0]), linestyle=styles[nb % len(styles)])
         good = ys > 0
         sl = slope(xs[good], ys[good]) if good.sum() >= 2 else float("nan")
         ns = [p["params"].get("bodies", p["bodies"]) for p in ps]  # lattice sizes asked (walls apart)
@@ -389,8 +391,8 @@ def section_scaling(doc, g):
         ax.set_yscale("log")
         log_ticks(ax, "x")
         log_ticks(ax, "y")
-        ax.set_xlabel("bodies")
-        ax.set_ylabel("broadphase ms per frame")
+        ax.set_xlabel("bodies (log scale)")
+        ax.set_ylabel("broadphase ms per frame (log scale)")
         ax.set_title("Broadphase scaling on identical recorded AABBs (solid: cpu, dashed: cuda)")
         ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0))
         doc.figure(fig, "scaling", "Broadphase scaling, log-log: ms per frame against bodies")
@@ -425,7 +427,8 @@ def section_max_instances(doc, g):
     searches = g["searches"]
     # Every engine searched in any of the files (runs of one engine each merge into one table).
     named = list(dict.fromkeys(engines_of(g) + [x.get("engine") for x in searches if x.get("engine")]))
-    engines = [e for e in ("cpu", "cuda", "bullet") if e in named] + [e for e in named if e not in ENGINE_COLORS]
+    first = ("cpu", "cuda", "bullet")  # the paper's engines first, then the others in the files' order
+    engines = [e for e in first if e in named] + [e for e in named if e not in first]
     doc.p(f"Largest instance count N whose steps/s over frames {win.get('first')}-{win.get('last')} (the settled "
           f"window) is >= {target:g}, per model (its Table 5 random scene grown at the same density) and engine: "
           "doubling from 1, then bisection to the bracket [N, N+1] (or to the resolution "
@@ -480,9 +483,9 @@ def section_max_instances(doc, g):
            and "instances" in p.get("params", {}).get("axes", {})]
     if pts and not too_many_to_draw(doc, "max-instances: the probes of the search", len(pts), "points"):
         fig, ax = plt.subplots(figsize=(8, 4.6))
-        cmap = plt.get_cmap("tab10")
         keys = list(dict.fromkeys((p["params"]["scene"], p["params"]["engine"]) for p in pts))
-        for k, key in enumerate(keys):
+        scenes = list(dict.fromkeys(key[0] for key in keys))  # a line style per scene, a colour per engine
+        for key in keys:
             mine = [p for p in pts if (p["params"]["scene"], p["params"]["engine"]) == key]
             for role, style in (("probe", "o"), ("confirm", "x")):
                 ps = sorted((p for p in mine if p.get("role", "probe") == role),
@@ -491,20 +494,20 @@ def section_max_instances(doc, g):
                     continue
                 xs = [p["params"]["axes"]["instances"] for p in ps]
                 ys = [med(first_window(p)["steps_per_s"]) for p in ps]
-                ax.plot(xs, ys, marker=style, ms=3 if role == "probe" else 6, color=cmap(k % 10),
+                ax.plot(xs, ys, marker=style, ms=3 if role == "probe" else 6, color=engine_colour(key[1]),
                         label=f"{key[0]} {key[1]}" + (" (bracket ends, confirmed)" if role == "confirm" else ""),
-                        linestyle={"cpu": "-", "cuda": "--"}.get(key[1], ":") if role == "probe" else "none")
+                        linestyle=["-", "--", ":", "-."][scenes.index(key[0]) % 4] if role == "probe" else "none")
         ax.axhline(target, color="black", linewidth=1)
         ax.set_xscale("log")
         ax.set_yscale("log")
         log_ticks(ax, "x")
         log_ticks(ax, "y")
-        ax.set_xlabel("instances")
-        ax.set_ylabel("steps/s over the window (median; cut probes: upper bound)")
+        ax.set_xlabel("instances (log scale)")
+        ax.set_ylabel("steps/s over the window (median; cut probes: upper bound; log scale)")
         ax.set_title(f"Probes of the search; the line is the target {target:g} steps/s")
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
         doc.figure(fig, "max-instances-probes", "max-instances: every probe's steps/s against its instance count "
-                   "(solid cpu, dashed cuda, dotted bullet; x: the bracket's ends measured again)")
+                   "(a colour per engine, a line style per model; x: the bracket's ends measured again)")
 
 
 def section_generic(doc, g):
