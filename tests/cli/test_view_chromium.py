@@ -19,29 +19,15 @@ import shutil
 import subprocess
 import sys
 
-CHROMIUM = "/usr/bin/chromium"
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--enable-logging=stderr",
-         "--window-size=1000,700", "--hide-scrollbars"]
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from headless_chromium import BASE_FLAGS, dump_dom, fail, require, screenshot  # noqa: E402
 
-
-def skip(reason):
-    print(f"SKIPPED: {reason}")
-    sys.exit(77)
-
-
-def fail(reason):
-    print(f"FAIL: {reason}")
-    sys.exit(1)
+FLAGS = [*BASE_FLAGS, "--enable-unsafe-swiftshader", "--window-size=1000,700"]
 
 
 def main():
     octocd, source, work = sys.argv[1], sys.argv[2], sys.argv[3]
-    if not os.access(CHROMIUM, os.X_OK):
-        skip(f"{CHROMIUM} is absent (apt-get install chromium; scripts/install-deps.sh --tests installs it)")
-    try:
-        from PIL import Image
-    except ImportError:
-        skip("PIL is absent (apt-get install python3-pil) to read the screenshot")
+    Image = require()
     shutil.rmtree(work, ignore_errors=True)
     os.makedirs(work)
     trace = os.path.join(work, "rot-stack.h5")
@@ -55,8 +41,7 @@ def main():
         fail(f"no page written: {out}")
     url = "file://" + os.path.abspath(page)
 
-    dom = subprocess.run([CHROMIUM, *FLAGS, "--virtual-time-budget=5000", "--dump-dom", url], capture_output=True,
-                         text=True, timeout=120)
+    dom = dump_dom(url, FLAGS)
     status = re.search(r'<body[^>]*data-status="([a-z]+)"', dom.stdout)
     errors = re.search(r'<pre id="octocd-errors">(.*?)</pre>', dom.stdout, re.S)
     uncaught = [line for line in dom.stderr.splitlines() if "CONSOLE" in line and "Uncaught" in line]
@@ -70,10 +55,7 @@ def main():
         fail(f"the page's status is '{status.group(1)}', not 'drawn'")
 
     png = os.path.join(work, "shot.png")
-    shot = subprocess.run([CHROMIUM, *FLAGS, f"--screenshot={png}", url], capture_output=True, text=True,
-                          timeout=120)
-    if not os.path.exists(png):
-        fail(f"no screenshot (chromium exit {shot.returncode}):\n{shot.stderr[-3000:]}")
+    shot = screenshot(url, png, FLAGS)
     uncaught = [line for line in shot.stderr.splitlines() if "CONSOLE" in line and "Uncaught" in line]
     if uncaught:
         fail("uncaught errors in the browser log:\n" + "\n".join(uncaught))

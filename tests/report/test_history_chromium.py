@@ -15,30 +15,16 @@ import shutil
 import subprocess
 import sys
 
-CHROMIUM = "/usr/bin/chromium"
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr", "--window-size=1200,3000",
-         "--hide-scrollbars"]
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from headless_chromium import BASE_FLAGS, console_errors, dump_dom, fail, require, screenshot  # noqa: E402
 
-
-def skip(reason):
-    print(f"SKIPPED: {reason}")
-    sys.exit(77)
-
-
-def fail(reason):
-    print(f"FAIL: {reason}")
-    sys.exit(1)
+FLAGS = [*BASE_FLAGS, "--window-size=1200,3000"]
 
 
 def main():
     octocd, source, work = sys.argv[1], sys.argv[2], sys.argv[3]
     keep = sys.argv[4] if len(sys.argv) > 4 else None
-    if not os.access(CHROMIUM, os.X_OK):
-        skip(f"{CHROMIUM} is absent (apt-get install chromium; scripts/install-deps.sh --tests installs it)")
-    try:
-        from PIL import Image
-    except ImportError:
-        skip("PIL is absent (apt-get install python3-pil) to read the screenshot")
+    Image = require()
     sys.path.insert(0, os.path.join(source, "tests", "report"))
     from history_synth import make_history
     shutil.rmtree(work, ignore_errors=True)
@@ -52,8 +38,7 @@ def main():
     url = "file://" + os.path.abspath(page)
     n_img = open(page).read().count("<img ")
 
-    dom = subprocess.run([CHROMIUM, *FLAGS, "--virtual-time-budget=5000", "--dump-dom", url], capture_output=True,
-                         text=True, timeout=120)
+    dom = dump_dom(url, FLAGS)
     plots = re.search(r'<body[^>]*data-plots="(\d+)"', dom.stdout)
     drawn = re.search(r'<body[^>]*data-drawn="(\d+)/(\d+)"', dom.stdout)
     if plots is None or drawn is None:
@@ -63,14 +48,12 @@ def main():
         fail(f"{n} plots, {n_img} <img> elements; expected 4 (3 series and the verdict grid)")
     if drawn.group(1) != drawn.group(2) or int(drawn.group(2)) != n:
         fail(f"{drawn.group(1)} of {drawn.group(2)} images drawn; expected all {n}")
-    errors = [line for line in dom.stderr.splitlines() if "CONSOLE" in line or "Refused to" in line]
+    errors = console_errors(dom.stderr)
     if errors:
         fail("console errors:\n" + "\n".join(errors))
 
     png = os.path.join(work, "shot.png")
-    shot = subprocess.run([CHROMIUM, *FLAGS, f"--screenshot={png}", url], capture_output=True, text=True, timeout=120)
-    if not os.path.exists(png):
-        fail(f"no screenshot (chromium exit {shot.returncode}):\n{shot.stderr[-3000:]}")
+    screenshot(url, png, FLAGS)
     import numpy as np
     px = np.asarray(Image.open(png).convert("RGB")).astype(int)
     h, w = px.shape[:2]

@@ -15,30 +15,16 @@ import shutil
 import subprocess
 import sys
 
-CHROMIUM = "/usr/bin/chromium"
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr", "--window-size=1200,9000",
-         "--hide-scrollbars"]
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from headless_chromium import BASE_FLAGS, console_errors, dump_dom, fail, require, screenshot  # noqa: E402
 
-
-def skip(reason):
-    print(f"SKIPPED: {reason}")
-    sys.exit(77)
-
-
-def fail(reason):
-    print(f"FAIL: {reason}")
-    sys.exit(1)
+FLAGS = [*BASE_FLAGS, "--window-size=1200,9000"]
 
 
 def main():
     octocd, source, work = sys.argv[1], sys.argv[2], sys.argv[3]
     keep = sys.argv[4] if len(sys.argv) > 4 else None
-    if not os.access(CHROMIUM, os.X_OK):
-        skip(f"{CHROMIUM} is absent (apt-get install chromium; scripts/install-deps.sh --tests installs it)")
-    try:
-        from PIL import Image
-    except ImportError:
-        skip("PIL is absent (apt-get install python3-pil) to read the screenshot")
+    Image = require()
     sys.path.insert(0, os.path.join(source, "tests", "report"))
     sys.path.insert(0, os.path.join(source, "report"))
     from test_report_readable import SIX, small_scenes
@@ -60,19 +46,16 @@ def main():
     if n_fig < 2:
         fail(f"{n_fig} inline plots in {page}; expected the steps/s bars and the stage shares")
 
-    dom = subprocess.run([CHROMIUM, *FLAGS, "--virtual-time-budget=5000", "--dump-dom", url], capture_output=True,
-                         text=True, timeout=120)
+    dom = dump_dom(url, FLAGS)
     if len(re.findall(r"<figure><svg", dom.stdout)) != n_fig:
         fail(f"the page's DOM holds {len(re.findall(r'<figure><svg', dom.stdout))} of its {n_fig} plots "
              f"(chromium exit {dom.returncode}):\n{dom.stderr[-3000:]}")
-    errors = [line for line in dom.stderr.splitlines() if "CONSOLE" in line or "Refused to" in line]
+    errors = console_errors(dom.stderr)
     if errors:
         fail("console errors:\n" + "\n".join(errors))
 
     png = os.path.join(work, "shot.png")
-    shot = subprocess.run([CHROMIUM, *FLAGS, f"--screenshot={png}", url], capture_output=True, text=True, timeout=120)
-    if not os.path.exists(png):
-        fail(f"no screenshot (chromium exit {shot.returncode}):\n{shot.stderr[-3000:]}")
+    screenshot(url, png, FLAGS)
     import numpy as np
     px = np.asarray(Image.open(png).convert("RGB")).astype(int)
 
