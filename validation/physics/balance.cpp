@@ -286,13 +286,23 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       const double ratio =
           balance_figure(mdv, fi, discs[i].data(), discs[i].size(), float_bound, 1.0, &open_along);
       const double dpl = len3(dp);
-      // The systematic ratio's sample: body-steps whose s = J . m dv / |m dv|^2 the record
-      // fixes to kFitPrecision (docs/validation.md, "A systematic impulse ratio").
+      // The systematic ratio's sample: s = (J . d) / (m dv . d) along the first direction d
+      // (m dv's own, then each row's normal) where the record fixes it to kFitPrecision: the
+      // rounding and the friction its rows leave open along d (sum u |d x n|) at most that
+      // of m dv . d (docs/validation.md, "A systematic impulse ratio").
       {
-        double open = float_bound;
-        for (const Disc& dc : discs[i]) open += dc.u;
-        const double m2 = dot3(mdv, mdv);
-        if (m2 > 0 && open <= kFitPrecision * std::sqrt(m2)) sample_ratio(dot3(fi, mdv) / m2);
+        auto sample_along = [&](const D3& d) {
+          const double md = dot3(mdv, d);
+          double open = float_bound;
+          for (const Disc& dc : discs[i]) open += dc.u * len3(cross3(d, dc.n));
+          if (!(std::fabs(md) > 0) || open > kFitPrecision * std::fabs(md)) return false;
+          sample_ratio(dot3(fi, d) / md);
+          return true;
+        };
+        const double ml = len3(mdv);
+        bool sampled = ml > 0 && sample_along((1.0 / ml) * mdv);
+        for (const Disc& dc : discs[i])
+          if (!sampled) sampled = sample_along(dc.n);
       }
       const bool defer = ratio > 1.0 && deferred.size() < kMaxDeferred;
       if (defer) {

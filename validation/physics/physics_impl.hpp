@@ -491,9 +491,10 @@ struct PhysicsValidators::Impl {
   std::vector<DeferredBalance> deferred;
   std::vector<BalanceDisc> deferred_discs;
   std::uint64_t deferred_over = 0;
-  /// The fit's sample: s = (J . m dv) / |m dv|^2 (reported impulses over the momentum change)
-  /// of body-steps whose s the record fixes to kFitPrecision (the open friction and the
-  /// rounding at most that of |m dv|), in bins of kFitBin over [1 - kFitSpan, 1 + kFitSpan].
+  /// The fit's sample: s = (J . d) / (m dv . d) (reported impulses over the momentum change)
+  /// of body-steps whose s the record fixes to kFitPrecision along d (m dv's direction or a
+  /// row's normal: the open friction there and the rounding at most that of m dv . d), in
+  /// bins of kFitBin over [1 - kFitSpan, 1 + kFitSpan].
   static constexpr double kFitPrecision = 1e-3, kFitBin = 1e-6, kFitSpan = 0.1;
   /// A ratio beyond 1 +- this is itself a failure (the row's `ratio` cause, one finding).
   static constexpr double kBiasMax = 0.01;
