@@ -415,6 +415,12 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.applicable = false;
       r.detail = "n/a: the trace declares impulses = \"none\" (the engine reports no impulse): a body's velocity "
                  "change cannot be held to its rows' impulses; conservation judges the isolated groups";
+    } else if (!s.bodies.contacts_complete) {
+      r.applicable = false;
+      r.detail = fmt::format("n/a: the trace declares contacts_complete = 0: {} body-steps in contact not judged (a "
+                             "row the engine did not report would read as a fault); free-flight and conservation "
+                             "judge the bodies and groups the geometry shows apart",
+                             s.balance_incomplete);
     } else if (!s.bodies.impulses_complete) {
       r.applicable = false;
       r.detail = fmt::format("n/a: the record holds the impulses of the first of response.iterations = {} "
