@@ -4,9 +4,10 @@
 /// dBoxBox: the 15 separating axes, a face axis kept unless an edge-edge axis overlaps less
 /// than 1/1.05 of it, the incident face clipped against the reference face), as the
 /// reference geometry (reference_contact.hpp) reads it: the same bits as FCL's own answer
-/// (the same operations in the same order; tests/reference/test_box_box_deepest.cpp checks
-/// it against FCL on randomised pairs) without FCL's contact vector, its culling to four
-/// points and the world positions of the points it does not keep.
+/// (the same operations in the same order; the test BoxBoxDeepest in
+/// tests/reference/test_reference_contact.cpp checks it against FCL on randomised pairs)
+/// without FCL's contact vector, its culling to four points and the world positions of
+/// the points it does not keep.
 ///
 /// Units: metres; double precision. Frames: each box centred at `position` with its axes the
 /// columns of `rotation` (row-major 3x3, body to world), full side lengths `side`.
