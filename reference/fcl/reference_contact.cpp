@@ -17,14 +17,12 @@
 #include <fcl/narrowphase/distance.h>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <string>
 #include <vector>
 
-#include "octocd/box_box_deepest.hpp"
 #include "octocd/convex_hull.hpp"
 #include "octocd/error.hpp"
 
@@ -381,27 +379,27 @@ bool hull_penetration(const CcdObject& ca, const CcdObject& cb, ReferenceNormal&
 /// FCL's box-box test on boxes of sides side_a, side_b placed at ta, tb, as fcl::collide
 /// runs it for two fcl::Box (ShapeCollisionTraversalNode -> GJKSolver_libccd ->
 /// detail::boxBoxIntersect -> detail::boxBox2 with at most 4 contacts, all of them kept
-/// under CollisionRequest(8, true)), through box_box_deepest (the same bits, only the
-/// deepest contact placed), without the CollisionObjects, the shared geometry and the
-/// result vectors FCL builds per call. False when FCL reports no contact (r untouched);
-/// else r from its deepest contact (the first of equal depths), as box_box.
+/// under CollisionRequest(8, true)), without the CollisionObjects, the shared geometry
+/// and the result vectors it builds per call. False when FCL reports no contact (r
+/// untouched); else r from its deepest contact (the first of equal depths), as box_box.
 bool box_contact(const V3& side_a, const fcl::Transform3<S>& ta, const V3& side_b, const fcl::Transform3<S>& tb,
                  ReferenceNormal& r) {
-  auto rows = [](const fcl::Transform3<S>& t) {
-    std::array<double, 9> m{};
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) m[static_cast<std::size_t>(3 * i + j)] = t.linear()(i, j);
-    return m;
-  };
-  auto arr = [](const V3& v) { return std::array<double, 3>{v[0], v[1], v[2]}; };
-  BoxBoxContact c;
-  if (!box_box_deepest(arr(side_a), rows(ta), arr(ta.translation()), arr(side_b), rows(tb), arr(tb.translation()), c))
-    return false;
+  thread_local std::vector<fcl::ContactPoint<S>> contacts;  // kept between calls
+  contacts.clear();
+  V3 normal;
+  S depth = 0;
+  int code = 0;
+  fcl::detail::boxBox2(side_a, ta, side_b, tb, normal, &depth, &code, 4, contacts);
+  if (code == 0 || contacts.empty()) return false;
   r.penetrating = true;
-  // The contact's normal points from A to B: B-to-A is its negation.
-  if (!unit(-V3(c.normal[0], c.normal[1], c.normal[2]), r.normal)) return true;
-  r.depth = std::max<S>(0, c.depth);
-  r.point_a = r.point_b = to_vec3(V3(c.pos[0], c.pos[1], c.pos[2]));
+  std::size_t deepest = 0;
+  for (std::size_t k = 1; k < contacts.size(); ++k)
+    if (contacts[k].penetration_depth > contacts[deepest].penetration_depth) deepest = k;
+  const fcl::ContactPoint<S>& c = contacts[deepest];
+  // ContactPoint::normal points from A to B: B-to-A is its negation.
+  if (!unit(-c.normal, r.normal)) return true;
+  r.depth = std::max<S>(0, c.penetration_depth);
+  r.point_a = r.point_b = to_vec3(c.pos);
   r.valid = std::isfinite(r.depth);
   return true;
 }

@@ -11,21 +11,17 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <memory>
 #include <random>
 #include <string>
-#include <vector>
 
 #include <fcl/geometry/shape/box.h>
 #include <fcl/narrowphase/collision.h>
 #include <fcl/narrowphase/collision_object.h>
-#include <fcl/narrowphase/detail/primitive_shape_algorithm/box_box.h>
 
-#include "octocd/box_box_deepest.hpp"
 #include "octocd/error.hpp"
 #include "octocd/reference_contact.hpp"
 #include "octocd/scene.hpp"
@@ -397,77 +393,6 @@ TEST(ReferenceContact, BoxBoxIsFclCollideExactly) {
   EXPECT_GT(hits, 100);
   EXPECT_LT(hits, 300);
   EXPECT_GT(aabb_hits, hits);
-}
-
-// box_box_deepest against its oracle, fcl::detail::boxBox2 (maxc 4) and its first deepest
-// contact, on 20,000 random pairs: turned boxes of random sides (face contacts of up to 8
-// clipped points, culled to 4 by FCL; edge-edge contacts), axis-aligned pairs (the world boxes an
-// AABB engine collides) and separated ones. The same answer, contact or none; the same
-// normal, depth and point within 1e-9 m, and in fact bit for bit.
-TEST(BoxBoxDeepest, IsFclBoxBox2DeepestContact) {
-  std::mt19937 rng(67);
-  std::uniform_real_distribution<double> sidelen(0.02, 0.3), pos(-0.2, 0.2), unit_d(-1, 1), angle(-3.1, 3.1);
-  std::uniform_int_distribution<int> kind(0, 3);
-  auto rotation = [&](bool turned) -> fcl::Matrix3d {
-    if (!turned) return fcl::Matrix3d::Identity();
-    fcl::Vector3d u(unit_d(rng), unit_d(rng), unit_d(rng));
-    if (u.norm() < 1e-3) u = fcl::Vector3d::UnitX();
-    return fcl::AngleAxisd(angle(rng), u.normalized()).toRotationMatrix();
-  };
-  auto arr9 = [](const fcl::Matrix3d& m) {
-    std::array<double, 9> a{};
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) a[static_cast<std::size_t>(3 * i + j)] = m(i, j);
-    return a;
-  };
-  auto arr3 = [](const fcl::Vector3d& v) { return std::array<double, 3>{v[0], v[1], v[2]}; };
-  int contacts = 0, none = 0, edge_edge = 0, face4 = 0, aligned = 0;
-  std::vector<fcl::ContactPointd> points;
-  for (int k = 0; k < 20000; ++k) {
-    const int what = kind(rng);  // 0, 1: both turned; 2: one turned; 3: both axis-aligned
-    const fcl::Vector3d sa(sidelen(rng), sidelen(rng), sidelen(rng)), sb(sidelen(rng), sidelen(rng), sidelen(rng));
-    fcl::Transform3d ta = fcl::Transform3d::Identity(), tb = fcl::Transform3d::Identity();
-    ta.linear() = rotation(what < 3);
-    tb.linear() = rotation(what < 2);
-    ta.translation() = fcl::Vector3d(pos(rng), pos(rng), pos(rng));
-    tb.translation() = fcl::Vector3d(pos(rng), pos(rng), pos(rng));
-    points.clear();
-    fcl::Vector3d normal;
-    double depth = 0;
-    int code = 0;
-    const int cnum = fcl::detail::boxBox2(sa, ta, sb, tb, normal, &depth, &code, 4, points);
-    BoxBoxContact got;
-    const bool hit = box_box_deepest(arr3(sa), arr9(ta.linear()), arr3(ta.translation()), arr3(sb),
-                                     arr9(tb.linear()), arr3(tb.translation()), got);
-    ASSERT_EQ(hit, code != 0 && !points.empty()) << "pair " << k;
-    if (!hit) {
-      ++none;
-      continue;
-    }
-    ++contacts;
-    edge_edge += code > 6;
-    aligned += what == 3;
-    // Face contacts of four points: four clipped points, or a cull of 5-8 to four.
-    face4 += code <= 6 && cnum == 4;
-    std::size_t deepest = 0;
-    for (std::size_t i = 1; i < points.size(); ++i)
-      if (points[i].penetration_depth > points[deepest].penetration_depth) deepest = i;
-    const fcl::ContactPointd& want = points[deepest];
-    for (int i = 0; i < 3; ++i) {
-      EXPECT_NEAR(got.normal[static_cast<std::size_t>(i)], want.normal[i], 1e-9) << "pair " << k;
-      EXPECT_NEAR(got.pos[static_cast<std::size_t>(i)], want.pos[i], 1e-9) << "pair " << k;
-      EXPECT_EQ(got.normal[static_cast<std::size_t>(i)], want.normal[i]) << "pair " << k << " (bit for bit)";
-      EXPECT_EQ(got.pos[static_cast<std::size_t>(i)], want.pos[i]) << "pair " << k << " (bit for bit)";
-    }
-    EXPECT_NEAR(got.depth, want.penetration_depth, 1e-9) << "pair " << k;
-    EXPECT_EQ(got.depth, want.penetration_depth) << "pair " << k << " (bit for bit)";
-  }
-  // Every kind of answer is exercised.
-  EXPECT_GT(contacts, 5000);
-  EXPECT_GT(none, 1000);
-  EXPECT_GT(edge_edge, 100);
-  EXPECT_GT(face4, 1000);
-  EXPECT_GT(aligned, 1000);
 }
 
 // intersect() on two boxes (the separating axes where the boxes clearly penetrate or are
