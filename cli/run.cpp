@@ -456,23 +456,20 @@ Command add_run_command(CLI::App& app) {
                         "); --trace writes format version 2 (orientation, angular velocity, inertia; with "
                         "--contacts manifold rows with points, /pairs, /aabbs)");
   run_cmd->add_option("--worlds", run.worlds.count,
-                      fmt::format("Batched worlds: step K copies of the scene as one world (engines cpu and cuda; "
+                      std::string("Batched worlds: step K copies of the scene as one world (engines cpu and cuda; "
                                   "docs/gpu.md, \"Batched worlds\"): copies on an x-z grid, each in a cell of the "
                                   "scene's bounds (domain, walls, bodies) plus --world-margin, so no pair joins two "
-                                  "copies; the summary adds world-steps/s (steps/s x K). Not with --trace. "
-                                  "[1, {}]",
-                                  octocd::kMaxWorlds))
+                                  "copies; the summary adds world-steps/s (steps/s x K). Not with --trace"))
       ->check(CLI::Range(1L, octocd::kMaxWorlds))
       ->default_val(1);
   run_cmd->add_option("--world-perturb", run.worlds.perturb,
-                      fmt::format("With --worlds: move each dynamic body of copies 1..K-1 by a uniform random "
-                                  "offset in [-EPS, EPS) per axis (m; copy 0 stays the reference). [0, {}]",
-                                  octocd::kMaxWorldPerturb))
+                      "With --worlds: move each dynamic body of copies 1..K-1 by a uniform random offset in "
+                      "[-EPS, EPS) per axis (m; copy 0 stays the reference)")
       ->check(CLI::Range(0.0, octocd::kMaxWorldPerturb))
       ->default_val(0.0);
   run_cmd->add_option("--seed", run.worlds.seed, "The --world-perturb random stream (an integer)")->default_val(1);
   run_cmd->add_option("--world-margin", run.worlds.margin,
-                      "With --worlds: the gap (m) between neighbouring copies' bounds [0.001, 2000]")
+                      "With --worlds: the gap (m) between neighbouring copies' bounds")
       ->check(CLI::Range(octocd::limits::kMinLength, octocd::limits::kMaxLength))
       ->default_val(0.5);
   add_engine_settings_options(run_cmd, run.settings);
