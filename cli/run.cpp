@@ -39,6 +39,7 @@
 #include "octocd/version.hpp"
 #include "octocd/world.hpp"
 #include "octocd/worlds.hpp"
+#include "octocd/world_copies.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/process_engines.hpp"
@@ -279,19 +280,65 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   octocd::write_file_atomically(path, j.dump(2) + "\n", "--summary-json");
 }
 
-/// `--worlds` runs on octocd's engines only: the copies are one model, stepped as one world.
-/// A reference engine would run them as separate runs (SPEC 20), which `run` does not do.
-void check_worlds_engine(const std::string& engine, bool traced) {
-  if (engine != "cpu" && engine != "cuda")
-    throw octocd::InputError(fmt::format(
-        "--worlds/--world-perturb: engine {} steps one scene per run; run each copy as its own `octocd run` "
-        "(the copies are the same scene); allowed: --engine cpu or cuda (octocd's engines step the copies as "
-        "one world)",
-        engine));
+/// octocd's engines step the copies of `--worlds` as one world; any other engine steps one
+/// scene per run and runs the copies as separate runs (run_copies).
+bool batched_worlds_engine(const std::string& engine) { return engine == "cpu" || engine == "cuda"; }
+
+void check_worlds_trace(bool traced) {
   if (traced)
     throw octocd::InputError(
         "--trace with --worlds/--world-perturb: a trace holds one scene, and the copies are made in memory; "
         "allowed: --trace without --worlds (one copy), or --summary-json for the batched run's figures");
+}
+
+/// `run --worlds K` on an engine that steps one scene per run (SPEC 20): the K copies as
+/// separate runs (world_copies.hpp), as many at once as the host has threads; a summary of
+/// the copies (steps/s per copy, world-steps/s = K frames / wall time).
+int run_copies(const RunOptions& o, const std::shared_ptr<const octocd::Model>& single, int frames, double model_s) {
+  const octocd::CopiesRun r =
+      octocd::run_copies_separately(o.engine, single, o.worlds, frames, 0, o.settings);
+  std::vector<double> per_copy;
+  std::int64_t ran = 0;
+  for (std::size_t c = 0; c < r.frames.size(); ++c) {
+    ran += r.frames[c];
+    if (r.step_ms[c] > 0.0) per_copy.push_back(1000.0 * static_cast<double>(r.frames[c]) / r.step_ms[c]);
+  }
+  std::sort(per_copy.begin(), per_copy.end());
+  const double median = per_copy.empty() ? 0.0 : per_copy[per_copy.size() / 2];
+  const double world_steps = r.wall_s > 0.0 ? static_cast<double>(ran) / r.wall_s : 0.0;
+  const long k = o.worlds.count;
+  if (!o.quiet) {
+    fmt::print("\nscene        {} ({} bodies) x {} copies as separate runs\n", single->scene.name,
+               single->initial.size(), k);
+    fmt::print("pipeline     engine {}, {} copies at once\n", o.engine, r.threads);
+    fmt::print("set-up       {:.2f} s (scene and bodies)\n", model_s);
+    fmt::print("frames       {} per copy (dt {} s), wall {:.2f} s for all copies\n", frames, single->scene.dt, r.wall_s);
+    fmt::print("steps/s      {:.1f}   (a copy's steps over its step time, the median over copies)\n", median);
+    fmt::print("worlds       {} copies as separate runs of engine {} ({} at once), world-steps/s {:.4g} (steps of "
+               "all copies over the wall time)\n",
+               k, o.engine, r.threads, world_steps);
+  }
+  if (!o.summary_json.empty()) {
+    nlohmann::json j;
+    j["scene"] = single->scene.name;
+    j["bodies"] = single->initial.size();
+    j["engine"] = o.engine;
+    j["frames"] = frames;
+    j["wall_s"] = r.wall_s;
+    j["setup_s"] = {{"model", model_s}};
+    j["steps_per_s"] = median;
+    j["worlds"] = k;
+    j["world_steps_per_s"] = world_steps;
+    j["worlds_separate_runs"] = true;
+    j["worlds_threads"] = r.threads;
+    j["build_id"] = octocd::build_id();
+    octocd::write_file_atomically(o.summary_json, j.dump(2) + "\n", "--summary-json");
+  }
+  if (const int sig = octocd::stop_signal()) {
+    report_stop(sig, "run", ran / std::max<long>(k, 1), frames, "", "");
+    return octocd::stop_exit_code(sig);
+  }
+  return 0;
 }
 
 /// What `run` keeps should it end at once (a second signal, the 1 s bound): the trace's
@@ -329,7 +376,12 @@ int run_command(const RunOptions& o) {
   std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   WorldsRun worlds;
   if (o.worlds.count > 1 || o.worlds.perturb > 0.0) {
-    check_worlds_engine(o.engine, !o.trace.empty());
+    check_worlds_trace(!o.trace.empty());
+    if (!batched_worlds_engine(o.engine)) {
+      loading.reset();
+      return run_copies(o, model, scene.frames,
+                        std::chrono::duration<double>(Clock::now() - t_setup).count());
+    }
     worlds.count = o.worlds.count;
     worlds.layout = octocd::worlds_layout(*model, o.worlds);
     model = octocd::make_worlds_model(*model, worlds.layout.offsets, o.worlds);
@@ -456,10 +508,11 @@ Command add_run_command(CLI::App& app) {
                         "); --trace writes format version 2 (orientation, angular velocity, inertia; with "
                         "--contacts manifold rows with points, /pairs, /aabbs)");
   run_cmd->add_option("--worlds", run.worlds.count,
-                      std::string("Batched worlds: step K copies of the scene as one world (engines cpu and cuda; "
-                                  "docs/gpu.md, \"Batched worlds\"): copies on an x-z grid, each in a cell of the "
-                                  "scene's bounds (domain, walls, bodies) plus --world-margin, so no pair joins two "
-                                  "copies; the summary adds world-steps/s (steps/s x K). Not with --trace"))
+                      std::string("Batched worlds: K copies of the scene (docs/gpu.md, \"Batched worlds\"). Engines cpu and "
+                                  "cuda step them as one world: copies on an x-z grid, each in a cell of the scene's "
+                                  "bounds (domain, walls, bodies) plus --world-margin, so no pair joins two copies; "
+                                  "other engines run them as separate runs, as many at once as the host has threads. "
+                                  "The summary adds world-steps/s. Not with --trace"))
       ->check(CLI::Range(1L, octocd::kMaxWorlds))
       ->default_val(1);
   run_cmd->add_option("--world-perturb", run.worlds.perturb,

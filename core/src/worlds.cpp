@@ -35,6 +35,23 @@ void check_spec(const WorldsSpec& spec) {
         fmt::format("--world-margin: {}; allowed: [{}, {}] m", spec.margin, limits::kMinLength, limits::kMaxLength));
 }
 
+/// The initial positions of copy `copy` at offset zero into `out`: `single`'s, each dynamic
+/// body moved by uniform(-eps, eps) per axis when copy > 0 and eps > 0. `seeds` is the
+/// stream of the copies' seeds (SplitMix64(spec.seed)), advanced once per perturbed copy;
+/// copies must come in order 0, 1, 2, ...
+void perturbed_positions(const Model& single, const WorldsSpec& spec, std::size_t copy, SplitMix64& seeds,
+                         std::vector<Vec3>& out) {
+  out = single.initial.x;
+  if (copy == 0 || spec.perturb <= 0.0) return;
+  SplitMix64 rng(seeds.next());
+  const float eps = static_cast<float>(spec.perturb);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    if (single.initial.w[i] <= 0.0f) continue;
+    const float ux = rng.uniform(-eps, eps), uy = rng.uniform(-eps, eps), uz = rng.uniform(-eps, eps);
+    out[i] = {out[i].x + ux, out[i].y + uy, out[i].z + uz};
+  }
+}
+
 double longest_side(const Aabb& b) {
   return std::max({static_cast<double>(b.max.x) - b.min.x, static_cast<double>(b.max.y) - b.min.y,
                    static_cast<double>(b.max.z) - b.min.z});
@@ -91,18 +108,12 @@ std::shared_ptr<const Model> make_worlds_model(const Model& single, const std::v
   s.v.reserve(n * k);
   s.w.reserve(n * k);
   SplitMix64 seeds(spec.seed);
+  std::vector<Vec3> xs;
   for (std::size_t c = 0; c < k; ++c) {
     const Vec3 off = offsets[c];
-    const bool perturbed = c > 0 && spec.perturb > 0.0;
-    SplitMix64 rng(perturbed ? seeds.next() : 0);
-    const float eps = static_cast<float>(spec.perturb);
+    perturbed_positions(single, spec, c, seeds, xs);
     for (std::size_t i = 0; i < n; ++i) {
-      Vec3 x = single.initial.x[i];
-      if (perturbed && single.initial.w[i] > 0.0f) {
-        const float ux = rng.uniform(-eps, eps), uy = rng.uniform(-eps, eps), uz = rng.uniform(-eps, eps);
-        x = {x.x + ux, x.y + uy, x.z + uz};
-      }
-      s.x.push_back(x + off);
+      s.x.push_back(xs[i] + off);
       s.v.push_back(single.initial.v[i]);
       s.w.push_back(single.initial.w[i]);
       if (rotates) {
@@ -138,6 +149,19 @@ std::shared_ptr<const Model> make_worlds_model(std::shared_ptr<const Model> sing
   check_spec(spec);
   if (spec.count == 1 && spec.perturb == 0.0) return single;
   return make_worlds_model(*single, worlds_layout(*single, spec).offsets, spec);
+}
+
+std::shared_ptr<const Model> worlds_copy_model(const Model& single, const WorldsSpec& spec, std::size_t copy) {
+  WorldsSpec checked = spec;
+  checked.count = std::max<long>(1, static_cast<long>(copy) + 1);
+  check_spec(checked);
+  SplitMix64 seeds(spec.seed);
+  std::vector<Vec3> xs;
+  for (std::size_t c = 1; c < copy && spec.perturb > 0.0; ++c) (void)seeds.next();  // the earlier copies' seeds
+  perturbed_positions(single, spec, copy, seeds, xs);
+  auto m = std::make_shared<Model>(single);
+  m->initial.x = std::move(xs);
+  return m;
 }
 
 BodyState world_state(const BodyState& all, std::size_t bodies_per_world, std::size_t copy) {

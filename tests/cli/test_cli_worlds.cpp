@@ -46,17 +46,31 @@ TEST(CliWorlds, SummaryGivesWorldStepsPerSecondAndEveryCopyInItsCell) {
   fs::remove_all(d);
 }
 
-TEST(CliWorlds, ReferenceEnginesAndTracesAreRefusedWithTheReason) {
-  const Result bullet = run_octocd("run " + box_stack() + " --worlds 4 --frames 5 --engine bullet --quiet");
-  EXPECT_EQ(bullet.code, 2) << bullet.output;
-  EXPECT_NE(bullet.output.find("engine bullet steps one scene per run"), std::string::npos) << bullet.output;
-  EXPECT_NE(bullet.output.find("allowed: --engine cpu or cuda"), std::string::npos) << bullet.output;
+TEST(CliWorlds, AReferenceEngineRunsTheCopiesAsSeparateRuns) {
   const fs::path d = temp_dir();
-  const Result traced =
-      run_octocd("run " + box_stack() + " --worlds 4 --frames 5 --quiet --trace " + (d / "t.h5").string());
-  EXPECT_EQ(traced.code, 2) << traced.output;
-  EXPECT_NE(traced.output.find("--trace with --worlds"), std::string::npos) << traced.output;
-  EXPECT_FALSE(fs::exists(d / "t.h5"));
+  const std::string js = (d / "summary.json").string();
+  const Result r = run_octocd("run " + box_stack() + " --worlds 3 --world-perturb 1e-4 --frames 20 --engine bullet "
+                              "--summary-json " + js);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("box-stack (5 bodies) x 3 copies as separate runs"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("worlds       3 copies as separate runs of engine bullet"), std::string::npos) << r.output;
+  std::ifstream f(js);
+  const nlohmann::json j = nlohmann::json::parse(f);
+  EXPECT_EQ(j.at("worlds"), 3);
+  EXPECT_EQ(j.at("worlds_separate_runs"), true);
+  EXPECT_GT(j.at("world_steps_per_s").get<double>(), 0.0);
+  fs::remove_all(d);
+}
+
+TEST(CliWorlds, TracesAndOutOfRangeCountsAreRefusedWithTheReason) {
+  const fs::path d = temp_dir();
+  for (const std::string engine : {"cpu", "bullet"}) {
+    const Result traced = run_octocd("run " + box_stack() + " --worlds 4 --frames 5 --quiet --engine " + engine +
+                                     " --trace " + (d / "t.h5").string());
+    EXPECT_EQ(traced.code, 2) << traced.output;
+    EXPECT_NE(traced.output.find("--trace with --worlds"), std::string::npos) << traced.output;
+    EXPECT_FALSE(fs::exists(d / "t.h5"));
+  }
   fs::remove_all(d);
   const Result zero = run_octocd("run " + box_stack() + " --worlds 0 --quiet");
   EXPECT_EQ(zero.code, 2) << zero.output;

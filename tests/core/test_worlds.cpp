@@ -191,3 +191,23 @@ TEST(Worlds, OutOfRangeRequestsNameTheOption) {
   EXPECT_NE(far.find("|coordinate| <= 1000 m"), std::string::npos) << far;
   EXPECT_NE(far.find("at most 136900 copies"), std::string::npos) << far;
 }
+
+TEST(Worlds, ACopyAloneStartsWhereItsBatchedCopyStartsBeforeTheTranslation) {
+  const auto single = lively_box_stack();
+  const std::size_t n = single->initial.size();
+  WorldsSpec spec;
+  spec.count = 4;
+  spec.perturb = 1e-3;
+  spec.seed = 11;
+  const WorldsLayout layout = worlds_layout(*single, spec);
+  const auto batched = make_worlds_model(*single, layout.offsets, spec);
+  for (std::size_t c = 0; c < 4; ++c) {
+    const auto alone = worlds_copy_model(*single, spec, c);
+    ASSERT_EQ(alone->initial.size(), n);
+    EXPECT_TRUE(same_bits(alone->initial.v, single->initial.v));
+    std::vector<Vec3> moved;
+    for (const Vec3& x : alone->initial.x) moved.push_back(x + layout.offsets[c]);
+    EXPECT_TRUE(same_bits(moved, world_state(batched->initial, n, c).x)) << "copy " << c;
+    EXPECT_EQ(same_bits(alone->initial.x, single->initial.x), c == 0) << "copy " << c;
+  }
+}

@@ -82,6 +82,13 @@ std::shared_ptr<const Model> make_worlds_model(const Model& single, const std::v
 /// when spec.count == 1 and spec.perturb == 0 (shared, not copied).
 std::shared_ptr<const Model> make_worlds_model(std::shared_ptr<const Model> single, const WorldsSpec& spec);
 
+/// Copy `copy` alone, at offset zero: a model equal to `single` but for the initial
+/// positions, perturbed as copy `copy` of make_worlds_model(single, ..., spec) is (so a
+/// copy run by itself, e.g. on a reference engine, starts where the batched copy starts
+/// before its translation). Copy 0, or spec.perturb == 0, gives `single`'s positions.
+/// Throws InputError as worlds_layout for spec.perturb, spec.margin or a copy >= kMaxWorlds.
+std::shared_ptr<const Model> worlds_copy_model(const Model& single, const WorldsSpec& spec, std::size_t copy);
+
 /// Copy `copy`'s bodies out of a batched state: bodies [copy n, (copy + 1) n) of x, v
 /// and w (n = `bodies_per_world`), positions as they are (translated by the copy's
 /// offset). Throws InputError when the state holds fewer than (copy + 1) n bodies.
