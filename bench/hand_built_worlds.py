@@ -80,7 +80,8 @@ def main():
                      "max": [hi[0] + (nx - 1) * sx, hi[1], hi[2] + (nz - 1) * sz]}
     bp = dict(s.get("broadphase", {}))
     depth = bp.get("depth", 2)
-    if bp.get("name", "octree") in ("octree", "octree-strict") and isinstance(depth, int):
+    # Only the octrees read the depth: deepening it for another broadphase changes nothing.
+    if isinstance(depth, int):
         side_1 = max(dmax[i] - dmin[i] for i in range(3))
         dom = out["domain"]
         side_k = max(dom["max"][i] - dom["min"][i] for i in range(3))

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The batched-worlds benchmark of issue 70 (SPEC 20; docs/gpu.md, "Batched worlds") for a GPU
+# The batched-worlds benchmark of issue 70 (docs/gpu.md, "Batched worlds") for a GPU
 # host: `octocd bench worlds` (bunny-stack-50 x 1, 1,024, 8,192, 65,536 copies on cuda; the
 # cpu engine on all the host's threads at 1 and 1,024 copies; 5 repetitions each), then the
 # hand-built scene of 8,192 copies (bench/hand_built_worlds.py: one scene file, each copy in

@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "bench_sweep.hpp"
+#include "command_support.hpp"
 #include "frame_sums.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
@@ -112,10 +113,11 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   }
   if (p.worlds > 1) {
     // Batched worlds (octocd/worlds.hpp): octocd's engines step the copies as one world.
-    if (p.engine != "cpu" && p.engine != "cuda") {
+    if (!engine_info(p.engine, "engines").batched_worlds) {
       r["status"] = "skipped";
-      r["reason"] = fmt::format("worlds={}: engine {} steps one scene per run (batched worlds: cpu and cuda)",
-                                p.worlds, p.engine);
+      r["reason"] = fmt::format("worlds={}: engine {} steps one scene per run (batched worlds: {})",
+                                p.worlds, p.engine,
+                                engines_with([](const EngineInfo& e) { return e.batched_worlds; }));
       return r;
     }
     if (p.traced != "off") {

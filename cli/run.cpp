@@ -282,7 +282,7 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
 
 /// octocd's engines step the copies of `--worlds` as one world; any other engine steps one
 /// scene per run and runs the copies as separate runs (run_copies).
-bool batched_worlds_engine(const std::string& engine) { return engine == "cpu" || engine == "cuda"; }
+bool batched_worlds_engine(const std::string& engine) { return octocd::engine_info(engine, "--engine").batched_worlds; }
 
 void check_worlds_trace(bool traced) {
   if (traced)
@@ -291,7 +291,7 @@ void check_worlds_trace(bool traced) {
         "allowed: --trace without --worlds (one copy), or --summary-json for the batched run's figures");
 }
 
-/// `run --worlds K` on an engine that steps one scene per run (SPEC 20): the K copies as
+/// `run --worlds K` on an engine that steps one scene per run (docs/gpu.md): the K copies as
 /// separate runs (world_copies.hpp), as many at once as the host has threads; a summary of
 /// the copies (steps/s per copy, world-steps/s = K frames / wall time).
 int run_copies(const RunOptions& o, const std::shared_ptr<const octocd::Model>& single, int frames, double model_s) {

@@ -1,4 +1,4 @@
-// Batched worlds (SPEC 20, docs/gpu.md "Batched worlds"): K copies of a scene placed apart
+// Batched worlds (docs/gpu.md, "Batched worlds"): K copies of a scene placed apart
 // on an x-z grid as one model, each optionally perturbed.
 #include "octocd/worlds.hpp"
 
@@ -7,6 +7,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/broadphase.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
 
@@ -138,7 +139,8 @@ std::shared_ptr<const Model> make_worlds_model(const Model& single, const std::v
   sc.walls = Walls::None;
   sc.name = fmt::format("{} x{} worlds", single.scene.name, k);
   const std::string& bp = sc.broadphase.name;
-  if ((bp == "octree" || bp == "octree-strict") && sc.broadphase.octree_depth >= 0 && side_k > side_1) {
+  const bool octree = bp == broadphase_name(BroadPhaseId::octree) || bp == broadphase_name(BroadPhaseId::octree_strict);
+  if (octree && sc.broadphase.octree_depth >= 0 && side_k > side_1) {
     const int deeper = static_cast<int>(std::ceil(std::log2(side_k / side_1) - 1e-9));
     sc.broadphase.octree_depth = std::min(10, sc.broadphase.octree_depth + std::max(0, deeper));
   }

@@ -1,4 +1,4 @@
-// Batched worlds (core/include/octocd/worlds.hpp, SPEC 20): K copies of a scene as one world.
+// Batched worlds (core/include/octocd/worlds.hpp): K copies of a scene as one world.
 // The oracle: every copy of a batched run equals, bit for bit, the single-world run of the
 // same scene translated by the copy's offset (and copy 0, at offset zero, the plain run).
 #include <gtest/gtest.h>

@@ -1,6 +1,6 @@
 #pragma once
 /// \file worlds.hpp
-/// Batched worlds (SPEC 20, docs/gpu.md "Batched worlds"): K independent copies of a scene
+/// Batched worlds (docs/gpu.md, "Batched worlds"): K independent copies of a scene
 /// run as one world by octocd's engines (`octocd run SCENE --worlds K`). The copies are
 /// placed apart on a grid in the x-z plane, each in its own cell: a cell is the scene's
 /// bounds (the domain and every body's initial world AABB, walls and other static bodies

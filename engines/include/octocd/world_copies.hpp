@@ -1,6 +1,6 @@
 #pragma once
 /// \file world_copies.hpp
-/// Copies of a scene as separate runs (SPEC 20, docs/gpu.md "Batched worlds"): what the
+/// Copies of a scene as separate runs (docs/gpu.md, "Batched worlds"): what the
 /// engines that step one scene per run (the reference engines, process engines) do for
 /// `octocd run --worlds K`: K engines, one per copy, each copy at offset zero and perturbed
 /// as the batched copy is (worlds_copy_model), several copies at once on threads.
