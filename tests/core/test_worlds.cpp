@@ -14,6 +14,7 @@
 #include "octocd/scene.hpp"
 #include "octocd/world.hpp"
 #include "octocd/worlds.hpp"
+#include "support/test_scenes.hpp"
 
 using namespace octocd;
 
@@ -26,17 +27,10 @@ std::string scene_path(const std::string& name) {
 
 std::shared_ptr<const Model> box_stack() { return build_model(load_scene(scene_path("box-stack"))); }
 
-/// box-stack made lively: an open box, and the boxes start with random velocities (up to
-/// 3 m/s a component), so they fly apart, hit the side walls and each other, and their x
-/// and z change (a translation then rounds differently from the untranslated run).
-std::shared_ptr<const Model> lively_box_stack() {
-  Scene s = load_scene(scene_path("box-stack"));
-  s.walls = Walls::OpenBox;
-  s.groups[0].velocity.kind = VelocitySpec::Kind::Random;
-  s.groups[0].velocity.max_speed = 3.0f;
-  s.groups[0].velocity.seed = 5;
-  return build_model(s);
-}
+/// Boxes thrown into an open box (tests/support/test_scenes.hpp): they fly, hit the side
+/// walls and each other, so their x and z change (a translation then rounds differently
+/// from the untranslated run).
+std::shared_ptr<const Model> thrown_boxes() { return build_model(test::mixed_boxes()); }
 
 /// Steps a cpu engine on `model` for `frames` frames; returns its state and the largest
 /// contact count of a frame.
@@ -54,8 +48,8 @@ bool same_bits(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
 
 }  // namespace
 
-TEST(Worlds, BoxStackCopiesEqualTheSingleWorldRunBitForBit) {
-  const auto single = lively_box_stack();
+TEST(Worlds, CopiesOfThrownBoxesEqualTheSingleWorldRunTranslatedBitForBit) {
+  const auto single = thrown_boxes();
   const std::size_t n = single->initial.size();
   WorldsSpec spec;
   spec.count = 6;  // a 3 x 2 grid: copies along x and z
@@ -193,7 +187,7 @@ TEST(Worlds, OutOfRangeRequestsNameTheOption) {
 }
 
 TEST(Worlds, ACopyAloneStartsWhereItsBatchedCopyStartsBeforeTheTranslation) {
-  const auto single = lively_box_stack();
+  const auto single = thrown_boxes();
   const std::size_t n = single->initial.size();
   WorldsSpec spec;
   spec.count = 4;
