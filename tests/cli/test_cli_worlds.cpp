@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -75,4 +76,45 @@ TEST(CliWorlds, TracesAndOutOfRangeCountsAreRefusedWithTheReason) {
   const Result zero = run_octocd("run " + box_stack() + " --worlds 0 --quiet");
   EXPECT_EQ(zero.code, 2) << zero.output;
   EXPECT_NE(zero.output.find("--worlds"), std::string::npos) << zero.output;
+}
+
+TEST(CliWorlds, BenchSweepsTakeWorldsAndReportWorldStepsPerSecond) {
+  const fs::path d = temp_dir();
+  const fs::path sweep = d / "w.json";
+  std::ofstream(sweep) << R"({"name": "w", "kind": "steps", "scenes": [")" << box_stack()
+                       << R"("], "engines": ["cpu", "bullet"], "worlds": [1, 3, 5], "max_worlds": {"cpu": 3},
+                           "warmup": 2, "frames": 10, "repeat": 2})";
+  const std::string out = (d / "r.json").string();
+  const Result r = run_octocd("bench " + sweep.string() + " -o " + out + " --quiet");
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::ifstream f(out);
+  const nlohmann::json res = nlohmann::json::parse(f);
+  std::vector<std::string> ids;
+  for (const auto& p : res.at("points")) {
+    ids.push_back(p.at("id"));
+    const long k = p.at("params").at("worlds");
+    if (p.at("params").at("engine") == "bullet" && k > 1) {
+      EXPECT_EQ(p.at("status"), "skipped") << p.at("id");
+      EXPECT_NE(p.at("reason").get<std::string>().find("steps one scene per run"), std::string::npos);
+      continue;
+    }
+    ASSERT_EQ(p.at("status"), "ok") << p.dump();
+    EXPECT_EQ(p.at("bodies"), 5 * k);
+    const auto& w = p.at("windows").at("all");
+    const auto sps = w.at("steps_per_s").at("values").get<std::vector<double>>();
+    const auto wsps = w.at("world_steps_per_s").at("values").get<std::vector<double>>();
+    ASSERT_EQ(sps.size(), 2u);
+    ASSERT_EQ(wsps.size(), 2u);
+    for (std::size_t i = 0; i < 2; ++i) EXPECT_DOUBLE_EQ(wsps[i], static_cast<double>(k) * sps[i]) << p.at("id");
+  }
+  // cpu stops at 3 copies (max_worlds); bullet has every count, skipped above one.
+  const std::vector<std::string> want{"box-stack | worlds=1 | cpu", "box-stack | worlds=1 | bullet",
+                                      "box-stack | worlds=3 | cpu", "box-stack | worlds=3 | bullet",
+                                      "box-stack | worlds=5 | bullet"};
+  EXPECT_EQ(ids, want);
+  std::ofstream(sweep) << R"({"name": "w", "kind": "steps", "scenes": [")" << box_stack() << R"("], "worlds": [0]})";
+  const Result bad = run_octocd("bench " + sweep.string() + " -o " + out + " --quiet");
+  EXPECT_EQ(bad.code, 2) << bad.output;
+  EXPECT_NE(bad.output.find("worlds[0]"), std::string::npos) << bad.output;
+  fs::remove_all(d);
 }
