@@ -6,15 +6,23 @@
 # its own open box of static boxes) on cuda with the same frames and repetitions, then the
 # table of both (bench/worlds_table.py) with the ratio --worlds 8192 / hand-built.
 #
-# Usage: bench/run-worlds.sh [OCTOCD] [OUT_DIR]   (defaults: build/octocd, reports/h100/worlds)
-# Meshes: the dataset cache of the source tree (datasets/fetch.sh) or $OCTOCD_DATA_DIR.
+# Usage: bench/run-worlds.sh [OCTOCD] [OUT_DIR] [BENCH_OPTION...]   (defaults: build/octocd,
+# reports/h100/worlds; in the GPU bundle of scripts/gpu-bundle.sh: ./bench/run-worlds.sh
+# bin/octocd OUT). BENCH_OPTIONs go to both `octocd bench` calls (a smoke run: --frames 3
+# --warmup 1 --repeat 1).
+# Meshes: $OCTOCD_DATA_DIR, else the datasets/cache beside bench/ (datasets/fetch.sh).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 octocd=${1:-build/octocd}
 out=${2:-reports/h100/worlds}
+shift $(( $# < 2 ? $# : 2 ))
 copies=8192
+# The hand-built scene is written to OUT_DIR: its mesh names resolve through the data dir.
+if [ -z "${OCTOCD_DATA_DIR:-}" ] && [ -d "$here/../datasets/cache" ]; then
+  export OCTOCD_DATA_DIR="$here/../datasets/cache"
+fi
 mkdir -p "$out"
-"$octocd" bench worlds -o "$out/worlds.json"
+"$octocd" bench worlds -o "$out/worlds.json" "$@"
 python3 "$here/hand_built_worlds.py" --copies "$copies" -o "$out/bunny-stack-50-hand-built-x$copies.json"
 cat > "$out/hand-built.sweep.json" <<JSON
 {
@@ -28,5 +36,5 @@ cat > "$out/hand-built.sweep.json" <<JSON
   "repeat": 5
 }
 JSON
-"$octocd" bench "$out/hand-built.sweep.json" -o "$out/hand-built.json"
+"$octocd" bench "$out/hand-built.sweep.json" -o "$out/hand-built.json" "$@"
 python3 "$here/worlds_table.py" "$out/worlds.json" "$out/hand-built.json" | tee "$out/worlds.md"
