@@ -86,6 +86,10 @@ struct Sweep {
   std::vector<std::string> geometries;  ///< Bullet's shape settings: "box", "hull"
   std::vector<bool> rotations;          ///< false, true: without and with rotation (where the engine rotates)
   double diverge_beyond_m = 1e6;        ///< a body this far outside the domain (m) makes its run diverged
+  // steps: batched worlds (octocd/worlds.hpp; docs/bench-format.md)
+  std::vector<long> worlds{1};          ///< copies of each scene run as one world (`worlds`)
+  bool worlds_given = false;            ///< the sweep has `worlds`: points report world_steps_per_s
+  std::map<std::string, long> max_worlds;  ///< engine -> the most copies it runs (larger points are not made)
 };
 
 /// The largest instance count a max-instances sweep may search to: limits::kMaxGeneratedBodies
@@ -138,6 +142,7 @@ struct Point {
   long bodies = 0;                 ///< broadphase: body count (bodies) or -1 (scenes)
   std::string traced = "off";      ///< steps: the trace mode (Sweep::traced)
   std::string broadphase;          ///< broadphase kind
+  long worlds = 1;                 ///< steps: copies of the scene run as one world (Sweep::worlds)
 };
 
 /// The trace modes of a steps sweep (Sweep::traced), in order.

@@ -53,6 +53,7 @@ EngineInfo cpu_info() {
   cpu.has_midphase = true;
   cpu.uses_scene_broadphase = true;
   cpu.records_every_step = true;
+  cpu.batched_worlds = true;
   return cpu;
 }
 
@@ -72,6 +73,7 @@ EngineInfo cuda_info() {
   cuda.device = true;
   cuda.memory_kind = "device memory";
   cuda.records_every_step = true;
+  cuda.batched_worlds = true;
   return cuda;
 }
 

@@ -41,6 +41,10 @@ struct EngineInfo {
   /// it in process (cpu, cuda); false: judged as a version 2 external trace when it
   /// records (bullet: hull mode, its default, or rotation; box mode records nothing).
   bool records_every_step = false;
+  /// It steps the K copies of `run --worlds K` as one world (octocd/worlds.hpp: cpu,
+  /// cuda); false: it steps one scene per run and runs the copies as separate runs
+  /// (octocd/world_copies.hpp).
+  bool batched_worlds = false;
   /// What it can collide a body as, one per setting it has (the speed-accuracy sweep's
   /// `geometry`): {"mesh"} for octocd's narrow phase on the meshes; {"hull", "box"} for an
   /// engine with a shape setting (bullet: BulletSettings::shape).
