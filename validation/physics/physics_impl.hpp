@@ -176,6 +176,33 @@ struct ContactTruth {
     have = true;
     intersects = g.penetrating;
   }
+  /// The same pair with A rounded by `ra` and B by `rb` (m, >= 0: each shape's Minkowski
+  /// sum with a sphere, PhysicsBodies::convex_radius). Exact: the rounded shapes' depth is
+  /// the posed ones' plus ra + rb along the same normal (every support value grows by the
+  /// radius, so SAT's accepted axes stay); shapes apart by d <= ra + rb penetrate by
+  /// ra + rb - d along their nearest-points direction; farther ones are d - ra - rb apart.
+  /// The witness points move onto the rounded surfaces.
+  void inflate(double ra, double rb) {
+    const double s = ra + rb;
+    if (!(s > 0)) return;
+    if (g.penetrating) {
+      g.depth += s;
+      fcl_depth += s;
+    } else if (g.distance > s) {
+      g.distance -= s;
+    } else {
+      g.penetrating = true;
+      g.depth = s - g.distance;
+      g.distance = 0;
+      fcl_depth = g.depth;
+      fcl_normal = g.normal;
+    }
+    if (g.valid) {
+      g.point_a = g.point_a - static_cast<float>(ra) * g.normal;
+      g.point_b = g.point_b + static_cast<float>(rb) * g.normal;
+    }
+    intersects = g.penetrating;
+  }
 };
 
 /// A pair's contact rows [first, first + count) (rows of a pair are consecutive).
@@ -324,6 +351,15 @@ struct PhysicsValidators::Impl {
   double speculative_reach(const FrameRecord& rec, Pair p) const;
   std::uint64_t speculative_allowed = 0;  ///< contact pairs given a speculative reach
   std::uint64_t points_persistent = 0;    ///< rows whose point check is not applied (persistent points)
+  // ---- depth_per and rounded shapes (contact_rows.cpp, candidates.cpp) -----------------
+  std::uint64_t depth_unknown_pairs = 0;   ///< depth_per "unknown": pairs whose depth is not judged
+  std::uint64_t depth_manifold_pairs = 0;  ///< depth_per "manifold": pairs judged along their normal
+  std::uint64_t rounded_pairs = 0;         ///< pairs judged on shapes inflated by a convex radius
+  /// Pair p's convex radii summed (m; PhysicsBodies::convex_radius, 0 without): how far the
+  /// rounded shapes reach beyond the posed ones.
+  double inflation(Pair p) const { return radius(p.a) + radius(p.b); }
+  /// Body i's convex radius (m; 0 without /bodies/convex_radius).
+  double radius(std::uint32_t i) const { return bodies.convex_radius.empty() ? 0.0 : bodies.convex_radius[i]; }
 
   // ---- Rows 1-4 (checked frames with poses) --------------------------------------
   /// Rows 1-4 of a checked frame, each on its own clock.

@@ -297,10 +297,33 @@ struct PhysicsBodies {
   /// the shapes. Read, not yet used beyond this: contact-geometry's point check is not
   /// applied (counted); normals and depths are judged.
   bool persistent_points = false;
-  /// `depth_per` "manifold": each row carries its manifold's deepest depth. Judged as
-  /// "point": contact-geometry judges each pair's deepest row, and a row's point may lie
-  /// within its (larger) depth of the surfaces.
+  /// `depth_per` "manifold": each row carries its manifold's one depth (Jolt's
+  /// mPenetrationDepth). contact-geometry judges one depth per pair: its deepest row's
+  /// depth against the exact reference's penetration along that row's normal (two convex
+  /// polytopes: the overlap of their hulls projected on the normal, >= the minimum
+  /// translation; other shapes: the minimum translation, as "point"); a row's point may
+  /// lie within that (larger) depth of the surfaces.
   bool depth_per_manifold = false;
+  /// `depth_per` "unknown": the rows carry no depth of their own (Havok's witness points).
+  /// contact-geometry's depth cause is n/a (counted, named), no row's depth decides
+  /// whether its normal is judged, and the point check takes the reference's depth;
+  /// penetration is still judged on the posed shapes. The rows' depth is still read as
+  /// the witness points' lever (momentum-balance, conservation, friction): write the
+  /// witness points' separation along the normal, or 0.
+  bool depth_unknown = false;
+  /// `/bodies/convex_radius` (m, >= 0; empty: every body 0): each body is collided as its
+  /// shape inflated by this radius (the Minkowski sum with a sphere: Jolt's convex radius,
+  /// Box2D's rounded polygons). Every geometric rule judges the rounded shapes: their
+  /// distance is the posed shapes' minus the radii sum, their depth the posed shapes' plus
+  /// it (exact for a Minkowski sum with a sphere); candidates grow by the radius.
+  std::vector<double> convex_radius;
+  /// `/bodies/com_offset` (m, body frame; empty: every body's position is its centre of
+  /// mass): where each body's centre of mass lies relative to the point its position gives
+  /// (MuJoCo's free joint integrates the body frame's origin). The trace reader turns the
+  /// records' states into the centres of mass (x + R c; with `velocity_at` "origin" also
+  /// v + w x R c), so the rules on states judge the centre of mass; the detection poses
+  /// stay the body frame's, where the shapes are placed.
+  std::vector<std::array<double, 3>> com_offset;
   /// The engine is design.md section 6's Jacobi response (octocd's cpu and cuda): an energy failure of
   /// an isolated group is reported as the model's property (its Jacobi-summed impulses
   /// computed from one pre-response state overshoot on chains), not as an engine fault.
