@@ -132,7 +132,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     ++rows_of[p.a];
     ++rows_of[p.b];
     const D3 nrm = unit3(d3(c.normal));
-    const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
+    const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
     const D3 pt = rec.has_points ? d3(c.point) : D3{};
     const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? pt - xb : D3{};
     // The friction impulse's direction: the trace convention's -v_t / |v_t|, v_t the

@@ -353,13 +353,25 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
     const ContactRecord& c = rec.contacts[deepest];
     double want = r.penetrating ? r.depth : 0.0;
     const char* want_what = by_sat ? "SAT minimum" : "FCL";
-    if (bodies.depth_per_manifold && by_sat && r.penetrating) {
-      // depth_per "manifold": one depth per manifold, the hulls' overlap along its deepest
-      // row's normal (>= the minimum translation; equal where the normal is the minimum's).
-      want = std::max(0.0, inflation(p) - hull_separation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b),
+    // The hulls' overlap along the deepest row's normal (>= the minimum translation; equal
+    // where the normal is the minimum's): depth_per "manifold" is judged on it, and an
+    // undeclared depth_per admits it beside the minimum ("point").
+    auto along_normal = [&] {
+      return std::max(0.0, inflation(p) - hull_separation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b),
                                                           det[p.b], c.normal));
+    };
+    if (bodies.depth_per_manifold && by_sat && r.penetrating) {
+      want = along_normal();
       want_what = "the hulls' overlap along the manifold's normal";
       ++depth_manifold_pairs;
+    } else if (!bodies.depth_per_declared && by_sat && r.penetrating && !r.depth_upper_bound &&
+               std::fabs(double(c.depth) - want) > tol.depth_m) {
+      const double along = along_normal();
+      if (std::fabs(double(c.depth) - along) <= tol.depth_m) ++depth_spared_as_manifold;
+      if (std::fabs(double(c.depth) - along) < std::fabs(double(c.depth) - want)) {
+        want = along;
+        want_what = "the hulls' overlap along the row's normal (depth_per undeclared: nearer than SAT's minimum)";
+      }
     }
     // An upper bound (non-convex meshes) judges one side only: the engine may be shallower.
     const double diff = r.depth_upper_bound ? double(c.depth) - want : std::fabs(double(c.depth) - want);

@@ -354,10 +354,22 @@ struct PhysicsValidators::Impl {
   // ---- depth_per and rounded shapes (contact_rows.cpp, candidates.cpp) -----------------
   std::uint64_t depth_unknown_pairs = 0;   ///< depth_per "unknown": pairs whose depth is not judged
   std::uint64_t depth_manifold_pairs = 0;  ///< depth_per "manifold": pairs judged along their normal
+  /// depth_per undeclared: pairs whose deepest row misses SAT's minimum but fits the hulls'
+  /// overlap along its normal (a manifold's depth): passed, counted.
+  std::uint64_t depth_spared_as_manifold = 0;
   std::uint64_t rounded_pairs = 0;         ///< pairs judged on shapes inflated by a convex radius
   /// Pair p's convex radii summed (m; PhysicsBodies::convex_radius, 0 without): how far the
   /// rounded shapes reach beyond the posed ones.
   double inflation(Pair p) const { return radius(p.a) + radius(p.b); }
+  /// Body i's centre of mass at pose `pose` (m, world): the pose's position plus the
+  /// rotated PhysicsBodies::com_offset (the position itself without one). The lever origin
+  /// of a row's impulse at the detection pose (momentum-balance, friction).
+  D3 com_at(const Pose& pose, std::uint32_t i) const {
+    const D3 x = dmath::d3(pose.position);
+    if (bodies.com_offset.empty()) return x;
+    const auto& c = bodies.com_offset[i];
+    return dmath::operator+(x, dmath::mul(dmath::rotation(pose.orientation), D3{c[0], c[1], c[2]}));
+  }
   /// Body i's convex radius (m; 0 without /bodies/convex_radius).
   double radius(std::uint32_t i) const { return bodies.convex_radius.empty() ? 0.0 : bodies.convex_radius[i]; }
 

@@ -242,6 +242,11 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail += fmt::format("; depth_per \"manifold\": {} convex pairs' one depth judged against the hulls' overlap "
                               "along the manifold's normal",
                               s.depth_manifold_pairs);
+    if (s.depth_spared_as_manifold)
+      r.detail += fmt::format("; depth_per undeclared: {} pairs' depth fits the hulls' overlap along the row's normal "
+                              "(a manifold's depth), not SAT's minimum: passed; declare depth_per to sharpen the "
+                              "verdict",
+                              s.depth_spared_as_manifold);
     if (s.rounded_pairs)
       r.detail += fmt::format("; {} pair-frames judged on shapes rounded by /bodies/convex_radius", s.rounded_pairs);
     out.push_back(r);

@@ -495,6 +495,7 @@ class TraceIn {
       const std::string depth_per = choice_attr("depth_per", {"point", "manifold", "unknown"}, "point");
       p.depth_per_manifold = depth_per == "manifold";
       p.depth_unknown = depth_per == "unknown";
+      p.depth_per_declared = has_attr("depth_per");
     }
     if (has_attr("friction_directions")) {
       const double d = number_attr("friction_directions", 0.0);

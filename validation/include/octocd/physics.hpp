@@ -311,6 +311,10 @@ struct PhysicsBodies {
   /// the witness points' lever (momentum-balance, conservation, friction): write the
   /// witness points' separation along the normal, or 0.
   bool depth_unknown = false;
+  /// `depth_per` declared. Undeclared admits "point" and "manifold": a pair's depth fails
+  /// only where it misses both SAT's minimum and the hulls' overlap along its deepest row's
+  /// normal ("unknown" is never assumed: it gives the depth judgement up).
+  bool depth_per_declared = true;
   /// `/bodies/convex_radius` (m, >= 0; empty: every body 0): each body is collided as its
   /// shape inflated by this radius (the Minkowski sum with a sphere: Jolt's convex radius,
   /// Box2D's rounded polygons). Every geometric rule judges the rounded shapes: their
