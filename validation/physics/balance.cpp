@@ -366,7 +366,8 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     // (docs/validation.md, "Free flight: any consistent integrator").
     const double updates =
         bodies.integrator == PhysicsBodies::Integrator::Substepped ? 4.0 + double(bodies.substeps - 1) : 4.0;
-    const double v_bound = updates * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + 1e-12;
+    const double v_bound = updates * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) +
+                           stored_origin_speed(rec, i) * 2.0 * kEps32 + 1e-12;
     const double dvl = len3(dv);
     free_vel.check(dvl <= v_bound, dvl, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: v' = ({:.6g}, {:.6g}, {:.6g}) m/s, v + g dt = "

@@ -370,6 +370,16 @@ struct PhysicsValidators::Impl {
     const auto& c = bodies.com_offset[i];
     return dmath::operator+(x, dmath::mul(dmath::rotation(pose.orientation), D3{c[0], c[1], c[2]}));
   }
+  /// With `velocity_at` "origin" (PhysicsBodies::velocity_at_origin): the speeds of the
+  /// origin's motion about the centre of mass before and after the step, |w x R c| summed
+  /// (m/s): the stored velocity was rounded at the origin's magnitude, so the converted
+  /// one carries u of it on each side (free-flight's velocity floor; 0 otherwise).
+  double stored_origin_speed(const FrameRecord& rec, std::uint32_t i) const {
+    if (!bodies.velocity_at_origin || bodies.com_offset.empty() || rec.w_pre.empty() || rec.w_post.empty()) return 0.0;
+    const D3 c{bodies.com_offset[i][0], bodies.com_offset[i][1], bodies.com_offset[i][2]};
+    // |w x R c| <= |w| |c| whatever R: the bound needs no orientation.
+    return dmath::len3(c) * (dmath::len3(dmath::d3(rec.w_pre[i])) + dmath::len3(dmath::d3(rec.w_post[i])));
+  }
   /// Body i's convex radius (m; 0 without /bodies/convex_radius).
   double radius(std::uint32_t i) const { return bodies.convex_radius.empty() ? 0.0 : bodies.convex_radius[i]; }
 

@@ -604,6 +604,7 @@ class TraceIn {
               "\"com\" (/states/velocity is the centre of mass's velocity: Jolt, PhysX, Rapier) or \"origin\" "
               "(the body frame origin's, the derivative of /states/position: MuJoCo's free joint)");
         velocity_at_origin_ = choice_attr("velocity_at", {"com", "origin"}, "com") == "origin";
+        p.velocity_at_origin = velocity_at_origin_;
       }
     }
     if (com_offset_.empty() && has_attr("velocity_at"))

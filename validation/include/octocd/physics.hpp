@@ -328,6 +328,10 @@ struct PhysicsBodies {
   /// v + w x R c), so the rules on states judge the centre of mass; the detection poses
   /// stay the body frame's, where the shapes are placed.
   std::vector<std::array<double, 3>> com_offset;
+  /// With com_offset: the root attribute `velocity_at` "origin" (the stored velocity was the
+  /// origin's, converted by the reader); free-flight's velocity floor takes the stored
+  /// magnitude (docs/validation.md, "Floors").
+  bool velocity_at_origin = false;
   /// The engine is design.md section 6's Jacobi response (octocd's cpu and cuda): an energy failure of
   /// an isolated group is reported as the model's property (its Jacobi-summed impulses
   /// computed from one pre-response state overshoot on chains), not as an engine fault.
