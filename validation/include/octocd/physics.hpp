@@ -326,7 +326,10 @@ struct PhysicsBodies {
   /// (MuJoCo's free joint integrates the body frame's origin). The trace reader turns the
   /// records' states into the centres of mass (x + R c; with `velocity_at` "origin" also
   /// v + w x R c), so the rules on states judge the centre of mass; the detection poses
-  /// stay the body frame's, where the shapes are placed.
+  /// stay the body frame's, where the shapes are placed. Records fed to PhysicsValidators
+  /// directly follow the same split: states (x_pre, x_post, v_pre, v_post) of the centres
+  /// of mass, detection poses (x_det, q_det) of the body frames; the rows' levers start at
+  /// x_det + R c. One offset per body, finite, or none (else InputError).
   std::vector<std::array<double, 3>> com_offset;
   /// With com_offset: the root attribute `velocity_at` "origin" (the stored velocity was the
   /// origin's, converted by the reader); free-flight's velocity floor takes the stored
