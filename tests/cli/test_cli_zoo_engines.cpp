@@ -809,6 +809,10 @@ TEST_F(ZooEngines, UndeclaredIsNeverStricterThanAnyDeclaredValue) {
     Zoo dropped = locked_engine();
     dropped.rows[49].erase(dropped.rows[49].begin() + 2);
     engines.emplace_back("joints-dropped", dropped);
+    Zoo deep = locked_engine();  // body 1's rows 1 cm deeper than the shapes at frame 30
+    for (Row& row : deep.rows[29])
+      if (row.b == 1) row.depth = f32(row.depth + 0.01);
+    engines.emplace_back("joints-deep", deep);
   }
   const std::map<std::string, std::vector<std::string>> values{
       {"gyroscopic", {"true", "false"}},
@@ -835,7 +839,7 @@ TEST_F(ZooEngines, UndeclaredIsNeverStricterThanAnyDeclaredValue) {
                                            << " but declared \"" << value << "\" does not\n" << r.output;
       }
     }
-  EXPECT_EQ(judged, 7u * 10u);
+  EXPECT_EQ(judged, 8u * 10u);
   EXPECT_GT(undeclared_failures, 0u);  // the planted faults fail undeclared too
 }
 
@@ -1475,6 +1479,12 @@ TEST_F(ZooEngines, OffCentreBodiesAreJudgedAtTheirCentreOfMass) {
   Zoo fast = origin;
   fast.states[120].v[2] = f32(1.5 * fast.states[120].v[2]);
   expect_caught(judge(fast, "fast"), {"free-flight", "body 2"});
+  Zoo bad = z;
+  bad.text["velocity_at"] = "middle";
+  const Result r = judge(bad, "bad-velocity-at");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("root attribute velocity_at"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("\"com\", \"origin\""), std::string::npos) << r.output;
 }
 
 TEST_F(ZooEngines, BadDeclarationsExitTwoNamingTheAttribute) {
