@@ -497,6 +497,88 @@ struct PhysicsValidators::Impl {
   /// impulses "none": rotating groups whose angular momentum is not judged (the
   /// witness-point lever of its rows needs their impulses).
   std::uint64_t groups_angular_unreported = 0;
+
+  // ---- contacts_complete 0: what the geometry shows apart (apart.cpp) ---------------
+  /// This step's bodies that may touch another body without a row (contacts_complete 0,
+  /// design.md section 13d item 5b): the pairs whose shapes, at the pre-step poses, lie
+  /// within the pair's margin + geometry_slack_m + both bodies' motion through the step
+  /// (NearPairs::reach), by the exact reference (ReferenceGeometry::posed; no answer:
+  /// near). Pairs inside one component of the contact graph are not tested (an impulse
+  /// between them is exchanged within it).
+  struct NearPairs {
+    std::int64_t frame = -1;          ///< the step they are of (-1: none computed)
+    std::vector<std::uint8_t> body;   ///< per body: 1 when in a near pair
+    std::vector<Pair> pairs;          ///< the near pairs (sorted)
+  };
+  NearPairs near;
+  /// Computes `near` for rec's step (states needed; nothing without them).
+  void find_near(const FrameRecord& rec);
+  /// How far body i's shape may move through rec's step (m): the larger of dt |v|, dt |v'|
+  /// and |x' - x|, plus |g| dt^2, plus its reach from its origin times the larger of
+  /// dt |w|, dt |w'| and the turn from q to q'.
+  double step_motion(const FrameRecord& rec, std::uint32_t i) const;
+  /// contacts_complete 0: marks as touching a static body (not isolated) every group of
+  /// `graph` in a near pair with a body outside it; returns how many such groups of 2 or
+  /// more dynamic bodies were isolated before.
+  std::uint64_t open_near_groups(ContactGraph& graph) const;
+  std::uint64_t free_near = 0;     ///< free-flight: body-steps without rows but near a body, not judged
+  std::uint64_t groups_near = 0;   ///< conservation: groups near a body outside them, not judged
+  std::uint64_t near_tested = 0;   ///< pairs the exact reference was asked about
+  std::uint64_t balance_incomplete = 0;  ///< momentum-balance: body-steps not judged (contacts_complete 0)
+
+  // ---- momentum-balance's systematic ratio (balance.cpp; docs/validation.md, "A systematic
+  // impulse ratio") -----------------------------------------------------------------------
+  /// What a row leaves open of a body's friction: a disc of radius u (kg m/s) normal to n.
+  struct BalanceDisc {
+    D3 n;
+    double u = 0;
+  };
+  /// A body-step whose linear balance failed at ratio 1: judged again in results() at the
+  /// fitted ratio (it fails only where it fails at both).
+  struct DeferredBalance {
+    std::int64_t frame = 0;
+    std::uint32_t body = 0, rows = 0;
+    D3 mdv, force;              ///< m (v' - v - g dt) and its rows' impulses summed (kg m/s)
+    double float_bound = 0;     ///< the rounding bound (kg m/s)
+    double r1 = 0;              ///< its figure at ratio 1 (of the bound)
+    std::size_t disc_first = 0, disc_count = 0;  ///< its discs in deferred_discs
+  };
+  /// At most this many deferred body-steps (and their discs) are kept; the rest stay failures
+  /// at ratio 1 (counted: deferred_over).
+  static constexpr std::size_t kMaxDeferred = std::size_t(1) << 18;
+  std::vector<DeferredBalance> deferred;
+  std::vector<BalanceDisc> deferred_discs;
+  std::uint64_t deferred_over = 0;
+  /// The fit's sample: s = (J . d) / (m dv . d) (reported impulses over the momentum change)
+  /// of body-steps whose s the record fixes to kFitPrecision along d (m dv's direction or a
+  /// row's normal: the open friction there and the rounding at most that of m dv . d), in
+  /// bins of kFitBin over [1 - kFitSpan, 1 + kFitSpan].
+  static constexpr double kFitPrecision = 1e-3, kFitBin = 1e-6, kFitSpan = 0.1;
+  /// A ratio beyond 1 +- this is itself a failure (the row's `ratio` cause, one finding).
+  static constexpr double kBiasMax = 0.01;
+  /// Fewer samples than this: no ratio is fitted (ratio 1).
+  static constexpr std::uint64_t kFitMinSamples = 10;
+  std::vector<std::uint64_t> ratio_bins;
+  std::uint64_t ratio_below = 0, ratio_above = 0;
+  /// Adds one body-step's s to the fit's sample.
+  void sample_ratio(double s);
+  /// The fitted ratio: the sample's median (its bin's centre), quartiles, size; `fitted`
+  /// when the sample has kFitMinSamples or more, `bias` when it lies beyond kBiasMax.
+  struct BalanceFit {
+    double ratio = 1, q1 = 1, q3 = 1;
+    std::uint64_t samples = 0;
+    bool fitted = false, bias = false;
+  };
+  BalanceFit balance_fit() const;
+  /// The linear balance's figure of a body-step at impulse ratio s: |m dv - J / s| along the
+  /// residual and each disc's normal, over the discs' support there plus the rounding;
+  /// `open_along`: the support of the worst direction.
+  static double balance_figure(const D3& mdv, const D3& force, const BalanceDisc* discs, std::size_t count,
+                               double float_bound, double s, double* open_along);
+  /// balance_lin with the deferred body-steps judged at `fit` (failures where they fail at
+  /// both ratio 1 and fit.ratio), and the fit's own finding (a ratio beyond kBiasMax) apart.
+  physics_detail::Tally fitted_balance(const BalanceFit& fit) const;
+  physics_detail::Tally balance_bias(const BalanceFit& fit) const;
 };
 
 }  // namespace octocd

@@ -291,6 +291,7 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   }
   if (checked && poses) s.geometry(rec, det);
   s.friction(rec, det);
+  if (!s.bodies.contacts_complete) s.find_near(rec);  // apart.cpp
   s.conservation(rec);
   s.balance(rec, det);
 }

@@ -288,10 +288,10 @@ struct PhysicsBodies {
   /// dt (|v_a - v_b| + |w_a| R_a + |w_b| R_b) (R: the body's reach from its origin,
   /// velocities the larger of before and after the step; not judged without states).
   bool speculative = false;
-  /// `contacts_complete` 0: the engine's API may drop contact rows (Havok). Read, not yet
-  /// used (design.md section 13d item 5b): the rows that take a body without rows as free
-  /// or need every row (contact-completeness, conservation, momentum-balance,
-  /// free-flight) are n/a, naming it.
+  /// `contacts_complete` 0: the engine's API may drop contact rows (Havok). free-flight and
+  /// conservation judge only the bodies and groups the exact reference shows apart from
+  /// every other body through the step (docs/validation.md, "Incomplete contact
+  /// reporting"); contact-completeness and momentum-balance are n/a, naming it.
   bool contacts_complete = true;
   /// `manifold_points` "persistent": a row's points ride on each body and may drift off
   /// the shapes. Read, not yet used beyond this: contact-geometry's point check is not
