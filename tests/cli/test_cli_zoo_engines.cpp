@@ -1468,6 +1468,14 @@ TEST_F(ZooEngines, RoundedShapesAreJudgedOnTheInflatedShape) {
   for (Row& row : deep.rows[29])
     if (row.b == 1) row.depth = f32(row.depth + 0.01);
   expect_caught(judge(deep, "rounded-deep"), {"contact-geometry", "frame 30: pair (0, 1)"});
+  // contacts_complete 0 (rows may be missing): box 1's rows dropped at frame 30 leave it
+  // touching the floor through its radius, so it is not judged as free (its friction and
+  // support changed its velocity); free-flight is not fooled by the posed shapes' gap.
+  Zoo gap = z;
+  gap.numbers["contacts_complete"] = 0;
+  gap.rows[29].erase(std::remove_if(gap.rows[29].begin(), gap.rows[29].end(), [](const Row& row) { return row.b == 1; }),
+                     gap.rows[29].end());
+  expect_clean(judge(gap, "rounded-incomplete"));
   Zoo sunk = z;  // 2 cm into the floor from frame 40 on: penetration of the rounded shapes
   for (std::size_t f = 40; f < sunk.states.size(); ++f) sunk.states[f].x[1][1] = f32(sunk.states[f].x[1][1] - 0.02);
   const Result pen = judge(sunk, "rounded-sunk");
@@ -1498,6 +1506,16 @@ TEST_F(ZooEngines, OffCentreBodiesAreJudgedAtTheirCentreOfMass) {
   Zoo fast = origin;
   fast.states[120].v[2] = f32(1.5 * fast.states[120].v[2]);
   expect_caught(judge(fast, "fast"), {"free-flight", "body 2"});
+  // contacts_complete 0 places the shapes in the body frame (x - R c): body 1's rows dropped
+  // on a bounce step leave it touching the floor, not judged free; body 2 alone is, and its
+  // teleport still fails.
+  const int bounce = first_impulse(z, 0, 1);
+  Zoo incomplete = z;
+  incomplete.numbers["contacts_complete"] = 0;
+  incomplete.rows[bounce - 1].clear();
+  expect_clean(judge(incomplete, "com-incomplete"));
+  incomplete.states[120].x[2][0] = f32(incomplete.states[120].x[2][0] + 0.01);
+  expect_caught(judge(incomplete, "com-incomplete-teleport"), {"free-flight", "frame 120", "body 2"});
   Zoo bad = z;
   bad.text["velocity_at"] = "middle";
   const Result r = judge(bad, "bad-velocity-at");

@@ -70,13 +70,10 @@ double PhysicsValidators::Impl::speculative_reach(const FrameRecord& rec, Pair p
     // The farthest point of the local box from the origin, rounded by the convex radius;
     // from the centre of mass (the states' point) up to |com_offset| farther.
     const Aabb& b = model->local_box(i);
-    const double com = bodies.com_offset.empty()
-                           ? 0.0
-                           : len3(D3{bodies.com_offset[i][0], bodies.com_offset[i][1], bodies.com_offset[i][2]});
     return len3(D3{std::max(std::fabs(double(b.min.x)), std::fabs(double(b.max.x))),
                    std::max(std::fabs(double(b.min.y)), std::fabs(double(b.max.y))),
                    std::max(std::fabs(double(b.min.z)), std::fabs(double(b.max.z)))}) +
-           radius(i) + com;
+           extra_reach(i);
   };
   const double v = std::max(len3(d3(rec.v_pre[p.a]) - d3(rec.v_pre[p.b])), len3(d3(rec.v_post[p.a]) - d3(rec.v_post[p.b])));
   const double w = spin ? std::max(len3(d3(rec.w_pre[p.a])), len3(d3(rec.w_post[p.a]))) * reach(p.a) +

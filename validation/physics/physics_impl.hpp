@@ -370,6 +370,25 @@ struct PhysicsValidators::Impl {
     const auto& c = bodies.com_offset[i];
     return dmath::operator+(x, dmath::mul(dmath::rotation(pose.orientation), D3{c[0], c[1], c[2]}));
   }
+  /// The body frame's pose of body i whose centre of mass is at x (a state's position)
+  /// with orientation q: x - R c (PhysicsBodies::com_offset; x itself without one). Where
+  /// a rule places the shapes from the states.
+  Pose frame_pose(Vec3 x, Quat q, std::uint32_t i) const {
+    if (bodies.com_offset.empty()) return Pose{x, q};
+    const auto& c = bodies.com_offset[i];
+    const D3 rc = dmath::mul(dmath::rotation(q), D3{c[0], c[1], c[2]});
+    return Pose{Vec3{static_cast<float>(x.x - rc[0]), static_cast<float>(x.y - rc[1]), static_cast<float>(x.z - rc[2])},
+                q};
+  }
+  /// How far body i's collided surface reaches beyond its local box's farthest point from
+  /// the states' point (m): its convex radius plus |com_offset| (apart.cpp, the
+  /// speculative reach).
+  double extra_reach(std::uint32_t i) const {
+    const double com = bodies.com_offset.empty() ? 0.0
+                                                 : dmath::len3(D3{bodies.com_offset[i][0], bodies.com_offset[i][1],
+                                                                  bodies.com_offset[i][2]});
+    return radius(i) + com;
+  }
   /// With `velocity_at` "origin" (PhysicsBodies::velocity_at_origin): the speeds of the
   /// origin's motion about the centre of mass before and after the step, |w x R c| summed
   /// (m/s): the stored velocity was rounded at the origin's magnitude, so the converted

@@ -286,8 +286,9 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   if (poses) {
     for (std::size_t i = 0; i < n; ++i) det[i] = detection_pose(*s.model, rec, i);
   } else if (rec.x_pre.size() == n) {
-    // No detection pose: the pre-step pose serves the contact-point lever arms.
-    for (std::size_t i = 0; i < n; ++i) det[i] = Pose{rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{}};
+    // No detection pose: the pre-step pose (its body frame) serves the contact-point lever arms.
+    for (std::size_t i = 0; i < n; ++i)
+      det[i] = s.frame_pose(rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{}, static_cast<std::uint32_t>(i));
   }
   if (checked && poses) s.geometry(rec, det);
   s.friction(rec, det);
