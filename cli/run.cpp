@@ -285,11 +285,18 @@ int run_command(const RunOptions& o) {
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   loading.reset();  // from here on the loop polls the signal, flushes and reports
   const auto t_model = Clock::now();
+  // Set-up progress of a large scene (kSetupLinesFrom bodies): its two stages on stderr.
+  constexpr std::size_t kSetupLinesFrom = 10000;
+  const bool setup_lines = !o.quiet && model->bodies.size() >= kSetupLinesFrom;
+  if (setup_lines)
+    std::fprintf(stderr, "set-up: scene and bodies %.2f s (%zu bodies); building the %s world\n",
+                 std::chrono::duration<double>(t_model - t_setup).count(), model->bodies.size(), o.engine.c_str());
   const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model, eo.settings);
   octocd::Engine& world = *engine;
   Totals totals;
   totals.model_s = std::chrono::duration<double>(t_model - t_setup).count();
   totals.engine_s = std::chrono::duration<double>(Clock::now() - t_model).count();
+  if (setup_lines) std::fprintf(stderr, "set-up: %s world %.2f s; stepping\n", o.engine.c_str(), totals.engine_s);
   std::unique_ptr<octocd::TraceWriter> trace;
   // An engine that writes its own trace (a process engine) gives it whole after the loop.
   if (!o.trace.empty() && !world.writes_own_trace()) {

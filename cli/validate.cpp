@@ -168,6 +168,32 @@ class JudgedSoFar {
   std::int64_t judged_ = 0;
 };
 
+/// Progress of a long judging on stderr: "validate: judged frame N of M (R frames/s)",
+/// the first after 2 s of judging and then every 2 s (a judging that ends sooner prints
+/// none). R: the frames judged since the first call over the seconds since it.
+class JudgingProgress {
+ public:
+  void tick(std::int64_t judged_to, std::int64_t frames) {
+    const auto now = Clock::now();
+    if (!start_) {
+      start_ = now;
+      first_ = judged_to;
+      last_ = now;
+      return;
+    }
+    if (now - last_ < std::chrono::seconds(2)) return;
+    last_ = now;
+    const double s = std::chrono::duration<double>(now - *start_).count();
+    std::fprintf(stderr, "validate: judged frame %lld of %lld (%.2f frames/s)\n", static_cast<long long>(judged_to),
+                 static_cast<long long>(frames), s > 0 ? double(judged_to - first_) / s : 0.0);
+  }
+
+ private:
+  std::optional<Clock::time_point> start_;
+  Clock::time_point last_;
+  std::int64_t first_ = 0;
+};
+
 /// Waits until `done` (set under `m`, `cv` notified) and returns true, or returns false
 /// once a signal has waited kValidateStopGrace for it, or at once on a second signal.
 bool wait_for_worker(std::mutex& m, std::condition_variable& cv, const bool& done) {
@@ -228,12 +254,14 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
   JudgedSoFar so_far;
   octocd::ExternalTraceInfo so_far_info;  // under so_far's snapshot (its own mutex below)
   std::mutex info_m;
+  JudgingProgress progress;
   eo.on_judged = [&](const std::vector<octocd::ValidationResult>& rows, const octocd::ExternalTraceInfo& i) {
     {
       const std::lock_guard<std::mutex> lock(info_m);
       so_far_info = i;
     }
     so_far.keep(rows, i.judged_to);
+    progress.tick(i.judged_to, o.frames_given ? std::min<std::int64_t>(o.frames, i.frames) : i.frames);
   };
   std::vector<octocd::ValidationResult> results;
   std::mutex worker_m;
@@ -717,8 +745,12 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   // normally stops at its next poll; if not, the verdict of the frames judged so far
   // (on_judged's latest snapshot) is reported and the process ends without it.
   JudgedSoFar so_far;
-  vo.on_judged = [&so_far](const std::vector<octocd::ValidationResult>& rows, std::int64_t judged) {
+  JudgingProgress progress;
+  const std::int64_t frames_total = o.frames;
+  vo.on_judged = [&so_far, &progress, frames_total](const std::vector<octocd::ValidationResult>& rows,
+                                                    std::int64_t judged) {
     so_far.keep(rows, judged);
+    progress.tick(judged, frames_total);
   };
   std::mutex worker_m;
   std::condition_variable worker_cv;
