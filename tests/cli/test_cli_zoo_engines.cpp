@@ -160,6 +160,12 @@ struct Zoo {
   int state_every = 1;
   /// Extra /bodies datasets (float): n values, or n x 3 when 3n.
   std::map<std::string, std::vector<double>> body_floats;
+  /// Per body its centre of mass in the body frame (m; empty: the box centre). The run
+  /// simulates the centres of mass (x, v); write() gives the body frame's origin x - R c
+  /// (and, with text velocity_at "origin", its velocity v - w x R c) and, with
+  /// `write_com`, /bodies/com_offset.
+  std::vector<V> com_offset;
+  bool write_com = true;
 
   int n() const { return static_cast<int>(bodies.size()); }
   M inertia_world(int i, const State& s) const { return conj(rotation(s.q[i]), bodies[i].inertia()); }
@@ -300,6 +306,11 @@ struct Zoo {
     floats("/bodies/inverse_mass", {nb}, im);
     floats("/bodies/inertia", {nb, 3, 3}, inertia);
     if (write_locked) put("/bodies/locked_dofs", H5T_NATIVE_UINT8, H5T_STD_U8LE, {nb}, locked.data());
+    if (!com_offset.empty() && write_com) {
+      std::vector<double> c;
+      for (const V& o : com_offset) c.insert(c.end(), o.begin(), o.end());
+      floats("/bodies/com_offset", {nb, 3}, c);
+    }
     for (const auto& [name, values] : body_floats)
       floats(name.c_str(), values.size() == nb ? std::vector<hsize_t>{nb} : std::vector<hsize_t>{nb, 3}, values);
     std::vector<double> x, v, w, q;
@@ -308,8 +319,15 @@ struct Zoo {
       const State& s = states[f];
       state_frame.push_back(static_cast<std::int64_t>(f));
       for (int i = 0; i < n(); ++i) {
-        x.insert(x.end(), s.x[i].begin(), s.x[i].end());
-        v.insert(v.end(), s.v[i].begin(), s.v[i].end());
+        V xi = s.x[i], vi = s.v[i];
+        if (!com_offset.empty()) {  // the body frame's origin, c behind the centre of mass
+          const V rc = mul(rotation(s.q[i]), com_offset[i]);
+          xi = xi - rc;
+          const auto at = text.find("velocity_at");
+          if (at != text.end() && at->second == "origin") vi = vi - cross(s.w[i], rc);
+        }
+        x.insert(x.end(), xi.begin(), xi.end());
+        v.insert(v.end(), vi.begin(), vi.end());
         w.insert(w.end(), s.w[i].begin(), s.w[i].end());
         q.insert(q.end(), s.q[i].begin(), s.q[i].end());
       }
@@ -518,6 +536,37 @@ Zoo gyroscopic_engine(int frames = 200) {
   z.run(frames, true, [&](const State& s, State& t, std::vector<Row>& rows) {
     floor_corners(z, 1, s, t, rows, 0.5);
     floor_corners(z, 2, s, t, rows, 0.5);
+  });
+  return z;
+}
+
+/// (h) Off-centre bodies: gyroscopic_engine's flat boxes with their centres of mass
+/// (3, -2, 1) cm off the box centre (a weight inside; the inertia about the centre of mass
+/// is the uniform box's): body 1 falls turning onto the floor and bounces on its corners
+/// (their levers from the centre of mass), body 2 spins alone. The run simulates the centres
+/// of mass; the trace gives the body frame's origin (MuJoCo's free joint), declared by
+/// /bodies/com_offset and velocity_at "com".
+Zoo com_engine(int frames = 200) {
+  Zoo z;
+  z.engine = "zoo-off-centre";
+  Body floor;
+  floor.h = {2, 0.1, 2};
+  floor.m = 0;
+  Body flat;
+  flat.h = {0.2, 0.1, 0.05};
+  z.bodies = {floor, flat, flat};
+  const V c{0.03, -0.02, 0.01};
+  z.com_offset = {{0, 0, 0}, c, c};
+  z.text["gyroscopic"] = "true";
+  z.text["velocity_at"] = "com";
+  std::vector<V> corners;  // the box's corners from the centre of mass
+  for (const V& k : box_corners(flat.h)) corners.push_back(k - c);
+  z.states.push_back(initial(z, {{0, -0.1, 0}, {0, 0.25, 0}, {1.2, 1.5, 0.5}}, {{0, 0, 0}, {0, 0, 0}, {0, 1, 0}},
+                             {{0, 0, 0}, {2, 5, 1}, {3, 6, 2}},
+                             {{1, 0, 0, 0}, axis_angle({1, 1, 0}, 0.5), axis_angle({0, 1, 1}, 0.2)}));
+  z.run(frames, true, [&](const State& s, State& t, std::vector<Row>& rows) {
+    floor_corners(z, 1, s, t, rows, 0.5, corners);
+    floor_corners(z, 2, s, t, rows, 0.5, corners);
   });
   return z;
 }
@@ -769,11 +818,16 @@ TEST_F(ZooEngines, UndeclaredIsNeverStricterThanAnyDeclaredValue) {
     Zoo dropped = locked_engine();
     dropped.rows[49].erase(dropped.rows[49].begin() + 2);
     engines.emplace_back("joints-dropped", dropped);
+    Zoo deep = locked_engine();  // body 1's rows 1 cm deeper than the shapes at frame 30
+    for (Row& row : deep.rows[29])
+      if (row.b == 1) row.depth = f32(row.depth + 0.01);
+    engines.emplace_back("joints-deep", deep);
   }
   const std::map<std::string, std::vector<std::string>> values{
       {"gyroscopic", {"true", "false"}},
       {"integrator", {"semi-implicit", "explicit", "any", "substepped"}},
-      {"contact_model", {"rigid", "soft"}}};
+      {"contact_model", {"rigid", "soft"}},
+      {"depth_per", {"point", "manifold"}}};
   std::size_t judged = 0, undeclared_failures = 0;
   for (const auto& [name, base] : engines)
     for (const auto& [attribute, choices] : values) {
@@ -794,7 +848,7 @@ TEST_F(ZooEngines, UndeclaredIsNeverStricterThanAnyDeclaredValue) {
                                            << " but declared \"" << value << "\" does not\n" << r.output;
       }
     }
-  EXPECT_EQ(judged, 7u * 8u);
+  EXPECT_EQ(judged, 8u * 10u);
   EXPECT_GT(undeclared_failures, 0u);  // the planted faults fail undeclared too
 }
 
@@ -1345,28 +1399,129 @@ TEST_F(ZooEngines, FourthRoundDeclarationsAreReadOrRefused) {
   const Result persistent = judge(drift, "persistent");
   expect_clean(persistent);
   EXPECT_NE(persistent.output.find("manifold_points \"persistent\""), std::string::npos) << persistent.output;
-  // depth_per: "manifold" read (judged as per point), "unknown" refused.
-  Zoo depth = base;
-  depth.text["depth_per"] = "manifold";
-  expect_clean(judge(depth, "depth-manifold"));
-  depth.text["depth_per"] = "unknown";
-  Result r = judge(depth, "depth-unknown");
-  EXPECT_EQ(r.code, 2) << r.output;
-  EXPECT_NE(r.output.find("root attribute depth_per"), std::string::npos) << r.output;
-  // /bodies/convex_radius and /bodies/com_offset: zeros read, anything else refused.
+  // /bodies/convex_radius and /bodies/com_offset of zeros: judged as without them.
   Zoo shapes = base;
   shapes.body_floats["/bodies/convex_radius"] = std::vector<double>(5, 0.0);
   shapes.body_floats["/bodies/com_offset"] = std::vector<double>(15, 0.0);
   expect_clean(judge(shapes, "zeros"));
-  shapes.body_floats["/bodies/convex_radius"][1] = 0.05;
-  r = judge(shapes, "rounded");
+  shapes.body_floats["/bodies/convex_radius"][1] = -0.01;
+  Result r = judge(shapes, "negative-radius");
   EXPECT_EQ(r.code, 2) << r.output;
-  EXPECT_NE(r.output.find("/bodies/convex_radius: body 1: 0.05"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("/bodies/convex_radius: body 1: -0.0099"), std::string::npos) << r.output;
   shapes.body_floats["/bodies/convex_radius"][1] = 0.0;
-  shapes.body_floats["/bodies/com_offset"][7] = 0.01;
-  r = judge(shapes, "off-centre");
+  shapes.body_floats["/bodies/com_offset"][7] = 0.01;  // an offset needs velocity_at
+  r = judge(shapes, "no-velocity-at");
   EXPECT_EQ(r.code, 2) << r.output;
-  EXPECT_NE(r.output.find("/bodies/com_offset: body 2"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("root attribute velocity_at"), std::string::npos) << r.output;
+}
+
+// design.md section 13d items 4 and 5b: depth_per "unknown" makes the depth cause n/a (named)
+// while penetration is judged on the posed shapes; "manifold" judges one depth per pair
+// along its normal; undeclared admits both "point" and "manifold". A depth 1 cm off fails
+// under "point", "manifold" and undeclared.
+TEST_F(ZooEngines, DepthPerIsJudgedAsDeclared) {
+  const Zoo base = locked_engine();
+  for (const char* value : {"point", "manifold"}) {
+    Zoo z = base;
+    z.text["depth_per"] = value;
+    expect_clean(judge(z, std::string("depth-") + value));
+  }
+  Zoo deep = base;  // body 1's rows (on the floor) 1 cm deeper than the shapes at frame 30
+  for (Row& row : deep.rows[29])
+    if (row.b == 1) row.depth = f32(row.depth + 0.01);
+  for (const char* value : {"point", "manifold", ""}) {
+    Zoo z = deep;
+    if (*value) z.text["depth_per"] = value;
+    expect_caught(judge(z, std::string("deep-") + value), {"contact-geometry", "frame 30: pair (0, 1)"});
+  }
+  Zoo unknown = deep;
+  unknown.text["depth_per"] = "unknown";
+  const Result u = judge(unknown, "deep-unknown");
+  expect_clean(u);
+  EXPECT_NE(u.output.find("depth n/a on"), std::string::npos) << u.output;
+  EXPECT_NE(u.output.find("depth_per \"unknown\""), std::string::npos) << u.output;
+  // Penetration is still judged on the posed shapes: box 1 sunk 2 cm into the floor from
+  // frame 40 on (its rows as before) fails penetration with depth_per "unknown".
+  Zoo sunk = base;
+  for (std::size_t f = 40; f < sunk.states.size(); ++f) sunk.states[f].x[1][1] = f32(sunk.states[f].x[1][1] - 0.02);
+  sunk.text["depth_per"] = "unknown";
+  const Result pen = judge(sunk, "sunk-unknown");
+  EXPECT_EQ(pen.code, 3) << pen.output;
+  EXPECT_TRUE(row_verdict(pen.output, "penetration", "FAIL")) << pen.output;
+}
+
+// design.md section 13d item 4: /bodies/convex_radius rounds a body's shape. Box 1 rests
+// 2 cm higher on the floor (its rows 0.5 mm deep into the floor): judged on the box rounded
+// by 2 cm it is clean; without the radius its rows join shapes 1.95 cm apart (a false
+// contact, margin 5 mm); a row depth 1 cm off on the rounded box still fails.
+TEST_F(ZooEngines, RoundedShapesAreJudgedOnTheInflatedShape) {
+  Zoo z = locked_engine();
+  for (State& s : z.states) s.x[1][1] = f32(s.x[1][1] + 0.02);
+  z.body_floats["/bodies/convex_radius"] = {0, 0.02, 0, 0, 0};
+  const Result ok = judge(z, "rounded");
+  expect_clean(ok);
+  EXPECT_NE(ok.output.find("rounded by /bodies/convex_radius"), std::string::npos) << ok.output;
+  Zoo bare = z;
+  bare.body_floats.erase("/bodies/convex_radius");
+  expect_caught(judge(bare, "not-rounded"), {"contact-completeness", "false contact on pair (0, 1)"});
+  Zoo deep = z;
+  for (Row& row : deep.rows[29])
+    if (row.b == 1) row.depth = f32(row.depth + 0.01);
+  expect_caught(judge(deep, "rounded-deep"), {"contact-geometry", "frame 30: pair (0, 1)"});
+  // contacts_complete 0 (rows may be missing): box 1's rows dropped at frame 30 leave it
+  // touching the floor through its radius, so it is not judged as free (its friction and
+  // support changed its velocity); free-flight is not fooled by the posed shapes' gap.
+  Zoo gap = z;
+  gap.numbers["contacts_complete"] = 0;
+  gap.rows[29].erase(std::remove_if(gap.rows[29].begin(), gap.rows[29].end(), [](const Row& row) { return row.b == 1; }),
+                     gap.rows[29].end());
+  expect_clean(judge(gap, "rounded-incomplete"));
+  Zoo sunk = z;  // 2 cm into the floor from frame 40 on: penetration of the rounded shapes
+  for (std::size_t f = 40; f < sunk.states.size(); ++f) sunk.states[f].x[1][1] = f32(sunk.states[f].x[1][1] - 0.02);
+  const Result pen = judge(sunk, "rounded-sunk");
+  EXPECT_EQ(pen.code, 3) << pen.output;
+  EXPECT_TRUE(row_verdict(pen.output, "penetration", "FAIL")) << pen.output;
+}
+
+// design.md section 13d item 5d: positions at the body frame's origin, 3.7 cm from the
+// centre of mass. Declared (/bodies/com_offset, velocity_at "com" or "origin"): clean;
+// left out, the spinning body's origin fails free-flight; a 1 cm teleport and a 1.5x
+// velocity still fail when declared.
+TEST_F(ZooEngines, OffCentreBodiesAreJudgedAtTheirCentreOfMass) {
+  const Zoo z = com_engine();
+  ASSERT_GT(first_impulse(z, 0, 1), 0);
+  expect_clean(judge(z, "com"));
+  // velocity_at "origin": the stored origin velocity (|w x R c| ~ 0.2 m/s here) is rounded
+  // at its own magnitude; free-flight's floor takes it (docs/validation.md, "Floors").
+  Zoo origin = z;
+  origin.text["velocity_at"] = "origin";
+  expect_clean(judge(origin, "origin"));
+  Zoo left_out = z;
+  left_out.write_com = false;
+  left_out.text.erase("velocity_at");
+  expect_caught(judge(left_out, "left-out"), {"free-flight", "body 2"});
+  Zoo teleport = z;
+  teleport.states[120].x[2][0] = f32(teleport.states[120].x[2][0] + 0.01);
+  expect_caught(judge(teleport, "teleport"), {"free-flight", "frame 120", "body 2"});
+  Zoo fast = origin;
+  fast.states[120].v[2] = f32(1.5 * fast.states[120].v[2]);
+  expect_caught(judge(fast, "fast"), {"free-flight", "body 2"});
+  // contacts_complete 0 places the shapes in the body frame (x - R c): body 1's rows dropped
+  // on a bounce step leave it touching the floor, not judged free; body 2 alone is, and its
+  // teleport still fails.
+  const int bounce = first_impulse(z, 0, 1);
+  Zoo incomplete = z;
+  incomplete.numbers["contacts_complete"] = 0;
+  incomplete.rows[bounce - 1].clear();
+  expect_clean(judge(incomplete, "com-incomplete"));
+  incomplete.states[120].x[2][0] = f32(incomplete.states[120].x[2][0] + 0.01);
+  expect_caught(judge(incomplete, "com-incomplete-teleport"), {"free-flight", "frame 120", "body 2"});
+  Zoo bad = z;
+  bad.text["velocity_at"] = "middle";
+  const Result r = judge(bad, "bad-velocity-at");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("root attribute velocity_at"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("\"com\", \"origin\""), std::string::npos) << r.output;
 }
 
 /// (j) A 30-box pile: 15 columns of two boxes (0.2 m, 1 kg, rotation locked) on a 5 x 3

@@ -42,7 +42,8 @@ double PhysicsValidators::Impl::step_motion(const FrameRecord& rec, std::uint32_
   const double reach = len3(D3{std::max(std::fabs(double(box.min.x)), std::fabs(double(box.max.x))),
                                std::max(std::fabs(double(box.min.y)), std::fabs(double(box.max.y))),
                                std::max(std::fabs(double(box.min.z)), std::fabs(double(box.max.z)))});
-  return linear + reach * std::min(turn, 2.0);  // a chord of a turn never exceeds the diameter
+  // From the states' point (the centre of mass), the rounded surface reaches extra_reach farther.
+  return linear + (reach + extra_reach(i)) * std::min(turn, 2.0);  // a chord never exceeds the diameter
 }
 
 void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
@@ -64,9 +65,10 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
   std::vector<Aabb> grown(n);
   for (std::size_t i = 0; i < n; ++i) {
     const auto u = static_cast<std::uint32_t>(i);
-    pose[i] = Pose{rec.x_pre[i], oriented ? rec.q_pre[i] : Quat{}};
+    pose[i] = frame_pose(rec.x_pre[i], oriented ? rec.q_pre[i] : Quat{}, u);  // the shapes' frame
     motion[i] = step_motion(rec, u);
-    grown[i] = expanded(ref->world_aabb(u, pose[i]), static_cast<float>(motion[i] + 0.5 * (max_margin + slack)));
+    grown[i] = expanded(ref->world_aabb(u, pose[i]),
+                        static_cast<float>(motion[i] + radius(u) + 0.5 * (max_margin + slack)));
   }
   std::vector<Pair> cand;
   ExactPairsSettings settings;
@@ -80,7 +82,9 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
     if (graph.find(p.a) == graph.find(p.b)) continue;  // one component: exchanged within it
     ++near_tested;
     const ReferenceNormal r = ref->posed(p.a, p.b, pose[p.a], pose[p.b]);
-    const bool apart = r.valid && r.signed_distance() > pair_margin(p) + slack + motion[p.a] + motion[p.b];
+    // Rounded shapes (convex_radius) are apart by the posed distance less their radii.
+    const bool apart =
+        r.valid && r.signed_distance() > pair_margin(p) + slack + motion[p.a] + motion[p.b] + inflation(p);
     if (apart) continue;
     near.pairs.push_back(p);
     near.body[p.a] = near.body[p.b] = 1;

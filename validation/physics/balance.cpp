@@ -129,7 +129,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     ++rows_of[p.a];
     ++rows_of[p.b];
     const D3 nrm = unit3(d3(c.normal));
-    const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
+    const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
     const D3 pt = rec.has_points ? d3(c.point) : D3{};
     const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? pt - xb : D3{};
     // The friction impulse's direction: the trace convention's -v_t / |v_t|, v_t the
@@ -399,7 +399,8 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     // (docs/validation.md, "Free flight: any consistent integrator").
     const double updates =
         bodies.integrator == PhysicsBodies::Integrator::Substepped ? 4.0 + double(bodies.substeps - 1) : 4.0;
-    const double v_bound = updates * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + 1e-12;
+    const double v_bound = updates * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) +
+                           stored_origin_speed(rec, i) * 2.0 * kEps32 + 1e-12;
     const double dvl = len3(dv);
     free_vel.check(dvl <= v_bound, dvl, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: v' = ({:.6g}, {:.6g}, {:.6g}) m/s, v + g dt = "

@@ -176,6 +176,33 @@ struct ContactTruth {
     have = true;
     intersects = g.penetrating;
   }
+  /// The same pair with A rounded by `ra` and B by `rb` (m, >= 0: each shape's Minkowski
+  /// sum with a sphere, PhysicsBodies::convex_radius). Exact: the rounded shapes' depth is
+  /// the posed ones' plus ra + rb along the same normal (every support value grows by the
+  /// radius, so SAT's accepted axes stay); shapes apart by d <= ra + rb penetrate by
+  /// ra + rb - d along their nearest-points direction; farther ones are d - ra - rb apart.
+  /// The witness points move onto the rounded surfaces.
+  void inflate(double ra, double rb) {
+    const double s = ra + rb;
+    if (!(s > 0)) return;
+    if (g.penetrating) {
+      g.depth += s;
+      fcl_depth += s;
+    } else if (g.distance > s) {
+      g.distance -= s;
+    } else {
+      g.penetrating = true;
+      g.depth = s - g.distance;
+      g.distance = 0;
+      fcl_depth = g.depth;
+      fcl_normal = g.normal;
+    }
+    if (g.valid) {
+      g.point_a = g.point_a - static_cast<float>(ra) * g.normal;
+      g.point_b = g.point_b + static_cast<float>(rb) * g.normal;
+    }
+    intersects = g.penetrating;
+  }
 };
 
 /// A pair's contact rows [first, first + count) (rows of a pair are consecutive).
@@ -324,6 +351,56 @@ struct PhysicsValidators::Impl {
   double speculative_reach(const FrameRecord& rec, Pair p) const;
   std::uint64_t speculative_allowed = 0;  ///< contact pairs given a speculative reach
   std::uint64_t points_persistent = 0;    ///< rows whose point check is not applied (persistent points)
+  // ---- depth_per and rounded shapes (contact_rows.cpp, candidates.cpp) -----------------
+  std::uint64_t depth_unknown_pairs = 0;   ///< depth_per "unknown": pairs whose depth is not judged
+  std::uint64_t depth_manifold_pairs = 0;  ///< depth_per "manifold": pairs judged along their normal
+  /// depth_per undeclared: pairs whose deepest row misses SAT's minimum but fits the hulls'
+  /// overlap along its normal (a manifold's depth): passed, counted.
+  std::uint64_t depth_spared_as_manifold = 0;
+  std::uint64_t rounded_pairs = 0;         ///< pairs judged on shapes inflated by a convex radius
+  /// Pair p's convex radii summed (m; PhysicsBodies::convex_radius, 0 without): how far the
+  /// rounded shapes reach beyond the posed ones.
+  double inflation(Pair p) const { return radius(p.a) + radius(p.b); }
+  /// Body i's centre of mass at pose `pose` (m, world): the pose's position plus the
+  /// rotated PhysicsBodies::com_offset (the position itself without one). The lever origin
+  /// of a row's impulse at the detection pose (momentum-balance, friction).
+  D3 com_at(const Pose& pose, std::uint32_t i) const {
+    const D3 x = dmath::d3(pose.position);
+    if (bodies.com_offset.empty()) return x;
+    const auto& c = bodies.com_offset[i];
+    return dmath::operator+(x, dmath::mul(dmath::rotation(pose.orientation), D3{c[0], c[1], c[2]}));
+  }
+  /// The body frame's pose of body i whose centre of mass is at x (a state's position)
+  /// with orientation q: x - R c (PhysicsBodies::com_offset; x itself without one). Where
+  /// a rule places the shapes from the states.
+  Pose frame_pose(Vec3 x, Quat q, std::uint32_t i) const {
+    if (bodies.com_offset.empty()) return Pose{x, q};
+    const auto& c = bodies.com_offset[i];
+    const D3 rc = dmath::mul(dmath::rotation(q), D3{c[0], c[1], c[2]});
+    return Pose{Vec3{static_cast<float>(x.x - rc[0]), static_cast<float>(x.y - rc[1]), static_cast<float>(x.z - rc[2])},
+                q};
+  }
+  /// How far body i's collided surface reaches beyond its local box's farthest point from
+  /// the states' point (m): its convex radius plus |com_offset| (apart.cpp, the
+  /// speculative reach).
+  double extra_reach(std::uint32_t i) const {
+    const double com = bodies.com_offset.empty() ? 0.0
+                                                 : dmath::len3(D3{bodies.com_offset[i][0], bodies.com_offset[i][1],
+                                                                  bodies.com_offset[i][2]});
+    return radius(i) + com;
+  }
+  /// With `velocity_at` "origin" (PhysicsBodies::velocity_at_origin): the speeds of the
+  /// origin's motion about the centre of mass before and after the step, |w x R c| summed
+  /// (m/s): the stored velocity was rounded at the origin's magnitude, so the converted
+  /// one carries u of it on each side (free-flight's velocity floor; 0 otherwise).
+  double stored_origin_speed(const FrameRecord& rec, std::uint32_t i) const {
+    if (!bodies.velocity_at_origin || bodies.com_offset.empty() || rec.w_pre.empty() || rec.w_post.empty()) return 0.0;
+    const D3 c{bodies.com_offset[i][0], bodies.com_offset[i][1], bodies.com_offset[i][2]};
+    // |w x R c| <= |w| |c| whatever R: the bound needs no orientation.
+    return dmath::len3(c) * (dmath::len3(dmath::d3(rec.w_pre[i])) + dmath::len3(dmath::d3(rec.w_post[i])));
+  }
+  /// Body i's convex radius (m; 0 without /bodies/convex_radius).
+  double radius(std::uint32_t i) const { return bodies.convex_radius.empty() ? 0.0 : bodies.convex_radius[i]; }
 
   // ---- Rows 1-4 (checked frames with poses) --------------------------------------
   /// Rows 1-4 of a checked frame, each on its own clock.

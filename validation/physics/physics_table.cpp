@@ -234,6 +234,21 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail += fmt::format("; manifold_points \"persistent\": {} row points not judged (they ride on each body "
                               "and may drift off the shapes)",
                               s.points_persistent);
+    if (s.depth_unknown_pairs)
+      r.detail += fmt::format("; depth n/a on {} pairs: depth_per \"unknown\" (the rows carry no depth; penetration "
+                              "is judged on the posed shapes)",
+                              s.depth_unknown_pairs);
+    if (s.depth_manifold_pairs)
+      r.detail += fmt::format("; depth_per \"manifold\": {} convex pairs' one depth judged against the hulls' overlap "
+                              "along the manifold's normal",
+                              s.depth_manifold_pairs);
+    if (s.depth_spared_as_manifold)
+      r.detail += fmt::format("; depth_per undeclared: {} pairs' depth fits the hulls' overlap along the row's normal "
+                              "(a manifold's depth), not SAT's minimum: passed; declare depth_per to sharpen the "
+                              "verdict",
+                              s.depth_spared_as_manifold);
+    if (s.rounded_pairs)
+      r.detail += fmt::format("; {} pair-frames judged on shapes rounded by /bodies/convex_radius", s.rounded_pairs);
     out.push_back(r);
   }
   // 4. Penetration.
