@@ -220,7 +220,18 @@ int bench_command(const BenchOptions& o) {
                                      origin, sc, scene_dir));
     }
   };
-  if (!o.csv.empty() && s.kind != "speed-accuracy")
+  if (s.kind == "divergence") {
+    if (o.warmup >= 0 || o.target > 0 || o.max_instances > 0 || o.resolution >= 0 || o.search_time_s >= 0 ||
+        !o.trace_dir.empty() || !o.history.empty() || !o.traced.empty() || o.resume || !o.shard.empty() || o.repeat > 0)
+      throw InputError(fmt::format("{} is of kind divergence; allowed: --engines, --frames, --csv, --quiet and the "
+                                   "engine settings (no --warmup, --target, --max-instances, --resolution, "
+                                   "--search-time, --trace-dir, --history, --traced, --resume, --shard, --repeat: one run per copy)",
+                                   origin));
+    if (o.frames > 0) s.frames = o.frames;
+    check_scenes();
+    return run_divergence(s, origin, def, o);
+  }
+  if (!o.csv.empty() && s.kind != "speed-accuracy" && s.kind != "divergence")
     throw InputError(fmt::format("--csv: {} is of kind '{}'; allowed: only for sweeps of kind speed-accuracy (others: "
                                  "octocd report --csv DIR)",
                                  origin, s.kind));

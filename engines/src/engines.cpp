@@ -53,6 +53,7 @@ EngineInfo cpu_info() {
   cpu.has_midphase = true;
   cpu.uses_scene_broadphase = true;
   cpu.records_every_step = true;
+  cpu.openmp_threads = true;
   return cpu;
 }
 
