@@ -135,8 +135,8 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
         fmt::format("at most {} points", kMaxPoints));
 
   json settings = result_settings(s, 0, 1);
-  settings.erase("warmup");
-  settings.erase("repeat");
+  settings["warmup"] = 0;
+  settings["repeat"] = 1;  // one run per copy
   settings["eps"] = s.eps;
   settings["copies"] = s.copies;
   settings["seed"] = s.seed;

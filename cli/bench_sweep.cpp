@@ -290,11 +290,12 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
       s.rotation = j.at("rotation").get<bool>();
     }
     if (!j.contains("eps") || !j.at("eps").is_array() || j.at("eps").empty())
-      bad(origin, "eps", "missing or not a non-empty array", "an array of perturbations in metres, each in (0, 1]");
+      bad(origin, "eps", "missing or not a non-empty array", "an array of perturbations in metres, each in [0, 1]");
     for (std::size_t i = 0; i < j.at("eps").size(); ++i) {
       const json& v = j.at("eps")[i];
-      if (!v.is_number() || !std::isfinite(v.get<double>()) || !(v.get<double>() > 0.0) || v.get<double>() > 1.0)
-        bad(origin, fmt::format("eps[{}]", i), v.dump(), "a number of metres in (0, 1]");
+      if (!v.is_number() || !std::isfinite(v.get<double>()) || !(v.get<double>() >= 0.0) || v.get<double>() > 1.0)
+        bad(origin, fmt::format("eps[{}]", i), v.dump(),
+            "a number of metres in [0, 1] (0: unperturbed copies, distance 0 for a deterministic engine)");
       if (std::find(s.eps.begin(), s.eps.end(), v.get<double>()) != s.eps.end())
         bad(origin, fmt::format("eps[{}]", i), v.dump() + " is listed twice", "each perturbation once");
       s.eps.push_back(v.get<double>());

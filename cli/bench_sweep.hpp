@@ -87,7 +87,7 @@ struct Sweep {
   std::vector<bool> rotations;          ///< false, true: without and with rotation (where the engine rotates)
   double diverge_beyond_m = 1e6;        ///< a body this far outside the domain (m) makes its run diverged
   // divergence (docs/bench-format.md, docs/predictability.md)
-  std::vector<double> eps;              ///< the ladder of initial perturbations (m), each in (0, 1]
+  std::vector<double> eps;              ///< the ladder of initial perturbations (m), each in [0, 1] (0: unperturbed copies)
   int copies = 16;                      ///< perturbed copies per eps
   std::uint64_t seed = 1;               ///< seeds every copy's perturbation
   bool rotation = false;                ///< rotation: true for every scene (engines that rotate only)

@@ -84,8 +84,10 @@ ValidationResult comparison_row(const std::string& name, const std::string& a_wh
   r.seconds = seconds;
   r.pass = c.same;
   if (c.same) {
-    r.detail = fmt::format("{} and {}: bit for bit over {} frames ({} compared)", a_what, b_what, frames,
-                           c.doc.value("quantities", nlohmann::json::array()).size());
+    std::string compared;
+    for (const nlohmann::json& q : c.doc.value("quantities", nlohmann::json::array()))
+      if (q.value("available", false)) compared += (compared.empty() ? "" : ", ") + q.value("quantity", std::string());
+    r.detail = fmt::format("{} and {}: bit for bit over {} frames ({})", a_what, b_what, frames, compared);
     return r;
   }
   ValidationCause cause;

@@ -614,7 +614,8 @@ int validate_determinism(const ValidateOptions& o, const std::shared_ptr<const o
     const octocd::StopAtOnce running("running the determinism comparisons");
     results = octocd::cli::determinism_rows(d);
   }
-  const std::string& name = model->scene.name;
+  // Its own key in --expect's file (SCENE--determinism): the scene's validator rows are not run here.
+  const std::string name = model->scene.name + "--determinism";
   const octocd::RunName run{name, ""};
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   if (!o.junit.empty())
@@ -627,7 +628,7 @@ int validate_determinism(const ValidateOptions& o, const std::shared_ptr<const o
                         "", &report);
   fmt::print("validate {} --determinism (engine {}, {} frames; each pair of runs compared bit for bit as `octocd "
              "compare` does)\n\n",
-             name, o.engine, o.frames);
+             model->scene.name, o.engine, o.frames);
   fmt::print("{}", octocd::format_results(results, {}, &report));
   return conclude_validate(o, run, results, report,
                            {{"engine", o.engine}, {"frames", o.frames}, {"mode", "determinism"},
