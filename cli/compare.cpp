@@ -835,8 +835,7 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
   return c;
 }
 
-CompareOutcome compare_traces(const CompareOptions& o) {
-  CompareOutcome out;
+void compare_traces(const CompareOptions& o, CompareOutcome& out) {
   const std::map<std::string, Tolerance> tols = parse_tolerances(o.tolerance);
   const char* kQuantityAllowed =
       "positions, velocities, orientations, angular_velocities, contacts, pairs, energy";
@@ -1079,12 +1078,23 @@ CompareOutcome compare_traces(const CompareOptions& o) {
                                        "/states)",
                                        o.a, o.b, why);
   }
+}
+
+CompareOutcome compare_traces(const CompareOptions& o) {
+  CompareOutcome out;
+  compare_traces(o, out);
   return out;
 }
 
 int compare_command(const CompareOptions& o) {
   if (!o.json.empty()) check_output_file(o.json, "--json");  // before any work (atomic_file.hpp)
-  const CompareOutcome out = compare_traces(o);
+  CompareOutcome out;
+  try {
+    compare_traces(o, out);
+  } catch (...) {  // what was found before the malformed part stays on stdout
+    fmt::print("{}", out.text);
+    throw;
+  }
   fmt::print("{}", out.text);
   if (!o.json.empty())
     write_file_atomically(o.json, out.doc.dump(1, ' ', false, json::error_handler_t::replace) + "\n", "--json");

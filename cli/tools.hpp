@@ -257,6 +257,8 @@ struct CompareOutcome {
 /// Compares traces o.a and o.b as `octocd compare` does (o.json is ignored: the caller writes
 /// CompareOutcome::doc). Throws InputError for unreadable or malformed traces and bad options.
 CompareOutcome compare_traces(const CompareOptions& o);
+/// As above, into `out`: on an exception `out.text` holds what was found before it.
+void compare_traces(const CompareOptions& o, CompareOutcome& out);
 
 /// `octocd report` options (cli/report.cpp).
 struct ReportOptions {
