@@ -917,7 +917,8 @@ Command add_validate_command(CLI::App& app) {
   val_cmd->add_option("--threads", val.threads,
                       "Threads judging one frame's heavy loops (reference geometry per pair, the reference pair set); "
                       "0 = the hardware's (default), 1 = serial; a scene's frame is judged while the engine runs the "
-                      "next (not with --trace, not with 1); verdicts do not depend on it")
+                      "next (not with --trace, not with 1); verdicts do not depend on it. With --determinism: the N threads of the "
+                      "threaded runs (>= 2; 0: max(2, the hardware's))")
       ->check(CLI::Range(0, 4096))
       ->default_val(0);
   val_cmd->add_flag("--determinism", val.determinism,
