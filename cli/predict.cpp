@@ -239,8 +239,8 @@ std::vector<ValidationResult> determinism_rows(const DeterminismOptions& o) {
             ? fmt::format("{} is a process engine (its own program); octocd sets no thread count for it", o.engine)
             : fmt::format("{} steps on one host thread (no OpenMP); no thread count to vary", o.engine)));
   }
-  if (o.engine == "cpu" || o.engine == "cuda") {
-    const std::string other = o.engine == "cpu" ? "cuda" : "cpu";
+  if (!info.device_twin.empty()) {
+    const std::string& other = info.device_twin;
     const EngineInfo& oi = engine_info(other, "--engine");
     const std::string why = engine_built(oi) ? engine_unavailable(oi) : std::string("not built in this octocd");
     if (!why.empty()) {
@@ -251,8 +251,8 @@ std::vector<ValidationResult> determinism_rows(const DeterminismOptions& o) {
     }
   } else {
     rows.push_back(not_applicable("determinism-cpu-cuda",
-                                  fmt::format("only octocd's cpu and cuda engines run one pipeline on both; {} has no "
-                                              "CPU/GPU pair",
+                                  fmt::format("{} has no twin on another kind of processor (EngineInfo::device_twin: "
+                                              "octocd's cpu and cuda run one pipeline on both)",
                                               o.engine)));
   }
   return rows;

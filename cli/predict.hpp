@@ -42,8 +42,8 @@ struct DeterminismOptions {
 /// The determinism rows of `o.engine` on `o.model` (tier Physics, bound 0 = bit for bit):
 /// `determinism-runs` (two runs with the same input), `determinism-threads` (1 against N
 /// OpenMP threads, an engine with EngineInfo::openmp_threads; else n/a with the reason)
-/// and `determinism-cpu-cuda` (octocd's cpu against its cuda engine, the engine judged
-/// being one of them; n/a for others, n/a naming why when cuda cannot run here). Every
+/// and `determinism-cpu-cuda` (the engine against its EngineInfo::device_twin: octocd's cpu
+/// against cuda; n/a for an engine without one, n/a naming why when the twin cannot run here). Every
 /// comparison is `octocd compare`'s (compare_traces, bit for bit) of two traces written by
 /// record_trace into temporary files (removed afterwards); a row that differs fails with
 /// the first difference (frame, body, quantity, |A - B|, both values). Throws what

@@ -304,28 +304,33 @@ done
 # --determinism` on rot-drop-220 and bunny-stack-50 over short windows: two runs bit for bit,
 # 1 against N threads where the engine threads (cpu), cpu against cuda where a GPU runs cuda.
 # octocd's engines translate only: rot-drop-220 (a rotating scene) is skipped for them.
-determinism_scenes() {  # "scene frames" per line
+determinism_scenes() {  # "scene frames rotates" per line
   if [ "$matrix" = "full" ]; then
-    printf '%s\n' "rot-drop-220 120" "bunny-stack-50 120"
+    printf '%s\n' "rot-drop-220 120 yes" "bunny-stack-50 120 no"
   else
-    printf '%s\n' "rot-drop-220 30" "bunny-stack-50 40"
+    printf '%s\n' "rot-drop-220 30 yes" "bunny-stack-50 40 no"
   fi
 }
+# Every engine of the registry available here (`octocd engines --json`), rotating or not.
 determinism_engines=()
+translating=""
 if [ "$matrix" != "none" ]; then
-  for e in cpu cuda; do
+  read -r -a all_engines <<<"$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
+print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"]))')"
+  translating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
+print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if not e["rotates"]))')"
+  for e in "${all_engines[@]+"${all_engines[@]}"}"; do
     if grep -qx "$e" <<<"$available"; then determinism_engines+=("$e")
     else echo "matrix   $e--determinism: not available here ($("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//'))"; fi
   done
-  determinism_engines+=("${matrix_engines[@]+"${matrix_engines[@]}"}")
 fi
 for e in "${determinism_engines[@]+"${determinism_engines[@]}"}"; do
-  while read -r sc n_frames; do
+  while read -r sc n_frames sc_rotates; do
     [ -r "$root/datasets/scenes/$sc.json" ] || { echo "matrix   $e--$sc--determinism: no scene $sc.json, skipped"; continue; }
     rotation=(--rotation)
-    if [ "$e" = "cpu" ] || [ "$e" = "cuda" ]; then
+    if grep -qw "$e" <<<"$translating"; then
       rotation=()
-      [ "$sc" = "rot-drop-220" ] && { echo "matrix   $e--$sc--determinism: skipped ($e translates only; $sc rotates)"; continue; }
+      [ "$sc_rotates" = "yes" ] && { echo "matrix   $e--$sc--determinism: skipped ($e translates only; $sc rotates)"; continue; }
     fi
     why_skip="$(matrix_skip "$e" "$sc")"
     [ -z "$why_skip" ] || { echo "matrix   $e--$sc--determinism: skipped ($why_skip)"; continue; }

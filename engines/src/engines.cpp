@@ -54,6 +54,7 @@ EngineInfo cpu_info() {
   cpu.uses_scene_broadphase = true;
   cpu.records_every_step = true;
   cpu.openmp_threads = true;
+  cpu.device_twin = "cuda";
   return cpu;
 }
 
@@ -73,6 +74,7 @@ EngineInfo cuda_info() {
   cuda.device = true;
   cuda.memory_kind = "device memory";
   cuda.records_every_step = true;
+  cuda.device_twin = "cpu";
   return cuda;
 }
 
