@@ -210,9 +210,16 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
                                         "resolution", "paper", "probe_repeat", "search_time_s"};
   static const std::set<std::string> sa{"scenes",     "set",      "dts",         "sim_seconds",
                                         "iterations", "geometries", "rotation", "diverge_beyond_m"};
-  if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances" && s.kind != "speed-accuracy")
-    bad(origin, "kind", "'" + s.kind + "'", "\"steps\", \"broadphase\", \"max-instances\", \"speed-accuracy\"");
-  const auto& extra = s.kind == "steps" ? steps : s.kind == "broadphase" ? bp : s.kind == "max-instances" ? mi : sa;
+  static const std::set<std::string> dv{"scenes", "set", "eps", "copies", "seed", "rotation"};
+  if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances" && s.kind != "speed-accuracy" &&
+      s.kind != "divergence")
+    bad(origin, "kind", "'" + s.kind + "'",
+        "\"steps\", \"broadphase\", \"max-instances\", \"speed-accuracy\", \"divergence\"");
+  const auto& extra = s.kind == "steps"           ? steps
+                      : s.kind == "broadphase"    ? bp
+                      : s.kind == "max-instances" ? mi
+                      : s.kind == "divergence"    ? dv
+                                                  : sa;
   if (s.kind == "speed-accuracy")
     for (const char* k : {"frames", "warmup"})
       if (j.contains(k))
@@ -275,6 +282,28 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
     s.windows.push_back(Window{"settled", s.warmup + 1, s.warmup + s.frames});
     s.frames = s.warmup + s.frames;  // steps to run
+  } else if (s.kind == "divergence") {
+    s.frames = get_int(j, "frames", origin, 1, 1000000, 300);
+    s.warmup = 0;
+    s.copies = get_int(j, "copies", origin, 1, 1024, 16);
+    s.seed = static_cast<std::uint64_t>(JsonFields(origin).integer(j.value("seed", json(1)), "seed", 0, 1LL << 53));
+    if (j.contains("rotation")) {
+      if (!j.at("rotation").is_boolean()) bad(origin, "rotation", j.at("rotation").dump(), "true or false");
+      s.rotation = j.at("rotation").get<bool>();
+    }
+    if (!j.contains("eps") || !j.at("eps").is_array() || j.at("eps").empty())
+      bad(origin, "eps", "missing or not a non-empty array", "an array of perturbations in metres, each in [0, 1]");
+    for (std::size_t i = 0; i < j.at("eps").size(); ++i) {
+      const json& v = j.at("eps")[i];
+      if (!v.is_number() || !std::isfinite(v.get<double>()) || !(v.get<double>() >= 0.0) || v.get<double>() > 1.0)
+        bad(origin, fmt::format("eps[{}]", i), v.dump(),
+            "a number of metres in [0, 1] (0: unperturbed copies, distance 0 for a deterministic engine)");
+      if (std::find(s.eps.begin(), s.eps.end(), v.get<double>()) != s.eps.end())
+        bad(origin, fmt::format("eps[{}]", i), v.dump() + " is listed twice", "each perturbation once");
+      s.eps.push_back(v.get<double>());
+    }
+    if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
+    for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
   } else if (s.kind == "speed-accuracy") {
     parse_speed_accuracy(j, origin, s);
     if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");

@@ -54,6 +54,8 @@ EngineInfo cpu_info() {
   cpu.uses_scene_broadphase = true;
   cpu.records_every_step = true;
   cpu.batched_worlds = true;
+  cpu.openmp_threads = true;
+  cpu.device_twin = "cuda";
   return cpu;
 }
 
@@ -74,6 +76,7 @@ EngineInfo cuda_info() {
   cuda.memory_kind = "device memory";
   cuda.records_every_step = true;
   cuda.batched_worlds = true;
+  cuda.device_twin = "cpu";
   return cuda;
 }
 
