@@ -111,7 +111,10 @@ class RapierWorld {
     this.deepestOwnAt = "";
     this.deepestOwnRows = 0;
     this.duplicateTies = 0;  // solver contacts with coincident tracked points, told apart by a changed impulse
-    this.duplicateUnresolved = 0;  // ... where none changed nor read 0 (the nearest kept)
+    this.duplicateUnresolved = 0;
+    this.duplicateAmbiguous = 0;  // ... where several changed to different impulses (the first taken)
+    this.duplicateAmbiguousWorst = 0;  // the largest difference of their impulses (N s), and where
+    this.duplicateAmbiguousAt = "";  // ... where none changed nor read 0 (the nearest kept)
     this.lastImpulse = new Map();  // pair -> manifold:point -> the impulse read the previous step
     this.tangentSeen = 0;  // rows whose tangent impulse Rapier reported non-zero (a witness)
   }
@@ -276,6 +279,19 @@ class RapierWorld {
               });
               // None changed: a solved point whose impulse stays bit for bit is one that stays 0.
               const zero = ties.filter((t) => m.contactImpulse(t.k) === 0);
+              // Two or more changed with different impulses (bunny-stack-50, frame 530, pair (8, 26):
+              // 0.036 -> 0 and 0 -> 0.0168 N s): Rapier's JavaScript API names no tracked point of a
+              // solver contact, so the writer cannot tell which one this step solved (taking the
+              // non-zero one there fails other bodies elsewhere): counted, the largest difference kept.
+              const values = new Set(fresh.map((t) => m.contactImpulse(t.k)));
+              if (values.size > 1) {
+                this.duplicateAmbiguous += 1;
+                const spread = Math.max(...values) - Math.min(...values);
+                if (spread > this.duplicateAmbiguousWorst) {
+                  this.duplicateAmbiguousWorst = spread;
+                  this.duplicateAmbiguousAt = `frame ${this.frame} pair (${i}, ${j})`;
+                }
+              }
               if (fresh.length > 0) best = fresh[0].k;
               else if (zero.length > 0) best = zero[0].k;
               else this.duplicateUnresolved += 1;
@@ -357,7 +373,10 @@ class RapierWorld {
              rapier_own_angular_momentum_groups: str([...this.ownAngular].sort((x, y) => y[1].change - x[1].change).slice(0, 60)
                .map(([k, v]) => `${k} ${v.change.toPrecision(4)} of ${v.exchanged.toPrecision(4)} frame ${v.frame}`).join("; ")), rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
              rapier_solver_match_worst_m: f64(this.matchWorst), rapier_duplicate_points: i32(this.duplicateTies),
-             rapier_duplicate_unresolved: i32(this.duplicateUnresolved) };
+             rapier_duplicate_unresolved: i32(this.duplicateUnresolved),
+             rapier_duplicate_ambiguous: i32(this.duplicateAmbiguous),
+             rapier_duplicate_ambiguous_worst_jn: f64(this.duplicateAmbiguousWorst),
+             rapier_duplicate_ambiguous_worst_at: str(this.duplicateAmbiguousAt) };
   }
 
   free() { this.world.free(); }
