@@ -680,6 +680,93 @@ ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const
   return r;
 }
 
+namespace {
+/// Whether the point q (geometry frame of g) lies inside the shape g: a box's faces, a
+/// mesh's generalised winding number (the sum of its triangles' signed solid angles seen
+/// from q, over 4 pi; either orientation of the triangles) above 1/2. Spheres: never.
+bool geometry_contains(const ShapeGeom& g, const V3& q) {
+  if (g.is_box) return (q.cwiseAbs() - g.half).maxCoeff() < 0;
+  if (!g.bvh) return false;
+  const auto* m = static_cast<const fcl::BVHModel<fcl::OBBRSS<S>>*>(g.exact.get());
+  const fcl::AABB<S>& box = m->aabb_local;
+  for (int k = 0; k < 3; ++k)
+    if (q[k] < box.min_[k] || q[k] > box.max_[k]) return false;
+  S omega = 0;
+  for (int t = 0; t < m->num_tris; ++t) {
+    const fcl::Triangle& tri = m->tri_indices[t];
+    const V3 a = m->vertices[tri[0]] - q, b = m->vertices[tri[1]] - q, c = m->vertices[tri[2]] - q;
+    const S la = a.norm(), lb = b.norm(), lc = c.norm();
+    // Van Oosterom and Strackee: tan(omega / 2) = a.(b x c) / (la lb lc + (a.b) lc + (a.c) lb + (b.c) la).
+    omega += 2 * std::atan2(a.dot(b.cross(c)), la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la);
+  }
+  return std::abs(omega) > 2 * fcl::constants<S>::pi();
+}
+
+/// The vertices of g in its geometry frame: a mesh's, a box's 8 corners, a declared hull's;
+/// none for a sphere.
+std::vector<V3> geometry_vertices(const ShapeGeom& g) {
+  if (g.is_box) return corners(-g.half, g.half);
+  std::vector<V3> out;
+  if (g.is_sphere) return out;
+  if (!g.bvh) {  // a declared convex hull: its vertices (body frame) in the geometry frame
+    for (const V3& v : g.hull_vertices) out.push_back(v - g.offset);
+    return out;
+  }
+  const auto* m = static_cast<const fcl::BVHModel<fcl::OBBRSS<S>>*>(g.exact.get());
+  out.assign(m->vertices, m->vertices + m->num_vertices);
+  return out;
+}
+}  // namespace
+
+PenetrationWitness ReferenceGeometry::penetration_witness(std::uint32_t a, std::uint32_t b, const Pose& pa,
+                                                          const Pose& pb, double floor) const {
+  const ShapeGeom& ga = impl_->geom(a);
+  const ShapeGeom& gb = impl_->geom(b);
+  const fcl::Matrix3<S> ra = rotation_of(pa), rb = rotation_of(pb);
+  const V3 xa = to_v3(pa.position), xb = to_v3(pb.position);
+  const fcl::Transform3<S> ta = geometry_transform(ga, ra, xa), tb = geometry_transform(gb, rb, xb);
+  PenetrationWitness w;
+  {
+    fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
+    fcl::CollisionRequest<S> req(1, true);
+    req.gjk_solver_type = fcl::GST_LIBCCD;
+    fcl::CollisionResult<S> res;
+    fcl::collide(&oa, &ob, req, res);
+    if (!res.isCollision()) return w;
+    w.intersect = true;
+    if (res.numContacts() > 0) {
+      const fcl::Contact<S>& c = res.getContact(0);
+      if (ga.bvh) w.triangle_a = static_cast<int>(c.b1);
+      if (gb.bvh) w.triangle_b = static_cast<int>(c.b2);
+    }
+  }
+  // Each shape's vertices against the other: the surface distance (cheap, BVH) first,
+  // the inside test only for a vertex that would deepen the bound.
+  auto search = [&](std::uint32_t body, const ShapeGeom& g, const fcl::Transform3<S>& t, const ShapeGeom& other,
+                    const fcl::Matrix3<S>& r_other, const V3& x_other, const fcl::Transform3<S>& t_other) {
+    const fcl::Transform3<S> to_other = t_other.inverse() * t;
+    const std::vector<V3> vs = geometry_vertices(g);
+    for (std::size_t i = 0; i < vs.size(); ++i) {
+      const V3 q = to_other * vs[i];
+      const fcl::AABB<S>& box = other.exact->aabb_local;
+      bool in_box = true;
+      for (int k = 0; k < 3; ++k) in_box = in_box && q[k] >= box.min_[k] && q[k] <= box.max_[k];
+      if (!in_box) continue;
+      const V3 p = t * vs[i];
+      const S d = geometry_surface_distance(other, r_other, x_other, p);
+      if (!(d > floor) || !(d > w.depth)) continue;
+      if (!geometry_contains(other, q)) continue;
+      w.depth = d;
+      w.vertex_body = body;
+      w.vertex = std::int64_t(i);
+      w.vertex_point = to_vec3(p);
+    }
+  };
+  search(a, ga, ta, gb, rb, xb, tb);
+  search(b, gb, tb, ga, ra, xa, ta);
+  return w;
+}
+
 double ReferenceGeometry::surface_distance(std::uint32_t body, const Pose& pose, Vec3 p) const {
   return geometry_surface_distance(impl_->geom(body), rotation_of(pose), to_v3(pose.position), to_v3(p));
 }

@@ -73,6 +73,7 @@ class JoltWorld {
     this.bi = bi;
     this.ids = [];
     this.bodies = [];
+    this.localBounds = [];  // per body: Jolt's own local bounds of its shape (Shape::GetLocalBounds)
     this.indexOfBody = new Map();  // Jolt body ID -> octocd body index
     const shapeCache = new Map();
     const collisionShapes = [];
@@ -111,6 +112,8 @@ class JoltWorld {
       J.destroy(cs);
       bi.AddBody(body.GetID(), J.EActivation_Activate);
       this.bodies.push(body);
+      const lb = shape.GetLocalBounds();  // in the shape's centre-of-mass frame
+      this.localBounds.push([[lb.mMin.GetX(), lb.mMin.GetY(), lb.mMin.GetZ()], [lb.mMax.GetX(), lb.mMax.GetY(), lb.mMax.GetZ()]]);
       this.indexOfBody.set(body.GetID().GetIndexAndSequenceNumber(), i);
     });
     this.pending = [];
@@ -129,6 +132,86 @@ class JoltWorld {
     this.bodyData = { collision_shape: { strings: collisionShapes },
                       convex_radius: { f64: new Float64Array(this.n) } };
     this.jt3 = false;
+    this.frame = 0;
+    // Witnesses from Jolt's own API (root attributes jolt_*, docs/engines.md, "Jolt"): the
+    // largest distance across the normal between a manifold point's two witness points
+    // (GetWorldSpaceContactPointOn1/2), and the largest angle between a manifold's normal and
+    // the penetration axis of Jolt's own fresh query (TransformedShape::CollideShape, body 1's
+    // shape against body 2 at the same pose: CollisionDispatch, no body-pair cache) on every
+    // 5th frame, each with where it was.
+    this.apartAcross = 0;
+    this.offBounds = 0;  // the largest distance of a manifold's witness point outside its own body's local bounds (m)
+    this.offBoundsAt = "";
+    this.offBoundsPairs = new Map();  // pair "(a, b)" -> its worst such point beyond 1 cm and its frame
+    this.apartAcrossAt = "";
+    this.freshAngle = 0;
+    this.freshAngleAt = "";
+    this.freshDepth = 0;  // Jolt's fresh penetration depth at the worst angle (m)
+    this.freshManifoldDepth = 0;  // the manifold's mPenetrationDepth there (m)
+    this.freshPairs = 0;
+    this.witnessTime = 0;  // s, this step's witness queries
+    this.freshSettings = new J.CollideShapeSettings();
+    this.freshSettings.mMaxSeparationDistance = this.margin;
+    this.unitScale = new J.Vec3(1, 1, 1);
+    this.shapeFilter = new J.ShapeFilter();
+  }
+
+  // Jolt's own fresh narrow phase for the manifold m of bodies b1, b2 (a, b in octocd's order):
+  // the angle between m's normal n12 and the penetration axis of the deepest hit.
+  freshWitness(b1, b2, m, n12, a, b) {
+    const J = Jolt;
+    const t0 = process.hrtime.bigint();
+    const col = new J.CollideShapeClosestHitCollisionCollector();
+    b2.GetTransformedShape().CollideShape(b1.GetShape(), this.unitScale, b1.GetCenterOfMassTransform(),
+                                          this.freshSettings, m.mBaseOffset, col, this.shapeFilter);
+    if (col.HadHit()) {
+      const h = col.mHit;
+      // mPenetrationAxis: the direction to move shape 2 out of collision, as the manifold's normal.
+      const ax = h.mPenetrationAxis, axis = [ax.GetX(), ax.GetY(), ax.GetZ()];
+      const len = Math.hypot(...axis);
+      const depth = h.mPenetrationDepth;
+      if (len > 0 && depth > 1e-5) {
+        this.freshPairs += 1;
+        const c = (axis[0] * n12[0] + axis[1] * n12[1] + axis[2] * n12[2]) / len;
+        const deg = Math.acos(Math.max(-1, Math.min(1, c))) * 180 / Math.PI;
+        if (deg > this.freshAngle) {
+          this.freshAngle = deg;
+          this.freshAngleAt = `frame ${this.frame} pair (${a}, ${b})`;
+          this.freshDepth = depth;
+          this.freshManifoldDepth = m.mPenetrationDepth;
+        }
+      }
+    }
+    J.destroy(col);
+    this.witnessTime += Number(process.hrtime.bigint() - t0) * 1e-9;
+  }
+
+  // How far (m) the world point w lies outside Jolt's own local bounds of body i's shape (at the
+  // body's centre-of-mass transform; 0 inside).
+  outsideBounds(body, i, w) {
+    const c = body.GetCenterOfMassPosition(), q = body.GetRotation();
+    const d = [w[0] - c.GetX(), w[1] - c.GetY(), w[2] - c.GetZ()];
+    const qw = q.GetW(), qv = [q.GetX(), q.GetY(), q.GetZ()];
+    // The inverse rotation of d: R^T d with the conjugate quaternion.
+    const cross = (u, v) => [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+    const neg = [-qv[0], -qv[1], -qv[2]];
+    const t = cross(neg, d).map((x) => 2 * x);
+    const u = cross(neg, t);
+    const l = [d[0] + qw * t[0] + u[0], d[1] + qw * t[1] + u[1], d[2] + qw * t[2] + u[2]];
+    const [lo, hi] = this.localBounds[i];
+    let sq = 0;
+    for (let k = 0; k < 3; ++k) {
+      const e = Math.max(lo[k] - l[k], 0, l[k] - hi[k]);
+      sq += e * e;
+    }
+    return Math.sqrt(sq);
+  }
+
+  // Seconds spent in witness queries during the last step (not the engine's step time).
+  witnessSeconds() {
+    const t = this.witnessTime;
+    this.witnessTime = 0;
+    return t;
   }
 
   // A box or hull with convex radius 0 (Jolt rounds convex shapes by 5 cm by default) whose centre
@@ -198,10 +281,21 @@ class JoltWorld {
         const w1 = [p1.GetX(), p1.GetY(), p1.GetZ()], w2 = [p2.GetX(), p2.GetY(), p2.GetZ()];
         // The point's penetration: p1 lies beyond p2 along n (1 -> 2) when the shapes overlap.
         const pen = (w1[0] - w2[0]) * n12[0] + (w1[1] - w2[1]) * n12[1] + (w1[2] - w2[2]) * n12[2];
+        const across = Math.hypot(w1[0] - w2[0] - pen * n12[0], w1[1] - w2[1] - pen * n12[1], w1[2] - w2[2] - pen * n12[2]);
+        if (across > this.apartAcross) { this.apartAcross = across; this.apartAcrossAt = `frame ${this.frame} pair (${a}, ${b})`; }
+        const out = Math.max(this.outsideBounds(b1, i1, w1), this.outsideBounds(b2, i2, w2));
+        if (out > this.offBounds) { this.offBounds = out; this.offBoundsAt = `frame ${this.frame} pair (${a}, ${b})`; }
+        if (out > 0.01) {
+          const key = `(${a}, ${b})`, was = this.offBoundsPairs.get(key);
+          if (!was || out > was.out) this.offBoundsPairs.set(key, { out, frame: this.frame });
+        }
         this.pending.push({ a, b, n: [s * n12[0], s * n12[1], s * n12[2]],
                             p: [(w1[0] + w2[0]) / 2, (w1[1] + w2[1]) / 2, (w1[2] + w2[2]) / 2],
                             depth: Math.max(0, pen), jn: 0, jt: 0 });
       }
+      const static1 = this.req.bodies[i1].static && this.req.bodies[i1].shape === "mesh";
+      const static2 = this.req.bodies[i2].static && this.req.bodies[i2].shape === "mesh";
+      if (this.frame % 5 === 0 && !static1 && !static2) this.freshWitness(b1, b2, m, n12, a, b);
     };
     listener.OnContactAdded = (b1, b2, m) => record(b1, b2, m);
     listener.OnContactPersisted = (b1, b2, m) => record(b1, b2, m);
@@ -214,6 +308,7 @@ class JoltWorld {
   step() {
     const n = this.collisionSteps;
     this.recording = true;
+    this.frame += 1;
     for (let k = 0; k < n; ++k) {
       this.jolt.Step(this.req.dt / n, 1);
       this.recording = false;
@@ -235,6 +330,16 @@ class JoltWorld {
     const rows = this.pending;
     this.pending = [];
     return rows;
+  }
+
+  endAttrs() {
+    return { jolt_points_apart_across_worst_m: f64(this.apartAcross), jolt_points_apart_across_worst_at: str(this.apartAcrossAt),
+             jolt_fresh_normal_angle_worst_deg: f64(this.freshAngle), jolt_fresh_normal_angle_worst_at: str(this.freshAngleAt),
+             jolt_fresh_depth_at_worst_m: f64(this.freshDepth), jolt_manifold_depth_at_worst_m: f64(this.freshManifoldDepth),
+             jolt_fresh_queries: i32(this.freshPairs),
+             jolt_point_outside_own_bounds_worst_m: f64(this.offBounds), jolt_point_outside_own_bounds_worst_at: str(this.offBoundsAt),
+             jolt_point_outside_own_bounds_pairs: str([...this.offBoundsPairs].sort((x, y) => y[1].out - x[1].out)
+               .map(([k, v]) => `${k} ${v.out.toFixed(4)} m frame ${v.frame}`).join("; ")) };
   }
 
   free() { Jolt.destroy(this.jolt); }

@@ -87,7 +87,8 @@ class RapierWorld {
       speculative: i32(1), manifold_points: str("persistent"), depth_per: str("point"),
       parameters_rapier: str(JSON.stringify({ numSolverIterations: this.substeps,
         numInternalPgsIterations: world.numInternalPgsIterations, predictionDistance: this.prediction,
-        lengthUnit: ip.lengthUnit, dt: world.timestep })),
+        lengthUnit: ip.lengthUnit, allowedLinearError: ip.normalizedAllowedLinearError * ip.lengthUnit,
+        contactErp: ip.contact_erp, dt: world.timestep })),
     };
     this.bodyData = { collision_shape: { strings: shapes } };
     this.jt3 = false;
@@ -104,13 +105,97 @@ class RapierWorld {
     this.missedAt = "";
     this.depthGap = 0;  // the largest contactShape penetration beyond the pair's deepest row (m)
     this.depthGapAt = "";
+    this.ownAngular = new Map();  // isolated group "(a, b, ...)" -> its largest own angular momentum change beyond 5e-4
+    this.witnessTime = 0;
+    this.deepestOwn = 0;  // the deepest contactShape penetration of a pair with rows (m), where, and its rows' deepest depth
+    this.deepestOwnAt = "";
+    this.deepestOwnRows = 0;
     this.duplicateTies = 0;  // solver contacts with coincident tracked points, told apart by a changed impulse
-    this.duplicateUnresolved = 0;  // ... where none changed nor read 0 (the nearest kept)
+    this.duplicateUnresolved = 0;
+    this.duplicateAmbiguous = 0;  // ... where several changed to different impulses (the first taken)
+    this.duplicateAmbiguousWorst = 0;  // the largest difference of their impulses (N s), and where
+    this.duplicateAmbiguousAt = "";  // ... where none changed nor read 0 (the nearest kept)
     this.lastImpulse = new Map();  // pair -> manifold:point -> the impulse read the previous step
     this.tangentSeen = 0;  // rows whose tangent impulse Rapier reported non-zero (a witness)
   }
 
-  step() { this.frame += 1; this.world.step(); }
+  step() {
+    this.frame += 1;
+    const t0 = process.hrtime.bigint();
+    this.preSnap = this.snapshot();
+    this.witnessTime = Number(process.hrtime.bigint() - t0) * 1e-9;
+    this.world.step();
+  }
+
+  // Seconds spent in witness snapshots during the last step (not the engine's step time).
+  witnessSeconds() { return this.witnessTime; }
+
+  // Rapier's own mass properties and velocities of every dynamic body (RigidBody.mass,
+  // worldCom, linvel, angvel, effectiveAngularInertia: the world tensor at the body's pose).
+  snapshot() {
+    const out = new Array(this.n);
+    for (let i = 0; i < this.n; ++i) {
+      if (this.req.bodies[i].static) continue;
+      const b = this.bodies[i];
+      const c = b.worldCom(), v = b.linvel(), w = b.angvel(), I = b.effectiveAngularInertia();
+      out[i] = { m: b.mass(), x: [c.x, c.y, c.z], v: [v.x, v.y, v.z], w: [w.x, w.y, w.z],
+                 I: [[I.m11, I.m12, I.m13], [I.m12, I.m22, I.m23], [I.m13, I.m23, I.m33]] };
+    }
+    return out;
+  }
+
+  // Witness from Rapier's own numbers (snapshot before and after the step): the angular momentum
+  // about the centre of mass of each isolated group (dynamic bodies whose rows this step name only
+  // each other), m (x - c) x v at the pre-step centres plus I w, before and after; its change
+  // (kg m^2/s), which contact impulses, equal and opposite at one point, keep but for the free
+  // rotation's discretisation.
+  ownAngularMomentum(rows) {
+    // Isolated groups: the components of this step's rows, all dynamic (no static body among them).
+    const parent = new Map();
+    const find = (x) => { while (parent.get(x) !== x) { parent.set(x, parent.get(parent.get(x))); x = parent.get(x); } return x; };
+    const add = (x) => { if (!parent.has(x)) parent.set(x, x); };
+    for (const r of rows) {
+      add(r.a); add(r.b);
+      const ra = find(r.a), rb = find(r.b);
+      if (ra !== rb) parent.set(ra, rb);
+    }
+    const groups = new Map();
+    for (const x of parent.keys()) {
+      const root = find(x);
+      if (!groups.has(root)) groups.set(root, []);
+      groups.get(root).push(x);
+    }
+    const post = this.snapshot(), pre = this.preSnap;
+    const cross = (u, v) => [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+    const mul = (M, v) => [0, 1, 2].map((k) => M[k][0] * v[0] + M[k][1] * v[1] + M[k][2] * v[2]);
+    for (const members of groups.values()) {
+      if (members.some((i) => !pre[i])) continue;  // a static body among them
+      members.sort((x, y) => x - y);
+      let M = 0;
+      const c0 = [0, 0, 0];
+      for (const i of members) {
+        M += pre[i].m;
+        for (let k = 0; k < 3; ++k) c0[k] += pre[i].m * pre[i].x[k];
+      }
+      for (let k = 0; k < 3; ++k) c0[k] /= M;
+      let dl = [0, 0, 0], exchanged = 0;
+      for (const i of members) {
+        const li = cross(sub(pre[i].x, c0), sub(post[i].v, pre[i].v)).map((x) => x * pre[i].m);
+        const spin = sub(mul(post[i].I, post[i].w), mul(pre[i].I, pre[i].w));
+        const d = [li[0] + spin[0], li[1] + spin[1], li[2] + spin[2]];
+        dl = [dl[0] + d[0], dl[1] + d[1], dl[2] + d[2]];
+        exchanged += Math.hypot(...d);
+      }
+      const change = Math.hypot(...dl);
+      const key = `(${members.join(", ")})`;
+      if (change > 5e-4) {
+        const was = this.ownAngular.get(key);
+        if (!was || change > was.change) this.ownAngular.set(key, { change, exchanged, frame: this.frame });
+      }
+    }
+  }
+
+
 
   readState(pos, vel, quat, angvel) {
     for (let i = 0; i < this.n; ++i) {
@@ -180,13 +265,33 @@ class RapierWorld {
             // Rapier may track the same point twice (same local points, same contactDist); the
             // solver uses one of them, the other keeps the impulse of the last step that solved
             // it, bit for bit. Among tracked points as near as the best (within 1e-7 m), one whose
-            // impulse changed since the previous step's read is one this step solved.
+            // impulse changed since the previous step's read is one this step solved; a point the
+            // previous step did not track (a new point of the manifold) holds no impulse of an
+            // earlier step, so a non-zero impulse there is this step's (bunny-stack-50, frame 351,
+            // pair (35, 44): of two new coincident points the first read 0 and the second 0.474
+            // N s, and taking the first dropped that impulse from body 35's and 44's balance).
             const ties = tracked.filter((t) => !used.has(t.k) && Math.hypot(...sub(t.mid, spv)) <= bestD + 1e-7);
             if (ties.length > 1) {
               this.duplicateTies += 1;
-              const fresh = ties.filter((t) => prevImpulse.get(`${mi}:${t.k}`) !== m.contactImpulse(t.k));
+              const fresh = ties.filter((t) => {
+                const before = prevImpulse.get(`${mi}:${t.k}`);
+                return before === undefined ? m.contactImpulse(t.k) !== 0 : before !== m.contactImpulse(t.k);
+              });
               // None changed: a solved point whose impulse stays bit for bit is one that stays 0.
               const zero = ties.filter((t) => m.contactImpulse(t.k) === 0);
+              // Two or more changed with different impulses (bunny-stack-50, frame 530, pair (8, 26):
+              // 0.036 -> 0 and 0 -> 0.0168 N s): Rapier's JavaScript API names no tracked point of a
+              // solver contact, so the writer cannot tell which one this step solved (taking the
+              // non-zero one there fails other bodies elsewhere): counted, the largest difference kept.
+              const values = new Set(fresh.map((t) => m.contactImpulse(t.k)));
+              if (values.size > 1) {
+                this.duplicateAmbiguous += 1;
+                const spread = Math.max(...values) - Math.min(...values);
+                if (spread > this.duplicateAmbiguousWorst) {
+                  this.duplicateAmbiguousWorst = spread;
+                  this.duplicateAmbiguousAt = `frame ${this.frame} pair (${i}, ${j})`;
+                }
+              }
               if (fresh.length > 0) best = fresh[0].k;
               else if (zero.length > 0) best = zero[0].k;
               else this.duplicateUnresolved += 1;
@@ -218,6 +323,7 @@ class RapierWorld {
       });
     }
     this.lastImpulse = nextImpulse;
+    this.ownAngularMomentum(rows);
     return rows;
   }
 
@@ -252,6 +358,7 @@ class RapierWorld {
       if (pairJn > 0) this.apartLoaded.add(`(${i}, ${j})`);
     }
     if (-d - deepest > this.depthGap) { this.depthGap = -d - deepest; this.depthGapAt = where; }
+    if (-d > this.deepestOwn) { this.deepestOwn = -d; this.deepestOwnAt = where; this.deepestOwnRows = deepest; }
   }
 
   endAttrs() {
@@ -260,9 +367,16 @@ class RapierWorld {
              rapier_apart_loaded_pairs: str([...this.apartLoaded].sort().join(" ")),
              rapier_missed_pairs: i32(this.missedPairs), rapier_missed_worst_m: f64(this.missedWorst),
              rapier_missed_worst_at: str(this.missedAt),
-             rapier_depth_gap_worst_m: f64(this.depthGap), rapier_depth_gap_worst_at: str(this.depthGapAt), rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
+             rapier_depth_gap_worst_m: f64(this.depthGap), rapier_depth_gap_worst_at: str(this.depthGapAt),
+             rapier_deepest_m: f64(this.deepestOwn), rapier_deepest_at: str(this.deepestOwnAt),
+             rapier_deepest_rows_m: f64(this.deepestOwnRows),
+             rapier_own_angular_momentum_groups: str([...this.ownAngular].sort((x, y) => y[1].change - x[1].change).slice(0, 60)
+               .map(([k, v]) => `${k} ${v.change.toPrecision(4)} of ${v.exchanged.toPrecision(4)} frame ${v.frame}`).join("; ")), rapier_tangent_impulse_rows: i32(this.tangentSeen), rapier_stale_rows_dropped: i32(this.staleDropped),
              rapier_solver_match_worst_m: f64(this.matchWorst), rapier_duplicate_points: i32(this.duplicateTies),
-             rapier_duplicate_unresolved: i32(this.duplicateUnresolved) };
+             rapier_duplicate_unresolved: i32(this.duplicateUnresolved),
+             rapier_duplicate_ambiguous: i32(this.duplicateAmbiguous),
+             rapier_duplicate_ambiguous_worst_jn: f64(this.duplicateAmbiguousWorst),
+             rapier_duplicate_ambiguous_worst_at: str(this.duplicateAmbiguousAt) };
   }
 
   free() { this.world.free(); }

@@ -277,6 +277,91 @@ TEST(PosedReference, NonConvexMeshHullIsNotTheShape) {
   EXPECT_NEAR(ref.surface_distance(0, db, v3(1.0, 0.3, 0)), 0.2, 1e-6);  // inside: to the top face
 }
 
+// Contact completeness on a non-convex pair (the dumbbell, static, and a dynamic box),
+// judged by the exact mesh-mesh test: no contact row on a frame where
+//  - the box sinks 0.01 m into one cube's top: its corners lie 0.01 m inside the mesh, a
+//    proven penetration: fails naming the vertex, the body it lies in and FCL's triangles;
+//  - a rod shorter than the cube's edge straddles its top outer edge turned 45 degrees
+//    (a diamond section, half diagonal 0.1 sqrt 2): the meshes cross, the minimum
+//    translation is 0.1 m, but every vertex lies on or outside the other shape, so the
+//    depth is an upper bound alone: n/a, named, not a failure;
+//  - the box sits in the gap: the hulls overlap, the meshes do not: no failure.
+TEST(PhysicsRows, NonConvexMissingContactNeedsAnExactWitness) {
+  const std::string text = R"({"name": "db", "domain": {"min": [-3, -3, -3], "max": [3, 3, 3]}, "walls": "none",
+    "gravity": [0, 0, 0],
+    "groups": [{"name": "db", "shape": {"mesh": ")" + dumbbell_obj() + R"(", "scale": 3}, "count": 1,
+                "mass": 0, "positions": [[0, 0, 0]]},
+               {"name": "box", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "mass": 1, "positions": [[0, 0, 0]]},
+               {"name": "rod", "shape": {"box": [0.1, 0.1, 0.3]}, "count": 1, "mass": 1, "positions": [[0, 2, 0]]}]})";
+  const auto model = build_model(parse_scene(text, "dumbbell (test)"));
+  auto record = [&](Vec3 box, Vec3 rod, Quat rod_q) {
+    FrameRecord rec;
+    rec.frame = 3;
+    rec.manifolds = true;
+    rec.has_points = true;
+    const Vec3 x[3] = {v3(0, 0, 0), box, rod};
+    const Quat q[3] = {Quat{}, Quat{}, rod_q};
+    for (int i = 0; i < 3; ++i) {
+      rec.x_det.push_back(x[i]);
+      rec.q_det.push_back(q[i]);
+      rec.aabbs.push_back(ReferenceGeometry(*model).world_aabb(std::uint32_t(i), Pose{x[i], q[i]}));
+      rec.x_pre.push_back(x[i]);
+      rec.x_post.push_back(x[i]);
+      rec.q_pre.push_back(q[i]);
+      rec.q_post.push_back(q[i]);
+      rec.v_pre.push_back(v3(0, 0, 0));
+      rec.v_post.push_back(v3(0, 0, 0));
+      rec.w_pre.push_back(v3(0, 0, 0));
+      rec.w_post.push_back(v3(0, 0, 0));
+    }
+    rec.pairs = {{0, 1}, {0, 2}, {1, 2}};
+    return rec;
+  };
+  const Vec3 far_rod = v3(0, 2, 0);
+  const Quat diamond = axis_angle({0, 0, 1}, float(kPi / 4));
+  // Proven: the box's four lower corners lie 0.01 m inside the right cube.
+  {
+    const auto rs = judge(*model, record(v3(1.0, 0.59, 0), far_rod, Quat{}), rotating_engine());
+    expect_caught(rs, "contact-completeness",
+                  {"frame 3", "pair (0, 1) penetrates by at least 0.01 m", "of body 1", "inside body 0",
+                   "triangles (", "FCL BVH collide"});
+    const ReferenceGeometry ref(*model);
+    const PenetrationWitness w = ref.penetration_witness(0, 1, Pose{v3(0, 0, 0), Quat{}},
+                                                         Pose{v3(1.0, 0.59, 0), Quat{}}, 1e-3);
+    EXPECT_TRUE(w.intersect);
+    EXPECT_NEAR(w.depth, 0.01, 1e-6);
+    EXPECT_EQ(w.vertex_body, 1u);
+    EXPECT_NEAR(w.vertex_point.y, 0.49, 1e-6);
+    EXPECT_GE(w.triangle_a, 0);  // a triangle of the dumbbell; the box has none
+    EXPECT_EQ(w.triangle_b, -1);
+  }
+  // An upper bound alone: the rod astride the cube's edge (x 1.5, y 0.5).
+  {
+    const Pose rod{v3(1.5, 0.5, 0), diamond};
+    const ReferenceGeometry ref(*model);
+    const ReferenceNormal g = ref.posed(0, 2, Pose{v3(0, 0, 0), Quat{}}, rod);
+    ASSERT_TRUE(g.penetrating);
+    EXPECT_TRUE(g.depth_upper_bound);
+    EXPECT_GT(g.depth, 0.09);  // the minimum translation is 0.1 m: far above contact_depth_m
+    const PenetrationWitness w = ref.penetration_witness(0, 2, Pose{v3(0, 0, 0), Quat{}}, rod, 1e-3);
+    EXPECT_TRUE(w.intersect);
+    EXPECT_LT(w.depth, 1e-3);
+    const auto rs = judge(*model, record(v3(0, 0, 0), rod.position, diamond), rotating_engine());
+    const ValidationResult& r = row_of(rs, "contact-completeness");
+    EXPECT_TRUE(r.pass) << r.detail;
+    EXPECT_NE(r.detail.find("1 non-convex pair-frames without a row penetrate by an upper bound"), std::string::npos)
+        << r.detail;
+    EXPECT_NE(r.detail.find("frame 3: pair (0, 2)"), std::string::npos) << r.detail;
+  }
+  // Hulls overlap, meshes apart: the box in the gap.
+  {
+    const auto rs = judge(*model, record(v3(0, 0, 0), far_rod, Quat{}), rotating_engine());
+    const ValidationResult& r = row_of(rs, "contact-completeness");
+    EXPECT_TRUE(r.pass) << r.detail;
+    EXPECT_EQ(r.detail.find("non-convex pair-frames"), std::string::npos) << r.detail;
+  }
+}
+
 // The translation-only overload keeps its meaning: identity poses give the same answer.
 TEST(PosedReference, IdentityPoseEqualsTranslationQuery) {
   const Scene scene = four_bodies();

@@ -106,9 +106,37 @@ void PhysicsValidators::Impl::judge_completeness(CheckedFrame& f) {
       continue;
     }
     const ReferenceNormal& g = f.truth[t].g;
+    if (!found && g.depth_upper_bound) {
+      // A non-convex pair: its depth is only an upper bound. The row fails where an exact
+      // test proves a penetration deeper than contact_depth_m (a vertex of one shape that
+      // deep inside the other: FCL's BVH collide and the mesh's winding number); an upper
+      // bound alone is n/a.
+      const std::vector<Pose>& det = *f.det;
+      const PenetrationWitness w = ref->penetration_witness(p.a, p.b, det[p.a], det[p.b], tol.contact_depth_m);
+      if (!(w.depth > tol.contact_depth_m)) {
+        ++complete_unproven;
+        if (g.depth > complete_unproven_worst) {
+          complete_unproven_worst = g.depth;
+          complete_unproven_what = fmt::format(
+              "frame {}: {} (upper bound {:.4g} m; {})", frame, pair_name(p), g.depth,
+              !w.intersect ? std::string("FCL's BVH collide finds no intersection")
+              : w.vertex < 0 ? std::string("no vertex of either shape lies deeper than contact_depth_m in the other")
+                             : fmt::format("the deepest vertex inside the other shape lies {:.4g} m deep", w.depth));
+        }
+        continue;
+      }
+      complete.check(false, w.depth, Where{frame, p}, [&] {
+        const std::uint32_t other = w.vertex_body == p.a ? p.b : p.a;
+        return fmt::format("frame {}: {} penetrates by at least {:.4g} m and has no contact: vertex {} of body {} at "
+                           "({:.4f}, {:.4f}, {:.4f}) lies {:.4g} m inside body {}; triangles ({}, {}) intersect "
+                           "[exact: FCL BVH collide on the posed meshes; the minimum translation is at most {:.4g} m]",
+                           frame, pair_name(p), w.depth, w.vertex, w.vertex_body, w.vertex_point.x,
+                           w.vertex_point.y, w.vertex_point.z, w.depth, other, w.triangle_a, w.triangle_b, g.depth);
+      });
+      continue;
+    }
     complete.check(found, g.depth, Where{frame, p}, [&] {
-      return fmt::format("frame {}: {} penetrates by {:.4g} m{} and has no contact", frame, pair_name(p), g.depth,
-                         g.depth_upper_bound ? " (upper bound: non-convex mesh)" : "");
+      return fmt::format("frame {}: {} penetrates by {:.4g} m and has no contact", frame, pair_name(p), g.depth);
     });
   }
   const std::vector<Pair>& pairs = f.contact_pairs;

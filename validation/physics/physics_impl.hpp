@@ -285,6 +285,12 @@ struct PhysicsValidators::Impl {
   /// required among the candidates or the contacts.
   Tally free_sleep;
   std::uint64_t fell_asleep = 0, groups_asleep = 0, broad_asleep = 0, complete_asleep = 0;
+  /// Contact completeness on non-convex pairs: pair-frames without a row whose depth
+  /// above contact_depth_m is only an upper bound, no exact test proving it (n/a); the
+  /// largest such bound (m) and where.
+  std::uint64_t complete_unproven = 0;
+  double complete_unproven_worst = 0;
+  std::string complete_unproven_what;
   std::uint64_t balance_clamped = 0, balance_no_rows = 0, balance_locked = 0, free_locked = 0, balance_rot_locked = 0;
   // Gyroscopic term undeclared: body-steps whose spin met the invariants (the term) and
   // those that kept w (no term) (figures of free-flight and momentum-balance).

@@ -136,6 +136,10 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail += fmt::format("; {} penetrating pair-frames of bodies asleep before the step (/states/sleeping) "
                               "without a row, not required",
                               s.complete_asleep);
+    if (s.complete_unproven)
+      r.detail += fmt::format("; {} non-convex pair-frames without a row penetrate by an upper bound above "
+                              "contact_depth_m that no vertex inside the other shape proves, n/a (largest: {})",
+                              s.complete_unproven, s.complete_unproven_what);
     if (r.applicable)
       fill_causes(r, info, {&s.complete, &s.false_contact});
     out.push_back(r);

@@ -17,7 +17,9 @@
 ///     with `flat` on its world AABBs (static-static pairs dropped on both sides). n/a
 ///     when the record has no candidate pairs.
 ///  2. `contact-completeness` (checked frames): every pair penetrating deeper than
-///     `contact_depth_m` (FCL; non-convex meshes must really intersect) has at least one
+///     `contact_depth_m` (FCL; non-convex meshes must really intersect, and their depth,
+///     an upper bound, is proven by a vertex that deep inside the other shape:
+///     ReferenceGeometry::penetration_witness; a bound alone is n/a) has at least one
 ///     contact row; a row on a pair farther apart than the contact margin (or the pair's
 ///     theta) + slack is a false contact.
 ///  3. `contact-geometry` (checked frames): per row on penetrating shapes, the angle

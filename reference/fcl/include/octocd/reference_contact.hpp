@@ -83,6 +83,26 @@ struct ReferenceNormal {
   double signed_distance() const { return penetrating ? -depth : distance; }
 };
 
+/// A proof that two posed shapes penetrate, and by at least how much
+/// (ReferenceGeometry::penetration_witness): FCL's BVH collide on the exact shapes (a
+/// mesh's triangles, a box) and the deepest vertex of either shape inside the other.
+struct PenetrationWitness {
+  /// FCL's collide on the exact shapes reports them intersecting (touching counts).
+  bool intersect = false;
+  /// The first intersecting primitive pair FCL reports: a triangle index of body a's
+  /// mesh and one of body b's (-1 for a box, or where FCL names none).
+  int triangle_a = -1, triangle_b = -1;
+  /// m, >= 0: a lower bound of the penetration depth (the least translation that
+  /// separates the shapes' interiors): the distance from `vertex_point` to the surface of
+  /// the other body, which the point lies inside (a box: inside its faces; a mesh: its
+  /// generalised winding number above 1/2, closed meshes). Translating either body by less
+  /// keeps that point inside. 0 when no vertex lies inside the other shape.
+  double depth = 0;
+  std::uint32_t vertex_body = 0;  ///< the body whose vertex gives `depth` (a or b)
+  std::int64_t vertex = -1;       ///< its index (a mesh vertex; a box corner 0..7); -1: none
+  Vec3 vertex_point;              ///< that vertex, world frame
+};
+
 /// What an engine collided a body as (design.md section 13b.10; external traces v2:
 /// `/bodies/collision_shape` or the root attribute `collision_shape`). The physics tier's
 /// geometric rows judge this shape; its gap to the true shape is a figure.
@@ -158,6 +178,17 @@ class ReferenceGeometry {
   /// normal = normalize(point_a - point_b). Touching (distance 0 without an EPA answer):
   /// penetrating with depth 0 and valid = false. Throws InputError for a body out of range.
   ReferenceNormal posed(std::uint32_t a, std::uint32_t b, const Pose& pa, const Pose& pb) const;
+
+  /// An exact lower bound of the penetration of bodies a, b at poses pa, pb, for pairs
+  /// where posed() gives only an upper bound (a non-convex mesh): FCL collide on the
+  /// exact shapes (fcl::BVHModel<OBBRSS> for meshes) with one contact, and every vertex of
+  /// each shape tested against the other (its surface distance first; only vertices
+  /// deeper than `floor` m and the best so far are tested for inside). Linear in the
+  /// candidate vertices times the other mesh's triangles: for rare pairs (a missing
+  /// contact), not every pair. Declared spheres: their centre is no vertex (depth 0).
+  /// Throws InputError for a body out of range.
+  PenetrationWitness penetration_witness(std::uint32_t a, std::uint32_t b, const Pose& pa, const Pose& pb,
+                                         double floor) const;
 
   /// Whether the posed shapes intersect (touching counts): hull GJK, then for a
   /// non-convex mesh FCL's BVH collide. Cheaper than posed().
