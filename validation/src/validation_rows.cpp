@@ -20,6 +20,16 @@ const std::vector<RowInfo>& validation_rows() {
 
 const RowInfo& row_info(RowId id) { return validation_rows()[static_cast<std::size_t>(id)]; }
 
+ValidationResult not_applicable(RowId id, const char* figure, const std::string& why) {
+  ValidationResult r;
+  r.tier = row_info(id).tier;
+  r.name = row_info(id).name;
+  r.figure = figure;
+  r.applicable = false;
+  r.detail = why;
+  return r;
+}
+
 const RowInfo* find_row_info(const std::string& name) {
   for (const RowInfo& r : validation_rows())
     if (name == r.name) return &r;

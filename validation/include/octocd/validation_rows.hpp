@@ -58,4 +58,8 @@ const RowInfo& row_info(RowId id);
 /// The row named `name`, or nullptr for a name no row has (a shard file of another build).
 const RowInfo* find_row_info(const std::string& name);
 
+/// The result of row `id` that does not apply (n/a, never a verdict): its tier and name,
+/// `figure` (what the row measures) and `why` as the detail.
+ValidationResult not_applicable(RowId id, const char* figure, const std::string& why);
+
 }  // namespace octocd
