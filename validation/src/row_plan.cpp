@@ -53,6 +53,12 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
     auto part = [&](bool have, const std::string& what) {
       if (!have && r.judged) r.partial += (r.partial.empty() ? "" : "; ") + what;
     };
+    // A row over each step's states before and after it, with every contact of the step.
+    auto needs_every_step = [&] {
+      needs(info.has_states, kStates);
+      needs(p.contacts_complete, kContactsComplete);
+      needs(!info.sparse_states, kEveryState);
+    };
     switch (row.id) {
       case RowId::BroadphaseCompleteness:
         needs(info.has_pairs, "/pairs/offsets and /pairs/pair (the engine's candidate pairs of each step)");
@@ -78,16 +84,12 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
              "/contacts/jt3 (version 2) for the vector rule [rule: jt3]; judged on the scalar jt [rule: scalar]");
         break;
       case RowId::Conservation:
-        needs(info.has_states, kStates);
-        needs(p.contacts_complete, kContactsComplete);
-        needs(!info.sparse_states, kEveryState);
+        needs_every_step();
         needs(info.has_contacts, fmt::format("{} (isolated groups are bodies in contact)", kContacts));
         part(info.has_rotation, fmt::format("{} for the angular momentum", kRotation));
         break;
       case RowId::MomentumBalance:
-        needs(info.has_states, kStates);
-        needs(p.contacts_complete, kContactsComplete);
-        needs(!info.sparse_states, kEveryState);
+        needs_every_step();
         needs(info.has_contacts, kContacts);
         needs(impulses_complete,
               "nothing: the trace declares impulses_complete = 0 (its rows hold part of the step's impulses)");
@@ -106,9 +108,7 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
              "/contacts/jt3 (version 2): the scalar jt leaves each slow row's friction direction open (a disc)");
         break;
       case RowId::FreeFlight:
-        needs(info.has_states, kStates);
-        needs(p.contacts_complete, kContactsComplete);
-        needs(!info.sparse_states, kEveryState);
+        needs_every_step();
         needs(info.has_contacts, fmt::format("{}: a body is free in a step without a row (a run without contacts "
                                              "writes /contacts/offsets of zeros and empty rows)",
                                              kContacts));
