@@ -171,6 +171,27 @@ inline void check_reserved(bool reserved, std::uint32_t reserved_n, std::uint32_
                                    name, n, reserved ? std::to_string(reserved_n) : std::string("none")));
 }
 
+/// Sets a broadphase descriptor's sort of bodies by key: the unsorted keys and their bodies
+/// (`d.key`, `d.body`: the radix sort's input) and the sorted ones (`d.sorted_key`,
+/// `d.slot_body`), from the broadphase's buffers.
+template <class Desc, class Key>
+inline void set_key_sort(Desc& d, DeviceBuffer<Key>& key, DeviceBuffer<std::uint32_t>& body,
+                         DeviceBuffer<Key>& sorted_key, DeviceBuffer<std::uint32_t>& slot_body) {
+  d.key = key.get();
+  d.body = body.get();
+  d.sorted_key = sorted_key.get();
+  d.slot_body = slot_body.get();
+}
+
+/// set_key_sort and the sorted slots' boxes (`d.slot_box`).
+template <class Desc, class Key>
+inline void set_key_sort(Desc& d, DeviceBuffer<Key>& key, DeviceBuffer<std::uint32_t>& body,
+                         DeviceBuffer<Key>& sorted_key, DeviceBuffer<std::uint32_t>& slot_body,
+                         DeviceBuffer<Aabb>& slot_box) {
+  set_key_sort(d, key, body, sorted_key, slot_body);
+  d.slot_box = slot_box.get();
+}
+
 }  // namespace bp
 }  // namespace gpu
 }  // namespace octocd

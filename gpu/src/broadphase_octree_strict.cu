@@ -193,11 +193,7 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
     d.counted = counted_.get();
     d.extent_sum = scalars_d_.get();
     d.counted_sum = scalars_u_.get();
-    d.key = key_.get();
-    d.body = body_.get();
-    d.sorted_key = key_sorted_.get();
-    d.slot_body = slot_body_.get();
-    d.slot_box = slot_box_.get();
+    bp::set_key_sort(d, key_, body_, key_sorted_, slot_body_, slot_box_);
     d.count = count_.get();
     d.offset = offset_.get();
     d.out = out;

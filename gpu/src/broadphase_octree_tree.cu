@@ -744,11 +744,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.nan_key = nan_key();
     d.min_extent = min_.get();
     d.root = depth_ < 0 ? root_.get() : nullptr;
-    d.key = key_.get();
-    d.body = body_.get();
-    d.sorted_key = sorted_key_.get();
-    d.slot_body = slot_body_.get();
-    d.slot_box = slot_box_.get();
+    bp::set_key_sort(d, key_, body_, sorted_key_, slot_body_, slot_box_);
     d.level_begin = level_begin_.get();
     d.cell_table = cell_table_.get();
     d.cell_mask = cell_mask_;

@@ -255,10 +255,7 @@ class SpatialHashDevice final : public DeviceBroadPhase {
     d.large_cells = large_cells_.get();
     d.small_off = small_off_.get();
     d.large_off = large_off_.get();
-    d.key = key_.get();
-    d.body = body_.get();
-    d.sorted_key = key_sorted_.get();
-    d.slot_body = slot_body_.get();
+    bp::set_key_sort(d, key_, body_, key_sorted_, slot_body_);
     d.count = count_.get();
     d.offset = offset_.get();
     d.out = out;
