@@ -171,6 +171,25 @@ inline void check_reserved(bool reserved, std::uint32_t reserved_n, std::uint32_
                                    name, n, reserved ? std::to_string(reserved_n) : std::string("none")));
 }
 
+/// Launches `kernel(d)` on `grid` blocks of kBlockSize threads in `stream` and checks the
+/// launch (launched: RuntimeError naming `name`).
+template <class Desc>
+inline void launch(void (*kernel)(Desc), unsigned grid, cudaStream_t stream, const Desc& d, const char* name) {
+  kernel<<<grid, kBlockSize, 0, stream>>>(d);
+  launched(cudaGetLastError(), name);
+}
+
+/// The start of a device broadphase's find(): checks that reserve() sized it for `n`
+/// (check_reserved, `name`); with no body, zeroes the pair total and returns false (nothing
+/// to find), else true.
+inline bool start_find(bool reserved, std::uint32_t reserved_n, std::uint32_t n, const std::string& name,
+                       const PairOutput& out, cudaStream_t stream) {
+  check_reserved(reserved, reserved_n, n, name);
+  if (n > 0) return true;
+  check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
+  return false;
+}
+
 /// Sets a broadphase descriptor's sort of bodies by key: the unsorted keys and their bodies
 /// (`d.key`, `d.body`: the radix sort's input) and the sorted ones (`d.sorted_key`,
 /// `d.slot_body`), from the broadphase's buffers.

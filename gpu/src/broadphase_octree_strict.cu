@@ -177,11 +177,7 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::octree_strict));
-    if (n == 0) {
-      check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
-      return;
-    }
+    if (!bp::start_find(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::octree_strict), out, stream)) return;
     StrictDesc d;
     d.aabb = aabb;
     d.n = n;

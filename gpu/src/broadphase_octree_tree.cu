@@ -809,16 +809,11 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     s.capacity = out.capacity;
     s.n = n;
     s.shift = out.shift;
-    loose_scatter_kernel<<<grid_for(std::max<std::uint32_t>(out.capacity, 1)), kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_scatter");
-    loose_segment_sort_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_segment_sort");
-    loose_long_sort_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_long_sort");
-    loose_huge_rank_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_huge_rank");
-    loose_huge_copy_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_huge_copy");
+    bp::launch(loose_scatter_kernel, grid_for(std::max<std::uint32_t>(out.capacity, 1)), stream, s, "loose_scatter");
+    bp::launch(loose_segment_sort_kernel, grid_for(n), stream, s, "loose_segment_sort");
+    bp::launch(loose_long_sort_kernel, kLongSortBlocks, stream, s, "loose_long_sort");
+    bp::launch(loose_huge_rank_kernel, kLongSortBlocks, stream, s, "loose_huge_rank");
+    bp::launch(loose_huge_copy_kernel, kLongSortBlocks, stream, s, "loose_huge_copy");
   }
 
   std::uint64_t device_bytes() const override {

@@ -237,11 +237,7 @@ class SpatialHashDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::spatial_hash));
-    if (n == 0) {
-      check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
-      return;
-    }
+    if (!bp::start_find(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::spatial_hash), out, stream)) return;
     const std::uint32_t entries = kEntriesPerBody * n;
     const std::uint32_t counts = entries + n + 1;
     HashDesc d;
