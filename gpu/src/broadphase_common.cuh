@@ -25,6 +25,17 @@ namespace bp {
 
 /// Lanes of a warp; the warp-per-item kernels launch 32 threads per item.
 constexpr unsigned kWarpSize = 32;
+
+/// This thread's place in a one-warp-per-item kernel: the warp's item (global thread index /
+/// kWarpSize) and the thread's lane in its warp.
+struct WarpItem {
+  std::size_t item;
+  unsigned lane;
+};
+__device__ inline WarpItem warp_item() {
+  const std::size_t thread = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  return {thread / kWarpSize, threadIdx.x & (kWarpSize - 1)};
+}
 constexpr unsigned kFullMask = 0xffffffffu;
 
 /// The output key of the pair {p, q} (p != q): (min << shift) | max, shift in [1, 32]

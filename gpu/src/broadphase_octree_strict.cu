@@ -94,9 +94,7 @@ __global__ void strict_gather_kernel(StrictDesc d) {
 /// One warp per slot s: the slots (s, end of s's subtree) through Eq. 6.
 template <bool kFill>
 __global__ void strict_query_kernel(StrictDesc d) {
-  const std::size_t thread = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  const unsigned lane = threadIdx.x & (bp::kWarpSize - 1);
-  const std::size_t item = thread / bp::kWarpSize;
+  const auto [item, lane] = bp::warp_item();
   unsigned long long tests = 0;
   if (item < d.n) {  // uniform over the warp
     const std::uint32_t s = static_cast<std::uint32_t>(item);

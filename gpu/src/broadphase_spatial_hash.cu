@@ -161,9 +161,7 @@ __global__ void hash_cell_query_kernel(HashDesc d) {
 /// bodies: by the smaller index).
 template <bool kFill>
 __global__ void hash_oversize_query_kernel(HashDesc d) {
-  const std::size_t thread = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  const unsigned lane = threadIdx.x & (bp::kWarpSize - 1);
-  const std::size_t item = thread / bp::kWarpSize;
+  const auto [item, lane] = bp::warp_item();
   unsigned long long tests = 0;
   if (item < d.n) {  // uniform over the warp
     const std::uint32_t p = static_cast<std::uint32_t>(item);
