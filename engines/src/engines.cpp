@@ -49,16 +49,21 @@ void check_none(const Items& items, const std::string& where) {
 }
 
 /// An EngineInfo of octocd's own pipeline: the scene's broadphase and midphase, a
-/// FrameRecord every step (judged in process).
+/// FrameRecord every step (judged in process), batched worlds.
 EngineInfo octocd_info(const char* name, const char* description) {
   EngineInfo e;
   e.name = name;
   e.description = description;
-  e.has_midphase = e.uses_scene_broadphase = e.records_every_step = true;
+  e.has_midphase = e.uses_scene_broadphase = e.records_every_step = e.batched_worlds = true;
   return e;
 }
 
-EngineInfo cpu_info() { return octocd_info("cpu", "octocd's CPU reference pipeline"); }
+EngineInfo cpu_info() {
+  EngineInfo cpu = octocd_info("cpu", "octocd's CPU reference pipeline");
+  cpu.openmp_threads = true;
+  cpu.device_twin = "cuda";
+  return cpu;
+}
 
 std::unique_ptr<Engine> make_cpu(const std::shared_ptr<const Model>& model, const Items& items,
                                  const std::string& where) {
@@ -71,6 +76,7 @@ EngineInfo cuda_info() {
   cuda.device_broadphases = true;
   cuda.device = true;
   cuda.memory_kind = "device memory";
+  cuda.device_twin = "cpu";
   return cuda;
 }
 

@@ -17,8 +17,9 @@ const char* const kContacts = "/contacts (offsets, pair, normal, depth, jn, jt)"
 const char* const kRotation = "/states/orientation and /states/angular_velocity (version 2)";
 const char* const kContactsComplete =
     "the root attribute contacts_complete = 1 (every contact of every step has its rows): the trace declares 0, and "
-    "judging a body without rows as free, or a pair without rows as missing, would be a false alarm (read, not yet "
-    "used: design.md section 13d item 5b)";
+    "judging a pair without rows as missing, or a body's velocity change by rows that may be incomplete, would be a "
+    "false alarm (free-flight and conservation judge the bodies and groups the geometry shows apart: "
+    "docs/validation.md, \"Incomplete contact reporting\")";
 const char* const kEveryState =
     "every state (/states/frame 0, 1, 2, ...: octocd run --state-every 1): the row needs each step's states before "
     "and after it, and this trace records a state every few frames";
@@ -53,12 +54,6 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
     auto part = [&](bool have, const std::string& what) {
       if (!have && r.judged) r.partial += (r.partial.empty() ? "" : "; ") + what;
     };
-    // A row over each step's states before and after it, with every contact of the step.
-    auto needs_every_step = [&] {
-      needs(info.has_states, kStates);
-      needs(p.contacts_complete, kContactsComplete);
-      needs(!info.sparse_states, kEveryState);
-    };
     // What the row's table entry says it needs (validation_rows.def), in order; then its own.
     for (const TraceNeed need : row.needs) switch (need) {
         case TraceNeed::Pairs:
@@ -70,8 +65,11 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
         case TraceNeed::CompleteContacts:
           needs(p.contacts_complete, kContactsComplete);
           break;
-        case TraceNeed::EveryStep:
-          needs_every_step();
+        case TraceNeed::States:
+          needs(info.has_states, kStates);
+          break;
+        case TraceNeed::EveryState:
+          needs(!info.sparse_states, kEveryState);
           break;
       }
     switch (row.id) {

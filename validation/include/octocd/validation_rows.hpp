@@ -46,7 +46,8 @@ enum class TraceNeed {
   Pairs,             ///< /pairs (the engine's candidate pairs of each step)
   Contacts,          ///< /contacts (offsets, pair, normal, depth, jn, jt)
   CompleteContacts,  ///< the root attribute contacts_complete = 1
-  EveryStep,         ///< /states, contacts_complete = 1 and every state (state_every 1)
+  States,            ///< /states/position and /states/velocity
+  EveryState,        ///< a state every frame (state_every 1)
 };
 
 /// One row's identity.
