@@ -4,6 +4,7 @@
 /// help texts from the registry, option validators, loading a scene, the stop line and
 /// closing a trace.
 
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -15,6 +16,11 @@
 #include "octocd/trace.hpp"
 
 namespace octocd::cli {
+
+/// The clock of `run`'s and `validate`'s wall times (setup, stepping, the stop's grace).
+using Clock = std::chrono::steady_clock;
+/// How many pipeline stages a FrameMetrics times (octocd::Stage::Count).
+constexpr int kStages = static_cast<int>(octocd::Stage::Count);
 
 /// The help of `--engine` (run, validate), from the registry: each engine's name and
 /// description, "(docs/engines.md)".

@@ -53,10 +53,6 @@ namespace octocd::cli {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-constexpr int kStages = static_cast<int>(octocd::Stage::Count);
-
-using octocd::make_engine;  // engines/include/octocd/engines.hpp
 
 struct RunOptions {
   std::string scene;

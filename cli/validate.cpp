@@ -19,6 +19,7 @@
 #include <climits>
 #include <condition_variable>
 #include <exception>
+#include <functional>
 #include <mutex>
 #include <thread>
 #include <filesystem>
@@ -57,10 +58,6 @@ namespace octocd::cli {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-constexpr int kStages = static_cast<int>(octocd::Stage::Count);
-
-using octocd::make_engine;  // engines/include/octocd/engines.hpp
 
 
 struct ValidateOptions {
@@ -210,6 +207,46 @@ bool wait_for_worker(std::mutex& m, std::condition_variable& cv, const bool& don
   }
 }
 
+/// Ends the process with `code` at once (stdout and stderr flushed), without waiting for a
+/// worker thread that a stop left running.
+[[noreturn]] void end_without_worker(int code) {
+  std::fflush(stdout);
+  std::fflush(stderr);
+  std::_Exit(code);
+}
+
+/// A job on its own thread, so that the main thread answers a signal within
+/// kValidateStopGrace while the job runs (a step of a big scene may take seconds): wait()
+/// as wait_for_worker, join() rethrows what the job threw.
+class Worker {
+ public:
+  explicit Worker(std::function<void()> job)
+      : thread_([this, job = std::move(job)] {
+          try {
+            job();
+          } catch (...) {
+            error_ = std::current_exception();
+          }
+          const std::lock_guard<std::mutex> lock(m_);
+          done_ = true;
+          cv_.notify_all();
+        }) {}
+  /// True once the job finished; false once a stop outlasted the grace (the job may still run).
+  bool wait() { return wait_for_worker(m_, cv_, done_); }
+  /// Joins the finished job and rethrows what it threw, if anything.
+  void join() {
+    thread_.join();
+    if (error_) std::rethrow_exception(error_);
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable cv_;
+  bool done_ = false;
+  std::exception_ptr error_;
+  std::thread thread_;  // last: the job starts once the members above exist
+};
+
 int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, const octocd::ExternalOptions& eo,
                      const octocd::ExternalTraceInfo& info, const std::vector<octocd::ValidationResult>& results,
                      int every, Clock::time_point t0, const std::string& cut);
@@ -266,19 +303,8 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
     progress.tick(i.judged_to, o.frames_given ? std::min<std::int64_t>(o.frames, i.frames) : i.frames);
   };
   std::vector<octocd::ValidationResult> results;
-  std::mutex worker_m;
-  std::condition_variable worker_cv;
-  bool worker_done = false;
-  std::exception_ptr worker_error;
-  std::thread worker([&] {
-    try {
-      results = octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
-    } catch (...) {
-      worker_error = std::current_exception();
-    }
-    const std::lock_guard<std::mutex> lock(worker_m);
-    worker_done = true;
-    worker_cv.notify_all();
+  Worker worker([&] {
+    results = octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
   });
   const auto stopped_checking = [&](int sig) {
     std::fprintf(stderr, "octocd validate: stopped by %s while checking the trace %s; no frame judged, no verdict\n",
@@ -289,7 +315,7 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
                                             octocd::stop_signal_name(sig)));
     return octocd::stop_exit_code(sig);
   };
-  if (!wait_for_worker(worker_m, worker_cv, worker_done)) {
+  if (!worker.wait()) {
     // A check outlasting the grace, or a second signal: the verdict of the frames judged so
     // far (the worker's latest snapshot) is written, then the process ends without the worker.
     const int sig = octocd::stop_signal();
@@ -308,17 +334,12 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
       i.stopped_in = judged + 1;
       code = trace_in_verdict(o, vo, eo, i, rows, every, t0, " (a check outlasted the stop's grace)");
     }
-    std::fflush(stdout);
-    std::fflush(stderr);
-    std::_Exit(code);
+    end_without_worker(code);
   }
-  worker.join();
-  if (worker_error) {
-    try {
-      std::rethrow_exception(worker_error);
-    } catch (const octocd::ValidationStopped&) {
-      return stopped_checking(octocd::stop_signal());
-    }
+  try {
+    worker.join();
+  } catch (const octocd::ValidationStopped&) {
+    return stopped_checking(octocd::stop_signal());
   }
   return trace_in_verdict(o, vo, eo, info, results, every, t0, "");
 }
@@ -799,22 +820,11 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
     so_far.keep(rows, judged);
     progress.tick(judged, frames_total);
   };
-  std::mutex worker_m;
-  std::condition_variable worker_cv;
-  bool worker_done = false;
-  std::exception_ptr worker_error;
-  std::thread worker([&] {
-    try {
-      octocd::check_engine_settings(o.settings, octocd::cli_argument_names());
-      results = octocd::validate_engine([&] { return make_engine(o.engine, model, o.settings); }, vo, &stopped_in);
-    } catch (...) {
-      worker_error = std::current_exception();
-    }
-    const std::lock_guard<std::mutex> lock(worker_m);
-    worker_done = true;
-    worker_cv.notify_all();
+  Worker worker([&] {
+    octocd::check_engine_settings(o.settings, octocd::cli_argument_names());
+    results = octocd::validate_engine([&] { return make_engine(o.engine, model, o.settings); }, vo, &stopped_in);
   });
-  if (!wait_for_worker(worker_m, worker_cv, worker_done)) {
+  if (!worker.wait()) {
     // A step or check outlasting the grace, or a second signal: the incomplete verdict of
     // the frames judged so far, then the process ends (the worker is not waited for).
     const int sig = octocd::stop_signal();
@@ -824,19 +834,13 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
                     "was cut short",
                     judged, o.frames, octocd::stop_signal_name(sig),
                     octocd::stop_signal_count() > 1 ? " twice" : "", judged + 1);
-    const int code = validate_verdict(o, scene.name, rows, vo.overridden, stopped, judged, t0);
-    std::fflush(stdout);
-    std::fflush(stderr);
-    std::_Exit(code);
+    end_without_worker(validate_verdict(o, scene.name, rows, vo.overridden, stopped, judged, t0));
   }
-  worker.join();
-  if (worker_error) {
-    try {
-      std::rethrow_exception(worker_error);
-    } catch (const octocd::RuntimeError&) {
-      close_after_failure(trace, o.trace, o.no_xdmf);
-      throw;
-    }
+  try {
+    worker.join();
+  } catch (const octocd::RuntimeError&) {
+    close_after_failure(trace, o.trace, o.no_xdmf);
+    throw;
   }
   const bool signalled = octocd::stop_signal() != 0;
   if (trace) {

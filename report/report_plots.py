@@ -108,25 +108,21 @@ def axis_label(p, axis):
 
 
 # The engine registry's own broadphases (engines/src/engines.cpp: EngineInfo::own_broadphase
-# -> own_broadphase_class), for results whose points record only `engine_broadphase`; a test
-# (tests/report/test_report_comparisons.py) keeps this in step with the registry.
-OWN_BROADPHASE_CLASS = {"bullet-dbvt": "btDbvtBroadphase", "mujoco-sap": "MuJoCo's mj_collision (sweep and prune)",
-                        "ode-hash": "dHashSpace", "dart-fcl": "FCL's dynamic AABB tree in DART's FCLCollisionGroup"}
-
-
-# The registry's own broadphases as `octocd engines --json` gives them (process engines
-# included: docs/bring-your-engine.md), read by read_registry_broadphases.
+# -> own_broadphase_class; process engines' too, docs/bring-your-engine.md) as `octocd
+# engines --json` gives them, read by read_registry_broadphases (`octocd report` passes its
+# own binary as --octocd), for results whose points record only `engine_broadphase`.
 REGISTRY_BROADPHASE_CLASS = {}
 
 
 def broadphase_class(eb, default):
-    """The class name of the own broadphase `eb`: the registry's, else the built-in mirror's, else `default`."""
-    return REGISTRY_BROADPHASE_CLASS.get(eb) or OWN_BROADPHASE_CLASS.get(eb, default)
+    """The class name of the own broadphase `eb`: the registry's, else `default`."""
+    return REGISTRY_BROADPHASE_CLASS.get(eb, default)
 
 
 def read_registry_broadphases(octocd):
-    """Fills REGISTRY_BROADPHASE_CLASS from `octocd engines --json`; left empty (the built-in
-    mirror above answers) when octocd cannot be run or answers otherwise."""
+    """Fills REGISTRY_BROADPHASE_CLASS from `octocd engines --json`; left empty (an engine's
+    own broadphase is then named as its points record it, e.g. bullet-dbvt) when octocd
+    cannot be run or answers otherwise."""
     import json
     import subprocess
     try:

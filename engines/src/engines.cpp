@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <functional>
+#include <string>
+#include <utility>
 
 #include <fmt/format.h>
 
@@ -46,14 +48,18 @@ void check_none(const Items& items, const std::string& where) {
     throw InputError(fmt::format("{}: '{}': this engine has no settings; allowed: none", where, items.front()));
 }
 
+/// An EngineInfo of octocd's own pipeline: the scene's broadphase and midphase, a
+/// FrameRecord every step (judged in process), batched worlds.
+EngineInfo octocd_info(const char* name, const char* description) {
+  EngineInfo e;
+  e.name = name;
+  e.description = description;
+  e.has_midphase = e.uses_scene_broadphase = e.records_every_step = e.batched_worlds = true;
+  return e;
+}
+
 EngineInfo cpu_info() {
-  EngineInfo cpu;
-  cpu.name = "cpu";
-  cpu.description = "octocd's CPU reference pipeline";
-  cpu.has_midphase = true;
-  cpu.uses_scene_broadphase = true;
-  cpu.records_every_step = true;
-  cpu.batched_worlds = true;
+  EngineInfo cpu = octocd_info("cpu", "octocd's CPU reference pipeline");
   cpu.openmp_threads = true;
   cpu.device_twin = "cuda";
   return cpu;
@@ -66,16 +72,10 @@ std::unique_ptr<Engine> make_cpu(const std::shared_ptr<const Model>& model, cons
 }
 
 EngineInfo cuda_info() {
-  EngineInfo cuda;
-  cuda.name = "cuda";
-  cuda.description = "the GPU engine (needs a CUDA build and device)";
-  cuda.has_midphase = true;
-  cuda.uses_scene_broadphase = true;
+  EngineInfo cuda = octocd_info("cuda", "the GPU engine (needs a CUDA build and device)");
   cuda.device_broadphases = true;
   cuda.device = true;
   cuda.memory_kind = "device memory";
-  cuda.records_every_step = true;
-  cuda.batched_worlds = true;
   cuda.device_twin = "cpu";
   return cuda;
 }
@@ -94,62 +94,53 @@ std::unique_ptr<Engine> make_cuda(const std::shared_ptr<const Model>& model, con
   return make_cuda_engine(model, model->scene.broadphase.name, cuda_settings(items, where));
 }
 
+/// A reference engine's EngineInfo: it rotates, collides convex hulls of the meshes and runs
+/// its own broadphase (`own_broadphase`, the class `own_class`) and narrow phase (no
+/// midphase: `no_midphase_reason`).
+EngineInfo reference_info(const char* name, const char* description, std::string own_broadphase,
+                          const char* own_class, const char* no_midphase_reason) {
+  EngineInfo e;
+  e.name = name;
+  e.description = description;
+  e.rotates = true;
+  e.own_broadphase = std::move(own_broadphase);
+  e.own_broadphase_class = own_class;
+  e.geometries = {"hull"};
+  e.no_midphase_reason = no_midphase_reason;
+  return e;
+}
+
 EngineInfo bullet_info() {
-  EngineInfo bullet;
-  bullet.name = "bullet";
-  bullet.description = "the same scene in Bullet's btDiscreteDynamicsWorld";
-  bullet.rotates = true;
-  bullet.own_broadphase = broadphase_name(BroadPhaseId::bullet_dbvt);
-  bullet.own_broadphase_class = "btDbvtBroadphase";
+  EngineInfo bullet = reference_info("bullet",
+      "the same scene in Bullet's btDiscreteDynamicsWorld", broadphase_name(BroadPhaseId::bullet_dbvt),
+      "btDbvtBroadphase",
+      "Bullet runs its own narrow phase: GJK/EPA on convex hulls and triangle meshes, or btBoxBoxDetector on the "
+      "AABB boxes (--bullet shape=box)");
   bullet.geometries = {"hull", "box"};
   bullet.geometry_setting = "shape";
   bullet.iterations_setting = "iterations";
-  bullet.no_midphase_reason =
-      "Bullet runs its own narrow phase: GJK/EPA on convex hulls and triangle meshes, or btBoxBoxDetector on the "
-      "AABB boxes (--bullet shape=box)";
   return bullet;
 }
 
 EngineInfo ode_info() {
-  EngineInfo ode;
-  ode.name = "ode";
-  ode.description = "the same scene in the Open Dynamics Engine (dWorld, rotating boxes and hulls)";
-  ode.rotates = true;
-  ode.own_broadphase = "ode-hash";
-  ode.own_broadphase_class = "dHashSpace";
-  ode.geometries = {"hull"};
-  ode.no_midphase_reason =
-      "ODE runs its own narrow phase: dCollide (dBoxBox, libccd MPR on convex hulls, trimesh colliders)";
-  return ode;
+  return reference_info("ode",
+      "the same scene in the Open Dynamics Engine (dWorld, rotating boxes and hulls)", "ode-hash", "dHashSpace",
+      "ODE runs its own narrow phase: dCollide (dBoxBox, libccd MPR on convex hulls, trimesh colliders)");
 }
-
 
 EngineInfo mujoco_info() {
-  EngineInfo mujoco;
-  mujoco.name = "mujoco";
-  mujoco.description = "the same scene in MuJoCo (soft contacts, convex hulls, rotating bodies)";
-  mujoco.rotates = true;
-  mujoco.own_broadphase = "mujoco-sap";
-  mujoco.own_broadphase_class = "MuJoCo's mj_collision (sweep and prune)";
-  mujoco.geometries = {"hull"};
-  mujoco.no_midphase_reason =
-      "MuJoCo runs its own narrow phase: mjc_BoxBox on box pairs, MPR (libccd) on the convex hulls of meshes";
-  return mujoco;
+  return reference_info("mujoco",
+      "the same scene in MuJoCo (soft contacts, convex hulls, rotating bodies)", "mujoco-sap",
+      "MuJoCo's mj_collision (sweep and prune)",
+      "MuJoCo runs its own narrow phase: mjc_BoxBox on box pairs, MPR (libccd) on the convex hulls of meshes");
 }
 
-
 EngineInfo dart_info() {
-  EngineInfo dart;
-  dart.name = "dart";
-  dart.description = "the same scene in DART (World, FCL collision, boxed LCP; rotating boxes and hulls)";
-  dart.rotates = true;
-  dart.own_broadphase = "dart-fcl";
-  dart.own_broadphase_class = "FCL's dynamic AABB tree in DART's FCLCollisionGroup";
-  dart.geometries = {"hull"};
-  dart.no_midphase_reason =
+  return reference_info("dart",
+      "the same scene in DART (World, FCL collision, boxed LCP; rotating boxes and hulls)", "dart-fcl",
+      "FCL's dynamic AABB tree in DART's FCLCollisionGroup",
       "DART runs its own narrow phase: FCL's (box-box, BVH triangle meshes for hulls and static meshes) with DART's "
-      "contact post-processing";
-  return dart;
+      "contact post-processing");
 }
 
 

@@ -25,6 +25,17 @@ namespace bp {
 
 /// Lanes of a warp; the warp-per-item kernels launch 32 threads per item.
 constexpr unsigned kWarpSize = 32;
+
+/// This thread's place in a one-warp-per-item kernel: the warp's item (global thread index /
+/// kWarpSize) and the thread's lane in its warp.
+struct WarpItem {
+  std::size_t item;
+  unsigned lane;
+};
+__device__ inline WarpItem warp_item() {
+  const std::size_t thread = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  return {thread / kWarpSize, threadIdx.x & (kWarpSize - 1)};
+}
 constexpr unsigned kFullMask = 0xffffffffu;
 
 /// The output key of the pair {p, q} (p != q): (min << shift) | max, shift in [1, 32]
@@ -169,6 +180,46 @@ inline void check_reserved(bool reserved, std::uint32_t reserved_n, std::uint32_
     throw RuntimeError(fmt::format("device broadphase '{}': find() with {} bodies but reserve() sized it for {}; "
                                    "call reserve(n) first (outside graph capture)",
                                    name, n, reserved ? std::to_string(reserved_n) : std::string("none")));
+}
+
+/// Launches `kernel(d)` on `grid` blocks of kBlockSize threads in `stream` and checks the
+/// launch (launched: RuntimeError naming `name`).
+template <class Desc>
+inline void launch(void (*kernel)(Desc), unsigned grid, cudaStream_t stream, const Desc& d, const char* name) {
+  kernel<<<grid, kBlockSize, 0, stream>>>(d);
+  launched(cudaGetLastError(), name);
+}
+
+/// The start of a device broadphase's find(): checks that reserve() sized it for `n`
+/// (check_reserved, `name`); with no body, zeroes the pair total and returns false (nothing
+/// to find), else true.
+inline bool start_find(bool reserved, std::uint32_t reserved_n, std::uint32_t n, const std::string& name,
+                       const PairOutput& out, cudaStream_t stream) {
+  check_reserved(reserved, reserved_n, n, name);
+  if (n > 0) return true;
+  check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
+  return false;
+}
+
+/// Sets a broadphase descriptor's sort of bodies by key: the unsorted keys and their bodies
+/// (`d.key`, `d.body`: the radix sort's input) and the sorted ones (`d.sorted_key`,
+/// `d.slot_body`), from the broadphase's buffers.
+template <class Desc, class Key>
+inline void set_key_sort(Desc& d, DeviceBuffer<Key>& key, DeviceBuffer<std::uint32_t>& body,
+                         DeviceBuffer<Key>& sorted_key, DeviceBuffer<std::uint32_t>& slot_body) {
+  d.key = key.get();
+  d.body = body.get();
+  d.sorted_key = sorted_key.get();
+  d.slot_body = slot_body.get();
+}
+
+/// set_key_sort and the sorted slots' boxes (`d.slot_box`).
+template <class Desc, class Key>
+inline void set_key_sort(Desc& d, DeviceBuffer<Key>& key, DeviceBuffer<std::uint32_t>& body,
+                         DeviceBuffer<Key>& sorted_key, DeviceBuffer<std::uint32_t>& slot_body,
+                         DeviceBuffer<Aabb>& slot_box) {
+  set_key_sort(d, key, body, sorted_key, slot_body);
+  d.slot_box = slot_box.get();
 }
 
 }  // namespace bp

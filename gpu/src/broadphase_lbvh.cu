@@ -178,18 +178,14 @@ class LbvhDevice final : public DeviceBroadPhase {
     d.flag = flag_.get();
     d.out = out;
     const unsigned g = grid_for(n);
-    lbvh_code_kernel<<<g, kBlockSize, 0, stream>>>(d);
-    bp::launched(cudaGetLastError(), "lbvh_code");
+    bp::launch(lbvh_code_kernel, g, stream, d, "lbvh_code");
     std::size_t bytes = temp_.capacity();
     bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, code_.get(), sorted_code_.get(), body_.get(),
                                                  slot_body_.get(), static_cast<int>(n), 0, kLbvhCodeBits, stream),
                  "cub::DeviceRadixSort::SortPairs");
-    lbvh_build_kernel<<<g, kBlockSize, 0, stream>>>(d);
-    bp::launched(cudaGetLastError(), "lbvh_build");
-    lbvh_refit_kernel<<<g, kBlockSize, 0, stream>>>(d);
-    bp::launched(cudaGetLastError(), "lbvh_refit");
-    lbvh_query_kernel<<<g, kBlockSize, 0, stream>>>(d);
-    bp::launched(cudaGetLastError(), "lbvh_query");
+    bp::launch(lbvh_build_kernel, g, stream, d, "lbvh_build");
+    bp::launch(lbvh_refit_kernel, g, stream, d, "lbvh_refit");
+    bp::launch(lbvh_query_kernel, g, stream, d, "lbvh_query");
   }
 
   std::uint64_t device_bytes() const override {

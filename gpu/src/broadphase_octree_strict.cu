@@ -94,9 +94,7 @@ __global__ void strict_gather_kernel(StrictDesc d) {
 /// One warp per slot s: the slots (s, end of s's subtree) through Eq. 6.
 template <bool kFill>
 __global__ void strict_query_kernel(StrictDesc d) {
-  const std::size_t thread = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  const unsigned lane = threadIdx.x & (bp::kWarpSize - 1);
-  const std::size_t item = thread / bp::kWarpSize;
+  const auto [item, lane] = bp::warp_item();
   unsigned long long tests = 0;
   if (item < d.n) {  // uniform over the warp
     const std::uint32_t s = static_cast<std::uint32_t>(item);
@@ -177,11 +175,7 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::octree_strict));
-    if (n == 0) {
-      check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
-      return;
-    }
+    if (!bp::start_find(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::octree_strict), out, stream)) return;
     StrictDesc d;
     d.aabb = aabb;
     d.n = n;
@@ -193,11 +187,7 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
     d.counted = counted_.get();
     d.extent_sum = scalars_d_.get();
     d.counted_sum = scalars_u_.get();
-    d.key = key_.get();
-    d.body = body_.get();
-    d.sorted_key = key_sorted_.get();
-    d.slot_body = slot_body_.get();
-    d.slot_box = slot_box_.get();
+    bp::set_key_sort(d, key_, body_, key_sorted_, slot_body_, slot_box_);
     d.count = count_.get();
     d.offset = offset_.get();
     d.out = out;

@@ -744,11 +744,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.nan_key = nan_key();
     d.min_extent = min_.get();
     d.root = depth_ < 0 ? root_.get() : nullptr;
-    d.key = key_.get();
-    d.body = body_.get();
-    d.sorted_key = sorted_key_.get();
-    d.slot_body = slot_body_.get();
-    d.slot_box = slot_box_.get();
+    bp::set_key_sort(d, key_, body_, sorted_key_, slot_body_, slot_box_);
     d.level_begin = level_begin_.get();
     d.cell_table = cell_table_.get();
     d.cell_mask = cell_mask_;
@@ -813,16 +809,11 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     s.capacity = out.capacity;
     s.n = n;
     s.shift = out.shift;
-    loose_scatter_kernel<<<grid_for(std::max<std::uint32_t>(out.capacity, 1)), kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_scatter");
-    loose_segment_sort_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_segment_sort");
-    loose_long_sort_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_long_sort");
-    loose_huge_rank_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_huge_rank");
-    loose_huge_copy_kernel<<<kLongSortBlocks, kBlockSize, 0, stream>>>(s);
-    bp::launched(cudaGetLastError(), "loose_huge_copy");
+    bp::launch(loose_scatter_kernel, grid_for(std::max<std::uint32_t>(out.capacity, 1)), stream, s, "loose_scatter");
+    bp::launch(loose_segment_sort_kernel, grid_for(n), stream, s, "loose_segment_sort");
+    bp::launch(loose_long_sort_kernel, kLongSortBlocks, stream, s, "loose_long_sort");
+    bp::launch(loose_huge_rank_kernel, kLongSortBlocks, stream, s, "loose_huge_rank");
+    bp::launch(loose_huge_copy_kernel, kLongSortBlocks, stream, s, "loose_huge_copy");
   }
 
   std::uint64_t device_bytes() const override {

@@ -161,9 +161,7 @@ __global__ void hash_cell_query_kernel(HashDesc d) {
 /// bodies: by the smaller index).
 template <bool kFill>
 __global__ void hash_oversize_query_kernel(HashDesc d) {
-  const std::size_t thread = static_cast<std::size_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-  const unsigned lane = threadIdx.x & (bp::kWarpSize - 1);
-  const std::size_t item = thread / bp::kWarpSize;
+  const auto [item, lane] = bp::warp_item();
   unsigned long long tests = 0;
   if (item < d.n) {  // uniform over the warp
     const std::uint32_t p = static_cast<std::uint32_t>(item);
@@ -237,11 +235,7 @@ class SpatialHashDevice final : public DeviceBroadPhase {
   }
 
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
-    bp::check_reserved(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::spatial_hash));
-    if (n == 0) {
-      check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
-      return;
-    }
+    if (!bp::start_find(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::spatial_hash), out, stream)) return;
     const std::uint32_t entries = kEntriesPerBody * n;
     const std::uint32_t counts = entries + n + 1;
     HashDesc d;
@@ -255,10 +249,7 @@ class SpatialHashDevice final : public DeviceBroadPhase {
     d.large_cells = large_cells_.get();
     d.small_off = small_off_.get();
     d.large_off = large_off_.get();
-    d.key = key_.get();
-    d.body = body_.get();
-    d.sorted_key = key_sorted_.get();
-    d.slot_body = slot_body_.get();
+    bp::set_key_sort(d, key_, body_, key_sorted_, slot_body_);
     d.count = count_.get();
     d.offset = offset_.get();
     d.out = out;

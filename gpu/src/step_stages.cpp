@@ -81,11 +81,39 @@ void CudaWorld::Impl::launched(cudaError_t e, const char* kernel) {
   }
 }
 
+namespace {
+
+/// A stage descriptor's body state: positions, velocities, inverse masses.
+template <class Desc>
+void set_body_state(Desc& d, CudaWorld::Impl& w) {
+  d.x = w.x.get();
+  d.v = w.v.get();
+  d.w = w.w.get();
+}
+
+/// A stage descriptor's pair list: the pairs, which the midphase confirmed, the count.
+template <class Desc>
+void set_pair_list(Desc& d, CudaWorld::Impl& w) {
+  d.pairs = w.pairs.get();
+  d.confirmed = w.confirmed.get();
+  d.pair_count = w.counts();
+}
+
+/// A stage descriptor's per-pair corrections (the contact terms' outputs, the apply's inputs).
+template <class Desc>
+void set_corrections(Desc& d, CudaWorld::Impl& w) {
+  d.hit = w.hit.get();
+  d.dx_a = w.dx_a.get();
+  d.dx_b = w.dx_b.get();
+  d.dv_a = w.dv_a.get();
+  d.dv_b = w.dv_b.get();
+}
+
+}  // namespace
+
 gpu::BodiesDesc CudaWorld::Impl::bodies() {
   gpu::BodiesDesc b;
-  b.x = x.get();
-  b.v = v.get();
-  b.w = w.get();
+  set_body_state(b, *this);
   b.local = local.get();
   b.shape = shape.get();
   b.aabb = aabb.get();
@@ -113,12 +141,10 @@ gpu::MidListDesc CudaWorld::Impl::mid_desc(const unsigned long long* keys) {
   md.shape = shape.get();
   md.shapes = shapes_desc();
   md.levels = levels;
-  md.pairs = pairs.get();
+  set_pair_list(md, *this);
   md.pair_keys = keys;
   md.pair_shift = gpu::key_bits(n);
-  md.pair_count = counts();
   md.pair_capacity = pcap();
-  md.confirmed = confirmed.get();
   md.counters = counters();
   md.steps = level_steps;
   md.early_exit = mid_early_exit;
@@ -139,44 +165,28 @@ gpu::MidListDesc CudaWorld::Impl::mid_desc(const unsigned long long* keys) {
 
 gpu::TermsDesc CudaWorld::Impl::terms_desc(const ContactParams& params) {
   gpu::TermsDesc td;
-  td.pairs = pairs.get();
-  td.confirmed = confirmed.get();
-  td.pair_count = counts();
+  set_pair_list(td, *this);
   td.pair_capacity = pcap();
-  td.x = x.get();
-  td.v = v.get();
-  td.w = w.get();
+  set_body_state(td, *this);
   td.local = local.get();
   td.params = params;
-  td.hit = hit.get();
-  td.dx_a = dx_a.get();
-  td.dx_b = dx_b.get();
-  td.dv_a = dv_a.get();
-  td.dv_b = dv_b.get();
+  set_corrections(td, *this);
   return td;
 }
 
 gpu::ApplyDesc CudaWorld::Impl::apply_desc() {
   gpu::ApplyDesc ad;
-  ad.x = x.get();
-  ad.v = v.get();
-  ad.w = w.get();
+  set_body_state(ad, *this);
   ad.n = n;
   ad.offsets = index_offsets.get();
   ad.entries = index_entries.get();
-  ad.hit = hit.get();
-  ad.dx_a = dx_a.get();
-  ad.dx_b = dx_b.get();
-  ad.dv_a = dv_a.get();
-  ad.dv_b = dv_b.get();
+  set_corrections(ad, *this);
   return ad;
 }
 
 gpu::IndexDesc CudaWorld::Impl::index_desc() {
   gpu::IndexDesc id;
-  id.pairs = pairs.get();
-  id.confirmed = confirmed.get();
-  id.pair_count = counts();
+  set_pair_list(id, *this);
   id.capacity = icap();
   id.n = n;
   id.w = w.get();
@@ -190,9 +200,7 @@ gpu::IndexDesc CudaWorld::Impl::index_desc() {
 
 gpu::MetricsDesc CudaWorld::Impl::metrics_desc(const ContactParams& params) {
   gpu::MetricsDesc xd;
-  xd.x = x.get();
-  xd.v = v.get();
-  xd.w = w.get();
+  set_body_state(xd, *this);
   xd.n = n;
   xd.depth0 = depth0.get();
   xd.pair_count = counts();

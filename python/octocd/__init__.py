@@ -48,13 +48,33 @@ Scene = _octocd.Scene
 
 #: Build id of the compiled module ("MAJOR.MINOR.PATCH+GITID").
 build_id: str = _octocd.build_id
-#: Engines built into this module: "cpu", "bullet" and, with CUDA, "cuda".
-engines: List[str] = list(_octocd.engines)
+
+
+def __getattr__(name: str):
+    # `octocd.engines`: the engines this octocd can build, read from the registry when asked
+    # (not at import), so that load_engines_file may name the engines file first.
+    if name == "engines":
+        return list(_octocd.engines())
+    raise AttributeError(f"module 'octocd' has no attribute '{name}'")
+
+
+def load_engines_file(path: str) -> List[str]:
+    """Names this process's engines file (docs/bring-your-engine.md, "The engines file"), as
+    the CLI's `--engines-file FILE` does: its process engines join the built-in ones and
+    those of the shipped and the user's engines files (a later same name replaces an
+    earlier), and `Engine(scene, engine=NAME)` runs them. The file is read at once: a
+    malformed one raises `InputError` naming the file and the field. Returns `engines`.
+
+    Call it before the first engine is looked up (before `Engine`, `engines` or
+    `validate_trace` with an engine); the registry is read once per process, so a later
+    call with another file raises `RuntimeError` (the same file again is a no-op)."""
+    return list(_octocd.load_engines_file(str(path)))
+
 
 __all__ = [
     "InputError", "RuntimeError", "Scene", "load_scene", "Engine", "FrameRecord", "ValidationResult",
     "ValidationCause", "ValidationExample", "ValidationResults", "ExpectationOutcome", "Validator", "validate_frame", "validate_trace", "merge_validations", "format_results", "failures", "Trace", "engines",
-    "broadphases", "tolerances", "cuda_device_status", "build_id", "view",
+    "broadphases", "tolerances", "cuda_device_status", "build_id", "view", "load_engines_file",
 ]
 
 

@@ -65,6 +65,11 @@ class FrameRecord:
         return self.metrics["stage_ms"]
 
 
+def _passed(name: str, doc: str) -> property:
+    """A read-only property of Engine that answers the compiled engine's attribute `name`."""
+    return property(lambda self: getattr(self._e, name), doc=doc)
+
+
 class Engine:
     """One of octocd's engines stepping a scene (octocd/engine.hpp).
 
@@ -122,42 +127,21 @@ class Engine:
         (`cpu` and `cuda`; `bullet` raises InputError)."""
         self._e.set_state(positions, velocities)
 
-    @property
-    def positions(self) -> _np.ndarray:
-        """(n, 3) float32 body positions (m, centre of the world AABB): a copy."""
-        return self._e.positions
-
-    @property
-    def velocities(self) -> _np.ndarray:
-        """(n, 3) float32 body velocities (m/s): a copy."""
-        return self._e.velocities
-
-    @property
-    def inverse_masses(self) -> _np.ndarray:
-        """(n,) float32 inverse masses (1/kg, 0 = static): a copy."""
-        return self._e.inverse_masses
-
-    @property
-    def local_boxes(self) -> _np.ndarray:
-        """(n, 2, 3) float32 local AABBs ([:, 0] min, [:, 1] max, m); world AABB = local + position."""
-        return self._e.local_boxes
-
-    @property
-    def groups(self) -> List[str]:
-        """Scene group name per body ("walls" for generated walls)."""
-        return self._e.groups
-
-    name = property(lambda self: self._e.name, doc='"cpu", "cuda" or "bullet".')
-    device = property(lambda self: self._e.device, doc="The CPU model or GPU name it runs on.")
-    broadphase = property(lambda self: self._e.broadphase, doc="The broadphase in use.")
-    midphase = property(lambda self: self._e.midphase, doc="The midphase in use.")
-    frame = property(lambda self: self._e.frame,
-                     doc="Steps taken so far (whole steps; safe to read from another thread during step()).")
-    body_count = property(lambda self: self._e.body_count, doc="Number of bodies n (walls included).")
-    recording = property(lambda self: self._e.recording, doc="Whether last_frame() has the full record.")
-    notes = property(lambda self: self._e.notes, doc="How this engine's metrics differ from cpu's.")
-    state_hash = property(lambda self: self._e.state_hash,
-                          doc="FNV-1a 64-bit hash of the bits of every position then velocity.")
+    positions = _passed("positions", "(n, 3) float32 body positions (m, centre of the world AABB): a copy.")
+    velocities = _passed("velocities", "(n, 3) float32 body velocities (m/s): a copy.")
+    inverse_masses = _passed("inverse_masses", "(n,) float32 inverse masses (1/kg, 0 = static): a copy.")
+    local_boxes = _passed("local_boxes", "(n, 2, 3) float32 local AABBs ([:, 0] min, [:, 1] max, m); world AABB = "
+                                         "local + position.")
+    groups = _passed("groups", 'Scene group name per body ("walls" for generated walls).')
+    name = _passed("name", '"cpu", "cuda" or "bullet".')
+    device = _passed("device", "The CPU model or GPU name it runs on.")
+    broadphase = _passed("broadphase", "The broadphase in use.")
+    midphase = _passed("midphase", "The midphase in use.")
+    frame = _passed("frame", "Steps taken so far (whole steps; safe to read from another thread during step()).")
+    body_count = _passed("body_count", "Number of bodies n (walls included).")
+    recording = _passed("recording", "Whether last_frame() has the full record.")
+    notes = _passed("notes", "How this engine's metrics differ from cpu's.")
+    state_hash = _passed("state_hash", "FNV-1a 64-bit hash of the bits of every position then velocity.")
 
     def __repr__(self) -> str:
         return (f"octocd.Engine({self.name!r}, scene {self.scene.name!r}, {self.body_count} bodies, "

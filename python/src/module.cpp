@@ -44,6 +44,7 @@
 #include "octocd/setting_error.hpp"
 #include "octocd/expect.hpp"
 #include "octocd/junit.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/results_table.hpp"
 #include "octocd/external.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -584,10 +585,32 @@ struct PyScene {
   std::shared_ptr<const Scene> scene;
 };
 
-/// The engines this build has (octocd.engines), in engine_infos() order.
-const std::vector<std::string>& built_engines() {
-  static const std::vector<std::string> names = built_engine_names();
-  return names;
+/// The engines this build has (octocd.engines), in engine_infos() order: read on each call,
+/// so that an engines file loaded after import (octocd.load_engines_file) is listed.
+std::vector<std::string> built_engines() { return built_engine_names(); }
+
+/// octocd.load_engines_file: names the process's engines file (octocd/process_engines.hpp,
+/// set_engines_file) and reads the registry at once, so that a malformed file is an
+/// InputError here ("FILE: FIELD: PROBLEM; allowed: ...") and its engines are listed by
+/// octocd.engines. Throws RuntimeError when the registry was read already with another
+/// file (one engines file per process), InputError for a path that is not a file.
+std::vector<std::string> load_engines_file(const std::string& path) {
+  if (path.empty()) throw InputError("path: ''; allowed: the path of an engines file (docs/bring-your-engine.md)");
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw InputError(fmt::format("{}: not a readable file; allowed: an engines file (JSON, docs/bring-your-engine.md)",
+                                 path));
+  const std::string file = std::filesystem::absolute(path, ec).lexically_normal().string();
+  try {
+    set_engines_file(file);
+  } catch (const RuntimeError&) {
+    const std::vector<std::string> read = engines_files_read();
+    throw RuntimeError(fmt::format("octocd.load_engines_file('{}'): the engine registry was read already (engines "
+                                   "files: {}); allowed: one engines file per process, loaded before the first "
+                                   "engine is looked up (octocd.engines, octocd.Engine)",
+                                   path, read.empty() ? std::string("none") : fmt::format("{}", fmt::join(read, ", "))));
+  }
+  return built_engine_names();
 }
 
 std::string join(const std::vector<std::string>& v, const char* sep = ", ") {
@@ -601,7 +624,7 @@ class PyEngine {
   PyEngine(const PyScene& scene, const std::string& engine, const std::optional<std::string>& broadphase,
            const std::optional<std::string>& midphase, bool record, const EngineSettingItems& settings) {
     const EngineInfo* info = find_engine_info(engine);
-    const std::vector<std::string>& names = built_engines();
+    const std::vector<std::string> names = built_engines();
     if (info == nullptr)
       throw InputError(fmt::format("engine: unknown engine '{}'; allowed: {}", engine, join(names)));
     if (!engine_built(*info))
@@ -1222,7 +1245,8 @@ PYBIND11_MODULE(_octocd, m) {
   });
 
   m.attr("build_id") = build_id();
-  m.attr("engines") = built_engines();
+  m.def("engines", &built_engines);
+  m.def("load_engines_file", &load_engines_file);
   m.def("cuda_device_status", &cuda_device_status);
   m.def("broadphases", &any_engine_broadphase_names);
   m.def("tolerances", [] {

@@ -882,12 +882,10 @@ struct BulletWorld::Impl {
 
 void BulletWorld::Impl::fill_record() {
   FrameRecord& r = record;
-  const std::size_t n = bodies.size();
-  r.aabbs.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
+  fill_engine_aabbs(r, bodies.size(), [&](std::size_t i) {
     const btBroadphaseProxy* proxy = bodies[i]->getBroadphaseHandle();
-    r.aabbs[i] = {from_bt(proxy->m_aabbMin), from_bt(proxy->m_aabbMax)};
-  }
+    return Aabb{from_bt(proxy->m_aabbMin), from_bt(proxy->m_aabbMax)};
+  });
   // Candidate pairs: the overlapping pair cache.
   r.pairs.clear();
   btOverlappingPairCache* cache = broadphase->getOverlappingPairCache();
@@ -902,8 +900,7 @@ void BulletWorld::Impl::fill_record() {
     if (ia > ib) std::swap(ia, ib);
     r.pairs.push_back({ia, ib});
   }
-  std::sort(r.pairs.begin(), r.pairs.end());
-  r.pairs.erase(std::unique(r.pairs.begin(), r.pairs.end()), r.pairs.end());
+  sort_unique_pairs(r.pairs);
   r.has_pairs = true;
 
   // Contacts: every manifold point within the breaking threshold, one row each, with its

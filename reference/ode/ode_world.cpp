@@ -131,17 +131,14 @@ struct OdeWorld::Impl : ReferenceCore {
 
 void OdeWorld::Impl::fill_record() {
   FrameRecord& r = record;
-  const std::size_t n = geoms.size();
-  r.aabbs.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
+  fill_engine_aabbs(r, geoms.size(), [&](std::size_t i) {
     dReal b[6];
     dGeomGetAABB(geoms[i], b);  // (minx, maxx, miny, maxy, minz, maxz) at the detection pose
-    r.aabbs[i] = {{float_below(b[0]), float_below(b[2]), float_below(b[4])},
-                  {float_above(b[1]), float_above(b[3]), float_above(b[5])}};
-  }
+    return Aabb{{float_below(b[0]), float_below(b[2]), float_below(b[4])},
+                {float_above(b[1]), float_above(b[3]), float_above(b[5])}};
+  });
   r.pairs = pairs;
-  std::sort(r.pairs.begin(), r.pairs.end());
-  r.pairs.erase(std::unique(r.pairs.begin(), r.pairs.end()), r.pairs.end());
+  sort_unique_pairs(r.pairs);
   r.has_pairs = true;
 
   std::vector<ContactRecord> unsorted;

@@ -40,14 +40,55 @@ std::string refusal(const std::string& engine, const EngineOptions& o, const Arg
 
 }  // namespace
 
+/// The adapters the build registered (octocd_register_engine: OCTOCD_REGISTERED_ADAPTERS,
+/// tests/CMakeLists.txt), in registration order.
+std::vector<std::string> registered_adapters() {
+  std::vector<std::string> names;
+  std::string list = OCTOCD_REGISTERED_ADAPTERS;
+  for (std::size_t at = 0; at < list.size();) {
+    const std::size_t comma = std::min(list.find(',', at), list.size());
+    names.push_back(list.substr(at, comma - at));
+    at = comma + 1;
+  }
+  return names;
+}
+
+TEST(EngineRegistry, EveryRegisteredAdapterIsABuiltEngine) {
+  // octocd's own engines first, then the adapters: each name once, none with a command.
+  const std::vector<std::string> builtin = builtin_engine_names();
+  ASSERT_GE(builtin.size(), 3u);
+  EXPECT_EQ(builtin[0], "cpu");
+  EXPECT_EQ(builtin[1], "cuda");
+  for (std::size_t i = 0; i < builtin.size(); ++i)
+    EXPECT_EQ(std::count(builtin.begin(), builtin.end(), builtin[i]), 1) << builtin[i];
+  // Every adapter registered by the build (bullet always: its package is required) is in
+  // the registry's table and built; the registry's table has no adapter the build lacks
+  // but it says so (engine_unavailable: "not built").
+  const std::vector<std::string> adapters = registered_adapters();
+  ASSERT_NE(std::find(adapters.begin(), adapters.end(), "bullet"), adapters.end()) << OCTOCD_REGISTERED_ADAPTERS;
+  const std::vector<std::string> built = built_engine_names();
+  for (const std::string& a : adapters) {
+    EXPECT_NE(std::find(builtin.begin(), builtin.end(), a), builtin.end()) << a << " is not in engines.cpp's table";
+    EXPECT_NE(std::find(built.begin(), built.end(), a), built.end()) << a << " registered but not built";
+  }
+  for (std::size_t i = 2; i < builtin.size(); ++i) {
+    const bool registered = std::find(adapters.begin(), adapters.end(), builtin[i]) != adapters.end();
+    const EngineInfo& info = engine_info(builtin[i], "engine");
+    EXPECT_EQ(engine_built(info), registered) << builtin[i];
+    if (!registered) {
+      EXPECT_NE(engine_unavailable(info).find("not built"), std::string::npos) << engine_unavailable(info);
+    }
+  }
+}
+
 TEST(EngineRegistry, CapabilitiesAreWhatTheEnginesDo) {
-  ASSERT_EQ(builtin_engine_names(), (std::vector<std::string>{"cpu", "cuda", "bullet", "mujoco", "ode", "dart"}));
+  const std::size_t builtin_count = builtin_engine_names().size();
   // Then the process engines of the engines files (the build tree's: rapier, jolt), each
   // with its command (tests/cli/test_cli_process_engines.cpp runs them).
   std::string allowed;
   for (std::size_t i = 0; i < engine_infos().size(); ++i) {
     const EngineInfo& info = engine_infos()[i];
-    EXPECT_EQ(info.command.empty(), i < 6) << info.name;
+    EXPECT_EQ(info.command.empty(), i < builtin_count) << info.name;
     allowed += (allowed.empty() ? "" : ", ") + info.name;
   }
   for (const EngineInfo& info : engine_infos()) {

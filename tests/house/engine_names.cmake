@@ -9,13 +9,14 @@ if(NOT SRC)
   message(FATAL_ERROR "engine_names.cmake: pass -DSRC=<the source directory>")
 endif()
 include(${CMAKE_CURRENT_LIST_DIR}/scan_sources.cmake)
-# Every engine name: the built-in entries' (engines/src/engines.cpp: `X.name = "NAME"`) and
-# the shipped process engines' (reference/engines.json.in: `"name": "NAME"`).
-file(STRINGS ${SRC}/engines/src/engines.cpp _builtin REGEX "\\.name = \"[a-z0-9_-]+\"")
+# Every engine name: the built-in entries' (engines/src/engines.cpp: `X.name = "NAME"` or
+# `octocd_info("NAME", ...)`, `reference_info("NAME", ...)`) and the shipped process
+# engines' (reference/engines.json.in: `"name": "NAME"`).
+file(STRINGS ${SRC}/engines/src/engines.cpp _builtin REGEX "(\\.name = |[a-z]+_info\\()\"[a-z0-9_-]+\"")
 file(STRINGS ${SRC}/reference/engines.json.in _process REGEX "\"name\": \"[a-z0-9_-]+\"")
 set(_names "")
 foreach(l IN LISTS _builtin _process)
-  string(REGEX REPLACE ".*\"([a-z0-9_-]+)\".*" "\\1" _n "${l}")
+  string(REGEX REPLACE ".*(= |\\(|: )\"([a-z0-9_-]+)\".*" "\\2" _n "${l}")
   list(APPEND _names ${_n})
 endforeach()
 list(REMOVE_DUPLICATES _names)

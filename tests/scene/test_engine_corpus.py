@@ -20,7 +20,6 @@ h5py = pytest.importorskip("h5py", reason="python3-h5py is not installed")
 
 SOURCE_DIR = os.environ.get("OCTOCD_SOURCE_DIR", os.path.join(os.path.dirname(__file__), "..", ".."))
 BIN = os.environ.get("OCTOCD_BIN", os.path.join(SOURCE_DIR, "build", "octocd"))
-REFERENCE_ENGINES = ["bullet", "mujoco", "ode", "dart"]
 
 DROP = {
     "name": "corpus-drop", "rotation": True, "dt": 0.002, "frames": 200,
@@ -47,7 +46,16 @@ def available():
     return set(r.stdout.split())
 
 
+def reference_engines():
+    """The registry's reference engines (`octocd engines --json`: the built-in engines that run
+    their own broadphase, bullet, mujoco, ode, dart, ...), built here or not, in its order."""
+    r = octocd("engines", "--json")
+    assert r.returncode == 0, r.stdout + r.stderr
+    return [e["name"] for e in json.loads(r.stdout)["engines"] if e.get("kind") == "builtin" and e.get("own_broadphase")]
+
+
 ENGINES = available() if os.path.exists(BIN) else set()
+REFERENCE_ENGINES = reference_engines() if os.path.exists(BIN) else []
 
 
 def engine_param(e):

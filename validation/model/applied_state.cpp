@@ -77,25 +77,13 @@ struct Run {
   std::uint32_t off = 0;
 };
 
-struct Tally {
-  std::uint64_t checks = 0, failures = 0;
-  double worst = 0.0;
-  std::string first;
-  void check(bool ok, double ratio, const std::string& what) {
-    ++checks;
-    worst = std::max(worst, ratio);
-    if (ok) return;
-    if (failures == 0) first = what;
-    ++failures;
-  }
-};
 
 }  // namespace
 
 struct AppliedStateJudge::Impl {
   const Model* model = nullptr;
   Tolerances tol;
-  Tally bodies, group_momentum, group_centre;
+  CheckTally bodies, group_momentum, group_centre;
   std::uint64_t dynamic_frames = 0, unjudged = 0, searched = 0, resolved = 0, exceeded = 0;
   std::uint64_t near_ties = 0, runs = 0;
   double worst = 0.0;

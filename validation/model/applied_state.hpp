@@ -20,6 +20,7 @@
 /// bound is exceeded without a match, only the bodies that no near-tie can reach within
 /// the remaining passes are judged; the others are counted as not judged.
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -29,6 +30,23 @@
 #include "octocd/validation.hpp"
 
 namespace octocd {
+
+/// A running count of the model tier's checks and failures: the worst figure (a ratio or an
+/// excess over its bound, judged <= 1 or <= 0 by the caller) and the first failure's
+/// description.
+struct CheckTally {
+  std::uint64_t checks = 0;
+  std::uint64_t failures = 0;
+  double worst = 0.0;
+  std::string first;
+  void check(bool ok, double figure, const std::string& what) {
+    ++checks;
+    worst = std::max(worst, figure);
+    if (ok) return;
+    if (failures == 0) first = what;
+    ++failures;
+  }
+};
 
 /// Judges the applied state frame by frame (FrameValidators owns one).
 class AppliedStateJudge {

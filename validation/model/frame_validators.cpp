@@ -117,20 +117,6 @@ void find_pairs_stoppable(const std::shared_ptr<BroadPhase>& bp, const std::vect
   out.swap(job->pairs);
 }
 
-/// A running count of checks and failures with the first failure's description.
-struct Tally {
-  std::uint64_t checks = 0;
-  std::uint64_t failures = 0;
-  double worst = 0.0;
-  std::string first;
-  void check(bool ok, double excess, const std::string& what) {
-    ++checks;
-    worst = std::max(worst, excess);
-    if (ok) return;
-    if (failures == 0) first = what;
-    ++failures;
-  }
-};
 
 }  // namespace
 
@@ -148,7 +134,7 @@ struct FrameValidators::Impl {
   std::unique_ptr<PhysicsValidators> physics;
   std::vector<Pair> expected, got;
 
-  Tally candidates, midphase, contraction, friction, momentum, centre;
+  CheckTally candidates, midphase, contraction, friction, momentum, centre;
   std::unique_ptr<AppliedStateJudge> applied;
   std::uint64_t candidate_frames = 0, midphase_pairs = 0, dynamic_pairs = 0;
   // Contacts of another engine whose per-contact terms could not be derived (a dynamic
@@ -443,7 +429,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
               ? 0.0
               : tol.applied_state_ulps * eps32 * (ma + mb) *
                     std::max({inf(c.v_a), inf(c.v_b), inf(c.v_a + c.dv_a), inf(c.v_b + c.dv_b)});
-      auto check_pair = [&](Tally& t, Vec3 da, Vec3 db, double rel, double slack, const char* what) {
+      auto check_pair = [&](CheckTally& t, Vec3 da, Vec3 db, double rel, double slack, const char* what) {
         const double sx = ma * da.x + mb * db.x, sy = ma * da.y + mb * db.y,
                      sz = ma * da.z + mb * db.z;
         const double scale = ma * length(da) + mb * length(db);
@@ -482,17 +468,11 @@ std::vector<ValidationResult> FrameValidators::results() const {
   };
   // Model-tier rows for another engine: n/a with the reason, never a FAIL.
   auto not_claimed = [&](RowId id, const char* figure, const char* why) {
-    ValidationResult r;
-    r.tier = row_info(id).tier;
-    r.name = row_info(id).name;
-    r.figure = figure;
-    r.applicable = false;
-    r.detail = why;
-    out.push_back(r);
+    out.push_back(not_applicable(id, figure, why));
   };
   const char* no_spec6 = "another engine that does not claim design.md section 6 (response_model \"spec6\"): the paper's "
                          "response model is not judged; the physics tier judges its physics";
-  auto tally = [](RowId id, const char* figure, const Tally& t, const std::string& ok_note) {
+  auto tally = [](RowId id, const char* figure, const CheckTally& t, const std::string& ok_note) {
     ValidationResult r;
     r.tier = row_info(id).tier;
     r.name = row_info(id).name;
@@ -550,7 +530,7 @@ std::vector<ValidationResult> FrameValidators::results() const {
   out.back().tolerances = "friction_speed,friction_cone_rel";
   {
     ValidationResult r = tally(RowId::ImpulseConservation, "contacts and isolated groups breaking momentum or centre",
-                               Tally{}, "");
+                               CheckTally{}, "");
     // Worst figures are residual / bound over the items judged, so a pass shows <= 1.
     const AppliedStateJudge::Groups g = s.applied->groups();
     const std::uint64_t failures = s.momentum.failures + s.centre.failures + g.failures;

@@ -79,6 +79,18 @@ SpinBounds spin_bounds(const std::array<double, 2>& pm, double dt, double om, do
   b.energy = (i1 > 0 ? 0.5 * d * d / i1 * h2 * om * om : 0.0) + dt * dw * d * om * om;
   return b;
 }
+/// The ratio (<= 1 passes) of a spin check judged two ways: `r_plain` without the
+/// gyroscopic term, `r_inv` by the invariant of free rotation. An engine declaring its
+/// gyroscopic term (Integrated) or its absence (Absent) is judged by that one; an undeclared
+/// one by the better of the two, counting in `plain` or `invariant` which one passed.
+double spin_ratio(PhysicsBodies::Gyroscopic g, double r_plain, double r_inv, std::uint64_t& plain,
+                  std::uint64_t& invariant) {
+  using G = PhysicsBodies::Gyroscopic;
+  const double r = g == G::Integrated ? r_inv : g == G::Absent ? r_plain : std::min(r_plain, r_inv);
+  if (g == G::Undeclared && r <= 1.0) ++(r_plain <= 1.0 ? plain : invariant);
+  return r;
+}
+
 }  // namespace
 
 void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<Pose>& det) {
@@ -360,10 +372,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       const double d_inv = len3(unlocked(l1 - l0 - torque[i], i, 3));
       const double r_plain = d_plain / rounding, r_inv = d_inv / inv_bound;
       using G = PhysicsBodies::Gyroscopic;
-      const double r_ang = bodies.gyroscopic == G::Integrated ? r_inv
-                           : bodies.gyroscopic == G::Absent   ? r_plain
-                                                              : std::min(r_plain, r_inv);
-      if (bodies.gyroscopic == G::Undeclared && r_ang <= 1.0) ++(r_plain <= 1.0 ? balance_ang_plain : balance_ang_invariant);
+      const double r_ang = spin_ratio(bodies.gyroscopic, r_plain, r_inv, balance_ang_plain, balance_ang_invariant);
       balance_ang.check(r_ang <= 1.0, r_ang, Where::of_body(frame, i), [&] {
         const std::string plain_text =
             fmt::format("I_w (w' - w) = ({:.4g}, {:.4g}, {:.4g}) kg m^2/s (no gyroscopic term; off by {:.4g}, bound "
@@ -463,10 +472,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     const double r_energy = (locked(i) >> 3) ? 0.0 : rise / e_bound;
     const double r_inv = std::max(dl / l_bound, r_energy);
     using G = PhysicsBodies::Gyroscopic;
-    const double ratio = bodies.gyroscopic == G::Integrated ? r_inv
-                         : bodies.gyroscopic == G::Absent   ? r_kept
-                                                            : std::min(r_kept, r_inv);
-    if (bodies.gyroscopic == G::Undeclared && ratio <= 1.0) ++(r_kept <= 1.0 ? free_spin_kept : free_spin_invariant);
+    const double ratio = spin_ratio(bodies.gyroscopic, r_kept, r_inv, free_spin_kept, free_spin_invariant);
     free_w.check(ratio <= 1.0, ratio, Where::of_body(frame, i), [&] {
       const std::string kept = fmt::format("w' - w off by {:.4g} rad/s (bound {:.3g}, no gyroscopic term)",
                                            len3(dw), w_bound);

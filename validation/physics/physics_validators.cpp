@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <utility>
 
 #include "octocd/error.hpp"
 #include "octocd/reference_contact.hpp"
@@ -72,33 +73,39 @@ const char* contact_model_name(PhysicsBodies::ContactModel m) {
                                                         : "rigid";
 }
 
+namespace {
+
+/// The name of `v` in `names` (value, name), or `otherwise`.
+template <class E, std::size_t N>
+const char* name_in(E v, const std::pair<E, const char*> (&names)[N], const char* otherwise) {
+  for (const auto& [e, name] : names)
+    if (e == v) return name;
+  return otherwise;
+}
+
+}  // namespace
+
 const char* gyroscopic_name(PhysicsBodies::Gyroscopic g) {
-  switch (g) {
-    case PhysicsBodies::Gyroscopic::Integrated: return "true";
-    case PhysicsBodies::Gyroscopic::Absent: return "false";
-    case PhysicsBodies::Gyroscopic::Undeclared: break;
-  }
-  return "undeclared";
+  using G = PhysicsBodies::Gyroscopic;
+  static constexpr std::pair<G, const char*> kNames[] = {{G::Integrated, "true"}, {G::Absent, "false"}};
+  return name_in(g, kNames, "undeclared");
 }
 
 const char* impulses_name(PhysicsBodies::Impulses i) {
-  switch (i) {
-    case PhysicsBodies::Impulses::Complete: return "complete";
-    case PhysicsBodies::Impulses::NormalOnly: return "normal-only";
-    case PhysicsBodies::Impulses::None: return "none";
-  }
-  return "complete";
+  using I = PhysicsBodies::Impulses;
+  static constexpr std::pair<I, const char*> kNames[] = {
+      {I::Complete, "complete"}, {I::NormalOnly, "normal-only"}, {I::None, "none"}};
+  return name_in(i, kNames, "complete");
 }
 
 const char* integrator_name(PhysicsBodies::Integrator i) {
-  switch (i) {
-    case PhysicsBodies::Integrator::SemiImplicit: return "semi-implicit";
-    case PhysicsBodies::Integrator::Explicit: return "explicit";
-    case PhysicsBodies::Integrator::Any: return "any";
-    case PhysicsBodies::Integrator::Substepped: return "substepped";
-    case PhysicsBodies::Integrator::Undeclared: return "undeclared";
-  }
-  return "semi-implicit";
+  using I = PhysicsBodies::Integrator;
+  static constexpr std::pair<I, const char*> kNames[] = {{I::SemiImplicit, "semi-implicit"},
+                                                         {I::Explicit, "explicit"},
+                                                         {I::Any, "any"},
+                                                         {I::Substepped, "substepped"},
+                                                         {I::Undeclared, "undeclared"}};
+  return name_in(i, kNames, "semi-implicit");
 }
 
 namespace physics_detail {

@@ -33,6 +33,14 @@ bool finite(Vec3 v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::is
   throw InputError(fmt::format("{}: {}: frame {}: {}; allowed: {}", origin, field, frame, problem, allowed));
 }
 
+/// Row `i` of a pair list, `q`: a < b < n.
+void check_pair_row(Pair q, std::size_t i, std::size_t n, const std::string& origin, const std::string& field,
+                    std::int64_t frame, const std::string& allowed) {
+  if (q.a >= q.b) fail(origin, field, frame, fmt::format("row {} is ({}, {}): a >= b", i, q.a, q.b), allowed);
+  if (q.b >= n)
+    fail(origin, field, frame, fmt::format("row {} is ({}, {}): body {} out of range", i, q.a, q.b, q.b), allowed);
+}
+
 /// Pairs sorted by (a, b), unique, a < b < n.
 void check_pairs(const std::vector<Pair>& pairs, std::size_t n, const std::string& origin,
                  const std::string& field, std::int64_t frame) {
@@ -40,11 +48,7 @@ void check_pairs(const std::vector<Pair>& pairs, std::size_t n, const std::strin
       fmt::format("pairs (a, b) with a < b < {} bodies, sorted by (a, b), each once", n);
   for (std::size_t i = 0; i < pairs.size(); ++i) {
     const Pair q = pairs[i];
-    if (q.a >= q.b)
-      fail(origin, field, frame, fmt::format("row {} is ({}, {}): a >= b", i, q.a, q.b), allowed);
-    if (q.b >= n)
-      fail(origin, field, frame, fmt::format("row {} is ({}, {}): body {} out of range", i, q.a, q.b, q.b),
-           allowed);
+    check_pair_row(q, i, n, origin, field, frame, allowed);
     if (i > 0 && !(pairs[i - 1] < q))
       fail(origin, field, frame,
            fmt::format("row {} is ({}, {}) after ({}, {}): {}", i, q.a, q.b, pairs[i - 1].a, pairs[i - 1].b,
@@ -73,11 +77,7 @@ void check_manifold_pairs(const std::vector<Pair>& pairs, std::size_t n, const s
       n);
   for (std::size_t i = 0; i < pairs.size(); ++i) {
     const Pair q = pairs[i];
-    if (q.a >= q.b)
-      fail(origin, field, frame, fmt::format("row {} is ({}, {}): a >= b", i, q.a, q.b), allowed);
-    if (q.b >= n)
-      fail(origin, field, frame, fmt::format("row {} is ({}, {}): body {} out of range", i, q.a, q.b, q.b),
-           allowed);
+    check_pair_row(q, i, n, origin, field, frame, allowed);
     if (i > 0 && q < pairs[i - 1]) {
       const bool repeated = std::find(pairs.begin(), pairs.begin() + static_cast<std::ptrdiff_t>(i), q) !=
                             pairs.begin() + static_cast<std::ptrdiff_t>(i);

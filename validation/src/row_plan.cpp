@@ -54,22 +54,31 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
     auto part = [&](bool have, const std::string& what) {
       if (!have && r.judged) r.partial += (r.partial.empty() ? "" : "; ") + what;
     };
+    // What the row's table entry says it needs (validation_rows.def), in order; then its own.
+    for (const TraceNeed need : row.needs) switch (need) {
+        case TraceNeed::Pairs:
+          needs(info.has_pairs, "/pairs/offsets and /pairs/pair (the engine's candidate pairs of each step)");
+          break;
+        case TraceNeed::Contacts:
+          needs(info.has_contacts, kContacts);
+          break;
+        case TraceNeed::CompleteContacts:
+          needs(p.contacts_complete, kContactsComplete);
+          break;
+        case TraceNeed::States:
+          needs(info.has_states, kStates);
+          break;
+        case TraceNeed::EveryState:
+          needs(!info.sparse_states, kEveryState);
+          break;
+      }
     switch (row.id) {
-      case RowId::BroadphaseCompleteness:
-        needs(info.has_pairs, "/pairs/offsets and /pairs/pair (the engine's candidate pairs of each step)");
+      default:  // the table's needs are all it needs (penetration: poses, states or AABBs, are checked)
         break;
-      case RowId::ContactCompleteness:
       case RowId::ContactGeometry:
-        needs(info.has_contacts, kContacts);
-        if (row.id == RowId::ContactCompleteness) needs(p.contacts_complete, kContactsComplete);
-        if (row.id == RowId::ContactGeometry)
-          part(info.has_points, "/contacts/point (version 2) for the check that each row's point lies on both shapes");
-        break;
-      case RowId::Penetration:
-        // Poses: a trace holds states or AABBs (checked).
+        part(info.has_points, "/contacts/point (version 2) for the check that each row's point lies on both shapes");
         break;
       case RowId::Friction:
-        needs(info.has_contacts, kContacts);
         part(!info.sparse_states, "every state (octocd run --state-every 1) for the dissipation; the cone is judged on "
                                   "the steps whose pre-step state is recorded");
         needs(p.impulses == PhysicsBodies::Impulses::Complete,
@@ -79,16 +88,10 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
              "/contacts/jt3 (version 2) for the vector rule [rule: jt3]; judged on the scalar jt [rule: scalar]");
         break;
       case RowId::Conservation:
-        needs(info.has_states, kStates);
-        needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, fmt::format("{} (isolated groups are bodies in contact)", kContacts));
         part(info.has_rotation, fmt::format("{} for the angular momentum", kRotation));
         break;
       case RowId::MomentumBalance:
-        needs(info.has_states, kStates);
-        needs(p.contacts_complete, kContactsComplete);
-        needs(!info.sparse_states, kEveryState);
-        needs(info.has_contacts, kContacts);
         needs(impulses_complete,
               "nothing: the trace declares impulses_complete = 0 (its rows hold part of the step's impulses)");
         part(info.has_rotation && info.has_points,
@@ -106,8 +109,6 @@ std::vector<TraceRowPlan> plan_trace_rows(const ExternalTraceInfo& info, const E
              "/contacts/jt3 (version 2): the scalar jt leaves each slow row's friction direction open (a disc)");
         break;
       case RowId::FreeFlight:
-        needs(info.has_states, kStates);
-        needs(!info.sparse_states, kEveryState);
         needs(info.has_contacts, fmt::format("{}: a body is free in a step without a row (a run without contacts "
                                              "writes /contacts/offsets of zeros and empty rows)",
                                              kContacts));

@@ -28,16 +28,6 @@ namespace octocd {
 
 namespace {
 
-ValidationResult not_applicable(RowId id, const char* figure, const std::string& why) {
-  ValidationResult r;
-  r.tier = row_info(id).tier;
-  r.name = row_info(id).name;
-  r.figure = figure;
-  r.applicable = false;
-  r.detail = why;
-  return r;
-}
-
 /// Mass-weighted centre of the dynamic bodies.
 Vec3 centre_of_mass(const BodyState& s) {
   double m = 0, x = 0, y = 0, z = 0;

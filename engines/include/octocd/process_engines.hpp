@@ -49,7 +49,7 @@ struct ProcessEngineSpec {
   std::string file;
 };
 
-/// The engines file given by the user (`--engines-file FILE`, Python's engines_file=), read
+/// The engines file given by the user (`--engines-file FILE`, Python's octocd.load_engines_file), read
 /// after the shipped and the user's; "" for none. Call before the registry is first read
 /// (main does, before registering the commands); a later call with another path throws
 /// RuntimeError (the registry is read once per process).

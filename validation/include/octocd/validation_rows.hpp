@@ -19,7 +19,7 @@ namespace octocd {
 /// The rows, in the order `validate` reports them: the physics tier, then the model tier;
 /// one per entry of octocd/validation_rows.def.
 enum class RowId {
-#define OCTOCD_ROW(id, name, tier, merge, causes) id,
+#define OCTOCD_ROW(id, name, tier, merge, causes, needs) id,
 #include "octocd/validation_rows.def"
 #undef OCTOCD_ROW
 };
@@ -40,6 +40,16 @@ struct RowCause {
   const char* unit;   ///< the unit of its figures ("m", "deg", "of bound", ...)
 };
 
+/// What a row needs of a trace to judge it (validation_rows.def's NEEDS; `--check-only`'s
+/// plan: octocd/row_plan.hpp).
+enum class TraceNeed {
+  Pairs,             ///< /pairs (the engine's candidate pairs of each step)
+  Contacts,          ///< /contacts (offsets, pair, normal, depth, jn, jt)
+  CompleteContacts,  ///< the root attribute contacts_complete = 1
+  States,            ///< /states/position and /states/velocity
+  EveryState,        ///< a state every frame (state_every 1)
+};
+
 /// One row's identity.
 struct RowInfo {
   RowId id;                     ///< its place in validation_rows()
@@ -47,6 +57,7 @@ struct RowInfo {
   Tier tier;                    ///< the judge it belongs to
   RowMerge merge;               ///< how shards' figures join
   std::vector<RowCause> causes; ///< its causes in their documented order; empty: it does not split its failures
+  std::vector<TraceNeed> needs; ///< what it needs of a trace, in order (further needs: row_plan.cpp)
 };
 
 /// Every row, in RowId order (physics tier, then model tier): validation_rows.def's entries.
@@ -57,5 +68,9 @@ const RowInfo& row_info(RowId id);
 
 /// The row named `name`, or nullptr for a name no row has (a shard file of another build).
 const RowInfo* find_row_info(const std::string& name);
+
+/// The result of row `id` that does not apply (n/a, never a verdict): its tier and name,
+/// `figure` (what the row measures) and `why` as the detail.
+ValidationResult not_applicable(RowId id, const char* figure, const std::string& why);
 
 }  // namespace octocd

@@ -4,6 +4,8 @@
 /// FrameRecord from its engine's contacts, and when it parses its settings (SettingTable):
 /// written once here so the adapters share it instead of copying it.
 
+#include <algorithm>
+#include <cstddef>
 #include <functional>
 #include <string>
 #include <vector>
@@ -24,6 +26,20 @@ float scalar_jt(const Vec3& j_t, const Vec3& v_rel, const Vec3& normal);
 /// r.w_pre x (c.point - r.x_pre) where the record has angular velocities. `dt` in s.
 float row_scalar_jt(const FrameRecord& r, const ContactRecord& c, const Vec3& j_a, const std::vector<float>& w,
                     double dt, const Vec3& gravity);
+
+/// Sets `r.aabbs` to `n` boxes, `box_of(i)` for body i (an Aabb: the engine's own world
+/// AABB at the detection pose, m).
+template <class BoxOf>
+void fill_engine_aabbs(FrameRecord& r, std::size_t n, BoxOf box_of) {
+  r.aabbs.resize(n);
+  for (std::size_t i = 0; i < n; ++i) r.aabbs[i] = box_of(i);
+}
+
+/// Sorts `pairs` by (a, b) and drops repeats (an engine's candidate pairs, as a record holds them).
+inline void sort_unique_pairs(std::vector<Pair>& pairs) {
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+}
 
 /// Finishes a manifold record: `rows` (one per engine contact, pair (a, b) with a < b) and
 /// their tangential impulse vectors `jt3` (same order, same size) go to `r.contacts` and
