@@ -119,7 +119,7 @@ int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
     octocd::write_json_file(o.json, doc, "--json");
   }
   if (!report.outcomes.empty()) fmt::print("\n");
-  for (const octocd::ExpectationOutcome& x : report.outcomes) fmt::print("{}\n", x.text);
+  for (const octocd::ExpectationOutcome& x : report.outcomes) fmt::print("{}\n", octocd::printable_line(x.text));
   if (!o.write_expect.empty()) {
     const std::vector<octocd::Expectation> entries = octocd::expectations_from(run, results);
     octocd::write_expectations(o.write_expect, run, entries);
