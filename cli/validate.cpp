@@ -15,6 +15,7 @@
 #include <new>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 #include <climits>
 #include <condition_variable>
@@ -433,6 +434,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
       octocd::copy_own_trace(world, path, temporary ? "validate" : "--trace");
     } else {
+      check_engine_inertia(world, *model, o.engine);  // before a trace octocd would refuse is begun
       if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
       octocd::TraceOptions topt;
       topt.state_every = 1;
@@ -446,6 +448,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       trace.append_state(0, world.state());
       for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
         const octocd::FrameMetrics& m = world.step();
+        check_engine_state(world.state(), stepped + 1, o.engine);  // the trace stays judgeable
         trace.append_frame_v2(m, world.state(), world.record());
         ++stepped;
       }
@@ -460,6 +463,9 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
   eo.against_fcl = vo.against_fcl;
   eo.tol = vo.tol;
   eo.overridden = vo.overridden;
+  // The trace's scene names its mesh files as the scene file does: relative to the scene
+  // file's folder, not to the (temporary) trace's.
+  eo.mesh_dir = fs::absolute(o.scene).parent_path().string();
   octocd::ExternalTraceInfo info;
   std::vector<octocd::ValidationResult> results;
   // A signal that stopped the stepping: the frames the trace took are judged (a second
@@ -592,7 +598,9 @@ int validate_command(ValidateOptions& o) {
   // The report of a scene that could not be validated; the original error is what the
   // caller sees (and its exit code), even when the report cannot be written.
   auto junit_error = [&](const char* kind, const char* message) {
-    if (o.junit.empty()) return;
+    // A failure to write --junit itself leaves that file as its message says (unchanged):
+    // no error case is written into it afterwards.
+    if (o.junit.empty() || std::string_view(message).rfind("--junit: ", 0) == 0) return;
     try {
       octocd::write_junit_error(o.junit, std::filesystem::path(o.trace_in.empty() ? o.scene : o.trace_in).stem().string(),
                                 kind, message);
