@@ -96,9 +96,16 @@ class Outputs:
 
     def commit(self):
         temps = []
+        made = []  # folders this commit created: removed again (when empty) if it fails
         try:
             for path, text in self.files.items():
+                folder = os.path.dirname(path) or "."
+                missing = []
+                while folder and not os.path.exists(folder):
+                    missing.append(folder)
+                    folder = os.path.dirname(folder)
                 os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+                made += missing
                 refuse_non_regular(path)
                 # An unpredictable name created O_EXCL (mkstemp): a link planted at a
                 # temporary name is never followed.
@@ -116,6 +123,11 @@ class Outputs:
             for tmp, _ in temps:
                 try:
                     os.unlink(tmp)
+                except OSError:
+                    pass
+            for folder in made:  # deepest first: a failed report leaves no empty plots/ folder
+                try:
+                    os.rmdir(folder)
                 except OSError:
                     pass
             raise

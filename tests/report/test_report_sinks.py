@@ -99,3 +99,20 @@ def test_a_long_description_is_cut_with_its_length_said(tmp_path):
     html = (out / "index.html").read_text()
     assert "... (60,000 characters)" in md and "... (60,000 characters)" in html
     assert len(md) < 200_000 and len(html) < 400_000, (len(md), len(html))
+
+
+def test_a_failed_first_report_leaves_no_empty_folder(tmp_path):
+    """Before: a report that failed on a full disk left an empty plots/ folder (and -o's
+    folder made for it); now the folders the failed write made are removed again."""
+    import resource
+
+    def limit():  # a file-size limit below the report's files: write() fails with EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))
+    out = tmp_path / "out"
+    r = subprocess.run([BIN, "report", RESULT, "-o", str(out)], capture_output=True, text=True, timeout=300,
+                       preexec_fn=limit)
+    assert r.returncode == 1 and "EFBIG" in r.stderr, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr
+    left = [str(p) for p in out.rglob("*")] if out.exists() else []
+    assert left == [], left
+    assert not (out / "plots").exists()
