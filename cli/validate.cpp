@@ -464,7 +464,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
   eo.tol = vo.tol;
   eo.overridden = vo.overridden;
   // The trace's scene names its mesh files as the scene file does: relative to the scene
-  // file's folder, not to the (temporary) trace's.
+  // file's folder (its --mesh-dir), not to the (temporary) trace's.
   eo.mesh_dir = fs::absolute(o.scene).parent_path().string();
   octocd::ExternalTraceInfo info;
   std::vector<octocd::ValidationResult> results;
@@ -499,6 +499,18 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
       if (!o.view.empty()) o.views = octocd::cli::write_failure_views(path, results, o.view);
     }
+  } catch (const octocd::InputError& e) {
+    octocd::set_stop_remove("");
+    std::error_code ec;
+    if (!temporary) throw;
+    fs::remove(path, ec);
+    // The scene was accepted: a trace the engine wrote that the reader refuses is the run's
+    // failure, said as such, never a refusal naming a temporary file that no longer exists.
+    std::string why = e.what();
+    if (why.rfind(path, 0) == 0) why = why.substr(path.size() + (why.compare(path.size(), 2, ": ") == 0 ? 2 : 0));
+    throw octocd::RuntimeError(fmt::format("engine {}: its trace of scene '{}' (temporary, removed) is one octocd's "
+                                           "reader refuses: {}",
+                                           o.engine, octocd::printable(model->scene.name), why));
   } catch (...) {
     octocd::set_stop_remove("");
     std::error_code ec;

@@ -93,6 +93,32 @@ TEST_F(DegenerateMeshes, AMeshBesideTheSceneIsFoundWhenItsTraceIsJudged) {
   }
 }
 
+// A mesh named by an absolute path outside the scene's folder: the temporary trace's scene
+// cannot be judged there (a trace's scene reads meshes inside --mesh-dir only). Before: exit
+// 2 naming the deleted temporary trace as bad input; now a run failure (exit 1) naming the
+// engine and the scene, never the temporary file.
+TEST_F(DegenerateMeshes, ARefusedTemporaryTraceIsNamedAsTheRunsFailure) {
+  const std::vector<std::string> es = engines();
+  if (std::find(es.begin(), es.end(), "bullet") == es.end()) GTEST_SKIP() << "no bullet in this octocd";
+  fs::create_directories(dir_ / "elsewhere");
+  fs::create_directories(dir_ / "scenes");
+  std::ofstream(dir_ / "elsewhere" / "o.obj")
+      << "v 0.1 0 0\nv -0.1 0 0\nv 0 0.1 0\nv 0 -0.1 0\nv 0 0 0.1\nv 0 0 -0.1\nf 1 3 5\nf 3 2 5\nf 2 4 5\n"
+         "f 4 1 5\nf 3 1 6\nf 2 3 6\nf 4 2 6\nf 1 4 6\n";
+  const fs::path s = dir_ / "scenes" / "far.json";
+  std::ofstream(s) << R"({"name": "far", "domain": {"min": [-2, 0, -2], "max": [2, 3, 2]}, "walls": "floor",)"
+                   << R"( "frames": 5, "rotation": true, "groups": [{"name": "b", "shape": {"mesh": ")"
+                   << (dir_ / "elsewhere" / "o.obj").string() << R"("}, "count": 2, "layout": {"type": "grid",)"
+                   << R"( "min": [-1, 0.5, -1], "max": [1, 2, 1]}}]})";
+  const Result r = run(bin() + " validate " + s.string() + " --against none --engine bullet --frames 3");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("engine bullet: its trace of scene 'far' (temporary, removed) is one octocd's reader "
+                          "refuses: "),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("octocd-validate-"), std::string::npos) << "names the temporary trace: " << r.output;
+}
+
 // Before: ODE aborted ("ODE INTERNAL ERROR 1: assertion !bSafeNormalize4Fault", exit 134)
 // on a tetrahedron whose bounding-box centre lies outside it; now exit 2 naming the shape.
 TEST_F(DegenerateMeshes, OdeRefusesAHullAroundItsOriginInsteadOfAborting) {
