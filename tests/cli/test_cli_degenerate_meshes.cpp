@@ -119,6 +119,33 @@ TEST_F(DegenerateMeshes, ARefusedTemporaryTraceIsNamedAsTheRunsFailure) {
   EXPECT_EQ(r.output.find("octocd-validate-"), std::string::npos) << "names the temporary trace: " << r.output;
 }
 
+// Before: a body that fell past 10^6 m (gravity 10^4 m/s^2, dt 0.1 s, no walls) was written
+// into the trace, which octocd then refused (validate: exit 2 naming the deleted temporary
+// trace; run: exit 0 and a trace no reader takes). Now the run stops before writing that
+// frame, exit 1 naming engine, frame and body; run's trace keeps the frames before and is
+// judgeable.
+TEST_F(DegenerateMeshes, AStatePastTheTraceLimitsEndsTheRunNamingTheFrame) {
+  const fs::path s = dir_ / "fall.json";
+  std::ofstream(s) << R"({"name": "fall", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]}, "walls": "none",)"
+                   << R"( "frames": 200, "dt": 0.1, "gravity": [0, -10000, 0], "rotation": true, "groups":)"
+                   << R"( [{"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 1, "positions": [[0, 0, 0]]}]})";
+  for (const std::string& e : engines()) {
+    SCOPED_TRACE(e);
+    const std::string trace = (dir_ / (e + ".h5")).string();
+    for (const std::string cmd : {" validate " + s.string() + " --against none", " run " + s.string() +
+                                                                                   " --quiet --no-xdmf --trace " + trace}) {
+      const Result r = run(bin() + cmd + " --engine " + e);
+      EXPECT_EQ(r.code, 1) << r.output;
+      EXPECT_TRUE(std::regex_search(r.output, std::regex("engine " + e + ": frame ([0-9]+): body 0: its position "
+                                                         "\\(0, -1\\.[0-9]+e\\+06, 0\\) m is out of range; allowed")))
+          << r.output;
+      EXPECT_EQ(r.output.find("octocd-validate-"), std::string::npos) << r.output;
+    }
+    const Result judged = run(bin() + " validate --trace-in " + trace + " --against none");
+    EXPECT_TRUE(judged.code == 0 || judged.code == 3) << "the trace run kept is judgeable: " << judged.output;
+  }
+}
+
 // Before: ODE aborted ("ODE INTERNAL ERROR 1: assertion !bSafeNormalize4Fault", exit 134)
 // on a tetrahedron whose bounding-box centre lies outside it; now exit 2 naming the shape.
 TEST_F(DegenerateMeshes, OdeRefusesAHullAroundItsOriginInsteadOfAborting) {
