@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "support/cli_run.hpp"
@@ -140,4 +141,23 @@ TEST_F(Sinks, TheNightlyShowsAFileNamesNewlineEscaped) {
   EXPECT_EQ(r.output.find("\npass     forged"), std::string::npos) << r.output;
   EXPECT_FALSE(has_control_byte(r.output)) << r.output;
   EXPECT_NE(r.output.find("a\\x0apass     forged (1 frames, 0.0 s)\\x1b[2J"), std::string::npos) << r.output;
+}
+
+// Before: a --junit that failed under a file-size limit was said to be unchanged, then held
+// a runtime-failure case written after the message. Now it is left as the message says.
+TEST_F(Sinks, AJunitThatCouldNotBeWrittenIsLeftAsTheMessageSays) {
+  const std::string scene = (dir_ / "box-in-box.json").string();
+  std::ofstream(scene) << kFailingScene;
+  const std::string xml = (dir_ / "j.xml").string();
+  std::ofstream(xml) << "OLD";
+  // 2 KiB: the whole JUnit (about 6 KB) fails; a runtime-failure case alone would fit.
+  const Result r = run("sh -c \"ulimit -f 2; exec " + bin() + " validate " + scene +
+                       " --frames 20 --every 5 --against none --junit " + xml + "\"");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("--junit: " + xml + ": writing failed: File too large (EFBIG)"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find(xml + " is unchanged"), std::string::npos) << r.output;
+  std::ifstream in(xml);
+  const std::string kept((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(kept, "OLD") << "the file the message calls unchanged was rewritten";
 }
