@@ -78,8 +78,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable_line(e.what()).c_str());
     return 1;
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "octocd: runtime failure: out of memory (the scene needs more than this "
-                         "process may allocate)\n");
+    std::fprintf(stderr, "octocd: runtime failure: out of memory (the scene, trace or result needs more than "
+                         "this process may allocate, e.g. under ulimit -v; no input was found damaged)\n");
     return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable_line(e.what()).c_str());
