@@ -68,7 +68,9 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
   CLI::App* c = app.add_subcommand(
       "bench",
       "Run a benchmark sweep on every engine this octocd has, side by side (the paper's Tables 5, 6, A1, Fig. A2, "
-      "broadphase scaling, the most instances at 30 steps/s, speed against accuracy over a ladder of time steps); results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
+      "broadphase scaling, the most instances at 30 steps/s, speed against accuracy over a ladder of time steps, divergence of "
+      "copies perturbed by eps (`bench divergence`: mean and max distance from the unperturbed run per frame, the "
+      "growth exponent; docs/predictability.md)); results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
   c->add_option("sweep", o.sweep, "A named sweep (" + named_list() + ") or a sweep JSON file");
   c->add_option("-o,--output", o.output, "Result file (JSON), rewritten after every finished point");
   c->add_option("--engines", o.engines,
@@ -83,7 +85,7 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
       ->check(CLI::PositiveNumber);
   c->add_option("--frames", o.frames,
                 "Timed frames per run (steps sweeps without windows; max-instances: the window's frames) or recorded "
-                "frames (broadphase sweeps), overrides the sweep's (>= 1)")
+                "frames (broadphase sweeps), or the frames of every run (divergence), overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
   c->add_option("--warmup", o.warmup,
                 "Untimed frames before the timed ones (steps and max-instances sweeps without windows) or steps before "
@@ -121,8 +123,8 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
                 "PREFIX/share/octocd when installed, else the source tree; $OCTOCD_SOURCE_DIR overrides, docs/install.md)");
   c->add_option("--data-dir", o.data_dir, "Folder of the dataset meshes (default as for `run`)");
   c->add_option("--csv", o.csv,
-                "speed-accuracy: also write the points as CSV to this file (default: the result's name with .csv, "
-                "beside it)");
+                "speed-accuracy: also write the points as CSV to this file; divergence: the mean and max distance per "
+                "frame of every point (default: the result's name with .csv, beside it)");
   c->add_option("--trace-dir", o.trace_dir,
                 "Also write the first repetition of every steps point as a trace (.h5) into this folder");
   c->add_option("--history", o.history,
@@ -220,7 +222,18 @@ int bench_command(const BenchOptions& o) {
                                      origin, sc, scene_dir));
     }
   };
-  if (!o.csv.empty() && s.kind != "speed-accuracy")
+  if (s.kind == "divergence") {
+    if (o.warmup >= 0 || o.target > 0 || o.max_instances > 0 || o.resolution >= 0 || o.search_time_s >= 0 ||
+        !o.trace_dir.empty() || !o.history.empty() || !o.traced.empty() || o.resume || !o.shard.empty() || o.repeat > 0)
+      throw InputError(fmt::format("{} is of kind divergence; allowed: --engines, --frames, --csv, --quiet and the "
+                                   "engine settings (no --warmup, --target, --max-instances, --resolution, "
+                                   "--search-time, --trace-dir, --history, --traced, --resume, --shard, --repeat: one run per copy)",
+                                   origin));
+    if (o.frames > 0) s.frames = o.frames;
+    check_scenes();
+    return run_divergence(s, origin, def, o);
+  }
+  if (!o.csv.empty() && s.kind != "speed-accuracy" && s.kind != "divergence")
     throw InputError(fmt::format("--csv: {} is of kind '{}'; allowed: only for sweeps of kind speed-accuracy (others: "
                                  "octocd report --csv DIR)",
                                  origin, s.kind));

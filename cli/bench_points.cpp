@@ -12,12 +12,14 @@
 #include <fmt/format.h>
 
 #include "bench_sweep.hpp"
+#include "command_support.hpp"
 #include "frame_sums.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/stop.hpp"
 #include "octocd/trace.hpp"
+#include "octocd/worlds.hpp"
 
 namespace octocd::cli::bench {
 
@@ -89,6 +91,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     if (!s.axes[a].labels[p.value[a]].empty()) params["labels"][s.axes[a].name] = s.axes[a].labels[p.value[a]];
   }
   if (p.traced != "off") params["traced"] = p.traced;
+  if (s.worlds_given) params["worlds"] = p.worlds;
   r["params"] = params;
   std::vector<std::string> added;
   const std::string text = ov.text ? *ov.text : scene_text(s, p, &added);
@@ -107,6 +110,30 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     r["status"] = "skipped";
     r["reason"] = std::string("scene: ") + e.what();
     return r;
+  }
+  if (p.worlds > 1) {
+    // Batched worlds (octocd/worlds.hpp): octocd's engines step the copies as one world.
+    if (!engine_info(p.engine, "engines").batched_worlds) {
+      r["status"] = "skipped";
+      r["reason"] = fmt::format("worlds={}: engine {} steps one scene per run (batched worlds: {})",
+                                p.worlds, p.engine,
+                                engines_with([](const EngineInfo& e) { return e.batched_worlds; }));
+      return r;
+    }
+    if (p.traced != "off") {
+      r["status"] = "skipped";
+      r["reason"] = fmt::format("worlds={}: a trace holds one scene (batched worlds are not traced)", p.worlds);
+      return r;
+    }
+    WorldsSpec spec;
+    spec.count = p.worlds;
+    try {
+      model = make_worlds_model(model, spec);
+    } catch (const InputError& e) {
+      r["status"] = "skipped";
+      r["reason"] = std::string("worlds: ") + e.what();
+      return r;
+    }
   }
   r["bodies"] = model->initial.x.size();
   std::unique_ptr<Engine> engine;
@@ -303,6 +330,11 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     json fw = figures(sums[w]);
     fw["first"] = s.windows[w].first;
     fw["last"] = s.windows[w].last;
+    if (s.worlds_given) {  // steps/s x copies: every figure of the spread scales by K
+      std::vector<double> ws = fw["steps_per_s"]["values"].get<std::vector<double>>();
+      for (double& v : ws) v *= static_cast<double>(p.worlds);
+      fw["world_steps_per_s"] = spread(ws);
+    }
     r["windows"][s.windows[w].name] = fw;
   }
   if (buckets > 0) {

@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "bench_sweep.hpp"
+#include "octocd/worlds.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/atomic_file.hpp"
 #include "octocd/scene.hpp"
@@ -197,7 +198,8 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   if (!j.is_object()) bad(origin, "(top level)", "not a JSON object", "an object with name, kind, ...");
   static const std::set<std::string> common{"name",  "kind",   "description", "engines", "frames",
                                             "warmup", "repeat", "format",      "version"};
-  static const std::set<std::string> steps{"scenes", "axes", "set", "windows", "series_every", "traced"};
+  static const std::set<std::string> steps{"scenes", "axes", "set", "windows", "series_every", "traced", "worlds",
+                                           "max_worlds"};
   static const std::set<std::string> bp{"bodies",       "scenes", "broadphases", "max_bodies",
                                         "warm_replays", "set",    "min_time_ms"};
   if (!j.contains("name") || !j.at("name").is_string() || j.at("name").get<std::string>().empty())
@@ -208,9 +210,16 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
                                         "resolution", "paper", "probe_repeat", "search_time_s"};
   static const std::set<std::string> sa{"scenes",     "set",      "dts",         "sim_seconds",
                                         "iterations", "geometries", "rotation", "diverge_beyond_m"};
-  if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances" && s.kind != "speed-accuracy")
-    bad(origin, "kind", "'" + s.kind + "'", "\"steps\", \"broadphase\", \"max-instances\", \"speed-accuracy\"");
-  const auto& extra = s.kind == "steps" ? steps : s.kind == "broadphase" ? bp : s.kind == "max-instances" ? mi : sa;
+  static const std::set<std::string> dv{"scenes", "set", "eps", "copies", "seed", "rotation"};
+  if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances" && s.kind != "speed-accuracy" &&
+      s.kind != "divergence")
+    bad(origin, "kind", "'" + s.kind + "'",
+        "\"steps\", \"broadphase\", \"max-instances\", \"speed-accuracy\", \"divergence\"");
+  const auto& extra = s.kind == "steps"           ? steps
+                      : s.kind == "broadphase"    ? bp
+                      : s.kind == "max-instances" ? mi
+                      : s.kind == "divergence"    ? dv
+                                                  : sa;
   if (s.kind == "speed-accuracy")
     for (const char* k : {"frames", "warmup"})
       if (j.contains(k))
@@ -273,6 +282,28 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
     s.windows.push_back(Window{"settled", s.warmup + 1, s.warmup + s.frames});
     s.frames = s.warmup + s.frames;  // steps to run
+  } else if (s.kind == "divergence") {
+    s.frames = get_int(j, "frames", origin, 1, 1000000, 300);
+    s.warmup = 0;
+    s.copies = get_int(j, "copies", origin, 1, 1024, 16);
+    s.seed = static_cast<std::uint64_t>(JsonFields(origin).integer(j.value("seed", json(1)), "seed", 0, 1LL << 53));
+    if (j.contains("rotation")) {
+      if (!j.at("rotation").is_boolean()) bad(origin, "rotation", j.at("rotation").dump(), "true or false");
+      s.rotation = j.at("rotation").get<bool>();
+    }
+    if (!j.contains("eps") || !j.at("eps").is_array() || j.at("eps").empty())
+      bad(origin, "eps", "missing or not a non-empty array", "an array of perturbations in metres, each in [0, 1]");
+    for (std::size_t i = 0; i < j.at("eps").size(); ++i) {
+      const json& v = j.at("eps")[i];
+      if (!v.is_number() || !std::isfinite(v.get<double>()) || !(v.get<double>() >= 0.0) || v.get<double>() > 1.0)
+        bad(origin, fmt::format("eps[{}]", i), v.dump(),
+            "a number of metres in [0, 1] (0: unperturbed copies, distance 0 for a deterministic engine)");
+      if (std::find(s.eps.begin(), s.eps.end(), v.get<double>()) != s.eps.end())
+        bad(origin, fmt::format("eps[{}]", i), v.dump() + " is listed twice", "each perturbation once");
+      s.eps.push_back(v.get<double>());
+    }
+    if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
+    for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
   } else if (s.kind == "speed-accuracy") {
     parse_speed_accuracy(j, origin, s);
     if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
@@ -282,6 +313,21 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     s.warmup = get_int(j, "warmup", origin, 0, 100000000, 30);
     s.series_every = get_int(j, "series_every", origin, 0, 100000000, 0);
     if (j.contains("traced")) s.traced = checked_trace_modes(string_list(j, "traced", origin), origin + ": traced");
+    if (j.contains("worlds")) {
+      const json& w = j.at("worlds");
+      if (!w.is_array() || w.empty())
+        bad(origin, "worlds", "not a non-empty array", fmt::format("an array of integers in [1, {}]", kMaxWorlds));
+      s.worlds.clear();
+      for (std::size_t i = 0; i < w.size(); ++i)
+        s.worlds.push_back(static_cast<long>(JsonFields(origin).integer(w[i], fmt::format("worlds[{}]", i), 1, kMaxWorlds)));
+      s.worlds_given = true;
+    }
+    if (j.contains("max_worlds")) {
+      if (!j.at("max_worlds").is_object()) bad(origin, "max_worlds", "not an object", "{\"ENGINE\": K}");
+      for (auto it = j.at("max_worlds").begin(); it != j.at("max_worlds").end(); ++it)
+        s.max_worlds[it.key()] =
+            static_cast<long>(JsonFields(origin).integer(it.value(), "max_worlds." + it.key(), 1, kMaxWorlds));
+    }
     if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
     for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
     if (j.contains("axes")) {
@@ -399,6 +445,7 @@ std::vector<Point> expand(const Sweep& s) {
     if (s.kind == "steps") {
       times(s.scenes.size());
       times(s.traced.size());
+      times(s.worlds.size());
       for (const auto& a : s.axes) times(a.values.size());
     } else {
       times(s.bodies.empty() ? s.scenes.size() : s.bodies.size());
@@ -437,17 +484,23 @@ std::vector<Point> expand(const Sweep& s) {
           idx[a] = rest % s.axes[a].values.size();
           rest /= s.axes[a].values.size();
         }
-        for (const auto& e : s.engines)
-          for (const auto& mode : s.traced) {
-            Point p = next_point(e, sc);
-            p.value = idx;
-            p.traced = mode;
-            p.id = stem(s.scenes[sc]);
-            for (std::size_t a = 0; a < s.axes.size(); ++a)
-              p.id += " | " + s.axes[a].name + "=" + value_text(s.axes[a].values[idx[a]]);
-            p.id += " | " + e;
-            if (mode != "off") p.id += " | traced=" + mode;  // untraced ids as before
-            pts.push_back(p);
+        for (const long k : s.worlds)
+          for (const auto& e : s.engines) {
+            const auto cap = s.max_worlds.find(e);
+            if (cap != s.max_worlds.end() && k > cap->second) continue;  // the engine's largest batch
+            for (const auto& mode : s.traced) {
+              Point p = next_point(e, sc);
+              p.value = idx;
+              p.traced = mode;
+              p.worlds = k;
+              p.id = stem(s.scenes[sc]);
+              for (std::size_t a = 0; a < s.axes.size(); ++a)
+                p.id += " | " + s.axes[a].name + "=" + value_text(s.axes[a].values[idx[a]]);
+              if (s.worlds_given) p.id += fmt::format(" | worlds={}", k);  // ids of sweeps without worlds as before
+              p.id += " | " + e;
+              if (mode != "off") p.id += " | traced=" + mode;  // untraced ids as before
+              pts.push_back(p);
+            }
           }
       }
     }

@@ -87,6 +87,15 @@ struct Sweep {
   std::vector<std::string> geometries;  ///< Bullet's shape settings: "box", "hull"
   std::vector<bool> rotations;          ///< false, true: without and with rotation (where the engine rotates)
   double diverge_beyond_m = 1e6;        ///< a body this far outside the domain (m) makes its run diverged
+  // steps: batched worlds (octocd/worlds.hpp; docs/bench-format.md)
+  std::vector<long> worlds{1};          ///< copies of each scene run as one world (`worlds`)
+  bool worlds_given = false;            ///< the sweep has `worlds`: points report world_steps_per_s
+  std::map<std::string, long> max_worlds;  ///< engine -> the most copies it runs (larger points are not made)
+  // divergence (docs/bench-format.md, docs/predictability.md)
+  std::vector<double> eps;              ///< the ladder of initial perturbations (m), each in [0, 1] (0: unperturbed copies)
+  int copies = 16;                      ///< perturbed copies per eps
+  std::uint64_t seed = 1;               ///< seeds every copy's perturbation
+  bool rotation = false;                ///< rotation: true for every scene (engines that rotate only)
 };
 
 /// The largest instance count a max-instances sweep may search to: limits::kMaxGeneratedBodies
@@ -139,6 +148,7 @@ struct Point {
   long bodies = 0;                 ///< broadphase: body count (bodies) or -1 (scenes)
   std::string traced = "off";      ///< steps: the trace mode (Sweep::traced)
   std::string broadphase;          ///< broadphase kind
+  long worlds = 1;                 ///< steps: copies of the scene run as one world (Sweep::worlds)
 };
 
 /// The trace modes of a steps sweep (Sweep::traced), in order.
@@ -306,6 +316,16 @@ json search_max_instances(MaxInstancesRun& run, std::size_t sc, const std::strin
 /// code (0, or 1 when a point failed). Throws InputError (exit 2) for bad input.
 int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& def, const BenchOptions& o,
                        int shard, int shards, bool engines_given);
+
+// ---- divergence (bench_divergence.cpp) -------------------------------------------------------
+
+/// Runs a sweep of kind divergence (docs/bench-format.md, docs/predictability.md): per
+/// scene and engine the unperturbed run and, per eps of the ladder, `copies` runs whose
+/// dynamic bodies start eps metres away in seeded random directions; per frame the mean
+/// and max distance of the bodies from the unperturbed run, and the growth exponent fitted
+/// over the run. Writes o.output and the CSV (o.csv, default RESULT.csv beside it); returns
+/// the exit code (0, or 1 when a point failed). Throws InputError (exit 2) for bad input.
+int run_divergence(const Sweep& s, const std::string& origin, const json& def, const BenchOptions& o);
 
 // ---- the result file (bench_result.cpp) -----------------------------------------------------
 

@@ -21,6 +21,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <iterator>
 #include <set>
 
 #include <fmt/format.h>
@@ -139,6 +140,7 @@ struct QuantityResult {
   std::int64_t body = -1;      ///< first body there (-1 for per-frame quantities)
   std::string detail;          ///< the values there
   std::int64_t beyond_count = 0;  ///< values beyond the tolerance
+  double first_size = 0.0;     ///< |A - B| at the first difference (inf: a NaN, a pair or row on one side only)
   bool available = true;       ///< false when a trace lacks the data (then `compared` says why)
 
   /// Records a difference `d` at (frame, body) with the values' text, if it is the largest.
@@ -358,7 +360,7 @@ QuantityResult compare_states(const Side& a, const Side& b, const char* dataset,
     return v;
   };
   // A body beyond the tolerance: counted, and the first one kept with its detail.
-  const auto count_hit = [&](bool hit, std::int64_t frame, std::int64_t body, const auto& detail) {
+  const auto count_hit = [&](bool hit, std::int64_t frame, std::int64_t body, const auto& detail, double size) {
     if (!hit) return;
     ++q.beyond_count;
     if (q.differs) return;
@@ -366,6 +368,7 @@ QuantityResult compare_states(const Side& a, const Side& b, const char* dataset,
     q.frame = frame;
     q.body = body;
     q.detail = detail();
+    q.first_size = size;
   };
   std::map<std::int64_t, std::int64_t> row_b;
   for (std::int64_t i = 0; i < rb; ++i) row_b[fb[static_cast<std::size_t>(i)]] = i;
@@ -393,17 +396,19 @@ QuantityResult compare_states(const Side& a, const Side& b, const char* dataset,
           return fmt::format("A {} B {}, angle {:.6g} deg", quat_text(pa), quat_text(pb), d * 57.29577951308232);
         };
         q.largest(same ? 0.0 : d, frame, body, both, {pa[0], pa[1], pa[2], pa[3]}, {pb[0], pb[1], pb[2], pb[3]});
-        count_hit(hit, frame, body, both);
+        count_hit(hit, frame, body, both, d);
         continue;
       }
       const auto both = [&] { return fmt::format("A {} B {}", vec_text(&xa[k0]), vec_text(&xb[k0])); };
+      double size = 0.0;  // the largest component difference of this body
       for (std::size_t c = 0; c < 3; ++c) {
         double d = 0.0;
         if (beyond(xa[k0 + c], xb[k0 + c], tol, d)) hit = true;
+        size = std::max(size, d);
         if (d > q.max_diff || (q.max_frame < 0 && d > 0.0))
           q.largest(d, frame, body, both, {xa[k0], xa[k0 + 1], xa[k0 + 2]}, {xb[k0], xb[k0 + 1], xb[k0 + 2]});
       }
-      count_hit(hit, frame, body, both);
+      count_hit(hit, frame, body, both, size);
     }
   }
   q.compared = fmt::format("{} common states x {} bodies", common, bodies);
@@ -458,6 +463,7 @@ QuantityResult compare_column(const Side& sa, const Side& sb, const std::string&
       q.differs = true;
       q.frame = fa[i];
       q.detail = both();
+      q.first_size = diff;
     }
     q.largest(diff, fa[i], -1, both, {static_cast<double>(va[i])}, {static_cast<double>(vb[it->second])});
   }
@@ -541,6 +547,7 @@ void compare_contact_records(const Side& a, const Side& b, const Tolerance& tol,
       const std::uint32_t pa0 = ra.pair[2 * ka], pa1 = ra.pair[2 * ka + 1];
       const std::uint32_t pb0 = rb.pair[2 * kb], pb1 = rb.pair[2 * kb + 1];
       std::string what;
+      double size = std::numeric_limits<double>::infinity();
       if (pa0 != pb0 || pa1 != pb1) {
         what = fmt::format("contact {}: pair A ({}, {}) B ({}, {})", k, pa0, pa1, pb0, pb1);
         q.largest(std::numeric_limits<double>::infinity(), ra.frame[i], pa0, [&] { return what; });
@@ -557,7 +564,10 @@ void compare_contact_records(const Side& a, const Side& b, const Tolerance& tol,
           const auto both = [&] {
             return fmt::format("contact ({}, {}) {}: A {} B {}", pa0, pa1, f.first, *f.second.first, *f.second.second);
           };
-          if (beyond(*f.second.first, *f.second.second, tol, d) && what.empty()) what = both();
+          if (beyond(*f.second.first, *f.second.second, tol, d) && what.empty()) {
+            what = both();
+            size = d;
+          }
           q.largest(d, ra.frame[i], pa0, both, {*f.second.first}, {*f.second.second});
         }
       }
@@ -567,6 +577,7 @@ void compare_contact_records(const Side& a, const Side& b, const Tolerance& tol,
         q.frame = ra.frame[i];
         q.body = pa0;
         q.detail = what;
+        q.first_size = size;
       }
       if (!what.empty()) break;
     }
@@ -617,6 +628,7 @@ QuantityResult compare_contacts_by_pair(const Side& a, const Side& b, const Tole
       const auto ia = pa.find(key), ib = pb.find(key);
       const std::size_t na = ia == pa.end() ? 0 : ia->second.size(), nb = ib == pb.end() ? 0 : ib->second.size();
       std::string what;
+      double size = std::numeric_limits<double>::infinity();
       if (na != nb) {
         what = fmt::format("pair ({}, {}): {} in A, {} in B", key.first, key.second, rows_text(na), rows_text(nb));
         q.largest(std::numeric_limits<double>::infinity(), frame, key.first, [&] { return what; });
@@ -640,7 +652,10 @@ QuantityResult compare_contacts_by_pair(const Side& a, const Side& b, const Tole
               return fmt::format("pair ({}, {}) row {} of {}: {}: A {} B {}", key.first, key.second, r, na, field,
                                  v.first, v.second);
             };
-            if (beyond(v.first, v.second, tol, d) && what.empty()) what = both();
+            if (beyond(v.first, v.second, tol, d) && what.empty()) {
+              what = both();
+              size = d;
+            }
             q.largest(d, frame, key.first, both, {v.first}, {v.second});
           }
         }
@@ -652,6 +667,7 @@ QuantityResult compare_contacts_by_pair(const Side& a, const Side& b, const Tole
         q.frame = frame;
         q.body = key.first;
         q.detail = what;
+        q.first_size = size;
       }
     }
   }
@@ -819,8 +835,7 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
   return c;
 }
 
-int compare_command(const CompareOptions& o) {
-  if (!o.json.empty()) check_output_file(o.json, "--json");  // before any work (atomic_file.hpp)
+void compare_traces(const CompareOptions& o, CompareOutcome& out) {
   const std::map<std::string, Tolerance> tols = parse_tolerances(o.tolerance);
   const char* kQuantityAllowed =
       "positions, velocities, orientations, angular_velocities, contacts, pairs, energy";
@@ -922,25 +937,25 @@ int compare_command(const CompareOptions& o) {
                        s.version == 1 ? "" : fmt::format(", version {}", s.version));
   };
   // The traces' text reaches the terminal with its control characters escaped (\xNN).
-  fmt::print("compare {} ({})\n   with {} ({})\n", printable(o.a), printable(header(a)), printable(o.b),
+  fmt::format_to(std::back_inserter(out.text), "compare {} ({})\n   with {} ({})\n", printable(o.a), printable(header(a)), printable(o.b),
              printable(header(b)));
-  fmt::print("scene {}, {} bodies; tolerances:", printable(a.scene_known ? sa : sb), na);
-  for (const auto& q : qs) fmt::print(" {}={}", q, tols.at(q).text());
-  fmt::print("\n");
+  fmt::format_to(std::back_inserter(out.text), "scene {}, {} bodies; tolerances:", printable(a.scene_known ? sa : sb), na);
+  for (const auto& q : qs) fmt::format_to(std::back_inserter(out.text), " {}={}", q, tols.at(q).text());
+  fmt::format_to(std::back_inserter(out.text), "\n");
   if (a.version != b.version || a.rotation != b.rotation)
-    fmt::print("note: {} (A) vs {} (B); a trace without rotation counts as unrotated (orientation identity, angular "
+    fmt::format_to(std::back_inserter(out.text), "note: {} (A) vs {} (B); a trace without rotation counts as unrotated (orientation identity, angular "
                "velocity zero)\n",
                a.kind() + (a.rotation ? " with rotation" : ""), b.kind() + (b.rotation ? " with rotation" : ""));
-  fmt::print("\n");
+  fmt::format_to(std::back_inserter(out.text), "\n");
   if (!structure.empty()) {
-    fmt::print("structure differs ({} key{}):\n", structure.size(), structure.size() == 1 ? "" : "s");
-    for (const auto& d : structure) fmt::print("  {}\n", printable(d));
-    fmt::print("\n");
+    fmt::format_to(std::back_inserter(out.text), "structure differs ({} key{}):\n", structure.size(), structure.size() == 1 ? "" : "s");
+    for (const auto& d : structure) fmt::format_to(std::back_inserter(out.text), "  {}\n", printable(d));
+    fmt::format_to(std::back_inserter(out.text), "\n");
   }
   if (!ignored.empty()) {
-    fmt::print("structure ignored (--ignore, {} key{}):\n", ignored.size(), ignored.size() == 1 ? "" : "s");
-    for (const auto& d : ignored) fmt::print("  {}\n", d);
-    fmt::print("\n");
+    fmt::format_to(std::back_inserter(out.text), "structure ignored (--ignore, {} key{}):\n", ignored.size(), ignored.size() == 1 ? "" : "s");
+    for (const auto& d : ignored) fmt::format_to(std::back_inserter(out.text), "  {}\n", d);
+    fmt::format_to(std::back_inserter(out.text), "\n");
   }
 
   std::vector<QuantityResult> results;
@@ -979,7 +994,7 @@ int compare_command(const CompareOptions& o) {
       results.push_back(compare_column<double>(a, b, "kinetic_energy", "energy", tol));
     }
   }
-  fmt::print("{:<18} {:<56} {:>12}  {}\n", "quantity", "compared", "max |A-B|", "largest difference / first beyond tolerance");
+  fmt::format_to(std::back_inserter(out.text), "{:<18} {:<56} {:>12}  {}\n", "quantity", "compared", "max |A-B|", "largest difference / first beyond tolerance");
   const QuantityResult* first = nullptr;
   bool any_missing = false;
   json jq = json::array();
@@ -990,12 +1005,12 @@ int compare_command(const CompareOptions& o) {
     const auto at = [](std::int64_t f, std::int64_t body) {
       return body >= 0 ? fmt::format("frame {}, body {}", f, body) : fmt::format("frame {}", f);
     };
-    fmt::print("{:<18} {:<56} {:>12}  {}\n", r.name, r.compared, r.available ? fmt::format("{:.6g}", r.max_diff) : "n/a",
+    fmt::format_to(std::back_inserter(out.text), "{:<18} {:<56} {:>12}  {}\n", r.name, r.compared, r.available ? fmt::format("{:.6g}", r.max_diff) : "n/a",
                !r.available ? "not compared"
                : r.max_frame < 0 ? "-"
                                  : fmt::format("largest at {}: {}", at(r.max_frame, r.max_body), r.max_detail));
     if (r.differs)
-      fmt::print("{:<18} {:<56} {:>12}  first beyond {} at {}: {} ({} beyond)\n", "", "", "", r.tol.text(),
+      fmt::format_to(std::back_inserter(out.text), "{:<18} {:<56} {:>12}  first beyond {} at {}: {} ({} beyond)\n", "", "", "", r.tol.text(),
                  at(r.frame, r.body), r.detail, r.beyond_count);
     jq.push_back({{"quantity", r.name},
                   {"tolerance", {{"abs", r.tol.abs}, {"rel", r.tol.rel}}},
@@ -1014,18 +1029,18 @@ int compare_command(const CompareOptions& o) {
   const bool compared_any =
       std::any_of(results.begin(), results.end(), [](const QuantityResult& r) { return r.available; });
   if (!compared_any)
-    fmt::print("\nNOTHING COMPARED: no requested quantity is in both traces\n");
+    fmt::format_to(std::back_inserter(out.text), "\nNOTHING COMPARED: no requested quantity is in both traces\n");
   else if (!structure.empty())
-    fmt::print("\nDIFFERENT: structure ({}){}\n", structure.front(),
+    fmt::format_to(std::back_inserter(out.text), "\nDIFFERENT: structure ({}){}\n", structure.front(),
                first ? fmt::format("; values first at frame {}{} ({})", first->frame,
                                    first->body >= 0 ? fmt::format(", body {}", first->body) : "", first->name)
                      : "");
   else if (first)
-    fmt::print("\nDIFFERENT: first at frame {}{} ({})\n", first->frame,
+    fmt::format_to(std::back_inserter(out.text), "\nDIFFERENT: first at frame {}{} ({})\n", first->frame,
                first->body >= 0 ? fmt::format(", body {}", first->body) : "", first->name);
   else
-    fmt::print("\nsame{}\n", any_missing ? " (in what both traces hold)" : "");
-  if (!o.json.empty()) {
+    fmt::format_to(std::back_inserter(out.text), "\nsame{}\n", any_missing ? " (in what both traces hold)" : "");
+  {
     json jt = json::object();
     for (const auto& q : qs) jt[q] = {{"abs", tols.at(q).abs}, {"rel", tols.at(q).rel}};
     json j{{"format", "octocd-compare"},
@@ -1042,18 +1057,49 @@ int compare_command(const CompareOptions& o) {
            {"ignored", ignored},
            {"compared_any", compared_any},
            {"quantities", jq}};
-    if (first) j["first"] = {{"frame", first->frame}, {"body", first->body}, {"quantity", first->name}};
-    write_file_atomically(o.json, j.dump(1, ' ', false, json::error_handler_t::replace) + "\n", "--json");
+    if (first) {
+      j["first"] = {{"frame", first->frame}, {"body", first->body}, {"quantity", first->name}};
+      out.first_frame = first->frame;
+      out.first_body = first->body;
+      out.first_quantity = first->name;
+      out.first_detail = first->detail;
+      out.first_size = first->first_size;
+    }
+    out.doc = std::move(j);
   }
+  out.same = !differ;
+  out.structure = structure;
   if (!compared_any) {
     // Nothing requested could be compared: not "same" (exit 2, naming what each trace lacks).
     std::string why;
     for (const auto& r : results) why += fmt::format("{}{}: {}", why.empty() ? "" : "; ", r.name, r.compared);
-    throw InputError(fmt::format("{} and {}: no requested quantity could be compared ({}); allowed: a quantity both "
-                                 "traces hold (--quantity positions,velocities works on every trace with /states)",
-                                 o.a, o.b, why));
+    out.nothing_compared = fmt::format("{} and {}: no requested quantity could be compared ({}); allowed: a quantity "
+                                       "both traces hold (--quantity positions,velocities works on every trace with "
+                                       "/states)",
+                                       o.a, o.b, why);
   }
-  return differ ? 3 : 0;
+}
+
+CompareOutcome compare_traces(const CompareOptions& o) {
+  CompareOutcome out;
+  compare_traces(o, out);
+  return out;
+}
+
+int compare_command(const CompareOptions& o) {
+  if (!o.json.empty()) check_output_file(o.json, "--json");  // before any work (atomic_file.hpp)
+  CompareOutcome out;
+  try {
+    compare_traces(o, out);
+  } catch (...) {  // what was found before the malformed part stays on stdout
+    fmt::print("{}", out.text);
+    throw;
+  }
+  fmt::print("{}", out.text);
+  if (!o.json.empty())
+    write_file_atomically(o.json, out.doc.dump(1, ' ', false, json::error_handler_t::replace) + "\n", "--json");
+  if (!out.nothing_compared.empty()) throw InputError(out.nothing_compared);
+  return out.same ? 0 : 3;
 }
 
 }  // namespace octocd::cli

@@ -38,6 +38,8 @@
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
 #include "octocd/world.hpp"
+#include "octocd/worlds.hpp"
+#include "octocd/world_copies.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/process_engines.hpp"
@@ -70,6 +72,7 @@ struct RunOptions {
   std::string data_dir;
   bool no_xdmf = false;
   bool rotation = false;  ///< --rotation: the scene's bodies rotate (engine bullet only)
+  octocd::WorldsSpec worlds;  ///< --worlds, --world-perturb, --seed, --world-margin (worlds.hpp)
   octocd::EngineSettingItems settings;  ///< --ENGINE KEY=VALUE items by engine
 };
 
@@ -149,8 +152,20 @@ class Progress {
   Clock::time_point last_draw_{};
 };
 
+/// What `--worlds` made (worlds.hpp): the copies' layout and, after the run, the copies
+/// whose bodies left their cells.
+struct WorldsRun {
+  long count = 1;
+  octocd::WorldsLayout layout;
+  std::vector<long> escaped;
+};
+
+double steps_per_s(const Totals& t) {
+  return t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0;
+}
+
 void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
-                   const std::string& trace, const std::string& xdmf) {
+                   const std::string& trace, const std::string& xdmf, const WorldsRun& worlds) {
   const std::string engine = world.name();
   const std::string memory_kind = octocd::engine_info(engine, "engine").memory_kind;
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
@@ -164,9 +179,20 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
              t.model_s, t.engine_s);
   fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
              static_cast<double>(t.frames) * s.dt, wall_s);
-  fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n",
-             t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0,
-             t.step_ms / n);
+  fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n", steps_per_s(t), t.step_ms / n);
+  if (worlds.count > 1) {
+    const octocd::WorldsLayout& l = worlds.layout;
+    fmt::print("worlds       {} copies of {} bodies (grid {} x {} on x, z; cells {:.3g} x {:.3g} m), "
+               "world-steps/s {:.4g}\n",
+               worlds.count, world.bodies().size() / static_cast<std::size_t>(worlds.count), l.nx, l.nz,
+               l.spacing.x, l.spacing.z, steps_per_s(t) * static_cast<double>(worlds.count));
+    if (worlds.escaped.empty())
+      fmt::print("             every copy stayed in its cell (no pair can have joined two copies)\n");
+    else
+      fmt::print("             {} copies left their cells (first: copy {}): their bodies may have met another "
+                 "copy's; a larger --world-margin keeps them apart\n",
+                 worlds.escaped.size(), worlds.escaped.front());
+  }
   if (t.max_memory_bytes > 0)  // engines that report it (cuda: device memory)
     fmt::print("memory       {:.1f} MiB held by the pipeline's buffers (largest over frames{})\n",
                static_cast<double>(t.max_memory_bytes) / 1048576.0, memory_kind.empty() ? "" : ", " + memory_kind);
@@ -209,7 +235,7 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
 }
 
 void write_summary_json(const std::string& path, const octocd::Engine& world, const Totals& t,
-                        double wall_s) {
+                        double wall_s, const WorldsRun& worlds) {
   const std::string engine = world.name();
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
   nlohmann::json j;
@@ -223,7 +249,11 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   j["wall_s"] = wall_s;
   // Set-up before the first step: scene file, meshes and bodies; the engine.
   j["setup_s"] = {{"model", t.model_s}, {"engine", t.engine_s}};
-  j["steps_per_s"] = t.step_ms > 0 ? 1000.0 * static_cast<double>(t.frames) / t.step_ms : 0.0;
+  j["steps_per_s"] = steps_per_s(t);
+  // Batched worlds (--worlds): copies, world-steps/s (steps/s x copies), copies that left their cells.
+  j["worlds"] = worlds.count;
+  j["world_steps_per_s"] = steps_per_s(t) * static_cast<double>(worlds.count);
+  j["worlds_escaped"] = worlds.escaped.size();
   j["mean_step_ms"] = t.step_ms / n;
   for (int st = 0; st < kStages; ++st) {
     const auto stage = static_cast<octocd::Stage>(st);
@@ -248,6 +278,67 @@ void write_summary_json(const std::string& path, const octocd::Engine& world, co
   j["device"] = world.device();
   j["build_id"] = octocd::build_id();
   octocd::write_file_atomically(path, j.dump(2) + "\n", "--summary-json");
+}
+
+/// octocd's engines step the copies of `--worlds` as one world; any other engine steps one
+/// scene per run and runs the copies as separate runs (run_copies).
+bool batched_worlds_engine(const std::string& engine) { return octocd::engine_info(engine, "--engine").batched_worlds; }
+
+void check_worlds_trace(bool traced) {
+  if (traced)
+    throw octocd::InputError(
+        "--trace with --worlds/--world-perturb: a trace holds one scene, and the copies are made in memory; "
+        "allowed: --trace without --worlds (one copy), or --summary-json for the batched run's figures");
+}
+
+/// `run --worlds K` on an engine that steps one scene per run (docs/gpu.md): the K copies as
+/// separate runs (world_copies.hpp), as many at once as the host has threads; a summary of
+/// the copies (steps/s per copy, world-steps/s = K frames / wall time).
+int run_copies(const RunOptions& o, const std::shared_ptr<const octocd::Model>& single, int frames, double model_s) {
+  const octocd::CopiesRun r =
+      octocd::run_copies_separately(o.engine, single, o.worlds, frames, 0, o.settings);
+  std::vector<double> per_copy;
+  std::int64_t ran = 0;
+  for (std::size_t c = 0; c < r.frames.size(); ++c) {
+    ran += r.frames[c];
+    if (r.step_ms[c] > 0.0) per_copy.push_back(1000.0 * static_cast<double>(r.frames[c]) / r.step_ms[c]);
+  }
+  std::sort(per_copy.begin(), per_copy.end());
+  const double median = per_copy.empty() ? 0.0 : per_copy[per_copy.size() / 2];
+  const double world_steps = r.wall_s > 0.0 ? static_cast<double>(ran) / r.wall_s : 0.0;
+  const long k = o.worlds.count;
+  if (!o.quiet) {
+    fmt::print("\nscene        {} ({} bodies) x {} copies as separate runs\n", single->scene.name,
+               single->initial.size(), k);
+    fmt::print("pipeline     engine {}, {} copies at once\n", o.engine, r.threads);
+    fmt::print("set-up       {:.2f} s (scene and bodies)\n", model_s);
+    fmt::print("frames       {} per copy (dt {} s), wall {:.2f} s for all copies\n", frames, single->scene.dt, r.wall_s);
+    fmt::print("steps/s      {:.1f}   (a copy's steps over its step time, the median over copies)\n", median);
+    fmt::print("worlds       {} copies as separate runs of engine {} ({} at once), world-steps/s {:.4g} (steps of "
+               "all copies over the wall time)\n",
+               k, o.engine, r.threads, world_steps);
+  }
+  if (!o.summary_json.empty()) {
+    nlohmann::json j;
+    j["scene"] = single->scene.name;
+    j["bodies"] = single->initial.size();
+    j["engine"] = o.engine;
+    j["frames"] = frames;
+    j["wall_s"] = r.wall_s;
+    j["setup_s"] = {{"model", model_s}};
+    j["steps_per_s"] = median;
+    j["worlds"] = k;
+    j["world_steps_per_s"] = world_steps;
+    j["worlds_separate_runs"] = true;
+    j["worlds_threads"] = r.threads;
+    j["build_id"] = octocd::build_id();
+    octocd::write_file_atomically(o.summary_json, j.dump(2) + "\n", "--summary-json");
+  }
+  if (const int sig = octocd::stop_signal()) {
+    report_stop(sig, "run", ran / std::max<long>(k, 1), frames, "", "");
+    return octocd::stop_exit_code(sig);
+  }
+  return 0;
 }
 
 /// What `run` keeps should it end at once (a second signal, the 1 s bound): the trace's
@@ -282,14 +373,33 @@ int run_command(const RunOptions& o) {
   eo.settings = o.settings;
   octocd::apply_engine_options(scene, octocd::engine_info(o.engine, "--engine"), eo, octocd::cli_argument_names());
 
-  const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
+  std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
+  WorldsRun worlds;
+  if (o.worlds.count > 1 || o.worlds.perturb > 0.0) {
+    check_worlds_trace(!o.trace.empty());
+    if (!batched_worlds_engine(o.engine)) {
+      loading.reset();
+      return run_copies(o, model, scene.frames,
+                        std::chrono::duration<double>(Clock::now() - t_setup).count());
+    }
+    worlds.count = o.worlds.count;
+    worlds.layout = octocd::worlds_layout(*model, o.worlds);
+    model = octocd::make_worlds_model(*model, worlds.layout.offsets, o.worlds);
+  }
   loading.reset();  // from here on the loop polls the signal, flushes and reports
   const auto t_model = Clock::now();
+  // Set-up progress of a large scene (kSetupLinesFrom bodies): its two stages on stderr.
+  constexpr std::size_t kSetupLinesFrom = 10000;
+  const bool setup_lines = !o.quiet && model->bodies.size() >= kSetupLinesFrom;
+  if (setup_lines)
+    std::fprintf(stderr, "set-up: scene and bodies %.2f s (%zu bodies); building the %s world\n",
+                 std::chrono::duration<double>(t_model - t_setup).count(), model->bodies.size(), o.engine.c_str());
   const std::unique_ptr<octocd::Engine> engine = make_engine(o.engine, model, eo.settings);
   octocd::Engine& world = *engine;
   Totals totals;
   totals.model_s = std::chrono::duration<double>(t_model - t_setup).count();
   totals.engine_s = std::chrono::duration<double>(Clock::now() - t_model).count();
+  if (setup_lines) std::fprintf(stderr, "set-up: %s world %.2f s; stepping\n", o.engine.c_str(), totals.engine_s);
   std::unique_ptr<octocd::TraceWriter> trace;
   // An engine that writes its own trace (a process engine) gives it whole after the loop.
   if (!o.trace.empty() && !world.writes_own_trace()) {
@@ -354,8 +464,10 @@ int run_command(const RunOptions& o) {
     octocd::set_stop_kept(fmt::format("the trace {} holds frames 1..{}, closed", o.trace, totals.frames));
   }
   const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
-  if (!o.quiet) print_summary(world, totals, wall_s, o.trace, xdmf);
-  if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s);
+  if (worlds.count > 1)
+    worlds.escaped = octocd::worlds_escaped(*model, worlds.layout, o.worlds.margin, world.state());
+  if (!o.quiet) print_summary(world, totals, wall_s, o.trace, xdmf, worlds);
+  if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s, worlds);
   if (const int sig = octocd::stop_signal()) {
     report_stop(sig, "run", totals.frames, scene.frames, o.trace,
                 o.trace.empty() || o.no_xdmf ? "" : "; no XDMF sidecar (a stopped run writes none)");
@@ -406,6 +518,24 @@ Command add_run_command(CLI::App& app) {
                         engines_with([](const EngineInfo& e) { return e.rotates; }) +
                         "); --trace writes format version 2 (orientation, angular velocity, inertia; with "
                         "--contacts manifold rows with points, /pairs, /aabbs)");
+  run_cmd->add_option("--worlds", run.worlds.count,
+                      std::string("Batched worlds: K copies of the scene (docs/gpu.md, \"Batched worlds\"). Engines cpu and "
+                                  "cuda step them as one world: copies on an x-z grid, each in a cell of the scene's "
+                                  "bounds (domain, walls, bodies) plus --world-margin, so no pair joins two copies; "
+                                  "other engines run them as separate runs, as many at once as the host has threads. "
+                                  "The summary adds world-steps/s. Not with --trace"))
+      ->check(CLI::Range(1L, octocd::kMaxWorlds))
+      ->default_val(1);
+  run_cmd->add_option("--world-perturb", run.worlds.perturb,
+                      "With --worlds: move each dynamic body of copies 1..K-1 by a uniform random offset in "
+                      "[-EPS, EPS) per axis (m; copy 0 stays the reference)")
+      ->check(CLI::Range(0.0, octocd::kMaxWorldPerturb))
+      ->default_val(0.0);
+  run_cmd->add_option("--seed", run.worlds.seed, "The --world-perturb random stream (an integer)")->default_val(1);
+  run_cmd->add_option("--world-margin", run.worlds.margin,
+                      "With --worlds: the gap (m) between neighbouring copies' bounds")
+      ->check(CLI::Range(octocd::limits::kMinLength, octocd::limits::kMaxLength))
+      ->default_val(0.5);
   add_engine_settings_options(run_cmd, run.settings);
 
   return {[run_cmd] { return run_cmd->parsed(); }, [options] { return run_command(*options); }};

@@ -240,6 +240,26 @@ struct CompareOptions {
 CLI::App* add_compare_command(CLI::App& app, CompareOptions& o);
 int compare_command(const CompareOptions& o);
 
+/// What `octocd compare` finds for two traces (compare_traces), without printing or writing.
+struct CompareOutcome {
+  bool same = false;               ///< no structure difference and no quantity beyond its tolerance
+  std::string text;                ///< what `compare` prints (the structure, the table, the verdict line)
+  nlohmann::json doc;              ///< what `compare --json` writes (format octocd-compare, version 2)
+  std::vector<std::string> structure;  ///< structure keys that differ (not --ignore'd)
+  std::int64_t first_frame = -1;   ///< the first differing value: frame (-1: none)
+  std::int64_t first_body = -1;    ///< its body (or a contact pair's first body; -1 per-frame quantities)
+  std::string first_quantity;      ///< its quantity (positions, velocities, ..., contacts, pairs, energy)
+  std::string first_detail;        ///< both values there
+  double first_size = 0.0;         ///< |A - B| there (unit of the quantity; inf: a side lacks the pair or a NaN)
+  /// Non-empty when no requested quantity is in both traces: the error `compare` exits 2 with.
+  std::string nothing_compared;
+};
+/// Compares traces o.a and o.b as `octocd compare` does (o.json is ignored: the caller writes
+/// CompareOutcome::doc). Throws InputError for unreadable or malformed traces and bad options.
+CompareOutcome compare_traces(const CompareOptions& o);
+/// As above, into `out`: on an exception `out.text` holds what was found before it.
+void compare_traces(const CompareOptions& o, CompareOutcome& out);
+
 /// `octocd report` options (cli/report.cpp).
 struct ReportOptions {
   std::vector<std::string> inputs;

@@ -50,6 +50,7 @@
 #include "octocd/process_engines.hpp"
 #include "command.hpp"
 #include "command_support.hpp"
+#include "predict.hpp"
 #include "tools.hpp"
 #include "view.hpp"
 
@@ -92,6 +93,7 @@ struct ValidateOptions {
   std::vector<std::string> merge;  ///< --merge A.json B.json ...: join shards' verdicts
   int threads = 0;            ///< --threads: threads per frame (0: the hardware's)
   octocd::Expectations expectations;  ///< --expect's file, read before the run
+  bool determinism = false;   ///< --determinism: runs compared bit for bit instead of the validators
 };
 
 /// Whether --view's pages could not be written (FailureViews::write_error): then says so
@@ -180,6 +182,32 @@ void write_stopped_json(const ValidateOptions& o, const octocd::RunName& run,
   octocd::write_json_file(o.json, doc, "--json");
 }
 
+/// Progress of a long judging on stderr: "validate: judged frame N of M (R frames/s)",
+/// the first after 2 s of judging and then every 2 s (a judging that ends sooner prints
+/// none). R: the frames judged since the first call over the seconds since it.
+class JudgingProgress {
+ public:
+  void tick(std::int64_t judged_to, std::int64_t frames) {
+    const auto now = Clock::now();
+    if (!start_) {
+      start_ = now;
+      first_ = judged_to;
+      last_ = now;
+      return;
+    }
+    if (now - last_ < std::chrono::seconds(2)) return;
+    last_ = now;
+    const double s = std::chrono::duration<double>(now - *start_).count();
+    std::fprintf(stderr, "validate: judged frame %lld of %lld (%.2f frames/s)\n", static_cast<long long>(judged_to),
+                 static_cast<long long>(frames), s > 0 ? double(judged_to - first_) / s : 0.0);
+  }
+
+ private:
+  std::optional<Clock::time_point> start_;
+  Clock::time_point last_;
+  std::int64_t first_ = 0;
+};
+
 /// Waits until `done` (set under `m`, `cv` notified) and returns true, or returns false
 /// once a signal has waited kValidateStopGrace for it, or at once on a second signal.
 bool wait_for_worker(std::mutex& m, std::condition_variable& cv, const bool& done) {
@@ -240,12 +268,14 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
   JudgedSoFar so_far;
   octocd::ExternalTraceInfo so_far_info;  // under so_far's snapshot (its own mutex below)
   std::mutex info_m;
+  JudgingProgress progress;
   eo.on_judged = [&](const std::vector<octocd::ValidationResult>& rows, const octocd::ExternalTraceInfo& i) {
     {
       const std::lock_guard<std::mutex> lock(info_m);
       so_far_info = i;
     }
     so_far.keep(rows, i.judged_to);
+    progress.tick(i.judged_to, o.frames_given ? std::min<std::int64_t>(o.frames, i.frames) : i.frames);
   };
   std::vector<octocd::ValidationResult> results;
   std::mutex worker_m;
@@ -584,6 +614,9 @@ int validate_command(ValidateOptions& o) {
                                "--check-only");
     return validate_merge(o);
   }
+  if (o.determinism && (!o.trace_in.empty() || !o.trace.empty() || !o.view.empty()))
+    throw octocd::InputError("--determinism: runs the engine on SCENE.json and compares its runs; allowed without "
+                             "--trace-in, --trace and --view (the runs' traces are temporary)");
   if (!o.shard.empty() && (o.trace_in.empty() || o.check_only))
     throw octocd::InputError("--shard: splits the frames of a judged trace; allowed with --trace-in FILE.h5 (not "
                              "--check-only); a scene's run is judged whole");
@@ -671,6 +704,47 @@ int validate_verdict(const ValidateOptions& o, const std::string& name,
                             {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
 }
 
+
+/// `octocd validate SCENE --determinism`: the rows of determinism_rows (cli/predict.hpp) in
+/// validate's table, JUnit, --json and --expect; exit as `validate` (3 when a row differs).
+int validate_determinism(const ValidateOptions& o, const std::shared_ptr<const octocd::Model>& model,
+                         Clock::time_point t0) {
+  octocd::check_engine_settings(o.settings, octocd::cli_argument_names());
+  octocd::cli::DeterminismOptions d;
+  d.engine = o.engine;
+  d.model = model;
+  d.settings = o.settings;
+  d.frames = o.frames;
+  if (o.threads == 1)
+    throw octocd::InputError("--threads 1: --determinism compares 1 thread against N; allowed: --threads N >= 2, or 0 "
+                             "(max(2, the hardware's))");
+  d.threads = o.threads;
+  std::vector<octocd::ValidationResult> results;
+  {
+    // The runs write temporary traces (removed on the way out): a signal ends them at once.
+    const octocd::StopAtOnce running("running the determinism comparisons");
+    results = octocd::cli::determinism_rows(d);
+  }
+  // Its own key in --expect's file (SCENE--determinism): the scene's validator rows are not run here.
+  const std::string name = model->scene.name + "--determinism";
+  const octocd::RunName run{name, ""};
+  const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
+  if (!o.junit.empty())
+    octocd::write_junit(o.junit, name, results, std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", o.engine},
+                         {"frames", std::to_string(o.frames)},
+                         {"mode", "determinism"},
+                         {"scene_file", o.scene},
+                         {"build_id", octocd::build_id()}},
+                        "", &report);
+  fmt::print("validate {} --determinism (engine {}, {} frames; each pair of runs compared bit for bit as `octocd "
+             "compare` does)\n\n",
+             model->scene.name, o.engine, o.frames);
+  fmt::print("{}", octocd::format_results(results, {}, &report));
+  return conclude_validate(o, run, results, report,
+                           {{"engine", o.engine}, {"frames", o.frames}, {"mode", "determinism"},
+                            {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
+}
 
 int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   // SIGINT/SIGTERM: stop between frames, flush, 130/143; the judging worker is waited for
@@ -761,6 +835,7 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   std::optional<octocd::StopAtOnce> building(std::in_place, "building the model");
   const std::shared_ptr<const octocd::Model> model = octocd::build_model(scene);
   building.reset();
+  if (o.determinism) return validate_determinism(o, model, t0);
   if (!octocd::engine_info(o.engine, "--engine").records_every_step) {
     // It is judged through its trace when it records (Bullet: hull mode or rotation).
     if (!make_engine(o.engine, model, o.settings)->can_record())
@@ -800,8 +875,12 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   // normally stops at its next poll; if not, the verdict of the frames judged so far
   // (on_judged's latest snapshot) is reported and the process ends without it.
   JudgedSoFar so_far;
-  vo.on_judged = [&so_far](const std::vector<octocd::ValidationResult>& rows, std::int64_t judged) {
+  JudgingProgress progress;
+  const std::int64_t frames_total = o.frames;
+  vo.on_judged = [&so_far, &progress, frames_total](const std::vector<octocd::ValidationResult>& rows,
+                                                    std::int64_t judged) {
     so_far.keep(rows, judged);
+    progress.tick(judged, frames_total);
   };
   std::mutex worker_m;
   std::condition_variable worker_cv;
@@ -953,9 +1032,18 @@ Command add_validate_command(CLI::App& app) {
   val_cmd->add_option("--threads", val.threads,
                       "Threads judging one frame's heavy loops (reference geometry per pair, the reference pair set); "
                       "0 = the hardware's (default), 1 = serial; a scene's frame is judged while the engine runs the "
-                      "next (not with --trace, not with 1); verdicts do not depend on it")
+                      "next (not with --trace, not with 1); verdicts do not depend on it. With --determinism: the N threads of the "
+                      "threaded runs (>= 2; 0: max(2, the hardware's))")
       ->check(CLI::Range(0, 4096))
       ->default_val(0);
+  val_cmd->add_flag("--determinism", val.determinism,
+                    "Instead of the validators: run the engine twice on SCENE and compare the traces bit for bit "
+                    "(every state, contacts where it records; as `octocd compare`), then at 1 against N threads for "
+                    "an engine that threads (cpu: --threads N, default max(2, the hardware's)), and cpu against cuda "
+                    "for octocd's engines (n/a with the reason when cuda cannot run here). Rows "
+                    "determinism-runs, determinism-threads, determinism-cpu-cuda; a row that differs fails naming "
+                    "the first difference (frame, body, quantity, |A-B|, both values); exit 0 all equal, 3 one "
+                    "differs (docs/predictability.md)");
   val_cmd->add_flag("--check-only", val.check_only,
                     "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not) and list per row judged, or n/a with the dataset or attribute to add, without judging");
 

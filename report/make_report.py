@@ -51,6 +51,7 @@ from report_plots import OWN_BROADPHASE_CLASS, read_registry_broadphases  # noqa
 from report_csv import file_slug, sweep_csv  # noqa: E402
 from report_gate import GATE_MIN_REPS, LEVEL_RANGE, gate_summary, reps_needed, section_gate  # noqa: E402
 import report_speed_accuracy as RSA  # noqa: E402  (sweeps of kind speed-accuracy, design.md section 15)
+import report_divergence as RDV  # noqa: E402  (sweeps of kind divergence, design.md section 20)
 from report_common import load_mark, num, overlap, printable, spread_text  # noqa: E402
 from report_plots import log_ticks, speedup_text, too_many_to_draw  # noqa: E402
 from report_traces import penetration_comment, section_traces  # noqa: E402,F401
@@ -181,15 +182,20 @@ def main():
             title, fn = (f"Sweep {name}: most instances at the target steps/s", section_max_instances)
         if g["first"]["sweep"].get("kind") == RSA.KIND:  # its own table of unmeasured points per scene
             title, fn = (f"Sweep {name}: speed against accuracy", section_speed_accuracy)
+        if g["first"]["sweep"].get("kind") == RDV.KIND:  # its own table of unmeasured points
+            title, fn = (f"Sweep {name}: divergence of perturbed copies", lambda d, gg: RDV.section(d, gg, None))
         nav.append((f"s{i}", title))
         doc.section = name
         CURRENT[0] = ", ".join(g["files"])
         doc.h(2, title, f"s{i}")
         machine_block(doc, g)
         fn(doc, g)
-        if g["first"]["sweep"].get("kind") != RSA.KIND:
+        if g["first"]["sweep"].get("kind") not in (RSA.KIND, RDV.KIND):
             skipped_block(doc, g)
-        if doc.csv_dir:
+        if doc.csv_dir and g["first"]["sweep"].get("kind") == RDV.KIND:
+            doc.files.put(os.path.join(doc.csv_dir, file_slug(name) + ".csv"), RDV.write_csv(None, g))
+            doc.ncsv += 1
+        elif doc.csv_dir:
             sweep_csv(doc, os.path.join(doc.csv_dir, file_slug(name) + ".csv"), g)
             doc.ncsv += 1
     if traces:

@@ -13,6 +13,7 @@ import sys
 
 from report_common import OCTOCD, fail, np
 import report_speed_accuracy as RSA  # sweeps of kind speed-accuracy (design.md section 15)
+import report_divergence as RDV  # sweeps of kind divergence (design.md section 20)
 
 
 def regular_file(path):
@@ -308,6 +309,9 @@ def check_points(path, j):
             fail(f"{where}.load_average: {json.dumps(la)[:60]}; allowed: a list of load averages in [0, 1e6]")
         if j["sweep"].get("kind") == RSA.KIND:
             RSA.check_point(where, p, fail)
+            continue
+        if j["sweep"].get("kind") == RDV.KIND:
+            RDV.check_point(where, p, fail)
             continue
         if p.get("status") != "ok":
             continue

@@ -23,7 +23,7 @@
 #   ./run-gpu-broadphase-bench.sh [OUTDIR] # bench_gpu_broadphase: OUTDIR/gpu-broadphase-scaling.{md,json}
 #
 # Layout: bin/ (octocd, test_*, bench_*, bench_gpu_broadphase among them; RPATH
-# $ORIGIN/lib), bin/lib/ (shared libraries, RPATH $ORIGIN), datasets/scenes, datasets/cache, tests/data, bench/sweeps; everything stripped. The
+# $ORIGIN/lib), bin/lib/ (shared libraries, RPATH $ORIGIN), datasets/scenes, datasets/cache, tests/data, bench/sweeps and the batched-worlds benchmark (bench/run-worlds.sh); everything stripped. The
 # CUDA runtime is linked statically; libcuda comes from the driver. glibc (libc, libm,
 # libpthread, libdl, librt, libresolv, ld-linux, ...) is the target's own.
 set -euo pipefail
@@ -137,6 +137,8 @@ else
 fi
 cp -r "$repo/tests/data" "$stage/tests/"
 mkdir -p "$stage/bench" && cp -r "$repo/bench/sweeps" "$stage/bench/"  # the named sweeps of octocd bench
+# The batched-worlds benchmark (docs/gpu.md, "Batched worlds"): ./bench/run-worlds.sh bin/octocd OUT
+cp "$repo/bench/run-worlds.sh" "$repo/bench/hand_built_worlds.py" "$repo/bench/worlds_table.py" "$stage/bench/"
 
 cat > "$stage/run-gpu-tests.sh" <<'EOF'
 #!/usr/bin/env bash

@@ -59,6 +59,10 @@
 #                   quick (the same scenes over short windows, CI's ctest `corpus`
 #                   label; traces ENGINE--SCENE--quick.h5), none (the default with SCENE.json
 #                   arguments). Traces go to DIR/matrix/ (--out).
+#                   Each engine (and cpu, and cuda where a GPU runs it) also gets
+#                   determinism rows: `validate --determinism` on rot-drop-220 and
+#                   bunny-stack-50 (full: 120 frames; quick: 30 and 40), cases
+#                   ENGINE--SCENE--determinism (docs/predictability.md).
 #   --history DIR   also add this night's verdicts (every case's `validate --json`, kept
 #                   in DIR/json/ of --out) with the machine, build and date to the history
 #                   folder DIR (`octocd history-append`: a new file, none rewritten);
@@ -308,6 +312,55 @@ for e in "${matrix_engines[@]+"${matrix_engines[@]}"}"; do
     child=0
     judge_case "$name" "$log" "$rc" "$t0" "$n_frames"
   done < <(matrix_scenes)
+done
+
+# The determinism rows of the matrix (docs/predictability.md): per engine, `validate
+# --determinism` on rot-drop-220 and bunny-stack-50 over short windows: two runs bit for bit,
+# 1 against N threads where the engine threads (cpu), cpu against cuda where a GPU runs cuda.
+# octocd's engines translate only: rot-drop-220 (a rotating scene) is skipped for them.
+determinism_scenes() {  # "scene frames rotates" per line
+  if [ "$matrix" = "full" ]; then
+    printf '%s\n' "rot-drop-220 120 yes" "bunny-stack-50 120 no"
+  else
+    printf '%s\n' "rot-drop-220 30 yes" "bunny-stack-50 40 no"
+  fi
+}
+# Every engine of the registry available here (`octocd engines --json`), rotating or not.
+determinism_engines=()
+translating=""
+if [ "$matrix" != "none" ]; then
+  read -r -a all_engines <<<"$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
+print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"]))')"
+  translating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
+print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if not e["rotates"]))')"
+  for e in "${all_engines[@]+"${all_engines[@]}"}"; do
+    if grep -qx "$e" <<<"$available"; then determinism_engines+=("$e")
+    else echo "matrix   $e--determinism: not available here ($("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//'))"; fi
+  done
+fi
+for e in "${determinism_engines[@]+"${determinism_engines[@]}"}"; do
+  while read -r sc n_frames sc_rotates; do
+    [ -r "$root/datasets/scenes/$sc.json" ] || { echo "matrix   $e--$sc--determinism: no scene $sc.json, skipped"; continue; }
+    rotation=(--rotation)
+    if grep -qw "$e" <<<"$translating"; then
+      rotation=()
+      [ "$sc_rotates" = "yes" ] && { echo "matrix   $e--$sc--determinism: skipped ($e translates only; $sc rotates)"; continue; }
+    fi
+    why_skip="$(matrix_skip "$e" "$sc")"
+    [ -z "$why_skip" ] || { echo "matrix   $e--$sc--determinism: skipped ($why_skip)"; continue; }
+    name="$e--$sc--determinism"
+    [ "$matrix" = "quick" ] && name="$e--$sc--determinism--quick"
+    log="$out/$name.log"
+    t0=$(date +%s.%N)
+    timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" validate "$root/datasets/scenes/$sc.json" --engine "$e" \
+      "${rotation[@]+"${rotation[@]}"}" --frames "$n_frames" --determinism --junit "$out/junit/$name.xml" \
+      --json "$out/json/$name.json" "${extra[@]}" >"$log" 2>&1 &
+    child=$!
+    wait "$child"
+    rc=$?
+    child=0
+    judge_case "$name" "$log" "$rc" "$t0" "$n_frames"
+  done < <(determinism_scenes)
 done
 
 # One report over every scene: the <testsuite> elements of each file under one root

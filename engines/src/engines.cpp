@@ -53,6 +53,9 @@ EngineInfo cpu_info() {
   cpu.has_midphase = true;
   cpu.uses_scene_broadphase = true;
   cpu.records_every_step = true;
+  cpu.batched_worlds = true;
+  cpu.openmp_threads = true;
+  cpu.device_twin = "cuda";
   return cpu;
 }
 
@@ -72,6 +75,8 @@ EngineInfo cuda_info() {
   cuda.device = true;
   cuda.memory_kind = "device memory";
   cuda.records_every_step = true;
+  cuda.batched_worlds = true;
+  cuda.device_twin = "cpu";
   return cuda;
 }
 

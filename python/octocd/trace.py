@@ -18,7 +18,7 @@ _ROOT_ATTRIBUTES = (
     "committed_states", "stage_names", "gravity", "response_model", "detection", "mu", "restitution",
     "friction_combine", "restitution_combine", "contact_margin", "broadphase_exact", "contact_geometry",
     "collision_shape", "contact_model", "integrator", "gyroscopic", "substeps", "impulses", "speculative",
-    "contacts_complete", "manifold_points", "depth_per")
+    "contacts_complete", "manifold_points", "depth_per", "velocity_at")
 
 
 class Trace:

@@ -6,6 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
 #include <string>
 #include <vector>
 
@@ -13,6 +16,7 @@
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/vertex_blocks.hpp"
+#include "octocd/worlds.hpp"
 
 using namespace octocd;
 
@@ -151,4 +155,27 @@ TEST(CudaFootprint, ModelAddsItsShapesAndUsesTheScenesDepth) {
   EXPECT_GE(cuda_device_bytes_needed(*boxes, "octree-strict"),
             cuda_device_bytes_needed(static_cast<std::uint64_t>(n), fixed) +
                 static_cast<std::uint64_t>(n) * (sizeof(double) + sizeof(std::uint32_t)));
+}
+
+// Batched worlds (octocd/worlds.hpp): 65,536 copies of bunny-stack-50 (3,604,480 bodies, the
+// benchmark's largest batch, bench/sweeps/worlds.json) fit an H100's 80 GB with room for the
+// pair and contact buffers to grow: the engine's estimate before its first step is far below
+// it, and under kCudaMaxBodies. Needs the bunny mesh (datasets/fetch.sh).
+TEST(CudaFootprint, SixtyFiveThousandWorldsOfBunnyStack50FitAnH100) {
+  const char* src = std::getenv("OCTOCD_SOURCE_DIR");
+  const std::string dir = std::string(src ? src : ".");
+  if (!std::filesystem::exists(dir + "/datasets/cache/bunny.obj") && !std::filesystem::exists(dir + "/datasets/cache/bunny.ply") &&
+      !std::filesystem::exists(dir + "/datasets/cache/bunny.off"))
+    GTEST_SKIP() << "no bunny mesh in " << dir << "/datasets/cache (run datasets/fetch.sh)";
+  const auto single = build_model(load_scene(dir + "/datasets/scenes/bunny-stack-50.json"));
+  WorldsSpec spec;
+  spec.count = 65536;
+  const auto batched = make_worlds_model(single, spec);
+  ASSERT_EQ(batched->initial.size(), 65536u * single->initial.size());
+  ASSERT_LT(batched->initial.size(), kCudaMaxBodies);
+  const std::uint64_t bytes = cuda_device_bytes_needed(*batched, batched->scene.broadphase.name);
+  std::cout << "[ info ] 65,536 worlds of bunny-stack-50: " << batched->initial.size() << " bodies, broadphase "
+            << batched->scene.broadphase.name << " depth " << batched->scene.broadphase.octree_depth << ", estimate "
+            << bytes / 1048576 << " MiB before the first step\n";
+  EXPECT_LT(bytes, std::uint64_t{8} << 30) << "an eighth of an H100's memory at most before the buffers grow";
 }

@@ -1023,6 +1023,23 @@ TEST(PhysicsDeclarations, LockedRotationIsNotApplicableAndCounted) {
   EXPECT_THROW(judge(*model, rec, b), InputError);
 }
 
+// PhysicsBodies' rounded shapes and centres of mass (design.md section 13d items 4, 5d): one
+// value per body, finite, radii >= 0, or none; anything else is refused naming the field.
+TEST(PhysicsDeclarations, ConvexRadiusAndComOffsetAreCheckedPerBody) {
+  const auto model = build_model(four_bodies("[0, 0, 0]"));
+  const FrameRecord rec = off_centre_collision(*model, 0.0).rec;
+  PhysicsBodies b = rotating_engine();
+  b.convex_radius = {0, 0};
+  EXPECT_THROW(judge(*model, rec, b), InputError);
+  b.convex_radius = {0, 0, -0.01, 0};
+  EXPECT_THROW(judge(*model, rec, b), InputError);
+  b.convex_radius.clear();
+  b.com_offset = {{0, 0, 0}};
+  EXPECT_THROW(judge(*model, rec, b), InputError);
+  b.com_offset.assign(4, {0, std::nan(""), 0});
+  EXPECT_THROW(judge(*model, rec, b), InputError);
+}
+
 // A gyroscopic term (explicit: w' = w - dt I_w^-1 (w x I_w w), q advanced by w' dt) on two
 // bodies of unequal principal moments that collide through their centres (no contact
 // torque): momentum-balance and conservation pass, declared or not (their L = R I R^T w

@@ -117,10 +117,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
   std::vector<double> mag(n, 0.0), tmag(n, 0.0), tallow(n, 0.0), any_dir(n, 0.0);
   // Per body, what the record leaves open of its rows' friction: a disc of radius u in the
   // plane normal to n per row (direction and size of J_t beyond the scalar jt).
-  struct Disc {
-    D3 n;
-    double u;
-  };
+  using Disc = BalanceDisc;
   std::vector<std::vector<Disc>> discs(n);
   std::vector<std::uint32_t> rows_of(n, 0);
   std::vector<std::uint8_t> in_contact(n, 0);
@@ -132,7 +129,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     ++rows_of[p.a];
     ++rows_of[p.b];
     const D3 nrm = unit3(d3(c.normal));
-    const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
+    const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
     const D3 pt = rec.has_points ? d3(c.point) : D3{};
     const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? pt - xb : D3{};
     // The friction impulse's direction: the trace convention's -v_t / |v_t|, v_t the
@@ -266,6 +263,10 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     }
     if (in_contact[i]) {
       // 7. Momentum balance.
+      if (!bodies.contacts_complete) {  // a row may be missing: n/a (row_plan.cpp names it)
+        ++balance_incomplete;
+        continue;
+      }
       if (rows_of[i] == 0) {
         ++balance_no_rows;  // a confirmed pair without rows (octocd's later passes)
         continue;
@@ -280,21 +281,48 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       // component along a direction d is at most sum u |d x n| + the rounding bound. Tested
       // along the residual itself and along each row's normal (where a manifold's discs,
       // all normal to it, allow nothing: a dropped row's jn n shows there).
-      double ratio = 0, open_along = 0;
+      const D3 mdv = unlocked(mi * (v1 - v0), i, 0), fi = unlocked(force[i], i, 0);
+      double open_along = 0;
+      const double ratio =
+          balance_figure(mdv, fi, discs[i].data(), discs[i].size(), float_bound, 1.0, &open_along);
       const double dpl = len3(dp);
-      auto test_dir = [&](D3 d) {
-        double support = 0;
-        for (const Disc& dc : discs[i]) support += dc.u * len3(cross3(d, dc.n));
-        const double r = std::fabs(dot3(dp, d)) / (support + float_bound);
-        if (r > ratio) {
-          ratio = r;
-          open_along = support;
-        }
-      };
-      if (dpl > 0) test_dir((1.0 / dpl) * dp);
-      for (const Disc& dc : discs[i]) test_dir(dc.n);
-      if (discs[i].empty()) ratio = dpl / float_bound;
-      balance_lin.check(ratio <= 1.0, ratio, Where::of_body(frame, i), [&] {
+      // The systematic ratio's sample: s = (J . d) / (m dv . d) along the first direction d
+      // (m dv's own, then each row's normal) where the record fixes it to kFitPrecision: the
+      // rounding and the friction its rows leave open along d (sum u |d x n|) at most that
+      // of m dv . d (docs/validation.md, "A systematic impulse ratio").
+      {
+        auto sample_along = [&](const D3& d) {
+          const double md = dot3(mdv, d);
+          double open = float_bound;
+          for (const Disc& dc : discs[i]) open += dc.u * len3(cross3(d, dc.n));
+          if (!(std::fabs(md) > 0) || open > kFitPrecision * std::fabs(md)) return false;
+          sample_ratio(dot3(fi, d) / md);
+          return true;
+        };
+        const double ml = len3(mdv);
+        bool sampled = ml > 0 && sample_along((1.0 / ml) * mdv);
+        for (const Disc& dc : discs[i])
+          if (!sampled) sampled = sample_along(dc.n);
+      }
+      const bool defer = ratio > 1.0 && deferred.size() < kMaxDeferred;
+      if (defer) {
+        // Judged in results() at the fitted ratio too (fitted_balance).
+        DeferredBalance d;
+        d.frame = frame;
+        d.body = static_cast<std::uint32_t>(i);
+        d.rows = rows_of[i];
+        d.mdv = mdv;
+        d.force = fi;
+        d.float_bound = float_bound;
+        d.r1 = ratio;
+        d.disc_first = deferred_discs.size();
+        d.disc_count = discs[i].size();
+        deferred_discs.insert(deferred_discs.end(), discs[i].begin(), discs[i].end());
+        deferred.push_back(d);
+      } else if (ratio > 1.0) {
+        ++deferred_over;
+      }
+      if (!defer) balance_lin.check(ratio <= 1.0, ratio, Where::of_body(frame, i), [&] {
         return fmt::format("frame {}: body {}: m (v' - v) - m g dt = ({:.4g}, {:.4g}, {:.4g}) kg m/s but its {} "
                            "contact rows' impulses sum to ({:.4g}, {:.4g}, {:.4g}): off by {:.4g} ({:.3g} of the "
                            "bound: rounding {:.3g}, friction the record leaves open {:.3g})",
@@ -358,7 +386,12 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       });
       continue;
     }
-    // 8. Free flight: no contact row and no confirmed pair in this step.
+    // 8. Free flight: no contact row and no confirmed pair in this step. contacts_complete
+    // 0: and apart from every other body through the step by the exact reference (apart.cpp).
+    if (!bodies.contacts_complete && (near.frame != frame || near.body[i])) {
+      ++free_near;
+      continue;
+    }
     if (locked_count > 0) ++free_locked;
     const D3 dv = unlocked(v1 - v0, i, 0);
     // Rounding: one float32 update of v (and of x below) per step, 4 eps32 of the
@@ -366,7 +399,8 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     // (docs/validation.md, "Free flight: any consistent integrator").
     const double updates =
         bodies.integrator == PhysicsBodies::Integrator::Substepped ? 4.0 + double(bodies.substeps - 1) : 4.0;
-    const double v_bound = updates * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + 1e-12;
+    const double v_bound = updates * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) +
+                           stored_origin_speed(rec, i) * 2.0 * kEps32 + 1e-12;
     const double dvl = len3(dv);
     free_vel.check(dvl <= v_bound, dvl, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: v' = ({:.6g}, {:.6g}, {:.6g}) m/s, v + g dt = "
@@ -467,6 +501,112 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
                          q_bound * 180.0 / kPi);
     });
   }
+}
+
+}  // namespace octocd
+
+// ---- Row 7's systematic ratio (docs/validation.md, "A systematic impulse ratio") -------
+namespace octocd {
+
+using namespace dmath;
+using namespace physics_detail;
+
+double PhysicsValidators::Impl::balance_figure(const D3& mdv, const D3& force, const BalanceDisc* discs,
+                                               std::size_t count, double float_bound, double s, double* open_along) {
+  const D3 dp = mdv - (1.0 / s) * force;
+  double ratio = 0, open = 0;
+  auto test_dir = [&](D3 d) {
+    double support = 0;
+    for (std::size_t k = 0; k < count; ++k) support += discs[k].u * len3(cross3(d, discs[k].n));
+    const double r = std::fabs(dot3(dp, d)) / (support + float_bound);
+    if (r > ratio) {
+      ratio = r;
+      open = support;
+    }
+  };
+  const double dpl = len3(dp);
+  if (dpl > 0) test_dir((1.0 / dpl) * dp);
+  for (std::size_t k = 0; k < count; ++k) test_dir(discs[k].n);
+  if (count == 0) ratio = dpl / float_bound;
+  if (open_along) *open_along = open;
+  return ratio;
+}
+
+void PhysicsValidators::Impl::sample_ratio(double s) {
+  const auto bins = static_cast<std::size_t>(std::lround(2.0 * kFitSpan / kFitBin)) + 1;
+  if (ratio_bins.empty()) ratio_bins.assign(bins, 0);
+  const double k = std::round((s - (1.0 - kFitSpan)) / kFitBin);
+  if (!(k >= 0)) {
+    ++ratio_below;
+  } else if (k > double(bins - 1)) {
+    ++ratio_above;
+  } else {
+    ++ratio_bins[static_cast<std::size_t>(k)];
+  }
+}
+
+PhysicsValidators::Impl::BalanceFit PhysicsValidators::Impl::balance_fit() const {
+  BalanceFit fit;
+  std::uint64_t total = ratio_below + ratio_above;
+  for (std::uint64_t c : ratio_bins) total += c;
+  fit.samples = total;
+  if (total < kFitMinSamples) return fit;
+  // The value at rank r of the sample (below the span: 1 - span, above: 1 + span).
+  auto at = [&](std::uint64_t r) {
+    if (r < ratio_below) return 1.0 - kFitSpan;
+    std::uint64_t seen = ratio_below;
+    for (std::size_t k = 0; k < ratio_bins.size(); ++k) {
+      seen += ratio_bins[k];
+      if (r < seen) return 1.0 - kFitSpan + double(k) * kFitBin;
+    }
+    return 1.0 + kFitSpan;
+  };
+  fit.fitted = true;
+  fit.ratio = at(total / 2);
+  fit.q1 = at(total / 4);
+  fit.q3 = at((3 * total) / 4);
+  fit.bias = std::fabs(fit.ratio - 1.0) > kBiasMax;
+  return fit;
+}
+
+Tally PhysicsValidators::Impl::fitted_balance(const BalanceFit& fit) const {
+  Tally t = balance_lin;
+  for (const DeferredBalance& d : deferred) {
+    const BalanceDisc* discs = deferred_discs.data() + d.disc_first;
+    double open1 = 0, open_s = 0;
+    balance_figure(d.mdv, d.force, discs, d.disc_count, d.float_bound, 1.0, &open1);
+    const double rs =
+        fit.fitted ? balance_figure(d.mdv, d.force, discs, d.disc_count, d.float_bound, fit.ratio, &open_s) : d.r1;
+    const bool ok = rs <= 1.0;
+    t.check(ok, ok ? rs : std::min(d.r1, rs), Where::of_body(d.frame, d.body), [&] {
+      const D3 dp = d.mdv - d.force;
+      std::string s = fmt::format(
+          "frame {}: body {}: m (v' - v) - m g dt = ({:.4g}, {:.4g}, {:.4g}) kg m/s but its {} contact rows' impulses "
+          "sum to ({:.4g}, {:.4g}, {:.4g}): off by {:.4g} ({:.3g} of the bound: rounding {:.3g}, friction the record "
+          "leaves open {:.3g})",
+          d.frame, d.body, d.mdv[0], d.mdv[1], d.mdv[2], d.rows, d.force[0], d.force[1], d.force[2], len3(dp), d.r1,
+          d.float_bound, open1);
+      if (fit.fitted)
+        s += fmt::format("; at the fitted impulse ratio {:.5f}: off by {:.4g} ({:.3g} of the bound)", fit.ratio,
+                         len3(d.mdv - (1.0 / fit.ratio) * d.force), rs);
+      return s;
+    });
+  }
+  return t;
+}
+
+Tally PhysicsValidators::Impl::balance_bias(const BalanceFit& fit) const {
+  Tally t;
+  if (!fit.fitted) return t;
+  const double off = std::fabs(fit.ratio - 1.0);
+  t.check(!fit.bias, off, Where{-1, "impulse ratio"}, [&] {
+    return fmt::format("the reported impulses are {:.5f} of the momentum change (median over {} body-steps, quartiles "
+                       "{:.5f} .. {:.5f}): {:.3g}% {}, beyond the {:.3g}% a systematic ratio may take (the trace's "
+                       "masses are not the engine's, or its impulses are scaled)",
+                       fit.ratio, fit.samples, fit.q1, fit.q3, 100.0 * off, fit.ratio < 1 ? "low" : "high",
+                       100.0 * kBiasMax);
+  });
+  return t;
 }
 
 }  // namespace octocd

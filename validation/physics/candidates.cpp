@@ -28,6 +28,7 @@ const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p)
   if (!t.have) {
     PairReferenceScratch scratch;
     t.assign(pair_reference_into(*ref, p.a, p.b, (*f.det)[p.a], (*f.det)[p.b], sat_settings, scratch));
+    t.inflate(radius(p.a), radius(p.b));
   }
   return t;
 }
@@ -46,7 +47,8 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
   const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
   std::vector<Aabb> grown(n);
   for (std::size_t i = 0; i < n; ++i)
-    grown[i] = expanded(ref->world_aabb(static_cast<std::uint32_t>(i), det[i]), static_cast<float>(0.5 * reach));
+    grown[i] = expanded(ref->world_aabb(static_cast<std::uint32_t>(i), det[i]),
+                        static_cast<float>(0.5 * reach + radius(static_cast<std::uint32_t>(i))));
   // At most limits::kMaxPairsPerBody pairs a body (PairLimitError, counted before the
   // tests): the truth below costs about 0.7 KiB and 3.5 us a pair.
   ExactPairsSettings pair_threads;
@@ -87,7 +89,9 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
   hit.assign(cand.size(), 1);
   if (!need_distance)
     parallel_items(cand.size(), threads, stop, [&](std::size_t i, unsigned) {
-      hit[i] = ref->intersect(cand[i].a, cand[i].b, det[cand[i].a], det[cand[i].b]) ? 1 : 0;
+      // Rounded shapes (a convex radius): the posed shapes may be apart and the rounded
+      // ones meet, so their truth is computed.
+      hit[i] = inflation(cand[i]) > 0 || ref->intersect(cand[i].a, cand[i].b, det[cand[i].a], det[cand[i].b]) ? 1 : 0;
     });
   {
     std::vector<Pair> todo;
@@ -125,6 +129,7 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
       const Pair p = all[i];
       ContactTruth& t = f.truth[i];
       t.assign(pair_reference_into(*ref, p.a, p.b, det[p.a], det[p.b], sat_settings, s));
+      t.inflate(radius(p.a), radius(p.b));
       for (std::uint32_t k = group_begin[i]; k < group_begin[i + 1]; ++k) pair_figures(f, group_list[k], t, s.accepted);
     });
   }

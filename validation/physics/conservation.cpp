@@ -41,6 +41,9 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   // 6. Conservation on isolated dynamic groups: components of the contact graph with at
   // least 2 dynamic bodies and no static body among their contacts.
   ContactGraph graph = contact_graph(rec);
+  // contacts_complete 0: a group near a body outside it may exchange an unreported
+  // impulse with it; judged as touching a static body (apart.cpp).
+  if (!bodies.contacts_complete && near.frame == frame) groups_near += open_near_groups(graph);
   auto find = [&](std::uint32_t i) { return graph.find(i); };
   const std::vector<std::uint8_t>& statics = graph.statics;
   // An engine may apply a row's impulse at two witness points (Bullet: one on each
@@ -265,7 +268,11 @@ void PhysicsValidators::Impl::advance_episodes(const FrameRecord& rec) {
     for (auto& e : episodes) e.spoiled = true;  // as conservation(): the episode is not seen whole
     return;
   }
-  const ContactGraph graph = contact_graph(rec);
+  ContactGraph graph = contact_graph(rec);
+  if (!bodies.contacts_complete) {  // as conservation() opens them
+    find_near(rec);
+    open_near_groups(graph);
+  }
   const std::vector<Component> comps = components(graph);
   if (bodies.contact_model == PhysicsBodies::ContactModel::Undeclared)  // as conservation() finds them
     for (const Component& c : comps)

@@ -66,11 +66,14 @@ double PhysicsValidators::Impl::speculative_reach(const FrameRecord& rec, Pair p
   const std::size_t n = model->bodies.size();
   if (rec.v_pre.size() != n || rec.v_post.size() != n) return std::numeric_limits<double>::infinity();
   const bool spin = rec.w_pre.size() == n && rec.w_post.size() == n;
-  auto reach = [&](std::uint32_t i) {  // the farthest point of the local box from the origin
+  auto reach = [&](std::uint32_t i) {
+    // The farthest point of the local box from the origin, rounded by the convex radius;
+    // from the centre of mass (the states' point) up to |com_offset| farther.
     const Aabb& b = model->local_box(i);
     return len3(D3{std::max(std::fabs(double(b.min.x)), std::fabs(double(b.max.x))),
                    std::max(std::fabs(double(b.min.y)), std::fabs(double(b.max.y))),
-                   std::max(std::fabs(double(b.min.z)), std::fabs(double(b.max.z)))});
+                   std::max(std::fabs(double(b.min.z)), std::fabs(double(b.max.z)))}) +
+           extra_reach(i);
   };
   const double v = std::max(len3(d3(rec.v_pre[p.a]) - d3(rec.v_pre[p.b])), len3(d3(rec.v_post[p.a]) - d3(rec.v_post[p.b])));
   const double w = spin ? std::max(len3(d3(rec.w_pre[p.a])), len3(d3(rec.w_post[p.a]))) * reach(p.a) +
@@ -152,8 +155,11 @@ void PhysicsValidators::Impl::pair_figures(CheckedFrame& f, std::size_t i, const
     RowFigures& rf = f.row_fig[k];
     rf.ref = row_reference(accepted, r, by_sat, c.normal);
     if (rec.has_points) {
-      rf.da = ref->surface_distance(p.a, det[p.a], c.point);
-      rf.db = ref->surface_distance(p.b, det[p.b], c.point);
+      // A rounded shape's surface lies its convex radius beyond the posed one: a point
+      // outside the posed shape is |d - r| from it, one inside (d unsigned) at least
+      // max(0, d - r), taken for both (never stricter than the rounded surface).
+      rf.da = std::max(0.0, ref->surface_distance(p.a, det[p.a], c.point) - radius(p.a));
+      rf.db = std::max(0.0, ref->surface_distance(p.b, det[p.b], c.point) - radius(p.b));
     }
   }
 }
@@ -221,6 +227,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
       continue;
     }
     if (r.depth_upper_bound) ++upper_bound_pairs;
+    if (inflation(p) > 0) ++rounded_pairs;
     std::size_t deepest = pr.first;
     for (std::size_t k = pr.first; k < pr.first + pr.count; ++k)
       if (rec.contacts[k].depth > rec.contacts[deepest].depth) deepest = k;
@@ -231,7 +238,9 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
     // threshold: Bullet on rot-pile-1000 kept a row 73 deg off for a cube pair that
     // penetrated 0.05 mm at another row, and one 41.5 deg off at depth 4.8e-6 m beside a
     // fresh row of 0.53 mm on the minimum translation).
-    const bool engine_places_depth = rec.contacts[deepest].depth > tol.geometry_slack_m;
+    // depth_per "unknown": no row's depth says where the engine placed the penetration.
+    const bool depth_known = !bodies.depth_unknown;
+    const bool engine_places_depth = depth_known && rec.contacts[deepest].depth > tol.geometry_slack_m;
     for (std::size_t k = pr.first; k < pr.first + pr.count; ++k) {
       const ContactRecord& c = rec.contacts[k];
       const RowReference& row_ref = row_fig[k].ref;
@@ -243,7 +252,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
       // contact_depth_m (which needs no contact at all, item 2) is a touching contact:
       // two boxes grazing edge on edge by 30 um have a minimum translation 60 deg from
       // the face normal Bullet's detector keeps at depth 0 (rot-pile-1000).
-      const bool touching = c.depth <= 0.0f && r.depth <= tol.contact_depth_m;
+      const bool touching = (!depth_known || c.depth <= 0.0f) && r.depth <= tol.contact_depth_m;
       if (!r.penetrating || r.depth <= tol.geometry_slack_m || touching ||
           (engine_places_depth && c.depth <= tol.geometry_slack_m)) {
         // A row on shapes that do not penetrate (or out of contact, above): the
@@ -266,7 +275,8 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
         const bool certain =
             !r.penetrating && r.distance > tol.geometry_slack_m &&
             (!ref->convex(p.a) || !ref->convex(p.b) ||
-             hull_separation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b), det[p.b], r.normal) >
+             hull_separation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b), det[p.b], r.normal) -
+                     inflation(p) >
                  tol.geometry_slack_m);
         if (!r.penetrating && r.distance > tol.geometry_slack_m && !certain) ++sign_uncertain_rows;
         if (certain) {
@@ -317,8 +327,8 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
         // Both surfaces: a point is where the two bodies meet, so it lies within the
         // pair's depth or distance (or the contact margin, for a persistent manifold's
         // row) of each; a point placed with a wrong orientation leaves at least one.
-        const double reach_p =
-            std::max({r.penetrating ? r.depth : r.distance, double(c.depth), pair_margin(p)});
+        const double reach_p = std::max(
+            {r.penetrating ? r.depth : r.distance, depth_known ? double(c.depth) : 0.0, pair_margin(p)});
         const double da = row_fig[k].da, db = row_fig[k].db;
         const double off = std::max(da, db) - reach_p;
         if (bodies.persistent_points) {  // manifold_points "persistent": may drift off the shapes
@@ -333,13 +343,38 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
         });
       }
     }
+    if (!depth_known) {  // depth_per "unknown": the depth cause is n/a (counted)
+      ++depth_unknown_pairs;
+      continue;
+    }
     const ContactRecord& c = rec.contacts[deepest];
-    const double want = r.penetrating ? r.depth : 0.0;
+    double want = r.penetrating ? r.depth : 0.0;
+    const char* want_what = by_sat ? "SAT minimum" : "FCL";
+    // The hulls' overlap along the deepest row's normal (>= the minimum translation; equal
+    // where the normal is the minimum's): depth_per "manifold" is judged on it, and an
+    // undeclared depth_per admits it beside the minimum ("point").
+    auto along_normal = [&] {
+      return std::max(0.0, inflation(p) - hull_separation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b),
+                                                          det[p.b], c.normal));
+    };
+    if (bodies.depth_per_manifold && by_sat && r.penetrating) {
+      want = along_normal();
+      want_what = "the hulls' overlap along the manifold's normal";
+      ++depth_manifold_pairs;
+    } else if (!bodies.depth_per_declared && by_sat && r.penetrating && !r.depth_upper_bound &&
+               std::fabs(double(c.depth) - want) > tol.depth_m) {
+      const double along = along_normal();
+      if (std::fabs(double(c.depth) - along) <= tol.depth_m) ++depth_spared_as_manifold;
+      if (std::fabs(double(c.depth) - along) < std::fabs(double(c.depth) - want)) {
+        want = along;
+        want_what = "the hulls' overlap along the row's normal (depth_per undeclared: nearer than SAT's minimum)";
+      }
+    }
     // An upper bound (non-convex meshes) judges one side only: the engine may be shallower.
     const double diff = r.depth_upper_bound ? double(c.depth) - want : std::fabs(double(c.depth) - want);
     depth.check(diff <= tol.depth_m, diff, Where{frame, p}, [&] {
-      return fmt::format("frame {}: {} deepest row depth {:.4g} m, {} {:.4g} m{} [reference: {}]", frame,
-                         pair_name(p), c.depth, by_sat ? "SAT minimum" : "FCL", want,
+      return fmt::format("frame {}: {} {} depth {:.4g} m, {} {:.4g} m{} [reference: {}]", frame, pair_name(p),
+                         bodies.depth_per_manifold ? "manifold" : "deepest row", c.depth, want_what, want,
                          r.depth_upper_bound ? " (upper bound)" : "", judge);
     });
   }

@@ -23,7 +23,7 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
   const double dt = model->scene.dt;
   auto w_of = [&](const std::vector<Vec3>& w, std::size_t i) { return w.size() == n ? d3(w[i]) : D3{}; };
   auto v_int = [&](std::uint32_t i) { return dynamic(i) ? d3(rec.v_pre[i]) + dt * g : d3(rec.v_pre[i]); };
-  const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
+  const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
   // Three states of the bodies' velocities: before the solver (after gravity), with the
   // pair's normal impulses alone applied (rotating records with points), after the step.
   struct Vel {
@@ -234,7 +234,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
       k0 = k1;
       continue;
     }
-    const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
+    const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
     const D3 va0 = v_int(p.a), vb0 = v_int(p.b), wa0 = w_of(rec.w_pre, p.a), wb0 = w_of(rec.w_pre, p.b);
     const D3 va1 = d3(rec.v_post[p.a]), vb1 = d3(rec.v_post[p.b]);
     const D3 wa1 = w_of(rec.w_post, p.a), wb1 = w_of(rec.w_post, p.b);

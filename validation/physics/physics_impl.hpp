@@ -176,6 +176,33 @@ struct ContactTruth {
     have = true;
     intersects = g.penetrating;
   }
+  /// The same pair with A rounded by `ra` and B by `rb` (m, >= 0: each shape's Minkowski
+  /// sum with a sphere, PhysicsBodies::convex_radius). Exact: the rounded shapes' depth is
+  /// the posed ones' plus ra + rb along the same normal (every support value grows by the
+  /// radius, so SAT's accepted axes stay); shapes apart by d <= ra + rb penetrate by
+  /// ra + rb - d along their nearest-points direction; farther ones are d - ra - rb apart.
+  /// The witness points move onto the rounded surfaces.
+  void inflate(double ra, double rb) {
+    const double s = ra + rb;
+    if (!(s > 0)) return;
+    if (g.penetrating) {
+      g.depth += s;
+      fcl_depth += s;
+    } else if (g.distance > s) {
+      g.distance -= s;
+    } else {
+      g.penetrating = true;
+      g.depth = s - g.distance;
+      g.distance = 0;
+      fcl_depth = g.depth;
+      fcl_normal = g.normal;
+    }
+    if (g.valid) {
+      g.point_a = g.point_a - static_cast<float>(ra) * g.normal;
+      g.point_b = g.point_b + static_cast<float>(rb) * g.normal;
+    }
+    intersects = g.penetrating;
+  }
 };
 
 /// A pair's contact rows [first, first + count) (rows of a pair are consecutive).
@@ -324,6 +351,56 @@ struct PhysicsValidators::Impl {
   double speculative_reach(const FrameRecord& rec, Pair p) const;
   std::uint64_t speculative_allowed = 0;  ///< contact pairs given a speculative reach
   std::uint64_t points_persistent = 0;    ///< rows whose point check is not applied (persistent points)
+  // ---- depth_per and rounded shapes (contact_rows.cpp, candidates.cpp) -----------------
+  std::uint64_t depth_unknown_pairs = 0;   ///< depth_per "unknown": pairs whose depth is not judged
+  std::uint64_t depth_manifold_pairs = 0;  ///< depth_per "manifold": pairs judged along their normal
+  /// depth_per undeclared: pairs whose deepest row misses SAT's minimum but fits the hulls'
+  /// overlap along its normal (a manifold's depth): passed, counted.
+  std::uint64_t depth_spared_as_manifold = 0;
+  std::uint64_t rounded_pairs = 0;         ///< pairs judged on shapes inflated by a convex radius
+  /// Pair p's convex radii summed (m; PhysicsBodies::convex_radius, 0 without): how far the
+  /// rounded shapes reach beyond the posed ones.
+  double inflation(Pair p) const { return radius(p.a) + radius(p.b); }
+  /// Body i's centre of mass at pose `pose` (m, world): the pose's position plus the
+  /// rotated PhysicsBodies::com_offset (the position itself without one). The lever origin
+  /// of a row's impulse at the detection pose (momentum-balance, friction).
+  D3 com_at(const Pose& pose, std::uint32_t i) const {
+    const D3 x = dmath::d3(pose.position);
+    if (bodies.com_offset.empty()) return x;
+    const auto& c = bodies.com_offset[i];
+    return dmath::operator+(x, dmath::mul(dmath::rotation(pose.orientation), D3{c[0], c[1], c[2]}));
+  }
+  /// The body frame's pose of body i whose centre of mass is at x (a state's position)
+  /// with orientation q: x - R c (PhysicsBodies::com_offset; x itself without one). Where
+  /// a rule places the shapes from the states.
+  Pose frame_pose(Vec3 x, Quat q, std::uint32_t i) const {
+    if (bodies.com_offset.empty()) return Pose{x, q};
+    const auto& c = bodies.com_offset[i];
+    const D3 rc = dmath::mul(dmath::rotation(q), D3{c[0], c[1], c[2]});
+    return Pose{Vec3{static_cast<float>(x.x - rc[0]), static_cast<float>(x.y - rc[1]), static_cast<float>(x.z - rc[2])},
+                q};
+  }
+  /// How far body i's collided surface reaches beyond its local box's farthest point from
+  /// the states' point (m): its convex radius plus |com_offset| (apart.cpp, the
+  /// speculative reach).
+  double extra_reach(std::uint32_t i) const {
+    const double com = bodies.com_offset.empty() ? 0.0
+                                                 : dmath::len3(D3{bodies.com_offset[i][0], bodies.com_offset[i][1],
+                                                                  bodies.com_offset[i][2]});
+    return radius(i) + com;
+  }
+  /// With `velocity_at` "origin" (PhysicsBodies::velocity_at_origin): the speeds of the
+  /// origin's motion about the centre of mass before and after the step, |w x R c| summed
+  /// (m/s): the stored velocity was rounded at the origin's magnitude, so the converted
+  /// one carries u of it on each side (free-flight's velocity floor; 0 otherwise).
+  double stored_origin_speed(const FrameRecord& rec, std::uint32_t i) const {
+    if (!bodies.velocity_at_origin || bodies.com_offset.empty() || rec.w_pre.empty() || rec.w_post.empty()) return 0.0;
+    const D3 c{bodies.com_offset[i][0], bodies.com_offset[i][1], bodies.com_offset[i][2]};
+    // |w x R c| <= |w| |c| whatever R: the bound needs no orientation.
+    return dmath::len3(c) * (dmath::len3(dmath::d3(rec.w_pre[i])) + dmath::len3(dmath::d3(rec.w_post[i])));
+  }
+  /// Body i's convex radius (m; 0 without /bodies/convex_radius).
+  double radius(std::uint32_t i) const { return bodies.convex_radius.empty() ? 0.0 : bodies.convex_radius[i]; }
 
   // ---- Rows 1-4 (checked frames with poses) --------------------------------------
   /// Rows 1-4 of a checked frame, each on its own clock.
@@ -439,6 +516,88 @@ struct PhysicsValidators::Impl {
   /// impulses "none": rotating groups whose angular momentum is not judged (the
   /// witness-point lever of its rows needs their impulses).
   std::uint64_t groups_angular_unreported = 0;
+
+  // ---- contacts_complete 0: what the geometry shows apart (apart.cpp) ---------------
+  /// This step's bodies that may touch another body without a row (contacts_complete 0,
+  /// design.md section 13d item 5b): the pairs whose shapes, at the pre-step poses, lie
+  /// within the pair's margin + geometry_slack_m + both bodies' motion through the step
+  /// (NearPairs::reach), by the exact reference (ReferenceGeometry::posed; no answer:
+  /// near). Pairs inside one component of the contact graph are not tested (an impulse
+  /// between them is exchanged within it).
+  struct NearPairs {
+    std::int64_t frame = -1;          ///< the step they are of (-1: none computed)
+    std::vector<std::uint8_t> body;   ///< per body: 1 when in a near pair
+    std::vector<Pair> pairs;          ///< the near pairs (sorted)
+  };
+  NearPairs near;
+  /// Computes `near` for rec's step (states needed; nothing without them).
+  void find_near(const FrameRecord& rec);
+  /// How far body i's shape may move through rec's step (m): the larger of dt |v|, dt |v'|
+  /// and |x' - x|, plus |g| dt^2, plus its reach from its origin times the larger of
+  /// dt |w|, dt |w'| and the turn from q to q'.
+  double step_motion(const FrameRecord& rec, std::uint32_t i) const;
+  /// contacts_complete 0: marks as touching a static body (not isolated) every group of
+  /// `graph` in a near pair with a body outside it; returns how many such groups of 2 or
+  /// more dynamic bodies were isolated before.
+  std::uint64_t open_near_groups(ContactGraph& graph) const;
+  std::uint64_t free_near = 0;     ///< free-flight: body-steps without rows but near a body, not judged
+  std::uint64_t groups_near = 0;   ///< conservation: groups near a body outside them, not judged
+  std::uint64_t near_tested = 0;   ///< pairs the exact reference was asked about
+  std::uint64_t balance_incomplete = 0;  ///< momentum-balance: body-steps not judged (contacts_complete 0)
+
+  // ---- momentum-balance's systematic ratio (balance.cpp; docs/validation.md, "A systematic
+  // impulse ratio") -----------------------------------------------------------------------
+  /// What a row leaves open of a body's friction: a disc of radius u (kg m/s) normal to n.
+  struct BalanceDisc {
+    D3 n;
+    double u = 0;
+  };
+  /// A body-step whose linear balance failed at ratio 1: judged again in results() at the
+  /// fitted ratio (it fails only where it fails at both).
+  struct DeferredBalance {
+    std::int64_t frame = 0;
+    std::uint32_t body = 0, rows = 0;
+    D3 mdv, force;              ///< m (v' - v - g dt) and its rows' impulses summed (kg m/s)
+    double float_bound = 0;     ///< the rounding bound (kg m/s)
+    double r1 = 0;              ///< its figure at ratio 1 (of the bound)
+    std::size_t disc_first = 0, disc_count = 0;  ///< its discs in deferred_discs
+  };
+  /// At most this many deferred body-steps (and their discs) are kept; the rest stay failures
+  /// at ratio 1 (counted: deferred_over).
+  static constexpr std::size_t kMaxDeferred = std::size_t(1) << 18;
+  std::vector<DeferredBalance> deferred;
+  std::vector<BalanceDisc> deferred_discs;
+  std::uint64_t deferred_over = 0;
+  /// The fit's sample: s = (J . d) / (m dv . d) (reported impulses over the momentum change)
+  /// of body-steps whose s the record fixes to kFitPrecision along d (m dv's direction or a
+  /// row's normal: the open friction there and the rounding at most that of m dv . d), in
+  /// bins of kFitBin over [1 - kFitSpan, 1 + kFitSpan].
+  static constexpr double kFitPrecision = 1e-3, kFitBin = 1e-6, kFitSpan = 0.1;
+  /// A ratio beyond 1 +- this is itself a failure (the row's `ratio` cause, one finding).
+  static constexpr double kBiasMax = 0.01;
+  /// Fewer samples than this: no ratio is fitted (ratio 1).
+  static constexpr std::uint64_t kFitMinSamples = 10;
+  std::vector<std::uint64_t> ratio_bins;
+  std::uint64_t ratio_below = 0, ratio_above = 0;
+  /// Adds one body-step's s to the fit's sample.
+  void sample_ratio(double s);
+  /// The fitted ratio: the sample's median (its bin's centre), quartiles, size; `fitted`
+  /// when the sample has kFitMinSamples or more, `bias` when it lies beyond kBiasMax.
+  struct BalanceFit {
+    double ratio = 1, q1 = 1, q3 = 1;
+    std::uint64_t samples = 0;
+    bool fitted = false, bias = false;
+  };
+  BalanceFit balance_fit() const;
+  /// The linear balance's figure of a body-step at impulse ratio s: |m dv - J / s| along the
+  /// residual and each disc's normal, over the discs' support there plus the rounding;
+  /// `open_along`: the support of the worst direction.
+  static double balance_figure(const D3& mdv, const D3& force, const BalanceDisc* discs, std::size_t count,
+                               double float_bound, double s, double* open_along);
+  /// balance_lin with the deferred body-steps judged at `fit` (failures where they fail at
+  /// both ratio 1 and fit.ratio), and the fit's own finding (a ratio beyond kBiasMax) apart.
+  physics_detail::Tally fitted_balance(const BalanceFit& fit) const;
+  physics_detail::Tally balance_bias(const BalanceFit& fit) const;
 };
 
 }  // namespace octocd

@@ -234,6 +234,21 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail += fmt::format("; manifold_points \"persistent\": {} row points not judged (they ride on each body "
                               "and may drift off the shapes)",
                               s.points_persistent);
+    if (s.depth_unknown_pairs)
+      r.detail += fmt::format("; depth n/a on {} pairs: depth_per \"unknown\" (the rows carry no depth; penetration "
+                              "is judged on the posed shapes)",
+                              s.depth_unknown_pairs);
+    if (s.depth_manifold_pairs)
+      r.detail += fmt::format("; depth_per \"manifold\": {} convex pairs' one depth judged against the hulls' overlap "
+                              "along the manifold's normal",
+                              s.depth_manifold_pairs);
+    if (s.depth_spared_as_manifold)
+      r.detail += fmt::format("; depth_per undeclared: {} pairs' depth fits the hulls' overlap along the row's normal "
+                              "(a manifold's depth), not SAT's minimum: passed; declare depth_per to sharpen the "
+                              "verdict",
+                              s.depth_spared_as_manifold);
+    if (s.rounded_pairs)
+      r.detail += fmt::format("; {} pair-frames judged on shapes rounded by /bodies/convex_radius", s.rounded_pairs);
     out.push_back(r);
   }
   // 4. Penetration.
@@ -342,6 +357,11 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                  : std::string("n/a: translation-only records (no orientation or angular "
                                                "velocity), contact torques are not modelled"));
     }
+    if (!s.bodies.contacts_complete)
+      r.detail += fmt::format("; contacts_complete 0: {} group-frames near a body outside them (shapes within the "
+                              "margin and the step's motion by the exact reference) not judged, an unreported contact "
+                              "may join them",
+                              s.groups_near);
     if (s.groups_angular_unreported)
       r.detail += fmt::format("; angular momentum not judged on {} group-frames: the trace declares impulses = "
                               "\"none\" (the witness-point lever of a row needs its impulse)",
@@ -384,9 +404,13 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     const RowInfo& info = row_info(RowId::MomentumBalance);
     ValidationResult r = row(info, "bodies whose velocity change is not their rows' impulses",
                              "balance_ulps,friction_direction_speed");
-    r.measured = double(s.balance_lin.failures + s.balance_ang.failures);
+    // The linear balance judged at the fitted systematic ratio too, and the ratio itself
+    // (docs/validation.md, "A systematic impulse ratio").
+    const auto fit = s.balance_fit();
+    const Tally lin = s.fitted_balance(fit), bias = s.balance_bias(fit);
+    r.measured = double(lin.failures + s.balance_ang.failures + bias.failures);
     r.pass = r.measured == 0;
-    r.applicable = s.balance_lin.checks + s.balance_ang.checks > 0;
+    r.applicable = lin.checks + s.balance_ang.checks > 0;
     const std::string extras =
         (s.balance_locked ? fmt::format("; {} body-steps with locked axes (those components n/a: a joint's impulses "
                                         "are not in the rows)",
@@ -406,6 +430,12 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.applicable = false;
       r.detail = "n/a: the trace declares impulses = \"none\" (the engine reports no impulse): a body's velocity "
                  "change cannot be held to its rows' impulses; conservation judges the isolated groups";
+    } else if (!s.bodies.contacts_complete) {
+      r.applicable = false;
+      r.detail = fmt::format("n/a: the trace declares contacts_complete = 0: {} body-steps in contact not judged (a "
+                             "row the engine did not report would read as a fault); free-flight and conservation "
+                             "judge the bodies and groups the geometry shows apart",
+                             s.balance_incomplete);
     } else if (!s.bodies.impulses_complete) {
       r.applicable = false;
       r.detail = fmt::format("n/a: the record holds the impulses of the first of response.iterations = {} "
@@ -416,8 +446,8 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail = s.state_frames ? "no dynamic body with contact rows in a step with states"
                                 : "no states (a trace: add /states/position and /states/velocity)";
     } else {
-      r.detail = fmt::format("{} body-steps: linear worst {:.3g} of its bound; angular {}", s.balance_lin.checks,
-                             s.balance_lin.worst_or(0.0),
+      r.detail = fmt::format("{} body-steps: linear worst {:.3g} of its bound; angular {}", lin.checks,
+                             lin.worst_or(0.0),
                              s.balance_ang.checks
                                  ? fmt::format("{} body-steps, worst {:.3g} of its bound{}", s.balance_ang.checks,
                                                s.balance_ang.worst_or(0.0), spin_note(s.bodies.gyroscopic, s.balance_ang_plain,
@@ -428,11 +458,25 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                                      s.balance_rot_locked)
                                        : std::string("n/a: no rotation or no contact points (torques unknown)"));
       r.detail += extras;
+      r.detail +=
+          fit.fitted
+              ? fmt::format("; impulse ratio {:.5f} (reported impulses over the momentum change: the median over {} "
+                            "body-steps, quartiles {:.5f} .. {:.5f}; {}), the linear balance judged at 1 and at it: "
+                            "{} body-steps failing at 1 pass at it",
+                            fit.ratio, fit.samples, fit.q1, fit.q3,
+                            fit.bias ? fmt::format("beyond the {:.3g}% a systematic ratio may take", 100.0 * s.kBiasMax)
+                                     : fmt::format("within the {:.3g}% a systematic ratio may take", 100.0 * s.kBiasMax),
+                            s.deferred.size() - (lin.failures - s.balance_lin.failures))
+              : fmt::format("; impulse ratio not fitted ({} body-steps fix it to {:.3g}, {} needed)", fit.samples,
+                            s.kFitPrecision, s.kFitMinSamples);
+      if (s.deferred_over)
+        r.detail += fmt::format("; {} failing body-steps beyond the {} kept for the fit judged at ratio 1",
+                                s.deferred_over, s.kMaxDeferred);
       if (s.bodies.impulses == PhysicsBodies::Impulses::NormalOnly)
         r.detail += "; impulses \"normal-only\": each body's residual m (v' - v) - m g dt - sum jn n within the sum "
                     "of its rows' cones (mu jn), jt and jt3 not read";
-      fill_causes(r, info, {&s.balance_lin, &s.balance_ang});
-      r.judged = s.balance_lin.checks;
+      fill_causes(r, info, {&lin, &s.balance_ang, &bias});
+      r.judged = lin.checks;
     }
     out.push_back(r);
   }
@@ -467,6 +511,11 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                     "orientation, a failure only where every integrator fails (declare integrator, and substeps, to "
                     "sharpen the verdict)";
     }
+    if (!s.bodies.contacts_complete)
+      r.detail += fmt::format("; contacts_complete 0: only bodies the exact reference shows apart from every other "
+                              "body through the step (beyond the margin and both bodies' motion) are judged free; {} "
+                              "body-steps without rows but near a body not judged ({} pairs tested)",
+                              s.free_near, s.near_tested);
     if (r.applicable) {
       if (s.free_sleep.checks + s.fell_asleep)
         r.detail += fmt::format("; {} body-steps asleep through the step judged not to move (worst {:.3g} of one "

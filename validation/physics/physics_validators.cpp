@@ -195,6 +195,16 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
       bad("locked_dofs", fmt::format("body {}: {}; allowed: 0 .. 63 (6 bits)", i, unsigned(bodies.locked_dofs[i])));
   if (!(bodies.slop >= 0) || !std::isfinite(bodies.slop))
     bad("slop", fmt::format("{}; allowed: finite >= 0 m", bodies.slop));
+  if (!bodies.convex_radius.empty() && bodies.convex_radius.size() != n)
+    bad("convex_radius", fmt::format("{} values for {} bodies; allowed: 0 or {}", bodies.convex_radius.size(), n, n));
+  for (std::size_t i = 0; i < bodies.convex_radius.size(); ++i)
+    if (!(bodies.convex_radius[i] >= 0) || !std::isfinite(bodies.convex_radius[i]))
+      bad("convex_radius", fmt::format("body {}: {}; allowed: finite >= 0 m", i, bodies.convex_radius[i]));
+  if (!bodies.com_offset.empty() && bodies.com_offset.size() != n)
+    bad("com_offset", fmt::format("{} offsets for {} bodies; allowed: 0 or {}", bodies.com_offset.size(), n, n));
+  for (std::size_t i = 0; i < bodies.com_offset.size(); ++i)
+    for (double c : bodies.com_offset[i])
+      if (!std::isfinite(c)) bad("com_offset", fmt::format("body {}: {}; allowed: finite (m, body frame)", i, c));
 
   s.mass.assign(n, 0.0);
   s.inertia.assign(n, M3{});
@@ -276,11 +286,13 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   if (poses) {
     for (std::size_t i = 0; i < n; ++i) det[i] = detection_pose(*s.model, rec, i);
   } else if (rec.x_pre.size() == n) {
-    // No detection pose: the pre-step pose serves the contact-point lever arms.
-    for (std::size_t i = 0; i < n; ++i) det[i] = Pose{rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{}};
+    // No detection pose: the pre-step pose (its body frame) serves the contact-point lever arms.
+    for (std::size_t i = 0; i < n; ++i)
+      det[i] = s.frame_pose(rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{}, static_cast<std::uint32_t>(i));
   }
   if (checked && poses) s.geometry(rec, det);
   s.friction(rec, det);
+  if (!s.bodies.contacts_complete) s.find_near(rec);  // apart.cpp
   s.conservation(rec);
   s.balance(rec, det);
 }

@@ -344,7 +344,7 @@ class TraceIn {
     p.restitution_combine = combine_attr("restitution_combine", combines);
     if (has_attr("contact_margin")) p.contact_margin = number_attr("contact_margin", 0.0);
     read_locked_dofs(p);
-    read_shape_offsets();
+    read_shape_offsets(p);
 
     // Per-body tables.
     Dataset inertia = open("/bodies/inertia", H5T_FLOAT, 3, false);
@@ -491,11 +491,12 @@ class TraceIn {
       p.contacts_complete = v == 1.0;
     }
     p.persistent_points = choice_attr("manifold_points", {"fixed", "persistent"}, "fixed") == "persistent";
-    if (has_attr("depth_per") && string_attr("depth_per") == "unknown")
-      bad("/ (root attribute depth_per)", "\"unknown\": not yet judged (design.md section 13d item 5b)",
-          "\"point\" (default: each row's own depth) or \"manifold\" (each row its manifold's deepest depth); "
-          "an engine without depths cannot be judged yet");
-    p.depth_per_manifold = choice_attr("depth_per", {"point", "manifold"}, "point") == "manifold";
+    {
+      const std::string depth_per = choice_attr("depth_per", {"point", "manifold", "unknown"}, "point");
+      p.depth_per_manifold = depth_per == "manifold";
+      p.depth_unknown = depth_per == "unknown";
+      p.depth_per_declared = has_attr("depth_per");
+    }
     if (has_attr("friction_directions")) {
       const double d = number_attr("friction_directions", 0.0);
       if (d != 1.0 && d != 2.0)
@@ -559,29 +560,69 @@ class TraceIn {
     }
   }
 
-  /// /bodies/convex_radius (n) and /bodies/com_offset (n x 3): read; only zeros are
-  /// judged yet (design.md section 13d items 4 and 5d): a rounded shape or a body origin
-  /// off its centre of mass is refused, naming the body, rather than judged wrongly.
-  void read_shape_offsets() {
+  /// /bodies/convex_radius (n, m, >= 0: PhysicsBodies::convex_radius) and
+  /// /bodies/com_offset (n x 3, m, body frame: the centre of mass relative to the body
+  /// frame's origin that /states/position gives; with a nonzero offset the root attribute
+  /// `velocity_at` says which point /states/velocity is the velocity of). The records'
+  /// states are turned into the centres of mass (com_state); the detection poses stay the
+  /// body frame's (the shapes are placed in it).
+  void read_shape_offsets(PhysicsBodies& p) {
     Dataset radius = open("/bodies/convex_radius", H5T_FLOAT, 1, false);
     if (radius.present()) {
       expect(radius, {n_}, fmt::format("{} values, one per body (as /bodies/inverse_mass)", n_));
       const std::vector<double> r = read<double>(radius, 0, n_);
-      for (hsize_t i = 0; i < n_; ++i)
-        if (r[i] != 0.0)
+      bool any = false;
+      for (hsize_t i = 0; i < n_; ++i) {
+        if (!(r[i] >= 0.0 && r[i] <= trace_limits::kMaxCoordinate))
           bad(radius.name, fmt::format("body {}: {}", i, r[i]),
-              "0 for every body: rounded shapes are not judged yet (design.md section 13d item 4); write the "
-              "radius into the shape the engine collided, or leave the dataset out");
+              fmt::format("a radius in [0, {:g}] m per body: the shape the engine collided is the body's shape "
+                          "inflated by it (0: not rounded)",
+                          trace_limits::kMaxCoordinate));
+        any = any || r[i] > 0.0;
+      }
+      if (any) p.convex_radius = r;
     }
     Dataset com = open("/bodies/com_offset", H5T_FLOAT, 2, false);
     if (com.present()) {
       expect(com, {n_, 3}, fmt::format("{} x 3, one offset per body (m, body frame)", n_));
       const std::vector<double> c = read<double>(com, 0, n_);
+      bool any = false;
       for (hsize_t i = 0; i < n_; ++i)
-        if (c[3 * i] != 0.0 || c[3 * i + 1] != 0.0 || c[3 * i + 2] != 0.0)
-          bad(com.name, fmt::format("body {}: ({}, {}, {})", i, c[3 * i], c[3 * i + 1], c[3 * i + 2]),
-              "(0, 0, 0) for every body: a position away from the centre of mass is not judged yet (design.md "
-              "section 13d item 5d); write the centre of mass's position, or re-centre the mesh");
+        for (int k = 0; k < 3; ++k) {
+          if (!(std::fabs(c[3 * i + k]) <= trace_limits::kMaxCoordinate))
+            bad(com.name, fmt::format("body {}: component {}: {}", i, k, c[3 * i + k]),
+                fmt::format("|offset| <= {:g} m per component (the centre of mass in the body frame)",
+                            trace_limits::kMaxCoordinate));
+          any = any || c[3 * i + k] != 0.0;
+        }
+      if (any) {
+        p.com_offset.resize(n_);
+        for (hsize_t i = 0; i < n_; ++i) p.com_offset[i] = {c[3 * i], c[3 * i + 1], c[3 * i + 2]};
+        com_offset_ = p.com_offset;
+        if (!has_attr("velocity_at"))
+          bad("/ (root attribute velocity_at)", "missing (with a nonzero /bodies/com_offset)",
+              "\"com\" (/states/velocity is the centre of mass's velocity: Jolt, PhysX, Rapier) or \"origin\" "
+              "(the body frame origin's, the derivative of /states/position: MuJoCo's free joint)");
+        velocity_at_origin_ = choice_attr("velocity_at", {"com", "origin"}, "com") == "origin";
+        p.velocity_at_origin = velocity_at_origin_;
+      }
+    }
+    if (com_offset_.empty() && has_attr("velocity_at"))
+      choice_attr("velocity_at", {"com", "origin"}, "com");  // checked; the same point without an offset
+  }
+
+  /// With a nonzero /bodies/com_offset: the state's positions (and, with `velocity_at`
+  /// "origin", velocities) of the body frame's origin turned into its centre of mass's,
+  /// x_c = x + R c and v_c = v + w x (R c), so every rule on states (momentum-balance,
+  /// free-flight, conservation) judges the centre of mass.
+  void com_state(std::vector<Vec3>& x, std::vector<Vec3>& v, const std::vector<Quat>& q,
+                 const std::vector<Vec3>& w) const {
+    for (std::size_t i = 0; i < x.size() && i < com_offset_.size(); ++i) {
+      const auto& c = com_offset_[i];
+      const Vec3 cb{static_cast<float>(c[0]), static_cast<float>(c[1]), static_cast<float>(c[2])};
+      const Vec3 rc = q.empty() ? cb : rotate(q[i], cb);
+      x[i] = x[i] + rc;
+      if (velocity_at_origin_ && i < v.size() && !w.empty()) v[i] = v[i] + cross(w[i], rc);
     }
   }
 
@@ -642,6 +683,10 @@ class TraceIn {
           Vec3 v = rec.v_pre[i];
           integrate(rec.x_det[i], v, bodies.inverse_mass[i], det_gravity_, Vec3{}, det_dt_);
         }
+      if (!com_offset_.empty()) {  // the states at the centres of mass; x_det stays the origin
+        com_state(rec.x_pre, rec.v_pre, rec.q_pre, rec.w_pre);
+        com_state(rec.x_post, rec.v_post, rec.q_post, rec.w_post);
+      }
     }
     rec.manifolds = true;
     if (info.has_contacts) {
@@ -950,6 +995,10 @@ class TraceIn {
   // Version 2.
   Dataset orientation_, angular_, c_point_, sleeping_;
   bool integrated_ = false;  ///< root attribute detection = "integrated"
+  /// /bodies/com_offset (body frame, m; empty: every offset 0) and root attribute
+  /// `velocity_at` "origin" (read_shape_offsets, com_state).
+  std::vector<std::array<double, 3>> com_offset_;
+  bool velocity_at_origin_ = false;
   float det_dt_ = 0.001f;    ///< dt and gravity of the "integrated" detection pose
   Vec3 det_gravity_{};
   std::vector<std::int64_t> pair_offsets_, contact_offsets_;

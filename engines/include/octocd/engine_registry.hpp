@@ -41,6 +41,17 @@ struct EngineInfo {
   /// it in process (cpu, cuda); false: judged as a version 2 external trace when it
   /// records (bullet: hull mode, its default, or rotation; box mode records nothing).
   bool records_every_step = false;
+  /// It steps the K copies of `run --worlds K` as one world (octocd/worlds.hpp: cpu,
+  /// cuda); false: it steps one scene per run and runs the copies as separate runs
+  /// (octocd/world_copies.hpp).
+  bool batched_worlds = false;
+  /// It steps with OpenMP threads on the host (cpu): `validate --determinism` runs it at 1
+  /// and N threads (omp_set_num_threads) and compares; false: it steps on one host thread
+  /// (or a device), so the thread-count row is n/a.
+  bool openmp_threads = false;
+  /// The engine that runs the same pipeline on the other kind of processor ("cuda" for
+  /// cpu, "cpu" for cuda), "" for none: `validate --determinism` compares the two bit for bit.
+  std::string device_twin;
   /// What it can collide a body as, one per setting it has (the speed-accuracy sweep's
   /// `geometry`): {"mesh"} for octocd's narrow phase on the meshes; {"hull", "box"} for an
   /// engine with a shape setting (bullet: BulletSettings::shape).

@@ -288,19 +288,53 @@ struct PhysicsBodies {
   /// dt (|v_a - v_b| + |w_a| R_a + |w_b| R_b) (R: the body's reach from its origin,
   /// velocities the larger of before and after the step; not judged without states).
   bool speculative = false;
-  /// `contacts_complete` 0: the engine's API may drop contact rows (Havok). Read, not yet
-  /// used (design.md section 13d item 5b): the rows that take a body without rows as free
-  /// or need every row (contact-completeness, conservation, momentum-balance,
-  /// free-flight) are n/a, naming it.
+  /// `contacts_complete` 0: the engine's API may drop contact rows (Havok). free-flight and
+  /// conservation judge only the bodies and groups the exact reference shows apart from
+  /// every other body through the step (docs/validation.md, "Incomplete contact
+  /// reporting"); contact-completeness and momentum-balance are n/a, naming it.
   bool contacts_complete = true;
   /// `manifold_points` "persistent": a row's points ride on each body and may drift off
   /// the shapes. Read, not yet used beyond this: contact-geometry's point check is not
   /// applied (counted); normals and depths are judged.
   bool persistent_points = false;
-  /// `depth_per` "manifold": each row carries its manifold's deepest depth. Judged as
-  /// "point": contact-geometry judges each pair's deepest row, and a row's point may lie
-  /// within its (larger) depth of the surfaces.
+  /// `depth_per` "manifold": each row carries its manifold's one depth (Jolt's
+  /// mPenetrationDepth). contact-geometry judges one depth per pair: its deepest row's
+  /// depth against the exact reference's penetration along that row's normal (two convex
+  /// polytopes: the overlap of their hulls projected on the normal, >= the minimum
+  /// translation; other shapes: the minimum translation, as "point"); a row's point may
+  /// lie within that (larger) depth of the surfaces.
   bool depth_per_manifold = false;
+  /// `depth_per` "unknown": the rows carry no depth of their own (Havok's witness points).
+  /// contact-geometry's depth cause is n/a (counted, named), no row's depth decides
+  /// whether its normal is judged, and the point check takes the reference's depth;
+  /// penetration is still judged on the posed shapes. The rows' depth is still read as
+  /// the witness points' lever (momentum-balance, conservation, friction): write the
+  /// witness points' separation along the normal, or 0.
+  bool depth_unknown = false;
+  /// `depth_per` declared. Undeclared admits "point" and "manifold": a pair's depth fails
+  /// only where it misses both SAT's minimum and the hulls' overlap along its deepest row's
+  /// normal ("unknown" is never assumed: it gives the depth judgement up).
+  bool depth_per_declared = true;
+  /// `/bodies/convex_radius` (m, >= 0; empty: every body 0): each body is collided as its
+  /// shape inflated by this radius (the Minkowski sum with a sphere: Jolt's convex radius,
+  /// Box2D's rounded polygons). Every geometric rule judges the rounded shapes: their
+  /// distance is the posed shapes' minus the radii sum, their depth the posed shapes' plus
+  /// it (exact for a Minkowski sum with a sphere); candidates grow by the radius.
+  std::vector<double> convex_radius;
+  /// `/bodies/com_offset` (m, body frame; empty: every body's position is its centre of
+  /// mass): where each body's centre of mass lies relative to the point its position gives
+  /// (MuJoCo's free joint integrates the body frame's origin). The trace reader turns the
+  /// records' states into the centres of mass (x + R c; with `velocity_at` "origin" also
+  /// v + w x R c), so the rules on states judge the centre of mass; the detection poses
+  /// stay the body frame's, where the shapes are placed. Records fed to PhysicsValidators
+  /// directly follow the same split: states (x_pre, x_post, v_pre, v_post) of the centres
+  /// of mass, detection poses (x_det, q_det) of the body frames; the rows' levers start at
+  /// x_det + R c. One offset per body, finite, or none (else InputError).
+  std::vector<std::array<double, 3>> com_offset;
+  /// With com_offset: the root attribute `velocity_at` "origin" (the stored velocity was the
+  /// origin's, converted by the reader); free-flight's velocity floor takes the stored
+  /// magnitude (docs/validation.md, "Floors").
+  bool velocity_at_origin = false;
   /// The engine is design.md section 6's Jacobi response (octocd's cpu and cuda): an energy failure of
   /// an isolated group is reported as the model's property (its Jacobi-summed impulses
   /// computed from one pre-response state overshoot on chains), not as an engine fault.

@@ -1,0 +1,181 @@
+"""The report's divergence section (design.md section 20, after Chung and Pollard, CAVW 2016;
+docs/predictability.md): results of `octocd bench` sweeps of kind `divergence`
+(docs/bench-format.md), per scene
+
+- a plot of the mean distance of the bodies from the unperturbed run over time, log scale, one
+  colour per engine and one line per eps of the ladder (darker: larger eps);
+- a table of the fitted growth exponents (1/s) per engine and eps, with the distance at the
+  first and last frame;
+- a table of the points not measured (skipped, failed) with their reasons.
+
+Called by make_report.py (`section(doc, g, h)`, `check_point(where, p, fail)`,
+`write_csv(path, g)`): `doc` is the report's Doc, `g` a merged sweep, `h` the shared helpers.
+"""
+import csv
+import io
+import math
+
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+KIND = "divergence"
+STATUSES = ("ok", "skipped", "failed")
+COLORS = ["#4e79a7", "#e15759", "#59a14f", "#f28e2b", "#76b7b2", "#b07aa1", "#9c755f", "#edc948", "#ff9da7",
+          "#bab0ac"]
+MAX_FRAMES = 1000001  # mean_m and max_m per point, at most (a sweep's frames + 1)
+
+INTRO = ("Per scene and engine, copies of the scene whose dynamic bodies start eps metres from their place (a "
+         "seeded random direction per body and copy) run beside the unperturbed run; the plot shows the mean "
+         "distance of the bodies from the unperturbed run over time (log scale; a distance of 0, a copy still bit "
+         "for bit on the unperturbed run, cannot be drawn on a log axis and is left out). A regular scene keeps "
+         "the distance near eps (a resting stack: the solver may even pull it back); a chaotic one (a pile) "
+         "grows it by orders of magnitude until it saturates at the scene's size. The growth exponent lambda is "
+         "the least-squares slope of ln(mean distance) over time over the whole run (d(t) ~ d0 exp(lambda t)); "
+         "saturation lowers it, so read it beside the plot. Positions are float32: an eps below a body's "
+         "coordinate resolution (about 6e-8 m at 1 m, 1e-6 m at 10 m) rounds away, and the distance at frame 0 "
+         "says what remained.")
+
+
+def _number(x):
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def check_point(where, p, fail):
+    """The fields this section reads, checked on one point of a divergence result: one line
+    naming the file, point and key through `fail` (exit 2)."""
+    if p.get("status") not in STATUSES:
+        fail(f"{where}.status: {p.get('status')!r}; allowed: {', '.join(STATUSES)}")
+    par = p.get("params")
+    if not isinstance(par, dict) or not isinstance(par.get("scene"), str) or not isinstance(par.get("engine"), str):
+        fail(f"{where}.params: {str(par)[:60]}; allowed: an object with strings scene and engine")
+    if not (_number(p.get("eps_m")) and math.isfinite(p["eps_m"]) and 0 <= p["eps_m"] <= 1):
+        fail(f"{where}.eps_m: {p.get('eps_m')!r}; allowed: a perturbation in metres in [0, 1]")
+    if p["status"] != "ok":
+        return
+    if not (_number(p.get("dt")) and math.isfinite(p["dt"]) and p["dt"] > 0):
+        fail(f"{where}.dt: {p.get('dt')!r}; allowed: a time step in seconds > 0")
+    for key in ("mean_m", "max_m"):
+        v = p.get(key)
+        if not isinstance(v, list) or not 1 <= len(v) <= MAX_FRAMES or not all(
+                x is None or (_number(x) and x >= 0) for x in v):
+            fail(f"{where}.{key}: {str(v)[:60]}; allowed: a list of distances >= 0 (m) or null, one per frame")
+    if len(p["mean_m"]) != len(p["max_m"]):
+        fail(f"{where}.max_m: {len(p['max_m'])} frames, mean_m {len(p['mean_m'])}; allowed: one per frame each")
+    e = p.get("exponent_per_s")
+    if e is not None and not (_number(e) and math.isfinite(e)):
+        fail(f"{where}.exponent_per_s: {e!r}; allowed: a number (1/s) or null")
+
+
+def _scene(p):
+    return p.get("params", {}).get("scene", "?")
+
+
+def _engine(p):
+    return p.get("params", {}).get("engine", "?")
+
+
+def _sci(v):
+    return "-" if not _number(v) else ("0" if v == 0 else f"{v:.3g}")
+
+
+def _slug(text):
+    return "".join(c if c.isalnum() else "-" for c in text).strip("-").lower() or "scene"
+
+
+def plot_scene(doc, scene, pts):
+    """One figure: mean distance over time per engine and eps, log scale; False when nothing to draw."""
+    ok = [p for p in pts if p.get("status") == "ok"]
+    engines = list(dict.fromkeys(_engine(p) for p in ok))
+    eps_all = sorted({p["eps_m"] for p in ok})
+    drawn = False
+    fig, ax = plt.subplots(figsize=(8.0, 4.6))
+    for ei, e in enumerate(engines):
+        colour = COLORS[ei % len(COLORS)]
+        mine = sorted((p for p in ok if _engine(p) == e), key=lambda p: p["eps_m"])
+        for p in mine:
+            rank = eps_all.index(p["eps_m"])
+            alpha = 0.35 + 0.65 * (rank + 1) / max(len(eps_all), 1)
+            t = [f * p["dt"] for f in range(len(p["mean_m"]))]
+            y = [v if _number(v) and v > 0 else float("nan") for v in p["mean_m"]]
+            if all(math.isnan(v) for v in y):
+                continue
+            ax.plot(t, y, color=colour, alpha=alpha, lw=1.2,
+                    label=e if p is mine[-1] or not drawn else None)
+            drawn = True
+    if not drawn:
+        plt.close(fig)
+        return False
+    ax.set_yscale("log")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("mean distance from the unperturbed run (m, log scale)")
+    ax.set_title(f"{scene}: divergence over time (one line per eps {', '.join(_sci(x) for x in eps_all)} m; "
+                 "darker: larger eps)", fontsize=9)
+    handles, labels = ax.get_legend_handles_labels()
+    seen = {}
+    for hd, lb in zip(handles, labels):
+        seen.setdefault(lb, hd)
+    ax.legend(seen.values(), seen.keys(), fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.14),
+              ncol=min(len(seen), 6))
+    doc.figure(fig, f"divergence-{_slug(scene)}",
+               f"{scene}: mean distance of the bodies from the unperturbed run over time, log scale; colour: engine, "
+               "one line per eps (darker: larger); frames at distance 0 are left out")
+    return True
+
+
+def exponent_table(doc, scene, pts):
+    ok = [p for p in pts if p.get("status") == "ok"]
+    if not ok:
+        return
+    rows = []
+    for p in sorted(ok, key=lambda p: (list(dict.fromkeys(_engine(q) for q in ok)).index(_engine(p)), p["eps_m"])):
+        e = p.get("exponent_per_s")
+        rows.append([_engine(p), _sci(p["eps_m"]), p.get("copies", "-"), _sci(p["mean_m"][0]), _sci(p["mean_m"][-1]),
+                     _sci(max((x for x in p["max_m"] if _number(x)), default=None)),
+                     f"{e:.3g}" if _number(e) else "- (" + str(p.get("exponent_reason", "none"))[:80] + ")"])
+    doc.table(["engine", "eps (m)", "copies", "mean distance at frame 0 (m)", "at the last frame (m)",
+               "largest distance (m)", "growth exponent (1/s)"], rows,
+              f"{scene}: the growth exponent is the least-squares slope of ln(mean distance) over time over the "
+              "whole run; ~0: the distance stays where it started; > 0: it grows (chaos, or a resting contact "
+              "broken); < 0: the solver pulls the copies back.", name=f"divergence-{_slug(scene)}")
+
+
+def lost_table(doc, pts):
+    lost = [p for p in pts if p.get("status") != "ok"]
+    if not lost:
+        return
+    doc.table(["status", "scene", "engine", "eps (m)", "reason"],
+              [[p.get("status"), _scene(p), _engine(p), _sci(p.get("eps_m")), str(p.get("reason", ""))[:300]]
+               for p in lost], "Not measured: why each engine did not run the scene.", name="divergence-lost")
+
+
+def section(doc, g, h):
+    """The divergence section of merged sweep g."""
+    pts = g["points_list"]
+    doc.p(INTRO)
+    for scene in dict.fromkeys(_scene(p) for p in pts):
+        mine = [p for p in pts if _scene(p) == scene]
+        doc.h(3, f"{scene}")
+        if not plot_scene(doc, scene, mine):
+            doc.p(f"{scene}: no distance above 0 to draw (every copy bit for bit on the unperturbed run, or no "
+                  "engine ran it).", "note")
+        exponent_table(doc, scene, mine)
+    lost_table(doc, pts)
+
+
+def write_csv(path, g):
+    """The sweep as data: per point and frame the mean and max distance (m) and the point's exponent."""
+    f = io.StringIO(newline="")
+    w = csv.writer(f)
+    w.writerow(["sweep", "scene", "engine", "eps [m]", "copies", "frame", "t [s]", "mean_distance [m]",
+                "max_distance [m]", "exponent [1/s]", "status"])
+    name = g["first"]["sweep"]["name"]
+    for p in g["points_list"]:
+        if p.get("status") != "ok":
+            w.writerow([name, _scene(p), _engine(p), p.get("eps_m"), p.get("copies"), "", "", "", "", "",
+                        p.get("status")])
+            continue
+        for fr, (m, x) in enumerate(zip(p["mean_m"], p["max_m"])):
+            w.writerow([name, _scene(p), _engine(p), p["eps_m"], p.get("copies"), fr, fr * p["dt"], m, x,
+                        p.get("exponent_per_s"), "ok"])
+    return f.getvalue()

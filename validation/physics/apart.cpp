@@ -1,0 +1,108 @@
+// contacts_complete 0 (design.md section 13d item 5b; physics_impl.hpp): an engine whose API
+// may drop contact rows (Havok's "collision finished" events carry no impulse) is judged on
+// the geometry. free-flight judges a body without rows only where the exact reference
+// shows it apart from every other body through the whole step, and conservation judges a
+// group only where it is apart from every body outside it: an unreported contact is never
+// a false alarm, and a body edited in free flight still fails (docs/validation.md,
+// "Incomplete contact reporting").
+#include "physics_impl.hpp"
+
+#include "../src/row_clock.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "octocd/exact_pairs.hpp"
+#include "octocd/reference_contact.hpp"
+
+namespace octocd {
+
+using namespace dmath;
+using namespace physics_detail;
+
+double PhysicsValidators::Impl::step_motion(const FrameRecord& rec, std::uint32_t i) const {
+  const std::size_t n = model->bodies.size();
+  const double dt = model->scene.dt;
+  const D3 g = d3(model->scene.gravity);
+  const double linear = std::max({dt * len3(d3(rec.v_pre[i])), dt * len3(d3(rec.v_post[i])),
+                                  len3(d3(rec.x_post[i]) - d3(rec.x_pre[i]))}) +
+                        len3(g) * dt * dt;
+  if (rec.q_pre.size() != n || rec.q_post.size() != n || rec.w_pre.size() != n || rec.w_post.size() != n)
+    return linear;
+  // The turn from q to q' (sign of q ignored) and the spin's own turn through the step.
+  const Quat a = rec.q_pre[i], b = rec.q_post[i];
+  const double na = std::sqrt(double(a.w) * a.w + double(a.x) * a.x + double(a.y) * a.y + double(a.z) * a.z);
+  const double nb = std::sqrt(double(b.w) * b.w + double(b.x) * b.x + double(b.y) * b.y + double(b.z) * b.z);
+  const double c = std::fabs(double(a.w) * b.w + double(a.x) * b.x + double(a.y) * b.y + double(a.z) * b.z) /
+                   (na * nb > 0 ? na * nb : 1.0);
+  const double turn = std::max({2.0 * std::acos(std::min(1.0, c)), dt * len3(d3(rec.w_pre[i])),
+                                dt * len3(d3(rec.w_post[i]))});
+  // The farthest point of the local box from the body's origin.
+  const Aabb& box = model->local_box(i);
+  const double reach = len3(D3{std::max(std::fabs(double(box.min.x)), std::fabs(double(box.max.x))),
+                               std::max(std::fabs(double(box.min.y)), std::fabs(double(box.max.y))),
+                               std::max(std::fabs(double(box.min.z)), std::fabs(double(box.max.z)))});
+  // From the states' point (the centre of mass), the rounded surface reaches extra_reach farther.
+  return linear + (reach + extra_reach(i)) * std::min(turn, 2.0);  // a chord never exceeds the diameter
+}
+
+void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
+  const std::size_t n = model->bodies.size();
+  near.frame = -1;
+  near.body.assign(n, 0);
+  near.pairs.clear();
+  if (rec.x_pre.size() != n || rec.v_pre.size() != n || rec.x_post.size() != n || rec.v_post.size() != n) return;
+  near.frame = rec.frame;
+  StopPoll poll(stop);
+  const bool oriented = rec.q_pre.size() == n;
+  const double slack = tol.geometry_slack_m;
+  // Candidates: each body's exact AABB at its pre-step pose grown by its motion through
+  // the step plus half the largest margin and the slack (exact_pairs). Two shapes that come
+  // within margin + slack of each other during the step are within that plus both motions
+  // at the pre-step pose, so their grown boxes overlap.
+  std::vector<Pose> pose(n);
+  std::vector<double> motion(n);
+  std::vector<Aabb> grown(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto u = static_cast<std::uint32_t>(i);
+    pose[i] = frame_pose(rec.x_pre[i], oriented ? rec.q_pre[i] : Quat{}, u);  // the shapes' frame
+    motion[i] = step_motion(rec, u);
+    grown[i] = expanded(ref->world_aabb(u, pose[i]),
+                        static_cast<float>(motion[i] + radius(u) + 0.5 * (max_margin + slack)));
+  }
+  std::vector<Pair> cand;
+  ExactPairsSettings settings;
+  settings.threads = threads;
+  settings.max_pairs_per_body = limits::kMaxPairsPerBody;
+  exact_pairs(grown, cand, settings);
+  ContactGraph graph = contact_graph(rec);
+  for (const Pair& p : cand) {
+    poll();
+    if (!dynamic(p.a) && !dynamic(p.b)) continue;
+    if (graph.find(p.a) == graph.find(p.b)) continue;  // one component: exchanged within it
+    ++near_tested;
+    const ReferenceNormal r = ref->posed(p.a, p.b, pose[p.a], pose[p.b]);
+    // Rounded shapes (convex_radius) are apart by the posed distance less their radii.
+    const bool apart =
+        r.valid && r.signed_distance() > pair_margin(p) + slack + motion[p.a] + motion[p.b] + inflation(p);
+    if (apart) continue;
+    near.pairs.push_back(p);
+    near.body[p.a] = near.body[p.b] = 1;
+  }
+}
+
+std::uint64_t PhysicsValidators::Impl::open_near_groups(ContactGraph& graph) const {
+  std::uint64_t opened = 0;
+  for (const Pair& p : near.pairs) {
+    const std::uint32_t ra = graph.find(p.a), rb = graph.find(p.b);
+    for (const std::uint32_t r : {ra, rb}) {
+      if (graph.statics[r]) continue;
+      graph.statics[r] = 1;  // an unreported contact may join it to another body
+      const auto it = graph.groups.find(r);
+      if (it != graph.groups.end() && it->second.size() >= 2) ++opened;
+    }
+  }
+  return opened;
+}
+
+}  // namespace octocd
