@@ -144,7 +144,7 @@ int bench_command(const BenchOptions& o) {
   if (o.list) {
     for (const auto& n : named) {
       const json j = read_sweep_file((fs::path(named_sweeps_dir()) / (n + ".json")).string());
-      fmt::print("{:<20} {}\n", n, j.value("description", ""));
+      fmt::print("{:<20} {}\n", n, octocd::printable(j.value("description", "")));
     }
     return 0;
   }
@@ -332,10 +332,10 @@ int bench_command(const BenchOptions& o) {
     fmt::print(stderr,
                "bench {}: {} searches ({} in this shard {}/{}), engines {}, target {:g} steps/s over frames {}-{}, "
                "counts 1 to {}, probes {} repetition(s), the bracket's ends {}; result {}\n",
-               s.name, s.scenes.size() * s.engines.size(), my_searches.size(), shard, shards, json(s.engines).dump(),
+               octocd::printable(s.name), s.scenes.size() * s.engines.size(), my_searches.size(), shard, shards, json(s.engines).dump(),
                s.target, s.windows[0].first, s.windows[0].last, s.max_instances, s.probe_repeat, s.repeat, o.output);
   else if (!o.quiet)
-    fmt::print(stderr, "bench {}: {} points ({} in this shard {}/{}), engines {}, {} repetitions; result {}\n", s.name,
+    fmt::print(stderr, "bench {}: {} points ({} in this shard {}/{}), engines {}, {} repetitions; result {}\n", octocd::printable(s.name),
                points.size(), mine.size(), shard, shards, o.engines.empty() ? json(s.engines).dump() : o.engines,
                s.repeat, o.output);
   for (const Point* p : mine) {
@@ -385,7 +385,7 @@ int bench_command(const BenchOptions& o) {
                 ? fmt::format("max {} instances at >= {:g} steps/s ({})", sum["max_instances"].get<long>(), s.target,
                               sum.value("reason", ""))
                 : sum.value("status", "") + ": " + sum.value("reason", "");
-        fmt::print(stderr, "bench {}: {} on {}: {}\n", s.name, sum.value("model", "?"), engine, line);
+        fmt::print(stderr, "bench {}: {} on {}: {}\n", octocd::printable(s.name), octocd::printable(sum.value("model", "?")), engine, octocd::printable(line));
       }
     }
     std::sort(result["points"].begin(), result["points"].end(),
@@ -402,7 +402,7 @@ int bench_command(const BenchOptions& o) {
                                    origin, result["searches"].size(), first.value("scene", "?"),
                                    first.value("engine", "?"), first.value("reason", "?"), o.output));
     }
-    if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", s.name, o.output);
+    if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", octocd::printable(s.name), o.output);
     add_to_history(o, result);
     const bool failed = run.any_failed || std::any_of(result["searches"].begin(), result["searches"].end(),
                                                       [](const json& x) { return x.value("status", "") == "failed"; });
@@ -522,7 +522,7 @@ int bench_command(const BenchOptions& o) {
                                  origin, result["points"].size(), mine.size(), first.value("id", "?"),
                                  first.value("reason", "?"), o.output));
   }
-  if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", s.name, o.output);
+  if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", octocd::printable(s.name), o.output);
   add_to_history(o, result);
   return any_failed ? 1 : 0;
 }

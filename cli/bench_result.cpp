@@ -239,10 +239,10 @@ void record_hygiene(json& result, const Sweep& s, bool quiet) {
                                    std::max(0.0, static_cast<double>(threads) - load), threads, omp));
   result["hygiene"] = {{"threads", threads}, {"omp_threads", omp}, {"load_average_start", la}, {"warnings", warnings}};
   for (const auto& w : warnings)
-    fmt::print(stderr, "bench {}: warning: {}; timings will be noisy (the report marks them){}\n", s.name,
+    fmt::print(stderr, "bench {}: warning: {}; timings will be noisy (the report marks them){}\n", octocd::printable(s.name),
                w.get<std::string>(), omp > 1 ? "; OMP_NUM_THREADS=1 helps on a shared machine" : "");
   if (s.repeat < 2 && !quiet)
-    fmt::print(stderr, "bench {}: note: 1 repetition per point: no spread, so no timing verdict\n", s.name);
+    fmt::print(stderr, "bench {}: note: 1 repetition per point: no spread, so no timing verdict\n", octocd::printable(s.name));
 }
 
 }  // namespace octocd::cli::bench

@@ -270,7 +270,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
                                      "finished one (kept as it is), else delete it and run again (a speed-accuracy "
                                      "run cannot go on midway: its errors need each line's reference run)",
                                      o.output, origin));
-      if (!o.quiet) fmt::print(stderr, "bench {}: {} is finished; kept as it is\n", s.name, o.output);
+      if (!o.quiet) fmt::print(stderr, "bench {}: {} is finished; kept as it is\n", octocd::printable(s.name), o.output);
       return 0;
     }
     const fs::path parent = fs::path(o.output).parent_path();
@@ -376,9 +376,10 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
     for (const char* f : {"speed", "steps_per_s"})
       for (const char* k : {"median", "min", "max", "mean", "stdev", "n"}) csv << ',' << f << '.' << k;
     csv << ",error.consistency,error.reference_dt,error.max_penetration_m,error.energy_drift,error.momentum_residual\n";
+    // Text cells: bounded, and a leading = + - @ TAB CR made text (octocd::csv_text_cell).
     const auto q = [](const std::string& t) {
       std::string r = "\"";
-      for (char c : t) r += c == '"' ? std::string("\"\"") : std::string(1, c);
+      for (char c : octocd::csv_text_cell(octocd::bounded(t))) r += c == '"' ? std::string("\"\"") : std::string(1, c);
       return r + "\"";
     };
     const auto num = [](const json& v) { return v.is_null() ? std::string() : v.dump(); };
@@ -403,7 +404,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
     fmt::print(stderr,
                "bench {}: {} points ({} in this shard {}/{}, whole lines), engines {}, dts {}, {:g} simulated s each, "
                "{} repetitions; result {} and {}\n",
-               s.name, points.size(), mine.size(), shard, shards, json(s.engines).dump(), json(s.dts).dump(),
+               octocd::printable(s.name), points.size(), mine.size(), shard, shards, json(s.engines).dump(), json(s.dts).dump(),
                static_cast<double>(matched) * dt_max, s.repeat, o.output, csv_path);
   std::size_t finished = 0;
   const auto finish = [&](SaPoint& p) {
@@ -522,7 +523,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
     throw InputError(fmt::format("{}: every point skipped ({}; first: {}: {}); allowed: a sweep with a point this "
                                  "octocd can run (result kept in {})",
                                  origin, mine.size(), points[mine.front()].id, points[mine.front()].reason, o.output));
-  if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}, CSV {}\n", s.name, o.output, csv_path);
+  if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}, CSV {}\n", octocd::printable(s.name), o.output, csv_path);
   return any_failed ? 1 : 0;
 }
 

@@ -27,6 +27,7 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/engine.hpp"
+#include "octocd/text.hpp"
 #include "octocd/world.hpp"
 #include "tools.hpp"
 
@@ -195,18 +196,18 @@ class SweepProgress {
   SweepProgress(std::size_t total, bool enabled) : total_(total), enabled_(enabled), tty_(isatty(fileno(stderr)) != 0) {}
   void start(std::size_t done, const std::string& label) {
     done_ = done;
-    label_ = label;
+    label_ = octocd::printable(label);
     detail_.clear();
     draw(true);
   }
   void detail(const std::string& d) {
-    detail_ = d;
+    detail_ = octocd::printable(d);
     draw(false);
   }
   void finish(const std::string& status) {
     if (!enabled_) return;
     if (tty_) std::fprintf(stderr, "\r\033[K");
-    std::fprintf(stderr, "[%zu/%zu] %s: %s\n", done_ + 1, total_, label_.c_str(), status.c_str());
+    std::fprintf(stderr, "[%zu/%zu] %s: %s\n", done_ + 1, total_, label_.c_str(), octocd::printable(status).c_str());
     std::fflush(stderr);
   }
 

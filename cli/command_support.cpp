@@ -2,6 +2,7 @@
 #include "command_support.hpp"
 
 #include <climits>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <system_error>
@@ -10,6 +11,8 @@
 
 #include "octocd/error.hpp"
 #include "octocd/stop.hpp"
+#include "octocd/text.hpp"
+#include "octocd/trace_reader.hpp"
 
 namespace octocd::cli {
 
@@ -44,6 +47,51 @@ void report_stop(int sig, const char* command, std::int64_t done, std::int64_t t
   std::fprintf(stderr, "octocd %s: stopped by %s after frame %lld of %lld%s\n", command,
                octocd::stop_signal_name(sig), static_cast<long long>(done),
                static_cast<long long>(total), (kept + note).c_str());
+}
+
+void check_engine_inertia(const octocd::Engine& world, const octocd::Model& model, const std::string& engine) {
+  namespace lim = octocd::trace_limits;
+  const octocd::RotationTraits* traits = world.rotation_traits();
+  if (!traits || !traits->rotates) return;
+  const octocd::BodyState& s = world.state();
+  for (std::size_t i = 0; i < traits->inertia.size() && i < s.size(); ++i) {
+    if (!(s.w[i] > 0.0f)) continue;  // static: never used
+    const auto& m = traits->inertia[i];
+    for (int k = 0; k < 3; ++k) {
+      const double d = m[static_cast<std::size_t>(4 * k)];
+      if (std::isfinite(d) && d >= lim::kMinInertia && d <= lim::kMaxInertia) continue;
+      const octocd::BodyInfo& b = model.bodies[i];
+      throw octocd::InputError(fmt::format(
+          "scene '{}': body {} (group '{}', shape '{}'): engine {} gives it inertia I[{}][{}] = {:g} kg m^2: the "
+          "shape cannot give a positive inertia a trace may hold; allowed: diagonal moments in [{:g}, {:g}] kg m^2 "
+          "for a dynamic body (docs/trace-format.md, \"Security rules and limits\"): a shape of volume, not a "
+          "needle, a flat or a collinear mesh",
+          octocd::printable(model.scene.name), i, octocd::printable(b.group),
+          octocd::printable(model.shapes[b.shape].name), engine, k, k, d, lim::kMinInertia, lim::kMaxInertia));
+    }
+  }
+}
+
+void check_engine_state(const octocd::BodyState& state, std::int64_t frame, const std::string& engine) {
+  namespace lim = octocd::trace_limits;
+  const auto bad = [&](std::size_t i, const char* what, const octocd::Vec3& v, const char* unit, double bound) {
+    return octocd::RuntimeError(fmt::format(
+        "engine {}: frame {}: body {}: its {} ({:g}, {:g}, {:g}) {} is {}; allowed: finite components within +-{:g} "
+        "{} (what a trace may hold: docs/trace-format.md, \"Security rules and limits\"); the run stops before "
+        "writing frame {}",
+        engine, frame, i, what, v.x, v.y, v.z, unit,
+        std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) ? "out of range" : "not finite", bound, unit,
+        frame));
+  };
+  const auto within = [](const octocd::Vec3& v, double bound) {
+    return std::fabs(v.x) <= bound && std::fabs(v.y) <= bound && std::fabs(v.z) <= bound;  // NaN fails
+  };
+  for (std::size_t i = 0; i < state.size(); ++i) {
+    if (!within(state.x[i], lim::kMaxCoordinate)) throw bad(i, "position", state.x[i], "m", lim::kMaxCoordinate);
+    if (!within(state.v[i], lim::kMaxSpeed)) throw bad(i, "velocity", state.v[i], "m/s", lim::kMaxSpeed);
+    if (i < state.omega.size() && !within(state.omega[i], lim::kMaxAngularSpeed))
+      throw bad(i, "angular velocity", state.omega[i], "rad/s", lim::kMaxAngularSpeed);
+  }
 }
 
 /// Loads the scene for `run` and `validate`: `--data-dir` (checked to be a folder) or the

@@ -11,6 +11,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "octocd/engine.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
@@ -41,6 +42,22 @@ CLI::Validator at_least_one();
 /// frame it stopped after of `total`, what `trace` holds, and `note`.
 void report_stop(int sig, const char* command, std::int64_t done, std::int64_t total, const std::string& trace,
                  const std::string& note = "");
+
+/// Before a reference engine steps (run, validate SCENE --engine E): the inertia the engine
+/// gives each dynamic body lies where a trace may hold it (docs/trace-format.md, "Security
+/// rules and limits": finite, diagonal moments in [1e-12, 1e15] kg m^2), else InputError
+/// "scene 'S': body B (group G, shape M): engine E gives it inertia I[k][k] = X kg m^2: the
+/// shape cannot give a positive inertia a trace may hold; allowed: ..." (a needle, a
+/// collinear or a 1e29-wide mesh), so the run fails first instead of writing a trace octocd
+/// refuses. Engines without rotation traits are not checked.
+void check_engine_inertia(const Engine& world, const Model& model, const std::string& engine);
+
+/// After each step of a reference engine (before its frame is written to a trace): every
+/// position, velocity and angular velocity finite and within the trace limits (|x| <= 1e6 m,
+/// |v| <= 1e6 m/s, |omega| <= 1e6 rad/s), else RuntimeError "engine E: frame F: body B: its
+/// angular velocity (...) rad/s is out of range; allowed: ... ; the run stops before writing
+/// frame F".
+void check_engine_state(const BodyState& state, std::int64_t frame, const std::string& engine);
 
 /// Loads the scene for `run` and `validate`: `--data-dir` (checked to be a folder; else
 /// InputError naming it) or the default lookup of docs/scenes.md.

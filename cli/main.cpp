@@ -45,7 +45,7 @@ int main(int argc, char** argv) {
     octocd::set_engines_file(engines_file);
     (void)octocd::engine_infos();
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "octocd: error: %s\n", octocd::printable(e.what()).c_str());
+    std::fprintf(stderr, "octocd: error: %s\n", octocd::printable_line(e.what()).c_str());
     return 2;
   }
   app.add_option("--engines-file", engines_file,
@@ -56,7 +56,7 @@ int main(int argc, char** argv) {
   } catch (const CLI::ConstructionError& e) {
     // A process engine's settings option --NAME that another option of a command has.
     std::fprintf(stderr, "octocd: error: the engines files: %s; allowed: a process engine name that is no option of "
-                 "octocd (its settings option is --NAME)\n", octocd::printable(e.what()).c_str());
+                 "octocd (its settings option is --NAME)\n", octocd::printable_line(e.what()).c_str());
     return 2;
   }
 
@@ -72,17 +72,17 @@ int main(int argc, char** argv) {
     for (const octocd::cli::Command& c : commands)
       if (c.selected()) return c.run();
   } catch (const octocd::InputError& e) {
-    std::fprintf(stderr, "octocd: error: %s\n", octocd::printable(e.what()).c_str());
+    std::fprintf(stderr, "octocd: error: %s\n", octocd::printable_line(e.what()).c_str());
     return 2;
   } catch (const octocd::RuntimeError& e) {
-    std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable(e.what()).c_str());
+    std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable_line(e.what()).c_str());
     return 1;
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "octocd: runtime failure: out of memory (the scene needs more than this "
-                         "process may allocate)\n");
+    std::fprintf(stderr, "octocd: runtime failure: out of memory (the scene, trace or result needs more than "
+                         "this process may allocate, e.g. under ulimit -v; no input was found damaged)\n");
     return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable(e.what()).c_str());
+    std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable_line(e.what()).c_str());
     return 1;
   }
   return 0;

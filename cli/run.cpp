@@ -407,6 +407,7 @@ int run_command(const RunOptions& o) {
     if (const octocd::RotationTraits* traits = world.rotation_traits()) {  // a rotating engine: version 2
       topt.v2 = *traits;
       topt.gravity = scene.gravity;
+      check_engine_inertia(world, *model, o.engine);  // a trace octocd would refuse is never begun
     }
     octocd::TraceMetadata meta = octocd::trace_metadata(world, o.state_every);
     meta.start_time = octocd::cli::utc_time_now();
@@ -434,6 +435,9 @@ int run_command(const RunOptions& o) {
       within.reset();
       totals.add(m);
       const std::int64_t flushed = trace ? trace->flushed_frames() : 0;
+      // A reference engine's state past the trace limits (a spinning needle) ends the run
+      // before its frame is written: every trace `run` writes is judgeable.
+      if (trace && world.rotation_traits()) check_engine_state(world.state(), f + 1, o.engine);
       if (trace) feed.append(*trace, world, m, scene.frames - (f + 1));
       if (trace && trace->flushed_frames() != flushed) octocd::set_stop_kept(run_kept(trace.get(), o.trace));
       progress.update(m, totals);

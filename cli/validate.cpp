@@ -15,6 +15,7 @@
 #include <new>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 #include <climits>
 #include <condition_variable>
@@ -118,7 +119,7 @@ int conclude_validate(const ValidateOptions& o, const octocd::RunName& run,
     octocd::write_json_file(o.json, doc, "--json");
   }
   if (!report.outcomes.empty()) fmt::print("\n");
-  for (const octocd::ExpectationOutcome& x : report.outcomes) fmt::print("{}\n", x.text);
+  for (const octocd::ExpectationOutcome& x : report.outcomes) fmt::print("{}\n", octocd::printable_line(x.text));
   if (!o.write_expect.empty()) {
     const std::vector<octocd::Expectation> entries = octocd::expectations_from(run, results);
     octocd::write_expectations(o.write_expect, run, entries);
@@ -166,6 +167,17 @@ class JudgedSoFar {
   std::vector<octocd::ValidationResult> rows_;
   std::int64_t judged_ = 0;
 };
+
+/// --json of a stopped `validate`: the rows of the frames judged, with `stopped` (the
+/// STOPPED line's text) in the document, so that a stop never loses what was judged.
+void write_stopped_json(const ValidateOptions& o, const octocd::RunName& run,
+                        const std::vector<octocd::ValidationResult>& results, const octocd::ExpectationReport& report,
+                        nlohmann::ordered_json meta, const std::string& stopped) {
+  if (o.json.empty()) return;
+  meta["stopped"] = stopped;
+  nlohmann::ordered_json doc = octocd::results_json(results, run, &report, meta);
+  octocd::write_json_file(o.json, doc, "--json");
+}
 
 /// Progress of a long judging on stderr: "validate: judged frame N of M (R frames/s)",
 /// the first after 2 s of judging and then every 2 s (a judging that ends sooner prints
@@ -386,6 +398,10 @@ int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, co
   fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
   if (info.stopped) {
     const int sig = octocd::stop_signal();
+    write_stopped_json(o, run, results, report,
+                       {{"engine", info.engine}, {"frames", info.frames}, {"every", every}, {"against", o.against},
+                        {"build_id", octocd::build_id()}},
+                       stopped);
     fmt::print("\nSTOPPED: {}\n", stopped);
     std::fflush(stdout);
     report_stop(sig, "validate", info.judged_to, info.frames, "", fmt::format(" of the trace {}", o.trace_in));
@@ -457,6 +473,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
   std::string path = o.trace;
   const std::string what = o.engine + (octocd::scene_rotates(model->scene) ? " (rotation)" : " (translation only)");
   std::string geometry;
+  std::int64_t stepped = 0;  // frames the engine stepped and the trace took
   try {
     const std::unique_ptr<octocd::Engine> engine =
         make_engine(o.engine, model, o.settings);
@@ -468,6 +485,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
       octocd::copy_own_trace(world, path, temporary ? "validate" : "--trace");
     } else {
+      check_engine_inertia(world, *model, o.engine);  // before a trace octocd would refuse is begun
       if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
       octocd::TraceOptions topt;
       topt.state_every = 1;
@@ -481,7 +499,9 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       trace.append_state(0, world.state());
       for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
         const octocd::FrameMetrics& m = world.step();
+        check_engine_state(world.state(), stepped + 1, o.engine);  // the trace stays judgeable
         trace.append_frame_v2(m, world.state(), world.record());
+        ++stepped;
       }
       trace.close();
     }
@@ -494,17 +514,54 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
   eo.against_fcl = vo.against_fcl;
   eo.tol = vo.tol;
   eo.overridden = vo.overridden;
+  // The trace's scene names its mesh files as the scene file does: relative to the scene
+  // file's folder (its --mesh-dir), not to the (temporary) trace's.
+  eo.mesh_dir = fs::absolute(o.scene).parent_path().string();
   octocd::ExternalTraceInfo info;
   std::vector<octocd::ValidationResult> results;
+  // A signal that stopped the stepping: the frames the trace took are judged (a second
+  // signal cuts the judging short, keeping the frames judged whole), as `validate SCENE`
+  // on the cpu engine keeps its verdict; without one, a signal while judging ends at once.
+  const int stop_sig = octocd::stop_signal();
   try {
-    // Judging the written trace polls no flag: a signal ends it at once (no table).
-    const std::string judging_what =
-        fmt::format(temporary ? "judging {}'s trace (its temporary file removed)" : "judging {}'s trace, which stays on disk",
-                    o.engine);
     if (temporary) octocd::set_stop_remove(path);
-    const octocd::StopAtOnce judging(judging_what.c_str());
-    results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
-    if (!o.view.empty()) o.views = octocd::cli::write_failure_views(path, results, o.view);
+    if (stop_sig != 0) {
+      eo.stop = [] { return octocd::stop_signal_count() > 1; };
+      eo.keep_on_stop = true;
+      try {
+        results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
+      } catch (const octocd::ValidationStopped&) {
+        std::fprintf(stderr, "octocd validate: stopped by %s after frame %lld of %d, and again while checking %s's "
+                             "trace; no frame judged, no verdict\n",
+                     octocd::stop_signal_name(stop_sig), static_cast<long long>(stepped), o.frames, o.engine.c_str());
+        if (!o.junit.empty())
+          octocd::write_junit_error(o.junit, model->scene.name, "stopped",
+                                    fmt::format("stopped by {} twice; no frame judged", octocd::stop_signal_name(stop_sig)));
+        octocd::set_stop_remove("");
+        std::error_code ec;
+        if (temporary) fs::remove(path, ec);
+        return octocd::stop_exit_code(stop_sig);
+      }
+    } else {
+      const std::string judging_what = fmt::format(
+          temporary ? "judging {}'s trace (its temporary file removed)" : "judging {}'s trace, which stays on disk",
+          o.engine);
+      const octocd::StopAtOnce judging(judging_what.c_str());
+      results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
+      if (!o.view.empty()) o.views = octocd::cli::write_failure_views(path, results, o.view);
+    }
+  } catch (const octocd::InputError& e) {
+    octocd::set_stop_remove("");
+    std::error_code ec;
+    if (!temporary) throw;
+    fs::remove(path, ec);
+    // The scene was accepted: a trace the engine wrote that the reader refuses is the run's
+    // failure, said as such, never a refusal naming a temporary file that no longer exists.
+    std::string why = e.what();
+    if (why.rfind(path, 0) == 0) why = why.substr(path.size() + (why.compare(path.size(), 2, ": ") == 0 ? 2 : 0));
+    throw octocd::RuntimeError(fmt::format("engine {}: its trace of scene '{}' (temporary, removed) is one octocd's "
+                                           "reader refuses: {}",
+                                           o.engine, octocd::printable(model->scene.name), why));
   } catch (...) {
     octocd::set_stop_remove("");
     std::error_code ec;
@@ -516,6 +573,16 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
   if (temporary) fs::remove(path, ec);
   const octocd::RunName run{model->scene.name, ""};
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
+  // Stopped: the table covers the frames judged whole; what the trace holds is what the
+  // judging read back from it (info.frames), never a count kept beside it.
+  std::string stopped;
+  if (stop_sig != 0)
+    stopped = fmt::format(
+        "the table covers {} of {} (an incomplete verdict); stopped by {} after frame {}{}",
+        info.judged_to >= 1 ? fmt::format("frames 1..{}", info.judged_to) : std::string("no whole frame"), o.frames,
+        octocd::stop_signal_name(stop_sig), stepped,
+        info.stopped ? fmt::format("; judging was cut short by a second signal inside frame {}", info.stopped_in)
+                     : std::string());
   if (!o.junit.empty())
     octocd::write_junit(o.junit, model->scene.name, octocd::cli::with_views_in_details(results, o.views, o.junit),
                         std::chrono::duration<double>(Clock::now() - t0).count(),
@@ -525,18 +592,27 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
                          {"against", o.against},
                          {"scene_file", o.scene},
                          {"build_id", octocd::build_id()}},
-                        "", &report);
+                        stopped, &report);
   fmt::print("validate {} (engine {}, judged as a version 2 external trace{}: {} bodies, {} "
              "frames, checks every {}, against: {})\n\ngeometry: {}\n\n",
              model->scene.name, what, temporary ? "" : " " + path, info.bodies, info.frames, o.every, o.against, geometry);
   fmt::print("{}", octocd::format_results(results, vo.overridden, &report));
-  if (const int sig = octocd::stop_signal()) {
-    report_stop(sig, "validate", info.frames, o.frames, o.trace);
-    return octocd::stop_exit_code(sig);
+  const nlohmann::ordered_json meta = {{"engine", what},   {"geometry", geometry},  {"frames", info.frames},
+                                       {"every", o.every}, {"against", o.against}, {"scene_file", o.scene},
+                                       {"build_id", octocd::build_id()}};
+  if (stop_sig != 0) {
+    write_stopped_json(o, run, results, report, meta, stopped);
+    fmt::print("\nSTOPPED: {}\n", stopped);
+    std::fflush(stdout);
+    const std::string kept = info.frames > 0 ? fmt::format("frames 1..{}", info.frames) : std::string("no frame");
+    std::fprintf(stderr, "octocd validate: stopped by %s after frame %lld of %d; %s\n", octocd::stop_signal_name(stop_sig),
+                 static_cast<long long>(stepped), o.frames,
+                 (temporary ? fmt::format("its temporary trace (it held {}) is removed", kept)
+                            : fmt::format("the trace {} holds {} (read back)", path, kept))
+                     .c_str());
+    return octocd::stop_exit_code(stop_sig);
   }
-  return conclude_validate(o, run, results, report,
-                           {{"engine", what}, {"geometry", geometry}, {"frames", info.frames}, {"every", o.every},
-                            {"against", o.against}, {"scene_file", o.scene}, {"build_id", octocd::build_id()}});
+  return conclude_validate(o, run, results, report, meta);
 }
 
 /// `octocd validate`: exit 0 when every validator passes, 3 when any fails. With
@@ -588,7 +664,9 @@ int validate_command(ValidateOptions& o) {
   // The report of a scene that could not be validated; the original error is what the
   // caller sees (and its exit code), even when the report cannot be written.
   auto junit_error = [&](const char* kind, const char* message) {
-    if (o.junit.empty()) return;
+    // A failure to write --junit itself leaves that file as its message says (unchanged):
+    // no error case is written into it afterwards.
+    if (o.junit.empty() || std::string_view(message).rfind("--junit: ", 0) == 0) return;
     try {
       octocd::write_junit_error(o.junit, std::filesystem::path(o.trace_in.empty() ? o.scene : o.trace_in).stem().string(),
                                 kind, message);
@@ -630,9 +708,14 @@ int validate_verdict(const ValidateOptions& o, const std::string& name,
   fmt::print("{}", octocd::format_results(results, overridden, &report));
   if (const int sig = octocd::stop_signal()) {
     // (A signal after the JUnit was written: the whole table, stopped at its end.)
-    fmt::print("\nSTOPPED: {}\n", stopped.empty() ? fmt::format("the table covers frames 1..{} of {}; stopped by {}",
-                                                                done, o.frames, octocd::stop_signal_name(sig))
-                                                  : stopped);
+    const std::string line = stopped.empty() ? fmt::format("the table covers frames 1..{} of {}; stopped by {}", done,
+                                                           o.frames, octocd::stop_signal_name(sig))
+                                             : stopped;
+    write_stopped_json(o, run, results, report,
+                       {{"engine", o.engine}, {"frames", o.frames}, {"every", o.every}, {"against", o.against},
+                        {"scene_file", o.scene}, {"build_id", octocd::build_id()}},
+                       line);
+    fmt::print("\nSTOPPED: {}\n", line);
     std::fflush(stdout);
     report_stop(sig, "validate", done, o.frames, o.trace);
     return octocd::stop_exit_code(sig);

@@ -4,9 +4,11 @@ stage colours (the engines' are report_plots.ENGINE_COLORS), the file being read
 the error of a malformed one) and the octocd binary that reads traces (OCTOCD), number formatting and the marks of points
 measured under load."""
 
+import csv
 import json
 import math
 import os
+import re
 import sys
 
 
@@ -32,6 +34,42 @@ def printable(text, limit=MAX_MESSAGE):
                   (f"\\x{ord(c):02x}" if ord(c) < 0x100 else c.encode("unicode_escape").decode("ascii"))
                   for c in text)
     return out + (f"... ({cut} more characters)" if cut > 0 else "")
+
+
+MAX_TEXT = 4096  # characters of one value from a file in report.md, index.html or a CSV cell
+MAX_LINE = 16384  # characters of one line or cell of report.md or index.html (values within it: MAX_TEXT)
+
+
+def bounded(text, limit=MAX_TEXT):
+    """`text` (a name, a description, a trace's attribute) cut to `limit` characters with its
+    whole length said: a 16 MiB attribute gives 4,096 characters and "... (16,777,216
+    characters)", never a 16 MB report."""
+    text = str(text)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text):,} characters)"
+
+
+_CSV_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|[+-]?(inf|nan)")
+
+
+def csv_guard(text):
+    """A text cell of a CSV file a spreadsheet opens (OWASP, "CSV Injection"): bounded, and
+    when it begins with = + - @ TAB or CR behind an apostrophe, so no formula runs from it; a
+    number written as text (`-3.5`, `+1e-3`, `-inf`) stays a number."""
+    t = bounded(text)
+    if t[:1] in ("=", "+", "-", "@", "\t", "\r") and not _CSV_NUMBER.fullmatch(t):
+        return "'" + t
+    return t
+
+
+class csv_writer:
+    """csv.writer whose writerow puts every text cell through csv_guard (numbers as they
+    are): the one CSV sink of the report."""
+
+    def __init__(self, f):
+        self._w = csv.writer(f)
+
+    def writerow(self, cells):
+        self._w.writerow([csv_guard(c) if isinstance(c, str) else c for c in cells])
 
 
 def fail(msg):

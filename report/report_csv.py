@@ -1,8 +1,9 @@
 """The report's data as CSV (report/make_report.py, --csv DIR): per point and repetition,
 plus a summary row per figure."""
 
-import csv
 import io
+
+from report_common import csv_writer
 
 
 CSV_UNITS = {"steps_per_s": "1/s", "cpu_steps_per_s": "1/s", "step_ms": "ms", "stage_ms": "ms", "pairs": "1/frame",
@@ -54,7 +55,7 @@ def sweep_csv(doc, path, g):
     name = g["first"]["sweep"]["name"]
     f = io.StringIO(newline="")
     if True:
-        w = csv.writer(f)
+        w = csv_writer(f)
         w.writerow(head)
         for p in pts:
             par = p.get("params", {})

@@ -3,7 +3,6 @@
 Mann-Whitney U test and a time-ratio interval; its section, summary lines and CSV."""
 
 import collections
-import csv
 import functools
 import io
 import json
@@ -11,7 +10,7 @@ import math
 import os
 import statistics
 
-from report_common import fail, load_mark, load_warning, np, num, printable
+from report_common import csv_writer, fail, load_mark, load_warning, np, num, printable
 
 
 GATE_MIN_REPS = 5
@@ -454,7 +453,7 @@ def gate_csv(doc, path, res):
     one summary row (kind summary: both medians, ratio, interval, p, slower 0/1)."""
     f = io.StringIO(newline="")
     if True:
-        w = csv.writer(f)
+        w = csv_writer(f)
         w.writerow(["point", "figure", "kind", "side", "repetition", "value", "unit", "base_median", "new_median",
                     "ratio_time", "ratio_lo", "ratio_hi", "p_slower", "slower"])
         for r in res["rows"]:

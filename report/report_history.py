@@ -45,7 +45,7 @@ import os
 import stat
 import sys
 
-from report_common import fail, np, plt, printable
+from report_common import csv_guard, fail, np, plt, printable
 from report_data import _parse
 from report_html import Outputs
 from report_plots import log_ticks
@@ -92,8 +92,7 @@ def csv_cell(v):
         return "" if v is None else str(v).lower()
     if isinstance(v, (int, float, np.integer, np.floating)):
         return repr(float(v)) if isinstance(v, (float, np.floating)) else str(int(v))
-    t = short(v)
-    return "'" + t if t[:1] in ("=", "+", "-", "@", "\t", "\r") else t
+    return csv_guard(short(v))
 
 
 def csv_text(header, rows):

@@ -9,7 +9,7 @@ import re
 import stat
 import tempfile
 
-from report_common import fail, plt
+from report_common import MAX_LINE, bounded, fail, plt
 
 
 def output_dir(path, option):
@@ -73,8 +73,14 @@ def md_escape(text, cell=False):
     a scene's or a file's name from a bench result or a trace cannot add links, images,
     HTML, headings or table cells to report.md. `cell`: a table cell's text, which starts
     no line (a leading #, >, +, - stays as it is)."""
-    flat = str(text).replace("\r", " ").replace("\n", " ")
+    flat = bounded(text, MAX_LINE).replace("\r", " ").replace("\n", " ")
     return (_MD_SPECIAL_CELL if cell else _MD_SPECIAL).sub(lambda m: m.group(0)[:-1] + "\\" + m.group(0)[-1], flat)
+
+
+def html_text(text):
+    """`text` for HTML: bounded (report_common.bounded, MAX_LINE) and escaped (no tag,
+    attribute or entity from data)."""
+    return html.escape(bounded(text, MAX_LINE))
 
 
 class Outputs:
@@ -90,9 +96,16 @@ class Outputs:
 
     def commit(self):
         temps = []
+        made = []  # folders this commit created: removed again (when empty) if it fails
         try:
             for path, text in self.files.items():
+                folder = os.path.dirname(path) or "."
+                missing = []
+                while folder and not os.path.exists(folder):
+                    missing.append(folder)
+                    folder = os.path.dirname(folder)
                 os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+                made += missing
                 refuse_non_regular(path)
                 # An unpredictable name created O_EXCL (mkstemp): a link planted at a
                 # temporary name is never followed.
@@ -112,6 +125,11 @@ class Outputs:
                     os.unlink(tmp)
                 except OSError:
                     pass
+            for folder in made:  # deepest first: a failed report leaves no empty plots/ folder
+                try:
+                    os.rmdir(folder)
+                except OSError:
+                    pass
             raise
 
 
@@ -129,19 +147,19 @@ class Doc:
 
     def h(self, level, text, anchor=None):
         a = f' id="{anchor}"' if anchor else ""
-        self.html.append(f"<h{level}{a}>{html.escape(text)}</h{level}>")
+        self.html.append(f"<h{level}{a}>{html_text(text)}</h{level}>")
         self.md.append("#" * level + " " + md_escape(text) + "\n")
 
     def p(self, text, cls=None):
         c = f' class="{cls}"' if cls else ""
-        self.html.append(f"<p{c}>{html.escape(text)}</p>")
+        self.html.append(f"<p{c}>{html_text(text)}</p>")
         self.md.append(md_escape(text) + "\n")
 
     def table(self, header, rows, note=None, name="table"):
         cls = ' class="compact"' if len(header) > 9 else ""
-        t = [f'<div class="wide"><table{cls}><thead><tr>' + "".join(f"<th>{html.escape(str(x))}</th>" for x in header) + "</tr></thead><tbody>"]
+        t = [f'<div class="wide"><table{cls}><thead><tr>' + "".join(f"<th>{html_text(x)}</th>" for x in header) + "</tr></thead><tbody>"]
         for r in rows:
-            t.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>")
+            t.append("<tr>" + "".join(f"<td>{html_text(x)}</td>" for x in r) + "</tr>")
         t.append("</tbody></table></div>")
         self.html.append("".join(t))
         self.md.append("| " + " | ".join(md_escape(x, cell=True) for x in header) + " |")
@@ -161,7 +179,7 @@ class Doc:
         svg = buf.getvalue()
         self.files.put(os.path.join(self.out, "plots", fname), svg)
         body = svg[svg.find("<svg"):]
-        self.html.append(f'<figure>{body}<figcaption>{html.escape(caption)}</figcaption></figure>')
+        self.html.append(f'<figure>{body}<figcaption>{html_text(caption)}</figcaption></figure>')
         self.md.append(f"![{md_escape(caption)}](plots/{fname})\n\n*{md_escape(caption)}*\n")
 
     def write(self, title):

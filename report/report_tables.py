@@ -2,12 +2,12 @@
 block, skipped points, the paper's tables (Table 5, Table 6, Table A1, Fig. A2), broadphase
 scaling, most instances at the target steps/s and any other sweep."""
 
-import html
 import math
 import os
 
-from report_common import (PAPER, load_mark, load_warning, med, np, num, overlap, plt,
+from report_common import (PAPER, bounded, load_mark, load_warning, med, np, num, overlap, plt,
     point_load, spread_text)
+from report_html import html_text, md_escape
 from report_plots import (axis_label, broadphase_class, engines_of, first_window, log_ticks, point_label,
     engine_colour, stage_shares, steps_bars, steps_points, too_many_to_draw)
 
@@ -60,9 +60,10 @@ def machine_block(doc, g):
     n_ok = sum(1 for p in g["points_list"] if p.get("status") == "ok")
     total = g.get("points_total", j.get("points_total", len(g["points_list"])))
     runs = g.get("runs") or [{"files": g["files"], "settings": s}]
-    parts = [f"Sweep `{sw['name']}` ({sw.get('kind')}): {sw.get('description', '')}",
-             f"Machine: {m.get('cpu')}, host {m.get('hostname')}; GPU: {m.get('gpu')}"
-             + (f"; driver: {m.get('driver')}" if m.get("driver") else ""),
+    B = bounded  # each value from the file cut with its length said; md_escape/html_text escape the lines
+    parts = [f"Sweep `{B(sw['name'])}` ({B(sw.get('kind'))}): {B(sw.get('description', ''))}",
+             f"Machine: {B(m.get('cpu'))}, host {B(m.get('hostname'))}; GPU: {B(m.get('gpu'))}"
+             + (f"; driver: {B(m.get('driver'))}" if m.get("driver") else ""),
              f"Build {b.get('build_id')}, source revision {b.get('git_revision')}; run {j.get('started')} to "
              f"{j.get('updated', '?')}"
              + (f"; load average {', '.join(f'{x:.1f}' for x in m['load_average'])} at the start"
@@ -89,8 +90,8 @@ def machine_block(doc, g):
     elif lw:
         parts.append(f"Load at the run's start or end: {lw}; no point ran with fewer free cores than its threads, "
                      "so no verdict is marked.")
-    doc.html.append('<div class="meta">' + "<br>".join(html.escape(x) for x in parts) + "</div>")
-    doc.md.extend("> " + x.replace("`", "") + "  " for x in parts)
+    doc.html.append('<div class="meta">' + "<br>".join(html_text(x) for x in parts) + "</div>")
+    doc.md.extend("> " + md_escape(x.replace("`", "")) + "  " for x in parts)
     doc.md.append("")
 
 

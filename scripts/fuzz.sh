@@ -9,11 +9,12 @@
 # says why), report-json (the bench-result JSON make_report.py reads: a Python driver,
 # scripts/fuzz_report_json.py, in /usr/bin/python3: no sanitizer applies to Python), and
 # (issue 57) the JSON readers of octocd: expect (the --expect reader), shards (the shard
-# reader of validate --merge), bench_result (the result reader of bench --resume).
+# reader of validate --merge), bench_result (the result reader of bench --resume), and
+# (issue 68) sinks (the escaping of untrusted text for the terminal, CSV and JSON).
 #
 #   scripts/fuzz.sh [SECONDS] [TARGET...]
 #       TARGET: scene mesh trace compare replay external report pytrace report-json expect
-#               shards bench_result (default: all twelve)
+#               shards bench_result sinks (default: all thirteen)
 #
 # Builds build-fuzz/ (CMake preset "fuzz": clang, ASan + UBSan, -fsanitize=fuzzer), makes
 # a seed corpus from the shipped files (datasets/scenes, tests/data, fuzz/regressions, a
@@ -31,7 +32,7 @@ seconds=${1:-600}
 shift || true
 targets=("$@")
 [ ${#targets[@]} -eq 0 ] && targets=(scene mesh trace compare replay external report pytrace report-json expect shards
-                                     bench_result)
+                                     bench_result sinks)
 libfuzzer=()
 for t in "${targets[@]}"; do [ "$t" != report-json ] && libfuzzer+=("$t"); done
 
@@ -55,6 +56,7 @@ for t in "${targets[@]}"; do
   case $t in
     scene) cp -n datasets/scenes/*.json tests/data/*.json "$work/scene/corpus/" ;;
     mesh)  cp -n tests/data/*.obj "$work/mesh/corpus/" ;;
+    sinks) ;;  # seeds: fuzz/regressions/sinks/ (escape sequences, formulas, cut UTF-8, a long line)
     report-json|expect|shards|bench_result) ;;  # seeds: fuzz/regressions/<t>/ (scripts/fuzz_json_seeds.py)
     trace|compare|replay|external|report|pytrace)
            if [ ! -f "$work/$t/corpus/box-stack-20.h5" ]; then
@@ -70,7 +72,7 @@ for t in "${targets[@]}"; do
              /usr/bin/python3 examples/python/rotating_writer.py "$work/$t/corpus/rotating-v2.h5" >/dev/null || true
            fi ;;
     *) echo "fuzz.sh: unknown target '$t'; allowed: scene mesh trace compare replay external report pytrace" \
-            "report-json expect shards bench_result" >&2; exit 2 ;;
+            "report-json expect shards bench_result sinks" >&2; exit 2 ;;
   esac
 done
 
@@ -97,7 +99,7 @@ for t in "${targets[@]}"; do
   # assimp 5.2 and libhdf5 1.10.8 leak on some malformed files they reject (upstream; the
   # inputs are in fuzz/upstream/): leaks are not findings for the mesh and trace targets.
   leaks=0
-  case $t in scene|expect|shards|bench_result) leaks=1 ;; esac  # octocd's own code only: a leak is a finding
+  case $t in scene|expect|shards|bench_result|sinks) leaks=1 ;; esac  # octocd's own code only: a leak is a finding
   if ! ASAN_OPTIONS="detect_leaks=$leaks" nice -n 15 ./build-fuzz/fuzz_"$t" "$work/$t/corpus" "${dict[@]}" \
         -max_total_time="$seconds" -timeout=20 -rss_limit_mb=4096 -max_len="$max_len" \
         -artifact_prefix="$work/$t/artifacts/" -print_final_stats=1 -close_fd_mask=1 2>"$work/$t/log.txt"; then

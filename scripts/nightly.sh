@@ -192,15 +192,29 @@ junit_error() {
 </testsuites>
 EOF2
 }
+# Text for the terminal (docs/robustness.md, "Sinks"): control characters (a newline or an
+# escape sequence in a scene's file name) written as \xNN, at most 2,000 characters.
+shown() {
+  local s="${1:0:2000}" out="" c i
+  for ((i = 0; i < ${#s}; i++)); do
+    c="${s:i:1}"
+    if [[ "$c" == [[:cntrl:]] ]]; then printf -v c '\\x%02x' "'$c"; fi
+    out+="$c"
+  done
+  if [ ${#1} -gt 2000 ]; then out+="... (${#1} characters)"; fi
+  printf '%s' "$out"
+}
 # The outcome of one case (a scene, or an engine's run of a scene in the matrix): its
 # JUnit report (an errored case when octocd wrote none or timed out), its line on stdout,
 # the counts. Arguments: name, log, rc, t0, frames.
 judge_case() {
   local name="$1" log="$2" rc="$3" t0="$4" n_frames="$5"
+  local shown_name
+  shown_name="$(shown "$name")"
   secs=$(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN { printf "%.1f", b - a }')
   if [ $rc -eq 124 ] || [ $rc -eq 137 ]; then
     # --timeout: octocd was stopped (its partial report, if any, is replaced by the error).
-    junit_error "$name" timeout "timed out after $timeout_s s (--timeout; $n_frames frames asked, see $log)"
+    junit_error "$name" timeout "timed out after $timeout_s s (--timeout; $n_frames frames asked, see $(shown "$log"))"
     rc=124
   elif [ ! -s "$out/junit/$name.xml" ]; then
     # octocd wrote no report (it crashed, or the command line was refused): one errored case.
@@ -208,23 +222,23 @@ judge_case() {
   fi
   # octocd's own plain-text outcome lines (validate's stdout): expected, NEW FAILURE,
   # GROWN, fixed (never the JUnit's XML-escaped messages).
-  outcomes() { grep -E "^($1) " "$log" | head -n "$2" | sed 's/^/         /'; }
+  outcomes() { grep -E "^($1) " "$log" | head -n "$2" | cut -c1-2000 | cat -v | sed 's/^/         /'; }
   n_expected=$(grep -c '^expected ' "$log")
   expected=$((expected + n_expected))
   case $rc in
     0) passed=$((passed + 1))
        if [ "$n_expected" -gt 0 ]; then
-         echo "pass     $name ($n_frames frames, ${secs} s; $n_expected expected failure(s))"
+         echo "pass     $shown_name ($n_frames frames, ${secs} s; $n_expected expected failure(s))"
          outcomes 'expected' 10
        else
-         echo "pass     $name ($n_frames frames, ${secs} s)"
+         echo "pass     $shown_name ($n_frames frames, ${secs} s)"
        fi
        outcomes 'fixed' 10 ;;
-    3) failed=$((failed + 1)); failed_list+=("$name"); echo "FAILED   $name (a validator failed, ${secs} s: $log)"
+    3) failed=$((failed + 1)); failed_list+=("$shown_name"); echo "FAILED   $shown_name (a validator failed, ${secs} s: $(shown "$log"))"
        outcomes 'NEW FAILURE|GROWN' 5; outcomes 'fixed' 5; outcomes 'expected' 10 ;;
-    124) broken=$((broken + 1)); broken_list+=("$name"); echo "TIMEOUT  $name (after $timeout_s s: $log)" ;;
-    2) bad=$((bad + 1)); bad_list+=("$name"); echo "BAD      $name (bad input: $log)"; tail -n 3 "$log" | sed 's/^/         /' ;;
-    *) broken=$((broken + 1)); broken_list+=("$name"); echo "ERROR    $name (exit $rc: $log)"; tail -n 3 "$log" | sed 's/^/         /' ;;
+    124) broken=$((broken + 1)); broken_list+=("$shown_name"); echo "TIMEOUT  $shown_name (after $timeout_s s: $(shown "$log"))" ;;
+    2) bad=$((bad + 1)); bad_list+=("$shown_name"); echo "BAD      $shown_name (bad input: $(shown "$log"))"; tail -n 3 "$log" | cut -c1-2000 | cat -v | sed 's/^/         /' ;;
+    *) broken=$((broken + 1)); broken_list+=("$shown_name"); echo "ERROR    $shown_name (exit $rc: $(shown "$log"))"; tail -n 3 "$log" | cut -c1-2000 | cat -v | sed 's/^/         /' ;;
   esac
 }
 

@@ -117,6 +117,26 @@ GlobalHeaps check_global_heaps(const std::string& path) {
   return heaps;
 }
 
+namespace {
+
+/// True when HDF5's error stack of the call that just failed holds an allocation failure
+/// (major H5E_RESOURCE, or minor H5E_CANTALLOC / H5E_NOSPACE): the process ran out of
+/// memory (a memory limit, ulimit -v), which says nothing about the file.
+bool hdf5_out_of_memory() {
+  bool oom = false;
+  H5Ewalk2(
+      H5E_DEFAULT, H5E_WALK_UPWARD,
+      [](unsigned, const H5E_error2_t* e, void* data) -> herr_t {
+        if (e->maj_num == H5E_RESOURCE || e->min_num == H5E_CANTALLOC || e->min_num == H5E_NOSPACE)
+          *static_cast<bool*>(data) = true;
+        return 0;
+      },
+      &oom);
+  return oom;
+}
+
+}  // namespace
+
 Hdf5Reader::Hdf5Reader(const std::string& path, const std::string& what) : path_(path), what_(what) {
   // A regular file only: HDF5 would block forever on a FIFO and read /dev/zero forever.
   struct stat st {};
@@ -143,12 +163,23 @@ Hdf5Reader::Hdf5Reader(const std::string& path, const std::string& what) : path_
     throw RuntimeError(fmt::format("{}: cannot set up HDF5 file access", path));
   file_ = Hdf5Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY | H5F_ACC_SWMR_READ, fapl));
   if (!file_.ok()) file_ = Hdf5Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, fapl));
+  if (!file_.ok() && hdf5_out_of_memory())
+    throw RuntimeError(fmt::format("{}: out of memory while HDF5 opened it (this process may allocate less than "
+                                   "the file needs: a memory limit such as ulimit -v; the file is not known to be "
+                                   "damaged)",
+                                   path));
   if (!file_.ok())
     throw InputError(fmt::format("{}: HDF5 cannot open it read-only (truncated or damaged: {} bytes); allowed: {}",
                                  path, st.st_size, what));
 }
 
+
 void Hdf5Reader::fail(const std::string& object, const std::string& problem, const std::string& allowed) const {
+  if (hdf5_out_of_memory())
+    throw RuntimeError(fmt::format("{}: {}: out of memory while reading it (this process may allocate less than "
+                                   "the read needs: a memory limit such as ulimit -v; the file is not known to be "
+                                   "damaged)",
+                                   path_, object));
   throw InputError(fmt::format("{}: {}: {}; allowed: {}", path_, object, problem, allowed));
 }
 

@@ -16,6 +16,7 @@
 #include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/json_strict.hpp"
+#include "octocd/text.hpp"
 #include "octocd/validation_rows.hpp"
 
 namespace octocd {
@@ -237,7 +238,7 @@ ExpectationReport match_expectations(const Expectations& expect, const RunName& 
         const Expectation& e = **it;
         used.insert(&e);
         o.allowed = e.worst;
-        o.reason = e.reason;
+        o.reason = bounded(e.reason);
         if (e.has_items) {
           for (const std::string& item : c.items)
             if (!std::binary_search(e.items.begin(), e.items.end(), item)) o.outside.push_back(item);
@@ -251,7 +252,7 @@ ExpectationReport match_expectations(const Expectations& expect, const RunName& 
                                c.count, o.outside.empty() ? "" : "; items not listed: " + join(o.outside), o.first);
         } else {
           o.text = fmt::format("expected {}/{}: worst {} <= allowed {} {}({} item(s)); reason: {}", o.row, o.cause,
-                               num(c.worst), num(e.worst), c.unit.empty() ? "" : c.unit + " ", c.count, e.reason);
+                               num(c.worst), num(e.worst), c.unit.empty() ? "" : c.unit + " ", c.count, bounded(e.reason));
         }
       }
       report.outcomes.push_back(std::move(o));
@@ -264,7 +265,7 @@ ExpectationReport match_expectations(const Expectations& expect, const RunName& 
     o.row = e->row;
     o.cause = e->cause;
     o.allowed = e->worst;
-    o.reason = e->reason;
+    o.reason = bounded(e->reason);
     const auto row = std::find_if(results.begin(), results.end(),
                                   [&](const ValidationResult& r) { return r.name == e->row; });
     const std::string state = row == results.end() ? "the row was not produced"

@@ -7,7 +7,7 @@ from typing import Any, Dict, List, Optional, Union
 
 import numpy as _np
 
-from . import _octocd
+from . import _args, _octocd
 from .scene import Scene, load_scene
 
 
@@ -116,7 +116,7 @@ class Engine:
         interrupt first takes the steps it already ran (frame() counts them).
         Returns the last step's metrics dict (see FrameRecord.metrics). Raises
         RuntimeError naming the body and frame when the state becomes non-finite."""
-        return self._e.step(int(n))
+        return self._e.step(_args.integer("n", n, 0, 2**31 - 1))
 
     def last_frame(self) -> FrameRecord:
         """The last step's FrameRecord (fresh NumPy copies)."""

@@ -7,7 +7,7 @@ from typing import Any, Dict, Union
 
 import numpy as _np
 
-from . import _octocd
+from . import _args, _octocd
 
 InputError = _octocd.InputError
 
@@ -59,7 +59,7 @@ class Trace:
                     "bodies/restitution", "contacts/point")
 
     def __init__(self, path: Union[str, "_os.PathLike[str]"]):
-        self.path = _os.fspath(path)
+        self.path = _args.path("path", path)
         self._f = _octocd.TraceFile(self.path)
         try:
             self._check()
@@ -166,6 +166,7 @@ class Trace:
         return self._rows("states/frame", 0, s, "i8") if self._has("states/frame") else _np.arange(s, dtype=_np.int64)
 
     def _state_row(self, frame: int) -> int:
+        frame = _args.integer("frame", frame, 0, _args.INT64_MAX)
         frames = self.state_frames
         rows = _np.flatnonzero(frames == frame)
         if rows.size == 0:
@@ -278,6 +279,7 @@ class Trace:
         return out
 
     def _contact_rows(self, frame: int):
+        frame = _args.integer("frame", frame, 0, _args.INT64_MAX)
         if not self._has("contacts/offsets"):
             raise InputError(f"{self.path}: /contacts: absent; allowed: a trace written with --contacts")
         noff = self._shape("contacts/offsets")[0]

@@ -7,7 +7,7 @@ import os as _os
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
-from . import _octocd
+from . import _args, _octocd
 from .scene import load_scene
 
 InputError = _octocd.InputError
@@ -197,7 +197,7 @@ class Validator:
         KeyboardInterrupt at once (the frame is judged on a helper thread; one cut short
         ends in the background and the next call waits for it). Returns self.
         """
-        self._v.observe(int(frame), aabbs, pairs, contacts, x_pre, v_pre, x_post, v_post, q_pre, q_post,
+        self._v.observe(_args.integer("frame", frame, 1, _args.INT64_MAX), aabbs, pairs, contacts, x_pre, v_pre, x_post, v_post, q_pre, q_post,
                         w_pre, w_post, x_det, q_det, bool(manifolds), bool(checked))
         return self
 
@@ -257,16 +257,17 @@ def validate_trace(path: Union[str, "_os.PathLike[str]"], *, every: int = 1, max
     if isinstance(expect, dict):
         text, origin = _json.dumps(expect), "expect"
     elif expect is not None:
-        origin = _os.fspath(expect)
-        try:
-            with open(origin, encoding="utf-8") as f:
-                text = f.read()
-        except OSError as e:
-            raise InputError(f"expect: cannot read '{origin}' ({e.strerror}); allowed: an expectations file (JSON)")
-    share = None if shard is None else f"{int(shard[0])}/{int(shard[1])}"
-    rows, outcomes, code, doc = _octocd.validate_trace(_os.fspath(path), int(every), int(max_frames),
+        origin, text = _args.read_json_input("expect", expect, "an expectations file (JSON)")
+    share = None
+    if shard is not None:
+        if isinstance(shard, (str, bytes)) or not hasattr(shard, "__len__") or len(shard) != 2:
+            raise InputError(f"shard: {shard!r:.80}; allowed: (i, n), shard i of n, 0 <= i < n <= 100000")
+        n = _args.integer("shard[1]", shard[1], 1, 100000)
+        share = f"{_args.integer('shard[0]', shard[0], 0, n - 1)}/{n}"
+    rows, outcomes, code, doc = _octocd.validate_trace(_args.path("path", path), _args.integer("every", every, 1, 2**31 - 1),
+                                                      _args.integer("max_frames", max_frames, 0, _args.INT64_MAX),
                                                       bool(against_fcl), tolerances, text, origin, bool(strict), share,
-                                                      "" if mesh_dir is None else _os.fspath(mesh_dir))
+                                                      "" if mesh_dir is None else _args.path("mesh_dir", mesh_dir))
     out = ValidationResults(_results(rows), [ExpectationOutcome(**o) for o in outcomes], code)
     out.shard_json = _json.loads(doc) if doc else None
     return out
@@ -279,6 +280,10 @@ def merge_validations(shards) -> ValidationResults:
     `validate --shard --json` files, in any order. Raises InputError naming the shard for
     overlapping, missing or foreign shards (another trace, engine, frames, every, against
     or tolerances). exit_code: 0 when every row passes, 3 otherwise."""
+    if isinstance(shards, (str, bytes, _os.PathLike, dict, ValidationResults)) or not hasattr(shards, "__iter__"):
+        raise InputError(f"merge_validations: shards: a {type(shards).__name__}; allowed: a list of the shards "
+                         "(validate_trace(..., shard=(i, n)) results, their shard_json dicts or --json paths), "
+                         "e.g. merge_validations(['s0.json', 's1.json'])")
     texts, names = [], []
     for k, s in enumerate(shards):
         if isinstance(s, ValidationResults):
@@ -291,13 +296,8 @@ def merge_validations(shards) -> ValidationResults:
             texts.append(_json.dumps(s))
             names.append(f"shard {k}")
         else:
-            name = _os.fspath(s)
-            try:
-                with open(name, encoding="utf-8") as f:
-                    texts.append(f.read())
-            except OSError as e:
-                raise InputError(f"merge_validations: cannot read '{name}' ({e.strerror}); allowed: a shard's "
-                                 "--json file")
+            name, text = _args.read_json_input(f"merge_validations: shards[{k}]", s, "a shard's --json file")
+            texts.append(text)
             names.append(name)
     rows, outcomes, code = _octocd.merge_validations(texts, names)
     return ValidationResults(_results(rows), [ExpectationOutcome(**o) for o in outcomes], code)

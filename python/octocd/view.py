@@ -4,7 +4,7 @@ from __future__ import annotations
 import os as _os
 from typing import Any, Dict, Optional, Sequence, Union
 
-from . import _octocd
+from . import _args, _octocd
 
 InputError = _octocd.InputError
 
@@ -24,8 +24,9 @@ def view(trace: Union[str, "_os.PathLike[str]"], *, frame: int = 1, pair: Option
     if pair is not None:
         if len(pair) != 2:
             raise InputError(f"pair: {pair!r}; allowed: two body indices (a, b)")
-        p = (int(pair[0]), int(pair[1]))
+        p = (_args.integer("pair[0]", pair[0], 0, 2**32 - 1), _args.integer("pair[1]", pair[1], 0, 2**32 - 1))
     if p is not None and body is not None:
         raise InputError("pair and body: both given; allowed: one item (a pair or a body), or neither")
-    return _octocd.view(_os.fspath(trace), int(frame), p, None if body is None else int(body), int(window),
-                        _os.fspath(out_dir))
+    return _octocd.view(_args.path("trace", trace), _args.integer("frame", frame, 1, _args.INT64_MAX), p,
+                        None if body is None else _args.integer("body", body, 0, 2**32 - 1),
+                        _args.integer("window", window, 0, 2**31 - 1), _args.path("out_dir", out_dir))

@@ -37,6 +37,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/atomic_file.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/engine.hpp"
 #include "octocd/engines.hpp"
@@ -50,6 +51,7 @@
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/shards.hpp"
+#include "octocd/text.hpp"
 #include "octocd/trace_reader.hpp"
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
@@ -78,6 +80,9 @@ std::string actual_shape(const py::array& a) {
   return shape_text(s, std::vector<std::string>(s.size()));
 }
 
+/// True on a little-endian machine (NumPy's byteorder '<' is then the native one).
+constexpr bool kNativeLittle = __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__;
+
 /// Checks `obj` against `shape` (-1: any length) and returns a C-contiguous copy or view
 /// of dtype T. `names` names each dimension in messages ("n", "P", ...); `what` is the
 /// allowed content ("positions (m)").
@@ -91,10 +96,17 @@ py::array_t<T, py::array::c_style> take(py::handle obj, const std::string& arg, 
   if (py::isinstance<py::array>(obj)) {
     arr = py::reinterpret_borrow<py::array>(obj);
     const char kind = arr.dtype().kind();
-    const bool ok = is_float ? kind == 'f' : (kind == 'i' || kind == 'u');
+    // docs/python.md: float32 or float64 (not float16 or longer), integers of any width, in
+    // the machine's byte order (a big-endian array is refused, not silently swapped).
+    const std::string order = py::str(arr.dtype().attr("byteorder"));
+    const py::ssize_t width = arr.dtype().itemsize();
+    const bool ok = order != (kNativeLittle ? ">" : "<") &&
+                    (is_float ? kind == 'f' && (width == 4 || width == 8) : (kind == 'i' || kind == 'u'));
     if (!ok && arr.size() > 0)  // an empty array of any dtype stands for 'none'
-      throw InputError(fmt::format("{}: dtype {}; allowed: {}{}", arg, std::string(py::str(arr.dtype())), allowed,
-                                   is_float ? " (float64 is rounded to float32)" : ""));
+      throw InputError(fmt::format("{}: dtype {}{}; allowed: {}{}", arg, std::string(py::str(arr.dtype())),
+                                   order == (kNativeLittle ? ">" : "<") ? " (big-endian)" : "", allowed,
+                                   is_float ? " (float64 is rounded to float32), in the machine's byte order"
+                                            : ", in the machine's byte order"));
   } else {
     // A plain sequence: converted to the dtype (numbers only).
     try {
@@ -1237,10 +1249,10 @@ PYBIND11_MODULE(_octocd, m) {
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
-    } catch (const InputError& e) {
-      PyErr_SetString(input_error.ptr(), e.what());
+    } catch (const InputError& e) {  // bounded, valid UTF-8: a message naming hostile bytes still decodes
+      PyErr_SetString(input_error.ptr(), utf8_replaced(bounded(e.what(), kMaxLineBytes, 1024)).c_str());
     } catch (const RuntimeError& e) {
-      PyErr_SetString(runtime_error.ptr(), e.what());
+      PyErr_SetString(runtime_error.ptr(), utf8_replaced(bounded(e.what(), kMaxLineBytes, 1024)).c_str());
     }
   });
 
@@ -1406,6 +1418,15 @@ PYBIND11_MODULE(_octocd, m) {
         return py::make_tuple(out_results(merged.results, nullptr), out_outcomes(report), report.exit_code(false));
       },
       py::arg("texts"), py::arg("names"));
+
+  // The CLI's reader of JSON inputs (octocd/atomic_file.hpp): a FIFO, a device or a folder is
+  // refused without blocking, /dev/zero is never read, at most 64 MiB.
+  m.def(
+      "read_input_file",
+      [](const std::string& path, const std::string& label, const std::string& allowed) {
+        return py::bytes(read_input_file(path, label, allowed));
+      },
+      py::arg("path"), py::arg("label"), py::arg("allowed"));
 
   m.def("format_results", [](const py::list& results, const std::vector<std::string>& overridden) {
     std::vector<ValidationResult> rs;

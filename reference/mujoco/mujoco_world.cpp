@@ -7,24 +7,81 @@
 
 #include <fmt/format.h>
 #include <mujoco/mujoco.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "octocd/convex_hull.hpp"
 #include "octocd/error.hpp"
 #include "octocd/pose.hpp"
+#include "octocd/text.hpp"
 #include "octocd/version.hpp"
 
 namespace octocd {
 
 namespace {
+
+/// While alive, what the process writes to stdout and stderr (file descriptors 1 and 2) goes
+/// to a temporary file instead of the terminal: MuJoCo's qhull prints its errors there
+/// (57 lines for a flat mesh). text() returns it; the descriptors are restored on destruction.
+class CapturedOutput {
+ public:
+  CapturedOutput() : file_(std::tmpfile()) {
+    if (!file_) return;
+    std::fflush(stdout);
+    std::fflush(stderr);
+    for (int k = 0; k < 2; ++k) {
+      saved_[k] = ::dup(k + 1);
+      if (saved_[k] >= 0) ::dup2(::fileno(file_), k + 1);
+    }
+  }
+  ~CapturedOutput() {
+    restore();
+    if (file_) std::fclose(file_);
+  }
+  CapturedOutput(const CapturedOutput&) = delete;
+  CapturedOutput& operator=(const CapturedOutput&) = delete;
+  /// Restores stdout and stderr, then returns at most 64 KiB of what was written.
+  std::string text() const {
+    const_cast<CapturedOutput*>(this)->restore();
+    if (!file_) return "";
+    std::string out(64u << 10, '\0');
+    std::rewind(file_);
+    out.resize(std::fread(out.data(), 1, out.size(), file_));
+    return out;
+  }
+
+ private:
+  void restore() {
+    std::fflush(stdout);
+    std::fflush(stderr);
+    for (int k = 0; k < 2; ++k)
+      if (saved_[k] >= 0) {
+        ::dup2(saved_[k], k + 1);
+        ::close(saved_[k]);
+        saved_[k] = -1;
+      }
+  }
+  std::FILE* file_;
+  int saved_[2] = {-1, -1};
+};
+
+/// The first non-empty line of `text` (cut to 300 bytes), for a one-line message.
+std::string first_line(const std::string& text) {
+  std::size_t a = text.find_first_not_of(" \t\r\n");
+  if (a == std::string::npos) return "";
+  const std::size_t b = text.find_first_of("\r\n", a);
+  return bounded(text.substr(a, b == std::string::npos ? std::string::npos : b - a), 300);
+}
 
 /// MuJoCo's error handler while a MuJoCo call runs (MujocoCall): MuJoCo's default prints,
 /// appends to MUJOCO_LOG.TXT in the working directory and exits the process.
@@ -249,6 +306,10 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
   for (std::size_t k = 0; k < src.shapes.size(); ++k) {
     const Shape& s = src.shapes[k];
     if (!shape_used[k] || !s.mesh) continue;
+    // The hull check every reference engine makes (reference/common/convex_hull.hpp): a mesh
+    // that spans no volume (collinear, flat) is the same InputError (exit 2) as on Bullet,
+    // ODE and DART, before MuJoCo's own qhull sees it.
+    (void)convex_hull(s.mesh->vertices, s.name);
     if (!any_mesh) x += "  <asset>\n";
     any_mesh = true;
     x += fmt::format("    <mesh name=\"s{}\" vertex=\"", k);
@@ -301,9 +362,17 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
     const int at = mj_findFileVFS(vfs.get(), file);
     std::memcpy(vfs->filedata[at], im.xml.data(), im.xml.size());
     char error[1024] = "";
-    im.m = mj_loadXML(file, vfs.get(), error, static_cast<int>(sizeof(error)));
+    std::string said;  // what MuJoCo (its qhull) printed while loading: never on the terminal raw
+    {
+      const CapturedOutput captured;
+      im.m = mj_loadXML(file, vfs.get(), error, static_cast<int>(sizeof(error)));
+      said = captured.text();
+    }
     mj_deleteVFS(vfs.get());
-    if (!im.m) throw RuntimeError(fmt::format("mujoco: MuJoCo refused the scene '{}': {}", scene.name, error));
+    if (!im.m)
+      throw RuntimeError(fmt::format("mujoco: MuJoCo refused the scene '{}': {}{}", scene.name, error,
+                                     said.empty() ? std::string() : "; it printed: " + first_line(said)));
+    if (!said.empty()) std::fprintf(stderr, "octocd: mujoco: %s\n", printable(first_line(said)).c_str());
     im.d = mj_makeData(im.m);
     if (!im.d) throw RuntimeError("mujoco: mj_makeData failed (out of memory?)");
   }

@@ -7,15 +7,19 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdarg>
 #include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <mutex>
 #include <utility>
 
 #include "octocd/convex_hull.hpp"
 #include "octocd/error.hpp"
+#include "octocd/text.hpp"
 #include "octocd/version.hpp"
 
 #if !defined(dDOUBLE)
@@ -40,11 +44,26 @@ float float_above(double d) {
   return f;
 }
 
+/// ODE's warnings (dMessage: "Polygon 3 is not defined counterclockwise", ...) on stderr as
+/// octocd shows text (control characters escaped, docs/robustness.md "Sinks"), the first 5
+/// of a process, then one line saying the rest are not shown: never ODE's raw printf.
+void ode_message(int num, const char* msg, va_list ap) {
+  static std::atomic<int> shown{0};
+  char text[512];
+  std::vsnprintf(text, sizeof text, msg, ap);
+  const int k = shown++;
+  if (k < 5) std::fprintf(stderr, "octocd: ode: warning %d: %s\n", num, printable(text).c_str());
+  if (k == 5) std::fprintf(stderr, "octocd: ode: more warnings, not shown\n");
+}
+
 /// ODE's library-wide set-up, once per process (dInitODE2; never closed: other worlds
 /// may live until exit), and its per-thread collision data for the calling thread.
 void init_ode_for_this_thread() {
   static std::once_flag once;
-  std::call_once(once, [] { dInitODE2(0); });
+  std::call_once(once, [] {
+    dInitODE2(0);
+    dSetMessageHandler(ode_message);
+  });
   dAllocateODEDataForThread(dAllocateMaskAll);
 }
 
@@ -202,6 +221,17 @@ OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial,
       std::vector<Vec3> pts(s.mesh->vertices);
       for (Vec3& p : pts) p -= centre;
       d.hull = convex_hull(pts, s.name);
+      // ODE's dGeomConvex takes the body origin (the local AABB's centre) as inside the hull:
+      // one outside (a corner tetrahedron) made ODE abort ("ODE INTERNAL ERROR 1: assertion
+      // !bSafeNormalize4Fault"). Refused instead, naming the shape.
+      for (std::size_t f = 0; f < d.hull.planes.size(); ++f)
+        if (!(d.hull.planes[f][3] > 1e-9))
+          throw InputError(fmt::format(
+              "{}: engine ode needs the centre of the mesh's bounding box inside its convex hull (ODE's convex "
+              "geometry takes it as the body's origin), but the hull's face {} passes {:g} m from it on its outer "
+              "side; allowed: a mesh whose bounding-box centre lies inside its hull (not, e.g., a corner "
+              "tetrahedron), or another engine",
+              s.name, f, -d.hull.planes[f][3]));
       d.mass = hull_mass_properties(d.hull);
       for (const auto& v : d.hull.vertices) d.points.insert(d.points.end(), v.begin(), v.end());
       for (std::size_t f = 0; f < d.hull.faces.size(); ++f) {

@@ -115,12 +115,17 @@ run="$(abs "$run")"
 if [ -e "$run" ] && [ -n "$(ls -A "$run" 2>/dev/null)" ]; then
   die "--run-dir '$run': not empty; allowed: a new or empty folder (a run's shards must not meet another run's)"
 fi
+# sbatch reads --output as a filename pattern: % starts a replacement (%j, %a, ...) and a
+# backslash turns every replacement off (the shards' logs would then share one file). A %
+# of the folder's name is written %% (sbatch's escape); a backslash is refused.
+case "$run" in *\\*) die "--run-dir '$run': holds a backslash, which turns off sbatch's --output patterns; allowed: a folder name without \\" ;; esac
+logs_pattern="${run//%/%%}/logs"
 mkdir -p "$run/shards" "$run/status" "$run/logs" || die "--run-dir '$run': cannot create it"
 
 common=(--parsable)
 [ ${#sbatch_extra[@]} -eq 0 ] || common+=("${sbatch_extra[@]}")
 array_opts=("${common[@]}" --job-name="octocd-$mode" --array="0-$((shards - 1))${max_running:+%$max_running}"
-            --cpus-per-task="$cpus" --output="$run/logs/shard-%a.log")
+            --cpus-per-task="$cpus" --output="$logs_pattern/shard-%a.log")
 [ -z "$partition" ] || array_opts+=(--partition="$partition")
 [ -z "$gpus" ] || array_opts+=(--gres="gpu:$gpus")
 [ -z "$time_limit" ] || array_opts+=(--time="$time_limit")
@@ -147,7 +152,7 @@ echo "run $run"
 echo "array $array_id"
 
 join_opts=("${common[@]}" --job-name="octocd-$mode-join" --dependency="afterany:$array_id"
-           --output="$run/logs/join.log")
+           --output="$logs_pattern/join.log")
 [ -z "$join_partition" ] || join_opts+=(--partition="$join_partition")
 join_cmd=("$here/join.sbatch" "$mode" "$run" "$shards" "$array_id" "$octocd" "${merge_args[@]+"${merge_args[@]}"}")
 refused() {

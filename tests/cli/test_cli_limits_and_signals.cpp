@@ -1018,3 +1018,71 @@ TEST_F(Hardening, BenchEndsWithinASecondOfSigintKeepingFinishedPoints) {
 }
 
 }  // namespace
+
+// Before (issue 68): `validate SCENE --engine mujoco|ode|dart|bullet` stopped by a signal
+// printed "nothing was written": no table, no --json, no --junit. Now the frames the engine
+// stepped are judged as the cpu engine's are: the STOPPED table, --json with `stopped`, the
+// JUnit `stopped` case, and a stop line whose frame count is read back from the trace.
+TEST_F(Hardening, ValidateOnAReferenceEngineKeepsItsVerdictOnAStop) {
+  for (const std::string engine : {"bullet", "mujoco", "ode", "dart"}) {
+    SCOPED_TRACE(engine);
+    const Result avail = run({"engines"});
+    if (!std::regex_search(avail.out, std::regex("(^|\n)" + engine + " +available"))) continue;  // not built in
+    for (const bool keep : {true, false}) {
+      SCOPED_TRACE(keep ? "--trace" : "temporary trace");
+      const std::string trace = (dir_ / (engine + ".h5")).string(), json = (dir_ / "v.json").string(),
+                        xml = (dir_ / "v.xml").string();
+      const fs::path tmp = dir_ / ("tmp-" + engine + (keep ? "-k" : "-t"));
+      fs::create_directories(tmp);
+      std::vector<std::string> args{"validate", box_scene("100000000"), "--engine", engine, "--frames", "100000000",
+                                    "--every", "10", "--against", "none", "--json", json, "--junit", xml};
+      if (keep) args.insert(args.end(), {"--trace", trace});
+      Child c(dir_, args, [&] { ::setenv("TMPDIR", tmp.c_str(), 1); });
+      // The event: the trace (given, or the temporary one in TMPDIR) holds 50 flushed frames.
+      std::string watched = trace;
+      const bool flushed = octocd::test::wait_until(
+          [&] {
+            if (!keep)
+              for (const auto& e : fs::directory_iterator(tmp)) watched = e.path().string();
+            try {
+              return !watched.empty() && octocd::read_trace_summary(watched).frames >= 50;
+            } catch (const std::exception&) {
+              return false;  // not created or not flushed yet
+            }
+          },
+          {dir_, tmp}, std::chrono::seconds(120));
+      ::kill(c.pid(), SIGINT);
+      const Result r = c.wait();
+      ASSERT_TRUE(flushed) << r.out << r.err;
+      ASSERT_EQ(r.signal, 0) << "killed by the signal instead of stopping";
+      EXPECT_EQ(r.code, 130) << r.out << r.err;
+      EXPECT_EQ(r.err.find("nothing was written"), std::string::npos) << r.err;
+      std::smatch m;
+      ASSERT_TRUE(std::regex_search(r.out, m, std::regex("STOPPED: the table covers frames 1\\.\\.([0-9]+) of "
+                                                         "100000000 \\(an incomplete verdict\\); stopped by SIGINT "
+                                                         "after frame ([0-9]+)")))
+          << r.out << r.err;
+      const std::int64_t judged = std::stoll(m[1]), stepped = std::stoll(m[2]);
+      EXPECT_GE(stepped, 50);
+      EXPECT_LE(judged, stepped);
+      EXPECT_NE(r.out.find("non-penetration"), std::string::npos) << r.out;  // the table
+      const std::string j = slurp(json);
+      EXPECT_NE(j.find("\"stopped\": \"the table covers frames 1.." + std::to_string(judged)), std::string::npos) << j;
+      const std::string x = slurp(xml);
+      EXPECT_NE(x.find("type=\"stopped\""), std::string::npos) << x;
+      if (keep) {
+        const std::int64_t held = octocd::read_trace_summary(trace).frames;
+        EXPECT_EQ(held, stepped);
+        EXPECT_NE(r.err.find("the trace " + trace + " holds frames 1.." + std::to_string(held) + " (read back)"),
+                  std::string::npos)
+            << r.err;
+      } else {
+        EXPECT_NE(r.err.find("its temporary trace (it held frames 1.." + std::to_string(stepped) + ") is removed"),
+                  std::string::npos)
+            << r.err;
+        EXPECT_TRUE(fs::is_empty(tmp)) << "the temporary trace is removed";
+      }
+      fs::remove(trace);
+    }
+  }
+}
