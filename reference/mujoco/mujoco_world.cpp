@@ -303,7 +303,17 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
     char error[1024] = "";
     im.m = mj_loadXML(file, vfs.get(), error, static_cast<int>(sizeof(error)));
     mj_deleteVFS(vfs.get());
-    if (!im.m) throw RuntimeError(fmt::format("mujoco: MuJoCo refused the scene '{}': {}", scene.name, error));
+    if (!im.m) {
+      // MuJoCo 2.2 sizes mjData's constraint arrays njmax x nv and refuses them past about
+      // 2^31 bytes: at the default nconmax of 1500, beyond about 2,000 free bodies.
+      const bool data = std::strstr(error, "could not create mjData") != nullptr;
+      throw RuntimeError(fmt::format(
+          "mujoco: MuJoCo refused the scene '{}': {}{}", scene.name, error,
+          data ? fmt::format("; MuJoCo 2.2 sizes its constraint arrays njmax x nv (here {} x {}): lower "
+                             "--mujoco max_contacts (now {}; docs/engines.md, \"Set-up of large scenes\")",
+                             njmax, 6 * dynamic, nconmax)
+               : std::string()));
+    }
     im.d = mj_makeData(im.m);
     if (!im.d) throw RuntimeError("mujoco: mj_makeData failed (out of memory?)");
   }
