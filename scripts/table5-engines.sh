@@ -14,7 +14,7 @@
 # SCENE defaults to the four Table 5 scenes. Exit 0 ok, 1 a bench failed, 2 bad arguments.
 set -euo pipefail
 if [ $# -lt 2 ]; then
-  sed -n '3,16p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'
   exit 2
 fi
 octocd=$(readlink -f "$1")
