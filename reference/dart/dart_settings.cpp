@@ -14,6 +14,7 @@ namespace octocd {
 
 const char* dart_collision_name(DartCollision c) { return c == DartCollision::Dart ? "dart" : "fcl"; }
 const char* dart_fcl_boxes_name(DartFclBoxes b) { return b == DartFclBoxes::Mesh ? "mesh" : "primitive"; }
+const char* dart_fcl_insert_name(DartFclInsert i) { return i == DartFclInsert::Origin ? "origin" : "posed"; }
 const char* dart_lcp_name(DartLcp l) { return l == DartLcp::Pgs ? "pgs" : "dantzig"; }
 
 DartSettings dart_library_defaults() {
@@ -38,6 +39,9 @@ const T& dart_table() {
                  "fcl (FCLCollisionDetector: boxes and meshes), dart (DARTCollisionDetector: boxes only)")},
       {"boxes", T::choice(&DartSettings::boxes, "primitive", DartFclBoxes::Primitive, "mesh", DartFclBoxes::Mesh,
                           "primitive (fcl::Box, FCL's box-box test), mesh (a 12-triangle BVH, DART's default)")},
+      {"insert", T::choice(&DartSettings::insert, "origin", DartFclInsert::Origin, "posed", DartFclInsert::Posed,
+                           "origin (each collision object enters FCL's tree at the origin, DART's own), posed (at "
+                           "its body's pose: a faster set-up, contacts in another order)")},
       {"lcp",
        T::choice(&DartSettings::lcp, "dantzig", DartLcp::Dantzig, "pgs", DartLcp::Pgs,
                  "dantzig (DantzigBoxedLcpSolver, PGS fallback), pgs (PgsBoxedLcpSolver, iterations sweeps)")},

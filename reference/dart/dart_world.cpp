@@ -7,6 +7,8 @@
 #include <dart/collision/CollisionResult.hpp>
 #include <dart/collision/dart/DARTCollisionDetector.hpp>
 #include <dart/collision/fcl/FCLCollisionDetector.hpp>
+#include <dart/collision/fcl/FCLCollisionObject.hpp>
+#include <dart/collision/fcl/FCLTypes.hpp>
 #include <dart/config.hpp>
 #include <dart/constraint/BoxedLcpConstraintSolver.hpp>
 #include <dart/constraint/ContactConstraint.hpp>
@@ -85,6 +87,32 @@ Eigen::Isometry3d isometry(Vec3 x, Quat q) {
   t.translation() = Eigen::Vector3d(x.x, x.y, x.z);
   return t;
 }
+
+/// DART's FCL collision detector whose collision objects start at their shape frame's world
+/// pose (DartFclInsert::Posed). FCLCollisionObject makes its fcl::CollisionObject at the
+/// identity and the collision group registers it in FCL's dynamic AABB tree at once, so n
+/// boxes go in as n leaves with one AABB at the origin: a chain n deep, O(n^2) to build.
+/// Posed here, each leaf goes in with its body's AABB. Before every collide DART poses each
+/// object again and refits and rebalances the tree: the steps collide the same poses, but
+/// the tree, so the order of the contacts, differs from the origin build's.
+class PosedFclDetector : public dart::collision::FCLCollisionDetector {
+ public:
+  /// A detector owned by the returned pointer (DART's detectors are held by shared_ptr).
+  static std::shared_ptr<PosedFclDetector> create() { return std::shared_ptr<PosedFclDetector>(new PosedFclDetector()); }
+
+ protected:
+  std::unique_ptr<dart::collision::CollisionObject> createCollisionObject(
+      const dart::dynamics::ShapeFrame* frame) override {
+    std::unique_ptr<dart::collision::CollisionObject> object = FCLCollisionDetector::createCollisionObject(frame);
+    auto* fcl_object = static_cast<dart::collision::FCLCollisionObject*>(object.get())->getFCLCollisionObject();
+    fcl_object->setTransform(dart::collision::FCLTypes::convertTransform(frame->getWorldTransform()));
+    fcl_object->computeAABB();
+    return object;
+  }
+
+ private:
+  PosedFclDetector() = default;
+};
 
 /// DART's process-wide contact constraint parameters (ContactConstraint statics), set to a
 /// world's values for the lifetime of the object and put back after.
@@ -195,7 +223,11 @@ DartWorld::DartWorld(std::shared_ptr<const Model> model, const BodyState& initia
   }
   auto* cs = m.world->getConstraintSolver();
   if (fcl) {
-    auto detector = dart::collision::FCLCollisionDetector::create();
+    std::shared_ptr<dart::collision::FCLCollisionDetector> detector;
+    if (settings.insert == DartFclInsert::Posed)
+      detector = PosedFclDetector::create();
+    else
+      detector = dart::collision::FCLCollisionDetector::create();
     {
       // DART warns on std::cerr about FCL 0.4's incomplete primitive support whenever
       // PRIMITIVE is set; the warning is kept off the run's output (docs/engines.md, "dart",

@@ -369,9 +369,18 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
       said = captured.text();
     }
     mj_deleteVFS(vfs.get());
-    if (!im.m)
-      throw RuntimeError(fmt::format("mujoco: MuJoCo refused the scene '{}': {}{}", scene.name, error,
-                                     said.empty() ? std::string() : "; it printed: " + first_line(said)));
+    if (!im.m) {
+      // MuJoCo 2.2 sizes mjData's constraint arrays njmax x nv and refuses them past about
+      // 2^31 bytes: at the default nconmax of 1500, beyond about 2,000 free bodies.
+      const bool data = std::strstr(error, "could not create mjData") != nullptr;
+      throw RuntimeError(fmt::format(
+          "mujoco: MuJoCo refused the scene '{}': {}{}{}", scene.name, error,
+          data ? fmt::format("; MuJoCo 2.2 sizes its constraint arrays njmax x nv (here {} x {}): lower "
+                             "--mujoco max_contacts (now {}; docs/engines.md, \"Set-up of large scenes\")",
+                             njmax, 6 * dynamic, nconmax)
+               : std::string(),
+          said.empty() ? std::string() : "; it printed: " + first_line(said)));
+    }
     if (!said.empty()) std::fprintf(stderr, "octocd: mujoco: %s\n", printable(first_line(said)).c_str());
     im.d = mj_makeData(im.m);
     if (!im.d) throw RuntimeError("mujoco: mj_makeData failed (out of memory?)");

@@ -5,6 +5,7 @@
 // the physics tier. Skipped when this octocd is built without DART.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -140,7 +141,7 @@ TEST(DartSettings, DefaultsAreDartsAndBadValuesAreNamed) {
   EXPECT_EQ(ours.iterations, darts.iterations);
   DartSettings s;
   apply_dart_settings(s, {"collision=dart", "boxes=mesh", "lcp=pgs", "iterations=50", "erp=0.2", "max_erv=0.5",
-                          "cfm=1e-6", "friction=pyramid", "contacts=5000"},
+                          "cfm=1e-6", "friction=pyramid", "contacts=5000", "insert=posed"},
                       "--dart");
   EXPECT_EQ(s.collision, DartCollision::Dart);
   EXPECT_EQ(s.boxes, DartFclBoxes::Mesh);
@@ -151,6 +152,8 @@ TEST(DartSettings, DefaultsAreDartsAndBadValuesAreNamed) {
   EXPECT_EQ(s.cfm, 1e-6);
   EXPECT_EQ(s.friction, DartFriction::Pyramid);
   EXPECT_EQ(s.max_contacts, 5000);
+  EXPECT_EQ(s.insert, DartFclInsert::Posed);
+  EXPECT_EQ(DartSettings().insert, DartFclInsert::Origin);
   auto error = [](const std::string& item) {
     DartSettings t;
     try {
@@ -166,7 +169,7 @@ TEST(DartSettings, DefaultsAreDartsAndBadValuesAreNamed) {
   EXPECT_NE(error("iterations=0").find("allowed: an integer in [1, 10000]"), std::string::npos);
   EXPECT_NE(error("collision=bullet").find("collision='bullet' is not allowed; allowed: fcl"), std::string::npos);
   EXPECT_NE(error("lcp=lemke").find("allowed: dantzig"), std::string::npos);
-  EXPECT_EQ(error("solver=pgs"), "--dart: unknown dart setting 'solver'; allowed: collision, boxes, lcp, iterations, "
+  EXPECT_EQ(error("solver=pgs"), "--dart: unknown dart setting 'solver'; allowed: collision, boxes, insert, lcp, iterations, "
                                  "erp, max_erv, cfm, friction, contacts (docs/engines.md)");
   EXPECT_NE(error("erp").find("'erp' is not KEY=VALUE"), std::string::npos);
   // A world sets DART's process-wide contact parameters only while it steps.
@@ -345,6 +348,41 @@ TEST(DartWorld, SlidingBoxFrictionOpposesTheSlidingInsideTheCone) {
 // A recorded run read back from its trace (ExternalTrace, as `validate --trace-in`
 // reads it) gives every frame's states and contact rows as recorded: the same pairs,
 // normals, depths, points, jn and jt3 to float.
+// insert=posed builds FCL's tree from the bodies' AABBs instead of n leaves at the origin.
+// Until the first contact both runs integrate free bodies alike; that frame collides the
+// same poses, so it finds the same contacts (pair, normal, point, depth), in FCL's order
+// for the other tree: the rows are compared as sorted sets.
+TEST(DartWorld, PosedInsertFindsTheSameFirstContacts) {
+  const auto model = build_model(load_scene(scene_path("rot-stack-10")));
+  auto records_of = [&](DartFclInsert insert) {
+    DartSettings s;
+    s.insert = insert;
+    DartWorld dart(model, model->initial, s);
+    std::vector<FrameRecord> records;
+    const std::string path = temp_trace(std::string("dart-insert-") + dart_fcl_insert_name(insert));
+    write_trace(dart, path, 40, &records);
+    std::filesystem::remove(path);
+    return records;
+  };
+  auto sorted_rows = [](const FrameRecord& r) {
+    std::vector<std::array<float, 9>> rows;
+    for (const ContactRecord& c : r.contacts)
+      rows.push_back({static_cast<float>(c.pair.a), static_cast<float>(c.pair.b), c.normal.x, c.normal.y, c.normal.z,
+                      c.point.x, c.point.y, c.point.z, c.depth});
+    std::sort(rows.begin(), rows.end());
+    return rows;
+  };
+  const auto origin = records_of(DartFclInsert::Origin), posed = records_of(DartFclInsert::Posed);
+  std::size_t f = 0;
+  while (f < origin.size() && origin[f].contacts.empty()) {
+    ASSERT_TRUE(posed[f].contacts.empty()) << "frame " << f + 1;
+    ++f;
+  }
+  ASSERT_LT(f, origin.size()) << "no contact in 40 frames";
+  EXPECT_GE(origin[f].contacts.size(), 4u);
+  EXPECT_EQ(sorted_rows(origin[f]), sorted_rows(posed[f])) << "frame " << f + 1;
+}
+
 TEST(DartWorld, TraceRoundTrips) {
   const Scene scene = load_scene(scene_path("rot-stack-10"));
   const auto model = build_model(scene);

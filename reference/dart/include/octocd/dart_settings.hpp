@@ -32,6 +32,19 @@ enum class DartFclBoxes {
   Mesh,
 };
 
+/// Where each collision object enters FCL's dynamic AABB tree when the world is built.
+enum class DartFclInsert {
+  /// At the origin, as DART does (FCLCollisionObject starts at the identity): n bodies of
+  /// one shape go in as n leaves with one AABB, a chain n deep, O(n^2) to build. The first
+  /// step poses every object and rebalances the tree.
+  Origin,
+  /// At the body's pose (the object is posed when DART creates it): the tree is built from
+  /// the bodies' AABBs. The first step's rebalanced tree differs from Origin's, so FCL
+  /// reports the contacts in another order and the constraint solve differs in the last
+  /// bits (a run is not bit for bit Origin's).
+  Posed,
+};
+
 /// Which boxed LCP solver BoxedLcpConstraintSolver runs.
 enum class DartLcp {
   /// DantzigBoxedLcpSolver (ODE's Dantzig pivoting solver) with PgsBoxedLcpSolver as the
@@ -52,6 +65,8 @@ using DartFriction = PyramidFriction;
 const char* dart_collision_name(DartCollision c);
 /// "primitive" or "mesh".
 const char* dart_fcl_boxes_name(DartFclBoxes b);
+/// "origin" or "posed".
+const char* dart_fcl_insert_name(DartFclInsert i);
 /// "dantzig" or "pgs".
 const char* dart_lcp_name(DartLcp l);
 /// "inscribed" or "pyramid".
@@ -67,6 +82,11 @@ struct DartSettings {
   /// primitive (DART's own default is mesh: a box collided as 12 triangles gets contacts
   /// on its triangles' intersections, not on its faces). Read only with collision=fcl.
   DartFclBoxes boxes = DartFclBoxes::Primitive;
+  /// Where collision objects enter FCL's tree at set-up (DartFclInsert); key `insert`,
+  /// values origin | posed. Default origin (DART's own). posed takes the FCL part of the
+  /// set-up from O(n^2) to about O(n log n) (docs/engines.md, "dart", gives the figures);
+  /// read only with collision=fcl.
+  DartFclInsert insert = DartFclInsert::Origin;
   /// The boxed LCP solver (DartLcp); key `lcp`, values dantzig | pgs. Default dantzig
   /// (DART's World default, with PGS as its fallback).
   DartLcp lcp = DartLcp::Dantzig;
