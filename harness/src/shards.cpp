@@ -328,6 +328,25 @@ MergedValidation merge_validation_docs(const std::vector<json>& docs, const std:
       }
     }
     for (std::size_t k = 0; k < causes.size(); ++k) {
+      // A finding about the whole trace rather than a frame (every example at frame -1,
+      // e.g. momentum-balance's systematic impulse ratio, fitted per shard) counts once per
+      // item however many shards report it; its example is the worst shard's.
+      std::vector<ValidationExample>& whole = causes[k].examples;
+      if (!whole.empty() && causes[k].items_complete &&
+          std::all_of(whole.begin(), whole.end(), [](const ValidationExample& e) { return e.frame < 0; })) {
+        const std::uint64_t once = items[k].size();
+        if (counts && causes[k].count > once) out.measured -= double(causes[k].count - once);
+        causes[k].count = std::min<std::uint64_t>(causes[k].count, once);
+        std::vector<ValidationExample> worst;
+        for (const ValidationExample& e : whole) {
+          auto it = std::find_if(worst.begin(), worst.end(), [&](const ValidationExample& w) { return w.item == e.item; });
+          if (it == worst.end())
+            worst.push_back(e);
+          else if (e.figure > it->figure)
+            *it = e;
+        }
+        whole = std::move(worst);
+      }
       // The first examples of the whole run: a shard's examples are in frame order, but a
       // soft-contact episode begun in a shard is judged (an example) at the frame it
       // closes, which may lie in the next shard's frames: by frame, then shard order.
