@@ -1,6 +1,6 @@
 // The result file of `octocd bench` (bench_sweep.hpp, docs/bench-format.md): its header
 // (sweep, settings, machine, build), the checks before --resume keeps a file's finished
-// points, and the timing hygiene recorded with it.
+// points, the timing hygiene recorded with it, and a sweep's stop or end.
 #include <algorithm>
 #include <filesystem>
 #include <fstream>

@@ -6,7 +6,8 @@
 ///                               parsing and checking, its points, the scene text of a point
 ///   cli/bench_points.cpp        running a steps point or a broadphase point
 ///   cli/bench_max_instances.cpp the max-instances search (doubling, bisection, confirmation)
-///   cli/bench_result.cpp        the result file: its header, resuming, timing hygiene
+///   cli/bench_result.cpp        the result file: its header, resuming, timing hygiene, a
+///                               stopped or finished sweep
 /// Sweep and result formats: docs/bench-format.md.
 
 #include <unistd.h>
