@@ -54,6 +54,7 @@
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
+#include "bench_main.hpp"
 
 using namespace octocd;
 
@@ -135,8 +136,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
   }
-  int rc = 0;
-  try {
+  return octocd::bench::exit_code_of("bench_step_paths", [&] {
+    int rc = 0;
     fmt::print("| scene | bodies | engine | path | steps/s median | min | max | vs untimed: median (min-max) | "
                "state hash |\n");
     fmt::print("|---|---|---|---|---|---|---|---|---|\n");
@@ -194,12 +195,6 @@ int main(int argc, char** argv) {
           rc = 3;
         }
     }
-  } catch (const InputError& e) {
-    std::cerr << "bench_step_paths: bad input: " << e.what() << "\n";
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "bench_step_paths: runtime failure: " << e.what() << "\n";
-    return 1;
-  }
-  return rc;
+    return rc;
+  });
 }

@@ -46,6 +46,7 @@
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
+#include "bench_main.hpp"
 #include "tools.hpp"
 
 using namespace octocd;
@@ -169,7 +170,7 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
   }
-  try {
+  return octocd::bench::exit_code_of("bench_trace_costs", [&] {
     fmt::print("| scene | bodies | mode | steps/s median | min | max | vs off | step us | batch's first step us | "
                "state() us a call | append us | trace MiB |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const std::string& file : scenes) {
@@ -205,12 +206,6 @@ int main(int argc, char** argv) {
         std::fflush(stdout);
       }
     }
-  } catch (const InputError& e) {
-    std::cerr << "bench_trace_costs: bad input: " << e.what() << "\n";
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "bench_trace_costs: " << e.what() << "\n";
-    return 1;
-  }
-  return 0;
+    return 0;
+  });
 }

@@ -74,6 +74,18 @@ std::vector<std::string> string_list(const json& j, const std::string& key, cons
   return out;
 }
 
+/// The object at `key` of names to integers in [lo, hi] (`max_worlds`, `max_bodies`), empty
+/// when absent; anything else is bad input naming the key (`shape`: the allowed object).
+std::map<std::string, long> integer_map(const json& j, const std::string& key, const std::string& origin, long lo,
+                                        long hi, const std::string& shape) {
+  std::map<std::string, long> out;
+  if (!j.contains(key)) return out;
+  if (!j.at(key).is_object()) bad(origin, key, "not an object", shape);
+  for (auto it = j.at(key).begin(); it != j.at(key).end(); ++it)
+    out[it.key()] = static_cast<long>(JsonFields(origin).integer(it.value(), key + "." + it.key(), lo, hi));
+  return out;
+}
+
 /// The string at `key`, or `fallback` when absent; anything else is bad input naming the
 /// key (not a raw json type_error).
 std::string optional_string(const json& j, const std::string& key, const std::string& origin,
@@ -322,12 +334,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
         s.worlds.push_back(static_cast<long>(JsonFields(origin).integer(w[i], fmt::format("worlds[{}]", i), 1, kMaxWorlds)));
       s.worlds_given = true;
     }
-    if (j.contains("max_worlds")) {
-      if (!j.at("max_worlds").is_object()) bad(origin, "max_worlds", "not an object", "{\"ENGINE\": K}");
-      for (auto it = j.at("max_worlds").begin(); it != j.at("max_worlds").end(); ++it)
-        s.max_worlds[it.key()] =
-            static_cast<long>(JsonFields(origin).integer(it.value(), "max_worlds." + it.key(), 1, kMaxWorlds));
-    }
+    s.max_worlds = integer_map(j, "max_worlds", origin, 1, kMaxWorlds, "{\"ENGINE\": K}");
     if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
     for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
     if (j.contains("axes")) {
@@ -413,12 +420,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     } else {
       s.broadphases = known;
     }
-    if (j.contains("max_bodies")) {
-      if (!j.at("max_bodies").is_object()) bad(origin, "max_bodies", "not an object", "{\"NAME\" or \"ENGINE:NAME\": N}");
-      for (auto it = j.at("max_bodies").begin(); it != j.at("max_bodies").end(); ++it)
-        s.max_bodies[it.key()] =
-            static_cast<long>(JsonFields(origin).integer(it.value(), "max_bodies." + it.key(), 0, kMaxSweepBodies));
-    }
+    s.max_bodies = integer_map(j, "max_bodies", origin, 0, kMaxSweepBodies, "{\"NAME\" or \"ENGINE:NAME\": N}");
   }
   return s;
 }
