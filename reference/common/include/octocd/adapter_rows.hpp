@@ -98,9 +98,9 @@ struct SettingValue {
                                         const std::string& doc);
 
 /// An engine's settings as one table: a row per key with the function that sets the
-/// settings struct `S` from its text (throwing InputError for a value out of range). The
-/// engine's public `<engine>_setting_names`, `set_<engine>_setting` and
-/// `apply_<engine>_settings` read it.
+/// settings struct `S` from its text (throwing InputError for a value out of range). An
+/// engine defines its one table as the specialization setting_table<S>() (below), which
+/// setting_names<S>() and apply_settings() read; a new key is one row.
 template <class S>
 struct SettingTable {
   /// Sets the settings struct from one value's text.
@@ -147,5 +147,29 @@ struct SettingTable {
                         [&](const std::string& k, const std::string& v) { set(s, k, v, where); });
   }
 };
+
+/// The settings table of an engine's settings struct `S` (BulletSettings, MujocoSettings,
+/// OdeSettings, DartSettings): the engine's settings header declares the specialization
+/// and its `<engine>_settings.cpp` defines it. No primary definition: a struct without a
+/// table does not link.
+template <class S>
+const SettingTable<S>& setting_table();
+
+/// The keys apply_settings takes for `S`, in its table's order (the struct's field order).
+template <class S>
+std::vector<std::string> setting_names() {
+  return setting_table<S>().names();
+}
+
+/// Applies "KEY=VALUE" items (the CLI's repeated `--<engine> KEY=VALUE`, Python's keyword
+/// dict) to `settings` in order, each through the row of setting_table<S>() for its KEY.
+/// Throws InputError "<where>: unknown <engine> setting 'KEY'; allowed: <keys> (<doc>)" for
+/// a key the table lacks, "<where>: KEY='VALUE' is not allowed; allowed: <range>" for a
+/// value out of the row's range, and "<where>: 'ITEM' is not KEY=VALUE; ..." for an item
+/// without '='.
+template <class S>
+void apply_settings(S& settings, const std::vector<std::string>& items, const std::string& where) {
+  setting_table<S>().apply(settings, items, where);
+}
 
 }  // namespace octocd
