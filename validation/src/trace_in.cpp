@@ -440,13 +440,8 @@ class TraceIn {
   /// them (written before they existed: /frames and the root attribute `parameters`) is
   /// read as declaring octocd's conventions (ExternalTraceInfo::octocd_conventions).
   void read_declarations(PhysicsBodies& p) {
-    if (has_attr("broadphase_exact")) {
-      const double exact = number_attr("broadphase_exact", 0.0);
-      if (exact != 0.0 && exact != 1.0)
-        bad("/ (root attribute broadphase_exact)", fmt::format("{}", exact),
-            "0 (default: any broadphase, extras allowed) or 1 (exactly the overlapping world AABBs)");
-      p.broadphase_exact = exact == 1.0;
-    }
+    p.broadphase_exact = flag_attr("broadphase_exact", p.broadphase_exact,
+                                   "0 (default: any broadphase, extras allowed) or 1 (exactly the overlapping world AABBs)");
     p.contact_geometry = choice_attr("contact_geometry", {"shape", "aabb"}, "shape") == "aabb" ? ContactGeometry::Aabb
                                                                                                : ContactGeometry::Shape;
     p.theta_margin = choice_attr("contact_margin_rule", {"fixed", "theta"}, "fixed") == "theta";
@@ -462,13 +457,9 @@ class TraceIn {
             fmt::format("a speed per component in [0, {:g}] m/s (0: no clamp)", trace_limits::kMaxSpeed));
       p.velocity_clamp = c;
     }
-    if (has_attr("impulses_complete")) {
-      const double c = number_attr("impulses_complete", 1.0);
-      if (c != 0.0 && c != 1.0)
-        bad("/ (root attribute impulses_complete)", fmt::format("{}", c),
-            "1 (default: the contact rows carry every impulse of the step) or 0 (they do not: momentum-balance n/a)");
-      p.impulses_complete = c == 1.0;
-    }
+    p.impulses_complete = flag_attr(
+        "impulses_complete", p.impulses_complete,
+        "1 (default: the contact rows carry every impulse of the step) or 0 (they do not: momentum-balance n/a)");
     {
       const std::string impulses = choice_attr("impulses", {"complete", "normal-only", "none"}, "complete");
       p.impulses = impulses == "none"          ? PhysicsBodies::Impulses::None
@@ -476,20 +467,12 @@ class TraceIn {
                                                : PhysicsBodies::Impulses::Complete;
     }
     // Fourth-round declarations (docs/trace-format.md, "Declarations").
-    if (has_attr("speculative")) {
-      const double v = number_attr("speculative", 0.0);
-      if (v != 0.0 && v != 1.0)
-        bad("/ (root attribute speculative)", fmt::format("{}", v),
-            "1 (rows may join shapes apart by the contact margin plus their approach within the step) or 0 (default)");
-      p.speculative = v == 1.0;
-    }
-    if (has_attr("contacts_complete")) {
-      const double v = number_attr("contacts_complete", 1.0);
-      if (v != 0.0 && v != 1.0)
-        bad("/ (root attribute contacts_complete)", fmt::format("{}", v),
-            "1 (default: every contact of every step has its rows) or 0 (the engine's API may drop rows)");
-      p.contacts_complete = v == 1.0;
-    }
+    p.speculative = flag_attr(
+        "speculative", p.speculative,
+        "1 (rows may join shapes apart by the contact margin plus their approach within the step) or 0 (default)");
+    p.contacts_complete =
+        flag_attr("contacts_complete", p.contacts_complete,
+                  "1 (default: every contact of every step has its rows) or 0 (the engine's API may drop rows)");
     p.persistent_points = choice_attr("manifold_points", {"fixed", "persistent"}, "fixed") == "persistent";
     {
       const std::string depth_per = choice_attr("depth_per", {"point", "manifold", "unknown"}, "point");
@@ -741,6 +724,15 @@ class TraceIn {
     for (const std::string& a : allowed) list += (list.empty() ? "\"" : ", \"") + a + "\"";
     bad(fmt::format("/ (root attribute {})", name), fmt::format("'{}' unknown", value),
         fmt::format("{} (default \"{}\")", list, fallback));
+  }
+
+  /// A 0/1 root attribute as a bool (absent: `fallback`); any other number is an error
+  /// naming the attribute with `allowed`.
+  bool flag_attr(const char* name, bool fallback, const std::string& allowed) const {
+    if (!has_attr(name)) return fallback;
+    const double v = h5_->number_attribute(name);
+    if (v != 0.0 && v != 1.0) bad(fmt::format("/ (root attribute {})", name), fmt::format("{}", v), allowed);
+    return v == 1.0;
   }
 
   MaterialCombine combine_attr(const char* name, const std::vector<std::string>& names) const {
