@@ -56,10 +56,7 @@ const SettingTable<DartSettings>& setting_table<DartSettings>() {
        T::number(
            &DartSettings::cfm, 1e-9, 1.0,
            "a decimal number in [1e-9, 1] (ContactConstraint::setConstraintForceMixing; DART's default 1e-5)")},
-      {"friction",
-       T::choice(
-           &DartSettings::friction, "inscribed", DartFriction::Inscribed, "pyramid", DartFriction::Pyramid,
-           "inscribed (mu / sqrt 2 per friction direction: inside the Coulomb cone), pyramid (mu per direction)")},
+      {"friction", T::pyramid_friction(&DartSettings::friction)},
       {"contacts", T::integer(&DartSettings::max_contacts, 1, 10000000,
                               "an integer in [1, 10000000] (CollisionOption::maxNumContacts per step)")},
   }};

@@ -49,10 +49,7 @@ const SettingTable<OdeSettings>& setting_table<OdeSettings>() {
                         "a decimal number in [0, 1] (dWorldSetCFM; ODE's default 1e-10 in double precision)")},
       {"contacts",
        T::integer(&OdeSettings::max_contacts, 1, 64, "an integer in [1, 64] (dCollide's contacts per pair)")},
-      {"friction",
-       T::choice(
-           &OdeSettings::friction, "inscribed", OdeFriction::Inscribed, "pyramid", OdeFriction::Pyramid,
-           "inscribed (mu / sqrt 2 per friction direction: inside the Coulomb cone), pyramid (mu per direction)")},
+      {"friction", T::pyramid_friction(&OdeSettings::friction)},
       {"gyroscopic",
        T::choice(&OdeSettings::gyroscopic, "true", true, "false", false, "true, false (dBodySetGyroscopicMode)")},
   }};

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "octocd/engine.hpp"
+#include "octocd/pyramid_friction.hpp"
 
 namespace octocd {
 
@@ -123,6 +124,14 @@ struct SettingTable {
   template <class E>
   static Setter choice(E S::*field, const char* name_a, E a, const char* name_b, E b, std::string allowed) {
     return [=](S& s, const SettingValue& v) { s.*field = v.choice(name_a, a, name_b, b, allowed); };
+  }
+  /// A setter of a friction-pyramid bound (pyramid_friction.hpp: the ode and dart engines'
+  /// `friction`), values inscribed | pyramid.
+  static Setter pyramid_friction(PyramidFriction S::*field) {
+    return choice(field, pyramid_friction_name(PyramidFriction::Inscribed), PyramidFriction::Inscribed,
+                  pyramid_friction_name(PyramidFriction::Pyramid), PyramidFriction::Pyramid,
+                  "inscribed (mu / sqrt 2 per friction direction: inside the Coulomb cone), pyramid (mu per "
+                  "direction)");
   }
   const char* engine;   ///< the engine's name, as in messages ("ode")
   const char* doc;      ///< the page that lists the keys ("docs/engines.md")
