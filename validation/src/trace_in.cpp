@@ -822,18 +822,19 @@ class TraceIn {
     };
     coord(rec.x_pre, "/states/position", true);
     coord(rec.x_post, "/states/position", true);
-    for (const auto* v : {&rec.v_pre, &rec.v_post})
-      for (std::size_t i = 0; i < v->size(); ++i)
-        for (int k = 0; k < 3; ++k)
-          if (!(std::fabs((*v)[i][k]) <= trace_limits::kMaxSpeed))
-            bad("/states/velocity", fmt::format("frame {}: body {}: {}", rec.frame, i, (*v)[i][k]),
-                fmt::format("|velocity| <= {:g} m/s per axis", trace_limits::kMaxSpeed));
-    for (const auto* w : {&rec.w_pre, &rec.w_post})
-      for (std::size_t i = 0; i < w->size(); ++i)
-        for (int k = 0; k < 3; ++k)
-          if (!(std::fabs((*w)[i][k]) <= trace_limits::kMaxAngularSpeed))
-            bad("/states/angular_velocity", fmt::format("frame {}: body {}: {}", rec.frame, i, (*w)[i][k]),
-                fmt::format("|angular velocity| <= {:g} rad/s per axis", trace_limits::kMaxAngularSpeed));
+    // Every axis of the pre- and post-step vectors (`what` in `unit`) within `limit`.
+    const auto per_axis = [&](const std::vector<Vec3>& pre, const std::vector<Vec3>& post, const char* name,
+                              const char* what, double limit, const char* unit) {
+      for (const std::vector<Vec3>* v : {&pre, &post})
+        for (std::size_t i = 0; i < v->size(); ++i)
+          for (int k = 0; k < 3; ++k)
+            if (!(std::fabs((*v)[i][k]) <= limit))
+              bad(name, fmt::format("frame {}: body {}: {}", rec.frame, i, (*v)[i][k]),
+                  fmt::format("|{}| <= {:g} {} per axis", what, limit, unit));
+    };
+    per_axis(rec.v_pre, rec.v_post, "/states/velocity", "velocity", trace_limits::kMaxSpeed, "m/s");
+    per_axis(rec.w_pre, rec.w_post, "/states/angular_velocity", "angular velocity", trace_limits::kMaxAngularSpeed,
+             "rad/s");
     const std::string impulse_allowed =
         fmt::format("|impulse| <= {:g} N s (trace_limits::kMaxImpulse)", trace_limits::kMaxImpulse);
     for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
