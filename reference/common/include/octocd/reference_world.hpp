@@ -3,9 +3,9 @@
 /// The adapter base of the reference engines (reference/mujoco, reference/ode,
 /// reference/dart): what every one of them keeps and does alike, written once. An
 /// engine's folder holds its model mapping (scene -> the engine's bodies, shapes and
-/// materials), its step and its contact extraction; the state, the metrics, the
-/// version 2 FrameRecord and the Engine accessors live here (docs/architecture.md,
-/// "Adding an engine").
+/// materials), its step and its contact extraction; the state, the settings
+/// (SettingsWorld), the metrics, the version 2 FrameRecord and the Engine accessors live
+/// here (docs/architecture.md, "Adding an engine").
 
 #include <algorithm>
 #include <array>
