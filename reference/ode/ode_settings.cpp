@@ -32,12 +32,10 @@ OdeSettings ode_library_defaults() {
   return s;
 }
 
-namespace {
-
-using T = SettingTable<OdeSettings>;
-
 /// The ode engine's settings, one row a key.
-const T& ode_table() {
+template <>
+const SettingTable<OdeSettings>& setting_table<OdeSettings>() {
+  using T = SettingTable<OdeSettings>;
   static const T table{"ode", "docs/engines.md", "stepper=quickstep", {
       {"stepper",
        T::choice(
@@ -51,26 +49,11 @@ const T& ode_table() {
                         "a decimal number in [0, 1] (dWorldSetCFM; ODE's default 1e-10 in double precision)")},
       {"contacts",
        T::integer(&OdeSettings::max_contacts, 1, 64, "an integer in [1, 64] (dCollide's contacts per pair)")},
-      {"friction",
-       T::choice(
-           &OdeSettings::friction, "inscribed", OdeFriction::Inscribed, "pyramid", OdeFriction::Pyramid,
-           "inscribed (mu / sqrt 2 per friction direction: inside the Coulomb cone), pyramid (mu per direction)")},
+      {"friction", T::pyramid_friction(&OdeSettings::friction)},
       {"gyroscopic",
        T::choice(&OdeSettings::gyroscopic, "true", true, "false", false, "true, false (dBodySetGyroscopicMode)")},
   }};
   return table;
-}
-
-}  // namespace
-
-std::vector<std::string> ode_setting_names() { return ode_table().names(); }
-
-void set_ode_setting(OdeSettings& s, const std::string& key, const std::string& value, const std::string& where) {
-  ode_table().set(s, key, value, where);
-}
-
-void apply_ode_settings(OdeSettings& s, const std::vector<std::string>& items, const std::string& where) {
-  ode_table().apply(s, items, where);
 }
 
 }  // namespace octocd

@@ -72,7 +72,7 @@ constexpr unsigned long kDynamicCategory = 1, kStaticCategory = 2;
 
 }  // namespace
 
-struct OdeWorld::Impl : ReferenceCore {
+struct OdeWorld::Impl : SettingsCore<OdeSettings> {
   /// One octocd shape as ODE takes it: a box's sides, or a hull's planes, points and
   /// polygons (dCreateConvex keeps pointers to them), or a triangle mesh's data.
   struct ShapeData {
@@ -93,7 +93,6 @@ struct OdeWorld::Impl : ReferenceCore {
     dContactGeom geom{};
   };
 
-  OdeSettings settings;
   float mu = 0.0f, restitution = 0.0f, restitution_threshold = 0.0f;
   dWorldID world = nullptr;
   dSpaceID space = nullptr;
@@ -177,13 +176,11 @@ void OdeWorld::Impl::fill_record() {
 }
 
 OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial, const OdeSettings& settings)
-    : ReferenceWorld(std::make_unique<Impl>()) {
+    : SettingsWorld(std::make_unique<Impl>(), std::move(model), initial, "ode", settings) {
   init_ode_for_this_thread();
   Impl& m = impl();
-  m.start(std::move(model), initial, "ode");
   const Model& src = *m.model;
   const Scene& scene = src.scene;
-  m.settings = settings;
   m.mu = scene.response.mu_kinetic;
   m.restitution = scene.response.restitution;
   m.restitution_threshold = scene.response.restitution_threshold;
@@ -419,8 +416,6 @@ const FrameMetrics& OdeWorld::step() {
   fm.stage_ms[static_cast<int>(Stage::Metrics)] = ms_since(t2);
   return m.finish_step(fm, t0);
 }
-
-const OdeSettings& OdeWorld::settings() const { return impl().settings; }
 
 bool OdeWorld::has_stage(Stage s) const { return s != Stage::Aabbs && s != Stage::Integrate; }
 

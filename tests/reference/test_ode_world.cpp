@@ -341,7 +341,7 @@ TEST(OdeSettings, DefaultsAreOdesAndBadValuesAreNamed) {
   EXPECT_EQ(ours.iterations, odes.iterations);
   EXPECT_EQ(ours.gyroscopic, odes.gyroscopic);
   OdeSettings s;
-  apply_ode_settings(s, {"stepper=quickstep", "iterations=50", "erp=0.5", "cfm=1e-6", "contacts=4",
+  apply_settings(s, {"stepper=quickstep", "iterations=50", "erp=0.5", "cfm=1e-6", "contacts=4",
                          "friction=pyramid", "gyroscopic=false"},
                      "--ode");
   EXPECT_EQ(s.stepper, OdeStepper::QuickStep);
@@ -354,7 +354,7 @@ TEST(OdeSettings, DefaultsAreOdesAndBadValuesAreNamed) {
   auto error = [](const std::string& item) {
     OdeSettings t;
     try {
-      apply_ode_settings(t, {item}, "--ode");
+      apply_settings(t, {item}, "--ode");
     } catch (const InputError& e) {
       return std::string(e.what());
     }

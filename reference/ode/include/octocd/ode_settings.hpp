@@ -2,12 +2,13 @@
 /// \file ode_settings.hpp
 /// The settings of the ODE engine (`ode`): which ODE stepper runs, its constraint
 /// parameters, how many contacts a pair may get and how friction is bounded. Set from
-/// C++ (OdeWorld's constructor) or as KEY=VALUE items (apply_ode_settings); docs/engines.md,
+/// C++ (OdeWorld's constructor) or as KEY=VALUE items (apply_settings); docs/engines.md,
 /// "ode", lists them with the ODE parameter each one sets.
 
 #include <string>
 #include <vector>
 
+#include "octocd/adapter_rows.hpp"
 #include "octocd/pyramid_friction.hpp"
 
 namespace octocd {
@@ -68,19 +69,14 @@ struct OdeSettings {
 /// defaults, which OdeSettings' defaults claim to be.
 OdeSettings ode_library_defaults();
 
-/// The keys set_ode_setting takes, in the struct's order: stepper, iterations, erp, cfm,
-/// contacts, friction, gyroscopic.
-std::vector<std::string> ode_setting_names();
-
-/// Sets the field `key` (a name of ode_setting_names()) of `settings` from text (stepper:
-/// step or quickstep; iterations: an integer in [1, 10000]; erp, cfm: a decimal number in
-/// [0, 1]; contacts: an integer in [1, 64]; friction: inscribed or pyramid; gyroscopic:
-/// true or false). Throws InputError "<where>: ..." naming the key, the value and what is
-/// allowed.
-void set_ode_setting(OdeSettings& settings, const std::string& key, const std::string& value, const std::string& where);
-
-/// Applies "KEY=VALUE" items in order with set_ode_setting. Throws InputError naming
-/// `where` and the item for text without '='.
-void apply_ode_settings(OdeSettings& settings, const std::vector<std::string>& items, const std::string& where);
+/// The ode engine's settings table, one row a key in the struct's order:
+/// stepper (step or quickstep), iterations (an integer in [1, 10000]), erp, cfm (a decimal
+/// number in [0, 1]), contacts (an integer in [1, 64]), friction (inscribed or pyramid),
+/// gyroscopic (true or false).
+/// apply_settings(settings, items, where) (adapter_rows.hpp) sets a OdeSettings from
+/// "KEY=VALUE" items (`--ode KEY=VALUE`, repeatable), throwing InputError that names the
+/// key, the value and what is allowed; setting_names<OdeSettings>() lists the keys.
+template <>
+const SettingTable<OdeSettings>& setting_table<OdeSettings>();
 
 }  // namespace octocd

@@ -92,7 +92,7 @@ namespace octocd {
 ///   -v_t / |v_t| (v_t: A's velocity relative to B's at the point from v_pre + dt g on
 ///   dynamic bodies and w_pre), |jt3| when |v_t| <= 1e-6 m/s; rows sorted by pair;
 /// - confirmed: the pairs with at least one row.
-class OdeWorld : public ReferenceWorld {
+class OdeWorld : public SettingsWorld<OdeSettings> {
  public:
   /// The model (shared, not copied) from the state `initial` (x, v, w per body; q and
   /// omega when given, else the identity and zero). Throws InputError when a mesh's hull
@@ -127,8 +127,6 @@ class OdeWorld : public ReferenceWorld {
   /// broadphase, midphase, response and metrics are timed; aabbs and integrate are not
   /// (they run inside dSpaceCollide and dWorldStep).
   bool has_stage(Stage s) const override;
-  /// The settings it was built with.
-  const OdeSettings& settings() const;
 
  private:
   struct Impl;
