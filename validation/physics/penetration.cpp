@@ -9,9 +9,17 @@
 
 namespace octocd {
 
+namespace {
+
+// The causes of the rows of this file (validation_rows.def), by their names.
+const std::size_t kPenetration = physics_detail::cause_index(RowId::Penetration, "penetration");
+
+}  // namespace
+
 using namespace physics_detail;
 
 void PhysicsValidators::Impl::judge_penetration(CheckedFrame& f) {
+  Tally& pen = tally(RowId::Penetration, kPenetration);
   const std::int64_t frame = f.rec->frame;
   // 4. Penetration: the largest true penetration after the settling window.
   if (double(frame) >= tol.penetration_settle_frames) {
@@ -58,6 +66,52 @@ void PhysicsValidators::Impl::judge_penetration(CheckedFrame& f) {
       });
     }
   }
+}
+
+// ---- penetration: its measure of a frame and its table entry -------------------------
+
+template <>
+void PhysicsValidators::Impl::measure<RowId::Penetration>(PhysicsFrame& f) {
+  // On a checked frame.
+  if (CheckedFrame* c = checked(f)) judge_penetration(*c);
+}
+
+template <>
+ValidationResult PhysicsValidators::Impl::table<RowId::Penetration>() const {
+  const Impl& s = *this;
+  const Tally& pen = s.tally(RowId::Penetration, kPenetration);
+  ValidationResult r =
+      start_row(RowId::Penetration, "largest true penetration (m)", "penetration_slops,penetration_settle_frames");
+  r.measured = s.pen_max;
+  r.bound = s.tol.penetration_slops * s.bodies.slop;
+  r.pass = r.measured <= r.bound;
+  // Judged: pair-frames with an exact depth. Where every penetrating pair-frame was a
+  // non-convex pair's upper bound, the row proved no penetration: n/a.
+  r.applicable = s.checked_frames > 0 && pen.checks > 0 && !(s.pen_upper_pairs > 0 && s.pen_upper_pairs == s.pen_pairs);
+  if (s.checked_frames == 0) {
+    r.detail = kNoChecked;
+  } else if (!r.applicable) {
+    r.detail = s.pen_upper_max > 0
+                   ? fmt::format(
+                         "no exact depth: every penetrating pair is a non-convex mesh pair, whose depth is "
+                         "an upper bound only (the least separating translation over 8 directions: a "
+                         "figure, not judged): largest {}, {} pair-frames above the bound {} m",
+                         s.pen_upper_what, s.pen_upper_over, fmt::format("{:.3g}", r.bound))
+                   : fmt::format("no pair-frame with an exact depth from frame {} on", s.tol.penetration_settle_frames);
+  } else if (s.pen_pairs == 0) {
+    r.detail =
+        fmt::format("no penetrating pair on the checked frames from frame {} on", s.tol.penetration_settle_frames);
+  } else {
+    r.detail = (s.pen_what.empty() ? std::string("no exact depth (convex shapes)") : s.pen_what) +
+               fmt::format(" (largest of {} penetrating pair-frames; bound {} x slop {} m)", s.pen_pairs,
+                           s.tol.penetration_slops, s.bodies.slop);
+    note(r.detail, s.pen_upper_max > 0,
+         "non-convex meshes, upper bounds only (the least separating translation over 8 "
+         "directions: a figure, not judged): largest {}, {} pair-frames above the bound",
+         s.pen_upper_what, s.pen_upper_over);
+  }
+  if (r.applicable) s.fill_causes(r, RowId::Penetration);
+  return r;
 }
 
 }  // namespace octocd
