@@ -413,10 +413,6 @@ struct PhysicsValidators::Impl {
   // Friction rules: pairs judged on jt3 (vectors) and on the scalar jt.
   std::uint64_t cone_jt3_pairs = 0, cone_scalar_pairs = 0, dissipation_jt3_pairs = 0, dissipation_small = 0;
   std::uint64_t dissipation_cone_only = 0, groups = 0, groups_rotating = 0, state_frames = 0, groups_clamped = 0;
-  double pen_max = 0, pen_upper_max = 0;
-  std::string pen_what, pen_upper_what;
-  std::uint64_t pen_upper_over = 0;
-  std::uint64_t pen_pairs = 0, pen_upper_pairs = 0;
   std::int64_t last_frame = 0;
   std::function<bool()> stop;  // polled inside the long loops (set_stop)
   int threads = 0;              // set_threads (0: the hardware's)
