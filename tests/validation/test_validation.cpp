@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <string>
 
@@ -112,6 +113,38 @@ TEST(Validators, AScenesRowsAreTheRowTablesInItsOrderAndTiers) {
     EXPECT_EQ(rs[k].name, rows[k].name);
     EXPECT_EQ(rs[k].tier, rows[k].tier) << rs[k].name;
   }
+}
+
+// docs/validation.md's "Causes per row" lists every row that splits its failures, with its
+// causes in the row table's order, and no other row.
+TEST(Validators, DocumentedCausesAreTheRowTables) {
+  std::ifstream doc(source_dir() + "/docs/validation.md");
+  ASSERT_TRUE(doc) << source_dir() + "/docs/validation.md";
+  std::map<std::string, std::string> documented;  // row -> "a, b, c"
+  bool in_section = false;
+  for (std::string line; std::getline(doc, line);) {
+    if (line.rfind("#", 0) == 0) in_section = line == "### Causes per row";
+    if (!in_section || line.rfind("| ", 0) != 0 || line.rfind("| row |", 0) == 0) continue;
+    const std::size_t bar = line.find(" | ", 2);
+    ASSERT_NE(bar, std::string::npos) << line;
+    std::string row = line.substr(2, bar - 2);
+    row = row.substr(0, row.find(" ("));  // "bullet-dynamics (stacks and piles)"
+    std::string causes = line.substr(bar + 3);
+    causes = causes.substr(0, causes.rfind(" |"));
+    EXPECT_TRUE(documented.emplace(row, causes).second) << "listed twice: " << row;
+  }
+  std::size_t with_causes = 0;
+  for (const RowInfo& row : validation_rows()) {
+    if (row.causes.empty()) continue;
+    ++with_causes;
+    std::string causes;
+    for (const RowCause& c : row.causes) causes += (causes.empty() ? "" : ", ") + std::string(c.name);
+    const auto it = documented.find(row.name);
+    ASSERT_NE(it, documented.end()) << row.name << " (" << causes << ") missing from docs/validation.md";
+    EXPECT_EQ(it->second, causes) << row.name;
+  }
+  EXPECT_EQ(documented.size(), with_causes);
+  EXPECT_GE(with_causes, 8u);
 }
 
 TEST(Validators, CandidateSetsCatchADroppedPair) {
