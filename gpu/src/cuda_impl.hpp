@@ -26,6 +26,7 @@
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
 #include "kernels.hpp"
+#include "scanned_counts.hpp"
 #include "octocd/cuda_world.hpp"
 
 namespace octocd {
@@ -184,19 +185,23 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<gpu::StepStats> stats{"step statistics"};
   gpu::DeviceBuffer<gpu::MetricsResult> metric_partials{"metrics partial sums"};
   // Variable size (pair_cap, list_cap), grown on overflow; reset_capacities shrinks them.
-  gpu::DeviceBuffer<std::uint32_t> bp_count{"broadphase counts"};
-  gpu::DeviceBuffer<std::uint32_t> bp_offset{"broadphase offsets"};
+  // Broadphase `flat` (n + 1 each): per body i the count and offset of its pairs (i, j), j > i.
+  gpu::ScannedCounts bp_counts{"broadphase counts", "broadphase offsets"};
   gpu::DeviceBuffer<unsigned long long> pair_keys{"pair keys"};
   gpu::DeviceBuffer<unsigned long long> pair_keys_sorted{"sorted pair keys"};
   gpu::DeviceBuffer<Pair> pairs{"candidate pairs"};
   gpu::DeviceBuffer<std::uint8_t> confirmed{"confirmed flags"};
   gpu::DeviceBuffer<gpu::MidItem> items_a{"midphase work list A"};
   gpu::DeviceBuffer<gpu::MidItem> items_b{"midphase work list B"};
-  gpu::DeviceBuffer<std::uint8_t> hit{"contact hit flags"};
-  gpu::DeviceBuffer<Vec3> dx_a{"contact dx_a"};
-  gpu::DeviceBuffer<Vec3> dx_b{"contact dx_b"};
-  gpu::DeviceBuffer<Vec3> dv_a{"contact dv_a"};
-  gpu::DeviceBuffer<Vec3> dv_b{"contact dv_b"};
+  // The per-pair corrections: the contact terms' outputs, the apply's inputs (gpu::TermsDesc,
+  // gpu::ApplyDesc; step_stages.cpp's set_corrections).
+  struct Corrections {
+    gpu::DeviceBuffer<std::uint8_t> hit{"contact hit flags"};
+    gpu::DeviceBuffer<Vec3> dx_a{"contact dx_a"};
+    gpu::DeviceBuffer<Vec3> dx_b{"contact dx_b"};
+    gpu::DeviceBuffer<Vec3> dv_a{"contact dv_a"};
+    gpu::DeviceBuffer<Vec3> dv_b{"contact dv_b"};
+  } corrections;
   gpu::DeviceBuffer<float> depth0{"contact depths"};
   gpu::DeviceBuffer<gpu::DeviceContact> records{"contact records"};
   // The per-stage path's contact index (response.cu, gpu::IndexDesc).
@@ -212,10 +217,9 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<std::uint32_t> prev_begin{"midphase kept key runs"};
   gpu::DeviceBuffer<std::uint32_t> prev_count{"midphase kept key count"};
   gpu::DeviceBuffer<unsigned long long> leaf_items{"midphase leaf items"};  // MidListDesc::leaf_items
-  // The small path's in-lists and their offsets.
+  // The small path's in-lists, per body their counts and offsets (n + 1 each; small path only).
   gpu::DeviceBuffer<std::uint32_t> in_list{"small-step in-lists"};
-  gpu::DeviceBuffer<std::uint32_t> body_begin{"small-step in-list offsets"};
-  gpu::DeviceBuffer<std::uint32_t> in_count{"small-step column counts"};  // small path only
+  gpu::ScannedCounts in_counts{"small-step column counts", "small-step in-list offsets"};
   gpu::DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
 
   gpu::StepStats* host = nullptr;  // pinned
@@ -303,7 +307,7 @@ struct CudaWorld::Impl {
 
   // ---- small_step_host.cpp: the fused small step ---------------------------------------
   /// The fused small step's descriptor (small_step.cu): the same buffers as the per-stage
-  /// path; the in-lists live in in_list, their offsets in body_begin.
+  /// path; the in-lists live in in_list, their counts and offsets in in_counts.
   gpu::SmallStepDesc small_desc(const Scene& scene, bool recording);
   /// One fused step (resident or a launch), its statistics through mapped memory.
   void run_small(const Scene& scene, bool recording);

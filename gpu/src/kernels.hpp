@@ -625,12 +625,7 @@ cudaError_t sort_keys_u64(void* temp, std::size_t& temp_bytes, const unsigned lo
 cudaError_t min_f32(void* temp, std::size_t& temp_bytes, const float* in, float* out, std::uint32_t count,
                     cudaStream_t stream);
 
-// ---- primitives.cu (CUB), for broadphase_octree_strict.cu and broadphase_spatial_hash.cu --
-/// Stable radix sort of (uint64 key, uint32 value) pairs by the key's bits [0, end_bit).
-/// With temp == nullptr only sets temp_bytes.
-cudaError_t sort_pairs_u64_u32(void* temp, std::size_t& temp_bytes, const unsigned long long* keys_in,
-                               unsigned long long* keys_out, const std::uint32_t* vals_in, std::uint32_t* vals_out,
-                               std::uint32_t count, int end_bit, cudaStream_t stream);
+// ---- primitives.cu (CUB), for broadphase_octree_strict.cu ----------------------------
 /// Sum of `count` doubles into *out (CUB's fixed reduction tree: the same bits run to run
 /// on one device). With temp == nullptr only sets temp_bytes.
 cudaError_t sum_f64(void* temp, std::size_t& temp_bytes, const double* in, double* out, std::uint32_t count,

@@ -28,10 +28,10 @@ gpu::SmallStepDesc CudaWorld::Impl::small_desc(const Scene& scene, bool recordin
   s.dt = scene.dt;
   s.max_velocity = params.max_velocity;
   s.iterations = params.iterations;
-  s.out_count = bp_count.get();
-  s.out_offset = bp_offset.get();
-  s.in_count = in_count.get();
-  s.in_offset = body_begin.get();
+  s.out_count = bp_counts.count.get();
+  s.out_offset = bp_counts.offset.get();
+  s.in_count = in_counts.count.get();
+  s.in_offset = in_counts.offset.get();
   s.in_list = in_list.get();
   s.pair_keys = pair_keys.get();
   s.shift = gpu::key_bits(n);
