@@ -13,7 +13,6 @@
 #include <fcl/math/bv/OBBRSS.h>
 #include <fcl/narrowphase/collision.h>
 #include <fcl/narrowphase/collision_object.h>
-#include <fcl/narrowphase/detail/primitive_shape_algorithm/box_box.h>
 #include <fcl/narrowphase/distance.h>
 
 #include <algorithm>
@@ -376,30 +375,113 @@ bool hull_penetration(const CcdObject& ca, const CcdObject& cb, ReferenceNormal&
   return true;
 }
 
-/// FCL's box-box test on boxes of sides side_a, side_b placed at ta, tb, as fcl::collide
-/// runs it for two fcl::Box (ShapeCollisionTraversalNode -> GJKSolver_libccd ->
-/// detail::boxBoxIntersect -> detail::boxBox2 with at most 4 contacts, all of them kept
-/// under CollisionRequest(8, true)), without the CollisionObjects, the shared geometry
-/// and the result vectors it builds per call. False when FCL reports no contact (r
-/// untouched); else r from its deepest contact (the first of equal depths), as box_box.
+/// The minimum translation of two boxes by the separating-axis theorem (octocd's own box-box
+/// reference): boxes of sides side_a, side_b, centred at ta, tb's translations with axes the
+/// columns of their rotations. For two convex polytopes the least translation that separates
+/// them is along a face normal of either or the cross product of an edge of each (Gottschalk);
+/// along a unit axis u the boxes' projections overlap by
+///   |ha . |R_a^T u|| + |hb . |R_b^T u|| - |(x_a - x_b) . u|   (m),
+/// and the penetration depth is the least of the overlaps over the 6 face normals and the 9
+/// edge-edge crosses (a cross shorter than 1e-12, two edges parallel within 1e-12 rad, gives
+/// no axis: its plane is spanned by face normals already tested). The normal is that axis,
+/// pointing from B to A (-u where x_a - x_b is perpendicular to it); equal overlaps keep the
+/// first axis in the order A's faces, B's faces, then a_i x b_j by i then j. Every overlap
+/// is computed on the unit axis itself (normalised first), so the depth is the overlap along
+/// the returned normal up to double rounding of the sums (~1e-16 of the boxes' and centres'
+/// scale). A negative overlap on any axis: apart (false, r untouched); all >= 0: penetrating
+/// (touching: depth 0). The contact point (point_a == point_b) is the midpoint of the deepest
+/// contact's witnesses, as libccd's EPA gives it: for a face axis, the incident box's
+/// deepest point (its support toward the reference face; the centre of an edge or face of it
+/// lying parallel to that face within 1e-9), clamped onto the reference face's rectangle, and
+/// its projection on that face; for an edge-edge axis, the closest points of the two edges
+/// along which the boxes touch (clamped to the edges).
 bool box_contact(const V3& side_a, const fcl::Transform3<S>& ta, const V3& side_b, const fcl::Transform3<S>& tb,
                  ReferenceNormal& r) {
-  thread_local std::vector<fcl::ContactPoint<S>> contacts;  // kept between calls
-  contacts.clear();
-  V3 normal;
-  S depth = 0;
-  int code = 0;
-  fcl::detail::boxBox2(side_a, ta, side_b, tb, normal, &depth, &code, 4, contacts);
-  if (code == 0 || contacts.empty()) return false;
+  const V3 ha = side_a * 0.5, hb = side_b * 0.5;
+  const fcl::Matrix3<S> ra = ta.linear(), rb = tb.linear();
+  const V3 xa = ta.translation(), xb = tb.translation();
+  const V3 d = xa - xb;  // B's centre to A's, world
+  // Every axis in A's frame: B's axes there are the columns of c = R_a^T R_b.
+  const fcl::Matrix3<S> c = ra.transpose() * rb;
+  const V3 da = ra.transpose() * d;
+  S best = std::numeric_limits<S>::infinity();
+  V3 best_u = V3::Zero();  // A's frame, unit, from B to A
+  int best_axis = -1;      // 0-2 A's faces, 3-5 B's faces, 6 + 3 i + j: a_i x b_j
+  // Overlap along the unit axis u (A's frame); false when it separates the boxes.
+  auto axis = [&](const V3& u, int id) {
+    const S rad_a = ha[0] * std::abs(u[0]) + ha[1] * std::abs(u[1]) + ha[2] * std::abs(u[2]);
+    const S rad_b = hb[0] * std::abs(c.col(0).dot(u)) + hb[1] * std::abs(c.col(1).dot(u)) +
+                    hb[2] * std::abs(c.col(2).dot(u));
+    const S t = da.dot(u);
+    const S overlap = rad_a + rad_b - std::abs(t);
+    if (overlap < 0) return false;
+    if (overlap < best) {
+      best = overlap;
+      best_u = t > 0 ? u : V3(-u);
+      best_axis = id;
+    }
+    return true;
+  };
+  for (int i = 0; i < 3; ++i)
+    if (!axis(V3::Unit(i), i)) return false;
+  for (int j = 0; j < 3; ++j)
+    if (!axis(c.col(j), 3 + j)) return false;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const V3 u = V3::Unit(i).cross(V3(c.col(j)));
+      const S len = u.norm();
+      if (!(len > 1e-12)) continue;
+      if (!axis(u / len, 6 + 3 * i + j)) return false;
+    }
+  if (best_axis < 0 || !std::isfinite(best)) return false;
+  const V3 n = ra * best_u;  // world, B to A
   r.penetrating = true;
-  std::size_t deepest = 0;
-  for (std::size_t k = 1; k < contacts.size(); ++k)
-    if (contacts[k].penetration_depth > contacts[deepest].penetration_depth) deepest = k;
-  const fcl::ContactPoint<S>& c = contacts[deepest];
-  // ContactPoint::normal points from A to B: B-to-A is its negation.
-  if (!unit(-c.normal, r.normal)) return true;
-  r.depth = std::max<S>(0, c.penetration_depth);
-  r.point_a = r.point_b = to_vec3(c.pos);
+  if (!unit(n, r.normal)) return true;
+  r.depth = std::max<S>(0, best);
+  // The contact point.
+  // Support of a box (centre x, axes R, half extents h) toward the direction w: its deepest
+  // vertex, or the centre of the edge or face that lies across w within 1e-9.
+  auto support = [](const V3& x, const fcl::Matrix3<S>& rot, const V3& h, const V3& w) {
+    V3 p = x;
+    for (int k = 0; k < 3; ++k) {
+      const S s = rot.col(k).dot(w);
+      if (std::abs(s) > 1e-9) p += (s > 0 ? h[k] : -h[k]) * rot.col(k);
+    }
+    return p;
+  };
+  V3 point;
+  if (best_axis < 6) {
+    // Reference face: A's (its face toward B, on -n) or B's (toward A, on +n); the incident
+    // box's deepest point toward it, clamped onto the face, lies `best` inside it.
+    const bool a_face = best_axis < 3;
+    const int k = best_axis % 3;
+    const fcl::Matrix3<S>& rx = a_face ? ra : rb;
+    const V3& x_ref = a_face ? xa : xb;
+    const V3& h_ref = a_face ? ha : hb;
+    const V3 deep = a_face ? support(xb, rb, hb, n) : support(xa, ra, ha, -n);
+    V3 q = rx.transpose() * (deep - x_ref);
+    for (int m = 0; m < 3; ++m)
+      if (m != k) q[m] = std::min(h_ref[m], std::max(-h_ref[m], q[m]));
+    point = x_ref + rx * q + (a_face ? -0.5 : 0.5) * best * n;
+  } else {
+    // Edge a_i of A (A's support toward B, -n) against edge b_j of B (its support toward A).
+    const int i = (best_axis - 6) / 3, j = (best_axis - 6) % 3;
+    const V3 ea = ra.col(i), eb = rb.col(j);
+    V3 pa = support(xa, ra, ha, -n), pb = support(xb, rb, hb, n);
+    pa -= ea * ea.dot(pa - xa);  // the edge's centre (its own axis is not a support direction)
+    pb -= eb * eb.dot(pb - xb);
+    const V3 w = pa - pb;
+    const S e = ea.dot(eb), f = ea.dot(w), g = eb.dot(w), den = 1 - e * e;
+    S s = 0, t = 0;
+    if (den > 1e-24) {
+      s = (e * g - f) / den;
+      t = (g - e * f) / den;
+    }
+    s = std::min(ha[i], std::max(-ha[i], s));
+    t = std::min(hb[j], std::max(-hb[j], t));
+    point = 0.5 * ((pa + s * ea) + (pb + t * eb));
+  }
+  r.point_a = r.point_b = to_vec3(point);
   r.valid = std::isfinite(r.depth);
   return true;
 }
@@ -440,10 +522,10 @@ const fcl::Box<S>* as_box(const ShapeGeom& g) {
   return g.exact && g.exact->getNodeType() == fcl::GEOM_BOX ? static_cast<const fcl::Box<S>*>(g.exact.get()) : nullptr;
 }
 
-/// Two posed boxes as boxes (or a declared sphere and a primitive): FCL's box-box test (ODE's dBoxBox, the separating axis of
-/// least penetration among the 15 candidates: the exact minimum translation of two
-/// boxes), its deepest contact; FCL distance when apart. (libccd's EPA on box corners can
-/// cycle without end on coplanar faces.)
+/// Two posed boxes as boxes: box_contact (the minimum translation over the 15 separating
+/// axes; libccd's EPA on box corners can cycle without end on coplanar faces); a declared
+/// sphere and a primitive: FCL's collide (sphere-box and sphere-sphere exact), its deepest
+/// contact. FCL distance when apart.
 ReferenceNormal box_box(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const ShapeGeom& gb,
                         const fcl::Transform3<S>& tb) {
   ReferenceNormal r;
