@@ -385,10 +385,11 @@ bool hull_penetration(const CcdObject& ca, const CcdObject& cb, ReferenceNormal&
 /// edge-edge crosses (a cross shorter than 1e-12, two edges parallel within 1e-12 rad, gives
 /// no axis: its plane is spanned by face normals already tested). The normal is that axis,
 /// pointing from B to A (-u where x_a - x_b is perpendicular to it); equal overlaps keep the
-/// first axis in the order A's faces, B's faces, then a_i x b_j by i then j. Every overlap
-/// is computed on the unit axis itself (normalised first), so the depth is the overlap along
-/// the returned normal up to double rounding of the sums (~1e-16 of the boxes' and centres'
-/// scale). A negative overlap on any axis: apart (false, r untouched); all >= 0: penetrating
+/// first axis in the order A's faces, B's faces, then a_i x b_j by i then j. An edge-edge
+/// cross is compared unnormalised (its overlap times its length, against the least so far
+/// times its length); the least overlap is computed on its unit axis itself, so the depth
+/// is the overlap along the returned normal up to double rounding of the sums (~1e-16 of
+/// the boxes' and centres' scale). A negative overlap on any axis: apart (false, r untouched); all >= 0: penetrating
 /// (touching: depth 0). The contact point (point_a == point_b) is the midpoint of the deepest
 /// contact's witnesses, as libccd's EPA gives it: for a face axis, the incident box's
 /// deepest point (its support toward the reference face; the centre of an edge or face of it
@@ -407,13 +408,18 @@ bool box_contact(const V3& side_a, const fcl::Transform3<S>& ta, const V3& side_
   S best = std::numeric_limits<S>::infinity();
   V3 best_u = V3::Zero();  // A's frame, unit, from B to A
   int best_axis = -1;      // 0-2 A's faces, 3-5 B's faces, 6 + 3 i + j: a_i x b_j
-  // Overlap along the unit axis u (A's frame); false when it separates the boxes.
-  auto axis = [&](const V3& u, int id) {
+  // Overlap along the axis u (A's frame), scaled by |u|: ha . |u| + hb . |R_b^T u| - |d . u|.
+  auto scaled_overlap = [&](const V3& u, S& t) {
     const S rad_a = ha[0] * std::abs(u[0]) + ha[1] * std::abs(u[1]) + ha[2] * std::abs(u[2]);
     const S rad_b = hb[0] * std::abs(c.col(0).dot(u)) + hb[1] * std::abs(c.col(1).dot(u)) +
                     hb[2] * std::abs(c.col(2).dot(u));
-    const S t = da.dot(u);
-    const S overlap = rad_a + rad_b - std::abs(t);
+    t = da.dot(u);
+    return rad_a + rad_b - std::abs(t);
+  };
+  // The unit axis u: false when it separates the boxes; the least overlap so far kept.
+  auto axis = [&](const V3& u, int id) {
+    S t = 0;
+    const S overlap = scaled_overlap(u, t);
     if (overlap < 0) return false;
     if (overlap < best) {
       best = overlap;
@@ -426,12 +432,18 @@ bool box_contact(const V3& side_a, const fcl::Transform3<S>& ta, const V3& side_
     if (!axis(V3::Unit(i), i)) return false;
   for (int j = 0; j < 3; ++j)
     if (!axis(c.col(j), 3 + j)) return false;
+  // Edge-edge axes: the sign and the comparison with the least overlap on the unnormalised
+  // cross (overlap x |u|); only a candidate for the least is normalised and taken as above.
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) {
       const V3 u = V3::Unit(i).cross(V3(c.col(j)));
-      const S len = u.norm();
-      if (!(len > 1e-12)) continue;
-      if (!axis(u / len, 6 + 3 * i + j)) return false;
+      const S len2 = u.squaredNorm();
+      if (!(len2 > 1e-24)) continue;
+      S t = 0;
+      const S scaled = scaled_overlap(u, t);
+      if (scaled < 0) return false;
+      if (!(scaled * scaled < best * best * len2)) continue;
+      if (!axis(u / std::sqrt(len2), 6 + 3 * i + j)) return false;
     }
   if (best_axis < 0 || !std::isfinite(best)) return false;
   const V3 n = ra * best_u;  // world, B to A
