@@ -430,11 +430,15 @@ bool box_contact(const V3& side_a, const fcl::Transform3<S>& ta, const V3& side_
   };
   for (int i = 0; i < 3; ++i)
     if (!axis(V3::Unit(i), i)) return false;
-  for (int j = 0; j < 3; ++j)
+  // Two unturned boxes (world AABBs, an unturned pose): B's faces and the edge crosses are
+  // A's face axes again, with the same overlaps bit for bit (c = I: every product by 0 or
+  // 1 is exact), so A's three decide (equal overlaps keep A's).
+  const bool unturned = ra == fcl::Matrix3<S>::Identity() && rb == fcl::Matrix3<S>::Identity();
+  for (int j = 0; j < 3 && !unturned; ++j)
     if (!axis(c.col(j), 3 + j)) return false;
   // Edge-edge axes: the sign and the comparison with the least overlap on the unnormalised
   // cross (overlap x |u|); only a candidate for the least is normalised and taken as above.
-  for (int i = 0; i < 3; ++i)
+  for (int i = 0; i < 3 && !unturned; ++i)
     for (int j = 0; j < 3; ++j) {
       const V3 u = V3::Unit(i).cross(V3(c.col(j)));
       const S len2 = u.squaredNorm();
