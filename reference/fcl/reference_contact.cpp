@@ -509,28 +509,46 @@ bool box_contact(const V3& side_a, const fcl::Transform3<S>& ta, const V3& side_
 /// projections separates the boxes, however rounded its direction; edge-edge axes of
 /// (nearly) parallel edges, |e_a x e_b| < 1e-7, are not tested, so a penetration is claimed
 /// only beyond band_in, larger than what such an axis could add (1e-7 x the boxes' scale).
+/// Non-finite centres or rotations: 0.
 int box_box_overlap_class(const V3& ha, const fcl::Matrix3<S>& ra, const V3& ta, const V3& hb,
                           const fcl::Matrix3<S>& rb, const V3& tb, S band_in, S band_out) {
   const V3 d = tb - ta;
-  S most = -std::numeric_limits<S>::infinity();  // the largest separation over the axes (m)
-  auto axis = [&](const V3& u) {
-    const S len = u.norm();
-    if (!(len >= 1e-7)) return;
-    const V3 n = u / len;
-    const S ra_n = ha[0] * std::abs(ra.col(0).dot(n)) + ha[1] * std::abs(ra.col(1).dot(n)) +
-                   ha[2] * std::abs(ra.col(2).dot(n));
-    const S rb_n = hb[0] * std::abs(rb.col(0).dot(n)) + hb[1] * std::abs(rb.col(1).dot(n)) +
-                   hb[2] * std::abs(rb.col(2).dot(n));
-    most = std::max(most, std::abs(d.dot(n)) - (ra_n + rb_n));
+  if (!d.allFinite() || !ra.allFinite() || !rb.allFinite()) return 0;
+  // Separation along u scaled by |u|: |d . u| - (A's and B's half projections on u).
+  auto scaled_separation = [&](const V3& u) {
+    const S ra_n = ha[0] * std::abs(ra.col(0).dot(u)) + ha[1] * std::abs(ra.col(1).dot(u)) +
+                   ha[2] * std::abs(ra.col(2).dot(u));
+    const S rb_n = hb[0] * std::abs(rb.col(0).dot(u)) + hb[1] * std::abs(rb.col(1).dot(u)) +
+                   hb[2] * std::abs(rb.col(2).dot(u));
+    return std::abs(d.dot(u)) - (ra_n + rb_n);
   };
-  for (int i = 0; i < 3; ++i) axis(ra.col(i));
-  for (int i = 0; i < 3; ++i) axis(rb.col(i));
+  // An axis separating by more than band_out decides -1 at once; +1 needs every axis tested
+  // to overlap by more than band_in.
+  bool all_in = true;
+  auto face = [&](const V3& u) {
+    const S len = u.norm();
+    if (!(len >= 1e-7)) return false;
+    const S sep = scaled_separation(u / len);
+    if (sep > band_out) return true;
+    all_in = all_in && sep < -band_in;
+    return false;
+  };
   for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) axis(ra.col(i).cross(rb.col(j)));
-  if (!std::isfinite(most)) return 0;
-  if (most < -band_in) return 1;
-  if (most > band_out) return -1;
-  return 0;
+    if (face(ra.col(i))) return -1;
+  for (int i = 0; i < 3; ++i)
+    if (face(rb.col(i))) return -1;
+  // Edge-edge crosses unnormalised: sep > band_out <=> s > band_out |u|, sep < -band_in
+  // <=> s < -band_in |u| (s = sep |u|), compared squared.
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const V3 u = ra.col(i).cross(rb.col(j));
+      const S len2 = u.squaredNorm();
+      if (!(len2 >= 1e-14)) continue;
+      const S s = scaled_separation(u);
+      if (s > 0 && s * s > band_out * band_out * len2) return -1;
+      all_in = all_in && s < 0 && s * s > band_in * band_in * len2;
+    }
+  return all_in ? 1 : 0;
 }
 
 /// The fcl::Box of a geometry, or null.
