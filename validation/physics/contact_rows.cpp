@@ -318,7 +318,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
         }
       } else if (aabb) {
         // The engine's normal is an axis of the two world AABBs (Eq. 10): compared with
-        // FCL box-box on the same boxes its angle says nothing about the shapes (a
+        // box-box on the same boxes its angle says nothing about the shapes (a
         // figure; the angle to the posed shapes is the other figure, below). Its sign is
         // judged: a normal pointing from A to B pushes the bodies into each other.
         ++aabb_angle_rows;

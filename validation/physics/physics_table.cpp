@@ -155,7 +155,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
     r.applicable = s.normal_angle.checks + s.depth.checks + s.points.checks > 0;
     const bool aabb = s.bodies.contact_geometry == ContactGeometry::Aabb;
     if (aabb) {
-      r.figure = "worst normal angle to FCL box-box on the world AABBs (deg; its sign judged)";
+      r.figure = "worst normal angle to box-box on the world AABBs (deg; its sign judged)";
       r.bound = 90.0;
     }
     std::string stats;
@@ -187,17 +187,17 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
                                                    s.tol.depth_m, s.points.failures, s.points.checks);
     } else if (aabb) {
       r.detail = fmt::format("normal angle n/a: the engine resolves contacts on world AABBs (its normal is an AABB "
-                             "axis; its angle to FCL box-box on the same boxes judges nothing about the shapes: worst "
+                             "axis; its angle to box-box on the same boxes judges nothing about the shapes: worst "
                              "{:.3g} deg over {} rows, a figure; its sign is judged on {} rows); depth of {} pairs "
-                             "judged against FCL box-box on the world AABBs: worst difference {:.3g} m; {}{}",
+                             "judged against box-box on the world AABBs: worst difference {:.3g} m; {}{}",
                              s.aabb_angle_worst, s.aabb_angle_rows, s.normal_angle.checks, s.depth.checks,
                              s.depth.worst_or(0.0), sign, stats);
     } else {
       r.detail = fmt::format("{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}",
                              s.normal_angle.checks, aabb ? " on the world AABBs" : "",
-                             aabb ? std::string("FCL box-box")
-                                  : fmt::format("reference: SAT on {} convex pair-frames, FCL (box-box, EPA or the "
-                                                "non-convex BVH bound) on {}",
+                             aabb ? std::string("box-box")
+                                  : fmt::format("reference: SAT on {} convex pair-frames, box-box, FCL (EPA, distance "
+                                                "or the non-convex BVH bound) on {}",
                                                 s.sat_pairs, s.fcl_pairs),
                              s.normal_angle.worst_or(0.0),
                              s.depth.worst_or(0.0),
