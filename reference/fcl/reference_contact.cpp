@@ -535,6 +535,11 @@ int box_box_overlap_class(const V3& ha, const fcl::Matrix3<S>& ra, const V3& ta,
   };
   for (int i = 0; i < 3; ++i)
     if (face(ra.col(i))) return -1;
+  // Two unturned boxes: B's faces and the edge crosses are A's face axes again (the same
+  // separations: products by 0 and 1 are exact), so A's three decide. (The crosses'
+  // squared test could only turn a +1 whose overlap exceeds band_in by a rounding into a 0
+  // left to GJK, which then finds the same intersection.)
+  if (ra == fcl::Matrix3<S>::Identity() && rb == fcl::Matrix3<S>::Identity()) return all_in ? 1 : 0;
   for (int i = 0; i < 3; ++i)
     if (face(rb.col(i))) return -1;
   // Edge-edge crosses unnormalised: sep > band_out <=> s > band_out |u|, sep < -band_in

@@ -196,7 +196,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
       r.detail = fmt::format("{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}",
                              s.normal_angle.checks, aabb ? " on the world AABBs" : "",
                              aabb ? std::string("box-box")
-                                  : fmt::format("reference: SAT on {} convex pair-frames, box-box, FCL (EPA, distance "
+                                  : fmt::format("reference: SAT on {} convex pair-frames, box-box or FCL (EPA, distance "
                                                 "or the non-convex BVH bound) on {}",
                                                 s.sat_pairs, s.fcl_pairs),
                              s.normal_angle.worst_or(0.0),
