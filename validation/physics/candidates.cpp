@@ -69,9 +69,9 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
   // Truth per pair: intersect() for every candidate, posed() where a row needs the depth
   // or the distance.
   // Two convex shapes (boxes, convex meshes) that penetrate get the exact minimum
-  // translation of the separating-axis test (design.md section 13b.9: FCL's box-box keeps a face axis
-  // up to 5% deeper than an edge-edge one, so its depth and normal are not the minimum
-  // there); FCL's answer stays beside it as the second opinion.
+  // translation of the separating-axis test (design.md section 13b.9); the posed answer
+  // (two boxes: octocd's box-box, the same minimum; hulls: FCL's EPA) stays beside it as
+  // the second opinion.
   const bool need_distance = tol.broadphase_margin_m - slack > 0;
 
   // Contact rows per pair (rows of a pair are consecutive).

@@ -239,7 +239,8 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
     const ContactTruth& shape_truth = *truth_of[i];
     const ReferenceNormal& shape_ref = shape_truth.g;
     // The reference that judges this pair: the separating-axis test (every near-minimal
-    // axis accepted) or FCL (box-box, EPA, or the BVH bound of non-convex meshes).
+    // axis accepted) or the posed reference (box-box for two boxes; FCL's EPA, distance or
+    // the BVH bound of non-convex meshes).
     const bool by_sat = !aabb && shape_truth.sat;
     const char* judge = by_sat ? "SAT" : "FCL";
     if (by_sat) {
@@ -334,7 +335,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
         }
       } else if (aabb) {
         // The engine's normal is an axis of the two world AABBs (Eq. 10): compared with
-        // FCL box-box on the same boxes its angle says nothing about the shapes (a
+        // box-box on the same boxes its angle says nothing about the shapes (a
         // figure; the angle to the posed shapes is the other figure, below). Its sign is
         // judged: a normal pointing from A to B pushes the bodies into each other.
         ++aabb_angle_rows;
@@ -494,7 +495,7 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ContactGeometry>() const 
   r.applicable = normal_angle.checks + depth.checks + points.checks > 0;
   const bool aabb = s.bodies.contact_geometry == ContactGeometry::Aabb;
   if (aabb) {
-    r.figure = "worst normal angle to FCL box-box on the world AABBs (deg; its sign judged)";
+    r.figure = "worst normal angle to box-box on the world AABBs (deg; its sign judged)";
     r.bound = 90.0;
   }
   std::string stats;
@@ -527,17 +528,17 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ContactGeometry>() const 
   } else if (aabb) {
     r.detail = fmt::format(
         "normal angle n/a: the engine resolves contacts on world AABBs (its normal is an AABB "
-        "axis; its angle to FCL box-box on the same boxes judges nothing about the shapes: worst "
+        "axis; its angle to box-box on the same boxes judges nothing about the shapes: worst "
         "{:.3g} deg over {} rows, a figure; its sign is judged on {} rows); depth of {} pairs "
-        "judged against FCL box-box on the world AABBs: worst difference {:.3g} m; {}{}",
+        "judged against box-box on the world AABBs: worst difference {:.3g} m; {}{}",
         s.aabb_angle_worst, s.aabb_angle_rows, normal_angle.checks, depth.checks, depth.worst_or(0.0), sign, stats);
   } else {
     r.detail = fmt::format(
         "{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}", normal_angle.checks,
         aabb ? " on the world AABBs" : "",
-        aabb ? std::string("FCL box-box")
-             : fmt::format("reference: SAT on {} convex pair-frames, FCL (box-box, EPA or the "
-                           "non-convex BVH bound) on {}",
+        aabb ? std::string("box-box")
+             : fmt::format("reference: SAT on {} convex pair-frames, box-box or FCL (EPA, distance "
+                           "or the non-convex BVH bound) on {}",
                            s.sat_pairs, s.fcl_pairs),
         normal_angle.worst_or(0.0), depth.worst_or(0.0),
         points.checks ? fmt::format(", {} points, worst {:.3g} m beyond the depth", points.checks, points.worst_or(0.0))

@@ -399,9 +399,8 @@ struct PhysicsValidators::Impl {
   double aabb_angle_worst = 0;
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
   std::uint64_t sign_uncertain_rows = 0;  // of them, on hulls FCL calls apart along no separating axis
-  // Contact geometry's references: pairs judged by the separating-axis test and by FCL;
-  // where FCL's normal lies outside SAT's accepted axes (figure: FCL's box-box keeps a
-  // face axis up to 5% deeper than the minimum).
+  // Contact geometry's references: pairs judged by the separating-axis test and by the posed
+  // reference; where the posed reference's normal lies outside SAT's accepted axes (a figure).
   std::uint64_t sat_pairs = 0, fcl_pairs = 0, sat_fcl_other = 0, sat_fcl_disagree = 0;
   double sat_fcl_worst_excess = 0, sat_fcl_other_excess = 0;
   std::string sat_fcl_what;
