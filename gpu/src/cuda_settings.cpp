@@ -52,7 +52,7 @@ void check_cuda_settings(const CudaSettings& s, const std::string& where) {
 std::vector<std::string> cuda_setting_names() {
   return {"midphase_early_exit", "memory_limit_bytes", "resident_timeout_ms", "stage_times", "stage_time_every",
           "sync_each_launch",    "graph",              "small_path",          "small_profile",
-          "record_batch"};
+          "record_batch",        "resident_spin"};
 }
 
 void set_cuda_setting(CudaSettings& s, const std::string& key, const std::string& value, const std::string& where) {
@@ -70,6 +70,7 @@ void set_cuda_setting(CudaSettings& s, const std::string& key, const std::string
         static_cast<long>(parse_integer(where, key, value, 1, kMostStageTimeEvery, "steps per timed step"));
   else if (key == "small_path") s.small_path = parse_bool(where, key, value);
   else if (key == "small_profile") s.small_profile = parse_bool(where, key, value);
+  else if (key == "resident_spin") s.resident_spin = parse_bool(where, key, value);
   else if (key == "record_batch")
     s.record_batch = static_cast<long>(parse_integer(where, key, value, 1, kMostRecordBatch, "recorded steps per batch"));
   else {

@@ -119,6 +119,7 @@ void CudaWorld::Impl::launch_resident(const Scene& scene, bool ring) {
   r.idle_ns = resident_stall ? 0 : resident_idle_ns;
   r.records = records.get();
   r.stall = resident_stall ? 1 : 0;
+  r.spin = resident_spin ? 1 : 0;
   if (ring) r.ring = ring_desc();
   r.stopped = resident_dev + kStoppedWord;
   resident_ring = ring;
@@ -157,9 +158,10 @@ void CudaWorld::Impl::resident_step(const Scene& scene, bool recording) {
   const bool covered = sequence <= ahead_last;  // an earlier request's batch runs this step
   if (!covered) {
     if (resident_alive && exited_mark() == epoch) stop_resident();  // it ended itself, idle
-    // A recorded run with record_batch > 1 runs ahead too, each step's record into the ring
-    // (a kernel launched without one is ended first); else a recorded step runs alone.
-    const bool ring = recording && batching_records();
+    // A recorded run with record_batch > 1 and steps promised runs ahead too, each step's
+    // record into the ring (a kernel launched without one is ended first); else a recorded
+    // step runs alone and is read from the live buffers.
+    const bool ring = recording && batching_records() && promised > 1;
     if (ring && resident_alive && !resident_ring) stop_resident();
     unsigned long long extra = recording && !ring ? 0 : batch_extra();
     if (ring) extra = std::min<unsigned long long>(extra, static_cast<unsigned long long>(record_batch - 1));

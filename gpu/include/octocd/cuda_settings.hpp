@@ -71,6 +71,13 @@ struct CudaSettings {
   /// other values: the host asks for the next batch as soon as it has copied one, and the
   /// device's 64 statistics slots leave room for a whole next batch only up to 32 steps.
   long record_batch = 32;
+  /// The resident small-step kernel's waits poll without backoff: block 0's for the host's
+  /// request (else __nanosleep from the 256th poll, up to 1 us) and the other blocks' for
+  /// the next step of a batch (else from the 64th poll, up to 256 ns), so a step is taken up
+  /// as soon as it is published, at the price of polling traffic beside the block that
+  /// works (a candidate saving on the small step's floor, unmeasured). Same bits either
+  /// way. Default false.
+  bool resident_spin = false;
 };
 
 /// Throws InputError naming the field, its value and the allowed range when a field of
