@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <string>
@@ -227,6 +228,26 @@ TEST_F(Tools, BenchTinySweepEndToEnd) {
   const Result again = run_octocd("bench " + (dir_ / "sweep.json").string() + " -o " + out.string());
   EXPECT_EQ(again.code, 2);
   EXPECT_NE(again.output.find("--resume"), std::string::npos) << again.output;
+}
+
+// `run` of a scene of 10^4 bodies or more says each stage of its start on stderr: the
+// scene, the engine's world (wall and CPU seconds) and the first frame (seconds after the
+// start, the process's CPU seconds), in that order; --quiet and a small scene say none.
+TEST_F(Tools, RunOfALargeSceneSaysEachSetUpStageWithCpuSeconds) {
+  const std::string large = source_dir() + "/datasets/scenes/boxes-uniform-10k.json";
+  const Result r = run_octocd("run " + large + " --engine ode --frames 1");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::regex stages(
+      "set-up: scene and bodies [0-9.]+ s \\(10006 bodies\\); building the ode world\n"
+      "set-up: ode world [0-9.]+ s \\([0-9.]+ CPU s\\); stepping\n"
+      "(.*\n)*set-up: first frame [0-9.]+ s after the start \\([0-9.]+ CPU s of the process\\)\n");
+  EXPECT_TRUE(std::regex_search(r.output, stages)) << r.output;
+  const Result quiet = run_octocd("run " + large + " --engine ode --frames 1 --quiet");
+  ASSERT_EQ(quiet.code, 0) << quiet.output;
+  EXPECT_EQ(quiet.output.find("set-up:"), std::string::npos) << quiet.output;
+  const Result small = run_octocd("run " + source_dir() + "/datasets/scenes/box-stack.json --engine ode --frames 1");
+  ASSERT_EQ(small.code, 0) << small.output;
+  EXPECT_EQ(small.output.find("set-up:"), std::string::npos) << small.output;
 }
 
 // --traced runs each point once per trace mode: the untraced point keeps its id, the
