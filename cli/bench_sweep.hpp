@@ -93,6 +93,9 @@ struct Sweep {
   std::vector<long> worlds{1};          ///< copies of each scene run as one world (`worlds`)
   bool worlds_given = false;            ///< the sweep has `worlds`: points report world_steps_per_s
   std::map<std::string, long> max_worlds;  ///< engine -> the most copies it runs (larger points are not made)
+  /// steps: engine -> why its points above max_bodies[engine] bodies are skipped (the
+  /// sweep's `max_bodies` {"ENGINE": {"bodies": N, "reason": "..."}}; max_bodies holds N).
+  std::map<std::string, std::string> max_bodies_reason;
   // divergence (docs/bench-format.md, docs/predictability.md)
   std::vector<double> eps;              ///< the ladder of initial perturbations (m), each in [0, 1] (0: unperturbed copies)
   int copies = 16;                      ///< perturbed copies per eps

@@ -17,6 +17,27 @@
 namespace octocd {
 
 
+const char* ode_space_name(OdeSpace s) {
+  switch (s) {
+    case OdeSpace::Hash: return "hash";
+    case OdeSpace::Sap: return "sap";
+    case OdeSpace::QuadTree: return "quadtree";
+    case OdeSpace::Auto: break;
+  }
+  return "auto";
+}
+
+OdeSpace ode_resolved_space(OdeSpace s, std::size_t bodies) {
+  if (s != OdeSpace::Auto) return s;
+  return bodies >= kOdeAutoSapBodies ? OdeSpace::Sap : OdeSpace::Hash;
+}
+
+int ode_quadtree_depth(std::size_t bodies) {
+  int depth = 1;
+  for (std::size_t leaves = 4; depth < 8 && leaves * 16 < bodies; leaves *= 4) ++depth;
+  return depth;
+}
+
 const char* ode_stepper_name(OdeStepper s) { return s == OdeStepper::QuickStep ? "quickstep" : "step"; }
 
 OdeSettings ode_library_defaults() {
@@ -52,6 +73,17 @@ const SettingTable<OdeSettings>& setting_table<OdeSettings>() {
       {"friction", T::pyramid_friction(&OdeSettings::friction)},
       {"gyroscopic",
        T::choice(&OdeSettings::gyroscopic, "true", true, "false", false, "true, false (dBodySetGyroscopicMode)")},
+      {"space",
+       [](OdeSettings& s, const SettingValue& v) {
+         for (const OdeSpace e : {OdeSpace::Hash, OdeSpace::Sap, OdeSpace::QuadTree, OdeSpace::Auto})
+           if (v.value == ode_space_name(e)) {
+             s.space = e;
+             return;
+           }
+         v.not_allowed(
+             "hash (dHashSpace), sap (dSweepAndPruneSpace), quadtree (dQuadTreeSpace over the domain), auto (hash "
+             "below 10000 bodies, sap from there)");
+       }},
   }};
   return table;
 }

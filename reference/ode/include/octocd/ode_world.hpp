@@ -14,8 +14,10 @@
 
 namespace octocd {
 
-/// The scene of a Model in one dWorld with one dHashSpace (ODE's multi-resolution hash
-/// grid), stepped once per frame by dWorldStep (or dWorldQuickStep, OdeSettings::stepper).
+/// The scene of a Model in one dWorld with one collision space (OdeSettings::space:
+/// dHashSpace, ODE's multi-resolution hash grid, below 10^4 bodies by default; sweep and
+/// prune from there), stepped once per frame by dWorldStep (or dWorldQuickStep,
+/// OdeSettings::stepper).
 ///
 /// Bodies (every body rotates: a scene without rotation simply starts with w = 0):
 /// - a dynamic body (inverse mass w > 0) is a dBody whose position is octocd's x (the
@@ -118,8 +120,9 @@ class OdeWorld : public SettingsWorld<OdeSettings> {
   const FrameMetrics& step() override;
   /// "ode".
   std::string name() const override { return "ode"; }
-  /// "ode-hash" (dHashSpace).
-  std::string broadphase_name() const override { return "ode-hash"; }
+  /// The space the scene got (OdeSettings::space resolved for its body count): "ode-hash"
+  /// (dHashSpace), "ode-sap" (dSweepAndPruneSpace) or "ode-quadtree" (dQuadTreeSpace).
+  std::string broadphase_name() const override;
   /// "ode-collide": ODE's dCollide (dBoxBox, libccd MPR, trimesh colliders).
   std::string midphase_name() const override { return "ode-collide"; }
   /// How ODE's figures differ from octocd's (see step()).
