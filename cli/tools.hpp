@@ -83,7 +83,7 @@ constexpr double kTraceFlushIntervalS = 0.1;
 /// ahead to the next such frame (Engine::plan_steps; nothing else is read in between). A
 /// recording feed (contact rows, or version 2) promises the run's steps at once: a
 /// recording engine may run ahead of them too, with state(), contacts() and record()
-/// still read (Engine::plan_steps; `cuda`: CudaSettings::record_batch).
+/// still read (Engine::plan_steps; the cuda engine runs recorded steps ahead in batches, docs/gpu.md).
 struct TraceFeed {
   bool v2 = false;           ///< append_frame_v2 with the engine's record
   bool states_only = false;  ///< no contact rows and not v2: the engine runs ahead between state frames
