@@ -65,12 +65,7 @@ std::string default_scene_dir() { return (fs::path(shared_dir()) / "datasets" / 
 }  // namespace
 
 CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
-  CLI::App* c = app.add_subcommand(
-      "bench",
-      "Run a benchmark sweep on every engine this octocd has, side by side (the paper's Tables 5, 6, A1, Fig. A2, "
-      "broadphase scaling, the most instances at 30 steps/s, speed against accuracy over a ladder of time steps, divergence of "
-      "copies perturbed by eps (`bench divergence`: mean and max distance from the unperturbed run per frame, the "
-      "growth exponent; docs/predictability.md)); results as JSON (docs/bench-format.md). Exit 0 ok, 1 a point failed, 2 bad input");
+  CLI::App* c = add_table_command(app, CommandId::bench);
   c->add_option("sweep", o.sweep, "A named sweep (" + named_list() + ") or a sweep JSON file");
   c->add_option("-o,--output", o.output, "Result file (JSON), rewritten after every finished point");
   c->add_option("--engines", o.engines,

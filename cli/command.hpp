@@ -8,6 +8,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "command_table.hpp"
+
 namespace octocd::cli {
 
 /// One subcommand after registration: whether CLI11 chose it, and running it (throws

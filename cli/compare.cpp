@@ -788,20 +788,7 @@ const char* state_dataset(const std::string& q) {
 }  // namespace
 
 CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
-  CLI::App* c = app.add_subcommand(
-      "compare",
-      "Compare two traces (golden-trace regression, CPU vs CUDA, one engine's run against another's): octocd traces "
-      "(format version 1, or 2 with `--engine bullet --rotation`) or external traces of version 1 or 2 (another "
-      "engine's, docs/trace-format.md; checked in full first). First their structure: frame count, state rows and "
-      "their frames, body count, scene name and scene parameters (every key that differs is named, e.g. "
-      "`/response/beta: 1 vs 0.999`; the broadphase is not compared: every broadphase finds the same pairs; an "
-      "external trace has no parameters: its scene and dt when both have them; an external or version 2 trace: "
-      "also its /bodies tables (masses, local boxes, inertia, materials) and the version 2 root attributes (mu, "
-      "restitution, combine rules, contact_margin, detection, ...) where both have them). Then per quantity (--quantity: "
-      "which fields, for which version), with its own tolerance: the largest difference (frame, body, both values) "
-      "and the first frame and body beyond the tolerance. Exit 0 same, 3 different (structure or a quantity beyond "
-      "its tolerance), 2 unreadable or malformed input (naming file, dataset, frame and the allowed values), bad "
-      "option, or no requested quantity that both traces hold (nothing compared, naming what each trace lacks)");
+  CLI::App* c = add_table_command(app, CommandId::compare);
   c->add_option("a", o.a, "First trace (.h5), e.g. the golden one")->required();
   c->add_option("b", o.b, "Second trace (.h5)")->required();
   c->add_option("--tolerance", o.tolerance,

@@ -93,10 +93,7 @@ int engines_command(const EnginesOptions& o) {
 
 Command add_engines_command(CLI::App& app) {
   const auto options = std::make_shared<EnginesOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "engines", "List the engines of this octocd (built in, and the process engines of the engines files: "
-                 "docs/bring-your-engine.md): available here, or unavailable with the reason (not built, no device, "
-                 "its command or runtime missing), and what each can do (docs/engines.md)");
+  CLI::App* cmd = add_table_command(app, CommandId::engines);
   cmd->add_flag("--available", options->available, "Print only the names of the engines that run here, one a line");
   cmd->add_flag("--json", options->json,
                 "Print the registry as JSON: per engine name, kind (builtin or process), available, why, rotates, "

@@ -206,13 +206,7 @@ std::string append_history(const std::string& dir, const std::string& kind, json
 }
 
 CLI::App* add_history_append_command(CLI::App& app, HistoryAppendOptions& o) {
-  CLI::App* c = app.add_subcommand(
-      "history-append",
-      "Add one run's results to a history folder (docs/regression.md): a new file DIR/DATE-COMMIT-KIND.json holding "
-      "the bench results and the verdicts of `validate --json` (per engine, scene and row: pass, expected, new, fixed, "
-      "with the expectation's outcome), the machine, the build's version and commit, and the date; written under a "
-      "temporary name and linked into place, never over an existing file. `scripts/nightly.sh --history DIR` calls "
-      "it; `octocd report --history DIR` draws the folder. Exit 0, 1 writing failed, 2 bad input (naming the file)");
+  CLI::App* c = add_table_command(app, CommandId::history_append);
   c->add_option("dir", o.dir, "The history folder (created)")->required();
   c->add_option("--bench", o.bench, "Result files of `octocd bench` (.json) to add (repeatable)");
   c->add_option("--validation", o.validation,

@@ -368,10 +368,7 @@ ReplayRun replay_broadphase(const ReplayInput& input, const std::string& engine,
 // ---- the command --------------------------------------------------------------------------
 
 CLI::App* add_replay_command(CLI::App& app, ReplayOptions& o) {
-  CLI::App* c = app.add_subcommand(
-      "replay",
-      "Replay the world AABBs recorded in a trace through several broadphases (each sees identical input), check "
-      "they return the same pairs and the recorded counts, and time them. Exit 0 all agree, 3 one differs, 2 bad input");
+  CLI::App* c = add_table_command(app, CommandId::replay);
   c->add_option("trace", o.trace,
                 "Trace (.h5) of `octocd run --trace` (needs /bodies, /states and the parameters attribute); format "
                 "version 1 only: a version 2 trace (`--engine bullet --rotation`, a rotating engine) is refused "

@@ -109,12 +109,7 @@ nlohmann::ordered_json number(double v) {
 }  // namespace
 
 CLI::App* add_trace_summary_command(CLI::App& app, TraceSummaryOptions& o) {
-  CLI::App* c = app.add_subcommand(
-      "trace-summary",
-      "What a trace holds, read by octocd's hardened reader (docs/trace-format.md, \"Security rules and limits\"): "
-      "format, version, root attributes, the complete rows of /frames (at most committed_frames) and, with --json, "
-      "its columns. `octocd report` reads traces through it. Exit 0, or 2 naming the file and dataset of a trace it "
-      "refuses (external links, external storage, virtual datasets, not a regular file, damaged)");
+  CLI::App* c = add_table_command(app, CommandId::trace_summary);
   c->add_option("trace", o.trace, "The trace (.h5)")->required();
   c->add_flag("--json", o.json,
               "One JSON object: format, version, path, frames, attributes {name: value}, columns {name: [values]} "
@@ -162,15 +157,7 @@ int trace_summary_command(const TraceSummaryOptions& o) {
 }
 
 CLI::App* add_report_command(CLI::App& app, ReportOptions& o) {
-  CLI::App* c = app.add_subcommand(
-      "report",
-      "Make a report of bench results and traces: DIR/index.html (self-contained, plots inline) and DIR/report.md "
-      "(plots in DIR/plots/): the paper's Tables 5, 6, A1 beside ours per engine, steps/s and stage shares, broadphase "
-      "scaling, the beta-delta heatmap, and per trace energy, contacts and penetration over frames. Shards of one "
-      "sweep (one build) are merged. With --baseline, a performance gate. Exit 0 ok, 1 failure (e.g. no "
-      "matplotlib), 2 bad input (one line naming the file and key, never a traceback; too few repetitions to "
-      "decide), 4 the gate fails: a slowdown against --baseline, or a point of the baseline missing, failed or "
-      "unmeasured in the new run");
+  CLI::App* c = add_table_command(app, CommandId::report);
   c->add_option("inputs", o.inputs, "Result files of `octocd bench` (.json) and traces (.h5); none with --history");
   c->add_option("-o,--output", o.output, "Output folder (created)")->required();
   c->add_option("--title", o.title, "Title of the report");

@@ -490,7 +490,7 @@ int run_command(const RunOptions& o) {
 Command add_run_command(CLI::App& app) {
   const auto options = std::make_shared<RunOptions>();
   RunOptions& run = *options;
-  CLI::App* run_cmd = app.add_subcommand("run", "Run a scene through the pipeline and print a summary");
+  CLI::App* run_cmd = add_table_command(app, CommandId::run);
   run_cmd->add_option("scene", run.scene, "Scene file (JSON, see docs/scenes.md)")->required();
   run_cmd->add_option("--engine", run.engine, engines_help())
       ->check(CLI::IsMember(octocd::engine_names()))

@@ -25,6 +25,7 @@
 #include "octocd/engine.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/trace.hpp"
+#include "command_table.hpp"
 
 namespace octocd::cli {
 

@@ -954,9 +954,7 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
 Command add_validate_command(CLI::App& app) {
   const auto options = std::make_shared<ValidateOptions>();
   ValidateOptions& val = *options;
-  CLI::App* val_cmd = app.add_subcommand(
-      "validate", "Judge a scene's run, or an engine's trace (--trace-in), with the validators of design.md section 7; exit 0 all pass (or fail as --expect expects), 3 a "
-                  "new or grown failure, 2 bad input");
+  CLI::App* val_cmd = add_table_command(app, CommandId::validate);
   val_cmd->add_option("scene", val.scene, "Scene file (JSON, see docs/scenes.md); or give --trace-in");
   val_cmd->add_option("--against", val.against,
                       "References: comma-separated bullet, fcl (Bullet/FCL broadphases, FCL "

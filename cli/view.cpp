@@ -41,11 +41,7 @@ struct ViewCommand::Impl {
 
 ViewCommand::ViewCommand(CLI::App& app) : impl_(std::make_unique<Impl>()) {
   Impl& s = *impl_;
-  s.cmd = app.add_subcommand(
-      "view",
-      "Draw a frame of a trace on one self-contained HTML page (three.js inlined; no network, no server): the posed "
-      "shapes near a pair or a body, their world AABBs, the engine's contact points and normals beside the "
-      "physics tier's reference (SAT or FCL), with a frame slider (docs/debugging.md)");
+  s.cmd = add_table_command(app, CommandId::view);
   s.cmd->add_option("trace", s.trace,
                     "Trace (HDF5): octocd's (any --state-every: a frame without its own state is drawn at the "
                     "nearest recorded one) or an external trace (versions 1 and 2), read through the hardened reader")

@@ -30,6 +30,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "command_table.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/validation_rows.hpp"
 #include "support/cli_run.hpp"
@@ -1021,6 +1022,33 @@ TEST_F(CliUser, TopHelpListsOneLinePerSubcommand) {
   }
   EXPECT_GE(listed, 9u) << top.output;
   EXPECT_LE(lines_total, 40u) << top.output;
+}
+
+// `octocd --help` lists the rows of cli/command_table.def, in their order, and each
+// subcommand's own help opens with its row's description.
+TEST_F(CliUser, HelpFollowsTheCommandTable) {
+  const Result top = octocd_cmd("--help");
+  ASSERT_EQ(top.code, 0);
+  const auto sub = top.output.find("\nSubcommands:\n");
+  ASSERT_NE(sub, std::string::npos) << top.output;
+  std::istringstream lines(top.output.substr(sub + 14));
+  std::vector<std::string> listed;
+  for (std::string line; std::getline(lines, line) && !line.empty() && line[0] == ' ';) {
+    std::istringstream w(line);
+    std::string name;
+    w >> name;
+    listed.push_back(name);
+  }
+  const std::vector<std::string>& names = octocd::cli::command_names();
+  EXPECT_EQ(listed, names) << top.output;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    const auto id = static_cast<octocd::cli::CommandId>(i);
+    EXPECT_EQ(names[i], octocd::cli::command_name(id));
+    const Result own = octocd_cmd(names[i] + " --help");
+    ASSERT_EQ(own.code, 0) << names[i];
+    EXPECT_EQ(own.output.rfind(std::string(octocd::cli::command_description(id)) + "\n", 0), 0u)
+        << names[i] << ": " << own.output;
+  }
 }
 
 // `octocd engines` lists every engine of the registry, each available or unavailable with
