@@ -98,25 +98,27 @@ struct ValidateOptions {
 
 /// Runs `write` (a write_junit or write_junit_error to o.junit); a failure to write that
 /// file (its message begins "--junit: ": a size limit, a full disk, a folder put in its
-/// way) is kept in o.junit_failed instead of thrown, and the verdict goes on to --json.
+/// way) is said at once on stderr (it says what the file holds) and kept in
+/// o.junit_failed instead of thrown, and the verdict goes on to the table and --json.
 void write_junit_guarded(const ValidateOptions& o, const std::function<void()>& write) {
   try {
     write();
   } catch (const std::runtime_error& e) {
     if (std::string_view(e.what()).rfind("--junit: ", 0) != 0) throw;
     o.junit_failed = e.what();
+    std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable_line(o.junit_failed).c_str());
   }
 }
 
-/// The exit of a `validate` whose --junit could not be written (o.junit_failed): one line
-/// on stderr with that failure (which says what the --junit file holds) and what --json
-/// holds, then 1; otherwise `code`. Called once the verdict and --json are written.
+/// The exit of a `validate` whose --junit could not be written (o.junit_failed): a last
+/// line on stderr saying what --json holds, then 1; otherwise `code`. Called once the
+/// verdict and --json are written.
 int with_junit_outcome(const ValidateOptions& o, int code) {
   if (o.junit_failed.empty()) return code;
   std::fflush(stdout);
   const std::string json = o.json.empty() ? std::string("no --json was asked (the verdict is the table above)")
                                           : fmt::format("--json {} holds the whole verdict (written)", o.json);
-  std::fprintf(stderr, "octocd: runtime failure: %s; %s\n", octocd::printable_line(o.junit_failed).c_str(),
+  std::fprintf(stderr, "octocd: --junit %s was not written (above); %s\n", octocd::printable_line(o.junit).c_str(),
                octocd::printable_line(json).c_str());
   return 1;
 }
@@ -708,19 +710,12 @@ int validate_command(ValidateOptions& o) {
       std::fprintf(stderr, "octocd: warning: %s\n", w.what());
     }
   };
-  // A --junit that failed before another failure (--json's own, say) is named too.
-  const auto junit_failed_too = [&] {
-    if (!o.junit_failed.empty())
-      std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable_line(o.junit_failed).c_str());
-  };
   try {
     return with_junit_outcome(o, validate_scene_command(o, t0));
   } catch (const octocd::InputError& e) {
-    junit_failed_too();
     junit_error("bad-input", e.what());
     throw;
   } catch (const octocd::RuntimeError& e) {
-    junit_failed_too();
     junit_error("runtime-failure", e.what());
     throw;
   }
