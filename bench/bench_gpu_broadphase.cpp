@@ -57,6 +57,7 @@
 #include <ctime>
 #include <exception>
 #include <fstream>
+#include <initializer_list>
 #include <iostream>
 #include <iterator>
 #include <memory>
@@ -90,6 +91,17 @@ using octocd::gpu::check;
 using octocd::gpu::DeviceBroadPhase;
 using octocd::gpu::DeviceBuffer;
 using Json = nlohmann::ordered_json;
+
+/// Writes members of `t` into the JSON object `j`, each under its own name, in the order
+/// given: j["a"] = t.a; j["b"] = t.b; ... (nlohmann's NLOHMANN_JSON_TO for each member, as
+/// its NLOHMANN_DEFINE_TYPE_* macros do; those write nlohmann::json only, and Json keeps the
+/// keys in insertion order).
+#define BENCH_JSON_MEMBERS(j, t, ...)                                        \
+  do {                                                                       \
+    Json& nlohmann_json_j = (j);                                             \
+    const auto& nlohmann_json_t = (t);                                       \
+    NLOHMANN_JSON_EXPAND(NLOHMANN_JSON_PASTE(NLOHMANN_JSON_TO, __VA_ARGS__)) \
+  } while (false)
 
 // ---- the boxes ----------------------------------------------------------------------------
 
@@ -703,6 +715,20 @@ struct MotionResult {
   bool check_ok = true;
 };
 
+/// A measured point's JSON (Result, MotionResult): `e` (the point's identity), then the
+/// error when it failed, else what measured(e) adds; then its pair check.
+template <class R, class Measured>
+Json point_json(Json e, const R& r, Measured measured) {
+  if (!r.ok) {
+    e["error"] = r.error;
+  } else {
+    measured(e);
+  }
+  e["check"] = r.check;
+  e["check_ok"] = r.check_ok;
+  return e;
+}
+
 /// Marks a Result or MotionResult failed with `ex`'s message, then clears CUDA's sticky
 /// error and waits for `stream` (clearing its error too) so the next point starts clean.
 template <class R>
@@ -920,6 +946,17 @@ std::string plan_counts(const MotionResult& r) {
   return fmt::format("{} / {} / {}", k[0], k[1], k[2]);
 }
 
+/// A markdown table's header row and its alignment row; per column its title and whether
+/// it is right-aligned (numbers).
+void table_head(std::ostream& os, std::initializer_list<std::pair<const char*, bool>> columns) {
+  std::string titles = "|", rule = "|";
+  for (const auto& [title, right] : columns) {
+    titles += fmt::format(" {} |", title);
+    rule += right ? "---:|" : "---|";
+  }
+  os << titles << "\n" << rule << "\n";
+}
+
 void print_motion(std::ostream& os, const Options& o, const std::vector<MotionResult>& ms) {
   if (ms.empty()) return;
   os << "\n## Coherent motion: `octree` with its pair cache against the one-shot `octree`\n\n";
@@ -931,9 +968,10 @@ void print_motion(std::ostream& os, const Options& o, const std::vector<MotionRe
       o.graph ? "each replayed from CUDA graphs (one per plan)" : "launched");
   os << "- margin: the fattened boxes' margin as a fraction of the median body size; plans: steps whose valid "
         "find() was Plain / Build / Hit\n\n";
-  os << "| n | margin | cache mean ms | median | min | max | one-shot mean ms | median | speed-up (means) | "
-        "Build ms | Hit ms | plans P/B/H | reruns | pairs (first, last) | check |\n";
-  os << "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---|---|\n";
+  table_head(os, {{"n", true}, {"margin", true}, {"cache mean ms", true}, {"median", true}, {"min", true},
+                  {"max", true}, {"one-shot mean ms", true}, {"median", true}, {"speed-up (means)", true},
+                  {"Build ms", true}, {"Hit ms", true}, {"plans P/B/H", false}, {"reruns", true},
+                  {"pairs (first, last)", false}, {"check", false}});
   for (const MotionResult& r : ms) {
     if (!r.ok) {
       os << fmt::format("| {} | {} | failed: {} |||||||||||||\n", size_label(r.n), r.margin, r.error);
@@ -954,28 +992,15 @@ void print_motion(std::ostream& os, const Options& o, const std::vector<MotionRe
 Json motion_json(const std::vector<MotionResult>& ms) {
   Json a = Json::array();
   for (const MotionResult& r : ms) {
-    Json e = {{"n", r.n}, {"margin_fraction", decimal(r.margin)}, {"ok", r.ok}};
-    if (!r.ok) {
-      e["error"] = r.error;
-    } else {
+    a.push_back(point_json({{"n", r.n}, {"margin_fraction", decimal(r.margin)}, {"ok", r.ok}}, r, [&](Json& e) {
       e["coherent_mean_ms"] = mean(r.coherent_ms);
       e["coherent_median_ms"] = median(r.coherent_ms);
       e["oneshot_mean_ms"] = mean(r.oneshot_ms);
       e["oneshot_median_ms"] = median(r.oneshot_ms);
       e["build_mean_ms"] = mean_of_plan(r.coherent_ms, r.plans, 1);
       e["hit_mean_ms"] = mean_of_plan(r.coherent_ms, r.plans, 2);
-      e["coherent_ms"] = r.coherent_ms;
-      e["oneshot_ms"] = r.oneshot_ms;
-      e["plans"] = r.plans;
-      e["reruns"] = r.reruns;
-      e["regrows"] = r.regrows;
-      e["pairs_first"] = r.pairs_first;
-      e["pairs_last"] = r.pairs_last;
-      e["oracle_checks"] = r.oracle_checks;
-    }
-    e["check"] = r.check;
-    e["check_ok"] = r.check_ok;
-    a.push_back(e);
+      BENCH_JSON_MEMBERS(e, r, coherent_ms, oneshot_ms, plans, reruns, regrows, pairs_first, pairs_last, oracle_checks);
+    }));
   }
   return a;
 }
@@ -1009,9 +1034,9 @@ void print_markdown(std::ostream& os, const Machine& m, const Options& o, const 
         "temporary storage (`octree`: pair keys and their scratch, capacity each); the input AABBs (24 B per body) "
         "not included\n\n";
 
-  os << "| broadphase | n | median ms | min ms | max ms | ns/body | per doubling | pairs | exact tests | "
-        "device MiB |\n";
-  os << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  table_head(os, {{"broadphase", false}, {"n", true}, {"median ms", true}, {"min ms", true}, {"max ms", true},
+                  {"ns/body", true}, {"per doubling", true}, {"pairs", true}, {"exact tests", true},
+                  {"device MiB", true}});
   for (const Result& r : rs) {
     if (!r.ok) {
       os << fmt::format("| {} | {} | failed: {} | | | | | | | |\n", r.broadphase, size_label(r.n), r.error);
@@ -1058,43 +1083,30 @@ Json to_json(const Machine& m, const Options& o, const std::vector<Result>& rs, 
                   {"driver_cuda", cuda_version_text(m.driver_cuda)},
                   {"runtime_cuda", cuda_version_text(m.runtime)},
                   {"host_cpu", m.host_cpu}};
-  j["config"] = {{"sizes", o.sizes},
-                 {"broadphases", o.broadphases},
-                 {"flat_max", o.flat_max},
-                 {"oracle_max", o.oracle_max},
-                 {"reps", o.reps},
-                 {"warmup", o.warmup},
-                 {"seed", o.seed},
-                 {"octree_depth", o.depth},
-                 {"cell_size_m", decimal(o.cell_size)},
-                 {"half_extents_m", {decimal(kHalfLarge), decimal(kHalfSmall)}},
-                 {"cube_side_m", "3.4 * (n / 1e4)^(1/3)"},
-                 {"density_per_m3", 1e4 / (kDensitySide * kDensitySide * kDensitySide)},
-                 {"graph", o.graph},
-                 {"timed", "find() + cub radix sort of the pair keys (exactly the pairs), CUDA events"}};
+  Json config;
+  BENCH_JSON_MEMBERS(config, o, sizes, broadphases, flat_max, oracle_max, reps, warmup, seed);
+  config.update(Json{{"octree_depth", o.depth},
+                     {"cell_size_m", decimal(o.cell_size)},
+                     {"half_extents_m", {decimal(kHalfLarge), decimal(kHalfSmall)}},
+                     {"cube_side_m", "3.4 * (n / 1e4)^(1/3)"},
+                     {"density_per_m3", 1e4 / (kDensitySide * kDensitySide * kDensitySide)},
+                     {"graph", o.graph},
+                     {"timed", "find() + cub radix sort of the pair keys (exactly the pairs), CUDA events"}});
+  j["config"] = std::move(config);
   Json results = Json::array();
   for (const Result& r : rs) {
-    Json e = {{"broadphase", r.broadphase}, {"n", r.n}, {"ok", r.ok}};
-    if (!r.ok) {
-      e["error"] = r.error;
-    } else {
-      e["median_ms"] = r.median_ms;
-      e["min_ms"] = r.min_ms;
-      e["max_ms"] = r.max_ms;
+    results.push_back(point_json({{"broadphase", r.broadphase}, {"n", r.n}, {"ok", r.ok}}, r, [&](Json& e) {
+      BENCH_JSON_MEMBERS(e, r, median_ms, min_ms, max_ms);
       e["ns_per_body"] = r.median_ms * 1e6 / r.n;
       e["growth_per_doubling"] = r.growth ? Json(*r.growth) : Json(nullptr);
-      e["pairs"] = r.pairs;
+      BENCH_JSON_MEMBERS(e, r, pairs);
       e["exact_tests"] = r.candidates;
       e["device_bytes"] = r.scratch_bytes + r.output_bytes;
-      e["scratch_bytes"] = r.scratch_bytes;
-      e["output_bytes"] = r.output_bytes;
+      BENCH_JSON_MEMBERS(e, r, scratch_bytes, output_bytes);
       e["key_capacity"] = r.capacity;
       e["capacity_regrows"] = r.regrows;
       e["times_ms"] = r.times;
-    }
-    e["check"] = r.check;
-    e["check_ok"] = r.check_ok;
-    results.push_back(e);
+    }));
   }
   j["results"] = results;
   Json targets = Json::array();
@@ -1298,6 +1310,13 @@ int run(const Options& o) {
   return all_ok ? 0 : 3;
 }
 
+/// Adds the option `name` bound to `value`, its default shown in --help, checked to be in
+/// [lo, hi] (CLI::Range).
+template <class T>
+CLI::Option* add_ranged(CLI::App& app, const std::string& name, T& value, const std::string& what, T lo, T hi) {
+  return app.add_option(name, value, what)->capture_default_str()->check(CLI::Range(lo, hi));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -1310,14 +1329,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--only", only, "device broadphases: " + octocd::join_broadphase_names(seam_names()))
       ->capture_default_str();
-  app.add_option("--reps", o.reps, "timed repetitions per broadphase and size")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 100000));
-  app.add_option("--warmup", o.warmup, "untimed calls before the repetitions")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 100000));
+  add_ranged(app, "--reps", o.reps, "timed repetitions per broadphase and size", 1, 100000);
+  add_ranged(app, "--warmup", o.warmup, "untimed calls before the repetitions", 0, 100000);
   app.add_option("--cell-size", o.cell_size, "spatial-hash cell size h (m)")->capture_default_str();
-  app.add_option("--depth", o.depth, "octree depth, -1 = auto")->capture_default_str()->check(CLI::Range(-1, 10));
+  add_ranged(app, "--depth", o.depth, "octree depth, -1 = auto", -1, 10);
   app.add_option("--seed", o.seed, "SplitMix64 seed of the boxes")->capture_default_str();
   app.add_option("--flat-max", o.flat_max, "the device `flat` runs up to this n")->capture_default_str();
   app.add_option("--oracle-max", o.oracle_max,
@@ -1328,23 +1343,15 @@ int main(int argc, char** argv) {
                "instead of the launches on the stream");
   app.add_option("--json", o.json_path, "also write the results as JSON to this file");
   std::string motion_sizes = "1000000", motion_margins = "0.125";
-  app.add_option("--motion-steps", o.motion_steps, "steps of the coherent-motion sequence (0: none)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 100000));
+  add_ranged(app, "--motion-steps", o.motion_steps, "steps of the coherent-motion sequence (0: none)", 0, 100000);
   app.add_option("--motion-sizes", motion_sizes, "body counts of the coherent-motion sequence")->capture_default_str();
   app.add_option("--motion-margins", motion_margins,
                  "margins of the pair cache's fattened boxes, fractions of the median body size, comma separated")
       ->capture_default_str();
-  app.add_option("--motion-speed", o.motion_speed, "largest speed of the moving boxes (m/s)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0f, 1000.0f));
-  app.add_option("--motion-dt", o.motion_dt, "time step of the moving boxes (s)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0f, 1.0f));
-  app.add_option("--motion-oracle-every", o.motion_oracle_every,
-                 "check the pair cache against the CPU oracle every this many steps (0: never)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 100000));
+  add_ranged(app, "--motion-speed", o.motion_speed, "largest speed of the moving boxes (m/s)", 0.0f, 1000.0f);
+  add_ranged(app, "--motion-dt", o.motion_dt, "time step of the moving boxes (s)", 0.0f, 1.0f);
+  add_ranged(app, "--motion-oracle-every", o.motion_oracle_every,
+             "check the pair cache against the CPU oracle every this many steps (0: never)", 0, 100000);
   try {
     app.parse(argc, argv);
     o.sizes = parse_sizes(sizes);

@@ -4,16 +4,19 @@
 //   off       no trace: the engine runs ahead of the calls (Engine::plan_steps, all frames);
 //   states    a version 1 trace with the state every --state-every frames: the engine runs
 //             ahead to the next state frame, state() copies the state back there;
-//   contacts  with every contact row too (Engine::set_recording: the cuda engine copies the
-//             step's pairs, flags and contact records back every step, and runs no step ahead).
+//   contacts  with every contact row too (Engine::set_recording), all frames promised as
+//             cli::TraceFeed does: the cuda engine's resident kernel runs recorded steps in
+//             batches of CudaSettings::record_batch and copies their records back once a
+//             batch (--cuda record_batch=1: a request and a copy-back per step, no step ahead).
 // Columns: step (Engine::step, with the recording's copies in contacts mode), of it the first
 // step of each batch (a new request to the resident kernel), state() per call, append
 // (TraceWriter::append_frame: buffering, and waiting for the writer thread when a flush is due)
 // and the trace's size. The traces use cli::kTraceFlushIntervalS as `run --trace` does
 // (--flush-interval overrides: 0 flushes every 50 frames, TraceOptions' default).
 // With --profile the contacts lines also print CudaWorld::small_profile (the kernel's time
-// against the host's round trip; recorded steps run one a request, so the stamps cost the
-// contacts mode nothing it does not already pay).
+// against the host's round trip; stamped steps run one a request, so with record_batch > 1
+// the profile changes the contacts mode's batches). --cuda KEY=VALUE (repeatable) sets a
+// cuda setting for every mode (docs/settings.md), e.g. record_batch=1 against the default.
 //
 // Per scene and repetition (--repeat, the modes interleaved): a fresh engine, --warmup
 // untraced steps, then --frames traced ones. Reported: median steps/s with the smallest and
@@ -22,7 +25,7 @@
 //
 // Usage: bench_trace_costs SCENE.json... [--engine cuda] [--frames 2000] [--warmup 30]
 //          [--repeat 5] [--state-every 10] [--modes off,states,contacts] [--flush-interval S]
-//          [--profile]
+//          [--profile] [--cuda KEY=VALUE]...
 // Exit: 0; 1 runtime error (e.g. no CUDA device for --engine cuda); 2 bad arguments.
 #include <unistd.h>
 
@@ -46,6 +49,7 @@
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
+#include "bench_main.hpp"
 #include "tools.hpp"
 
 using namespace octocd;
@@ -76,12 +80,14 @@ struct Options {
   int frames = 2000, warmup = 30, repeat = 5, state_every = 10;
   double flush_interval = cli::kTraceFlushIntervalS;
   bool profile = false;
+  std::vector<std::string> cuda;  // --cuda KEY=VALUE items, every mode
 };
 
 Sample run_mode(const std::shared_ptr<const Model>& model, const std::string& mode, const Options& o) {
   const bool traced = mode != "off", contacts = mode == "contacts";
   EngineSettingItems settings;
-  if (o.profile && contacts) settings["cuda"] = {"small_profile=true"};  // other engines ignore it
+  if (!o.cuda.empty()) settings["cuda"] = o.cuda;
+  if (o.profile && contacts) settings["cuda"].push_back("small_profile=true");  // other engines ignore it
   std::unique_ptr<Engine> e = make_engine(o.engine, model, settings);
   e->plan_steps(o.warmup);
   for (int f = 0; f < o.warmup; ++f) e->step();
@@ -104,6 +110,7 @@ Sample run_mode(const std::shared_ptr<const Model>& model, const std::string& mo
   Sample s;
   if (!traced) e->plan_steps(o.frames);
   else if (ahead) e->plan_steps(std::min<std::int64_t>(to_next_state(0), o.frames));
+  else e->plan_steps(o.frames);  // contacts: as cli::TraceFeed promises a recording engine's steps
   bool batch_start = true;
   const auto t0 = Clock::now();
   for (int f = 1; f <= o.frames; ++f) {
@@ -163,13 +170,14 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"off", "states", "contacts"}));
   app.add_option("--flush-interval", o.flush_interval, "TraceOptions::flush_interval_s (s)")
       ->check(CLI::Range(0.0, 3600.0));
+  app.add_option("--cuda", o.cuda, "a cuda setting for every mode, KEY=VALUE, repeatable (docs/settings.md)");
   app.add_flag("--profile", o.profile, "contacts lines: the small path's kernel profile (CudaSettings::small_profile)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
   }
-  try {
+  return octocd::bench::exit_code_of("bench_trace_costs", [&] {
     fmt::print("| scene | bodies | mode | steps/s median | min | max | vs off | step us | batch's first step us | "
                "state() us a call | append us | trace MiB |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const std::string& file : scenes) {
@@ -205,12 +213,6 @@ int main(int argc, char** argv) {
         std::fflush(stdout);
       }
     }
-  } catch (const InputError& e) {
-    std::cerr << "bench_trace_costs: bad input: " << e.what() << "\n";
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "bench_trace_costs: " << e.what() << "\n";
-    return 1;
-  }
-  return 0;
+    return 0;
+  });
 }

@@ -390,9 +390,7 @@ int bench_command(const BenchOptions& o) {
     }
     std::sort(result["points"].begin(), result["points"].end(),
               [](const json& a, const json& b) { return a.value("index", 0) < b.value("index", 0); });
-    result["complete"] = true;
-    result["machine"]["load_average_end"] = load_average();
-    write();
+    record_complete(result, write);
     if (!my_searches.empty() && std::all_of(result["searches"].begin(), result["searches"].end(), [](const json& x) {
           return x.value("status", "") == "skipped";
         })) {
@@ -510,9 +508,7 @@ int bench_command(const BenchOptions& o) {
   // Keep the points in sweep order (resumed ones first otherwise).
   std::sort(result["points"].begin(), result["points"].end(),
             [](const json& a, const json& b) { return a.value("index", 0) < b.value("index", 0); });
-  result["complete"] = true;
-  result["machine"]["load_average_end"] = load_average();
-  write();
+  record_complete(result, write);
   // A sweep none of whose points could run measured nothing: bad input, not success.
   if (!mine.empty() && std::all_of(result["points"].begin(), result["points"].end(),
                                    [](const json& pt) { return pt.value("status", "") == "skipped"; })) {

@@ -234,13 +234,7 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
     const double ref_s = std::chrono::duration<double>(Clock::now() - t_ref).count();
     for (std::size_t k = first; k < first + s.eps.size(); ++k) {
       DvPoint& p = points[k];
-      if (const int sig = octocd::stop_signal()) {
-        result["stopped"] = octocd::stop_signal_name(sig);
-        write();
-        std::fprintf(stderr, "\noctocd bench: stopped by %s; result %s keeps the finished points\n",
-                     octocd::stop_signal_name(sig), o.output.c_str());
-        return octocd::stop_exit_code(sig);
-      }
+      if (const int sig = octocd::stop_signal()) return record_stopped(result, sig, write, o.output);
       progress.start(done++, p.id);
       if (!skip.empty()) {
         p.status = any_failed && skip.find(" failed on ") != std::string::npos ? "failed" : "skipped";
@@ -296,14 +290,7 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
       write();
     }
   }
-  if (const int sig = octocd::stop_signal()) {
-    result["stopped"] = octocd::stop_signal_name(sig);
-    write();
-    return octocd::stop_exit_code(sig);
-  }
-  result["complete"] = true;
-  result["machine"]["load_average_end"] = load_average();
-  write();
+  if (const std::optional<int> stopped = finish_sweep(result, write)) return *stopped;
   if (std::all_of(points.begin(), points.end(), [](const DvPoint& p) { return p.status == "skipped"; }))
     throw InputError(fmt::format("{}: every point skipped (first: {}: {}); allowed: a sweep with a point this octocd "
                                  "can run (result kept in {})",

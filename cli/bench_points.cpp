@@ -136,9 +136,32 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     }
   }
   r["bodies"] = model->initial.x.size();
+  if (const auto cap = s.max_bodies.find(p.engine);
+      cap != s.max_bodies.end() && static_cast<long>(model->initial.x.size()) > cap->second) {
+    r["status"] = "skipped";
+    r["reason"] = fmt::format("{} bodies, above max_bodies {} for {}: {}", model->initial.x.size(), cap->second,
+                              p.engine, s.max_bodies_reason.at(p.engine));
+    return r;
+  }
+  // Engines that step on the host: their steps per process CPU second are a figure too (the
+  // gate's, on a shared machine). A device engine's CPU time would miss its kernels.
+  // (Not a process engine: its steps run in another process, whose CPU time this one's is not.)
+  const EngineInfo& stepping = octocd::engine_info(p.engine, "engines");
+  const bool host_engine = !stepping.device && stepping.command.empty();
+  // Each repetition's set-up: the engine built from the model (wall and, on the host, CPU s).
+  std::vector<double> setup_s, setup_cpu_s;
+  const auto build = [&] {
+    const double cpu0 = host_engine ? process_cpu_ms() : 0.0;
+    const auto t = Clock::now();
+    std::unique_ptr<Engine> e = make_engine(p.engine, model, o.settings);
+    setup_s.push_back(std::chrono::duration<double>(Clock::now() - t).count());
+    if (host_engine) setup_cpu_s.push_back((process_cpu_ms() - cpu0) / 1000.0);
+    return e;
+  };
+  progress.detail("set-up of the engine");
   std::unique_ptr<Engine> engine;
   try {
-    engine = make_engine(p.engine, model, o.settings);
+    engine = build();
   } catch (const std::exception& e) {
     r["status"] = "skipped";
     r["reason"] = e.what();
@@ -178,11 +201,6 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     r["has_stage"][stage_name(static_cast<Stage>(st))] = engine->has_stage(static_cast<Stage>(st));
 
   const int total = s.frames;
-  // Engines that step on the host: their steps per process CPU second are a figure too (the
-  // gate's, on a shared machine). A device engine's CPU time would miss its kernels.
-  // (Not a process engine: its steps run in another process, whose CPU time this one's is not.)
-  const EngineInfo& stepping = octocd::engine_info(p.engine, "engines");
-  const bool host_engine = !stepping.device && stepping.command.empty();
   std::vector<std::vector<WindowSums>> sums(s.windows.size());  // [window][rep]
   const int buckets = s.series_every > 0 ? (total + s.series_every - 1) / s.series_every : 0;
   std::vector<std::vector<WindowSums>> series(static_cast<std::size_t>(buckets));  // [bucket][rep]
@@ -196,7 +214,8 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   for (int rep = 0; rep < repeat; ++rep) {
     if (rep > 0) {
       engine.reset();  // the last repetition's device memory back first: the memory check sees one engine
-      engine = make_engine(p.engine, model, o.settings);
+      progress.detail(fmt::format("rep {}/{} set-up of the engine", rep + 1, repeat));
+      engine = build();
     }
     std::unique_ptr<TraceWriter> trace;
     const bool kept = rep == 0 && ov.trace && !o.trace_dir.empty();
@@ -353,6 +372,8 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     r["series"] = ser;
   }
   r["wall_s"] = spread(wall);
+  r["setup_s"] = spread(setup_s);
+  if (host_engine) r["setup_cpu_s"] = spread(setup_cpu_s);
   r["status"] = "ok";
   return r;
 }

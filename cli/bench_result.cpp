@@ -1,6 +1,6 @@
 // The result file of `octocd bench` (bench_sweep.hpp, docs/bench-format.md): its header
 // (sweep, settings, machine, build), the checks before --resume keeps a file's finished
-// points, and the timing hygiene recorded with it.
+// points, the timing hygiene recorded with it, and a sweep's stop or end.
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -13,6 +13,7 @@
 #include "octocd/error.hpp"
 #include "octocd/json_fields.hpp"
 #include "octocd/json_strict.hpp"
+#include "octocd/stop.hpp"
 
 namespace octocd::cli::bench {
 
@@ -243,6 +244,30 @@ void record_hygiene(json& result, const Sweep& s, bool quiet) {
                w.get<std::string>(), omp > 1 ? "; OMP_NUM_THREADS=1 helps on a shared machine" : "");
   if (s.repeat < 2 && !quiet)
     fmt::print(stderr, "bench {}: note: 1 repetition per point: no spread, so no timing verdict\n", octocd::printable(s.name));
+}
+
+int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output) {
+  result["stopped"] = octocd::stop_signal_name(sig);
+  write();
+  std::fprintf(stderr, "\noctocd bench: stopped by %s; result %s keeps the finished points\n",
+               octocd::stop_signal_name(sig), output.c_str());
+  return octocd::stop_exit_code(sig);
+}
+
+void record_complete(json& result, const std::function<void()>& write) {
+  result["complete"] = true;
+  result["machine"]["load_average_end"] = load_average();
+  write();
+}
+
+std::optional<int> finish_sweep(json& result, const std::function<void()>& write) {
+  if (const int sig = octocd::stop_signal()) {
+    result["stopped"] = octocd::stop_signal_name(sig);
+    write();
+    return octocd::stop_exit_code(sig);
+  }
+  record_complete(result, write);
+  return std::nullopt;
 }
 
 }  // namespace octocd::cli::bench

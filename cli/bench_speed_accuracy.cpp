@@ -30,6 +30,14 @@ namespace {
 
 /// One line: the points of one (scene, engine, geometry, rotation, iterations) over the dts.
 struct Line {
+  /// The line of scene `sc` (file stem `scene_stem`) on engine `e` with geometry `geo`,
+  /// rotation `rot` and Bullet's iterations `it`; its name "SCENE | ENGINE | GEOMETRY |
+  /// rotation|translation[ | iterations=N]".
+  Line(std::size_t sc, const std::string& scene_stem, const std::string& e, const std::string& geo, bool rot,
+       std::optional<int> it)
+      : scene(sc), engine(e), geometry(geo), rotation(rot), iterations(it),
+        name(fmt::format("{} | {} | {} | {}{}", scene_stem, e, geo, rot ? "rotation" : "translation",
+                         it ? fmt::format(" | iterations={}", *it) : std::string())) {}
   std::size_t scene = 0;
   std::string engine, geometry;  ///< geometry: what the engine collides: mesh, hull, box
   bool rotation = false;
@@ -158,14 +166,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
               !info.iterations_setting.empty() ? std::vector<std::optional<int>>(s.iterations.begin(), s.iterations.end())
                         : std::vector<std::optional<int>>{std::nullopt};
           for (const auto& it : its) {
-            Line l;
-            l.scene = sc;
-            l.engine = e;
-            l.geometry = geo;
-            l.rotation = rot;
-            l.iterations = it;
-            l.name = fmt::format("{} | {} | {} | {}{}", scene, e, geo, rot ? "rotation" : "translation",
-                                 it ? fmt::format(" | iterations={}", *it) : std::string());
+            Line l(sc, scene, e, geo, rot, it);
             std::string broadphase = "?";
             const std::string why_not = engine_built(info) ? engine_unavailable(info) : "not built in this octocd";
             try {
@@ -425,13 +426,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
       SaPoint& p = points[k];
       if (p.finished) continue;
       const Line& l = lines[p.line];
-      if (const int sig = octocd::stop_signal()) {
-        result["stopped"] = octocd::stop_signal_name(sig);
-        write();
-        std::fprintf(stderr, "\noctocd bench: stopped by %s; result %s keeps the finished points\n",
-                     octocd::stop_signal_name(sig), o.output.c_str());
-        return octocd::stop_exit_code(sig);
-      }
+      if (const int sig = octocd::stop_signal()) return record_stopped(result, sig, write, o.output);
       progress.start(finished, fmt::format("{} (repetition {}/{})", p.id, rep + 1, s.repeat));
       p.started.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
       std::shared_ptr<const Model> model;
@@ -511,14 +506,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
       if (rep + 1 == s.repeat) finish(p);
     }
   }
-  if (const int sig = octocd::stop_signal()) {
-    result["stopped"] = octocd::stop_signal_name(sig);
-    write();
-    return octocd::stop_exit_code(sig);
-  }
-  result["complete"] = true;
-  result["machine"]["load_average_end"] = load_average();
-  write();
+  if (const std::optional<int> stopped = finish_sweep(result, write)) return *stopped;
   if (!mine.empty() && std::all_of(mine.begin(), mine.end(), [&](std::size_t k) { return points[k].status == "skipped"; }))
     throw InputError(fmt::format("{}: every point skipped ({}; first: {}: {}); allowed: a sweep with a point this "
                                  "octocd can run (result kept in {})",

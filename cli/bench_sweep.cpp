@@ -74,6 +74,18 @@ std::vector<std::string> string_list(const json& j, const std::string& key, cons
   return out;
 }
 
+/// The object at `key` of names to integers in [lo, hi] (`max_worlds`, `max_bodies`), empty
+/// when absent; anything else is bad input naming the key (`shape`: the allowed object).
+std::map<std::string, long> integer_map(const json& j, const std::string& key, const std::string& origin, long lo,
+                                        long hi, const std::string& shape) {
+  std::map<std::string, long> out;
+  if (!j.contains(key)) return out;
+  if (!j.at(key).is_object()) bad(origin, key, "not an object", shape);
+  for (auto it = j.at(key).begin(); it != j.at(key).end(); ++it)
+    out[it.key()] = static_cast<long>(JsonFields(origin).integer(it.value(), key + "." + it.key(), lo, hi));
+  return out;
+}
+
 /// The string at `key`, or `fallback` when absent; anything else is bad input naming the
 /// key (not a raw json type_error).
 std::string optional_string(const json& j, const std::string& key, const std::string& origin,
@@ -199,7 +211,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   static const std::set<std::string> common{"name",  "kind",   "description", "engines", "frames",
                                             "warmup", "repeat", "format",      "version"};
   static const std::set<std::string> steps{"scenes", "axes", "set", "windows", "series_every", "traced", "worlds",
-                                           "max_worlds"};
+                                           "max_worlds", "max_bodies"};
   static const std::set<std::string> bp{"bodies",       "scenes", "broadphases", "max_bodies",
                                         "warm_replays", "set",    "min_time_ms"};
   if (!j.contains("name") || !j.at("name").is_string() || j.at("name").get<std::string>().empty())
@@ -322,11 +334,26 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
         s.worlds.push_back(static_cast<long>(JsonFields(origin).integer(w[i], fmt::format("worlds[{}]", i), 1, kMaxWorlds)));
       s.worlds_given = true;
     }
-    if (j.contains("max_worlds")) {
-      if (!j.at("max_worlds").is_object()) bad(origin, "max_worlds", "not an object", "{\"ENGINE\": K}");
-      for (auto it = j.at("max_worlds").begin(); it != j.at("max_worlds").end(); ++it)
-        s.max_worlds[it.key()] =
-            static_cast<long>(JsonFields(origin).integer(it.value(), "max_worlds." + it.key(), 1, kMaxWorlds));
+    s.max_worlds = integer_map(j, "max_worlds", origin, 1, kMaxWorlds, "{\"ENGINE\": K}");
+    if (j.contains("max_bodies")) {
+      // {"ENGINE": {"bodies": N, "reason": "..."}}: that engine's points of scenes above N
+      // bodies are skipped with the reason (a set-up that would not finish in time).
+      const std::string allowed = "{\"ENGINE\": {\"bodies\": N, \"reason\": \"why\"}}, N in [0, " +
+                                  std::to_string(kMaxSweepBodies) + "], ENGINE one of " +
+                                  fmt::format("{}", fmt::join(engine_names(), ", "));
+      if (!j.at("max_bodies").is_object()) bad(origin, "max_bodies", "not an object", allowed);
+      for (auto it = j.at("max_bodies").begin(); it != j.at("max_bodies").end(); ++it) {
+        const std::string k = "max_bodies." + it.key();
+        if (std::find(engine_names().begin(), engine_names().end(), it.key()) == engine_names().end())
+          bad(origin, k, "not an engine", allowed);
+        const json& v = it.value();
+        if (!v.is_object() || v.size() != 2 || !v.contains("bodies") || !v.contains("reason") ||
+            !v.at("reason").is_string() || v.at("reason").get<std::string>().empty())
+          bad(origin, k, v.dump(), allowed);
+        s.max_bodies[it.key()] =
+            static_cast<long>(JsonFields(origin).integer(v.at("bodies"), k + ".bodies", 0, kMaxSweepBodies));
+        s.max_bodies_reason[it.key()] = v.at("reason").get<std::string>();
+      }
     }
     if (!j.contains("scenes")) bad(origin, "scenes", "missing", "an array of scene names or files");
     for (const auto& e : string_list(j, "scenes", origin)) s.scenes.push_back(resolve_scene(e, scene_dir, sweep_dir));
@@ -413,12 +440,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     } else {
       s.broadphases = known;
     }
-    if (j.contains("max_bodies")) {
-      if (!j.at("max_bodies").is_object()) bad(origin, "max_bodies", "not an object", "{\"NAME\" or \"ENGINE:NAME\": N}");
-      for (auto it = j.at("max_bodies").begin(); it != j.at("max_bodies").end(); ++it)
-        s.max_bodies[it.key()] =
-            static_cast<long>(JsonFields(origin).integer(it.value(), "max_bodies." + it.key(), 0, kMaxSweepBodies));
-    }
+    s.max_bodies = integer_map(j, "max_bodies", origin, 0, kMaxSweepBodies, "{\"NAME\" or \"ENGINE:NAME\": N}");
   }
   return s;
 }

@@ -6,7 +6,8 @@
 ///                               parsing and checking, its points, the scene text of a point
 ///   cli/bench_points.cpp        running a steps point or a broadphase point
 ///   cli/bench_max_instances.cpp the max-instances search (doubling, bisection, confirmation)
-///   cli/bench_result.cpp        the result file: its header, resuming, timing hygiene
+///   cli/bench_result.cpp        the result file: its header, resuming, timing hygiene, a
+///                               stopped or finished sweep
 /// Sweep and result formats: docs/bench-format.md.
 
 #include <unistd.h>
@@ -20,6 +21,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -91,6 +93,9 @@ struct Sweep {
   std::vector<long> worlds{1};          ///< copies of each scene run as one world (`worlds`)
   bool worlds_given = false;            ///< the sweep has `worlds`: points report world_steps_per_s
   std::map<std::string, long> max_worlds;  ///< engine -> the most copies it runs (larger points are not made)
+  /// steps: engine -> why its points above max_bodies[engine] bodies are skipped (the
+  /// sweep's `max_bodies` {"ENGINE": {"bodies": N, "reason": "..."}}; max_bodies holds N).
+  std::map<std::string, std::string> max_bodies_reason;
   // divergence (docs/bench-format.md, docs/predictability.md)
   std::vector<double> eps;              ///< the ladder of initial perturbations (m), each in [0, 1] (0: unperturbed copies)
   int copies = 16;                      ///< perturbed copies per eps
@@ -364,5 +369,19 @@ bool finished_result_matches(const json& old, const std::string& path, const jso
 /// Records result["hygiene"] (threads, OpenMP threads, load average, warnings) and prints
 /// its warnings: a loaded machine or oversubscribed threads make timings noisy.
 void record_hygiene(json& result, const Sweep& s, bool quiet);
+
+/// A sweep stopped by signal `sig` between two points (octocd/stop.hpp): records
+/// result["stopped"] (the signal's name), rewrites the result file with `write`, says on
+/// stderr that `output` keeps the finished points and returns the stop's exit code.
+int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output);
+
+/// A sweep's end: marks the result complete (result["complete"], the machine's
+/// load_average_end) and rewrites the result file with `write`.
+void record_complete(json& result, const std::function<void()>& write);
+
+/// The end of a divergence or speed-accuracy sweep: when SIGINT or SIGTERM arrived,
+/// records result["stopped"], rewrites the file and returns the stop's exit code; else
+/// record_complete and nothing.
+std::optional<int> finish_sweep(json& result, const std::function<void()>& write);
 
 }  // namespace octocd::cli::bench

@@ -123,6 +123,7 @@ TraceFeed TraceFeed::of(const Engine& engine, bool contacts) {
 
 void TraceFeed::start(const TraceWriter& trace, Engine& engine, std::int64_t steps) const {
   if (states_only) engine.plan_steps(std::min<std::int64_t>(trace.steps_to_next_state(0), steps));
+  else engine.plan_steps(steps);  // a recording engine's promise: state(), contacts(), record() stay allowed
 }
 
 void TraceFeed::append(TraceWriter& trace, Engine& engine, const FrameMetrics& m, std::int64_t remaining) const {

@@ -80,15 +80,18 @@ constexpr double kTraceFlushIntervalS = 0.1;
 /// How a run's steps reach its trace (`run --trace`, `bench --traced`): a rotating engine
 /// that records writes version 2 records; otherwise version 1 rows, the state given only on
 /// the frames whose state the trace writes, and with no contact rows the engine may run
-/// ahead to the next such frame (Engine::plan_steps; nothing else is read in between).
+/// ahead to the next such frame (Engine::plan_steps; nothing else is read in between). A
+/// recording feed (contact rows, or version 2) promises the run's steps at once: a
+/// recording engine may run ahead of them too, with state(), contacts() and record()
+/// still read (Engine::plan_steps; `cuda`: CudaSettings::record_batch).
 struct TraceFeed {
   bool v2 = false;           ///< append_frame_v2 with the engine's record
   bool states_only = false;  ///< no contact rows and not v2: the engine runs ahead between state frames
 
   /// The feed of `engine` into a trace that records contact rows or not.
   static TraceFeed of(const Engine& engine, bool contacts);
-  /// Promises the steps to the first state frame (at most `steps`, the run's); call before
-  /// the first step.
+  /// Promises the steps to the first state frame (at most `steps`, the run's), or, for a
+  /// recording feed, all `steps`; call after set_recording and before the first step.
   void start(const TraceWriter& trace, Engine& engine, std::int64_t steps) const;
   /// Appends the step `m` just taken and, at a state frame of a states-only feed, promises
   /// the steps to the next one (at most `remaining`, the run's steps left). Throws what

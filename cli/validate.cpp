@@ -132,6 +132,28 @@ bool views_failed(const ValidateOptions& o) {
   return true;
 }
 
+/// --junit of a scene's verdict (the scene run here, or `engine`'s trace of it): `results`
+/// with --view's pages in their details, the time since `t0`, the run's properties (engine,
+/// frames, every, against, scene_file, build_id) and `stopped` (the line of an incomplete
+/// verdict, "" for a whole one). Nothing without --junit; a failure to write it is kept
+/// (write_junit_guarded).
+void write_scene_junit(const ValidateOptions& o, const std::string& suite, const std::string& engine,
+                       std::int64_t frames, const std::vector<octocd::ValidationResult>& results,
+                       const std::string& stopped, const octocd::ExpectationReport& report, Clock::time_point t0) {
+  if (o.junit.empty()) return;
+  write_junit_guarded(o, [&] {
+    octocd::write_junit(o.junit, suite, octocd::cli::with_views_in_details(results, o.views, o.junit),
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", engine},
+                         {"frames", std::to_string(frames)},
+                         {"every", std::to_string(o.every)},
+                         {"against", o.against},
+                         {"scene_file", o.scene},
+                         {"build_id", octocd::build_id()}},
+                        stopped, &report);
+  });
+}
+
 /// The end of every `validate` path: matches `results` of `run` against --expect, writes
 /// --json and --write-expect, prints the outcome lines (plain text) and the verdict line;
 /// returns the exit code: 0 when every failure is expected (or none), 3 when one is new or
@@ -617,18 +639,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
         octocd::stop_signal_name(stop_sig), stepped,
         info.stopped ? fmt::format("; judging was cut short by a second signal inside frame {}", info.stopped_in)
                      : std::string());
-  if (!o.junit.empty())
-    write_junit_guarded(o, [&] {
-      octocd::write_junit(o.junit, model->scene.name, octocd::cli::with_views_in_details(results, o.views, o.junit),
-                          std::chrono::duration<double>(Clock::now() - t0).count(),
-                          {{"engine", what},
-                           {"frames", std::to_string(info.frames)},
-                           {"every", std::to_string(o.every)},
-                           {"against", o.against},
-                           {"scene_file", o.scene},
-                           {"build_id", octocd::build_id()}},
-                          stopped, &report);
-    });
+  write_scene_junit(o, model->scene.name, what, info.frames, results, stopped, report, t0);
   fmt::print("validate {} (engine {}, judged as a version 2 external trace{}: {} bodies, {} "
              "frames, checks every {}, against: {})\n\ngeometry: {}\n\n",
              model->scene.name, what, temporary ? "" : " " + path, info.bodies, info.frames, o.every, o.against, geometry);
@@ -729,18 +740,7 @@ int validate_verdict(const ValidateOptions& o, const std::string& name,
                      const std::string& stopped, std::int64_t done, Clock::time_point t0) {
   const octocd::RunName run{name, ""};
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
-  if (!o.junit.empty())
-    write_junit_guarded(o, [&] {
-      octocd::write_junit(o.junit, name, octocd::cli::with_views_in_details(results, o.views, o.junit),
-                          std::chrono::duration<double>(Clock::now() - t0).count(),
-                          {{"engine", o.engine},
-                           {"frames", std::to_string(o.frames)},
-                           {"every", std::to_string(o.every)},
-                           {"against", o.against},
-                           {"scene_file", o.scene},
-                           {"build_id", octocd::build_id()}},
-                          stopped, &report);
-    });
+  write_scene_junit(o, name, o.engine, o.frames, results, stopped, report, t0);
   fmt::print("validate {} (engine {}, {} frames, checks every {}, against: {})\n\n", name, o.engine,
              o.frames, o.every, o.against);
   fmt::print("{}", octocd::format_results(results, overridden, &report));

@@ -97,6 +97,11 @@ CURRENT = ["the inputs"]  # the file being read, for the one-line error of a mal
 OCTOCD = [None]  # the octocd binary that reads traces (--octocd)
 
 
+def is_number(x):
+    """Whether `x` (a value read from a JSON file) is a number: an int or float, never a bool."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
 def num(v, digits=3):
     if v is None or (isinstance(v, float) and math.isnan(v)):
         return "-"

@@ -307,11 +307,16 @@ def check_points(path, j):
                 isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and 0 <= x <= 1e6
                 for x in la)):
             fail(f"{where}.load_average: {json.dumps(la)[:60]}; allowed: a list of load averages in [0, 1e6]")
-        if j["sweep"].get("kind") == RSA.KIND:
-            RSA.check_point(where, p, fail)
-            continue
-        if j["sweep"].get("kind") == RDV.KIND:
-            RDV.check_point(where, p, fail)
+        section = {RSA.KIND: RSA, RDV.KIND: RDV}.get(j["sweep"].get("kind"))
+        if section is not None:
+            # A section's kind: its statuses, and the scene and engine it sorts points by.
+            if p.get("status") not in section.STATUSES:
+                fail(f"{where}.status: {p.get('status')!r}; allowed: {', '.join(section.STATUSES)}")
+            par = p.get("params")
+            if not isinstance(par, dict) or not isinstance(par.get("scene"), str) or not isinstance(
+                    par.get("engine"), str):
+                fail(f"{where}.params: {str(par)[:60]}; allowed: an object with strings scene and engine")
+            section.check_point(where, p, fail)
             continue
         if p.get("status") != "ok":
             continue

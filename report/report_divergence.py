@@ -19,6 +19,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from report_common import is_number  # noqa: E402
+
 KIND = "divergence"
 STATUSES = ("ok", "skipped", "failed")
 COLORS = ["#4e79a7", "#e15759", "#59a14f", "#f28e2b", "#76b7b2", "#b07aa1", "#9c755f", "#edc948", "#ff9da7",
@@ -37,33 +39,25 @@ INTRO = ("Per scene and engine, copies of the scene whose dynamic bodies start e
          "says what remained.")
 
 
-def _number(x):
-    return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
 def check_point(where, p, fail):
-    """The fields this section reads, checked on one point of a divergence result: one line
-    naming the file, point and key through `fail` (exit 2)."""
-    if p.get("status") not in STATUSES:
-        fail(f"{where}.status: {p.get('status')!r}; allowed: {', '.join(STATUSES)}")
-    par = p.get("params")
-    if not isinstance(par, dict) or not isinstance(par.get("scene"), str) or not isinstance(par.get("engine"), str):
-        fail(f"{where}.params: {str(par)[:60]}; allowed: an object with strings scene and engine")
-    if not (_number(p.get("eps_m")) and math.isfinite(p["eps_m"]) and 0 <= p["eps_m"] <= 1):
+    """The divergence fields of one point (eps_m; of a point with status ok also dt, mean_m,
+    max_m and exponent_per_s), checked after report_data.check_points checked its status (one
+    of STATUSES) and params: one line naming the file, point and key through `fail` (exit 2)."""
+    if not (is_number(p.get("eps_m")) and math.isfinite(p["eps_m"]) and 0 <= p["eps_m"] <= 1):
         fail(f"{where}.eps_m: {p.get('eps_m')!r}; allowed: a perturbation in metres in [0, 1]")
     if p["status"] != "ok":
         return
-    if not (_number(p.get("dt")) and math.isfinite(p["dt"]) and p["dt"] > 0):
+    if not (is_number(p.get("dt")) and math.isfinite(p["dt"]) and p["dt"] > 0):
         fail(f"{where}.dt: {p.get('dt')!r}; allowed: a time step in seconds > 0")
     for key in ("mean_m", "max_m"):
         v = p.get(key)
         if not isinstance(v, list) or not 1 <= len(v) <= MAX_FRAMES or not all(
-                x is None or (_number(x) and x >= 0) for x in v):
+                x is None or (is_number(x) and x >= 0) for x in v):
             fail(f"{where}.{key}: {str(v)[:60]}; allowed: a list of distances >= 0 (m) or null, one per frame")
     if len(p["mean_m"]) != len(p["max_m"]):
         fail(f"{where}.max_m: {len(p['max_m'])} frames, mean_m {len(p['mean_m'])}; allowed: one per frame each")
     e = p.get("exponent_per_s")
-    if e is not None and not (_number(e) and math.isfinite(e)):
+    if e is not None and not (is_number(e) and math.isfinite(e)):
         fail(f"{where}.exponent_per_s: {e!r}; allowed: a number (1/s) or null")
 
 
@@ -76,7 +70,7 @@ def _engine(p):
 
 
 def _sci(v):
-    return "-" if not _number(v) else ("0" if v == 0 else f"{v:.3g}")
+    return "-" if not is_number(v) else ("0" if v == 0 else f"{v:.3g}")
 
 
 def _slug(text):
@@ -97,7 +91,7 @@ def plot_scene(doc, scene, pts):
             rank = eps_all.index(p["eps_m"])
             alpha = 0.35 + 0.65 * (rank + 1) / max(len(eps_all), 1)
             t = [f * p["dt"] for f in range(len(p["mean_m"]))]
-            y = [v if _number(v) and v > 0 else float("nan") for v in p["mean_m"]]
+            y = [v if is_number(v) and v > 0 else float("nan") for v in p["mean_m"]]
             if all(math.isnan(v) for v in y):
                 continue
             ax.plot(t, y, color=colour, alpha=alpha, lw=1.2,
@@ -131,8 +125,8 @@ def exponent_table(doc, scene, pts):
     for p in sorted(ok, key=lambda p: (list(dict.fromkeys(_engine(q) for q in ok)).index(_engine(p)), p["eps_m"])):
         e = p.get("exponent_per_s")
         rows.append([_engine(p), _sci(p["eps_m"]), p.get("copies", "-"), _sci(p["mean_m"][0]), _sci(p["mean_m"][-1]),
-                     _sci(max((x for x in p["max_m"] if _number(x)), default=None)),
-                     f"{e:.3g}" if _number(e) else "- (" + str(p.get("exponent_reason", "none"))[:80] + ")"])
+                     _sci(max((x for x in p["max_m"] if is_number(x)), default=None)),
+                     f"{e:.3g}" if is_number(e) else "- (" + str(p.get("exponent_reason", "none"))[:80] + ")"])
     doc.table(["engine", "eps (m)", "copies", "mean distance at frame 0 (m)", "at the last frame (m)",
                "largest distance (m)", "growth exponent (1/s)"], rows,
               f"{scene}: the growth exponent is the least-squares slope of ln(mean distance) over time over the "

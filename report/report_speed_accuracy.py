@@ -24,6 +24,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from report_common import is_number  # noqa: E402
+
 KIND = "speed-accuracy"
 STATUSES = ("ok", "diverged", "skipped", "failed")
 GEOMETRY_MARKERS = {"mesh": "o", "hull": "s", "box": "^"}
@@ -48,22 +50,14 @@ INTRO = ("Every engine runs each scene over a ladder of time steps (and Bullet's
 
 # ---- input -------------------------------------------------------------------------------------
 
-def _number(x):
-    return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
 def check_point(where, p, fail):
-    """The fields this section reads, checked on one point of a speed-accuracy result: one
-    line naming the file, point and key through `fail` (exit 2)."""
-    if p.get("status") not in STATUSES:
-        fail(f"{where}.status: {p.get('status')!r}; allowed: {', '.join(STATUSES)}")
-    par = p.get("params")
-    if not isinstance(par, dict) or not isinstance(par.get("scene"), str) or not isinstance(par.get("engine"), str):
-        fail(f"{where}.params: {str(par)[:60]}; allowed: an object with strings scene and engine")
+    """The fields this section reads, checked on one point of a speed-accuracy result once
+    report_data.check_points checked its status (one of STATUSES) and params: one line naming
+    the file, point and key through `fail` (exit 2)."""
     for key in ("line", "engine_label", "geometry", "reason"):
         if key in p and not isinstance(p[key], str):
             fail(f"{where}.{key}: {p[key]!r}; allowed: a string")
-    if "dt" in p and not (_number(p["dt"]) and math.isfinite(p["dt"]) and p["dt"] > 0):
+    if "dt" in p and not (is_number(p["dt"]) and math.isfinite(p["dt"]) and p["dt"] > 0):
         fail(f"{where}.dt: {p['dt']!r}; allowed: a time step in seconds > 0")
     if p.get("iterations") is not None and not (isinstance(p["iterations"], int) and not isinstance(
             p["iterations"], bool)):
@@ -75,14 +69,14 @@ def check_point(where, p, fail):
             fail(f"{where}.{key}: missing; allowed: a measured speed-accuracy point (docs/bench-format.md)")
     s = p.get("speed")
     if not isinstance(s, dict) or not isinstance(s.get("n"), int) or not all(
-            s.get(k) is None or _number(s.get(k)) for k in ("median", "min", "max")):
+            s.get(k) is None or is_number(s.get(k)) for k in ("median", "min", "max")):
         fail(f"{where}.speed: {str(s)[:60]}; allowed: a spread {{median, min, max, n, ...}} of simulated s per wall s")
     e = p.get("error")
     if not isinstance(e, dict):
         fail(f"{where}.error: {str(e)[:60]}; allowed: an object {{consistency, reference_dt, max_penetration_m, "
              "energy_drift, momentum_residual}}")
     for key in ("consistency", "reference_dt", "max_penetration_m", "energy_drift", "momentum_residual"):
-        if e.get(key) is not None and not _number(e[key]):
+        if e.get(key) is not None and not is_number(e[key]):
             fail(f"{where}.error.{key}: {e[key]!r}; allowed: a number or null")
     if e.get("consistency") is not None and e["consistency"] < 0:
         fail(f"{where}.error.consistency: {e['consistency']!r}; allowed: an error >= 0")
@@ -92,7 +86,7 @@ def check_point(where, p, fail):
 
 def drawable(v):
     """Whether v can sit on a log axis (and 4x it, a tenth of it): finite in [1e-300, 1e300]."""
-    return _number(v) and 1e-300 <= v <= 1e300
+    return is_number(v) and 1e-300 <= v <= 1e300
 
 
 def speed(p):
@@ -106,12 +100,12 @@ def error(p):
     """The consistency error (0 or drawable), or None where not measured or out of range."""
     e = p.get("error") if p.get("status") == "ok" else None
     v = e.get("consistency") if isinstance(e, dict) else None
-    return float(v) if _number(v) and (v == 0 or drawable(v)) else None
+    return float(v) if is_number(v) and (v == 0 or drawable(v)) else None
 
 
 def dt_of(p):
     dt = p.get("dt")
-    if not _number(dt):
+    if not is_number(dt):
         try:
             dt = float(p.get("params", {}).get("axes", {}).get("dt"))
         except (TypeError, ValueError):
@@ -171,7 +165,7 @@ def is_reference(p):
     """Whether p is its line's reference: its dt is the reference dt, or its error is 0."""
     e, dt = p.get("error") or {}, dt_of(p)
     ref = e.get("reference_dt") if isinstance(e, dict) else None
-    if _number(ref) and dt is not None and abs(ref - dt) <= 1e-9 * max(ref, dt):
+    if is_number(ref) and dt is not None and abs(ref - dt) <= 1e-9 * max(ref, dt):
         return True
     return error(p) == 0.0
 
@@ -390,7 +384,7 @@ def plot(doc, scene, pts, front, h):
 
 
 def mm(v):
-    return 1e3 * v if _number(v) else None
+    return 1e3 * v if is_number(v) else None
 
 
 def points_table(doc, pts, front, h):
@@ -409,8 +403,8 @@ def points_table(doc, pts, front, h):
                      p.get("iterations") if p.get("iterations") is not None else "-",
                      h.spread_text(p.get("speed")) if ok else "-", err_text if ok else "-",
                      h.num(mm(e.get("max_penetration_m"))) if ok else "-",
-                     sci(e.get("energy_drift")) if ok and _number(e.get("energy_drift")) else "-",
-                     sci(e.get("momentum_residual")) if ok and _number(e.get("momentum_residual")) else "-",
+                     sci(e.get("energy_drift")) if ok and is_number(e.get("energy_drift")) else "-",
+                     sci(e.get("momentum_residual")) if ok and is_number(e.get("momentum_residual")) else "-",
                      "front" if id(p) in on_front else "", p.get("status")])
     doc.table(["engine", "geometry", "dt", "iterations", "speed (sim. s / wall s)", "consistency error",
                "max penetration (mm)", "energy drift", "momentum residual", "Pareto", "status"], rows,

@@ -242,19 +242,34 @@ judge_case() {
   esac
 }
 
-for scene in "${scenes[@]+"${scenes[@]}"}"; do
-  name="$(basename "$scene" .json)"
-  log="$out/$name.log"
-  n_frames="$(frames_of "$name")"
+# Case $1 ($2 frames): the command "${@:3}" in the background (stop() ends it on a signal),
+# its output in $out/$1.log, then its outcome (judge_case).
+run_case() {
+  local name="$1" n_frames="$2" t0 rc
+  shift 2
   t0=$(date +%s.%N)
-  timeout --signal=TERM --kill-after=10 "$timeout_s" \
-    "$bin" validate "$scene" --frames "$n_frames" --every "$every" --against "$against" \
-    --junit "$out/junit/$name.xml" --json "$out/json/$name.json" "${tolerances[@]}" "${extra[@]}" >"$log" 2>&1 &
+  "$@" >"$out/$name.log" 2>&1 &
   child=$!
   wait "$child"
   rc=$?
   child=0
-  judge_case "$name" "$log" "$rc" "$t0" "$n_frames"
+  judge_case "$name" "$out/$name.log" "$rc" "$t0" "$n_frames"
+}
+# A matrix case: engine $1's run of scene $2 with rotation, traced to $out/matrix/$3.h5,
+# then that trace judged (`validate --trace-in`); the run's exit code when it fails.
+matrix_case() {
+  local trace="$out/matrix/$3.h5"
+  timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" run "$root/datasets/scenes/$2.json" --engine "$1" --rotation --frames "$n_frames" --state-every 1 \
+    --contacts --trace "$trace" --no-xdmf --quiet "${extra_run[@]}" || return $?
+  timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" validate --trace-in "$trace" --every "$m_every" --against "$against" --junit "$out/junit/$3.xml" \
+    --json "$out/json/$3.json" "${tolerances[@]}" "${extra_trace[@]}"
+}
+for scene in "${scenes[@]+"${scenes[@]}"}"; do
+  name="$(basename "$scene" .json)"
+  n_frames="$(frames_of "$name")"
+  run_case "$name" "$n_frames" timeout --signal=TERM --kill-after=10 "$timeout_s" \
+    "$bin" validate "$scene" --frames "$n_frames" --every "$every" --against "$against" \
+    --junit "$out/junit/$name.xml" --json "$out/json/$name.json" "${tolerances[@]}" "${extra[@]}"
 done
 
 # The engine matrix: ENGINE--SCENE cases, each a run with rotation and its judged trace.
@@ -297,20 +312,7 @@ for e in "${matrix_engines[@]+"${matrix_engines[@]}"}"; do
     [ -z "$why_skip" ] || { echo "matrix   $e--$sc: skipped ($why_skip)"; continue; }
     name="$e--$sc"
     [ "$matrix" = "quick" ] && name="$e--$sc--quick"
-    log="$out/$name.log"
-    trace="$out/matrix/$name.h5"
-    t0=$(date +%s.%N)
-    (
-      timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" run "$root/datasets/scenes/$sc.json" --engine "$e" --rotation --frames "$n_frames" --state-every 1 \
-        --contacts --trace "$trace" --no-xdmf --quiet "${extra_run[@]}" || exit $?
-      timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" validate --trace-in "$trace" --every "$m_every" --against "$against" --junit "$out/junit/$name.xml" \
-        --json "$out/json/$name.json" "${tolerances[@]}" "${extra_trace[@]}"
-    ) >"$log" 2>&1 &
-    child=$!
-    wait "$child"
-    rc=$?
-    child=0
-    judge_case "$name" "$log" "$rc" "$t0" "$n_frames"
+    run_case "$name" "$n_frames" matrix_case "$e" "$sc" "$name"
   done < <(matrix_scenes)
 done
 
@@ -350,16 +352,9 @@ for e in "${determinism_engines[@]+"${determinism_engines[@]}"}"; do
     [ -z "$why_skip" ] || { echo "matrix   $e--$sc--determinism: skipped ($why_skip)"; continue; }
     name="$e--$sc--determinism"
     [ "$matrix" = "quick" ] && name="$e--$sc--determinism--quick"
-    log="$out/$name.log"
-    t0=$(date +%s.%N)
-    timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" validate "$root/datasets/scenes/$sc.json" --engine "$e" \
-      "${rotation[@]+"${rotation[@]}"}" --frames "$n_frames" --determinism --junit "$out/junit/$name.xml" \
-      --json "$out/json/$name.json" "${extra[@]}" >"$log" 2>&1 &
-    child=$!
-    wait "$child"
-    rc=$?
-    child=0
-    judge_case "$name" "$log" "$rc" "$t0" "$n_frames"
+    run_case "$name" "$n_frames" timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" validate \
+      "$root/datasets/scenes/$sc.json" --engine "$e" "${rotation[@]+"${rotation[@]}"}" --frames "$n_frames" \
+      --determinism --junit "$out/junit/$name.xml" --json "$out/json/$name.json" "${extra[@]}"
   done < <(determinism_scenes)
 done
 

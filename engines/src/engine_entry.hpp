@@ -32,7 +32,7 @@ struct EngineHooks {
 };
 
 /// The hooks of a reference world `W` built as W(model, model->initial, settings), its
-/// settings struct `S` filled by `Apply` (apply_<engine>_settings) and its keys from `Names`.
+/// settings struct `S` filled by `Apply` (apply_settings<S>) and its keys from `Names`.
 template <class W, class S, void (*Apply)(S&, const std::vector<std::string>&, const std::string&),
           std::vector<std::string> (*Names)()>
 EngineHooks reference_engine_hooks(const char* help = "") {

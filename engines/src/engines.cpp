@@ -16,6 +16,7 @@
 #include "octocd/cuda_settings.hpp"
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/names.hpp"
 #include "octocd/process_engines.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/world.hpp"
@@ -214,11 +215,7 @@ const std::vector<EngineInfo>& engine_infos() {
 }
 
 const std::vector<std::string>& engine_names() {
-  static const std::vector<std::string> names = [] {
-    std::vector<std::string> v;
-    for (const EngineInfo& e : engine_infos()) v.push_back(e.name);
-    return v;
-  }();
+  static const std::vector<std::string> names = names_of(engine_infos());
   return names;
 }
 

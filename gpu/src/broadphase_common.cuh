@@ -3,8 +3,9 @@
 // DeviceBroadPhase broadphase_octree_tree.cu, broadphase_octree_strict.cu, broadphase_spatial_hash.cu,
 // broadphase_lbvh.cu): the pair key, a binary search on sorted 64-bit keys, the
 // per-block sum of the exact-test counter, a warp's ordered writer into PairOutput::keys
-// (count pass: counts only; fill pass: writes where the index is below the capacity),
-// and an unordered appender (one atomic per group of threads). CUDA only (nvcc).
+// (count pass: counts only; fill pass: writes where the index is below the capacity) and
+// the frame of a two-pass one-warp-per-item query around it, and an unordered appender
+// (one atomic per group of threads). CUDA only (nvcc).
 #include <algorithm>
 #include <cstdint>
 #include <cstdlib>
@@ -22,6 +23,21 @@
 namespace octocd {
 namespace gpu {
 namespace bp {
+
+/// The base of a device broadphase's kernel descriptor: what its find() was given (the
+/// kernels read the boxes and write the pairs through `out`).
+struct FindDesc {
+  const Aabb* aabb = nullptr;  ///< world AABBs (m), per body (device)
+  std::uint32_t n = 0;         ///< bodies
+  PairOutput out;              ///< pair keys, total, capacity, shift, exact tests
+
+  /// Sets the three from find()'s arguments (host).
+  void set_find(const Aabb* boxes, std::uint32_t bodies, const PairOutput& output) {
+    aabb = boxes;
+    n = bodies;
+    out = output;
+  }
+};
 
 /// Lanes of a warp; the warp-per-item kernels launch 32 threads per item.
 constexpr unsigned kWarpSize = 32;
@@ -153,6 +169,33 @@ struct PairBuffer {
   }
 };
 
+/// The frame of a one-warp-per-item query in two passes (count, then fill; PairOutput's
+/// contract) over `items` items whose counts and offsets start at index `first`: for an item
+/// i < items (uniform over the warp) it calls query(i, lane, w, tests) with the item's
+/// WarpWriter w (fill pass, kFill: writing into out.keys from offset[first + i] below
+/// out.capacity; count pass: counting only, no offset read) and this thread's exact-test
+/// counter; then in the count pass lane 0 stores w.written in count[first + i], and the
+/// block's tests are added to *out.candidates (block_add). Every thread of the block
+/// (kBlockSize threads) must call it, once.
+template <bool kFill, class Query>
+__device__ inline void warp_query(std::uint32_t items, std::uint32_t first, const PairOutput& out,
+                                  const std::uint32_t* offset, std::uint32_t* count, Query&& query) {
+  const auto [item, lane] = warp_item();
+  unsigned long long tests = 0;
+  if (item < items) {  // uniform over the warp
+    const std::uint32_t i = static_cast<std::uint32_t>(item);
+    WarpWriter w;
+    if (kFill) {
+      w.keys = out.keys;
+      w.base = offset[first + i];
+      w.capacity = out.capacity;
+    }
+    query(i, lane, w, tests);
+    if (!kFill && lane == 0) count[first + i] = w.written;
+  }
+  if (!kFill) block_add(out.candidates, tests);
+}
+
 /// Blocks of kBlockSize threads for one warp per item (at least 1).
 inline unsigned warp_grid_for(std::size_t items) { return grid_for(items * kWarpSize); }
 
@@ -199,27 +242,6 @@ inline bool start_find(bool reserved, std::uint32_t reserved_n, std::uint32_t n,
   if (n > 0) return true;
   check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
   return false;
-}
-
-/// Sets a broadphase descriptor's sort of bodies by key: the unsorted keys and their bodies
-/// (`d.key`, `d.body`: the radix sort's input) and the sorted ones (`d.sorted_key`,
-/// `d.slot_body`), from the broadphase's buffers.
-template <class Desc, class Key>
-inline void set_key_sort(Desc& d, DeviceBuffer<Key>& key, DeviceBuffer<std::uint32_t>& body,
-                         DeviceBuffer<Key>& sorted_key, DeviceBuffer<std::uint32_t>& slot_body) {
-  d.key = key.get();
-  d.body = body.get();
-  d.sorted_key = sorted_key.get();
-  d.slot_body = slot_body.get();
-}
-
-/// set_key_sort and the sorted slots' boxes (`d.slot_box`).
-template <class Desc, class Key>
-inline void set_key_sort(Desc& d, DeviceBuffer<Key>& key, DeviceBuffer<std::uint32_t>& body,
-                         DeviceBuffer<Key>& sorted_key, DeviceBuffer<std::uint32_t>& slot_body,
-                         DeviceBuffer<Aabb>& slot_box) {
-  set_key_sort(d, key, body, sorted_key, slot_body);
-  d.slot_box = slot_box.get();
 }
 
 }  // namespace bp

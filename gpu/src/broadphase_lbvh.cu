@@ -23,9 +23,8 @@
 #include <initializer_list>
 #include <string>
 
-#include <cub/device/device_radix_sort.cuh>
-
 #include "broadphase_common.cuh"
+#include "broadphase_key_sort.cuh"
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
 #include "device_footprint.hpp"
@@ -38,14 +37,13 @@ namespace {
 
 static_assert(sizeof(LbvhNode) == footprint::kLbvhNodeBytes, "device_footprint.hpp: LbvhNode");
 
-/// What the kernels read and write (device pointers).
-struct LbvhDesc {
-  const Aabb* aabb = nullptr;              ///< world AABBs, per body
-  std::uint32_t n = 0;                     ///< bodies
+/// What the kernels read and write (device pointers): FindDesc's boxes, bodies and pair
+/// output (keys, total, exact tests), and:
+struct LbvhDesc : bp::FindDesc {
   LooseGrid grid;                          ///< root cube of the scene's domain
-  std::uint32_t* code = nullptr;           ///< per body: its code
+  std::uint32_t* key = nullptr;            ///< per body: its code (the sort's keys)
   std::uint32_t* body = nullptr;           ///< per body: its index (the sort's values)
-  const std::uint32_t* sorted_code = nullptr;  ///< per slot: code, ascending
+  const std::uint32_t* sorted_key = nullptr;   ///< per slot: code, ascending
   const std::uint32_t* slot_body = nullptr;    ///< per slot: body
   Aabb* slot_box = nullptr;                ///< per slot: the body's AABB (the leaves' boxes)
   LbvhNode* nodes = nullptr;               ///< n - 1 internal nodes (0 = root)
@@ -53,13 +51,12 @@ struct LbvhDesc {
   std::uint32_t* node_parent = nullptr;    ///< n - 1: parent of internal node (kLbvhNone for the root)
   std::uint32_t* leaf_parent = nullptr;    ///< n: parent of each slot's leaf
   std::uint32_t* flag = nullptr;           ///< n - 1 refit counters
-  PairOutput out;                          ///< pair keys, total, exact tests
 };
 
 __global__ void lbvh_code_kernel(LbvhDesc d) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= d.n) return;
-  d.code[i] = lbvh_code(d.grid, d.aabb[i]);
+  d.key[i] = lbvh_code(d.grid, d.aabb[i]);
   d.body[i] = i;
 }
 
@@ -70,7 +67,7 @@ __global__ void lbvh_build_kernel(LbvhDesc d) {
   if (s >= d.n) return;
   d.slot_box[s] = d.aabb[d.slot_body[s]];
   if (s + 1 >= d.n) return;
-  const LbvhNode node = lbvh_internal(d.sorted_code, d.n, s);
+  const LbvhNode node = lbvh_internal(d.sorted_key, d.n, s);
   d.nodes[s] = node;
   d.flag[s] = 0u;
   if (s == 0) d.node_parent[0] = kLbvhNone;
@@ -133,27 +130,20 @@ class LbvhDevice final : public DeviceBroadPhase {
   std::string name() const override { return broadphase_name(BroadPhaseId::lbvh); }
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
-    (void)stream;
     if (n > 0x7fffffffu)
       throw RuntimeError(fmt::format("device broadphase '{}': {} bodies; it takes at most 2^31 - 1", name(), n));
     // n - 1 internal nodes; n entries keep every buffer (and the host estimate,
     // device_footprint.cpp) linear in n.
     const std::size_t inner = n;
-    code_.ensure(n);
-    body_.ensure(n);
-    sorted_code_.ensure(n);
-    slot_body_.ensure(n);
-    slot_box_.ensure(n);
+    sort_.ensure(n, true);
     leaf_parent_.ensure(n);
     nodes_.ensure(inner);
     node_box_.ensure(inner);
     node_parent_.ensure(inner);
     flag_.ensure(inner);
-    std::size_t bytes = 0;
-    check(cub::DeviceRadixSort::SortPairs(nullptr, bytes, code_.get(), sorted_code_.get(), body_.get(),
-                                          slot_body_.get(), static_cast<int>(n), 0, kLbvhCodeBits),
-          "cub::DeviceRadixSort::SortPairs (size)");
-    temp_.ensure(std::max<std::size_t>(bytes, 1));
+    std::size_t bytes = 1;
+    sort_.need_temp(bytes, n, kLbvhCodeBits, stream);
+    temp_.ensure(bytes);
     n_ = n;
     reserved_ = true;
   }
@@ -163,45 +153,33 @@ class LbvhDevice final : public DeviceBroadPhase {
     check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
     if (n < 2) return;  // no pair, no exact test
     LbvhDesc d;
-    d.aabb = aabb;
-    d.n = n;
+    d.set_find(aabb, n, out);
     d.grid = grid_;
-    d.code = code_.get();
-    d.body = body_.get();
-    d.sorted_code = sorted_code_.get();
-    d.slot_body = slot_body_.get();
-    d.slot_box = slot_box_.get();
+    sort_.set_with_boxes(d);
     d.nodes = nodes_.get();
     d.node_box = node_box_.get();
     d.node_parent = node_parent_.get();
     d.leaf_parent = leaf_parent_.get();
     d.flag = flag_.get();
-    d.out = out;
     const unsigned g = grid_for(n);
     bp::launch(lbvh_code_kernel, g, stream, d, "lbvh_code");
     std::size_t bytes = temp_.capacity();
-    bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, code_.get(), sorted_code_.get(), body_.get(),
-                                                 slot_body_.get(), static_cast<int>(n), 0, kLbvhCodeBits, stream),
-                 "cub::DeviceRadixSort::SortPairs");
+    bp::launched(sort_.sort(temp_.get(), bytes, n, kLbvhCodeBits, stream), "cub::DeviceRadixSort::SortPairs");
     bp::launch(lbvh_build_kernel, g, stream, d, "lbvh_build");
     bp::launch(lbvh_refit_kernel, g, stream, d, "lbvh_refit");
     bp::launch(lbvh_query_kernel, g, stream, d, "lbvh_query");
   }
 
   std::uint64_t device_bytes() const override {
-    return total_bytes({&code_, &body_, &sorted_code_, &slot_body_, &slot_box_, &leaf_parent_, &nodes_, &node_box_,
-                        &node_parent_, &flag_, &temp_});
+    return sort_.bytes() + total_bytes({&leaf_parent_, &nodes_, &node_box_, &node_parent_, &flag_, &temp_});
   }
 
  private:
   LooseGrid grid_;
   bool reserved_ = false;
   std::uint32_t n_ = 0;
-  DeviceBuffer<std::uint32_t> code_{"lbvh body codes"};
-  DeviceBuffer<std::uint32_t> body_{"lbvh body indices"};
-  DeviceBuffer<std::uint32_t> sorted_code_{"lbvh sorted codes"};
-  DeviceBuffer<std::uint32_t> slot_body_{"lbvh slot bodies"};
-  DeviceBuffer<Aabb> slot_box_{"lbvh slot boxes"};
+  bp::KeySortBuffers<std::uint32_t> sort_{"lbvh body codes", "lbvh body indices", "lbvh sorted codes",
+                                          "lbvh slot bodies", "lbvh slot boxes"};
   DeviceBuffer<std::uint32_t> leaf_parent_{"lbvh leaf parents"};
   DeviceBuffer<LbvhNode> nodes_{"lbvh internal nodes"};
   DeviceBuffer<Aabb> node_box_{"lbvh internal boxes"};

@@ -28,6 +28,8 @@
 // Cost: like the CPU's (design.md section 5.1) a body that straddles a split plane near the root is
 // tested against its whole subtree; the warp per slot spreads that work over 32 lanes.
 #include "broadphase_common.cuh"
+#include "broadphase_key_sort.cuh"
+#include "scanned_counts.hpp"
 #include "octocd/broadphase.hpp"
 #include "octocd/loose_octree.hpp"
 #include "octocd/strict_octree.hpp"
@@ -36,10 +38,9 @@ namespace octocd {
 namespace gpu {
 namespace {
 
-/// What the strict-octree kernels read and write (device pointers; n bodies).
-struct StrictDesc {
-  const Aabb* aabb = nullptr;         ///< world AABBs (m), per body
-  std::uint32_t n = 0;                ///< bodies
+/// What the strict-octree kernels read and write (device pointers; n bodies): FindDesc's
+/// boxes, bodies and pair output (keys, capacity, candidates), and:
+struct StrictDesc : bp::FindDesc {
   Aabb domain;                        ///< the scene's domain (m): the root cube's box
   int depth = 2;                      ///< D_w in [0, 10]; -1 = auto (read *depth_auto)
   int* depth_auto = nullptr;          ///< one int: D_w for auto (written by the depth kernel)
@@ -55,7 +56,6 @@ struct StrictDesc {
   Aabb* slot_box = nullptr;           ///< per slot: the body's AABB
   std::uint32_t* count = nullptr;     ///< per slot: pairs found (count pass); count[n] = 0
   const std::uint32_t* offset = nullptr;  ///< per slot: exclusive scan of count (fill pass)
-  PairOutput out;                     ///< keys, capacity, candidates
 };
 
 __device__ int depth_of(const StrictDesc& d) { return d.depth >= 0 ? d.depth : *d.depth_auto; }
@@ -94,17 +94,9 @@ __global__ void strict_gather_kernel(StrictDesc d) {
 /// One warp per slot s: the slots (s, end of s's subtree) through Eq. 6.
 template <bool kFill>
 __global__ void strict_query_kernel(StrictDesc d) {
-  const auto [item, lane] = bp::warp_item();
-  unsigned long long tests = 0;
-  if (item < d.n) {  // uniform over the warp
-    const std::uint32_t s = static_cast<std::uint32_t>(item);
+  bp::warp_query<kFill>(d.n, 0, d.out, d.offset, d.count,
+                        [&](std::uint32_t s, unsigned lane, bp::WarpWriter& w, unsigned long long& tests) {
     const unsigned long long key = d.sorted_key[s];
-    bp::WarpWriter w;
-    if (kFill) {
-      w.keys = d.out.keys;
-      w.base = d.offset[s];
-      w.capacity = d.out.capacity;
-    }
     if (key != d.no_key) {
       const std::uint32_t end = bp::lower_bound_u64(d.sorted_key, s + 1, d.n, strict_subtree_key_end(key, depth_of(d)));
       const Aabb box = d.slot_box[s];
@@ -121,9 +113,7 @@ __global__ void strict_query_kernel(StrictDesc d) {
       }
       if (lane == 0) tests = end - s - 1;
     }
-    if (!kFill && lane == 0) d.count[s] = w.written;
-  }
-  if (!kFill) bp::block_add(d.out.candidates, tests);
+  });
 }
 
 class StrictOctreeDevice final : public DeviceBroadPhase {
@@ -141,13 +131,8 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
     const std::size_t n1 = static_cast<std::size_t>(n) + 1;
-    key_.ensure(n);
-    key_sorted_.ensure(n);
-    body_.ensure(n);
-    slot_body_.ensure(n);
-    slot_box_.ensure(n);
-    count_.ensure(n1);
-    offset_.ensure(n1);
+    sort_.ensure(n, true);
+    pairs_.ensure(n1);
     scalars_d_.ensure(1);
     scalars_u_.ensure(1);
     depth_auto_.ensure(1);
@@ -157,12 +142,8 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
     }
     // CUB temporary storage for every primitive find() runs on these sizes.
     std::size_t bytes = 0;
-    bp::need_temp(bytes, "cub::DeviceRadixSort::SortPairs (size)", [&](std::size_t& b) {
-      return sort_pairs_u64_u32(nullptr, b, nullptr, nullptr, nullptr, nullptr, n, end_bit_, stream);
-    });
-    bp::need_temp(bytes, "cub::DeviceScan::ExclusiveSum (size)", [&](std::size_t& b) {
-      return exclusive_scan_u32(nullptr, b, nullptr, nullptr, static_cast<std::uint32_t>(n1), stream);
-    });
+    sort_.need_temp(bytes, n, end_bit_, stream);
+    pairs_.need_temp(bytes, static_cast<std::uint32_t>(n1), stream);
     if (depth_ < 0) {
       bp::need_temp(bytes, "cub::DeviceReduce::Sum (size)",
                     [&](std::size_t& b) { return sum_f64(nullptr, b, nullptr, nullptr, n, stream); });
@@ -177,8 +158,7 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
   void find(const Aabb* aabb, std::uint32_t n, const PairOutput& out, cudaStream_t stream) override {
     if (!bp::start_find(reserved_, reserved_n_, n, broadphase_name(BroadPhaseId::octree_strict), out, stream)) return;
     StrictDesc d;
-    d.aabb = aabb;
-    d.n = n;
+    d.set_find(aabb, n, out);
     d.domain = domain_;
     d.depth = depth_;
     d.depth_auto = depth_auto_.get();
@@ -187,10 +167,9 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
     d.counted = counted_.get();
     d.extent_sum = scalars_d_.get();
     d.counted_sum = scalars_u_.get();
-    bp::set_key_sort(d, key_, body_, key_sorted_, slot_body_, slot_box_);
-    d.count = count_.get();
-    d.offset = offset_.get();
-    d.out = out;
+    sort_.set_with_boxes(d);
+    d.count = pairs_.count.get();
+    d.offset = pairs_.offset.get();
     std::size_t bytes = temp_.capacity();
 
     if (depth_ < 0) {  // auto_octree_depth on the device
@@ -205,46 +184,35 @@ class StrictOctreeDevice final : public DeviceBroadPhase {
     strict_keys_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "strict_keys");
     bytes = temp_.capacity();
-    bp::launched(sort_pairs_u64_u32(temp_.get(), bytes, key_.get(), key_sorted_.get(), body_.get(), slot_body_.get(),
-                                    n, end_bit_, stream),
-                 "cub::DeviceRadixSort::SortPairs");
+    bp::launched(sort_.sort(temp_.get(), bytes, n, end_bit_, stream), "cub::DeviceRadixSort::SortPairs");
     strict_gather_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "strict_gather");
-    check(cudaMemsetAsync(count_.get() + n, 0, sizeof(std::uint32_t), stream), "cudaMemset strict counts");
+    check(cudaMemsetAsync(pairs_.count.get() + n, 0, sizeof(std::uint32_t), stream), "cudaMemset strict counts");
     strict_query_kernel<false><<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "strict_query (count)");
     bytes = temp_.capacity();
-    bp::launched(exclusive_scan_u32(temp_.get(), bytes, count_.get(), offset_.get(), n + 1, stream),
-                 "cub::DeviceScan::ExclusiveSum");
-    check(cudaMemcpyAsync(out.total, offset_.get() + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, stream),
-          "cudaMemcpy pair total");
+    bp::launched(pairs_.scan(temp_.get(), bytes, n + 1, stream), "cub::DeviceScan::ExclusiveSum");
+    check(pairs_.copy_total(out.total, n, stream), "cudaMemcpy pair total");
     strict_query_kernel<true><<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "strict_query (fill)");
   }
 
   std::uint64_t device_bytes() const override {
-    return total_bytes(buffers());
+    return sort_.bytes() + pairs_.bytes() +
+           total_bytes({&extent_, &counted_, &scalars_d_, &scalars_u_, &depth_auto_, &temp_});
   }
 
  private:
-  std::vector<const BufferBase*> buffers() const {
-    return {&key_,   &key_sorted_, &body_,      &slot_body_, &slot_box_, &count_, &offset_,
-            &extent_, &counted_,   &scalars_d_, &scalars_u_, &depth_auto_, &temp_};
-  }
-
   int depth_;
   Aabb domain_;
   int end_bit_ = 34;
   unsigned long long no_key_ = 0;
   bool reserved_ = false;
   std::uint32_t reserved_n_ = 0;
-  DeviceBuffer<unsigned long long> key_{"octree-strict body keys"};
-  DeviceBuffer<unsigned long long> key_sorted_{"octree-strict sorted keys"};
-  DeviceBuffer<std::uint32_t> body_{"octree-strict body indices"};
-  DeviceBuffer<std::uint32_t> slot_body_{"octree-strict slot bodies"};
-  DeviceBuffer<Aabb> slot_box_{"octree-strict slot boxes"};
-  DeviceBuffer<std::uint32_t> count_{"octree-strict pair counts"};
-  DeviceBuffer<std::uint32_t> offset_{"octree-strict pair offsets"};
+  bp::KeySortBuffers<unsigned long long> sort_{"octree-strict body keys", "octree-strict body indices",
+                                               "octree-strict sorted keys", "octree-strict slot bodies",
+                                               "octree-strict slot boxes"};
+  ScannedCounts pairs_{"octree-strict pair counts", "octree-strict pair offsets"};
   DeviceBuffer<double> extent_{"octree-strict body extents"};
   DeviceBuffer<std::uint32_t> counted_{"octree-strict counted extents"};
   DeviceBuffer<double> scalars_d_{"octree-strict extent sum"};

@@ -62,18 +62,19 @@
 #include <cstdlib>
 #include <string>
 
-#include <cub/device/device_radix_sort.cuh>
 #include <cub/block/block_radix_sort.cuh>
 #include <cub/block/block_reduce.cuh>
 #include <cuda/functional>
 #include <cub/device/device_scan.cuh>
 
 #include "broadphase_common.cuh"
+#include "broadphase_key_sort.cuh"
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
 #include "device_footprint.hpp"
 #include "kernels.hpp"
 #include "loose_blocks.hpp"
+#include "scanned_counts.hpp"
 #include "octocd/cuda_world.hpp"
 
 namespace octocd {
@@ -696,14 +697,9 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   bool sorts_pairs() const override { return true; }
 
   void reserve(std::uint32_t n, cudaStream_t stream) override {
-    (void)stream;
     min_.ensure(1);
     root_.ensure(1);
-    key_.ensure(n);
-    body_.ensure(n);
-    sorted_key_.ensure(n);
-    slot_body_.ensure(n);
-    slot_box_.ensure(n);
+    sort_.ensure(n, true);
     level_begin_.ensure(kLevelTable);
     if (n > (1u << 29)) throw RuntimeError(fmt::format("octree: {} bodies; the device octree takes at most 2^29", n));
     cell_mask_ = static_cast<std::uint32_t>(footprint::loose_cell_table_entries(n) - 1);
@@ -711,17 +707,13 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     occupancy_blocks_ = static_cast<std::uint32_t>(footprint::loose_occupancy_blocks(n));
     occupancy_.ensure(occupancy_blocks_ / 4);
     const std::size_t n1 = static_cast<std::size_t>(n) + 1;
-    pair_count_.ensure(n1);
-    pair_offset_.ensure(n1);
+    pairs_.ensure(n1);
     long_list_.ensure(std::max<std::size_t>(n, 1));
     long_count_.ensure(2);
-    std::size_t a = 0, c = 0;
-    check(cub::DeviceRadixSort::SortPairs(nullptr, a, key_.get(), sorted_key_.get(), body_.get(), slot_body_.get(),
-                                          static_cast<int>(n), 0, 32),
-          "cub::DeviceRadixSort::SortPairs (size)");
-    check(exclusive_scan_u32(nullptr, c, pair_count_.get(), pair_offset_.get(), n + 1, stream),
-          "cub::DeviceScan::ExclusiveSum (size)");
-    temp_.ensure(std::max({a, c, std::size_t{1}}));
+    std::size_t bytes = 1;
+    sort_.need_temp(bytes, n, 32, stream);
+    pairs_.need_temp(bytes, n + 1, stream);
+    temp_.ensure(bytes);
     n_ = n;
   }
 
@@ -730,7 +722,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     check(cudaMemsetAsync(out.total, 0, sizeof(std::uint32_t), stream), "cudaMemset pair total");
     if (n == 0) return;
     if (out.scratch) {
-      check(cudaMemsetAsync(pair_count_.get(), 0, (static_cast<std::size_t>(n) + 1) * sizeof(std::uint32_t), stream),
+      check(cudaMemsetAsync(pairs_.count.get(), 0, (static_cast<std::size_t>(n) + 1) * sizeof(std::uint32_t), stream),
             "cudaMemset octree pair counts");
       check(cudaMemsetAsync(long_count_.get(), 0, 2 * sizeof(std::uint32_t), stream),
             "cudaMemset octree long segments");
@@ -744,7 +736,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.nan_key = nan_key();
     d.min_extent = min_.get();
     d.root = depth_ < 0 ? root_.get() : nullptr;
-    bp::set_key_sort(d, key_, body_, sorted_key_, slot_body_, slot_box_);
+    sort_.set_with_boxes(d);
     d.level_begin = level_begin_.get();
     d.cell_table = cell_table_.get();
     d.cell_mask = cell_mask_;
@@ -752,7 +744,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     d.occupancy_blocks = occupancy_blocks_;
     const bool sorted = out.scratch != nullptr;
     d.pair_keys = sorted ? out.scratch : out.keys;
-    d.pair_count = sorted ? pair_count_.get() : nullptr;
+    d.pair_count = sorted ? pairs_.count.get() : nullptr;
     d.shift = out.shift;
     d.capacity = out.capacity;
     d.total = out.total;
@@ -770,9 +762,7 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
     loose_keys_kernel<<<g, kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "loose_keys");
     std::size_t bytes = temp_.capacity();
-    bp::launched(cub::DeviceRadixSort::SortPairs(temp_.get(), bytes, key_.get(), sorted_key_.get(), body_.get(),
-                                             slot_body_.get(), static_cast<int>(n), 0, key_bits_, stream),
-             "cub::DeviceRadixSort::SortPairs");
+    bp::launched(sort_.sort(temp_.get(), bytes, n, key_bits_, stream), "cub::DeviceRadixSort::SortPairs");
     check(cudaMemsetAsync(cell_table_.get(), 0xff,
                           (static_cast<std::size_t>(cell_mask_) + 1) * sizeof(unsigned long long), stream),
           "cudaMemset octree block table");
@@ -795,14 +785,14 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   /// segment sorts.
   void sort_pairs(const PairOutput& out, std::uint32_t n, cudaStream_t stream) {
     std::size_t bytes = temp_.capacity();
-    bp::launched(exclusive_scan_u32(temp_.get(), bytes, pair_count_.get(), pair_offset_.get(), n + 1, stream),
+    bp::launched(pairs_.scan(temp_.get(), bytes, n + 1, stream),
                  "cub::DeviceScan::ExclusiveSum (octree pair segments)");
     LooseSortDesc s;
     s.scratch = out.scratch;
     s.scratch_rw = out.scratch;
     s.keys = out.keys;
-    s.count = pair_count_.get();
-    s.offset = pair_offset_.get();
+    s.count = pairs_.count.get();
+    s.offset = pairs_.offset.get();
     s.long_list = long_list_.get();
     s.long_count = long_count_.get();
     s.total = out.total;
@@ -817,8 +807,8 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   }
 
   std::uint64_t device_bytes() const override {
-    return total_bytes({&min_, &key_, &body_, &sorted_key_, &slot_body_, &slot_box_, &level_begin_, &cell_table_,
-                        &occupancy_, &pair_count_, &pair_offset_, &long_list_, &long_count_, &temp_});
+    return sort_.bytes() + pairs_.bytes() +
+           total_bytes({&min_, &level_begin_, &cell_table_, &occupancy_, &long_list_, &long_count_, &temp_});
   }
 
  private:
@@ -833,18 +823,14 @@ class LooseOctreeDevice final : public DeviceBroadPhase {
   std::uint32_t n_ = kNotReserved;
   DeviceBuffer<float> min_{"octree smallest extent"};
   DeviceBuffer<LooseRoot> root_{"octree snapped root"};
-  DeviceBuffer<std::uint32_t> key_{"octree body keys"};
-  DeviceBuffer<std::uint32_t> body_{"octree body indices"};
-  DeviceBuffer<std::uint32_t> sorted_key_{"octree sorted keys"};
-  DeviceBuffer<std::uint32_t> slot_body_{"octree slot bodies"};
-  DeviceBuffer<Aabb> slot_box_{"octree slot boxes"};
+  bp::KeySortBuffers<std::uint32_t> sort_{"octree body keys", "octree body indices", "octree sorted keys",
+                                          "octree slot bodies", "octree slot boxes"};
   DeviceBuffer<std::uint32_t> level_begin_{"octree level table"};
   std::uint32_t cell_mask_ = 1;
   DeviceBuffer<unsigned long long> cell_table_{"octree block table"};
   std::uint32_t occupancy_blocks_ = 0;
   DeviceBuffer<std::uint32_t> occupancy_{"octree occupancy map"};
-  DeviceBuffer<std::uint32_t> pair_count_{"octree pairs per body"};
-  DeviceBuffer<std::uint32_t> pair_offset_{"octree pair segments"};
+  ScannedCounts pairs_{"octree pairs per body", "octree pair segments"};
   DeviceBuffer<std::uint32_t> long_list_{"octree long pair segments"};
   DeviceBuffer<std::uint32_t> long_count_{"octree long pair segment count"};
   DeviceBuffer<unsigned char> temp_{"octree CUB temporary storage"};

@@ -41,6 +41,8 @@
 // oversize tests, the quantity the CPU reports as cell_candidates (the numbers differ
 // from the CPU's where the oversize lists differ).
 #include "broadphase_common.cuh"
+#include "broadphase_key_sort.cuh"
+#include "scanned_counts.hpp"
 #include "device_footprint.hpp"
 #include "octocd/broadphase.hpp"
 #include "octocd/spatial_hash.hpp"
@@ -63,10 +65,9 @@ constexpr unsigned long long kUnusedKey = ~0ull;
 
 static_assert(kEntriesPerBody >= kSmallCells, "the budget must hold every small body");
 
-/// What the spatial-hash kernels read and write (device pointers).
-struct HashDesc {
-  const Aabb* aabb = nullptr;             ///< world AABBs (m), per body
-  std::uint32_t n = 0;                    ///< bodies
+/// What the spatial-hash kernels read and write (device pointers): FindDesc's boxes, bodies
+/// and pair output (keys, capacity, candidates), and:
+struct HashDesc : bp::FindDesc {
   double inv_h = 0.0;                     ///< 1 / h (1/m), hash_inv_cell_size
   std::uint32_t entries = 0;              ///< E, the entry budget
   std::uint8_t* kind = nullptr;           ///< per body: HashKind (after step 3: final)
@@ -81,7 +82,6 @@ struct HashDesc {
   const std::uint32_t* slot_body = nullptr;        ///< E: bodies, in the sorted order
   std::uint32_t* count = nullptr;         ///< E + n + 1: pairs per entry slot, per oversize body, 0
   const std::uint32_t* offset = nullptr;  ///< E + n + 1: exclusive scan of count
-  PairOutput out;                         ///< keys, capacity, candidates
 };
 
 __global__ void hash_span_kernel(HashDesc d) {
@@ -161,16 +161,8 @@ __global__ void hash_cell_query_kernel(HashDesc d) {
 /// bodies: by the smaller index).
 template <bool kFill>
 __global__ void hash_oversize_query_kernel(HashDesc d) {
-  const auto [item, lane] = bp::warp_item();
-  unsigned long long tests = 0;
-  if (item < d.n) {  // uniform over the warp
-    const std::uint32_t p = static_cast<std::uint32_t>(item);
-    bp::WarpWriter w;
-    if (kFill) {
-      w.keys = d.out.keys;
-      w.base = d.offset[d.entries + p];
-      w.capacity = d.out.capacity;
-    }
+  bp::warp_query<kFill>(d.n, d.entries, d.out, d.offset, d.count,
+                        [&](std::uint32_t p, unsigned lane, bp::WarpWriter& w, unsigned long long& tests) {
     if (d.kind[p] == kHashOversize) {
       const Aabb bp_box = d.aabb[p];
       for (std::uint32_t q0 = 0; q0 < d.n; q0 += bp::kWarpSize) {
@@ -186,9 +178,7 @@ __global__ void hash_oversize_query_kernel(HashDesc d) {
         w.round(hit, hit ? bp::pair_key(p, q, d.out.shift) : 0ull);
       }
     }
-    if (!kFill && lane == 0) d.count[d.entries + p] = w.written;
-  }
-  if (!kFill) bp::block_add(d.out.candidates, tests);
+  });
 }
 
 class SpatialHashDevice final : public DeviceBroadPhase {
@@ -208,27 +198,14 @@ class SpatialHashDevice final : public DeviceBroadPhase {
     const std::size_t n1 = static_cast<std::size_t>(n) + 1;
     kind_.ensure(n);
     cell0_.ensure(3 * static_cast<std::size_t>(n));
-    small_cells_.ensure(n1);
-    large_cells_.ensure(n1);
-    small_off_.ensure(n1);
-    large_off_.ensure(n1);
-    key_.ensure(entries);
-    key_sorted_.ensure(entries);
-    body_.ensure(entries);
-    slot_body_.ensure(entries);
-    count_.ensure(counts);
-    offset_.ensure(counts);
+    small_.ensure(n1);
+    large_.ensure(n1);
+    sort_.ensure(entries, false);
+    pairs_.ensure(counts);
     std::size_t bytes = 0;
-    bp::need_temp(bytes, "cub::DeviceRadixSort::SortPairs (size)", [&](std::size_t& b) {
-      return sort_pairs_u64_u32(nullptr, b, nullptr, nullptr, nullptr, nullptr, static_cast<std::uint32_t>(entries),
-                                64, stream);
-    });
-    bp::need_temp(bytes, "cub::DeviceScan::ExclusiveSum (size)", [&](std::size_t& b) {
-      return exclusive_scan_u32(nullptr, b, nullptr, nullptr, static_cast<std::uint32_t>(counts), stream);
-    });
-    bp::need_temp(bytes, "cub::DeviceScan::ExclusiveSum (size)", [&](std::size_t& b) {
-      return exclusive_scan_u32(nullptr, b, nullptr, nullptr, static_cast<std::uint32_t>(n1), stream);
-    });
+    sort_.need_temp(bytes, static_cast<std::uint32_t>(entries), 64, stream);
+    pairs_.need_temp(bytes, static_cast<std::uint32_t>(counts), stream);
+    small_.need_temp(bytes, static_cast<std::uint32_t>(n1), stream);  // large_ scans as many
     temp_.ensure(bytes);
     reserved_ = true;
     reserved_n_ = n;
@@ -239,50 +216,41 @@ class SpatialHashDevice final : public DeviceBroadPhase {
     const std::uint32_t entries = kEntriesPerBody * n;
     const std::uint32_t counts = entries + n + 1;
     HashDesc d;
-    d.aabb = aabb;
-    d.n = n;
+    d.set_find(aabb, n, out);
     d.inv_h = inv_h_;
     d.entries = entries;
     d.kind = kind_.get();
     d.cell0 = cell0_.get();
-    d.small_cells = small_cells_.get();
-    d.large_cells = large_cells_.get();
-    d.small_off = small_off_.get();
-    d.large_off = large_off_.get();
-    bp::set_key_sort(d, key_, body_, key_sorted_, slot_body_);
-    d.count = count_.get();
-    d.offset = offset_.get();
-    d.out = out;
+    d.small_cells = small_.count.get();
+    d.large_cells = large_.count.get();
+    d.small_off = small_.offset.get();
+    d.large_off = large_.offset.get();
+    sort_.set(d);
+    d.count = pairs_.count.get();
+    d.offset = pairs_.offset.get();
 
     hash_span_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "hash_span");
     std::size_t bytes = temp_.capacity();
-    bp::launched(exclusive_scan_u32(temp_.get(), bytes, small_cells_.get(), small_off_.get(), n + 1, stream),
-                 "cub::DeviceScan::ExclusiveSum");
+    bp::launched(small_.scan(temp_.get(), bytes, n + 1, stream), "cub::DeviceScan::ExclusiveSum");
     bytes = temp_.capacity();
-    bp::launched(exclusive_scan_u32(temp_.get(), bytes, large_cells_.get(), large_off_.get(), n + 1, stream),
-                 "cub::DeviceScan::ExclusiveSum");
+    bp::launched(large_.scan(temp_.get(), bytes, n + 1, stream), "cub::DeviceScan::ExclusiveSum");
     // Unused slots: key ~0 (sorted last, skipped), body ~0 (never read).
-    check(cudaMemsetAsync(key_.get(), 0xff, entries * sizeof(unsigned long long), stream), "cudaMemset hash keys");
-    check(cudaMemsetAsync(body_.get(), 0xff, entries * sizeof(std::uint32_t), stream), "cudaMemset hash bodies");
+    check(cudaMemsetAsync(sort_.key.get(), 0xff, entries * sizeof(unsigned long long), stream), "cudaMemset hash keys");
+    check(cudaMemsetAsync(sort_.body.get(), 0xff, entries * sizeof(std::uint32_t), stream), "cudaMemset hash bodies");
     hash_entries_kernel<<<grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "hash_entries");
     bytes = temp_.capacity();
-    bp::launched(
-        sort_pairs_u64_u32(temp_.get(), bytes, key_.get(), key_sorted_.get(), body_.get(), slot_body_.get(), entries,
-                           64, stream),
-        "cub::DeviceRadixSort::SortPairs");
-    check(cudaMemsetAsync(count_.get() + entries + n, 0, sizeof(std::uint32_t), stream), "cudaMemset hash counts");
+    bp::launched(sort_.sort(temp_.get(), bytes, entries, 64, stream), "cub::DeviceRadixSort::SortPairs");
+    check(cudaMemsetAsync(pairs_.count.get() + entries + n, 0, sizeof(std::uint32_t), stream),
+          "cudaMemset hash counts");
     hash_cell_query_kernel<false><<<grid_for(entries), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "hash_cell_query (count)");
     hash_oversize_query_kernel<false><<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "hash_oversize_query (count)");
     bytes = temp_.capacity();
-    bp::launched(exclusive_scan_u32(temp_.get(), bytes, count_.get(), offset_.get(), counts, stream),
-                 "cub::DeviceScan::ExclusiveSum");
-    check(cudaMemcpyAsync(out.total, offset_.get() + entries + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice,
-                          stream),
-          "cudaMemcpy pair total");
+    bp::launched(pairs_.scan(temp_.get(), bytes, counts, stream), "cub::DeviceScan::ExclusiveSum");
+    check(pairs_.copy_total(out.total, entries + n, stream), "cudaMemcpy pair total");
     hash_cell_query_kernel<true><<<grid_for(entries), kBlockSize, 0, stream>>>(d);
     bp::launched(cudaGetLastError(), "hash_cell_query (fill)");
     hash_oversize_query_kernel<true><<<bp::warp_grid_for(n), kBlockSize, 0, stream>>>(d);
@@ -290,8 +258,7 @@ class SpatialHashDevice final : public DeviceBroadPhase {
   }
 
   std::uint64_t device_bytes() const override {
-    return total_bytes({&kind_, &cell0_, &small_cells_, &large_cells_, &small_off_, &large_off_, &key_, &key_sorted_,
-                        &body_, &slot_body_, &count_, &offset_, &temp_});
+    return sort_.bytes() + small_.bytes() + large_.bytes() + pairs_.bytes() + total_bytes({&kind_, &cell0_, &temp_});
   }
 
  private:
@@ -300,16 +267,12 @@ class SpatialHashDevice final : public DeviceBroadPhase {
   std::uint32_t reserved_n_ = 0;
   DeviceBuffer<std::uint8_t> kind_{"spatial-hash body kinds"};
   DeviceBuffer<std::int32_t> cell0_{"spatial-hash body min cells"};
-  DeviceBuffer<std::uint32_t> small_cells_{"spatial-hash small-body cell counts"};
-  DeviceBuffer<std::uint32_t> large_cells_{"spatial-hash large-body cell counts"};
-  DeviceBuffer<std::uint32_t> small_off_{"spatial-hash small-body entry offsets"};
-  DeviceBuffer<std::uint32_t> large_off_{"spatial-hash large-body entry offsets"};
-  DeviceBuffer<unsigned long long> key_{"spatial-hash entry keys"};
-  DeviceBuffer<unsigned long long> key_sorted_{"spatial-hash sorted entry keys"};
-  DeviceBuffer<std::uint32_t> body_{"spatial-hash entry bodies"};
-  DeviceBuffer<std::uint32_t> slot_body_{"spatial-hash sorted entry bodies"};
-  DeviceBuffer<std::uint32_t> count_{"spatial-hash pair counts"};
-  DeviceBuffer<std::uint32_t> offset_{"spatial-hash pair offsets"};
+  ScannedCounts small_{"spatial-hash small-body cell counts", "spatial-hash small-body entry offsets"};
+  ScannedCounts large_{"spatial-hash large-body cell counts", "spatial-hash large-body entry offsets"};
+  bp::KeySortBuffers<unsigned long long> sort_{"spatial-hash entry keys", "spatial-hash entry bodies",
+                                               "spatial-hash sorted entry keys", "spatial-hash sorted entry bodies",
+                                               "spatial-hash slot boxes (unused)"};
+  ScannedCounts pairs_{"spatial-hash pair counts", "spatial-hash pair offsets"};
   DeviceBuffer<unsigned char> temp_{"spatial-hash CUB temporary storage"};
 };
 

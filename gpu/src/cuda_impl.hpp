@@ -26,7 +26,9 @@
 #include "device_broadphase.hpp"
 #include "device_buffer.hpp"
 #include "kernels.hpp"
+#include "scanned_counts.hpp"
 #include "octocd/cuda_world.hpp"
+#include "record_ring.hpp"
 
 namespace octocd {
 
@@ -152,6 +154,59 @@ struct CudaWorld::Impl {
   unsigned long long ahead_last = 0;
   gpu::DeviceBuffer<unsigned long long> resident_control{"resident step control"};
 
+  // ---- recorded batches (cuda_world.cpp; CudaSettings::record_batch, gpu::RecordRing) ----
+  long record_batch = 1;  // CudaSettings::record_batch
+  bool resident_spin = false;  // CudaSettings::resident_spin (ResidentDesc::spin)
+  std::uint64_t ring_max_bytes = gpu::kRecordRingMaxBytes;  // TestHooks::record_ring_max_bytes
+  std::uint32_t ring_slots = 0;  // slots of the ring now allocated (0: none)
+  std::uint32_t ring_pairs = 0;  // pairs a slot holds
+  gpu::DeviceBuffer<Vec3> ring_x_pre{"record ring: positions before the step"};
+  gpu::DeviceBuffer<Vec3> ring_v_pre{"record ring: velocities before the step"};
+  gpu::DeviceBuffer<Vec3> ring_x_post{"record ring: positions after the step"};
+  gpu::DeviceBuffer<Vec3> ring_v_post{"record ring: velocities after the step"};
+  gpu::DeviceBuffer<Aabb> ring_aabb{"record ring: world AABBs"};
+  gpu::DeviceBuffer<Pair> ring_pair_list{"record ring: candidate pairs"};
+  gpu::DeviceBuffer<std::uint8_t> ring_confirmed{"record ring: confirmed flags"};
+  gpu::DeviceBuffer<gpu::DeviceContact> ring_records{"record ring: contact records"};
+  // The ring's pinned host copy (the same layout), carved from one allocation.
+  unsigned char* ring_copy = nullptr;
+  Vec3* copy_x_pre = nullptr;
+  Vec3* copy_v_pre = nullptr;
+  Vec3* copy_x_post = nullptr;
+  Vec3* copy_v_post = nullptr;
+  Aabb* copy_aabb = nullptr;
+  Pair* copy_pairs = nullptr;
+  std::uint8_t* copy_confirmed = nullptr;
+  gpu::DeviceContact* copy_records = nullptr;
+  gpu::RecordWindow window;  // the steps the host copy holds, and the batch's first sequence
+  std::vector<std::size_t> window_at;  // per slot of the batch: where its pairs start in the pool
+  long long served_slot = -1;  // the last step's slot in the host copy (-1: not from the ring)
+  bool recorded_batch = false;  // the request under way records with the ring
+  bool resident_ring = false;   // the resident kernel was launched with the ring
+  unsigned long long prefetched_first = 0;  // the first step of a batch requested by prefetch_records (0: none)
+  static constexpr int kStoppedWord = 9;  // resident_host[9]: ResidentDesc::stopped (kernel writes)
+  /// Whether recorded steps run in batches through the ring: the resident kernel, and
+  /// record_batch > 1.
+  bool batching_records() const { return persistent && record_batch > 1; }
+  /// The ring's buffers (for device_bytes, and abandoned with the others after a hang).
+  std::vector<gpu::BufferBase*> ring_buffers();
+  /// Sizes the ring (record_batch slots, pairs per slot: gpu::record_ring_pairs) and its
+  /// pinned host copy; no resident kernel may run (a change frees memory).
+  void ensure_record_ring();
+  /// The ring as the resident kernel's descriptor gets it (slots 0 when not batching).
+  gpu::RecordRing ring_desc();
+  /// Makes the host copy hold step `sequence`'s record: waits for the batch's steps up to
+  /// window.copy_last (or the step that ended it early) and copies their slots back in one
+  /// go. False when the step's record is not in the ring (its pairs did not fit a slot: read
+  /// it from the live buffers).
+  bool fetch_records(std::uint32_t pairs_found);
+  /// After the host copy took a whole batch (its steps q .. last, q the step under way):
+  /// requests the next batch of recorded steps at once, when the promise has steps left, so
+  /// that the device runs it while the host takes this one (the statistics slots bound it:
+  /// RecordWindow::next_batch_room; it ends at the next timed step, and is not asked for
+  /// when both its last step and `last` are stamped: one set of stamps).
+  void prefetch_records(unsigned long long q, unsigned long long last);
+
   // ---- buffers (step_stages.cpp sizes them) ---------------------------------------------
   // Capacities of the variable-size buffers (entries); prepare() sizes the buffers.
   std::size_t pair_cap = 1;
@@ -184,19 +239,23 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<gpu::StepStats> stats{"step statistics"};
   gpu::DeviceBuffer<gpu::MetricsResult> metric_partials{"metrics partial sums"};
   // Variable size (pair_cap, list_cap), grown on overflow; reset_capacities shrinks them.
-  gpu::DeviceBuffer<std::uint32_t> bp_count{"broadphase counts"};
-  gpu::DeviceBuffer<std::uint32_t> bp_offset{"broadphase offsets"};
+  // Broadphase `flat` (n + 1 each): per body i the count and offset of its pairs (i, j), j > i.
+  gpu::ScannedCounts bp_counts{"broadphase counts", "broadphase offsets"};
   gpu::DeviceBuffer<unsigned long long> pair_keys{"pair keys"};
   gpu::DeviceBuffer<unsigned long long> pair_keys_sorted{"sorted pair keys"};
   gpu::DeviceBuffer<Pair> pairs{"candidate pairs"};
   gpu::DeviceBuffer<std::uint8_t> confirmed{"confirmed flags"};
   gpu::DeviceBuffer<gpu::MidItem> items_a{"midphase work list A"};
   gpu::DeviceBuffer<gpu::MidItem> items_b{"midphase work list B"};
-  gpu::DeviceBuffer<std::uint8_t> hit{"contact hit flags"};
-  gpu::DeviceBuffer<Vec3> dx_a{"contact dx_a"};
-  gpu::DeviceBuffer<Vec3> dx_b{"contact dx_b"};
-  gpu::DeviceBuffer<Vec3> dv_a{"contact dv_a"};
-  gpu::DeviceBuffer<Vec3> dv_b{"contact dv_b"};
+  // The per-pair corrections: the contact terms' outputs, the apply's inputs (gpu::TermsDesc,
+  // gpu::ApplyDesc; step_stages.cpp's set_corrections).
+  struct Corrections {
+    gpu::DeviceBuffer<std::uint8_t> hit{"contact hit flags"};
+    gpu::DeviceBuffer<Vec3> dx_a{"contact dx_a"};
+    gpu::DeviceBuffer<Vec3> dx_b{"contact dx_b"};
+    gpu::DeviceBuffer<Vec3> dv_a{"contact dv_a"};
+    gpu::DeviceBuffer<Vec3> dv_b{"contact dv_b"};
+  } corrections;
   gpu::DeviceBuffer<float> depth0{"contact depths"};
   gpu::DeviceBuffer<gpu::DeviceContact> records{"contact records"};
   // The per-stage path's contact index (response.cu, gpu::IndexDesc).
@@ -212,10 +271,9 @@ struct CudaWorld::Impl {
   gpu::DeviceBuffer<std::uint32_t> prev_begin{"midphase kept key runs"};
   gpu::DeviceBuffer<std::uint32_t> prev_count{"midphase kept key count"};
   gpu::DeviceBuffer<unsigned long long> leaf_items{"midphase leaf items"};  // MidListDesc::leaf_items
-  // The small path's in-lists and their offsets.
+  // The small path's in-lists, per body their counts and offsets (n + 1 each; small path only).
   gpu::DeviceBuffer<std::uint32_t> in_list{"small-step in-lists"};
-  gpu::DeviceBuffer<std::uint32_t> body_begin{"small-step in-list offsets"};
-  gpu::DeviceBuffer<std::uint32_t> in_count{"small-step column counts"};  // small path only
+  gpu::ScannedCounts in_counts{"small-step column counts", "small-step in-list offsets"};
   gpu::DeviceBuffer<unsigned char> temp{"CUB temporary storage"};
 
   gpu::StepStats* host = nullptr;  // pinned
@@ -303,16 +361,18 @@ struct CudaWorld::Impl {
 
   // ---- small_step_host.cpp: the fused small step ---------------------------------------
   /// The fused small step's descriptor (small_step.cu): the same buffers as the per-stage
-  /// path; the in-lists live in in_list, their offsets in body_begin.
+  /// path; the in-lists live in in_list, their counts and offsets in in_counts.
   gpu::SmallStepDesc small_desc(const Scene& scene, bool recording);
   /// One fused step (resident or a launch), its statistics through mapped memory.
   void run_small(const Scene& scene, bool recording);
   /// Spins until the fused step's kernel has written this step's number.
   void wait_small_step();
   unsigned long long exited_mark() const;
+  unsigned long long stopped_mark() const;  // resident_host[kStoppedWord]
   unsigned long long done_mark() const;
   void write_request(unsigned long long value);
-  void launch_resident(const Scene& scene);
+  /// Launches the resident kernel; `ring`: with the record ring (ensure_record_ring).
+  void launch_resident(const Scene& scene, bool ring);
   /// The steps after this one that its request asks for (ResidentDesc): at most
   /// kResidentAheadMax, promised - 1, and the steps to the next timed one (a batch ends at
   /// its timed step, the one its request stamps); 0 under small_profile.

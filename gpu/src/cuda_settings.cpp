@@ -15,6 +15,7 @@ namespace {
 
 constexpr long kMostTimeoutMs = 86400000L;
 constexpr long kMostStageTimeEvery = 1000000L;
+constexpr long kMostRecordBatch = 64;  // the resident kernel's batch: 1 + kResidentAheadMax steps
 
 bool parse_bool(const std::string& where, const std::string& key, const std::string& value) {
   if (value == "1" || value == "true" || value == "on") return true;
@@ -43,11 +44,15 @@ void check_cuda_settings(const CudaSettings& s, const std::string& where) {
   if (s.stage_time_every < 1 || s.stage_time_every > kMostStageTimeEvery)
     throw InputError(fmt::format("{}: stage_time_every={} is not allowed; allowed: 1 .. {} (steps per timed step)",
                                  where, s.stage_time_every, kMostStageTimeEvery));
+  if (s.record_batch < 1 || s.record_batch > kMostRecordBatch)
+    throw InputError(fmt::format("{}: record_batch={} is not allowed; allowed: 1 .. {} (recorded steps per batch)",
+                                 where, s.record_batch, kMostRecordBatch));
 }
 
 std::vector<std::string> cuda_setting_names() {
   return {"midphase_early_exit", "memory_limit_bytes", "resident_timeout_ms", "stage_times", "stage_time_every",
-          "sync_each_launch",    "graph",              "small_path",          "small_profile"};
+          "sync_each_launch",    "graph",              "small_path",          "small_profile",
+          "record_batch",        "resident_spin"};
 }
 
 void set_cuda_setting(CudaSettings& s, const std::string& key, const std::string& value, const std::string& where) {
@@ -65,6 +70,9 @@ void set_cuda_setting(CudaSettings& s, const std::string& key, const std::string
         static_cast<long>(parse_integer(where, key, value, 1, kMostStageTimeEvery, "steps per timed step"));
   else if (key == "small_path") s.small_path = parse_bool(where, key, value);
   else if (key == "small_profile") s.small_profile = parse_bool(where, key, value);
+  else if (key == "resident_spin") s.resident_spin = parse_bool(where, key, value);
+  else if (key == "record_batch")
+    s.record_batch = static_cast<long>(parse_integer(where, key, value, 1, kMostRecordBatch, "recorded steps per batch"));
   else {
     std::string names;
     for (const std::string& n : cuda_setting_names()) names += (names.empty() ? "" : ", ") + n;

@@ -34,6 +34,7 @@ CudaWorld::Impl::~Impl() {
     // cudaFree and cudaFreeHost would wait for the kernel forever: leave the memory to the
     // process's end (the driver reclaims it).
     for (BufferBase* b : all_buffers()) b->abandon();
+    for (BufferBase* b : ring_buffers()) b->abandon();
     resident_control.abandon();
     (void)bp.release();
     return;
@@ -44,6 +45,7 @@ CudaWorld::Impl::~Impl() {
   if (resident_host) (void)cudaFreeHost(resident_host);
   if (ring_host) (void)cudaFreeHost(ring_host);
   if (staging) (void)cudaFreeHost(staging);
+  if (ring_copy) (void)cudaFreeHost(ring_copy);
   for (cudaEvent_t& e : events)
     if (e) (void)cudaEventDestroy(e);
   if (stream) (void)cudaStreamDestroy(stream);
@@ -70,6 +72,159 @@ void CudaWorld::Impl::allocate_staging() {
   staged_pairs = reinterpret_cast<Pair*>(take(pair_bytes));
   staged_confirmed = take(flag_bytes);
   staged_records = reinterpret_cast<gpu::DeviceContact*>(take(record_bytes));
+}
+
+// ---- recorded batches (CudaSettings::record_batch) ----------------------------------------
+
+std::vector<BufferBase*> CudaWorld::Impl::ring_buffers() {
+  return {&ring_x_pre, &ring_v_pre, &ring_x_post, &ring_v_post, &ring_aabb, &ring_pair_list, &ring_confirmed,
+          &ring_records};
+}
+
+void CudaWorld::Impl::ensure_record_ring() {
+  const std::uint32_t slots = static_cast<std::uint32_t>(record_batch);
+  constexpr std::uint64_t body_bytes = 4 * sizeof(Vec3) + sizeof(Aabb);
+  constexpr std::uint64_t pair_bytes = sizeof(Pair) + sizeof(std::uint8_t) + sizeof(gpu::DeviceContact);
+  const std::uint32_t pool = gpu::record_ring_pairs(pair_cap, slots, n, body_bytes, pair_bytes, ring_max_bytes);
+  if (ring_copy && slots == ring_slots && pool == ring_pairs) return;
+  if (ring_copy) (void)cudaFreeHost(ring_copy);  // no resident kernel runs (launch_resident)
+  ring_copy = nullptr;
+  ring_slots = 0;
+  window.clear();
+  const std::size_t states = static_cast<std::size_t>(slots) * n;
+  for (gpu::DeviceBuffer<Vec3>* b : {&ring_x_pre, &ring_v_pre, &ring_x_post, &ring_v_post}) b->reset(states);
+  ring_aabb.reset(states);
+  ring_pair_list.reset(pool);
+  ring_confirmed.reset(pool);
+  ring_records.reset(pool);
+  const auto rounded = [](std::size_t bytes) { return (bytes + 63) / 64 * 64; };
+  const std::size_t vec = rounded(sizeof(Vec3) * states), box = rounded(sizeof(Aabb) * states);
+  const std::size_t pair_b = rounded(sizeof(Pair) * pool), flag_b = rounded(pool),
+                    rec_b = rounded(sizeof(gpu::DeviceContact) * pool);
+  check(cudaMallocHost(reinterpret_cast<void**>(&ring_copy), 4 * vec + box + pair_b + flag_b + rec_b),
+        "cudaMallocHost (record ring's host copy)");
+  unsigned char* p = ring_copy;
+  const auto take = [&p](std::size_t bytes) {
+    unsigned char* at = p;
+    p += bytes;
+    return at;
+  };
+  copy_x_pre = reinterpret_cast<Vec3*>(take(vec));
+  copy_v_pre = reinterpret_cast<Vec3*>(take(vec));
+  copy_x_post = reinterpret_cast<Vec3*>(take(vec));
+  copy_v_post = reinterpret_cast<Vec3*>(take(vec));
+  copy_aabb = reinterpret_cast<Aabb*>(take(box));
+  copy_pairs = reinterpret_cast<Pair*>(take(pair_b));
+  copy_confirmed = take(flag_b);
+  copy_records = reinterpret_cast<gpu::DeviceContact*>(take(rec_b));
+  ring_slots = slots;
+  ring_pairs = pool;
+  window_at.assign(static_cast<std::size_t>(slots) + 1, 0);
+}
+
+gpu::RecordRing CudaWorld::Impl::ring_desc() {
+  gpu::RecordRing r;
+  r.x_pre = ring_x_pre.get();
+  r.v_pre = ring_v_pre.get();
+  r.x_post = ring_x_post.get();
+  r.v_post = ring_v_post.get();
+  r.aabb = ring_aabb.get();
+  r.pairs = ring_pair_list.get();
+  r.confirmed = ring_confirmed.get();
+  r.records = ring_records.get();
+  r.pair_capacity = ring_pairs;
+  r.slots = ring_slots;
+  return r;
+}
+
+bool CudaWorld::Impl::fetch_records(std::uint32_t pairs_found) {
+  const unsigned long long q = sequence;
+  if (window.holds(q)) return true;
+  window.advance(q);  // the first step of a batch prefetch_records asked for
+  if (ring_slots == 0 || q < window.base || pairs_found > ring_pairs) return false;
+  unsigned long long last = window.copy_last(q, ahead_last, static_cast<unsigned long long>(record_batch), ring_slots);
+  // Wait for the batch's steps up to `last`, or up to the step that ended it early (its own
+  // record then stays in the live buffers when it is this one). done before stopped: the
+  // kernel writes the stop mark before the step's number.
+  const auto t0 = Clock::now();
+  for (unsigned spins = 1;; ++spins) {
+    const unsigned long long done = done_mark();
+    const unsigned long long stopped = stopped_mark();
+    if (stopped >= q && stopped <= last && done >= stopped) {
+      if (stopped == q) return false;
+      last = stopped - 1;
+      break;
+    }
+    if (done >= last) break;
+    if (exited_mark() == epoch) {
+      // Its marks are final now: look once more, then give up.
+      const unsigned long long d2 = done_mark(), s2 = stopped_mark();
+      if (d2 >= last || (s2 >= q && s2 <= last && d2 >= s2)) continue;
+      resident_alive = false;
+      throw RuntimeError(fmt::format("the resident small-step kernel ended before recorded step {} (batch to {})",
+                                     last, ahead_last));
+    }
+    if ((spins & 1023u) != 0) continue;
+    const cudaError_t e = cudaStreamQuery(resident_stream);
+    if (e != cudaSuccess && e != cudaErrorNotReady) {
+      resident_alive = false;
+      check(e, "small_resident (cudaStreamQuery, recorded batch)");
+    }
+    if (ms_since(t0) > static_cast<double>(resident_timeout_ms))
+      throw RuntimeError(fmt::format("the resident small-step kernel did not finish recorded step {} within {} ms "
+                                     "(resident_timeout_ms)",
+                                     last, resident_timeout_ms));
+  }
+  // The pool offsets of the batch's slots from its steps' pair counts (each step's
+  // statistics slot, written before its number), as the kernel advanced them.
+  const std::size_t first = window.slot(q), count = static_cast<std::size_t>(last - q + 1);
+  window_at[0] = 0;
+  for (std::size_t k = 0; k < first + count; ++k)
+    window_at[k + 1] = window_at[k] + ring_host[(window.base + k) % gpu::kResidentStatsSlots].counts[0];
+  const std::size_t b0 = first * n, bn = count * n;
+  const auto back = [this](void* to, const void* from, std::size_t bytes, const char* what) {
+    if (bytes > 0) check(cudaMemcpyAsync(to, from, bytes, cudaMemcpyDeviceToHost, stream), what);
+  };
+  back(copy_x_pre + b0, ring_x_pre.get() + b0, sizeof(Vec3) * bn, "cudaMemcpy from 'record ring: x_pre'");
+  back(copy_v_pre + b0, ring_v_pre.get() + b0, sizeof(Vec3) * bn, "cudaMemcpy from 'record ring: v_pre'");
+  back(copy_x_post + b0, ring_x_post.get() + b0, sizeof(Vec3) * bn, "cudaMemcpy from 'record ring: x_post'");
+  back(copy_v_post + b0, ring_v_post.get() + b0, sizeof(Vec3) * bn, "cudaMemcpy from 'record ring: v_post'");
+  back(copy_aabb + b0, ring_aabb.get() + b0, sizeof(Aabb) * bn, "cudaMemcpy from 'record ring: AABBs'");
+  const std::size_t p0 = window_at[first], pn = window_at[first + count] - p0;
+  back(copy_pairs + p0, ring_pair_list.get() + p0, sizeof(Pair) * pn, "cudaMemcpy from 'record ring: pairs'");
+  back(copy_confirmed + p0, ring_confirmed.get() + p0, pn, "cudaMemcpy from 'record ring: confirmed flags'");
+  back(copy_records + p0, ring_records.get() + p0, sizeof(gpu::DeviceContact) * pn,
+       "cudaMemcpy from 'record ring: contact records'");
+  check(cudaStreamSynchronize(stream), "cudaStreamSynchronize (recorded batch)");
+  window.copied(q, last);
+  if (last == ahead_last) prefetch_records(q, last);
+  return true;
+}
+
+void CudaWorld::Impl::prefetch_records(unsigned long long q, unsigned long long last) {
+  if (small_profile || !resident_alive || exited_mark() == epoch) return;  // (an exited kernel: the next step asks)
+  const std::int64_t remaining = promised - static_cast<std::int64_t>(last - q);  // promised after `last`
+  if (remaining <= 0) return;
+  unsigned long long room = 0;
+  if (!gpu::RecordWindow::next_batch_room(q, last, gpu::kResidentStatsSlots, room)) return;
+  const unsigned long long first = last + 1;
+  const std::int64_t frame = step_frame + static_cast<std::int64_t>(first - q);
+  unsigned long long extra = 0;
+  if (!timed_frame(frame)) {  // as batch_extra: up to the next timed step, which ends the batch
+    extra = std::min({room, static_cast<unsigned long long>(remaining - 1),
+                      static_cast<unsigned long long>(record_batch - 1), gpu::kResidentAheadMax});
+    if (stage_times)
+      extra = std::min(extra, static_cast<unsigned long long>(stage_time_every - (frame - 1) % stage_time_every));
+  }
+  const bool stamp = timed_frame(frame + static_cast<std::int64_t>(extra));
+  // The phase stamps have one place: not while this batch's last step's are still to be read.
+  if (stamp && timed_frame(step_frame + static_cast<std::int64_t>(last - q))) return;
+  ahead_last = first + extra;
+  prefetched_first = first;
+  window.next_base = first;
+  ++resident_requests;
+  write_request((first << gpu::kResidentShift) | (extra << gpu::kResidentAheadShift) | gpu::kResidentRecord |
+                (stamp && small_dev ? gpu::kResidentStamp : 0ull));
 }
 
 void CudaWorld::Impl::run_step(const Scene& scene, bool recording) {
@@ -120,6 +275,9 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.use_graph = settings.graph;
   d.stage_times = settings.stage_times;
   d.stage_time_every = settings.stage_time_every;
+  d.record_batch = settings.record_batch;
+  d.resident_spin = settings.resident_spin;
+  if (hooks.record_ring_max_bytes > 0) d.ring_max_bytes = hooks.record_ring_max_bytes;
   {
     int dev = 0, sms = 1;
     check(cudaGetDevice(&dev), "cudaGetDevice");
@@ -342,6 +500,7 @@ std::uint64_t CudaWorld::resident_requests() const { return impl_->resident_requ
 std::uint64_t CudaWorld::device_bytes() const {
   std::uint64_t total = 0;
   for (const BufferBase* b : impl_->all_buffers()) total += b->bytes();
+  for (const BufferBase* b : impl_->ring_buffers()) total += b->bytes();
   if (impl_->bp) total += impl_->bp->device_bytes();
   return total;
 }
@@ -388,9 +547,16 @@ void CudaWorld::set_recording(bool on) {
 const FrameRecord& CudaWorld::record() const {
   if (!record_whole_) {
     const Impl& d = *impl_;
-    download(record_.x_pre, d.x_pre, d.n, d.stream);
-    download(record_.v_pre, d.v_pre, d.n, d.stream);
-    download(record_.aabbs, d.aabb, d.n, d.stream);
+    if (d.served_slot >= 0) {  // from the recorded batch's host copy
+      const std::size_t at = static_cast<std::size_t>(d.served_slot) * d.n;
+      record_.x_pre.assign(d.copy_x_pre + at, d.copy_x_pre + at + d.n);
+      record_.v_pre.assign(d.copy_v_pre + at, d.copy_v_pre + at + d.n);
+      record_.aabbs.assign(d.copy_aabb + at, d.copy_aabb + at + d.n);
+    } else {
+      download(record_.x_pre, d.x_pre, d.n, d.stream);
+      download(record_.v_pre, d.v_pre, d.n, d.stream);
+      download(record_.aabbs, d.aabb, d.n, d.stream);
+    }
     const BodyState& s = state();
     record_.x_post = s.x;
     record_.v_post = s.v;
@@ -402,6 +568,15 @@ const FrameRecord& CudaWorld::record() const {
 const BodyState& CudaWorld::state() const {
   if (state_frame_ != frame_) {
     Impl& d = *impl_;
+    if (d.served_slot >= 0) {
+      // A recorded batch's step: its state after it from the host copy (the kernel may run
+      // ahead); w never changes in a step, so the host's copy of it holds.
+      const std::size_t at = static_cast<std::size_t>(d.served_slot) * d.n;
+      state_.x.assign(d.copy_x_post + at, d.copy_x_post + at + d.n);
+      state_.v.assign(d.copy_v_post + at, d.copy_v_post + at + d.n);
+      state_frame_ = frame_;
+      return state_;
+    }
     d.refuse_ahead("state");
     if (d.staging) {
       const std::size_t n = d.n;
@@ -437,6 +612,7 @@ const FrameMetrics& CudaWorld::step() {
   const std::uint32_t n = d.n;
   FrameMetrics m;
   m.frame = frame_ + 1;
+  d.served_slot = -1;
   m.time = static_cast<double>(m.frame) * static_cast<double>(scene.dt);
   if (recording_) {
     // The state at the step's start stays on the device until record() asks for it; on the
@@ -508,7 +684,17 @@ const FrameMetrics& CudaWorld::step() {
     std::vector<gpu::DeviceContact> records_pageable;
     const std::uint8_t* confirmed = nullptr;
     const gpu::DeviceContact* recs = nullptr;
-    if (d.staging && np <= Impl::kStagedRecordPairs) {
+    const bool from_ring = d.recorded_batch && d.fetch_records(np);
+    // A recorded batch's step not in the ring (its pairs did not fit) ended the batch: the
+    // next step is a new request.
+    if (d.recorded_batch && !from_ring) d.ahead_last = std::min(d.ahead_last, d.sequence);
+    if (from_ring) {
+      const std::size_t slot = d.window.slot(d.sequence), at = d.window_at[slot];
+      d.served_slot = static_cast<long long>(slot);
+      record_.pairs.assign(d.copy_pairs + at, d.copy_pairs + at + np);
+      confirmed = d.copy_confirmed + at;
+      recs = d.copy_records + at;
+    } else if (d.staging && np <= Impl::kStagedRecordPairs) {
       if (np > 0) {
         check(cudaMemcpyAsync(d.staged_pairs, d.pairs.get(), sizeof(Pair) * np, cudaMemcpyDeviceToHost, d.stream),
               "cudaMemcpy from 'candidate pairs'");

@@ -137,7 +137,7 @@ std::uint64_t engine_bytes(std::uint64_t n, const BroadPhaseConfig& cfg, const S
                                buf(sc.cells, sizeof(MeshOctreeCell)) + buf(sc.level_offsets, sizeof(std::uint32_t)) +
                                buf(sc.blocks, sizeof(Aabb)) + buf(sc.theta, sizeof(float)) + buf(1, kStepStatsBytes) +
                                buf(kMetricsPartials, kMetricsResultBytes);
-  // prepare() at the first capacities: bp_count, bp_offset, body_begin (n + 1 each), the
+  // prepare() at the first capacities: bp_counts (two), in_counts.offset (n + 1 each), the
   // contact index's offsets (n + 1, 8 bytes); per candidate pair: pair keys (2), pairs,
   // confirmed, hit, dx_a, dx_b, dv_a, dv_b, depth0, records, the contact index's ranks
   // and entries (the small path holds its in-lists instead), its long-segment list (pcap /

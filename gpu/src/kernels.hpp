@@ -472,8 +472,9 @@ constexpr std::uint32_t kSmallSharedBoxesMaxBodies = 1024;
 /// sequence .. sequence + ahead (ahead <= kResidentAheadMax) back to back, with no request
 /// between them, while each step leaves every list within its capacity and every body
 /// finite (a step that does not is the batch's last: the host reruns it or throws); flags:
-/// kResidentRecord (the first step's first pass writes `records`; the host asks no steps
-/// ahead then), kResidentStamp (stamp the phases of the batch's last step into
+/// kResidentRecord (every step of the batch is recorded: its first pass writes `records`;
+/// with `ring` given each step then copies its record into the ring's slot
+/// step - sequence, RecordRing), kResidentStamp (stamp the phases of the batch's last step into
 /// SmallStepDesc::profile), kResidentExit (end the kernel, after the batch under way).
 /// Each step runs the per-step kernel's code with its sequence, so it ends by writing its
 /// statistics to its slot and its sequence to SmallStepDesc::done. The kernel also ends
@@ -481,6 +482,29 @@ constexpr std::uint32_t kSmallSharedBoxesMaxBodies = 1024;
 /// on an idle resident kernel for long); on every exit it writes `epoch` to `exited`
 /// (mapped), after its last step's `done`. The host tells the two apart: a request is
 /// either run (done >= its sequence) or left (exited == epoch and done older).
+/// The recorded steps of a resident batch (ResidentDesc::ring; CudaSettings::record_batch):
+/// device arrays of `slots` slots. After a recorded step's response, block 0 copies into
+/// slot k (the step's place in its batch, 0 for the request's first step) what
+/// CudaWorld::record reads: the state at the step's start (x_pre, v_pre), the world AABBs,
+/// the state after it (x_post, v_post: n each, at k * n), and the step's pairs, confirmed
+/// flags and first-pass contact records, as many as the step found, right after the pairs
+/// of the batch's earlier steps (a pool of pair_capacity pairs: the host finds a step's
+/// place from the earlier steps' pair counts). A step whose pairs do not fit the pool's rest
+/// copies none and ends its batch (the host reads that step's record from the live buffers). The host copies a batch's slots back in
+/// one go (cuda_world.cpp, CudaWorld::Impl::fetch_records).
+struct RecordRing {
+  Vec3* x_pre = nullptr;
+  Vec3* v_pre = nullptr;
+  Vec3* x_post = nullptr;
+  Vec3* v_post = nullptr;
+  Aabb* aabb = nullptr;
+  Pair* pairs = nullptr;
+  std::uint8_t* confirmed = nullptr;
+  DeviceContact* records = nullptr;
+  std::uint32_t pair_capacity = 0;  ///< pairs the pool holds (all slots together)
+  std::uint32_t slots = 0;          ///< 0: no ring (a recorded step is read from the live buffers)
+};
+
 struct ResidentDesc {
   unsigned long long* request = nullptr;  ///< mapped pinned host memory, written by the host
   unsigned long long* exited = nullptr;   ///< mapped pinned host memory, written at exit
@@ -489,6 +513,15 @@ struct ResidentDesc {
   unsigned long long epoch = 0;           ///< this launch's number, written to *exited
   unsigned long long idle_ns = 0;         ///< exit after this long without a request (0: never)
   DeviceContact* records = nullptr;       ///< the first pass's records of a recorded step
+  RecordRing ring;                        ///< recorded batches' slots (slots 0: none)
+  /// Mapped pinned host memory (may be null): the sequence of the last step that ended its
+  /// batch early (a list over its capacity, a non-finite body, a ring slot too small),
+  /// written before that step's SmallStepDesc::done.
+  unsigned long long* stopped = nullptr;
+  /// CudaSettings::resident_spin: the waits (block 0's for a request, the other blocks' for
+  /// the next step's ticket) poll without __nanosleep backoff (0: back off after 256 and 64
+  /// polls, up to 1024 and 256 ns).
+  int spin = 0;
   int stall = 0;  ///< test hook (CudaWorld::TestHooks::resident_ignores_requests): ignore step requests, honour exit
 };
 constexpr int kResidentShift = 9;
@@ -625,12 +658,7 @@ cudaError_t sort_keys_u64(void* temp, std::size_t& temp_bytes, const unsigned lo
 cudaError_t min_f32(void* temp, std::size_t& temp_bytes, const float* in, float* out, std::uint32_t count,
                     cudaStream_t stream);
 
-// ---- primitives.cu (CUB), for broadphase_octree_strict.cu and broadphase_spatial_hash.cu --
-/// Stable radix sort of (uint64 key, uint32 value) pairs by the key's bits [0, end_bit).
-/// With temp == nullptr only sets temp_bytes.
-cudaError_t sort_pairs_u64_u32(void* temp, std::size_t& temp_bytes, const unsigned long long* keys_in,
-                               unsigned long long* keys_out, const std::uint32_t* vals_in, std::uint32_t* vals_out,
-                               std::uint32_t count, int end_bit, cudaStream_t stream);
+// ---- primitives.cu (CUB), for broadphase_octree_strict.cu ----------------------------
 /// Sum of `count` doubles into *out (CUB's fixed reduction tree: the same bits run to run
 /// on one device). With temp == nullptr only sets temp_bytes.
 cudaError_t sum_f64(void* temp, std::size_t& temp_bytes, const double* in, double* out, std::uint32_t count,

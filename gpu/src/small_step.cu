@@ -308,11 +308,16 @@ struct NoHandOver {
 /// tile filter read as off, constants the compiler folds away.
 /// Returns, to thread 0 of block 0 (false elsewhere), whether the next step may follow
 /// without the host: every list within its capacity (the host's regrow test,
-/// CudaWorld::Impl::grow_if_needed) and every body finite.
+/// CudaWorld::Impl::grow_if_needed), every body finite, and (with `ring`) the step's
+/// record in the ring (RecordRing: block 0 copies it after the response, before the
+/// hand-over, into slot `ring_slot` and its pairs from `ring_at`; thread 0 of block 0 sets
+/// *ring_used to the pairs copied).
 template <bool kLean, bool kResident = false, class HandOver = NoHandOver>
 __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned long long sequence,
                                                 DeviceContact* records, unsigned long long* profile,
-                                                unsigned char* smem, HandOver&& hand_over = HandOver{}) {
+                                                unsigned char* smem, HandOver&& hand_over = HandOver{},
+                                                const RecordRing* ring = nullptr, std::uint32_t ring_slot = 0,
+                                                std::uint32_t ring_at = 0, std::uint32_t* ring_used = nullptr) {
   cg::grid_group grid = cg::this_grid();
   const BodiesDesc& b = s.bodies;
   const std::uint32_t n = b.n;
@@ -606,6 +611,34 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
   }
   stamp(profile, 8);
 
+  // 7b. A recorded step of a resident batch with a ring (RecordRing): block 0 copies the
+  // step's record into its slot, before the next step is handed over (its midphase rewrites
+  // the pairs and flags, its integration x_pre). A step whose pairs do not fit the slot
+  // copies nothing and ends the batch (the host reads it from the live buffers).
+  bool ring_fits = true;
+  if (ring != nullptr && records != nullptr && blockIdx.x == 0) {  // uniform per block
+    const std::uint32_t np = st->counts[0];
+    ring_fits = ring_at <= ring->pair_capacity && np <= ring->pair_capacity - ring_at;
+    if (fits && ring_fits) {
+      if (threadIdx.x == 0 && ring_used) *ring_used = np;
+      const std::size_t at = static_cast<std::size_t>(ring_slot) * n;
+      for (std::uint32_t i = threadIdx.x; i < n; i += blockDim.x) {
+        ring->x_pre[at + i] = s.x_pre[i];
+        ring->v_pre[at + i] = s.v_pre[i];
+        ring->aabb[at + i] = b.aabb[i];
+        ring->x_post[at + i] = b.x[i];
+        ring->v_post[at + i] = b.v[i];
+      }
+      const std::size_t pat = ring_at;
+      for (std::uint32_t k = threadIdx.x; k < np; k += blockDim.x) {
+        ring->pairs[pat + k] = s.terms.pairs[k];
+        ring->confirmed[pat + k] = s.terms.confirmed[k];
+        ring->records[pat + k] = records[k];
+      }
+    }
+    __syncthreads();  // every copy read before thread 0 hands the next step over
+  }
+
   // 8. Block 0: the metrics, then everything the host reads, then the step's number.
   bool goes_on = false;
   if (blockIdx.x == 0) {
@@ -618,7 +651,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
         for (int c = 0; c < hd::kMidphaseMaxLevels + 1; ++c) host->counts[c] = st->counts[c];
         host->index_long = st->index_long;
       }
-      goes_on = fits && first_bad >= n;
+      goes_on = fits && ring_fits && first_bad >= n;
       hand_over(goes_on);
     }
     metrics::metrics_block(s.metrics, reinterpret_cast<metrics::Acc*>(smem), 0, 1, &st->metrics);
@@ -632,7 +665,7 @@ __device__ __forceinline__ bool small_step_body(const SmallStepDesc& s, unsigned
         __threadfence_system();  // the statistics (and stamps) before the step's number
         *s.done = sequence;
       }
-      if (!early) goes_on = fits && st->metrics.first_non_finite >= n;
+      if (!early) goes_on = fits && ring_fits && st->metrics.first_non_finite >= n;
     }
   }
   return goes_on;
@@ -649,7 +682,7 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(const __grid_con
 constexpr unsigned long long kExitCommand = ~0ull;
 
 /// Block 0, thread 0: waits for a request other than `handled` (system-scope loads of the
-/// mapped word, tight at first, then __nanosleep backoff up to 1 us); returns it, or
+/// mapped word, tight at first, then __nanosleep backoff up to 1 us unless r.spin); returns it, or
 /// kExitCommand for an exit request or after r.idle_ns without one.
 __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long long handled) {
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_system> request(*r.request);
@@ -662,7 +695,7 @@ __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long 
       if (!r.stall) return req;
     }
     if ((spins & 7u) == 0 && r.idle_ns != 0 && global_ns() - t0 > r.idle_ns) return kExitCommand;
-    if (spins >= 256) {
+    if (spins >= 256 && !r.spin) {
       __nanosleep(sleep_ns);
       sleep_ns = sleep_ns < 1024 ? sleep_ns * 2 + 32 : 1024;
     }
@@ -699,11 +732,20 @@ __global__ void __launch_bounds__(kBlockSize, 1)
   unsigned long long ran = 0;  // the last step run, whose *done is still to be written (0: none)
   unsigned long long handed = 0;  // the command published by the early hand-over (0: none)
   bool stamp_last = false;
-  // Block 0, thread 0: the batch's next step's command; publishing a command (a step's
+  // Block 0, thread 0: the batch records every step (kResidentRecord), its first step, and
+  // whether the step `ran` ended its batch early (written to r.stopped with its done).
+  bool record_batch = false;
+  unsigned long long first = 0;
+  bool ran_stopped = false;
+  std::uint32_t ring_at = 0;  // the batch's pairs copied into the ring so far
+  __shared__ std::uint32_t block_ring_at;  // block 0: ring_at for the step under way
+  // Block 0, thread 0: the batch's next step's command (a recorded batch's carries the
+  // record flag and the step's ring slot, next - first, in the ahead bits); publishing a command (a step's
   // counts zeroed first, released with the ticket: small_step_body's kResident); the next
   // step published when the request asked for it and the step went on (0: none).
   const auto next_command = [&]() -> unsigned long long {
-    return (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull);
+    return (next << kResidentShift) | (next == last && stamp_last ? kResidentStamp : 0ull) |
+           (record_batch ? kResidentRecord | (((next - first) & kResidentAheadMax) << kResidentAheadShift) : 0ull);
   };
   const auto publish = [&](unsigned long long cmd) {
     if (cmd != kExitCommand) zero_step_counts(*s.stats);
@@ -730,6 +772,7 @@ __global__ void __launch_bounds__(kBlockSize, 1)
         }
         handed = 0;
         if (ran != 0 && s.done) {
+          if (ran_stopped && r.stopped) *r.stopped = ran;  // before the step's number
           __threadfence_system();  // the statistics (and stamps) before the step's number
           *s.done = ran;
         }
@@ -741,14 +784,17 @@ __global__ void __launch_bounds__(kBlockSize, 1)
             next = cmd >> kResidentShift;
             last = next + ((cmd >> kResidentAheadShift) & kResidentAheadMax);
             stamp_last = (cmd & kResidentStamp) != 0;
-            cmd = next_command() | (cmd & kResidentRecord);
+            record_batch = (cmd & kResidentRecord) != 0;
+            first = next;
+            ring_at = 0;
+            cmd = next_command();
           }
           publish(cmd);
         }
       } else {
         unsigned sleep_ns = 0;
         for (unsigned spins = 0; ticket.load(cuda::std::memory_order_acquire) == my_ticket; ++spins) {
-          if (spins >= 64) {
+          if (spins >= 64 && !r.spin) {
             __nanosleep(sleep_ns);
             sleep_ns = sleep_ns < 256 ? sleep_ns * 2 + 32 : 256;
           }
@@ -757,21 +803,30 @@ __global__ void __launch_bounds__(kBlockSize, 1)
       }
       ++my_ticket;
       command = cmd;
+      block_ring_at = ring_at;
     }
     __syncthreads();
     const unsigned long long cmd = command;
-    __syncthreads();  // every thread has read it before thread 0 writes the next one
+    const std::uint32_t at = block_ring_at;
+    __syncthreads();  // every thread has read them before thread 0 writes the next ones
     if (cmd == kExitCommand) break;
     bool early = false;  // block 0, thread 0: the step handed the next one over itself
+    std::uint32_t ring_used = 0;  // block 0, thread 0: the step's pairs copied into the ring
+    const bool recorded = (cmd & kResidentRecord) != 0;
     const bool goes_on = small_step_body<kLean, true>(
-        s, cmd >> kResidentShift, (cmd & kResidentRecord) != 0 ? r.records : nullptr,
-        (cmd & kResidentStamp) != 0 ? s.profile : nullptr, smem, [&](bool on) {
+        s, cmd >> kResidentShift, recorded ? r.records : nullptr, (cmd & kResidentStamp) != 0 ? s.profile : nullptr,
+        smem,
+        [&](bool on) {
           early = true;
           handed = publish_next(on);
-        });
+        },
+        recorded && r.ring.slots != 0 ? &r.ring : nullptr,
+        static_cast<std::uint32_t>((cmd >> kResidentAheadShift) & kResidentAheadMax), at, &ring_used);
     if (blockIdx.x == 0 && threadIdx.x == 0) {
       if (!early) next = goes_on ? next + 1 : 0;
       ran = cmd >> kResidentShift;
+      ran_stopped = !goes_on;
+      ring_at += ring_used;
     }
   }
   if (blockIdx.x == 0 && threadIdx.x == 0) {

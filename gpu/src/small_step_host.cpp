@@ -28,10 +28,10 @@ gpu::SmallStepDesc CudaWorld::Impl::small_desc(const Scene& scene, bool recordin
   s.dt = scene.dt;
   s.max_velocity = params.max_velocity;
   s.iterations = params.iterations;
-  s.out_count = bp_count.get();
-  s.out_offset = bp_offset.get();
-  s.in_count = in_count.get();
-  s.in_offset = body_begin.get();
+  s.out_count = bp_counts.count.get();
+  s.out_offset = bp_counts.offset.get();
+  s.in_count = in_counts.count.get();
+  s.in_offset = in_counts.offset.get();
   s.in_list = in_list.get();
   s.pair_keys = pair_keys.get();
   s.shift = gpu::key_bits(n);
@@ -67,6 +67,7 @@ void CudaWorld::Impl::run_small(const Scene& scene, bool recording) {
   if (persistent) {
     resident_step(scene, recording);
   } else {
+    recorded_batch = false;  // a recorded step's record is read from the live buffers
     launched(gpu::launch_small_step(small_desc(scene, recording), small_grid, stream), "small_step");
     if (!host_dev)
       check(cudaMemcpyAsync(host, stats.get(), sizeof(gpu::StepStats), cudaMemcpyDeviceToHost, stream),
@@ -99,12 +100,16 @@ void CudaWorld::Impl::wait_small_step() {
 unsigned long long CudaWorld::Impl::exited_mark() const {
   return __atomic_load_n(resident_host + kExitedWord, __ATOMIC_ACQUIRE);
 }
+unsigned long long CudaWorld::Impl::stopped_mark() const {
+  return __atomic_load_n(resident_host + kStoppedWord, __ATOMIC_ACQUIRE);
+}
 unsigned long long CudaWorld::Impl::done_mark() const { return __atomic_load_n(small_host, __ATOMIC_ACQUIRE); }
 void CudaWorld::Impl::write_request(unsigned long long value) {
   __atomic_store_n(resident_host + kRequestWord, value, __ATOMIC_SEQ_CST);  // drains the store buffer
 }
 
-void CudaWorld::Impl::launch_resident(const Scene& scene) {
+void CudaWorld::Impl::launch_resident(const Scene& scene, bool ring) {
+  if (ring) ensure_record_ring();  // no kernel runs: the ring may be (re)allocated
   gpu::ResidentDesc r;
   r.request = resident_dev + kRequestWord;
   r.exited = resident_dev + kExitedWord;
@@ -114,6 +119,10 @@ void CudaWorld::Impl::launch_resident(const Scene& scene) {
   r.idle_ns = resident_stall ? 0 : resident_idle_ns;
   r.records = records.get();
   r.stall = resident_stall ? 1 : 0;
+  r.spin = resident_spin ? 1 : 0;
+  if (ring) r.ring = ring_desc();
+  r.stopped = resident_dev + kStoppedWord;
+  resident_ring = ring;
   gpu::SmallStepDesc s = small_desc(scene, false);
   s.profile = small_dev + 1;  // stamped on the requests that carry kResidentStamp
   s.host_stats = ring_dev;
@@ -149,13 +158,22 @@ void CudaWorld::Impl::resident_step(const Scene& scene, bool recording) {
   const bool covered = sequence <= ahead_last;  // an earlier request's batch runs this step
   if (!covered) {
     if (resident_alive && exited_mark() == epoch) stop_resident();  // it ended itself, idle
-    const unsigned long long extra = recording ? 0 : batch_extra();
+    // A recorded run with record_batch > 1 and steps promised runs ahead too, each step's
+    // record into the ring (a kernel launched without one is ended first); else a recorded
+    // step runs alone and is read from the live buffers.
+    const bool ring = recording && batching_records() && promised > 1;
+    if (ring && resident_alive && !resident_ring) stop_resident();
+    unsigned long long extra = recording && !ring ? 0 : batch_extra();
+    if (ring) extra = std::min<unsigned long long>(extra, static_cast<unsigned long long>(record_batch - 1));
+    recorded_batch = ring;
+    prefetched_first = 0;
+    if (ring) window.start(sequence);
     const bool stamp = small_profile || timed_frame(step_frame + static_cast<std::int64_t>(extra));
     ahead_last = sequence + extra;
     ++resident_requests;
     write_request((sequence << gpu::kResidentShift) | (extra << gpu::kResidentAheadShift) |
                   (recording ? gpu::kResidentRecord : 0ull) | (stamp && small_dev ? gpu::kResidentStamp : 0ull));
-    if (!resident_alive) launch_resident(scene);
+    if (!resident_alive) launch_resident(scene, ring);
   }
   const auto t0 = Clock::now();
   for (unsigned spins = 1;; ++spins) {
@@ -165,10 +183,16 @@ void CudaWorld::Impl::resident_step(const Scene& scene, bool recording) {
       resident_alive = false;
       // A batch stops early only after a step the host reruns (stop_resident) or throws on
       // (ahead_last reset): its later steps are never waited for.
+      // A batch requested ahead (prefetch_records) that the kernel, idle, ended without
+      // taking: launched again, it takes the request still in the word.
+      if (covered && prefetched_first != 0 && sequence >= prefetched_first && done_mark() < prefetched_first) {
+        launch_resident(scene, true);
+        continue;
+      }
       if (covered)
         throw RuntimeError(fmt::format("the resident small-step kernel ended before step {} of its batch (to {})",
                                        sequence, ahead_last));
-      launch_resident(scene);  // it ended without taking the request
+      launch_resident(scene, recorded_batch && !covered);  // it ended without taking the request
       continue;
     }
     if ((spins & 1023u) != 0) continue;
@@ -213,6 +237,9 @@ void CudaWorld::Impl::stop_resident() {
   }
   resident_alive = false;
   ahead_last = 0;  // no batch runs on
+  recorded_batch = false;
+  prefetched_first = 0;
+  window.next_base = 0;
   check(cudaStreamSynchronize(resident_stream), "cudaStreamSynchronize (resident kernel's end)");
 }
 

@@ -64,10 +64,10 @@ std::vector<BufferBase*> CudaWorld::Impl::all_buffers() {
 }
 
 std::vector<BufferBase*> CudaWorld::Impl::scratch_buffers() {
-  return {&bp_count, &bp_offset, &pair_keys, &pair_keys_sorted, &pairs, &confirmed, &items_a, &items_b,
-          &hit,      &dx_a,      &dx_b,      &dv_a,             &dv_b,  &depth0,    &records, &in_list,
-          &body_begin, &in_count, &index_offsets, &index_rank, &index_entries, &index_long, &witness,
-          &prev_keys, &prev_witness, &prev_begin, &prev_count, &leaf_items, &temp};
+  return {&bp_counts.count, &bp_counts.offset, &pair_keys, &pair_keys_sorted, &pairs, &confirmed, &items_a, &items_b,
+          &corrections.hit, &corrections.dx_a, &corrections.dx_b, &corrections.dv_a, &corrections.dv_b, &depth0,
+          &records, &in_list, &in_counts.offset, &in_counts.count, &index_offsets, &index_rank, &index_entries,
+          &index_long, &witness, &prev_keys, &prev_witness, &prev_begin, &prev_count, &leaf_items, &temp};
 }
 
 void CudaWorld::Impl::launched(cudaError_t e, const char* kernel) {
@@ -102,11 +102,11 @@ void set_pair_list(Desc& d, CudaWorld::Impl& w) {
 /// A stage descriptor's per-pair corrections (the contact terms' outputs, the apply's inputs).
 template <class Desc>
 void set_corrections(Desc& d, CudaWorld::Impl& w) {
-  d.hit = w.hit.get();
-  d.dx_a = w.dx_a.get();
-  d.dx_b = w.dx_b.get();
-  d.dv_a = w.dv_a.get();
-  d.dv_b = w.dv_b.get();
+  d.hit = w.corrections.hit.get();
+  d.dx_a = w.corrections.dx_a.get();
+  d.dx_b = w.corrections.dx_b.get();
+  d.dv_a = w.corrections.dv_a.get();
+  d.dv_b = w.corrections.dv_b.get();
 }
 
 }  // namespace
@@ -218,11 +218,11 @@ void CudaWorld::Impl::prepare() {
     throw RuntimeError(fmt::format("the step needs more than 2^31 - 1 pairs ({}) or midphase items ({})",
                                    pair_cap, list_cap));
   const std::size_t n1 = static_cast<std::size_t>(n) + 1;
-  bp_count.ensure(n1);
-  bp_offset.ensure(n1);
+  bp_counts.ensure(n1);
   for (BufferBase* b :
-       std::initializer_list<BufferBase*>{&pair_keys, &pair_keys_sorted, &pairs, &confirmed, &hit, &dx_a, &dx_b, &dv_a,
-                                          &dv_b, &depth0, &records})
+       std::initializer_list<BufferBase*>{&pair_keys, &pair_keys_sorted, &pairs, &confirmed, &corrections.hit,
+                                          &corrections.dx_a, &corrections.dx_b, &corrections.dv_a, &corrections.dv_b,
+                                          &depth0, &records})
     b->ensure(pair_cap);
   if (witnesses()) {
     for (BufferBase* b : std::initializer_list<BufferBase*>{&witness, &prev_keys, &prev_witness}) b->ensure(pair_cap);
@@ -240,8 +240,7 @@ void CudaWorld::Impl::prepare() {
   }
   if (small) {
     in_list.ensure(pair_cap);
-    body_begin.ensure(n1);
-    in_count.ensure(n1);
+    in_counts.ensure(n1);
   } else {
     index_offsets.ensure(n1);
     index_rank.ensure(pair_cap);
@@ -254,8 +253,7 @@ void CudaWorld::Impl::prepare() {
         "cub::DeviceRadixSort::SortKeys (size)");
   check(gpu::exclusive_scan_u64(nullptr, b, index_offsets.get(), index_offsets.get(), n + 1, stream),
         "cub::DeviceScan::ExclusiveSum (size)");
-  check(gpu::exclusive_scan_u32(nullptr, c, bp_count.get(), bp_offset.get(), n + 1, stream),
-        "cub::DeviceScan::ExclusiveSum (size)");
+  bp_counts.need_temp(c, n + 1, stream);
   temp.ensure(std::max({a, b, c, std::size_t{1}}));
   if (bp) bp->reserve(n, stream);
   prepared = true;
@@ -263,14 +261,13 @@ void CudaWorld::Impl::prepare() {
 
 void CudaWorld::Impl::flat_broadphase() {
   const std::size_t n1 = static_cast<std::size_t>(n) + 1;
-  check(cudaMemsetAsync(bp_count.get(), 0, n1 * sizeof(std::uint32_t), stream), "cudaMemset broadphase counts");
-  launched(gpu::launch_flat_count(aabb.get(), n, bp_count.get(), stream), "flat_count");
+  check(cudaMemsetAsync(bp_counts.count.get(), 0, n1 * sizeof(std::uint32_t), stream),
+        "cudaMemset broadphase counts");
+  launched(gpu::launch_flat_count(aabb.get(), n, bp_counts.count.get(), stream), "flat_count");
   std::size_t bytes = temp.capacity();
-  launched(gpu::exclusive_scan_u32(temp.get(), bytes, bp_count.get(), bp_offset.get(), n + 1, stream),
-           "cub::DeviceScan::ExclusiveSum");
-  check(cudaMemcpyAsync(counts(), bp_offset.get() + n, sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, stream),
-        "cudaMemcpy pair total");
-  launched(gpu::launch_flat_fill(aabb.get(), n, bp_offset.get(), pair_keys.get(), pcap(), gpu::key_bits(n),
+  launched(bp_counts.scan(temp.get(), bytes, n + 1, stream), "cub::DeviceScan::ExclusiveSum");
+  check(bp_counts.copy_total(counts(), n, stream), "cudaMemcpy pair total");
+  launched(gpu::launch_flat_fill(aabb.get(), n, bp_counts.offset.get(), pair_keys.get(), pcap(), gpu::key_bits(n),
                                  stream),
            "flat_fill");
 }

@@ -16,6 +16,7 @@
 #include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/json_strict.hpp"
+#include "octocd/names.hpp"
 #include "octocd/text.hpp"
 #include "octocd/validation_rows.hpp"
 
@@ -66,19 +67,13 @@ std::vector<ValidationCause> failure_causes(const ValidationResult& r) {
 }
 
 const std::vector<std::string>& validation_row_names() {
-  static const std::vector<std::string> names = [] {
-    std::vector<std::string> v;
-    for (const RowInfo& row : validation_rows()) v.push_back(row.name);
-    return v;
-  }();
+  static const std::vector<std::string> names = names_of(validation_rows());
   return names;
 }
 
 std::vector<std::string> documented_causes(const std::string& row) {
-  std::vector<std::string> out;
-  if (const RowInfo* info = find_row_info(row))
-    for (const RowCause& c : info->causes) out.push_back(c.name);
-  return out;
+  const RowInfo* info = find_row_info(row);
+  return info ? names_of(info->causes) : std::vector<std::string>{};
 }
 
 std::string Expectation::label() const {

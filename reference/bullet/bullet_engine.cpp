@@ -10,13 +10,13 @@ EngineHooks bullet_engine_hooks() {
   h.make = [](const std::shared_ptr<const Model>& model, const EngineItems& items,
               const std::string& where) -> std::unique_ptr<Engine> {
     BulletSettings s;
-    apply_bullet_settings(s, items, where);
+    apply_settings(s, items, where);
     return std::make_unique<BulletWorld>(model, model->initial, BulletOptions(), s);
   };
-  h.setting_names = &bullet_setting_names;
+  h.setting_names = &setting_names<BulletSettings>;
   h.check_settings = [](const EngineItems& items, const std::string& where) {
     BulletSettings s;
-    apply_bullet_settings(s, items, where);
+    apply_settings(s, items, where);
   };
   h.settings_help =
       "shape=hull: convex hulls of dynamic meshes, triangle meshes of static ones, the default; shape=box: boxes "

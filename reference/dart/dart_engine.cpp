@@ -6,7 +6,7 @@
 namespace octocd {
 
 EngineHooks dart_engine_hooks() {
-  return reference_engine_hooks<DartWorld, DartSettings, &apply_dart_settings, &dart_setting_names>();
+  return reference_engine_hooks<DartWorld, DartSettings, &apply_settings<DartSettings>, &setting_names<DartSettings>>();
 }
 
 }  // namespace octocd

@@ -27,12 +27,10 @@ DartSettings dart_library_defaults() {
   return s;
 }
 
-namespace {
-
-using T = SettingTable<DartSettings>;
-
 /// The dart engine's settings, one row a key.
-const T& dart_table() {
+template <>
+const SettingTable<DartSettings>& setting_table<DartSettings>() {
+  using T = SettingTable<DartSettings>;
   static const T table{"dart", "docs/engines.md", "lcp=pgs", {
       {"collision",
        T::choice(&DartSettings::collision, "fcl", DartCollision::Fcl, "dart", DartCollision::Dart,
@@ -58,26 +56,11 @@ const T& dart_table() {
        T::number(
            &DartSettings::cfm, 1e-9, 1.0,
            "a decimal number in [1e-9, 1] (ContactConstraint::setConstraintForceMixing; DART's default 1e-5)")},
-      {"friction",
-       T::choice(
-           &DartSettings::friction, "inscribed", DartFriction::Inscribed, "pyramid", DartFriction::Pyramid,
-           "inscribed (mu / sqrt 2 per friction direction: inside the Coulomb cone), pyramid (mu per direction)")},
+      {"friction", T::pyramid_friction(&DartSettings::friction)},
       {"contacts", T::integer(&DartSettings::max_contacts, 1, 10000000,
                               "an integer in [1, 10000000] (CollisionOption::maxNumContacts per step)")},
   }};
   return table;
-}
-
-}  // namespace
-
-std::vector<std::string> dart_setting_names() { return dart_table().names(); }
-
-void set_dart_setting(DartSettings& s, const std::string& key, const std::string& value, const std::string& where) {
-  dart_table().set(s, key, value, where);
-}
-
-void apply_dart_settings(DartSettings& s, const std::vector<std::string>& items, const std::string& where) {
-  dart_table().apply(s, items, where);
 }
 
 }  // namespace octocd

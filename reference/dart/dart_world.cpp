@@ -139,8 +139,7 @@ class ContactParameters {
 
 }  // namespace
 
-struct DartWorld::Impl : ReferenceCore {
-  DartSettings settings;
+struct DartWorld::Impl : SettingsCore<DartSettings> {
   dart::simulation::WorldPtr world;
   std::vector<dart::dynamics::BodyNode*> nodes;  // index = body id; static ones too
   std::unordered_map<const dart::dynamics::ShapeFrame*, std::uint32_t> body_of;
@@ -187,14 +186,12 @@ void DartWorld::Impl::fill_record() {
 }
 
 DartWorld::DartWorld(std::shared_ptr<const Model> model, const BodyState& initial, const DartSettings& settings)
-    : ReferenceWorld(std::make_unique<Impl>()) {
+    : SettingsWorld(std::make_unique<Impl>(), std::move(model), initial, "dart", settings) {
   using namespace dart::dynamics;
   Impl& m = impl();
-  m.start(std::move(model), initial, "dart");
   const Model& src = *m.model;
   const Scene& scene = src.scene;
   const std::size_t n = initial.size();
-  m.settings = settings;
 
   const bool fcl = settings.collision == DartCollision::Fcl;
   if (!fcl)
@@ -456,7 +453,6 @@ std::string DartWorld::broadphase_name() const {
 std::string DartWorld::midphase_name() const {
   return impl().settings.collision == DartCollision::Fcl ? "dart-fcl-collide" : "dart-collide";
 }
-const DartSettings& DartWorld::settings() const { return impl().settings; }
 std::string DartWorld::dart_version() { return DART_VERSION; }
 
 bool DartWorld::has_stage(Stage s) const { return s == Stage::Response || s == Stage::Metrics; }

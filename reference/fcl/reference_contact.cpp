@@ -13,7 +13,6 @@
 #include <fcl/math/bv/OBBRSS.h>
 #include <fcl/narrowphase/collision.h>
 #include <fcl/narrowphase/collision_object.h>
-#include <fcl/narrowphase/detail/primitive_shape_algorithm/box_box.h>
 #include <fcl/narrowphase/distance.h>
 
 #include <algorithm>
@@ -376,30 +375,129 @@ bool hull_penetration(const CcdObject& ca, const CcdObject& cb, ReferenceNormal&
   return true;
 }
 
-/// FCL's box-box test on boxes of sides side_a, side_b placed at ta, tb, as fcl::collide
-/// runs it for two fcl::Box (ShapeCollisionTraversalNode -> GJKSolver_libccd ->
-/// detail::boxBoxIntersect -> detail::boxBox2 with at most 4 contacts, all of them kept
-/// under CollisionRequest(8, true)), without the CollisionObjects, the shared geometry
-/// and the result vectors it builds per call. False when FCL reports no contact (r
-/// untouched); else r from its deepest contact (the first of equal depths), as box_box.
+/// The minimum translation of two boxes by the separating-axis theorem (octocd's own box-box
+/// reference): boxes of sides side_a, side_b, centred at ta, tb's translations with axes the
+/// columns of their rotations. For two convex polytopes the least translation that separates
+/// them is along a face normal of either or the cross product of an edge of each (Gottschalk);
+/// along a unit axis u the boxes' projections overlap by
+///   |ha . |R_a^T u|| + |hb . |R_b^T u|| - |(x_a - x_b) . u|   (m),
+/// and the penetration depth is the least of the overlaps over the 6 face normals and the 9
+/// edge-edge crosses (a cross shorter than 1e-12, two edges parallel within 1e-12 rad, gives
+/// no axis: its plane is spanned by face normals already tested). The normal is that axis,
+/// pointing from B to A (-u where x_a - x_b is perpendicular to it); equal overlaps keep the
+/// first axis in the order A's faces, B's faces, then a_i x b_j by i then j. An edge-edge
+/// cross is compared unnormalised (its overlap times its length, against the least so far
+/// times its length); the least overlap is computed on its unit axis itself, so the depth
+/// is the overlap along the returned normal up to double rounding of the sums (~1e-16 of
+/// the boxes' and centres' scale). A negative overlap on any axis: apart (false, r untouched); all >= 0: penetrating
+/// (touching: depth 0). The contact point (point_a == point_b) is the midpoint of the deepest
+/// contact's witnesses, as libccd's EPA gives it: for a face axis, the incident box's
+/// deepest point (its support toward the reference face; the centre of an edge or face of it
+/// lying parallel to that face within 1e-9), clamped onto the reference face's rectangle, and
+/// its projection on that face; for an edge-edge axis, the closest points of the two edges
+/// along which the boxes touch (clamped to the edges).
 bool box_contact(const V3& side_a, const fcl::Transform3<S>& ta, const V3& side_b, const fcl::Transform3<S>& tb,
                  ReferenceNormal& r) {
-  thread_local std::vector<fcl::ContactPoint<S>> contacts;  // kept between calls
-  contacts.clear();
-  V3 normal;
-  S depth = 0;
-  int code = 0;
-  fcl::detail::boxBox2(side_a, ta, side_b, tb, normal, &depth, &code, 4, contacts);
-  if (code == 0 || contacts.empty()) return false;
+  const V3 ha = side_a * 0.5, hb = side_b * 0.5;
+  const fcl::Matrix3<S> ra = ta.linear(), rb = tb.linear();
+  const V3 xa = ta.translation(), xb = tb.translation();
+  const V3 d = xa - xb;  // B's centre to A's, world
+  // Every axis in A's frame: B's axes there are the columns of c = R_a^T R_b.
+  const fcl::Matrix3<S> c = ra.transpose() * rb;
+  const V3 da = ra.transpose() * d;
+  S best = std::numeric_limits<S>::infinity();
+  V3 best_u = V3::Zero();  // A's frame, unit, from B to A
+  int best_axis = -1;      // 0-2 A's faces, 3-5 B's faces, 6 + 3 i + j: a_i x b_j
+  // Overlap along the axis u (A's frame), scaled by |u|: ha . |u| + hb . |R_b^T u| - |d . u|.
+  auto scaled_overlap = [&](const V3& u, S& t) {
+    const S rad_a = ha[0] * std::abs(u[0]) + ha[1] * std::abs(u[1]) + ha[2] * std::abs(u[2]);
+    const S rad_b = hb[0] * std::abs(c.col(0).dot(u)) + hb[1] * std::abs(c.col(1).dot(u)) +
+                    hb[2] * std::abs(c.col(2).dot(u));
+    t = da.dot(u);
+    return rad_a + rad_b - std::abs(t);
+  };
+  // The unit axis u: false when it separates the boxes; the least overlap so far kept.
+  auto axis = [&](const V3& u, int id) {
+    S t = 0;
+    const S overlap = scaled_overlap(u, t);
+    if (overlap < 0) return false;
+    if (overlap < best) {
+      best = overlap;
+      best_u = t > 0 ? u : V3(-u);
+      best_axis = id;
+    }
+    return true;
+  };
+  for (int i = 0; i < 3; ++i)
+    if (!axis(V3::Unit(i), i)) return false;
+  // Two unturned boxes (world AABBs, an unturned pose): B's faces and the edge crosses are
+  // A's face axes again, with the same overlaps bit for bit (c = I: every product by 0 or
+  // 1 is exact), so A's three decide (equal overlaps keep A's).
+  const bool unturned = ra == fcl::Matrix3<S>::Identity() && rb == fcl::Matrix3<S>::Identity();
+  for (int j = 0; j < 3 && !unturned; ++j)
+    if (!axis(c.col(j), 3 + j)) return false;
+  // Edge-edge axes: the sign and the comparison with the least overlap on the unnormalised
+  // cross (overlap x |u|); only a candidate for the least is normalised and taken as above.
+  for (int i = 0; i < 3 && !unturned; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const V3 u = V3::Unit(i).cross(V3(c.col(j)));
+      const S len2 = u.squaredNorm();
+      if (!(len2 > 1e-24)) continue;
+      S t = 0;
+      const S scaled = scaled_overlap(u, t);
+      if (scaled < 0) return false;
+      if (!(scaled * scaled < best * best * len2)) continue;
+      if (!axis(u / std::sqrt(len2), 6 + 3 * i + j)) return false;
+    }
+  if (best_axis < 0 || !std::isfinite(best)) return false;
+  const V3 n = ra * best_u;  // world, B to A
   r.penetrating = true;
-  std::size_t deepest = 0;
-  for (std::size_t k = 1; k < contacts.size(); ++k)
-    if (contacts[k].penetration_depth > contacts[deepest].penetration_depth) deepest = k;
-  const fcl::ContactPoint<S>& c = contacts[deepest];
-  // ContactPoint::normal points from A to B: B-to-A is its negation.
-  if (!unit(-c.normal, r.normal)) return true;
-  r.depth = std::max<S>(0, c.penetration_depth);
-  r.point_a = r.point_b = to_vec3(c.pos);
+  if (!unit(n, r.normal)) return true;
+  r.depth = std::max<S>(0, best);
+  // The contact point.
+  // Support of a box (centre x, axes R, half extents h) toward the direction w: its deepest
+  // vertex, or the centre of the edge or face that lies across w within 1e-9.
+  auto support = [](const V3& x, const fcl::Matrix3<S>& rot, const V3& h, const V3& w) {
+    V3 p = x;
+    for (int k = 0; k < 3; ++k) {
+      const S s = rot.col(k).dot(w);
+      if (std::abs(s) > 1e-9) p += (s > 0 ? h[k] : -h[k]) * rot.col(k);
+    }
+    return p;
+  };
+  V3 point;
+  if (best_axis < 6) {
+    // Reference face: A's (its face toward B, on -n) or B's (toward A, on +n); the incident
+    // box's deepest point toward it, clamped onto the face, lies `best` inside it.
+    const bool a_face = best_axis < 3;
+    const int k = best_axis % 3;
+    const fcl::Matrix3<S>& rx = a_face ? ra : rb;
+    const V3& x_ref = a_face ? xa : xb;
+    const V3& h_ref = a_face ? ha : hb;
+    const V3 deep = a_face ? support(xb, rb, hb, n) : support(xa, ra, ha, -n);
+    V3 q = rx.transpose() * (deep - x_ref);
+    for (int m = 0; m < 3; ++m)
+      if (m != k) q[m] = std::min(h_ref[m], std::max(-h_ref[m], q[m]));
+    point = x_ref + rx * q + (a_face ? -0.5 : 0.5) * best * n;
+  } else {
+    // Edge a_i of A (A's support toward B, -n) against edge b_j of B (its support toward A).
+    const int i = (best_axis - 6) / 3, j = (best_axis - 6) % 3;
+    const V3 ea = ra.col(i), eb = rb.col(j);
+    V3 pa = support(xa, ra, ha, -n), pb = support(xb, rb, hb, n);
+    pa -= ea * ea.dot(pa - xa);  // the edge's centre (its own axis is not a support direction)
+    pb -= eb * eb.dot(pb - xb);
+    const V3 w = pa - pb;
+    const S e = ea.dot(eb), f = ea.dot(w), g = eb.dot(w), den = 1 - e * e;
+    S s = 0, t = 0;
+    if (den > 1e-24) {
+      s = (e * g - f) / den;
+      t = (g - e * f) / den;
+    }
+    s = std::min(ha[i], std::max(-ha[i], s));
+    t = std::min(hb[j], std::max(-hb[j], t));
+    point = 0.5 * ((pa + s * ea) + (pb + t * eb));
+  }
+  r.point_a = r.point_b = to_vec3(point);
   r.valid = std::isfinite(r.depth);
   return true;
 }
@@ -411,28 +509,51 @@ bool box_contact(const V3& side_a, const fcl::Transform3<S>& ta, const V3& side_
 /// projections separates the boxes, however rounded its direction; edge-edge axes of
 /// (nearly) parallel edges, |e_a x e_b| < 1e-7, are not tested, so a penetration is claimed
 /// only beyond band_in, larger than what such an axis could add (1e-7 x the boxes' scale).
+/// Non-finite centres or rotations: 0.
 int box_box_overlap_class(const V3& ha, const fcl::Matrix3<S>& ra, const V3& ta, const V3& hb,
                           const fcl::Matrix3<S>& rb, const V3& tb, S band_in, S band_out) {
   const V3 d = tb - ta;
-  S most = -std::numeric_limits<S>::infinity();  // the largest separation over the axes (m)
-  auto axis = [&](const V3& u) {
-    const S len = u.norm();
-    if (!(len >= 1e-7)) return;
-    const V3 n = u / len;
-    const S ra_n = ha[0] * std::abs(ra.col(0).dot(n)) + ha[1] * std::abs(ra.col(1).dot(n)) +
-                   ha[2] * std::abs(ra.col(2).dot(n));
-    const S rb_n = hb[0] * std::abs(rb.col(0).dot(n)) + hb[1] * std::abs(rb.col(1).dot(n)) +
-                   hb[2] * std::abs(rb.col(2).dot(n));
-    most = std::max(most, std::abs(d.dot(n)) - (ra_n + rb_n));
+  if (!d.allFinite() || !ra.allFinite() || !rb.allFinite()) return 0;
+  // Separation along u scaled by |u|: |d . u| - (A's and B's half projections on u).
+  auto scaled_separation = [&](const V3& u) {
+    const S ra_n = ha[0] * std::abs(ra.col(0).dot(u)) + ha[1] * std::abs(ra.col(1).dot(u)) +
+                   ha[2] * std::abs(ra.col(2).dot(u));
+    const S rb_n = hb[0] * std::abs(rb.col(0).dot(u)) + hb[1] * std::abs(rb.col(1).dot(u)) +
+                   hb[2] * std::abs(rb.col(2).dot(u));
+    return std::abs(d.dot(u)) - (ra_n + rb_n);
   };
-  for (int i = 0; i < 3; ++i) axis(ra.col(i));
-  for (int i = 0; i < 3; ++i) axis(rb.col(i));
+  // An axis separating by more than band_out decides -1 at once; +1 needs every axis tested
+  // to overlap by more than band_in.
+  bool all_in = true;
+  auto face = [&](const V3& u) {
+    const S len = u.norm();
+    if (!(len >= 1e-7)) return false;
+    const S sep = scaled_separation(u / len);
+    if (sep > band_out) return true;
+    all_in = all_in && sep < -band_in;
+    return false;
+  };
   for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) axis(ra.col(i).cross(rb.col(j)));
-  if (!std::isfinite(most)) return 0;
-  if (most < -band_in) return 1;
-  if (most > band_out) return -1;
-  return 0;
+    if (face(ra.col(i))) return -1;
+  // Two unturned boxes: B's faces and the edge crosses are A's face axes again (the same
+  // separations: products by 0 and 1 are exact), so A's three decide. (The crosses'
+  // squared test could only turn a +1 whose overlap exceeds band_in by a rounding into a 0
+  // left to GJK, which then finds the same intersection.)
+  if (ra == fcl::Matrix3<S>::Identity() && rb == fcl::Matrix3<S>::Identity()) return all_in ? 1 : 0;
+  for (int i = 0; i < 3; ++i)
+    if (face(rb.col(i))) return -1;
+  // Edge-edge crosses unnormalised: sep > band_out <=> s > band_out |u|, sep < -band_in
+  // <=> s < -band_in |u| (s = sep |u|), compared squared.
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const V3 u = ra.col(i).cross(rb.col(j));
+      const S len2 = u.squaredNorm();
+      if (!(len2 >= 1e-14)) continue;
+      const S s = scaled_separation(u);
+      if (s > 0 && s * s > band_out * band_out * len2) return -1;
+      all_in = all_in && s < 0 && s * s > band_in * band_in * len2;
+    }
+  return all_in ? 1 : 0;
 }
 
 /// The fcl::Box of a geometry, or null.
@@ -440,10 +561,10 @@ const fcl::Box<S>* as_box(const ShapeGeom& g) {
   return g.exact && g.exact->getNodeType() == fcl::GEOM_BOX ? static_cast<const fcl::Box<S>*>(g.exact.get()) : nullptr;
 }
 
-/// Two posed boxes as boxes (or a declared sphere and a primitive): FCL's box-box test (ODE's dBoxBox, the separating axis of
-/// least penetration among the 15 candidates: the exact minimum translation of two
-/// boxes), its deepest contact; FCL distance when apart. (libccd's EPA on box corners can
-/// cycle without end on coplanar faces.)
+/// Two posed boxes as boxes: box_contact (the minimum translation over the 15 separating
+/// axes; libccd's EPA on box corners can cycle without end on coplanar faces); a declared
+/// sphere and a primitive: FCL's collide (sphere-box and sphere-sphere exact), its deepest
+/// contact. FCL distance when apart.
 ReferenceNormal box_box(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const ShapeGeom& gb,
                         const fcl::Transform3<S>& tb) {
   ReferenceNormal r;

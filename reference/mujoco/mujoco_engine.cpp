@@ -6,7 +6,7 @@
 namespace octocd {
 
 EngineHooks mujoco_engine_hooks() {
-  return reference_engine_hooks<MujocoWorld, MujocoSettings, &apply_mujoco_settings, &mujoco_setting_names>();
+  return reference_engine_hooks<MujocoWorld, MujocoSettings, &apply_settings<MujocoSettings>, &setting_names<MujocoSettings>>();
 }
 
 }  // namespace octocd

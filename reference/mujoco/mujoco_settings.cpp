@@ -14,12 +14,10 @@ namespace octocd {
 
 const char* mujoco_cone_name(MujocoCone c) { return c == MujocoCone::Pyramidal ? "pyramidal" : "elliptic"; }
 
-namespace {
-
-using T = SettingTable<MujocoSettings>;
-
 /// The mujoco engine's settings, one row a key.
-const T& mujoco_table() {
+template <>
+const SettingTable<MujocoSettings>& setting_table<MujocoSettings>() {
+  using T = SettingTable<MujocoSettings>;
   static const T table{"mujoco", "docs/engines.md", "cone=pyramidal", {
       {"iterations",
        T::integer(&MujocoSettings::iterations, 1, 10000,
@@ -39,19 +37,6 @@ const T& mujoco_table() {
                   "least 256, at most 1500)")},
   }};
   return table;
-}
-
-}  // namespace
-
-std::vector<std::string> mujoco_setting_names() { return mujoco_table().names(); }
-
-void set_mujoco_setting(MujocoSettings& s, const std::string& key, const std::string& value,
-                        const std::string& where) {
-  mujoco_table().set(s, key, value, where);
-}
-
-void apply_mujoco_settings(MujocoSettings& s, const std::vector<std::string>& items, const std::string& where) {
-  mujoco_table().apply(s, items, where);
 }
 
 }  // namespace octocd

@@ -137,8 +137,7 @@ std::array<double, 3> solid_box_inertia(Vec3 h, double m) {
 
 }  // namespace
 
-struct MujocoWorld::Impl : ReferenceCore {
-  MujocoSettings settings;
+struct MujocoWorld::Impl : SettingsCore<MujocoSettings> {
   std::string xml;
   mjModel* m = nullptr;
   mjData* d = nullptr;
@@ -258,13 +257,11 @@ void MujocoWorld::Impl::fill_record() {
 }
 
 MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& initial, const MujocoSettings& settings)
-    : ReferenceWorld(std::make_unique<Impl>()) {
+    : SettingsWorld(std::make_unique<Impl>(), std::move(model), initial, "mujoco", settings) {
   Impl& im = impl();
-  im.start(std::move(model), initial, "mujoco");
   const Model& src = *im.model;
   const Scene& scene = src.scene;
   const std::size_t n = initial.size();
-  im.settings = settings;
   for (std::size_t i = 0; i < n; ++i) im.state.q[i] = normalized(im.state.q[i]);
 
   // ---- The MJCF text.
@@ -511,7 +508,6 @@ const FrameMetrics& MujocoWorld::step() {
   return im.finish_step(fm, t0);
 }
 
-const MujocoSettings& MujocoWorld::settings() const { return impl().settings; }
 const std::string& MujocoWorld::xml() const { return impl().xml; }
 std::string MujocoWorld::mujoco_version() { return mj_versionString(); }
 

@@ -6,7 +6,7 @@
 namespace octocd {
 
 EngineHooks ode_engine_hooks() {
-  return reference_engine_hooks<OdeWorld, OdeSettings, &apply_ode_settings, &ode_setting_names>();
+  return reference_engine_hooks<OdeWorld, OdeSettings, &apply_settings<OdeSettings>, &setting_names<OdeSettings>>();
 }
 
 }  // namespace octocd

@@ -17,6 +17,27 @@
 namespace octocd {
 
 
+const char* ode_space_name(OdeSpace s) {
+  switch (s) {
+    case OdeSpace::Hash: return "hash";
+    case OdeSpace::Sap: return "sap";
+    case OdeSpace::QuadTree: return "quadtree";
+    case OdeSpace::Auto: break;
+  }
+  return "auto";
+}
+
+OdeSpace ode_resolved_space(OdeSpace s, std::size_t bodies) {
+  if (s != OdeSpace::Auto) return s;
+  return bodies >= kOdeAutoSapBodies ? OdeSpace::Sap : OdeSpace::Hash;
+}
+
+int ode_quadtree_depth(std::size_t bodies) {
+  int depth = 1;
+  for (std::size_t leaves = 4; depth < 8 && leaves * 16 < bodies; leaves *= 4) ++depth;
+  return depth;
+}
+
 const char* ode_stepper_name(OdeStepper s) { return s == OdeStepper::QuickStep ? "quickstep" : "step"; }
 
 OdeSettings ode_library_defaults() {
@@ -32,12 +53,10 @@ OdeSettings ode_library_defaults() {
   return s;
 }
 
-namespace {
-
-using T = SettingTable<OdeSettings>;
-
 /// The ode engine's settings, one row a key.
-const T& ode_table() {
+template <>
+const SettingTable<OdeSettings>& setting_table<OdeSettings>() {
+  using T = SettingTable<OdeSettings>;
   static const T table{"ode", "docs/engines.md", "stepper=quickstep", {
       {"stepper",
        T::choice(
@@ -51,26 +70,22 @@ const T& ode_table() {
                         "a decimal number in [0, 1] (dWorldSetCFM; ODE's default 1e-10 in double precision)")},
       {"contacts",
        T::integer(&OdeSettings::max_contacts, 1, 64, "an integer in [1, 64] (dCollide's contacts per pair)")},
-      {"friction",
-       T::choice(
-           &OdeSettings::friction, "inscribed", OdeFriction::Inscribed, "pyramid", OdeFriction::Pyramid,
-           "inscribed (mu / sqrt 2 per friction direction: inside the Coulomb cone), pyramid (mu per direction)")},
+      {"friction", T::pyramid_friction(&OdeSettings::friction)},
       {"gyroscopic",
        T::choice(&OdeSettings::gyroscopic, "true", true, "false", false, "true, false (dBodySetGyroscopicMode)")},
+      {"space",
+       [](OdeSettings& s, const SettingValue& v) {
+         for (const OdeSpace e : {OdeSpace::Hash, OdeSpace::Sap, OdeSpace::QuadTree, OdeSpace::Auto})
+           if (v.value == ode_space_name(e)) {
+             s.space = e;
+             return;
+           }
+         v.not_allowed(
+             "hash (dHashSpace), sap (dSweepAndPruneSpace), quadtree (dQuadTreeSpace over the domain), auto (hash "
+             "below 10000 bodies, sap from there)");
+       }},
   }};
   return table;
-}
-
-}  // namespace
-
-std::vector<std::string> ode_setting_names() { return ode_table().names(); }
-
-void set_ode_setting(OdeSettings& s, const std::string& key, const std::string& value, const std::string& where) {
-  ode_table().set(s, key, value, where);
-}
-
-void apply_ode_settings(OdeSettings& s, const std::vector<std::string>& items, const std::string& where) {
-  ode_table().apply(s, items, where);
 }
 
 }  // namespace octocd

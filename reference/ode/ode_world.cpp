@@ -72,7 +72,7 @@ constexpr unsigned long kDynamicCategory = 1, kStaticCategory = 2;
 
 }  // namespace
 
-struct OdeWorld::Impl : ReferenceCore {
+struct OdeWorld::Impl : SettingsCore<OdeSettings> {
   /// One octocd shape as ODE takes it: a box's sides, or a hull's planes, points and
   /// polygons (dCreateConvex keeps pointers to them), or a triangle mesh's data.
   struct ShapeData {
@@ -93,10 +93,10 @@ struct OdeWorld::Impl : ReferenceCore {
     dContactGeom geom{};
   };
 
-  OdeSettings settings;
   float mu = 0.0f, restitution = 0.0f, restitution_threshold = 0.0f;
   dWorldID world = nullptr;
   dSpaceID space = nullptr;
+  OdeSpace space_used = OdeSpace::Hash;  ///< settings.space resolved for the scene's body count
   dJointGroupID joints = nullptr;
   std::vector<ShapeData> shapes;
   std::vector<dBodyID> bodies;  // index = body id; nullptr for a static body
@@ -177,13 +177,11 @@ void OdeWorld::Impl::fill_record() {
 }
 
 OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial, const OdeSettings& settings)
-    : ReferenceWorld(std::make_unique<Impl>()) {
+    : SettingsWorld(std::make_unique<Impl>(), std::move(model), initial, "ode", settings) {
   init_ode_for_this_thread();
   Impl& m = impl();
-  m.start(std::move(model), initial, "ode");
   const Model& src = *m.model;
   const Scene& scene = src.scene;
-  m.settings = settings;
   m.mu = scene.response.mu_kinetic;
   m.restitution = scene.response.restitution;
   m.restitution_threshold = scene.response.restitution_threshold;
@@ -195,10 +193,19 @@ OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial,
   dWorldSetCFM(m.world, settings.cfm);
   dWorldSetQuickStepNumIterations(m.world, settings.iterations);
   dWorldSetAutoDisableFlag(m.world, 0);
-  m.space = dHashSpaceCreate(nullptr);
   m.joints = dJointGroupCreate(0);
 
   const std::size_t n = initial.size();
+  m.space_used = ode_resolved_space(settings.space, n);
+  if (m.space_used == OdeSpace::Sap) {
+    m.space = dSweepAndPruneSpaceCreate(nullptr, dSAP_AXES_XYZ);
+  } else if (m.space_used == OdeSpace::QuadTree) {
+    const Vec3 c = 0.5f * (scene.domain.min + scene.domain.max), e = 0.5f * (scene.domain.max - scene.domain.min);
+    const dVector3 centre = {c.x, c.y, c.z, 0}, extents = {e.x, e.y, e.z, 0};
+    m.space = dQuadTreeSpaceCreate(nullptr, centre, extents, ode_quadtree_depth(n));
+  } else {
+    m.space = dHashSpaceCreate(nullptr);
+  }
 
   // Which shapes a static body uses as a triangle mesh, and which as a hull or box.
   std::vector<char> static_mesh(src.shapes.size(), 0), dynamic_use(src.shapes.size(), 0);
@@ -426,7 +433,13 @@ const FrameMetrics& OdeWorld::step() {
   return m.finish_step(fm, t0);
 }
 
-const OdeSettings& OdeWorld::settings() const { return impl().settings; }
+std::string OdeWorld::broadphase_name() const {
+  switch (impl().space_used) {
+    case OdeSpace::Sap: return "ode-sap";
+    case OdeSpace::QuadTree: return "ode-quadtree";
+    default: return "ode-hash";
+  }
+}
 
 bool OdeWorld::has_stage(Stage s) const { return s != Stage::Aabbs && s != Stage::Integrate; }
 
@@ -434,14 +447,17 @@ std::string OdeWorld::notes() const {
   const OdeSettings& s = impl().settings;
   return fmt::format(
       "{}; {} (erp {}, cfm {}{}), friction {} (dContactApprox1), up to {} contacts per pair,\n"
-      "gyroscopic term {}. broadphase candidates = AABB pairs = dynamic pairs = the pairs dHashSpace hands the\n"
+      "gyroscopic term {}. broadphase candidates = AABB pairs = dynamic pairs = the pairs {} hands the\n"
       "near callback (ODE's own AABBs at the pre-step pose: a hull's are tighter than its posed local box;\n"
       "no static-static pairs); midphase = ODE's dCollide (dBoxBox, libccd MPR for hulls: one point per\n"
       "pair, trimesh colliders); response = contact joints + the ODE step, which also integrates (aabbs and\n"
       "integrate n/a). contacts = contact rows, penetration over their depths; kinetic energy includes rotation.",
       impl().geometry, s.stepper == OdeStepper::QuickStep ? "dWorldQuickStep" : "dWorldStep", s.erp, s.cfm,
       s.stepper == OdeStepper::QuickStep ? fmt::format(", {} iterations", s.iterations) : std::string(),
-      ode_friction_name(s.friction), s.max_contacts, s.gyroscopic ? "on" : "off");
+      ode_friction_name(s.friction), s.max_contacts, s.gyroscopic ? "on" : "off",
+      impl().space_used == OdeSpace::Sap        ? "dSweepAndPruneSpace"
+      : impl().space_used == OdeSpace::QuadTree ? "dQuadTreeSpace"
+                                                : "dHashSpace");
 }
 
 }  // namespace octocd

@@ -2,7 +2,8 @@
 // gpu/include/octocd/cuda_world.hpp; issue 8, "bad input at scale"): it needs no device
 // and exists in builds without CUDA, so these tests run everywhere. The GPU side (the
 // estimate against the engine's memory_bytes, the check at construction, the CLI's exit 1)
-// is in tests/gpu/test_cuda_world.cpp.
+// is in tests/gpu/test_cuda_world.cpp. Also the host bookkeeping of recorded batches
+// (gpu/src/record_ring.hpp: CudaSettings::record_batch), which needs no device either.
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -17,6 +18,7 @@
 #include "octocd/scene.hpp"
 #include "octocd/vertex_blocks.hpp"
 #include "octocd/worlds.hpp"
+#include "record_ring.hpp"  // gpu/src: plain C++
 
 using namespace octocd;
 
@@ -178,4 +180,81 @@ TEST(CudaFootprint, SixtyFiveThousandWorldsOfBunnyStack50FitAnH100) {
             << batched->scene.broadphase.name << " depth " << batched->scene.broadphase.octree_depth << ", estimate "
             << bytes / 1048576 << " MiB before the first step\n";
   EXPECT_LT(bytes, std::uint64_t{8} << 30) << "an eighth of an H100's memory at most before the buffers grow";
+}
+
+// The record ring's pair pool: the engine's pair capacity for every slot when that fits the
+// byte budget (what the states and boxes leave), else what fits, never 0; nothing for a
+// ring without slots. Numbers worked by hand: 32 slots x 50 bodies x 60 bytes = 96,000 bytes
+// of states; 113 bytes a pair.
+TEST(RecordRing, PoolIsTheCapacityOfEverySlotWithinTheBudget) {
+  using octocd::gpu::record_ring_pairs;
+  EXPECT_EQ(record_ring_pairs(400, 32, 50, 60, 113, 64ull << 20), 400u * 32u);
+  EXPECT_EQ(record_ring_pairs(400, 32, 50, 60, 113, 96000 + 113 * 1000 + 50), 1000u);
+  EXPECT_EQ(record_ring_pairs(400, 32, 50, 60, 113, 96000), 1u) << "no room left: one pair (every step overflows)";
+  EXPECT_EQ(record_ring_pairs(400, 32, 50, 60, 113, 1000), 1u) << "states beyond the budget: still one pair";
+  EXPECT_EQ(record_ring_pairs(400, 0, 50, 60, 113, 64ull << 20), 1u);
+  EXPECT_EQ(record_ring_pairs(1ull << 40, 64, 1, 60, 1, ~0ull), 0xffffffffu) << "clamped to 32 bits";
+}
+
+// The host copy's window: which steps it holds (by sequence number), their slots from the
+// request's first step, and how far a copy-back reaches: to the batch's last step, at most
+// `batch` steps from the one asked for, never past the ring's last slot, never before it.
+TEST(RecordRing, WindowHoldsTheCopiedStepsAndCopiesToTheBatchEnd) {
+  octocd::gpu::RecordWindow w;
+  EXPECT_FALSE(w.holds(0));
+  EXPECT_FALSE(w.holds(1));
+  w.start(101);  // a request for steps 101 .. 164
+  EXPECT_FALSE(w.holds(101));
+  EXPECT_EQ(w.slot(101), 0u);
+  EXPECT_EQ(w.slot(164), 63u);
+  EXPECT_EQ(w.copy_last(101, 164, 64, 64), 164u) << "the whole batch";
+  EXPECT_EQ(w.copy_last(101, 164, 32, 64), 132u) << "at most record_batch steps";
+  EXPECT_EQ(w.copy_last(140, 164, 64, 32), 140u) << "never before the step asked for";
+  EXPECT_EQ(w.copy_last(101, 164, 64, 16), 116u) << "never past the ring's last slot";
+  EXPECT_EQ(w.copy_last(101, 90, 64, 64), 101u) << "a batch that ended earlier: the step alone";
+  w.copied(101, 132);
+  EXPECT_TRUE(w.holds(101));
+  EXPECT_TRUE(w.holds(132));
+  EXPECT_FALSE(w.holds(133));
+  EXPECT_FALSE(w.holds(100));
+  w.copied(133, 164);
+  EXPECT_FALSE(w.holds(132)) << "a new copy replaces the window";
+  EXPECT_TRUE(w.holds(150));
+  EXPECT_EQ(w.slot(150), 49u);
+  w.start(165);
+  EXPECT_FALSE(w.holds(150)) << "a new request holds nothing yet";
+  EXPECT_EQ(w.base, 165u);
+  w.copied(165, 165);
+  w.clear();
+  EXPECT_FALSE(w.holds(165));
+}
+
+// The next batch, asked for while the host takes this one: the device's 64 statistics slots
+// (one per step, by sequence modulo 64) of the steps the host has not taken must survive, so
+// from step 101 held with a batch to 132 the next may run 133 .. 164 (31 after its first),
+// from 101 to 164 none; the window moves to it when a step of it is asked for, not before.
+TEST(RecordRing, NextBatchFitsTheStatisticsSlotsAndMovesTheWindow) {
+  using octocd::gpu::RecordWindow;
+  unsigned long long room = 99;
+  ASSERT_TRUE(RecordWindow::next_batch_room(101, 132, 64, room));
+  EXPECT_EQ(room, 31u);
+  ASSERT_TRUE(RecordWindow::next_batch_room(101, 101, 64, room));
+  EXPECT_EQ(room, 62u) << "102 .. 164";
+  EXPECT_FALSE(RecordWindow::next_batch_room(101, 164, 64, room)) << "a batch of 64: no room";
+  EXPECT_FALSE(RecordWindow::next_batch_room(101, 170, 64, room));
+  RecordWindow w;
+  w.start(101);
+  w.copied(101, 132);
+  w.next_base = 133;
+  w.advance(120);
+  EXPECT_TRUE(w.holds(120)) << "a step of this batch: the window stays";
+  EXPECT_EQ(w.base, 101u);
+  w.advance(133);
+  EXPECT_EQ(w.base, 133u);
+  EXPECT_EQ(w.next_base, 0u);
+  EXPECT_FALSE(w.holds(132));
+  EXPECT_FALSE(w.holds(133)) << "nothing of the next batch is copied yet";
+  EXPECT_EQ(w.slot(140), 7u);
+  w.advance(200);
+  EXPECT_EQ(w.base, 133u) << "no next batch asked for: the window stays";
 }

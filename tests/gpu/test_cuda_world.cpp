@@ -713,10 +713,16 @@ TEST(CudaSettingsCheck, OutOfRangeValuesAreInputErrors) {
     t.stage_time_every = bad;
     expect_bad_settings_rejected(t, fmt::format("stage_time_every={} is not allowed; allowed: 1 .. 1000000", bad));
   }
+  for (const long bad : {0L, -2L, 65L}) {
+    CudaSettings t;
+    t.record_batch = bad;
+    expect_bad_settings_rejected(t, fmt::format("record_batch={} is not allowed; allowed: 1 .. 64", bad));
+  }
   CudaSettings s;
+  EXPECT_EQ(s.record_batch, 32) << "the documented default (docs/settings.md)";
   apply_cuda_settings(s, {"graph=false", "stage_times=0", "midphase_early_exit=off", "memory_limit_bytes=4096",
                           "resident_timeout_ms=300", "sync_each_launch=true", "small_profile=1",
-                          "stage_time_every=7", "small_path=off"},
+                          "stage_time_every=7", "small_path=off", "record_batch=5", "resident_spin=on"},
                       "--cuda");
   EXPECT_FALSE(s.graph);
   EXPECT_FALSE(s.stage_times);
@@ -727,11 +733,14 @@ TEST(CudaSettingsCheck, OutOfRangeValuesAreInputErrors) {
   EXPECT_EQ(s.resident_timeout_ms, 300);
   EXPECT_TRUE(s.sync_each_launch);
   EXPECT_TRUE(s.small_profile);
+  EXPECT_EQ(s.record_batch, 5);
+  EXPECT_TRUE(s.resident_spin);
   const std::vector<std::pair<std::string, std::string>> bad = {
       {"graph=yes", "--cuda: graph='yes' is not a switch"},
       {"resident_timeout_ms=0", "--cuda: resident_timeout_ms='0' is not allowed; allowed: an integer 1 .. 86400000"},
       {"memory_limit_bytes=12x", "--cuda: memory_limit_bytes='12x' is not allowed"},
       {"stage_time_every=0", "--cuda: stage_time_every='0' is not allowed; allowed: an integer 1 .. 1000000"},
+      {"record_batch=65", "--cuda: record_batch='65' is not allowed; allowed: an integer 1 .. 64"},
       {"small=1", "--cuda: unknown cuda setting 'small'; allowed: midphase_early_exit, "},
       {"graph", "--cuda: 'graph' is not KEY=VALUE"}};
   for (const auto& [item, says] : bad) {
@@ -1653,6 +1662,90 @@ TEST(CudaPersistent, AnInterruptedPlanTakesTheStepsRunAhead) {
   (void)g.step();  // no plan: the next step is requested alone
   EXPECT_EQ(g.steps_ahead(), 0);
   EXPECT_EQ(g.resident_requests(), requests + 1);
+}
+
+// Recorded runs in batches (CudaSettings::record_batch, issue 67 item 2): with the steps
+// promised (plan_steps) a recording engine runs up to record_batch steps a request, each
+// step's record copied into the device ring and back to the host a batch at once. After
+// every step the record (x_pre, v_pre, AABBs, pairs, confirmed pairs, contacts, x_post,
+// v_post), contacts() and the counts equal the cpu engine's bit for bit, and so does
+// state() (from the batch's copy, while the kernel runs ahead), for record_batch 1 (the
+// step-by-step path: a request per step), 64 and 7, 64 with stage times every 16 steps (a
+// batch ends at each timed step), 64 from capacity 1 (reruns end batches), 64 with a
+// ring whose pair pool holds about 200 pairs (test hook: steps that overflow it end their
+// batch and are read from the live buffers), and 32 with no steps promised (a request a
+// step, read from the live buffers). bunny-stack-50 (the fused front), box-stack
+// (the one-block response) and bunny-random-400 (the shared boxes). The engines run one
+// after the other: two resident kernels need not fit on the device at once.
+TEST(CudaPersistent, RecordedBatchesGiveTheStepByStepRecords) {
+  REQUIRE_CUDA_DEVICE();
+  for (const char* scene : {"bunny-stack-50", "box-stack", "bunny-random-400"}) {
+    const auto model = with_levels(load_model(scene), "1,2");
+    const int frames = std::string(scene) == "bunny-random-400" ? 120 : 300;
+    const std::uint64_t n = model->initial.size();
+    auto cpu = cpu_flat(model);
+    cpu->set_recording(true);
+    std::vector<FrameMetrics> ref_m;
+    std::vector<FrameRecord> ref;
+    std::vector<std::uint64_t> ref_hash;
+    for (int f = 1; f <= frames; ++f) {
+      ref_m.push_back(cpu->step());
+      ref.push_back(cpu->record());
+      ref_hash.push_back(cpu->state_hash());
+    }
+    struct Variant {
+      const char* name;
+      long batch;
+      bool stage_times;
+      bool tiny;
+      std::uint64_t pool_pairs;  // 0: the default ring
+      bool plan = true;          // plan_steps(frames) before the first step
+    };
+    const Variant variants[] = {{"record_batch=1", 1, false, false, 0},
+                                {"record_batch=64", 64, false, false, 0},
+                                {"record_batch=7", 7, false, false, 0},
+                                {"record_batch=64, stage times every 16", 64, true, false, 0},
+                                {"record_batch=64 from capacity 1", 64, false, true, 0},
+                                {"record_batch=64, a pool of 200 pairs", 64, false, false, 200},
+                                {"record_batch=32, no steps promised", 32, false, false, 0, false}};
+    for (const Variant& v : variants) {
+      CudaSettings settings = path_settings("small");
+      settings.record_batch = v.batch;
+      settings.stage_times = v.stage_times;
+      settings.stage_time_every = 16;
+      CudaWorld::TestHooks hooks = idle_after(600000000L);
+      if (v.pool_pairs > 0)
+        hooks.record_ring_max_bytes = static_cast<std::uint64_t>(v.batch) * n * (4 * sizeof(Vec3) + sizeof(Aabb)) +
+                                      v.pool_pairs * (sizeof(Pair) + 1 + sizeof(gpu::DeviceContact));
+      CudaWorld g(model, "flat", settings, hooks);
+      ASSERT_TRUE(g.persistent()) << scene;
+      if (v.tiny) g.reset_capacities(1);
+      g.set_recording(true);
+      if (v.plan) g.plan_steps(frames);
+      for (int f = 1; f <= frames; ++f) {
+        const std::size_t i = static_cast<std::size_t>(f - 1);
+        const FrameMetrics mg = g.step();
+        const std::string what = fmt::format("{} frame {} ({})", scene, f, v.name);
+        expect_cpu_cuda_counts(ref_m[i], mg, what);
+        const std::string c = contact_difference(ref[i].contacts, g.contacts());
+        EXPECT_TRUE(c.empty()) << what << ": contacts(): " << c;
+        if (f % 3 == 0) {
+          EXPECT_EQ(ref_hash[i], g.state_hash()) << what << ": state() after the step";
+        }
+        expect_same_record(ref[i], g.record(), what);
+        if (::testing::Test::HasFailure()) FAIL() << what;
+      }
+      EXPECT_EQ(ref_hash.back(), g.state_hash()) << scene << " " << v.name;
+      const std::uint64_t requests = g.resident_requests();
+      if (v.batch == 1 || !v.plan) {
+        EXPECT_GE(requests, static_cast<std::uint64_t>(frames)) << scene << " " << v.name << ": a request a step";
+      } else if (!v.tiny && v.pool_pairs == 0) {
+        EXPECT_LT(requests, static_cast<std::uint64_t>(frames / 4)) << scene << " " << v.name << ": batches";
+      }
+      std::cout << "[ info ] " << scene << " " << v.name << ": " << frames << " recorded steps equal to the cpu, "
+                << requests << " requests, " << g.resident_launches() << " launches\n";
+    }
+  }
 }
 
 // A body that turns non-finite stops the batch at its step: step() throws the cpu's

@@ -140,7 +140,7 @@ TEST(DartSettings, DefaultsAreDartsAndBadValuesAreNamed) {
   EXPECT_EQ(ours.cfm, darts.cfm);
   EXPECT_EQ(ours.iterations, darts.iterations);
   DartSettings s;
-  apply_dart_settings(s, {"collision=dart", "boxes=mesh", "lcp=pgs", "iterations=50", "erp=0.2", "max_erv=0.5",
+  apply_settings(s, {"collision=dart", "boxes=mesh", "lcp=pgs", "iterations=50", "erp=0.2", "max_erv=0.5",
                           "cfm=1e-6", "friction=pyramid", "contacts=5000", "insert=posed"},
                       "--dart");
   EXPECT_EQ(s.collision, DartCollision::Dart);
@@ -157,7 +157,7 @@ TEST(DartSettings, DefaultsAreDartsAndBadValuesAreNamed) {
   auto error = [](const std::string& item) {
     DartSettings t;
     try {
-      apply_dart_settings(t, {item}, "--dart");
+      apply_settings(t, {item}, "--dart");
     } catch (const InputError& e) {
       return std::string(e.what());
     }

@@ -388,7 +388,7 @@ TEST(MujocoWorld, BadAccelerationNamesTheBody) {
 
 TEST(MujocoSettings, KeysValuesAndErrors) {
   MujocoSettings s;
-  apply_mujoco_settings(s, {"iterations=20", "cone=pyramidal", "timeconst=0.01", "margin=0.002", "multiccd=off",
+  apply_settings(s, {"iterations=20", "cone=pyramidal", "timeconst=0.01", "margin=0.002", "multiccd=off",
                             "max_contacts=500"},
                         "--mujoco");
   EXPECT_EQ(s.iterations, 20);
@@ -400,7 +400,7 @@ TEST(MujocoSettings, KeysValuesAndErrors) {
   auto error = [](const std::string& item) {
     MujocoSettings t;
     try {
-      apply_mujoco_settings(t, {item}, "--mujoco");
+      apply_settings(t, {item}, "--mujoco");
     } catch (const InputError& e) {
       return std::string(e.what());
     }

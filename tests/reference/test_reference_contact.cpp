@@ -21,6 +21,7 @@
 #include <fcl/geometry/shape/box.h>
 #include <fcl/narrowphase/collision.h>
 #include <fcl/narrowphase/collision_object.h>
+#include <fcl/narrowphase/detail/primitive_shape_algorithm/box_box.h>
 
 #include "octocd/error.hpp"
 #include "octocd/reference_contact.hpp"
@@ -291,108 +292,154 @@ TEST(ReferenceContact, BodyOutOfRangeThrows) {
   EXPECT_THROW(ref.normal(0, 2, {0, 0, 0}, {1, 0, 0}), InputError);
 }
 
-namespace {
 
-/// FCL's own answer for two fcl::Box of sides sa, sb at ta, tb: fcl::collide with
-/// CollisionRequest(8, true) and libccd, its deepest contact (the first of equal depths)
-/// as B-to-A normal, depth and point; `hit` false when FCL reports no contact.
-struct FclBoxes {
-  bool hit = false;
-  Vec3 normal, point;
-  double depth = 0;
-};
-FclBoxes fcl_boxes(const fcl::Vector3d& sa, const fcl::Transform3d& ta, const fcl::Vector3d& sb,
-                   const fcl::Transform3d& tb) {
-  fcl::CollisionObjectd oa(std::make_shared<fcl::Boxd>(sa), ta), ob(std::make_shared<fcl::Boxd>(sb), tb);
-  fcl::CollisionRequestd req(8, true);
-  req.gjk_solver_type = fcl::GST_LIBCCD;
-  fcl::CollisionResultd res;
-  fcl::collide(&oa, &ob, req, res);
-  FclBoxes out;
-  if (res.numContacts() == 0) return out;
-  std::size_t deepest = 0;
-  for (std::size_t k = 1; k < res.numContacts(); ++k)
-    if (res.getContact(k).penetration_depth > res.getContact(deepest).penetration_depth) deepest = k;
-  const fcl::Contactd& c = res.getContact(deepest);
-  const fcl::Vector3d n = -c.normal / c.normal.norm();
-  out.hit = true;
-  out.normal = v3(n.x(), n.y(), n.z());
-  out.depth = std::max(0.0, c.penetration_depth);
-  out.point = v3(c.pos.x(), c.pos.y(), c.pos.z());
-  return out;
-}
-
-}  // namespace
-
-// posed() on two boxes and aabb_pair() answer exactly what fcl::collide answers on
-// fcl::Box objects at the same transforms (they call FCL's box-box routine directly):
-// the same normal, depth and point, bit for bit, on 300 random overlapping pairs of
-// turned boxes of different sides and on the world boxes of each.
-TEST(ReferenceContact, BoxBoxIsFclCollideExactly) {
+// posed() on two boxes and aabb_pair() (octocd's box-box: the least overlap over the 15
+// separating axes) against FCL's box-box routine (fcl::detail::boxBox2, ODE's dBoxBox), the
+// oracle, on 6,000 pose pairs: turned boxes (face and edge-edge minima), axis-aligned ones
+// (face-face, equal overlaps on several axes), near-parallel ones (B turned 1e-7 to 1e-2 rad
+// from A) and touching ones (A moved out along the answer's normal by its depth), and the
+// world boxes of each. FCL's depth is the overlap along its own axis (its `depth` output);
+// it keeps a face axis unless an edge-edge axis overlaps less than 1/1.05 of it, so:
+//  - the same verdict (FCL's code 0 <=> apart) except within 1e-9 m of touching;
+//  - our depth D <= FCL's d_F + tol (the minimum is at most FCL's axis's overlap) and
+//    d_F <= 1.05 D + tol (FCL's face preference); where d_F <= D + tol (FCL took a minimal
+//    axis) the normals agree within 1e-5 rad, or FCL's axis overlaps by D too (a tie: both
+//    are minimum translations); the contact point lies within D + 1e-6 m of both boxes;
+//  - our normal is the least translation: projecting the 16 corners on it (the normal is
+//    float: ~6e-8 rad) gives D within 1e-6 m.
+// tol = 1e-9 m: each overlap is a sum of about seven double products of terms below 0.5 m
+// (rounding ~1e-15 m); FCL pads |R| by 10 eps, which adds up to ~2e-15 m / |a_i x b_j| on
+// an edge-edge axis: below 1e-9 m while the edges are more than 1e-6 rad from parallel
+// (its nearly parallel edge axes only grow, never chosen as the minimum).
+TEST(ReferenceContact, BoxBoxIsTheMinimumOverFclBoxBox) {
   const std::string text = R"({"name": "pair", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]}, "walls": "none",
     "groups": [{"name": "a", "shape": {"box": [0.1, 0.05, 0.08]}, "count": 1, "positions": [[0, 0, 0]]},
                {"name": "b", "shape": {"box": [0.07, 0.12, 0.04]}, "count": 1, "positions": [[0.5, 0, 0]]}]})";
   const World world(scene_from_text(text, "boxes_exact"));
   const ReferenceGeometry ref(world);
   std::mt19937 rng(11);
-  std::uniform_real_distribution<float> pos(-0.15f, 0.15f), angle(-3.1f, 3.1f), axis(-1, 1);
-  auto pose = [&](float scale) {
+  std::uniform_real_distribution<float> pos(-0.15f, 0.15f), angle(-3.1f, 3.1f), axis(-1, 1), expo(-7, -2);
+  auto random_axis = [&] {
     Vec3 u = v3(axis(rng), axis(rng), axis(rng));
     const float n = std::sqrt(u.x * u.x + u.y * u.y + u.z * u.z);
-    u = v3(u.x / n, u.y / n, u.z / n);
-    return Pose{v3(scale * pos(rng), scale * pos(rng), scale * pos(rng)), axis_angle(u, angle(rng))};
+    return v3(u.x / n, u.y / n, u.z / n);
   };
-  // The FCL transform of a centred box at a pose, as ReferenceGeometry places it.
-  auto transform = [](const Pose& p) -> fcl::Transform3d {
+  auto position = [&] { return v3(pos(rng), pos(rng), pos(rng)); };
+  auto rotation = [](const Quat& q) -> fcl::Matrix3d {
+    return fcl::Quaterniond(q.w, q.x, q.y, q.z).normalized().toRotationMatrix();
+  };
+  // A centred box as ReferenceGeometry places it, and the same box's world AABB.
+  auto transform = [&](const Pose& p) -> fcl::Transform3d {
     fcl::Transform3d t = fcl::Transform3d::Identity();
-    t.linear() = fcl::Quaterniond(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z)
-                     .normalized()
-                     .toRotationMatrix();
-    t.translation() = fcl::Vector3d(p.position.x, p.position.y, p.position.z) + t.linear() * fcl::Vector3d::Zero();
+    t.linear() = rotation(p.orientation);
+    t.translation() = fcl::Vector3d(p.position.x, p.position.y, p.position.z);
     return t;
   };
-  auto side = [](const Aabb& b) -> fcl::Vector3d {
+  auto side_of = [](const Aabb& b) -> fcl::Vector3d {
     return fcl::Vector3d(b.max.x, b.max.y, b.max.z) - fcl::Vector3d(b.min.x, b.min.y, b.min.z);
   };
-  int hits = 0, aabb_hits = 0;
-  for (int k = 0; k < 300; ++k) {
-    const Pose pa = pose(1.0f), pb = pose(1.0f);
-    const FclBoxes want = fcl_boxes(side(world.model().local_box(0)), transform(pa),
-                                    side(world.model().local_box(1)), transform(pb));
-    const ReferenceNormal got = ref.posed(0, 1, pa, pb);
-    ASSERT_EQ(got.penetrating, want.hit) << "pair " << k;
-    if (want.hit) {
-      ++hits;
-      ASSERT_TRUE(got.valid);
-      EXPECT_EQ(got.depth, want.depth) << "pair " << k;
-      EXPECT_TRUE(got.normal.x == want.normal.x && got.normal.y == want.normal.y && got.normal.z == want.normal.z)
-          << "pair " << k;
-      EXPECT_TRUE(got.point_a.x == want.point.x && got.point_a.y == want.point.y && got.point_a.z == want.point.z)
-          << "pair " << k;
+  const double tol = 1e-9;
+  struct Box {
+    fcl::Vector3d side;
+    fcl::Transform3d t;
+  };
+  // The translation of A along the unit n that separates the boxes' 8 corners each.
+  auto overlap_along = [](const Box& a, const Box& b, const fcl::Vector3d& n) {
+    double a_lo = 1e30, b_hi = -1e30;
+    for (int i = 0; i < 8; ++i) {
+      const fcl::Vector3d c((i & 1) ? 0.5 : -0.5, (i & 2) ? 0.5 : -0.5, (i & 4) ? 0.5 : -0.5);
+      a_lo = std::min(a_lo, n.dot(a.t * c.cwiseProduct(a.side)));
+      b_hi = std::max(b_hi, n.dot(b.t * c.cwiseProduct(b.side)));
     }
+    return b_hi - a_lo;
+  };
+  auto outside = [](const Box& b, const fcl::Vector3d& p) {
+    const fcl::Vector3d q = b.t.linear().transpose() * (p - b.t.translation());
+    return (q.cwiseAbs() - 0.5 * b.side).cwiseMax(0.0).norm();
+  };
+  auto dv = [](Vec3 v) { return fcl::Vector3d(v.x, v.y, v.z); };
+  int hits[4] = {0, 0, 0, 0}, apart = 0, edge_min = 0, face_min = 0, fcl_face_deeper = 0, ties = 0, same = 0;
+  // One pair: FCL's box-box and ours agree as the comment above says; returns ours.
+  auto check = [&](const Box& a, const Box& b, const ReferenceNormal& got, int category, const std::string& what) {
+    fcl::Vector3d normal;
+    double depth = 0;
+    int code = 0;
+    std::vector<fcl::ContactPointd> contacts;
+    fcl::detail::boxBox2(a.side, a.t, b.side, b.t, normal, &depth, &code, 4, contacts);
+    const bool fcl_hit = code != 0;
+    if (fcl_hit != got.penetrating) {
+      // Only at touching: FCL's depth or our distance within tol.
+      EXPECT_LE(fcl_hit ? depth : got.distance, tol) << what;
+      return;
+    }
+    if (!fcl_hit) {
+      ++apart;
+      return;
+    }
+    ++hits[category];
+    ASSERT_TRUE(got.valid) << what;
+    const double D = got.depth;
+    const fcl::Vector3d n_fcl = -normal.normalized();  // B to A
+    EXPECT_LE(D, depth + tol) << what;
+    EXPECT_LE(depth, 1.05 * D + tol) << what;
+    const fcl::Vector3d n = dv(got.normal).normalized();
+    EXPECT_NEAR(overlap_along(a, b, n), D, 1e-6) << what;
+    const double between = std::atan2(n.cross(n_fcl).norm(), n.dot(n_fcl));
+    if (depth <= D + tol) {
+      if (between <= 1e-5) {
+        ++same;
+      } else {
+        ++ties;
+        EXPECT_NEAR(overlap_along(a, b, n_fcl), D, 1e-6) << what << " (FCL's axis: a tie)";
+      }
+    } else {
+      ++fcl_face_deeper;  // FCL's axis overlaps more (a face kept, or a nearly parallel one)
+    }
+    const fcl::Vector3d p = dv(got.point_a);
+    EXPECT_LE(outside(a, p), D + 1e-6) << what;
+    EXPECT_LE(outside(b, p), D + 1e-6) << what;
+    bool face = false;
+    for (const Box* x : {&a, &b})
+      for (int k = 0; k < 3; ++k) face = face || std::abs(x->t.linear().col(k).dot(n)) > 1 - 1e-6;
+    (face ? face_min : edge_min) += 1;
+  };
+  const fcl::Vector3d side_a = side_of(world.model().local_box(0)), side_b = side_of(world.model().local_box(1));
+  for (int k = 0; k < 6000; ++k) {
+    const int category = k % 4;  // 0 turned, 1 axis-aligned, 2 near-parallel, 3 touching
+    Pose pa{position(), category == 1 ? Quat{} : axis_angle(random_axis(), angle(rng))};
+    Pose pb{position(), category == 1 ? Quat{} : axis_angle(random_axis(), angle(rng))};
+    if (category == 2) pb.orientation = normalized(pa.orientation * axis_angle(random_axis(), std::pow(10.0f, expo(rng))));
+    if (category == 3) {
+      const ReferenceNormal r = ref.posed(0, 1, pa, pb);
+      if (!r.penetrating || !r.valid) continue;
+      pa.position = pa.position + float(r.depth) * r.normal;
+    }
+    const std::string what = "pair " + std::to_string(k) + " category " + std::to_string(category);
+    const Box a{side_a, transform(pa)}, b{side_b, transform(pb)};
+    const ReferenceNormal got = ref.posed(0, 1, pa, pb);
+    if (category == 3) {
+      // Moved out by the depth (float poses: within 1e-6 m): touching.
+      EXPECT_LT(got.penetrating ? got.depth : got.distance, 1e-6) << what;
+    }
+    check(a, b, got, category, what);
     // The world boxes of the same poses, as an engine resolving on AABBs collides them.
     const Aabb wa = posed_box_aabb(world.model().local_box(0), pa), wb = posed_box_aabb(world.model().local_box(1), pb);
-    fcl::Transform3d twa = fcl::Transform3d::Identity(), twb = fcl::Transform3d::Identity();
-    twa.translation() = (fcl::Vector3d(wa.min.x, wa.min.y, wa.min.z) + fcl::Vector3d(wa.max.x, wa.max.y, wa.max.z)) * 0.5;
-    twb.translation() = (fcl::Vector3d(wb.min.x, wb.min.y, wb.min.z) + fcl::Vector3d(wb.max.x, wb.max.y, wb.max.z)) * 0.5;
-    const FclBoxes want_w = fcl_boxes(side(wa), twa, side(wb), twb);
-    const ReferenceNormal got_w = ReferenceGeometry::aabb_pair(wa, wb);
-    ASSERT_EQ(got_w.penetrating, want_w.hit) << "world boxes " << k;
-    if (want_w.hit) {
-      ++aabb_hits;
-      EXPECT_EQ(got_w.depth, want_w.depth) << "world boxes " << k;
-      EXPECT_TRUE(got_w.normal.x == want_w.normal.x && got_w.normal.y == want_w.normal.y &&
-                  got_w.normal.z == want_w.normal.z)
-          << "world boxes " << k;
-      EXPECT_TRUE(got_w.point_a.x == want_w.point.x && got_w.point_a.y == want_w.point.y &&
-                  got_w.point_a.z == want_w.point.z)
-          << "world boxes " << k;
-    }
+    Box aw{side_of(wa), fcl::Transform3d::Identity()}, bw{side_of(wb), fcl::Transform3d::Identity()};
+    aw.t.translation() = (dv(wa.min) + dv(wa.max)) * 0.5;
+    bw.t.translation() = (dv(wb.min) + dv(wb.max)) * 0.5;
+    check(aw, bw, ReferenceGeometry::aabb_pair(wa, wb), 1, what + " (world boxes)");
   }
-  // Most pairs meet (centres within 0.26 m of boxes 0.08-0.24 m across), some do not.
-  EXPECT_GT(hits, 100);
-  EXPECT_LT(hits, 300);
-  EXPECT_GT(aabb_hits, hits);
+  // Every kind of pair met: each category penetrates often, both kinds of minimum occur,
+  // FCL's axis is deeper, and most answers are FCL's own axis.
+  for (int c = 0; c < 4; ++c) EXPECT_GT(hits[c], 300) << "category " << c;
+  EXPECT_GT(apart, 300);
+  EXPECT_GT(edge_min, 100);
+  EXPECT_GT(face_min, 1000);
+  EXPECT_GT(fcl_face_deeper, 20);
+  EXPECT_GT(same, 5 * (ties + fcl_face_deeper));
+  std::printf("box-box against FCL: %d/%d/%d/%d penetrating (turned, aligned and world, near-parallel, touching), "
+              "%d apart; minimum on a face %d, edge-edge %d; FCL's axis the same %d, a tie %d, a deeper face %d\n",
+              hits[0], hits[1], hits[2], hits[3], apart, face_min, edge_min, same, ties, fcl_face_deeper);
 }
 
 // intersect() on two boxes (the separating axes where the boxes clearly penetrate or are

@@ -227,25 +227,25 @@ TEST(BulletWorld, BoxModeRestsOnTheAabb) {
 // and what is allowed.
 TEST(BulletWorld, SettingsParseAndRefuse) {
   BulletSettings s;
-  apply_bullet_settings(s, {"shape=box"}, "--bullet");
+  apply_settings(s, {"shape=box"}, "--bullet");
   EXPECT_EQ(s.shape, BulletShape::Box);
-  apply_bullet_settings(s, {"shape=hull"}, "--bullet");
+  apply_settings(s, {"shape=hull"}, "--bullet");
   EXPECT_EQ(s.shape, BulletShape::Hull);
   try {
-    apply_bullet_settings(s, {"shape=sphere"}, "--bullet");
+    apply_settings(s, {"shape=sphere"}, "--bullet");
     FAIL() << "shape=sphere accepted";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("--bullet: shape='sphere' is not allowed; allowed: hull"), std::string::npos)
         << e.what();
   }
-  EXPECT_THROW(apply_bullet_settings(s, {"margin=0"}, "--bullet"), InputError);
-  EXPECT_THROW(apply_bullet_settings(s, {"shape"}, "--bullet"), InputError);
+  EXPECT_THROW(apply_settings(s, {"margin=0"}, "--bullet"), InputError);
+  EXPECT_THROW(apply_settings(s, {"shape"}, "--bullet"), InputError);
   EXPECT_EQ(s.solver_iterations, 10);  // Bullet's default
-  apply_bullet_settings(s, {"iterations=20"}, "--bullet");
+  apply_settings(s, {"iterations=20"}, "--bullet");
   EXPECT_EQ(s.solver_iterations, 20);
   for (const char* bad : {"iterations=0", "iterations=10001", "iterations=5x", "iterations="}) {
     try {
-      apply_bullet_settings(s, {bad}, "--bullet");
+      apply_settings(s, {bad}, "--bullet");
       FAIL() << bad << " accepted";
     } catch (const InputError& e) {
       EXPECT_NE(std::string(e.what()).find("allowed: an integer in [1, 10000]"), std::string::npos) << e.what();

@@ -27,10 +27,17 @@ h5py = pytest.importorskip("h5py", reason="python3-h5py is not installed")
 import test_engine_corpus as corpus  # noqa: E402  (its engine runs and helpers)
 from legacy_trace import make_legacy  # noqa: E402
 
-ROWS = ["broadphase-completeness", "contact-completeness", "contact-geometry", "penetration", "friction",
-        "conservation", "momentum-balance", "free-flight", "candidate-sets", "midphase-completeness",
-        "non-penetration-eq14", "friction-monotonicity", "impulse-conservation", "applied-state", "analytic",
-        "bullet-dynamics"]
+
+def _row_table():
+    """Every row's name in the row table's order, and the physics tier's
+    (validation/include/octocd/validation_rows.def)."""
+    with open(os.path.join(corpus.SOURCE_DIR, "validation", "include", "octocd", "validation_rows.def")) as f:
+        rows = re.findall(r'^OCTOCD_ROW\(\w+, "([a-z0-9-]+)", (\w+),', f.read(), re.M)
+    assert len(rows) >= 16, rows
+    return [name for name, _ in rows], [name for name, tier in rows if tier == "Physics"]
+
+
+ROWS, PHYSICS_ROWS = _row_table()
 CONTACT_ROWS = ["contact-completeness", "contact-geometry", "friction", "conservation", "momentum-balance",
                 "free-flight"]
 
@@ -80,7 +87,7 @@ def test_an_earlier_version_2_trace_is_judged_on_what_it_carries(workdir, engine
     # declaration that there is one direction.
     assert plan["momentum-balance"].startswith("n/a    add /contacts/jt3"), plan["momentum-balance"]
     assert "friction_directions = 1" in plan["momentum-balance"], plan["momentum-balance"]
-    for row in ROWS[:8]:
+    for row in PHYSICS_ROWS:
         assert plan[row].startswith("judged" if row != "momentum-balance" else "n/a"), (row, plan[row])
     r = corpus.judge(legacy)
     assert corpus.verdict(r.stdout, "momentum-balance") == "n/a", r.stdout
@@ -89,7 +96,7 @@ def test_an_earlier_version_2_trace_is_judged_on_what_it_carries(workdir, engine
     assert failures(r.stdout) <= corpus.ENGINE_FAULTS.get(engine, set()), r.stdout
     if corpus.verdict(r.stdout, "friction") == "pass":
         assert "rule jt3 on 0 pairs" in detail(r.stdout, "friction"), r.stdout
-    for row in ROWS[:8]:  # n/a only for what the run holds (conservation: no isolated group) or names what to add
+    for row in PHYSICS_ROWS:  # n/a only for what the run holds (conservation: no isolated group) or names what to add
         assert corpus.verdict(r.stdout, row) != "missing", (row, r.stdout)
         assert ("to judge it, add" in detail(r.stdout, row)) == (row == "momentum-balance"), (row, r.stdout)
 

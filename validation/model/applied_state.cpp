@@ -14,6 +14,7 @@
 // double re-derivation.
 #include "applied_state.hpp"
 
+#include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
 
 #include <algorithm>
@@ -111,9 +112,16 @@ struct AppliedStateJudge::Impl {
   void run(const Island& is, const std::vector<std::uint8_t>& forced, Run& r) const;
   /// Compares the run's prediction of the island's dynamic bodies with the engine's.
   void compare(const Island& is, Run& r) const;
-  /// Explores the island's branches; returns the run judged against and sets `judged`
-  /// (per local dynamic body).
-  Run search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged);
+  /// What a search adds to the judge's counters (summed in island order after the islands
+  /// are searched on the validators' threads).
+  struct SearchCounts {
+    std::uint64_t near_ties = 0, runs = 0, searched = 0, resolved = 0, exceeded = 0;
+  };
+  /// Explores the island's branches; returns the run judged against, sets `judged` (per
+  /// local dynamic body) and adds to `counts`. Reads only the frame's shared state: islands
+  /// may be searched on several threads at once.
+  Run search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged, SearchCounts& counts) const;
+  int threads = 0;  // set_threads: the islands' threads (0: the hardware's)
 };
 
 AppliedStateJudge::AppliedStateJudge(const Model& model, const Tolerances& tol) : impl_(std::make_unique<Impl>()) {
@@ -124,6 +132,8 @@ AppliedStateJudge::AppliedStateJudge(const Model& model, const Tolerances& tol) 
 AppliedStateJudge::~AppliedStateJudge() = default;
 
 void AppliedStateJudge::set_stop(std::function<bool()> stop) { impl_->stop = std::move(stop); }
+
+void AppliedStateJudge::set_threads(int threads) { impl_->threads = threads; }
 
 void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8_t>& forced, Run& r) const {
   const Model& m = *model;
@@ -407,19 +417,20 @@ void AppliedStateJudge::Impl::compare(const Island& is, Run& r) const {
   }
 }
 
-Run AppliedStateJudge::Impl::search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged) {
+Run AppliedStateJudge::Impl::search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged,
+                                    SearchCounts& counts) const {
   Run first;
   run(is, {}, first);
   judged.assign(is.dynamic, 1);
   if (!judge_response) return first;
   compare(is, first);
-  near_ties += first.trace.size();
-  ++runs;
+  counts.near_ties += first.trace.size();
+  ++counts.runs;
   if (first.off == 0) return first;
   // Breadth-first over the near-ties by the number of outcomes changed from the first
   // run's: each queued branch forces a prefix of outcomes, the rest follow the proposal;
   // a branch only changes outcomes after its forced prefix, so no branch is run twice.
-  ++searched;
+  ++counts.searched;
   struct Branch {
     std::vector<std::uint8_t> forced;
   };
@@ -460,11 +471,11 @@ Run AppliedStateJudge::Impl::search(const Island& is, bool judge_response, std::
     run(is, b.forced, r);
     work += r.work;
     ++done;
-    ++runs;
+    ++counts.runs;
     compare(is, r);
     open = open || r.open;
     if (r.off == 0) {
-      ++resolved;
+      ++counts.resolved;
       return r;
     }
     if (r.off < best.off || (r.off == best.off && r.worst < best.worst)) best = r;
@@ -474,7 +485,7 @@ Run AppliedStateJudge::Impl::search(const Island& is, bool judge_response, std::
   // Bound exceeded: judge only the bodies no near-tie of the first run can reach. A
   // near-tie in pass p changes its two bodies at the end of pass p, their neighbours at
   // the end of pass p + 1, ...: N - 1 - p contact hops.
-  ++exceeded;
+  ++counts.exceeded;
   const int passes = model->scene.response.iterations;
   std::vector<int> reach(is.local.size(), -1);
   std::vector<std::vector<std::uint32_t>> adj(is.local.size());
@@ -588,11 +599,27 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   std::vector<std::uint8_t> clamped(n, 0);
   std::vector<std::uint32_t> count0(n, 0);
   std::vector<D3> x_tol(n), v_tol(n);
-  std::vector<std::uint8_t> judged;
-  StopPoll poll(s.stop);
-  for (const Island& is : islands) {
-    poll();
-    const Run r = s.search(is, judge_response, judged);
+  // The islands are independent: searched on the validators' threads, then tallied in
+  // island order (a verdict never depends on the thread count).
+  struct Searched {
+    Run run;
+    std::vector<std::uint8_t> judged;
+    Impl::SearchCounts counts;
+  };
+  std::vector<Searched> searched(islands.size());
+  parallel_items_on(islands.size(), loop_threads(s.threads, islands.size()), s.stop, [&](std::size_t j, unsigned) {
+    searched[j].run = s.search(islands[j], judge_response, searched[j].judged, searched[j].counts);
+  });
+  for (std::size_t j = 0; j < islands.size(); ++j) {
+    const Island& is = islands[j];
+    const Run& r = searched[j].run;
+    const std::vector<std::uint8_t>& judged = searched[j].judged;
+    const Impl::SearchCounts& c = searched[j].counts;
+    s.near_ties += c.near_ties;
+    s.runs += c.runs;
+    s.searched += c.searched;
+    s.resolved += c.resolved;
+    s.exceeded += c.exceeded;
     for (std::uint32_t l = 0; l < is.dynamic; ++l) {
       const std::uint32_t i = is.local[l];
       clamped[i] = r.clamped[l];
@@ -605,14 +632,18 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
         ++s.unjudged;
         continue;
       }
+      // The worst quantity's figures, worded only for a failure.
       double worst = 0.0;
-      std::string what;
+      struct Worst {
+        const char* quantity = nullptr;
+        int k = 0;
+        double got = 0, want = 0, tolerance = 0;
+      } w_args;
       auto judge = [&](const char* quantity, int k, double got, double want, double tolerance) {
         const double ratio = std::fabs(got - want) / tolerance;
-        if ((ratio <= worst || std::isnan(worst)) && !what.empty()) return;
+        if ((ratio <= worst || std::isnan(worst)) && w_args.quantity) return;
         worst = std::isnan(ratio) ? std::numeric_limits<double>::infinity() : ratio;
-        what = fmt::format("frame {}: body {} {}.{} = {:.9g}, design.md section 6 gives {:.9g} (tolerance {:.3g}; {} contacts)",
-                           frame, i, quantity, "xyz"[k], got, want, tolerance, r.count0[l]);
+        w_args = {quantity, k, got, want, tolerance};
       };
       const Aabb& local = model.local_box(i);
       for (int k = 0; k < 3; ++k) {
@@ -625,7 +656,12 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
         judge("v", k, rec.v_post[i][k], r.v[l][k], r.v_tol[l][k]);
       }
       s.worst = std::max(s.worst, worst);
-      s.bodies.check(worst <= 1.0, worst, what);
+      s.bodies.check(worst <= 1.0, worst,
+                     worst <= 1.0 ? std::string()
+                                  : fmt::format("frame {}: body {} {}.{} = {:.9g}, design.md section 6 gives {:.9g} "
+                                                "(tolerance {:.3g}; {} contacts)",
+                                                frame, i, w_args.quantity, "xyz"[w_args.k], w_args.got, w_args.want,
+                                                w_args.tolerance, r.count0[l]));
     }
   }
 

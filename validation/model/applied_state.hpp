@@ -90,6 +90,9 @@ class AppliedStateJudge {
   /// Polled per island and per relaxation pass of the re-derivation; observe throws
   /// ValidationStopped when it returns true. Empty (default): never.
   void set_stop(std::function<bool()> stop);
+  /// Threads the frame's islands are searched on (0: the hardware's; 1: serial); the
+  /// verdicts do not depend on it.
+  void set_threads(int threads);
 
  private:
   struct Impl;

@@ -13,6 +13,32 @@
 
 namespace octocd {
 
+namespace {
+
+/// " (gyroscopic term declared)", " (no gyroscopic term declared)", or undeclared how
+/// many passing body-steps kept w (no term) and how many met the invariants of the term.
+std::string spin_note(PhysicsBodies::Gyroscopic g, std::uint64_t kept, std::uint64_t invariant) {
+  switch (g) {
+    case PhysicsBodies::Gyroscopic::Integrated: return " (gyroscopic term declared)";
+    case PhysicsBodies::Gyroscopic::Absent: return " (no gyroscopic term declared)";
+    case PhysicsBodies::Gyroscopic::Undeclared: break;
+  }
+  return fmt::format(" (gyroscopic term undeclared: {} kept w, {} precessed keeping L and the energy; declare "
+                     "gyroscopic to sharpen the verdict)",
+                     kept, invariant);
+}
+
+// The causes of the rows of this file (validation_rows.def), by their names.
+const std::size_t kLinear = physics_detail::cause_index(RowId::MomentumBalance, "linear"),
+                  kAngular = physics_detail::cause_index(RowId::MomentumBalance, "angular");
+const std::size_t kVelocity = physics_detail::cause_index(RowId::FreeFlight, "velocity"),
+                  kPosition = physics_detail::cause_index(RowId::FreeFlight, "position"),
+                  kAngularVelocity = physics_detail::cause_index(RowId::FreeFlight, "angular-velocity"),
+                  kOrientation = physics_detail::cause_index(RowId::FreeFlight, "orientation"),
+                  kSleeping = physics_detail::cause_index(RowId::FreeFlight, "sleeping");
+
+}  // namespace
+
 using namespace dmath;
 using namespace physics_detail;
 
@@ -94,6 +120,13 @@ double spin_ratio(PhysicsBodies::Gyroscopic g, double r_plain, double r_inv, std
 }  // namespace
 
 void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<Pose>& det) {
+  Tally& balance_lin = tally(RowId::MomentumBalance, kLinear);
+  Tally& balance_ang = tally(RowId::MomentumBalance, kAngular);
+  Tally& free_vel = tally(RowId::FreeFlight, kVelocity);
+  Tally& free_pos = tally(RowId::FreeFlight, kPosition);
+  Tally& free_w = tally(RowId::FreeFlight, kAngularVelocity);
+  Tally& free_q = tally(RowId::FreeFlight, kOrientation);
+  Tally& free_sleep = tally(RowId::FreeFlight, kSleeping);
   const Model& m = *model;
   const std::size_t n = m.bodies.size();
   const std::int64_t frame = rec.frame;
@@ -106,7 +139,6 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
   const double dt = m.scene.dt;
   const double eps = tol.balance_ulps * kEps32;
   StopPoll poll(stop);
-  std::optional<RowClock> clock(std::in_place, t_balance);
   auto v_int = [&](std::size_t i) { return d3(rec.v_pre[i]) + dt * g; };  // dynamic bodies
   auto w_of = [&](const std::vector<Vec3>& w, std::size_t i) { return rotating ? d3(w[i]) : D3{}; };
   auto locked = [&](std::size_t i) -> unsigned { return bodies.locked_dofs.empty() ? 0u : bodies.locked_dofs[i]; };
@@ -576,6 +608,7 @@ PhysicsValidators::Impl::BalanceFit PhysicsValidators::Impl::balance_fit() const
 }
 
 Tally PhysicsValidators::Impl::fitted_balance(const BalanceFit& fit) const {
+  const Tally& balance_lin = tally(RowId::MomentumBalance, kLinear);
   Tally t = balance_lin;
   for (const DeferredBalance& d : deferred) {
     const BalanceDisc* discs = deferred_discs.data() + d.disc_first;
@@ -613,6 +646,158 @@ Tally PhysicsValidators::Impl::balance_bias(const BalanceFit& fit) const {
                        100.0 * kBiasMax);
   });
   return t;
+}
+
+// ---- momentum-balance: its measure of a frame and its table entry -------------------------
+
+template <>
+void PhysicsValidators::Impl::measure<RowId::MomentumBalance>(PhysicsFrame& f) {
+  // Every frame with states, in one pass over the bodies with free-flight (timed here).
+  balance(f.rec, f.det);
+}
+
+template <>
+ValidationResult PhysicsValidators::Impl::table<RowId::MomentumBalance>() const {
+  const Impl& s = *this;
+  const Tally& balance_lin = s.tally(RowId::MomentumBalance, kLinear);
+  const Tally& balance_ang = s.tally(RowId::MomentumBalance, kAngular);
+  const RowInfo& info = row_info(RowId::MomentumBalance);
+  ValidationResult r = start_row(RowId::MomentumBalance, "bodies whose velocity change is not their rows' impulses",
+                                 "balance_ulps,friction_direction_speed");
+  // The linear balance judged at the fitted systematic ratio too, and the ratio itself
+  // (docs/validation.md, "A systematic impulse ratio").
+  const auto fit = s.balance_fit();
+  const Tally lin = s.fitted_balance(fit), bias = s.balance_bias(fit);
+  r.measured = double(lin.failures + balance_ang.failures + bias.failures);
+  r.pass = r.measured == 0;
+  r.applicable = lin.checks + balance_ang.checks > 0;
+  const std::string extras =
+      (s.balance_locked ? fmt::format("; {} body-steps with locked axes (those components n/a: a joint's impulses "
+                                      "are not in the rows)",
+                                      s.balance_locked)
+                        : std::string()) +
+      (s.balance_no_rows
+           ? fmt::format("; {} body-steps in a confirmed pair without rows, not judged", s.balance_no_rows)
+           : std::string()) +
+      (s.balance_clamped ? fmt::format("; {} body-steps at the declared velocity clamp, not judged", s.balance_clamped)
+                         : std::string()) +
+      (s.fell_asleep ? fmt::format("; {} body-steps falling asleep (/states/sleeping: the engine zeroed the "
+                                   "velocity), not judged",
+                                   s.fell_asleep)
+                     : std::string());
+  if (s.bodies.impulses == PhysicsBodies::Impulses::None) {
+    r.applicable = false;
+    r.detail =
+        "n/a: the trace declares impulses = \"none\" (the engine reports no impulse): a body's velocity "
+        "change cannot be held to its rows' impulses; conservation judges the isolated groups";
+  } else if (!s.bodies.contacts_complete) {
+    r.applicable = false;
+    r.detail = fmt::format(
+        "n/a: the trace declares contacts_complete = 0: {} body-steps in contact not judged (a "
+        "row the engine did not report would read as a fault); free-flight and conservation "
+        "judge the bodies and groups the geometry shows apart",
+        s.balance_incomplete);
+  } else if (!s.bodies.impulses_complete) {
+    r.applicable = false;
+    r.detail = fmt::format(
+        "n/a: the record holds the impulses of the first of response.iterations = {} "
+        "relaxation passes (octocd's ContactRecord); the later passes apply more impulses on the "
+        "same pairs, so the rows are not the step's impulses",
+        s.model->scene.response.iterations);
+  } else if (!r.applicable) {
+    r.detail = s.state_frames ? "no dynamic body with contact rows in a step with states"
+                              : "no states (a trace: add /states/position and /states/velocity)";
+  } else {
+    r.detail = fmt::format(
+        "{} body-steps: linear worst {:.3g} of its bound; angular {}", lin.checks, lin.worst_or(0.0),
+        balance_ang.checks
+            ? fmt::format("{} body-steps, worst {:.3g} of its bound{}", balance_ang.checks, balance_ang.worst_or(0.0),
+                          spin_note(s.bodies.gyroscopic, s.balance_ang_plain, s.balance_ang_invariant))
+        : s.balance_rot_locked ? fmt::format("n/a: rotation locked (locked_dofs) on all {} body-steps with "
+                                             "rotation and points",
+                                             s.balance_rot_locked)
+                               : std::string("n/a: no rotation or no contact points (torques unknown)"));
+    r.detail += extras;
+    r.detail += fit.fitted
+                    ? fmt::format(
+                          "; impulse ratio {:.5f} (reported impulses over the momentum change: the median over {} "
+                          "body-steps, quartiles {:.5f} .. {:.5f}; {}), the linear balance judged at 1 and at it: "
+                          "{} body-steps failing at 1 pass at it",
+                          fit.ratio, fit.samples, fit.q1, fit.q3,
+                          fit.bias ? fmt::format("beyond the {:.3g}% a systematic ratio may take", 100.0 * s.kBiasMax)
+                                   : fmt::format("within the {:.3g}% a systematic ratio may take", 100.0 * s.kBiasMax),
+                          s.deferred.size() - (lin.failures - balance_lin.failures))
+                    : fmt::format("; impulse ratio not fitted ({} body-steps fix it to {:.3g}, {} needed)", fit.samples,
+                                  s.kFitPrecision, s.kFitMinSamples);
+    note(r.detail, s.deferred_over, "{} failing body-steps beyond the {} kept for the fit judged at ratio 1",
+         s.deferred_over, s.kMaxDeferred);
+    if (s.bodies.impulses == PhysicsBodies::Impulses::NormalOnly)
+      r.detail +=
+          "; impulses \"normal-only\": each body's residual m (v' - v) - m g dt - sum jn n within the sum "
+          "of its rows' cones (mu jn), jt and jt3 not read";
+    physics_detail::fill_causes(r, info, {&lin, &balance_ang, &bias});
+    r.judged = lin.checks;
+  }
+  return r;
+}
+
+// ---- free-flight: its measure of a frame and its table entry -------------------------
+
+template <>
+void PhysicsValidators::Impl::measure<RowId::FreeFlight>(PhysicsFrame&) {
+  // Measured in momentum-balance's pass over the bodies (balance()): nothing of its own.
+}
+
+template <>
+ValidationResult PhysicsValidators::Impl::table<RowId::FreeFlight>() const {
+  const Impl& s = *this;
+  const Tally& free_vel = s.tally(RowId::FreeFlight, kVelocity);
+  const Tally& free_pos = s.tally(RowId::FreeFlight, kPosition);
+  const Tally& free_w = s.tally(RowId::FreeFlight, kAngularVelocity);
+  const Tally& free_q = s.tally(RowId::FreeFlight, kOrientation);
+  const Tally& free_sleep = s.tally(RowId::FreeFlight, kSleeping);
+  ValidationResult r = start_row(RowId::FreeFlight, "bodies without contacts not following gravity and their spin",
+                                 "free_flight_angle_rad");
+  r.measured = double(free_vel.failures + free_pos.failures + free_w.failures + free_q.failures + free_sleep.failures);
+  r.pass = r.measured == 0;
+  r.applicable = free_vel.checks + free_sleep.checks > 0;
+  if (!r.applicable) {
+    r.detail = s.state_frames ? "no dynamic body without contacts in a step with states"
+                              : "no states (a trace: add /states/position and /states/velocity)";
+  } else if (free_vel.checks == 0) {
+    r.detail = fmt::format("no body-step in free flight; {} asleep body-steps (/states/sleeping)", free_sleep.checks);
+  } else {
+    r.detail = fmt::format(
+        "{} body-steps (integrator {}): worst velocity {:.3g} m/s, position {:.3g} m{}{}", free_vel.checks,
+        integrator_name(s.bodies.integrator), free_vel.worst_or(0.0), free_pos.worst_or(0.0),
+        free_w.checks
+            ? fmt::format(", spin (angular velocity) {:.3g} of its bound{} over {}, orientation {:.3g} "
+                          "deg over {}",
+                          free_w.worst_or(0.0), spin_note(s.bodies.gyroscopic, s.free_spin_kept, s.free_spin_invariant),
+                          free_w.checks, free_q.worst_or(0.0), free_q.checks)
+            : std::string("; rotation n/a (translation-only records)"),
+        s.free_locked ? fmt::format("; {} body-steps with locked axes (those components n/a)", s.free_locked)
+                      : std::string());
+    if (s.bodies.integrator == PhysicsBodies::Integrator::Undeclared)
+      r.detail +=
+          "; integrator undeclared: x' = x + dt v + a g dt^2 for every a in [0, 1] and substepping's "
+          "orientation, a failure only where every integrator fails (declare integrator, and substeps, to "
+          "sharpen the verdict)";
+  }
+  note(r.detail, !s.bodies.contacts_complete,
+       "contacts_complete 0: only bodies the exact reference shows apart from every other "
+       "body through the step (beyond the margin and both bodies' motion) are judged free; {} "
+       "body-steps without rows but near a body not judged ({} pairs tested)",
+       s.free_near, s.near_tested);
+  if (r.applicable) {
+    note(r.detail, free_sleep.checks + s.fell_asleep,
+         "{} body-steps asleep through the step judged not to move (worst {:.3g} of one "
+         "rounding), {} falling asleep not judged (/states/sleeping)",
+         free_sleep.checks, free_sleep.worst_or(0.0), s.fell_asleep);
+    s.fill_causes(r, RowId::FreeFlight);
+    r.judged = free_vel.checks + free_sleep.checks;
+  }
+  return r;
 }
 
 }  // namespace octocd

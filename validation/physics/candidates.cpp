@@ -14,6 +14,14 @@
 
 namespace octocd {
 
+namespace {
+
+// The causes of the rows of this file (validation_rows.def), by their names.
+const std::size_t kMissingPair = physics_detail::cause_index(RowId::BroadphaseCompleteness, "missing-pair"),
+                  kNotFlat = physics_detail::cause_index(RowId::BroadphaseCompleteness, "not-flat");
+
+}  // namespace
+
 using namespace dmath;
 using namespace physics_detail;
 
@@ -61,9 +69,9 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
   // Truth per pair: intersect() for every candidate, posed() where a row needs the depth
   // or the distance.
   // Two convex shapes (boxes, convex meshes) that penetrate get the exact minimum
-  // translation of the separating-axis test (design.md section 13b.9: FCL's box-box keeps a face axis
-  // up to 5% deeper than an edge-edge one, so its depth and normal are not the minimum
-  // there); FCL's answer stays beside it as the second opinion.
+  // translation of the separating-axis test (design.md section 13b.9); the posed answer
+  // (two boxes: octocd's box-box, the same minimum; hulls: FCL's EPA) stays beside it as
+  // the second opinion.
   const bool need_distance = tol.broadphase_margin_m - slack > 0;
 
   // Contact rows per pair (rows of a pair are consecutive).
@@ -153,6 +161,8 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
 
 // ---- Row 1: broadphase completeness ------------------------------------------------
 void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
+  Tally& broad = tally(RowId::BroadphaseCompleteness, kMissingPair);
+  Tally& broad_exact = tally(RowId::BroadphaseCompleteness, kNotFlat);
   const FrameRecord& rec = *f.rec;
   const std::int64_t frame = rec.frame;
   ExactPairsSettings pair_threads;
@@ -225,6 +235,53 @@ void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
       });
     }
   }
+}
+
+// ---- broadphase-completeness: its measure of a frame and its table entry -------------------------
+
+template <>
+void PhysicsValidators::Impl::measure<RowId::BroadphaseCompleteness>(PhysicsFrame& f) {
+  // On a checked frame: its candidates and reference geometry (shared with rows 2-4, timed here), then the row.
+  if (CheckedFrame* c = checked(f)) judge_broadphase(*c);
+}
+
+template <>
+ValidationResult PhysicsValidators::Impl::table<RowId::BroadphaseCompleteness>() const {
+  const Impl& s = *this;
+  const Tally& broad = s.tally(RowId::BroadphaseCompleteness, kMissingPair);
+  const Tally& broad_exact = s.tally(RowId::BroadphaseCompleteness, kNotFlat);
+  ValidationResult r = start_row(RowId::BroadphaseCompleteness, "required pairs missing from the engine's candidates",
+                                 "broadphase_margin_m,geometry_slack_m");
+  r.measured = double(broad.failures + broad_exact.failures);
+  r.bound = 0;
+  r.pass = r.measured == 0;
+  if (s.broad_frames > 0 && broad.checks + broad_exact.checks == 0) {
+    r.applicable = false;
+    r.detail = fmt::format(
+        "no pair required on {} checked frames (no shapes within the margin) and no exact "
+        "broadphase declared: nothing judged ({:.3g} candidates per frame)",
+        s.broad_frames, double(s.broad_candidates) / double(s.broad_frames));
+  } else if (s.broad_frames == 0) {
+    r.applicable = false;
+    r.detail = s.broad_no_pairs ? "the engine gave no candidate pairs (has_pairs false; a trace: add /pairs/offsets "
+                                  "and /pairs/pair)"
+                                : kNoChecked;
+  } else if (broad.failures) {
+    r.detail = broad.first + fmt::format(" ({} of {} required pairs missing)", broad.failures, broad.checks);
+  } else if (broad_exact.failures) {
+    r.detail = broad_exact.first;
+  } else {
+    r.detail =
+        fmt::format("{} required pairs over {} frames, all candidates; {:.3g} candidates per true pair{}", broad.checks,
+                    s.broad_frames, s.broad_true ? double(s.broad_candidates) / double(s.broad_true) : 0.0,
+                    s.bodies.broadphase_exact ? "; equal to flat on the engine's AABBs (static-static "
+                                                "pairs dropped)"
+                                              : "");
+  }
+  note(r.detail, s.broad_asleep, "{} pair-frames of bodies asleep before the step (/states/sleeping) not required",
+       s.broad_asleep);
+  if (r.applicable) s.fill_causes(r, RowId::BroadphaseCompleteness);
+  return r;
 }
 
 }  // namespace octocd

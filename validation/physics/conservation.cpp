@@ -13,11 +13,23 @@
 
 namespace octocd {
 
+namespace {
+
+// The causes of the rows of this file (validation_rows.def), by their names.
+const std::size_t kMomentum = physics_detail::cause_index(RowId::Conservation, "momentum"),
+                  kAngularMomentum = physics_detail::cause_index(RowId::Conservation, "angular-momentum"),
+                  kEnergy = physics_detail::cause_index(RowId::Conservation, "energy");
+
+}  // namespace
+
 using namespace dmath;
 using namespace physics_detail;
 
 // ---- Row 6: conservation, every frame with states -----------------------------------
 void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
+  Tally& momentum = tally(RowId::Conservation, kMomentum);
+  Tally& angular = tally(RowId::Conservation, kAngularMomentum);
+  Tally& energy = tally(RowId::Conservation, kEnergy);
   const Model& m = *model;
   const std::size_t n = m.bodies.size();
   const std::int64_t frame = rec.frame;
@@ -31,7 +43,6 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   }
   ++state_frames;
   StopPoll poll(stop);
-  RowClock clock(t_conservation);
   const bool rotating = rec.q_pre.size() == n && rec.q_post.size() == n && rec.w_pre.size() == n &&
                         rec.w_post.size() == n;
   auto v_int = [&](std::size_t i) {  // velocity the step starts from: gravity on dynamic bodies
@@ -295,6 +306,7 @@ double PhysicsValidators::Impl::mechanical_energy(const FrameRecord& rec, std::u
 }
 
 void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::vector<Component>& components) {
+  Tally& energy = tally(RowId::Conservation, kEnergy);
   const std::int64_t frame = rec.frame;
   const double g2dt2 = dot3(d3(model->scene.gravity), d3(model->scene.gravity)) * model->scene.dt * model->scene.dt;
   auto kinetic = [&](std::uint32_t i) {
@@ -435,6 +447,91 @@ void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::v
   }
   pairs_before = std::move(pairs);
   pairs_frame = frame;
+}
+
+// ---- conservation: its measure of a frame and its table entry -------------------------
+
+template <>
+void PhysicsValidators::Impl::measure<RowId::Conservation>(PhysicsFrame& f) {
+  // Every frame with states; with contacts_complete 0 first the pairs the geometry shows near (apart.cpp, shared with
+  // free-flight, timed here).
+  if (!bodies.contacts_complete) find_near(f.rec);
+  conservation(f.rec);
+}
+
+template <>
+ValidationResult PhysicsValidators::Impl::table<RowId::Conservation>() const {
+  const Impl& s = *this;
+  const Tally& momentum = s.tally(RowId::Conservation, kMomentum);
+  const Tally& angular = s.tally(RowId::Conservation, kAngularMomentum);
+  const Tally& energy = s.tally(RowId::Conservation, kEnergy);
+  ValidationResult r = start_row(RowId::Conservation, "isolated groups breaking momentum, angular momentum or energy",
+                                 "momentum_rel,angular_momentum_rel,energy_rel");
+  r.measured = double(momentum.failures + angular.failures + energy.failures);
+  r.pass = r.measured == 0;
+  r.applicable = s.groups > 0;
+  if (momentum.failures) {
+    r.detail = momentum.first;
+  } else if (energy.failures) {
+    r.detail = energy.first;
+  } else if (angular.failures) {
+    r.detail = angular.first;
+  } else if (!r.applicable) {
+    r.detail = s.state_frames ? "no isolated dynamic group (2+ dynamic bodies in contact, no static contact)"
+                              : "no states (a trace: add /states/position and /states/velocity)";
+  } else {
+    r.detail = fmt::format(
+        "{} isolated group-frames: worst momentum change {:.3g} of its bound; energy {}; "
+        "angular momentum {}",
+        s.groups, momentum.worst_or(0.0),
+        s.restitution_le_1 ? fmt::format("worst rise {:.3g} of KE", energy.worst_or(0.0))
+                           : std::string("not judged (a restitution above 1)"),
+        s.groups_rotating
+            ? fmt::format("{} groups, worst change {:.3g} of its bound", s.groups_rotating, angular.worst_or(0.0))
+        : s.groups_rotation_locked ? std::string("n/a: every group has a body whose rotation is locked (locked_dofs)")
+                                   : std::string("n/a: translation-only records (no orientation or angular "
+                                                 "velocity), contact torques are not modelled"));
+  }
+  note(r.detail, !s.bodies.contacts_complete,
+       "contacts_complete 0: {} group-frames near a body outside them (shapes within the "
+       "margin and the step's motion by the exact reference) not judged, an unreported contact "
+       "may join them",
+       s.groups_near);
+  note(r.detail, s.groups_angular_unreported,
+       "angular momentum not judged on {} group-frames: the trace declares impulses = "
+       "\"none\" (the witness-point lever of a row needs its impulse)",
+       s.groups_angular_unreported);
+  note(r.detail, s.groups_clamped, "{} group-frames not judged (a body at the declared velocity clamp {} m/s)",
+       s.groups_clamped, s.bodies.velocity_clamp);
+  note(r.detail, s.groups_asleep,
+       "{} group-frames not judged (a body asleep before or after the step: "
+       "/states/sleeping)",
+       s.groups_asleep);
+  note(r.detail, s.bodies.contact_model == PhysicsBodies::ContactModel::Undeclared && s.restitution_le_1,
+       "contact_model undeclared: energy judged as rigid (per step) and as soft (per contact "
+       "episode: {} judged, {} not), a failure only where both fail ({} steps raising the "
+       "kinetic energy spared: their episode's energy did not rise or was not judged); declare "
+       "contact_model to sharpen the verdict",
+       s.episodes_judged, s.episodes_unjudged + s.owned_open(), s.rigid_rises_spared);
+  note(r.detail, s.bodies.contact_model == PhysicsBodies::ContactModel::Soft,
+       "contact_model soft: energy judged per contact episode of an isolated group, "
+       "from its first contact until none of its bodies touches another ({} episodes judged, "
+       "{} of them of 3 or more bodies; {} not judged: a body touched a static one, it began "
+       "in contact ({}: a pair touching in the step before, its soft contact's stored energy "
+       "unseen), a step had no states, or still in contact at the end ({} open)), not on {} "
+       "group-steps",
+       s.episodes_judged, s.episodes_judged_groups, s.episodes_unjudged + s.owned_open(), s.episodes_begun_in_contact,
+       s.owned_open(), s.energy_soft_steps);
+  note(r.detail, s.groups_locked,
+       "{} group-frames with a body whose axes are locked (locked_dofs): momentum along "
+       "locked translation axes not judged; {} with a rotation locked: angular momentum not "
+       "judged",
+       s.groups_locked, s.groups_rotation_locked);
+  if (r.applicable) {
+    s.fill_causes(r, RowId::Conservation);
+    r.judged = s.groups;
+  }
+  return r;
 }
 
 }  // namespace octocd

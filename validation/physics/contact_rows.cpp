@@ -15,6 +15,17 @@
 namespace octocd {
 
 namespace {
+
+// The causes of the rows of this file (validation_rows.def), by their names.
+const std::size_t kMissingContact = physics_detail::cause_index(RowId::ContactCompleteness, "missing-contact"),
+                  kFalseContact = physics_detail::cause_index(RowId::ContactCompleteness, "false-contact");
+const std::size_t kNormalAngle = physics_detail::cause_index(RowId::ContactGeometry, "normal-angle"),
+                  kDepth = physics_detail::cause_index(RowId::ContactGeometry, "depth"),
+                  kPointOffShape = physics_detail::cause_index(RowId::ContactGeometry, "point-off-shape");
+
+}  // namespace
+
+namespace {
 /// What a row's normal was compared with where SAT judges the pair: the nearest of its
 /// accepted axes (those within `epsilon` m of the minimum translation `depth`), or the
 /// minimum translation itself when SAT kept no axis (row_reference).
@@ -84,6 +95,8 @@ double PhysicsValidators::Impl::speculative_reach(const FrameRecord& rec, Pair p
 
 // ---- Row 2: contact completeness -----------------------------------------------------
 void PhysicsValidators::Impl::judge_completeness(CheckedFrame& f) {
+  Tally& complete = tally(RowId::ContactCompleteness, kMissingContact);
+  Tally& false_contact = tally(RowId::ContactCompleteness, kFalseContact);
   const std::int64_t frame = f.rec->frame;
   const double slack = tol.geometry_slack_m;
   StopPoll poll(stop);
@@ -193,6 +206,9 @@ void PhysicsValidators::Impl::pair_figures(CheckedFrame& f, std::size_t i, const
 }
 
 void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
+  Tally& normal_angle = tally(RowId::ContactGeometry, kNormalAngle);
+  Tally& depth = tally(RowId::ContactGeometry, kDepth);
+  Tally& points = tally(RowId::ContactGeometry, kPointOffShape);
   const FrameRecord& rec = *f.rec;
   const std::vector<Pose>& det = *f.det;
   const std::int64_t frame = rec.frame;
@@ -223,7 +239,8 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
     const ContactTruth& shape_truth = *truth_of[i];
     const ReferenceNormal& shape_ref = shape_truth.g;
     // The reference that judges this pair: the separating-axis test (every near-minimal
-    // axis accepted) or FCL (box-box, EPA, or the BVH bound of non-convex meshes).
+    // axis accepted) or the posed reference (box-box for two boxes; FCL's EPA, distance or
+    // the BVH bound of non-convex meshes).
     const bool by_sat = !aabb && shape_truth.sat;
     const char* judge = by_sat ? "SAT" : "FCL";
     if (by_sat) {
@@ -318,7 +335,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
         }
       } else if (aabb) {
         // The engine's normal is an axis of the two world AABBs (Eq. 10): compared with
-        // FCL box-box on the same boxes its angle says nothing about the shapes (a
+        // box-box on the same boxes its angle says nothing about the shapes (a
         // figure; the angle to the posed shapes is the other figure, below). Its sign is
         // judged: a normal pointing from A to B pushes the bodies into each other.
         ++aabb_angle_rows;
@@ -406,6 +423,172 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
                          r.depth_upper_bound ? " (upper bound)" : "", judge);
     });
   }
+}
+
+// ---- contact-completeness: its measure of a frame and its table entry -------------------------
+
+template <>
+void PhysicsValidators::Impl::measure<RowId::ContactCompleteness>(PhysicsFrame& f) {
+  // On a checked frame.
+  if (CheckedFrame* c = checked(f)) judge_completeness(*c);
+}
+
+template <>
+ValidationResult PhysicsValidators::Impl::table<RowId::ContactCompleteness>() const {
+  const Impl& s = *this;
+  const Tally& complete = s.tally(RowId::ContactCompleteness, kMissingContact);
+  const Tally& false_contact = s.tally(RowId::ContactCompleteness, kFalseContact);
+  ValidationResult r = start_row(RowId::ContactCompleteness, "penetrating pairs without a contact + false contacts",
+                                 "contact_depth_m,geometry_slack_m");
+  r.measured = double(complete.failures + false_contact.failures);
+  r.pass = r.measured == 0;
+  r.applicable = s.checked_frames > 0 && (complete.checks + false_contact.checks) > 0;
+  const std::string margin =
+      s.bodies.theta_margin ? std::string("the pair's theta") : fmt::format("{} m", s.bodies.contact_margin);
+  if (complete.failures) {
+    r.detail = complete.first + fmt::format(" ({} such pairs)", complete.failures);
+  } else if (false_contact.failures) {
+    r.detail = false_contact.first + fmt::format(" ({} false contacts)", false_contact.failures);
+  } else if (!r.applicable) {
+    r.detail = s.checked_frames ? "no pair penetrated deeper than contact_depth_m and no contact" : kNoChecked;
+  } else {
+    r.detail = fmt::format(
+        "{} penetrating pairs all with contacts; {} contact pairs all within {} (farthest "
+        "{:.3g} m beyond it)",
+        complete.checks, false_contact.checks, margin, false_contact.worst_or(0.0));
+  }
+  note(r.detail, s.bodies.speculative,
+       "speculative contacts declared: {} contact pair-frames allowed the pair's approach "
+       "within the step beyond the margin",
+       s.speculative_allowed);
+  note(r.detail, s.complete_asleep,
+       "{} penetrating pair-frames of bodies asleep before the step (/states/sleeping) "
+       "without a row, not required",
+       s.complete_asleep);
+  note(r.detail, s.complete_unproven,
+       "{} non-convex pair-frames without a row penetrate by an upper bound above "
+       "contact_depth_m that no vertex inside the other shape proves, n/a (largest: {})",
+       s.complete_unproven, s.complete_unproven_what);
+  if (r.applicable) s.fill_causes(r, RowId::ContactCompleteness);
+  return r;
+}
+
+// ---- contact-geometry: its measure of a frame and its table entry -------------------------
+
+template <>
+void PhysicsValidators::Impl::measure<RowId::ContactGeometry>(PhysicsFrame& f) {
+  // On a checked frame.
+  if (CheckedFrame* c = checked(f)) judge_contact_geometry(*c);
+}
+
+template <>
+ValidationResult PhysicsValidators::Impl::table<RowId::ContactGeometry>() const {
+  const Impl& s = *this;
+  const Tally& normal_angle = s.tally(RowId::ContactGeometry, kNormalAngle);
+  const Tally& depth = s.tally(RowId::ContactGeometry, kDepth);
+  const Tally& points = s.tally(RowId::ContactGeometry, kPointOffShape);
+  ValidationResult r = start_row(RowId::ContactGeometry, "worst normal angle to the reference's (deg; SAT or FCL)",
+                                 "normal_angle_deg,depth_m,sat_accept_rel");
+  r.measured = normal_angle.worst_or(0.0);
+  r.bound = s.tol.normal_angle_deg;
+  r.pass = normal_angle.failures == 0 && depth.failures == 0 && points.failures == 0;
+  r.applicable = normal_angle.checks + depth.checks + points.checks > 0;
+  const bool aabb = s.bodies.contact_geometry == ContactGeometry::Aabb;
+  if (aabb) {
+    r.figure = "worst normal angle to box-box on the world AABBs (deg; its sign judged)";
+    r.bound = 90.0;
+  }
+  std::string stats;
+  if (aabb && !s.shape_angles.empty()) {
+    std::vector<double> a = s.shape_angles;
+    std::sort(a.begin(), a.end());
+    double mean = 0;
+    for (double x : a) mean += x;
+    mean /= double(a.size());
+    stats = fmt::format(
+        "; against the posed shapes (figure, not judged: the engine resolves on world AABBs): "
+        "mean {:.1f} deg, median {:.1f}, p95 {:.1f}, max {:.1f}",
+        mean, a[a.size() / 2], a[a.size() * 95 / 100], a.back());
+  }
+  const std::string sign = fmt::format("sign agreement {:.4f} of {} rows",
+                                       s.sign_rows ? double(s.sign_agree) / double(s.sign_rows) : 1.0, s.sign_rows);
+  if (!r.applicable) {
+    r.detail = s.checked_frames ? "no contact rows on checked frames" : kNoChecked;
+  } else if (normal_angle.failures) {
+    r.detail = normal_angle.worst_what + fmt::format(" ({} of {} rows beyond {} deg; {})", normal_angle.failures,
+                                                     normal_angle.checks, aabb ? 90.0 : s.tol.normal_angle_deg, sign);
+    if (s.sign_rows > 0 && 2 * s.sign_agree < s.sign_rows)
+      r.detail += "; most normals point from A to B: the convention is from B to A (design.md section 2)";
+  } else if (depth.failures) {
+    r.detail = depth.worst_what + fmt::format(" (depth off by more than {} m on {} of {} pairs)", s.tol.depth_m,
+                                              depth.failures, depth.checks);
+  } else if (points.failures) {
+    r.detail = points.worst_what + fmt::format(" (points off the shapes by more than {} m on {} of {} rows)",
+                                               s.tol.depth_m, points.failures, points.checks);
+  } else if (aabb) {
+    r.detail = fmt::format(
+        "normal angle n/a: the engine resolves contacts on world AABBs (its normal is an AABB "
+        "axis; its angle to box-box on the same boxes judges nothing about the shapes: worst "
+        "{:.3g} deg over {} rows, a figure; its sign is judged on {} rows); depth of {} pairs "
+        "judged against box-box on the world AABBs: worst difference {:.3g} m; {}{}",
+        s.aabb_angle_worst, s.aabb_angle_rows, normal_angle.checks, depth.checks, depth.worst_or(0.0), sign, stats);
+  } else {
+    r.detail = fmt::format(
+        "{} rows judged{} ({}): worst angle {:.3g} deg, worst depth difference {:.3g} m{}{}; {}{}", normal_angle.checks,
+        aabb ? " on the world AABBs" : "",
+        aabb ? std::string("box-box")
+             : fmt::format("reference: SAT on {} convex pair-frames, box-box or FCL (EPA, distance "
+                           "or the non-convex BVH bound) on {}",
+                           s.sat_pairs, s.fcl_pairs),
+        normal_angle.worst_or(0.0), depth.worst_or(0.0),
+        points.checks ? fmt::format(", {} points, worst {:.3g} m beyond the depth", points.checks, points.worst_or(0.0))
+                      : "",
+        s.rows_unjudged ? fmt::format("; {} rows not judged (FCL gave no normal)", s.rows_unjudged) : "", sign, stats);
+    note(r.detail, s.speculative_rows,
+         "{} rows on shapes that do not penetrate, or of depth 0 beside a penetrating "
+         "row of their pair, not judged on the normal (worst angle {:.3g} deg to FCL's "
+         "direction)",
+         s.speculative_rows, s.speculative_worst);
+    note(r.detail, s.sign_uncertain_rows,
+         "{} rows on convex hulls that FCL calls apart along an axis that does not "
+         "separate them: sign not judged",
+         s.sign_uncertain_rows);
+    note(r.detail, s.upper_bound_pairs, "{} non-convex mesh pairs: depth judged one-sided against an upper bound",
+         s.upper_bound_pairs);
+    for (const auto& [kind, figure] : s.declared)
+      r.detail += fmt::format(
+          "; {} bodies collided as declared \"{}\" (judged on it; its surface lies up to "
+          "{:.3g} m from the true shape: a figure)",
+          figure.first, kind, figure.second);
+    note(r.detail, s.sat_fcl_other,
+         "second opinion: FCL's normal on another axis than the minimum on {} pair-frames "
+         "(figure; FCL up to {:.3g} m deeper)",
+         s.sat_fcl_other, s.sat_fcl_other_excess);
+    note(r.detail, s.sat_fcl_disagree,
+         "FCL's normal outside SAT's accepted axes on {} pair-frames "
+         "(figure; largest depth excess {}: {:.3g} m)",
+         s.sat_fcl_disagree, s.sat_fcl_what, s.sat_fcl_worst_excess);
+  }
+  if (r.applicable) s.fill_causes(r, RowId::ContactGeometry);
+  note(r.detail, s.points_persistent,
+       "manifold_points \"persistent\": {} row points not judged (they ride on each body "
+       "and may drift off the shapes)",
+       s.points_persistent);
+  note(r.detail, s.depth_unknown_pairs,
+       "depth n/a on {} pairs: depth_per \"unknown\" (the rows carry no depth; penetration "
+       "is judged on the posed shapes)",
+       s.depth_unknown_pairs);
+  note(r.detail, s.depth_manifold_pairs,
+       "depth_per \"manifold\": {} convex pairs' one depth judged against the hulls' overlap "
+       "along the manifold's normal",
+       s.depth_manifold_pairs);
+  note(r.detail, s.depth_spared_as_manifold,
+       "depth_per undeclared: {} pairs' depth fits the hulls' overlap along the row's normal "
+       "(a manifold's depth), not SAT's minimum: passed; declare depth_per to sharpen the "
+       "verdict",
+       s.depth_spared_as_manifold);
+  note(r.detail, s.rounded_pairs, "{} pair-frames judged on shapes rounded by /bodies/convex_radius", s.rounded_pairs);
+  return r;
 }
 
 }  // namespace octocd

@@ -13,11 +13,20 @@
 
 namespace octocd {
 
+namespace {
+
+// The causes of the rows of this file (validation_rows.def), by their names.
+const std::size_t kCone = physics_detail::cause_index(RowId::Friction, "cone"),
+                  kDissipation = physics_detail::cause_index(RowId::Friction, "dissipation");
+
+}  // namespace
+
 using namespace dmath;
 using namespace physics_detail;
 
 void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p,
                                                   std::size_t k0, std::size_t k1) {
+  Tally& dissipation = tally(RowId::Friction, kDissipation);
   const std::size_t n = model->bodies.size();
   const D3 g = d3(model->scene.gravity);
   const double dt = model->scene.dt;
@@ -114,6 +123,8 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
 
 // ---- Row 5: friction, every frame (dissipation on frames with states) ----------------
 void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector<Pose>& det) {
+  Tally& cone = tally(RowId::Friction, kCone);
+  Tally& dissipation = tally(RowId::Friction, kDissipation);
   // impulses "normal-only" or "none": the rows carry no friction impulse; whatever jt and
   // jt3 hold (zeros, typically) is never judged (the row is n/a, named).
   if (bodies.impulses != PhysicsBodies::Impulses::Complete) return;
@@ -123,7 +134,6 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
   const D3 g = d3(m.scene.gravity);
   const double dt = m.scene.dt;
   StopPoll poll(stop);
-  std::optional<RowClock> clock(std::in_place, t_friction);  // rows 5a-5b
 
   // 5a. The cone, per pair: a pair's rows together (a manifold is one contact patch):
   // |sum J_t| <= mu sum jn. A sequential-impulse solver clamps each row's friction by that
@@ -327,6 +337,56 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
     }
     k0 = k1;
   }
+}
+
+// ---- friction: its measure of a frame and its table entry -------------------------
+
+template <>
+void PhysicsValidators::Impl::measure<RowId::Friction>(PhysicsFrame& f) {
+  // Every frame: the cone; dissipation on frames with states.
+  friction(f.rec, f.det);
+}
+
+template <>
+ValidationResult PhysicsValidators::Impl::table<RowId::Friction>() const {
+  const Impl& s = *this;
+  const Tally& cone = s.tally(RowId::Friction, kCone);
+  const Tally& dissipation = s.tally(RowId::Friction, kDissipation);
+  ValidationResult r = start_row(RowId::Friction, "contacts outside the cone or rows raising the tangential speed",
+                                 "friction_cone_abs,friction_speed");
+  r.measured = double(cone.failures + dissipation.failures);
+  r.pass = r.measured == 0;
+  r.applicable = cone.checks > 0;
+  if (cone.failures) {
+    r.detail = cone.first + fmt::format(" ({} of {} contacts outside the cone)", cone.failures, cone.checks);
+  } else if (dissipation.failures) {
+    r.detail = dissipation.first + fmt::format(" ({} of {} rows where friction raises the sliding)",
+                                               dissipation.failures, dissipation.checks);
+  } else if (s.bodies.impulses != PhysicsBodies::Impulses::Complete) {
+    r.detail = fmt::format(
+        "n/a: the trace declares impulses = \"{}\": its rows carry no friction impulse, so the "
+        "cone and dissipation are not judged (on the zeros a writer puts in jt, jt3 they would "
+        "pass vacuously){}",
+        impulses_name(s.bodies.impulses),
+        s.bodies.impulses == PhysicsBodies::Impulses::NormalOnly
+            ? "; momentum-balance holds each body's residual within its rows' cones"
+            : "");
+  } else if (!r.applicable) {
+    r.detail = "no contact rows";
+  } else {
+    r.detail = fmt::format(
+        "{} contacts in the cone (worst {:.3g} kg m/s inside; rule jt3 on {} pairs, scalar jt on "
+        "{}); dissipation on {} rows or pairs (worst {:.3g} m/s; {} pairs on jt3); {} rows judged "
+        "on the cone only (scalar jt: the pair is not its bodies' only one, or no states)",
+        cone.checks, -cone.worst_or(0.0), s.cone_jt3_pairs, s.cone_scalar_pairs, dissipation.checks,
+        dissipation.worst_or(0.0), s.dissipation_jt3_pairs, s.dissipation_cone_only);
+    note(r.detail, s.dissipation_small,
+         "{} pairs with a friction impulse up to friction_cone_abs not judged on its "
+         "direction",
+         s.dissipation_small);
+  }
+  if (r.applicable) s.fill_causes(r, RowId::Friction);
+  return r;
 }
 
 }  // namespace octocd

@@ -6,7 +6,8 @@
 ///
 /// The rows live in files per family:
 ///  - physics_validators.cpp: the settings' names, the constructor and the frame driver
-///    (observe: detection poses, then rows 1-4 on checked frames, 5-8 on every frame);
+///    (observe: detection poses, then every row's measure: rows 1-4 judge checked frames,
+///    5-8 every frame);
 ///  - candidates.cpp: a checked frame's candidate pairs and their reference geometry,
 ///    row 1 (broadphase completeness);
 ///  - contact_rows.cpp: rows 2 (contact completeness) and 3 (contact geometry);
@@ -15,14 +16,19 @@
 ///  - conservation.cpp: row 6 (momentum, angular momentum, energy of isolated groups;
 ///    the soft-contact episodes);
 ///  - balance.cpp: rows 7 (momentum balance per body) and 8 (free flight);
-///  - physics_table.cpp: results(), the rows' verdicts and details.
+///  - physics_table.cpp: the generic sums (RowSums), observe()'s calls of every row's
+///    measure and results()' of every row's table entry, in validation_rows.def's order.
+/// Each row's measure (Impl::measure<RowId>) and table entry (Impl::table<RowId>: its
+/// ValidationResult from the sums) sit in its file; its tallies are its RowSums.
 
 #include <algorithm>
 #include <cstdint>
 #include <functional>
+#include <initializer_list>
 #include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <utility>
@@ -31,6 +37,7 @@
 #include <fmt/format.h>
 
 #include "octocd/physics.hpp"
+#include "octocd/validation_rows.hpp"
 #include "dmath.hpp"
 #include "reference.hpp"
 #include "frame_array.hpp"
@@ -255,6 +262,50 @@ struct CheckedFrame {
   FrameArray<RowFigures> row_fig;        ///< per record row
 };
 
+/// A physics row's sums (PhysicsValidators::Impl::row_sums): one Tally per cause of its
+/// validation_rows.def entry, in the entry's order; its own time (s, RowClock around its
+/// measure: shared work goes to the first row that needs it, e.g. the candidates and the
+/// FCL/SAT truth of every pair to broadphase-completeness); its own state beyond the
+/// tallies (Impl::row_state; empty until the row makes it).
+struct RowSums {
+  std::vector<Tally> causes;
+  double seconds = 0;
+  std::shared_ptr<void> state;
+};
+/// One RowSums per row of validation_rows(), with a Tally per cause (physics_table.cpp).
+std::vector<RowSums> make_row_sums();
+/// The index of cause `name` among row `id`'s causes (validation_rows.def); throws
+/// std::logic_error naming both when the row has no such cause.
+std::size_t cause_index(RowId id, const char* name);
+
+/// One frame as the rows' measures read it (Impl::measure): its record, its detection
+/// poses (one per body; the pre-step poses without them), whether it is a checked frame
+/// with poses, and its candidates and reference geometry once a row asked (Impl::checked).
+struct PhysicsFrame {
+  const FrameRecord& rec;
+  const std::vector<Pose>& det;
+  bool checked = false;
+  std::optional<CheckedFrame> geometry;
+};
+
+/// The detail of a row with no checked frame to judge.
+extern const char* const kNoChecked;
+
+/// The row's failures by cause (causes with failures only), its judged count, its verdict
+/// and n/a when it judged nothing: the detail gets "; causes: ..." listing every cause.
+/// `tallies` are the tallies of `row`'s causes (validation_rows.hpp), in their order;
+/// throws std::logic_error when their count is not the row's.
+void fill_causes(ValidationResult& r, const RowInfo& row, const std::vector<const Tally*>& tallies);
+inline void fill_causes(ValidationResult& r, const RowInfo& row, std::initializer_list<const Tally*> tallies) {
+  fill_causes(r, row, std::vector<const Tally*>(tallies));
+}
+
+/// Appends "; " and `format` of `args` to `detail` when `when` holds (a row's detail notes).
+template <class... A>
+void note(std::string& detail, bool when, fmt::format_string<A...> format, A&&... args) {
+  if (when) detail += "; " + fmt::format(format, std::forward<A>(args)...);
+}
+
 }  // namespace physics_detail
 
 struct PhysicsValidators::Impl {
@@ -275,15 +326,60 @@ struct PhysicsValidators::Impl {
   double max_margin = 0;
   bool restitution_le_1 = true;
 
-  // Rows.
-  Tally broad, broad_exact, complete, false_contact, normal_angle, depth, points, pen, cone, dissipation;
-  Tally momentum, angular, energy;
-  Tally balance_lin, balance_ang, free_vel, free_pos, free_w, free_q;
+  /// The rows' sums, indexed by RowId: each physics row's tallies (one per cause of
+  /// validation_rows.def, in its order) and its clock (physics_detail::RowSums).
+  std::vector<physics_detail::RowSums> row_sums = physics_detail::make_row_sums();
+  /// Row `id`'s sums.
+  physics_detail::RowSums& sums(RowId id) { return row_sums[std::size_t(id)]; }
+  const physics_detail::RowSums& sums(RowId id) const { return row_sums[std::size_t(id)]; }
+  /// The tally of row `id`'s cause `k` (an index from physics_detail::cause_index).
+  Tally& tally(RowId id, std::size_t k) { return row_sums[std::size_t(id)].causes[k]; }
+  const Tally& tally(RowId id, std::size_t k) const { return row_sums[std::size_t(id)].causes[k]; }
+  /// A row's own state beyond its tallies: a T kept in its RowSums, made on first use
+  /// (the row's file defines T; a row that never wrote one reads a default T).
+  template <class T>
+  T& row_state(RowId id) {
+    auto& p = sums(id).state;
+    if (!p) p = std::make_shared<T>();
+    return *static_cast<T*>(p.get());
+  }
+  template <class T>
+  const T& row_state(RowId id) const {
+    static const T none{};
+    const auto& p = sums(id).state;
+    return p ? *static_cast<const T*>(p.get()) : none;
+  }
+  /// Row `id`'s measure of one frame (the row's file defines it for every physics row of
+  /// validation_rows.def; observe() calls them in the table's order, each on its row's
+  /// clock).
+  template <RowId id>
+  void measure(physics_detail::PhysicsFrame& f);
+  /// Row `id`'s result from the sums (the row's file; results() calls them in order).
+  template <RowId id>
+  ValidationResult table() const;
+  /// Every physics row's measure of frame `f`, in validation_rows.def's order, each on its
+  /// row's clock (physics_table.cpp).
+  void measure_rows(physics_detail::PhysicsFrame& f);
+  /// The frame's candidates and reference geometry (checked_frame) on a checked frame with
+  /// poses, computed on the first call (counted in checked_frames; its time goes to the row
+  /// that asked first); nullptr on other frames.
+  physics_detail::CheckedFrame* checked(physics_detail::PhysicsFrame& f) {
+    if (!f.checked) return nullptr;
+    if (!f.geometry) {
+      ++checked_frames;
+      f.geometry.emplace(checked_frame(f.rec, f.det));
+    }
+    return &*f.geometry;
+  }
+  /// A physics result of row `id` with its tier, name, figure and tolerances.
+  static ValidationResult start_row(RowId id, const char* figure, const char* tolerances);
+  /// fill_causes with row `id`'s own tallies.
+  void fill_causes(ValidationResult& r, RowId id) const;
+
   /// Sleeping bodies (PhysicsBodies::Deactivation::Flagged): free-flight's `sleeping` cause
   /// (asleep through the step, must not move); body-steps that fell asleep (not judged);
   /// groups with a sleeping body (not judged on conservation); pairs of sleeping bodies not
   /// required among the candidates or the contacts.
-  Tally free_sleep;
   std::uint64_t fell_asleep = 0, groups_asleep = 0, broad_asleep = 0, complete_asleep = 0;
   /// Contact completeness on non-convex pairs: pair-frames without a row whose depth
   /// above contact_depth_m is only an upper bound, no exact test proving it (n/a); the
@@ -295,7 +391,6 @@ struct PhysicsValidators::Impl {
   // Gyroscopic term undeclared: body-steps whose spin met the invariants (the term) and
   // those that kept w (no term) (figures of free-flight and momentum-balance).
   std::uint64_t free_spin_invariant = 0, free_spin_kept = 0, balance_ang_invariant = 0, balance_ang_plain = 0;
-  double t_balance = 0;
   std::uint64_t broad_frames = 0, broad_candidates = 0, broad_true = 0, broad_no_pairs = 0;
   std::uint64_t checked_frames = 0, rows_unjudged = 0, upper_bound_pairs = 0;
   std::uint64_t sign_rows = 0, sign_agree = 0, shape_angle_rows = 0;
@@ -304,9 +399,8 @@ struct PhysicsValidators::Impl {
   double aabb_angle_worst = 0;
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
   std::uint64_t sign_uncertain_rows = 0;  // of them, on hulls FCL calls apart along no separating axis
-  // Contact geometry's references: pairs judged by the separating-axis test and by FCL;
-  // where FCL's normal lies outside SAT's accepted axes (figure: FCL's box-box keeps a
-  // face axis up to 5% deeper than the minimum).
+  // Contact geometry's references: pairs judged by the separating-axis test and by the posed
+  // reference; where the posed reference's normal lies outside SAT's accepted axes (a figure).
   std::uint64_t sat_pairs = 0, fcl_pairs = 0, sat_fcl_other = 0, sat_fcl_disagree = 0;
   double sat_fcl_worst_excess = 0, sat_fcl_other_excess = 0;
   std::string sat_fcl_what;
@@ -318,17 +412,9 @@ struct PhysicsValidators::Impl {
   // Friction rules: pairs judged on jt3 (vectors) and on the scalar jt.
   std::uint64_t cone_jt3_pairs = 0, cone_scalar_pairs = 0, dissipation_jt3_pairs = 0, dissipation_small = 0;
   std::uint64_t dissipation_cone_only = 0, groups = 0, groups_rotating = 0, state_frames = 0, groups_clamped = 0;
-  double pen_max = 0, pen_upper_max = 0;
-  std::string pen_what, pen_upper_what;
-  std::uint64_t pen_upper_over = 0;
-  std::uint64_t pen_pairs = 0, pen_upper_pairs = 0;
   std::int64_t last_frame = 0;
   std::function<bool()> stop;  // polled inside the long loops (set_stop)
   int threads = 0;              // set_threads (0: the hardware's)
-  // Each row's own time (s): RowClock around its work; shared work goes to the first row
-  // that needs it (the candidates, the FCL/SAT truth of every pair and row 3's figures
-  // computed beside it: broadphase-completeness).
-  double t_broad = 0, t_complete = 0, t_geometry = 0, t_pen = 0, t_friction = 0, t_conservation = 0;
 
   double pair_margin(Pair p) const {
     if (!bodies.theta_margin) return bodies.contact_margin;
@@ -409,8 +495,6 @@ struct PhysicsValidators::Impl {
   double radius(std::uint32_t i) const { return bodies.convex_radius.empty() ? 0.0 : bodies.convex_radius[i]; }
 
   // ---- Rows 1-4 (checked frames with poses) --------------------------------------
-  /// Rows 1-4 of a checked frame, each on its own clock.
-  void geometry(const FrameRecord& rec, const std::vector<Pose>& det);
   /// The frame's candidates, their reference geometry (on `threads` threads) and the
   /// pairs row 1 requires (candidates.cpp).
   physics_detail::CheckedFrame checked_frame(const FrameRecord& rec, const std::vector<Pose>& det) const;
@@ -605,5 +689,19 @@ struct PhysicsValidators::Impl {
   physics_detail::Tally fitted_balance(const BalanceFit& fit) const;
   physics_detail::Tally balance_bias(const BalanceFit& fit) const;
 };
+
+// Every physics row of validation_rows.def has a measure and a table entry, defined in the
+// row's own file (Impl::measure, Impl::table).
+#define OCTOCD_PHYSICS_ROW_Physics(id)                                                           \
+  template <>                                                                                    \
+  void PhysicsValidators::Impl::measure<RowId::id>(physics_detail::PhysicsFrame & f);            \
+  template <>                                                                                    \
+  ValidationResult PhysicsValidators::Impl::table<RowId::id>() const;
+#define OCTOCD_PHYSICS_ROW_Model(id)
+#define OCTOCD_ROW(id, name, tier, merge, causes, needs) OCTOCD_PHYSICS_ROW_##tier(id)
+#include "octocd/validation_rows.def"
+#undef OCTOCD_ROW
+#undef OCTOCD_PHYSICS_ROW_Model
+#undef OCTOCD_PHYSICS_ROW_Physics
 
 }  // namespace octocd

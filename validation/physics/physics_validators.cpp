@@ -297,25 +297,8 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
     for (std::size_t i = 0; i < n; ++i)
       det[i] = s.frame_pose(rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{}, static_cast<std::uint32_t>(i));
   }
-  if (checked && poses) s.geometry(rec, det);
-  s.friction(rec, det);
-  if (!s.bodies.contacts_complete) s.find_near(rec);  // apart.cpp
-  s.conservation(rec);
-  s.balance(rec, det);
-}
-
-// ---- Rows 1-4: the geometric rows, on checked frames ------------------------------
-void PhysicsValidators::Impl::geometry(const FrameRecord& rec, const std::vector<Pose>& det) {
-  ++checked_frames;
-  std::optional<RowClock> clock(std::in_place, t_broad);  // candidates, truth, row 1
-  CheckedFrame f = checked_frame(rec, det);
-  judge_broadphase(f);
-  clock.emplace(t_complete);
-  judge_completeness(f);
-  clock.emplace(t_geometry);
-  judge_contact_geometry(f);
-  clock.emplace(t_pen);
-  judge_penetration(f);
+  PhysicsFrame f{rec, det, checked && poses, std::nullopt};
+  s.measure_rows(f);
 }
 
 }  // namespace octocd

@@ -7,9 +7,9 @@
 ///
 /// Two convex polytopes (boxes, convex meshes, declared hulls and boxes) that penetrate:
 /// the separating-axis test (sat.hpp) gives the depth and the normal of the minimum
-/// translation, and every axis within its epsilon is an accepted normal; FCL's answer is
-/// kept beside it (the second opinion). Other shapes: FCL / libccd (ReferenceGeometry::
-/// posed). Units: metres; normals unit, from B to A (design.md section 2).
+/// translation, and every axis within its epsilon is an accepted normal; the posed answer
+/// (ReferenceGeometry::posed: two boxes octocd's box-box, hulls FCL's EPA) is kept beside
+/// it (the second opinion). Other shapes: FCL / libccd (ReferenceGeometry::posed). Units: metres; normals unit, from B to A (design.md section 2).
 
 #include <cstdint>
 #include <vector>
@@ -23,13 +23,13 @@ namespace octocd {
 
 /// The reference geometry of one pair at its detection poses.
 struct PairReference {
-  /// The reference: FCL's posed() answer, with SAT's depth and normal when `sat`.
+  /// The reference: posed()'s answer, with SAT's depth and normal when `sat`.
   ReferenceNormal g;
   /// g's depth and normal are the separating-axis test's (both shapes convex polytopes
-  /// and FCL found them penetrating).
+  /// and posed() found them penetrating).
   bool sat = false;
   SatResult sat_result;  ///< the separating-axis test (filled when `sat`)
-  ReferenceNormal fcl;   ///< FCL's own answer (the second opinion where `sat`)
+  ReferenceNormal fcl;   ///< posed()'s own answer (the second opinion where `sat`)
 };
 
 /// The reference of bodies a, b at poses pa, pb: ref.posed(a, b, pa, pb); when it

@@ -2,7 +2,8 @@
 /// \file sat.hpp
 /// Exact reference geometry of two convex polytopes by the separating-axis test (design.md section
 /// 13b.9): the physics tier's `contact-geometry` row judges box-box and convex-polytope
-/// pairs against it; FCL stays the reference for other shapes and the second opinion.
+/// pairs against it; FCL stays the reference for other shapes, and the posed answer
+/// (ReferenceGeometry::posed: two boxes octocd's box-box, hulls FCL's EPA) the second opinion.
 ///
 /// Shapes: each body's convex hull (octocd/reference_contact.hpp HullFeatures: a box's 8
 /// corners, or a convex mesh's hull) in its body frame, placed at a Pose (body to world).

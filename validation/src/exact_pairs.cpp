@@ -83,6 +83,55 @@ std::string limit_message(std::uint64_t count, bool tests, std::uint64_t limit, 
                      bodies, count, limit, pairs, pairs);
 }
 
+/// Sorts one level's entries into entry_less's order when the cells they span number at
+/// most 4 x the entries + 1024: a stable counting sort on the cell's lexicographic rank
+/// (the entries are appended in box order, and a box is in a cell once, so equal cells keep
+/// their boxes ascending). False (nothing done) when the cells are too many.
+bool counting_sort_entries(std::vector<Entry>& e) {
+  if (e.size() < 2) return true;
+  Cell lo = e[0].cell, hi = e[0].cell;
+  for (const Entry& x : e)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], x.cell[k]);
+      hi[k] = std::max(hi[k], x.cell[k]);
+    }
+  const std::uint64_t limit = 4 * std::uint64_t(e.size()) + 1024;
+  std::array<std::uint64_t, 3> span{};
+  std::uint64_t cells = 1;
+  for (int k = 0; k < 3; ++k) {
+    span[k] = std::uint64_t(hi[k] - lo[k]) + 1;  // cell indices lie within +-2^40
+    if (span[k] > limit || cells > limit / span[k]) return false;
+    cells *= span[k];
+  }
+  auto rank = [&](const Cell& c) {
+    return (std::uint64_t(c[0] - lo[0]) * span[1] + std::uint64_t(c[1] - lo[1])) * span[2] + std::uint64_t(c[2] - lo[2]);
+  };
+  std::vector<std::size_t> start(cells + 1, 0);
+  for (const Entry& x : e) ++start[rank(x.cell) + 1];
+  for (std::uint64_t c = 0; c < cells; ++c) start[c + 1] += start[c];
+  std::vector<Entry> out(e.size());
+  for (const Entry& x : e) out[start[rank(x.cell)]++] = x;
+  e.swap(out);
+  return true;
+}
+
+/// Sorts pairs of boxes below n into Pair order: counted by a, each a's pairs (a body's:
+/// few) then sorted by b.
+void sort_pairs(std::vector<Pair>& v, std::size_t n) {
+  std::vector<std::size_t> start(n + 1, 0);
+  for (const Pair& p : v) ++start[p.a + 1];
+  for (std::size_t a = 0; a < n; ++a) start[a + 1] += start[a];
+  std::vector<Pair> out(v.size());
+  {
+    std::vector<std::size_t> fill(start.begin(), start.end() - 1);
+    for (const Pair& p : v) out[fill[p.a]++] = p;
+  }
+  for (std::size_t a = 0; a < n; ++a)
+    std::sort(out.begin() + std::ptrdiff_t(start[a]), out.begin() + std::ptrdiff_t(start[a + 1]),
+              [](Pair p, Pair q) { return p.b < q.b; });
+  v.swap(out);
+}
+
 }  // namespace
 
 PairLimitError::PairLimitError(std::uint64_t count_, bool tests_, std::uint64_t limit_, std::size_t bodies_)
@@ -177,7 +226,8 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
         for (std::int64_t z = c0c[2]; z <= c1c[2]; ++z) entries[l].push_back({{x, y, z}, std::uint32_t(i)});
   }
   const unsigned threads = thread_count(settings, n);
-  for (auto& e : entries) parallel_sort(e, threads, entry_less);
+  for (auto& e : entries)
+    if (!counting_sort_entries(e)) parallel_sort(e, threads, entry_less);
 
   // The cell of the lowest corner of two hulls' intersection, on `l`.
   auto reference_cell = [&](std::uint32_t a, std::uint32_t b, int l) {
@@ -310,7 +360,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
   if (max_pairs > 0 && total > max_pairs) throw PairLimitError(total, false, max_pairs, n);
   out.reserve(total);
   for (const auto& f : found) out.insert(out.end(), f.begin(), f.end());
-  parallel_sort(out, threads, [](Pair p, Pair q) { return p < q; });
+  sort_pairs(out, n);  // every index is below n
 }
 
 namespace {

@@ -440,13 +440,8 @@ class TraceIn {
   /// them (written before they existed: /frames and the root attribute `parameters`) is
   /// read as declaring octocd's conventions (ExternalTraceInfo::octocd_conventions).
   void read_declarations(PhysicsBodies& p) {
-    if (has_attr("broadphase_exact")) {
-      const double exact = number_attr("broadphase_exact", 0.0);
-      if (exact != 0.0 && exact != 1.0)
-        bad("/ (root attribute broadphase_exact)", fmt::format("{}", exact),
-            "0 (default: any broadphase, extras allowed) or 1 (exactly the overlapping world AABBs)");
-      p.broadphase_exact = exact == 1.0;
-    }
+    p.broadphase_exact = flag_attr("broadphase_exact", p.broadphase_exact,
+                                   "0 (default: any broadphase, extras allowed) or 1 (exactly the overlapping world AABBs)");
     p.contact_geometry = choice_attr("contact_geometry", {"shape", "aabb"}, "shape") == "aabb" ? ContactGeometry::Aabb
                                                                                                : ContactGeometry::Shape;
     p.theta_margin = choice_attr("contact_margin_rule", {"fixed", "theta"}, "fixed") == "theta";
@@ -462,13 +457,9 @@ class TraceIn {
             fmt::format("a speed per component in [0, {:g}] m/s (0: no clamp)", trace_limits::kMaxSpeed));
       p.velocity_clamp = c;
     }
-    if (has_attr("impulses_complete")) {
-      const double c = number_attr("impulses_complete", 1.0);
-      if (c != 0.0 && c != 1.0)
-        bad("/ (root attribute impulses_complete)", fmt::format("{}", c),
-            "1 (default: the contact rows carry every impulse of the step) or 0 (they do not: momentum-balance n/a)");
-      p.impulses_complete = c == 1.0;
-    }
+    p.impulses_complete = flag_attr(
+        "impulses_complete", p.impulses_complete,
+        "1 (default: the contact rows carry every impulse of the step) or 0 (they do not: momentum-balance n/a)");
     {
       const std::string impulses = choice_attr("impulses", {"complete", "normal-only", "none"}, "complete");
       p.impulses = impulses == "none"          ? PhysicsBodies::Impulses::None
@@ -476,20 +467,12 @@ class TraceIn {
                                                : PhysicsBodies::Impulses::Complete;
     }
     // Fourth-round declarations (docs/trace-format.md, "Declarations").
-    if (has_attr("speculative")) {
-      const double v = number_attr("speculative", 0.0);
-      if (v != 0.0 && v != 1.0)
-        bad("/ (root attribute speculative)", fmt::format("{}", v),
-            "1 (rows may join shapes apart by the contact margin plus their approach within the step) or 0 (default)");
-      p.speculative = v == 1.0;
-    }
-    if (has_attr("contacts_complete")) {
-      const double v = number_attr("contacts_complete", 1.0);
-      if (v != 0.0 && v != 1.0)
-        bad("/ (root attribute contacts_complete)", fmt::format("{}", v),
-            "1 (default: every contact of every step has its rows) or 0 (the engine's API may drop rows)");
-      p.contacts_complete = v == 1.0;
-    }
+    p.speculative = flag_attr(
+        "speculative", p.speculative,
+        "1 (rows may join shapes apart by the contact margin plus their approach within the step) or 0 (default)");
+    p.contacts_complete =
+        flag_attr("contacts_complete", p.contacts_complete,
+                  "1 (default: every contact of every step has its rows) or 0 (the engine's API may drop rows)");
     p.persistent_points = choice_attr("manifold_points", {"fixed", "persistent"}, "fixed") == "persistent";
     {
       const std::string depth_per = choice_attr("depth_per", {"point", "manifold", "unknown"}, "point");
@@ -743,6 +726,15 @@ class TraceIn {
         fmt::format("{} (default \"{}\")", list, fallback));
   }
 
+  /// A 0/1 root attribute as a bool (absent: `fallback`); any other number is an error
+  /// naming the attribute with `allowed`.
+  bool flag_attr(const char* name, bool fallback, const std::string& allowed) const {
+    if (!has_attr(name)) return fallback;
+    const double v = h5_->number_attribute(name);
+    if (v != 0.0 && v != 1.0) bad(fmt::format("/ (root attribute {})", name), fmt::format("{}", v), allowed);
+    return v == 1.0;
+  }
+
   MaterialCombine combine_attr(const char* name, const std::vector<std::string>& names) const {
     const std::string value = choice_attr(name, names, "product");
     for (MaterialCombine c : {MaterialCombine::Product, MaterialCombine::Min, MaterialCombine::Max,
@@ -830,18 +822,19 @@ class TraceIn {
     };
     coord(rec.x_pre, "/states/position", true);
     coord(rec.x_post, "/states/position", true);
-    for (const auto* v : {&rec.v_pre, &rec.v_post})
-      for (std::size_t i = 0; i < v->size(); ++i)
-        for (int k = 0; k < 3; ++k)
-          if (!(std::fabs((*v)[i][k]) <= trace_limits::kMaxSpeed))
-            bad("/states/velocity", fmt::format("frame {}: body {}: {}", rec.frame, i, (*v)[i][k]),
-                fmt::format("|velocity| <= {:g} m/s per axis", trace_limits::kMaxSpeed));
-    for (const auto* w : {&rec.w_pre, &rec.w_post})
-      for (std::size_t i = 0; i < w->size(); ++i)
-        for (int k = 0; k < 3; ++k)
-          if (!(std::fabs((*w)[i][k]) <= trace_limits::kMaxAngularSpeed))
-            bad("/states/angular_velocity", fmt::format("frame {}: body {}: {}", rec.frame, i, (*w)[i][k]),
-                fmt::format("|angular velocity| <= {:g} rad/s per axis", trace_limits::kMaxAngularSpeed));
+    // Every axis of the pre- and post-step vectors (`what` in `unit`) within `limit`.
+    const auto per_axis = [&](const std::vector<Vec3>& pre, const std::vector<Vec3>& post, const char* name,
+                              const char* what, double limit, const char* unit) {
+      for (const std::vector<Vec3>* v : {&pre, &post})
+        for (std::size_t i = 0; i < v->size(); ++i)
+          for (int k = 0; k < 3; ++k)
+            if (!(std::fabs((*v)[i][k]) <= limit))
+              bad(name, fmt::format("frame {}: body {}: {}", rec.frame, i, (*v)[i][k]),
+                  fmt::format("|{}| <= {:g} {} per axis", what, limit, unit));
+    };
+    per_axis(rec.v_pre, rec.v_post, "/states/velocity", "velocity", trace_limits::kMaxSpeed, "m/s");
+    per_axis(rec.w_pre, rec.w_post, "/states/angular_velocity", "angular velocity", trace_limits::kMaxAngularSpeed,
+             "rad/s");
     const std::string impulse_allowed =
         fmt::format("|impulse| <= {:g} N s (trace_limits::kMaxImpulse)", trace_limits::kMaxImpulse);
     for (std::size_t k = 0; k < rec.contacts.size(); ++k) {

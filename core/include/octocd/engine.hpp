@@ -291,8 +291,11 @@ class Engine {
   virtual const FrameMetrics& step() = 0;
   /// A promise: the caller's next `steps` calls are step(), with nothing but step()'s
   /// metrics, last_metrics() and frame() read in between (no state(), contacts(),
-  /// record(), set_state() or set_recording()). An engine may then run ahead of the calls
-  /// (`cuda`'s resident small step runs up to 64 steps per host round trip); each step()
+  /// record(), set_state() or set_recording()); while recording (set_recording(true)
+  /// before the promise) state(), contacts() and record() of the step just taken may be
+  /// read too. An engine may then run ahead of the calls (`cuda`'s resident small step runs
+  /// up to 64 steps per host round trip, recorded ones up to CudaSettings::record_batch,
+  /// their records copied back a batch at once); each step()
   /// still returns its own step's metrics, and the results are the same bits. A call the
   /// promise rules out may throw RuntimeError until the steps run ahead are taken. A later
   /// call replaces the count (0: no more ahead). Engines that cannot run ahead ignore it.

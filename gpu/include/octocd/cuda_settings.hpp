@@ -61,10 +61,27 @@ struct CudaSettings {
   /// On the small-scene path: stamp each phase of the fused kernel with %globaltimer and
   /// keep the means (CudaWorld::small_profile). Default false.
   bool small_profile = false;
+  /// Recorded runs (Engine::set_recording) on the small-scene path's resident kernel: the
+  /// steps a request runs back to back when the caller promised them (Engine::plan_steps),
+  /// each copying its record (pairs, confirmed flags, contact records, x_pre, v_pre, AABBs,
+  /// the state after it) into a device ring of this many slots, copied back to pinned host
+  /// memory in one batch; step(), contacts(), record() and state() then read the host copy.
+  /// The records are the same bits either way. 1: every recorded step is its own request and
+  /// its own copies (no step ahead). Allowed 1 .. 64; default 32, not yet measured against
+  /// other values: the host asks for the next batch as soon as it has copied one, and the
+  /// device's 64 statistics slots leave room for a whole next batch only up to 32 steps.
+  long record_batch = 32;
+  /// The resident small-step kernel's waits poll without backoff: block 0's for the host's
+  /// request (else __nanosleep from the 256th poll, up to 1 us) and the other blocks' for
+  /// the next step of a batch (else from the 64th poll, up to 256 ns), so a step is taken up
+  /// as soon as it is published, at the price of polling traffic beside the block that
+  /// works (a candidate saving on the small step's floor, unmeasured). Same bits either
+  /// way. Default false.
+  bool resident_spin = false;
 };
 
 /// Throws InputError naming the field, its value and the allowed range when a field of
-/// `settings` is out of range (resident_timeout_ms, stage_time_every). `where` prefixes the message (e.g.
+/// `settings` is out of range (resident_timeout_ms, stage_time_every, record_batch). `where` prefixes the message (e.g.
 /// "--cuda").
 void check_cuda_settings(const CudaSettings& settings, const std::string& where);
 

@@ -126,6 +126,10 @@ struct CudaTestHooks {
   /// runs from this many live pairs on instead of kWitnessPassPairsPerWarp per warp of the
   /// start's grid (gpu/src/kernels.hpp): 1 runs it every step.
   std::uint32_t witness_pass_min_pairs = 0;
+  /// > 0: the record ring of recorded batches (CudaSettings::record_batch) holds at most
+  /// this many bytes instead of 64 MiB, so that a batch's pairs overflow its pool (the step
+  /// that does not fit ends the batch and is read from the live buffers).
+  std::uint64_t record_ring_max_bytes = 0;
 };
 
 /// The CUDA engine. Owns its device buffers (released by the destructor) and a CUDA
@@ -171,6 +175,12 @@ struct CudaTestHooks {
 /// on the device never waits on an idle one for longer. The host waits at most
 /// CudaSettings::resident_timeout_ms for a step, then throws RuntimeError (the engine can
 /// then only be destroyed).
+/// Recorded runs (set_recording) under plan_steps: with CudaSettings::record_batch > 1 the
+/// resident kernel runs recorded steps in batches too, up to record_batch steps a request;
+/// each step copies its record (the state before and after it, the world AABBs, its pairs,
+/// confirmed flags and contact records) into a device ring, which the host copies back to
+/// pinned memory once a batch, and step(), contacts(), record() and state() read that copy:
+/// the same bits as the step-by-step path (record_batch = 1: a request and a copy per step).
 ///
 /// Errors (all thrown from the constructor or step()): RuntimeError when no device is
 /// usable, when the device has less memory free (cudaMemGetInfo) than

@@ -27,8 +27,9 @@
 ///     convex polytopes (boxes, convex meshes, declared hulls and boxes): the
 ///     separating-axis test (sat.hpp), the angle to the nearest axis whose overlap is
 ///     within geometry_slack_m + `sat_accept_rel` of the minimum, the depth against the
-///     SAT minimum, FCL's answer a second opinion (figure). Other shapes: FCL (two boxes
-///     beyond SAT's budget: FCL's box-box; convex hulls: libccd EPA). Details name the
+///     SAT minimum, the posed reference's answer a second opinion (figure: FCL's EPA on
+///     hulls; two boxes: octocd's box-box, the same minimum). Other shapes: FCL (convex
+///     hulls: libccd EPA). Details name the
 ///     reference ("[reference: SAT]" / "[reference: FCL]"); rows on shapes
 ///     that do not penetrate give the angle to the nearest-points direction as a figure
 ///     (two shapes touching at an edge or corner have no defined normal there, and a
@@ -38,7 +39,8 @@
 ///     the midpoint of a persistent manifold's row) + `depth_m` of the nearer of the two
 ///     surfaces (a witness point lies on one; any point of the intersection lies within
 ///     the depth of both). Engines resolving on world AABBs
-///     (ContactGeometry::Aabb) are judged against FCL box-box on rec.aabbs; their angle
+///     (ContactGeometry::Aabb) are judged against box-box on rec.aabbs (the least overlap
+///     of the two boxes' axes, ReferenceGeometry::aabb_pair); their angle
 ///     to the posed shapes is a figure. The sign share is a figure.
 ///  4. `penetration` (checked frames): the largest true penetration (FCL) from frame
 ///     `penetration_settle_frames` on, at most `penetration_slops` x slop.

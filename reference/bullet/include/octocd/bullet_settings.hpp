@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "octocd/adapter_rows.hpp"
+
 namespace octocd {
 
 /// What Bullet collides a body as.
@@ -40,18 +42,12 @@ struct BulletSettings {
   int solver_iterations = 10;
 };
 
-/// The keys set_bullet_setting takes, in the struct's order: the field names.
-std::vector<std::string> bullet_setting_names();
-
-/// Sets the field `key` (a name of bullet_setting_names()) of `settings` from text
-/// (shape: hull or box; iterations: an integer in [1, 10000]). Throws InputError "<where>: ..." naming the key, the value and
-/// what is allowed.
-void set_bullet_setting(BulletSettings& settings, const std::string& key, const std::string& value,
-                        const std::string& where);
-
-/// Applies "KEY=VALUE" items (the CLI's repeated `--bullet KEY=VALUE`) in order with
-/// set_bullet_setting. Throws InputError naming `where` and the item for text without '='.
-void apply_bullet_settings(BulletSettings& settings, const std::vector<std::string>& items,
-                           const std::string& where);
+/// The bullet engine's settings table, one row a key in the struct's order:
+/// shape (hull or box), iterations (an integer in [1, 10000]).
+/// apply_settings(settings, items, where) (adapter_rows.hpp) sets a BulletSettings from
+/// "KEY=VALUE" items (`--bullet KEY=VALUE`, repeatable), throwing InputError that names the
+/// key, the value and what is allowed; setting_names<BulletSettings>() lists the keys.
+template <>
+const SettingTable<BulletSettings>& setting_table<BulletSettings>();
 
 }  // namespace octocd

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "octocd/engine.hpp"
+#include "octocd/pyramid_friction.hpp"
 
 namespace octocd {
 
@@ -98,9 +99,9 @@ struct SettingValue {
                                         const std::string& doc);
 
 /// An engine's settings as one table: a row per key with the function that sets the
-/// settings struct `S` from its text (throwing InputError for a value out of range). The
-/// engine's public `<engine>_setting_names`, `set_<engine>_setting` and
-/// `apply_<engine>_settings` read it.
+/// settings struct `S` from its text (throwing InputError for a value out of range). An
+/// engine defines its one table as the specialization setting_table<S>() (below), which
+/// setting_names<S>() and apply_settings() read; a new key is one row.
 template <class S>
 struct SettingTable {
   /// Sets the settings struct from one value's text.
@@ -123,6 +124,14 @@ struct SettingTable {
   template <class E>
   static Setter choice(E S::*field, const char* name_a, E a, const char* name_b, E b, std::string allowed) {
     return [=](S& s, const SettingValue& v) { s.*field = v.choice(name_a, a, name_b, b, allowed); };
+  }
+  /// A setter of a friction-pyramid bound (pyramid_friction.hpp: the ode and dart engines'
+  /// `friction`), values inscribed | pyramid.
+  static Setter pyramid_friction(PyramidFriction S::*field) {
+    return choice(field, pyramid_friction_name(PyramidFriction::Inscribed), PyramidFriction::Inscribed,
+                  pyramid_friction_name(PyramidFriction::Pyramid), PyramidFriction::Pyramid,
+                  "inscribed (mu / sqrt 2 per friction direction: inside the Coulomb cone), pyramid (mu per "
+                  "direction)");
   }
   const char* engine;   ///< the engine's name, as in messages ("ode")
   const char* doc;      ///< the page that lists the keys ("docs/engines.md")
@@ -147,5 +156,29 @@ struct SettingTable {
                         [&](const std::string& k, const std::string& v) { set(s, k, v, where); });
   }
 };
+
+/// The settings table of an engine's settings struct `S` (BulletSettings, MujocoSettings,
+/// OdeSettings, DartSettings): the engine's settings header declares the specialization
+/// and its `<engine>_settings.cpp` defines it. No primary definition: a struct without a
+/// table does not link.
+template <class S>
+const SettingTable<S>& setting_table();
+
+/// The keys apply_settings takes for `S`, in its table's order (the struct's field order).
+template <class S>
+std::vector<std::string> setting_names() {
+  return setting_table<S>().names();
+}
+
+/// Applies "KEY=VALUE" items (the CLI's repeated `--<engine> KEY=VALUE`, Python's keyword
+/// dict) to `settings` in order, each through the row of setting_table<S>() for its KEY.
+/// Throws InputError "<where>: unknown <engine> setting 'KEY'; allowed: <keys> (<doc>)" for
+/// a key the table lacks, "<where>: KEY='VALUE' is not allowed; allowed: <range>" for a
+/// value out of the row's range, and "<where>: 'ITEM' is not KEY=VALUE; ..." for an item
+/// without '='.
+template <class S>
+void apply_settings(S& settings, const std::vector<std::string>& items, const std::string& where) {
+  setting_table<S>().apply(settings, items, where);
+}
 
 }  // namespace octocd

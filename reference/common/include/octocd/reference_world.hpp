@@ -3,9 +3,9 @@
 /// The adapter base of the reference engines (reference/mujoco, reference/ode,
 /// reference/dart): what every one of them keeps and does alike, written once. An
 /// engine's folder holds its model mapping (scene -> the engine's bodies, shapes and
-/// materials), its step and its contact extraction; the state, the metrics, the
-/// version 2 FrameRecord and the Engine accessors live here (docs/architecture.md,
-/// "Adding an engine").
+/// materials), its step and its contact extraction; the state, the settings
+/// (SettingsWorld), the metrics, the version 2 FrameRecord and the Engine accessors live
+/// here (docs/architecture.md, "Adding an engine").
 
 #include <algorithm>
 #include <array>
@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "octocd/engine.hpp"
@@ -174,6 +175,34 @@ class ReferenceWorld : public Engine {
 
  private:
   std::unique_ptr<ReferenceCore> core_;
+};
+
+/// A ReferenceCore with the adapter's settings struct `S` (MujocoSettings, OdeSettings,
+/// DartSettings): the state of an adapter that has settings derives from it.
+template <class S>
+struct SettingsCore : ReferenceCore {
+  S settings;  ///< what the world was built with
+};
+
+/// A ReferenceWorld whose adapter has a settings struct `S`: it starts the adapter's state
+/// and keeps the settings, so the adapter's constructor goes on from a started core.
+template <class S>
+class SettingsWorld : public ReferenceWorld {
+ public:
+  /// The settings it was built with.
+  const S& settings() const { return static_cast<const SettingsCore<S>&>(core()).settings; }
+
+ protected:
+  /// Takes ownership of the adapter's state `core`, runs core->start(model, initial,
+  /// engine) (ReferenceCore::start: throws InputError when the body counts differ) and
+  /// stores `settings` in it; the adapter's constructor builds the rest.
+  SettingsWorld(std::unique_ptr<SettingsCore<S>> core, std::shared_ptr<const Model> model,
+                const BodyState& initial, const std::string& engine, const S& settings)
+      : ReferenceWorld(std::move(core)) {
+    auto& c = static_cast<SettingsCore<S>&>(this->core());
+    c.start(std::move(model), initial, engine);
+    c.settings = settings;
+  }
 };
 
 }  // namespace octocd

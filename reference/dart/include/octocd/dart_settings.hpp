@@ -3,13 +3,14 @@
 /// The settings of the DART engine (`dart`): which of DART's collision detectors finds the
 /// contacts, how FCL takes boxes, which boxed LCP solver DART's constraint solver runs, its
 /// contact constraint parameters and how friction is bounded. Set from C++ (DartWorld's
-/// constructor) or as KEY=VALUE items (apply_dart_settings); docs/engines.md, "dart", and
+/// constructor) or as KEY=VALUE items (apply_settings); docs/engines.md, "dart", and
 /// docs/settings.md list them with the DART parameter each one sets. Plain data: no DART
 /// header is needed to use it.
 
 #include <string>
 #include <vector>
 
+#include "octocd/adapter_rows.hpp"
 #include "octocd/pyramid_friction.hpp"
 
 namespace octocd {
@@ -121,20 +122,15 @@ struct DartSettings {
 /// them for the duration of each step and puts the previous values back.)
 DartSettings dart_library_defaults();
 
-/// The keys set_dart_setting takes, in the struct's order: collision, boxes, lcp,
-/// iterations, erp, max_erv, cfm, friction, contacts.
-std::vector<std::string> dart_setting_names();
-
-/// Sets the field `key` (a name of dart_setting_names()) of `settings` from text
-/// (collision: fcl or dart; boxes: primitive or mesh; lcp: dantzig or pgs; iterations: an
-/// integer in [1, 10000]; erp: a decimal number in [0, 1]; max_erv: in [0, 100]; cfm: in
-/// [1e-9, 1]; friction: inscribed or pyramid; contacts: an integer in [1, 10000000]).
-/// Throws InputError "<where>: ..." naming the key, the value and what is allowed.
-void set_dart_setting(DartSettings& settings, const std::string& key, const std::string& value,
-                      const std::string& where);
-
-/// Applies "KEY=VALUE" items in order with set_dart_setting. Throws InputError naming
-/// `where` and the item for text without '='.
-void apply_dart_settings(DartSettings& settings, const std::vector<std::string>& items, const std::string& where);
+/// The dart engine's settings table, one row a key in the struct's order:
+/// collision (fcl or dart), boxes (primitive or mesh), insert (origin or posed), lcp
+/// (dantzig or pgs), iterations (an integer in [1, 10000]), erp (a decimal number in [0, 1]),
+/// max_erv (in [0, 100]), cfm (in [1e-9, 1]), friction (inscribed or pyramid), contacts (an
+/// integer in [1, 10000000]).
+/// apply_settings(settings, items, where) (adapter_rows.hpp) sets a DartSettings from
+/// "KEY=VALUE" items (`--dart KEY=VALUE`, repeatable), throwing InputError that names the
+/// key, the value and what is allowed; setting_names<DartSettings>() lists the keys.
+template <>
+const SettingTable<DartSettings>& setting_table<DartSettings>();
 
 }  // namespace octocd

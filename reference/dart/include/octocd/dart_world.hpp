@@ -89,7 +89,7 @@ namespace octocd {
 ///   J_A - jn normal; jt = jt3 along -v_t / |v_t| (v_t from v_pre + dt g on dynamic
 ///   bodies and w_pre), |jt3| when |v_t| <= 1e-6 m/s; rows sorted by pair;
 /// - confirmed: the pairs with at least one row.
-class DartWorld : public ReferenceWorld {
+class DartWorld : public SettingsWorld<DartSettings> {
  public:
   /// The model (shared, not copied) from the state `initial` (x, v, w per body; q and
   /// omega when given, else the identity and zero). Throws InputError when a mesh's hull
@@ -125,8 +125,6 @@ class DartWorld : public ReferenceWorld {
   /// Response and metrics are timed; aabbs, broadphase, midphase and integrate are not
   /// (they run inside World::step).
   bool has_stage(Stage s) const override;
-  /// The settings it was built with.
-  const DartSettings& settings() const;
   /// DART's version string (DART_VERSION of the headers built against).
   static std::string dart_version();
 

@@ -39,10 +39,14 @@
 /// so that its vertex bounds are the shape's local AABB (octocd's meshes are centred on
 /// it already; an external trace may give a local box off the body origin). Unlike the
 /// translation-only normal(), posed() decides "penetrating" on the shapes themselves:
-///  - two boxes: FCL's box-box test (ODE's dBoxBox: the separating axis of least
-///    penetration among the 15 of two boxes, the exact minimum translation); FCL's
-///    distance when apart. (libccd's EPA on box corners can cycle without end when faces
-///    are coplanar, as in a resting stack.)
+///  - two boxes: octocd's own box-box (reference_contact.cpp box_contact): the least
+///    overlap over the 15 separating axes of two boxes (3 + 3 face normals, 9 edge-edge
+///    crosses), which for convex polytopes is the exact minimum translation (depth) and
+///    its axis (normal); the contact point is the midpoint of the deepest contact's
+///    witnesses. FCL's box-box routine (ODE's dBoxBox) is its oracle in the tests: it keeps
+///    a face axis unless an edge-edge one overlaps less than 1/1.05 of it, so its depth is
+///    up to 5% above the minimum. FCL's distance when apart. (libccd's EPA on box corners
+///    can cycle without end when faces are coplanar, as in a resting stack.)
 ///  - a declared sphere (CollisionShape::Sphere) with a box, sphere or hull: FCL's
 ///    collide on the primitives (sphere-box and sphere-sphere exact).
 ///  - other convex shapes (meshes whose every triangle lies on their hull): GJK on the
@@ -166,14 +170,14 @@ class ReferenceGeometry {
 
   /// Penetrating-pair normal from fcl::collide on the convex hulls / boxes with
   /// CollisionRequest(1, enable_contact = true), gjk_solver_type = GST_LIBCCD (FCL 0.7
-  /// runs MPR there for Convex, ODE's box-box for two boxes). Converted to B-to-A
+  /// runs MPR there for Convex, its box-box routine, ODE's dBoxBox, for two boxes). Converted to B-to-A
   /// (-Contact::normal with o1 = A). valid = false when FCL reports no contact.
   /// For comparison and fallback; normal() is the reference.
   ReferenceNormal fcl_collide_normal(std::uint32_t a, std::uint32_t b, Vec3 xa, Vec3 xb) const;
 
   /// Contact geometry of bodies a, b at poses pa, pb (design.md section 13; see the file comment for
   /// non-convex meshes). Penetrating: normal from B to A (the direction to translate A
-  /// to separate), depth >= 0, point_a = point_b = the EPA contact point. Separated:
+  /// to separate), depth >= 0, point_a = point_b = the contact point (EPA's; two boxes: box-box's). Separated:
   /// distance > 0, point_a on A, point_b on B (FCL distance on the boxes / BVH models),
   /// normal = normalize(point_a - point_b). Touching (distance 0 without an EPA answer):
   /// penetrating with depth 0 and valid = false. Throws InputError for a body out of range.
@@ -216,9 +220,10 @@ class ReferenceGeometry {
   /// InputError for a body out of range.
   const HullFeatures& hull_features(std::uint32_t body) const;
 
-  /// Box-box geometry of two axis-aligned boxes given in the world (FCL's box-box test;
-  /// FCL distance when apart): what an engine that resolves contacts on world AABBs
-  /// (octocd's design.md section 6) should find. Same conventions as posed().
+  /// Box-box geometry of two axis-aligned boxes given in the world (the box-box minimum
+  /// translation of posed(); FCL distance when apart): what an engine that resolves
+  /// contacts on world AABBs (octocd's design.md section 6) should find. Same conventions
+  /// as posed().
   static ReferenceNormal aabb_pair(const Aabb& a, const Aabb& b);
 
  private:

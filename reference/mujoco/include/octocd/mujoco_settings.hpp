@@ -3,11 +3,13 @@
 /// The settings of the MuJoCo engine (`mujoco`): the constraint solver's iterations, the
 /// friction cone, the contact spring's time constant, the contact margin and multi-point
 /// convex collisions. Set in C++ (MujocoWorld's constructor) or as KEY=VALUE items
-/// (apply_mujoco_settings), like the Bullet engine's (bullet_settings.hpp);
+/// (apply_settings), like the Bullet engine's (bullet_settings.hpp);
 /// docs/engines.md ("mujoco") says what each maps to in MuJoCo.
 
 #include <string>
 #include <vector>
+
+#include "octocd/adapter_rows.hpp"
 
 namespace octocd {
 
@@ -57,20 +59,14 @@ struct MujocoSettings {
   int max_contacts = 0;
 };
 
-/// The keys set_mujoco_setting takes, in the struct's order: the field names.
-std::vector<std::string> mujoco_setting_names();
-
-/// Sets the field `key` (a name of mujoco_setting_names()) of `settings` from text
-/// (iterations: an integer in [1, 10000]; cone: elliptic or pyramidal; timeconst: a
-/// decimal number in [0, 1]; margin: a decimal number in [0, 0.1]; multiccd: on or off;
-/// max_contacts: an integer in [0, 1000000]).
-/// Throws InputError "<where>: ..." naming the key, the value and what is allowed.
-void set_mujoco_setting(MujocoSettings& settings, const std::string& key, const std::string& value,
-                        const std::string& where);
-
-/// Applies "KEY=VALUE" items in order with set_mujoco_setting. Throws InputError naming
-/// `where` and the item for text without '='.
-void apply_mujoco_settings(MujocoSettings& settings, const std::vector<std::string>& items,
-                           const std::string& where);
+/// The mujoco engine's settings table, one row a key in the struct's order:
+/// iterations (an integer in [1, 10000]), cone (elliptic or pyramidal), timeconst (a
+/// decimal number in [0, 1]), margin (a decimal number in [0, 0.1]), multiccd (on or off),
+/// max_contacts (an integer in [0, 1000000]).
+/// apply_settings(settings, items, where) (adapter_rows.hpp) sets a MujocoSettings from
+/// "KEY=VALUE" items (`--mujoco KEY=VALUE`, repeatable), throwing InputError that names the
+/// key, the value and what is allowed; setting_names<MujocoSettings>() lists the keys.
+template <>
+const SettingTable<MujocoSettings>& setting_table<MujocoSettings>();
 
 }  // namespace octocd

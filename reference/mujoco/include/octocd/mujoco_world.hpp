@@ -82,7 +82,7 @@ namespace octocd {
 ///   jt = jt3 along -v_t / |v_t| (docs/trace-format.md, "The sign of jt"), |jt3| when
 ///   |v_t| <= 1e-6 m/s; rows sorted by pair;
 /// - confirmed: the pairs with at least one row.
-class MujocoWorld : public ReferenceWorld {
+class MujocoWorld : public SettingsWorld<MujocoSettings> {
  public:
   /// From a model (shared, not copied) and the state to start from (x, v, w per body;
   /// q, omega where given, else the identity and zero). Throws RuntimeError with
@@ -115,8 +115,6 @@ class MujocoWorld : public ReferenceWorld {
   bool has_stage(Stage s) const override;
   /// How MuJoCo's figures differ from octocd's (see step()).
   std::string notes() const override;
-  /// The settings it was built with.
-  const MujocoSettings& settings() const;
   /// The MJCF text this engine loaded (for tests and debugging: mj_loadXML of it gives
   /// the same mjModel).
   const std::string& xml() const;

@@ -14,8 +14,10 @@
 
 namespace octocd {
 
-/// The scene of a Model in one dWorld with one dHashSpace (ODE's multi-resolution hash
-/// grid), stepped once per frame by dWorldStep (or dWorldQuickStep, OdeSettings::stepper).
+/// The scene of a Model in one dWorld with one collision space (OdeSettings::space:
+/// dHashSpace, ODE's multi-resolution hash grid, below 10^4 bodies by default; sweep and
+/// prune from there), stepped once per frame by dWorldStep (or dWorldQuickStep,
+/// OdeSettings::stepper).
 ///
 /// Bodies (every body rotates: a scene without rotation simply starts with w = 0):
 /// - a dynamic body (inverse mass w > 0) is a dBody whose position is octocd's x (the
@@ -92,7 +94,7 @@ namespace octocd {
 ///   -v_t / |v_t| (v_t: A's velocity relative to B's at the point from v_pre + dt g on
 ///   dynamic bodies and w_pre), |jt3| when |v_t| <= 1e-6 m/s; rows sorted by pair;
 /// - confirmed: the pairs with at least one row.
-class OdeWorld : public ReferenceWorld {
+class OdeWorld : public SettingsWorld<OdeSettings> {
  public:
   /// The model (shared, not copied) from the state `initial` (x, v, w per body; q and
   /// omega when given, else the identity and zero). Throws InputError when a mesh's hull
@@ -118,8 +120,9 @@ class OdeWorld : public ReferenceWorld {
   const FrameMetrics& step() override;
   /// "ode".
   std::string name() const override { return "ode"; }
-  /// "ode-hash" (dHashSpace).
-  std::string broadphase_name() const override { return "ode-hash"; }
+  /// The space the scene got (OdeSettings::space resolved for its body count): "ode-hash"
+  /// (dHashSpace), "ode-sap" (dSweepAndPruneSpace) or "ode-quadtree" (dQuadTreeSpace).
+  std::string broadphase_name() const override;
   /// "ode-collide": ODE's dCollide (dBoxBox, libccd MPR, trimesh colliders).
   std::string midphase_name() const override { return "ode-collide"; }
   /// How ODE's figures differ from octocd's (see step()).
@@ -127,8 +130,6 @@ class OdeWorld : public ReferenceWorld {
   /// broadphase, midphase, response and metrics are timed; aabbs and integrate are not
   /// (they run inside dSpaceCollide and dWorldStep).
   bool has_stage(Stage s) const override;
-  /// The settings it was built with.
-  const OdeSettings& settings() const;
 
  private:
   struct Impl;
