@@ -346,10 +346,47 @@ std::string run_kept(const octocd::TraceWriter* trace, const std::string& path) 
              : fmt::format("the trace {} holds no frame (none flushed yet), no sidecar", path);
 }
 
-/// `run`: from a SIGINT or SIGTERM to the end of the process, at most this long (s): the
-/// step in progress gets the 0.5 s grace, the trace's last flush is bounded by
-/// TraceOptions::flush_bytes; past it the process ends keeping the flushed frames.
-constexpr double kRunStopBound = 0.95;
+/// What `run` keeps when it ends at once, read back from the trace itself (its
+/// committed_frames once no flush is in flight; TraceWriter::read_back_frames_and_hold),
+/// on set_stop_kept_reader's thread; "" (run_kept's text instead) when it cannot be read.
+std::string run_read_back(octocd::TraceWriter& trace, const std::string& path) {
+  const std::int64_t frames = trace.read_back_frames_and_hold();
+  if (frames < 0) return "";
+  return frames > 0 ? fmt::format("the trace {} holds frames 1..{} (read back), no sidecar", path, frames)
+                    : fmt::format("the trace {} holds no frame (read back), no sidecar", path);
+}
+
+/// How long the read-back of what `run` keeps may take before the process ends with
+/// run_kept's text instead (s).
+constexpr double kRunReadBackBound = 0.2;
+
+/// `run`: from a SIGINT or SIGTERM to the end of the process, at most this long (s) plus
+/// kRunReadBackBound: the step in progress gets the 0.5 s grace, the trace's last flush is
+/// bounded by TraceOptions::flush_bytes; past it the process ends keeping the flushed
+/// frames, said as read back from the trace.
+constexpr double kRunStopBound = 0.75;
+
+/// While alive, a `run` that ends at once says what its trace holds read back from it
+/// (run_read_back); cleared before the trace is closed or destroyed.
+class KeptReadBack {
+ public:
+  KeptReadBack() = default;
+  void start(octocd::TraceWriter* trace, const std::string& path) {
+    if (!trace) return;
+    octocd::set_stop_kept_reader([trace, path] { return run_read_back(*trace, path); }, kRunReadBackBound);
+    on_ = true;
+  }
+  void stop() {
+    if (on_) octocd::set_stop_kept_reader({});
+    on_ = false;
+  }
+  ~KeptReadBack() { stop(); }
+  KeptReadBack(const KeptReadBack&) = delete;
+  KeptReadBack& operator=(const KeptReadBack&) = delete;
+
+ private:
+  bool on_ = false;
+};
 
 int run_command(const RunOptions& o) {
   // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kRunStopBound.
@@ -425,6 +462,8 @@ int run_command(const RunOptions& o) {
     trace->append_state(0, world.state());
     octocd::set_stop_kept(run_kept(trace.get(), o.trace));
   }
+  KeptReadBack read_back;  // destroyed before `trace`
+  read_back.start(trace.get(), o.trace);
 
   Progress progress(scene.frames, !o.quiet);
   // Without a trace nothing but the metrics is read between the steps: the engine may run
@@ -434,6 +473,7 @@ int run_command(const RunOptions& o) {
   if (!trace) world.plan_steps(scene.frames);
   else feed.start(*trace, world, scene.frames);
   const auto t0 = Clock::now();
+  std::int64_t kept_flushed = 0;  // the flushed frames run_kept last said
   try {
     for (int f = 0; f < scene.frames && octocd::stop_signal() == 0; ++f) {
       // A step of a big scene may take seconds: a signal it does not answer within the
@@ -447,15 +487,19 @@ int run_command(const RunOptions& o) {
         std::fprintf(stderr, "set-up: first frame %.2f s after the start (%.2f CPU s of the process)\n",
                      std::chrono::duration<double>(Clock::now() - t_setup).count(), cpu_s());
       totals.add(m);
-      const std::int64_t flushed = trace ? trace->flushed_frames() : 0;
       // A reference engine's state past the trace limits (a spinning needle) ends the run
       // before its frame is written: every trace `run` writes is judgeable.
       if (trace && world.rotation_traits()) check_engine_state(world.state(), f + 1, o.engine);
       if (trace) feed.append(*trace, world, m, scene.frames - (f + 1));
-      if (trace && trace->flushed_frames() != flushed) octocd::set_stop_kept(run_kept(trace.get(), o.trace));
+      // The fallback text follows the flushes, those the writer thread ended meanwhile too.
+      if (trace && trace->flushed_frames() != kept_flushed) {
+        kept_flushed = trace->flushed_frames();
+        octocd::set_stop_kept(run_kept(trace.get(), o.trace));
+      }
       progress.update(m, totals);
     }
   } catch (const octocd::RuntimeError&) {
+    read_back.stop();
     close_after_failure(trace, o.trace, o.no_xdmf);
     throw;
   }
@@ -465,6 +509,7 @@ int run_command(const RunOptions& o) {
     // not octocd's, which the XDMF sidecar's hyperslabs describe: no sidecar for it.
     octocd::copy_own_trace(world, o.trace, "--trace");
   }
+  read_back.stop();
   if (trace) {
     trace->close();
     // A stopped run has a second: the sidecar re-reads the whole trace (the hardened

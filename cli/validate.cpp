@@ -91,7 +91,37 @@ struct ValidateOptions {
   int threads = 0;            ///< --threads: threads per frame (0: the hardware's)
   octocd::Expectations expectations;  ///< --expect's file, read before the run
   bool determinism = false;   ///< --determinism: runs compared bit for bit instead of the validators
+  /// Why --junit could not be written (write_junit_guarded): raised by validate_command
+  /// once --json is written, so a failed --junit never costs the --json file.
+  mutable std::string junit_failed;
 };
+
+/// Runs `write` (a write_junit or write_junit_error to o.junit); a failure to write that
+/// file (its message begins "--junit: ": a size limit, a full disk, a folder put in its
+/// way) is said at once on stderr (it says what the file holds) and kept in
+/// o.junit_failed instead of thrown, and the verdict goes on to the table and --json.
+void write_junit_guarded(const ValidateOptions& o, const std::function<void()>& write) {
+  try {
+    write();
+  } catch (const std::runtime_error& e) {
+    if (std::string_view(e.what()).rfind("--junit: ", 0) != 0) throw;
+    o.junit_failed = e.what();
+    std::fprintf(stderr, "octocd: runtime failure: %s\n", octocd::printable_line(o.junit_failed).c_str());
+  }
+}
+
+/// The exit of a `validate` whose --junit could not be written (o.junit_failed): a last
+/// line on stderr saying what --json holds, then 1; otherwise `code`. Called once the
+/// verdict and --json are written.
+int with_junit_outcome(const ValidateOptions& o, int code) {
+  if (o.junit_failed.empty()) return code;
+  std::fflush(stdout);
+  const std::string json = o.json.empty() ? std::string("no --json was asked (the verdict is the table above)")
+                                          : fmt::format("--json {} holds the whole verdict (written)", o.json);
+  std::fprintf(stderr, "octocd: --junit %s was not written (above); %s\n", octocd::printable_line(o.junit).c_str(),
+               octocd::printable_line(json).c_str());
+  return 1;
+}
 
 /// Whether --view's pages could not be written (FailureViews::write_error): then says so
 /// on stderr, after the verdict (which stands), and `validate` exits 1.
@@ -105,20 +135,23 @@ bool views_failed(const ValidateOptions& o) {
 /// --junit of a scene's verdict (the scene run here, or `engine`'s trace of it): `results`
 /// with --view's pages in their details, the time since `t0`, the run's properties (engine,
 /// frames, every, against, scene_file, build_id) and `stopped` (the line of an incomplete
-/// verdict, "" for a whole one). Nothing without --junit.
+/// verdict, "" for a whole one). Nothing without --junit; a failure to write it is kept
+/// (write_junit_guarded).
 void write_scene_junit(const ValidateOptions& o, const std::string& suite, const std::string& engine,
                        std::int64_t frames, const std::vector<octocd::ValidationResult>& results,
                        const std::string& stopped, const octocd::ExpectationReport& report, Clock::time_point t0) {
   if (o.junit.empty()) return;
-  octocd::write_junit(o.junit, suite, octocd::cli::with_views_in_details(results, o.views, o.junit),
-                      std::chrono::duration<double>(Clock::now() - t0).count(),
-                      {{"engine", engine},
-                       {"frames", std::to_string(frames)},
-                       {"every", std::to_string(o.every)},
-                       {"against", o.against},
-                       {"scene_file", o.scene},
-                       {"build_id", octocd::build_id()}},
-                      stopped, &report);
+  write_junit_guarded(o, [&] {
+    octocd::write_junit(o.junit, suite, octocd::cli::with_views_in_details(results, o.views, o.junit),
+                        std::chrono::duration<double>(Clock::now() - t0).count(),
+                        {{"engine", engine},
+                         {"frames", std::to_string(frames)},
+                         {"every", std::to_string(o.every)},
+                         {"against", o.against},
+                         {"scene_file", o.scene},
+                         {"build_id", octocd::build_id()}},
+                        stopped, &report);
+  });
 }
 
 /// The end of every `validate` path: matches `results` of `run` against --expect, writes
@@ -365,7 +398,7 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
       i.stopped_in = judged + 1;
       code = trace_in_verdict(o, vo, eo, i, rows, every, t0, " (a check outlasted the stop's grace)");
     }
-    end_without_worker(code);
+    end_without_worker(with_junit_outcome(o, code));
   }
   try {
     worker.join();
@@ -401,16 +434,18 @@ int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, co
     share = fmt::format(", shard {}/{}: frames {}..{}", eo.shard.index, eo.shard.count, first, last);
   }
   if (!o.junit.empty())
-    octocd::write_junit(o.junit, std::filesystem::path(o.trace_in).stem().string(),
-                        octocd::cli::with_views_in_details(results, o.views, o.junit),
-                        std::chrono::duration<double>(Clock::now() - t0).count(),
-                        {{"engine", info.engine},
-                         {"frames", std::to_string(info.frames)},
-                         {"every", std::to_string(every)},
-                         {"against", o.against},
-                         {"trace_file", o.trace_in},
-                         {"build_id", octocd::build_id()}},
-                        stopped, &report);
+    write_junit_guarded(o, [&] {
+      octocd::write_junit(o.junit, std::filesystem::path(o.trace_in).stem().string(),
+                          octocd::cli::with_views_in_details(results, o.views, o.junit),
+                          std::chrono::duration<double>(Clock::now() - t0).count(),
+                          {{"engine", info.engine},
+                           {"frames", std::to_string(info.frames)},
+                           {"every", std::to_string(every)},
+                           {"against", o.against},
+                           {"trace_file", o.trace_in},
+                           {"build_id", octocd::build_id()}},
+                          stopped, &report);
+    });
   fmt::print("validate external trace {} (engine '{}', {} bodies, {} frames, checks every {}, against: {}{})\n\n",
              octocd::printable(o.trace_in), octocd::printable(info.engine), info.bodies, info.frames, every, o.against,
              share);
@@ -461,11 +496,13 @@ int validate_merge(const ValidateOptions& o) {
   if (!o.junit.empty()) {
     double seconds = 0;
     for (const octocd::ValidationResult& r : m.results) seconds += r.seconds;
-    octocd::write_junit(o.junit, std::filesystem::path(m.identity.trace).stem().string(), m.results, seconds,
-                        {{"engine", m.identity.engine},
-                         {"frames", std::to_string(m.identity.frames)},
-                         {"shards", std::to_string(m.files.size())}},
-                        "", &report);
+    write_junit_guarded(o, [&] {
+      octocd::write_junit(o.junit, std::filesystem::path(m.identity.trace).stem().string(), m.results, seconds,
+                          {{"engine", m.identity.engine},
+                           {"frames", std::to_string(m.identity.frames)},
+                           {"shards", std::to_string(m.files.size())}},
+                          "", &report);
+    });
   }
   nlohmann::ordered_json files = nlohmann::ordered_json::array();
   for (const std::string& f : m.files) files.push_back(f);
@@ -643,7 +680,7 @@ int validate_command(ValidateOptions& o) {
     if (!o.scene.empty() || !o.trace_in.empty() || !o.shard.empty() || o.check_only)
       throw octocd::InputError("--merge: joins shards' JSON verdicts; allowed without SCENE, --trace-in, --shard and "
                                "--check-only");
-    return validate_merge(o);
+    return with_junit_outcome(o, validate_merge(o));
   }
   if (o.determinism && (!o.trace_in.empty() || !o.trace.empty() || !o.view.empty()))
     throw octocd::InputError("--determinism: runs the engine on SCENE.json and compares its runs; allowed without "
@@ -676,7 +713,7 @@ int validate_command(ValidateOptions& o) {
   auto junit_error = [&](const char* kind, const char* message) {
     // A failure to write --junit itself leaves that file as its message says (unchanged):
     // no error case is written into it afterwards.
-    if (o.junit.empty() || std::string_view(message).rfind("--junit: ", 0) == 0) return;
+    if (o.junit.empty() || !o.junit_failed.empty() || std::string_view(message).rfind("--junit: ", 0) == 0) return;
     try {
       octocd::write_junit_error(o.junit, std::filesystem::path(o.trace_in.empty() ? o.scene : o.trace_in).stem().string(),
                                 kind, message);
@@ -685,7 +722,7 @@ int validate_command(ValidateOptions& o) {
     }
   };
   try {
-    return validate_scene_command(o, t0);
+    return with_junit_outcome(o, validate_scene_command(o, t0));
   } catch (const octocd::InputError& e) {
     junit_error("bad-input", e.what());
     throw;
@@ -752,13 +789,15 @@ int validate_determinism(const ValidateOptions& o, const std::shared_ptr<const o
   const octocd::RunName run{name, ""};
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   if (!o.junit.empty())
-    octocd::write_junit(o.junit, name, results, std::chrono::duration<double>(Clock::now() - t0).count(),
-                        {{"engine", o.engine},
-                         {"frames", std::to_string(o.frames)},
-                         {"mode", "determinism"},
-                         {"scene_file", o.scene},
-                         {"build_id", octocd::build_id()}},
-                        "", &report);
+    write_junit_guarded(o, [&] {
+      octocd::write_junit(o.junit, name, results, std::chrono::duration<double>(Clock::now() - t0).count(),
+                          {{"engine", o.engine},
+                           {"frames", std::to_string(o.frames)},
+                           {"mode", "determinism"},
+                           {"scene_file", o.scene},
+                           {"build_id", octocd::build_id()}},
+                          "", &report);
+    });
   fmt::print("validate {} --determinism (engine {}, {} frames; each pair of runs compared bit for bit as `octocd "
              "compare` does)\n\n",
              model->scene.name, o.engine, o.frames);
@@ -918,7 +957,7 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
                     "was cut short",
                     judged, o.frames, octocd::stop_signal_name(sig),
                     octocd::stop_signal_count() > 1 ? " twice" : "", judged + 1);
-    end_without_worker(validate_verdict(o, scene.name, rows, vo.overridden, stopped, judged, t0));
+    end_without_worker(with_junit_outcome(o, validate_verdict(o, scene.name, rows, vo.overridden, stopped, judged, t0)));
   }
   try {
     worker.join();

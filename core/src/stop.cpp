@@ -5,6 +5,8 @@
 
 #include "octocd/stop.hpp"
 
+#include <fcntl.h>
+#include <pthread.h>
 #include <signal.h>
 #include <sys/time.h>
 #include <time.h>
@@ -15,7 +17,11 @@
 #include <cstring>
 
 #include <atomic>
+#include <cerrno>
+#include <functional>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <utility>
 
 namespace octocd {
@@ -45,6 +51,21 @@ constexpr std::size_t kKeptSlots = 4, kKeptBytes = 1024;
 char g_kept_text[kKeptSlots][kKeptBytes];
 std::atomic<const char*> g_kept{nullptr};
 std::atomic<unsigned> g_kept_slot{0};
+
+// set_stop_kept_reader: a thread waits on a pipe; the handler that would end the process
+// writes one byte to it and leaves the ending to that thread (bounded by the tick).
+int g_wake[2] = {-1, -1};
+std::atomic<bool> g_reader_on{false};            // a reader is set
+std::atomic<bool> g_reader_asked{false};         // an ending was handed to it
+std::atomic<long long> g_reader_bound_ns{200000000};
+std::atomic<long long> g_reader_until_ns{0};     // past this the tick ends the process itself
+std::atomic<int> g_pending_sig{0};               // the ending handed over: exit_now's arguments
+std::atomic<const char*> g_pending_middle{""};
+std::atomic<const char*> g_pending_tail{"\n"};
+char g_pending_what[1024];                       // copied: a StopWithin's text may go away
+std::atomic<bool> g_exiting{false};              // exit_now has begun (one line, one _exit)
+std::mutex g_reader_mu;                          // guards g_reader while it is set or called
+std::function<std::string()> g_reader;
 
 // Async-signal-safe (clock_gettime is).
 long long now_ns() {
@@ -78,6 +99,8 @@ void put(const char* t) {
 // Async-signal-safe: write(2) and _exit(2) only. Prints "octocd: stopped by SIG...",
 // then `middle` and `what`, then "; <kept>" when set_stop_kept gave a text (else `tail`).
 [[noreturn]] void exit_now(int sig, const char* middle, const char* what, const char* tail) {
+  if (g_exiting.exchange(true))  // another thread is ending the process: its line, its _exit
+    for (;;) ::pause();
   if (g_remove.load()) ::unlink(g_remove_text);  // unlink(2) is async-signal-safe
   put("octocd: stopped by ");
   put(sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal");
@@ -93,15 +116,71 @@ void put(const char* t) {
   ::_exit(128 + sig);
 }
 
+// Async-signal-safe: ends the process (exit_now), or, with a kept reader set and not yet
+// asked, hands the ending to its thread once and returns; after that returns until the
+// reader's bound has passed, then ends the process with set_stop_kept's text.
+void end_process(int sig, const char* middle, const char* what, const char* tail) {
+  if (g_reader_on.load() && !g_reader_asked.exchange(true)) {
+    std::size_t n = 0;
+    while (what[n] != '\0' && n + 1 < sizeof g_pending_what) {
+      g_pending_what[n] = what[n];
+      ++n;
+    }
+    g_pending_what[n] = '\0';
+    g_pending_sig.store(sig);
+    g_pending_middle.store(middle);
+    g_pending_tail.store(tail);
+    g_reader_until_ns.store(now_ns() + g_reader_bound_ns.load());
+    start_tick();
+    const char b = 1;
+    if (::write(g_wake[1], &b, 1) == 1) return;
+  }
+  if (g_reader_asked.load()) {
+    if (now_ns() < g_reader_until_ns.load()) return;  // the reader still has time
+    exit_now(g_pending_sig.load(), g_pending_middle.load(), g_pending_what, g_pending_tail.load());
+  }
+  exit_now(sig, middle, what, tail);
+}
+
 // SIGALRM, every 20 ms after the first signal: StopWithin's grace or the deadline ran out.
 extern "C" void tick(int) {
   const int sig = g_signal.load();
   if (sig == 0) return;
+  if (g_reader_asked.load()) return end_process(sig, "", "", "\n");  // the reader's bound
   const long long elapsed_us = (now_ns() - g_signal_ns.load()) / 1000;
   if (const char* what = g_within.load())
-    if (elapsed_us >= g_grace_us.load()) exit_now(sig, " while ", what, "\n");
+    if (elapsed_us >= g_grace_us.load()) return end_process(sig, " while ", what, "\n");
   const long deadline = g_deadline_us.load();
-  if (deadline > 0 && elapsed_us >= deadline) exit_now(sig, "", ": stopping took longer than its bound", "\n");
+  if (deadline > 0 && elapsed_us >= deadline) end_process(sig, "", ": stopping took longer than its bound", "\n");
+}
+
+// The kept reader's thread (set_stop_kept_reader): waits for an ending handed over, asks
+// the reader for the text and ends the process with it. Signals go to the other threads.
+void reader_loop() {
+  sigset_t block;
+  sigemptyset(&block);
+  sigaddset(&block, SIGINT);
+  sigaddset(&block, SIGTERM);
+  sigaddset(&block, SIGALRM);
+  pthread_sigmask(SIG_BLOCK, &block, nullptr);
+  char b = 0;
+  for (;;) {
+    const ssize_t n = ::read(g_wake[0], &b, 1);
+    if (n == 1) break;
+    if (n < 0 && errno == EINTR) continue;
+    return;  // the pipe failed: the tick ends the process with set_stop_kept's text
+  }
+  std::string text;
+  {
+    const std::lock_guard<std::mutex> lock(g_reader_mu);
+    try {
+      if (g_reader) text = g_reader();
+    } catch (...) {
+      text.clear();
+    }
+  }
+  if (!text.empty()) set_stop_kept(text);
+  exit_now(g_pending_sig.load(), g_pending_middle.load(), g_pending_what, g_pending_tail.load());
 }
 
 extern "C" void record_signal(int sig) {
@@ -112,7 +191,7 @@ extern "C" void record_signal(int sig) {
     // A second signal while stopping: the user insists; the process ends now, saying
     // what it keeps (everything flushed before: a trace is readable at any instant),
     // unless the command answers it itself (SecondSignal::Recorded; the deadline holds).
-    if (g_second_ends.load()) exit_now(sig, " again", " while stopping", "\n");
+    if (g_second_ends.load()) end_process(sig, " again", " while stopping", "\n");
     return;
   }
   g_signal_ns.store(now_ns());
@@ -154,7 +233,22 @@ void set_stop_kept(const std::string& text) {
   g_kept.store(g_kept_text[slot]);
 }
 
+void set_stop_kept_reader(std::function<std::string()> reader, double bound_s) {
+  const std::lock_guard<std::mutex> lock(g_reader_mu);
+  g_reader = std::move(reader);
+  g_reader_bound_ns.store(std::max(1000000LL, static_cast<long long>(bound_s * 1e9)));
+  if (g_reader && g_wake[0] < 0) {
+    if (::pipe2(g_wake, O_CLOEXEC) != 0) {
+      g_wake[0] = g_wake[1] = -1;
+    } else {
+      std::thread(reader_loop).detach();
+    }
+  }
+  g_reader_on.store(static_cast<bool>(g_reader) && g_wake[0] >= 0);
+}
+
 StopOnSignals::StopOnSignals(double deadline_s, SecondSignal second) {
+  g_reader_asked.store(false);
   g_signal.store(0);
   g_count.store(0);
   g_second_ends.store(second == SecondSignal::EndsAtOnce);
@@ -195,6 +289,7 @@ StopAtOnce::StopAtOnce(const char* what) {
 StopAtOnce::~StopAtOnce() { g_at_once.store(nullptr); }
 
 StopOnSignals::~StopOnSignals() {
+  set_stop_kept_reader({});
   stop_tick();
   g_deadline_us.store(0);
   g_kept.store(nullptr);

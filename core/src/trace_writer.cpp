@@ -350,6 +350,7 @@ struct TraceWriter::Impl {
   bool failed = false;               // a write failed: the file was abandoned
   std::int64_t last_appended = 0;    // frame of the last append_frame
   std::atomic<std::int64_t> flushed_rows{0};  // /frames rows on disk after the last good flush
+  std::mutex io;                     // held by every write and flush (read_back_and_hold)
   std::int64_t last_flushed = 0;     // frame of the last of them
   std::vector<float> scratch;
 
@@ -513,6 +514,7 @@ struct TraceWriter::Impl {
   // Writes the staged rows, flushes, records committed_frames / committed_states and
   // flushes again (write_and_flush); throws Hdf5Failure. Touches no column's buf.
   void write_staged_and_flush() {
+    const std::lock_guard<std::mutex> lock(io);
     // After SIGINT/SIGTERM the process has a second to end: rows stored uncompressed.
     write_all(stop_signal() != 0);
     check(H5Fflush(file, H5F_SCOPE_GLOBAL), path, "flush");
@@ -1046,6 +1048,7 @@ void TraceWriter::close() {
   // Everything reaches the disk first: once the flush succeeded, closing the datasets and
   // the file writes nothing but the superblock's SWMR flags, in place.
   m.write_and_flush("writing the last frames (up to frame " + std::to_string(m.last_appended) + ")");
+  const std::lock_guard<std::mutex> lock(m.io);
   m.closed = true;
   for (Column* c : m.columns()) c->dset.reset();
   const herr_t r = H5Fclose(m.file.get());
@@ -1066,6 +1069,20 @@ const std::string& TraceWriter::path() const { return impl_->path; }
 bool TraceWriter::failed() const { return impl_->failed; }
 
 std::int64_t TraceWriter::flushed_frames() const { return impl_->flushed_rows; }
+
+std::int64_t TraceWriter::read_back_frames_and_hold() {
+  Impl& m = *impl_;
+  m.io.lock();  // never unlocked: no write starts after the read (the process is ending)
+  hbool_t threadsafe = 0;
+  if (m.closed || m.failed || H5is_library_threadsafe(&threadsafe) < 0 || !threadsafe) return -1;
+  QuietHdf5 quiet;
+  std::int64_t frames = -1;
+  const hid_t a = H5Aopen(m.file.get(), "committed_frames", H5P_DEFAULT);
+  if (a < 0) return -1;
+  if (H5Aread(a, H5T_NATIVE_INT64, &frames) < 0) frames = -1;
+  H5Aclose(a);
+  return frames;
+}
 
 // ---------------------------------------------------------------------------------------
 

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <utility>
 
 #include "octocd/adapter_rows.hpp"
@@ -100,12 +101,20 @@ ContactRecord ReferenceCore::manifold_row(std::uint32_t i1, std::uint32_t i2, co
                                           std::vector<Vec3>& jt3) const {
   const bool swap = i1 > i2;  // A is body 2
   const double sa = swap ? -1.0 : 1.0;
-  const double nrm[3] = {sa * normal21[0], sa * normal21[1], sa * normal21[2]};
+  // The engine's normal may be unit only to its own rounding (|n| - 1 ~ 1e-8 from a
+  // collider); its friction directions are orthogonal to n whatever its length, so the
+  // impulse splits along the unit n: normal part (J.n) n, the rest in the contact plane.
+  const double len = std::sqrt(normal21[0] * normal21[0] + normal21[1] * normal21[1] + normal21[2] * normal21[2]);
+  const double sn = len > 0.0 ? sa / len : sa;
+  const double nrm[3] = {sn * normal21[0], sn * normal21[1], sn * normal21[2]};
   const double j_a[3] = {sa * impulse1[0], sa * impulse1[1], sa * impulse1[2]};
-  // An engine's normal row has lo = 0, so its impulse is >= 0; projecting the summed
-  // impulse (friction rows orthogonal to the normal) back on the normal may round below it.
-  const double jn = std::max(0.0, j_a[0] * nrm[0] + j_a[1] * nrm[1] + j_a[2] * nrm[2]);
-  const double jt_d[3] = {j_a[0] - jn * nrm[0], j_a[1] - jn * nrm[1], j_a[2] - jn * nrm[2]};
+  // The tangential part is J less its whole normal part, J.n of either sign: an engine's
+  // normal row has lo = 0, but its summed impulse projected back may round a little below
+  // 0 (a solver's tolerance), and that rounding belongs to the normal, never to friction
+  // (subtracting max(0, J.n) left it in jt3: a 1.5e-8 row 78 deg out of its plane).
+  const double along = j_a[0] * nrm[0] + j_a[1] * nrm[1] + j_a[2] * nrm[2];
+  const double jn = std::max(0.0, along);
+  const double jt_d[3] = {j_a[0] - along * nrm[0], j_a[1] - along * nrm[1], j_a[2] - along * nrm[2]};
   ContactRecord c;
   c.pair = swap ? Pair{i2, i1} : Pair{i1, i2};
   c.normal = {static_cast<float>(nrm[0]), static_cast<float>(nrm[1]), static_cast<float>(nrm[2])};

@@ -257,6 +257,12 @@ OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial,
       dGeomTriMeshDataBuildSingle(d.tri, d.tri_vertices.data(), static_cast<int>(3 * sizeof(float)),
                                   static_cast<int>(s.mesh->vertices.size()), d.tri_indices.data(),
                                   static_cast<int>(d.tri_indices.size()), static_cast<int>(3 * sizeof(dTriIndex)));
+      // ODE's convex-trimesh collider needs the face angles: without them a hull (a
+      // dynamic mesh) touching a static mesh aborts the process (ODE INTERNAL ERROR 2).
+      if (!dGeomTriMeshDataPreprocess2(d.tri, (1U << dTRIDATAPREPROCESS_BUILD_CONCAVE_EDGES) |
+                                                  (1U << dTRIDATAPREPROCESS_BUILD_FACE_ANGLES),
+                                       nullptr))
+        throw RuntimeError(fmt::format("ode: preprocessing static mesh {} for its colliders failed", s.name));
     }
   }
 

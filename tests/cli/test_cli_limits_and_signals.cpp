@@ -1086,3 +1086,57 @@ TEST_F(Hardening, ValidateOnAReferenceEngineKeepsItsVerdictOnAStop) {
     }
   }
 }
+
+// ---- issue 68: the stop line states what the trace holds, read back -------------------
+
+/// 64 boxes (half 0.05 m) resting on the floor 1 cm apart, pulled by gravity (-7, -9.81, -7)
+/// into the corner of an open box: they slide apart (fast steps, one small ODE island each)
+/// until about frame 50, then pile into one island, whose dWorldStep (a Dantzig LCP over
+/// some 700 contact rows) takes 0.3-4 s a step on the 2-core VM. 6,000 static boxes far
+/// away make each state row 315 KB, so with --state-every 1 the trace's buffered rows reach
+/// TraceOptions::flush_bytes about every 27 frames and its writer thread flushes them
+/// behind the steps.
+std::string corner_pile_scene(const fs::path& dir) {
+  const fs::path p = dir / "corner-pile.json";
+  std::ofstream(p) << R"({"name": "corner-pile", "domain": {"min": [-1, -1, -1], "max": [1, 1, 1]},
+    "walls": "open-box", "dt": 0.005, "gravity": [-7, -9.81, -7], "frames": 100000, "rotation": true,
+    "response": {"restitution": 0.0},
+    "groups": [{"name": "b", "shape": {"box": [0.05, 0.05, 0.05]}, "count": 64,
+                "layout": {"type": "grid", "min": [-0.891, -0.949, -0.891], "max": [-0.121, -0.949, -0.121],
+                           "spacing": 0.11}},
+               {"name": "far", "shape": {"box": [0.004, 0.004, 0.004]}, "count": 6000, "mass": 0,
+                "layout": {"type": "grid", "min": [0.2, 0.0, 0.2], "max": [0.9, 0.9, 0.9]}}]})";
+  return p.string();
+}
+
+// SIGINT once the trace holds 50 frames (an event: the file read back), when ODE's steps
+// of the pile are long: the step in progress outlasts the 0.5 s grace and the process ends
+// inside it. Before: the line said what `run` had last seen of its writer thread's flushes,
+// "the trace T holds no frame (none flushed yet)", while the trace held 53 complete frames
+// (issue 68: "frames 1..50" with 700 in the file). Now the frames are read back from the
+// file once no flush is in flight, and the line names exactly what a reader finds.
+TEST_F(Hardening, RunStoppedInsideALongStepStatesTheFramesTheTraceHolds) {
+  const Result e = run({"engines"});
+  if (!std::regex_search(e.out, std::regex("(^|\n)ode +available"))) GTEST_SKIP() << "no ode in this octocd";
+  const std::string trace = (dir_ / "pile.h5").string();
+  Child c(dir_, {"run", corner_pile_scene(dir_), "--engine", "ode", "--ode", "stepper=step", "--state-every", "1",
+                 "--trace", trace, "--quiet"});
+  ASSERT_TRUE(wait_for_frames(trace, 50)) << "50 frames not flushed within 60 s";
+  ::kill(c.pid(), SIGINT);
+  bool ended = false;
+  const Result r = c.wait_within(30, ended);
+  ASSERT_TRUE(ended) << "still running 30 s after SIGINT";
+  ASSERT_EQ(r.signal, 0) << "killed by the signal instead of stopping";
+  EXPECT_EQ(r.code, 130) << r.err;
+  const std::int64_t held = octocd::read_trace_summary(trace).frames;
+  EXPECT_GE(held, 50);
+  const std::string holds = "the trace " + trace + " holds frames 1.." + std::to_string(held);
+  if (r.err.find("octocd: stopped by SIGINT while run stepped frame ") != std::string::npos) {
+    std::printf("stopped inside a step; the trace holds %lld frames\n", static_cast<long long>(held));
+    EXPECT_NE(r.err.find(holds + " (read back), no sidecar\n"), std::string::npos) << r.err;
+  } else {  // the step ended within the grace (a fast machine): the trace closed with every frame run
+    std::printf("stopped between steps; the trace holds %lld frames\n", static_cast<long long>(held));
+    EXPECT_EQ(stopped_after(r.err), held) << r.err;
+    EXPECT_NE(r.err.find(holds + ";"), std::string::npos) << r.err;
+  }
+}

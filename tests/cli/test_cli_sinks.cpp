@@ -8,6 +8,8 @@
 #include <iterator>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "support/cli_run.hpp"
 #include "octocd/text.hpp"
 
@@ -160,4 +162,42 @@ TEST_F(Sinks, AJunitThatCouldNotBeWrittenIsLeftAsTheMessageSays) {
   std::ifstream in(xml);
   const std::string kept((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_EQ(kept, "OLD") << "the file the message calls unchanged was rewritten";
+}
+
+TEST_F(Sinks, AJsonIsWrittenWhenTheJunitCannotBe) {
+  const std::string scene = (dir_ / "box-in-box.json").string();
+  std::ofstream(scene) << kFailingScene;
+  // A --junit name of 250 bytes passes the output checks, but its temporary file beside it
+  // (NAME.tmp.XXXXXX) is longer than a file name may be: writing it fails (ENAMETOOLONG).
+  const std::string xml = (dir_ / std::string(250, 'j')).string();
+  const std::string json = (dir_ / "o.json").string();
+  const Result r = run(bin() + " validate " + scene + " --frames 20 --every 5 --against none --junit " + xml +
+                       " --json " + json);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("--junit: " + xml + ": cannot create a temporary file in its folder"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find(xml + " is unchanged"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("octocd: --junit " + xml + " was not written (above); --json " + json +
+                          " holds the whole verdict (written)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(xml));
+  EXPECT_NE(r.output.find("VALIDATION FAILED"), std::string::npos) << r.output;
+  // The verdict is whole in --json: its rows are those of the same run with a --junit it could write.
+  const std::string good = (dir_ / "good.json").string();
+  const Result g = run(bin() + " validate " + scene + " --frames 20 --every 5 --against none --junit " +
+                       (dir_ / "j.xml").string() + " --json " + good);
+  ASSERT_EQ(g.code, 3) << g.output;
+  const auto rows = [](const std::string& path) {
+    std::ifstream in(path);
+    EXPECT_TRUE(in.good()) << path << " was not written";
+    const nlohmann::json doc = nlohmann::json::parse(in, nullptr, false);
+    EXPECT_TRUE(doc.is_object() && doc.contains("rows")) << path;
+    nlohmann::json out = doc.is_object() ? doc.value("rows", nlohmann::json::array()) : nlohmann::json::array();
+    for (auto& row : out) row.erase("seconds");  // timings differ between runs
+    return out;
+  };
+  const nlohmann::json kept = rows(json), whole = rows(good);
+  EXPECT_FALSE(kept.empty());
+  EXPECT_EQ(kept, whole);
 }

@@ -9,9 +9,13 @@
   ValueError, or silently truncated); a non-UTF-8 path is InputError naming the argument.
 - Dtypes as docs/python.md says: float16 and big-endian arrays are refused.
 - merge_validations('s0.json') (a string, not a list) is refused with a clear message.
+- Out of memory inside HDF5 itself (a 48 MiB compressed chunk inflated under a memory limit
+  the same trace stored plainly reads within) is "out of memory while reading it", exit 1,
+  in the CLI and in octocd.Trace, never "damaged".
 Every input is generated here, small.
 """
 import os
+import re
 import subprocess
 import sys
 
@@ -25,6 +29,7 @@ h5py = pytest.importorskip("h5py", reason="python3-h5py is not installed")
 
 SOURCE_DIR = os.environ.get("OCTOCD_SOURCE_DIR", os.path.join(os.path.dirname(__file__), "..", ".."))
 SCENE = os.path.join(SOURCE_DIR, "datasets", "scenes", "box-stack.json")
+BIN = os.environ.get("OCTOCD_BIN", os.path.join(SOURCE_DIR, "build", "octocd"))
 
 
 def external_trace(path, n=2, frames=3):
@@ -144,3 +149,80 @@ def test_merge_validations_of_a_non_list_is_refused_clearly(shards):
     msg = str(info.value)
     assert msg.startswith("merge_validations: shards: a "), msg
     assert "allowed: a list of the shards" in msg and "cannot read '/'" not in msg, msg
+
+
+def chunked_trace(path, chunk_mib):
+    """external_trace's 2 boxes, 3 frames, with /states/position compressed in one chunk of
+    `chunk_mib` MiB (0: stored plainly): reading any row inflates the whole chunk, a buffer
+    HDF5 allocates itself. The values are the same either way."""
+    n, frames = 2, 3
+    x = np.zeros((frames + 1, n, 3), np.float32)
+    x[:, :, 0] = np.arange(n) * 2.0
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = "octocd-trace"
+        f.attrs["version"] = 1
+        f.attrs["dt"] = 0.001
+        f.attrs["gravity"] = np.zeros(3)
+        f["bodies/local_aabb_min"] = np.full((n, 3), -0.5, np.float32)
+        f["bodies/local_aabb_max"] = np.full((n, 3), 0.5, np.float32)
+        f["bodies/inverse_mass"] = np.ones(n, np.float32)
+        if chunk_mib:
+            rows = (chunk_mib << 20) // (n * 3 * 4)
+            f.require_group("states").create_dataset("position", data=x, maxshape=(None, n, 3),
+                                                     chunks=(rows, n, 3), compression="gzip")
+        else:
+            f["states/position"] = x
+        f["states/velocity"] = np.zeros_like(x)
+    return str(path)
+
+
+def smallest_limit(run_under, start_mib=48, step_mib=16, last_mib=4096):
+    """The smallest address-space limit (MiB, in steps of step_mib) under which run_under(limit)
+    succeeds: the event that the process's own needs fit, found by trying, no timing."""
+    for mib in range(start_mib, last_mib + 1, step_mib):
+        if run_under(mib):
+            return mib
+    pytest.skip(f"nothing ran under {last_mib} MiB of address space")
+
+
+def test_out_of_memory_inside_hdf5_is_never_a_damaged_file(tmp_path):
+    # The hostile case: a trace whose /states/position is one 48 MiB compressed chunk (a few
+    # KB on disk), read under the smallest memory limit within which the same trace stored
+    # plainly is read. The only allocation that grows is HDF5's own buffer for the inflated
+    # chunk, so the failure comes from inside the library (H5E_RESOURCE / H5E_CANTALLOC on
+    # its error stack): the message must say out of memory, exit 1, never "damaged" or bad
+    # input (exit 2). Without the limit the same file reads (it is not damaged).
+    plain = chunked_trace(tmp_path / "plain.h5", 0)
+    big = chunked_trace(tmp_path / "big.h5", 48)
+    want = re.escape(big) + r": /states/position: out of memory while reading it \(.*the file is not known to be damaged\)"
+    if os.access(BIN, os.X_OK):
+        def cli(path, mib):
+            return subprocess.run(["prlimit", f"--as={mib << 20}", BIN, "validate", "--trace-in", path, "--check-only"],
+                                  capture_output=True, text=True, timeout=120)
+        assert cli(big, 1 << 20).returncode == 0, "the chunked trace must read without a limit"
+        mib = smallest_limit(lambda m: cli(plain, m).returncode == 0)
+        r = cli(big, mib)
+        assert r.returncode == 1 and re.search(want, r.stderr), (mib, r.returncode, r.stderr[-2000:])
+        assert "damaged:" not in r.stderr and "truncated" not in r.stderr, r.stderr[-2000:]
+    # octocd.Trace, in a child under the same kind of limit.
+    code = """
+import resource, sys
+mib = int(sys.argv[1])
+resource.setrlimit(resource.RLIMIT_AS, (mib << 20, mib << 20))
+import octocd
+try:
+    octocd.Trace(sys.argv[2]).state(1)
+    print("read")
+except Exception as e:
+    print(type(e).__name__ + ": " + str(e))
+"""
+
+    def py(path, mib):
+        r = subprocess.run([sys.executable, "-c", code, str(mib), path], capture_output=True, text=True,
+                           timeout=120, env=dict(os.environ))
+        return (r.stdout + r.stderr).strip().splitlines()[-1:] or [""]
+
+    assert py(big, 1 << 20) == ["read"]
+    mib = smallest_limit(lambda m: py(plain, m) == ["read"], start_mib=128)
+    line = py(big, mib)[0]
+    assert re.fullmatch("RuntimeError: " + want, line), (mib, line)

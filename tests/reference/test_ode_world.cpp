@@ -706,3 +706,72 @@ TEST(OdeEngineFault, DantzigFrictionExceedsTheFinalNormalForce) {
 TEST(OdeWorld, NotBuilt) { GTEST_SKIP() << "this octocd is built without ODE (pkg-config found no 'ode')"; }
 
 #endif
+
+// ---- issue 68: a manifold row's friction impulse lies in its contact plane --------------
+
+#if OCTOCD_HAVE_ODE
+#include "octocd/reference_world.hpp"
+
+namespace {
+
+/// A bare ReferenceCore: two dynamic bodies at rest (what row_scalar_jt reads).
+struct TwoBodies : ReferenceCore {
+  TwoBodies() {
+    w = {1.0f, 1.0f};
+    record.x_pre = {Vec3{0, 0, 0}, Vec3{0, 1, 0}};
+    record.v_pre = {Vec3{}, Vec3{}};
+    record.w_pre = {Vec3{}, Vec3{}};
+  }
+};
+
+/// Degrees between `j` and the plane orthogonal to `n`, as check_frame_record measures it.
+double degrees_out_of_plane(const Vec3& j, const Vec3& n) {
+  const double jl = std::sqrt(double(j.x) * j.x + double(j.y) * j.y + double(j.z) * j.z);
+  const double nl = std::sqrt(double(n.x) * n.x + double(n.y) * n.y + double(n.z) * n.z);
+  const double along = std::fabs(double(j.x) * n.x + double(j.y) * n.y + double(j.z) * n.z) / (jl * nl);
+  return std::asin(std::min(1.0, along)) * 180.0 / 3.14159265358979323846;
+}
+
+}  // namespace
+
+// The oracle is the engine's own split: ODE applies lambda_n along its contact normal n and
+// its friction along directions orthogonal to n (dPlaneSpace), so the row's jt3 must be
+// that friction vector, and jn = max(0, lambda_n |n|). Two hostile cases, with a friction
+// of 3e-9 kg m/s (a body all but sticking): (a) a normal unit only to a collider's
+// rounding (|n| = 1 + 2e-8) under a normal impulse of 1 kg m/s; (b) a normal impulse a
+// solver left at -1.5e-8 (its tolerance below lo = 0). Before: (a) put 4e-8 of the normal
+// impulse into jt3 and (b) all of it (jn clamped to 0, jt3 = J): 89 and 78.7 deg out of
+// the contact plane, rows octocd's reader refuses (kJt3MaxAngleDeg = 1).
+TEST(ManifoldRow, TheFrictionImpulseIsTheEnginesInTheContactPlane) {
+  const double s = 1.0 / std::sqrt(3.0);
+  const double unit_n[3] = {s, s, s};                                    // from body 2 into body 1
+  const double t[3] = {1.0 / std::sqrt(2.0), -1.0 / std::sqrt(2.0), 0};  // orthogonal to n
+  const double friction = 3e-9;
+  struct Case {
+    const char* what;
+    double n_scale, lambda;
+  };
+  for (const Case& k : {Case{"a normal 2e-8 longer than unit", 1.0 + 2e-8, 1.0},
+                        Case{"a normal impulse rounded to -1.5e-8", 1.0, -1.5e-8}}) {
+    SCOPED_TRACE(k.what);
+    const double n[3] = {k.n_scale * unit_n[0], k.n_scale * unit_n[1], k.n_scale * unit_n[2]};
+    double j[3];
+    for (int c = 0; c < 3; ++c) j[c] = k.lambda * n[c] + friction * t[c];
+    for (const bool swapped : {false, true}) {  // i1 < i2 (A is body 1) and i1 > i2 (A is body 2)
+      const TwoBodies core;
+      std::vector<Vec3> jt3;
+      const ContactRecord row = swapped ? core.manifold_row(1, 0, n, j, 0.001, Vec3{0, 0.5, 0}, jt3)
+                                        : core.manifold_row(0, 1, n, j, 0.001, Vec3{0, 0.5, 0}, jt3);
+      ASSERT_EQ(jt3.size(), 1u);
+      const double sa = swapped ? -1.0 : 1.0;  // the row is seen from A
+      for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR((&jt3[0].x)[c], sa * friction * t[c], 1e-6 * friction) << "component " << c;
+      EXPECT_LT(degrees_out_of_plane(jt3[0], row.normal), 1e-3);
+      EXPECT_NEAR(row.jn, std::max(0.0, k.lambda * k.n_scale), 1e-7 * std::fabs(k.lambda));
+      EXPECT_NEAR(std::sqrt(double(row.normal.x) * row.normal.x + double(row.normal.y) * row.normal.y +
+                            double(row.normal.z) * row.normal.z),
+                  1.0, 1e-7);
+    }
+  }
+}
+#endif

@@ -14,6 +14,7 @@
 ///     for (int f = 0; f < frames && !octocd::stop_signal(); ++f) step();
 ///     if (const int sig = octocd::stop_signal()) { flush(); report(sig); return octocd::stop_exit_code(sig); }
 
+#include <functional>
 #include <string>
 
 namespace octocd {
@@ -44,6 +45,17 @@ const char* stop_signal_name(int sig);
 /// "" clears it. Call from the thread that runs the command, at most once a frame or so
 /// (a ring of four buffers: a handler never reads one being rewritten).
 void set_stop_kept(const std::string& text);
+
+/// What the process keeps, read back when it ends at once while stopping (a second signal,
+/// the deadline, a StopWithin's grace) instead of a text set beforehand: `reader` runs on a
+/// thread of its own (never in the signal handler; the process's other threads go on) and
+/// returns the text set_stop_kept would give, read from the output itself (e.g. `run`'s
+/// trace: the committed rows in the file once no flush is in flight); the line on stderr
+/// then ends with "; <its text>" and the process ends with 128 + sig. When it returns ""
+/// or throws, or has not returned within `bound_s` (the process ends then all the same),
+/// set_stop_kept's text is used. An empty function clears it; `reader` must stay callable
+/// until cleared. Call from the thread that runs the command (not while a stop ends it).
+void set_stop_kept_reader(std::function<std::string()> reader, double bound_s = 0.2);
 
 /// Installs handlers for SIGINT and SIGTERM that record the signal (see stop_signal) and
 /// clears any signal recorded before; the destructor restores the previous handlers.

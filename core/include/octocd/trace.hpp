@@ -171,6 +171,13 @@ class TraceWriter {
   /// Rows of /frames on disk after the last successful flush (one on the writer thread
   /// counts once it has ended: wait_for_flush).
   std::int64_t flushed_frames() const;
+  /// For a process that ends at once while stopping (stop.hpp, set_stop_kept_reader; from
+  /// any thread): waits until no write or flush is in flight, keeps every later one from
+  /// starting (the writer is unusable after it: call it only on the way out), and returns
+  /// the root attribute committed_frames read back from the file: the /frames rows every
+  /// reader takes, which the file then holds. -1 when the file was closed or abandoned,
+  /// the attribute cannot be read, or HDF5 is not thread-safe.
+  std::int64_t read_back_frames_and_hold();
 
  private:
   void create_layout(const TraceMetadata& meta, const TraceBodies& bodies);

@@ -79,10 +79,12 @@ struct ReferenceCore {
   std::uint64_t posed_overlapping_pairs();
 
   /// One manifold row from an engine contact between bodies i1 and i2 (i1 != i2):
-  /// `normal21` the unit normal from body 2 into body 1, `impulse1` the impulse on body 1
-  /// (N s, world), `depth` (m; negative taken as 0), `point` (world). The row's pair is
-  /// (min, max) with the normal and impulse seen from A (flipped when i1 > i2); jn =
-  /// max(0, J_A . n), jt3 = J_A - jn n (appended to `jt3`), jt = row_scalar_jt.
+  /// `normal21` the normal from body 2 into body 1 (unit to the engine's rounding; used
+  /// normalized), `impulse1` the impulse on body 1 (N s, world), `depth` (m; negative taken
+  /// as 0), `point` (world). The row's pair is (min, max) with the normal and impulse seen
+  /// from A (flipped when i1 > i2); with n unit: jn = max(0, J_A . n), jt3 = J_A - (J_A . n) n
+  /// (appended to `jt3`: in the contact plane to double rounding, whatever the sign of
+  /// J_A . n), jt = row_scalar_jt.
   ContactRecord manifold_row(std::uint32_t i1, std::uint32_t i2, const double normal21[3], const double impulse1[3],
                              double depth, Vec3 point, std::vector<Vec3>& jt3) const;
 };
