@@ -53,7 +53,7 @@ foreach(_rel validation/physics/physics_impl.hpp validation/physics/physics_tabl
 endforeach()
 if(NOT _hits STREQUAL "")
   message(FATAL_ERROR "a row named in the physics tier's shared files; its tallies are its RowSums "
-    "(Impl::tally(RowId, cause_index(...))), its own state Impl::row_state<T>, its measure and table entry "
+    "(Impl::tally(RowId, "cause")), its own state Impl::row_state<T>, its measure and table entry "
     "Impl::measure<RowId::ID> and Impl::table<RowId::ID> in its own file under validation/physics/:\n${_hits}")
 endif()
 

@@ -11,9 +11,6 @@ namespace octocd {
 
 namespace {
 
-// The causes of the rows of this file (validation_rows.def), by their names.
-const std::size_t kPenetration = physics_detail::cause_index(RowId::Penetration, "penetration");
-
 /// Penetration's sums beyond its tally (Impl::row_state): the largest exact depth (m) and
 /// where; the non-convex pairs' upper bounds (a figure): the largest and where, how many
 /// above the bound; penetrating pair-frames, and of them those with an upper bound only.
@@ -28,7 +25,7 @@ struct PenetrationSums {
 using namespace physics_detail;
 
 void PhysicsValidators::Impl::judge_penetration(CheckedFrame& f) {
-  Tally& pen = tally(RowId::Penetration, kPenetration);
+  Tally& pen = tally(RowId::Penetration, "penetration");
   PenetrationSums& ps = row_state<PenetrationSums>(RowId::Penetration);
   const std::int64_t frame = f.rec->frame;
   // 4. Penetration: the largest true penetration after the settling window.
@@ -89,7 +86,7 @@ void PhysicsValidators::Impl::measure<RowId::Penetration>(PhysicsFrame& f) {
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::Penetration>() const {
   const Impl& s = *this;
-  const Tally& pen = s.tally(RowId::Penetration, kPenetration);
+  const Tally& pen = s.tally(RowId::Penetration, "penetration");
   const PenetrationSums& ps = s.row_state<PenetrationSums>(RowId::Penetration);
   ValidationResult r =
       start_row(RowId::Penetration, "largest true penetration (m)", "penetration_slops,penetration_settle_frames");

@@ -31,6 +31,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -332,9 +333,23 @@ struct PhysicsValidators::Impl {
   /// Row `id`'s sums.
   physics_detail::RowSums& sums(RowId id) { return row_sums[std::size_t(id)]; }
   const physics_detail::RowSums& sums(RowId id) const { return row_sums[std::size_t(id)]; }
-  /// The tally of row `id`'s cause `k` (an index from physics_detail::cause_index).
-  Tally& tally(RowId id, std::size_t k) { return row_sums[std::size_t(id)].causes[k]; }
-  const Tally& tally(RowId id, std::size_t k) const { return row_sums[std::size_t(id)].causes[k]; }
+  /// The tally of row `id`'s cause named `cause` (validation_rows.def); throws
+  /// std::logic_error naming both when the row has no such cause (physics_detail::cause_index).
+  Tally& tally(RowId id, const char* cause) { return sums(id).causes[physics_detail::cause_index(id, cause)]; }
+  const Tally& tally(RowId id, const char* cause) const {
+    return sums(id).causes[physics_detail::cause_index(id, cause)];
+  }
+  /// The tallies of row `id`'s causes named `causes` (each a const char*), as a tuple of
+  /// references in the order named: `auto [a, b] = tallies(RowId::ID, "a", "b");`. Throws as
+  /// tally() does.
+  template <class... Names>
+  auto tallies(RowId id, Names... causes) {
+    return std::tie(tally(id, causes)...);
+  }
+  template <class... Names>
+  auto tallies(RowId id, Names... causes) const {
+    return std::tie(tally(id, causes)...);
+  }
   /// A row's own state beyond its tallies: a T kept in its RowSums, made on first use
   /// (the row's file defines T; a row that never wrote one reads a default T).
   template <class T>
@@ -373,6 +388,9 @@ struct PhysicsValidators::Impl {
   }
   /// A physics result of row `id` with its tier, name, figure and tolerances.
   static ValidationResult start_row(RowId id, const char* figure, const char* tolerances);
+  /// start_row for a row whose figure is its failures: measured is the failures of all its
+  /// tallies summed (bound 0), pass when there are none.
+  ValidationResult failures_row(RowId id, const char* figure, const char* tolerances) const;
   /// fill_causes with row `id`'s own tallies.
   void fill_causes(ValidationResult& r, RowId id) const;
 

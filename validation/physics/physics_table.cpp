@@ -67,6 +67,15 @@ ValidationResult PhysicsValidators::Impl::start_row(RowId id, const char* figure
   return r;
 }
 
+ValidationResult PhysicsValidators::Impl::failures_row(RowId id, const char* figure, const char* tolerances) const {
+  ValidationResult r = start_row(id, figure, tolerances);
+  std::uint64_t failures = 0;
+  for (const Tally& t : sums(id).causes) failures += t.failures;
+  r.measured = double(failures);
+  r.pass = r.measured == 0;
+  return r;
+}
+
 void PhysicsValidators::Impl::fill_causes(ValidationResult& r, RowId id) const {
   std::vector<const Tally*> tallies;
   for (const Tally& t : sums(id).causes) tallies.push_back(&t);
