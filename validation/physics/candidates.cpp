@@ -152,7 +152,10 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
 }
 
 // ---- Row 1: broadphase completeness ------------------------------------------------
-void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
+// The first row to judge a checked frame: its clock holds the frame's candidates and
+// reference geometry (checked(), shared with rows 2-4).
+template <>
+void PhysicsValidators::Impl::judge<RowId::BroadphaseCompleteness>(CheckedFrame& f) {
   auto [broad, broad_exact] = tallies(RowId::BroadphaseCompleteness, "missing-pair", "not-flat");
   const FrameRecord& rec = *f.rec;
   const std::int64_t frame = rec.frame;
@@ -228,13 +231,7 @@ void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
   }
 }
 
-// ---- broadphase-completeness: its measure of a frame and its table entry -------------------------
-
-template <>
-void PhysicsValidators::Impl::measure<RowId::BroadphaseCompleteness>(PhysicsFrame& f) {
-  // On a checked frame: its candidates and reference geometry (shared with rows 2-4, timed here), then the row.
-  if (CheckedFrame* c = checked(f)) judge_broadphase(*c);
-}
+// ---- broadphase-completeness: its table entry -------------------------
 
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::BroadphaseCompleteness>() const {

@@ -83,7 +83,8 @@ double PhysicsValidators::Impl::speculative_reach(const FrameRecord& rec, Pair p
 }
 
 // ---- Row 2: contact completeness -----------------------------------------------------
-void PhysicsValidators::Impl::judge_completeness(CheckedFrame& f) {
+template <>
+void PhysicsValidators::Impl::judge<RowId::ContactCompleteness>(CheckedFrame& f) {
   auto [complete, false_contact] = tallies(RowId::ContactCompleteness, "missing-contact", "false-contact");
   const std::int64_t frame = f.rec->frame;
   const double slack = tol.geometry_slack_m;
@@ -193,7 +194,8 @@ void PhysicsValidators::Impl::pair_figures(CheckedFrame& f, std::size_t i, const
   }
 }
 
-void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
+template <>
+void PhysicsValidators::Impl::judge<RowId::ContactGeometry>(CheckedFrame& f) {
   auto [normal_angle, depth, points] = tallies(RowId::ContactGeometry, "normal-angle", "depth", "point-off-shape");
   const FrameRecord& rec = *f.rec;
   const std::vector<Pose>& det = *f.det;
@@ -411,13 +413,7 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
   }
 }
 
-// ---- contact-completeness: its measure of a frame and its table entry -------------------------
-
-template <>
-void PhysicsValidators::Impl::measure<RowId::ContactCompleteness>(PhysicsFrame& f) {
-  // On a checked frame.
-  if (CheckedFrame* c = checked(f)) judge_completeness(*c);
-}
+// ---- contact-completeness: its table entry -------------------------
 
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::ContactCompleteness>() const {
@@ -456,13 +452,7 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ContactCompleteness>() co
   return r;
 }
 
-// ---- contact-geometry: its measure of a frame and its table entry -------------------------
-
-template <>
-void PhysicsValidators::Impl::measure<RowId::ContactGeometry>(PhysicsFrame& f) {
-  // On a checked frame.
-  if (CheckedFrame* c = checked(f)) judge_contact_geometry(*c);
-}
+// ---- contact-geometry: its table entry -------------------------
 
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::ContactGeometry>() const {

@@ -24,7 +24,8 @@ struct PenetrationSums {
 
 using namespace physics_detail;
 
-void PhysicsValidators::Impl::judge_penetration(CheckedFrame& f) {
+template <>
+void PhysicsValidators::Impl::judge<RowId::Penetration>(CheckedFrame& f) {
   Tally& pen = tally(RowId::Penetration, "penetration");
   PenetrationSums& ps = row_state<PenetrationSums>(RowId::Penetration);
   const std::int64_t frame = f.rec->frame;
@@ -75,13 +76,7 @@ void PhysicsValidators::Impl::judge_penetration(CheckedFrame& f) {
   }
 }
 
-// ---- penetration: its measure of a frame and its table entry -------------------------
-
-template <>
-void PhysicsValidators::Impl::measure<RowId::Penetration>(PhysicsFrame& f) {
-  // On a checked frame.
-  if (CheckedFrame* c = checked(f)) judge_penetration(*c);
-}
+// ---- penetration: its table entry -------------------------
 
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::Penetration>() const {

@@ -365,10 +365,15 @@ struct PhysicsValidators::Impl {
     return p ? *static_cast<const T*>(p.get()) : none;
   }
   /// Row `id`'s measure of one frame (the row's file defines it for every physics row of
-  /// validation_rows.def; observe() calls them in the table's order, each on its row's
-  /// clock).
+  /// validation_rows.def that measures Every frame; observe() calls them in the table's
+  /// order, each on its row's clock).
   template <RowId id>
   void measure(physics_detail::PhysicsFrame& f);
+  /// Row `id`'s judgement of one checked frame with poses, its candidates and reference
+  /// geometry (checked()): the measure of a row of validation_rows.def that measures
+  /// Checked frames (the row's file defines it; measure_rows calls it on such frames only).
+  template <RowId id>
+  void judge(physics_detail::CheckedFrame& f);
   /// Row `id`'s result from the sums (the row's file; results() calls them in order).
   template <RowId id>
   ValidationResult table() const;
@@ -528,14 +533,6 @@ struct PhysicsValidators::Impl {
   /// from its truth `t` and SAT's accepted axes (contact_rows.cpp). Thread-safe across groups.
   void pair_figures(physics_detail::CheckedFrame& f, std::size_t i, const physics_detail::ContactTruth& t,
                     const std::vector<SatAxis>& accepted) const;
-  /// Row 1: broadphase completeness (candidates.cpp).
-  void judge_broadphase(physics_detail::CheckedFrame& f);
-  /// Row 2: contact completeness (contact_rows.cpp).
-  void judge_completeness(physics_detail::CheckedFrame& f);
-  /// Row 3: contact geometry (contact_rows.cpp).
-  void judge_contact_geometry(physics_detail::CheckedFrame& f);
-  /// Row 4: penetration (penetration.cpp).
-  void judge_penetration(physics_detail::CheckedFrame& f);
 
   // ---- Rows 5-8 (every frame) -------------------------------------------------------
   /// Row 5: the cone on every frame, dissipation on frames with states (friction.cpp).
@@ -708,18 +705,25 @@ struct PhysicsValidators::Impl {
   physics_detail::Tally balance_bias(const BalanceFit& fit) const;
 };
 
-// Every physics row of validation_rows.def has a measure and a table entry, defined in the
-// row's own file (Impl::measure, Impl::table).
-#define OCTOCD_PHYSICS_ROW_Physics(id)                                                           \
+// Every physics row of validation_rows.def has a measure (Impl::measure of every frame, or
+// Impl::judge of the checked frames, as its FRAMES says) and a table entry (Impl::table),
+// defined in the row's own file.
+#define OCTOCD_PHYSICS_ROW_Physics_Every(id)                                                     \
   template <>                                                                                    \
   void PhysicsValidators::Impl::measure<RowId::id>(physics_detail::PhysicsFrame & f);            \
   template <>                                                                                    \
   ValidationResult PhysicsValidators::Impl::table<RowId::id>() const;
-#define OCTOCD_PHYSICS_ROW_Model(id)
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs) OCTOCD_PHYSICS_ROW_##tier(id)
+#define OCTOCD_PHYSICS_ROW_Physics_Checked(id)                                                   \
+  template <>                                                                                    \
+  void PhysicsValidators::Impl::judge<RowId::id>(physics_detail::CheckedFrame & f);              \
+  template <>                                                                                    \
+  ValidationResult PhysicsValidators::Impl::table<RowId::id>() const;
+#define OCTOCD_PHYSICS_ROW_Model_Every(id)
+#define OCTOCD_ROW(id, name, tier, merge, causes, needs, frames) OCTOCD_PHYSICS_ROW_##tier##_##frames(id)
 #include "octocd/validation_rows.def"
 #undef OCTOCD_ROW
-#undef OCTOCD_PHYSICS_ROW_Model
-#undef OCTOCD_PHYSICS_ROW_Physics
+#undef OCTOCD_PHYSICS_ROW_Model_Every
+#undef OCTOCD_PHYSICS_ROW_Physics_Checked
+#undef OCTOCD_PHYSICS_ROW_Physics_Every
 
 }  // namespace octocd

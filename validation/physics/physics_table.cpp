@@ -82,19 +82,27 @@ void PhysicsValidators::Impl::fill_causes(ValidationResult& r, RowId id) const {
   physics_detail::fill_causes(r, row_info(id), tallies);
 }
 
-// Every physics row of validation_rows.def, in its order: its measure on its row's clock.
+// Every physics row of validation_rows.def, in its order, on its row's clock: its measure
+// of every frame, or its judgement of a checked frame's candidates and reference geometry
+// (computed by the first row that asks, on its clock).
 void PhysicsValidators::Impl::measure_rows(PhysicsFrame& f) {
-#define OCTOCD_PHYSICS_ROW_Physics(id)       \
+#define OCTOCD_PHYSICS_ROW_Physics_Every(id) \
   {                                          \
     RowClock clock(sums(RowId::id).seconds); \
     measure<RowId::id>(f);                   \
   }
-#define OCTOCD_PHYSICS_ROW_Model(id)
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs) OCTOCD_PHYSICS_ROW_##tier(id)
+#define OCTOCD_PHYSICS_ROW_Physics_Checked(id)              \
+  {                                                         \
+    RowClock clock(sums(RowId::id).seconds);                \
+    if (CheckedFrame* c = checked(f)) judge<RowId::id>(*c); \
+  }
+#define OCTOCD_PHYSICS_ROW_Model_Every(id)
+#define OCTOCD_ROW(id, name, tier, merge, causes, needs, frames) OCTOCD_PHYSICS_ROW_##tier##_##frames(id)
 #include "octocd/validation_rows.def"
 #undef OCTOCD_ROW
-#undef OCTOCD_PHYSICS_ROW_Model
-#undef OCTOCD_PHYSICS_ROW_Physics
+#undef OCTOCD_PHYSICS_ROW_Model_Every
+#undef OCTOCD_PHYSICS_ROW_Physics_Checked
+#undef OCTOCD_PHYSICS_ROW_Physics_Every
 }
 
 // Every physics row of validation_rows.def, in its order: its table entry and its time.
@@ -105,7 +113,7 @@ std::vector<ValidationResult> PhysicsValidators::results() const {
   out.push_back(s.table<RowId::id>()); \
   out.back().seconds = s.sums(RowId::id).seconds;
 #define OCTOCD_PHYSICS_ROW_Model(id)
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs) OCTOCD_PHYSICS_ROW_##tier(id)
+#define OCTOCD_ROW(id, name, tier, merge, causes, needs, frames) OCTOCD_PHYSICS_ROW_##tier(id)
 #include "octocd/validation_rows.def"
 #undef OCTOCD_ROW
 #undef OCTOCD_PHYSICS_ROW_Model
