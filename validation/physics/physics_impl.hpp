@@ -17,9 +17,11 @@
 ///    the soft-contact episodes);
 ///  - balance.cpp: rows 7 (momentum balance per body) and 8 (free flight);
 ///  - physics_table.cpp: the generic sums (RowSums), observe()'s calls of every row's
-///    measure and results()' of every row's table entry, in validation_rows.def's order.
-/// Each row's measure (Impl::measure<RowId>) and table entry (Impl::table<RowId>: its
-/// ValidationResult from the sums) sit in its file; its tallies are its RowSums.
+///    measure and results()' of every row's table entry, in validation_rows.def's order
+///    (physics_rows.inc: the physics rows of the table by the frames they measure).
+/// Each row's measure (Impl::measure<RowId> of every frame, or Impl::judge<RowId> of the
+/// checked frames) and table entry (Impl::table<RowId>: its ValidationResult from the sums)
+/// sit in its file; its tallies are its RowSums.
 
 #include <algorithm>
 #include <cstdint>
@@ -708,22 +710,16 @@ struct PhysicsValidators::Impl {
 // Every physics row of validation_rows.def has a measure (Impl::measure of every frame, or
 // Impl::judge of the checked frames, as its FRAMES says) and a table entry (Impl::table),
 // defined in the row's own file.
-#define OCTOCD_PHYSICS_ROW_Physics_Every(id)                                                     \
-  template <>                                                                                    \
-  void PhysicsValidators::Impl::measure<RowId::id>(physics_detail::PhysicsFrame & f);            \
-  template <>                                                                                    \
+#define OCTOCD_PHYSICS_EVERY(id)                                                      \
+  template <>                                                                         \
+  void PhysicsValidators::Impl::measure<RowId::id>(physics_detail::PhysicsFrame & f); \
+  template <>                                                                         \
   ValidationResult PhysicsValidators::Impl::table<RowId::id>() const;
-#define OCTOCD_PHYSICS_ROW_Physics_Checked(id)                                                   \
-  template <>                                                                                    \
-  void PhysicsValidators::Impl::judge<RowId::id>(physics_detail::CheckedFrame & f);              \
-  template <>                                                                                    \
+#define OCTOCD_PHYSICS_CHECKED(id)                                                    \
+  template <>                                                                         \
+  void PhysicsValidators::Impl::judge<RowId::id>(physics_detail::CheckedFrame & f);   \
+  template <>                                                                         \
   ValidationResult PhysicsValidators::Impl::table<RowId::id>() const;
-#define OCTOCD_PHYSICS_ROW_Model_Every(id)
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs, frames) OCTOCD_PHYSICS_ROW_##tier##_##frames(id)
-#include "octocd/validation_rows.def"
-#undef OCTOCD_ROW
-#undef OCTOCD_PHYSICS_ROW_Model_Every
-#undef OCTOCD_PHYSICS_ROW_Physics_Checked
-#undef OCTOCD_PHYSICS_ROW_Physics_Every
+#include "physics_rows.inc"
 
 }  // namespace octocd

@@ -86,38 +86,28 @@ void PhysicsValidators::Impl::fill_causes(ValidationResult& r, RowId id) const {
 // of every frame, or its judgement of a checked frame's candidates and reference geometry
 // (computed by the first row that asks, on its clock).
 void PhysicsValidators::Impl::measure_rows(PhysicsFrame& f) {
-#define OCTOCD_PHYSICS_ROW_Physics_Every(id) \
+#define OCTOCD_PHYSICS_EVERY(id)             \
   {                                          \
     RowClock clock(sums(RowId::id).seconds); \
     measure<RowId::id>(f);                   \
   }
-#define OCTOCD_PHYSICS_ROW_Physics_Checked(id)              \
+#define OCTOCD_PHYSICS_CHECKED(id)                          \
   {                                                         \
     RowClock clock(sums(RowId::id).seconds);                \
     if (CheckedFrame* c = checked(f)) judge<RowId::id>(*c); \
   }
-#define OCTOCD_PHYSICS_ROW_Model_Every(id)
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs, frames) OCTOCD_PHYSICS_ROW_##tier##_##frames(id)
-#include "octocd/validation_rows.def"
-#undef OCTOCD_ROW
-#undef OCTOCD_PHYSICS_ROW_Model_Every
-#undef OCTOCD_PHYSICS_ROW_Physics_Checked
-#undef OCTOCD_PHYSICS_ROW_Physics_Every
+#include "physics_rows.inc"
 }
 
 // Every physics row of validation_rows.def, in its order: its table entry and its time.
 std::vector<ValidationResult> PhysicsValidators::results() const {
   const Impl& s = *impl_;
   std::vector<ValidationResult> out;
-#define OCTOCD_PHYSICS_ROW_Physics(id) \
+#define OCTOCD_PHYSICS_EVERY(id)       \
   out.push_back(s.table<RowId::id>()); \
   out.back().seconds = s.sums(RowId::id).seconds;
-#define OCTOCD_PHYSICS_ROW_Model(id)
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs, frames) OCTOCD_PHYSICS_ROW_##tier(id)
-#include "octocd/validation_rows.def"
-#undef OCTOCD_ROW
-#undef OCTOCD_PHYSICS_ROW_Model
-#undef OCTOCD_PHYSICS_ROW_Physics
+#define OCTOCD_PHYSICS_CHECKED(id) OCTOCD_PHYSICS_EVERY(id)
+#include "physics_rows.inc"
   return out;
 }
 
