@@ -1,6 +1,7 @@
 # A physics row is a unit (docs/architecture.md "Adding a validator row"): its line of
 # validation/include/octocd/validation_rows.def, and its measure and table entry
-# (PhysicsValidators::Impl::measure<RowId::ID>, table<RowId::ID>) in its own file under
+# (PhysicsValidators::Impl::measure<RowId::ID>, or judge<RowId::ID> for a row that judges
+# checked frames, and table<RowId::ID>) in its own file under
 # validation/physics/. The physics tier's shared files, physics_impl.hpp (the sums, one Tally
 # per cause of every row, and each row's clock) and physics_table.cpp (the calls of every
 # row's measure and table entry), are made from the table: fails when either names a row
@@ -53,14 +54,16 @@ foreach(_rel validation/physics/physics_impl.hpp validation/physics/physics_tabl
 endforeach()
 if(NOT _hits STREQUAL "")
   message(FATAL_ERROR "a row named in the physics tier's shared files; its tallies are its RowSums "
-    "(Impl::tally(RowId, cause_index(...))), its own state Impl::row_state<T>, its measure and table entry "
-    "Impl::measure<RowId::ID> and Impl::table<RowId::ID> in its own file under validation/physics/:\n${_hits}")
+    "(Impl::tally(RowId, \"cause\")), its own state Impl::row_state<T>, its measure and table entry "
+    "Impl::measure<RowId::ID> (or Impl::judge<RowId::ID>) and Impl::table<RowId::ID> in its own file under "
+    "validation/physics/:\n${_hits}")
 endif()
 
 file(GLOB _files ${SRC}/validation/physics/*.cpp)
 set(_missing "")
 foreach(_id IN LISTS _physics)
-  foreach(_what measure table)
+  # Its measure: Impl::measure<RowId::ID> (FRAMES Every) or Impl::judge<RowId::ID> (FRAMES Checked).
+  foreach(_what "(measure|judge)" table)
     set(_found 0)
     foreach(_f IN LISTS _files)
       file(STRINGS ${_f} _def REGEX "PhysicsValidators::Impl::${_what}<RowId::${_id}>\\(")

@@ -28,15 +28,6 @@ std::string spin_note(PhysicsBodies::Gyroscopic g, std::uint64_t kept, std::uint
                      kept, invariant);
 }
 
-// The causes of the rows of this file (validation_rows.def), by their names.
-const std::size_t kLinear = physics_detail::cause_index(RowId::MomentumBalance, "linear"),
-                  kAngular = physics_detail::cause_index(RowId::MomentumBalance, "angular");
-const std::size_t kVelocity = physics_detail::cause_index(RowId::FreeFlight, "velocity"),
-                  kPosition = physics_detail::cause_index(RowId::FreeFlight, "position"),
-                  kAngularVelocity = physics_detail::cause_index(RowId::FreeFlight, "angular-velocity"),
-                  kOrientation = physics_detail::cause_index(RowId::FreeFlight, "orientation"),
-                  kSleeping = physics_detail::cause_index(RowId::FreeFlight, "sleeping");
-
 }  // namespace
 
 using namespace dmath;
@@ -120,13 +111,9 @@ double spin_ratio(PhysicsBodies::Gyroscopic g, double r_plain, double r_inv, std
 }  // namespace
 
 void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<Pose>& det) {
-  Tally& balance_lin = tally(RowId::MomentumBalance, kLinear);
-  Tally& balance_ang = tally(RowId::MomentumBalance, kAngular);
-  Tally& free_vel = tally(RowId::FreeFlight, kVelocity);
-  Tally& free_pos = tally(RowId::FreeFlight, kPosition);
-  Tally& free_w = tally(RowId::FreeFlight, kAngularVelocity);
-  Tally& free_q = tally(RowId::FreeFlight, kOrientation);
-  Tally& free_sleep = tally(RowId::FreeFlight, kSleeping);
+  auto [balance_lin, balance_ang] = tallies(RowId::MomentumBalance, "linear", "angular");
+  auto [free_vel, free_pos, free_w, free_q, free_sleep] =
+      tallies(RowId::FreeFlight, "velocity", "position", "angular-velocity", "orientation", "sleeping");
   const Model& m = *model;
   const std::size_t n = m.bodies.size();
   const std::int64_t frame = rec.frame;
@@ -608,7 +595,7 @@ PhysicsValidators::Impl::BalanceFit PhysicsValidators::Impl::balance_fit() const
 }
 
 Tally PhysicsValidators::Impl::fitted_balance(const BalanceFit& fit) const {
-  const Tally& balance_lin = tally(RowId::MomentumBalance, kLinear);
+  const Tally& balance_lin = tally(RowId::MomentumBalance, "linear");
   Tally t = balance_lin;
   for (const DeferredBalance& d : deferred) {
     const BalanceDisc* discs = deferred_discs.data() + d.disc_first;
@@ -659,8 +646,7 @@ void PhysicsValidators::Impl::measure<RowId::MomentumBalance>(PhysicsFrame& f) {
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::MomentumBalance>() const {
   const Impl& s = *this;
-  const Tally& balance_lin = s.tally(RowId::MomentumBalance, kLinear);
-  const Tally& balance_ang = s.tally(RowId::MomentumBalance, kAngular);
+  auto [balance_lin, balance_ang] = s.tallies(RowId::MomentumBalance, "linear", "angular");
   const RowInfo& info = row_info(RowId::MomentumBalance);
   ValidationResult r = start_row(RowId::MomentumBalance, "bodies whose velocity change is not their rows' impulses",
                                  "balance_ulps,friction_direction_speed");
@@ -751,15 +737,10 @@ void PhysicsValidators::Impl::measure<RowId::FreeFlight>(PhysicsFrame&) {
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::FreeFlight>() const {
   const Impl& s = *this;
-  const Tally& free_vel = s.tally(RowId::FreeFlight, kVelocity);
-  const Tally& free_pos = s.tally(RowId::FreeFlight, kPosition);
-  const Tally& free_w = s.tally(RowId::FreeFlight, kAngularVelocity);
-  const Tally& free_q = s.tally(RowId::FreeFlight, kOrientation);
-  const Tally& free_sleep = s.tally(RowId::FreeFlight, kSleeping);
-  ValidationResult r = start_row(RowId::FreeFlight, "bodies without contacts not following gravity and their spin",
-                                 "free_flight_angle_rad");
-  r.measured = double(free_vel.failures + free_pos.failures + free_w.failures + free_q.failures + free_sleep.failures);
-  r.pass = r.measured == 0;
+  auto [free_vel, free_pos, free_w, free_q, free_sleep] =
+      s.tallies(RowId::FreeFlight, "velocity", "position", "angular-velocity", "orientation", "sleeping");
+  ValidationResult r = failures_row(RowId::FreeFlight, "bodies without contacts not following gravity and their spin",
+                                    "free_flight_angle_rad");
   r.applicable = free_vel.checks + free_sleep.checks > 0;
   if (!r.applicable) {
     r.detail = s.state_frames ? "no dynamic body without contacts in a step with states"

@@ -14,14 +14,6 @@
 
 namespace octocd {
 
-namespace {
-
-// The causes of the rows of this file (validation_rows.def), by their names.
-const std::size_t kMissingPair = physics_detail::cause_index(RowId::BroadphaseCompleteness, "missing-pair"),
-                  kNotFlat = physics_detail::cause_index(RowId::BroadphaseCompleteness, "not-flat");
-
-}  // namespace
-
 using namespace dmath;
 using namespace physics_detail;
 
@@ -160,9 +152,11 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
 }
 
 // ---- Row 1: broadphase completeness ------------------------------------------------
-void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
-  Tally& broad = tally(RowId::BroadphaseCompleteness, kMissingPair);
-  Tally& broad_exact = tally(RowId::BroadphaseCompleteness, kNotFlat);
+// The first row to judge a checked frame: its clock holds the frame's candidates and
+// reference geometry (checked(), shared with rows 2-4).
+template <>
+void PhysicsValidators::Impl::judge<RowId::BroadphaseCompleteness>(CheckedFrame& f) {
+  auto [broad, broad_exact] = tallies(RowId::BroadphaseCompleteness, "missing-pair", "not-flat");
   const FrameRecord& rec = *f.rec;
   const std::int64_t frame = rec.frame;
   ExactPairsSettings pair_threads;
@@ -237,24 +231,14 @@ void PhysicsValidators::Impl::judge_broadphase(CheckedFrame& f) {
   }
 }
 
-// ---- broadphase-completeness: its measure of a frame and its table entry -------------------------
-
-template <>
-void PhysicsValidators::Impl::measure<RowId::BroadphaseCompleteness>(PhysicsFrame& f) {
-  // On a checked frame: its candidates and reference geometry (shared with rows 2-4, timed here), then the row.
-  if (CheckedFrame* c = checked(f)) judge_broadphase(*c);
-}
+// ---- broadphase-completeness: its table entry -------------------------
 
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::BroadphaseCompleteness>() const {
   const Impl& s = *this;
-  const Tally& broad = s.tally(RowId::BroadphaseCompleteness, kMissingPair);
-  const Tally& broad_exact = s.tally(RowId::BroadphaseCompleteness, kNotFlat);
-  ValidationResult r = start_row(RowId::BroadphaseCompleteness, "required pairs missing from the engine's candidates",
-                                 "broadphase_margin_m,geometry_slack_m");
-  r.measured = double(broad.failures + broad_exact.failures);
-  r.bound = 0;
-  r.pass = r.measured == 0;
+  auto [broad, broad_exact] = s.tallies(RowId::BroadphaseCompleteness, "missing-pair", "not-flat");
+  ValidationResult r = failures_row(RowId::BroadphaseCompleteness, "required pairs missing from the engine's candidates",
+                                    "broadphase_margin_m,geometry_slack_m");
   if (s.broad_frames > 0 && broad.checks + broad_exact.checks == 0) {
     r.applicable = false;
     r.detail = fmt::format(

@@ -13,23 +13,12 @@
 
 namespace octocd {
 
-namespace {
-
-// The causes of the rows of this file (validation_rows.def), by their names.
-const std::size_t kMomentum = physics_detail::cause_index(RowId::Conservation, "momentum"),
-                  kAngularMomentum = physics_detail::cause_index(RowId::Conservation, "angular-momentum"),
-                  kEnergy = physics_detail::cause_index(RowId::Conservation, "energy");
-
-}  // namespace
-
 using namespace dmath;
 using namespace physics_detail;
 
 // ---- Row 6: conservation, every frame with states -----------------------------------
 void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
-  Tally& momentum = tally(RowId::Conservation, kMomentum);
-  Tally& angular = tally(RowId::Conservation, kAngularMomentum);
-  Tally& energy = tally(RowId::Conservation, kEnergy);
+  auto [momentum, angular, energy] = tallies(RowId::Conservation, "momentum", "angular-momentum", "energy");
   const Model& m = *model;
   const std::size_t n = m.bodies.size();
   const std::int64_t frame = rec.frame;
@@ -306,7 +295,7 @@ double PhysicsValidators::Impl::mechanical_energy(const FrameRecord& rec, std::u
 }
 
 void PhysicsValidators::Impl::soft_episodes(const FrameRecord& rec, const std::vector<Component>& components) {
-  Tally& energy = tally(RowId::Conservation, kEnergy);
+  Tally& energy = tally(RowId::Conservation, "energy");
   const std::int64_t frame = rec.frame;
   const double g2dt2 = dot3(d3(model->scene.gravity), d3(model->scene.gravity)) * model->scene.dt * model->scene.dt;
   auto kinetic = [&](std::uint32_t i) {
@@ -462,13 +451,9 @@ void PhysicsValidators::Impl::measure<RowId::Conservation>(PhysicsFrame& f) {
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::Conservation>() const {
   const Impl& s = *this;
-  const Tally& momentum = s.tally(RowId::Conservation, kMomentum);
-  const Tally& angular = s.tally(RowId::Conservation, kAngularMomentum);
-  const Tally& energy = s.tally(RowId::Conservation, kEnergy);
-  ValidationResult r = start_row(RowId::Conservation, "isolated groups breaking momentum, angular momentum or energy",
-                                 "momentum_rel,angular_momentum_rel,energy_rel");
-  r.measured = double(momentum.failures + angular.failures + energy.failures);
-  r.pass = r.measured == 0;
+  auto [momentum, angular, energy] = s.tallies(RowId::Conservation, "momentum", "angular-momentum", "energy");
+  ValidationResult r = failures_row(RowId::Conservation, "isolated groups breaking momentum, angular momentum or energy",
+                                    "momentum_rel,angular_momentum_rel,energy_rel");
   r.applicable = s.groups > 0;
   if (momentum.failures) {
     r.detail = momentum.first;

@@ -15,17 +15,6 @@
 namespace octocd {
 
 namespace {
-
-// The causes of the rows of this file (validation_rows.def), by their names.
-const std::size_t kMissingContact = physics_detail::cause_index(RowId::ContactCompleteness, "missing-contact"),
-                  kFalseContact = physics_detail::cause_index(RowId::ContactCompleteness, "false-contact");
-const std::size_t kNormalAngle = physics_detail::cause_index(RowId::ContactGeometry, "normal-angle"),
-                  kDepth = physics_detail::cause_index(RowId::ContactGeometry, "depth"),
-                  kPointOffShape = physics_detail::cause_index(RowId::ContactGeometry, "point-off-shape");
-
-}  // namespace
-
-namespace {
 /// What a row's normal was compared with where SAT judges the pair: the nearest of its
 /// accepted axes (those within `epsilon` m of the minimum translation `depth`), or the
 /// minimum translation itself when SAT kept no axis (row_reference).
@@ -94,9 +83,9 @@ double PhysicsValidators::Impl::speculative_reach(const FrameRecord& rec, Pair p
 }
 
 // ---- Row 2: contact completeness -----------------------------------------------------
-void PhysicsValidators::Impl::judge_completeness(CheckedFrame& f) {
-  Tally& complete = tally(RowId::ContactCompleteness, kMissingContact);
-  Tally& false_contact = tally(RowId::ContactCompleteness, kFalseContact);
+template <>
+void PhysicsValidators::Impl::judge<RowId::ContactCompleteness>(CheckedFrame& f) {
+  auto [complete, false_contact] = tallies(RowId::ContactCompleteness, "missing-contact", "false-contact");
   const std::int64_t frame = f.rec->frame;
   const double slack = tol.geometry_slack_m;
   StopPoll poll(stop);
@@ -205,10 +194,9 @@ void PhysicsValidators::Impl::pair_figures(CheckedFrame& f, std::size_t i, const
   }
 }
 
-void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
-  Tally& normal_angle = tally(RowId::ContactGeometry, kNormalAngle);
-  Tally& depth = tally(RowId::ContactGeometry, kDepth);
-  Tally& points = tally(RowId::ContactGeometry, kPointOffShape);
+template <>
+void PhysicsValidators::Impl::judge<RowId::ContactGeometry>(CheckedFrame& f) {
+  auto [normal_angle, depth, points] = tallies(RowId::ContactGeometry, "normal-angle", "depth", "point-off-shape");
   const FrameRecord& rec = *f.rec;
   const std::vector<Pose>& det = *f.det;
   const std::int64_t frame = rec.frame;
@@ -425,23 +413,14 @@ void PhysicsValidators::Impl::judge_contact_geometry(CheckedFrame& f) {
   }
 }
 
-// ---- contact-completeness: its measure of a frame and its table entry -------------------------
-
-template <>
-void PhysicsValidators::Impl::measure<RowId::ContactCompleteness>(PhysicsFrame& f) {
-  // On a checked frame.
-  if (CheckedFrame* c = checked(f)) judge_completeness(*c);
-}
+// ---- contact-completeness: its table entry -------------------------
 
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::ContactCompleteness>() const {
   const Impl& s = *this;
-  const Tally& complete = s.tally(RowId::ContactCompleteness, kMissingContact);
-  const Tally& false_contact = s.tally(RowId::ContactCompleteness, kFalseContact);
-  ValidationResult r = start_row(RowId::ContactCompleteness, "penetrating pairs without a contact + false contacts",
-                                 "contact_depth_m,geometry_slack_m");
-  r.measured = double(complete.failures + false_contact.failures);
-  r.pass = r.measured == 0;
+  auto [complete, false_contact] = s.tallies(RowId::ContactCompleteness, "missing-contact", "false-contact");
+  ValidationResult r = failures_row(RowId::ContactCompleteness, "penetrating pairs without a contact + false contacts",
+                                    "contact_depth_m,geometry_slack_m");
   r.applicable = s.checked_frames > 0 && (complete.checks + false_contact.checks) > 0;
   const std::string margin =
       s.bodies.theta_margin ? std::string("the pair's theta") : fmt::format("{} m", s.bodies.contact_margin);
@@ -473,20 +452,12 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ContactCompleteness>() co
   return r;
 }
 
-// ---- contact-geometry: its measure of a frame and its table entry -------------------------
-
-template <>
-void PhysicsValidators::Impl::measure<RowId::ContactGeometry>(PhysicsFrame& f) {
-  // On a checked frame.
-  if (CheckedFrame* c = checked(f)) judge_contact_geometry(*c);
-}
+// ---- contact-geometry: its table entry -------------------------
 
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::ContactGeometry>() const {
   const Impl& s = *this;
-  const Tally& normal_angle = s.tally(RowId::ContactGeometry, kNormalAngle);
-  const Tally& depth = s.tally(RowId::ContactGeometry, kDepth);
-  const Tally& points = s.tally(RowId::ContactGeometry, kPointOffShape);
+  auto [normal_angle, depth, points] = s.tallies(RowId::ContactGeometry, "normal-angle", "depth", "point-off-shape");
   ValidationResult r = start_row(RowId::ContactGeometry, "worst normal angle to the reference's (deg; SAT or FCL)",
                                  "normal_angle_deg,depth_m,sat_accept_rel");
   r.measured = normal_angle.worst_or(0.0);

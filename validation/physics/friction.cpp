@@ -13,20 +13,12 @@
 
 namespace octocd {
 
-namespace {
-
-// The causes of the rows of this file (validation_rows.def), by their names.
-const std::size_t kCone = physics_detail::cause_index(RowId::Friction, "cone"),
-                  kDissipation = physics_detail::cause_index(RowId::Friction, "dissipation");
-
-}  // namespace
-
 using namespace dmath;
 using namespace physics_detail;
 
 void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p,
                                                   std::size_t k0, std::size_t k1) {
-  Tally& dissipation = tally(RowId::Friction, kDissipation);
+  Tally& dissipation = tally(RowId::Friction, "dissipation");
   const std::size_t n = model->bodies.size();
   const D3 g = d3(model->scene.gravity);
   const double dt = model->scene.dt;
@@ -123,8 +115,7 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
 
 // ---- Row 5: friction, every frame (dissipation on frames with states) ----------------
 void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector<Pose>& det) {
-  Tally& cone = tally(RowId::Friction, kCone);
-  Tally& dissipation = tally(RowId::Friction, kDissipation);
+  auto [cone, dissipation] = tallies(RowId::Friction, "cone", "dissipation");
   // impulses "normal-only" or "none": the rows carry no friction impulse; whatever jt and
   // jt3 hold (zeros, typically) is never judged (the row is n/a, named).
   if (bodies.impulses != PhysicsBodies::Impulses::Complete) return;
@@ -350,12 +341,9 @@ void PhysicsValidators::Impl::measure<RowId::Friction>(PhysicsFrame& f) {
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::Friction>() const {
   const Impl& s = *this;
-  const Tally& cone = s.tally(RowId::Friction, kCone);
-  const Tally& dissipation = s.tally(RowId::Friction, kDissipation);
-  ValidationResult r = start_row(RowId::Friction, "contacts outside the cone or rows raising the tangential speed",
-                                 "friction_cone_abs,friction_speed");
-  r.measured = double(cone.failures + dissipation.failures);
-  r.pass = r.measured == 0;
+  auto [cone, dissipation] = s.tallies(RowId::Friction, "cone", "dissipation");
+  ValidationResult r = failures_row(RowId::Friction, "contacts outside the cone or rows raising the tangential speed",
+                                    "friction_cone_abs,friction_speed");
   r.applicable = cone.checks > 0;
   if (cone.failures) {
     r.detail = cone.first + fmt::format(" ({} of {} contacts outside the cone)", cone.failures, cone.checks);

@@ -11,9 +11,6 @@ namespace octocd {
 
 namespace {
 
-// The causes of the rows of this file (validation_rows.def), by their names.
-const std::size_t kPenetration = physics_detail::cause_index(RowId::Penetration, "penetration");
-
 /// Penetration's sums beyond its tally (Impl::row_state): the largest exact depth (m) and
 /// where; the non-convex pairs' upper bounds (a figure): the largest and where, how many
 /// above the bound; penetrating pair-frames, and of them those with an upper bound only.
@@ -27,8 +24,9 @@ struct PenetrationSums {
 
 using namespace physics_detail;
 
-void PhysicsValidators::Impl::judge_penetration(CheckedFrame& f) {
-  Tally& pen = tally(RowId::Penetration, kPenetration);
+template <>
+void PhysicsValidators::Impl::judge<RowId::Penetration>(CheckedFrame& f) {
+  Tally& pen = tally(RowId::Penetration, "penetration");
   PenetrationSums& ps = row_state<PenetrationSums>(RowId::Penetration);
   const std::int64_t frame = f.rec->frame;
   // 4. Penetration: the largest true penetration after the settling window.
@@ -78,18 +76,12 @@ void PhysicsValidators::Impl::judge_penetration(CheckedFrame& f) {
   }
 }
 
-// ---- penetration: its measure of a frame and its table entry -------------------------
-
-template <>
-void PhysicsValidators::Impl::measure<RowId::Penetration>(PhysicsFrame& f) {
-  // On a checked frame.
-  if (CheckedFrame* c = checked(f)) judge_penetration(*c);
-}
+// ---- penetration: its table entry -------------------------
 
 template <>
 ValidationResult PhysicsValidators::Impl::table<RowId::Penetration>() const {
   const Impl& s = *this;
-  const Tally& pen = s.tally(RowId::Penetration, kPenetration);
+  const Tally& pen = s.tally(RowId::Penetration, "penetration");
   const PenetrationSums& ps = s.row_state<PenetrationSums>(RowId::Penetration);
   ValidationResult r =
       start_row(RowId::Penetration, "largest true penetration (m)", "penetration_slops,penetration_settle_frames");

@@ -17,9 +17,11 @@
 ///    the soft-contact episodes);
 ///  - balance.cpp: rows 7 (momentum balance per body) and 8 (free flight);
 ///  - physics_table.cpp: the generic sums (RowSums), observe()'s calls of every row's
-///    measure and results()' of every row's table entry, in validation_rows.def's order.
-/// Each row's measure (Impl::measure<RowId>) and table entry (Impl::table<RowId>: its
-/// ValidationResult from the sums) sit in its file; its tallies are its RowSums.
+///    measure and results()' of every row's table entry, in validation_rows.def's order
+///    (physics_rows.inc: the physics rows of the table by the frames they measure).
+/// Each row's measure (Impl::measure<RowId> of every frame, or Impl::judge<RowId> of the
+/// checked frames) and table entry (Impl::table<RowId>: its ValidationResult from the sums)
+/// sit in its file; its tallies are its RowSums.
 
 #include <algorithm>
 #include <cstdint>
@@ -31,6 +33,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -332,9 +335,23 @@ struct PhysicsValidators::Impl {
   /// Row `id`'s sums.
   physics_detail::RowSums& sums(RowId id) { return row_sums[std::size_t(id)]; }
   const physics_detail::RowSums& sums(RowId id) const { return row_sums[std::size_t(id)]; }
-  /// The tally of row `id`'s cause `k` (an index from physics_detail::cause_index).
-  Tally& tally(RowId id, std::size_t k) { return row_sums[std::size_t(id)].causes[k]; }
-  const Tally& tally(RowId id, std::size_t k) const { return row_sums[std::size_t(id)].causes[k]; }
+  /// The tally of row `id`'s cause named `cause` (validation_rows.def); throws
+  /// std::logic_error naming both when the row has no such cause (physics_detail::cause_index).
+  Tally& tally(RowId id, const char* cause) { return sums(id).causes[physics_detail::cause_index(id, cause)]; }
+  const Tally& tally(RowId id, const char* cause) const {
+    return sums(id).causes[physics_detail::cause_index(id, cause)];
+  }
+  /// The tallies of row `id`'s causes named `causes` (each a const char*), as a tuple of
+  /// references in the order named: `auto [a, b] = tallies(RowId::ID, "a", "b");`. Throws as
+  /// tally() does.
+  template <class... Names>
+  auto tallies(RowId id, Names... causes) {
+    return std::tie(tally(id, causes)...);
+  }
+  template <class... Names>
+  auto tallies(RowId id, Names... causes) const {
+    return std::tie(tally(id, causes)...);
+  }
   /// A row's own state beyond its tallies: a T kept in its RowSums, made on first use
   /// (the row's file defines T; a row that never wrote one reads a default T).
   template <class T>
@@ -350,10 +367,15 @@ struct PhysicsValidators::Impl {
     return p ? *static_cast<const T*>(p.get()) : none;
   }
   /// Row `id`'s measure of one frame (the row's file defines it for every physics row of
-  /// validation_rows.def; observe() calls them in the table's order, each on its row's
-  /// clock).
+  /// validation_rows.def that measures Every frame; observe() calls them in the table's
+  /// order, each on its row's clock).
   template <RowId id>
   void measure(physics_detail::PhysicsFrame& f);
+  /// Row `id`'s judgement of one checked frame with poses, its candidates and reference
+  /// geometry (checked()): the measure of a row of validation_rows.def that measures
+  /// Checked frames (the row's file defines it; measure_rows calls it on such frames only).
+  template <RowId id>
+  void judge(physics_detail::CheckedFrame& f);
   /// Row `id`'s result from the sums (the row's file; results() calls them in order).
   template <RowId id>
   ValidationResult table() const;
@@ -373,6 +395,9 @@ struct PhysicsValidators::Impl {
   }
   /// A physics result of row `id` with its tier, name, figure and tolerances.
   static ValidationResult start_row(RowId id, const char* figure, const char* tolerances);
+  /// start_row for a row whose figure is its failures: measured is the failures of all its
+  /// tallies summed (bound 0), pass when there are none.
+  ValidationResult failures_row(RowId id, const char* figure, const char* tolerances) const;
   /// fill_causes with row `id`'s own tallies.
   void fill_causes(ValidationResult& r, RowId id) const;
 
@@ -510,14 +535,6 @@ struct PhysicsValidators::Impl {
   /// from its truth `t` and SAT's accepted axes (contact_rows.cpp). Thread-safe across groups.
   void pair_figures(physics_detail::CheckedFrame& f, std::size_t i, const physics_detail::ContactTruth& t,
                     const std::vector<SatAxis>& accepted) const;
-  /// Row 1: broadphase completeness (candidates.cpp).
-  void judge_broadphase(physics_detail::CheckedFrame& f);
-  /// Row 2: contact completeness (contact_rows.cpp).
-  void judge_completeness(physics_detail::CheckedFrame& f);
-  /// Row 3: contact geometry (contact_rows.cpp).
-  void judge_contact_geometry(physics_detail::CheckedFrame& f);
-  /// Row 4: penetration (penetration.cpp).
-  void judge_penetration(physics_detail::CheckedFrame& f);
 
   // ---- Rows 5-8 (every frame) -------------------------------------------------------
   /// Row 5: the cone on every frame, dissipation on frames with states (friction.cpp).
@@ -690,18 +707,19 @@ struct PhysicsValidators::Impl {
   physics_detail::Tally balance_bias(const BalanceFit& fit) const;
 };
 
-// Every physics row of validation_rows.def has a measure and a table entry, defined in the
-// row's own file (Impl::measure, Impl::table).
-#define OCTOCD_PHYSICS_ROW_Physics(id)                                                           \
-  template <>                                                                                    \
-  void PhysicsValidators::Impl::measure<RowId::id>(physics_detail::PhysicsFrame & f);            \
-  template <>                                                                                    \
+// Every physics row of validation_rows.def has a measure (Impl::measure of every frame, or
+// Impl::judge of the checked frames, as its FRAMES says) and a table entry (Impl::table),
+// defined in the row's own file.
+#define OCTOCD_PHYSICS_EVERY(id)                                                      \
+  template <>                                                                         \
+  void PhysicsValidators::Impl::measure<RowId::id>(physics_detail::PhysicsFrame & f); \
+  template <>                                                                         \
   ValidationResult PhysicsValidators::Impl::table<RowId::id>() const;
-#define OCTOCD_PHYSICS_ROW_Model(id)
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs) OCTOCD_PHYSICS_ROW_##tier(id)
-#include "octocd/validation_rows.def"
-#undef OCTOCD_ROW
-#undef OCTOCD_PHYSICS_ROW_Model
-#undef OCTOCD_PHYSICS_ROW_Physics
+#define OCTOCD_PHYSICS_CHECKED(id)                                                    \
+  template <>                                                                         \
+  void PhysicsValidators::Impl::judge<RowId::id>(physics_detail::CheckedFrame & f);   \
+  template <>                                                                         \
+  ValidationResult PhysicsValidators::Impl::table<RowId::id>() const;
+#include "physics_rows.inc"
 
 }  // namespace octocd

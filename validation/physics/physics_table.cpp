@@ -67,40 +67,47 @@ ValidationResult PhysicsValidators::Impl::start_row(RowId id, const char* figure
   return r;
 }
 
+ValidationResult PhysicsValidators::Impl::failures_row(RowId id, const char* figure, const char* tolerances) const {
+  ValidationResult r = start_row(id, figure, tolerances);
+  std::uint64_t failures = 0;
+  for (const Tally& t : sums(id).causes) failures += t.failures;
+  r.measured = double(failures);
+  r.pass = r.measured == 0;
+  return r;
+}
+
 void PhysicsValidators::Impl::fill_causes(ValidationResult& r, RowId id) const {
   std::vector<const Tally*> tallies;
   for (const Tally& t : sums(id).causes) tallies.push_back(&t);
   physics_detail::fill_causes(r, row_info(id), tallies);
 }
 
-// Every physics row of validation_rows.def, in its order: its measure on its row's clock.
+// Every physics row of validation_rows.def, in its order, on its row's clock: its measure
+// of every frame, or its judgement of a checked frame's candidates and reference geometry
+// (computed by the first row that asks, on its clock).
 void PhysicsValidators::Impl::measure_rows(PhysicsFrame& f) {
-#define OCTOCD_PHYSICS_ROW_Physics(id)       \
+#define OCTOCD_PHYSICS_EVERY(id)             \
   {                                          \
     RowClock clock(sums(RowId::id).seconds); \
     measure<RowId::id>(f);                   \
   }
-#define OCTOCD_PHYSICS_ROW_Model(id)
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs) OCTOCD_PHYSICS_ROW_##tier(id)
-#include "octocd/validation_rows.def"
-#undef OCTOCD_ROW
-#undef OCTOCD_PHYSICS_ROW_Model
-#undef OCTOCD_PHYSICS_ROW_Physics
+#define OCTOCD_PHYSICS_CHECKED(id)                          \
+  {                                                         \
+    RowClock clock(sums(RowId::id).seconds);                \
+    if (CheckedFrame* c = checked(f)) judge<RowId::id>(*c); \
+  }
+#include "physics_rows.inc"
 }
 
 // Every physics row of validation_rows.def, in its order: its table entry and its time.
 std::vector<ValidationResult> PhysicsValidators::results() const {
   const Impl& s = *impl_;
   std::vector<ValidationResult> out;
-#define OCTOCD_PHYSICS_ROW_Physics(id) \
+#define OCTOCD_PHYSICS_EVERY(id)       \
   out.push_back(s.table<RowId::id>()); \
   out.back().seconds = s.sums(RowId::id).seconds;
-#define OCTOCD_PHYSICS_ROW_Model(id)
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs) OCTOCD_PHYSICS_ROW_##tier(id)
-#include "octocd/validation_rows.def"
-#undef OCTOCD_ROW
-#undef OCTOCD_PHYSICS_ROW_Model
-#undef OCTOCD_PHYSICS_ROW_Physics
+#define OCTOCD_PHYSICS_CHECKED(id) OCTOCD_PHYSICS_EVERY(id)
+#include "physics_rows.inc"
   return out;
 }
 

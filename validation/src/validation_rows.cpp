@@ -10,7 +10,7 @@ namespace octocd {
 
 const std::vector<RowInfo>& validation_rows() {
   static const std::vector<RowInfo> rows = {
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs)                                          \
+#define OCTOCD_ROW(id, name, tier, merge, causes, needs, frames)                                  \
   {RowId::id, name, Tier::tier, RowMerge::merge, std::vector<RowCause> OCTOCD_ROW_CAUSES causes, \
    std::vector<TraceNeed> OCTOCD_ROW_CAUSES needs},
 #include "octocd/validation_rows.def"

@@ -19,7 +19,7 @@ namespace octocd {
 /// The rows, in the order `validate` reports them: the physics tier, then the model tier;
 /// one per entry of octocd/validation_rows.def.
 enum class RowId {
-#define OCTOCD_ROW(id, name, tier, merge, causes, needs) id,
+#define OCTOCD_ROW(id, name, tier, merge, causes, needs, frames) id,
 #include "octocd/validation_rows.def"
 #undef OCTOCD_ROW
 };
