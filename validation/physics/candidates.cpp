@@ -104,21 +104,21 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
     f.truth = FrameArray<ContactTruth>(all.size(), threads);
     // Row 3's figures of each pair's groups of rows come from the same pass, while the
     // pair's SAT axes are at hand: groups listed per truth entry (counting sort).
-    const std::size_t groups = rows.size();
-    f.pair_fig = FrameArray<PairFigures>(groups, threads);
+    const std::size_t n_groups = rows.size();
+    f.pair_fig = FrameArray<PairFigures>(n_groups, threads);
     f.row_fig = FrameArray<RowFigures>(rec.contacts.size(), threads);
-    if (bodies.contact_geometry == ContactGeometry::Aabb) f.aabb_ref = FrameArray<ReferenceNormal>(groups, threads);
-    std::vector<std::uint32_t> group_begin(all.size() + 1, 0), group_list(groups);
+    if (bodies.contact_geometry == ContactGeometry::Aabb) f.aabb_ref = FrameArray<ReferenceNormal>(n_groups, threads);
+    std::vector<std::uint32_t> group_begin(all.size() + 1, 0), group_list(n_groups);
     {
-      std::vector<std::size_t> group_truth(groups);
+      std::vector<std::size_t> group_truth(n_groups);
       std::size_t cursor = 0;
-      for (std::size_t g = 0; g < groups; ++g) {
+      for (std::size_t g = 0; g < n_groups; ++g) {
         group_truth[g] = f.find_after(rows[g].p, cursor);
         if (group_truth[g] < all.size()) ++group_begin[group_truth[g] + 1];
       }
       for (std::size_t i = 0; i < all.size(); ++i) group_begin[i + 1] += group_begin[i];
       std::vector<std::uint32_t> fill(group_begin.begin(), group_begin.end() - 1);
-      for (std::size_t g = 0; g < groups; ++g)
+      for (std::size_t g = 0; g < n_groups; ++g)
         if (group_truth[g] < all.size()) group_list[fill[group_truth[g]]++] = static_cast<std::uint32_t>(g);
     }
     // Per worker: the placed hulls and accepted axes of its last pair (pairs in a chunk

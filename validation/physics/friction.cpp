@@ -17,8 +17,7 @@ using namespace dmath;
 using namespace physics_detail;
 
 void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p,
-                                                  std::size_t k0, std::size_t k1) {
-  Tally& dissipation = tally(RowId::Friction, "dissipation");
+                                                  std::size_t k0, std::size_t k1, Tally& dissipation) {
   const std::size_t n = model->bodies.size();
   const D3 g = d3(model->scene.gravity);
   const double dt = model->scene.dt;
@@ -224,7 +223,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
       // mean speed along the impulses, sum_k jt3_k . v_t,k' / sum_k |jt3_k|, within
       // friction_speed + the witness-point allowance (|w_a| + |w_b|) s, s the largest
       // distance between a row's witness points (its depth, or the gap across its point).
-      judge_pair_friction(rec, det, p, k0, k1);
+      judge_pair_friction(rec, det, p, k0, k1, dissipation);
       k0 = k1;
       continue;
     }

@@ -539,9 +539,10 @@ struct PhysicsValidators::Impl {
   // ---- Rows 5-8 (every frame) -------------------------------------------------------
   /// Row 5: the cone on every frame, dissipation on frames with states (friction.cpp).
   void friction(const FrameRecord& rec, const std::vector<Pose>& det);
-  /// Dissipation of pair p's rows [k0, k1) from their tangential impulse vectors (jt3).
+  /// Dissipation of pair p's rows [k0, k1) from their tangential impulse vectors (jt3),
+  /// into `dissipation` (the friction row's tally of that cause).
   void judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p, std::size_t k0,
-                           std::size_t k1);
+                           std::size_t k1, Tally& dissipation);
   /// Row 6 on frames with states: isolated groups' momentum, energy, angular momentum;
   /// soft contacts' episodes (conservation.cpp).
   void conservation(const FrameRecord& rec);
