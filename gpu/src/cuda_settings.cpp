@@ -49,35 +49,57 @@ void check_cuda_settings(const CudaSettings& s, const std::string& where) {
                                  where, s.record_batch, kMostRecordBatch));
 }
 
+namespace {
+
+/// One cuda setting of `--cuda KEY=VALUE`: a switch (`flag`) or an integer in lo .. hi (`unit`
+/// names it in the refusal) stored by `set`.
+struct CudaSettingRow {
+  const char* key;
+  bool CudaSettings::*flag;
+  void (*set)(CudaSettings&, unsigned long long);
+  unsigned long long lo, hi;
+  const char* unit;
+};
+
+/// Every cuda setting, in the order `--help` and the refusals list them.
+const CudaSettingRow kCudaSettingRows[] = {
+    {"midphase_early_exit", &CudaSettings::midphase_early_exit, nullptr, 0, 0, nullptr},
+    {"memory_limit_bytes", nullptr, [](CudaSettings& s, unsigned long long v) { s.memory_limit_bytes = v; }, 0,
+     ~0ull, "bytes; 0: no limit"},
+    {"resident_timeout_ms", nullptr,
+     [](CudaSettings& s, unsigned long long v) { s.resident_timeout_ms = static_cast<long>(v); }, 1,
+     static_cast<unsigned long long>(kMostTimeoutMs), "milliseconds"},
+    {"stage_times", &CudaSettings::stage_times, nullptr, 0, 0, nullptr},
+    {"stage_time_every", nullptr,
+     [](CudaSettings& s, unsigned long long v) { s.stage_time_every = static_cast<long>(v); }, 1,
+     static_cast<unsigned long long>(kMostStageTimeEvery), "steps per timed step"},
+    {"sync_each_launch", &CudaSettings::sync_each_launch, nullptr, 0, 0, nullptr},
+    {"graph", &CudaSettings::graph, nullptr, 0, 0, nullptr},
+    {"small_path", &CudaSettings::small_path, nullptr, 0, 0, nullptr},
+    {"small_profile", &CudaSettings::small_profile, nullptr, 0, 0, nullptr},
+    {"record_batch", nullptr, [](CudaSettings& s, unsigned long long v) { s.record_batch = static_cast<long>(v); },
+     1, static_cast<unsigned long long>(kMostRecordBatch), "recorded steps per batch"},
+    {"resident_spin", &CudaSettings::resident_spin, nullptr, 0, 0, nullptr},
+};
+
+}  // namespace
+
 std::vector<std::string> cuda_setting_names() {
-  return {"midphase_early_exit", "memory_limit_bytes", "resident_timeout_ms", "stage_times", "stage_time_every",
-          "sync_each_launch",    "graph",              "small_path",          "small_profile",
-          "record_batch",        "resident_spin"};
+  std::vector<std::string> names;
+  for (const CudaSettingRow& row : kCudaSettingRows) names.emplace_back(row.key);
+  return names;
 }
 
 void set_cuda_setting(CudaSettings& s, const std::string& key, const std::string& value, const std::string& where) {
-  if (key == "midphase_early_exit") s.midphase_early_exit = parse_bool(where, key, value);
-  else if (key == "memory_limit_bytes")
-    s.memory_limit_bytes = parse_integer(where, key, value, 0, ~0ull, "bytes; 0: no limit");
-  else if (key == "resident_timeout_ms")
-    s.resident_timeout_ms =
-        static_cast<long>(parse_integer(where, key, value, 1, kMostTimeoutMs, "milliseconds"));
-  else if (key == "sync_each_launch") s.sync_each_launch = parse_bool(where, key, value);
-  else if (key == "graph") s.graph = parse_bool(where, key, value);
-  else if (key == "stage_times") s.stage_times = parse_bool(where, key, value);
-  else if (key == "stage_time_every")
-    s.stage_time_every =
-        static_cast<long>(parse_integer(where, key, value, 1, kMostStageTimeEvery, "steps per timed step"));
-  else if (key == "small_path") s.small_path = parse_bool(where, key, value);
-  else if (key == "small_profile") s.small_profile = parse_bool(where, key, value);
-  else if (key == "resident_spin") s.resident_spin = parse_bool(where, key, value);
-  else if (key == "record_batch")
-    s.record_batch = static_cast<long>(parse_integer(where, key, value, 1, kMostRecordBatch, "recorded steps per batch"));
-  else {
-    std::string names;
-    for (const std::string& n : cuda_setting_names()) names += (names.empty() ? "" : ", ") + n;
-    throw InputError(fmt::format("{}: unknown cuda setting '{}'; allowed: {} (docs/settings.md)", where, key, names));
+  for (const CudaSettingRow& row : kCudaSettingRows) {
+    if (key != row.key) continue;
+    if (row.flag) s.*row.flag = parse_bool(where, key, value);
+    else row.set(s, parse_integer(where, key, value, row.lo, row.hi, row.unit));
+    return;
   }
+  std::string names;
+  for (const std::string& n : cuda_setting_names()) names += (names.empty() ? "" : ", ") + n;
+  throw InputError(fmt::format("{}: unknown cuda setting '{}'; allowed: {} (docs/settings.md)", where, key, names));
 }
 
 void apply_cuda_settings(CudaSettings& s, const std::vector<std::string>& items, const std::string& where) {
