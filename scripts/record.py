@@ -119,9 +119,11 @@ def bench_rows(result):
         base["git_revision"] = rev
         windows = p.get("windows")
         if windows:
+            # A point's own figures beside its windows' (wall_s, setup_s, setup_cpu_s).
+            own = {k: v for k, v in p.items() if k in ("wall_s", "setup_s", "setup_cpu_s") and is_summary(v)}
             for wname, w in windows.items():
                 row = dict(base, window=wname)
-                flatten_figures("", w, row)
+                flatten_figures("", dict(own, **w), row)
                 yield row
         else:
             row = dict(base, window="")

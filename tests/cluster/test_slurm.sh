@@ -211,7 +211,7 @@ whole, sharded, shards = (pathlib.Path(p) for p in sys.argv[1:])
 def rows(report):
     with open(report / "csv" / "cluster-small.csv") as f:
         table = list(csv.DictReader(f))
-    timing = ("ms", "steps_per_s", "wall_s")  # measured times differ from run to run
+    timing = ("ms", "steps_per_s", "wall_s", "setup_")  # measured times differ from run to run
     keep = [c for c in table[0] if not any(t in c for t in timing)]
     return keep, sorted(tuple(r[c] for c in keep) for r in table)
 kw, w = rows(whole)
