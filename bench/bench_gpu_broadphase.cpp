@@ -1299,9 +1299,9 @@ int run(const Options& o) {
     j["motion"] = motion_json(motions);
     try {
       octocd::write_file_atomically(o.json_path, j.dump(2) + "\n", "--json");
-    } catch (const std::exception& e) {
-      std::cerr << "bench_gpu_broadphase: " << e.what() << "\n";
-      return dynamic_cast<const octocd::InputError*>(&e) ? 2 : 1;
+    } catch (const std::exception& err) {
+      std::cerr << "bench_gpu_broadphase: " << err.what() << "\n";
+      return dynamic_cast<const octocd::InputError*>(&err) ? 2 : 1;
     }
   }
   std::cerr << fmt::format("bench_gpu_broadphase: {:.1f} s, {}\n",

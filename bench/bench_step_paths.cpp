@@ -11,10 +11,6 @@
 //   graph-timed  the per-stage kernels from their CUDA graph (small_path off), stage times
 //                sampled; graph: the same, stage times off; graph-every: stage times on
 //                every step (stage_time_every 1: an event graph every step);
-//   run-spin, persistent-spin
-//                run and persistent with CudaSettings::resident_spin (the resident kernel's
-//                waits poll without backoff): not in the default list, an A/B of the
-//                small step's floor (--engines run,run-spin,persistent,persistent-spin);
 //   cpu          the cpu engine.
 // A timed line's "vs untimed" column is its steps/s over its untimed twin's (run /
 // persistent, small-timed / small, graph-timed and graph-every / graph), repetition by
@@ -34,7 +30,7 @@
 //
 // Usage: bench_step_paths SCENE.json... [--frames 2000] [--warmup 20] [--repeat 5]
 //          [--midphase 1,2] [--engines run,persistent,small-timed,small,graph-timed,graph,cpu]
-//          (also graph-every, run-spin, persistent-spin)
+//          (also graph-every)
 //          [--stage-time-every K] [--profile]
 // The path column says "small+resident" where the kernel was resident. With --profile
 // (CudaSettings::small_profile) each small line is followed by the engine's mean time per
@@ -75,7 +71,6 @@ struct Run {
   bool small_path;   ///< CudaSettings::small_path
   bool resident;     ///< CudaWorld::set_persistent
   const char* twin;  ///< the untimed line this one is compared with ("": none)
-  bool spin = false;  ///< CudaSettings::resident_spin
 };
 
 constexpr Run kRuns[] = {{"run", "cuda", true, false, true, true, "persistent"},
@@ -85,8 +80,6 @@ constexpr Run kRuns[] = {{"run", "cuda", true, false, true, true, "persistent"},
                          {"graph-timed", "cuda", true, false, false, true, "graph"},
                          {"graph", "cuda", false, false, false, true, ""},
                          {"graph-every", "cuda", true, true, false, true, "graph"},
-                         {"run-spin", "cuda", true, false, true, true, "persistent-spin", true},
-                         {"persistent-spin", "cuda", false, false, true, true, "", true},
                          {"cpu", "cpu", true, false, true, true, ""}};
 
 const Run& run_named(const std::string& label) {
@@ -105,8 +98,7 @@ std::unique_ptr<Engine> make(const std::string& label, const std::shared_ptr<con
   settings["cuda"] = {fmt::format("stage_times={}", flag(run.stage_times)),
                       fmt::format("stage_time_every={}", run.every_step ? 1 : every),
                       fmt::format("small_path={}", flag(run.small_path)),
-                      fmt::format("small_profile={}", flag(profile)),
-                      fmt::format("resident_spin={}", flag(run.spin))};
+                      fmt::format("small_profile={}", flag(profile))};
   std::unique_ptr<Engine> e = make_engine(run.engine, model, settings);
   if (auto* c = dynamic_cast<CudaWorld*>(e.get())) c->set_persistent(run.resident);
   return e;
@@ -134,11 +126,11 @@ int main(int argc, char** argv) {
   app.add_option("--repeat", repeat, "repetitions (fresh engine each)")->check(CLI::Range(1, 1000));
   app.add_option("--midphase", midphase, "midphase level list for every scene (e.g. 1,2 or aabb-only)");
   app.add_option("--engines", engines,
-                 "run, persistent, small-timed, small, graph-timed, graph, graph-every, run-spin, persistent-spin, cpu "
+                 "run, persistent, small-timed, small, graph-timed, graph, graph-every, cpu "
                  "(see the file's comment)")
       ->delimiter(',')
       ->check(CLI::IsMember({"run", "persistent", "small-timed", "small", "graph-timed", "graph", "graph-every",
-                             "run-spin", "persistent-spin", "cpu"}));
+                             "cpu"}));
   app.add_option("--stage-time-every", every, "CudaSettings::stage_time_every of the timed lines")
       ->check(CLI::Range(1L, 1000000L));
   app.add_flag("--profile", profile, "mean time per phase of the small path's kernel (CudaSettings::small_profile)");

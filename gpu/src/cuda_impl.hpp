@@ -156,7 +156,6 @@ struct CudaWorld::Impl {
 
   // ---- recorded batches (cuda_world.cpp; CudaSettings::record_batch, gpu::RecordRing) ----
   long record_batch = 1;  // CudaSettings::record_batch
-  bool resident_spin = false;  // CudaSettings::resident_spin (ResidentDesc::spin)
   std::uint64_t ring_max_bytes = gpu::kRecordRingMaxBytes;  // TestHooks::record_ring_max_bytes
   std::uint32_t ring_slots = 0;  // slots of the ring now allocated (0: none)
   std::uint32_t ring_pairs = 0;  // pairs a slot holds

@@ -79,7 +79,6 @@ const CudaSettingRow kCudaSettingRows[] = {
     {"small_profile", &CudaSettings::small_profile, nullptr, 0, 0, nullptr},
     {"record_batch", nullptr, [](CudaSettings& s, unsigned long long v) { s.record_batch = static_cast<long>(v); },
      1, static_cast<unsigned long long>(kMostRecordBatch), "recorded steps per batch"},
-    {"resident_spin", &CudaSettings::resident_spin, nullptr, 0, 0, nullptr},
 };
 
 }  // namespace

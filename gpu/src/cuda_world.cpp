@@ -276,7 +276,6 @@ CudaWorld::CudaWorld(std::shared_ptr<const Model> model, const std::string& broa
   d.stage_times = settings.stage_times;
   d.stage_time_every = settings.stage_time_every;
   d.record_batch = settings.record_batch;
-  d.resident_spin = settings.resident_spin;
   if (hooks.record_ring_max_bytes > 0) d.ring_max_bytes = hooks.record_ring_max_bytes;
   {
     int dev = 0, sms = 1;

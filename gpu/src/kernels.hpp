@@ -518,10 +518,6 @@ struct ResidentDesc {
   /// batch early (a list over its capacity, a non-finite body, a ring slot too small),
   /// written before that step's SmallStepDesc::done.
   unsigned long long* stopped = nullptr;
-  /// CudaSettings::resident_spin: the waits (block 0's for a request, the other blocks' for
-  /// the next step's ticket) poll without __nanosleep backoff (0: back off after 256 and 64
-  /// polls, up to 1024 and 256 ns).
-  int spin = 0;
   int stall = 0;  ///< test hook (CudaWorld::TestHooks::resident_ignores_requests): ignore step requests, honour exit
 };
 constexpr int kResidentShift = 9;

@@ -682,7 +682,7 @@ __global__ void __launch_bounds__(kBlockSize) small_step_kernel(const __grid_con
 constexpr unsigned long long kExitCommand = ~0ull;
 
 /// Block 0, thread 0: waits for a request other than `handled` (system-scope loads of the
-/// mapped word, tight at first, then __nanosleep backoff up to 1 us unless r.spin); returns it, or
+/// mapped word, tight at first, then __nanosleep backoff up to 1 us); returns it, or
 /// kExitCommand for an exit request or after r.idle_ns without one.
 __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long long handled) {
   cuda::atomic_ref<unsigned long long, cuda::thread_scope_system> request(*r.request);
@@ -695,7 +695,7 @@ __device__ unsigned long long wait_request(const ResidentDesc& r, unsigned long 
       if (!r.stall) return req;
     }
     if ((spins & 7u) == 0 && r.idle_ns != 0 && global_ns() - t0 > r.idle_ns) return kExitCommand;
-    if (spins >= 256 && !r.spin) {
+    if (spins >= 256) {
       __nanosleep(sleep_ns);
       sleep_ns = sleep_ns < 1024 ? sleep_ns * 2 + 32 : 1024;
     }
@@ -794,7 +794,7 @@ __global__ void __launch_bounds__(kBlockSize, 1)
       } else {
         unsigned sleep_ns = 0;
         for (unsigned spins = 0; ticket.load(cuda::std::memory_order_acquire) == my_ticket; ++spins) {
-          if (spins >= 64 && !r.spin) {
+          if (spins >= 64) {
             __nanosleep(sleep_ns);
             sleep_ns = sleep_ns < 256 ? sleep_ns * 2 + 32 : 256;
           }

@@ -119,7 +119,6 @@ void CudaWorld::Impl::launch_resident(const Scene& scene, bool ring) {
   r.idle_ns = resident_stall ? 0 : resident_idle_ns;
   r.records = records.get();
   r.stall = resident_stall ? 1 : 0;
-  r.spin = resident_spin ? 1 : 0;
   if (ring) r.ring = ring_desc();
   r.stopped = resident_dev + kStoppedWord;
   resident_ring = ring;

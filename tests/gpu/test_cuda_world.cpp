@@ -722,7 +722,7 @@ TEST(CudaSettingsCheck, OutOfRangeValuesAreInputErrors) {
   EXPECT_EQ(s.record_batch, 32) << "the documented default (docs/settings.md)";
   apply_cuda_settings(s, {"graph=false", "stage_times=0", "midphase_early_exit=off", "memory_limit_bytes=4096",
                           "resident_timeout_ms=300", "sync_each_launch=true", "small_profile=1",
-                          "stage_time_every=7", "small_path=off", "record_batch=5", "resident_spin=on"},
+                          "stage_time_every=7", "small_path=off", "record_batch=5"},
                       "--cuda");
   EXPECT_FALSE(s.graph);
   EXPECT_FALSE(s.stage_times);
@@ -734,7 +734,6 @@ TEST(CudaSettingsCheck, OutOfRangeValuesAreInputErrors) {
   EXPECT_TRUE(s.sync_each_launch);
   EXPECT_TRUE(s.small_profile);
   EXPECT_EQ(s.record_batch, 5);
-  EXPECT_TRUE(s.resident_spin);
   const std::vector<std::pair<std::string, std::string>> bad = {
       {"graph=yes", "--cuda: graph='yes' is not a switch"},
       {"resident_timeout_ms=0", "--cuda: resident_timeout_ms='0' is not allowed; allowed: an integer 1 .. 86400000"},
