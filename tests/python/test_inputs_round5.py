@@ -22,6 +22,8 @@ import sys
 import numpy as np
 import pytest
 
+from test_hostile_input import external_trace as hostile_external_trace
+
 octocd = pytest.importorskip(
     "octocd", reason="the octocd Python module is not built (configure with OCTOCD_PYTHON=ON and "
     "python3-pybind11, and put build/python on PYTHONPATH)")
@@ -32,22 +34,10 @@ SCENE = os.path.join(SOURCE_DIR, "datasets", "scenes", "box-stack.json")
 BIN = os.environ.get("OCTOCD_BIN", os.path.join(SOURCE_DIR, "build", "octocd"))
 
 
-def external_trace(path, n=2, frames=3):
-    """A small valid external trace (version 1, states only): n boxes at rest, 2 m apart
-    (as tests/python/test_hostile_input.py writes it)."""
-    x = np.zeros((frames + 1, n, 3), np.float32)
-    x[:, :, 0] = np.arange(n) * 2.0
-    with h5py.File(path, "w") as f:
-        f.attrs["format"] = "octocd-trace"
-        f.attrs["version"] = 1
-        f.attrs["dt"] = 0.001
-        f.attrs["gravity"] = np.zeros(3)
-        f["bodies/local_aabb_min"] = np.full((n, 3), -0.5, np.float32)
-        f["bodies/local_aabb_max"] = np.full((n, 3), 0.5, np.float32)
-        f["bodies/inverse_mass"] = np.ones(n, np.float32)
-        f["states/position"] = x
-        f["states/velocity"] = np.zeros_like(x)
-    return str(path)
+def external_trace(path, **kw):
+    """test_hostile_input.py's small valid external trace (2 boxes at rest, 2 m apart), as a
+    str path."""
+    return str(hostile_external_trace(path, **kw))
 
 
 def in_child(code, timeout=60):
@@ -155,25 +145,15 @@ def chunked_trace(path, chunk_mib):
     """external_trace's 2 boxes, 3 frames, with /states/position compressed in one chunk of
     `chunk_mib` MiB (0: stored plainly): reading any row inflates the whole chunk, a buffer
     HDF5 allocates itself. The values are the same either way."""
-    n, frames = 2, 3
-    x = np.zeros((frames + 1, n, 3), np.float32)
-    x[:, :, 0] = np.arange(n) * 2.0
-    with h5py.File(path, "w") as f:
-        f.attrs["format"] = "octocd-trace"
-        f.attrs["version"] = 1
-        f.attrs["dt"] = 0.001
-        f.attrs["gravity"] = np.zeros(3)
-        f["bodies/local_aabb_min"] = np.full((n, 3), -0.5, np.float32)
-        f["bodies/local_aabb_max"] = np.full((n, 3), 0.5, np.float32)
-        f["bodies/inverse_mass"] = np.ones(n, np.float32)
-        if chunk_mib:
-            rows = (chunk_mib << 20) // (n * 3 * 4)
-            f.require_group("states").create_dataset("position", data=x, maxshape=(None, n, 3),
-                                                     chunks=(rows, n, 3), compression="gzip")
-        else:
-            f["states/position"] = x
-        f["states/velocity"] = np.zeros_like(x)
-    return str(path)
+    def rechunk(f):
+        x = f["states/position"][...]
+        del f["states/position"]
+        n = x.shape[1]
+        rows = (chunk_mib << 20) // (n * 3 * 4)
+        f["states"].create_dataset("position", data=x, maxshape=(None, n, 3), chunks=(rows, n, 3),
+                                   compression="gzip")
+
+    return external_trace(path, extra=rechunk if chunk_mib else None)
 
 
 def smallest_limit(run_under, start_mib=48, step_mib=16, last_mib=4096):
