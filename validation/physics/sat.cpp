@@ -4,7 +4,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace octocd {
 
@@ -28,14 +33,42 @@ Scratch& scratch() {
   return s;
 }
 
-void project(const std::vector<D3>& vs, const D3& u, double& lo, double& hi) {
+/// Whether a and b are equal bit for bit (-0 and +0 differ, a NaN equals its own bits).
+bool same_bits(const D3& a, const D3& b) { return std::memcmp(a.data(), b.data(), sizeof(D3)) == 0; }
+
+/// The extremes [lo, hi] of hull h's vertices projected on u: each projection is
+/// dot3(v, u) ((x u0 + y u1) + z u2, no fused multiply-add), the extremes those of
+/// std::min / std::max taken vertex by vertex (a NaN projection is skipped, as there), so
+/// the figures are the scalar loop's bit for bit; with SSE2 two vertices an instruction.
+void project(const PlacedHull& h, const D3& u, double& lo, double& hi) {
+  const std::size_t n = h.x.size();  // even (place_hull pads)
+  const double* xs = h.x.data();
+  const double* ys = h.y.data();
+  const double* zs = h.z.data();
+#if defined(__SSE2__)
+  const __m128d u0 = _mm_set1_pd(u[0]), u1 = _mm_set1_pd(u[1]), u2 = _mm_set1_pd(u[2]);
+  __m128d lo2 = _mm_set1_pd(std::numeric_limits<double>::infinity());
+  __m128d hi2 = _mm_set1_pd(-std::numeric_limits<double>::infinity());
+  for (std::size_t k = 0; k < n; k += 2) {
+    const __m128d t = _mm_add_pd(_mm_add_pd(_mm_mul_pd(_mm_loadu_pd(xs + k), u0), _mm_mul_pd(_mm_loadu_pd(ys + k), u1)),
+                                 _mm_mul_pd(_mm_loadu_pd(zs + k), u2));
+    lo2 = _mm_min_pd(t, lo2);  // t < lo ? t : lo, as std::min(lo, t)
+    hi2 = _mm_max_pd(t, hi2);  // t > hi ? t : hi, as std::max(hi, t)
+  }
+  double l[2], m[2];
+  _mm_storeu_pd(l, lo2);
+  _mm_storeu_pd(m, hi2);
+  lo = std::min(l[0], l[1]);
+  hi = std::max(m[0], m[1]);
+#else
   lo = std::numeric_limits<double>::infinity();
   hi = -lo;
-  for (const D3& v : vs) {
-    const double t = dot3(v, u);
+  for (std::size_t k = 0; k < n; ++k) {
+    const double t = xs[k] * u[0] + ys[k] * u[1] + zs[k] * u[2];
     lo = std::min(lo, t);
     hi = std::max(hi, t);
   }
+#endif
 }
 
 }  // namespace
@@ -43,15 +76,26 @@ void project(const std::vector<D3>& vs, const D3& u, double& lo, double& hi) {
 void place_hull(const HullFeatures& h, const Pose& p, PlacedHull& out) {
   const auto r = rotation(p.orientation);
   const D3 x{double(p.position.x), double(p.position.y), double(p.position.z)};
-  out.vertices.clear();
-  out.faces.clear();
-  out.edges.clear();
-  for (const D3& v : h.vertices) {
-    const D3 w = mul(r, v);
-    out.vertices.push_back({w[0] + x[0], w[1] + x[1], w[2] + x[2]});
+  const std::size_t n = h.vertices.size(), padded = n + (n & 1);
+  out.vertex_count = n;
+  out.x.resize(padded);
+  out.y.resize(padded);
+  out.z.resize(padded);
+  for (std::size_t k = 0; k < n; ++k) {
+    const D3 w = mul(r, h.vertices[k]);
+    out.x[k] = w[0] + x[0];
+    out.y[k] = w[1] + x[1];
+    out.z[k] = w[2] + x[2];
   }
-  for (const D3& f : h.face_normals) out.faces.push_back(mul(r, f));
-  for (const D3& e : h.edge_dirs) out.edges.push_back(mul(r, e));
+  if (padded != n) {
+    out.x[n] = out.x[n - 1];
+    out.y[n] = out.y[n - 1];
+    out.z[n] = out.z[n - 1];
+  }
+  out.faces.resize(h.face_normals.size());
+  out.edges.resize(h.edge_dirs.size());
+  for (std::size_t k = 0; k < h.face_normals.size(); ++k) out.faces[k] = mul(r, h.face_normals[k]);
+  for (std::size_t k = 0; k < h.edge_dirs.size(); ++k) out.edges[k] = mul(r, h.edge_dirs[k]);
 }
 
 SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullFeatures& b, const Pose& pb,
@@ -69,23 +113,40 @@ SatResult sat_min_translation_placed(const PlacedHull& A, const PlacedHull& B, c
                                      std::vector<SatAxis>& accepted) {
   SatResult r;
   accepted.clear();
-  if (A.vertices.empty() || B.vertices.empty()) return r;
+  if (A.vertex_count == 0 || B.vertex_count == 0) return r;
   const double naxes =
       double(A.faces.size() + B.faces.size()) + double(A.edges.size()) * double(B.edges.size());
-  if (naxes * double(A.vertices.size() + B.vertices.size()) > settings.max_work) return r;
+  if (naxes * double(A.vertex_count + B.vertex_count) > settings.max_work) return r;
   r.tested = true;
   Scratch& work = scratch();
 
   // Every axis with its overlap, in the order tested.
   std::vector<SatAxis>& all = work.all;
   all.clear();
-  auto test = [&](D3 u, int kind) {
-    const double len = std::sqrt(dot3(u, u));
+  // Directions already tested, as given (before normalisation), with their axis in `all`:
+  // a direction equal bit for bit to one of them (B's faces when both hulls are turned
+  // alike, an edge cross along a face normal) has the same unit axis, projections and
+  // overlap, so its axis is copied (with its own kind) instead of computed again. Up to
+  // kRemembered directions are remembered (two boxes have at most 15).
+  constexpr std::size_t kRemembered = 16;
+  D3 seen[kRemembered];
+  std::size_t seen_axis[kRemembered];
+  std::size_t n_seen = 0;
+  auto test = [&](const D3& given, int kind) {
+    for (std::size_t k = 0; k < n_seen; ++k)
+      if (same_bits(seen[k], given)) {
+        SatAxis ax = all[seen_axis[k]];
+        ax.kind = kind;
+        ++r.axes;
+        all.push_back(ax);
+        return;
+      }
+    const double len = std::sqrt(dot3(given, given));
     if (!(len > 1e-9)) return;
-    u = {u[0] / len, u[1] / len, u[2] / len};
+    const D3 u{given[0] / len, given[1] / len, given[2] / len};
     double a0, a1, b0, b1;
-    project(A.vertices, u, a0, a1);
-    project(B.vertices, u, b0, b1);
+    project(A, u, a0, a1);
+    project(B, u, b0, b1);
     const double plus = b1 - a0, minus = a1 - b0;  // translate A along +u, or along -u
     SatAxis ax;
     ax.kind = kind;
@@ -95,6 +156,10 @@ SatResult sat_min_translation_placed(const PlacedHull& A, const PlacedHull& B, c
     } else {
       ax.normal = {-u[0], -u[1], -u[2]};
       ax.overlap = minus;
+    }
+    if (n_seen < kRemembered) {
+      seen[n_seen] = given;
+      seen_axis[n_seen++] = all.size();
     }
     ++r.axes;
     all.push_back(ax);
@@ -130,8 +195,19 @@ double sat_angle_to_accepted(const SatResult& r, const std::array<double, 3>& n,
 double sat_angle_to_accepted(const std::vector<SatAxis>& accepted, const std::array<double, 3>& n,
                              std::size_t* nearest) {
   double best = 3.14159265358979323846;
+  // An axis whose normal equals bit for bit an earlier one's has the same angle, which
+  // cannot be below `best` (strictly) again: skipped. The first kRemembered distinct
+  // normals are remembered.
+  constexpr std::size_t kRemembered = 16;
+  std::size_t seen[kRemembered];
+  std::size_t n_seen = 0;
   for (std::size_t k = 0; k < accepted.size(); ++k) {
     const D3& u = accepted[k].normal;
+    bool repeated = false;
+    for (std::size_t m = 0; m < n_seen && !repeated; ++m)
+      repeated = same_bits(accepted[seen[m]].normal, u);
+    if (repeated) continue;
+    if (n_seen < kRemembered) seen[n_seen++] = k;
     const D3 c = cross3(n, u);
     const double angle = std::atan2(std::sqrt(dot3(c, c)), dot3(n, u));
     if (angle < best) {

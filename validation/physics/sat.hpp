@@ -26,7 +26,10 @@
 /// of it (a stable face contact), while an exact detector takes the least overlap.
 ///
 /// Cost: (faces_a + faces_b + edges_a x edges_b) x (vertices_a + vertices_b) products;
-/// two boxes: 15 axes x 16 vertices. Pairs beyond SatSettings::max_work are not tested
+/// two boxes: 15 axes x 16 vertices. An axis whose direction repeats an earlier one's bit
+/// for bit (two boxes turned alike: B's faces are A's, and each edge cross one of them)
+/// copies that axis's figures instead of projecting again (the same figures: the same
+/// arithmetic). Pairs beyond SatSettings::max_work are not tested
 /// (sat_min_translation returns tested = false) and the caller falls back to FCL.
 
 #include <array>
@@ -82,9 +85,14 @@ SatResult sat_min_translation(const HullFeatures& a, const Pose& pa, const HullF
                               const SatSettings& settings = SatSettings{});
 
 /// A hull placed in the world frame (place_hull): its vertices (m), unit face normals and
-/// unit edge directions, as sat_min_translation places them.
+/// unit edge directions, as sat_min_translation places them. The vertices are kept one
+/// coordinate a vector (vertex k is (x[k], y[k], z[k])), padded to an even count by
+/// repeating the last vertex (a repeated vertex moves no projection's extremes), so that a
+/// projection takes two vertices an instruction.
 struct PlacedHull {
-  std::vector<std::array<double, 3>> vertices, faces, edges;
+  std::vector<double> x, y, z;  ///< vertex coordinates (m, world), padded (see above)
+  std::size_t vertex_count = 0;  ///< the hull's vertices, before padding
+  std::vector<std::array<double, 3>> faces, edges;
 };
 
 /// Hull `h` at pose `p` (body to world), written into `out` (its vectors cleared, their
