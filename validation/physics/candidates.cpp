@@ -33,19 +33,27 @@ const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p)
   return t;
 }
 
-CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::vector<Pose>& det) const {
+void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::vector<Pose>& det,
+                                           CheckedFrame& f) const {
   const std::size_t n = model->bodies.size();
   const double slack = tol.geometry_slack_m;
   StopPoll poll(stop);
-  CheckedFrame f;
+  // Every table of f is rebuilt below in the memory it holds (a previous frame's).
   f.rec = &rec;
   f.det = &det;
+  f.truth_pairs.clear();
+  f.extra.clear();
+  f.rows.clear();
+  f.contact_pairs.clear();
+  f.required.clear();
+  CheckedFrame::Work& work = f.work;
   // Candidates: exact posed world AABBs, each grown by half the largest distance any row
   // asks about, through exact_pairs (flat's set in O(n log n + pairs), independent of
   // octocd's broadphases): every pair whose shapes are that close has overlapping grown
   // boxes (the AABB gap is at most the shapes' distance).
   const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
-  std::vector<Aabb> grown(n);
+  std::vector<Aabb>& grown = work.grown;
+  grown.resize(n);
   for (std::size_t i = 0; i < n; ++i)
     grown[i] = expanded(ref->world_aabb(static_cast<std::uint32_t>(i), det[i]),
                         static_cast<float>(0.5 * reach + radius(static_cast<std::uint32_t>(i))));
@@ -94,36 +102,44 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
       hit[i] = inflation(cand[i]) > 0 || ref->intersect(cand[i].a, cand[i].b, det[cand[i].a], det[cand[i].b]) ? 1 : 0;
     });
   {
-    std::vector<Pair> todo;
+    std::vector<Pair>& todo = work.todo;
+    todo.clear();
     for (std::size_t i = 0; i < cand.size(); ++i)
       if (hit[i]) todo.push_back(cand[i]);
     std::vector<Pair>& all = f.truth_pairs;
     // Both sorted, so their union is (a pair repeated in contact_pairs is kept once).
     std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
     all.erase(std::unique(all.begin(), all.end()), all.end());
-    f.truth = FrameArray<ContactTruth>(all.size(), threads);
+    f.truth.assign(all.size(), threads);
     // Row 3's figures of each pair's groups of rows come from the same pass, while the
     // pair's SAT axes are at hand: groups listed per truth entry (counting sort).
     const std::size_t n_groups = rows.size();
-    f.pair_fig = FrameArray<PairFigures>(n_groups, threads);
-    f.row_fig = FrameArray<RowFigures>(rec.contacts.size(), threads);
-    if (bodies.contact_geometry == ContactGeometry::Aabb) f.aabb_ref = FrameArray<ReferenceNormal>(n_groups, threads);
-    std::vector<std::uint32_t> group_begin(all.size() + 1, 0), group_list(n_groups);
+    f.pair_fig.assign(n_groups, threads);
+    f.row_fig.assign(rec.contacts.size(), threads);
+    f.aabb_ref.assign(bodies.contact_geometry == ContactGeometry::Aabb ? n_groups : 0, threads);
+    std::vector<std::uint32_t>& group_begin = work.group_begin;
+    std::vector<std::uint32_t>& group_list = work.group_list;
+    group_begin.assign(all.size() + 1, 0);
+    group_list.assign(n_groups, 0);
     {
-      std::vector<std::size_t> group_truth(n_groups);
+      std::vector<std::size_t>& group_truth = work.group_truth;
+      group_truth.assign(n_groups, 0);
       std::size_t cursor = 0;
       for (std::size_t g = 0; g < n_groups; ++g) {
         group_truth[g] = f.find_after(rows[g].p, cursor);
         if (group_truth[g] < all.size()) ++group_begin[group_truth[g] + 1];
       }
       for (std::size_t i = 0; i < all.size(); ++i) group_begin[i + 1] += group_begin[i];
-      std::vector<std::uint32_t> fill(group_begin.begin(), group_begin.end() - 1);
+      std::vector<std::uint32_t>& fill = work.fill;
+      fill.assign(group_begin.begin(), group_begin.end() - 1);
       for (std::size_t g = 0; g < n_groups; ++g)
         if (group_truth[g] < all.size()) group_list[fill[group_truth[g]]++] = static_cast<std::uint32_t>(g);
     }
     // Per worker: the placed hulls and accepted axes of its last pair (pairs in a chunk
     // share their first body, placed once).
-    std::vector<PairReferenceScratch> scratch(loop_threads(threads, all.size()));
+    std::vector<PairReferenceScratch>& scratch = work.scratch;
+    scratch.resize(loop_threads(threads, all.size()));
+    for (PairReferenceScratch& sc : scratch) sc.placed_a = 0xffffffffu;  // no hull placed at these poses yet
     parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned worker) {
       PairReferenceScratch& s = scratch[worker];
       const Pair p = all[i];
@@ -148,7 +164,6 @@ CheckedFrame PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, cons
     }
     if (close) required.push_back(p);
   }
-  return f;
 }
 
 // ---- Row 1: broadphase completeness ------------------------------------------------

@@ -263,6 +263,14 @@ struct CheckedFrame {
   FrameArray<PairFigures> pair_fig;      ///< per group of rows
   FrameArray<ReferenceNormal> aabb_ref;  ///< per group: box-box on the world AABBs (Aabb geometry only)
   FrameArray<RowFigures> row_fig;        ///< per record row
+  /// checked_frame's own work space (its contents serve one frame's pass only).
+  struct Work {
+    std::vector<Aabb> grown;         ///< per body: its exact posed box grown by the reach
+    std::vector<Pair> todo;          ///< the candidates that intersect
+    std::vector<std::uint32_t> group_begin, group_list, fill;  ///< groups of rows per truth entry
+    std::vector<std::size_t> group_truth;                      ///< per group of rows: its truth entry
+    std::vector<PairReferenceScratch> scratch;                 ///< per worker
+  } work;
 };
 
 /// A physics row's sums (PhysicsValidators::Impl::row_sums): one Tally per cause of its
@@ -389,7 +397,13 @@ struct PhysicsValidators::Impl {
     if (!f.checked) return nullptr;
     if (!f.geometry) {
       ++checked_frames;
-      f.geometry.emplace(checked_frame(f.rec, f.det));
+      if (spare_frame) {
+        f.geometry = std::move(spare_frame);
+        spare_frame.reset();
+      } else {
+        f.geometry.emplace();
+      }
+      checked_frame(f.rec, f.det, *f.geometry);
     }
     return &*f.geometry;
   }
@@ -521,8 +535,14 @@ struct PhysicsValidators::Impl {
 
   // ---- Rows 1-4 (checked frames with poses) --------------------------------------
   /// The frame's candidates, their reference geometry (on `threads` threads) and the
-  /// pairs row 1 requires (candidates.cpp).
-  physics_detail::CheckedFrame checked_frame(const FrameRecord& rec, const std::vector<Pose>& det) const;
+  /// pairs row 1 requires, written into `f` (candidates.cpp): every table of `f` is
+  /// rebuilt for this frame in the memory it already holds (a checked frame's tables are
+  /// kept from frame to frame: spare_frame).
+  void checked_frame(const FrameRecord& rec, const std::vector<Pose>& det, physics_detail::CheckedFrame& f) const;
+  /// The last checked frame's tables, kept for the next one's (checked(), observe()): their
+  /// memory, 0.2-0.3 KB a pair, is allocated and first touched once per judge instead of
+  /// once per frame.
+  std::optional<physics_detail::CheckedFrame> spare_frame;
   /// Pair p's reference geometry, computed into f.truth when missing.
   const physics_detail::ContactTruth& full_truth(physics_detail::CheckedFrame& f, Pair p) const;
   /// full_truth() with the look-up through CheckedFrame::find_after (`cursor` as there).

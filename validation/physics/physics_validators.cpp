@@ -299,6 +299,7 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   }
   PhysicsFrame f{rec, det, checked && poses, std::nullopt};
   s.measure_rows(f);
+  if (f.geometry) s.spare_frame = std::move(f.geometry);  // its tables serve the next checked frame
 }
 
 }  // namespace octocd
