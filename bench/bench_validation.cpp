@@ -19,15 +19,22 @@
 // --lattice instead judges a contact-heavy frame: N boxes (half extent 0.1 m) on a cubic
 // grid of spacing 0.19 m, no gravity, so every box overlaps its 26 neighbours by 1 cm
 // (about 13 contact pairs a body); the engine's first step is recorded (--warmup 0).
+// --same-judge: each repetition judges the record again on the same validators, which
+// judged it once untimed first: a run's frames after its first (the validators keep a
+// checked frame's tables for the next one), where the default times a run's first frame.
 // --json FILE writes the physics verdict of the last repetition (results_json, each row's
 // seconds set to 0) for every size and thread count, one document per line, so that a
 // change meant only for speed can be checked to leave the verdict unchanged (diff). The
 // file is written at the end through octocd/atomic_file.hpp (a temporary beside it renamed
 // over a regular file; a FIFO, device, folder or link there is exit 2 before any work).
 //
+// A bad option value or scene file (missing, unreadable, not a scene, no bodies) is exit 2
+// with an error naming it and what is allowed; the default scene is the source tree's, so
+// a binary run away from it needs SCENE.json (or --lattice).
+//
 // Usage: bench_validation [SCENE.json] [--bodies 20000,100000] [--reps 5] [--warmup 20]
 //                         [--only physics,full,pairs] [--rows] [--threads 1,2] [--lattice]
-//                         [--json FILE]
+//                         [--same-judge] [--json FILE]
 #include <thread>
 
 #include <time.h>
@@ -38,6 +45,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -73,20 +81,51 @@ double load_average() {
   return l;
 }
 
-std::vector<long> parse_list(const std::string& s) {
+/// The comma-separated integers of option `option`, each in [lo, hi]; InputError naming the
+/// option, the item and the allowed range otherwise.
+std::vector<long> parse_list(const std::string& option, const std::string& s, long lo, long hi) {
   std::vector<long> out;
   std::stringstream ss(s);
   std::string item;
-  while (std::getline(ss, item, ',')) out.push_back(std::stol(item));
+  while (std::getline(ss, item, ',')) {
+    std::size_t used = 0;
+    long v = 0;
+    try {
+      v = std::stol(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != item.size() || v < lo || v > hi)
+      throw octocd::InputError(fmt::format("{}: '{}' in '{}'; allowed: a comma-separated list of integers in [{}, {}]",
+                                           option, item, s, lo, hi));
+    out.push_back(v);
+  }
+  if (out.empty())
+    throw octocd::InputError(fmt::format("{}: empty; allowed: a comma-separated list of integers in [{}, {}]", option,
+                                         lo, hi));
   return out;
 }
 
-/// The scene scaled to about `bodies` bodies at its own density.
+/// The scene at `path` scaled to about `bodies` bodies at its own density. The file is
+/// read and checked as `octocd run` reads a scene (load_scene: InputError naming the
+/// file, the key and the allowed range); a scene without groups of bodies is InputError.
 octocd::Scene scaled_scene(const std::string& path, long bodies) {
-  std::ifstream in(path);
-  nlohmann::json j = nlohmann::json::parse(in);
+  try {
+    octocd::load_scene(path);  // every check of a scene file, with its own errors
+  } catch (const octocd::InputError& e) {
+    throw octocd::InputError(fmt::format("{} (the scene modes scale a scene file: give SCENE.json, by default "
+                                         "datasets/scenes/boxes-uniform-100k.json of the source tree, or --lattice)",
+                                         e.what()));
+  }
+  nlohmann::json j = nlohmann::json::parse(
+      octocd::read_input_file(path, "SCENE", "a readable JSON scene file", octocd::limits::kMaxSceneFileBytes));
   long n0 = 0;
-  for (const auto& g : j["groups"]) n0 += g["count"].get<long>();
+  if (j.contains("groups"))
+    for (const auto& g : j["groups"]) n0 += g.value("count", 0L);
+  if (n0 <= 0)
+    throw octocd::InputError(fmt::format("SCENE: {}: groups: no bodies to scale; allowed: a scene whose groups "
+                                         "give their counts (e.g. datasets/scenes/boxes-uniform-100k.json), or --lattice",
+                                         path));
   const double ratio = double(bodies) / double(n0), s = std::cbrt(ratio);
   auto scale3 = [&](nlohmann::json& v) {
     for (auto& c : v) c = c.get<double>() * s;
@@ -137,13 +176,29 @@ Stats stats(std::vector<double> v) {
 
 }  // namespace
 
+int bench(int argc, char** argv);
+
 int main(int argc, char** argv) {
+  // A bad option or scene is exit 2 with its error; any other failure exit 1.
+  try {
+    return bench(argc, argv);
+  } catch (const octocd::InputError& e) {
+    std::fprintf(stderr, "bench_validation: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_validation: %s\n", e.what());
+    return 1;
+  }
+}
+
+int bench(int argc, char** argv) {
   std::string scene_path = std::string(OCTOCD_SOURCE_DIR) + "/datasets/scenes/boxes-uniform-100k.json";
   std::vector<long> sizes{20000, 100000};
   int reps = 5, warmup = 20;
   std::string only = "physics,full,pairs";
   bool rows_shown = false;  // --rows: each row's own seconds on the last repetition
   bool lattice = false;     // --lattice: the contact-heavy box lattice instead of SCENE
+  bool same_judge = false;  // --same-judge: the repetitions on one set of validators (see time_observe)
   std::vector<long> thread_counts{0};
   std::string json_path;    // --json FILE: the physics verdicts, one JSON document a line
   for (int i = 1; i < argc; ++i) {
@@ -155,18 +210,19 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
-    if (a == "--bodies") sizes = parse_list(next());
-    else if (a == "--reps") reps = std::stoi(next());
-    else if (a == "--warmup") warmup = std::stoi(next());
+    if (a == "--bodies") sizes = parse_list(a, next(), 1, long(octocd::limits::kMaxGeneratedBodies));
+    else if (a == "--reps") reps = int(parse_list(a, next(), 1, 1000000).at(0));
+    else if (a == "--warmup") warmup = int(parse_list(a, next(), 0, 1000000).at(0));
     else if (a == "--only") only = next();
     else if (a == "--rows") rows_shown = true;
     else if (a == "--lattice") lattice = true;
-    else if (a == "--threads") thread_counts = parse_list(next());
+    else if (a == "--same-judge") same_judge = true;
+    else if (a == "--threads") thread_counts = parse_list(a, next(), 0, 4096);
     else if (a == "--json") json_path = next();
     else if (!a.empty() && a[0] != '-') scene_path = a;
     else {
       std::fprintf(stderr, "usage: bench_validation [SCENE.json] [--bodies N,..] [--reps R] [--warmup W] [--only ...] "
-                           "[--rows] [--threads T,..] [--lattice] [--json FILE]\n");
+                           "[--rows] [--threads T,..] [--lattice] [--same-judge] [--json FILE]\n");
       return 2;
     }
   }
@@ -216,10 +272,28 @@ int main(int argc, char** argv) {
     vo.threads = int(th);
     // Times `reps` observations of `rec` by fresh validators from `make`; after the last one
     // prints the slow rows (rows_shown) and, with `verdict` and --json, appends the verdict.
+    // With --same-judge the repetitions judge `rec` again on one set of validators that
+    // judged it once untimed (a run's frames after its first), and the verdict written is
+    // that first judgement's (a fresh set's).
     auto time_observe = [&](const char* what, auto make, bool verdict) {
       std::vector<double> t;
+      auto write_verdict = [&](const octocd::FrameValidators& v) {
+        if (!verdict || json_path.empty()) return;
+        std::vector<octocd::ValidationResult> results = v.results();
+        for (octocd::ValidationResult& x : results) x.seconds = 0;  // the verdict only
+        json_text += octocd::results_json(results, octocd::RunName{scene.name, ""},
+                                          nullptr, {{"threads", th}}).dump() + "\n";
+      };
+      std::unique_ptr<octocd::FrameValidators> kept;
+      if (same_judge) {
+        kept.reset(new octocd::FrameValidators(make()));
+        kept->observe(rec, true);
+        write_verdict(*kept);
+      }
       for (int r = 0; r < reps; ++r) {
-        octocd::FrameValidators v = make();
+        std::unique_ptr<octocd::FrameValidators> fresh;
+        if (!same_judge) fresh.reset(new octocd::FrameValidators(make()));
+        octocd::FrameValidators& v = same_judge ? *kept : *fresh;
         const double c0 = cpu_seconds();
         const auto t0 = Clock::now();
         v.observe(rec, true);
@@ -229,12 +303,7 @@ int main(int argc, char** argv) {
           for (const octocd::ValidationResult& x : v.results())
             if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
         }
-        if (r + 1 == reps && verdict && !json_path.empty()) {
-          std::vector<octocd::ValidationResult> results = v.results();
-          for (octocd::ValidationResult& x : results) x.seconds = 0;  // the verdict only
-          json_text += octocd::results_json(results, octocd::RunName{scene.name, ""},
-                                            nullptr, {{"threads", th}}).dump() + "\n";
-        }
+        if (r + 1 == reps && !same_judge) write_verdict(v);
       }
       row(what, t);
     };

@@ -230,6 +230,31 @@ TEST_F(HostileFiles, BenchValidationWritesItsJsonAsEveryOutput) {
     EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos) << e.path();
 }
 
+// bench_validation's scene modes (no --lattice) scale a scene file. Before, a scene that
+// was not there (the default one, the source tree's, seen from a binary run elsewhere)
+// ended on an uncaught JSON parse error (abort); now it is exit 2 naming the file and what
+// the mode needs, as is a file that is not a scene and a bad option value; a scene that
+// is there is judged.
+TEST_F(HostileFiles, BenchValidationSceneModesRunOrSayWhatTheyNeed) {
+  const std::string tool = OCTOCD_TEST_BENCH_VALIDATION;
+  const std::string args = " --bodies 200 --reps 1 --warmup 1 --only physics";
+  Result r = run("timeout -k 5 60 " + tool + " " + at("missing.json") + args);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(at("missing.json")), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--lattice"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("terminate"), std::string::npos) << r.output;
+  spit(at("not-json.json"), "{ not json");
+  r = run("timeout -k 5 60 " + tool + " " + at("not-json.json") + args);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find(at("not-json.json")), std::string::npos) << r.output;
+  r = run("timeout -k 5 60 " + tool + " --bodies many --lattice");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("--bodies: 'many'"), std::string::npos) << r.output;
+  r = run("timeout -k 5 120 " + tool + " " + source_dir() + "/datasets/scenes/boxes-uniform-10k.json" + args);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("physics "), std::string::npos) << r.output;
+}
+
 // Before: --expect and --merge opened their files with std::ifstream: a FIFO blocked
 // forever (no writer) and /dev/zero was read until memory ran out. Now each input is
 // opened without blocking and checked on its descriptor: exit 2 naming the option, the
