@@ -83,11 +83,40 @@ std::string limit_message(std::uint64_t count, bool tests, std::uint64_t limit, 
                      bodies, count, limit, pairs, pairs);
 }
 
+/// Where each cell's entries lie in one level's sorted entries, for the cells of a dense
+/// span (counting_sort_entries): cell c's are [begin(c), end(c)), found in O(1) where a
+/// binary search over the entries costs log2(entries) comparisons of three coordinates.
+struct DenseCells {
+  bool dense = false;  ///< false: no index (the entries were sorted by comparisons)
+  Cell lo{};
+  std::array<std::uint64_t, 3> span{};
+  std::vector<std::size_t> end;  ///< per cell rank: one past its last entry
+  /// The cell's rank in the span, or false when it lies outside.
+  bool rank(const Cell& c, std::uint64_t& r) const {
+    for (int k = 0; k < 3; ++k)
+      if (c[k] < lo[k] || std::uint64_t(c[k] - lo[k]) >= span[k]) return false;
+    r = (std::uint64_t(c[0] - lo[0]) * span[1] + std::uint64_t(c[1] - lo[1])) * span[2] + std::uint64_t(c[2] - lo[2]);
+    return true;
+  }
+  /// [first, last) of cell c's entries (first == last: none).
+  void range(const Cell& c, std::size_t& first, std::size_t& last) const {
+    std::uint64_t r = 0;
+    if (!rank(c, r)) {
+      first = last = 0;
+      return;
+    }
+    first = r == 0 ? 0 : end[r - 1];
+    last = end[r];
+  }
+};
+
 /// Sorts one level's entries into entry_less's order when the cells they span number at
 /// most 4 x the entries + 1024: a stable counting sort on the cell's lexicographic rank
 /// (the entries are appended in box order, and a box is in a cell once, so equal cells keep
-/// their boxes ascending). False (nothing done) when the cells are too many.
-bool counting_sort_entries(std::vector<Entry>& e) {
+/// their boxes ascending), leaving each cell's entries located in `index`. False (nothing
+/// done, `index` not dense) when the cells are too many.
+bool counting_sort_entries(std::vector<Entry>& e, DenseCells& index) {
+  index.dense = false;
   if (e.size() < 2) return true;
   Cell lo = e[0].cell, hi = e[0].cell;
   for (const Entry& x : e)
@@ -103,15 +132,24 @@ bool counting_sort_entries(std::vector<Entry>& e) {
     if (span[k] > limit || cells > limit / span[k]) return false;
     cells *= span[k];
   }
-  auto rank = [&](const Cell& c) {
-    return (std::uint64_t(c[0] - lo[0]) * span[1] + std::uint64_t(c[1] - lo[1])) * span[2] + std::uint64_t(c[2] - lo[2]);
-  };
-  std::vector<std::size_t> start(cells + 1, 0);
-  for (const Entry& x : e) ++start[rank(x.cell) + 1];
+  index.lo = lo;
+  index.span = span;
+  std::uint64_t r = 0;
+  std::vector<std::size_t>& start = index.end;
+  start.assign(cells + 1, 0);
+  for (const Entry& x : e) {
+    index.rank(x.cell, r);
+    ++start[r + 1];
+  }
   for (std::uint64_t c = 0; c < cells; ++c) start[c + 1] += start[c];
   std::vector<Entry> out(e.size());
-  for (const Entry& x : e) out[start[rank(x.cell)]++] = x;
+  for (const Entry& x : e) {
+    index.rank(x.cell, r);
+    out[start[r]++] = x;
+  }
+  // start[r] is now one past cell r's last entry.
   e.swap(out);
+  index.dense = true;
   return true;
 }
 
@@ -226,8 +264,9 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
         for (std::int64_t z = c0c[2]; z <= c1c[2]; ++z) entries[l].push_back({{x, y, z}, std::uint32_t(i)});
   }
   const unsigned threads = thread_count(settings, n);
-  for (auto& e : entries)
-    if (!counting_sort_entries(e)) parallel_sort(e, threads, entry_less);
+  std::vector<DenseCells> cell_index(levels);
+  for (int l = 0; l < levels; ++l)
+    if (!counting_sort_entries(entries[l], cell_index[l])) parallel_sort(entries[l], threads, entry_less);
 
   // The cell of the lowest corner of two hulls' intersection, on `l`.
   auto reference_cell = [&](std::uint32_t a, std::uint32_t b, int l) {
@@ -271,17 +310,25 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
   };
   auto cell_less = [](const Entry& en, const Cell& key) { return en.cell < key; };
   // Step 2's lookups of box a: visit(l, cell, first, last) for every cell of every coarser
-  // used level in a's range, [first, last) the entries of that cell.
+  // used level in a's range, [first, last) the entries of that cell (through the level's
+  // dense index where its entries were counting-sorted, else a binary search).
   auto each_coarser_cell = [&](std::uint32_t a, auto&& visit) {
     for (int l = level[a] + 1; l < levels; ++l) {
       if (!used[l]) continue;
       const std::vector<Entry>& e = entries[l];
+      const DenseCells& index = cell_index[l];
       Cell lo, hi;
       cell_range(a, l, lo, hi);
       for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
         for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
           for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
             const Cell c{x, y, z};
+            if (index.dense) {
+              std::size_t f = 0, t = 0;
+              index.range(c, f, t);
+              visit(l, c, e.begin() + std::ptrdiff_t(f), e.begin() + std::ptrdiff_t(t));
+              continue;
+            }
             const auto first = std::lower_bound(e.begin(), e.end(), c, cell_less);
             auto last = first;
             while (last != e.end() && last->cell == c) ++last;

@@ -71,7 +71,9 @@ class PairLimitError : public InputError {
 /// lives on the lowest level whose side is at least its largest side, in 8 cells at most
 /// (up to 27 where rounding of the cell index lands a side exactly on a cell border).
 /// Pairs of one level meet in a shared cell; a box meets the boxes of coarser levels by
-/// looking up its own range of their cells. Every candidate is tested with `overlaps`
+/// looking up its own range of their cells (in O(1) through a dense table of the level's
+/// cells where they span at most 4 x its entries + 1,024 cells, else by binary search).
+/// Every candidate is tested with `overlaps`
 /// itself and reported only from the one cell holding the lowest corner of the two hulls'
 /// intersection (cell indices are floor((x - origin) / side), monotone in x, so that
 /// cell lies in both boxes' ranges). A box with a NaN coordinate overlaps nothing under
@@ -80,7 +82,8 @@ class PairLimitError : public InputError {
 ///
 /// Cost: O(n log n) for the grid plus the candidates that share a cell (for bodies of
 /// similar size spread through a scene, a few per body) plus n x the unbounded boxes;
-/// memory: 8 cell entries per box (32 bytes each) plus the pairs (8 bytes each). Many
+/// memory: 8 cell entries per box (32 bytes each), the dense tables (8 bytes a cell, at
+/// most 4 x the entries + 1,025 cells a level) plus the pairs (8 bytes each). Many
 /// boxes crowded into one cell (all coincident) make it quadratic, as their pairs are;
 /// ExactPairsSettings::max_pairs_per_body refuses them before that work (PairLimitError).
 void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings = {});
