@@ -79,6 +79,15 @@ struct Run {
 };
 
 
+/// Work space of one island's run (AppliedStateJudge::Impl::run), kept per thread.
+struct RunScratch {
+  std::vector<F3> xf, vf, dxf_sum, dvf_sum;
+  std::vector<D3> scale_x, scale_v, dx_sum, dv_sum;
+  std::vector<double> coord_max, vel_max, run_v;
+  std::vector<float> w;
+  std::vector<std::uint32_t> count;
+};
+
 }  // namespace
 
 struct AppliedStateJudge::Impl {
@@ -149,10 +158,26 @@ void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8
   r.v_tol.resize(nl);
   r.clamped.assign(nl, 0);
   r.count0.assign(nl, 0);
-  std::vector<F3> xf(nl), vf(nl);
-  std::vector<D3> scale_x(nl), scale_v(nl);
-  std::vector<double> coord_max(nl, 0.0), vel_max(nl, 0.0), run_v(nl, 0.0);
-  std::vector<float> w(nl);
+  // The island's work space, kept per thread: most islands are one body, and 13 vectors
+  // allocated and freed for each were most of a sparse frame's malloc time. Each vector is
+  // set to what a fresh one held (nl value-initialised elements).
+  thread_local RunScratch scratch;
+  std::vector<F3>& xf = scratch.xf;
+  std::vector<F3>& vf = scratch.vf;
+  std::vector<D3>& scale_x = scratch.scale_x;
+  std::vector<D3>& scale_v = scratch.scale_v;
+  std::vector<double>& coord_max = scratch.coord_max;
+  std::vector<double>& vel_max = scratch.vel_max;
+  std::vector<double>& run_v = scratch.run_v;
+  std::vector<float>& w = scratch.w;
+  xf.assign(nl, F3{});
+  vf.assign(nl, F3{});
+  scale_x.assign(nl, D3{});
+  scale_v.assign(nl, D3{});
+  coord_max.assign(nl, 0.0);
+  vel_max.assign(nl, 0.0);
+  run_v.assign(nl, 0.0);
+  w.assign(nl, 0.0f);
   for (std::size_t l = 0; l < nl; ++l) {
     const std::uint32_t i = is.local[l];
     w[l] = m.initial.w[i];
@@ -168,9 +193,16 @@ void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8
   }
 
   const std::size_t nc = is.contacts.size();
-  std::vector<D3> dx_sum(nl), dv_sum(nl);
-  std::vector<F3> dxf_sum(nl), dvf_sum(nl);
-  std::vector<std::uint32_t> count(nl);
+  std::vector<D3>& dx_sum = scratch.dx_sum;
+  std::vector<D3>& dv_sum = scratch.dv_sum;
+  std::vector<F3>& dxf_sum = scratch.dxf_sum;
+  std::vector<F3>& dvf_sum = scratch.dvf_sum;
+  std::vector<std::uint32_t>& count = scratch.count;
+  dx_sum.assign(nl, D3{});
+  dv_sum.assign(nl, D3{});
+  dxf_sum.assign(nl, F3{});
+  dvf_sum.assign(nl, F3{});
+  count.assign(nl, 0);
   std::size_t next = 0;  // index of the next near-tie in the trace
   // A near-tie: `allowed` outcomes are consistent with the double value; one outcome
   // allowed is no branch. The outcome is the forced one, else the float32 proposal when
