@@ -40,26 +40,25 @@ struct Loop {
   std::mutex error_mutex;
   std::exception_ptr error;
 
-  /// Claims and runs chunks until none is left or the loop is cancelled.
+  /// Claims and runs chunks until none is left or the loop is cancelled. An exception of
+  /// the body (or of the stop poll) is kept for the caller and cancels the loop.
   void work(unsigned worker, const std::function<bool()>* stop, bool& stopped) {
-    for (;;) {
-      if (cancel.load(std::memory_order_relaxed)) return;
-      if (stop && *stop && (*stop)()) {
-        stopped = true;
-        cancel.store(true, std::memory_order_relaxed);
-        return;
+    try {
+      for (;;) {
+        if (cancel.load(std::memory_order_relaxed)) return;
+        if (stop && *stop && (*stop)()) {
+          stopped = true;
+          cancel.store(true, std::memory_order_relaxed);
+          return;
+        }
+        const std::size_t first = next.fetch_add(chunk, std::memory_order_relaxed);
+        if (first >= n) return;
+        (*body)(first, std::min(n, first + chunk), worker);
       }
-      const std::size_t first = next.fetch_add(chunk, std::memory_order_relaxed);
-      if (first >= n) return;
-      const std::size_t last = std::min(n, first + chunk);
-      try {
-        (*body)(first, last, worker);
-      } catch (...) {
-        const std::lock_guard<std::mutex> lock(error_mutex);
-        if (!error) error = std::current_exception();
-        cancel.store(true, std::memory_order_relaxed);
-        return;
-      }
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+      cancel.store(true, std::memory_order_relaxed);
     }
   }
 };

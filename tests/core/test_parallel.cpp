@@ -99,6 +99,21 @@ TEST(Parallel, AStopSkipsTheItemsNotStarted) {
   }
 }
 
+TEST(Parallel, AStopPollThatThrowsIsRethrownAfterTheWorkersLeft) {
+  for (int threads : {1, 2}) {
+    std::atomic<std::size_t> ran{0};
+    LoopOptions o = with(threads, 8);
+    o.stop = [&]() -> bool {
+      if (ran.load() >= 100) throw std::runtime_error("stop poll");
+      return false;
+    };
+    EXPECT_THROW(octocd::parallel_for(100000, o, [&](std::size_t, unsigned) { ++ran; }), std::runtime_error);
+    std::atomic<std::size_t> again{0};
+    EXPECT_TRUE(octocd::parallel_for(1000, with(threads), [&](std::size_t, unsigned) { ++again; }));
+    EXPECT_EQ(again.load(), 1000u);
+  }
+}
+
 TEST(Parallel, ALoopInsideAnItemRunsSeriallyOnItsThread) {
   std::atomic<int> wrong{0};
   std::atomic<std::size_t> inner{0};
