@@ -2,7 +2,6 @@
 // the divergence sweep (cli/predict.hpp, docs/predictability.md).
 #include "predict.hpp"
 
-#include <omp.h>
 
 #include <algorithm>
 #include <chrono>
@@ -48,19 +47,6 @@ class TemporaryTraces {
   std::vector<std::string> paths_;
 };
 
-/// Sets the OpenMP thread count for its lifetime (0: leaves it), then restores it.
-class OmpThreads {
- public:
-  explicit OmpThreads(int n) : saved_(omp_get_max_threads()) {
-    if (n > 0) omp_set_num_threads(n);
-  }
-  OmpThreads(const OmpThreads&) = delete;
-  OmpThreads& operator=(const OmpThreads&) = delete;
-  ~OmpThreads() { omp_set_num_threads(saved_); }
-
- private:
-  int saved_;
-};
 
 /// The unit of `compare`'s quantity (its --tolerance help).
 const char* quantity_unit(const std::string& q) {
@@ -202,14 +188,15 @@ std::vector<ValidationResult> determinism_rows(const DeterminismOptions& o) {
   const EngineInfo& info = engine_info(o.engine, "--engine");
   const int threads = o.threads > 0 ? o.threads : std::max(2, static_cast<int>(std::thread::hardware_concurrency()));
   TemporaryTraces tmp;
-  // One run into a temporary trace (at `n` OpenMP threads, 0: as set), its wall seconds.
+  // One run into a temporary trace (at `n` threads through the engine's thread setting,
+  // 0: as the caller's settings say), its wall seconds.
   const auto run = [&](const std::string& engine, int n, const std::string& what) {
     const std::string& path = tmp.make("determinism-" + engine + "-" + what);
     const auto t0 = Clock::now();
-    {
-      const OmpThreads at(n);
-      record_trace(engine, o.model, o.settings, o.frames, path);
-    }
+    EngineSettingItems settings = o.settings;
+    const std::string& key = engine_info(engine, "--engine").threads_setting;
+    if (n > 0 && !key.empty()) settings[engine].push_back(fmt::format("{}={}", key, n));
+    record_trace(engine, o.model, settings, o.frames, path);
     return std::make_pair(path, std::chrono::duration<double>(Clock::now() - t0).count());
   };
   const auto compare = [](const std::string& a, const std::string& b) {
@@ -221,13 +208,14 @@ std::vector<ValidationResult> determinism_rows(const DeterminismOptions& o) {
     return out;
   };
   std::vector<ValidationResult> rows;
-  const int n = info.openmp_threads ? threads : 0;
-  const std::string at_n = info.openmp_threads ? fmt::format(" at {} threads", threads) : "";
+  const bool threaded = !info.threads_setting.empty();
+  const int n = threaded ? threads : 0;
+  const std::string at_n = threaded ? fmt::format(" at {} threads", threads) : "";
   const auto [first, s1] = run(o.engine, n, "1");
   const auto [second, s2] = run(o.engine, n, "2");
   rows.push_back(comparison_row("determinism-runs", "run 1" + at_n, "run 2" + at_n, compare(first, second), o.frames,
                                 s1 + s2));
-  if (info.openmp_threads) {
+  if (threaded) {
     const auto [serial, s3] = run(o.engine, 1, "serial");
     rows.push_back(comparison_row("determinism-threads", fmt::format("run 1 at {} threads", threads), "a run at 1 thread",
                                   compare(first, serial), o.frames, s3));
@@ -237,7 +225,7 @@ std::vector<ValidationResult> determinism_rows(const DeterminismOptions& o) {
         info.device ? fmt::format("{} steps on the GPU; no host thread count to vary", o.engine)
         : !info.command.empty()
             ? fmt::format("{} is a process engine (its own program); octocd sets no thread count for it", o.engine)
-            : fmt::format("{} steps on one host thread (no OpenMP); no thread count to vary", o.engine)));
+            : fmt::format("{} steps on one host thread (no thread setting); no thread count to vary", o.engine)));
   }
   if (!info.device_twin.empty()) {
     const std::string& other = info.device_twin;
@@ -246,7 +234,7 @@ std::vector<ValidationResult> determinism_rows(const DeterminismOptions& o) {
     if (!why.empty()) {
       rows.push_back(not_applicable("determinism-cpu-cuda", fmt::format("skipped: {} cannot run here ({})", other, why)));
     } else {
-      const auto [theirs, s4] = run(other, oi.openmp_threads ? threads : 0, "other");
+      const auto [theirs, s4] = run(other, oi.threads_setting.empty() ? 0 : threads, "other");
       rows.push_back(comparison_row("determinism-cpu-cuda", o.engine, other, compare(first, theirs), o.frames, s4));
     }
   } else {

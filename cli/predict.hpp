@@ -34,14 +34,14 @@ struct DeterminismOptions {
   std::shared_ptr<const Model> model;   ///< its scene, as validate built it
   EngineSettingItems settings;          ///< --ENGINE KEY=VALUE items
   int frames = 300;                     ///< steps of every run (>= 1)
-  /// Threads of the threaded runs of an engine with EngineInfo::openmp_threads (>= 2;
-  /// 0: max(2, the hardware's)); the single-threaded run uses 1.
+  /// Threads of the threaded runs of an engine with an EngineInfo::threads_setting (>= 2;
+  /// 0: max(2, the hardware's)), passed as that setting; the single-threaded run uses 1.
   int threads = 0;
 };
 
 /// The determinism rows of `o.engine` on `o.model` (tier Physics, bound 0 = bit for bit):
 /// `determinism-runs` (two runs with the same input), `determinism-threads` (1 against N
-/// OpenMP threads, an engine with EngineInfo::openmp_threads; else n/a with the reason)
+/// threads, an engine with an EngineInfo::threads_setting; else n/a with the reason)
 /// and `determinism-cpu-cuda` (the engine against its EngineInfo::device_twin: octocd's cpu
 /// against cuda; n/a for an engine without one, n/a naming why when the twin cannot run here). Every
 /// comparison is `octocd compare`'s (compare_traces, bit for bit) of two traces written by

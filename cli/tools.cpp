@@ -1,7 +1,6 @@
 // What bench, replay, compare and report share (tools.hpp), and their registration.
 #include "tools.hpp"
 
-#include <omp.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -19,6 +18,7 @@
 
 #include "octocd/cuda_world.hpp"
 #include "octocd/error.hpp"
+#include "octocd/parallel.hpp"
 #include "octocd/shared_files.hpp"
 #include "octocd/version.hpp"
 
@@ -66,7 +66,7 @@ nlohmann::json machine_description() {
   m["hostname"] = host;
   m["cpu"] = cpu_description();
   m["threads"] = static_cast<long>(sysconf(_SC_NPROCESSORS_ONLN));
-  m["omp_threads"] = omp_get_max_threads();  // the CPU engine's midphase team
+  m["omp_threads"] = default_threads();  // the CPU engine's threads (octocd/parallel.hpp)
   m["load_average"] = load_average();
   m["gpu"] = cuda_device_status();
   std::string driver;

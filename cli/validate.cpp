@@ -1073,7 +1073,7 @@ Command add_validate_command(CLI::App& app) {
       ->expected(1, -1);
   val_cmd->add_option("--threads", val.threads,
                       "Threads judging one frame's heavy loops (reference geometry per pair, the reference pair set); "
-                      "0 = the hardware's (default), 1 = serial; a scene's frame is judged while the engine runs the "
+                      "0 = OMP_NUM_THREADS when set, else the CPUs this process may run on (default), 1 = serial; a scene's frame is judged while the engine runs the "
                       "next (not with --trace, not with 1); verdicts do not depend on it. With --determinism: the N threads of the "
                       "threaded runs (>= 2; 0: max(2, the hardware's))")
       ->check(CLI::Range(0, 4096))

@@ -70,7 +70,7 @@
 ///    The answer never depends on this history; `cell_candidates` does (below).
 ///
 /// Threads (broadphase_octree_tree.cpp): from kParallelMinBodies bodies on, step 1 and the
-/// queries of step 4 run on omp_get_max_threads() OpenMP threads (cells in dynamic chunks;
+/// queries of step 4 run on the worker team (octocd/parallel.hpp, current_threads(); cells in chunks;
 /// the overflow tests in chunks of in-tree slots), each appending to its own pair list; the
 /// lists are joined before the sort of step 5, so pairs and candidates do not depend on the
 /// thread count.

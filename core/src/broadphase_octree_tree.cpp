@@ -14,11 +14,8 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
-#if defined(_OPENMP)
-#include <omp.h>
-#endif
-
 #include "broadphase_detail.hpp"
+#include "octocd/parallel.hpp"
 
 namespace octocd::detail {
 
@@ -38,16 +35,10 @@ constexpr std::uint32_t kCountCap = 1u << (32 - kSlotBits);
 constexpr std::size_t kParallelMinBodies = 4096;
 /// In-tree slots per task of the overflow tests when they run on several threads.
 constexpr std::uint32_t kOverflowChunk = 4096;
-
-// max_threads(): the OpenMP threads the query may use (omp_get_max_threads; 1 without OpenMP).
-// thread_num(): the calling thread's number in the current parallel region (0 outside one).
-#if defined(_OPENMP)
-inline int max_threads() { return omp_get_max_threads(); }
-inline int thread_num() { return omp_get_thread_num(); }
-#else
-inline int max_threads() { return 1; }
-inline int thread_num() { return 0; }
-#endif
+/// Occupied cells per task of the cell queries when they run on several threads.
+constexpr std::size_t kCellChunk = 256;
+/// Bodies per task of the keys (step 1) when they run on several threads.
+constexpr std::size_t kKeyChunk = 1024;
 
 /// The cells of level m whose loose boxes meet q, per axis (loose_query_axis_q); false
 /// when the range is empty on some axis.
@@ -97,7 +88,9 @@ class Tree {
   std::uint64_t find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out) {
     out.clear();
     const std::size_t n = boxes.size();
-    const int threads = n >= kParallelMinBodies ? std::max(1, max_threads()) : 1;
+    LoopOptions by_bodies;
+    by_bodies.min_items = kParallelMinBodies;
+    const int threads = static_cast<int>(loop_threads(n, by_bodies));
     if (workers_.size() < static_cast<std::size_t>(threads)) workers_.resize(static_cast<std::size_t>(threads));
     for (int t = 0; t < threads; ++t) {
       auto& f = workers_[static_cast<std::size_t>(t)].flat;
@@ -114,35 +107,35 @@ class Tree {
       for (std::int64_t c = 0; c < ncells; ++c) candidates += query_cell(static_cast<std::uint32_t>(c), flat, out);
       candidates += query_overflow(0, overflow_begin_, true, out);
     } else {
-      // Each thread appends to its own pair list; the lists are joined, then sorted (the
-      // output does not depend on the thread count or on the schedule).
-      const auto chunks = static_cast<std::int64_t>((overflow_begin_ + kOverflowChunk - 1) / kOverflowChunk);
+      // Each worker appends to its own pair list; the lists are joined, then sorted (the
+      // output does not depend on the thread count or on the schedule). Tasks: blocks of
+      // kCellChunk cells, then (with overflow bodies) the overflow tests in chunks of
+      // in-tree slots, the last task holding the overflow-overflow tests.
+      const std::size_t cell_tasks = (static_cast<std::size_t>(ncells) + kCellChunk - 1) / kCellChunk;
+      const std::size_t chunks = (overflow_begin_ + kOverflowChunk - 1) / kOverflowChunk;
       const bool any_overflow = overflow_end_ > overflow_begin_;
-#if defined(_OPENMP)
-#pragma omp parallel num_threads(threads)
-#endif
-      {
-        Worker& w = workers_[static_cast<std::size_t>(thread_num())];
-        w.pairs.clear();
-        w.candidates = 0;
-#if defined(_OPENMP)
-#pragma omp for schedule(dynamic, 256) nowait
-#endif
-        for (std::int64_t c = 0; c < ncells; ++c) {
-          w.candidates += query_cell(static_cast<std::uint32_t>(c), w.flat, w.pairs);
-        }
-        if (any_overflow) {
-#if defined(_OPENMP)
-#pragma omp for schedule(dynamic, 1) nowait
-#endif
-          for (std::int64_t k = 0; k <= chunks; ++k) {
-            // Task `chunks` (possibly the only one) holds the overflow-overflow tests.
-            const auto lo = static_cast<std::uint32_t>(std::min<std::int64_t>(k * kOverflowChunk, overflow_begin_));
-            const auto hi = static_cast<std::uint32_t>(std::min<std::int64_t>((k + 1) * kOverflowChunk, overflow_begin_));
-            w.candidates += query_overflow(lo, hi, k == chunks, w.pairs);
-          }
-        }
+      const std::size_t tasks = cell_tasks + (any_overflow ? chunks + 1 : 0);
+      for (int t = 0; t < threads; ++t) {
+        workers_[static_cast<std::size_t>(t)].pairs.clear();
+        workers_[static_cast<std::size_t>(t)].candidates = 0;
       }
+      LoopOptions loop;
+      loop.threads = threads;
+      loop.chunk = 1;
+      parallel_for(tasks, loop, [&](std::size_t task, unsigned worker) {
+        Worker& w = workers_[worker];
+        if (task < cell_tasks) {
+          const std::size_t end = std::min(static_cast<std::size_t>(ncells), (task + 1) * kCellChunk);
+          for (std::size_t c = task * kCellChunk; c < end; ++c) {
+            w.candidates += query_cell(static_cast<std::uint32_t>(c), w.flat, w.pairs);
+          }
+          return;
+        }
+        const std::size_t k = task - cell_tasks;
+        const auto lo = static_cast<std::uint32_t>(std::min<std::size_t>(k * kOverflowChunk, overflow_begin_));
+        const auto hi = static_cast<std::uint32_t>(std::min<std::size_t>((k + 1) * kOverflowChunk, overflow_begin_));
+        w.candidates += query_overflow(lo, hi, k == chunks, w.pairs);
+      });
       std::size_t total = 0;
       for (int t = 0; t < threads; ++t) total += workers_[static_cast<std::size_t>(t)].pairs.size();
       out.resize(total);
@@ -193,30 +186,28 @@ class Tree {
       }
       depth_ = loose_auto_depth(min_ext);
     }
-    const auto sn = static_cast<std::int64_t>(n);
-#if defined(_OPENMP)
-#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1)
-#endif
-    for (std::int64_t si = 0; si < sn; ++si) {
-      const auto i = static_cast<std::size_t>(si);
+    LoopOptions loop;
+    loop.threads = threads;
+    loop.chunk = kKeyChunk;
+    parallel_for(n, loop, [&](std::size_t i, unsigned) {
       const Aabb& b = boxes[i];
       if (loose_has_nan(b)) {
         key_[i] = kLooseNoKey;
-        continue;
+        return;
       }
       const Vec3 lo = loose_unit(grid_, b.min);
       const Vec3 hi = loose_unit(grid_, b.max);
       const LoosePlace pl = loose_place_unit(lo, hi, depth_);
       if (pl.level < 0) {
         key_[i] = kLooseOverflowKey;
-        continue;
+        return;
       }
       // = loose_place_key(pl), with tables for the bit spread and the level bases.
       const unsigned l = static_cast<unsigned>(pl.level);
       key_[i] = level_base_[l] + (spread_[pl.ix] | (spread_[pl.iy] << 1) | (spread_[pl.iz] << 2));
       lin_[i] = pl.ix | (pl.iy << l) | (pl.iz << (2 * l));
       qbody_[i] = qbox_of(lo, hi);
-    }
+    });
   }
 
   /// Step 2: order_ = items (key << 32 | body) sorted ascending.

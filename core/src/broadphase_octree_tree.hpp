@@ -52,8 +52,8 @@ inline bool overlaps_nb(const Aabb& a, const Aabb& b) {
 }
 
 /// The loose octree over one call's boxes (steps 1-5). Keeps its buffers and the previous
-/// call's order across calls; runs its own OpenMP threads from 4096 bodies on; not
-/// thread-safe.
+/// call's order across calls; runs on the worker team (octocd/parallel.hpp) from 4096
+/// bodies on; not thread-safe.
 class LooseOctreeTree {
  public:
   /// depth: D_w, or -1 for `auto` (loose_auto_depth of the smallest body extent); domain:

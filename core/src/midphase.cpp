@@ -16,10 +16,15 @@
 #include "octocd/error.hpp"
 #include "octocd/midphase_hd.hpp"
 #include "octocd/midphase_views.hpp"
+#include "octocd/parallel.hpp"
 #include "octocd/stages.hpp"
 
 namespace octocd {
 namespace {
+
+/// Pairs from which confirm_pairs runs on the worker team (octocd/parallel.hpp); fewer
+/// are cheaper on the calling thread than waking a worker.
+constexpr std::size_t kParallelMinPairs = 64;
 
 /// A host octree as the shared header's view.
 hd::OctreeView view(const MeshOctree& t) {
@@ -152,24 +157,38 @@ void confirm_pairs(const Model& model, const BodyState& state, const std::vector
   // Pairs are independent, so they run in parallel; the confirmed flags are stored in
   // pair order, so the result does not depend on the thread count.
   confirmed.assign(pairs.size(), 0);
-  std::uint64_t box_tests = 0, box_pairs = 0, vertex_tests = 0, dynamic_pairs = 0;
-  const std::int64_t np = static_cast<std::int64_t>(pairs.size());
+  const std::size_t np = pairs.size();
   const MidphaseConfig& config = model.scene.midphase;
-  // Few pairs are cheaper on one thread than waking the team.
-#pragma omp parallel for schedule(dynamic, 8) \
-    reduction(+ : box_tests, box_pairs, vertex_tests, dynamic_pairs) if (np >= 64)
-  for (std::int64_t k = 0; k < np; ++k) {
-    const Pair p = pairs[static_cast<std::size_t>(k)];
-    if (state.w[p.a] == 0.0f && state.w[p.b] == 0.0f) continue;  // static-static
-    ++dynamic_pairs;
+  // Per-worker tallies, summed in worker order afterwards (integer sums: the totals do
+  // not depend on which worker tested which pair).
+  struct Tally {
+    std::uint64_t box_tests = 0, box_pairs = 0, vertex_tests = 0, dynamic_pairs = 0;
+    char pad[32];  // one cache line each
+  };
+  LoopOptions loop;
+  loop.min_items = kParallelMinPairs;
+  loop.chunk = 8;
+  std::vector<Tally> tally(loop_threads(np, loop));
+  parallel_for(np, loop, [&](std::size_t k, unsigned worker) {
+    const Pair p = pairs[k];
+    if (state.w[p.a] == 0.0f && state.w[p.b] == 0.0f) return;  // static-static
+    Tally& t = tally[worker];
+    ++t.dynamic_pairs;
     const std::uint32_t sa = model.bodies[p.a].shape, sb = model.bodies[p.b].shape;
     const PlacedShape a{model.shapes[sa].octree.get(), state.x[p.a], boxes[p.a]};
     const PlacedShape b{model.shapes[sb].octree.get(), state.x[p.b], boxes[p.b]};
     MidphaseStats st;
-    confirmed[static_cast<std::size_t>(k)] = confirm_contact(a, b, model.theta(sa, sb), config, st) ? 1 : 0;
-    box_tests += st.box_tests;
-    box_pairs += st.box_pairs;
-    vertex_tests += st.vertex_tests;
+    confirmed[k] = confirm_contact(a, b, model.theta(sa, sb), config, st) ? 1 : 0;
+    t.box_tests += st.box_tests;
+    t.box_pairs += st.box_pairs;
+    t.vertex_tests += st.vertex_tests;
+  });
+  std::uint64_t box_tests = 0, box_pairs = 0, vertex_tests = 0, dynamic_pairs = 0;
+  for (const Tally& t : tally) {
+    box_tests += t.box_tests;
+    box_pairs += t.box_pairs;
+    vertex_tests += t.vertex_tests;
+    dynamic_pairs += t.dynamic_pairs;
   }
   m.dynamic_pairs = dynamic_pairs;
   m.box_tests = box_tests;

@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
+#include "octocd/parallel.hpp"
 #include "octocd/stages.hpp"
 #include "octocd/version.hpp"
 
@@ -38,8 +39,8 @@ World::World(const Scene& scene) : World(scene, make_broadphase(scene.broadphase
 World::World(const Scene& scene, std::unique_ptr<BroadPhase> broadphase)
     : World(build_model(scene), std::move(broadphase)) {}
 
-World::World(std::shared_ptr<const Model> model, std::unique_ptr<BroadPhase> broadphase)
-    : model_(std::move(model)), state_(model_->initial), broadphase_(std::move(broadphase)) {
+World::World(std::shared_ptr<const Model> model, std::unique_ptr<BroadPhase> broadphase, CpuSettings settings)
+    : model_(std::move(model)), state_(model_->initial), broadphase_(std::move(broadphase)), settings_(settings) {
   if (!broadphase_) throw InputError("World: no broadphase given");
   require_translation_only(model_->scene, "cpu");  // design.md section 3: octocd's engines translate only
   aabbs_.resize(state_.size());
@@ -50,6 +51,8 @@ std::string World::device() const { return cpu_description(); }
 
 const FrameMetrics& World::step() {
   const auto t_step = Clock::now();
+  // The stages' loops run on settings_.threads threads (0: the caller's count).
+  const ThreadCount threads(settings_.threads > 0 ? settings_.threads : current_threads());
   const Scene& scene = model_->scene;
   const Model& model = *model_;
   FrameMetrics m;

@@ -4,6 +4,7 @@
 #include "octocd/engines.hpp"
 
 #include <algorithm>
+#include <cstdlib>
 #include <functional>
 #include <string>
 #include <utility>
@@ -61,15 +62,45 @@ EngineInfo octocd_info(const char* name, const char* description) {
 
 EngineInfo cpu_info() {
   EngineInfo cpu = octocd_info("cpu", "octocd's CPU reference pipeline");
-  cpu.openmp_threads = true;
+  cpu.threads_setting = "threads";
   cpu.device_twin = "cuda";
   return cpu;
 }
 
+/// The most threads `--cpu threads=N` takes.
+constexpr long kMostCpuThreads = 4096;
+
+std::vector<std::string> cpu_setting_names() { return {"threads"}; }
+
+/// CpuSettings from `threads=N` items (the last one wins); InputError naming the key and
+/// the range otherwise.
+CpuSettings cpu_settings(const Items& items, const std::string& where) {
+  CpuSettings s;
+  for (const std::string& item : items) {
+    const std::size_t eq = item.find('=');
+    const std::string key = item.substr(0, eq);
+    if (eq == std::string::npos)
+      throw InputError(fmt::format("{}: '{}' is not KEY=VALUE; allowed: threads=N (docs/settings.md)", where, item));
+    if (key != "threads")
+      throw InputError(fmt::format("{}: unknown cpu setting '{}'; allowed: threads (docs/settings.md)", where, key));
+    const std::string value = item.substr(eq + 1);
+    char* end = nullptr;
+    const long v = std::strtol(value.c_str(), &end, 10);
+    if (value.empty() || value[0] < '0' || value[0] > '9' || *end != '\0' || v > kMostCpuThreads)
+      throw InputError(fmt::format("{}: threads='{}' is not allowed; allowed: an integer 0 .. {} (0: OMP_NUM_THREADS "
+                                   "when set, else the CPUs this process may run on)",
+                                   where, value, kMostCpuThreads));
+    s.threads = static_cast<int>(v);
+  }
+  return s;
+}
+
+void check_cpu(const Items& items, const std::string& where) { (void)cpu_settings(items, where); }
+
 std::unique_ptr<Engine> make_cpu(const std::shared_ptr<const Model>& model, const Items& items,
                                  const std::string& where) {
-  check_none(items, where);
-  return std::make_unique<World>(model, make_any_broadphase(model->scene.broadphase, model->scene.domain));
+  return std::make_unique<World>(model, make_any_broadphase(model->scene.broadphase, model->scene.domain),
+                                 cpu_settings(items, where));
 }
 
 EngineInfo cuda_info() {
@@ -165,7 +196,9 @@ Registered adapter_entry(EngineInfo info, const char* package) {
 /// The engines, one entry each, in engine_infos()' order.
 const std::vector<Registered>& registered() {
   static const std::vector<Registered> r{
-      {cpu_info(), &make_cpu, true, &no_settings, "", &check_none},
+      {cpu_info(), &make_cpu, true, &cpu_setting_names,
+       "threads=N: its stages' threads; 0: OMP_NUM_THREADS when set, else the CPUs this process may run on",
+       &check_cpu},
       {cuda_info(), &make_cuda, OCTOCD_HAVE_CUDA != 0, &cuda_setting_names, "", &check_cuda},
       adapter_entry(bullet_info(), "libbullet-dev"),
       adapter_entry(mujoco_info(), "libmujoco-dev"),

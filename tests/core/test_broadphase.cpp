@@ -12,13 +12,10 @@
 #include <string>
 #include <vector>
 
-#if defined(_OPENMP)
-#include <omp.h>
-#endif
-
 #include "octocd/broadphase.hpp"
 #include "octocd/error.hpp"
 #include "octocd/loose_octree.hpp"
+#include "octocd/parallel.hpp"
 #include "support/doc_broadphases.hpp"
 
 namespace octocd {
@@ -747,13 +744,12 @@ TEST(BroadPhase, AutoLooseOctreeDepth) {
   EXPECT_EQ(auto_loose_octree_depth(with_nan, kDomain), 2);
 }
 
-// The loose octree runs its keys and queries on OpenMP threads from 4096 bodies on: the
+// The loose octree runs its keys and queries on the worker team from 4096 bodies on: the
 // pairs (and the candidate count) must not depend on the thread count, including the
 // overflow tests split in chunks of in-tree bodies (walls and huge bodies here), on every
 // kind of call of one instance: the first (tree on the boxes), the build of the pair
 // cache, a hit, an update of a few escaped bodies, a rebuild after a teleport.
 TEST(BroadPhase, LooseOctreeThreadCountDoesNotChangeTheAnswer) {
-#if defined(_OPENMP)
   std::vector<Aabb> boxes = random_boxes(12000, 77);
   boxes[10] = {{-3.0f, -0.1f, -3.0f}, {3.0f, 0.0f, 3.0f}};        // floor slab (overflow)
   boxes[11] = {{-2.1f, -3.0f, -3.0f}, {-2.0f, 3.0f, 3.0f}};       // wall (overflow)
@@ -763,10 +759,9 @@ TEST(BroadPhase, LooseOctreeThreadCountDoesNotChangeTheAnswer) {
   frames.push_back(boxes);
   for (Aabb& b : boxes) b = translated(b, {0.25f, 0.0f, 0.0f});
   frames.push_back(boxes);
-  const int saved = omp_get_max_threads();
   std::vector<std::vector<std::uint64_t>> candidates;
   for (int threads : {1, 2, 3}) {
-    omp_set_num_threads(threads);
+    const ThreadCount at(threads);
     auto bp = make_broadphase({"octree", -1, 0.25f}, kDomain);
     std::vector<Pair> got;
     BroadPhaseStats st;
@@ -778,11 +773,7 @@ TEST(BroadPhase, LooseOctreeThreadCountDoesNotChangeTheAnswer) {
       candidates.back().push_back(st.cell_candidates);
     }
   }
-  omp_set_num_threads(saved);
   for (const auto& c : candidates) EXPECT_EQ(c, candidates.front());
-#else
-  GTEST_SKIP() << "built without OpenMP";
-#endif
 }
 
 // ---- the loose octree's pair cache (broadphase_octree_cache.cpp, steps 6-7) -----

@@ -40,8 +40,9 @@ void clamp_velocities(BodyState& state, float v_max);
 /// Midphase and narrow phase of the step (design.md sections 5.2-5.3) over the broadphase's pairs:
 /// confirmed[k] = 1 when confirm_contact accepts pairs[k] (the shapes placed at state.x
 /// with world AABBs `boxes`, theta of their shapes, the scene's midphase), else 0;
-/// static-static pairs are 0 and not tested. Pairs run in parallel (OpenMP, from 64
-/// pairs on); the result does not depend on the thread count. Sets m.dynamic_pairs,
+/// static-static pairs are 0 and not tested. Pairs run in parallel on the worker team
+/// (octocd/parallel.hpp, current_threads(), from 64 pairs on); the result does not depend
+/// on the thread count. Sets m.dynamic_pairs,
 /// m.box_tests, m.box_pairs and m.vertex_tests. `confirmed` is resized to pairs.size().
 void confirm_pairs(const Model& model, const BodyState& state, const std::vector<Aabb>& boxes,
                    const std::vector<Pair>& pairs, std::vector<std::uint8_t>& confirmed, FrameMetrics& m);

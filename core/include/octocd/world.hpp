@@ -21,6 +21,15 @@
 
 namespace octocd {
 
+/// The cpu engine's settings (docs/settings.md, "The cpu engine"; `--cpu KEY=VALUE`).
+struct CpuSettings {
+  /// Threads of its parallel stages (midphase; the octree broadphase from 4096 bodies),
+  /// on the process's worker team (octocd/parallel.hpp); 0: the caller's count
+  /// (current_threads(): OMP_NUM_THREADS when set, else the CPUs this process may run on).
+  /// 1 .. 4096 otherwise. Results do not depend on it.
+  int threads = 0;
+};
+
 /// The CPU reference engine (`cpu`, design.md section 4): owns its hot state and the chosen
 /// broadphase; shares the Model (shapes, bodies) it was built from.
 class World : public Engine {
@@ -34,9 +43,9 @@ class World : public Engine {
   /// make_any_broadphase). Takes ownership; `broadphase` must not be null.
   World(const Scene& scene, std::unique_ptr<BroadPhase> broadphase);
 
-  /// From an already built model (shared, not copied) and a broadphase (owned). Throws
-  /// InputError for a rotating scene (require_translation_only).
-  World(std::shared_ptr<const Model> model, std::unique_ptr<BroadPhase> broadphase);
+  /// From an already built model (shared, not copied), a broadphase (owned) and its
+  /// settings. Throws InputError for a rotating scene (require_translation_only).
+  World(std::shared_ptr<const Model> model, std::unique_ptr<BroadPhase> broadphase, CpuSettings settings = {});
 
   std::string name() const override { return "cpu"; }
   std::string device() const override;
@@ -72,6 +81,7 @@ class World : public Engine {
   std::shared_ptr<const Model> model_;
   BodyState state_;
   std::unique_ptr<BroadPhase> broadphase_;
+  CpuSettings settings_;
   std::vector<Aabb> aabbs_;
   std::vector<Pair> pairs_;
   std::vector<std::uint8_t> confirmed_;  // per pair: midphase verdict

@@ -45,10 +45,10 @@ struct EngineInfo {
   /// cuda); false: it steps one scene per run and runs the copies as separate runs
   /// (octocd/world_copies.hpp).
   bool batched_worlds = false;
-  /// It steps with OpenMP threads on the host (cpu): `validate --determinism` runs it at 1
-  /// and N threads (omp_set_num_threads) and compares; false: it steps on one host thread
-  /// (or a device), so the thread-count row is n/a.
-  bool openmp_threads = false;
+  /// The setting key of its host thread count (cpu: "threads", CpuSettings::threads):
+  /// `validate --determinism` runs it at 1 and N threads ("KEY=N") and compares; "" when
+  /// it steps on one host thread (or a device), so the thread-count row is n/a.
+  std::string threads_setting;
   /// The engine that runs the same pipeline on the other kind of processor ("cuda" for
   /// cpu, "cpu" for cuda), "" for none: `validate --determinism` compares the two bit for bit.
   std::string device_twin;

@@ -143,8 +143,9 @@ struct ValidationOptions {
   /// the incomplete verdict it reports when a step outlasts its stop bound.
   std::function<void(const std::vector<ValidationResult>& results, std::int64_t judged)> on_judged;
   /// Threads that judge one frame's heavy loops (the physics tier's reference geometry
-  /// per candidate pair, the reference pair set): 0 = the hardware's
-  /// (std::thread::hardware_concurrency), 1 = serial. Results do not depend on it (items
+  /// per candidate pair, the reference pair set), on the worker team (octocd/parallel.hpp):
+  /// 0 = current_threads() (OMP_NUM_THREADS when set, else the CPUs this process may run
+  /// on), 1 = serial. Results do not depend on it (items
   /// are judged into their own slots and tallied in serial order).
   int threads = 0;
   /// validate_engine judges frame f (on a copy of its record, on a second thread) while

@@ -1,0 +1,172 @@
+// The worker team of octocd/parallel.hpp: every item once, a stalled worker never holds
+// up the items it did not claim, exceptions and stops, nested and concurrent loops.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <condition_variable>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+#include <vector>
+
+#include "octocd/parallel.hpp"
+
+namespace {
+
+using octocd::LoopOptions;
+
+LoopOptions with(int threads, std::size_t chunk = 0) {
+  LoopOptions o;
+  o.threads = threads;
+  o.chunk = chunk;
+  return o;
+}
+
+TEST(Parallel, EveryItemRunsOnceOnAWorkerBelowTheLoopThreads) {
+  for (int threads : {1, 2, 3, 8}) {
+    for (std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{7}, std::size_t{100000}}) {
+      std::vector<std::atomic<int>> runs(n);
+      std::atomic<unsigned> worst_worker{0};
+      const unsigned bound = octocd::loop_threads(n, with(threads));
+      EXPECT_LE(bound, static_cast<unsigned>(threads));
+      const bool done = octocd::parallel_for(n, with(threads), [&](std::size_t i, unsigned w) {
+        runs[i].fetch_add(1);
+        unsigned seen = worst_worker.load();
+        while (w > seen && !worst_worker.compare_exchange_weak(seen, w)) {
+        }
+      });
+      EXPECT_TRUE(done);
+      for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(runs[i].load(), 1) << "item " << i << ", " << threads << " threads";
+      if (n > 0) EXPECT_LT(worst_worker.load(), std::max(1u, bound)) << threads << " threads, " << n << " items";
+    }
+  }
+}
+
+// A worker that claimed an item and then stalls holds up only that item: the caller does
+// every other one. The stalled item waits (on an event, no sleep) until all the others
+// are done, so the loop can only end if the caller took them all.
+TEST(Parallel, TheCallerDoesEveryItemAStalledWorkerDidNotClaim) {
+  constexpr std::size_t n = 2000;
+  std::mutex m;
+  std::condition_variable cv;
+  std::size_t done = 0;
+  std::atomic<std::size_t> by_caller{0}, by_workers{0};
+  const bool finished = octocd::parallel_for(n, with(2, 1), [&](std::size_t, unsigned w) {
+    std::unique_lock<std::mutex> lock(m);
+    if (w != 0) {
+      cv.wait(lock, [&] { return done == n - 1; });  // stalls until the caller did the rest
+      ++by_workers;
+    } else {
+      ++by_caller;
+    }
+    ++done;
+    cv.notify_all();
+  });
+  EXPECT_TRUE(finished);
+  EXPECT_EQ(done, n);
+  EXPECT_LE(by_workers.load(), 1u);  // one chunk of one item at most
+  EXPECT_GE(by_caller.load(), n - 1);
+}
+
+TEST(Parallel, TheFirstExceptionIsRethrownAndTheTeamStaysUsable) {
+  for (int threads : {1, 3}) {
+    std::atomic<std::size_t> ran{0};
+    EXPECT_THROW(octocd::parallel_for(10000, with(threads, 4),
+                                      [&](std::size_t i, unsigned) {
+                                        ++ran;
+                                        if (i == 5000) throw std::runtime_error("item 5000");
+                                      }),
+                 std::runtime_error);
+    if (threads == 1) EXPECT_EQ(ran.load(), 5001u);  // the items after the throw are skipped
+    std::atomic<std::size_t> again{0};
+    EXPECT_TRUE(octocd::parallel_for(1000, with(threads), [&](std::size_t, unsigned) { ++again; }));
+    EXPECT_EQ(again.load(), 1000u);
+  }
+}
+
+TEST(Parallel, AStopSkipsTheItemsNotStarted) {
+  for (int threads : {1, 2}) {
+    std::atomic<std::size_t> ran{0};
+    LoopOptions o = with(threads, 8);
+    o.stop = [&] { return ran.load() >= 100; };
+    EXPECT_FALSE(octocd::parallel_for(100000, o, [&](std::size_t, unsigned) { ++ran; }));
+    if (threads == 1) EXPECT_EQ(ran.load(), 104u);  // polled between chunks of 8
+    EXPECT_GE(ran.load(), 100u);
+    o.stop = [] { return false; };
+    ran = 0;
+    EXPECT_TRUE(octocd::parallel_for(5000, o, [&](std::size_t, unsigned) { ++ran; }));
+    EXPECT_EQ(ran.load(), 5000u);
+  }
+}
+
+TEST(Parallel, AStopPollThatThrowsIsRethrownAfterTheWorkersLeft) {
+  for (int threads : {1, 2}) {
+    std::atomic<std::size_t> ran{0};
+    LoopOptions o = with(threads, 8);
+    o.stop = [&]() -> bool {
+      if (ran.load() >= 100) throw std::runtime_error("stop poll");
+      return false;
+    };
+    EXPECT_THROW(octocd::parallel_for(100000, o, [&](std::size_t, unsigned) { ++ran; }), std::runtime_error);
+    std::atomic<std::size_t> again{0};
+    EXPECT_TRUE(octocd::parallel_for(1000, with(threads), [&](std::size_t, unsigned) { ++again; }));
+    EXPECT_EQ(again.load(), 1000u);
+  }
+}
+
+TEST(Parallel, ALoopInsideAnItemRunsSeriallyOnItsThread) {
+  std::atomic<int> wrong{0};
+  std::atomic<std::size_t> inner{0};
+  octocd::parallel_for(64, with(4, 1), [&](std::size_t, unsigned) {
+    if (octocd::current_threads() != 1) ++wrong;
+    if (octocd::loop_threads(1000, with(4)) != 1) ++wrong;
+    const std::thread::id me = std::this_thread::get_id();
+    octocd::parallel_for(1000, with(4), [&](std::size_t, unsigned w) {
+      if (w != 0 || std::this_thread::get_id() != me) ++wrong;
+      ++inner;
+    });
+  });
+  EXPECT_EQ(wrong.load(), 0);
+  EXPECT_EQ(inner.load(), 64u * 1000u);
+}
+
+// Two callers at once: one gets the team, the other runs its loop alone; both complete.
+TEST(Parallel, LoopsFromTwoThreadsAtOnceBothComplete) {
+  constexpr std::size_t n = 200000;
+  std::vector<std::atomic<int>> a(n), b(n);
+  auto fill = [](std::vector<std::atomic<int>>& v) {
+    for (int round = 0; round < 20; ++round)
+      octocd::parallel_for(v.size(), with(3), [&](std::size_t i, unsigned) { v[i].fetch_add(1); });
+  };
+  std::thread other([&] { fill(b); });
+  fill(a);
+  other.join();
+  for (std::size_t i = 0; i < n; ++i) {
+    ASSERT_EQ(a[i].load(), 20) << i;
+    ASSERT_EQ(b[i].load(), 20) << i;
+  }
+}
+
+TEST(Parallel, ThreadCountSetsTheCallersCountForItsScope) {
+  const int outside = octocd::current_threads();
+  EXPECT_GE(octocd::default_threads(), 1);
+  EXPECT_EQ(outside, octocd::default_threads());
+  {
+    const octocd::ThreadCount three(3);
+    EXPECT_EQ(octocd::current_threads(), 3);
+    EXPECT_EQ(octocd::loop_threads(1000, LoopOptions{}), 3u);
+    EXPECT_EQ(octocd::loop_threads(2, LoopOptions{}), 2u);  // never more than the items
+    LoopOptions few;
+    few.min_items = 64;
+    EXPECT_EQ(octocd::loop_threads(63, few), 1u);  // below the call site's threshold
+    {
+      const octocd::ThreadCount dflt(0);
+      EXPECT_EQ(octocd::current_threads(), octocd::default_threads());
+    }
+    EXPECT_EQ(octocd::current_threads(), 3);
+    std::thread([] { EXPECT_EQ(octocd::current_threads(), octocd::default_threads()); }).join();  // per thread
+  }
+  EXPECT_EQ(octocd::current_threads(), outside);
+}
+
+}  // namespace
