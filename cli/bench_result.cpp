@@ -25,6 +25,11 @@ json result_settings(const Sweep& s, int shard, int shards) {
                 {"frames", s.frames},
                 {"warmup", s.warmup},
                 {"shard", {{"index", shard}, {"count", shards}}}};
+  if (s.kind == "steps" || s.kind == "speed-accuracy") {
+    settings["protocol"] = s.protocol;
+    settings["min_time_s"] = std::max(s.min_time_s, 0.0);
+    settings["max_time_s"] = std::max(s.max_time_s, 0.0);
+  }
   if (s.kind == "broadphase") {
     settings["warm_replays"] = s.warm_replays;
     settings["min_time_ms"] = s.min_time_ms;
