@@ -456,7 +456,8 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
         if (p.finished) continue;
         any = true;
         const Line& l = lines[p.line];
-        if (const int sig = octocd::stop_signal()) return record_stopped(result, sig, write, o.output);
+        if (const int sig = octocd::stop_signal())
+          return record_stopped(result, sig, write, o.output, fmt::format("{} of {} points", finished, mine.size()));
         progress.start(finished, fmt::format("{} (repetition {}/{})", p.id, rep + 1, s.repeat));
         p.started.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
         const auto t_rep = Clock::now();

@@ -247,8 +247,9 @@ class SweepProgress {
 
 /// The default time budget of a point under protocol "budget" (s): at most kDefaultMaxTimeS
 /// (set-ups and frames of all its repetitions), and more repetitions than asked while its
-/// time is below kDefaultMinTimeS. With these, `bench table5` on an idle 2-core machine
-/// ends within 10 minutes (docs/benchmarks.md); no extra repetitions by default.
+/// time is below kDefaultMinTimeS (none by default). With these, `bench table5` on every
+/// engine of a CPU build (24 measured points) is bounded by about 24 x 20 s plus set-ups
+/// (docs/bench-format.md "Time budget" has the measured time).
 constexpr double kDefaultMaxTimeS = 20.0;
 constexpr double kDefaultMinTimeS = 0.0;
 /// The most repetitions of a point (a spread holds at most 1000 values).
@@ -410,8 +411,10 @@ void record_hygiene(json& result, const Sweep& s, bool quiet);
 
 /// A sweep stopped by signal `sig` between two points (octocd/stop.hpp): records
 /// result["stopped"] (the signal's name), rewrites the result file with `write`, says on
-/// stderr that `output` keeps the finished points and returns the stop's exit code.
-int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output);
+/// stderr that `output` keeps the finished points (`finished`, when given: how many, e.g.
+/// "203 of 360 points") and returns the stop's exit code.
+int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output,
+                   const std::string& finished = "");
 
 /// A sweep's end: marks the result complete (result["complete"], the machine's
 /// load_average_end) and rewrites the result file with `write`.
