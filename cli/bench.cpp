@@ -1,8 +1,10 @@
 // `octocd bench NAME|SWEEP.json` (design.md section 12): the paper's experiments redone side by side on
 // every engine this octocd has. A sweep expands to points (scene x axis values x engine,
-// or bodies x broadphase x engine); each point is run `repeat` times and every figure is
-// stored with its median and spread. The result file is rewritten (atomically) after every
-// point, so a killed sweep keeps what it finished and `--resume` goes on from there.
+// or bodies x broadphase x engine); each point is run `repeat` times (steps and
+// speed-accuracy sweeps on a time budget per point, docs/bench-format.md "Time budget") and
+// every figure is stored with its median and spread. The result file is rewritten
+// (atomically) after every point, so a killed sweep keeps what it finished and `--resume`
+// goes on from there.
 // Named sweeps are the files of bench/sweeps/. This file holds the command; the sweep, its
 // points, the max-instances search and the result file have files of their own
 // (bench_sweep.hpp). Result format: docs/bench-format.md.
@@ -60,6 +62,15 @@ void add_to_history(const BenchOptions& o, const json& result) {
   if (!o.quiet) fmt::print(stderr, "bench: added the result to the history: {}\n", path);
 }
 
+/// The budget on the start line: ", protocol paper (no time budget)" or ", at most 20 s a point ...".
+std::string budget_text(const Sweep& s) {
+  if (s.kind != "steps" && s.kind != "speed-accuracy") return "";
+  if (s.protocol == "paper") return ", protocol paper (no time budget)";
+  std::string t = s.max_time_s > 0 ? fmt::format(", at most {:g} s a point", s.max_time_s) : ", no time limit";
+  if (s.min_time_s > 0) t += fmt::format(", repetitions until {:g} s", s.min_time_s);
+  return t + (s.max_time_s > 0 ? " (--protocol paper: the full protocol)" : "");
+}
+
 std::string default_scene_dir() { return (fs::path(shared_dir()) / "datasets" / "scenes").string(); }
 
 }  // namespace
@@ -78,6 +89,22 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
                 "copy-back and the trace write");
   c->add_option("--repeat", o.repeat, "Repetitions of every point, overrides the sweep's (>= 1)")
       ->check(CLI::PositiveNumber);
+  c->add_option("--protocol", o.protocol,
+                "Steps and speed-accuracy sweeps: budget (the default: each point runs at least its repetitions and "
+                "--min-time, at most --max-time, a slow repetition cut to fewer timed frames) or paper (the sweep's "
+                "full protocol, no time limit: table5's 300 frames after 30 warm-up, 5 repetitions)")
+      ->check(CLI::IsMember({"budget", "paper"}));
+  c->add_option("--min-time", o.min_time_s,
+                fmt::format("Budget protocol: seconds a point keeps adding repetitions for once it has those asked, "
+                            "overrides the sweep's min_time_s (default {:g})",
+                            kDefaultMinTimeS))
+      ->check(CLI::Range(0.0, 86400.0));
+  c->add_option("--max-time", o.max_time_s,
+                fmt::format("Budget protocol: the most seconds a point may take (its set-ups and frames), overrides the "
+                            "sweep's max_time_s (default {:g}; 0: no limit); a point whose first repetition cannot "
+                            "time a frame within its share is skipped with an estimate",
+                            kDefaultMaxTimeS))
+      ->check(CLI::Range(0.0, 86400.0));
   c->add_option("--frames", o.frames,
                 "Timed frames per run (steps sweeps without windows; max-instances: the window's frames) or recorded "
                 "frames (broadphase sweeps), or the frames of every run (divergence), overrides the sweep's (>= 1)")
@@ -217,6 +244,30 @@ int bench_command(const BenchOptions& o) {
                                      origin, sc, scene_dir));
     }
   };
+  // The time budget of a point (steps and speed-accuracy; docs/bench-format.md "Time budget").
+  if (s.kind == "steps" || s.kind == "speed-accuracy") {
+    s.protocol = o.protocol.empty() ? "budget" : o.protocol;
+    if (s.protocol == "paper") {
+      if (o.min_time_s >= 0 || o.max_time_s >= 0 || o.frames > 0 || o.warmup >= 0 || o.repeat > 0)
+        throw InputError(fmt::format("--protocol paper: {} then runs its own frames, warm-up and repetitions with no "
+                                     "time budget; allowed: no --min-time, --max-time, --frames, --warmup or --repeat "
+                                     "with it (or --protocol budget)",
+                                     origin));
+      s.min_time_s = 0.0;
+      s.max_time_s = 0.0;
+    } else {
+      s.min_time_s = o.min_time_s >= 0 ? o.min_time_s : s.min_time_s >= 0 ? s.min_time_s : kDefaultMinTimeS;
+      s.max_time_s = o.max_time_s >= 0 ? o.max_time_s : s.max_time_s >= 0 ? s.max_time_s : kDefaultMaxTimeS;
+      if (s.max_time_s > 0 && s.min_time_s > s.max_time_s)
+        throw InputError(fmt::format("--min-time: {:g} s is above the most time a point may take ({:g} s, --max-time "
+                                     "or the sweep's max_time_s); allowed: a minimum <= the maximum, or --max-time 0",
+                                     s.min_time_s, s.max_time_s));
+    }
+  } else if (!o.protocol.empty() || o.min_time_s >= 0 || o.max_time_s >= 0) {
+    throw InputError(fmt::format("--protocol, --min-time, --max-time: {} is of kind '{}'; allowed: steps and "
+                                 "speed-accuracy sweeps (max-instances: --search-time)",
+                                 origin, s.kind));
+  }
   if (s.kind == "divergence") {
     if (o.warmup >= 0 || o.target > 0 || o.max_instances > 0 || o.resolution >= 0 || o.search_time_s >= 0 ||
         !o.trace_dir.empty() || !o.history.empty() || !o.traced.empty() || o.resume || !o.shard.empty() || o.repeat > 0)
@@ -330,9 +381,9 @@ int bench_command(const BenchOptions& o) {
                octocd::printable(s.name), s.scenes.size() * s.engines.size(), my_searches.size(), shard, shards, json(s.engines).dump(),
                s.target, s.windows[0].first, s.windows[0].last, s.max_instances, s.probe_repeat, s.repeat, o.output);
   else if (!o.quiet)
-    fmt::print(stderr, "bench {}: {} points ({} in this shard {}/{}), engines {}, {} repetitions; result {}\n", octocd::printable(s.name),
+    fmt::print(stderr, "bench {}: {} points ({} in this shard {}/{}), engines {}, {} repetitions{}; result {}\n", octocd::printable(s.name),
                points.size(), mine.size(), shard, shards, o.engines.empty() ? json(s.engines).dump() : o.engines,
-               s.repeat, o.output);
+               s.repeat, budget_text(s), o.output);
   for (const Point* p : mine) {
     const auto it = kept.find(p->id);
     if (it != kept.end()) result["points"].push_back(it->second);  // resumed: kept as they were
@@ -418,7 +469,16 @@ int bench_command(const BenchOptions& o) {
     std::string status = r.value("status", "?");
     if (status == "ok" && r.contains("windows")) {
       const json& w = r["windows"].begin().value();
-      status += fmt::format(" ({:.1f} steps/s median)", w["steps_per_s"].value("median", 0.0));
+      status += fmt::format(" ({:.1f} steps/s median", w["steps_per_s"].value("median", 0.0));
+      if (r.contains("budget")) {  // the count reached, the frames measured, the time taken
+        const json& b = r["budget"];
+        status += fmt::format(", {} of {} repetitions", b.value("repetitions", 0), b.value("repetitions_asked", 0));
+        if (b.contains("frames") && b.value("frames", 0) != b.value("frames_asked", 0))
+          status += fmt::format(", {} of {} timed frames", b.value("frames", 0), b.value("frames_asked", 0));
+        status += fmt::format(", {:.1f} s", b.value("time_s", 0.0));
+        if (b.value("ended_by", "") == "max_time") status += ", max_time_s reached";
+      }
+      status += ")";
     } else if (status == "ok" && r.contains("ms_per_frame")) {
       status += fmt::format(" ({:.4f} ms/frame median)", r["ms_per_frame"].value("median", 0.0));
     } else if (r.contains("reason")) {
@@ -448,41 +508,116 @@ int bench_command(const BenchOptions& o) {
   for (const Point* p : mine)
     if (!kept.count(p->id)) todo.push_back(p);
   if (s.kind == "steps") {
-    // Round-robin: repetition r of every point, then repetition r + 1 of every point, so a
-    // load burst on the machine hits every point's repetitions alike (design.md section 14b). A point
-    // is stored once its last repetition ran (a stop before that drops its repetitions).
-    std::vector<std::vector<json>> reps(todo.size());
-    std::vector<std::vector<double>> started(todo.size());  // each repetition's start, s after t0
-    std::vector<bool> over(todo.size(), false);
+    // Round-robin within groups of kRoundRobinGroup consecutive points: repetition r of each
+    // of the group's points, then repetition r + 1, so a load burst hits their repetitions
+    // alike (design.md section 14b); each point is stored as soon as it is finished, so a stop
+    // drops at most the group's unfinished points. The budget (docs/bench-format.md "Time
+    // budget"): a point's first repetition gets its share of max_time_s and is cut to fewer
+    // timed frames (or the point skipped) when slower; later ones run its timed frames; no
+    // repetition starts that would end past max_time_s, and one still running there is dropped.
+    struct Run {
+      std::vector<json> reps;
+      std::vector<double> started;  // each repetition's start, s after t0
+      double spent_s = 0.0;         // set-ups and frames of every repetition (the budget's time)
+      int timed_frames = 0;         // > 0: the first repetition was cut to this many timed frames
+      json cut;                     // that cut (budget_cut)
+      bool over = false;
+    };
+    // The first repetition's share of max_time_s: 80 % of max_time_s / repeat, the rest a
+    // margin for the later ones (the first also builds the model; a later one may meet load).
+    constexpr double kFirstShare = 0.8;
+    const double max_t = s.max_time_s > 0 ? s.max_time_s : 0.0, min_t = std::max(s.min_time_s, 0.0);
     const auto t0 = Clock::now();
-    for (int rep = 0; rep < s.repeat; ++rep) {
-      for (std::size_t k = 0; k < todo.size(); ++k) {
-        if (over[k]) continue;
-        const Point& p = *todo[k];
-        if (const int sig = octocd::stop_signal()) return stopped(sig);
-        progress.start(finished, fmt::format("{} (repetition {}/{})", p.id, rep + 1, s.repeat));
-        StepsOverride ov;
-        ov.repeat = 1;
-        ov.trace = rep == 0;
-        started[k].push_back(std::chrono::duration<double>(Clock::now() - t0).count());
-        json r;
-        try {
-          r = run_point(p, ov);
-        } catch (const BenchStopped&) {
-          return stopped(octocd::stop_signal());
-        }
-        if (r.value("status", "") != "ok") {
-          over[k] = true;
-          finish_point(p, r);
-          continue;
-        }
-        reps[k].push_back(std::move(r));
-        if (rep + 1 == s.repeat) {
-          over[k] = true;
-          json m = merge_repetitions(reps[k]);
-          m["repetition_start_s"] = started[k];
-          finish_point(p, std::move(m));
-          reps[k].clear();
+    // The point's result from its repetitions, with what the budget did.
+    const auto merged = [&](Run& st, const std::string& ended_by) {
+      json m = merge_repetitions(st.reps);
+      m.erase("budget_cut");
+      m["repetition_start_s"] = st.started;
+      const int asked_frames = s.windows.front().last - s.windows.front().first + 1;
+      json b{{"protocol", s.protocol},
+             {"min_time_s", min_t},
+             {"max_time_s", max_t},
+             {"time_s", st.spent_s},
+             {"repetitions_asked", s.repeat},
+             {"repetitions", static_cast<int>(st.reps.size())},
+             {"ended_by", ended_by}};
+      if (s.cuttable) {
+        b["frames_asked"] = asked_frames;
+        b["frames"] = st.timed_frames > 0 ? st.timed_frames : asked_frames;
+      }
+      if (!st.cut.is_null()) b["cut"] = st.cut;
+      m["budget"] = b;
+      return m;
+    };
+    std::vector<Run> runs(todo.size());
+    for (std::size_t g0 = 0; g0 < todo.size(); g0 += kRoundRobinGroup) {
+      const std::size_t g1 = std::min(todo.size(), g0 + kRoundRobinGroup);
+      for (bool any = true; any;) {
+        any = false;
+        for (std::size_t k = g0; k < g1; ++k) {
+          Run& st = runs[k];
+          if (st.over) continue;
+          const Point& p = *todo[k];
+          if (const int sig = octocd::stop_signal()) return stopped(sig);
+          const int n = static_cast<int>(st.reps.size());
+          progress.start(finished, fmt::format("{} (repetition {}/{})", p.id, n + 1, s.repeat));
+          StepsOverride ov;
+          ov.repeat = 1;
+          ov.trace = n == 0;
+          if (max_t > 0) {
+            if (n == 0) {
+              ov.time_limit_s = kFirstShare * max_t / s.repeat;
+            } else {
+              ov.timed_frames = st.timed_frames;
+              ov.time_limit_s = max_t - st.spent_s;
+              ov.abandon_over_time = true;
+            }
+          }
+          st.started.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+          const auto t_rep = Clock::now();
+          json r;
+          try {
+            r = run_point(p, ov);
+          } catch (const BenchStopped&) {
+            return stopped(octocd::stop_signal());
+          }
+          st.spent_s += std::chrono::duration<double>(Clock::now() - t_rep).count();
+          const std::string status = r.value("status", "");
+          if (status == "over_time") {  // a later repetition still running at max_time_s: dropped
+            st.started.pop_back();
+            st.over = true;
+            finish_point(p, merged(st, "max_time"));
+            continue;
+          }
+          if (status != "ok") {  // skipped (maybe by the budget) or failed: stored as it is
+            st.over = true;
+            if (max_t > 0 && r.contains("estimate_s"))
+              r["budget"] = {{"protocol", s.protocol}, {"min_time_s", min_t}, {"max_time_s", max_t},
+                             {"time_s", st.spent_s}, {"repetitions_asked", s.repeat}, {"repetitions", 0},
+                             {"ended_by", "max_time"}};
+            finish_point(p, r);
+            continue;
+          }
+          if (n == 0 && r.contains("budget_cut")) {
+            st.cut = r["budget_cut"];
+            st.timed_frames = st.cut.value("frames", 0);
+          }
+          st.reps.push_back(std::move(r));
+          // Another repetition: until those asked (while the next one is expected to end within
+          // max_time_s), then while the point's time is below min_time_s.
+          const double mean = st.spent_s / static_cast<double>(st.reps.size());
+          const bool fits = max_t <= 0 || st.spent_s + mean <= max_t;
+          const int have = static_cast<int>(st.reps.size());
+          std::string ended_by;
+          if (have >= kMaxRepetitions) ended_by = "repetitions";
+          else if (have >= s.repeat && (st.spent_s >= min_t || !fits)) ended_by = have > s.repeat ? "min_time" : "repetitions";
+          else if (!fits) ended_by = "max_time";  // fewer repetitions than asked
+          if (ended_by.empty()) {
+            any = true;
+            continue;
+          }
+          st.over = true;
+          finish_point(p, merged(st, ended_by));
         }
       }
     }

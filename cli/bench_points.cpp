@@ -74,16 +74,21 @@ std::string file_safe(const std::string& id) {
 
 std::shared_ptr<const Model> ModelCache::get(const std::string& t, const std::string& origin,
                                              const std::string& data_dir, std::size_t max_bodies) {
-  if (t != text || !model) {
-    model.reset();
-    model = build_model(parse_scene(t, origin, data_dir, max_bodies));
-    text = t;
-  }
-  return model;
+  for (auto it = entries.begin(); it != entries.end(); ++it)
+    if (it->first == t) {
+      auto e = std::move(*it);  // the most recent last
+      entries.erase(it);
+      entries.push_back(std::move(e));
+      return entries.back().second;
+    }
+  if (entries.size() >= kRoundRobinGroup) entries.erase(entries.begin());
+  entries.emplace_back(t, build_model(parse_scene(t, origin, data_dir, max_bodies)));
+  return entries.back().second;
 }
 
 json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const BenchOptions& o,
                      SweepProgress& progress, const StepsOverride& ov) {
+  const auto t_call = Clock::now();  // a repetition dropped past max_time_s counts from here
   json r;
   json params{{"scene", stem(s.scenes[p.scene])}, {"engine", p.engine}};
   for (std::size_t a = 0; a < s.axes.size(); ++a) {
@@ -167,6 +172,11 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     r["reason"] = e.what();
     return r;
   }
+  // A first repetition's share of the budget counts its frames only (not building the model
+  // or the engine: a set-up longer than the share would skip a point whose frames are quick;
+  // the point's time, the later repetitions' budget, counts both).
+  const auto t_budget = ov.abandon_over_time ? t_call : Clock::now();
+
   // An engine that ignores an axis (its own broadphase, no midphase stage) is measured once,
   // under the axis's first value.
   for (std::size_t a = 0; a < s.axes.size(); ++a) {
@@ -200,8 +210,16 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
   for (int st = 0; st < kStages; ++st)
     r["has_stage"][stage_name(static_cast<Stage>(st))] = engine->has_stage(static_cast<Stage>(st));
 
-  const int total = s.frames;
-  std::vector<std::vector<WindowSums>> sums(s.windows.size());  // [window][rep]
+  // The windows as run: a budgeted repetition after the first runs the timed frames its
+  // first was cut to (ov.timed_frames), and a cut shortens the only window.
+  std::vector<Window> windows = s.windows;
+  if (ov.timed_frames > 0 && s.cuttable) windows[0].last = windows[0].first + ov.timed_frames - 1;
+  const int total = s.cuttable ? windows[0].last : s.frames;
+  const bool budgeted = ov.time_limit_s > 0.0;
+  // A budgeted cuttable repetition keeps its timed frames' figures, so a cut can sum the first n.
+  std::vector<std::pair<FrameMetrics, double>> timed_frames;  // (metrics, CPU ms) per timed frame
+  double stepped_ms = 0.0;  // wall ms of every step call so far (the warm-up's too): a skipped point's estimate
+  std::vector<std::vector<WindowSums>> sums(windows.size());  // [window][rep]
   const int buckets = s.series_every > 0 ? (total + s.series_every - 1) / s.series_every : 0;
   std::vector<std::vector<WindowSums>> series(static_cast<std::size_t>(buckets));  // [bucket][rep]
   std::vector<double> energy_series(static_cast<std::size_t>(buckets), 0.0);
@@ -272,14 +290,57 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
       const FrameMetrics& m = traced ? timed : stepped;
       const double cpu = host_engine ? process_cpu_ms() - cpu0 : 0.0;
       within.reset();
-      for (std::size_t w = 0; w < s.windows.size(); ++w)
-        if (f >= s.windows[w].first && f <= s.windows[w].last) {
+      stepped_ms += m.step_ms;
+      for (std::size_t w = 0; w < windows.size(); ++w)
+        if (f >= windows[w].first && f <= windows[w].last) {
           sums[w].back().add(m);
           sums[w].back().cpu_ms += cpu;
         }
-      if (ov.cut_below > 0.0 && f >= s.windows[0].first) {
+      if (budgeted && s.cuttable && f >= windows[0].first) timed_frames.emplace_back(m, cpu);
+      if (budgeted && f < total && std::chrono::duration<double>(Clock::now() - t_budget).count() > ov.time_limit_s) {
+        if (ov.abandon_over_time) {
+          if (trace) trace->close();
+          r["status"] = "over_time";
+          return r;
+        }
+        if (!s.cuttable || f < windows[0].first) {
+          // Not one timed frame within the time: skipped, with what the point would take.
+          if (trace) trace->close();
+          const double per_frame_s = stepped_ms / 1000.0 / f;
+          const double setup = setup_s.empty() ? 0.0 : setup_s.front();
+          const double rep_s = setup + per_frame_s * s.frames;
+          r["status"] = "skipped";
+          r["estimate_s"] = {{"repetition", rep_s},
+                             {"point", rep_s * s.repeat},
+                             {"probe_frames", f},
+                             {"probe_steps_per_s", per_frame_s > 0.0 ? 1.0 / per_frame_s : 0.0},
+                             {"setup_s", setup}};
+          r["reason"] = fmt::format(
+              "over the time budget: probed {} frames in {:.1f} s ({:.3g} steps/s; set-up {:.1f} s), one repetition "
+              "of {} frames would take about {:.0f} s and {} repetitions about {:.0f} s; the first repetition's share "
+              "of max_time_s is {:.3g} s of frames, {}; --protocol paper or --max-time {:.0f} runs it",
+              f, stepped_ms / 1000.0, per_frame_s > 0.0 ? 1.0 / per_frame_s : 0.0, setup, s.frames, rep_s, s.repeat,
+              rep_s * s.repeat, ov.time_limit_s,
+              s.cuttable ? "spent before the first timed frame" : "too short for the whole run (windows are never cut)",
+              std::ceil(rep_s * s.repeat * 1.25));
+          return r;
+        }
+        // Cut: the first n timed frames are the repetition's window.
+        const int asked = windows[0].last - windows[0].first + 1;
+        const int n = cut_frames(asked, f - windows[0].first + 1);
+        WindowSums cut_sums;
+        for (int k = 0; k < n; ++k) {
+          cut_sums.add(timed_frames[static_cast<std::size_t>(k)].first);
+          cut_sums.cpu_ms += timed_frames[static_cast<std::size_t>(k)].second;
+        }
+        sums[0].back() = cut_sums;
+        r["budget_cut"] = {{"frames_asked", asked}, {"frames", n}, {"frames_stepped", f - windows[0].first + 1}};
+        windows[0].last = windows[0].first + n - 1;
+        break;
+      }
+      if (ov.cut_below > 0.0 && f >= windows[0].first) {
         WindowSums& w0 = sums[0].back();
-        const std::int64_t planned = s.windows[0].last - s.windows[0].first + 1;
+        const std::int64_t planned = windows[0].last - windows[0].first + 1;
         if (w0.step_ms > 1000.0 * static_cast<double>(planned) / ov.cut_below) {
           w0.bound_frames = planned;
           ++cut;
@@ -305,7 +366,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
                 {"note", fmt::format("a repetition is cut once its window's step time exceeds {} frames / {} steps/s: "
                                      "its steps/s value is then the upper bound frames / step time so far, below {}; "
                                      "repetitions stop once most were cut",
-                                     s.windows[0].last - s.windows[0].first + 1, ov.cut_below, ov.cut_below)}};
+                                     windows[0].last - windows[0].first + 1, ov.cut_below, ov.cut_below)}};
   }
 
   auto figures = [&](const std::vector<WindowSums>& reps) {
@@ -345,16 +406,16 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     w["penetration_share_above_slop"] = spread(share);
     return w;
   };
-  for (std::size_t w = 0; w < s.windows.size(); ++w) {
+  for (std::size_t w = 0; w < windows.size(); ++w) {
     json fw = figures(sums[w]);
-    fw["first"] = s.windows[w].first;
-    fw["last"] = s.windows[w].last;
+    fw["first"] = windows[w].first;
+    fw["last"] = windows[w].last;
     if (s.worlds_given) {  // steps/s x copies: every figure of the spread scales by K
       std::vector<double> ws = fw["steps_per_s"]["values"].get<std::vector<double>>();
       for (double& v : ws) v *= static_cast<double>(p.worlds);
       fw["world_steps_per_s"] = spread(ws);
     }
-    r["windows"][s.windows[w].name] = fw;
+    r["windows"][windows[w].name] = fw;
   }
   if (buckets > 0) {
     json ser;

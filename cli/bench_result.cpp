@@ -25,6 +25,11 @@ json result_settings(const Sweep& s, int shard, int shards) {
                 {"frames", s.frames},
                 {"warmup", s.warmup},
                 {"shard", {{"index", shard}, {"count", shards}}}};
+  if (s.kind == "steps" || s.kind == "speed-accuracy") {
+    settings["protocol"] = s.protocol;
+    settings["min_time_s"] = std::max(s.min_time_s, 0.0);
+    settings["max_time_s"] = std::max(s.max_time_s, 0.0);
+  }
   if (s.kind == "broadphase") {
     settings["warm_replays"] = s.warm_replays;
     settings["min_time_ms"] = s.min_time_ms;
@@ -246,11 +251,12 @@ void record_hygiene(json& result, const Sweep& s, bool quiet) {
     fmt::print(stderr, "bench {}: note: 1 repetition per point: no spread, so no timing verdict\n", octocd::printable(s.name));
 }
 
-int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output) {
+int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output,
+                   const std::string& finished) {
   result["stopped"] = octocd::stop_signal_name(sig);
   write();
-  std::fprintf(stderr, "\noctocd bench: stopped by %s; result %s keeps the finished points\n",
-               octocd::stop_signal_name(sig), output.c_str());
+  std::fprintf(stderr, "\noctocd bench: stopped by %s%s; result %s keeps the finished points\n",
+               octocd::stop_signal_name(sig), finished.empty() ? "" : (" after " + finished).c_str(), output.c_str());
   return octocd::stop_exit_code(sig);
 }
 

@@ -66,6 +66,11 @@ struct SaPoint {
   /// highest: how busy the machine was while this point was measured (report's load mark).
   json load_average = json::array();
   bool finished = false;
+  double spent_s = 0.0;     ///< wall time of its repetitions (set-up and steps): the budget's time
+  std::string ended_by;     ///< why its repetitions ended: repetitions, min_time, max_time
+  long probe_steps = 0;     ///< a repetition over max_time_s: the steps it ran
+  double probe_wall_s = 0;  ///< and their wall time
+  json estimate;            ///< a point skipped by the budget: the time it would take (s)
 };
 
 std::string dt_text(double dt) { return fmt::format("{:.6g}", dt); }
@@ -281,6 +286,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
   const std::string csv_path =
       !o.csv.empty() ? o.csv : (fs::path(o.output).parent_path() / (fs::path(o.output).stem().string() + ".csv")).string();
 
+  const double max_t = s.max_time_s > 0 ? s.max_time_s : 0.0, min_t = std::max(s.min_time_s, 0.0);
   const auto point_json = [&](const SaPoint& p) {
     const Line& l = lines[p.line];
     json r;
@@ -354,6 +360,15 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
     r["error"] = err;
     r["error_reasons"] = why;
     if (!p.started.empty()) r["repetition_start_s"] = p.started;
+    if (!p.estimate.is_null()) r["estimate_s"] = p.estimate;
+    if (!p.ended_by.empty() || !p.estimate.is_null())
+      r["budget"] = {{"protocol", s.protocol},
+                     {"min_time_s", min_t},
+                     {"max_time_s", max_t},
+                     {"time_s", p.spent_s},
+                     {"repetitions_asked", s.repeat},
+                     {"repetitions", static_cast<int>(p.speed.size())},
+                     {"ended_by", p.ended_by.empty() ? std::string("max_time") : p.ended_by}};
     if (!p.load_average.empty()) {
       r["load_average"] = p.load_average;
       // More runnable threads than cores (the bench's own included) while it measured.
@@ -411,8 +426,11 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
   const auto finish = [&](SaPoint& p) {
     p.finished = true;
     progress.start(finished++, p.id);
-    progress.finish(p.status == "ok" ? fmt::format("ok ({:.3g} simulated s per s median)", spread(p.speed)["median"].get<double>())
-                                     : p.status + ": " + p.reason);
+    progress.finish(p.status == "ok"
+                        ? fmt::format("ok ({:.3g} simulated s per s median, {} of {} repetitions, {:.1f} s{})",
+                                      spread(p.speed)["median"].get<double>(), p.speed.size(), s.repeat, p.spent_s,
+                                      p.ended_by == "max_time" ? ", max_time_s reached" : "")
+                        : p.status + ": " + p.reason);
     write();
   };
   for (const std::size_t k : mine)
@@ -421,89 +439,142 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
   octocd::StopOnSignals stop_on_signals;
   const auto t0 = Clock::now();
   bool any_failed = false;
-  for (int rep = 0; rep < s.repeat; ++rep) {
-    for (const std::size_t k : mine) {
-      SaPoint& p = points[k];
-      if (p.finished) continue;
-      const Line& l = lines[p.line];
-      if (const int sig = octocd::stop_signal()) return record_stopped(result, sig, write, o.output);
-      progress.start(finished, fmt::format("{} (repetition {}/{})", p.id, rep + 1, s.repeat));
-      p.started.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
-      std::shared_ptr<const Model> model;
-      std::unique_ptr<Engine> engine;
-      try {
-        model = models.get(point_scene(s, l.scene, p.dt, p.steps, l.rotation), s.scenes[l.scene], o.data_dir);
-        engine = make_engine(l.engine, model, line_settings(engine_info(l.engine, "engines"), l.geometry, l.iterations));
-      } catch (const std::exception& e) {
-        p.status = "skipped";
-        p.reason = fmt::format("engine {} cannot run scene {}: {}", l.engine, stem(s.scenes[l.scene]), e.what());
-        finish(p);
-        continue;
-      }
-      p.bodies = static_cast<long>(model->initial.size());
-      const Vec3 lo = model->scene.domain.min, hi = model->scene.domain.max;
-      double wall = 0.0, pen = 0.0;
-      std::string diverged;
-      std::vector<float> samples;
-      double e_first = std::numeric_limits<double>::quiet_NaN(), e_last = e_first;
-      try {
-        for (long step = 1; step <= p.steps && diverged.empty(); ++step) {
-          if ((step & 63) == 0 && octocd::stop_signal() != 0) break;
-          const auto ts = Clock::now();
-          const FrameMetrics& m = engine->step();
-          wall += std::chrono::duration<double>(Clock::now() - ts).count();
-          if (std::isfinite(m.penetration_max)) pen = std::max(pen, m.penetration_max);
-          if (step % p.every != 0) continue;
-          const BodyState& st = engine->state();
-          for (std::size_t i = 0; i < st.size() && diverged.empty(); ++i) {
-            if (!finite3(st.x[i]) || !finite3(st.v[i]))
-              diverged = fmt::format("non-finite state at step {} (t = {:g} s): body {}", step, static_cast<double>(step) * p.dt, i);
-            else if (outside(st.x[i], lo, hi) > s.diverge_beyond_m)
-              diverged = fmt::format("body {} {:.4g} m outside the domain at step {} (t = {:g} s; diverge_beyond_m {:g})",
-                                     i, outside(st.x[i], lo, hi), step, static_cast<double>(step) * p.dt, s.diverge_beyond_m);
-          }
-          if (!diverged.empty()) break;
-          const double e = total_energy(*model, st, m.kinetic_energy);
-          if (!std::isfinite(e_first)) e_first = e;
-          e_last = e;
-          if (rep == 0)
-            for (std::size_t i = 0; i < st.size(); ++i)
-              if (st.w[i] > 0.0f) samples.insert(samples.end(), {st.x[i].x, st.x[i].y, st.x[i].z});
-        }
-      } catch (const std::exception& e) {
-        // A runtime failure: a non-finite state the engine found itself is a divergence.
-        const std::string what = e.what();
-        const bool nonfinite = what.find("non-finite") != std::string::npos || what.find("NaN") != std::string::npos ||
-                               what.find("nan") != std::string::npos || what.find("inf") != std::string::npos;
-        if (nonfinite) {
-          diverged = what;
-        } else {
-          p.status = "failed";
-          p.reason = what;
-          any_failed = true;
+  // Round-robin within groups of kRoundRobinGroup points (design.md section 14b); the budget
+  // (docs/bench-format.md "Time budget"): a repetition runs the whole simulated time (the
+  // errors need it), so the first may take all of max_time_s (beyond it the point is skipped
+  // with an estimate); a later one starts only when expected to end within max_time_s and is
+  // dropped if still running there.
+  std::vector<std::size_t> todo;
+  for (const std::size_t k : mine)
+    if (!points[k].finished) todo.push_back(k);
+  for (std::size_t g0 = 0; g0 < todo.size(); g0 += kRoundRobinGroup) {
+    const std::size_t g1 = std::min(todo.size(), g0 + kRoundRobinGroup);
+    for (int rep = 0;; ++rep) {
+      bool any = false;
+      for (std::size_t gi = g0; gi < g1; ++gi) {
+        SaPoint& p = points[todo[gi]];
+        if (p.finished) continue;
+        any = true;
+        const Line& l = lines[p.line];
+        if (const int sig = octocd::stop_signal())
+          return record_stopped(result, sig, write, o.output, fmt::format("{} of {} points", finished, mine.size()));
+        progress.start(finished, fmt::format("{} (repetition {}/{})", p.id, rep + 1, s.repeat));
+        p.started.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+        const auto t_rep = Clock::now();
+        const double limit = max_t > 0 ? max_t - p.spent_s : 0.0;
+        bool over_time = false;
+        std::shared_ptr<const Model> model;
+        std::unique_ptr<Engine> engine;
+        try {
+          model = models.get(point_scene(s, l.scene, p.dt, p.steps, l.rotation), s.scenes[l.scene], o.data_dir);
+          engine = make_engine(l.engine, model, line_settings(engine_info(l.engine, "engines"), l.geometry, l.iterations));
+        } catch (const std::exception& e) {
+          p.status = "skipped";
+          p.reason = fmt::format("engine {} cannot run scene {}: {}", l.engine, stem(s.scenes[l.scene]), e.what());
           finish(p);
           continue;
         }
+        p.bodies = static_cast<long>(model->initial.size());
+        const Vec3 lo = model->scene.domain.min, hi = model->scene.domain.max;
+        double wall = 0.0, pen = 0.0;
+        std::string diverged;
+        std::vector<float> samples;
+        double e_first = std::numeric_limits<double>::quiet_NaN(), e_last = e_first;
+        try {
+          for (long step = 1; step <= p.steps && diverged.empty(); ++step) {
+            if ((step & 63) == 0 && octocd::stop_signal() != 0) break;
+            const auto ts = Clock::now();
+            const FrameMetrics& m = engine->step();
+            const auto te = Clock::now();
+            wall += std::chrono::duration<double>(te - ts).count();
+            if (limit > 0.0 && step < p.steps && std::chrono::duration<double>(te - t_rep).count() > limit) {
+              over_time = true;  // past max_time_s: the first repetition skips the point, a later one is dropped
+              p.probe_steps = step;
+              p.probe_wall_s = wall;
+              break;
+            }
+            if (std::isfinite(m.penetration_max)) pen = std::max(pen, m.penetration_max);
+            if (step % p.every != 0) continue;
+            const BodyState& st = engine->state();
+            for (std::size_t i = 0; i < st.size() && diverged.empty(); ++i) {
+              if (!finite3(st.x[i]) || !finite3(st.v[i]))
+                diverged = fmt::format("non-finite state at step {} (t = {:g} s): body {}", step, static_cast<double>(step) * p.dt, i);
+              else if (outside(st.x[i], lo, hi) > s.diverge_beyond_m)
+                diverged = fmt::format("body {} {:.4g} m outside the domain at step {} (t = {:g} s; diverge_beyond_m {:g})",
+                                       i, outside(st.x[i], lo, hi), step, static_cast<double>(step) * p.dt, s.diverge_beyond_m);
+            }
+            if (!diverged.empty()) break;
+            const double e = total_energy(*model, st, m.kinetic_energy);
+            if (!std::isfinite(e_first)) e_first = e;
+            e_last = e;
+            if (rep == 0)
+              for (std::size_t i = 0; i < st.size(); ++i)
+                if (st.w[i] > 0.0f) samples.insert(samples.end(), {st.x[i].x, st.x[i].y, st.x[i].z});
+          }
+        } catch (const std::exception& e) {
+          // A runtime failure: a non-finite state the engine found itself is a divergence.
+          const std::string what = e.what();
+          const bool nonfinite = what.find("non-finite") != std::string::npos || what.find("NaN") != std::string::npos ||
+                                 what.find("nan") != std::string::npos || what.find("inf") != std::string::npos;
+          if (nonfinite) {
+            diverged = what;
+          } else {
+            p.status = "failed";
+            p.reason = what;
+            any_failed = true;
+            finish(p);
+            continue;
+          }
+        }
+        p.spent_s += std::chrono::duration<double>(Clock::now() - t_rep).count();
+        if (over_time && diverged.empty()) {
+          p.started.pop_back();
+          if (p.speed.empty()) {
+            const double sps = p.probe_wall_s > 0.0 ? static_cast<double>(p.probe_steps) / p.probe_wall_s : 0.0;
+            const double rep_s = sps > 0.0 ? static_cast<double>(p.steps) / sps : 0.0;
+            p.status = "skipped";
+            p.estimate = {{"repetition", rep_s}, {"point", rep_s * s.repeat}, {"probe_steps", p.probe_steps},
+                          {"probe_steps_per_s", sps}};
+            p.reason = fmt::format("over the time budget: probed {} of {} steps in {:.1f} s ({:.3g} steps/s), one "
+                                   "repetition would take about {:.0f} s and {} repetitions about {:.0f} s, beyond "
+                                   "max_time_s {:.3g} s (a repetition runs the whole simulated time); --protocol paper or "
+                                   "--max-time {:.0f} runs it",
+                                   p.probe_steps, p.steps, p.probe_wall_s, sps, rep_s, s.repeat, rep_s * s.repeat, max_t,
+                                   std::ceil(rep_s * s.repeat * 1.25));
+          } else {
+            p.ended_by = "max_time";
+          }
+          finish(p);
+          continue;
+        }
+        if (octocd::stop_signal() != 0 && diverged.empty() && engine->frame() < p.steps) continue;  // stopped mid-run
+        if (!diverged.empty()) {
+          p.status = "diverged";
+          p.reason = diverged;
+          finish(p);
+          continue;
+        }
+        const double sim = static_cast<double>(p.steps) * p.dt;
+        p.speed.push_back(wall > 0.0 ? sim / wall : std::numeric_limits<double>::infinity());
+        p.sps.push_back(wall > 0.0 ? static_cast<double>(p.steps) / wall : std::numeric_limits<double>::infinity());
+        p.pen_max = std::max(p.pen_max, pen);
+        if (const json la = load_average(); !la.empty() && (p.load_average.empty() || la[0] > p.load_average[0]))
+          p.load_average = la;
+        if (rep == 0) {
+          p.samples = std::move(samples);
+          p.e_first = e_first;
+          p.e_last = e_last;
+        }
+        // Another repetition: until those asked (while the next is expected to end within
+        // max_time_s), then while the point's time is below min_time_s.
+        const int have = static_cast<int>(p.speed.size());
+        const bool fits = max_t <= 0 || p.spent_s + p.spent_s / have <= max_t;
+        if (have >= kMaxRepetitions) p.ended_by = "repetitions";
+        else if (have >= s.repeat && (p.spent_s >= min_t || !fits)) p.ended_by = have > s.repeat ? "min_time" : "repetitions";
+        else if (!fits) p.ended_by = "max_time";  // fewer repetitions than asked
+        if (!p.ended_by.empty()) finish(p);
       }
-      if (octocd::stop_signal() != 0 && diverged.empty() && engine->frame() < p.steps) continue;  // stopped mid-run
-      if (!diverged.empty()) {
-        p.status = "diverged";
-        p.reason = diverged;
-        finish(p);
-        continue;
-      }
-      const double sim = static_cast<double>(p.steps) * p.dt;
-      p.speed.push_back(wall > 0.0 ? sim / wall : std::numeric_limits<double>::infinity());
-      p.sps.push_back(wall > 0.0 ? static_cast<double>(p.steps) / wall : std::numeric_limits<double>::infinity());
-      p.pen_max = std::max(p.pen_max, pen);
-      if (const json la = load_average(); !la.empty() && (p.load_average.empty() || la[0] > p.load_average[0]))
-        p.load_average = la;
-      if (rep == 0) {
-        p.samples = std::move(samples);
-        p.e_first = e_first;
-        p.e_last = e_last;
-      }
-      if (rep + 1 == s.repeat) finish(p);
+      if (!any) break;
     }
   }
   if (const std::optional<int> stopped = finish_sweep(result, write)) return *stopped;

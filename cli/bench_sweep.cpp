@@ -211,7 +211,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   static const std::set<std::string> common{"name",  "kind",   "description", "engines", "frames",
                                             "warmup", "repeat", "format",      "version"};
   static const std::set<std::string> steps{"scenes", "axes", "set", "windows", "series_every", "traced", "worlds",
-                                           "max_worlds", "max_bodies"};
+                                           "max_worlds", "max_bodies", "min_time_s", "max_time_s"};
   static const std::set<std::string> bp{"bodies",       "scenes", "broadphases", "max_bodies",
                                         "warm_replays", "set",    "min_time_ms"};
   if (!j.contains("name") || !j.at("name").is_string() || j.at("name").get<std::string>().empty())
@@ -220,8 +220,8 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
   s.kind = optional_string(j, "kind", origin, "steps");
   static const std::set<std::string> mi{"scenes", "set",          "target_steps_per_s", "max_instances",
                                         "resolution", "paper", "probe_repeat", "search_time_s"};
-  static const std::set<std::string> sa{"scenes",     "set",      "dts",         "sim_seconds",
-                                        "iterations", "geometries", "rotation", "diverge_beyond_m"};
+  static const std::set<std::string> sa{"scenes",     "set",        "dts",      "sim_seconds",      "iterations",
+                                        "geometries", "rotation", "diverge_beyond_m", "min_time_s", "max_time_s"};
   static const std::set<std::string> dv{"scenes", "set", "eps", "copies", "seed", "rotation"};
   if (s.kind != "steps" && s.kind != "broadphase" && s.kind != "max-instances" && s.kind != "speed-accuracy" &&
       s.kind != "divergence")
@@ -255,6 +255,14 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     if (std::find(engine_names().begin(), engine_names().end(), s.engines[i]) == engine_names().end())
       bad(origin, fmt::format("engines[{}]", i), "'" + s.engines[i] + "'", fmt::format("{}", fmt::join(engine_names(), ", ")));
   s.repeat = get_int(j, "repeat", origin, 1, 1000, 5);
+  // The time budget of a point (steps and speed-accuracy sweeps; the key sets above refuse it elsewhere).
+  for (const char* k : {"min_time_s", "max_time_s"}) {
+    if (!j.contains(k)) continue;
+    const json& v = j.at(k);
+    if (!v.is_number() || !std::isfinite(v.get<double>()) || v.get<double>() < 0.0 || v.get<double>() > 86400.0)
+      bad(origin, k, v.dump().substr(0, 60) + " is out of range", "a number of seconds in [0, 86400] (0: no limit)");
+    (std::string(k) == "min_time_s" ? s.min_time_s : s.max_time_s) = v.get<double>();
+  }
   if (j.contains("set")) {
     if (!j.at("set").is_object()) bad(origin, "set", "not an object", "an object of JSON pointer -> value");
     s.set = j.at("set");
@@ -409,6 +417,7 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     } else {
       s.windows.push_back(Window{"all", s.warmup + 1, s.warmup + s.frames});
       s.frames = s.warmup + s.frames;  // steps to run
+      s.cuttable = s.series_every == 0;
     }
   } else {
     s.frames = get_int(j, "frames", origin, 1, 100000, 5);
@@ -443,6 +452,12 @@ Sweep parse_sweep(const json& j, const std::string& origin, const std::string& s
     s.max_bodies = integer_map(j, "max_bodies", origin, 0, kMaxSweepBodies, "{\"NAME\" or \"ENGINE:NAME\": N}");
   }
   return s;
+}
+
+int cut_frames(int asked, int measured) {
+  int n = std::max(asked, 1);
+  while (n > std::max(measured, 1)) n = (n + 1) / 2;
+  return n;
 }
 
 std::string stem(const std::string& path) { return fs::path(path).stem().string(); }

@@ -96,6 +96,16 @@ struct Sweep {
   /// steps: engine -> why its points above max_bodies[engine] bodies are skipped (the
   /// sweep's `max_bodies` {"ENGINE": {"bodies": N, "reason": "..."}}; max_bodies holds N).
   std::map<std::string, std::string> max_bodies_reason;
+  // steps and speed-accuracy: the time budget of a point (docs/bench-format.md, "Time budget")
+  /// The sweep file's `min_time_s` and `max_time_s` (-1: not given); bench_command resolves
+  /// them with the protocol and the command's options before anything runs.
+  double min_time_s = -1.0, max_time_s = -1.0;
+  /// "budget" (the default: a point runs until it has `repeat` repetitions and min_time_s, and
+  /// no longer than max_time_s) or "paper" (no budget: every point runs its full protocol).
+  std::string protocol = "budget";
+  /// steps: the sweep has no `windows` and no `series_every`: one window after the warm-up, so a
+  /// budgeted repetition may be cut to fewer timed frames (with windows a point runs whole or is skipped).
+  bool cuttable = false;
   // divergence (docs/bench-format.md, docs/predictability.md)
   std::vector<double> eps;              ///< the ladder of initial perturbations (m), each in [0, 1] (0: unperturbed copies)
   int copies = 16;                      ///< perturbed copies per eps
@@ -235,14 +245,33 @@ class SweepProgress {
   Clock::time_point last_{};
 };
 
+/// The default time budget of a point under protocol "budget" (s): at most kDefaultMaxTimeS
+/// (set-ups and frames of all its repetitions), and more repetitions than asked while its
+/// time is below kDefaultMinTimeS (none by default). With these, `bench table5` on every
+/// engine of a CPU build (24 measured points) is bounded by about 24 x 20 s plus set-ups
+/// (docs/bench-format.md "Time budget" has the measured time).
+constexpr double kDefaultMaxTimeS = 20.0;
+constexpr double kDefaultMinTimeS = 0.0;
+/// The most repetitions of a point (a spread holds at most 1000 values).
+constexpr int kMaxRepetitions = 1000;
+/// Repetitions run round-robin within groups of this many consecutive points (design.md
+/// section 14b): a load burst hits the group's points alike, and a point is stored once its
+/// group's rounds have finished it, never waiting for the whole sweep.
+constexpr std::size_t kRoundRobinGroup = 4;
+
+/// The timed frames a budgeted repetition is cut to: the largest of `asked`, asked/2,
+/// asked/4, ... (rounded up) that is <= `measured` (>= 1), so runs of one build on one
+/// machine mostly cut to the same count (the gate compares like with like).
+int cut_frames(int asked, int measured);
+
 /// Thrown between two frames (or replays) once SIGINT or SIGTERM arrived: the point is
 /// abandoned, the finished ones are kept (octocd/stop.hpp).
 struct BenchStopped {};
 
-/// The model of the last scene text built, reused while the text stays the same.
+/// The models of the last kRoundRobinGroup scene texts built, reused while a text recurs
+/// (the points of a round-robin group).
 struct ModelCache {
-  std::string text;
-  std::shared_ptr<const Model> model;
+  std::vector<std::pair<std::string, std::shared_ptr<const Model>>> entries;  ///< most recent last
   /// The model of scene text `t` (parse_scene with `origin`, `data_dir` and `max_bodies`);
   /// InputError as parse_scene.
   std::shared_ptr<const Model> get(const std::string& t, const std::string& origin, const std::string& data_dir,
@@ -265,6 +294,16 @@ struct StepsOverride {
   /// bound), and no more repetitions run once most of them were cut (the median is below).
   double cut_below = 0.0;
   bool trace = true;  ///< false: no trace even with --trace-dir (a later round-robin repetition)
+  /// > 0: the time this one repetition may take (s, from the call, set-up included). Past it,
+  /// between two frames: with `abandon_over_time` the repetition is dropped (status
+  /// "over_time"); else, once a timed frame ran and the sweep is cuttable, the window is cut
+  /// to cut_frames(asked, measured) frames (`budget_cut` says so); else the point is skipped
+  /// with the time its repetitions would take, estimated from the frames stepped (`estimate_s`).
+  double time_limit_s = 0.0;
+  bool abandon_over_time = false;
+  /// > 0: timed frames of the (only) window instead of the sweep's: a budgeted point's later
+  /// repetitions run the count its first was cut to.
+  int timed_frames = 0;
   /// The most bodies `text` may hold (parse_scene's max_bodies): limits::kMaxGeneratedBodies
   /// for the scenes max-instances generates.
   std::size_t max_bodies = limits::kMaxBodies;
@@ -372,8 +411,10 @@ void record_hygiene(json& result, const Sweep& s, bool quiet);
 
 /// A sweep stopped by signal `sig` between two points (octocd/stop.hpp): records
 /// result["stopped"] (the signal's name), rewrites the result file with `write`, says on
-/// stderr that `output` keeps the finished points and returns the stop's exit code.
-int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output);
+/// stderr that `output` keeps the finished points (`finished`, when given: how many, e.g.
+/// "203 of 360 points") and returns the stop's exit code.
+int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output,
+                   const std::string& finished = "");
 
 /// A sweep's end: marks the result complete (result["complete"], the machine's
 /// load_average_end) and rewrites the result file with `write`.

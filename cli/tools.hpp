@@ -180,6 +180,9 @@ struct BenchOptions {
   long max_instances = 0;         ///< > 0 overrides a max-instances sweep's cap
   double resolution = -1.0;       ///< >= 0 overrides a max-instances sweep's bisection resolution
   int search_time_s = -1;         ///< >= 0 overrides a max-instances sweep's time limit per search (0: none)
+  std::string protocol;           ///< "budget" (default: a time budget per point) or "paper" (the sweep's full protocol)
+  double min_time_s = -1.0;       ///< >= 0 overrides the time a point runs repetitions for at least (budget protocol)
+  double max_time_s = -1.0;       ///< >= 0 overrides the most time a point may take (budget protocol; 0: no limit)
   std::string shard;              ///< "i/N"
   std::string output;             ///< RESULT.json
   bool resume = false;

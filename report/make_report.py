@@ -161,6 +161,12 @@ def main():
                  f"the new run, whose smallest one-sided Mann-Whitney U p is {least:.3g} (every new time above every "
                  f"baseline time), not below the level: no slowdown could be shown{more}; allowed: >= {k} repetitions "
                  f"a side at this level (octocd bench --repeat {k}), or --level above {least:.3g}")
+        if gate["frames"] and not gate["broken"]:
+            pid, spans = gate["frames"][0]
+            more = f" (and {len(gate['frames']) - 1} more point(s))" if len(gate["frames"]) > 1 else ""
+            fail(f"no verdict: '{pid}' was timed over other frames in its runs ({spans}){more}: the time budget cut "
+                 "them differently, and steps/s over other frames do not compare; allowed: runs that timed the same "
+                 "frames (octocd bench --protocol paper, or a --max-time that cuts neither)")
         if gate["broken"]:
             # A failed new run: its sections are not drawn (their figures are what failed).
             results = []

@@ -285,13 +285,14 @@ def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
     """NEW beside BASE per point and timing figure. Returns a dict: rows (one per point and
     figure, numbers), broken (points of the baseline the new run lacks, failed, skipped or
     measured as non-finite or <= 0: exit 4), few (figures with < 5 repetitions a side: exit 2),
+    frames (points whose runs timed other frames, the time budget's cuts: exit 2),
     slower (rows SLOWER: exit 4), across, notes. Bad input (another sweep, another machine
     without `across`, a forged summary, a broken baseline) exits 2 here."""
     across = check_same_sweep(base, new, across)
     bwhy = stopped_text(base)
     if bwhy:
         fail(f"--baseline: {bwhy}; allowed: a finished run of `octocd bench` as the baseline")
-    out = {"rows": [], "broken": [], "few": [], "slower": [], "across": across, "notes": []}
+    out = {"rows": [], "broken": [], "few": [], "frames": [], "slower": [], "across": across, "notes": []}
     nwhy = stopped_text(new)
     if nwhy:
         out["broken"].append(("the new run", f"not a finished run: {nwhy}"))
@@ -334,6 +335,20 @@ def gate_decide(base, new, threshold, alpha, across=False, timing="auto"):
         if [x[0] for x in bt] != [x[0] for x in nt]:
             out["broken"].append((pid, f"the new run ({nfile}) has figures {[x[0] for x in nt]}, the baseline "
                                        f"{[x[0] for x in bt]}"))
+            continue
+        # Steps/s over other frames (the time budget cut the runs' windows differently) are
+        # not like with like: no verdict (docs/bench-format.md "Time budget").
+        spans = {}
+        for side in (base, new):
+            for f, x in runs_of(side, pid):
+                w = x.get("windows")
+                if isinstance(w, dict):
+                    spans.setdefault(tuple((wn, v.get("first"), v.get("last")) if isinstance(v, dict) else (wn,)
+                                           for wn, v in w.items()), f)
+        if len(spans) > 1:
+            out["frames"].append((pid, "; ".join(f"{f}: " + ", ".join(
+                f"{s[0]} frames {s[1]}-{s[2]}" if len(s) == 3 else str(s[0]) for s in span)
+                for span, f in spans.items())))
             continue
         i = index_of[pid]
         for k, ((label, bs, hib), (_, ns, _)) in enumerate(zip(bt, nt)):

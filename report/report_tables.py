@@ -36,13 +36,42 @@ def engines_ran_text(g):
         for e, d in seen.items())
 
 
+def sps_text(p):
+    """A steps point's steps/s spread, with the timed frames when the time budget cut them
+    (docs/bench-format.md "Time budget": figures over fewer frames than the sweep's)."""
+    text = spread_text(first_window(p)["steps_per_s"])
+    b = p.get("budget")
+    if isinstance(b, dict):
+        f, fa = b.get("frames"), b.get("frames_asked")
+        if isinstance(f, int) and isinstance(fa, int) and not isinstance(f, bool) and f != fa:
+            text += f" over {f:,} of {fa:,} frames"
+    return text
+
+
 def settings_text(s, files):
     """One run's settings (engines, repetitions, frames) and its files."""
     return (f"engines {', '.join(s.get('engines', []))}: {s.get('repeat')} repetitions per point"
             + (f", {s.get('frames')} frames per run (warm-up {s.get('warmup')})" if "frames" in s else "")
             + (f", {s.get('warm_replays')} untimed replay(s) first" if "warm_replays" in s else "")
             + (f", each timed repetition at least {s.get('min_time_ms')} ms" if "min_time_ms" in s else "")
+            + budget_text(s)
             + f" (files: {files_text(files)})")
+
+
+def budget_text(s):
+    """The time budget of a steps or speed-accuracy run (docs/bench-format.md "Time budget")."""
+    if s.get("protocol") == "paper":
+        return ", the full protocol (no time budget)"
+    if s.get("protocol") != "budget":
+        return ""
+    def seconds(k):  # a number of seconds, else 0 (the figures are the run's, text is no number)
+        v = s.get(k)
+        return v if isinstance(v, (int, float)) and not isinstance(v, bool) and v == v and v > 0 else 0
+    lim = seconds("max_time_s")
+    return ((f", time budget: at most {lim:g} s a point (a slow point's repetitions cut to fewer timed frames, "
+             "or it is skipped with an estimate: its `budget` says the frames and repetitions reached)" if lim else
+             ", no time limit")
+            + (f", repetitions until {seconds('min_time_s'):g} s" if seconds("min_time_s") else ""))
 
 
 def files_text(files, shown=4):
@@ -142,7 +171,7 @@ def section_table5(doc, g):
                 if p is None and cfg != "A" and find(pts, scene=sc, engine=e, midphase="A") is not None:
                     r.append("(= A: no midphase)")
                 else:
-                    r.append(spread_text(first_window(p)["steps_per_s"]) if p else "-")
+                    r.append(sps_text(p) if p else "-")
             best = []
             rows.append(r)
     doc.table(["scene (bodies)", "config", "paper FPS"] + [f"{e} steps/s" for e in engines], rows)
@@ -198,8 +227,8 @@ def section_table6(doc, g):
              f"{ref['rcr']:+.1f}%"]
         for e in engines:
             l0, c = find(pts, scene=sc, engine=e, midphase="L0"), find(pts, scene=sc, engine=e, midphase="C")
-            r.append(spread_text(first_window(l0)["steps_per_s"]) if l0 else "-")
-            r.append(spread_text(first_window(c)["steps_per_s"]) if c else ("(= L0: no midphase)" if l0 else "-"))
+            r.append(sps_text(l0) if l0 else "-")
+            r.append(sps_text(c) if c else ("(= L0: no midphase)" if l0 else "-"))
             if l0 and c:
                 sa, sb = first_window(l0)["steps_per_s"], first_window(c)["steps_per_s"]
                 a, b = med(sa), med(sb)
