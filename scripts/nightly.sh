@@ -13,7 +13,7 @@
 #      ...; an unexpected exit code; --timeout reached), and no scene was bad input
 #   2  some scene was bad input (octocd exit 2), or this script was called wrongly
 # Every scene is validated whatever happened to the ones before it. While a case runs, a
-# line every 10 s gives its seconds so far and the frame its octocd reached ("frame F of N").
+# line at most 10 s apart gives its seconds so far and the frame its octocd reached ("frame F of N").
 #
 # Usage: scripts/nightly.sh [--build DIR] [--scenes SET] [--frames N] [--every K]
 #                           [--tolerance NAME=VALUE]... [--timeout S] [--against LIST]
@@ -245,14 +245,15 @@ judge_case() {
   esac
 }
 
-# Progress of case $1 while it runs (log $2, started at $3): every 10 s one line with the
+# Progress of case $1 while it runs (log $2, started at $3): one line every 9 s (at most 10 s
+# apart on a loaded machine) with the
 # seconds so far and the latest frame its octocd reported in the log (validate's "judged
 # frame F of N", every 2 s; run's "frame F/N", every 10% of its frames), so a long scene is
 # never silent for more than 10 s.
 heartbeat() {
   local shown_name line secs_so_far
   shown_name="$(shown "$1")"
-  while sleep 10 </dev/null >/dev/null 2>&1; do  # sleep holds no pipe of ours (ctest waits on them)
+  while sleep 9 </dev/null >/dev/null 2>&1; do  # sleep holds no pipe of ours (ctest waits on them)
     line="$(tail -c 4096 "$2" 2>/dev/null | grep -aoE '(judged frame [0-9]+ of [0-9]+|^frame [0-9]+/[0-9]+)' | tail -n 1 |
             sed -E 's/^judged frame ([0-9]+) of ([0-9]+)$/validate: frame \1 of \2/; s|^frame ([0-9]+)/([0-9]+)$|run: frame \1 of \2|')"
     secs_so_far=$(awk -v a="$3" -v b="$(date +%s.%N)" 'BEGIN { printf "%.0f", b - a }')
@@ -260,7 +261,7 @@ heartbeat() {
   done
 }
 # Case $1 ($2 frames): the command "${@:3}" in the background (stop() ends it on a signal),
-# its output in $out/$1.log and a progress line every 10 s (heartbeat), then its outcome
+# its output in $out/$1.log and a progress line at most 10 s apart (heartbeat), then its outcome
 # (judge_case).
 run_case() {
   local name="$1" n_frames="$2" t0 rc
