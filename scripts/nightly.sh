@@ -12,7 +12,8 @@
 #   1  some run failed or timed out (octocd exit 1: a non-finite state, an I/O error,
 #      ...; an unexpected exit code; --timeout reached), and no scene was bad input
 #   2  some scene was bad input (octocd exit 2), or this script was called wrongly
-# Every scene is validated whatever happened to the ones before it.
+# Every scene is validated whatever happened to the ones before it. While a case runs, a
+# line at most 10 s apart gives its seconds so far and the frame its octocd reached ("frame F of N").
 #
 # Usage: scripts/nightly.sh [--build DIR] [--scenes SET] [--frames N] [--every K]
 #                           [--tolerance NAME=VALUE]... [--timeout S] [--against LIST]
@@ -167,9 +168,11 @@ if [ -n "$data_dir" ]; then extra_trace=("${extra[@]:2}"); fi
 passed=0 failed=0 broken=0 bad=0 expected=0
 failed_list=() broken_list=() bad_list=()
 child=0
+beat=0
 stop() {  # a signal to the nightly stops the scene running now (octocd stops within a second)
   trap - INT TERM
   echo "nightly: stopped by a signal" >&2
+  [ "$beat" -gt 0 ] && kill "$beat" 2>/dev/null
   [ "$child" -gt 0 ] && kill -TERM "$child" 2>/dev/null && wait "$child"
   exit 130
 }
@@ -242,17 +245,38 @@ judge_case() {
   esac
 }
 
+# Progress of case $1 while it runs (log $2, started at $3): one line every 9 s (at most 10 s
+# apart on a loaded machine) with the
+# seconds so far and the latest frame its octocd reported in the log (validate's "judged
+# frame F of N", every 2 s; run's "frame F/N", every 10% of its frames), so a long scene is
+# never silent for more than 10 s.
+heartbeat() {
+  local shown_name line secs_so_far
+  shown_name="$(shown "$1")"
+  while sleep 9 </dev/null >/dev/null 2>&1; do  # sleep holds no pipe of ours (ctest waits on them)
+    line="$(tail -c 4096 "$2" 2>/dev/null | grep -aoE '(judged frame [0-9]+ of [0-9]+|^frame [0-9]+/[0-9]+)' | tail -n 1 |
+            sed -E 's/^judged frame ([0-9]+) of ([0-9]+)$/validate: frame \1 of \2/; s|^frame ([0-9]+)/([0-9]+)$|run: frame \1 of \2|')"
+    secs_so_far=$(awk -v a="$3" -v b="$(date +%s.%N)" 'BEGIN { printf "%.0f", b - a }')
+    echo "  ...    $shown_name: ${secs_so_far} s, ${line:-starting (no frame yet)}"
+  done
+}
 # Case $1 ($2 frames): the command "${@:3}" in the background (stop() ends it on a signal),
-# its output in $out/$1.log, then its outcome (judge_case).
+# its output in $out/$1.log and a progress line at most 10 s apart (heartbeat), then its outcome
+# (judge_case).
 run_case() {
   local name="$1" n_frames="$2" t0 rc
   shift 2
   t0=$(date +%s.%N)
   "$@" >"$out/$name.log" 2>&1 &
   child=$!
+  heartbeat "$name" "$out/$name.log" "$t0" &
+  beat=$!
   wait "$child"
   rc=$?
   child=0
+  kill "$beat" 2>/dev/null
+  wait "$beat" 2>/dev/null
+  beat=0
   judge_case "$name" "$out/$name.log" "$rc" "$t0" "$n_frames"
 }
 # A matrix case: engine $1's run of scene $2 with rotation, traced to $out/matrix/$3.h5,
@@ -260,7 +284,7 @@ run_case() {
 matrix_case() {
   local trace="$out/matrix/$3.h5"
   timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" run "$root/datasets/scenes/$2.json" --engine "$1" --rotation --frames "$n_frames" --state-every 1 \
-    --contacts --trace "$trace" --no-xdmf --quiet "${extra_run[@]}" || return $?
+    --contacts --trace "$trace" --no-xdmf "${extra_run[@]}" || return $?
   timeout --signal=TERM --kill-after=10 "$timeout_s" "$bin" validate --trace-in "$trace" --every "$m_every" --against "$against" --junit "$out/junit/$3.xml" \
     --json "$out/json/$3.json" "${tolerances[@]}" "${extra_trace[@]}"
 }

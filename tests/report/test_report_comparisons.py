@@ -1,7 +1,7 @@
 """The report's comparisons (issue 34 item 4) on small generated bench results: the paper's
 FPS on its own axis, engine labels from the registry, stage ms beside the shares, speed-ups
 on the plots, the load mark only where the load exceeded the free cores, the penetration
-of a stack commented from its frames. Run by ctest (`report.gate`, pytest on tests/report)."""
+of a stack commented from its frames. Run by ctest (`report.sections`)."""
 import contextlib
 import copy
 import importlib.util

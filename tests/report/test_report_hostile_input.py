@@ -1,4 +1,4 @@
-"""`octocd report` on untrusted input (issue 36), run by ctest (`report.gate`).
+"""`octocd report` on untrusted input (issue 36), run by ctest (`report.inputs`).
 
 - Traces reach the report only through `octocd trace-summary --json` (the hardened reader):
   external storage is refused naming file and dataset (exit 2, one line, no traceback),

@@ -43,6 +43,10 @@ const std::vector<std::string>& validation_row_names();
 /// not split its failures, or a name no row has.
 std::vector<std::string> documented_causes(const std::string& row);
 
+/// The share of a written expectation's figure left above the worst figure measured
+/// (expectations_from): 0.1, so a recorded non-integer figure is at most 90% of its allowance.
+inline constexpr double kExpectHeadroom = 0.1;
+
 /// One known failure (an entry of an expectations file).
 struct Expectation {
   std::string scene;   ///< the scene's name; "" when `trace` names the run
@@ -125,10 +129,11 @@ struct ExpectationReport {
 ExpectationReport match_expectations(const Expectations& expect, const RunName& run,
                                      const std::vector<ValidationResult>& results);
 
-/// The expectations that accept exactly `results`' current failures of `run` (one per
-/// failing cause, its worst figure rounded up to 3 significant digits, its items when
-/// complete, and a placeholder reason to
-/// edit): what `--write-expect` records.
+/// The expectations that accept `results`' current failures of `run` (one per failing
+/// cause; its figure: a whole-number worst exactly, any other worst divided by
+/// 1 - kExpectHeadroom and rounded up to 3 significant digits; its items when complete; a
+/// placeholder reason naming the worst and the allowance, to edit): what `--write-expect`
+/// records.
 std::vector<Expectation> expectations_from(const RunName& run, const std::vector<ValidationResult>& results);
 
 /// JSON of expectations ({"expectations": [...]}, the file format above).
