@@ -350,10 +350,8 @@ std::string run_kept(const octocd::TraceWriter* trace, const std::string& path) 
 /// committed_frames once no flush is in flight; TraceWriter::read_back_frames_and_hold),
 /// on set_stop_kept_reader's thread; "" (run_kept's text instead) when it cannot be read.
 std::string run_read_back(octocd::TraceWriter& trace, const std::string& path) {
-  const std::int64_t frames = trace.read_back_frames_and_hold();
-  if (frames < 0) return "";
-  return frames > 0 ? fmt::format("the trace {} holds frames 1..{} (read back), no sidecar", path, frames)
-                    : fmt::format("the trace {} holds no frame (read back), no sidecar", path);
+  const std::string held = trace_read_back(trace, path);
+  return held.empty() ? held : held + ", no sidecar";
 }
 
 /// How long the read-back of what `run` keeps may take before the process ends with
@@ -370,6 +368,8 @@ int run_command(const RunOptions& o) {
   // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kRunStopBound; the
   // session says what the trace keeps should the process end inside a step.
   octocd::RunSession session("run", {kRunStopBound});
+  session.keep(o.trace.empty() ? std::string("no frame run yet")
+                               : fmt::format("no frame run yet; the trace {} is not begun", o.trace));
   // Output paths before any work: absent or a regular file (atomic_file.hpp).
   if (!o.trace.empty()) octocd::check_output_file(o.trace, "--trace");
   if (!o.summary_json.empty()) octocd::check_output_file(o.summary_json, "--summary-json");
@@ -443,6 +443,7 @@ int run_command(const RunOptions& o) {
     octocd::TraceWriter* writer = trace.get();
     session.keep_read_back([writer, path = o.trace] { return run_read_back(*writer, path); }, kRunReadBackBound);
   }
+  if (!trace) session.keep("");  // nothing written: the stop line says where it stopped
   // Declared after `trace`: the reader is cleared before the trace goes, whatever the way out.
   const struct ForgetReadBack {
     octocd::RunSession& session;

@@ -557,15 +557,24 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       // removes a temporary trace; a --trace keeps its flushed frames): no frame is judged
       // before the stepping ends.
       octocd::RunSession* session = octocd::RunSession::current();
-      if (session && temporary) session->add_temporary(path);
-      std::int64_t kept_flushed = -1;
-      for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
-        if (session && trace.flushed_frames() != kept_flushed) {
-          kept_flushed = trace.flushed_frames();
-          session->keep(temporary ? std::string("its temporary trace is removed; no frame judged")
-                                  : fmt::format("the trace {} holds frames 1..{} (its last flush); no frame judged",
-                                                path, kept_flushed));
+      if (session && temporary) {
+        session->add_temporary(path);
+        session->keep("its temporary trace is removed; no frame judged");
+      } else if (session) {
+        session->keep(fmt::format("the trace {} holds the frames of its last flush; no frame judged", path));
+        session->keep_read_back([&trace, path] {
+          const std::string held = octocd::cli::trace_read_back(trace, path);
+          return held.empty() ? held : held + "; no frame judged";
+        });
+      }
+      // Cleared before the trace is closed or destroyed, whatever the way out.
+      const struct ForgetReadBack {
+        octocd::RunSession* session;
+        ~ForgetReadBack() {
+          if (session) session->forget_read_back();
         }
+      } forget_read_back{session};
+      for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
         std::optional<octocd::StopWithin> within(
             std::in_place, fmt::format("validate stepped frame {} of {} on engine {} (a step longer than the 0.5 s "
                                        "grace)",
@@ -576,6 +585,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
         trace.append_frame_v2(m, world.state(), world.record());
         ++stepped;
       }
+      if (session) session->forget_read_back();
       trace.close();
       if (session) session->keep("");
       if (session && temporary) session->forget_temporary(path);  // removed below, once judged

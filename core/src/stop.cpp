@@ -105,11 +105,16 @@ void remove_temporaries(bool forget) {
     if (forget ? g_temp_on[k].exchange(false) : g_temp_on[k].load()) ::rmdir(g_temp_text[k]);
 }
 
+// The stop line's descriptor: a copy of stderr taken by StopOnSignals, so a line written
+// while a library has pointed descriptor 2 elsewhere (MuJoCo's model compile captures it
+// into a temporary file) still reaches the command's stderr; 2 when none was taken.
+std::atomic<int> g_err_fd{2};
+
 // Async-signal-safe: write(2) only.
 void put(const char* t) {
   std::size_t n = 0;
   while (t[n] != '\0') ++n;
-  (void)!::write(2, t, n);
+  (void)!::write(g_err_fd.load(), t, n);
 }
 
 // Async-signal-safe: write(2) and _exit(2) only. Prints "octocd: stopped by SIG...",
@@ -299,6 +304,7 @@ void set_stop_kept_reader(std::function<std::string()> reader, double bound_s) {
 }
 
 StopOnSignals::StopOnSignals(double deadline_s, SecondSignal second) {
+  if (const int fd = ::fcntl(2, F_DUPFD_CLOEXEC, 3); fd >= 0) g_err_fd.store(fd);
   g_reader_asked.store(false);
   g_signal.store(0);
   g_count.store(0);
@@ -348,6 +354,7 @@ StopOnSignals::~StopOnSignals() {
   sigaction(SIGINT, &g_old_int, nullptr);
   sigaction(SIGTERM, &g_old_term, nullptr);
   sigaction(SIGALRM, &g_old_alrm, nullptr);
+  if (const int fd = g_err_fd.exchange(2); fd != 2) ::close(fd);
 }
 
 }  // namespace octocd

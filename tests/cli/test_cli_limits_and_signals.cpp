@@ -1289,3 +1289,94 @@ TEST_F(Hardening, BenchSpeedAccuracyOnBulletEndsWithinASecondInsideAStep) {
   EXPECT_EQ(lines(slurp(csv)).size(), 2u) << slurp(csv);  // the header and the point
   expect_no_temporary_file(dir_);
 }
+
+// `report` forwards a signal to its script and waits for it; a script that does not answer
+// (Python inside a C extension, here one ignoring SIGINT and SIGTERM in a busy loop) is
+// killed 0.7 s after the signal: exit 143 within 1 s (plus kStopMarginS), one line saying
+// so, the earlier report folder left as it was, no script process left. The signal follows
+// an event: the script's marker file.
+TEST_F(Hardening, ReportEndsWithinASecondWhenItsScriptDoesNotAnswer) {
+  const fs::path script = dir_ / "stuck.py", marker = dir_ / "started", out = dir_ / "rep";
+  std::ofstream(script) << "import os, signal, sys\n"
+                           "signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+                           "signal.signal(signal.SIGTERM, signal.SIG_IGN)\n"
+                           "open(sys.argv[0].replace('stuck.py', 'started'), 'w').write(str(os.getpid()))\n"
+                           "while True:\n    pass\n";
+  fs::create_directories(out);
+  std::ofstream(out / "index.html") << "earlier";
+  const std::string input = (fs::path(octocd::test::source_dir()) / "tests" / "data" / "bench-small-table6.json").string();
+  Child c(dir_, {"report", input, "-o", out.string()},
+          [&] { ::setenv("OCTOCD_REPORT_SCRIPT", script.c_str(), 1); });
+  const bool started = octocd::test::wait_until([&] { return !slurp(marker).empty(); }, {dir_}, std::chrono::seconds(60));
+  const auto t0 = std::chrono::steady_clock::now();
+  ::kill(c.pid(), SIGTERM);
+  bool ended = false;
+  const Result r = c.wait_within(60, ended);
+  const double took = seconds_since(t0);
+  std::printf("report ended %.3f s after SIGTERM\n", took);
+  ASSERT_TRUE(started) << r.err;
+  ASSERT_TRUE(ended) << "still running 60 s after SIGTERM";
+  EXPECT_LT(took, 1.0 + kStopMarginS) << r.err;
+  EXPECT_EQ(r.code, 143) << r.err;
+  EXPECT_NE(r.err.find("octocd: report stopped by SIGTERM; " + script.string() +
+                       " did not end within 700 ms and was killed (the earlier report in " + out.string()),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(slurp(out / "index.html"), "earlier");
+  const pid_t script_pid = std::stoi(slurp(marker));
+  EXPECT_TRUE(::kill(script_pid, 0) != 0 && errno == ESRCH) << "the script outlived report";
+}
+
+// `validate SCENE --engine bullet` on 13,824 touching boxes (0.4-1 s a step on the 2-core
+// VM), SIGINT once its trace holds a frame (an event): it ends within 1 s (plus
+// kStopMarginS), exit 130, either inside the step (the grace: the line names the frame and
+// the trace's frames read back, which the file holds) or between steps (the verdict of the
+// frames judged within 0.45 s, the STOPPED line).
+TEST_F(Hardening, ValidateOnBulletEndsWithinASecondInsideAStep) {
+  const Result e = run({"engines"});
+  if (!std::regex_search(e.out, std::regex("(^|\n)bullet +available"))) GTEST_SKIP() << "no bullet in this octocd";
+  const std::string trace = (dir_ / "v.h5").string();
+  Child c(dir_, {"validate", lattice_scene(dir_, 24), "--engine", "bullet", "--frames", "1000", "--every", "1000",
+                 "--against", "none", "--trace", trace});
+  const bool flushed = wait_for_frames(trace, 1);
+  const auto t0 = std::chrono::steady_clock::now();
+  ::kill(c.pid(), SIGINT);
+  bool ended = false;
+  const Result r = c.wait_within(60, ended);
+  const double took = seconds_since(t0);
+  ASSERT_TRUE(flushed) << r.err;
+  ASSERT_TRUE(ended) << "still running 60 s after SIGINT";
+  const bool inside = r.err.find("octocd: stopped by SIGINT while validate stepped frame ") != std::string::npos;
+  std::printf("validate on bullet ended %.3f s after SIGINT (%s)\n", took, inside ? "inside a step" : "between steps");
+  EXPECT_LT(took, 1.0 + kStopMarginS) << r.err;
+  EXPECT_EQ(r.code, 130) << r.err;
+  const std::int64_t held = octocd::read_trace_summary(trace).frames;
+  EXPECT_GE(held, 1);
+  if (inside)
+    EXPECT_NE(r.err.find("the trace " + trace + " holds frames 1.." + std::to_string(held) +
+                         " (read back); no frame judged\n"),
+              std::string::npos)
+        << r.err;
+  else
+    EXPECT_NE(r.out.find("STOPPED: the table covers "), std::string::npos) << r.out << r.err;
+}
+
+// `validate --determinism` ends at once on a signal (its runs' traces are temporary): the
+// run session removes the traces written so far. The signal follows an event: the first
+// temporary trace appearing in TMPDIR.
+TEST_F(Hardening, ValidateDeterminismStoppedLeavesNoTemporaryTrace) {
+  const fs::path tmp = dir_ / "tmp";
+  fs::create_directories(tmp);
+  Child c(dir_, {"validate", lattice_scene(dir_, 12), "--frames", "100000", "--determinism", "--threads", "2"},
+          [&] { ::setenv("TMPDIR", tmp.c_str(), 1); });
+  const bool made = octocd::test::wait_until([&] { return !fs::is_empty(tmp); }, {tmp}, std::chrono::seconds(60));
+  ::kill(c.pid(), SIGINT);
+  bool ended = false;
+  const Result r = c.wait_within(60, ended);
+  ASSERT_TRUE(made) << r.err;
+  ASSERT_TRUE(ended) << "still running 60 s after SIGINT";
+  EXPECT_EQ(r.code, 130) << r.err;
+  EXPECT_NE(r.err.find("octocd: stopped by SIGINT while running the determinism comparisons"), std::string::npos)
+      << r.err;
+  EXPECT_TRUE(fs::is_empty(tmp)) << "a temporary trace was left";
+}
