@@ -1380,3 +1380,46 @@ TEST_F(Hardening, ValidateDeterminismStoppedLeavesNoTemporaryTrace) {
       << r.err;
   EXPECT_TRUE(fs::is_empty(tmp)) << "a temporary trace was left";
 }
+
+// `bench` of kind divergence had no bound either: its runs step an engine frame after frame
+// (run_positions) without a poll inside. Now its run session ends it within 1 s (plus
+// kStopMarginS) of SIGTERM, exit 143, saying what the result and CSV keep: the point finished
+// before the signal (an event: it appears in the result file), which they hold.
+TEST_F(Hardening, BenchDivergenceOnBulletEndsWithinASecond) {
+  const Result e = run({"engines"});
+  if (!std::regex_search(e.out, std::regex("(^|\n)bullet +available"))) GTEST_SKIP() << "no bullet in this octocd";
+  std::ofstream(dir_ / "small.json") << R"({"name": "small", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]},
+    "walls": "floor", "frames": 10, "groups": [{"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 8,
+    "layout": {"type": "grid", "min": [-0.5, 0.1, -0.5], "max": [0.5, 1.5, 0.5]}}]})";
+  lattice_scene(dir_, 24);
+  std::ofstream(dir_ / "sweep.json") << R"({"name": "stop-dv", "kind": "divergence", "engines": ["bullet"],
+    "scenes": ["small.json", "lattice.json"], "frames": 20, "eps": [1e-6], "copies": 2, "seed": 1})";
+  const fs::path out = dir_ / "dv.json", csv = dir_ / "dv.csv";
+  Child c(dir_, {"bench", (dir_ / "sweep.json").string(), "-o", out.string(), "--csv", csv.string(), "--scene-dir",
+                 dir_.string(), "--quiet"});
+  const bool first = octocd::test::wait_until(
+      [&] {
+        try {
+          return nlohmann::json::parse(slurp(out))["points"].size() == 1;
+        } catch (const std::exception&) {
+          return false;  // not written yet
+        }
+      },
+      {dir_}, std::chrono::seconds(120));
+  const auto t0 = std::chrono::steady_clock::now();
+  ::kill(c.pid(), SIGTERM);
+  bool ended = false;
+  const Result r = c.wait_within(60, ended);
+  const double took = seconds_since(t0);
+  ASSERT_TRUE(first) << "the first point not in the result within 120 s: " << r.err;
+  std::printf("bench divergence ended %.3f s after SIGTERM: %s", took, r.err.c_str());
+  ASSERT_TRUE(ended) << "still running 60 s after SIGTERM";
+  EXPECT_LT(took, 1.0 + kStopMarginS) << r.err;
+  EXPECT_EQ(r.code, 143) << r.err;
+  EXPECT_NE(r.err.find("; the result " + out.string() + " and the CSV " + csv.string() +
+                       " keep the 1 finished point(s)\n"),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(nlohmann::json::parse(slurp(out))["points"].size(), 1u) << slurp(out);
+  expect_no_temporary_file(dir_);
+}
