@@ -1243,8 +1243,10 @@ constexpr double kStopMarginS = 2.0;
 // (plus kStopMarginS on a loaded machine) with exit 143 and one line saying what the result
 // and CSV keep, and they hold exactly that: the point finished before the signal. The
 // signal follows an event: the first point in the result file; the second point's steps
-// are Bullet's on a lattice of 13,824 touching boxes (0.4-1 s a step on the 2-core VM).
-TEST_F(Hardening, BenchSpeedAccuracyOnBulletEndsWithinASecondInsideAStep) {
+// are Bullet's on a lattice of 13,824 touching boxes (0.4-1 s a step on the loaded 2-core
+// VM, so the signal often lands inside one; on an idle machine it may land in the set-up or
+// between steps: either way the same bound and line hold, and the test prints which).
+TEST_F(Hardening, BenchSpeedAccuracyOnBulletEndsWithinASecond) {
   const Result e = run({"engines"});
   if (!std::regex_search(e.out, std::regex("(^|\n)bullet +available"))) GTEST_SKIP() << "no bullet in this octocd";
   std::ofstream(dir_ / "small.json") << R"({"name": "small", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]},
