@@ -2,19 +2,23 @@
 """Stop latency: seconds from SIGINT to the end of an octocd command, with busy loops beside.
 
     /usr/bin/python3 bench/stop_latency.py [--build build] [--busy 2] [--repeat 5]
-        [--out stop-latency.csv]
+        [--cases NAME,...] [--out stop-latency.csv]
 
-Each case starts one command on a dense scene (every pair of boxes overlaps, so a step or
-a frame's checks take about a second and the signal lands inside one), waits for an event
-(the first frame flushed into its trace, the first point in its result file, the judge
-opening the trace), sends SIGINT and measures the wall time until the process exits. The
-cases: `run` (trace flushed every frame), `validate SCENE` (a step and its checks on a
-worker), `validate --trace-in` (a trace of a lattice of 15,625 boxes touching their 26
-neighbours judged: the validators refuse coincident boxes), `bench` (a point of the dense
-scene). `--busy N` runs N busy loops (pure Python spins) beside them for the whole
-measurement, so the figures are those of a loaded machine; the table names the load
-average. It checks what each case must keep: exit 130, and for `validate` the STOPPED line
-with the verdict of the frames judged (`--junit` with its 'stopped' case).
+Each case starts one command on a scene whose step or frame's checks take about a second
+(so the signal lands inside one), waits for an event (the first frame flushed into its
+trace, the first point in its result file, a temporary trace appearing, the judge opening
+the trace), sends SIGINT and measures the wall time until the process exits. The cases:
+`run` (trace flushed every frame), `validate SCENE` (a step and its checks on a worker),
+`validate --trace-in` (a trace of a lattice of 15,625 boxes touching their 26 neighbours
+judged: the validators refuse coincident boxes), `bench` (a point of the dense scene), and
+inside a reference engine's step (Bullet on a lattice of 13,824 touching boxes, 0.4-1 s
+a step on the loaded 2-core VM): `run bullet`, `validate bullet`, `validate --determinism bullet`,
+`bench steps bullet`, `bench speed-accuracy bullet`. `--busy N` runs N busy loops (pure
+Python spins) beside them for the whole measurement, so the figures are those of a loaded
+machine; the table names the load average. It checks what each case must keep: exit 130,
+the stop line's kept text true of the files (the result's finished points, the trace's
+frames), for `validate` the STOPPED line with the verdict of the frames judged (`--junit`
+with its 'stopped' case), and no temporary file left in the case's TMPDIR.
 
 The tests assert the behaviour (tests/cli/test_cli_limits_and_signals.cpp) with bounds
 that hold on a loaded 2-core machine; this script records the times.
@@ -25,6 +29,7 @@ import json
 import multiprocessing
 import os
 import platform
+import re
 import signal
 import statistics
 import subprocess
@@ -85,8 +90,29 @@ def trace_frames(path):
         return 0
 
 
-def measure(cmd, ready, cwd):
-    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def result_points(path):
+    """Points in a bench result file (-1 when it cannot be read yet)."""
+    try:
+        with open(path) as f:
+            return len(json.load(f)["points"])
+    except Exception:
+        return -1
+
+
+def kept_points(err, path):
+    """The stop line's "keep(s) the N ..." count equals the points the result file holds."""
+    m = re.search(r"keeps? the ([0-9]+) (?:finished )?point", err)
+    return m is not None and int(m.group(1)) == result_points(path)
+
+
+def kept_frames(err, path):
+    """The stop line's "holds frames 1..N" equals the frames the trace holds."""
+    m = re.search(r"holds frames 1\.\.([0-9]+)", err)
+    return m is not None and int(m.group(1)) == trace_frames(path)
+
+
+def measure(cmd, ready, cwd, env=None):
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     if not wait_for(ready, proc):
         proc.kill()
         out, err = proc.communicate()
@@ -103,6 +129,7 @@ def main():
     p.add_argument("--busy", type=int, default=2, help="busy loops beside the command (0 .. 64)")
     p.add_argument("--repeat", type=int, default=5, help="repetitions of each case (>= 1)")
     p.add_argument("--out", default="stop-latency.csv", help="CSV: a row per case and repetition")
+    p.add_argument("--cases", default="", help="comma-separated case names (default: every case)")
     args = p.parse_args()
     if not 0 <= args.busy <= 64 or args.repeat < 1:
         sys.exit("stop_latency: --busy in 0 .. 64 and --repeat >= 1")
@@ -142,8 +169,63 @@ def main():
         return ([octocd, "bench", sweep, "-o", r, "--scene-dir", work, "--quiet"],
                 lambda: time.monotonic() - started > 3.0, lambda out, err: True)
 
+    # Inside a reference engine's step: Bullet on 24^3 touching boxes, 0.4-1 s a step (2-core VM, loaded).
+    lattice_scene(work, 24, "hulls")
+    with open(os.path.join(work, "small.json"), "w") as f:
+        json.dump({"name": "small", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]}, "walls": "floor", "frames": 10,
+                   "groups": [{"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 8,
+                               "layout": {"type": "grid", "min": [-0.5, 0.1, -0.5], "max": [0.5, 1.5, 0.5]}}]}, f)
+    sa_sweep, steps_sweep = os.path.join(work, "sa.json"), os.path.join(work, "steps.json")
+    with open(sa_sweep, "w") as f:
+        json.dump({"name": "stop-sa", "kind": "speed-accuracy", "engines": ["bullet"], "repeat": 1,
+                   "scenes": ["small.json", "hulls.json"], "dts": [0.01], "sim_seconds": 0.2, "iterations": [5],
+                   "geometries": ["hull"], "rotation": [False]}, f)
+    with open(steps_sweep, "w") as f:
+        json.dump({"name": "stop-steps", "kind": "steps", "scenes": ["small.json", "hulls.json"],
+                   "engines": ["bullet"], "warmup": 0, "frames": 20, "repeat": 1}, f)
+    hulls = os.path.join(work, "hulls.json")
+
+    def tmp_env(k, name):
+        d = os.path.join(work, f"tmp-{name}-{k}")
+        os.makedirs(d, exist_ok=True)
+        return d, dict(os.environ, TMPDIR=d)
+
+    def case_run_bullet(k):
+        t = os.path.join(work, f"rb-{k}.h5")
+        return ([octocd, "run", hulls, "--engine", "bullet", "--trace", t, "--state-every", "1", "--quiet"],
+                lambda: trace_frames(t) >= 1, lambda out, err: kept_frames(err, t))
+
+    def case_validate_bullet(k):
+        t, j = os.path.join(work, f"vb-{k}.h5"), os.path.join(work, f"vb-{k}.xml")
+        return ([octocd, "validate", hulls, "--engine", "bullet", "--frames", "1000", "--every", "1000",
+                 "--against", "none", "--trace", t, "--junit", j], lambda: trace_frames(t) >= 1,
+                lambda out, err: kept_frames(err, t))
+
+    def case_determinism_bullet(k):
+        d, env = tmp_env(k, "det")
+        return ([octocd, "validate", hulls, "--engine", "bullet", "--frames", "1000", "--determinism",
+                 "--threads", "2"], lambda: len(os.listdir(d)) > 0, lambda out, err: True, env)
+
+    def case_bench_steps_bullet(k):
+        r = os.path.join(work, f"bs-{k}.json")
+        return ([octocd, "bench", steps_sweep, "-o", r, "--scene-dir", work, "--quiet"],
+                lambda: result_points(r) >= 1, lambda out, err: kept_points(err, r))
+
+    def case_bench_sa_bullet(k):
+        r, c = os.path.join(work, f"sa-{k}.json"), os.path.join(work, f"sa-{k}.csv")
+        return ([octocd, "bench", sa_sweep, "-o", r, "--csv", c, "--scene-dir", work, "--quiet"],
+                lambda: result_points(r) >= 1, lambda out, err: kept_points(err, r))
+
     cases = [("run", case_run), ("validate SCENE", case_validate), ("validate --trace-in", case_trace_in),
-             ("bench", case_bench)]
+             ("bench", case_bench), ("run bullet", case_run_bullet), ("validate bullet", case_validate_bullet),
+             ("validate --determinism bullet", case_determinism_bullet), ("bench steps bullet", case_bench_steps_bullet),
+             ("bench speed-accuracy bullet", case_bench_sa_bullet)]
+    if args.cases:
+        wanted = args.cases.split(",")
+        unknown = [c for c in wanted if c not in dict(cases)]
+        if unknown:
+            sys.exit(f"stop_latency: --cases {','.join(unknown)}: unknown; allowed: {', '.join(n for n, _ in cases)}")
+        cases = [c for c in cases if c[0] in wanted]
     spinners = [multiprocessing.Process(target=spin, daemon=True) for _ in range(args.busy)]
     for s in spinners:
         s.start()
@@ -152,9 +234,12 @@ def main():
         time.sleep(1.0)  # the spinners running before the first case
         for name, make in cases:
             for k in range(args.repeat):
-                cmd, ready, kept = make(k)
-                seconds, code, out, err = measure(cmd, ready, work)
-                ok = code == 128 + signal.SIGINT and kept(out, err)
+                cmd, ready, kept, *env = make(k)
+                seconds, code, out, err = measure(cmd, ready, work, env[0] if env else None)
+                tmp = env[0]["TMPDIR"] if env else None
+                ok = code == 128 + signal.SIGINT and kept(out, err) and not (tmp and os.listdir(tmp))
+                if not ok:
+                    print(f"{name} #{k}: exit {code}; stderr: {err.strip()[-400:]}", flush=True)
                 rows.append({"case": name, "repetition": k, "seconds": round(seconds, 4), "exit": code,
                              "kept": ok, "load1": round(os.getloadavg()[0], 2), "busy": args.busy})
                 print(f"{name:22s} #{k}: {seconds:.3f} s, exit {code}, kept {ok}", flush=True)
@@ -168,6 +253,8 @@ def main():
     print(f"\n{platform.node()}, {os.cpu_count()} CPUs, {args.busy} busy loops beside; load average "
           f"{os.getloadavg()[0]:.2f}; seconds from SIGINT to exit, median (min-max) of {args.repeat}:")
     for name, _ in cases:
+        if not any(r["case"] == name for r in rows):
+            continue
         t = [r["seconds"] for r in rows if r["case"] == name]
         kept = all(r["kept"] for r in rows if r["case"] == name)
         print(f"| {name} | {statistics.median(t):.3f} ({min(t):.3f}-{max(t):.3f}) | {'kept' if kept else 'LOST'} |")

@@ -18,7 +18,7 @@
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/shared_files.hpp"
-#include "octocd/stop.hpp"
+#include "octocd/run_session.hpp"
 #include "tools.hpp"
 
 namespace octocd::cli {
@@ -366,12 +366,14 @@ int bench_command(const BenchOptions& o) {
   ModelCache models;
   InputCache inputs;
   bool any_failed = false;
+  // SIGINT/SIGTERM: stop between frames, or inside a step within the session's bound;
+  // either way the result keeps the finished points.
+  octocd::RunSession session("bench", {kBenchStopBound});
   auto write = [&] {
     result["updated"] = utc_time_now();
     write_file_atomically(o.output, result.dump(1) + "\n", "-o");
-    // What a process ended at once (a second signal, the 1 s bound) keeps: this file.
-    octocd::set_stop_kept(fmt::format("the result {} keeps the {} point(s) finished before (--resume goes on)",
-                                      o.output, result["points"].size()));
+    session.keep(fmt::format("the result {} keeps the {} point(s) finished before (--resume goes on)", o.output,
+                             result["points"].size()));
   };
   record_hygiene(result, s, o.quiet);
   if (!o.quiet && s.kind == "max-instances")
@@ -390,25 +392,21 @@ int bench_command(const BenchOptions& o) {
   }
   if (s.kind == "max-instances")
     for (const auto& [id, pt] : kept) result["points"].push_back(pt);
-  // SIGINT/SIGTERM: stop between frames, keep the finished points, within kBenchStopBound.
-  octocd::StopOnSignals stop_on_signals(kBenchStopBound);
-  octocd::set_stop_kept(fmt::format("the result {} keeps the points finished before (--resume goes on)", o.output));
+  session.keep(result["points"].empty()
+                   ? fmt::format("no point finished yet: the result {} is not written", o.output)
+                   : fmt::format("the result {} keeps the {} point(s) finished before (--resume goes on)", o.output,
+                                 result["points"].size()));
   const auto stopped = [&](int sig) {
     result["stopped"] = octocd::stop_signal_name(sig);
     std::sort(result["points"].begin(), result["points"].end(),
               [](const json& a, const json& b) { return a.value("index", 0) < b.value("index", 0); });
     write();
+    std::fputc('\n', stderr);
     if (s.kind == "max-instances")
-      std::fprintf(stderr,
-                   "\noctocd bench: stopped by %s after %zu probes (%zu of %zu searches done); result %s keeps them "
-                   "(--resume goes on)\n",
-                   octocd::stop_signal_name(sig), result["points"].size(),
-                   result.contains("searches") ? result["searches"].size() : std::size_t{0}, my_searches.size(),
-                   o.output.c_str());
-    else
-      std::fprintf(stderr, "\noctocd bench: stopped by %s after %zu of %zu points; result %s keeps them (--resume goes on)\n",
-                   octocd::stop_signal_name(sig), result["points"].size(), mine.size(), o.output.c_str());
-    return octocd::stop_exit_code(sig);
+      return session.stopped(sig, fmt::format(" after {} probes ({} of {} searches done)", result["points"].size(),
+                                              result.contains("searches") ? result["searches"].size() : std::size_t{0},
+                                              my_searches.size()));
+    return session.stopped(sig, fmt::format(" after {} of {} points", result["points"].size(), mine.size()));
   };
   if (s.kind == "max-instances") {
     MaxInstancesRun run{s, o, result, kept, {}, {}, progress, write};

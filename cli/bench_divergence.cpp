@@ -20,7 +20,7 @@
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
-#include "octocd/stop.hpp"
+#include "octocd/run_session.hpp"
 #include "predict.hpp"
 
 namespace octocd::cli::bench {
@@ -174,6 +174,10 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
     }
     return r;
   };
+  // SIGINT/SIGTERM: the sweep stops between points, or ends inside a step within the
+  // session's bound; either way the result and the CSV keep the finished points.
+  octocd::RunSession session("bench");
+  session.keep(fmt::format("no point finished yet: the result {} is not written", o.output));
   const auto write = [&] {
     json out = result;
     out["points"] = json::array();
@@ -196,6 +200,8 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
     out["updated"] = utc_time_now();
     write_file_atomically(o.output, out.dump(1) + "\n", "-o");
     write_file_atomically(csv_path, csv.str(), "--csv");
+    session.keep(fmt::format("the result {} and the CSV {} keep the {} finished point(s)", o.output, csv_path,
+                             out["points"].size()));
   };
 
   if (!o.quiet)
@@ -205,7 +211,6 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
                s.name, points.size(), s.scenes.size(), s.engines.size(), s.eps.size(), s.copies, s.frames, o.output,
                csv_path);
   SweepProgress progress(points.size(), !o.quiet);
-  octocd::StopOnSignals stop_on_signals;
   ModelCache models;
   bool any_failed = false;
   std::size_t done = 0;
@@ -234,7 +239,7 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
     const double ref_s = std::chrono::duration<double>(Clock::now() - t_ref).count();
     for (std::size_t k = first; k < first + s.eps.size(); ++k) {
       DvPoint& p = points[k];
-      if (const int sig = octocd::stop_signal()) return record_stopped(result, sig, write, o.output);
+      if (const int sig = octocd::stop_signal()) return record_stopped(result, sig, write, session);
       progress.start(done++, p.id);
       if (!skip.empty()) {
         p.status = any_failed && skip.find(" failed on ") != std::string::npos ? "failed" : "skipped";
@@ -290,7 +295,7 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
       write();
     }
   }
-  if (const std::optional<int> stopped = finish_sweep(result, write)) return *stopped;
+  if (const std::optional<int> stopped = finish_sweep(result, write, session)) return *stopped;
   if (std::all_of(points.begin(), points.end(), [](const DvPoint& p) { return p.status == "skipped"; }))
     throw InputError(fmt::format("{}: every point skipped (first: {}: {}); allowed: a sweep with a point this octocd "
                                  "can run (result kept in {})",

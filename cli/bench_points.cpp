@@ -17,7 +17,7 @@
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/scene.hpp"
-#include "octocd/stop.hpp"
+#include "octocd/run_session.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/worlds.hpp"
 
@@ -39,13 +39,20 @@ double process_cpu_ms() {
   return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 
-/// Removes the file at `path` (if any) when it goes.
+/// Removes the file at `path` (if any) when it goes; the run session (if any) removes it
+/// should the process end at once.
 struct RemovedAtEnd {
-  std::string path;
+  explicit RemovedAtEnd(std::string p) : path(std::move(p)) {
+    if (RunSession* session = RunSession::current(); session && !path.empty()) session->add_temporary(path);
+  }
   ~RemovedAtEnd() {
+    if (RunSession* session = RunSession::current(); session && !path.empty()) session->forget_temporary(path);
     std::error_code ec;
     if (!path.empty()) fs::remove(path, ec);
   }
+  RemovedAtEnd(const RemovedAtEnd&) = delete;
+  RemovedAtEnd& operator=(const RemovedAtEnd&) = delete;
+  std::string path;
 };
 
 /// Sums over the frames of one window of one repetition.

@@ -251,13 +251,12 @@ void record_hygiene(json& result, const Sweep& s, bool quiet) {
     fmt::print(stderr, "bench {}: note: 1 repetition per point: no spread, so no timing verdict\n", octocd::printable(s.name));
 }
 
-int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output,
+int record_stopped(json& result, int sig, const std::function<void()>& write, RunSession& session,
                    const std::string& finished) {
   result["stopped"] = octocd::stop_signal_name(sig);
   write();
-  std::fprintf(stderr, "\noctocd bench: stopped by %s%s; result %s keeps the finished points\n",
-               octocd::stop_signal_name(sig), finished.empty() ? "" : (" after " + finished).c_str(), output.c_str());
-  return octocd::stop_exit_code(sig);
+  std::fputc('\n', stderr);
+  return session.stopped(sig, finished.empty() ? std::string() : " after " + finished);
 }
 
 void record_complete(json& result, const std::function<void()>& write) {
@@ -266,12 +265,8 @@ void record_complete(json& result, const std::function<void()>& write) {
   write();
 }
 
-std::optional<int> finish_sweep(json& result, const std::function<void()>& write) {
-  if (const int sig = octocd::stop_signal()) {
-    result["stopped"] = octocd::stop_signal_name(sig);
-    write();
-    return octocd::stop_exit_code(sig);
-  }
+std::optional<int> finish_sweep(json& result, const std::function<void()>& write, RunSession& session) {
+  if (const int sig = session.signal()) return record_stopped(result, sig, write, session);
   record_complete(result, write);
   return std::nullopt;
 }

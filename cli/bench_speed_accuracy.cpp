@@ -20,7 +20,7 @@
 #include "octocd/error.hpp"
 #include "octocd/json_strict.hpp"
 #include "octocd/scene.hpp"
-#include "octocd/stop.hpp"
+#include "octocd/run_session.hpp"
 
 namespace octocd::cli::bench {
 
@@ -378,6 +378,10 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
     return r;
   };
 
+  // SIGINT/SIGTERM: the sweep stops between points, or ends inside a step within the
+  // session's bound; either way the result and the CSV keep the finished points.
+  octocd::RunSession session("bench");
+  session.keep(fmt::format("no point finished yet: the result {} is not written", o.output));
   const auto write = [&]() {
     json out = result;
     out["points"] = json::array();
@@ -413,6 +417,8 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
       csv << '\n';
     }
     write_file_atomically(csv_path, csv.str(), "--csv");
+    session.keep(fmt::format("the result {} and the CSV {} keep the {} finished point(s)", o.output, csv_path,
+                             out["points"].size()));
   };
 
   SweepProgress progress(mine.size(), !o.quiet);
@@ -436,7 +442,6 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
   for (const std::size_t k : mine)
     if (points[k].status == "skipped") finish(points[k]);
 
-  octocd::StopOnSignals stop_on_signals;
   const auto t0 = Clock::now();
   bool any_failed = false;
   // Round-robin within groups of kRoundRobinGroup points (design.md section 14b); the budget
@@ -457,7 +462,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
         any = true;
         const Line& l = lines[p.line];
         if (const int sig = octocd::stop_signal())
-          return record_stopped(result, sig, write, o.output, fmt::format("{} of {} points", finished, mine.size()));
+          return record_stopped(result, sig, write, session, fmt::format("{} of {} points", finished, mine.size()));
         progress.start(finished, fmt::format("{} (repetition {}/{})", p.id, rep + 1, s.repeat));
         p.started.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
         const auto t_rep = Clock::now();
@@ -482,10 +487,17 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
         double e_first = std::numeric_limits<double>::quiet_NaN(), e_last = e_first;
         try {
           for (long step = 1; step <= p.steps && diverged.empty(); ++step) {
-            if ((step & 63) == 0 && octocd::stop_signal() != 0) break;
+            if (session.signal() != 0) break;
+            // A step of a big scene may take seconds (Bullet's GJK on hulls): a signal it does
+            // not answer within the grace ends the bench there, the session saying what the
+            // result keeps. Made outside the timed step.
+            std::optional<octocd::StopWithin> within(
+                std::in_place, fmt::format("bench point {} stepped step {} of {} (a step longer than the 0.5 s grace)",
+                                           p.id, step, p.steps));
             const auto ts = Clock::now();
             const FrameMetrics& m = engine->step();
             const auto te = Clock::now();
+            within.reset();
             wall += std::chrono::duration<double>(te - ts).count();
             if (limit > 0.0 && step < p.steps && std::chrono::duration<double>(te - t_rep).count() > limit) {
               over_time = true;  // past max_time_s: the first repetition skips the point, a later one is dropped
@@ -577,7 +589,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
       if (!any) break;
     }
   }
-  if (const std::optional<int> stopped = finish_sweep(result, write)) return *stopped;
+  if (const std::optional<int> stopped = finish_sweep(result, write, session)) return *stopped;
   if (!mine.empty() && std::all_of(mine.begin(), mine.end(), [&](std::size_t k) { return points[k].status == "skipped"; }))
     throw InputError(fmt::format("{}: every point skipped ({}; first: {}: {}); allowed: a sweep with a point this "
                                  "octocd can run (result kept in {})",

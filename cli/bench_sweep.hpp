@@ -29,6 +29,7 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/engine.hpp"
+#include "octocd/run_session.hpp"
 #include "octocd/text.hpp"
 #include "octocd/world.hpp"
 #include "tools.hpp"
@@ -409,11 +410,11 @@ bool finished_result_matches(const json& old, const std::string& path, const jso
 /// its warnings: a loaded machine or oversubscribed threads make timings noisy.
 void record_hygiene(json& result, const Sweep& s, bool quiet);
 
-/// A sweep stopped by signal `sig` between two points (octocd/stop.hpp): records
-/// result["stopped"] (the signal's name), rewrites the result file with `write`, says on
-/// stderr that `output` keeps the finished points (`finished`, when given: how many, e.g.
-/// "203 of 360 points") and returns the stop's exit code.
-int record_stopped(json& result, int sig, const std::function<void()>& write, const std::string& output,
+/// A sweep stopped by signal `sig` between two points (octocd/run_session.hpp): records
+/// result["stopped"] (the signal's name), rewrites the result file with `write` (which
+/// tells `session` what it keeps), and ends with session.stopped(): the stop line (with
+/// `finished`, when given: how many points, e.g. "203 of 360 points"), the stop's exit code.
+int record_stopped(json& result, int sig, const std::function<void()>& write, RunSession& session,
                    const std::string& finished = "");
 
 /// A sweep's end: marks the result complete (result["complete"], the machine's
@@ -421,8 +422,7 @@ int record_stopped(json& result, int sig, const std::function<void()>& write, co
 void record_complete(json& result, const std::function<void()>& write);
 
 /// The end of a divergence or speed-accuracy sweep: when SIGINT or SIGTERM arrived,
-/// records result["stopped"], rewrites the file and returns the stop's exit code; else
-/// record_complete and nothing.
-std::optional<int> finish_sweep(json& result, const std::function<void()>& write);
+/// record_stopped; else record_complete and nothing.
+std::optional<int> finish_sweep(json& result, const std::function<void()>& write, RunSession& session);
 
 }  // namespace octocd::cli::bench

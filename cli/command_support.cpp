@@ -38,6 +38,13 @@ std::string data_dir_help() {
 
 /// The line a command stopped by SIGINT/SIGTERM prints on stderr: where it stopped and
 /// what it kept.
+std::string trace_read_back(octocd::TraceWriter& trace, const std::string& path) {
+  const std::int64_t frames = trace.read_back_frames_and_hold();
+  if (frames < 0) return "";
+  return frames > 0 ? fmt::format("the trace {} holds frames 1..{} (read back)", path, frames)
+                    : fmt::format("the trace {} holds no frame (read back)", path);
+}
+
 void report_stop(int sig, const char* command, std::int64_t done, std::int64_t total,
                  const std::string& trace, const std::string& note) {
   std::string kept;

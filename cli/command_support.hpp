@@ -38,6 +38,12 @@ std::string data_dir_help();
 /// ("--frames: 0 is out of range; allowed: an integer in [1, 2147483647]").
 CLI::Validator at_least_one();
 
+/// What a trace being written holds, read back from the file once no flush is in flight
+/// (TraceWriter::read_back_frames_and_hold: every later write held off): "the trace PATH
+/// holds frames 1..K (read back)" or "the trace PATH holds no frame (read back)"; "" when
+/// it cannot be read. For RunSession::keep_read_back (run_session.hpp).
+std::string trace_read_back(octocd::TraceWriter& trace, const std::string& path);
+
 /// Prints on stderr the line of a command stopped by SIGINT/SIGTERM: the signal, the
 /// frame it stopped after of `total`, what `trace` holds, and `note`.
 void report_stop(int sig, const char* command, std::int64_t done, std::int64_t total, const std::string& trace,

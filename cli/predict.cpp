@@ -15,6 +15,7 @@
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/process_engines.hpp"
+#include "octocd/run_session.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/trace_reader.hpp"
 #include "tools.hpp"
@@ -33,13 +34,16 @@ class TemporaryTraces {
   TemporaryTraces& operator=(const TemporaryTraces&) = delete;
   ~TemporaryTraces() {
     for (const std::string& p : paths_) {
+      if (RunSession* session = RunSession::current()) session->forget_temporary(p);
       std::error_code ec;
       std::filesystem::remove(p, ec);
     }
   }
-  /// A new empty file (temporary_trace) named after `what`.
+  /// A new empty file (temporary_trace) named after `what`; the run session (if any)
+  /// removes it should the process end at once.
   const std::string& make(const std::string& what) {
     paths_.push_back(temporary_trace(what));
+    if (RunSession* session = RunSession::current()) session->add_temporary(paths_.back());
     return paths_.back();
   }
 

@@ -12,10 +12,12 @@
 
 #include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -47,6 +49,9 @@ std::string script() {
   if (const char* p = std::getenv("OCTOCD_REPORT_SCRIPT"); p && *p) return p;
   return (fs::path(shared_dir()) / "report" / "make_report.py").string();
 }
+
+/// From a forwarded SIGINT/SIGTERM to the script's SIGKILL: `report` ends within 1 s.
+constexpr std::chrono::milliseconds kReportStopBound{700};
 
 // The script's process while it runs (0: none), and the signal forwarded to it.
 std::atomic<pid_t> g_child{0};
@@ -277,15 +282,34 @@ int report_command(const ReportOptions& o) {
   }
   g_child = pid;
   if (const int sig = g_forwarded.load()) ::kill(pid, sig);  // a signal between fork and here
+  // Polled (10 ms): once a signal was forwarded, the script has kReportStopBound to end
+  // (Python inside a C extension answers its KeyboardInterrupt only when it returns), then
+  // it is killed, so `report` ends within 1 s of the signal.
   int status = 0;
   pid_t got = 0;
-  while ((got = waitpid(pid, &status, 0)) < 0 && errno == EINTR) {
+  std::optional<std::chrono::steady_clock::time_point> signalled;
+  bool killed = false;
+  for (;;) {
+    got = waitpid(pid, &status, WNOHANG);
+    if (got == pid || (got < 0 && errno != EINTR)) break;
+    if (g_forwarded.load() != 0) {
+      const auto now = std::chrono::steady_clock::now();
+      if (!signalled) signalled = now;
+      if (!killed && now - *signalled >= kReportStopBound) {
+        ::kill(pid, SIGKILL);
+        killed = true;
+      }
+    }
+    ::usleep(10000);
   }
   g_child = 0;
   if (got < 0) throw RuntimeError("report: waitpid failed");
   if (const int sig = g_forwarded.load()) {
-    std::fprintf(stderr, "octocd: report stopped by %s; %s ended (the earlier report in %s, if any, is left as it "
-                         "was)\n", stop_signal_name(sig), sc.c_str(), o.output.c_str());
+    std::fprintf(stderr, "octocd: report stopped by %s; %s %s (the earlier report in %s, if any, is left as it "
+                         "was)\n", stop_signal_name(sig), sc.c_str(),
+                 killed ? fmt::format("did not end within {} ms and was killed", kReportStopBound.count()).c_str()
+                        : "ended",
+                 o.output.c_str());
     return stop_exit_code(sig);
   }
   if (!WIFEXITED(status))

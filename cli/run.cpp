@@ -33,7 +33,7 @@
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/atomic_file.hpp"
-#include "octocd/stop.hpp"
+#include "octocd/run_session.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
@@ -350,10 +350,8 @@ std::string run_kept(const octocd::TraceWriter* trace, const std::string& path) 
 /// committed_frames once no flush is in flight; TraceWriter::read_back_frames_and_hold),
 /// on set_stop_kept_reader's thread; "" (run_kept's text instead) when it cannot be read.
 std::string run_read_back(octocd::TraceWriter& trace, const std::string& path) {
-  const std::int64_t frames = trace.read_back_frames_and_hold();
-  if (frames < 0) return "";
-  return frames > 0 ? fmt::format("the trace {} holds frames 1..{} (read back), no sidecar", path, frames)
-                    : fmt::format("the trace {} holds no frame (read back), no sidecar", path);
+  const std::string held = trace_read_back(trace, path);
+  return held.empty() ? held : held + ", no sidecar";
 }
 
 /// How long the read-back of what `run` keeps may take before the process ends with
@@ -366,31 +364,12 @@ constexpr double kRunReadBackBound = 0.2;
 /// frames, said as read back from the trace.
 constexpr double kRunStopBound = 0.75;
 
-/// While alive, a `run` that ends at once says what its trace holds read back from it
-/// (run_read_back); cleared before the trace is closed or destroyed.
-class KeptReadBack {
- public:
-  KeptReadBack() = default;
-  void start(octocd::TraceWriter* trace, const std::string& path) {
-    if (!trace) return;
-    octocd::set_stop_kept_reader([trace, path] { return run_read_back(*trace, path); }, kRunReadBackBound);
-    on_ = true;
-  }
-  void stop() {
-    if (on_) octocd::set_stop_kept_reader({});
-    on_ = false;
-  }
-  ~KeptReadBack() { stop(); }
-  KeptReadBack(const KeptReadBack&) = delete;
-  KeptReadBack& operator=(const KeptReadBack&) = delete;
-
- private:
-  bool on_ = false;
-};
-
 int run_command(const RunOptions& o) {
-  // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kRunStopBound.
-  octocd::StopOnSignals stop_on_signals(kRunStopBound);
+  // SIGINT/SIGTERM: stop between frames, flush, 130/143, within kRunStopBound; the
+  // session says what the trace keeps should the process end inside a step.
+  octocd::RunSession session("run", {kRunStopBound});
+  session.keep(o.trace.empty() ? std::string("no frame run yet")
+                               : fmt::format("no frame run yet; the trace {} is not begun", o.trace));
   // Output paths before any work: absent or a regular file (atomic_file.hpp).
   if (!o.trace.empty()) octocd::check_output_file(o.trace, "--trace");
   if (!o.summary_json.empty()) octocd::check_output_file(o.summary_json, "--summary-json");
@@ -460,10 +439,16 @@ int run_command(const RunOptions& o) {
     meta.start_time = octocd::cli::utc_time_now();
     trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(world), topt);
     trace->append_state(0, world.state());
-    octocd::set_stop_kept(run_kept(trace.get(), o.trace));
+    session.keep(run_kept(trace.get(), o.trace));
+    octocd::TraceWriter* writer = trace.get();
+    session.keep_read_back([writer, path = o.trace] { return run_read_back(*writer, path); }, kRunReadBackBound);
   }
-  KeptReadBack read_back;  // destroyed before `trace`
-  read_back.start(trace.get(), o.trace);
+  if (!trace) session.keep("");  // nothing written: the stop line says where it stopped
+  // Declared after `trace`: the reader is cleared before the trace goes, whatever the way out.
+  const struct ForgetReadBack {
+    octocd::RunSession& session;
+    ~ForgetReadBack() { session.forget_read_back(); }
+  } forget_read_back{session};
 
   Progress progress(scene.frames, !o.quiet);
   // Without a trace nothing but the metrics is read between the steps: the engine may run
@@ -494,12 +479,12 @@ int run_command(const RunOptions& o) {
       // The fallback text follows the flushes, those the writer thread ended meanwhile too.
       if (trace && trace->flushed_frames() != kept_flushed) {
         kept_flushed = trace->flushed_frames();
-        octocd::set_stop_kept(run_kept(trace.get(), o.trace));
+        session.keep(run_kept(trace.get(), o.trace));
       }
       progress.update(m, totals);
     }
   } catch (const octocd::RuntimeError&) {
-    read_back.stop();
+    session.forget_read_back();
     close_after_failure(trace, o.trace, o.no_xdmf);
     throw;
   }
@@ -509,13 +494,13 @@ int run_command(const RunOptions& o) {
     // not octocd's, which the XDMF sidecar's hyperslabs describe: no sidecar for it.
     octocd::copy_own_trace(world, o.trace, "--trace");
   }
-  read_back.stop();
+  session.forget_read_back();
   if (trace) {
     trace->close();
     // A stopped run has a second: the sidecar re-reads the whole trace (the hardened
     // reader walks its heaps: 1 s for 200 MB), so it is left out.
     if (octocd::stop_signal() == 0) xdmf = write_sidecar(o.trace, o.no_xdmf);
-    octocd::set_stop_kept(fmt::format("the trace {} holds frames 1..{}, closed", o.trace, totals.frames));
+    session.keep(fmt::format("the trace {} holds frames 1..{}, closed", o.trace, totals.frames));
   }
   const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
   if (worlds.count > 1)

@@ -40,7 +40,7 @@
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/atomic_file.hpp"
-#include "octocd/stop.hpp"
+#include "octocd/run_session.hpp"
 #include "octocd/text.hpp"
 #include "octocd/trace.hpp"
 #include "octocd/validation.hpp"
@@ -553,13 +553,42 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       meta.start_time = octocd::cli::utc_time_now();
       octocd::TraceWriter trace(path, meta, octocd::trace_bodies(world), topt);
       trace.append_state(0, world.state());
+      // A step that outlasts the grace after a signal ends the process there (the session
+      // removes a temporary trace; a --trace keeps its flushed frames): no frame is judged
+      // before the stepping ends.
+      octocd::RunSession* session = octocd::RunSession::current();
+      if (session && temporary) {
+        session->add_temporary(path);
+        session->keep("its temporary trace is removed; no frame judged");
+      } else if (session) {
+        session->keep(fmt::format("the trace {} holds the frames of its last flush; no frame judged", path));
+        session->keep_read_back([&trace, path] {
+          const std::string held = octocd::cli::trace_read_back(trace, path);
+          return held.empty() ? held : held + "; no frame judged";
+        });
+      }
+      // Cleared before the trace is closed or destroyed, whatever the way out.
+      const struct ForgetReadBack {
+        octocd::RunSession* session;
+        ~ForgetReadBack() {
+          if (session) session->forget_read_back();
+        }
+      } forget_read_back{session};
       for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
+        std::optional<octocd::StopWithin> within(
+            std::in_place, fmt::format("validate stepped frame {} of {} on engine {} (a step longer than the 0.5 s "
+                                       "grace)",
+                                       f + 1, o.frames, o.engine));
         const octocd::FrameMetrics& m = world.step();
+        within.reset();
         check_engine_state(world.state(), stepped + 1, o.engine);  // the trace stays judgeable
         trace.append_frame_v2(m, world.state(), world.record());
         ++stepped;
       }
+      if (session) session->forget_read_back();
       trace.close();
+      if (session) session->keep("");
+      if (session && temporary) session->forget_temporary(path);  // removed below, once judged
     }
   } catch (...) {  // the engine failed: its temporary trace goes (a --trace keeps the frames written)
     std::error_code ec;
@@ -582,13 +611,16 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
   try {
     if (temporary) octocd::set_stop_remove(path);
     if (stop_sig != 0) {
-      eo.stop = [] { return octocd::stop_signal_count() > 1; };
+      // The stepped frames are judged for kValidateStopGrace (a second signal: at once):
+      // the verdict of the frames judged whole by then, within the 1 s of a stop.
+      const auto judge_until = Clock::now() + kValidateStopGrace;
+      eo.stop = [judge_until] { return octocd::stop_signal_count() > 1 || Clock::now() >= judge_until; };
       eo.keep_on_stop = true;
       try {
         results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
       } catch (const octocd::ValidationStopped&) {
-        std::fprintf(stderr, "octocd validate: stopped by %s after frame %lld of %d, and again while checking %s's "
-                             "trace; no frame judged, no verdict\n",
+        std::fprintf(stderr, "octocd validate: stopped by %s after frame %lld of %d, and cut short (a second signal "
+                             "or its bound) while checking %s's trace; no frame judged, no verdict\n",
                      octocd::stop_signal_name(stop_sig), static_cast<long long>(stepped), o.frames, o.engine.c_str());
         if (!o.junit.empty())
           octocd::write_junit_error(o.junit, model->scene.name, "stopped",
@@ -637,7 +669,9 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
         "the table covers {} of {} (an incomplete verdict); stopped by {} after frame {}{}",
         info.judged_to >= 1 ? fmt::format("frames 1..{}", info.judged_to) : std::string("no whole frame"), o.frames,
         octocd::stop_signal_name(stop_sig), stepped,
-        info.stopped ? fmt::format("; judging was cut short by a second signal inside frame {}", info.stopped_in)
+        info.stopped ? fmt::format("; judging was cut short (a second signal or its {} ms after the stop) inside "
+                                   "frame {}",
+                                   kValidateStopGrace.count(), info.stopped_in)
                      : std::string());
   write_scene_junit(o, model->scene.name, what, info.frames, results, stopped, report, t0);
   fmt::print("validate {} (engine {}, judged as a version 2 external trace{}: {} bodies, {} "
@@ -811,7 +845,7 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   // SIGINT/SIGTERM: stop between frames, flush, 130/143; the judging worker is waited for
   // kValidateStopGrace (a second signal ends the wait), then the verdict of the frames
   // judged so far is written, whatever that takes: no deadline cuts the writing.
-  octocd::StopOnSignals stop_on_signals(0.0, octocd::SecondSignal::Recorded);
+  octocd::RunSession session("validate", {0.0, octocd::SecondSignal::Recorded});
   octocd::Scene scene;
   if (o.trace_in.empty()) {  // --trace-in judges a trace, not a scene
     const octocd::StopAtOnce loading("loading the scene and its meshes");

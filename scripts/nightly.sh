@@ -167,16 +167,31 @@ if [ -n "$data_dir" ]; then extra_trace=("${extra[@]:2}"); fi
 
 passed=0 failed=0 broken=0 bad=0 expected=0
 failed_list=() broken_list=() bad_list=()
-child=0
-beat=0
-stop() {  # a signal to the nightly stops the scene running now (octocd stops within a second)
+child=0 beat=0 case_now=""
+# A signal to the nightly stops the case running now (octocd stops within a second, saying
+# what it keeps), waits for it, says what the nightly keeps and exits 128 + the signal.
+# $1: the signal's number, $2: its name. A matrix case is a subshell: its octocd (under
+# `timeout`, which passes the signal on) is stopped and waited for too, so none outlives
+# the nightly; a plain case's `timeout` passes the signal on itself (one signal, not two).
+stop() {
   trap - INT TERM
-  echo "nightly: stopped by a signal" >&2
+  local kids="" k n
   [ "$beat" -gt 0 ] && kill "$beat" 2>/dev/null
-  [ "$child" -gt 0 ] && kill -TERM "$child" 2>/dev/null && wait "$child"
-  exit 130
+  if [ "$child" -gt 0 ]; then
+    if [ "$(ps -o comm= -p "$child" 2>/dev/null)" != timeout ]; then kids="$(pgrep -P "$child" || true)"; fi
+    kill -TERM "$child" $kids 2>/dev/null
+    wait "$child" 2>/dev/null
+    # Each ends once its octocd has (a zombie then: its parent, the subshell, is gone).
+    for k in $kids; do
+      while [ -d "/proc/$k" ] && ! grep -q '^State:[[:space:]]*Z' "/proc/$k/status" 2>/dev/null; do sleep 0.02; done
+    done
+  fi
+  n=$(find "$out/junit" -maxdepth 1 -name '*.xml' 2>/dev/null | wc -l)
+  echo "nightly: stopped by SIG$2${case_now:+ during case $(shown "$case_now")}; $out/junit keeps the reports of $n case(s) (no summary)" >&2
+  exit $((128 + $1))
 }
-trap stop INT TERM
+trap 'stop 2 INT' INT
+trap 'stop 15 TERM' TERM
 started_all=$(date +%s.%N)
 # The JUnit report of case $1 when octocd wrote none: one errored test case of type $2 with
 # message $3, taking $secs seconds.
@@ -267,13 +282,14 @@ run_case() {
   local name="$1" n_frames="$2" t0 rc
   shift 2
   t0=$(date +%s.%N)
+  case_now="$name"
   "$@" >"$out/$name.log" 2>&1 &
   child=$!
   heartbeat "$name" "$out/$name.log" "$t0" &
   beat=$!
   wait "$child"
   rc=$?
-  child=0
+  child=0 case_now=""
   kill "$beat" 2>/dev/null
   wait "$beat" 2>/dev/null
   beat=0

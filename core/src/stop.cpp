@@ -45,6 +45,13 @@ std::atomic<int> g_count{0};                 // signals received since StopOnSig
 char g_remove_text[4096];
 std::atomic<bool> g_remove{false};
 
+// stop_track_temporary's paths and stop_track_child's process groups: removed and killed
+// by exit_now (a slot is free while its flag is false; written only while it is).
+constexpr std::size_t kTrackSlots = 8;
+char g_temp_text[kTrackSlots][4096];
+std::atomic<bool> g_temp_on[kTrackSlots];
+std::atomic<int> g_children[kTrackSlots];  // process group ids, 0: free
+
 // set_stop_kept's text: a ring of buffers, so the handler never reads one being rewritten
 // (the text changes at most once a frame; a handler reads it within microseconds).
 constexpr std::size_t kKeptSlots = 4, kKeptBytes = 1024;
@@ -89,11 +96,25 @@ void stop_tick() {
   ::setitimer(ITIMER_REAL, &off, nullptr);
 }
 
+// Async-signal-safe: unlink(2) and rmdir(2) only. The files first, then the folders (their
+// unlink failed), so a folder registered before or after its files is emptied first.
+void remove_temporaries(bool forget) {
+  for (std::size_t k = 0; k < kTrackSlots; ++k)
+    if (g_temp_on[k].load()) ::unlink(g_temp_text[k]);
+  for (std::size_t k = 0; k < kTrackSlots; ++k)
+    if (forget ? g_temp_on[k].exchange(false) : g_temp_on[k].load()) ::rmdir(g_temp_text[k]);
+}
+
+// The stop line's descriptor: a copy of stderr taken by StopOnSignals, so a line written
+// while a library has pointed descriptor 2 elsewhere (MuJoCo's model compile captures it
+// into a temporary file) still reaches the command's stderr; 2 when none was taken.
+std::atomic<int> g_err_fd{2};
+
 // Async-signal-safe: write(2) only.
 void put(const char* t) {
   std::size_t n = 0;
   while (t[n] != '\0') ++n;
-  (void)!::write(2, t, n);
+  (void)!::write(g_err_fd.load(), t, n);
 }
 
 // Async-signal-safe: write(2) and _exit(2) only. Prints "octocd: stopped by SIG...",
@@ -102,6 +123,9 @@ void put(const char* t) {
   if (g_exiting.exchange(true))  // another thread is ending the process: its line, its _exit
     for (;;) ::pause();
   if (g_remove.load()) ::unlink(g_remove_text);  // unlink(2) is async-signal-safe
+  for (auto& c : g_children)
+    if (const int group = c.load(); group > 0) ::kill(-group, SIGKILL);  // kill(2) is async-signal-safe
+  remove_temporaries(false);
   put("octocd: stopped by ");
   put(sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal");
   put(middle);
@@ -213,6 +237,38 @@ void set_stop_remove(const std::string& path) {
   g_remove.store(true);
 }
 
+bool stop_track_temporary(const std::string& path, bool tracked) {
+  if (path.empty() || path.size() >= sizeof g_temp_text[0]) return false;
+  for (std::size_t k = 0; k < kTrackSlots; ++k) {
+    if (tracked) {
+      if (g_temp_on[k].load()) continue;
+      std::memcpy(g_temp_text[k], path.c_str(), path.size() + 1);
+      g_temp_on[k].store(true);
+      return true;
+    }
+    if (g_temp_on[k].load() && path == g_temp_text[k]) {
+      g_temp_on[k].store(false);
+      return true;
+    }
+  }
+  return false;
+}
+
+bool stop_track_child(int group, bool tracked) {
+  if (group <= 0) return false;
+  for (auto& c : g_children) {
+    int expected = tracked ? 0 : group;
+    if (c.compare_exchange_strong(expected, tracked ? group : 0)) return true;
+  }
+  return false;
+}
+
+void stop_clean_up() {
+  for (auto& c : g_children)
+    if (const int group = c.exchange(0); group > 0) ::kill(-group, SIGKILL);
+  remove_temporaries(true);
+}
+
 const char* stop_signal_name(int sig) {
   switch (sig) {
     case SIGINT: return "SIGINT";
@@ -248,6 +304,7 @@ void set_stop_kept_reader(std::function<std::string()> reader, double bound_s) {
 }
 
 StopOnSignals::StopOnSignals(double deadline_s, SecondSignal second) {
+  if (const int fd = ::fcntl(2, F_DUPFD_CLOEXEC, 3); fd >= 0) g_err_fd.store(fd);
   g_reader_asked.store(false);
   g_signal.store(0);
   g_count.store(0);
@@ -297,6 +354,7 @@ StopOnSignals::~StopOnSignals() {
   sigaction(SIGINT, &g_old_int, nullptr);
   sigaction(SIGTERM, &g_old_term, nullptr);
   sigaction(SIGALRM, &g_old_alrm, nullptr);
+  if (const int fd = g_err_fd.exchange(2); fd != 2) ::close(fd);
 }
 
 }  // namespace octocd

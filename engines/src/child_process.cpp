@@ -158,6 +158,12 @@ ChildOutcome run_child(const ChildRun& run) {
     o.spawn_error = fmt::format("{}: {}", run.argv.empty() ? "" : run.argv[0], std::strerror(rc));
     return o;
   }
+  // A process that ends at once while stopping (stop.hpp) kills the group too.
+  (void)octocd::stop_track_child(pid, true);
+  struct Forget {
+    pid_t group;
+    ~Forget() { (void)octocd::stop_track_child(group, false); }
+  } forget{pid};
   bool out_open = true, err_open = true;
   int status = 0;
   bool reaped = false;

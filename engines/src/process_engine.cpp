@@ -17,7 +17,7 @@
 #include "octocd/error.hpp"
 #include "octocd/external.hpp"
 #include "octocd/process_engines.hpp"
-#include "octocd/stop.hpp"
+#include "octocd/run_session.hpp"
 #include "octocd/text.hpp"
 #include "octocd/trace_reader.hpp"
 
@@ -106,10 +106,13 @@ class ProcessEngine final : public Engine {
  private:
   void remove_folder() {
     if (folder_.empty()) return;
+    for (const std::string& p : {folder_, request_path(), trace_path_}) (void)stop_track_temporary(p, false);
     std::error_code ec;
     fs::remove_all(folder_, ec);
     folder_.clear();
   }
+
+  std::string request_path() const { return (fs::path(folder_) / "request.json").string(); }
 
   [[noreturn]] void fail(const std::string& what, const process_detail::ChildOutcome* o = nullptr) {
     const std::string tail = o ? process_detail::output_tail(*o) : std::string();
@@ -130,8 +133,10 @@ class ProcessEngine final : public Engine {
       throw RuntimeError(fmt::format("engine '{}': cannot create its temporary folder {}: {}", spec_.info.name, templ,
                                      std::strerror(errno)));
     folder_ = templ;
-    const std::string request = (fs::path(folder_) / "request.json").string();
+    const std::string request = request_path();
     trace_path_ = (fs::path(folder_) / "trace.h5").string();
+    // A process that ends at once while stopping (run_session.hpp) removes them too.
+    for (const std::string& p : {folder_, request, trace_path_}) (void)stop_track_temporary(p, true);
     {
       std::ofstream out(request, std::ios::binary);
       out << process_request(spec_, *model_, frames_, trace_path_, items_).dump(1) << "\n";
@@ -154,9 +159,11 @@ class ProcessEngine final : public Engine {
       // Nothing of the run was read yet: its temporary files go, and octocd ends as a
       // stopped command (stop.hpp: StopAtOnce's rule for work with nothing to flush).
       remove_folder();
-      std::fprintf(stderr, "octocd: stopped by %s while engine '%s' ran (its process group stopped: SIGTERM, then "
-                   "SIGKILL); no frame of it was read\n",
-                   stop_signal_name(o.stop_signal), printable(spec_.info.name).c_str());
+      const std::string where = fmt::format(" while engine '{}' ran (its process group stopped: SIGTERM, then "
+                                            "SIGKILL); no frame of it was read",
+                                            printable(spec_.info.name));
+      if (RunSession* session = RunSession::current()) session->end_now(o.stop_signal, where);  // says what it keeps
+      std::fprintf(stderr, "octocd: stopped by %s%s\n", stop_signal_name(o.stop_signal), where.c_str());
       std::fflush(stdout);
       std::fflush(stderr);
       std::_Exit(stop_exit_code(o.stop_signal));

@@ -8,7 +8,9 @@
 /// stderr saying what is kept (set_stop_kept), so a stuck flush can still be interrupted;
 /// so does a deadline passed (StopOnSignals' `deadline_s`, e.g. `run`'s 1 s bound).
 ///
-/// Use (as `octocd run` and `octocd validate` do; `octocd bench` should do the same):
+/// A command holds these through its run session (run_session.hpp: RunSession), which owns
+/// what it keeps (the kept text, temporary files, child processes); the functions below are
+/// its machinery. Use:
 ///
 ///     octocd::StopOnSignals stop;              // installs the handlers, restores on exit
 ///     for (int f = 0; f < frames && !octocd::stop_signal(); ++f) step();
@@ -35,6 +37,23 @@ int stop_signal_count();
 /// temporary file is left; "" clears it. Copied (paths of 4096 bytes or more are not
 /// kept). One at a time; call from the thread that writes it.
 void set_stop_remove(const std::string& path);
+
+/// Tracks (`tracked` true) or forgets a temporary file or an empty-once-its-files-go folder
+/// that a process ended at once while stopping (a second signal, the deadline, a grace)
+/// removes: the files unlinked, then the folders removed (those emptied by it). At most 8 at once and paths under 4096 bytes: false when it is not
+/// tracked (no free slot, too long) or, forgetting, was not. Any thread; use RunSession
+/// (run_session.hpp), which owns these for a command.
+bool stop_track_temporary(const std::string& path, bool tracked);
+
+/// Tracks or forgets a child process group (its id, > 0) that a process ended at once
+/// while stopping kills (SIGKILL to the group), so no child outlives octocd. At most 8 at
+/// once: false when it is not tracked or, forgetting, was not. Any thread.
+bool stop_track_child(int group, bool tracked);
+
+/// Kills the tracked child process groups and removes the tracked temporary files and
+/// folders now (what exit_now does on its way out), forgetting them all: the end of a
+/// command's own stop path (RunSession::stopped).
+void stop_clean_up();
 
 /// "SIGINT", "SIGTERM" or "signal N".
 const char* stop_signal_name(int sig);

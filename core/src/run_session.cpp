@@ -1,0 +1,65 @@
+/// \file run_session.cpp
+/// RunSession: the stop machinery of stop.cpp (handlers, bound, kept text, tracked
+/// temporaries and children) held by one object per command.
+
+#include "octocd/run_session.hpp"
+
+#include <atomic>
+#include <cstdio>
+#include <cstdlib>
+#include <utility>
+
+namespace octocd {
+namespace {
+
+std::atomic<RunSession*> g_current{nullptr};
+
+}  // namespace
+
+RunSession::RunSession(std::string command, RunSessionSettings settings)
+    : command_(std::move(command)), signals_(settings.bound_s, settings.second) {
+  g_current.store(this);
+}
+
+RunSession::~RunSession() {
+  forget_read_back();
+  stop_clean_up();
+  g_current.store(nullptr);
+}
+
+RunSession* RunSession::current() { return g_current.load(); }
+
+void RunSession::keep(const std::string& text) {
+  kept_ = text;
+  set_stop_kept(text);
+}
+
+void RunSession::keep_read_back(std::function<std::string()> reader, double bound_s) {
+  set_stop_kept_reader(std::move(reader), bound_s);
+}
+
+void RunSession::forget_read_back() { set_stop_kept_reader({}); }
+
+bool RunSession::add_temporary(const std::string& path) { return stop_track_temporary(path, true); }
+
+void RunSession::forget_temporary(const std::string& path) { (void)stop_track_temporary(path, false); }
+
+bool RunSession::add_child(int group) { return stop_track_child(group, true); }
+
+void RunSession::forget_child(int group) { (void)stop_track_child(group, false); }
+
+int RunSession::stopped(int sig, const std::string& where) {
+  stop_clean_up();
+  std::fflush(stdout);
+  std::fprintf(stderr, "octocd %s: stopped by %s%s%s%s\n", command_.c_str(), stop_signal_name(sig), where.c_str(),
+               kept_.empty() ? "" : "; ", kept_.c_str());
+  std::fflush(stderr);
+  return stop_exit_code(sig);
+}
+
+void RunSession::end_now(int sig, const std::string& where) {
+  const int code = stopped(sig, where);
+  std::_Exit(code);
+}
+
+}  // namespace octocd
