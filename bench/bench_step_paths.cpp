@@ -1,6 +1,6 @@
 // Steps per second of the cuda engine's step paths in one process (issue 20 item 2, issue 33
-// item 1), beside the cpu engine (World with the scene's broadphase; its threads: OpenMP's,
-// e.g. OMP_NUM_THREADS=16). The lines (--engines):
+// item 1), beside the cpu engine (World with the scene's broadphase; its threads: the
+// worker team's, octocd/parallel.hpp, e.g. OMP_NUM_THREADS=16). The lines (--engines):
 //   run          CudaSettings{} as `octocd run --engine cuda` runs it: the path the scene
 //                takes (the resident small step up to kCudaSmallStepMaxBodies bodies, else
 //                the graph) with its stage times sampled (stage_time_every);

@@ -239,14 +239,14 @@ void record_hygiene(json& result, const Sweep& s, bool quiet) {
   const double load = la.empty() ? 0.0 : la[0].get<double>();
   json warnings = json::array();
   if (threads > 0 && omp > threads)
-    warnings.push_back(fmt::format("{} OpenMP threads on {} cores oversubscribe them", omp, threads));
+    warnings.push_back(fmt::format("{} CPU engine threads on {} cores oversubscribe them", omp, threads));
   if (threads > 0 && load + static_cast<double>(omp) > static_cast<double>(threads) + 1.0)
-    warnings.push_back(fmt::format("load average {:.1f} leaves {:.1f} of {} cores free for {} OpenMP thread(s)", load,
+    warnings.push_back(fmt::format("load average {:.1f} leaves {:.1f} of {} cores free for {} CPU engine thread(s)", load,
                                    std::max(0.0, static_cast<double>(threads) - load), threads, omp));
   result["hygiene"] = {{"threads", threads}, {"omp_threads", omp}, {"load_average_start", la}, {"warnings", warnings}};
   for (const auto& w : warnings)
     fmt::print(stderr, "bench {}: warning: {}; timings will be noisy (the report marks them){}\n", octocd::printable(s.name),
-               w.get<std::string>(), omp > 1 ? "; OMP_NUM_THREADS=1 helps on a shared machine" : "");
+               w.get<std::string>(), omp > 1 ? "; --cpu threads=1 (or OMP_NUM_THREADS=1) helps on a shared machine" : "");
   if (s.repeat < 2 && !quiet)
     fmt::print(stderr, "bench {}: note: 1 repetition per point: no spread, so no timing verdict\n", octocd::printable(s.name));
 }

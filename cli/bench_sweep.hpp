@@ -406,7 +406,7 @@ std::map<std::string, json> resumable_points(const json& old, const std::string&
 /// result (not an object, another format, `complete` not a boolean, `sweep` not an object).
 bool finished_result_matches(const json& old, const std::string& path, const json& def, const json& settings);
 
-/// Records result["hygiene"] (threads, OpenMP threads, load average, warnings) and prints
+/// Records result["hygiene"] (threads, the CPU engine's threads, load average, warnings) and prints
 /// its warnings: a loaded machine or oversubscribed threads make timings noisy.
 void record_hygiene(json& result, const Sweep& s, bool quiet);
 

@@ -137,24 +137,24 @@ def overlap(a, b):
 
 
 def load_warning(m):
-    """Why timings of this machine description are suspect (OpenMP threads oversubscribing the
+    """Why timings of this machine description are suspect (the CPU engine's threads oversubscribing the
     cores, or a load at the start or end above them), or ''. A run-level note; verdicts are
     marked per point (point_load)."""
     threads, omp = m.get("threads") or 0, m.get("omp_threads") or 1
     why = []
     if threads and omp > threads:
-        why.append(f"{omp} OpenMP threads on {threads} cores")
+        why.append(f"{omp} CPU engine threads on {threads} cores")
     # At the start the load is the others'; at the end it includes the bench's own threads.
     for key, when, own in (("load_average", "start", omp), ("load_average_end", "end", 0)):
         la = m.get(key)
         if threads and isinstance(la, list) and la and isinstance(la[0], (int, float)) and la[0] + own > threads + 1:
             why.append(f"load {la[0]:.1f} at the {when} leaves {max(threads - la[0], 0):.1f} of {threads} cores free "
-                       f"for {omp} OpenMP thread(s)" + (" (its own included)" if when == "end" else ""))
+                       f"for {omp} CPU engine thread(s)" + (" (its own included)" if when == "end" else ""))
     return "; ".join(why)
 
 
 def own_threads(p, m):
-    """The threads the bench itself ran while measuring point p: the CPU engine's OpenMP
+    """The threads the bench itself ran while measuring point p: the CPU engine's
     threads, one for any other engine (cuda's host thread, Bullet)."""
     return (m.get("omp_threads") or 1) if p.get("params", {}).get("engine") == "cpu" else 1
 

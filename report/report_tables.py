@@ -99,7 +99,7 @@ def machine_block(doc, g):
                 if m.get("load_average") else "")
              + (f", {', '.join(f'{x:.1f}' for x in m['load_average_end'])} at the end"
                 if m.get("load_average_end") else "")
-             + (f"; CPU engine on {m['omp_threads']} OpenMP threads" if m.get("omp_threads") else ""),
+             + (f"; CPU engine on {m['omp_threads']} threads" if m.get("omp_threads") else ""),
              "Settings: " + "; ".join(settings_text(r["settings"], r["files"]) for r in runs),
              f"Points: {len(g['points_list'])} of {total} in these files ({n_ok} measured)"
              + ("" if len(g["points_list"]) >= total else " — incomplete: missing shards or an interrupted run")]
