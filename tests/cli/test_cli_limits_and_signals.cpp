@@ -1237,6 +1237,45 @@ TEST(RunSession, StoppedSaysWhatIsKeptAndRemovesTheTemporaries) {
 /// plus a margin for a loaded 2-core machine (measured: see docs/robustness.md, "Stops").
 constexpr double kStopMarginS = 2.0;
 
+// The two scenes of the bench stop tests in `dir`: small.json (8 boxes on a floor, one quick
+// point) and lattice.json (24^3 touching boxes: a Bullet step long enough to be inside).
+void write_small_and_lattice(const fs::path& dir) {
+  std::ofstream(dir / "small.json") << R"({"name": "small", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]},
+    "walls": "floor", "frames": 10, "groups": [{"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 8,
+    "layout": {"type": "grid", "min": [-0.5, 0.1, -0.5], "max": [0.5, 1.5, 0.5]}}]})";
+  lattice_scene(dir, 24);
+}
+
+// What a bench stopped after its first point did: whether that point reached the result
+// within 120 s, whether the process ended within 60 s of SIGTERM, the seconds it took, its output.
+struct StoppedBench {
+  bool first = false, ended = false;
+  double took = 0.0;
+  Result r;
+};
+
+// Runs `octocd bench dir/sweep.json -o out --csv csv`, waits for the result file to hold one
+// point (an event), sends SIGTERM and waits for the process.
+StoppedBench stop_bench_after_its_first_point(const fs::path& dir, const fs::path& out, const fs::path& csv) {
+  Child c(dir, {"bench", (dir / "sweep.json").string(), "-o", out.string(), "--csv", csv.string(), "--scene-dir",
+                dir.string(), "--quiet"});
+  StoppedBench b;
+  b.first = octocd::test::wait_until(
+      [&] {
+        try {
+          return nlohmann::json::parse(slurp(out))["points"].size() == 1;
+        } catch (const std::exception&) {
+          return false;  // not written yet
+        }
+      },
+      {dir}, std::chrono::seconds(120));
+  const auto t0 = std::chrono::steady_clock::now();
+  ::kill(c.pid(), SIGTERM);
+  b.r = c.wait_within(60, b.ended);
+  b.took = seconds_since(t0);
+  return b;
+}
+
 // Before (issue 77): `bench speed-accuracy` given one SIGTERM was still running 120 s later,
 // inside Bullet's btGjkPairDetector (its sweep loop had no bound). Now the sweep runs in a
 // run session with the 0.8 s bound and a 0.5 s grace around each step: it ends within 1 s
@@ -1249,30 +1288,12 @@ constexpr double kStopMarginS = 2.0;
 TEST_F(Hardening, BenchSpeedAccuracyOnBulletEndsWithinASecond) {
   const Result e = run({"engines"});
   if (!std::regex_search(e.out, std::regex("(^|\n)bullet +available"))) GTEST_SKIP() << "no bullet in this octocd";
-  std::ofstream(dir_ / "small.json") << R"({"name": "small", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]},
-    "walls": "floor", "frames": 10, "groups": [{"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 8,
-    "layout": {"type": "grid", "min": [-0.5, 0.1, -0.5], "max": [0.5, 1.5, 0.5]}}]})";
-  lattice_scene(dir_, 24);
+  write_small_and_lattice(dir_);
   std::ofstream(dir_ / "sweep.json") << R"({"name": "stop-sa", "kind": "speed-accuracy", "engines": ["bullet"],
     "repeat": 1, "scenes": ["small.json", "lattice.json"], "dts": [0.01], "sim_seconds": 0.2, "iterations": [5],
     "geometries": ["hull"], "rotation": [false]})";
   const fs::path out = dir_ / "sa.json", csv = dir_ / "sa.csv";
-  Child c(dir_, {"bench", (dir_ / "sweep.json").string(), "-o", out.string(), "--csv", csv.string(), "--scene-dir",
-                 dir_.string(), "--quiet"});
-  const bool first = octocd::test::wait_until(
-      [&] {
-        try {
-          return nlohmann::json::parse(slurp(out))["points"].size() == 1;
-        } catch (const std::exception&) {
-          return false;  // not written yet
-        }
-      },
-      {dir_}, std::chrono::seconds(120));
-  const auto t0 = std::chrono::steady_clock::now();
-  ::kill(c.pid(), SIGTERM);
-  bool ended = false;
-  const Result r = c.wait_within(60, ended);
-  const double took = seconds_since(t0);
+  const auto [first, ended, took, r] = stop_bench_after_its_first_point(dir_, out, csv);
   ASSERT_TRUE(first) << "the first point not in the result within 120 s: " << r.err;
   const bool inside = r.err.find("octocd: stopped by SIGTERM while bench point ") != std::string::npos;
   std::printf("bench speed-accuracy ended %.3f s after SIGTERM (%s): %s", took,
@@ -1390,29 +1411,11 @@ TEST_F(Hardening, ValidateDeterminismStoppedLeavesNoTemporaryTrace) {
 TEST_F(Hardening, BenchDivergenceOnBulletEndsWithinASecond) {
   const Result e = run({"engines"});
   if (!std::regex_search(e.out, std::regex("(^|\n)bullet +available"))) GTEST_SKIP() << "no bullet in this octocd";
-  std::ofstream(dir_ / "small.json") << R"({"name": "small", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]},
-    "walls": "floor", "frames": 10, "groups": [{"name": "b", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 8,
-    "layout": {"type": "grid", "min": [-0.5, 0.1, -0.5], "max": [0.5, 1.5, 0.5]}}]})";
-  lattice_scene(dir_, 24);
+  write_small_and_lattice(dir_);
   std::ofstream(dir_ / "sweep.json") << R"({"name": "stop-dv", "kind": "divergence", "engines": ["bullet"],
     "scenes": ["small.json", "lattice.json"], "frames": 20, "eps": [1e-6], "copies": 2, "seed": 1})";
   const fs::path out = dir_ / "dv.json", csv = dir_ / "dv.csv";
-  Child c(dir_, {"bench", (dir_ / "sweep.json").string(), "-o", out.string(), "--csv", csv.string(), "--scene-dir",
-                 dir_.string(), "--quiet"});
-  const bool first = octocd::test::wait_until(
-      [&] {
-        try {
-          return nlohmann::json::parse(slurp(out))["points"].size() == 1;
-        } catch (const std::exception&) {
-          return false;  // not written yet
-        }
-      },
-      {dir_}, std::chrono::seconds(120));
-  const auto t0 = std::chrono::steady_clock::now();
-  ::kill(c.pid(), SIGTERM);
-  bool ended = false;
-  const Result r = c.wait_within(60, ended);
-  const double took = seconds_since(t0);
+  const auto [first, ended, took, r] = stop_bench_after_its_first_point(dir_, out, csv);
   ASSERT_TRUE(first) << "the first point not in the result within 120 s: " << r.err;
   std::printf("bench divergence ended %.3f s after SIGTERM: %s", took, r.err.c_str());
   ASSERT_TRUE(ended) << "still running 60 s after SIGTERM";
