@@ -18,8 +18,8 @@
 # Usage: scripts/nightly.sh [--build DIR] [--scenes SET] [--frames N] [--every K]
 #                           [--tolerance NAME=VALUE]... [--timeout S] [--against LIST]
 #                           [--out DIR] [--data-dir DIR] [--expect FILE|none]
-#                           [--write-expect FILE] [--strict] [--matrix SET] [--history DIR]
-#                           [SCENE.json ...]
+#                           [--write-expect FILE] [--strict] [--matrix SET] [--engines LIST]
+#                           [--history DIR] [SCENE.json ...]
 #   --build DIR     build folder holding `octocd` (default: build); $OCTOCD_BIN, when
 #                   set, names the binary itself and wins
 #   --scenes SET    default: the scenes that fit the nightly budget (15 minutes on a
@@ -64,6 +64,9 @@
 #                   determinism rows: `validate --determinism` on rot-drop-220 and
 #                   bunny-stack-50 (full: 120 frames; quick: 30 and 40), cases
 #                   ENGINE--SCENE--determinism (docs/predictability.md).
+#   --engines LIST  the matrix's engines restricted to LIST (comma-separated registry names,
+#                   e.g. rapier,jolt; default: every engine); a name the registry lacks is
+#                   exit 2. CI's ctest runs the quick matrix as two tests this way.
 #   --history DIR   also add this night's verdicts (every case's `validate --json`, kept
 #                   in DIR/json/ of --out) with the machine, build and date to the history
 #                   folder DIR (`octocd history-append`: a new file, none rewritten);
@@ -88,6 +91,7 @@ expect="$root/scripts/nightly-expect.json"
 write_expect=""
 strict=()
 matrix=""
+only_engines=""
 history=""
 is_uint() { [[ "$1" =~ ^[0-9]+$ ]] && [ "$1" -ge 1 ]; }
 # An option's value: "$2" present and not empty, else exit 2 naming the option.
@@ -107,6 +111,7 @@ while [ $# -gt 0 ]; do
     --write-expect) need "$1" "${2-}" "a file"; write_expect="$2"; shift 2 ;;
     --strict) strict=(--strict); shift ;;
     --matrix) need "$1" "${2-}" "full, quick or none"; matrix="$2"; shift 2 ;;
+    --engines) need "$1" "${2-}" "engine names, comma-separated"; only_engines="$2"; shift 2 ;;
     --history) need "$1" "${2-}" "a folder"; history="$2"; shift 2 ;;
     -h|--help) usage 0 ;;
     -*) echo "nightly: unknown option '$1'" >&2; usage 2 ;;
@@ -332,10 +337,23 @@ matrix_skip() {  # engine scene
 matrix_engines=()
 if [ "$matrix" != "none" ]; then
   available="$("$bin" engines --available 2>/dev/null)"
+  # --engines: each name must be the registry's (a typo would silently judge nothing).
+  if [ -n "$only_engines" ]; then
+    registry="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
+print("\n".join(e["name"] for e in json.load(sys.stdin)["engines"]))')"
+    for e in ${only_engines//,/ }; do
+      grep -qxF -- "$e" <<<"$registry" || { echo "nightly: --engines '$e': not an engine of this octocd; allowed: $(paste -sd, <<<"$registry")" >&2; exit 2; }
+    done
+  fi
+fi
+# Whether engine $1 is in the matrix (--engines, default every engine).
+in_matrix() { [ -z "$only_engines" ] || grep -qxF -- "$1" <<<"${only_engines//,/$'\n'}"; }
+if [ "$matrix" != "none" ]; then
   # The registry's rotating engines, built in or process engines (`octocd engines --json`).
   rotating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
 print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if e["rotates"]))')"
   for e in $rotating; do
+    in_matrix "$e" || continue
     if grep -qx "$e" <<<"$available"; then
       matrix_engines+=("$e")
     else
@@ -376,6 +394,7 @@ print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"]))')"
   translating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
 print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if not e["rotates"]))')"
   for e in "${all_engines[@]+"${all_engines[@]}"}"; do
+    in_matrix "$e" || continue
     if grep -qx "$e" <<<"$available"; then determinism_engines+=("$e")
     else echo "matrix   $e--determinism: not available here ($("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//'))"; fi
   done

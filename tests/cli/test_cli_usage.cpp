@@ -896,6 +896,11 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
   // Called wrongly: exit 2.
   EXPECT_EQ(run("bash " + quote(script) + " --scenes everything").code, 2);
   EXPECT_EQ(run("bash " + quote(script) + " --timeout -5").code, 2);
+  // --engines names registry engines only: a typo is exit 2 naming it and the allowed names.
+  r = run("OCTOCD_BIN=" + quote(bin()) + " bash " + quote(script) + " --scenes none --matrix quick --engines cpu,bulet --out " +
+          quote((dir_ / "engines").string()));
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("--engines 'bulet': not an engine of this octocd; allowed: cpu,"), std::string::npos) << r.output;
 }
 
 // The nightly's gate (design.md section 14b): green on a healthy build whose only failure is expected,
