@@ -1,6 +1,7 @@
-// The HDF5 trace writer (design.md section 8; layout: docs/trace-format.md) and the metadata
-// and body tables it takes from an engine. The summary of a trace read back is in
-// trace_summary.cpp, the XDMF sidecar in trace_xdmf.cpp.
+// The HDF5 trace writer (design.md section 8; layout: docs/trace-format.md). Its HDF5 write
+// primitives are in trace_hdf5_out.cpp, the metadata and body tables it takes from an engine
+// in trace_metadata.cpp, the summary of a trace read back in trace_summary.cpp, the XDMF
+// sidecar in trace_xdmf.cpp.
 //
 // The file is created with the latest format, every group, dataset and attribute is
 // created up front, then SWMR writing starts. Rows are buffered in memory and written in
