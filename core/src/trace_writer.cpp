@@ -1,6 +1,7 @@
-// The HDF5 trace writer (design.md section 8; layout: docs/trace-format.md) and the metadata
-// and body tables it takes from an engine. The summary of a trace read back is in
-// trace_summary.cpp, the XDMF sidecar in trace_xdmf.cpp.
+// The HDF5 trace writer (design.md section 8; layout: docs/trace-format.md). Its HDF5 write
+// primitives are in trace_hdf5_out.cpp, the metadata and body tables it takes from an engine
+// in trace_metadata.cpp, the summary of a trace read back in trace_summary.cpp, the XDMF
+// sidecar in trace_xdmf.cpp.
 //
 // The file is created with the latest format, every group, dataset and attribute is
 // created up front, then SWMR writing starts. Rows are buffered in memory and written in
@@ -45,6 +46,7 @@
 #include "octocd/stop.hpp"
 #include "octocd/version.hpp"
 #include "hdf5_handle.hpp"
+#include "trace_hdf5_out.hpp"
 #include "trace_detail.hpp"
 
 namespace octocd {
@@ -80,25 +82,6 @@ const std::vector<std::string>& detail::trace_frame_columns() { return frame_col
 
 namespace {
 
-// The innermost (most specific) and outermost messages of HDF5's current error stack.
-std::string hdf5_message() {
-  std::vector<std::string> msgs;
-  H5Ewalk2(
-      H5E_DEFAULT, H5E_WALK_DOWNWARD,
-      [](unsigned, const H5E_error2_t* e, void* data) -> herr_t {
-        auto* out = static_cast<std::vector<std::string>*>(data);
-        std::string s = e->desc ? e->desc : "";
-        if (e->func_name) s += std::string(" (") + e->func_name + ")";
-        out->push_back(s);
-        return 0;
-      },
-      &msgs);
-  H5Eclear2(H5E_DEFAULT);
-  if (msgs.empty()) return "unknown HDF5 error";
-  if (msgs.size() == 1) return msgs.front();
-  return msgs.front() + ": " + msgs.back();
-}
-
 // HDF5 closes every open file from an atexit handler. A trace abandoned after a failed
 // write (a full disk) must never be flushed again: that would write metadata that points
 // past the data on disk, or, after a failed H5Fclose, touch a freed file (SIGSEGV), and
@@ -109,226 +92,10 @@ const bool kHdf5NoAtexit = [] {
   return true;
 }();
 
-// The operating system's reason in an HDF5 I/O error ("... error message = 'No space left
-// on device', ..."), or "" when the message holds none.
-std::string os_reason(const std::string& message) {
-  const std::string tag = "error message = '";
-  const auto b = message.find(tag);
-  if (b == std::string::npos) return "";
-  const auto e = message.find('\'', b + tag.size());
-  return message.substr(b + tag.size(), e == std::string::npos ? std::string::npos : e - b - tag.size());
-}
-
-// An HDF5 call that failed: the message names the trace and the operation; `reason` is
-// the operating system's reason when HDF5 gives one ("No space left on device"), else
-// HDF5's own message, on one line.
-class Hdf5Failure : public RuntimeError {
- public:
-  Hdf5Failure(const std::string& path, const std::string& op, std::string reason)
-      : RuntimeError("trace '" + path + "': " + op + " failed: " + reason), reason_(std::move(reason)) {}
-  const std::string& reason() const { return reason_; }
-
- private:
-  std::string reason_;
-};
-
-[[noreturn]] void fail(const std::string& path, const std::string& op) {
-  std::string message = hdf5_message();
-  const std::string reason = os_reason(message);
-  if (!reason.empty()) message = reason;
-  std::replace(message.begin(), message.end(), '\n', ' ');
-  throw Hdf5Failure(path, op, message);
-}
-
-template <class T>
-T check(T ret, const std::string& path, const std::string& op) {
-  if (ret < 0) fail(path, op);
-  return ret;
-}
-
-using Handle = detail::Hdf5Handle;
-
-Handle vlen_string_type(const std::string& path) {
-  Handle t(check(H5Tcopy(H5T_C_S1), path, "H5Tcopy"));
-  check(H5Tset_size(t, H5T_VARIABLE), path, "H5Tset_size");
-  check(H5Tset_cset(t, H5T_CSET_UTF8), path, "H5Tset_cset");
-  return t;
-}
-
-void attr_string(hid_t obj, const char* name, const std::string& value, const std::string& path) {
-  Handle type = vlen_string_type(path);
-  Handle space(check(H5Screate(H5S_SCALAR), path, "H5Screate"));
-  Handle a(check(H5Acreate2(obj, name, type, space, H5P_DEFAULT, H5P_DEFAULT), path,
-                 std::string("create attribute ") + name));
-  const char* p = value.c_str();
-  check(H5Awrite(a, type, &p), path, std::string("write attribute ") + name);
-}
-
-void attr_strings(hid_t obj, const char* name, const std::vector<std::string>& values,
-                  const std::string& path) {
-  Handle type = vlen_string_type(path);
-  const hsize_t n = values.size();
-  Handle space(check(H5Screate_simple(1, &n, nullptr), path, "H5Screate_simple"));
-  Handle a(check(H5Acreate2(obj, name, type, space, H5P_DEFAULT, H5P_DEFAULT), path,
-                 std::string("create attribute ") + name));
-  std::vector<const char*> ptrs;
-  for (const auto& v : values) ptrs.push_back(v.c_str());
-  if (n > 0) check(H5Awrite(a, type, ptrs.data()), path, std::string("write attribute ") + name);
-}
-
-template <class T>
-void attr_scalar(hid_t obj, const char* name, hid_t file_type, hid_t mem_type, T value,
-                 const std::string& path) {
-  Handle space(check(H5Screate(H5S_SCALAR), path, "H5Screate"));
-  Handle a(check(H5Acreate2(obj, name, file_type, space, H5P_DEFAULT, H5P_DEFAULT), path,
-                 std::string("create attribute ") + name));
-  check(H5Awrite(a, mem_type, &value), path, std::string("write attribute ") + name);
-}
-
-// A fixed-size dataset written once, before SWMR starts.
-void fixed_dataset(hid_t group, const char* name, hid_t file_type, hid_t mem_type,
-                   std::vector<hsize_t> dims, const void* data, const std::string& path) {
-  Handle space(check(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr), path,
-                     "H5Screate_simple"));
-  Handle d(check(H5Dcreate2(group, name, file_type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
-                 path, std::string("create dataset ") + name));
-  if (dims[0] > 0)
-    check(H5Dwrite(d, mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data), path,
-          std::string("write dataset ") + name);
-}
-
-void string_dataset(hid_t group, const char* name, const std::vector<std::string>& values,
-                    const std::string& path) {
-  Handle type = vlen_string_type(path);
-  std::vector<const char*> ptrs;
-  for (const auto& v : values) ptrs.push_back(v.c_str());
-  fixed_dataset(group, name, type, type, {values.size()}, ptrs.data(), path);
-}
-
-// One extendable dataset whose rows are buffered in memory until the next flush.
-struct Column {
-  std::string name;          // full path in the file, for messages
-  Handle dset;
-  hid_t mem_type = -1;       // a native type (not owned)
-  std::size_t elem = 0;      // bytes per element
-  std::vector<hsize_t> tail; // dimensions after the row dimension
-  std::size_t width = 1;     // elements per row
-  std::vector<unsigned char> buf;  // rows appended since the last stage()
-  std::vector<unsigned char> out;  // rows staged for the next write
-  hsize_t rows = 0;          // rows on disk
-  bool filtered = false;     // shuffle + deflate, one row a chunk (make_column)
-
-  hsize_t pending() const { return elem * width == 0 ? 0 : out.size() / (elem * width); }  // 0: never created
-
-  /// Moves the appended rows behind the staged ones.
-  void stage() {
-    if (out.empty())
-      out.swap(buf);
-    else
-      out.insert(out.end(), buf.begin(), buf.end());
-    buf.clear();
-  }
-
-  template <class T>
-  void push(const T* p, std::size_t count) {
-    const auto* b = reinterpret_cast<const unsigned char*>(p);
-    buf.insert(buf.end(), b, b + count * sizeof(T));
-  }
-  template <class T>
-  void push1(T v) {
-    push(&v, 1);
-  }
-
-  /// Appends the buffered rows. `raw`: a filtered column's rows are stored as they are,
-  /// one chunk each with its filters marked skipped (H5Dwrite_chunk; every reader of
-  /// HDF5 1.10.2+ reads them), so the last flush of a stopped run costs a copy, not
-  /// deflate (0.4 s a frame of 10^6 bodies' positions and velocities on a slow core).
-  void write(const std::string& path, bool raw = false) {
-    stage();
-    write_staged(path, raw);
-  }
-
-  /// Appends the staged rows (write() without stage(): the writer thread's, while the
-  /// caller appends to buf).
-  void write_staged(const std::string& path, bool raw = false) {
-    const hsize_t n = pending();
-    if (n == 0) return;
-    std::vector<hsize_t> size{rows + n}, start{rows}, count{n};
-    for (hsize_t t : tail) {
-      size.push_back(t);
-      start.push_back(0);
-      count.push_back(t);
-    }
-    const int rank = static_cast<int>(size.size());
-    check(H5Dset_extent(dset, size.data()), path, "extend " + name);
-    if (raw && filtered) {
-      const std::size_t row_bytes = elem * width;
-      std::vector<hsize_t> offset(size.size(), 0);
-      constexpr std::uint32_t kSkipShuffleAndDeflate = 0x3;  // filter i skipped: bit i set
-      for (hsize_t r = 0; r < n; ++r) {
-        offset[0] = rows + r;
-        check(H5Dwrite_chunk(dset, H5P_DEFAULT, kSkipShuffleAndDeflate, offset.data(), row_bytes,
-                             out.data() + r * row_bytes),
-              path, "write rows of " + name);
-      }
-      rows += n;
-      out.clear();
-      return;
-    }
-    Handle fspace(check(H5Dget_space(dset), path, "H5Dget_space " + name));
-    check(H5Sselect_hyperslab(fspace, H5S_SELECT_SET, start.data(), nullptr, count.data(),
-                              nullptr),
-          path, "select rows of " + name);
-    Handle mspace(check(H5Screate_simple(rank, count.data(), nullptr), path, "H5Screate_simple"));
-    check(H5Dwrite(dset, mem_type, mspace, fspace, H5P_DEFAULT, out.data()), path,
-          "write rows of " + name);
-    rows += n;
-    out.clear();
-  }
-};
-
-Column make_column(hid_t group, const std::string& group_name, const char* name, hid_t file_type,
-                   hid_t mem_type, std::vector<hsize_t> tail, hsize_t chunk_rows, int gzip,
-                   const std::string& path) {
-  Column c;
-  c.name = group_name + "/" + name;
-  c.mem_type = mem_type;
-  c.elem = H5Tget_size(mem_type);
-  c.tail = tail;
-  std::vector<hsize_t> dims{0}, maxdims{H5S_UNLIMITED}, chunk{chunk_rows};
-  for (hsize_t t : tail) {
-    c.width *= static_cast<std::size_t>(t);
-    dims.push_back(t);
-    maxdims.push_back(t == 0 ? H5S_UNLIMITED : t);
-    chunk.push_back(std::max<hsize_t>(t, 1));
-  }
-  const int rank = static_cast<int>(dims.size());
-  Handle space(check(H5Screate_simple(rank, dims.data(), maxdims.data()), path,
-                     "H5Screate_simple " + c.name));
-  Handle dcpl(check(H5Pcreate(H5P_DATASET_CREATE), path, "H5Pcreate"));
-  check(H5Pset_chunk(dcpl, rank, chunk.data()), path, "H5Pset_chunk " + c.name);
-  if (gzip > 0 && H5Zfilter_avail(H5Z_FILTER_DEFLATE) > 0) {
-    check(H5Pset_shuffle(dcpl), path, "H5Pset_shuffle " + c.name);
-    check(H5Pset_deflate(dcpl, static_cast<unsigned>(gzip)), path, "H5Pset_deflate " + c.name);
-    c.filtered = chunk_rows == 1;  // a chunk is a row: H5Dwrite_chunk can store one as it is
-  }
-  c.dset = Handle(check(H5Dcreate2(group, name, file_type, space, H5P_DEFAULT, dcpl, H5P_DEFAULT),
-                        path, "create dataset " + c.name));
-  return c;
-}
-
-std::string iso_utc_now() {
-  const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
-nlohmann::json vec_json(Vec3 v) { return nlohmann::json::array({v.x, v.y, v.z}); }
-
 }  // namespace
+
+using namespace trace_out;
+
 
 // ---------------------------------------------------------------------------------------
 
@@ -1088,86 +855,6 @@ std::int64_t TraceWriter::read_back_frames_and_hold() {
   if (H5Aread(a, H5T_NATIVE_INT64, &frames) < 0) frames = -1;
   H5Aclose(a);
   return frames;
-}
-
-// ---------------------------------------------------------------------------------------
-
-TraceMetadata trace_metadata(const Engine& engine, int state_every) {
-  const Scene& s = engine.scene();
-  TraceMetadata meta;
-  meta.scene_name = s.name;
-  meta.scene_json = s.json;
-  nlohmann::json p;
-  const ContactParams& r = s.response;
-  p["response"] = {{"slop", r.slop},
-                   {"beta", r.beta},
-                   {"alpha", r.alpha},
-                   {"restitution", r.restitution},
-                   {"restitution_threshold", r.restitution_threshold},
-                   {"impulse_floor", r.impulse_floor},
-                   {"mu_static", r.mu_static},
-                   {"mu_kinetic", r.mu_kinetic},
-                   {"max_velocity", r.max_velocity},
-                   {"epsilon", r.epsilon},
-                   {"overlap", r.overlap == OverlapMode::Paper ? "paper" : "separating"},
-                   {"iterations", r.iterations}};
-  p["theta"] = s.theta ? nlohmann::json(*s.theta) : nlohmann::json("auto");
-  p["dt"] = s.dt;
-  p["frames"] = s.frames;
-  p["gravity"] = vec_json(s.gravity);
-  p["domain"] = {{"min", vec_json(s.domain.min)}, {"max", vec_json(s.domain.max)}};
-  p["wall_thickness"] = s.wall_thickness;
-  p["broadphase"] = {{"name", engine.broadphase_name()},
-                     {"octree_depth", s.broadphase.octree_depth},
-                     {"cell_size", s.broadphase.cell_size}};
-  p["midphase"] = engine.midphase_name();
-  p["geometry"] = engine.collision_geometry();  // what the engine collided (design.md section 15)
-  p["mesh_octree_depth"] = s.mesh_octree_depth;
-  meta.parameters_json = p.dump();
-  meta.engine = engine.name();
-  meta.broadphase = engine.broadphase_name();
-  meta.midphase = engine.midphase_name();
-  meta.build_id = build_id();
-  meta.device = engine.device();
-  meta.start_time = iso_utc_now();
-  meta.dt = s.dt;
-  meta.state_every = state_every;
-  // The engine says whether it follows octocd's contact conventions; the trace declares
-  // them, so readers never judge by the engine's name.
-  if (engine.octocd_contacts()) meta.declarations = octocd_trace_declarations(engine.model());
-  return meta;
-}
-
-TraceDeclarations octocd_trace_declarations(const Model& model) {
-  const ContactParams& r = model.scene.response;
-  TraceDeclarations d;
-  d.contact_geometry = "aabb";
-  d.broadphase_exact = 1;
-  d.contact_margin_rule = "theta";
-  d.jt_direction = "along-sliding";
-  d.velocity_clamp = r.max_velocity;
-  d.impulses_complete = r.iterations <= 1 ? 1 : 0;
-  d.response_scheme = "jacobi";
-  d.integrator = "semi-implicit";
-  d.contact_model = "rigid";
-  d.deactivation = "off";
-  d.friction_directions = 1;  // design.md section 6: J_t along t, one direction
-  return d;
-}
-
-TraceBodies trace_bodies(const Engine& engine) {
-  TraceBodies tb;
-  const auto& info = engine.bodies();
-  const auto& shapes = engine.shapes();
-  const BodyState& st = engine.state();
-  for (std::size_t i = 0; i < info.size(); ++i) {
-    tb.shape_id.push_back(info[i].shape);
-    tb.inverse_mass.push_back(i < st.w.size() ? st.w[i] : 0.0f);
-    tb.local_aabb.push_back(info[i].shape < shapes.size() ? shapes[info[i].shape].local : Aabb{});
-    tb.group.push_back(info[i].group);
-  }
-  for (const Shape& sh : shapes) tb.shape_names.push_back(sh.name);
-  return tb;
 }
 
 }  // namespace octocd

@@ -12,7 +12,7 @@
 #include <fmt/format.h>
 
 #include "engine_adapters.hpp"
-#include "engine_entry.hpp"
+#include "octocd/engine_entry.hpp"
 #include "octocd/broadphase.hpp"
 #include "octocd/cuda_settings.hpp"
 #include "octocd/cuda_world.hpp"

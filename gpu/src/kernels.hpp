@@ -191,7 +191,7 @@ constexpr unsigned long long kNoWitness = ~0ull;
 
 /// Most vertex tests a candidate pair's witness costs in a step beyond its descent: its
 /// last witness (one test) and, when that fails, the 32 x 32 pairs of the two 32-vertex
-/// blocks that hold its vertices (midphase.cuh, witness_block_close).
+/// blocks that hold its vertices (midphase_witness.cuh, witness_block_close).
 constexpr std::uint32_t kWitnessVertexTests = 1 + 32 * 32;
 
 /// Live pairs per warp of mid_start's grid from which the witness pass (a thread per pair,
@@ -241,11 +241,11 @@ struct MidListDesc {
   /// last expand step's kernels and moved to [0] by mid_keep.
   unsigned long long* leaf_items = nullptr;
   /// A leaf skips a pair of vertex tiles whose boxes are more than theta apart on an axis
-  /// (midphase.cuh, tiles_apart): the same results. 1 on every path; the small path's lean
+  /// (midphase_tiles.cuh, tiles_apart): the same results. 1 on every path; the small path's lean
   /// kernel compiles it as 0.
   int tile_cull = 1;
   /// A leaf stages, for each tile of B's vertices, only A's vertices near that tile (within
-  /// theta of its box, midphase.cuh near_tile; whole vertex blocks skipped by their boxes)
+  /// theta of its box, midphase_tiles.cuh near_tile; whole vertex blocks skipped by their boxes)
   /// instead of every vertex of A's cell inside B's grown cell box: the same results; with
   /// the early exit off the same counts too (they count the whole filtered ranges either
   /// way). 1 on every path; the small path's lean kernel compiles it as 0.

@@ -1,6 +1,6 @@
 // The bullet engine's registration (engine_entry.hpp): compiled into octocd_engines
 // (octocd_register_engine in reference/CMakeLists.txt).
-#include "engine_entry.hpp"
+#include "octocd/engine_entry.hpp"
 #include "octocd/bullet_world.hpp"
 
 namespace octocd {

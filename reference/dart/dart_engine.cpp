@@ -1,6 +1,6 @@
 // The dart engine's registration (engine_entry.hpp): compiled into octocd_engines when
 // reference/dart is built (octocd_register_engine in this folder's CMakeLists.txt).
-#include "engine_entry.hpp"
+#include "octocd/engine_entry.hpp"
 #include "octocd/dart_world.hpp"
 
 namespace octocd {

@@ -1,6 +1,6 @@
 // The ode engine's registration (engine_entry.hpp): compiled into octocd_engines when
 // reference/ode is built (octocd_register_engine in this folder's CMakeLists.txt).
-#include "engine_entry.hpp"
+#include "octocd/engine_entry.hpp"
 #include "octocd/ode_world.hpp"
 
 namespace octocd {

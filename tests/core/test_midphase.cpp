@@ -486,7 +486,7 @@ TEST(Midphase, FarApartIsRejectedEarly) {
   EXPECT_EQ(st.vertex_tests, 0u);
 }
 
-// The CUDA midphase (gpu/src/midphase.cuh, context) puts the mesh first itself and calls
+// The CUDA midphase (gpu/src/midphase_warp.cuh, context) puts the mesh first itself and calls
 // hd::setup_pair on the ordered pair, so no placed shape is chosen by reference on the
 // device; that is only right if the set-up of (box, mesh) is the set-up of (mesh, box) but
 // for `swap`, field for field, and if the box-box / aabb-only answer does not depend on the

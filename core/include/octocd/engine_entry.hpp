@@ -4,7 +4,9 @@
 /// factory and its settings. An adapter's folder holds one `<engine>_engine.cpp` defining
 /// `EngineHooks <engine>_engine_hooks()`; its CMakeLists.txt registers it with
 /// `octocd_register_engine` (reference/CMakeLists.txt), which compiles it into
-/// octocd_engines and lists it in the generated engine_adapters.hpp. Internal to engines/.
+/// octocd_engines and lists it in the generated engine_adapters.hpp. It stands in core/, below
+/// both the adapters (reference/) that fill it and the registry (engines/) that reads it, so that
+/// neither of those folders includes the other's headers for it (docs/architecture.md, "No circles").
 
 #include <memory>
 #include <string>
