@@ -52,6 +52,7 @@ input[type=range] { width: 100%; } select { max-width: 100%; }
 <div><label>frame <b id="frame-label"></b><input id="slider" type="range"></label></div>
 <div><label>contact <select id="pick"></select></label></div>
 <div><label><input id="boxes" type="checkbox"> world AABBs of the other bodies</label></div>
+<div><label><input id="impulses" type="checkbox"> the pair's impulses and friction cone</label></div>
 <div id="figures"></div>
 <div id="legend">
 <div><span style="background:#e8642c"></span><span style="background:#56b4e9"></span>the item's bodies
@@ -175,7 +176,8 @@ camera.near = radius / 1000; camera.far = radius * 1000; camera.updateProjection
 
 // Arrows, per pair: the pair's deepest row or reference over the window draws as the
 // stub plus 0.7 of the item's size; depth 0 as the stub. Impulses, per pair: the largest
-// of its sum jn and friction over the window draws as 0.6 of the item's size.
+// of its sum jn and friction over the window draws as 1.1 of the item's size (the cone's
+// ring beyond the normals' arrowheads).
 function key(p) { return p.a + ',' + p.b; }
 var maxDepth = {}, maxImpulse = {};
 function grow(m, k, v) { if (v > 0 && !(m[k] >= v)) m[k] = v; }
@@ -188,7 +190,7 @@ D.frames.forEach(function (f) {
 });
 var stub = radius * 0.12;
 function depthScale(p) { var m = maxDepth[key(p)]; return m > 0 ? 0.7 * radius / m : 1; }
-function impulseScale(p) { var m = maxImpulse[key(p)]; return m > 0 ? 0.6 * radius / m : 1; }
+function impulseScale(p) { var m = maxImpulse[key(p)]; return m > 0 ? 1.1 * radius / m : 1; }
 // Another pair's arrows at half the length: the item's stay the longest.
 function arrowLength(depth, p) {
   var l = Math.max(depth, 0) * depthScale(p);
@@ -233,7 +235,7 @@ function drawFriction(f, r) {
   addArrow(fr.jn, origin, fr.jn_sum * s, 0x333333, 1.4);
   var rim = ring(tip, n, fr.cone * s, 0x333333);
   for (var i = 0; i < 48; i += 12) addLine([origin, rim[i]], 0x333333, false);
-  if (fr.jt) addArrow(fr.jt, tip, fr.jt_sum * s, 0xe0009b, 1.6);
+  if (fr.jt) addArrow(fr.jt, tip, fr.jt_sum * s, 0xe0009b, 2.2);
   else ring(tip, n, fr.jt_sum * s, 0xe0009b);
 }
 function addDot(p, color, r) {
@@ -292,7 +294,7 @@ function draw(f) {
     if (j.valid || j.penetrating) addArrow(selected ? selected.ref_normal : j.normal, origin, arrowLength(j.penetrating ? j.depth : 0, r), 0x1a9a3a, 1.8);
     addDot(pa, 0x7b3fb0, dot * 0.8); addDot(pb, 0x7b3fb0, dot * 0.8);
     if (!j.penetrating) addLine([pa, pb], 0x7b3fb0, false);
-    if (r.friction) drawFriction(f, r);
+    if (r.friction && $('impulses').checked) drawFriction(f, r);
   });
   f.contacts.forEach(function (c) {
     if (c === selected) return;
@@ -352,6 +354,10 @@ function draw(f) {
 slider.addEventListener('input', function () { show(+slider.value, false); });
 pick.addEventListener('change', function () { draw(D.frames[+slider.value]); });
 $('boxes').checked = item.kind === 'none';
+// The impulses over the normals: on, but on a page of another row's failure (a normal's
+// angle, a depth), where they would cover the normals that failed.
+$('impulses').checked = !D.failure || D.failure.row === 'friction';
+$('impulses').addEventListener('change', function () { draw(D.frames[+slider.value]); });
 $('boxes').addEventListener('change', function () {
   D.bodies.forEach(function (b, k) { bodies[k].helper.visible = b.item || $('boxes').checked; });
 });
