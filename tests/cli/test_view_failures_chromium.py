@@ -19,6 +19,7 @@ Steps:
 IMAGES_DIR (optional): the two screenshots are copied there (docs/images, by hand).
 Exit 0 pass, 1 fail, 77 skipped (no chromium or PIL, or dart / mujoco not available).
 """
+import json
 import os
 import re
 import shutil
@@ -122,7 +123,6 @@ def main():
              f"{angle and angle.group(1)}:\n{figures}")
     data = open(page, encoding="utf-8").read()
     doc = re.search(r'<script type="application/json" id="octocd-data">(.*?)</script>', data, re.S).group(1)
-    import json
     frames = json.loads(doc)["frames"]
     deepest_all = max((c["depth"] for f in frames for c in f["contacts"]), default=0)
     deepest_pair = max(c["depth"] for f in frames for c in f["contacts"] if (c["a"], c["b"]) == (a, b))
