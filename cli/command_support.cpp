@@ -17,9 +17,8 @@
 namespace octocd::cli {
 
 std::string engines_help() {
-  std::string text;
-  for (const EngineInfo& e : engine_infos()) text += (text.empty() ? "" : "; ") + e.name + ": " + e.description;
-  return text + " (docs/engines.md)";
+  return "The engine that steps the scene (`octocd engines` describes each and says which are available here; "
+         "docs/engines.md)";
 }
 
 std::string engines_with(bool (*has)(const EngineInfo&)) {

@@ -23,8 +23,8 @@ using Clock = std::chrono::steady_clock;
 /// How many pipeline stages a FrameMetrics times (octocd::Stage::Count).
 constexpr int kStages = static_cast<int>(octocd::Stage::Count);
 
-/// The help of `--engine` (run, validate), from the registry: each engine's name and
-/// description, "(docs/engines.md)".
+/// The help of `--engine` (run, validate): the engines' names are the option's choices;
+/// their descriptions are `octocd engines`' (docs/engines.md).
 std::string engines_help();
 
 /// "--engine A, --engine B" for the engines of the registry whose EngineInfo has `has`

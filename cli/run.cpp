@@ -82,6 +82,11 @@ struct Totals : octocd::cli::FrameSums {
   double energy_sum = 0.0, energy_max = 0.0;
   double model_s = 0.0;   ///< set-up: scene file, meshes, bodies (build_model), s
   double engine_s = 0.0;  ///< set-up: the engine (cuda: device buffers and upload), s
+  /// A process engine's start-up, set-up and trace writing (its first step's wall time less
+  /// its step calls' seconds, as its trace reports them), s; counted in engine_s.
+  double process_s = 0.0;
+  /// The engine reports its pair counts (a process engine's trace may have no /pairs).
+  bool pairs_reported = true;
   octocd::FrameMetrics last;  ///< the last frame's row (the "last" column)
 
   void add(const octocd::FrameMetrics& m) {
@@ -113,6 +118,7 @@ class Progress {
 
   void update(const octocd::FrameMetrics& m, const Totals& t) {
     if (!enabled_) return;
+    std::fflush(stdout);  // stdout and stderr to one file: the lines in the order they happened
     const auto now = Clock::now();
     const bool last = m.frame == total_;
     if (tty_) {
@@ -120,21 +126,22 @@ class Progress {
       last_draw_ = now;
       constexpr int kWidth = 30;
       const int filled = static_cast<int>(kWidth * m.frame / std::max<std::int64_t>(total_, 1));
-      std::fprintf(stderr, "\r[%s%s] frame %lld/%lld  %8.1f steps/s  pairs %llu  contacts %llu ",
+      std::fprintf(stderr, "\r[%s%s] frame %lld/%lld  %8.1f steps/s  pairs %s  contacts %llu ",
                    std::string(static_cast<std::size_t>(filled), '#').c_str(),
                    std::string(static_cast<std::size_t>(kWidth - filled), ' ').c_str(),
                    static_cast<long long>(m.frame), static_cast<long long>(total_),
-                   rate(t), static_cast<unsigned long long>(m.aabb_pairs),
+                   rate(t), pairs_ ? std::to_string(m.aabb_pairs).c_str() : "n/a",
                    static_cast<unsigned long long>(m.contacts));
       if (last) std::fprintf(stderr, "\n");
       std::fflush(stderr);
     } else {
       const std::int64_t step = std::max<std::int64_t>(total_ / 10, 1);
       if (m.frame % step != 0 && !last) return;
-      std::fprintf(stderr, "frame %lld/%lld  %.1f steps/s  pairs %llu  contacts %llu\n",
+      std::fprintf(stderr, "frame %lld/%lld  %.1f steps/s  pairs %s  contacts %llu%s\n",
                    static_cast<long long>(m.frame), static_cast<long long>(total_), rate(t),
-                   static_cast<unsigned long long>(m.aabb_pairs),
-                   static_cast<unsigned long long>(m.contacts));
+                   pairs_ ? std::to_string(m.aabb_pairs).c_str() : "n/a",
+                   static_cast<unsigned long long>(m.contacts), read_ ? "  (read from its trace)" : "");
+      std::fflush(stderr);
     }
   }
 
@@ -145,6 +152,16 @@ class Progress {
   std::int64_t total_;
   bool enabled_;
   bool tty_;
+  bool pairs_ = true;  // the engine reports its pair counts (else "n/a")
+  bool read_ = false;  // the frames are read from a process engine's trace, run before
+
+ public:
+  /// A process engine's frames, read from its trace after its process ran them all;
+  /// `pairs`: whether it reports pair counts (its trace may have no /pairs).
+  void set_read_from_trace(bool pairs) {
+    read_ = true;
+    pairs_ = pairs;
+  }
   Clock::time_point last_draw_{};
 };
 
@@ -171,8 +188,11 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
   fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", engine, world.broadphase_name(),
              world.midphase_name(), world.device());
   fmt::print("geometry     {}\n", world.collision_geometry());
-  fmt::print("set-up       {:.2f} s (scene and bodies {:.2f} s, engine {:.2f} s)\n", t.model_s + t.engine_s,
-             t.model_s, t.engine_s);
+  fmt::print("set-up       {:.2f} s (scene and bodies {:.2f} s, engine {:.2f} s{})\n", t.model_s + t.engine_s,
+             t.model_s, t.engine_s,
+             t.process_s > 0 ? fmt::format(", of which {:.2f} s its process's start-up, set-up and trace writing "
+                                           "outside its step calls", t.process_s)
+                             : std::string());
   fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
              static_cast<double>(t.frames) * s.dt, wall_s);
   fmt::print("steps/s      {:.1f}   (mean step {:.3f} ms)\n", steps_per_s(t), t.step_ms / n);
@@ -208,9 +228,14 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
   auto row = [](const char* name, double sum_over_n, std::uint64_t max, std::uint64_t last) {
     fmt::print("{:<24} {:>14.1f} {:>14} {:>14}\n", name, sum_over_n, max, last);
   };
-  row("broadphase candidates", t.candidates / n, t.max_candidates, t.last.cell_candidates);
-  row("AABB pairs", t.pairs / n, t.max_pairs, t.last.aabb_pairs);
-  row("  dynamic pairs", t.dynamic_pairs / n, t.max_dynamic_pairs, t.last.dynamic_pairs);
+  // Counts the engine does not report: n/a, never 0.
+  auto pair_row = [&](const char* name, double sum_over_n, std::uint64_t max, std::uint64_t last) {
+    if (t.pairs_reported) row(name, sum_over_n, max, last);
+    else fmt::print("{:<24} {:>14} {:>14} {:>14}\n", name, "n/a", "n/a", "n/a");
+  };
+  pair_row("broadphase candidates", t.candidates / n, t.max_candidates, t.last.cell_candidates);
+  pair_row("AABB pairs", t.pairs / n, t.max_pairs, t.last.aabb_pairs);
+  pair_row("  dynamic pairs", t.dynamic_pairs / n, t.max_dynamic_pairs, t.last.dynamic_pairs);
   row("midphase box pairs", t.box_pairs / n, t.max_box_pairs, t.last.box_pairs);
   row("vertex tests", t.vertex_tests / n, t.max_vertex_tests, t.last.vertex_tests);
   row("contacts", t.contacts / n, t.max_contacts, t.last.contacts);
@@ -223,7 +248,8 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
   fmt::print("\n(penetration: mean over frames with contacts of the frame mean; max and last are the "
              "largest d_p.\n AABB pairs include static-static pairs (walls touching walls); dynamic pairs "
              "are the ones\n that can produce a contact; broadphase candidates are the pairs tested before "
-             "the exact AABB test.)\n");
+             "the exact AABB test{}.)\n",
+             t.pairs_reported ? "" : ";\n n/a: the engine reports no pairs (its trace has no /pairs)");
   const std::string notes = world.notes();
   if (!notes.empty()) fmt::print("\nengine {}: {}\n", engine, notes);
   if (!trace.empty()) fmt::print("\ntrace        {}\n", trace);
@@ -457,6 +483,15 @@ int run_command(const RunOptions& o) {
   const octocd::cli::TraceFeed feed = octocd::cli::TraceFeed::of(world, o.contacts);
   if (!trace) world.plan_steps(scene.frames);
   else feed.start(*trace, world, scene.frames);
+  // A process engine runs every step in its first step() (process_engines.hpp): its
+  // start-up is said as it happens, and measured into the set-up.
+  const bool own_process = world.writes_own_trace();
+  if (own_process && !o.quiet) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "engine %s: starting %s for %d frames; octocd reads its frames once it has run them\n",
+                 world.name().c_str(), world.device().c_str(), scene.frames);
+    std::fflush(stderr);
+  }
   const auto t0 = Clock::now();
   std::int64_t kept_flushed = 0;  // the flushed frames run_kept last said
   try {
@@ -471,6 +506,18 @@ int run_command(const RunOptions& o) {
       if (setup_lines && f == 0)
         std::fprintf(stderr, "set-up: first frame %.2f s after the start (%.2f CPU s of the process)\n",
                      std::chrono::duration<double>(Clock::now() - t_setup).count(), cpu_s());
+      if (own_process && f == 0) {
+        const double first_s = std::chrono::duration<double>(Clock::now() - t0).count();
+        const double steps_s = m.step_ms * static_cast<double>(scene.frames) / 1000.0;
+        totals.process_s = std::max(0.0, first_s - steps_s);
+        totals.engine_s += totals.process_s;
+        totals.pairs_reported = world.record().has_pairs;
+        progress.set_read_from_trace(totals.pairs_reported);
+        if (!o.quiet)
+          std::fprintf(stderr, "engine %s: its process ran %d frames in %.2f s (%.2f s in its step calls, %.2f s "
+                       "start-up, set-up and trace writing); reading its frames\n",
+                       world.name().c_str(), scene.frames, first_s, steps_s, totals.process_s);
+      }
       totals.add(m);
       // A reference engine's state past the trace limits (a spinning needle) ends the run
       // before its frame is written: every trace `run` writes is judgeable.
@@ -502,7 +549,8 @@ int run_command(const RunOptions& o) {
     if (octocd::stop_signal() == 0) xdmf = write_sidecar(o.trace, o.no_xdmf);
     session.keep(fmt::format("the trace {} holds frames 1..{}, closed", o.trace, totals.frames));
   }
-  const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  // The stepping's wall time; a process engine's start-up is in the set-up.
+  const double wall_s = std::chrono::duration<double>(Clock::now() - t0).count() - totals.process_s;
   if (worlds.count > 1)
     worlds.escaped = octocd::worlds_escaped(*model, worlds.layout, o.worlds.margin, world.state());
   if (!o.quiet) print_summary(world, totals, wall_s, o.trace, xdmf, worlds);

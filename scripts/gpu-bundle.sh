@@ -20,12 +20,15 @@
 #   OCTOCD_GPU_TEST_FRAMES=1000 ./run-gpu-tests.sh --gtest_filter='*CpuVsCuda*'
 #   ./bin/octocd run datasets/scenes/bunny-random-400.json ...
 #   ./run-tests.sh                        # every gtest binary (CPU tests too)
-#   ./run-gpu-broadphase-bench.sh [OUTDIR] # bench_gpu_broadphase: OUTDIR/gpu-broadphase-scaling.{md,json}
+#   ./run-gpu-broadphase-bench.sh [OUTDIR] # bench_gpu_broadphase:
+#                                          # OUTDIR/gpu-broadphase-scaling.{md,json}
 #
 # Layout: bin/ (octocd, test_*, bench_*, bench_gpu_broadphase among them; RPATH
-# $ORIGIN/lib), bin/lib/ (shared libraries, RPATH $ORIGIN), datasets/scenes, datasets/cache, tests/data, bench/sweeps and the batched-worlds benchmark (bench/run-worlds.sh); everything stripped. The
-# CUDA runtime is linked statically; libcuda comes from the driver. glibc (libc, libm,
-# libpthread, libdl, librt, libresolv, ld-linux, ...) is the target's own.
+# $ORIGIN/lib), bin/lib/ (shared libraries, RPATH $ORIGIN), datasets/scenes, datasets/cache,
+# tests/data, bench/sweeps and the batched-worlds benchmark (bench/run-worlds.sh);
+# everything stripped. The CUDA runtime is linked statically; libcuda comes from the
+# driver. glibc (libc, libm, libpthread, libdl, librt, libresolv, ld-linux, ...) is the
+# target's own.
 set -euo pipefail
 
 repo=$(git -C "$(dirname "$0")" rev-parse --show-toplevel)

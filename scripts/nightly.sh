@@ -74,7 +74,12 @@
 #   SCENE.json ...  scenes to validate instead of the set
 set -uo pipefail
 
-usage() { sed -n '2,/^set -uo/p' "$0" | sed '$d' | sed 's/^# \{0,1\}//' >&2; exit "$1"; }
+# The comment above as help: on stdout for --help (exit 0), on stderr for a wrong call.
+usage() {
+  if [ "$1" = 0 ]; then sed -n '2,/^set -uo/p' "$0" | sed '$d' | sed 's/^# \{0,1\}//'
+  else sed -n '2,/^set -uo/p' "$0" | sed '$d' | sed 's/^# \{0,1\}//' >&2; fi
+  exit "$1"
+}
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="build"

@@ -146,6 +146,39 @@ Json reference_json(const char* kind, const ReferenceNormal& r) {
               {"point_b", vec(r.point_b)}};
 }
 
+/// A pair's friction as the friction row's cone judges it (validation/physics/friction.cpp,
+/// docs/validation.md): its rows `rows` of `rec` together, |sum jt3| (or sum |jt| without
+/// jt3) against the cone mu sum jn; the sums' vectors for the page to draw.
+Json friction_json(const FrameRecord& rec, const std::vector<std::size_t>& rows, const PhysicsBodies& physics,
+                   Pair p) {
+  const bool vector_friction = rec.jt3.size() == rec.contacts.size() && !rec.jt3.empty();
+  double jn_sum = 0, jt_abs = 0;
+  double jt[3] = {0, 0, 0}, jn_vec[3] = {0, 0, 0};
+  for (std::size_t k : rows) {
+    const ContactRecord& c = rec.contacts[k];
+    jn_sum += double(c.jn);
+    for (int d = 0; d < 3; ++d) jn_vec[d] += double(c.jn) * double(c.normal[d]);
+    if (vector_friction) {
+      for (int d = 0; d < 3; ++d) jt[d] += double(rec.jt3[k][d]);
+      jt_abs += double(length(rec.jt3[k]));
+    } else {
+      jt_abs += std::fabs(double(c.jt));
+    }
+  }
+  const double jt_sum = vector_friction ? std::sqrt(jt[0] * jt[0] + jt[1] * jt[1] + jt[2] * jt[2]) : jt_abs;
+  const double mu = pair_friction(physics, p.a, p.b);
+  const double cone = mu * jn_sum;
+  return Json{{"rule", vector_friction ? "jt3" : "scalar"},
+              {"rows", rows.size()},
+              {"jt_sum", num(jt_sum)},
+              {"jt", vector_friction ? Json::array({num(jt[0]), num(jt[1]), num(jt[2])}) : Json(nullptr)},
+              {"jn_sum", num(jn_sum)},
+              {"jn", Json::array({num(jn_vec[0]), num(jn_vec[1]), num(jn_vec[2])})},
+              {"mu", num(mu)},
+              {"cone", num(cone)},
+              {"ratio", cone > 0 ? num(jt_sum / cone) : Json(nullptr)}};
+}
+
 }  // namespace
 
 ViewPage write_view(const std::string& trace, const ViewSettings& settings, const std::string& out_dir) {
@@ -210,6 +243,8 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
   const PhysicsBodies physics = eo.octocd_engine ? octocd_physics_bodies(model) : in->bodies().physics;
   const ReferenceGeometry ref(model, physics.collision_shape);
   const bool aabb_geometry = physics.contact_geometry == ContactGeometry::Aabb;
+  // The friction row judges the rows' friction only where they carry it.
+  const bool friction_judged = physics.impulses == PhysicsBodies::Impulses::Complete;
   const Tolerances tol;
   SatSettings sat;
   sat.abs_m = tol.geometry_slack_m;
@@ -365,6 +400,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
         entry["sat_epsilon"] = num(t.sat_result.epsilon);
       }
       entry["in_contact"] = found != rows_of.end();
+      if (found != rows_of.end() && friction_judged) entry["friction"] = friction_json(rec, found->second, physics, p);
       const std::size_t ref_index = refs.size();
       refs.push_back(std::move(entry));
       if (found == rows_of.end()) continue;
@@ -393,6 +429,11 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
     note = note.empty() ? no : no + "; " + note;
   }
 
+  if (!info.has_contacts) {
+    const std::string rows = "this trace has no contact rows (octocd run --contacts writes them): the bodies are "
+                             "drawn without the engine's contacts";
+    note = note.empty() ? rows : rows + "; " + note;
+  }
   if (sparse) {
     const std::string states =
         "the trace records the states of some frames only (e.g. octocd run --state-every K): a frame without its "
@@ -408,6 +449,9 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
             {"octocd_engine", eo.octocd_engine},
             {"contact_geometry", aabb_geometry ? "aabb" : "shape"},
             {"bodies_in_trace", n},
+            {"has_contact_rows", info.has_contacts},
+            {"first_contact_frame", first_contact},
+            {"impulses", impulses_name(physics.impulses)},
             {"frames_in_trace", info.frames},
             {"frame", frame},
             {"window", settings.window},

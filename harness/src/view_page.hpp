@@ -26,9 +26,13 @@ function showErrors() { var p = document.getElementById('octocd-errors'); if (p)
 </script>
 <style>
 html, body { margin: 0; height: 100%; overflow: hidden; font: 13px/1.35 sans-serif; background: #f4f4f2; }
-#view { position: absolute; inset: 0; }
-#panel { position: absolute; left: 8px; top: 8px; width: 400px; max-height: calc(100% - 16px); overflow: auto;
-  background: rgba(255,255,255,0.92); border: 1px solid #bbb; padding: 8px; border-radius: 4px; }
+#view { position: absolute; left: 400px; top: 0; right: 0; bottom: 0; }
+#panel { position: absolute; left: 0; top: 0; bottom: 0; width: 400px; box-sizing: border-box; overflow: auto;
+  background: #fff; border-right: 1px solid #bbb; padding: 8px; }
+body.collapsed #view { left: 30px; } body.collapsed #panel { width: 30px; padding: 4px; overflow: hidden; }
+body.collapsed #panel > :not(#toggle) { display: none; }
+#toggle { float: right; font-size: 12px; }
+#failure { font-weight: bold; color: #8a1010; margin: 4px 0; }
 #panel h1 { font-size: 14px; margin: 0 0 4px 0; }
 #figures { white-space: pre-wrap; font: 12px/1.3 monospace; margin: 6px 0; }
 #note { color: #a04000; margin: 4px 0; }
@@ -40,20 +44,31 @@ input[type=range] { width: 100%; } select { max-width: 100%; }
 <body data-status="loading">
 <div id="view"></div>
 <div id="panel">
+<button id="toggle" title="hide or show this panel">&#9664;</button>
 <h1 id="heading"></h1>
+<div id="failure"></div>
 <div id="about"></div>
 <div id="note"></div>
 <div><label>frame <b id="frame-label"></b><input id="slider" type="range"></label></div>
 <div><label>contact <select id="pick"></select></label></div>
+<div><label><input id="boxes" type="checkbox"> world AABBs of the other bodies</label></div>
+<div><label><input id="impulses" type="checkbox"> the pair's impulses and friction cone</label></div>
 <div id="figures"></div>
 <div id="legend">
-<div><span style="background:#e8642c"></span>the item's bodies (highlighted)</div>
-<div><span style="background:#9aa7b8"></span>other bodies (dark: static)</div>
-<div><span style="background:none;border-color:#3a6fd8"></span>world AABBs (the item's: orange)</div>
-<div><span style="background:#1f5fd0"></span>engine normal at its point (length: depth x scale)</div>
+<div><span style="background:#e8642c"></span><span style="background:#56b4e9"></span>the item's bodies
+ (pair: A orange, B sky blue)</div>
+<div><span style="background:#c8c8c8"></span>other bodies (dark: static; without an item, a colour
+ per body)</div>
+<div><span style="background:none;border-color:#3a6fd8"></span>world AABBs (the item's: its colour; the
+ others' with the box above)</div>
+<div><span style="background:#1f3f9f"></span>engine normal at its point (length: depth x the pair's
+ scale)</div>
 <div><span style="background:#d01f1f"></span>engine normal of the selected contact</div>
 <div><span style="background:#1a9a3a"></span>reference normal (SAT or FCL, the physics tier's own)</div>
-<div><span style="background:#b01fb0"></span>reference points (nearest points / contact point)</div>
+<div><span style="background:#7b3fb0"></span>reference points (nearest points / contact point)</div>
+<div><span style="background:#333"></span>normal impulse sum jn n; its ring: the cone mu jn</div>
+<div><span style="background:#e0009b"></span>friction impulse sum jt3 from its tip (scalar jt: a
+ ring of radius |jt|)</div>
 <div id="scale"></div>
 <div>drag: orbit, wheel: zoom, right drag: pan</div>
 </div>
@@ -78,15 +93,18 @@ $('heading').textContent = document.title;
 var about = 'trace ' + D.trace + ' (version ' + D.trace_version + (D.octocd_engine ? ', octocd engine' : '') +
   '): ' + D.bodies_in_trace + ' bodies, ' + D.frames_in_trace + ' frames. Drawn: ' + D.bodies.length +
   ' bodies (cap ' + D.cap + '), frames ' + D.frames[0].frame + '..' + D.frames[D.frames.length - 1].frame + '.';
-if (D.failure) about += ' Failing: ' + D.failure.row + '/' + D.failure.cause + ', figure ' + f4(D.failure.figure) + ' ' + D.failure.unit + '.';
+if (D.failure) $('failure').textContent = 'Failing: ' + D.failure.row + '/' + D.failure.cause + ', figure ' +
+  f4(D.failure.figure) + ' ' + D.failure.unit + ' (frame ' + D.frame + ')';
+if (!D.has_contact_rows) about += ' This trace has no contact rows.';
 if (D.contact_geometry === 'aabb') about += ' The engine resolves contacts on world AABBs: judged against box-box on them (AABB); the shapes\' reference is shown too.';
 $('about').textContent = about;
 $('note').textContent = D.note;
 
 var view = $('view');
+function viewSize() { return [view.clientWidth || window.innerWidth, view.clientHeight || window.innerHeight]; }
 var renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
 renderer.setPixelRatio(window.devicePixelRatio || 1);
-renderer.setSize(view.clientWidth || window.innerWidth, view.clientHeight || window.innerHeight);
+renderer.setSize(viewSize()[0], viewSize()[1]);
 renderer.setClearColor(0xf4f4f2, 1);
 view.appendChild(renderer.domElement);
 var scene = new THREE.Scene();
@@ -114,43 +132,70 @@ var geoms = D.shapes.map(function (s) {
   }
   return g;
 });
-var bodies = D.bodies.map(function (b) {
-  var color = b.item ? 0xe8642c : (b.static ? 0x5d6673 : 0x9aa7b8);
-  var mat = new THREE.MeshLambertMaterial({ color: color, transparent: !b.item, opacity: b.item ? 0.85 : 0.3,
-    side: THREE.DoubleSide, depthWrite: b.item });
+// Colours: the pair's A orange and B sky blue (told apart by colour-blind readers too), a
+// body item orange, others neutral; without an item a colour per dynamic body.
+var PALETTE = [0xe69f00, 0x56b4e9, 0x009e73, 0xd55e00, 0x0072b2, 0xcc79a7, 0xb8a800, 0x8c564b];
+function bodyColor(b, k) {
+  if (b.item) return item.kind === 'pair' && b.id === item.b ? 0x56b4e9 : 0xe8642c;
+  if (b.static) return 0x6b6b6b;
+  return item.kind === 'none' ? PALETTE[k % PALETTE.length] : 0xc8c8c8;
+}
+var bodies = D.bodies.map(function (b, k) {
+  var color = bodyColor(b, k), strong = b.item || (item.kind === 'none' && !b.static);
+  // A static item (a wall, the floor) stays see-through: the other body of its pair shows.
+  var solid = strong && !b.static;
+  var mat = new THREE.MeshLambertMaterial({ color: color, transparent: !solid, opacity: solid ? 0.85 : b.item ? 0.2 : 0.18,
+    side: THREE.DoubleSide, depthWrite: solid });
   var mesh = new THREE.Mesh(geoms[b.shape], mat);
   mesh.add(new THREE.LineSegments(new THREE.EdgesGeometry(geoms[b.shape], 30),
-    new THREE.LineBasicMaterial({ color: b.item ? 0x7a2a00 : 0x555555 })));
+    new THREE.LineBasicMaterial({ color: new THREE.Color(color).multiplyScalar(0.5) })));
   scene.add(mesh);
   var box = new THREE.Box3(new THREE.Vector3(), new THREE.Vector3());
-  var helper = new THREE.Box3Helper(box, b.item ? 0xe8642c : 0x3a6fd8);
+  var helper = new THREE.Box3Helper(box, b.item ? color : 0x3a6fd8);
+  helper.visible = b.item || item.kind === 'none';
   scene.add(helper);
   return { mesh: mesh, box: box, helper: helper };
 });
 
-// Camera on the item (or everything drawn) at the first frame.
+// Camera on the item's dynamic bodies (its static ones when it has none; everything drawn
+// without an item) at the first frame: a pair with a wall is seen at the body on the wall.
 var first = D.frames.filter(function (f) { return f.frame === D.frame; })[0] || D.frames[0];
 var focus = new THREE.Box3();
+var itemDynamic = D.bodies.some(function (b) { return b.item && !b.static; });
 D.bodies.forEach(function (b, k) {
-  if (item.kind === 'none' || b.item) focus.union(new THREE.Box3(v3(first.aabbs[k][0]), v3(first.aabbs[k][1])));
+  if (item.kind === 'none' || (b.item && (!b.static || !itemDynamic)))
+    focus.union(new THREE.Box3(v3(first.aabbs[k][0]), v3(first.aabbs[k][1])));
 });
 var centre = new THREE.Vector3(), size = new THREE.Vector3();
 focus.getCenter(centre); focus.getSize(size);
 var radius = Math.max(size.length() / 2, 1e-3);
-camera.position.copy(centre).add(new THREE.Vector3(1.2, 0.9, 1.6).multiplyScalar(radius * 1.6));
+// Far enough for the arrows too (up to about 0.8 radius beyond a body).
+camera.position.copy(centre).add(new THREE.Vector3(1.2, 0.9, 1.6).multiplyScalar(radius * 2.4));
 controls.target.copy(centre); controls.update();
 camera.near = radius / 1000; camera.far = radius * 1000; camera.updateProjectionMatrix();
 
-// Arrows: a depth of maxDepth draws as half the item's size; depth 0 as a stub.
-var maxDepth = 0;
+// Arrows, per pair: the pair's deepest row or reference over the window draws as the
+// stub plus 0.7 of the item's size; depth 0 as the stub. Impulses, per pair: the largest
+// of its sum jn and friction over the window draws as 1.1 of the item's size (the cone's
+// ring beyond the normals' arrowheads).
+function key(p) { return p.a + ',' + p.b; }
+var maxDepth = {}, maxImpulse = {};
+function grow(m, k, v) { if (v > 0 && !(m[k] >= v)) m[k] = v; }
 D.frames.forEach(function (f) {
-  f.contacts.forEach(function (c) { maxDepth = Math.max(maxDepth, c.depth); });
-  f.references.forEach(function (r) { if (r.judged.penetrating) maxDepth = Math.max(maxDepth, r.judged.depth); });
+  f.contacts.forEach(function (c) { grow(maxDepth, key(c), c.depth); });
+  f.references.forEach(function (r) {
+    if (r.judged.penetrating) grow(maxDepth, key(r), r.judged.depth);
+    if (r.friction) { grow(maxImpulse, key(r), r.friction.jn_sum); grow(maxImpulse, key(r), r.friction.jt_sum); }
+  });
 });
-var scale = maxDepth > 0 ? radius / maxDepth : 1;
-var stub = radius * 0.15;
-$('scale').textContent = 'arrow length = ' + f4(stub) + ' m + depth x ' + f4(scale) + ' (deepest ' + f4(maxDepth) + ' m)';
-function arrowLength(depth) { return stub + Math.max(depth, 0) * scale; }
+var stub = radius * 0.12;
+function depthScale(p) { var m = maxDepth[key(p)]; return m > 0 ? 0.7 * radius / m : 1; }
+function impulseScale(p) { var m = maxImpulse[key(p)]; return m > 0 ? 1.1 * radius / m : 1; }
+// Another pair's arrows at half the length: the item's stay the longest.
+function arrowLength(depth, p) {
+  var l = Math.max(depth, 0) * depthScale(p);
+  return stub + (item.kind === 'none' || isItem(p) ? l : 0.5 * l);
+}
 var overlay = new THREE.Group(); scene.add(overlay);
 function addArrow(dir, origin, length, color, width) {
   var d = v3(dir); if (d.lengthSq() === 0) return;
@@ -160,6 +205,39 @@ function addArrow(dir, origin, length, color, width) {
 }
 // Overlays drawn over the shapes (never hidden inside a body).
 function onTop(o) { o.material.depthTest = false; o.material.transparent = true; o.renderOrder = 10; }
+function addLine(points, color, loop) {
+  var g = new THREE.BufferGeometry().setFromPoints(points);
+  var l = loop ? new THREE.LineLoop(g, new THREE.LineBasicMaterial({ color: color }))
+               : new THREE.Line(g, new THREE.LineBasicMaterial({ color: color }));
+  onTop(l); overlay.add(l);
+}
+// A ring of `r` around `centre` in the plane normal to unit `n`.
+function ring(centre, n, r, color) {
+  var u = new THREE.Vector3(1, 0, 0); if (Math.abs(n.x) > 0.9) u.set(0, 1, 0);
+  u.sub(n.clone().multiplyScalar(u.dot(n))).normalize();
+  var w = new THREE.Vector3().crossVectors(n, u), pts = [];
+  for (var i = 0; i < 48; i++) {
+    var t = 2 * Math.PI * i / 48;
+    pts.push(centre.clone().add(u.clone().multiplyScalar(r * Math.cos(t))).add(w.clone().multiplyScalar(r * Math.sin(t))));
+  }
+  addLine(pts, color, true);
+  return pts;
+}
+// The pair's friction: sum jn n from its rows' mean point, the cone mu jn as a ring at its
+// tip (with four generators from the point), the friction impulse from the tip.
+function drawFriction(f, r) {
+  var fr = r.friction, s = impulseScale(r), n = v3(fr.jn), origin = new THREE.Vector3(), rows = 0;
+  if (n.lengthSq() === 0 || !(fr.jn_sum > 0)) return;
+  n.normalize();
+  f.contacts.forEach(function (c) { if (c.a === r.a && c.b === r.b) { origin.add(rowPoint(f, c)); rows++; } });
+  if (rows) origin.multiplyScalar(1 / rows);
+  var tip = origin.clone().add(n.clone().multiplyScalar(fr.jn_sum * s));
+  addArrow(fr.jn, origin, fr.jn_sum * s, 0x333333, 1.4);
+  var rim = ring(tip, n, fr.cone * s, 0x333333);
+  for (var i = 0; i < 48; i += 12) addLine([origin, rim[i]], 0x333333, false);
+  if (fr.jt) addArrow(fr.jt, tip, fr.jt_sum * s, 0xe0009b, 2.2);
+  else ring(tip, n, fr.jt_sum * s, 0xe0009b);
+}
 function addDot(p, color, r) {
   var m = new THREE.Mesh(new THREE.SphereBufferGeometry(r, 12, 8), new THREE.MeshBasicMaterial({ color: color }));
   onTop(m); m.position.copy(p); overlay.add(m);
@@ -213,24 +291,26 @@ function draw(f) {
     if (!showIt) return;
     var j = r.judged, pa = v3(j.point_a), pb = v3(j.point_b);
     var origin = selected ? rowPoint(f, selected) : pa.clone().add(pb).multiplyScalar(0.5);
-    if (j.valid || j.penetrating) addArrow(selected ? selected.ref_normal : j.normal, origin, arrowLength(j.penetrating ? j.depth : 0), 0x1a9a3a, 1.8);
-    addDot(pa, 0xb01fb0, dot * 0.8); addDot(pb, 0xb01fb0, dot * 0.8);
-    if (!j.penetrating) {
-      var g = new THREE.BufferGeometry().setFromPoints([pa, pb]);
-      var l = new THREE.Line(g, new THREE.LineBasicMaterial({ color: 0xb01fb0 })); onTop(l); overlay.add(l);
-    }
+    if (j.valid || j.penetrating) addArrow(selected ? selected.ref_normal : j.normal, origin, arrowLength(j.penetrating ? j.depth : 0, r), 0x1a9a3a, 1.8);
+    addDot(pa, 0x7b3fb0, dot * 0.8); addDot(pb, 0x7b3fb0, dot * 0.8);
+    if (!j.penetrating) addLine([pa, pb], 0x7b3fb0, false);
+    if (r.friction && $('impulses').checked) drawFriction(f, r);
   });
   f.contacts.forEach(function (c) {
     if (c === selected) return;
     var p = rowPoint(f, c);
-    addArrow(c.normal, p, arrowLength(c.depth), 0x1f5fd0, 1);
-    addDot(p, 0x1f5fd0, dot);
+    addArrow(c.normal, p, arrowLength(c.depth, c), 0x1f3f9f, 1);
+    addDot(p, 0x1f3f9f, dot);
   });
   if (selected) {  // last: over the reference's wider arrow
     var sp = rowPoint(f, selected);
-    addArrow(selected.normal, sp, arrowLength(selected.depth), 0xd01f1f, 1);
+    addArrow(selected.normal, sp, arrowLength(selected.depth, selected), 0xd01f1f, 1);
     addDot(sp, 0xd01f1f, dot);
   }
+  var shown = selected || selRef;
+  $('scale').textContent = shown ? 'arrows of pair (' + shown.a + ', ' + shown.b + '): length ' + f4(stub) +
+    ' m + depth x ' + f4(depthScale(shown)) + ' (its deepest ' + f4(maxDepth[key(shown)] || 0) +
+    ' m over the window); impulses x ' + f4(impulseScale(shown)) + ' m per kg m/s; each pair its own scales' : '';
   var t = [];
   if (selected) {
     t.push('pair (' + selected.a + ', ' + selected.b + '), frame ' + f.frame);
@@ -252,7 +332,20 @@ function draw(f) {
     if (selRef.judge === 'AABB') t.push('shapes\' ref     ' + selRef.shapes.kind + ' ' + fv(selRef.shapes.normal) +
       (selRef.shapes.penetrating ? ' depth ' + f4(selRef.shapes.depth) : ' distance ' + f4(selRef.shapes.distance)) + ' m');
   }
-  if (!selected && !selRef) t.push('no contact among the bodies drawn in frame ' + f.frame);
+  if (selRef && selRef.friction) {
+    var fr = selRef.friction;
+    t.push('friction        rule ' + fr.rule + ', ' + fr.rows + ' row' + (fr.rows === 1 ? '' : 's') + ' of the pair');
+    t.push((fr.rule === 'jt3' ? '|sum jt3|       ' : 'sum |jt|        ') + f4(fr.jt_sum) + ' kg m/s');
+    t.push('cone mu x jn    ' + f4(fr.mu) + ' x ' + f4(fr.jn_sum) + ' = ' + f4(fr.cone) + ' kg m/s');
+    if (fr.ratio !== null) t.push('ratio           ' + f4(fr.ratio) + 'x the cone (' + (fr.ratio > 1 ? 'outside' : 'inside') + ')');
+  } else if (selRef && D.impulses !== 'complete') {
+    t.push('friction        not drawn: the trace\'s impulses are ' + D.impulses);
+  }
+  if (!selected && !selRef) {
+    if (!D.has_contact_rows) t.push('this trace has no contact rows (octocd run --contacts writes them)');
+    else t.push('no contact row among the bodies drawn in frame ' + f.frame +
+      (D.first_contact_frame > 0 ? ' (the trace\'s first contact row: frame ' + D.first_contact_frame + ')' : ''));
+  }
   if (f.rows_not_drawn) t.push(f.rows_not_drawn + ' more rows not drawn (cap)');
   if (f.pairs_without_reference) t.push(f.pairs_without_reference + ' pairs without a reference (cap)');
   $('figures').textContent = t.join('\n');
@@ -260,9 +353,24 @@ function draw(f) {
 
 slider.addEventListener('input', function () { show(+slider.value, false); });
 pick.addEventListener('change', function () { draw(D.frames[+slider.value]); });
-window.addEventListener('resize', function () {
-  renderer.setSize(window.innerWidth, window.innerHeight);
-  camera.aspect = window.innerWidth / Math.max(window.innerHeight, 1); camera.updateProjectionMatrix();
+$('boxes').checked = item.kind === 'none';
+// The impulses over the normals: on, but on a page of another row's failure (a normal's
+// angle, a depth), where they would cover the normals that failed.
+$('impulses').checked = !D.failure || D.failure.row === 'friction';
+$('impulses').addEventListener('change', function () { draw(D.frames[+slider.value]); });
+$('boxes').addEventListener('change', function () {
+  D.bodies.forEach(function (b, k) { bodies[k].helper.visible = b.item || $('boxes').checked; });
+});
+function resize() {
+  var wh = viewSize();
+  renderer.setSize(wh[0], wh[1]);
+  camera.aspect = wh[0] / Math.max(wh[1], 1); camera.updateProjectionMatrix();
+}
+window.addEventListener('resize', resize);
+$('toggle').addEventListener('click', function () {
+  var c = document.body.classList.toggle('collapsed');
+  $('toggle').innerHTML = c ? '&#9654;' : '&#9664;';
+  resize();
 });
 show(+slider.value, false);
 function loop() { controls.update(); renderer.render(scene, camera); requestAnimationFrame(loop); }

@@ -275,6 +275,18 @@ TEST(CliView, VersionTwoTraceKeepsOrientationsAndManifoldPoints) {
   EXPECT_EQ(f["contacts"][0]["ref"], f["contacts"][1]["ref"]);
   const auto& ref = f["references"][f["contacts"][0]["ref"].get<std::size_t>()];
   EXPECT_TRUE(ref["judged"]["valid"].get<bool>());
+  // The pair's friction as the cone judges it: both rows together, mu sum jn against
+  // |sum jt3| (or sum |jt|), their ratio.
+  ASSERT_TRUE(ref.contains("friction")) << ref.dump();
+  const auto& fr = ref["friction"];
+  EXPECT_EQ(fr["rows"], 2);
+  const double jn = f["contacts"][0]["jn"].get<double>() + f["contacts"][1]["jn"].get<double>();
+  EXPECT_NEAR(fr["jn_sum"].get<double>(), jn, 1e-6 * std::max(1.0, jn));
+  EXPECT_NEAR(fr["cone"].get<double>(), fr["mu"].get<double>() * jn, 1e-6 * std::max(1.0, jn));
+  if (fr["rule"] == "scalar")
+    EXPECT_NEAR(fr["jt_sum"].get<double>(),
+                std::fabs(f["contacts"][0]["jt"].get<double>()) + std::fabs(f["contacts"][1]["jt"].get<double>()), 1e-6);
+  if (jn > 0) EXPECT_NEAR(fr["ratio"].get<double>(), fr["jt_sum"].get<double>() / fr["cone"].get<double>(), 1e-5);
   fs::remove_all(dir);
 }
 
@@ -331,6 +343,10 @@ TEST(CliView, MainJobTraceWithSparseStatesOpens) {
   ASSERT_TRUE(data.is_object());
   EXPECT_EQ(data["frame"], first_contact);
   EXPECT_NE(data["note"].get<std::string>().find("nearest recorded state"), std::string::npos);
+  // No contact rows in the trace: the page says so plainly.
+  EXPECT_EQ(data["has_contact_rows"], false);
+  EXPECT_NE(data["note"].get<std::string>().find("this trace has no contact rows"), std::string::npos);
+  EXPECT_NE(r.output.find("this trace has no contact rows"), std::string::npos) << r.output;
   // Recorded states and the frame asked for on the slider; each frame's state is the
   // recorded one nearest to it, and a recorded frame's positions are its /states row.
   const std::vector<double> position = read_column(trace, "/states/position");

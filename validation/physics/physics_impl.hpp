@@ -460,12 +460,7 @@ struct PhysicsValidators::Impl {
     return model->theta(model->bodies[p.a].shape, model->bodies[p.b].shape);
   }
   /// The pair's friction coefficient, at least physics_detail::kMuFloor.
-  double pair_mu(Pair p) const {
-    const double mu = bodies.body_friction.empty()
-                          ? bodies.mu
-                          : combine_material(bodies.combine, bodies.body_friction[p.a], bodies.body_friction[p.b]);
-    return std::max(mu, physics_detail::kMuFloor);
-  }
+  double pair_mu(Pair p) const { return pair_friction(bodies, p.a, p.b); }
   bool dynamic(std::uint32_t i) const { return mass[i] > 0; }
   /// Body i asleep in the state before (pre) or after the step (FrameRecord::asleep_pre /
   /// asleep_post; PhysicsBodies::Deactivation).

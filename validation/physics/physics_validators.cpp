@@ -39,6 +39,13 @@ double combine_material(MaterialCombine c, double a, double b) {
   return a * b;
 }
 
+double pair_friction(const PhysicsBodies& bodies, std::uint32_t a, std::uint32_t b) {
+  const double mu = bodies.body_friction.empty() ? bodies.mu
+                                                 : combine_material(bodies.combine, bodies.body_friction[a],
+                                                                    bodies.body_friction[b]);
+  return std::max(mu, physics_detail::kMuFloor);
+}
+
 Pose detection_pose(const Model& model, const FrameRecord& rec, std::size_t i) {
   Pose p;
   if (!rec.x_det.empty()) {

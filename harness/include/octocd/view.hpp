@@ -3,9 +3,12 @@
 /// A viewer of a frame (design.md section 16; `octocd view`, `octocd validate --view`, Python
 /// `octocd.view`): one self-contained HTML page that draws the posed shapes of the bodies
 /// near an item (a pair or a body) of a trace, their world AABBs, the engine's contact
-/// points and normals (arrows scaled by depth), the reference's normal and points (the
-/// separating-axis test or FCL, computed by the physics tier's own code:
-/// validation/physics/reference.hpp), with a frame slider over a window around the frame.
+/// points and normals (arrows scaled by depth, each pair its own scale), the reference's
+/// normal and points (the separating-axis test or FCL, computed by the physics tier's own
+/// code: validation/physics/reference.hpp), each pair's friction as the friction row's cone
+/// judges it (sum jn n, the cone mu sum jn, the friction impulse and their ratio; pair_friction
+/// in octocd/physics.hpp), with a frame slider over a window around the frame. The text panel
+/// lies beside the scene; a trace without contact rows says so (docs/debugging.md).
 ///
 /// Input: an octocd trace (version 1) or an external trace (versions 1 and 2), read only
 /// through the hardened external-trace reader (octocd/external.hpp ExternalTrace) with

@@ -351,6 +351,10 @@ const char* contact_model_name(PhysicsBodies::ContactModel m);
 const char* gyroscopic_name(PhysicsBodies::Gyroscopic g);
 /// "complete", "normal-only" or "none".
 const char* impulses_name(PhysicsBodies::Impulses i);
+/// The friction coefficient of pair (a, b) as the friction row judges it: the bodies'
+/// body_friction combined by `combine` (else `mu`), at least 1e-5 (an engine's friction
+/// floor, docs/validation.md "Floors"). a and b index the bodies (caller-checked).
+double pair_friction(const PhysicsBodies& bodies, std::uint32_t a, std::uint32_t b);
 /// "semi-implicit", "explicit", "any", "substepped" or "undeclared".
 const char* integrator_name(PhysicsBodies::Integrator i);
 
