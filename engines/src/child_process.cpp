@@ -19,6 +19,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/folder_entries.hpp"
 #include "octocd/stop.hpp"
 #include "octocd/text.hpp"
 
@@ -199,40 +200,33 @@ int add_children(pid_t pid, pid_t* list, int n) {
   *e = '\0';
   const int dir = ::open(path, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (dir < 0) return n;
-  alignas(8) char entries[2048];
-  for (;;) {
-    const ssize_t got = ::getdents64(dir, entries, sizeof entries);
-    if (got <= 0) break;
-    for (ssize_t off = 0; off < got;) {
-      const auto* d = reinterpret_cast<const struct dirent64*>(entries + off);
-      off += d->d_reclen;
-      if (d->d_name[0] < '0' || d->d_name[0] > '9') continue;
-      char rel[300];
-      char* r = rel;
-      for (const char* c = d->d_name; *c && r < rel + 280; ++c) *r++ = *c;
-      const char tail[] = "/children";
-      for (const char* c = tail; *c; ++c) *r++ = *c;
-      *r = '\0';
-      const int fd = ::openat(dir, rel, O_RDONLY | O_CLOEXEC);
-      if (fd < 0) continue;
-      char buf[1024];
-      long value = -1;
-      for (;;) {
-        const ssize_t k = ::read(fd, buf, sizeof buf);
-        if (k <= 0) break;
-        for (ssize_t i = 0; i < k; ++i) {
-          if (buf[i] >= '0' && buf[i] <= '9') {
-            value = (value < 0 ? 0 : value * 10) + (buf[i] - '0');
-          } else if (value >= 0) {
-            if (n < kMaxWalk) list[n++] = static_cast<pid_t>(value);
-            value = -1;
-          }
+  for_each_folder_entry(dir, [&](const char* tid) {
+    if (tid[0] < '0' || tid[0] > '9') return;
+    char rel[300];
+    char* r = rel;
+    for (const char* c = tid; *c && r < rel + 280; ++c) *r++ = *c;
+    const char tail[] = "/children";
+    for (const char* c = tail; *c; ++c) *r++ = *c;
+    *r = '\0';
+    const int fd = ::openat(dir, rel, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return;
+    char buf[1024];
+    long value = -1;
+    for (;;) {
+      const ssize_t k = ::read(fd, buf, sizeof buf);
+      if (k <= 0) break;
+      for (ssize_t i = 0; i < k; ++i) {
+        if (buf[i] >= '0' && buf[i] <= '9') {
+          value = (value < 0 ? 0 : value * 10) + (buf[i] - '0');
+        } else if (value >= 0) {
+          if (n < kMaxWalk) list[n++] = static_cast<pid_t>(value);
+          value = -1;
         }
       }
-      if (value >= 0 && n < kMaxWalk) list[n++] = static_cast<pid_t>(value);
-      ::close(fd);
     }
-  }
+    if (value >= 0 && n < kMaxWalk) list[n++] = static_cast<pid_t>(value);
+    ::close(fd);
+  });
   ::close(dir);
   return n;
 }

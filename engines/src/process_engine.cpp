@@ -110,9 +110,11 @@ class ProcessEngine final : public Engine {
  private:
   void remove_folder() {
     if (folder_.empty()) return;
-    for (const std::string& p : {folder_, request_path(), trace_path_}) (void)stop_track_temporary(p, false);
+    // Removed, then forgotten: a process ended meanwhile by another thread (another copy of
+    // `run --worlds` stopped) still removes it.
     std::error_code ec;
     fs::remove_all(folder_, ec);
+    (void)stop_track_temporary(folder_, false);
     folder_.clear();
   }
 
@@ -139,8 +141,8 @@ class ProcessEngine final : public Engine {
     folder_ = templ;
     const std::string request = request_path();
     trace_path_ = (fs::path(folder_) / "trace.h5").string();
-    // A process that ends at once while stopping (run_session.hpp) removes them too.
-    for (const std::string& p : {folder_, request, trace_path_}) (void)stop_track_temporary(p, true);
+    // A process that ends at once while stopping (run_session.hpp) removes it and its files too.
+    (void)stop_track_temporary(folder_, true);
     {
       std::ofstream out(request, std::ios::binary);
       out << process_request(spec_, *model_, frames_, trace_path_, items_).dump(1) << "\n";

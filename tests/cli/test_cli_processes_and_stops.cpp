@@ -1,11 +1,13 @@
-// Processes and stops (issue 79, items 1 and 7; docs/bring-your-engine.md, "The
+// Processes and stops (issue 79, items 1, 2 and 7; docs/bring-your-engine.md, "The
 // invocation"). Item 1: the small Python engine of tests/data/process_engines/engines.json,
 // given its `escape` setting, first starts a grandchild that leaves the engine's tree as
 // far as a process can (a double fork and setsid(): a new session and process group,
 // re-parented) and writes its pid. That grandchild, asserted by pid, has ended once octocd
 // returns after a run that succeeds, fails or times out, after SIGTERM to octocd, after
 // octocd is killed outright (SIGKILL), and after `octocd engines` ran a check that starts
-// one. Item 7: a command that cannot start is unavailable with the reason (errno), a
+// one. Item 2: a stopped `run --worlds` of a process engine leaves no engine process and no
+// octocd-* folder in TMPDIR; a stopped `validate --determinism` keeps its finished rows and
+// says so. Item 7: a command that cannot start is unavailable with the reason (errno), a
 // timeout is stated as set, NULs are shown as \x00.
 #include <fcntl.h>
 #include <gtest/gtest.h>
@@ -105,6 +107,20 @@ TEST_F(ProcessTree, ASetsidGrandchildEndsWithARunThatSucceedsFailsOrTimesOut) {
   }
 }
 
+/// The processes whose command line names `text` (the engines started for a request in the
+/// test's TMPDIR, and their forks), from /proc.
+std::vector<pid_t> processes_naming(const std::string& text) {
+  std::vector<pid_t> out;
+  for (const auto& e : fs::directory_iterator("/proc")) {
+    const std::string name = e.path().filename().string();
+    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream in(e.path() / "cmdline", std::ios::binary);
+    const std::string cmd((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (cmd.find(text) != std::string::npos) out.push_back(static_cast<pid_t>(std::stol(name)));
+  }
+  return out;
+}
+
 /// `octocd --engines-file engines.json ARGS` on `pystop` (hangs until stopped), started in
 /// the background with its stderr in dir/stderr.txt, `ready` and `escape` items added; returns
 /// octocd's pid once an engine and its grandchild run (their pids in `engine`, `grandchild`).
@@ -167,6 +183,32 @@ TEST_F(ProcessTree, OctocdKilledOutrightStillTakesTheTreeWithIt) {
   EXPECT_TRUE(ended_within(engine, std::chrono::seconds(10)));
   EXPECT_TRUE(ended_within(grandchild, std::chrono::seconds(10)))
       << "the setsid() grandchild " << grandchild << " outlived octocd";
+}
+
+TEST_F(ProcessTree, AStoppedRunOfWorldsLeavesNoEngineAndNoTemporaryFolder) {
+  // `run --worlds 6` on a process engine: the copies as separate runs, as many at once as
+  // the host has threads, each in its own octocd-pystop-XXXXXX folder in TMPDIR.
+  pid_t engine = 0, grandchild = 0;
+  const pid_t pid =
+      start_hanging(dir_, {"run", data("boxes.json"), "--engine", "pystop", "--worlds", "6", "--quiet"}, engine,
+                    grandchild);
+  ASSERT_GT(engine, 0);
+  const std::vector<pid_t> running = processes_naming((dir_ / "tmp").string());
+  ASSERT_FALSE(running.empty());
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ASSERT_TRUE(octocd::test::wait_child(pid, status, std::chrono::seconds(30)));
+  std::ifstream in(dir_ / "stderr.txt");
+  const std::string err((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_TRUE(WIFEXITED(status)) << err;
+  EXPECT_EQ(WEXITSTATUS(status), 143) << err;
+  EXPECT_NE(err.find("octocd run: stopped by SIGTERM while engine 'pystop' ran"), std::string::npos) << err;
+  // The copy that saw the stop ended octocd; the others' keepers end their trees as octocd goes.
+  for (const pid_t p : running) EXPECT_TRUE(ended_within(p, std::chrono::seconds(10))) << "process " << p << " left";
+  EXPECT_TRUE(ended_within(grandchild, std::chrono::seconds(10))) << "the grandchild " << grandchild << " left";
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(dir_ / "tmp")) left.push_back(e.path().filename().string());
+  EXPECT_TRUE(left.empty()) << "left in TMPDIR: " << left.front();
 }
 
 TEST_F(ProcessTree, ACheckCommandsSetsidGrandchildEndsWithTheCheck) {
@@ -253,6 +295,74 @@ TEST_F(ProcessTree, NulsInAnEnginesFileOrAnEnginesOutputAreShownEscaped) {
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("exited with code 1 after "), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("its stderr ended: before\\x00after"), std::string::npos) << r.output;
+}
+
+}  // namespace
+
+namespace {
+
+/// A lattice of n^3 touching unit-spaced boxes without gravity (a few ms a step).
+std::string lattice(const fs::path& dir, int n) {
+  const fs::path p = dir / "lattice.json";
+  const double h = 0.55 * (n - 1) / 2;
+  std::ofstream(p) << R"({"name": "lattice", "domain": {"min": [)" << -h - 2 << ", " << -h - 2 << ", " << -h - 2
+                   << R"(], "max": [)" << h + 2 << ", " << h + 2 << ", " << h + 2 << R"(]},
+    "gravity": [0, 0, 0], "frames": 100,
+    "groups": [{"name": "b", "shape": {"box": [0.3, 0.3, 0.3]}, "count": )"
+                   << n * n * n << R"(, "layout": {"type": "grid", "min": [)" << -h << ", " << -h << ", " << -h
+                   << R"(], "max": [)" << h << ", " << h << ", " << h << R"(], "spacing": 0.55}}]})";
+  return p.string();
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+// `validate --determinism` stopped by a signal used to end at once, "nothing was written",
+// its finished rows lost. Now it stops between frames and keeps them: stopped inside the
+// third run (the 1-thread one, its temporary trace appearing in TMPDIR: an event), the table,
+// --json and --junit hold the first row (two runs compared), the line says so, exit 130, no
+// temporary trace is left.
+TEST_F(ProcessTree, AStoppedDeterminismValidationKeepsItsFinishedRows) {
+  const fs::path json = dir_ / "d.json", junit = dir_ / "d.xml", tmp = dir_ / "tmp";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::setenv("TMPDIR", tmp.c_str(), 1);
+    const int out = ::open((dir_ / "stdout.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int err = ::open((dir_ / "stderr.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(out, 1);
+    ::dup2(err, 2);
+    const std::string b = octocd::test::bin(), scene = lattice(dir_, 8);
+    ::execl(b.c_str(), b.c_str(), "validate", scene.c_str(), "--engine", "cpu", "--determinism", "--threads", "2",
+            "--frames", "300", "--json", json.c_str(), "--junit", junit.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const auto serial = [&] {
+    for (const auto& e : fs::directory_iterator(tmp))
+      if (e.path().filename().string().find("serial") != std::string::npos) return true;
+    return false;
+  };
+  const bool third = octocd::test::wait_until(serial, {tmp}, std::chrono::seconds(120));
+  ::kill(pid, SIGINT);
+  int status = 0;
+  ASSERT_TRUE(octocd::test::wait_child(pid, status, std::chrono::seconds(60)));
+  const std::string out = slurp(dir_ / "stdout.txt"), err = slurp(dir_ / "stderr.txt");
+  ASSERT_TRUE(third) << err;
+  ASSERT_TRUE(WIFEXITED(status)) << err;
+  EXPECT_EQ(WEXITSTATUS(status), 130) << err;
+  EXPECT_NE(err.find("octocd validate: stopped by SIGINT after 1 of 3 determinism rows; the table above holds the 1 "
+                     "finished row(s), --junit " + junit.string() + " too, --json " + json.string() + " too\n"),
+            std::string::npos)
+      << err;
+  EXPECT_NE(out.find("determinism-runs"), std::string::npos) << out;
+  EXPECT_NE(out.find("STOPPED: stopped by SIGINT after 1 of 3 determinism rows"), std::string::npos) << out;
+  const std::string j = slurp(json);
+  EXPECT_NE(j.find("\"determinism-runs\""), std::string::npos) << j;
+  EXPECT_EQ(j.find("\"determinism-threads\""), std::string::npos) << j;
+  EXPECT_NE(j.find("stopped by SIGINT after 1 of 3 determinism rows"), std::string::npos) << j;
+  EXPECT_NE(slurp(junit).find("determinism-runs"), std::string::npos);
+  EXPECT_TRUE(fs::is_empty(tmp)) << "a temporary trace was left";
 }
 
 }  // namespace
