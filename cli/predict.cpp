@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <limits>
 #include <thread>
+#include <tuple>
 
 #include <fmt/format.h>
 
@@ -123,15 +124,16 @@ ValidationResult not_applicable(const std::string& name, const std::string& why)
 
 }  // namespace
 
-void record_trace(const std::string& engine, const std::shared_ptr<const Model>& model,
-                  const EngineSettingItems& settings, int frames, const std::string& path) {
+bool record_trace(const std::string& engine, const std::shared_ptr<const Model>& model,
+                  const EngineSettingItems& settings, int frames, const std::string& path,
+                  const std::function<bool()>& stop) {
   const std::unique_ptr<Engine> made = make_engine(engine, model, settings);
   Engine& world = *made;
   if (world.writes_own_trace()) {  // a process engine: its process runs every frame at once
     world.plan_steps(frames);
     world.step();
     copy_own_trace(world, path, "the recorded run");
-    return;
+    return true;
   }
   TraceOptions topt;
   topt.state_every = 1;
@@ -146,10 +148,15 @@ void record_trace(const std::string& engine, const std::shared_ptr<const Model>&
   const TraceFeed feed = TraceFeed::of(world, topt.contacts);
   feed.start(trace, world, frames);
   for (int f = 0; f < frames; ++f) {
+    if (stop && stop()) {
+      trace.close();
+      return false;
+    }
     const FrameMetrics& m = world.step();
     feed.append(trace, world, m, frames - (f + 1));
   }
   trace.close();
+  return true;
 }
 
 std::vector<std::vector<Vec3>> run_positions(const std::string& engine, const std::shared_ptr<const Model>& model,
@@ -200,8 +207,8 @@ std::vector<ValidationResult> determinism_rows(const DeterminismOptions& o) {
     EngineSettingItems settings = o.settings;
     const std::string& key = engine_info(engine, "--engine").threads_setting;
     if (n > 0 && !key.empty()) settings[engine].push_back(fmt::format("{}={}", key, n));
-    record_trace(engine, o.model, settings, o.frames, path);
-    return std::make_pair(path, std::chrono::duration<double>(Clock::now() - t0).count());
+    const bool whole = record_trace(engine, o.model, settings, o.frames, path, o.stop);
+    return std::make_tuple(path, std::chrono::duration<double>(Clock::now() - t0).count(), whole);
   };
   const auto compare = [](const std::string& a, const std::string& b) {
     CompareOptions c;
@@ -212,17 +219,30 @@ std::vector<ValidationResult> determinism_rows(const DeterminismOptions& o) {
     return out;
   };
   std::vector<ValidationResult> rows;
+  // What a process that ends inside a run (a process engine's, stop.hpp) keeps: the rows
+  // finished so far are counted, not written (the caller writes them on its own stop path).
+  const auto finished = [&rows] {
+    if (RunSession* session = RunSession::current())
+      session->keep(fmt::format("{} of 3 determinism rows had finished; none written (the stop came inside a run)",
+                                rows.size()));
+  };
+  finished();
   const bool threaded = !info.threads_setting.empty();
   const int n = threaded ? threads : 0;
   const std::string at_n = threaded ? fmt::format(" at {} threads", threads) : "";
-  const auto [first, s1] = run(o.engine, n, "1");
-  const auto [second, s2] = run(o.engine, n, "2");
+  const auto [first, s1, whole1] = run(o.engine, n, "1");
+  if (!whole1) return rows;
+  const auto [second, s2, whole2] = run(o.engine, n, "2");
+  if (!whole2) return rows;
   rows.push_back(comparison_row("determinism-runs", "run 1" + at_n, "run 2" + at_n, compare(first, second), o.frames,
                                 s1 + s2));
+  finished();
   if (threaded) {
-    const auto [serial, s3] = run(o.engine, 1, "serial");
+    const auto [serial, s3, whole3] = run(o.engine, 1, "serial");
+    if (!whole3) return rows;
     rows.push_back(comparison_row("determinism-threads", fmt::format("run 1 at {} threads", threads), "a run at 1 thread",
                                   compare(first, serial), o.frames, s3));
+    finished();
   } else {
     rows.push_back(not_applicable(
         "determinism-threads",
@@ -238,7 +258,8 @@ std::vector<ValidationResult> determinism_rows(const DeterminismOptions& o) {
     if (!why.empty()) {
       rows.push_back(not_applicable("determinism-cpu-cuda", fmt::format("skipped: {} cannot run here ({})", other, why)));
     } else {
-      const auto [theirs, s4] = run(other, oi.threads_setting.empty() ? 0 : threads, "other");
+      const auto [theirs, s4, whole4] = run(other, oi.threads_setting.empty() ? 0 : threads, "other");
+      if (!whole4) return rows;
       rows.push_back(comparison_row("determinism-cpu-cuda", o.engine, other, compare(first, theirs), o.frames, s4));
     }
   } else {

@@ -812,12 +812,19 @@ int validate_determinism(const ValidateOptions& o, const std::shared_ptr<const o
     throw octocd::InputError("--threads 1: --determinism compares 1 thread against N; allowed: --threads N >= 2, or 0 "
                              "(max(2, the hardware's))");
   d.threads = o.threads;
-  std::vector<octocd::ValidationResult> results;
-  {
-    // The runs write temporary traces (removed on the way out): a signal ends them at once.
-    const octocd::StopAtOnce running("running the determinism comparisons");
-    results = octocd::cli::determinism_rows(d);
-  }
+  // SIGINT/SIGTERM: the runs stop between frames (and between runs); the rows finished
+  // before are written (table, --junit, --json) and said; the runs' temporary traces go
+  // (the run session). A process engine's run stopped inside its process ends octocd there
+  // (process_engines.hpp), saying how many rows had finished.
+  constexpr std::size_t kRows = 3;  // determinism-runs, -threads, -cpu-cuda
+  octocd::RunSession* session = octocd::RunSession::current();
+  d.stop = [] { return octocd::stop_signal() != 0; };
+  const std::vector<octocd::ValidationResult> results = octocd::cli::determinism_rows(d);
+  const int sig = octocd::stop_signal();
+  std::string stopped;
+  if (sig != 0)
+    stopped = fmt::format("stopped by {} after {} of {} determinism rows", octocd::stop_signal_name(sig),
+                          results.size(), kRows);
   // Its own key in --expect's file (SCENE--determinism): the scene's validator rows are not run here.
   const std::string name = model->scene.name + "--determinism";
   const octocd::RunName run{name, ""};
@@ -830,12 +837,29 @@ int validate_determinism(const ValidateOptions& o, const std::shared_ptr<const o
                            {"mode", "determinism"},
                            {"scene_file", o.scene},
                            {"build_id", octocd::build_id()}},
-                          "", &report);
+                          stopped, &report);
     });
   fmt::print("validate {} --determinism (engine {}, {} frames; each pair of runs compared bit for bit as `octocd "
              "compare` does)\n\n",
              model->scene.name, o.engine, o.frames);
   fmt::print("{}", octocd::format_results(results, {}, &report));
+  if (sig != 0) {
+    write_stopped_json(o, run, results, report,
+                       {{"engine", o.engine}, {"frames", o.frames}, {"mode", "determinism"},
+                        {"scene_file", o.scene}, {"build_id", octocd::build_id()}},
+                       stopped);
+    fmt::print("\nSTOPPED: {}\n", stopped);
+    std::fflush(stdout);
+    std::string kept = fmt::format("the table above holds the {} finished row(s)", results.size());
+    if (!o.junit.empty()) kept += fmt::format(", --junit {} too", o.junit);
+    if (!o.json.empty()) kept += fmt::format(", --json {} too", o.json);
+    if (session) {
+      session->keep(kept);
+      return session->stopped(sig, fmt::format(" after {} of {} determinism rows", results.size(), kRows));
+    }
+    std::fprintf(stderr, "octocd validate: %s; %s\n", stopped.c_str(), kept.c_str());
+    return octocd::stop_exit_code(sig);
+  }
   return conclude_validate(o, run, results, report,
                            {{"engine", o.engine}, {"frames", o.frames}, {"mode", "determinism"},
                             {"scene_file", o.scene}, {"build_id", octocd::build_id()}});

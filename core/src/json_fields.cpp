@@ -40,7 +40,12 @@ std::string json_type_text(const nlohmann::json& v) {
 JsonFields::JsonFields(std::string prefix) : prefix_(std::move(prefix)) {}
 
 void JsonFields::fail(const std::string& field, const std::string& problem, const std::string& allowed) const {
-  throw InputError(fmt::format("{}: {}: {}; allowed: {}", prefix_, field, problem, allowed));
+  // A NUL of the file (a key, a quoted value) is shown as \x00: what() is a C string, cut
+  // at the first NUL.
+  std::string text = fmt::format("{}: {}: {}; allowed: {}", prefix_, field, problem, allowed);
+  for (std::size_t at = text.find('\0'); at != std::string::npos; at = text.find('\0', at + 4))
+    text.replace(at, 1, "\\x00");
+  throw InputError(text);
 }
 
 const nlohmann::json& JsonFields::member(const nlohmann::json& obj, const std::string& where, const char* key,

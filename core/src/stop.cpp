@@ -5,6 +5,9 @@
 
 #include "octocd/stop.hpp"
 
+#include "octocd/folder_entries.hpp"
+
+#include <dirent.h>
 #include <fcntl.h>
 #include <pthread.h>
 #include <signal.h>
@@ -47,7 +50,7 @@ std::atomic<bool> g_remove{false};
 
 // stop_track_temporary's paths and stop_track_child's process groups: removed and killed
 // by exit_now (a slot is free while its flag is false; written only while it is).
-constexpr std::size_t kTrackSlots = 8;
+constexpr std::size_t kTrackSlots = 64;  // a process engine's folder per copy of `run --worlds`
 char g_temp_text[kTrackSlots][4096];
 std::atomic<bool> g_temp_on[kTrackSlots];
 std::atomic<int> g_children[kTrackSlots];  // process group ids, 0: free
@@ -96,13 +99,28 @@ void stop_tick() {
   ::setitimer(ITIMER_REAL, &off, nullptr);
 }
 
-// Async-signal-safe: unlink(2) and rmdir(2) only. The files first, then the folders (their
-// unlink failed), so a folder registered before or after its files is emptied first.
+// Async-signal-safe: unlinks the entries of the folder `path` (files; empty subfolders),
+// one level deep, with open(2), getdents64(2) (for_each_folder_entry) and unlinkat(2) only.
+void empty_folder(const char* path) {
+  const int dir = ::open(path, O_RDONLY | O_DIRECTORY | O_CLOEXEC | O_NOFOLLOW);
+  if (dir < 0) return;
+  for_each_folder_entry(dir, [dir](const char* name) {
+    if (::unlinkat(dir, name, 0) != 0) ::unlinkat(dir, name, AT_REMOVEDIR);
+  });
+  ::close(dir);
+}
+
+// Async-signal-safe: unlink(2), rmdir(2) and empty_folder only. The files first, then the
+// folders (their unlink failed), each emptied of the files it still holds (a process
+// engine's request, its trace, what it wrote in its working folder).
 void remove_temporaries(bool forget) {
   for (std::size_t k = 0; k < kTrackSlots; ++k)
     if (g_temp_on[k].load()) ::unlink(g_temp_text[k]);
   for (std::size_t k = 0; k < kTrackSlots; ++k)
-    if (forget ? g_temp_on[k].exchange(false) : g_temp_on[k].load()) ::rmdir(g_temp_text[k]);
+    if (forget ? g_temp_on[k].exchange(false) : g_temp_on[k].load()) {
+      empty_folder(g_temp_text[k]);
+      ::rmdir(g_temp_text[k]);
+    }
 }
 
 // The stop line's descriptor: a copy of stderr taken by StopOnSignals, so a line written

@@ -1,10 +1,14 @@
 #pragma once
 // Running an engine's command as a child process, bounded (process_engines.cpp and
-// process_engine.cpp; not installed): posix_spawn of an argument vector (no shell), stdin
-// /dev/null, stdout and stderr read through pipes of which only the tail is kept, its own
-// process group, a wall-time bound, a watched output file's size bound, and octocd's stop
-// signal (octocd/stop.hpp) answered by stopping the group (SIGTERM, then SIGKILL).
+// process_engine.cpp; not installed): an argument vector executed (no shell) under a keeper
+// process, a child subreaper that ends the engine's whole process tree with it (a
+// descendant that calls setsid() included: docs/bring-your-engine.md, "The invocation");
+// stdin /dev/null, stdout and stderr read through pipes of which only the tail is kept, its
+// own process group, a wall-time bound, a watched output file's size bound, and octocd's
+// stop signal (octocd/stop.hpp) or the caller's cancel flag answered by stopping the tree
+// (SIGTERM, then SIGKILL).
 
+#include <atomic>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -16,9 +20,13 @@ struct ChildRun {
   std::vector<std::string> argv;  ///< argv[0] an executable's path (resolved), then its arguments
   std::string cwd;                ///< working folder of the child
   double timeout_s = 600.0;       ///< wall-time bound (s)
+  std::string timeout_setting = "timeout_s";  ///< the bound's name in messages ("timeout_s")
   std::string watched;            ///< a file whose size is bounded ("" none)
   std::uint64_t watched_max = 0;  ///< its largest size (bytes)
   double grace_s = 2.0;           ///< SIGTERM to SIGKILL when a bound is passed (s)
+  /// When set (any thread), the tree is stopped as on octocd's stop signal (End::Stopped,
+  /// stop_signal 0): Python's Ctrl-C inside Engine.step(). nullptr: none. Not owned.
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 /// How the child ended.
@@ -31,15 +39,20 @@ struct ChildOutcome {
   std::string spawn_error; ///< SpawnFailed: why
   std::string out_tail, err_tail;  ///< the last bytes of stdout and stderr (raw)
   std::uint64_t out_bytes = 0, err_bytes = 0;  ///< all bytes written to each
+  double timeout_s = 0.0;       ///< the run's wall-time bound (s), as set
+  std::string timeout_setting;  ///< its name (ChildRun::timeout_setting)
+  double grace_s = 0.0;         ///< the run's SIGTERM to SIGKILL grace (s)
 };
 
-/// Runs `run` to its end (or a bound, or octocd's stop signal). Never throws for what the
-/// child does; std::bad_alloc only.
+/// Runs `run` to its end (or a bound, octocd's stop signal, the cancel flag); when it
+/// returns, the process and every descendant of it have ended (killed when still running)
+/// and been reaped. Never throws for what the child does; std::bad_alloc only.
 ChildOutcome run_child(const ChildRun& run);
 
 /// What the child did, in words: "exited with code 3 after 0.21 s", "was killed by signal
-/// 11 (SIGSEGV) after ...", "ran past its bound of 2 s (timeout_s) and was stopped",
-/// "wrote more than N bytes to FILE (max_trace_bytes) and was stopped", "could not be started: ...".
+/// 11 (SIGSEGV) after ...", "ran past its timeout_s of 4 s and was stopped after 6.01 s
+/// (...)", "wrote a trace beyond its max_trace_bytes ...", "could not be started: PATH:
+/// No such file or directory (ENOENT)".
 std::string describe(const ChildOutcome& o);
 
 /// "; its stderr ended: <lines>" (else its stdout's, else ""): the last lines (at most 8
@@ -47,8 +60,13 @@ std::string describe(const ChildOutcome& o);
 /// number of bytes it wrote when more than shown.
 std::string output_tail(const ChildOutcome& o);
 
-/// The full path of `program`: itself when it holds a '/', else the first executable
-/// PATH entry holding it; "" when none.
+/// The full path of `program`: itself when it holds a '/' and is an executable regular
+/// file, else the first PATH entry holding one of that name; "" when none.
 std::string find_on_path(const std::string& program);
+
+/// "" when find_on_path(program) finds it, else why not: "not found on PATH" (a name), or
+/// for a path "cannot be run: " and the reason with its errno name ("No such file or
+/// directory (ENOENT)", "Permission denied (EACCES)", "a folder (EISDIR)").
+std::string why_not_runnable(const std::string& program);
 
 }  // namespace octocd::process_detail

@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -103,12 +104,17 @@ class ProcessEngine final : public Engine {
   bool writes_own_trace() const override { return true; }
   std::string own_trace() const override { return trace_ ? trace_path_ : std::string(); }
 
+  /// Stops the process run by a step in flight (any thread; see cancel_process_engine_step).
+  void cancel() { cancel_.store(true); }
+
  private:
   void remove_folder() {
     if (folder_.empty()) return;
-    for (const std::string& p : {folder_, request_path(), trace_path_}) (void)stop_track_temporary(p, false);
+    // Removed, then forgotten: a process ended meanwhile by another thread (another copy of
+    // `run --worlds` stopped) still removes it.
     std::error_code ec;
     fs::remove_all(folder_, ec);
+    (void)stop_track_temporary(folder_, false);
     folder_.clear();
   }
 
@@ -135,8 +141,8 @@ class ProcessEngine final : public Engine {
     folder_ = templ;
     const std::string request = request_path();
     trace_path_ = (fs::path(folder_) / "trace.h5").string();
-    // A process that ends at once while stopping (run_session.hpp) removes them too.
-    for (const std::string& p : {folder_, request, trace_path_}) (void)stop_track_temporary(p, true);
+    // A process that ends at once while stopping (run_session.hpp) removes it and its files too.
+    (void)stop_track_temporary(folder_, true);
     {
       std::ofstream out(request, std::ios::binary);
       out << process_request(spec_, *model_, frames_, trace_path_, items_).dump(1) << "\n";
@@ -153,13 +159,21 @@ class ProcessEngine final : public Engine {
     run.timeout_s = spec_.timeout_s;
     run.watched = trace_path_;
     run.watched_max = spec_.max_trace_bytes;
+    run.cancel = &cancel_;
     const process_detail::ChildOutcome o = process_detail::run_child(run);
+    cancel_.store(false);
     using End = process_detail::ChildOutcome::End;
+    if (o.end == End::Stopped && o.stop_signal == 0) {
+      // Cancelled by the caller (Python's Ctrl-C): the step fails, octocd goes on.
+      remove_folder();
+      throw RuntimeError(fmt::format("engine '{}' ({}) {}; no frame of it was read", printable(spec_.info.name),
+                                     spec_.file, process_detail::describe(o)));
+    }
     if (o.end == End::Stopped) {
       // Nothing of the run was read yet: its temporary files go, and octocd ends as a
       // stopped command (stop.hpp: StopAtOnce's rule for work with nothing to flush).
       remove_folder();
-      const std::string where = fmt::format(" while engine '{}' ran (its process group stopped: SIGTERM, then "
+      const std::string where = fmt::format(" while engine '{}' ran (its process tree stopped: SIGTERM, then "
                                             "SIGKILL); no frame of it was read",
                                             printable(spec_.info.name));
       if (RunSession* session = RunSession::current()) session->end_now(o.stop_signal, where);  // says what it keeps
@@ -252,6 +266,7 @@ class ProcessEngine final : public Engine {
   std::string folder_, trace_path_;
   std::unique_ptr<ExternalTrace> trace_;
   double wall_step_seconds_ = 0.0;
+  std::atomic<bool> cancel_{false};  ///< set by cancel(), cleared when the run it stopped returns
   BodyState state_;
   FrameRecord record_;
   FrameMetrics metrics_;
@@ -273,6 +288,13 @@ void copy_own_trace(const Engine& engine, const std::string& path, const std::st
                                    ec.message()));
   }
   rename_over(tmp.path, path, label);
+}
+
+bool cancel_process_engine_step(Engine& engine) {
+  auto* p = dynamic_cast<ProcessEngine*>(&engine);
+  if (p == nullptr) return false;
+  p->cancel();
+  return true;
 }
 
 std::unique_ptr<Engine> make_process_engine(const ProcessEngineSpec& spec, const std::shared_ptr<const Model>& model,

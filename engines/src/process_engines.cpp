@@ -111,7 +111,12 @@ std::vector<std::string> read_argv(const JsonFields& f, const nlohmann::json& v,
     if (i == 0 && item.find_first_of(" \t\n;|&$`<>()*?'\"\\") != std::string::npos)
       f.fail(where, fmt::format("'{}' reads as a shell command line", item),
              "a program's name or path alone, its arguments as further items");
-    argv.push_back(i == 0 ? item : resolve_item(item, folder));
+    // argv[0]: a name looked up on PATH, or a path (a relative one against the engines
+    // file's folder, where the other items are resolved too).
+    if (i == 0 && item.find('/') != std::string::npos && item[0] != '/')
+      argv.push_back((folder / item).lexically_normal().string());
+    else
+      argv.push_back(i == 0 ? item : resolve_item(item, folder));
   }
   return argv;
 }
@@ -255,8 +260,8 @@ std::string process_engine_unavailable(const ProcessEngineSpec& spec) {
   try {
     const fs::path folder = fs::path(spec.file).parent_path();
     auto missing = [&](const std::vector<std::string>& argv, const char* what) -> std::string {
-      if (process_detail::find_on_path(argv[0]).empty())
-        return fmt::format("{} '{}' not found on PATH ({})", what, printable(argv[0]), spec.file);
+      if (const std::string why = process_detail::why_not_runnable(argv[0]); !why.empty())
+        return fmt::format("{} '{}' {} ({})", what, printable(argv[0]), why, spec.file);
       for (std::size_t i = 1; i < argv.size(); ++i) {
         if (!names_a_file(argv[i])) continue;
         std::error_code ec;
@@ -273,6 +278,7 @@ std::string process_engine_unavailable(const ProcessEngineSpec& spec) {
       run.argv[0] = process_detail::find_on_path(spec.check[0]);
       run.cwd = folder.string();
       run.timeout_s = kCheckTimeoutS;
+      run.timeout_setting = "fixed bound for a check";
       const process_detail::ChildOutcome o = process_detail::run_child(run);
       if (o.end != process_detail::ChildOutcome::End::Exited || o.code != 0)
         why = fmt::format("its check ({}) {}{}", printable(join(spec.check, " ")), process_detail::describe(o),

@@ -32,6 +32,7 @@ follows external links, external storage and virtual datasets into other files.
 """
 from __future__ import annotations
 
+import os
 from typing import Dict, List
 
 try:
@@ -67,8 +68,18 @@ def load_engines_file(path: str) -> List[str]:
 
     Call it before the first engine is looked up (before `Engine`, `engines` or
     `validate_trace` with an engine); the registry is read once per process, so a later
-    call with another file raises `RuntimeError` (the same file again is a no-op)."""
-    return list(_octocd.load_engines_file(str(path)))
+    call with another file raises `RuntimeError` (the same file again is a no-op).
+    A path that is not a str, bytes or os.PathLike, or not UTF-8, raises `InputError`."""
+    allowed = "allowed: the path of an engines file (a str or os.PathLike, UTF-8), docs/bring-your-engine.md"
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        raise InputError(f"path: {type(path).__name__} ({path!r}); {allowed}")
+    text = os.fspath(path)
+    try:
+        text = text.decode("utf-8") if isinstance(text, bytes) else text
+        text.encode("utf-8")
+    except UnicodeError:
+        raise InputError(f"path: {path!r} is not UTF-8; {allowed}") from None
+    return list(_octocd.load_engines_file(text))
 
 
 __all__ = [

@@ -96,6 +96,9 @@ class Engine:
     def __init__(self, scene: Union[Scene, str, Dict[str, Any]], engine: str = "cpu",
                  broadphase: Optional[str] = None, midphase: Optional[str] = None, record: bool = True,
                  **settings: Optional[Dict[str, Any]]):
+        if not isinstance(engine, str):
+            raise _octocd.InputError(f"engine: {type(engine).__name__} ({engine!r}); allowed: an engine's name as a "
+                                     f"str, one of octocd.engines")
         self.scene = load_scene(scene)
         items: Dict[str, List[str]] = {}
         for name, values in settings.items():

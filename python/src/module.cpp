@@ -638,7 +638,7 @@ class PyEngine {
     const EngineInfo* info = find_engine_info(engine);
     const std::vector<std::string> names = built_engines();
     if (info == nullptr)
-      throw InputError(fmt::format("engine: unknown engine '{}'; allowed: {}", engine, join(names)));
+      throw InputError(fmt::format("engine: unknown engine '{}'; allowed: {}", printable(engine), join(names)));
     if (!engine_built(*info))
       throw InputError(fmt::format("engine: '{}' is not built in this octocd (configured with OCTOCD_CUDA=OFF "
                                    "or without nvcc); allowed: {}",
@@ -824,8 +824,10 @@ class PyEngine {
   std::atomic<std::int64_t> frames_{0};
   double last_step_ms_ = std::numeric_limits<double>::infinity();  // the first step runs on the helper
   /// The steps run on a helper thread, one cut short by Ctrl-C completing there (declared
-  /// after engine_: destroyed first, it waits for the step).
-  InterruptibleWork work_;
+  /// after engine_: destroyed first, it waits for the step). A process engine's step is
+  /// stopped by Ctrl-C (its process tree ended within 0.2 s; the step fails, settle()
+  /// raises that): the caller's KeyboardInterrupt does not wait for the process's timeout_s.
+  InterruptibleWork work_{[this] { (void)cancel_process_engine_step(*engine_); }};
 };
 
 // ---- judging another engine ----------------------------------------------------------

@@ -4,8 +4,11 @@ fresh interpreter (the engine registry is read once per process). Run by ctest
 (`python.pytest`) with PYTHONPATH=build/python, OCTOCD_BIN and OCTOCD_SOURCE_DIR set."""
 import json
 import os
+import select
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -104,3 +107,82 @@ octocd.load_engines_file({ENGINES!r})
 print(json.dumps(octocd.load_engines_file({ENGINES!r})))
 """)
     assert "pyboxes" in again
+
+
+def test_ctrl_c_inside_step_stops_the_process_engine_and_its_tree(tmp_path):
+    # `pystop` hangs until stopped (timeout_s 600) after starting a grandchild that calls
+    # setsid(); SIGINT while Engine.step() waits for it: KeyboardInterrupt within 1 s, the
+    # interpreter exits at once (not after timeout_s), the engine and the grandchild are gone.
+    ready, escaped = str(tmp_path / "engine.pid"), str(tmp_path / "grandchild.pid")
+    os.mkfifo(ready + ".tmp")  # the engine writes its pid through it once it runs: an event to wait on
+    code = f"""
+import sys, time, octocd
+octocd.load_engines_file({ENGINES!r})
+eng = octocd.Engine(octocd.load_scene({SCENE!r}), engine="pystop", pystop={{"ready": {ready!r}, "escape": {escaped!r}}})
+try:
+    eng.step(5)
+    print("finished", flush=True)
+except KeyboardInterrupt:
+    print("KeyboardInterrupt", flush=True)
+"""
+    env = dict(os.environ, TMPDIR=str(tmp_path))
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=env)
+    try:
+        fd = os.open(ready + ".tmp", os.O_RDONLY | os.O_NONBLOCK)
+        try:
+            assert select.select([fd], [], [], 120)[0], p.stderr.read() if p.poll() is not None else "no engine"
+            engine = int(os.read(fd, 64).decode())
+        finally:
+            os.close(fd)
+        with open(escaped) as f:
+            grandchild = int(f.read())
+        t0 = time.monotonic()
+        p.send_signal(signal.SIGINT)
+        line = p.stdout.readline().strip()
+        raised = time.monotonic() - t0
+        code = p.wait(timeout=10)
+        exited = time.monotonic() - t0
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    print(f"KeyboardInterrupt {raised:.3f} s, exit {exited:.3f} s after SIGINT")
+    assert line == "KeyboardInterrupt", (line, p.stderr.read())
+    assert raised < 1.0 and exited < 5.0 and code == 0, (raised, exited, code)
+    for pid in (engine, grandchild):
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    assert not [n for n in os.listdir(tmp_path) if n.startswith("octocd-")]
+
+
+@pytest.mark.parametrize("path", [b"/tmp/engines\xff.json", "/tmp/engines\udcff.json", 3, None, ""])
+def test_every_bad_path_of_load_engines_file_is_an_input_error(path):
+    out = python(f"""
+import json, octocd
+try:
+    octocd.load_engines_file({path!r})
+    print(json.dumps("loaded"))
+except octocd.InputError as e:
+    print(json.dumps("InputError: " + str(e)))
+except Exception as e:
+    print(json.dumps(type(e).__name__ + ": " + str(e)))
+""")
+    assert out.startswith("InputError: path: ") and "allowed:" in out, out
+
+
+@pytest.mark.parametrize("engine", ["3", "None", "b'pyboxes'", "'py\\x00boxes'"])
+def test_a_bad_engine_name_of_a_process_engine_is_an_input_error(engine):
+    # `engine` is Python source: an int, None, bytes, a name holding a NUL (shown escaped).
+    out = python(f"""
+import json, octocd
+octocd.load_engines_file({ENGINES!r})
+try:
+    octocd.Engine(octocd.load_scene({SCENE!r}), engine={engine})
+    print(json.dumps("made"))
+except octocd.InputError as e:
+    print(json.dumps("InputError: " + str(e)))
+except Exception as e:
+    print(json.dumps(type(e).__name__ + ": " + str(e)))
+""")
+    assert out.startswith("InputError: engine: ") and "allowed:" in out and "\0" not in out, out

@@ -25,7 +25,8 @@ class JsonFields {
   /// `prefix`: the option and the file; it is written printable (octocd/text.hpp).
   explicit JsonFields(std::string prefix);
 
-  /// Throws InputError "<prefix>: <field>: <problem>; allowed: <allowed>".
+  /// Throws InputError "<prefix>: <field>: <problem>; allowed: <allowed>", each NUL in it
+  /// written \x00 (what() would end at it).
   [[noreturn]] void fail(const std::string& field, const std::string& problem, const std::string& allowed) const;
 
   /// `obj[key]` of an object `obj` (field `where`); missing: InputError naming

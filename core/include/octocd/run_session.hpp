@@ -81,8 +81,9 @@ class RunSession {
   /// Clears keep_read_back's reader (before what it reads goes).
   void forget_read_back();
 
-  /// A temporary file, or a folder for temporary files (registered before its files),
-  /// that no stop or failure leaves behind. At most 8 at once; false (not owned) beyond.
+  /// A temporary file, or a folder for temporary files, that no stop or failure leaves
+  /// behind (a folder is emptied of its files, one level, then removed). At most 64 at
+  /// once; false (not owned) beyond.
   bool add_temporary(const std::string& path);
 
   /// Hands a temporary back to the command (it was removed, or renamed into the output).

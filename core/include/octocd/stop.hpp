@@ -38,15 +38,16 @@ int stop_signal_count();
 /// kept). One at a time; call from the thread that writes it.
 void set_stop_remove(const std::string& path);
 
-/// Tracks (`tracked` true) or forgets a temporary file or an empty-once-its-files-go folder
-/// that a process ended at once while stopping (a second signal, the deadline, a grace)
-/// removes: the files unlinked, then the folders removed (those emptied by it). At most 8 at once and paths under 4096 bytes: false when it is not
+/// Tracks (`tracked` true) or forgets a temporary file or folder that a process ended at
+/// once while stopping (a second signal, the deadline, a grace) removes: the files
+/// unlinked, then the folders emptied of their files (one level) and removed. At most 64
+/// at once and paths under 4096 bytes: false when it is not
 /// tracked (no free slot, too long) or, forgetting, was not. Any thread; use RunSession
 /// (run_session.hpp), which owns these for a command.
 bool stop_track_temporary(const std::string& path, bool tracked);
 
 /// Tracks or forgets a child process group (its id, > 0) that a process ended at once
-/// while stopping kills (SIGKILL to the group), so no child outlives octocd. At most 8 at
+/// while stopping kills (SIGKILL to the group), so no child outlives octocd. At most 64 at
 /// once: false when it is not tracked or, forgetting, was not. Any thread.
 bool stop_track_child(int group, bool tracked);
 

@@ -96,8 +96,17 @@ nlohmann::ordered_json process_request(const ProcessEngineSpec& spec, const Mode
 /// trace (Engine::own_trace), which is checked and replayed frame by frame. Every failure
 /// of the process is a RuntimeError "engine 'NAME': ..." naming what it did and the
 /// sanitised tail of its stderr; a SIGINT/SIGTERM (stop_signal) while it runs stops its
-/// process group (SIGTERM, then SIGKILL) and ends octocd with stop_exit_code, its
-/// temporary files removed.
+/// process tree (SIGTERM, then SIGKILL) and ends octocd with stop_exit_code, its
+/// temporary files removed. Whatever ends a run, the process and every process it started
+/// (one that calls setsid() included) have ended when step() returns or octocd exits
+/// (docs/bring-your-engine.md, "The invocation").
+/// Stops the process a step() of the process engine `engine` runs now, from any thread
+/// (Python's Ctrl-C inside Engine.step()): its tree is stopped (SIGTERM, SIGKILL 0.2 s
+/// later) and that step() throws RuntimeError "engine 'NAME' ... was stopped ..." instead
+/// of ending octocd; a step() that starts before the stop is taken is stopped at once.
+/// False (nothing done) when `engine` is not a process engine.
+bool cancel_process_engine_step(Engine& engine);
+
 std::unique_ptr<Engine> make_process_engine(const ProcessEngineSpec& spec, const std::shared_ptr<const Model>& model,
                                             const std::vector<std::string>& items, const std::string& where);
 

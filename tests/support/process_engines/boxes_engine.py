@@ -8,15 +8,36 @@ scene keeps it clear of everything). Usage: boxes_engine.py [--mode MODE] REQUES
 MODE plants a fault for octocd's tests (tests/cli/test_cli_process_engines.cpp): ok (the
 default), crash (exit 3), signal (SIGABRT), hang (sleep), truncated, bodies, frames,
 hostile (escapes and 10 MB on stderr, exit 1), no-timing. A `ready` setting names a file
-written (with the process id) once the request is read: the tests wait on it."""
+written (with the process id) once the request is read: the tests wait on it. An `escape`
+setting names a file: first a grandchild is started that leaves the engine's process tree
+as far as a process can (a double fork, setsid(): its own session and process group,
+re-parented), sleeps, and writes its process id there; octocd must end it all the same."""
 import json
 import os
 import signal
 import sys
 import time
 
-import h5py
-import numpy as np
+
+def start_escaped_grandchild(path):
+    """Double fork and setsid(): a sleeper in a new session whose parent has exited; its
+    process id is written to `path` (renamed into place) before this returns."""
+    r, w = os.pipe()
+    if os.fork() == 0:
+        os.setsid()
+        if os.fork() == 0:
+            os.close(r)
+            with open(path + ".tmp", "w") as f:
+                f.write(str(os.getpid()))
+            os.rename(path + ".tmp", path)
+            os.write(w, b"1")
+            os.close(w)
+            while True:
+                time.sleep(1)
+        os._exit(0)
+    os.close(w)
+    os.read(r, 1)  # the grandchild's pid is written
+    os.close(r)
 
 
 def main():
@@ -26,6 +47,9 @@ def main():
         mode, args = args[1], args[2:]
     with open(args[0]) as f:
         req = json.load(f)
+    escape = req["settings"].get("escape")
+    if escape:
+        start_escaped_grandchild(escape)
     ready = req["settings"].get("ready")
     if ready:
         with open(ready + ".tmp", "w") as f:
@@ -43,6 +67,11 @@ def main():
         sys.stderr.buffer.write(b"\x1b[2J\x1b]0;pwned\x07\x9b31m \xc2\x9b31m red\n" * 10 + b"x" * (10 << 20) + b"\nlast line \x1b[0m\n")
         sys.stderr.flush()
         sys.exit(1)
+
+    # Imported once the request is read and the `ready` and `escape` files written: the
+    # tests wait on those, and these imports take a second on a loaded machine.
+    import h5py
+    import numpy as np
 
     F, dt = req["frames"], req["dt"]
     g = np.array(req["gravity"], float)
