@@ -6,6 +6,7 @@
 #include <thrust/binary_search.h>
 #include <thrust/device_ptr.h>
 #include <thrust/execution_policy.h>
+#include <thrust/system/cuda/execution_policy.h>
 #include <thrust/functional.h>
 #include <thrust/reduce.h>
 #include <thrust/sort.h>
@@ -16,6 +17,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -45,6 +47,36 @@ struct Buffer {
     check(cudaMalloc(&p, std::max<std::size_t>(n, 1) * sizeof(T)), what);
     cap = std::max<std::size_t>(n, 1);
     return p;
+  }
+};
+
+/// Thrust's temporary storage, kept from call to call: once warm a frame allocates and frees
+/// nothing (cudaFree waits for the whole device, a resident kernel of the judged engine too).
+struct CachedAllocator {
+  using value_type = char;
+  std::multimap<std::size_t, char*> spare;  // size -> block
+  std::map<char*, std::size_t> lent;
+  char* allocate(std::ptrdiff_t n) {
+    char* p = nullptr;
+    const auto it = spare.lower_bound(std::size_t(n));
+    if (it != spare.end()) {
+      p = it->second;
+      lent[p] = it->first;
+      spare.erase(it);
+      return p;
+    }
+    check(cudaMalloc(&p, std::max<std::size_t>(std::size_t(n), 1)), "cudaMalloc(sort and reduce storage)");
+    lent[p] = std::size_t(n);
+    return p;
+  }
+  void deallocate(char* p, std::size_t) {
+    const auto it = lent.find(p);
+    spare.emplace(it->second, p);
+    lent.erase(it);
+  }
+  ~CachedAllocator() {
+    for (const auto& [n, p] : spare) cudaFree(p);
+    for (const auto& [p, n] : lent) cudaFree(p);
   }
 };
 
@@ -373,16 +405,16 @@ class CudaJudge final : public DeviceJudge {
     auto index = thrust::counting_iterator<int>(0);
     // Cell side: the largest extent among the bodies at most twice the mean extent.
     const double mean =
-        thrust::transform_reduce(thrust::device, index, index + n, ExtentOf{lo, hi}, 0.0, thrust::plus<double>()) /
+        thrust::transform_reduce(thrust::cuda::par(alloc_), index, index + n, ExtentOf{lo, hi}, 0.0, thrust::plus<double>()) /
         double(n);
     const double limit = 2 * mean;
-    double cell = thrust::transform_reduce(thrust::device, index, index + n, SmallExtent{lo, hi, limit}, 0.0,
+    double cell = thrust::transform_reduce(thrust::cuda::par(alloc_), index, index + n, SmallExtent{lo, hi, limit}, 0.0,
                                            thrust::maximum<double>());
     double origin[3], top[3];
     for (int d = 0; d < 3; ++d) {
-      origin[d] = thrust::transform_reduce(thrust::device, index, index + n, SmallLow{lo, hi, limit, d}, INFINITY,
+      origin[d] = thrust::transform_reduce(thrust::cuda::par(alloc_), index, index + n, SmallLow{lo, hi, limit, d}, INFINITY,
                                            thrust::minimum<double>());
-      top[d] = thrust::transform_reduce(thrust::device, index, index + n, SmallHigh{lo, hi, limit, d}, -INFINITY,
+      top[d] = thrust::transform_reduce(thrust::cuda::par(alloc_), index, index + n, SmallHigh{lo, hi, limit, d}, -INFINITY,
                                         thrust::maximum<double>());
     }
     // Keep every axis within 2^21 - 3 cells, and the cell a hair wider than the widest
@@ -395,8 +427,8 @@ class CudaJudge final : public DeviceJudge {
     std::uint32_t* ids = ids_.reserve(n_, "cudaMalloc(ids)");
     cell_keys<<<blocks(n_, 256), 256>>>(n, lo, hi, cell, origin[0], origin[1], origin[2], keys, ids);
     check(cudaGetLastError(), "cell_keys");
-    thrust::sort_by_key(thrust::device, keys, keys + n, ids);
-    const int small = int(thrust::lower_bound(thrust::device, keys, keys + n, kBig) - keys);
+    thrust::sort_by_key(thrust::cuda::par(alloc_), keys, keys + n, ids);
+    const int small = int(thrust::lower_bound(thrust::cuda::par(alloc_), keys, keys + n, kBig) - keys);
     unsigned long long cap = std::max<unsigned long long>(pairs_.cap, 4 * n_);
     for (;;) {
       std::uint64_t* pairs = pairs_.reserve(cap, "cudaMalloc(candidate pairs)");
@@ -412,8 +444,8 @@ class CudaJudge final : public DeviceJudge {
       check(cudaMemcpy(&found, count_, sizeof(found), cudaMemcpyDeviceToHost), "download pair count");
       if (found <= cap) {
         // A wide body against another wide body is emitted from both sides: sort, then drop repeats.
-        thrust::sort(thrust::device, pairs, pairs + found);
-        const std::size_t m = std::size_t(thrust::unique(thrust::device, pairs, pairs + found) - pairs);
+        thrust::sort(thrust::cuda::par(alloc_), pairs, pairs + found);
+        const std::size_t m = std::size_t(thrust::unique(thrust::cuda::par(alloc_), pairs, pairs + found) - pairs);
         std::vector<std::uint64_t> host(m);
         check(cudaMemcpy(host.data(), pairs, m * sizeof(std::uint64_t), cudaMemcpyDeviceToHost),
               "download candidate pairs");
@@ -426,6 +458,7 @@ class CudaJudge final : public DeviceJudge {
   }
 
   std::string name_;
+  CachedAllocator alloc_;  // before the buffers: destroyed after every use of them
   std::size_t n_ = 0;
   unsigned long long* count_ = nullptr;
   Buffer<Body> bodies_;
