@@ -875,6 +875,7 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   vo.every = o.every;
   vo.threads = o.threads;
   if (const octocd::JudgeDeviceKind& kind = octocd::judge_device_kind(o.judge_device, "--judge-device"); kind.make) {
+    (void)kind.make();  // no device or no CUDA build: exit 1 saying why, before the run
     vo.judge_device = kind.make;
     fmt::print("judge device {}: broadphase-completeness and penetration on the GPU (their details say what went "
                "to the CPU reference); every other row on the CPU\n",
