@@ -19,9 +19,14 @@
 // --lattice instead judges a contact-heavy frame: N boxes (half extent 0.1 m) on a cubic
 // grid of spacing 0.19 m, no gravity, so every box overlaps its 26 neighbours by 1 cm
 // (about 13 contact pairs a body); the engine's first step is recorded (--warmup 0).
+// --rows: each row's own seconds a frame (its clock over the frames its validators judged).
 // --same-judge: each repetition judges the record again on the same validators, which
 // judged it once untimed first: a run's frames after its first (the validators keep a
 // checked frame's tables for the next one), where the default times a run's first frame.
+// --judge-device cuda: the physics tier's rows broadphase-completeness and penetration on
+// the GPU (ValidationOptions::judge_device, octocd/device_judge.hpp); with --rows their own
+// seconds are the device rows' time a frame (the CPU rows' shared geometry then goes to
+// contact-completeness, the first CPU row that asks).
 // --json FILE writes the physics verdict of the last repetition (results_json, each row's
 // seconds set to 0) for every size and thread count, one document per line, so that a
 // change meant only for speed can be checked to leave the verdict unchanged (diff). The
@@ -34,7 +39,7 @@
 //
 // Usage: bench_validation [SCENE.json] [--bodies 20000,100000] [--reps 5] [--warmup 20]
 //                         [--only physics,full,pairs] [--rows] [--threads 1,2] [--lattice]
-//                         [--same-judge] [--json FILE]
+//                         [--same-judge] [--judge-device cpu|cuda] [--json FILE]
 #include <thread>
 
 #include <time.h>
@@ -54,6 +59,7 @@
 #include <nlohmann/json.hpp>
 
 #include "octocd/atomic_file.hpp"
+#include "octocd/device_judge.hpp"
 #include "octocd/error.hpp"
 #include "octocd/exact_pairs.hpp"
 #include "octocd/expect.hpp"
@@ -201,6 +207,8 @@ int bench(int argc, char** argv) {
   bool same_judge = false;  // --same-judge: the repetitions on one set of validators (see time_observe)
   std::vector<long> thread_counts{0};
   std::string json_path;    // --json FILE: the physics verdicts, one JSON document a line
+  // --judge-device NAME: rows 1 and 4 on that device (null: the CPU)
+  std::unique_ptr<octocd::DeviceJudge> (*judge_make)() = nullptr;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -219,10 +227,18 @@ int bench(int argc, char** argv) {
     else if (a == "--same-judge") same_judge = true;
     else if (a == "--threads") thread_counts = parse_list(a, next(), 0, 4096);
     else if (a == "--json") json_path = next();
+    else if (a == "--judge-device") {
+      try {
+        judge_make = octocd::judge_device_kind(next(), "--judge-device").make;
+      } catch (const std::invalid_argument& e) {
+        std::fprintf(stderr, "%s\n", e.what());
+        return 2;
+      }
+    }
     else if (!a.empty() && a[0] != '-') scene_path = a;
     else {
       std::fprintf(stderr, "usage: bench_validation [SCENE.json] [--bodies N,..] [--reps R] [--warmup W] [--only ...] "
-                           "[--rows] [--threads T,..] [--lattice] [--same-judge] [--json FILE]\n");
+                           "[--rows] [--threads T,..] [--lattice] [--same-judge] [--judge-device cpu|cuda] [--json FILE]\n");
       return 2;
     }
   }
@@ -267,6 +283,7 @@ int bench(int argc, char** argv) {
     octocd::ValidationOptions vo;
     vo.against_fcl = false;
     vo.against_bullet = false;
+    if (judge_make) vo.judge_device = judge_make;
     for (long th : thread_counts) {
     threads = th;
     vo.threads = int(th);
@@ -300,8 +317,17 @@ int bench(int argc, char** argv) {
         t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
         cpu.push_back(cpu_seconds() - c0);
         if (r + 1 == reps && rows_shown) {
+          // The rows' clocks sum every frame these validators judged (--same-judge: all of them).
+          const int frames = same_judge ? reps + 1 : 1;
           for (const octocd::ValidationResult& x : v.results())
-            if (x.seconds > 1e-3) fmt::print("  {:<28} {:.4f} s\n", x.name, x.seconds);
+            if (x.seconds > 1e-3 * frames)
+              fmt::print("  {:<28} {:.4f} s a frame{}\n", x.name, x.seconds / frames,
+                         x.detail.find("judged on the device") != std::string::npos ? " (device row)" : "");
+          for (const octocd::ValidationResult& x : v.results()) {
+            const std::size_t at = x.detail.find("judged on the device");
+            if (x.name == "broadphase-completeness" && at != std::string::npos)
+              fmt::print("  {}\n", x.detail.substr(at, x.detail.find("; causes:", at) - at));
+          }
         }
         if (r + 1 == reps && !same_judge) write_verdict(v);
       }

@@ -35,6 +35,7 @@
 #include "octocd/junit.hpp"
 #include "octocd/results_table.hpp"
 #include "octocd/shards.hpp"
+#include "octocd/device_judge.hpp"
 #include "octocd/external.hpp"
 #include "octocd/midphase.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -89,6 +90,7 @@ struct ValidateOptions {
   std::string shard;          ///< --shard i/N: judge only this share of the trace's frames
   std::vector<std::string> merge;  ///< --merge A.json B.json ...: join shards' verdicts
   int threads = 0;            ///< --threads: threads per frame (0: the hardware's)
+  std::string judge_device = "cpu";  ///< --judge-device: cpu, or cuda (rows 1 and 4 on the GPU)
   octocd::Expectations expectations;  ///< --expect's file, read before the run
   bool determinism = false;   ///< --determinism: runs compared bit for bit instead of the validators
   /// Why --junit could not be written (write_junit_guarded): raised by validate_command
@@ -344,6 +346,7 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
   eo.tol = vo.tol;
   eo.overridden = vo.overridden;
   eo.threads = o.threads;
+  eo.judge_device = vo.judge_device;
   eo.mesh_dir = o.mesh_dir;
   if (!o.shard.empty()) eo.shard = octocd::parse_shard(o.shard);
   octocd::ExternalTraceInfo info;
@@ -599,6 +602,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
   eo.against_fcl = vo.against_fcl;
   eo.tol = vo.tol;
   eo.overridden = vo.overridden;
+  eo.judge_device = vo.judge_device;
   // The trace's scene names its mesh files as the scene file does: relative to the scene
   // file's folder (its --mesh-dir), not to the (temporary) trace's.
   eo.mesh_dir = fs::absolute(o.scene).parent_path().string();
@@ -894,6 +898,13 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
   vo.frames = o.frames;
   vo.every = o.every;
   vo.threads = o.threads;
+  if (const octocd::JudgeDeviceKind& kind = octocd::judge_device_kind(o.judge_device, "--judge-device"); kind.make) {
+    (void)kind.make();  // no device or no CUDA build: exit 1 saying why, before the run
+    vo.judge_device = kind.make;
+    fmt::print("judge device {}: broadphase-completeness and penetration on the GPU (their details say what went "
+               "to the CPU reference); every other row on the CPU\n",
+               kind.name);
+  }
   // Frames judged while the engine runs the next ones, unless a trace is written (its
   // frames then stay those judged when a signal stops the checks of a frame).
   vo.pipeline = o.trace.empty();
@@ -1129,6 +1140,18 @@ Command add_validate_command(CLI::App& app) {
                       "--junit, --expect as an unsharded run); exit 2 naming a file for overlapping, missing or "
                       "foreign shards")
       ->expected(1, -1);
+  val_cmd->add_option("--judge-device", val.judge_device,
+                      "Where the physics tier's rows broadphase-completeness and penetration run: cpu (the CPU "
+                      "tier, the oracle), or cuda: their candidates and box-box separating-axis tests on the GPU in "
+                      "double precision, pairs with other shapes by the CPU reference (counted and named in the "
+                      "rows' details); every other row on the CPU; verdicts are the CPU tier's (docs/gpu.md, "
+                      "\"Judging on the device\"); cuda without a CUDA build or device exits 1 saying why")
+      ->check(CLI::IsMember([] {
+        std::vector<std::string> names;
+        for (const octocd::JudgeDeviceKind& k : octocd::judge_device_kinds()) names.push_back(k.name);
+        return names;
+      }()))
+      ->capture_default_str();
   val_cmd->add_option("--threads", val.threads,
                       "Threads judging one frame's heavy loops (reference geometry per pair, the reference pair set); "
                       "0 = OMP_NUM_THREADS when set, else the CPUs this process may run on (default), 1 = serial; a scene's frame is judged while the engine runs the "

@@ -13,7 +13,10 @@
 # - a circle between rooms (the top-level folders: core, gpu, ..., cli, python, bench;
 #   an adapter's registration file, compiled into octocd_engines, is in engines) through
 #   their includes;
-# - an include from validation/ (the judges) of a file under harness/.
+# - an include from validation/ (the judges) of a file under harness/;
+# - an include from validation/device/ (the judges' device part) of a file outside it and
+#   core/ (it shares no code with the engine it judges: docs/architecture.md, "The judges'
+#   device part").
 # Run: cmake -DSRC=<source dir> -P tests/house/include_graph.cmake
 if(NOT SRC)
   message(FATAL_ERROR "include_graph.cmake: pass -DSRC=<the source directory>")
@@ -97,6 +100,7 @@ endfunction()
 set(_units "")
 set(_room_names "")
 set(_judges_to_harness "")
+set(_device_judge_out "")
 set(_kw "^(namespace|using|template|class|struct|union|enum|return|typedef|static_assert|if|for|while|switch|case|default|public|private|protected|extern|friend|operator|sizeof|decltype|alignas|noexcept)$")
 foreach(f IN LISTS _files)
   unit_of(uf ${f})
@@ -116,6 +120,9 @@ foreach(f IN LISTS _files)
     list(APPEND _inc_${idf} "${to}")
     if(f MATCHES "^validation/" AND to MATCHES "^harness/")
       string(APPEND _judges_to_harness "  ${f} includes ${to}\n")
+    endif()
+    if(f MATCHES "^validation/device/" AND NOT to MATCHES "^(validation/device|core)/")
+      string(APPEND _device_judge_out "  ${f} includes ${to}\n")
     endif()
     room_of(rt ${to})
     if(NOT rt STREQUAL rf)
@@ -154,6 +161,11 @@ list(REMOVE_DUPLICATES _room_names)
 if(NOT _judges_to_harness STREQUAL "")
   message(FATAL_ERROR "the judges (validation/) include the harness (harness/), which stands above them "
     "(docs/architecture.md, \"What the harness does with verdicts\"):\n${_judges_to_harness}")
+endif()
+
+if(NOT _device_judge_out STREQUAL "")
+  message(FATAL_ERROR "the judges' device part (validation/device/) includes a file outside itself and core/ "
+    "(docs/architecture.md, \"The judges' device part\"):\n${_device_judge_out}")
 endif()
 
 # Pass 2: who defines what a header declares: a source (.cpp, .cu) that includes the header
@@ -290,4 +302,4 @@ endif()
 list(LENGTH _units _nunits)
 list(LENGTH _room_names _nrooms)
 message(STATUS "include_graph: ${_nfiles} files, ${_nunits} units, ${_edges} calls between units, "
-  "${_nrooms} rooms: no circle; the judges include nothing of the harness")
+  "${_nrooms} rooms: no circle; the judges include nothing of the harness; their device part only core")

@@ -23,6 +23,7 @@
 #include "octocd/broadphase_registry.hpp"
 #include "octocd/error.hpp"
 #include "octocd/exact_pairs.hpp"
+#include "octocd/device_judge.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/reference_contact.hpp"
 #include "octocd/validation.hpp"
@@ -278,6 +279,7 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   s.applied = std::make_unique<AppliedStateJudge>(model, options.tol);
   s.physics->set_stop(options.stop);
   s.physics->set_threads(options.threads);
+  if (options.judge_device) s.physics->set_judge_device(options.judge_device());
   s.applied->set_stop(options.stop);
   s.applied->set_threads(options.threads);
 }

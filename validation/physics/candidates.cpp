@@ -7,7 +7,9 @@
 #include "../src/row_clock.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <iterator>
+#include <type_traits>
 
 #include "octocd/exact_pairs.hpp"
 #include "octocd/reference_contact.hpp"
@@ -171,6 +173,19 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
 // reference geometry (checked(), shared with rows 2-4).
 template <>
 void PhysicsValidators::Impl::judge<RowId::BroadphaseCompleteness>(CheckedFrame& f) {
+  judge_broadphase(f);
+}
+
+// On the device's geometry (device_rows.cpp): the same judgement, flat's set on the
+// engine's AABBs from the device too.
+template <>
+bool PhysicsValidators::Impl::judge_device<RowId::BroadphaseCompleteness>(DeviceCheckedFrame& f) {
+  judge_broadphase(f);
+  return true;
+}
+
+template <class Frame>
+void PhysicsValidators::Impl::judge_broadphase(Frame& f) {
   auto [broad, broad_exact] = tallies(RowId::BroadphaseCompleteness, "missing-pair", "not-flat");
   const FrameRecord& rec = *f.rec;
   const std::int64_t frame = rec.frame;
@@ -210,7 +225,13 @@ void PhysicsValidators::Impl::judge<RowId::BroadphaseCompleteness>(CheckedFrame&
       // Set equality with `flat` on the engine's own world AABBs, static-static dropped:
       // flat's set through exact_pairs (O(n log n + pairs); tests/validation/test_exact_pairs).
       std::vector<Pair> want, got;
-      exact_pairs(rec.aabbs, want, pair_threads);
+      if constexpr (std::is_same_v<Frame, DeviceCheckedFrame>) {
+        const auto t0 = std::chrono::steady_clock::now();
+        device->overlapping_pairs(rec.aabbs, want);
+        device_flat_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      } else {
+        exact_pairs(rec.aabbs, want, pair_threads);
+      }
       auto dyn = [&](Pair p) { return dynamic(p.a) || dynamic(p.b); };
       std::copy_if(want.begin(), want.end(), std::back_inserter(got), dyn);
       want.swap(got);
@@ -279,6 +300,7 @@ ValidationResult PhysicsValidators::Impl::table<RowId::BroadphaseCompleteness>()
   }
   note(r.detail, s.broad_asleep, "{} pair-frames of bodies asleep before the step (/states/sleeping) not required",
        s.broad_asleep);
+  if (s.device) note(r.detail, true, "{}", s.device_note());
   if (r.applicable) s.fill_causes(r, RowId::BroadphaseCompleteness);
   return r;
 }

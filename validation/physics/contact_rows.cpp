@@ -83,6 +83,12 @@ double PhysicsValidators::Impl::speculative_reach(const FrameRecord& rec, Pair p
 }
 
 // ---- Row 2: contact completeness -----------------------------------------------------
+// Judged on the CPU's reference normals and separating axes only: not on the device.
+template <>
+bool PhysicsValidators::Impl::judge_device<RowId::ContactCompleteness>(DeviceCheckedFrame&) {
+  return false;
+}
+
 template <>
 void PhysicsValidators::Impl::judge<RowId::ContactCompleteness>(CheckedFrame& f) {
   auto [complete, false_contact] = tallies(RowId::ContactCompleteness, "missing-contact", "false-contact");
@@ -192,6 +198,12 @@ void PhysicsValidators::Impl::pair_figures(CheckedFrame& f, std::size_t i, const
       rf.db = std::max(0.0, ref->surface_distance(p.b, det[p.b], c.point) - radius(p.b));
     }
   }
+}
+
+// Judged on the CPU's reference normals and separating axes only: not on the device.
+template <>
+bool PhysicsValidators::Impl::judge_device<RowId::ContactGeometry>(DeviceCheckedFrame&) {
+  return false;
 }
 
 template <>

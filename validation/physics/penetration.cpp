@@ -26,6 +26,18 @@ using namespace physics_detail;
 
 template <>
 void PhysicsValidators::Impl::judge<RowId::Penetration>(CheckedFrame& f) {
+  judge_penetration(f);
+}
+
+// On the device's geometry (device_rows.cpp): the same judgement.
+template <>
+bool PhysicsValidators::Impl::judge_device<RowId::Penetration>(DeviceCheckedFrame& f) {
+  judge_penetration(f);
+  return true;
+}
+
+template <class Frame>
+void PhysicsValidators::Impl::judge_penetration(Frame& f) {
   Tally& pen = tally(RowId::Penetration, "penetration");
   PenetrationSums& ps = row_state<PenetrationSums>(RowId::Penetration);
   const std::int64_t frame = f.rec->frame;
@@ -38,7 +50,7 @@ void PhysicsValidators::Impl::judge<RowId::Penetration>(CheckedFrame& f) {
     std::vector<char> kind(f.truth.size(), kNone);
     std::vector<double> depth_of(f.truth.size(), 0.0);
     parallel_items(f.truth.size(), threads, stop, [&](std::size_t i, unsigned) {
-      const ContactTruth& t = f.truth[i];
+      const auto& t = f.truth[i];
       if (!t.have) return;
       kind[i] = !t.g.penetrating ? kApart : t.g.depth_upper_bound ? kUpper : kExact;
       depth_of[i] = t.g.depth;
@@ -113,6 +125,7 @@ ValidationResult PhysicsValidators::Impl::table<RowId::Penetration>() const {
          "directions: a figure, not judged): largest {}, {} pair-frames above the bound",
          ps.upper_what, ps.upper_over);
   }
+  if (s.device) note(r.detail, true, "{}", s.device_note());
   if (r.applicable) s.fill_causes(r, RowId::Penetration);
   return r;
 }

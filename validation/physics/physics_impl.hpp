@@ -39,6 +39,7 @@
 
 #include <fmt/format.h>
 
+#include "octocd/device_judge.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/validation_rows.hpp"
 #include "dmath.hpp"
@@ -273,6 +274,25 @@ struct CheckedFrame {
   } work;
 };
 
+/// One pair's reference geometry on a device-judged frame: the device's separating-axis
+/// test for two boxes, the CPU reference (pair_reference_into) for any other pair.
+struct DeviceTruth {
+  ReferenceNormal g;  ///< penetrating, depth (and distance where the CPU reference gave it)
+  bool have = true;   ///< always computed (the rows read it as ContactTruth::have)
+  bool cpu = false;   ///< from the CPU reference (a pair with another shape, or undecided)
+};
+
+/// One checked frame as the device rows read it (PhysicsValidators::Impl::device_frame):
+/// the same tables as CheckedFrame's that rows 1 and 4 read, from the device judge.
+struct DeviceCheckedFrame {
+  const FrameRecord* rec = nullptr;
+  DeviceFrameAnswer answer;         ///< the device's candidates and box tests
+  std::vector<Pair> contact_pairs;  ///< the pairs of rows (sorted, distinct)
+  std::vector<Pair> truth_pairs;    ///< hit candidates and contact pairs (sorted, distinct)
+  std::vector<DeviceTruth> truth;   ///< per truth pair
+  std::vector<Pair> required;       ///< candidates whose shapes are within the broadphase margin
+};
+
 /// A physics row's sums (PhysicsValidators::Impl::row_sums): one Tally per cause of its
 /// validation_rows.def entry, in the entry's order; its own time (s, RowClock around its
 /// measure: shared work goes to the first row that needs it, e.g. the candidates and the
@@ -297,6 +317,8 @@ struct PhysicsFrame {
   const std::vector<Pose>& det;
   bool checked = false;
   std::optional<CheckedFrame> geometry;
+  std::optional<DeviceCheckedFrame> device_geometry;  ///< with a judge device (Impl::device_checked)
+  bool counted = false;  ///< counted in Impl::checked_frames
 };
 
 /// The detail of a row with no checked frame to judge.
@@ -396,7 +418,7 @@ struct PhysicsValidators::Impl {
   physics_detail::CheckedFrame* checked(physics_detail::PhysicsFrame& f) {
     if (!f.checked) return nullptr;
     if (!f.geometry) {
-      ++checked_frames;
+      count_checked(f);
       if (spare_frame) {
         f.geometry = std::move(spare_frame);
         spare_frame.reset();
@@ -407,6 +429,27 @@ struct PhysicsValidators::Impl {
     }
     return &*f.geometry;
   }
+  /// Counts `f` once in checked_frames (by the first of checked() and device_checked()).
+  void count_checked(physics_detail::PhysicsFrame& f) {
+    if (!f.counted) ++checked_frames;
+    f.counted = true;
+  }
+  /// With a judge device: the frame's device geometry (device_frame), computed on the first
+  /// call (its time goes to the row that asked first); nullptr on frames that are not checked.
+  physics_detail::DeviceCheckedFrame* device_checked(physics_detail::PhysicsFrame& f) {
+    if (!f.checked) return nullptr;
+    if (!f.device_geometry) {
+      count_checked(f);
+      f.device_geometry.emplace();
+      device_frame(f.rec, f.det, *f.device_geometry);
+    }
+    return &*f.device_geometry;
+  }
+  /// With a judge device: row `id`'s judgement of a checked frame from the device's
+  /// geometry, true when it judged there; false: the row needs the CPU's CheckedFrame
+  /// (judge). Every row that judges Checked frames defines it in its file.
+  template <RowId id>
+  bool judge_device(physics_detail::DeviceCheckedFrame& f);
   /// A physics result of row `id` with its tier, name, figure and tolerances.
   static ValidationResult start_row(RowId id, const char* figure, const char* tolerances);
   /// start_row for a row whose figure is its failures: measured is the failures of all its
@@ -527,6 +570,31 @@ struct PhysicsValidators::Impl {
   }
   /// Body i's convex radius (m; 0 without /bodies/convex_radius).
   double radius(std::uint32_t i) const { return bodies.convex_radius.empty() ? 0.0 : bodies.convex_radius[i]; }
+
+  // ---- The judge device (device_rows.cpp; octocd/device_judge.hpp) ------------------
+  /// The device that judges rows 1 and 4 (set_judge_device); null: every row on the CPU.
+  std::unique_ptr<DeviceJudge> device;
+  bool device_bodies_set = false;
+  std::vector<char> device_box;  ///< per body: a box on the device
+  /// Device figures: frames, candidate pairs, truth pairs the CPU reference answered and
+  /// their shape pairs ("bunny@0.2 / box": count), the device calls' seconds.
+  std::uint64_t device_frames = 0, device_candidates = 0, device_cpu_pairs = 0, device_box_pairs = 0;
+  std::map<std::string, std::uint64_t> device_cpu_shapes;
+  double device_seconds = 0, device_flat_seconds = 0;  ///< judge_frame's; overlapping_pairs' (not-flat)
+  /// The device geometry of a checked frame into `f` (device_rows.cpp).
+  void device_frame(const FrameRecord& rec, const std::vector<Pose>& det, physics_detail::DeviceCheckedFrame& f);
+  /// The note a device row's detail carries: where it ran, what went to the CPU reference.
+  std::string device_note() const;
+  /// truth_after() on a device frame: every pair a row asks is among its truth pairs
+  /// (throws std::logic_error otherwise).
+  const physics_detail::DeviceTruth& truth_after(physics_detail::DeviceCheckedFrame& f, Pair p,
+                                                 std::size_t& cursor) const;
+  /// Row 1's judgement on either frame kind (candidates.cpp).
+  template <class Frame>
+  void judge_broadphase(Frame& f);
+  /// Row 4's judgement on either frame kind (penetration.cpp).
+  template <class Frame>
+  void judge_penetration(Frame& f);
 
   // ---- Rows 1-4 (checked frames with poses) --------------------------------------
   /// The frame's candidates, their reference geometry (on `threads` threads) and the

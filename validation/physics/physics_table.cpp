@@ -84,17 +84,22 @@ void PhysicsValidators::Impl::fill_causes(ValidationResult& r, RowId id) const {
 
 // Every physics row of validation_rows.def, in its order, on its row's clock: its measure
 // of every frame, or its judgement of a checked frame's candidates and reference geometry
-// (computed by the first row that asks, on its clock).
+// (computed by the first row that asks, on its clock); with a judge device, a row that
+// judges the device's geometry (judge_device true: device_checked) needs no CheckedFrame.
 void PhysicsValidators::Impl::measure_rows(PhysicsFrame& f) {
 #define OCTOCD_PHYSICS_EVERY(id)             \
   {                                          \
     RowClock clock(sums(RowId::id).seconds); \
     measure<RowId::id>(f);                   \
   }
-#define OCTOCD_PHYSICS_CHECKED(id)                          \
-  {                                                         \
-    RowClock clock(sums(RowId::id).seconds);                \
-    if (CheckedFrame* c = checked(f)) judge<RowId::id>(*c); \
+#define OCTOCD_PHYSICS_CHECKED(id)                                                \
+  {                                                                               \
+    RowClock clock(sums(RowId::id).seconds);                                      \
+    bool judged = false;                                                          \
+    if (device)                                                                   \
+      if (DeviceCheckedFrame* d = device_checked(f)) judged = judge_device<RowId::id>(*d); \
+    if (!judged)                                                                  \
+      if (CheckedFrame* c = checked(f)) judge<RowId::id>(*c);                     \
   }
 #include "physics_rows.inc"
 }

@@ -3,6 +3,7 @@
 // FrameValidators that judge octocd's engines.
 #include "octocd/external.hpp"
 
+#include "octocd/device_judge.hpp"
 #include "octocd/physics.hpp"
 
 #include <algorithm>
@@ -562,6 +563,7 @@ void ExternalValidator::Impl::prepare(FrameRecord& rec) {
     vo.tol = s.options.tol;
     vo.overridden = s.options.overridden;
     vo.threads = s.options.threads;
+    vo.judge_device = s.options.judge_device;
     vo.stop = s.options.stop;
     s.validators = std::make_unique<FrameValidators>(
         // Another engine's pairs are judged by the physics tier (broadphase completeness),

@@ -120,6 +120,8 @@ struct ExternalOptions {
   ShardSpec shard;
   /// Threads per frame (ValidationOptions::threads; 0: the hardware's).
   int threads = 0;
+  /// The judge device of rows 1 and 4 (ValidationOptions::judge_device; empty: the CPU).
+  std::function<std::unique_ptr<DeviceJudge>()> judge_device;
   /// Polled inside the long loops of a frame's checks (as ValidationOptions::stop) and by
   /// validate_external_trace between frames; when it returns true they throw
   /// ValidationStopped (the frame in progress is then partly judged). May be empty (never

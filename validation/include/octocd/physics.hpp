@@ -119,6 +119,8 @@
 
 namespace octocd {
 
+class DeviceJudge;  // octocd/device_judge.hpp (validation/device/)
+
 /// How a pair's friction coefficient or restitution is made from the two bodies' values.
 enum class MaterialCombine {
   Product,    ///< a * b (Bullet's btManifoldResult default)
@@ -397,6 +399,13 @@ class PhysicsValidators {
   /// Threads for the per-pair reference geometry of a checked frame (FCL, SAT):
   /// ValidationOptions::threads (0: the hardware's). Verdicts do not depend on it.
   void set_threads(int threads);
+
+  /// Judges rows 1 (broadphase-completeness) and 4 (penetration) of the checked frames on
+  /// `device` (octocd/device_judge.hpp: the candidates and the box pairs' separating-axis
+  /// test there, every other pair by the CPU reference), and says so in their details;
+  /// null: on the CPU (default). Set before the first observe(). Verdicts, causes and
+  /// failing items are the CPU's (tests/gpu/test_device_judge.cpp).
+  void set_judge_device(std::unique_ptr<DeviceJudge> device);
 
   /// Shards (`validate --trace-in T --shard i/N`): with contact_model soft, the energy of
   /// an isolated group is judged over its contact episode, which may begin in one shard's

@@ -26,6 +26,7 @@
 namespace octocd {
 
 class PhysicsValidators;
+class DeviceJudge;  // octocd/device_judge.hpp (validation/device/)
 
 struct PhysicsBodies;  // octocd/physics.hpp
 
@@ -148,6 +149,12 @@ struct ValidationOptions {
   /// on), 1 = serial. Results do not depend on it (items
   /// are judged into their own slots and tallied in serial order).
   int threads = 0;
+  /// The judge device (`--judge-device cuda`): when set, called once per run; the device
+  /// it returns computes the physics tier's rows broadphase-completeness and penetration
+  /// (their candidates and box-box geometry; octocd/device_judge.hpp: make_cuda_judge),
+  /// every other row runs on the CPU. Empty (default): every row on the CPU. Verdicts are
+  /// the CPU's (tests/gpu/test_device_judge.cpp); errors of the factory propagate.
+  std::function<std::unique_ptr<DeviceJudge>()> judge_device;
   /// validate_engine judges frame f (on a copy of its record, on a second thread) while
   /// the engine runs frame f + 1; ignored when threads is 1. Verdicts are the serial
   /// run's; what changes: on_step(f) runs before frame f is judged, so a stop inside
