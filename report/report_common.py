@@ -89,8 +89,11 @@ except ImportError as e:  # exit 1: a missing dependency is not bad input
           file=sys.stderr)
     sys.exit(1)
 
+# Every text matplotlib draws is plain text: a `$...$` in a scene's, engine's or sweep's name
+# is never read as mathtext (a malformed one would fail the whole page), nor TeX.
 plt.rcParams.update({"svg.fonttype": "none", "font.family": "sans-serif", "font.size": 9,
-                     "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100})
+                     "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100,
+                     "text.parse_math": False, "text.usetex": False})
 
 
 CURRENT = ["the inputs"]  # the file being read, for the one-line error of a malformed one
