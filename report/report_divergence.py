@@ -115,6 +115,12 @@ def plot_scene(doc, scene, pts):
         note_engine(fig, e, why)
         ax.plot([], [], color=engine_colour(e), marker=engine_marker(e), lw=1.2, label=f"{e}: no line ({why[:60]})")
     ax.set_yscale("log")
+    # Plain tick labels (1e-06, 0.001, 1): matplotlib's own log labels are mathtext, which the
+    # report does not parse (report_common: every text is plain).
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    ax.yaxis.set_major_locator(LogLocator(base=10))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}" if v > 0 else ""))
+    ax.yaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("time (s)")
     ax.set_ylabel("mean distance from the unperturbed run (m, log scale)")
     ax.set_title(f"{scene}: divergence over time (one line per eps {', '.join(_sci(x) for x in eps_all)} m; "

@@ -97,6 +97,8 @@ def check_plots(out, engines, skipped=()):
     plots = sorted(os.listdir(out / "plots"))
     assert plots
     for name in plots:
+        # Every text is plain: no mathtext source shown raw (a log axis's own labels are mathtext).
+        assert "mathdefault" not in (out / "plots" / name).read_text(), name
         record, drawn = plot_engines(out / "plots" / name)
         assert sorted(record) == sorted(engines), (name, record)
         for e, rec in record.items():
