@@ -160,6 +160,16 @@ def skipped_block(doc, g):
     doc.table(["status", "engine", "points", "reason", "points (ids)"], rows)
 
 
+def not_measured(g, scene, engine):
+    """A table cell for an engine with no figure on a scene: why, from its skipped or failed
+    point ("- (skipped: ...)"), else "- (not in these files)"."""
+    for p in g["points_list"]:
+        par = p.get("params", {})
+        if par.get("engine") == engine and par.get("scene") == scene and p.get("status") in ("skipped", "failed"):
+            return f"- ({p['status']}: {str(p.get('reason', ''))[:60]})"
+    return "- (not in these files)"
+
+
 def pairs_cell(p, spread):
     """A pair or test count of point p: "- (not reported)" for an engine that times no stage
     (a process engine reports 0 pairs: it gives octocd no broadphase figures)."""
@@ -214,7 +224,7 @@ def section_table5(doc, g):
                 if p is None and cfg != "A" and find(pts, scene=sc, engine=e, midphase="A") is not None:
                     r.append("(= A: no midphase)")
                 else:
-                    r.append(sps_text(p) if p else "-")
+                    r.append(sps_text(p) if p else not_measured(g, sc, e))
             best = []
             rows.append(r)
     doc.table(["scene (bodies)", "config", "paper FPS"] + [f"{e} steps/s" for e in engines], rows)
@@ -233,7 +243,7 @@ def section_table5(doc, g):
                          f"{spread_text(sp['A'])} steps/s")
                 continue
             if len(vals) != 3:
-                r.append("-")
+                r.append(not_measured(g, sc, e) if not vals else f"- ({len(vals)} of 3 configurations measured)")
                 continue
             order = sorted(vals, key=vals.get, reverse=True)
             if min(sp[order[0]].get("n", 1), sp[order[1]].get("n", 1)) < 2:
@@ -273,8 +283,8 @@ def section_table6(doc, g):
              f"{ref['rcr']:+.1f}%"]
         for e in engines:
             l0, c = find(pts, scene=sc, engine=e, midphase="L0"), find(pts, scene=sc, engine=e, midphase="C")
-            r.append(sps_text(l0) if l0 else "-")
-            r.append(sps_text(c) if c else ("(= L0: no midphase)" if l0 else "-"))
+            r.append(sps_text(l0) if l0 else not_measured(g, sc, e))
+            r.append(sps_text(c) if c else ("(= L0: no midphase)" if l0 else not_measured(g, sc, e)))
             if l0 and c:
                 sa, sb = first_window(l0)["steps_per_s"], first_window(c)["steps_per_s"]
                 a, b = med(sa), med(sb)

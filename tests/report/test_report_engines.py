@@ -205,3 +205,22 @@ def test_the_svg_check_sees_a_moved_colour(tmp_path):
     except AssertionError:
         return
     raise AssertionError("a moved colour passed the check")
+
+
+def test_an_engine_without_a_figure_has_a_cell_saying_why():
+    """Table 5 with cuda skipped on every point: its cells say why, never a bare '-'."""
+    j = FIX.table5()
+    for p in j["points"]:
+        if p["params"]["engine"] == "cuda":
+            p["status"], p["reason"] = "skipped", "this octocd was built without CUDA"
+            p.pop("windows", None)
+    doc = FIX.section(FIX.MR.section_table5, j)
+    header, rows = doc.tables[0]
+    col = header.index("cuda steps/s")
+    start = next(i for i, r in enumerate(rows) if r[0].startswith("bunny-random-400"))
+    mine = rows[start:start + 3]  # configurations A, B, C of a scene the result has
+    assert all(r[col] == "- (skipped: this octocd was built without CUDA)" for r in mine), mine
+    assert any(r[col] == "- (not in these files)" for r in rows)  # a scene of the paper's table it lacks
+    header, rows = doc.tables[1]
+    col = header.index("cuda: fastest (speed vs A)")
+    assert next(r for r in rows if r[0] == "bunny-random-400")[col].startswith("- (skipped: "), rows
