@@ -224,3 +224,22 @@ def test_an_engine_without_a_figure_has_a_cell_saying_why():
     header, rows = doc.tables[1]
     col = header.index("cuda: fastest (speed vs A)")
     assert next(r for r in rows if r[0] == "bunny-random-400")[col].startswith("- (skipped: "), rows
+
+
+def test_speed_accuracy_lines_take_their_engines_colour(tmp_path):
+    """The speed-accuracy plots draw each engine's lines in its colour (they went by line order)."""
+    import test_speed_accuracy as SA
+    out = report(tmp_path, SA.result(SA.all_points()))
+    plots = sorted(os.listdir(out / "plots"))
+    assert plots
+    seen = set()
+    for name in plots:
+        record, drawn = plot_engines(out / "plots" / name)
+        assert record, name
+        for e, rec in record.items():
+            assert rec["colour"].lower() == RP.engine_colour(e).lower(), (name, e, rec)
+        for e, cols in drawn.items():
+            strokes = {c for k, c in cols if k == "stroke"}
+            assert strokes == {RP.engine_colour(e).lower()}, (name, e, cols)
+            seen.add(e)
+    assert seen == {"cpu", "cuda", "bullet"}, seen
