@@ -65,6 +65,72 @@ std::pair<std::string, std::string> engine_scene_of_trace(const std::string& tra
   return {stem.substr(0, sep), stem.substr(sep + 2)};
 }
 
+/// Whether `t` is a UTC time as octocd writes one (YYYY-MM-DDTHH:MM:SSZ) with fields in range.
+bool is_utc_time(const std::string& t) {
+  if (t.size() != 20 || t[4] != '-' || t[7] != '-' || t[10] != 'T' || t[13] != ':' || t[16] != ':' || t[19] != 'Z')
+    return false;
+  for (int i : {0, 1, 2, 3, 5, 6, 8, 9, 11, 12, 14, 15, 17, 18})
+    if (t[static_cast<std::size_t>(i)] < '0' || t[static_cast<std::size_t>(i)] > '9') return false;
+  const auto at = [&](int i, int n) { return std::stoi(t.substr(static_cast<std::size_t>(i), static_cast<std::size_t>(n))); };
+  return at(5, 2) >= 1 && at(5, 2) <= 12 && at(8, 2) >= 1 && at(8, 2) <= 31 && at(11, 2) <= 23 && at(14, 2) <= 59 &&
+         at(17, 2) <= 60;
+}
+
+/// The build of a result's "build" object as a history file records it ({"build_id",
+/// "git_revision", "version", "commit"}), or null when it names none.
+json build_of_result(const JsonFields& f, const json& r, const std::string& where) {
+  if (!r.contains("build")) return nullptr;
+  const json& b = f.object(r["build"], where + "build");
+  json out = json::object();
+  for (const char* k : {"build_id", "git_revision"})
+    if (b.contains(k)) out[k] = f.text(b[k], where + "build." + k, kMaxName);
+  const std::string id = out.value("build_id", std::string());
+  if (id.empty() && out.value("git_revision", std::string()).empty()) return nullptr;
+  const auto plus = id.find('+');
+  out["version"] = plus == std::string::npos ? id : id.substr(0, plus);
+  out["commit"] = plus == std::string::npos ? out.value("git_revision", std::string()) : id.substr(plus + 1);
+  return out;
+}
+
+/// The date and build a history entry carries, from the run's own results.
+struct HistoryStamp {
+  std::string date;        ///< the earliest "started" of the results (UTC), "" when there is none
+  json build;              ///< the results' build ({build_id, git_revision, version, commit}) or null
+  std::string build_from;  ///< the result that gave `build`
+};
+
+/// The run's start and build from bench results `bench` (named `names`, else bench[i]):
+/// the earliest "started" and their one build. InputError naming the file and field for a
+/// "started" that is missing or no UTC time YYYY-MM-DDTHH:MM:SSZ, or results of two builds.
+HistoryStamp history_stamp(const json& bench, const std::vector<std::string>& names) {
+  HistoryStamp s;
+  for (std::size_t i = 0; i < bench.size(); ++i) {
+    const std::string name = i < names.size() ? names[i] : fmt::format("bench[{}]", i);
+    const JsonFields f(name);
+    const json& r = bench[i];
+    const std::string allowed = "a result of `octocd bench` (docs/bench-format.md)";
+    const std::string started = f.text(f.member(r, "", "started", allowed), "started", 64);
+    if (!is_utc_time(started))
+      throw InputError(fmt::format("{}: started: '{}'; allowed: a UTC time YYYY-MM-DDTHH:MM:SSZ (the run's start, "
+                                   "as octocd bench writes it)", printable(name), printable(started)));
+    if (s.date.empty() || started < s.date) s.date = started;  // the run began with its first result
+    const json build = build_of_result(f, r, "");
+    if (build.is_null()) continue;
+    if (s.build.is_null()) {
+      s.build = build;
+      s.build_from = name;
+    } else if (build.value("build_id", std::string()) != s.build.value("build_id", std::string()) ||
+               build.value("git_revision", std::string()) != s.build.value("git_revision", std::string())) {
+      throw InputError(fmt::format("{}: build: {} ({}); {} has {} ({}); allowed: results of one build in one run",
+                                   printable(name), printable(build.value("build_id", std::string())),
+                                   printable(build.value("git_revision", std::string())), printable(s.build_from),
+                                   printable(s.build.value("build_id", std::string())),
+                                   printable(s.build.value("git_revision", std::string()))));
+    }
+  }
+  return s;
+}
+
 }  // namespace
 
 json history_build() {
@@ -147,16 +213,27 @@ json history_verdicts(const std::string& path) {
   return out;
 }
 
+// The entry's "date" and "build" are the run's own (history_stamp of `bench`: a backfill of
+// archived results keeps each run's start and commit); without a result (verdicts alone) the
+// appending binary's history_build and now. "dated_by" says which ("result" or "append"),
+// "appended" {"date", "build"} when and by what the file was added.
 std::string append_history(const std::string& dir, const std::string& kind, json bench, json verdicts,
                            const std::string& label) {
   std::error_code ec;
   check_output_folder(dir, label.c_str(), true);
+  // The run's own start and build from its results (a backfill keeps its date and commit);
+  // the appending binary's build and now only for a run without a result (verdicts alone).
+  const HistoryStamp run = history_stamp(bench, {});
   fs::create_directories(dir, ec);
   if (ec) throw RuntimeError(fmt::format("{}: {}: cannot create the folder: {}", label, dir, ec.message()));
-  const json build = history_build();
-  const std::string date = utc_time_now();
+  const json appender = history_build();
+  const std::string now = utc_time_now();
+  const json build = run.build.is_null() ? appender : run.build;
+  const std::string date = run.date.empty() ? now : run.date;
   json entry = {{"format", "octocd-history"}, {"version", 1}, {"kind", kind}, {"date", date},
                 {"build", build}, {"machine", machine_description()},
+                {"dated_by", run.date.empty() ? "append" : "result"},
+                {"appended", {{"date", now}, {"build", appender}}},
                 {"bench", std::move(bench)}, {"verdicts", std::move(verdicts)}};
   const std::string text = entry.dump(1, ' ', false, json::error_handler_t::replace) + "\n";
   // YYYYMMDDTHHMMSSZ-COMMIT-KIND.json: sorted by name is sorted by date.
@@ -239,6 +316,7 @@ int history_append_command(const HistoryAppendOptions& o) {
                         {"verdict", "error"}, {"status", "error"}});
   }
   const std::size_t rows = verdicts.size();
+  (void)history_stamp(bench, o.bench);  // a bad start or two builds: exit 2 naming the file, nothing written
   const std::string path = append_history(o.dir, o.kind, std::move(bench), std::move(verdicts), "history-append");
   fmt::print("octocd history-append: wrote {} ({} bench result(s), {} verdict row(s))\n", printable(path),
              o.bench.size(), rows);

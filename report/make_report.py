@@ -52,7 +52,7 @@ from report_csv import file_slug, sweep_csv  # noqa: E402
 from report_gate import GATE_MIN_REPS, LEVEL_RANGE, gate_summary, reps_needed, section_gate  # noqa: E402
 import report_speed_accuracy as RSA  # noqa: E402  (sweeps of kind speed-accuracy, design.md section 15)
 import report_divergence as RDV  # noqa: E402  (sweeps of kind divergence, design.md section 20)
-from report_common import load_mark, num, overlap, printable, spread_text  # noqa: E402
+from report_common import Stopped, load_mark, num, on_sigterm, overlap, printable, spread_text  # noqa: E402
 from report_plots import log_ticks, speedup_text, too_many_to_draw  # noqa: E402
 from report_traces import penetration_comment, section_traces  # noqa: E402,F401
 from report_tables import (engines_ran_text, machine_block, section_figA2, section_generic,  # noqa: E402,F401
@@ -221,14 +221,18 @@ def main():
 
 def run():
     """main() as `octocd report` runs it: every failure one line and an exit code (0, 1, 2, 4,
-    130), never a traceback (scripts/fuzz_report_json.py fuzzes it so)."""
+    130 for SIGINT, 143 for SIGTERM), never a traceback (scripts/fuzz_report_json.py fuzzes
+    it so)."""
+    import signal
+    signal.signal(signal.SIGTERM, on_sigterm)
     try:
         main()
     except SystemExit:
         raise
-    except KeyboardInterrupt:  # SIGINT (octocd report forwards it): nothing was committed
-        print("octocd report: stopped by SIGINT; the earlier report (if any) is left as it was", file=sys.stderr)
-        sys.exit(130)
+    except (KeyboardInterrupt, Stopped) as e:  # SIGINT or SIGTERM: nothing was committed
+        sig = "SIGTERM" if isinstance(e, Stopped) else "SIGINT"
+        print(f"octocd report: stopped by {sig}; the earlier report (if any) is left as it was", file=sys.stderr)
+        sys.exit(143 if isinstance(e, Stopped) else 130)
     except OSError as e:
         # Writing the report: a full disk or a size limit is a runtime failure (exit 1), a
         # path it may not write bad input (exit 2); the earlier report is left as it was.

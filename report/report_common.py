@@ -72,6 +72,24 @@ class csv_writer:
         self._w.writerow([csv_guard(c) if isinstance(c, str) else c for c in cells])
 
 
+class Stopped(BaseException):
+    """SIGTERM arrived (octocd report forwards it): raised in the main thread like SIGINT's
+    KeyboardInterrupt, so a stop unwinds (the pool of drawing workers ended) and is one line."""
+
+
+MAIN_PID = os.getpid()
+STOP = [0]  # the stopping signal once one arrived (a raise swallowed in a fork hook is raised again)
+
+
+def on_sigterm(sig, frame):
+    """SIGTERM's handler: Stopped in the main process; a forked worker that has not yet reset
+    its handlers (report_history._worker_init) ends at once, silently."""
+    if os.getpid() != MAIN_PID:
+        os._exit(128 + sig)
+    STOP[0] = sig
+    raise Stopped(sig)
+
+
 def fail(msg):
     """Bad input: one line naming the file and what is allowed, exit 2 (never a traceback).
     The line is printable(): text from a hostile file cannot break it or the terminal."""
@@ -89,8 +107,11 @@ except ImportError as e:  # exit 1: a missing dependency is not bad input
           file=sys.stderr)
     sys.exit(1)
 
+# Every text matplotlib draws is plain text: a `$...$` in a scene's, engine's or sweep's name
+# is never read as mathtext (a malformed one would fail the whole page), nor TeX.
 plt.rcParams.update({"svg.fonttype": "none", "font.family": "sans-serif", "font.size": 9,
-                     "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100})
+                     "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100,
+                     "text.parse_math": False, "text.usetex": False})
 
 
 CURRENT = ["the inputs"]  # the file being read, for the one-line error of a malformed one

@@ -2,8 +2,10 @@
 docs/predictability.md): results of `octocd bench` sweeps of kind `divergence`
 (docs/bench-format.md), per scene
 
-- a plot of the mean distance of the bodies from the unperturbed run over time, log scale, one
-  colour per engine and one line per eps of the ladder (darker: larger eps);
+- a plot of the mean distance of the bodies from the unperturbed run over time, log scale, each
+  engine in its colour and marker of every plot of the report (report_plots.engine_colour,
+  engine_marker; an engine that did not run the scene named in the legend with why), its name
+  at the end of its line, one line per eps of the ladder (darker: larger eps);
 - a table of the fitted growth exponents (1/s) per engine and eps, with the distance at the
   first and last frame;
 - a table of the points not measured (skipped, failed) with their reasons.
@@ -20,11 +22,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from report_common import is_number  # noqa: E402
+from report_plots import engine_colour, engine_marker, note_engine, unmeasured_engines  # noqa: E402
 
 KIND = "divergence"
 STATUSES = ("ok", "skipped", "failed")
-COLORS = ["#4e79a7", "#e15759", "#59a14f", "#f28e2b", "#76b7b2", "#b07aa1", "#9c755f", "#edc948", "#ff9da7",
-          "#bab0ac"]
 MAX_FRAMES = 1000001  # mean_m and max_m per point, at most (a sweep's frames + 1)
 
 INTRO = ("Per scene and engine, copies of the scene whose dynamic bodies start eps metres from their place (a "
@@ -84,9 +85,10 @@ def plot_scene(doc, scene, pts):
     eps_all = sorted({p["eps_m"] for p in ok})
     drawn = False
     fig, ax = plt.subplots(figsize=(8.0, 4.6))
-    for ei, e in enumerate(engines):
-        colour = COLORS[ei % len(COLORS)]
+    for e in engines:
+        colour, marker = engine_colour(e), engine_marker(e)
         mine = sorted((p for p in ok if _engine(p) == e), key=lambda p: p["eps_m"])
+        end = None  # the end of the engine's largest-eps line: its name is written there
         for p in mine:
             rank = eps_all.index(p["eps_m"])
             alpha = 0.35 + 0.65 * (rank + 1) / max(len(eps_all), 1)
@@ -94,13 +96,31 @@ def plot_scene(doc, scene, pts):
             y = [v if is_number(v) and v > 0 else float("nan") for v in p["mean_m"]]
             if all(math.isnan(v) for v in y):
                 continue
-            ax.plot(t, y, color=colour, alpha=alpha, lw=1.2,
-                    label=e if p is mine[-1] or not drawn else None)
+            ax.plot(t, y, color=colour, alpha=alpha, lw=1.2, marker=marker, markevery=max(len(t) // 8, 1), ms=4,
+                    label=e, gid=f"engine:{e}")
+            end = max((k for k in range(len(y)) if not math.isnan(y[k])), default=None)
+            end = (t[end], y[end]) if end is not None else None
             drawn = True
+        if end is not None:
+            note_engine(fig, e)
+            ax.annotate(e, end, xytext=(3, 0), textcoords="offset points", fontsize=8, color="#222",
+                        va="center", ha="left")
     if not drawn:
         plt.close(fig)
         return False
+    on = fig.__dict__.get("octocd_engines", {})
+    lost = {e: "every distance 0 (a log axis cannot draw it)" for e in engines if e not in on}
+    lost.update(unmeasured_engines(pts, ok))
+    for e, why in lost.items():
+        note_engine(fig, e, why)
+        ax.plot([], [], color=engine_colour(e), marker=engine_marker(e), lw=1.2, label=f"{e}: no line ({why[:60]})")
     ax.set_yscale("log")
+    # Plain tick labels (1e-06, 0.001, 1): matplotlib's own log labels are mathtext, which the
+    # report does not parse (report_common: every text is plain).
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    ax.yaxis.set_major_locator(LogLocator(base=10))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}" if v > 0 else ""))
+    ax.yaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("time (s)")
     ax.set_ylabel("mean distance from the unperturbed run (m, log scale)")
     ax.set_title(f"{scene}: divergence over time (one line per eps {', '.join(_sci(x) for x in eps_all)} m; "

@@ -45,7 +45,7 @@ import os
 import stat
 import sys
 
-from report_common import csv_guard, fail, np, plt, printable
+from report_common import STOP, Stopped, csv_guard, fail, np, plt, printable
 from report_data import _parse
 from report_html import Outputs
 from report_plots import log_ticks
@@ -58,6 +58,10 @@ MAX_FILE_BYTES = 64 << 20
 MAX_FILES = 100000
 MAX_TEXT_SHOWN = 200    # characters of a name, reason, machine or commit on the page and in CSV
 MAX_GRID_ROWS = 300     # rows of a verdict grid drawn (every row is in the CSV)
+MAX_SERIES_PLOTS = 100  # series drawn per machine (those with a change first); every one is in the CSV
+MAX_CHANGE_ROWS = 500   # rows of a machine's table of changes on the page (every one is in the CSV)
+DPI = 100               # the plots' pixels per inch: a font of FONT_PT points is FONT_PT x 100/72 px
+FONT_PT = 8             # the smallest font on a plot: 11 px
 STATUSES = ["pass", "expected", "new", "fixed", "n/a", "error"]
 # Okabe-Ito (colour-blind safe): pass bluish green, expected yellow, new vermillion, fixed
 # blue, n/a grey, error (the case gave no verdict: crashed, timed out) black; white where a
@@ -83,6 +87,11 @@ def short(text, limit=MAX_TEXT_SHOWN):
     """Untrusted text for the page and the CSV: one line, printable, at most `limit` characters
     (cached: the same names recur every night)."""
     return _short(str(text), limit)
+
+
+def short_lines(text, limit=40):
+    """A label of several lines (run_label): each line short()."""
+    return "\n".join(short(line, limit) for line in str(text).split("\n"))
 
 
 def csv_cell(v):
@@ -402,7 +411,7 @@ def _png(fig, quantize=True):
     python3-matplotlib depends on python3-pil): 2.5x smaller than RGBA for these line plots,
     so 100 series stay well under the page's 10 MB."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=72)
+    fig.savefig(buf, format="png", dpi=DPI)
     plt.close(fig)
     data = buf.getvalue()
     if not quantize:  # the verdict grid: its status colours kept exact
@@ -418,9 +427,38 @@ def _png(fig, quantize=True):
     return base64.b64encode(data).decode("ascii")
 
 
+def measure_of(window):
+    """(what the series measures, its axis label) from its window's name: a name ending in
+    " (cpu)" is steps per process CPU second (cpu_steps_per_s), else wall-clock steps/s."""
+    if str(window).endswith(" (cpu)"):
+        return ("steps per CPU second of the bench process (cpu_steps_per_s; bench prints wall steps/s)",
+                "steps per CPU s (log)")
+    return "wall-clock steps/s (steps_per_s, as bench prints them)", "wall steps/s (log)"
+
+
+def run_label(e):
+    """A run on an axis: its date, time (two runs of one day apart) and commit, on two lines."""
+    return f"{e['date'][:10]} {e['date'][11:16]}\n{e['commit'][:10]}"
+
+
+def when_text(e):
+    """A run's start on the page: date and time to the minute (UTC)."""
+    return f"{e['date'][:10]} {e['date'][11:16]}"
+
+
+def run_labels(runs):
+    """run_label of each run; runs of one minute and commit numbered (#2, #3) so no two are alike."""
+    out, seen = [], {}
+    for e in runs:
+        lab = run_label(e)
+        seen[lab] = seen.get(lab, 0) + 1
+        out.append(lab if seen[lab] == 1 else f"{lab} #{seen[lab]}")
+    return out
+
+
 def series_plot(key, nights, s, found, labels):
     """steps/s of one point over its runs: the median, the min-max band, change windows shaded."""
-    fig, ax = plt.subplots(figsize=(9, 2.2))
+    fig, ax = plt.subplots(figsize=(9, 2.6))
     x = np.asarray(nights)
     ax.fill_between(x, s[:, 1], s[:, 2], color="#4e79a7", alpha=0.25, linewidth=0, label="min-max of repetitions")
     ax.plot(x, s[:, 0], color="#4e79a7", linewidth=0.9, label="median")
@@ -436,13 +474,16 @@ def series_plot(key, nights, s, found, labels):
     if np.nanmax(s[:, 2]) < 3 * np.nanmin(s[:, 1]):
         from matplotlib.ticker import MaxNLocator
         ax.yaxis.set_major_locator(MaxNLocator(4))
-    ax.set_ylabel("steps/s (log)")
-    ax.set_xlabel("night (run of this machine)")
-    ax.set_title(short(" | ".join(key), 120), fontsize=9, loc="left")
+    what, ylabel = measure_of(key[2])
+    ax.set_ylabel(ylabel, fontsize=FONT_PT)
+    ax.tick_params(labelsize=FONT_PT)
+    ax.set_xlabel("run of this machine (its start, commit)", fontsize=FONT_PT)
+    ax.set_title(short(" | ".join(key[:2]) + f" | window {key[2].removesuffix(' (cpu)')}: {what}", 160),
+                 fontsize=FONT_PT + 1, loc="left")
     n = len(labels)
     ticks = sorted({0, n - 1} | {int(round(i * (n - 1) / 5)) for i in range(6)}) if n > 1 else [0]
     ax.set_xticks(ticks)
-    ax.set_xticklabels([short(labels[i], 24) for i in ticks], fontsize=7)
+    ax.set_xticklabels([short_lines(labels[i]) for i in ticks], fontsize=FONT_PT)
     fig.tight_layout()
     return _png(fig)
 
@@ -452,20 +493,20 @@ def verdict_grid(keys, runs, matrix):
     from matplotlib.colors import ListedColormap
     order = ["", *STATUSES]
     cmap = ListedColormap([STATUS_COLORS[s] for s in order])
-    fig_h = max(2.0, 0.16 * len(keys) + 1.2)
+    fig_h = max(2.4, 0.17 * len(keys) + 1.6)
     fig, ax = plt.subplots(figsize=(10, fig_h))
     ax.imshow(matrix, aspect="auto", interpolation="nearest", cmap=cmap, vmin=-0.5, vmax=len(order) - 0.5)
     ax.set_yticks(range(len(keys)))
-    ax.set_yticklabels([short(" · ".join(k), 60) for k in keys], fontsize=7)
+    ax.set_yticklabels([short(" · ".join(k), 60) for k in keys], fontsize=FONT_PT)
     n = len(runs)
     ticks = sorted({0, n - 1} | {int(round(i * (n - 1) / 6)) for i in range(7)}) if n > 1 else [0]
+    labels = run_labels(runs)
     ax.set_xticks(ticks)
-    ax.set_xticklabels([short(f"{runs[i]['date'][:10]} {runs[i]['commit'][:10]}", 30) for i in ticks], fontsize=7,
-                       rotation=30, ha="right")
+    ax.set_xticklabels([short_lines(labels[i]) for i in ticks], fontsize=FONT_PT, rotation=30, ha="right")
     ax.grid(False)
     from matplotlib.patches import Patch
     ax.legend(handles=[Patch(color=STATUS_COLORS[s], label=s) for s in STATUSES], loc="upper left",
-              bbox_to_anchor=(1.0, 1.0), fontsize=7)
+              bbox_to_anchor=(1.0, 1.0), fontsize=FONT_PT)
     fig.tight_layout()
     return _png(fig, quantize=False)
 
@@ -478,6 +519,24 @@ def render(task):
     return verdict_grid(*task[1:])
 
 
+def _worker_init():
+    """A drawing worker: a stop is its parent's to handle (SIGINT ignored; SIGTERM, which the
+    parent's pool sends when it stops, ends it at once without a traceback), and it ends with
+    its parent (Linux PR_SET_PDEATHSIG: a parent killed outright leaves no worker writing
+    tracebacks into a closed pipe)."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM, signal.SIGINT})  # held by map_tasks while forking
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        if os.getppid() == 1:  # the parent ended before prctl
+            os._exit(0)
+    except (OSError, AttributeError):
+        pass
+
+
 def map_tasks(fn, tasks, workers):
     """[fn(t) for t in tasks], by `workers` forked processes when there are enough tasks."""
     if workers <= 1 or len(tasks) < 8:
@@ -485,14 +544,26 @@ def map_tasks(fn, tasks, workers):
     import multiprocessing
     try:
         ctx = multiprocessing.get_context("fork")
-        with ctx.Pool(workers) as pool:
-            return pool.map(fn, tasks, chunksize=max(1, len(tasks) // (8 * workers)))
+        # SIGTERM is held while the workers are forked (a stop inside a fork hook would be
+        # swallowed and printed), then delivered; each worker unblocks it in _worker_init.
+        import signal
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
+        try:
+            pool = ctx.Pool(workers, initializer=_worker_init)
+        finally:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM, signal.SIGINT})
+        with pool:
+            out = pool.map(fn, tasks, chunksize=max(1, len(tasks) // (8 * workers)))
     except OSError:
-        return [fn(t) for t in tasks]
+        out = [fn(t) for t in tasks]
+    if STOP[0]:  # a SIGTERM whose Stopped a fork hook swallowed
+        raise Stopped(STOP[0])
+    return out
 
 
-def fmt_pct(r):
-    return "-" if r is None else f"{100 * r:.1f} %"
+def fmt_pct(r, why):
+    """A relative step as a percentage, or `why` none can be given."""
+    return why if r is None else f"{100 * r:.1f} %"
 
 
 def run(folder, out, level, title=None, workers=None, csv_dir=None, timing="auto"):
@@ -531,7 +602,16 @@ def run(folder, out, level, title=None, workers=None, csv_dir=None, timing="auto
         S = max(1, len(keys))
         alpha = level / S
         if keys:
+            ncpu = sum(1 for k in keys if k[2].endswith(" (cpu)"))
             page.append(f"<h3>steps/s over commits ({len(keys)} series)</h3>")
+            page.append("<p class=note>Each series is one point and window of a bench sweep: " +
+                        (f"{ncpu} in steps per CPU second of the bench process (cpu_steps_per_s, window marked "
+                         "'(cpu)': hardly moved by other processes' load; bench prints wall steps/s), "
+                         if ncpu else "") +
+                        (f"{len(keys) - ncpu} in wall-clock steps/s (steps_per_s, as bench prints them)"
+                         if len(keys) > ncpu else "").rstrip(", ") +
+                        " (--timing cpu, wall or auto chooses). Each run is labelled by its own start (date and "
+                        "time) and the commit of the build that made it.</p>")
             page.append(f"<p class=note>Change points: binary segmentation with the standardized Mann-Whitney rank "
                         f"statistic maximized over splits (at least {MIN_SEGMENT} runs each side), p by James, James "
                         f"and Siegmund's approximation; level {level:g} family-wise over this machine's {S} series "
@@ -539,10 +619,11 @@ def run(folder, out, level, title=None, workers=None, csv_dir=None, timing="auto
                         "one change over a window. Red: slower, green: faster.</p>")
         chg_html = []
         plots = []
+        all_labels = run_labels(runs)
         for k in keys:
             idx = [i for i, e in enumerate(runs) if k in e["series"]]
             s = np.array([runs[i]["series"][k] for i in idx], dtype=float)
-            labels = [f"{runs[i]['date'][:10]} {runs[i]['commit'][:10]}" for i in idx]
+            labels = [all_labels[i] for i in idx]
             x = np.log(s[:, 0])
             found = changes(x, alpha)
             sig = noise(x)
@@ -558,27 +639,49 @@ def run(folder, out, level, title=None, workers=None, csv_dir=None, timing="auto
                        g["last"] - g["first"] + 1, math.exp(g["before"]), math.exp(g["after"]), g["ratio"], g["p"]]
                 chg_rows.append(row)
                 chg_html.append(
-                    f"<tr><td>{E(short(' | '.join(k), 160))}</td><td>{E(short(runs[a]['date'][:10]))} "
-                    f"<code>{E(short(runs[a]['commit'], 40))}</code></td><td>{E(short(runs[b]['date'][:10]))} "
+                    f"<tr><td>{E(short(' | '.join(k), 160))}</td><td>{E(when_text(runs[a]))} "
+                    f"<code>{E(short(runs[a]['commit'], 40))}</code></td><td>{E(when_text(runs[b]))} "
                     f"<code>{E(short(runs[b]['commit'], 40))}</code></td><td>{g['last'] - g['first'] + 1}</td>"
                     f"<td>{math.exp(g['before']):.4g}</td><td>{math.exp(g['after']):.4g}</td>"
                     f"<td class={'slow' if g['ratio'] < 1 else 'fast'}>{100 * (g['ratio'] - 1):+.1f} %</td>"
                     f"<td>{g['p']:.2g}</td></tr>")
-            tasks.append(("series", k, list(range(n)), s, found, labels))
-            plots.append((k, len(tasks) - 1, n, sig, mid, recent, len(found)))
+            plots.append((k, ("series", k, list(range(n)), s, found, labels), n, sig, mid, recent, len(found)))
         if chg_html:
             page.append("<h4>Changes found</h4><table><tr><th>series</th><th>first run of the change</th>"
                         "<th>last run of the change</th><th>runs</th><th>steps/s before (median)</th>"
-                        "<th>after</th><th>change</th><th>p</th></tr>" + "".join(chg_html) + "</table>")
+                        "<th>after</th><th>change</th><th>p</th></tr>" + "".join(chg_html[:MAX_CHANGE_ROWS]) +
+                        "</table>")
+            if len(chg_html) > MAX_CHANGE_ROWS:
+                page.append(f"<p class=note>The table shows the first {MAX_CHANGE_ROWS} of {len(chg_html)} changes; "
+                            "history-changes.csv holds every one.</p>")
         elif keys:
             page.append("<p>No change point in any series at this level.</p>")
-        for k, ti, n, sig, mid, recent, nf in plots:
-            page.append(f"<figure><img alt='steps/s of {E(short(' | '.join(k), 160))}' src='@@PLOT{ti}@@'>"
-                        f"<figcaption>{n} runs; night-to-night noise {100 * sig:.2f} % (robust sd of log steps/s); "
-                        f"smallest step seen half the time: {fmt_pct(mid)} at mid-history, {fmt_pct(recent)} 10 runs "
-                        f"before the last; {nf} change(s).</figcaption></figure>")
+        # At most MAX_SERIES_PLOTS plots a machine, the series with a change first (a night naming
+        # thousands of points would take minutes to draw and a page no one reads).
+        drawn = sorted(plots, key=lambda q: q[6] == 0)[:MAX_SERIES_PLOTS]
+        if len(plots) > len(drawn):
+            page.append(f"<p class=note>{len(plots) - len(drawn)} of {len(plots)} series are not drawn (a machine's "
+                        f"page draws at most {MAX_SERIES_PLOTS}, those with a change first); their figures are in "
+                        "history-points.csv and their changes above and in history-changes.csv.</p>")
+        drawn_keys = {q[0] for q in drawn}
+        for k, task, n, sig, mid, recent, nf in plots:
+            if k not in drawn_keys:
+                continue
+            tasks.append(task)
+            noise_text = (f"night-to-night noise {100 * sig:.2f} % (robust sd of log steps/s)" if math.isfinite(sig)
+                          else "night-to-night noise: not estimated (fewer than 3 runs)")
+            page.append(f"<figure><img alt='steps/s of {E(short(' | '.join(k), 160))}' src='@@PLOT{len(tasks) - 1}@@'>"
+                        f"<figcaption>{n} runs; {noise_text}; smallest step seen half the time: "
+                        f"{fmt_pct(mid, f'none at mid-history (fewer than {2 * MIN_SEGMENT} runs)')}"
+                        f"{' at mid-history' if mid is not None else ''}, "
+                        f"{fmt_pct(recent, 'none 10 runs before the last (fewer than 20 runs)')}"
+                        f"{' 10 runs before the last' if recent is not None else ''}; {nf} change(s)."
+                        "</figcaption></figure>")
         # ---- verdicts
         vruns = [e for e in runs if e["has_verdicts"]]
+        if vruns and not any(e["verdicts"] for e in vruns):
+            page.append("<p>No verdict rows in these runs (bench results only).</p>")
+            vruns = []
         if vruns:
             vkeys = sorted({k for e in vruns for k in e["verdicts"]})
             code = {s: i for i, s in enumerate(["", *STATUSES])}
@@ -596,10 +699,16 @@ def run(folder, out, level, title=None, workers=None, csv_dir=None, timing="auto
                     st = ["", *STATUSES][row[j0]] or "absent"
                     ver_rows.append([mach, *k, st, vruns[j0]["date"], vruns[j0]["commit"], vruns[j1]["date"],
                                      vruns[j1]["commit"], j1 - j0 + 1])
-            ever = [i for i in range(len(vkeys)) if np.any((M[i] != code["pass"]) & (M[i] != code[""]))]
+            # Rows that passed every night, or were n/a every night (absent nights aside), are folded.
+            passing = [i for i in range(len(vkeys)) if np.all((M[i] == code["pass"]) | (M[i] == code[""]))]
+            never = [i for i in range(len(vkeys)) if np.all((M[i] == code["n/a"]) | (M[i] == code[""]))
+                     and np.any(M[i] == code["n/a"])]
+            folded = set(passing) | set(never)
+            ever = [i for i in range(len(vkeys)) if i not in folded]
             page.append(f"<h3>Verdicts over time ({len(vkeys)} engine x scene x row, {len(vruns)} nights)</h3>")
-            page.append(f"<p>{len(vkeys) - len(ever)} row(s) passed (or were absent) every night and are left out of "
-                        "the grid (history-verdicts.csv has them all).</p>")
+            page.append(f"<p>{len(passing)} row(s) passed every night and {len(never)} were n/a every night (not "
+                        "judged: the engine or scene lacks what the row needs), absent nights aside; they are left "
+                        "out of the grid (history-verdicts.csv has them all).</p>")
             shown = ever[:MAX_GRID_ROWS]
             if len(ever) > MAX_GRID_ROWS:
                 page.append(f"<p>The grid draws the first {MAX_GRID_ROWS} of {len(ever)} rows that were not always "
@@ -635,10 +744,10 @@ def run(folder, out, level, title=None, workers=None, csv_dir=None, timing="auto
                             "<th>nights</th><th>first new in this run of nights</th><th>reason</th></tr>" +
                             "".join(f"<tr><td>{E(short(k[0]))}</td><td>{E(short(k[1]))}</td><td>{E(short(k[2]))}</td>"
                                     f"<td class={'exp' if st == 'expected' else 'slow'}>{st}</td>"
-                                    f"<td>{E(vruns[j]['date'][:10])} <code>{E(short(vruns[j]['commit'], 40))}</code></td>"
+                                    f"<td>{E(when_text(vruns[j]))} <code>{E(short(vruns[j]['commit'], 40))}</code></td>"
                                     f"<td>{last - j + 1}</td><td>" +
-                                    (f"{E(vruns[q]['date'][:10])} <code>{E(short(vruns[q]['commit'], 40))}</code>"
-                                     if q is not None else "-") + f"</td><td>{E(short(reason))}</td></tr>"
+                                    (f"{E(when_text(vruns[q]))} <code>{E(short(vruns[q]['commit'], 40))}</code>"
+                                     if q is not None else "none: expected every night of this stretch") + f"</td><td>{E(short(reason))}</td></tr>"
                                     for k, st, j, q, reason in cur) + "</table>")
             else:
                 page.append("<p>No row fails on the last night.</p>")

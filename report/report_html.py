@@ -4,6 +4,7 @@ renamed into place only once all are written."""
 
 import html
 import io
+import json
 import os
 import re
 import stat
@@ -183,7 +184,11 @@ class Doc:
         self.nplot += 1
         fname = f"{self.nplot:02d}-{name}.svg"
         buf = io.StringIO()
-        fig.savefig(buf, format="svg", bbox_inches="tight")
+        # The engines on the plot (report_plots.note_engine: each one's colour and marker, or why
+        # it is not drawn) as the SVG's dc:description, "octocd-engines {json}", for tests.
+        engines = getattr(fig, "octocd_engines", None)
+        meta = {"Description": "octocd-engines " + json.dumps(engines, sort_keys=True)} if engines else None
+        fig.savefig(buf, format="svg", bbox_inches="tight", metadata=meta)
         plt.close(fig)
         svg = buf.getvalue()
         self.files.put(os.path.join(self.out, "plots", fname), svg)

@@ -22,6 +22,78 @@ FALLBACK_COLORS = ["#332288", "#88CCEE", "#44AA99", "#117733", "#999933", "#DDCC
                    "#AA4499", "#DDDDDD"]
 
 
+# One marker per engine beside its colour (lines and points), so an engine is told apart
+# without colour too; other engines take FALLBACK_MARKERS by the same CRC-32.
+ENGINE_MARKERS = {"cpu": "o", "cuda": "s", "bullet": "^", "mujoco": "D", "ode": "v", "dart": "P", "rapier": "X",
+                  "jolt": "*"}
+FALLBACK_MARKERS = ["h", "p", "<", ">", "d", "8", "H"]  # filled, none of ENGINE_MARKERS
+
+# What the `contacts` figure of a point counts on each engine (docs/engines.md, each
+# engine's "contacts" row): counts of different things, never compared across engines.
+CONTACTS_COUNTED = {
+    "cpu": "octocd contacts: pairs the response resolves (one per body pair)",
+    "cuda": "octocd contacts: pairs the response resolves (one per body pair)",
+    "bullet": "Bullet manifold points (up to 4 per body pair)",
+    "mujoco": "MuJoCo contacts (ncon; several per geom pair with multi-point collision)",
+    "ode": "ODE contact joints (up to `contacts` per pair, default 8)",
+    "dart": "DART's FCL contacts (up to 4 per box pair, one per touching triangle pair of a hull)",
+    "rapier": "Rapier solver contacts of its manifolds",
+    "jolt": "Jolt contact points of its manifolds",
+}
+
+
+def contacts_counted(engine, process=False):
+    """What engine's `contacts` figure counts (CONTACTS_COUNTED), for a column's note."""
+    name = str(engine)
+    if name in CONTACTS_COUNTED:
+        return CONTACTS_COUNTED[name]
+    return "the engine's own contact count (a process engine)" if process else "the engine's own contact count"
+
+
+def is_process_point(p):
+    """Whether point p ran on an engine that times no stage of the pipeline (every has_stage
+    false: a process engine, which reports its whole step only, and 0 AABB pairs)."""
+    hs = p.get("has_stage")
+    return isinstance(hs, dict) and bool(hs) and not any(hs.values())
+
+
+def engine_marker(engine):
+    """The marker of `engine` on every plot (ENGINE_MARKERS, else FALLBACK_MARKERS by CRC-32)."""
+    name = str(engine)
+    if name in ENGINE_MARKERS:
+        return ENGINE_MARKERS[name]
+    return FALLBACK_MARKERS[zlib.crc32(name.encode("utf-8")) % len(FALLBACK_MARKERS)]
+
+
+def note_engine(fig, engine, why=None):
+    """Records on `fig` that `engine` is on it (drawn in engine_colour) or, with `why`, why it
+    is not; report_html.Doc.figure writes the record into the SVG's metadata (dc:description,
+    "octocd-engines {json}"), which tests read to check that no engine is missing and no
+    colour moves between plots."""
+    rec = fig.__dict__.setdefault("octocd_engines", {})
+    name = str(engine)
+    if why is None:
+        rec[name] = {"colour": engine_colour(name), "marker": engine_marker(name)}
+    elif name not in rec:
+        rec[name] = {"colour": engine_colour(name), "marker": engine_marker(name), "not_drawn": str(why)}
+
+
+def unmeasured_engines(all_points, drawn):
+    """{engine: why} for the engines of `all_points` (a sweep's points) with no point among
+    `drawn`: the first skipped or failed point's reason, else "not measured"."""
+    have = {p.get("params", {}).get("engine") for p in drawn}
+    out = {}
+    for p in all_points or []:
+        e = p.get("params", {}).get("engine")
+        if e is None or e in have:
+            continue
+        if e not in out or (out[e] == "not measured" and p.get("reason")):
+            st = p.get("status", "?")
+            out[e] = f"{st}: {str(p.get('reason', ''))[:120]}" if p.get("reason") else (
+                "not measured" if st == "ok" else st)
+    return out
+
+
 def engine_colour(engine):
     """The colour of `engine` on every plot: ENGINE_COLORS's, else a FALLBACK_COLORS entry
     chosen by the CRC-32 of the name (the same name gets the same colour on every run, plot and
@@ -176,11 +248,13 @@ def log_ticks(ax, axis="y"):
     a.set_minor_formatter(NullFormatter())
 
 
-def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"], paper=None):
+def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["scene"], paper=None, all_points=None):
     """steps/s bars per scene (or xkey): one colour per engine, a hatch per group_axis value,
-    each bar after an engine's first value of group_axis labelled with its speed-up over that
-    one ("1.8x"); `paper` {(scene, label): FPS} draws the paper's figures (FPS of a whole Unity
-    application) in a panel of their own beside ours, never on our steps/s axis."""
+    the engine's name over each bar and, after an engine's first value of group_axis, its
+    speed-up over that one ("bullet 1.8x"); `paper` {(scene, label): FPS} draws the paper's
+    figures (FPS of a whole Unity application) in a panel of their own beside ours, never on
+    our steps/s axis. An engine of `all_points` (the sweep's points) with no bar is named in
+    the legend with why (skipped, failed)."""
     scenes = list(dict.fromkeys(xkey(p) for p in pts))
     vals = list(dict.fromkeys(point_label(p, group_axis) for p in pts))
     engines = list(dict.fromkeys(p["params"]["engine"] for p in pts))
@@ -216,22 +290,31 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
         colour = engine_colour(eng)
         shade = 1.0 - 0.35 * (vals.index(val) / max(len(vals) - 1, 1))  # lighter for later values
         ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=f"{eng} {val}".strip(), color=colour, alpha=shade,
-               hatch=HATCHES[vals.index(val) % len(HATCHES)], edgecolor="#222", linewidth=0.6)
-        # The speed-up over the engine's first value on this axis, printed over the bar.
+               hatch=HATCHES[vals.index(val) % len(HATCHES)], edgecolor="#222", linewidth=0.6, gid=f"engine:{eng}")
+        note_engine(fig, eng)
+        # The engine's name over each bar, with its speed-up over its first value on this axis.
         for i, sc in enumerate(scenes):
             mine = fpts.get((sc, eng), {})
-            ref_val = next((v for v in vals if v in mine), None)
-            if ref_val is None or ref_val == val or val not in mine or not med(mine[ref_val]) or not med(mine[val]):
+            if val not in mine:
                 continue
-            ax.annotate(speedup_text(med(mine[val]) / med(mine[ref_val])), (xs[i], mine[val]["max"]),
-                        xytext=(0, 2), textcoords="offset points", ha="center", va="bottom", fontsize=7,
-                        rotation=90 if len(combos) > 4 else 0)
+            ref_val = next((v for v in vals if v in mine), None)
+            text = str(eng) if len(str(eng)) <= 24 else str(eng)[:23] + "…"  # the legend has it whole
+            if ref_val is not None and ref_val != val and med(mine[ref_val]) and med(mine[val]):
+                text += " " + speedup_text(med(mine[val]) / med(mine[ref_val]))
+            ax.annotate(text, (xs[i], mine[val]["max"]), xytext=(0, 2), textcoords="offset points", ha="center",
+                        va="bottom", fontsize=7.5, rotation=90)
     ax.set_yscale("log")
     log_ticks(ax)
-    ax.margins(y=0.15)
-    ax.set_ylabel("octocd steps/s (median, bars min–max; log scale)")
-    ax.set_title("octocd" + (f" (Nx: speed-up over the engine's first {group_axis})" if group_axis else ""),
-                 fontsize=9)
+    lo_y, hi_y = ax.get_ylim()
+    ax.set_ylim(lo_y, hi_y * 8)  # room for the names over the bars (log axis: about one decade)
+    missing = unmeasured_engines(all_points, pts)
+    for eng, why in missing.items():
+        note_engine(fig, eng, why)
+        ax.bar([np.nan], [np.nan], 0, color=engine_colour(eng), edgecolor="#222", linewidth=0.6,
+               label=f"{eng}: no bar ({why[:60]})")
+    ax.set_ylabel("steps/s of each engine's step (median, bars min–max; log scale)")
+    ax.set_title("each bar: the named engine's steps/s" +
+                 (f" (Nx: speed-up over the engine's first {group_axis})" if group_axis else ""), fontsize=9)
     fig.suptitle(title, fontsize=10)
     readable_xticks(fig, ax, scenes)
     if paper_vals:
@@ -250,7 +333,7 @@ def steps_bars(doc, pts, group_axis, title, name, xkey=lambda p: p["params"]["sc
         pax.set_ylabel("paper FPS (Unity, whole application)")
         pax.set_title("the paper's FPS (its own axis)", fontsize=9)
         legend_below_ticks(fig, pax, fontsize=8, ncol=len(paper_vals))
-    legend_below_ticks(fig, ax, fontsize=9, ncol=min(len(combos), 4))
+    legend_below_ticks(fig, ax, fontsize=9, ncol=min(len(combos) + len(missing), 4))
     doc.figure(fig, name, title + ("; the paper's FPS in the right-hand panel, on its own axis" if paper_vals else ""))
 
 
@@ -259,52 +342,82 @@ def speedup_text(r):
     return f"{num(r)}x"
 
 
-def stage_shares(doc, pts, group_axis, title, name):
+def stage_shares(doc, pts, group_axis, title, name, all_points=None):
     """Per point the share of each stage in the step (bars, %) with the stage's time in ms printed
-    in its segment and the step's total ms at the bar's end; the same as a table (ms and %)."""
-    rows = [p for p in pts if p.get("has_stage", {}).get("midphase", True)]
+    in its segment and the step's total ms at the bar's end; the same as a table (ms and %).
+    Every point is a row: a stage the engine does not time is "not timed", and an engine that
+    times none (a process engine) has its row saying so with its whole step's ms."""
+    rows = list(pts)
     if not rows:
         return
-    labels, shares, times = [], [], []
+    labels, shares, times, notes = [], [], [], []
     drawn = len(rows) <= MAX_BARS
     for p in rows:
         w = first_window(p)
-        st = [med(w.get("stage_ms", {}).get(s, {})) or 0.0 for s in STAGES]
+        hs = p.get("has_stage") if isinstance(p.get("has_stage"), dict) else {}
+        # A stage the engine does not time counts 0 (whatever figure the point holds for it).
+        st = [0.0 if hs.get(s) is False else med(w.get("stage_ms", {}).get(s, {})) or 0.0 for s in STAGES]
         tot = sum(st) or 1.0
         shares.append([100.0 * x / tot for x in st])
         times.append(st)
-        labels.append(f"{p['params']['scene']} {point_label(p, group_axis)} {p['params']['engine']}")
+        notes.append("no stage times: the engine times its whole step only" if is_process_point(p) else
+                     [s for s in STAGES if hs.get(s) is False])
+        labels.append(f"{p['params']['scene']} {point_label(p, group_axis)} {p['params']['engine']}".strip())
     if not drawn:
         doc.p(f"{title}: not drawn: {len(rows)} bars (a plot holds at most {MAX_BARS}); the table below holds every "
               "figure.", "note")
     else:
-        stage_bars(doc, rows, labels, shares, times, title, name)
-    doc.table(["point"] + [f"{s} ms (%)" for s in STAGES] + ["sum ms"],
-              [[lab] + [f"{num(t, 3)} ({num(sh, 2)}%)" for t, sh in zip(ts, shs)] + [num(sum(ts), 3)]
-               for lab, ts, shs in zip(labels, times, shares)],
-              "Median ms per frame of each stage over the repetitions, its share of their sum in brackets.",
-              name=name)
+        stage_bars(doc, rows, labels, shares, times, notes, title, name, all_points)
+    table = []
+    for p, lab, ts, shs, nt in zip(rows, labels, times, shares, notes):
+        if isinstance(nt, str):
+            step = med(first_window(p).get("step_ms", {}))
+            table.append([lab] + [f"- ({nt})" if k == 0 else "-" for k in range(len(STAGES))]
+                         + [num(step, 3) + " (whole step)" if step is not None else "-"])
+            continue
+        table.append([lab] + [("- (not timed)" if s in nt else f"{num(t, 3)} ({num(sh, 2)}%)")
+                              for s, t, sh in zip(STAGES, ts, shs)] + [num(sum(ts), 3)])
+    for eng, why in unmeasured_engines(all_points, rows).items():
+        table.append([f"{eng}: not measured ({why[:100]})"] + ["-"] * (len(STAGES) + 1))
+    doc.table(["point"] + [f"{s} ms (%)" for s in STAGES] + ["sum ms"], table,
+              "Median ms per frame of each stage over the repetitions, its share of their sum in brackets; "
+              "'- (not timed)': the engine does not time that stage apart (its time is in another stage's); a "
+              "process engine times its whole step only.", name=name)
 
 
-def stage_bars(doc, rows, labels, shares, times, title, name):
-    """stage_shares' plot: a bar per point, a segment per stage."""
-    fig, ax = plt.subplots(figsize=(9, 0.26 * len(rows) + 1.3))
+def stage_bars(doc, rows, labels, shares, times, notes, title, name, all_points=None):
+    """stage_shares' plot: a bar per point, a segment per stage, the engine's marker in its
+    colour before each bar; a point without stage times says so on its row."""
+    fig, ax = plt.subplots(figsize=(9, 0.3 * len(rows) + 1.4))
     left = np.zeros(len(rows))
     arr = np.array(shares)
     for k, s in enumerate(STAGES):
         ax.barh(np.arange(len(rows)), arr[:, k], left=left, color=STAGE_COLORS[k], label=s)
         for i in range(len(rows)):
             if arr[i, k] >= 9.0:  # room for the figure inside the segment
-                ax.text(left[i] + arr[i, k] / 2, i, num(times[i][k], 2), ha="center", va="center", fontsize=6,
+                ax.text(left[i] + arr[i, k] / 2, i, num(times[i][k], 2), ha="center", va="center", fontsize=7.5,
                         color="black")
         left += arr[:, k]
-    for i in range(len(rows)):
-        ax.text(101, i, f"{num(sum(times[i]), 3)} ms", ha="left", va="center", fontsize=7)
+    for i, p in enumerate(rows):
+        eng = p["params"]["engine"]
+        note_engine(fig, eng)
+        ax.scatter([-2.5], [i], marker=engine_marker(eng), color=engine_colour(eng), edgecolors="#222",
+                   linewidths=0.5, s=30, clip_on=False, zorder=5, gid=f"engine:{eng}")
+        if isinstance(notes[i], str):
+            step = med(first_window(p).get("step_ms", {}))
+            ax.text(1, i, f"{eng}: {notes[i]}" + (f" ({num(step, 3)} ms)" if step is not None else ""),
+                    ha="left", va="center", fontsize=7.5, color="#333")
+        else:
+            ax.text(101, i, f"{num(sum(times[i]), 3)} ms", ha="left", va="center", fontsize=7.5)
+    for eng, why in unmeasured_engines(all_points, rows).items():
+        note_engine(fig, eng, why)
     ax.set_yticks(np.arange(len(rows)))
     ax.set_yticklabels(labels, fontsize=8)
+    ax.tick_params(axis="y", pad=12)
     ax.invert_yaxis()
     ax.set_xlim(0, 100)
     ax.set_xlabel("share of the step (%); in the segments: the stage's median ms per frame; right: the step's ms")
     ax.set_title(title)
     ax.legend(fontsize=9, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.12 - 1.0 / max(len(rows), 4)))
-    doc.figure(fig, name, title + " (ms per frame printed in each segment and at the bar's end)")
+    doc.figure(fig, name, title + " (ms per frame printed in each segment and at the bar's end; the marker before "
+               "each bar: its engine)")

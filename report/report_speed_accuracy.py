@@ -25,12 +25,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from report_common import is_number  # noqa: E402
+from report_plots import engine_colour, note_engine  # noqa: E402
 
 KIND = "speed-accuracy"
 STATUSES = ("ok", "diverged", "skipped", "failed")
 GEOMETRY_MARKERS = {"mesh": "o", "hull": "s", "box": "^"}
-LINE_COLORS = ["#4e79a7", "#e15759", "#59a14f", "#f28e2b", "#76b7b2", "#b07aa1", "#9c755f", "#edc948", "#ff9da7",
-               "#bab0ac"]
 MAX_THRESHOLDS = 4  # sentences of the reading per scene, at most
 
 INTRO = ("Every engine runs each scene over a ladder of time steps (and Bullet's solver iterations), the same "
@@ -333,8 +332,12 @@ def plot(doc, scene, pts, front, h):
     ref_band = 0.035  # axes fraction: the row of the error-0 points, below the lowest decade
     for k, ln in enumerate(lines):
         mine = sorted((p for p in ok if (p.get("line") or p.get("id")) == ln), key=lambda p: speed(p))
-        colour = LINE_COLORS[k % len(LINE_COLORS)]
         first = mine[0]
+        # The engine's colour of every plot of the report (report_plots.engine_colour); its lines
+        # are told apart by marker (geometry), style (rotation) and their labels.
+        engine = first.get("params", {}).get("engine", "?")
+        colour = engine_colour(engine)
+        note_engine(fig, engine)
         marker = GEOMETRY_MARKERS.get(first.get("geometry"), "D")
         style = "-" if first.get("rotation") else "--"
         name = label(first) + (f", {first.get('iterations')} iterations"
@@ -345,7 +348,7 @@ def plot(doc, scene, pts, front, h):
         ys = [error(p) for p in pos_pts]
         xerr = np.array([speed_bar(p) for p in pos_pts]).T.reshape(2, len(pos_pts))
         ax.errorbar(xs, ys, xerr=xerr, color=colour, marker=marker, linestyle=style, ms=5, capsize=2, lw=1.2,
-                    label=name)
+                    label=name, gid=f"engine:{engine}")
         for p in mine:
             text = dt_text(dt_of(p), unit=False) + (f", {p.get('iterations')} it." if line_varies else "")
             if error(p) > 0:

@@ -9,19 +9,28 @@ from report_common import (PAPER, bounded, load_mark, load_warning, med, np, num
     point_load, spread_text)
 from report_html import html_text, md_escape
 from report_plots import (axis_label, broadphase_class, engines_of, first_window, log_ticks, point_label,
-    engine_colour, stage_shares, steps_bars, steps_points, too_many_to_draw)
+    contacts_counted, engine_colour, is_process_point, stage_shares, steps_bars, steps_points, too_many_to_draw)
 
 
 def engines_ran_text(g):
-    """What each engine of a sweep ran, as its measured points record it: its broadphase (an
-    engine's own by the registry's class name) and, where recorded, the geometry it collided."""
+    """What each engine of a sweep ran, with figures: its points measured (of its points), the
+    range of their median steps/s, its broadphase (an engine's own by the registry's class
+    name), the geometry it collided where recorded, and its skipped or failed points."""
     seen = {}
     for p in g["points_list"]:
-        if p.get("status") != "ok":
-            continue
         e = p.get("params", {}).get("engine", "?")
+        d = seen.setdefault(e, {"broadphase": [], "geometry": [], "points": 0, "ok": 0, "sps": [], "lost": {}})
+        d["points"] += 1
+        if p.get("status") != "ok":
+            d["lost"][p.get("status", "?")] = d["lost"].get(p.get("status", "?"), 0) + 1
+            d.setdefault("why", str(p.get("reason", ""))[:120])
+            continue
+        d["ok"] += 1
+        w = next(iter(p["windows"].values()), None) if isinstance(p.get("windows"), dict) else None
+        m = med(w.get("steps_per_s")) if isinstance(w, dict) else None
+        if isinstance(m, (int, float)) and not isinstance(m, bool) and math.isfinite(m):
+            d["sps"].append(m)
         bp = p.get("engine_broadphase")
-        d = seen.setdefault(e, {"broadphase": [], "geometry": []})
         if bp:
             label = broadphase_class(bp, bp)
             if label not in d["broadphase"]:
@@ -30,10 +39,21 @@ def engines_ran_text(g):
             d["geometry"].append(p["geometry"])
     if not seen:
         return ""
-    return "Engines ran: " + "; ".join(
-        f"{e}: " + ", ".join(([f"broadphase {', '.join(d['broadphase'])}"] if d["broadphase"] else [])
-                             + ([f"geometry {' | '.join(d['geometry'])}"] if d["geometry"] else [])) or "?"
-        for e, d in seen.items())
+
+    def one(e, d):
+        parts = [f"{d['ok']} of {d['points']} point(s) measured"]
+        if d["sps"]:
+            lo, hi = min(d["sps"]), max(d["sps"])
+            parts[0] += f", {num(lo)} steps/s" if lo == hi else f", {num(lo)}–{num(hi)} steps/s (medians)"
+        parts += [f"{n} {st}" for st, n in d["lost"].items()]
+        if d["lost"] and d.get("why"):
+            parts[-1] += f" ({d['why']})"
+        if d["broadphase"]:
+            parts.append(f"broadphase {', '.join(d['broadphase'])}")
+        if d["geometry"]:
+            parts.append(f"geometry {' | '.join(d['geometry'])}")
+        return f"{e}: " + ", ".join(parts)
+    return "Engines ran: " + "; ".join(one(e, d) for e, d in seen.items())
 
 
 def sps_text(p):
@@ -106,19 +126,20 @@ def machine_block(doc, g):
     ran = engines_ran_text(g)
     if ran:
         parts.append(ran)
-    if any(r["settings"].get("repeat") == 1 for r in runs):
-        parts.append("1 repetition per point: the figures have no spread, and no verdict (fastest, slower) can be "
-                     "taken from them.")
-    lw = load_warning(m)
+    # Notes only where they apply: repetitions and load matter to timed points (not to a
+    # divergence sweep's distances), the verdicts only to sections that take one.
+    timed = sw.get("kind") != "divergence"
+    verdicts = sw.get("name") in ("table5", "table6", "tableA1") or sw.get("kind") == "speed-accuracy"
     measured = [p for p in g["points_list"] if p.get("status") == "ok"]
-    loaded = [p for p in measured if point_load(p, m)]
+    if timed and measured and any(r["settings"].get("repeat") == 1 for r in runs):
+        parts.append("1 repetition per point: the figures have no spread" +
+                     (", and no verdict (fastest, slower) can be taken from them." if verdicts else "."))
+    lw = load_warning(m)
+    loaded = [p for p in measured if point_load(p, m)] if timed else []
     if loaded:
         parts.append(f"⚠ {len(loaded)} of {len(measured)} measured points ran under load (e.g. '{loaded[0]['id']}': "
-                     f"{point_load(loaded[0], m)}); the verdicts that use them are marked ⚠."
+                     f"{point_load(loaded[0], m)})" + ("; the verdicts that use them are marked ⚠." if verdicts else ".")
                      + (f" Run: {lw}." if lw else ""))
-    elif lw:
-        parts.append(f"Load at the run's start or end: {lw}; no point ran with fewer free cores than its threads, "
-                     "so no verdict is marked.")
     doc.html.append('<div class="meta">' + "<br>".join(html_text(x) for x in parts) + "</div>")
     doc.md.extend("> " + md_escape(x.replace("`", "")) + "  " for x in parts)
     doc.md.append("")
@@ -137,6 +158,38 @@ def skipped_block(doc, g):
         shown = ", ".join(ids[:3]) + (f" and {len(ids) - 3} more" if len(ids) > 3 else "")
         rows.append([status, engine, len(ids), reason[:300], shown])
     doc.table(["status", "engine", "points", "reason", "points (ids)"], rows)
+
+
+def not_measured(g, scene, engine):
+    """A table cell for an engine with no figure on a scene: why, from its skipped or failed
+    point ("- (skipped: ...)"), else "- (not in these files)"."""
+    for p in g["points_list"]:
+        par = p.get("params", {})
+        if par.get("engine") == engine and par.get("scene") == scene and p.get("status") in ("skipped", "failed"):
+            return f"- ({p['status']}: {str(p.get('reason', ''))[:60]})"
+    return "- (not in these files)"
+
+
+def pairs_cell(p, spread):
+    """A pair or test count of point p: "- (not reported)" for an engine that times no stage
+    (a process engine reports 0 pairs: it gives octocd no broadphase figures)."""
+    if is_process_point(p):
+        return "- (not reported)"
+    return num(med(spread))
+
+
+def contacts_note(pts):
+    """What the contacts column counts on each engine of `pts` (report_plots.CONTACTS_COUNTED):
+    counts of different things, not comparable across engines."""
+    engines = list(dict.fromkeys(p["params"]["engine"] for p in pts))
+    if not engines:
+        return ""
+    what = {}
+    for e in engines:
+        proc = any(is_process_point(p) for p in pts if p["params"]["engine"] == e)
+        what.setdefault(contacts_counted(e, proc), []).append(e)
+    return ("Contacts count different things on each engine (not comparable across engines): "
+            + "; ".join(f"{', '.join(es)}: {w}" for w, es in what.items()) + ".")
 
 
 def find(pts, **kw):
@@ -171,7 +224,7 @@ def section_table5(doc, g):
                 if p is None and cfg != "A" and find(pts, scene=sc, engine=e, midphase="A") is not None:
                     r.append("(= A: no midphase)")
                 else:
-                    r.append(sps_text(p) if p else "-")
+                    r.append(sps_text(p) if p else not_measured(g, sc, e))
             best = []
             rows.append(r)
     doc.table(["scene (bodies)", "config", "paper FPS"] + [f"{e} steps/s" for e in engines], rows)
@@ -190,7 +243,7 @@ def section_table5(doc, g):
                          f"{spread_text(sp['A'])} steps/s")
                 continue
             if len(vals) != 3:
-                r.append("-")
+                r.append(not_measured(g, sc, e) if not vals else f"- ({len(vals)} of 3 configurations measured)")
                 continue
             order = sorted(vals, key=vals.get, reverse=True)
             if min(sp[order[0]].get("n", 1), sp[order[1]].get("n", 1)) < 2:
@@ -205,16 +258,19 @@ def section_table5(doc, g):
         rows.append(r)
     doc.table(["scene", "paper: fastest"] + [f"{e}: fastest (speed vs A)" for e in engines], rows)
     steps_bars(doc, pts, "midphase", "Table 5: steps/s per scene, midphase A [2] / B [1,2] / C [0,1,2], per engine",
-               "table5-steps", paper={(sc, c): ref[c][0] for sc, ref in paper["rows"].items() for c in ("A", "B", "C")})
-    stage_shares(doc, pts, "midphase", "Table 5: share of each stage in the step", "table5-stages")
+               "table5-steps", paper={(sc, c): ref[c][0] for sc, ref in paper["rows"].items() for c in ("A", "B", "C")},
+               all_points=g["points_list"])
+    stage_shares(doc, pts, "midphase", "Table 5: share of each stage in the step", "table5-stages",
+                 all_points=g["points_list"])
     counts = []
     for p in pts:
         w = first_window(p)
         counts.append([p["params"]["scene"], point_label(p, "midphase"), p["params"]["engine"], num(med(w["step_ms"]), 4),
-                       num(med(w["pairs"])), num(med(w["box_pairs"])), num(med(w["vertex_tests"])),
+                       pairs_cell(p, w["pairs"]), pairs_cell(p, w["box_pairs"]), pairs_cell(p, w["vertex_tests"]),
                        num(med(w["contacts"]))])
-    doc.table(["scene", "config", "engine", "step ms", "AABB pairs", "box pairs", "vertex tests", "contacts"], counts,
-              "Per frame, means over the timed frames (median over repetitions).")
+    doc.table(["scene", "config", "engine", "step ms", "AABB pairs", "box pairs", "vertex tests",
+               "contacts (each engine's own count)"], counts,
+              "Per frame, means over the timed frames (median over repetitions). " + contacts_note(pts))
 
 
 def section_table6(doc, g):
@@ -227,8 +283,8 @@ def section_table6(doc, g):
              f"{ref['rcr']:+.1f}%"]
         for e in engines:
             l0, c = find(pts, scene=sc, engine=e, midphase="L0"), find(pts, scene=sc, engine=e, midphase="C")
-            r.append(sps_text(l0) if l0 else "-")
-            r.append(sps_text(c) if c else ("(= L0: no midphase)" if l0 else "-"))
+            r.append(sps_text(l0) if l0 else not_measured(g, sc, e))
+            r.append(sps_text(c) if c else ("(= L0: no midphase)" if l0 else not_measured(g, sc, e)))
             if l0 and c:
                 sa, sb = first_window(l0)["steps_per_s"], first_window(c)["steps_per_s"]
                 a, b = med(sa), med(sb)
@@ -244,8 +300,10 @@ def section_table6(doc, g):
         head += [f"{e} L0", f"{e} C", f"{e} RCR"]
     doc.table(head, rows)
     steps_bars(doc, pts, "midphase", "Table 6: steps/s, Level 0 (aabb-only) vs C [0,1,2], per engine", "table6-steps",
-               paper={(sc, c): ref[c][0] for sc, ref in paper["rows"].items() for c in ("L0", "C")})
-    stage_shares(doc, pts, "midphase", "Table 6: share of each stage in the step", "table6-stages")
+               paper={(sc, c): ref[c][0] for sc, ref in paper["rows"].items() for c in ("L0", "C")},
+               all_points=g["points_list"])
+    stage_shares(doc, pts, "midphase", "Table 6: share of each stage in the step", "table6-stages",
+                 all_points=g["points_list"])
 
 
 def section_tableA1(doc, g):
@@ -303,7 +361,7 @@ def section_tableA1(doc, g):
                    "octree (solid), per mesh and engine (median over repetitions of each 100-frame block)")
     steps_bars(doc, [dict(p, windows={"late": p["windows"]["late"]}) for p in pts if "late" in p["windows"]],
                "broadphase", "Table A1, late phase: steps/s per mesh, SH vs O-A, per engine", "tableA1-late",
-               xkey=lambda p: p["params"]["axes"].get("mesh", p["params"]["scene"]))
+               xkey=lambda p: p["params"]["axes"].get("mesh", p["params"]["scene"]), all_points=g["points_list"])
     rows = []
     for p in pts:
         for ph in ("early", "late"):
@@ -549,13 +607,18 @@ def section_generic(doc, g):
             for wn, w in p["windows"].items():
                 pen = med(w.get("penetration_mean"))
                 rows.append([p["id"], wn, spread_text(w["steps_per_s"]), num(med(w.get("step_ms")), 4),
-                             num(med(w.get("pairs"))), num(med(w.get("contacts"))),
+                             pairs_cell(p, w.get("pairs")), num(med(w.get("contacts"))),
                              num(pen * 1e3 if isinstance(pen, (int, float)) else None)])
         elif "ms_per_frame" in p:
             rows.append([p["id"], "replay", "-", spread_text(p["ms_per_frame"]), num(p.get("pairs")), "-", "-"])
-    doc.table(["point", "window", "steps/s", "step ms", "pairs", "contacts", "mean d_p (mm)"], rows)
     pts = steps_points(g)
+    doc.table(["point", "window", "steps/s", "step ms", "AABB pairs", "contacts (each engine's own count)",
+               "mean d_p (mm)"], rows,
+              "Per frame, means over the timed frames (median over repetitions); '-': not measured. "
+              + contacts_note(pts))
     if pts:
         axis = next(iter(pts[0]["params"].get("axes", {})), None)
-        steps_bars(doc, pts, axis, f"{g['first']['sweep']['name']}: steps/s", "sweep-steps")
-        stage_shares(doc, pts, axis, f"{g['first']['sweep']['name']}: stage shares", "sweep-stages")
+        steps_bars(doc, pts, axis, f"{g['first']['sweep']['name']}: steps/s", "sweep-steps",
+                   all_points=g["points_list"])
+        stage_shares(doc, pts, axis, f"{g['first']['sweep']['name']}: stage shares", "sweep-stages",
+                     all_points=g["points_list"])

@@ -75,3 +75,18 @@ def make_history(folder, nights=60, points=4, seed=1, noise=0.03, creep=None, cr
         with open(os.path.join(folder, name), "w") as f:
             json.dump(entry, f, separators=(",", ":"))
     return folder
+
+
+def bench_result(started, commit, points=1, sweep="nightly-sweep", scene="scene-0", level=1.0):
+    """A result of `octocd bench` started at `started` by build 0.9.0+COMMIT: point i at
+    (1000 + 100 i) x level steps/s, min-max 1 % either side."""
+    pts = [{"id": f"{scene}-{i} | cpu", "index": i, "status": "ok", "params": {"scene": scene, "engine": "cpu"},
+            "windows": {"all": {"first": 1, "last": 10, "steps_per_s": {
+                "n": 3, "median": (1000.0 + 100 * i) * level, "min": (990.0 + 99 * i) * level,
+                "max": (1010.0 + 101 * i) * level}}}}
+           for i in range(points)]
+    return {"format": "octocd-bench", "version": 1,
+            "sweep": {"name": sweep, "kind": "steps", "description": "", "origin": "x", "definition": {}},
+            "settings": {}, "machine": {"hostname": "h", "cpu": "c", "threads": 2},
+            "build": {"build_id": f"0.9.0+{commit}", "git_revision": commit}, "started": started,
+            "points_total": points, "complete": True, "points": pts}

@@ -20,7 +20,7 @@ sys.path.insert(0, os.path.join(SRC, "report"))
 BIN = os.environ.get("OCTOCD_BIN", os.path.join(SRC, "build", "octocd"))
 SCRIPT = os.path.join(SRC, "report", "make_report.py")
 
-from history_synth import make_history  # noqa: E402
+from history_synth import bench_result, make_history  # noqa: E402
 import report_history as H  # noqa: E402
 
 FLIP = ("bullet", "rot-stack-10", "penetration")
@@ -301,3 +301,147 @@ def test_timing_cpu_figure_is_its_own_series(tmp_path):
     report(str(h), str(tmp_path / "wall"), "--timing", "wall")
     c = rows(str(tmp_path / "wall" / "history-changes.csv"))
     assert len(c) == 1 and c[0]["window"] == "all" and night_date(37) <= c[0]["first_date"] <= night_date(43), c
+
+
+# ---- issue 80 item 3, issue 79 items 2, 5 and 6: dated by the run, readable, bounded, stoppable
+
+@pytest.mark.skipif(not os.access(BIN, os.X_OK), reason="no octocd binary (OCTOCD_BIN)")
+def test_a_backfill_is_dated_by_its_runs(tmp_path):
+    """Five results of five dates and builds appended on one day: each history file carries its
+    run's start and commit (name and fields), the page and its CSV tell the five apart; two runs
+    of one day and commit are told apart by their time."""
+    hist = tmp_path / "hist"
+    runs = [(f"2026-11-{20 + k}T02:00:00Z", f"c0ffee{k}") for k in range(5)] + [("2026-11-24T14:30:00Z", "c0ffee4")]
+    for k, (started, commit) in enumerate(runs):
+        (tmp_path / f"r{k}.json").write_text(json.dumps(bench_result(started, commit)))
+        r = subprocess.run([BIN, "history-append", str(hist), "--bench", str(tmp_path / f"r{k}.json")],
+                           capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, r.stderr
+    files = sorted(os.listdir(hist))
+    assert [f[:16] for f in files] == [s.replace("-", "").replace(":", "") for s, _ in runs], files
+    for f, (started, commit) in zip(files, runs):
+        j = json.load(open(hist / f))
+        assert j["date"] == started and j["build"]["commit"] == commit and j["dated_by"] == "result", j
+        assert j["build"]["build_id"] == f"0.9.0+{commit}" and commit in f
+        assert j["appended"]["date"] > "2026-11-25" and j["appended"]["build"]["commit"]  # when and by what
+    out = tmp_path / "out"
+    report(str(hist), str(out))
+    pts = rows(str(out / "history-points.csv"))
+    assert [(p["date"], p["commit"]) for p in pts] == runs
+    entries, _ = H.read_folder(str(hist))
+    labels = H.run_labels(entries)
+    assert len(set(labels)) == 6, labels
+    assert labels[4] == "2026-11-24 02:00\nc0ffee4" and labels[5] == "2026-11-24 14:30\nc0ffee4", labels
+    # Results of two builds in one run, or a start that is no UTC time: exit 2 naming the file.
+    (tmp_path / "odd.json").write_text(json.dumps(bench_result("yesterday", "c0ffee9")))
+    for args, words in (([str(tmp_path / "r0.json"), str(tmp_path / "r1.json")], ["r1.json", "one build"]),
+                        ([str(tmp_path / "odd.json")], ["odd.json", "started", "YYYY-MM-DDTHH:MM:SSZ"])):
+        r = subprocess.run([BIN, "history-append", str(hist)] + [x for a in args for x in ("--bench", a)],
+                           capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and all(w in r.stderr for w in words), r.stderr
+    assert sorted(os.listdir(hist)) == files
+
+
+def test_plots_are_readable_and_label_what_they_measure(tmp_path, monkeypatch):
+    """Every text of the history's plots is at least 10 px; a series names its measure (wall
+    steps/s or steps per CPU second); two runs of one day are two tick labels."""
+    sizes, titles = [], []
+
+    def keep(fig, quantize=True):
+        for t in fig.findobj(lambda a: hasattr(a, "get_fontsize") and hasattr(a, "get_text")):
+            if t.get_text() and t.get_visible():
+                sizes.append(t.get_fontsize() * H.DPI / 72.0)
+        titles.extend(ax.get_title(loc="left") for ax in fig.axes)
+        titles.extend(ax.get_ylabel() for ax in fig.axes)
+        H.plt.close(fig)
+        return ""
+    monkeypatch.setattr(H, "_png", keep)
+    runs = [{"date": "2026-11-26T02:00:00Z", "commit": "abc"}, {"date": "2026-11-26T14:00:00Z", "commit": "abc"}]
+    s = np.array([[1000.0, 990.0, 1010.0, 3], [1001.0, 991.0, 1011.0, 3]])
+    H.series_plot(("sweep", "p", "all (cpu)"), [0, 1], s, [], H.run_labels(runs))
+    H.series_plot(("sweep", "p", "all"), [0, 1], s, [], H.run_labels(runs))
+    H.verdict_grid([("cpu", "s", "row")], runs, np.array([[1, 3]], dtype=np.int8))
+    assert sizes and min(sizes) >= 10.0, sorted(sizes)[:5]
+    assert any("steps per CPU second" in t for t in titles) and any("wall-clock steps/s" in t for t in titles)
+    assert "steps per CPU s (log)" in titles and "wall steps/s (log)" in titles
+
+
+def test_rows_na_every_night_are_folded_and_placeholders_said(tmp_path):
+    make_history(str(tmp_path / "h"), nights=5, points=1, seed=3, rows=[("cpu", "s", "judged")], flip=None)
+    for name in sorted(os.listdir(tmp_path / "h")):
+        j = json.load(open(tmp_path / "h" / name))
+        j["verdicts"].append({"engine": "cpu", "scene": "s", "row": "never-judged", "verdict": "n/a",
+                              "status": "n/a"})
+        json.dump(j, open(tmp_path / "h" / name, "w"))
+    report(str(tmp_path / "h"), str(tmp_path / "out"))
+    page = open(tmp_path / "out" / "index.html").read()
+    assert "1 row(s) passed every night and 1 were n/a every night" in page
+    assert "none 10 runs before the last (fewer than 20 runs)" in page
+    assert ">-<" not in page
+
+
+def test_names_with_mathtext_syntax_give_a_page(tmp_path):
+    """`$...$` in a sweep, point or row name is drawn as plain text (it used to stop the page)."""
+    h = tmp_path / "h"
+    make_history(str(h), nights=8, points=1, seed=4, rows=[("$x^$", "$\\frac{$", "a$b$")])
+    for name in os.listdir(h):
+        j = json.load(open(h / name))
+        j["bench"][0]["sweep"]["name"] = "$\\sqrt{$"
+        j["bench"][0]["points"][0]["id"] = "$bad^$ | cpu"
+        j["verdicts"][0]["status"] = "new"
+        json.dump(j, open(h / name, "w"))
+    report(str(h), str(tmp_path / "out"))
+    assert open(tmp_path / "out" / "index.html").read().count("data:image/png") == 2
+
+
+def test_many_points_are_bounded_and_said(tmp_path):
+    """One night naming 3,000 points: at most MAX_SERIES_PLOTS plots, the rest said left out and
+    in the CSV (it drew 3,000 plots: no page in 180 s)."""
+    h = tmp_path / "h"
+    make_history(str(h), nights=2, points=3000, seed=5)
+    r = report(str(h), str(tmp_path / "out"))
+    page = open(tmp_path / "out" / "index.html").read()
+    assert page.count("<img ") == H.MAX_SERIES_PLOTS, r.stdout
+    assert f"{3000 - H.MAX_SERIES_PLOTS} of 3000 series are not drawn" in page
+    assert len(rows(str(tmp_path / "out" / "history-points.csv"))) == 6000
+
+
+def test_a_stopped_history_report_says_so_in_one_line(tmp_path):
+    """SIGTERM while the workers read the folder: exit 143, one line, no worker traceback, no
+    worker left (they end with their parent), no page written."""
+    import signal
+    import time
+    h = tmp_path / "h"
+    make_history(str(h), nights=400, points=200, seed=6)
+    p = subprocess.Popen([sys.executable, SCRIPT, "--history", str(h), "-o", str(tmp_path / "out")],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def children():
+        try:
+            with open(f"/proc/{p.pid}/task/{p.pid}/children") as f:
+                return [int(x) for x in f.read().split()]
+        except OSError:
+            return []
+    deadline = time.monotonic() + 120
+    kids = []
+    while not kids and p.poll() is None and time.monotonic() < deadline:  # the event: the pool's workers exist
+        kids = children()
+        time.sleep(0.005)
+    assert kids, "no worker process appeared"
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 143, (p.returncode, err)
+    assert "Traceback" not in err and err.strip().splitlines() == [
+        "octocd report: stopped by SIGTERM; the earlier report (if any) is left as it was"], err
+    assert not os.path.exists(tmp_path / "out" / "index.html")
+
+    def running(k):
+        try:
+            with open(f"/proc/{k}/stat") as f:
+                return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+        except OSError:
+            return False
+    deadline = time.monotonic() + 30
+    while any(running(k) for k in kids):  # the event: every worker ended
+        assert time.monotonic() < deadline, "a worker outlived the stopped report"
+        time.sleep(0.01)

@@ -157,7 +157,10 @@ def test_speedups_are_printed_on_the_steps_plot():
     fig = next(f for n, f, _ in doc.figs if n == "table5-steps")
     texts = fig_texts(fig)
     # B = 1.5 x A and C = 2 x A for cpu and cuda on both scenes: 8 speed-ups; bullet (one value) none.
-    assert sorted(t for t in texts if t.endswith("x")) == ["1.50x"] * 4 + ["2.00x"] * 4, texts
+    assert sorted(t.split()[-1] for t in texts if t.endswith("x")) == ["1.50x"] * 4 + ["2.00x"] * 4, texts
+    # Each bar names its engine (issue 80 item 1): 2 scenes x (3 cpu + 3 cuda + 1 bullet) bars.
+    names = sorted(t.get_text().split()[0] for t in fig.axes[0].texts)
+    assert names == ["bullet"] * 2 + ["cpu"] * 6 + ["cuda"] * 6, texts
 
 
 # ---- absolute stage times beside the shares ---------------------------------------------------
@@ -209,7 +212,7 @@ def test_bullet_broadphase_named_btdbvt_never_sh(tmp_path):
     labels = fig.axes[0].get_legend_handles_labels()[1]
     assert "bullet btDbvtBroadphase" in labels and not any(l.startswith("bullet SH") for l in labels), labels
     texts = fig_texts(fig)
-    assert texts.count("1.11x") == 2, texts  # O-A over SH, cpu, both meshes
+    assert [t.split()[-1] for t in texts].count("1.11x") == 2, texts  # O-A over SH, cpu, both meshes
     rc, md, log = run_main(tmp_path, tablea1())
     assert rc == 0, log
     assert "bullet SH" not in md and "btDbvtBroadphase" in md
@@ -221,8 +224,14 @@ def test_what_each_engine_ran_is_named():
         if p["params"]["engine"] == "bullet":
             p["geometry"] = "convex hulls of the meshes"
     g = MR.merge([("r.json", j)])[0]
-    assert MR.engines_ran_text(g) == ("Engines ran: cpu: broadphase hash, octree; bullet: broadphase btDbvtBroadphase, "
-                                      "geometry convex hulls of the meshes")
+    assert MR.engines_ran_text(g) == ("Engines ran: cpu: 4 of 4 point(s) measured, 900.0–1,000 steps/s (medians), "
+                                      "broadphase hash, octree; bullet: 2 of 2 point(s) measured, 5,000 steps/s, "
+                                      "broadphase btDbvtBroadphase, geometry convex hulls of the meshes")
+    # A skipped engine is named with its count and reason, never an empty "cuda: ".
+    j["points"].append({"id": "x | cuda", "index": 99, "status": "skipped", "reason": "built without CUDA",
+                        "params": {"scene": "bunny-stack-50", "engine": "cuda", "axes": {}}})
+    g = MR.merge([("r.json", j)])[0]
+    assert MR.engines_ran_text(g).endswith("; cuda: 0 of 1 point(s) measured, 1 skipped (built without CUDA)")
 
 
 def test_own_broadphase_classes_are_the_registrys():
