@@ -306,7 +306,9 @@ int run_copies(const RunOptions& o, const std::shared_ptr<const octocd::Model>& 
   if (!o.quiet) {
     fmt::print("\nscene        {} ({} bodies) x {} copies as separate runs\n", single->scene.name,
                single->initial.size(), k);
-    fmt::print("pipeline     engine {}, {} copies at once\n", o.engine, r.threads);
+    const std::string& unsafe = octocd::engine_info(o.engine, "--engine").not_thread_safe;
+    if (unsafe.empty()) fmt::print("pipeline     engine {}, {} copies at once\n", o.engine, r.threads);
+    else fmt::print("pipeline     engine {}, one copy at a time (not thread-safe: {})\n", o.engine, unsafe);
     fmt::print("set-up       {:.2f} s (scene and bodies)\n", model_s);
     fmt::print("frames       {} per copy (dt {} s), wall {:.2f} s for all copies\n", frames, single->scene.dt, r.wall_s);
     fmt::print("steps/s      {:.1f}   (a copy's steps over its step time, the median over copies)\n", median);

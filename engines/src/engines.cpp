@@ -155,24 +155,36 @@ EngineInfo bullet_info() {
 }
 
 EngineInfo ode_info() {
-  return reference_info("ode",
+  EngineInfo ode = reference_info("ode",
       "the same scene in the Open Dynamics Engine (dWorld, rotating boxes and hulls)", "ode-hash", "dHashSpace",
       "ODE runs its own narrow phase: dCollide (dBoxBox, libccd MPR on convex hulls, trimesh colliders)");
+  ode.not_thread_safe =
+      "Debian's ODE 0.16 is built without ODE_EXT_mt_collisions (dGetConfiguration): its collision data is one per "
+      "process, and worlds colliding at once on threads corrupt it (SIGSEGV or an ODE assertion; docs/engines.md)";
+  return ode;
 }
 
 EngineInfo mujoco_info() {
-  return reference_info("mujoco",
+  EngineInfo mujoco = reference_info("mujoco",
       "the same scene in MuJoCo (soft contacts, convex hulls, rotating bodies)", "mujoco-sap",
       "MuJoCo's mj_collision (sweep and prune)",
       "MuJoCo runs its own narrow phase: mjc_BoxBox on box pairs, MPR (libccd) on the convex hulls of meshes");
+  mujoco.not_thread_safe =
+      "MuJoCo 2.2's error and warning handlers (mju_user_error, mju_user_warning) are process-wide pointers the "
+      "adapter sets around each step (docs/engines.md)";
+  return mujoco;
 }
 
 EngineInfo dart_info() {
-  return reference_info("dart",
+  EngineInfo dart = reference_info("dart",
       "the same scene in DART (World, FCL collision, boxed LCP; rotating boxes and hulls)", "dart-fcl",
       "FCL's dynamic AABB tree in DART's FCLCollisionGroup",
       "DART runs its own narrow phase: FCL's (box-box, BVH triangle meshes for hulls and static meshes) with DART's "
       "contact post-processing");
+  dart.not_thread_safe =
+      "DART 6.12's contact parameters (ContactConstraint's error reduction and constraint force mixing) are "
+      "process-wide statics the adapter sets around each step (docs/engines.md)";
+  return dart;
 }
 
 

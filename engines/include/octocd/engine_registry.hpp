@@ -45,6 +45,10 @@ struct EngineInfo {
   /// cuda); false: it steps one scene per run and runs the copies as separate runs
   /// (octocd/world_copies.hpp).
   bool batched_worlds = false;
+  /// "" when separate instances of it may step at once on threads of one process; else
+  /// why not (library state shared by every instance of the process, unguarded), and
+  /// run_copies_separately (octocd/world_copies.hpp) runs its copies one after another.
+  std::string not_thread_safe;
   /// The setting key of its host thread count (cpu: "threads", CpuSettings::threads):
   /// `validate --determinism` runs it at 1 and N threads ("KEY=N") and compares; "" when
   /// it steps on one host thread (or a device), so the thread-count row is n/a.
