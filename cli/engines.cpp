@@ -9,6 +9,7 @@
 #include "command.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
+#include "octocd/error.hpp"
 #include "octocd/process_engines.hpp"
 #include "octocd/text.hpp"
 
@@ -20,6 +21,7 @@ namespace {
 struct EnginesOptions {
   bool available = false;  ///< --available: only the names of the engines that run here
   bool json = false;       ///< --json: the registry as JSON on stdout
+  double check_timeout_s = 30.0;  ///< --check-timeout: one bound for every process engine's check, run at once
 };
 
 std::string join(const std::vector<std::string>& v, const char* sep = ", ") {
@@ -72,6 +74,10 @@ int engines_json() {
 }
 
 int engines_command(const EnginesOptions& o) {
+  if (!(o.check_timeout_s > 0.0 && o.check_timeout_s <= 30.0))
+    throw InputError(fmt::format("--check-timeout: {:g} s; allowed: a number of seconds in (0, 30]", o.check_timeout_s));
+  // Every process engine's check at once, under one bound; the answers are kept for the process.
+  check_process_engines(process_engines(builtin_engine_names()), o.check_timeout_s);
   if (o.json) return engines_json();
   for (const EngineInfo& e : engine_infos()) {
     const std::string why = engine_unavailable(e);
@@ -95,6 +101,10 @@ Command add_engines_command(CLI::App& app) {
   const auto options = std::make_shared<EnginesOptions>();
   CLI::App* cmd = add_table_command(app, CommandId::engines);
   cmd->add_flag("--available", options->available, "Print only the names of the engines that run here, one a line");
+  cmd->add_option("--check-timeout", options->check_timeout_s,
+                  "One bound (s) for the checks of every process engine, run at once (at most 32 at a time): a "
+                  "check still running then is stopped and its engine listed unavailable, timed out; in (0, 30]")
+      ->default_val(30.0);
   cmd->add_flag("--json", options->json,
                 "Print the registry as JSON: per engine name, kind (builtin or process), available, why, rotates, "
                 "geometries, settings, description, own_broadphase and its class where it runs its own (a process "

@@ -38,6 +38,7 @@
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
 #include "octocd/world.hpp"
+#include "octocd/text.hpp"
 #include "octocd/worlds.hpp"
 #include "octocd/world_copies.hpp"
 #include "octocd/cuda_world.hpp"
@@ -166,11 +167,14 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
   const std::string memory_kind = octocd::engine_info(engine, "engine").memory_kind;
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
   const octocd::Scene& s = world.scene();
-  fmt::print("\nscene        {} ({} bodies, {} shapes)\n", s.name, world.bodies().size(),
+  // Names and descriptions from files (the scene's, an engines file's command items) are
+  // written for the terminal (octocd::printable).
+  using octocd::printable;
+  fmt::print("\nscene        {} ({} bodies, {} shapes)\n", printable(s.name), world.bodies().size(),
              world.shapes().size());
-  fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", engine, world.broadphase_name(),
-             world.midphase_name(), world.device());
-  fmt::print("geometry     {}\n", world.collision_geometry());
+  fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", printable(engine),
+             printable(world.broadphase_name()), printable(world.midphase_name()), printable(world.device()));
+  fmt::print("geometry     {}\n", printable(world.collision_geometry()));
   fmt::print("set-up       {:.2f} s (scene and bodies {:.2f} s, engine {:.2f} s)\n", t.model_s + t.engine_s,
              t.model_s, t.engine_s);
   fmt::print("frames       {} (dt {} s, simulated {:.3f} s, wall {:.2f} s)\n", t.frames, s.dt,
@@ -225,7 +229,15 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
              "are the ones\n that can produce a contact; broadphase candidates are the pairs tested before "
              "the exact AABB test.)\n");
   const std::string notes = world.notes();
-  if (!notes.empty()) fmt::print("\nengine {}: {}\n", engine, notes);
+  if (!notes.empty()) {
+    std::string shown;  // each line printable, the lines kept
+    for (std::size_t at = 0; at <= notes.size();) {
+      const std::size_t end = std::min(notes.find('\n', at), notes.size());
+      shown += (at ? "\n" : "") + printable(std::string_view(notes).substr(at, end - at), static_cast<std::size_t>(-1));
+      at = end + 1;
+    }
+    fmt::print("\nengine {}: {}\n", printable(engine), shown);
+  }
   if (!trace.empty()) fmt::print("\ntrace        {}\n", trace);
   if (!xdmf.empty()) fmt::print("xdmf         {} (ParaView, Xdmf3 reader)\n", xdmf);
 }
@@ -304,7 +316,7 @@ int run_copies(const RunOptions& o, const std::shared_ptr<const octocd::Model>& 
   const double world_steps = r.wall_s > 0.0 ? static_cast<double>(ran) / r.wall_s : 0.0;
   const long k = o.worlds.count;
   if (!o.quiet) {
-    fmt::print("\nscene        {} ({} bodies) x {} copies as separate runs\n", single->scene.name,
+    fmt::print("\nscene        {} ({} bodies) x {} copies as separate runs\n", octocd::printable(single->scene.name),
                single->initial.size(), k);
     const std::string& unsafe = octocd::engine_info(o.engine, "--engine").not_thread_safe;
     if (unsafe.empty()) fmt::print("pipeline     engine {}, {} copies at once\n", o.engine, r.threads);

@@ -8,7 +8,9 @@ scene keeps it clear of everything). Usage: boxes_engine.py [--mode MODE] REQUES
 MODE plants a fault for octocd's tests (tests/cli/test_cli_process_engines.cpp): ok (the
 default), crash (exit 3), signal (SIGABRT), hang (sleep), truncated, bodies, frames,
 hostile (escapes and 10 MB on stderr, exit 1), no-timing. A `ready` setting names a file
-written (with the process id) once the request is read: the tests wait on it."""
+written (with the process id) once the request is read: the tests wait on it. A
+`wall_step_seconds` setting is written as that attribute instead of the measured time (a
+hostile timing: 0, 5e-324, nan, ...)."""
 import json
 import os
 import signal
@@ -80,7 +82,8 @@ def main():
         h.attrs.update(format="octocd-trace", version=2, engine="boxes_engine 1.0", scene=req["scene_json"],
                        dt=dt, gravity=g, collision_shape="box", deactivation="off")
         if mode != "no-timing":
-            h.attrs["wall_step_seconds"] = np.float64(wall)
+            told = req["settings"].get("wall_step_seconds")
+            h.attrs["wall_step_seconds"] = np.float64(wall if told is None else float(told))
         h["bodies/local_aabb_min"] = np.float32(lo[:m])
         h["bodies/local_aabb_max"] = np.float32(hi[:m])
         h["bodies/inverse_mass"] = np.float32([1 / w if w > 0 else 0 for w in mass[:m]])
