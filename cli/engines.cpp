@@ -39,6 +39,8 @@ std::string capabilities(const EngineInfo& e) {
   s += ", geometry " + join(e.geometries);
   const std::vector<std::string> keys = engine_setting_names(e);
   if (!keys.empty()) s += ", settings " + join(keys);
+  if (!e.not_thread_safe.empty()) s += ", not thread-safe (run --worlds: one copy at a time)";
+  if (e.max_bodies > 0) s += fmt::format(", at most {} bodies", e.max_bodies);
   return s;
 }
 
@@ -55,6 +57,12 @@ int engines_json() {
     j["rotates"] = e.rotates;
     j["geometries"] = e.geometries;
     j["settings"] = engine_setting_names(e);
+    j["thread_safe"] = e.not_thread_safe.empty();
+    if (!e.not_thread_safe.empty()) j["not_thread_safe"] = e.not_thread_safe;
+    if (e.max_bodies > 0) {
+      j["max_bodies"] = e.max_bodies;
+      j["max_bodies_reason"] = e.max_bodies_reason;
+    }
     j["description"] = e.description;
     if (!e.own_broadphase.empty()) {
       j["own_broadphase"] = e.own_broadphase;
@@ -107,7 +115,8 @@ Command add_engines_command(CLI::App& app) {
       ->default_val(30.0);
   cmd->add_flag("--json", options->json,
                 "Print the registry as JSON: per engine name, kind (builtin or process), available, why, rotates, "
-                "geometries, settings, description, own_broadphase and its class where it runs its own (a process "
+                "geometries, settings, thread_safe (not_thread_safe: why not), max_bodies and its reason where it has "
+                "one, description, own_broadphase and its class where it runs its own (a process "
                 "engine also: command, engines_file), and the engines files read");
   return {[cmd] { return cmd->parsed(); }, [options] { return engines_command(*options); }};
 }
