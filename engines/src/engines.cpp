@@ -159,8 +159,9 @@ EngineInfo ode_info() {
       "the same scene in the Open Dynamics Engine (dWorld, rotating boxes and hulls)", "ode-hash", "dHashSpace",
       "ODE runs its own narrow phase: dCollide (dBoxBox, libccd MPR on convex hulls, trimesh colliders)");
   ode.not_thread_safe =
-      "Debian's ODE 0.16 is built without ODE_EXT_mt_collisions (dGetConfiguration): its collision data is one per "
-      "process, and worlds colliding at once on threads corrupt it (SIGSEGV or an ODE assertion; docs/engines.md)";
+      "ODE 0.16's default threading implementation is one per process and Debian builds it without "
+      "ODE_EXT_mt_collisions (dGetConfiguration): worlds stepped at once on threads end in SIGSEGV or an ODE "
+      "assertion (m_dependencies_count, threading_impl_templates.h; docs/engines.md)";
   return ode;
 }
 
