@@ -9,6 +9,7 @@
 // points, the max-instances search and the result file have files of their own
 // (bench_sweep.hpp). Result format: docs/bench-format.md.
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <map>
 
@@ -19,6 +20,8 @@
 #include "octocd/error.hpp"
 #include "octocd/shared_files.hpp"
 #include "octocd/run_session.hpp"
+#include "octocd/text.hpp"
+#include "octocd/timing_limits.hpp"
 #include "tools.hpp"
 
 namespace octocd::cli {
@@ -72,6 +75,37 @@ std::string budget_text(const Sweep& s) {
 }
 
 std::string default_scene_dir() { return (fs::path(shared_dir()) / "datasets" / "scenes").string(); }
+
+/// A finished point's timing figures (each window's steps_per_s, cpu_steps_per_s and
+/// world_steps_per_s, a broadphase point's ms_per_frame: median, min, max, values) are
+/// ones `report` takes: a finite number, 0 (not measured) or within [limits::kMinTiming,
+/// limits::kMaxTiming]. Otherwise InputError naming the point, its engine, the field and
+/// the range, before the point is written: no result holds a figure another command refuses.
+void check_point_timings(const json& r, const Point& p) {
+  const auto check = [&](const json& spread, const std::string& at) {
+    if (!spread.is_object()) return;
+    const auto one = [&](const json& v, const std::string& where) {
+      const double x = v.is_number() ? v.get<double>() : std::nan("");
+      if (x == 0.0 || (std::isfinite(x) && x >= limits::kMinTiming && x <= limits::kMaxTiming)) return;
+      throw InputError(fmt::format("bench point {} (engine {}): {}: {}; allowed: a finite number from {:g} to {:g} "
+                                   "(0: not measured); a timing octocd bench cannot have measured, so no result is "
+                                   "written with it",
+                                   printable(p.id), printable(p.engine), where, v.is_null() ? "not finite" : v.dump(),
+                                   limits::kMinTiming, limits::kMaxTiming));
+    };
+    for (const char* k : {"median", "min", "max"})
+      if (spread.contains(k)) one(spread[k], at + "." + k);
+    if (spread.contains("values") && spread["values"].is_array())
+      for (std::size_t i = 0; i < spread["values"].size(); ++i)
+        one(spread["values"][i], fmt::format("{}.values[{}]", at, i));
+  };
+  if (r.value("status", "") != "ok") return;
+  if (r.contains("windows") && r["windows"].is_object())
+    for (const auto& [name, w] : r["windows"].items())
+      for (const char* k : {"steps_per_s", "cpu_steps_per_s", "world_steps_per_s"})
+        if (w.contains(k)) check(w[k], "windows." + name + "." + k);
+  if (r.contains("ms_per_frame")) check(r["ms_per_frame"], "ms_per_frame");
+}
 
 }  // namespace
 
@@ -463,6 +497,7 @@ int bench_command(const BenchOptions& o) {
       // More runnable threads than cores (the bench's own included) while it measured.
       r["under_load"] = threads > 0 && !la.empty() && la[0].get<double>() > static_cast<double>(threads) + 1.0;
     }
+    check_point_timings(r, p);
     if (r.value("status", "") == "failed") any_failed = true;
     std::string status = r.value("status", "?");
     if (status == "ok" && r.contains("windows")) {

@@ -208,8 +208,8 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
     fmt::print(stderr,
                "bench {}: {} points ({} scenes x {} engines x {} eps), {} copies each and one unperturbed run, {} "
                "frames; result {} and {}\n",
-               s.name, points.size(), s.scenes.size(), s.engines.size(), s.eps.size(), s.copies, s.frames, o.output,
-               csv_path);
+               printable(s.name), points.size(), s.scenes.size(), s.engines.size(), s.eps.size(), s.copies, s.frames,
+               printable(o.output), printable(csv_path));
   SweepProgress progress(points.size(), !o.quiet);
   ModelCache models;
   bool any_failed = false;
@@ -300,7 +300,8 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
     throw InputError(fmt::format("{}: every point skipped (first: {}: {}); allowed: a sweep with a point this octocd "
                                  "can run (result kept in {})",
                                  origin, points.front().id, points.front().reason, o.output));
-  if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}, CSV {}\n", s.name, o.output, csv_path);
+  if (!o.quiet)
+    fmt::print(stderr, "bench {}: done, result {}, CSV {}\n", printable(s.name), printable(o.output), printable(csv_path));
   return any_failed ? 1 : 0;
 }
 

@@ -155,6 +155,13 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
                               p.engine, s.max_bodies_reason.at(p.engine));
     return r;
   }
+  if (const EngineInfo& limited = octocd::engine_info(p.engine, "engines");
+      limited.max_bodies > 0 && model->bodies.size() > limited.max_bodies) {
+    r["status"] = "skipped";
+    r["reason"] = fmt::format("{} bodies, above engine {}'s measured limit of {} bodies: {}", model->bodies.size(),
+                              p.engine, limited.max_bodies, limited.max_bodies_reason);
+    return r;
+  }
   // Engines that step on the host: their steps per process CPU second are a figure too (the
   // gate's, on a shared machine). A device engine's CPU time would miss its kernels.
   // (Not a process engine: its steps run in another process, whose CPU time this one's is not.)

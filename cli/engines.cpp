@@ -9,6 +9,7 @@
 #include "command.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
+#include "octocd/error.hpp"
 #include "octocd/process_engines.hpp"
 #include "octocd/text.hpp"
 
@@ -20,6 +21,7 @@ namespace {
 struct EnginesOptions {
   bool available = false;  ///< --available: only the names of the engines that run here
   bool json = false;       ///< --json: the registry as JSON on stdout
+  double check_timeout_s = 30.0;  ///< --check-timeout: one bound for every process engine's check, run at once
 };
 
 std::string join(const std::vector<std::string>& v, const char* sep = ", ") {
@@ -37,6 +39,8 @@ std::string capabilities(const EngineInfo& e) {
   s += ", geometry " + join(e.geometries);
   const std::vector<std::string> keys = engine_setting_names(e);
   if (!keys.empty()) s += ", settings " + join(keys);
+  if (!e.not_thread_safe.empty()) s += ", not thread-safe (run --worlds: one copy at a time)";
+  if (e.max_bodies > 0) s += fmt::format(", at most {} bodies", e.max_bodies);
   return s;
 }
 
@@ -53,6 +57,12 @@ int engines_json() {
     j["rotates"] = e.rotates;
     j["geometries"] = e.geometries;
     j["settings"] = engine_setting_names(e);
+    j["thread_safe"] = e.not_thread_safe.empty();
+    if (!e.not_thread_safe.empty()) j["not_thread_safe"] = e.not_thread_safe;
+    if (e.max_bodies > 0) {
+      j["max_bodies"] = e.max_bodies;
+      j["max_bodies_reason"] = e.max_bodies_reason;
+    }
     j["description"] = e.description;
     if (!e.own_broadphase.empty()) {
       j["own_broadphase"] = e.own_broadphase;
@@ -72,6 +82,10 @@ int engines_json() {
 }
 
 int engines_command(const EnginesOptions& o) {
+  if (!(o.check_timeout_s > 0.0 && o.check_timeout_s <= 30.0))
+    throw InputError(fmt::format("--check-timeout: {:g} s; allowed: a number of seconds in (0, 30]", o.check_timeout_s));
+  // Every process engine's check at once, under one bound; the answers are kept for the process.
+  check_process_engines(process_engines(builtin_engine_names()), o.check_timeout_s);
   if (o.json) return engines_json();
   for (const EngineInfo& e : engine_infos()) {
     const std::string why = engine_unavailable(e);
@@ -95,9 +109,14 @@ Command add_engines_command(CLI::App& app) {
   const auto options = std::make_shared<EnginesOptions>();
   CLI::App* cmd = add_table_command(app, CommandId::engines);
   cmd->add_flag("--available", options->available, "Print only the names of the engines that run here, one a line");
+  cmd->add_option("--check-timeout", options->check_timeout_s,
+                  "One bound (s) for the checks of every process engine, run at once (at most 32 at a time): a "
+                  "check still running then is stopped and its engine listed unavailable, timed out; in (0, 30]")
+      ->default_val(30.0);
   cmd->add_flag("--json", options->json,
                 "Print the registry as JSON: per engine name, kind (builtin or process), available, why, rotates, "
-                "geometries, settings, description, own_broadphase and its class where it runs its own (a process "
+                "geometries, settings, thread_safe (not_thread_safe: why not), max_bodies and its reason where it has "
+                "one, description, own_broadphase and its class where it runs its own (a process "
                 "engine also: command, engines_file), and the engines files read");
   return {[cmd] { return cmd->parsed(); }, [options] { return engines_command(*options); }};
 }

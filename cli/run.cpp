@@ -38,6 +38,7 @@
 #include "octocd/validation.hpp"
 #include "octocd/version.hpp"
 #include "octocd/world.hpp"
+#include "octocd/text.hpp"
 #include "octocd/worlds.hpp"
 #include "octocd/world_copies.hpp"
 #include "octocd/cuda_world.hpp"
@@ -183,11 +184,14 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
   const std::string memory_kind = octocd::engine_info(engine, "engine").memory_kind;
   const double n = static_cast<double>(std::max<std::int64_t>(t.frames, 1));
   const octocd::Scene& s = world.scene();
-  fmt::print("\nscene        {} ({} bodies, {} shapes)\n", s.name, world.bodies().size(),
+  // Names and descriptions from files (the scene's, an engines file's command items) are
+  // written for the terminal (octocd::printable).
+  using octocd::printable;
+  fmt::print("\nscene        {} ({} bodies, {} shapes)\n", printable(s.name), world.bodies().size(),
              world.shapes().size());
-  fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", engine, world.broadphase_name(),
-             world.midphase_name(), world.device());
-  fmt::print("geometry     {}\n", world.collision_geometry());
+  fmt::print("pipeline     engine {}, broadphase {}, midphase {}, on {}\n", printable(engine),
+             printable(world.broadphase_name()), printable(world.midphase_name()), printable(world.device()));
+  fmt::print("geometry     {}\n", printable(world.collision_geometry()));
   fmt::print("set-up       {:.2f} s (scene and bodies {:.2f} s, engine {:.2f} s{})\n", t.model_s + t.engine_s,
              t.model_s, t.engine_s,
              t.process_s > 0 ? fmt::format(", of which {:.2f} s its process's start-up, set-up and trace writing "
@@ -251,7 +255,15 @@ void print_summary(const octocd::Engine& world, const Totals& t, double wall_s,
              "the exact AABB test{}.)\n",
              t.pairs_reported ? "" : ";\n n/a: the engine reports no pairs (its trace has no /pairs)");
   const std::string notes = world.notes();
-  if (!notes.empty()) fmt::print("\nengine {}: {}\n", engine, notes);
+  if (!notes.empty()) {
+    std::string shown;  // each line printable, the lines kept
+    for (std::size_t at = 0; at <= notes.size();) {
+      const std::size_t end = std::min(notes.find('\n', at), notes.size());
+      shown += (at ? "\n" : "") + printable(std::string_view(notes).substr(at, end - at), static_cast<std::size_t>(-1));
+      at = end + 1;
+    }
+    fmt::print("\nengine {}: {}\n", printable(engine), shown);
+  }
   if (!trace.empty()) fmt::print("\ntrace        {}\n", trace);
   if (!xdmf.empty()) fmt::print("xdmf         {} (ParaView, Xdmf3 reader)\n", xdmf);
 }
@@ -330,9 +342,11 @@ int run_copies(const RunOptions& o, const std::shared_ptr<const octocd::Model>& 
   const double world_steps = r.wall_s > 0.0 ? static_cast<double>(ran) / r.wall_s : 0.0;
   const long k = o.worlds.count;
   if (!o.quiet) {
-    fmt::print("\nscene        {} ({} bodies) x {} copies as separate runs\n", single->scene.name,
+    fmt::print("\nscene        {} ({} bodies) x {} copies as separate runs\n", octocd::printable(single->scene.name),
                single->initial.size(), k);
-    fmt::print("pipeline     engine {}, {} copies at once\n", o.engine, r.threads);
+    const std::string& unsafe = octocd::engine_info(o.engine, "--engine").not_thread_safe;
+    if (unsafe.empty()) fmt::print("pipeline     engine {}, {} copies at once\n", o.engine, r.threads);
+    else fmt::print("pipeline     engine {}, one copy at a time (not thread-safe: {})\n", o.engine, unsafe);
     fmt::print("set-up       {:.2f} s (scene and bodies)\n", model_s);
     fmt::print("frames       {} per copy (dt {} s), wall {:.2f} s for all copies\n", frames, single->scene.dt, r.wall_s);
     fmt::print("steps/s      {:.1f}   (a copy's steps over its step time, the median over copies)\n", median);

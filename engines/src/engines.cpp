@@ -155,24 +155,48 @@ EngineInfo bullet_info() {
 }
 
 EngineInfo ode_info() {
-  return reference_info("ode",
+  EngineInfo ode = reference_info("ode",
       "the same scene in the Open Dynamics Engine (dWorld, rotating boxes and hulls)", "ode-hash", "dHashSpace",
       "ODE runs its own narrow phase: dCollide (dBoxBox, libccd MPR on convex hulls, trimesh colliders)");
+  ode.not_thread_safe =
+      "ODE 0.16's default threading implementation is one per process and Debian builds it without "
+      "ODE_EXT_mt_collisions (dGetConfiguration): worlds stepped at once on threads end in SIGSEGV or an ODE "
+      "assertion (m_dependencies_count, threading_impl_templates.h; docs/engines.md)";
+  return ode;
 }
 
 EngineInfo mujoco_info() {
-  return reference_info("mujoco",
+  EngineInfo mujoco = reference_info("mujoco",
       "the same scene in MuJoCo (soft contacts, convex hulls, rotating bodies)", "mujoco-sap",
       "MuJoCo's mj_collision (sweep and prune)",
       "MuJoCo runs its own narrow phase: mjc_BoxBox on box pairs, MPR (libccd) on the convex hulls of meshes");
+  mujoco.max_bodies = 5000;
+  mujoco.max_bodies_reason =
+      "MuJoCo 2.2 builds its model from XML only and its compiler (mj_setConst) is quadratic in the bodies "
+      "(2.8 CPU s at 5,000, 11-45 CPU s at 10^4, about 1,100 CPU s at 10^5), and boxes-uniform-10k (--mujoco "
+      "max_contacts=100) ends in SIGSEGV inside mj_fwdConstraint at frame 2 (docs/engines.md, \"Set-up of large "
+      "scenes (MuJoCo 2.2)\")";
+  mujoco.not_thread_safe =
+      "MuJoCo 2.2's error and warning handlers (mju_user_error, mju_user_warning) are process-wide pointers the "
+      "adapter sets around each step (docs/engines.md)";
+  return mujoco;
 }
 
 EngineInfo dart_info() {
-  return reference_info("dart",
+  EngineInfo dart = reference_info("dart",
       "the same scene in DART (World, FCL collision, boxed LCP; rotating boxes and hulls)", "dart-fcl",
       "FCL's dynamic AABB tree in DART's FCLCollisionGroup",
       "DART runs its own narrow phase: FCL's (box-box, BVH triangle meshes for hulls and static meshes) with DART's "
       "contact post-processing");
+  dart.max_bodies = 20000;
+  dart.max_bodies_reason =
+      "DART 6.12 adds bodies in O(n) each (World::addSkeleton, FCL's dynamic tree, CollisionGroup::"
+      "addShapeFrameImpl): 5-6 s at 10^4, 334 s at 5 x 10^4 (22-29 s with --dart insert=posed), 124-144 s at 10^5 "
+      "even posed (docs/engines.md, dart, \"Set-up of large scenes\")";
+  dart.not_thread_safe =
+      "DART 6.12's contact parameters (ContactConstraint's error reduction and constraint force mixing) are "
+      "process-wide statics the adapter sets around each step (docs/engines.md)";
+  return dart;
 }
 
 
@@ -383,6 +407,11 @@ std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_p
   const auto it = settings.find(name);
   static const Items kNone;
   const std::string where = fmt::format(fmt::runtime(cli_argument_names().settings), name);
+  if (info.max_bodies > 0 && model->bodies.size() > info.max_bodies)
+    throw RuntimeError(fmt::format("engine {} does not start {} bodies: above its measured limit of {} bodies ({}); "
+                                   "allowed: at most {} bodies on {}, or another engine (octocd engines)",
+                                   name, model->bodies.size(), info.max_bodies, info.max_bodies_reason,
+                                   info.max_bodies, name));
   if (!info.command.empty())
     return make_process_engine(*find_process_engine(name), model, it == settings.end() ? kNone : it->second, where);
   return registered(info).make(model, it == settings.end() ? kNone : it->second, where);

@@ -19,6 +19,7 @@
 #include "octocd/external.hpp"
 #include "octocd/process_engines.hpp"
 #include "octocd/run_session.hpp"
+#include "octocd/timing_limits.hpp"
 #include "octocd/text.hpp"
 #include "octocd/trace_reader.hpp"
 
@@ -205,9 +206,13 @@ class ProcessEngine final : public Engine {
                                      "time (s) spent in the engine's step calls",
                                      trace_path_));
       wall_step_seconds_ = reader.number_attribute("wall_step_seconds");
-      if (!finite_non_negative(wall_step_seconds_))
-        throw InputError(fmt::format("{}: wall_step_seconds: {}; allowed: a finite number of seconds >= 0", trace_path_,
-                                     wall_step_seconds_));
+      // Its steps/s (frames over it) must be a figure a bench result can hold.
+      const double steps_per_s = static_cast<double>(frames_) / wall_step_seconds_;
+      if (!finite_non_negative(wall_step_seconds_) ||
+          (frames_ > 0 && !(std::isfinite(steps_per_s) && steps_per_s <= limits::kMaxTiming)))
+        throw InputError(fmt::format("{}: wall_step_seconds: {:g}; allowed: a finite number of seconds > 0 whose "
+                                     "{} frames over it are at most {:g} steps/s (0 only for a run of no frames)",
+                                     trace_path_, wall_step_seconds_, frames_, limits::kMaxTiming));
     } catch (const std::exception& e) {
       fail(fmt::format("exited with code 0 after {:.2f} s but wrote a trace the hardened reader refuses: {}", o.seconds,
                        e.what()),

@@ -5,6 +5,8 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +16,7 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <thread>
 
 #include <fmt/format.h>
 
@@ -38,6 +41,8 @@ constexpr std::uintmax_t kMaxEnginesFileBytes = 1 << 20;
 constexpr std::size_t kMaxEngines = 256, kMaxItems = 64, kMaxKeys = 64;
 /// Wall-time bound of a check command (s).
 constexpr double kCheckTimeoutS = 30.0;
+/// Most check commands check_process_engines runs at once (each a process that mostly waits).
+constexpr std::size_t kMostChecksAtOnce = 32;
 
 std::mutex g_mutex;
 std::string g_user_file;  // set_engines_file
@@ -251,7 +256,13 @@ const ProcessEngineSpec* find_process_engine(const std::string& name) {
   return nullptr;
 }
 
-std::string process_engine_unavailable(const ProcessEngineSpec& spec) {
+namespace {
+
+using CheckClock = std::chrono::steady_clock;
+
+/// process_engine_unavailable with its check bounded by `deadline` as well as kCheckTimeoutS
+/// (the shorter), cached. A check that cannot start before `deadline` is not run, and says so.
+std::string unavailable_by(const ProcessEngineSpec& spec, CheckClock::time_point deadline, double bound_s) {
   {
     const std::lock_guard<std::mutex> lock(g_mutex);
     if (const auto it = g_unavailable.find(spec.info.name); it != g_unavailable.end()) return it->second;
@@ -277,12 +288,21 @@ std::string process_engine_unavailable(const ProcessEngineSpec& spec) {
       run.argv = spec.check;
       run.argv[0] = process_detail::find_on_path(spec.check[0]);
       run.cwd = folder.string();
-      run.timeout_s = kCheckTimeoutS;
-      run.timeout_setting = "fixed bound for a check";
-      const process_detail::ChildOutcome o = process_detail::run_child(run);
-      if (o.end != process_detail::ChildOutcome::End::Exited || o.code != 0)
-        why = fmt::format("its check ({}) {}{}", printable(join(spec.check, " ")), process_detail::describe(o),
-                          process_detail::output_tail(o));
+      run.timeout_s = std::min(kCheckTimeoutS, std::chrono::duration<double>(deadline - CheckClock::now()).count());
+      run.timeout_setting = "the checks' overall bound (octocd engines --check-timeout)";
+      if (run.timeout_s <= 0.0) {
+        why = fmt::format("its check ({}) was not run: the checks' overall bound of {:g} s had passed",
+                          printable(join(spec.check, " ")), bound_s);
+      } else {
+        const process_detail::ChildOutcome o = process_detail::run_child(run);
+        if (o.end == process_detail::ChildOutcome::End::TimedOut)
+          why = fmt::format("its check ({}) timed out: it ran past {:.3g} s (the checks' bound, {:g} s for all at "
+                            "once) and was stopped{}",
+                            printable(join(spec.check, " ")), run.timeout_s, bound_s, process_detail::output_tail(o));
+        else if (o.end != process_detail::ChildOutcome::End::Exited || o.code != 0)
+          why = fmt::format("its check ({}) {}{}", printable(join(spec.check, " ")), process_detail::describe(o),
+                            process_detail::output_tail(o));
+      }
     }
   } catch (const std::exception& e) {
     why = e.what();
@@ -290,6 +310,30 @@ std::string process_engine_unavailable(const ProcessEngineSpec& spec) {
   const std::lock_guard<std::mutex> lock(g_mutex);
   g_unavailable[spec.info.name] = why;
   return why;
+}
+
+}  // namespace
+
+std::string process_engine_unavailable(const ProcessEngineSpec& spec) {
+  return unavailable_by(spec, CheckClock::now() + std::chrono::duration_cast<CheckClock::duration>(
+                                                      std::chrono::duration<double>(kCheckTimeoutS)),
+                        kCheckTimeoutS);
+}
+
+void check_process_engines(const std::vector<ProcessEngineSpec>& specs, double bound_s) {
+  if (!(bound_s > 0.0) || !(bound_s <= kCheckTimeoutS))
+    throw InputError(fmt::format("the checks' bound: {:g} s; allowed: (0, {:g}] s", bound_s, kCheckTimeoutS));
+  const auto deadline =
+      CheckClock::now() + std::chrono::duration_cast<CheckClock::duration>(std::chrono::duration<double>(bound_s));
+  std::atomic<std::size_t> next{0};
+  const auto work = [&] {
+    for (std::size_t i = next++; i < specs.size(); i = next++) (void)unavailable_by(specs[i], deadline, bound_s);
+  };
+  std::vector<std::thread> team;
+  const std::size_t n = std::min(specs.size(), kMostChecksAtOnce);
+  for (std::size_t t = 1; t < n; ++t) team.emplace_back(work);
+  work();
+  for (std::thread& t : team) t.join();
 }
 
 void check_process_settings(const ProcessEngineSpec& spec, const std::vector<std::string>& items,

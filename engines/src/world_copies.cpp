@@ -20,7 +20,10 @@ CopiesRun run_copies_separately(const std::string& engine, const std::shared_ptr
   out.states.resize(k);
   out.step_ms.assign(k, 0.0);
   out.frames.assign(k, 0);
-  const int t = static_cast<int>(loop_threads(k, LoopOptions{threads, 2, 1, {}}));
+  // An engine whose instances share unguarded process-wide state steps its copies one
+  // after another (EngineInfo::not_thread_safe).
+  const bool serial = !engine_info(engine, "--engine").not_thread_safe.empty();
+  const int t = serial ? 1 : static_cast<int>(loop_threads(k, LoopOptions{threads, 2, 1, {}}));
   out.threads = t;
   std::atomic<bool> failed{false};
   // Engines are made and destroyed one at a time (a library's set-up may share state

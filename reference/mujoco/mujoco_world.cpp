@@ -146,6 +146,7 @@ struct MujocoWorld::Impl : SettingsCore<MujocoSettings> {
   std::vector<std::uint32_t> geom_body;  // per MuJoCo geom: the octocd body
   std::vector<std::array<double, 3>> diag_inertia;  // per body, diagonal, body frame (0: static)
   std::array<int, mjNWARNING> warnings{};  // mjData::warning counts seen so far
+  int nconmax = 0, njmax = 0;  // the contact and constraint capacity (<size>), from max_contacts
 
   ~Impl() override {
     if (d) mj_deleteData(d);
@@ -154,6 +155,7 @@ struct MujocoWorld::Impl : SettingsCore<MujocoSettings> {
 
   void read_state();
   void check_step();
+  void check_capacity() const;
   std::string body_of_index(int k, int index) const;
   void fill_record();
 };
@@ -216,6 +218,22 @@ void MujocoWorld::Impl::check_step() {
     throw RuntimeError(fmt::format("mujoco: frame {}: MuJoCo warning: {} ({}){}", frame, k < 8 ? kWhat[k] : "unknown",
                                    g_last_warning, bad_state ? body_of_index(k, d->warning[k].lastinfo) : ""));
   }
+}
+
+/// After mj_fwdPosition (collision and constraint set-up): a full contact or constraint
+/// buffer throws, naming max_contacts and its value, before mj_fwdConstraint runs on the
+/// truncated arrays (MuJoCo 2.2 ends there in SIGSEGV: docs/engines.md).
+void MujocoWorld::Impl::check_capacity() const {
+  const bool contacts = d->warning[mjWARN_CONTACTFULL].number != warnings[mjWARN_CONTACTFULL];
+  const bool rows = d->warning[mjWARN_CNSTRFULL].number != warnings[mjWARN_CNSTRFULL];
+  if (!contacts && !rows) return;
+  throw RuntimeError(fmt::format(
+      "mujoco: frame {}: the {} is full ({} {}): MuJoCo would drop {} and its solver may then crash; "
+      "--mujoco max_contacts={} ({}); allowed: a larger max_contacts (an integer in [1, 1000000]; MuJoCo 2.2 "
+      "allocates about 12 bytes x njmax^2, docs/engines.md)",
+      frame + 1, contacts ? "contact buffer" : "constraint buffer", contacts ? "nconmax" : "njmax",
+      contacts ? nconmax : njmax, contacts ? "contacts" : "constraint rows", nconmax,
+      settings.max_contacts > 0 ? "as set" : "the default: 6 per dynamic body, at least 256, at most 1500"));
 }
 
 void MujocoWorld::Impl::fill_record() {
@@ -282,6 +300,8 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
                           ? settings.max_contacts
                           : static_cast<int>(std::min(kMostDefaultContacts, std::max<std::size_t>(256, 6 * dynamic)));
   const int njmax = nconmax * (settings.cone == MujocoCone::Elliptic ? 3 : 4);
+  im.nconmax = nconmax;
+  im.njmax = njmax;
   std::string x;
   x.reserve(4096);
   x += "<mujoco model=\"octocd\">\n";
@@ -458,6 +478,7 @@ const FrameMetrics& MujocoWorld::step() {
     mj_checkVel(m, d);
     auto t = std::chrono::steady_clock::now();
     mj_fwdPosition(m, d);
+    im.check_capacity();
     detect_ms = ms_since(t);
     t = std::chrono::steady_clock::now();
     mj_fwdVelocity(m, d);

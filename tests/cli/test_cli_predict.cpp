@@ -97,6 +97,20 @@ TEST_F(Predict, DivergenceOfUnperturbedCopiesIsZeroAndGrowsWithEps) {
   EXPECT_EQ(rows, 8u * 41u);
 }
 
+// The sweep's name comes from its file: on the terminal its escape sequences are shown as
+// \x1b (octocd::printable), never run (a CSI that clears the screen, an OSC that retitles it).
+TEST_F(Predict, DivergencePrintsItsSweepNameEscaped) {
+  const fs::path sweep = dir_ / "esc.json";
+  std::ofstream(sweep) << R"({"name": "dv\u001b[2J\u001b]0;pwned\u0007", "kind": "divergence", "scenes": [")"
+                       << src("datasets/scenes/box-stack.json")
+                       << R"("], "engines": ["cpu"], "eps": [1e-4], "copies": 1, "frames": 3})";
+  const Result r = run_octocd("bench " + sweep.string() + " -o " + (dir_ / "e.json").string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find('\x1b'), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find('\x07'), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("bench dv\\x1b[2J\\x1b]0;pwned\\x07: 1 points"), std::string::npos) << r.output;
+}
+
 TEST_F(Predict, DivergenceRefusesBadLadders) {
   const fs::path sweep = dir_ / "bad.json";
   std::ofstream(sweep) << R"({"name": "b", "kind": "divergence", "scenes": [")" << src("datasets/scenes/box-stack.json")

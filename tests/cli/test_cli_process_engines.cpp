@@ -92,7 +92,7 @@ TEST_F(ProcessEngines, ListedBesideTheBuiltInOnesWithTheirAvailability) {
   EXPECT_EQ(by["pyboxes"]["why"], "");
   EXPECT_EQ(by["pyboxes"]["rotates"], true);
   EXPECT_EQ(by["pyboxes"]["geometries"], nlohmann::json::array({"box"}));
-  EXPECT_EQ(by["pyboxes"]["settings"], nlohmann::json::array({"ready", "escape"}));
+  EXPECT_EQ(by["pyboxes"]["settings"], nlohmann::json::array({"ready", "escape", "wall_step_seconds"}));
   // Command items naming files are made absolute against the engines file's folder.
   EXPECT_TRUE(fs::path(by["pyboxes"]["command"][1].get<std::string>()).is_absolute());
   EXPECT_EQ(by["pymissing"]["available"], false);
@@ -174,6 +174,80 @@ TEST_F(ProcessEngines, RunGivesTheTraceAndBenchTheStepsPerSecondOfItsTiming) {
   EXPECT_GT(point.at("windows").at("all").at("steps_per_s").at("median").get<double>(), 0.0);
   EXPECT_FALSE(point.at("windows").at("all").contains("cpu_steps_per_s"));  // octocd's CPU time is not the engine's
   EXPECT_TRUE(tmp_empty());
+}
+
+// A process engine's timing is checked before it is used: a wall_step_seconds of 0, the
+// smallest subnormal, 1e-300, inf or NaN (steps/s 0, inf or 10^302) fails the run naming the
+// attribute and the allowed range, and bench stores the point as failed with that reason
+// instead of a steps/s `report` refuses.
+TEST_F(ProcessEngines, AHostileTimingIsRefusedNamingTheFieldAndTheRange) {
+  for (const char* wall : {"0", "5e-324", "1e-300", "inf", "nan"}) {
+    SCOPED_TRACE(wall);
+    const std::string item = std::string(" --pyboxes wall_step_seconds=") + wall;
+    const Result r = octocd("run " + data("boxes.json") + " --engine pyboxes --frames 30 --quiet" + item);
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_TRUE(std::regex_search(r.output, std::regex("runtime failure: engine 'pyboxes' .*wall_step_seconds: .*; "
+                                                       "allowed: a finite number of seconds > 0 whose 30 frames over "
+                                                       "it are at most 1e\\+15 steps/s")))
+        << r.output;
+    const std::string result = path(std::string("bench-") + wall + ".json");
+    const Result b = octocd("bench " + data("bench.json") + " --scene-dir " + data("") + " --quiet -o " + result + item);
+    EXPECT_EQ(b.code, 1) << b.output;
+    std::ifstream bin(result);
+    const nlohmann::json bench = nlohmann::json::parse(bin);
+    const nlohmann::json& point = bench.at("points").at(0);
+    EXPECT_EQ(point.at("status"), "failed");
+    EXPECT_NE(point.at("reason").get<std::string>().find("wall_step_seconds"), std::string::npos);
+    EXPECT_FALSE(point.contains("windows"));
+    EXPECT_TRUE(tmp_empty());
+  }
+}
+
+// The engines file's command items reach the terminal on `run`'s "pipeline ... on a process
+// (...)" line: their escape sequences are shown as \x1b (octocd::printable), never run.
+TEST_F(ProcessEngines, RunPrintsTheCommandItemsEscaped) {
+  const std::string script =
+      (fs::path(octocd::test::source_dir()) / "tests/support/process_engines/boxes_engine.py").string();
+  const std::string engines = path("esc-engines.json");
+  std::ofstream(engines) << R"({"format": "octocd-engines", "version": 1, "engines": [{"name": "pyesc",
+      "command": ["/usr/bin/python3", ")" << script << R"(", "--mode", "ok\u001b[2J\u001b]0;pwned\u0007"],
+      "rotates": true, "geometries": ["box"]}]})";
+  const Result r = octocd("run " + data("boxes.json") + " --engine pyesc --frames 5", engines);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find('\x1b'), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find('\x07'), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("on a process (python3 boxes_engine.py --mode ok\\x1b[2J\\x1b]0;pwned\\x07)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_TRUE(tmp_empty());
+}
+
+// `octocd engines` runs every process engine's check at once under one bound: six checks
+// that never end (one after another: 6 x 2 s, 6 x 30 s by default) are all answered within
+// the 2 s bound and its 2 s grace, each named as timed out.
+TEST_F(ProcessEngines, HangingChecksAreAnsweredWithinOneBoundEachNamed) {
+  const std::string script =
+      (fs::path(octocd::test::source_dir()) / "tests/support/process_engines/boxes_engine.py").string();
+  const std::string engines = path("hang-engines.json");
+  {
+    std::ofstream f(engines);
+    f << R"({"format": "octocd-engines", "version": 1, "engines": [)";
+    for (int i = 0; i < 6; ++i)
+      f << (i ? "," : "") << R"({"name": "hang)" << i << R"(", "command": ["/usr/bin/python3", ")" << script
+        << R"("], "check": ["/bin/sleep", "1000"]})";
+    f << "]}";
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  const Result r = octocd("engines --check-timeout 2", engines);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (int i = 0; i < 6; ++i)
+    EXPECT_TRUE(std::regex_search(r.output, std::regex("hang" + std::to_string(i) +
+                                                       " +unavailable: its check \\(/bin/sleep 1000\\) timed out: "
+                                                       "it ran past [0-9.]+ s \\(the checks' bound, 2 s for all")))
+        << r.output;
+  EXPECT_LT(s, 8.0) << "six checks of 2 s one after another take 12 s";
+  EXPECT_EQ(octocd("engines --check-timeout 31", engines).code, 2);
 }
 
 struct Fault {

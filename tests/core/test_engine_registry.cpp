@@ -10,6 +10,8 @@
 #include <cstdlib>
 #include <string>
 
+#include <fmt/format.h>
+
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
@@ -166,4 +168,33 @@ TEST(EngineRegistry, OptionsAnEngineCannotRunAreRefusedInTheCallersSpelling) {
   EXPECT_EQ(refusal("cpu", rot, cli_argument_names()),
             "--rotation: engine cpu translates only (design.md section 3); allowed: --rotation with --engine bullet");
   EXPECT_EQ(refusal("bullet", rot, cli_argument_names()), "");
+}
+
+// An engine with a measured size limit (EngineInfo::max_bodies: mujoco 5,000, dart 20,000)
+// refuses a larger model at once, before any set-up (MuJoCo's compile of 10^4 bodies took
+// 11-45 CPU s and then crashed; DART's set-up of 10^5 takes minutes), naming the count, the
+// limit and the measured reason; at the limit it is not refused for its size.
+TEST(EngineRegistry, AnEngineRefusesAModelAboveItsMeasuredLimitAtOnce) {
+  for (const char* name : {"mujoco", "dart"}) {
+    SCOPED_TRACE(name);
+    const EngineInfo& info = engine_info(name, "test");
+    ASSERT_GT(info.max_bodies, 0u);
+    ASSERT_FALSE(info.max_bodies_reason.empty());
+    const std::string scene = R"({"name": "many", "domain": {"min": [-40, -40, -40], "max": [40, 40, 40]},
+        "gravity": [0, 0, 0], "walls": "none", "groups": [{"name": "b", "shape": {"box": [0.01, 0.01, 0.01]},
+        "count": )" + std::to_string(info.max_bodies + 1) + R"(, "mass": 1, "layout": {"type": "random", "seed": 1}}]})";
+    const auto model = build_model(parse_scene(scene, "many.json"));
+    ASSERT_EQ(model->bodies.size(), info.max_bodies + 1);
+    std::string what;
+    try {
+      (void)make_engine(name, model);
+    } catch (const RuntimeError& e) {
+      what = e.what();
+    }
+    EXPECT_NE(what.find(fmt::format("engine {} does not start {} bodies: above its measured limit of {} bodies (",
+                                    name, info.max_bodies + 1, info.max_bodies)),
+              std::string::npos)
+        << what;
+  }
+  EXPECT_EQ(engine_info("bullet", "test").max_bodies, 0u) << "Bullet starts 10^5 bodies in 6-7 CPU s";
 }

@@ -386,6 +386,29 @@ TEST(MujocoWorld, BadAccelerationNamesTheBody) {
   EXPECT_NE(what.find("): DOF 9 is body 1 (group spinner)"), std::string::npos) << what;
 }
 
+// A column of four boxes on the floor finds more contacts than `max_contacts=2` holds: the
+// first step throws before MuJoCo's solver runs on the truncated arrays (with 10^4 boxes and
+// max_contacts=100 it ended in SIGSEGV inside mj_fwdConstraint), naming the setting and its
+// value; the engine's state is still the initial one.
+TEST(MujocoWorld, AFullContactBufferIsAnErrorNamingMaxContacts) {
+  const auto model = build_model(scene_of(
+      R"({"name": "stack", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 4, "mass": 2,
+          "positions": [[0, 0.1, 0], [0, 0.3, 0], [0, 0.5, 0], [0, 0.7, 0]]})",
+      "", "floor"));
+  MujocoSettings settings;
+  settings.max_contacts = 2;
+  MujocoWorld w(model, model->initial, settings);
+  std::string what;
+  try {
+    w.step();
+  } catch (const RuntimeError& e) {
+    what = e.what();
+  }
+  EXPECT_NE(what.find("mujoco: frame 1: the contact buffer is full (nconmax 2)"), std::string::npos) << what;
+  EXPECT_NE(what.find("--mujoco max_contacts=2 (as set)"), std::string::npos) << what;
+  EXPECT_EQ(w.frame(), 0) << "no frame was counted";
+}
+
 TEST(MujocoSettings, KeysValuesAndErrors) {
   MujocoSettings s;
   apply_settings(s, {"iterations=20", "cone=pyramidal", "timeconst=0.01", "margin=0.002", "multiccd=off",

@@ -68,3 +68,26 @@ TEST(WorldCopies, AnEngineThatCannotBeMadeIsRethrown) {
   spec.count = 3;
   EXPECT_THROW(run_copies_separately("no-such-engine", single, spec, 5, 2), InputError);
 }
+
+// An engine whose instances share unguarded process-wide state (EngineInfo::not_thread_safe:
+// ODE, whose collision data is one per process) steps its copies one after another, whatever
+// the threads asked, and each copy still equals its run alone.
+TEST(WorldCopies, AnEngineThatIsNotThreadSafeRunsItsCopiesOneAtATime) {
+  const EngineInfo& ode = engine_info("ode", "test");
+  ASSERT_FALSE(ode.not_thread_safe.empty()) << "ODE's collision data is one per process (docs/engines.md)";
+  EXPECT_TRUE(engine_info("cpu", "test").not_thread_safe.empty());
+  if (!engine_built(ode)) GTEST_SKIP() << "ode is not built in this octocd";
+  const auto single = thrown_boxes();
+  WorldsSpec spec;
+  spec.count = 4;
+  spec.perturb = 1e-3;
+  const int frames = 30;
+  const CopiesRun r = run_copies_separately("ode", single, spec, frames, 4);
+  EXPECT_EQ(r.threads, 1);
+  for (std::size_t c = 0; c < 4; ++c) {
+    auto e = make_engine("ode", worlds_copy_model(*single, spec, c));
+    for (int f = 0; f < frames; ++f) e->step();
+    EXPECT_EQ(r.frames[c], frames) << "copy " << c;
+    EXPECT_TRUE(same_bits(r.states[c].x, e->state().x)) << "copy " << c;
+  }
+}

@@ -7,6 +7,7 @@
 /// factory and settings parser (`make_engine`, octocd/engines.hpp), in the library
 /// octocd_engines that links every engine's own.
 
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -45,6 +46,17 @@ struct EngineInfo {
   /// cuda); false: it steps one scene per run and runs the copies as separate runs
   /// (octocd/world_copies.hpp).
   bool batched_worlds = false;
+  /// "" when separate instances of it may step at once on threads of one process; else
+  /// why not (library state shared by every instance of the process, unguarded), and
+  /// run_copies_separately (octocd/world_copies.hpp) runs its copies one after another.
+  std::string not_thread_safe;
+  /// The most bodies (walls included) it is known to start and step on this project's
+  /// measurements (docs/engines.md, "Set-up of large scenes"), 0 for no limit: make_engine
+  /// refuses a larger model at once with `max_bodies_reason`, instead of minutes of set-up
+  /// and then a crash or no first frame.
+  std::size_t max_bodies = 0;
+  /// What was measured above max_bodies, for the refusal, else "".
+  std::string max_bodies_reason;
   /// The setting key of its host thread count (cpu: "threads", CpuSettings::threads):
   /// `validate --determinism` runs it at 1 and N threads ("KEY=N") and compares; "" when
   /// it steps on one host thread (or a device), so the thread-count row is n/a.

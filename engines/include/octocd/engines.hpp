@@ -89,7 +89,8 @@ std::vector<std::string> built_engine_names();
 /// are ignored). Throws InputError for an unknown name ("--engine: unknown engine ..."), a
 /// bad setting item ("--ENGINE: ...") or a broadphase the engine does not have,
 /// RuntimeError when the engine cannot start (no CUDA device, a build without CUDA or
-/// without the engine's library, too little device memory).
+/// without the engine's library, too little device memory, more bodies than its
+/// EngineInfo::max_bodies: refused before any set-up, with the measured reason).
 std::unique_ptr<Engine> make_engine(const std::string& name, const std::shared_ptr<const Model>& model,
                                     const EngineSettingItems& settings = {});
 

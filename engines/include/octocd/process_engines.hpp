@@ -79,6 +79,14 @@ const ProcessEngineSpec* find_process_engine(const std::string& name);
 /// per engine and process (cached). Never throws.
 std::string process_engine_unavailable(const ProcessEngineSpec& spec);
 
+/// Answers process_engine_unavailable for every engine of `specs` not yet answered, their
+/// check commands at once (at most 32 at a time) under one overall bound of `bound_s`
+/// seconds, each check stopped at the bound (then SIGTERM, SIGKILL 2 s later): all answered
+/// within about bound_s + 2 s, whatever the count of hanging checks; a check that could not
+/// start within the bound (more than 32 slow ones) is answered "was not run". Throws
+/// InputError for a bound outside (0, 30] s.
+void check_process_engines(const std::vector<ProcessEngineSpec>& specs, double bound_s = 30.0);
+
 /// Checks settings items "KEY=VALUE" for `spec`: each has '=' and a KEY of spec.settings.
 /// Throws InputError "<where>: 'ITEM' ...; allowed: <keys>".
 void check_process_settings(const ProcessEngineSpec& spec, const std::vector<std::string>& items,

@@ -35,7 +35,8 @@ using CopyFrameCallback = std::function<void(std::size_t copy, const FrameMetric
 /// Runs copies 0 .. spec.count-1 of `single` for `frames` steps each on engine `engine`
 /// (make_engine with `settings`), copy c from worlds_copy_model(*single, spec, c), `threads`
 /// copies at once on the worker team (octocd/parallel.hpp; 0: current_threads(), at least
-/// 1; never more than the copies); an engine's own parallel loops run serially inside a
+/// 1; never more than the copies; 1 for an engine with EngineInfo::not_thread_safe, whatever
+/// `threads`); an engine's own parallel loops run serially inside a
 /// copy (no nested teams). A copy's engine is made on the thread that steps it and
 /// destroyed there, one engine at a time (steps run at once). Stops
 /// between steps on octocd::stop_signal(). The first error of any copy (InputError,

@@ -11,7 +11,9 @@ hostile (escapes and 10 MB on stderr, exit 1), no-timing. A `ready` setting name
 written (with the process id) once the request is read: the tests wait on it. An `escape`
 setting names a file: first a grandchild is started that leaves the engine's process tree
 as far as a process can (a double fork, setsid(): its own session and process group,
-re-parented), sleeps, and writes its process id there; octocd must end it all the same."""
+re-parented), sleeps, and writes its process id there; octocd must end it all the same. A
+`wall_step_seconds` setting is written as that attribute instead of the measured time (a
+hostile timing: 0, 5e-324, nan, ...)."""
 import json
 import os
 import signal
@@ -109,7 +111,8 @@ def main():
         h.attrs.update(format="octocd-trace", version=2, engine="boxes_engine 1.0", scene=req["scene_json"],
                        dt=dt, gravity=g, collision_shape="box", deactivation="off")
         if mode != "no-timing":
-            h.attrs["wall_step_seconds"] = np.float64(wall)
+            told = req["settings"].get("wall_step_seconds")
+            h.attrs["wall_step_seconds"] = np.float64(wall if told is None else float(told))
         h["bodies/local_aabb_min"] = np.float32(lo[:m])
         h["bodies/local_aabb_max"] = np.float32(hi[:m])
         h["bodies/inverse_mass"] = np.float32([1 / w if w > 0 else 0 for w in mass[:m]])
