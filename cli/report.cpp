@@ -305,6 +305,10 @@ int report_command(const ReportOptions& o) {
   g_child = 0;
   if (got < 0) throw RuntimeError("report: waitpid failed");
   if (const int sig = g_forwarded.load()) {
+    // make_report.py says a stop itself ("octocd report: stopped by ..."; exit 128 + signal):
+    // one line for the user, so this one only where the script did not (killed, or ended
+    // otherwise).
+    if (!killed && WIFEXITED(status) && WEXITSTATUS(status) == stop_exit_code(sig)) return stop_exit_code(sig);
     std::fprintf(stderr, "octocd: report stopped by %s; %s %s (the earlier report in %s, if any, is left as it "
                          "was)\n", stop_signal_name(sig), sc.c_str(),
                  killed ? fmt::format("did not end within {} ms and was killed", kReportStopBound.count()).c_str()

@@ -406,22 +406,32 @@ def test_many_points_are_bounded_and_said(tmp_path):
     assert len(rows(str(tmp_path / "out" / "history-points.csv"))) == 6000
 
 
-def test_a_stopped_history_report_says_so_in_one_line(tmp_path):
+@pytest.mark.parametrize("through_octocd", [False, True])
+def test_a_stopped_history_report_says_so_in_one_line(tmp_path, through_octocd):
     """SIGTERM while the workers read the folder: exit 143, one line, no worker traceback, no
-    worker left (they end with their parent), no page written."""
+    worker left (they end with their parent), no page written; the same through `octocd
+    report --history`, which forwards the signal and adds no second line."""
     import signal
     import time
+    if through_octocd and not os.access(BIN, os.X_OK):
+        pytest.skip("no octocd binary (OCTOCD_BIN)")
     h = tmp_path / "h"
     make_history(str(h), nights=400, points=200, seed=6)
-    p = subprocess.Popen([sys.executable, SCRIPT, "--history", str(h), "-o", str(tmp_path / "out")],
+    cmd = [BIN, "report"] if through_octocd else [sys.executable, SCRIPT]
+    p = subprocess.Popen(cmd + ["--history", str(h), "-o", str(tmp_path / "out")],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
-    def children():
+    def children_of(pid):
         try:
-            with open(f"/proc/{p.pid}/task/{p.pid}/children") as f:
+            with open(f"/proc/{pid}/task/{pid}/children") as f:
                 return [int(x) for x in f.read().split()]
         except OSError:
             return []
+
+    def children():  # the pool's workers: the script's children (octocd's grandchildren)
+        if not through_octocd:
+            return children_of(p.pid)
+        return [k for script in children_of(p.pid) for k in children_of(script)]
     deadline = time.monotonic() + 120
     kids = []
     while not kids and p.poll() is None and time.monotonic() < deadline:  # the event: the pool's workers exist
