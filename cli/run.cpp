@@ -503,7 +503,7 @@ int run_command(const RunOptions& o) {
   if (own_process && !o.quiet) {
     std::fflush(stdout);
     std::fprintf(stderr, "engine %s: starting %s for %d frames; octocd reads its frames once it has run them\n",
-                 world.name().c_str(), world.device().c_str(), scene.frames);
+                 octocd::printable(world.name()).c_str(), octocd::printable(world.device()).c_str(), scene.frames);
     std::fflush(stderr);
   }
   const auto t0 = Clock::now();
@@ -530,7 +530,7 @@ int run_command(const RunOptions& o) {
         if (!o.quiet)
           std::fprintf(stderr, "engine %s: its process ran %d frames in %.2f s (%.2f s in its step calls, %.2f s "
                        "start-up, set-up and trace writing); reading its frames\n",
-                       world.name().c_str(), scene.frames, first_s, steps_s, totals.process_s);
+                       octocd::printable(world.name()).c_str(), scene.frames, first_s, steps_s, totals.process_s);
       }
       totals.add(m);
       // A reference engine's state past the trace limits (a spinning needle) ends the run
