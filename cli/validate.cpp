@@ -540,6 +540,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
     geometry = world.collision_geometry();
     if (world.writes_own_trace()) {  // a process engine: its own trace is judged, as written
       world.plan_steps(o.frames);
+      octocd::cli::show_process_progress(world, o.frames, true);  // its start-up and steps, as they happen
       world.step();  // its process runs every frame; the trace is checked against the request
       if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
       octocd::copy_own_trace(world, path, temporary ? "validate" : "--trace");
