@@ -162,8 +162,8 @@ void show_process_progress(Engine& world, std::int64_t frames, bool shown) {
   if (!shown || !world.writes_own_trace()) return;
   const std::string name = printable(world.name());
   std::fflush(stdout);  // stdout and stderr to one file: the lines in the order they happened
-  std::fprintf(stderr, "engine %s: starting %s for %lld frames; its frames are said as its process steps them, "
-               "then read from its trace\n",
+  std::fprintf(stderr, "engine %s: starting %s for %lld frames; its steps are said as its process reports them, "
+               "then its frames are read from its trace\n",
                name.c_str(), printable(world.device()).c_str(), static_cast<long long>(frames));
   std::fflush(stderr);
   struct Said {
