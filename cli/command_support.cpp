@@ -1,15 +1,18 @@
 // What `run` and `validate` share (command_support.hpp).
 #include "command_support.hpp"
 
+#include <algorithm>
 #include <climits>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <system_error>
 
 #include <fmt/format.h>
 
 #include "octocd/error.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/stop.hpp"
 #include "octocd/text.hpp"
 #include "octocd/trace_reader.hpp"
@@ -153,6 +156,44 @@ CLI::Validator at_least_one() {
         return "";
       },
       "");  // the option's own help says ">= 1"
+}
+
+void show_process_progress(Engine& world, std::int64_t frames, bool shown) {
+  if (!shown || !world.writes_own_trace()) return;
+  const std::string name = printable(world.name());
+  std::fflush(stdout);  // stdout and stderr to one file: the lines in the order they happened
+  std::fprintf(stderr, "engine %s: starting %s for %lld frames; its steps are said as its process reports them, "
+               "then its frames are read from its trace\n",
+               name.c_str(), printable(world.device()).c_str(), static_cast<long long>(frames));
+  std::fflush(stderr);
+  struct Said {
+    double at_s = 0.0;           // when the last line was said (s since the process started)
+    std::int64_t tenth = 0;      // the tenths of the frames said
+    bool started = false;        // its start-up was said
+  };
+  auto said = std::make_shared<Said>();
+  set_process_progress(world, [name, said](const ProcessProgress& p) {
+    constexpr double kQuietS = 10.0;  // the longest silence while it runs
+    const std::int64_t tenth = p.stepped < 0 ? 0 : 10 * p.stepped / std::max<std::int64_t>(p.frames, 1);
+    const bool start = p.stepped >= 0 && !said->started;
+    if (!start && tenth <= said->tenth && p.seconds - said->at_s < kQuietS) return;
+    std::fflush(stdout);
+    if (start) {
+      said->started = true;
+      std::fprintf(stderr, "engine %s: its process started in %.2f s; stepping\n", name.c_str(), p.started_s);
+    }
+    if (p.stepped < 0) {
+      std::fprintf(stderr, "engine %s: its process is still starting after %.0f s\n", name.c_str(), p.seconds);
+    } else if (tenth > said->tenth || !start) {
+      const double stepping_s = p.seconds - p.started_s;
+      std::fprintf(stderr, "frame %lld/%lld  %.1f frames/s  (its process as it runs, trace writing included)\n",
+                   static_cast<long long>(p.stepped), static_cast<long long>(p.frames),
+                   stepping_s > 0.0 ? static_cast<double>(p.stepped) / stepping_s : 0.0);
+    }
+    std::fflush(stderr);
+    said->at_s = p.seconds;
+    said->tenth = std::max(said->tenth, tenth);
+  });
 }
 
 }  // namespace octocd::cli

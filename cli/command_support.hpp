@@ -1,8 +1,8 @@
 #pragma once
 /// \file command_support.hpp
 /// What the subcommands `run` and `validate` share (their files: run.cpp, validate.cpp):
-/// help texts from the registry, option validators, loading a scene, the stop line and
-/// closing a trace.
+/// help texts from the registry, option validators, loading a scene, the stop line,
+/// closing a trace and a process engine's progress.
 
 #include <chrono>
 #include <cstdint>
@@ -76,5 +76,14 @@ std::string write_sidecar(const std::string& trace, bool no_xdmf);
 /// After a runtime failure: closes `trace` and writes its sidecar as far as the disk allows
 /// (a failure here is dropped: the original error is the one the user must see).
 void close_after_failure(std::unique_ptr<TraceWriter>& trace, const std::string& path, bool no_xdmf);
+
+/// A process engine's run said on stderr as it happens (stdout flushed first, each line
+/// flushed): now "engine NAME: starting PROCESS for F frames; ..."; then, from inside its
+/// first step(), "engine NAME: its process started in S s; stepping" at its first progress
+/// line (docs/bring-your-engine.md, "Progress"), a line "frame N/F  R frames/s  (its
+/// process as it runs, ...)" at each tenth of the frames it says it stepped, and a line at
+/// least every 10 s meanwhile ("... still starting after T s" before its first progress
+/// line). Nothing when `world` is not a process engine or `shown` is false.
+void show_process_progress(Engine& world, std::int64_t frames, bool shown);
 
 }  // namespace octocd::cli

@@ -498,14 +498,9 @@ int run_command(const RunOptions& o) {
   if (!trace) world.plan_steps(scene.frames);
   else feed.start(*trace, world, scene.frames);
   // A process engine runs every step in its first step() (process_engines.hpp): its
-  // start-up is said as it happens, and measured into the set-up.
+  // start-up and steps are said as they happen, its start-up measured into the set-up.
   const bool own_process = world.writes_own_trace();
-  if (own_process && !o.quiet) {
-    std::fflush(stdout);
-    std::fprintf(stderr, "engine %s: starting %s for %d frames; octocd reads its frames once it has run them\n",
-                 octocd::printable(world.name()).c_str(), octocd::printable(world.device()).c_str(), scene.frames);
-    std::fflush(stderr);
-  }
+  octocd::cli::show_process_progress(world, scene.frames, !o.quiet);
   const auto t0 = Clock::now();
   std::int64_t kept_flushed = 0;  // the flushed frames run_kept last said
   try {

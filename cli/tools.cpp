@@ -24,10 +24,13 @@
 
 namespace octocd::cli {
 
-void add_engine_settings_options(CLI::App* command, EngineSettingItems& items) {
+void add_engine_settings_options(CLI::App* command, EngineSettingItems& items, bool brief) {
   for (const EngineInfo& info : engine_infos()) {
     const std::string help = engine_settings_help(info);
-    if (!help.empty()) command->add_option("--" + info.name, items[info.name], help);
+    if (help.empty()) continue;
+    command->add_option("--" + info.name, items[info.name],
+                        brief ? fmt::format("Setting KEY=VALUE of engine {}, repeatable (keys: octocd engines)", info.name)
+                              : help);
   }
 }
 

@@ -30,10 +30,11 @@
 namespace octocd::cli {
 
 /// Adds a repeatable `--ENGINE KEY=VALUE` option to `command` for every engine of the
-/// registry that has settings (engine_setting_names; help from engine_settings_help),
+/// registry that has settings (engine_setting_names; help from engine_settings_help, or
+/// with `brief` one line that sends the reader to `octocd engines` for the keys),
 /// collecting each engine's items into `items[ENGINE]` (docs/settings.md). The items are
 /// checked by check_engine_settings.
-void add_engine_settings_options(CLI::App* command, EngineSettingItems& items);
+void add_engine_settings_options(CLI::App* command, EngineSettingItems& items, bool brief = false);
 
 /// Median, minimum, maximum, mean and sample standard deviation of repeated measurements,
 /// as stored in bench results: {"median", "min", "max", "mean", "stdev", "n", "values"}.

@@ -540,6 +540,7 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
     geometry = world.collision_geometry();
     if (world.writes_own_trace()) {  // a process engine: its own trace is judged, as written
       world.plan_steps(o.frames);
+      octocd::cli::show_process_progress(world, o.frames, true);  // its start-up and steps, as they happen
       world.step();  // its process runs every frame; the trace is checked against the request
       if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
       octocd::copy_own_trace(world, path, temporary ? "validate" : "--trace");
@@ -1063,14 +1064,12 @@ Command add_validate_command(CLI::App& app) {
   const auto options = std::make_shared<ValidateOptions>();
   ValidateOptions& val = *options;
   CLI::App* val_cmd = add_table_command(app, CommandId::validate);
+  // Each option's help fits one or two lines; the details are in docs/validation.md and
+  // the pages it names (docs/cli.md keeps this help).
   val_cmd->add_option("scene", val.scene, "Scene file (JSON, see docs/scenes.md); or give --trace-in");
-  val_cmd->add_option("--against", val.against,
-                      "References: comma-separated bullet, fcl (Bullet/FCL broadphases, FCL "
-                      "normals, Bullet dynamics), or none")
+  val_cmd->add_option("--against", val.against, "References: comma-separated bullet, fcl, or none (docs/validation.md)")
       ->default_val("bullet,fcl");
-  val_cmd->add_option("--frames", val.frames,
-                      "Steps to run (>= 1); every validator, the analytic and Bullet ones included, "
-                      "uses this many")
+  val_cmd->add_option("--frames", val.frames, "Steps to run (>= 1), for every validator")
       ->check(at_least_one())
       ->default_val(300);
   val_cmd->add_option("--every", val.every,
@@ -1078,97 +1077,47 @@ Command add_validate_command(CLI::App& app) {
       ->check(at_least_one())
       ->default_val(10);
   val_cmd->add_option("--engine", val.engine,
-                      engines_help() +
-                          ". An engine that records every step (" +
-                          engines_with([](const EngineInfo& e) { return e.records_every_step; }) +
-                          ") is judged in process, the others through their version 2 trace (--trace keeps it; a "
-                          "process engine's own trace, docs/bring-your-engine.md). Default: cpu, or the first engine "
-                          "that rotates for a rotating scene (rotation: true, an orientation or an angular velocity)")
+                      "The engine that steps the scene (`octocd engines`); default cpu, or the first engine that "
+                      "rotates for a rotating scene")
       ->check(CLI::IsMember(octocd::engine_names()))
       ->default_val("cpu");
   val_cmd->add_flag("--rotation", val.rotation,
-                    "The bodies rotate (as the scene key rotation: true); needs " +
-                        engines_with([](const EngineInfo& e) { return e.rotates; }));
-  add_engine_settings_options(val_cmd, val.settings);
-  {
-    std::string names;
-    for (const auto& e : octocd::tolerance_table())
-      names += (names.empty() ? "" : ", ") + std::string(e.name) + " (" + e.unit + ")";
-    val_cmd->add_option("--tolerance", val.tolerances,
-                        "Override a validator bound, NAME=VALUE, repeatable; marked '*' in the table. "
-                        "Names: " + names);
-  }
-  val_cmd->add_option("--trace", val.trace,
-                      "Write the validated run as a trace with the results under /validation "
-                      "(and its XDMF sidecar FILE.h5.xmf)");
+                    "The bodies rotate (as rotation: true); needs an engine that rotates");
+  add_engine_settings_options(val_cmd, val.settings, true);
+  val_cmd->add_option("--tolerance", val.tolerances,
+                      "Override a validator bound, NAME=VALUE, repeatable; marked '*' in the table (names, units: "
+                      "docs/validation.md)");
+  val_cmd->add_option("--trace", val.trace, "Write the validated run as a trace with the results under /validation");
   val_cmd->add_flag("--no-xdmf", val.no_xdmf, "With --trace: do not write the XDMF sidecar");
-  val_cmd->add_option("--data-dir", val.data_dir, data_dir_help());
-  val_cmd->add_option("--junit", val.junit,
-                      "Also write a JUnit XML report: one test case per validator row (classname = "
-                      "SCENE.TIER) with its own time, failures with the measured value against the bound and "
-                      "the detail line; written when validators fail too, and when a signal stops the run");
-  val_cmd->add_option(
-      "--trace-in", val.trace_in,
-      "Judge another engine's trace (docs/trace-format.md, External traces) instead of a scene, frame by "
-      "frame; --frames limits the frames (default all), --every defaults to 1");
+  val_cmd->add_option("--data-dir", val.data_dir, "Folder of the dataset meshes (default: docs/scenes.md)");
+  val_cmd->add_option("--junit", val.junit, "Also write a JUnit XML report, one test case per row");
+  val_cmd->add_option("--trace-in", val.trace_in, "Judge another engine's trace (docs/trace-format.md) instead of a scene");
   val_cmd->add_option("--expect", val.expect,
-                      "Known failures (JSON, docs/validation-output.md): per scene or trace, row, cause, optional "
-                      "items, the worst figure allowed and a reason. Exit 0 when every failure is expected and "
-                      "within its figure; 3 naming each new or grown one; an expectation that no longer fails "
-                      "is reported as fixed");
-  val_cmd->add_option("--write-expect", val.write_expect,
-                      "Record this run's failures (worst figures, items, a placeholder reason to edit) in FILE.json, "
-                      "replacing this scene's or trace's entries and keeping the others; exits 0");
+                      "Known failures (JSON, docs/validation-output.md): exit 0 when every failure is expected, 3 "
+                      "naming each new or grown one");
+  val_cmd->add_option("--write-expect", val.write_expect, "Record this run's failures in FILE.json; exits 0");
   val_cmd->add_flag("--strict", val.strict, "With --expect: an expected failure that no longer fails is exit 3");
-  val_cmd->add_option("--json", val.json,
-                      "Also write every row (verdict pass|fail|n/a|expected, figures, judged, seconds) with its causes, "
-                      "examples and failing items, and the expectation outcomes, as JSON (docs/validation-output.md)");
-  val_cmd->add_option("--view", val.view,
-                      "Also write a page per failing example (octocd view: the frame, the pair or body, the engine's "
-                      "contacts beside the reference; at most 20 pages) into DIR, linked from the table, --json and "
-                      "--junit by relative paths; without --trace or --trace-in the run's trace goes to "
-                      "DIR/SCENE-trace.h5 (docs/debugging.md)");
-  val_cmd->add_option("--mesh-dir", val.mesh_dir,
-                      "With --trace-in: the only folder (besides the data dir) where the mesh files named by the "
-                      "trace's scene are looked up (default: the trace's folder); a mesh named elsewhere is refused");
-  val_cmd->add_option("--shard", val.shard,
-                      "With --trace-in: judge only shard i of N (i/N, 0 <= i < N): the contiguous block of frames "
-                      "floor(iF/N)+1 .. floor((i+1)F/N); write its --json for --merge (a Slurm job array: "
-                      "--shard $SLURM_ARRAY_TASK_ID/N)");
-  val_cmd->add_option("--merge", val.merge,
-                      "Join the --json files of every shard of one --trace-in run into its verdict (table, --json, "
-                      "--junit, --expect as an unsharded run); exit 2 naming a file for overlapping, missing or "
-                      "foreign shards")
+  val_cmd->add_option("--json", val.json, "Also write every row as JSON (docs/validation-output.md)");
+  val_cmd->add_option("--view", val.view, "Also write a page per failing example into DIR (docs/debugging.md)");
+  val_cmd->add_option("--mesh-dir", val.mesh_dir, "With --trace-in: the only folder besides the data dir for its meshes");
+  val_cmd->add_option("--shard", val.shard, "With --trace-in: judge only shard i of N (i/N) of its frames");
+  val_cmd->add_option("--merge", val.merge, "Join the --json files of one --trace-in run's shards into its verdict")
       ->expected(1, -1);
   val_cmd->add_option("--judge-device", val.judge_device,
-                      "Where the physics tier's rows broadphase-completeness and penetration run: cpu (the CPU "
-                      "tier, the oracle), or cuda: their candidates and box-box separating-axis tests on the GPU in "
-                      "double precision, pairs with other shapes by the CPU reference (counted and named in the "
-                      "rows' details); every other row on the CPU; verdicts are the CPU tier's (docs/gpu.md, "
-                      "\"Judging on the device\"); cuda without a CUDA build or device exits 1 saying why")
+                      "Where broadphase-completeness and penetration are judged (docs/gpu.md)")
       ->check(CLI::IsMember([] {
         std::vector<std::string> names;
         for (const octocd::JudgeDeviceKind& k : octocd::judge_device_kinds()) names.push_back(k.name);
         return names;
       }()))
       ->capture_default_str();
-  val_cmd->add_option("--threads", val.threads,
-                      "Threads judging one frame's heavy loops (reference geometry per pair, the reference pair set); "
-                      "0 = OMP_NUM_THREADS when set, else the CPUs this process may run on (default), 1 = serial; a scene's frame is judged while the engine runs the "
-                      "next (not with --trace, not with 1); verdicts do not depend on it. With --determinism: the N threads of the "
-                      "threaded runs (>= 2; 0: max(2, the hardware's))")
+  val_cmd->add_option("--threads", val.threads, "Threads judging one frame; 0: OMP_NUM_THREADS, else every CPU")
       ->check(CLI::Range(0, 4096))
       ->default_val(0);
   val_cmd->add_flag("--determinism", val.determinism,
-                    "Instead of the validators: run the engine twice on SCENE and compare the traces bit for bit "
-                    "(every state, contacts where it records; as `octocd compare`), then at 1 against N threads for "
-                    "an engine that threads (cpu: --threads N, default max(2, the hardware's)), and cpu against cuda "
-                    "for octocd's engines (n/a with the reason when cuda cannot run here). Rows "
-                    "determinism-runs, determinism-threads, determinism-cpu-cuda; a row that differs fails naming "
-                    "the first difference (frame, body, quantity, |A-B|, both values); exit 0 all equal, 3 one "
-                    "differs (docs/predictability.md)");
+                    "Compare runs bit for bit instead of judging (docs/predictability.md)");
   val_cmd->add_flag("--check-only", val.check_only,
-                    "With --trace-in: only check the file's structure and values (exit 0 valid, 2 not) and list per row judged, or n/a with the dataset or attribute to add, without judging");
+                    "With --trace-in: only check the file and list the rows it can judge");
 
   return {[val_cmd] { return val_cmd->parsed(); },
           [options, val_cmd] {

@@ -5,9 +5,34 @@ import os
 
 from report_common import CURRENT, np, num, plt
 from report_data import read_trace
+from report_plots import ENGINE_COLORS, FALLBACK_COLORS, engine_marker
 
 
-TRACE_COLORS = ["#4e79a7", "#e15759", "#59a14f", "#f28e2b", "#76b7b2", "#b07aa1", "#9c755f", "#edc948"]
+def trace_engine(attrs):
+    """The engine of a trace whose `engine` attribute names one of ENGINE_COLORS (its first
+    word: "cpu", "rapier 0.21.0"), else None."""
+    words = str(attrs.get("engine") or "").split()
+    name = words[0].lower() if words else ""
+    return name if name in ENGINE_COLORS else None
+
+
+def trace_colours(traces):
+    """One colour per trace file, kept through the traces section: the first file of an engine
+    of ENGINE_COLORS takes that engine's colour (as on every other plot of the report); any
+    other file (a second run of one engine, an engine the map does not name) the first of
+    FALLBACK_COLORS (none an engine's) not yet taken, in file order; beyond them the colours
+    repeat."""
+    colours, taken = [None] * len(traces), set()
+    for k, t in enumerate(traces):
+        e = trace_engine(t["attrs"])
+        if e and ENGINE_COLORS[e] not in taken:
+            colours[k] = ENGINE_COLORS[e]
+            taken.add(colours[k])
+    free = [c for c in FALLBACK_COLORS if c not in taken]
+    for k in range(len(traces)):
+        if colours[k] is None:
+            colours[k] = free.pop(0) if free else FALLBACK_COLORS[k % len(FALLBACK_COLORS)]
+    return colours
 
 
 def penetration_comment(cols, name="the trace"):
@@ -51,38 +76,47 @@ def penetration_comment(cols, name="the trace"):
 
 
 def section_traces(doc, paths):
-    """One table row per trace, and the traces overlaid on shared axes (one colour each)."""
+    """One table row per trace, and the traces overlaid on shared axes, each file in its one
+    colour of trace_colours (said beside its name in the text and the table)."""
     traces = []
     for path in paths:
         CURRENT[0] = path
         traces.append(read_trace(path))
     doc.h(2, "Traces" if len(traces) > 1 else f"Trace {os.path.basename(paths[0])}")
+    colours = trace_colours(traces)
     rows = []
-    for t in traces:
+    for t, colour in zip(traces, colours):
         a, n, c = t["attrs"], t["n"], t["cols"]
+        e = trace_engine(a)
+        drawn = f"drawn in {colour}" + (f" (engine {e}'s colour)" if colour == ENGINE_COLORS.get(e) else "")
         step = c["step_ms"]
         doc.p(f"{os.path.basename(t['path'])}: scene {a.get('scene_name')}, engine {a.get('engine')}, broadphase "
               f"{a.get('broadphase')}, midphase {a.get('midphase')}, {a.get('body_count')} bodies, {n} frames; device "
-              f"{a.get('device')}; build {a.get('build_id')}; started {a.get('start_time')}.")
+              f"{a.get('device')}; build {a.get('build_id')}; started {a.get('start_time')}; {drawn}.")
         comment = penetration_comment(c, os.path.basename(t["path"]))
         if comment:
             doc.p(comment)
-        rows.append([os.path.basename(t["path"]), n, num(1000.0 * n / step.sum()) if step.sum() > 0 else "-",
+        rows.append([os.path.basename(t["path"]), colour, n, num(1000.0 * n / step.sum()) if step.sum() > 0 else "-",
                      num(step.mean(), 4) if n else "-", num(c["contacts"].mean()) if n else "-",
                      int(c["contacts"].max()) if n else "-", num(1e3 * c["penetration_max"].max()) if n else "-",
                      num(c["kinetic_energy"][-1]) if n else "-"])
-    doc.table(["trace", "frames", "steps/s", "mean step ms", "mean contacts", "max contacts", "max d_p (mm)",
+    doc.table(["trace", "colour", "frames", "steps/s", "mean step ms", "mean contacts", "max contacts", "max d_p (mm)",
                "final kinetic energy (J)"], rows, name="traces")
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), sharex=True)
-    for k, t in enumerate(traces):
-        c, col = t["cols"], TRACE_COLORS[k % len(TRACE_COLORS)]
-        lab = os.path.basename(t["path"])
-        axes[0].plot(c["frame"], c["kinetic_energy"], color=col, label=lab)
-        axes[1].plot(c["frame"], c["contacts"], color=col, label=f"{lab} contacts")
-        axes[1].plot(c["frame"], c["aabb_pairs"], color=col, linestyle=":", label=f"{lab} AABB pairs")
-        axes[2].plot(c["frame"], 1e3 * c["penetration_max"], color=col, label=f"{lab} max")
-        axes[2].plot(c["frame"], 1e3 * c["penetration_mean"], color=col, linestyle="--", alpha=0.7,
-                     label=f"{lab} mean")
+    for t, col in zip(traces, colours):
+        c, lab = t["cols"], os.path.basename(t["path"])
+        e = trace_engine(t["attrs"])
+        # The engine's marker where the file has its colour (a few per line), so it reads
+        # without colour too; each line's gid names its file (the tests read it in the SVG).
+        mk = dict(marker=engine_marker(e), markevery=max(len(c["frame"]) // 8, 1), markersize=4) \
+            if col == ENGINE_COLORS.get(e) else {}
+        style = dict(color=col, gid=f"trace:{lab}", **mk)
+        axes[0].plot(c["frame"], c["kinetic_energy"], label=lab, **style)
+        axes[1].plot(c["frame"], c["contacts"], label=f"{lab} contacts", **style)
+        axes[1].plot(c["frame"], c["aabb_pairs"], linestyle=":", label=f"{lab} AABB pairs", **style)
+        axes[2].plot(c["frame"], 1e3 * c["penetration_max"], label=f"{lab} max", **style)
+        axes[2].plot(c["frame"], 1e3 * c["penetration_mean"], linestyle="--", alpha=0.7, label=f"{lab} mean",
+                     **style)
     axes[0].set_title("kinetic energy (J)")
     axes[1].set_title("contacts (solid), AABB pairs (dotted)")
     axes[2].set_title("AABB penetration d_p (mm): max, mean (dashed)")

@@ -40,14 +40,39 @@ void keep_tail(std::string& tail, const char* data, std::size_t n) {
   if (tail.size() > 2 * kTailBytes) tail.erase(0, tail.size() - kTailBytes);
 }
 
-/// Reads what `fd` holds now (non-blocking) into `tail`, at most `reads` reads of 16 KiB;
-/// false at EOF or error.
-bool drain(int fd, std::string& tail, std::uint64_t& total, int reads = 64) {
+/// Longest stdout line given whole to ChildRun::on_poll (bytes); a longer one is cut there.
+constexpr std::size_t kLineBytes = 4096;
+
+/// The complete lines of a stream, split as its bytes come (ChildRun::on_poll).
+struct LineSplitter {
+  std::string partial;               ///< the line begun, not yet ended
+  bool cut = false;                  ///< the line begun passed kLineBytes: its rest is dropped
+  std::vector<std::string> lines;    ///< complete lines not yet handed on
+
+  void add(const char* data, std::size_t n) {
+    for (std::size_t i = 0; i < n; ++i) {
+      if (data[i] == '\n') {
+        lines.push_back(std::move(partial));
+        partial.clear();
+        cut = false;
+      } else if (partial.size() < kLineBytes) {
+        partial.push_back(data[i]);
+      } else {
+        cut = true;
+      }
+    }
+  }
+};
+
+/// Reads what `fd` holds now (non-blocking) into `tail` (and `lines` when given), at most
+/// `reads` reads of 16 KiB; false at EOF or error.
+bool drain(int fd, std::string& tail, std::uint64_t& total, LineSplitter* lines = nullptr, int reads = 64) {
   char buf[16384];
   for (int k = 0; k < reads; ++k) {
     const ssize_t n = ::read(fd, buf, sizeof buf);
     if (n > 0) {
       keep_tail(tail, buf, static_cast<std::size_t>(n));
+      if (lines) lines->add(buf, static_cast<std::size_t>(n));
       total += static_cast<std::uint64_t>(n);
       continue;
     }
@@ -413,6 +438,8 @@ ChildOutcome run_child(const ChildRun& run) {
     return o;
   }
   bool out_open = true, err_open = true;
+  LineSplitter out_lines;
+  LineSplitter* const split = run.on_poll ? &out_lines : nullptr;
   int status = 0;
   bool reaped = false;
   double ordered_at = -1.0, ordered_grace = 0.0;  // when the keeper was told to stop, and its grace
@@ -432,8 +459,12 @@ ChildOutcome run_child(const ChildRun& run) {
     } else {
       ::usleep(10000);
     }
-    if (out_open) out_open = drain(out[0], o.out_tail, o.out_bytes);
+    if (out_open) out_open = drain(out[0], o.out_tail, o.out_bytes, split);
     if (err_open) err_open = drain(err[0], o.err_tail, o.err_bytes);
+    if (split) {
+      run.on_poll(split->lines);
+      split->lines.clear();
+    }
     const pid_t w = ::waitpid(keeper, &status, WNOHANG);
     if (w == keeper) {
       reaped = true;
@@ -465,8 +496,9 @@ ChildOutcome run_child(const ChildRun& run) {
   }
   o.seconds = since(t0);
   // What the pipes still hold (the keeper killed every writer before it ended).
-  if (out_open) drain(out[0], o.out_tail, o.out_bytes);
+  if (out_open) drain(out[0], o.out_tail, o.out_bytes, split);
   if (err_open) drain(err[0], o.err_tail, o.err_bytes);
+  if (split && !split->lines.empty()) run.on_poll(split->lines);
   KeeperReport report;
   const bool reported = ::read(rep[0], &report, sizeof report) == static_cast<ssize_t>(sizeof report);
   ::close(out[0]);

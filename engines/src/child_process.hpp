@@ -10,6 +10,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,11 @@ struct ChildRun {
   /// When set (any thread), the tree is stopped as on octocd's stop signal (End::Stopped,
   /// stop_signal 0): Python's Ctrl-C inside Engine.step(). nullptr: none. Not owned.
   const std::atomic<bool>* cancel = nullptr;
+  /// When set: called on run_child's thread after each wait for output (about 10 ms apart
+  /// while the child runs; once more after it ended when lines are left) with the complete
+  /// lines its stdout gave since the last call (without their '\n'; a line over 4 KiB is
+  /// cut there), often none. It must not throw. Empty: none.
+  std::function<void(const std::vector<std::string>& stdout_lines)> on_poll;
 };
 
 /// How the child ended.

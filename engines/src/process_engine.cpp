@@ -4,11 +4,15 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <memory>
 #include <optional>
 
 #include <fmt/format.h>
@@ -108,6 +112,9 @@ class ProcessEngine final : public Engine {
   /// Stops the process run by a step in flight (any thread; see cancel_process_engine_step).
   void cancel() { cancel_.store(true); }
 
+  /// The run's progress goes to `report` (set_process_progress).
+  void set_progress(std::function<void(const ProcessProgress&)> report) { progress_ = std::move(report); }
+
  private:
   void remove_folder() {
     if (folder_.empty()) return;
@@ -161,6 +168,7 @@ class ProcessEngine final : public Engine {
     run.watched = trace_path_;
     run.watched_max = spec_.max_trace_bytes;
     run.cancel = &cancel_;
+    if (progress_) run.on_poll = progress_reader();
     const process_detail::ChildOutcome o = process_detail::run_child(run);
     cancel_.store(false);
     using End = process_detail::ChildOutcome::End;
@@ -234,6 +242,30 @@ class ProcessEngine final : public Engine {
     }
   }
 
+  /// Reads the process's stdout lines `octocd-progress N` (docs/bring-your-engine.md,
+  /// "Progress") into progress_ calls: at each such line, else once a second.
+  std::function<void(const std::vector<std::string>&)> progress_reader() {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto p = std::make_shared<ProcessProgress>();
+    p->frames = frames_;
+    auto said_s = std::make_shared<double>(0.0);
+    return [this, t0, p, said_s](const std::vector<std::string>& lines) {
+      p->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      bool news = false;
+      for (const std::string& line : lines) {
+        long long n = -1;
+        char rest = 0;
+        if (std::sscanf(line.c_str(), "octocd-progress %lld%c", &n, &rest) != 1 || n < 0 || n > p->frames) continue;
+        if (p->started_s < 0.0) p->started_s = p->seconds;
+        p->stepped = std::max<std::int64_t>(p->stepped, n);
+        news = true;
+      }
+      if (!news && p->seconds - *said_s < 1.0) return;
+      *said_s = p->seconds;
+      progress_(*p);
+    };
+  }
+
   void fill_metrics() {
     FrameMetrics m;
     m.frame = frame_;
@@ -272,6 +304,7 @@ class ProcessEngine final : public Engine {
   std::unique_ptr<ExternalTrace> trace_;
   double wall_step_seconds_ = 0.0;
   std::atomic<bool> cancel_{false};  ///< set by cancel(), cleared when the run it stopped returns
+  std::function<void(const ProcessProgress&)> progress_;  ///< set_progress's; empty: none
   BodyState state_;
   FrameRecord record_;
   FrameMetrics metrics_;
@@ -299,6 +332,13 @@ bool cancel_process_engine_step(Engine& engine) {
   auto* p = dynamic_cast<ProcessEngine*>(&engine);
   if (p == nullptr) return false;
   p->cancel();
+  return true;
+}
+
+bool set_process_progress(Engine& engine, std::function<void(const ProcessProgress&)> report) {
+  auto* p = dynamic_cast<ProcessEngine*>(&engine);
+  if (p == nullptr) return false;
+  p->set_progress(std::move(report));
   return true;
 }
 

@@ -31,6 +31,11 @@ export async function main(engine, argv = process.argv.slice(2)) {
     let prePos = new Float64Array(3 * n), preQuat = new Float64Array(4 * n);
     world.readState(pos, vel, quat, angvel);
     writer.state(0, pos, vel, quat, angvel);
+    // Progress for octocd (docs/bring-your-engine.md, "Progress"): `octocd-progress N` on
+    // stdout once set up, then at most every 0.5 s and after the last frame.
+    const progress = (frame) => process.stdout.write(`octocd-progress ${frame}\n`);
+    progress(0);
+    let saidAt = process.hrtime.bigint();
     let wall = 0;
     for (let frame = 1; frame <= req.frames; ++frame) {
       [prePos, pos] = [pos, prePos];
@@ -47,6 +52,11 @@ export async function main(engine, argv = process.argv.slice(2)) {
       }
       writer.contacts(frame, world.contacts(prePos, preQuat));
       writer.state(frame, pos, vel, quat, angvel);
+      const now = process.hrtime.bigint();
+      if (frame === req.frames || now - saidAt >= 500000000n) {
+        progress(frame);
+        saidAt = now;
+      }
     }
     writer.close({ wall_step_seconds: f64(wall), ...(world.endAttrs ? world.endAttrs() : {}) });
     writer = null;

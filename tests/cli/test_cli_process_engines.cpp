@@ -92,7 +92,7 @@ TEST_F(ProcessEngines, ListedBesideTheBuiltInOnesWithTheirAvailability) {
   EXPECT_EQ(by["pyboxes"]["why"], "");
   EXPECT_EQ(by["pyboxes"]["rotates"], true);
   EXPECT_EQ(by["pyboxes"]["geometries"], nlohmann::json::array({"box"}));
-  EXPECT_EQ(by["pyboxes"]["settings"], nlohmann::json::array({"ready", "escape", "wall_step_seconds"}));
+  EXPECT_EQ(by["pyboxes"]["settings"], nlohmann::json::array({"ready", "escape", "wall_step_seconds", "hold"}));
   // Command items naming files are made absolute against the engines file's folder.
   EXPECT_TRUE(fs::path(by["pyboxes"]["command"][1].get<std::string>()).is_absolute());
   EXPECT_EQ(by["pymissing"]["available"], false);

@@ -12,6 +12,9 @@
    give its size ("default scene set (N scenes"), and docs/validation.md's count of the
    scenes whose conservation row fails without --expect ("fails on K of the N scenes") is
    the count scripts/nightly-expect.json records for it.
+4. Tolerances: docs/validation.md's table of the tolerances (`octocd validate --help` sends
+   the reader there) has one row `| `NAME` | DEFAULT | UNIT |` per entry of
+   validation/include/octocd/tolerances.def, in its order, and no other.
 
 Usage: check_docs_facts.py OCTOCD_BIN SOURCE_DIR. Exit 0 when all hold, 1 naming each page,
 the fact and what the code says.
@@ -100,11 +103,27 @@ def main(octocd, root):
         errors.append(f"docs/validation.md: conservation fails on {fails.group(1)} of {fails.group(2)} scenes; "
                       f"scripts/nightly-expect.json records {len(conservation)} of the {len(names)} of default_set")
 
+    # 4. Tolerances.
+    defs = re.findall(r'OCTOCD_TOLERANCE\((\w+),\s*([^,]+?),\s*"([^"]*)"',
+                      page("validation/include/octocd/tolerances.def"))
+    tol = page("docs/validation.md").split("\n| name | default | unit |\n", 1)
+    if len(tol) < 2:
+        errors.append("docs/validation.md: no tolerances table ('| name | default | unit |')")
+    table = tol[-1].split("\n\n", 1)[0] if len(tol) == 2 else ""
+    rows = re.findall(r"^\| `(\w+)` \| ([^|]+?) \| ([^|]+?) \|$", table, re.M)
+    if len(defs) < 10:
+        errors.append(f"tolerances.def: {len(defs)} entries read: too few to check")
+    if rows != defs:
+        extra = [r for r in rows if r not in defs]
+        missing = [d for d in defs if d not in rows]
+        errors.append(f"docs/validation.md: its tolerances table differs from tolerances.def: missing or different "
+                      f"{missing}, not in tolerances.def {extra}" + ("" if missing or extra else ", the order"))
+
     if errors:
         print("FAIL:\n" + "\n".join(errors))
         return 1
     print(f"docs agree with the code: {len(engines)} engines, exit codes {', '.join(codes)}, the nightly's "
-          f"{len(names)} default scenes ({len(conservation)} with conservation expected)")
+          f"{len(names)} default scenes ({len(conservation)} with conservation expected), {len(defs)} tolerances")
     return 0
 
 

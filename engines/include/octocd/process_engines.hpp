@@ -16,6 +16,7 @@
 ///   3. the file of set_engines_file (`--engines-file FILE`).
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -98,6 +99,31 @@ void check_process_settings(const ProcessEngineSpec& spec, const std::vector<std
 nlohmann::ordered_json process_request(const ProcessEngineSpec& spec, const Model& model, std::int64_t frames,
                                        const std::string& trace, const std::vector<std::string>& items);
 
+/// Stops the process a step() of the process engine `engine` runs now, from any thread
+/// (Python's Ctrl-C inside Engine.step()): its tree is stopped (SIGTERM, SIGKILL 0.2 s
+/// later) and that step() throws RuntimeError "engine 'NAME' ... was stopped ..." instead
+/// of ending octocd; a step() that starts before the stop is taken is stopped at once.
+/// False (nothing done) when `engine` is not a process engine.
+bool cancel_process_engine_step(Engine& engine);
+
+/// What a process engine's process has said of its run so far, while it runs.
+struct ProcessProgress {
+  std::int64_t frames = 0;     ///< the frames its request asks for
+  /// The frames it has said it stepped: N of its last stdout line `octocd-progress N`
+  /// (docs/bring-your-engine.md, "Progress"), 0 <= N <= frames; -1 before its first such
+  /// line (still starting, or an engine that says none).
+  std::int64_t stepped = -1;
+  double seconds = 0.0;        ///< wall time since its process was started (s)
+  double started_s = -1.0;     ///< `seconds` at its first progress line (its start-up); -1 before
+};
+
+/// Has `report` called on the thread of the process engine `engine`'s first step() while
+/// its process runs: at each progress line the process writes, and at least once a second
+/// otherwise; `report` must not throw. An empty `report` calls nothing. False (nothing
+/// done) when `engine` is not a process engine.
+bool set_process_progress(Engine& engine, std::function<void(const ProcessProgress&)> report);
+
+
 /// The engine `spec` on `model` (shared) with its settings `items` (checked: InputError
 /// naming `where`). Cheap: the process runs at the first step(), for the frames of
 /// plan_steps when called before it, else the scene's frames; it then writes its own
@@ -108,13 +134,6 @@ nlohmann::ordered_json process_request(const ProcessEngineSpec& spec, const Mode
 /// temporary files removed. Whatever ends a run, the process and every process it started
 /// (one that calls setsid() included) have ended when step() returns or octocd exits
 /// (docs/bring-your-engine.md, "The invocation").
-/// Stops the process a step() of the process engine `engine` runs now, from any thread
-/// (Python's Ctrl-C inside Engine.step()): its tree is stopped (SIGTERM, SIGKILL 0.2 s
-/// later) and that step() throws RuntimeError "engine 'NAME' ... was stopped ..." instead
-/// of ending octocd; a step() that starts before the stop is taken is stopped at once.
-/// False (nothing done) when `engine` is not a process engine.
-bool cancel_process_engine_step(Engine& engine);
-
 std::unique_ptr<Engine> make_process_engine(const ProcessEngineSpec& spec, const std::shared_ptr<const Model>& model,
                                             const std::vector<std::string>& items, const std::string& where);
 

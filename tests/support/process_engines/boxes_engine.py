@@ -13,7 +13,10 @@ setting names a file: first a grandchild is started that leaves the engine's pro
 as far as a process can (a double fork, setsid(): its own session and process group,
 re-parented), sleeps, and writes its process id there; octocd must end it all the same. A
 `wall_step_seconds` setting is written as that attribute instead of the measured time (a
-hostile timing: 0, 5e-324, nan, ...)."""
+hostile timing: 0, 5e-324, nan, ...). Progress (docs/bring-your-engine.md): a line
+`octocd-progress N` on stdout once set up (N 0) and after each frame N. A `hold` setting
+names a FIFO: after saying frame F // 2 the engine waits until a byte can be read from it
+(the tests read octocd's progress lines meanwhile, then release it)."""
 import json
 import os
 import signal
@@ -91,6 +94,13 @@ def main():
     resting = dynamic & (np.abs(x[0, :, 1] + lo[:, 1] - floor_top) < 1e-6) & (np.abs(v[0]).sum(axis=1) == 0)
     falling = dynamic & ~resting
     rows = []  # per frame: (pair, normal, point, jn)
+    hold = req["settings"].get("hold")
+    held = 0.0  # seconds waiting on `hold`, not stepping
+
+    def progress(frame):
+        print(f"octocd-progress {frame}", flush=True)
+
+    progress(0)
     t0 = time.perf_counter()
     for f in range(1, F + 1):
         v[f], x[f] = v[f - 1], x[f - 1]
@@ -103,7 +113,13 @@ def main():
                     p = x[f - 1, i] + [cx, lo[i, 1], cz]
                     frame_rows.append(((0, i), (0, -1, 0), p, mass[i] * -g[1] * dt / 4))
         rows.append(frame_rows)
-    wall = time.perf_counter() - t0
+        progress(f)
+        if hold and f == F // 2:
+            h0 = time.perf_counter()
+            with open(hold, "rb") as fifo:
+                fifo.read(1)
+            held += time.perf_counter() - h0
+    wall = time.perf_counter() - t0 - held
 
     written = F - 1 if mode == "frames" else F
     m = n - 1 if mode == "bodies" else n
