@@ -165,7 +165,9 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
                 "i/N: run only the points whose index is i modulo N (0 <= i < N), for job arrays; `report` merges "
                 "the shards' result files");
   c->add_flag("--resume", o.resume,
-              "Continue the result file of an interrupted run of the same sweep: keep its finished points, run the rest");
+              "Continue the result file of an interrupted run of the same sweep: keep its finished points, run the rest "
+              "(steps, broadphase and max-instances sweeps; speed-accuracy keeps a finished result only, divergence "
+              "starts over)");
   c->add_flag("--list", o.list, "List the named sweeps and exit");
   c->add_flag("--print", o.print, "Print the sweep's definition (JSON) and exit");
   c->add_option("--print-scene", o.print_scene,

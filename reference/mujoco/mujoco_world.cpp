@@ -231,7 +231,7 @@ void MujocoWorld::Impl::check_capacity() const {
   throw RuntimeError(fmt::format(
       "mujoco: frame {}: the {} is full ({} {}): MuJoCo would drop {} and its solver may then crash; "
       "--mujoco max_contacts={} ({}); allowed: a larger max_contacts (an integer in [1, 1000000]; MuJoCo 2.2 "
-      "allocates about 12 bytes x njmax^2, docs/engines.md)",
+      "allocates several arrays of njmax x nv x 8 bytes and refuses 2^31 in all, docs/engines.md)",
       frame + 1, contacts ? "contact buffer" : "constraint buffer", contacts ? "nconmax" : "njmax",
       contacts ? nconmax : njmax, contacts ? "contacts" : "constraint rows", nconmax,
       settings.max_contacts > 0 ? "as set"
