@@ -433,6 +433,14 @@ TEST_F(Tools, BenchResumeChecksTheTypeAndRangeOfWhatItReads) {
        "points[1].windows.all.steps_per_s.n: 18446744073709551615 is out of range"},
       {[](json& j) { j["points"][1]["windows"]["all"]["steps_per_s"]["values"][0] = "fast"; },
        "points[1].windows.all.steps_per_s.values[0]: a string \"fast\"; allowed: null or a number"},
+      // A figure bench never writes (check_point_timings) is not kept either: before, a
+      // negative, denormal or null steps/s was resumed into the result as finished work.
+      {[](json& j) { j["points"][1]["windows"]["all"]["steps_per_s"]["median"] = -5; },
+       "points[1].windows.all.steps_per_s.median: -5; allowed: 0 (not measured) or a timing from 1e-12 to 1e+15"},
+      {[](json& j) { j["points"][1]["windows"]["all"]["steps_per_s"]["values"][0] = 5e-324; },
+       "points[1].windows.all.steps_per_s.values[0]: 5e-324; allowed: 0 (not measured)"},
+      {[](json& j) { j["points"][1]["windows"]["all"]["cpu_steps_per_s"]["max"] = nullptr; },
+       "points[1].windows.all.cpu_steps_per_s.max: null; allowed: 0 (not measured)"},
       {[](json& j) { j["points"][0]["reason"] = 7; }, "points[0].reason: an integer 7; allowed: a string"},
       {[](json& j) { j["points"] = json::object(); }, "points: an object {}; allowed: an array"},
       {[](json& j) { j.erase("machine"); }, "machine: missing"},
