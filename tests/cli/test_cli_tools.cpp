@@ -362,6 +362,18 @@ TEST_F(Tools, BenchShardsSplitThePointsAndResumeKeepsFinishedOnes) {
   ASSERT_EQ(k["points"].size(), 2u);
   EXPECT_EQ(k["points"][0], keep);
   EXPECT_TRUE(k["complete"].get<bool>());
+  // The progress of a resumed run counts on from the kept points and says how many it kept
+  // (before: "[1/2]" for the last point, and no word of the kept one).
+  j = read_json(out);
+  j["points"].erase(1);
+  j["complete"] = false;
+  std::ofstream(out) << j.dump(1);
+  const Result told = run_octocd("bench " + sweep + " --engines cpu,bullet --shard 0/2 -o " + out.string() + " --resume");
+  ASSERT_EQ(told.code, 0) << told.output;
+  EXPECT_NE(told.output.find("(2 in this shard 0/2, 1 of them kept from the result by --resume)"), std::string::npos)
+      << told.output;
+  EXPECT_NE(told.output.find("[2/2] "), std::string::npos) << told.output;
+  EXPECT_EQ(told.output.find("[1/2] "), std::string::npos) << told.output;
   // Another shard or sweep is not resumed.
   const Result other = run_octocd("bench " + sweep + " --engines cpu --shard 0/2 -o " + out.string() + " --resume");
   EXPECT_EQ(other.code, 2);
