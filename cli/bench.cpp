@@ -165,7 +165,9 @@ CLI::App* add_bench_command(CLI::App& app, BenchOptions& o) {
                 "i/N: run only the points whose index is i modulo N (0 <= i < N), for job arrays; `report` merges "
                 "the shards' result files");
   c->add_flag("--resume", o.resume,
-              "Continue the result file of an interrupted run of the same sweep: keep its finished points, run the rest");
+              "Continue the result file of an interrupted run of the same sweep: keep its finished points, run the rest "
+              "(steps, broadphase and max-instances sweeps; speed-accuracy keeps a finished result only, divergence "
+              "starts over)");
   c->add_flag("--list", o.list, "List the named sweeps and exit");
   c->add_flag("--print", o.print, "Print the sweep's definition (JSON) and exit");
   c->add_option("--print-scene", o.print_scene,
@@ -396,6 +398,9 @@ int bench_command(const BenchOptions& o) {
       for (const auto& e : s.engines)
         if (k++ % static_cast<std::size_t>(shards) == static_cast<std::size_t>(shard)) my_searches.emplace_back(sc, e);
   }
+  // Points of this shard the result already holds (--resume): the progress counts on from them.
+  std::size_t kept_mine = 0;
+  for (const Point* p : mine) kept_mine += kept.count(p->id);
   SweepProgress progress(s.kind == "max-instances" ? my_searches.size() : mine.size(), !o.quiet);
   ModelCache models;
   InputCache inputs;
@@ -417,9 +422,10 @@ int bench_command(const BenchOptions& o) {
                octocd::printable(s.name), s.scenes.size() * s.engines.size(), my_searches.size(), shard, shards, json(s.engines).dump(),
                s.target, s.windows[0].first, s.windows[0].last, s.max_instances, s.probe_repeat, s.repeat, o.output);
   else if (!o.quiet)
-    fmt::print(stderr, "bench {}: {} points ({} in this shard {}/{}), engines {}, {} repetitions{}; result {}\n", octocd::printable(s.name),
-               points.size(), mine.size(), shard, shards, o.engines.empty() ? json(s.engines).dump() : o.engines,
-               s.repeat, budget_text(s), o.output);
+    fmt::print(stderr, "bench {}: {} points ({} in this shard {}/{}{}), engines {}, {} repetitions{}; result {}\n", octocd::printable(s.name),
+               points.size(), mine.size(), shard, shards,
+               kept_mine > 0 ? fmt::format(", {} of them kept from the result by --resume", kept_mine) : std::string(),
+               o.engines.empty() ? json(s.engines).dump() : o.engines, s.repeat, budget_text(s), printable(o.output));
   for (const Point* p : mine) {
     const auto it = kept.find(p->id);
     if (it != kept.end()) result["points"].push_back(it->second);  // resumed: kept as they were
@@ -485,7 +491,7 @@ int bench_command(const BenchOptions& o) {
     return failed ? 1 : 0;
   }
   // A finished point (all its repetitions, or skipped/failed): stamped, stored, file rewritten.
-  std::size_t finished = 0;
+  std::size_t finished = kept_mine;
   const auto finish_point = [&](const Point& p, json r) {
     r["id"] = p.id;
     r["index"] = p.index;

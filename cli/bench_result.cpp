@@ -2,6 +2,7 @@
 // (sweep, settings, machine, build), the checks before --resume keeps a file's finished
 // points, the timing hygiene recorded with it, and a sweep's stop or end.
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -14,6 +15,7 @@
 #include "octocd/json_fields.hpp"
 #include "octocd/json_strict.hpp"
 #include "octocd/stop.hpp"
+#include "octocd/timing_limits.hpp"
 
 namespace octocd::cli::bench {
 
@@ -77,6 +79,25 @@ void check_spread(const JsonFields& f, const json& v, const std::string& at) {
     for (std::size_t i = 0; i < vals.size(); ++i)
       (void)f.number_or_null(vals[i], fmt::format("{}.values[{}]", at, i), -1e300, 1e300);
   }
+}
+
+/// A kept point's timing spread (steps_per_s, cpu_steps_per_s, world_steps_per_s,
+/// ms_per_frame): as check_spread, and its median, min, max and values each 0 (not
+/// measured) or in [limits::kMinTiming, limits::kMaxTiming], the figures a run of bench
+/// writes (check_point_timings): a resumed result keeps no figure bench would not write.
+void check_timing_spread(const JsonFields& f, const json& v, const std::string& at) {
+  check_spread(f, v, at);
+  const auto one = [&](const json& x, const std::string& where) {
+    const double t = x.is_number() ? x.get<double>() : std::nan("");
+    if (t == 0.0 || (std::isfinite(t) && t >= limits::kMinTiming && t <= limits::kMaxTiming)) return;
+    f.fail(where, x.is_null() ? "null" : x.dump().substr(0, 60),
+           fmt::format("0 (not measured) or a timing from {:g} to {:g}, as bench writes them", limits::kMinTiming,
+                       limits::kMaxTiming));
+  };
+  for (const char* k : {"median", "min", "max"})
+    if (v.contains(k)) one(v[k], at + "." + k);
+  if (v.contains("values"))
+    for (std::size_t i = 0; i < v["values"].size(); ++i) one(v["values"][i], fmt::format("{}.values[{}]", at, i));
 }
 
 }  // namespace
@@ -193,11 +214,14 @@ std::map<std::string, json> resumable_points(const json& old, const std::string&
                                       : std::string("a ms_per_frame spread (docs/bench-format.md)"));
       }
       // The figures the run reads back (a max-instances search: the median and n of steps/s).
-      if (s.kind != "broadphase")
+      if (s.kind != "broadphase") {
         for (const auto& w : windows)
-          check_spread(f, pt["windows"][w]["steps_per_s"], at + ".windows." + w + ".steps_per_s");
-      else
-        check_spread(f, pt["ms_per_frame"], at + ".ms_per_frame");
+          for (const char* k : {"steps_per_s", "cpu_steps_per_s", "world_steps_per_s"})
+            if (pt["windows"][w].contains(k))
+              check_timing_spread(f, pt["windows"][w][k], at + ".windows." + w + "." + k);
+      } else {
+        check_timing_spread(f, pt["ms_per_frame"], at + ".ms_per_frame");
+      }
       kept[id] = pt;
     } else if (status == "skipped") {
       kept[id] = pt;

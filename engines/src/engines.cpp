@@ -170,11 +170,10 @@ EngineInfo mujoco_info() {
       "the same scene in MuJoCo (soft contacts, convex hulls, rotating bodies)", "mujoco-sap",
       "MuJoCo's mj_collision (sweep and prune)",
       "MuJoCo runs its own narrow phase: mjc_BoxBox on box pairs, MPR (libccd) on the convex hulls of meshes");
-  mujoco.max_bodies = 5000;
+  mujoco.max_bodies = 12000;
   mujoco.max_bodies_reason =
       "MuJoCo 2.2 builds its model from XML only and its compiler (mj_setConst) is quadratic in the bodies "
-      "(2.8 CPU s at 5,000, 11-45 CPU s at 10^4, about 1,100 CPU s at 10^5), and boxes-uniform-10k (--mujoco "
-      "max_contacts=100) ends in SIGSEGV inside mj_fwdConstraint at frame 2 (docs/engines.md, \"Set-up of large "
+      "(2.8 CPU s at 5,000, 11-45 CPU s at 10^4, about 1,100 CPU s at 10^5; docs/engines.md, \"Set-up of large "
       "scenes (MuJoCo 2.2)\")";
   mujoco.not_thread_safe =
       "MuJoCo 2.2's error and warning handlers (mju_user_error, mju_user_warning) are process-wide pointers the "

@@ -147,6 +147,7 @@ struct MujocoWorld::Impl : SettingsCore<MujocoSettings> {
   std::vector<std::array<double, 3>> diag_inertia;  // per body, diagonal, body frame (0: static)
   std::array<int, mjNWARNING> warnings{};  // mjData::warning counts seen so far
   int nconmax = 0, njmax = 0;  // the contact and constraint capacity (<size>), from max_contacts
+  const char* solver = "Newton";  // mjOption::solver: "Newton", or "CG" above kMostNewtonBodies
 
   ~Impl() override {
     if (d) mj_deleteData(d);
@@ -230,10 +231,12 @@ void MujocoWorld::Impl::check_capacity() const {
   throw RuntimeError(fmt::format(
       "mujoco: frame {}: the {} is full ({} {}): MuJoCo would drop {} and its solver may then crash; "
       "--mujoco max_contacts={} ({}); allowed: a larger max_contacts (an integer in [1, 1000000]; MuJoCo 2.2 "
-      "allocates about 12 bytes x njmax^2, docs/engines.md)",
+      "allocates several arrays of njmax x nv x 8 bytes and refuses 2^31 in all, docs/engines.md)",
       frame + 1, contacts ? "contact buffer" : "constraint buffer", contacts ? "nconmax" : "njmax",
       contacts ? nconmax : njmax, contacts ? "contacts" : "constraint rows", nconmax,
-      settings.max_contacts > 0 ? "as set" : "the default: 6 per dynamic body, at least 256, at most 1500"));
+      settings.max_contacts > 0 ? "as set"
+                                : "the default: 6 per dynamic body, at least 256, at most 1500 and what keeps njmax x nv "
+                                  "x 8 bytes within 2^29"));
 }
 
 void MujocoWorld::Impl::fill_record() {
@@ -295,23 +298,48 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
   // elliptic contact (condim 3), 4 per pyramidal one. MuJoCo 2.2 allocates its constraint
   // arrays at these sizes, some (J M^-1 J' + R) quadratic in the rows: 12 bytes x rows^2
   // (1500 contacts: about 1 GB; rot-pile-1000's 6000 could not be allocated).
+  // MuJoCo 2.2 also allocates mjData's constraint arrays, several of njmax x nv mjtNums
+  // (efc_J among them), in one buffer sized as an int, and refuses the scene ("could not
+  // create mjData") past 2^31 bytes: njmax 4,500 failed at nv 24,000 (one array 8.6e8
+  // bytes) with a stack of 1.5e8 bytes. The default keeps one array, njmax x nv x 8 bytes,
+  // within 2^29 (at least 16 contacts).
   constexpr std::size_t kMostDefaultContacts = 1500;
-  const int nconmax = settings.max_contacts > 0
-                          ? settings.max_contacts
-                          : static_cast<int>(std::min(kMostDefaultContacts, std::max<std::size_t>(256, 6 * dynamic)));
-  const int njmax = nconmax * (settings.cone == MujocoCone::Elliptic ? 3 : 4);
+  const std::size_t rows_per_contact = settings.cone == MujocoCone::Elliptic ? 3 : 4;
+  const std::size_t jacobian_contacts =
+      std::max<std::size_t>(16, (std::size_t{1} << 29) / (8 * rows_per_contact * std::max<std::size_t>(1, 6 * dynamic)));
+  const int nconmax =
+      settings.max_contacts > 0
+          ? settings.max_contacts
+          : static_cast<int>(std::min({kMostDefaultContacts, jacobian_contacts, std::max<std::size_t>(256, 6 * dynamic)}));
+  const int njmax = nconmax * static_cast<int>(rows_per_contact);
   im.nconmax = nconmax;
   im.njmax = njmax;
+  // The solver and the stack, from the scene (docs/engines.md, "Set-up of large scenes"):
+  // MuJoCo 2.2's Newton solver takes 3 nv^2 mjtNums of mjData's stack (its dense Hessians;
+  // mjData::maxuse_stack 432,228,360 at nv = 12,000) and sizes them as an int nv * nv,
+  // which wraps past nv = 46,340 (7,723 free bodies: a negative request that
+  // mj_stackAlloc does not refuse, the SIGSEGV in mj_fwdConstraint), and its default
+  // nstack (about 5 nv^2 + 12 njmax nv, an int) wraps past about 3,400 free bodies. Up to
+  // kMostNewtonBodies dynamic bodies: Newton on MuJoCo's default stack; above: the
+  // conjugate-gradient solver (no nv x nv array) on a stack sized here.
+  constexpr std::size_t kMostNewtonBodies = 2000;
+  const bool newton = dynamic <= kMostNewtonBodies;
+  const double nv = 6.0 * static_cast<double>(dynamic), nbody = static_cast<double>(n) + 1.0;
+  const long long nstack =
+      newton ? -1
+             : static_cast<long long>(std::min(2147483647.0, nbody * nbody + 64.0 * (nv + njmax) + 1e6));
+  im.solver = newton ? "Newton" : "CG";
   std::string x;
   x.reserve(4096);
   x += "<mujoco model=\"octocd\">\n";
   x += "  <compiler inertiafromgeom=\"false\" angle=\"radian\"/>\n";
   x += fmt::format(
-      "  <option timestep=\"{}\" gravity=\"{}\" integrator=\"Euler\" cone=\"{}\" iterations=\"{}\" solver=\"Newton\" "
+      "  <option timestep=\"{}\" gravity=\"{}\" integrator=\"Euler\" cone=\"{}\" iterations=\"{}\" solver=\"{}\" "
       "impratio=\"1\" density=\"0\" viscosity=\"0\">\n    <flag multiccd=\"{}\"/>\n  </option>\n",
-      num(im.dt), vec(scene.gravity), mujoco_cone_name(settings.cone), settings.iterations,
+      num(im.dt), vec(scene.gravity), mujoco_cone_name(settings.cone), settings.iterations, im.solver,
       settings.multiccd ? "enable" : "disable");
-  x += fmt::format("  <size nconmax=\"{}\" njmax=\"{}\"/>\n", nconmax, njmax);
+  x += fmt::format("  <size nconmax=\"{}\" njmax=\"{}\"{}/>\n", nconmax, njmax,
+                   nstack > 0 ? fmt::format(" nstack=\"{}\"", nstack) : std::string());
   x += fmt::format(
       "  <default>\n    <geom condim=\"3\" friction=\"{} 0 0\" solref=\"{} {}\" margin=\"{}\" gap=\"{}\"/>\n  "
       "</default>\n",
@@ -387,14 +415,16 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
     }
     mj_deleteVFS(vfs.get());
     if (!im.m) {
-      // MuJoCo 2.2 sizes mjData's constraint arrays njmax x nv and refuses them past about
-      // 2^31 bytes: at the default nconmax of 1500, beyond about 2,000 free bodies.
+      // MuJoCo 2.2 sizes mjData's constraint arrays njmax x nv each and refuses them past
+      // 2^31 bytes in all (the default capacity keeps one within 2^29).
       const bool data = std::strstr(error, "could not create mjData") != nullptr;
       throw RuntimeError(fmt::format(
           "mujoco: MuJoCo refused the scene '{}': {}{}{}", scene.name, error,
-          data ? fmt::format("; MuJoCo 2.2 sizes its constraint arrays njmax x nv (here {} x {}): lower "
-                             "--mujoco max_contacts (now {}; docs/engines.md, \"Set-up of large scenes\")",
-                             njmax, 6 * dynamic, nconmax)
+          data ? fmt::format("; MuJoCo 2.2 sizes its constraint arrays njmax x nv mjtNums each (here {} x {}: {:.3g} "
+                             "bytes; it refuses 2^31 in all): lower --mujoco max_contacts (now {}{}; docs/engines.md, "
+                             "\"Set-up of large scenes\")",
+                             njmax, 6 * dynamic, 8.0 * njmax * 6.0 * static_cast<double>(dynamic), nconmax,
+                             settings.max_contacts > 0 ? "" : ", the default")
                : std::string(),
           said.empty() ? std::string() : "; it printed: " + first_line(said)));
     }
@@ -538,7 +568,7 @@ bool MujocoWorld::has_stage(Stage s) const {
 
 std::string MujocoWorld::notes() const {
   return fmt::format(
-      "MuJoCo {}: {}; soft contacts (solref timeconst {} s, dampratio from e), {} cone, semi-implicit\n"
+      "MuJoCo {}: {}; soft contacts (solref timeconst {} s, dampratio from e), {} cone, {} solver, semi-implicit\n"
       "Euler. broadphase candidates are not exposed (0); AABB and dynamic pairs are the exact boxes\n"
       "at the pre-step pose that overlap. midphase = mj_fwdPosition (kinematics, MuJoCo's broadphase\n"
       "and narrow phase, constraint set-up), response = bias forces and the constraint solver,\n"
@@ -546,7 +576,7 @@ std::string MujocoWorld::notes() const {
       "rows; kinetic energy includes rotation.",
       mujoco_version(), impl().geometry,
       num(impl().timeconst),
-      mujoco_cone_name(impl().settings.cone));
+      mujoco_cone_name(impl().settings.cone), impl().solver);
 }
 
 }  // namespace octocd

@@ -362,6 +362,18 @@ TEST_F(Tools, BenchShardsSplitThePointsAndResumeKeepsFinishedOnes) {
   ASSERT_EQ(k["points"].size(), 2u);
   EXPECT_EQ(k["points"][0], keep);
   EXPECT_TRUE(k["complete"].get<bool>());
+  // The progress of a resumed run counts on from the kept points and says how many it kept
+  // (before: "[1/2]" for the last point, and no word of the kept one).
+  j = read_json(out);
+  j["points"].erase(1);
+  j["complete"] = false;
+  std::ofstream(out) << j.dump(1);
+  const Result told = run_octocd("bench " + sweep + " --engines cpu,bullet --shard 0/2 -o " + out.string() + " --resume");
+  ASSERT_EQ(told.code, 0) << told.output;
+  EXPECT_NE(told.output.find("(2 in this shard 0/2, 1 of them kept from the result by --resume)"), std::string::npos)
+      << told.output;
+  EXPECT_NE(told.output.find("[2/2] "), std::string::npos) << told.output;
+  EXPECT_EQ(told.output.find("[1/2] "), std::string::npos) << told.output;
   // Another shard or sweep is not resumed.
   const Result other = run_octocd("bench " + sweep + " --engines cpu --shard 0/2 -o " + out.string() + " --resume");
   EXPECT_EQ(other.code, 2);
@@ -433,6 +445,14 @@ TEST_F(Tools, BenchResumeChecksTheTypeAndRangeOfWhatItReads) {
        "points[1].windows.all.steps_per_s.n: 18446744073709551615 is out of range"},
       {[](json& j) { j["points"][1]["windows"]["all"]["steps_per_s"]["values"][0] = "fast"; },
        "points[1].windows.all.steps_per_s.values[0]: a string \"fast\"; allowed: null or a number"},
+      // A figure bench never writes (check_point_timings) is not kept either: before, a
+      // negative, denormal or null steps/s was resumed into the result as finished work.
+      {[](json& j) { j["points"][1]["windows"]["all"]["steps_per_s"]["median"] = -5; },
+       "points[1].windows.all.steps_per_s.median: -5; allowed: 0 (not measured) or a timing from 1e-12 to 1e+15"},
+      {[](json& j) { j["points"][1]["windows"]["all"]["steps_per_s"]["values"][0] = 5e-324; },
+       "points[1].windows.all.steps_per_s.values[0]: 5e-324; allowed: 0 (not measured)"},
+      {[](json& j) { j["points"][1]["windows"]["all"]["cpu_steps_per_s"]["max"] = nullptr; },
+       "points[1].windows.all.cpu_steps_per_s.max: null; allowed: 0 (not measured)"},
       {[](json& j) { j["points"][0]["reason"] = 7; }, "points[0].reason: an integer 7; allowed: a string"},
       {[](json& j) { j["points"] = json::object(); }, "points: an object {}; allowed: an array"},
       {[](json& j) { j.erase("machine"); }, "machine: missing"},

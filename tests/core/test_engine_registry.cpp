@@ -170,9 +170,9 @@ TEST(EngineRegistry, OptionsAnEngineCannotRunAreRefusedInTheCallersSpelling) {
   EXPECT_EQ(refusal("bullet", rot, cli_argument_names()), "");
 }
 
-// An engine with a measured size limit (EngineInfo::max_bodies: mujoco 5,000, dart 20,000)
-// refuses a larger model at once, before any set-up (MuJoCo's compile of 10^4 bodies took
-// 11-45 CPU s and then crashed; DART's set-up of 10^5 takes minutes), naming the count, the
+// An engine with a measured size limit (EngineInfo::max_bodies: mujoco 12,000, dart 20,000)
+// refuses a larger model at once, before any set-up (MuJoCo's compile is quadratic:
+// 11-48 CPU s at 10^4, about 1,100 CPU s at 10^5; DART's set-up of 10^5 takes minutes), naming the count, the
 // limit and the measured reason; at the limit it is not refused for its size.
 TEST(EngineRegistry, AnEngineRefusesAModelAboveItsMeasuredLimitAtOnce) {
   for (const char* name : {"mujoco", "dart"}) {

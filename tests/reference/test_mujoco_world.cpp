@@ -409,6 +409,44 @@ TEST(MujocoWorld, AFullContactBufferIsAnErrorNamingMaxContacts) {
   EXPECT_EQ(w.frame(), 0) << "no frame was counted";
 }
 
+// 4,000 free boxes, four resting on the floor so the solver runs at the first step: MuJoCo
+// 2.2's own stack size (nstack, about 5 nv^2 + 12 njmax nv mjtNums as an int) wraps past
+// about 3,400 free bodies (here mj_loadXML stopped with "Stack overflow"), and its Newton
+// solver takes 3 nv^2 of it, nv x nv as an int that wraps past 7,723 bodies (the SIGSEGV
+// in mj_fwdConstraint at 10^4). Above 2,000 dynamic bodies the adapter runs MuJoCo's CG
+// solver on a stack it sizes from the scene (docs/engines.md, "Set-up of large scenes").
+TEST(MujocoWorld, LargeScenesRunOnTheConjugateGradientSolverWithAStackSizedFromTheScene) {
+  const auto model = build_model(scene_of(
+      R"({"name": "resting", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 4, "mass": 1,
+          "positions": [[0, 0.099, 0], [0.5, 0.099, 0], [1, 0.099, 0], [1.5, 0.099, 0]]},
+         {"name": "high", "shape": {"box": [0.04, 0.04, 0.04]}, "count": 3996, "mass": 1,
+          "layout": {"type": "grid", "min": [-2.8, 1.0, -2.8], "max": [2.8, 3.8, 2.8], "spacing": 0.25}})",
+      "", "floor"));
+  std::size_t dynamic = 0;
+  for (float w : model->initial.w) dynamic += w > 0.0f ? 1 : 0;
+  ASSERT_EQ(dynamic, 4000u);
+  MujocoWorld w(model, model->initial);
+  const std::string& xml = w.xml();
+  EXPECT_NE(xml.find("solver=\"CG\""), std::string::npos);
+  const std::size_t at = xml.find("nstack=\"");
+  ASSERT_NE(at, std::string::npos);
+  const long long nstack = std::stoll(xml.substr(at + 8));
+  EXPECT_GT(nstack, 4001LL * 4001);  // MuJoCo's broadphase takes about nbody^2 / 2 of it
+  EXPECT_LT(nstack, 2147483647LL);
+  for (int f = 0; f < 2; ++f) {
+    const FrameMetrics& m = w.step();
+    EXPECT_GE(m.contacts, 4u) << "frame " << f + 1 << ": the four resting boxes touch the floor";
+  }
+  std::size_t resting = 0;
+  for (std::size_t i = 0; i < model->initial.size(); ++i) {
+    if (!(model->initial.w[i] > 0.0f) || model->initial.x[i].y > 0.5f) continue;
+    ++resting;
+    EXPECT_NEAR(w.state().x[i].y, 0.1f, 0.01f) << "body " << i << " rests on the floor";
+  }
+  EXPECT_EQ(resting, 4u);
+  EXPECT_NE(w.notes().find("CG solver"), std::string::npos) << w.notes();
+}
+
 TEST(MujocoSettings, KeysValuesAndErrors) {
   MujocoSettings s;
   apply_settings(s, {"iterations=20", "cone=pyramidal", "timeconst=0.01", "margin=0.002", "multiccd=off",

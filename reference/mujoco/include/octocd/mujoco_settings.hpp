@@ -53,9 +53,10 @@ struct MujocoSettings {
   bool multiccd = true;
   /// Contact capacity (`<size nconmax>`; the constraint rows njmax follow: 3 per contact
   /// with the elliptic cone, 4 with the pyramidal one); key `max_contacts`, an integer in
-  /// [0, 1000000]. 0 (the default): 6 per dynamic body, at least 256, at most 1500. MuJoCo 2.2
-  /// allocates arrays quadratic in the rows (about 12 bytes x njmax^2); a step that finds
-  /// more contacts throws RuntimeError naming this key (MuJoCo would drop them).
+  /// [0, 1000000]. 0 (the default): 6 per dynamic body, at least 256, at most 1500, and at
+  /// most what keeps njmax x nv x 8 bytes within 2^29 (MuJoCo 2.2 allocates several njmax x
+  /// nv arrays in one buffer sized as an int: docs/engines.md); a step that finds more
+  /// contacts throws RuntimeError naming this key (MuJoCo would drop them).
   int max_contacts = 0;
 };
 

@@ -43,7 +43,10 @@ namespace octocd {
 /// - options: timestep = scene.dt, gravity = scene.gravity, integrator Euler
 ///   (semi-implicit: v += dt a, then x += dt v), cone MujocoSettings::cone, iterations
 ///   MujocoSettings::iterations, multiccd MujocoSettings::multiccd, MuJoCo's Newton
-///   solver and warm start; no damping, no sleeping.
+///   solver (its conjugate-gradient solver above 2,000 dynamic bodies, on a stack
+///   `<size nstack>` sized from the scene: MuJoCo 2.2 sizes Newton's nv x nv Hessians and
+///   its default stack as ints, which wrap; docs/engines.md) and warm start; no damping,
+///   no sleeping.
 ///
 /// Stepping: one MuJoCo step of dt per frame, mj_step's own sequence called in parts so
 /// its stages are timed: mj_checkPos, mj_checkVel, mj_fwdPosition (kinematics,
