@@ -902,6 +902,12 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
           quote((dir_ / "engines").string()));
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--engines 'bulet': not an engine of this octocd; allowed: cpu,"), std::string::npos) << r.output;
+  // --matrix-scenes names the matrix's scenes only: a typo is exit 2 naming it and the allowed ones.
+  r = run("OCTOCD_BIN=" + quote(bin()) + " bash " + quote(script) + " --scenes none --matrix quick --engines cpu " +
+          "--matrix-scenes rot-slope,rot-stak-10 --out " + quote((dir_ / "matrix-scenes").string()));
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("--matrix-scenes 'rot-stak-10': not a scene of the matrix; allowed: rot-stack-10,rot-slope,"),
+            std::string::npos) << r.output;
 }
 
 // The nightly's gate (design.md section 14b): green on a healthy build whose only failure is expected,
