@@ -3,7 +3,8 @@ synthetic history folders (tests/report/history_synth.py) with a planted 2 %-a-n
 a planted step and a planted verdict flip must be found, and flat noisy histories must give
 no change point at the documented level; damaged, foreign and hostile files are named and
 skipped; machines are kept apart; `octocd history-append` and `bench --history` add files
-and never rewrite one. Run by ctest (`report.history`): OCTOCD_BIN is the octocd binary."""
+and never rewrite one. Run by ctest (`report.history.scale`: the 3,000-point night and the
+stopped reports; `report.history`: the rest): OCTOCD_BIN is the octocd binary."""
 import csv
 import json
 import os
