@@ -777,6 +777,7 @@ TEST_F(CliUser, ValidateExpectationsGateOnNewAndGrownFailures) {
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("expected non-penetration-eq14/non-penetration-eq14: worst 4 <= allowed 4"),
             std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("within 10% of the allowance"), std::string::npos) << r.output;  // a count, exact
   EXPECT_NE(r.output.find("all validators pass or fail as expected (1 expected failure(s)"), std::string::npos);
   {
     Xml x(xml);
@@ -901,6 +902,12 @@ TEST_F(CliUser, NightlyScriptExitCodesAndJUnit) {
           quote((dir_ / "engines").string()));
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("--engines 'bulet': not an engine of this octocd; allowed: cpu,"), std::string::npos) << r.output;
+  // --matrix-scenes names the matrix's scenes only: a typo is exit 2 naming it and the allowed ones.
+  r = run("OCTOCD_BIN=" + quote(bin()) + " bash " + quote(script) + " --scenes none --matrix quick --engines cpu " +
+          "--matrix-scenes rot-slope,rot-stak-10 --out " + quote((dir_ / "matrix-scenes").string()));
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("--matrix-scenes 'rot-stak-10': not a scene of the matrix; allowed: rot-stack-10,rot-slope,"),
+            std::string::npos) << r.output;
 }
 
 // The nightly's gate (design.md section 14b): green on a healthy build whose only failure is expected,
@@ -945,6 +952,20 @@ TEST_F(CliUser, NightlyScriptGatesOnExpectations) {
     ASSERT_FALSE(total.empty());
     EXPECT_GT(std::stod(total), 0.0);
   }
+  // An allowance less than 10 % above the figure (4 of 4.2) still passes, and the summary names
+  // it with its margin; 10 % or more (4 of 4.5) is not named.
+  e["expectations"][0]["worst"] = 4.2;
+  write_file(dir_ / "thin.json", e.dump());
+  r = nightly("thin", "--expect " + quote((dir_ / "thin.json").string()) + " " + pass + " " + fail);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("nightly: 1 expected failure(s) within 10% of the allowance"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("box-in-box non-penetration-eq14/non-penetration-eq14 worst 4 of allowed 4.2 (margin 4.8%)"),
+            std::string::npos) << r.output;
+  e["expectations"][0]["worst"] = 4.5;
+  write_file(dir_ / "wide.json", e.dump());
+  r = nightly("wide", "--expect " + quote((dir_ / "wide.json").string()) + " " + pass + " " + fail);
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output.find("within 10% of the allowance"), std::string::npos) << r.output;
   // (a) grown: exit 3, named in plain text.
   e["expectations"][0]["worst"] = 3;
   write_file(dir_ / "grown.json", e.dump());

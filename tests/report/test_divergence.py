@@ -2,7 +2,7 @@
 `octocd bench tests/data/bench-small-divergence.json` (two free-falling boxes and box-stack, cpu,
 40 frames): one log-scale plot per scene, a table of exponents per scene with the free fall's
 exponent ~0, the CSV with a row per frame of every point, and a malformed point refused with
-exit 2 naming it. Run by ctest (`report.sections`)."""
+exit 2 naming it. Run by ctest (`report.readable`)."""
 import csv
 import json
 import os

@@ -1,5 +1,5 @@
 """The performance gate and the report's merging on untrusted results (issue 57 item 4), run
-by ctest (`report.gate`):
+by ctest (`report.gate.points`: the 10^5 points; `report.gate.untrusted`: the rest):
 
 - the gate's statistics scale: U's exact null distribution where it is cheap (equal to
   scipy's exact result; beyond 30 a side to scipy's recursion run in numpy, which scipy's

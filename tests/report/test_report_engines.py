@@ -6,7 +6,7 @@ writes: each plot's record of its engines (dc:description "octocd-engines {json}
 report_plots.note_engine) names every engine of the sweep, drawn or with why not, and the
 elements drawn for an engine (id "engine:NAME") are filled or stroked in
 report_plots.ENGINE_COLORS's colour, the same on every plot. Names holding `$...$` (mathtext
-syntax) give a page. Run by ctest (`report.sections`)."""
+syntax) give a page. Run by ctest (`report.engines`)."""
 import json
 import os
 import re

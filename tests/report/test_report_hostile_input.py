@@ -1,4 +1,5 @@
-"""`octocd report` on untrusted input (issue 36), run by ctest (`report.inputs`).
+"""`octocd report` on untrusted input (issue 36), run by ctest (`report.inputs.corpus`:
+the fuzz corpus; `report.inputs`: the rest).
 
 - Traces reach the report only through `octocd trace-summary --json` (the hardened reader):
   external storage is refused naming file and dataset (exit 2, one line, no traceback),

@@ -2,7 +2,7 @@
 at most MAX_BARS (400) items, as the gate's plots do (issue 57 item 5; report_plots.py,
 too_many_to_draw): beyond, the plot is left out with a note and the tables keep every
 figure. Before, each drew whatever a result held (10^4 items took matplotlib minutes).
-Generated results, no octocd run; run by ctest (`report.sections`)."""
+Generated results, no octocd run; run by ctest (`report.readable`)."""
 import os
 import sys
 

@@ -2,7 +2,7 @@
 the same on every plot (report_plots.ENGINE_COLORS, engine_colour), category labels whose
 drawn boxes never overlap (matplotlib's Agg renderer, each tick label's window extent), log
 axes labelled. A generated small-scenes result of six engines, no octocd run; run by ctest
-(`report.sections`)."""
+(`report.readable`)."""
 import itertools
 import os
 import sys

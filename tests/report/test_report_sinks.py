@@ -1,5 +1,5 @@
 """The report's sinks (issue 68): text from a bench result reaches report.md, index.html and
-the CSV files escaped for each and bounded, run by ctest (`report.inputs`).
+the CSV files escaped for each and bounded, run by ctest (`report.sinks`).
 
 - report.md's "> Sweep" and "> Machine" lines: Markdown escaped (no raw link, image, HTML or
   added table row from a name, a description, the CPU or the host).
