@@ -99,19 +99,38 @@ def fail(msg):
 
 try:
     import numpy as np  # noqa: F401  (the other report_*.py modules take np from here)
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 except ImportError as e:  # exit 1: a missing dependency is not bad input
     print(f"octocd report: runtime failure: {e}; install Debian's python3-matplotlib and python3-numpy",
           file=sys.stderr)
     sys.exit(1)
 
-# Every text matplotlib draws is plain text: a `$...$` in a scene's, engine's or sweep's name
-# is never read as mathtext (a malformed one would fail the whole page), nor TeX.
-plt.rcParams.update({"svg.fonttype": "none", "font.family": "sans-serif", "font.size": 9,
-                     "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100,
-                     "text.parse_math": False, "text.usetex": False})
+
+class _Pyplot:
+    """matplotlib.pyplot, imported at the first use of an attribute: a report that ends on an
+    input error, or draws nothing, never pays for its import (about 0.5 s of CPU).
+    Every text matplotlib draws is plain text: a `$...$` in a scene's, engine's or sweep's name
+    is never read as mathtext (a malformed one would fail the whole page), nor TeX."""
+
+    _module = None
+
+    def __getattr__(self, name):
+        if _Pyplot._module is None:
+            try:
+                import matplotlib
+                matplotlib.use("Agg")
+                import matplotlib.pyplot as pyplot
+            except ImportError as e:  # exit 1: a missing dependency is not bad input
+                print(f"octocd report: runtime failure: {e}; install Debian's python3-matplotlib and "
+                      "python3-numpy", file=sys.stderr)
+                sys.exit(1)
+            pyplot.rcParams.update({"svg.fonttype": "none", "font.family": "sans-serif", "font.size": 9,
+                                    "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100,
+                                    "text.parse_math": False, "text.usetex": False})
+            _Pyplot._module = pyplot
+        return getattr(_Pyplot._module, name)
+
+
+plt = _Pyplot()
 
 
 CURRENT = ["the inputs"]  # the file being read, for the one-line error of a malformed one

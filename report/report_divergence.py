@@ -17,12 +17,8 @@ import csv
 import io
 import math
 
-import matplotlib
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-from report_common import is_number  # noqa: E402
-from report_plots import engine_colour, engine_marker, note_engine, unmeasured_engines  # noqa: E402
+from report_common import is_number, plt
+from report_plots import engine_colour, engine_marker, note_engine, unmeasured_engines
 
 KIND = "divergence"
 STATUSES = ("ok", "skipped", "failed")

@@ -19,13 +19,8 @@ log_ticks, speedup_text, overlap, load_mark, too_many_to_draw) as attributes.
 """
 import math
 
-import matplotlib
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from report_common import is_number  # noqa: E402
-from report_plots import engine_colour, note_engine  # noqa: E402
+from report_common import is_number, np, plt
+from report_plots import engine_colour, note_engine
 
 KIND = "speed-accuracy"
 STATUSES = ("ok", "diverged", "skipped", "failed")
