@@ -1,7 +1,7 @@
 #pragma once
 // HDF5 C API helpers shared by the trace writer (trace_writer.cpp), the trace reader
 // (trace_reader.cpp: replay, compare), read_trace_summary (trace_summary.cpp), the XDMF
-// sidecar (trace_xdmf.cpp) and the external-trace reader (validation/src/trace_in.cpp). Private to the
+// sidecar (trace_xdmf.cpp) and the external-trace reader (trace_in.hpp). Private to the
 // build (not installed): it needs HDF5's C headers.
 //
 // Every trace is untrusted input (issue 22): Hdf5Reader is the one way octocd opens and

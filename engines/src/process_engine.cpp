@@ -20,7 +20,7 @@
 #include "child_process.hpp"
 #include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
-#include "octocd/external.hpp"
+#include "octocd/external_trace.hpp"
 #include "octocd/process_engines.hpp"
 #include "octocd/run_session.hpp"
 #include "octocd/timing_limits.hpp"

@@ -23,7 +23,7 @@
 #include "child_process.hpp"
 #include "octocd/convex_hull.hpp"
 #include "octocd/error.hpp"
-#include "octocd/external.hpp"
+#include "octocd/external_trace.hpp"
 #include "octocd/json_fields.hpp"
 #include "octocd/json_strict.hpp"
 #include "octocd/shared_files.hpp"

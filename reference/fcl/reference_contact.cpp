@@ -654,16 +654,6 @@ double ReferenceGeometry::declared_gap(std::uint32_t body) const {
   return impl_->gaps[impl_->body_shape[body]];
 }
 
-const char* collision_shape_name(CollisionShape c) {
-  switch (c) {
-    case CollisionShape::Mesh: return "mesh";
-    case CollisionShape::ConvexHull: return "convex_hull";
-    case CollisionShape::Box: return "box";
-    case CollisionShape::Sphere: return "sphere";
-  }
-  return "mesh";
-}
-
 ReferenceGeometry::~ReferenceGeometry() = default;
 
 ReferenceNormal ReferenceGeometry::fcl_collide_normal(std::uint32_t a, std::uint32_t b, Vec3 xa,

@@ -16,7 +16,10 @@
 # - an include from validation/ (the judges) of a file under harness/;
 # - an include from validation/device/ (the judges' device part) of a file outside it and
 #   core/ (it shares no code with the engine it judges: docs/architecture.md, "The judges'
-#   device part").
+#   device part");
+# - an include from engines/ or reference/ (the engines) of a file under validation/: an
+#   engine reads its traces through core's external-trace reader, never the judges' library
+#   (docs/architecture.md, "No circles").
 # Run: cmake -DSRC=<source dir> -P tests/house/include_graph.cmake
 if(NOT SRC)
   message(FATAL_ERROR "include_graph.cmake: pass -DSRC=<the source directory>")
@@ -101,6 +104,7 @@ set(_units "")
 set(_room_names "")
 set(_judges_to_harness "")
 set(_device_judge_out "")
+set(_engines_to_judges "")
 set(_kw "^(namespace|using|template|class|struct|union|enum|return|typedef|static_assert|if|for|while|switch|case|default|public|private|protected|extern|friend|operator|sizeof|decltype|alignas|noexcept)$")
 foreach(f IN LISTS _files)
   unit_of(uf ${f})
@@ -123,6 +127,9 @@ foreach(f IN LISTS _files)
     endif()
     if(f MATCHES "^validation/device/" AND NOT to MATCHES "^(validation/device|core)/")
       string(APPEND _device_judge_out "  ${f} includes ${to}\n")
+    endif()
+    if(rf MATCHES "^(engines|reference)$" AND to MATCHES "^validation/")
+      string(APPEND _engines_to_judges "  ${f} includes ${to}\n")
     endif()
     room_of(rt ${to})
     if(NOT rt STREQUAL rf)
@@ -166,6 +173,12 @@ endif()
 if(NOT _device_judge_out STREQUAL "")
   message(FATAL_ERROR "the judges' device part (validation/device/) includes a file outside itself and core/ "
     "(docs/architecture.md, \"The judges' device part\"):\n${_device_judge_out}")
+endif()
+
+if(NOT _engines_to_judges STREQUAL "")
+  message(FATAL_ERROR "an engine (engines/, reference/) includes the judges (validation/), which stand above "
+    "the engines they judge; traces are read through core's octocd/external_trace.hpp (docs/architecture.md, "
+    "\"No circles\"):\n${_engines_to_judges}")
 endif()
 
 # Pass 2: who defines what a header declares: a source (.cpp, .cu) that includes the header
@@ -302,4 +315,5 @@ endif()
 list(LENGTH _units _nunits)
 list(LENGTH _room_names _nrooms)
 message(STATUS "include_graph: ${_nfiles} files, ${_nunits} units, ${_edges} calls between units, "
-  "${_nrooms} rooms: no circle; the judges include nothing of the harness; their device part only core")
+  "${_nrooms} rooms: no circle; the judges include nothing of the harness; their device part only core; "
+  "the engines nothing of the judges")

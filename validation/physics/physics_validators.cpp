@@ -17,28 +17,6 @@
 
 namespace octocd {
 
-const char* material_combine_name(MaterialCombine c) {
-  switch (c) {
-    case MaterialCombine::Product: return "product";
-    case MaterialCombine::Min: return "min";
-    case MaterialCombine::Max: return "max";
-    case MaterialCombine::Average: return "average";
-    case MaterialCombine::Geometric: return "geometric";
-  }
-  return "product";
-}
-
-double combine_material(MaterialCombine c, double a, double b) {
-  switch (c) {
-    case MaterialCombine::Product: return a * b;
-    case MaterialCombine::Min: return a < b ? a : b;
-    case MaterialCombine::Max: return a > b ? a : b;
-    case MaterialCombine::Average: return 0.5 * (a + b);
-    case MaterialCombine::Geometric: return std::sqrt(a * b);
-  }
-  return a * b;
-}
-
 double pair_friction(const PhysicsBodies& bodies, std::uint32_t a, std::uint32_t b) {
   const double mu = bodies.body_friction.empty() ? bodies.mu
                                                  : combine_material(bodies.combine, bodies.body_friction[a],

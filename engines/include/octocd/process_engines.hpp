@@ -4,7 +4,7 @@
 /// file as a command (an argument vector, never a shell string) that reads a run request
 /// (JSON) and writes a version 2 trace (docs/trace-format.md). octocd starts it, bounds it
 /// (wall time, trace size, the tail of its output kept), reads its trace through the
-/// hardened reader (octocd/external.hpp) and replays the frames through the Engine
+/// hardened reader (octocd/external_trace.hpp) and replays the frames through the Engine
 /// interface, so `run`, `validate`, `bench` and the engine matrix take it by name like a
 /// built-in engine (engine_registry.hpp: EngineInfo::command is non-empty for it).
 ///

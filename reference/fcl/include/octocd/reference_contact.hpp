@@ -67,6 +67,7 @@
 #include <vector>
 
 #include "octocd/math.hpp"
+#include "octocd/physics_bodies.hpp"  // CollisionShape
 #include "octocd/pose.hpp"
 #include "octocd/world.hpp"
 
@@ -107,19 +108,6 @@ struct PenetrationWitness {
   Vec3 vertex_point;              ///< that vertex, world frame
 };
 
-/// What an engine collided a body as (design.md section 13b.10; external traces v2:
-/// `/bodies/collision_shape` or the root attribute `collision_shape`). The physics tier's
-/// geometric rows judge this shape; its gap to the true shape is a figure.
-enum class CollisionShape {
-  Mesh,        ///< "mesh": the shape itself (a box shape: the box; a mesh: its triangles)
-  ConvexHull,  ///< "convex_hull": the convex hull of the shape's vertices (a box: itself)
-  Box,         ///< "box": the shape's local box (its AABB in the body frame)
-  /// "sphere": centred on the local box, through the mesh's farthest vertex. Mesh shapes
-  /// only (a box shape cannot be a sphere: refused).
-  Sphere,
-};
-/// "mesh", "convex_hull", "box", "sphere".
-const char* collision_shape_name(CollisionShape c);
 
 /// A shape's convex hull in the body frame, as the separating-axis test needs it
 /// (validation/physics/sat.hpp): a box's 8 corners, 3 face axes and 3 edge axes; a mesh's
