@@ -20,12 +20,20 @@ PairReference pair_reference_into(const ReferenceGeometry& ref, std::uint32_t a,
   t.g = ref.posed(a, b, pa, pb);
   t.fcl = t.g;
   if (t.g.penetrating && t.g.valid && ref.convex(a) && ref.convex(b)) {
-    if (scratch.placed_a != a) {
-      place_hull(ref.hull_features(a), pa, scratch.a);
-      scratch.placed_a = a;
+    // Two boxes: the closed form (no vertex projected); else, or at non-finite poses, the
+    // hull test on placed hulls.
+    const HullFeatures &ha = ref.hull_features(a), &hb = ref.hull_features(b);
+    std::array<double, 3> lo_a, hi_a, lo_b, hi_b;
+    if (hull_box(ha, lo_a, hi_a) && hull_box(hb, lo_b, hi_b))
+      t.sat_result = sat_boxes(lo_a, hi_a, pa, lo_b, hi_b, pb, settings, scratch.accepted);
+    if (!t.sat_result.tested) {
+      if (scratch.placed_a != a) {
+        place_hull(ha, pa, scratch.a);
+        scratch.placed_a = a;
+      }
+      place_hull(hb, pb, scratch.b);
+      t.sat_result = sat_min_translation_placed(scratch.a, scratch.b, settings, scratch.accepted);
     }
-    place_hull(ref.hull_features(b), pb, scratch.b);
-    t.sat_result = sat_min_translation_placed(scratch.a, scratch.b, settings, scratch.accepted);
     if (t.sat_result.tested && !t.sat_result.separated) {
       t.sat = true;
       t.g.depth = t.sat_result.depth;
