@@ -23,9 +23,15 @@ PairReference pair_reference_into(const ReferenceGeometry& ref, std::uint32_t a,
     // Two boxes: the closed form (no vertex projected); else, or at non-finite poses, the
     // hull test on placed hulls.
     const HullFeatures &ha = ref.hull_features(a), &hb = ref.hull_features(b);
-    std::array<double, 3> lo_a, hi_a, lo_b, hi_b;
-    if (hull_box(ha, lo_a, hi_a) && hull_box(hb, lo_b, hi_b))
-      t.sat_result = sat_boxes(lo_a, hi_a, pa, lo_b, hi_b, pb, settings, scratch.accepted);
+    auto seen = [](const HullFeatures& h, PairReferenceScratch::BoxSeen& s) -> const PairReferenceScratch::BoxSeen& {
+      if (s.hull != &h) {
+        s.hull = &h;
+        s.box = hull_box(h, s.lo, s.hi);
+      }
+      return s;
+    };
+    const PairReferenceScratch::BoxSeen &ba = seen(ha, scratch.box_seen[0]), &bb = seen(hb, scratch.box_seen[1]);
+    if (ba.box && bb.box) t.sat_result = sat_boxes(ba.lo, ba.hi, pa, bb.lo, bb.hi, pb, settings, scratch.accepted);
     if (!t.sat_result.tested) {
       if (scratch.placed_a != a) {
         place_hull(ha, pa, scratch.a);

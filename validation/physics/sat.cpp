@@ -236,29 +236,35 @@ SatResult sat_boxes(const std::array<double, 3>& lo_a, const std::array<double, 
     return sat_box(lo.data(), hi.data(), rot.data(), x);
   };
   const SatBox A = place(lo_a, hi_a, pa), B = place(lo_b, hi_b, pb);
-  SatAxis all[15];
-  int n = 0;
-  box_sat_each(A, B, [&](int kind, const double* u, double overlap) {
-    SatAxis& ax = all[n++];
-    ax.normal = {u[0], u[1], u[2]};
-    ax.overlap = overlap;
-    ax.kind = kind;
+  // The axes' figures; a normal is computed for the minimum and the accepted axes only.
+  BoxSatAxis all[15];
+  int n = 0, least = 0;
+  box_sat_each(A, B, [&](const BoxSatAxis& x) {
+    if (n == 0 || x.overlap < all[least].overlap) least = n;  // the first least (std::min_element)
+    all[n++] = x;
   });
   if (n == 0) return r;
   r.tested = true;
   r.axes = std::size_t(n);
-  // The first least overlap (as std::min_element in the hull test).
-  int least = 0;
-  for (int k = 1; k < n; ++k)
-    if (all[k].overlap < all[least].overlap) least = k;
+  auto unit = [](const BoxSatAxis& x) {
+    D3 u;
+    box_sat_normal(x, u.data());
+    return u;
+  };
   r.depth = all[least].overlap;
-  r.normal = all[least].normal;
+  r.normal = unit(all[least]);
   r.separated = r.depth <= 0;
   r.epsilon = settings.abs_m + settings.rel * std::max(r.depth, 0.0);
   if (!r.separated) {
     const double within = r.depth + r.epsilon;
     for (int k = 0; k < n; ++k)
-      if (all[k].overlap <= within) accepted.push_back(all[k]);
+      if (all[k].overlap <= within) {
+        SatAxis ax;
+        ax.normal = unit(all[k]);
+        ax.overlap = all[k].overlap;
+        ax.kind = all[k].kind;
+        accepted.push_back(ax);
+      }
   }
   return r;
 }

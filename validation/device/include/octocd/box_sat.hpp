@@ -56,14 +56,29 @@ OCTOCD_HD inline SatBox sat_box(const double lo[3], const double hi[3], const do
   return b;
 }
 
+/// One axis of box_sat_each.
+struct BoxSatAxis {
+  int kind;         ///< 0 a face normal of A, 1 of B, 2 an edge-edge cross product
+  double given[3];  ///< the axis as given (world): the column, or the cross of two columns
+  double len;       ///< |given| (> 1e-9)
+  /// +1 or -1: the unit normal from B to A is sign x given / len (+1 where (c_a - c_b) .
+  /// given >= 0, A lying on given's side of B).
+  double sign;
+  double overlap;   ///< m: the translation of A along the normal that separates the projections
+};
+
+/// The unit normal of axis `x`, from B to A: sign x (given / len), each component divided
+/// as the hull test divides (sat.hpp), so the same `given` gives the same normal bit for bit.
+OCTOCD_HD inline void box_sat_normal(const BoxSatAxis& x, double u[3]) {
+  for (int k = 0; k < 3; ++k) u[k] = x.sign * (x.given[k] / x.len);
+}
+
 /// The 15 axes of boxes `a` and `b` in the order of the hull test (sat.hpp): A's face
 /// normals a_0..a_2 (kind 0), B's b_0..b_2 (kind 1), then a_i x b_j by i, then j (kind 2),
-/// each given to `f(kind, normal, overlap)`: `normal` (double[3]) the unit axis u =
-/// given / |given| (given: the column, or the cross product of the two columns in the
-/// world) pointing from B to A (u where (c_a - c_b) . u >= 0, else -u), `overlap` (m) the
-/// translation of A along it that separates the projections (<= 0: apart or touching on
-/// that axis). An axis whose `given` is not longer than 1e-9 (nearly parallel edges, or a
-/// non-finite rotation) is skipped. Returns the count of axes given to f.
+/// each given to `f(const BoxSatAxis&)` (its overlap <= 0: apart or touching on that
+/// axis; its normal by box_sat_normal, computed only where asked). An axis whose `given`
+/// is not longer than 1e-9 (nearly parallel edges, or a non-finite rotation) is skipped.
+/// Returns the count of axes given to f.
 template <class F>
 OCTOCD_HD inline int box_sat_each(const SatBox& a, const SatBox& b, F&& f) {
   double d[3];  // c_b - c_a, world
@@ -84,32 +99,36 @@ OCTOCD_HD inline int box_sat_each(const SatBox& a, const SatBox& b, F&& f) {
     }
   }
   int count = 0;
-  // One axis: `given` (world), its overlap scaled by |given| (ra + rb - |t|, t = d . given).
-  auto axis = [&](int kind, const double given[3], double radii, double t, bool scaled) {
-    const double len = sqrt(given[0] * given[0] + given[1] * given[1] + given[2] * given[2]);
-    if (!(len > 1e-9)) return;
-    const double s = t <= 0 ? 1.0 : -1.0;  // t <= 0: A lies on +given's side of B
-    const double u[3] = {s * (given[0] / len), s * (given[1] / len), s * (given[2] / len)};
-    const double overlap = radii - fabs(t);
-    f(kind, u, scaled ? overlap / len : overlap);
+  BoxSatAxis x = {};
+  // One axis: x.given set; `radii` and t = d . given scaled by |given| where `scaled`.
+  auto axis = [&](int kind, double radii, double t, bool scaled) {
+    x.len = sqrt(x.given[0] * x.given[0] + x.given[1] * x.given[1] + x.given[2] * x.given[2]);
+    if (!(x.len > 1e-9)) return;
+    x.kind = kind;
+    x.sign = t <= 0 ? 1.0 : -1.0;  // t <= 0: A lies on +given's side of B
+    x.overlap = scaled ? (radii - fabs(t)) / x.len : radii - fabs(t);
+    f(static_cast<const BoxSatAxis&>(x));
     ++count;
   };
-  for (int i = 0; i < 3; ++i)
-    axis(0, ac[i], a.half[i] + (b.half[0] * absR[i][0] + b.half[1] * absR[i][1] + b.half[2] * absR[i][2]), T[i],
-         false);
-  for (int j = 0; j < 3; ++j)
-    axis(1, bc[j], (a.half[0] * absR[0][j] + a.half[1] * absR[1][j] + a.half[2] * absR[2][j]) + b.half[j], TB[j],
-         false);
+  for (int i = 0; i < 3; ++i) {
+    for (int m = 0; m < 3; ++m) x.given[m] = ac[i][m];
+    axis(0, a.half[i] + (b.half[0] * absR[i][0] + b.half[1] * absR[i][1] + b.half[2] * absR[i][2]), T[i], false);
+  }
+  for (int j = 0; j < 3; ++j) {
+    for (int m = 0; m < 3; ++m) x.given[m] = bc[j][m];
+    axis(1, (a.half[0] * absR[0][j] + a.half[1] * absR[1][j] + a.half[2] * absR[2][j]) + b.half[j], TB[j], false);
+  }
   constexpr double eps = kBoxSatEps;
   for (int i = 0; i < 3; ++i) {
     const int i1 = (i + 1) % 3, i2 = (i + 2) % 3;
     for (int j = 0; j < 3; ++j) {
       const int j1 = (j + 1) % 3, j2 = (j + 2) % 3;
-      const double given[3] = {ac[i][1] * bc[j][2] - ac[i][2] * bc[j][1], ac[i][2] * bc[j][0] - ac[i][0] * bc[j][2],
-                               ac[i][0] * bc[j][1] - ac[i][1] * bc[j][0]};
+      x.given[0] = ac[i][1] * bc[j][2] - ac[i][2] * bc[j][1];
+      x.given[1] = ac[i][2] * bc[j][0] - ac[i][0] * bc[j][2];
+      x.given[2] = ac[i][0] * bc[j][1] - ac[i][1] * bc[j][0];
       const double radii = (a.half[i1] * (absR[i2][j] + eps) + a.half[i2] * (absR[i1][j] + eps)) +
                            (b.half[j1] * (absR[i][j2] + eps) + b.half[j2] * (absR[i][j1] + eps));
-      axis(2, given, radii, T[i2] * R[i1][j] - T[i1] * R[i2][j], true);
+      axis(2, radii, T[i2] * R[i1][j] - T[i1] * R[i2][j], true);
     }
   }
   return count;
@@ -120,7 +139,7 @@ OCTOCD_HD inline int box_sat_each(const SatBox& a, const SatBox& b, F&& f) {
 /// -overlap bounds their distance from below. +infinity when no axis was tested.
 OCTOCD_HD inline double box_sat_least_overlap(const SatBox& a, const SatBox& b) {
   double least = INFINITY;
-  box_sat_each(a, b, [&](int, const double*, double overlap) { least = fmin(least, overlap); });
+  box_sat_each(a, b, [&](const BoxSatAxis& x) { least = fmin(least, x.overlap); });
   return least;
 }
 
