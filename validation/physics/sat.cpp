@@ -259,11 +259,10 @@ SatResult sat_boxes(const std::array<double, 3>& lo_a, const std::array<double, 
     const double within = r.depth + r.epsilon;
     for (int k = 0; k < n; ++k)
       if (all[k].overlap <= within) {
-        SatAxis ax;
-        ax.normal = unit(all[k]);
+        SatAxis& ax = accepted.emplace_back();  // filled in place: no copy through the stack
+        box_sat_normal(all[k], ax.normal.data());
         ax.overlap = all[k].overlap;
         ax.kind = all[k].kind;
-        accepted.push_back(ax);
       }
   }
   return r;
