@@ -79,6 +79,17 @@ struct Run {
 };
 
 
+/// What the search of one island leaves for the tally: the run judged against, which of
+/// its dynamic bodies are judged, and what the search adds to the counters.
+struct SearchCounts {
+  std::uint64_t near_ties = 0, runs = 0, searched = 0, resolved = 0, exceeded = 0;
+};
+struct Searched {
+  Run run;
+  std::vector<std::uint8_t> judged;
+  SearchCounts counts;
+};
+
 /// Work space of one island's run (AppliedStateJudge::Impl::run), kept per thread.
 struct RunScratch {
   std::vector<F3> xf, vf, dxf_sum, dvf_sum;
@@ -121,15 +132,20 @@ struct AppliedStateJudge::Impl {
   void run(const Island& is, const std::vector<std::uint8_t>& forced, Run& r) const;
   /// Compares the run's prediction of the island's dynamic bodies with the engine's.
   void compare(const Island& is, Run& r) const;
-  /// What a search adds to the judge's counters (summed in island order after the islands
-  /// are searched on the validators' threads).
-  struct SearchCounts {
-    std::uint64_t near_ties = 0, runs = 0, searched = 0, resolved = 0, exceeded = 0;
-  };
-  /// Explores the island's branches; returns the run judged against, sets `judged` (per
-  /// local dynamic body) and adds to `counts`. Reads only the frame's shared state: islands
-  /// may be searched on several threads at once.
-  Run search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged, SearchCounts& counts) const;
+  /// Runs the island's passes into `out` (its vectors' memory reused) and, where the first
+  /// run is off, explores the island's branches (search_branches); `out` ends as the run
+  /// judged against, sets `judged` (per local dynamic body) and adds to `counts` (what a
+  /// search adds to the judge's counters, summed in island order after the islands are
+  /// searched on the validators' threads). Reads only the frame's shared state: islands may
+  /// be searched on several threads at once.
+  void search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged, SearchCounts& counts,
+              Run& out) const;
+  /// The branches of an island whose first run `first` (compared) is off: the run judged against.
+  Run search_branches(const Island& is, const Run& first, std::vector<std::uint8_t>& judged,
+                      SearchCounts& counts) const;
+  /// Per island of the last frame: its search, kept so that the next frame's runs reuse
+  /// their vectors' memory (most islands are one body: about 7 allocations each).
+  std::vector<Searched> island_searches;
   int threads = 0;  // set_threads: the islands' threads (0: the hardware's)
 };
 
@@ -449,16 +465,21 @@ void AppliedStateJudge::Impl::compare(const Island& is, Run& r) const {
   }
 }
 
-Run AppliedStateJudge::Impl::search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged,
-                                    SearchCounts& counts) const {
-  Run first;
-  run(is, {}, first);
+void AppliedStateJudge::Impl::search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged,
+                                     SearchCounts& counts, Run& out) const {
+  out.work = 0;
+  run(is, {}, out);
   judged.assign(is.dynamic, 1);
-  if (!judge_response) return first;
-  compare(is, first);
-  counts.near_ties += first.trace.size();
+  if (!judge_response) return;
+  compare(is, out);
+  counts.near_ties += out.trace.size();
   ++counts.runs;
-  if (first.off == 0) return first;
+  if (out.off == 0) return;
+  out = search_branches(is, out, judged, counts);
+}
+
+Run AppliedStateJudge::Impl::search_branches(const Island& is, const Run& first, std::vector<std::uint8_t>& judged,
+                                             SearchCounts& counts) const {
   // Breadth-first over the near-ties by the number of outcomes changed from the first
   // run's: each queued branch forces a prefix of outcomes, the rest follow the proposal;
   // a branch only changes outcomes after its forced prefix, so no branch is run twice.
@@ -633,20 +654,17 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   std::vector<D3> x_tol(n), v_tol(n);
   // The islands are independent: searched on the validators' threads, then tallied in
   // island order (a verdict never depends on the thread count).
-  struct Searched {
-    Run run;
-    std::vector<std::uint8_t> judged;
-    Impl::SearchCounts counts;
-  };
-  std::vector<Searched> searched(islands.size());
+  std::vector<Searched>& searched = s.island_searches;
+  if (searched.size() < islands.size()) searched.resize(islands.size());
   parallel_items_on(islands.size(), loop_threads(s.threads, islands.size()), s.stop, [&](std::size_t j, unsigned) {
-    searched[j].run = s.search(islands[j], judge_response, searched[j].judged, searched[j].counts);
+    searched[j].counts = SearchCounts{};
+    s.search(islands[j], judge_response, searched[j].judged, searched[j].counts, searched[j].run);
   });
   for (std::size_t j = 0; j < islands.size(); ++j) {
     const Island& is = islands[j];
     const Run& r = searched[j].run;
     const std::vector<std::uint8_t>& judged = searched[j].judged;
-    const Impl::SearchCounts& c = searched[j].counts;
+    const SearchCounts& c = searched[j].counts;
     s.near_ties += c.near_ties;
     s.runs += c.runs;
     s.searched += c.searched;

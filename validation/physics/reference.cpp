@@ -20,12 +20,26 @@ PairReference pair_reference_into(const ReferenceGeometry& ref, std::uint32_t a,
   t.g = ref.posed(a, b, pa, pb);
   t.fcl = t.g;
   if (t.g.penetrating && t.g.valid && ref.convex(a) && ref.convex(b)) {
-    if (scratch.placed_a != a) {
-      place_hull(ref.hull_features(a), pa, scratch.a);
-      scratch.placed_a = a;
+    // Two boxes: the closed form (no vertex projected); else, or at non-finite poses, the
+    // hull test on placed hulls.
+    const HullFeatures &ha = ref.hull_features(a), &hb = ref.hull_features(b);
+    auto seen = [](const HullFeatures& h, PairReferenceScratch::BoxSeen& s) -> const PairReferenceScratch::BoxSeen& {
+      if (s.hull != &h) {
+        s.hull = &h;
+        s.box = hull_box(h, s.lo, s.hi);
+      }
+      return s;
+    };
+    const PairReferenceScratch::BoxSeen &ba = seen(ha, scratch.box_seen[0]), &bb = seen(hb, scratch.box_seen[1]);
+    if (ba.box && bb.box) t.sat_result = sat_boxes(ba.lo, ba.hi, pa, bb.lo, bb.hi, pb, settings, scratch.accepted);
+    if (!t.sat_result.tested) {
+      if (scratch.placed_a != a) {
+        place_hull(ha, pa, scratch.a);
+        scratch.placed_a = a;
+      }
+      place_hull(hb, pb, scratch.b);
+      t.sat_result = sat_min_translation_placed(scratch.a, scratch.b, settings, scratch.accepted);
     }
-    place_hull(ref.hull_features(b), pb, scratch.b);
-    t.sat_result = sat_min_translation_placed(scratch.a, scratch.b, settings, scratch.accepted);
     if (t.sat_result.tested && !t.sat_result.separated) {
       t.sat = true;
       t.g.depth = t.sat_result.depth;

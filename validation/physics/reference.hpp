@@ -11,6 +11,7 @@
 /// (ReferenceGeometry::posed: two boxes octocd's box-box, hulls FCL's EPA) is kept beside
 /// it (the second opinion). Other shapes: FCL / libccd (ReferenceGeometry::posed). Units: metres; normals unit, from B to A (design.md section 2).
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -46,6 +47,13 @@ struct PairReferenceScratch {
   PlacedHull a, b;
   std::uint32_t placed_a = 0xffffffffu;  ///< the body whose hull `a` holds (none: 2^32 - 1)
   std::vector<SatAxis> accepted;         ///< the last pair's accepted axes (where `sat`)
+  /// A hull last asked whether it is a box (hull_box), by address, with the answer.
+  struct BoxSeen {
+    const HullFeatures* hull = nullptr;
+    bool box = false;
+    std::array<double, 3> lo{}, hi{};  ///< its extent where `box`
+  };
+  BoxSeen box_seen[2];  ///< body a's hull, body b's (a scratch serves one ReferenceGeometry)
 };
 
 /// pair_reference for callers that judge many pairs at one set of poses: the same figures

@@ -2,6 +2,8 @@
 #include "sat.hpp"
 #include "dmath.hpp"
 
+#include "octocd/box_sat.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -185,6 +187,84 @@ SatResult sat_min_translation_placed(const PlacedHull& A, const PlacedHull& B, c
   }
   // A large pair (up to SatSettings::max_work axes) does not keep its axes' memory.
   if (all.capacity() > kKeptAxes) std::vector<SatAxis>().swap(all);
+  return r;
+}
+
+bool hull_box(const HullFeatures& h, std::array<double, 3>& lo, std::array<double, 3>& hi) {
+  if (h.vertices.size() != 8 || h.face_normals.size() != 3 || h.edge_dirs.size() != 3) return false;
+  for (int k = 0; k < 3; ++k) {
+    const D3 e{k == 0 ? 1.0 : 0.0, k == 1 ? 1.0 : 0.0, k == 2 ? 1.0 : 0.0};
+    if (h.face_normals[k] != e || h.edge_dirs[k] != e) return false;
+  }
+  D3 l = h.vertices[0], u = h.vertices[0];
+  for (const D3& v : h.vertices)
+    for (int d = 0; d < 3; ++d) {
+      l[d] = std::min(l[d], v[d]);
+      u[d] = std::max(u[d], v[d]);
+    }
+  // Each vertex a corner (every coordinate its least or greatest), the 8 all different.
+  unsigned corners = 0;
+  for (const D3& v : h.vertices) {
+    unsigned bits = 0;
+    for (int d = 0; d < 3; ++d) {
+      if (v[d] == u[d] && l[d] < u[d]) bits |= 1u << d;
+      else if (v[d] != l[d]) return false;
+    }
+    corners |= 1u << bits;
+  }
+  if (corners != 0xffu) return false;
+  lo = l;
+  hi = u;
+  return true;
+}
+
+SatResult sat_boxes(const std::array<double, 3>& lo_a, const std::array<double, 3>& hi_a, const Pose& pa,
+                    const std::array<double, 3>& lo_b, const std::array<double, 3>& hi_b, const Pose& pb,
+                    const SatSettings& settings, std::vector<SatAxis>& accepted) {
+  SatResult r;
+  accepted.clear();
+  for (const Pose* p : {&pa, &pb}) {
+    const float v[7] = {p->position.x, p->position.y, p->position.z, p->orientation.w,
+                        p->orientation.x, p->orientation.y, p->orientation.z};
+    for (float x : v)
+      if (!std::isfinite(x)) return r;
+  }
+  if (15.0 * 16.0 > settings.max_work) return r;  // the hull test's count for two boxes
+  auto place = [](const D3& lo, const D3& hi, const Pose& p) {
+    const M3 rot = rotation(p.orientation);
+    const double x[3] = {double(p.position.x), double(p.position.y), double(p.position.z)};
+    return sat_box(lo.data(), hi.data(), rot.data(), x);
+  };
+  const SatBox A = place(lo_a, hi_a, pa), B = place(lo_b, hi_b, pb);
+  // The axes' figures; a normal is computed for the minimum and the accepted axes only.
+  BoxSatAxis all[15];
+  int n = 0, least = 0;
+  box_sat_each(A, B, [&](const BoxSatAxis& x) {
+    if (n == 0 || x.overlap < all[least].overlap) least = n;  // the first least (std::min_element)
+    all[n++] = x;
+  });
+  if (n == 0) return r;
+  r.tested = true;
+  r.axes = std::size_t(n);
+  auto unit = [](const BoxSatAxis& x) {
+    D3 u;
+    box_sat_normal(x, u.data());
+    return u;
+  };
+  r.depth = all[least].overlap;
+  r.normal = unit(all[least]);
+  r.separated = r.depth <= 0;
+  r.epsilon = settings.abs_m + settings.rel * std::max(r.depth, 0.0);
+  if (!r.separated) {
+    const double within = r.depth + r.epsilon;
+    for (int k = 0; k < n; ++k)
+      if (all[k].overlap <= within) {
+        SatAxis& ax = accepted.emplace_back();  // filled in place: no copy through the stack
+        box_sat_normal(all[k], ax.normal.data());
+        ax.overlap = all[k].overlap;
+        ax.kind = all[k].kind;
+      }
+  }
   return r;
 }
 

@@ -2,6 +2,8 @@
 // pairs' separating-axis test, in double precision. Shares no code with gpu/ (the engine).
 #include "octocd/device_judge.hpp"
 
+#include "octocd/box_sat.hpp"
+
 #include <cuda_runtime.h>
 #include <thrust/binary_search.h>
 #include <thrust/device_ptr.h>
@@ -230,36 +232,16 @@ __global__ void wide_pairs(int n, int small, const std::uint32_t* ids, const dou
   emit(w, j, count, out, cap);
 }
 
-/// The separating-axis test of two posed boxes (sat.hpp's axes for two boxes).
+/// The separating-axis test of two posed boxes: octocd/box_sat.hpp's closed form, the
+/// formula the CPU tier's reference takes for two boxes (sat.hpp sat_boxes).
 __device__ double box_box_overlap(const Body& A, const float* pa, const Body& B, const float* pb) {
-  double ca[8][3], cb[8][3], ra[9], rb[9];
-  corners(A, pa, ca);
-  corners(B, pb, cb);
-  rotation(pa + 3, ra);
-  rotation(pb + 3, rb);
-  double least = INFINITY;
-  auto test = [&](double ux, double uy, double uz) {
-    double a0 = INFINITY, a1 = -INFINITY, b0 = INFINITY, b1 = -INFINITY;
-    for (int k = 0; k < 8; ++k) {
-      const double p = ca[k][0] * ux + ca[k][1] * uy + ca[k][2] * uz;
-      const double q = cb[k][0] * ux + cb[k][1] * uy + cb[k][2] * uz;
-      a0 = fmin(a0, p), a1 = fmax(a1, p), b0 = fmin(b0, q), b1 = fmax(b1, q);
-    }
-    least = fmin(least, fmin(b1 - a0, a1 - b0));
+  auto place = [](const Body& b, const float* pose) {
+    double r[9];
+    rotation(pose + 3, r);
+    const double x[3] = {double(pose[0]), double(pose[1]), double(pose[2])};
+    return sat_box(b.lo, b.hi, r, x);
   };
-  // Face normals: the rotations' columns.
-  for (int k = 0; k < 3; ++k) test(ra[k], ra[3 + k], ra[6 + k]);
-  for (int k = 0; k < 3; ++k) test(rb[k], rb[3 + k], rb[6 + k]);
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) {
-      const double ex = ra[i], ey = ra[3 + i], ez = ra[6 + i];
-      const double fx = rb[j], fy = rb[3 + j], fz = rb[6 + j];
-      const double x = ey * fz - ez * fy, y = ez * fx - ex * fz, z = ex * fy - ey * fx;
-      const double len = sqrt(x * x + y * y + z * z);
-      if (len < 1e-9) continue;  // nearly parallel edges: no axis
-      test(x / len, y / len, z / len);
-    }
-  return least;
+  return box_sat_least_overlap(place(A, pa), place(B, pb));
 }
 
 /// Per pair (key a << 32 | b): the box-box test when both are boxes.

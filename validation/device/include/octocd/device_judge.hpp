@@ -14,9 +14,9 @@
 ///    wider than twice the mean; wider bodies are tested against every body), sorted by
 ///    (a, b) with a < b;
 ///  - per candidate whose two bodies are boxes: the separating-axis test of the two posed
-///    boxes in double precision (3 + 3 face normals and the 9 edge-edge crosses whose
-///    length is at least 1e-9; sat.hpp's axes for two boxes), its least overlap (m). Pairs
-///    with another shape are marked and left to the CPU reference.
+///    boxes in double precision (octocd/box_sat.hpp's closed form, the CPU reference's for
+///    two boxes: 3 + 3 face normals and the 9 edge-edge crosses longer than 1e-9), its
+///    least overlap (m). Pairs with another shape are marked and left to the CPU reference.
 /// Poses arrive in float32 and are taken exactly; the quaternion is normalised in double
 /// (as dmath::rotation). Units: metres.
 
