@@ -36,7 +36,9 @@ namespace {
 
 using octocd::test::bin;
 
-#if defined(__SANITIZE_ADDRESS__)
+// Whether the `octocd` under test runs with AddressSanitizer (OCTOCD_TEST_BIN_SANITIZED: the
+// sanitizer build, which compiles this program itself without the instrumentation).
+#if defined(OCTOCD_TEST_BIN_SANITIZED) || defined(__SANITIZE_ADDRESS__)
 constexpr bool kAsan = true;
 #elif defined(__has_feature)
 #if __has_feature(address_sanitizer)
