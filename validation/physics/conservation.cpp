@@ -485,8 +485,8 @@ ValidationResult PhysicsValidators::Impl::table<RowId::Conservation>() const {
   }
   note(r.detail, !s.bodies.contacts_complete,
        "contacts_complete 0: {} group-frames near a body outside them (shapes within the "
-       "margin and the step's motion by the exact reference) not judged, an unreported contact "
-       "may join them",
+       "margin and the pair's motion through the step by the exact reference) not judged, an "
+       "unreported contact may join them",
        s.groups_near);
   note(r.detail, s.bodies.contacts_complete && !s.bodies.incomplete_rows.empty(),
        "/contacts/incomplete: {} group-frames on its steps or pairs near a body of a declared pair outside them not "
