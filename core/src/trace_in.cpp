@@ -184,6 +184,7 @@ TraceIn::TraceIn(const std::string& path, bool with_scene, bool sparse, bool rec
   det_gravity_ = bodies.gravity;
   if (with_scene && info.has_scene) scene_defaults();
   read_declarations(bodies.physics);
+  read_incomplete_rows(bodies.physics);
   if (info.version == 2)
     read_v2();
   else

@@ -122,6 +122,11 @@ class TraceIn {
   /// them (written before they existed: /frames and the root attribute `parameters`) is
   /// read as declaring octocd's conventions (ExternalTraceInfo::octocd_conventions).
   void read_declarations(PhysicsBodies& p);
+  /// `/contacts/incomplete` (either version, with /contacts and contacts_complete 1):
+  /// K frames (1 .. F) or K x 3 rows (frame, body_a, body_b) whose contact rows the engine
+  /// may have dropped, into PhysicsBodies::incomplete_rows (sorted, pairs as a < b); any
+  /// other shape, type, frame or body is an error naming the row and the allowed range.
+  void read_incomplete_rows(PhysicsBodies& p) const;
   /// /bodies/convex_radius (n, m, >= 0: PhysicsBodies::convex_radius) and
   /// /bodies/com_offset (n x 3, m, body frame: the centre of mass relative to the body
   /// frame's origin that /states/position gives; with a nonzero offset the root attribute

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "octocd/scene.hpp"
@@ -243,6 +244,47 @@ void TraceIn::read_declarations(PhysicsBodies& p) {
       bad("/ (root attribute gyroscopic)", fmt::format("'{}' unknown", text), allowed);
     p.gyroscopic = text == "true" ? PhysicsBodies::Gyroscopic::Integrated : PhysicsBodies::Gyroscopic::Absent;
   }
+}
+
+void TraceIn::read_incomplete_rows(PhysicsBodies& p) const {
+  const std::string name = "/contacts/incomplete";
+  if (!exists(name)) return;
+  const std::string allowed_shape =
+      "K frames (integers, each in 1 .. F: every pair of the step may lack rows) or K x 3 rows (frame, body_a, "
+      "body_b: that pair's rows may be missing in that step)";
+  const int rank = static_cast<int>(h5_->open_dataset(name).dims.size());
+  if (rank != 1 && rank != 2) bad(name, fmt::format("{} dimensions", rank), allowed_shape);
+  const Dataset d = open(name, H5T_INTEGER, rank, false);
+  if (rank == 2 && d.dims[1] != 3) bad(name, fmt::format("shape {} x {}", d.dims[0], d.dims[1]), allowed_shape);
+  if (!info.has_contacts)
+    bad(name, "without /contacts", "the steps or pairs whose rows may be missing, with /contacts (offsets and rows)");
+  if (!p.contacts_complete)
+    bad(name, "given with the root attribute contacts_complete = 0 (every step may lack rows already)",
+        "contacts_complete 1 (default) with the steps or pairs listed here, or contacts_complete 0 without them");
+  const std::vector<std::int64_t> v = read<std::int64_t>(d, 0, d.dims[0]);
+  const std::size_t k = static_cast<std::size_t>(d.dims[0]);
+  std::vector<PhysicsBodies::IncompleteRows> rows(k);
+  for (std::size_t r = 0; r < k; ++r) {
+    const std::int64_t frame = rank == 1 ? v[r] : v[3 * r];
+    if (frame < 1 || frame > frames_)
+      bad(name, fmt::format("row {}: frame {}", r, frame), fmt::format("a frame in 1 .. {} (the trace's steps)", frames_));
+    rows[r].frame = frame;
+    rows[r].a = rows[r].b = PhysicsBodies::kEveryPair;
+    if (rank == 1) continue;
+    const std::int64_t a = v[3 * r + 1], b = v[3 * r + 2];
+    for (const std::int64_t body : {a, b})
+      if (body < 0 || body >= static_cast<std::int64_t>(n_))
+        bad(name, fmt::format("row {}: body {}", r, body),
+            fmt::format("a body index in 0 .. {} (as /bodies/inverse_mass)", n_ - 1));
+    if (a == b) bad(name, fmt::format("row {}: pair ({}, {})", r, a, b), "two different bodies");
+    rows[r].a = static_cast<std::uint32_t>(std::min(a, b));
+    rows[r].b = static_cast<std::uint32_t>(std::max(a, b));
+  }
+  auto key = [](const PhysicsBodies::IncompleteRows& e) { return std::make_tuple(e.frame, e.a, e.b); };
+  std::sort(rows.begin(), rows.end(), [&](const auto& l, const auto& r) { return key(l) < key(r); });
+  rows.erase(std::unique(rows.begin(), rows.end(), [&](const auto& l, const auto& r) { return key(l) == key(r); }),
+             rows.end());
+  p.incomplete_rows = std::move(rows);
 }
 
 void TraceIn::read_shape_offsets(PhysicsBodies& p) {

@@ -789,6 +789,23 @@ TEST(PhysicsRows, BadBodiesAreInputErrors) {
   b = rotating_engine();
   b.body_friction = {0.5f, -1.0f, 0.5f, 0.5f};
   EXPECT_THROW(PhysicsValidators(*model, b, Tolerances{}, "x"), InputError);
+  // incomplete_rows: pairs a < b < n (or a whole step), sorted, no duplicates.
+  using Rows = PhysicsBodies::IncompleteRows;
+  const std::uint32_t all = PhysicsBodies::kEveryPair;
+  b = rotating_engine();
+  b.incomplete_rows = {Rows{3, 1, 2}, Rows{3, all, all}, Rows{5, 0, 3}};  // a whole step sorts last
+  EXPECT_NO_THROW(PhysicsValidators(*model, b, Tolerances{}, "x"));
+  for (const std::vector<Rows>& bad : {std::vector<Rows>{Rows{3, 2, 1}}, std::vector<Rows>{Rows{3, 1, 4}},
+                                       std::vector<Rows>{Rows{5, 0, 3}, Rows{3, 1, 2}},
+                                       std::vector<Rows>{Rows{3, 1, 2}, Rows{3, 1, 2}}}) {
+    b.incomplete_rows = bad;
+    try {
+      PhysicsValidators v(*model, b, Tolerances{}, "x");
+      ADD_FAILURE() << "accepted entry (" << bad.back().frame << ", " << bad.back().a << ", " << bad.back().b << ")";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("PhysicsBodies.incomplete_rows: entry"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(PhysicsRows, NoCandidatePairsIsNotApplicable) {

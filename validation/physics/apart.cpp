@@ -1,10 +1,11 @@
 // contacts_complete 0 (design.md section 13d item 5b; physics_impl.hpp): an engine whose API
 // may drop contact rows (Havok's "collision finished" events carry no impulse) is judged on
-// the geometry. free-flight judges a body without rows only where the exact reference
-// shows it apart from every other body through the whole step, and conservation judges a
-// group only where it is apart from every body outside it: an unreported contact is never
-// a false alarm, and a body edited in free flight still fails (docs/validation.md,
-// "Incomplete contact reporting").
+// the geometry; with /contacts/incomplete only on the steps or pairs it lists. free-flight
+// judges a body without rows there only where the exact reference shows it apart from every
+// other body (of a declared pair) through the whole step by the pair's relative motion, and
+// conservation judges a group only where it is apart from every such body outside it: an
+// unreported contact is never a false alarm, and a body edited in free flight still fails
+// (docs/validation.md, "Incomplete contact reporting").
 #include "physics_impl.hpp"
 
 #include "../src/row_clock.hpp"
@@ -21,14 +22,19 @@ using namespace dmath;
 using namespace physics_detail;
 
 double PhysicsValidators::Impl::step_motion(const FrameRecord& rec, std::uint32_t i) const {
-  const std::size_t n = model->bodies.size();
   const double dt = model->scene.dt;
   const D3 g = d3(model->scene.gravity);
   const double linear = std::max({dt * len3(d3(rec.v_pre[i])), dt * len3(d3(rec.v_post[i])),
                                   len3(d3(rec.x_post[i]) - d3(rec.x_pre[i]))}) +
                         len3(g) * dt * dt;
+  return linear + step_turn(rec, i);
+}
+
+double PhysicsValidators::Impl::step_turn(const FrameRecord& rec, std::uint32_t i) const {
+  const std::size_t n = model->bodies.size();
+  const double dt = model->scene.dt;
   if (rec.q_pre.size() != n || rec.q_post.size() != n || rec.w_pre.size() != n || rec.w_post.size() != n)
-    return linear;
+    return 0.0;
   // The turn from q to q' (sign of q ignored) and the spin's own turn through the step.
   const Quat a = rec.q_pre[i], b = rec.q_post[i];
   const double na = std::sqrt(double(a.w) * a.w + double(a.x) * a.x + double(a.y) * a.y + double(a.z) * a.z);
@@ -43,7 +49,59 @@ double PhysicsValidators::Impl::step_motion(const FrameRecord& rec, std::uint32_
                                std::max(std::fabs(double(box.min.y)), std::fabs(double(box.max.y))),
                                std::max(std::fabs(double(box.min.z)), std::fabs(double(box.max.z)))});
   // From the states' point (the centre of mass), the rounded surface reaches extra_reach farther.
-  return linear + (reach + extra_reach(i)) * std::min(turn, 2.0);  // a chord never exceeds the diameter
+  return (reach + extra_reach(i)) * std::min(turn, 2.0);  // a chord never exceeds the diameter
+}
+
+double PhysicsValidators::Impl::pair_motion(const FrameRecord& rec, std::uint32_t a, std::uint32_t b) const {
+  const double dt = model->scene.dt;
+  // Each body's path through the step lies within the larger of its displacements along v,
+  // v' and x' - x of its start, and gravity bends both paths alike: the distance between
+  // the two shapes changes by at most their relative displacement (and one |g| dt^2 for a
+  // path's bend beside a body gravity does not move) plus both turns.
+  const D3 dv0 = d3(rec.v_pre[a]) - d3(rec.v_pre[b]), dv1 = d3(rec.v_post[a]) - d3(rec.v_post[b]);
+  const D3 dx = (d3(rec.x_post[a]) - d3(rec.x_pre[a])) - (d3(rec.x_post[b]) - d3(rec.x_pre[b]));
+  const double relative = std::max({dt * len3(dv0), dt * len3(dv1), len3(dx)}) +
+                          len3(d3(model->scene.gravity)) * dt * dt + step_turn(rec, a) + step_turn(rec, b);
+  return std::min(relative, step_motion(rec, a) + step_motion(rec, b));
+}
+
+std::pair<const PhysicsBodies::IncompleteRows*, const PhysicsBodies::IncompleteRows*>
+PhysicsValidators::Impl::incomplete_of(std::int64_t frame) const {
+  const auto& rows = bodies.incomplete_rows;
+  const auto lo = std::lower_bound(rows.begin(), rows.end(), frame,
+                                   [](const PhysicsBodies::IncompleteRows& e, std::int64_t f) { return e.frame < f; });
+  auto hi = lo;
+  while (hi != rows.end() && hi->frame == frame) ++hi;
+  return {rows.data() + (lo - rows.begin()), rows.data() + (hi - rows.begin())};
+}
+
+bool PhysicsValidators::Impl::incomplete_step(std::int64_t frame) const {
+  if (!bodies.contacts_complete) return true;
+  const auto [lo, hi] = incomplete_of(frame);
+  return lo != hi;
+}
+
+bool PhysicsValidators::Impl::incomplete_whole_step(std::int64_t frame) const {
+  if (!bodies.contacts_complete) return true;
+  const auto [lo, hi] = incomplete_of(frame);
+  return std::any_of(lo, hi, [](const PhysicsBodies::IncompleteRows& e) { return e.a == PhysicsBodies::kEveryPair; });
+}
+
+bool PhysicsValidators::Impl::incomplete_pair(std::int64_t frame, Pair p) const {
+  if (!bodies.contacts_complete) return true;
+  const auto [lo, hi] = incomplete_of(frame);
+  const std::uint32_t a = std::min(p.a, p.b), b = std::max(p.a, p.b);
+  return std::any_of(lo, hi, [&](const PhysicsBodies::IncompleteRows& e) {
+    return e.a == PhysicsBodies::kEveryPair || (e.a == a && e.b == b);
+  });
+}
+
+bool PhysicsValidators::Impl::incomplete_body(std::int64_t frame, std::uint32_t i) const {
+  if (!bodies.contacts_complete) return true;
+  const auto [lo, hi] = incomplete_of(frame);
+  return std::any_of(lo, hi, [&](const PhysicsBodies::IncompleteRows& e) {
+    return e.a == PhysicsBodies::kEveryPair || e.a == i || e.b == i;
+  });
 }
 
 void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
@@ -76,15 +134,17 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
   settings.max_pairs_per_body = limits::kMaxPairsPerBody;
   exact_pairs(grown, cand, settings);
   ContactGraph graph = contact_graph(rec);
+  const bool whole = incomplete_whole_step(rec.frame);
   for (const Pair& p : cand) {
     poll();
     if (!dynamic(p.a) && !dynamic(p.b)) continue;
     if (graph.find(p.a) == graph.find(p.b)) continue;  // one component: exchanged within it
+    if (!whole && !incomplete_pair(rec.frame, p)) continue;  // /contacts/incomplete: this pair's rows are complete
     ++near_tested;
     const ReferenceNormal r = ref->posed(p.a, p.b, pose[p.a], pose[p.b]);
     // Rounded shapes (convex_radius) are apart by the posed distance less their radii.
     const bool apart =
-        r.valid && r.signed_distance() > pair_margin(p) + slack + motion[p.a] + motion[p.b] + inflation(p);
+        r.valid && r.signed_distance() > pair_margin(p) + slack + pair_motion(rec, p.a, p.b) + inflation(p);
     if (apart) continue;
     near.pairs.push_back(p);
     near.body[p.a] = near.body[p.b] = 1;

@@ -294,7 +294,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     }
     if (in_contact[i]) {
       // 7. Momentum balance.
-      if (!bodies.contacts_complete) {  // a row may be missing: n/a (row_plan.cpp names it)
+      if (incomplete_body(frame, static_cast<std::uint32_t>(i))) {  // a row may be missing: not judged
         ++balance_incomplete;
         continue;
       }
@@ -414,9 +414,10 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       });
       continue;
     }
-    // 8. Free flight: no contact row and no confirmed pair in this step. contacts_complete
-    // 0: and apart from every other body through the step by the exact reference (apart.cpp).
-    if (!bodies.contacts_complete && (near.frame != frame || near.body[i])) {
+    // 8. Free flight: no contact row and no confirmed pair in this step. On a step that may
+    // lack rows (contacts_complete 0, /contacts/incomplete): and apart from every body of a
+    // pair that may lack them through the step by the exact reference (apart.cpp).
+    if (incomplete_body(frame, static_cast<std::uint32_t>(i)) && (near.frame != frame || near.body[i])) {
       ++free_near;
       continue;
     }
@@ -717,6 +718,10 @@ ValidationResult PhysicsValidators::Impl::table<RowId::MomentumBalance>() const 
                                   s.kFitPrecision, s.kFitMinSamples);
     note(r.detail, s.deferred_over, "{} failing body-steps beyond the {} kept for the fit judged at ratio 1",
          s.deferred_over, s.kMaxDeferred);
+    note(r.detail, s.balance_incomplete,
+         "{} body-steps in contact on the steps or pairs /contacts/incomplete declares (a row may be missing) not "
+         "judged",
+         s.balance_incomplete);
     if (s.bodies.impulses == PhysicsBodies::Impulses::NormalOnly)
       r.detail +=
           "; impulses \"normal-only\": each body's residual m (v' - v) - m g dt - sum jn n within the sum "
@@ -767,9 +772,14 @@ ValidationResult PhysicsValidators::Impl::table<RowId::FreeFlight>() const {
   }
   note(r.detail, !s.bodies.contacts_complete,
        "contacts_complete 0: only bodies the exact reference shows apart from every other "
-       "body through the step (beyond the margin and both bodies' motion) are judged free; {} "
+       "body through the step (beyond the margin and the pair's motion) are judged free; {} "
        "body-steps without rows but near a body not judged ({} pairs tested)",
        s.free_near, s.near_tested);
+  note(r.detail, s.bodies.contacts_complete && !s.bodies.incomplete_rows.empty(),
+       "/contacts/incomplete: on its {} steps or pairs only bodies the exact reference shows apart from the declared "
+       "pairs' bodies through the step are judged free; {} body-steps without rows but near a body not judged ({} "
+       "pairs tested)",
+       s.bodies.incomplete_rows.size(), s.free_near, s.near_tested);
   if (r.applicable) {
     note(r.detail, free_sleep.checks + s.fell_asleep,
          "{} body-steps asleep through the step judged not to move (worst {:.3g} of one "

@@ -41,9 +41,15 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   // 6. Conservation on isolated dynamic groups: components of the contact graph with at
   // least 2 dynamic bodies and no static body among their contacts.
   ContactGraph graph = contact_graph(rec);
-  // contacts_complete 0: a group near a body outside it may exchange an unreported
-  // impulse with it; judged as touching a static body (apart.cpp).
-  if (!bodies.contacts_complete && near.frame == frame) groups_near += open_near_groups(graph);
+  // A step that may lack rows (contacts_complete 0, /contacts/incomplete): a group near a
+  // body outside it (of a pair that may lack rows) may exchange an unreported impulse with
+  // it; judged as touching a static body (apart.cpp). One apart from every such body is judged.
+  if (incomplete_step(frame)) {
+    if (near.frame == frame)
+      groups_near += open_near_groups(graph);
+    else
+      for (auto& group : graph.groups) graph.statics[group.first] = 1;  // no states: nothing shown apart
+  }
   auto find = [&](std::uint32_t i) { return graph.find(i); };
   const std::vector<std::uint8_t>& statics = graph.statics;
   // An engine may apply a row's impulse at two witness points (Bullet: one on each
@@ -269,7 +275,7 @@ void PhysicsValidators::Impl::advance_episodes(const FrameRecord& rec) {
     return;
   }
   ContactGraph graph = contact_graph(rec);
-  if (!bodies.contacts_complete) {  // as conservation() opens them
+  if (incomplete_step(rec.frame)) {  // as conservation() opens them
     find_near(rec);
     open_near_groups(graph);
   }
@@ -444,7 +450,7 @@ template <>
 void PhysicsValidators::Impl::measure<RowId::Conservation>(PhysicsFrame& f) {
   // Every frame with states; with contacts_complete 0 first the pairs the geometry shows near (apart.cpp, shared with
   // free-flight, timed here).
-  if (!bodies.contacts_complete) find_near(f.rec);
+  if (incomplete_step(f.rec.frame)) find_near(f.rec);
   conservation(f.rec);
 }
 
@@ -479,8 +485,12 @@ ValidationResult PhysicsValidators::Impl::table<RowId::Conservation>() const {
   }
   note(r.detail, !s.bodies.contacts_complete,
        "contacts_complete 0: {} group-frames near a body outside them (shapes within the "
-       "margin and the step's motion by the exact reference) not judged, an unreported contact "
-       "may join them",
+       "margin and the pair's motion through the step by the exact reference) not judged, an "
+       "unreported contact may join them",
+       s.groups_near);
+  note(r.detail, s.bodies.contacts_complete && !s.bodies.incomplete_rows.empty(),
+       "/contacts/incomplete: {} group-frames on its steps or pairs near a body of a declared pair outside them not "
+       "judged, an unreported contact may join them",
        s.groups_near);
   note(r.detail, s.groups_angular_unreported,
        "angular momentum not judged on {} group-frames: the trace declares impulses = "

@@ -709,32 +709,54 @@ struct PhysicsValidators::Impl {
   std::uint64_t groups_angular_unreported = 0;
 
   // ---- contacts_complete 0: what the geometry shows apart (apart.cpp) ---------------
-  /// This step's bodies that may touch another body without a row (contacts_complete 0,
-  /// design.md section 13d item 5b): the pairs whose shapes, at the pre-step poses, lie
-  /// within the pair's margin + geometry_slack_m + both bodies' motion through the step
-  /// (NearPairs::reach), by the exact reference (ReferenceGeometry::posed; no answer:
-  /// near). Pairs inside one component of the contact graph are not tested (an impulse
-  /// between them is exchanged within it).
+  /// This step's bodies that may touch another body without a row (contacts_complete 0 or
+  /// /contacts/incomplete, design.md section 13d item 5b): the pairs whose shapes, at the
+  /// pre-step poses, lie within the pair's margin + geometry_slack_m + the pair's motion
+  /// through the step (pair_motion), by the exact reference (ReferenceGeometry::posed; no
+  /// answer: near). Pairs inside one component of the contact graph are not tested (an
+  /// impulse between them is exchanged within it).
   struct NearPairs {
     std::int64_t frame = -1;          ///< the step they are of (-1: none computed)
     std::vector<std::uint8_t> body;   ///< per body: 1 when in a near pair
     std::vector<Pair> pairs;          ///< the near pairs (sorted)
   };
   NearPairs near;
-  /// Computes `near` for rec's step (states needed; nothing without them).
+  /// Computes `near` for rec's step (states needed; nothing without them). With
+  /// `/contacts/incomplete` naming pairs of the step (not the whole step), only those pairs
+  /// are kept: every other pair's rows are complete.
   void find_near(const FrameRecord& rec);
   /// How far body i's shape may move through rec's step (m): the larger of dt |v|, dt |v'|
   /// and |x' - x|, plus |g| dt^2, plus its reach from its origin times the larger of
-  /// dt |w|, dt |w'| and the turn from q to q'.
+  /// dt |w|, dt |w'| and the turn from q to q' (step_turn).
   double step_motion(const FrameRecord& rec, std::uint32_t i) const;
-  /// contacts_complete 0: marks as touching a static body (not isolated) every group of
+  /// The rotating part of step_motion: body i's reach from its origin times its turn (m).
+  double step_turn(const FrameRecord& rec, std::uint32_t i) const;
+  /// How far the shapes of a and b may move towards each other through rec's step (m):
+  /// their relative translation, the larger of dt |v_a - v_b|, dt |v'_a - v'_b| and
+  /// |(x'_a - x_a) - (x'_b - x_b)|, plus |g| dt^2, plus both turns (step_turn); at most the
+  /// sum of both step_motion. Two bodies falling side by side do not approach.
+  double pair_motion(const FrameRecord& rec, std::uint32_t a, std::uint32_t b) const;
+  // ---- where rows may be missing: contacts_complete 0 (every step) or /contacts/incomplete
+  /// Step `frame` may lack some pair's rows.
+  bool incomplete_step(std::int64_t frame) const;
+  /// Step `frame` may lack every pair's rows (contacts_complete 0, or the frame listed whole).
+  bool incomplete_whole_step(std::int64_t frame) const;
+  /// Step `frame` may lack the rows of pair p (a < b).
+  bool incomplete_pair(std::int64_t frame, Pair p) const;
+  /// Step `frame` may lack rows of a pair with body i.
+  bool incomplete_body(std::int64_t frame, std::uint32_t i) const;
+  /// The entries of bodies.incomplete_rows of `frame` (a range of it).
+  std::pair<const PhysicsBodies::IncompleteRows*, const PhysicsBodies::IncompleteRows*> incomplete_of(
+      std::int64_t frame) const;
+  std::uint64_t complete_declared = 0;  ///< contact-completeness: penetrating pair-frames without rows declared incomplete
+  /// A step that may lack rows: marks as touching a static body (not isolated) every group of
   /// `graph` in a near pair with a body outside it; returns how many such groups of 2 or
   /// more dynamic bodies were isolated before.
   std::uint64_t open_near_groups(ContactGraph& graph) const;
   std::uint64_t free_near = 0;     ///< free-flight: body-steps without rows but near a body, not judged
   std::uint64_t groups_near = 0;   ///< conservation: groups near a body outside them, not judged
   std::uint64_t near_tested = 0;   ///< pairs the exact reference was asked about
-  std::uint64_t balance_incomplete = 0;  ///< momentum-balance: body-steps not judged (contacts_complete 0)
+  std::uint64_t balance_incomplete = 0;  ///< momentum-balance: body-steps not judged (a row may be missing)
 
   // ---- momentum-balance's systematic ratio (balance.cpp; docs/validation.md, "A systematic
   // impulse ratio") -----------------------------------------------------------------------

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <tuple>
 #include <utility>
 
 #include "octocd/error.hpp"
@@ -197,6 +198,20 @@ PhysicsValidators::PhysicsValidators(const Model& model, const PhysicsBodies& bo
   for (std::size_t i = 0; i < bodies.com_offset.size(); ++i)
     for (double c : bodies.com_offset[i])
       if (!std::isfinite(c)) bad("com_offset", fmt::format("body {}: {}; allowed: finite (m, body frame)", i, c));
+  for (std::size_t k = 0; k < bodies.incomplete_rows.size(); ++k) {
+    const PhysicsBodies::IncompleteRows& e = bodies.incomplete_rows[k];
+    const bool whole = e.a == PhysicsBodies::kEveryPair && e.b == PhysicsBodies::kEveryPair;
+    if (!whole && !(e.a < e.b && e.b < n))
+      bad("incomplete_rows", fmt::format("entry {}: pair ({}, {}); allowed: a < b < {} or both kEveryPair", k, e.a,
+                                         e.b, n));
+    if (k > 0) {
+      const PhysicsBodies::IncompleteRows& p = bodies.incomplete_rows[k - 1];
+      if (!(std::make_tuple(p.frame, p.a, p.b) < std::make_tuple(e.frame, e.a, e.b)))
+        bad("incomplete_rows", fmt::format("entry {}: frame {} after frame {}; allowed: sorted by (frame, a, b), no "
+                                           "duplicates",
+                                           k, e.frame, p.frame));
+    }
+  }
 
   s.mass.assign(n, 0.0);
   s.inertia.assign(n, M3{});

@@ -15,10 +15,13 @@ namespace {
 const char* const kStates = "/states/position and /states/velocity";
 const char* const kContacts = "/contacts (offsets, pair, normal, depth, jn, jt)";
 const char* const kRotation = "/states/orientation and /states/angular_velocity (version 2)";
+// The trace declares contacts_complete 0: never advised back to 1 (the writer knows its
+// engine drops rows); the rows are judged where the steps or pairs that may lack them are named.
 const char* const kContactsComplete =
-    "the root attribute contacts_complete = 1 (every contact of every step has its rows): the trace declares 0, and "
-    "judging a pair without rows as missing, or a body's velocity change by rows that may be incomplete, would be a "
-    "false alarm (free-flight and conservation judge the bodies and groups the geometry shows apart: "
+    "/contacts/incomplete in place of the root attribute contacts_complete = 0 that the trace declares, where the "
+    "engine drops rows only on some steps or pairs (K frames, or K x 3 rows (frame, body_a, body_b)): judging a pair "
+    "without rows as missing, or a body's velocity change by rows that may be incomplete, would be a false alarm on "
+    "any step (free-flight and conservation judge the bodies and groups the geometry shows apart: "
     "docs/validation.md, \"Incomplete contact reporting\")";
 const char* const kEveryState =
     "every state (/states/frame 0, 1, 2, ...: octocd run --state-every 1): the row needs each step's states before "

@@ -205,6 +205,22 @@ struct PhysicsBodies {
   /// every other body through the step (docs/validation.md, "Incomplete contact
   /// reporting"); contact-completeness and momentum-balance are n/a, naming it.
   bool contacts_complete = true;
+  /// One entry of `/contacts/incomplete`: step `frame` (1 .. F) may lack rows, of the pair
+  /// (a, b) (a < b, body indices) or, where a == b == kEveryPair, of any pair.
+  struct IncompleteRows {
+    std::int64_t frame = 0;
+    std::uint32_t a = 0, b = 0;
+  };
+  /// IncompleteRows::a and b of an entry naming a whole step.
+  static constexpr std::uint32_t kEveryPair = 0xffffffffu;
+  /// `/contacts/incomplete` (with contacts_complete 1): the steps, or pairs of a step, whose
+  /// rows the engine may have dropped (Havok: the step that ends a contact), sorted by
+  /// (frame, a, b), no duplicates; empty: none. On those only, as contacts_complete 0 does
+  /// for every step: contact-completeness does not require the pair's rows, momentum-balance
+  /// does not judge its bodies, and free-flight and conservation judge a body or group there
+  /// only where the exact reference shows it apart from the declared pairs' other bodies
+  /// (docs/validation.md, "Incomplete contact reporting"). The rest is judged as complete.
+  std::vector<IncompleteRows> incomplete_rows;
   /// `manifold_points` "persistent": a row's points ride on each body and may drift off
   /// the shapes. Read, not yet used beyond this: contact-geometry's point check is not
   /// applied (counted); normals and depths are judged.
