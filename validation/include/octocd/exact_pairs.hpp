@@ -88,6 +88,34 @@ class PairLimitError : public InputError {
 /// ExactPairsSettings::max_pairs_per_body refuses them before that work (PairLimitError).
 void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings = {});
 
+/// exact_pairs' work space: the boxes' hulls and levels, the grid's cell entries and dense
+/// cell tables, the pairs found per thread and their sort's buffers. A caller that keeps
+/// one between calls (the validators: one per call site, kept from frame to frame) has
+/// each later call rebuild these tables in the memory they already hold instead of
+/// allocating and first-touching it anew. It holds no result: any boxes may follow any
+/// others. One call at a time. Movable (a moved-from object is usable, empty).
+class ExactPairsTables {
+ public:
+  ExactPairsTables();
+  ~ExactPairsTables();
+  ExactPairsTables(ExactPairsTables&&) noexcept;
+  ExactPairsTables& operator=(ExactPairsTables&&) noexcept;
+  ExactPairsTables(const ExactPairsTables&) = delete;
+  ExactPairsTables& operator=(const ExactPairsTables&) = delete;
+  struct Impl;
+  /// The tables (exact_pairs.cpp defines them).
+  Impl& impl();
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+/// exact_pairs with its tables in `tables` (kept by the caller; the result is the same
+/// as with fresh tables). Its per-box passes (hulls, levels, cell entries, the limit's
+/// lookups) run on the settings' threads from 1,024 boxes on.
+void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings,
+                 ExactPairsTables& tables);
+
 /// exact_pairs as a BroadPhase named "exact-grid" (the validators' reference where
 /// `flat`'s n(n-1)/2 tests cost too much). Stateless; stats.pairs and
 /// stats.cell_candidates are the pairs found; settings.max_pairs_per_body applies to
