@@ -210,6 +210,7 @@ struct ExactPairsTables::Impl {
   std::vector<std::uint64_t> ranks;         ///< the counting sort's cell rank per entry
   std::vector<DenseCells> cell_index;       ///< per level
   std::vector<Run> runs;                    ///< cells of two or more entries
+  std::vector<std::vector<Run>> run_parts;  ///< per part of a level's entries: the runs it begins
   std::vector<std::uint64_t> tests;         ///< per box: step 2's candidate tests (the limit)
   std::vector<std::vector<Pair>> found;     ///< per worker: the pairs it found
   std::vector<std::size_t> pair_start, pair_fill;  ///< sort_pairs' counts
@@ -376,17 +377,31 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     found[worker].push_back(a < b ? Pair{a, b} : Pair{b, a});
   };
 
-  // 1. Pairs of one level, in their shared cell (every level's cells, one list).
+  // 1. Pairs of one level, in their shared cell (every level's cells, one list). A level's
+  // runs are found in parts of its entries on threads: a run belongs to the part holding
+  // its first entry (it may reach beyond it), and the parts' lists joined in order are the
+  // list of a serial scan.
   std::vector<Run>& runs = t.runs;
   runs.clear();
+  const std::size_t parts = box_threads > 1 ? std::size_t(box_threads) * 4 : 1;
+  if (t.run_parts.size() < parts) t.run_parts.resize(parts);
   for (int l = 0; l < levels; ++l) {
     const std::vector<Entry>& e = entries[std::size_t(l)];
-    for (std::size_t k = 0; k < e.size();) {
-      std::size_t j = k + 1;
-      while (j < e.size() && same_cell(e[j].cell, e[k].cell)) ++j;
-      if (j - k > 1) runs.push_back({l, k, j});
-      k = j;
-    }
+    const std::size_t level_parts = e.size() >= kParallelBoxesFrom ? parts : 1;
+    parallel_items_on(level_parts, level_parts > 1 ? box_threads : 1u, never, [&](std::size_t q, unsigned) {
+      std::vector<Run>& found_runs = t.run_parts[q];
+      found_runs.clear();
+      std::size_t k = e.size() * q / level_parts;
+      const std::size_t end = e.size() * (q + 1) / level_parts;
+      while (k > 0 && k < end && same_cell(e[k].cell, e[k - 1].cell)) ++k;  // a run begun before the part
+      while (k < end) {
+        std::size_t j = k + 1;
+        while (j < e.size() && same_cell(e[j].cell, e[k].cell)) ++j;
+        if (j - k > 1) found_runs.push_back({l, k, j});
+        k = j;
+      }
+    });
+    for (std::size_t q = 0; q < level_parts; ++q) runs.insert(runs.end(), t.run_parts[q].begin(), t.run_parts[q].end());
   }
 
   int finest_used = levels;

@@ -111,8 +111,9 @@ class ExactPairsTables {
 };
 
 /// exact_pairs with its tables in `tables` (kept by the caller; the result is the same
-/// as with fresh tables). Its per-box passes (hulls, levels, cell entries, the limit's
-/// lookups) run on the settings' threads from 1,024 boxes on.
+/// as with fresh tables). Its per-box passes (hulls, levels, cell entries and their ranks,
+/// the cells' runs, the limit's lookups, the pairs' sort) run on the settings' threads
+/// from 1,024 boxes (or entries) on; the result never depends on the thread count.
 void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings,
                  ExactPairsTables& tables);
 
