@@ -32,8 +32,9 @@ constexpr std::uint64_t kCandidateTestsPerPair = 8;
 
 /// Knobs of exact_pairs (defaults are what the validators use).
 struct ExactPairsSettings {
-  /// Threads for the cell scan; 0: one below 4096 boxes, else current_threads()
-  /// (octocd/parallel.hpp: OMP_NUM_THREADS when set, else the CPUs this process may run on). The result does not depend on it.
+  /// Threads for the cell scan and the per-box passes (those from 1,024 boxes on); 0: one
+  /// below 4096 boxes, else current_threads() (octocd/parallel.hpp: OMP_NUM_THREADS when
+  /// set, else the CPUs this process may run on). The result does not depend on it.
   int threads = 0;
   /// Most pairs per box; 0: no limit. With a limit, L = max_pairs_per_body x the boxes:
   /// exact_pairs counts the candidate tests of its grid (boxes sharing a cell, O(n log n),
