@@ -233,6 +233,46 @@ TEST(ExactPairs, ALatticeOfTouchingBoxesIsWithinTheLimit) {
   EXPECT_GT(out.size(), 10u * boxes.size());  // 26 neighbours inside, fewer on the faces
 }
 
+// One ExactPairsTables kept across calls (as the validators keep it from frame to frame):
+// each call gives flat's set whatever the call before left in the tables (more or fewer
+// boxes, levels, unbounded boxes and pairs, a refusal by the limit), on 1, 2 and 3 threads.
+TEST(ExactPairs, KeptTablesGiveFlatsSetAfterAnyEarlierCall) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> pos(-6, 6), size(0.05f, 0.4f), u(0, 1);
+  auto scene = [&](int n, float huge_share) {  // at one density: the domain grows with n
+    const float k = std::cbrt(float(n) / 3000.0f);
+    std::vector<Aabb> boxes;
+    for (int i = 0; i < n; ++i) {
+      float h = size(rng);
+      if (u(rng) < huge_share) h *= 20;  // coarser levels
+      boxes.push_back(box(k * pos(rng), k * pos(rng), k * pos(rng), h, h, h * u(rng) + 1e-4f));
+    }
+    return boxes;
+  };
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  std::vector<std::vector<Aabb>> calls = {scene(3000, 0.02f), scene(400, 0.0f), scene(2500, 0.1f)};
+  calls[1].push_back({{-inf, -1, -1}, {inf, 1, 1}});  // an unbounded rod
+  calls[1].push_back({{nan, 0, 0}, {1, 1, 1}});
+  calls.push_back(coincident(200));  // refused with the limit
+  calls.push_back(scene(1500, 0.05f));
+  for (int threads : {1, 2, 3}) {
+    ExactPairsTables tables;
+    ExactPairsSettings s = limited();
+    s.threads = threads;
+    for (std::size_t c = 0; c < calls.size(); ++c) {
+      std::vector<Pair> got{{7, 9}};  // cleared by the call
+      if (c == 3) {
+        EXPECT_THROW(exact_pairs(calls[c], got, s, tables), PairLimitError);
+        continue;
+      }
+      exact_pairs(calls[c], got, s, tables);
+      const std::vector<Pair> want = flat_pairs(calls[c]);
+      ASSERT_GT(want.size(), calls[c].size() / 4) << "call " << c << ": the boxes meet";
+      EXPECT_EQ(got, want) << "call " << c << ", " << threads << " threads";
+    }
+  }
+}
+
 TEST(ExactPairs, BroadPhaseAdapterMatchesFlat) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> pos(-3, 3);

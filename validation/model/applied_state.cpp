@@ -146,6 +146,9 @@ struct AppliedStateJudge::Impl {
   /// Per island of the last frame: its search, kept so that the next frame's runs reuse
   /// their vectors' memory (most islands are one body: about 7 allocations each).
   std::vector<Searched> island_searches;
+  /// The last frame's islands and spare ones: the next frame's islands take their vectors'
+  /// memory (most islands are one body: three vectors each).
+  std::vector<Island> islands, spare_islands;
   int threads = 0;  // set_threads: the islands' threads (0: the hardware's)
 };
 
@@ -613,13 +616,26 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   for (const Pair& q : rec.confirmed)
     if (w[q.a] > 0.0f && w[q.b] > 0.0f) s.parent[s.find(q.a)] = s.find(q.b);
   std::vector<std::int32_t> island_of(n, -1);
-  std::vector<Island> islands;
+  std::vector<Island>& islands = s.islands;
+  std::vector<Island>& spare = s.spare_islands;
+  for (Island& is : islands) spare.push_back(std::move(is));
+  islands.clear();
   for (std::size_t i = 0; i < n; ++i) {
     if (!(w[i] > 0.0f)) continue;
     const std::uint32_t root = s.find(static_cast<std::uint32_t>(i));
     if (island_of[root] < 0) {
       island_of[root] = static_cast<std::int32_t>(islands.size());
-      islands.emplace_back();
+      if (spare.empty()) {
+        islands.emplace_back();
+      } else {  // a kept island, emptied
+        islands.push_back(std::move(spare.back()));
+        spare.pop_back();
+        Island& kept = islands.back();
+        kept.local.clear();
+        kept.dynamic = 0;
+        kept.contacts.clear();
+        kept.ends.clear();
+      }
     }
     Island& is = islands[static_cast<std::size_t>(island_of[root])];
     is.local.push_back(static_cast<std::uint32_t>(i));

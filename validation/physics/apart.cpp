@@ -132,7 +132,7 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
   ExactPairsSettings settings;
   settings.threads = threads;
   settings.max_pairs_per_body = limits::kMaxPairsPerBody;
-  exact_pairs(grown, cand, settings);
+  exact_pairs(grown, cand, settings, near_tables);
   ContactGraph graph = contact_graph(rec);
   const bool whole = incomplete_whole_step(rec.frame);
   for (const Pair& p : cand) {

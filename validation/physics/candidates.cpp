@@ -64,7 +64,7 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
   ExactPairsSettings pair_threads;
   pair_threads.threads = threads;
   pair_threads.max_pairs_per_body = limits::kMaxPairsPerBody;
-  exact_pairs(grown, f.cand, pair_threads);
+  exact_pairs(grown, f.cand, pair_threads, work.pair_tables);
   f.cand.erase(std::remove_if(f.cand.begin(), f.cand.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }),
                f.cand.end());
 
@@ -230,7 +230,7 @@ void PhysicsValidators::Impl::judge_broadphase(Frame& f) {
         device->overlapping_pairs(rec.aabbs, want);
         device_flat_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       } else {
-        exact_pairs(rec.aabbs, want, pair_threads);
+        exact_pairs(rec.aabbs, want, pair_threads, f.work.pair_tables);
       }
       auto dyn = [&](Pair p) { return dynamic(p.a) || dynamic(p.b); };
       std::copy_if(want.begin(), want.end(), std::back_inserter(got), dyn);

@@ -40,6 +40,7 @@
 #include <fmt/format.h>
 
 #include "octocd/device_judge.hpp"
+#include "octocd/exact_pairs.hpp"
 #include "octocd/physics.hpp"
 #include "octocd/validation_rows.hpp"
 #include "dmath.hpp"
@@ -271,6 +272,7 @@ struct CheckedFrame {
     std::vector<std::uint32_t> group_begin, group_list, fill;  ///< groups of rows per truth entry
     std::vector<std::size_t> group_truth;                      ///< per group of rows: its truth entry
     std::vector<PairReferenceScratch> scratch;                 ///< per worker
+    ExactPairsTables pair_tables;  ///< exact_pairs' tables: the candidates', then row 1's flat set
   } work;
 };
 
@@ -721,6 +723,8 @@ struct PhysicsValidators::Impl {
     std::vector<Pair> pairs;          ///< the near pairs (sorted)
   };
   NearPairs near;
+  /// find_near's exact_pairs tables, kept from frame to frame.
+  ExactPairsTables near_tables;
   /// Computes `near` for rec's step (states needed; nothing without them). With
   /// `/contacts/incomplete` naming pairs of the step (not the whole step), only those pairs
   /// are kept: every other pair's rows are complete.

@@ -110,19 +110,37 @@ struct DenseCells {
   }
 };
 
+/// Fewest boxes (or cell entries) whose per-item passes (hulls, levels, cell entries and
+/// their ranks, the limit's lookups, the pairs' sort) run on threads: below it one thread
+/// costs less than waking another.
+constexpr std::size_t kParallelBoxesFrom = 1024;
+
 /// Sorts one level's entries into entry_less's order when the cells they span number at
 /// most 4 x the entries + 1024: a stable counting sort on the cell's lexicographic rank
 /// (the entries are appended in box order, and a box is in a cell once, so equal cells keep
 /// their boxes ascending), leaving each cell's entries located in `index`. False (nothing
-/// done, `index` not dense) when the cells are too many.
-bool counting_sort_entries(std::vector<Entry>& e, DenseCells& index) {
+/// done, `index` not dense) when the cells are too many. The span and each entry's rank
+/// are found on `threads` threads (from kParallelBoxesFrom entries), the counts and the
+/// scatter on the caller; `buffer` and `ranks` are work space.
+bool counting_sort_entries(std::vector<Entry>& e, DenseCells& index, std::vector<Entry>& buffer,
+                           std::vector<std::uint64_t>& ranks, unsigned threads) {
   index.dense = false;
   if (e.size() < 2) return true;
-  Cell lo = e[0].cell, hi = e[0].cell;
-  for (const Entry& x : e)
+  const unsigned th = e.size() >= kParallelBoxesFrom ? std::max(threads, 1u) : 1u;
+  const std::function<bool()> never;
+  std::vector<std::array<Cell, 2>> part(th, {e[0].cell, e[0].cell});  // per worker: lowest, highest
+  parallel_items_on(e.size(), th, never, [&](std::size_t i, unsigned worker) {
+    std::array<Cell, 2>& b = part[worker];
     for (int k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], x.cell[k]);
-      hi[k] = std::max(hi[k], x.cell[k]);
+      b[0][k] = std::min(b[0][k], e[i].cell[k]);
+      b[1][k] = std::max(b[1][k], e[i].cell[k]);
+    }
+  });
+  Cell lo = e[0].cell, hi = e[0].cell;
+  for (const std::array<Cell, 2>& b : part)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], b[0][k]);
+      hi[k] = std::max(hi[k], b[1][k]);
     }
   const std::uint64_t limit = 4 * std::uint64_t(e.size()) + 1024;
   std::array<std::uint64_t, 3> span{};
@@ -134,43 +152,70 @@ bool counting_sort_entries(std::vector<Entry>& e, DenseCells& index) {
   }
   index.lo = lo;
   index.span = span;
-  std::uint64_t r = 0;
+  ranks.resize(e.size());
+  parallel_items_on(e.size(), th, never, [&](std::size_t i, unsigned) { index.rank(e[i].cell, ranks[i]); });
   std::vector<std::size_t>& start = index.end;
   start.assign(cells + 1, 0);
-  for (const Entry& x : e) {
-    index.rank(x.cell, r);
-    ++start[r + 1];
-  }
+  for (std::size_t i = 0; i < e.size(); ++i) ++start[ranks[i] + 1];
   for (std::uint64_t c = 0; c < cells; ++c) start[c + 1] += start[c];
-  std::vector<Entry> out(e.size());
-  for (const Entry& x : e) {
-    index.rank(x.cell, r);
-    out[start[r]++] = x;
-  }
+  buffer.resize(e.size());
+  for (std::size_t i = 0; i < e.size(); ++i) buffer[start[ranks[i]]++] = e[i];
   // start[r] is now one past cell r's last entry.
-  e.swap(out);
+  e.swap(buffer);
   index.dense = true;
   return true;
 }
 
+/// Whether two cells are the same (three comparisons; std::array's == calls memcmp).
+bool same_cell(const Cell& x, const Cell& y) { return x[0] == y[0] && x[1] == y[1] && x[2] == y[2]; }
+
 /// Sorts pairs of boxes below n into Pair order: counted by a, each a's pairs (a body's:
-/// few) then sorted by b.
-void sort_pairs(std::vector<Pair>& v, std::size_t n) {
-  std::vector<std::size_t> start(n + 1, 0);
+/// few) then sorted by b, those sorts on `threads` threads. `start`, `fill` and `buffer` are
+/// work space (their memory kept by the caller); `buffer` ends holding v's old elements.
+void sort_pairs(std::vector<Pair>& v, std::size_t n, std::vector<std::size_t>& start, std::vector<std::size_t>& fill,
+                std::vector<Pair>& buffer, unsigned threads) {
+  start.assign(n + 1, 0);
   for (const Pair& p : v) ++start[p.a + 1];
   for (std::size_t a = 0; a < n; ++a) start[a + 1] += start[a];
-  std::vector<Pair> out(v.size());
-  {
-    std::vector<std::size_t> fill(start.begin(), start.end() - 1);
-    for (const Pair& p : v) out[fill[p.a]++] = p;
-  }
-  for (std::size_t a = 0; a < n; ++a)
-    std::sort(out.begin() + std::ptrdiff_t(start[a]), out.begin() + std::ptrdiff_t(start[a + 1]),
+  buffer.resize(v.size());
+  fill.assign(start.begin(), start.end() - 1);
+  for (const Pair& p : v) buffer[fill[p.a]++] = p;
+  parallel_items_on(n, threads, std::function<bool()>(), [&](std::size_t a, unsigned) {
+    std::sort(buffer.begin() + std::ptrdiff_t(start[a]), buffer.begin() + std::ptrdiff_t(start[a + 1]),
               [](Pair p, Pair q) { return p.b < q.b; });
-  v.swap(out);
+  });
+  v.swap(buffer);
 }
 
+/// One cell's run of two or more entries on a level: [first, last) of its sorted entries.
+struct Run {
+  int level;
+  std::size_t first, last;
+};
+
 }  // namespace
+
+/// Every table exact_pairs fills, kept with its memory for the next call.
+struct ExactPairsTables::Impl {
+  std::vector<Hull> hull;                   ///< per box
+  std::vector<int> level;                   ///< per box: its level; -1 NaN, -2 unbounded
+  std::vector<double> ext;                  ///< per box: its hull's largest side
+  std::vector<double> extents;              ///< the finite boxes' largest sides (their median)
+  std::vector<std::array<double, 6>> span;  ///< per worker: the finite hulls' lowest and highest corner
+  std::vector<std::uint32_t> entry_count;   ///< per box: its cells on its level
+  std::vector<std::size_t> entry_first;     ///< per box: its first entry on its level
+  std::vector<std::uint32_t> unbounded;     ///< the unbounded boxes, ascending
+  std::vector<std::vector<Entry>> entries;  ///< per level: (cell, box), sorted
+  std::vector<Entry> sorted;                ///< the counting sort's output, swapped with a level's entries
+  std::vector<std::uint64_t> ranks;         ///< the counting sort's cell rank per entry
+  std::vector<DenseCells> cell_index;       ///< per level
+  std::vector<Run> runs;                    ///< cells of two or more entries
+  std::vector<std::vector<Run>> run_parts;  ///< per part of a level's entries: the runs it begins
+  std::vector<std::uint64_t> tests;         ///< per box: step 2's candidate tests (the limit)
+  std::vector<std::vector<Pair>> found;     ///< per worker: the pairs it found
+  std::vector<std::size_t> pair_start, pair_fill;  ///< sort_pairs' counts
+  std::vector<Pair> pairs;                  ///< sort_pairs' output, swapped with the result
+};
 
 PairLimitError::PairLimitError(std::uint64_t count_, bool tests_, std::uint64_t limit_, std::size_t bodies_)
     : InputError(limit_message(count_, tests_, limit_, bodies_)),
@@ -183,39 +228,62 @@ PairLimitError::PairLimitError(const std::string& message, const PairLimitError&
     : InputError(message), count(from.count), tests(from.tests), limit(from.limit), bodies(from.bodies) {}
 
 void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings) {
+  ExactPairsTables tables;
+  exact_pairs(boxes, out, settings, tables);
+}
+
+void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings,
+                 ExactPairsTables& tables) {
   out.clear();
   const std::size_t n = boxes.size();
   if (n < 2) return;
+  ExactPairsTables::Impl& t = tables.impl();
+  const unsigned threads = thread_count(settings, n);
+  // The per-box passes (hulls, levels, cell entries, the limit's lookups) on threads from
+  // kParallelBoxesFrom boxes; each box writes its own slots, so the tables are those of
+  // one thread.
+  const unsigned box_threads = n >= kParallelBoxesFrom ? threads : 1u;
+  const std::function<bool()> never;
   // Hulls; NaN boxes (which overlap nothing) and unbounded ones set apart.
-  std::vector<Hull> hull(n);
-  std::vector<int> level(n, 0);  // -1: NaN (skipped), -2: unbounded (tested against all)
-  std::vector<double> extents;
-  extents.reserve(n);
-  std::array<double, 3> lowest{HUGE_VAL, HUGE_VAL, HUGE_VAL}, highest{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-  for (std::size_t i = 0; i < n; ++i) {
+  std::vector<Hull>& hull = t.hull;
+  std::vector<int>& level = t.level;  // -1: NaN (skipped), -2: unbounded (tested against all)
+  std::vector<double>& ext = t.ext;
+  hull.resize(n);
+  level.resize(n);
+  ext.resize(n);
+  t.span.assign(std::max(box_threads, 1u), {HUGE_VAL, HUGE_VAL, HUGE_VAL, -HUGE_VAL, -HUGE_VAL, -HUGE_VAL});
+  parallel_items_on(n, box_threads, never, [&](std::size_t i, unsigned worker) {
     const Aabb& b = boxes[i];
     bool nan = false, finite = true;
-    double ext = 0;
+    double e = 0;
     for (int k = 0; k < 3; ++k) {
       const double lo = b.min[k], hi = b.max[k];
       if (std::isnan(lo) || std::isnan(hi)) nan = true;
       if (!std::isfinite(lo) || !std::isfinite(hi)) finite = false;
       hull[i].lo[k] = std::min(lo, hi);
       hull[i].hi[k] = std::max(lo, hi);
-      ext = std::max(ext, hull[i].hi[k] - hull[i].lo[k]);
+      e = std::max(e, hull[i].hi[k] - hull[i].lo[k]);
     }
-    if (nan) {
-      level[i] = -1;
-    } else if (!finite) {
-      level[i] = -2;
-    } else {
-      extents.push_back(ext);
+    ext[i] = e;
+    level[i] = nan ? -1 : !finite ? -2 : 0;
+    if (level[i] == 0) {
+      std::array<double, 6>& s = t.span[worker];
       for (int k = 0; k < 3; ++k) {
-        lowest[k] = std::min(lowest[k], hull[i].lo[k]);
-        highest[k] = std::max(highest[k], hull[i].hi[k]);
+        s[k] = std::min(s[k], hull[i].lo[k]);
+        s[3 + k] = std::max(s[3 + k], hull[i].hi[k]);
       }
     }
-  }
+  });
+  std::array<double, 3> lowest{HUGE_VAL, HUGE_VAL, HUGE_VAL}, highest{-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+  for (const std::array<double, 6>& s : t.span)
+    for (int k = 0; k < 3; ++k) {
+      lowest[k] = std::min(lowest[k], s[k]);
+      highest[k] = std::max(highest[k], s[3 + k]);
+    }
+  std::vector<double>& extents = t.extents;
+  extents.clear();
+  for (std::size_t i = 0; i < n; ++i)
+    if (level[i] == 0) extents.push_back(ext[i]);
   Grid grid;
   double c0 = 1.0;
   if (!extents.empty()) {
@@ -234,73 +302,6 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     done = !std::isfinite(grid.side.back() * 2);
   }
   const int levels = int(grid.side.size());
-  std::vector<std::uint32_t> unbounded;
-  std::vector<std::vector<Entry>> entries(levels);
-  std::vector<int> used(levels, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (level[i] == -1) continue;
-    if (level[i] == -2) {
-      unbounded.push_back(std::uint32_t(i));
-      continue;
-    }
-    double ext = 0;
-    for (int k = 0; k < 3; ++k) ext = std::max(ext, hull[i].hi[k] - hull[i].lo[k]);
-    int l = 0;
-    while (l < levels && ext > grid.side[l]) ++l;
-    if (l == levels) {
-      level[i] = -2;
-      unbounded.push_back(std::uint32_t(i));
-      continue;
-    }
-    level[i] = l;
-    used[l] = 1;
-    Cell c0c, c1c;
-    for (int k = 0; k < 3; ++k) {
-      c0c[k] = grid.index(hull[i].lo[k], k, l);
-      c1c[k] = grid.index(hull[i].hi[k], k, l);
-    }
-    for (std::int64_t x = c0c[0]; x <= c1c[0]; ++x)
-      for (std::int64_t y = c0c[1]; y <= c1c[1]; ++y)
-        for (std::int64_t z = c0c[2]; z <= c1c[2]; ++z) entries[l].push_back({{x, y, z}, std::uint32_t(i)});
-  }
-  const unsigned threads = thread_count(settings, n);
-  std::vector<DenseCells> cell_index(levels);
-  for (int l = 0; l < levels; ++l)
-    if (!counting_sort_entries(entries[l], cell_index[l])) parallel_sort(entries[l], threads, entry_less);
-
-  // The cell of the lowest corner of two hulls' intersection, on `l`.
-  auto reference_cell = [&](std::uint32_t a, std::uint32_t b, int l) {
-    Cell c;
-    for (int k = 0; k < 3; ++k) c[k] = grid.index(std::max(hull[a].lo[k], hull[b].lo[k]), k, l);
-    return c;
-  };
-  std::vector<std::vector<Pair>> found(std::max(threads, 1u));
-  auto emit = [&](unsigned worker, std::uint32_t a, std::uint32_t b) {
-    found[worker].push_back(a < b ? Pair{a, b} : Pair{b, a});
-  };
-  const std::function<bool()> never;
-
-  // 1. Pairs of one level, in their shared cell (every level's cells, one list).
-  struct Run {
-    int level;
-    std::size_t first, last;
-  };
-  std::vector<Run> runs;
-  for (int l = 0; l < levels; ++l) {
-    const std::vector<Entry>& e = entries[l];
-    for (std::size_t k = 0; k < e.size();) {
-      std::size_t j = k + 1;
-      while (j < e.size() && e[j].cell == e[k].cell) ++j;
-      if (j - k > 1) runs.push_back({l, k, j});
-      k = j;
-    }
-  }
-
-  int finest_used = levels;
-  for (int l = levels - 1; l >= 0; --l)
-    if (used[l]) finest_used = l;
-  bool coarser = false;
-  for (int l = finest_used + 1; l < levels; ++l) coarser = coarser || used[l];
   // A box's range of cells on level l.
   auto cell_range = [&](std::uint32_t a, int l, Cell& lo, Cell& hi) {
     for (int k = 0; k < 3; ++k) {
@@ -308,15 +309,115 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
       hi[k] = grid.index(hull[a].hi[k], k, l);
     }
   };
+  // Each bounded box's level (the lowest whose side is at least its largest side) and its
+  // count of cells there; a box wider than every level joins the unbounded ones.
+  std::vector<std::uint32_t>& entry_count = t.entry_count;
+  entry_count.resize(n);
+  parallel_items_on(n, box_threads, never, [&](std::size_t i, unsigned) {
+    entry_count[i] = 0;
+    if (level[i] < 0) return;
+    int l = 0;
+    while (l < levels && ext[i] > grid.side[l]) ++l;
+    if (l == levels) {
+      level[i] = -2;
+      return;
+    }
+    level[i] = l;
+    Cell lo, hi;
+    cell_range(std::uint32_t(i), l, lo, hi);
+    std::uint64_t cells = 1;  // at most 3 a side (a side within the cell's, rounded)
+    for (int k = 0; k < 3; ++k) cells *= std::uint64_t(hi[k] - lo[k] + 1);
+    entry_count[i] = std::uint32_t(cells);
+  });
+  // Each box's entries follow the entries of the boxes before it on its level (box order,
+  // as a serial pass appends them), then are written on threads.
+  std::vector<std::uint32_t>& unbounded = t.unbounded;
+  unbounded.clear();
+  std::vector<int> used(levels, 0);
+  std::vector<std::size_t> level_size(levels, 0);
+  std::vector<std::size_t>& entry_first = t.entry_first;
+  entry_first.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (level[i] == -2) unbounded.push_back(std::uint32_t(i));
+    if (level[i] < 0) continue;
+    const auto l = std::size_t(level[i]);
+    used[l] = 1;
+    entry_first[i] = level_size[l];
+    level_size[l] += entry_count[i];
+  }
+  if (t.entries.size() < std::size_t(levels)) t.entries.resize(std::size_t(levels));
+  if (t.cell_index.size() < std::size_t(levels)) t.cell_index.resize(std::size_t(levels));
+  std::vector<std::vector<Entry>>& entries = t.entries;
+  for (int l = 0; l < levels; ++l) entries[std::size_t(l)].resize(level_size[std::size_t(l)]);
+  parallel_items_on(n, box_threads, never, [&](std::size_t i, unsigned) {
+    const int l = level[i];
+    if (l < 0) return;
+    Cell lo, hi;
+    cell_range(std::uint32_t(i), l, lo, hi);
+    Entry* e = entries[std::size_t(l)].data() + entry_first[i];
+    for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
+      for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+        for (std::int64_t z = lo[2]; z <= hi[2]; ++z) *e++ = {{x, y, z}, std::uint32_t(i)};
+  });
+  std::vector<DenseCells>& cell_index = t.cell_index;
+  for (int l = 0; l < levels; ++l)
+    if (!counting_sort_entries(entries[std::size_t(l)], cell_index[std::size_t(l)], t.sorted, t.ranks, box_threads))
+      parallel_sort(entries[std::size_t(l)], threads, entry_less);
+
+  // The cell of the lowest corner of two hulls' intersection, on `l`.
+  auto reference_cell = [&](std::uint32_t a, std::uint32_t b, int l) {
+    Cell c;
+    for (int k = 0; k < 3; ++k) c[k] = grid.index(std::max(hull[a].lo[k], hull[b].lo[k]), k, l);
+    return c;
+  };
+  std::vector<std::vector<Pair>>& found = t.found;
+  if (found.size() < std::max(threads, 1u)) found.resize(std::max(threads, 1u));
+  for (std::vector<Pair>& f : found) f.clear();
+  auto emit = [&](unsigned worker, std::uint32_t a, std::uint32_t b) {
+    found[worker].push_back(a < b ? Pair{a, b} : Pair{b, a});
+  };
+
+  // 1. Pairs of one level, in their shared cell (every level's cells, one list). A level's
+  // runs are found in parts of its entries on threads: a run belongs to the part holding
+  // its first entry (it may reach beyond it), and the parts' lists joined in order are the
+  // list of a serial scan.
+  std::vector<Run>& runs = t.runs;
+  runs.clear();
+  const std::size_t parts = box_threads > 1 ? std::size_t(box_threads) * 4 : 1;
+  if (t.run_parts.size() < parts) t.run_parts.resize(parts);
+  for (int l = 0; l < levels; ++l) {
+    const std::vector<Entry>& e = entries[std::size_t(l)];
+    const std::size_t level_parts = e.size() >= kParallelBoxesFrom ? parts : 1;
+    parallel_items_on(level_parts, level_parts > 1 ? box_threads : 1u, never, [&](std::size_t q, unsigned) {
+      std::vector<Run>& found_runs = t.run_parts[q];
+      found_runs.clear();
+      std::size_t k = e.size() * q / level_parts;
+      const std::size_t end = e.size() * (q + 1) / level_parts;
+      while (k > 0 && k < end && same_cell(e[k].cell, e[k - 1].cell)) ++k;  // a run begun before the part
+      while (k < end) {
+        std::size_t j = k + 1;
+        while (j < e.size() && same_cell(e[j].cell, e[k].cell)) ++j;
+        if (j - k > 1) found_runs.push_back({l, k, j});
+        k = j;
+      }
+    });
+    for (std::size_t q = 0; q < level_parts; ++q) runs.insert(runs.end(), t.run_parts[q].begin(), t.run_parts[q].end());
+  }
+
+  int finest_used = levels;
+  for (int l = levels - 1; l >= 0; --l)
+    if (used[std::size_t(l)]) finest_used = l;
+  bool coarser = false;
+  for (int l = finest_used + 1; l < levels; ++l) coarser = coarser || used[std::size_t(l)];
   auto cell_less = [](const Entry& en, const Cell& key) { return en.cell < key; };
   // Step 2's lookups of box a: visit(l, cell, first, last) for every cell of every coarser
   // used level in a's range, [first, last) the entries of that cell (through the level's
   // dense index where its entries were counting-sorted, else a binary search).
   auto each_coarser_cell = [&](std::uint32_t a, auto&& visit) {
     for (int l = level[a] + 1; l < levels; ++l) {
-      if (!used[l]) continue;
-      const std::vector<Entry>& e = entries[l];
-      const DenseCells& index = cell_index[l];
+      if (!used[std::size_t(l)]) continue;
+      const std::vector<Entry>& e = entries[std::size_t(l)];
+      const DenseCells& index = cell_index[std::size_t(l)];
       Cell lo, hi;
       cell_range(a, l, lo, hi);
       for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
@@ -324,9 +425,9 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
           for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
             const Cell c{x, y, z};
             if (index.dense) {
-              std::size_t f = 0, t = 0;
-              index.range(c, f, t);
-              visit(l, c, e.begin() + std::ptrdiff_t(f), e.begin() + std::ptrdiff_t(t));
+              std::size_t f = 0, to = 0;
+              index.range(c, f, to);
+              visit(l, c, e.begin() + std::ptrdiff_t(f), e.begin() + std::ptrdiff_t(to));
               continue;
             }
             const auto first = std::lower_bound(e.begin(), e.end(), c, cell_less);
@@ -356,14 +457,20 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
                                       : std::uint64_t(unbounded.size()) * rest);
     if (tests > max_tests) throw PairLimitError(tests, true, max_tests, n);
     if (coarser) {
-      // Step 2's lookups, counting each cell's boxes (std::equal_range), stopped once past the limit.
-      for (std::size_t i = 0; i < n && tests <= max_tests; ++i) {
+      // Step 2's lookups, each box's cells' boxes counted on threads, then summed in box
+      // order and stopped once past the limit (the count a serial pass stops at).
+      std::vector<std::uint64_t>& box_tests = t.tests;
+      box_tests.resize(n);
+      parallel_items_on(n, box_threads, never, [&](std::size_t i, unsigned) {
+        std::uint64_t c = 0;
         const std::uint32_t a = std::uint32_t(i);
-        if (level[a] < 0) continue;
-        each_coarser_cell(a, [&](int, const Cell&, auto first, auto last) {
-          tests = add_saturating(tests, std::uint64_t(last - first));
-        });
-      }
+        if (level[a] >= 0)
+          each_coarser_cell(a, [&](int, const Cell&, auto first, auto last) {
+            c = add_saturating(c, std::uint64_t(last - first));
+          });
+        box_tests[i] = c;
+      });
+      for (std::size_t i = 0; i < n && tests <= max_tests; ++i) tests = add_saturating(tests, box_tests[i]);
       if (tests > max_tests) throw PairLimitError(tests, true, max_tests, n);
     }
   }
@@ -371,11 +478,11 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
   parallel_items_on(runs.size(), std::min<unsigned>(threads, unsigned(std::max<std::size_t>(runs.size(), 1))), never,
                     [&](std::size_t r, unsigned worker) {
     const Run& run = runs[r];
-    const std::vector<Entry>& e = entries[run.level];
+    const std::vector<Entry>& e = entries[std::size_t(run.level)];
     for (std::size_t p = run.first; p < run.last; ++p)
       for (std::size_t q = p + 1; q < run.last; ++q) {
         const std::uint32_t a = e[p].box, b = e[q].box;
-        if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, run.level) == e[p].cell) emit(worker, a, b);
+        if (overlaps(boxes[a], boxes[b]) && same_cell(reference_cell(a, b, run.level), e[p].cell)) emit(worker, a, b);
       }
   });
 
@@ -387,7 +494,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
       each_coarser_cell(a, [&](int l, const Cell& c, auto first, auto last) {
         for (auto it = first; it != last; ++it) {
           const std::uint32_t b = it->box;
-          if (overlaps(boxes[a], boxes[b]) && reference_cell(a, b, l) == c) emit(worker, a, b);
+          if (overlaps(boxes[a], boxes[b]) && same_cell(reference_cell(a, b, l), c)) emit(worker, a, b);
         }
       });
     });
@@ -407,7 +514,16 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
   if (max_pairs > 0 && total > max_pairs) throw PairLimitError(total, false, max_pairs, n);
   out.reserve(total);
   for (const auto& f : found) out.insert(out.end(), f.begin(), f.end());
-  sort_pairs(out, n);  // every index is below n
+  sort_pairs(out, n, t.pair_start, t.pair_fill, t.pairs, box_threads);  // every index is below n
+}
+
+ExactPairsTables::ExactPairsTables() : impl_(std::make_unique<Impl>()) {}
+ExactPairsTables::~ExactPairsTables() = default;
+ExactPairsTables::ExactPairsTables(ExactPairsTables&&) noexcept = default;
+ExactPairsTables& ExactPairsTables::operator=(ExactPairsTables&&) noexcept = default;
+ExactPairsTables::Impl& ExactPairsTables::impl() {
+  if (!impl_) impl_ = std::make_unique<Impl>();  // a moved-from object is usable again
+  return *impl_;
 }
 
 namespace {

@@ -32,8 +32,9 @@ constexpr std::uint64_t kCandidateTestsPerPair = 8;
 
 /// Knobs of exact_pairs (defaults are what the validators use).
 struct ExactPairsSettings {
-  /// Threads for the cell scan; 0: one below 4096 boxes, else current_threads()
-  /// (octocd/parallel.hpp: OMP_NUM_THREADS when set, else the CPUs this process may run on). The result does not depend on it.
+  /// Threads for the cell scan and the per-box passes (those from 1,024 boxes on); 0: one
+  /// below 4096 boxes, else current_threads() (octocd/parallel.hpp: OMP_NUM_THREADS when
+  /// set, else the CPUs this process may run on). The result does not depend on it.
   int threads = 0;
   /// Most pairs per box; 0: no limit. With a limit, L = max_pairs_per_body x the boxes:
   /// exact_pairs counts the candidate tests of its grid (boxes sharing a cell, O(n log n),
@@ -87,6 +88,35 @@ class PairLimitError : public InputError {
 /// boxes crowded into one cell (all coincident) make it quadratic, as their pairs are;
 /// ExactPairsSettings::max_pairs_per_body refuses them before that work (PairLimitError).
 void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings = {});
+
+/// exact_pairs' work space: the boxes' hulls and levels, the grid's cell entries and dense
+/// cell tables, the pairs found per thread and their sort's buffers. A caller that keeps
+/// one between calls (the validators: one per call site, kept from frame to frame) has
+/// each later call rebuild these tables in the memory they already hold instead of
+/// allocating and first-touching it anew. It holds no result: any boxes may follow any
+/// others. One call at a time. Movable (a moved-from object is usable, empty).
+class ExactPairsTables {
+ public:
+  ExactPairsTables();
+  ~ExactPairsTables();
+  ExactPairsTables(ExactPairsTables&&) noexcept;
+  ExactPairsTables& operator=(ExactPairsTables&&) noexcept;
+  ExactPairsTables(const ExactPairsTables&) = delete;
+  ExactPairsTables& operator=(const ExactPairsTables&) = delete;
+  struct Impl;
+  /// The tables (exact_pairs.cpp defines them).
+  Impl& impl();
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+/// exact_pairs with its tables in `tables` (kept by the caller; the result is the same
+/// as with fresh tables). Its per-box passes (hulls, levels, cell entries and their ranks,
+/// the cells' runs, the limit's lookups, the pairs' sort) run on the settings' threads
+/// from 1,024 boxes (or entries) on; the result never depends on the thread count.
+void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const ExactPairsSettings& settings,
+                 ExactPairsTables& tables);
 
 /// exact_pairs as a BroadPhase named "exact-grid" (the validators' reference where
 /// `flat`'s n(n-1)/2 tests cost too much). Stateless; stats.pairs and
