@@ -38,24 +38,15 @@ std::string data_dir_help() {
          "the source tree; docs/scenes.md)";
 }
 
-/// The line a command stopped by SIGINT/SIGTERM prints on stderr: where it stopped and
-/// what it kept.
-std::string trace_read_back(octocd::TraceWriter& trace, const std::string& path) {
-  const std::int64_t frames = trace.read_back_frames_and_hold();
-  if (frames < 0) return "";
-  return frames > 0 ? fmt::format("the trace {} holds frames 1..{} (read back)", path, frames)
-                    : fmt::format("the trace {} holds no frame (read back)", path);
-}
-
-void report_stop(int sig, const char* command, std::int64_t done, std::int64_t total,
-                 const std::string& trace, const std::string& note) {
-  std::string kept;
-  if (!trace.empty())
-    kept = done > 0 ? fmt::format("; the trace {} holds frames 1..{}", trace, done)
-                    : fmt::format("; the trace {} holds no frame", trace);
-  std::fprintf(stderr, "octocd %s: stopped by %s after frame %lld of %lld%s\n", command,
-               octocd::stop_signal_name(sig), static_cast<long long>(done),
-               static_cast<long long>(total), (kept + note).c_str());
+int stopped_after_frame(octocd::RunSession& session, int sig, std::int64_t done, std::int64_t total,
+                        const std::string& trace, const std::string& kept_tail, const std::string& where_tail) {
+  if (trace.empty())
+    session.keep("");
+  else
+    session.keep((done > 0 ? fmt::format("the trace {} holds frames 1..{}", trace, done)
+                           : fmt::format("the trace {} holds no frame", trace)) +
+                 kept_tail);
+  return session.stopped(sig, fmt::format(" after frame {} of {}{}", done, total, where_tail));
 }
 
 void check_engine_inertia(const octocd::Engine& world, const octocd::Model& model, const std::string& engine) {

@@ -13,6 +13,7 @@
 
 #include "octocd/engine.hpp"
 #include "octocd/engine_registry.hpp"
+#include "octocd/run_session.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
 
@@ -38,16 +39,14 @@ std::string data_dir_help();
 /// ("--frames: 0 is out of range; allowed: an integer in [1, 2147483647]").
 CLI::Validator at_least_one();
 
-/// What a trace being written holds, read back from the file once no flush is in flight
-/// (TraceWriter::read_back_frames_and_hold: every later write held off): "the trace PATH
-/// holds frames 1..K (read back)" or "the trace PATH holds no frame (read back)"; "" when
-/// it cannot be read. For RunSession::keep_read_back (run_session.hpp).
-std::string trace_read_back(octocd::TraceWriter& trace, const std::string& path);
-
-/// Prints on stderr the line of a command stopped by SIGINT/SIGTERM: the signal, the
-/// frame it stopped after of `total`, what `trace` holds, and `note`.
-void report_stop(int sig, const char* command, std::int64_t done, std::int64_t total, const std::string& trace,
-                 const std::string& note = "");
+/// The stop of `run` or `validate` after frame `done` of `total`: the session keeps what
+/// `trace` holds ("the trace T holds frames 1..DONE" or "... holds no frame", then
+/// `kept_tail`; nothing when `trace` is "") and says its stop line (RunSession::stopped:
+/// "octocd CMD: stopped by SIG... after frame DONE of TOTAL<where_tail>; <kept>"). Returns
+/// the exit code for the command to return (128 + sig).
+int stopped_after_frame(octocd::RunSession& session, int sig, std::int64_t done, std::int64_t total,
+                        const std::string& trace, const std::string& kept_tail = "",
+                        const std::string& where_tail = "");
 
 /// Before a reference engine steps (run, validate SCENE --engine E): the inertia the engine
 /// gives each dynamic body lies where a trace may hold it (docs/trace-format.md, "Security

@@ -4,13 +4,13 @@
 // with --baseline a performance gate (exit 4 on a slowdown shown by a one-sided Mann-Whitney U test
 // on the repetitions, or a failed new run), with --csv the data as CSV. The script reads
 // traces through `octocd trace-summary --json` (this file too): octocd's hardened reader.
-// SIGINT/SIGTERM to octocd are forwarded to the script, which is waited for.
+// SIGINT/SIGTERM to octocd (its run session records them) are forwarded to the script,
+// which is waited for.
 #include <signal.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -26,8 +26,8 @@
 #include "octocd/atomic_file.hpp"
 #include "octocd/error.hpp"
 #include "octocd/text.hpp"
+#include "octocd/run_session.hpp"
 #include "octocd/shared_files.hpp"
-#include "octocd/stop.hpp"
 #include "octocd/trace_reader.hpp"
 #include "tools.hpp"
 
@@ -52,40 +52,6 @@ std::string script() {
 
 /// From a forwarded SIGINT/SIGTERM to the script's SIGKILL: `report` ends within 1 s.
 constexpr std::chrono::milliseconds kReportStopBound{700};
-
-// The script's process while it runs (0: none), and the signal forwarded to it.
-std::atomic<pid_t> g_child{0};
-std::atomic<int> g_forwarded{0};
-static_assert(std::atomic<pid_t>::is_always_lock_free, "the handler needs a lock-free pid");
-
-// Async-signal-safe: kill(2) only. The first SIGINT/SIGTERM is passed to the script (which
-// ends and is waited for); a second one kills it.
-extern "C" void forward_signal(int sig) {
-  const int before = g_forwarded.exchange(sig);
-  if (const pid_t pid = g_child.load(); pid > 0) ::kill(pid, before == 0 ? sig : SIGKILL);
-}
-
-/// Installs forward_signal for SIGINT and SIGTERM while alive (restores the old handlers).
-class ForwardSignals {
- public:
-  ForwardSignals() {
-    struct sigaction sa {};
-    sa.sa_handler = forward_signal;
-    sigemptyset(&sa.sa_mask);
-    sa.sa_flags = 0;  // waitpid returns EINTR: the loop waits again
-    sigaction(SIGINT, &sa, &old_int_);
-    sigaction(SIGTERM, &sa, &old_term_);
-  }
-  ~ForwardSignals() {
-    sigaction(SIGINT, &old_int_, nullptr);
-    sigaction(SIGTERM, &old_term_, nullptr);
-  }
-  ForwardSignals(const ForwardSignals&) = delete;
-  ForwardSignals& operator=(const ForwardSignals&) = delete;
-
- private:
-  struct sigaction old_int_ {}, old_term_ {};
-};
 
 /// An input of the report: a regular file (a FIFO would block the script forever).
 void check_input(const std::string& path, const char* what) {
@@ -267,9 +233,9 @@ int report_command(const ReportOptions& o) {
   std::fflush(stdout);
   std::fflush(stderr);
   // SIGINT/SIGTERM to octocd reach the script too (forwarded; a terminal's Ctrl-C reaches
-  // both, the script being in octocd's process group), and octocd waits for it to end.
-  g_forwarded = 0;
-  const ForwardSignals forward;
+  // both, the script being in octocd's process group), and octocd waits for it to end. The
+  // session records them (a second one only counted: the loop below answers it).
+  RunSession session("report", {0.0, SecondSignal::Recorded});
   const pid_t pid = fork();
   if (pid < 0) throw RuntimeError("report: fork failed");
   if (pid == 0) {
@@ -280,21 +246,27 @@ int report_command(const ReportOptions& o) {
                          "OCTOCD_PYTHON)\n", argv[0]);
     _exit(1);
   }
-  g_child = pid;
-  if (const int sig = g_forwarded.load()) ::kill(pid, sig);  // a signal between fork and here
-  // Polled (10 ms): once a signal was forwarded, the script has kReportStopBound to end
-  // (Python inside a C extension answers its KeyboardInterrupt only when it returns), then
-  // it is killed, so `report` ends within 1 s of the signal.
+  // Polled (10 ms): the first signal is forwarded to the script, which then has
+  // kReportStopBound to end (Python inside a C extension answers its KeyboardInterrupt only
+  // when it returns), then it is killed, so `report` ends within 1 s of the signal; a
+  // second signal kills it at once.
   int status = 0;
   pid_t got = 0;
   std::optional<std::chrono::steady_clock::time_point> signalled;
-  bool killed = false;
+  bool killed = false, insisted = false;
   for (;;) {
     got = waitpid(pid, &status, WNOHANG);
     if (got == pid || (got < 0 && errno != EINTR)) break;
-    if (g_forwarded.load() != 0) {
+    if (const int sig = session.signal()) {
       const auto now = std::chrono::steady_clock::now();
-      if (!signalled) signalled = now;
+      if (!signalled) {
+        signalled = now;
+        ::kill(pid, sig);
+      }
+      if (!insisted && stop_signal_count() > 1) {
+        ::kill(pid, SIGKILL);
+        insisted = true;
+      }
       if (!killed && now - *signalled >= kReportStopBound) {
         ::kill(pid, SIGKILL);
         killed = true;
@@ -302,9 +274,8 @@ int report_command(const ReportOptions& o) {
     }
     ::usleep(10000);
   }
-  g_child = 0;
   if (got < 0) throw RuntimeError("report: waitpid failed");
-  if (const int sig = g_forwarded.load()) {
+  if (const int sig = session.signal()) {
     // make_report.py says a stop itself ("octocd report: stopped by ..."; exit 128 + signal):
     // one line for the user, so this one only where the script did not (killed, or ended
     // otherwise).

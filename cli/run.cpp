@@ -328,7 +328,8 @@ void check_worlds_trace(bool traced) {
 /// `run --worlds K` on an engine that steps one scene per run (docs/gpu.md): the K copies as
 /// separate runs (world_copies.hpp), as many at once as the host has threads; a summary of
 /// the copies (steps/s per copy, world-steps/s = K frames / wall time).
-int run_copies(const RunOptions& o, const std::shared_ptr<const octocd::Model>& single, int frames, double model_s) {
+int run_copies(octocd::RunSession& session, const RunOptions& o, const std::shared_ptr<const octocd::Model>& single,
+               int frames, double model_s) {
   const octocd::CopiesRun r =
       octocd::run_copies_separately(o.engine, single, o.worlds, frames, 0, o.settings);
   std::vector<double> per_copy;
@@ -370,32 +371,12 @@ int run_copies(const RunOptions& o, const std::shared_ptr<const octocd::Model>& 
     j["build_id"] = octocd::build_id();
     octocd::write_file_atomically(o.summary_json, j.dump(2) + "\n", "--summary-json");
   }
-  if (const int sig = octocd::stop_signal()) {
-    report_stop(sig, "run", ran / std::max<long>(k, 1), frames, "", "");
-    return octocd::stop_exit_code(sig);
-  }
+  if (const int sig = session.signal()) return stopped_after_frame(session, sig, ran / std::max<long>(k, 1), frames, "");
   return 0;
 }
 
-/// What `run` keeps should it end at once (a second signal, the 1 s bound): the trace's
-/// frames as of its last flush (trace.hpp: readable at any instant).
-std::string run_kept(const octocd::TraceWriter* trace, const std::string& path) {
-  if (!trace) return "";
-  return trace->flushed_frames() > 0
-             ? fmt::format("the trace {} holds frames 1..{} (its last flush), no sidecar", path, trace->flushed_frames())
-             : fmt::format("the trace {} holds no frame (none flushed yet), no sidecar", path);
-}
-
-/// What `run` keeps when it ends at once, read back from the trace itself (its
-/// committed_frames once no flush is in flight; TraceWriter::read_back_frames_and_hold),
-/// on set_stop_kept_reader's thread; "" (run_kept's text instead) when it cannot be read.
-std::string run_read_back(octocd::TraceWriter& trace, const std::string& path) {
-  const std::string held = trace_read_back(trace, path);
-  return held.empty() ? held : held + ", no sidecar";
-}
-
-/// How long the read-back of what `run` keeps may take before the process ends with
-/// run_kept's text instead (s).
+/// How long the read-back of what `run` keeps may take before the process ends with the
+/// trace's last flush said instead (s).
 constexpr double kRunReadBackBound = 0.2;
 
 /// `run`: from a SIGINT or SIGTERM to the end of the process, at most this long (s) plus
@@ -431,7 +412,7 @@ int run_command(const RunOptions& o) {
     check_worlds_trace(!o.trace.empty());
     if (!batched_worlds_engine(o.engine)) {
       loading.reset();
-      return run_copies(o, model, scene.frames,
+      return run_copies(session, o, model, scene.frames,
                         std::chrono::duration<double>(Clock::now() - t_setup).count());
     }
     worlds.count = o.worlds.count;
@@ -479,16 +460,12 @@ int run_command(const RunOptions& o) {
     meta.start_time = octocd::cli::utc_time_now();
     trace = std::make_unique<octocd::TraceWriter>(o.trace, meta, octocd::trace_bodies(world), topt);
     trace->append_state(0, world.state());
-    session.keep(run_kept(trace.get(), o.trace));
-    octocd::TraceWriter* writer = trace.get();
-    session.keep_read_back([writer, path = o.trace] { return run_read_back(*writer, path); }, kRunReadBackBound);
   }
-  if (!trace) session.keep("");  // nothing written: the stop line says where it stopped
-  // Declared after `trace`: the reader is cleared before the trace goes, whatever the way out.
-  const struct ForgetReadBack {
-    octocd::RunSession& session;
-    ~ForgetReadBack() { session.forget_read_back(); }
-  } forget_read_back{session};
+  // Declared after `trace`: the session keeps the trace's frames (its last flush, read back
+  // should the process end at once) until the trace is closed, whatever the way out.
+  std::optional<octocd::RunSession::KeptTrace> kept;
+  if (trace) kept.emplace(session.keep_trace(*trace, o.trace, ", no sidecar", kRunReadBackBound));
+  else session.keep("");  // nothing written: the stop line says where it stopped
 
   Progress progress(scene.frames, !o.quiet);
   // Without a trace nothing but the metrics is read between the steps: the engine may run
@@ -502,7 +479,6 @@ int run_command(const RunOptions& o) {
   const bool own_process = world.writes_own_trace();
   octocd::cli::show_process_progress(world, scene.frames, !o.quiet);
   const auto t0 = Clock::now();
-  std::int64_t kept_flushed = 0;  // the flushed frames run_kept last said
   try {
     for (int f = 0; f < scene.frames && octocd::stop_signal() == 0; ++f) {
       // A step of a big scene may take seconds: a signal it does not answer within the
@@ -531,16 +507,14 @@ int run_command(const RunOptions& o) {
       // A reference engine's state past the trace limits (a spinning needle) ends the run
       // before its frame is written: every trace `run` writes is judgeable.
       if (trace && world.rotation_traits()) check_engine_state(world.state(), f + 1, o.engine);
-      if (trace) feed.append(*trace, world, m, scene.frames - (f + 1));
-      // The fallback text follows the flushes, those the writer thread ended meanwhile too.
-      if (trace && trace->flushed_frames() != kept_flushed) {
-        kept_flushed = trace->flushed_frames();
-        session.keep(run_kept(trace.get(), o.trace));
+      if (trace) {
+        feed.append(*trace, world, m, scene.frames - (f + 1));
+        kept->frame_written();
       }
       progress.update(m, totals);
     }
   } catch (const octocd::RuntimeError&) {
-    session.forget_read_back();
+    if (kept) kept->end();
     close_after_failure(trace, o.trace, o.no_xdmf);
     throw;
   }
@@ -550,7 +524,7 @@ int run_command(const RunOptions& o) {
     // not octocd's, which the XDMF sidecar's hyperslabs describe: no sidecar for it.
     octocd::copy_own_trace(world, o.trace, "--trace");
   }
-  session.forget_read_back();
+  if (kept) kept->end();
   if (trace) {
     trace->close();
     // A stopped run has a second: the sidecar re-reads the whole trace (the hardened
@@ -564,11 +538,9 @@ int run_command(const RunOptions& o) {
     worlds.escaped = octocd::worlds_escaped(*model, worlds.layout, o.worlds.margin, world.state());
   if (!o.quiet) print_summary(world, totals, wall_s, o.trace, xdmf, worlds);
   if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s, worlds);
-  if (const int sig = octocd::stop_signal()) {
-    report_stop(sig, "run", totals.frames, scene.frames, o.trace,
-                o.trace.empty() || o.no_xdmf ? "" : "; no XDMF sidecar (a stopped run writes none)");
-    return octocd::stop_exit_code(sig);
-  }
+  if (const int sig = session.signal())
+    return stopped_after_frame(session, sig, totals.frames, scene.frames, o.trace,
+                               o.no_xdmf ? "" : "; no XDMF sidecar (a stopped run writes none)");
   return 0;
 }
 

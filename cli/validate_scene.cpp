@@ -47,13 +47,24 @@ namespace {
 /// false: Bullet, MuJoCo, ODE): the engine runs `--frames` steps into a version 2 trace
 /// (`--trace FILE`, else a temporary file, removed afterwards) with every state and contact,
 /// which is then judged as `--trace-in` judges it (validate_trace_in).
-int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& vo,
+int validate_through_trace(octocd::RunSession& session, ValidateOptions& o, const octocd::ValidationOptions& vo,
                            const std::shared_ptr<const octocd::Model>& model, Clock::time_point t0) {
   namespace fs = std::filesystem;
   const bool temporary = o.trace.empty();
   // A temporary trace is made once the engine has stepped: a process engine stopped by a
-  // signal ends octocd at once (process_engines.hpp), with nothing of its own left.
+  // signal ends octocd at once (process_engines.hpp), with nothing of its own left. From
+  // its making to its removal it is the session's: any stop or failure removes it.
   std::string path = o.trace;
+  const auto make_temporary = [&] {
+    path = octocd::cli::temporary_trace("validate-" + o.engine);
+    session.add_temporary(path);
+  };
+  const auto remove_temporary = [&] {
+    if (!temporary || path.empty()) return;
+    std::error_code ec;
+    fs::remove(path, ec);
+    session.forget_temporary(path);
+  };
   const std::string what = o.engine + (octocd::scene_rotates(model->scene) ? " (rotation)" : " (translation only)");
   std::string geometry;
   std::int64_t stepped = 0;  // frames the engine stepped and the trace took
@@ -66,11 +77,11 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       world.plan_steps(o.frames);
       octocd::cli::show_process_progress(world, o.frames, true);  // its start-up and steps, as they happen
       world.step();  // its process runs every frame; the trace is checked against the request
-      if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
+      if (temporary) make_temporary();
       octocd::copy_own_trace(world, path, temporary ? "validate" : "--trace");
     } else {
       check_engine_inertia(world, *model, o.engine);  // before a trace octocd would refuse is begun
-      if (temporary) path = octocd::cli::temporary_trace("validate-" + o.engine);
+      if (temporary) make_temporary();
       octocd::TraceOptions topt;
       topt.state_every = 1;
       topt.contacts = true;
@@ -84,24 +95,11 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       // A step that outlasts the grace after a signal ends the process there (the session
       // removes a temporary trace; a --trace keeps its flushed frames): no frame is judged
       // before the stepping ends.
-      octocd::RunSession* session = octocd::RunSession::current();
-      if (session && temporary) {
-        session->add_temporary(path);
-        session->keep("its temporary trace is removed; no frame judged");
-      } else if (session) {
-        session->keep(fmt::format("the trace {} holds the frames of its last flush; no frame judged", path));
-        session->keep_read_back([&trace, path] {
-          const std::string held = octocd::cli::trace_read_back(trace, path);
-          return held.empty() ? held : held + "; no frame judged";
-        });
-      }
-      // Cleared before the trace is closed or destroyed, whatever the way out.
-      const struct ForgetReadBack {
-        octocd::RunSession* session;
-        ~ForgetReadBack() {
-          if (session) session->forget_read_back();
-        }
-      } forget_read_back{session};
+      // Declared after the trace: the read-back ends before the trace is closed or destroyed,
+      // whatever the way out.
+      std::optional<octocd::RunSession::KeptTrace> kept;
+      if (temporary) session.keep("its temporary trace is removed; no frame judged");
+      else kept.emplace(session.keep_trace(trace, path, "; no frame judged"));
       for (int f = 0; f < o.frames && octocd::stop_signal() == 0; ++f) {
         std::optional<octocd::StopWithin> within(
             std::in_place, fmt::format("validate stepped frame {} of {} on engine {} (a step longer than the 0.5 s "
@@ -111,16 +109,15 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
         within.reset();
         check_engine_state(world.state(), stepped + 1, o.engine);  // the trace stays judgeable
         trace.append_frame_v2(m, world.state(), world.record());
+        if (kept) kept->frame_written();
         ++stepped;
       }
-      if (session) session->forget_read_back();
+      if (kept) kept->end();
       trace.close();
-      if (session) session->keep("");
-      if (session && temporary) session->forget_temporary(path);  // removed below, once judged
+      session.keep("");
     }
   } catch (...) {  // the engine failed: its temporary trace goes (a --trace keeps the frames written)
-    std::error_code ec;
-    if (temporary && !path.empty()) fs::remove(path, ec);
+    remove_temporary();
     throw;
   }
   octocd::ExternalOptions eo;
@@ -138,7 +135,6 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
   // on the cpu engine keeps its verdict; without one, a signal while judging ends at once.
   const int stop_sig = octocd::stop_signal();
   try {
-    if (temporary) octocd::set_stop_remove(path);
     if (stop_sig != 0) {
       // The stepped frames are judged for kValidateStopGrace (a second signal: at once):
       // the verdict of the frames judged whole by then, within the 1 s of a stop.
@@ -148,16 +144,15 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       try {
         results = octocd::validate_external_trace(path, eo, o.every, 0, &info);
       } catch (const octocd::ValidationStopped&) {
-        std::fprintf(stderr, "octocd validate: stopped by %s after frame %lld of %d, and cut short (a second signal "
-                             "or its bound) while checking %s's trace; no frame judged, no verdict\n",
-                     octocd::stop_signal_name(stop_sig), static_cast<long long>(stepped), o.frames, o.engine.c_str());
+        session.keep("no frame judged, no verdict");
+        const int code = session.stopped(stop_sig, fmt::format(" after frame {} of {}, and cut short (a second signal "
+                                                               "or its bound) while checking {}'s trace",
+                                                               stepped, o.frames, o.engine));
+        remove_temporary();
         if (!o.junit.empty())
           octocd::write_junit_error(o.junit, model->scene.name, "stopped",
                                     fmt::format("stopped by {} twice; no frame judged", octocd::stop_signal_name(stop_sig)));
-        octocd::set_stop_remove("");
-        std::error_code ec;
-        if (temporary) fs::remove(path, ec);
-        return octocd::stop_exit_code(stop_sig);
+        return code;
       }
     } else {
       const std::string judging_what = fmt::format(
@@ -168,10 +163,8 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
       if (!o.view.empty()) o.views = octocd::cli::write_failure_views(path, results, o.view);
     }
   } catch (const octocd::InputError& e) {
-    octocd::set_stop_remove("");
-    std::error_code ec;
     if (!temporary) throw;
-    fs::remove(path, ec);
+    remove_temporary();
     // The scene was accepted: a trace the engine wrote that the reader refuses is the run's
     // failure, said as such, never a refusal naming a temporary file that no longer exists.
     std::string why = e.what();
@@ -180,14 +173,10 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
                                            "reader refuses: {}",
                                            o.engine, octocd::printable(model->scene.name), why));
   } catch (...) {
-    octocd::set_stop_remove("");
-    std::error_code ec;
-    if (temporary) fs::remove(path, ec);
+    remove_temporary();
     throw;
   }
-  octocd::set_stop_remove("");
-  std::error_code ec;
-  if (temporary) fs::remove(path, ec);
+  remove_temporary();
   const octocd::RunName run{model->scene.name, ""};
   const octocd::ExpectationReport report = octocd::match_expectations(o.expectations, run, results);
   // Stopped: the table covers the frames judged whole; what the trace holds is what the
@@ -215,12 +204,9 @@ int validate_through_trace(ValidateOptions& o, const octocd::ValidationOptions& 
     fmt::print("\nSTOPPED: {}\n", stopped);
     std::fflush(stdout);
     const std::string kept = info.frames > 0 ? fmt::format("frames 1..{}", info.frames) : std::string("no frame");
-    std::fprintf(stderr, "octocd validate: stopped by %s after frame %lld of %d; %s\n", octocd::stop_signal_name(stop_sig),
-                 static_cast<long long>(stepped), o.frames,
-                 (temporary ? fmt::format("its temporary trace (it held {}) is removed", kept)
-                            : fmt::format("the trace {} holds {} (read back)", path, kept))
-                     .c_str());
-    return octocd::stop_exit_code(stop_sig);
+    session.keep(temporary ? fmt::format("its temporary trace (it held {}) is removed", kept)
+                           : fmt::format("the trace {} holds {} (read back)", path, kept));
+    return session.stopped(stop_sig, fmt::format(" after frame {} of {}", stepped, o.frames));
   }
   return conclude_validate(o, run, results, report, meta);
 }
@@ -248,8 +234,7 @@ int validate_verdict(const ValidateOptions& o, const std::string& name,
                        line);
     fmt::print("\nSTOPPED: {}\n", line);
     std::fflush(stdout);
-    report_stop(sig, "validate", done, o.frames, o.trace);
-    return octocd::stop_exit_code(sig);
+    return stopped_after_frame(*octocd::RunSession::current(), sig, done, o.frames, o.trace);
   }
   return conclude_validate(o, run, results, report,
                            {{"engine", o.engine}, {"frames", o.frames}, {"every", o.every}, {"against", o.against},
@@ -275,7 +260,6 @@ int validate_determinism(const ValidateOptions& o, const std::shared_ptr<const o
   // (the run session). A process engine's run stopped inside its process ends octocd there
   // (process_engines.hpp), saying how many rows had finished.
   constexpr std::size_t kRows = 3;  // determinism-runs, -threads, -cpu-cuda
-  octocd::RunSession* session = octocd::RunSession::current();
   d.stop = [] { return octocd::stop_signal() != 0; };
   const std::vector<octocd::ValidationResult> results = octocd::cli::determinism_rows(d);
   const int sig = octocd::stop_signal();
@@ -311,12 +295,9 @@ int validate_determinism(const ValidateOptions& o, const std::shared_ptr<const o
     std::string kept = fmt::format("the table above holds the {} finished row(s)", results.size());
     if (!o.junit.empty()) kept += fmt::format(", --junit {} too", o.junit);
     if (!o.json.empty()) kept += fmt::format(", --json {} too", o.json);
-    if (session) {
-      session->keep(kept);
-      return session->stopped(sig, fmt::format(" after {} of {} determinism rows", results.size(), kRows));
-    }
-    std::fprintf(stderr, "octocd validate: %s; %s\n", stopped.c_str(), kept.c_str());
-    return octocd::stop_exit_code(sig);
+    octocd::RunSession& session = *octocd::RunSession::current();
+    session.keep(kept);
+    return session.stopped(sig, fmt::format(" after {} of {} determinism rows", results.size(), kRows));
   }
   return conclude_validate(o, run, results, report,
                            {{"engine", o.engine}, {"frames", o.frames}, {"mode", "determinism"},
@@ -429,7 +410,7 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
           "--engine: {} with boxes equal to the AABBs and no rotation cannot be validated (no per-frame record); "
           "allowed: {}, or {} with --bullet shape=hull (the default) or --rotation",
           o.engine, engines_with([](const EngineInfo& e) { return e.records_every_step; }), o.engine));
-    return validate_through_trace(o, vo, model, t0);
+    return validate_through_trace(session, o, vo, model, t0);
   }
   std::unique_ptr<octocd::TraceWriter> trace;
   std::int64_t done = 0;  // frames of the validated engine

@@ -80,8 +80,8 @@ int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, co
                        stopped);
     fmt::print("\nSTOPPED: {}\n", stopped);
     std::fflush(stdout);
-    report_stop(sig, "validate", info.judged_to, info.frames, "", fmt::format(" of the trace {}", o.trace_in));
-    return octocd::stop_exit_code(sig);
+    return stopped_after_frame(*octocd::RunSession::current(), sig, info.judged_to, info.frames, "", "",
+                               fmt::format(" of the trace {}", o.trace_in));
   }
   nlohmann::ordered_json meta = {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
                                  {"against", o.against}, {"build_id", octocd::build_id()}};
@@ -160,13 +160,14 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
     results = octocd::validate_external_trace(o.trace_in, eo, every, o.frames_given ? o.frames : 0, &info);
   });
   const auto stopped_checking = [&](int sig) {
-    std::fprintf(stderr, "octocd validate: stopped by %s while checking the trace %s; no frame judged, no verdict\n",
-                 octocd::stop_signal_name(sig), o.trace_in.c_str());
+    octocd::RunSession& session = *octocd::RunSession::current();
+    session.keep("no frame judged, no verdict");
+    const int code = session.stopped(sig, fmt::format(" while checking the trace {}", o.trace_in));
     if (!o.junit.empty())
       octocd::write_junit_error(o.junit, std::filesystem::path(o.trace_in).stem().string(), "stopped",
                                 fmt::format("stopped by {} while checking the trace; no frame judged",
                                             octocd::stop_signal_name(sig)));
-    return octocd::stop_exit_code(sig);
+    return code;
   };
   if (!worker.wait()) {
     // A check outlasting the grace, or a second signal: the verdict of the frames judged so

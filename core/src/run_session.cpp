@@ -9,6 +9,10 @@
 #include <cstdlib>
 #include <utility>
 
+#include <fmt/format.h>
+
+#include "octocd/trace.hpp"
+
 namespace octocd {
 namespace {
 
@@ -39,6 +43,50 @@ void RunSession::keep_read_back(std::function<std::string()> reader, double boun
 }
 
 void RunSession::forget_read_back() { set_stop_kept_reader({}); }
+
+RunSession::KeptTrace::KeptTrace(RunSession* session, TraceWriter* trace, std::string path, std::string tail)
+    : session_(session), trace_(trace), path_(std::move(path)), tail_(std::move(tail)) {}
+
+RunSession::KeptTrace::KeptTrace(KeptTrace&& other) noexcept
+    : session_(std::exchange(other.session_, nullptr)),
+      trace_(other.trace_),
+      path_(std::move(other.path_)),
+      tail_(std::move(other.tail_)),
+      flushed_(other.flushed_) {}
+
+RunSession::KeptTrace::~KeptTrace() { end(); }
+
+void RunSession::KeptTrace::end() {
+  if (session_) session_->forget_read_back();
+  session_ = nullptr;
+}
+
+void RunSession::KeptTrace::keep_flushed() {
+  const std::int64_t flushed = trace_->flushed_frames();
+  if (flushed == flushed_) return;
+  flushed_ = flushed;
+  session_->keep(flushed > 0 ? fmt::format("the trace {} holds frames 1..{} (its last flush){}", path_, flushed, tail_)
+                             : fmt::format("the trace {} holds no frame (none flushed yet){}", path_, tail_));
+}
+
+void RunSession::KeptTrace::frame_written() {
+  if (session_) keep_flushed();
+}
+
+RunSession::KeptTrace RunSession::keep_trace(TraceWriter& trace, const std::string& path, const std::string& tail,
+                                             double bound_s) {
+  KeptTrace kept(this, &trace, path, tail);
+  kept.keep_flushed();
+  keep_read_back(
+      [&trace, path, tail]() -> std::string {
+        const std::int64_t frames = trace.read_back_frames_and_hold();
+        if (frames < 0) return "";
+        return frames > 0 ? fmt::format("the trace {} holds frames 1..{} (read back){}", path, frames, tail)
+                          : fmt::format("the trace {} holds no frame (read back){}", path, tail);
+      },
+      bound_s);
+  return kept;
+}
 
 bool RunSession::add_temporary(const std::string& path) { return stop_track_temporary(path, true); }
 

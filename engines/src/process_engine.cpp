@@ -8,7 +8,6 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -122,7 +121,7 @@ class ProcessEngine final : public Engine {
     // `run --worlds` stopped) still removes it.
     std::error_code ec;
     fs::remove_all(folder_, ec);
-    (void)stop_track_temporary(folder_, false);
+    if (RunSession* session = RunSession::current()) session->forget_temporary(folder_);
     folder_.clear();
   }
 
@@ -149,8 +148,8 @@ class ProcessEngine final : public Engine {
     folder_ = templ;
     const std::string request = request_path();
     trace_path_ = (fs::path(folder_) / "trace.h5").string();
-    // A process that ends at once while stopping (run_session.hpp) removes it and its files too.
-    (void)stop_track_temporary(folder_, true);
+    // A command's stop or failure (its run session) removes it and its files too.
+    if (RunSession* session = RunSession::current()) session->add_temporary(folder_);
     {
       std::ofstream out(request, std::ios::binary);
       out << process_request(spec_, *model_, frames_, trace_path_, items_).dump(1) << "\n";
@@ -172,24 +171,19 @@ class ProcessEngine final : public Engine {
     const process_detail::ChildOutcome o = process_detail::run_child(run);
     cancel_.store(false);
     using End = process_detail::ChildOutcome::End;
-    if (o.end == End::Stopped && o.stop_signal == 0) {
-      // Cancelled by the caller (Python's Ctrl-C): the step fails, octocd goes on.
+    if (o.end == End::Stopped) {
+      // Nothing of the run was read yet: its temporary files go. Stopped by a signal, octocd
+      // ends as a stopped command through its run session (stop.hpp: StopAtOnce's rule for
+      // work with nothing to flush); cancelled by the caller (Python's Ctrl-C), the step
+      // fails and octocd goes on.
       remove_folder();
+      RunSession* session = RunSession::current();
+      if (o.stop_signal != 0 && session)
+        session->end_now(o.stop_signal, fmt::format(" while engine '{}' ran (its process tree stopped: SIGTERM, then "
+                                                    "SIGKILL); no frame of it was read",
+                                                    printable(spec_.info.name)));  // says what the command keeps
       throw RuntimeError(fmt::format("engine '{}' ({}) {}; no frame of it was read", printable(spec_.info.name),
                                      spec_.file, process_detail::describe(o)));
-    }
-    if (o.end == End::Stopped) {
-      // Nothing of the run was read yet: its temporary files go, and octocd ends as a
-      // stopped command (stop.hpp: StopAtOnce's rule for work with nothing to flush).
-      remove_folder();
-      const std::string where = fmt::format(" while engine '{}' ran (its process tree stopped: SIGTERM, then "
-                                            "SIGKILL); no frame of it was read",
-                                            printable(spec_.info.name));
-      if (RunSession* session = RunSession::current()) session->end_now(o.stop_signal, where);  // says what it keeps
-      std::fprintf(stderr, "octocd: stopped by %s%s\n", stop_signal_name(o.stop_signal), where.c_str());
-      std::fflush(stdout);
-      std::fflush(stderr);
-      std::_Exit(stop_exit_code(o.stop_signal));
     }
     if (o.end == End::Oversize)
       fail(fmt::format("wrote a trace beyond its max_trace_bytes {} and was stopped after {:.2f} s",

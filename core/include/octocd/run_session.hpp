@@ -1,10 +1,11 @@
 #pragma once
 /// \file run_session.hpp
-/// The run session of a long command (`run`, `validate`, `bench`, the process engines it
-/// starts): the one object that owns what the command keeps should a SIGINT or SIGTERM stop
-/// it or should it fail, and that states it. The command registers, as it goes:
+/// The run session of a long command (`run`, `validate`, `bench`, `report`, the process
+/// engines they start): the one object that owns what the command keeps should a SIGINT or
+/// SIGTERM stop it or should it fail, and that states it. The command registers, as it goes:
 ///   - what its output holds now (keep: "the result r.json keeps the 3 point(s) finished
-///     before"), or how to read that back from the output itself (keep_read_back);
+///     before"), or how to read that back from the output itself (keep_read_back; a trace
+///     being written: keep_trace, its frames as flushed and read back);
 ///   - its temporary files and folders (add_temporary): removed on any stop or failure;
 ///   - the child process groups it started (add_child): killed on any stop.
 /// A stop then ends the same way whichever path it takes: the command's own stop path
@@ -22,12 +23,15 @@
 ///       session.keep("the result r.json keeps the 3 point(s) finished before");
 ///     }
 
+#include <cstdint>
 #include <functional>
 #include <string>
 
 #include "octocd/stop.hpp"
 
 namespace octocd {
+
+class TraceWriter;
 
 /// From the first SIGINT/SIGTERM to the end of a session's process, at most this long (s)
 /// by default: 1 s less the 20 ms tick and the process's exit (docs/robustness.md).
@@ -46,7 +50,8 @@ struct RunSessionSettings {
 /// One long command's run session: installs the SIGINT/SIGTERM handlers (a StopOnSignals
 /// with the bound) and owns what the command keeps when stopped or failing. One at a time
 /// per process (not nestable); construct and use it from the command's thread, except
-/// add_child / forget_child (any thread). On destruction (a normal end or an exception)
+/// add_temporary / forget_temporary / add_child / forget_child (any thread: a process
+/// engine's copy of `run --worlds` registers its folder from its own). On destruction (a normal end or an exception)
 /// the temporaries still registered are removed and the children still registered killed.
 class RunSession {
  public:
@@ -81,12 +86,50 @@ class RunSession {
   /// Clears keep_read_back's reader (before what it reads goes).
   void forget_read_back();
 
+  /// While alive, the trace being written is what the command keeps (RunSession::keep_trace).
+  /// Its end clears the read-back (declare it after the trace: it ends first, whatever the
+  /// way out).
+  class KeptTrace {
+   public:
+    KeptTrace(KeptTrace&& other) noexcept;
+    KeptTrace(const KeptTrace&) = delete;
+    KeptTrace& operator=(const KeptTrace&) = delete;
+    KeptTrace& operator=(KeptTrace&&) = delete;
+    ~KeptTrace();
+
+    /// After each frame written: keep()'s text follows the trace's flushed frames, those a
+    /// writer thread ended meanwhile too (a new text only when they changed).
+    void frame_written();
+
+    /// Clears the read-back now (before the trace is closed); keep()'s text stays.
+    void end();
+
+   private:
+    friend class RunSession;
+    KeptTrace(RunSession* session, TraceWriter* trace, std::string path, std::string tail);
+    void keep_flushed();
+    RunSession* session_;
+    TraceWriter* trace_;
+    std::string path_, tail_;
+    std::int64_t flushed_ = -1;
+  };
+
+  /// The trace `trace` being written at `path` is what the command keeps: keep() says its
+  /// flushed frames now and at each KeptTrace::frame_written() ("the trace PATH holds frames
+  /// 1..K (its last flush)TAIL", or "holds no frame (none flushed yet)TAIL"), and a process
+  /// ended at once reads them back from the file (keep_read_back, at most `bound_s`;
+  /// TraceWriter::read_back_frames_and_hold: "the trace PATH holds frames 1..K (read
+  /// back)TAIL", "holds no frame (read back)TAIL"). `tail`: what follows, e.g. ", no
+  /// sidecar". `trace` must outlive the returned KeptTrace.
+  KeptTrace keep_trace(TraceWriter& trace, const std::string& path, const std::string& tail, double bound_s = 0.2);
+
   /// A temporary file, or a folder for temporary files, that no stop or failure leaves
   /// behind (a folder is emptied of its files, one level, then removed). At most 64 at
-  /// once; false (not owned) beyond.
+  /// once; false (not owned) beyond. Any thread.
   bool add_temporary(const std::string& path);
 
   /// Hands a temporary back to the command (it was removed, or renamed into the output).
+  /// Any thread.
   void forget_temporary(const std::string& path);
 
   /// A child process group (its id) that no stop leaves running. Any thread.

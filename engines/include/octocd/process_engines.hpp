@@ -130,8 +130,9 @@ bool set_process_progress(Engine& engine, std::function<void(const ProcessProgre
 /// trace (Engine::own_trace), which is checked and replayed frame by frame. Every failure
 /// of the process is a RuntimeError "engine 'NAME': ..." naming what it did and the
 /// sanitised tail of its stderr; a SIGINT/SIGTERM (stop_signal) while it runs stops its
-/// process tree (SIGTERM, then SIGKILL) and ends octocd with stop_exit_code, its
-/// temporary files removed. Whatever ends a run, the process and every process it started
+/// process tree (SIGTERM, then SIGKILL) and ends octocd through the command's run session
+/// (RunSession::end_now, run_session.hpp), its temporary folder (the session's while the
+/// process runs) removed; without a session the step fails (RuntimeError). Whatever ends a run, the process and every process it started
 /// (one that calls setsid() included) have ended when step() returns or octocd exits
 /// (docs/bring-your-engine.md, "The invocation").
 std::unique_ptr<Engine> make_process_engine(const ProcessEngineSpec& spec, const std::shared_ptr<const Model>& model,
