@@ -374,12 +374,22 @@ matrix_skip() {  # engine scene
   fi
 }
 matrix_engines=()
+# The registry (`octocd engines --json`, asked once: it runs every engine's check), one engine a
+# line: name, rotates (yes/no), available (yes/no), why not, separated by tabs.
+engine_table=""
+# Field $1 (1 name, 2 rotates, 3 available) of the engines whose field $2 is $3 (any: all), a line each.
+engines_where() { awk -F'\t' -v f="$1" -v k="$2" -v v="$3" 'k == 0 || $k == v { print $f }' <<<"$engine_table"; }
+# Why engine $1 is not available: the registry's reason.
+engine_why() { awk -F'\t' -v e="$1" '$1 == e { print "unavailable: " $4 }' <<<"$engine_table"; }
 if [ "$matrix" != "none" ]; then
-  available="$("$bin" engines --available 2>/dev/null)"
+  engine_table="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
+yn = lambda b: "yes" if b else "no"
+for e in json.load(sys.stdin)["engines"]:
+    print("\t".join([e["name"], yn(e["rotates"]), yn(e["available"]), " ".join(e.get("why", "").split())]))')"
+  available="$(engines_where 1 3 yes)"
   # --engines: each name must be the registry's (a typo would silently judge nothing).
   if [ -n "$only_engines" ]; then
-    registry="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
-print("\n".join(e["name"] for e in json.load(sys.stdin)["engines"]))')"
+    registry="$(engines_where 1 0 any)"
     for e in ${only_engines//,/ }; do
       grep -qxF -- "$e" <<<"$registry" || { echo "nightly: --engines '$e': not an engine of this octocd; allowed: $(paste -sd, <<<"$registry")" >&2; exit 2; }
     done
@@ -398,14 +408,13 @@ if [ -n "$only_matrix_scenes" ]; then
 fi
 if [ "$matrix" != "none" ]; then
   # The registry's rotating engines, built in or process engines (`octocd engines --json`).
-  rotating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
-print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if e["rotates"]))')"
+  rotating="$(engines_where 1 2 yes)"
   for e in $rotating; do
     in_matrix "$e" || continue
     if grep -qx "$e" <<<"$available"; then
       matrix_engines+=("$e")
     else
-      why="$("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//')"
+      why="$(engine_why "$e")"
       echo "matrix   $e: not available here (${why:-not an engine of this octocd})"
     fi
   done
@@ -438,14 +447,12 @@ determinism_scenes() {  # "scene frames rotates" per line
 determinism_engines=()
 translating=""
 if [ "$matrix" != "none" ]; then
-  read -r -a all_engines <<<"$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
-print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"]))')"
-  translating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
-print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if not e["rotates"]))')"
+  read -r -a all_engines <<<"$(engines_where 1 0 any | paste -sd' ')"
+  translating="$(engines_where 1 2 no)"
   for e in "${all_engines[@]+"${all_engines[@]}"}"; do
     in_matrix "$e" || continue
     if grep -qx "$e" <<<"$available"; then determinism_engines+=("$e")
-    else echo "matrix   $e--determinism: not available here ($("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//'))"; fi
+    else echo "matrix   $e--determinism: not available here ($(engine_why "$e"))"; fi
   done
 fi
 for e in "${determinism_engines[@]+"${determinism_engines[@]}"}"; do
