@@ -14,6 +14,7 @@
 #   2  some scene was bad input (octocd exit 2), or this script was called wrongly
 # Every scene is validated whatever happened to the ones before it. While a case runs, a
 # line at most 10 s apart gives its seconds so far and the frame its octocd reached ("frame F of N").
+# A case's line gives its wall and CPU seconds (its commands' user + system), the summary both totals.
 # The summary lists each expected failure whose figure lies within 10% of its allowance (the
 # expectations file keeps a margin of >= 10%, or an exact figure): re-record it by that rule.
 #
@@ -183,7 +184,7 @@ if [ -n "$data_dir" ]; then extra_run+=(--data-dir "$data_dir"); fi
 extra_trace=("${extra[@]}")
 if [ -n "$data_dir" ]; then extra_trace=("${extra[@]:2}"); fi
 
-passed=0 failed=0 broken=0 bad=0 expected=0
+passed=0 failed=0 broken=0 bad=0 expected=0 case_cpu_ms=0 cpu_all_ms=0
 failed_list=() broken_list=() bad_list=() thin_list=()
 child=0 beat=0 case_now=""
 # A signal to the nightly stops the case running now (octocd stops within a second, saying
@@ -273,13 +274,13 @@ judge_case() {
   case $rc in
     0) passed=$((passed + 1))
        if [ "$n_expected" -gt 0 ]; then
-         echo "pass     $shown_name ($n_frames frames, ${secs} s; $n_expected expected failure(s))"
+         echo "pass     $shown_name ($n_frames frames, ${secs} s, $(cpu_s "$case_cpu_ms") CPU-s; $n_expected expected failure(s))"
          outcomes 'expected' 10
        else
-         echo "pass     $shown_name ($n_frames frames, ${secs} s)"
+         echo "pass     $shown_name ($n_frames frames, ${secs} s, $(cpu_s "$case_cpu_ms") CPU-s)"
        fi
        outcomes 'fixed' 10 ;;
-    3) failed=$((failed + 1)); failed_list+=("$shown_name"); echo "FAILED   $shown_name (a validator failed, ${secs} s: $(shown "$log"))"
+    3) failed=$((failed + 1)); failed_list+=("$shown_name"); echo "FAILED   $shown_name (a validator failed, ${secs} s, $(cpu_s "$case_cpu_ms") CPU-s: $(shown "$log"))"
        outcomes 'NEW FAILURE|GROWN' 5; outcomes 'fixed' 5; outcomes 'expected' 10 ;;
     124) broken=$((broken + 1)); broken_list+=("$shown_name"); echo "TIMEOUT  $shown_name (after $timeout_s s: $(shown "$log"))" ;;
     2) bad=$((bad + 1)); bad_list+=("$shown_name"); echo "BAD      $shown_name (bad input: $(shown "$log"))"; tail -n 3 "$log" | cut -c1-2000 | cat -v | sed 's/^/         /' ;;
@@ -302,20 +303,36 @@ heartbeat() {
     echo "  ...    $shown_name: ${secs_so_far} s, ${line:-starting (no frame yet)}"
   done
 }
+# The CPU time (user + system) of this shell's finished children, in ms, into cpu_ms: bash's
+# `times` (its second line), written to a file so that no subshell runs it (a forked shell's
+# children times start at zero).
+children_cpu_ms() {
+  local line u s t
+  times >"$out/.times"
+  { read -r line; read -r u s; } <"$out/.times"
+  cpu_ms=0
+  for t in "$u" "$s"; do  # "1m2.345s" -> 62345
+    [[ "$t" =~ ^([0-9]+)m([0-9]+)[.,]([0-9]{3})s$ ]] &&
+      cpu_ms=$((cpu_ms + BASH_REMATCH[1] * 60000 + 10#${BASH_REMATCH[2]} * 1000 + 10#${BASH_REMATCH[3]}))
+  done
+}
+cpu_s() { local r=$((($1 + 50) / 100)); printf '%d.%d' $((r / 10)) $((r % 10)); }  # ms -> "12.3"
 # Case $1 ($2 frames): the command "${@:3}" in the background (stop() ends it on a signal),
 # its output in $out/$1.log and a progress line at most 10 s apart (heartbeat), then its outcome
 # (judge_case).
 run_case() {
-  local name="$1" n_frames="$2" t0 rc
+  local name="$1" n_frames="$2" t0 rc c0
   shift 2
   t0=$(date +%s.%N)
   case_now="$name"
+  children_cpu_ms; c0=$cpu_ms
   "$@" >"$out/$name.log" 2>&1 &
   child=$!
   heartbeat "$name" "$out/$name.log" "$t0" &
   beat=$!
   wait "$child"
   rc=$?
+  children_cpu_ms; case_cpu_ms=$((cpu_ms - c0)); cpu_all_ms=$((cpu_all_ms + case_cpu_ms))
   child=0 case_now=""
   kill "$beat" 2>/dev/null
   wait "$beat" 2>/dev/null
@@ -357,12 +374,22 @@ matrix_skip() {  # engine scene
   fi
 }
 matrix_engines=()
+# The registry (`octocd engines --json`, asked once: it runs every engine's check), one engine a
+# line: name, rotates (yes/no), available (yes/no), why not, separated by tabs.
+engine_table=""
+# Field $1 (1 name, 2 rotates, 3 available) of the engines whose field $2 is $3 (any: all), a line each.
+engines_where() { awk -F'\t' -v f="$1" -v k="$2" -v v="$3" 'k == 0 || $k == v { print $f }' <<<"$engine_table"; }
+# Why engine $1 is not available: the registry's reason.
+engine_why() { awk -F'\t' -v e="$1" '$1 == e { print "unavailable: " $4 }' <<<"$engine_table"; }
 if [ "$matrix" != "none" ]; then
-  available="$("$bin" engines --available 2>/dev/null)"
+  engine_table="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
+yn = lambda b: "yes" if b else "no"
+for e in json.load(sys.stdin)["engines"]:
+    print("\t".join([e["name"], yn(e["rotates"]), yn(e["available"]), " ".join(e.get("why", "").split())]))')"
+  available="$(engines_where 1 3 yes)"
   # --engines: each name must be the registry's (a typo would silently judge nothing).
   if [ -n "$only_engines" ]; then
-    registry="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
-print("\n".join(e["name"] for e in json.load(sys.stdin)["engines"]))')"
+    registry="$(engines_where 1 0 any)"
     for e in ${only_engines//,/ }; do
       grep -qxF -- "$e" <<<"$registry" || { echo "nightly: --engines '$e': not an engine of this octocd; allowed: $(paste -sd, <<<"$registry")" >&2; exit 2; }
     done
@@ -381,14 +408,13 @@ if [ -n "$only_matrix_scenes" ]; then
 fi
 if [ "$matrix" != "none" ]; then
   # The registry's rotating engines, built in or process engines (`octocd engines --json`).
-  rotating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
-print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if e["rotates"]))')"
+  rotating="$(engines_where 1 2 yes)"
   for e in $rotating; do
     in_matrix "$e" || continue
     if grep -qx "$e" <<<"$available"; then
       matrix_engines+=("$e")
     else
-      why="$("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//')"
+      why="$(engine_why "$e")"
       echo "matrix   $e: not available here (${why:-not an engine of this octocd})"
     fi
   done
@@ -421,14 +447,12 @@ determinism_scenes() {  # "scene frames rotates" per line
 determinism_engines=()
 translating=""
 if [ "$matrix" != "none" ]; then
-  read -r -a all_engines <<<"$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
-print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"]))')"
-  translating="$("$bin" engines --json 2>/dev/null | python3 -c 'import json, sys
-print(" ".join(e["name"] for e in json.load(sys.stdin)["engines"] if not e["rotates"]))')"
+  read -r -a all_engines <<<"$(engines_where 1 0 any | paste -sd' ')"
+  translating="$(engines_where 1 2 no)"
   for e in "${all_engines[@]+"${all_engines[@]}"}"; do
     in_matrix "$e" || continue
     if grep -qx "$e" <<<"$available"; then determinism_engines+=("$e")
-    else echo "matrix   $e--determinism: not available here ($("$bin" engines | grep -E "^$e " | sed 's/^[a-z]* *//'))"; fi
+    else echo "matrix   $e--determinism: not available here ($(engine_why "$e"))"; fi
   done
 fi
 for e in "${determinism_engines[@]+"${determinism_engines[@]}"}"; do
@@ -452,6 +476,7 @@ done
 
 # One report over every scene: the <testsuite> elements of each file under one root
 # (octocd writes each element on its own lines), with the totals summed.
+rm -f "$out/.times"
 merged="$out/junit.xml"
 {
   tests=0 failures=0 errors=0 skipped=0
@@ -471,7 +496,7 @@ merged="$out/junit.xml"
 } >"$merged"
 
 echo
-echo "nightly: ${#scenes[@]} scenes and $((passed + failed + broken + bad - ${#scenes[@]})) matrix cases in $total_s s: $passed passed ($expected expected failure(s), ${expect##*/}), $failed failed, $broken errors, $bad bad input (JUnit: $merged)"
+echo "nightly: ${#scenes[@]} scenes and $((passed + failed + broken + bad - ${#scenes[@]})) matrix cases in $total_s s ($(cpu_s "$cpu_all_ms") CPU-s, user + system, in the cases' commands): $passed passed ($expected expected failure(s), ${expect##*/}), $failed failed, $broken errors, $bad bad input (JUnit: $merged)"
 [ -n "$write_expect" ] && echo "nightly: wrote the current failures to $write_expect (edit each reason)"
 [ $failed -gt 0 ] && echo "nightly: validators failed on: ${failed_list[*]}"
 [ $broken -gt 0 ] && echo "nightly: runs failed on: ${broken_list[*]}"

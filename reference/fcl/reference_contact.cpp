@@ -12,7 +12,6 @@
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
 #include <fcl/narrowphase/collision.h>
-#include <fcl/narrowphase/collision_object.h>
 #include <fcl/narrowphase/distance.h>
 
 #include <algorithm>
@@ -319,18 +318,16 @@ fcl::Matrix3<S> rotation_of(const Pose& p) {
 /// FCL collide on the exact geometries (boxes / BVH models): do they intersect?
 bool exact_collide(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const ShapeGeom& gb,
                    const fcl::Transform3<S>& tb) {
-  fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
   fcl::CollisionRequest<S> req(1, false);
   req.gjk_solver_type = fcl::GST_LIBCCD;
   fcl::CollisionResult<S> res;
-  fcl::collide(&oa, &ob, req, res);
+  fcl::collide(ga.exact.get(), ta, gb.exact.get(), tb, req, res);
   return res.isCollision();
 }
 
 /// FCL distance on the exact geometries, nearest points in the world frame.
 void exact_distance(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const ShapeGeom& gb,
                     const fcl::Transform3<S>& tb, ReferenceNormal& r) {
-  fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
   fcl::DistanceRequest<S> req(true);  // enable_nearest_points
   req.gjk_solver_type = fcl::GST_LIBCCD;
   req.distance_tolerance = 1e-9;
@@ -341,9 +338,9 @@ void exact_distance(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const Sha
   // swapped (pinned by PosedReference.SeparatedMeshAboveFloorNormal): ask mesh first.
   const bool swap = !ga.bvh && gb.bvh;
   if (swap) {
-    fcl::distance(&ob, &oa, req, res);
+    fcl::distance(gb.exact.get(), tb, ga.exact.get(), ta, req, res);
   } else {
-    fcl::distance(&oa, &ob, req, res);
+    fcl::distance(ga.exact.get(), ta, gb.exact.get(), tb, req, res);
   }
   r.penetrating = false;
   r.distance = res.min_distance;
@@ -574,11 +571,10 @@ ReferenceNormal box_box(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const
     if (!box_contact(box_a->side, ta, box_b->side, tb, r)) exact_distance(ga, ta, gb, tb, r);
     return r;
   }
-  fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
   fcl::CollisionRequest<S> req(8, true);
   req.gjk_solver_type = fcl::GST_LIBCCD;
   fcl::CollisionResult<S> res;
-  fcl::collide(&oa, &ob, req, res);
+  fcl::collide(ga.exact.get(), ta, gb.exact.get(), tb, req, res);
   if (res.numContacts() == 0) {
     exact_distance(ga, ta, gb, tb, r);
     return r;
@@ -661,12 +657,11 @@ ReferenceNormal ReferenceGeometry::fcl_collide_normal(std::uint32_t a, std::uint
   const ShapeGeom& ga = impl_->geom(a);
   const ShapeGeom& gb = impl_->geom(b);
   const fcl::Matrix3<S> id = fcl::Matrix3<S>::Identity();
-  fcl::CollisionObject<S> oa(ga.hull, geometry_transform(ga, id, to_v3(xa))),
-      ob(gb.hull, geometry_transform(gb, id, to_v3(xb)));
   fcl::CollisionRequest<S> req(1, true);
   req.gjk_solver_type = fcl::GST_LIBCCD;
   fcl::CollisionResult<S> res;
-  fcl::collide(&oa, &ob, req, res);
+  fcl::collide(ga.hull.get(), geometry_transform(ga, id, to_v3(xa)), gb.hull.get(),
+               geometry_transform(gb, id, to_v3(xb)), req, res);
   ReferenceNormal r;
   r.penetrating = true;
   if (res.numContacts() == 0) return r;
@@ -838,11 +833,10 @@ PenetrationWitness ReferenceGeometry::penetration_witness(std::uint32_t a, std::
   const fcl::Transform3<S> ta = geometry_transform(ga, ra, xa), tb = geometry_transform(gb, rb, xb);
   PenetrationWitness w;
   {
-    fcl::CollisionObject<S> oa(ga.exact, ta), ob(gb.exact, tb);
     fcl::CollisionRequest<S> req(1, true);
     req.gjk_solver_type = fcl::GST_LIBCCD;
     fcl::CollisionResult<S> res;
-    fcl::collide(&oa, &ob, req, res);
+    fcl::collide(ga.exact.get(), ta, gb.exact.get(), tb, req, res);
     if (!res.isCollision()) return w;
     w.intersect = true;
     if (res.numContacts() > 0) {
@@ -892,13 +886,13 @@ double geometry_surface_distance(const ShapeGeom& g, const fcl::Matrix3<S>& r, c
   }
   if (g.is_sphere) return std::abs((p - (x + r * g.offset)).norm() - g.radius);
   auto sphere = std::make_shared<fcl::Sphere<S>>(1e-9);
+  sphere->computeLocalAABB();
   fcl::Transform3<S> tp = fcl::Transform3<S>::Identity();
   tp.translation() = p;
-  fcl::CollisionObject<S> os(sphere, tp), om(g.exact, geometry_transform(g, r, x));
   fcl::DistanceRequest<S> req(false);
   req.gjk_solver_type = fcl::GST_LIBCCD;
   fcl::DistanceResult<S> res;
-  fcl::distance(&os, &om, req, res);
+  fcl::distance(sphere.get(), tp, g.exact.get(), geometry_transform(g, r, x), req, res);
   return std::max<S>(0, res.min_distance + 1e-9);
 }
 }  // namespace

@@ -63,17 +63,34 @@ std::vector<Vec3> candidates(const PlacedShape& s, const Aabb& other, float marg
 
 /// The exhaustive vertex test (design.md section 5.3) over candidate vertices only: a vertex farther
 /// than theta from the other body's AABB cannot be within theta of any of its vertices,
-/// so dropping it changes nothing; the remaining pairs are all tested, with no pruning.
+/// so dropping it changes nothing; no tree or grid prunes the remaining pairs. Its answer is
+/// that of testing every remaining pair with length2(u - w) < theta^2 in float: B's vertices
+/// sorted by x, each vertex of A computes only the pairs whose float difference along x is
+/// below |theta| in magnitude. Every other pair has dx * dx >= theta^2 before rounding, so
+/// its float length2 (rounding is monotone, the other two squares are >= 0) is >= theta^2 as
+/// rounded: it cannot answer yes. Non-finite coordinates: every pair, as written.
 bool exhaustive_oracle(const PlacedShape& a_in, const PlacedShape& b_in, float theta) {
   if (!a_in.octree || !b_in.octree) return exhaustive_contact(a_in, b_in, theta);
   const float margin = 1.01f * theta + 1e-6f;
   const std::vector<Vec3> ca = candidates(a_in, b_in.box, margin);
   if (ca.empty()) return false;
-  const std::vector<Vec3> cb = candidates(b_in, a_in.box, margin);
+  std::vector<Vec3> cb = candidates(b_in, a_in.box, margin);
   const float theta2 = theta * theta;
-  for (const Vec3& u : ca)
-    for (const Vec3& w : cb)
-      if (length2(u - w) < theta2) return true;
+  const auto finite = [](const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
+  if (!std::all_of(ca.begin(), ca.end(), finite) || !std::all_of(cb.begin(), cb.end(), finite)) {
+    for (const Vec3& u : ca)
+      for (const Vec3& w : cb)
+        if (length2(u - w) < theta2) return true;
+    return false;
+  }
+  const float reach = std::fabs(theta);
+  std::sort(cb.begin(), cb.end(), [](const Vec3& p, const Vec3& q) { return p.x < q.x; });
+  for (const Vec3& u : ca) {
+    // u.x - w.x does not rise as w.x rises: the pairs within reach along x are one run.
+    auto w = std::partition_point(cb.begin(), cb.end(), [&](const Vec3& q) { return u.x - q.x >= reach; });
+    for (; w != cb.end() && u.x - w->x > -reach; ++w)
+      if (length2(u - *w) < theta2) return true;
+  }
   return false;
 }
 

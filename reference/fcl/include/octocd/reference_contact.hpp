@@ -129,8 +129,10 @@ struct HullFeatures {
 /// mesh's hull is its BVH);
 /// for boxes fcl::Box<double> with the local AABB's sides. Not owned by the World; must
 /// not outlive it (it reads World::shapes() and World::bodies() at construction only, but
-/// body indices passed to normal() must be the World's). Queries are const and build
-/// their FCL objects locally, so concurrent normal() calls are safe.
+/// body indices passed to normal() must be the World's). Queries are const: they hand FCL
+/// the shared geometries with each query's transforms and build no fcl::CollisionObject (whose
+/// construction recomputes a mesh's local AABB over all its vertices, a write to the shared
+/// geometry), so concurrent normal() calls are safe.
 class ReferenceGeometry {
  public:
   explicit ReferenceGeometry(const Engine& world);
