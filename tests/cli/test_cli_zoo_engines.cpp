@@ -37,6 +37,7 @@
 #include <functional>
 #include <iostream>
 #include <map>
+#include <random>
 #include <regex>
 #include <set>
 #include <string>
@@ -1709,6 +1710,66 @@ TEST_F(ZooEngines, ASystematicImpulseRatioIsOneFinding) {
     EXPECT_EQ(causes, (std::set<std::string>{"momentum-balance/ratio"})) << r.output;
     EXPECT_NE(r.output.find("the reported impulses are 0.98000 of the momentum change"), std::string::npos)
         << r.output;
+  }
+}
+
+/// Zoo engine (j) reporting each row's jn off by its own uniform random factor in
+/// [1 - scatter, 1 + scatter] (Havok: about +-0.2% around the momentum change).
+Zoo scattered(Zoo z, double scatter) {
+  std::mt19937 random(78);
+  std::uniform_real_distribution<double> factor(1.0 - scatter, 1.0 + scatter);
+  for (auto& step : z.rows)
+    for (Row& r : step) r.jn = f32(factor(random) * r.jn);
+  return z;
+}
+
+TEST_F(ZooEngines, ASpreadOfImpulsesIsOneFinding) {
+  const Zoo pile = pile_engine();
+  const int fi = first_impulse(pile, 29, 30);  // body 30 lands on body 29
+  ASSERT_GT(fi, 0);
+  const Zoo spread = scattered(pile, 0.002);
+  const Result ok = judge(spread, "spread");
+  expect_clean(ok);
+  EXPECT_TRUE(row_verdict(ok.output, "momentum-balance", "pass")) << ok.output;
+  const std::regex finding(
+      "one finding, a spread of the reported impulses about the momentum change: quartiles "
+      "([0-9.]+) \\.\\. ([0-9.]+) over ([0-9]+) body-steps whose rows push one way, about the centre ([0-9.]+); "
+      "([0-9]+) body-steps failing at it pass");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(ok.output, m, finding)) << ok.output;
+  const double q1 = std::stod(m[1]), q3 = std::stod(m[2]), centre = std::stod(m[4]);
+  EXPECT_LT(q1, 1.0 - 2e-4) << m[0];  // a scatter, not one factor: the quartiles apart
+  EXPECT_GT(q3, 1.0 + 2e-4) << m[0];
+  EXPECT_GT(q1, 1.0 - 2e-3) << m[0];  // inside the planted +-0.2%
+  EXPECT_LT(q3, 1.0 + 2e-3) << m[0];
+  EXPECT_NEAR(centre, 1.0, 5e-4) << m[0];
+  EXPECT_GT(std::stoull(m[5]), 100u) << m[0];  // body-steps failing at the centre alone
+  {  // body 30's velocity x1.5 in the step it lands: still caught, naming frame and body
+    Zoo f = spread;
+    f.states[fi].v[30] = f32(1.5 * f.states[fi].v[30]);
+    const Result r = judge(f, "fast");
+    expect_caught(r, {"momentum-balance", "frame " + std::to_string(fi) + ": body 30"});
+    EXPECT_EQ(failing_causes(r.output).count("momentum-balance/ratio"), 0u) << r.output;
+  }
+  {  // one of body 1's four floor rows dropped in step 200
+    Zoo f = spread;
+    auto& step = f.rows[199];
+    const auto it = std::find_if(step.begin(), step.end(), [](const Row& r) { return r.a == 0 && r.b == 1; });
+    ASSERT_NE(it, step.end());
+    step.erase(it);
+    expect_caught(judge(f, "dropped"), {"momentum-balance", "frame 200: body 1"});
+  }
+  {  // a 2% systematic factor on the scatter: the factor is the one finding
+    const Result r = judge(biased(spread, 0.98), "bias");
+    EXPECT_EQ(r.code, 3) << r.output;
+    EXPECT_EQ(failing_causes(r.output), (std::set<std::string>{"momentum-balance/ratio"})) << r.output;
+    EXPECT_NE(r.output.find("the reported impulses are 0.98"), std::string::npos) << r.output;
+  }
+  {  // a 2% scatter: the spread itself is the one finding (fences beyond 1 +- 1%)
+    const Result r = judge(scattered(pile, 0.02), "wide");
+    EXPECT_EQ(r.code, 3) << r.output;
+    EXPECT_EQ(failing_causes(r.output), (std::set<std::string>{"momentum-balance/ratio"})) << r.output;
+    EXPECT_NE(r.output.find("the reported impulses scatter from"), std::string::npos) << r.output;
   }
 }
 

@@ -778,12 +778,14 @@ struct PhysicsValidators::Impl {
     double float_bound = 0;     ///< the rounding bound (kg m/s)
     double r1 = 0;              ///< its figure at ratio 1 (of the bound)
     std::size_t disc_first = 0, disc_count = 0;  ///< its discs in deferred_discs
+    std::size_t row_first = 0, row_count = 0;    ///< its rows' impulses on it in deferred_rows
   };
   /// At most this many deferred body-steps (and their discs) are kept; the rest stay failures
   /// at ratio 1 (counted: deferred_over).
   static constexpr std::size_t kMaxDeferred = std::size_t(1) << 18;
   std::vector<DeferredBalance> deferred;
   std::vector<BalanceDisc> deferred_discs;
+  std::vector<D3> deferred_rows;  ///< each deferred body-step's rows' impulses on it (kg m/s)
   std::uint64_t deferred_over = 0;
   /// The fit's sample: s = (J . d) / (m dv . d) (reported impulses over the momentum change)
   /// of body-steps whose s the record fixes to kFitPrecision along d (m dv's direction or a
@@ -794,26 +796,51 @@ struct PhysicsValidators::Impl {
   static constexpr double kBiasMax = 0.01;
   /// Fewer samples than this: no ratio is fitted (ratio 1).
   static constexpr std::uint64_t kFitMinSamples = 10;
-  std::vector<std::uint64_t> ratio_bins;
-  std::uint64_t ratio_below = 0, ratio_above = 0;
-  /// Adds one body-step's s to the fit's sample.
-  void sample_ratio(double s);
+  /// The spread's fences: Tukey's far-out fences, this many interquartile ranges beyond the
+  /// quartiles of the one-sided sample (docs/validation.md, "A spread of reported impulses").
+  static constexpr double kSpreadFence = 3.0;
+  /// A sample in bins of kFitBin over [1 - kFitSpan, 1 + kFitSpan], counts below and above.
+  struct RatioSample {
+    std::vector<std::uint64_t> bins;
+    std::uint64_t below = 0, above = 0;
+    /// Adds one value.
+    void add(double s);
+    /// The number of values.
+    std::uint64_t total() const;
+    /// The value at rank r (0-based; below the span: 1 - kFitSpan, above: 1 + kFitSpan).
+    double at(std::uint64_t r) const;
+  };
+  /// Every body-step's s (the centre's sample) and those whose rows all push one way along d
+  /// (sum |J_k . d| = |J . d| within kFitPrecision: s is a weighted mean of the rows' own
+  /// ratios, the spread's sample).
+  RatioSample ratio_sample, spread_sample;
   /// The fitted ratio: the sample's median (its bin's centre), quartiles, size; `fitted`
-  /// when the sample has kFitMinSamples or more, `bias` when it lies beyond kBiasMax.
+  /// when the sample has kFitMinSamples or more. The spread: the one-sided sample's quartiles
+  /// and fences [lo, hi] (the centre inside), `spread` when that sample has kFitMinSamples
+  /// or more. `bias` when the centre or a fence lies beyond kBiasMax of 1.
   struct BalanceFit {
     double ratio = 1, q1 = 1, q3 = 1;
     std::uint64_t samples = 0;
     bool fitted = false, bias = false;
+    double spread_q1 = 1, spread_q3 = 1, lo = 1, hi = 1;
+    std::uint64_t spread_samples = 0;
+    bool spread = false;
+    /// How far a row's 1/s may lie from the centre's inside the fences (0 without a spread).
+    double row_allowance() const;
   };
   BalanceFit balance_fit() const;
   /// The linear balance's figure of a body-step at impulse ratio s: |m dv - J / s| along the
-  /// residual and each disc's normal, over the discs' support there plus the rounding;
-  /// `open_along`: the support of the worst direction.
+  /// residual and each disc's normal, over the discs' support there, `allow` x sum |J_k . d|
+  /// of its rows' impulses J_k (the spread) and the rounding; `open_along`: the support of the
+  /// worst direction.
   static double balance_figure(const D3& mdv, const D3& force, const BalanceDisc* discs, std::size_t count,
-                               double float_bound, double s, double* open_along);
+                               double float_bound, double s, double* open_along, const D3* rows = nullptr,
+                               std::size_t row_count = 0, double allow = 0);
   /// balance_lin with the deferred body-steps judged at `fit` (failures where they fail at
-  /// both ratio 1 and fit.ratio), and the fit's own finding (a ratio beyond kBiasMax) apart.
-  physics_detail::Tally fitted_balance(const BalanceFit& fit) const;
+  /// ratio 1, at fit.ratio and with each row's ratio anywhere in the spread's fences;
+  /// `in_spread`: those passing only the last), and the fit's own finding (a centre or a
+  /// fence beyond kBiasMax) apart.
+  physics_detail::Tally fitted_balance(const BalanceFit& fit, std::uint64_t* in_spread) const;
   physics_detail::Tally balance_bias(const BalanceFit& fit) const;
 };
 
