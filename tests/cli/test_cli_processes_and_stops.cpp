@@ -8,7 +8,8 @@
 // one. Item 2: a stopped `run --worlds` of a process engine leaves no engine process and no
 // octocd-* folder in TMPDIR; a stopped `validate --determinism` keeps its finished rows and
 // says so. Item 7: a command that cannot start is unavailable with the reason (errno), a
-// timeout is stated as set, NULs are shown as \x00.
+// timeout is stated as set, NULs are shown as \x00, a check's code (python3 -c CODE) is run, never
+// taken for a missing file.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -260,6 +261,27 @@ TEST_F(ProcessTree, ACommandThatCannotStartIsUnavailableWithTheReason) {
       << r.output;
   EXPECT_TRUE(std::regex_search(r.output, std::regex("absent +unavailable: command '.*/absent-engine' cannot be run: "
                                                      "No such file or directory \\(ENOENT\\)")))
+      << r.output;
+}
+
+// A check's code is run, never taken for a file: `python3 -c "print(1/1)"` used to be
+// unavailable, "check file '.../print(1/1)' is missing", without being run. A script the
+// check names that is not there is still said at once.
+TEST_F(ProcessTree, ACheckThatIsCodeIsRunNotTakenForAMissingFile) {
+  const fs::path file = dir_ / "engines.json";
+  std::ofstream(file) << R"J({"format": "octocd-engines", "version": 1, "engines": [
+      {"name": "divides", "command": ["/usr/bin/python3"], "check": ["/usr/bin/python3", "-c", "print(1/1)"]},
+      {"name": "halves", "command": ["/usr/bin/python3"],
+       "check": ["/usr/bin/python3", "-c", "import sys; sys.exit(int(4/2))"]},
+      {"name": "noscript", "command": ["/usr/bin/python3"], "check": ["/usr/bin/python3", "checks/absent.py"]}]})J";
+  const Result r = octocd("engines", file.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("divides +available"))) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("halves +unavailable: its check \\(/usr/bin/python3 -c import sys; "
+                                                     "sys\\.exit\\(int\\(4/2\\)\\)\\) exited with code 2")))
+      << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("noscript +unavailable: check file '.*/checks/absent\\.py' is "
+                                                     "missing")))
       << r.output;
 }
 
