@@ -273,7 +273,8 @@ TEST_F(ProcessTree, ACheckThatIsCodeIsRunNotTakenForAMissingFile) {
       {"name": "divides", "command": ["/usr/bin/python3"], "check": ["/usr/bin/python3", "-c", "print(1/1)"]},
       {"name": "halves", "command": ["/usr/bin/python3"],
        "check": ["/usr/bin/python3", "-c", "import sys; sys.exit(int(4/2))"]},
-      {"name": "noscript", "command": ["/usr/bin/python3"], "check": ["/usr/bin/python3", "checks/absent.py"]}]})J";
+      {"name": "noscript", "command": ["/usr/bin/python3"], "check": ["/usr/bin/python3", "checks/absent.py"]},
+      {"name": "parens", "command": ["/usr/bin/python3", "eng(1).py"]}]})J";
   const Result r = octocd("engines", file.string());
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_TRUE(std::regex_search(r.output, std::regex("divides +available"))) << r.output;
@@ -282,6 +283,8 @@ TEST_F(ProcessTree, ACheckThatIsCodeIsRunNotTakenForAMissingFile) {
       << r.output;
   EXPECT_TRUE(std::regex_search(r.output, std::regex("noscript +unavailable: check file '.*/checks/absent\\.py' is "
                                                      "missing")))
+      << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("parens +unavailable: command file '.*/eng\\(1\\)\\.py' is missing")))
       << r.output;
 }
 
