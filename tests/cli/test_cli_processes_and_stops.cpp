@@ -240,6 +240,45 @@ TEST_F(ProcessTree, ACheckCommandsSetsidGrandchildEndsWithTheCheck) {
   EXPECT_TRUE(ended_now(grandchild)) << "the check's setsid() grandchild " << grandchild << " outlived octocd";
 }
 
+// `octocd engines` stopped by SIGTERM while a check runs: the check's process ends, nothing
+// is listed, one line says so, exit 143. Before: the default action (no line, killed by the
+// signal). The event: the check's file written beside the engines file.
+TEST_F(ProcessTree, AStoppedEnginesListingEndsItsChecksAndSaysSo) {
+  const fs::path file = dir_ / "engines.json";
+  std::ofstream(file) << R"J({"format": "octocd-engines", "version": 1, "engines": [
+      {"name": "pyslowcheck", "command": ["/usr/bin/python3"], "check": ["/usr/bin/python3", "-c",
+       "import os, time\nopen('check.pid', 'w').write(str(os.getpid()))\ntime.sleep(1000)\n"]}]})J";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::setenv("TMPDIR", (dir_ / "tmp").c_str(), 1);
+    const int out = ::open((dir_ / "stdout.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int err = ::open((dir_ / "stderr.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(out, 1);
+    ::dup2(err, 2);
+    const std::string b = octocd::test::bin();
+    ::execl(b.c_str(), b.c_str(), "--engines-file", file.c_str(), "engines", static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const bool started = octocd::test::wait_until([&] { return pid_in(dir_ / "check.pid") > 0; }, {dir_},
+                                                std::chrono::seconds(60));
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ASSERT_TRUE(octocd::test::wait_child(pid, status, std::chrono::seconds(30)));
+  std::ifstream in(dir_ / "stderr.txt");
+  const std::string err((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::ifstream in_out(dir_ / "stdout.txt");
+  const std::string out((std::istreambuf_iterator<char>(in_out)), std::istreambuf_iterator<char>());
+  ASSERT_TRUE(started) << err;
+  ASSERT_TRUE(WIFEXITED(status)) << "ended by signal " << (WIFSIGNALED(status) ? WTERMSIG(status) : 0) << ": " << err;
+  EXPECT_EQ(WEXITSTATUS(status), 143) << err;
+  EXPECT_TRUE(std::regex_search(
+      err, std::regex("octocd engines: stopped by SIGTERM while the checks of [0-9]+ process engine\\(s\\) ran; "
+                      "nothing listed\n")))
+      << err;
+  EXPECT_EQ(out.find("available"), std::string::npos) << out;
+  EXPECT_TRUE(ended_within(pid_in(dir_ / "check.pid"), std::chrono::seconds(10))) << "the check outlived octocd";
+}
+
 TEST_F(ProcessTree, ACommandThatCannotStartIsUnavailableWithTheReason) {
   // A folder, a file without the execute bit, a relative path resolved against the engines
   // file's folder (as its other items are) that is not there.
