@@ -176,5 +176,5 @@ TEST(CliWorlds, AStoppedRunOfCopiesSaysHowManyCopiesRan) {
   const nlohmann::json j = nlohmann::json::parse(f);
   EXPECT_EQ(j.at("worlds"), 100000);
   EXPECT_EQ(j.at("worlds_whole"), whole);
-  fs::remove_all(d);
+  fs::remove_all(temp_dir());
 }
