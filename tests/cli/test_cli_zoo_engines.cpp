@@ -1568,6 +1568,75 @@ TEST_F(ZooEngines, DepthPerIsJudgedAsDeclared) {
   EXPECT_TRUE(row_verdict(pen.output, "penetration", "FAIL")) << pen.output;
 }
 
+// depth_per "manifold" along a normal a little off the floor's (docs/validation.md, "Depth
+// per manifold"): box 1's 4 rows carry the manifold's one depth (0.5 mm) along a normal
+// turned 1.4 deg about z from frame 20 on. The deepest point of the overlap along that
+// normal is 0.5 mm / cos 1.4 deg, so the run is clean declared "manifold", "point" or
+// undeclared (the hulls' overlap projected on the normal reads the far edge of the 4 m
+// floor instead: 2.8 cm or 7.6 cm by the side); a depth 1 cm off still fails. The engine
+// reports no impulses (impulses "none", as Jolt): its rows' impulses were applied along
+// the floor's normal.
+TEST_F(ZooEngines, ManifoldDepthIsTheOverlapsDeepestPointAlongItsNormal) {
+  Zoo base = locked_engine();
+  base.text["impulses"] = "none";
+  const double t = 1.4 * 3.14159265358979323846 / 180.0;
+  for (const double side : {1.0, -1.0}) {
+    Zoo tilted = base;
+    for (std::size_t f = 19; f < tilted.rows.size(); ++f)
+      for (Row& row : tilted.rows[f])
+        if (row.b == 1) row.n = f32(V{side * std::sin(t), -std::cos(t), 0});
+    for (const char* value : {"manifold", "point", ""}) {
+      Zoo z = tilted;
+      if (*value) z.text["depth_per"] = value;
+      expect_clean(judge(z, std::string("tilted-") + value));
+    }
+    Zoo deep = tilted;
+    deep.text["depth_per"] = "manifold";
+    for (Row& row : deep.rows[29])
+      if (row.b == 1) row.depth = f32(row.depth + 0.01);
+    expect_caught(judge(deep, "tilted-deep"), {"contact-geometry", "frame 30: pair (0, 1) manifold depth"});
+  }
+}
+
+// Resting normals without a depth (docs/validation.md, contact-geometry): box 1 rests 0.5 mm
+// deep on the floor on 4 loaded rows that carry depth 0 (an engine that reports no depth,
+// or declares depth_per "unknown"). Clean, the rows are judged on SAT's axes; at frame 30
+// the 4 rows with their normal flipped (pointing from the floor into the box), or turned by
+// 45 deg, fail contact-geometry naming the frame and the pair, whatever depth_per says. A
+// normal turned by 30 deg lies within normal_angle_deg (40) as on any row: its impulses
+// then miss box 1's momentum change, and momentum-balance names the frame and the body.
+TEST_F(ZooEngines, RestingNormalsAreJudgedWhateverTheDepth) {
+  Zoo base = locked_engine();
+  for (auto& step : base.rows)
+    for (Row& row : step)
+      if (row.b == 1) row.depth = 0;
+  auto planted = [&](V n) {
+    Zoo z = base;
+    for (Row& row : z.rows[29])
+      if (row.b == 1) row.n = f32(n);
+    return z;
+  };
+  const double c45 = std::sqrt(0.5);
+  for (const char* value : {"", "point", "unknown"}) {
+    Zoo z = base;
+    if (*value) z.text["depth_per"] = value;
+    const Result ok = judge(z, std::string("resting-") + value);
+    expect_clean(ok);
+    EXPECT_NE(ok.output.find("resting rows"), std::string::npos) << ok.output;
+    for (const V& n : {V{0, 1, 0}, V{c45, -c45, 0}}) {
+      Zoo f = planted(n);
+      if (*value) f.text["depth_per"] = value;
+      const Result r = judge(f, std::string("resting-fault-") + value);
+      EXPECT_TRUE(row_verdict(r.output, "contact-geometry", "FAIL")) << r.output;
+      expect_caught(r, {"frame 30: pair (0, 1) row 0: normal", "a resting row: depth 0 m"});
+    }
+  }
+  const Result turned = judge(planted({0.5, -std::sqrt(0.75), 0}), "resting-30");
+  EXPECT_TRUE(row_verdict(turned.output, "contact-geometry", "pass")) << turned.output;
+  EXPECT_TRUE(row_verdict(turned.output, "momentum-balance", "FAIL")) << turned.output;
+  expect_caught(turned, {"frame 30", "body 1"});
+}
+
 // design.md section 13d item 4: /bodies/convex_radius rounds a body's shape. Box 1 rests
 // 2 cm higher on the floor (its rows 0.5 mm deep into the floor): judged on the box rounded
 // by 2 cm it is clean; without the radius its rows join shapes 1.95 cm apart (a false

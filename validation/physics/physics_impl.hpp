@@ -482,6 +482,12 @@ struct PhysicsValidators::Impl {
   std::uint64_t aabb_angle_rows = 0;  // Aabb geometry: rows compared with box-box on the AABBs (figure)
   double aabb_angle_worst = 0;
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
+  /// Resting rows (depth 0 or no depth, beside a deeper row, or on shapes that penetrate by
+  /// no more than contact_depth_m) judged on the posed shapes' exact direction (SAT's
+  /// accepted axes, or box-box on the world AABBs); of them, rows passed along an axis on
+  /// which the touching shapes overlap by no more than contact_depth_m (not SAT's minimum).
+  std::uint64_t resting_rows = 0, resting_wide = 0;
+  double resting_worst = 0;  ///< deg: the largest judged angle of a resting row (not aabb)
   std::uint64_t sign_uncertain_rows = 0;  // of them, on hulls FCL calls apart along no separating axis
   // Contact geometry's references: pairs judged by the separating-axis test and by the posed
   // reference; where the posed reference's normal lies outside SAT's accepted axes (a figure).
