@@ -169,6 +169,25 @@ TEST_F(Untrusted, TheBaseTraceIsReadByEveryReader) {  // the readers' baseline: 
   EXPECT_EQ(octocd::read_trace_summary(b).frames, 20);
 }
 
+// A trace with a state every 10 frames (`run --trace`'s default) is one `validate --trace-in`
+// judges: --check-only calls it valid, says which states it holds, lists the rows that need
+// every state as n/a naming --state-every 1, and exits 0. (Before: "valid external trace",
+// then exit 2 from a second reader that wanted every state.)
+TEST_F(Untrusted, ACheckOnlyOfStatesEveryTenFramesAgreesWithItsExit) {
+  const std::string p = (dir_ / "sparse.h5").string();
+  const Result w = run(bin() + " run " + source_dir() + "/tests/data/spheres-drop.json --frames 20 --quiet --no-xdmf " +
+                       "--trace " + p);
+  ASSERT_EQ(w.code, 0) << w.output;
+  const Result r = run(bin() + " validate --trace-in " + p + " --check-only");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find(": valid external trace: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(" 20 frames, version 1; states (2 of the 20 frames) "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("n/a    add every state (/states/frame 0, 1, 2, ...: octocd run --state-every 1)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("error"), std::string::npos) << r.output;
+}
+
 // Before: SIGSEGV in validate --trace-in, compare and replay (read into one double).
 TEST_F(Untrusted, ARootAttributeStoredAsAnArrayIsRefusedNamingIt) {
   expect_refused_by_all(hostile("version-array", [](hid_t f) { array_attribute(f, "version", 1000, false); }),
