@@ -18,6 +18,7 @@
 #include "bench_sweep.hpp"
 #include "octocd/engine_registry.hpp"
 #include "octocd/error.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/shared_files.hpp"
 #include "octocd/run_session.hpp"
 #include "octocd/text.hpp"
@@ -528,11 +529,18 @@ int bench_command(const BenchOptions& o) {
     result["points"].push_back(r);
     write();
   };
+  // Points failed on a value an engine gave (EngineValueError): stored as failed, and the
+  // bench ends with exit 2 naming the first.
+  std::vector<std::string> bad_values;
   const auto run_point = [&](const Point& p, const StepsOverride& ov) {
     json r;
     try {
       r = s.kind == "steps" ? run_steps_point(s, p, models, o, progress, ov)
                             : run_broadphase_point(s, p, inputs, o, progress);
+    } catch (const EngineValueError& e) {
+      r["status"] = "failed";
+      r["reason"] = e.what();
+      bad_values.push_back(fmt::format("point {}: {}", p.id, e.what()));
     } catch (const InputError&) {
       throw;
     } catch (const BenchStopped&) {
@@ -689,6 +697,10 @@ int bench_command(const BenchOptions& o) {
   }
   if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}\n", octocd::printable(s.name), o.output);
   add_to_history(o, result);
+  if (!bad_values.empty())
+    throw InputError(fmt::format("{} point(s) failed on a value an engine gave, stored as failed in the result {} "
+                                 "with the other points; the first: {}",
+                                 bad_values.size(), o.output, bad_values.front()));
   return any_failed ? 1 : 0;
 }
 

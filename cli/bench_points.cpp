@@ -7,6 +7,7 @@
 #include <ctime>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <optional>
 
 #include <fmt/format.h>
@@ -278,6 +279,16 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
     for (auto& b : series) b.emplace_back();
     if (!trace) engine->plan_steps(total);  // nothing but the metrics is read between the steps
     else feed.start(*trace, *engine, total);
+    // A process engine runs every frame in its first step: its start-up and steps as its
+    // process says them (set_process_progress, the progress lines run and validate read).
+    if (engine->writes_own_trace()) {
+      auto said = std::make_shared<ProcessProgressLines>(printable(engine->name()), false);
+      set_process_progress(*engine, [&progress, said](const ProcessProgress& pp) {
+        progress.detail(pp.stepped < 0 ? fmt::format("its process is starting ({:.0f} s)", pp.seconds)
+                                       : fmt::format("its process: frame {}/{}", pp.stepped, pp.frames));
+        for (const std::string& line : said->next(pp)) progress.note(line);
+      });
+    }
     FrameMetrics timed;  // a traced point's frame: the step's metrics with the whole frame's time
     const auto t0 = Clock::now();
     for (int f = 1; f <= total; ++f) {

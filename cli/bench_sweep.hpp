@@ -220,6 +220,15 @@ class SweepProgress {
     detail_ = octocd::printable(d);
     draw(false);
   }
+  /// A line of the point in progress ("[k/N] label: text"), on any stderr (the bar, on a
+  /// terminal, drawn again below it): what a process engine's run says as it runs.
+  void note(const std::string& text) {
+    if (!enabled_) return;
+    if (tty_) std::fprintf(stderr, "\r\033[K");
+    std::fprintf(stderr, "[%zu/%zu] %s: %s\n", done_ + 1, total_, label_.c_str(), octocd::printable(text).c_str());
+    std::fflush(stderr);
+    draw(true);
+  }
   void finish(const std::string& status) {
     if (!enabled_) return;
     if (tty_) std::fprintf(stderr, "\r\033[K");

@@ -149,6 +149,29 @@ CLI::Validator at_least_one() {
       "");  // the option's own help says ">= 1"
 }
 
+std::vector<std::string> ProcessProgressLines::next(const ProcessProgress& p) {
+  constexpr double kQuietS = 10.0;  // the longest silence while it runs
+  std::vector<std::string> lines;
+  const std::int64_t tenth = p.stepped < 0 ? 0 : 10 * p.stepped / std::max<std::int64_t>(p.frames, 1);
+  const bool start = p.stepped >= 0 && !started_;
+  if (!start && (!tenths_ || tenth <= tenth_) && p.seconds - said_s_ < kQuietS) return lines;
+  if (start) {
+    started_ = true;
+    lines.push_back(fmt::format("engine {}: its process started in {:.2f} s; stepping", name_, p.started_s));
+  }
+  if (p.stepped < 0) {
+    lines.push_back(fmt::format("engine {}: its process is still starting after {:.0f} s", name_, p.seconds));
+  } else if ((tenths_ && tenth > tenth_) || !start) {
+    const double stepping_s = p.seconds - p.started_s;
+    lines.push_back(fmt::format("frame {}/{}  {:.1f} frames/s  (its process as it runs, trace writing included)",
+                                p.stepped, p.frames,
+                                stepping_s > 0.0 ? static_cast<double>(p.stepped) / stepping_s : 0.0));
+  }
+  said_s_ = p.seconds;
+  tenth_ = std::max(tenth_, tenth);
+  return lines;
+}
+
 void show_process_progress(Engine& world, std::int64_t frames, bool shown) {
   if (!shown || !world.writes_own_trace()) return;
   const std::string name = printable(world.name());
@@ -157,33 +180,13 @@ void show_process_progress(Engine& world, std::int64_t frames, bool shown) {
                "then its frames are read from its trace\n",
                name.c_str(), printable(world.device()).c_str(), static_cast<long long>(frames));
   std::fflush(stderr);
-  struct Said {
-    double at_s = 0.0;           // when the last line was said (s since the process started)
-    std::int64_t tenth = 0;      // the tenths of the frames said
-    bool started = false;        // its start-up was said
-  };
-  auto said = std::make_shared<Said>();
-  set_process_progress(world, [name, said](const ProcessProgress& p) {
-    constexpr double kQuietS = 10.0;  // the longest silence while it runs
-    const std::int64_t tenth = p.stepped < 0 ? 0 : 10 * p.stepped / std::max<std::int64_t>(p.frames, 1);
-    const bool start = p.stepped >= 0 && !said->started;
-    if (!start && tenth <= said->tenth && p.seconds - said->at_s < kQuietS) return;
+  auto said = std::make_shared<ProcessProgressLines>(name, true);
+  set_process_progress(world, [said](const ProcessProgress& p) {
+    const std::vector<std::string> lines = said->next(p);
+    if (lines.empty()) return;
     std::fflush(stdout);
-    if (start) {
-      said->started = true;
-      std::fprintf(stderr, "engine %s: its process started in %.2f s; stepping\n", name.c_str(), p.started_s);
-    }
-    if (p.stepped < 0) {
-      std::fprintf(stderr, "engine %s: its process is still starting after %.0f s\n", name.c_str(), p.seconds);
-    } else if (tenth > said->tenth || !start) {
-      const double stepping_s = p.seconds - p.started_s;
-      std::fprintf(stderr, "frame %lld/%lld  %.1f frames/s  (its process as it runs, trace writing included)\n",
-                   static_cast<long long>(p.stepped), static_cast<long long>(p.frames),
-                   stepping_s > 0.0 ? static_cast<double>(p.stepped) / stepping_s : 0.0);
-    }
+    for (const std::string& line : lines) std::fprintf(stderr, "%s\n", line.c_str());
     std::fflush(stderr);
-    said->at_s = p.seconds;
-    said->tenth = std::max(said->tenth, tenth);
   });
 }
 

@@ -8,11 +8,14 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
 #include "octocd/engine.hpp"
 #include "octocd/engine_registry.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/run_session.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
@@ -75,6 +78,26 @@ std::string write_sidecar(const std::string& trace, bool no_xdmf);
 /// After a runtime failure: closes `trace` and writes its sidecar as far as the disk allows
 /// (a failure here is dropped: the original error is the one the user must see).
 void close_after_failure(std::unique_ptr<TraceWriter>& trace, const std::string& path, bool no_xdmf);
+
+/// What to say of a process engine's run as its progress comes (set_process_progress):
+/// "engine NAME: its process started in S s; stepping" at its first progress line, "frame
+/// N/F  R frames/s  (its process as it runs, ...)" at each tenth of its frames (when
+/// `tenths`), and a line at least every 10 s meanwhile ("engine NAME: its process is still
+/// starting after T s" before its first progress line, else the frame line). One per run.
+class ProcessProgressLines {
+ public:
+  /// `name`: the engine's name as shown (printable).
+  ProcessProgressLines(std::string name, bool tenths) : name_(std::move(name)), tenths_(tenths) {}
+  /// The lines to say for `p` now (none, one or two), without newlines.
+  std::vector<std::string> next(const ProcessProgress& p);
+
+ private:
+  std::string name_;
+  bool tenths_;
+  double said_s_ = 0.0;     // when the last line was said (s since the process started)
+  std::int64_t tenth_ = 0;  // the tenths of the frames said
+  bool started_ = false;    // its start-up was said
+};
 
 /// A process engine's run said on stderr as it happens (stdout flushed first, each line
 /// flushed): now "engine NAME: starting PROCESS for F frames; ..."; then, from inside its

@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 
@@ -546,16 +547,24 @@ std::string describe(const ChildOutcome& o) {
   return "";
 }
 
+bool progress_line(const std::string& line, std::int64_t* frames) {
+  long long n = -1;
+  char rest = 0;
+  if (std::sscanf(line.c_str(), "octocd-progress %lld%c", &n, &rest) != 1 || n < 0) return false;
+  if (frames) *frames = n;
+  return true;
+}
+
 std::string output_tail(const ChildOutcome& o) {
   const bool err = !o.err_tail.empty();
   const std::string& tail = err ? o.err_tail : o.out_tail;
   const std::uint64_t total = err ? o.err_bytes : o.out_bytes;
-  if (tail.empty()) return "";
-  // The last 8 lines, at most 1000 bytes, each printable.
+  // The last 8 lines, at most 1000 bytes, each printable; of stdout, its progress lines
+  // left out (they say how far it ran, not what went wrong).
   std::string t = tail;
   while (!t.empty() && (t.back() == '\n' || t.back() == '\r')) t.pop_back();
   std::vector<std::string> lines;
-  std::size_t end = t.size(), used = 0;
+  std::size_t end = t.size(), used = 0, progress = 0;
   bool whole = total == tail.size();  // every byte it wrote is shown
   while (end > 0) {
     if (lines.size() == 8 || used >= 1000) {
@@ -566,20 +575,29 @@ std::string output_tail(const ChildOutcome& o) {
     const std::size_t begin = nl == std::string::npos ? 0 : nl + 1;
     std::string line = t.substr(begin, end - begin);
     if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (used + line.size() > 1000) {
-      line = "..." + line.substr(line.size() - (1000 - used));
-      whole = false;
+    if (!err && progress_line(line, nullptr)) {
+      ++progress;
+    } else {
+      if (used + line.size() > 1000) {
+        line = "..." + line.substr(line.size() - (1000 - used));
+        whole = false;
+      }
+      used += line.size();
+      lines.push_back(terminal_safe(line));
     }
-    used += line.size();
-    lines.push_back(terminal_safe(line));
     if (nl == std::string::npos) break;
     end = nl;
   }
+  if (lines.empty())
+    return progress > 0 ? "; no error output (its stderr is empty, its stdout holds only octocd-progress lines)"
+                        : "; no error output (its stderr and stdout are empty)";
   std::reverse(lines.begin(), lines.end());
   std::string shown;
   for (const std::string& l : lines) shown += (shown.empty() ? "" : " | ") + l;
-  return fmt::format("; its {} ended{}: {}", err ? "stderr" : "stdout",
-                     whole ? std::string() : fmt::format(" (the last {} of {} bytes)", used, total), shown);
+  return fmt::format("; its {} ended{}{}: {}", err ? "stderr" : "stdout",
+                     progress > 0 ? " (its octocd-progress lines left out)" : "",
+                     whole || progress > 0 ? std::string() : fmt::format(" (the last {} of {} bytes)", used, total),
+                     shown);
 }
 
 }  // namespace octocd::process_detail

@@ -61,9 +61,15 @@ ChildOutcome run_child(const ChildRun& run);
 /// No such file or directory (ENOENT)".
 std::string describe(const ChildOutcome& o);
 
-/// "; its stderr ended: <lines>" (else its stdout's, else ""): the last lines (at most 8
-/// lines, 1000 bytes), each made printable (octocd/text.hpp), joined by " | ", with the
-/// number of bytes it wrote when more than shown.
+/// Whether `line` is a progress line `octocd-progress N` (docs/bring-your-engine.md,
+/// "Progress": N an integer >= 0, nothing after it); N then goes to `*frames` (when not
+/// null). The one reader of those lines: the progress of a run and the failure messages.
+bool progress_line(const std::string& line, std::int64_t* frames);
+
+/// "; its stderr ended: <lines>" (else its stdout's, less its progress lines: "; its stdout
+/// ended (its octocd-progress lines left out): <lines>"; else "; no error output (...)"):
+/// the last lines (at most 8 lines, 1000 bytes), each made printable (octocd/text.hpp),
+/// joined by " | ", with the number of bytes it wrote when more than shown.
 std::string output_tail(const ChildOutcome& o);
 
 /// The full path of `program`: itself when it holds a '/' and is an executable regular

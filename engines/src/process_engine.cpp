@@ -208,17 +208,26 @@ class ProcessEngine final : public Engine {
                                      "time (s) spent in the engine's step calls",
                                      trace_path_));
       wall_step_seconds_ = reader.number_attribute("wall_step_seconds");
-      // Its steps/s (frames over it) must be a figure a bench result can hold.
-      const double steps_per_s = static_cast<double>(frames_) / wall_step_seconds_;
-      if (!finite_non_negative(wall_step_seconds_) ||
-          (frames_ > 0 && !(std::isfinite(steps_per_s) && steps_per_s <= limits::kMaxTiming)))
-        throw InputError(fmt::format("{}: wall_step_seconds: {:g}; allowed: a finite number of seconds > 0 whose "
-                                     "{} frames over it are at most {:g} steps/s (0 only for a run of no frames)",
-                                     trace_path_, wall_step_seconds_, frames_, limits::kMaxTiming));
     } catch (const std::exception& e) {
       fail(fmt::format("exited with code 0 after {:.2f} s but wrote a trace the hardened reader refuses: {}", o.seconds,
                        e.what()),
            &o);
+    }
+    // Its steps/s (frames over it) must be a figure a bench result can hold: a value outside
+    // that is bad input from the engine (exit 2), never a run or a result another command refuses.
+    const double steps_per_s = static_cast<double>(frames_) / wall_step_seconds_;
+    if (!finite_non_negative(wall_step_seconds_) ||
+        (frames_ > 0 && !(std::isfinite(steps_per_s) && steps_per_s <= limits::kMaxTiming))) {
+      const std::string given = fmt::format("{:g}", wall_step_seconds_);
+      trace_.reset();
+      remove_folder();
+      throw EngineValueError(fmt::format(
+          "engine '{}' ({}) gave wall_step_seconds = {} (its trace's root attribute; {} frames over it: {} steps/s); "
+          "allowed: a finite number of seconds > 0 whose {} frames over it are at most {:g} steps/s (0 only for a run "
+          "of no frames)",
+          printable(spec_.info.name), spec_.file, given, frames_,
+          std::isnan(steps_per_s) ? std::string("not a number") : fmt::format("{:g}", steps_per_s), frames_,
+          limits::kMaxTiming));
     }
     if (info.version != 2 || !info.has_states)
       fail(fmt::format("wrote a version {} trace{}; allowed: a version 2 trace with every state (docs/trace-format.md)",
@@ -247,9 +256,8 @@ class ProcessEngine final : public Engine {
       p->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       bool news = false;
       for (const std::string& line : lines) {
-        long long n = -1;
-        char rest = 0;
-        if (std::sscanf(line.c_str(), "octocd-progress %lld%c", &n, &rest) != 1 || n < 0 || n > p->frames) continue;
+        std::int64_t n = -1;
+        if (!process_detail::progress_line(line, &n) || n > p->frames) continue;
         if (p->started_s < 0.0) p->started_s = p->seconds;
         p->stepped = std::max<std::int64_t>(p->stepped, n);
         news = true;

@@ -21,6 +21,7 @@
 #include <fmt/format.h>
 
 #include "child_process.hpp"
+#include "octocd/atomic_file.hpp"
 #include "octocd/convex_hull.hpp"
 #include "octocd/error.hpp"
 #include "octocd/external_trace.hpp"
@@ -286,6 +287,13 @@ std::string unavailable_by(const ProcessEngineSpec& spec, CheckClock::time_point
         std::error_code ec;
         const fs::path p = fs::path(argv[i]).is_absolute() ? fs::path(argv[i]) : folder / argv[i];
         if (!fs::exists(p, ec)) return fmt::format("{} file '{}' is missing ({})", what, printable(p.string()), spec.file);
+        // Examined with stat, never opened: a program reading a FIFO blocks until its bound,
+        // a device may never end. A folder may be an argument (a package, a data folder).
+        struct stat st {};
+        if (::stat(p.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode))
+          return fmt::format("{} item '{}' is not a regular file ({}); not run: a program reading it would block or "
+                             "never end; allowed: a regular file or a folder ({})",
+                             what, printable(p.string()), file_type_word(st.st_mode), spec.file);
       }
       return "";
     };

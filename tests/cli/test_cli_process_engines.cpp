@@ -9,12 +9,14 @@
 // the child; a bad engines file is exit 2 naming the file and the field.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <chrono>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <regex>
@@ -177,27 +179,37 @@ TEST_F(ProcessEngines, RunGivesTheTraceAndBenchTheStepsPerSecondOfItsTiming) {
 }
 
 // A process engine's timing is checked before it is used: a wall_step_seconds of 0, the
-// smallest subnormal, 1e-300, inf or NaN (steps/s 0, inf or 10^302) fails the run naming the
-// attribute and the allowed range, and bench stores the point as failed with that reason
-// instead of a steps/s `report` refuses.
+// smallest subnormal, 1e-300, a negative number, inf or NaN (steps/s 0, inf or 10^302) is
+// bad input from the engine, exit 2 naming the engine, the field, the value and the allowed
+// range; bench stores the point as failed with that reason instead of a steps/s `report`
+// refuses, and exits 2 naming it. (Before: exit 1, a runtime failure.)
 TEST_F(ProcessEngines, AHostileTimingIsRefusedNamingTheFieldAndTheRange) {
-  for (const char* wall : {"0", "5e-324", "1e-300", "inf", "nan"}) {
+  for (const char* wall : {"0", "5e-324", "1e-300", "-1", "inf", "nan"}) {
     SCOPED_TRACE(wall);
     const std::string item = std::string(" --pyboxes wall_step_seconds=") + wall;
+    const std::string said = std::string(wall) == "5e-324" ? "4.94066e-324" : wall;
+    const std::regex refused("octocd: error: engine 'pyboxes' \\(.*engines.json\\) gave wall_step_seconds = " + said +
+                             " \\(its trace's root attribute; 30 frames over it: .* steps/s\\); allowed: a finite "
+                             "number of seconds > 0 whose 30 frames over it are at most 1e\\+15 steps/s");
     const Result r = octocd("run " + data("boxes.json") + " --engine pyboxes --frames 30 --quiet" + item);
-    EXPECT_EQ(r.code, 1) << r.output;
-    EXPECT_TRUE(std::regex_search(r.output, std::regex("runtime failure: engine 'pyboxes' .*wall_step_seconds: .*; "
-                                                       "allowed: a finite number of seconds > 0 whose 30 frames over "
-                                                       "it are at most 1e\\+15 steps/s")))
-        << r.output;
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_TRUE(std::regex_search(r.output, refused)) << r.output;
+    if (std::string(wall) == "0") {  // validate SCENE --engine: the same refusal
+      const Result v = octocd("validate " + data("boxes.json") + " --engine pyboxes --frames 30" + item);
+      EXPECT_EQ(v.code, 2) << v.output;
+      EXPECT_TRUE(std::regex_search(v.output, refused)) << v.output;
+    }
     const std::string result = path(std::string("bench-") + wall + ".json");
     const Result b = octocd("bench " + data("bench.json") + " --scene-dir " + data("") + " --quiet -o " + result + item);
-    EXPECT_EQ(b.code, 1) << b.output;
+    EXPECT_EQ(b.code, 2) << b.output;
+    EXPECT_NE(b.output.find("octocd: error: 1 point(s) failed on a value an engine gave"), std::string::npos)
+        << b.output;
+    EXPECT_NE(b.output.find("gave wall_step_seconds = " + said), std::string::npos) << b.output;
     std::ifstream bin(result);
     const nlohmann::json bench = nlohmann::json::parse(bin);
     const nlohmann::json& point = bench.at("points").at(0);
     EXPECT_EQ(point.at("status"), "failed");
-    EXPECT_NE(point.at("reason").get<std::string>().find("wall_step_seconds"), std::string::npos);
+    EXPECT_NE(point.at("reason").get<std::string>().find("wall_step_seconds = " + said), std::string::npos);
     EXPECT_FALSE(point.contains("windows"));
     EXPECT_TRUE(tmp_empty());
   }
@@ -250,6 +262,36 @@ TEST_F(ProcessEngines, HangingChecksAreAnsweredWithinOneBoundEachNamed) {
   EXPECT_EQ(octocd("engines --check-timeout 31", engines).code, 2);
 }
 
+// A file item of a check or a command that is a FIFO is examined, never opened: the engine
+// is unavailable at once naming the item and its type. (Before: python3 opened the FIFO and
+// blocked until the checks' bound, reported "timed out".)
+TEST_F(ProcessEngines, AFifoItemIsSaidAsSuchWithoutWaiting) {
+  const std::string script =
+      (fs::path(octocd::test::source_dir()) / "tests/support/process_engines/boxes_engine.py").string();
+  const std::string fifo = path("check.py");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0) << std::strerror(errno);
+  const std::string engines = path("fifo-engines.json");
+  std::ofstream(engines) << R"({"format": "octocd-engines", "version": 1, "engines": [
+      {"name": "fifocheck", "command": ["/usr/bin/python3", ")" << script << R"("],
+       "check": ["/usr/bin/python3", ")" << fifo << R"("]},
+      {"name": "fifocommand", "command": ["/usr/bin/python3", ")" << fifo << R"("], "timeout_s": 3}]})";
+  // The shipped engines' checks run beside these under the same bound: the time of the
+  // listing is theirs; the FIFO's line says it was not run (never "timed out").
+  const Result r = octocd("engines --check-timeout 5", engines);
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* what : {"fifocheck +unavailable: check", "fifocommand +unavailable: command"})
+    EXPECT_TRUE(std::regex_search(r.output, std::regex(std::string(what) + " item '" + fifo +
+                                                       "' is not a regular file \\(a FIFO\\); not run")))
+        << r.output;
+  EXPECT_FALSE(std::regex_search(r.output, std::regex("fifocheck +unavailable: [^\\n]*timed out"))) << r.output;
+  const Result run = octocd("run " + data("boxes.json") + " --engine fifocommand --frames 5 --quiet", engines);
+  EXPECT_EQ(run.code, 1) << run.output;
+  EXPECT_NE(run.output.find("is unavailable here: command item '" + fifo + "' is not a regular file (a FIFO)"),
+            std::string::npos)
+      << run.output;
+  EXPECT_TRUE(tmp_empty());
+}
+
 struct Fault {
   const char* engine;
   const char* what;  // a regular expression the message must match
@@ -265,6 +307,12 @@ TEST_F(ProcessEngines, EveryFaultIsAClearRuntimeFailureNamingTheEngine) {
       {"pybodies", "engine 'pybodies' .* wrote a trace of 3 bodies; the request has 4"},
       {"pyframes", "engine 'pyframes' .* wrote a trace of 29 frames; the request asked for 30"},
       {"pynotiming", "engine 'pynotiming' .* wall_step_seconds: missing"},
+      // An empty stderr: the last lines of stdout but its progress lines, else "no error
+      // output" (before: the progress lines were quoted as the error).
+      {"pystdout", "engine 'pystdout' .* exited with code 5 after .* s; its stdout ended \\(its octocd-progress lines "
+                   "left out\\): boxes_engine: planted failure said on stdout\\n"},
+      {"pyquiet", "engine 'pyquiet' .* exited with code 5 after .* s; no error output \\(its stderr is empty, its "
+                  "stdout holds only octocd-progress lines\\)\\n"},
       {"pybig", "engine 'pybig' .* wrote a trace beyond its max_trace_bytes 1000"},
       {"pyhostile", "engine 'pyhostile' .* exited with code 1 .*its stderr ended \\(the last [0-9]+ of 1048[0-9]+ "
                     "bytes\\): .*last line \\\\x1b\\[0m"},

@@ -11,9 +11,9 @@ engine pyboxes of tests/data/process_engines/engines.json), stdout and stderr to
   wall time excludes it;
 - the pair counts the engine does not report (its trace has no /pairs) read n/a, not 0;
 - held on a FIFO (its `hold` setting) after saying frame 20 of 40, the engine's start-up
-  and frame 20 are read from `run`'s and from `validate`'s output while it waits: the test
-  waits on those lines (bounded at 60 s: a failure, never a wait that passes), then
-  releases it.
+  and frame 20 are read from `run`'s and from `validate`'s output, and its start-up from
+  `bench`'s, while it waits: the test waits on those lines (bounded at 60 s: a failure,
+  never a wait that passes), then releases it.
 
 Usage: test_run_progress.py OCTOCD_BIN SOURCE_DIR WORK_DIR
 Exit 0 pass, 1 fail, 77 skipped (the engine's check fails: no h5py or numpy).
@@ -68,14 +68,21 @@ def held_run(args, fifo, wanted, env):
 
 def check_streamed(octocd, engines, data, work, env):
     """run and validate with pyboxes held after frame 20 of 40: its start-up and frame 20
-    are said while it waits."""
-    for command in ("run", "validate"):
+    are said while it waits; bench (tests/data/process_engines/bench.json: pyboxes, 40
+    frames, one repetition) says its start-up while it waits (its point's line, from the
+    same progress lines)."""
+    for command in ("run", "validate", "bench"):
         fifo = os.path.join(work, f"hold-{command}")
         os.mkfifo(fifo)
-        args = [octocd, "--engines-file", engines, command, os.path.join(data, "boxes.json"), "--engine", "pyboxes",
-                "--frames", "40", "--pyboxes", f"hold={fifo}"]
-        wanted = [r"^engine pyboxes: starting .* for 40 frames", r"^engine pyboxes: its process started in [0-9.]+ s",
-                  r"^frame 20/40 .*\(its process as it runs"]
+        if command == "bench":
+            args = [octocd, "--engines-file", engines, command, os.path.join(data, "bench.json"), "--scene-dir", data,
+                    "-o", os.path.join(work, "bench-held.json"), "--pyboxes", f"hold={fifo}"]
+            wanted = [r"^\[1/1\] .*: engine pyboxes: its process started in [0-9.]+ s; stepping$"]
+        else:
+            args = [octocd, "--engines-file", engines, command, os.path.join(data, "boxes.json"), "--engine",
+                    "pyboxes", "--frames", "40", "--pyboxes", f"hold={fifo}"]
+            wanted = [r"^engine pyboxes: starting .* for 40 frames",
+                      r"^engine pyboxes: its process started in [0-9.]+ s", r"^frame 20/40 .*\(its process as it runs"]
         rc, text, before = held_run(args, fifo, wanted, env)
         if rc not in (0, 3):
             fail(f"{command} exit {rc}:\n{text}")

@@ -25,8 +25,19 @@
 
 #include "octocd/engine.hpp"
 #include "octocd/engine_registry.hpp"
+#include "octocd/error.hpp"
 
 namespace octocd {
+
+/// A value a process engine gave that is outside its allowed range (its trace's
+/// `wall_step_seconds` of 0, a subnormal, 1e-300, a negative number, inf or NaN): bad input
+/// from the engine, so `octocd` exits 2 (an InputError). The message names the engine, its
+/// engines file, the field, the value and the allowed range. `bench` stores the point as
+/// failed with this message, goes on, and then exits 2.
+class EngineValueError : public InputError {
+ public:
+  using InputError::InputError;
+};
 
 /// One engine of an engines file (docs/bring-your-engine.md, "The engines file").
 struct ProcessEngineSpec {
@@ -129,7 +140,9 @@ bool set_process_progress(Engine& engine, std::function<void(const ProcessProgre
 /// plan_steps when called before it, else the scene's frames; it then writes its own
 /// trace (Engine::own_trace), which is checked and replayed frame by frame. Every failure
 /// of the process is a RuntimeError "engine 'NAME': ..." naming what it did and the
-/// sanitised tail of its stderr; a SIGINT/SIGTERM (stop_signal) while it runs stops its
+/// sanitised tail of its stderr (its stdout's lines other than progress lines when its
+/// stderr is empty); a bad value in its trace (a wall_step_seconds giving no finite steps/s)
+/// is an EngineValueError; a SIGINT/SIGTERM (stop_signal) while it runs stops its
 /// process tree (SIGTERM, then SIGKILL) and ends octocd through the command's run session
 /// (RunSession::end_now, run_session.hpp), its temporary folder (the session's while the
 /// process runs) removed; without a session the step fails (RuntimeError). Whatever ends a run, the process and every process it started

@@ -7,7 +7,8 @@ scene keeps it clear of everything). Usage: boxes_engine.py [--mode MODE] REQUES
 
 MODE plants a fault for octocd's tests (tests/cli/test_cli_process_engines.cpp): ok (the
 default), crash (exit 3), signal (SIGABRT), hang (sleep), truncated, bodies, frames,
-hostile (escapes and 10 MB on stderr, exit 1), no-timing. A `ready` setting names a file
+hostile (escapes and 10 MB on stderr, exit 1), no-timing, quiet (progress lines, then exit 5
+with nothing on stderr), stdout (as quiet, after a line on stdout). A `ready` setting names a file
 written (with the process id) once the request is read: the tests wait on it. An `escape`
 setting names a file: first a grandchild is started that leaves the engine's process tree
 as far as a process can (a double fork, setsid(): its own session and process group,
@@ -68,6 +69,12 @@ def main():
     if mode == "hang":
         while True:
             time.sleep(1)
+    if mode in ("quiet", "stdout"):  # exit 5, stderr empty: progress lines (after an error line) on stdout
+        if mode == "stdout":
+            print("boxes_engine: planted failure said on stdout", flush=True)
+        for frame in range(4):
+            print(f"octocd-progress {frame}", flush=True)
+        sys.exit(5)
     if mode == "hostile":
         sys.stderr.buffer.write(b"\x1b[2J\x1b]0;pwned\x07\x9b31m \xc2\x9b31m red\n" * 10 + b"x" * (10 << 20) + b"\nlast line \x1b[0m\n")
         sys.stderr.flush()
