@@ -48,7 +48,7 @@ import sys
 from report_common import STOP, Stopped, csv_guard, fail, np, plt, printable
 from report_data import _parse
 from report_html import Outputs
-from report_plots import log_ticks
+from report_plots import engine_colour, engine_marker, log_ticks
 
 MIN_SEGMENT = 3         # nights on each side of a split
 MAX_RAMP = 30          # nights on either side of a change point a ramp may span
@@ -167,7 +167,7 @@ def read_entry(path, raw, timing="wall"):
     verdicts = j.get("verdicts", [])
     if not isinstance(bench, list) or not isinstance(verdicts, list):
         _skip(f"{path}: bench or verdicts: not an array; allowed: an octocd-history file (docs/regression.md)")
-    series = {}
+    series, engines = {}, {}
     for bi, r in enumerate(bench):
         if not isinstance(r, dict) or r.get("format") != "octocd-bench" or not isinstance(r.get("points"), list):
             _skip(f"{path}: bench[{bi}]: not a result of octocd bench; allowed: octocd-bench results")
@@ -181,7 +181,12 @@ def read_entry(path, raw, timing="wall"):
                 use_cpu = timing == "cpu" or (timing == "auto" and "cpu_steps_per_s" in w)
                 s = _spread(w.get("cpu_steps_per_s" if use_cpu else "steps_per_s"))
                 if s is not None:
-                    series[(str(sweep), str(p.get("id", "?")), str(wname) + (" (cpu)" if use_cpu else ""))] = s
+                    key = (str(sweep), str(p.get("id", "?")), str(wname) + (" (cpu)" if use_cpu else ""))
+                    series[key] = s
+                    params = p.get("params")
+                    engine = params.get("engine") if isinstance(params, dict) else None
+                    if isinstance(engine, str):
+                        engines[key] = engine
     rows = {}
     for vi, v in enumerate(verdicts):
         if not isinstance(v, dict):
@@ -198,7 +203,8 @@ def read_entry(path, raw, timing="wall"):
         rows[key] = (st, reason)
     return {"file": os.path.basename(path), "date": date, "when": when, "commit": commit, "version": version,
             "machine": " · ".join(x for x in (host, cpu, gpu if gpu and not gpu.startswith("no CUDA") else "") if x),
-            "series": series, "verdicts": rows, "has_verdicts": bool(verdicts) or j.get("kind") == "nightly"}
+            "series": series, "engines": engines, "verdicts": rows,
+            "has_verdicts": bool(verdicts) or j.get("kind") == "nightly"}
 
 
 def read_folder(folder, workers=1, timing="wall"):
@@ -456,12 +462,16 @@ def run_labels(runs):
     return out
 
 
-def series_plot(key, nights, s, found, labels):
-    """steps/s of one point over its runs: the median, the min-max band, change windows shaded."""
+def series_plot(key, nights, s, found, labels, engine=None):
+    """steps/s of one point over its runs: the median, the min-max band, change windows shaded;
+    in the colour and marker `engine` has on every plot of the report (report_plots), a grey
+    line when the point names no engine."""
     fig, ax = plt.subplots(figsize=(9, 2.6))
     x = np.asarray(nights)
-    ax.fill_between(x, s[:, 1], s[:, 2], color="#4e79a7", alpha=0.25, linewidth=0, label="min-max of repetitions")
-    ax.plot(x, s[:, 0], color="#4e79a7", linewidth=0.9, label="median")
+    colour = engine_colour(engine) if engine else "#555555"
+    ax.fill_between(x, s[:, 1], s[:, 2], color=colour, alpha=0.25, linewidth=0, label="min-max of repetitions")
+    ax.plot(x, s[:, 0], color=colour, linewidth=0.9, label="median", marker=engine_marker(engine) if engine else None,
+            markersize=3)
     for g in found:
         color = "#D55E00" if g["ratio"] < 1 else "#009E73"
         if g["last"] > g["first"]:  # a change over a window of runs
@@ -611,7 +621,8 @@ def run(folder, out, level, title=None, workers=None, csv_dir=None, timing="auto
                         (f"{len(keys) - ncpu} in wall-clock steps/s (steps_per_s, as bench prints them)"
                          if len(keys) > ncpu else "").rstrip(", ") +
                         " (--timing cpu, wall or auto chooses). Each run is labelled by its own start (date and "
-                        "time) and the commit of the build that made it.</p>")
+                        "time) and the commit of the build that made it; each series is drawn in its engine's "
+                        "colour and marker, those of the report's plots.</p>")
             page.append(f"<p class=note>Change points: binary segmentation with the standardized Mann-Whitney rank "
                         f"statistic maximized over splits (at least {MIN_SEGMENT} runs each side), p by James, James "
                         f"and Siegmund's approximation; level {level:g} family-wise over this machine's {S} series "
@@ -645,7 +656,9 @@ def run(folder, out, level, title=None, workers=None, csv_dir=None, timing="auto
                     f"<td>{math.exp(g['before']):.4g}</td><td>{math.exp(g['after']):.4g}</td>"
                     f"<td class={'slow' if g['ratio'] < 1 else 'fast'}>{100 * (g['ratio'] - 1):+.1f} %</td>"
                     f"<td>{g['p']:.2g}</td></tr>")
-            plots.append((k, ("series", k, list(range(n)), s, found, labels), n, sig, mid, recent, len(found)))
+            engine = next((runs[i]["engines"][k] for i in reversed(idx) if k in runs[i]["engines"]), None)
+            plots.append((k, ("series", k, list(range(n)), s, found, labels, engine), n, sig, mid, recent,
+                          len(found)))
         if chg_html:
             page.append("<h4>Changes found</h4><table><tr><th>series</th><th>first run of the change</th>"
                         "<th>last run of the change</th><th>runs</th><th>steps/s before (median)</th>"

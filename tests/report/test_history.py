@@ -367,6 +367,34 @@ def test_plots_are_readable_and_label_what_they_measure(tmp_path, monkeypatch):
     assert "steps per CPU s (log)" in titles and "wall steps/s (log)" in titles
 
 
+def test_each_series_takes_its_engines_colour_and_marker(tmp_path, monkeypatch):
+    """A series is drawn in its engine's colour and marker, those of every plot of the report
+    (report_plots.engine_colour, engine_marker): cpu's blue and circle, bullet's vermilion and
+    triangle (issue 80 item 1: they were one grey-blue for every engine)."""
+    from report_plots import ENGINE_COLORS, ENGINE_MARKERS
+    make_history(str(tmp_path / "h"), nights=4, points=2, seed=5, rows=[], flip=None)
+    for name in sorted(os.listdir(tmp_path / "h")):
+        j = json.load(open(tmp_path / "h" / name))
+        p = j["bench"][0]["points"][1]
+        p["id"], p["params"]["engine"] = p["id"].replace("| cpu", "| bullet"), "bullet"
+        json.dump(j, open(tmp_path / "h" / name, "w"))
+    drawn = {}
+
+    def keep(fig, quantize=True):
+        for ax in fig.axes:
+            if ax.get_lines():
+                line = ax.get_lines()[0]
+                drawn[ax.get_title(loc="left")] = (line.get_color(), line.get_marker())
+        H.plt.close(fig)
+        return ""
+    monkeypatch.setattr(H, "_png", keep)
+    H.run(str(tmp_path / "h"), str(tmp_path / "out"), 0.05, workers=1)
+    assert len(drawn) == 2, drawn
+    for title, (colour, marker) in drawn.items():
+        engine = "bullet" if "| bullet" in title else "cpu"
+        assert (colour, marker) == (ENGINE_COLORS[engine], ENGINE_MARKERS[engine]), (title, colour, marker)
+
+
 def test_rows_na_every_night_are_folded_and_placeholders_said(tmp_path):
     make_history(str(tmp_path / "h"), nights=5, points=1, seed=3, rows=[("cpu", "s", "judged")], flip=None)
     for name in sorted(os.listdir(tmp_path / "h")):
