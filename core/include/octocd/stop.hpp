@@ -49,13 +49,14 @@ class TrackedTemporary {
  public:
   /// `path`: copied.
   explicit TrackedTemporary(std::string path);
-  ~TrackedTemporary();
   TrackedTemporary(const TrackedTemporary&) = delete;
   TrackedTemporary& operator=(const TrackedTemporary&) = delete;
+  /// Forgets the path (stop_track_temporary), when it was tracked.
+  ~TrackedTemporary();
 
  private:
   std::string path_;
-  bool tracked_;
+  bool tracked_;  ///< stop_track_temporary's answer
 };
 
 /// Tracks or forgets a child process group (its id, > 0) that a process ended at once
