@@ -24,9 +24,7 @@ The tests assert the behaviour (tests/cli/test_cli_limits_and_signals.cpp) with 
 that hold on a loaded 2-core machine; this script records the times.
 """
 import argparse
-import csv
 import json
-import multiprocessing
 import os
 import platform
 import re
@@ -37,10 +35,7 @@ import sys
 import tempfile
 import time
 
-
-def spin():
-    while True:
-        pass
+from busy_load import busy_loops, write_rows
 
 
 def lattice_scene(folder, per_axis, name="lattice"):
@@ -226,11 +221,8 @@ def main():
         if unknown:
             sys.exit(f"stop_latency: --cases {','.join(unknown)}: unknown; allowed: {', '.join(n for n, _ in cases)}")
         cases = [c for c in cases if c[0] in wanted]
-    spinners = [multiprocessing.Process(target=spin, daemon=True) for _ in range(args.busy)]
-    for s in spinners:
-        s.start()
     rows = []
-    try:
+    with busy_loops(args.busy):
         time.sleep(1.0)  # the spinners running before the first case
         for name, make in cases:
             for k in range(args.repeat):
@@ -243,13 +235,7 @@ def main():
                 rows.append({"case": name, "repetition": k, "seconds": round(seconds, 4), "exit": code,
                              "kept": ok, "load1": round(os.getloadavg()[0], 2), "busy": args.busy})
                 print(f"{name:22s} #{k}: {seconds:.3f} s, exit {code}, kept {ok}", flush=True)
-    finally:
-        for s in spinners:
-            s.terminate()
-    with open(args.out, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
-        w.writeheader()
-        w.writerows(rows)
+    write_rows(args.out, rows)
     print(f"\n{platform.node()}, {os.cpu_count()} CPUs, {args.busy} busy loops beside; load average "
           f"{os.getloadavg()[0]:.2f}; seconds from SIGINT to exit, median (min-max) of {args.repeat}:")
     for name, _ in cases:

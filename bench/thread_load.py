@@ -23,9 +23,7 @@ case, the median (min-max) of each variant and the ratio of medians default / on
 (>= 1: more threads are not slower). The CSV has a row per process.
 """
 import argparse
-import csv
 import json
-import multiprocessing
 import os
 import platform
 import statistics
@@ -34,12 +32,9 @@ import sys
 import tempfile
 import time
 
+from busy_load import busy_loops, write_rows
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def spin():
-    while True:
-        pass
 
 
 def cpu_model():
@@ -115,10 +110,7 @@ def main():
     rows = []
     cpus = len(os.sched_getaffinity(0))
     for busy in busy_levels:
-        spinners = [multiprocessing.Process(target=spin, daemon=True) for _ in range(busy)]
-        for s in spinners:
-            s.start()
-        try:
+        with busy_loops(busy):
             for rep in range(args.repeat):
                 for case in cases:
                     for variant, env in variants.items():
@@ -133,14 +125,7 @@ def main():
                                "load1": round(os.getloadavg()[0], 2)}
                         rows.append(row)
                         print(",".join(str(v) for v in row.values()), flush=True)
-        finally:
-            for s in spinners:
-                s.terminate()
-                s.join()
-    with open(args.out, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
-        w.writeheader()
-        w.writerows(rows)
+    write_rows(args.out, rows)
 
     print(f"\n{platform.node()} ({cpu_model()}), {cpus} CPUs; {args.octocd}; median (min-max) of {args.repeat}; "
           f"ratio = default / one thread (>= 1: more threads are not slower)")

@@ -300,7 +300,7 @@ json run_steps_point(const Sweep& s, const Point& p, ModelCache& cache, const Be
       // grace ends the bench there (the result file keeps the points finished before).
       std::optional<octocd::StopWithin> within(
           std::in_place, fmt::format("bench point {} stepped frame {} of {} (a step longer than the 0.5 s grace)",
-                                     p.id, f, total));  // then set_stop_kept's text: what the result keeps
+                                     p.id, f, total));  // then the run session's kept text: what the result keeps
       const double cpu0 = host_engine ? process_cpu_ms() : 0.0;
       const auto t_frame = Clock::now();
       const FrameMetrics& stepped = engine->step();

@@ -38,17 +38,6 @@ std::string data_dir_help() {
          "the source tree; docs/scenes.md)";
 }
 
-int stopped_after_frame(octocd::RunSession& session, int sig, std::int64_t done, std::int64_t total,
-                        const std::string& trace, const std::string& kept_tail, const std::string& where_tail) {
-  if (trace.empty())
-    session.keep("");
-  else
-    session.keep((done > 0 ? fmt::format("the trace {} holds frames 1..{}", trace, done)
-                           : fmt::format("the trace {} holds no frame", trace)) +
-                 kept_tail);
-  return session.stopped(sig, fmt::format(" after frame {} of {}{}", done, total, where_tail));
-}
-
 void check_engine_inertia(const octocd::Engine& world, const octocd::Model& model, const std::string& engine) {
   namespace lim = octocd::trace_limits;
   const octocd::RotationTraits* traits = world.rotation_traits();

@@ -42,15 +42,6 @@ std::string data_dir_help();
 /// ("--frames: 0 is out of range; allowed: an integer in [1, 2147483647]").
 CLI::Validator at_least_one();
 
-/// The stop of `run` or `validate` after frame `done` of `total`: the session keeps what
-/// `trace` holds ("the trace T holds frames 1..DONE" or "... holds no frame", then
-/// `kept_tail`; nothing when `trace` is "") and says its stop line (RunSession::stopped:
-/// "octocd CMD: stopped by SIG... after frame DONE of TOTAL<where_tail>; <kept>"). Returns
-/// the exit code for the command to return (128 + sig).
-int stopped_after_frame(octocd::RunSession& session, int sig, std::int64_t done, std::int64_t total,
-                        const std::string& trace, const std::string& kept_tail = "",
-                        const std::string& where_tail = "");
-
 /// Before a reference engine steps (run, validate SCENE --engine E): the inertia the engine
 /// gives each dynamic body lies where a trace may hold it (docs/trace-format.md, "Security
 /// rules and limits": finite, diagonal moments in [1e-12, 1e15] kg m^2), else InputError

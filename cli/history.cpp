@@ -18,6 +18,7 @@
 #include "octocd/error.hpp"
 #include "octocd/json_fields.hpp"
 #include "octocd/json_strict.hpp"
+#include "octocd/stop.hpp"
 #include "octocd/text.hpp"
 #include "octocd/version.hpp"
 #include "tools.hpp"
@@ -243,6 +244,7 @@ std::string append_history(const std::string& dir, const std::string& kind, json
   const std::string base = fmt::format("{}-{}-{}", stamp, file_safe(build.value("commit", std::string())), kind);
   const std::string first = (fs::path(dir) / (base + ".json")).string();
   const TemporaryFile tmp = create_temporary_beside(first, label);
+  const TrackedTemporary tracked(tmp.path);  // until it is linked, a stop removes it too
   std::size_t done = 0;
   while (done < text.size()) {
     const ssize_t n = ::write(tmp.fd, text.data() + done, text.size() - done);

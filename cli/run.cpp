@@ -575,8 +575,8 @@ int run_command(const RunOptions& o) {
   if (!o.quiet) print_summary(world, totals, wall_s, o.trace, xdmf, worlds);
   if (!o.summary_json.empty()) write_summary_json(o.summary_json, world, totals, wall_s, worlds);
   if (const int sig = session.signal())
-    return stopped_after_frame(session, sig, totals.frames, scene.frames, o.trace,
-                               o.no_xdmf ? "" : "; no XDMF sidecar (a stopped run writes none)");
+    return session.stopped_after_frame(sig, totals.frames, scene.frames, o.trace,
+                                       o.no_xdmf ? "" : "; no XDMF sidecar (a stopped run writes none)");
   return 0;
 }
 

@@ -234,7 +234,7 @@ int validate_verdict(const ValidateOptions& o, const std::string& name,
                        line);
     fmt::print("\nSTOPPED: {}\n", line);
     std::fflush(stdout);
-    return stopped_after_frame(*octocd::RunSession::current(), sig, done, o.frames, o.trace);
+    return octocd::RunSession::current()->stopped_after_frame(sig, done, o.frames, o.trace);
   }
   return conclude_validate(o, run, results, report,
                            {{"engine", o.engine}, {"frames", o.frames}, {"every", o.every}, {"against", o.against},

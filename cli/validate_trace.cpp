@@ -80,8 +80,8 @@ int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, co
                        stopped);
     fmt::print("\nSTOPPED: {}\n", stopped);
     std::fflush(stdout);
-    return stopped_after_frame(*octocd::RunSession::current(), sig, info.judged_to, info.frames, "", "",
-                               fmt::format(" of the trace {}", o.trace_in));
+    return octocd::RunSession::current()->stopped_after_frame(sig, info.judged_to, info.frames, "", "",
+                                                              fmt::format(" of the trace {}", o.trace_in));
   }
   nlohmann::ordered_json meta = {{"engine", info.engine}, {"frames", info.frames}, {"every", every},
                                  {"against", o.against}, {"build_id", octocd::build_id()}};

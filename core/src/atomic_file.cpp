@@ -113,10 +113,7 @@ void write_file_atomically(const std::string& path, const std::string& text, con
   // POSIX calls, so a failure names errno (ENOSPC, EFBIG, ...) and the temporary file is
   // removed whatever fails.
   const TemporaryFile tmp = create_temporary_beside(path, label);
-  set_stop_remove(tmp.path);  // a process ended at once by a signal removes it too
-  struct Forget {
-    ~Forget() { set_stop_remove(""); }
-  } forget;
+  const TrackedTemporary tracked(tmp.path);  // until it is renamed, a stop removes it too
   int err = 0;
   for (std::size_t done = 0; done < text.size() && err == 0;) {
     const ssize_t n = ::write(tmp.fd, text.data() + done, text.size() - done);

@@ -105,6 +105,17 @@ int RunSession::stopped(int sig, const std::string& where) {
   return stop_exit_code(sig);
 }
 
+int RunSession::stopped_after_frame(int sig, std::int64_t done, std::int64_t total, const std::string& trace,
+                                    const std::string& kept_tail, const std::string& where_tail) {
+  if (trace.empty())
+    keep("");
+  else
+    keep((done > 0 ? fmt::format("the trace {} holds frames 1..{}", trace, done)
+                   : fmt::format("the trace {} holds no frame", trace)) +
+         kept_tail);
+  return stopped(sig, fmt::format(" after frame {} of {}{}", done, total, where_tail));
+}
+
 void RunSession::end_now(int sig, const std::string& where) {
   const int code = stopped(sig, where);
   std::_Exit(code);

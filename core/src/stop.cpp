@@ -44,10 +44,6 @@ std::atomic<bool> g_ticking{false};          // the 20 ms SIGALRM tick runs
 std::atomic<bool> g_second_ends{true};       // a second signal ends the process at once
 std::atomic<int> g_count{0};                 // signals received since StopOnSignals
 
-// set_stop_remove's path: unlinked by exit_now (a temporary file being written).
-char g_remove_text[4096];
-std::atomic<bool> g_remove{false};
-
 // stop_track_temporary's paths and stop_track_child's process groups: removed and killed
 // by exit_now (a slot is free while its flag is false; written only while it is).
 constexpr std::size_t kTrackSlots = 64;  // a process engine's folder per copy of `run --worlds`
@@ -140,7 +136,6 @@ void put(const char* t) {
 [[noreturn]] void exit_now(int sig, const char* middle, const char* what, const char* tail) {
   if (g_exiting.exchange(true))  // another thread is ending the process: its line, its _exit
     for (;;) ::pause();
-  if (g_remove.load()) ::unlink(g_remove_text);  // unlink(2) is async-signal-safe
   for (auto& c : g_children)
     if (const int group = c.load(); group > 0) ::kill(-group, SIGKILL);  // kill(2) is async-signal-safe
   remove_temporaries(false);
@@ -248,13 +243,6 @@ int stop_signal_count() { return g_count.load(std::memory_order_relaxed); }
 
 int stop_exit_code(int sig) { return 128 + sig; }
 
-void set_stop_remove(const std::string& path) {
-  g_remove.store(false);
-  if (path.empty() || path.size() >= sizeof g_remove_text) return;
-  std::memcpy(g_remove_text, path.c_str(), path.size() + 1);
-  g_remove.store(true);
-}
-
 bool stop_track_temporary(const std::string& path, bool tracked) {
   if (path.empty() || path.size() >= sizeof g_temp_text[0]) return false;
   for (std::size_t k = 0; k < kTrackSlots; ++k) {
@@ -270,6 +258,13 @@ bool stop_track_temporary(const std::string& path, bool tracked) {
     }
   }
   return false;
+}
+
+TrackedTemporary::TrackedTemporary(std::string path)
+    : path_(std::move(path)), tracked_(stop_track_temporary(path_, true)) {}
+
+TrackedTemporary::~TrackedTemporary() {
+  if (tracked_) (void)stop_track_temporary(path_, false);
 }
 
 bool stop_track_child(int group, bool tracked) {

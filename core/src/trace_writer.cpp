@@ -404,12 +404,7 @@ TraceWriter::TraceWriter(const std::string& path, const TraceMetadata& meta,
   // a symbolic link there is InputError, never written through (atomic_file.hpp).
   const TemporaryFile tmp = create_temporary_beside(path, "trace");
   const std::string& made = tmp.path;
-  // A process ended at once while stopping (stop.hpp) removes it too, until it is renamed.
-  (void)stop_track_temporary(made, true);
-  struct Forget {
-    const std::string& made;
-    ~Forget() { (void)stop_track_temporary(made, false); }
-  } forget{made};
+  const TrackedTemporary tracked(made);  // until it is renamed, a stop removes it too
   struct stat made_st {};
   int made_fd = tmp.fd;  // open until HDF5 has the file, so that its inode cannot be reused
   const bool stat_ok = ::fstat(made_fd, &made_st) == 0;

@@ -319,6 +319,7 @@ void copy_own_trace(const Engine& engine, const std::string& path, const std::st
   if (from.empty())
     throw RuntimeError(fmt::format("{}: engine '{}' has written no trace of its own", label, engine.name()));
   TemporaryFile tmp = create_temporary_beside(path, label);
+  const TrackedTemporary tracked(tmp.path);  // until it is renamed, a stop removes it too
   ::close(tmp.fd);
   std::error_code ec;
   fs::copy_file(from, tmp.path, fs::copy_options::overwrite_existing, ec);

@@ -147,12 +147,25 @@ inline void check_mesh_argument(const Mesh& mesh, const std::string& arg) {
 /// Magnitudes the validators' float32 arithmetic stays finite with: the bounds of a
 /// trace's values (docs/trace-format.md, "Security rules and limits"), as the CLI's
 /// `validate --trace-in` checks them.
+/// One component `c` of row `row` of argument `arg`: InputError naming them unless |c| <= limit.
+inline void check_coordinate(float c, std::size_t row, const char* arg, double limit, const char* what) {
+  if (!(std::fabs(c) <= limit))
+    throw InputError(fmt::format("{}: row {} holds {}; allowed: {} with |component| <= {:g}", arg, row, c, what, limit));
+}
+
+/// Every component of every row of `xs` (check_coordinate).
 inline void check_coordinates(const std::vector<Vec3>& xs, const char* arg, double limit, const char* what) {
   for (std::size_t i = 0; i < xs.size(); ++i)
-    for (int k = 0; k < 3; ++k)
-      if (!(std::fabs(xs[i][k]) <= limit))
-        throw InputError(fmt::format("{}: row {} holds {}; allowed: {} with |component| <= {:g}", arg, i, xs[i][k],
-                                     what, limit));
+    for (int k = 0; k < 3; ++k) check_coordinate(xs[i][k], i, arg, limit, what);
+}
+
+/// Every corner component of every box of `boxes`, row by row (check_coordinate).
+inline void check_coordinates(const std::vector<Aabb>& boxes, const char* arg, double limit, const char* what) {
+  for (std::size_t i = 0; i < boxes.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      check_coordinate(boxes[i].min[k], i, arg, limit, what);
+      check_coordinate(boxes[i].max[k], i, arg, limit, what);
+    }
 }
 
 class PyValidator {
@@ -167,13 +180,7 @@ class PyValidator {
       if (py::hasattr(local_boxes, "__len__") && py::len(local_boxes) > trace_limits::kMaxBodies)
         throw_body_cap("local_boxes", py::len(local_boxes));
       b.local_boxes = boxes(local_boxes, "local_boxes", -1, "local box (m)");
-      for (std::size_t i = 0; i < b.local_boxes.size(); ++i)
-        for (int k = 0; k < 3; ++k)
-          for (const float c : {b.local_boxes[i].min[k], b.local_boxes[i].max[k]})
-            if (!(std::fabs(c) <= trace_limits::kMaxCoordinate))
-              throw InputError(fmt::format("local_boxes: row {} holds {}; allowed: local box corners (m) with "
-                                           "|component| <= {:g}",
-                                           i, c, trace_limits::kMaxCoordinate));
+      check_coordinates(b.local_boxes, "local_boxes", trace_limits::kMaxCoordinate, "local box corners (m)");
     }
     const auto n = static_cast<py::ssize_t>(b.local_boxes.size());
     if (!inverse_mass.is_none())
@@ -340,13 +347,7 @@ class PyValidator {
                         trace_limits::kMaxCoordinate, "positions (m)");
     check_coordinates(rec.v_pre, "v_pre", trace_limits::kMaxSpeed, "velocities (m/s)");
     check_coordinates(rec.v_post, "v_post", trace_limits::kMaxSpeed, "velocities (m/s)");
-    for (std::size_t i = 0; i < rec.aabbs.size(); ++i)
-      for (int k = 0; k < 3; ++k)
-        for (const float c : {rec.aabbs[i].min[k], rec.aabbs[i].max[k]})
-          if (!(std::fabs(c) <= trace_limits::kMaxCoordinate))
-            throw InputError(fmt::format("aabbs: row {} holds {}; allowed: world AABB corners (m) with |component| "
-                                         "<= {:g}",
-                                         i, c, trace_limits::kMaxCoordinate));
+    check_coordinates(rec.aabbs, "aabbs", trace_limits::kMaxCoordinate, "world AABB corners (m)");
     BusyGuard busy(busy_, "this Validator");
     settle();
     interrupted_->store(false);

@@ -315,6 +315,26 @@ fcl::Matrix3<S> rotation_of(const Pose& p) {
   return e.normalized().toRotationMatrix();
 }
 
+/// Two bodies' shapes at their poses: each one's geometry, rotation, position and the FCL
+/// transform of its geometry frame (geometry_transform). The shapes are referenced, not
+/// copied: they must outlive it.
+struct PosedPair {
+  PosedPair(const ShapeGeom& a, const ShapeGeom& b, const Pose& pa, const Pose& pb)
+      : ga(a),
+        gb(b),
+        ra(rotation_of(pa)),
+        rb(rotation_of(pb)),
+        xa(to_v3(pa.position)),
+        xb(to_v3(pb.position)),
+        ta(geometry_transform(a, ra, xa)),
+        tb(geometry_transform(b, rb, xb)) {}
+  const ShapeGeom& ga;
+  const ShapeGeom& gb;
+  fcl::Matrix3<S> ra, rb;
+  V3 xa, xb;
+  fcl::Transform3<S> ta, tb;
+};
+
 /// FCL collide on the exact geometries (boxes / BVH models): do they intersect?
 bool exact_collide(const ShapeGeom& ga, const fcl::Transform3<S>& ta, const ShapeGeom& gb,
                    const fcl::Transform3<S>& tb) {
@@ -716,25 +736,21 @@ bool ReferenceGeometry::intersect(std::uint32_t a, std::uint32_t b, const Pose& 
 }
 
 ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const Pose& pa, const Pose& pb) const {
-  const ShapeGeom& ga = impl_->geom(a);
-  const ShapeGeom& gb = impl_->geom(b);
-  const fcl::Matrix3<S> ra = rotation_of(pa), rb = rotation_of(pb);
-  const V3 xa = to_v3(pa.position), xb = to_v3(pb.position);
-  const fcl::Transform3<S> ta = geometry_transform(ga, ra, xa), tb = geometry_transform(gb, rb, xb);
+  const PosedPair pq(impl_->geom(a), impl_->geom(b), pa, pb);
   ReferenceNormal r;
-  if (ga.is_box && gb.is_box) return box_box(ga, ta, gb, tb);
+  if (pq.ga.is_box && pq.gb.is_box) return box_box(pq.ga, pq.ta, pq.gb, pq.tb);
   // A declared sphere against a primitive or a hull: FCL's own test (sphere-box and
   // sphere-sphere exact, GJK/EPA on its sphere support otherwise); libccd's EPA on a
   // sphere's support may stop short when the centres coincide.
-  if ((ga.is_sphere || gb.is_sphere) && !ga.bvh && !gb.bvh) return box_box(ga, ta, gb, tb);
-  const CcdObject ca{&ga.hull_vertices, ra, xa, ga.radius};
-  const CcdObject cb{&gb.hull_vertices, rb, xb, gb.radius};
+  if ((pq.ga.is_sphere || pq.gb.is_sphere) && !pq.ga.bvh && !pq.gb.bvh) return box_box(pq.ga, pq.ta, pq.gb, pq.tb);
+  const CcdObject ca{&pq.ga.hull_vertices, pq.ra, pq.xa, pq.ga.radius};
+  const CcdObject cb{&pq.gb.hull_vertices, pq.rb, pq.xb, pq.gb.radius};
   if (hull_penetration(ca, cb, r)) {
-    if (ga.convex && gb.convex) return r;  // exact: EPA on the shapes themselves
-    if (!exact_collide(ga, ta, gb, tb)) {
+    if (pq.ga.convex && pq.gb.convex) return r;  // exact: EPA on the shapes themselves
+    if (!exact_collide(pq.ga, pq.ta, pq.gb, pq.tb)) {
       // Hulls meet, the meshes do not: separated, BVH distance.
       ReferenceNormal d;
-      exact_distance(ga, ta, gb, tb, d);
+      exact_distance(pq.ga, pq.ta, pq.gb, pq.tb, d);
       return d;
     }
     if (!r.valid) return r;
@@ -747,12 +763,12 @@ ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const
     // centre line (B to A) and the six axes. A direction is bisected only when it
     // separates the meshes within the best depth so far.
     auto separated_at = [&](const V3& n, S t) {
-      fcl::Transform3<S> moved = ta;
+      fcl::Transform3<S> moved = pq.ta;
       moved.translation() += t * n;
-      return !exact_collide(ga, moved, gb, tb);
+      return !exact_collide(pq.ga, moved, pq.gb, pq.tb);
     };
     std::vector<V3> dirs = {to_v3(r.normal)};
-    const V3 centre_line = xa + ra * ga.offset - (xb + rb * gb.offset);
+    const V3 centre_line = pq.xa + pq.ra * pq.ga.offset - (pq.xb + pq.rb * pq.gb.offset);
     if (centre_line.norm() > 0) dirs.push_back(centre_line.normalized());
     for (int k = 0; k < 3; ++k) {
       dirs.push_back(V3::Unit(k));
@@ -782,7 +798,7 @@ ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const
     if (best_dir != 0) r.normal = to_vec3(dirs[best_dir]);
     return r;
   }
-  exact_distance(ga, ta, gb, tb, r);
+  exact_distance(pq.ga, pq.ta, pq.gb, pq.tb, r);
   return r;
 }
 
@@ -826,23 +842,19 @@ std::vector<V3> geometry_vertices(const ShapeGeom& g) {
 
 PenetrationWitness ReferenceGeometry::penetration_witness(std::uint32_t a, std::uint32_t b, const Pose& pa,
                                                           const Pose& pb, double floor) const {
-  const ShapeGeom& ga = impl_->geom(a);
-  const ShapeGeom& gb = impl_->geom(b);
-  const fcl::Matrix3<S> ra = rotation_of(pa), rb = rotation_of(pb);
-  const V3 xa = to_v3(pa.position), xb = to_v3(pb.position);
-  const fcl::Transform3<S> ta = geometry_transform(ga, ra, xa), tb = geometry_transform(gb, rb, xb);
+  const PosedPair pq(impl_->geom(a), impl_->geom(b), pa, pb);
   PenetrationWitness w;
   {
     fcl::CollisionRequest<S> req(1, true);
     req.gjk_solver_type = fcl::GST_LIBCCD;
     fcl::CollisionResult<S> res;
-    fcl::collide(ga.exact.get(), ta, gb.exact.get(), tb, req, res);
+    fcl::collide(pq.ga.exact.get(), pq.ta, pq.gb.exact.get(), pq.tb, req, res);
     if (!res.isCollision()) return w;
     w.intersect = true;
     if (res.numContacts() > 0) {
       const fcl::Contact<S>& c = res.getContact(0);
-      if (ga.bvh) w.triangle_a = static_cast<int>(c.b1);
-      if (gb.bvh) w.triangle_b = static_cast<int>(c.b2);
+      if (pq.ga.bvh) w.triangle_a = static_cast<int>(c.b1);
+      if (pq.gb.bvh) w.triangle_b = static_cast<int>(c.b2);
     }
   }
   // Each shape's vertices against the other: the surface distance (cheap, BVH) first,
@@ -867,8 +879,8 @@ PenetrationWitness ReferenceGeometry::penetration_witness(std::uint32_t a, std::
       w.vertex_point = to_vec3(p);
     }
   };
-  search(a, ga, ta, gb, rb, xb, tb);
-  search(b, gb, tb, ga, ra, xa, ta);
+  search(a, pq.ga, pq.ta, pq.gb, pq.rb, pq.xb, pq.tb);
+  search(b, pq.gb, pq.tb, pq.ga, pq.ra, pq.xa, pq.ta);
   return w;
 }
 

@@ -157,14 +157,7 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
   for (std::size_t i = 0; i < cand.size(); ++i) {
     const Pair p = cand[i];
     poll();
-    bool close = false;
-    if (need_distance) {
-      close = truth_after(f, p, cursor).g.signed_distance() < tol.broadphase_margin_m - slack;
-    } else if (hit[i]) {
-      const ReferenceNormal& g = truth_after(f, p, cursor).g;
-      close = g.penetrating && -g.depth < tol.broadphase_margin_m - slack;
-    }
-    if (close) required.push_back(p);
+    if (required_pair(f, p, hit[i] != 0, cursor)) required.push_back(p);
   }
 }
 

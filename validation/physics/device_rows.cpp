@@ -181,15 +181,7 @@ void PhysicsValidators::Impl::device_frame(const FrameRecord& rec, const std::ve
   f.required.clear();
   std::size_t cursor = 0;
   for (std::size_t k = 0; k < cand.size(); ++k) {
-    const Pair p = cand[k];
-    bool close = false;
-    if (need_distance) {
-      close = truth_after(f, p, cursor).g.signed_distance() < tol.broadphase_margin_m - slack;
-    } else if (hit[k]) {
-      const ReferenceNormal& g = truth_after(f, p, cursor).g;
-      close = g.penetrating && -g.depth < tol.broadphase_margin_m - slack;
-    }
-    if (close) f.required.push_back(p);
+    if (required_pair(f, cand[k], hit[k] != 0, cursor)) f.required.push_back(cand[k]);
   }
 }
 

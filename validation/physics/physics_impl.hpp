@@ -642,6 +642,19 @@ struct PhysicsValidators::Impl {
     const std::size_t k = f.find_after(p, cursor);
     return k < f.truth.size() ? f.truth[k] : full_truth(f, p);
   }
+  /// Whether candidate `p` of a checked frame (either kind) is a pair row 1 requires of
+  /// the broadphase: its shapes within broadphase_margin_m less geometry_slack_m. With that
+  /// margin above 0 every candidate's distance is looked up; else only a candidate whose
+  /// shapes intersect (`hit`) is, and it is required when it penetrates by less than the
+  /// slack less the margin. `cursor` as in truth_after (candidates in sorted order).
+  template <class Frame>
+  bool required_pair(Frame& f, Pair p, bool hit, std::size_t& cursor) const {
+    const double within = tol.broadphase_margin_m - tol.geometry_slack_m;
+    if (within > 0) return truth_after(f, p, cursor).g.signed_distance() < within;
+    if (!hit) return false;
+    const ReferenceNormal& g = truth_after(f, p, cursor).g;
+    return g.penetrating && -g.depth < within;
+  }
   /// Row 3's figures of group `i` of f.rows (PairFigures, RowFigures, CheckedFrame::aabb_ref)
   /// from its truth `t` and SAT's accepted axes (contact_rows.cpp). Thread-safe across groups.
   void pair_figures(physics_detail::CheckedFrame& f, std::size_t i, const physics_detail::ContactTruth& t,

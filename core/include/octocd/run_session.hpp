@@ -144,6 +144,13 @@ class RunSession {
   /// `where`: e.g. " after frame 12 of 100".
   int stopped(int sig, const std::string& where);
 
+  /// stopped() after frame `done` of `total` (run, validate): the command keeps what the
+  /// trace `trace` holds ("the trace T holds frames 1..DONE", or "the trace T holds no
+  /// frame", then `kept_tail`; nothing when `trace` is "") and says " after frame DONE of
+  /// TOTAL<where_tail>". Returns stop_exit_code(sig).
+  int stopped_after_frame(int sig, std::int64_t done, std::int64_t total, const std::string& trace,
+                          const std::string& kept_tail = "", const std::string& where_tail = "");
+
   /// Ends the process now, from work that cannot return to the command's stop path (a
   /// process engine whose child was stopped): stopped()'s line, then _Exit(128 + sig).
   [[noreturn]] void end_now(int sig, const std::string& where);

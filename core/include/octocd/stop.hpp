@@ -32,12 +32,6 @@ int stop_exit_code(int sig);
 /// stopping: the user insists). Safe to call from any thread.
 int stop_signal_count();
 
-/// A temporary file being written (write_file_atomically's `path.tmp.PID`) that the
-/// process removes should it end at once (a second signal, a deadline, a grace), so no
-/// temporary file is left; "" clears it. Copied (paths of 4096 bytes or more are not
-/// kept). One at a time; call from the thread that writes it.
-void set_stop_remove(const std::string& path);
-
 /// Tracks (`tracked` true) or forgets a temporary file or folder that a process ended at
 /// once while stopping (a second signal, the deadline, a grace) removes: the files
 /// unlinked, then the folders emptied of their files (one level) and removed. At most 64
@@ -45,6 +39,25 @@ void set_stop_remove(const std::string& path);
 /// tracked (no free slot, too long) or, forgetting, was not. Any thread; use RunSession
 /// (run_session.hpp), which owns these for a command.
 bool stop_track_temporary(const std::string& path, bool tracked);
+
+/// While alive, `path` is a tracked temporary (stop_track_temporary), so a stop removes it:
+/// a file written under a temporary name and then renamed (write_file_atomically's
+/// PATH.tmp.XXXXXX, a trace being created, a history entry); the guard ends once the file
+/// is renamed or removed. Not tracked when no slot is free (stop_track_temporary's false).
+/// Any thread.
+class TrackedTemporary {
+ public:
+  /// `path`: copied.
+  explicit TrackedTemporary(std::string path);
+  TrackedTemporary(const TrackedTemporary&) = delete;
+  TrackedTemporary& operator=(const TrackedTemporary&) = delete;
+  /// Forgets the path (stop_track_temporary), when it was tracked.
+  ~TrackedTemporary();
+
+ private:
+  std::string path_;
+  bool tracked_;  ///< stop_track_temporary's answer
+};
 
 /// Tracks or forgets a child process group (its id, > 0) that a process ended at once
 /// while stopping kills (SIGKILL to the group), so no child outlives octocd. At most 64 at
