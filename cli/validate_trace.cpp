@@ -108,11 +108,11 @@ int trace_in_verdict(ValidateOptions& o, const octocd::ValidationOptions& vo, co
 int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, Clock::time_point t0) {
   if (o.check_only) {
     const octocd::ExternalTraceInfo info = octocd::check_external_trace(o.trace_in);
-    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames, version {}; {}{}{}{}{}{}{}{}\n",
+    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames, version {}; {}{}{}{}{}{}{}{}{}\n",
                o.trace_in, info.engine, info.bodies, info.frames, info.version, info.has_states ? "states " : "",
                info.has_rotation ? "rotation " : "", info.has_aabbs ? "aabbs " : "", info.has_pairs ? "pairs " : "",
                info.has_contacts ? "contacts " : "", info.has_points ? "points " : "",
-               info.manifolds ? "manifolds " : "", info.has_scene ? "scene" : "");
+               info.has_point_b ? "point_b " : "", info.manifolds ? "manifolds " : "", info.has_scene ? "scene" : "");
     // Per row, without judging: judged (the trace carries what it needs) or n/a with what
     // to add (docs/validate-your-engine.md, "What a trace must carry").
     const octocd::ExternalTrace trace(o.trace_in);
