@@ -2074,6 +2074,15 @@ TEST_F(ZooEngines, TwoWitnessPointsPerRowAreJudgedOnBoth) {
     expect_caught(r, {"contact-geometry", at + ": pair (0, 1) row 0: point_b"});
     EXPECT_TRUE(row_verdict(r.output, "momentum-balance", "pass")) << r.output;
   }
+  {  // a point on B that is not a number: refused before anything is judged (exit 2)
+    Zoo bad = z;
+    bad.rows[first - 1][0].pb = {std::nan(""), 0, 0};
+    const Result r = judge(bad, "point-b-nan");
+    EXPECT_EQ(r.code, 2) << r.output;
+    for (const std::string& f :
+         {std::string("/contacts/point_b: ") + at + ": row 0 (pair (0, 1))", std::string("not finite")})
+      EXPECT_NE(r.output.find(f), std::string::npos) << f << "\n" << r.output;
+  }
 }
 
 TEST_F(ZooEngines, BadDeclarationsExitTwoNamingTheAttribute) {
