@@ -111,7 +111,7 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
     // Opened as the judging opens it (states every K-th frame read as recorded): a trace
     // this line calls valid is one `validate --trace-in` judges, and the exit says so.
     const octocd::ExternalTrace trace(o.trace_in, octocd::TraceStates::Recorded);
-    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames, version {}; {}{}{}{}{}{}{}{}\n",
+    fmt::print("{}: valid external trace: engine '{}', {} bodies, {} frames, version {}; {}{}{}{}{}{}{}{}{}\n",
                octocd::printable(o.trace_in), octocd::printable(info.engine), info.bodies, info.frames, info.version,
                !info.has_states        ? ""
                : trace.sparse_states() ? fmt::format("states ({} of the {} frames) ", trace.state_frames().size() - 1,
@@ -119,7 +119,7 @@ int validate_trace_in(ValidateOptions& o, const octocd::ValidationOptions& vo, C
                                        : std::string("states "),
                info.has_rotation ? "rotation " : "", info.has_aabbs ? "aabbs " : "", info.has_pairs ? "pairs " : "",
                info.has_contacts ? "contacts " : "", info.has_points ? "points " : "",
-               info.manifolds ? "manifolds " : "", info.has_scene ? "scene" : "");
+               info.has_point_b ? "point_b " : "", info.manifolds ? "manifolds " : "", info.has_scene ? "scene" : "");
     // Per row, without judging: judged (the trace carries what it needs) or n/a with what
     // to add (docs/validate-your-engine.md, "What a trace must carry").
     fmt::print("\nrows (judged: the trace carries what the row needs; n/a: what to add to judge it):\n");

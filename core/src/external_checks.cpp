@@ -279,6 +279,21 @@ void check_frame_record(const FrameRecord& rec, std::size_t n, const std::string
            fmt::format("{} is ({}, {}, {}): not finite", which, c.point.x, c.point.y, c.point.z),
            "a finite world point (m)");
   }
+  if (!rec.point_b.empty()) {
+    if (!rec.has_points || rec.point_b.size() != rec.contacts.size())
+      fail(origin, names.contact_point_b, f,
+           fmt::format("{} points for {} contact rows{}", rec.point_b.size(), rec.contacts.size(),
+                       rec.has_points ? "" : " without contact points"),
+           "one point on B per contact row, with the rows' points (or none)");
+    for (std::size_t i = 0; i < rec.point_b.size(); ++i) {
+      const Vec3 p = rec.point_b[i];
+      if (!finite(p))
+        fail(origin, names.contact_point_b, f,
+             fmt::format("row {} (pair ({}, {})) is ({}, {}, {}): not finite", i, rec.contacts[i].pair.a,
+                         rec.contacts[i].pair.b, p.x, p.y, p.z),
+             "a finite world point (m)");
+    }
+  }
   if (!rec.jt3.empty()) {
     if (rec.jt3.size() != rec.contacts.size())
       fail(origin, names.contact_jt3, f, fmt::format("{} vectors for {} contact rows", rec.jt3.size(), rec.contacts.size()),

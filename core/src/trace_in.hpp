@@ -102,7 +102,8 @@ class TraceIn {
                                                 "/bodies/inertia",     "/contacts/point",
                                                 "/bodies/friction",    "/bodies/restitution",
                                                 "/contacts/jt3",       "/bodies/collision_shape",
-                                                "/bodies/locked_dofs", "/states/sleeping"};
+                                                "/bodies/locked_dofs", "/states/sleeping",
+                                                "/contacts/point_b"};
   void reject_v2_datasets() const;
   /// The physics defaults from the scene (both versions): its response's mu_s, e and slop
   /// (the root attributes and /bodies tables of version 2 override them); its dt and
@@ -223,7 +224,7 @@ class TraceIn {
   bool committed_ = false;                  // the trace has committed_states (octocd's own)
   hsize_t n_ = 0;
   std::int64_t frames_ = 0;
-  Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_, c_jt3_;
+  Dataset position_, velocity_, aabb_min_, aabb_max_, pairs_, c_pair_, c_normal_, c_depth_, c_jn_, c_jt_, c_jt3_, c_point_b_;
   // Version 2.
   Dataset orientation_, angular_, c_point_, sleeping_;
   bool integrated_ = false;  ///< root attribute detection = "integrated"

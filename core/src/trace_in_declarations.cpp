@@ -111,6 +111,16 @@ void TraceIn::read_v2() {
            fmt::format("{} x 3, one tangential impulse vector (world, N s) per contact row (as /contacts/pair)",
                        c_pair_.dims[0]));
   }
+  // Each row's point on B, where the engine applies B's impulse (two witness points per row).
+  c_point_b_ = open("/contacts/point_b", H5T_FLOAT, 2, false);
+  info.has_point_b = c_point_b_.present();
+  if (c_point_b_.present()) {
+    if (!info.has_points)
+      bad(c_point_b_.name, "without /contacts/point",
+          "each row's point on B with /contacts/point (the row's point on A)");
+    expect(c_point_b_, {c_pair_.dims[0], 3},
+           fmt::format("{} x 3, one world point (m) on B per contact row (as /contacts/pair)", c_pair_.dims[0]));
+  }
 }
 
 void TraceIn::read_collision_shapes(PhysicsBodies& p) const {

@@ -127,6 +127,11 @@ void TraceIn::fill_v2(FrameRecord& rec, std::int64_t f, RecordFieldNames& names)
       rec.jt3 = vectors(read<float>(c_jt3_, first, rec.contacts.size()));
       names.contact_jt3 = "/contacts/jt3";
     }
+    if (c_point_b_.present()) {
+      const hsize_t first = static_cast<hsize_t>(contact_offsets_[r - 1]);
+      rec.point_b = vectors(read<float>(c_point_b_, first, rec.contacts.size()));
+      names.contact_point_b = "/contacts/point_b";
+    }
   }
 }
 
@@ -201,6 +206,11 @@ void TraceIn::check_magnitudes(const FrameRecord& rec) const {
           bad("/contacts/point", fmt::format("frame {}: contact {}: {}", rec.frame, k, c.point[a]),
               fmt::format("|coordinate| <= {:g} m", trace_limits::kMaxCoordinate));
   }
+  for (std::size_t k = 0; k < rec.point_b.size(); ++k)
+    for (int a = 0; a < 3; ++a)
+      if (!(std::fabs(rec.point_b[k][a]) <= trace_limits::kMaxCoordinate))
+        bad("/contacts/point_b", fmt::format("frame {}: contact {}: {}", rec.frame, k, rec.point_b[k][a]),
+            fmt::format("|coordinate| <= {:g} m", trace_limits::kMaxCoordinate));
   for (std::size_t k = 0; k < rec.jt3.size(); ++k)
     for (int a = 0; a < 3; ++a)
       if (!(std::fabs(rec.jt3[k][a]) <= trace_limits::kMaxImpulse))

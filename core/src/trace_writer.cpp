@@ -109,7 +109,7 @@ struct TraceWriter::Impl {
   Column c_offsets, c_frame, c_pair, c_normal, c_depth, c_jn, c_jt;
   std::int64_t contact_total = 0;
   // Version 2 (TraceOptions::v2): rotation, contact points, candidate pairs, AABBs.
-  Column s_orient, s_angvel, c_point, c_jt3, p_offsets, p_pair, a_min, a_max;
+  Column s_orient, s_angvel, c_point, c_jt3, c_point_b, p_offsets, p_pair, a_min, a_max;
   std::int64_t pair_total = 0;
   int since_flush = 0;
   std::chrono::steady_clock::time_point last_flush_start = std::chrono::steady_clock::now();
@@ -227,7 +227,8 @@ struct TraceWriter::Impl {
     std::vector<Column*> all{&s_frame, &s_pos, &s_vel, &c_offsets, &c_frame, &c_pair, &c_normal,
                              &c_depth, &c_jn, &c_jt};
     if (opt.v2)
-      for (Column* c : {&s_orient, &s_angvel, &c_point, &c_jt3, &p_offsets, &p_pair, &a_min, &a_max}) all.push_back(c);
+      for (Column* c : {&s_orient, &s_angvel, &c_point, &c_jt3, &c_point_b, &p_offsets, &p_pair, &a_min, &a_max})
+        all.push_back(c);
     for (Column& c : frames) all.push_back(&c);
     return all;
   }
@@ -296,7 +297,7 @@ struct TraceWriter::Impl {
     s_orient.write_staged(path, raw);
     s_angvel.write_staged(path, raw);
     if (opt.contacts)
-      for (Column* c : {&c_point, &c_jt3, &a_min, &a_max, &p_pair, &p_offsets}) c->write_staged(path, raw);
+      for (Column* c : {&c_point, &c_jt3, &c_point_b, &a_min, &a_max, &p_pair, &p_offsets}) c->write_staged(path, raw);
   }
 
   // Version 2: the orientation and angular velocity rows of a state row.
@@ -663,6 +664,8 @@ void TraceWriter::create_v2_layout() {
     m.c_point = make_column(g, "/contacts", "point", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {3}, kChunk, 0, path);
     if (t.jt3)
       m.c_jt3 = make_column(g, "/contacts", "jt3", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {3}, kChunk, 0, path);
+    if (t.point_b)
+      m.c_point_b = make_column(g, "/contacts", "point_b", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {3}, kChunk, 0, path);
   }
   if (t.candidate_pairs) {
     Handle g(check(H5Gcreate2(root, "pairs", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), path, "create group /pairs"));
@@ -706,6 +709,13 @@ void TraceWriter::append_frame_v2(const FrameMetrics& fm, const BodyState& state
                            std::to_string(rec.jt3.size()) + " tangential impulse vectors for " +
                            std::to_string(rec.contacts.size()) + " contacts");
       for (const Vec3& j : rec.jt3) m.c_jt3.push(&j.x, 3);
+    }
+    if (m.opt.v2->point_b) {
+      if (rec.point_b.size() != rec.contacts.size())
+        throw RuntimeError("trace '" + m.path + "': frame " + std::to_string(fm.frame) + " has " +
+                           std::to_string(rec.point_b.size()) + " points on B for " +
+                           std::to_string(rec.contacts.size()) + " contacts");
+      for (const Vec3& p : rec.point_b) m.c_point_b.push(&p.x, 3);
     }
   }
   append_frame(fm, state, rec.contacts);

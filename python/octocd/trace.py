@@ -58,7 +58,7 @@ class Trace:
     """
 
     _V2_DATASETS = ("states/orientation", "states/angular_velocity", "bodies/inertia", "bodies/friction",
-                    "bodies/restitution", "contacts/point")
+                    "bodies/restitution", "contacts/point", "contacts/point_b", "contacts/jt3")
 
     def __init__(self, path: Union[str, "_os.PathLike[str]"]):
         self.path = _args.path("path", path)
@@ -92,7 +92,8 @@ class Trace:
                 if self._has(d):
                     self._fail("/" + d, "a version 2 dataset in a version 1 trace (v1/v2 fields mixed)",
                                "/states/orientation, /states/angular_velocity, /bodies/inertia, /bodies/friction, "
-                               "/bodies/restitution, /contacts/point only with the root attribute version = 2")
+                               "/bodies/restitution, /contacts/point, /contacts/point_b, /contacts/jt3 only with "
+                               "the root attribute version = 2")
         has_q = self._has("states/orientation")
         has_w = self._has("states/angular_velocity")
         if has_q != has_w:
@@ -106,6 +107,15 @@ class Trace:
                 if len(shape) != 3 or shape[1] != n or shape[2] != tail:
                     self._fail(f"/states/{name}", f"shape {' x '.join(map(str, shape))}",
                                f"states x {n} bodies x {tail}")
+        if self._has("contacts/point_b"):  # each row's point on B: beside /contacts/point, one per row
+            if not self._has("contacts/point"):
+                self._fail("/contacts/point_b", "without /contacts/point",
+                           "each row's point on B with /contacts/point (the row's point on A)")
+            rows = self._shape("contacts/pair")[0] if self._has("contacts/pair") else 0
+            shape = tuple(self._shape("contacts/point_b"))
+            if shape != (rows, 3):
+                self._fail("/contacts/point_b", f"shape {' x '.join(map(str, shape))}",
+                           f"{rows} x 3, one world point (m) on B per contact row (as /contacts/pair)")
 
     def __enter__(self) -> "Trace":
         return self
@@ -307,19 +317,21 @@ class Trace:
     def contacts(self, frame: int) -> Dict[str, _np.ndarray]:
         """Frame `frame`'s /contacts rows: pair (C, 2) int64, normal (C, 3), depth, jn, jt
         (C,) float32 and, when the trace has /contacts/point (version 2), point (C, 3)
-        (world, m). A version 2 trace may hold several rows per pair (a manifold,
+        (world, m); with /contacts/point_b (two witness points per row) point_b (C, 3), the
+        point on B where the engine applied B's impulse (point is then A's); with
+        /contacts/jt3 jt3 (C, 3), the friction impulse vectors on A. A version 2 trace may hold several rows per pair (a manifold,
         consecutive): see contacts_by_pair. Raises InputError when the trace has no
         contacts for it."""
         a, b = self._contact_rows(frame)
         out = {}
-        for k in ("pair", "normal", "depth", "jn", "jt", "point"):
+        for k in ("pair", "normal", "depth", "jn", "jt", "point", "point_b", "jt3"):
             if self._has("contacts/" + k):
                 out[k] = self._rows("contacts/" + k, a, b - a, "i8" if k == "pair" else "f4")
         return out
 
     def contacts_by_pair(self, frame: int) -> Dict[Any, Dict[str, _np.ndarray]]:
         """Frame `frame`'s contacts grouped by pair: {(a, b): {"normal": (k, 3), "depth",
-        "jn", "jt": (k,), "point": (k, 3) when present}}, a pair's k rows (its manifold) in
+        "jn", "jt": (k,), "point", "point_b", "jt3": (k, 3) when present}}, a pair's k rows (its manifold) in
         the order written, pairs in (a, b) order."""
         rows = self.contacts(frame)
         out: Dict[Any, Dict[str, _np.ndarray]] = {}

@@ -260,7 +260,7 @@ void BulletWorld::Impl::fill_record() {
   // Contacts: every manifold point within the breaking threshold, one row each, with its
   // friction impulse vector (the friction directions' impulses summed, on A).
   r.contacts.clear();
-  std::vector<Vec3> jt3;
+  std::vector<Vec3> jt3, point_b;
   const bool two_dirs = (world->getSolverInfo().m_solverMode & SOLVER_USE_2_FRICTION_DIRECTIONS) != 0;
   const int nm = dispatcher->getNumManifolds();
   for (int k = 0; k < nm; ++k) {
@@ -286,17 +286,21 @@ void BulletWorld::Impl::fill_record() {
       c.pair = {ia, ib};
       c.normal = swap ? -n01 : n01;  // from B to A
       c.depth = std::max(0.0f, -distance);
-      c.point = 0.5f * (p0 + p1);
+      // The solver applies the impulse at each body's own witness point (rel_pos1 from
+      // getPositionWorldOnA on body0, rel_pos2 from getPositionWorldOnB on body1): the
+      // row's point is A's, point_b B's.
+      c.point = swap ? p1 : p0;
       c.jn = cp.m_appliedImpulse;
       const Vec3 j_a = swap ? -friction : friction;  // friction impulse on A
       c.jt = row_scalar_jt(r, c, j_a, w, dt, gravity);
       r.contacts.push_back(c);
       jt3.push_back(j_a);
+      point_b.push_back(swap ? p0 : p1);
     }
   }
   std::vector<ContactRecord> rows;
   rows.swap(r.contacts);
-  finish_manifold_record(r, rows, jt3);
+  finish_manifold_record(r, rows, jt3, &point_b);
 }
 
 BulletWorld::BulletWorld(const World& src, const BulletSettings& settings)
@@ -409,6 +413,7 @@ BulletWorld::BulletWorld(std::shared_ptr<const Model> model, const BodyState& in
     // sqrt(2) x the threshold apart; + 1 mm for the float32 distances.
     m.traits.contact_margin = static_cast<float>(std::sqrt(2.0) * gContactBreakingThreshold) + 0.001f;
     m.traits.jt3 = true;  // fill_record gives every row its friction impulse vector
+    m.traits.point_b = true;  // and its point on B (the row's point is A's witness point)
     // Every dynamic body has setActivationState(DISABLE_DEACTIVATION): Bullet never puts
     // one to sleep (its velocities zeroed, its pose frozen), so every body is judged awake.
     m.traits.deactivation = "off";

@@ -28,7 +28,8 @@ float row_scalar_jt(const FrameRecord& r, const ContactRecord& c, const Vec3& j_
   return scalar_jt(j_a, point_velocity(c.pair.a) - point_velocity(c.pair.b), c.normal);
 }
 
-void finish_manifold_record(FrameRecord& r, std::vector<ContactRecord>& rows, std::vector<Vec3>& jt3) {
+void finish_manifold_record(FrameRecord& r, std::vector<ContactRecord>& rows, std::vector<Vec3>& jt3,
+                            std::vector<Vec3>* point_b) {
   std::vector<std::size_t> order(rows.size());
   std::iota(order.begin(), order.end(), std::size_t{0});
   std::stable_sort(order.begin(), order.end(),
@@ -37,12 +38,15 @@ void finish_manifold_record(FrameRecord& r, std::vector<ContactRecord>& rows, st
   r.jt3.clear();
   r.contacts.reserve(order.size());
   r.jt3.reserve(order.size());
+  r.point_b.clear();
   for (std::size_t k : order) {
     r.contacts.push_back(rows[k]);
     r.jt3.push_back(jt3[k]);
+    if (point_b) r.point_b.push_back((*point_b)[k]);
   }
   rows.clear();
   jt3.clear();
+  if (point_b) point_b->clear();
   r.confirmed.clear();
   for (const ContactRecord& c : r.contacts)
     if (r.confirmed.empty() || !(r.confirmed.back() == c.pair)) r.confirmed.push_back(c.pair);

@@ -22,6 +22,9 @@
 //  (k) an integrator of the body origin: a bunny whose centre of mass lies 2.4 cm from its
 //      body frame's origin lands spinning, another spins alone; the engine advances the
 //      origin (MuJoCo's free joint: integrated_point "origin").
+//  (l) two witness points per row: two boxes meet face to face in the air, each row's
+//      impulse applied at a point on each body 3 cm apart across the normal
+//      (/contacts/point_b).
 //  (j) a pile of 30 boxes in 15 columns whose top boxes bounce on the bottom ones: with
 //      the rows of each ended contact's last impulse dropped (contacts_complete 0, judged
 //      on the geometry), and with every impulse reported 0.2% or 2% low (the systematic
@@ -141,6 +144,7 @@ struct State {
 struct Row {
   int a = 0, b = 0;
   V n{}, p{};
+  V pb{};  ///< the point on B where B's impulse acts (written as /contacts/point_b with Zoo::point_b)
   double depth = 0, jn = 0, jt = 0;
 };
 
@@ -158,6 +162,8 @@ struct Zoo {
   std::map<std::string, double> numbers{
       {"mu", 0.5}, {"restitution", 0.5}, {"contact_margin", 0.005}, {"friction_directions", 1}};
   bool write_locked = true;
+  /// Writes each row's Row::pb as /contacts/point_b (two witness points per row).
+  bool point_b = false;
   std::size_t hull_vertices = 0;  // (f): the L's hull vertex count
   /// States written every `state_every`-th frame (with /states/frame), as `octocd run
   /// --state-every K` writes them; contacts every frame.
@@ -360,13 +366,14 @@ struct Zoo {
     put("/pairs/offsets", H5T_NATIVE_INT64, H5T_STD_I64LE, {pair_offsets.size()}, pair_offsets.data());
     put("/pairs/pair", H5T_NATIVE_INT64, H5T_STD_I64LE, {pairs.size() / 2, 2}, pairs.data());
     std::vector<std::int64_t> offsets{0}, cpair;
-    std::vector<double> normal, point, depth, jn, jt;
+    std::vector<double> normal, point, point_on_b, depth, jn, jt;
     for (const auto& step : rows) {
       for (const Row& r : step) {
         cpair.push_back(r.a);
         cpair.push_back(r.b);
         normal.insert(normal.end(), r.n.begin(), r.n.end());
         point.insert(point.end(), r.p.begin(), r.p.end());
+        point_on_b.insert(point_on_b.end(), r.pb.begin(), r.pb.end());
         depth.push_back(r.depth);
         jn.push_back(r.jn);
         jt.push_back(r.jt);
@@ -378,6 +385,7 @@ struct Zoo {
     put("/contacts/pair", H5T_NATIVE_INT64, H5T_STD_I64LE, {c, 2}, cpair.data());
     floats("/contacts/normal", {c, 3}, normal);
     floats("/contacts/point", {c, 3}, point);
+    if (point_b) floats("/contacts/point_b", {c, 3}, point_on_b);
     floats("/contacts/depth", {c}, depth);
     floats("/contacts/jn", {c}, jn);
     floats("/contacts/jt", {c}, jt);
@@ -1993,6 +2001,87 @@ TEST_F(ZooEngines, ASpreadOfImpulsesIsOneFinding) {
     EXPECT_EQ(r.code, 3) << r.output;
     EXPECT_EQ(failing_causes(r.output), (std::set<std::string>{"momentum-balance/ratio"})) << r.output;
     EXPECT_NE(r.output.find("the reported impulses scatter from"), std::string::npos) << r.output;
+  }
+}
+
+/// (l) Two witness points per row (cannon-es, Bullet): two 1 kg boxes meet face to face
+/// along x in the air; the engine applies the row's impulse at a point on each body, on
+/// A's +x face 2 cm above A's centre and on B's -x face 1 cm below it (3 cm apart across
+/// the normal), with the impulse those two levers give (restitution 0.5 at the points):
+/// the pair leaves turning, its angular momentum changed by (p_a - p_b) x J. Declared by
+/// /contacts/point_b.
+Zoo witness_pair_engine(int frames = 40) {
+  Zoo z;
+  z.engine = "zoo-witness-pair";
+  z.bodies = {Body{}, Body{}};
+  z.point_b = true;
+  z.numbers["contact_margin"] = 0.002;
+  const double e = 0.5;
+  z.states.push_back(initial(z, {{-0.2105, 1.0, 0}, {0, 1.0, 0}}, {{1, 0, 0}, {0, 0, 0}}, {{0, 0, 0}, {0, 0, 0}},
+                             {{1, 0, 0, 0}, {1, 0, 0, 0}}));
+  z.run(frames, false, [&](const State& s, State& t, std::vector<Row>& rows) {
+    const double d = 0.2 - (s.x[1][0] - s.x[0][0]);
+    if (!(d > 0)) return;
+    Row r;
+    r.a = 0;
+    r.b = 1;
+    r.n = {-1, 0, 0};
+    r.depth = f32(d);
+    r.p = f32(s.x[0] + V{0.1, 0.02, 0});
+    r.pb = f32(s.x[1] + V{-0.1, -0.01, 0});
+    const V ra = r.p - s.x[0], rb = r.pb - s.x[1];
+    const M ia = conj(rotation(s.q[0]), diag({1 / z.bodies[0].inertia()[0], 1 / z.bodies[0].inertia()[4],
+                                              1 / z.bodies[0].inertia()[8]}));
+    const M ib = conj(rotation(s.q[1]), diag({1 / z.bodies[1].inertia()[0], 1 / z.bodies[1].inertia()[4],
+                                              1 / z.bodies[1].inertia()[8]}));
+    const double vn = dot((t.v[0] + cross(t.w[0], ra)) - (t.v[1] + cross(t.w[1], rb)), r.n);
+    if (vn < 0) {
+      const V ca = cross(ra, r.n), cb = cross(rb, r.n);
+      const double k = 1 / z.bodies[0].m + 1 / z.bodies[1].m + dot(ca, mul(ia, ca)) + dot(cb, mul(ib, cb));
+      r.jn = f32(-(1 + e) * vn / k);
+      const V j = r.jn * r.n;  // on A at p, -j on B at pb
+      t.v[0] = t.v[0] + (1 / z.bodies[0].m) * j;
+      t.w[0] = t.w[0] + mul(ia, cross(ra, j));
+      t.v[1] = t.v[1] - (1 / z.bodies[1].m) * j;
+      t.w[1] = t.w[1] - mul(ib, cross(rb, j));
+    }
+    rows.push_back(r);
+  });
+  return z;
+}
+
+TEST_F(ZooEngines, TwoWitnessPointsPerRowAreJudgedOnBoth) {
+  const Zoo z = witness_pair_engine();
+  const int first = first_impulse(z, 0, 1);
+  ASSERT_GT(first, 0);
+  // The pair leaves turning: each body's spin is its own lever's.
+  ASSERT_GT(norm(z.states[first].w[0]), 1.0);
+  ASSERT_GT(norm(z.states[first].w[1]), 0.5);
+  expect_clean(judge(z, "witness-pair"));
+  const std::string at = "frame " + std::to_string(first);
+  {  // one point per row (A's): B's lever is 3 cm off across the normal
+    Zoo one = z;
+    one.point_b = false;
+    const Result r = judge(one, "one-point");
+    expect_caught(r, {at + ": body 1", at + ": isolated group of 2 bodies"});
+    EXPECT_TRUE(row_verdict(r.output, "momentum-balance", "FAIL")) << r.output;
+    EXPECT_TRUE(row_verdict(r.output, "conservation", "FAIL")) << r.output;
+  }
+  {  // B's point moved 1 cm off B's face (into A, along the normal: the levers' torques stay)
+    Zoo off = z;
+    off.rows[first - 1][0].pb = f32(off.rows[first - 1][0].pb + V{-0.01, 0, 0});
+    const Result r = judge(off, "point-b-off");
+    expect_caught(r, {"contact-geometry", at + ": pair (0, 1) row 0: point_b"});
+    EXPECT_TRUE(row_verdict(r.output, "momentum-balance", "pass")) << r.output;
+  }
+  {  // a point on B that is not a number: refused before anything is judged (exit 2)
+    Zoo bad = z;
+    bad.rows[first - 1][0].pb = {std::nan(""), 0, 0};
+    const Result r = judge(bad, "point-b-nan");
+    EXPECT_EQ(r.code, 2) << r.output;
+    for (const std::string& f :
+         {std::string("/contacts/point_b: ") + at + ": row 0 (pair (0, 1))", std::string("not finite")})
+      EXPECT_NE(r.output.find(f), std::string::npos) << f << "\n" << r.output;
   }
 }
 

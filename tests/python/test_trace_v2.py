@@ -102,24 +102,26 @@ def test_bullet_rotation_trace_exposes_orientation_angular_velocity_inertia_and_
         rows_seen = 0
         for fr in range(20, 61, 10):
             c = t.contacts(fr)
-            assert set(c) == {"pair", "normal", "depth", "jn", "jt", "point"}
+            # Bullet's rows: A's witness point, B's (/contacts/point_b), the friction vectors.
+            assert set(c) == {"pair", "normal", "depth", "jn", "jt", "point", "point_b", "jt3"}
             by_pair = t.contacts_by_pair(fr)
             assert list(by_pair) == [(0, 1)]
             k = len(by_pair[(0, 1)]["depth"])
             assert k >= 2 and k == len(c["depth"])
             assert np.array_equal(by_pair[(0, 1)]["point"], c["point"])
+            assert np.array_equal(by_pair[(0, 1)]["point_b"], c["point_b"])
             assert np.allclose(np.linalg.norm(c["normal"].astype(float), axis=1), 1.0, atol=1e-3)
             assert (c["depth"] >= 0).all() and (c["jn"] >= 0).all()
             x_pre, _ = t.state(fr - 1)
             q_pre, _ = t.rotation(fr - 1)
-            for p in c["point"].astype(float):
+            for p in np.concatenate([c["point"], c["point_b"]]).astype(float):
                 for body in (0, 1):
                     local = rotate(q_pre[body] * np.array([1, -1, -1, -1]), p - x_pre[body])
                     lo_b = f["bodies/local_aabb_min"][body] - margin
                     hi_b = f["bodies/local_aabb_max"][body] + margin
                     assert (local >= lo_b).all() and (local <= hi_b).all(), (fr, body, p, local)
                 rows_seen += 1
-        assert rows_seen >= 10
+        assert rows_seen >= 20
     assert octocd.Trace(path).version == 2
 
 

@@ -3,7 +3,9 @@ it: the friction as the scalar `jt` only (no `/contacts/jt3`), no declarations (
 attributes `contact_model`, `gyroscopic`, `integrator`, `deactivation`, `collision_shape`,
 `contact_geometry`, `broadphase_exact`, `contact_margin_rule`, `jt_direction`,
 `velocity_clamp`, `impulses_complete`, `response_scheme`, `friction_directions`; datasets
-`/bodies/collision_shape`, `/bodies/locked_dofs`, `/states/sleeping`).
+`/bodies/collision_shape`, `/bodies/locked_dofs`, `/states/sleeping`), one point per row (a
+row's two witness points `/contacts/point`, `/contacts/point_b` become their midpoint in
+`/contacts/point`, as the earlier writer of Bullet's traces wrote it).
 
     /usr/bin/python3 tests/scene/legacy_trace.py CLEAN.h5 LEGACY.h5 [--drop /pairs ...]
 
@@ -29,6 +31,9 @@ def make_legacy(clean, out, drop=()):
         for name in DECLARATIONS:
             if name in f.attrs:
                 del f.attrs[name]
+        if "/contacts/point_b" in f:
+            f["/contacts/point"][...] = 0.5 * (f["/contacts/point"][...] + f["/contacts/point_b"][...])
+            del f["/contacts/point_b"]
         for name in DECLARED_DATASETS + list(drop):
             if name in f:
                 del f[name]

@@ -68,7 +68,8 @@ V3 rotate(const double* q, V3 v, bool inverse = false) {
 struct Trace {
   std::string path;
   int bodies = 0, frames = 0;
-  Data pos, vel, quat, inv_mass, contact_offsets, contact_pair, normal, depth, jn, jt, jt3, point, pair_offsets, pairs;
+  Data pos, vel, quat, inv_mass, contact_offsets, contact_pair, normal, depth, jn, jt, jt3, point, point_b, pair_offsets,
+      pairs;
   double mu = 0.5;
 
   void load(const std::string& p) {
@@ -87,6 +88,7 @@ struct Trace {
     jt = read(f, "/contacts/jt");
     jt3 = read(f, "/contacts/jt3");
     point = read(f, "/contacts/point");
+    point_b = read(f, "/contacts/point_b");  // Bullet: each row's witness point on B
     pair_offsets = read(f, "/pairs/offsets");
     pairs = read(f, "/pairs/pair");
     mu = root_double(f, "mu", 0.5);
@@ -339,6 +341,7 @@ void drop_contact(hid_t file, const Trace& t, int frame, int a, int b) {
   replace(file, "/contacts/jt", subset(t.jt));
   if (!t.jt3.v.empty()) replace(file, "/contacts/jt3", subset(t.jt3));
   if (!t.point.v.empty()) replace(file, "/contacts/point", subset(t.point));
+  if (!t.point_b.v.empty()) replace(file, "/contacts/point_b", subset(t.point_b));
 }
 
 TEST_F(RotationFaults, AContactRemovedFromAPenetratingPairFails) {

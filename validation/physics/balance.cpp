@@ -162,8 +162,11 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     ++rows_of[p.b];
     const D3 nrm = unit3(d3(c.normal));
     const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
+    // The row's point on A, and on B where the record gives a second witness point
+    // (FrameRecord::point_b: the engine applied B's impulse there).
+    const bool two_points = rec.has_points && rec.point_b.size() == rec.contacts.size();
     const D3 pt = rec.has_points ? d3(c.point) : D3{};
-    const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? pt - xb : D3{};
+    const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? d3(point_on_b(rec, k)) - xb : D3{};
     // The friction impulse's direction: the trace convention's -v_t / |v_t|, v_t the
     // tangential velocity of A relative to B at the row's point before the solver
     // (v_pre + dt g on dynamic bodies, w_pre); octocd's records: J_t along +t.
@@ -185,7 +188,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       jt_vec = d3(rec.jt3[k]);  // /contacts/jt3: the friction impulse on A, nothing left open
     } else if (vt_len > tol.friction_direction_speed) {
       jt_vec = (bodies.jt_along_sliding ? double(c.jt) : -double(c.jt)) * ((1.0 / vt_len) * vt);
-      if (rotating && rec.has_points) {
+      if (rotating && rec.has_points && !two_points) {
         // An engine may take each body's velocity at its own witness point (Bullet), up
         // to the depth or the contact margin apart along the normal: v_t there differs by
         // up to (|w_a| + |w_b|) s, turning the direction by at most that over |v_t|; the
@@ -245,7 +248,8 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       // (which moves the friction part's lever) and, in a persistent manifold, up to the
       // contact margin apart sideways as the bodies move before the point is dropped
       // (which moves the normal part's lever): half of that from the recorded point.
-      const double s = double(c.depth) + pair_margin(p);
+      // With both witness points recorded (point_b) each lever is the engine's own: none.
+      const double s = two_points ? 0.0 : double(c.depth) + pair_margin(p);
       const double lever = s * (jt + uncertain) + 0.5 * s * std::fabs(double(c.jn));
       tallow[p.a] += len3(ra) * (uncertain + theta * (std::fabs(double(c.jn)) + jt)) + lever;
       tallow[p.b] += len3(rb) * (uncertain + theta * (std::fabs(double(c.jn)) + jt)) + lever;

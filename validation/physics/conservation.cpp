@@ -58,17 +58,36 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   // "witness-pair" the two points may also lie apart across the normal (a persistent
   // manifold's drift), and the lever applies to the whole impulse (jn and jt). Summed per
   // group, it joins the bound.
+  // With both witness points recorded (FrameRecord::point_b) a row turns its pair by
+  // exactly (p_a - p_b) x J: summed per group into the expected change (witness_turn), it
+  // leaves open only the friction impulse a record without jt3 gives as a scalar
+  // (|p_a - p_b| |jt|) and the points' float32 rounding.
   std::map<std::uint32_t, double> witness_torque;
-  for (const ContactRecord& c : rec.contacts)
-    if (dynamic(c.pair.a) && dynamic(c.pair.b)) {
-      // impulses "normal-only": |jt| unknown, at most mu jn (the row cone margin as in
-      // momentum-balance) + friction_cone_abs.
-      const double jt = bodies.impulses == PhysicsBodies::Impulses::NormalOnly
-                            ? pair_mu(c.pair) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs
-                            : std::fabs(double(c.jt));
-      const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
-      witness_torque[find(c.pair.a)] += (double(c.depth) + pair_margin(c.pair)) * j;
+  std::map<std::uint32_t, D3> witness_turn;
+  const bool two_points = rec.has_points && rec.point_b.size() == rec.contacts.size();
+  const bool normal_only = bodies.impulses == PhysicsBodies::Impulses::NormalOnly;
+  const bool vector_friction = rec.jt3.size() == rec.contacts.size() && !normal_only;
+  for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
+    const ContactRecord& c = rec.contacts[k];
+    if (!dynamic(c.pair.a) || !dynamic(c.pair.b)) continue;
+    // impulses "normal-only": |jt| unknown, at most mu jn (the row cone margin as in
+    // momentum-balance) + friction_cone_abs.
+    const double jt = normal_only
+                          ? pair_mu(c.pair) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs
+                          : std::fabs(double(c.jt));
+    if (two_points) {
+      const D3 pa = d3(c.point), pb = d3(rec.point_b[k]);
+      const D3 nrm = d3(c.normal);
+      const D3 j = (double(c.jn) / len3(nrm)) * nrm + (vector_friction ? d3(rec.jt3[k]) : D3{});
+      const std::uint32_t root = find(c.pair.a);
+      witness_turn[root] = witness_turn[root] + cross3(pa - pb, j);
+      witness_torque[root] += vector_friction ? 4.0 * kEps32 * (len3(pa) + len3(pb)) * len3(j)
+                                              : len3(pa - pb) * jt + 4.0 * kEps32 * (len3(pa) + len3(pb)) * (len3(j) + jt);
+      continue;
     }
+    const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
+    witness_torque[find(c.pair.a)] += (double(c.depth) + pair_margin(c.pair)) * j;
+  }
   const std::map<std::uint32_t, std::vector<std::uint32_t>>& groups_of = graph.groups;
   for (auto& group : groups_of) {
     poll();
@@ -193,14 +212,20 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
       if (bodies.gyroscopic != PhysicsBodies::Gyroscopic::Absent)  // declared or admitted (undeclared)
         gyro += dt * dt * std::max(dot3(w0, w0) * len3(iw0), dot3(w1, w1) * len3(iw1));
     }
-    const double dl = len3(l1 - l0);
+    const D3 turn = witness_turn[root];  // zero without point_b
+    const double dl = len3(l1 - l0 - turn);
     const double lbound =
         tol.angular_momentum_rel * lexchanged + gyro + orbital_drift + witness_torque[root] + 16.0 * kEps32 * lscale +
         1e-9;
     angular.check(dl <= lbound, dl / lbound, Where{frame, group_name(members)}, [&] {
       return fmt::format("frame {}: isolated group of {} bodies (body {} ...): angular momentum about its centre "
-                         "of mass changes by {:.4g} kg m^2/s (exchanged {:.4g}, bound {:.3g})",
-                         frame, members.size(), members.front(), dl, lexchanged, lbound);
+                         "of mass changes by {:.4g} kg m^2/s{} (exchanged {:.4g}, bound {:.3g})",
+                         frame, members.size(), members.front(), dl,
+                         two_points ? fmt::format(" beyond its rows' (p_a - p_b) x J = ({:.4g}, {:.4g}, {:.4g}) "
+                                                  "(/contacts/point_b)",
+                                                  turn[0], turn[1], turn[2])
+                                    : std::string(),
+                         lexchanged, lbound);
     });
   }
   if (tracks_episodes()) soft_episodes(rec, components(graph));

@@ -200,6 +200,10 @@ void PhysicsValidators::Impl::pair_figures(CheckedFrame& f, std::size_t i, const
       // max(0, d - r), taken for both (never stricter than the rounded surface).
       rf.da = std::max(0.0, ref->surface_distance(p.a, det[p.a], c.point) - radius(p.a));
       rf.db = std::max(0.0, ref->surface_distance(p.b, det[p.b], c.point) - radius(p.b));
+      if (rec.point_b.size() == rec.contacts.size()) {  // the row's point on B: the same measure
+        rf.da_b = std::max(0.0, ref->surface_distance(p.a, det[p.a], rec.point_b[k]) - radius(p.a));
+        rf.db_b = std::max(0.0, ref->surface_distance(p.b, det[p.b], rec.point_b[k]) - radius(p.b));
+      }
     }
   }
 }
@@ -436,6 +440,17 @@ void PhysicsValidators::Impl::judge<RowId::ContactGeometry>(CheckedFrame& f) {
                              frame, pair_name(p), k - pr.first, c.point.x, c.point.y, c.point.z, da, p.a, db, p.b,
                              reach_p);
         });
+        if (rec.point_b.size() == rec.contacts.size()) {
+          // The row's point on B (/contacts/point_b): judged as its point, on both surfaces.
+          const Vec3 pb = rec.point_b[k];
+          const double da_b = row_fig[k].da_b, db_b = row_fig[k].db_b;
+          const double off_b = std::max(da_b, db_b) - reach_p;
+          points.check(off_b <= tol.depth_m, off_b, Where{frame, p}, [&] {
+            return fmt::format("frame {}: {} row {}: point_b ({:.4f}, {:.4f}, {:.4f}) is {:.4g} m from body {} "
+                               "and {:.4g} m from body {} (depth or distance {:.4g} m)",
+                               frame, pair_name(p), k - pr.first, pb.x, pb.y, pb.z, da_b, p.a, db_b, p.b, reach_p);
+          });
+        }
       }
     }
     if (!depth_known) {  // depth_per "unknown": the depth cause is n/a (counted)

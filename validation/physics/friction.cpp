@@ -38,14 +38,15 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
     const M3 ib = dynamic(p.b) ? conjugated(rotation(det[p.b].orientation), inverse(inertia[p.b])) : M3{};
     for (std::size_t k = k0; k < k1; ++k) {
       const ContactRecord& c = rec.contacts[k];
-      const D3 j = double(c.jn) * d3(c.normal), pt = d3(c.point);
+      // B's impulse at its own witness point where the record gives one (point_b).
+      const D3 j = double(c.jn) * d3(c.normal), pt = d3(c.point), pt_b = d3(point_on_b(rec, k));
       if (dynamic(p.a)) {
         normal.va = normal.va + (1.0 / mass[p.a]) * j;
         normal.wa = normal.wa + mul(ia, cross3(pt - xa, j));
       }
       if (dynamic(p.b)) {
         normal.vb = normal.vb - (1.0 / mass[p.b]) * j;
-        normal.wb = normal.wb - mul(ib, cross3(pt - xb, j));
+        normal.wb = normal.wb - mul(ib, cross3(pt_b - xb, j));
       }
     }
   }
@@ -57,7 +58,8 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
     for (std::size_t k = k0; k < k1; ++k) {
       const ContactRecord& c = rec.contacts[k];
       const D3 nrm = d3(c.normal), j = d3(rec.jt3[k]);
-      const D3 ra = rec.has_points ? d3(c.point) - xa : D3{}, rb = rec.has_points ? d3(c.point) - xb : D3{};
+      const D3 ra = rec.has_points ? d3(c.point) - xa : D3{};
+      const D3 rb = rec.has_points ? d3(point_on_b(rec, k)) - xb : D3{};
       const D3 rel = (v.va + cross3(v.wa, ra)) - (v.vb + cross3(v.wb, rb));
       const D3 vt = rel - dot3(rel, nrm) * nrm;
       work += dot3(j, vt);
@@ -250,14 +252,14 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
       for (std::size_t k = k0; k < k1; ++k) {
         const ContactRecord& c = rec.contacts[k];
         const D3 j = double(c.jn) * d3(c.normal);
-        const D3 pt = d3(c.point);
+        const D3 pt = d3(c.point), pt_b = d3(point_on_b(rec, k));
         if (dynamic(p.a)) {
           van = van + (1.0 / mass[p.a]) * j;
           wan = wan + mul(ia, cross3(pt - xa, j));
         }
         if (dynamic(p.b)) {
           vbn = vbn - (1.0 / mass[p.b]) * j;
-          wbn = wbn - mul(ib, cross3(pt - xb, j));
+          wbn = wbn - mul(ib, cross3(pt_b - xb, j));
         }
       }
     }
@@ -265,7 +267,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
       const ContactRecord& c = rec.contacts[k];
       const D3 nrm = d3(c.normal);
       const D3 pt = rec.has_points ? d3(c.point) : D3{};
-      const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? pt - xb : D3{};
+      const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? d3(point_on_b(rec, k)) - xb : D3{};
       auto tangential_speed = [&](D3 va, D3 wa, D3 vb, D3 wb) {
         const D3 rel = (va + cross3(wa, ra)) - (vb + cross3(wb, rb));
         return len3(rel - dot3(rel, nrm) * nrm);

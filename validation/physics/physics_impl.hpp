@@ -233,6 +233,8 @@ struct PairFigures {
 struct RowFigures {
   RowReference ref;       ///< the reference normal the row is judged against, and its angle
   double da = 0, db = 0;  ///< the point's distance to A's and B's surfaces (m; has_points)
+  /// The point on B's (FrameRecord::point_b) distance to A's and B's surfaces (m; 0 without).
+  double da_b = 0, db_b = 0;
 };
 
 /// One checked frame as rows 1-4 read it (PhysicsValidators::Impl::checked_frame).
@@ -538,6 +540,12 @@ struct PhysicsValidators::Impl {
   /// Pair p's convex radii summed (m; PhysicsBodies::convex_radius, 0 without): how far the
   /// rounded shapes reach beyond the posed ones.
   double inflation(Pair p) const { return radius(p.a) + radius(p.b); }
+  /// Where row k of `rec` applies its impulse on B (m, world): FrameRecord::point_b where
+  /// the record carries it (two witness points per row), else the row's point (one point
+  /// for both bodies). Only meaningful with rec.has_points.
+  static Vec3 point_on_b(const FrameRecord& rec, std::size_t k) {
+    return rec.point_b.size() == rec.contacts.size() ? rec.point_b[k] : rec.contacts[k].point;
+  }
   /// Body i's centre of mass at pose `pose` (m, world): the pose's position plus the
   /// rotated PhysicsBodies::com_offset (the position itself without one). The lever origin
   /// of a row's impulse at the detection pose (momentum-balance, friction).

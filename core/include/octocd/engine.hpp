@@ -195,6 +195,13 @@ struct FrameRecord {
   /// its friction directions summed as a vector). Empty when the engine gives none: the
   /// physics tier then judges the scalar ContactRecord::jt.
   std::vector<Vec3> jt3;
+  /// Where the engine applied each row's impulse on B (m, world frame), one per entry of
+  /// `contacts`, in the same order, when it applies a row at two witness points: the
+  /// row's ContactRecord::point is then the point on A, this the point on B (external
+  /// traces v2: `/contacts/point_b`; `bullet` with rotation: getPositionWorldOnB of body1,
+  /// btSequentialImpulseConstraintSolver's rel_pos2). Empty: one point per row (octocd's
+  /// engines), used for both bodies. Only with has_points.
+  std::vector<Vec3> point_b;
   /// Bodies the engine had deactivated (put to sleep) in the state before / after the
   /// step: one flag per body, 1 = asleep (external traces v2: `/states/sleeping`). Empty:
   /// every body awake. A body asleep in both is judged not to move; one that fell asleep
@@ -244,6 +251,9 @@ struct RotationTraits {
   /// Every record carries FrameRecord::jt3 (the tangential impulse vectors): the trace
   /// writes /contacts/jt3.
   bool jt3 = false;
+  /// Every record carries FrameRecord::point_b (each row's point on B): the trace writes
+  /// /contacts/point_b.
+  bool point_b = false;
   // ---- Declarations (docs/validate-your-engine.md, "Declarations"): engine facts the
   // physics tier's rules read; "" = not declared (the root attribute is not written and a
   // reader takes its documented default).

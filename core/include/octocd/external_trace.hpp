@@ -95,6 +95,8 @@ struct RecordFieldNames {
               q_det = "q_det", contact_point = "contacts.point";
   /// The tangential impulse vectors (design.md section 13b.11; traces: /contacts/jt3).
   std::string contact_jt3 = "contacts.jt3";
+  /// Each row's point on B (FrameRecord::point_b; traces: /contacts/point_b).
+  std::string contact_point_b = "contacts.point_b";
 };
 
 /// Largest angle (degrees) between a contact row's tangential impulse vector
@@ -114,7 +116,8 @@ inline constexpr double kJt3MaxAngleDeg = 1.0;
 /// several rows, which must be consecutive (sorted by (a, b) non-decreasingly); normals
 /// finite and unit (|n| within 1e-3 of 1); depth finite >= 0; J_n finite >= 0; J_t finite;
 /// with rec.has_points every contact point finite (m); rec.jt3 empty or one finite vector
-/// per contact within kJt3MaxAngleDeg of its contact plane.
+/// per contact within kJt3MaxAngleDeg of its contact plane; rec.point_b empty or, with
+/// rec.has_points, one finite point (m) per contact.
 /// Rotation (design.md section 13): q_pre, q_post, w_pre, w_post all empty (no rotation) or all one per
 /// body, and then the states too; quaternions finite with | |q| - 1 | <= 1e-3; angular
 /// velocities finite (rad/s). Detection pose: x_det empty or one finite position per
@@ -165,6 +168,7 @@ struct ExternalTraceInfo {
   bool has_points = false;          ///< v2: /contacts/point
   bool manifolds = false;           ///< v2: some pair has several contact rows in a frame
   bool has_jt3 = false;             ///< v2: /contacts/jt3 (friction impulse vectors)
+  bool has_point_b = false;         ///< v2: /contacts/point_b (each row's point on B)
   bool has_sleeping = false;        ///< v2: /states/sleeping (the bodies the engine deactivated)
   /// A version 1 trace of octocd's TraceWriter (/frames and the root attribute
   /// `parameters`) that declares none of the declarations (written before they existed):

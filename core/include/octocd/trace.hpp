@@ -105,7 +105,8 @@ struct TraceOptions {
   /// friction_combine, restitution_combine, contact_margin, broadphase_exact,
   /// contact_geometry, gravity; /bodies/inertia, friction, restitution;
   /// /states/orientation and angular_velocity beside every state row; with `contacts`,
-  /// /contacts/point (and /contacts/jt3 when RotationTraits::jt3), /pairs (offsets, pair)
+  /// /contacts/point (and /contacts/jt3 when RotationTraits::jt3, /contacts/point_b when
+  /// RotationTraits::point_b), /pairs (offsets, pair)
   /// and /aabbs (min, max) from append_frame_v2.
   /// Unset: version 1 (with TraceMetadata::declarations as root attributes).
   std::optional<RotationTraits> v2;

@@ -42,7 +42,8 @@
 ///     each point within the pair's depth (or distance, or half the contact margin:
 ///     the midpoint of a persistent manifold's row) + `depth_m` of the nearer of the two
 ///     surfaces (a witness point lies on one; any point of the intersection lies within
-///     the depth of both). Engines resolving on world AABBs
+///     the depth of both); FrameRecord::point_b (the row's point on B) is judged the same
+///     way. Engines resolving on world AABBs
 ///     (ContactGeometry::Aabb) are judged against box-box on rec.aabbs (the least overlap
 ///     of the two boxes' axes, ReferenceGeometry::aabb_pair); their angle
 ///     to the posed shapes is a figure. The sign share is a figure.
@@ -82,7 +83,9 @@
 ///     mass, sum m (x_pre - c_pre) x v + R I R^T w (v, q, w before: v_pre + dt g, q_pre,
 ///     w_pre; after: v_post, q_post, w_post), kept within angular_momentum_rel x the
 ///     exchange + dt |w x I w| per body (free rotation) + (depth + margin) |jt| per row
-///     (impulses applied at two witness points) (rotating records; n/a for
+///     (impulses applied at two witness points; with FrameRecord::point_b the change is
+///     expected to be exactly sum (p_a - p_b) x J over the group's rows, leaving
+///     |p_a - p_b| |jt| open without jt3) (rotating records; n/a for
 ///     translation-only ones); kinetic energy (translational + rotational) does not rise
 ///     when every restitution <= 1 (contact_model soft: per pair contact episode instead,
 ///     PhysicsBodies::contact_model). Groups with locked axes (locked_dofs) do not judge
@@ -90,7 +93,8 @@
 ///  7. `momentum-balance` (every frame with states; design.md section 13b.7): per dynamic body with
 ///     contact rows, m (v' - v) - m g dt = sum of its rows' J = jn n + J_t (J_t: jt along
 ///     -v_t, or +t for octocd's records), and with rotation and points the torques
-///     sum (p - x) x J = I_w (w' - w) (no gyroscopic term) or = L' - L, L = R I R^T w
+///     sum (p - x) x J = I_w (w' - w) (p on B: FrameRecord::point_b where the record
+///     carries it, with no witness-point allowance) (no gyroscopic term) or = L' - L, L = R I R^T w
 ///     before and after the step, within its first-order bound (the term; undeclared:
 ///     either, PhysicsBodies::gyroscopic); bound: balance_ulps x 2^-23 x
 ///     (rows + 2) x the magnitudes, plus what a scalar jt leaves open (discs in each row's

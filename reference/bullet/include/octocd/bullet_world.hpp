@@ -232,8 +232,10 @@ class BulletWorld : public Engine {
   ///   swapped and the normal flipped when body0 > body1); normal = Bullet's
   ///   normalWorldOnB, which points from body1 to body0, i.e. from B to A; the distance
   ///   and the two witness points are moved from the hulls' inflated surfaces (margin
-  ///   outside) to the true shapes; depth = max(0, -distance); point = the midpoint of the
-  ///   two witness points; jn = appliedImpulse; jt = the friction impulse on A
+  ///   outside) to the true shapes; depth = max(0, -distance); point = A's witness point
+  ///   and point_b = B's (where the solver applies each body's impulse: rel_pos1 and
+  ///   rel_pos2 of btSequentialImpulseConstraintSolver::setupContactConstraint);
+  ///   jn = appliedImpulse; jt = the friction impulse on A
   ///   (appliedImpulseLateral1 x lateralFrictionDir1, + lateral 2 when the solver uses
   ///   two directions) projected on -v_t/|v_t|, v_t the tangential part of A's velocity
   ///   relative to B's at the point, from v_pre + dt g (dynamic bodies) and w_pre, so

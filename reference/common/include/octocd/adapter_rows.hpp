@@ -46,8 +46,11 @@ inline void sort_unique_pairs(std::vector<Pair>& pairs) {
 /// their tangential impulse vectors `jt3` (same order, same size) go to `r.contacts` and
 /// `r.jt3`, sorted by pair with a stable sort (a pair's rows consecutive, in the engine's
 /// order); `r.confirmed` gets the pairs with a row; has_contact_terms false, manifolds and
-/// has_points true. `rows` and `jt3` are left empty.
-void finish_manifold_record(FrameRecord& r, std::vector<ContactRecord>& rows, std::vector<Vec3>& jt3);
+/// has_points true. `rows` and `jt3` are left empty. `point_b` (same size, or null): each
+/// row's point on B where the engine applies B's impulse, sorted alongside into
+/// `r.point_b` and left empty; null: `r.point_b` empty (one point per row).
+void finish_manifold_record(FrameRecord& r, std::vector<ContactRecord>& rows, std::vector<Vec3>& jt3,
+                            std::vector<Vec3>* point_b = nullptr);
 
 /// Applies "KEY=VALUE" items in order by calling `set(key, value)` (which throws InputError
 /// for a bad key or value). Throws InputError "<where>: 'ITEM' is not KEY=VALUE; allowed:
