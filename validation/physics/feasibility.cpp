@@ -49,6 +49,16 @@ constexpr std::size_t kMaxRemembered = 8;
 /// takes as a normal the engine may use there (cos 45 degrees).
 constexpr double kFeatureCos = 0.70710678118654752;
 
+/// How far an engine's own normal may lie from octocd's (deg): an engine queries the shapes
+/// its own way (Jolt's normals lie up to 1.17 deg from a fresh query of the same pair).
+/// Every normal within it is admitted by widening each cone to tilted_mu.
+constexpr double kNormalSlackDeg = 1.5;
+/// The friction coefficient of the cone about n that holds every cone of coefficient mu
+/// about a normal within kNormalSlackDeg of n: tan(atan(mu) + the slack).
+double tilted_mu(double mu) {
+  return std::tan(std::min(std::atan(mu) + kNormalSlackDeg * 3.14159265358979323846 / 180.0, 1.5));
+}
+
 D3 unit(D3 a) {
   const double l = len3(a);
   return l > 0 ? (1.0 / l) * a : D3{};
@@ -514,7 +524,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       const auto [e1, e2] = tangent_basis(c.normal);
       for (int j = 0; j < kConeSides; ++j) {
         const double a = 2.0 * kPi * j / kConeSides;
-        const D3 dir = c.normal + (c.mu * widen) * (std::cos(a) * e1 + std::sin(a) * e2);
+        const D3 dir = c.normal + (tilted_mu(c.mu) * widen) * (std::cos(a) * e1 + std::sin(a) * e2);
         columns.push_back({k, dir});
         for (const auto& [i, sign] : {std::pair<std::uint32_t, double>{c.pair.a, 1.0}, {c.pair.b, -1.0}}) {
           const auto it = slot.find(i);

@@ -108,8 +108,8 @@
 ///     face of the other shape, that face's normal within 45 degrees. Per island (dynamic
 ///     bodies joined by such contacts, 48 bodies at most: larger ones counted and named,
 ///     not judged) a linear programme (COIN-OR CLP) over compressive impulses in each
-///     point's friction cone (an 8-sided pyramid circumscribed about it, 1.082 mu along its
-///     edges) minimises the largest residual of the bodies' momentum changes m (v' - v -
+///     point's friction cone (widened to every normal within 1.5 deg of octocd's, then an
+///     8-sided pyramid circumscribed about it, 1.082 x that along its edges) minimises the largest residual of the bodies' momentum changes m (v' - v -
 ///     g dt) and, with rotation, L' - L (or I_w (w' - w) without the gyroscopic term), each
 ///     in units of its bound: balance_ulps x 2^-23 x (points + 2) x the magnitudes, the
 ///     torque of that at the farthest point, and with rotation the lever the engine's point
