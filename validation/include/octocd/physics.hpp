@@ -106,7 +106,7 @@
 ///     hulls, else FCL's; an engine on AABBs: the world boxes' least overlap), its points
 ///     (the corners of the overlap of the two shapes' near outlines) and, per vertex near a
 ///     face of the other shape, that face's normal within 45 degrees. Per island (dynamic
-///     bodies joined by such contacts, 48 bodies at most: larger ones counted and named,
+///     bodies joined by such contacts, 16 bodies at most: larger ones counted and named,
 ///     not judged) a linear programme (COIN-OR CLP) over compressive impulses in each
 ///     point's friction cone (widened to every normal within 1.5 deg of octocd's, then an
 ///     8-sided pyramid circumscribed about it, 1.082 x that along its edges) minimises the largest residual of the bodies' momentum changes m (v' - v -
