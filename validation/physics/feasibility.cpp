@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <numeric>
 
 #include <ClpSimplex.hpp>
@@ -42,9 +43,17 @@ constexpr std::size_t kMaxNormals = 6;
 /// Of a failing island, the most bodies whose motion is left free in turn to find which
 /// explain the failure.
 constexpr std::size_t kMaxLeftFree = 16;
-/// The most normals a pair remembers from earlier steps in reach (a persistent manifold
-/// keeps the normal a point was found with while the bodies turn: Bullet).
-constexpr std::size_t kMaxRemembered = 8;
+/// The most earlier steps whose poses the row keeps to find the normals a persistent manifold
+/// point may still carry (a persistent point keeps the normal it was found with while the
+/// bodies turn: Bullet), and the most poses kept in all (bodies x steps: 2^21, 64 MiB).
+constexpr std::size_t kMaxPastSteps = 64;
+constexpr std::size_t kMaxPastPoses = std::size_t(1) << 21;
+/// Of the normals a point carried on earlier steps, those kept as columns lie at least this
+/// far apart (deg), the oldest always kept: the cones about two normals span the cones about
+/// every normal between them (a friction cone of half-angle > 0 about each end).
+constexpr double kPersistSpacingDeg = 5.0;
+/// The least angle of an earlier normal from the ones a point has for it to be kept: 0.1 deg.
+constexpr double kPersistLeastCos = 0.99999847691328769;
 /// The separating-axis test's largest work on a pair here (axes x vertices): two boxes, a
 /// box and a small hull; larger hulls take the posed reference's normal, and their faces
 /// near a vertex are not listed (kMaxFaceScan).
@@ -72,6 +81,12 @@ constexpr double kPosedNormalSlackDeg = 5.0;
 D3 unit(D3 a) {
   const double l = len3(a);
   return l > 0 ? (1.0 / l) * a : D3{};
+}
+
+/// R^T v: a world vector in the frame whose rotation is R.
+D3 mul_t(const M3& r, const D3& v) {
+  return {r[0] * v[0] + r[3] * v[1] + r[6] * v[2], r[1] * v[0] + r[4] * v[1] + r[7] * v[2],
+          r[2] * v[0] + r[5] * v[1] + r[8] * v[2]};
 }
 
 /// Two unit vectors spanning the plane normal to unit n.
@@ -149,6 +164,41 @@ bool crossing(const P2& a, const P2& b, const P2& c, const P2& d, P2& out) {
   return true;
 }
 
+/// The separating-axis test over the face normals of hulls a and b only (their vertices
+/// `va`, `vb` in the world; rotations ra, rb): the unit axis (B to A) of the least overlap,
+/// with `gap` its minus (the largest gap when apart); zero when neither hull has faces.
+D3 face_axes_least(const std::vector<D3>& va, const HullFeatures& ha, const M3& ra, const std::vector<D3>& vb,
+                   const HullFeatures& hb, const M3& rb, double& gap) {
+  D3 best{};
+  double least = std::numeric_limits<double>::infinity();
+  auto range = [](const std::vector<D3>& v, const D3& u) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (const D3& x : v) {
+      const double t = dot3(u, x);
+      lo = std::min(lo, t);
+      hi = std::max(hi, t);
+    }
+    return std::pair<double, double>{lo, hi};
+  };
+  for (const auto& [h, r] : {std::pair<const HullFeatures*, const M3*>{&ha, &ra}, {&hb, &rb}})
+    for (const auto& fl : h->face_normals) {
+      const D3 u = unit(mul(*r, D3{fl[0], fl[1], fl[2]}));
+      const auto [a0, a1] = range(va, u);
+      const auto [b0, b1] = range(vb, u);
+      // A moved along +u by b1 - a0, or along -u by a1 - b0, separates them along u.
+      if (b1 - a0 < least) {
+        least = b1 - a0;
+        best = u;
+      }
+      if (a1 - b0 < least) {
+        least = a1 - b0;
+        best = -1.0 * u;
+      }
+    }
+  gap = -least;
+  return best;
+}
+
 /// One contact of a pair as the programme reads it: a point (world) and the pair's normal
 /// (unit, B to A), with the pair's friction coefficient.
 struct Contact {
@@ -165,11 +215,12 @@ struct FeasibilityState {
   std::uint64_t too_large = 0, asleep = 0, clamped = 0, locked = 0, unsolved = 0;
   std::string too_large_first, unsolved_first;
   std::size_t largest = 0;
-  /// Per pair within reach on the last judged step, the normals it was given on the
-  /// steps since it came within reach (most recent first, at most kMaxRemembered).
-  std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<D3>> remembered;
-  std::int64_t remembered_frame = -1;
-  std::uint64_t remembered_used = 0;  ///< pair-steps given a remembered normal
+  /// The detection poses of the steps before this one (most recent first, consecutive
+  /// frames, at most kMaxPastSteps and kMaxPastPoses in all), and the frame of the first.
+  std::deque<std::vector<Pose>> past;
+  std::int64_t past_frame = -1;
+  std::uint64_t persisted = 0;  ///< contact points given normals of their earlier steps
+  std::size_t persisted_steps = 0;  ///< the most earlier steps a point's normals came from
 };
 
 }  // namespace
@@ -180,9 +231,26 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   const std::vector<Pose>& det = f.det;
   const Model& m = *model;
   const std::size_t n = m.bodies.size();
+  auto& st = row_state<FeasibilityState>(RowId::ImpulseFeasibility);
+  // Every step's detection poses join the past (after this step is judged): a gap in the
+  // frames or a step without poses starts it anew.
+  const bool posed = det.size() == n && rec.x_pre.size() == n;
+  if (!posed || rec.frame != st.past_frame + 1) st.past.clear();
+  struct Remember {
+    FeasibilityState& st;
+    const std::vector<Pose>& det;
+    std::int64_t frame;
+    bool posed;
+    std::size_t cap;
+    ~Remember() {
+      if (!posed) return;
+      st.past.push_front(det);
+      st.past_frame = frame;
+      while (st.past.size() > cap) st.past.pop_back();
+    }
+  } remember{st, det, rec.frame, posed, std::max<std::size_t>(1, std::min(kMaxPastSteps, kMaxPastPoses / std::max<std::size_t>(n, 1)))};
   if (!f.sampled) return;
   if (rec.x_pre.size() != n || rec.v_pre.size() != n || rec.x_post.size() != n || rec.v_post.size() != n) return;
-  auto& st = row_state<FeasibilityState>(RowId::ImpulseFeasibility);
   auto [infeasible] = tallies(RowId::ImpulseFeasibility, "infeasible");
   ++st.steps;
   const bool rotating = rec.q_pre.size() == n && rec.q_post.size() == n && rec.w_pre.size() == n &&
@@ -220,7 +288,48 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     return i;
   };
   std::vector<std::uint8_t> touched(n, 0);
-  std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<D3>> next_memory;
+  // The normals a persistent manifold point at `pt` may carry from the earlier steps (the
+  // past), beyond `nrm` (B to A): a point keeps the normal it was found with while its two
+  // material points (pt on A and on B, carried back with each body's pose) stay within the
+  // pair's margin (+ slack) of each other along and across it (Bullet's breaking
+  // threshold); the normal found then is `nrm` as it lay on A's or on B's earlier pose
+  // (the face it belongs to turns with its body). Walks back while either carried normal
+  // keeps the point; appends those kept (kPersistSpacingDeg apart, the oldest kept).
+  const double spacing_cos = std::cos(kPersistSpacingDeg * kPi / 180.0);
+  auto earlier_normals = [&](const Pair& p, const D3& pt, const D3& nrm, std::vector<D3>& out) {
+    if (st.past.empty()) return;
+    const M3 ra = rotation(det[p.a].orientation), rb = rotation(det[p.b].orientation);
+    const D3 la = mul_t(ra, pt - d3(det[p.a].position)), lb = mul_t(rb, pt - d3(det[p.b].position));
+    const std::array<D3, 2> local{mul_t(ra, nrm), mul_t(rb, nrm)};
+    std::array<D3, 2> last{nrm, nrm}, pending{nrm, nrm};
+    std::array<bool, 2> open{true, true};
+    const double thr = pair_margin(p) + slack;
+    std::size_t k = 0;
+    for (; k < st.past.size() && (open[0] || open[1]); ++k) {
+      const Pose& qa = st.past[k][p.a];
+      const Pose& qb = st.past[k][p.b];
+      const M3 pa = rotation(qa.orientation), pb = rotation(qb.orientation);
+      const D3 d = (d3(qa.position) + mul(pa, la)) - (d3(qb.position) + mul(pb, lb));
+      for (int side = 0; side < 2; ++side) {
+        if (!open[side]) continue;
+        const D3 nk = mul(side == 0 ? pa : pb, local[std::size_t(side)]);
+        const double along = dot3(d, nk);
+        if (along > thr || len3(d - along * nk) > thr) {
+          open[side] = false;
+          continue;
+        }
+        if (dot3(nk, last[std::size_t(side)]) < spacing_cos) {
+          out.push_back(nk);
+          last[std::size_t(side)] = pending[std::size_t(side)] = nk;
+        } else {
+          pending[std::size_t(side)] = nk;
+        }
+      }
+    }
+    for (int side = 0; side < 2; ++side)
+      if (dot3(pending[std::size_t(side)], last[std::size_t(side)]) < kPersistLeastCos) out.push_back(pending[std::size_t(side)]);
+    st.persisted_steps = std::max(st.persisted_steps, k);
+  };
   for (const Pair& p : cand) {
     poll();
     if (!dynamic(p.a) && !dynamic(p.b)) continue;
@@ -268,6 +377,11 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       SatSettings cheap = sat_settings;
       cheap.max_work = kMaxSatWork;  // larger hulls: the posed reference (FCL / libccd)
       const SatResult sat = sat_min_translation(ha, det[p.a], hb, det[p.b], cheap);
+      const M3 ra = rotation(det[p.a].orientation), rb = rotation(det[p.b].orientation);
+      const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
+      std::vector<D3> va(ha.vertices.size()), vb(hb.vertices.size());
+      for (std::size_t k = 0; k < va.size(); ++k) va[k] = xa + mul(ra, ha.vertices[k]);
+      for (std::size_t k = 0; k < vb.size(); ++k) vb[k] = xb + mul(rb, hb.vertices[k]);
       std::vector<D3> normals;
       double gap = 0;
       if (sat.tested) {
@@ -276,45 +390,44 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
         for (const SatAxis& ax : sat.accepted)
           if (normals.size() < 4 && dot3(D3{ax.normal[0], ax.normal[1], ax.normal[2]}, normals[0]) < 1.0 - 1e-9)
             normals.push_back(D3{ax.normal[0], ax.normal[1], ax.normal[2]});
+        // Apart: the direction of the nearest points (an engine's GJK normal) is no
+        // separating axis where the nearest features are a vertex and an edge or two
+        // vertices: the posed reference's (FCL's distance) is taken too.
+        if (gap > slack && gap <= reach) {
+          const ReferenceNormal r = ref->posed(p.a, p.b, det[p.a], det[p.b]);
+          if (r.valid && !r.penetrating && r.distance > slack) {
+            const D3 nr = unit(d3(r.normal));
+            if (dot3(nr, normals[0]) < 1.0 - 1e-9) normals.push_back(nr);
+          }
+        }
       } else {
+        // The posed reference (FCL / libccd); where it finds the shapes touching (|signed
+        // distance| within the slack, or no answer) its direction is its nearest points'
+        // rounding: the separating-axis test on the two hulls' face normals alone instead
+        // (a large hull resting on a face or a vertex).
         const ReferenceNormal r = ref->posed(p.a, p.b, det[p.a], det[p.b]);
-        if (!r.valid) {
-          gap = 0;  // touching: the hull vertices below decide the normal's points
-          const D3 d = com_at(det[p.a], p.a) - com_at(det[p.b], p.b);
-          normals.push_back(unit(d));
-        } else {
+        if (r.valid && std::fabs(r.signed_distance()) > slack) {
           gap = r.signed_distance();
           normals.push_back(unit(d3(r.normal)));
+        } else {
+          double face_gap = 0;
+          const D3 axis = face_axes_least(va, ha, ra, vb, hb, rb, face_gap);
+          if (len3(axis) == 0) continue;
+          gap = r.valid ? r.signed_distance() : face_gap;
+          normals.push_back(axis);
         }
       }
       if (gap > reach) continue;
-      // The normals of the steps since the pair came within reach (the last judged step
-      // must be the one before: a persistent manifold's normal is the one its point was
-      // found with), after this step's own.
-      {
-        std::vector<D3>& memory = next_memory[{p.a, p.b}];
-        memory = normals;
-        const auto it = st.remembered.find({p.a, p.b});
-        if (it != st.remembered.end() && st.remembered_frame == rec.frame - 1) {
-          bool used = false;
-          for (const D3& old : it->second) {
-            bool known = false;
-            for (const D3& q : memory) known = known || dot3(q, old) > 1.0 - 1e-4;
-            if (known || memory.size() >= kMaxRemembered) continue;
-            memory.push_back(old);
-            if (normals.size() < kMaxNormals + kMaxRemembered) {
-              normals.push_back(old);
-              used = true;
-            }
-          }
-          st.remembered_used += used;
-        }
-      }
-      const M3 ra = rotation(det[p.a].orientation), rb = rotation(det[p.b].orientation);
-      const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
-      std::vector<D3> va(ha.vertices.size()), vb(hb.vertices.size());
-      for (std::size_t k = 0; k < va.size(); ++k) va[k] = xa + mul(ra, ha.vertices[k]);
-      for (std::size_t k = 0; k < vb.size(); ++k) vb[k] = xb + mul(rb, hb.vertices[k]);
+      // A contact point with its normal, and with each normal it may carry from earlier steps.
+      std::vector<D3> earlier;
+      auto add_point = [&](const D3& pt, const D3& normal, double lever) {
+        const double slack_deg = sat.tested ? kNormalSlackDeg : kPosedNormalSlackDeg;
+        contacts.push_back({p, pt, normal, mu, lever, slack_deg});
+        earlier.clear();
+        earlier_normals(p, pt, normal, earlier);
+        st.persisted += !earlier.empty();
+        for (const D3& e : earlier) contacts.push_back({p, pt, e, mu, lever, slack_deg});
+      };
       for (const D3& nrm_raw : normals) {
         const D3 nrm = unit(nrm_raw);
         if (len3(nrm) == 0) continue;
@@ -382,7 +495,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
         const double lever = std::max(0.0, max_b - min_a) + reach;
         for (const P2& q : outline) {
           const D3& pt = patch[q.k];
-          contacts.push_back({p, pt, nrm, mu, lever, sat.tested ? kNormalSlackDeg : kPosedNormalSlackDeg});
+          add_point(pt, nrm, lever);
           // A vertex of one shape near a face of the other: that face's normal, where it is
           // within kFeatureCos of the pair's (an engine's manifold point keeps the normal of
           // the feature it was found on; a box's corner beside another's face takes the
@@ -403,7 +516,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
               const D3 face_n = vertex_of_a ? out : -1.0 * out;          // B to A
               const double c = dot3(face_n, nrm);
               if (c < kFeatureCos || c > 1.0 - 1e-9) continue;
-              contacts.push_back({p, pt, face_n, mu, lever, sat.tested ? kNormalSlackDeg : kPosedNormalSlackDeg});
+              add_point(pt, face_n, lever);
             }
           }
         }
@@ -415,8 +528,6 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     touched[p.a] = touched[p.b] = 1;
   }
   st.contacts += contacts.size();
-  st.remembered = std::move(next_memory);
-  st.remembered_frame = rec.frame;
 
   // Islands: the dynamic bodies joined through contacts between dynamic bodies.
   std::map<std::uint32_t, std::vector<std::uint32_t>> islands;
@@ -759,9 +870,10 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ImpulseFeasibility>() con
         infeasible.checks, st.steps, st.pairs, st.contacts, st.largest, infeasible.worst_or(0.0), kConeSides,
         1.0 / std::cos(kPi / kConeSides));
   }
-  note(r.detail, st.remembered_used,
-       "{} pair-steps also given the normals of their earlier steps in reach (a persistent manifold's)",
-       st.remembered_used);
+  note(r.detail, st.persisted,
+       "{} contact points also given the normals they carried on earlier steps (a persistent manifold's; up to {} "
+       "steps back)",
+       st.persisted, st.persisted_steps);
   note(r.detail, st.too_large, "{} islands above {} bodies not judged (first: {})", st.too_large, kMaxIslandBodies,
        st.too_large_first);
   note(r.detail, st.unsolved, "{} islands the programme did not solve, not judged (first: {})", st.unsolved,
