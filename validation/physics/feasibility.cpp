@@ -37,8 +37,8 @@ constexpr std::size_t kMaxIslandBodies = 16;
 /// kConeSides sides circumscribed about it (every feasible friction impulse stays feasible;
 /// the pyramid reaches 1 / cos(pi / kConeSides) = 1.082 mu along its edges).
 constexpr int kConeSides = 8;
-/// The most normals a pair is given (its least translation's axis, then the face axes
-/// within reach of it).
+/// The most separating axes a pair is given (its least translation's, then every axis
+/// within the pair's reach of it, least overlap first).
 constexpr std::size_t kMaxNormals = 6;
 /// Of a failing island, the most bodies whose motion is left free in turn to find which
 /// explain the failure.
@@ -293,16 +293,17 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // material points (pt on A and on B, carried back with each body's pose) stay within the
   // pair's margin (+ slack) of each other along and across it (Bullet's breaking
   // threshold); the normal found then is `nrm` as it lay on A's or on B's earlier pose
-  // (the face it belongs to turns with its body). Walks back while either carried normal
-  // keeps the point; appends those kept (kPersistSpacingDeg apart, the oldest kept).
+  // (the face it belongs to turns with its body: `sides` bit 0 A, bit 1 B, both for an
+  // edge cross or a normal of unknown origin). Walks back while a carried normal keeps the
+  // point; appends those kept (kPersistSpacingDeg apart, the oldest kept).
   const double spacing_cos = std::cos(kPersistSpacingDeg * kPi / 180.0);
-  auto earlier_normals = [&](const Pair& p, const D3& pt, const D3& nrm, std::vector<D3>& out) {
+  auto earlier_normals = [&](const Pair& p, const D3& pt, const D3& nrm, unsigned sides, std::vector<D3>& out) {
     if (st.past.empty()) return;
     const M3 ra = rotation(det[p.a].orientation), rb = rotation(det[p.b].orientation);
     const D3 la = mul_t(ra, pt - d3(det[p.a].position)), lb = mul_t(rb, pt - d3(det[p.b].position));
     const std::array<D3, 2> local{mul_t(ra, nrm), mul_t(rb, nrm)};
     std::array<D3, 2> last{nrm, nrm}, pending{nrm, nrm};
-    std::array<bool, 2> open{true, true};
+    std::array<bool, 2> open{(sides & 1u) != 0, (sides & 2u) != 0};
     const double thr = pair_margin(p) + slack;
     std::size_t k = 0;
     for (; k < st.past.size() && (open[0] || open[1]); ++k) {
@@ -327,7 +328,8 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       }
     }
     for (int side = 0; side < 2; ++side)
-      if (dot3(pending[std::size_t(side)], last[std::size_t(side)]) < kPersistLeastCos) out.push_back(pending[std::size_t(side)]);
+      if ((sides >> side & 1u) && dot3(pending[std::size_t(side)], last[std::size_t(side)]) < kPersistLeastCos)
+        out.push_back(pending[std::size_t(side)]);
     st.persisted_steps = std::max(st.persisted_steps, k);
   };
   for (const Pair& p : cand) {
@@ -374,8 +376,14 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       // reference (FCL / libccd).
       const HullFeatures& ha = ref->hull_features(p.a);
       const HullFeatures& hb = ref->hull_features(p.b);
+      // Every axis within the pair's reach of the least overlap is a plane the engine may
+      // take within its margin (an edge of one shape across an edge of the other, touching:
+      // Bullet's normal is their cross product while SAT's least is a face's).
       SatSettings cheap = sat_settings;
       cheap.max_work = kMaxSatWork;  // larger hulls: the posed reference (FCL / libccd)
+      cheap.abs_m = std::max(cheap.abs_m, reach);
+      cheap.rel = 0;
+      cheap.accept_separated = true;
       const SatResult sat = sat_min_translation(ha, det[p.a], hb, det[p.b], cheap);
       const M3 ra = rotation(det[p.a].orientation), rb = rotation(det[p.b].orientation);
       const D3 xa = d3(det[p.a].position), xb = d3(det[p.b].position);
@@ -383,13 +391,28 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       for (std::size_t k = 0; k < va.size(); ++k) va[k] = xa + mul(ra, ha.vertices[k]);
       for (std::size_t k = 0; k < vb.size(); ++k) vb[k] = xb + mul(rb, hb.vertices[k]);
       std::vector<D3> normals;
+      std::vector<unsigned> sides_of;  // per normal: whose face it is (earlier_normals' `sides`)
       double gap = 0;
       if (sat.tested) {
         gap = -sat.depth;
-        normals.push_back(D3{sat.normal[0], sat.normal[1], sat.normal[2]});
-        for (const SatAxis& ax : sat.accepted)
-          if (normals.size() < 4 && dot3(D3{ax.normal[0], ax.normal[1], ax.normal[2]}, normals[0]) < 1.0 - 1e-9)
-            normals.push_back(D3{ax.normal[0], ax.normal[1], ax.normal[2]});
+        // The accepted axes (the least among them), least overlap first, distinct
+        // directions, at most kMaxNormals.
+        std::vector<SatAxis> by_overlap(sat.accepted);
+        std::stable_sort(by_overlap.begin(), by_overlap.end(),
+                         [](const SatAxis& x, const SatAxis& y) { return x.overlap < y.overlap; });
+        for (const SatAxis& ax : by_overlap) {
+          if (normals.size() >= kMaxNormals) break;
+          const D3 u{ax.normal[0], ax.normal[1], ax.normal[2]};
+          bool known = false;
+          for (const D3& q : normals) known = known || dot3(u, q) > 1.0 - 1e-9;
+          if (known) continue;
+          normals.push_back(u);
+          sides_of.push_back(ax.kind == 0 ? 1u : ax.kind == 1 ? 2u : 3u);
+        }
+        if (normals.empty()) {
+          normals.push_back(D3{sat.normal[0], sat.normal[1], sat.normal[2]});
+          sides_of.push_back(3u);
+        }
         // Apart: the direction of the nearest points (an engine's GJK normal) is no
         // separating axis where the nearest features are a vertex and an edge or two
         // vertices: the posed reference's (FCL's distance) is taken too.
@@ -397,7 +420,10 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
           const ReferenceNormal r = ref->posed(p.a, p.b, det[p.a], det[p.b]);
           if (r.valid && !r.penetrating && r.distance > slack) {
             const D3 nr = unit(d3(r.normal));
-            if (dot3(nr, normals[0]) < 1.0 - 1e-9) normals.push_back(nr);
+            if (dot3(nr, normals[0]) < 1.0 - 1e-9) {
+              normals.push_back(nr);
+              sides_of.push_back(3u);
+            }
           }
         }
       } else {
@@ -409,27 +435,29 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
         if (r.valid && std::fabs(r.signed_distance()) > slack) {
           gap = r.signed_distance();
           normals.push_back(unit(d3(r.normal)));
+          sides_of.push_back(3u);
         } else {
           double face_gap = 0;
           const D3 axis = face_axes_least(va, ha, ra, vb, hb, rb, face_gap);
           if (len3(axis) == 0) continue;
           gap = r.valid ? r.signed_distance() : face_gap;
           normals.push_back(axis);
+          sides_of.push_back(3u);
         }
       }
       if (gap > reach) continue;
       // A contact point with its normal, and with each normal it may carry from earlier steps.
       std::vector<D3> earlier;
-      auto add_point = [&](const D3& pt, const D3& normal, double lever) {
+      auto add_point = [&](const D3& pt, const D3& normal, unsigned sides, double lever) {
         const double slack_deg = sat.tested ? kNormalSlackDeg : kPosedNormalSlackDeg;
         contacts.push_back({p, pt, normal, mu, lever, slack_deg});
         earlier.clear();
-        earlier_normals(p, pt, normal, earlier);
+        earlier_normals(p, pt, normal, sides, earlier);
         st.persisted += !earlier.empty();
         for (const D3& e : earlier) contacts.push_back({p, pt, e, mu, lever, slack_deg});
       };
-      for (const D3& nrm_raw : normals) {
-        const D3 nrm = unit(nrm_raw);
+      for (std::size_t ni = 0; ni < normals.size(); ++ni) {
+        const D3 nrm = unit(normals[ni]);
         if (len3(nrm) == 0) continue;
         double min_a = std::numeric_limits<double>::infinity(), max_b = -min_a;
         for (const D3& v : va) min_a = std::min(min_a, dot3(nrm, v));
@@ -495,7 +523,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
         const double lever = std::max(0.0, max_b - min_a) + reach;
         for (const P2& q : outline) {
           const D3& pt = patch[q.k];
-          add_point(pt, nrm, lever);
+          add_point(pt, nrm, sides_of[ni], lever);
           // A vertex of one shape near a face of the other: that face's normal, where it is
           // within kFeatureCos of the pair's (an engine's manifold point keeps the normal of
           // the feature it was found on; a box's corner beside another's face takes the
@@ -516,7 +544,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
               const D3 face_n = vertex_of_a ? out : -1.0 * out;          // B to A
               const double c = dot3(face_n, nrm);
               if (c < kFeatureCos || c > 1.0 - 1e-9) continue;
-              add_point(pt, face_n, lever);
+              add_point(pt, face_n, vertex_of_a ? 2u : 1u, lever);
             }
           }
         }
