@@ -448,7 +448,18 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       if (gap > reach) continue;
       // A contact point with its normal, and with each normal it may carry from earlier steps.
       std::vector<D3> earlier;
+      // A point already given this normal with the same earlier poses (by another axis's
+      // patch, or as a face near a vertex) is not given it again; its lever is the larger.
+      std::vector<std::pair<std::size_t, unsigned>> given;  // contacts' index, its `sides`
       auto add_point = [&](const D3& pt, const D3& normal, unsigned sides, double lever) {
+        for (const auto& [k, s] : given) {
+          const D3 d = contacts[k].point - pt;
+          if (s == sides && dot3(d, d) <= 1e-24 && dot3(contacts[k].normal, normal) > 1.0 - 1e-12) {
+            contacts[k].lever = std::max(contacts[k].lever, lever);  // the bound reads each body's largest
+            return;
+          }
+        }
+        given.emplace_back(contacts.size(), sides);
         const double slack_deg = sat.tested ? kNormalSlackDeg : kPosedNormalSlackDeg;
         contacts.push_back({p, pt, normal, mu, lever, slack_deg});
         earlier.clear();
