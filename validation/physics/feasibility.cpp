@@ -60,6 +60,14 @@ constexpr double kPersistLeastCos = 0.99999847691328769;
 constexpr double kMaxSatWork = 5e4;
 /// The most faces x vertices of the other shape scanned for faces near a patch's vertex.
 constexpr std::size_t kMaxFaceScan = 4096;
+/// The most pairs of edges (one of each hull near the contact) examined for edge crossings
+/// on hulls too large for the separating-axis test: a box against a tessellated ball has a
+/// few dozen; two finely tessellated hulls resting on each other have thousands, their
+/// patch's outline is found without them.
+constexpr std::size_t kMaxCrossingWork = 256;
+/// Edge crossings whose normals lie within this angle (deg) of each other are given one
+/// normal (the first's), their outline kept.
+constexpr double kCrossingGroupDeg = 0.5;
 /// The widest angle between a vertex's own face normal and its pair's normal that the row
 /// takes as a normal the engine may use there (cos 45 degrees).
 constexpr double kFeatureCos = 0.70710678118654752;
@@ -199,6 +207,103 @@ D3 face_axes_least(const std::vector<D3>& va, const HullFeatures& ha, const M3& 
   return best;
 }
 
+/// A convex hull's edges (pairs of indices into its vertices): each face's outline, the
+/// faces found as the vertices on each face normal's two support planes (3 or more within
+/// `tol` of it), each outline ordered about its centre; each edge once.
+std::vector<std::pair<std::uint32_t, std::uint32_t>> hull_edges(const HullFeatures& h) {
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
+  std::vector<D3> v(h.vertices.size());
+  double extent = 0;
+  for (std::size_t k = 0; k < v.size(); ++k) {
+    v[k] = D3{h.vertices[k][0], h.vertices[k][1], h.vertices[k][2]};
+    extent = std::max(extent, len3(v[k]));
+  }
+  const double tol = 1e-9 * std::max(1.0, extent);
+  for (const auto& fl : h.face_normals)
+    for (const double sign : {1.0, -1.0}) {
+      const D3 n = sign * unit(D3{fl[0], fl[1], fl[2]});
+      double top = -std::numeric_limits<double>::infinity();
+      for (const D3& p : v) top = std::max(top, dot3(n, p));
+      std::vector<std::uint32_t> face;
+      D3 c{};
+      for (std::size_t k = 0; k < v.size(); ++k)
+        if (dot3(n, v[k]) >= top - tol) {
+          face.push_back(std::uint32_t(k));
+          c = c + v[k];
+        }
+      if (face.size() < 3) continue;
+      c = (1.0 / double(face.size())) * c;
+      const auto [e1, e2] = tangent_basis(n);
+      std::sort(face.begin(), face.end(), [&](std::uint32_t a, std::uint32_t b) {
+        return std::atan2(dot3(e2, v[a] - c), dot3(e1, v[a] - c)) < std::atan2(dot3(e2, v[b] - c), dot3(e1, v[b] - c));
+      });
+      for (std::size_t k = 0; k < face.size(); ++k) {
+        const std::uint32_t a = face[k], b = face[(k + 1) % face.size()];
+        edges.emplace_back(std::min(a, b), std::max(a, b));
+      }
+    }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  return edges;
+}
+
+/// The closest points of segments [p0, p1] and [q0, q1] (Ericson, Real-Time Collision
+/// Detection 5.1.9): s on the first, t on the second.
+void closest_on_segments(const D3& p0, const D3& p1, const D3& q0, const D3& q1, D3& s, D3& t) {
+  const D3 d1 = p1 - p0, d2 = q1 - q0, r = p0 - q0;
+  const double a = dot3(d1, d1), e = dot3(d2, d2), f = dot3(d2, r);
+  double u = 0, w = 0;
+  if (a <= 1e-300 && e <= 1e-300) {
+    s = p0;
+    t = q0;
+    return;
+  }
+  if (a <= 1e-300) {
+    w = std::clamp(f / e, 0.0, 1.0);
+  } else {
+    const double c = dot3(d1, r);
+    if (e <= 1e-300) {
+      u = std::clamp(-c / a, 0.0, 1.0);
+    } else {
+      const double b = dot3(d1, d2), den = a * e - b * b;
+      u = den > 0 ? std::clamp((b * f - c * e) / den, 0.0, 1.0) : 0.0;
+      w = (b * u + f) / e;
+      if (w < 0) {
+        w = 0;
+        u = std::clamp(-c / a, 0.0, 1.0);
+      } else if (w > 1) {
+        w = 1;
+        u = std::clamp((b - c) / a, 0.0, 1.0);
+      }
+    }
+  }
+  s = p0 + u * d1;
+  t = q0 + w * d2;
+}
+
+/// A hull's edges and its supporting planes in its body frame: per face normal direction
+/// both outward normals u with the hull's support max(u . v) (the hull is the intersection
+/// of their half-spaces u . x <= support).
+struct HullEdges {
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
+  std::vector<D3> normals;
+  std::vector<double> support;
+};
+
+HullEdges hull_edges_and_planes(const HullFeatures& h) {
+  HullEdges out;
+  out.edges = hull_edges(h);
+  for (const auto& fl : h.face_normals)
+    for (const double sign : {1.0, -1.0}) {
+      const D3 u = sign * unit(D3{fl[0], fl[1], fl[2]});
+      double top = -std::numeric_limits<double>::infinity();
+      for (const auto& v : h.vertices) top = std::max(top, dot3(u, D3{v[0], v[1], v[2]}));
+      out.normals.push_back(u);
+      out.support.push_back(top);
+    }
+  return out;
+}
+
 /// One contact of a pair as the programme reads it: a point (world) and the pair's normal
 /// (unit, B to A), with the pair's friction coefficient.
 struct Contact {
@@ -219,6 +324,10 @@ struct FeasibilityState {
   /// frames, at most kMaxPastSteps and kMaxPastPoses in all), and the frame of the first.
   std::deque<std::vector<Pose>> past;
   std::int64_t past_frame = -1;
+  /// Each hull's edges and supporting planes (HullEdges), found once.
+  std::map<const HullFeatures*, HullEdges> hulls;
+  std::uint64_t crossings = 0;  ///< contact points on an edge of one hull within reach of the other
+  std::uint64_t crossings_skipped = 0;  ///< pair-steps above kMaxCrossingWork
   std::uint64_t persisted = 0;  ///< contact points given normals of their earlier steps
   std::size_t persisted_steps = 0;  ///< the most earlier steps a point's normals came from
 };
@@ -443,6 +552,21 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
           gap = r.valid ? r.signed_distance() : face_gap;
           normals.push_back(axis);
           sides_of.push_back(3u);
+          // The posed reference's own direction too, where the shapes' overlap along it
+          // lies within the pair's reach of the face axes' least: an edge of one shape
+          // across an edge of the other (a box's edge over an icosphere's ridge: ODE's and
+          // FCL's normal is their cross product, and the slab of the face axes' least
+          // holds no point of both).
+          if (r.valid) {
+            const D3 nr = unit(d3(r.normal));
+            double lo_a = std::numeric_limits<double>::infinity(), hi_b = -lo_a;
+            for (const D3& v : va) lo_a = std::min(lo_a, dot3(nr, v));
+            for (const D3& v : vb) hi_b = std::max(hi_b, dot3(nr, v));
+            if (len3(nr) > 0 && dot3(nr, axis) < 1.0 - 1e-9 && hi_b - lo_a <= -face_gap + reach) {
+              normals.push_back(nr);
+              sides_of.push_back(3u);
+            }
+          }
         }
       }
       if (gap > reach) continue;
@@ -556,6 +680,161 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
               const double c = dot3(face_n, nrm);
               if (c < kFeatureCos || c > 1.0 - 1e-9) continue;
               add_point(pt, face_n, vertex_of_a ? 2u : 1u, lever);
+            }
+          }
+        }
+      }
+      // Edge crossings, on hulls too large for the separating-axis test (whose edge-cross
+      // axes give them otherwise): an edge of A passing within the pair's reach of an edge
+      // of B is a contact point, its normal their cross product (B to A). A box's edge lying
+      // over a tessellated ball's ridges touches each ridge it crosses, none of them in the
+      // slab of the pair's one normal (DART's rows on a box resting on an icosphere).
+      if (!sat.tested) {
+        auto extras = [&](const HullFeatures& h) -> const HullEdges& {
+          auto it = st.hulls.find(&h);
+          if (it == st.hulls.end()) it = st.hulls.emplace(&h, hull_edges_and_planes(h)).first;
+          return it->second;
+        };
+        // Along each of the pair's normals n (B to A) the other shape lies below
+        // max(n . B) (A's points) or above min(n . A) (B's): a point of contact within
+        // the reach lies in that band grown by the reach.
+        std::vector<std::array<double, 2>> band;  // per normal: min(n . A), max(n . B)
+        for (const D3& nrm : normals) {
+          double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+          for (const D3& v : va) lo = std::min(lo, dot3(nrm, v));
+          for (const D3& v : vb) hi = std::max(hi, dot3(nrm, v));
+          band.push_back({lo, hi});
+        }
+        // The edges (world) of one hull that reach into that band for every normal and
+        // whose box meets the other body's grown by the reach.
+        auto near_edges = [&](const HullFeatures& h, const std::vector<D3>& w, const Aabb& other, bool of_a) {
+          std::vector<std::pair<D3, D3>> out;
+          for (const auto& [i0, i1] : extras(h).edges) {
+            const D3& x = w[i0];
+            const D3& y = w[i1];
+            bool meets = true;
+            for (std::size_t k = 0; k < normals.size() && meets; ++k) {
+              const double px = dot3(normals[k], x), py = dot3(normals[k], y);
+              meets = of_a ? std::min(px, py) <= band[k][1] + reach : std::max(px, py) >= band[k][0] - reach;
+            }
+            for (int k = 0; k < 3 && meets; ++k) {
+              const double lo = std::min(x[std::size_t(k)], y[std::size_t(k)]);
+              const double hi = std::max(x[std::size_t(k)], y[std::size_t(k)]);
+              meets = hi >= double((&other.min.x)[k]) - reach && lo <= double((&other.max.x)[k]) + reach;
+            }
+            if (meets) out.emplace_back(x, y);
+          }
+          return out;
+        };
+        struct Crossing {
+          D3 point, normal;
+          unsigned sides;
+          double lever;
+        };
+        std::vector<Crossing> crossing;
+        const std::vector<std::pair<D3, D3>> ea = near_edges(ha, va, world[p.b], true),
+                                             eb = near_edges(hb, vb, world[p.a], false);
+        if (ea.size() * eb.size() > kMaxCrossingWork) {
+          ++st.crossings_skipped;
+        } else {
+          D3 ca{}, cb{};
+          for (const D3& v : va) ca = ca + v;
+          for (const D3& v : vb) cb = cb + v;
+          ca = (1.0 / double(std::max<std::size_t>(va.size(), 1))) * ca;
+          cb = (1.0 / double(std::max<std::size_t>(vb.size(), 1))) * cb;
+          for (const auto& [a0, a1] : ea)
+            for (const auto& [b0, b1] : eb) {
+              D3 on_a, on_b;
+              closest_on_segments(a0, a1, b0, b1, on_a, on_b);
+              const D3 d = on_a - on_b;
+              if (dot3(d, d) > reach * reach) continue;
+              D3 nrm = unit(cross3(a1 - a0, b1 - b0));
+              if (len3(nrm) == 0) continue;
+              if (dot3(nrm, ca - cb) < 0) nrm = -1.0 * nrm;
+              crossing.push_back({0.5 * (on_a + on_b), nrm, 3u, reach + len3(d)});
+            }
+          // An edge of one hull inside the other grown by the reach: the part of it within
+          // (clipped by the other's supporting half-spaces moved out by the reach); its two
+          // ends are contact points, each with the normal of the other's plane nearest it
+          // (the face the edge enters or leaves by). A box's edge sunk into a ball's facets
+          // meets them where it enters and leaves.
+          auto clip = [&](const std::vector<std::pair<D3, D3>>& edges, const HullFeatures& other, const Pose& pose,
+                          bool edge_of_a) {
+            const HullEdges& he = extras(other);
+            const M3 r = rotation(pose.orientation);
+            const D3 x = d3(pose.position);
+            std::vector<D3> nw(he.normals.size());
+            std::vector<double> off(he.normals.size());
+            for (std::size_t k = 0; k < nw.size(); ++k) {
+              nw[k] = mul(r, he.normals[k]);
+              off[k] = dot3(nw[k], x) + he.support[k] + reach;
+            }
+            for (const auto& [e0, e1] : edges) {
+              double t0 = 0, t1 = 1;
+              const D3 de = e1 - e0;
+              for (std::size_t k = 0; k < nw.size() && t0 <= t1; ++k) {
+                const double s0 = dot3(nw[k], e0) - off[k], ds = dot3(nw[k], de);
+                if (std::fabs(ds) < 1e-300) {
+                  if (s0 > 0) t1 = -1;
+                } else if (ds > 0) {
+                  t1 = std::min(t1, -s0 / ds);
+                } else {
+                  t0 = std::max(t0, -s0 / ds);
+                }
+              }
+              if (!(t0 <= t1)) continue;
+              for (const double t : {t0, t1}) {
+                const D3 pt = e0 + t * de;
+                std::size_t best = 0;
+                double nearest = -std::numeric_limits<double>::infinity();
+                for (std::size_t k = 0; k < nw.size(); ++k) {
+                  const double sd = dot3(nw[k], pt) - off[k];
+                  if (sd > nearest) {
+                    nearest = sd;
+                    best = k;
+                  }
+                }
+                // The other's outward normal at its face: B to A when the other is B.
+                crossing.push_back({pt, edge_of_a ? nw[best] : -1.0 * nw[best], edge_of_a ? 2u : 1u, 2.0 * reach});
+                if (t1 == t0) break;
+              }
+            }
+          };
+          clip(ea, hb, det[p.b], true);
+          clip(eb, ha, det[p.a], false);
+          // Points whose normals lie within kCrossingGroupDeg of each other (and of the same
+          // face's body) share the first one's; of each group only its outline along it is
+          // kept (impulses inside are combinations of impulses at its corners).
+          struct Group {
+            D3 normal;
+            unsigned sides;
+            double lever;
+            std::vector<D3> points;
+          };
+          std::vector<Group> groups;
+          const double group_cos = std::cos(kCrossingGroupDeg * kPi / 180.0);
+          for (const Crossing& c : crossing) {
+            Group* g = nullptr;
+            for (Group& h : groups)
+              if (h.sides == c.sides && dot3(h.normal, c.normal) >= group_cos) {
+                g = &h;
+                break;
+              }
+            if (!g) {
+              groups.push_back({c.normal, c.sides, 0.0, {}});
+              g = &groups.back();
+            }
+            g->lever = std::max(g->lever, c.lever);
+            g->points.push_back(c.point);
+          }
+          for (const Group& g : groups) {
+            const auto [e1, e2] = tangent_basis(g.normal);
+            std::vector<P2> flat;
+            for (std::size_t k = 0; k < g.points.size(); ++k)
+              flat.push_back({dot3(e1, g.points[k]), dot3(e2, g.points[k]), k});
+            for (const P2& q : hull2(flat)) {
+              ++st.crossings;
+              add_point(g.points[q.k], g.normal, g.sides, g.lever);
             }
           }
         }
@@ -913,6 +1192,11 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ImpulseFeasibility>() con
        "{} contact points also given the normals they carried on earlier steps (a persistent manifold's; up to {} "
        "steps back)",
        st.persisted, st.persisted_steps);
+  note(r.detail, st.crossings,
+       "{} contact points where an edge of one hull (hulls too large for the separating-axis test) passes the other",
+       st.crossings);
+  note(r.detail, st.crossings_skipped, "{} pair-steps with more than {} pairs of edges near the contact: no edge crossings taken",
+       st.crossings_skipped, kMaxCrossingWork);
   note(r.detail, st.too_large, "{} islands above {} bodies not judged (first: {})", st.too_large, kMaxIslandBodies,
        st.too_large_first);
   note(r.detail, st.unsolved, "{} islands the programme did not solve, not judged (first: {})", st.unsolved,
