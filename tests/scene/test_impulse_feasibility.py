@@ -1,0 +1,222 @@
+"""The physics tier's impulse-feasibility row (docs/validation.md, "impulse-feasibility") on
+traces that carry poses, velocities, shapes and materials only: octocd's own box-stack and
+bunny-stack-50 and Bullet's rot-drop-220 are run with their contact rows, which pick the
+bodies and frames of the planted faults, and then judged with /contacts, /pairs and /aabbs
+removed. The clean traces pass the row; a copy with one planted fault (a 1.5x velocity on a
+body in contact, a friction impulse 1.2x beyond the cone, a pulling impulse, 5% injected
+kinetic energy) fails it naming the frame and the body.
+
+Run by ctest with OCTOCD_BIN and OCTOCD_SOURCE_DIR set (short windows: about 20 s in all
+on 2 cores).
+"""
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+h5py = pytest.importorskip("h5py", reason="python3-h5py is not installed")
+
+SOURCE_DIR = os.environ.get("OCTOCD_SOURCE_DIR", os.path.join(os.path.dirname(__file__), "..", ".."))
+BIN = os.environ.get("OCTOCD_BIN", os.path.join(SOURCE_DIR, "build", "octocd"))
+ROW = "impulse-feasibility"
+
+# (scene, engine arguments, frames run, first frame a fault may be planted in)
+CASES = {
+    "box-stack": ("box-stack", [], 60, 20),
+    "bunny-stack-50": ("bunny-stack-50", [], 260, 200),
+    "rot-drop-220": ("rot-drop-220", ["--engine", "bullet", "--rotation"], 125, 100),
+}
+
+
+def octocd(*args):
+    return subprocess.run([BIN, *args], capture_output=True, text=True)
+
+
+class Trace:
+    """A run's trace with its contact rows (read once), and what the plants need of it."""
+
+    def __init__(self, path):
+        self.path = path
+        with h5py.File(path, "r") as f:
+            self.v = f["/states/velocity"][:].astype(np.float64)
+            self.w = f["/states/angular_velocity"][:].astype(np.float64) if "/states/angular_velocity" in f else None
+            self.inv_mass = f["/bodies/inverse_mass"][:].astype(np.float64)
+            self.offsets = f["/contacts/offsets"][:]
+            self.pair = f["/contacts/pair"][:]
+            self.normal = f["/contacts/normal"][:].astype(np.float64)
+            self.dt = float(f.attrs["dt"])
+            params = json.loads(f.attrs["parameters"])
+            self.gravity = np.array(params["gravity"], dtype=np.float64)
+            if "/bodies/friction" in f:
+                fr = f["/bodies/friction"][:].astype(np.float64)
+                self.mu = lambda a, b: fr[a] * fr[b]  # friction_combine "product" (both engines here)
+            else:
+                mu = float(params["response"]["mu_static"])
+                self.mu = lambda a, b: mu
+
+    def rows(self, step):
+        return range(int(self.offsets[step - 1]), int(self.offsets[step]))
+
+    def pairs_of(self, step, body):
+        """{other body: normal towards `body` (B to A flipped for B)} of its rows in `step`."""
+        out = {}
+        for r in self.rows(step):
+            a, b = (int(x) for x in self.pair[r])
+            if body == a:
+                out[b] = self.normal[r]
+            elif body == b:
+                out[a] = -self.normal[r]
+        return out
+
+    def momentum_change(self, step, body):
+        """m (v' - v - g dt) of `body` over `step`."""
+        return (self.v[step, body] - self.v[step - 1, body] - self.dt * self.gravity) / self.inv_mass[body]
+
+
+@pytest.fixture(scope="module")
+def traces(tmp_path_factory):
+    work = tmp_path_factory.mktemp("feasibility")
+    out = {}
+    for name, (scene, engine, frames, first) in CASES.items():
+        path = str(work / f"{name}.h5")
+        r = octocd("run", os.path.join(SOURCE_DIR, "datasets", "scenes", scene + ".json"), *engine, "--frames",
+                   str(frames), "--trace", path, "--state-every", "1", "--contacts", "--no-xdmf", "--quiet")
+        assert r.returncode == 0, r.stdout + r.stderr
+        out[name] = (Trace(path), first, work)
+    return out
+
+
+def bare_copy(trace, tag, edit=None):
+    """A copy of the trace without contact rows, candidate pairs and AABBs, edited by
+    edit(file) when given."""
+    path = trace.path.replace(".h5", f"-{tag}.h5")
+    shutil.copy(trace.path, path)
+    with h5py.File(path, "r+") as f:
+        for group in ("contacts", "pairs", "aabbs"):
+            if group in f:
+                del f[group]
+        if edit:
+            edit(f)
+    return path
+
+
+def judge(path):
+    out = path + ".json"
+    r = octocd("validate", "--trace-in", path, "--every", "1", "--json", out)
+    assert r.returncode in (0, 3), r.stdout + r.stderr
+    rows = {x["name"]: x for x in json.load(open(out))["rows"]}
+    return rows[ROW]
+
+
+def set_velocity(step, body, v):
+    def edit(f):
+        d = f["/states/velocity"]
+        d[step, body] = v.astype(np.float32)
+    return edit
+
+
+def in_contact(t, first):
+    """(step, body): steps from `first` on and the dynamic bodies with rows in them."""
+    for step in range(first, len(t.offsets)):
+        bodies = sorted({int(x) for r in t.rows(step) for x in t.pair[r] if t.inv_mass[int(x)] > 0})
+        for body in bodies:
+            yield step, body
+
+
+def fails_naming(row, step, body):
+    """The row fails first at `step`, naming `body`: as the example's item, or among the
+    bodies whose motion left free makes the island feasible (along a chain of contacts the
+    same residual may sit on any of its bodies)."""
+    assert row["verdict"] == "fail", row["detail"]
+    examples = [e for c in row["causes"] for e in c["examples"]]
+    assert examples and examples[0]["frame"] == step, (step, body, row["detail"])
+    at = [e for e in examples if e["frame"] == step]
+    named = [e for e in at if e["item"] == f"body {body}" or
+             re.search(rf"\bbody {body}\b[^;]*left free", e["text"])]
+    assert named, (step, body, [e["text"] for e in at])
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_clean_trace_passes(traces, name):
+    t, first, _ = traces[name]
+    row = judge(bare_copy(t, "clean"))
+    assert row["verdict"] == "pass", row["detail"]
+    assert row["judged"] > 0, row["detail"]
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_velocity_1_5x_on_a_body_in_contact_fails(traces, name):
+    t, first, _ = traces[name]
+    # The body in contact moving fastest after its step, its velocity x 1.5.
+    step, body = max(in_contact(t, first), key=lambda sb: np.linalg.norm(t.v[sb[0], sb[1]]))
+    assert np.linalg.norm(t.v[step, body]) > 1e-3
+    row = judge(bare_copy(t, "velocity", set_velocity(step, body, 1.5 * t.v[step, body])))
+    fails_naming(row, step, body)
+
+
+def single_pair(t, first):
+    """(step, body, other, n, jn): a body whose only rows in the step are with one other
+    body, pushed along n (towards it) by jn = m dv . n, the largest such push."""
+    best = None
+    for step, body in in_contact(t, first):
+        pairs = t.pairs_of(step, body)
+        if len(pairs) != 1:
+            continue
+        (other, n), = pairs.items()
+        jn = float(np.dot(t.momentum_change(step, body), n))
+        if best is None or jn > best[4]:
+            best = (step, body, other, n / np.linalg.norm(n), jn)
+    return best
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_friction_1_2x_beyond_the_cone_fails(traces, name):
+    t, first, _ = traces[name]
+    step, body, other, n, jn = single_pair(t, first)
+    assert jn > 0
+    m = 1.0 / t.inv_mass[body]
+    dp = t.momentum_change(step, body)
+    tangential = dp - np.dot(dp, n) * n
+    tdir = tangential / np.linalg.norm(tangential) if np.linalg.norm(tangential) > 1e-9 * jn else \
+        np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.6 else [0, 1.0, 0])
+    tdir = tdir / np.linalg.norm(tdir)
+    # The pair's whole impulse on the body: its push jn along n, friction 1.2 mu jn.
+    new_dp = jn * n + 1.2 * t.mu(body, other) * jn * tdir
+    v = t.v[step - 1, body] + t.dt * t.gravity + new_dp / m
+    row = judge(bare_copy(t, "friction", set_velocity(step, body, v)))
+    fails_naming(row, step, body)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_pulling_impulse_fails(traces, name):
+    t, first, _ = traces[name]
+    step, body, other, n, jn = single_pair(t, first)
+    m = 1.0 / t.inv_mass[body]
+    # The pair pulls the body towards the other one with the impulse it pushed with.
+    v = t.v[step, body] - 2.0 * jn * n / m
+    row = judge(bare_copy(t, "pulling", set_velocity(step, body, v)))
+    fails_naming(row, step, body)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_five_percent_injected_energy_fails(traces, name):
+    t, first, _ = traces[name]
+
+    def kinetic(sb):
+        step, body = sb
+        e = 0.5 * np.dot(t.v[step, body], t.v[step, body]) / t.inv_mass[body]
+        return e
+    step, body = max(in_contact(t, first), key=kinetic)
+    scale = math.sqrt(1.05)
+
+    def edit(f):
+        f["/states/velocity"][step, body] = (scale * t.v[step, body]).astype(np.float32)
+        if t.w is not None:
+            f["/states/angular_velocity"][step, body] = (scale * t.w[step, body]).astype(np.float32)
+    row = judge(bare_copy(t, "energy", edit))
+    fails_naming(row, step, body)
