@@ -220,3 +220,89 @@ def test_five_percent_injected_energy_fails(traces, name):
             f["/states/angular_velocity"][step, body] = (scale * t.w[step, body]).astype(np.float32)
     row = judge(bare_copy(t, "energy", edit))
     fails_naming(row, step, body)
+
+
+# Jolt 5.6 (jolt-physics 1.1) applies a manifold's friction as one impulse at the mean of its
+# points (loaded or speculative) within mu times their summed normal impulse, and a torsion about
+# the normal; the adapter declares friction_per "manifold". A cube tumbling on one corner, its
+# bottom face's other three corners 5-13 mm above the floor (speculative points), sliding and
+# spinning: Jolt's body 77 of rot-drop-220 before frame 390. Its first step is no Coulomb friction
+# at any of Jolt's own points (the twist about the normal needs mu 21.8 there).
+JOLT_CORNER = {
+    "name": "jolt-corner", "dt": 0.001, "frames": 3, "walls": "open-box", "rotation": True,
+    "domain": {"min": [-1.0, 0.0, -1.0], "max": [1.0, 3.0, 1.0]},
+    "response": {"mu_static": 0.5, "mu_kinetic": 0.5, "restitution": 0.2},
+    "groups": [{"name": "cube", "shape": {"box": [0.05, 0.05, 0.05]}, "count": 1, "mass": 1.0,
+                "positions": [[0.03167079761624336, 0.05624338611960411, -0.30575665831565857]],
+                "orientation": {"axis": [-0.045196267081795, 0.9955912918279772, 0.08219049262640053],
+                                "angle_deg": 60.373123482360285},
+                "velocity": {"type": "fixed", "value": [0.5038079023361206, -0.5255903005599976, -0.24829551577568054]},
+                "angular_velocity": [0.563088059425354, 7.048529624938965, -8.473285675048828]}],
+}
+CUBE = 5  # after the open box's five walls
+
+
+def jolt_available():
+    if not os.path.exists(BIN):
+        return False
+    r = octocd("engines", "--json")
+    return r.returncode == 0 and any(e["name"] == "jolt" and e.get("available") for e in json.loads(r.stdout)["engines"])
+
+
+@pytest.fixture(scope="module")
+def jolt_corner(tmp_path_factory):
+    if not jolt_available():
+        pytest.skip("engine jolt is not available here (octocd engines says why)")
+    work = tmp_path_factory.mktemp("jolt-corner")
+    scene = work / "jolt-corner.json"
+    scene.write_text(json.dumps(JOLT_CORNER))
+    path = str(work / "jolt-corner.h5")
+    r = octocd("run", str(scene), "--engine", "jolt", "--rotation", "--frames", "3", "--trace", path,
+               "--state-every", "1", "--no-xdmf", "--quiet")
+    assert r.returncode == 0, r.stdout + r.stderr
+    with h5py.File(path, "r") as f:
+        assert f.attrs["friction_per"] == "manifold"
+        v = f["/states/velocity"][:].astype(np.float64)
+        m = 1.0 / float(f["/bodies/inverse_mass"][CUBE])
+        g = np.array(f.attrs["gravity"], dtype=np.float64) * float(f.attrs["dt"])
+    return path, v, m, g
+
+
+def jolt_copy(jolt_corner, tag, edit):
+    path = jolt_corner[0].replace(".h5", f"-{tag}.h5")
+    shutil.copy(jolt_corner[0], path)
+    with h5py.File(path, "r+") as f:
+        edit(f)
+    return path
+
+
+def test_jolt_manifold_friction_passes_as_declared(jolt_corner):
+    row = judge(jolt_corner[0])
+    assert row["verdict"] == "pass", row["detail"]
+    assert row["judged"] > 0 and "friction per manifold" in row["detail"], row["detail"]
+
+
+def test_jolt_manifold_friction_is_no_coulomb_cone_at_each_point(jolt_corner):
+    def edit(f):
+        f.attrs["friction_per"] = "point"
+    fails_naming(judge(jolt_copy(jolt_corner, "point", edit)), 1, CUBE)
+
+
+def test_jolt_friction_1_2x_beyond_the_manifold_bound_fails(jolt_corner):
+    _, v, m, g = jolt_corner
+    dp = m * (v[1, CUBE] - v[0, CUBE] - g)
+    n = np.array([0.0, 1.0, 0.0])  # the floor's
+    tangential = dp - np.dot(dp, n) * n
+    assert np.linalg.norm(tangential) > 0.49 * np.dot(dp, n)  # sliding: friction at mu
+
+    def edit(f):
+        f["/states/velocity"][1, CUBE] = (v[1, CUBE] + 0.2 * tangential / m).astype(np.float32)
+    fails_naming(judge(jolt_copy(jolt_corner, "friction", edit)), 1, CUBE)
+
+
+def test_jolt_velocity_1_5x_fails(jolt_corner):
+    _, v, _, _ = jolt_corner
+
+    def edit(f):
+        f["/states/velocity"][1, CUBE] = (1.5 * v[1, CUBE]).astype(np.float32)
+    fails_naming(judge(jolt_copy(jolt_corner, "velocity", edit)), 1, CUBE)

@@ -737,43 +737,113 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
         sigma0[per * s + 3 + r] = ang + (use_plain ? 0.0 : spin);
       }
     }
-    // Columns: kConeSides generators per contact point (the circumscribed pyramid).
+    // Columns: kConeSides generators per contact point (the circumscribed pyramid); with
+    // friction_per "manifold" a normal per contact point, kConeSides unit tangents per
+    // contact point whose sum over a pair is bounded by its normal impulses (a budget row),
+    // and with rotation a torsion about each of the pair's normals (a second budget row).
     const double widen = 1.0 / std::cos(kPi / kConeSides);
     std::vector<int> col_start{0};
     std::vector<int> row_index;
     std::vector<double> value;
+    enum class Kind { Cone, Normal, Friction, Torsion };
     struct Column {
       std::size_t contact;
-      D3 dir;
+      D3 dir;  ///< the impulse on A (Torsion: the torque on A)
+      Kind kind = Kind::Cone;
     };
     std::vector<Column> columns;
-    for (const std::size_t k : ks) {
+    // A column acting on A (+) and B (-): an impulse `dir` at the contact's point, or a torque.
+    auto add_column = [&](std::size_t k, const D3& dir, Kind kind) {
       const Contact& c = contacts[k];
-      const auto [e1, e2] = tangent_basis(c.normal);
-      for (int j = 0; j < kConeSides; ++j) {
-        const double a = 2.0 * kPi * j / kConeSides;
-        const D3 dir = c.normal + (tilted_mu(c.mu, c.slack_deg) * widen) * (std::cos(a) * e1 + std::sin(a) * e2);
-        columns.push_back({k, dir});
-        for (const auto& [i, sign] : {std::pair<std::uint32_t, double>{c.pair.a, 1.0}, {c.pair.b, -1.0}}) {
-          const auto it = slot.find(i);
-          if (it == slot.end()) continue;
-          const std::size_t s = it->second;
+      columns.push_back({k, dir, kind});
+      for (const auto& [i, sign] : {std::pair<std::uint32_t, double>{c.pair.a, 1.0}, {c.pair.b, -1.0}}) {
+        const auto it = slot.find(i);
+        if (it == slot.end()) continue;
+        const std::size_t s = it->second;
+        if (kind != Kind::Torsion)
           for (int r = 0; r < 3; ++r) {
             row_index.push_back(int(per * s + r));
             value.push_back(sign * dir[std::size_t(r)]);
           }
-          if (rotating) {
-            const D3 t = cross3(c.point - com_at(det[i], i), dir);
-            for (int r = 0; r < 3; ++r) {
-              row_index.push_back(int(per * s + 3 + r));
-              value.push_back(sign * t[std::size_t(r)]);
-            }
+        if (rotating) {
+          const D3 t = kind == Kind::Torsion ? dir : cross3(c.point - com_at(det[i], i), dir);
+          for (int r = 0; r < 3; ++r) {
+            row_index.push_back(int(per * s + 3 + r));
+            value.push_back(sign * t[std::size_t(r)]);
           }
         }
-        col_start.push_back(int(row_index.size()));
+      }
+      col_start.push_back(int(row_index.size()));
+    };
+    // Budget rows (friction_per "manifold"): sum over columns of coef x lambda <= 0, each
+    // divided by `scale` (a row of the pair's first dynamic body in sigma0) for the programme.
+    struct Budget {
+      std::vector<std::pair<std::size_t, double>> coef;  // column, coefficient
+      std::size_t scale_row = 0;
+    };
+    std::vector<Budget> budgets;
+    if (!bodies.friction_per_manifold) {
+      for (const std::size_t k : ks) {
+        const Contact& c = contacts[k];
+        const auto [e1, e2] = tangent_basis(c.normal);
+        for (int j = 0; j < kConeSides; ++j) {
+          const double a = 2.0 * kPi * j / kConeSides;
+          add_column(k, c.normal + (tilted_mu(c.mu, c.slack_deg) * widen) * (std::cos(a) * e1 + std::sin(a) * e2),
+                     Kind::Cone);
+        }
+      }
+    } else {
+      // Per pair: its normal impulses N_k, friction generators g (unit tangents at its points,
+      // kConeSides a point: any tangential impulse at any point of the patch costs at most
+      // 1 / cos(pi / kConeSides) its magnitude), sum g <= widen sum mu_k N_k; with rotation
+      // torsions t about its normals, sum t <= sum mu_k D N_k, D the largest distance between
+      // two of its points plus twice their largest lever (the engine's points may lie that
+      // far from octocd's: each engine point's distance from the engine's mean point is <= D).
+      std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::size_t>> by_pair;
+      for (const std::size_t k : ks) by_pair[{contacts[k].pair.a, contacts[k].pair.b}].push_back(k);
+      for (const auto& [pr, pks] : by_pair) {
+        const auto it = slot.count(pr.first) ? slot.find(pr.first) : slot.find(pr.second);
+        Budget linear, torsion;
+        linear.scale_row = per * it->second;
+        torsion.scale_row = per * it->second + 3;
+        double span = 0, lever = 0;
+        for (const std::size_t k : pks) {
+          lever = std::max(lever, contacts[k].lever);
+          for (const std::size_t q : pks) span = std::max(span, len3(contacts[k].point - contacts[q].point));
+        }
+        const double extent = span + 2.0 * lever;
+        std::vector<D3> axes;
+        for (const std::size_t k : pks) {
+          const Contact& c = contacts[k];
+          const double mu_t = tilted_mu(c.mu, c.slack_deg);
+          linear.coef.emplace_back(columns.size(), -widen * mu_t);
+          torsion.coef.emplace_back(columns.size(), -mu_t * extent);
+          add_column(k, c.normal, Kind::Normal);
+          const auto [e1, e2] = tangent_basis(c.normal);
+          for (int j = 0; j < kConeSides; ++j) {
+            const double a = 2.0 * kPi * j / kConeSides;
+            linear.coef.emplace_back(columns.size(), 1.0);
+            add_column(k, std::cos(a) * e1 + std::sin(a) * e2, Kind::Friction);
+          }
+          if (!rotating) continue;
+          bool known = false;
+          for (const D3& u : axes) known = known || dot3(u, c.normal) > 1.0 - 1e-9;
+          if (known) continue;
+          axes.push_back(c.normal);
+          for (const double sign : {1.0, -1.0}) {
+            torsion.coef.emplace_back(columns.size(), 1.0);
+            add_column(k, sign * c.normal, Kind::Torsion);
+          }
+        }
+        budgets.push_back(std::move(linear));
+        if (rotating) budgets.push_back(std::move(torsion));
       }
     }
     const std::size_t ncols = columns.size();
+    std::vector<std::vector<std::pair<int, double>>> budget_of(ncols);  // per column: budget row, coefficient
+    for (std::size_t bi = 0; bi < budgets.size(); ++bi)
+      for (const auto& [c, v] : budgets[bi].coef)
+        budget_of[c].emplace_back(int(bi), v / sigma0[budgets[bi].scale_row]);
     // The programme: minimise t over impulses lambda >= 0 with |A lambda - b|_r <= t sigma_r
     // for every row r; solved with each row scaled by 1 / sigma_r. Returns the largest
     // scaled residual of the solution (recomputed in double) and the solution.
@@ -789,6 +859,10 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
           idx.push_back(int(2 * r + 1));
           val.push_back(value[std::size_t(e)] / sig[r]);
         }
+        for (const auto& [bi, v] : budget_of[c]) {
+          idx.push_back(int(2 * rows) + bi);
+          val.push_back(v);
+        }
         start.push_back(CoinBigIndex(idx.size()));
       }
       for (std::size_t r = 0; r < rows; ++r) {  // the column of t
@@ -800,11 +874,12 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       start.push_back(CoinBigIndex(idx.size()));
       std::vector<int> len(ncols + 1);
       for (std::size_t c = 0; c <= ncols; ++c) len[c] = int(start[c + 1] - start[c]);
-      const CoinPackedMatrix a(true, int(2 * rows), int(ncols + 1), CoinBigIndex(idx.size()), val.data(), idx.data(),
+      const int nrows = int(2 * rows + budgets.size());
+      const CoinPackedMatrix a(true, nrows, int(ncols + 1), CoinBigIndex(idx.size()), val.data(), idx.data(),
                                start.data(), len.data());
       std::vector<double> col_lo(ncols + 1, 0.0), col_hi(ncols + 1, COIN_DBL_MAX), obj(ncols + 1, 0.0);
       obj[ncols] = 1.0;
-      std::vector<double> row_lo(2 * rows), row_hi(2 * rows);
+      std::vector<double> row_lo(std::size_t(nrows), -COIN_DBL_MAX), row_hi(std::size_t(nrows), 0.0);
       for (std::size_t r = 0; r < rows; ++r) {
         const double br = rhs[r] / sig[r];
         row_lo[2 * r] = -COIN_DBL_MAX;  // A' lambda - t <= b'
@@ -835,13 +910,13 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     // action within the step on the spin (balance.cpp: dt (|I_w^-1 tau| |L| + |w| |tau|)).
     auto widened = [&](const std::vector<double>& lambda) {
       std::vector<double> sig(sigma0);
-      std::vector<double> jsum(members.size(), 0.0);
+      std::vector<double> jsum(members.size(), 0.0), tsum(members.size(), 0.0);
       for (std::size_t c = 0; c < ncols; ++c) {
         const Contact& ct = contacts[columns[c].contact];
         const double j = lambda[c] * len3(columns[c].dir);
         for (const std::uint32_t i : {ct.pair.a, ct.pair.b}) {
           const auto it = slot.find(i);
-          if (it != slot.end()) jsum[it->second] += j;
+          if (it != slot.end()) (columns[c].kind == Kind::Torsion ? tsum : jsum)[it->second] += j;
         }
       }
       for (std::size_t s = 0; s < members.size(); ++s) {
@@ -849,8 +924,8 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
         for (int r = 0; r < 3; ++r) sig[per * s + r] += eps * k2 * jsum[s];
         if (rotating)
           for (int r = 0; r < 3; ++r)
-            sig[per * s + 3 + r] +=
-                jsum[s] * (eps * k2 * reach_of[s] + lever_of[s] + reach_of[s] * (turn[s] + spin_turn[s]));
+            sig[per * s + 3 + r] += jsum[s] * (eps * k2 * reach_of[s] + lever_of[s] + reach_of[s] * (turn[s] + spin_turn[s])) +
+                                    tsum[s] * (eps * k2 + turn[s] + spin_turn[s]);
       }
       return sig;
     };
@@ -930,7 +1005,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       std::map<std::pair<std::uint32_t, std::uint32_t>, D3> on_pair;
       for (std::size_t c = 0; c < ncols; ++c) {
         const Contact& ct = contacts[columns[c].contact];
-        if (ct.pair.a != body && ct.pair.b != body) continue;
+        if (columns[c].kind == Kind::Torsion || (ct.pair.a != body && ct.pair.b != body)) continue;
         on_pair[{ct.pair.a, ct.pair.b}] = on_pair[{ct.pair.a, ct.pair.b}] + lambda[c] * columns[c].dir;
       }
       std::string pairs;
@@ -973,6 +1048,10 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ImpulseFeasibility>() con
         infeasible.checks, st.steps, st.pairs, st.contacts, st.largest, infeasible.worst_or(0.0), kConeSides,
         1.0 / std::cos(kPi / kConeSides));
   }
+  note(r.detail, bodies.friction_per_manifold,
+       "friction per manifold (friction_per \"manifold\"): each pair's friction one tangential impulse of at most "
+       "mu x its normal impulse at any point of its patch, and a torsion about its normal of at most mu x its extent x "
+       "its normal impulse");
   note(r.detail, st.persisted,
        "{} contact points also given the normals they carried on earlier steps (a persistent manifold's; up to {} "
        "steps back)",
