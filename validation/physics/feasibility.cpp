@@ -11,11 +11,13 @@
 #include "physics_impl.hpp"
 #include "feasibility_geometry.hpp"
 
+#include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <deque>
+#include <mutex>
 #include <numeric>
 
 #include <ClpSimplex.hpp>
@@ -154,7 +156,6 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   const double eps = tol.balance_ulps * kEps32;
   const double slack = tol.geometry_slack_m;
   const bool aabb_geometry = bodies.contact_geometry == ContactGeometry::Aabb;
-  StopPoll poll(stop);
 
   // Candidates: each body's exact AABB at its detection pose grown by its motion through
   // the step, its convex radius and half the largest margin and the slack (apart.cpp's
@@ -174,7 +175,6 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   exact_pairs(grown, cand, settings);
 
   // Each pair within reach: its contact points and normal.
-  std::vector<Contact> contacts;
   std::vector<std::uint32_t> parent(n);
   std::iota(parent.begin(), parent.end(), 0u);
   auto find = [&](std::uint32_t i) {
@@ -191,7 +191,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // edge cross or a normal of unknown origin). Walks back while a carried normal keeps the
   // point; appends those kept (kPersistSpacingDeg apart, the oldest kept).
   const double spacing_cos = std::cos(kPersistSpacingDeg * kPi / 180.0);
-  auto earlier_normals = [&](const Pair& p, const D3& pt, const D3& nrm, unsigned sides, std::vector<D3>& out) {
+  auto earlier_normals = [&](const Pair& p, const D3& pt, const D3& nrm, unsigned sides, std::vector<D3>& out, std::size_t& steps_back) {
     if (st.past.empty()) return;
     const M3 ra = rotation(det[p.a].orientation), rb = rotation(det[p.b].orientation);
     const D3 la = mul_t(ra, pt - d3(det[p.a].position)), lb = mul_t(rb, pt - d3(det[p.b].position));
@@ -224,14 +224,23 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     for (int side = 0; side < 2; ++side)
       if ((sides >> side & 1u) && dot3(pending[std::size_t(side)], last[std::size_t(side)]) < kPersistLeastCos)
         out.push_back(pending[std::size_t(side)]);
-    st.persisted_steps = std::max(st.persisted_steps, k);
+    steps_back = std::max(steps_back, k);
   };
-  for (const Pair& p : cand) {
-    poll();
-    if (!dynamic(p.a) && !dynamic(p.b)) continue;
+  // Each candidate pair's contact points on `threads` threads, each into its own slot.
+  struct PairContacts {
+    std::vector<Contact> contacts;
+    std::uint64_t persisted = 0, crossings = 0, crossings_skipped = 0;
+    std::size_t persisted_steps = 0;
+  };
+  std::vector<PairContacts> pair_out(cand.size());
+  std::mutex hulls_mutex;
+  parallel_items(cand.size(), threads, stop, [&](std::size_t ci, unsigned) {
+    const Pair p = cand[ci];
+    PairContacts& found = pair_out[ci];
+    std::vector<Contact>& contacts = found.contacts;
+    if (!dynamic(p.a) && !dynamic(p.b)) return;
     const double reach = pair_margin(p) + slack + motion[p.a] + motion[p.b] + inflation(p);
     const double mu = pair_mu(p);
-    const std::size_t before = contacts.size();
     if (aabb_geometry) {
       // The engine resolves on the world AABBs: the normal is the axis of least overlap
       // (or of the gap), from B's centre to A's; the point the overlap box's centre.
@@ -254,7 +263,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
           axis = k;
         }
       }
-      if (!(least > -reach)) continue;
+      if (!(least > -reach)) return;
       D3 nrm{};
       const double ca = 0.5 * (double((&a.min.x)[axis]) + double((&a.max.x)[axis]));
       const double cb = 0.5 * (double((&b.min.x)[axis]) + double((&b.max.x)[axis]));
@@ -333,7 +342,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
         } else {
           double face_gap = 0;
           const D3 axis = face_axes_least(va, ha, ra, vb, hb, rb, face_gap);
-          if (len3(axis) == 0) continue;
+          if (len3(axis) == 0) return;
           gap = r.valid ? r.signed_distance() : face_gap;
           normals.push_back(axis);
           sides_of.push_back(3u);
@@ -354,7 +363,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
           }
         }
       }
-      if (gap > reach) continue;
+      if (gap > reach) return;
       // A contact point with its normal, and with each normal it may carry from earlier steps.
       std::vector<D3> earlier;
       // A point already given this normal with the same earlier poses (by another axis's
@@ -372,8 +381,8 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
         const double slack_deg = sat.tested ? kNormalSlackDeg : kPosedNormalSlackDeg;
         contacts.push_back({p, pt, normal, mu, lever, slack_deg});
         earlier.clear();
-        earlier_normals(p, pt, normal, sides, earlier);
-        st.persisted += !earlier.empty();
+        earlier_normals(p, pt, normal, sides, earlier, found.persisted_steps);
+        found.persisted += !earlier.empty();
         for (const D3& e : earlier) contacts.push_back({p, pt, e, mu, lever, slack_deg});
       };
       for (std::size_t ni = 0; ni < normals.size(); ++ni) {
@@ -476,6 +485,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       // slab of the pair's one normal (DART's rows on a box resting on an icosphere).
       if (!sat.tested) {
         auto extras = [&](const HullFeatures& h) -> const HullEdges& {
+          const std::lock_guard<std::mutex> lock(hulls_mutex);  // found once per hull, by any thread
           auto it = st.hulls.find(&h);
           if (it == st.hulls.end()) it = st.hulls.emplace(&h, hull_edges_and_planes(h)).first;
           return it->second;
@@ -520,7 +530,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
         const std::vector<std::pair<D3, D3>> ea = near_edges(ha, va, world[p.b], true),
                                              eb = near_edges(hb, vb, world[p.a], false);
         if (ea.size() * eb.size() > kMaxCrossingWork) {
-          ++st.crossings_skipped;
+          ++found.crossings_skipped;
         } else {
           D3 ca{}, cb{};
           for (const D3& v : va) ca = ca + v;
@@ -618,14 +628,25 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
             for (std::size_t k = 0; k < g.points.size(); ++k)
               flat.push_back({dot3(e1, g.points[k]), dot3(e2, g.points[k]), k});
             for (const P2& q : hull2(flat)) {
-              ++st.crossings;
+              ++found.crossings;
               add_point(g.points[q.k], g.normal, g.sides, g.lever);
             }
           }
         }
       }
     }
-    if (contacts.size() == before) continue;
+  });
+  // In candidate order: the contacts, the pairs with any, the islands they join.
+  std::vector<Contact> contacts;
+  for (std::size_t ci = 0; ci < cand.size(); ++ci) {
+    PairContacts& out = pair_out[ci];
+    if (out.contacts.empty()) continue;
+    const Pair p = cand[ci];
+    contacts.insert(contacts.end(), out.contacts.begin(), out.contacts.end());
+    st.persisted += out.persisted;
+    st.crossings += out.crossings;
+    st.crossings_skipped += out.crossings_skipped;
+    st.persisted_steps = std::max(st.persisted_steps, out.persisted_steps);
     ++st.pairs;
     if (dynamic(p.a) && dynamic(p.b)) parent[find(p.a)] = find(p.b);
     touched[p.a] = touched[p.b] = 1;
@@ -642,40 +663,49 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     island_contacts[find(dynamic(p.a) ? p.a : p.b)].push_back(k);
   }
   auto locked = [&](std::uint32_t i) -> unsigned { return bodies.locked_dofs.empty() ? 0u : bodies.locked_dofs[i]; };
-  for (auto& [root, members] : islands) {
-    poll();
+  // Each island judged on `threads` threads into its own slot, then tallied in island order
+  // (the verdicts do not depend on the thread count).
+  enum class Outcome { Judged, Asleep, Locked, Clamped, TooLarge, Unsolved };
+  struct IslandVerdict {
+    Outcome outcome = Outcome::Judged;
+    double figure = 0;
+    std::uint32_t body = 0;
+    std::string text;  ///< the failure's, where figure > 1
+  };
+  std::vector<const std::vector<std::uint32_t>*> island_members;
+  std::vector<const std::vector<std::size_t>*> island_ks;
+  for (const auto& [root, members] : islands) {
+    island_members.push_back(&members);
+    island_ks.push_back(&island_contacts[root]);
+  }
+  std::vector<IslandVerdict> verdicts(island_members.size());
+  parallel_items(island_members.size(), threads, stop, [&](std::size_t ii, unsigned) {
+    const std::vector<std::uint32_t>& members = *island_members[ii];
+    IslandVerdict& verdict = verdicts[ii];
     // Islands the row does not judge, counted.
-    bool skip = false;
     for (const std::uint32_t i : members) {
       if (asleep(rec.asleep_pre, i) || asleep(rec.asleep_post, i)) {
-        ++st.asleep;
-        skip = true;
-        break;
+        verdict.outcome = Outcome::Asleep;
+        return;
       }
       if (locked(i)) {
-        ++st.locked;
-        skip = true;
-        break;
+        verdict.outcome = Outcome::Locked;
+        return;
       }
       if (bodies.velocity_clamp > 0.0) {
         const Vec3 v = rec.v_post[i];
         const double c = bodies.velocity_clamp * (1.0 - 1e-6);
         if (std::fabs(v.x) >= c || std::fabs(v.y) >= c || std::fabs(v.z) >= c) {
-          ++st.clamped;
-          skip = true;
-          break;
+          verdict.outcome = Outcome::Clamped;
+          return;
         }
       }
     }
-    if (skip) continue;
     if (members.size() > kMaxIslandBodies) {
-      if (!st.too_large) st.too_large_first = fmt::format("frame {}: {} of {} bodies", rec.frame, group_name(members), members.size());
-      ++st.too_large;
-      continue;
+      verdict.outcome = Outcome::TooLarge;
+      return;
     }
-    ++st.islands;
-    st.largest = std::max(st.largest, members.size());
-    const std::vector<std::size_t>& ks = island_contacts[root];
+    const std::vector<std::size_t>& ks = *island_ks[ii];
     // Rows: per body 3 linear, with rotation 3 angular; row r of body slot s is 6 s + r.
     const std::size_t per = rotating ? 6 : 3;
     const std::size_t rows = per * members.size();
@@ -954,9 +984,8 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       }
     }
     if (!std::isfinite(figure)) {
-      if (!st.unsolved) st.unsolved_first = fmt::format("frame {}: {}", rec.frame, group_name(members));
-      ++st.unsolved;
-      continue;
+      verdict.outcome = Outcome::Unsolved;
+      return;
     }
     // The worst body of the nearest feasible impulses, named.
     std::vector<double> res(*rhs);
@@ -993,7 +1022,10 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     for (std::size_t r = per * ws; r < per * (ws + 1); ++r)
       if (std::fabs(res[r]) / sigma[r] > std::fabs(res[worst_row]) / sigma[worst_row]) worst_row = r;
     const std::uint32_t body = members[ws];
-    infeasible.check(figure <= 1.0, figure, Where::of_body(rec.frame, body), [&] {
+    verdict.figure = figure;
+    verdict.body = body;
+    if (figure <= 1.0) return;
+    verdict.text = [&] {
       std::string culprit_text;
       for (const std::size_t s : culprits)
         culprit_text += fmt::format("{}body {}", culprit_text.empty() ? "" : ", ", members[s]);
@@ -1025,7 +1057,39 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
           angular ? "dL" : "m (v' - v) - m g dt", (*rhs)[r0], (*rhs)[r0 + 1], (*rhs)[r0 + 2],
           angular ? "kg m^2/s" : "kg m/s", res[r0], res[r0 + 1], res[r0 + 2], figure, sigma[worst_row],
           pairs.empty() ? "none" : pairs, culprit_text);
-    });
+    }();
+  });
+  for (std::size_t ii = 0; ii < verdicts.size(); ++ii) {
+    const IslandVerdict& verdict = verdicts[ii];
+    const std::vector<std::uint32_t>& members = *island_members[ii];
+    switch (verdict.outcome) {
+      case Outcome::Asleep:
+        ++st.asleep;
+        break;
+      case Outcome::Locked:
+        ++st.locked;
+        break;
+      case Outcome::Clamped:
+        ++st.clamped;
+        break;
+      case Outcome::TooLarge:
+        if (!st.too_large)
+          st.too_large_first = fmt::format("frame {}: {} of {} bodies", rec.frame, group_name(members), members.size());
+        ++st.too_large;
+        break;
+      case Outcome::Unsolved:
+        if (!st.unsolved) st.unsolved_first = fmt::format("frame {}: {}", rec.frame, group_name(members));
+        ++st.unsolved;
+        ++st.islands;
+        st.largest = std::max(st.largest, members.size());
+        break;
+      case Outcome::Judged:
+        ++st.islands;
+        st.largest = std::max(st.largest, members.size());
+        infeasible.check(verdict.figure <= 1.0, verdict.figure, Where::of_body(rec.frame, verdict.body),
+                         [&] { return verdict.text; });
+        break;
+    }
   }
 }
 
