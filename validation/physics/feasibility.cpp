@@ -639,14 +639,14 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // In candidate order: the contacts, the pairs with any, the islands they join.
   std::vector<Contact> contacts;
   for (std::size_t ci = 0; ci < cand.size(); ++ci) {
-    PairContacts& out = pair_out[ci];
-    if (out.contacts.empty()) continue;
-    const Pair p = cand[ci];
-    contacts.insert(contacts.end(), out.contacts.begin(), out.contacts.end());
+    const PairContacts& out = pair_out[ci];
     st.persisted += out.persisted;
     st.crossings += out.crossings;
     st.crossings_skipped += out.crossings_skipped;
     st.persisted_steps = std::max(st.persisted_steps, out.persisted_steps);
+    if (out.contacts.empty()) continue;
+    const Pair p = cand[ci];
+    contacts.insert(contacts.end(), out.contacts.begin(), out.contacts.end());
     ++st.pairs;
     if (dynamic(p.a) && dynamic(p.b)) parent[find(p.a)] = find(p.b);
     touched[p.a] = touched[p.b] = 1;
