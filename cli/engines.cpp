@@ -11,6 +11,7 @@
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
 #include "octocd/process_engines.hpp"
+#include "octocd/run_session.hpp"
 #include "octocd/text.hpp"
 
 namespace octocd::cli {
@@ -84,8 +85,15 @@ int engines_json() {
 int engines_command(const EnginesOptions& o) {
   if (!(o.check_timeout_s > 0.0 && o.check_timeout_s <= 30.0))
     throw InputError(fmt::format("--check-timeout: {:g} s; allowed: a number of seconds in (0, 30]", o.check_timeout_s));
+  // SIGINT/SIGTERM while the checks run: they are stopped (their process trees end with
+  // them), nothing is listed (a stopped check says nothing of its engine), one line, 130/143.
+  RunSession session("engines");
+  session.keep("nothing listed");
   // Every process engine's check at once, under one bound; the answers are kept for the process.
-  check_process_engines(process_engines(builtin_engine_names()), o.check_timeout_s);
+  const std::vector<ProcessEngineSpec>& specs = process_engines(builtin_engine_names());
+  check_process_engines(specs, o.check_timeout_s);
+  if (const int sig = session.signal())
+    return session.stopped(sig, fmt::format(" while the checks of {} process engine(s) ran", specs.size()));
   if (o.json) return engines_json();
   for (const EngineInfo& e : engine_infos()) {
     const std::string why = engine_unavailable(e);

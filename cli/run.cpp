@@ -3,6 +3,7 @@
 #include <signal.h>
 #include <unistd.h>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -326,22 +327,48 @@ void check_worlds_trace(bool traced) {
 }
 
 /// `run --worlds K` on an engine that steps one scene per run (docs/gpu.md): the K copies as
-/// separate runs (world_copies.hpp), as many at once as the host has threads; a summary of
-/// the copies (steps/s per copy, world-steps/s = K frames / wall time).
+/// separate runs (world_copies.hpp), as many at once as the host has threads; progress on
+/// stderr (the first copy run whole, then at most one line a second); a summary of the
+/// copies (steps/s per copy, world-steps/s = the steps run / wall time). A stop says how many
+/// copies ran whole and where the one cut short stopped.
 int run_copies(octocd::RunSession& session, const RunOptions& o, const std::shared_ptr<const octocd::Model>& single,
                int frames, double model_s) {
+  const long k = o.worlds.count;
+  std::vector<int> copy_frames(static_cast<std::size_t>(std::max<long>(k, 1)), 0);  // one writer per copy
+  std::atomic<long> whole_so_far{0};
+  std::mutex print_mutex;
+  const auto t0 = Clock::now();
+  auto last_line = t0 - std::chrono::hours(1);
+  const auto on_frame = [&](std::size_t c, const octocd::FrameMetrics&, const octocd::Engine&) {
+    if (++copy_frames[c] != frames) return;
+    const long whole = ++whole_so_far;
+    if (o.quiet) return;
+    const std::lock_guard<std::mutex> lock(print_mutex);
+    const auto now = Clock::now();
+    if (whole != k && now - last_line < std::chrono::seconds(1)) return;
+    last_line = now;
+    std::fflush(stdout);
+    std::fprintf(stderr, "worlds: %ld of %ld copies run (%d frames each), %.1f s\n", whole, k, frames,
+                 std::chrono::duration<double>(now - t0).count());
+    std::fflush(stderr);
+  };
   const octocd::CopiesRun r =
-      octocd::run_copies_separately(o.engine, single, o.worlds, frames, 0, o.settings);
+      octocd::run_copies_separately(o.engine, single, o.worlds, frames, 0, o.settings, on_frame);
   std::vector<double> per_copy;
   std::int64_t ran = 0;
+  long whole = 0;
+  std::size_t cut = r.frames.size();  // the first copy begun and cut short by a stop
   for (std::size_t c = 0; c < r.frames.size(); ++c) {
     ran += r.frames[c];
+    if (r.frames[c] == frames) ++whole;
+    else if (r.frames[c] > 0 && cut == r.frames.size()) cut = c;
     if (r.step_ms[c] > 0.0) per_copy.push_back(1000.0 * static_cast<double>(r.frames[c]) / r.step_ms[c]);
   }
   std::sort(per_copy.begin(), per_copy.end());
   const double median = per_copy.empty() ? 0.0 : per_copy[per_copy.size() / 2];
   const double world_steps = r.wall_s > 0.0 ? static_cast<double>(ran) / r.wall_s : 0.0;
-  const long k = o.worlds.count;
+  const std::string copies =
+      whole == k ? fmt::format("{} copies", k) : fmt::format("{} of {} copies run whole (stopped)", whole, k);
   if (!o.quiet) {
     fmt::print("\nscene        {} ({} bodies) x {} copies as separate runs\n", octocd::printable(single->scene.name),
                single->initial.size(), k);
@@ -349,11 +376,12 @@ int run_copies(octocd::RunSession& session, const RunOptions& o, const std::shar
     if (unsafe.empty()) fmt::print("pipeline     engine {}, {} copies at once\n", o.engine, r.threads);
     else fmt::print("pipeline     engine {}, one copy at a time (not thread-safe: {})\n", o.engine, unsafe);
     fmt::print("set-up       {:.2f} s (scene and bodies)\n", model_s);
-    fmt::print("frames       {} per copy (dt {} s), wall {:.2f} s for all copies\n", frames, single->scene.dt, r.wall_s);
+    fmt::print("frames       {} per copy (dt {} s), wall {:.2f} s for {}\n", frames, single->scene.dt, r.wall_s,
+               whole == k ? std::string("all copies") : copies);
     fmt::print("steps/s      {:.1f}   (a copy's steps over its step time, the median over copies)\n", median);
-    fmt::print("worlds       {} copies as separate runs of engine {} ({} at once), world-steps/s {:.4g} (steps of "
-               "all copies over the wall time)\n",
-               k, o.engine, r.threads, world_steps);
+    fmt::print("worlds       {} as separate runs of engine {} ({} at once), world-steps/s {:.4g} (steps of "
+               "all copies run over the wall time)\n",
+               copies, o.engine, r.threads, world_steps);
   }
   if (!o.summary_json.empty()) {
     nlohmann::json j;
@@ -365,13 +393,21 @@ int run_copies(octocd::RunSession& session, const RunOptions& o, const std::shar
     j["setup_s"] = {{"model", model_s}};
     j["steps_per_s"] = median;
     j["worlds"] = k;
+    j["worlds_whole"] = whole;
     j["world_steps_per_s"] = world_steps;
     j["worlds_separate_runs"] = true;
     j["worlds_threads"] = r.threads;
     j["build_id"] = octocd::build_id();
     octocd::write_file_atomically(o.summary_json, j.dump(2) + "\n", "--summary-json");
   }
-  if (const int sig = session.signal()) return stopped_after_frame(session, sig, ran / std::max<long>(k, 1), frames, "");
+  if (const int sig = session.signal()) {
+    session.keep(o.summary_json.empty() ? std::string("")
+                                        : fmt::format("--summary-json {} holds the copies run", o.summary_json));
+    return session.stopped(
+        sig, fmt::format(" after {} of {} copies ({} frames each){}", whole, k, frames,
+                         cut < r.frames.size() ? fmt::format("; copy {} stopped after frame {}", cut + 1, r.frames[cut])
+                                               : std::string()));
+  }
   return 0;
 }
 

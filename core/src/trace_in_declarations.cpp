@@ -331,6 +331,8 @@ void TraceIn::read_shape_offsets(PhysicsBodies& p) {
   }
   if (com_offset_.empty() && has_attr("velocity_at"))
     choice_attr("velocity_at", {"com", "origin"}, "com");  // checked; the same point without an offset
+  // Which point the engine's integrator advances; without an offset both are one point.
+  p.integrated_origin = choice_attr("integrated_point", {"com", "origin"}, "com") == "origin";
 }
 
 void TraceIn::read_locked_dofs(PhysicsBodies& p) {

@@ -88,14 +88,22 @@ std::string resolve_item(const std::string& item, const fs::path& folder) {
   return item;
 }
 
-/// Whether an item of a command reads as a file name (a path, or a script's name).
-bool names_a_file(const std::string& item) {
+/// Whether item `i` of a command reads as a file name: a script's name (`eng(1).py`), or a
+/// path holding no character of code. Never an option, the code an interpreter's code option
+/// takes (`python3 -c CODE`, `node -e CODE`, `perl -E CODE`), or an item holding a line
+/// break, a quote or a shell character (`;`, `$`, `|`, ...); a path holding a bracket, `*`,
+/// `?`, `!` or a backslash is code too: `print(1/1)` is code, not a missing file.
+bool names_a_file(const std::vector<std::string>& argv, std::size_t i) {
+  const std::string& item = argv[i];
   if (item.empty() || item[0] == '-') return false;
-  if (item.find('/') != std::string::npos) return true;
+  if (i > 0)
+    for (const char* code_option : {"-c", "-e", "-E", "-p", "--eval", "--print"})
+      if (argv[i - 1] == code_option) return false;
+  if (item.find_first_of("\n\r\t;'\"`$|&<>") != std::string::npos) return false;
   for (const char* ext : {".js", ".mjs", ".cjs", ".py", ".rb", ".lua", ".jar", ".wasm", ".exe"})
     if (item.size() > std::strlen(ext) && item.compare(item.size() - std::strlen(ext), std::string::npos, ext) == 0)
       return true;
-  return false;
+  return item.find('/') != std::string::npos && item.find_first_of("()[]{}*?!\\") == std::string::npos;
 }
 
 std::vector<std::string> read_argv(const JsonFields& f, const nlohmann::json& v, const std::string& field,
@@ -274,7 +282,7 @@ std::string unavailable_by(const ProcessEngineSpec& spec, CheckClock::time_point
       if (const std::string why = process_detail::why_not_runnable(argv[0]); !why.empty())
         return fmt::format("{} '{}' {} ({})", what, printable(argv[0]), why, spec.file);
       for (std::size_t i = 1; i < argv.size(); ++i) {
-        if (!names_a_file(argv[i])) continue;
+        if (!names_a_file(argv, i)) continue;
         std::error_code ec;
         const fs::path p = fs::path(argv[i]).is_absolute() ? fs::path(argv[i]) : folder / argv[i];
         if (!fs::exists(p, ec)) return fmt::format("{} file '{}' is missing ({})", what, printable(p.string()), spec.file);

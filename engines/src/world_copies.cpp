@@ -36,6 +36,7 @@ CopiesRun run_copies_separately(const std::string& engine, const std::shared_ptr
   const auto t0 = std::chrono::steady_clock::now();
   parallel_for(k, loop, [&](std::size_t c, unsigned) {
     try {
+      if (failed || stop_signal() != 0) return;  // a copy not begun by a stop is not made
       std::unique_ptr<Engine> e;
       {
         std::lock_guard<std::mutex> lock(make_mutex);

@@ -18,7 +18,9 @@ _ROOT_ATTRIBUTES = (
     "committed_states", "stage_names", "gravity", "response_model", "detection", "mu", "restitution",
     "friction_combine", "restitution_combine", "contact_margin", "broadphase_exact", "contact_geometry",
     "collision_shape", "contact_model", "integrator", "gyroscopic", "substeps", "impulses", "speculative",
-    "contacts_complete", "manifold_points", "depth_per", "velocity_at")
+    "contacts_complete", "manifold_points", "depth_per", "velocity_at", "contact_margin_rule", "jt_direction",
+    "velocity_clamp", "impulses_complete", "response_scheme", "deactivation", "impulse_points", "integrated_point",
+    "friction_directions")
 
 
 class Trace:

@@ -114,7 +114,17 @@ ContactRecord ReferenceCore::manifold_row(std::uint32_t i1, std::uint32_t i2, co
   // (subtracting max(0, J.n) left it in jt3: a 1.5e-8 row 78 deg out of its plane).
   const double along = j_a[0] * nrm[0] + j_a[1] * nrm[1] + j_a[2] * nrm[2];
   const double jn = std::max(0.0, along);
-  const double jt_d[3] = {j_a[0] - along * nrm[0], j_a[1] - along * nrm[1], j_a[2] - along * nrm[2]};
+  double jt_d[3] = {j_a[0] - along * nrm[0], j_a[1] - along * nrm[1], j_a[2] - along * nrm[2]};
+  // J's components carry the engine's rounding, a few double epsilons of |J| (its rows are
+  // summed, the normal's and the friction's orthogonal, so nothing cancels), and so does the
+  // split: a tangential part below kRoundingOfTheSplit |J| (about 4,500 epsilons) is that
+  // rounding, of no direction of its own, and no friction (0). Above it the rounding is under
+  // 1/400 of the part: within 0.15 deg of the plane. ODE on a static triangle soup gave rows of
+  // 2.3e7 kg m/s whose residue of 1.1e-8 kg m/s sat 89.6 deg out of the plane.
+  constexpr double kRoundingOfTheSplit = 1e-12;
+  const double j_len = std::sqrt(j_a[0] * j_a[0] + j_a[1] * j_a[1] + j_a[2] * j_a[2]);
+  const double jt_len = std::sqrt(jt_d[0] * jt_d[0] + jt_d[1] * jt_d[1] + jt_d[2] * jt_d[2]);
+  if (jt_len <= kRoundingOfTheSplit * j_len) jt_d[0] = jt_d[1] = jt_d[2] = 0.0;
   ContactRecord c;
   c.pair = swap ? Pair{i2, i1} : Pair{i1, i2};
   c.normal = {static_cast<float>(nrm[0]), static_cast<float>(nrm[1]), static_cast<float>(nrm[2])};

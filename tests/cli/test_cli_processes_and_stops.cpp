@@ -8,7 +8,8 @@
 // one. Item 2: a stopped `run --worlds` of a process engine leaves no engine process and no
 // octocd-* folder in TMPDIR; a stopped `validate --determinism` keeps its finished rows and
 // says so. Item 7: a command that cannot start is unavailable with the reason (errno), a
-// timeout is stated as set, NULs are shown as \x00.
+// timeout is stated as set, NULs are shown as \x00, a check's code (python3 -c CODE) is run, never
+// taken for a missing file.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -239,6 +240,45 @@ TEST_F(ProcessTree, ACheckCommandsSetsidGrandchildEndsWithTheCheck) {
   EXPECT_TRUE(ended_now(grandchild)) << "the check's setsid() grandchild " << grandchild << " outlived octocd";
 }
 
+// `octocd engines` stopped by SIGTERM while a check runs: the check's process ends, nothing
+// is listed, one line says so, exit 143. Before: the default action (no line, killed by the
+// signal). The event: the check's file written beside the engines file.
+TEST_F(ProcessTree, AStoppedEnginesListingEndsItsChecksAndSaysSo) {
+  const fs::path file = dir_ / "engines.json";
+  std::ofstream(file) << R"J({"format": "octocd-engines", "version": 1, "engines": [
+      {"name": "pyslowcheck", "command": ["/usr/bin/python3"], "check": ["/usr/bin/python3", "-c",
+       "import os, time\nopen('check.pid', 'w').write(str(os.getpid()))\ntime.sleep(1000)\n"]}]})J";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::setenv("TMPDIR", (dir_ / "tmp").c_str(), 1);
+    const int out = ::open((dir_ / "stdout.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int err = ::open((dir_ / "stderr.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(out, 1);
+    ::dup2(err, 2);
+    const std::string b = octocd::test::bin();
+    ::execl(b.c_str(), b.c_str(), "--engines-file", file.c_str(), "engines", static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const bool started = octocd::test::wait_until([&] { return pid_in(dir_ / "check.pid") > 0; }, {dir_},
+                                                std::chrono::seconds(60));
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ASSERT_TRUE(octocd::test::wait_child(pid, status, std::chrono::seconds(30)));
+  std::ifstream in(dir_ / "stderr.txt");
+  const std::string err((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::ifstream in_out(dir_ / "stdout.txt");
+  const std::string out((std::istreambuf_iterator<char>(in_out)), std::istreambuf_iterator<char>());
+  ASSERT_TRUE(started) << err;
+  ASSERT_TRUE(WIFEXITED(status)) << "ended by signal " << (WIFSIGNALED(status) ? WTERMSIG(status) : 0) << ": " << err;
+  EXPECT_EQ(WEXITSTATUS(status), 143) << err;
+  EXPECT_TRUE(std::regex_search(
+      err, std::regex("octocd engines: stopped by SIGTERM while the checks of [0-9]+ process engine\\(s\\) ran; "
+                      "nothing listed\n")))
+      << err;
+  EXPECT_EQ(out.find("available"), std::string::npos) << out;
+  EXPECT_TRUE(ended_within(pid_in(dir_ / "check.pid"), std::chrono::seconds(10))) << "the check outlived octocd";
+}
+
 TEST_F(ProcessTree, ACommandThatCannotStartIsUnavailableWithTheReason) {
   // A folder, a file without the execute bit, a relative path resolved against the engines
   // file's folder (as its other items are) that is not there.
@@ -260,6 +300,30 @@ TEST_F(ProcessTree, ACommandThatCannotStartIsUnavailableWithTheReason) {
       << r.output;
   EXPECT_TRUE(std::regex_search(r.output, std::regex("absent +unavailable: command '.*/absent-engine' cannot be run: "
                                                      "No such file or directory \\(ENOENT\\)")))
+      << r.output;
+}
+
+// A check's code is run, never taken for a file: `python3 -c "print(1/1)"` used to be
+// unavailable, "check file '.../print(1/1)' is missing", without being run. A script the
+// check names that is not there is still said at once.
+TEST_F(ProcessTree, ACheckThatIsCodeIsRunNotTakenForAMissingFile) {
+  const fs::path file = dir_ / "engines.json";
+  std::ofstream(file) << R"J({"format": "octocd-engines", "version": 1, "engines": [
+      {"name": "divides", "command": ["/usr/bin/python3"], "check": ["/usr/bin/python3", "-c", "print(1/1)"]},
+      {"name": "halves", "command": ["/usr/bin/python3"],
+       "check": ["/usr/bin/python3", "-c", "import sys; sys.exit(int(4/2))"]},
+      {"name": "noscript", "command": ["/usr/bin/python3"], "check": ["/usr/bin/python3", "checks/absent.py"]},
+      {"name": "parens", "command": ["/usr/bin/python3", "eng(1).py"]}]})J";
+  const Result r = octocd("engines", file.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("divides +available"))) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("halves +unavailable: its check \\(/usr/bin/python3 -c import sys; "
+                                                     "sys\\.exit\\(int\\(4/2\\)\\)\\) exited with code 2")))
+      << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("noscript +unavailable: check file '.*/checks/absent\\.py' is "
+                                                     "missing")))
+      << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("parens +unavailable: command file '.*/eng\\(1\\)\\.py' is missing")))
       << r.output;
 }
 

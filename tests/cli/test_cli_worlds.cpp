@@ -1,17 +1,24 @@
 // `octocd run --worlds K` (batched worlds, core/include/octocd/worlds.hpp; docs/gpu.md
-// "Batched worlds"): the summary's world-steps/s, the copies' cells, and what is refused.
+// "Batched worlds"): the summary's world-steps/s, the copies' cells, what is refused, and
+// what a stopped run of copies says.
+#include <fcntl.h>
 #include <gtest/gtest.h>
-
+#include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <regex>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "support/cli_run.hpp"
+#include "support/wait_event.hpp"
 
 namespace fs = std::filesystem;
 using octocd::test::Result;
@@ -117,4 +124,57 @@ TEST(CliWorlds, BenchSweepsTakeWorldsAndReportWorldStepsPerSecond) {
   EXPECT_EQ(bad.code, 2) << bad.output;
   EXPECT_NE(bad.output.find("worlds[0]"), std::string::npos) << bad.output;
   fs::remove_all(d);
+}
+
+// `run --worlds K` on a reference engine stopped by SIGTERM while its copies run one at a
+// time (ode): the line says how many copies ran whole and where the one cut short stopped,
+// the summary and --summary-json say the same. Before: "stopped by SIGTERM after frame 1 of
+// 20" beside "10000 copies ..., wall 4.25 s for all copies", and every copy not begun was
+// still made. The event: the progress line of the first copy run whole.
+TEST(CliWorlds, AStoppedRunOfCopiesSaysHowManyCopiesRan) {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  const fs::path d = temp_dir() / info->name();
+  fs::create_directories(d);
+  const fs::path err_file = d / "stderr.txt", js = d / "summary.json";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const int out = ::open((d / "stdout.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int err = ::open(err_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(out, 1);
+    ::dup2(err, 2);
+    const std::string b = octocd::test::bin(), scene = box_stack();
+    ::execl(b.c_str(), b.c_str(), "run", scene.c_str(), "--engine", "ode", "--worlds", "100000", "--frames", "20",
+            "--summary-json", js.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const auto slurp = [](const fs::path& p) {
+    std::ifstream in(p);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  };
+  const bool one_whole = octocd::test::wait_until(
+      [&] { return slurp(err_file).find("worlds: 1 of 100000 copies run") != std::string::npos; }, {d},
+      std::chrono::seconds(60));
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ASSERT_TRUE(octocd::test::wait_child(pid, status, std::chrono::seconds(30)));
+  const std::string out = slurp(d / "stdout.txt"), err = slurp(err_file);
+  if (err.find("not built") != std::string::npos) GTEST_SKIP() << err;
+  ASSERT_TRUE(one_whole) << err;
+  ASSERT_TRUE(WIFEXITED(status)) << err;
+  EXPECT_EQ(WEXITSTATUS(status), 143) << err;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(err, m, std::regex("octocd run: stopped by SIGTERM after ([0-9]+) of 100000 copies "
+                                                   "\\(20 frames each\\)(; copy [0-9]+ stopped after frame [0-9]+)?; "
+                                                   "--summary-json .* holds the copies run\n")))
+      << err;
+  const long whole = std::stol(m[1].str());
+  EXPECT_GE(whole, 1);
+  EXPECT_LT(whole, 100000);
+  EXPECT_NE(out.find("frames       20 per copy (dt 0.001 s), wall "), std::string::npos) << out;
+  EXPECT_NE(out.find(std::to_string(whole) + " of 100000 copies run whole (stopped)"), std::string::npos) << out;
+  std::ifstream f(js);
+  const nlohmann::json j = nlohmann::json::parse(f);
+  EXPECT_EQ(j.at("worlds"), 100000);
+  EXPECT_EQ(j.at("worlds_whole"), whole);
+  fs::remove_all(temp_dir());
 }

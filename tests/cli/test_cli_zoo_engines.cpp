@@ -19,6 +19,9 @@
 //  (g) substeps: n semi-implicit substeps per step (integrator "substepped", `substeps` n):
 //      a free body advances by x + dt v + (n + 1) / (2n) g dt^2; a flat box bounces on the
 //      floor turning (its rows' normal and points turn within the step).
+//  (k) an integrator of the body origin: a bunny whose centre of mass lies 2.4 cm from its
+//      body frame's origin lands spinning, another spins alone; the engine advances the
+//      origin (MuJoCo's free joint: integrated_point "origin").
 //  (j) a pile of 30 boxes in 15 columns whose top boxes bounce on the bottom ones: with
 //      the rows of each ended contact's last impulse dropped (contacts_complete 0, judged
 //      on the geometry), and with every impulse reported 0.2% or 2% low (the systematic
@@ -167,6 +170,9 @@ struct Zoo {
   /// `write_com`, /bodies/com_offset.
   std::vector<V> com_offset;
   bool write_com = true;
+  /// The states are the body frame's origin already (its position and velocity, as an
+  /// engine integrating the origin keeps them: origin_engine): written as they are.
+  bool states_at_origin = false;
 
   int n() const { return static_cast<int>(bodies.size()); }
   M inertia_world(int i, const State& s) const { return conj(rotation(s.q[i]), bodies[i].inertia()); }
@@ -321,7 +327,7 @@ struct Zoo {
       state_frame.push_back(static_cast<std::int64_t>(f));
       for (int i = 0; i < n(); ++i) {
         V xi = s.x[i], vi = s.v[i];
-        if (!com_offset.empty()) {  // the body frame's origin, c behind the centre of mass
+        if (!com_offset.empty() && !states_at_origin) {  // the body frame's origin, c behind the centre of mass
           const V rc = mul(rotation(s.q[i]), com_offset[i]);
           xi = xi - rc;
           const auto at = text.find("velocity_at");
@@ -570,6 +576,113 @@ Zoo com_engine(int frames = 200) {
     floor_corners(z, 2, s, t, rows, 0.5, corners);
   });
   return z;
+}
+
+/// (k) An engine that integrates the body frame's origin (MuJoCo's free joint): two
+/// bunnies (scale 0.2, 1 kg, their inertia about the centre of mass the uniform local
+/// box's) whose centre of mass lies c = (2, -1, 1) cm from the body origin (a weight
+/// inside), collided as their convex hulls on a static floor box (top at y = 0). Body 1
+/// falls turning and bounces on its hull vertices (e = 0.3, frictionless, resolved one
+/// after the other, levers from the centre of mass); body 2 spins alone. Per step at dt =
+/// 1/240 s, from the state at the step's start (r = origin - centre of mass = -R c): the
+/// explicit gyroscopic term a = -I_w^-1 (w x I_w w), w' = w + dt a, the origin's velocity
+/// v_o' = v_o + dt (g + a x r + w x (w x r)) (its exact acceleration at the start), each
+/// row's impulse J at arm p - x_c moving v_o by J / m + (I_w^-1 (arm x J)) x r, then x_o' =
+/// x_o + dt v_o' and q advanced by w' dt: a consistent first-order integrator of the
+/// origin, whose centre of mass drifts by O(dt^2). The states are the origin's
+/// (velocity_at "origin"). The trace's scene gives the meshes (collision_shape
+/// "convex_hull").
+Zoo origin_engine(const fs::path& dir, int frames = 150) {
+  Zoo z;
+  z.engine = "zoo-origin";
+  z.dt = 1.0 / 240.0;
+  z.text["scene"] = R"({"name": "zoo-origin", "rotation": true, "dt": 0.004166666666666667, "frames": )" +
+                    std::to_string(frames) +
+                    R"(, "walls": "none", "gravity": [0, -9.81, 0], "domain": {"min": [-3, -1, -3], "max": [3, 6, 3]},
+    "groups": [
+      {"name": "floor", "shape": {"box": [2, 0.1, 2]}, "count": 1, "mass": 0, "positions": [[0, -0.1, 0]]},
+      {"name": "bunnies", "shape": {"mesh": "bunny", "scale": 0.2}, "count": 2, "mass": 1,
+       "positions": [[0, 0.3, 0], [1.2, 2.0, 0.5]]}]})";
+  const auto model = build_model(parse_scene(z.text["scene"], (dir / "zoo-origin.json").string()));
+  const octocd::Aabb box = model->local_box(1);
+  Body bunny;
+  bunny.h = {0.5 * (double(box.max.x) - box.min.x), 0.5 * (double(box.max.y) - box.min.y),
+             0.5 * (double(box.max.z) - box.min.z)};
+  z.bodies = {floor_body(), bunny, bunny};
+  const ReferenceGeometry hulls(*model, {CollisionShape::Mesh, CollisionShape::ConvexHull, CollisionShape::ConvexHull});
+  std::vector<V> hull;
+  for (const auto& p : hulls.hull_features(1).vertices) hull.push_back({p[0], p[1], p[2]});
+  const V c{0.02, -0.01, 0.01};
+  z.com_offset = {{0, 0, 0}, c, c};
+  z.states_at_origin = true;
+  z.text["velocity_at"] = "origin";
+  z.text["integrated_point"] = "origin";
+  z.text["gyroscopic"] = "true";
+  z.text["integrator"] = "semi-implicit";
+  z.text["collision_shape"] = "convex_hull";
+  z.states.push_back(initial(z, {{0, -0.1, 0}, {0, 0.3, 0}, {1.2, 2.0, 0.5}}, {{0, 0, 0}, {0.2, -0.5, 0}, {0, 1, 0}},
+                             {{0, 0, 0}, {4, 9, 3}, {10, 6, 4}},
+                             {{1, 0, 0, 0}, axis_angle({1, 0.5, 0.2}, 0.7), axis_angle({0, 1, 1}, 0.2)}));
+  const double e = 0.3;
+  for (int f = 1; f <= frames; ++f) {
+    const State s = z.states.back();
+    State t = s;
+    std::vector<Row> step;
+    for (int i = 1; i < z.n(); ++i) {
+      const Body& b = z.bodies[i];
+      const M rot = rotation(s.q[i]);
+      const M iw = conj(rot, b.inertia());
+      const M iw_inv = conj(rot, diag({1 / b.inertia()[0], 1 / b.inertia()[4], 1 / b.inertia()[8]}));
+      const V r = -1.0 * mul(rot, c);  // origin - centre of mass
+      const V w = s.w[i];
+      const V a = -1.0 * mul(iw_inv, cross(w, mul(iw, w)));
+      V w1 = w + z.dt * a;
+      V v1 = s.v[i] + z.dt * (z.g + cross(a, r) + cross(w, cross(w, r)));
+      const V xc = s.x[i] - r;
+      for (const V& local : i == 1 ? hull : std::vector<V>{}) {
+        const V p = s.x[i] + mul(rot, local);
+        if (!(p[1] < 0)) continue;
+        Row row;
+        row.a = 0;
+        row.b = i;
+        row.n = {0, -1, 0};
+        row.depth = f32(-p[1]);
+        row.p = f32(V{p[0], 0.5 * p[1], p[2]});
+        const V arm = row.p - xc;
+        const V vp = (v1 - cross(w1, r)) + cross(w1, arm);  // the point's velocity from the centre of mass
+        if (vp[1] < 0) {
+          const V rn = cross(arm, V{0, 1, 0});
+          row.jn = f32(-(1 + e) * vp[1] / (1 / b.m + dot(rn, mul(iw_inv, rn))));
+          const V dw = mul(iw_inv, cross(arm, row.jn * V{0, 1, 0}));
+          w1 = w1 + dw;
+          v1 = v1 + (row.jn / b.m) * V{0, 1, 0} + cross(dw, r);
+        }
+        step.push_back(row);
+      }
+      t.v[i] = f32(v1);
+      t.w[i] = f32(w1);
+      t.x[i] = f32(s.x[i] + z.dt * t.v[i]);
+      const double angle = norm(t.w[i]) * z.dt;
+      t.q[i] = f32(angle > 0 ? qnorm(qmul(axis_angle(t.w[i], angle), s.q[i])) : s.q[i]);
+    }
+    z.states.push_back(t);
+    z.rows.push_back(step);
+  }
+  return z;
+}
+
+/// The largest drift of body i's centre of mass off free flight over z's steps without
+/// rows on it: |v_c' - v_c - g dt| with v_c = v_o + w x R c (m/s; z integrates the origin).
+double com_drift(const Zoo& z, int i) {
+  double worst = 0;
+  for (std::size_t f = 1; f < z.states.size(); ++f) {
+    bool free = true;
+    for (const Row& r : z.rows[f - 1]) free = free && r.a != i && r.b != i;
+    if (!free) continue;
+    auto vc = [&](const State& s) { return s.v[i] + cross(s.w[i], mul(rotation(s.q[i]), z.com_offset[i])); };
+    worst = std::max(worst, norm(vc(z.states[f]) - vc(z.states[f - 1]) - z.dt * z.g));
+  }
+  return worst;
 }
 
 /// (g) Substeps: `n` semi-implicit substeps per step of `dt` (Zoo::substep), declared
@@ -1455,6 +1568,75 @@ TEST_F(ZooEngines, DepthPerIsJudgedAsDeclared) {
   EXPECT_TRUE(row_verdict(pen.output, "penetration", "FAIL")) << pen.output;
 }
 
+// depth_per "manifold" along a normal a little off the floor's (docs/validation.md, "Depth
+// per manifold"): box 1's 4 rows carry the manifold's one depth (0.5 mm) along a normal
+// turned 1.4 deg about z from frame 20 on. The deepest point of the overlap along that
+// normal is 0.5 mm / cos 1.4 deg, so the run is clean declared "manifold", "point" or
+// undeclared (the hulls' overlap projected on the normal reads the far edge of the 4 m
+// floor instead: 2.8 cm or 7.6 cm by the side); a depth 1 cm off still fails. The engine
+// reports no impulses (impulses "none", as Jolt): its rows' impulses were applied along
+// the floor's normal.
+TEST_F(ZooEngines, ManifoldDepthIsTheOverlapsDeepestPointAlongItsNormal) {
+  Zoo base = locked_engine();
+  base.text["impulses"] = "none";
+  const double t = 1.4 * 3.14159265358979323846 / 180.0;
+  for (const double side : {1.0, -1.0}) {
+    Zoo tilted = base;
+    for (std::size_t f = 19; f < tilted.rows.size(); ++f)
+      for (Row& row : tilted.rows[f])
+        if (row.b == 1) row.n = f32(V{side * std::sin(t), -std::cos(t), 0});
+    for (const char* value : {"manifold", "point", ""}) {
+      Zoo z = tilted;
+      if (*value) z.text["depth_per"] = value;
+      expect_clean(judge(z, std::string("tilted-") + value));
+    }
+    Zoo deep = tilted;
+    deep.text["depth_per"] = "manifold";
+    for (Row& row : deep.rows[29])
+      if (row.b == 1) row.depth = f32(row.depth + 0.01);
+    expect_caught(judge(deep, "tilted-deep"), {"contact-geometry", "frame 30: pair (0, 1) manifold depth"});
+  }
+}
+
+// Resting normals without a depth (docs/validation.md, contact-geometry): box 1 rests 0.5 mm
+// deep on the floor on 4 loaded rows that carry depth 0 (an engine that reports no depth,
+// or declares depth_per "unknown"). Clean, the rows are judged on SAT's axes; at frame 30
+// the 4 rows with their normal flipped (pointing from the floor into the box), or turned by
+// 45 deg, fail contact-geometry naming the frame and the pair, whatever depth_per says. A
+// normal turned by 30 deg lies within normal_angle_deg (40) as on any row: its impulses
+// then miss box 1's momentum change, and momentum-balance names the frame and the body.
+TEST_F(ZooEngines, RestingNormalsAreJudgedWhateverTheDepth) {
+  Zoo base = locked_engine();
+  for (auto& step : base.rows)
+    for (Row& row : step)
+      if (row.b == 1) row.depth = 0;
+  auto planted = [&](V n) {
+    Zoo z = base;
+    for (Row& row : z.rows[29])
+      if (row.b == 1) row.n = f32(n);
+    return z;
+  };
+  const double c45 = std::sqrt(0.5);
+  for (const char* value : {"", "point", "unknown"}) {
+    Zoo z = base;
+    if (*value) z.text["depth_per"] = value;
+    const Result ok = judge(z, std::string("resting-") + value);
+    expect_clean(ok);
+    EXPECT_NE(ok.output.find("resting rows"), std::string::npos) << ok.output;
+    for (const V& n : {V{0, 1, 0}, V{c45, -c45, 0}}) {
+      Zoo f = planted(n);
+      if (*value) f.text["depth_per"] = value;
+      const Result r = judge(f, std::string("resting-fault-") + value);
+      EXPECT_TRUE(row_verdict(r.output, "contact-geometry", "FAIL")) << r.output;
+      expect_caught(r, {"frame 30: pair (0, 1) row 0: normal", "a resting row: depth 0 m"});
+    }
+  }
+  const Result turned = judge(planted({0.5, -std::sqrt(0.75), 0}), "resting-30");
+  EXPECT_TRUE(row_verdict(turned.output, "contact-geometry", "pass")) << turned.output;
+  EXPECT_TRUE(row_verdict(turned.output, "momentum-balance", "FAIL")) << turned.output;
+  expect_caught(turned, {"frame 30", "body 1"});
+}
+
 // design.md section 13d item 4: /bodies/convex_radius rounds a body's shape. Box 1 rests
 // 2 cm higher on the floor (its rows 0.5 mm deep into the floor): judged on the box rounded
 // by 2 cm it is clean; without the radius its rows join shapes 1.95 cm apart (a false
@@ -1527,6 +1709,47 @@ TEST_F(ZooEngines, OffCentreBodiesAreJudgedAtTheirCentreOfMass) {
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("root attribute velocity_at"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("\"com\", \"origin\""), std::string::npos) << r.output;
+}
+
+// Issue 78 item 6: an engine integrating the body origin (zoo engine (k)). Declared
+// (integrated_point "origin"): clean; undeclared, the centre of mass's first-order drift
+// fails free-flight on the lone spinner and momentum-balance on the landing bunny; a 1.5x
+// velocity (free and in contact) and a 1 cm teleport still fail declared; a bad value
+// exits 2 naming the attribute and the allowed values.
+TEST_F(ZooEngines, OriginIntegratorIsJudgedWithinItsFirstOrderDrift) {
+  const Zoo z = origin_engine(dir_);
+  const int first = first_impulse(z, 0, 1);
+  ASSERT_GT(first, 0);
+  int contact_steps = 0;
+  for (const auto& step : z.rows) contact_steps += !step.empty();
+  std::cout << "zoo-origin: first impulse at frame " << first << ", " << contact_steps
+            << " steps with rows; the lone bunny's centre of mass drifts up to " << com_drift(z, 2)
+            << " m/s a step off free flight\n";
+  const Result ok = judge(z, "origin");
+  expect_clean(ok);
+  EXPECT_NE(ok.output.find("integrated_point \"origin\""), std::string::npos) << ok.output;
+  Zoo undeclared = z;
+  undeclared.text.erase("integrated_point");
+  const Result r = judge(undeclared, "origin-undeclared");
+  expect_caught(r, {"body 2 without contacts"});
+  EXPECT_TRUE(row_verdict(r.output, "free-flight", "FAIL")) << r.output;
+  EXPECT_TRUE(row_verdict(r.output, "momentum-balance", "FAIL")) << r.output;
+  Zoo fast = z;
+  fast.states[100].v[2] = f32(1.5 * fast.states[100].v[2]);
+  expect_caught(judge(fast, "origin-fast"), {"free-flight", "frame 100: body 2"});
+  Zoo teleport = z;
+  teleport.states[100].x[2][0] = f32(teleport.states[100].x[2][0] + 0.01);
+  expect_caught(judge(teleport, "origin-teleport"), {"free-flight", "frame 100: body 2"});
+  Zoo landing = z;  // body 1's velocity x1.5 right after its first impulse
+  landing.states[first].v[1] = f32(1.5 * landing.states[first].v[1]);
+  expect_caught(judge(landing, "origin-landing"),
+                {"momentum-balance", "frame " + std::to_string(first) + ": body 1"});
+  Zoo bad = z;
+  bad.text["integrated_point"] = "centre";
+  const Result b = judge(bad, "bad-integrated-point");
+  EXPECT_EQ(b.code, 2) << b.output;
+  EXPECT_NE(b.output.find("root attribute integrated_point"), std::string::npos) << b.output;
+  EXPECT_NE(b.output.find("\"com\", \"origin\""), std::string::npos) << b.output;
 }
 
 /// (j) A 30-box pile: 15 columns of two boxes (0.2 m, 1 kg, rotation locked) on a 5 x 3

@@ -238,3 +238,25 @@ def test_external_version_1_trace_reads_unrotated(tmp_path):
         half = (f["bodies/local_aabb_max"][:] - f["bodies/local_aabb_min"][:]) / 2
         m = np.where(f["bodies/inverse_mass"][:] > 0, 1 / np.maximum(f["bodies/inverse_mass"][:], 1e-30), 0)
         assert np.allclose(t.inertia[:, 1, 1], m / 3 * (half[:, 0] ** 2 + half[:, 2] ** 2), rtol=1e-6)
+
+
+def test_attrs_holds_every_declaration_docs_list(tmp_path):
+    """Trace.attrs gives every root-attribute declaration of docs/validate-your-engine.md's
+    table (its first column's names, datasets aside) that a trace carries: a declaration
+    added to the reader and the docs but not to the Python reader fails here."""
+    doc = open(os.path.join(SOURCE_DIR, "docs", "validate-your-engine.md"), encoding="utf-8").read()
+    table = doc[doc.index("| declaration | values |"):].split("\n\n")[0]
+    names = set()
+    for row in table.splitlines()[2:]:
+        first = row.split("|")[1]
+        names.update(n for n in first.replace("`", " ").replace(",", " ").split() if not n.startswith("/"))
+    assert {"integrated_point", "impulse_points", "contact_model", "speculative"} <= names
+    out = str(tmp_path / "toy.h5")
+    subprocess.run([sys.executable, os.path.join(SOURCE_DIR, "examples", "python", "toy_engine.py"), out],
+                   check=True, capture_output=True)
+    with h5py.File(out, "a") as f:
+        for k in names:
+            f.attrs[k] = "declared-" + k
+    with octocd.Trace(out) as t:
+        missing = sorted(k for k in names if t.attrs.get(k) != "declared-" + k)
+    assert not missing, f"Trace.attrs lacks {missing}"

@@ -832,4 +832,39 @@ TEST(ManifoldRow, TheFrictionImpulseIsTheEnginesInTheContactPlane) {
     }
   }
 }
+
+// A row of a huge normal impulse: ODE on a static triangle soup (20,000 points) gave a row of
+// 2.27e7 kg m/s along n = (0.01125083, 0.99983209, 0.01446396) whose impulse's rounding (a
+// few ulps of 2.27e7, 3.7e-9 kg m/s each) left 1.1e-8 kg m/s in jt3, 89.6 deg out of the
+// contact plane: `run --trace` exited 0 and `validate --trace-in` refused the trace. The
+// oracle is the reader's rule (a jt3 above 1e-9 kg m/s within 1 deg of the plane) and the
+// engine's own friction where it has one: none (J = lambda n, each component 0 to 4 ulps
+// off), and 1e-9 of lambda (22.7 mN s), which is kept.
+TEST(ManifoldRow, TheRoundingOfAHugeNormalImpulseIsNoFriction) {
+  const double n0[3] = {0.01125083, 0.99983209, 0.01446396};
+  const double len = std::sqrt(n0[0] * n0[0] + n0[1] * n0[1] + n0[2] * n0[2]);
+  const double n[3] = {n0[0] / len, n0[1] / len, n0[2] / len};
+  const double t[3] = {n[1], -n[0], 0.0};  // orthogonal to n; |t| = sqrt(n0^2 + n1^2)
+  const double t_len = std::sqrt(t[0] * t[0] + t[1] * t[1]);
+  const double lambda = 2.2716296e7;
+  for (const double friction : {0.0, 1e-9 * lambda}) {
+    for (int ulps = 0; ulps <= 4; ++ulps) {
+      SCOPED_TRACE(testing::Message() << "friction " << friction << " kg m/s, " << ulps << " ulps");
+      double j[3];
+      for (int c = 0; c < 3; ++c) {
+        j[c] = lambda * n[c] + friction * t[c] / t_len;
+        for (int u = 0; u < ulps; ++u) j[c] = std::nextafter(j[c], (c == 1) ? -1e300 : 1e300);
+      }
+      const TwoBodies core;
+      std::vector<Vec3> jt3;
+      const ContactRecord row = core.manifold_row(0, 1, n, j, 0.001, Vec3{0, 0.5, 0}, jt3);
+      ASSERT_EQ(jt3.size(), 1u);
+      const double jl = std::sqrt(double(jt3[0].x) * jt3[0].x + double(jt3[0].y) * jt3[0].y +
+                                  double(jt3[0].z) * jt3[0].z);
+      if (jl > 1e-9) EXPECT_LT(degrees_out_of_plane(jt3[0], row.normal), 1.0) << "jt3 |" << jl << "| kg m/s";
+      EXPECT_NEAR(jl, friction, 1e-4 * friction + 1e-9);
+      EXPECT_NEAR(row.jn, lambda, 1e-6 * lambda);
+    }
+  }
+}
 #endif

@@ -473,31 +473,81 @@ TEST(PhysicsRows, FlippedAndTurnedNormals) {
   }
 }
 
-// A row the engine places at depth 0 is a touching contact when its pair penetrates less
-// than contact_depth_m (such a pair needs no contact at all): its normal is a figure (two
-// boxes grazing edge on edge have a minimum translation far from the face normal a
-// detector keeps). The same rows on a pair penetrating 2 mm are judged and caught.
-TEST(PhysicsRows, DepthZeroRowsOnAGrazingPairAreFigures) {
+// A row the engine places at depth 0 on a pair penetrating by no more than contact_depth_m
+// (which needs no contact at all) is a resting row, judged on the posed shapes whatever its
+// depth (docs/validation.md, contact-geometry): the diamond-cube rows at depth 0 along -x
+// pass and turned 60 deg fail on the pair penetrating 0.5 mm, as on the pair penetrating
+// 2 mm.
+TEST(PhysicsRows, DepthZeroRowsAreJudgedWhateverTheDepth) {
   const auto model = build_model(four_bodies());
   const Vec3 turned = v3(-std::cos(kPi / 3), std::sin(kPi / 3), 0);  // 60 deg off -x
   for (const double shift : {0.0, 0.0015}) {
     SCOPED_TRACE(shift == 0.0 ? "pair (2, 3) penetrates 2 mm" : "pair (2, 3) penetrates 0.5 mm");
-    RestingRecord r = resting(*model);
-    // Move the cube away from the diamond by `shift` (the floor contacts stay valid).
-    for (Vec3* x : {&r.rec.x_det[3], &r.rec.x_pre[3], &r.rec.x_post[3]}) x->x += float(shift);
-    r.rec.aabbs[3] = posed_box_aabb(model->local_box(3), Pose{r.rec.x_det[3], r.rec.q_det[3]});
-    for (ContactRecord& c : r.rec.contacts) {
-      if (c.pair.a == 0 && c.pair.b == 3) c.point.x += float(shift);
-      if (c.pair.a == 2 && c.pair.b == 3) {
-        c.depth = 0.0f;
-        c.normal = turned;
+    for (const bool fault : {false, true}) {
+      RestingRecord r = resting(*model);
+      // Move the cube away from the diamond by `shift` (the floor contacts stay valid).
+      for (Vec3* x : {&r.rec.x_det[3], &r.rec.x_pre[3], &r.rec.x_post[3]}) x->x += float(shift);
+      r.rec.aabbs[3] = posed_box_aabb(model->local_box(3), Pose{r.rec.x_det[3], r.rec.q_det[3]});
+      for (ContactRecord& c : r.rec.contacts) {
+        if (c.pair.a == 0 && c.pair.b == 3) c.point.x += float(shift);
+        if (c.pair.a == 2 && c.pair.b == 3) {
+          c.depth = 0.0f;
+          if (fault) c.normal = turned;
+        }
+      }
+      const auto rs = judge(*model, r.rec, rotating_engine());
+      // Below contact_depth_m the rows are resting rows, and the details say so.
+      const bool resting_pair = shift > 0;
+      if (fault) {
+        expect_caught(rs, "contact-geometry",
+                      {"frame 7", "pair (2, 3) row 0", "60.0 deg", resting_pair ? "a resting row: depth 0 m" : "SAT"});
+      } else {
+        const ValidationResult& g = row_of(rs, "contact-geometry");
+        EXPECT_TRUE(g.pass) << g.detail;
+        if (resting_pair) EXPECT_NE(g.detail.find("2 resting rows"), std::string::npos) << g.detail;
       }
     }
+  }
+}
+
+// Two shapes that touch are in contact along every axis on which they overlap by at most
+// contact_depth_m: the cube moved to the floor's -x edge (away from the wall), 0.3 mm into
+// its top face and 0.5 mm past its side (an edge resting on an edge), its 4 floor rows at
+// depth 0: along the
+// floor's top normal (SAT's minimum), its side normal (0.5 mm: 90 deg from the minimum)
+// and the direction between them pass; flipped, or turned 60 deg into +y, they fail.
+TEST(PhysicsRows, RestingRowsOnTouchingShapesTakeEveryAxisWithinContactDepth) {
+  const auto model = build_model(four_bodies());
+  const double c45 = std::sqrt(0.5);
+  struct Case {
+    const char* what;
+    Vec3 normal;
+    bool caught;
+  };
+  for (const Case& k : {Case{"top", v3(0, -1, 0), false}, Case{"side", v3(1, 0, 0), false},
+                        Case{"between", v3(c45, -c45, 0), false}, Case{"flipped", v3(0, 1, 0), true},
+                        Case{"turned into +y", v3(std::cos(kPi / 3), std::sin(kPi / 3), 0), true}}) {
+    SCOPED_TRACE(k.what);
+    RestingRecord r = resting(*model);
+    const Vec3 at = v3(-1.0 - 0.1 + 0.0005, 0.1 - 0.0003, 0);  // the floor's half width is 1.0
+    for (Vec3* x : {&r.rec.x_det[3], &r.rec.x_pre[3], &r.rec.x_post[3]}) *x = at;
+    r.rec.aabbs[3] = posed_box_aabb(model->local_box(3), Pose{at, r.rec.q_det[3]});
+    // The diamond's rows on the cube leave with it: the cube only meets the floor.
+    auto& rows = r.rec.contacts;
+    rows.erase(std::remove_if(rows.begin(), rows.end(), [](const ContactRecord& c) { return c.pair.b == 3 && c.pair.a == 2; }),
+               rows.end());
+    for (ContactRecord& c : rows)
+      if (c.pair.a == 0 && c.pair.b == 3) {
+        c.depth = 0.0f;
+        c.normal = k.normal;
+        c.point = v3(-1.0, 0.0, c.point.z);
+      }
     const auto rs = judge(*model, r.rec, rotating_engine());
-    if (shift == 0.0) {
-      expect_caught(rs, "contact-geometry", {"frame 7", "pair (2, 3) row 0", "60.0 deg"});
+    const ValidationResult& g = row_of(rs, "contact-geometry");
+    if (k.caught) {
+      expect_caught(rs, "contact-geometry", {"frame 7", "pair (0, 3) row 0", "a resting row: depth 0 m"});
     } else {
-      EXPECT_TRUE(row_of(rs, "contact-geometry").pass) << row_of(rs, "contact-geometry").detail;
+      EXPECT_TRUE(g.pass) << g.detail;
     }
   }
 }

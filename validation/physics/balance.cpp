@@ -308,9 +308,16 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       if (!bodies.impulses_complete || bodies.impulses == PhysicsBodies::Impulses::None) continue;
       if (locked(i)) ++balance_locked;
       const D3 dp = unlocked(mi * (v1 - v0) - force[i], i, 0);
+      // integrated_point "origin": the centre of mass's drift under the origin's
+      // first-order integration (docs/validation.md, "An engine that integrates the body origin").
+      const OriginDrift drift = origin_drift(rec, static_cast<std::uint32_t>(i));
+      if (bodies.integrated_origin && !bodies.com_offset.empty()) {
+        ++origin_drift_balance;
+        origin_drift_balance_worst = std::max(origin_drift_balance_worst, drift.velocity);
+      }
       const double float_bound =
           eps * double(rows_of[i] + 2) * (mi * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + mag[i]) + 1e-9 +
-          any_dir[i];
+          any_dir[i] + mi * drift.velocity;
       // The residual must lie in the sum of the rows' friction discs (plus rounding): its
       // component along a direction d is at most sum u |d x n| + the rounding bound. Tested
       // along the residual itself and along each row's normal (where a manifold's discs,
@@ -368,9 +375,13 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       if (!defer) balance_lin.check(ratio <= 1.0, ratio, Where::of_body(frame, i), [&] {
         return fmt::format("frame {}: body {}: m (v' - v) - m g dt = ({:.4g}, {:.4g}, {:.4g}) kg m/s but its {} "
                            "contact rows' impulses sum to ({:.4g}, {:.4g}, {:.4g}): off by {:.4g} ({:.3g} of the "
-                           "bound: rounding {:.3g}, friction the record leaves open {:.3g})",
+                           "bound: rounding {:.3g}{}, friction the record leaves open {:.3g})",
                            frame, i, mi * (v1[0] - v0[0]), mi * (v1[1] - v0[1]), mi * (v1[2] - v0[2]), rows_of[i],
-                           force[i][0], force[i][1], force[i][2], dpl, ratio, float_bound, open_along);
+                           force[i][0], force[i][1], force[i][2], dpl, ratio, float_bound,
+                           drift.velocity > 0
+                               ? fmt::format(" with the origin integrator's drift m {:.3g}", mi * drift.velocity)
+                               : std::string(),
+                           open_along);
       });
       if (!rotating || !rec.has_points) continue;
       if ((locked(i) >> 3) == 7u) {  // every rotation locked by a joint
@@ -440,13 +451,22 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     // (docs/validation.md, "Free flight: any consistent integrator").
     const double updates =
         bodies.integrator == PhysicsBodies::Integrator::Substepped ? 4.0 + double(bodies.substeps - 1) : 4.0;
+    // integrated_point "origin": the centre of mass's drift under the origin's
+    // first-order integration (docs/validation.md, "An engine that integrates the body origin").
+    const OriginDrift drift = origin_drift(rec, static_cast<std::uint32_t>(i));
+    if (bodies.integrated_origin && !bodies.com_offset.empty()) {
+      ++origin_drift_free;
+      origin_drift_free_worst = std::max(origin_drift_free_worst, drift.velocity);
+    }
     const double v_bound = updates * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) +
-                           stored_origin_speed(rec, i) * 2.0 * kEps32 + 1e-12;
+                           stored_origin_speed(rec, i) * 2.0 * kEps32 + drift.velocity + 1e-12;
     const double dvl = len3(dv);
     free_vel.check(dvl <= v_bound, dvl, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: v' = ({:.6g}, {:.6g}, {:.6g}) m/s, v + g dt = "
-                         "({:.6g}, {:.6g}, {:.6g}): off by {:.4g} m/s (bound {:.3g})",
-                         frame, i, v1[0], v1[1], v1[2], v0[0], v0[1], v0[2], dvl, v_bound);
+                         "({:.6g}, {:.6g}, {:.6g}): off by {:.4g} m/s (bound {:.3g}{})",
+                         frame, i, v1[0], v1[1], v1[2], v0[0], v0[1], v0[2], dvl, v_bound,
+                         drift.velocity > 0 ? fmt::format(", the origin integrator's drift {:.3g}", drift.velocity)
+                                            : std::string());
     });
     const D3 x0 = d3(rec.x_pre[i]), x1 = d3(rec.x_post[i]);
     // x' = x + dt v + a g dt^2 (v before the step): a = 1 semi-implicit (x + dt v'), 0
@@ -466,7 +486,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
                       : bodies.integrator == I::Substepped ? d_family
                                                            : std::min({d_semi, d_expl, d_family});
     const double x_bound =
-        updates * kEps32 * (len3(x0) + len3(x1) + dt * (len3(v1) + len3(d3(rec.v_pre[i])))) + 1e-12;
+        updates * kEps32 * (len3(x0) + len3(x1) + dt * (len3(v1) + len3(d3(rec.v_pre[i])))) + drift.position + 1e-12;
     free_pos.check(dx <= x_bound, dx, Where::of_body(frame, i), [&] {
       const std::string rule =
           bodies.integrator == I::SemiImplicit ? std::string("x + dt v'")
@@ -476,8 +496,10 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
                             bodies.substeps)
               : fmt::format("x + dt v + a g dt^2 for every a in [0, 1] (nearest a = {:.4g})", a_fit);
       return fmt::format("frame {}: body {} without contacts: x' = ({:.6g}, {:.6g}, {:.6g}) m is {:.4g} m from {} "
-                         "(integrator {}; bound {:.3g})",
-                         frame, i, x1[0], x1[1], x1[2], dx, rule, integrator_name(bodies.integrator), x_bound);
+                         "(integrator {}; bound {:.3g}{})",
+                         frame, i, x1[0], x1[1], x1[2], dx, rule, integrator_name(bodies.integrator), x_bound,
+                         drift.position > 0 ? fmt::format(", the origin integrator's drift {:.3g}", drift.position)
+                                            : std::string());
     });
     if (!rotating) continue;
     // The spin of a torque-free body (docs/validation.md, "Free rotation: the
@@ -787,6 +809,10 @@ ValidationResult PhysicsValidators::Impl::table<RowId::MomentumBalance>() const 
          "{} body-steps in contact on the steps or pairs /contacts/incomplete declares (a row may be missing) not "
          "judged",
          s.balance_incomplete);
+    note(r.detail, s.origin_drift_balance,
+         "integrated_point \"origin\": {} body-steps allowed the centre of mass's drift under the origin's "
+         "first-order integration, m |c| dt w (3 |w' - w| + 2 dt w^2) (at most {:.3g} m/s)",
+         s.origin_drift_balance, s.origin_drift_balance_worst);
     if (s.bodies.impulses == PhysicsBodies::Impulses::NormalOnly)
       r.detail +=
           "; impulses \"normal-only\": each body's residual m (v' - v) - m g dt - sum jn n within the sum "
@@ -845,6 +871,11 @@ ValidationResult PhysicsValidators::Impl::table<RowId::FreeFlight>() const {
        "pairs' bodies through the step are judged free; {} body-steps without rows but near a body not judged ({} "
        "pairs tested)",
        s.bodies.incomplete_rows.size(), s.free_near, s.near_tested);
+  note(r.detail, s.origin_drift_free,
+       "integrated_point \"origin\": {} body-steps allowed the centre of mass's drift under the origin's "
+       "first-order integration, |c| dt w (3 |w' - w| + 2 dt w^2) in velocity (at most {:.3g} m/s) and |c| dt "
+       "(|w' - w| + 2 dt w^2) in position",
+       s.origin_drift_free, s.origin_drift_free_worst);
   if (r.applicable) {
     note(r.detail, free_sleep.checks + s.fell_asleep,
          "{} body-steps asleep through the step judged not to move (worst {:.3g} of one "

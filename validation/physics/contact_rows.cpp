@@ -297,19 +297,62 @@ void PhysicsValidators::Impl::judge<RowId::ContactGeometry>(CheckedFrame& f) {
       const Vec3 ref_normal = row_ref.normal;
       ++sign_rows;
       if (dot(c.normal, r.normal) > 0.0f) ++sign_agree;
-      // A row the engine places at depth 0 on a pair that penetrates less than
-      // contact_depth_m (which needs no contact at all, item 2) is a touching contact:
-      // two boxes grazing edge on edge by 30 um have a minimum translation 60 deg from
-      // the face normal Bullet's detector keeps at depth 0 (rot-pile-1000).
+      // A resting row: the engine places it at depth 0 (or gives no depth) on a pair that
+      // penetrates by no more than contact_depth_m (a pair that needs no contact at all,
+      // item 2), or beside a deeper row of its manifold, or its shapes touch within
+      // geometry_slack_m: a loaded resting contact as much as a touching one.
       const bool touching = (!depth_known || c.depth <= 0.0f) && r.depth <= tol.contact_depth_m;
-      if (!r.penetrating || r.depth <= tol.geometry_slack_m || touching ||
-          (engine_places_depth && c.depth <= tol.geometry_slack_m)) {
-        // A row on shapes that do not penetrate (or out of contact, above): the
-        // nearest-points direction of two shapes that (nearly) touch at an edge or a
-        // corner is no contact normal, and a persistent manifold (Bullet) keeps the normal
-        // a point was found with while the bodies turn. Its angle is a figure; the normal
-        // is judged where the shapes penetrate (the minimum translation, which a correct
-        // engine's normal follows).
+      const bool resting = !r.penetrating || r.depth <= tol.geometry_slack_m || touching ||
+                           (engine_places_depth && c.depth <= tol.geometry_slack_m);
+      // Whatever the row's depth, its normal is judged where the posed shapes' separating
+      // direction is exact: SAT's accepted axes on two convex polytopes that penetrate or
+      // touch (every axis within SAT's epsilon of the minimum translation: the face normal
+      // of a face contact, each candidate of an edge or corner contact), and box-box on the
+      // world AABBs (aabb: its sign). FCL's answer on shapes that touch is no such
+      // direction: a non-convex pair's depth is an upper bound along the direction that
+      // gave it, and GJK's nearest points of shapes within tens of micrometres point
+      // either way.
+      const bool exact_direction = r.penetrating && (by_sat || aabb);
+      double judged_angle = angle;
+      Vec3 judged_normal = ref_normal;
+      if (resting && exact_direction) {
+        ++resting_rows;
+        if (!aabb && angle > tol.normal_angle_deg && r.depth < tol.contact_depth_m) {
+          // Two shapes that touch are in contact along every axis on which they overlap by
+          // no more than contact_depth_m (the depth that needs no contact): the row's normal
+          // itself (any direction between the faces of an edge that rests on an edge), or
+          // the nearest SAT axis that overlaps that little (two boxes grazing edge on edge:
+          // a detector may keep a face normal far from the edge-edge minimum translation).
+          const double along = inflation(p) - hull_separation(ref->hull_features(p.a), det[p.a],
+                                                              ref->hull_features(p.b), det[p.b], c.normal);
+          double a = 0.0;
+          Vec3 axis = c.normal;
+          if (along > tol.contact_depth_m) {
+            SatSettings wide = sat_settings;
+            wide.abs_m = std::max(sat_settings.abs_m, tol.contact_depth_m - r.depth);
+            const SatResult touch = sat_min_translation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b),
+                                                        det[p.b], wide);
+            std::size_t nearest = 0;
+            a = touch.tested ? sat_angle_to_accepted(touch, d3(c.normal), &nearest) * deg : 180.0;
+            if (touch.tested && !touch.accepted.empty()) {
+              const auto& u = touch.accepted[nearest].normal;
+              axis = Vec3{float(u[0]), float(u[1]), float(u[2])};
+            }
+          }
+          if (a < judged_angle) {
+            ++resting_wide;
+            judged_angle = a;
+            judged_normal = axis;
+          }
+        }
+      }
+      if (resting && !exact_direction) {
+        // A row on shapes that do not penetrate (or touch without an exact direction,
+        // above): the nearest-points direction of two shapes that (nearly) touch at an
+        // edge or a corner is no contact normal, and a persistent manifold (Bullet) keeps
+        // the normal a point was found with while the bodies turn. Its angle is a figure;
+        // the normal is judged where the shapes penetrate or touch (SAT's accepted axes,
+        // which a correct engine's normal follows).
         ++speculative_rows;
         speculative_worst = std::max(speculative_worst, angle);
         // Its sign is judged where the shapes are apart (design.md section 13c.2): the
@@ -352,14 +395,17 @@ void PhysicsValidators::Impl::judge<RowId::ContactGeometry>(CheckedFrame& f) {
                              r.normal.y, r.normal.z, angle);
         });
       } else {
-        normal_angle.check(angle <= tol.normal_angle_deg, angle, Where{frame, p}, [&] {
+        if (resting) resting_worst = std::max(resting_worst, judged_angle);
+        normal_angle.check(judged_angle <= tol.normal_angle_deg, judged_angle, Where{frame, p}, [&] {
           return fmt::format("frame {}: {} row {}: normal ({:.3f}, {:.3f}, {:.3f}) is {:.1f} deg from {}'s "
-                             "({:.3f}, {:.3f}, {:.3f}) ({}){}",
-                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, angle, judge,
-                             ref_normal.x, ref_normal.y, ref_normal.z,
-                             aabb     ? "box-box on the world AABBs, minimum translation"
-                             : by_sat ? sat_axes_text(shape_truth.sat_accepted, shape_truth.sat_epsilon, r.depth)
-                                      : std::string("minimum translation"),
+                             "({:.3f}, {:.3f}, {:.3f}) ({}){}{}",
+                             frame, pair_name(p), k - pr.first, c.normal.x, c.normal.y, c.normal.z, judged_angle,
+                             judge, judged_normal.x, judged_normal.y, judged_normal.z,
+                             by_sat ? sat_axes_text(shape_truth.sat_accepted, shape_truth.sat_epsilon, r.depth)
+                                    : std::string("minimum translation"),
+                             resting ? fmt::format("; a resting row: depth {:.4g} m{}, judged whatever its depth",
+                                                   c.depth, depth_known ? "" : " (depth_per \"unknown\")")
+                                     : std::string(),
                              by_sat ? " [reference: SAT]" : " [reference: FCL]");
         });
       }
@@ -399,16 +445,24 @@ void PhysicsValidators::Impl::judge<RowId::ContactGeometry>(CheckedFrame& f) {
     const ContactRecord& c = rec.contacts[deepest];
     double want = r.penetrating ? r.depth : 0.0;
     const char* want_what = by_sat ? "SAT minimum" : "FCL";
-    // The hulls' overlap along the deepest row's normal (>= the minimum translation; equal
-    // where the normal is the minimum's): depth_per "manifold" is judged on it, and an
-    // undeclared depth_per admits it beside the minimum ("point").
+    // The deepest point of the shapes' overlap along the deepest row's normal n: the
+    // translation of A along n that separates them (sat_depth_along: >= the minimum
+    // translation, equal where n is the minimum's, d / cos of the angle across the same
+    // face; the hulls' overlap projected on n would read the far side of a large face
+    // instead: a 6 m floor under a normal 1 degree off adds 5 cm). depth_per "manifold" is
+    // judged on it, and an undeclared depth_per admits it beside the minimum ("point").
     auto along_normal = [&] {
+      const SatAlong along = sat_depth_along(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b), det[p.b],
+                                             d3(c.normal), inflation(p), sat_settings);
+      if (along.tested) return along.depth;
+      // No axis across n (none by construction where SAT judged the pair): the hulls'
+      // overlap projected on n, an upper bound of the translation along it.
       return std::max(0.0, inflation(p) - hull_separation(ref->hull_features(p.a), det[p.a], ref->hull_features(p.b),
                                                           det[p.b], c.normal));
     };
     if (bodies.depth_per_manifold && by_sat && r.penetrating) {
       want = along_normal();
-      want_what = "the hulls' overlap along the manifold's normal";
+      want_what = "the deepest point of the overlap along the manifold's normal";
       ++depth_manifold_pairs;
     } else if (!bodies.depth_per_declared && by_sat && r.penetrating && !r.depth_upper_bound &&
                std::fabs(double(c.depth) - want) > tol.depth_m) {
@@ -416,7 +470,8 @@ void PhysicsValidators::Impl::judge<RowId::ContactGeometry>(CheckedFrame& f) {
       if (std::fabs(double(c.depth) - along) <= tol.depth_m) ++depth_spared_as_manifold;
       if (std::fabs(double(c.depth) - along) < std::fabs(double(c.depth) - want)) {
         want = along;
-        want_what = "the hulls' overlap along the row's normal (depth_per undeclared: nearer than SAT's minimum)";
+        want_what = "the deepest point of the overlap along the row's normal (depth_per undeclared: nearer than SAT's "
+                    "minimum)";
       }
     }
     // An upper bound (non-convex meshes) judges one side only: the engine may be shallower.
@@ -535,10 +590,16 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ContactGeometry>() const 
                       : "",
         s.rows_unjudged ? fmt::format("; {} rows not judged (FCL gave no normal)", s.rows_unjudged) : "", sign, stats);
     note(r.detail, s.speculative_rows,
-         "{} rows on shapes that do not penetrate, or of depth 0 beside a penetrating "
-         "row of their pair, not judged on the normal (worst angle {:.3g} deg to FCL's "
-         "direction)",
+         "{} rows on shapes that do not penetrate, or on a non-convex pair within contact_depth_m, "
+         "not judged on the angle (worst angle {:.3g} deg to FCL's direction)",
          s.speculative_rows, s.speculative_worst);
+    note(r.detail, s.resting_rows,
+         "{} resting rows (depth 0 or none, beside a deeper row, or on shapes within contact_depth_m) judged "
+         "on the posed shapes' separating direction (worst {:.3g} deg){}",
+         s.resting_rows, s.resting_worst,
+         s.resting_wide ? fmt::format(" ({} along an axis the touching shapes overlap by at most contact_depth_m)",
+                                      s.resting_wide)
+                        : std::string());
     note(r.detail, s.sign_uncertain_rows,
          "{} rows on convex hulls that FCL calls apart along an axis that does not "
          "separate them: sign not judged",
@@ -569,11 +630,11 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ContactGeometry>() const 
        "is judged on the posed shapes)",
        s.depth_unknown_pairs);
   note(r.detail, s.depth_manifold_pairs,
-       "depth_per \"manifold\": {} convex pairs' one depth judged against the hulls' overlap "
-       "along the manifold's normal",
+       "depth_per \"manifold\": {} convex pairs' one depth judged against the deepest point of "
+       "the overlap along the manifold's normal",
        s.depth_manifold_pairs);
   note(r.detail, s.depth_spared_as_manifold,
-       "depth_per undeclared: {} pairs' depth fits the hulls' overlap along the row's normal "
+       "depth_per undeclared: {} pairs' depth fits the deepest point of the overlap along the row's normal "
        "(a manifold's depth), not SAT's minimum: passed; declare depth_per to sharpen the "
        "verdict",
        s.depth_spared_as_manifold);

@@ -294,9 +294,13 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
       D3 imp = dynamic(p.a) ? mass[p.a] * (va1 - va0) : -mass[p.b] * (vb1 - vb0);
       imp = imp - dot3(imp, nrm) * nrm;
       const double imp_len = len3(imp);
+      // integrated_point "origin": the centre of mass's drift under the origin's first-order
+      // integration is in the momentum change too (momentum-balance's allowance).
+      const double drift = dynamic(p.a) ? mass[p.a] * origin_drift(rec, p.a).velocity
+                                        : mass[p.b] * origin_drift(rec, p.b).velocity;
       const double noise = 1e-6 * (dynamic(p.a) ? mass[p.a] * (len3(va1) + len3(va0))
-                                                : mass[p.b] * (len3(vb1) + len3(vb0))) + 1e-12;
-      if (imp_len <= noise) {  // no friction impulse (within float rounding): nothing to judge
+                                                : mass[p.b] * (len3(vb1) + len3(vb0))) + drift + 1e-12;
+      if (imp_len <= noise) {  // no friction impulse (within float rounding or the drift): nothing to judge
         dissipation.judged();
         continue;
       }

@@ -487,6 +487,12 @@ struct PhysicsValidators::Impl {
   std::uint64_t aabb_angle_rows = 0;  // Aabb geometry: rows compared with box-box on the AABBs (figure)
   double aabb_angle_worst = 0;
   std::uint64_t speculative_rows = 0;  // rows on shapes that do not penetrate (figure)
+  /// Resting rows (depth 0 or no depth, beside a deeper row, or on shapes that penetrate by
+  /// no more than contact_depth_m) judged on the posed shapes' exact direction (SAT's
+  /// accepted axes, or box-box on the world AABBs); of them, rows passed along an axis on
+  /// which the touching shapes overlap by no more than contact_depth_m (not SAT's minimum).
+  std::uint64_t resting_rows = 0, resting_wide = 0;
+  double resting_worst = 0;  ///< deg: the largest judged angle of a resting row (not aabb)
   std::uint64_t sign_uncertain_rows = 0;  // of them, on hulls FCL calls apart along no separating axis
   // Contact geometry's references: pairs judged by the separating-axis test and by the posed
   // reference; where the posed reference's normal lies outside SAT's accepted axes (a figure).
@@ -575,6 +581,26 @@ struct PhysicsValidators::Impl {
     // |w x R c| <= |w| |c| whatever R: the bound needs no orientation.
     return dmath::len3(c) * (dmath::len3(dmath::d3(rec.w_pre[i])) + dmath::len3(dmath::d3(rec.w_post[i])));
   }
+  /// What an engine integrating the body frame's origin (PhysicsBodies::integrated_origin)
+  /// moves the centre of mass off its own rule in one step (docs/validation.md, "An engine
+  /// that integrates the body origin"): with c = |com_offset|, w the larger of |w|, |w'|
+  /// and dw = |w' - w|, velocity c dt w (3 dw + 2 dt w^2) (m/s), position c dt (dw + 2 dt
+  /// w^2) (m); both 0 without the declaration, an offset or angular velocities.
+  struct OriginDrift {
+    double velocity = 0, position = 0;
+  };
+  OriginDrift origin_drift(const FrameRecord& rec, std::uint32_t i) const {
+    if (!bodies.integrated_origin || bodies.com_offset.empty() || rec.w_pre.empty() || rec.w_post.empty()) return {};
+    const double c = dmath::len3(D3{bodies.com_offset[i][0], bodies.com_offset[i][1], bodies.com_offset[i][2]});
+    const D3 w0 = dmath::d3(rec.w_pre[i]), w1 = dmath::d3(rec.w_post[i]);
+    const double w = std::max(dmath::len3(w0), dmath::len3(w1));
+    const double dw = dmath::len3(dmath::operator-(w1, w0)), dt = model->scene.dt;
+    return {c * dt * w * (3.0 * dw + 2.0 * dt * w * w), c * dt * (dw + 2.0 * dt * w * w)};
+  }
+  /// integrated_point "origin": body-steps judged with OriginDrift's allowance (free-flight,
+  /// momentum-balance) and the largest velocity allowance given to each (m/s).
+  std::uint64_t origin_drift_free = 0, origin_drift_balance = 0;
+  double origin_drift_free_worst = 0, origin_drift_balance_worst = 0;
   /// Body i's convex radius (m; 0 without /bodies/convex_radius).
   double radius(std::uint32_t i) const { return bodies.convex_radius.empty() ? 0.0 : bodies.convex_radius[i]; }
 

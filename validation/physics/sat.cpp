@@ -190,6 +190,45 @@ SatResult sat_min_translation_placed(const PlacedHull& A, const PlacedHull& B, c
   return r;
 }
 
+SatAlong sat_depth_along(const HullFeatures& a, const Pose& pa, const HullFeatures& b, const Pose& pb, const D3& n,
+                         double radius, const SatSettings& settings) {
+  SatAlong out;
+  Scratch& work = scratch();
+  place_hull(a, pa, work.a);
+  place_hull(b, pb, work.b);
+  const PlacedHull &A = work.a, &B = work.b;
+  if (A.vertex_count == 0 || B.vertex_count == 0) return out;
+  const double naxes = double(A.faces.size() + B.faces.size()) + double(A.edges.size()) * double(B.edges.size());
+  if (naxes * double(A.vertex_count + B.vertex_count) > settings.max_work) return out;
+  out.tested = true;
+  double best = std::numeric_limits<double>::infinity();
+  auto test = [&](const D3& given) {
+    const double len = std::sqrt(dot3(given, given));
+    if (!(len > 1e-9)) return;
+    const D3 u{given[0] / len, given[1] / len, given[2] / len};
+    const double un = dot3(u, n);
+    if (un == 0) return;  // parallel to the ray: never its exit
+    double a0, a1, b0, b1;
+    project(A, u, a0, a1);
+    project(B, u, b0, b1);
+    // Along +u, B - A reaches b1 - a0; along -u, a1 - b0 (the overlaps of the two
+    // translations), each grown by the radius.
+    const double reach = un > 0 ? b1 - a0 : a1 - b0;
+    const double t = (reach + radius) / std::fabs(un);
+    if (t < best) {
+      best = t;
+      out.axis = un > 0 ? u : D3{-u[0], -u[1], -u[2]};
+    }
+  };
+  for (const D3& f : A.faces) test(f);
+  for (const D3& f : B.faces) test(f);
+  for (const D3& ea : A.edges)
+    for (const D3& eb : B.edges) test(cross3(ea, eb));
+  out.tested = std::isfinite(best);
+  out.depth = out.tested ? std::max(0.0, best) : 0.0;
+  return out;
+}
+
 bool hull_box(const HullFeatures& h, std::array<double, 3>& lo, std::array<double, 3>& hi) {
   if (h.vertices.size() != 8 || h.face_normals.size() != 3 || h.edge_dirs.size() != 3) return false;
   for (int k = 0; k < 3; ++k) {

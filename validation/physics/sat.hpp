@@ -138,6 +138,30 @@ SatResult sat_boxes(const std::array<double, 3>& lo_a, const std::array<double, 
                     const std::array<double, 3>& lo_b, const std::array<double, 3>& hi_b, const Pose& pb,
                     const SatSettings& settings, std::vector<SatAxis>& accepted);
 
+/// The penetration of two posed convex hulls along one direction.
+struct SatAlong {
+  bool tested = false;  ///< false: beyond SatSettings::max_work, a hull without vertices, or no axis across n
+  double depth = 0;     ///< m, >= 0: the translation of A along n after which the shapes no longer overlap
+  std::array<double, 3> axis{};  ///< unit, world frame: the axis whose face of B - A the translation leaves through
+};
+
+/// How far hull `a` at pose `pa` must be translated along the unit world direction `n`
+/// (from B to A) to leave hull `b` at `pb`, each shape rounded by its convex radius,
+/// `radius` the two summed (m, >= 0): the deepest point of the shapes' overlap along n.
+/// A + t n meets B exactly where t n lies in the Minkowski difference B - A, whose faces
+/// are among the separating-axis test's axes (the face normals of both hulls and the
+/// cross products of their edges), each taken with both orientations u: for shapes that
+/// overlap (the origin inside B - A) the depth is the ray's exit, min over the axes with
+/// u . n > 0 of (overlap along u + radius) / (u . n), at least 0. It equals
+/// the minimum translation where n is the minimum's axis, grows as 1 / cos of the angle
+/// while n leaves it across the same face, and never reads the far side of a large face
+/// (as the hulls' overlap projected on n does). Exact for hulls; with a radius the faces'
+/// planes pushed out by it (exact where the ray leaves through a face, above the rounded
+/// edge's exit by at most the radius otherwise). Cost: the separating-axis test's, under
+/// `settings`.max_work. Throws nothing beyond std::bad_alloc.
+SatAlong sat_depth_along(const HullFeatures& a, const Pose& pa, const HullFeatures& b, const Pose& pb,
+                         const std::array<double, 3>& n, double radius, const SatSettings& settings = SatSettings{});
+
 /// The smallest angle (radians, [0, pi]) between the unit vector `n` and an accepted axis
 /// of `r` (each taken with its orientation, B to A); pi when none is accepted.
 double sat_angle_to_accepted(const SatResult& r, const std::array<double, 3>& n, std::size_t* nearest = nullptr);

@@ -271,6 +271,15 @@ struct PhysicsBodies {
   /// origin's, converted by the reader); free-flight's velocity floor takes the stored
   /// magnitude (docs/validation.md, "Floors").
   bool velocity_at_origin = false;
+  /// The root attribute `integrated_point` "origin" (default "com"): the engine's
+  /// integrator advances the body frame's origin (x' = x + dt v_o, v_o' = v_o + dt times the
+  /// origin's acceleration: MuJoCo's free joint), not the centre of mass. Such a consistent
+  /// first-order integrator moves the centre of mass off its own rule by up to
+  /// |c| dt w (3 |w' - w| + 2 dt w^2) in velocity and |c| dt (|w' - w| + 2 dt w^2) in
+  /// position per step (w the larger of |w|, |w'|; docs/validation.md, "An engine that
+  /// integrates the body origin"): free-flight and momentum-balance allow that drift, and
+  /// judge the centre of mass otherwise as before. Needs com_offset to change anything.
+  bool integrated_origin = false;
   /// The engine is design.md section 6's Jacobi response (octocd's cpu and cuda): an energy failure of
   /// an isolated group is reported as the model's property (its Jacobi-summed impulses
   /// computed from one pre-response state overshoot on chains), not as an engine fault.

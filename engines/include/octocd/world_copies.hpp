@@ -39,7 +39,8 @@ using CopyFrameCallback = std::function<void(std::size_t copy, const FrameMetric
 /// `threads`); an engine's own parallel loops run serially inside a
 /// copy (no nested teams). A copy's engine is made on the thread that steps it and
 /// destroyed there, one engine at a time (steps run at once). Stops
-/// between steps on octocd::stop_signal(). The first error of any copy (InputError,
+/// between steps on octocd::stop_signal(); a copy not begun by then is not made (0 frames).
+/// The first error of any copy (InputError,
 /// RuntimeError: a non-finite state, an engine that cannot start) is rethrown after every
 /// thread has ended; the copies still running stop at their next step.
 CopiesRun run_copies_separately(const std::string& engine, const std::shared_ptr<const Model>& single,

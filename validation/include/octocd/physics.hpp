@@ -30,9 +30,13 @@
 ///     SAT minimum, the posed reference's answer a second opinion (figure: FCL's EPA on
 ///     hulls; two boxes: octocd's box-box, the same minimum). Other shapes: FCL (convex
 ///     hulls: libccd EPA). Details name the
-///     reference ("[reference: SAT]" / "[reference: FCL]"); rows on shapes
-///     that do not penetrate give the angle to the nearest-points direction as a figure
-///     (two shapes touching at an edge or corner have no defined normal there, and a
+///     reference ("[reference: SAT]" / "[reference: FCL]"). Resting rows (depth 0 or
+///     none, beside a deeper row, or on shapes within `contact_depth_m`) are judged the
+///     same way whatever their depth where SAT judges the pair (shapes within
+///     `contact_depth_m` also along any axis they overlap by at most that much); rows on
+///     shapes that do not penetrate, and a non-convex pair's resting rows, give the angle
+///     to the nearest-points direction as a figure, the sign judged where the shapes are
+///     apart (two shapes touching at an edge or corner have no defined normal there, and a
 ///     persistent manifold keeps the normal a point was found with while bodies turn); the pair's deepest row's depth against
 ///     FCL's within `depth_m` (one-sided against a non-convex upper bound); with points,
 ///     each point within the pair's depth (or distance, or half the contact margin:
