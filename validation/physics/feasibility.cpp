@@ -733,9 +733,13 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       const D3 dp = mi * (v1 - v0);
       const double k2 = double(points_of[s] + 2);
       const double lin = eps * k2 * mi * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) + 1e-9;
+      // integrated_point "origin": the centre of mass's drift under the origin's first-order
+      // integration, momentum-balance's allowance (docs/validation.md, "An engine that
+      // integrates the body origin").
+      const double drift = mi * origin_drift(rec, i).velocity;
       for (int r = 0; r < 3; ++r) {
         b[per * s + r] = dp[std::size_t(r)];
-        sigma0[per * s + r] = lin;
+        sigma0[per * s + r] = lin + drift;
         if (rotating) b_alt[per * s + r] = dp[std::size_t(r)];
       }
       if (!rotating) continue;
