@@ -14,6 +14,8 @@ PACKAGES=(
   # the field's libraries
   libbullet-dev libfcl-dev libccd-dev libeigen3-dev libassimp-dev libqhull-dev
   libhdf5-dev hdf5-tools nlohmann-json3-dev libcli11-dev libfmt-dev libspdlog-dev
+  # the linear programme of the physics tier's impulse-feasibility row (COIN-OR CLP)
+  coinor-libclp-dev
   # the reference engines beyond Bullet (reference/mujoco, reference/ode; docs/engines.md):
   # 6.5 MB installed with their libraries (qhull, tinyxml2, lodepng), seconds of apt
   libmujoco-dev libode-dev

@@ -193,6 +193,7 @@ void TraceIn::read_declarations(PhysicsBodies& p) {
     p.depth_unknown = depth_per == "unknown";
     p.depth_per_declared = has_attr("depth_per");
   }
+  p.friction_per_manifold = choice_attr("friction_per", {"point", "manifold"}, "point") == "manifold";
   if (has_attr("friction_directions")) {
     const double d = number_attr("friction_directions", 0.0);
     if (d != 1.0 && d != 2.0)

@@ -122,7 +122,9 @@ class JoltWorld {
     const n = this.collisionSteps;
     this.attrs = {
       // Jolt combines friction as the geometric mean and restitution as the maximum (its defaults).
-      friction_combine: str("geometric"), restitution_combine: str("max"),
+      // Its friction (Jolt 5.6, jolt-physics 1.1) is one impulse per manifold at the mean of its
+      // points within mu times the manifold's summed normal impulse, and a torsion about the normal.
+      friction_combine: str("geometric"), restitution_combine: str("max"), friction_per: str("manifold"),
       contact_margin: f64(this.margin), deactivation: str("off"), broadphase_exact: i32(0),
       impulse_points: str("witness-pair"), gyroscopic: str("false"),
       impulses: str("none"), speculative: i32(1), depth_per: str("point"),

@@ -35,6 +35,7 @@
 
 #include <fstream>
 #include <map>
+#include <set>
 
 #include "octocd/dart_world.hpp"
 #endif
@@ -419,8 +420,11 @@ TEST(DartWorld, TraceRoundTrips) {
 // A recorded stack of ten boxes (rot-stack-10, 300 frames: the stack settles under FCL's
 // box-box manifolds) passes every row of the physics tier that judges something; a tilted
 // box dropped onto a static icosphere collided as its triangle mesh (MeshShape, declared
-// "mesh") passes every row but contact-geometry, which fails on FCL's box-against-mesh
-// normals (DartEngineFault.FclPrimitiveBoxAgainstAMeshGetsNormalsPointingTheWrongWay).
+// "mesh") passes every row but two, both on FCL's box-against-mesh normals
+// (DartEngineFault.FclPrimitiveBoxAgainstAMeshGetsNormalsPointingTheWrongWay):
+// contact-geometry, and impulse-feasibility on exactly the steps where DART's own rows
+// (CollisionResult's contacts, Contact::force dt) pull the box into the ball: their sum on
+// the box points inwards along the ball's radius at the contact (37 of 400 steps).
 TEST(DartWorld, RecordedRunsPassThePhysicsTier) {
   {
     const Scene scene = load_scene(scene_path("rot-stack-10"));
@@ -444,12 +448,41 @@ TEST(DartWorld, RecordedRunsPassThePhysicsTier) {
     DartWorld dart(model, model->initial);
     EXPECT_EQ(dart.rotation_traits()->body_collision_shape[0], "mesh");
     const std::string path = temp_trace("dart-mesh");
-    EXPECT_GT(write_trace(dart, path, 400), 100u);
+    std::vector<FrameRecord> records;
+    EXPECT_GT(write_trace(dart, path, 400, &records), 100u);
     EXPECT_NE(dart.collision_geometry().find("triangle meshes"), std::string::npos) << dart.collision_geometry();
-    // Only contact-geometry fails: FCL's box-against-mesh normals (DartEngineFault below).
-    const std::string failures = physics_failures(path);
-    EXPECT_EQ(failures.rfind("contact-geometry: ", 0), 0u) << failures;
-    EXPECT_EQ(failures.find('\n'), failures.size() - 1) << failures;
+    // The steps on which DART's own rows pull the box (body 1) towards the ball's centre.
+    std::set<std::int64_t> pulled;
+    for (const FrameRecord& r : records) {
+      if (r.contacts.empty()) continue;
+      double inward = 0.0;  // the rows' impulse on the box along the ball's outward radius
+      for (std::size_t k = 0; k < r.contacts.size(); ++k) {
+        const ContactRecord& c = r.contacts[k];
+        ASSERT_EQ(c.pair, (Pair{0, 1}));
+        const Vec3 on_a = c.jn * c.normal + r.jt3[k];  // on the ball (A); the box gets minus it
+        inward += dot(on_a, c.point) / length(c.point);
+      }
+      if (inward > 1e-6) pulled.insert(r.frame);
+    }
+    EXPECT_GT(pulled.size(), 10u);
+    // Only contact-geometry and impulse-feasibility fail: FCL's box-against-mesh normals.
+    ExternalOptions eo;
+    eo.threads = 1;
+    std::string failed;
+    for (const ValidationResult& r : validate_external_trace(path, eo)) {
+      if (r.tier != Tier::Physics || r.pass) continue;
+      failed += r.name + " ";
+      if (r.name != "impulse-feasibility") continue;
+      ASSERT_EQ(r.causes.size(), 1u);
+      // Every infeasible step is one where DART pulls, named by its first examples.
+      EXPECT_EQ(r.causes[0].count, pulled.size()) << r.detail;
+      for (const ValidationExample& e : r.causes[0].examples) {
+        EXPECT_EQ(e.item, "body 1");
+        EXPECT_EQ(pulled.count(e.frame), 1u) << e.text;
+      }
+      RecordProperty("pulled_steps", static_cast<int>(pulled.size()));
+    }
+    EXPECT_EQ(failed, "contact-geometry impulse-feasibility ");
     std::filesystem::remove(path);
   }
 }

@@ -411,7 +411,7 @@ TEST(Validators, AStopEndsACheckWhoseBroadphaseCallPollsNothing) {
   }
   g_slow_released.notify_all();  // the helper thread ends
   const std::vector<ValidationResult> rs = v.results();
-  EXPECT_EQ(rs.size(), 14u);
+  EXPECT_EQ(rs.size(), 15u);
   for (const ValidationResult& r : rs) EXPECT_GE(r.seconds, 0.0) << r.name;
   EXPECT_GT(find(rs, "applied-state").seconds, 0.0);
 }

@@ -8,6 +8,7 @@
 #include <cmath>
 
 #include "octocd/math.hpp"
+#include "octocd/pose.hpp"
 
 namespace octocd::dmath {
 

@@ -16,6 +16,8 @@
 ///  - conservation.cpp: row 6 (momentum, angular momentum, energy of isolated groups;
 ///    the soft-contact episodes);
 ///  - balance.cpp: rows 7 (momentum balance per body) and 8 (free flight);
+///  - feasibility.cpp: row 9 (impulse feasibility: the motion explained by contact
+///    impulses octocd finds itself, on the sampled frames with states);
 ///  - physics_table.cpp: the generic sums (RowSums), observe()'s calls of every row's
 ///    measure and results()' of every row's table entry, in validation_rows.def's order
 ///    (physics_rows.inc: the physics rows of the table by the frames they measure).
@@ -323,6 +325,9 @@ struct PhysicsFrame {
   std::optional<CheckedFrame> geometry;
   std::optional<DeviceCheckedFrame> device_geometry;  ///< with a judge device (Impl::device_checked)
   bool counted = false;  ///< counted in Impl::checked_frames
+  /// A checked frame by the --every cadence, with poses or not (PhysicsValidators::observe's
+  /// `checked`): the frames impulse-feasibility judges.
+  bool sampled = false;
 };
 
 /// The detail of a row with no checked frame to judge.

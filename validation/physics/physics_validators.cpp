@@ -297,7 +297,7 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
     for (std::size_t i = 0; i < n; ++i)
       det[i] = s.frame_pose(rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{}, static_cast<std::uint32_t>(i));
   }
-  PhysicsFrame f{rec, det, checked && poses, std::nullopt, std::nullopt, false};
+  PhysicsFrame f{rec, det, checked && poses, std::nullopt, std::nullopt, false, checked};
   s.measure_rows(f);
   if (f.geometry) s.spare_frame = std::move(f.geometry);  // its tables serve the next checked frame
 }

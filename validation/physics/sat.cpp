@@ -180,7 +180,7 @@ SatResult sat_min_translation_placed(const PlacedHull& A, const PlacedHull& B, c
   r.normal = min_it->normal;
   r.separated = r.depth <= 0;
   r.epsilon = settings.abs_m + settings.rel * std::max(r.depth, 0.0);
-  if (!r.separated) {
+  if (!r.separated || settings.accept_separated) {
     const double within = r.depth + r.epsilon;
     for (const SatAxis& ax : all)
       if (ax.overlap <= within) accepted.push_back(ax);

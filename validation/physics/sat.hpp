@@ -61,6 +61,10 @@ struct SatSettings {
   /// tested (two icospheres of 162 vertices and 480 edges need ~7.5e7). 2e6: a box
   /// against a 162-vertex icosphere (~3e5) is tested.
   double max_work = 2e6;
+  /// Also fill SatResult::accepted when the shapes are apart or touch (every axis whose
+  /// overlap is within epsilon of the least, the largest gap's first): impulse-feasibility
+  /// takes every plane an engine may take within its margin.
+  bool accept_separated = false;
 };
 
 /// One axis of the separating-axis test.
@@ -78,7 +82,9 @@ struct SatResult {
   double depth = 0;        ///< m: the minimum overlap (the penetration depth); <= 0 when separated
   std::array<double, 3> normal{};  ///< unit, world frame, B to A: the axis of the minimum
   double epsilon = 0;      ///< m: SatSettings::abs_m + rel x max(depth, 0)
-  std::vector<SatAxis> accepted;  ///< every axis with overlap <= depth + epsilon (penetrating pairs)
+  /// every axis with overlap <= depth + epsilon (penetrating pairs; apart ones too with
+  /// SatSettings::accept_separated)
+  std::vector<SatAxis> accepted;
   std::size_t axes = 0;    ///< axes tested
 };
 

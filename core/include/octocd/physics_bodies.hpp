@@ -225,6 +225,14 @@ struct PhysicsBodies {
   /// the shapes. Read, not yet used beyond this: contact-geometry's point check is not
   /// applied (counted); normals and depths are judged.
   bool persistent_points = false;
+  /// `friction_per` "manifold": the engine applies a pair's friction as one tangential
+  /// impulse of at most mu times the pair's summed normal impulse at one point of its
+  /// contact patch (the mean of its manifold's points, loaded or speculative), and a
+  /// torsion about the normal of at most mu sum_k d_k N_k (d_k: point k's distance from
+  /// that point in the contact plane): Jolt 5.6's friction model. impulse-feasibility
+  /// pools each pair's friction that way instead of a Coulomb cone at each contact point
+  /// ("point", the default); rows' reported friction is judged as before.
+  bool friction_per_manifold = false;
   /// `depth_per` "manifold": each row carries its manifold's one depth (Jolt's
   /// mPenetrationDepth). contact-geometry judges one depth per pair: its deepest row's
   /// depth against the exact reference's penetration along that row's normal (two convex

@@ -106,6 +106,25 @@
 ///     rotational energy not rising, or w' = w for an engine without the gyroscopic term;
 ///     docs/validation.md, "Free rotation: the invariants"), q' = q advanced by w dt within
 ///     free_flight_angle_rad + (|w| dt)^2. Locked axes are not judged (counted).
+///  9. `impulse-feasibility` (checked frames, the --every cadence, with states; docs/validation.md,
+///     "Motion explained by feasible contact impulses"): reads no contact row. Per step,
+///     octocd finds the contacts itself: every pair whose posed shapes (detection pose) lie
+///     within the pair's margin + geometry_slack_m + both bodies' motion through the step,
+///     its normals (the separating-axis test's least translation and accepted axes on the
+///     hulls, else FCL's; an engine on AABBs: the world boxes' least overlap), its points
+///     (the corners of the overlap of the two shapes' near outlines) and, per vertex near a
+///     face of the other shape, that face's normal within 45 degrees. Per island (dynamic
+///     bodies joined by such contacts, 16 bodies at most: larger ones counted and named,
+///     not judged) a linear programme (COIN-OR CLP) over compressive impulses in each
+///     point's friction cone (widened to every normal within 1.5 deg of octocd's, then an
+///     8-sided pyramid circumscribed about it, 1.082 x that along its edges) minimises the largest residual of the bodies' momentum changes m (v' - v -
+///     g dt) and, with rotation, L' - L (or I_w (w' - w) without the gyroscopic term), each
+///     in units of its bound: balance_ulps x 2^-23 x (points + 2) x the magnitudes, the
+///     torque of that at the farthest point, and with rotation the lever the engine's point
+///     may take beside octocd's times the impulses found. Above 1 fails naming the island,
+///     the body, its residual, the nearest feasible impulses per pair, and the bodies whose
+///     motion left free makes the island feasible. Islands with a sleeping, locked or
+///     clamped body are counted, not judged.
 /// Reporting (design.md section 13b.13): every row fills ValidationResult::judged and ::causes (per
 /// cause its count, worst figure, first examples with frame and item "pair (A, B)",
 /// "body I" or "group (I, J, K)", and the failing items) and lists every cause in its
