@@ -318,8 +318,8 @@ fcl::Matrix3<S> rotation_of(const Pose& p) {
 /// Two bodies' shapes at their poses: each one's geometry, rotation, position and the FCL
 /// transform of its geometry frame (geometry_transform). The shapes are referenced, not
 /// copied: they must outlive it.
-struct PosedPair {
-  PosedPair(const ShapeGeom& a, const ShapeGeom& b, const Pose& pa, const Pose& pb)
+struct PosedShapes {
+  PosedShapes(const ShapeGeom& a, const ShapeGeom& b, const Pose& pa, const Pose& pb)
       : ga(a),
         gb(b),
         ra(rotation_of(pa)),
@@ -736,7 +736,7 @@ bool ReferenceGeometry::intersect(std::uint32_t a, std::uint32_t b, const Pose& 
 }
 
 ReferenceNormal ReferenceGeometry::posed(std::uint32_t a, std::uint32_t b, const Pose& pa, const Pose& pb) const {
-  const PosedPair pq(impl_->geom(a), impl_->geom(b), pa, pb);
+  const PosedShapes pq(impl_->geom(a), impl_->geom(b), pa, pb);
   ReferenceNormal r;
   if (pq.ga.is_box && pq.gb.is_box) return box_box(pq.ga, pq.ta, pq.gb, pq.tb);
   // A declared sphere against a primitive or a hull: FCL's own test (sphere-box and
@@ -842,7 +842,7 @@ std::vector<V3> geometry_vertices(const ShapeGeom& g) {
 
 PenetrationWitness ReferenceGeometry::penetration_witness(std::uint32_t a, std::uint32_t b, const Pose& pa,
                                                           const Pose& pb, double floor) const {
-  const PosedPair pq(impl_->geom(a), impl_->geom(b), pa, pb);
+  const PosedShapes pq(impl_->geom(a), impl_->geom(b), pa, pb);
   PenetrationWitness w;
   {
     fcl::CollisionRequest<S> req(1, true);
