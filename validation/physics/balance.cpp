@@ -35,11 +35,6 @@ using namespace physics_detail;
 
 // ---- Rows 7-8: momentum balance per body and free flight, every frame with states ---
 namespace {
-/// Unit vector of a (double; zero stays zero).
-D3 unit3(D3 a) {
-  const double l = len3(a);
-  return l > 0 ? (1.0 / l) * a : D3{};
-}
 /// Angle (rad) between two orientations (the rotation q1 q0^-1), sign of q ignored.
 double quat_angle(Quat a, Quat b) {
   const double na = std::sqrt(double(a.w) * a.w + double(a.x) * a.x + double(a.y) * a.y + double(a.z) * a.z);
@@ -54,7 +49,7 @@ std::array<double, 4> advanced(Quat q, D3 w, double dt) {
   const double angle = len3(w) * dt;
   double dw = 1, dx = 0, dy = 0, dz = 0;
   if (angle > 0) {
-    const D3 axis = unit3(w);
+    const D3 axis = unit(w);
     const double s = std::sin(0.5 * angle);
     dw = std::cos(0.5 * angle);
     dx = s * axis[0];
@@ -63,14 +58,6 @@ std::array<double, 4> advanced(Quat q, D3 w, double dt) {
   }
   return {dw * q.w - dx * q.x - dy * q.y - dz * q.z, dw * q.x + dx * q.w + dy * q.z - dz * q.y,
           dw * q.y - dx * q.z + dy * q.w + dz * q.x, dw * q.z + dx * q.y - dy * q.x + dz * q.w};
-}
-/// v turned by the rotation w dt (Rodrigues), in double.
-D3 turned(D3 v, D3 w, double dt) {
-  const double angle = len3(w) * dt;
-  if (!(angle > 0)) return v;
-  const D3 k = unit3(w);
-  const D3 kv = cross3(k, v);
-  return v + std::sin(angle) * kv + (1.0 - std::cos(angle)) * cross3(k, kv);
 }
 double quat_angle(const std::array<double, 4>& a, Quat b) {
   return quat_angle(Quat{float(a[0]), float(a[1]), float(a[2]), float(a[3])}, b);
@@ -160,7 +147,7 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     in_contact[p.a] = in_contact[p.b] = 1;
     ++rows_of[p.a];
     ++rows_of[p.b];
-    const D3 nrm = unit3(d3(c.normal));
+    const D3 nrm = unit(d3(c.normal));
     const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
     // The row's point on A, and on B where the record gives a second witness point
     // (FrameRecord::point_b: the engine applied B's impulse there).
@@ -463,7 +450,8 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
       origin_drift_free_worst = std::max(origin_drift_free_worst, drift.velocity);
     }
     const double v_bound = updates * kEps32 * (len3(d3(rec.v_pre[i])) + len3(v1) + len3(dt * g)) +
-                           stored_origin_speed(rec, i) * 2.0 * kEps32 + drift.velocity + 1e-12;
+                           stored_origin_speed(rec, static_cast<std::uint32_t>(i)) * 2.0 * kEps32 + drift.velocity +
+                           1e-12;
     const double dvl = len3(dv);
     free_vel.check(dvl <= v_bound, dvl, Where::of_body(frame, i), [&] {
       return fmt::format("frame {}: body {} without contacts: v' = ({:.6g}, {:.6g}, {:.6g}) m/s, v + g dt = "

@@ -25,6 +25,19 @@ inline D3 cross3(const D3& a, const D3& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
 inline double len3(const D3& a) { return std::sqrt(dot3(a, a)); }
+/// a / |a|, or zero for a zero vector.
+inline D3 unit(const D3& a) {
+  const double l = len3(a);
+  return l > 0 ? (1.0 / l) * a : D3{};
+}
+/// v turned by the rotation w dt (Rodrigues; w in rad/s, dt in s).
+inline D3 turned(const D3& v, const D3& w, double dt) {
+  const double angle = len3(w) * dt;
+  if (!(angle > 0)) return v;
+  const D3 k = unit(w);
+  const D3 kv = cross3(k, v);
+  return v + std::sin(angle) * kv + (1.0 - std::cos(angle)) * cross3(k, kv);
+}
 /// m v.
 inline D3 mul(const M3& m, const D3& v) {
   return {m[0] * v[0] + m[1] * v[1] + m[2] * v[2], m[3] * v[0] + m[4] * v[1] + m[5] * v[2],

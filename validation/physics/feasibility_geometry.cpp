@@ -10,11 +10,6 @@ namespace octocd::feasibility_geometry {
 
 using namespace dmath;
 
-D3 unit(D3 a) {
-  const double l = len3(a);
-  return l > 0 ? (1.0 / l) * a : D3{};
-}
-
 /// R^T v: a world vector in the frame whose rotation is R.
 D3 mul_t(const M3& r, const D3& v) {
   return {r[0] * v[0] + r[3] * v[1] + r[6] * v[2], r[1] * v[0] + r[4] * v[1] + r[7] * v[2],
@@ -28,14 +23,6 @@ std::pair<D3, D3> tangent_basis(const D3& n) {
   return {e1, cross3(n, e1)};
 }
 
-/// v turned by the rotation w dt (Rodrigues), in double.
-D3 turned(D3 v, D3 w, double dt) {
-  const double angle = len3(w) * dt;
-  if (!(angle > 0)) return v;
-  const D3 k = unit(w);
-  const D3 kv = cross3(k, v);
-  return v + std::sin(angle) * kv + (1.0 - std::cos(angle)) * cross3(k, kv);
-}
 double cross2(const P2& o, const P2& a, const P2& b) { return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x); }
 
 /// The 2D convex hull (Andrew's monotone chain), counter-clockwise, collinear points dropped.

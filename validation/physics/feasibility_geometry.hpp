@@ -1,9 +1,9 @@
 #pragma once
 /// \file feasibility_geometry.hpp
-/// The geometry the impulse-feasibility row (feasibility.cpp) builds its contact points
-/// with: 2D convex hulls of a contact patch projected on its tangent plane, segment
-/// crossings and closest points, a hull's edges and supporting planes, the least
-/// translation over two hulls' face normals. Double precision throughout; units metres.
+/// The geometry the impulse-feasibility row builds its contact points with
+/// (feasibility_contacts.cpp): 2D convex hulls of a contact patch projected on its tangent
+/// plane, segment crossings and closest points, a hull's edges and supporting planes, the
+/// least translation over two hulls' face normals. Double precision throughout; units metres.
 #include <cstddef>
 #include <cstdint>
 #include <utility>
@@ -17,14 +17,10 @@ namespace octocd::feasibility_geometry {
 using dmath::D3;
 using dmath::M3;
 
-/// a / |a|, or zero for a zero vector.
-D3 unit(D3 a);
 /// R^T v: a world vector in the frame whose rotation is R.
 D3 mul_t(const M3& r, const D3& v);
 /// Two unit vectors spanning the plane normal to unit n (with n, a right-handed frame).
 std::pair<D3, D3> tangent_basis(const D3& n);
-/// v turned by the rotation w dt (Rodrigues), in double (w in rad/s, dt in s).
-D3 turned(D3 v, D3 w, double dt);
 
 /// A point of a tangent plane (its coordinates along tangent_basis' two vectors).
 struct P2 {

@@ -17,7 +17,9 @@
 ///    the soft-contact episodes);
 ///  - balance.cpp: rows 7 (momentum balance per body) and 8 (free flight);
 ///  - feasibility.cpp: row 9 (impulse feasibility: the motion explained by contact
-///    impulses octocd finds itself, on the sampled frames with states);
+///    impulses octocd finds itself, on the sampled frames with states), with
+///    feasibility_contacts.cpp (the contact points found on the posed shapes) and
+///    feasibility_programme.cpp (each island's linear programme, COIN-OR CLP);
 ///  - physics_table.cpp: the generic sums (RowSums), observe()'s calls of every row's
 ///    measure and results()' of every row's table entry, in validation_rows.def's order
 ///    (physics_rows.inc: the physics rows of the table by the frames they measure).
@@ -349,6 +351,14 @@ void note(std::string& detail, bool when, fmt::format_string<A...> format, A&&..
 }
 
 }  // namespace physics_detail
+
+/// The impulse-feasibility row's parts (feasibility.hpp).
+namespace feasibility {
+struct Contact;
+struct ContactSearch;
+struct PairContacts;
+struct IslandVerdict;
+}  // namespace feasibility
 
 struct PhysicsValidators::Impl {
   using D3 = dmath::D3;
@@ -792,6 +802,18 @@ struct PhysicsValidators::Impl {
   /// |(x'_a - x_a) - (x'_b - x_b)|, plus |g| dt^2, plus both turns (step_turn); at most the
   /// sum of both step_motion. Two bodies falling side by side do not approach.
   double pair_motion(const FrameRecord& rec, std::uint32_t a, std::uint32_t b) const;
+  // ---- impulse feasibility's parts (feasibility.hpp) ----------------------------------
+  /// Pair p's contact points and normals found on the posed shapes (docs/validation.md,
+  /// "Motion explained by feasible contact impulses", 1), into `found`: none when the pair is
+  /// out of reach or has no dynamic body (feasibility_contacts.cpp).
+  void feasibility_contacts(const feasibility::ContactSearch& search, Pair p, feasibility::PairContacts& found) const;
+  /// The verdict on one island of step `rec` (its dynamic bodies `members`, its contacts `ks`
+  /// into `contacts`; `rotating`: angular momentum judged too) by its linear programme
+  /// (the same section, 2-4; feasibility_programme.cpp).
+  feasibility::IslandVerdict feasibility_island(const FrameRecord& rec, const std::vector<Pose>& det,
+                                                const std::vector<feasibility::Contact>& contacts,
+                                                const std::vector<std::uint32_t>& members,
+                                                const std::vector<std::size_t>& ks, bool rotating) const;
   // ---- where rows may be missing: contacts_complete 0 (every step) or /contacts/incomplete
   /// Step `frame` may lack some pair's rows.
   bool incomplete_step(std::int64_t frame) const;

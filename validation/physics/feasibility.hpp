@@ -1,0 +1,108 @@
+#pragma once
+/// \file feasibility.hpp
+/// The physics tier's row 9, impulse feasibility (docs/validation.md, "Motion explained by
+/// feasible contact impulses"), in three parts: the row's measure and table entry
+/// (feasibility.cpp: each checked step's candidates, islands and tallies), the contact
+/// points octocd finds on the posed shapes (feasibility_contacts.cpp, with the plane
+/// geometry of feasibility_geometry.hpp) and each island's linear programme solved with
+/// COIN-OR CLP (feasibility_programme.cpp). Internal to validation/physics.
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "physics_impl.hpp"
+#include "feasibility_geometry.hpp"
+
+namespace octocd::feasibility {
+
+using dmath::D3;
+
+/// Islands with more dynamic bodies than this are not judged (counted and named): the
+/// programme has 3-6 rows a body and 8 columns a contact point.
+constexpr std::size_t kMaxIslandBodies = 16;
+/// Friction-cone generators per contact point: the cone mu is replaced by the pyramid of
+/// kConeSides sides circumscribed about it (every feasible friction impulse stays feasible;
+/// the pyramid reaches 1 / cos(pi / kConeSides) = 1.082 mu along its edges).
+constexpr int kConeSides = 8;
+/// The most earlier steps whose poses the row keeps to find the normals a persistent manifold
+/// point may still carry (a persistent point keeps the normal it was found with while the
+/// bodies turn: Bullet), and the most poses kept in all (bodies x steps: 2^21, 64 MiB).
+constexpr std::size_t kMaxPastSteps = 64;
+constexpr std::size_t kMaxPastPoses = std::size_t(1) << 21;
+/// The most pairs of edges (one of each hull near the contact) examined for edge crossings
+/// on hulls too large for the separating-axis test: a box against a tessellated ball has a
+/// few dozen; two finely tessellated hulls resting on each other have thousands, their
+/// patch's outline is found without them.
+constexpr std::size_t kMaxCrossingWork = 256;
+/// How far an engine's own normal may lie from octocd's (deg): an engine queries the shapes
+/// its own way (Jolt's normals lie up to 1.17 deg from a fresh query of the same pair).
+/// Every normal within it is admitted by widening each cone (feasibility_programme.cpp).
+constexpr double kNormalSlackDeg = 1.5;
+/// The same slack where the normal is the posed reference's (FCL / libccd EPA on hulls too
+/// large for the separating-axis test here, or a mesh): Bullet's bunny-stack-50 takes a
+/// normal beyond 1.5 deg of it (frame 292, pair (31, 40)).
+constexpr double kPosedNormalSlackDeg = 5.0;
+
+/// One contact of a pair as the programme reads it: a point (world) and the pair's normal
+/// (unit, B to A), with the pair's friction coefficient.
+struct Contact {
+  Pair pair;
+  D3 point, normal;
+  double mu = 0;
+  double lever = 0;  ///< how far the engine's point may lie from `point` (m)
+  double slack_deg = kNormalSlackDeg;  ///< how far the engine's normal may lie from `normal`
+};
+
+/// The row's counts beyond its tally (PhysicsValidators::Impl::row_state).
+struct FeasibilityState {
+  std::uint64_t steps = 0, islands = 0, contacts = 0, pairs = 0;
+  std::uint64_t too_large = 0, asleep = 0, clamped = 0, locked = 0, unsolved = 0;
+  std::string too_large_first, unsolved_first;
+  std::size_t largest = 0;
+  /// The detection poses of the steps before this one (most recent first, consecutive
+  /// frames, at most kMaxPastSteps and kMaxPastPoses in all), and the frame of the first.
+  std::deque<std::vector<Pose>> past;
+  std::int64_t past_frame = -1;
+  /// Each hull's edges and supporting planes (HullEdges), found once.
+  std::map<const HullFeatures*, feasibility_geometry::HullEdges> hulls;
+  std::uint64_t crossings = 0;  ///< contact points on an edge of one hull within reach of the other
+  std::uint64_t crossings_skipped = 0;  ///< pair-steps above kMaxCrossingWork
+  std::uint64_t persisted = 0;  ///< contact points given normals of their earlier steps
+  std::size_t persisted_steps = 0;  ///< the most earlier steps a point's normals came from
+};
+
+/// One candidate pair's contacts found on the posed shapes, with its counts.
+struct PairContacts {
+  std::vector<Contact> contacts;
+  std::uint64_t persisted = 0, crossings = 0, crossings_skipped = 0;
+  std::size_t persisted_steps = 0;
+};
+
+/// What the contact search of one step reads (PhysicsValidators::Impl::feasibility_contacts):
+/// the row's state (its earlier poses; the hulls' edges, found once under `hulls_mutex` by
+/// whichever thread needs them first), each body's detection pose, world AABB (exact, or the
+/// engine's under contact_geometry "aabb") and motion through the step (m).
+struct ContactSearch {
+  FeasibilityState& st;
+  std::mutex& hulls_mutex;
+  const std::vector<Pose>& det;
+  const std::vector<Aabb>& world;
+  const std::vector<double>& motion;
+};
+
+/// What became of an island: judged (figure and body), or counted and not judged.
+enum class Outcome { Judged, Asleep, Locked, Clamped, TooLarge, Unsolved };
+/// An island's verdict (PhysicsValidators::Impl::feasibility_island): the programme's figure (the largest residual in units of its bound,
+/// <= 1 passes), the body named, and the failure's text where figure > 1.
+struct IslandVerdict {
+  Outcome outcome = Outcome::Judged;
+  double figure = 0;
+  std::uint32_t body = 0;
+  std::string text;
+};
+
+}  // namespace octocd::feasibility
