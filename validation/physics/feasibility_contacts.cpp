@@ -48,8 +48,13 @@ constexpr double kFeatureCos = 0.70710678118654752;
 /// or a normal of unknown origin). Walks back while a carried normal keeps the point;
 /// appends those kept (kPersistSpacingDeg apart, the oldest kept) to `out`; `steps_back`
 /// becomes at least the steps walked.
+/// The rotations of a pair's two bodies at the row's earlier poses, most recent first,
+/// computed as far back as the walks of its points have gone.
+struct PastRotations {
+  std::vector<M3> a, b;
+};
 void earlier_normals(const ContactSearch& search, const Pair& p, double thr, const D3& pt, const D3& nrm,
-                     unsigned sides, std::vector<D3>& out, std::size_t& steps_back) {
+                     unsigned sides, std::vector<D3>& out, std::size_t& steps_back, PastRotations& past) {
   const FeasibilityState& st = search.st;
   const std::vector<Pose>& det = search.det;
   if (st.past.empty()) return;
@@ -63,7 +68,12 @@ void earlier_normals(const ContactSearch& search, const Pair& p, double thr, con
   for (; k < st.past.size() && (open[0] || open[1]); ++k) {
     const Pose& qa = st.past[k][p.a];
     const Pose& qb = st.past[k][p.b];
-    const M3 pa = rotation(qa.orientation), pb = rotation(qb.orientation);
+    if (past.a.size() == k) {
+      past.a.push_back(rotation(qa.orientation));
+      past.b.push_back(rotation(qb.orientation));
+    }
+    const M3& pa = past.a[k];
+    const M3& pb = past.b[k];
     const D3 d = (d3(qa.position) + mul(pa, la)) - (d3(qb.position) + mul(pb, lb));
     for (int side = 0; side < 2; ++side) {
       if (!open[side]) continue;
@@ -230,6 +240,7 @@ void PhysicsValidators::Impl::feasibility_contacts(const feasibility::ContactSea
     if (gap > reach) return;
     // A contact point with its normal, and with each normal it may carry from earlier steps.
     std::vector<D3> earlier;
+    PastRotations past;
     // A point already given this normal with the same earlier poses (by another axis's
     // patch, or as a face near a vertex) is not given it again; its lever is the larger.
     std::vector<std::pair<std::size_t, unsigned>> given;  // contacts' index, its `sides`
@@ -245,7 +256,7 @@ void PhysicsValidators::Impl::feasibility_contacts(const feasibility::ContactSea
       const double slack_deg = sat.tested ? kNormalSlackDeg : kPosedNormalSlackDeg;
       contacts.push_back({p, pt, normal, mu, lever, slack_deg});
       earlier.clear();
-      earlier_normals(search, p, pair_margin(p) + slack, pt, normal, sides, earlier, found.persisted_steps);
+      earlier_normals(search, p, pair_margin(p) + slack, pt, normal, sides, earlier, found.persisted_steps, past);
       found.persisted += !earlier.empty();
       for (const D3& e : earlier) contacts.push_back({p, pt, e, mu, lever, slack_deg});
     };

@@ -12,7 +12,6 @@
 #include <limits>
 
 #include <ClpSimplex.hpp>
-#include <CoinPackedMatrix.hpp>
 
 namespace octocd::feasibility {
 
@@ -245,63 +244,65 @@ feasibility::IslandVerdict PhysicsValidators::Impl::feasibility_island(
     for (const auto& [c, v] : budgets[bi].coef)
       budget_of[c].emplace_back(int(bi), v / sigma0[budgets[bi].scale_row]);
   // The programme: minimise t over impulses lambda >= 0 with |A lambda - b|_r <= t sigma_r
-  // for every row r; solved with each row scaled by 1 / sigma_r. Returns the largest
-  // scaled residual of the solution (recomputed in double) and the solution.
+  // for every row r; solved with each row scaled by 1 / sigma_r. Its matrix, column-major:
+  // row r of A as rows 2r (A' lambda - t <= b') and 2r + 1 (A' lambda + t >= b'), the
+  // budget rows after them, the column of t last; the pattern is the island's, the values
+  // and row bounds each solve's.
+  const int nrows = int(2 * rows + budgets.size());
+  std::vector<int> idx;
+  std::vector<CoinBigIndex> start{0};
+  for (std::size_t c = 0; c < ncols; ++c) {
+    for (int e = col_start[c]; e < col_start[c + 1]; ++e) {
+      const int r = row_index[std::size_t(e)];
+      idx.push_back(2 * r);
+      idx.push_back(2 * r + 1);
+    }
+    for (const auto& entry : budget_of[c]) idx.push_back(int(2 * rows) + entry.first);
+    start.push_back(CoinBigIndex(idx.size()));
+  }
+  for (std::size_t r = 0; r < rows; ++r) {  // the column of t
+    idx.push_back(int(2 * r));
+    idx.push_back(int(2 * r + 1));
+  }
+  start.push_back(CoinBigIndex(idx.size()));
+  std::vector<double> val(idx.size());
+  std::vector<double> col_lo(ncols + 1, 0.0), col_hi(ncols + 1, COIN_DBL_MAX), obj(ncols + 1, 0.0);
+  obj[ncols] = 1.0;
+  std::vector<double> row_lo(std::size_t(nrows), -COIN_DBL_MAX), row_hi(std::size_t(nrows), 0.0), residual(rows);
+  for (std::size_t r = 0; r < rows; ++r) row_hi[2 * r + 1] = COIN_DBL_MAX;
+  // Solves the programme for `rhs` with bounds `sig`: the largest scaled residual of the
+  // solution (recomputed in double; NaN when CLP finds none) and the solution.
   auto solve = [&](const std::vector<double>& rhs, const std::vector<double>& sig, std::vector<double>& lambda) {
-    std::vector<int> idx;
-    std::vector<double> val;
-    std::vector<CoinBigIndex> start{0};
+    std::size_t at = 0;
     for (std::size_t c = 0; c < ncols; ++c) {
       for (int e = col_start[c]; e < col_start[c + 1]; ++e) {
-        const std::size_t r = std::size_t(row_index[std::size_t(e)]);
-        idx.push_back(int(2 * r));
-        val.push_back(value[std::size_t(e)] / sig[r]);
-        idx.push_back(int(2 * r + 1));
-        val.push_back(value[std::size_t(e)] / sig[r]);
+        const double v = value[std::size_t(e)] / sig[std::size_t(row_index[std::size_t(e)])];
+        val[at++] = v;
+        val[at++] = v;
       }
-      for (const auto& [bi, v] : budget_of[c]) {
-        idx.push_back(int(2 * rows) + bi);
-        val.push_back(v);
-      }
-      start.push_back(CoinBigIndex(idx.size()));
+      for (const auto& entry : budget_of[c]) val[at++] = entry.second;
     }
-    for (std::size_t r = 0; r < rows; ++r) {  // the column of t
-      idx.push_back(int(2 * r));
-      val.push_back(-1.0);
-      idx.push_back(int(2 * r + 1));
-      val.push_back(1.0);
-    }
-    start.push_back(CoinBigIndex(idx.size()));
-    std::vector<int> len(ncols + 1);
-    for (std::size_t c = 0; c <= ncols; ++c) len[c] = int(start[c + 1] - start[c]);
-    const int nrows = int(2 * rows + budgets.size());
-    const CoinPackedMatrix a(true, nrows, int(ncols + 1), CoinBigIndex(idx.size()), val.data(), idx.data(),
-                             start.data(), len.data());
-    std::vector<double> col_lo(ncols + 1, 0.0), col_hi(ncols + 1, COIN_DBL_MAX), obj(ncols + 1, 0.0);
-    obj[ncols] = 1.0;
-    std::vector<double> row_lo(std::size_t(nrows), -COIN_DBL_MAX), row_hi(std::size_t(nrows), 0.0);
     for (std::size_t r = 0; r < rows; ++r) {
-      const double br = rhs[r] / sig[r];
-      row_lo[2 * r] = -COIN_DBL_MAX;  // A' lambda - t <= b'
-      row_hi[2 * r] = br;
-      row_lo[2 * r + 1] = br;  // A' lambda + t >= b'
-      row_hi[2 * r + 1] = COIN_DBL_MAX;
+      val[at++] = -1.0;
+      val[at++] = 1.0;
     }
+    for (std::size_t r = 0; r < rows; ++r) row_hi[2 * r] = row_lo[2 * r + 1] = rhs[r] / sig[r];
     ClpSimplex lp;
     lp.setLogLevel(0);
     lp.scaling(0);  // its scaled tolerances would leave unscaled residuals of several bounds
-    lp.loadProblem(a, col_lo.data(), col_hi.data(), obj.data(), row_lo.data(), row_hi.data());
+    lp.loadProblem(int(ncols + 1), nrows, start.data(), idx.data(), val.data(), col_lo.data(), col_hi.data(),
+                   obj.data(), row_lo.data(), row_hi.data());
     lp.dual();
     lambda.assign(ncols, 0.0);
     if (lp.status() != 0 && lp.status() != 1) return std::numeric_limits<double>::quiet_NaN();
     const double* x = lp.primalColumnSolution();
     for (std::size_t c = 0; c < ncols; ++c) lambda[c] = std::max(0.0, x[c]);
-    std::vector<double> res(rhs);
+    residual.assign(rhs.begin(), rhs.end());
     for (std::size_t c = 0; c < ncols; ++c)
       for (int e = col_start[c]; e < col_start[c + 1]; ++e)
-        res[std::size_t(row_index[std::size_t(e)])] -= value[std::size_t(e)] * lambda[c];
+        residual[std::size_t(row_index[std::size_t(e)])] -= value[std::size_t(e)] * lambda[c];
     double worst = 0;
-    for (std::size_t r = 0; r < rows; ++r) worst = std::max(worst, std::fabs(res[r]) / sig[r]);
+    for (std::size_t r = 0; r < rows; ++r) worst = std::max(worst, std::fabs(residual[r]) / sig[r]);
     return worst;
   };
   // The bound grows with the impulses found: rounding of each impulse's sum (eps (k + 2)
