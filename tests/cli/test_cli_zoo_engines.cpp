@@ -2058,12 +2058,17 @@ TEST_F(ZooEngines, TwoWitnessPointsPerRowAreJudgedOnBoth) {
   ASSERT_GT(norm(z.states[first].w[0]), 1.0);
   ASSERT_GT(norm(z.states[first].w[1]), 0.5);
   const std::string at = "frame " + std::to_string(first);
-  {  // every row that reads the rows passes; impulse-feasibility reads none: it puts a pair's
-     // impulse on both bodies at points it finds on the posed shapes, so impulses acting
-     // between points 3 cm apart are infeasible there (docs/validation.md, impulse-feasibility)
+  {  // every row passes; impulse-feasibility takes each row's impulse at its two witness points
+     // too (docs/validation.md, impulse-feasibility)
     const Result r = judge(z, "witness-pair");
-    for (const char* row : {"contact-geometry", "friction", "conservation", "momentum-balance", "free-flight"})
+    for (const char* row :
+         {"contact-geometry", "friction", "conservation", "momentum-balance", "free-flight", "impulse-feasibility"})
       EXPECT_TRUE(row_verdict(r.output, row, "pass")) << row << "\n" << r.output;
+  }
+  {  // B leaves the step 1.5x as fast: no compressive impulse at either pair of points explains it
+    Zoo fast = z;
+    fast.states[std::size_t(first)].v[1] = 1.5 * fast.states[std::size_t(first)].v[1];
+    const Result r = judge(fast, "witness-pair-fast");
     EXPECT_TRUE(row_verdict(r.output, "impulse-feasibility", "FAIL")) << r.output;
     EXPECT_NE(r.output.find(at + " body 1: " + at + ": island group (0, 1)"), std::string::npos) << r.output;
   }

@@ -3,8 +3,9 @@
 // checked step (the --every cadence) with states, whether compressive contact impulses
 // inside each pair's friction cone, at contact points octocd finds itself on the posed
 // shapes, can produce every dynamic body's observed change of linear (and, with rotation,
-// angular) momentum, gravity removed. It reads nothing of the engine's contact rows: an
-// engine that reports poses and velocities only is judged. Per island (dynamic bodies
+// angular) momentum, gravity removed. It needs nothing of the engine's contact rows (an
+// engine that reports poses and velocities only is judged); rows with two witness points
+// (/contacts/point_b) add their points to their pair's. Per island (dynamic bodies
 // joined through such contacts) a linear programme (COIN-OR CLP) finds the impulses that
 // minimise the largest residual in units of each body's bound; above 1 the motion has no
 // explanation by contact.
@@ -86,7 +87,14 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // Each candidate pair's contact points on `threads` threads, each into its own slot.
   std::vector<PairContacts> pair_out(cand.size());
   std::mutex hulls_mutex;
-  const ContactSearch search{st, hulls_mutex, det, world, motion};
+  // Rows with two witness points (FrameRecord::point_b), by pair.
+  std::vector<std::pair<Pair, std::size_t>> witness_rows;
+  if (rec.has_points && !rec.contacts.empty() && rec.point_b.size() == rec.contacts.size()) {
+    for (std::size_t k = 0; k < rec.contacts.size(); ++k) witness_rows.emplace_back(rec.contacts[k].pair, k);
+    std::stable_sort(witness_rows.begin(), witness_rows.end(),
+                     [](const auto& x, const auto& y) { return x.first < y.first; });
+  }
+  const ContactSearch search{st, hulls_mutex, det, world, motion, rec, witness_rows};
   parallel_items(cand.size(), threads, stop,
                  [&](std::size_t ci, unsigned) { feasibility_contacts(search, cand[ci], pair_out[ci]); });
   // In candidate order: the contacts, the pairs with any, the islands they join.
@@ -96,6 +104,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     st.persisted += out.persisted;
     st.crossings += out.crossings;
     st.crossings_skipped += out.crossings_skipped;
+    st.witness += out.witness;
     st.persisted_steps = std::max(st.persisted_steps, out.persisted_steps);
     if (out.contacts.empty()) continue;
     const Pair p = cand[ci];
@@ -185,6 +194,10 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ImpulseFeasibility>() con
        "friction per manifold (friction_per \"manifold\"): each pair's friction one tangential impulse of at most "
        "mu x its normal impulse at any point of its patch, and a torsion about its normal of at most mu x its extent x "
        "its normal impulse");
+  note(r.detail, st.witness,
+       "{} contact points at the two witness points of the engine's rows (/contacts/point_b: the impulse on A at "
+       "point, on B at point_b), each along the normal found nearest the row's",
+       st.witness);
   note(r.detail, st.persisted,
        "{} contact points also given the normals they carried on earlier steps (a persistent manifold's; up to {} "
        "steps back)",

@@ -47,7 +47,9 @@ constexpr double kNormalSlackDeg = 1.5;
 /// normal beyond 1.5 deg of it (frame 292, pair (31, 40)).
 constexpr double kPosedNormalSlackDeg = 5.0;
 
-/// One contact of a pair as the programme reads it: a point (world) and the pair's normal
+/// One contact of a pair as the programme reads it: the pair's impulse acts on A at `point`
+/// and on B at `point_b` (world, m: the same point, unless a contact row of the trace gives
+/// the engine's two witness points, /contacts/point_b), along generators about `normal`
 /// (unit, B to A), with the pair's friction coefficient.
 struct Contact {
   Pair pair;
@@ -55,6 +57,9 @@ struct Contact {
   double mu = 0;
   double lever = 0;  ///< how far the engine's point may lie from `point` (m)
   double slack_deg = kNormalSlackDeg;  ///< how far the engine's normal may lie from `normal`
+  D3 point_b = point;                  ///< where B takes the impulse (m, world)
+  /// Where body `i` (A or B of the pair) takes the impulse.
+  const D3& point_of(std::uint32_t i) const { return i == pair.a ? point : point_b; }
 };
 
 /// The row's counts beyond its tally (PhysicsValidators::Impl::row_state).
@@ -71,6 +76,7 @@ struct FeasibilityState {
   std::map<const HullFeatures*, feasibility_geometry::HullEdges> hulls;
   std::uint64_t crossings = 0;  ///< contact points on an edge of one hull within reach of the other
   std::uint64_t crossings_skipped = 0;  ///< pair-steps above kMaxCrossingWork
+  std::uint64_t witness = 0;  ///< contact points at a row's two witness points (/contacts/point_b)
   std::uint64_t persisted = 0;  ///< contact points given normals of their earlier steps
   std::size_t persisted_steps = 0;  ///< the most earlier steps a point's normals came from
 };
@@ -78,20 +84,24 @@ struct FeasibilityState {
 /// One candidate pair's contacts found on the posed shapes, with its counts.
 struct PairContacts {
   std::vector<Contact> contacts;
-  std::uint64_t persisted = 0, crossings = 0, crossings_skipped = 0;
+  std::uint64_t persisted = 0, crossings = 0, crossings_skipped = 0, witness = 0;
   std::size_t persisted_steps = 0;
 };
 
 /// What the contact search of one step reads (PhysicsValidators::Impl::feasibility_contacts):
 /// the row's state (its earlier poses; the hulls' edges, found once under `hulls_mutex` by
 /// whichever thread needs them first), each body's detection pose, world AABB (exact, or the
-/// engine's under contact_geometry "aabb") and motion through the step (m).
+/// engine's under contact_geometry "aabb") and motion through the step (m); the step's
+/// record and, where its contact rows carry two witness points (FrameRecord::point_b), those
+/// rows by pair (sorted; empty otherwise).
 struct ContactSearch {
   FeasibilityState& st;
   std::mutex& hulls_mutex;
   const std::vector<Pose>& det;
   const std::vector<Aabb>& world;
   const std::vector<double>& motion;
+  const FrameRecord& rec;
+  const std::vector<std::pair<Pair, std::size_t>>& witness_rows;
 };
 
 /// What became of an island: judged (figure and body), or counted and not judged.

@@ -510,6 +510,29 @@ void PhysicsValidators::Impl::feasibility_contacts(const feasibility::ContactSea
       }
     }
   }
+  // Two witness points per row (/contacts/point_b): the engine applied each of the pair's rows
+  // at its point on A and its point_b on B; each row is a contact at those two points (no
+  // lever beside them: they are the engine's own), along the normal found above nearest the
+  // row's own.
+  if (contacts.empty() || search.witness_rows.empty()) return;
+  const auto [lo, hi] = std::equal_range(search.witness_rows.begin(), search.witness_rows.end(),
+                                         std::pair<Pair, std::size_t>{p, 0}, [](const auto& x, const auto& y) {
+                                           return x.first < y.first;
+                                         });
+  const std::size_t found_points = contacts.size();
+  for (auto it = lo; it != hi; ++it) {
+    const ContactRecord& row = search.rec.contacts[it->second];
+    const D3 own = d3(row.normal);
+    std::size_t nearest = 0;
+    for (std::size_t k = 1; k < found_points; ++k)
+      if (dot3(contacts[k].normal, own) > dot3(contacts[nearest].normal, own)) nearest = k;
+    Contact c = contacts[nearest];
+    c.point = d3(row.point);
+    c.point_b = d3(search.rec.point_b[it->second]);
+    c.lever = 0.0;
+    contacts.push_back(c);
+    ++found.witness;
+  }
 }
 
 }  // namespace octocd

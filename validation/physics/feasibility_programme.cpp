@@ -86,7 +86,7 @@ feasibility::IslandVerdict PhysicsValidators::Impl::feasibility_island(
       if (it == slot.end()) continue;
       ++points_of[it->second];
       lever_of[it->second] = std::max(lever_of[it->second], c.lever);
-      reach_of[it->second] = std::max(reach_of[it->second], len3(c.point - com_at(det[i], i)));
+      reach_of[it->second] = std::max(reach_of[it->second], len3(c.point_of(i) - com_at(det[i], i)));
     }
   }
   if (rotating) b_alt.assign(rows, 0.0);
@@ -165,7 +165,7 @@ feasibility::IslandVerdict PhysicsValidators::Impl::feasibility_island(
           value.push_back(sign * dir[std::size_t(r)]);
         }
       if (rotating) {
-        const D3 t = kind == Kind::Torsion ? dir : cross3(c.point - com_at(det[i], i), dir);
+        const D3 t = kind == Kind::Torsion ? dir : cross3(c.point_of(i) - com_at(det[i], i), dir);
         for (int r = 0; r < 3; ++r) {
           row_index.push_back(int(per * s + 3 + r));
           value.push_back(sign * t[std::size_t(r)]);
