@@ -35,10 +35,11 @@ double tilted_mu(double mu, double slack_deg) {
 
 /// A ClpSimplex as its constructor leaves it, copied for every solve: the constructor builds
 /// CLP's message catalogue, a tenth of a judged step's instructions on Bullet's rot-drop-220
-/// (callgrind), which a copy takes ready-made.
+/// (callgrind), which a copy takes ready-made. Never destroyed: a judging thread may copy it
+/// until the process ends.
 const ClpSimplex& pristine_simplex() {
-  static const ClpSimplex pristine;
-  return pristine;
+  static const ClpSimplex* const pristine = new ClpSimplex;
+  return *pristine;
 }
 
 }  // namespace
