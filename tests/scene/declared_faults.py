@@ -58,10 +58,14 @@ def rot(q):
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
-def run(a=1.0):
-    """The clean run: states x, v, w, q ((F + 1) x n x 3 or 4) and per step its rows, dicts of
-    a, b, n (B to A), p, depth, jn, jt, jt3 (on A). The free body advances x + dt v + a g dt^2
-    (a = 1 semi-implicit, 0 explicit, (n + 1) / (2n) n substeps); the boxes x + dt v'."""
+def run(a=1.0, origin=None):
+    """The clean run: states x, v, w, q ((F + 1) x n x 3 or 4) of the centres of mass and per
+    step its rows, dicts of a, b, n (B to A), p, depth, jn, jt, jt3 (on A). The free body
+    advances x + dt v + a g dt^2 (a = 1 semi-implicit, 0 explicit, (n + 1) / (2n) n
+    substeps); the boxes x + dt v'. With `origin` (its centre of mass in the body frame) the
+    free body's origin o = x - R c is integrated instead, as MuJoCo's free joint does:
+    v_o' = v_o + dt (g - w x (w x R c)), o' = o + dt v_o' (its centre of mass drifts to first
+    order in dt)."""
     x, v, w = np.zeros((N, 3)), np.zeros((N, 3)), np.zeros((N, 3))
     q = np.tile([1.0, 0, 0, 0], (N, 1))
     x[0] = [0, -0.1, 0]
@@ -69,8 +73,10 @@ def run(a=1.0):
         angle = np.radians(60 * k + 15)
         x[1 + k] = [-1.25 + 0.5 * k, H - DEPTH, 0.0]
         v[1 + k] = [np.cos(angle), 0, np.sin(angle)]
-    x[FREE], v[FREE], w[FREE] = [0, 1.5, 1.0], [0.3, 0.5, 0], [0, 2.0, 1.0]
+    x[FREE], v[FREE], w[FREE] = [0, 1.5, 1.0], [0.3, 0.5, 0], [0, 20.0, 10.0]
     x, v, w, q = f32(x), f32(v), f32(w), f32(q)
+    if origin is not None:
+        o, v_o = x[FREE] - origin, v[FREE] - np.cross(w[FREE], origin)  # R = 1 at the start
     states, rows = [(x, v, w, q)], []
     for _ in range(FRAMES):
         x1, v1, w1, q1, step = x.copy(), v + DT * G, w.copy(), q.copy(), []
@@ -101,6 +107,12 @@ def run(a=1.0):
         # The lone cube keeps w (no torque, no precession): q turned by w t from the identity.
         turn = np.linalg.norm(w1[FREE]) * DT * (len(states))
         q1[FREE] = np.concatenate([[np.cos(turn / 2)], np.sin(turn / 2) * w1[FREE] / np.linalg.norm(w1[FREE])])
+        if origin is not None:
+            rc = rot(q[FREE]) @ origin
+            v_o = v_o + DT * (G - np.cross(w[FREE], np.cross(w[FREE], rc)))
+            o = o + DT * v_o
+            rc = rot(q1[FREE]) @ origin
+            x1[FREE], v1[FREE] = o + rc, f32(v_o + np.cross(w1[FREE], rc))
         x, v, w, q = f32(x1), v1, w1, f32(q1)
         states.append((x, v, w, q))
         rows.append(step)
@@ -220,7 +232,8 @@ def reported(r, impulses=None, depth_unknown=False, jt_along=False, scalar=False
     return r
 
 
-# Each declaration: (its name in the table, the run's integrator a, write()'s and reported()'s keywords).
+# Each declaration: (its name in the table, the run's integrator a (or "origin": the lone body's origin
+# integrated), write()'s and reported()'s keywords).
 DECLARATIONS = [
     ("nothing (every row reported)", 1.0, {}, {}),
     ("no `/contacts` (poses only)", 1.0, {"contacts": "none"}, {}),
@@ -246,7 +259,7 @@ DECLARATIONS = [
     ('`collision_shape` "box"', 1.0, {"attrs": {"collision_shape": "box"}}, {}),
     ("`/bodies/convex_radius` 5 mm", 1.0, {"radius": 0.005}, {}),
     ('`/bodies/com_offset` 2 cm, `velocity_at` "com"', 1.0, {"com": COM, "attrs": {"velocity_at": "com"}}, {}),
-    ('`integrated_point` "origin" (com_offset 2 cm)', 1.0,
+    ('`integrated_point` "origin" (com_offset 2 cm; the free body\'s origin integrated)', "origin",
      {"com": COM, "velocity_at": "origin", "attrs": {"velocity_at": "origin", "integrated_point": "origin"}}, {}),
     ("`/bodies/locked_dofs` (the boxes' rotation)", 1.0, {"locked": True}, {}),
     ('`gyroscopic` "true"', 1.0, {"attrs": {"gyroscopic": "true"}}, {}),
@@ -294,7 +307,7 @@ def measure(octocd, work):
     out = {}
     for i, (name, a, written, rewritten) in enumerate(DECLARATIONS):
         if a not in runs:
-            clean = run(a)
+            clean = run(origin=COM) if a == "origin" else run(a)
             runs[a] = (clean, plant(clean))
         paths = []
         for tag, r in zip(("clean", "faults"), runs[a]):

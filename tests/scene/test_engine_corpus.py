@@ -359,3 +359,17 @@ def test_the_declarations_table_is_measured(tmp_path):
     start = page.find(declared_faults.HEADER)
     assert start >= 0, "docs/validate-your-engine.md has no table headed " + declared_faults.HEADER
     assert page[start:].split("\n\n", 1)[0] == table, "the page's table differs from the run's:\n" + table
+
+
+def test_the_origin_integrator_needs_its_declaration(tmp_path):
+    """The small engine of tests/scene/declared_faults.py with its lone box's origin integrated
+    (MuJoCo's free joint; its centre of mass 2 cm off the origin, spinning at 22 rad/s): the
+    centre of mass drifts 1.1e-4 m/s a step, so without `integrated_point` "origin" free-flight
+    fails naming the box; the table's line declaring it passes (above)."""
+    import declared_faults as d
+    path = str(tmp_path / "origin-undeclared.h5")
+    d.write(path, d.run(origin=d.COM), com=d.COM, velocity_at="origin", attrs={"velocity_at": "origin"})
+    code, rows = d.judge(BIN, path)
+    row = next(r for r in rows if r["name"] == "free-flight")
+    assert code == 3 and row["verdict"] == "fail", row["detail"]
+    assert any(f"body {d.FREE}" in item for c in row["causes"] for item in c["items"]), row["causes"]
