@@ -3,7 +3,7 @@
 "What each declaration turns off"): a small engine written here steps a static floor, six 1 kg
 boxes (0.2 m) sliding on it at 1 m/s in six directions on 4 corner rows each (Coulomb friction
 at mu 0.5, the rows' normal impulses split so the box does not turn) and a box spinning alone
-in the air (30 steps of 1 ms). Its trace is rewritten as each declaration says an engine that
+in the air at 22 rad/s (30 steps of 1 ms). Its trace is rewritten as each declaration says an engine that
 declares it writes (the reported rows, the states' frame, the shapes), with one fault planted
 in the run's last step on each body (so that no later step shows a planted state jumping
 back), and judged on every frame: the steps before it and the bodies not planted must pass
