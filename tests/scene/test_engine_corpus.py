@@ -4,6 +4,12 @@ mujoco, ode, ...) runs a drop of 24 rotated boxes and a few asymmetric bodies sp
 free flight; its clean trace must pass every physics row, and each planted fault, edited
 into a copy of the trace with h5py, must fail its row naming the frame.
 
+Beside them the small engine of tests/scene/declared_faults.py, rewritten as each declaration
+says (an engine reporting only poses, one without friction or impulses, one with per-step
+incompleteness, one integrating the body origin, one with two points per row, ...): its clean
+trace passes under each, and which of seven planted faults stay visible under each is
+docs/validate-your-engine.md's table, checked here against the run.
+
 Run by ctest with OCTOCD_BIN and OCTOCD_SOURCE_DIR set; pytest skips an engine this build
 does not have, saying so.
 """
@@ -338,3 +344,32 @@ def test_partial_impulses_pass_clean_and_catch_planted_faults(workdir, engine, i
         assert out.returncode == 3, f"{engine}, {name} at frame {frame} not caught:\n{out.stdout}"
         assert verdict(out.stdout, "momentum-balance") == "FAIL", f"{engine}, {name}\n{out.stdout}"
         assert f"frame {frame}" in out.stdout, f"{engine}, {name}: frame {frame} not named\n{out.stdout}"
+
+
+def test_the_declarations_table_is_measured(tmp_path):
+    """docs/validate-your-engine.md, "What each declaration turns off": the table of planted
+    faults per declaration is this run's (tests/scene/declared_faults.py), and under each the
+    steps before the faults' and the bodies not planted pass every row."""
+    import declared_faults
+    measured = declared_faults.measure(BIN, str(tmp_path))
+    for name, (stray, _) in measured.items():
+        assert not stray, f"declared {name}, failures that are no planted fault's: {stray}"
+    table = declared_faults.table(measured)
+    page = open(os.path.join(SOURCE_DIR, "docs", "validate-your-engine.md"), encoding="utf-8").read()
+    start = page.find(declared_faults.HEADER)
+    assert start >= 0, "docs/validate-your-engine.md has no table headed " + declared_faults.HEADER
+    assert page[start:].split("\n\n", 1)[0] == table, "the page's table differs from the run's:\n" + table
+
+
+def test_the_origin_integrator_needs_its_declaration(tmp_path):
+    """The small engine of tests/scene/declared_faults.py with its lone box's origin integrated
+    (MuJoCo's free joint; its centre of mass 2 cm off the origin, spinning at 22 rad/s): the
+    centre of mass drifts 1.1e-4 m/s a step, so without `integrated_point` "origin" free-flight
+    fails naming the box; the table's line declaring it passes (above)."""
+    import declared_faults as d
+    path = str(tmp_path / "origin-undeclared.h5")
+    d.write(path, d.run(origin=d.COM), com=d.COM, velocity_at="origin", attrs={"velocity_at": "origin"})
+    code, rows = d.judge(BIN, path)
+    row = next(r for r in rows if r["name"] == "free-flight")
+    assert code == 3 and row["verdict"] == "fail", row["detail"]
+    assert any(f"body {d.FREE}" in item for c in row["causes"] for item in c["items"]), row["causes"]
