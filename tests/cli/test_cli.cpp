@@ -15,6 +15,9 @@
 #include "octocd/trace.hpp"
 #include "support/cli_run.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -239,3 +242,5 @@ TEST_F(Cli, CudaEngineWithoutDeviceExitsOne) {
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("CUDA"), std::string::npos) << r.output;
 }
+
+}  // namespace octocd_test_cli

@@ -22,6 +22,9 @@
 #include "support/cli_run.hpp"
 #include "support/wait_event.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_bench_budget {
+
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
@@ -273,3 +276,5 @@ TEST_F(BenchBudget, SkippedPointStatesItsEstimateAndPaperKeepsTheFullProtocol) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_cli_bench_budget

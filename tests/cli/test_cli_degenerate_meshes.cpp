@@ -13,6 +13,9 @@
 
 #include "support/cli_run.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_degenerate_meshes {
+
 namespace fs = std::filesystem;
 using octocd::test::bin;
 using octocd::test::Result;
@@ -223,3 +226,5 @@ TEST_F(DegenerateMeshes, OdeDropsAHullOnAStaticMeshWithoutAborting) {
     EXPECT_NEAR(std::stod(y.output), 0.6, 0.01) << y.output;
   }
 }
+
+}  // namespace octocd_test_cli_degenerate_meshes

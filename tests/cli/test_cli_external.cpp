@@ -20,6 +20,9 @@
 #include "support/cli_run.hpp"
 #include "support/external_trace.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_external {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -425,3 +428,5 @@ TEST_F(TraceIn, Version2CollisionShapes) {
   for (const char* f : {"t.h5", "/bodies/collision_shape", "body 2", "\"sphere\" on a box shape", "allowed for a box"})
     EXPECT_NE(s.output.find(f), std::string::npos) << f << " not in:\n" << s.output;
 }
+
+}  // namespace octocd_test_cli_external

@@ -27,6 +27,9 @@
 #include "support/cli_run.hpp"
 #include "support/external_trace.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_hostile_files {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -434,3 +437,5 @@ TEST(NightlyOptions, AnOptionWithoutItsValueIsExitTwoNamingIt) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_cli_hostile_files

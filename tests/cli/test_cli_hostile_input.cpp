@@ -31,6 +31,9 @@
 #include "octocd/trace.hpp"
 #include "octocd/trace_reader.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_hostile_input {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -986,3 +989,5 @@ TEST_F(UntrustedV3, ACompressionBombIsRefusedOnceItsReadsPassTheBudget) {
       << r.output;
   EXPECT_LT(took, 60.0);
 }
+
+}  // namespace octocd_test_cli_hostile_input

@@ -30,6 +30,9 @@
 #include "support/cli_run.hpp"
 #include "support/wait_event.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_limits_and_signals {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -1434,3 +1437,5 @@ TEST_F(Hardening, BenchDivergenceOnBulletEndsWithinASecond) {
   EXPECT_EQ(nlohmann::json::parse(slurp(out))["points"].size(), 1u) << slurp(out);
   expect_no_temporary_file(dir_);
 }
+
+}  // namespace octocd_test_cli_limits_and_signals

@@ -29,6 +29,9 @@
 #include "support/cli_run.hpp"
 #include "support/wait_event.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_max_instances {
+
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 using octocd::test::bin;
@@ -455,3 +458,5 @@ TEST_F(MaxInstances, DeviceMemoryStopsTheSearchThere) {
   EXPECT_EQ(zj["searches"][0]["limited_by"], "memory");
   EXPECT_NE(zj["searches"][0]["reason"].get<std::string>().find("a single instance does not fit"), std::string::npos);
 }
+
+}  // namespace octocd_test_cli_max_instances

@@ -19,6 +19,9 @@
 
 #include "support/cli_run.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_predict {
+
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 using octocd::test::Result;
@@ -147,3 +150,5 @@ TEST_F(Predict, DeterminismRefusesATraceAndOneThread) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_cli_predict

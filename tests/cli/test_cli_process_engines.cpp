@@ -29,6 +29,9 @@
 #include "support/cli_run.hpp"
 #include "support/wait_event.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_process_engines {
+
 namespace fs = std::filesystem;
 using octocd::test::Result;
 
@@ -408,3 +411,5 @@ TEST_F(ProcessEngines, ABadEnginesFileIsBadInputNamingTheFileAndTheField) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_cli_process_engines

@@ -29,6 +29,9 @@
 #include "support/cli_run.hpp"
 #include "support/wait_event.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_processes_and_stops {
+
 namespace fs = std::filesystem;
 using octocd::test::Result;
 
@@ -430,3 +433,5 @@ TEST_F(ProcessTree, AStoppedDeterminismValidationKeepsItsFinishedRows) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_cli_processes_and_stops

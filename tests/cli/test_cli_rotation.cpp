@@ -9,6 +9,9 @@
 
 #include "support/cli_run.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_rotation {
+
 using octocd::test::Result;
 using octocd::test::run_octocd;
 using octocd::test::source_dir;
@@ -75,3 +78,5 @@ TEST(CliRotation, BulletWritesVersion2AndTranslationOnlyVersion1) {
   fs::remove(v1, ec);
   fs::remove(v2, ec);
 }
+
+}  // namespace octocd_test_cli_rotation

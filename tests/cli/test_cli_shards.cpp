@@ -19,6 +19,9 @@
 #include "support/cli_run.hpp"
 #include "support/trace_edit.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_shards {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -235,3 +238,5 @@ TEST(ValidateThreads, ThreadsAndPipelineGiveTheSerialVerdict) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_cli_shards

@@ -13,6 +13,9 @@
 #include "support/cli_run.hpp"
 #include "octocd/text.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_sinks {
+
 namespace fs = std::filesystem;
 using octocd::test::bin;
 using octocd::test::Result;
@@ -201,3 +204,5 @@ TEST_F(Sinks, AJsonIsWrittenWhenTheJunitCannotBe) {
   EXPECT_FALSE(kept.empty());
   EXPECT_EQ(kept, whole);
 }
+
+}  // namespace octocd_test_cli_sinks

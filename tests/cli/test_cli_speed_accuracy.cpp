@@ -20,6 +20,9 @@
 
 #include "support/cli_run.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_speed_accuracy {
+
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 using octocd::test::Result;
@@ -214,3 +217,5 @@ TEST_F(SpeedAccuracy, ShardsKeepLinesWholeAndMergeToTheWholeRun) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_cli_speed_accuracy

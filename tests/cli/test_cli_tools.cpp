@@ -28,6 +28,9 @@
 #include "support/cli_run.hpp"
 #include "support/wait_event.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_tools {
+
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
@@ -1082,3 +1085,5 @@ TEST_F(Tools, ReportPageRendersInHeadlessChromium) {
   ASSERT_TRUE(fs::exists(png));
   EXPECT_GT(fs::file_size(png), 30000u);  // a blank page is a few kB
 }
+
+}  // namespace octocd_test_cli_tools

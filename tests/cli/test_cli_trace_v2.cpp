@@ -22,6 +22,9 @@
 
 #include "support/cli_run.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_trace_v2 {
+
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 using octocd::test::Result;
@@ -479,3 +482,5 @@ TEST_F(TraceV2, BodiesAndMaterialsOfVersion2TracesAreStructure) {
   EXPECT_NE(r.output.find(" vs 0.3 (root attribute)"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("DIFFERENT: structure"), std::string::npos) << r.output;
 }
+
+}  // namespace octocd_test_cli_trace_v2

@@ -35,6 +35,9 @@
 #include "octocd/validation_rows.hpp"
 #include "support/cli_run.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_usage {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -1107,3 +1110,5 @@ TEST(CliEngines, ListsTheRegistryWithAvailability) {
     }
   }
 }
+
+}  // namespace octocd_test_cli_usage

@@ -20,6 +20,9 @@
 #include "support/external_trace.hpp"
 #include "support/trace_edit.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_view {
+
 namespace fs = std::filesystem;
 using octocd::test::run_octocd;
 using octocd::test::Trace;
@@ -382,3 +385,5 @@ TEST(CliView, MainJobTraceWithSparseStatesOpens) {
   EXPECT_EQ(shown, (std::vector<std::int64_t>{10, 10, 20}));
   fs::remove_all(dir);
 }
+
+}  // namespace octocd_test_cli_view

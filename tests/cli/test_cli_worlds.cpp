@@ -20,6 +20,9 @@
 #include "support/cli_run.hpp"
 #include "support/wait_event.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_worlds {
+
 namespace fs = std::filesystem;
 using octocd::test::Result;
 using octocd::test::run_octocd;
@@ -178,3 +181,5 @@ TEST(CliWorlds, AStoppedRunOfCopiesSaysHowManyCopiesRan) {
   EXPECT_EQ(j.at("worlds_whole"), whole);
   fs::remove_all(temp_dir());
 }
+
+}  // namespace octocd_test_cli_worlds

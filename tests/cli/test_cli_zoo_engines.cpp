@@ -56,6 +56,9 @@
 #include "octocd/reference_contact.hpp"
 #include "octocd/scene.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_zoo_engines {
+
 namespace fs = std::filesystem;
 using octocd::build_model;
 using octocd::CollisionShape;
@@ -2157,3 +2160,5 @@ TEST_F(ZooEngines, PythonDeclarationsWriterPasses) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_cli_zoo_engines

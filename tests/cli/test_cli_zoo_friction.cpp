@@ -27,6 +27,9 @@
 #include "octocd/trace.hpp"
 #include "octocd/world.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_zoo_friction {
+
 namespace fs = std::filesystem;
 using namespace octocd;
 using octocd::test::Result;
@@ -279,3 +282,5 @@ TEST_F(ZooFriction, ReversedFrictionOnAFourRowManifoldIsCaught) {
                                                                                    "their sliding",
                                                 "[rule: jt3]"});
 }
+
+}  // namespace octocd_test_cli_zoo_friction

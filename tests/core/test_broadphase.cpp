@@ -19,6 +19,7 @@
 #include "support/doc_broadphases.hpp"
 
 namespace octocd {
+namespace octocd_test_broadphase {
 namespace {
 
 // ---- data sets ----------------------------------------------------------------
@@ -933,4 +934,5 @@ TEST(BroadPhase, LooseOctreeBacksOffOnIncoherentInput) {
 }
 
 }  // namespace
+}  // namespace octocd_test_broadphase
 }  // namespace octocd

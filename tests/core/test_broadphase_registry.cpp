@@ -16,6 +16,9 @@
 #include "octocd/reference_broadphase.hpp"
 #include "support/doc_broadphases.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_broadphase_registry {
+
 using namespace octocd;
 
 namespace {
@@ -162,3 +165,5 @@ TEST(BroadPhaseRegistry, DocsTableStatesTheRegistry) {
               return r.cpu == "none" && r.device != "none";
             }));
 }
+
+}  // namespace octocd_test_broadphase_registry

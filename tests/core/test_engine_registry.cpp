@@ -18,6 +18,9 @@
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_engine_registry {
+
 using namespace octocd;
 
 namespace {
@@ -198,3 +201,5 @@ TEST(EngineRegistry, AnEngineRefusesAModelAboveItsMeasuredLimitAtOnce) {
   }
   EXPECT_EQ(engine_info("bullet", "test").max_bodies, 0u) << "Bullet starts 10^5 bodies in 6-7 CPU s";
 }
+
+}  // namespace octocd_test_engine_registry

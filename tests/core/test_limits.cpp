@@ -23,6 +23,9 @@
 #include "octocd/scene.hpp"
 #include "octocd/trace.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_limits {
+
 namespace fs = std::filesystem;
 using nlohmann::json;
 using namespace octocd;
@@ -376,3 +379,5 @@ TEST(Limits, TraceWriterKeepsFlushedFramesWhenWritesFail) {
   EXPECT_GE(s.state_rows, kept);
   fs::remove_all(dir);
 }
+
+}  // namespace octocd_test_limits

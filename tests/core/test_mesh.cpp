@@ -20,6 +20,9 @@
 #include "octocd/error.hpp"
 #include "octocd/mesh.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_mesh {
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -430,3 +433,5 @@ TEST(LoadMesh, AnObjMaterialFileIsNeverOpened) {
                                     << ")";
   EXPECT_EQ(WEXITSTATUS(status), 0) << "3: not the 4 triangles; 4: an exception";
 }
+
+}  // namespace octocd_test_mesh

@@ -17,6 +17,9 @@
 #include "octocd/midphase_views.hpp"
 #include "octocd/vertex_blocks.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_midphase {
+
 namespace {
 
 using octocd::Aabb;
@@ -572,3 +575,5 @@ TEST(Midphase, SetupOfTheOrderedPairIsTheSetup) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_midphase

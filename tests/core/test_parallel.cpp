@@ -11,6 +11,9 @@
 
 #include "octocd/parallel.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_parallel {
+
 namespace {
 
 using octocd::LoopOptions;
@@ -170,3 +173,5 @@ TEST(Parallel, ThreadCountSetsTheCallersCountForItsScope) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_parallel

@@ -16,6 +16,9 @@
 #include "octocd/world.hpp"
 #include "support/test_scenes.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_planted_faults {
+
 using namespace octocd;
 using octocd::test::FaultyWorld;
 using octocd::test::PlantedFaults;
@@ -144,3 +147,5 @@ TEST(PlantedFaults, OtherRoundingDiffersInTheLastBits) {
   f.other_rounding = true;
   EXPECT_NE(first_difference(boxes, f, 300), 0);
 }
+
+}  // namespace octocd_test_planted_faults

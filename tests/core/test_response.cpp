@@ -5,6 +5,9 @@
 
 #include "octocd/math.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_response {
+
 using namespace octocd;
 
 namespace {
@@ -165,3 +168,5 @@ TEST(PointBox, DistanceInsideAndOutside) {
   EXPECT_EQ(distance2_point_aabb({0.5f, 0, 0}, b), 0.0f);
   EXPECT_FLOAT_EQ(distance2_point_aabb({2, 3, 1}, b), 1.0f + 4.0f);
 }
+
+}  // namespace octocd_test_response

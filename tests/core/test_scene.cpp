@@ -19,6 +19,9 @@
 #include "octocd/mesh.hpp"
 #include "octocd/scene.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_scene {
+
 namespace fs = std::filesystem;
 using nlohmann::json;
 using namespace octocd;
@@ -866,3 +869,5 @@ TEST(Scene, RandomLayoutWithAFlatRegionStaysInsideTheGrid) {
     }
   }
 }
+
+}  // namespace octocd_test_scene

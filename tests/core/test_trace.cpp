@@ -23,6 +23,9 @@
 #include "octocd/error.hpp"
 #include "octocd/trace.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_trace {
+
 namespace fs = std::filesystem;
 using namespace octocd;
 
@@ -675,3 +678,5 @@ TEST(Trace, XdmfSidecarReferencesEveryStateRow) {
   EXPECT_EQ(count("</Xdmf>"), 1u);
   EXPECT_THROW(write_xdmf_sidecar((temp_dir() / "missing.h5").string()), RuntimeError);
 }
+
+}  // namespace octocd_test_trace

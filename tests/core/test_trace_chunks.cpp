@@ -21,6 +21,9 @@
 #include "octocd/view.hpp"
 #include "support/trace_edit.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_trace_chunks {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -185,3 +188,5 @@ TEST(ViewStop, AStopEndsTheWindowWithoutAPage) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_trace_chunks

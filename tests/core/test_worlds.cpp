@@ -16,6 +16,9 @@
 #include "octocd/worlds.hpp"
 #include "support/test_scenes.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_worlds {
+
 using namespace octocd;
 
 namespace {
@@ -205,3 +208,5 @@ TEST(Worlds, ACopyAloneStartsWhereItsBatchedCopyStartsBeforeTheTranslation) {
     EXPECT_EQ(same_bits(alone->initial.x, single->initial.x), c == 0) << "copy " << c;
   }
 }
+
+}  // namespace octocd_test_worlds

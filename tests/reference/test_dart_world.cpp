@@ -40,6 +40,9 @@
 #include "octocd/dart_world.hpp"
 #endif
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_dart_world {
+
 using namespace octocd;
 
 #if OCTOCD_HAVE_DART
@@ -886,3 +889,5 @@ TEST(DartWorld, NotBuilt) {
 }
 
 #endif
+
+}  // namespace octocd_test_dart_world

@@ -28,6 +28,9 @@
 #include "octocd/mujoco_world.hpp"
 #endif
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_mujoco_world {
+
 using namespace octocd;
 
 #if !OCTOCD_HAVE_MUJOCO
@@ -835,3 +838,5 @@ TEST(MujocoFaults, HullAtTheFootOfAWallGetsAContactAlongTheWall) {
 }
 
 #endif  // OCTOCD_HAVE_MUJOCO
+
+}  // namespace octocd_test_mujoco_world

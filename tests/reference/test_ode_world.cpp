@@ -30,7 +30,11 @@
 #include <ode/ode.h>
 
 #include "octocd/ode_world.hpp"
+#include "octocd/reference_world.hpp"
 #endif
+
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_ode_world {
 
 using namespace octocd;
 
@@ -768,7 +772,6 @@ TEST(OdeWorld, NotBuilt) { GTEST_SKIP() << "this octocd is built without ODE (pk
 // ---- issue 68: a manifold row's friction impulse lies in its contact plane --------------
 
 #if OCTOCD_HAVE_ODE
-#include "octocd/reference_world.hpp"
 
 namespace {
 
@@ -868,3 +871,5 @@ TEST(ManifoldRow, TheRoundingOfAHugeNormalImpulseIsNoFriction) {
   }
 }
 #endif
+
+}  // namespace octocd_test_ode_world

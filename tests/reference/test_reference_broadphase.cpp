@@ -19,6 +19,7 @@
 #include "support/doc_broadphases.hpp"
 
 namespace octocd {
+namespace octocd_test_reference_broadphase {
 namespace {
 
 const Aabb kDomain{{-2.0f, 0.0f, -1.0f}, {2.0f, 1.0f, 1.0f}};
@@ -207,4 +208,5 @@ TEST(ReferenceBroadPhaseRegistry, BodyCountChangeThrowsAndEmptyWorks) {
 }
 
 }  // namespace
+}  // namespace octocd_test_reference_broadphase
 }  // namespace octocd

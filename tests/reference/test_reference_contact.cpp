@@ -28,6 +28,9 @@
 #include "octocd/scene.hpp"
 #include "octocd/world.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_reference_contact {
+
 using namespace octocd;
 
 namespace {
@@ -473,3 +476,5 @@ TEST(ReferenceContact, BoxIntersectIsFclBoxBoxAwayFromTouching) {
   EXPECT_GT(meet, 500);
   EXPECT_GT(apart, 500);
 }
+
+}  // namespace octocd_test_reference_contact

@@ -13,6 +13,9 @@
 #include "octocd/scene.hpp"
 #include "octocd/world.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_analytic_scenes {
+
 using namespace octocd;
 
 namespace {
@@ -205,3 +208,5 @@ TEST(Failures, BodyOutsideDomainStillCollides) {
   EXPECT_TRUE(found) << "body outside the domain lost by the broadphase";
   EXPECT_GE(world.last_metrics().contacts, 1u);
 }
+
+}  // namespace octocd_test_analytic_scenes

@@ -13,6 +13,9 @@
 #include "octocd/scene.hpp"
 #include "octocd/world.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_broadphase_scenes {
+
 using namespace octocd;
 
 namespace {
@@ -122,3 +125,5 @@ TEST(BroadphaseOnBoxScene, EveryBroadphaseEqualsFlatOnBoxesRandom10000) {
     }
   }
 }
+
+}  // namespace octocd_test_broadphase_scenes

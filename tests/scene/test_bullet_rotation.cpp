@@ -21,6 +21,9 @@
 #include "octocd/trace.hpp"
 #include "octocd/world.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_bullet_rotation {
+
 using namespace octocd;
 
 namespace {
@@ -600,3 +603,5 @@ TEST(BulletRotation, CheckedNarrowphaseReplacesAWrongGjkContact) {
     }
   }
 }
+
+}  // namespace octocd_test_bullet_rotation

@@ -14,6 +14,9 @@
 #include "octocd/scene.hpp"
 #include "octocd/world.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_bullet_world {
+
 using namespace octocd;
 
 namespace {
@@ -276,3 +279,5 @@ TEST(BulletWorld, SolverIterationsSettingReachesTheSolver) {
   EXPECT_NE(sum_a, sum_b);
   EXPECT_LT(sum_a, sum_b);
 }
+
+}  // namespace octocd_test_bullet_world

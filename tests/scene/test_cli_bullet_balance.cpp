@@ -27,6 +27,9 @@
 #include "support/cli_run.hpp"
 #include "support/trace_edit.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_bullet_balance {
+
 namespace fs = std::filesystem;
 using octocd::test::Result;
 using octocd::test::run_octocd;
@@ -492,3 +495,5 @@ INSTANTIATE_TEST_SUITE_P(Scenes, BulletFriction,
                          });
 
 }  // namespace
+
+}  // namespace octocd_test_cli_bullet_balance

@@ -23,6 +23,9 @@
 #include "support/cli_run.hpp"
 #include "support/trace_edit.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_free_rotation {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -248,3 +251,5 @@ TEST_F(FreeRotation, EditsOfAPrecessingBunnyFailFreeFlight) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_cli_free_rotation

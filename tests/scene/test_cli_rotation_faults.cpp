@@ -26,6 +26,9 @@
 #include "support/cli_run.hpp"
 #include "support/trace_edit.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_cli_rotation_faults {
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -619,3 +622,5 @@ TEST(FrictionOnManifolds, BulletsSlopeReversedFrictionIsCaught) {
   std::error_code ec;
   fs::remove_all(dir, ec);
 }
+
+}  // namespace octocd_test_cli_rotation_faults

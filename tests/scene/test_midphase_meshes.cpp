@@ -21,6 +21,9 @@
 #include "octocd/mesh_octree.hpp"
 #include "octocd/midphase.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_midphase_meshes {
+
 namespace {
 
 using octocd::Aabb;
@@ -147,3 +150,5 @@ TEST(MidphaseMeshes, BunnyExhaustiveOracleAgrees) {
 }
 
 }  // namespace
+
+}  // namespace octocd_test_midphase_meshes

@@ -14,6 +14,9 @@
 #include "octocd/world_copies.hpp"
 #include "support/test_scenes.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_world_copies {
+
 using namespace octocd;
 
 namespace {
@@ -91,3 +94,5 @@ TEST(WorldCopies, AnEngineThatIsNotThreadSafeRunsItsCopiesOneAtATime) {
     EXPECT_TRUE(same_bits(r.states[c].x, e->state().x)) << "copy " << c;
   }
 }
+
+}  // namespace octocd_test_world_copies

@@ -17,6 +17,9 @@
 #include "octocd/validation.hpp"
 #include "support/test_scenes.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_applied_state {
+
 using namespace octocd;
 using octocd::test::FaultyWorld;
 using octocd::test::mixed_boxes;
@@ -348,3 +351,5 @@ TEST(FrameContacts, CountAfterTheEq9Discard) {
   }
   EXPECT_GT(jam.last_metrics().contacts, 0u);
 }
+
+}  // namespace octocd_test_applied_state

@@ -14,6 +14,9 @@
 #include "octocd/validation.hpp"
 #include "octocd/world.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_applied_state_iterations {
+
 using namespace octocd;
 using octocd::test::PlantedFaults;
 
@@ -238,3 +241,5 @@ TEST(PassesBound, ExceededBoundIsCountedAndTheRestJudged) {
   EXPECT_GT(j.share, 0.5) << j.applied.detail;
   EXPECT_LT(j.share, 1.0) << j.applied.detail;
 }
+
+}  // namespace octocd_test_applied_state_iterations

@@ -23,6 +23,7 @@
 #include "../../validation/physics/sat.hpp"
 
 namespace octocd {
+namespace octocd_test_box_sat {
 namespace {
 
 using D3 = std::array<double, 3>;
@@ -246,4 +247,5 @@ TEST(BoxSeparatingAxis, BoxHullsAreRecognised) {
 }
 
 }  // namespace
+}  // namespace octocd_test_box_sat
 }  // namespace octocd

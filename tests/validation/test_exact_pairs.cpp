@@ -13,6 +13,7 @@
 #include "../../validation/src/parallel.hpp"
 
 namespace octocd {
+namespace octocd_test_exact_pairs {
 namespace {
 
 std::vector<Pair> flat_pairs(const std::vector<Aabb>& boxes) {
@@ -290,4 +291,5 @@ TEST(ExactPairs, BroadPhaseAdapterMatchesFlat) {
 }
 
 }  // namespace
+}  // namespace octocd_test_exact_pairs
 }  // namespace octocd

@@ -20,6 +20,7 @@
 #include "octocd/validation_rows.hpp"
 
 namespace octocd {
+namespace octocd_test_expect {
 namespace {
 
 using Kind = ExpectationOutcome::Kind;
@@ -304,4 +305,5 @@ TEST(Expect, TableShowsCausesExamplesAndExpectedRows) {
 }
 
 }  // namespace
+}  // namespace octocd_test_expect
 }  // namespace octocd

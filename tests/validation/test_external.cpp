@@ -20,6 +20,9 @@
 #include "support/external_trace.hpp"
 #include "support/test_scenes.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_external {
+
 using namespace octocd;
 
 namespace {
@@ -471,3 +474,5 @@ TEST(ExternalV2, SceneShapesTranslateToTheGivenLocalBoxes) {
   EXPECT_NE(error_of([&] { ExternalValidator w(bodies, {}); }).find("local_boxes: body " + std::to_string(sphere)),
             std::string::npos);
 }
+
+}  // namespace octocd_test_external

@@ -30,6 +30,9 @@
 #include "../../validation/physics/sat.hpp"
 #include "../../validation/physics/seek.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_physics {
+
 using namespace octocd;
 
 namespace {
@@ -1618,3 +1621,5 @@ TEST(PosedReference, DeclaredCollisionShapes) {
     EXPECT_NE(std::string(e.what()).find("body 1: \"sphere\" on a box shape"), std::string::npos) << e.what();
   }
 }
+
+}  // namespace octocd_test_physics

@@ -24,6 +24,7 @@
 #include "support/shard_rows.hpp"
 
 namespace octocd {
+namespace octocd_test_shards {
 namespace {
 
 using json = nlohmann::json;
@@ -158,4 +159,5 @@ TEST(MergeShards, AKeyTwiceInAShardFileIsRefused) {
 }
 
 }  // namespace
+}  // namespace octocd_test_shards
 }  // namespace octocd

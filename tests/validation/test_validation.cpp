@@ -22,6 +22,9 @@
 #include "octocd/validation_rows.hpp"
 #include "support/test_scenes.hpp"
 
+// This file's own names (its tests compile in unity batches with the folder's other files).
+namespace octocd_test_validation {
+
 using namespace octocd;
 using octocd::test::FaultyWorld;
 using octocd::test::mixed_boxes;
@@ -439,3 +442,5 @@ TEST(Validators, ValidateEngineStoppedInsideAFrameKeepsItsRows) {
   EXPECT_NE(find(rs, "analytic").detail.find("not run: stopped after frame"), std::string::npos);
   EXPECT_FALSE(find(rs, "bullet-dynamics").applicable);
 }
+
+}  // namespace octocd_test_validation
