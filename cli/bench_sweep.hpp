@@ -224,20 +224,21 @@ class SweepProgress {
   /// A line of the point in progress ("[k/N] label: text"), on any stderr (the bar, on a
   /// terminal, drawn again below it): what a process engine's run says as it runs.
   void note(const std::string& text) {
-    if (!enabled_) return;
+    if (!line(text)) return;
+    draw(true);
+  }
+  void finish(const std::string& status) { line(status); }
+
+ private:
+  /// "[k/N] label: text" on its own line (the bar, on a terminal, cleared first); false when
+  /// disabled.
+  bool line(const std::string& text) {
+    if (!enabled_) return false;
     if (tty_) std::fprintf(stderr, "\r\033[K");
     std::fprintf(stderr, "[%zu/%zu] %s: %s\n", done_ + 1, total_, label_.c_str(), octocd::printable(text).c_str());
     std::fflush(stderr);
-    draw(true);
+    return true;
   }
-  void finish(const std::string& status) {
-    if (!enabled_) return;
-    if (tty_) std::fprintf(stderr, "\r\033[K");
-    std::fprintf(stderr, "[%zu/%zu] %s: %s\n", done_ + 1, total_, label_.c_str(), octocd::printable(status).c_str());
-    std::fflush(stderr);
-  }
-
- private:
   void draw(bool force) {
     if (!enabled_ || !tty_) return;
     const auto now = Clock::now();
