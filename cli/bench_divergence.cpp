@@ -19,6 +19,7 @@
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/run_session.hpp"
 #include "predict.hpp"
@@ -213,6 +214,7 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
   SweepProgress progress(points.size(), !o.quiet);
   ModelCache models;
   bool any_failed = false;
+  BadEngineValues bad_values;  // points failed on a value an engine gave: exit 2 at the end
   std::size_t done = 0;
   // Scene-major, then engine: the unperturbed run once per (scene, engine), then its eps.
   for (std::size_t first = 0; first < points.size(); first += s.eps.size()) {
@@ -221,6 +223,9 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
     const EngineInfo& info = engine_info(head.engine, "engines");
     std::string skip = engine_built(info) ? engine_unavailable(info) : std::string("not built in this octocd");
     if (!skip.empty()) skip = "engine " + head.engine + ": " + skip;
+    // The unperturbed run failed (its points failed, else skipped); on a value the engine gave.
+    bool ref_failed = false;
+    std::optional<EngineValueError> ref_bad_value;
     std::shared_ptr<const Model> model;
     std::vector<std::vector<Vec3>> ref;
     const auto t_ref = Clock::now();
@@ -229,11 +234,15 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
         model = models.get(scene_of(head.scene), s.scenes[head.scene], o.data_dir);
         progress.start(done, fmt::format("{} | {} | unperturbed", scene, head.engine));
         ref = run_positions(head.engine, model, o.settings, s.frames);
+      } catch (const EngineValueError& e) {
+        skip = fmt::format("engine {} failed on scene {}: {}", head.engine, scene, e.what());
+        ref_failed = true;
+        ref_bad_value = e;
       } catch (const InputError& e) {
         skip = fmt::format("engine {} cannot run scene {}: {}", head.engine, scene, e.what());
       } catch (const std::exception& e) {
         skip = fmt::format("engine {} failed on scene {}: {}", head.engine, scene, e.what());
-        any_failed = true;
+        ref_failed = true;
       }
     }
     const double ref_s = std::chrono::duration<double>(Clock::now() - t_ref).count();
@@ -242,8 +251,10 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
       if (const int sig = octocd::stop_signal()) return record_stopped(result, sig, write, session);
       progress.start(done++, p.id);
       if (!skip.empty()) {
-        p.status = any_failed && skip.find(" failed on ") != std::string::npos ? "failed" : "skipped";
+        p.status = ref_failed ? "failed" : "skipped";
         p.reason = skip;
+        if (ref_failed) any_failed = true;
+        if (ref_bad_value) bad_values.add(p.id, *ref_bad_value);
         p.finished = true;
         progress.finish(p.status + ": " + p.reason);
         write();
@@ -270,6 +281,11 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
               p.max[f] = std::isnan(d) ? d : std::max(p.max[f], d);
             }
         }
+      } catch (const EngineValueError& e) {
+        p.status = "failed";
+        p.reason = fmt::format("engine {} failed on a perturbed copy of scene {}: {}", p.engine, scene,
+                               bad_values.add(p.id, e));
+        any_failed = true;
       } catch (const std::exception& e) {
         p.status = "failed";
         p.reason = fmt::format("engine {} failed on a perturbed copy of scene {}: {}", p.engine, scene, e.what());
@@ -302,6 +318,7 @@ int run_divergence(const Sweep& s, const std::string& origin, const json& def, c
                                  origin, points.front().id, points.front().reason, o.output));
   if (!o.quiet)
     fmt::print(stderr, "bench {}: done, result {}, CSV {}\n", printable(s.name), printable(o.output), printable(csv_path));
+  bad_values.refuse(o.output);
   return any_failed ? 1 : 0;
 }
 

@@ -9,6 +9,7 @@
 
 #include "bench_sweep.hpp"
 #include "octocd/error.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/stop.hpp"
 
 namespace octocd::cli::bench {
@@ -111,6 +112,10 @@ Measured measure_count(MaxInstancesRun& run, std::size_t sc, const std::string& 
       r = run_steps_point(s, p, run.models, run.o, run.progress, ov);
     } catch (const BenchStopped&) {
       throw;
+    } catch (const EngineValueError& e) {  // bad input from the engine: the probe fails, the bench exits 2
+      r = json::object();
+      r["status"] = "failed";
+      r["reason"] = run.bad_values.add(p.id, e);
     } catch (const InputError& e) {
       if (n == 1) throw;  // the template itself is refused: bad input
       r = json::object();

@@ -295,4 +295,16 @@ std::optional<int> finish_sweep(json& result, const std::function<void()>& write
   return std::nullopt;
 }
 
+std::string BadEngineValues::add(const std::string& id, const std::exception& e) {
+  points.push_back(fmt::format("point {}: {}", id, e.what()));
+  return e.what();
+}
+
+void BadEngineValues::refuse(const std::string& output) const {
+  if (points.empty()) return;
+  throw InputError(fmt::format("{} point(s) failed on a value an engine gave, stored as failed in the result {} with "
+                               "the other points; the first: {}",
+                               points.size(), output, points.front()));
+}
+
 }  // namespace octocd::cli::bench

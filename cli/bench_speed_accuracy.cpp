@@ -19,6 +19,7 @@
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
 #include "octocd/json_strict.hpp"
+#include "octocd/process_engines.hpp"
 #include "octocd/scene.hpp"
 #include "octocd/run_session.hpp"
 
@@ -444,6 +445,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
 
   const auto t0 = Clock::now();
   bool any_failed = false;
+  BadEngineValues bad_values;  // points failed on a value an engine gave: exit 2 at the end
   // Round-robin within groups of kRoundRobinGroup points (design.md section 14b); the budget
   // (docs/bench-format.md "Time budget"): a repetition runs the whole simulated time (the
   // errors need it), so the first may take all of max_time_s (beyond it the point is skipped
@@ -523,6 +525,12 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
               for (std::size_t i = 0; i < st.size(); ++i)
                 if (st.w[i] > 0.0f) samples.insert(samples.end(), {st.x[i].x, st.x[i].y, st.x[i].z});
           }
+        } catch (const EngineValueError& e) {  // bad input from the engine (its timing): never a divergence
+          p.status = "failed";
+          p.reason = bad_values.add(p.id, e);
+          any_failed = true;
+          finish(p);
+          continue;
         } catch (const std::exception& e) {
           // A runtime failure: a non-finite state the engine found itself is a divergence.
           const std::string what = e.what();
@@ -595,6 +603,7 @@ int run_speed_accuracy(const Sweep& s, const std::string& origin, const json& de
                                  "octocd can run (result kept in {})",
                                  origin, mine.size(), points[mine.front()].id, points[mine.front()].reason, o.output));
   if (!o.quiet) fmt::print(stderr, "bench {}: done, result {}, CSV {}\n", octocd::printable(s.name), o.output, csv_path);
+  bad_values.refuse(o.output);
   return any_failed ? 1 : 0;
 }
 

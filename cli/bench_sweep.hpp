@@ -18,6 +18,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
+#include <exception>
 #include <functional>
 #include <map>
 #include <memory>
@@ -223,20 +224,21 @@ class SweepProgress {
   /// A line of the point in progress ("[k/N] label: text"), on any stderr (the bar, on a
   /// terminal, drawn again below it): what a process engine's run says as it runs.
   void note(const std::string& text) {
-    if (!enabled_) return;
+    if (!line(text)) return;
+    draw(true);
+  }
+  void finish(const std::string& status) { line(status); }
+
+ private:
+  /// "[k/N] label: text" on its own line (the bar, on a terminal, cleared first); false when
+  /// disabled.
+  bool line(const std::string& text) {
+    if (!enabled_) return false;
     if (tty_) std::fprintf(stderr, "\r\033[K");
     std::fprintf(stderr, "[%zu/%zu] %s: %s\n", done_ + 1, total_, label_.c_str(), octocd::printable(text).c_str());
     std::fflush(stderr);
-    draw(true);
+    return true;
   }
-  void finish(const std::string& status) {
-    if (!enabled_) return;
-    if (tty_) std::fprintf(stderr, "\r\033[K");
-    std::fprintf(stderr, "[%zu/%zu] %s: %s\n", done_ + 1, total_, label_.c_str(), octocd::printable(status).c_str());
-    std::fflush(stderr);
-  }
-
- private:
   void draw(bool force) {
     if (!enabled_ || !tty_) return;
     const auto now = Clock::now();
@@ -337,6 +339,21 @@ json merge_repetitions(const std::vector<json>& reps);
 json run_broadphase_point(const Sweep& s, const Point& p, InputCache& cache, const BenchOptions& o,
                           SweepProgress& progress);
 
+/// The points of a sweep that failed on a value an engine gave (EngineValueError,
+/// octocd/process_engines.hpp: bad input from the engine, e.g. a process engine's
+/// wall_step_seconds of 0). Every kind of sweep stores such a point as failed with the error
+/// as its reason and runs the others; once the result is written, refuse() ends the bench
+/// with exit 2 (docs/bench-format.md).
+struct BadEngineValues {
+  std::vector<std::string> points;  ///< "point ID: the error", in the order met
+  /// Records point `id`'s error `e`; returns its text (the point's reason).
+  std::string add(const std::string& id, const std::exception& e);
+  /// Throws the InputError "N point(s) failed on a value an engine gave, stored as failed in
+  /// the result OUTPUT with the other points; the first: ..." when a point was added; else
+  /// returns.
+  void refuse(const std::string& output) const;
+};
+
 // ---- max-instances (bench_max_instances.cpp) --------------------------------------------------
 
 /// Everything a max-instances search shares with bench_command.
@@ -351,6 +368,7 @@ struct MaxInstancesRun {
   std::function<void()> write;
   int next_index = 0;
   bool any_failed = false;
+  BadEngineValues bad_values{};  ///< probes failed on a value an engine gave
 };
 
 /// One (model, engine) search: doubling + bisection on probes of probe_repeat repetitions,

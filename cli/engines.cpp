@@ -10,6 +10,7 @@
 #include "octocd/engine_registry.hpp"
 #include "octocd/engines.hpp"
 #include "octocd/error.hpp"
+#include "octocd/names.hpp"
 #include "octocd/process_engines.hpp"
 #include "octocd/run_session.hpp"
 #include "octocd/text.hpp"
@@ -25,21 +26,15 @@ struct EnginesOptions {
   double check_timeout_s = 30.0;  ///< --check-timeout: one bound for every process engine's check, run at once
 };
 
-std::string join(const std::vector<std::string>& v, const char* sep = ", ") {
-  std::string s;
-  for (const std::string& x : v) s += (s.empty() ? "" : sep) + x;
-  return s;
-}
-
 /// What the engine `e` can do, in words, for the table.
 std::string capabilities(const EngineInfo& e) {
   std::string s = e.rotates ? "rotates" : "translates only";
   s += e.has_midphase ? ", octree midphase" : "";
   s += e.uses_scene_broadphase ? ", the scene's broadphase" : ", broadphase " + e.own_broadphase;
   s += e.records_every_step ? ", judged in process" : ", judged through its trace";
-  s += ", geometry " + join(e.geometries);
+  s += ", geometry " + join_names(e.geometries);
   const std::vector<std::string> keys = engine_setting_names(e);
-  if (!keys.empty()) s += ", settings " + join(keys);
+  if (!keys.empty()) s += ", settings " + join_names(keys);
   if (!e.not_thread_safe.empty()) s += ", not thread-safe (run --worlds: one copy at a time)";
   if (e.max_bodies > 0) s += fmt::format(", at most {} bodies", e.max_bodies);
   return s;
@@ -105,7 +100,8 @@ int engines_command(const EnginesOptions& o) {
     fmt::print("         {}\n         {}\n", printable(e.description), capabilities(e));
     if (!e.command.empty()) {
       const ProcessEngineSpec* p = find_process_engine(e.name);
-      fmt::print("         a process engine: {} (from {})\n", printable(join(e.command, " ")), p ? printable(p->file) : "");
+      fmt::print("         a process engine: {} (from {})\n", printable(join_names(e.command, " ")),
+                 p ? printable(p->file) : "");
     }
   }
   return 0;

@@ -703,20 +703,16 @@ void TraceWriter::append_frame_v2(const FrameMetrics& fm, const BodyState& state
       m.p_offsets.push1(m.pair_total);
     }
     for (const ContactRecord& c : rec.contacts) m.c_point.push(&c.point.x, 3);
-    if (m.opt.v2->jt3) {
-      if (rec.jt3.size() != rec.contacts.size())
+    // A vector per contact row (jt3, point_b): one for each row, else the frame is refused.
+    const auto per_row = [&](const std::vector<Vec3>& vectors, const char* what, auto& column) {
+      if (vectors.size() != rec.contacts.size())
         throw RuntimeError("trace '" + m.path + "': frame " + std::to_string(fm.frame) + " has " +
-                           std::to_string(rec.jt3.size()) + " tangential impulse vectors for " +
+                           std::to_string(vectors.size()) + " " + what + " for " +
                            std::to_string(rec.contacts.size()) + " contacts");
-      for (const Vec3& j : rec.jt3) m.c_jt3.push(&j.x, 3);
-    }
-    if (m.opt.v2->point_b) {
-      if (rec.point_b.size() != rec.contacts.size())
-        throw RuntimeError("trace '" + m.path + "': frame " + std::to_string(fm.frame) + " has " +
-                           std::to_string(rec.point_b.size()) + " points on B for " +
-                           std::to_string(rec.contacts.size()) + " contacts");
-      for (const Vec3& p : rec.point_b) m.c_point_b.push(&p.x, 3);
-    }
+      for (const Vec3& v : vectors) column.push(&v.x, 3);
+    };
+    if (m.opt.v2->jt3) per_row(rec.jt3, "tangential impulse vectors", m.c_jt3);
+    if (m.opt.v2->point_b) per_row(rec.point_b, "points on B", m.c_point_b);
   }
   append_frame(fm, state, rec.contacts);
 }

@@ -238,12 +238,6 @@ const Registered& registered(const EngineInfo& info) {
   throw RuntimeError(fmt::format("engine '{}' is not in the registry (engines.cpp)", info.name));
 }
 
-std::string join(const std::vector<std::string>& v, const char* sep) {
-  std::string s;
-  for (const std::string& x : v) s += (s.empty() ? "" : sep) + x;
-  return s;
-}
-
 /// `names.choose` for the first engine with `has`, e.g. "--engine cuda".
 template <class Has>
 std::string choose_engine(const ArgumentNames& names, Has has) {
@@ -283,20 +277,14 @@ const EngineInfo* find_engine_info(const std::string& name) {
 
 const EngineInfo& engine_info(const std::string& name, const std::string& where) {
   if (const EngineInfo* e = find_engine_info(name)) return *e;
-  throw InputError(fmt::format("{}: unknown engine '{}'; allowed: {}", where, name, join(engine_names(), ", ")));
+  throw InputError(fmt::format("{}: unknown engine '{}'; allowed: {}", where, name, join_names(engine_names())));
 }
 
 ArgumentNames cli_argument_names() { return ArgumentNames{}; }
 
 ArgumentNames python_argument_names() {
-  ArgumentNames n;
-  n.broadphase = "broadphase";
-  n.midphase = "midphase";
-  n.rotation = "rotation";
-  n.choose = "engine='{}'";
-  n.omit = "None";
-  n.settings = "{}";
-  return n;
+  // Keyword arguments broadphase, midphase and rotation; engine='NAME'; None; NAME={...}.
+  return ArgumentNames{"broadphase", "midphase", "rotation", "engine='{}'", "None", "{}"};
 }
 
 std::vector<std::string> any_engine_broadphase_names() { return every_broadphase_name(); }
@@ -328,7 +316,7 @@ void apply_engine_options(Scene& scene, const EngineInfo& info, const EngineOpti
                                      return e.device_broadphases;
                                    })));
     if (!on_device_only && std::find(known.begin(), known.end(), bp) == known.end()) {
-      std::string list = join(known, ", ");
+      std::string list = join_names(known);
       const std::string device_engine = choose_engine(names, [](const EngineInfo& e) { return e.device_broadphases; });
       for (const std::string& nm : device_only) list += ", " + nm + " (" + device_engine + ")";
       throw InputError(fmt::format("{}: unknown broadphase '{}'; allowed: {}", where, bp, list));
@@ -378,13 +366,13 @@ std::string engine_settings_help(const EngineInfo& info) {
     const std::vector<std::string> keys = engine_setting_names(info);
     return keys.empty() ? "" : fmt::format("A setting of the process engine {}, KEY=VALUE, repeatable, passed to its "
                                            "process as a string; keys: {}",
-                                           info.name, join(keys, ", "));
+                                           info.name, join_names(keys));
   }
   const Registered& r = registered(info);
   const std::vector<std::string> keys = r.setting_names();
   if (keys.empty()) return "";
   std::string text = fmt::format("A setting of the {} engine, KEY=VALUE, repeatable (docs/settings.md); keys: {}",
-                                 info.name, join(keys, ", "));
+                                 info.name, join_names(keys));
   if (*r.settings_help) text += fmt::format(" ({})", r.settings_help);
   return text;
 }
@@ -394,7 +382,7 @@ void check_engine_settings(const EngineSettingItems& settings, const ArgumentNam
     const std::string where = fmt::format(fmt::runtime(names.settings), engine);
     const EngineInfo* info = find_engine_info(engine);
     if (info == nullptr)
-      throw InputError(fmt::format("{}: unknown engine '{}'; allowed: {}", where, engine, join(engine_names(), ", ")));
+      throw InputError(fmt::format("{}: unknown engine '{}'; allowed: {}", where, engine, join_names(engine_names())));
     if (!info->command.empty()) check_process_settings(*find_process_engine(engine), items, where);
     else registered(*info).check_settings(items, where);
   }

@@ -27,6 +27,7 @@
 #include "octocd/external_trace.hpp"
 #include "octocd/json_fields.hpp"
 #include "octocd/json_strict.hpp"
+#include "octocd/names.hpp"
 #include "octocd/shared_files.hpp"
 #include "octocd/text.hpp"
 
@@ -51,12 +52,6 @@ bool g_loaded = false;
 std::vector<ProcessEngineSpec> g_engines;
 std::vector<std::string> g_files;
 std::map<std::string, std::string> g_unavailable;  // name -> why ("" available), cached
-
-std::string join(const std::vector<std::string>& v, const char* sep) {
-  std::string s;
-  for (const std::string& x : v) s += (s.empty() ? "" : sep) + x;
-  return s;
-}
 
 /// The engines files to read, in order (those that exist).
 std::vector<std::string> engines_file_candidates(const std::string& user_file) {
@@ -188,7 +183,7 @@ std::vector<ProcessEngineSpec> read_engines_file(const std::string& path, const 
     for (const auto& [key, value] : e.items()) {
       (void)value;
       if (std::find(kFields.begin(), kFields.end(), key) == kFields.end())
-        f.fail(at + "." + key, "an unknown field", join(kFields, ", "));
+        f.fail(at + "." + key, "an unknown field", join_names(kFields));
     }
     ProcessEngineSpec s;
     s.file = path;
@@ -197,7 +192,7 @@ std::vector<ProcessEngineSpec> read_engines_file(const std::string& path, const 
       f.fail(at + ".name", fmt::format("'{}'", name), "a name of [a-z0-9_-]{1,32}");
     if (std::find(builtin.begin(), builtin.end(), name) != builtin.end())
       f.fail(at + ".name", fmt::format("'{}' is a built-in engine", name),
-             "a name no built-in engine has (built in: " + join(builtin, ", ") + ")");
+             "a name no built-in engine has (built in: " + join_names(builtin) + ")");
     if (!names.insert(name).second) f.fail(at + ".name", fmt::format("'{}' twice in this file", name), "each name once");
     s.info.name = name;
     s.info.description = e.contains("description") ? f.text(e["description"], at + ".description", 1000)
@@ -280,8 +275,8 @@ std::string unavailable_by(const ProcessEngineSpec& spec, CheckClock::time_point
   try {
     const fs::path folder = fs::path(spec.file).parent_path();
     auto missing = [&](const std::vector<std::string>& argv, const char* what) -> std::string {
-      if (const std::string why = process_detail::why_not_runnable(argv[0]); !why.empty())
-        return fmt::format("{} '{}' {} ({})", what, printable(argv[0]), why, spec.file);
+      if (const std::string not_runnable = process_detail::why_not_runnable(argv[0]); !not_runnable.empty())
+        return fmt::format("{} '{}' {} ({})", what, printable(argv[0]), not_runnable, spec.file);
       for (std::size_t i = 1; i < argv.size(); ++i) {
         if (!names_a_file(argv, i)) continue;
         std::error_code ec;
@@ -308,15 +303,16 @@ std::string unavailable_by(const ProcessEngineSpec& spec, CheckClock::time_point
       run.timeout_setting = "the checks' overall bound (octocd engines --check-timeout)";
       if (run.timeout_s <= 0.0) {
         why = fmt::format("its check ({}) was not run: the checks' overall bound of {:g} s had passed",
-                          printable(join(spec.check, " ")), bound_s);
+                          printable(join_names(spec.check, " ")), bound_s);
       } else {
         const process_detail::ChildOutcome o = process_detail::run_child(run);
         if (o.end == process_detail::ChildOutcome::End::TimedOut)
           why = fmt::format("its check ({}) timed out: it ran past {:.3g} s (the checks' bound, {:g} s for all at "
                             "once) and was stopped{}",
-                            printable(join(spec.check, " ")), run.timeout_s, bound_s, process_detail::output_tail(o));
+                            printable(join_names(spec.check, " ")), run.timeout_s, bound_s,
+                            process_detail::output_tail(o));
         else if (o.end != process_detail::ChildOutcome::End::Exited || o.code != 0)
-          why = fmt::format("its check ({}) {}{}", printable(join(spec.check, " ")), process_detail::describe(o),
+          why = fmt::format("its check ({}) {}{}", printable(join_names(spec.check, " ")), process_detail::describe(o),
                             process_detail::output_tail(o));
       }
     }
@@ -354,7 +350,7 @@ void check_process_engines(const std::vector<ProcessEngineSpec>& specs, double b
 
 void check_process_settings(const ProcessEngineSpec& spec, const std::vector<std::string>& items,
                             const std::string& where) {
-  const std::string keys = spec.settings.empty() ? "none (this engine has no settings)" : join(spec.settings, ", ");
+  const std::string keys = spec.settings.empty() ? "none (this engine has no settings)" : join_names(spec.settings);
   for (const std::string& item : items) {
     const auto eq = item.find('=');
     if (eq == std::string::npos || eq == 0)

@@ -23,12 +23,6 @@
 namespace octocd {
 namespace {
 
-std::string join(const std::vector<std::string>& v) {
-  std::string s;
-  for (const std::string& x : v) s += (s.empty() ? "" : ", ") + x;
-  return s;
-}
-
 /// "%.6g" of a figure for messages (plain text).
 std::string num(double v) { return fmt::format("{:.6g}", v); }
 
@@ -131,12 +125,12 @@ Expectations parse_expectations(const nlohmann::json& doc, const std::string& or
     x.row = text("row", true);
     const std::vector<std::string>& rows = validation_row_names();
     if (std::find(rows.begin(), rows.end(), x.row) == rows.end())
-      throw bad("row", fmt::format("unknown row '{}'; allowed: {}", x.row, join(rows)));
+      throw bad("row", fmt::format("unknown row '{}'; allowed: {}", x.row, join_names(rows)));
     x.cause = text("cause", true);
     std::vector<std::string> causes = documented_causes(x.row);
     if (std::find(causes.begin(), causes.end(), x.row) == causes.end()) causes.push_back(x.row);
     if (std::find(causes.begin(), causes.end(), x.cause) == causes.end())
-      throw bad("cause", fmt::format("unknown cause '{}' of row {}; allowed: {}", x.cause, x.row, join(causes)));
+      throw bad("cause", fmt::format("unknown cause '{}' of row {}; allowed: {}", x.cause, x.row, join_names(causes)));
     if (e.contains("items")) {
       if (!e["items"].is_array()) throw bad("items", "not a list; allowed: a list of item strings");
       x.has_items = true;
@@ -255,7 +249,8 @@ ExpectationReport match_expectations(const Expectations& expect, const RunName& 
         if (grown) {
           o.text = fmt::format("GROWN {}/{}: worst {} {} allowed {} {}({} item(s)){}: {}", o.row, o.cause, num(c.worst),
                                c.worst <= e.worst ? "<=" : ">", num(e.worst), c.unit.empty() ? "" : c.unit + " ",
-                               c.count, o.outside.empty() ? "" : "; items not listed: " + join(o.outside), o.first);
+                               c.count, o.outside.empty() ? "" : "; items not listed: " + join_names(o.outside),
+                               o.first);
         } else {
           o.text = fmt::format("expected {}/{}: worst {} <= allowed {} {}({} item(s)); reason: {}", o.row, o.cause,
                                num(c.worst), num(e.worst), c.unit.empty() ? "" : c.unit + " ", c.count, bounded(e.reason));

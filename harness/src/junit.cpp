@@ -21,7 +21,7 @@ namespace octocd {
 namespace {
 
 /// "%.9g" of a figure (JUnit text, not for machines).
-std::string num(double v) { return fmt::format("{:.9g}", v); }
+std::string junit_figure(double v) { return fmt::format("{:.9g}", v); }
 
 // Atomically: a failed write (a full disk, a file size limit) leaves the previous report,
 // if any, intact and no 0-byte or half file.
@@ -65,7 +65,7 @@ void write_junit(const std::string& path, const std::string& suite,
   }
   for (const ValidationResult& r : results) {
     const std::string figures =
-        fmt::format("{}: measured {}, bound {}", r.figure, num(r.measured), num(r.bound));
+        fmt::format("{}: measured {}, bound {}", r.figure, junit_figure(r.measured), junit_figure(r.bound));
     // Each row's own time (ValidationResult::seconds), so the slow validator shows.
     o << "    <testcase classname=\"" << s << "." << tier_name(r.tier) << "\" name=\"" << xml_escape(r.name)
       << "\" time=\"" << fmt::format("{:.6f}", std::max(r.seconds, 0.0)) << "\"";
@@ -76,16 +76,16 @@ void write_junit(const std::string& path, const std::string& suite,
       std::string message = "expected:";
       for (const ExpectationOutcome& x : report->outcomes)
         if (x.row == r.name && x.kind == ExpectationOutcome::Kind::Expected)
-          message += fmt::format(" {} worst {} <= allowed {} ({} item(s)): {};", x.cause, num(x.worst),
-                                 num(x.allowed), x.count, x.reason);
+          message += fmt::format(" {} worst {} <= allowed {} ({} item(s)): {};", x.cause, junit_figure(x.worst),
+                                 junit_figure(x.allowed), x.count, x.reason);
       message.pop_back();
       o << ">\n      <skipped message=\"" << xml_escape(message) << "\"/>\n      <system-out>"
         << xml_escape(figures + "\n" + r.detail) << "</system-out>\n    </testcase>\n";
     } else if (!r.pass) {
       // The measured value against the bound first: what a CI page shows in one line.
-      const std::string message = fmt::format("measured {} {} bound {} ({}): {}", num(r.measured),
+      const std::string message = fmt::format("measured {} {} bound {} ({}): {}", junit_figure(r.measured),
                                               r.measured > r.bound ? ">" : r.measured < r.bound ? "<" : "vs",
-                                              num(r.bound), r.figure, r.detail);
+                                              junit_figure(r.bound), r.figure, r.detail);
       o << ">\n      <failure message=\"" << xml_escape(message) << "\" type=\"ValidatorFailure\">"
         << xml_escape(message + outcome_lines(r)) << "</failure>\n    </testcase>\n";
     } else {

@@ -33,11 +33,11 @@ namespace {
 using Json = nlohmann::ordered_json;
 
 /// A float as the shortest decimal that reads back to it (keeps the page small).
-Json num(double v) {
+Json as_float(double v) {
   if (!std::isfinite(v)) return nullptr;
   return std::strtod(fmt::format("{}", static_cast<float>(v)).c_str(), nullptr);
 }
-Json vec(Vec3 v) { return Json::array({num(v.x), num(v.y), num(v.z)}); }
+Json vec(Vec3 v) { return Json::array({as_float(v.x), as_float(v.y), as_float(v.z)}); }
 
 std::string read_text(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
@@ -59,10 +59,10 @@ std::string script_safe(std::string text) {
 
 /// JSON placed inside <script type="application/json">: '<', '>' and '&' as \u escapes
 /// (they can only occur inside JSON strings), so no markup can appear.
-std::string json_safe(const std::string& json) {
+std::string json_safe(const std::string& text) {
   std::string out;
-  out.reserve(json.size());
-  for (char c : json) {
+  out.reserve(text.size());
+  for (char c : text) {
     if (c == '<') out += "\\u003c";
     else if (c == '>') out += "\\u003e";
     else if (c == '&') out += "\\u0026";
@@ -115,19 +115,19 @@ Json shape_json(const Model& model, const ReferenceGeometry& ref, std::uint32_t 
     const Vec3 c = center(s.local);
     double r = 0;
     for (const Vec3& v : s.mesh->vertices) r = std::max(r, double(length(v - c)));
-    return Json{{"kind", "sphere"}, {"center", vec(c)}, {"radius", num(r)}};
+    return Json{{"kind", "sphere"}, {"center", vec(c)}, {"radius", as_float(r)}};
   }
   if (declared == CollisionShape::ConvexHull) {
     Json v = Json::array();
     for (const auto& p : ref.hull_features(body).vertices)
-      for (double x : p) v.push_back(num(x));
+      for (double x : p) v.push_back(as_float(x));
     return Json{{"kind", "hull"}, {"vertices", std::move(v)}};
   }
   Json v = Json::array(), t = Json::array();
   for (const Vec3& p : s.mesh->vertices) {
-    v.push_back(num(p.x));
-    v.push_back(num(p.y));
-    v.push_back(num(p.z));
+    v.push_back(as_float(p.x));
+    v.push_back(as_float(p.y));
+    v.push_back(as_float(p.z));
   }
   for (const auto& tri : s.mesh->triangles)
     for (std::uint32_t k : tri) t.push_back(k);
@@ -139,8 +139,8 @@ Json reference_json(const char* kind, const ReferenceNormal& r) {
               {"valid", r.valid},
               {"penetrating", r.penetrating},
               {"normal", vec(r.normal)},
-              {"depth", num(r.depth)},
-              {"distance", num(r.distance)},
+              {"depth", as_float(r.depth)},
+              {"distance", as_float(r.distance)},
               {"depth_upper_bound", r.depth_upper_bound},
               {"point_a", vec(r.point_a)},
               {"point_b", vec(r.point_b)}};
@@ -170,13 +170,13 @@ Json friction_json(const FrameRecord& rec, const std::vector<std::size_t>& rows,
   const double cone = mu * jn_sum;
   return Json{{"rule", vector_friction ? "jt3" : "scalar"},
               {"rows", rows.size()},
-              {"jt_sum", num(jt_sum)},
-              {"jt", vector_friction ? Json::array({num(jt[0]), num(jt[1]), num(jt[2])}) : Json(nullptr)},
-              {"jn_sum", num(jn_sum)},
-              {"jn", Json::array({num(jn_vec[0]), num(jn_vec[1]), num(jn_vec[2])})},
-              {"mu", num(mu)},
-              {"cone", num(cone)},
-              {"ratio", cone > 0 ? num(jt_sum / cone) : Json(nullptr)}};
+              {"jt_sum", as_float(jt_sum)},
+              {"jt", vector_friction ? Json::array({as_float(jt[0]), as_float(jt[1]), as_float(jt[2])}) : Json(nullptr)},
+              {"jn_sum", as_float(jn_sum)},
+              {"jn", Json::array({as_float(jn_vec[0]), as_float(jn_vec[1]), as_float(jn_vec[2])})},
+              {"mu", as_float(mu)},
+              {"cone", as_float(cone)},
+              {"ratio", cone > 0 ? as_float(jt_sum / cone) : Json(nullptr)}};
 }
 
 }  // namespace
@@ -341,7 +341,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
     for (std::uint32_t i : drawn) {
       x.push_back(vec(det[i].position));
       const Quat& o = det[i].orientation;
-      q.push_back(Json::array({num(o.w), num(o.x), num(o.y), num(o.z)}));
+      q.push_back(Json::array({as_float(o.w), as_float(o.x), as_float(o.y), as_float(o.z)}));
       const Aabb w = world_box(rec, det, i);
       boxes.push_back(Json::array({vec(w.min), vec(w.max)}));
     }
@@ -374,8 +374,8 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
         if (found != rows_of.end())
           for (std::size_t k : found->second) {
             const ContactRecord& c = rec.contacts[k];
-            contacts.push_back(Json{{"a", p.a}, {"b", p.b}, {"normal", vec(c.normal)}, {"depth", num(c.depth)},
-                                    {"jn", num(c.jn)}, {"jt", num(c.jt)},
+            contacts.push_back(Json{{"a", p.a}, {"b", p.b}, {"normal", vec(c.normal)}, {"depth", as_float(c.depth)},
+                                    {"jn", as_float(c.jn)}, {"jt", as_float(c.jt)},
                                     {"point", rec.has_points ? vec(c.point) : Json(nullptr)}, {"ref", nullptr}});
           }
         continue;
@@ -394,10 +394,11 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
       if (t.sat) {
         Json axes = Json::array();
         for (const SatAxis& ax : t.sat_result.accepted)
-          axes.push_back(Json{{"normal", Json::array({num(ax.normal[0]), num(ax.normal[1]), num(ax.normal[2])})},
-                              {"overlap", num(ax.overlap)}});
+          axes.push_back(Json{
+              {"normal", Json::array({as_float(ax.normal[0]), as_float(ax.normal[1]), as_float(ax.normal[2])})},
+              {"overlap", as_float(ax.overlap)}});
         entry["sat_accepted"] = std::move(axes);
-        entry["sat_epsilon"] = num(t.sat_result.epsilon);
+        entry["sat_epsilon"] = as_float(t.sat_result.epsilon);
       }
       entry["in_contact"] = found != rows_of.end();
       if (found != rows_of.end() && friction_judged) entry["friction"] = friction_json(rec, found->second, physics, p);
@@ -407,12 +408,12 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
       for (std::size_t k : found->second) {
         const ContactRecord& c = rec.contacts[k];
         const RowReference rr = row_reference(t, r, by_sat, c.normal);
-        contacts.push_back(Json{{"a", p.a}, {"b", p.b}, {"normal", vec(c.normal)}, {"depth", num(c.depth)},
-                                {"jn", num(c.jn)}, {"jt", num(c.jt)},
+        contacts.push_back(Json{{"a", p.a}, {"b", p.b}, {"normal", vec(c.normal)}, {"depth", as_float(c.depth)},
+                                {"jn", as_float(c.jn)}, {"jt", as_float(c.jt)},
                                 {"point", rec.has_points ? vec(c.point) : Json(nullptr)},
                                 {"ref", ref_index},
                                 {"ref_normal", vec(rr.normal)},
-                                {"angle_deg", num(rr.angle * 180.0 / 3.14159265358979323846)}});
+                                {"angle_deg", as_float(rr.angle * 180.0 / 3.14159265358979323846)}});
       }
     }
     Json fr{{"frame", f}, {"state_frame", in->state_frame(f)}, {"x", std::move(x)}, {"q", std::move(q)}, {"aabbs", std::move(boxes)},
@@ -462,7 +463,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
             {"bodies", std::move(bodies)},
             {"frames", std::move(frames)}};
   if (!settings.row.empty())
-    data["failure"] = Json{{"row", settings.row}, {"cause", settings.cause}, {"figure", num(settings.figure)},
+    data["failure"] = Json{{"row", settings.row}, {"cause", settings.cause}, {"figure", as_float(settings.figure)},
                            {"unit", settings.unit}};
 
   std::string name = settings.file_name;
@@ -482,14 +483,8 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
     throw RuntimeError(fmt::format("view: {}: the folder cannot be created ({})", out_dir, ec.message()));
   // Beside its name under an unpredictable one, then renamed: never written in place.
   write_file_atomically(path.string(), page, "view");
-  ViewPage result;
-  result.path = path.string();
-  result.bytes = page.size();
-  result.bodies = drawn.size();
-  result.frames = window.size();
-  result.frame = frame;
-  result.note = note;
-  return result;
+  // The page, its bytes, the bodies drawn, the frames on the slider, the first frame, the note.
+  return ViewPage{path.string(), page.size(), drawn.size(), window.size(), frame, note};
 }
 
 }  // namespace octocd

@@ -3,6 +3,7 @@
 /// octocd.Scene and octocd.Engine's compiled half: scenes, the engines this build has, engines
 /// files, and an engine stepped with the GIL released (docs/python.md).
 
+#include "octocd/names.hpp"
 #include "py_arrays.hpp"
 
 namespace octocd::python_binding {
@@ -37,16 +38,11 @@ inline std::vector<std::string> load_engines_file(const std::string& path) {
     throw RuntimeError(fmt::format("octocd.load_engines_file('{}'): the engine registry was read already (engines "
                                    "files: {}); allowed: one engines file per process, loaded before the first "
                                    "engine is looked up (octocd.engines, octocd.Engine)",
-                                   path, read.empty() ? std::string("none") : fmt::format("{}", fmt::join(read, ", "))));
+                                   path, read.empty() ? std::string("none") : join_names(read)));
   }
   return built_engine_names();
 }
 
-inline std::string join(const std::vector<std::string>& v, const char* sep = ", ") {
-  std::string s;
-  for (const auto& x : v) s += (s.empty() ? "" : sep) + x;
-  return s;
-}
 
 class PyEngine {
  public:
@@ -55,11 +51,11 @@ class PyEngine {
     const EngineInfo* info = find_engine_info(engine);
     const std::vector<std::string> names = built_engines();
     if (info == nullptr)
-      throw InputError(fmt::format("engine: unknown engine '{}'; allowed: {}", printable(engine), join(names)));
+      throw InputError(fmt::format("engine: unknown engine '{}'; allowed: {}", printable(engine), join_names(names)));
     if (!engine_built(*info))
       throw InputError(fmt::format("engine: '{}' is not built in this octocd (configured with OCTOCD_CUDA=OFF "
                                    "or without nvcc); allowed: {}",
-                                   engine, join(names)));
+                                   engine, join_names(names)));
     EngineOptions options;
     options.broadphase = broadphase.value_or("");
     options.midphase = midphase.value_or("");
@@ -73,7 +69,7 @@ class PyEngine {
       for (const std::string& n : names)
         if (n != engine) others.push_back("'" + n + "'");
       throw RuntimeError(fmt::format("engine '{}': {}; allowed: engine={} on this machine", engine, why,
-                                     join(others, " or ")));
+                                     join_names(others, " or ")));
     }
     model_ = build_model(sc);
     engine_ = make_engine(engine, model_, options.settings);

@@ -19,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <string>
 #include <vector>
@@ -185,8 +186,24 @@ TEST_F(ProcessEngines, RunGivesTheTraceAndBenchTheStepsPerSecondOfItsTiming) {
 // smallest subnormal, 1e-300, a negative number, inf or NaN (steps/s 0, inf or 10^302) is
 // bad input from the engine, exit 2 naming the engine, the field, the value and the allowed
 // range; bench stores the point as failed with that reason instead of a steps/s `report`
-// refuses, and exits 2 naming it. (Before: exit 1, a runtime failure.)
+// refuses, and exits 2 naming it. (Before: exit 1, a runtime failure.) So do sweeps of the
+// kinds speed-accuracy, divergence and max-instances, the cpu's point beside it run and
+// kept. (Before: speed-accuracy called the point diverged and divergence skipped it, both
+// with exit 0; max-instances ended at once with exit 2, writing no result.)
 TEST_F(ProcessEngines, AHostileTimingIsRefusedNamingTheFieldAndTheRange) {
+  // The smallest sweep of each kind: 2 frames of pyboxes, then of cpu (which translates only).
+  std::ofstream(path("sa.json")) << R"({"name": "sa", "kind": "speed-accuracy", "scenes": ["boxes"],
+      "set": {"/rotation": false}, "engines": ["pyboxes", "cpu"], "repeat": 1, "dts": [0.001],
+      "sim_seconds": 0.002, "rotation": [false]})";
+  std::ofstream(path("dv.json")) << R"({"name": "dv", "kind": "divergence", "scenes": ["boxes"],
+      "set": {"/rotation": false}, "engines": ["pyboxes", "cpu"], "frames": 2, "eps": [0.0001], "copies": 1})";
+  std::ofstream(path("mi.json")) << R"({"name": "mi", "kind": "max-instances", "scenes": ["grid.json"],
+      "engines": ["pyboxes", "cpu"], "warmup": 0, "frames": 2, "repeat": 1, "max_instances": 1,
+      "target_steps_per_s": 0.000001})";
+  std::ofstream(path("grid.json")) << R"({"name": "grid", "domain": {"min": [-1, 0, -1], "max": [1, 2, 1]},
+      "dt": 0.001, "frames": 2, "walls": "floor", "groups": [{"name": "b", "shape": {"box": [0.1, 0.1, 0.1]},
+      "count": 8, "mass": 1.0, "layout": {"type": "grid", "min": [-0.25, 0.5, -0.25], "max": [0.25, 1.0, 0.25],
+      "spacing": 0.5}}]})";
   for (const char* wall : {"0", "5e-324", "1e-300", "-1", "inf", "nan"}) {
     SCOPED_TRACE(wall);
     const std::string item = std::string(" --pyboxes wall_step_seconds=") + wall;
@@ -215,6 +232,27 @@ TEST_F(ProcessEngines, AHostileTimingIsRefusedNamingTheFieldAndTheRange) {
     EXPECT_NE(point.at("reason").get<std::string>().find("wall_step_seconds = " + said), std::string::npos);
     EXPECT_FALSE(point.contains("windows"));
     EXPECT_TRUE(tmp_empty());
+    if (std::string(wall) != "0") continue;
+    for (const char* kind : {"sa", "dv", "mi"}) {
+      SCOPED_TRACE(kind);
+      const std::string out = path(std::string(kind) + "-result.json");
+      const Result k = octocd("bench " + path(std::string(kind) + ".json") + " --scene-dir " + data("") +
+                              " --quiet -o " + out + item);
+      EXPECT_EQ(k.code, 2) << k.output;
+      EXPECT_NE(k.output.find("octocd: error: 1 point(s) failed on a value an engine gave"), std::string::npos)
+          << k.output;
+      ASSERT_TRUE(fs::exists(out)) << k.output;  // the result written
+      std::ifstream kin(out);
+      const nlohmann::json swept = nlohmann::json::parse(kin);
+      std::map<std::string, nlohmann::json> by;  // each engine's point
+      for (const auto& pt : swept.at("points")) by[pt.at("params").at("engine").get<std::string>()] = pt;
+      ASSERT_TRUE(by.count("pyboxes") && by.count("cpu")) << swept.dump(1);
+      EXPECT_EQ(by["pyboxes"].at("status"), "failed");
+      EXPECT_NE(by["pyboxes"].at("reason").get<std::string>().find("gave wall_step_seconds = 0 "), std::string::npos)
+          << by["pyboxes"].dump(1);
+      EXPECT_EQ(by["cpu"].at("status"), "ok") << by["cpu"].dump(1);
+      EXPECT_TRUE(tmp_empty());
+    }
   }
 }
 

@@ -14,6 +14,7 @@
 // double re-derivation.
 #include "applied_state.hpp"
 
+#include "../physics/dmath.hpp"
 #include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
 
@@ -32,16 +33,15 @@ namespace octocd {
 
 namespace {
 
-using D3 = std::array<double, 3>;
+using dmath::D3;
+using dmath::d3;
+using dmath::kEps32;
+using dmath::len3;
+using dmath::operator-;
 using F3 = std::array<float, 3>;
 
-constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23, float32 rounding
-
-D3 d3(Vec3 v) { return {v.x, v.y, v.z}; }
 F3 f3(Vec3 v) { return {v.x, v.y, v.z}; }
 double inf_norm(const D3& a) { return std::max({std::fabs(a[0]), std::fabs(a[1]), std::fabs(a[2])}); }
-double norm2(const D3& a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); }
-double norm(double x, double y, double z) { return std::sqrt(x * x + y * y + z * z); }
 
 /// The kinds of near-tie (for messages and statistics).
 enum Kind : std::uint8_t { kHit, kFixedAxis, kAxis, kSign, kApproach, kRestitution, kStick, kKinds };
@@ -295,7 +295,7 @@ void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8
         d[k] = 0.5 * (amin[k] + amax[k]) - 0.5 * (bmin[k] + bmax[k]);
         fd[k] = 0.5f * (famin[k] + famax[k]) - 0.5f * (fbmin[k] + fbmax[k]);
       }
-      const double dist = norm2(d);
+      const double dist = len3(d);
       const float fdist = std::sqrt(fd[0] * fd[0] + fd[1] * fd[1] + fd[2] * fd[2]);
       const double eps = p.epsilon;
       const std::uint8_t fixed =
@@ -362,7 +362,7 @@ void AppliedStateJudge::Impl::run(const Island& is, const std::vector<std::uint8
           vt[k] = vrel[k] - vn * nrm[k];
           fvt[k] = fvrel[k] - fvn * fn[k];
         }
-        const double vt_len = norm2(vt);
+        const double vt_len = len3(vt);
         const float fvt_len = std::sqrt(fvt[0] * fvt[0] + fvt[1] * fvt[1] + fvt[2] * fvt[2]);
         if (vt_len > 0.0 || fvt_len > 0.0f) {
           for (int k = 0; k < 3; ++k) {
@@ -784,14 +784,14 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
     if (!touched[i] || !(w[i] > 0.0f) || s.find(static_cast<std::uint32_t>(i)) != i) continue;
     const Group& gr = g[i];
     if (!gr.isolated || gr.bodies < 2) continue;
-    const double dp = norm(gr.p1[0] - gr.p0[0], gr.p1[1] - gr.p0[1], gr.p1[2] - gr.p0[2]);
+    const double dp = len3(gr.p1 - gr.p0);
     const double bound = tol.applied_conservation_rel * gr.exchange + gr.mtol + 1e-9;
     s.group_momentum.check(dp <= bound, dp / bound,
                            fmt::format("frame {}: isolated group of {} bodies (body {} ...) changes momentum by "
                                        "{:.3g} kg m/s (exchanged {:.3g}, bound {:.3g})",
                                        frame, gr.bodies, gr.first, dp, gr.exchange, bound));
     if (gr.bodies == 2 && gr.centre) {
-      const double dc = norm(gr.c1[0] - gr.c0[0], gr.c1[1] - gr.c0[1], gr.c1[2] - gr.c0[2]);
+      const double dc = len3(gr.c1 - gr.c0);
       const double cbound = tol.applied_conservation_rel * gr.cexchange + gr.ctol + 1e-12;
       s.group_centre.check(dc <= cbound, dc / cbound,
                            fmt::format("frame {}: isolated pair (body {} ...) moves its mass-weighted centre by "

@@ -30,6 +30,7 @@
 #include "octocd/validation_rows.hpp"
 
 #include "applied_state.hpp"
+#include "../physics/dmath.hpp"
 #include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
 
@@ -541,17 +542,16 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
       // values they are differences of (positions through the AABBs, velocities): a few
       // roundings of those magnitudes, as for the applied state.
       auto inf = [](Vec3 u) { return std::max({std::fabs(u.x), std::fabs(u.y), std::fabs(u.z)}); };
-      const double eps32 = 1.0 / 8388608.0;
       const double slack_x =
           rec.has_contact_terms
               ? 0.0
-              : tol.applied_state_ulps * eps32 * (ma + mb) *
+              : tol.applied_state_ulps * dmath::kEps32 * (ma + mb) *
                     std::max({inf(boxes[c.pair.a].min), inf(boxes[c.pair.a].max), inf(boxes[c.pair.b].min),
                               inf(boxes[c.pair.b].max)});
       const double slack_v =
           rec.has_contact_terms
               ? 0.0
-              : tol.applied_state_ulps * eps32 * (ma + mb) *
+              : tol.applied_state_ulps * dmath::kEps32 * (ma + mb) *
                     std::max({inf(c.v_a), inf(c.v_b), inf(c.v_a + c.dv_a), inf(c.v_b + c.dv_b)});
       auto check_pair = [&](CheckTally& t, Vec3 da, Vec3 db, double rel, double slack, const char* what) {
         const double sx = ma * da.x + mb * db.x, sy = ma * da.y + mb * db.y,

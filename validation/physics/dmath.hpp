@@ -1,8 +1,9 @@
 #pragma once
 /// \file dmath.hpp
-/// Double-precision 3-vectors and row-major 3x3 matrices of the physics tier's judges
-/// (the row files physics_impl.hpp lists, sat.cpp): they recompute in double what engines did in float32.
-/// Internal to validation/physics.
+/// Double-precision 3-vectors and row-major 3x3 matrices of the judges (the physics tier's
+/// row files physics_impl.hpp lists, sat.cpp; the model tier's applied-state re-derivation,
+/// model/applied_state.cpp): they recompute in double what engines did in float32.
+/// Internal to validation/.
 
 #include <array>
 #include <cmath>
@@ -14,6 +15,9 @@ namespace octocd::dmath {
 
 using D3 = std::array<double, 3>;  ///< (x, y, z)
 using M3 = std::array<double, 9>;  ///< row-major 3x3
+
+/// 2^-23: the relative rounding of a float32 (its unit in the last place at 1, FLT_EPSILON).
+inline constexpr double kEps32 = 1.0 / 8388608.0;
 
 /// A float32 vector in double.
 inline D3 d3(Vec3 v) { return {double(v.x), double(v.y), double(v.z)}; }

@@ -58,10 +58,10 @@ namespace octocd {
 namespace physics_detail {
 
 using dmath::D3;
+using dmath::kEps32;
 using dmath::M3;
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr double kEps32 = 1.0 / 8388608.0;  // 2^-23
 /// A relative sliding speed (m/s) below which v_t has no direction: jt is then J_t's
 /// magnitude (the trace convention; octocd's Bullet adapter uses the same threshold).
 constexpr double kNoSliding = 1e-6;

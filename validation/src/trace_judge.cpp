@@ -177,9 +177,9 @@ std::vector<ValidationResult> validate_external_trace(const std::string& path, E
       f = after;
     }
     if (first <= last && next_posed(first) > last) judged_to = last;
-    for (std::int64_t f = last + 1; episodes && f <= frames && made->episodes_pending(); ++f) {
+    for (std::int64_t later = last + 1; episodes && later <= frames && made->episodes_pending(); ++later) {
       if (options.stop && options.stop()) throw ValidationStopped();
-      made->observe_episodes(in.frame(f));
+      made->observe_episodes(in.frame(later));
     }
   } catch (const PairLimitError& e) {
     throw PairLimitError(fmt::format("{}: {}", path, e.what()), e);  // "T: frame F: ..."

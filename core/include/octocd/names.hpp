@@ -17,4 +17,12 @@ std::vector<std::string> names_of(const Items& items) {
   return out;
 }
 
+/// `names` with `sep` between them, in their order ({"a", "b"} -> "a, b"; none -> ""): an
+/// `allowed: ...` list, a command line for a message.
+inline std::string join_names(const std::vector<std::string>& names, const char* sep = ", ") {
+  std::string out;
+  for (const std::string& n : names) out += (out.empty() ? "" : sep) + n;
+  return out;
+}
+
 }  // namespace octocd
