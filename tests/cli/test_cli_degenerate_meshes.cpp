@@ -70,7 +70,7 @@ TEST_F(DegenerateMeshes, AMeshWithoutVolumeIsTheSameExit2OnEveryEngine) {
   for (const std::string& e : es)
     for (const auto& [s, name] : {std::pair{flat, std::string("flat")}, std::pair{line, std::string("line")}}) {
       SCOPED_TRACE(e + " " + name);
-      for (const std::string cmd : {" validate " + s + " --against none", " run " + s + " --quiet --trace " +
+      for (const std::string& cmd : {" validate " + s + " --against none", " run " + s + " --quiet --trace " +
                                                                                 (dir_ / "t.h5").string()}) {
         const Result r = run(bin() + cmd + " --engine " + e + " --frames 5");
         EXPECT_EQ(r.code, 2) << r.output;
@@ -135,7 +135,7 @@ TEST_F(DegenerateMeshes, AStatePastTheTraceLimitsEndsTheRunNamingTheFrame) {
   for (const std::string& e : engines()) {
     SCOPED_TRACE(e);
     const std::string trace = (dir_ / (e + ".h5")).string();
-    for (const std::string cmd : {" validate " + s.string() + " --against none", " run " + s.string() +
+    for (const std::string& cmd : {" validate " + s.string() + " --against none", " run " + s.string() +
                                                                                    " --quiet --no-xdmf --trace " + trace}) {
       const Result r = run(bin() + cmd + " --engine " + e);
       EXPECT_EQ(r.code, 1) << r.output;
@@ -173,7 +173,7 @@ TEST_F(DegenerateMeshes, ANeedleWhoseInertiaNoTraceMayHoldIsRefusedBeforeAStep) 
   for (const std::string& e : engines()) {
     SCOPED_TRACE(e);
     const std::string trace = (dir_ / (e + ".h5")).string();
-    for (const std::string cmd : {" validate " + needle + " --against none", " run " + needle + " --quiet --trace " +
+    for (const std::string& cmd : {" validate " + needle + " --against none", " run " + needle + " --quiet --trace " +
                                                                                    trace}) {
       const Result r = run(bin() + cmd + " --engine " + e + " --frames 5");
       EXPECT_EQ(r.code, 2) << r.output;

@@ -286,10 +286,13 @@ TEST(CliView, VersionTwoTraceKeepsOrientationsAndManifoldPoints) {
   const double jn = f["contacts"][0]["jn"].get<double>() + f["contacts"][1]["jn"].get<double>();
   EXPECT_NEAR(fr["jn_sum"].get<double>(), jn, 1e-6 * std::max(1.0, jn));
   EXPECT_NEAR(fr["cone"].get<double>(), fr["mu"].get<double>() * jn, 1e-6 * std::max(1.0, jn));
-  if (fr["rule"] == "scalar")
+  if (fr["rule"] == "scalar") {
     EXPECT_NEAR(fr["jt_sum"].get<double>(),
                 std::fabs(f["contacts"][0]["jt"].get<double>()) + std::fabs(f["contacts"][1]["jt"].get<double>()), 1e-6);
-  if (jn > 0) EXPECT_NEAR(fr["ratio"].get<double>(), fr["jt_sum"].get<double>() / fr["cone"].get<double>(), 1e-5);
+  }
+  if (jn > 0) {
+    EXPECT_NEAR(fr["ratio"].get<double>(), fr["jt_sum"].get<double>() / fr["cone"].get<double>(), 1e-5);
+  }
   fs::remove_all(dir);
 }
 

@@ -446,8 +446,12 @@ TEST(OdeWorld, EverySpaceFindsTheSamePairsAndSapPassesThePhysicsTier) {
     hash.step();
     sap.step();
     quad.step();
-    if (sap_same) EXPECT_EQ(sap.record().pairs, hash.record().pairs) << "frame " << f;
-    if (quad_same) EXPECT_EQ(quad.record().pairs, hash.record().pairs) << "frame " << f;
+    if (sap_same) {
+      EXPECT_EQ(sap.record().pairs, hash.record().pairs) << "frame " << f;
+    }
+    if (quad_same) {
+      EXPECT_EQ(quad.record().pairs, hash.record().pairs) << "frame " << f;
+    }
     if (sap_same && quad_same && !hash.record().pairs.empty()) ++compared;
   }
   EXPECT_GT(compared, 0);
@@ -864,7 +868,9 @@ TEST(ManifoldRow, TheRoundingOfAHugeNormalImpulseIsNoFriction) {
       ASSERT_EQ(jt3.size(), 1u);
       const double jl = std::sqrt(double(jt3[0].x) * jt3[0].x + double(jt3[0].y) * jt3[0].y +
                                   double(jt3[0].z) * jt3[0].z);
-      if (jl > 1e-9) EXPECT_LT(degrees_out_of_plane(jt3[0], row.normal), 1.0) << "jt3 |" << jl << "| kg m/s";
+      if (jl > 1e-9) {
+        EXPECT_LT(degrees_out_of_plane(jt3[0], row.normal), 1.0) << "jt3 |" << jl << "| kg m/s";
+      }
       EXPECT_NEAR(jl, friction, 1e-4 * friction + 1e-9);
       EXPECT_NEAR(row.jn, lambda, 1e-6 * lambda);
     }

@@ -507,7 +507,9 @@ TEST(PhysicsRows, DepthZeroRowsAreJudgedWhateverTheDepth) {
       } else {
         const ValidationResult& g = row_of(rs, "contact-geometry");
         EXPECT_TRUE(g.pass) << g.detail;
-        if (resting_pair) EXPECT_NE(g.detail.find("2 resting rows"), std::string::npos) << g.detail;
+        if (resting_pair) {
+          EXPECT_NE(g.detail.find("2 resting rows"), std::string::npos) << g.detail;
+        }
       }
     }
   }
