@@ -90,11 +90,22 @@ class Child {
       ::_exit(127);
     }
   }
+  Child(const Child&) = delete;
+  Child& operator=(const Child&) = delete;
+  /// A child not waited for (a failed assertion ended the test first) is killed and reaped:
+  /// no `octocd` outlives its test.
+  ~Child() {
+    if (pid_ > 0 && !waited_) {
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, nullptr, 0);
+    }
+  }
   pid_t pid() const { return pid_; }
   Result wait() {
     Result r;
     int status = 0;
     ::waitpid(pid_, &status, 0);
+    waited_ = true;
     if (WIFEXITED(status)) r.code = WEXITSTATUS(status);
     if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
     r.out = slurp(out_);
@@ -107,6 +118,7 @@ class Child {
     int status = 0;
     ended = octocd::test::wait_child(
         pid_, status, std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::duration<double>(seconds)));
+    waited_ = ended;
     if (!ended) {
       ::kill(pid_, SIGKILL);
       return wait();
@@ -122,6 +134,7 @@ class Child {
  private:
   fs::path out_, err_;
   pid_t pid_ = -1;
+  bool waited_ = false;  ///< reaped by wait() or wait_within()
 };
 
 /// Lines of `text` (without the newlines).
