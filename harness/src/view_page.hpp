@@ -112,6 +112,12 @@ var camera = new THREE.PerspectiveCamera(45, (view.clientWidth || 1) / (view.cli
 scene.add(new THREE.AmbientLight(0xffffff, 0.55));
 var sun = new THREE.DirectionalLight(0xffffff, 0.6); sun.position.set(1, 2, 1.5); scene.add(sun);
 var controls = new THREE.OrbitControls(camera, renderer.domElement);
+// Rendered on demand (three.js manual, "Rendering on demand"): a frame is drawn when the
+// camera moves or the page's content changes, none while the page is idle.
+var renderPending = false;
+function render() { renderPending = false; renderer.render(scene, camera); }
+function requestRender() { if (!renderPending) { renderPending = true; requestAnimationFrame(render); } }
+controls.addEventListener('change', requestRender);
 
 // Shapes (body frame).
 var geoms = D.shapes.map(function (s) {
@@ -349,6 +355,7 @@ function draw(f) {
   if (f.rows_not_drawn) t.push(f.rows_not_drawn + ' more rows not drawn (cap)');
   if (f.pairs_without_reference) t.push(f.pairs_without_reference + ' pairs without a reference (cap)');
   $('figures').textContent = t.join('\n');
+  requestRender();
 }
 
 slider.addEventListener('input', function () { show(+slider.value, false); });
@@ -360,11 +367,13 @@ $('impulses').checked = !D.failure || D.failure.row === 'friction';
 $('impulses').addEventListener('change', function () { draw(D.frames[+slider.value]); });
 $('boxes').addEventListener('change', function () {
   D.bodies.forEach(function (b, k) { bodies[k].helper.visible = b.item || $('boxes').checked; });
+  requestRender();
 });
 function resize() {
   var wh = viewSize();
   renderer.setSize(wh[0], wh[1]);
   camera.aspect = wh[0] / Math.max(wh[1], 1); camera.updateProjectionMatrix();
+  requestRender();
 }
 window.addEventListener('resize', resize);
 $('toggle').addEventListener('click', function () {
@@ -373,10 +382,8 @@ $('toggle').addEventListener('click', function () {
   resize();
 });
 show(+slider.value, false);
-function loop() { controls.update(); renderer.render(scene, camera); requestAnimationFrame(loop); }
 renderer.render(scene, camera);
 document.body.setAttribute('data-status', window.octocdErrors.length ? 'error' : 'drawn');
-requestAnimationFrame(loop);
 })();
 </script>
 </body></html>
