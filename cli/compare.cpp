@@ -249,8 +249,8 @@ CLI::App* add_compare_command(CLI::App& app, CompareOptions& o) {
                 "(/states/angular_velocity, version 2, per component), a trace without them counting as unrotated "
                 "(identity, zero: version 1 against version 2 works); contacts (two octocd version 1 traces: "
                 "/frames/contacts and the /contacts records in order; otherwise by pair: the pairs with contact rows "
-                "in each frame, each pair's row count (a manifold), then its rows: depth, jn, jt, normal, and point "
-                "when both have /contacts/point); pairs (/frames/aabb_pairs) and energy (/frames/kinetic_energy): "
+                "in each frame, each pair's row count (a manifold), then its rows: depth, jn, jt, normal, and point, "
+                "point_b, jt3 where both have /contacts/point, /contacts/point_b, /contacts/jt3); pairs (/frames/aabb_pairs) and energy (/frames/kinetic_energy): "
                 "octocd traces only (an external trace has no /frames). Default: positions,velocities,contacts,pairs, "
                 "and orientations,angular_velocities when either trace is of version 2");
   c->add_option("--ignore", o.ignore,

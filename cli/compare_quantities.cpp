@@ -113,6 +113,7 @@ struct Contacts {
   std::vector<std::int64_t> off, frame;
   std::vector<std::uint32_t> pair;
   std::vector<float> normal, depth, jn, jt, point;  ///< point: empty without /contacts/point
+  std::vector<float> point_b, jt3;                  ///< empty without /contacts/point_b, /contacts/jt3
 };
 
 Contacts load_contacts(const Side& s) {
@@ -138,11 +139,15 @@ Contacts load_contacts(const Side& s) {
     std::uint64_t flat = std::min({rows_of(t, "/contacts/pair"), rows_of(t, "/contacts/depth"),
                                    rows_of(t, "/contacts/normal"), rows_of(t, "/contacts/jn"),
                                    rows_of(t, "/contacts/jt")});
-    if (s.points) {
-      const auto shape = t.shape("/contacts/point");
+    const std::pair<bool, const char*> vectors[] = {{s.points, "/contacts/point"},
+                                                    {s.point_b, "/contacts/point_b"},
+                                                    {s.jt3, "/contacts/jt3"}};
+    for (const auto& [present, name] : vectors) {
+      if (!present) continue;
+      const auto shape = t.shape(name);
       if (shape.size() != 2 || shape[1] != 3)
-        throw InputError(fmt::format("{}: /contacts/point: shape {}; allowed: C x 3 (one world point per contact row)",
-                                     t.path(), fmt::join(shape, " x ")));
+        throw InputError(fmt::format("{}: {}: shape {}; allowed: C x 3 (one vector per contact row)", t.path(), name,
+                                     fmt::join(shape, " x ")));
       flat = std::min(flat, shape[0]);
     }
     std::size_t good = 0;
@@ -157,6 +162,8 @@ Contacts load_contacts(const Side& s) {
   r.jn = t.read_f32("/contacts/jn", used);
   r.jt = t.read_f32("/contacts/jt", used);
   if (s.points) r.point = t.read_f32("/contacts/point", used);
+  if (s.point_b) r.point_b = t.read_f32("/contacts/point_b", used);
+  if (s.jt3) r.jt3 = t.read_f32("/contacts/jt3", used);
   return r;
 }
 
@@ -182,6 +189,8 @@ Side make_side(const TraceReader& t) {
     s.rotation = info.has_rotation;
     s.has_contacts = info.has_contacts;
     s.points = info.has_points;
+    s.point_b = info.has_point_b;
+    s.jt3 = info.has_jt3;
     if (!t.has_attribute("scene_name")) {
       s.scene_known = false;
       if (info.has_scene) try {
@@ -225,6 +234,8 @@ Side make_side(const TraceReader& t) {
   s.rotation = q && w;
   s.has_contacts = t.has_dataset("/contacts/offsets");
   s.points = s.has_contacts && t.has_dataset("/contacts/point");
+  s.point_b = s.points && t.has_dataset("/contacts/point_b");
+  s.jt3 = s.has_contacts && t.has_dataset("/contacts/jt3");
   return s;
 }
 
@@ -473,7 +484,7 @@ QuantityResult compare_contacts_by_pair(const Side& a, const Side& b, const Tole
     return q;
   }
   const Contacts ca = load_contacts(a), cb = load_contacts(b);
-  const bool points = a.points && b.points;
+  const bool points = a.points && b.points, point_b = a.point_b && b.point_b, jt3 = a.jt3 && b.jt3;
   std::map<std::int64_t, std::size_t> row_b;
   for (std::size_t i = 0; i < cb.frame.size(); ++i) row_b[cb.frame[i]] = i;
   using Key = std::pair<std::uint32_t, std::uint32_t>;
@@ -517,6 +528,12 @@ QuantityResult compare_contacts_by_pair(const Side& a, const Side& b, const Tole
           if (points)
             for (std::size_t c = 0; c < 3; ++c)
               fields.push_back({fmt::format("point.{}", "xyz"[c]), {ca.point[3 * ka + c], cb.point[3 * kb + c]}});
+          if (point_b)
+            for (std::size_t c = 0; c < 3; ++c)
+              fields.push_back({fmt::format("point_b.{}", "xyz"[c]), {ca.point_b[3 * ka + c], cb.point_b[3 * kb + c]}});
+          if (jt3)
+            for (std::size_t c = 0; c < 3; ++c)
+              fields.push_back({fmt::format("jt3.{}", "xyz"[c]), {ca.jt3[3 * ka + c], cb.jt3[3 * kb + c]}});
           for (const auto& [field, v] : fields) {
             double d = 0.0;
             const auto both = [&, &field = field, &v = v] {
@@ -542,10 +559,17 @@ QuantityResult compare_contacts_by_pair(const Side& a, const Side& b, const Tole
       }
     }
   }
-  q.compared = fmt::format("{} common frames: {} pairs, {} rows by pair{}", common, pairs, rows,
-                           points                  ? " with points"
-                           : a.points || b.points ? fmt::format(" (/contacts/point only in {})", a.points ? "A" : "B")
-                                                   : "");
+  // The per-row vectors compared (both traces have them), and those only one side has.
+  std::string with, only;
+  const std::pair<const char*, std::pair<bool, bool>> vectors[] = {{"point", {a.points, b.points}},
+                                                                   {"point_b", {a.point_b, b.point_b}},
+                                                                   {"jt3", {a.jt3, b.jt3}}};
+  for (const auto& [name, has] : vectors) {
+    if (has.first && has.second) with += fmt::format("{}{}", with.empty() ? " with " : ", ", name);
+    else if (has.first || has.second)
+      only += fmt::format(" (/contacts/{} only in {})", name, has.first ? "A" : "B");
+  }
+  q.compared = fmt::format("{} common frames: {} pairs, {} rows by pair{}{}", common, pairs, rows, with, only);
   return q;
 }
 

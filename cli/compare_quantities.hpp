@@ -66,6 +66,8 @@ struct Side {
   bool rotation = false;                   ///< /states/orientation and /states/angular_velocity
   bool has_contacts = false;               ///< /contacts/offsets
   bool points = false;                     ///< /contacts/point
+  bool point_b = false;                    ///< /contacts/point_b (each row's point on B; with point)
+  bool jt3 = false;                        ///< /contacts/jt3 (each row's friction impulse vector on A)
   const std::string& path() const { return t->path(); }
   /// "octocd trace version 1" or "external trace version 2".
   std::string kind() const { return fmt::format("{} trace version {}", external ? "external" : "octocd", version); }
@@ -98,7 +100,8 @@ void compare_contact_records(const Side& a, const Side& b, const Tolerance& tol,
 /// Contacts by pair at the frames both traces hold (a version 2 or an external trace on
 /// either side): per frame the set of pairs with contact rows, each pair's row count (a
 /// manifold's points), then its rows in the order written: depth, jn, jt, normal and, when
-/// both traces have /contacts/point, the point. A pair on one side only, or with another
+/// both traces have them, /contacts/point, /contacts/point_b (the row's point on B) and
+/// /contacts/jt3 (its friction impulse vector). A pair on one side only, or with another
 /// row count, is an infinite difference.
 QuantityResult compare_contacts_by_pair(const Side& a, const Side& b, const Tolerance& tol);
 

@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -144,6 +145,25 @@ Json reference_json(const char* kind, const ReferenceNormal& r) {
               {"depth_upper_bound", r.depth_upper_bound},
               {"point_a", vec(r.point_a)},
               {"point_b", vec(r.point_b)}};
+}
+
+/// Contact row k of `rec` as the page draws it: pair, normal, depth, jn, jt, the engine's
+/// point (null without /contacts/point), its point on B (`point_b`, null without
+/// /contacts/point_b: the impulse acts between the two) and its friction impulse vector on A
+/// (`jt3`, null without /contacts/jt3), then `more`.
+Json row_json(const FrameRecord& rec, std::size_t k, std::initializer_list<std::pair<const char*, Json>> more) {
+  const ContactRecord& c = rec.contacts[k];
+  Json out{{"a", c.pair.a},
+           {"b", c.pair.b},
+           {"normal", vec(c.normal)},
+           {"depth", as_float(c.depth)},
+           {"jn", as_float(c.jn)},
+           {"jt", as_float(c.jt)},
+           {"point", rec.has_points ? vec(c.point) : Json(nullptr)},
+           {"point_b", rec.point_b.size() == rec.contacts.size() ? vec(rec.point_b[k]) : Json(nullptr)},
+           {"jt3", rec.jt3.size() == rec.contacts.size() ? vec(rec.jt3[k]) : Json(nullptr)}};
+  for (const auto& [key, value] : more) out[key] = value;
+  return out;
 }
 
 /// A pair's friction as the friction row's cone judges it (validation/physics/friction.cpp,
@@ -372,12 +392,7 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
       if (pi >= kMaxReferencePairs) {
         ++refs_left;
         if (found != rows_of.end())
-          for (std::size_t k : found->second) {
-            const ContactRecord& c = rec.contacts[k];
-            contacts.push_back(Json{{"a", p.a}, {"b", p.b}, {"normal", vec(c.normal)}, {"depth", as_float(c.depth)},
-                                    {"jn", as_float(c.jn)}, {"jt", as_float(c.jt)},
-                                    {"point", rec.has_points ? vec(c.point) : Json(nullptr)}, {"ref", nullptr}});
-          }
+          for (std::size_t k : found->second) contacts.push_back(row_json(rec, k, {{"ref", nullptr}}));
         continue;
       }
       poll();
@@ -408,12 +423,10 @@ ViewPage write_view(const std::string& trace, const ViewSettings& settings, cons
       for (std::size_t k : found->second) {
         const ContactRecord& c = rec.contacts[k];
         const RowReference rr = row_reference(t, r, by_sat, c.normal);
-        contacts.push_back(Json{{"a", p.a}, {"b", p.b}, {"normal", vec(c.normal)}, {"depth", as_float(c.depth)},
-                                {"jn", as_float(c.jn)}, {"jt", as_float(c.jt)},
-                                {"point", rec.has_points ? vec(c.point) : Json(nullptr)},
-                                {"ref", ref_index},
-                                {"ref_normal", vec(rr.normal)},
-                                {"angle_deg", as_float(rr.angle * 180.0 / 3.14159265358979323846)}});
+        contacts.push_back(row_json(rec, k,
+                                    {{"ref", ref_index},
+                                     {"ref_normal", vec(rr.normal)},
+                                     {"angle_deg", as_float(rr.angle * 180.0 / 3.14159265358979323846)}}));
       }
     }
     Json fr{{"frame", f}, {"state_frame", in->state_frame(f)}, {"x", std::move(x)}, {"q", std::move(q)}, {"aabbs", std::move(boxes)},

@@ -64,6 +64,8 @@ input[type=range] { width: 100%; } select { max-width: 100%; }
 <div><span style="background:#1f3f9f"></span>engine normal at its point (length: depth x the pair's
  scale)</div>
 <div><span style="background:#d01f1f"></span>engine normal of the selected contact</div>
+<div><span style="background:#f08c00"></span>the row's point on B (/contacts/point_b), joined to its
+ point: the impulse acts between the two</div>
 <div><span style="background:#1a9a3a"></span>reference normal (SAT or FCL, the physics tier's own)</div>
 <div><span style="background:#7b3fb0"></span>reference points (nearest points / contact point)</div>
 <div><span style="background:#333"></span>normal impulse sum jn n; its ring: the cone mu jn</div>
@@ -303,6 +305,11 @@ function draw(f) {
     if (r.friction && $('impulses').checked) drawFriction(f, r);
   });
   f.contacts.forEach(function (c) {
+    if (c.point_b) {  // the engine's second witness point: B takes the row's impulse there
+      var q = v3(c.point_b);
+      addDot(q, 0xf08c00, dot * (c === selected ? 1 : 0.8));
+      addLine([rowPoint(f, c), q], 0xf08c00, false);
+    }
     if (c === selected) return;
     var p = rowPoint(f, c);
     addArrow(c.normal, p, arrowLength(c.depth, c), 0x1f3f9f, 1);
@@ -323,7 +330,9 @@ function draw(f) {
     t.push('engine normal   ' + fv(selected.normal));
     t.push('engine depth    ' + f4(selected.depth) + ' m');
     t.push('engine point    ' + (selected.point ? fv(selected.point) : 'none (drawn at the AABBs\' overlap)'));
+    if (selected.point_b) t.push('engine point B  ' + fv(selected.point_b));
     t.push('J_n, J_t        ' + f4(selected.jn) + ', ' + f4(selected.jt) + ' kg m/s');
+    if (selected.jt3) t.push('J_t vector      ' + fv(selected.jt3) + ' kg m/s');
   }
   if (selRef) {
     var j = selRef.judged;

@@ -181,7 +181,10 @@ class Validator:
         pairs: (P, 2) int candidate pairs (a < b < n, sorted, unique); None: the engine
             has no candidate set (candidate-sets is then not judged on this frame).
         contacts: dict pair (C, 2) int, normal (C, 3) (unit, from B to A), depth (C,)
-            (m, >= 0), jn (C,) (>= 0), jt (C,) (kg m/s), optional point (C, 3) (m).
+            (m, >= 0), jn (C,) (>= 0), jt (C,) (kg m/s), optional point (C, 3) (m), with it
+            optional point_b (C, 3) (m: each row's point on B, the impulse applied between the
+            two witness points), and optional jt3 (C, 3) (kg m/s: each row's friction impulse
+            vector on A); docs/trace-format.md's /contacts/point_b and /contacts/jt3.
         x_pre, v_pre, x_post, v_post: (n, 3) states before / after the step: all four
             or none.
         q_pre, q_post: (n, 4) orientations (w, x, y, z), unit, body to world; w_pre,

@@ -305,16 +305,16 @@ class PyValidator {
     if (!contacts.is_none()) {
       if (!py::isinstance<py::dict>(contacts))
         throw InputError("contacts: not a dict; allowed: {'pair': (C, 2), 'normal': (C, 3), 'depth': (C,), 'jn': "
-                         "(C,), 'jt': (C,)[, 'point': (C, 3)]}");
+                         "(C,), 'jt': (C,)[, 'point': (C, 3)[, 'point_b': (C, 3)]][, 'jt3': (C, 3)]}");
       const py::dict c = py::reinterpret_borrow<py::dict>(contacts);
       // octocd's own FrameRecord.contacts adds the design.md section 6 terms: accepted and ignored (the
       // validators derive them from the states), so an octocd record can be fed back.
-      static const char* const kKeys[] = {"pair", "normal", "depth", "jn", "jt", "point", "axis",
-                                          "v_a", "v_b", "dx_a", "dx_b", "dv_a", "dv_b"};
+      static const char* const kKeys[] = {"pair", "normal", "depth", "jn", "jt", "point", "point_b", "jt3",
+                                          "axis", "v_a", "v_b", "dx_a", "dx_b", "dv_a", "dv_b"};
       for (auto item : c) {
         const std::string k = py::str(item.first);
         if (std::find(std::begin(kKeys), std::end(kKeys), k) == std::end(kKeys))
-          throw InputError(fmt::format("contacts: unknown key '{}'; allowed: pair, normal, depth, jn, jt, point "
+          throw InputError(fmt::format("contacts: unknown key '{}'; allowed: pair, normal, depth, jn, jt, point, point_b, jt3 "
                                        "(and, ignored, the design.md section 6 terms of octocd's records: axis, v_a, v_b, dx_a, "
                                        "dx_b, dv_a, dv_b)",
                                        k));
@@ -322,7 +322,7 @@ class PyValidator {
       for (const char* k : {"pair", "normal", "depth", "jn", "jt"})
         if (!c.contains(k))
           throw InputError(fmt::format("contacts: no '{}'; allowed: a dict with pair (C, 2), normal (C, 3), depth, "
-                                       "jn, jt (C,) and optionally point (C, 3)",
+                                       "jn, jt (C,) and optionally point, point_b, jt3 (C, 3)",
                                        k));
       const std::vector<Pair> cp = pairs(c["pair"], "contacts['pair']");
       const auto cn = static_cast<py::ssize_t>(cp.size());
@@ -335,6 +335,12 @@ class PyValidator {
         point = vec3s(c["point"], "contacts['point']", cn, "world contact point (m)");
         rec.has_points = true;
       }
+      // Each row's point on B (two witness points per row: checked to come with `point`) and
+      // its tangential impulse vector on A (docs/trace-format.md, /contacts/point_b, /contacts/jt3).
+      if (c.contains("point_b"))
+        rec.point_b = vec3s(c["point_b"], "contacts['point_b']", cn, "world contact point on B (m)");
+      if (c.contains("jt3"))
+        rec.jt3 = vec3s(c["jt3"], "contacts['jt3']", cn, "friction impulse vector on A (kg m/s)");
       rec.contacts.resize(cp.size());
       for (std::size_t i = 0; i < cp.size(); ++i) {
         ContactRecord& r = rec.contacts[i];

@@ -180,7 +180,7 @@ TEST_F(TraceV2, CompareOfAVersion2TraceWithItselfAndAnIndependentRunIsSame) {
     for (const std::string q : {"positions", "velocities", "orientations", "angular_velocities"})
       EXPECT_NE(r.output.find(q + std::string(18 - q.size() + 1, ' ') + states), std::string::npos)
           << q << "\n" << r.output;
-    EXPECT_NE(r.output.find("rows by pair with points"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("rows by pair with point, point_b, jt3"), std::string::npos) << r.output;
     const json j = read_json(path("c.json"));
     EXPECT_TRUE(j["same"].get<bool>());
     EXPECT_EQ(j["traces"][0]["version"], 2);
@@ -295,6 +295,23 @@ TEST_F(TraceV2, CompareFindsOneManifoldRowsImpulseOrPointByPair) {
   r = run_octocd("compare " + a + " " + c);
   EXPECT_EQ(r.code, 3) << r.output;
   EXPECT_NE(r.output.find(": jn: A "), std::string::npos) << r.output;
+  // One row's point on B (Bullet's second witness point) by 1 mm, and its friction vector.
+  const std::string d = copy(a, "d.h5");
+  auto pb = get(d, "/contacts/point_b", {k, 0}, {1, 3});
+  pb[2] += 0.001f;
+  put(d, "/contacts/point_b", {k, 0}, {1, 3}, pb);
+  r = run_octocd("compare " + a + " " + d);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("DIFFERENT: " + at), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(": point_b.z: A "), std::string::npos) << r.output;
+  EXPECT_EQ(run_octocd("compare " + a + " " + d + " --tolerance contacts=0.002").code, 0);
+  const std::string e = copy(a, "e.h5");
+  auto jt3 = get(e, "/contacts/jt3", {k, 0}, {1, 3});
+  jt3[0] = jt3[0] * 2.0f + 1.0f;
+  put(e, "/contacts/jt3", {k, 0}, {1, 3}, jt3);
+  r = run_octocd("compare " + a + " " + e);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find(": jt3.x: A "), std::string::npos) << r.output;
 }
 
 TEST_F(TraceV2, AnExternalVersion2TraceComparesWithTheOctocdTraceItWasMadeFrom) {

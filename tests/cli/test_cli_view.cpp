@@ -259,7 +259,11 @@ TEST(CliView, ValidateViewLinksThePageFromTableJsonAndJunit) {
 // the pair judged on the posed (rotated) boxes.
 TEST(CliView, VersionTwoTraceKeepsOrientationsAndManifoldPoints) {
   const std::string dir = scratch("v2");
-  const Trace t = Trace::make_v2();
+  Trace t = Trace::make_v2();
+  // Frame 1's rows with a second witness point 1 mm inside B, and friction vectors: the page
+  // carries both per row (null for a trace without them).
+  t.point_b = {0.099f, 0.05f, 0.05f, 0.099f, -0.05f, -0.05f, 0.099f, 0, 0, 0.099f, 0.05f, 0, 0.099f, -0.05f, 0};
+  t.jt3 = {0, 0.001f, 0, 0, -0.002f, 0, 0, 0.003f, 0, 0, 0, 0, 0, 0.005f, 0};
   t.write(dir + "/v2.h5");
   const auto r = run_octocd("view " + dir + "/v2.h5 --frame 1 --pair 1,2 --window 0 -o " + dir);
   ASSERT_EQ(r.code, 0) << r.output;
@@ -274,6 +278,9 @@ TEST(CliView, VersionTwoTraceKeepsOrientationsAndManifoldPoints) {
   ASSERT_EQ(f["contacts"].size(), 2u);
   EXPECT_NEAR(f["contacts"][0]["point"][1].get<double>(), 0.05, 1e-6);
   EXPECT_NEAR(f["contacts"][1]["point"][1].get<double>(), -0.05, 1e-6);
+  EXPECT_NEAR(f["contacts"][0]["point_b"][0].get<double>(), 0.099, 1e-6);
+  EXPECT_NEAR(f["contacts"][1]["point_b"][1].get<double>(), -0.05, 1e-6);
+  EXPECT_NEAR(f["contacts"][1]["jt3"][1].get<double>(), -0.002, 1e-6);
   // Both rows share the pair's reference, computed on the posed boxes.
   EXPECT_EQ(f["contacts"][0]["ref"], f["contacts"][1]["ref"]);
   const auto& ref = f["references"][f["contacts"][0]["ref"].get<std::size_t>()];

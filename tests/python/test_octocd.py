@@ -288,6 +288,47 @@ def test_validate_frame_one_frame_and_without_pairs():
                    "broadphase-completeness").failed
 
 
+def test_observe_takes_two_witness_points_and_friction_vectors():
+    # Two free 1 kg boxes (0.2 m) touching face to face, one row pushing them apart by J along
+    # +y between two witness points 0.1 m apart sideways: A takes J at (0.05, 0, 0), B -J at
+    # point_b (-0.05, 0, 0). Newton-Euler: both spin +z at 0.05 J / I. With point_b both
+    # bodies' levers hold (momentum-balance and impulse-feasibility pass); without it B's lever
+    # is A's point and its spin has the wrong sign (both fail). jt3 reaches the friction row.
+    import math
+    h, J, dt = 0.1, 0.1, 0.01
+    inertia = 1.0 / 12 * (2 * h) ** 2 * 2
+    wz = 0.05 * J / inertia
+    x_pre = np.float32([[0, h, 0], [0, -h, 0]])
+    v_post = np.float32([[0, J, 0], [0, -J, 0]])
+    still = np.zeros((2, 3), np.float32)
+    q_post = np.float32([[math.cos(wz * dt / 2), 0, 0, math.sin(wz * dt / 2)]] * 2)
+
+    def judged(point_b, jt3):
+        c = {"pair": np.int64([[0, 1]]), "normal": np.float32([[0, 1, 0]]), "depth": np.float32([0]),
+             "jn": np.float32([J]), "jt": np.float32([0]), "point": np.float32([[0.05, 0, 0]])}
+        if point_b:
+            c["point_b"] = np.float32([[-0.05, 0, 0]])
+        if jt3:
+            c["jt3"] = np.float32([[0, 0, 0]])
+        return octocd.validate_frame(
+            local_boxes=np.float32([[[-h] * 3, [h] * 3]] * 2), inverse_mass=np.float32([1, 1]), dt=dt,
+            gravity=(0, 0, 0), physics={"inertia": np.float32([np.eye(3) * inertia] * 2)}, pairs=np.int64([[0, 1]]),
+            contacts=c, x_pre=x_pre, v_pre=still, x_post=x_pre + v_post * dt, v_post=v_post,
+            q_pre=np.float32([[1, 0, 0, 0]] * 2), q_post=q_post, w_pre=still, w_post=np.float32([[0, 0, wz]] * 2))
+    both, neither = judged(True, True), judged(False, False)
+    for name in ("momentum-balance", "impulse-feasibility"):
+        assert row(both, name).passed, row(both, name).detail
+        assert row(neither, name).failed, row(neither, name).detail
+    assert "rule jt3 on 1 pairs" in row(both, "friction").detail, row(both, "friction").detail
+    assert "rule jt3 on 0 pairs" in row(neither, "friction").detail, row(neither, "friction").detail
+    with pytest.raises(octocd.InputError, match=r"contacts.point_b: frame 1: .*without contact points"):
+        octocd.validate_frame(local_boxes=np.float32([[[-h] * 3, [h] * 3]] * 2), inverse_mass=np.float32([1, 1]),
+                              dt=dt, contacts={"pair": np.int64([[0, 1]]), "normal": np.float32([[0, 1, 0]]),
+                                               "depth": np.float32([0]), "jn": np.float32([J]),
+                                               "jt": np.float32([0]), "point_b": np.float32([[-0.05, 0, 0]])},
+                              x_pre=x_pre, v_pre=still, x_post=x_pre, v_post=still)
+
+
 # ---- bad arrays ------------------------------------------------------------------------
 
 @pytest.fixture

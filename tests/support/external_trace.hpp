@@ -34,6 +34,7 @@ struct Trace {
   std::vector<float> inertia;                        // n 3 3
   std::vector<float> point;                          // C 3
   std::vector<float> jt3;                            // C 3: tangential impulse vectors (written when non-empty)
+  std::vector<float> point_b;                        // C 3: each row's point on B (written when non-empty)
   std::vector<std::string> collision_shape;          // n: /bodies/collision_shape (written when non-empty)
   std::vector<float> friction, restitution;          // n
   std::map<std::string, std::string> string_attrs;   // root attributes
@@ -179,6 +180,7 @@ struct Trace {
     if (!inertia.empty()) put("/bodies/inertia", F, FT, {inertia.size() / 9, 3, 3}, inertia.data());
     if (!point.empty()) put("/contacts/point", F, FT, {point.size() / 3, 3}, point.data());
     if (!jt3.empty()) put("/contacts/jt3", F, FT, {jt3.size() / 3, 3}, jt3.data());
+    if (!point_b.empty()) put("/contacts/point_b", F, FT, {point_b.size() / 3, 3}, point_b.data());
     if (!collision_shape.empty()) {
       std::vector<const char*> ptrs;
       for (const std::string& shape : collision_shape) ptrs.push_back(shape.c_str());
