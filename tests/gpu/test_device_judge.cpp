@@ -1,13 +1,14 @@
 // The judges' device part (validation/device/, octocd/device_judge.hpp) against the CPU
 // tier, the oracle: on shipped scenes (boxes; boxes with meshes, whose pairs the device
 // leaves to the CPU reference) the physics tier judges the same recorded frames once on
-// the CPU and once with rows broadphase-completeness and penetration on the device, and
-// every row must give the same verdict, applicability, judged count, causes, failure
-// counts and failing items, with figures equal to 1e-9 m (the device's separating-axis
-// arithmetic rounds apart from the CPU's). Planted faults must fail on both alike: a
+// the CPU and once with rows broadphase-completeness and penetration on the device (and
+// rows contact-completeness and contact-geometry on the CPU geometry of the device's
+// candidate pairs), and every row must give the same verdict, applicability, judged
+// count, causes, failure counts and failing items, with figures equal to 1e-9 m (the
+// device's separating-axis arithmetic rounds apart from the CPU's). Planted faults must fail on both alike: a
 // required pair dropped from the engine's candidates, a frame whose boxes are turned (the
 // engine's pairs then miss pairs and the boxes penetrate; the rotated separating axes),
-// and a penetration bound below every depth.
+// a penetrating pair's contact rows dropped, and a penetration bound below every depth.
 //
 // Without a usable CUDA device every test is SKIPPED with the reason (CI builds with nvcc
 // and has no GPU). Environment: OCTOCD_SOURCE_DIR (scenes and datasets; default: the
@@ -132,6 +133,7 @@ TEST_P(DeviceJudgeScenes, SameVerdictsAsTheCpuTier) {
   expect_same(cpu, dev);
   EXPECT_NE(row(dev, "broadphase-completeness").detail.find("judged on the device (cuda: "), std::string::npos);
   EXPECT_NE(row(dev, "penetration").detail.find("judged on the device (cuda: "), std::string::npos);
+  EXPECT_NE(row(dev, "contact-completeness").detail.find("from the device (cuda: "), std::string::npos);
   EXPECT_GT(row(dev, "broadphase-completeness").judged, 0u) << "nothing judged: the comparison would be vacuous";
 }
 
@@ -170,6 +172,35 @@ TEST(DeviceJudgeFaults, DroppedPairFailsOnBoth) {
   ASSERT_FALSE(row(dev, "broadphase-completeness").causes.empty());
   EXPECT_EQ(row(dev, "broadphase-completeness").causes[0].items,
             std::vector<std::string>{fmt::format("pair ({}, {})", gone.a, gone.b)});
+}
+
+// A penetrating pair's contact rows dropped: missing-contact on both (the CPU geometry of
+// the device's candidates against the CPU's own), the same item.
+TEST(DeviceJudgeFaults, DroppedContactFailsOnBoth) {
+  REQUIRE_DEVICE();
+  std::shared_ptr<const Model> model;
+  std::vector<FrameRecord> recs = recorded("box-stack", 20, model);
+  FrameRecord& last = recs.back();
+  ASSERT_FALSE(last.contacts.empty()) << "box-stack has no contact at frame 20";
+  const ContactRecord* deepest = &last.contacts.front();
+  for (const ContactRecord& c : last.contacts)
+    if (c.depth > deepest->depth) deepest = &c;
+  ASSERT_GT(deepest->depth, 1e-4f) << "no contact deeper than the geometry slack";
+  Tolerances tol;
+  tol.contact_depth_m = 0.25 * deepest->depth;  // the dropped pair penetrates deeper
+  const Pair gone = deepest->pair;
+  last.contacts.erase(std::remove_if(last.contacts.begin(), last.contacts.end(),
+                                     [&](const ContactRecord& c) { return c.pair == gone; }),
+                      last.contacts.end());
+  const PhysicsBodies bodies = octocd_physics_bodies(*model);
+  const auto cpu = judged(*model, bodies, recs, 20, false, tol);
+  const auto dev = judged(*model, bodies, recs, 20, true, tol);
+  const auto failed = expect_same(cpu, dev);
+  EXPECT_TRUE(has(failed, "contact-completeness"));
+  const ValidationResult& r = row(dev, "contact-completeness");
+  ASSERT_FALSE(r.causes.empty());
+  EXPECT_EQ(r.causes[0].items, std::vector<std::string>{fmt::format("pair ({}, {})", gone.a, gone.b)});
+  EXPECT_NE(r.detail.find("from the device (cuda: "), std::string::npos) << r.detail;
 }
 
 // Turned boxes (random orientations at the detection pose) on a dense frame: the engine's

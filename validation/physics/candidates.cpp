@@ -36,7 +36,7 @@ const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p)
 }
 
 void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::vector<Pose>& det,
-                                           CheckedFrame& f) const {
+                                           CheckedFrame& f, const std::vector<Pair>* candidates) const {
   const std::size_t n = model->bodies.size();
   const double slack = tol.geometry_slack_m;
   StopPoll poll(stop);
@@ -53,20 +53,25 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
   // asks about, through exact_pairs (flat's set in O(n log n + pairs), independent of
   // octocd's broadphases): every pair whose shapes are that close has overlapping grown
   // boxes (the AABB gap is at most the shapes' distance).
-  const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
-  std::vector<Aabb>& grown = work.grown;
-  grown.resize(n);
-  for (std::size_t i = 0; i < n; ++i)
-    grown[i] = expanded(ref->world_aabb(static_cast<std::uint32_t>(i), det[i]),
-                        static_cast<float>(0.5 * reach + radius(static_cast<std::uint32_t>(i))));
-  // At most limits::kMaxPairsPerBody pairs a body (PairLimitError, counted before the
-  // tests): the truth below costs about 0.7 KiB and 3.5 us a pair.
-  ExactPairsSettings pair_threads;
-  pair_threads.threads = threads;
-  pair_threads.max_pairs_per_body = limits::kMaxPairsPerBody;
-  exact_pairs(grown, f.cand, pair_threads, work.pair_tables);
-  f.cand.erase(std::remove_if(f.cand.begin(), f.cand.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }),
-               f.cand.end());
+  // The judge device's candidates (device_rows.cpp) are the same set, found there.
+  if (candidates) {
+    f.cand.assign(candidates->begin(), candidates->end());
+  } else {
+    const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
+    std::vector<Aabb>& grown = work.grown;
+    grown.resize(n);
+    for (std::size_t i = 0; i < n; ++i)
+      grown[i] = expanded(ref->world_aabb(static_cast<std::uint32_t>(i), det[i]),
+                          static_cast<float>(0.5 * reach + radius(static_cast<std::uint32_t>(i))));
+    // At most limits::kMaxPairsPerBody pairs a body (PairLimitError, counted before the
+    // tests): the truth below costs about 0.7 KiB and 3.5 us a pair.
+    ExactPairsSettings pair_threads;
+    pair_threads.threads = threads;
+    pair_threads.max_pairs_per_body = limits::kMaxPairsPerBody;
+    exact_pairs(grown, f.cand, pair_threads, work.pair_tables);
+    f.cand.erase(std::remove_if(f.cand.begin(), f.cand.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }),
+                 f.cand.end());
+  }
 
   // Truth per pair: intersect() for every candidate, posed() where a row needs the depth
   // or the distance.

@@ -83,7 +83,8 @@ double PhysicsValidators::Impl::speculative_reach(const FrameRecord& rec, Pair p
 }
 
 // ---- Row 2: contact completeness -----------------------------------------------------
-// Judged on the CPU's reference normals and separating axes only: not on the device.
+// Judged on the CPU's reference normals and separating axes; with a judge device, of the
+// device's candidates (checked()): the CPU's candidate search is skipped.
 template <>
 bool PhysicsValidators::Impl::judge_device<RowId::ContactCompleteness>(DeviceCheckedFrame&) {
   return false;
@@ -208,7 +209,7 @@ void PhysicsValidators::Impl::pair_figures(CheckedFrame& f, std::size_t i, const
   }
 }
 
-// Judged on the CPU's reference normals and separating axes only: not on the device.
+// Judged on the CPU's reference normals, separating axes and surfaces, as row 2.
 template <>
 bool PhysicsValidators::Impl::judge_device<RowId::ContactGeometry>(DeviceCheckedFrame&) {
   return false;
@@ -537,6 +538,9 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ContactCompleteness>() co
        "{} non-convex pair-frames without a row penetrate by an upper bound above "
        "contact_depth_m that no vertex inside the other shape proves, n/a (largest: {})",
        s.complete_unproven, s.complete_unproven_what);
+  note(r.detail, s.device_cpu_geometry_frames,
+       "candidates of {} checked frames from the device ({}); the reference geometry of rows 2 and 3 on the CPU",
+       s.device_cpu_geometry_frames, s.device ? s.device->device_name() : std::string());
   if (r.applicable) s.fill_causes(r, RowId::ContactCompleteness);
   return r;
 }

@@ -2,7 +2,8 @@
 // checked frame's candidates and box-box geometry from the device, every other pair's from
 // the CPU reference, for rows 1 (broadphase-completeness) and 4 (penetration), which judge
 // them as they judge the CPU's (candidates.cpp, penetration.cpp). Every other row stays on
-// the CPU (physics_table.cpp).
+// the CPU (physics_table.cpp); rows 2 and 3's CheckedFrame takes the device's candidates
+// (PhysicsValidators::Impl::checked).
 #include "physics_impl.hpp"
 
 #include "../src/parallel.hpp"

@@ -433,10 +433,13 @@ struct PhysicsValidators::Impl {
   void measure_rows(physics_detail::PhysicsFrame& f);
   /// The frame's candidates and reference geometry (checked_frame) on a checked frame with
   /// poses, computed on the first call (counted in checked_frames; its time goes to the row
-  /// that asked first); nullptr on other frames.
+  /// that asked first); nullptr on other frames. With a judge device the candidates are the
+  /// device's (device_checked: the same set of grown boxes, posed on the device), the reference
+  /// geometry of the pairs the rows read the CPU's.
   physics_detail::CheckedFrame* checked(physics_detail::PhysicsFrame& f) {
     if (!f.checked) return nullptr;
     if (!f.geometry) {
+      const std::vector<Pair>* from_device = device ? &device_checked(f)->answer.candidates : nullptr;
       count_checked(f);
       if (spare_frame) {
         f.geometry = std::move(spare_frame);
@@ -444,7 +447,8 @@ struct PhysicsValidators::Impl {
       } else {
         f.geometry.emplace();
       }
-      checked_frame(f.rec, f.det, *f.geometry);
+      checked_frame(f.rec, f.det, *f.geometry, from_device);
+      if (from_device) ++device_cpu_geometry_frames;
     }
     return &*f.geometry;
   }
@@ -632,6 +636,8 @@ struct PhysicsValidators::Impl {
   std::uint64_t device_frames = 0, device_candidates = 0, device_cpu_pairs = 0, device_box_pairs = 0;
   std::map<std::string, std::uint64_t> device_cpu_shapes;
   double device_seconds = 0, device_flat_seconds = 0;  ///< judge_frame's; overlapping_pairs' (not-flat)
+  /// Checked frames whose CPU geometry (rows 2 and 3) took the device's candidates (checked()).
+  std::uint64_t device_cpu_geometry_frames = 0;
   /// The device geometry of a checked frame into `f` (device_rows.cpp).
   void device_frame(const FrameRecord& rec, const std::vector<Pose>& det, physics_detail::DeviceCheckedFrame& f);
   /// The note a device row's detail carries: where it ran, what went to the CPU reference.
@@ -652,7 +658,11 @@ struct PhysicsValidators::Impl {
   /// pairs row 1 requires, written into `f` (candidates.cpp): every table of `f` is
   /// rebuilt for this frame in the memory it already holds (a checked frame's tables are
   /// kept from frame to frame: spare_frame).
-  void checked_frame(const FrameRecord& rec, const std::vector<Pose>& det, physics_detail::CheckedFrame& f) const;
+  /// `candidates`: the frame's candidate pairs found elsewhere (the judge device's: sorted,
+  /// a < b, a body dynamic, every pair whose grown boxes overlap), taken instead of
+  /// exact_pairs' search; null: searched here.
+  void checked_frame(const FrameRecord& rec, const std::vector<Pose>& det, physics_detail::CheckedFrame& f,
+                     const std::vector<Pair>* candidates = nullptr) const;
   /// The last checked frame's tables, kept for the next one's (checked(), observe()): their
   /// memory, 0.2-0.3 KB a pair, is allocated and first touched once per judge instead of
   /// once per frame.

@@ -5,7 +5,8 @@
 /// read on a checked frame, computed on a GPU in double precision, independently of the
 /// engine it judges. It calls nothing of gpu/ (the CUDA engine's broadphases, midphase or
 /// response) and reads only core types, so a bug shared with the engine cannot pass unseen;
-/// the CPU tier (validation/physics/) stays the oracle and judges every other row.
+/// the CPU tier (validation/physics/) stays the oracle and judges every other row (rows
+/// contact-completeness and contact-geometry on the device's candidate pairs).
 ///
 /// What the device computes:
 ///  - candidates: every pair of bodies whose world AABBs overlap (inclusive: touching
