@@ -54,6 +54,11 @@ struct Choice {
   std::uint32_t contact = 0;  // index into the island's contacts
 };
 
+/// The fewest bodies and contacts, summed over a frame's islands, whose searches run on the
+/// validators' threads (two islands or more): below it one thread costs less than waking
+/// another (applied-state costs about 430 instructions a body on islands of one body).
+constexpr std::size_t kParallelIslandWorkFrom = 1024;
+
 /// An island: dynamic bodies joined by confirmed contacts, and the contacts (indices into
 /// rec.confirmed, in (a, b) order) touching them. `local` lists every body the contacts
 /// touch, the island's dynamic ones first.
@@ -672,7 +677,10 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   // island order (a verdict never depends on the thread count).
   std::vector<Searched>& searched = s.island_searches;
   if (searched.size() < islands.size()) searched.resize(islands.size());
-  parallel_items_on(islands.size(), loop_threads(s.threads, islands.size()), s.stop, [&](std::size_t j, unsigned) {
+  std::size_t island_work = 0;  // bodies and contacts of every island: the search's size
+  for (const Island& is : islands) island_work += is.local.size() + is.contacts.size();
+  const unsigned island_threads = island_work >= kParallelIslandWorkFrom ? loop_threads(s.threads, islands.size(), 2) : 1u;
+  parallel_items_on(islands.size(), island_threads, s.stop, [&](std::size_t j, unsigned) {
     searched[j].counts = SearchCounts{};
     s.search(islands[j], judge_response, searched[j].judged, searched[j].counts, searched[j].run);
   });

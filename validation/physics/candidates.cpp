@@ -21,6 +21,12 @@ using namespace physics_detail;
 
 namespace {
 std::pair<std::uint32_t, std::uint32_t> key(Pair p) { return std::make_pair(p.a, p.b); }
+
+/// The fewest candidates whose intersection tests, and the fewest pairs whose truth, run on
+/// the validators' threads: below them one thread costs less than waking another (two
+/// boxes' test about 900 instructions, their truth and row figures about 4,700).
+constexpr std::size_t kParallelTestsFrom = 1024;
+constexpr std::size_t kParallelTruthFrom = 256;
 }  // namespace
 
 const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p) const {
@@ -103,7 +109,7 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
   std::vector<char>& hit = f.hit;
   hit.assign(cand.size(), 1);
   if (!need_distance)
-    parallel_items(cand.size(), threads, stop, [&](std::size_t i, unsigned) {
+    parallel_items_on(cand.size(), loop_threads(threads, cand.size(), kParallelTestsFrom), stop, [&](std::size_t i, unsigned) {
       // Rounded shapes (a convex radius): the posed shapes may be apart and the rounded
       // ones meet, so their truth is computed.
       hit[i] = inflation(cand[i]) > 0 || ref->intersect(cand[i].a, cand[i].b, det[cand[i].a], det[cand[i].b]) ? 1 : 0;
@@ -145,9 +151,10 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
     // Per worker: the placed hulls and accepted axes of its last pair (pairs in a chunk
     // share their first body, placed once).
     std::vector<PairReferenceScratch>& scratch = work.scratch;
-    scratch.resize(loop_threads(threads, all.size()));
+    const unsigned truth_threads = loop_threads(threads, all.size(), kParallelTruthFrom);
+    scratch.resize(truth_threads);
     for (PairReferenceScratch& sc : scratch) sc.placed_a = 0xffffffffu;  // no hull placed at these poses yet
-    parallel_items(all.size(), threads, stop, [&](std::size_t i, unsigned worker) {
+    parallel_items_on(all.size(), truth_threads, stop, [&](std::size_t i, unsigned worker) {
       PairReferenceScratch& s = scratch[worker];
       const Pair p = all[i];
       ContactTruth& t = f.truth[i];

@@ -11,6 +11,10 @@ namespace octocd {
 
 namespace {
 
+/// The fewest truth entries whose figures are read on the validators' threads: a read is a
+/// few instructions, so below it one thread costs less than waking another.
+constexpr std::size_t kParallelReadsFrom = 16384;
+
 /// Penetration's sums beyond its tally (Impl::row_state): the largest exact depth (m) and
 /// where; the non-convex pairs' upper bounds (a figure): the largest and where, how many
 /// above the bound; penetrating pair-frames, and of them those with an upper bound only.
@@ -49,7 +53,8 @@ void PhysicsValidators::Impl::judge_penetration(Frame& f) {
     enum Kind : char { kNone, kApart, kUpper, kExact };
     std::vector<char> kind(f.truth.size(), kNone);
     std::vector<double> depth_of(f.truth.size(), 0.0);
-    parallel_items(f.truth.size(), threads, stop, [&](std::size_t i, unsigned) {
+    parallel_items_on(f.truth.size(), loop_threads(threads, f.truth.size(), kParallelReadsFrom), stop,
+                      [&](std::size_t i, unsigned) {
       const auto& t = f.truth[i];
       if (!t.have) return;
       kind[i] = !t.g.penetrating ? kApart : t.g.depth_upper_bound ? kUpper : kExact;

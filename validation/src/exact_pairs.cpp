@@ -111,8 +111,8 @@ struct DenseCells {
 };
 
 /// Fewest boxes (or cell entries) whose per-item passes (hulls, levels, cell entries and
-/// their ranks, the limit's lookups, the pairs' sort) run on threads: below it one thread
-/// costs less than waking another.
+/// their ranks, the limit's lookups, the three pair searches, the pairs' sort) run on
+/// threads: below it one thread costs less than waking another.
 constexpr std::size_t kParallelBoxesFrom = 1024;
 
 /// Sorts one level's entries into entry_less's order when the cells they span number at
@@ -239,9 +239,9 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
   if (n < 2) return;
   ExactPairsTables::Impl& t = tables.impl();
   const unsigned threads = thread_count(settings, n);
-  // The per-box passes (hulls, levels, cell entries, the limit's lookups) on threads from
-  // kParallelBoxesFrom boxes; each box writes its own slots, so the tables are those of
-  // one thread.
+  // The per-box passes (hulls, levels, cell entries, the limit's lookups, the pair
+  // searches) on threads from kParallelBoxesFrom boxes; each box writes its own slots (the
+  // searches their worker's list, merged and sorted), so the tables are those of one thread.
   const unsigned box_threads = n >= kParallelBoxesFrom ? threads : 1u;
   const std::function<bool()> never;
   // Hulls; NaN boxes (which overlap nothing) and unbounded ones set apart.
@@ -475,7 +475,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     }
   }
 
-  parallel_items_on(runs.size(), std::min<unsigned>(threads, unsigned(std::max<std::size_t>(runs.size(), 1))), never,
+  parallel_items_on(runs.size(), std::min<unsigned>(box_threads, unsigned(std::max<std::size_t>(runs.size(), 1))), never,
                     [&](std::size_t r, unsigned worker) {
     const Run& run = runs[r];
     const std::vector<Entry>& e = entries[std::size_t(run.level)];
@@ -488,7 +488,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
 
   // 2. A box against the boxes of every coarser level, in its own range of their cells.
   if (coarser)
-    parallel_items_on(n, threads, never, [&](std::size_t i, unsigned worker) {
+    parallel_items_on(n, box_threads, never, [&](std::size_t i, unsigned worker) {
       const std::uint32_t a = std::uint32_t(i);
       if (level[a] < 0) return;
       each_coarser_cell(a, [&](int l, const Cell& c, auto first, auto last) {
@@ -500,7 +500,7 @@ void exact_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, const E
     });
 
   // 3. Unbounded boxes against every other box (pairs of two unbounded boxes once).
-  parallel_items_on(unbounded.size(), std::min<unsigned>(threads, unsigned(std::max<std::size_t>(unbounded.size(), 1))),
+  parallel_items_on(unbounded.size(), std::min<unsigned>(box_threads, unsigned(std::max<std::size_t>(unbounded.size(), 1))),
                     never, [&](std::size_t u, unsigned worker) {
     const std::uint32_t a = unbounded[u];
     for (std::uint32_t b = 0; b < n; ++b) {
