@@ -91,7 +91,9 @@ TEST(ExactPairs, HugeTinyCoincidentAndDegenerateBoxes) {
   std::mt19937 rng(99);
   std::uniform_real_distribution<float> pos(-5, 5);
   std::vector<Aabb> boxes;
-  for (int i = 0; i < 200; ++i) boxes.push_back(box(pos(rng), pos(rng), pos(rng), 1e-7f, 1e-7f, 1e-7f));  // tiny
+  // 1,000 tiny boxes: with the rest over 1,024 boxes, so the passes over the unbounded and
+  // huge boxes run on threads (exact_pairs.cpp's kParallelBoxesFrom) at 2 and 3 threads.
+  for (int i = 0; i < 1000; ++i) boxes.push_back(box(pos(rng), pos(rng), pos(rng), 1e-7f, 1e-7f, 1e-7f));  // tiny
   for (int i = 0; i < 40; ++i) boxes.push_back(box(0, 0, 0, 0.3f, 0.3f, 0.3f));  // coincident
   boxes.push_back(box(0, 0, 0, 1e6f, 1e6f, 1e6f));  // huge: meets all
   boxes.push_back(box(3, 0, 0, 1e30f, 1e-3f, 1e30f));  // huge slab

@@ -59,8 +59,13 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
   // asks about, through exact_pairs (flat's set in O(n log n + pairs), independent of
   // octocd's broadphases): every pair whose shapes are that close has overlapping grown
   // boxes (the AABB gap is at most the shapes' distance).
-  // The judge device's candidates (device_rows.cpp) are the same set, found there.
+  // The judge device's candidates (device_rows.cpp) are the same set, found there, under
+  // the same limit of limits::kMaxPairsPerBody pairs a body as exact_pairs' below.
   if (candidates) {
+    const std::uint64_t limit = limits::kMaxPairsPerBody > UINT64_MAX / std::max<std::size_t>(n, 1)
+                                    ? UINT64_MAX
+                                    : std::uint64_t(limits::kMaxPairsPerBody) * n;
+    if (candidates->size() > limit) throw PairLimitError(candidates->size(), false, limit, n);
     f.cand.assign(candidates->begin(), candidates->end());
   } else {
     const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
