@@ -114,6 +114,21 @@ const ValidationResult& row(const std::vector<ValidationResult>& rs, const std::
 
 bool has(const std::vector<std::string>& v, const std::string& s) { return std::find(v.begin(), v.end(), s) != v.end(); }
 
+// box-stack recorded over 20 frames (`recs`, `model`) and the pair of its last frame's
+// deepest contact row (`gone`, depth `depth`), which penetrates beyond the geometry slack.
+void deepest_contact_of_box_stack(std::shared_ptr<const Model>& model, std::vector<FrameRecord>& recs, Pair& gone,
+                                  float& depth) {
+  recs = recorded("box-stack", 20, model);
+  const FrameRecord& last = recs.back();
+  ASSERT_FALSE(last.contacts.empty()) << "box-stack has no contact at frame 20";
+  const ContactRecord* deepest = &last.contacts.front();
+  for (const ContactRecord& c : last.contacts)
+    if (c.depth > deepest->depth) deepest = &c;
+  ASSERT_GT(deepest->depth, 1e-4f) << "no contact deeper than the geometry slack";
+  gone = deepest->pair;
+  depth = deepest->depth;
+}
+
 struct SceneCase {
   const char* name;
   int frames, every;
@@ -152,16 +167,13 @@ INSTANTIATE_TEST_SUITE_P(Shipped, DeviceJudgeScenes,
 TEST(DeviceJudgeFaults, DroppedPairFailsOnBoth) {
   REQUIRE_DEVICE();
   std::shared_ptr<const Model> model;
-  std::vector<FrameRecord> recs = recorded("box-stack", 20, model);
-  FrameRecord& last = recs.back();
+  std::vector<FrameRecord> recs;
+  Pair gone;
+  float depth = 0;
   // The pair of the deepest contact row penetrates: drop it from the candidates (its
   // contact rows stay).
-  ASSERT_FALSE(last.contacts.empty()) << "box-stack has no contact at frame 20";
-  const ContactRecord* deepest = &last.contacts.front();
-  for (const ContactRecord& c : last.contacts)
-    if (c.depth > deepest->depth) deepest = &c;
-  ASSERT_GT(deepest->depth, 1e-4f) << "no contact deeper than the geometry slack";
-  const Pair gone = deepest->pair;
+  ASSERT_NO_FATAL_FAILURE(deepest_contact_of_box_stack(model, recs, gone, depth));
+  FrameRecord& last = recs.back();
   last.pairs.erase(std::remove(last.pairs.begin(), last.pairs.end(), gone), last.pairs.end());
   PhysicsBodies bodies = octocd_physics_bodies(*model);
   bodies.broadphase_exact = false;  // the missing-pair cause alone
@@ -179,16 +191,13 @@ TEST(DeviceJudgeFaults, DroppedPairFailsOnBoth) {
 TEST(DeviceJudgeFaults, DroppedContactFailsOnBoth) {
   REQUIRE_DEVICE();
   std::shared_ptr<const Model> model;
-  std::vector<FrameRecord> recs = recorded("box-stack", 20, model);
+  std::vector<FrameRecord> recs;
+  Pair gone;
+  float depth = 0;
+  ASSERT_NO_FATAL_FAILURE(deepest_contact_of_box_stack(model, recs, gone, depth));
   FrameRecord& last = recs.back();
-  ASSERT_FALSE(last.contacts.empty()) << "box-stack has no contact at frame 20";
-  const ContactRecord* deepest = &last.contacts.front();
-  for (const ContactRecord& c : last.contacts)
-    if (c.depth > deepest->depth) deepest = &c;
-  ASSERT_GT(deepest->depth, 1e-4f) << "no contact deeper than the geometry slack";
   Tolerances tol;
-  tol.contact_depth_m = 0.25 * deepest->depth;  // the dropped pair penetrates deeper
-  const Pair gone = deepest->pair;
+  tol.contact_depth_m = 0.25 * depth;  // the dropped pair penetrates deeper
   last.contacts.erase(std::remove_if(last.contacts.begin(), last.contacts.end(),
                                      [&](const ContactRecord& c) { return c.pair == gone; }),
                       last.contacts.end());
