@@ -370,8 +370,10 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
   }
 
   // 9. Applied state (design.md section 7.9): the engine's post-step state against the independent
-  // re-derivation, every frame; momentum and centre on isolated dynamic groups.
-  if (has_states) {
+  // re-derivation, every frame; momentum and centre on isolated dynamic groups. Only for an
+  // engine that claims the paper's response: for any other both rows are n/a (results()),
+  // so nothing of the re-derivation is read.
+  if (has_states && judge_response) {
     const RowClock clock(s.t_applied);
     s.applied->observe(rec, judge_response);
   }
