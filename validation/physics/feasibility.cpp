@@ -97,8 +97,9 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   const ContactSearch search{st, hulls_mutex, det, world, motion, rec, witness_rows};
   parallel_items(cand.size(), threads, stop,
                  [&](std::size_t ci, unsigned) { feasibility_contacts(search, cand[ci], pair_out[ci]); });
-  // In candidate order: the contacts, the pairs with any, the islands they join.
-  std::vector<Contact> contacts;
+  // In candidate order: the pairs with contacts, the islands they join. The contacts stay
+  // in their pairs' slots: only an island the programme may judge takes a copy of its own.
+  std::uint64_t found = 0;
   for (std::size_t ci = 0; ci < cand.size(); ++ci) {
     const PairContacts& out = pair_out[ci];
     st.persisted += out.persisted;
@@ -108,37 +109,52 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     st.persisted_steps = std::max(st.persisted_steps, out.persisted_steps);
     if (out.contacts.empty()) continue;
     const Pair p = cand[ci];
-    contacts.insert(contacts.end(), out.contacts.begin(), out.contacts.end());
+    found += out.contacts.size();
     ++st.pairs;
     if (dynamic(p.a) && dynamic(p.b)) parent[find(p.a)] = find(p.b);
     touched[p.a] = touched[p.b] = 1;
   }
-  st.contacts += contacts.size();
+  st.contacts += found;
 
-  // Islands: the dynamic bodies joined through contacts between dynamic bodies.
-  std::map<std::uint32_t, std::vector<std::uint32_t>> islands;
-  for (std::uint32_t i = 0; i < n; ++i)
-    if (dynamic(i) && touched[i]) islands[find(i)].push_back(i);
-  std::map<std::uint32_t, std::vector<std::size_t>> island_contacts;
-  for (std::size_t k = 0; k < contacts.size(); ++k) {
-    const Pair p = contacts[k].pair;
-    island_contacts[find(dynamic(p.a) ? p.a : p.b)].push_back(k);
+  // Islands: the dynamic bodies joined through contacts between dynamic bodies, in the
+  // order of their roots (a pair with contacts has a dynamic body: feasibility_contacts).
+  std::vector<std::int32_t> island_of(n, -1);
+  std::vector<std::vector<std::uint32_t>> island_members;
+  {
+    std::vector<std::uint32_t> roots;
+    for (std::uint32_t i = 0; i < n; ++i)
+      if (dynamic(i) && touched[i]) {
+        const std::uint32_t r = find(i);
+        if (island_of[r] < 0) {
+          island_of[r] = 0;
+          roots.push_back(r);
+        }
+      }
+    std::sort(roots.begin(), roots.end());
+    for (std::size_t ii = 0; ii < roots.size(); ++ii) island_of[roots[ii]] = static_cast<std::int32_t>(ii);
+    island_members.resize(roots.size());
+    for (std::uint32_t i = 0; i < n; ++i)
+      if (dynamic(i) && touched[i]) island_members[std::size_t(island_of[find(i)])].push_back(i);
   }
+  // Each island's contacts in candidate order, copied only where the island has at most
+  // kMaxIslandBodies bodies: feasibility_island decides a larger one without reading them.
+  std::vector<std::vector<Contact>> island_contacts(island_members.size());
+  for (std::size_t ci = 0; ci < cand.size(); ++ci)
+    for (const Contact& c : pair_out[ci].contacts) {
+      const std::size_t ii = std::size_t(island_of[find(dynamic(c.pair.a) ? c.pair.a : c.pair.b)]);
+      if (island_members[ii].size() <= kMaxIslandBodies) island_contacts[ii].push_back(c);
+    }
   // Each island judged on `threads` threads into its own slot, then tallied in island order
   // (the verdicts do not depend on the thread count).
-  std::vector<const std::vector<std::uint32_t>*> island_members;
-  std::vector<const std::vector<std::size_t>*> island_ks;
-  for (const auto& [root, members] : islands) {
-    island_members.push_back(&members);
-    island_ks.push_back(&island_contacts[root]);
-  }
   std::vector<IslandVerdict> verdicts(island_members.size());
   parallel_items(island_members.size(), threads, stop, [&](std::size_t ii, unsigned) {
-    verdicts[ii] = feasibility_island(rec, det, contacts, *island_members[ii], *island_ks[ii], rotating);
+    std::vector<std::size_t> ks(island_contacts[ii].size());
+    std::iota(ks.begin(), ks.end(), std::size_t(0));
+    verdicts[ii] = feasibility_island(rec, det, island_contacts[ii], island_members[ii], ks, rotating);
   });
   for (std::size_t ii = 0; ii < verdicts.size(); ++ii) {
     const IslandVerdict& verdict = verdicts[ii];
-    const std::vector<std::uint32_t>& members = *island_members[ii];
+    const std::vector<std::uint32_t>& members = island_members[ii];
     switch (verdict.outcome) {
       case Outcome::Asleep:
         ++st.asleep;
