@@ -141,12 +141,15 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
   std::vector<std::uint32_t> rows_of(n, 0);
   std::vector<std::uint8_t> in_contact(n, 0);
   for (const Pair& p : rec.confirmed) in_contact[p.a] = in_contact[p.b] = 1;
+  for (const ContactRecord& c : rec.contacts) {
+    in_contact[c.pair.a] = in_contact[c.pair.b] = 1;
+    ++rows_of[c.pair.a];
+    ++rows_of[c.pair.b];
+  }
+  for (std::size_t i = 0; i < n; ++i) row_j[i].reserve(rows_of[i]);  // one allocation a body in contact
   for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
     const ContactRecord& c = rec.contacts[k];
     const Pair p = c.pair;
-    in_contact[p.a] = in_contact[p.b] = 1;
-    ++rows_of[p.a];
-    ++rows_of[p.b];
     const D3 nrm = unit(d3(c.normal));
     const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
     // The row's point on A, and on B where the record gives a second witness point
