@@ -271,17 +271,20 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
   // The contact graph: the contact rows' pairs and the engine's confirmed pairs (octocd's
   // later relaxation passes may resolve a confirmed pair that the first pass's Eq. 9
   // discarded, so its impulses are in the state but not in the rows).
-  std::vector<Pair> linked;
-  for (const ContactRecord& c : rec.contacts) linked.push_back(c.pair);
-  linked.insert(linked.end(), rec.confirmed.begin(), rec.confirmed.end());
+  // Both lists read in place, the rows' pairs first.
+  auto each_link = [&](auto&& fn) {
+    for (const ContactRecord& c : rec.contacts) fn(c.pair);
+    for (const Pair& q : rec.confirmed) fn(q);
+  };
   std::vector<std::uint8_t> touched(n, 0);
   graph.statics.assign(n, 0);
-  for (const Pair& q : linked) {
+  each_link([&](const Pair& q) {
     parent[find(q.a)] = find(q.b);
     touched[q.a] = touched[q.b] = 1;
-  }
-  for (const Pair& q : linked)
+  });
+  each_link([&](const Pair& q) {
     if (!dynamic(q.a) || !dynamic(q.b)) graph.statics[find(q.a)] = 1;
+  });
   for (std::size_t i = 0; i < n; ++i)
     if (touched[i] && dynamic(static_cast<std::uint32_t>(i)))
       graph.groups[find(static_cast<std::uint32_t>(i))].push_back(static_cast<std::uint32_t>(i));
