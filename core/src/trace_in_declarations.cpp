@@ -187,6 +187,14 @@ void TraceIn::read_declarations(PhysicsBodies& p) {
       flag_attr("contacts_complete", p.contacts_complete,
                 "1 (default: every contact of every step has its rows) or 0 (the engine's API may drop rows)");
   p.persistent_points = choice_attr("manifold_points", {"fixed", "persistent"}, "fixed") == "persistent";
+  if (has_attr("normal_reuse_deg")) {
+    const double a = number_attr("normal_reuse_deg", 0.0);
+    if (!(a >= 0.0 && a <= 180.0))
+      bad("/ (root attribute normal_reuse_deg)", fmt::format("{}", a),
+          "an angle in [0, 180] degrees: the most a pair's two bodies turn relative to each other while the engine "
+          "applies a normal found on an earlier step (0: every step's normals are its own; absent: no bound)");
+    p.normal_reuse_deg = a;
+  }
   {
     const std::string depth_per = choice_attr("depth_per", {"point", "manifold", "unknown"}, "point");
     p.depth_per_manifold = depth_per == "manifold";

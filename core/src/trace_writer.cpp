@@ -613,6 +613,8 @@ void TraceWriter::create_v2_layout() {
   if (!t.gyroscopic.empty()) attr_string(root, "gyroscopic", t.gyroscopic, path);
   if (!t.deactivation.empty()) attr_string(root, "deactivation", t.deactivation, path);
   if (!t.impulse_points.empty()) attr_string(root, "impulse_points", t.impulse_points, path);
+  if (t.normal_reuse_deg >= 0.0)
+    attr_scalar(root, "normal_reuse_deg", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, t.normal_reuse_deg, path);
   {
     const hsize_t three = 3;
     Handle space(check(H5Screate_simple(1, &three, nullptr), path, "H5Screate_simple"));

@@ -20,7 +20,7 @@ _ROOT_ATTRIBUTES = (
     "collision_shape", "contact_model", "integrator", "gyroscopic", "substeps", "impulses", "speculative",
     "contacts_complete", "manifold_points", "depth_per", "velocity_at", "contact_margin_rule", "jt_direction",
     "velocity_clamp", "impulses_complete", "response_scheme", "deactivation", "impulse_points", "integrated_point",
-    "friction_directions", "friction_per")
+    "friction_directions", "friction_per", "normal_reuse_deg")
 
 
 class Trace:

@@ -392,6 +392,7 @@ DartWorld::DartWorld(std::shared_ptr<const Model> model, const BodyState& initia
   t.candidate_pairs = false;
   t.contact_model = "rigid";
   t.gyroscopic = "true";
+  t.normal_reuse_deg = 0.0;  // every step, the constraint solver runs collision detection anew
 }
 
 DartWorld::~DartWorld() = default;

@@ -67,7 +67,13 @@ class JoltWorld {
     this.margin = ps.mSpeculativeContactDistance;
     this.physicsSettings = { mNumVelocitySteps: ps.mNumVelocitySteps, mNumPositionSteps: ps.mNumPositionSteps,
                              mSpeculativeContactDistance: ps.mSpeculativeContactDistance, mBaumgarte: ps.mBaumgarte,
-                             mPenetrationSlop: ps.mPenetrationSlop, collisionSteps: this.collisionSteps };
+                             mPenetrationSlop: ps.mPenetrationSlop, collisionSteps: this.collisionSteps,
+                             mBodyPairCacheCosMaxDeltaRotationDiv2: ps.mBodyPairCacheCosMaxDeltaRotationDiv2,
+                             mBodyPairCacheMaxDeltaPositionSq: ps.mBodyPairCacheMaxDeltaPositionSq };
+    // Jolt reuses a body pair's cached manifolds (normals included, turned with the bodies)
+    // while the pair's relative rotation stays within this angle of the step they were
+    // found on: ContactConstraintManager::GetContactsFromCache (2 degrees by default).
+    this.normalReuseDeg = 2 * Math.acos(Math.min(1, ps.mBodyPairCacheCosMaxDeltaRotationDiv2)) * 180 / Math.PI;
     system.SetGravity(vec3(req.gravity));
     const bi = system.GetBodyInterface();
     this.bi = bi;
@@ -127,7 +133,7 @@ class JoltWorld {
       friction_combine: str("geometric"), restitution_combine: str("max"), friction_per: str("manifold"),
       contact_margin: f64(this.margin), deactivation: str("off"), broadphase_exact: i32(0),
       impulse_points: str("witness-pair"), gyroscopic: str("false"),
-      impulses: str("none"), speculative: i32(1), depth_per: str("point"),
+      impulses: str("none"), speculative: i32(1), depth_per: str("point"), normal_reuse_deg: f64(this.normalReuseDeg),
       ...(n === 1 ? { integrator: str("semi-implicit") } : { integrator: str("substepped"), substeps: i32(n) }),
       parameters_jolt: str(JSON.stringify(this.physicsSettings)),
     };

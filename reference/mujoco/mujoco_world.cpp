@@ -476,6 +476,7 @@ MujocoWorld::MujocoWorld(std::shared_ptr<const Model> model, const BodyState& in
   t.contact_model = "soft";
   t.gyroscopic = "true";
   t.deactivation = "off";  // MuJoCo 2.x has no sleeping: mj_step integrates every body
+  t.normal_reuse_deg = 0.0;  // mj_step finds every contact anew (mj_collision): no cached normal
   for (std::size_t i = 0; i < n; ++i) {
     std::array<float, 9> tensor{};
     for (int k = 0; k < 3; ++k) tensor[static_cast<std::size_t>(4 * k)] = static_cast<float>(im.diag_inertia[i][static_cast<std::size_t>(k)]);

@@ -356,6 +356,7 @@ OdeWorld::OdeWorld(std::shared_ptr<const Model> model, const BodyState& initial,
   t.contact_model = "rigid";
   t.gyroscopic = settings.gyroscopic ? "true" : "false";
   t.deactivation = "off";  // dWorldSetAutoDisableFlag(world, 0) and per body: no body is ever disabled
+  t.normal_reuse_deg = 0.0;  // every step collides anew (dSpaceCollide, its joint group emptied)
 }
 
 OdeWorld::~OdeWorld() = default;

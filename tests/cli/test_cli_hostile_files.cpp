@@ -228,7 +228,7 @@ TEST_F(HostileFiles, BenchValidationWritesItsJsonAsEveryOutput) {
   ASSERT_FALSE(text.empty());
   EXPECT_EQ(text.find("old"), std::string::npos) << text;
   EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 1) << text;
-  EXPECT_NO_THROW((void)nlohmann::json::parse(text)) << text;
+  EXPECT_TRUE(nlohmann::json::accept(text)) << text;
   for (const auto& e : fs::directory_iterator(dir_))
     EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos) << e.path();
 }

@@ -257,6 +257,7 @@ DECLARATIONS = [
     ('`jt_direction` "along-sliding"', 1.0, {"attrs": {"jt_direction": "along-sliding"}}, {"jt_along": True}),
     ("`speculative` 1", 1.0, {"attrs": {"speculative": np.int32(1)}}, {}),
     ('`manifold_points` "persistent"', 1.0, {"attrs": {"manifold_points": "persistent"}}, {}),
+    ("`normal_reuse_deg` 0", 1.0, {"attrs": {"normal_reuse_deg": 0.0}}, {}),
     ('`contact_geometry` "aabb"', 1.0, {"attrs": {"contact_geometry": "aabb"}}, {}),
     ("`broadphase_exact` 1", 1.0, {"attrs": {"broadphase_exact": np.int32(1)}, "exact_pairs": True}, {}),
     ('`collision_shape` "box"', 1.0, {"attrs": {"collision_shape": "box"}}, {}),

@@ -34,22 +34,23 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   const std::size_t n = m.bodies.size();
   auto& st = row_state<FeasibilityState>(RowId::ImpulseFeasibility);
   // Every step's detection poses join the past (after this step is judged): a gap in the
-  // frames or a step without poses starts it anew.
-  const bool posed = det.size() == n && rec.x_pre.size() == n;
-  if (!posed || rec.frame != st.past_frame + 1) st.past.clear();
+  // frames or a step without poses starts it anew. An engine whose normals are each step's
+  // own (`normal_reuse_deg` 0) needs none.
+  const bool keep_past = det.size() == n && rec.x_pre.size() == n && bodies.normal_reuse_deg > 0.0;
+  if (!keep_past || rec.frame != st.past_frame + 1) st.past.clear();
   struct Remember {
     FeasibilityState& st;
     const std::vector<Pose>& det;
     std::int64_t frame;
-    bool posed;
+    bool keep_past;
     std::size_t cap;
     ~Remember() {
-      if (!posed) return;
+      if (!keep_past) return;
       st.past.push_front(det);
       st.past_frame = frame;
       while (st.past.size() > cap) st.past.pop_back();
     }
-  } remember{st, det, rec.frame, posed, std::max<std::size_t>(1, std::min(kMaxPastSteps, kMaxPastPoses / std::max<std::size_t>(n, 1)))};
+  } remember{st, det, rec.frame, keep_past, std::max<std::size_t>(1, std::min(kMaxPastSteps, kMaxPastPoses / std::max<std::size_t>(n, 1)))};
   if (!f.sampled) return;
   if (rec.x_pre.size() != n || rec.v_pre.size() != n || rec.x_post.size() != n || rec.v_post.size() != n) return;
   auto [infeasible] = tallies(RowId::ImpulseFeasibility, "infeasible");
@@ -218,6 +219,11 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ImpulseFeasibility>() con
        "{} contact points also given the normals they carried on earlier steps (a persistent manifold's; up to {} "
        "steps back)",
        st.persisted, st.persisted_steps);
+  note(r.detail, bodies.normal_reuse_deg == 0.0,
+       "normal_reuse_deg 0: every contact point takes its step's own normals only (none carried from earlier steps)");
+  note(r.detail, bodies.normal_reuse_deg > 0.0 && std::isfinite(bodies.normal_reuse_deg),
+       "normal_reuse_deg {:g}: earlier normals only from steps whose pair turned by at most {:g} deg from this one",
+       bodies.normal_reuse_deg, bodies.normal_reuse_deg);
   note(r.detail, st.crossings,
        "{} contact points where an edge of one hull (hulls too large for the separating-axis test) passes the other",
        st.crossings);

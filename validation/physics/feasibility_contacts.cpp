@@ -47,17 +47,36 @@ constexpr double kFeatureCos = 0.70710678118654752;
 /// face it belongs to turns with its body: `sides` bit 0 A, bit 1 B, both for an edge cross
 /// or a normal of unknown origin). Walks back while a carried normal keeps the point;
 /// appends those kept (kPersistSpacingDeg apart, the oldest kept) to `out`; `steps_back`
-/// becomes at least the steps walked.
+/// becomes at least the steps walked. With a finite `reuse_deg` (the trace's
+/// `normal_reuse_deg`), a step's normal is kept only where the pair's relative rotation then
+/// lies within reuse_deg of its rotation now (|q_now . q_then| >= cos(reuse_deg / 2) for the
+/// relative quaternions conj(q_a) q_b: Jolt's own body-pair cache test), and the walk ends at
+/// the first step beyond 2 reuse_deg (a manifold found at step m is reused while each later
+/// step lies within reuse_deg of m's, so within 2 reuse_deg of one another).
 /// The rotations of a pair's two bodies at the row's earlier poses, most recent first,
 /// computed as far back as the walks of its points have gone.
 struct PastRotations {
   std::vector<M3> a, b;
 };
+/// The rotation of B relative to A, conj(q_a) q_b, in double.
+std::array<double, 4> relative_rotation(const Quat& a, const Quat& b) {
+  const double aw = a.w, ax = -double(a.x), ay = -double(a.y), az = -double(a.z);
+  const double bw = b.w, bx = b.x, by = b.y, bz = b.z;
+  return {aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+          aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw};
+}
+
 void earlier_normals(const ContactSearch& search, const Pair& p, double thr, const D3& pt, const D3& nrm,
-                     unsigned sides, std::vector<D3>& out, std::size_t& steps_back, PastRotations& past) {
+                     unsigned sides, double reuse_deg, std::vector<D3>& out, std::size_t& steps_back,
+                     PastRotations& past) {
   const FeasibilityState& st = search.st;
   const std::vector<Pose>& det = search.det;
-  if (st.past.empty()) return;
+  if (st.past.empty() || !(reuse_deg > 0.0)) return;
+  const bool bounded = std::isfinite(reuse_deg);
+  const double keep_cos = std::cos(std::min(reuse_deg, 180.0) * kPi / 360.0);  // cos(reuse / 2)
+  const double walk_cos = std::cos(std::min(reuse_deg, 180.0) * kPi / 180.0);  // cos(2 reuse / 2)
+  const std::array<double, 4> rel_now =
+      bounded ? relative_rotation(det[p.a].orientation, det[p.b].orientation) : std::array<double, 4>{};
   const double spacing_cos = std::cos(kPersistSpacingDeg * kPi / 180.0);
   const M3 ra = rotation(det[p.a].orientation), rb = rotation(det[p.b].orientation);
   const D3 la = mul_t(ra, pt - d3(det[p.a].position)), lb = mul_t(rb, pt - d3(det[p.b].position));
@@ -72,6 +91,13 @@ void earlier_normals(const ContactSearch& search, const Pair& p, double thr, con
       past.a.push_back(rotation(qa.orientation));
       past.b.push_back(rotation(qb.orientation));
     }
+    bool keep = true;
+    if (bounded) {
+      const std::array<double, 4> rel = relative_rotation(qa.orientation, qb.orientation);
+      const double c = std::fabs(rel[0] * rel_now[0] + rel[1] * rel_now[1] + rel[2] * rel_now[2] + rel[3] * rel_now[3]);
+      if (c < walk_cos) break;
+      keep = c >= keep_cos;
+    }
     const M3& pa = past.a[k];
     const M3& pb = past.b[k];
     const D3 d = (d3(qa.position) + mul(pa, la)) - (d3(qb.position) + mul(pb, lb));
@@ -83,6 +109,7 @@ void earlier_normals(const ContactSearch& search, const Pair& p, double thr, con
         open[side] = false;
         continue;
       }
+      if (!keep) continue;
       if (dot3(nk, last[std::size_t(side)]) < spacing_cos) {
         out.push_back(nk);
         last[std::size_t(side)] = pending[std::size_t(side)] = nk;
@@ -256,7 +283,8 @@ void PhysicsValidators::Impl::feasibility_contacts(const feasibility::ContactSea
       const double slack_deg = sat.tested ? kNormalSlackDeg : kPosedNormalSlackDeg;
       contacts.push_back({p, pt, normal, mu, lever, slack_deg});
       earlier.clear();
-      earlier_normals(search, p, pair_margin(p) + slack, pt, normal, sides, earlier, found.persisted_steps, past);
+      earlier_normals(search, p, pair_margin(p) + slack, pt, normal, sides, bodies.normal_reuse_deg, earlier,
+                      found.persisted_steps, past);
       found.persisted += !earlier.empty();
       for (const D3& e : earlier) contacts.push_back({p, pt, e, mu, lever, slack_deg});
     };

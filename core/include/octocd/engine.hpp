@@ -274,6 +274,12 @@ struct RotationTraits {
   /// threshold), so a row turns its pair by up to (depth + contact margin) x |J|; "" =
   /// undeclared ("one": one point, or two apart along the normal only).
   std::string impulse_points;
+  /// Root attribute `normal_reuse_deg`: the most (degrees) a pair's two bodies turn relative
+  /// to each other while the engine still applies a contact normal found on an earlier step:
+  /// 0 when every step finds its normals anew (MuJoCo, ODE, DART), Jolt's body-pair cache
+  /// angle; < 0 = undeclared (a persistent manifold keeps its normal while its point holds:
+  /// Bullet). Read as PhysicsBodies::normal_reuse_deg.
+  double normal_reuse_deg = -1.0;
 };
 
 /// One simulation engine: `cpu` (World), `cuda` (CudaWorld), `bullet` (BulletWorld).

@@ -9,6 +9,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 namespace octocd {
@@ -225,6 +226,17 @@ struct PhysicsBodies {
   /// the shapes. Read, not yet used beyond this: contact-geometry's point check is not
   /// applied (counted); normals and depths are judged.
   bool persistent_points = false;
+  /// `normal_reuse_deg` (degrees, [0, 180]): the most a pair's two bodies turn relative to
+  /// each other while the engine still applies a contact normal it found on an earlier step.
+  /// impulse-feasibility gives each contact point the normals it carried on earlier steps
+  /// (a persistent manifold's, docs/validation.md, "Motion explained by feasible contact
+  /// impulses") only from the steps whose relative rotation of the pair lies within this
+  /// angle of the current one, walking back while it lies within twice it (a cached manifold
+  /// found at step m is reused while each later step stays within the angle of m's).
+  /// 0: every normal is the step's own (MuJoCo, ODE, DART); 2: Jolt's body-pair cache
+  /// (PhysicsSettings::mBodyPairCacheCosMaxDeltaRotationDiv2 = cos(1 deg)); undeclared
+  /// (infinity): no bound, a point keeps its normal while its material points hold (Bullet).
+  double normal_reuse_deg = std::numeric_limits<double>::infinity();
   /// `friction_per` "manifold": the engine applies a pair's friction as one tangential
   /// impulse of at most mu times the pair's summed normal impulse at one point of its
   /// contact patch (the mean of its manifold's points, loaded or speculative), and a
