@@ -39,6 +39,12 @@ constexpr double kCrossingGroupDeg = 0.5;
 /// takes as a normal the engine may use there (cos 45 degrees).
 constexpr double kFeatureCos = 0.70710678118654752;
 
+/// The rotations of a pair's two bodies at the row's earlier poses, most recent first,
+/// computed as far back as the walks of its points have gone.
+struct PastRotations {
+  std::vector<M3> a, b;
+};
+
 /// The normals a persistent manifold point at `pt` of pair p may carry from the earlier steps
 /// (the row's past poses), beyond `nrm` (B to A): a point keeps the normal it was found with
 /// while its two material points (pt on A and on B, carried back with each body's pose) stay
@@ -53,19 +59,6 @@ constexpr double kFeatureCos = 0.70710678118654752;
 /// relative quaternions conj(q_a) q_b: Jolt's own body-pair cache test), and the walk ends at
 /// the first step beyond 2 reuse_deg (a manifold found at step m is reused while each later
 /// step lies within reuse_deg of m's, so within 2 reuse_deg of one another).
-/// The rotations of a pair's two bodies at the row's earlier poses, most recent first,
-/// computed as far back as the walks of its points have gone.
-struct PastRotations {
-  std::vector<M3> a, b;
-};
-/// The rotation of B relative to A, conj(q_a) q_b, in double.
-std::array<double, 4> relative_rotation(const Quat& a, const Quat& b) {
-  const double aw = a.w, ax = -double(a.x), ay = -double(a.y), az = -double(a.z);
-  const double bw = b.w, bx = b.x, by = b.y, bz = b.z;
-  return {aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-          aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw};
-}
-
 void earlier_normals(const ContactSearch& search, const Pair& p, double thr, const D3& pt, const D3& nrm,
                      unsigned sides, double reuse_deg, std::vector<D3>& out, std::size_t& steps_back,
                      PastRotations& past) {
@@ -75,8 +68,7 @@ void earlier_normals(const ContactSearch& search, const Pair& p, double thr, con
   const bool bounded = std::isfinite(reuse_deg);
   const double keep_cos = std::cos(std::min(reuse_deg, 180.0) * kPi / 360.0);  // cos(reuse / 2)
   const double walk_cos = std::cos(std::min(reuse_deg, 180.0) * kPi / 180.0);  // cos(2 reuse / 2)
-  const std::array<double, 4> rel_now =
-      bounded ? relative_rotation(det[p.a].orientation, det[p.b].orientation) : std::array<double, 4>{};
+  const Quat rel_now = conjugate(det[p.a].orientation) * det[p.b].orientation;  // B relative to A
   const double spacing_cos = std::cos(kPersistSpacingDeg * kPi / 180.0);
   const M3 ra = rotation(det[p.a].orientation), rb = rotation(det[p.b].orientation);
   const D3 la = mul_t(ra, pt - d3(det[p.a].position)), lb = mul_t(rb, pt - d3(det[p.b].position));
@@ -93,8 +85,9 @@ void earlier_normals(const ContactSearch& search, const Pair& p, double thr, con
     }
     bool keep = true;
     if (bounded) {
-      const std::array<double, 4> rel = relative_rotation(qa.orientation, qb.orientation);
-      const double c = std::fabs(rel[0] * rel_now[0] + rel[1] * rel_now[1] + rel[2] * rel_now[2] + rel[3] * rel_now[3]);
+      const Quat rel = conjugate(qa.orientation) * qb.orientation;
+      const double c = std::fabs(double(rel.w) * rel_now.w + double(rel.x) * rel_now.x + double(rel.y) * rel_now.y +
+                                 double(rel.z) * rel_now.z);
       if (c < walk_cos) break;
       keep = c >= keep_cos;
     }
