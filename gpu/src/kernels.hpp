@@ -565,9 +565,10 @@ cudaError_t launch_flat_fill(const Aabb* aabb, std::uint32_t n, const std::uint3
 cudaError_t launch_mid_decide(const MidListDesc& d, unsigned grid, cudaStream_t stream);
 /// Witnesses (before start; nothing when the witness cache is off, d.wit.witness null): per
 /// live pair (one thread each) pairs[k], and confirmed[k] = 1 when the pair is still within
-/// theta at its last witness, else 0. `grid` blocks of kBlockSize threads (grid-stride).
+/// theta at its last witness, else 0 (a static-static pair: 0, decided, witness[k] =
+/// kStaticStatic). `grid` blocks of kBlockSize threads (grid-stride).
 cudaError_t launch_mid_witness(const MidListDesc& d, unsigned grid, cudaStream_t stream);
-/// Start: per live pair (one warp each; those launch_mid_witness confirmed skipped)
+/// Start: per live pair (one warp each; those launch_mid_witness confirmed or decided skipped)
 /// confirmed[k] for decided pairs, the step 0 items of mesh pairs into d.out. `grid` blocks
 /// of kBlockSize threads (grid-stride).
 cudaError_t launch_mid_start(const MidListDesc& d, unsigned grid, cudaStream_t stream);

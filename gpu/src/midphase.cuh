@@ -125,12 +125,54 @@ __device__ inline void start_pair(const MidListDesc& d, std::uint32_t k, const P
   first_step<kLean>(d, c, k, t);
 }
 
-/// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid).
+/// mid_start's work on pair k (every lane of the warp; passed: the witness pass ran, which
+/// wrote pairs[k] and, for a pair it neither confirmed nor decided, witness[k] = `passed_w`,
+/// the failed witness or kNoWitness).
+template <bool kWitness, bool kLean = false>
+__device__ inline void start_item(const MidListDesc& d, std::uint32_t k, bool witnesses, bool passed,
+                                  unsigned long long passed_w, Tally& t) {
+  // The pair from its sorted key (the broadphase's output), kept for the later stages.
+  const unsigned long long key = d.pair_keys[k];
+  const Pair p = unpack_pair(d, key);
+  if (!passed && lane_id() == 0) d.pairs[k] = p;
+  if (witnesses) {
+    unsigned long long w = kNoWitness;  // the last witness, tested and failed (or none)
+    if (passed) {
+      w = passed_w;
+    } else {
+      std::uint32_t tests = 0;
+      const bool close = lane_id() == 0 && witness_close(d, p, key, tests, w);
+      t.vertex_tests += tests;  // lane 0's tally is the warp's
+      w = __shfl_sync(kFull, w, 0);
+      if (__shfl_sync(kFull, close ? 1 : 0, 0) != 0) {
+        if (lane_id() == 0) {
+          d.confirmed[k] = 1;
+          d.wit.witness[k] = w;
+        }
+        return;
+      }
+    }
+    unsigned long long found = kNoWitness;
+    if (w != kNoWitness && witness_block_close(d, p, w, t, found)) {
+      if (lane_id() == 0) {
+        d.confirmed[k] = 1;
+        d.wit.witness[k] = found;
+      }
+      return;
+    }
+  }
+  start_pair<kLean>(d, k, context(d, k, p), witnesses, t);
+}
+
+/// mid_start's work: one warp per live candidate pair (grid-stride over the whole grid:
+/// warp g runs pairs g, g + warps, g + 2 warps, ...).
 /// With the witness cache on, a pair is first tested at its last witness (witness_close,
 /// before its set-up; by mid_witness_items when witness_pass, else here by lane 0), then,
 /// when that fails, at the vertex blocks beside it (witness_block_close): a pair still
 /// within theta there is confirmed and keeps the vertex pair found, with no set-up and no
-/// cell test.
+/// cell test. After the witness pass the warp reads 32 of its pairs' answers at once (a
+/// lane each) and runs only those the pass left open (not confirmed, not kStaticStatic),
+/// in the same order: a pass that settled most pairs leaves no chain of loads per pair.
 /// !kWitness: compiled without the cache (the fused small step).
 template <bool kWitness, bool kLean = false>
 __device__ inline void mid_start_items(const MidListDesc& d) {
@@ -138,39 +180,27 @@ __device__ inline void mid_start_items(const MidListDesc& d) {
   const bool witnesses = kWitness && d.wit.witness != nullptr;
   const bool passed = witnesses && witness_pass(d, np);  // pairs[k] and confirmed[k] written
   Tally t;
-  for (std::uint32_t k = global_warp(); k < np; k += warp_count()) {
-    if (passed && d.confirmed[k] != 0) continue;  // confirmed at its witness (mid_witness)
-    // The pair from its sorted key (the broadphase's output), kept for the later stages.
-    const unsigned long long key = d.pair_keys[k];
-    const Pair p = unpack_pair(d, key);
-    if (!passed && lane_id() == 0) d.pairs[k] = p;
-    if (witnesses) {
-      unsigned long long w = kNoWitness;  // the last witness, tested and failed (or none)
-      if (passed) {
-        w = d.wit.witness[k];
-      } else {
-        std::uint32_t tests = 0;
-        const bool close = lane_id() == 0 && witness_close(d, p, key, tests, w);
-        t.vertex_tests += tests;  // lane 0's tally is the warp's
-        w = __shfl_sync(kFull, w, 0);
-        if (__shfl_sync(kFull, close ? 1 : 0, 0) != 0) {
-          if (lane_id() == 0) {
-            d.confirmed[k] = 1;
-            d.wit.witness[k] = w;
-          }
-          continue;
-        }
+  if (passed) {
+    const unsigned long long g = global_warp();
+    const unsigned long long warps = warp_count();
+    for (unsigned long long r = 0; g + r * warps < np; r += 32) {
+      const unsigned long long mine = g + (r + lane_id()) * warps;  // this lane's pair
+      unsigned long long w = kNoWitness;
+      bool open = false;
+      if (mine < np && d.confirmed[mine] == 0) {
+        w = d.wit.witness[mine];
+        open = w != kStaticStatic;
       }
-      unsigned long long found = kNoWitness;
-      if (w != kNoWitness && witness_block_close(d, p, w, t, found)) {
-        if (lane_id() == 0) {
-          d.confirmed[k] = 1;
-          d.wit.witness[k] = found;
-        }
-        continue;
+      for (unsigned m = __ballot_sync(kFull, open); m != 0; m &= m - 1u) {
+        const int j = __ffs(m) - 1;
+        const unsigned long long wj = __shfl_sync(kFull, w, j);
+        start_item<kWitness, kLean>(d, static_cast<std::uint32_t>(g + (r + static_cast<unsigned long long>(j)) * warps),
+                                    witnesses, true, wj, t);
       }
     }
-    start_pair<kLean>(d, k, context(d, k, p), witnesses, t);
+  } else {
+    for (std::uint32_t k = global_warp(); k < np; k += warp_count())
+      start_item<kWitness, kLean>(d, k, witnesses, false, kNoWitness, t);
   }
   flush(d, t);
 }

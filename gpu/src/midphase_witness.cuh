@@ -7,6 +7,12 @@ namespace octocd {
 namespace gpu {
 namespace mid {
 
+/// WitnessDesc::witness of a static-static pair that the witness pass decided (confirmed[k]
+/// = 0, as the set-up would: World::step skips such pairs), which mid_start then skips.
+/// Never a vertex pair (A's index ~0u - 1 is past any shape's vertices) and never kept
+/// (keep_witness keeps the witnesses of confirmed pairs only).
+constexpr unsigned long long kStaticStatic = ~0ull - 1ull;
+
 /// The last step's witness of the pair with sorted key `key` whose first body is `a` (one
 /// thread): the first kept key >= `key` from prev_begin[a] (a galloping search: a body's
 /// run is short but a wall's holds thousands), kNoWitness unless it is `key` (the pair was
@@ -150,7 +156,12 @@ __device__ inline bool witness_pass(const MidListDesc& d, std::uint32_t np) { re
 /// witness_pass): one thread per live candidate pair k (grid-stride), pairs[k] from its
 /// sorted key, and confirmed[k] = 1 with witness[k] its last witness when the pair is still
 /// within theta there (witness_close), else confirmed[k] = 0 and witness[k] the failed
-/// witness or kNoWitness (mid_start then tests the blocks beside it, or sets the pair up). A thread per pair keeps every pair's chain of
+/// witness or kNoWitness (mid_start then tests the blocks beside it, or sets the pair up). A
+/// static-static pair is decided here (confirmed[k] = 0, the set-up's answer: never a
+/// contact; witness[k] = kStaticStatic, so mid_start skips it): it has no witness to look
+/// up (none is kept for an unconfirmed pair), and mid_start's set-up of it would be a
+/// warp's chain of dependent loads (batched worlds' walls: 505,856 such pairs a step at
+/// 65,536 copies of bunny-stack-50). A thread per pair keeps every pair's chain of
 /// dependent loads (the lookup, the shapes, the two vertices) in flight at once.
 __device__ inline void mid_witness_items(const MidListDesc& d) {
   const std::uint32_t np = *d.pair_count < d.pair_capacity ? *d.pair_count : d.pair_capacity;
@@ -160,6 +171,11 @@ __device__ inline void mid_witness_items(const MidListDesc& d) {
     const unsigned long long key = d.pair_keys[k];
     const Pair p = unpack_pair(d, key);
     d.pairs[k] = p;
+    if (d.w[p.a] == 0.0f && d.w[p.b] == 0.0f) {
+      d.confirmed[k] = 0;
+      d.wit.witness[k] = kStaticStatic;
+      continue;
+    }
     unsigned long long w;
     const bool close = witness_close(d, p, key, tests, w);
     d.confirmed[k] = close ? 1 : 0;

@@ -1866,8 +1866,8 @@ TEST(CudaStageTimes, SampledStageTimesKeepTheCpuBits) {
 // copies are alike, stepped by both engines with the scene's own broadphase (octree,
 // deepened for the grid) as `octocd run --worlds 64 --world-perturb 1e-4` does: states equal
 // bit for bit after every step, contacts found, and every copy in its cell at the end.
-TEST(CudaWorlds, SixtyFourCopiesOfBunnyStack50EqualTheCpuBitForBit) {
-  REQUIRE_CUDA_DEVICE();
+// `hooks`: the cuda engine's test hooks; `what`: its name in the messages.
+static void expect_sixty_four_worlds_equal_the_cpu(const CudaWorld::TestHooks& hooks, const std::string& what_engine) {
   WorldsSpec spec;
   spec.count = 64;
   spec.perturb = 1e-4;
@@ -1877,7 +1877,7 @@ TEST(CudaWorlds, SixtyFourCopiesOfBunnyStack50EqualTheCpuBitForBit) {
   const auto model = make_worlds_model(*single, layout.offsets, spec);
   ASSERT_EQ(model->initial.size(), 64 * single->initial.size());
   World cpu(model, make_broadphase(model->scene.broadphase, model->scene.domain));
-  CudaWorld gpu(model, model->scene.broadphase.name);
+  CudaWorld gpu(model, model->scene.broadphase.name, CudaSettings{}, hooks);
   ASSERT_EQ(cpu.state_hash(), gpu.state_hash()) << "initial states differ";
   const int frames = std::max(test_frames(), 400);  // the bunnies land from frame ~150 on
   std::uint64_t contacts = 0;
@@ -1885,7 +1885,7 @@ TEST(CudaWorlds, SixtyFourCopiesOfBunnyStack50EqualTheCpuBitForBit) {
     const FrameMetrics mc = cpu.step();
     const FrameMetrics mg = gpu.step();
     contacts += mc.contacts;
-    const std::string what = fmt::format("bunny-stack-50 x64 worlds frame {}", f);
+    const std::string what = fmt::format("bunny-stack-50 x64 worlds ({}) frame {}", what_engine, f);
     if (cpu.state_hash() != gpu.state_hash())
       FAIL() << what << ": states differ (first at this frame): " << first_difference(cpu.state(), gpu.state());
     expect_cpu_cuda_counts(mc, mg, what, /*same_broadphase_work=*/false);  // cpu and device octrees
@@ -1893,6 +1893,23 @@ TEST(CudaWorlds, SixtyFourCopiesOfBunnyStack50EqualTheCpuBitForBit) {
   }
   EXPECT_GT(contacts, 0u) << "the copies' bunnies never touched: the run compared free fall only";
   EXPECT_TRUE(worlds_escaped(*model, layout, spec.margin, gpu.state()).empty());
-  std::cout << "[ info ] bunny-stack-50 x64 worlds (" << gpu.step_path() << " path): " << frames
+  std::cout << "[ info ] bunny-stack-50 x64 worlds (" << what_engine << ", " << gpu.step_path() << " path): " << frames
             << " frames equal bit for bit, " << contacts << " contacts in total\n";
+}
+
+TEST(CudaWorlds, SixtyFourCopiesOfBunnyStack50EqualTheCpuBitForBit) {
+  REQUIRE_CUDA_DEVICE();
+  expect_sixty_four_worlds_equal_the_cpu({}, "cuda");
+}
+
+// The same with the witness pass on every step (CudaTestHooks::witness_pass_min_pairs 1):
+// it decides the copies' static-static wall pairs itself, and mid_start runs only the
+// pairs it left open (midphase.cuh, mid_start_items). On its own the pass runs from 4
+// pairs per warp of mid_start's grid (16,896 pairs on an H100's 132 SMs; 65,536 copies have
+// 505,856 wall pairs), which 64 copies never reach.
+TEST(CudaWorlds, SixtyFourCopiesWithTheWitnessPassEveryStepEqualTheCpuBitForBit) {
+  REQUIRE_CUDA_DEVICE();
+  CudaWorld::TestHooks hooks;
+  hooks.witness_pass_min_pairs = 1;
+  expect_sixty_four_worlds_equal_the_cpu(hooks, "cuda, witness pass every step");
 }
