@@ -219,7 +219,7 @@ bool PhysicsValidators::Impl::judge_device<RowId::BroadphaseCompleteness>(Device
 
 template <class Frame>
 void PhysicsValidators::Impl::judge_broadphase(Frame& f) {
-  const std::array<Tally*, 1> missing{&tally(RowId::BroadphaseCompleteness, "missing-pair")};
+  const std::array<Tally*, 1> required_tally{&tally(RowId::BroadphaseCompleteness, "missing-pair")};
   Tally& broad_exact = tally(RowId::BroadphaseCompleteness, "not-flat");
   const FrameRecord& rec = *f.rec;
   const std::int64_t frame = rec.frame;
@@ -260,7 +260,7 @@ void PhysicsValidators::Impl::judge_broadphase(Frame& f) {
         });
       }
     };
-    judge_in_order<BroadphaseDry>(f.required.size(), threads, kParallelRequiredFrom, stop, *this, missing,
+    judge_in_order<BroadphaseDry>(f.required.size(), threads, kParallelRequiredFrom, stop, *this, required_tally,
                                   judge_required);
     if (bodies.broadphase_exact) {
       // Set equality with `flat` on the engine's own world AABBs, static-static dropped:

@@ -145,7 +145,7 @@ struct ConeDry {
 }  // namespace
 
 void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector<Pose>& det) {
-  auto [cone, dissipation] = tallies(RowId::Friction, "cone", "dissipation");
+  Tally& dissipation = tally(RowId::Friction, "dissipation");
   // impulses "normal-only" or "none": the rows carry no friction impulse; whatever jt and
   // jt3 hold (zeros, typically) is never judged (the row is n/a, named).
   if (bodies.impulses != PhysicsBodies::Impulses::Complete) return;
@@ -217,7 +217,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
     }
   };
   judge_in_order<ConeDry>(first_row.size() - 1, threads, kParallelConesFrom, stop, *this,
-                          std::array<Tally*, 1>{&cone}, judge_cones);
+                          std::array<Tally*, 1>{&tally(RowId::Friction, "cone")}, judge_cones);
 
   const bool states = rec.x_pre.size() == n && rec.v_pre.size() == n && rec.x_post.size() == n &&
                       rec.v_post.size() == n;
