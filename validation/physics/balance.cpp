@@ -98,34 +98,11 @@ double spin_ratio(PhysicsBodies::Gyroscopic g, double r_plain, double r_inv, std
   return r;
 }
 
-/// The fewest contact rows whose terms, and the fewest bodies whose rows 7 and 8, are
-/// computed on the validators' threads: a row's terms cost about 300 instructions, a body
-/// in contact its rows' sums and about 500 more; below these one thread costs less than
-/// waking another.
+/// The fewest contact rows summed, and the fewest bodies judged, on the validators' threads
+/// (rows 7 and 8): a row's terms cost about 300 instructions, a body's judgement about 500;
+/// below these one thread costs less than waking another.
 constexpr std::size_t kParallelBalanceRowsFrom = 1024;
 constexpr std::size_t kParallelBodiesFrom = 1024;
-
-/// One contact row's terms on its two bodies (balance's pass over the rows): the impulse
-/// J on A (-J on B), its unit normal, the friction it leaves open (a disc of radius
-/// `uncertain` normal to `nrm` where > 0), |J| + uncertain, the substeps' share of any
-/// direction (added where `substep`), and with points each body's torque, its allowance
-/// and |r| (|J| + uncertain).
-struct BalanceRow {
-  D3 j{}, nrm{};
-  double uncertain = 0, mag = 0, any_dir = 0;
-  bool substep = false;
-  D3 torque_a{}, torque_b{};
-  double tallow_a = 0, tallow_b = 0, tmag_a = 0, tmag_b = 0;
-};
-
-/// balance()'s tables, kept from frame to frame in the row's state (Impl::row_state).
-struct BalanceScratch {
-  std::vector<std::uint32_t> rows_of;     ///< per body: its contact rows
-  std::vector<std::uint8_t> in_contact;   ///< per body: in a row or a confirmed pair
-  std::vector<std::size_t> row_begin, fill;
-  std::vector<std::uint32_t> body_rows;   ///< the rows of each body, ascending
-  FrameArray<BalanceRow> rows;            ///< per contact row (value-initialised on the threads)
-};
 
 /// Values a block adds to a RatioSample, added to the Impl's in block order.
 struct SampleLog {
@@ -204,131 +181,137 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     return std::fabs(v.x) >= c || std::fabs(v.y) >= c || std::fabs(v.z) >= c;
   };
 
-  // Each row's impulse J = jn n + J_t on A (and -J on B), with its torque about each
-  // body's detection-pose position and what the record leaves uncertain: one BalanceRow a
-  // row, on the threads; each body then sums its rows' terms in row order (below).
+  // Each row's impulse J = jn n + J_t on A (and -J on B), summed per body with its torque
+  // about the body's detection-pose position, and what the record leaves uncertain.
+  std::vector<D3> force(n), torque(n);
+  std::vector<double> mag(n, 0.0), tmag(n, 0.0), tallow(n, 0.0), any_dir(n, 0.0);
+  // Per body, what the record leaves open of its rows' friction: a disc of radius u in the
+  // plane normal to n per row (direction and size of J_t beyond the scalar jt).
   using Disc = BalanceDisc;
-  BalanceScratch& scratch = row_state<BalanceScratch>(RowId::MomentumBalance);
-  std::vector<std::uint32_t>& rows_of = scratch.rows_of;
-  std::vector<std::uint8_t>& in_contact = scratch.in_contact;
-  rows_of.assign(n, 0);
-  in_contact.assign(n, 0);
+  std::vector<std::vector<Disc>> discs(n);
+  std::vector<std::vector<D3>> row_j(n);  // each row's impulse on the body (the spread's terms)
+  std::vector<std::uint32_t> rows_of(n, 0);
+  std::vector<std::uint8_t> in_contact(n, 0);
   for (const Pair& p : rec.confirmed) in_contact[p.a] = in_contact[p.b] = 1;
   for (const ContactRecord& c : rec.contacts) {
     in_contact[c.pair.a] = in_contact[c.pair.b] = 1;
     ++rows_of[c.pair.a];
     ++rows_of[c.pair.b];
   }
-  // Body i's rows, ascending: body_rows[row_begin[i] .. row_begin[i + 1]).
-  std::vector<std::size_t>& row_begin = scratch.row_begin;
-  std::vector<std::uint32_t>& body_rows = scratch.body_rows;
-  row_begin.assign(n + 1, 0);
-  for (std::size_t i = 0; i < n; ++i) row_begin[i + 1] = row_begin[i] + rows_of[i];
-  body_rows.resize(row_begin[n]);
-  {
-    std::vector<std::size_t>& fill = scratch.fill;
-    fill.assign(row_begin.begin(), row_begin.end() - 1);
+  // On the threads, each owning a range of bodies: a thread computes the rows with a body
+  // of its own and sums them into its bodies only, in row order (each body's sums are the
+  // serial loop's, bit for bit). A row with bodies of two ranges is computed by both.
+  const unsigned row_threads = loop_threads(threads, rec.contacts.size(), kParallelBalanceRowsFrom);
+  parallel_items_on(row_threads, row_threads, stop, [&](std::size_t range, unsigned) {
+    const std::size_t lo = n * range / row_threads, hi = n * (range + 1) / row_threads;
+    for (std::size_t i = lo; i < hi; ++i) row_j[i].reserve(rows_of[i]);  // one allocation a body in contact
     for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
-      body_rows[fill[rec.contacts[k].pair.a]++] = static_cast<std::uint32_t>(k);
-      body_rows[fill[rec.contacts[k].pair.b]++] = static_cast<std::uint32_t>(k);
-    }
-  }
-  FrameArray<BalanceRow>& row_terms = scratch.rows;
-  row_terms.assign(rec.contacts.size(), threads);
-  parallel_items_on(rec.contacts.size(), loop_threads(threads, rec.contacts.size(), kParallelBalanceRowsFrom), stop,
-                    [&](std::size_t k, unsigned) {
-    const ContactRecord& c = rec.contacts[k];
-    const Pair p = c.pair;
-    const D3 nrm = unit(d3(c.normal));
-    const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
-    // The row's point on A, and on B where the record gives a second witness point
-    // (FrameRecord::point_b: the engine applied B's impulse there).
-    const bool two_points = rec.has_points && rec.point_b.size() == rec.contacts.size();
-    const D3 pt = rec.has_points ? d3(c.point) : D3{};
-    const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? d3(point_on_b(rec, k)) - xb : D3{};
-    // The friction impulse's direction: the trace convention's -v_t / |v_t|, v_t the
-    // tangential velocity of A relative to B at the row's point before the solver
-    // (v_pre + dt g on dynamic bodies, w_pre); octocd's records: J_t along +t.
-    const D3 va = (dynamic(p.a) ? v_int(p.a) : d3(rec.v_pre[p.a])) + cross3(w_of(rec.w_pre, p.a), ra);
-    const D3 vb = (dynamic(p.b) ? v_int(p.b) : d3(rec.v_pre[p.b])) + cross3(w_of(rec.w_pre, p.b), rb);
-    const D3 rel = va - vb;
-    const D3 vt = rel - dot3(rel, nrm) * nrm;
-    const double vt_len = len3(vt);
-    const bool normal_only = bodies.impulses == PhysicsBodies::Impulses::NormalOnly;
-    const bool vector_friction = rec.jt3.size() == rec.contacts.size() && !normal_only;
-    const double jt = normal_only ? 0.0 : vector_friction ? len3(d3(rec.jt3[k])) : std::fabs(double(c.jt));
-    D3 jt_vec{};
-    double uncertain = 0;  // |J_t - jt_vec| at most this (kg m/s), in the tangent plane
-    if (normal_only) {
-      // The friction is not reported (jt, jt3 never read): J_t is anywhere in the row's
-      // cone, with the row cone margin below (a sequential solver's row whose jn moved).
-      uncertain = pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs;
-    } else if (vector_friction) {
-      jt_vec = d3(rec.jt3[k]);  // /contacts/jt3: the friction impulse on A, nothing left open
-    } else if (vt_len > tol.friction_direction_speed) {
-      jt_vec = (bodies.jt_along_sliding ? double(c.jt) : -double(c.jt)) * ((1.0 / vt_len) * vt);
-      if (rotating && rec.has_points && !two_points) {
-        // An engine may take each body's velocity at its own witness point (Bullet), up
-        // to the depth or the contact margin apart along the normal: v_t there differs by
-        // up to (|w_a| + |w_b|) s, turning the direction by at most that over |v_t|; the
-        // part of J_t across the recorded direction is not in a scalar jt.
-        const double s = double(c.depth) + pair_margin(p);
-        const double turn =
-            std::min(2.0, (len3(w_of(rec.w_pre, p.a)) + len3(w_of(rec.w_pre, p.b))) * s / vt_len);
-        uncertain = turn * (jt + pair_mu(p) * std::fabs(double(c.jn)));
+      const ContactRecord& c = rec.contacts[k];
+      const Pair p = c.pair;
+      const bool own_a = p.a >= lo && p.a < hi, own_b = p.b >= lo && p.b < hi;
+      if (!own_a && !own_b) continue;
+      const D3 nrm = unit(d3(c.normal));
+      const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
+      // The row's point on A, and on B where the record gives a second witness point
+      // (FrameRecord::point_b: the engine applied B's impulse there).
+      const bool two_points = rec.has_points && rec.point_b.size() == rec.contacts.size();
+      const D3 pt = rec.has_points ? d3(c.point) : D3{};
+      const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? d3(point_on_b(rec, k)) - xb : D3{};
+      // The friction impulse's direction: the trace convention's -v_t / |v_t|, v_t the
+      // tangential velocity of A relative to B at the row's point before the solver
+      // (v_pre + dt g on dynamic bodies, w_pre); octocd's records: J_t along +t.
+      const D3 va = (dynamic(p.a) ? v_int(p.a) : d3(rec.v_pre[p.a])) + cross3(w_of(rec.w_pre, p.a), ra);
+      const D3 vb = (dynamic(p.b) ? v_int(p.b) : d3(rec.v_pre[p.b])) + cross3(w_of(rec.w_pre, p.b), rb);
+      const D3 rel = va - vb;
+      const D3 vt = rel - dot3(rel, nrm) * nrm;
+      const double vt_len = len3(vt);
+      const bool normal_only = bodies.impulses == PhysicsBodies::Impulses::NormalOnly;
+      const bool vector_friction = rec.jt3.size() == rec.contacts.size() && !normal_only;
+      const double jt = normal_only ? 0.0 : vector_friction ? len3(d3(rec.jt3[k])) : std::fabs(double(c.jt));
+      D3 jt_vec{};
+      double uncertain = 0;  // |J_t - jt_vec| at most this (kg m/s), in the tangent plane
+      if (normal_only) {
+        // The friction is not reported (jt, jt3 never read): J_t is anywhere in the row's
+        // cone, with the row cone margin below (a sequential solver's row whose jn moved).
+        uncertain = pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs;
+      } else if (vector_friction) {
+        jt_vec = d3(rec.jt3[k]);  // /contacts/jt3: the friction impulse on A, nothing left open
+      } else if (vt_len > tol.friction_direction_speed) {
+        jt_vec = (bodies.jt_along_sliding ? double(c.jt) : -double(c.jt)) * ((1.0 / vt_len) * vt);
+        if (rotating && rec.has_points && !two_points) {
+          // An engine may take each body's velocity at its own witness point (Bullet), up
+          // to the depth or the contact margin apart along the normal: v_t there differs by
+          // up to (|w_a| + |w_b|) s, turning the direction by at most that over |v_t|; the
+          // part of J_t across the recorded direction is not in a scalar jt.
+          const double s = double(c.depth) + pair_margin(p);
+          const double turn =
+              std::min(2.0, (len3(w_of(rec.w_pre, p.a)) + len3(w_of(rec.w_pre, p.b))) * s / vt_len);
+          uncertain = turn * (jt + pair_mu(p) * std::fabs(double(c.jn)));
+        }
+      } else if (vt_len > kNoSliding) {
+        // Nearly no sliding before the step: the engine picks the friction direction
+        // itself (Bullet below sqrt(FLT_EPSILON) = 3.45e-4 m/s: btPlaneSpace1's axis), and a
+        // scalar jt, the impulse's projection on the recorded -v_t, says neither which nor
+        // how large J_t is; it lies in the cone (the friction row judges that).
+        // A row's own cone, with the margin a sequential solver leaves on a row whose normal
+        // impulse moved to the manifold's other rows after its friction was clamped (Bullet:
+        // up to 13% above mu times the row's final jn; the friction row holds the pair's sum
+        // to the cone itself). Never with jt3; what it leaves open is stated in
+        // docs/validate-your-engine.md, "The row cone margin".
+        uncertain = std::max(jt, pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs);
+      } else {
+        // No sliding: v_t has no direction; jt is the friction impulse's magnitude (the
+        // convention, and octocd's Bullet adapter below 1e-6 m/s), its direction open.
+        uncertain = jt;
       }
-    } else if (vt_len > kNoSliding) {
-      // Nearly no sliding before the step: the engine picks the friction direction
-      // itself (Bullet below sqrt(FLT_EPSILON) = 3.45e-4 m/s: btPlaneSpace1's axis), and a
-      // scalar jt, the impulse's projection on the recorded -v_t, says neither which nor
-      // how large J_t is; it lies in the cone (the friction row judges that).
-      // A row's own cone, with the margin a sequential solver leaves on a row whose normal
-      // impulse moved to the manifold's other rows after its friction was clamped (Bullet:
-      // up to 13% above mu times the row's final jn; the friction row holds the pair's sum
-      // to the cone itself). Never with jt3; what it leaves open is stated in
-      // docs/validate-your-engine.md, "The row cone margin".
-      uncertain = std::max(jt, pair_mu(p) * std::fabs(double(c.jn)) * (1.0 + kRowConeMargin) + tol.friction_cone_abs);
-    } else {
-      // No sliding: v_t has no direction; jt is the friction impulse's magnitude (the
-      // convention, and octocd's Bullet adapter below 1e-6 m/s), its direction open.
-      uncertain = jt;
-    }
-    // Substeps (declared or undeclared, rotating records): the engine applies the row's
-    // impulse in parts through the step, its normal and its points turning with the two
-    // bodies, by at most theta = (|w_a| + |w_b|) dt (the larger of |w|, |w'| each): jn n
-    // leaves n into the tangent plane by |jn| theta (a disc), J_t leaves the plane by
-    // |J_t| theta (any direction), and the lever of both turns by |r| |J| theta
-    // (docs/validation.md, "Free flight: any consistent integrator").
-    double theta = 0;
-    if (bodies.may_substep() && rotating) {
-      const double wa = std::max(len3(w_of(rec.w_pre, p.a)), len3(w_of(rec.w_post, p.a)));
-      const double wb = std::max(len3(w_of(rec.w_pre, p.b)), len3(w_of(rec.w_post, p.b)));
-      theta = std::min(2.0, (wa + wb) * dt);
-      uncertain += theta * std::fabs(double(c.jn));
-    }
-    const D3 j = double(c.jn) * nrm + jt_vec;
-    BalanceRow& t = row_terms[k];
-    t.j = j;
-    t.nrm = nrm;
-    t.uncertain = uncertain;
-    t.mag = len3(j) + uncertain;
-    t.any_dir = theta * jt;
-    t.substep = bodies.may_substep() && rotating;
-    if (rec.has_points) {
-      t.torque_a = cross3(ra, j);
-      t.torque_b = cross3(rb, j);
-      // An engine may apply the row at a witness point on each body (Bullet) instead of
-      // the recorded point between them: the two lie the depth apart along the normal
-      // (which moves the friction part's lever) and, in a persistent manifold, up to the
-      // contact margin apart sideways as the bodies move before the point is dropped
-      // (which moves the normal part's lever): half of that from the recorded point.
-      // With both witness points recorded (point_b) each lever is the engine's own: none.
-      const double s = two_points ? 0.0 : double(c.depth) + pair_margin(p);
-      const double lever = s * (jt + uncertain) + 0.5 * s * std::fabs(double(c.jn));
-      t.tallow_a = len3(ra) * (uncertain + theta * (std::fabs(double(c.jn)) + jt)) + lever;
-      t.tallow_b = len3(rb) * (uncertain + theta * (std::fabs(double(c.jn)) + jt)) + lever;
-      t.tmag_a = len3(ra) * (len3(j) + uncertain);
-      t.tmag_b = len3(rb) * (len3(j) + uncertain);
+      // Substeps (declared or undeclared, rotating records): the engine applies the row's
+      // impulse in parts through the step, its normal and its points turning with the two
+      // bodies, by at most theta = (|w_a| + |w_b|) dt (the larger of |w|, |w'| each): jn n
+      // leaves n into the tangent plane by |jn| theta (a disc), J_t leaves the plane by
+      // |J_t| theta (any direction), and the lever of both turns by |r| |J| theta
+      // (docs/validation.md, "Free flight: any consistent integrator").
+      double theta = 0;
+      if (bodies.may_substep() && rotating) {
+        const double wa = std::max(len3(w_of(rec.w_pre, p.a)), len3(w_of(rec.w_post, p.a)));
+        const double wb = std::max(len3(w_of(rec.w_pre, p.b)), len3(w_of(rec.w_post, p.b)));
+        theta = std::min(2.0, (wa + wb) * dt);
+        uncertain += theta * std::fabs(double(c.jn));
+        if (own_a) any_dir[p.a] += theta * jt;
+        if (own_b) any_dir[p.b] += theta * jt;
+      }
+      const D3 j = double(c.jn) * nrm + jt_vec;
+      if (own_a) {
+        force[p.a] = force[p.a] + j;
+        row_j[p.a].push_back(j);
+        mag[p.a] += len3(j) + uncertain;
+        if (uncertain > 0) discs[p.a].push_back({nrm, uncertain});
+      }
+      if (own_b) {
+        force[p.b] = force[p.b] - j;
+        row_j[p.b].push_back(-1.0 * j);
+        mag[p.b] += len3(j) + uncertain;
+        if (uncertain > 0) discs[p.b].push_back({nrm, uncertain});
+      }
+      if (rec.has_points) {
+        if (own_a) torque[p.a] = torque[p.a] + cross3(ra, j);
+        if (own_b) torque[p.b] = torque[p.b] - cross3(rb, j);
+        // An engine may apply the row at a witness point on each body (Bullet) instead of
+        // the recorded point between them: the two lie the depth apart along the normal
+        // (which moves the friction part's lever) and, in a persistent manifold, up to the
+        // contact margin apart sideways as the bodies move before the point is dropped
+        // (which moves the normal part's lever): half of that from the recorded point.
+        // With both witness points recorded (point_b) each lever is the engine's own: none.
+        const double s = two_points ? 0.0 : double(c.depth) + pair_margin(p);
+        const double lever = s * (jt + uncertain) + 0.5 * s * std::fabs(double(c.jn));
+        if (own_a) {
+          tallow[p.a] += len3(ra) * (uncertain + theta * (std::fabs(double(c.jn)) + jt)) + lever;
+          tmag[p.a] += len3(ra) * (len3(j) + uncertain);
+        }
+        if (own_b) {
+          tallow[p.b] += len3(rb) * (uncertain + theta * (std::fabs(double(c.jn)) + jt)) + lever;
+          tmag[p.b] += len3(rb) * (len3(j) + uncertain);
+        }
+      }
     }
   });
 
@@ -336,8 +319,6 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
   // on the threads and tallied in body order (judge_in_order).
   auto judge_bodies = [&](std::size_t first, std::size_t last, auto& s, auto& balance_lin, auto& balance_ang,
                           auto& free_vel, auto& free_pos, auto& free_w, auto& free_q, auto& free_sleep) {
-    std::vector<Disc> discs_i;  // the body's rows' open friction: a disc of radius u normal to n per row
-    std::vector<D3> row_j_i;    // each row's impulse on the body (the spread's terms)
     for (std::size_t i = first; i < last; ++i) {
       if (!dynamic(static_cast<std::uint32_t>(i))) continue;
       const double mi = mass[i];
@@ -389,26 +370,11 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
           continue;
         }
         if (!bodies.impulses_complete || bodies.impulses == PhysicsBodies::Impulses::None) continue;
-        // The body's rows summed in row order: impulses, torques, what they leave open.
-        D3 force_i{}, torque_i{};
-        double mag_i = 0, tmag_i = 0, tallow_i = 0, any_dir_i = 0;
-        discs_i.clear();
-        row_j_i.clear();
-        for (std::size_t q = row_begin[i]; q < row_begin[i + 1]; ++q) {
-          const std::uint32_t k = body_rows[q];
-          const BalanceRow& t = row_terms[k];
-          const bool on_a = rec.contacts[k].pair.a == i;
-          if (t.substep) any_dir_i += t.any_dir;
-          force_i = on_a ? force_i + t.j : force_i - t.j;
-          row_j_i.push_back(on_a ? t.j : -1.0 * t.j);
-          mag_i += t.mag;
-          if (t.uncertain > 0) discs_i.push_back({t.nrm, t.uncertain});
-          if (rec.has_points) {
-            torque_i = on_a ? torque_i + t.torque_a : torque_i - t.torque_b;
-            tallow_i += on_a ? t.tallow_a : t.tallow_b;
-            tmag_i += on_a ? t.tmag_a : t.tmag_b;
-          }
-        }
+        const D3& force_i = force[i];
+        const D3& torque_i = torque[i];
+        const double mag_i = mag[i], tmag_i = tmag[i], tallow_i = tallow[i], any_dir_i = any_dir[i];
+        const std::vector<Disc>& discs_i = discs[i];
+        const std::vector<D3>& row_j_i = row_j[i];
         if (locked(i)) ++s.balance_locked;
         const D3 dp = unlocked(mi * (v1 - v0) - force_i, i, 0);
         // integrated_point "origin": the centre of mass's drift under the origin's

@@ -153,10 +153,6 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     std::iota(ks.begin(), ks.end(), std::size_t(0));
     verdicts[ii] = feasibility_island(rec, det, island_contacts[ii], island_members[ii], ks, rotating);
   });
-  // The pairs' contacts are freed on the threads too (one allocation a pair with contacts:
-  // 240,534 on the contact lattice, 47 x 10^6 instructions of free() on one thread).
-  parallel_items(pair_out.size(), threads, std::function<bool()>(),
-                 [&](std::size_t ci, unsigned) { std::vector<Contact>().swap(pair_out[ci].contacts); });
   for (std::size_t ii = 0; ii < verdicts.size(); ++ii) {
     const IslandVerdict& verdict = verdicts[ii];
     const std::vector<std::uint32_t>& members = island_members[ii];
