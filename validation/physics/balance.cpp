@@ -198,13 +198,16 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     ++rows_of[c.pair.a];
     ++rows_of[c.pair.b];
   }
+  // One allocation a body in contact, on this thread (memory freed here again: blocks a
+  // worker allocated would return to its arena).
+  for (std::size_t i = 0; i < n; ++i) row_j[i].reserve(rows_of[i]);
+  for (std::size_t i = 0; i < n; ++i) discs[i].reserve(rows_of[i]);
   // On the threads, each owning a range of bodies: a thread computes the rows with a body
   // of its own and sums them into its bodies only, in row order (each body's sums are the
   // serial loop's, bit for bit). A row with bodies of two ranges is computed by both.
   const unsigned row_threads = loop_threads(threads, rec.contacts.size(), kParallelBalanceRowsFrom);
   parallel_items_on(row_threads, row_threads, stop, [&](std::size_t range, unsigned) {
     const std::size_t lo = n * range / row_threads, hi = n * (range + 1) / row_threads;
-    for (std::size_t i = lo; i < hi; ++i) row_j[i].reserve(rows_of[i]);  // one allocation a body in contact
     for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
       const ContactRecord& c = rec.contacts[k];
       const Pair p = c.pair;

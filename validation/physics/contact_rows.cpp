@@ -33,6 +33,9 @@ struct GeometryDry {
          aabb_angle_worst = 0;
   std::string sat_fcl_what;
   std::vector<double> shape_angles;
+  /// Made on the judging thread with room for a block's rows (one a pair mostly): memory a
+  /// worker allocated would return to its arena when freed here, and fault in again.
+  GeometryDry() { shape_angles.reserve(physics_detail::kOrderedBlock); }
   /// A new largest FCL excess is described (sat_fcl_what): the block is judged again live.
   template <class Live>
   bool describes(const Live& s) const {
