@@ -37,8 +37,9 @@
 namespace octocd::physics_detail {
 
 /// Items a block of judge_in_order holds: about 10^3 blocks on the lattice's 240,534
-/// contact pairs, each merged in a few dozen instructions, and a replayed block (a new
-/// worst: about ln(n) of them per cause) costs 256 items on the calling thread.
+/// contact pairs, each merged in a few dozen instructions, and a replayed block (a failure
+/// or a new worst: few once a tally's worst has settled) costs 256 items on the calling
+/// thread.
 constexpr std::size_t kOrderedBlock = 256;
 
 /// A Tally's checks of one block judged off the calling thread: counted, never described.

@@ -22,7 +22,7 @@
 ///    feasibility_programme.cpp (each island's linear programme, COIN-OR CLP);
 ///  - ordered_judge.hpp: judge_in_order, a row's tally loop judged on the threads in
 ///    blocks and tallied in item order with the serial loop's verdict, figures and texts
-///    (rows 1, 2, 3, 7 and 8);
+///    (rows 1, 2, 3, 5, 7 and 8);
 ///  - physics_table.cpp: the generic sums (RowSums), observe()'s calls of every row's
 ///    measure and results()' of every row's table entry, in validation_rows.def's order
 ///    (physics_rows.inc: the physics rows of the table by the frames they measure).
