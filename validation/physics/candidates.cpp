@@ -5,8 +5,10 @@
 
 #include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
+#include "ordered_judge.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <iterator>
 #include <type_traits>
@@ -27,6 +29,21 @@ std::pair<std::uint32_t, std::uint32_t> key(Pair p) { return std::make_pair(p.a,
 /// boxes' test about 900 instructions, their truth and row figures about 4,700).
 constexpr std::size_t kParallelTestsFrom = 1024;
 constexpr std::size_t kParallelTruthFrom = 256;
+/// The fewest required pairs row 1 looks up on the threads (judge_in_order).
+constexpr std::size_t kParallelRequiredFrom = 2048;
+
+/// Row 1's own state that a block of required pairs judged on a thread writes.
+struct BroadphaseDry {
+  std::uint64_t broad_asleep = 0;
+  template <class Live>
+  bool describes(const Live&) const {
+    return false;
+  }
+  template <class Live>
+  void merge_into(Live& s) const {
+    s.broad_asleep += broad_asleep;
+  }
+};
 }  // namespace
 
 const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p) const {
@@ -45,7 +62,6 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
                                            CheckedFrame& f, const std::vector<Pair>* candidates) const {
   const std::size_t n = model->bodies.size();
   const double slack = tol.geometry_slack_m;
-  StopPoll poll(stop);
   // Every table of f is rebuilt below in the memory it holds (a previous frame's).
   f.rec = &rec;
   f.det = &det;
@@ -168,14 +184,21 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
       for (std::uint32_t k = group_begin[i]; k < group_begin[i + 1]; ++k) pair_figures(f, group_list[k], t, s.accepted);
     });
   }
-  // The candidates are sorted: their truth is looked up onwards from the last one.
+  // The candidates are sorted: their truth is looked up onwards from the last one, in
+  // blocks on the threads (every pair looked up is among the truth's: with a broadphase
+  // margin every candidate is, else each one that intersects), then listed in order.
+  std::vector<char>& is_required = work.is_required;
+  is_required.assign(cand.size(), 0);
+  const std::size_t blocks = (cand.size() + kOrderedBlock - 1) / kOrderedBlock;
+  parallel_items_on(blocks, loop_threads(threads, cand.size(), kParallelRequiredFrom), stop,
+                    [&](std::size_t b, unsigned) {
+    std::size_t cursor = 0;
+    for (std::size_t i = b * kOrderedBlock; i < std::min(cand.size(), (b + 1) * kOrderedBlock); ++i)
+      is_required[i] = required_pair(f, cand[i], hit[i] != 0, cursor) ? 1 : 0;
+  });
   std::vector<Pair>& required = f.required;
-  std::size_t cursor = 0;
-  for (std::size_t i = 0; i < cand.size(); ++i) {
-    const Pair p = cand[i];
-    poll();
-    if (required_pair(f, p, hit[i] != 0, cursor)) required.push_back(p);
-  }
+  for (std::size_t i = 0; i < cand.size(); ++i)
+    if (is_required[i]) required.push_back(cand[i]);
 }
 
 // ---- Row 1: broadphase completeness ------------------------------------------------
@@ -196,7 +219,8 @@ bool PhysicsValidators::Impl::judge_device<RowId::BroadphaseCompleteness>(Device
 
 template <class Frame>
 void PhysicsValidators::Impl::judge_broadphase(Frame& f) {
-  auto [broad, broad_exact] = tallies(RowId::BroadphaseCompleteness, "missing-pair", "not-flat");
+  const std::array<Tally*, 1> required_tally{&tally(RowId::BroadphaseCompleteness, "missing-pair")};
+  Tally& broad_exact = tally(RowId::BroadphaseCompleteness, "not-flat");
   const FrameRecord& rec = *f.rec;
   const std::int64_t frame = rec.frame;
   ExactPairsSettings pair_threads;
@@ -209,28 +233,35 @@ void PhysicsValidators::Impl::judge_broadphase(Frame& f) {
     broad_candidates += rec.pairs.size();
     broad_true += f.required.size();
     // The required pairs are sorted, and so are the engine's (FrameRecord::pairs): both
-    // looked up onwards from the last answer (binary_search where the engine's are not).
+    // looked up onwards from the last answer (binary_search where the engine's are not),
+    // on the threads and tallied in order (judge_in_order). Every required pair is among
+    // the truth's pairs (checked_frame, device_frame), so truth_after only reads here.
     const bool engine_sorted = std::is_sorted(rec.pairs.begin(), rec.pairs.end());
-    std::size_t engine_cursor = 0, truth_cursor = 0;
-    for (const Pair& p : f.required) {
-      bool found;
-      if (engine_sorted) {
-        const std::size_t k = seek(rec.pairs, p, engine_cursor);
-        found = k < rec.pairs.size() && rec.pairs[k] == p;
-      } else {
-        found = std::binary_search(rec.pairs.begin(), rec.pairs.end(), p);
+    auto judge_required = [&](std::size_t first, std::size_t last, auto& s, auto& broad) {
+      std::size_t engine_cursor = 0, truth_cursor = 0;
+      for (std::size_t i = first; i < last; ++i) {
+        const Pair p = f.required[i];
+        bool found;
+        if (engine_sorted) {
+          const std::size_t k = seek(rec.pairs, p, engine_cursor);
+          found = k < rec.pairs.size() && rec.pairs[k] == p;
+        } else {
+          found = std::binary_search(rec.pairs.begin(), rec.pairs.end(), p);
+        }
+        const ReferenceNormal& g = truth_after(f, p, truth_cursor).g;
+        if (!found && pair_asleep(rec, p)) {  // a pair of sleeping bodies need not be a candidate
+          ++s.broad_asleep;
+          continue;
+        }
+        broad.check(found, g.penetrating ? g.depth : -g.distance, Where{frame, p}, [&] {
+          return fmt::format("frame {}: {} misses {} whose shapes are {} {:.3g} m (margin {} m)", frame, label,
+                             pair_name(p), g.penetrating ? "penetrating by" : "apart by",
+                             g.penetrating ? g.depth : g.distance, tol.broadphase_margin_m);
+        });
       }
-      const ReferenceNormal& g = truth_after(f, p, truth_cursor).g;
-      if (!found && pair_asleep(rec, p)) {  // a pair of sleeping bodies need not be a candidate
-        ++broad_asleep;
-        continue;
-      }
-      broad.check(found, g.penetrating ? g.depth : -g.distance, Where{frame, p}, [&] {
-        return fmt::format("frame {}: {} misses {} whose shapes are {} {:.3g} m (margin {} m)", frame, label,
-                           pair_name(p), g.penetrating ? "penetrating by" : "apart by",
-                           g.penetrating ? g.depth : g.distance, tol.broadphase_margin_m);
-      });
-    }
+    };
+    judge_in_order<BroadphaseDry>(f.required.size(), threads, kParallelRequiredFrom, stop, *this, required_tally,
+                                  judge_required);
     if (bodies.broadphase_exact) {
       // Set equality with `flat` on the engine's own world AABBs, static-static dropped:
       // flat's set through exact_pairs (O(n log n + pairs); tests/validation/test_exact_pairs).

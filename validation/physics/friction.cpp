@@ -3,9 +3,12 @@
 // where the record's states and impulses show it.
 #include "physics_impl.hpp"
 
+#include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
+#include "ordered_judge.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <optional>
 
@@ -115,8 +118,34 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
 }
 
 // ---- Row 5: friction, every frame (dissipation on frames with states) ----------------
+namespace {
+/// The fewest contact pairs whose cones are judged on the validators' threads
+/// (judge_in_order): a pair's cone costs about 250 instructions.
+constexpr std::size_t kParallelConesFrom = 2048;
+
+/// friction()'s table kept from frame to frame in the row's state (Impl::row_state): the
+/// first row of each contact pair, then the rows' count.
+struct FrictionScratch {
+  std::vector<std::size_t> first_row;
+};
+
+/// The cone's own state that a block of pairs judged on a thread writes (judge_in_order).
+struct ConeDry {
+  std::uint64_t cone_jt3_pairs = 0, cone_scalar_pairs = 0;
+  template <class Live>
+  bool describes(const Live&) const {
+    return false;
+  }
+  template <class Live>
+  void merge_into(Live& s) const {
+    s.cone_jt3_pairs += cone_jt3_pairs;
+    s.cone_scalar_pairs += cone_scalar_pairs;
+  }
+};
+}  // namespace
+
 void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector<Pose>& det) {
-  auto [cone, dissipation] = tallies(RowId::Friction, "cone", "dissipation");
+  Tally& dissipation = tally(RowId::Friction, "dissipation");
   // impulses "normal-only" or "none": the rows carry no friction impulse; whatever jt and
   // jt3 hold (zeros, typically) is never judged (the row is n/a, named).
   if (bodies.impulses != PhysicsBodies::Impulses::Complete) return;
@@ -149,37 +178,46 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
     return 4.0 * kEps32 * s;
   };
   const bool vector_friction = !rec.jt3.empty();
-  for (std::size_t k0 = 0; k0 < rec.contacts.size();) {
-    poll();
-    const Pair pr = rec.contacts[k0].pair;
-    std::size_t k1 = k0;
-    double jt_sum = 0.0, jn_sum = 0.0, jt_abs = 0.0;
-    D3 jt_vec{};
-    for (; k1 < rec.contacts.size() && rec.contacts[k1].pair == pr; ++k1) {
-      if (vector_friction) {
-        jt_vec = jt_vec + d3(rec.jt3[k1]);
-        jt_abs += len3(d3(rec.jt3[k1]));
-      } else {
-        jt_abs += std::fabs(double(rec.contacts[k1].jt));
+  // The pairs' first rows (rows of a pair are consecutive), judged on the threads and
+  // tallied in pair order (judge_in_order).
+  std::vector<std::size_t>& first_row = row_state<FrictionScratch>(RowId::Friction).first_row;
+  first_row.clear();
+  for (std::size_t k = 0; k < rec.contacts.size(); ++k)
+    if (k == 0 || !(rec.contacts[k - 1].pair == rec.contacts[k].pair)) first_row.push_back(k);
+  first_row.push_back(rec.contacts.size());
+  auto judge_cones = [&](std::size_t first, std::size_t last, auto& s, auto& cone) {
+    for (std::size_t q = first; q < last; ++q) {
+      const std::size_t k0 = first_row[q], k1 = first_row[q + 1];
+      const Pair pr = rec.contacts[k0].pair;
+      double jt_sum = 0.0, jn_sum = 0.0, jt_abs = 0.0;
+      D3 jt_vec{};
+      for (std::size_t k = k0; k < k1; ++k) {
+        if (vector_friction) {
+          jt_vec = jt_vec + d3(rec.jt3[k]);
+          jt_abs += len3(d3(rec.jt3[k]));
+        } else {
+          jt_abs += std::fabs(double(rec.contacts[k].jt));
+        }
+        jn_sum += double(rec.contacts[k].jn);
       }
-      jn_sum += double(rec.contacts[k1].jn);
+      jt_sum = vector_friction ? len3(jt_vec) : jt_abs;
+      const double mu = pair_mu(pr);
+      const std::size_t rows = k1 - k0;
+      const double rounding = 16.0 * kEps32 * (jt_abs + mu * jn_sum) + momentum_floor(pr) + 1e-12;
+      const double limit = mu * jn_sum + rounding + (vector_friction ? 0.0 : tol.friction_cone_abs);
+      const double excess = jt_sum - limit;
+      (vector_friction ? ++s.cone_jt3_pairs : ++s.cone_scalar_pairs);
+      cone.check(excess <= 0, excess, Where{frame, pr}, [&] {
+        return fmt::format("frame {}: {} |{}| {:.6g} > mu {:.4g} x jn {:.6g} ({:.4g} x the cone){} [rule: {}]", frame,
+                           pair_name(pr), vector_friction ? "sum jt3" : "jt", jt_sum, mu, jn_sum,
+                           mu * jn_sum > 0 ? jt_sum / (mu * jn_sum) : std::numeric_limits<double>::infinity(),
+                           rows > 1 ? fmt::format(" (sums over its {} rows)", rows) : std::string(),
+                           vector_friction ? "jt3" : "scalar");
+      });
     }
-    jt_sum = vector_friction ? len3(jt_vec) : jt_abs;
-    const double mu = pair_mu(pr);
-    const std::size_t rows = k1 - k0;
-    const double rounding = 16.0 * kEps32 * (jt_abs + mu * jn_sum) + momentum_floor(pr) + 1e-12;
-    const double limit = mu * jn_sum + rounding + (vector_friction ? 0.0 : tol.friction_cone_abs);
-    const double excess = jt_sum - limit;
-    (vector_friction ? ++cone_jt3_pairs : ++cone_scalar_pairs);
-    cone.check(excess <= 0, excess, Where{frame, pr}, [&] {
-      return fmt::format("frame {}: {} |{}| {:.6g} > mu {:.4g} x jn {:.6g} ({:.4g} x the cone){} [rule: {}]", frame,
-                         pair_name(pr), vector_friction ? "sum jt3" : "jt", jt_sum, mu, jn_sum,
-                         mu * jn_sum > 0 ? jt_sum / (mu * jn_sum) : std::numeric_limits<double>::infinity(),
-                         rows > 1 ? fmt::format(" (sums over its {} rows)", rows) : std::string(),
-                         vector_friction ? "jt3" : "scalar");
-    });
-    k0 = k1;
-  }
+  };
+  judge_in_order<ConeDry>(first_row.size() - 1, threads, kParallelConesFrom, stop, *this,
+                          std::array<Tally*, 1>{&tally(RowId::Friction, "cone")}, judge_cones);
 
   const bool states = rec.x_pre.size() == n && rec.v_pre.size() == n && rec.x_post.size() == n &&
                       rec.v_post.size() == n;

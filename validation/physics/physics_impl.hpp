@@ -20,6 +20,9 @@
 ///    impulses octocd finds itself, on the sampled frames with states), with
 ///    feasibility_contacts.cpp (the contact points found on the posed shapes) and
 ///    feasibility_programme.cpp (each island's linear programme, COIN-OR CLP);
+///  - ordered_judge.hpp: judge_in_order, a row's tally loop judged on the threads in
+///    blocks and tallied in item order with the serial loop's verdict, figures and texts
+///    (rows 1, 2, 3, 5, 7 and 8);
 ///  - physics_table.cpp: the generic sums (RowSums), observe()'s calls of every row's
 ///    measure and results()' of every row's table entry, in validation_rows.def's order
 ///    (physics_rows.inc: the physics rows of the table by the frames they measure).
@@ -275,8 +278,9 @@ struct CheckedFrame {
   struct Work {
     std::vector<Aabb> grown;         ///< per body: its exact posed box grown by the reach
     std::vector<Pair> todo;          ///< the candidates that intersect
+    std::vector<char> is_required;   ///< per candidate: row 1 requires it
     std::vector<std::uint32_t> group_begin, group_list, fill;  ///< groups of rows per truth entry
-    std::vector<std::size_t> group_truth;                      ///< per group of rows: its truth entry
+    std::vector<std::size_t> group_truth;  ///< per group of rows: its truth entry (row 3 reads it too)
     std::vector<PairReferenceScratch> scratch;                 ///< per worker
     ExactPairsTables pair_tables;  ///< exact_pairs' tables: the candidates', then row 1's flat set
   } work;
