@@ -24,6 +24,7 @@ struct EnginesOptions {
   bool available = false;  ///< --available: only the names of the engines that run here
   bool json = false;       ///< --json: the registry as JSON on stdout
   double check_timeout_s = 30.0;  ///< --check-timeout: one bound for every process engine's check, run at once
+  bool no_checks = false;  ///< --no-checks: no process engine's check runs; their availability is not said
 };
 
 /// What the engine `e` can do, in words, for the table.
@@ -40,15 +41,23 @@ std::string capabilities(const EngineInfo& e) {
   return s;
 }
 
-/// The registry as JSON: one object per engine (docs/cli.md, "engines").
-int engines_json() {
+/// What `why` says of a process engine whose check --no-checks left out.
+constexpr const char* kNotChecked = "not checked (--no-checks)";
+
+/// The registry as JSON: one object per engine (docs/cli.md, "engines"). With `checked`
+/// false a process engine's "available" is null and its "why" kNotChecked.
+int engines_json(bool checked) {
   nlohmann::ordered_json list = nlohmann::ordered_json::array();
   for (const EngineInfo& e : engine_infos()) {
-    const std::string why = engine_unavailable(e);
+    const bool answered = checked || e.command.empty();
+    const std::string why = answered ? engine_unavailable(e) : kNotChecked;
     nlohmann::ordered_json j;
     j["name"] = e.name;
     j["kind"] = e.command.empty() ? "builtin" : "process";
-    j["available"] = why.empty();
+    if (answered)
+      j["available"] = why.empty();
+    else
+      j["available"] = nullptr;
     j["why"] = utf8_replaced(why);
     j["rotates"] = e.rotates;
     j["geometries"] = e.geometries;
@@ -80,6 +89,10 @@ int engines_json() {
 int engines_command(const EnginesOptions& o) {
   if (!(o.check_timeout_s > 0.0 && o.check_timeout_s <= 30.0))
     throw InputError(fmt::format("--check-timeout: {:g} s; allowed: a number of seconds in (0, 30]", o.check_timeout_s));
+  if (o.no_checks && !o.json)
+    throw InputError("--no-checks: without --json; allowed: with --json only (the table and --available say what runs "
+                     "here, which takes the checks)");
+  if (o.no_checks) return engines_json(false);
   // SIGINT/SIGTERM while the checks run: they are stopped (their process trees end with
   // them), nothing is listed (a stopped check says nothing of its engine), one line, 130/143.
   RunSession session("engines");
@@ -89,7 +102,7 @@ int engines_command(const EnginesOptions& o) {
   check_process_engines(specs, o.check_timeout_s);
   if (const int sig = session.signal())
     return session.stopped(sig, fmt::format(" while the checks of {} process engine(s) ran", specs.size()));
-  if (o.json) return engines_json();
+  if (o.json) return engines_json(true);
   for (const EngineInfo& e : engine_infos()) {
     const std::string why = engine_unavailable(e);
     if (o.available) {
@@ -122,6 +135,10 @@ Command add_engines_command(CLI::App& app) {
                 "geometries, settings, thread_safe (not_thread_safe: why not), max_bodies and its reason where it has "
                 "one, description, own_broadphase and its class where it runs its own (a process "
                 "engine also: command, engines_file), and the engines files read");
+  cmd->add_flag("--no-checks", options->no_checks,
+                "With --json: run no process engine's check (each starts its runtime, about 0.6 s of CPU for Node.js): "
+                "a process engine's available is null and its why \"not checked (--no-checks)\"; built-in engines "
+                "are answered as always");
   return {[cmd] { return cmd->parsed(); }, [options] { return engines_command(*options); }};
 }
 

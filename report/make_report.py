@@ -47,7 +47,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the report_*.p
 from report_common import CURRENT, NOISE_NOTE, OCTOCD, PAPER, fail, load_warning, np, plt  # noqa: E402,F401
 from report_data import LOADED, check_points, load, merge, read_trace  # noqa: E402,F401
 from report_html import Doc, output_dir  # noqa: E402
-from report_plots import read_registry_broadphases  # noqa: E402
+from report_plots import REGISTRY_SOURCE, read_registry_broadphases  # noqa: E402,F401
 from report_csv import file_slug, sweep_csv  # noqa: E402
 from report_gate import GATE_MIN_REPS, LEVEL_RANGE, gate_summary, reps_needed, section_gate  # noqa: E402
 import report_speed_accuracy as RSA  # noqa: E402  (sweeps of kind speed-accuracy, design.md section 15)
@@ -112,8 +112,7 @@ def main():
         fail("no inputs; allowed: result files of octocd bench (.json) and traces (.h5), or --history DIR")
     a.title = a.title or "octocd benchmark report"
     OCTOCD[0] = a.octocd
-    if a.octocd:
-        read_registry_broadphases(a.octocd)  # the registry's own broadphases, process engines' too
+    REGISTRY_SOURCE[:] = [a.octocd, False]  # the registry's own broadphases, read when a point asks
     LOADED.clear()  # each file read and checked once per report
     output_dir(a.output, "-o")
     if a.csv:

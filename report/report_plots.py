@@ -181,24 +181,31 @@ def axis_label(p, axis):
 
 # The engine registry's own broadphases (engines/src/engines.cpp: EngineInfo::own_broadphase
 # -> own_broadphase_class; process engines' too, docs/bring-your-engine.md) as `octocd
-# engines --json` gives them, read by read_registry_broadphases (`octocd report` passes its
-# own binary as --octocd), for results whose points record only `engine_broadphase`.
+# engines --json --no-checks` gives them (`octocd report` passes its own binary as --octocd),
+# for results whose points record only `engine_broadphase`: read once, when a point first
+# asks (a report of traces alone never runs octocd for it).
 REGISTRY_BROADPHASE_CLASS = {}
+REGISTRY_SOURCE = [None, False]  # [the octocd binary to ask, asked already]
 
 
 def broadphase_class(eb, default):
     """The class name of the own broadphase `eb`: the registry's, else `default`."""
+    if REGISTRY_SOURCE[0] and not REGISTRY_SOURCE[1]:
+        REGISTRY_SOURCE[1] = True
+        read_registry_broadphases(REGISTRY_SOURCE[0])
     return REGISTRY_BROADPHASE_CLASS.get(eb, default)
 
 
 def read_registry_broadphases(octocd):
-    """Fills REGISTRY_BROADPHASE_CLASS from `octocd engines --json`; left empty (an engine's
-    own broadphase is then named as its points record it, e.g. bullet-dbvt) when octocd
-    cannot be run or answers otherwise."""
+    """Fills REGISTRY_BROADPHASE_CLASS from `octocd engines --json --no-checks` (the registry's
+    facts; no process engine's runtime is started); left empty (an engine's own broadphase is
+    then named as its points record it, e.g. bullet-dbvt) when octocd cannot be run or answers
+    otherwise."""
     import json
     import subprocess
     try:
-        out = subprocess.run([octocd, "engines", "--json"], capture_output=True, text=True, timeout=300).stdout
+        out = subprocess.run([octocd, "engines", "--json", "--no-checks"], capture_output=True, text=True,
+                             timeout=300).stdout
         for e in json.loads(out).get("engines", []):
             if isinstance(e, dict) and e.get("own_broadphase") and e.get("own_broadphase_class"):
                 REGISTRY_BROADPHASE_CLASS[str(e["own_broadphase"])] = str(e["own_broadphase_class"])

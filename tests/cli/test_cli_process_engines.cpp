@@ -104,6 +104,35 @@ TEST_F(ProcessEngines, ListedBesideTheBuiltInOnesWithTheirAvailability) {
   EXPECT_EQ(by["pymissing"]["available"], false);
   EXPECT_NE(by["pymissing"]["why"].get<std::string>().find("not found on PATH"), std::string::npos);
   EXPECT_EQ(doc.at("engines_files").back(), data("engines.json"));
+
+  // --no-checks: the same registry facts; a process engine's availability null, not said;
+  // a built-in engine's answered as with the checks. Without --json it is refused.
+  const Result n = octocd("engines --json --no-checks");
+  ASSERT_EQ(n.code, 0) << n.output;
+  const nlohmann::json unchecked = nlohmann::json::parse(n.output);
+  ASSERT_EQ(unchecked.at("engines").size(), doc.at("engines").size());
+  for (const auto& e : unchecked.at("engines")) {
+    nlohmann::json checked = by.at(e.at("name").get<std::string>());
+    SCOPED_TRACE(e.at("name").get<std::string>());
+    if (e.at("kind") == "process") {
+      EXPECT_TRUE(e.at("available").is_null());
+      EXPECT_EQ(e.at("why"), "not checked (--no-checks)");
+    } else {
+      EXPECT_EQ(e.at("available"), checked.at("available"));
+      EXPECT_EQ(e.at("why"), checked.at("why"));
+    }
+    for (const char* key : {"available", "why"}) {
+      checked.erase(key);
+    }
+    nlohmann::json facts = e;
+    facts.erase("available");
+    facts.erase("why");
+    EXPECT_EQ(facts, checked);
+  }
+  EXPECT_EQ(unchecked.at("engines_files"), doc.at("engines_files"));
+  const Result t = octocd("engines --no-checks");
+  EXPECT_EQ(t.code, 2) << t.output;
+  EXPECT_NE(t.output.find("--no-checks: without --json; allowed: with --json only"), std::string::npos) << t.output;
 }
 
 TEST_F(ProcessEngines, TheUsersEnginesFileIsReadAndTheOptionsFileReplacesItsEntries) {

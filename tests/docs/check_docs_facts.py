@@ -34,8 +34,9 @@ def main(octocd, root):
         return (root / name).read_text(encoding="utf-8")
 
     # 1. Engines.
-    engines = [e["name"] for e in json.loads(subprocess.run([octocd, "engines", "--json"], capture_output=True,
-                                                            text=True, check=True).stdout)["engines"]]
+    engines = [e["name"] for e in json.loads(subprocess.run([octocd, "engines", "--json", "--no-checks"],
+                                                            capture_output=True, text=True,
+                                                            check=True).stdout)["engines"]]
     if len(engines) < 3:
         errors.append(f"octocd engines --json lists {engines}: too few to check")
     engines_md = page("docs/engines.md")
