@@ -8,6 +8,7 @@
 // (docs/validation.md, "Incomplete contact reporting").
 #include "physics_impl.hpp"
 
+#include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
 
 #include <algorithm>
@@ -121,13 +122,13 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
   std::vector<Pose> pose(n);
   std::vector<double> motion(n);
   std::vector<Aabb> grown(n);
-  for (std::size_t i = 0; i < n; ++i) {
+  parallel_items(n, threads, stop, [&](std::size_t i, unsigned) {
     const auto u = static_cast<std::uint32_t>(i);
     pose[i] = frame_pose(rec.x_pre[i], oriented ? rec.q_pre[i] : Quat{}, u);  // the shapes' frame
     motion[i] = step_motion(rec, u);
     grown[i] = expanded(ref->world_aabb(u, pose[i]),
                         static_cast<float>(motion[i] + radius(u) + 0.5 * (max_margin + slack)));
-  }
+  });
   std::vector<Pair> cand;
   ExactPairsSettings settings;
   settings.threads = threads;

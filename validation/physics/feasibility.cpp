@@ -65,17 +65,17 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // reach): two shapes that come within the margin of each other in the step overlap.
   std::vector<double> motion(n);
   std::vector<Aabb> grown(n), world(n);
-  for (std::size_t i = 0; i < n; ++i) {
+  parallel_items(n, threads, stop, [&](std::size_t i, unsigned) {
     const auto u = static_cast<std::uint32_t>(i);
     motion[i] = step_motion(rec, u);
     world[i] = aabb_geometry && rec.aabbs.size() == n ? rec.aabbs[i] : ref->world_aabb(u, det[i]);
     grown[i] = expanded(world[i], static_cast<float>(motion[i] + radius(u) + 0.5 * (max_margin + slack)));
-  }
+  });
   std::vector<Pair> cand;
   ExactPairsSettings settings;
   settings.threads = threads;
   settings.max_pairs_per_body = limits::kMaxPairsPerBody;
-  exact_pairs(grown, cand, settings);
+  exact_pairs(grown, cand, settings, st.pair_tables);
 
   // Each pair within reach: its contact points and normal.
   std::vector<std::uint32_t> parent(n);

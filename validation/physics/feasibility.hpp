@@ -79,6 +79,8 @@ struct FeasibilityState {
   std::uint64_t witness = 0;  ///< contact points at a row's two witness points (/contacts/point_b)
   std::uint64_t persisted = 0;  ///< contact points given normals of their earlier steps
   std::size_t persisted_steps = 0;  ///< the most earlier steps a point's normals came from
+  /// exact_pairs' tables of the step's candidate search, kept from step to step.
+  ExactPairsTables pair_tables;
 };
 
 /// One candidate pair's contacts found on the posed shapes, with its counts.
