@@ -3,12 +3,14 @@
 // leaves to the CPU reference) the physics tier judges the same recorded frames once on
 // the CPU and once with rows broadphase-completeness and penetration on the device (and
 // rows contact-completeness and contact-geometry on the CPU geometry of the device's
-// candidate pairs), and every row must give the same verdict, applicability, judged
+// candidate pairs; impulse-feasibility and the near-pair search on the device's pairs within
+// a step's reach), and every row must give the same verdict, applicability, judged
 // count, causes, failure counts and failing items, with figures equal to 1e-9 m (the
 // device's separating-axis arithmetic rounds apart from the CPU's). Planted faults must fail on both alike: a
 // required pair dropped from the engine's candidates, a frame whose boxes are turned (the
 // engine's pairs then miss pairs and the boxes penetrate; the rotated separating axes),
-// a penetrating pair's contact rows dropped, and a penetration bound below every depth.
+// a penetrating pair's contact rows dropped, a penetration bound below every depth, and a
+// free box's velocity edited under contacts_complete 0.
 //
 // Without a usable CUDA device every test is SKIPPED with the reason (CI builds with nvcc
 // and has no GPU). Environment: OCTOCD_SOURCE_DIR (scenes and datasets; default: the
@@ -150,6 +152,10 @@ TEST_P(DeviceJudgeScenes, SameVerdictsAsTheCpuTier) {
   EXPECT_NE(row(dev, "penetration").detail.find("judged on the device (cuda: "), std::string::npos);
   EXPECT_NE(row(dev, "contact-completeness").detail.find("from the device (cuda: "), std::string::npos);
   EXPECT_GT(row(dev, "broadphase-completeness").judged, 0u) << "nothing judged: the comparison would be vacuous";
+  // impulse-feasibility took its pairs within a step's reach from the device.
+  EXPECT_EQ(row(dev, "broadphase-completeness").detail.find("; 0 searches of pairs within a step's reach"),
+            std::string::npos);
+  EXPECT_GT(row(dev, "impulse-feasibility").judged + row(dev, "free-flight").judged, 0u);
 }
 
 INSTANTIATE_TEST_SUITE_P(Shipped, DeviceJudgeScenes,
@@ -255,6 +261,34 @@ TEST(DeviceJudgeFaults, TightPenetrationBoundFailsOnBoth) {
   const auto dev = judged(*model, bodies, recs, 5, true, tol);
   const auto failed = expect_same(cpu, dev);
   EXPECT_TRUE(has(failed, "penetration"));
+}
+
+// contacts_complete 0 (an engine that may drop contact rows): free-flight judges a body without
+// rows only where the near-pair search, on the device here, shows it apart from every other
+// body. A free box's velocity edited in the last frame fails on both alike, the same item.
+TEST(DeviceJudgeFaults, IncompleteContactsEditedFreeVelocityFailsAlike) {
+  REQUIRE_DEVICE();
+  std::shared_ptr<const Model> model;
+  std::vector<FrameRecord> recs = recorded("boxes-uniform-10k", 20, model);
+  FrameRecord& last = recs.back();
+  ASSERT_EQ(last.v_post.size(), model->bodies.size());
+  std::vector<char> paired(model->bodies.size(), 0);
+  for (const Pair& p : last.pairs) paired[p.a] = paired[p.b] = 1;
+  for (const ContactRecord& c : last.contacts) paired[c.pair.a] = paired[c.pair.b] = 1;
+  std::size_t edited = model->bodies.size();
+  for (std::size_t i = 0; i < model->bodies.size() && edited == model->bodies.size(); ++i)
+    if (!paired[i] && std::fabs(last.v_pre[i].x) + std::fabs(last.v_pre[i].y) + std::fabs(last.v_pre[i].z) > 0.1f)
+      edited = i;
+  ASSERT_LT(edited, model->bodies.size()) << "no moving box without pairs at frame 20";
+  last.v_post[edited].x += 0.5f;
+  PhysicsBodies bodies = octocd_physics_bodies(*model);
+  bodies.contacts_complete = false;
+  const auto cpu = judged(*model, bodies, recs, 10, false);
+  const auto dev = judged(*model, bodies, recs, 10, true);
+  const auto failed = expect_same(cpu, dev);
+  EXPECT_TRUE(has(failed, "free-flight"));
+  EXPECT_EQ(row(dev, "broadphase-completeness").detail.find("; 0 searches of pairs within a step's reach"),
+            std::string::npos);
 }
 
 }  // namespace

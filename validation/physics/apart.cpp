@@ -130,10 +130,7 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
                         static_cast<float>(motion[i] + radius(u) + 0.5 * (max_margin + slack)));
   });
   std::vector<Pair> cand;
-  ExactPairsSettings settings;
-  settings.threads = threads;
-  settings.max_pairs_per_body = limits::kMaxPairsPerBody;
-  exact_pairs(grown, cand, settings, near_tables);
+  reach_pairs(grown, cand, near_tables);
   ContactGraph graph = contact_graph(rec);
   const bool whole = incomplete_whole_step(rec.frame);
   for (const Pair& p : cand) {

@@ -3,14 +3,18 @@
 // the CPU reference, for rows 1 (broadphase-completeness) and 4 (penetration), which judge
 // them as they judge the CPU's (candidates.cpp, penetration.cpp). Every other row stays on
 // the CPU (physics_table.cpp); rows 2 and 3's CheckedFrame takes the device's candidates
-// (PhysicsValidators::Impl::checked).
+// (PhysicsValidators::Impl::checked). impulse-feasibility and the near-pair search take their
+// pairs within a step's reach from the device too (reach_pairs).
 #include "physics_impl.hpp"
 
 #include "../src/parallel.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <iterator>
 #include <stdexcept>
+
+#include "octocd/exact_pairs.hpp"
 
 namespace octocd {
 
@@ -31,41 +35,46 @@ struct Pending {
 
 }  // namespace
 
+void PhysicsValidators::Impl::set_device_bodies() {
+  if (device_bodies_set) return;
+  const std::size_t n = model->bodies.size();
+  const double slack = tol.geometry_slack_m;
+  const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
+  // A box on the device: a box shape (or a body declared as its box), its hull the 8
+  // corners of its local box; any other body's pairs go to the CPU reference.
+  std::vector<DeviceJudgeBody> b(n);
+  device_box.assign(n, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto body = static_cast<std::uint32_t>(i);
+    const CollisionShape shape_as =
+        bodies.collision_shape.empty() ? CollisionShape::Mesh : bodies.collision_shape[i];
+    const bool box_shape = !model->shapes[model->bodies[i].shape].mesh;
+    bool box = (box_shape && shape_as != CollisionShape::Sphere) || shape_as == CollisionShape::Box;
+    if (box) {
+      const HullFeatures& h = ref->hull_features(body);
+      box = h.vertices.size() == 8 && h.face_normals.size() == 3;
+      if (box) {
+        b[i].lo = b[i].hi = h.vertices[0];
+        for (const auto& v : h.vertices)
+          for (int d = 0; d < 3; ++d) b[i].lo[d] = std::min(b[i].lo[d], v[d]), b[i].hi[d] = std::max(b[i].hi[d], v[d]);
+      }
+    }
+    b[i].box = box;
+    b[i].dynamic = dynamic(body);
+    b[i].grow = 0.5 * reach + radius(body);
+    device_box[i] = box ? 1 : 0;
+  }
+  device->set_bodies(b);
+  device_bodies_set = true;
+}
+
 void PhysicsValidators::Impl::device_frame(const FrameRecord& rec, const std::vector<Pose>& det,
                                            DeviceCheckedFrame& f) {
   const std::size_t n = model->bodies.size();
   const double slack = tol.geometry_slack_m;
-  const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
   const bool need_distance = tol.broadphase_margin_m - slack > 0;
   f.rec = &rec;
-  if (!device_bodies_set) {
-    // A box on the device: a box shape (or a body declared as its box), its hull the 8
-    // corners of its local box; any other body's pairs go to the CPU reference.
-    std::vector<DeviceJudgeBody> b(n);
-    device_box.assign(n, 0);
-    for (std::size_t i = 0; i < n; ++i) {
-      const auto body = static_cast<std::uint32_t>(i);
-      const CollisionShape shape_as =
-          bodies.collision_shape.empty() ? CollisionShape::Mesh : bodies.collision_shape[i];
-      const bool box_shape = !model->shapes[model->bodies[i].shape].mesh;
-      bool box = (box_shape && shape_as != CollisionShape::Sphere) || shape_as == CollisionShape::Box;
-      if (box) {
-        const HullFeatures& h = ref->hull_features(body);
-        box = h.vertices.size() == 8 && h.face_normals.size() == 3;
-        if (box) {
-          b[i].lo = b[i].hi = h.vertices[0];
-          for (const auto& v : h.vertices)
-            for (int d = 0; d < 3; ++d) b[i].lo[d] = std::min(b[i].lo[d], v[d]), b[i].hi[d] = std::max(b[i].hi[d], v[d]);
-        }
-      }
-      b[i].box = box;
-      b[i].dynamic = dynamic(body);
-      b[i].grow = 0.5 * reach + radius(body);
-      device_box[i] = box ? 1 : 0;
-    }
-    device->set_bodies(b);
-    device_bodies_set = true;
-  }
+  set_device_bodies();
   // Non-box bodies' exact posed world AABBs (the CPU reference's), boxes posed on the device.
   std::vector<Aabb> world;
   if (std::find(device_box.begin(), device_box.end(), 0) != device_box.end()) {
@@ -193,6 +202,28 @@ const DeviceTruth& PhysicsValidators::Impl::truth_after(DeviceCheckedFrame& f, P
   return f.truth[k];
 }
 
+void PhysicsValidators::Impl::reach_pairs(const std::vector<Aabb>& grown, std::vector<Pair>& out,
+                                          ExactPairsTables& tables) {
+  const std::size_t n = grown.size();
+  if (device) {
+    set_device_bodies();
+    const auto t0 = std::chrono::steady_clock::now();
+    device->overlapping_pairs(grown, out);
+    device_reach_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++device_reach_calls;
+    const std::uint64_t limit = limits::kMaxPairsPerBody > UINT64_MAX / std::max<std::size_t>(n, 1)
+                                    ? UINT64_MAX
+                                    : std::uint64_t(limits::kMaxPairsPerBody) * n;
+    if (out.size() > limit) throw PairLimitError(out.size(), false, limit, n);
+    return;
+  }
+  ExactPairsSettings settings;
+  settings.threads = threads;
+  settings.max_pairs_per_body = limits::kMaxPairsPerBody;
+  exact_pairs(grown, out, settings, tables);
+  out.erase(std::remove_if(out.begin(), out.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }), out.end());
+}
+
 std::string PhysicsValidators::Impl::device_note() const {
   std::string shapes;
   for (const auto& [name, count] : device_cpu_shapes)
@@ -200,11 +231,13 @@ std::string PhysicsValidators::Impl::device_note() const {
   return fmt::format(
       "judged on the device ({}): {} checked frames, {:.3g} candidate pairs a frame, {} pair-frames of two boxes "
       "decided there (separating axes, double precision), {} by the CPU reference{}; device calls {:.3g} ms a frame "
-      "(candidates and box tests), {:.3g} ms (flat's set on the engine's AABBs)",
+      "(candidates and box tests), {:.3g} ms (flat's set on the engine's AABBs); {} searches of pairs within a step's "
+      "reach (impulse-feasibility, the near pairs) {:.3g} ms each",
       device->device_name(), device_frames, device_frames ? double(device_candidates) / double(device_frames) : 0.0,
       device_box_pairs, device_cpu_pairs, shapes.empty() ? "" : " (" + shapes + ")",
       device_frames ? 1e3 * device_seconds / double(device_frames) : 0.0,
-      device_frames ? 1e3 * device_flat_seconds / double(device_frames) : 0.0);
+      device_frames ? 1e3 * device_flat_seconds / double(device_frames) : 0.0, device_reach_calls,
+      device_reach_calls ? 1e3 * device_reach_seconds / double(device_reach_calls) : 0.0);
 }
 
 }  // namespace octocd

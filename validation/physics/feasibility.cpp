@@ -72,10 +72,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     grown[i] = expanded(world[i], static_cast<float>(motion[i] + radius(u) + 0.5 * (max_margin + slack)));
   });
   std::vector<Pair> cand;
-  ExactPairsSettings settings;
-  settings.threads = threads;
-  settings.max_pairs_per_body = limits::kMaxPairsPerBody;
-  exact_pairs(grown, cand, settings, st.pair_tables);
+  reach_pairs(grown, cand, st.pair_tables);
 
   // Each pair within reach: its contact points and normal.
   std::vector<std::uint32_t> parent(n);

@@ -640,8 +640,21 @@ struct PhysicsValidators::Impl {
   std::uint64_t device_frames = 0, device_candidates = 0, device_cpu_pairs = 0, device_box_pairs = 0;
   std::map<std::string, std::uint64_t> device_cpu_shapes;
   double device_seconds = 0, device_flat_seconds = 0;  ///< judge_frame's; overlapping_pairs' (not-flat)
+  /// reach_pairs' calls on the device and their seconds (impulse-feasibility, the near pairs).
+  std::uint64_t device_reach_calls = 0;
+  double device_reach_seconds = 0;
+  /// Every pair (a < b, sorted) whose `grown` boxes overlap (inclusive), at least one body
+  /// dynamic: the device's overlapping_pairs when a judge device is set, else exact_pairs on
+  /// the validators' threads with `tables` (whose set also holds static-static pairs, which
+  /// are dropped here too: no caller reads them). At most limits::kMaxPairsPerBody pairs a
+  /// body (PairLimitError naming the count). Candidates of impulse-feasibility and of the
+  /// near-pair search (design.md section 13; device_rows.cpp).
+  void reach_pairs(const std::vector<Aabb>& grown, std::vector<Pair>& out, ExactPairsTables& tables);
   /// Checked frames whose CPU geometry (rows 2 and 3) took the device's candidates (checked()).
   std::uint64_t device_cpu_geometry_frames = 0;
+  /// The bodies on the device (DeviceJudge::set_bodies), once: the boxes, their local boxes and
+  /// growth, the dynamic flags (device_rows.cpp).
+  void set_device_bodies();
   /// The device geometry of a checked frame into `f` (device_rows.cpp).
   void device_frame(const FrameRecord& rec, const std::vector<Pose>& det, physics_detail::DeviceCheckedFrame& f);
   /// The note a device row's detail carries: where it ran, what went to the CPU reference.
