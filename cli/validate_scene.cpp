@@ -339,7 +339,8 @@ int validate_scene_command(ValidateOptions& o, Clock::time_point t0) {
     (void)kind.make();  // no device or no CUDA build: exit 1 saying why, before the run
     vo.judge_device = kind.make;
     fmt::print("judge device {}: broadphase-completeness and penetration on the GPU (their details say what went "
-               "to the CPU reference); every other row on the CPU\n",
+               "to the CPU reference); every other row on the CPU, contact-completeness, contact-geometry and "
+               "impulse-feasibility on the GPU's candidate pairs\n",
                kind.name);
   }
   // Frames judged while the engine runs the next ones, unless a trace is written (its

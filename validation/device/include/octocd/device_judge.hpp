@@ -6,7 +6,8 @@
 /// engine it judges. It calls nothing of gpu/ (the CUDA engine's broadphases, midphase or
 /// response) and reads only core types, so a bug shared with the engine cannot pass unseen;
 /// the CPU tier (validation/physics/) stays the oracle and judges every other row (rows
-/// contact-completeness and contact-geometry on the device's candidate pairs).
+/// contact-completeness and contact-geometry on the device's candidate pairs,
+/// impulse-feasibility and the near-pair search on overlapping_pairs of their grown boxes).
 ///
 /// What the device computes:
 ///  - candidates: every pair of bodies whose world AABBs overlap (inclusive: touching
