@@ -122,7 +122,7 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
   std::vector<Pose> pose(n);
   std::vector<double> motion(n);
   std::vector<Aabb> grown(n);
-  parallel_items(n, threads, stop, [&](std::size_t i, unsigned) {
+  parallel_items_on(n, loop_threads(threads, n, kParallelBodyBoxesFrom), stop, [&](std::size_t i, unsigned) {
     const auto u = static_cast<std::uint32_t>(i);
     pose[i] = frame_pose(rec.x_pre[i], oriented ? rec.q_pre[i] : Quat{}, u);  // the shapes' frame
     motion[i] = step_motion(rec, u);

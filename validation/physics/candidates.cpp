@@ -87,7 +87,7 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
     const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;
     std::vector<Aabb>& grown = work.grown;
     grown.resize(n);
-    parallel_items(n, threads, stop, [&](std::size_t i, unsigned) {
+    parallel_items_on(n, loop_threads(threads, n, kParallelBodyBoxesFrom), stop, [&](std::size_t i, unsigned) {
       grown[i] = expanded(ref->world_aabb(static_cast<std::uint32_t>(i), det[i]),
                           static_cast<float>(0.5 * reach + radius(static_cast<std::uint32_t>(i))));
     });

@@ -65,7 +65,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // reach): two shapes that come within the margin of each other in the step overlap.
   std::vector<double> motion(n);
   std::vector<Aabb> grown(n), world(n);
-  parallel_items(n, threads, stop, [&](std::size_t i, unsigned) {
+  parallel_items_on(n, loop_threads(threads, n, kParallelBodyBoxesFrom), stop, [&](std::size_t i, unsigned) {
     const auto u = static_cast<std::uint32_t>(i);
     motion[i] = step_motion(rec, u);
     world[i] = aabb_geometry && rec.aabbs.size() == n ? rec.aabbs[i] : ref->world_aabb(u, det[i]);

@@ -65,6 +65,10 @@ using dmath::kEps32;
 using dmath::M3;
 
 constexpr double kPi = 3.14159265358979323846;
+/// Fewest bodies whose per-body boxes (a posed box grown by its reach: rows 1 and 9, the
+/// near-pair search) are computed on threads: below it one thread costs less than waking
+/// another (exact_pairs' per-box passes use the same 1,024).
+constexpr std::size_t kParallelBodyBoxesFrom = 1024;
 /// A relative sliding speed (m/s) below which v_t has no direction: jt is then J_t's
 /// magnitude (the trace convention; octocd's Bullet adapter uses the same threshold).
 constexpr double kNoSliding = 1e-6;
