@@ -135,8 +135,7 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
   const bool whole = incomplete_whole_step(rec.frame);
   for (const Pair& p : cand) {
     poll();
-    if (!dynamic(p.a) && !dynamic(p.b)) continue;
-    if (graph.find(p.a) == graph.find(p.b)) continue;  // one component: exchanged within it
+    if (graph.find(p.a) == graph.find(p.b)) continue;  // reach_pairs: a body of every pair is dynamic  // one component: exchanged within it
     if (!whole && !incomplete_pair(rec.frame, p)) continue;  // /contacts/incomplete: this pair's rows are complete
     ++near_tested;
     const ReferenceNormal r = ref->posed(p.a, p.b, pose[p.a], pose[p.b]);

@@ -78,10 +78,7 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
   // The judge device's candidates (device_rows.cpp) are the same set, found there, under
   // the same limit of limits::kMaxPairsPerBody pairs a body as exact_pairs' below.
   if (candidates) {
-    const std::uint64_t limit = limits::kMaxPairsPerBody > UINT64_MAX / std::max<std::size_t>(n, 1)
-                                    ? UINT64_MAX
-                                    : std::uint64_t(limits::kMaxPairsPerBody) * n;
-    if (candidates->size() > limit) throw PairLimitError(candidates->size(), false, limit, n);
+    require_pair_limit(candidates->size(), n);
     f.cand.assign(candidates->begin(), candidates->end());
   } else {
     const double reach = std::max(tol.broadphase_margin_m, max_margin) + slack;

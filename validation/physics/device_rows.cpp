@@ -211,10 +211,7 @@ void PhysicsValidators::Impl::reach_pairs(const std::vector<Aabb>& grown, std::v
     device->overlapping_pairs(grown, out);
     device_reach_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     ++device_reach_calls;
-    const std::uint64_t limit = limits::kMaxPairsPerBody > UINT64_MAX / std::max<std::size_t>(n, 1)
-                                    ? UINT64_MAX
-                                    : std::uint64_t(limits::kMaxPairsPerBody) * n;
-    if (out.size() > limit) throw PairLimitError(out.size(), false, limit, n);
+    require_pair_limit(out.size(), n);
     return;
   }
   ExactPairsSettings settings;

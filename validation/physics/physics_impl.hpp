@@ -69,6 +69,15 @@ constexpr double kPi = 3.14159265358979323846;
 /// near-pair search) are computed on threads: below it one thread costs less than waking
 /// another (exact_pairs' per-box passes use the same 1,024).
 constexpr std::size_t kParallelBodyBoxesFrom = 1024;
+/// Throws PairLimitError (the count, the limit, the bodies) when `pairs` exceeds
+/// limits::kMaxPairsPerBody pairs a body of `bodies`: the limit exact_pairs applies, for a
+/// pair set found elsewhere (the judge device's). Saturates instead of overflowing.
+inline void require_pair_limit(std::size_t pairs, std::size_t bodies) {
+  const std::uint64_t limit = limits::kMaxPairsPerBody > UINT64_MAX / std::max<std::size_t>(bodies, 1)
+                                  ? UINT64_MAX
+                                  : std::uint64_t(limits::kMaxPairsPerBody) * bodies;
+  if (pairs > limit) throw PairLimitError(pairs, false, limit, bodies);
+}
 /// A relative sliding speed (m/s) below which v_t has no direction: jt is then J_t's
 /// magnitude (the trace convention; octocd's Bullet adapter uses the same threshold).
 constexpr double kNoSliding = 1e-6;
