@@ -1,5 +1,6 @@
 // The worker team of octocd/parallel.hpp: every item once, a stalled worker never holds
-// up the items it did not claim, exceptions and stops, nested and concurrent loops.
+// up the items it did not claim, exceptions and stops, nested and concurrent loops; the
+// tuner that runs a loop on the team or on its caller alone.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -9,6 +10,7 @@
 #include <thread>
 #include <vector>
 
+#include "../../core/src/loop_tuner.hpp"
 #include "octocd/parallel.hpp"
 
 // This file's own names (its tests compile in unity batches with the folder's other files).
@@ -40,7 +42,9 @@ TEST(Parallel, EveryItemRunsOnceOnAWorkerBelowTheLoopThreads) {
       });
       EXPECT_TRUE(done);
       for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(runs[i].load(), 1) << "item " << i << ", " << threads << " threads";
-      if (n > 0) EXPECT_LT(worst_worker.load(), std::max(1u, bound)) << threads << " threads, " << n << " items";
+      if (n > 0) {
+        EXPECT_LT(worst_worker.load(), std::max(1u, bound)) << threads << " threads, " << n << " items";
+      }
     }
   }
 }
@@ -80,7 +84,9 @@ TEST(Parallel, TheFirstExceptionIsRethrownAndTheTeamStaysUsable) {
                                         if (i == 5000) throw std::runtime_error("item 5000");
                                       }),
                  std::runtime_error);
-    if (threads == 1) EXPECT_EQ(ran.load(), 5001u);  // the items after the throw are skipped
+    if (threads == 1) {
+      EXPECT_EQ(ran.load(), 5001u);  // the items after the throw are skipped
+    }
     std::atomic<std::size_t> again{0};
     EXPECT_TRUE(octocd::parallel_for(1000, with(threads), [&](std::size_t, unsigned) { ++again; }));
     EXPECT_EQ(again.load(), 1000u);
@@ -93,7 +99,9 @@ TEST(Parallel, AStopSkipsTheItemsNotStarted) {
     LoopOptions o = with(threads, 8);
     o.stop = [&] { return ran.load() >= 100; };
     EXPECT_FALSE(octocd::parallel_for(100000, o, [&](std::size_t, unsigned) { ++ran; }));
-    if (threads == 1) EXPECT_EQ(ran.load(), 104u);  // polled between chunks of 8
+    if (threads == 1) {
+      EXPECT_EQ(ran.load(), 104u);  // polled between chunks of 8
+    }
     EXPECT_GE(ran.load(), 100u);
     o.stop = [] { return false; };
     ran = 0;
@@ -173,5 +181,115 @@ TEST(Parallel, ThreadCountSetsTheCallersCountForItsScope) {
 }
 
 }  // namespace
+
+
+// The tuner of the team (core/src/loop_tuner.hpp), fed with made-up measurements: which way
+// each loop runs, when a probe ends, what it decides and how long the choice holds.
+namespace tuner {
+
+using octocd::detail::LoopTuner;
+
+// Runs `loops` loops of `wall` seconds each through the tuner, those on the team at
+// `team_rate` CPU seconds per loop second and those alone at `alone_rate`, `now` advancing
+// by each loop; returns how many ran on the team.
+int feed(LoopTuner& t, double& now, int loops, double wall, double team_rate, double alone_rate) {
+  int on_team = 0;
+  for (int i = 0; i < loops; ++i) {
+    const LoopTuner::Use use = t.begin(now);
+    now += wall;
+    if (use.team) ++on_team;
+    if (use.measure) t.end(use.team, wall, wall * (use.team ? team_rate : alone_rate), now);
+  }
+  return on_team;
+}
+
+TEST(LoopTuner, AProbeAlternatesTheWaysAndKeepsTheTeamWhereItGetsMoreCpu) {
+  LoopTuner t;
+  double now = 100.0;
+  // 2.6 ms loops: each way needs 4 loops and 10 ms, so the probe is 8 loops, every other
+  // one on the team, the first among them.
+  EXPECT_TRUE(t.begin(now).team);
+  EXPECT_FALSE(t.begin(now).team);  // (two loops asked for, none ended: nothing measured)
+  LoopTuner u;
+  EXPECT_EQ(feed(u, now, 7, 0.0026, 1.6, 1.0), 4);
+  EXPECT_TRUE(u.probing());
+  EXPECT_EQ(feed(u, now, 1, 0.0026, 1.6, 1.0), 0);
+  EXPECT_FALSE(u.probing());
+  EXPECT_EQ(u.decisions(), 1u);
+  EXPECT_TRUE(u.team());
+  EXPECT_DOUBLE_EQ(u.last_team_rate(), 1.6);
+  EXPECT_DOUBLE_EQ(u.last_alone_rate(), 1.0);
+  // Settled: unmeasured loops on the team until kSettleSeconds after the decision.
+  const double decided = now;
+  while (now < decided + LoopTuner::kSettleSeconds - 0.002) {
+    const LoopTuner::Use use = u.begin(now);
+    ASSERT_TRUE(use.team);
+    ASSERT_FALSE(use.measure);
+    now += 0.001;
+  }
+  const LoopTuner::Use next = u.begin(decided + LoopTuner::kSettleSeconds);  // a new probe
+  EXPECT_TRUE(next.team);
+  EXPECT_TRUE(next.measure);
+  EXPECT_TRUE(u.probing());
+}
+
+TEST(LoopTuner, TheCallerAloneIsChosenWhenTheTeamGetsLessThanTheGainAndTheTeamIsProbedAgain) {
+  LoopTuner t;
+  double now = 0.0;
+  // Beside a busy process the woken worker shares the caller's core: about the same CPU a
+  // second either way.
+  feed(t, now, 8, 0.0026, 1.1, 1.0);
+  ASSERT_EQ(t.decisions(), 1u);
+  EXPECT_FALSE(t.team());
+  EXPECT_EQ(feed(t, now, 900, 0.001, 1.1, 1.0), 0);  // 0.9 s: alone, unmeasured
+  EXPECT_EQ(t.decisions(), 1u);
+  now += LoopTuner::kSettleSeconds;
+  // The load went away: the next probe gives the team back.
+  feed(t, now, 8, 0.0026, 1.9, 1.0);
+  EXPECT_EQ(t.decisions(), 2u);
+  EXPECT_TRUE(t.team());
+  // Just above the gain the team is kept; just below it is not. Beside two busy processes
+  // the caller alone gets part of a core (0.6 CPU a second) and the team wins at 1.0.
+  LoopTuner above, below, shared;
+  double a = 0.0, b = 0.0, c = 0.0;
+  feed(above, a, 8, 0.0026, 1.01 * LoopTuner::kTeamGain, 1.0);
+  feed(below, b, 8, 0.0026, 0.99 * LoopTuner::kTeamGain, 1.0);
+  feed(shared, c, 8, 0.0026, 1.0, 0.6);
+  EXPECT_TRUE(above.team());
+  EXPECT_FALSE(below.team());
+  EXPECT_TRUE(shared.team());
+}
+
+TEST(LoopTuner, LongLoopsEndAProbeEachAndTheChoiceHoldsLongerTheLongerTheyAre) {
+  LoopTuner t;
+  double now = 0.0;
+  // Loops of 0.5 s: one on the team, one alone (each past kProbeLongSeconds).
+  EXPECT_EQ(feed(t, now, 2, 0.5, 12.0, 1.0), 1);
+  ASSERT_EQ(t.decisions(), 1u);
+  EXPECT_TRUE(t.team());
+  // The caller alone took 0.5 s in the probe: the choice holds for 50 x that.
+  const double decided = now;
+  EXPECT_FALSE(t.begin(decided + 20.0).measure);
+  EXPECT_FALSE(t.begin(decided + 0.99 * LoopTuner::kSettleOverProbe * 0.5).measure);
+  EXPECT_TRUE(t.begin(decided + LoopTuner::kSettleOverProbe * 0.5).measure);
+}
+
+TEST(LoopTuner, ShortLoopsNeedEnoughLoopTimeOnEachWay) {
+  LoopTuner t;
+  double now = 0.0;
+  // Loops of 30 us: 10 ms of them each way is 334 each, 668 in all.
+  EXPECT_EQ(feed(t, now, 667, 30e-6, 1.5, 1.0), 334);
+  EXPECT_TRUE(t.probing());
+  EXPECT_EQ(t.decisions(), 0u);
+  feed(t, now, 1, 30e-6, 1.5, 1.0);
+  EXPECT_FALSE(t.probing());
+  EXPECT_TRUE(t.team());
+  // Outside a probe a measurement changes nothing.
+  for (int i = 0; i < 1000; ++i) t.end(false, 0.01, 0.01, now);
+  EXPECT_EQ(t.decisions(), 1u);
+  EXPECT_TRUE(t.team());
+}
+
+}  // namespace tuner
 
 }  // namespace octocd_test_parallel

@@ -16,6 +16,11 @@
 ///   a worker), or while the team runs another caller's loop, runs serially on its caller.
 /// - A loop runs in parallel only from `min_items` items on, a threshold each call site
 ///   sets from its measured cost (fewer items are cheaper on one thread than a wake-up).
+/// - Whether a loop that may use the team does is measured while the process runs
+///   (core/src/loop_tuner.hpp, design.md section 4): a short probe runs loops on the team
+///   and on their caller alone in turn, and the way that gets the process more CPU per
+///   second of loop holds for the next second (beside one busy process on two cores a woken
+///   worker shares its caller's core, and the caller alone is faster).
 ///
 /// The thread count is a setting: the CPU engine's `threads` (docs/settings.md),
 /// `validate --threads`, `run --threads` for `--worlds`. 0 everywhere means
@@ -71,7 +76,8 @@ using ChunkBody = std::function<void(std::size_t first, std::size_t last, unsign
 /// started finish), true when every item ran. The first exception thrown by `body` is
 /// rethrown after every worker has left the loop (the remaining items are skipped).
 /// The loop's threads: min(options' threads, n), 1 below min_items items, inside
-/// another loop's item, or while the team runs another caller's loop.
+/// another loop's item, while the team runs another caller's loop, or while the tuner
+/// (above) runs loops on their callers alone.
 bool parallel_chunks(std::size_t n, const LoopOptions& options, const ChunkBody& body);
 
 /// parallel_chunks with body(i, worker) called for each item i.
