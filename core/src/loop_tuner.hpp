@@ -7,18 +7,18 @@
 /// A loop on the team is faster than on its caller alone only when the scheduler runs the
 /// workers beside the caller. On an idle machine it does; beside one busy process on two
 /// cores a woken worker shares the caller's core instead (the kernel places it there), and
-/// the loop takes longer than the caller alone would; beside two, the team's threads get a
-/// larger share of the cores than one thread does. So the tuner measures both ways in turn
-/// and compares the CPU the process gets per second of loop (CPU time of all its threads
-/// over the loops' wall time; the work is the same either way):
-///   1. a probe: loops alternate between the team and the caller alone (both see the same
-///      load) until each way has kProbeLoops loops and kProbeSeconds of loop time (or
-///      either has kProbeLongSeconds, for loops too long to count); kProbeSeconds spans
-///      several of the kernel's scheduling periods, so a share of a core shows as such,
-///   2. the team when its CPU per loop second is >= kTeamGain x the caller's alone, else
-///      the caller alone, for kSettleSeconds (and at least kSettleOverProbe x the caller
-///      alone's loop time in the probe, so a probe of long loops costs a bounded share),
-///      then 1. again.
+/// the loop takes longer than on the caller alone; beside two, the team's threads get a
+/// larger share of the cores than one thread does, and a worker goes on with the loop while
+/// the caller waits for a core. So the tuner measures both ways in turn and compares the
+/// CPU the process gets per wall second (all its threads; the work is the same either way):
+///   1. a probe of four phases, each at least kPhaseSeconds (several of the kernel's
+///      scheduling periods, so a share of a core shows as such), its loops on the team,
+///      alone, alone, on the team (a drift of the load hits both ways alike); it ends
+///      after two where the team gets kClearGain x alone's CPU per second,
+///   2. the team when its CPU per second is >= kTeamGain x alone's, else the caller alone,
+///      for kSettleSeconds (and at least kSettleOverProbe x the probe, so a probe that
+///      long loops stretched costs a bounded share), then 1. again.
+/// Phases change at a loop's start; the process's CPU time is read only there.
 /// Results never depend on the choice (parallel.hpp: each item writes its own result).
 /// Not thread-safe: the team calls it under a lock.
 
@@ -31,83 +31,71 @@ namespace octocd::detail {
 /// clock, CPU in seconds of the whole process (all threads).
 class LoopTuner {
  public:
-  /// Loops and loop seconds of each way in a probe; a probe also ends when either way
-  /// has kProbeLongSeconds.
-  static constexpr int kProbeLoops = 4;
-  static constexpr double kProbeSeconds = 0.01;
-  static constexpr double kProbeLongSeconds = 0.05;
-  /// The team is kept when its CPU per loop second is at least this times the caller's
-  /// alone (the rest is what waking and feeding workers costs without a gain).
-  static constexpr double kTeamGain = 1.25;
+  /// The least wall time of each of the probe's four phases.
+  static constexpr double kPhaseSeconds = 0.015;
+  /// The team is kept when the process's CPU per second on it is at least this times
+  /// alone's (less is what waking and feeding workers costs without a gain).
+  static constexpr double kTeamGain = 1.15;
+  /// A probe ends after its first two phases when the team gets at least this times
+  /// alone's CPU per second (an idle machine: 1.6 on two cores).
+  static constexpr double kClearGain = 1.4;
   /// How long a choice holds before the next probe, at least, and at least this many
-  /// times the caller-alone loop seconds of the probe.
+  /// times the probe's wall time.
   static constexpr double kSettleSeconds = 1.0;
-  static constexpr double kSettleOverProbe = 50.0;
+  static constexpr double kSettleOverProbe = 20.0;
 
-  /// How the next loop runs: on the team or not, and whether it is measured (then the
-  /// caller passes its wall and CPU seconds to end()).
-  struct Use {
-    bool team = true;
-    bool measure = false;
-  };
-
-  /// At a loop's start, `now` in seconds.
-  Use begin(double now) {
-    if (!probing_) {
-      if (now < settled_until_) return {team_, false};
-      team_probe_ = Probe{};
-      alone_probe_ = Probe{};
-      probing_ = true;
-      next_on_team_ = true;
+  /// Whether the loop starting at `now` (seconds) runs on the team. `cpu` returns the
+  /// process's CPU seconds; it is called only where a phase starts or ends.
+  template <class Cpu>
+  bool begin(double now, Cpu&& cpu) {
+    if (phase_ < 0) {
+      if (now < settled_until_) return team_;
+      phase_ = 0;
+      probe_start_ = phase_start_ = now;
+      phase_cpu_ = cpu();
+      team_cpu_ = team_wall_ = alone_cpu_ = alone_wall_ = 0.0;
+      return kPhaseTeam[0];
     }
-    const bool team = next_on_team_;
-    next_on_team_ = !next_on_team_;
-    return {team, true};
-  }
-
-  /// After a measured loop: how it ran, its wall seconds, the process's CPU seconds
-  /// meanwhile, and `now`. Ignored outside a probe.
-  void end(bool team, double wall_s, double cpu_s, double now) {
-    if (!probing_) return;
-    Probe& p = team ? team_probe_ : alone_probe_;
-    ++p.loops;
-    p.wall += std::max(0.0, wall_s);
-    p.cpu += std::max(0.0, cpu_s);
-    const bool enough = (team_probe_.full() && alone_probe_.full()) ||
-                        (team_probe_.wall >= kProbeLongSeconds && alone_probe_.loops > 0) ||
-                        (alone_probe_.wall >= kProbeLongSeconds && team_probe_.loops > 0);
-    if (!enough) return;
-    team_ = team_probe_.rate() >= kTeamGain * alone_probe_.rate();
-    settled_until_ = now + std::max(kSettleSeconds, kSettleOverProbe * alone_probe_.wall);
-    probing_ = false;
+    if (now - phase_start_ < kPhaseSeconds) return kPhaseTeam[phase_];
+    const double c = cpu();
+    (kPhaseTeam[phase_] ? team_cpu_ : alone_cpu_) += std::max(0.0, c - phase_cpu_);
+    (kPhaseTeam[phase_] ? team_wall_ : alone_wall_) += now - phase_start_;
+    ++phase_;
+    const double team_rate = team_wall_ > 0.0 ? team_cpu_ / team_wall_ : 0.0;
+    const double alone_rate = alone_wall_ > 0.0 ? alone_cpu_ / alone_wall_ : 0.0;
+    const bool clear = phase_ == 2 && team_rate >= kClearGain * alone_rate;
+    if (phase_ < kPhases && !clear) {
+      phase_start_ = now;
+      phase_cpu_ = c;
+      return kPhaseTeam[phase_];
+    }
+    last_team_rate_ = team_rate;
+    last_alone_rate_ = alone_rate;
+    team_ = team_rate >= kTeamGain * alone_rate;
+    settled_until_ = now + std::max(kSettleSeconds, kSettleOverProbe * (now - probe_start_));
+    phase_ = -1;
     ++decisions_;
-    last_team_rate_ = team_probe_.rate();
-    last_alone_rate_ = alone_probe_.rate();
+    return team_;
   }
 
   /// Whether a probe is under way; the last probe's choice (true: the team; true before
   /// any); how many probes have decided.
-  bool probing() const { return probing_; }
+  bool probing() const { return phase_ >= 0; }
   bool team() const { return team_; }
   std::uint64_t decisions() const { return decisions_; }
-  /// The last decided probe's CPU per loop second on the team and alone (0 before one).
+  /// The last probe's CPU seconds per wall second on the team and alone (0 before one).
   double last_team_rate() const { return last_team_rate_; }
   double last_alone_rate() const { return last_alone_rate_; }
 
  private:
-  struct Probe {
-    int loops = 0;
-    double wall = 0.0;
-    double cpu = 0.0;
-    bool full() const { return loops >= kProbeLoops && wall >= kProbeSeconds; }
-    double rate() const { return wall > 0.0 ? cpu / wall : 0.0; }
-  };
+  static constexpr int kPhases = 4;
+  static constexpr bool kPhaseTeam[kPhases] = {true, false, false, true};
 
-  bool probing_ = false;
-  bool next_on_team_ = true;
+  int phase_ = -1;  // -1: settled
   bool team_ = true;
   double settled_until_ = -1e300;  // the first loop starts a probe
-  Probe team_probe_, alone_probe_;
+  double probe_start_ = 0.0, phase_start_ = 0.0, phase_cpu_ = 0.0;
+  double team_cpu_ = 0.0, team_wall_ = 0.0, alone_cpu_ = 0.0, alone_wall_ = 0.0;
   std::uint64_t decisions_ = 0;
   double last_team_rate_ = 0.0, last_alone_rate_ = 0.0;
 };

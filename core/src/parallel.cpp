@@ -136,14 +136,16 @@ class Team {
     return true;
   }
 
-  /// The tuner's choice for a loop starting now (loop_tuner.hpp).
-  detail::LoopTuner::Use tune_begin(double now) {
+  /// Whether a loop starting now runs on the team (the tuner's choice, loop_tuner.hpp).
+  bool tune(double now) {
     const std::lock_guard<std::mutex> lock(tuner_mutex_);
-    return tuner_.begin(now);
+    return tuner_.begin(now, [this] { return process_cpu_seconds() - spun_; });
   }
-  void tune_end(bool on_team, double wall_s, double cpu_s, double now) {
+
+  /// The caller's spin seconds so far (CPU that did no item), for the tuner.
+  void add_spin(double s) {
     const std::lock_guard<std::mutex> lock(tuner_mutex_);
-    tuner_.end(on_team, wall_s, cpu_s, now);
+    spun_ += s;
   }
 
  private:
@@ -177,6 +179,7 @@ class Team {
   std::uint64_t generation_ = 0;
   std::mutex tuner_mutex_;
   detail::LoopTuner tuner_;
+  double spun_ = 0.0;
 };
 
 Team& team() {
@@ -253,19 +256,8 @@ bool parallel_chunks(std::size_t n, const LoopOptions& options, const ChunkBody&
   const std::function<bool()>* stop = options.stop ? &options.stop : nullptr;
   const unsigned threads = loop_threads(n, options);
   if (threads <= 1) return run_alone(n, options, body);
-  // On the team or on the caller alone, as the tuner chose; a measured loop reports its
-  // wall time and the process's CPU time meanwhile (less the caller's spin).
-  const double start = seconds_now();
-  const detail::LoopTuner::Use use = team().tune_begin(start);
-  const double cpu_start = use.measure ? process_cpu_seconds() : 0.0;
-  if (!use.team) {
-    const bool finished = run_alone(n, options, body);
-    if (use.measure) {
-      const double now = seconds_now();
-      team().tune_end(false, now - start, process_cpu_seconds() - cpu_start, now);
-    }
-    return finished;
-  }
+  // On the team or on the caller alone, as the tuner chose.
+  if (!team().tune(seconds_now())) return run_alone(n, options, body);
   Loop loop;
   loop.body = &body;
   loop.n = n;
@@ -277,10 +269,7 @@ bool parallel_chunks(std::size_t n, const LoopOptions& options, const ChunkBody&
   const int saved = tls_threads;
   const bool ran = team().run(loop, stop, stopped, spun);
   tls_threads = saved;
-  if (ran && use.measure && !loop.error) {
-    const double now = seconds_now();
-    team().tune_end(true, now - start, process_cpu_seconds() - cpu_start - spun, now);
-  }
+  if (spun > 0.0) team().add_spin(spun);
   if (!ran) {
     // The team is busy with another caller's loop: this one runs on its caller alone.
     LoopOptions serial = options;

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cmath>
 #include <condition_variable>
 #include <mutex>
 #include <stdexcept>
@@ -189,105 +190,125 @@ namespace tuner {
 
 using octocd::detail::LoopTuner;
 
-// Runs `loops` loops of `wall` seconds each through the tuner, those on the team at
-// `team_rate` CPU seconds per loop second and those alone at `alone_rate`, `now` advancing
-// by each loop; returns how many ran on the team.
-int feed(LoopTuner& t, double& now, int loops, double wall, double team_rate, double alone_rate) {
-  int on_team = 0;
-  for (int i = 0; i < loops; ++i) {
-    const LoopTuner::Use use = t.begin(now);
-    now += wall;
-    if (use.team) ++on_team;
-    if (use.measure) t.end(use.team, wall, wall * (use.team ? team_rate : alone_rate), now);
-  }
-  return on_team;
-}
+constexpr double kWall = 0.0011;  // seconds a loop, where not said
 
-TEST(LoopTuner, AProbeAlternatesTheWaysAndKeepsTheTeamWhereItGetsMoreCpu) {
-  LoopTuner t;
+// A made-up process: loops of `wall` seconds one after the other, in which the process gets
+// `team_rate` CPU seconds per second when the loop runs on the team and `alone_rate` when
+// it runs on its caller alone.
+struct Process {
   double now = 100.0;
-  // 2.6 ms loops: each way needs 4 loops and 10 ms, so the probe is 8 loops, every other
-  // one on the team, the first among them.
-  EXPECT_TRUE(t.begin(now).team);
-  EXPECT_FALSE(t.begin(now).team);  // (two loops asked for, none ended: nothing measured)
-  LoopTuner u;
-  EXPECT_EQ(feed(u, now, 7, 0.0026, 1.6, 1.0), 4);
-  EXPECT_TRUE(u.probing());
-  EXPECT_EQ(feed(u, now, 1, 0.0026, 1.6, 1.0), 0);
-  EXPECT_FALSE(u.probing());
-  EXPECT_EQ(u.decisions(), 1u);
-  EXPECT_TRUE(u.team());
-  EXPECT_DOUBLE_EQ(u.last_team_rate(), 1.6);
-  EXPECT_DOUBLE_EQ(u.last_alone_rate(), 1.0);
-  // Settled: unmeasured loops on the team until kSettleSeconds after the decision.
-  const double decided = now;
-  while (now < decided + LoopTuner::kSettleSeconds - 0.002) {
-    const LoopTuner::Use use = u.begin(now);
-    ASSERT_TRUE(use.team);
-    ASSERT_FALSE(use.measure);
-    now += 0.001;
+  double cpu = 0.0;
+  int calls = 0;  // of the CPU clock
+
+  // Runs `loops` loops through the tuner; returns how many ran on the team.
+  int run(LoopTuner& t, int loops, double wall, double team_rate, double alone_rate) {
+    int on_team = 0;
+    for (int i = 0; i < loops; ++i) {
+      const bool team = t.begin(now, [this] {
+        ++calls;
+        return cpu;
+      });
+      now += wall;
+      cpu += wall * (team ? team_rate : alone_rate);
+      on_team += team ? 1 : 0;
+    }
+    return on_team;
   }
-  const LoopTuner::Use next = u.begin(decided + LoopTuner::kSettleSeconds);  // a new probe
-  EXPECT_TRUE(next.team);
-  EXPECT_TRUE(next.measure);
+};
+
+TEST(LoopTuner, AProbeRunsTeamAloneAloneTeamPhasesAndKeepsTheTeamWhereItGetsMoreCpu) {
+  LoopTuner t;
+  Process p;
+  // 1.1 ms loops: a phase is the loops that start within kPhaseSeconds of its first.
+  const int per_phase = static_cast<int>(std::ceil(LoopTuner::kPhaseSeconds / kWall));
+  EXPECT_EQ(p.run(t, per_phase, kWall, 1.3, 1.0), per_phase);
+  EXPECT_EQ(p.run(t, per_phase, kWall, 1.3, 1.0), 0);
+  EXPECT_EQ(p.run(t, per_phase, kWall, 1.3, 1.0), 0);
+  EXPECT_TRUE(t.probing());
+  EXPECT_EQ(p.run(t, per_phase, kWall, 1.3, 1.0), per_phase);
+  EXPECT_EQ(t.decisions(), 0u);
+  EXPECT_EQ(p.run(t, 1, kWall, 1.3, 1.0), 1);  // the fifth phase's start decides
+  EXPECT_FALSE(t.probing());
+  EXPECT_EQ(t.decisions(), 1u);
+  EXPECT_TRUE(t.team());
+  EXPECT_NEAR(t.last_team_rate(), 1.3, 1e-9);
+  EXPECT_NEAR(t.last_alone_rate(), 1.0, 1e-9);
+  // The CPU clock was read where phases changed only.
+  EXPECT_EQ(p.calls, 5);
+  // Settled: on the team, the clock unread, until kSettleSeconds after the decision or
+  // kSettleOverProbe x the probe's four phases, whichever is later.
+  const double decided = p.now - kWall;
+  const double probe = 4 * per_phase * kWall;
+  const double hold = std::max(LoopTuner::kSettleSeconds, LoopTuner::kSettleOverProbe * probe);
+  const int settled = static_cast<int>((hold - 0.002) / kWall);
+  EXPECT_EQ(p.run(t, settled, kWall, 1.3, 1.0), settled);
+  EXPECT_EQ(p.calls, 5);
+  EXPECT_EQ(t.decisions(), 1u);
+  p.now = decided + hold + 1e-9;
+  p.run(t, 1, kWall, 1.3, 1.0);  // a new probe
+  EXPECT_TRUE(t.probing());
+}
+
+TEST(LoopTuner, AClearGainEndsTheProbeAfterTwoPhases) {
+  LoopTuner t;
+  Process p;
+  // An idle machine: the team gets 1.6 CPU seconds a second, alone 1.
+  const int per_phase = static_cast<int>(std::ceil(LoopTuner::kPhaseSeconds / kWall));
+  p.run(t, 2 * per_phase + 1, kWall, 1.6, 1.0);
+  EXPECT_FALSE(t.probing());
+  EXPECT_TRUE(t.team());
+  EXPECT_EQ(t.decisions(), 1u);
+  // Below the clear gain the probe goes on to its four phases.
+  LoopTuner u;
+  Process q;
+  q.run(u, 2 * per_phase + 1, kWall, 0.99 * LoopTuner::kClearGain, 1.0);
   EXPECT_TRUE(u.probing());
 }
 
-TEST(LoopTuner, TheCallerAloneIsChosenWhenTheTeamGetsLessThanTheGainAndTheTeamIsProbedAgain) {
+TEST(LoopTuner, TheCallerAloneIsChosenBelowTheGainAndTheTeamIsProbedAgain) {
   LoopTuner t;
-  double now = 0.0;
-  // Beside a busy process the woken worker shares the caller's core: about the same CPU a
-  // second either way.
-  feed(t, now, 8, 0.0026, 1.1, 1.0);
+  Process p;
+  // Beside one busy process on two cores a woken worker shares the caller's core: about
+  // the same CPU a second either way.
+  p.run(t, 80, kWall, 1.05, 1.0);
   ASSERT_EQ(t.decisions(), 1u);
   EXPECT_FALSE(t.team());
-  EXPECT_EQ(feed(t, now, 900, 0.001, 1.1, 1.0), 0);  // 0.9 s: alone, unmeasured
+  EXPECT_EQ(p.run(t, 900, kWall, 1.05, 1.0), 0);  // 0.99 s: alone, the clock unread
   EXPECT_EQ(t.decisions(), 1u);
-  now += LoopTuner::kSettleSeconds;
+  p.now += LoopTuner::kSettleSeconds;
   // The load went away: the next probe gives the team back.
-  feed(t, now, 8, 0.0026, 1.9, 1.0);
+  p.run(t, 80, kWall, 1.9, 1.0);
   EXPECT_EQ(t.decisions(), 2u);
   EXPECT_TRUE(t.team());
-  // Just above the gain the team is kept; just below it is not. Beside two busy processes
-  // the caller alone gets part of a core (0.6 CPU a second) and the team wins at 1.0.
+  // Just above the gain the team is kept, just below it not. Beside two busy processes
+  // the caller alone gets part of a core and the team wins with less than one.
   LoopTuner above, below, shared;
-  double a = 0.0, b = 0.0, c = 0.0;
-  feed(above, a, 8, 0.0026, 1.01 * LoopTuner::kTeamGain, 1.0);
-  feed(below, b, 8, 0.0026, 0.99 * LoopTuner::kTeamGain, 1.0);
-  feed(shared, c, 8, 0.0026, 1.0, 0.6);
+  Process a, b, c;
+  a.run(above, 80, kWall, 1.01 * LoopTuner::kTeamGain, 1.0);
+  b.run(below, 80, kWall, 0.99 * LoopTuner::kTeamGain, 1.0);
+  c.run(shared, 80, kWall, 0.8, 0.5);
+  EXPECT_EQ(above.decisions() + below.decisions() + shared.decisions(), 3u);
   EXPECT_TRUE(above.team());
   EXPECT_FALSE(below.team());
   EXPECT_TRUE(shared.team());
 }
 
-TEST(LoopTuner, LongLoopsEndAProbeEachAndTheChoiceHoldsLongerTheLongerTheyAre) {
+TEST(LoopTuner, LongLoopsMakeLongPhasesAndTheChoiceHoldsLongerTheLongerTheProbe) {
   LoopTuner t;
-  double now = 0.0;
-  // Loops of 0.5 s: one on the team, one alone (each past kProbeLongSeconds).
-  EXPECT_EQ(feed(t, now, 2, 0.5, 12.0, 1.0), 1);
+  Process p;
+  // Loops of 0.5 s: each phase one loop; the team clearly ahead, so two phases, 1 s.
+  p.run(t, 3, 0.5, 12.0, 1.0);
   ASSERT_EQ(t.decisions(), 1u);
   EXPECT_TRUE(t.team());
-  // The caller alone took 0.5 s in the probe: the choice holds for 50 x that.
-  const double decided = now;
-  EXPECT_FALSE(t.begin(decided + 20.0).measure);
-  EXPECT_FALSE(t.begin(decided + 0.99 * LoopTuner::kSettleOverProbe * 0.5).measure);
-  EXPECT_TRUE(t.begin(decided + LoopTuner::kSettleOverProbe * 0.5).measure);
-}
-
-TEST(LoopTuner, ShortLoopsNeedEnoughLoopTimeOnEachWay) {
-  LoopTuner t;
-  double now = 0.0;
-  // Loops of 30 us: 10 ms of them each way is 334 each, 668 in all.
-  EXPECT_EQ(feed(t, now, 667, 30e-6, 1.5, 1.0), 334);
-  EXPECT_TRUE(t.probing());
-  EXPECT_EQ(t.decisions(), 0u);
-  feed(t, now, 1, 30e-6, 1.5, 1.0);
+  // The probe took 1 s: the choice holds for kSettleOverProbe x that.
+  const double decided = p.now - 0.5;
+  Process later = p;
+  later.now = decided + 0.99 * LoopTuner::kSettleOverProbe * 1.0;
+  later.run(t, 1, kWall, 12.0, 1.0);
   EXPECT_FALSE(t.probing());
-  EXPECT_TRUE(t.team());
-  // Outside a probe a measurement changes nothing.
-  for (int i = 0; i < 1000; ++i) t.end(false, 0.01, 0.01, now);
-  EXPECT_EQ(t.decisions(), 1u);
-  EXPECT_TRUE(t.team());
+  later.now = decided + LoopTuner::kSettleOverProbe * 1.0;
+  later.run(t, 1, kWall, 12.0, 1.0);
+  EXPECT_TRUE(t.probing());
 }
 
 }  // namespace tuner
