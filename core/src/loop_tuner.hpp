@@ -16,8 +16,9 @@
 ///      alone, alone, on the team (a drift of the load hits both ways alike); it ends
 ///      after two where the team gets kClearGain x alone's CPU per second,
 ///   2. the team when its CPU per second is >= kTeamGain x alone's, else the caller alone,
-///      for kSettleSeconds (and at least kSettleOverProbe x the probe, so a probe that
-///      long loops stretched costs a bounded share), then 1. again.
+///      for kSettleSeconds and at least kSettleOverAlone x the probe's time alone (so
+///      the probe's phases alone, the costly ones where the team wins, take at most 1% of
+///      the time, stretched as they may be by a long loop), then 1. again.
 /// Phases change at a loop's start; the process's CPU time is read only there.
 /// Results never depend on the choice (parallel.hpp: each item writes its own result).
 /// Not thread-safe: the team calls it under a lock.
@@ -40,9 +41,9 @@ class LoopTuner {
   /// alone's CPU per second (an idle machine: 1.6 on two cores).
   static constexpr double kClearGain = 1.4;
   /// How long a choice holds before the next probe, at least, and at least this many
-  /// times the probe's wall time.
+  /// times the wall time of the probe's phases alone.
   static constexpr double kSettleSeconds = 1.0;
-  static constexpr double kSettleOverProbe = 20.0;
+  static constexpr double kSettleOverAlone = 100.0;
 
   /// Whether the loop starting at `now` (seconds) runs on the team. `cpu` returns the
   /// process's CPU seconds; it is called only where a phase starts or ends.
@@ -51,7 +52,7 @@ class LoopTuner {
     if (phase_ < 0) {
       if (now < settled_until_) return team_;
       phase_ = 0;
-      probe_start_ = phase_start_ = now;
+      phase_start_ = now;
       phase_cpu_ = cpu();
       team_cpu_ = team_wall_ = alone_cpu_ = alone_wall_ = 0.0;
       return kPhaseTeam[0];
@@ -72,7 +73,7 @@ class LoopTuner {
     last_team_rate_ = team_rate;
     last_alone_rate_ = alone_rate;
     team_ = team_rate >= kTeamGain * alone_rate;
-    settled_until_ = now + std::max(kSettleSeconds, kSettleOverProbe * (now - probe_start_));
+    settled_until_ = now + std::max(kSettleSeconds, kSettleOverAlone * alone_wall_);
     phase_ = -1;
     ++decisions_;
     return team_;
@@ -94,7 +95,7 @@ class LoopTuner {
   int phase_ = -1;  // -1: settled
   bool team_ = true;
   double settled_until_ = -1e300;  // the first loop starts a probe
-  double probe_start_ = 0.0, phase_start_ = 0.0, phase_cpu_ = 0.0;
+  double phase_start_ = 0.0, phase_cpu_ = 0.0;
   double team_cpu_ = 0.0, team_wall_ = 0.0, alone_cpu_ = 0.0, alone_wall_ = 0.0;
   std::uint64_t decisions_ = 0;
   double last_team_rate_ = 0.0, last_alone_rate_ = 0.0;

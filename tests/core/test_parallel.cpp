@@ -236,10 +236,10 @@ TEST(LoopTuner, AProbeRunsTeamAloneAloneTeamPhasesAndKeepsTheTeamWhereItGetsMore
   // The CPU clock was read where phases changed only.
   EXPECT_EQ(p.calls, 5);
   // Settled: on the team, the clock unread, until kSettleSeconds after the decision or
-  // kSettleOverProbe x the probe's four phases, whichever is later.
+  // kSettleOverAlone x the probe's two phases alone, whichever is later.
   const double decided = p.now - kWall;
-  const double probe = 4 * per_phase * kWall;
-  const double hold = std::max(LoopTuner::kSettleSeconds, LoopTuner::kSettleOverProbe * probe);
+  const double alone = 2 * per_phase * kWall;
+  const double hold = std::max(LoopTuner::kSettleSeconds, LoopTuner::kSettleOverAlone * alone);
   const int settled = static_cast<int>((hold - 0.002) / kWall);
   EXPECT_EQ(p.run(t, settled, kWall, 1.3, 1.0), settled);
   EXPECT_EQ(p.calls, 5);
@@ -275,7 +275,7 @@ TEST(LoopTuner, TheCallerAloneIsChosenBelowTheGainAndTheTeamIsProbedAgain) {
   EXPECT_FALSE(t.team());
   EXPECT_EQ(p.run(t, 900, kWall, 1.05, 1.0), 0);  // 0.99 s: alone, the clock unread
   EXPECT_EQ(t.decisions(), 1u);
-  p.now += LoopTuner::kSettleSeconds;
+  p.now += LoopTuner::kSettleOverAlone * 0.04;  // past 100 x its two phases alone (< 40 ms)
   // The load went away: the next probe gives the team back.
   p.run(t, 80, kWall, 1.9, 1.0);
   EXPECT_EQ(t.decisions(), 2u);
@@ -293,20 +293,20 @@ TEST(LoopTuner, TheCallerAloneIsChosenBelowTheGainAndTheTeamIsProbedAgain) {
   EXPECT_TRUE(shared.team());
 }
 
-TEST(LoopTuner, LongLoopsMakeLongPhasesAndTheChoiceHoldsLongerTheLongerTheProbe) {
+TEST(LoopTuner, LongLoopsMakeLongPhasesAndTheChoiceHoldsLongerTheLongerItsTimeAlone) {
   LoopTuner t;
   Process p;
-  // Loops of 0.5 s: each phase one loop; the team clearly ahead, so two phases, 1 s.
+  // Loops of 0.5 s: each phase one loop; the team clearly ahead, so two phases.
   p.run(t, 3, 0.5, 12.0, 1.0);
   ASSERT_EQ(t.decisions(), 1u);
   EXPECT_TRUE(t.team());
-  // The probe took 1 s: the choice holds for kSettleOverProbe x that.
+  // Its phase alone took 0.5 s: the choice holds for kSettleOverAlone x that.
   const double decided = p.now - 0.5;
   Process later = p;
-  later.now = decided + 0.99 * LoopTuner::kSettleOverProbe * 1.0;
+  later.now = decided + 0.99 * LoopTuner::kSettleOverAlone * 0.5;
   later.run(t, 1, kWall, 12.0, 1.0);
   EXPECT_FALSE(t.probing());
-  later.now = decided + LoopTuner::kSettleOverProbe * 1.0;
+  later.now = decided + LoopTuner::kSettleOverAlone * 0.5;
   later.run(t, 1, kWall, 12.0, 1.0);
   EXPECT_TRUE(t.probing());
 }
