@@ -14,7 +14,8 @@
 ///   1. a probe of four phases, each at least kPhaseSeconds (several of the kernel's
 ///      scheduling periods, so a share of a core shows as such), its loops on the team,
 ///      alone, alone, on the team (a drift of the load hits both ways alike); it ends
-///      after two where the team gets kClearGain x alone's CPU per second,
+///      after one where the team gets kSureTeamRate CPU seconds a second, after two
+///      where it gets kClearGain x alone's,
 ///   2. the team when its CPU per second is >= kTeamGain x alone's, else the caller alone,
 ///      for kSettleSeconds and at least kSettleOverAlone x the probe's time alone (so
 ///      the probe's phases alone, the costly ones where the team wins, take at most 1% of
@@ -40,6 +41,11 @@ class LoopTuner {
   /// A probe ends after its first two phases when the team gets at least this times
   /// alone's CPU per second (an idle machine: 1.6 on two cores).
   static constexpr double kClearGain = 1.4;
+  /// A probe ends after its first phase when the team gets at least this many CPU seconds
+  /// a second: more than one thread alone and a helper thread of the process could (an idle
+  /// 16-core host: 8-12). It spares the phase alone where it costs most: on 16 threads a
+  /// loop of 9 ms on the team takes 140 ms alone.
+  static constexpr double kSureTeamRate = 2.5;
   /// How long a choice holds before the next probe, at least, and at least this many
   /// times the wall time of the probe's phases alone.
   static constexpr double kSettleSeconds = 1.0;
@@ -64,7 +70,7 @@ class LoopTuner {
     ++phase_;
     const double team_rate = team_wall_ > 0.0 ? team_cpu_ / team_wall_ : 0.0;
     const double alone_rate = alone_wall_ > 0.0 ? alone_cpu_ / alone_wall_ : 0.0;
-    const bool clear = phase_ == 2 && team_rate >= kClearGain * alone_rate;
+    const bool clear = (phase_ == 1 && team_rate >= kSureTeamRate) || (phase_ == 2 && team_rate >= kClearGain * alone_rate);
     if (phase_ < kPhases && !clear) {
       phase_start_ = now;
       phase_cpu_ = c;

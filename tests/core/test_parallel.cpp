@@ -258,6 +258,14 @@ TEST(LoopTuner, AClearGainEndsTheProbeAfterTwoPhases) {
   EXPECT_FALSE(t.probing());
   EXPECT_TRUE(t.team());
   EXPECT_EQ(t.decisions(), 1u);
+  // A many-core machine: 10 CPU seconds a second on the team end the probe after its
+  // first phase (no phase alone, which would cost a loop at a tenth of its speed).
+  LoopTuner many;
+  Process m;
+  m.run(many, per_phase + 1, kWall, 10.0, 1.0);
+  EXPECT_FALSE(many.probing());
+  EXPECT_TRUE(many.team());
+  EXPECT_EQ(many.last_alone_rate(), 0.0);
   // Below the clear gain the probe goes on to its four phases.
   LoopTuner u;
   Process q;
@@ -296,18 +304,19 @@ TEST(LoopTuner, TheCallerAloneIsChosenBelowTheGainAndTheTeamIsProbedAgain) {
 TEST(LoopTuner, LongLoopsMakeLongPhasesAndTheChoiceHoldsLongerTheLongerItsTimeAlone) {
   LoopTuner t;
   Process p;
-  // Loops of 0.5 s: each phase one loop; the team clearly ahead, so two phases.
-  p.run(t, 3, 0.5, 12.0, 1.0);
+  // Loops of 0.5 s: each phase one loop; the team clearly ahead (below the sure rate), so
+  // two phases.
+  p.run(t, 3, 0.5, 2.0, 1.0);
   ASSERT_EQ(t.decisions(), 1u);
   EXPECT_TRUE(t.team());
   // Its phase alone took 0.5 s: the choice holds for kSettleOverAlone x that.
   const double decided = p.now - 0.5;
   Process later = p;
   later.now = decided + 0.99 * LoopTuner::kSettleOverAlone * 0.5;
-  later.run(t, 1, kWall, 12.0, 1.0);
+  later.run(t, 1, kWall, 2.0, 1.0);
   EXPECT_FALSE(t.probing());
   later.now = decided + LoopTuner::kSettleOverAlone * 0.5;
-  later.run(t, 1, kWall, 12.0, 1.0);
+  later.run(t, 1, kWall, 2.0, 1.0);
   EXPECT_TRUE(t.probing());
 }
 
