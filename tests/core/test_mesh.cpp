@@ -30,11 +30,25 @@ using octocd::InputError;
 using octocd::Mesh;
 using octocd::Vec3;
 
-/// Writes `text` to a fresh file in a per-test temp dir and returns its path.
+/// This process's temp dir for mesh files (one per process: ctest runs each test in its own).
+fs::path temp_root() {
+  static const fs::path d = fs::temp_directory_path() / ("octocd_test_mesh_" + std::to_string(::getpid()));
+  return d;
+}
+
+/// Removes the test files at exit unless OCTOCD_KEEP_TEST_FILES is set.
+class MeshTempCleanup : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    std::error_code ec;
+    if (!std::getenv("OCTOCD_KEEP_TEST_FILES")) fs::remove_all(temp_root(), ec);
+  }
+};
+const auto* const kMeshCleanup = ::testing::AddGlobalTestEnvironment(new MeshTempCleanup);
+
+/// Writes `text` to a fresh file in this process's temp dir and returns its path.
 std::string write_temp(const std::string& name, const std::string& text) {
-  const fs::path dir = fs::temp_directory_path() /
-                       ("octocd_test_mesh_" + std::to_string(::testing::UnitTest::GetInstance()
-                                                                  ->random_seed()));
+  const fs::path dir = temp_root();
   fs::create_directories(dir);
   const fs::path p = dir / name;
   std::ofstream(p, std::ios::binary) << text;

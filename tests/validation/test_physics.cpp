@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <random>
@@ -180,11 +181,26 @@ void expect_caught(const std::vector<ValidationResult>& rs, const std::string& n
   for (const auto& f : fragments) EXPECT_NE(r.detail.find(f), std::string::npos) << name << ": " << r.detail;
 }
 
+/// The dumbbell's file of this process (one per process: ctest runs the tests that write it
+/// in parallel processes).
+std::string dumbbell_path() {
+  return testing::TempDir() + "octocd_physics_dumbbell-" + std::to_string(::getpid()) + ".obj";
+}
+
+/// Removes the dumbbell's file at exit unless OCTOCD_KEEP_TEST_FILES is set.
+class DumbbellCleanup : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    std::error_code ec;
+    if (!std::getenv("OCTOCD_KEEP_TEST_FILES")) std::filesystem::remove(dumbbell_path(), ec);
+  }
+};
+const auto* const kDumbbellCleanup = ::testing::AddGlobalTestEnvironment(new DumbbellCleanup);
+
 /// A non-convex mesh: two unit cubes side by side along x with a unit gap (x in
 /// [-1.5, -0.5] and [0.5, 1.5]), written as OBJ; "scale": 3 keeps its units.
 std::string dumbbell_obj() {
-  // One file per process: ctest runs the tests that write it in parallel processes.
-  const std::string path = testing::TempDir() + "octocd_physics_dumbbell-" + std::to_string(::getpid()) + ".obj";
+  const std::string path = dumbbell_path();
   std::ofstream f(path);
   int base = 0;
   for (double cx : {-1.0, 1.0}) {
