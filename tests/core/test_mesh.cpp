@@ -19,6 +19,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/mesh.hpp"
+#include "support/temp_files.hpp"
 
 // This file's own names (its tests compile in unity batches with the folder's other files).
 namespace octocd_test_mesh {
@@ -36,15 +37,7 @@ fs::path temp_root() {
   return d;
 }
 
-/// Removes the test files at exit unless OCTOCD_KEEP_TEST_FILES is set.
-class MeshTempCleanup : public ::testing::Environment {
- public:
-  void TearDown() override {
-    std::error_code ec;
-    if (!std::getenv("OCTOCD_KEEP_TEST_FILES")) fs::remove_all(temp_root(), ec);
-  }
-};
-const auto* const kMeshCleanup = ::testing::AddGlobalTestEnvironment(new MeshTempCleanup);
+const auto* const kMeshCleanup = octocd::test::remove_at_exit(temp_root);  // unless OCTOCD_KEEP_TEST_FILES
 
 /// Writes `text` to a fresh file in this process's temp dir and returns its path.
 std::string write_temp(const std::string& name, const std::string& text) {

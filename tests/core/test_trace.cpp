@@ -22,6 +22,7 @@
 
 #include "octocd/error.hpp"
 #include "octocd/trace.hpp"
+#include "support/temp_files.hpp"
 
 // This file's own names (its tests compile in unity batches with the folder's other files).
 namespace octocd_test_trace {
@@ -44,15 +45,7 @@ fs::path temp_dir() {
   return temp_root();
 }
 
-// Removes the test files at exit unless OCTOCD_KEEP_TEST_FILES is set.
-class TempCleanup : public ::testing::Environment {
- public:
-  void TearDown() override {
-    std::error_code ec;
-    if (!std::getenv("OCTOCD_KEEP_TEST_FILES")) fs::remove_all(temp_root(), ec);
-  }
-};
-const auto* const kCleanup = ::testing::AddGlobalTestEnvironment(new TempCleanup);
+const auto* const kCleanup = octocd::test::remove_at_exit(temp_root);  // unless OCTOCD_KEEP_TEST_FILES
 
 TraceMetadata make_meta() {
   TraceMetadata m;

@@ -11,7 +11,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <random>
@@ -30,6 +29,7 @@
 #include "../../validation/physics/reference.hpp"
 #include "../../validation/physics/sat.hpp"
 #include "../../validation/physics/seek.hpp"
+#include "support/temp_files.hpp"
 
 // This file's own names (its tests compile in unity batches with the folder's other files).
 namespace octocd_test_physics {
@@ -187,15 +187,8 @@ std::string dumbbell_path() {
   return testing::TempDir() + "octocd_physics_dumbbell-" + std::to_string(::getpid()) + ".obj";
 }
 
-/// Removes the dumbbell's file at exit unless OCTOCD_KEEP_TEST_FILES is set.
-class DumbbellCleanup : public ::testing::Environment {
- public:
-  void TearDown() override {
-    std::error_code ec;
-    if (!std::getenv("OCTOCD_KEEP_TEST_FILES")) std::filesystem::remove(dumbbell_path(), ec);
-  }
-};
-const auto* const kDumbbellCleanup = ::testing::AddGlobalTestEnvironment(new DumbbellCleanup);
+const auto* const kDumbbellCleanup =
+    octocd::test::remove_at_exit([] { return dumbbell_path(); });  // unless OCTOCD_KEEP_TEST_FILES
 
 /// A non-convex mesh: two unit cubes side by side along x with a unit gap (x in
 /// [-1.5, -0.5] and [0.5, 1.5]), written as OBJ; "scale": 3 keeps its units.

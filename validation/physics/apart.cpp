@@ -133,9 +133,10 @@ void PhysicsValidators::Impl::find_near(const FrameRecord& rec) {
   reach_pairs(grown, cand, near_tables);
   ContactGraph graph = contact_graph(rec);
   const bool whole = incomplete_whole_step(rec.frame);
+  // reach_pairs: a body of every pair is dynamic.
   for (const Pair& p : cand) {
     poll();
-    if (graph.find(p.a) == graph.find(p.b)) continue;  // reach_pairs: a body of every pair is dynamic  // one component: exchanged within it
+    if (graph.find(p.a) == graph.find(p.b)) continue;  // one component: exchanged within it
     if (!whole && !incomplete_pair(rec.frame, p)) continue;  // /contacts/incomplete: this pair's rows are complete
     ++near_tested;
     const ReferenceNormal r = ref->posed(p.a, p.b, pose[p.a], pose[p.b]);
