@@ -14,12 +14,19 @@
 ///   1. a probe of four phases, each at least kPhaseSeconds (several of the kernel's
 ///      scheduling periods, so a share of a core shows as such), its loops on the team,
 ///      alone, alone, on the team (a drift of the load hits both ways alike); it ends
-///      after one where the team gets kSureTeamRate CPU seconds a second, after two
-///      where it gets kClearGain x alone's,
-///   2. the team when its CPU per second is >= kTeamGain x alone's, else the caller alone,
-///      for kSettleSeconds and at least kSettleOverAlone x the probe's time alone (so
-///      the probe's phases alone, the costly ones where the team wins, take at most 1% of
-///      the time, stretched as they may be by a long loop), then 1. again.
+///      after one where the team's loops get kSureTeamRate CPU seconds a second, after two
+///      where they get kClearGain x alone's,
+///   2. the team when its loops' CPU per second is >= kTeamGain x alone's, else the caller
+///      alone, for kSettleSeconds and at least kSettleOverAlone x the wall time of the
+///      probe's loops alone (so those loops, the costly ones where the team wins, take at
+///      most 1% of the time, stretched as they may be by a long loop), then 1. again.
+/// The team's loops' rate: the team phases' CPU less what one thread gets outside the loops
+/// (alone's rate; at most 1 before a phase alone), over the loops' wall time (ended()).
+/// A phase is mostly serial where loops are sparse between long serial parts (a
+/// validator's row, a large scene's set-up): its rate on the team is near 1 even where its
+/// loops run twice as fast, and the loops' rate keeps the choice about the loops.
+/// Anything the team gets outside its loops (beside busy processes the workers' share of
+/// the cores reaches the caller's serial parts too) counts for the team.
 /// Phases change at a loop's start; the process's CPU time is read only there.
 /// Results never depend on the choice (parallel.hpp: each item writes its own result).
 /// Not thread-safe: the team calls it under a lock.
@@ -55,7 +62,8 @@ class LoopTuner {
   static constexpr double kSettleOverAlone = 100.0;
 
   /// Whether the loop starting at `now` (seconds) runs on the team. `cpu` returns the
-  /// process's CPU seconds; it is called only where a phase starts or ends.
+  /// process's CPU seconds; it is called only where a phase starts or ends. While
+  /// probing() after it, the loop's wall time goes to ended().
   template <class Cpu>
   bool begin(double now, Cpu&& cpu) {
     if (phase_ < 0) {
@@ -63,29 +71,39 @@ class LoopTuner {
       phase_ = 0;
       phase_start_ = now;
       phase_cpu_ = cpu();
-      team_cpu_ = team_wall_ = alone_cpu_ = alone_wall_ = 0.0;
+      phase_loops_ = 0.0;
+      team_cpu_ = team_wall_ = team_loops_ = alone_cpu_ = alone_wall_ = alone_loops_ = 0.0;
       return kPhaseTeam[0];
     }
     if (now - phase_start_ < kPhaseSeconds) return kPhaseTeam[phase_];
     const double c = cpu();
+    const double wall = now - phase_start_;
     (kPhaseTeam[phase_] ? team_cpu_ : alone_cpu_) += std::max(0.0, c - phase_cpu_);
-    (kPhaseTeam[phase_] ? team_wall_ : alone_wall_) += now - phase_start_;
+    (kPhaseTeam[phase_] ? team_wall_ : alone_wall_) += wall;
+    (kPhaseTeam[phase_] ? team_loops_ : alone_loops_) += std::min(phase_loops_, wall);
     ++phase_;
-    const double team_rate = team_wall_ > 0.0 ? team_cpu_ / team_wall_ : 0.0;
     const double alone_rate = alone_wall_ > 0.0 ? alone_cpu_ / alone_wall_ : 0.0;
+    const double team_rate = team_loop_rate(alone_wall_ > 0.0 ? alone_rate : 1.0);
     const bool clear = (phase_ == 1 && team_rate >= kSureTeamRate) || (phase_ == 2 && team_rate >= kClearGain * alone_rate);
     if (phase_ < kPhases && !clear) {
       phase_start_ = now;
       phase_cpu_ = c;
+      phase_loops_ = 0.0;
       return kPhaseTeam[phase_];
     }
     last_team_rate_ = team_rate;
     last_alone_rate_ = alone_rate;
     team_ = team_rate >= kTeamGain * alone_rate;
-    settled_until_ = now + std::max(kSettleSeconds, kSettleOverAlone * alone_wall_);
+    settled_until_ = now + std::max(kSettleSeconds, kSettleOverAlone * alone_loops_);
     phase_ = -1;
     ++decisions_;
     return team_;
+  }
+
+  /// A loop that began() during a probe ran for `wall` seconds (on the team or alone, as
+  /// begin() said); nothing outside a probe.
+  void ended(double wall) {
+    if (phase_ >= 0) phase_loops_ += std::max(0.0, wall);
   }
 
   /// Whether a probe is under way; the last probe's choice (true: the team; true before
@@ -93,7 +111,8 @@ class LoopTuner {
   bool probing() const { return phase_ >= 0; }
   bool team() const { return team_; }
   std::uint64_t decisions() const { return decisions_; }
-  /// The last probe's CPU seconds per wall second on the team and alone (0 before one).
+  /// The last probe's CPU seconds per wall second in the team's loops (as the file comment
+  /// reckons it) and alone (0 before one).
   double last_team_rate() const { return last_team_rate_; }
   double last_alone_rate() const { return last_alone_rate_; }
 
@@ -101,11 +120,20 @@ class LoopTuner {
   static constexpr int kPhases = 4;
   static constexpr bool kPhaseTeam[kPhases] = {true, false, false, true};
 
+  /// The team phases' CPU per second in their loops, where one thread outside them gets
+  /// `serial_rate`; the phases' whole rate where no loop's time was told (ended()).
+  double team_loop_rate(double serial_rate) const {
+    if (team_wall_ <= 0.0) return 0.0;
+    if (team_loops_ <= 0.0) return team_cpu_ / team_wall_;
+    return std::max(0.0, team_cpu_ - serial_rate * (team_wall_ - team_loops_)) / team_loops_;
+  }
+
   int phase_ = -1;  // -1: settled
   bool team_ = true;
   double settled_until_ = -1e300;  // the first loop starts a probe
-  double phase_start_ = 0.0, phase_cpu_ = 0.0;
-  double team_cpu_ = 0.0, team_wall_ = 0.0, alone_cpu_ = 0.0, alone_wall_ = 0.0;
+  double phase_start_ = 0.0, phase_cpu_ = 0.0, phase_loops_ = 0.0;
+  double team_cpu_ = 0.0, team_wall_ = 0.0, team_loops_ = 0.0;
+  double alone_cpu_ = 0.0, alone_wall_ = 0.0, alone_loops_ = 0.0;
   std::uint64_t decisions_ = 0;
   double last_team_rate_ = 0.0, last_alone_rate_ = 0.0;
 };

@@ -136,10 +136,22 @@ class Team {
     return true;
   }
 
-  /// Whether a loop starting now runs on the team (the tuner's choice, loop_tuner.hpp).
-  bool tune(double now) {
+  /// Whether a loop starting now runs on the team (the tuner's choice, loop_tuner.hpp),
+  /// and whether the tuner is probing (then the loop's wall time goes to loop_ended()).
+  struct Choice {
+    bool team = true;
+    bool probing = false;
+  };
+  Choice tune(double now) {
     const std::lock_guard<std::mutex> lock(tuner_mutex_);
-    return tuner_.begin(now, [this] { return process_cpu_seconds() - spun_; });
+    const bool on_team = tuner_.begin(now, [this] { return process_cpu_seconds() - spun_; });
+    return {on_team, tuner_.probing()};
+  }
+
+  /// A loop begun while probing took `wall` seconds.
+  void loop_ended(double wall) {
+    const std::lock_guard<std::mutex> lock(tuner_mutex_);
+    tuner_.ended(wall);
   }
 
   /// The caller's spin seconds so far (CPU that did no item), for the tuner.
@@ -250,14 +262,10 @@ bool run_alone(std::size_t n, const LoopOptions& options, const ChunkBody& body)
   return true;
 }
 
-}  // namespace
-
-bool parallel_chunks(std::size_t n, const LoopOptions& options, const ChunkBody& body) {
+/// A loop on the team (the caller one of its threads), or on the caller alone where the
+/// team is running another caller's loop.
+bool run_on_team(std::size_t n, unsigned threads, const LoopOptions& options, const ChunkBody& body) {
   const std::function<bool()>* stop = options.stop ? &options.stop : nullptr;
-  const unsigned threads = loop_threads(n, options);
-  if (threads <= 1) return run_alone(n, options, body);
-  // On the team or on the caller alone, as the tuner chose.
-  if (!team().tune(seconds_now())) return run_alone(n, options, body);
   Loop loop;
   loop.body = &body;
   loop.n = n;
@@ -270,14 +278,28 @@ bool parallel_chunks(std::size_t n, const LoopOptions& options, const ChunkBody&
   const bool ran = team().run(loop, stop, stopped, spun);
   tls_threads = saved;
   if (spun > 0.0) team().add_spin(spun);
-  if (!ran) {
-    // The team is busy with another caller's loop: this one runs on its caller alone.
-    LoopOptions serial = options;
-    serial.threads = 1;
-    return parallel_chunks(n, serial, body);
-  }
+  if (!ran) return run_alone(n, options, body);  // the team runs another caller's loop
   if (loop.error) std::rethrow_exception(loop.error);
   return !stopped;
+}
+
+}  // namespace
+
+bool parallel_chunks(std::size_t n, const LoopOptions& options, const ChunkBody& body) {
+  const unsigned threads = loop_threads(n, options);
+  if (threads <= 1) return run_alone(n, options, body);
+  // On the team or on the caller alone, as the tuner chose; while it probes, it is told
+  // the loop's wall time.
+  const double start = seconds_now();
+  const Team::Choice choice = team().tune(start);
+  if (choice.probing) {
+    struct Told {
+      double start;
+      ~Told() { team().loop_ended(seconds_now() - start); }
+    } told{start};
+    return choice.team ? run_on_team(n, threads, options, body) : run_alone(n, options, body);
+  }
+  return choice.team ? run_on_team(n, threads, options, body) : run_alone(n, options, body);
 }
 
 }  // namespace octocd

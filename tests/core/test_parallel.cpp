@@ -194,10 +194,12 @@ constexpr double kWall = 0.0011;  // seconds a loop, where not said
 
 // A made-up process: loops of `wall` seconds one after the other, in which the process gets
 // `team_rate` CPU seconds per second when the loop runs on the team and `alone_rate` when
-// it runs on its caller alone.
+// it runs on its caller alone; after each loop `gap` seconds of serial work at `alone_rate`.
+// It tells the tuner each loop's wall time while it probes, as the team does.
 struct Process {
   double now = 100.0;
   double cpu = 0.0;
+  double gap = 0.0;
   int calls = 0;  // of the CPU clock
 
   // Runs `loops` loops through the tuner; returns how many ran on the team.
@@ -208,8 +210,12 @@ struct Process {
         ++calls;
         return cpu;
       });
+      const bool probing = t.probing();
       now += wall;
       cpu += wall * (team ? team_rate : alone_rate);
+      if (probing) t.ended(wall);
+      now += gap;
+      cpu += gap * alone_rate;
       on_team += team ? 1 : 0;
     }
     return on_team;
@@ -318,6 +324,55 @@ TEST(LoopTuner, LongLoopsMakeLongPhasesAndTheChoiceHoldsLongerTheLongerItsTimeAl
   later.now = decided + LoopTuner::kSettleOverAlone * 0.5;
   later.run(t, 1, kWall, 2.0, 1.0);
   EXPECT_TRUE(t.probing());
+}
+
+TEST(LoopTuner, SparseLoopsBetweenLongSerialPartsAreJudgedByTheLoopsAlone) {
+  // A validator's rows: 2 ms loops between 30 ms of serial work. On an idle machine the
+  // loops run twice as fast on the team but the phases' whole rates are 1.06 and 1.0 (the team
+  // would lose at kTeamGain); the loops' own rates decide: the team.
+  LoopTuner t;
+  Process p;
+  p.gap = 0.030;
+  // Each phase one loop and its serial part; the clear gain ends the probe at the third
+  // loop's start.
+  p.run(t, 3, 0.002, 2.0, 1.0);
+  ASSERT_EQ(t.decisions(), 1u);
+  EXPECT_TRUE(t.team());
+  EXPECT_NEAR(t.last_team_rate(), 2.0, 1e-9);
+  EXPECT_NEAR(t.last_alone_rate(), 1.0, 1e-9);
+  // The choice holds kSettleSeconds: the probe's loop alone took 2 ms (its phase alone 32 ms,
+  // whose 100 x would hold it 3.2 s: the serial part costs the same either way).
+  const double decided = p.now - 0.032;
+  Process later = p;
+  later.now = decided + 0.99 * LoopTuner::kSettleSeconds;
+  later.run(t, 1, 0.002, 2.0, 1.0);
+  EXPECT_FALSE(t.probing());
+  later.now = decided + LoopTuner::kSettleSeconds + 1e-9;
+  later.run(t, 1, 0.002, 2.0, 1.0);
+  EXPECT_TRUE(t.probing());
+  // Beside one busy process the same loops get no more CPU on the team: the caller alone.
+  LoopTuner busy;
+  Process q;
+  q.gap = 0.020;
+  q.run(busy, 10, 0.002, 1.0, 1.0);
+  ASSERT_EQ(busy.decisions(), 1u);
+  EXPECT_FALSE(busy.team());
+  // Serial parts that get more CPU while the team is chosen (beside two busy processes the
+  // workers' share of the cores reaches them) count for the team.
+  LoopTuner shared;
+  Process r;
+  r.gap = 0.020;
+  for (int i = 0; i < 12 && shared.decisions() == 0; ++i) {
+    const bool team = shared.begin(r.now, [&r] { return r.cpu; });
+    const bool probing = shared.probing();
+    r.now += 0.002;
+    r.cpu += 0.002 * (team ? 0.8 : 0.5);
+    if (probing) shared.ended(0.002);
+    r.now += r.gap;
+    r.cpu += r.gap * (team ? 0.8 : 0.5);
+  }
+  ASSERT_EQ(shared.decisions(), 1u);
+  EXPECT_TRUE(shared.team());
 }
 
 }  // namespace tuner

@@ -18,8 +18,8 @@
 ///   sets from its measured cost (fewer items are cheaper on one thread than a wake-up).
 /// - Whether a loop that may use the team does is measured while the process runs
 ///   (core/src/loop_tuner.hpp, design.md section 4): a short probe runs loops on the team
-///   and on their caller alone in turn, and the way that gets the process more CPU per
-///   second holds for the next second (beside one busy process on two cores a woken
+///   and on their caller alone in turn, and the way whose loops get the process more CPU
+///   per second holds for the next second (beside one busy process on two cores a woken
 ///   worker shares its caller's core, and the caller alone is faster).
 ///
 /// The thread count is a setting: the CPU engine's `threads` (docs/settings.md),
