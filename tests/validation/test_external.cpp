@@ -85,6 +85,33 @@ TEST(External, MissingAndExtraPairsAreNamed) {
   EXPECT_NE(r.detail.find("(0, 1)"), std::string::npos) << r.detail;
 }
 
+TEST(External, AnExactBroadphaseIsHeldToFlatsSetOnItsOwnBoxesWhateverTheirMargin) {
+  // The engine's boxes are the posed boxes: flat's set on them is read off the judge's
+  // candidates (its boxes grown by the reach hold them). Missing and extra pairs named.
+  TwoBoxes t;
+  t.bodies.physics.broadphase_exact = true;
+  ValidationResult r = find(validate_frame(t.bodies, t.rec), "broadphase-completeness");
+  EXPECT_TRUE(r.pass) << r.detail;
+  t.rec.pairs = {};
+  r = find(validate_frame(t.bodies, t.rec), "broadphase-completeness");
+  EXPECT_FALSE(r.pass);
+  EXPECT_NE(r.detail.find("misses pair (1, 2) of flat on its world AABBs (1 missing, 0 extra)"), std::string::npos)
+      << r.detail;
+  // Boxes grown by a 0.5 m margin, wider than the judge's reach: pairs (0, 1) and (0, 2)
+  // overlap on the engine's boxes only (the shapes are 0.9 m apart), so flat's set comes
+  // from its own search; an engine that reports (1, 2) alone misses them.
+  TwoBoxes wide;
+  wide.bodies.physics.broadphase_exact = true;
+  for (Aabb& b : wide.rec.aabbs) b = expanded(b, 0.5f);
+  r = find(validate_frame(wide.bodies, wide.rec), "broadphase-completeness");
+  EXPECT_FALSE(r.pass);
+  EXPECT_NE(r.detail.find("misses pair (0, 1) of flat on its world AABBs (2 missing, 0 extra)"), std::string::npos)
+      << r.detail;
+  wide.rec.pairs = {{0, 1}, {0, 2}, {1, 2}};
+  r = find(validate_frame(wide.bodies, wide.rec), "broadphase-completeness");
+  EXPECT_TRUE(r.pass) << r.detail;
+}
+
 TEST(External, ANormalFromAToBFailsAndSaysTheConvention) {
   TwoBoxes t;
   t.rec.contacts[0].normal = {1, 0, 0};

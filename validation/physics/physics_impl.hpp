@@ -296,6 +296,9 @@ struct CheckedFrame {
     std::vector<std::size_t> group_truth;  ///< per group of rows: its truth entry (row 3 reads it too)
     std::vector<PairReferenceScratch> scratch;                 ///< per worker
     ExactPairsTables pair_tables;  ///< exact_pairs' tables: the candidates', then row 1's flat set
+    /// Whether `cand` is flat's set on `grown` less its static-static pairs (checked_frame's
+    /// own search; not where the candidates came from the judge device).
+    bool cand_of_grown = false;
   } work;
 };
 
