@@ -32,6 +32,19 @@ constexpr std::size_t kParallelTruthFrom = 256;
 /// The fewest required pairs row 1 looks up on the threads (judge_in_order).
 constexpr std::size_t kParallelRequiredFrom = 2048;
 
+/// Whether each of `boxes` lies within the box of `grown` of the same index (bounds
+/// inclusive; a NaN bound does not), as many of each.
+bool within_grown(const std::vector<Aabb>& boxes, const std::vector<Aabb>& grown) {
+  if (boxes.size() != grown.size()) return false;
+  for (std::size_t i = 0; i < boxes.size(); ++i) {
+    const Aabb &b = boxes[i], &g = grown[i];
+    if (!(b.min.x >= g.min.x && b.min.y >= g.min.y && b.min.z >= g.min.z && b.max.x <= g.max.x &&
+          b.max.y <= g.max.y && b.max.z <= g.max.z))
+      return false;
+  }
+  return true;
+}
+
 /// flat's set on `boxes` less its static-static pairs (`dynamic`), sorted, read off `cand`,
 /// flat's set on `grown` less its static-static pairs, where each box lies within its
 /// grown box: two boxes that overlap (Eq. 6, bounds inclusive) have overlapping grown
@@ -41,13 +54,7 @@ constexpr std::size_t kParallelRequiredFrom = 2048;
 template <class Dynamic>
 bool flat_within_grown(const std::vector<Aabb>& boxes, const std::vector<Aabb>& grown, const std::vector<Pair>& cand,
                        Dynamic&& dynamic, std::vector<Pair>& out) {
-  if (boxes.size() != grown.size()) return false;
-  for (std::size_t i = 0; i < boxes.size(); ++i) {
-    const Aabb &b = boxes[i], &g = grown[i];
-    if (!(b.min.x >= g.min.x && b.min.y >= g.min.y && b.min.z >= g.min.z && b.max.x <= g.max.x &&
-          b.max.y <= g.max.y && b.max.z <= g.max.z))
-      return false;
-  }
+  if (!within_grown(boxes, grown)) return false;
   out.clear();
   for (const Pair p : cand)
     if ((dynamic(p.a) || dynamic(p.b)) && overlaps(boxes[p.a], boxes[p.b])) out.push_back(p);
@@ -81,7 +88,8 @@ const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p)
 }
 
 void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::vector<Pose>& det,
-                                           CheckedFrame& f, const std::vector<Pair>* candidates) const {
+                                           CheckedFrame& f, const std::vector<Pair>* candidates,
+                                           bool with_reach) const {
   const std::size_t n = model->bodies.size();
   const double slack = tol.geometry_slack_m;
   // Every table of f is rebuilt below in the memory it holds (a previous frame's).
@@ -100,6 +108,21 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
   // The judge device's candidates (device_rows.cpp) are the same set, found there, under
   // the same limit of limits::kMaxPairsPerBody pairs a body as exact_pairs' below.
   work.cand_of_grown = candidates == nullptr;
+  // Impulse-feasibility's pairs within the step's reach, found here for the row to read
+  // (CheckedFrame::Work::reach): where one set's boxes lie within the other's, the smaller
+  // set is read off the larger (flat_within_grown), one search of the frame fewer. A reach
+  // search over its limit is left to the row, which meets it in its own place.
+  work.reach = false;
+  const bool reach_boxes = with_reach && !candidates;
+  if (reach_boxes) step_reach_boxes(rec, det, work.motion, work.world, work.reach_grown);
+  auto search_reach = [&] {
+    try {
+      reach_pairs_cpu(work.reach_grown, work.reach_cand, work.reach_tables);
+      work.reach = true;
+    } catch (const PairLimitError&) {
+    }
+  };
+  auto is_dynamic = [&](std::uint32_t i) { return dynamic(i); };
   if (candidates) {
     require_pair_limit(candidates->size(), n);
     f.cand.assign(candidates->begin(), candidates->end());
@@ -113,12 +136,28 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
     });
     // At most limits::kMaxPairsPerBody pairs a body (PairLimitError, counted before the
     // tests): the truth below costs about 0.7 KiB and 3.5 us a pair.
-    ExactPairsSettings pair_threads;
-    pair_threads.threads = threads;
-    pair_threads.max_pairs_per_body = limits::kMaxPairsPerBody;
-    exact_pairs(grown, f.cand, pair_threads, work.pair_tables);
-    f.cand.erase(std::remove_if(f.cand.begin(), f.cand.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }),
-                 f.cand.end());
+    // A moving body's reach box holds its grown box: the reach searched, the candidates
+    // read off it (neither set holds a static-static pair).
+    bool have_cand = false;
+    if (reach_boxes && within_grown(grown, work.reach_grown)) {
+      search_reach();
+      have_cand = work.reach && flat_within_grown(grown, work.reach_grown, work.reach_cand, is_dynamic, f.cand);
+    }
+    if (!have_cand) {
+      ExactPairsSettings pair_threads;
+      pair_threads.threads = threads;
+      pair_threads.max_pairs_per_body = limits::kMaxPairsPerBody;
+      exact_pairs(grown, f.cand, pair_threads, work.pair_tables);
+      f.cand.erase(std::remove_if(f.cand.begin(), f.cand.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }),
+                   f.cand.end());
+    }
+    // Bodies at rest with a broadphase margin wider than the contact margins: the other way.
+    if (reach_boxes && !work.reach) {
+      if (flat_within_grown(work.reach_grown, grown, f.cand, is_dynamic, work.reach_cand))
+        work.reach = true;
+      else
+        search_reach();
+    }
   }
 
   // Truth per pair: intersect() for every candidate, posed() where a row needs the depth

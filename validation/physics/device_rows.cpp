@@ -214,6 +214,11 @@ void PhysicsValidators::Impl::reach_pairs(const std::vector<Aabb>& grown, std::v
     require_pair_limit(out.size(), n);
     return;
   }
+  reach_pairs_cpu(grown, out, tables);
+}
+
+void PhysicsValidators::Impl::reach_pairs_cpu(const std::vector<Aabb>& grown, std::vector<Pair>& out,
+                                              ExactPairsTables& tables) const {
   ExactPairsSettings settings;
   settings.threads = threads;
   settings.max_pairs_per_body = limits::kMaxPairsPerBody;

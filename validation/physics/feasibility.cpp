@@ -25,6 +25,32 @@ namespace octocd {
 
 using namespace physics_detail;
 
+bool PhysicsValidators::Impl::feasibility_step(const PhysicsFrame& f) const {
+  const std::size_t n = model->bodies.size();
+  const FrameRecord& rec = f.rec;
+  return f.sampled && rec.x_pre.size() == n && rec.v_pre.size() == n && rec.x_post.size() == n &&
+         rec.v_post.size() == n;
+}
+
+void PhysicsValidators::Impl::step_reach_boxes(const FrameRecord& rec, const std::vector<Pose>& det,
+                                               std::vector<double>& motion, std::vector<Aabb>& world,
+                                               std::vector<Aabb>& grown) const {
+  // Each body's exact AABB at its detection pose grown by its motion through the step, its
+  // convex radius and half the largest margin and the slack (apart.cpp's reach).
+  const std::size_t n = model->bodies.size();
+  const double slack = tol.geometry_slack_m;
+  const bool aabb_geometry = bodies.contact_geometry == ContactGeometry::Aabb;
+  motion.resize(n);
+  world.resize(n);
+  grown.resize(n);
+  parallel_items_on(n, loop_threads(threads, n, kParallelBodyBoxesFrom), stop, [&](std::size_t i, unsigned) {
+    const auto u = static_cast<std::uint32_t>(i);
+    motion[i] = step_motion(rec, u);
+    world[i] = aabb_geometry && rec.aabbs.size() == n ? rec.aabbs[i] : ref->world_aabb(u, det[i]);
+    grown[i] = expanded(world[i], static_cast<float>(motion[i] + radius(u) + 0.5 * (max_margin + slack)));
+  });
+}
+
 template <>
 void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f) {
   using namespace feasibility;
@@ -51,28 +77,25 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       while (st.past.size() > cap) st.past.pop_back();
     }
   } remember{st, det, rec.frame, keep_past, std::max<std::size_t>(1, std::min(kMaxPastSteps, kMaxPastPoses / std::max<std::size_t>(n, 1)))};
-  if (!f.sampled) return;
-  if (rec.x_pre.size() != n || rec.v_pre.size() != n || rec.x_post.size() != n || rec.v_post.size() != n) return;
+  if (!feasibility_step(f)) return;
   auto [infeasible] = tallies(RowId::ImpulseFeasibility, "infeasible");
   ++st.steps;
   const bool rotating = rec.q_pre.size() == n && rec.q_post.size() == n && rec.w_pre.size() == n &&
                         rec.w_post.size() == n && bodies.contact_geometry == ContactGeometry::Shape;
-  const double slack = tol.geometry_slack_m;
-  const bool aabb_geometry = bodies.contact_geometry == ContactGeometry::Aabb;
 
-  // Candidates: each body's exact AABB at its detection pose grown by its motion through
-  // the step, its convex radius and half the largest margin and the slack (apart.cpp's
-  // reach): two shapes that come within the margin of each other in the step overlap.
-  std::vector<double> motion(n);
-  std::vector<Aabb> grown(n), world(n);
-  parallel_items_on(n, loop_threads(threads, n, kParallelBodyBoxesFrom), stop, [&](std::size_t i, unsigned) {
-    const auto u = static_cast<std::uint32_t>(i);
-    motion[i] = step_motion(rec, u);
-    world[i] = aabb_geometry && rec.aabbs.size() == n ? rec.aabbs[i] : ref->world_aabb(u, det[i]);
-    grown[i] = expanded(world[i], static_cast<float>(motion[i] + radius(u) + 0.5 * (max_margin + slack)));
-  });
-  std::vector<Pair> cand;
-  reach_pairs(grown, cand, st.pair_tables);
+  // Candidates: the pairs within the step's reach (step_reach_boxes), searched with the
+  // checked frame's candidates where this step's checked frame holds them.
+  std::vector<double> own_motion;
+  std::vector<Aabb> own_world, grown;
+  std::vector<Pair> own_cand;
+  const CheckedFrame* shared = f.geometry && f.geometry->work.reach ? &*f.geometry : nullptr;
+  if (!shared) {
+    step_reach_boxes(rec, det, own_motion, own_world, grown);
+    reach_pairs(grown, own_cand, st.pair_tables);
+  }
+  const std::vector<double>& motion = shared ? shared->work.motion : own_motion;
+  const std::vector<Aabb>& world = shared ? shared->work.world : own_world;
+  const std::vector<Pair>& cand = shared ? shared->work.reach_cand : own_cand;
 
   // Each pair within reach: its contact points and normal.
   std::vector<std::uint32_t> parent(n);

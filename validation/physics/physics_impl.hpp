@@ -299,6 +299,13 @@ struct CheckedFrame {
     /// Whether `cand` is flat's set on `grown` less its static-static pairs (checked_frame's
     /// own search; not where the candidates came from the judge device).
     bool cand_of_grown = false;
+    /// Impulse-feasibility's search of this step (checked_frame's `with_reach`): `reach` when
+    /// done; its boxes (step_reach_boxes) and pairs (reach_pairs_cpu), the row reads them.
+    bool reach = false;
+    std::vector<double> motion;
+    std::vector<Aabb> world, reach_grown;
+    std::vector<Pair> reach_cand;
+    ExactPairsTables reach_tables;
   } work;
 };
 
@@ -467,7 +474,7 @@ struct PhysicsValidators::Impl {
       } else {
         f.geometry.emplace();
       }
-      checked_frame(f.rec, f.det, *f.geometry, from_device);
+      checked_frame(f.rec, f.det, *f.geometry, from_device, !from_device && feasibility_step(f));
       if (from_device) ++device_cpu_geometry_frames;
     }
     return &*f.geometry;
@@ -666,6 +673,18 @@ struct PhysicsValidators::Impl {
   /// body (PairLimitError naming the count). Candidates of impulse-feasibility and of the
   /// near-pair search (design.md section 13; device_rows.cpp).
   void reach_pairs(const std::vector<Aabb>& grown, std::vector<Pair>& out, ExactPairsTables& tables);
+  /// reach_pairs' search on the CPU (exact_pairs), whatever the judge device.
+  void reach_pairs_cpu(const std::vector<Aabb>& grown, std::vector<Pair>& out, ExactPairsTables& tables) const;
+  /// Impulse-feasibility's boxes of a step (feasibility.cpp): per body its motion through
+  /// the step (step_motion, m), its exact AABB at its detection pose (the record's world
+  /// AABB where the engine resolves on AABBs) and that box grown by the motion, its convex
+  /// radius and half the largest margin and the slack: two shapes that come within the
+  /// margin of each other in the step have overlapping grown boxes.
+  void step_reach_boxes(const FrameRecord& rec, const std::vector<Pose>& det, std::vector<double>& motion,
+                        std::vector<Aabb>& world, std::vector<Aabb>& grown) const;
+  /// Whether impulse-feasibility judges frame `f`'s step (a checked frame by the cadence,
+  /// every body's states before and after the step recorded).
+  bool feasibility_step(const physics_detail::PhysicsFrame& f) const;
   /// Checked frames whose CPU geometry (rows 2 and 3) took the device's candidates (checked()).
   std::uint64_t device_cpu_geometry_frames = 0;
   /// The bodies on the device (DeviceJudge::set_bodies), once: the boxes, their local boxes and
@@ -694,8 +713,12 @@ struct PhysicsValidators::Impl {
   /// `candidates`: the frame's candidate pairs found elsewhere (the judge device's: sorted,
   /// a < b, a body dynamic, every pair whose grown boxes overlap), taken instead of
   /// exact_pairs' search; null: searched here.
+  /// `with_reach`: impulse-feasibility judges this step (feasibility_step): its pairs within
+  /// the step's reach are searched here too (CheckedFrame::Work::reach) and, where each
+  /// candidate box lies within its reach box, the candidates are read off them (one search
+  /// of the frame fewer).
   void checked_frame(const FrameRecord& rec, const std::vector<Pose>& det, physics_detail::CheckedFrame& f,
-                     const std::vector<Pair>* candidates = nullptr) const;
+                     const std::vector<Pair>* candidates = nullptr, bool with_reach = false) const;
   /// The last checked frame's tables, kept for the next one's (checked(), observe()): their
   /// memory, 0.2-0.3 KB a pair, is allocated and first touched once per judge instead of
   /// once per frame.
