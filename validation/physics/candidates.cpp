@@ -32,6 +32,12 @@ constexpr std::size_t kParallelTruthFrom = 256;
 /// The fewest required pairs row 1 looks up on the threads (judge_in_order).
 constexpr std::size_t kParallelRequiredFrom = 2048;
 
+/// The smallest box that holds boxes a and b.
+Aabb hull_of(const Aabb& a, const Aabb& b) {
+  return {{std::min(a.min.x, b.min.x), std::min(a.min.y, b.min.y), std::min(a.min.z, b.min.z)},
+          {std::max(a.max.x, b.max.x), std::max(a.max.y, b.max.y), std::max(a.max.z, b.max.z)}};
+}
+
 /// Whether each of `boxes` lies within the box of `grown` of the same index (bounds
 /// inclusive; a NaN bound does not), as many of each.
 bool within_grown(const std::vector<Aabb>& boxes, const std::vector<Aabb>& grown) {
@@ -109,19 +115,11 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
   // the same limit of limits::kMaxPairsPerBody pairs a body as exact_pairs' below.
   work.cand_of_grown = candidates == nullptr;
   // Impulse-feasibility's pairs within the step's reach, found here for the row to read
-  // (CheckedFrame::Work::reach): where one set's boxes lie within the other's, the smaller
-  // set is read off the larger (flat_within_grown), one search of the frame fewer. A reach
-  // search over its limit is left to the row, which meets it in its own place.
+  // (CheckedFrame::Work::reach), in the candidates' search (below). A reach search over its
+  // limit is left to the row, which meets it in its own place.
   work.reach = false;
   const bool reach_boxes = with_reach && !candidates;
   if (reach_boxes) step_reach_boxes(rec, det, work.motion, work.world, work.reach_grown);
-  auto search_reach = [&] {
-    try {
-      reach_pairs_cpu(work.reach_grown, work.reach_cand, work.reach_tables);
-      work.reach = true;
-    } catch (const PairLimitError&) {
-    }
-  };
   auto is_dynamic = [&](std::uint32_t i) { return dynamic(i); };
   if (candidates) {
     require_pair_limit(candidates->size(), n);
@@ -136,12 +134,27 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
     });
     // At most limits::kMaxPairsPerBody pairs a body (PairLimitError, counted before the
     // tests): the truth below costs about 0.7 KiB and 3.5 us a pair.
-    // A moving body's reach box holds its grown box: the reach searched, the candidates
-    // read off it (neither set holds a static-static pair).
+    // With the reach: one search of the boxes that hold each body's grown and reach boxes,
+    // both sets read off it (flat_within_grown; neither holds a static-static pair). Where
+    // that search is over its limit (or a NaN bound keeps a box out), each set is searched
+    // on its own boxes.
     bool have_cand = false;
-    if (reach_boxes && within_grown(grown, work.reach_grown)) {
-      search_reach();
-      have_cand = work.reach && flat_within_grown(grown, work.reach_grown, work.reach_cand, is_dynamic, f.cand);
+    if (reach_boxes) {
+      std::vector<Aabb>& both = work.both;
+      both.resize(n);
+      parallel_items_on(n, loop_threads(threads, n, kParallelBodyBoxesFrom), stop, [&](std::size_t i, unsigned) {
+        both[i] = hull_of(grown[i], work.reach_grown[i]);
+      });
+      bool searched = false;
+      try {
+        reach_pairs_cpu(both, work.both_cand, work.reach_tables);
+        searched = true;
+      } catch (const PairLimitError&) {
+      }
+      if (searched) {
+        have_cand = flat_within_grown(grown, both, work.both_cand, is_dynamic, f.cand);
+        work.reach = flat_within_grown(work.reach_grown, both, work.both_cand, is_dynamic, work.reach_cand);
+      }
     }
     if (!have_cand) {
       ExactPairsSettings pair_threads;
@@ -151,12 +164,12 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
       f.cand.erase(std::remove_if(f.cand.begin(), f.cand.end(), [&](Pair p) { return !dynamic(p.a) && !dynamic(p.b); }),
                    f.cand.end());
     }
-    // Bodies at rest with a broadphase margin wider than the contact margins: the other way.
     if (reach_boxes && !work.reach) {
-      if (flat_within_grown(work.reach_grown, grown, f.cand, is_dynamic, work.reach_cand))
+      try {
+        reach_pairs_cpu(work.reach_grown, work.reach_cand, work.reach_tables);
         work.reach = true;
-      else
-        search_reach();
+      } catch (const PairLimitError&) {
+      }
     }
   }
 

@@ -306,6 +306,10 @@ struct CheckedFrame {
     std::vector<Aabb> world, reach_grown;
     std::vector<Pair> reach_cand;
     ExactPairsTables reach_tables;
+    /// Per body the box holding its grown and reach boxes, and their pairs: the one search
+    /// both sets are read off.
+    std::vector<Aabb> both;
+    std::vector<Pair> both_cand;
   } work;
 };
 
@@ -714,9 +718,8 @@ struct PhysicsValidators::Impl {
   /// a < b, a body dynamic, every pair whose grown boxes overlap), taken instead of
   /// exact_pairs' search; null: searched here.
   /// `with_reach`: impulse-feasibility judges this step (feasibility_step): its pairs within
-  /// the step's reach are searched here too (CheckedFrame::Work::reach) and, where each
-  /// candidate box lies within its reach box, the candidates are read off them (one search
-  /// of the frame fewer).
+  /// the step's reach are found here too (CheckedFrame::Work::reach), both sets read off one
+  /// search of the boxes that hold each body's two boxes (one search of the frame fewer).
   void checked_frame(const FrameRecord& rec, const std::vector<Pose>& det, physics_detail::CheckedFrame& f,
                      const std::vector<Pair>* candidates = nullptr, bool with_reach = false) const;
   /// The last checked frame's tables, kept for the next one's (checked(), observe()): their
