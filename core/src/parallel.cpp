@@ -290,15 +290,16 @@ bool parallel_chunks(std::size_t n, const LoopOptions& options, const ChunkBody&
   if (threads <= 1) return run_alone(n, options, body);
   // On the team or on the caller alone, as the tuner chose; while it probes, it is told
   // the loop's wall time.
+  struct Told {
+    double start;
+    bool probing;
+    ~Told() {
+      if (probing) team().loop_ended(seconds_now() - start);
+    }
+  };
   const double start = seconds_now();
   const Team::Choice choice = team().tune(start);
-  if (choice.probing) {
-    struct Told {
-      double start;
-      ~Told() { team().loop_ended(seconds_now() - start); }
-    } told{start};
-    return choice.team ? run_on_team(n, threads, options, body) : run_alone(n, options, body);
-  }
+  const Told told{start, choice.probing};
   return choice.team ? run_on_team(n, threads, options, body) : run_alone(n, options, body);
 }
 

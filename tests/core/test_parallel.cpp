@@ -194,12 +194,14 @@ constexpr double kWall = 0.0011;  // seconds a loop, where not said
 
 // A made-up process: loops of `wall` seconds one after the other, in which the process gets
 // `team_rate` CPU seconds per second when the loop runs on the team and `alone_rate` when
-// it runs on its caller alone; after each loop `gap` seconds of serial work at `alone_rate`.
-// It tells the tuner each loop's wall time while it probes, as the team does.
+// it runs on its caller alone; after each loop `gap` seconds of serial work at `alone_rate`
+// (with `gap_at_loop_rate`, at the rate of the loop before it). It tells the tuner each
+// loop's wall time while it probes, as the team does.
 struct Process {
   double now = 100.0;
   double cpu = 0.0;
   double gap = 0.0;
+  bool gap_at_loop_rate = false;
   int calls = 0;  // of the CPU clock
 
   // Runs `loops` loops through the tuner; returns how many ran on the team.
@@ -215,7 +217,7 @@ struct Process {
       cpu += wall * (team ? team_rate : alone_rate);
       if (probing) t.ended(wall);
       now += gap;
-      cpu += gap * alone_rate;
+      cpu += gap * (gap_at_loop_rate && team ? team_rate : alone_rate);
       on_team += team ? 1 : 0;
     }
     return on_team;
@@ -362,15 +364,8 @@ TEST(LoopTuner, SparseLoopsBetweenLongSerialPartsAreJudgedByTheLoopsAlone) {
   LoopTuner shared;
   Process r;
   r.gap = 0.020;
-  for (int i = 0; i < 12 && shared.decisions() == 0; ++i) {
-    const bool team = shared.begin(r.now, [&r] { return r.cpu; });
-    const bool probing = shared.probing();
-    r.now += 0.002;
-    r.cpu += 0.002 * (team ? 0.8 : 0.5);
-    if (probing) shared.ended(0.002);
-    r.now += r.gap;
-    r.cpu += r.gap * (team ? 0.8 : 0.5);
-  }
+  r.gap_at_loop_rate = true;
+  r.run(shared, 3, 0.002, 0.8, 0.5);
   ASSERT_EQ(shared.decisions(), 1u);
   EXPECT_TRUE(shared.team());
 }
