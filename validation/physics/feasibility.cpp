@@ -158,20 +158,22 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
       if (dynamic(i) && touched[i]) island_members[std::size_t(island_of[find(i)])].push_back(i);
   }
   // Each island's contacts in candidate order, copied only where the island has at most
-  // kMaxIslandBodies bodies: feasibility_island decides a larger one without reading them.
+  // kMaxIslandBodies bodies: feasibility_islands decides a larger one without reading them.
   std::vector<std::vector<Contact>> island_contacts(island_members.size());
   for (std::size_t ci = 0; ci < cand.size(); ++ci)
     for (const Contact& c : pair_out[ci].contacts) {
       const std::size_t ii = std::size_t(island_of[find(dynamic(c.pair.a) ? c.pair.a : c.pair.b)]);
       if (island_members[ii].size() <= kMaxIslandBodies) island_contacts[ii].push_back(c);
     }
-  // Each island judged on `threads` threads into its own slot, then tallied in island order
-  // (the verdicts do not depend on the thread count).
+  // The islands judged kIslandsPerSolve at a time (consecutive islands, their first
+  // programmes solved as one) on `threads` threads, each into its own slot, then tallied in
+  // island order (the verdicts do not depend on the thread count).
   std::vector<IslandVerdict> verdicts(island_members.size());
-  parallel_items(island_members.size(), threads, stop, [&](std::size_t ii, unsigned) {
-    std::vector<std::size_t> ks(island_contacts[ii].size());
-    std::iota(ks.begin(), ks.end(), std::size_t(0));
-    verdicts[ii] = feasibility_island(rec, det, island_contacts[ii], island_members[ii], ks, rotating);
+  const std::size_t batches = (island_members.size() + kIslandsPerSolve - 1) / kIslandsPerSolve;
+  parallel_items(batches, threads, stop, [&](std::size_t bi, unsigned) {
+    const std::size_t first = bi * kIslandsPerSolve;
+    feasibility_islands(rec, det, island_contacts, island_members, first,
+                        std::min(kIslandsPerSolve, island_members.size() - first), rotating, verdicts);
   });
   for (std::size_t ii = 0; ii < verdicts.size(); ++ii) {
     const IslandVerdict& verdict = verdicts[ii];

@@ -24,6 +24,9 @@ using dmath::D3;
 /// Islands with more dynamic bodies than this are not judged (counted and named): the
 /// programme has 3-6 rows a body and 8 columns a contact point.
 constexpr std::size_t kMaxIslandBodies = 16;
+/// Consecutive islands judged by one call of feasibility_islands (on one thread): the first
+/// programmes of the small ones among them are solved as one (feasibility_programme.cpp).
+constexpr std::size_t kIslandsPerSolve = 32;
 /// Friction-cone generators per contact point: the cone mu is replaced by the pyramid of
 /// kConeSides sides circumscribed about it (every feasible friction impulse stays feasible;
 /// the pyramid reaches 1 / cos(pi / kConeSides) = 1.082 mu along its edges).
@@ -108,7 +111,7 @@ struct ContactSearch {
 
 /// What became of an island: judged (figure and body), or counted and not judged.
 enum class Outcome { Judged, Asleep, Locked, Clamped, TooLarge, Unsolved };
-/// An island's verdict (PhysicsValidators::Impl::feasibility_island): the programme's figure (the largest residual in units of its bound,
+/// An island's verdict (PhysicsValidators::Impl::feasibility_islands): the programme's figure (the largest residual in units of its bound,
 /// <= 1 passes), the body named, and the failure's text where figure > 1.
 struct IslandVerdict {
   Outcome outcome = Outcome::Judged;

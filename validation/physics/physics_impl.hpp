@@ -876,13 +876,16 @@ struct PhysicsValidators::Impl {
   /// "Motion explained by feasible contact impulses", 1), into `found`: none when the pair is
   /// out of reach or has no dynamic body (feasibility_contacts.cpp).
   void feasibility_contacts(const feasibility::ContactSearch& search, Pair p, feasibility::PairContacts& found) const;
-  /// The verdict on one island of step `rec` (its dynamic bodies `members`, its contacts `ks`
-  /// into `contacts`; `rotating`: angular momentum judged too) by its linear programme
-  /// (the same section, 2-4; feasibility_programme.cpp).
-  feasibility::IslandVerdict feasibility_island(const FrameRecord& rec, const std::vector<Pose>& det,
-                                                const std::vector<feasibility::Contact>& contacts,
-                                                const std::vector<std::uint32_t>& members,
-                                                const std::vector<std::size_t>& ks, bool rotating) const;
+  /// The verdicts on islands first .. first + count - 1 of step `rec` (island ii: its
+  /// dynamic bodies island_members[ii], its contacts island_contacts[ii]; `rotating`: angular
+  /// momentum judged too) by their linear programmes, into verdicts[ii] (the same section,
+  /// 2-4; feasibility_programme.cpp): the first programmes of consecutive small islands
+  /// solved as one, an island whose impulses found there leave more than its bound solved
+  /// again alone.
+  void feasibility_islands(const FrameRecord& rec, const std::vector<Pose>& det,
+                           const std::vector<std::vector<feasibility::Contact>>& island_contacts,
+                           const std::vector<std::vector<std::uint32_t>>& island_members, std::size_t first,
+                           std::size_t count, bool rotating, std::vector<feasibility::IslandVerdict>& verdicts) const;
   // ---- where rows may be missing: contacts_complete 0 (every step) or /contacts/incomplete
   /// Step `frame` may lack some pair's rows.
   bool incomplete_step(std::int64_t frame) const;
