@@ -138,7 +138,8 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   st.contacts += found;
 
   // Islands: the dynamic bodies joined through contacts between dynamic bodies, in the
-  // order of their roots (a pair with contacts has a dynamic body: feasibility_contacts).
+  // order of their roots (a pair with contacts has a dynamic body: feasibility_contacts),
+  // each island's bodies ascending (the programme finds a body's slot by bisection).
   std::vector<std::int32_t> island_of(n, -1);
   std::vector<std::vector<std::uint32_t>> island_members;
   {

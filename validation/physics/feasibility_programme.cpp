@@ -60,7 +60,12 @@ struct Programme {
   const std::vector<Contact>* contacts = nullptr;
   const std::vector<std::uint32_t>* members = nullptr;
   std::size_t per = 3, rows = 0;
-  std::map<std::uint32_t, std::size_t> slot;
+  /// Body i's slot in `members` (ascending), or kNone.
+  static constexpr std::size_t kNone = std::size_t(-1);
+  std::size_t slot(std::uint32_t i) const {
+    const auto it = std::lower_bound(members->begin(), members->end(), i);
+    return it != members->end() && *it == i ? std::size_t(it - members->begin()) : kNone;
+  }
   /// The momentum changes (b; b_alt: the angular rows without the gyroscopic term) and the
   /// bounds before the impulses' own rounding (sigma0).
   std::vector<double> b, b_alt, sigma0;
@@ -241,8 +246,6 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
     P.per = rotating ? 6 : 3;
     const std::size_t per = P.per;
     const std::size_t rows = P.rows = per * members.size();
-    auto& slot = P.slot;
-    for (std::size_t s = 0; s < members.size(); ++s) slot[members[s]] = s;
     auto& b = P.b;
     auto& b_alt = P.b_alt;
     auto& sigma0 = P.sigma0;
@@ -253,11 +256,11 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
     P.reach_of.assign(members.size(), 0.0);
     for (const Contact& c : contacts) {
       for (const std::uint32_t i : {c.pair.a, c.pair.b}) {
-        const auto it = slot.find(i);
-        if (it == slot.end()) continue;
-        ++P.points_of[it->second];
-        P.lever_of[it->second] = std::max(P.lever_of[it->second], c.lever);
-        P.reach_of[it->second] = std::max(P.reach_of[it->second], len3(c.point_of(i) - com_at(det[i], i)));
+        const std::size_t s = P.slot(i);
+        if (s == Programme::kNone) continue;
+        ++P.points_of[s];
+        P.lever_of[s] = std::max(P.lever_of[s], c.lever);
+        P.reach_of[s] = std::max(P.reach_of[s], len3(c.point_of(i) - com_at(det[i], i)));
       }
     }
     if (rotating) b_alt.assign(rows, 0.0);
@@ -318,9 +321,8 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
       const Contact& c = contacts[k];
       P.columns.push_back({k, dir, kind});
       for (const auto& [i, sign] : {std::pair<std::uint32_t, double>{c.pair.a, 1.0}, {c.pair.b, -1.0}}) {
-        const auto it = slot.find(i);
-        if (it == slot.end()) continue;
-        const std::size_t s = it->second;
+        const std::size_t s = P.slot(i);
+        if (s == Programme::kNone) continue;
         if (kind != Kind::Torsion)
           for (int r = 0; r < 3; ++r) {
             P.row_index.push_back(int(per * s + r));
@@ -363,10 +365,10 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
       std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::size_t>> by_pair;
       for (std::size_t k = 0; k < contacts.size(); ++k) by_pair[{contacts[k].pair.a, contacts[k].pair.b}].push_back(k);
       for (const auto& [pr, pks] : by_pair) {
-        const auto it = slot.count(pr.first) ? slot.find(pr.first) : slot.find(pr.second);
+        const std::size_t first_slot = P.slot(pr.first) != Programme::kNone ? P.slot(pr.first) : P.slot(pr.second);
         Budget linear, torsion;
-        linear.scale_row = per * it->second;
-        torsion.scale_row = per * it->second + 3;
+        linear.scale_row = per * first_slot;
+        torsion.scale_row = per * first_slot + 3;
         double span = 0, lever = 0;
         for (const std::size_t k : pks) {
           lever = std::max(lever, contacts[k].lever);
@@ -441,8 +443,8 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
         const Contact& ct = contacts[P.columns[c].contact];
         const double j = lambda[c] * len3(P.columns[c].dir);
         for (const std::uint32_t i : {ct.pair.a, ct.pair.b}) {
-          const auto it = P.slot.find(i);
-          if (it != P.slot.end()) (P.columns[c].kind == Kind::Torsion ? tsum : jsum)[it->second] += j;
+          const std::size_t s = P.slot(i);
+          if (s != Programme::kNone) (P.columns[c].kind == Kind::Torsion ? tsum : jsum)[s] += j;
         }
       }
       for (std::size_t s = 0; s < members.size(); ++s) {
