@@ -118,9 +118,12 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   const ContactSearch search{st, hulls_mutex, det, world, motion, rec, witness_rows};
   parallel_items(cand.size(), threads, stop,
                  [&](std::size_t ci, unsigned) { feasibility_contacts(search, cand[ci], pair_out[ci]); });
-  // In candidate order: the pairs with contacts, the islands they join. The contacts stay
-  // in their pairs' slots: only an island the programme may judge takes a copy of its own.
+  // In candidate order: the pairs with contacts, the islands they join, and their dynamic
+  // bodies. The contacts stay in their pairs' slots: only an island the programme may judge
+  // takes a copy of its own.
   std::uint64_t found = 0;
+  std::vector<std::size_t> with_contacts;
+  std::vector<std::uint32_t> bodies_touched;
   for (std::size_t ci = 0; ci < cand.size(); ++ci) {
     const PairContacts& out = pair_out[ci];
     st.persisted += out.persisted;
@@ -132,49 +135,79 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     const Pair p = cand[ci];
     found += out.contacts.size();
     ++st.pairs;
+    with_contacts.push_back(ci);
     if (dynamic(p.a) && dynamic(p.b)) parent[find(p.a)] = find(p.b);
-    touched[p.a] = touched[p.b] = 1;
+    for (const std::uint32_t i : {p.a, p.b})
+      if (!touched[i]) {
+        touched[i] = 1;
+        if (dynamic(i)) bodies_touched.push_back(i);
+      }
   }
   st.contacts += found;
 
   // Islands: the dynamic bodies joined through contacts between dynamic bodies, in the
   // order of their roots (a pair with contacts has a dynamic body: feasibility_contacts),
-  // each island's bodies ascending (the programme finds a body's slot by bisection).
+  // each island's bodies ascending (the programme finds a body's slot by bisection); read
+  // off the bodies touched, not all n.
+  parallel_sort(bodies_touched, loop_threads(threads, bodies_touched.size()), std::less<std::uint32_t>());
   std::vector<std::int32_t> island_of(n, -1);
-  std::vector<std::vector<std::uint32_t>> island_members;
-  {
-    std::vector<std::uint32_t> roots;
-    for (std::uint32_t i = 0; i < n; ++i)
-      if (dynamic(i) && touched[i]) {
-        const std::uint32_t r = find(i);
-        if (island_of[r] < 0) {
-          island_of[r] = 0;
-          roots.push_back(r);
-        }
-      }
-    std::sort(roots.begin(), roots.end());
-    for (std::size_t ii = 0; ii < roots.size(); ++ii) island_of[roots[ii]] = static_cast<std::int32_t>(ii);
-    island_members.resize(roots.size());
-    for (std::uint32_t i = 0; i < n; ++i)
-      if (dynamic(i) && touched[i]) island_members[std::size_t(island_of[find(i)])].push_back(i);
-  }
-  // Each island's contacts in candidate order, copied only where the island has at most
-  // kMaxIslandBodies bodies: feasibility_islands decides a larger one without reading them.
-  std::vector<std::vector<Contact>> island_contacts(island_members.size());
-  for (std::size_t ci = 0; ci < cand.size(); ++ci)
-    for (const Contact& c : pair_out[ci].contacts) {
-      const std::size_t ii = std::size_t(island_of[find(dynamic(c.pair.a) ? c.pair.a : c.pair.b)]);
-      if (island_members[ii].size() <= kMaxIslandBodies) island_contacts[ii].push_back(c);
+  std::vector<std::uint32_t> roots, root_of(bodies_touched.size());
+  for (std::size_t k = 0; k < bodies_touched.size(); ++k) {
+    const std::uint32_t r = root_of[k] = find(bodies_touched[k]);
+    if (island_of[r] < 0) {
+      island_of[r] = 0;
+      roots.push_back(r);
     }
-  // The islands judged kIslandsPerSolve at a time (consecutive islands, their first
-  // programmes solved as one) on `threads` threads, each into its own slot, then tallied in
-  // island order (the verdicts do not depend on the thread count).
+  }
+  std::sort(roots.begin(), roots.end());
+  for (std::size_t ii = 0; ii < roots.size(); ++ii) island_of[roots[ii]] = static_cast<std::int32_t>(ii);
+  // Each island's bodies and its pairs with contacts (candidate order), as ranges of two
+  // flat lists: first[ii] .. first[ii + 1].
+  auto ranges = [&](std::size_t items, auto island_of_item, std::vector<std::size_t>& first, auto& flat, auto value) {
+    first.assign(roots.size() + 1, 0);
+    for (std::size_t k = 0; k < items; ++k) ++first[island_of_item(k) + 1];
+    for (std::size_t ii = 0; ii < roots.size(); ++ii) first[ii + 1] += first[ii];
+    std::vector<std::size_t> at(first.begin(), first.end() - 1);
+    flat.resize(items);
+    for (std::size_t k = 0; k < items; ++k) flat[at[island_of_item(k)]++] = value(k);
+  };
+  std::vector<std::size_t> member_first, pair_first, pairs_flat;
+  std::vector<std::uint32_t> members_flat;
+  ranges(bodies_touched.size(), [&](std::size_t k) { return std::size_t(island_of[root_of[k]]); }, member_first,
+         members_flat, [&](std::size_t k) { return bodies_touched[k]; });
+  ranges(with_contacts.size(),
+         [&](std::size_t k) {
+           const Pair p = cand[with_contacts[k]];
+           return std::size_t(island_of[find(dynamic(p.a) ? p.a : p.b)]);
+         },
+         pair_first, pairs_flat, [&](std::size_t k) { return with_contacts[k]; });
+  // Each island's bodies, and its contacts in candidate order copied only where it has at
+  // most kMaxIslandBodies bodies (feasibility_islands decides a larger one without reading
+  // them), on `threads` threads.
+  std::vector<std::vector<std::uint32_t>> island_members(roots.size());
+  std::vector<std::vector<Contact>> island_contacts(roots.size());
+  parallel_items(roots.size(), threads, stop, [&](std::size_t ii, unsigned) {
+    island_members[ii].assign(members_flat.begin() + std::ptrdiff_t(member_first[ii]),
+                              members_flat.begin() + std::ptrdiff_t(member_first[ii + 1]));
+    if (island_members[ii].size() > kMaxIslandBodies) return;
+    std::size_t count = 0;
+    for (std::size_t k = pair_first[ii]; k < pair_first[ii + 1]; ++k) count += pair_out[pairs_flat[k]].contacts.size();
+    island_contacts[ii].reserve(count);
+    for (std::size_t k = pair_first[ii]; k < pair_first[ii + 1]; ++k)
+      for (const Contact& c : pair_out[pairs_flat[k]].contacts) island_contacts[ii].push_back(c);
+  });
+  // The islands judged in runs of consecutive islands (their small first programmes solved
+  // as one): kIslandsPerSolve a run, fewer where that leaves under kMinIslandRuns runs (the
+  // threads' share; a run's length depends on the island count alone), on `threads`
+  // threads, each into its own slot, then tallied in island order (the verdicts do not
+  // depend on the thread count).
   std::vector<IslandVerdict> verdicts(island_members.size());
-  const std::size_t batches = (island_members.size() + kIslandsPerSolve - 1) / kIslandsPerSolve;
-  parallel_items(batches, threads, stop, [&](std::size_t bi, unsigned) {
-    const std::size_t first = bi * kIslandsPerSolve;
-    feasibility_islands(rec, det, island_contacts, island_members, first,
-                        std::min(kIslandsPerSolve, island_members.size() - first), rotating, verdicts);
+  const std::size_t run = std::clamp<std::size_t>(island_members.size() / kMinIslandRuns, 1, kIslandsPerSolve);
+  const std::size_t runs = (island_members.size() + run - 1) / run;
+  parallel_items(runs, threads, stop, [&](std::size_t ri, unsigned) {
+    const std::size_t first = ri * run;
+    feasibility_islands(rec, det, island_contacts, island_members, first, std::min(run, island_members.size() - first),
+                        rotating, verdicts);
   });
   for (std::size_t ii = 0; ii < verdicts.size(); ++ii) {
     const IslandVerdict& verdict = verdicts[ii];

@@ -24,9 +24,12 @@ using dmath::D3;
 /// Islands with more dynamic bodies than this are not judged (counted and named): the
 /// programme has 3-6 rows a body and 8 columns a contact point.
 constexpr std::size_t kMaxIslandBodies = 16;
-/// Consecutive islands judged by one call of feasibility_islands (on one thread): the first
-/// programmes of the small ones among them are solved as one (feasibility_programme.cpp).
+/// Consecutive islands judged by one call of feasibility_islands (on one thread), at most:
+/// the first programmes of the small ones among them are solved as one
+/// (feasibility_programme.cpp); fewer where a step's islands would make fewer than
+/// kMinIslandRuns such runs (the threads' share of a step of a few hundred islands).
 constexpr std::size_t kIslandsPerSolve = 32;
+constexpr std::size_t kMinIslandRuns = 64;
 /// Friction-cone generators per contact point: the cone mu is replaced by the pyramid of
 /// kConeSides sides circumscribed about it (every feasible friction impulse stays feasible;
 /// the pyramid reaches 1 / cos(pi / kConeSides) = 1.082 mu along its edges).
