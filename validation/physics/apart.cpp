@@ -156,8 +156,8 @@ std::uint64_t PhysicsValidators::Impl::open_near_groups(ContactGraph& graph) con
     for (const std::uint32_t r : {ra, rb}) {
       if (graph.statics[r]) continue;
       graph.statics[r] = 1;  // an unreported contact may join it to another body
-      const auto it = graph.groups.find(r);
-      if (it != graph.groups.end() && it->second.size() >= 2) ++opened;
+      const std::size_t gi = graph.group_of(r);
+      if (gi < graph.groups.size() && graph.groups[gi].second.size() >= 2) ++opened;
     }
   }
   return opened;

@@ -62,8 +62,8 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
   // exactly (p_a - p_b) x J: summed per group into the expected change (witness_turn), it
   // leaves open only the friction impulse a record without jt3 gives as a scalar
   // (|p_a - p_b| |jt|) and the points' float32 rounding.
-  std::map<std::uint32_t, double> witness_torque;
-  std::map<std::uint32_t, D3> witness_turn;
+  std::vector<double> witness_torque(graph.groups.size(), 0.0);  // per group
+  std::vector<D3> witness_turn(graph.groups.size(), D3{});
   const bool two_points = rec.has_points && rec.point_b.size() == rec.contacts.size();
   const bool normal_only = bodies.impulses == PhysicsBodies::Impulses::NormalOnly;
   const bool vector_friction = rec.jt3.size() == rec.contacts.size() && !normal_only;
@@ -79,17 +79,17 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
       const D3 pa = d3(c.point), pb = d3(rec.point_b[k]);
       const D3 nrm = d3(c.normal);
       const D3 j = (double(c.jn) / len3(nrm)) * nrm + (vector_friction ? d3(rec.jt3[k]) : D3{});
-      const std::uint32_t root = find(c.pair.a);
-      witness_turn[root] = witness_turn[root] + cross3(pa - pb, j);
-      witness_torque[root] += vector_friction ? 4.0 * kEps32 * (len3(pa) + len3(pb)) * len3(j)
+      const std::size_t gi = graph.group_of(find(c.pair.a));
+      witness_turn[gi] = witness_turn[gi] + cross3(pa - pb, j);
+      witness_torque[gi] += vector_friction ? 4.0 * kEps32 * (len3(pa) + len3(pb)) * len3(j)
                                               : len3(pa - pb) * jt + 4.0 * kEps32 * (len3(pa) + len3(pb)) * (len3(j) + jt);
       continue;
     }
     const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
-    witness_torque[find(c.pair.a)] += (double(c.depth) + pair_margin(c.pair)) * j;
+    witness_torque[graph.group_of(find(c.pair.a))] += (double(c.depth) + pair_margin(c.pair)) * j;
   }
-  const std::map<std::uint32_t, std::vector<std::uint32_t>>& groups_of = graph.groups;
-  for (auto& group : groups_of) {
+  for (std::size_t gi = 0; gi < graph.groups.size(); ++gi) {
+    const auto& group = graph.groups[gi];
     poll();
     // Not a structured binding: lambdas below capture it (clang 14, the fuzz preset's
     // compiler, refuses to capture structured bindings before C++20).
@@ -212,10 +212,10 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
       if (bodies.gyroscopic != PhysicsBodies::Gyroscopic::Absent)  // declared or admitted (undeclared)
         gyro += dt * dt * std::max(dot3(w0, w0) * len3(iw0), dot3(w1, w1) * len3(iw1));
     }
-    const D3 turn = witness_turn[root];  // zero without point_b
+    const D3 turn = witness_turn[gi];  // zero without point_b
     const double dl = len3(l1 - l0 - turn);
     const double lbound =
-        tol.angular_momentum_rel * lexchanged + gyro + orbital_drift + witness_torque[root] + 16.0 * kEps32 * lscale +
+        tol.angular_momentum_rel * lexchanged + gyro + orbital_drift + witness_torque[gi] + 16.0 * kEps32 * lscale +
         1e-9;
     angular.check(dl <= lbound, dl / lbound, Where{frame, group_name(members)}, [&] {
       return fmt::format("frame {}: isolated group of {} bodies (body {} ...): angular momentum about its centre "
@@ -278,17 +278,34 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
   };
   std::vector<std::uint8_t> touched(n, 0);
   graph.statics.assign(n, 0);
+  std::vector<std::uint32_t> dynamic_touched;
   each_link([&](const Pair& q) {
     parent[find(q.a)] = find(q.b);
-    touched[q.a] = touched[q.b] = 1;
+    for (const std::uint32_t i : {q.a, q.b})
+      if (!touched[i]) {
+        touched[i] = 1;
+        if (dynamic(i)) dynamic_touched.push_back(i);
+      }
   });
   each_link([&](const Pair& q) {
     if (!dynamic(q.a) || !dynamic(q.b)) graph.statics[find(q.a)] = 1;
   });
-  for (std::size_t i = 0; i < n; ++i)
-    if (touched[i] && dynamic(static_cast<std::uint32_t>(i)))
-      graph.groups[find(static_cast<std::uint32_t>(i))].push_back(static_cast<std::uint32_t>(i));
+  // The groups read off the dynamic bodies touched (root, body), sorted: roots ascending,
+  // each group's bodies ascending.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> by_root(dynamic_touched.size());
+  for (std::size_t k = 0; k < dynamic_touched.size(); ++k) by_root[k] = {find(dynamic_touched[k]), dynamic_touched[k]};
+  std::sort(by_root.begin(), by_root.end());
+  for (std::size_t k = 0; k < by_root.size(); ++k) {
+    if (k == 0 || by_root[k].first != by_root[k - 1].first) graph.groups.emplace_back(by_root[k].first, std::vector<std::uint32_t>{});
+    graph.groups.back().second.push_back(by_root[k].second);
+  }
   return graph;
+}
+
+std::size_t PhysicsValidators::Impl::ContactGraph::group_of(std::uint32_t r) const {
+  const auto it = std::lower_bound(groups.begin(), groups.end(), r,
+                                   [](const auto& group, std::uint32_t root) { return group.first < root; });
+  return it != groups.end() && it->first == r ? std::size_t(it - groups.begin()) : groups.size();
 }
 
 std::vector<PhysicsValidators::Impl::Component> PhysicsValidators::Impl::components(const ContactGraph& graph) const {

@@ -765,13 +765,15 @@ struct PhysicsValidators::Impl {
   /// Rows 7-8 on frames with states (balance.cpp).
   void balance(const FrameRecord& rec, const std::vector<Pose>& det);
   /// A step's contact graph: the contact rows' and confirmed pairs joined (find), per
-  /// root whether a member touches a static body, and per root its dynamic bodies in
-  /// contact (sorted).
+  /// root whether a member touches a static body, and the groups: per root (ascending)
+  /// its dynamic bodies in contact (ascending).
   struct ContactGraph {
     std::vector<std::uint32_t> parent;
     std::vector<std::uint8_t> statics;
-    std::map<std::uint32_t, std::vector<std::uint32_t>> groups;
+    std::vector<std::pair<std::uint32_t, std::vector<std::uint32_t>>> groups;
     std::uint32_t find(std::uint32_t i);
+    /// The index in `groups` of root r's group, or groups.size() when r has none.
+    std::size_t group_of(std::uint32_t r) const;
   };
   ContactGraph contact_graph(const FrameRecord& rec) const;
   /// Mechanical energy of body i (kinetic + rotational - m g . x), before or after the step.
