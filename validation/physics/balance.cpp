@@ -183,25 +183,61 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
 
   // Each row's impulse J = jn n + J_t on A (and -J on B), summed per body with its torque
   // about the body's detection-pose position, and what the record leaves uncertain.
-  std::vector<D3> force(n), torque(n);
-  std::vector<double> mag(n, 0.0), tmag(n, 0.0), tallow(n, 0.0), any_dir(n, 0.0);
+  // In the kept per-body sums (BalanceScratch: zero and empty on entry, the bodies of this
+  // frame's rows and confirmed pairs reset on leaving).
+  BalanceScratch& scratch = balance_scratch;
+  if (scratch.force.size() != n) {
+    scratch = BalanceScratch{};
+    scratch.force.resize(n);
+    scratch.torque.resize(n);
+    for (auto* v : {&scratch.mag, &scratch.tmag, &scratch.tallow, &scratch.any_dir}) v->assign(n, 0.0);
+    scratch.discs.resize(n);
+    scratch.row_j.resize(n);
+    scratch.rows_of.assign(n, 0);
+    scratch.in_contact.assign(n, 0);
+  }
+  struct Reset {
+    BalanceScratch& s;
+    const FrameRecord& rec;
+    ~Reset() {
+      auto clear = [&](std::uint32_t i) {
+        s.force[i] = s.torque[i] = D3{};
+        s.mag[i] = s.tmag[i] = s.tallow[i] = s.any_dir[i] = 0.0;
+        s.discs[i].clear();
+        s.row_j[i].clear();
+        s.rows_of[i] = 0;
+        s.in_contact[i] = 0;
+      };
+      for (const Pair& p : rec.confirmed) clear(p.a), clear(p.b);
+      for (const ContactRecord& c : rec.contacts) clear(c.pair.a), clear(c.pair.b);
+    }
+  } reset{scratch, rec};
+  std::vector<D3>& force = scratch.force;
+  std::vector<D3>& torque = scratch.torque;
+  std::vector<double>& mag = scratch.mag;
+  std::vector<double>& tmag = scratch.tmag;
+  std::vector<double>& tallow = scratch.tallow;
+  std::vector<double>& any_dir = scratch.any_dir;
   // Per body, what the record leaves open of its rows' friction: a disc of radius u in the
   // plane normal to n per row (direction and size of J_t beyond the scalar jt).
   using Disc = BalanceDisc;
-  std::vector<std::vector<Disc>> discs(n);
-  std::vector<std::vector<D3>> row_j(n);  // each row's impulse on the body (the spread's terms)
-  std::vector<std::uint32_t> rows_of(n, 0);
-  std::vector<std::uint8_t> in_contact(n, 0);
+  std::vector<std::vector<Disc>>& discs = scratch.discs;
+  std::vector<std::vector<D3>>& row_j = scratch.row_j;  // each row's impulse on the body (the spread's terms)
+  std::vector<std::uint32_t>& rows_of = scratch.rows_of;
+  std::vector<std::uint8_t>& in_contact = scratch.in_contact;
   for (const Pair& p : rec.confirmed) in_contact[p.a] = in_contact[p.b] = 1;
   for (const ContactRecord& c : rec.contacts) {
     in_contact[c.pair.a] = in_contact[c.pair.b] = 1;
     ++rows_of[c.pair.a];
     ++rows_of[c.pair.b];
   }
-  // One allocation a body in contact, on this thread (memory freed here again: blocks a
-  // worker allocated would return to its arena).
-  for (std::size_t i = 0; i < n; ++i) row_j[i].reserve(rows_of[i]);
-  for (std::size_t i = 0; i < n; ++i) discs[i].reserve(rows_of[i]);
+  // Room for each body's rows, on this thread (blocks a worker allocated would return to its
+  // arena): kept from frame to frame, grown where a body has more rows than before.
+  for (const ContactRecord& c : rec.contacts)
+    for (const std::uint32_t i : {c.pair.a, c.pair.b}) {
+      row_j[i].reserve(rows_of[i]);
+      discs[i].reserve(rows_of[i]);
+    }
   // On the threads, each owning a range of bodies: a thread computes the rows with a body
   // of its own and sums them into its bodies only, in row order (each body's sums are the
   // serial loop's, bit for bit). A row with bodies of two ranges is computed by both.

@@ -917,6 +917,19 @@ struct PhysicsValidators::Impl {
     D3 n;
     double u = 0;
   };
+  /// balance()'s per-body sums of a frame's rows, kept from frame to frame (their memory
+  /// allocated and faulted in once, not each frame: at 10^6 bodies 130 MB that took most of
+  /// the row's time). Between frames every entry is zero or empty: balance() resets the
+  /// bodies of its frame's rows and confirmed pairs as it leaves, by return or exception.
+  struct BalanceScratch {
+    std::vector<D3> force, torque;
+    std::vector<double> mag, tmag, tallow, any_dir;
+    std::vector<std::vector<BalanceDisc>> discs;
+    std::vector<std::vector<D3>> row_j;
+    std::vector<std::uint32_t> rows_of;
+    std::vector<std::uint8_t> in_contact;
+  };
+  BalanceScratch balance_scratch;
   /// A body-step whose linear balance failed at ratio 1: judged again in results() at the
   /// fitted ratio (it fails only where it fails at both).
   struct DeferredBalance {
