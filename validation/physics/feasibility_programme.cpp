@@ -4,9 +4,9 @@
 // largest residual of every body's momentum change (and, with rotation, its angular
 // momentum change) in units of its bound, solved with COIN-OR CLP; above 1 of the bound, a
 // failure naming the body, its residual, the nearest feasible impulses and the bodies whose
-// motion, left free, explains it. The first programmes of kIslandsPerSolve islands are
-// solved as one (block-diagonal) programme; an island whose impulses found there leave
-// more than its bound is solved again on its own.
+// motion, left free, explains it. The first programmes of consecutive small translation-
+// only islands are solved as one (block-diagonal) programme; an island whose impulses
+// found there leave more than its bound is solved again on its own.
 #include "feasibility.hpp"
 
 #include <algorithm>
@@ -25,9 +25,10 @@ using physics_detail::kPi;
 
 namespace {
 
-/// Programmes solved as one: each of at most kMaxSharedProgramme matrix entries (CLP's
-/// set-up is most of such a programme's solve; a larger one's iterations outweigh it), at
-/// most kMaxSharedEntries in all (larger arrays leave the allocator's reused memory).
+/// Programmes solved as one (translation only): each of at most kMaxSharedProgramme matrix
+/// entries (CLP's set-up is most of such a programme's solve; a larger one's iterations
+/// outweigh it), at most kMaxSharedEntries in all (larger arrays leave the allocator's
+/// reused memory).
 constexpr std::size_t kMaxSharedProgramme = 256;
 constexpr std::size_t kMaxSharedEntries = 4096;
 
@@ -559,8 +560,10 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
     return verdict;
   };
 
-  // The islands first..first+count in order: each judged one built; one of more than
-  // kMaxSharedProgramme entries finished at once (solved alone), the others gathered while
+  // The islands first..first+count in order: each judged one built; a rotating one or one
+  // of more than kMaxSharedProgramme entries finished at once (solved alone: a rotating
+  // island's angular bounds are far apart in scale, and the shared solve left a tenth of
+  // Bullet's rot-drop-220 islands above their bound, solved again), the others gathered while
   // their entries stay within kMaxSharedEntries, their first programmes solved as one, then
   // each finished (solved alone again where the impulses found together leave more than its
   // bound).
@@ -584,7 +587,7 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
     P.contacts = &island_contacts[ii];
     P.members = &island_members[ii];
     build(P);
-    if (P.idx.size() > kMaxSharedProgramme) {
+    if (rotating || P.idx.size() > kMaxSharedProgramme) {
       verdicts[ii] = finish(P, nullptr);
       continue;
     }
