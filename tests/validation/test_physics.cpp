@@ -805,6 +805,118 @@ TEST(PhysicsRows, IsolatedGroupConservation) {
       << row_of(tr, "conservation").detail;
 }
 
+// Conservation judges its isolated groups on threads (judge_in_order) and tallies them in
+// group order: 1,000 head-on pairs of boxes, no gravity, each its own isolated group (a
+// block of 256 groups on a thread); among the first 256, every third pair gains 0.5 kg m/s
+// from nowhere (momentum fails: more failing groups than the examples kept, judged again on
+// the calling thread); every fifth pair bounces apart faster than it came (the kinetic
+// energy rises: a rigid rise, contact_model undeclared, kept from the blocks judged on the
+// threads and spared once its episode closes, a step later, unjudged). The row is the same
+// with 1 and 2 threads, and counts every group and every rise.
+TEST(PhysicsRows, IsolatedGroupsOnThreadsGiveTheSerialVerdict) {
+  constexpr int kPairs = 1000;
+  std::string positions;
+  auto base = [](int k) { return v3(float(k % 40), float(k / 40), 0.0f); };
+  for (int k = 0; k < kPairs; ++k) {
+    const Vec3 b = base(k);
+    positions += fmt::format("{}[{}, {}, 0], [{}, {}, 0]", k ? ", " : "", b.x, b.y, b.x + 0.199f, b.y);
+  }
+  const auto model = build_model(parse_scene(R"({
+    "name": "pairs", "domain": {"min": [-1, -1, -1], "max": [41, 26, 1]}, "walls": "none", "gravity": [0, 0, 0],
+    "groups": [{"name": "boxes", "shape": {"box": [0.1, 0.1, 0.1]}, "count": )" +
+                                                 std::to_string(2 * kPairs) + R"(, "mass": 1.0, "positions": [)" +
+                                                 positions + "]}]}",
+                                             "pairs (test)"));
+  FrameRecord rec;
+  rec.frame = 3;
+  rec.has_points = true;
+  rec.manifolds = true;
+  rec.has_contact_terms = false;
+  for (int k = 0; k < kPairs; ++k) {
+    const Vec3 b = base(k);
+    const std::uint32_t a = std::uint32_t(2 * k), c = a + 1;
+    rec.x_det.push_back(b);
+    rec.x_det.push_back(v3(b.x + 0.199f, b.y, 0));
+    rec.v_pre.push_back(v3(1, 0, 0));
+    rec.v_pre.push_back(v3(-1, 0, 0));
+    // An exchange of 1 kg m/s along x stops both (jn 1 along -x on A); planted as above.
+    Vec3 va = v3(0, 0, 0), vc = v3(0, 0, 0);
+    float jn = 1.0f;
+    if (k < 256 && k % 3 == 0) va = v3(0.5f, 0, 0);
+    if (k % 5 == 0) {
+      va = v3(-1.2f, 0, 0);
+      vc = v3(1.2f, 0, 0);
+      jn = 2.2f;
+    }
+    rec.v_post.push_back(va);
+    rec.v_post.push_back(vc);
+    rec.pairs.push_back({a, c});
+    ContactRecord cr;
+    cr.pair = {a, c};
+    cr.normal = v3(-1, 0, 0);
+    cr.depth = 0.001f;
+    cr.point = v3(b.x + 0.0995f, b.y, 0);
+    cr.jn = jn;
+    cr.jt = 0.0f;
+    rec.contacts.push_back(cr);
+  }
+  for (std::size_t i = 0; i < rec.x_det.size(); ++i)
+    rec.aabbs.push_back(translated(model->local_box(i), rec.x_det[i]));
+  rec.x_pre = rec.x_det;
+  rec.x_post = rec.x_det;
+  for (std::size_t i = 0; i < rec.x_post.size(); ++i)
+    rec.x_post[i] = rec.x_pre[i] + float(model->scene.dt) * rec.v_post[i];
+  auto conservation = [&](int threads) {
+    PhysicsBodies bodies = rotating_engine();
+    bodies.contact_model = PhysicsBodies::ContactModel::Undeclared;
+    PhysicsValidators v(*model, bodies, Tolerances{}, "engine 'test'");
+    v.set_threads(threads);
+    v.observe(rec, true);
+    // The next step: every pair apart, no contact (its episode closes and is judged).
+    FrameRecord next = rec;
+    next.frame = rec.frame + 1;
+    next.contacts.clear();
+    next.pairs.clear();
+    next.x_det = rec.x_post;
+    next.x_pre = rec.x_post;
+    next.v_pre = rec.v_post;
+    for (std::size_t i = 0; i < next.x_post.size(); ++i)
+      next.x_post[i] = next.x_pre[i] + float(model->scene.dt) * next.v_post[i];
+    for (std::size_t i = 0; i < next.x_det.size(); ++i) next.aabbs[i] = translated(model->local_box(i), next.x_det[i]);
+    v.observe(next, true);
+    for (const ValidationResult& r : v.results())
+      if (r.name == "conservation") return r;
+    ADD_FAILURE() << "no conservation row";
+    return ValidationResult{};
+  };
+  const ValidationResult serial = conservation(1), threaded = conservation(2);
+  EXPECT_EQ(serial.judged, std::uint64_t(kPairs));
+  EXPECT_FALSE(serial.pass) << serial.detail;
+  EXPECT_EQ(serial.pass, threaded.pass);
+  EXPECT_EQ(serial.judged, threaded.judged);
+  EXPECT_EQ(serial.detail, threaded.detail);
+  EXPECT_NE(serial.detail.find("kinetic energy"), std::string::npos) << serial.detail;
+  ASSERT_EQ(serial.causes.size(), threaded.causes.size());
+  std::uint64_t momentum_failures = 0;
+  for (std::size_t c = 0; c < serial.causes.size(); ++c) {
+    const ValidationCause &a = serial.causes[c], &b = threaded.causes[c];
+    EXPECT_EQ(a.name, b.name);
+    EXPECT_EQ(a.count, b.count) << a.name;
+    EXPECT_EQ(a.worst, b.worst) << a.name;
+    EXPECT_EQ(a.items, b.items) << a.name;
+    ASSERT_EQ(a.examples.size(), b.examples.size()) << a.name;
+    for (std::size_t e = 0; e < a.examples.size(); ++e) {
+      EXPECT_EQ(a.examples[e].item, b.examples[e].item);
+      EXPECT_EQ(a.examples[e].text, b.examples[e].text);
+    }
+    if (a.name == "momentum") momentum_failures = a.count;
+  }
+  // Pairs k < 256 with k % 3 == 0 but not k % 5 == 0 (those keep their momentum): 68.
+  EXPECT_EQ(momentum_failures, 68u) << serial.detail;
+  EXPECT_NE(serial.detail.find("200 steps raising the kinetic energy spared"), std::string::npos) << serial.detail;
+  EXPECT_NE(serial.detail.find("energy 0 of 800 group-frames"), std::string::npos) << serial.detail;
+}
+
 // Dissipation at the contact point: a friction impulse that speeds up the sliding fails.
 TEST(PhysicsRows, FrictionRaisingTangentialSpeed) {
   const auto model = build_model(four_bodies("[0, 0, 0]"));

@@ -106,15 +106,16 @@ std::string body_name(std::size_t i);
 std::string group_name(const std::vector<std::uint32_t>& members);
 
 /// Where a judged item is: its frame and its name as expectations write it ("pair (A, B)",
-/// "body I", "group (I, J, K)"). A pair's or a body's name is written only when a Tally
-/// needs it (a failure): most items pass, and a frame judges 10^5 - 10^6 of them.
+/// "body I", "group (I, J, K)"). A pair's, a body's or a group's name is written only when a
+/// Tally needs it (a failure): most items pass, and a frame judges 10^5 - 10^6 of them.
 struct Where {
-  enum class Kind { Text, Pair, Body };
+  enum class Kind { Text, Pair, Body, Group };
   std::int64_t frame = -1;
   Kind kind = Kind::Text;
   std::string text;  ///< Kind::Text: the name ("" for none)
   Pair pair{};       ///< Kind::Pair
   std::size_t body = 0;  ///< Kind::Body
+  const std::vector<std::uint32_t>* members = nullptr;  ///< Kind::Group: borrowed for the check's call
   Where() = default;
   Where(std::int64_t f, std::string name) : frame(f), text(std::move(name)) {}
   Where(std::int64_t f, Pair p) : frame(f), kind(Kind::Pair), pair(p) {}
@@ -125,9 +126,21 @@ struct Where {
     w.body = i;
     return w;
   }
-  /// The item's name: "pair (A, B)", "body I" or the text.
+  /// An isolated group by its members (ascending), which must outlive the Tally::check
+  /// the Where is given to.
+  static Where of_group(std::int64_t f, const std::vector<std::uint32_t>& m) {
+    Where w;
+    w.frame = f;
+    w.kind = Kind::Group;
+    w.members = &m;
+    return w;
+  }
+  /// The item's name: "pair (A, B)", "body I", "group (I, J, K)" or the text.
   std::string name() const {
-    return kind == Kind::Pair ? pair_name(pair) : kind == Kind::Body ? body_name(body) : text;
+    return kind == Kind::Pair    ? pair_name(pair)
+           : kind == Kind::Body  ? body_name(body)
+           : kind == Kind::Group ? group_name(*members)
+                                 : text;
   }
 };
 
