@@ -87,6 +87,11 @@ struct FeasibilityState {
   std::size_t persisted_steps = 0;  ///< the most earlier steps a point's normals came from
   /// exact_pairs' tables of the step's candidate search, kept from step to step.
   ExactPairsTables pair_tables;
+  /// The step's per-body tables (n entries each: union-find parents, bodies touched, each
+  /// root's island), rewritten every step in memory kept from step to step.
+  std::vector<std::uint32_t> parent;
+  std::vector<std::uint8_t> touched;
+  std::vector<std::int32_t> island_of;
 };
 
 /// One candidate pair's contacts found on the posed shapes, with its counts.
