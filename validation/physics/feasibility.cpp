@@ -157,28 +157,39 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // Islands: the dynamic bodies joined through contacts between dynamic bodies, in the
   // order of their roots (a pair with contacts has a dynamic body: feasibility_contacts),
   // each island's bodies ascending (the programme finds a body's slot by bisection); read
-  // off the bodies touched.
+  // off the bodies touched. A root is a dynamic body touched that is its own parent (unions
+  // join dynamic bodies only), so the roots come out ascending from the bodies touched; the
+  // finds read the parents only (no path halving), on `threads` threads.
+  auto root = [&](std::uint32_t i) {
+    while (parent[i] != i) i = parent[i];
+    return i;
+  };
   std::vector<std::int32_t>& island_of = st.island_of;
-  island_of.assign(n, -1);
+  island_of.resize(n);
   std::vector<std::uint32_t> roots, root_of(bodies_touched.size());
-  for (std::size_t k = 0; k < bodies_touched.size(); ++k) {
-    const std::uint32_t r = root_of[k] = find(bodies_touched[k]);
-    if (island_of[r] < 0) {
-      island_of[r] = 0;
-      roots.push_back(r);
-    }
-  }
-  std::sort(roots.begin(), roots.end());
-  for (std::size_t ii = 0; ii < roots.size(); ++ii) island_of[roots[ii]] = static_cast<std::int32_t>(ii);
+  parallel_items(bodies_touched.size(), threads, stop,
+                 [&](std::size_t k, unsigned) { root_of[k] = root(bodies_touched[k]); });
+  for (std::size_t k = 0; k < bodies_touched.size(); ++k)
+    if (root_of[k] == bodies_touched[k]) roots.push_back(root_of[k]);
+  parallel_items(roots.size(), threads, stop,
+                 [&](std::size_t ii, unsigned) { island_of[roots[ii]] = static_cast<std::int32_t>(ii); });
   // Each island's bodies and its pairs with contacts (candidate order), as ranges of two
-  // flat lists: first[ii] .. first[ii + 1].
+  // flat lists: first[ii] .. first[ii + 1]; the items sorted by (island, item) on `threads`
+  // threads (the keys are distinct: the order of a stable counting sort by island).
+  std::vector<std::uint64_t> keys;
   auto ranges = [&](std::size_t items, auto island_of_item, std::vector<std::size_t>& first, auto& flat, auto value) {
+    keys.resize(items);
+    parallel_items(items, threads, stop, [&](std::size_t k, unsigned) {
+      keys[k] = (std::uint64_t(island_of_item(k)) << 32) | std::uint64_t(k);
+    });
+    parallel_sort(keys, loop_threads(threads, items), std::less<std::uint64_t>());
     first.assign(roots.size() + 1, 0);
-    for (std::size_t k = 0; k < items; ++k) ++first[island_of_item(k) + 1];
-    for (std::size_t ii = 0; ii < roots.size(); ++ii) first[ii + 1] += first[ii];
-    std::vector<std::size_t> at(first.begin(), first.end() - 1);
     flat.resize(items);
-    for (std::size_t k = 0; k < items; ++k) flat[at[island_of_item(k)]++] = value(k);
+    for (std::size_t j = 0; j < items; ++j) {
+      ++first[(keys[j] >> 32) + 1];
+      flat[j] = value(std::size_t(keys[j] & 0xffffffffu));
+    }
+    for (std::size_t ii = 0; ii < roots.size(); ++ii) first[ii + 1] += first[ii];
   };
   std::vector<std::size_t> member_first, pair_first, pairs_flat;
   std::vector<std::uint32_t> members_flat;
@@ -187,7 +198,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   ranges(with_contacts.size(),
          [&](std::size_t k) {
            const Pair p = cand[with_contacts[k]];
-           return std::size_t(island_of[find(dynamic(p.a) ? p.a : p.b)]);
+           return std::size_t(island_of[root(dynamic(p.a) ? p.a : p.b)]);
          },
          pair_first, pairs_flat, [&](std::size_t k) { return with_contacts[k]; });
   // Each island's bodies, and its contacts in candidate order copied only where it has at
