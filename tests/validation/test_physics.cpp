@@ -805,45 +805,45 @@ TEST(PhysicsRows, IsolatedGroupConservation) {
       << row_of(tr, "conservation").detail;
 }
 
-// Conservation judges its isolated groups on threads (judge_in_order) and tallies them in
-// group order: 1,000 head-on pairs of boxes, no gravity, each its own isolated group (a
-// block of 256 groups on a thread); among the first 256, every third pair gains 0.5 kg m/s
-// from nowhere (momentum fails: more failing groups than the examples kept, judged again on
-// the calling thread); every fifth pair bounces apart faster than it came (the kinetic
-// energy rises: a rigid rise, contact_model undeclared, kept from the blocks judged on the
-// threads and spared once its episode closes, a step later, unjudged). The row is the same
-// with 1 and 2 threads, and counts every group and every rise.
-TEST(PhysicsRows, IsolatedGroupsOnThreadsGiveTheSerialVerdict) {
-  constexpr int kPairs = 1000;
+/// kPairs head-on pairs of boxes (half side 0.1 m, 1 kg), no gravity, pair k at (k % 40,
+/// k / 40, 0) and 0.199 m along x from it: each pair overlaps by 1 mm along x.
+constexpr int kHeadOnPairs = 1000;
+Vec3 head_on_base(int k) { return v3(float(k % 40), float(k / 40), 0.0f); }
+
+Scene head_on_scene() {
   std::string positions;
-  auto base = [](int k) { return v3(float(k % 40), float(k / 40), 0.0f); };
-  for (int k = 0; k < kPairs; ++k) {
-    const Vec3 b = base(k);
+  for (int k = 0; k < kHeadOnPairs; ++k) {
+    const Vec3 b = head_on_base(k);
     positions += fmt::format("{}[{}, {}, 0], [{}, {}, 0]", k ? ", " : "", b.x, b.y, b.x + 0.199f, b.y);
   }
-  const auto model = build_model(parse_scene(R"({
+  return parse_scene(R"({
     "name": "pairs", "domain": {"min": [-1, -1, -1], "max": [41, 26, 1]}, "walls": "none", "gravity": [0, 0, 0],
     "groups": [{"name": "boxes", "shape": {"box": [0.1, 0.1, 0.1]}, "count": )" +
-                                                 std::to_string(2 * kPairs) + R"(, "mass": 1.0, "positions": [)" +
-                                                 positions + "]}]}",
-                                             "pairs (test)"));
+                         std::to_string(2 * kHeadOnPairs) + R"(, "mass": 1.0, "positions": [)" + positions + "]}]}",
+                     "pairs (test)");
+}
+
+/// Step `frame` of the head-on pairs: each pair closes at 2 m/s and an exchange of 1 kg m/s
+/// along x (jn 1 along -x on A, its row at the overlap's centre) stops both. Planted where
+/// asked: among the first 256 pairs every third gains 0.5 kg m/s from nowhere; every fifth
+/// bounces apart faster than it came (jn 2.2).
+FrameRecord head_on_step(const Model& model, std::int64_t frame, bool planted) {
   FrameRecord rec;
-  rec.frame = 3;
+  rec.frame = frame;
   rec.has_points = true;
   rec.manifolds = true;
   rec.has_contact_terms = false;
-  for (int k = 0; k < kPairs; ++k) {
-    const Vec3 b = base(k);
+  for (int k = 0; k < kHeadOnPairs; ++k) {
+    const Vec3 b = head_on_base(k);
     const std::uint32_t a = std::uint32_t(2 * k), c = a + 1;
     rec.x_det.push_back(b);
     rec.x_det.push_back(v3(b.x + 0.199f, b.y, 0));
     rec.v_pre.push_back(v3(1, 0, 0));
     rec.v_pre.push_back(v3(-1, 0, 0));
-    // An exchange of 1 kg m/s along x stops both (jn 1 along -x on A); planted as above.
     Vec3 va = v3(0, 0, 0), vc = v3(0, 0, 0);
     float jn = 1.0f;
-    if (k < 256 && k % 3 == 0) va = v3(0.5f, 0, 0);
-    if (k % 5 == 0) {
+    if (planted && k < 256 && k % 3 == 0) va = v3(0.5f, 0, 0);
+    if (planted && k % 5 == 0) {
       va = v3(-1.2f, 0, 0);
       vc = v3(1.2f, 0, 0);
       jn = 2.2f;
@@ -860,12 +860,25 @@ TEST(PhysicsRows, IsolatedGroupsOnThreadsGiveTheSerialVerdict) {
     cr.jt = 0.0f;
     rec.contacts.push_back(cr);
   }
-  for (std::size_t i = 0; i < rec.x_det.size(); ++i)
-    rec.aabbs.push_back(translated(model->local_box(i), rec.x_det[i]));
+  for (std::size_t i = 0; i < rec.x_det.size(); ++i) rec.aabbs.push_back(translated(model.local_box(i), rec.x_det[i]));
   rec.x_pre = rec.x_det;
   rec.x_post = rec.x_det;
   for (std::size_t i = 0; i < rec.x_post.size(); ++i)
-    rec.x_post[i] = rec.x_pre[i] + float(model->scene.dt) * rec.v_post[i];
+    rec.x_post[i] = rec.x_pre[i] + float(model.scene.dt) * rec.v_post[i];
+  return rec;
+}
+
+// Conservation judges its isolated groups on threads (judge_in_order) and tallies them in
+// group order: 1,000 head-on pairs, each its own isolated group (a block of 256 groups on
+// a thread), planted (head_on_step): the momentum failures, more than the examples kept,
+// are judged again on the calling thread; the rigid rises (contact_model undeclared) are
+// kept from the blocks judged on the threads and spared once their episodes close, a step
+// later, unjudged. The row is the same with 1 and 2 threads, and counts every group and
+// every rise.
+TEST(PhysicsRows, IsolatedGroupsOnThreadsGiveTheSerialVerdict) {
+  constexpr int kPairs = kHeadOnPairs;
+  const auto model = build_model(head_on_scene());
+  const FrameRecord rec = head_on_step(*model, 3, true);
   auto conservation = [&](int threads) {
     PhysicsBodies bodies = rotating_engine();
     bodies.contact_model = PhysicsBodies::ContactModel::Undeclared;
@@ -915,6 +928,29 @@ TEST(PhysicsRows, IsolatedGroupsOnThreadsGiveTheSerialVerdict) {
   EXPECT_EQ(momentum_failures, 68u) << serial.detail;
   EXPECT_NE(serial.detail.find("200 steps raising the kinetic energy spared"), std::string::npos) << serial.detail;
   EXPECT_NE(serial.detail.find("energy 0 of 800 group-frames"), std::string::npos) << serial.detail;
+}
+
+// impulse-feasibility finds each step's contact points afresh (its per-pair lists are kept
+// from step to step, emptied): the head-on pairs judged over two steps in contact find as
+// many contact points as each step judged alone (normal_reuse_deg 0: no earlier normals).
+TEST(PhysicsRows, FeasibilityFindsEachStepsContactPointsAfresh) {
+  const auto model = build_model(head_on_scene());
+  PhysicsBodies bodies = rotating_engine();
+  bodies.normal_reuse_deg = 0.0;
+  auto points = [&](const std::vector<std::int64_t>& frames) {
+    PhysicsValidators v(*model, bodies, Tolerances{}, "engine 'test'");
+    for (const std::int64_t f : frames) v.observe(head_on_step(*model, f, false), true);
+    const ValidationResult& r = row_of(v.results(), "impulse-feasibility");
+    EXPECT_TRUE(r.pass) << r.detail;
+    const std::size_t at = r.detail.find(" contact points found on the posed shapes");
+    EXPECT_NE(at, std::string::npos) << r.detail;
+    const std::size_t from = r.detail.rfind(' ', at - 1) + 1;
+    return std::stoull(r.detail.substr(from, at - from));
+  };
+  const auto one = points({3}), other = points({4}), both = points({3, 4});
+  EXPECT_GE(one, std::uint64_t(kHeadOnPairs));
+  EXPECT_EQ(one, other);
+  EXPECT_EQ(both, one + other);
 }
 
 // Dissipation at the contact point: a friction impulse that speeds up the sliding fails.

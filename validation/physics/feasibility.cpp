@@ -116,7 +116,8 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   std::vector<std::uint8_t>& touched = st.touched;
   touched.assign(n, 0);
   // Each candidate pair's contact points on `threads` threads, each into its own slot.
-  std::vector<PairContacts> pair_out(cand.size());
+  std::vector<PairContacts>& pair_out = st.pair_out;
+  pair_out.resize(cand.size());
   std::mutex hulls_mutex;
   // Rows with two witness points (FrameRecord::point_b), by pair.
   std::vector<std::pair<Pair, std::size_t>> witness_rows;
@@ -127,7 +128,10 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   }
   const ContactSearch search{st, hulls_mutex, det, world, motion, rec, witness_rows};
   parallel_items(cand.size(), threads, stop,
-                 [&](std::size_t ci, unsigned) { feasibility_contacts(search, cand[ci], pair_out[ci]); });
+                 [&](std::size_t ci, unsigned) {
+                   pair_out[ci].clear();
+                   feasibility_contacts(search, cand[ci], pair_out[ci]);
+                 });
   // In candidate order: the pairs with contacts, the islands they join, and their dynamic
   // bodies. The contacts stay in their pairs' slots: only an island the programme may judge
   // takes a copy of its own.
@@ -158,19 +162,25 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // order of their roots (a pair with contacts has a dynamic body: feasibility_contacts),
   // each island's bodies ascending (the programme finds a body's slot by bisection); read
   // off the bodies touched. A root is a dynamic body touched that is its own parent (unions
-  // join dynamic bodies only), so the roots come out ascending from the bodies touched; the
-  // finds read the parents only (no path halving), on `threads` threads.
-  auto root = [&](std::uint32_t i) {
-    while (parent[i] != i) i = parent[i];
-    return i;
-  };
+  // join dynamic bodies only), so the roots come out ascending from the bodies touched.
+  // Each body's root: on `threads` threads where the path is short (the parents only
+  // read), else on this thread with path halving; then each body touched points at its root.
+  constexpr std::uint32_t kNoRoot = 0xffffffffu;
+  constexpr int kShortPath = 8;
+  std::vector<std::uint32_t> roots, root_of(bodies_touched.size());
+  parallel_items(bodies_touched.size(), threads, stop, [&](std::size_t k, unsigned) {
+    std::uint32_t i = bodies_touched[k];
+    for (int step = 0; step < kShortPath && parent[i] != i; ++step) i = parent[i];
+    root_of[k] = parent[i] == i ? i : kNoRoot;
+  });
+  for (std::size_t k = 0; k < bodies_touched.size(); ++k) {
+    if (root_of[k] == kNoRoot) root_of[k] = find(bodies_touched[k]);
+    if (root_of[k] == bodies_touched[k]) roots.push_back(root_of[k]);
+  }
+  parallel_items(bodies_touched.size(), threads, stop,
+                 [&](std::size_t k, unsigned) { parent[bodies_touched[k]] = root_of[k]; });
   std::vector<std::int32_t>& island_of = st.island_of;
   island_of.resize(n);
-  std::vector<std::uint32_t> roots, root_of(bodies_touched.size());
-  parallel_items(bodies_touched.size(), threads, stop,
-                 [&](std::size_t k, unsigned) { root_of[k] = root(bodies_touched[k]); });
-  for (std::size_t k = 0; k < bodies_touched.size(); ++k)
-    if (root_of[k] == bodies_touched[k]) roots.push_back(root_of[k]);
   parallel_items(roots.size(), threads, stop,
                  [&](std::size_t ii, unsigned) { island_of[roots[ii]] = static_cast<std::int32_t>(ii); });
   // Each island's bodies and its pairs with contacts (candidate order), as ranges of two
@@ -182,7 +192,8 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     parallel_items(items, threads, stop, [&](std::size_t k, unsigned) {
       keys[k] = (std::uint64_t(island_of_item(k)) << 32) | std::uint64_t(k);
     });
-    parallel_sort(keys, loop_threads(threads, items), std::less<std::uint64_t>());
+    if (!std::is_sorted(keys.begin(), keys.end()))  // sorted already: one island, or islands in item order
+      parallel_sort(keys, loop_threads(threads, items), std::less<std::uint64_t>());
     first.assign(roots.size() + 1, 0);
     flat.resize(items);
     for (std::size_t j = 0; j < items; ++j) {
@@ -198,17 +209,20 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   ranges(with_contacts.size(),
          [&](std::size_t k) {
            const Pair p = cand[with_contacts[k]];
-           return std::size_t(island_of[root(dynamic(p.a) ? p.a : p.b)]);
+           return std::size_t(island_of[parent[dynamic(p.a) ? p.a : p.b]]);
          },
          pair_first, pairs_flat, [&](std::size_t k) { return with_contacts[k]; });
   // Each island's bodies, and its contacts in candidate order copied only where it has at
   // most kMaxIslandBodies bodies (feasibility_islands decides a larger one without reading
   // them), on `threads` threads.
-  std::vector<std::vector<std::uint32_t>> island_members(roots.size());
-  std::vector<std::vector<Contact>> island_contacts(roots.size());
+  std::vector<std::vector<std::uint32_t>>& island_members = st.island_members;
+  std::vector<std::vector<Contact>>& island_contacts = st.island_contacts;
+  island_members.resize(roots.size());
+  island_contacts.resize(roots.size());
   parallel_items(roots.size(), threads, stop, [&](std::size_t ii, unsigned) {
     island_members[ii].assign(members_flat.begin() + std::ptrdiff_t(member_first[ii]),
                               members_flat.begin() + std::ptrdiff_t(member_first[ii + 1]));
+    island_contacts[ii].clear();
     if (island_members[ii].size() > kMaxIslandBodies) return;
     std::size_t count = 0;
     for (std::size_t k = pair_first[ii]; k < pair_first[ii + 1]; ++k) count += pair_out[pairs_flat[k]].contacts.size();

@@ -68,6 +68,19 @@ struct Contact {
   const D3& point_of(std::uint32_t i) const { return i == pair.a ? point : point_b; }
 };
 
+/// One candidate pair's contacts found on the posed shapes, with its counts.
+struct PairContacts {
+  std::vector<Contact> contacts;
+  std::uint64_t persisted = 0, crossings = 0, crossings_skipped = 0, witness = 0;
+  std::size_t persisted_steps = 0;
+  /// Empties the contacts (keeping their memory) and zeroes the counts.
+  void clear() {
+    contacts.clear();
+    persisted = crossings = crossings_skipped = witness = 0;
+    persisted_steps = 0;
+  }
+};
+
 /// The row's counts beyond its tally (PhysicsValidators::Impl::row_state).
 struct FeasibilityState {
   std::uint64_t steps = 0, islands = 0, contacts = 0, pairs = 0;
@@ -92,14 +105,14 @@ struct FeasibilityState {
   std::vector<std::uint32_t> parent;
   std::vector<std::uint8_t> touched;
   std::vector<std::int32_t> island_of;
+  /// The step's contacts per candidate pair, and each island's bodies and contacts, in
+  /// memory kept from step to step (at 240,000 pairs a step, freeing their lists was about
+  /// as many instructions as the rest of the row).
+  std::vector<PairContacts> pair_out;
+  std::vector<std::vector<std::uint32_t>> island_members;
+  std::vector<std::vector<Contact>> island_contacts;
 };
 
-/// One candidate pair's contacts found on the posed shapes, with its counts.
-struct PairContacts {
-  std::vector<Contact> contacts;
-  std::uint64_t persisted = 0, crossings = 0, crossings_skipped = 0, witness = 0;
-  std::size_t persisted_steps = 0;
-};
 
 /// What the contact search of one step reads (PhysicsValidators::Impl::feasibility_contacts):
 /// the row's state (its earlier poses; the hulls' edges, found once under `hulls_mutex` by
