@@ -25,6 +25,12 @@ namespace octocd {
 
 using namespace physics_detail;
 
+namespace {
+/// The fewest items of the islands' index (roots, ranges: a few instructions an item) that
+/// go to the validators' threads: below it, waking them costs more than the loop.
+constexpr std::size_t kParallelIndexFrom = 16384;
+}  // namespace
+
 bool PhysicsValidators::Impl::feasibility_step(const PhysicsFrame& f) const {
   const std::size_t n = model->bodies.size();
   const FrameRecord& rec = f.rec;
@@ -164,11 +170,13 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // off the bodies touched. A root is a dynamic body touched that is its own parent (unions
   // join dynamic bodies only), so the roots come out ascending from the bodies touched.
   // Each body's root: on `threads` threads where the path is short (the parents only
-  // read), else on this thread with path halving; then each body touched points at its root.
+  // read), else on this thread with path halving; then each body touched points at its
+  // root. The index's loops go to the threads from kParallelIndexFrom items.
   constexpr std::uint32_t kNoRoot = 0xffffffffu;
   constexpr int kShortPath = 8;
   std::vector<std::uint32_t> roots, root_of(bodies_touched.size());
-  parallel_items(bodies_touched.size(), threads, stop, [&](std::size_t k, unsigned) {
+  const unsigned index_threads = loop_threads(threads, bodies_touched.size(), kParallelIndexFrom);
+  parallel_items_on(bodies_touched.size(), index_threads, stop, [&](std::size_t k, unsigned) {
     std::uint32_t i = bodies_touched[k];
     for (int step = 0; step < kShortPath && parent[i] != i; ++step) i = parent[i];
     root_of[k] = parent[i] == i ? i : kNoRoot;
@@ -177,19 +185,19 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     if (root_of[k] == kNoRoot) root_of[k] = find(bodies_touched[k]);
     if (root_of[k] == bodies_touched[k]) roots.push_back(root_of[k]);
   }
-  parallel_items(bodies_touched.size(), threads, stop,
-                 [&](std::size_t k, unsigned) { parent[bodies_touched[k]] = root_of[k]; });
+  parallel_items_on(bodies_touched.size(), index_threads, stop,
+                    [&](std::size_t k, unsigned) { parent[bodies_touched[k]] = root_of[k]; });
   std::vector<std::int32_t>& island_of = st.island_of;
   island_of.resize(n);
-  parallel_items(roots.size(), threads, stop,
-                 [&](std::size_t ii, unsigned) { island_of[roots[ii]] = static_cast<std::int32_t>(ii); });
+  parallel_items_on(roots.size(), loop_threads(threads, roots.size(), kParallelIndexFrom), stop,
+                    [&](std::size_t ii, unsigned) { island_of[roots[ii]] = static_cast<std::int32_t>(ii); });
   // Each island's bodies and its pairs with contacts (candidate order), as ranges of two
   // flat lists: first[ii] .. first[ii + 1]; the items sorted by (island, item) on `threads`
   // threads (the keys are distinct: the order of a stable counting sort by island).
   std::vector<std::uint64_t> keys;
   auto ranges = [&](std::size_t items, auto island_of_item, std::vector<std::size_t>& first, auto& flat, auto value) {
     keys.resize(items);
-    parallel_items(items, threads, stop, [&](std::size_t k, unsigned) {
+    parallel_items_on(items, loop_threads(threads, items, kParallelIndexFrom), stop, [&](std::size_t k, unsigned) {
       keys[k] = (std::uint64_t(island_of_item(k)) << 32) | std::uint64_t(k);
     });
     if (!std::is_sorted(keys.begin(), keys.end()))  // sorted already: one island, or islands in item order
