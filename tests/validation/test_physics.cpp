@@ -810,34 +810,41 @@ TEST(PhysicsRows, IsolatedGroupConservation) {
 constexpr int kHeadOnPairs = 1000;
 Vec3 head_on_base(int k) { return v3(float(k % 40), float(k / 40), 0.0f); }
 
-Scene head_on_scene() {
+Scene head_on_scene(int pairs = kHeadOnPairs) {
   std::string positions;
-  for (int k = 0; k < kHeadOnPairs; ++k) {
+  for (int k = 0; k < pairs; ++k) {
     const Vec3 b = head_on_base(k);
     positions += fmt::format("{}[{}, {}, 0], [{}, {}, 0]", k ? ", " : "", b.x, b.y, b.x + 0.199f, b.y);
   }
   return parse_scene(R"({
     "name": "pairs", "domain": {"min": [-1, -1, -1], "max": [41, 26, 1]}, "walls": "none", "gravity": [0, 0, 0],
     "groups": [{"name": "boxes", "shape": {"box": [0.1, 0.1, 0.1]}, "count": )" +
-                         std::to_string(2 * kHeadOnPairs) + R"(, "mass": 1.0, "positions": [)" + positions + "]}]}",
+                         std::to_string(2 * pairs) + R"(, "mass": 1.0, "positions": [)" + positions + "]}]}",
                      "pairs (test)");
 }
 
 /// Step `frame` of the head-on pairs: each pair closes at 2 m/s and an exchange of 1 kg m/s
 /// along x (jn 1 along -x on A, its row at the overlap's centre) stops both. Planted where
 /// asked: among the first 256 pairs every third gains 0.5 kg m/s from nowhere; every fifth
-/// bounces apart faster than it came (jn 2.2).
-FrameRecord head_on_step(const Model& model, std::int64_t frame, bool planted) {
+/// bounces apart faster than it came (jn 2.2). `twist_deg` > 0: each B turned about z by
+/// frame x twist_deg at detection (q_det), so each step's contact normals are its own.
+FrameRecord head_on_step(const Model& model, std::int64_t frame, bool planted, double twist_deg = 0.0) {
+  const int pairs = int(model.bodies.size() / 2);
   FrameRecord rec;
   rec.frame = frame;
   rec.has_points = true;
   rec.manifolds = true;
   rec.has_contact_terms = false;
-  for (int k = 0; k < kHeadOnPairs; ++k) {
+  const double half = 0.5 * double(frame) * twist_deg * kPi / 180.0;
+  for (int k = 0; k < pairs; ++k) {
     const Vec3 b = head_on_base(k);
     const std::uint32_t a = std::uint32_t(2 * k), c = a + 1;
     rec.x_det.push_back(b);
     rec.x_det.push_back(v3(b.x + 0.199f, b.y, 0));
+    if (twist_deg > 0) {
+      rec.q_det.push_back(Quat{});
+      rec.q_det.push_back(Quat{float(std::cos(half)), 0.0f, 0.0f, float(std::sin(half))});
+    }
     rec.v_pre.push_back(v3(1, 0, 0));
     rec.v_pre.push_back(v3(-1, 0, 0));
     Vec3 va = v3(0, 0, 0), vc = v3(0, 0, 0);
@@ -860,7 +867,9 @@ FrameRecord head_on_step(const Model& model, std::int64_t frame, bool planted) {
     cr.jt = 0.0f;
     rec.contacts.push_back(cr);
   }
-  for (std::size_t i = 0; i < rec.x_det.size(); ++i) rec.aabbs.push_back(translated(model.local_box(i), rec.x_det[i]));
+  for (std::size_t i = 0; i < rec.x_det.size(); ++i)
+    rec.aabbs.push_back(rec.q_det.empty() ? translated(model.local_box(i), rec.x_det[i])
+                                          : posed_box_aabb(model.local_box(i), Pose{rec.x_det[i], rec.q_det[i]}));
   rec.x_pre = rec.x_det;
   rec.x_post = rec.x_det;
   for (std::size_t i = 0; i < rec.x_post.size(); ++i)
@@ -940,7 +949,8 @@ TEST(PhysicsRows, FeasibilityFindsEachStepsContactPointsAfresh) {
   auto points = [&](const std::vector<std::int64_t>& frames) {
     PhysicsValidators v(*model, bodies, Tolerances{}, "engine 'test'");
     for (const std::int64_t f : frames) v.observe(head_on_step(*model, f, false), true);
-    const ValidationResult& r = row_of(v.results(), "impulse-feasibility");
+    const std::vector<ValidationResult> rows = v.results();
+    const ValidationResult& r = row_of(rows, "impulse-feasibility");
     EXPECT_TRUE(r.pass) << r.detail;
     const std::size_t at = r.detail.find(" contact points found on the posed shapes");
     EXPECT_NE(at, std::string::npos) << r.detail;
@@ -951,6 +961,24 @@ TEST(PhysicsRows, FeasibilityFindsEachStepsContactPointsAfresh) {
   EXPECT_GE(one, std::uint64_t(kHeadOnPairs));
   EXPECT_EQ(one, other);
   EXPECT_EQ(both, one + other);
+}
+
+// impulse-feasibility keeps the poses of up to 64 earlier steps here (kMaxPastSteps; a
+// step's contact points also take the normals they carried then) and, once that past is
+// full, takes the newest step's into the oldest's memory: 20 head-on pairs whose B turns
+// 0.2 deg a step, judged on step 70 after steps 1..69 (the past recycled) and after steps
+// 6..69 only (the same 64 steps, never recycled), give the same row.
+TEST(PhysicsRows, FeasibilityKeepsTheLastStepsPoses) {
+  const auto model = build_model(head_on_scene(20));
+  auto row = [&](std::int64_t first) {
+    PhysicsValidators v(*model, rotating_engine(), Tolerances{}, "engine 'test'");
+    for (std::int64_t f = first; f <= 70; ++f) v.observe(head_on_step(*model, f, false, 0.2), f == 70);
+    const std::vector<ValidationResult> rows = v.results();
+    return ValidationResult(row_of(rows, "impulse-feasibility"));
+  };
+  const ValidationResult recycled = row(1), fresh = row(6);
+  EXPECT_EQ(recycled.detail, fresh.detail);
+  EXPECT_NE(fresh.detail.find("normals they carried on earlier steps"), std::string::npos) << fresh.detail;
 }
 
 // Dissipation at the contact point: a friction impulse that speeds up the sliding fails.
