@@ -200,7 +200,10 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
     BalanceScratch& s;
     const FrameRecord& rec;
     ~Reset() {
+      // Every body written below is marked in_contact (its pair's first loop), and clear()
+      // unmarks it: a body met again among the links is already clean.
       auto clear = [&](std::uint32_t i) {
+        if (!s.in_contact[i]) return;
         s.force[i] = s.torque[i] = D3{};
         s.mag[i] = s.tmag[i] = s.tallow[i] = s.any_dir[i] = 0.0;
         s.discs[i].clear();
