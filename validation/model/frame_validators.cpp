@@ -145,12 +145,28 @@ void find_pairs_stoppable(const std::shared_ptr<BroadPhase>& bp, const std::vect
 /// 12 ns). Its comparisons stay spread over the whole run; the row's detail names the stride.
 constexpr double kQuadraticTestsPerJudgedFrame = 2e7;
 
+/// The most AABB tests one call of a quadratic-cost broadphase may make for it to be compared
+/// at all: about two minutes of one core, up to 141,421 boxes. Above it one call is a judged
+/// frame of hours (10^6 boxes: 5 x 10^11 tests), which no stride spreads: such a broadphase
+/// is not compared, and the row's detail says so.
+constexpr double kQuadraticTestsPerCall = 1e10;
+
+/// The AABB tests of one call of a quadratic-cost broadphase on `n` boxes, n(n-1)/2.
+double quadratic_tests(std::size_t n) {
+  return 0.5 * static_cast<double>(n) * static_cast<double>(n > 0 ? n - 1 : 0);
+}
+
+/// Whether a broadphase of cost `cost` is compared at all on `n` boxes.
+bool comparable(BroadPhaseCost cost, std::size_t n) {
+  return cost != BroadPhaseCost::quadratic || quadratic_tests(n) <= kQuadraticTestsPerCall;
+}
+
 /// The judged frames between two comparisons of a broadphase of cost `cost` on `n` boxes:
 /// 1, or the stride above for a quadratic one.
 std::uint64_t compare_stride(BroadPhaseCost cost, std::size_t n) {
   if (cost != BroadPhaseCost::quadratic) return 1;
-  const double tests = 0.5 * static_cast<double>(n) * static_cast<double>(n > 0 ? n - 1 : 0);
-  return std::max<std::uint64_t>(1, static_cast<std::uint64_t>(std::ceil(tests / kQuadraticTestsPerJudgedFrame)));
+  return std::max<std::uint64_t>(
+      1, static_cast<std::uint64_t>(std::ceil(quadratic_tests(n) / kQuadraticTestsPerJudgedFrame)));
 }
 
 /// The pair sets of the broadphases `bps[order[j]]` for j < `count` on the same boxes, each
@@ -420,7 +436,8 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
     const std::uint64_t judged_frame = s.candidate_frames - 1;
     std::vector<std::size_t> due;
     for (std::size_t b : s.bp_order)
-      if (judged_frame % compare_stride(s.bp_cost[b], boxes.size()) == 0) due.push_back(b);
+      if (comparable(s.bp_cost[b], boxes.size()) && judged_frame % compare_stride(s.bp_cost[b], boxes.size()) == 0)
+        due.push_back(b);
     find_pairs_all_stoppable(s.broadphases, due, due.size(), boxes, s.bp_pairs,
                              loop_threads(s.options.threads, due.size(), 2), s.options.stop);
     std::sort(due.begin(), due.end());
@@ -614,7 +631,12 @@ std::vector<ValidationResult> FrameValidators::results() const {
     std::string names = "flat's pair set (exact-grid) vs";
     for (std::size_t b = 0; b < s.broadphases.size(); ++b) {
       names += " " + s.broadphases[b]->name();
-      if (s.bp_compared[b] < s.candidate_frames)
+      const std::size_t n = s.model->bodies.size();
+      if (!comparable(s.bp_cost[b], n))
+        names += fmt::format(" (not compared: a quadratic broadphase's one call would be {:.2g} AABB tests on {} "
+                             "boxes, above {:.0e})",
+                             quadratic_tests(n), n, kQuadraticTestsPerCall);
+      else if (s.bp_compared[b] < s.candidate_frames)
         names += fmt::format(" (on {} of the {} frames: a quadratic broadphase is compared once in {} judged frames, "
                              "at most {:.0e} AABB tests a frame)",
                              s.bp_compared[b], s.candidate_frames, compare_stride(s.bp_cost[b], s.model->bodies.size()),
