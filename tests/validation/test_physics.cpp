@@ -963,6 +963,20 @@ TEST(PhysicsRows, FeasibilityFindsEachStepsContactPointsAfresh) {
   EXPECT_EQ(both, one + other);
 }
 
+// momentum-balance keeps its per-body sums from frame to frame and resets the bodies a frame
+// touched (each once): 20 head-on pairs in contact on three steps in a row, each step's
+// impulses exactly its momentum changes, pass on every step; sums left over from the step
+// before would double a body's impulse on the next.
+TEST(PhysicsRows, BalanceSumsStartAfreshEachFrame) {
+  const auto model = build_model(head_on_scene(20));
+  PhysicsValidators v(*model, rotating_engine(), Tolerances{}, "engine 'test'");
+  for (std::int64_t f = 3; f <= 5; ++f) v.observe(head_on_step(*model, f, false), true);
+  const std::vector<ValidationResult> rows = v.results();
+  const ValidationResult& r = row_of(rows, "momentum-balance");
+  EXPECT_TRUE(r.pass) << r.detail;
+  EXPECT_NE(r.detail.find("120 body-steps"), std::string::npos) << r.detail;
+}
+
 // impulse-feasibility keeps the poses of up to 64 earlier steps here (kMaxPastSteps; a
 // step's contact points also take the normals they carried then) and, once that past is
 // full, takes the newest step's into the oldest's memory: 20 head-on pairs whose B turns
