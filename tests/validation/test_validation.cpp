@@ -164,15 +164,23 @@ TEST(Validators, CandidateSetsCatchADroppedPair) {
 // A quadratic-cost broadphase (fcl-naive: n(n-1)/2 tests) above 6,325 bodies is compared once
 // in ceil(n(n-1)/2 / 2e7) judged frames, from the first: 10,006 boxes give once in 3, so of two
 // judged frames the first. A faulty one is still caught there, and the detail names the stride.
-TEST(Validators, QuadraticBroadphaseIsComparedOnAStride) {
-  const Scene scene = load_scene(source_dir() + "/datasets/scenes/boxes-uniform-10k.json");
+/// The candidate-sets row of `frames` steps of `scene` on the CPU engine with fcl-naive as the
+/// one extra broadphase (dropping its last pair where `drop_one`).
+ValidationResult fcl_naive_candidate_sets(const Scene& scene, int frames, bool drop_one = false) {
   BroadPhaseConfig cfg = scene.broadphase;
   cfg.name = "fcl-naive";
+  World world(scene);
+  std::vector<std::unique_ptr<BroadPhase>> extra;
+  std::unique_ptr<BroadPhase> naive = make_any_broadphase(cfg, scene.domain);
+  if (drop_one) naive = std::make_unique<DroppingBroadPhase>(std::move(naive), "fcl-naive");
+  extra.push_back(std::move(naive));
+  return find(run(world, frames, std::move(extra)), "candidate-sets");
+}
+
+TEST(Validators, QuadraticBroadphaseIsComparedOnAStride) {
+  const Scene scene = load_scene(source_dir() + "/datasets/scenes/boxes-uniform-10k.json");
   {
-    World world(scene);
-    std::vector<std::unique_ptr<BroadPhase>> extra;
-    extra.push_back(make_any_broadphase(cfg, scene.domain));
-    const ValidationResult r = find(run(world, 10, std::move(extra)), "candidate-sets");
+    const ValidationResult r = fcl_naive_candidate_sets(scene, 10);
     EXPECT_TRUE(r.pass) << r.detail;
     EXPECT_NE(r.detail.find("fcl-naive (on 1 of the 2 frames: a quadratic broadphase is compared once in 3 judged "
                             "frames"),
@@ -180,10 +188,7 @@ TEST(Validators, QuadraticBroadphaseIsComparedOnAStride) {
         << r.detail;
   }
   {
-    World world(scene);
-    std::vector<std::unique_ptr<BroadPhase>> extra;
-    extra.push_back(std::make_unique<DroppingBroadPhase>(make_any_broadphase(cfg, scene.domain), "fcl-naive"));
-    const ValidationResult r = find(run(world, 10, std::move(extra)), "candidate-sets");
+    const ValidationResult r = fcl_naive_candidate_sets(scene, 10, true);
     EXPECT_FALSE(r.pass) << r.detail;
     EXPECT_NE(r.detail.find("frame 5: fcl-naive misses pair"), std::string::npos) << r.detail;
   }
@@ -203,12 +208,7 @@ TEST(Validators, QuadraticBroadphaseAboveItsCallLimitIsNotCompared) {
                            "spacing": 0.5}}]})",
                                   "sparse-grid");
   ASSERT_EQ(body_count(scene), 150000u);
-  BroadPhaseConfig cfg = scene.broadphase;
-  cfg.name = "fcl-naive";
-  World world(scene);
-  std::vector<std::unique_ptr<BroadPhase>> extra;
-  extra.push_back(make_any_broadphase(cfg, scene.domain));
-  const ValidationResult r = find(run(world, 5, std::move(extra)), "candidate-sets");
+  const ValidationResult r = fcl_naive_candidate_sets(scene, 5);
   EXPECT_TRUE(r.pass) << r.detail;
   EXPECT_NE(r.detail.find("fcl-naive (not compared: a quadratic broadphase's one call would be 1.1e+10 AABB tests on "
                           "150000 boxes, above 1e+10)"),
