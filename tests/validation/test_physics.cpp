@@ -939,6 +939,58 @@ TEST(PhysicsRows, IsolatedGroupsOnThreadsGiveTheSerialVerdict) {
   EXPECT_NE(serial.detail.find("energy 0 of 800 group-frames"), std::string::npos) << serial.detail;
 }
 
+// Friction's dissipation judges its pairs on threads (judge_in_order) and tallies them in
+// pair order: 2,500 head-on pairs sliding along +y (blocks of 256 pairs on the threads),
+// each its bodies' only pair, with a friction impulse (jt3) of 0.05 kg m/s on A against
+// the sliding. Planted: every seventh of the first 256 pushes along it instead (the
+// sliding 0.3 m/s before, with the normal impulses and after the step, so every reading
+// fails): that block is judged again on the calling thread, the others' counts merged.
+// The row is the same with 1 and 2 threads, planted or not, and counts every pair.
+TEST(PhysicsRows, DissipationOnThreadsGivesTheSerialVerdict) {
+  constexpr int kPairs = 2500;
+  const auto model = build_model(head_on_scene(kPairs));
+  auto friction = [&](bool planted, int threads) {
+    FrameRecord rec = head_on_step(*model, 3, false);
+    for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
+      const std::uint32_t a = rec.contacts[k].pair.a;
+      rec.v_pre[a].y = 0.3f;
+      rec.v_post[a].y = 0.3f;
+      const bool push = planted && k < 256 && k % 7 == 0;
+      rec.jt3.push_back(v3(0, push ? 0.05f : -0.05f, 0));
+    }
+    for (std::size_t i = 0; i < rec.x_post.size(); ++i)
+      rec.x_post[i] = rec.x_pre[i] + float(model->scene.dt) * rec.v_post[i];
+    PhysicsValidators v(*model, rotating_engine(), Tolerances{}, "engine 'test'");
+    v.set_threads(threads);
+    v.observe(rec, true);
+    return row_of(v.results(), "friction");
+  };
+  for (const bool planted : {false, true}) {
+    const ValidationResult serial = friction(planted, 1), threaded = friction(planted, 2);
+    EXPECT_EQ(serial.pass, !planted) << serial.detail;
+    EXPECT_EQ(serial.detail, threaded.detail);
+    ASSERT_EQ(serial.causes.size(), threaded.causes.size());
+    std::uint64_t dissipation_failures = 0;
+    for (std::size_t c = 0; c < serial.causes.size(); ++c) {
+      const ValidationCause &a = serial.causes[c], &b = threaded.causes[c];
+      EXPECT_EQ(a.name, b.name);
+      EXPECT_EQ(a.count, b.count) << a.name;
+      EXPECT_EQ(a.worst, b.worst) << a.name;
+      EXPECT_EQ(a.items, b.items) << a.name;
+      ASSERT_EQ(a.examples.size(), b.examples.size()) << a.name;
+      for (std::size_t e = 0; e < a.examples.size(); ++e) {
+        EXPECT_EQ(a.examples[e].item, b.examples[e].item);
+        EXPECT_EQ(a.examples[e].text, b.examples[e].text);
+      }
+      if (a.name == "dissipation") dissipation_failures = a.count;
+    }
+    EXPECT_EQ(dissipation_failures, planted ? 37u : 0u) << serial.detail;
+    const std::string counted = planted ? "(37 of 2500 rows where friction raises the sliding)"
+                                        : "dissipation on 2500 rows or pairs (worst -0.3 m/s; 2500 pairs on jt3)";
+    EXPECT_NE(serial.detail.find(counted), std::string::npos) << serial.detail;
+  }
+}
+
 // impulse-feasibility finds each step's contact points afresh (its per-pair lists are kept
 // from step to step, emptied): the head-on pairs judged over two steps in contact find as
 // many contact points as each step judged alone (normal_reuse_deg 0: no earlier normals).

@@ -103,6 +103,9 @@ double spin_ratio(PhysicsBodies::Gyroscopic g, double r_plain, double r_inv, std
 /// below these one thread costs less than waking another.
 constexpr std::size_t kParallelBalanceRowsFrom = 1024;
 constexpr std::size_t kParallelBodiesFrom = 1024;
+/// The fewest bodies whose kept sums are reset on the threads after a frame (a byte read
+/// per body, a few stores per body in contact).
+constexpr std::size_t kParallelBalanceResetFrom = 16384;
 
 /// Values a block adds to a RatioSample, added to the Impl's in block order.
 struct SampleLog {
@@ -198,11 +201,14 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
   }
   struct Reset {
     BalanceScratch& s;
-    const FrameRecord& rec;
+    unsigned threads;
     ~Reset() {
-      // Every body written below is marked in_contact (its pair's first loop), and clear()
-      // unmarks it: a body met again among the links is already clean.
-      auto clear = [&](std::uint32_t i) {
+      // Every body written below is marked in_contact (the counting pass), and only those
+      // are cleared: each body once, on the threads (no stop: the sums must be clean).
+      LoopOptions o;
+      o.threads = static_cast<int>(threads);
+      o.min_items = kParallelBalanceResetFrom;
+      parallel_for(s.in_contact.size(), o, [&](std::size_t i, unsigned) {
         if (!s.in_contact[i]) return;
         s.force[i] = s.torque[i] = D3{};
         s.mag[i] = s.tmag[i] = s.tallow[i] = s.any_dir[i] = 0.0;
@@ -210,11 +216,9 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
         s.row_j[i].clear();
         s.rows_of[i] = 0;
         s.in_contact[i] = 0;
-      };
-      for (const Pair& p : rec.confirmed) clear(p.a), clear(p.b);
-      for (const ContactRecord& c : rec.contacts) clear(c.pair.a), clear(c.pair.b);
+      });
     }
-  } reset{scratch, rec};
+  } reset{scratch, loop_threads(threads, n, kParallelBalanceResetFrom)};
   std::vector<D3>& force = scratch.force;
   std::vector<D3>& torque = scratch.torque;
   std::vector<double>& mag = scratch.mag;
@@ -228,23 +232,32 @@ void PhysicsValidators::Impl::balance(const FrameRecord& rec, const std::vector<
   std::vector<std::vector<D3>>& row_j = scratch.row_j;  // each row's impulse on the body (the spread's terms)
   std::vector<std::uint32_t>& rows_of = scratch.rows_of;
   std::vector<std::uint8_t>& in_contact = scratch.in_contact;
-  for (const Pair& p : rec.confirmed) in_contact[p.a] = in_contact[p.b] = 1;
-  for (const ContactRecord& c : rec.contacts) {
-    in_contact[c.pair.a] = in_contact[c.pair.b] = 1;
-    ++rows_of[c.pair.a];
-    ++rows_of[c.pair.b];
-  }
-  // Room for each body's rows, on this thread (blocks a worker allocated would return to its
-  // arena): kept from frame to frame, grown where a body has more rows than before.
-  for (const ContactRecord& c : rec.contacts)
-    for (const std::uint32_t i : {c.pair.a, c.pair.b}) {
-      row_j[i].reserve(rows_of[i]);
-      discs[i].reserve(rows_of[i]);
-    }
   // On the threads, each owning a range of bodies: a thread computes the rows with a body
   // of its own and sums them into its bodies only, in row order (each body's sums are the
   // serial loop's, bit for bit). A row with bodies of two ranges is computed by both.
   const unsigned row_threads = loop_threads(threads, rec.contacts.size(), kParallelBalanceRowsFrom);
+  // Each body's rows counted and its links marked (in_contact), then room made for its
+  // rows (kept from frame to frame, grown where a body has more rows than before), by
+  // the same ranges.
+  parallel_items_on(row_threads, row_threads, stop, [&](std::size_t range, unsigned) {
+    const std::uint32_t lo = static_cast<std::uint32_t>(n * range / row_threads),
+                        hi = static_cast<std::uint32_t>(n * (range + 1) / row_threads);
+    auto own = [&](std::uint32_t i) { return i >= lo && i < hi; };
+    for (const Pair& p : rec.confirmed)
+      for (const std::uint32_t i : {p.a, p.b})
+        if (own(i)) in_contact[i] = 1;
+    for (const ContactRecord& c : rec.contacts)
+      for (const std::uint32_t i : {c.pair.a, c.pair.b})
+        if (own(i)) {
+          in_contact[i] = 1;
+          ++rows_of[i];
+        }
+    for (std::uint32_t i = lo; i < hi; ++i)
+      if (rows_of[i]) {
+        row_j[i].reserve(rows_of[i]);
+        discs[i].reserve(rows_of[i]);
+      }
+  });
   parallel_items_on(row_threads, row_threads, stop, [&](std::size_t range, unsigned) {
     const std::size_t lo = n * range / row_threads, hi = n * (range + 1) / row_threads;
     for (std::size_t k = 0; k < rec.contacts.size(); ++k) {

@@ -81,7 +81,6 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
     else
       for (auto& group : graph.groups) graph.statics[group.first] = 1;  // no states: nothing shown apart
   }
-  auto find = [&](std::uint32_t i) { return graph.find(i); };
   const std::vector<std::uint8_t>& statics = graph.statics;
   // An engine may apply a row's impulse at two witness points (Bullet: one on each
   // body), apart along the normal by the depth or distance: the friction part then turns
@@ -110,14 +109,14 @@ void PhysicsValidators::Impl::conservation(const FrameRecord& rec) {
       const D3 pa = d3(c.point), pb = d3(rec.point_b[k]);
       const D3 nrm = d3(c.normal);
       const D3 j = (double(c.jn) / len3(nrm)) * nrm + (vector_friction ? d3(rec.jt3[k]) : D3{});
-      const std::size_t gi = graph.group_of(find(c.pair.a));
+      const std::size_t gi = graph.group_index[c.pair.a];  // a dynamic body of a row: a member
       witness_turn[gi] = witness_turn[gi] + cross3(pa - pb, j);
       witness_torque[gi] += vector_friction ? 4.0 * kEps32 * (len3(pa) + len3(pb)) * len3(j)
                                               : len3(pa - pb) * jt + 4.0 * kEps32 * (len3(pa) + len3(pb)) * (len3(j) + jt);
       continue;
     }
     const double j = bodies.witness_pair_impulses ? std::hypot(double(c.jn), jt) : jt;
-    witness_torque[graph.group_of(find(c.pair.a))] += (double(c.depth) + pair_margin(c.pair)) * j;
+    witness_torque[graph.group_index[c.pair.a]] += (double(c.depth) + pair_margin(c.pair)) * j;
   }
   // The isolated groups, judged on the threads and tallied in group order (judge_in_order).
   auto judge_groups = [&](std::size_t first, std::size_t last, auto& s, auto& momentum, auto& energy, auto& angular) {
@@ -314,14 +313,34 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
   std::vector<std::uint8_t> touched(n, 0);
   graph.statics.assign(n, 0);
   std::vector<std::uint32_t> dynamic_touched;
-  each_link([&](const Pair& q) {
+  // A link equal to one already joined is skipped (its bodies share a root: joining them
+  // again changes no parent, and path halving never changes a root, so every root is the
+  // one the full list gives): a pair's further rows, and a confirmed pair among the rows'
+  // pairs where both lists are sorted (looked up onwards from the last one).
+  auto join = [&](const Pair& q) {
     parent[find(q.a)] = find(q.b);
     for (const std::uint32_t i : {q.a, q.b})
       if (!touched[i]) {
         touched[i] = 1;
         if (dynamic(i)) dynamic_touched.push_back(i);
       }
-  });
+  };
+  bool rows_sorted = true;
+  for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
+    const Pair q = rec.contacts[k].pair;
+    if (k > 0 && rec.contacts[k - 1].pair == q) continue;
+    if (k > 0 && q < rec.contacts[k - 1].pair) rows_sorted = false;
+    join(q);
+  }
+  const bool skip_rows = rows_sorted && std::is_sorted(rec.confirmed.begin(), rec.confirmed.end());
+  std::size_t row = 0;
+  for (const Pair& q : rec.confirmed) {
+    if (skip_rows) {
+      while (row < rec.contacts.size() && rec.contacts[row].pair < q) ++row;
+      if (row < rec.contacts.size() && rec.contacts[row].pair == q) continue;
+    }
+    join(q);
+  }
   each_link([&](const Pair& q) {
     if (!dynamic(q.a) || !dynamic(q.b)) graph.statics[find(q.a)] = 1;
   });
@@ -334,6 +353,9 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
     if (k == 0 || by_root[k].first != by_root[k - 1].first) graph.groups.emplace_back(by_root[k].first, std::vector<std::uint32_t>{});
     graph.groups.back().second.push_back(by_root[k].second);
   }
+  graph.group_index.resize(n);
+  for (std::size_t gi = 0; gi < graph.groups.size(); ++gi)
+    for (const std::uint32_t i : graph.groups[gi].second) graph.group_index[i] = static_cast<std::uint32_t>(gi);
   return graph;
 }
 

@@ -19,8 +19,9 @@ namespace octocd {
 using namespace dmath;
 using namespace physics_detail;
 
+template <class Sums, class T>
 void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p,
-                                                  std::size_t k0, std::size_t k1, Tally& dissipation) {
+                                                  std::size_t k0, std::size_t k1, Sums& sums, T& dissipation) const {
   const std::size_t n = model->bodies.size();
   const D3 g = d3(model->scene.gravity);
   const double dt = model->scene.dt;
@@ -92,10 +93,10 @@ void PhysicsValidators::Impl::judge_pair_friction(const FrameRecord& rec, const 
   // rot-drop-220 and 2 of rot-pile-1000, sum |jt3| 0.96e-3 - 0.99e-3 kg m/s, on a body
   // landing with a tiny normal impulse while sliding at 0.5 m/s). Counted.
   if (impulse <= tol.friction_cone_abs) {
-    ++dissipation_small;
+    ++sums.dissipation_small;
     return;
   }
-  ++dissipation_jt3_pairs;
+  ++sums.dissipation_jt3_pairs;
   double fast0 = 0, fastn = 0, fast1 = 0;
   const double along0 = push(before, fast0), alongn = coupled ? push(normal, fastn) : along0, along1 = push(after, fast1);
   // Coulomb friction opposes the sliding. A discrete solver takes the sliding before its
@@ -127,6 +128,22 @@ constexpr std::size_t kParallelConesFrom = 2048;
 /// first row of each contact pair, then the rows' count.
 struct FrictionScratch {
   std::vector<std::size_t> first_row;
+  std::vector<std::uint32_t> pairs_of;  ///< per body: its distinct contact pairs this frame
+};
+
+/// Dissipation's own counts that a block of pairs judged on a thread writes (judge_in_order).
+struct DissipationDry {
+  std::uint64_t dissipation_cone_only = 0, dissipation_small = 0, dissipation_jt3_pairs = 0;
+  template <class Live>
+  bool describes(const Live&) const {
+    return false;
+  }
+  template <class Live>
+  void merge_into(Live& s) const {
+    s.dissipation_cone_only += dissipation_cone_only;
+    s.dissipation_small += dissipation_small;
+    s.dissipation_jt3_pairs += dissipation_jt3_pairs;
+  }
 };
 
 /// The cone's own state that a block of pairs judged on a thread writes (judge_in_order).
@@ -145,7 +162,7 @@ struct ConeDry {
 }  // namespace
 
 void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector<Pose>& det) {
-  Tally& dissipation = tally(RowId::Friction, "dissipation");
+  Tally& dissipation_tally = tally(RowId::Friction, "dissipation");
   // impulses "normal-only" or "none": the rows carry no friction impulse; whatever jt and
   // jt3 hold (zeros, typically) is never judged (the row is n/a, named).
   if (bodies.impulses != PhysicsBodies::Impulses::Complete) return;
@@ -154,7 +171,6 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
   const std::int64_t frame = rec.frame;
   const D3 g = d3(m.scene.gravity);
   const double dt = m.scene.dt;
-  StopPoll poll(stop);
 
   // 5a. The cone, per pair: a pair's rows together (a manifold is one contact patch):
   // |sum J_t| <= mu sum jn. A sequential-impulse solver clamps each row's friction by that
@@ -237,140 +253,140 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
   };
 
   // Distinct contact pairs per body.
-  std::vector<std::uint32_t> pairs_of(n, 0);
-  for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
-    const Pair p = rec.contacts[k].pair;
-    if (k > 0 && rec.contacts[k - 1].pair == p) continue;
+  std::vector<std::uint32_t>& pairs_of = row_state<FrictionScratch>(RowId::Friction).pairs_of;
+  pairs_of.assign(n, 0);
+  for (std::size_t q = 0; q + 1 < first_row.size(); ++q) {
+    const Pair p = rec.contacts[first_row[q]].pair;
     ++pairs_of[p.a];
     ++pairs_of[p.b];
   }
 
-  // 5b. Dissipation at the contact points, where the pair is its dynamic bodies' only one.
-  for (std::size_t k0 = 0; k0 < rec.contacts.size();) {
-    poll();
-    const Pair p = rec.contacts[k0].pair;
-    std::size_t k1 = k0;
-    while (k1 < rec.contacts.size() && rec.contacts[k1].pair == p) ++k1;
-    // "Where the contact is the only one on its dynamic bodies" (design.md section 13.5): a manifold
-    // row is a contact; with several rows, friction at one row turns the bodies and so
-    // moves the tangential velocity at the others (Bullet: a 4-row box pair raised one
-    // row's speed from 1.05 to 1.12 m/s while dissipating): judged on the cone only.
-    const bool pair_alone = (!dynamic(p.a) || pairs_of[p.a] == 1) && (!dynamic(p.b) || pairs_of[p.b] == 1);
-    if (vector_friction && pair_alone) {
-      // jt3: the pair's friction impulse is known, whatever else touches its bodies. It
-      // must do no positive work on the final relative sliding at the rows' points
-      // (maximal dissipation, summed over the manifold): sum_k jt3_k . v_t,k' <= 0, as a
-      // mean speed along the impulses, sum_k jt3_k . v_t,k' / sum_k |jt3_k|, within
-      // friction_speed + the witness-point allowance (|w_a| + |w_b|) s, s the largest
-      // distance between a row's witness points (its depth, or the gap across its point).
-      judge_pair_friction(rec, det, p, k0, k1, dissipation);
-      k0 = k1;
-      continue;
-    }
-    const bool alone = k1 - k0 == 1 && (!dynamic(p.a) || pairs_of[p.a] == 1) &&
-                       (!dynamic(p.b) || pairs_of[p.b] == 1);
-    if (!alone) {
-      dissipation_cone_only += k1 - k0;
-      k0 = k1;
-      continue;
-    }
-    const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
-    const D3 va0 = v_int(p.a), vb0 = v_int(p.b), wa0 = w_of(rec.w_pre, p.a), wb0 = w_of(rec.w_pre, p.b);
-    const D3 va1 = d3(rec.v_post[p.a]), vb1 = d3(rec.v_post[p.b]);
-    const D3 wa1 = w_of(rec.w_post, p.a), wb1 = w_of(rec.w_post, p.b);
-    // A solver applies the normal impulses too; off the centre of mass they turn the
-    // bodies and so change the tangential velocity at the point (a box landing on an
-    // edge). Friction acts on the velocity after them, so the speed it must not raise is
-    // the larger of the speed before the step and the speed with the pair's normal
-    // impulses alone applied (the same for translation-only bodies or without points).
-    D3 van = va0, vbn = vb0, wan = wa0, wbn = wb0;
-    const bool coupled = rotating && rec.has_points;
-    if (coupled) {
-      const M3 ia = inv_inertia(p.a), ib = inv_inertia(p.b);
+  // 5b. Dissipation at the contact points, where the pair is its dynamic bodies' only one:
+  // per pair on the threads, tallied in pair order (judge_in_order).
+  auto judge_dissipation = [&](std::size_t first, std::size_t last, auto& s, auto& dissipation) {
+    for (std::size_t q = first; q < last; ++q) {
+      const std::size_t k0 = first_row[q], k1 = first_row[q + 1];
+      const Pair p = rec.contacts[k0].pair;
+      // "Where the contact is the only one on its dynamic bodies" (design.md section 13.5): a manifold
+      // row is a contact; with several rows, friction at one row turns the bodies and so
+      // moves the tangential velocity at the others (Bullet: a 4-row box pair raised one
+      // row's speed from 1.05 to 1.12 m/s while dissipating): judged on the cone only.
+      const bool pair_alone = (!dynamic(p.a) || pairs_of[p.a] == 1) && (!dynamic(p.b) || pairs_of[p.b] == 1);
+      if (vector_friction && pair_alone) {
+        // jt3: the pair's friction impulse is known, whatever else touches its bodies. It
+        // must do no positive work on the final relative sliding at the rows' points
+        // (maximal dissipation, summed over the manifold): sum_k jt3_k . v_t,k' <= 0, as a
+        // mean speed along the impulses, sum_k jt3_k . v_t,k' / sum_k |jt3_k|, within
+        // friction_speed + the witness-point allowance (|w_a| + |w_b|) s, s the largest
+        // distance between a row's witness points (its depth, or the gap across its point).
+        judge_pair_friction(rec, det, p, k0, k1, s, dissipation);
+        continue;
+      }
+      const bool alone = k1 - k0 == 1 && (!dynamic(p.a) || pairs_of[p.a] == 1) &&
+                         (!dynamic(p.b) || pairs_of[p.b] == 1);
+      if (!alone) {
+        s.dissipation_cone_only += k1 - k0;
+        continue;
+      }
+      const D3 xa = com_at(det[p.a], p.a), xb = com_at(det[p.b], p.b);
+      const D3 va0 = v_int(p.a), vb0 = v_int(p.b), wa0 = w_of(rec.w_pre, p.a), wb0 = w_of(rec.w_pre, p.b);
+      const D3 va1 = d3(rec.v_post[p.a]), vb1 = d3(rec.v_post[p.b]);
+      const D3 wa1 = w_of(rec.w_post, p.a), wb1 = w_of(rec.w_post, p.b);
+      // A solver applies the normal impulses too; off the centre of mass they turn the
+      // bodies and so change the tangential velocity at the point (a box landing on an
+      // edge). Friction acts on the velocity after them, so the speed it must not raise is
+      // the larger of the speed before the step and the speed with the pair's normal
+      // impulses alone applied (the same for translation-only bodies or without points).
+      D3 van = va0, vbn = vb0, wan = wa0, wbn = wb0;
+      const bool coupled = rotating && rec.has_points;
+      if (coupled) {
+        const M3 ia = inv_inertia(p.a), ib = inv_inertia(p.b);
+        for (std::size_t k = k0; k < k1; ++k) {
+          const ContactRecord& c = rec.contacts[k];
+          const D3 j = double(c.jn) * d3(c.normal);
+          const D3 pt = d3(c.point), pt_b = d3(point_on_b(rec, k));
+          if (dynamic(p.a)) {
+            van = van + (1.0 / mass[p.a]) * j;
+            wan = wan + mul(ia, cross3(pt - xa, j));
+          }
+          if (dynamic(p.b)) {
+            vbn = vbn - (1.0 / mass[p.b]) * j;
+            wbn = wbn - mul(ib, cross3(pt_b - xb, j));
+          }
+        }
+      }
       for (std::size_t k = k0; k < k1; ++k) {
         const ContactRecord& c = rec.contacts[k];
-        const D3 j = double(c.jn) * d3(c.normal);
-        const D3 pt = d3(c.point), pt_b = d3(point_on_b(rec, k));
-        if (dynamic(p.a)) {
-          van = van + (1.0 / mass[p.a]) * j;
-          wan = wan + mul(ia, cross3(pt - xa, j));
+        const D3 nrm = d3(c.normal);
+        const D3 pt = rec.has_points ? d3(c.point) : D3{};
+        const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? d3(point_on_b(rec, k)) - xb : D3{};
+        auto tangential_speed = [&](D3 va, D3 wa, D3 vb, D3 wb) {
+          const D3 rel = (va + cross3(wa, ra)) - (vb + cross3(wb, rb));
+          return len3(rel - dot3(rel, nrm) * nrm);
+        };
+        const double before = tangential_speed(va0, wa0, vb0, wb0);
+        const double with_normal = coupled ? tangential_speed(van, wan, vbn, wbn) : before;
+        const double after = tangential_speed(va1, wa1, vb1, wb1);
+        if (!coupled) {
+          const double rise = after - std::max(before, with_normal);
+          dissipation.check(rise <= tol.friction_speed, rise, Where{frame, p}, [&] {
+            return fmt::format("frame {}: {} row {}: tangential speed at the {} {:.6g} -> {:.6g} m/s", frame,
+                               pair_name(p), k - k0, rec.has_points ? "contact point" : "centres", before, after);
+          });
+          continue;
         }
-        if (dynamic(p.b)) {
-          vbn = vbn - (1.0 / mass[p.b]) * j;
-          wbn = wbn - mul(ib, cross3(pt_b - xb, j));
+        // Rotating bodies with contact points. The row's friction impulse on A is the
+        // tangential part of A's momentum change (B's, negated, when A is static): the row
+        // is its bodies' only contact, so no model of the solver is needed. Friction must
+        // not push the point along its final sliding (it does no positive work: J_t . v_t'
+        // <= 0, the maximal-dissipation condition, which exact Coulomb friction meets and
+        // which implies |v_t'| <= |v_t| there). |v_t'| itself is not judged on spinning
+        // bodies: a sequential-impulse solver's friction row along one fixed direction
+        // changes the other tangential component through the bodies' rotation (the
+        // point's effective mass is not isotropic), and Bullet raised |v_t| on 4 rows of
+        // rot-drop-220 by 0.14-5% with friction opposing the sliding along its row.
+        D3 imp = dynamic(p.a) ? mass[p.a] * (va1 - va0) : -mass[p.b] * (vb1 - vb0);
+        imp = imp - dot3(imp, nrm) * nrm;
+        const double imp_len = len3(imp);
+        // integrated_point "origin": the centre of mass's drift under the origin's first-order
+        // integration is in the momentum change too (momentum-balance's allowance).
+        const double drift = dynamic(p.a) ? mass[p.a] * origin_drift(rec, p.a).velocity
+                                          : mass[p.b] * origin_drift(rec, p.b).velocity;
+        const double noise = 1e-6 * (dynamic(p.a) ? mass[p.a] * (len3(va1) + len3(va0))
+                                                  : mass[p.b] * (len3(vb1) + len3(vb0))) + drift + 1e-12;
+        if (imp_len <= noise) {  // no friction impulse (within float rounding or the drift): nothing to judge
+          dissipation.judged();
+          continue;
         }
-      }
-    }
-    for (std::size_t k = k0; k < k1; ++k) {
-      const ContactRecord& c = rec.contacts[k];
-      const D3 nrm = d3(c.normal);
-      const D3 pt = rec.has_points ? d3(c.point) : D3{};
-      const D3 ra = rec.has_points ? pt - xa : D3{}, rb = rec.has_points ? d3(point_on_b(rec, k)) - xb : D3{};
-      auto tangential_speed = [&](D3 va, D3 wa, D3 vb, D3 wb) {
-        const D3 rel = (va + cross3(wa, ra)) - (vb + cross3(wb, rb));
-        return len3(rel - dot3(rel, nrm) * nrm);
-      };
-      const double before = tangential_speed(va0, wa0, vb0, wb0);
-      const double with_normal = coupled ? tangential_speed(van, wan, vbn, wbn) : before;
-      const double after = tangential_speed(va1, wa1, vb1, wb1);
-      if (!coupled) {
-        const double rise = after - std::max(before, with_normal);
-        dissipation.check(rise <= tol.friction_speed, rise, Where{frame, p}, [&] {
-          return fmt::format("frame {}: {} row {}: tangential speed at the {} {:.6g} -> {:.6g} m/s", frame,
-                             pair_name(p), k - k0, rec.has_points ? "contact point" : "centres", before, after);
+        const D3 rel1 = (va1 + cross3(wa1, ra)) - (vb1 + cross3(wb1, rb));
+        const double along = dot3(rel1 - dot3(rel1, nrm) * nrm, (1.0 / imp_len) * imp);
+        // The row's point is one point between the bodies' witness points, which an engine
+        // may use instead (Bullet: A's velocity at the point on A, B's at the point on B).
+        // Moving a body's point by s along the normal moves its velocity there by up to
+        // |w| s: on spinning bodies the sliding velocity is known to within |w_a| + |w_b|
+        // times the distance between the witness points. A rolling icosphere of rot-drop-220
+        // (|w| 3.9 rad/s, resting on a 1 mm hull margin, as the adapter then had) shows 1-3 mm/s at the midpoint
+        // while it rolls without sliding. Judged beyond that allowance.
+        double allowance = 0.0;
+        if (along > tol.friction_speed + allowance) {
+          // The witness points lie at most the row's depth apart (penetrating), or the gap
+          // between the surfaces across the point (FCL: its distance to each surface).
+          const double gap = std::max(double(c.depth), ref->surface_distance(p.a, det[p.a], c.point) +
+                                                           ref->surface_distance(p.b, det[p.b], c.point));
+          allowance += (len3(wa1) + len3(wb1)) * gap;
+        }
+        dissipation.check(along <= tol.friction_speed + allowance, along, Where{frame, p}, [&] {
+          return fmt::format(
+              "frame {}: {} row {}: the friction impulse ({:.4g} kg m/s, from the momentum change) pushes the contact "
+              "point along its sliding: {:.4g} m/s along the impulse after the step (tangential speed at the contact "
+              "point {:.6g} -> {:.6g} m/s, {:.6g} with the normal impulses alone; witness-point allowance {:.3g} m/s)",
+              frame, pair_name(p), k - k0, imp_len, along, before, after, with_normal, allowance);
         });
-        continue;
       }
-      // Rotating bodies with contact points. The row's friction impulse on A is the
-      // tangential part of A's momentum change (B's, negated, when A is static): the row
-      // is its bodies' only contact, so no model of the solver is needed. Friction must
-      // not push the point along its final sliding (it does no positive work: J_t . v_t'
-      // <= 0, the maximal-dissipation condition, which exact Coulomb friction meets and
-      // which implies |v_t'| <= |v_t| there). |v_t'| itself is not judged on spinning
-      // bodies: a sequential-impulse solver's friction row along one fixed direction
-      // changes the other tangential component through the bodies' rotation (the
-      // point's effective mass is not isotropic), and Bullet raised |v_t| on 4 rows of
-      // rot-drop-220 by 0.14-5% with friction opposing the sliding along its row.
-      D3 imp = dynamic(p.a) ? mass[p.a] * (va1 - va0) : -mass[p.b] * (vb1 - vb0);
-      imp = imp - dot3(imp, nrm) * nrm;
-      const double imp_len = len3(imp);
-      // integrated_point "origin": the centre of mass's drift under the origin's first-order
-      // integration is in the momentum change too (momentum-balance's allowance).
-      const double drift = dynamic(p.a) ? mass[p.a] * origin_drift(rec, p.a).velocity
-                                        : mass[p.b] * origin_drift(rec, p.b).velocity;
-      const double noise = 1e-6 * (dynamic(p.a) ? mass[p.a] * (len3(va1) + len3(va0))
-                                                : mass[p.b] * (len3(vb1) + len3(vb0))) + drift + 1e-12;
-      if (imp_len <= noise) {  // no friction impulse (within float rounding or the drift): nothing to judge
-        dissipation.judged();
-        continue;
-      }
-      const D3 rel1 = (va1 + cross3(wa1, ra)) - (vb1 + cross3(wb1, rb));
-      const double along = dot3(rel1 - dot3(rel1, nrm) * nrm, (1.0 / imp_len) * imp);
-      // The row's point is one point between the bodies' witness points, which an engine
-      // may use instead (Bullet: A's velocity at the point on A, B's at the point on B).
-      // Moving a body's point by s along the normal moves its velocity there by up to
-      // |w| s: on spinning bodies the sliding velocity is known to within |w_a| + |w_b|
-      // times the distance between the witness points. A rolling icosphere of rot-drop-220
-      // (|w| 3.9 rad/s, resting on a 1 mm hull margin, as the adapter then had) shows 1-3 mm/s at the midpoint
-      // while it rolls without sliding. Judged beyond that allowance.
-      double allowance = 0.0;
-      if (along > tol.friction_speed + allowance) {
-        // The witness points lie at most the row's depth apart (penetrating), or the gap
-        // between the surfaces across the point (FCL: its distance to each surface).
-        const double gap = std::max(double(c.depth), ref->surface_distance(p.a, det[p.a], c.point) +
-                                                         ref->surface_distance(p.b, det[p.b], c.point));
-        allowance += (len3(wa1) + len3(wb1)) * gap;
-      }
-      dissipation.check(along <= tol.friction_speed + allowance, along, Where{frame, p}, [&] {
-        return fmt::format(
-            "frame {}: {} row {}: the friction impulse ({:.4g} kg m/s, from the momentum change) pushes the contact "
-            "point along its sliding: {:.4g} m/s along the impulse after the step (tangential speed at the contact "
-            "point {:.6g} -> {:.6g} m/s, {:.6g} with the normal impulses alone; witness-point allowance {:.3g} m/s)",
-            frame, pair_name(p), k - k0, imp_len, along, before, after, with_normal, allowance);
-      });
     }
-    k0 = k1;
-  }
+  };
+  judge_in_order<DissipationDry>(first_row.size() - 1, threads, kParallelConesFrom, stop, *this,
+                                 std::array<Tally*, 1>{&dissipation_tally}, judge_dissipation);
 }
 
 // ---- friction: its measure of a frame and its table entry -------------------------

@@ -769,9 +769,11 @@ struct PhysicsValidators::Impl {
   /// Row 5: the cone on every frame, dissipation on frames with states (friction.cpp).
   void friction(const FrameRecord& rec, const std::vector<Pose>& det);
   /// Dissipation of pair p's rows [k0, k1) from their tangential impulse vectors (jt3),
-  /// into `dissipation` (the friction row's tally of that cause).
+  /// into `dissipation` (the friction row's tally of that cause, or a block's DryTally)
+  /// and the counts of `sums` (the Impl, or a block's sums: judge_in_order).
+  template <class Sums, class T>
   void judge_pair_friction(const FrameRecord& rec, const std::vector<Pose>& det, Pair p, std::size_t k0,
-                           std::size_t k1, Tally& dissipation);
+                           std::size_t k1, Sums& sums, T& dissipation) const;
   /// Row 6 on frames with states: isolated groups' momentum, energy, angular momentum;
   /// soft contacts' episodes (conservation.cpp).
   void conservation(const FrameRecord& rec);
@@ -784,6 +786,8 @@ struct PhysicsValidators::Impl {
     std::vector<std::uint32_t> parent;
     std::vector<std::uint8_t> statics;
     std::vector<std::pair<std::uint32_t, std::vector<std::uint32_t>>> groups;
+    /// Per body: the index in `groups` of its group (read for the groups' members only).
+    std::vector<std::uint32_t> group_index;
     std::uint32_t find(std::uint32_t i);
     /// The index in `groups` of root r's group, or groups.size() when r has none.
     std::size_t group_of(std::uint32_t r) const;
