@@ -55,15 +55,20 @@ bool within_grown(const std::vector<Aabb>& boxes, const std::vector<Aabb>& grown
 /// flat's set on `grown` less its static-static pairs, where each box lies within its
 /// grown box: two boxes that overlap (Eq. 6, bounds inclusive) have overlapping grown
 /// boxes (a.min >= grown_a.min, b.max <= grown_b.max, and so on), so every pair of flat's
-/// set is among `cand`, and the exact test keeps exactly those. False, `out` untouched,
-/// where a box is not within its grown one (a NaN bound is not) or the sizes differ.
+/// set is among `cand`, and the exact test keeps exactly those (on `threads` threads,
+/// parallel_select). False, `out` untouched, where a box is not within its grown one (a
+/// NaN bound is not) or the sizes differ.
 template <class Dynamic>
 bool flat_within_grown(const std::vector<Aabb>& boxes, const std::vector<Aabb>& grown, const std::vector<Pair>& cand,
-                       Dynamic&& dynamic, std::vector<Pair>& out) {
+                       Dynamic&& dynamic, std::vector<Pair>& out, int threads, const std::function<bool()>& stop) {
   if (!within_grown(boxes, grown)) return false;
-  out.clear();
-  for (const Pair p : cand)
-    if ((dynamic(p.a) || dynamic(p.b)) && overlaps(boxes[p.a], boxes[p.b])) out.push_back(p);
+  parallel_select(
+      cand.size(), out, loop_threads(threads, cand.size(), kParallelSelectFrom), stop,
+      [&](std::size_t i) {
+        const Pair p = cand[i];
+        return (dynamic(p.a) || dynamic(p.b)) && overlaps(boxes[p.a], boxes[p.b]);
+      },
+      [&](std::size_t i) { return cand[i]; });
   return true;
 }
 
@@ -80,6 +85,14 @@ struct BroadphaseDry {
   }
 };
 }  // namespace
+
+void physics_detail::pair_run_starts(const std::vector<ContactRecord>& contacts, std::vector<std::size_t>& starts,
+                                     int threads, const std::function<bool()>& stop) {
+  parallel_select(
+      contacts.size(), starts, loop_threads(threads, contacts.size(), kParallelSelectFrom), stop,
+      [&](std::size_t k) { return k == 0 || !(contacts[k - 1].pair == contacts[k].pair); },
+      [](std::size_t k) { return k; });
+}
 
 const ContactTruth& PhysicsValidators::Impl::full_truth(CheckedFrame& f, Pair p) const {
   const std::size_t k = f.find(p);
@@ -152,8 +165,9 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
       } catch (const PairLimitError&) {
       }
       if (searched) {
-        have_cand = flat_within_grown(grown, both, work.both_cand, is_dynamic, f.cand);
-        work.reach = flat_within_grown(work.reach_grown, both, work.both_cand, is_dynamic, work.reach_cand);
+        have_cand = flat_within_grown(grown, both, work.both_cand, is_dynamic, f.cand, threads, stop);
+        work.reach =
+            flat_within_grown(work.reach_grown, both, work.both_cand, is_dynamic, work.reach_cand, threads, stop);
       }
     }
     if (!have_cand) {
@@ -183,16 +197,19 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
 
   // Contact rows per pair (rows of a pair are consecutive).
   std::vector<PairRows>& rows = f.rows;
-  for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
-    const Pair p = rec.contacts[k].pair;
-    if (!rows.empty() && rows.back().p == p && rows.back().first + rows.back().count == k) {
-      ++rows.back().count;
-    } else {
-      rows.push_back({p, k, 1});
-    }
-  }
   std::vector<Pair>& contact_pairs = f.contact_pairs;
-  for (const PairRows& r : rows) contact_pairs.push_back(r.p);
+  {
+    const std::vector<std::size_t>& starts = work.row_starts;
+    pair_run_starts(rec.contacts, work.row_starts, threads, stop);
+    rows.resize(starts.size());
+    contact_pairs.resize(starts.size());
+    parallel_items_on(starts.size(), loop_threads(threads, starts.size(), kParallelSelectFrom), stop,
+                      [&](std::size_t g, unsigned) {
+      const std::size_t first = starts[g], last = g + 1 < starts.size() ? starts[g + 1] : rec.contacts.size();
+      rows[g] = {rec.contacts[first].pair, first, last - first};
+      contact_pairs[g] = rows[g].p;
+    });
+  }
   if (!std::is_sorted(contact_pairs.begin(), contact_pairs.end())) std::sort(contact_pairs.begin(), contact_pairs.end());
 
   // The truth the rows below read, on `threads` threads (parallel_items): every candidate
@@ -210,9 +227,9 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
     });
   {
     std::vector<Pair>& todo = work.todo;
-    todo.clear();
-    for (std::size_t i = 0; i < cand.size(); ++i)
-      if (hit[i]) todo.push_back(cand[i]);
+    parallel_select(
+        cand.size(), todo, loop_threads(threads, cand.size(), kParallelSelectFrom), stop,
+        [&](std::size_t i) { return hit[i] != 0; }, [&](std::size_t i) { return cand[i]; });
     std::vector<Pair>& all = f.truth_pairs;
     // Both sorted, so their union is (a pair repeated in contact_pairs is kept once).
     std::set_union(todo.begin(), todo.end(), contact_pairs.begin(), contact_pairs.end(), std::back_inserter(all));
@@ -269,9 +286,9 @@ void PhysicsValidators::Impl::checked_frame(const FrameRecord& rec, const std::v
     for (std::size_t i = b * kOrderedBlock; i < std::min(cand.size(), (b + 1) * kOrderedBlock); ++i)
       is_required[i] = required_pair(f, cand[i], hit[i] != 0, cursor) ? 1 : 0;
   });
-  std::vector<Pair>& required = f.required;
-  for (std::size_t i = 0; i < cand.size(); ++i)
-    if (is_required[i]) required.push_back(cand[i]);
+  parallel_select(
+      cand.size(), f.required, loop_threads(threads, cand.size(), kParallelSelectFrom), stop,
+      [&](std::size_t i) { return is_required[i] != 0; }, [&](std::size_t i) { return cand[i]; });
 }
 
 // ---- Row 1: broadphase completeness ------------------------------------------------
@@ -347,14 +364,20 @@ void PhysicsValidators::Impl::judge_broadphase(Frame& f) {
         device->overlapping_pairs(rec.aabbs, want);
         device_flat_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       } else if (!f.work.cand_of_grown ||
-                 !flat_within_grown(rec.aabbs, f.work.grown, f.cand, [&](std::uint32_t i) { return dynamic(i); }, want)) {
+                 !flat_within_grown(rec.aabbs, f.work.grown, f.cand, [&](std::uint32_t i) { return dynamic(i); }, want,
+                                    threads, stop)) {
         exact_pairs(rec.aabbs, want, pair_threads, f.work.pair_tables);
       }
-      auto dyn = [&](Pair p) { return dynamic(p.a) || dynamic(p.b); };
-      std::copy_if(want.begin(), want.end(), std::back_inserter(got), dyn);
+      // Both sets less their static-static pairs, on the threads (parallel_select).
+      auto dynamic_of = [&](const std::vector<Pair>& from, std::vector<Pair>& to) {
+        parallel_select(
+            from.size(), to, loop_threads(threads, from.size(), kParallelSelectFrom), stop,
+            [&](std::size_t i) { return dynamic(from[i].a) || dynamic(from[i].b); },
+            [&](std::size_t i) { return from[i]; });
+      };
+      dynamic_of(want, got);
       want.swap(got);
-      got.clear();
-      std::copy_if(rec.pairs.begin(), rec.pairs.end(), std::back_inserter(got), dyn);
+      dynamic_of(rec.pairs, got);
       std::vector<Pair> missing, extra;
       std::set_difference(want.begin(), want.end(), got.begin(), got.end(), std::back_inserter(missing));
       std::set_difference(got.begin(), got.end(), want.begin(), want.end(), std::back_inserter(extra));

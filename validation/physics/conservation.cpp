@@ -3,6 +3,7 @@
 // over each isolated group's contact episode instead of per step.
 #include "physics_impl.hpp"
 
+#include "../src/parallel.hpp"
 #include "../src/row_clock.hpp"
 #include "ordered_judge.hpp"
 
@@ -306,10 +307,6 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
   // later relaxation passes may resolve a confirmed pair that the first pass's Eq. 9
   // discarded, so its impulses are in the state but not in the rows).
   // Both lists read in place, the rows' pairs first.
-  auto each_link = [&](auto&& fn) {
-    for (const ContactRecord& c : rec.contacts) fn(c.pair);
-    for (const Pair& q : rec.confirmed) fn(q);
-  };
   std::vector<std::uint8_t> touched(n, 0);
   graph.statics.assign(n, 0);
   std::vector<std::uint32_t> dynamic_touched;
@@ -341,9 +338,21 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
     }
     join(q);
   }
-  each_link([&](const Pair& q) {
-    if (!dynamic(q.a) || !dynamic(q.b)) graph.statics[find(q.a)] = 1;
-  });
+  // The links with a static body (selected on the threads), their roots marked.
+  std::vector<Pair> with_static;
+  const unsigned select_threads = loop_threads(threads, rec.contacts.size() + rec.confirmed.size(), kParallelSelectFrom);
+  for (const bool rows : {true, false}) {
+    const std::size_t count = rows ? rec.contacts.size() : rec.confirmed.size();
+    auto link = [&](std::size_t k) { return rows ? rec.contacts[k].pair : rec.confirmed[k]; };
+    parallel_select(
+        count, with_static, select_threads, stop,
+        [&](std::size_t k) {
+          const Pair q = link(k);
+          return !dynamic(q.a) || !dynamic(q.b);
+        },
+        link);
+    for (const Pair& q : with_static) graph.statics[find(q.a)] = 1;
+  }
   // The groups read off the dynamic bodies touched (root, body), sorted: roots ascending,
   // each group's bodies ascending.
   std::vector<std::pair<std::uint32_t, std::uint32_t>> by_root(dynamic_touched.size());

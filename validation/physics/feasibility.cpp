@@ -141,28 +141,53 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // In candidate order: the pairs with contacts, the islands they join, and their dynamic
   // bodies. The contacts stay in their pairs' slots: only an island the programme may judge
   // takes a copy of its own.
-  std::uint64_t found = 0;
+  // The counts summed per block of candidates on the threads (integers: any order), the
+  // pairs with contacts selected on them; the unions then in candidate order.
   std::vector<std::size_t> with_contacts;
   std::vector<std::uint32_t> bodies_touched;
-  for (std::size_t ci = 0; ci < cand.size(); ++ci) {
-    const PairContacts& out = pair_out[ci];
-    st.persisted += out.persisted;
-    st.crossings += out.crossings;
-    st.crossings_skipped += out.crossings_skipped;
-    st.witness += out.witness;
-    st.persisted_steps = std::max(st.persisted_steps, out.persisted_steps);
-    if (out.contacts.empty()) continue;
+  {
+    const unsigned count_threads = loop_threads(threads, cand.size(), kParallelSelectFrom);
+    const std::size_t blocks = std::max<std::size_t>(1, std::size_t(count_threads) * 8);
+    struct Counts {
+      std::uint64_t persisted = 0, crossings = 0, crossings_skipped = 0, witness = 0, found = 0;
+      std::size_t persisted_steps = 0;
+    };
+    std::vector<Counts> sums(blocks);
+    parallel_items_on(blocks, count_threads, stop, [&](std::size_t b, unsigned) {
+      Counts& sum = sums[b];
+      for (std::size_t ci = cand.size() * b / blocks; ci < cand.size() * (b + 1) / blocks; ++ci) {
+        const PairContacts& out = pair_out[ci];
+        sum.persisted += out.persisted;
+        sum.crossings += out.crossings;
+        sum.crossings_skipped += out.crossings_skipped;
+        sum.witness += out.witness;
+        sum.persisted_steps = std::max(sum.persisted_steps, out.persisted_steps);
+        sum.found += out.contacts.size();
+      }
+    });
+    for (std::size_t b = 0; b < blocks; ++b) {
+      st.persisted += sums[b].persisted;
+      st.crossings += sums[b].crossings;
+      st.crossings_skipped += sums[b].crossings_skipped;
+      st.witness += sums[b].witness;
+      st.persisted_steps = std::max(st.persisted_steps, sums[b].persisted_steps);
+      st.contacts += sums[b].found;
+    }
+  }
+  parallel_select(
+      cand.size(), with_contacts, loop_threads(threads, cand.size(), kParallelSelectFrom), stop,
+      [&](std::size_t ci) { return !pair_out[ci].contacts.empty(); }, [](std::size_t ci) { return ci; });
+  st.pairs += with_contacts.size();
+  for (const std::size_t ci : with_contacts) {
     const Pair p = cand[ci];
-    found += out.contacts.size();
-    ++st.pairs;
-    with_contacts.push_back(ci);
     if (dynamic(p.a) && dynamic(p.b)) parent[find(p.a)] = find(p.b);
     touched[p.a] = touched[p.b] = 1;
   }
   // The dynamic bodies touched, ascending: a scan of the n flags.
-  for (std::size_t i = 0; i < n; ++i)
-    if (touched[i] && dynamic(static_cast<std::uint32_t>(i))) bodies_touched.push_back(static_cast<std::uint32_t>(i));
-  st.contacts += found;
+  parallel_select(
+      n, bodies_touched, loop_threads(threads, n, kParallelSelectFrom), stop,
+      [&](std::size_t i) { return touched[i] && dynamic(static_cast<std::uint32_t>(i)); },
+      [](std::size_t i) { return static_cast<std::uint32_t>(i); });
 
   // Islands: the dynamic bodies joined through contacts between dynamic bodies, in the
   // order of their roots (a pair with contacts has a dynamic body: feasibility_contacts),

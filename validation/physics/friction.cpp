@@ -197,9 +197,7 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
   // The pairs' first rows (rows of a pair are consecutive), judged on the threads and
   // tallied in pair order (judge_in_order).
   std::vector<std::size_t>& first_row = row_state<FrictionScratch>(RowId::Friction).first_row;
-  first_row.clear();
-  for (std::size_t k = 0; k < rec.contacts.size(); ++k)
-    if (k == 0 || !(rec.contacts[k - 1].pair == rec.contacts[k].pair)) first_row.push_back(k);
+  pair_run_starts(rec.contacts, first_row, threads, stop);
   first_row.push_back(rec.contacts.size());
   auto judge_cones = [&](std::size_t first, std::size_t last, auto& s, auto& cone) {
     for (std::size_t q = first; q < last; ++q) {
@@ -252,14 +250,19 @@ void PhysicsValidators::Impl::friction(const FrameRecord& rec, const std::vector
     return conjugated(rotation(det[i].orientation), inverse(inertia[i]));
   };
 
-  // Distinct contact pairs per body.
+  // Distinct contact pairs per body: on the threads, each counting a range of bodies.
   std::vector<std::uint32_t>& pairs_of = row_state<FrictionScratch>(RowId::Friction).pairs_of;
   pairs_of.assign(n, 0);
-  for (std::size_t q = 0; q + 1 < first_row.size(); ++q) {
-    const Pair p = rec.contacts[first_row[q]].pair;
-    ++pairs_of[p.a];
-    ++pairs_of[p.b];
-  }
+  const unsigned count_threads = loop_threads(threads, first_row.size(), kParallelConesFrom);
+  parallel_items_on(count_threads, count_threads, stop, [&](std::size_t range, unsigned) {
+    const std::uint32_t lo = static_cast<std::uint32_t>(n * range / count_threads),
+                        hi = static_cast<std::uint32_t>(n * (range + 1) / count_threads);
+    for (std::size_t q = 0; q + 1 < first_row.size(); ++q) {
+      const Pair p = rec.contacts[first_row[q]].pair;
+      if (p.a >= lo && p.a < hi) ++pairs_of[p.a];
+      if (p.b >= lo && p.b < hi) ++pairs_of[p.b];
+    }
+  });
 
   // 5b. Dissipation at the contact points, where the pair is its dynamic bodies' only one:
   // per pair on the threads, tallied in pair order (judge_in_order).

@@ -250,6 +250,12 @@ struct ContactTruth {
   }
 };
 
+/// The first row of each run of consecutive rows of one pair in `contacts`, ascending,
+/// into `starts`, on up to `threads` threads (0: the hardware's; parallel_select in
+/// candidates.cpp); `stop` as the validators' loops (ValidationStopped).
+void pair_run_starts(const std::vector<ContactRecord>& contacts, std::vector<std::size_t>& starts, int threads,
+                     const std::function<bool()>& stop);
+
 /// A pair's contact rows [first, first + count) (rows of a pair are consecutive).
 struct PairRows {
   Pair p;
@@ -304,6 +310,7 @@ struct CheckedFrame {
   struct Work {
     std::vector<Aabb> grown;         ///< per body: its exact posed box grown by the reach
     std::vector<Pair> todo;          ///< the candidates that intersect
+    std::vector<std::size_t> row_starts;  ///< pair_run_starts of the frame's rows
     std::vector<char> is_required;   ///< per candidate: row 1 requires it
     std::vector<std::uint32_t> group_begin, group_list, fill;  ///< groups of rows per truth entry
     std::vector<std::size_t> group_truth;  ///< per group of rows: its truth entry (row 3 reads it too)

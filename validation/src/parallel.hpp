@@ -49,6 +49,38 @@ void parallel_items(std::size_t n, int threads, const std::function<bool()>& sto
   parallel_items_on(n, loop_threads(threads, n), stop, std::forward<F>(body));
 }
 
+/// `out` = value(i) for every i in [0, n) with keep(i), in i order, on `threads` threads
+/// (keep and value called once per item, from any thread): the items counted per block,
+/// then each block written at its offset. One thread, or fewer than
+/// kParallelSelectFrom items: the plain loop. `stop` as parallel_items_on.
+constexpr std::size_t kParallelSelectFrom = 8192;
+template <class T, class Keep, class Value>
+void parallel_select(std::size_t n, std::vector<T>& out, unsigned threads, const std::function<bool()>& stop,
+                     Keep&& keep, Value&& value) {
+  out.clear();
+  if (threads <= 1 || n < kParallelSelectFrom) {
+    for (std::size_t i = 0; i < n; ++i)
+      if (keep(i)) out.push_back(value(i));
+    return;
+  }
+  const std::size_t blocks = std::size_t(threads) * 8;
+  std::vector<std::size_t> offset(blocks + 1, 0);
+  std::vector<char> kept(n);
+  auto first = [&](std::size_t b) { return n * b / blocks; };
+  parallel_items_on(blocks, threads, stop, [&](std::size_t b, unsigned) {
+    std::size_t c = 0;
+    for (std::size_t i = first(b); i < first(b + 1); ++i) c += (kept[i] = keep(i) ? 1 : 0);
+    offset[b + 1] = c;
+  });
+  for (std::size_t b = 0; b < blocks; ++b) offset[b + 1] += offset[b];
+  out.resize(offset[blocks]);
+  parallel_items_on(blocks, threads, stop, [&](std::size_t b, unsigned) {
+    std::size_t k = offset[b];
+    for (std::size_t i = first(b); i < first(b + 1); ++i)
+      if (kept[i]) out[k++] = value(i);
+  });
+}
+
 /// std::sort of `v` by `less` on `threads` threads (at least 4,096 elements; fewer are
 /// sorted on the calling thread): `threads` chunks sorted on threads, then merged pairwise
 /// (std::merge, each round's merges on threads). The order std::sort gives wherever no
