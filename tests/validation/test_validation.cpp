@@ -420,7 +420,8 @@ class EndlessBroadPhase : public BroadPhase {
 
 // ValidationOptions::stop is honoured inside the candidate-set check, while a broadphase
 // call that polls nothing is still running: observe throws ValidationStopped, and the
-// rows so far (with their own times) remain. Before: the check ran to the call's end.
+// rows so far (with their own times) remain, the candidate-sets row naming the comparisons
+// the stop left out. Before: the check ran to the call's end.
 TEST(Validators, AStopEndsACheckWhoseBroadphaseCallPollsNothing) {
   const Scene scene = mixed_boxes();
   World world(scene);
@@ -444,6 +445,12 @@ TEST(Validators, AStopEndsACheckWhoseBroadphaseCallPollsNothing) {
   EXPECT_EQ(rs.size(), 15u);
   for (const ValidationResult& r : rs) EXPECT_GE(r.seconds, 0.0) << r.name;
   EXPECT_GT(find(rs, "applied-state").seconds, 0.0);
+  // The broadphases the stop left uncompared on the frame are named as such.
+  const std::string& detail = find(rs, "candidate-sets").detail;
+  EXPECT_NE(detail.find("(on 0 of the 1 frames: the run stopped before its comparison on the last)"),
+            std::string::npos)
+      << detail;
+  EXPECT_EQ(detail.find("quadratic"), std::string::npos) << detail;
 }
 
 // validate_engine stopped by ValidationOptions::stop inside the checks: the results of

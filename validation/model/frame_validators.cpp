@@ -636,11 +636,15 @@ std::vector<ValidationResult> FrameValidators::results() const {
         names += fmt::format(" (not compared: a quadratic broadphase's one call would be {:.2g} AABB tests on {} "
                              "boxes, above {:.0e})",
                              quadratic_tests(n), n, kQuadraticTestsPerCall);
+      else if (const std::uint64_t stride = compare_stride(s.bp_cost[b], n);
+               s.bp_compared[b] < (s.candidate_frames + stride - 1) / stride)
+        // Fewer comparisons than its judged frames call for: the run stopped inside one.
+        names += fmt::format(" (on {} of the {} frames: the run stopped before its comparison on the last)",
+                             s.bp_compared[b], s.candidate_frames);
       else if (s.bp_compared[b] < s.candidate_frames)
         names += fmt::format(" (on {} of the {} frames: a quadratic broadphase is compared once in {} judged frames, "
                              "at most {:.0e} AABB tests a frame)",
-                             s.bp_compared[b], s.candidate_frames, compare_stride(s.bp_cost[b], s.model->bodies.size()),
-                             kQuadraticTestsPerJudgedFrame);
+                             s.bp_compared[b], s.candidate_frames, stride, kQuadraticTestsPerJudgedFrame);
     }
     out.push_back(tally(RowId::CandidateSets, "frames x broadphases differing from flat", s.candidates,
                         fmt::format("{} frames, the engine's own pairs and {}", s.candidate_frames, names)));
