@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstdlib>
 #include <filesystem>
@@ -13,6 +14,8 @@
 #include <string>
 
 #include <unistd.h>
+
+#include <fmt/format.h>
 
 #include "octocd/bullet_world.hpp"
 #include "octocd/reference_broadphase.hpp"
@@ -210,19 +213,27 @@ TEST(Validators, QuadraticBroadphaseIsComparedOnAStride) {
   }
 }
 
+/// `count` boxes of 0.2 m on a grid 0.5 m apart (no pair), filled from the corner of a cube
+/// just large enough, no gravity, no walls, the octree broadphase.
+Scene sparse_grid(int count) {
+  const int side = int(std::ceil(std::cbrt(double(count))));
+  const double half = 0.25 * (side - 1);
+  return parse_scene(fmt::format(R"({{
+    "name": "sparse-grid-{0}", "dt": 0.001, "frames": 10,
+    "domain": {{"min": [{1}, {1}, {1}], "max": [{2}, {2}, {2}]}},
+    "gravity": [0, 0, 0], "walls": "none",
+    "broadphase": {{"name": "octree", "depth": "auto"}},
+    "groups": [{{"name": "box", "shape": {{"box": [0.1, 0.1, 0.1]}}, "count": {0}, "mass": 1.0,
+                "layout": {{"type": "grid", "min": [{3}, {3}, {3}], "max": [{4}, {4}, {4}], "spacing": 0.5}}}}]}})",
+                                 count, -half - 1, half + 1, -half, half),
+                     "sparse-grid");
+}
+
 // Above 141,421 boxes one call of a quadratic-cost broadphase is over 10^10 AABB tests (at
 // 10^6 boxes 5 x 10^11: hours on the first judged frame, where the stride starts): it is not
 // compared at all, and the detail says so. 150,000 boxes 0.5 m apart, no pair.
 TEST(Validators, QuadraticBroadphaseAboveItsCallLimitIsNotCompared) {
-  const Scene scene = parse_scene(R"({
-    "name": "sparse-grid-150000", "dt": 0.001, "frames": 5,
-    "domain": {"min": [-14, -14, -14], "max": [14, 14, 14]},
-    "gravity": [0, 0, 0], "walls": "none",
-    "broadphase": {"name": "octree", "depth": "auto"},
-    "groups": [{"name": "box", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 150000, "mass": 1.0,
-                "layout": {"type": "grid", "min": [-13.25, -13.25, -13.25], "max": [13.25, 13.25, 13.25],
-                           "spacing": 0.5}}]})",
-                                  "sparse-grid");
+  const Scene scene = sparse_grid(150000);
   ASSERT_EQ(body_count(scene), 150000u);
   const ValidationResult r = fcl_naive_candidate_sets(scene, 5);
   EXPECT_TRUE(r.pass) << r.detail;
@@ -237,15 +248,7 @@ TEST(Validators, QuadraticBroadphaseAboveItsCallLimitIsNotCompared) {
 // the first. The detail names the stride; a broadphase that adds a pair is caught on the
 // frame it is compared on, once.
 TEST(Validators, LargeScenesCompareBroadphasesOnAStride) {
-  const Scene scene = parse_scene(R"({
-    "name": "sparse-grid-250000", "dt": 0.001, "frames": 10,
-    "domain": {"min": [-16, -16, -16], "max": [16, 16, 16]},
-    "gravity": [0, 0, 0], "walls": "none",
-    "broadphase": {"name": "octree", "depth": "auto"},
-    "groups": [{"name": "box", "shape": {"box": [0.1, 0.1, 0.1]}, "count": 250000, "mass": 1.0,
-                "layout": {"type": "grid", "min": [-15.5, -15.5, -15.5], "max": [15.5, 15.5, 15.5],
-                           "spacing": 0.5}}]})",
-                                  "sparse-grid");
+  const Scene scene = sparse_grid(250000);
   ASSERT_EQ(body_count(scene), 250000u);
   auto candidate_sets = [&](bool add_one) {
     World world(scene);

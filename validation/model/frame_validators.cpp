@@ -639,9 +639,9 @@ std::vector<ValidationResult> FrameValidators::results() const {
   };
   if (s.source.octocd_pipeline) {
     std::string names = "flat's pair set (exact-grid) vs";
+    const std::size_t n = s.model->bodies.size();
     for (std::size_t b = 0; b < s.broadphases.size(); ++b) {
       names += " " + s.broadphases[b]->name();
-      const std::size_t n = s.model->bodies.size();
       if (!comparable(s.bp_cost[b], n))
         names += fmt::format(" (not compared: a quadratic broadphase's one call would be {:.2g} AABB tests on {} "
                              "boxes, above {:.0e})",

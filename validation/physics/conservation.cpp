@@ -310,10 +310,6 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
   std::vector<std::uint8_t> touched(n, 0);
   graph.statics.assign(n, 0);
   std::vector<std::uint32_t> dynamic_touched;
-  // A link equal to one already joined is skipped (its bodies share a root: joining them
-  // again changes no parent, and path halving never changes a root, so every root is the
-  // one the full list gives): a pair's further rows, and a confirmed pair among the rows'
-  // pairs where both lists are sorted (looked up onwards from the last one).
   auto join = [&](const Pair& q) {
     parent[find(q.a)] = find(q.b);
     for (const std::uint32_t i : {q.a, q.b})
@@ -322,22 +318,8 @@ PhysicsValidators::Impl::ContactGraph PhysicsValidators::Impl::contact_graph(con
         if (dynamic(i)) dynamic_touched.push_back(i);
       }
   };
-  bool rows_sorted = true;
-  for (std::size_t k = 0; k < rec.contacts.size(); ++k) {
-    const Pair q = rec.contacts[k].pair;
-    if (k > 0 && rec.contacts[k - 1].pair == q) continue;
-    if (k > 0 && q < rec.contacts[k - 1].pair) rows_sorted = false;
-    join(q);
-  }
-  const bool skip_rows = rows_sorted && std::is_sorted(rec.confirmed.begin(), rec.confirmed.end());
-  std::size_t row = 0;
-  for (const Pair& q : rec.confirmed) {
-    if (skip_rows) {
-      while (row < rec.contacts.size() && rec.contacts[row].pair < q) ++row;
-      if (row < rec.contacts.size() && rec.contacts[row].pair == q) continue;
-    }
-    join(q);
-  }
+  for (const ContactRecord& c : rec.contacts) join(c.pair);
+  for (const Pair& q : rec.confirmed) join(q);
   // The links with a static body (selected on the threads), their roots marked.
   std::vector<Pair> with_static;
   const unsigned select_threads = loop_threads(threads, rec.contacts.size() + rec.confirmed.size(), kParallelSelectFrom);

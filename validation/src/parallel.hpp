@@ -49,11 +49,15 @@ void parallel_items(std::size_t n, int threads, const std::function<bool()>& sto
   parallel_items_on(n, loop_threads(threads, n), stop, std::forward<F>(body));
 }
 
+/// The fewest items parallel_select runs on threads (two passes of a few instructions an
+/// item: below this one thread costs less than waking another).
+constexpr std::size_t kParallelSelectFrom = 8192;
+
 /// `out` = value(i) for every i in [0, n) with keep(i), in i order, on `threads` threads
 /// (keep and value called once per item, from any thread): the items counted per block,
 /// then each block written at its offset. One thread, or fewer than
-/// kParallelSelectFrom items: the plain loop. `stop` as parallel_items_on.
-constexpr std::size_t kParallelSelectFrom = 8192;
+/// kParallelSelectFrom items: the plain loop. `stop` as parallel_items_on
+/// (ValidationStopped; `out` then holds no meaning). T default-constructible.
 template <class T, class Keep, class Value>
 void parallel_select(std::size_t n, std::vector<T>& out, unsigned threads, const std::function<bool()>& stop,
                      Keep&& keep, Value&& value) {
