@@ -18,6 +18,8 @@
 #include <fmt/format.h>
 
 #include "octocd/bullet_world.hpp"
+#include "octocd/exact_pairs.hpp"
+#include "octocd/physics.hpp"
 #include "octocd/reference_broadphase.hpp"
 #include "octocd/trace.hpp"
 #include "faults/planted_faults.hpp"
@@ -95,6 +97,23 @@ class AddingBroadPhase : public BroadPhase {
 
  private:
   std::unique_ptr<BroadPhase> inner_;
+};
+
+/// A broadphase that leaves out another's pairs of two static bodies (w = 0).
+class StaticDroppingBroadPhase : public BroadPhase {
+ public:
+  StaticDroppingBroadPhase(std::unique_ptr<BroadPhase> inner, std::vector<float> w)
+      : inner_(std::move(inner)), w_(std::move(w)) {}
+  std::string name() const override { return "drops-static-pairs"; }
+  void find_pairs(const std::vector<Aabb>& boxes, std::vector<Pair>& out, BroadPhaseStats& stats) override {
+    inner_->find_pairs(boxes, out, stats);
+    out.erase(std::remove_if(out.begin(), out.end(), [&](Pair p) { return w_[p.a] == 0.0f && w_[p.b] == 0.0f; }),
+              out.end());
+  }
+
+ private:
+  std::unique_ptr<BroadPhase> inner_;
+  std::vector<float> w_;
 };
 
 }  // namespace
@@ -268,6 +287,60 @@ TEST(Validators, LargeScenesCompareBroadphasesOnAStride) {
   EXPECT_FALSE(planted.pass) << planted.detail;
   EXPECT_EQ(planted.measured, 1.0) << planted.detail;
   EXPECT_NE(planted.detail.find("frame 5: adds-one-pair adds pair (0, 1)"), std::string::npos) << planted.detail;
+}
+
+// candidate-sets' `flat` set is broadphase-completeness' pairs with a dynamic body (computed
+// once a frame, PhysicsValidators::flat_pairs) joined with the static bodies' own pairs. In
+// mixed-boxes the open box's floor and four walls overlap along eight edges: a broadphase that leaves out
+// those static-static pairs is caught, naming the first, on every judged frame.
+TEST(Validators, CandidateSetsHoldTheStaticStaticPairs) {
+  const Scene scene = mixed_boxes();
+  World probe(scene);
+  probe.set_recording(true);
+  probe.step();
+  const std::vector<float>& w = probe.model().initial.w;
+  std::vector<Pair> all;
+  exact_pairs(probe.record().aabbs, all);
+  std::vector<Pair> walls;
+  std::copy_if(all.begin(), all.end(), std::back_inserter(walls),
+               [&](Pair p) { return w[p.a] == 0.0f && w[p.b] == 0.0f; });
+  ASSERT_EQ(walls.size(), 8u);
+
+  World world(scene);
+  std::vector<std::unique_ptr<BroadPhase>> extra;
+  extra.push_back(std::make_unique<StaticDroppingBroadPhase>(make_broadphase(scene.broadphase, scene.domain), w));
+  const ValidationResult r = find(run(world, 20, std::move(extra)), "candidate-sets");
+  EXPECT_FALSE(r.pass) << r.detail;
+  EXPECT_EQ(r.measured, 4.0) << r.detail;  // frames 5, 10, 15, 20
+  EXPECT_NE(r.detail.find(fmt::format("frame 5: drops-static-pairs misses pair ({}, {}) (8 missing, 0 extra)",
+                                      walls[0].a, walls[0].b)),
+            std::string::npos)
+      << r.detail;
+}
+
+// The physics tier keeps a checked frame's `flat` set (its pairs with a dynamic body) for the
+// model tier, and only that frame's: exact_pairs on the frame's AABBs less the static-static
+// pairs; none after a frame that is not checked.
+TEST(Validators, PhysicsKeepsTheCheckedFramesFlatPairs) {
+  World world(mixed_boxes());
+  world.set_recording(true);
+  PhysicsValidators v(world.model(), octocd_physics_bodies(world.model()), Tolerances{}, "engine cpu");
+  const std::vector<float>& w = world.model().initial.w;
+  for (int f = 1; f <= 30; ++f) {
+    world.step();
+    const bool checked = f % 2 == 0;
+    v.observe(world.record(), checked);
+    if (!checked) {
+      EXPECT_EQ(v.flat_pairs(), nullptr) << "frame " << f;
+      continue;
+    }
+    ASSERT_NE(v.flat_pairs(), nullptr) << "frame " << f;
+    std::vector<Pair> want;
+    exact_pairs(world.record().aabbs, want);
+    want.erase(std::remove_if(want.begin(), want.end(), [&](Pair p) { return w[p.a] == 0.0f && w[p.b] == 0.0f; }),
+               want.end());
+    EXPECT_EQ(*v.flat_pairs(), want) << "frame " << f;
+  }
 }
 
 TEST(Validators, MidphaseCompletenessCatchesLossyPruning) {

@@ -257,6 +257,38 @@ struct FrameValidators::Impl {
   ConfirmFn confirm;
   std::unique_ptr<PhysicsValidators> physics;
   std::vector<Pair> expected;
+  /// The static bodies (w = 0, in index order), their boxes and their pairs (static_flat).
+  std::vector<std::uint32_t> statics;
+  std::vector<Aabb> static_boxes;
+  std::vector<Pair> static_pairs;
+  ExactPairsSettings pair_threads;
+  /// `expected` = `with_dynamic` (flat's pairs with a dynamic body, sorted) joined with
+  /// flat's pairs among the static bodies; false (expected unset) when that search is over
+  /// its limit (PairLimitError): the caller searches every box.
+  bool static_flat(const std::vector<Aabb>& boxes, const std::vector<float>& w, const std::vector<Pair>& with_dynamic) {
+    statics.clear();
+    static_boxes.clear();
+    for (std::uint32_t i = 0; i < boxes.size(); ++i)
+      if (!(w[i] > 0.0f)) {
+        statics.push_back(i);
+        static_boxes.push_back(boxes[i]);
+      }
+   
+    if (statics.size() > 1) {
+      try {
+        exact_pairs(static_boxes, static_pairs, pair_threads);
+      } catch (const PairLimitError&) {
+        return false;
+      }
+      // Indices in the static list -> body indices: increasing, so (a, b) order is kept.
+      for (Pair& q : static_pairs) q = Pair{statics[q.a], statics[q.b]};
+    }
+    expected.clear();
+    expected.reserve(with_dynamic.size() + static_pairs.size());
+    std::merge(with_dynamic.begin(), with_dynamic.end(), static_pairs.begin(), static_pairs.end(),
+               std::back_inserter(expected));
+    return true;
+  }
   // Per compared broadphase (index into `broadphases`): its cost class, its last pair set and
   // the judged frames it was compared on; `bp_order` lists them quadratic-cost first.
   std::vector<BroadPhaseCost> bp_cost;
@@ -298,6 +330,7 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   pair_threads.threads = options.threads;
   pair_threads.max_pairs_per_body = limits::kMaxPairsPerBody;
   s.flat = make_exact_pairs_broadphase(pair_threads);
+  s.pair_threads = pair_threads;
   for (auto& bp : broadphases) {
     const BroadPhaseInfo* info = find_broadphase_info(bp->name());
     s.bp_cost.push_back(info ? info->cost : BroadPhaseCost::subquadratic);
@@ -409,7 +442,12 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
     // (design.md section 7.1). Another engine's pairs are judged by the physics tier's broadphase
     // completeness (extras allowed), never against octocd's exact AABB rule.
     std::optional<RowClock> clock(std::in_place, s.t_candidates);
-    find_pairs_stoppable(s.flat, boxes, s.expected, s.options.stop);
+    // `flat`'s set: broadphase-completeness' pairs with a dynamic body, computed on this
+    // frame's AABBs, joined with the static-static pairs (exact_pairs over the static bodies'
+    // boxes); else one search of every box.
+    const std::vector<Pair>* dynamic_pairs = s.physics->flat_pairs();
+    if (!dynamic_pairs || !s.static_flat(boxes, w, *dynamic_pairs))
+      find_pairs_stoppable(s.flat, boxes, s.expected, s.options.stop);
     ++s.candidate_frames;
     auto compare = [&](const std::vector<Pair>& got, const std::string& who, bool own) {
       const bool same = got == s.expected;

@@ -404,6 +404,8 @@ void PhysicsValidators::Impl::judge_broadphase(Frame& f) {
                                        "inclusive (Eq. 6), min_A <= max_B and max_A >= min_B"
                                      : "");
       });
+      flat_dynamic.swap(want);  // candidate-sets reads it (flat_pairs)
+      flat_frame = frame;
     }
   }
 }

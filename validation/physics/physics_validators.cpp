@@ -280,6 +280,10 @@ void PhysicsValidators::set_episode_frames(std::int64_t first, std::int64_t last
   impl_->episode_last = last;
 }
 
+const std::vector<Pair>* PhysicsValidators::flat_pairs() const {
+  return impl_->flat_frame == impl_->last_frame ? &impl_->flat_dynamic : nullptr;
+}
+
 void PhysicsValidators::observe_episodes(const FrameRecord& rec) { impl_->advance_episodes(rec); }
 
 bool PhysicsValidators::episodes_pending() const { return impl_->owned_open() > 0; }
@@ -288,6 +292,7 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   Impl& s = *impl_;
   const std::size_t n = s.model->bodies.size();
   s.last_frame = rec.frame;
+  s.flat_frame = -1;
   std::vector<Pose> det(n);
   const bool poses = !rec.x_det.empty() || rec.aabbs.size() == n;
   if (poses) {

@@ -191,6 +191,12 @@ class PhysicsValidators {
   /// every frame that has states.
   void observe(const FrameRecord& rec, bool checked);
 
+  /// `flat`'s pairs on the world AABBs of the last observed frame that have a dynamic body
+  /// (sorted by (a, b); static-static pairs left out), when that frame's
+  /// broadphase-completeness computed them (a checked frame of an engine that declares an
+  /// exact AABB broadphase: octocd's); null otherwise. Valid until the next observe().
+  const std::vector<Pair>* flat_pairs() const;
+
   /// The eight rows so far (1-8 above), tier Physics, each with how many items it judged,
   /// its causes and its own time (ValidationResult::seconds).
   std::vector<ValidationResult> results() const;
