@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include <fmt/format.h>
+
 #include "faults/planted_faults.hpp"
 #include "octocd/error.hpp"
 #include "octocd/setting_error.hpp"
@@ -156,6 +158,63 @@ TEST(AppliedState, WrongBodyImpulseBreaksMomentumOfIsolatedGroups) {
   const ValidationResult r = find(validate_with(head_on(), f), "impulse-conservation");
   EXPECT_FALSE(r.pass) << r.detail;
   EXPECT_NE(r.detail.find("isolated group of 2 bodies"), std::string::npos) << r.detail;
+}
+
+// The islands are judged on the validators' threads and their tallies summed: the verdicts,
+// the counts and the first failures (the lowest island's body, the lowest root's group) are
+// the serial judge's. 1,728 boxes 2 cm apart with random velocities collide in pairs and
+// small groups, about the walls too; their masses of 1 and 4 kg alternate like a chessboard's
+// squares (eight grids 0.24 m apart). The planted fault (B's velocity change added to A)
+// fails every body with an impulse and the momentum of every isolated group.
+TEST(AppliedState, ThreadsGiveTheSerialVerdict) {
+  std::string groups;
+  for (int g = 0; g < 8; ++g) {
+    const int ix = g & 1, iy = g >> 1 & 1, iz = g >> 2 & 1;
+    const double x = -0.66 + 0.12 * ix, y = -0.66 + 0.12 * iy, z = -0.66 + 0.12 * iz;
+    groups += fmt::format(R"({}{{"name": "g{}", "shape": {{"box": [0.05, 0.05, 0.05]}}, "count": 216, "mass": {},
+       "layout": {{"type": "grid", "min": [{}, {}, {}], "max": [{}, {}, {}], "spacing": 0.24}},
+       "velocity": {{"type": "random", "max": 2.0, "seed": {}}}}})",
+                          g ? ", " : "", g, (ix + iy + iz) % 2 ? 4.0 : 1.0, x, y, z, x + 1.2, y + 1.2, z + 1.2, 11 + g);
+  }
+  const Scene gas = parse_scene(R"({"name": "gas", "domain": {"min": [-1, -1, -1], "max": [1, 1, 1]},
+    "gravity": [0, 0, 0], "frames": 30, "walls": "closed-box", "groups": [)" + groups + "]}",
+                                "gas (test)");
+  auto rows = [&](PlantedFaults faults, int threads) {
+    ValidationOptions opt;
+    opt.frames = 30;
+    opt.every = 5;
+    opt.against_bullet = false;
+    opt.against_fcl = false;
+    opt.threads = threads;
+    const auto model = build_model(gas);
+    const auto rs = validate_engine(
+        [&]() -> std::unique_ptr<Engine> {
+          return octocd::test::cpu_engine(model, make_broadphase(gas.broadphase, gas.domain), faults);
+        },
+        opt);
+    return std::make_pair(find(rs, "applied-state"), find(rs, "impulse-conservation"));
+  };
+  PlantedFaults wrong_body;
+  wrong_body.impulse_wrong_body = true;
+  for (const PlantedFaults& faults : {PlantedFaults{}, wrong_body}) {
+    const auto serial = rows(faults, 1);
+    EXPECT_EQ(serial.first.pass, !faults.any()) << serial.first.detail;
+    EXPECT_EQ(serial.second.pass, !faults.any()) << serial.second.detail;
+    if (faults.any()) {
+      EXPECT_GT(serial.first.measured, 100.0) << serial.first.detail;  // body-frames off
+      EXPECT_NE(serial.second.detail.find("isolated group of"), std::string::npos) << serial.second.detail;
+    } else {
+      EXPECT_NE(serial.second.detail.find("isolated groups on the applied state judged"), std::string::npos)
+          << serial.second.detail;
+    }
+    for (int threads : {2, 3}) {
+      const auto threaded = rows(faults, threads);
+      EXPECT_EQ(threaded.first.measured, serial.first.measured) << threads;
+      EXPECT_EQ(threaded.first.detail, serial.first.detail) << threads;
+      EXPECT_EQ(threaded.second.measured, serial.second.measured) << threads;
+      EXPECT_EQ(threaded.second.detail, serial.second.detail) << threads;
+    }
+  }
 }
 
 TEST(AppliedState, ValidatorsRefuseAnEngineThatDoesNotRecord) {

@@ -58,6 +58,8 @@ struct Choice {
 /// validators' threads (two islands or more): below it one thread costs less than waking
 /// another (applied-state costs about 430 instructions a body on islands of one body).
 constexpr std::size_t kParallelIslandWorkFrom = 1024;
+/// Bodies a thread integrates at a time (a few instructions each).
+constexpr std::size_t kBodiesPerBlock = 4096;
 
 /// An island: dynamic bodies joined by confirmed contacts, and the contacts (indices into
 /// rec.confirmed, in (a, b) order) touching them. `local` lists every body the contacts
@@ -84,15 +86,30 @@ struct Run {
 };
 
 
-/// What the search of one island leaves for the tally: the run judged against, which of
-/// its dynamic bodies are judged, and what the search adds to the counters.
+/// What the search of one island adds to the judge's counters.
 struct SearchCounts {
   std::uint64_t near_ties = 0, runs = 0, searched = 0, resolved = 0, exceeded = 0;
 };
-struct Searched {
-  Run run;
-  std::vector<std::uint8_t> judged;
+
+/// An isolated dynamic group's figures on the applied state (an island of two dynamic
+/// bodies or more with no static body, none clamped), judged in the order of its
+/// union-find root.
+struct GroupFigures {
+  std::uint32_t root = 0, bodies = 0, first = 0;
+  bool centre = false;  // an isolated pair, each body with one contact: the centre is judged
+  double dp = 0, bound = 0, exchange = 0, dc = 0, cbound = 0, cexchange = 0;
+};
+
+/// What one thread's islands add to the frame's tallies: integer counts, the worst ratio
+/// (a maximum) and the first failure of the lowest island, so the sums over the threads do
+/// not depend on how the islands were shared out.
+struct IslandTally {
   SearchCounts counts;
+  std::uint64_t checks = 0, failures = 0, dynamic_frames = 0, unjudged = 0;
+  double worst = 0.0;
+  std::size_t first_island = std::numeric_limits<std::size_t>::max();
+  std::string first;
+  std::vector<GroupFigures> groups;
 };
 
 /// Work space of one island's run (AppliedStateJudge::Impl::run), kept per thread.
@@ -102,6 +119,15 @@ struct RunScratch {
   std::vector<double> coord_max, vel_max, run_v;
   std::vector<float> w;
   std::vector<std::uint32_t> count;
+};
+
+/// One thread's island (its vectors rebuilt per island), the run judged against, and the
+/// thread's tally.
+struct IslandWorker {
+  Island island;
+  Run run;
+  std::vector<std::uint8_t> judged;
+  IslandTally tally;
 };
 
 }  // namespace
@@ -125,7 +151,15 @@ struct AppliedStateJudge::Impl {
   std::vector<D3> x_int, v_int;
   std::vector<F3> xf_int, vf_int;
   std::vector<std::uint32_t> parent;
-  std::vector<std::int32_t> slot;
+  /// The frame's islands, numbered in the order of their first dynamic body: island j's
+  /// dynamic bodies are dyn[dyn_start[j] .. dyn_start[j + 1]) (in body order), its contacts
+  /// con[con_start[j] .. con_start[j + 1]) (indices into rec.confirmed, in order); `root`:
+  /// each dynamic body's union-find root; `island_of`: per root, its island; `slot`: each
+  /// dynamic body's index in its island's list.
+  std::vector<std::uint32_t> root, dyn_start, dyn, con_start, con, slot, cursor;
+  std::vector<std::int32_t> island_of;
+  /// Per thread of the islands' loop (the memory of its island and run kept between frames).
+  std::vector<IslandWorker> workers;
 
   std::uint32_t find(std::uint32_t i) {
     while (parent[i] != i) i = parent[i] = parent[parent[i]];
@@ -140,7 +174,7 @@ struct AppliedStateJudge::Impl {
   /// Runs the island's passes into `out` (its vectors' memory reused) and, where the first
   /// run is off, explores the island's branches (search_branches); `out` ends as the run
   /// judged against, sets `judged` (per local dynamic body) and adds to `counts` (what a
-  /// search adds to the judge's counters, summed in island order after the islands are
+  /// search adds to the judge's counters, summed over the threads after the islands are
   /// searched on the validators' threads). Reads only the frame's shared state: islands may
   /// be searched on several threads at once.
   void search(const Island& is, bool judge_response, std::vector<std::uint8_t>& judged, SearchCounts& counts,
@@ -148,12 +182,12 @@ struct AppliedStateJudge::Impl {
   /// The branches of an island whose first run `first` (compared) is off: the run judged against.
   Run search_branches(const Island& is, const Run& first, std::vector<std::uint8_t>& judged,
                       SearchCounts& counts) const;
-  /// Per island of the last frame: its search, kept so that the next frame's runs reuse
-  /// their vectors' memory (most islands are one body: about 7 allocations each).
-  std::vector<Searched> island_searches;
-  /// The last frame's islands and spare ones: the next frame's islands take their vectors'
-  /// memory (most islands are one body: three vectors each).
-  std::vector<Island> islands, spare_islands;
+  /// Builds island j of the frame in `is` (its locals: the dynamic bodies, then each static
+  /// body its contacts touch, in the order first touched).
+  void build_island(std::size_t j, Island& is) const;
+  /// Searches island j on worker `w` and adds its bodies' verdicts and its group's figures
+  /// to the worker's tally.
+  void judge_island(std::size_t j, bool judge_response, IslandWorker& w) const;
   int threads = 0;  // set_threads: the islands' threads (0: the hardware's)
 };
 
@@ -579,6 +613,131 @@ Run AppliedStateJudge::Impl::search_branches(const Island& is, const Run& first,
   return first;
 }
 
+void AppliedStateJudge::Impl::build_island(std::size_t j, Island& is) const {
+  const std::vector<float>& w = model->initial.w;
+  is.local.assign(dyn.begin() + dyn_start[j], dyn.begin() + dyn_start[j + 1]);
+  is.dynamic = static_cast<std::uint32_t>(is.local.size());
+  is.contacts.clear();
+  is.ends.clear();
+  for (std::size_t k = con_start[j]; k < con_start[j + 1]; ++k) {
+    const Pair q = rec->confirmed[con[k]];
+    std::array<std::uint32_t, 2> e{};
+    for (int side = 0; side < 2; ++side) {
+      const std::uint32_t body = side == 0 ? q.a : q.b;
+      if (w[body] > 0.0f) {
+        e[static_cast<std::size_t>(side)] = slot[body];
+      } else {  // a static body: local to this island (a floor may serve many)
+        auto it = std::find(is.local.begin() + is.dynamic, is.local.end(), body);
+        e[static_cast<std::size_t>(side)] = static_cast<std::uint32_t>(it - is.local.begin());
+        if (it == is.local.end()) is.local.push_back(body);
+      }
+    }
+    is.contacts.push_back(con[k]);
+    is.ends.push_back(e);
+  }
+}
+
+void AppliedStateJudge::Impl::judge_island(std::size_t j, bool judge_response, IslandWorker& wk) const {
+  const Model& m = *model;
+  const Scene& sc = m.scene;
+  const FrameRecord& fr = *rec;
+  const std::vector<float>& w = m.initial.w;
+  Island& is = wk.island;
+  build_island(j, is);
+  IslandTally& t = wk.tally;
+  search(is, judge_response, wk.judged, t.counts, wk.run);
+  const Run& r = wk.run;
+  if (judge_response)
+    for (std::uint32_t l = 0; l < is.dynamic; ++l) {
+      const std::uint32_t i = is.local[l];
+      ++t.dynamic_frames;
+      if (!wk.judged[l]) {
+        ++t.unjudged;
+        continue;
+      }
+      // The worst quantity's figures, worded only for a failure.
+      double body_worst = 0.0;
+      struct Worst {
+        const char* quantity = nullptr;
+        int k = 0;
+        double got = 0, want = 0, tolerance = 0;
+      } w_args;
+      auto judge = [&](const char* quantity, int k, double got, double want, double tolerance) {
+        const double ratio = std::fabs(got - want) / tolerance;
+        if ((ratio <= body_worst || std::isnan(body_worst)) && w_args.quantity) return;
+        body_worst = std::isnan(ratio) ? std::numeric_limits<double>::infinity() : ratio;
+        w_args = {quantity, k, got, want, tolerance};
+      };
+      const Aabb& local = m.local_box(i);
+      for (int k = 0; k < 3; ++k) {
+        // The world AABB the engine used is its integrated position's box (design.md section 4.2); the
+        // float32 sum local + x rounds at the scale of both.
+        const double box_scale = std::max(std::fabs(local.min[k]), std::fabs(local.max[k]));
+        judge("aabb.min", k, fr.aabbs[i].min[k], static_cast<double>(local.min[k]) + x_int[i][k],
+              r.x_tol[l][k] + tol.applied_state_ulps * box_scale * kEps32);
+        judge("x", k, fr.x_post[i][k], r.x[l][k], r.x_tol[l][k]);
+        judge("v", k, fr.v_post[i][k], r.v[l][k], r.v_tol[l][k]);
+      }
+      ++t.checks;
+      t.worst = std::max(t.worst, body_worst);
+      if (body_worst <= 1.0) continue;
+      ++t.failures;
+      if (j < t.first_island) {
+        t.first_island = j;
+        t.first = fmt::format("frame {}: body {} {}.{} = {:.9g}, design.md section 6 gives {:.9g} "
+                              "(tolerance {:.3g}; {} contacts)",
+                              fr.frame, i, w_args.quantity, "xyz"[w_args.k], w_args.got, w_args.want,
+                              w_args.tolerance, r.count0[l]);
+      }
+    }
+
+  // The island's group: isolated when it holds two dynamic bodies or more, no static body
+  // and no clamped one (clamped by the re-derivation's run, or at v_max in the engine's
+  // state: a body the re-derivation did not judge may have been clamped in a branch it did
+  // not run). Its sums run over its bodies in body order.
+  if (is.dynamic < 2 || is.local.size() > is.dynamic) return;
+  const double dt = sc.dt;
+  const double vmax_near = sc.response.max_velocity * (1.0 - 16.0 * kEps32 * (sc.response.iterations + 2));
+  auto x_at = [&](std::uint32_t i, int k) {
+    return judge_response ? x_int[i][k]
+                          : static_cast<double>(fr.aabbs[i].min[k]) - static_cast<double>(m.local_box(i).min[k]);
+  };
+  D3 p0{}, p1{}, c0{}, c1{};
+  double exchange = 0, cexchange = 0, ctol = 0, mtol = 0;
+  bool centre = true;
+  for (std::uint32_t l = 0; l < is.dynamic; ++l) {
+    const std::uint32_t i = is.local[l];
+    bool at_vmax = false;
+    for (int k = 0; k < 3; ++k) at_vmax = at_vmax || std::fabs(fr.v_post[i][k]) >= vmax_near;
+    if (r.clamped[l] || at_vmax) return;
+    if (r.count0[l] != 1) centre = false;  // the centre is not kept by design
+    const double mi = 1.0 / w[i];
+    for (int k = 0; k < 3; ++k) {
+      const double vi = static_cast<double>(fr.v_pre[i][k]) + dt * sc.gravity[k];
+      p0[k] += mi * vi;
+      p1[k] += mi * fr.v_post[i][k];
+      exchange += mi * std::fabs(fr.v_post[i][k] - vi);
+      mtol += mi * r.v_tol[l][k];
+      c0[k] += mi * x_at(i, k);
+      c1[k] += mi * fr.x_post[i][k];
+      cexchange += mi * std::fabs(fr.x_post[i][k] - x_at(i, k));
+      ctol += mi * r.x_tol[l][k];
+    }
+  }
+  GroupFigures g;
+  g.root = root[is.local[0]];
+  g.bodies = is.dynamic;
+  g.first = is.local[0];
+  g.dp = len3(p1 - p0);
+  g.bound = tol.applied_conservation_rel * exchange + mtol + 1e-9;
+  g.exchange = exchange;
+  g.centre = is.dynamic == 2 && centre;
+  g.dc = len3(c1 - c0);
+  g.cbound = tol.applied_conservation_rel * cexchange + ctol + 1e-12;
+  g.cexchange = cexchange;
+  t.groups.push_back(g);
+}
+
 void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   Impl& s = *impl_;
   if (rec.x_pre.empty()) return;
@@ -587,225 +746,134 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   const std::vector<float>& w = model.initial.w;
   const std::size_t n = rec.x_pre.size();
   const std::int64_t frame = rec.frame;
-  const Tolerances& tol = s.tol;
   s.rec = &rec;
   s.any_response = s.any_response || judge_response;
 
   // design.md section 4.1, semi-implicit Euler: v <- v + dt g; x <- x + dt v (static bodies stay); in
-  // double for the prediction and in float32 for the proposal.
+  // double for the prediction and in float32 for the proposal. Blocks of bodies on the threads.
   const double dt = sc.dt;
   s.x_int.resize(n);
   s.v_int.resize(n);
   s.xf_int.resize(n);
   s.vf_int.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    D3 x = d3(rec.x_pre[i]), v = d3(rec.v_pre[i]);
-    F3 xf = f3(rec.x_pre[i]), vf = f3(rec.v_pre[i]);
-    if (w[i] > 0.0f)
-      for (int k = 0; k < 3; ++k) {
-        v[k] = v[k] + dt * sc.gravity[k];
-        x[k] = x[k] + dt * v[k];
-        vf[k] = vf[k] + sc.dt * sc.gravity[k];
-        xf[k] = xf[k] + sc.dt * vf[k];
-      }
-    s.x_int[i] = x;
-    s.v_int[i] = v;
-    s.xf_int[i] = xf;
-    s.vf_int[i] = vf;
-  }
+  const std::size_t blocks = (n + kBodiesPerBlock - 1) / kBodiesPerBlock;
+  parallel_items_on(blocks, loop_threads(s.threads, blocks, 2), s.stop, [&](std::size_t b, unsigned) {
+    for (std::size_t i = b * kBodiesPerBlock, end = std::min(n, i + kBodiesPerBlock); i < end; ++i) {
+      D3 x = d3(rec.x_pre[i]), v = d3(rec.v_pre[i]);
+      F3 xf = f3(rec.x_pre[i]), vf = f3(rec.v_pre[i]);
+      if (w[i] > 0.0f)
+        for (int k = 0; k < 3; ++k) {
+          v[k] = v[k] + dt * sc.gravity[k];
+          x[k] = x[k] + dt * v[k];
+          vf[k] = vf[k] + sc.dt * sc.gravity[k];
+          xf[k] = xf[k] + sc.dt * vf[k];
+        }
+      s.x_int[i] = x;
+      s.v_int[i] = v;
+      s.xf_int[i] = xf;
+      s.vf_int[i] = vf;
+    }
+  });
 
   // Islands: dynamic bodies joined by confirmed contacts between two dynamic bodies; a
-  // contact with a static body belongs to its dynamic body's island.
+  // contact with a static body belongs to its dynamic body's island. Numbered in the order
+  // of their first dynamic body; bodies and contacts listed per island (counted, then placed).
   s.parent.resize(n);
   for (std::size_t i = 0; i < n; ++i) s.parent[i] = static_cast<std::uint32_t>(i);
   for (const Pair& q : rec.confirmed)
     if (w[q.a] > 0.0f && w[q.b] > 0.0f) s.parent[s.find(q.a)] = s.find(q.b);
-  std::vector<std::int32_t> island_of(n, -1);
-  std::vector<Island>& islands = s.islands;
-  std::vector<Island>& spare = s.spare_islands;
-  for (Island& is : islands) spare.push_back(std::move(is));
-  islands.clear();
+  s.root.resize(n);
+  s.island_of.assign(n, -1);
+  s.dyn_start.assign(1, 0);
   for (std::size_t i = 0; i < n; ++i) {
     if (!(w[i] > 0.0f)) continue;
-    const std::uint32_t root = s.find(static_cast<std::uint32_t>(i));
-    if (island_of[root] < 0) {
-      island_of[root] = static_cast<std::int32_t>(islands.size());
-      if (spare.empty()) {
-        islands.emplace_back();
-      } else {  // a kept island, emptied
-        islands.push_back(std::move(spare.back()));
-        spare.pop_back();
-        Island& kept = islands.back();
-        kept.local.clear();
-        kept.dynamic = 0;
-        kept.contacts.clear();
-        kept.ends.clear();
-      }
+    const std::uint32_t r = s.find(static_cast<std::uint32_t>(i));
+    s.root[i] = r;
+    if (s.island_of[r] < 0) {
+      s.island_of[r] = static_cast<std::int32_t>(s.dyn_start.size() - 1);
+      s.dyn_start.push_back(0);
     }
-    Island& is = islands[static_cast<std::size_t>(island_of[root])];
-    is.local.push_back(static_cast<std::uint32_t>(i));
-    ++is.dynamic;
+    ++s.dyn_start[static_cast<std::size_t>(s.island_of[r]) + 1];
   }
-  s.slot.assign(n, -1);
-  for (const Island& is : islands)
-    for (std::uint32_t l = 0; l < is.dynamic; ++l) s.slot[is.local[l]] = static_cast<std::int32_t>(l);
+  const std::size_t islands = s.dyn_start.size() - 1;
+  for (std::size_t j = 0; j < islands; ++j) s.dyn_start[j + 1] += s.dyn_start[j];
+  s.dyn.resize(s.dyn_start.back());
+  s.slot.resize(n);
+  s.cursor.assign(s.dyn_start.begin(), s.dyn_start.end() - 1);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(w[i] > 0.0f)) continue;
+    const std::size_t j = static_cast<std::size_t>(s.island_of[s.root[i]]);
+    s.slot[i] = s.cursor[j] - s.dyn_start[j];
+    s.dyn[s.cursor[j]++] = static_cast<std::uint32_t>(i);
+  }
+  auto island_of_contact = [&](const Pair& q) {
+    return static_cast<std::size_t>(s.island_of[s.root[w[q.a] > 0.0f ? q.a : q.b]]);
+  };
+  s.con_start.assign(islands + 1, 0);
+  for (const Pair& q : rec.confirmed)
+    if (w[q.a] > 0.0f || w[q.b] > 0.0f) ++s.con_start[island_of_contact(q) + 1];  // static-static: changes nothing
+  for (std::size_t j = 0; j < islands; ++j) s.con_start[j + 1] += s.con_start[j];
+  s.con.resize(s.con_start.back());
+  s.cursor.assign(s.con_start.begin(), s.con_start.end() - 1);
   for (std::size_t c = 0; c < rec.confirmed.size(); ++c) {
     const Pair q = rec.confirmed[c];
-    if (!(w[q.a] > 0.0f) && !(w[q.b] > 0.0f)) continue;  // static-static: changes nothing
-    const std::uint32_t dyn = w[q.a] > 0.0f ? q.a : q.b;
-    Island& is = islands[static_cast<std::size_t>(island_of[s.find(dyn)])];
-    std::array<std::uint32_t, 2> e{};
-    for (int k = 0; k < 2; ++k) {
-      const std::uint32_t body = k == 0 ? q.a : q.b;
-      if (w[body] > 0.0f) {
-        e[static_cast<std::size_t>(k)] = static_cast<std::uint32_t>(s.slot[body]);
-      } else {  // a static body: local to this island (a floor may serve many)
-        auto it = std::find(is.local.begin() + is.dynamic, is.local.end(), body);
-        e[static_cast<std::size_t>(k)] = static_cast<std::uint32_t>(it - is.local.begin());
-        if (it == is.local.end()) is.local.push_back(body);
-      }
-    }
-    is.contacts.push_back(static_cast<std::uint32_t>(c));
-    is.ends.push_back(e);
+    if (w[q.a] > 0.0f || w[q.b] > 0.0f) s.con[s.cursor[island_of_contact(q)]++] = static_cast<std::uint32_t>(c);
   }
 
-  // Per island: the run judged against, then each dynamic body against it.
-  std::vector<std::uint8_t> clamped(n, 0);
-  std::vector<std::uint32_t> count0(n, 0);
-  std::vector<D3> x_tol(n), v_tol(n);
-  // The islands are independent: searched on the validators' threads, then tallied in
-  // island order (a verdict never depends on the thread count).
-  std::vector<Searched>& searched = s.island_searches;
-  if (searched.size() < islands.size()) searched.resize(islands.size());
-  std::size_t island_work = 0;  // bodies and contacts of every island: the search's size
-  for (const Island& is : islands) island_work += is.local.size() + is.contacts.size();
-  const unsigned island_threads = island_work >= kParallelIslandWorkFrom ? loop_threads(s.threads, islands.size(), 2) : 1u;
-  parallel_items_on(islands.size(), island_threads, s.stop, [&](std::size_t j, unsigned) {
-    searched[j].counts = SearchCounts{};
-    s.search(islands[j], judge_response, searched[j].judged, searched[j].counts, searched[j].run);
-  });
-  for (std::size_t j = 0; j < islands.size(); ++j) {
-    const Island& is = islands[j];
-    const Run& r = searched[j].run;
-    const std::vector<std::uint8_t>& judged = searched[j].judged;
-    const SearchCounts& c = searched[j].counts;
-    s.near_ties += c.near_ties;
-    s.runs += c.runs;
-    s.searched += c.searched;
-    s.resolved += c.resolved;
-    s.exceeded += c.exceeded;
-    for (std::uint32_t l = 0; l < is.dynamic; ++l) {
-      const std::uint32_t i = is.local[l];
-      clamped[i] = r.clamped[l];
-      count0[i] = r.count0[l];
-      x_tol[i] = r.x_tol[l];
-      v_tol[i] = r.v_tol[l];
-      if (!judge_response) continue;
-      ++s.dynamic_frames;
-      if (!judged[l]) {
-        ++s.unjudged;
-        continue;
-      }
-      // The worst quantity's figures, worded only for a failure.
-      double worst = 0.0;
-      struct Worst {
-        const char* quantity = nullptr;
-        int k = 0;
-        double got = 0, want = 0, tolerance = 0;
-      } w_args;
-      auto judge = [&](const char* quantity, int k, double got, double want, double tolerance) {
-        const double ratio = std::fabs(got - want) / tolerance;
-        if ((ratio <= worst || std::isnan(worst)) && w_args.quantity) return;
-        worst = std::isnan(ratio) ? std::numeric_limits<double>::infinity() : ratio;
-        w_args = {quantity, k, got, want, tolerance};
-      };
-      const Aabb& local = model.local_box(i);
-      for (int k = 0; k < 3; ++k) {
-        // The world AABB the engine used is its integrated position's box (design.md section 4.2); the
-        // float32 sum local + x rounds at the scale of both.
-        const double box_scale = std::max(std::fabs(local.min[k]), std::fabs(local.max[k]));
-        judge("aabb.min", k, rec.aabbs[i].min[k], static_cast<double>(local.min[k]) + s.x_int[i][k],
-              r.x_tol[l][k] + tol.applied_state_ulps * box_scale * kEps32);
-        judge("x", k, rec.x_post[i][k], r.x[l][k], r.x_tol[l][k]);
-        judge("v", k, rec.v_post[i][k], r.v[l][k], r.v_tol[l][k]);
-      }
-      s.worst = std::max(s.worst, worst);
-      s.bodies.check(worst <= 1.0, worst,
-                     worst <= 1.0 ? std::string()
-                                  : fmt::format("frame {}: body {} {}.{} = {:.9g}, design.md section 6 gives {:.9g} "
-                                                "(tolerance {:.3g}; {} contacts)",
-                                                frame, i, w_args.quantity, "xyz"[w_args.k], w_args.got, w_args.want,
-                                                w_args.tolerance, r.count0[l]));
+  // Per island, on the validators' threads: the run judged against, each dynamic body
+  // against it, and its group's figures; the threads' tallies are then summed (a verdict
+  // never depends on the thread count).
+  const std::size_t island_work = s.dyn.size() + s.con.size();  // the search's size
+  const unsigned island_threads = island_work >= kParallelIslandWorkFrom ? loop_threads(s.threads, islands, 2) : 1u;
+  if (s.workers.size() < island_threads) s.workers.resize(island_threads);
+  for (IslandWorker& wk : s.workers) {
+    wk.tally = IslandTally{};
+    wk.tally.groups.clear();
+  }
+  parallel_items_on(islands, island_threads, s.stop,
+                    [&](std::size_t j, unsigned t) { s.judge_island(j, judge_response, s.workers[t]); });
+  std::size_t first_island = std::numeric_limits<std::size_t>::max();
+  const std::string* first = nullptr;
+  std::vector<GroupFigures> groups;
+  for (const IslandWorker& wk : s.workers) {
+    const IslandTally& t = wk.tally;
+    s.near_ties += t.counts.near_ties;
+    s.runs += t.counts.runs;
+    s.searched += t.counts.searched;
+    s.resolved += t.counts.resolved;
+    s.exceeded += t.counts.exceeded;
+    s.dynamic_frames += t.dynamic_frames;
+    s.unjudged += t.unjudged;
+    s.bodies.checks += t.checks;
+    s.bodies.worst = std::max(s.bodies.worst, t.worst);
+    s.worst = std::max(s.worst, t.worst);
+    if (t.failures && t.first_island < first_island) {
+      first_island = t.first_island;
+      first = &t.first;
     }
+    groups.insert(groups.end(), t.groups.begin(), t.groups.end());
+  }
+  if (first) {
+    if (s.bodies.failures == 0) s.bodies.first = *first;
+    for (const IslandWorker& wk : s.workers) s.bodies.failures += wk.tally.failures;
   }
 
-  // Isolated dynamic groups: connected components of the confirmed-contact graph with no
-  // static body and no clamped body. Momentum is exchanged in equal and opposite impulses,
-  // so it is kept; the mass-weighted centre is kept where every body has one contact (an
-  // isolated pair): elsewhere the per-body averaging moves it by design.
-  auto x_int = [&](std::size_t i, int k) {
-    return judge_response ? s.x_int[i][k]
-                          : static_cast<double>(rec.aabbs[i].min[k]) - static_cast<double>(model.local_box(i).min[k]);
-  };
-  struct Group {
-    bool isolated = true, centre = true;
-    int bodies = 0;
-    D3 p0{}, p1{}, c0{}, c1{};
-    double exchange = 0, cexchange = 0, ctol = 0, mtol = 0;
-    std::uint32_t first = 0;
-  };
-  std::vector<std::uint8_t> touched(n, 0);
-  std::vector<std::uint8_t> touches_static(n, 0);
-  for (const Pair& q : rec.confirmed) {
-    touched[q.a] = touched[q.b] = 1;
-    if (!(w[q.a] > 0.0f) && w[q.b] > 0.0f) touches_static[q.b] = 1;
-    if (!(w[q.b] > 0.0f) && w[q.a] > 0.0f) touches_static[q.a] = 1;
-  }
-  std::vector<Group> g(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!touched[i] || !(w[i] > 0.0f)) continue;
-    Group& gr = g[s.find(static_cast<std::uint32_t>(i))];
-    if (gr.bodies == 0) gr.first = static_cast<std::uint32_t>(i);
-    ++gr.bodies;
-    // Clamped by the re-derivation's run, or at v_max in the engine's state (a body the
-    // re-derivation did not judge may have been clamped in a branch it did not run).
-    bool at_vmax = false;
-    for (int k = 0; k < 3; ++k)
-      at_vmax = at_vmax || std::fabs(rec.v_post[i][k]) >= sc.response.max_velocity * (1.0 - 16.0 * kEps32 *
-                                                                                                (sc.response.iterations + 2));
-    if (touches_static[i] || clamped[i] || at_vmax) gr.isolated = false;
-    if (count0[i] != 1) gr.centre = false;  // the centre is not kept by design
-    const double mi = 1.0 / w[i];
-    for (int k = 0; k < 3; ++k) {
-      const double v_int = static_cast<double>(rec.v_pre[i][k]) + dt * sc.gravity[k];
-      gr.p0[k] += mi * v_int;
-      gr.p1[k] += mi * rec.v_post[i][k];
-      gr.exchange += mi * std::fabs(rec.v_post[i][k] - v_int);
-      gr.mtol += mi * v_tol[i][k];
-      gr.c0[k] += mi * x_int(i, k);
-      gr.c1[k] += mi * rec.x_post[i][k];
-      gr.cexchange += mi * std::fabs(rec.x_post[i][k] - x_int(i, k));
-      gr.ctol += mi * x_tol[i][k];
-    }
-  }
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!touched[i] || !(w[i] > 0.0f) || s.find(static_cast<std::uint32_t>(i)) != i) continue;
-    const Group& gr = g[i];
-    if (!gr.isolated || gr.bodies < 2) continue;
-    const double dp = len3(gr.p1 - gr.p0);
-    const double bound = tol.applied_conservation_rel * gr.exchange + gr.mtol + 1e-9;
-    s.group_momentum.check(dp <= bound, dp / bound,
-                           fmt::format("frame {}: isolated group of {} bodies (body {} ...) changes momentum by "
-                                       "{:.3g} kg m/s (exchanged {:.3g}, bound {:.3g})",
-                                       frame, gr.bodies, gr.first, dp, gr.exchange, bound));
-    if (gr.bodies == 2 && gr.centre) {
-      const double dc = len3(gr.c1 - gr.c0);
-      const double cbound = tol.applied_conservation_rel * gr.cexchange + gr.ctol + 1e-12;
-      s.group_centre.check(dc <= cbound, dc / cbound,
-                           fmt::format("frame {}: isolated pair (body {} ...) moves its mass-weighted centre by "
-                                       "{:.3g} kg m (corrections {:.3g}, bound {:.3g})",
-                                       frame, gr.first, dc, gr.cexchange, cbound));
-    }
+  // Isolated dynamic groups, in the order of their roots. Momentum is exchanged in equal and
+  // opposite impulses, so it is kept; the mass-weighted centre is kept where every body has
+  // one contact (an isolated pair): elsewhere the per-body averaging moves it by design.
+  std::sort(groups.begin(), groups.end(), [](const GroupFigures& x, const GroupFigures& y) { return x.root < y.root; });
+  for (const GroupFigures& gr : groups) {
+    s.group_momentum.check(gr.dp <= gr.bound, gr.dp / gr.bound, [&] {
+      return fmt::format("frame {}: isolated group of {} bodies (body {} ...) changes momentum by "
+                         "{:.3g} kg m/s (exchanged {:.3g}, bound {:.3g})",
+                         frame, gr.bodies, gr.first, gr.dp, gr.exchange, gr.bound);
+    });
+    if (gr.centre)
+      s.group_centre.check(gr.dc <= gr.cbound, gr.dc / gr.cbound, [&] {
+        return fmt::format("frame {}: isolated pair (body {} ...) moves its mass-weighted centre by "
+                           "{:.3g} kg m (corrections {:.3g}, bound {:.3g})",
+                           frame, gr.first, gr.dc, gr.cexchange, gr.cbound);
+      });
   }
   s.rec = nullptr;
 }

@@ -25,6 +25,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "octocd/validation.hpp"
@@ -44,6 +45,15 @@ struct CheckTally {
     worst = std::max(worst, figure);
     if (ok) return;
     if (failures == 0) first = what;
+    ++failures;
+  }
+  /// check() with the description made by `what()` only where it is kept (the first failure).
+  template <class F, class = decltype(std::declval<F>()())>
+  void check(bool ok, double figure, F&& what) {
+    ++checks;
+    worst = std::max(worst, figure);
+    if (ok) return;
+    if (failures == 0) first = what();
     ++failures;
   }
 };
