@@ -508,17 +508,17 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
         // The engine's own verdict this frame (its confirmed set).
         const bool engine_says = std::binary_search(rec.confirmed.begin(), rec.confirmed.end(), q);
         s.midphase.check(engine_says == truth, engine_says == truth ? 0.0 : 1.0,
-                         fmt::format("frame {}: {} midphase [{}] says {} for pair ({}, {}), "
+                         [&] { return fmt::format("frame {}: {} midphase [{}] says {} for pair ({}, {}), "
                                      "exhaustive says {}",
                                      frame, s.source.label, model.scene.midphase.to_string(), engine_says,
-                                     q.a, q.b, truth));
+                                     q.a, q.b, truth); });
         for (const MidphaseConfig& c : s.configs) {
           MidphaseStats ms;
           const bool got = s.confirm(a, b, theta, c, ms);
           s.midphase.check(got == truth, got == truth ? 0.0 : 1.0,
-                           fmt::format("frame {}: midphase {} says {} for pair ({}, {}), "
+                           [&] { return fmt::format("frame {}: midphase {} says {} for pair ({}, {}), "
                                        "exhaustive says {}",
-                                       frame, c.to_string(), got, q.a, q.b, truth));
+                                       frame, c.to_string(), got, q.a, q.b, truth); });
         }
       }
     }
@@ -557,8 +557,8 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
     if (!terms) {
       ++s.contacts_unjudged;
       s.friction.check(cone_ok, std::max(cone, 0.0),
-                       fmt::format("frame {}: pair ({}, {}) |J_t| {:.6g} vs mu_s J_n {:.6g}", frame, c.pair.a,
-                                   c.pair.b, std::fabs(c.jt), p.mu_static * c.jn));
+                       [&] { return fmt::format("frame {}: pair ({}, {}) |J_t| {:.6g} vs mu_s J_n {:.6g}", frame, c.pair.a,
+                                   c.pair.b, std::fabs(c.jt), p.mu_static * c.jn); });
       continue;
     }
     // 4. Non-penetration contraction (Eq. 14, section 3.3.3), this contact's own
@@ -583,9 +583,9 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
         }
       }
       s.contraction.check(ok, std::max(excess, 0.0),
-                          fmt::format("frame {}: pair ({}, {}) depth {:.6g} -> {:.6g} m (slop {}, "
+                          [&] { return fmt::format("frame {}: pair ({}, {}) depth {:.6g} -> {:.6g} m (slop {}, "
                                       "alpha beta {})",
-                                      frame, c.pair.a, c.pair.b, d, d1, p.slop, p.alpha * p.beta));
+                                      frame, c.pair.a, c.pair.b, d, d1, p.slop, p.alpha * p.beta); });
     }
     // 5. Friction: no rise of the relative tangential speed, |J_t| <= mu_s J_n (3.3.2).
     {
@@ -595,10 +595,10 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
       const double rise = static_cast<double>(length(after)) - length(before);
       const bool ok = rise <= tol.friction_speed && cone_ok;
       s.friction.check(ok, std::max(rise, cone),
-                       fmt::format("frame {}: pair ({}, {}) |v_t| {:.6g} -> {:.6g} m/s, |J_t| {:.6g} "
+                       [&] { return fmt::format("frame {}: pair ({}, {}) |v_t| {:.6g} -> {:.6g} m/s, |J_t| {:.6g} "
                                    "vs mu_s J_n {:.6g}",
                                    frame, c.pair.a, c.pair.b, length(before), length(after),
-                                   std::fabs(c.jt), p.mu_static * c.jn));
+                                   std::fabs(c.jt), p.mu_static * c.jn); });
     }
     // 6. Conservation per dynamic-dynamic contact: momentum and mass-weighted centre.
     if (wa > 0.0f && wb > 0.0f) {
@@ -628,8 +628,8 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
         const double share = scale > 0 ? residual / scale : 0.0;
         const double bound = rel * scale + slack + 1e-9;
         t.check(residual <= bound, residual / bound,
-                fmt::format("frame {}: pair ({}, {}) {} changes by {:.3g} ({:.3g} of the exchange)",
-                            frame, c.pair.a, c.pair.b, what, residual, share));
+                [&] { return fmt::format("frame {}: pair ({}, {}) {} changes by {:.3g} ({:.3g} of the exchange)",
+                            frame, c.pair.a, c.pair.b, what, residual, share); });
       };
       check_pair(s.momentum, c.dv_a, c.dv_b, tol.momentum_rel, slack_v, "momentum");
       check_pair(s.centre, c.dx_a, c.dx_b, tol.centre_rel, slack_x, "mass-weighted centre");

@@ -575,6 +575,8 @@ struct PhysicsValidators::Impl {
   std::uint64_t cone_jt3_pairs = 0, cone_scalar_pairs = 0, dissipation_jt3_pairs = 0, dissipation_small = 0;
   std::uint64_t dissipation_cone_only = 0, groups = 0, groups_rotating = 0, state_frames = 0, groups_clamped = 0;
   std::int64_t last_frame = 0;
+  /// The observed step's detection poses (memory kept from step to step).
+  std::vector<Pose> step_poses;
   /// broadphase-completeness' set of `flat` on the world AABBs of frame `flat_frame`, less its
   /// static-static pairs (PhysicsValidators::flat_pairs); flat_frame -1: none kept.
   std::vector<Pair> flat_dynamic;

@@ -293,15 +293,20 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   const std::size_t n = s.model->bodies.size();
   s.last_frame = rec.frame;
   s.flat_frame = -1;
-  std::vector<Pose> det(n);
+  std::vector<Pose>& det = s.step_poses;
+  det.assign(n, Pose{});
   const bool poses = !rec.x_det.empty() || rec.aabbs.size() == n;
-  if (poses) {
-    for (std::size_t i = 0; i < n; ++i) det[i] = detection_pose(*s.model, rec, i);
-  } else if (rec.x_pre.size() == n) {
-    // No detection pose: the pre-step pose (its body frame) serves the contact-point lever arms.
-    for (std::size_t i = 0; i < n; ++i)
-      det[i] = s.frame_pose(rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{}, static_cast<std::uint32_t>(i));
-  }
+  const bool pre_poses = !poses && rec.x_pre.size() == n;
+  // Each body's pose, blocks of bodies on the threads.
+  constexpr std::size_t kBlock = 4096;
+  const std::size_t blocks = (poses || pre_poses) ? (n + kBlock - 1) / kBlock : 0;
+  parallel_items_on(blocks, loop_threads(s.threads, blocks, 2), s.stop, [&](std::size_t b, unsigned) {
+    for (std::size_t i = b * kBlock, end = std::min(n, i + kBlock); i < end; ++i)
+      det[i] = poses ? detection_pose(*s.model, rec, i)
+                     // No detection pose: the pre-step pose (its body frame) serves the contact-point lever arms.
+                     : s.frame_pose(rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{},
+                                    static_cast<std::uint32_t>(i));
+  });
   PhysicsFrame f{rec, det, checked && poses, std::nullopt, std::nullopt, false, checked};
   s.measure_rows(f);
   if (f.geometry) s.spare_frame = std::move(f.geometry);  // its tables serve the next checked frame
