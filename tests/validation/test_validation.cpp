@@ -2,6 +2,7 @@
 // (issue 3 item 3: "a validator that cannot fail is a defect").
 #include <gtest/gtest.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -340,6 +341,68 @@ TEST(Validators, PhysicsKeepsTheCheckedFramesFlatPairs) {
     want.erase(std::remove_if(want.begin(), want.end(), [&](Pair p) { return w[p.a] == 0.0f && w[p.b] == 0.0f; }),
                want.end());
     EXPECT_EQ(*v.flat_pairs(), want) << "frame " << f;
+  }
+}
+
+/// Boxes of 1 kg, {half side, position, velocity} each (float32 values written exactly), in
+/// boxes-uniform-1m's closed box, no gravity, dt 1 ms, AABB-only midphase: an island of that
+/// scene cut out with its wall.
+Scene island_of_boxes(const std::string& name, const std::vector<std::array<std::array<double, 3>, 3>>& boxes) {
+  std::string groups;
+  for (std::size_t k = 0; k < boxes.size(); ++k) {
+    const auto& [h, x, v] = boxes[k];
+    groups += fmt::format(R"({}{{"name": "b{}", "shape": {{"box": [{}, {}, {}]}}, "count": 1, "mass": 1.0,
+      "positions": [[{}, {}, {}]], "velocity": {{"type": "fixed", "value": [{}, {}, {}]}}}})",
+                          k ? ", " : "", k, h[0], h[1], h[2], x[0], x[1], x[2], v[0], v[1], v[2]);
+  }
+  return parse_scene(R"({"name": ")" + name + R"(", "domain": {"min": [-7.891, -7.891, -7.891],
+    "max": [7.891, 7.891, 7.891]}, "gravity": [0, 0, 0], "dt": 0.001, "frames": 1, "walls": "closed-box",
+    "broadphase": {"name": "octree", "depth": "auto"}, "midphase": {"levels": "aabb-only"},
+    "groups": [)" + groups + "]}",
+                     name);
+}
+
+// impulse-feasibility's programme where CLP's unscaled dual simplex reports an optimum whose
+// impulses leave a resting box (its bound 1e-9 kg m/s) 102 and 23 x off: two islands of
+// boxes-uniform-1m's frames 46 and 47 (the cpu and cuda engines step them bit for bit), cut
+// out with their wall. The row's second opinions (CLP's dual simplex with its scaling, its
+// primal simplex) find impulses within 0.003 of the bounds; the resting box given a sideways
+// velocity that nothing pushes still fails.
+TEST(Validators, FeasibilityTakesSecondOpinionsOnAFailure) {
+  const double L = 0.06, S = 0.03;
+  const std::vector<Scene> islands = {
+      island_of_boxes("frame-46", {{{{L, L, L}, {-7.6283426, -6.334025, 1.7753646}, {-0.1872612, 0.18793195, -0.31167692}}},
+                                   {{{L, L, L}, {-7.83114, -6.3594327, 1.6667272}, {0.0, 0.0, 0.0}}},
+                                   {{{L, L, L}, {-7.650882, -6.2387633, 1.6551882}, {-0.18726122, 0.18793195, -0.6128431}}},
+                                   {{{S, S, S}, {-7.741089, -6.3178673, 1.6713655}, {0.041854262, 0.034480896, -0.054673523}}}}),
+      island_of_boxes("frame-47", {{{{L, L, L}, {3.4092658, -7.7352757, 0.13076447}, {0.6055453, -0.5222961, -0.2649205}}},
+                                   {{{L, L, L}, {3.649894, -7.8310113, 0.18434112}, {0.0, 0.0, 0.0}}},
+                                   {{{L, L, L}, {3.5294938, -7.746698, 0.10116594}, {0.3547347, 0.6149511, 0.099035025}}}})};
+  for (const Scene& scene : islands) {
+    // nudge: m/s added to the resting box's (body 7's) velocity after the step, along z (a
+    // tangent of its wall's normal).
+    auto feasibility = [&](double nudge) {
+      World world(scene);
+      ValidationOptions opt;
+      opt.every = 1;
+      world.set_recording(true);
+      FrameValidators v(world, opt, {});
+      world.step();
+      FrameRecord rec = world.record();
+      rec.v_post[7].z += static_cast<float>(nudge);
+      v.observe(rec, true);
+      return find(v.results(), "impulse-feasibility");
+    };
+    const ValidationResult clean = feasibility(0.0);
+    EXPECT_TRUE(clean.pass) << scene.name << ": " << clean.detail;
+    EXPECT_NE(clean.detail.find("1 island-steps of 1 steps"), std::string::npos) << scene.name << ": " << clean.detail;
+    EXPECT_LT(clean.measured, 0.01) << scene.name << ": " << clean.detail;
+    // The resting box pushed sideways by 10^-3 kg m/s, 100 x its neighbours' bounds: friction
+    // from the wall needs a normal impulse that only a neighbour could balance.
+    const ValidationResult planted = feasibility(1e-3);
+    EXPECT_FALSE(planted.pass) << scene.name << ": " << planted.detail;
+    EXPECT_NE(planted.detail.find("infeasible 1 of 1 island-steps"), std::string::npos)
+        << scene.name << ": " << planted.detail;
   }
 }
 
