@@ -58,8 +58,8 @@ struct Choice {
 /// validators' threads (two islands or more): below it one thread costs less than waking
 /// another (applied-state costs about 430 instructions a body on islands of one body).
 constexpr std::size_t kParallelIslandWorkFrom = 1024;
-/// Bodies a thread integrates at a time (a few instructions each).
-constexpr std::size_t kBodiesPerBlock = 4096;
+/// The fewest bodies integrated on the validators' threads (a few instructions each).
+constexpr std::size_t kParallelIntegrateFrom = 1024;
 
 /// An island: dynamic bodies joined by confirmed contacts, and the contacts (indices into
 /// rec.confirmed, in (a, b) order) touching them. `local` lists every body the contacts
@@ -750,29 +750,26 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   s.any_response = s.any_response || judge_response;
 
   // design.md section 4.1, semi-implicit Euler: v <- v + dt g; x <- x + dt v (static bodies stay); in
-  // double for the prediction and in float32 for the proposal. Blocks of bodies on the threads.
+  // double for the prediction and in float32 for the proposal; on the threads.
   const double dt = sc.dt;
   s.x_int.resize(n);
   s.v_int.resize(n);
   s.xf_int.resize(n);
   s.vf_int.resize(n);
-  const std::size_t blocks = (n + kBodiesPerBlock - 1) / kBodiesPerBlock;
-  parallel_items_on(blocks, loop_threads(s.threads, blocks, 2), s.stop, [&](std::size_t b, unsigned) {
-    for (std::size_t i = b * kBodiesPerBlock, end = std::min(n, i + kBodiesPerBlock); i < end; ++i) {
-      D3 x = d3(rec.x_pre[i]), v = d3(rec.v_pre[i]);
-      F3 xf = f3(rec.x_pre[i]), vf = f3(rec.v_pre[i]);
-      if (w[i] > 0.0f)
-        for (int k = 0; k < 3; ++k) {
-          v[k] = v[k] + dt * sc.gravity[k];
-          x[k] = x[k] + dt * v[k];
-          vf[k] = vf[k] + sc.dt * sc.gravity[k];
-          xf[k] = xf[k] + sc.dt * vf[k];
-        }
-      s.x_int[i] = x;
-      s.v_int[i] = v;
-      s.xf_int[i] = xf;
-      s.vf_int[i] = vf;
-    }
+  parallel_items_on(n, loop_threads(s.threads, n, kParallelIntegrateFrom), s.stop, [&](std::size_t i, unsigned) {
+    D3 x = d3(rec.x_pre[i]), v = d3(rec.v_pre[i]);
+    F3 xf = f3(rec.x_pre[i]), vf = f3(rec.v_pre[i]);
+    if (w[i] > 0.0f)
+      for (int k = 0; k < 3; ++k) {
+        v[k] = v[k] + dt * sc.gravity[k];
+        x[k] = x[k] + dt * v[k];
+        vf[k] = vf[k] + sc.dt * sc.gravity[k];
+        xf[k] = xf[k] + sc.dt * vf[k];
+      }
+    s.x_int[i] = x;
+    s.v_int[i] = v;
+    s.xf_int[i] = xf;
+    s.vf_int[i] = vf;
   });
 
   // Islands: dynamic bodies joined by confirmed contacts between two dynamic bodies; a
@@ -834,6 +831,7 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
                     [&](std::size_t j, unsigned t) { s.judge_island(j, judge_response, s.workers[t]); });
   std::size_t first_island = std::numeric_limits<std::size_t>::max();
   const std::string* first = nullptr;
+  std::uint64_t failures = 0;
   std::vector<GroupFigures> groups;
   for (const IslandWorker& wk : s.workers) {
     const IslandTally& t = wk.tally;
@@ -845,6 +843,7 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
     s.dynamic_frames += t.dynamic_frames;
     s.unjudged += t.unjudged;
     s.bodies.checks += t.checks;
+    failures += t.failures;
     s.bodies.worst = std::max(s.bodies.worst, t.worst);
     s.worst = std::max(s.worst, t.worst);
     if (t.failures && t.first_island < first_island) {
@@ -853,10 +852,8 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
     }
     groups.insert(groups.end(), t.groups.begin(), t.groups.end());
   }
-  if (first) {
-    if (s.bodies.failures == 0) s.bodies.first = *first;
-    for (const IslandWorker& wk : s.workers) s.bodies.failures += wk.tally.failures;
-  }
+  if (first && s.bodies.failures == 0) s.bodies.first = *first;
+  s.bodies.failures += failures;
 
   // Isolated dynamic groups, in the order of their roots. Momentum is exchanged in equal and
   // opposite impulses, so it is kept; the mass-weighted centre is kept where every body has

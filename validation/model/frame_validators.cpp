@@ -257,7 +257,8 @@ struct FrameValidators::Impl {
   ConfirmFn confirm;
   std::unique_ptr<PhysicsValidators> physics;
   std::vector<Pair> expected;
-  /// The static bodies (w = 0, in index order), their boxes and their pairs (static_flat).
+  /// The static bodies (w = 0, in index order; the model's, set once), their boxes and their
+  /// pairs (static_flat).
   std::vector<std::uint32_t> statics;
   std::vector<Aabb> static_boxes;
   std::vector<Pair> static_pairs;
@@ -265,14 +266,9 @@ struct FrameValidators::Impl {
   /// `expected` = `with_dynamic` (flat's pairs with a dynamic body, sorted) joined with
   /// flat's pairs among the static bodies; false (expected unset) when that search is over
   /// its limit (PairLimitError): the caller searches every box.
-  bool static_flat(const std::vector<Aabb>& boxes, const std::vector<float>& w, const std::vector<Pair>& with_dynamic) {
-    statics.clear();
+  bool static_flat(const std::vector<Aabb>& boxes, const std::vector<Pair>& with_dynamic) {
     static_boxes.clear();
-    for (std::uint32_t i = 0; i < boxes.size(); ++i)
-      if (!(w[i] > 0.0f)) {
-        statics.push_back(i);
-        static_boxes.push_back(boxes[i]);
-      }
+    for (const std::uint32_t i : statics) static_boxes.push_back(boxes[i]);
    
     if (statics.size() > 1) {
       try {
@@ -331,6 +327,8 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   pair_threads.max_pairs_per_body = limits::kMaxPairsPerBody;
   s.flat = make_exact_pairs_broadphase(pair_threads);
   s.pair_threads = pair_threads;
+  for (std::uint32_t i = 0; i < model.initial.w.size(); ++i)
+    if (!(model.initial.w[i] > 0.0f)) s.statics.push_back(i);
   for (auto& bp : broadphases) {
     const BroadPhaseInfo* info = find_broadphase_info(bp->name());
     s.bp_cost.push_back(info ? info->cost : BroadPhaseCost::subquadratic);
@@ -446,7 +444,7 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
     // frame's AABBs, joined with the static-static pairs (exact_pairs over the static bodies'
     // boxes); else one search of every box.
     const std::vector<Pair>* dynamic_pairs = s.physics->flat_pairs();
-    if (!dynamic_pairs || !s.static_flat(boxes, w, *dynamic_pairs))
+    if (!dynamic_pairs || !s.static_flat(boxes, *dynamic_pairs))
       find_pairs_stoppable(s.flat, boxes, s.expected, s.options.stop);
     ++s.candidate_frames;
     auto compare = [&](const std::vector<Pair>& got, const std::string& who, bool own) {

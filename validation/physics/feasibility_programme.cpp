@@ -177,7 +177,8 @@ void solve_together(std::vector<Solve>& solves, Simplex simplex = Simplex::Dual)
   }
   ClpSimplex lp(pristine_simplex());
   lp.setLogLevel(0);
-  // Scaling off: its scaled tolerances would leave unscaled residuals of several bounds.
+  // Scaling off but for the second opinion that asks for it: CLP's scaled tolerances would
+  // leave unscaled residuals of several bounds.
   lp.scaling(simplex == Simplex::DualScaled ? 3 : 0);
   lp.loadProblem(int(ncols), nrows, start.data(), idx.data(), val.data(), col_lo.data(), col_hi.data(), obj.data(),
                  row_lo.data(), row_hi.data());

@@ -297,16 +297,14 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   det.assign(n, Pose{});
   const bool poses = !rec.x_det.empty() || rec.aabbs.size() == n;
   const bool pre_poses = !poses && rec.x_pre.size() == n;
-  // Each body's pose, blocks of bodies on the threads.
-  constexpr std::size_t kBlock = 4096;
-  const std::size_t blocks = (poses || pre_poses) ? (n + kBlock - 1) / kBlock : 0;
-  parallel_items_on(blocks, loop_threads(s.threads, blocks, 2), s.stop, [&](std::size_t b, unsigned) {
-    for (std::size_t i = b * kBlock, end = std::min(n, i + kBlock); i < end; ++i)
+  // Each body's pose, on the threads.
+  if (poses || pre_poses)
+    parallel_items_on(n, loop_threads(s.threads, n, kParallelBodyBoxesFrom), s.stop, [&](std::size_t i, unsigned) {
       det[i] = poses ? detection_pose(*s.model, rec, i)
                      // No detection pose: the pre-step pose (its body frame) serves the contact-point lever arms.
                      : s.frame_pose(rec.x_pre[i], rec.q_pre.size() == n ? rec.q_pre[i] : Quat{},
                                     static_cast<std::uint32_t>(i));
-  });
+    });
   PhysicsFrame f{rec, det, checked && poses, std::nullopt, std::nullopt, false, checked};
   s.measure_rows(f);
   if (f.geometry) s.spare_frame = std::move(f.geometry);  // its tables serve the next checked frame
