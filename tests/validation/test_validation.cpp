@@ -12,6 +12,7 @@
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <set>
 #include <string>
 
 #include <unistd.h>
@@ -403,6 +404,88 @@ TEST(Validators, FeasibilityTakesSecondOpinionsOnAFailure) {
     EXPECT_FALSE(planted.pass) << scene.name << ": " << planted.detail;
     EXPECT_NE(planted.detail.find("infeasible 1 of 1 island-steps"), std::string::npos)
         << scene.name << ": " << planted.detail;
+  }
+}
+
+// impulse-feasibility's islands passed on witness impulses (Gauss-Seidel sweeps within the
+// pyramids) without their programmes: the row's worst figure and failures on a step of 100
+// islands are those of each island judged alone (every other body asleep: its programme
+// solved, a probe). 100 stacks of one to three boxes on the floor (y up), no gravity; each
+// top box given a sideways velocity after the step (none on every 7th), v0 x k^j m/s for
+// stack j. v0 6e-10, k 1.001: every island within its bound, the witnesses' figures (a box
+// pushed sideways off a floor it does not press: none) 1.6 x their programmes', those of
+// the 22 islands beyond the 64 largest above the programmes' largest (solved in a second
+// round); v0 1e-11, k 1.1: 39 fail.
+TEST(Validators, FeasibilityWitnessesKeepTheProgrammesVerdict) {
+  std::string groups;
+  for (int j = 0; j < 100; ++j)
+    for (int level = 0; level <= j % 3; ++level)
+      groups += fmt::format(R"({}{{"name": "s{}-{}", "shape": {{"box": [0.1, 0.1, 0.1]}}, "count": 1, "mass": {},
+        "positions": [[{}, {}, {}]], "velocity": {{"type": "fixed", "value": [0, 0, 0]}}}})",
+                            groups.empty() ? "" : ", ", j, level, 1.0 + 0.01 * (j % 4), -1.75 + 0.35 * (j % 10),
+                            -1.9 + 0.2 * level, -1.75 + 0.35 * (j / 10));
+  const Scene scene = parse_scene(R"({"name": "stacks", "domain": {"min": [-2, -2, -2], "max": [2, 2, 2]},
+    "gravity": [0, 0, 0], "dt": 0.01, "frames": 1, "walls": "floor",
+    "broadphase": {"name": "octree", "depth": "auto"}, "midphase": {"levels": "aabb-only"},
+    "groups": [)" + groups + "]}",
+                                  "stacks");
+  // Body index of each stack's top box: the floor is body 0, the boxes follow in order.
+  std::vector<std::uint32_t> top;
+  for (std::uint32_t j = 0, next = 1; j < 100; ++j) {
+    next += j % 3 + 1;
+    top.push_back(next - 1);
+  }
+  // The row on the step with sideways velocities v0 k^j, with only `alone`'s stack awake
+  // (-1: every stack).
+  auto feasibility = [&](double v0, double k, int alone) {
+    World world(scene);
+    ValidationOptions opt;
+    opt.every = 1;
+    world.set_recording(true);
+    FrameValidators v(world, opt, {});
+    world.step();
+    FrameRecord rec = world.record();
+    for (int j = 0; j < 100; ++j)
+      if (j % 7 != 0) (j % 2 ? rec.v_post[top[std::size_t(j)]].x : rec.v_post[top[std::size_t(j)]].z) +=
+                          static_cast<float>(v0 * std::pow(k, j));
+    if (alone >= 0) {
+      rec.asleep_pre.assign(rec.v_post.size(), 1);
+      const std::uint32_t t = top[std::size_t(alone)];
+      for (int level = 0; level <= alone % 3; ++level) rec.asleep_pre[t - std::uint32_t(level)] = 0;
+      rec.asleep_post = rec.asleep_pre;
+    }
+    v.observe(rec, true);
+    return find(v.results(), "impulse-feasibility");
+  };
+  // The row's worst figure (its detail's "worst X of its bound", 3 digits; failing: its
+  // cause's worst).
+  auto figure = [](const ValidationResult& r) {
+    if (!r.pass) return r.causes.at(0).worst;
+    const std::size_t at = r.detail.find("worst ");
+    return at == std::string::npos ? -1.0 : std::stod(r.detail.substr(at + 6));
+  };
+  for (const auto& [v0, k] : {std::pair<double, double>{6e-10, 1.001}, {1e-11, 1.1}}) {
+    const ValidationResult all = feasibility(v0, k, -1);
+    ASSERT_TRUE(all.applicable) << all.detail;
+    EXPECT_NE(all.detail.find("100 island-steps of 1 steps"), std::string::npos) << all.detail;
+    double worst = 0;
+    std::set<std::string> failing;
+    for (int j = 0; j < 100; ++j) {
+      const ValidationResult one = feasibility(v0, k, j);
+      ASSERT_NE(one.detail.find("1 island-steps of 1 steps"), std::string::npos) << j << ": " << one.detail;
+      EXPECT_EQ(one.detail.find("passed on impulses found by Gauss-Seidel"), std::string::npos) << one.detail;
+      worst = std::max(worst, figure(one));
+      if (!one.pass) failing.insert(one.causes.at(0).items.begin(), one.causes.at(0).items.end());
+    }
+    EXPECT_GT(worst, 0.1) << "k " << k;
+    EXPECT_EQ(figure(all), worst) << "k " << k << ": " << all.detail;
+    EXPECT_EQ(all.pass ? std::vector<std::string>{} : all.causes.at(0).items,
+              std::vector<std::string>(failing.begin(), failing.end()))
+        << "k " << k << ": " << all.detail;
+    EXPECT_EQ(failing.size(), k < 1.05 ? 0u : 39u) << "k " << k << ": " << all.detail;
+    // Islands passed on their witnesses where the step's largest figure is within the bound.
+    if (failing.empty())
+      EXPECT_NE(all.detail.find("passed on impulses found by Gauss-Seidel"), std::string::npos) << all.detail;
   }
 }
 

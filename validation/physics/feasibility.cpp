@@ -263,19 +263,52 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     for (std::size_t k = pair_first[ii]; k < pair_first[ii + 1]; ++k)
       for (const Contact& c : pair_out[pairs_flat[k]].contacts) island_contacts[ii].push_back(c);
   });
-  // The islands judged in runs of consecutive islands (their small first programmes solved
-  // as one): kIslandsPerSolve a run, fewer where that leaves under kMinIslandRuns runs (the
-  // threads' share; a run's length depends on the island count alone), on `threads`
-  // threads, each into its own slot, then tallied in island order (the verdicts do not
-  // depend on the thread count).
-  std::vector<IslandVerdict> verdicts(island_members.size());
-  const std::size_t run = std::clamp<std::size_t>(island_members.size() / kMinIslandRuns, 1, kIslandsPerSolve);
-  const std::size_t runs = (island_members.size() + run - 1) / run;
-  parallel_items(runs, threads, stop, [&](std::size_t ri, unsigned) {
-    const std::size_t first = ri * run;
-    feasibility_islands(rec, det, island_contacts, island_members, first, std::min(run, island_members.size() - first),
-                        rotating, verdicts);
-  });
+  // The islands judged in three passes, each over runs of islands on `threads` threads,
+  // each island into its own slot, then tallied in island order (the verdicts do not depend
+  // on the thread count): every island's witness; the programmes of the islands without a
+  // witness within the bound and of the kProbeIslands with the largest witness figures; the
+  // programmes of the islands whose witness figure exceeds the largest figure found so far
+  // (at most 1). Any other island's witness figure stands: its programme's figure could not
+  // exceed the step's largest, nor its bound (docs/validation.md, "Motion explained by
+  // feasible contact impulses", 3).
+  const std::size_t islands = island_members.size();
+  std::vector<IslandVerdict> verdicts(islands);
+  auto judge = [&](const std::vector<std::uint32_t>& ids, IslandPass pass) {
+    const std::size_t run = std::clamp<std::size_t>(ids.size() / kMinIslandRuns, 1, kIslandsPerSolve);
+    parallel_items((ids.size() + run - 1) / run, threads, stop, [&](std::size_t ri, unsigned) {
+      const std::size_t first = ri * run;
+      feasibility_islands(rec, det, island_contacts, island_members, ids.data() + first,
+                          std::min(run, ids.size() - first), rotating, pass, verdicts);
+    });
+  };
+  {
+    std::vector<std::uint32_t> all(islands);
+    std::iota(all.begin(), all.end(), 0u);
+    judge(all, IslandPass::Witness);
+  }
+  std::vector<std::uint32_t> first_round, probes;
+  for (std::size_t ii = 0; ii < islands; ++ii) {
+    if (verdicts[ii].outcome != Outcome::Judged) continue;
+    (verdicts[ii].witness <= 1.0 ? probes : first_round).push_back(static_cast<std::uint32_t>(ii));
+  }
+  const auto larger_witness = [&](std::uint32_t x, std::uint32_t y) {
+    return verdicts[x].witness > verdicts[y].witness || (verdicts[x].witness == verdicts[y].witness && x < y);
+  };
+  const std::size_t probe_count = std::min(probes.size(), kProbeIslands);
+  std::partial_sort(probes.begin(), probes.begin() + std::ptrdiff_t(probe_count), probes.end(), larger_witness);
+  first_round.insert(first_round.end(), probes.begin(), probes.begin() + std::ptrdiff_t(probe_count));
+  std::sort(first_round.begin(), first_round.end());
+  judge(first_round, IslandPass::Programme);
+  double largest = -std::numeric_limits<double>::infinity();
+  for (const std::uint32_t ii : first_round)
+    if (verdicts[ii].outcome == Outcome::Judged) largest = std::max(largest, verdicts[ii].figure);
+  const double threshold = std::min(largest, 1.0);
+  std::vector<std::uint32_t> second_round;
+  for (std::size_t k = probe_count; k < probes.size(); ++k)
+    if (verdicts[probes[k]].witness > threshold) second_round.push_back(probes[k]);
+  std::sort(second_round.begin(), second_round.end());
+  judge(second_round, IslandPass::Programme);
+  st.witnessed += probes.size() - probe_count - second_round.size();
   for (std::size_t ii = 0; ii < verdicts.size(); ++ii) {
     const IslandVerdict& verdict = verdicts[ii];
     const std::vector<std::uint32_t>& members = island_members[ii];
@@ -352,6 +385,10 @@ ValidationResult PhysicsValidators::Impl::table<RowId::ImpulseFeasibility>() con
        st.crossings);
   note(r.detail, st.crossings_skipped, "{} pair-steps with more than {} pairs of edges near the contact: no edge crossings taken",
        st.crossings_skipped, kMaxCrossingWork);
+  note(r.detail, st.witnessed,
+       "{} island-steps passed on impulses found by Gauss-Seidel sweeps within their pyramids (their figures within "
+       "the step's largest and the bound: their programmes not solved)",
+       st.witnessed);
   note(r.detail, st.too_large, "{} islands above {} bodies not judged (first: {})", st.too_large, kMaxIslandBodies,
        st.too_large_first);
   note(r.detail, st.unsolved, "{} islands the programme did not solve, not judged (first: {})", st.unsolved,

@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <string>
@@ -24,6 +25,13 @@ using dmath::D3;
 /// Islands with more dynamic bodies than this are not judged (counted and named): the
 /// programme has 3-6 rows a body and 8 columns a contact point.
 constexpr std::size_t kMaxIslandBodies = 16;
+/// Projected Gauss-Seidel sweeps over an island's contact points that find its witness
+/// impulses (feasibility_programme.cpp, witness_figure), at most.
+constexpr int kWitnessSweeps = 16;
+/// Islands of a step whose programmes are solved first beside those without a witness
+/// within the bound: the ones with the largest witness figures (their programmes' figures
+/// set the threshold below which the others' witnesses stand).
+constexpr std::size_t kProbeIslands = 64;
 /// Consecutive islands judged by one call of feasibility_islands (on one thread), at most:
 /// the first programmes of the small ones among them are solved as one
 /// (feasibility_programme.cpp); fewer where a step's islands would make fewer than
@@ -85,6 +93,8 @@ struct PairContacts {
 struct FeasibilityState {
   std::uint64_t steps = 0, islands = 0, contacts = 0, pairs = 0;
   std::uint64_t too_large = 0, asleep = 0, clamped = 0, locked = 0, unsolved = 0;
+  /// Islands whose witness figure stood (their programmes not solved).
+  std::uint64_t witnessed = 0;
   std::string too_large_first, unsolved_first;
   std::size_t largest = 0;
   /// The detection poses of the steps before this one (most recent first, consecutive
@@ -132,11 +142,17 @@ struct ContactSearch {
 
 /// What became of an island: judged (figure and body), or counted and not judged.
 enum class Outcome { Judged, Asleep, Locked, Clamped, TooLarge, Unsolved };
-/// An island's verdict (PhysicsValidators::Impl::feasibility_islands): the programme's figure (the largest residual in units of its bound,
-/// <= 1 passes), the body named, and the failure's text where figure > 1.
+/// A pass of feasibility_islands: the islands' outcomes and witness figures, or their
+/// programmes solved.
+enum class IslandPass : int { Witness, Programme };
+/// An island's verdict (PhysicsValidators::Impl::feasibility_islands): its figure (the
+/// largest residual in units of its bound of the impulses found, <= 1 passes), the body
+/// named, and the failure's text where figure > 1.
 struct IslandVerdict {
   Outcome outcome = Outcome::Judged;
   double figure = 0;
+  /// The figure of the island's witness impulses (infinity: none).
+  double witness = std::numeric_limits<double>::infinity();
   std::uint32_t body = 0;
   std::string text;
 };

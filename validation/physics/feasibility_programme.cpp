@@ -10,6 +10,7 @@
 #include "feasibility.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -95,6 +96,18 @@ struct Programme {
   std::vector<int> idx;
   std::vector<CoinBigIndex> start{0};
 
+  /// Empties every list (keeping its memory) for the next island's build.
+  void clear() {
+    for (auto* v : {&b, &b_alt, &sigma0, &lever_of, &reach_of, &turn, &spin_turn, &value}) v->clear();
+    points_of.clear();
+    columns.clear();
+    col_start.assign(1, 0);
+    row_index.clear();
+    budget_of.clear();
+    budgets = 0;
+    idx.clear();
+    start.assign(1, 0);
+  }
   std::size_t ncols() const { return columns.size(); }
   int nrows() const { return int(2 * rows + budgets); }
   /// The largest scaled residual |b - A lambda|_r / sig_r of impulses `lambda`, in double;
@@ -110,6 +123,100 @@ struct Programme {
     return worst;
   }
 };
+
+/// Impulses on the kConeSides generators of one contact point's pyramid (programme columns
+/// c0 .. c0 + kConeSides - 1, each the impulse `dir` on A) whose sum on a body (A: s = 1, B:
+/// s = -1) comes near `x` (kg m/s), in closed form: x's component along the pyramid's axis
+/// (zero where it points out of the pyramid) shared by the generators, its tangential
+/// component taken by the one or two generators nearest its direction, scaled into the
+/// pyramid where it reaches beyond. Written into `lambda` (the other columns untouched).
+void pyramid_witness(const Programme& P, std::size_t c0, double s, const D3& x, std::vector<double>& lambda) {
+  D3 axis{0, 0, 0};
+  for (int j = 0; j < kConeSides; ++j) axis = axis + (1.0 / kConeSides) * P.columns[c0 + std::size_t(j)].dir;
+  axis = s * axis;
+  const double beta = dot3(x, axis) / dot3(axis, axis);
+  for (int j = 0; j < kConeSides; ++j) lambda[c0 + std::size_t(j)] = 0.0;
+  if (!(beta > 0.0)) return;
+  const D3 t = x - beta * axis;
+  std::array<D3, kConeSides> w;
+  std::size_t k = 0;
+  for (int j = 0; j < kConeSides; ++j) {
+    w[std::size_t(j)] = s * P.columns[c0 + std::size_t(j)].dir - axis;
+    if (dot3(t, w[std::size_t(j)]) > dot3(t, w[k])) k = std::size_t(j);
+  }
+  const std::size_t next = (k + 1) % kConeSides, prev = (k + kConeSides - 1) % kConeSides;
+  const std::size_t k2 = dot3(t, w[next]) >= dot3(t, w[prev]) ? next : prev;
+  // t = a w_k + c w_k2 (least squares in the plane of the two), else along w_k alone.
+  const double g11 = dot3(w[k], w[k]), g12 = dot3(w[k], w[k2]), g22 = dot3(w[k2], w[k2]);
+  const double r1 = dot3(t, w[k]), r2 = dot3(t, w[k2]), det = g11 * g22 - g12 * g12;
+  double a = det > 0.0 ? (r1 * g22 - r2 * g12) / det : -1.0, c = det > 0.0 ? (r2 * g11 - r1 * g12) / det : -1.0;
+  if (!(a >= 0.0 && c >= 0.0)) {
+    a = g11 > 0.0 ? std::max(0.0, r1 / g11) : 0.0;
+    c = 0.0;
+  }
+  a /= beta;
+  c /= beta;
+  if (a + c <= 1.0) {
+    const double share = beta * (1.0 - a - c) / kConeSides;
+    for (int j = 0; j < kConeSides; ++j) lambda[c0 + std::size_t(j)] = share;
+    lambda[c0 + k] += beta * a;
+    lambda[c0 + k2] += beta * c;
+  } else {
+    lambda[c0 + k] = beta * a / (a + c);
+    lambda[c0 + k2] = beta * c / (a + c);
+  }
+}
+
+/// The figure of impulses found by projected Gauss-Seidel sweeps for a translation-only
+/// island with friction per contact point: contact point by contact point, the impulse in
+/// its pyramid (pyramid_witness) that takes up the residual its bodies are left with by the
+/// other points (split between two dynamic bodies row by row in proportion to their
+/// bounds: the split that minimises the larger of the two scaled residuals), at most
+/// `sweeps` sweeps; the smallest figure of the sweeps and of no impulse (recomputed from
+/// the impulses: a witness, an upper bound on the programme's minimum); `lambda` its
+/// impulses. Infinity where the form does not apply (rotation, friction per manifold).
+double witness_figure(const Programme& P, const std::vector<double>& rhs, const std::vector<double>& sig,
+                      std::vector<double>& lambda, std::vector<double>& residual, int sweeps) {
+  const std::vector<Contact>& contacts = *P.contacts;
+  if (P.per != 3 || P.ncols() != kConeSides * contacts.size()) return std::numeric_limits<double>::infinity();
+  for (const auto& column : P.columns)
+    if (column.kind != Kind::Cone) return std::numeric_limits<double>::infinity();
+  lambda.assign(P.ncols(), 0.0);
+  double best = P.figure_of(rhs, sig, lambda, residual);
+  std::vector<double> trial(P.ncols(), 0.0), res(rhs.begin(), rhs.end());
+  for (int sweep = 0; sweep < sweeps && best > 0.0; ++sweep) {
+    for (std::size_t k = 0; k < contacts.size(); ++k) {
+      const Contact& c = contacts[k];
+      const std::size_t sa = P.slot(c.pair.a), sb = P.slot(c.pair.b), c0 = kConeSides * k;
+      D3 j{0, 0, 0};
+      for (int q = 0; q < kConeSides; ++q) j = j + trial[c0 + std::size_t(q)] * P.columns[c0 + std::size_t(q)].dir;
+      D3 x;
+      for (std::size_t r = 0; r < 3; ++r) {
+        const double ra = sa != Programme::kNone ? res[3 * sa + r] + j[r] : 0.0;
+        const double rb = sb != Programme::kNone ? res[3 * sb + r] - j[r] : 0.0;
+        if (sa == Programme::kNone)
+          x[r] = -rb;
+        else if (sb == Programme::kNone)
+          x[r] = ra;
+        else
+          x[r] = (ra * sig[3 * sb + r] - rb * sig[3 * sa + r]) / (sig[3 * sa + r] + sig[3 * sb + r]);
+      }
+      pyramid_witness(P, c0, 1.0, x, trial);
+      D3 j2{0, 0, 0};
+      for (int q = 0; q < kConeSides; ++q) j2 = j2 + trial[c0 + std::size_t(q)] * P.columns[c0 + std::size_t(q)].dir;
+      for (std::size_t r = 0; r < 3; ++r) {
+        if (sa != Programme::kNone) res[3 * sa + r] += j[r] - j2[r];
+        if (sb != Programme::kNone) res[3 * sb + r] -= j[r] - j2[r];
+      }
+    }
+    const double f = P.figure_of(rhs, sig, trial, residual);
+    if (f < best) {
+      best = f;
+      lambda = trial;
+    }
+  }
+  return best;
+}
 
 /// One programme of a solve: the island's, its right-hand side and bounds, and what the
 /// solve returns (its impulses and figure: NaN when CLP finds none).
@@ -225,7 +332,8 @@ namespace octocd {
 void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const std::vector<Pose>& det,
                                                   const std::vector<std::vector<feasibility::Contact>>& island_contacts,
                                                   const std::vector<std::vector<std::uint32_t>>& island_members,
-                                                  std::size_t first, std::size_t count, bool rotating,
+                                                  const std::uint32_t* ids, std::size_t count, bool rotating,
+                                                  feasibility::IslandPass pass,
                                                   std::vector<feasibility::IslandVerdict>& verdicts) const {
   using namespace feasibility;
   const D3 g = d3(model->scene.gravity);
@@ -258,8 +366,9 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
     }
     return true;
   };
-  // The island's programme: its rows' momentum changes and bounds, its columns.
-  auto build = [&](Programme& P) {
+  // The island's programme: its rows' momentum changes and bounds, its columns, and where
+  // `pattern`, CLP's pattern.
+  auto build = [&](Programme& P, bool pattern) {
     const std::vector<Contact>& contacts = *P.contacts;
     const std::vector<std::uint32_t>& members = *P.members;
     P.per = rotating ? 6 : 3;
@@ -421,6 +530,7 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
         if (rotating) budgets.push_back(std::move(torsion));
       }
     }
+    if (!pattern) return;
     const std::size_t ncols = P.ncols();
     P.budgets = budgets.size();
     P.budget_of.assign(ncols, {});
@@ -444,13 +554,14 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
   };
   // The verdict on a built island; `shared`: impulses within its bounds found by the
   // islands' shared solve (null: its programme is solved alone).
-  auto finish = [&](const Programme& P, const Solve* shared) {
+  auto finish = [&](const Programme& P, const Solve* shared, double witness) {
     const std::vector<Contact>& contacts = *P.contacts;
     const std::vector<std::uint32_t>& members = *P.members;
     const std::size_t per = P.per, ncols = P.ncols();
     const std::vector<double>& b = P.b;
     const std::vector<double>& sigma0 = P.sigma0;
     IslandVerdict verdict;
+    verdict.witness = witness;
     // The bound grows with the impulses found: rounding of each impulse's sum (eps (k + 2)
     // |J|) and, with rotation, the lever the engine's point may take beside octocd's (its
     // depth and reach: `lever`), the turn of the body through the step and the impulse's
@@ -515,6 +626,13 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
         sigma = s2;
         rhs = &P.b_alt;
       }
+    }
+    // The witness impulses where they leave less than every solve.
+    if (std::isfinite(witness) && !(figure <= witness)) {
+      std::vector<double> unused;
+      figure = witness_figure(P, b, sigma0, lambda, unused, kWitnessSweeps);
+      sigma = sigma0;
+      rhs = &b;
     }
     if (!std::isfinite(figure)) {
       verdict.outcome = Outcome::Unsolved;
@@ -592,13 +710,33 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
     return verdict;
   };
 
-  // The islands first..first+count in order: each judged one built; a rotating one or one
-  // of more than kMaxSharedProgramme entries finished at once (solved alone: a rotating
-  // island's angular bounds are far apart in scale, and the shared solve left a tenth of
-  // Bullet's rot-drop-220 islands above their bound, solved again), the others gathered while
-  // their entries stay within kMaxSharedEntries, their first programmes solved as one, then
-  // each finished (solved alone again where the impulses found together leave more than its
-  // bound).
+  // IslandPass::Witness: each island's outcome, and for a judged one its witness figure
+  // (witness_figure; infinity where none), which stands as its figure until a programme is
+  // solved for it.
+  if (pass == IslandPass::Witness) {
+    Programme P;
+    std::vector<double> lambda, residual;
+    for (std::size_t k = 0; k < count; ++k) {
+      const std::size_t ii = ids[k];
+      verdicts[ii] = IslandVerdict{};
+      if (!judged(island_members[ii], verdicts[ii]) || rotating || bodies.friction_per_manifold) continue;
+      P.clear();
+      P.contacts = &island_contacts[ii];
+      P.members = &island_members[ii];
+      build(P, false);
+      verdicts[ii].witness = witness_figure(P, P.b, P.sigma0, lambda, residual, kWitnessSweeps);
+      verdicts[ii].figure = verdicts[ii].witness;
+      verdicts[ii].body = island_members[ii].front();
+    }
+    return;
+  }
+  // IslandPass::Programme: the islands `ids` (judged ones, ascending) in order, each built;
+  // a rotating one or one of more than kMaxSharedProgramme entries finished at once (solved
+  // alone: a rotating island's angular bounds are far apart in scale, and the shared solve
+  // left a tenth of Bullet's rot-drop-220 islands above their bound, solved again), the
+  // others gathered while their entries stay within kMaxSharedEntries, their first
+  // programmes solved as one, then each finished (solved alone again where the impulses
+  // found together leave more than its bound).
   std::vector<Programme> group;
   std::vector<std::size_t> group_at;
   std::size_t group_entries = 0;
@@ -607,20 +745,20 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
     for (const Programme& P : group) solves.push_back(Solve{&P, &P.b, &P.sigma0, {}});
     if (group.size() > 1) solve_together(solves);
     for (std::size_t k = 0; k < group.size(); ++k)
-      verdicts[group_at[k]] = finish(group[k], group.size() > 1 && solves[k].figure <= 1.0 ? &solves[k] : nullptr);
+      verdicts[group_at[k]] = finish(group[k], group.size() > 1 && solves[k].figure <= 1.0 ? &solves[k] : nullptr,
+                                     verdicts[group_at[k]].witness);
     group.clear();
     group_at.clear();
     group_entries = 0;
   };
-  for (std::size_t ii = first; ii < first + count; ++ii) {
-    verdicts[ii] = IslandVerdict{};
-    if (!judged(island_members[ii], verdicts[ii])) continue;
+  for (std::size_t k = 0; k < count; ++k) {
+    const std::size_t ii = ids[k];
     Programme P;
     P.contacts = &island_contacts[ii];
     P.members = &island_members[ii];
-    build(P);
+    build(P, true);
     if (rotating || P.idx.size() > kMaxSharedProgramme) {
-      verdicts[ii] = finish(P, nullptr);
+      verdicts[ii] = finish(P, nullptr, verdicts[ii].witness);
       continue;
     }
     if (group_entries + P.idx.size() > kMaxSharedEntries) flush();

@@ -409,6 +409,7 @@ struct Contact;
 struct ContactSearch;
 struct PairContacts;
 struct IslandVerdict;
+enum class IslandPass : int;
 }  // namespace feasibility
 
 struct PhysicsValidators::Impl {
@@ -908,16 +909,19 @@ struct PhysicsValidators::Impl {
   /// "Motion explained by feasible contact impulses", 1), into `found`: none when the pair is
   /// out of reach or has no dynamic body (feasibility_contacts.cpp).
   void feasibility_contacts(const feasibility::ContactSearch& search, Pair p, feasibility::PairContacts& found) const;
-  /// The verdicts on islands first .. first + count - 1 of step `rec` (island ii: its
-  /// dynamic bodies island_members[ii], its contacts island_contacts[ii]; `rotating`: angular
-  /// momentum judged too) by their linear programmes, into verdicts[ii] (the same section,
-  /// 2-4; feasibility_programme.cpp): the first programmes of consecutive small islands
-  /// solved as one, an island whose impulses found there leave more than its bound solved
-  /// again alone.
+  /// One pass over islands ids[0 .. count - 1] of step `rec` (island ii: its dynamic bodies
+  /// island_members[ii], its contacts island_contacts[ii]; `rotating`: angular momentum
+  /// judged too) into verdicts[ii] (the same section, 2-4; feasibility_programme.cpp):
+  /// IslandPass::Witness decides which islands are judged and gives each judged one its
+  /// witness figure; IslandPass::Programme (judged islands, ascending, after their witness
+  /// pass) solves their linear programmes, the first programmes of consecutive small islands
+  /// as one, an island whose impulses found there leave more than its bound solved again
+  /// alone, and the figure is the smaller of the programme's and the witness'.
   void feasibility_islands(const FrameRecord& rec, const std::vector<Pose>& det,
                            const std::vector<std::vector<feasibility::Contact>>& island_contacts,
-                           const std::vector<std::vector<std::uint32_t>>& island_members, std::size_t first,
-                           std::size_t count, bool rotating, std::vector<feasibility::IslandVerdict>& verdicts) const;
+                           const std::vector<std::vector<std::uint32_t>>& island_members, const std::uint32_t* ids,
+                           std::size_t count, bool rotating, feasibility::IslandPass pass,
+                           std::vector<feasibility::IslandVerdict>& verdicts) const;
   // ---- where rows may be missing: contacts_complete 0 (every step) or /contacts/incomplete
   /// Step `frame` may lack some pair's rows.
   bool incomplete_step(std::int64_t frame) const;
