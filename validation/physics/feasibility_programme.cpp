@@ -172,7 +172,8 @@ void pyramid_witness(const Programme& P, std::size_t c0, double s, const D3& x, 
 /// its pyramid (pyramid_witness) that takes up the residual its bodies are left with by the
 /// other points (split between two dynamic bodies row by row in proportion to their
 /// bounds: the split that minimises the larger of the two scaled residuals), at most
-/// `sweeps` sweeps; the smallest figure of the sweeps and of no impulse (recomputed from
+/// `sweeps` sweeps, until a sweep lowers the figure no further; the smallest figure of the
+/// sweeps and of no impulse (recomputed from
 /// the impulses: a witness, an upper bound on the programme's minimum); `lambda` its
 /// impulses. Infinity where the form does not apply (rotation, friction per manifold).
 double witness_figure(const Programme& P, const std::vector<double>& rhs, const std::vector<double>& sig,
@@ -210,10 +211,9 @@ double witness_figure(const Programme& P, const std::vector<double>& rhs, const 
       }
     }
     const double f = P.figure_of(rhs, sig, trial, residual);
-    if (f < best) {
-      best = f;
-      lambda = trial;
-    }
+    if (!(f < best)) break;
+    best = f;
+    lambda = trial;
   }
   return best;
 }
@@ -477,10 +477,10 @@ void PhysicsValidators::Impl::feasibility_islands(const FrameRecord& rec, const 
       for (std::size_t k = 0; k < contacts.size(); ++k) {
         const Contact& c = contacts[k];
         const auto [e1, e2] = tangent_basis(c.normal);
+        const double reach = tilted_mu(c.mu, c.slack_deg) * widen;
         for (int j = 0; j < kConeSides; ++j) {
           const double a = 2.0 * kPi * j / kConeSides;
-          add_column(k, c.normal + (tilted_mu(c.mu, c.slack_deg) * widen) * (std::cos(a) * e1 + std::sin(a) * e2),
-                     Kind::Cone);
+          add_column(k, c.normal + reach * (std::cos(a) * e1 + std::sin(a) * e2), Kind::Cone);
         }
       }
     } else {
