@@ -42,6 +42,7 @@
 #include <limits>
 
 #include "octocd/broadphase.hpp"
+#include "octocd/parallel.hpp"
 #include "octocd/strict_octree.hpp"
 
 #include "broadphase_detail.hpp"
@@ -49,6 +50,10 @@
 namespace octocd {
 
 namespace {
+
+/// The fewest bodies whose sort, copies and descent run on the worker team
+/// (octocd/parallel.hpp): below, one thread costs less than waking others.
+constexpr std::size_t kParallelItemsFrom = 4096;
 
 /// Float to an unsigned key with the same order (-0 sorts just before +0).
 inline std::uint32_t float_key(float f) {
@@ -76,6 +81,7 @@ struct Node {
   std::uint32_t begin;
   std::uint32_t end;
   std::int32_t parent;       // nearest non-empty proper ancestor, -1 at the top
+  std::uint32_t last;        // one past the last node of its subtree (pre-order)
   std::uint64_t anc_pop;     // bodies in all proper ancestors (for the candidate count)
   Aabb bounds;               // union of the AABBs of the bodies of its subtree
 };
@@ -86,7 +92,7 @@ struct Cand {
   std::uint32_t body;
 };
 
-/// A node on the descent stack; its ancestor candidates are cands_[cbegin, cend).
+/// A node on a descent's stack; its ancestor candidates are the stack's cands[cbegin, cend).
 struct Frame {
   std::int32_t node;
   std::uint32_t cbegin;
@@ -110,10 +116,12 @@ class StrictOctreeBroadPhase final : public BroadPhase {
     // Bodies in sorted order (SoA of what the sweep reads).
     sorted_.resize(items_.size());
     sminx_.resize(items_.size());
-    for (std::size_t k = 0; k < items_.size(); ++k) {
+    LoopOptions by_items;
+    by_items.min_items = kParallelItemsFrom;
+    parallel_for(items_.size(), by_items, [&](std::size_t k, unsigned) {
       sorted_[k] = boxes[items_[k].body];
       sminx_[k] = sorted_[k].min.x;
-    }
+    });
 
     // Pass 1: the non-empty nodes in pre-order, their parents and subtree bounds.
     nodes_.clear();
@@ -149,65 +157,65 @@ class StrictOctreeBroadPhase final : public BroadPhase {
 
     // Pass 2: descent. A node's candidates are the bodies of its ancestors that overlap
     // its subtree bounds (the only ones that can overlap a body of its subtree), filtered
-    // from the parent's candidates and the parent's own bodies.
-    std::uint64_t candidates = 0;
-    frames_.clear();
-    cands_.clear();
-    for (std::size_t k = 0; k < nodes_.size(); ++k) {
-      const Node& node = nodes_[k];
-      while (!frames_.empty() && frames_.back().node != node.parent) {
-        cands_.resize(frames_.back().cbegin);
-        frames_.pop_back();
-      }
-      const std::uint32_t cbegin = static_cast<std::uint32_t>(cands_.size());
-      if (node.parent >= 0) {
-        // Both inputs are sorted by min.x, so the merged list is too.
-        const Frame& pf = frames_.back();
-        const Node& p = nodes_[node.parent];
-        filt_.clear();
-        for (std::uint32_t c = pf.cbegin; c < pf.cend; ++c) {
-          if (overlaps(cands_[c].box, node.bounds)) filt_.push_back(cands_[c]);
-        }
-        std::size_t a = 0;
-        for (std::uint32_t j = p.begin; j < p.end; ++j) {
-          if (!overlaps(sorted_[j], node.bounds)) continue;
-          while (a < filt_.size() && filt_[a].box.min.x <= sorted_[j].min.x) cands_.push_back(filt_[a++]);
-          cands_.push_back({sorted_[j], items_[j].body});
-        }
-        while (a < filt_.size()) cands_.push_back(filt_[a++]);
-      }
-      const std::uint32_t cend = static_cast<std::uint32_t>(cands_.size());
-      frames_.push_back({static_cast<std::int32_t>(k), cbegin, cend});
-
-      const std::uint64_t pop = node.end - node.begin;
-      candidates += pop * (pop - 1) / 2 + pop * node.anc_pop;
-      // Same node: sweep and prune on x (slots sorted by min.x).
-      for (std::uint32_t i = node.begin; i < node.end; ++i) {
-        const Aabb bi = sorted_[i];
-        const std::uint32_t body_i = items_[i].body;
-        for (std::uint32_t j = i + 1; j < node.end && sminx_[j] <= bi.max.x; ++j) {
-          if (overlaps(bi, sorted_[j])) emit(body_i, items_[j].body, out);
-        }
-      }
-      // Own bodies against the ancestor candidates: a two-list sweep on x. A pair is met
-      // from whichever of the two has the smaller min.x (own first on ties).
-      std::uint32_t i = node.begin, c = cbegin;
-      while (i < node.end && c < cend) {
-        if (sminx_[i] <= cands_[c].box.min.x) {
-          const Aabb bi = sorted_[i];
-          for (std::uint32_t q = c; q < cend && cands_[q].box.min.x <= bi.max.x; ++q) {
-            if (overlaps(bi, cands_[q].box)) emit(items_[i].body, cands_[q].body, out);
-          }
-          ++i;
-        } else {
-          const Aabb bc = cands_[c].box;
-          for (std::uint32_t q = i; q < node.end && sminx_[q] <= bc.max.x; ++q) {
-            if (overlaps(sorted_[q], bc)) emit(items_[q].body, cands_[c].body, out);
-          }
-          ++c;
-        }
+    // from the parent's candidates and the parent's own bodies. In tasks on the worker team:
+    // subtrees of at most `target` nodes (each first rebuilds its ancestors' candidates),
+    // and the nodes above them (task 0); their pairs joined in task order.
+    const std::size_t nn = nodes_.size();
+    const unsigned threads = loop_threads(items_.size(), by_items);
+    const std::size_t target = threads <= 1 ? nn : std::max<std::size_t>(64, nn / (std::size_t(threads) * 16));
+    task_roots_.clear();
+    for (std::size_t k = 0; k < nn;) {
+      if (nodes_[k].last - k <= target) {
+        task_roots_.push_back(static_cast<std::uint32_t>(k));
+        k = nodes_[k].last;
+      } else {
+        ++k;
       }
     }
+    const std::size_t tasks = task_roots_.size() + 1;
+    task_out_.resize(tasks);
+    std::vector<std::uint64_t> task_candidates(tasks, 0);
+    scratch_.resize(std::max(1u, threads));
+    LoopOptions by_task;
+    by_task.threads = static_cast<int>(threads);
+    by_task.chunk = 1;
+    parallel_for(tasks, by_task, [&](std::size_t t, unsigned worker) {
+      Scratch& sc = scratch_[worker];
+      sc.frames.clear();
+      sc.cands.clear();
+      std::vector<Pair>& pairs = task_out_[t];
+      pairs.clear();
+      std::uint64_t& candidates = task_candidates[t];
+      if (t == 0) {  // the nodes above the subtrees
+        for (std::size_t r = 0, k = 0; k < nn;) {
+          if (r < task_roots_.size() && task_roots_[r] == k) {
+            k = nodes_[k].last;
+            ++r;
+            continue;
+          }
+          enter(k, sc);
+          candidates += judge_node(k, sc, pairs);
+          ++k;
+        }
+        return;
+      }
+      const std::uint32_t root = task_roots_[t - 1];
+      sc.chain.clear();
+      for (std::int32_t a = nodes_[root].parent; a >= 0; a = nodes_[a].parent) sc.chain.push_back(a);
+      for (auto a = sc.chain.rbegin(); a != sc.chain.rend(); ++a) enter(std::size_t(*a), sc);
+      for (std::size_t k = root; k < nodes_[root].last; ++k) {
+        enter(k, sc);
+        candidates += judge_node(k, sc, pairs);
+      }
+    });
+    std::uint64_t candidates = 0;
+    std::size_t total = 0;
+    for (std::size_t t = 0; t < tasks; ++t) {
+      candidates += task_candidates[t];
+      total += task_out_[t].size();
+    }
+    out.reserve(total);
+    for (const std::vector<Pair>& pairs : task_out_) out.insert(out.end(), pairs.begin(), pairs.end());
 
     detail::sort_pairs(out, n, tmp_pairs_, count_);
     stats.cell_candidates = candidates;
@@ -216,8 +224,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
                              sizeof(Item) + sorted_.capacity() * sizeof(Aabb) +
                          sminx_.capacity() * sizeof(float) + nodes_.capacity() * sizeof(Node) +
                          parents_.capacity() * sizeof(std::int32_t) +
-                         frames_.capacity() * sizeof(Frame) +
-                         (cands_.capacity() + filt_.capacity()) * sizeof(Cand) +
+                         scratch_bytes() + task_roots_.capacity() * sizeof(std::uint32_t) +
                          tmp_pairs_.capacity() * sizeof(Pair) +
                          count_.capacity() * sizeof(std::uint32_t);
   }
@@ -232,10 +239,91 @@ class StrictOctreeBroadPhase final : public BroadPhase {
   void close_top() {
     const std::int32_t t = parents_.back();
     parents_.pop_back();
+    nodes_[t].last = static_cast<std::uint32_t>(nodes_.size());
     if (!parents_.empty()) {
       Node& p = nodes_[parents_.back()];
       p.bounds = merged(p.bounds, nodes_[t].bounds);
     }
+  }
+
+  /// A descent's stack: the frames of the nodes entered, their candidates, scratch.
+  struct Scratch {
+    std::vector<Frame> frames;
+    std::vector<Cand> cands;
+    std::vector<Cand> filt;
+    std::vector<std::int32_t> chain;
+  };
+
+  /// Enters node k on `sc`'s stack: pops the frames down to its parent's, then pushes its
+  /// own with its candidates (the parent's candidates and the parent's own bodies that
+  /// overlap its subtree bounds; both sorted by min.x, so the merged list is too).
+  void enter(std::size_t k, Scratch& sc) const {
+    const Node& node = nodes_[k];
+    while (!sc.frames.empty() && sc.frames.back().node != node.parent) {
+      sc.cands.resize(sc.frames.back().cbegin);
+      sc.frames.pop_back();
+    }
+    const std::uint32_t cbegin = static_cast<std::uint32_t>(sc.cands.size());
+    if (node.parent >= 0) {
+      const Frame& pf = sc.frames.back();
+      const Node& p = nodes_[node.parent];
+      sc.filt.clear();
+      for (std::uint32_t c = pf.cbegin; c < pf.cend; ++c) {
+        if (overlaps(sc.cands[c].box, node.bounds)) sc.filt.push_back(sc.cands[c]);
+      }
+      std::size_t a = 0;
+      for (std::uint32_t j = p.begin; j < p.end; ++j) {
+        if (!overlaps(sorted_[j], node.bounds)) continue;
+        while (a < sc.filt.size() && sc.filt[a].box.min.x <= sorted_[j].min.x) sc.cands.push_back(sc.filt[a++]);
+        sc.cands.push_back({sorted_[j], items_[j].body});
+      }
+      while (a < sc.filt.size()) sc.cands.push_back(sc.filt[a++]);
+    }
+    sc.frames.push_back({static_cast<std::int32_t>(k), cbegin, static_cast<std::uint32_t>(sc.cands.size())});
+  }
+
+  /// The pairs of node k (entered on `sc`, its frame on top) into `out`: its own bodies by
+  /// sweep and prune on x, and against its ancestor candidates by a two-list sweep on x (a
+  /// pair met from whichever has the smaller min.x, own first on ties). Returns the node's
+  /// cell candidates (all pairs in related nodes).
+  std::uint64_t judge_node(std::size_t k, const Scratch& sc, std::vector<Pair>& out) const {
+    const Node& node = nodes_[k];
+    const std::uint32_t cbegin = sc.frames.back().cbegin, cend = sc.frames.back().cend;
+    const std::uint64_t pop = node.end - node.begin;
+    for (std::uint32_t i = node.begin; i < node.end; ++i) {
+      const Aabb bi = sorted_[i];
+      const std::uint32_t body_i = items_[i].body;
+      for (std::uint32_t j = i + 1; j < node.end && sminx_[j] <= bi.max.x; ++j) {
+        if (overlaps(bi, sorted_[j])) emit(body_i, items_[j].body, out);
+      }
+    }
+    std::uint32_t i = node.begin, c = cbegin;
+    while (i < node.end && c < cend) {
+      if (sminx_[i] <= sc.cands[c].box.min.x) {
+        const Aabb bi = sorted_[i];
+        for (std::uint32_t q = c; q < cend && sc.cands[q].box.min.x <= bi.max.x; ++q) {
+          if (overlaps(bi, sc.cands[q].box)) emit(items_[i].body, sc.cands[q].body, out);
+        }
+        ++i;
+      } else {
+        const Aabb bc = sc.cands[c].box;
+        for (std::uint32_t q = i; q < node.end && sminx_[q] <= bc.max.x; ++q) {
+          if (overlaps(sorted_[q], bc)) emit(items_[q].body, sc.cands[c].body, out);
+        }
+        ++c;
+      }
+    }
+    return pop * (pop - 1) / 2 + pop * node.anc_pop;
+  }
+
+  /// The descents' scratch and pairs (bytes).
+  std::size_t scratch_bytes() const {
+    std::size_t bytes = 0;
+    for (const Scratch& sc : scratch_)
+      bytes += sc.frames.capacity() * sizeof(Frame) + (sc.cands.capacity() + sc.filt.capacity()) * sizeof(Cand) +
+               sc.chain.capacity() * sizeof(std::int32_t);
+    for (const std::vector<Pair>& pairs : task_out_) bytes += pairs.capacity() * sizeof(Pair);
+    return bytes;
   }
 
   static void emit(std::uint32_t p, std::uint32_t q, std::vector<Pair>& out) {
@@ -304,7 +392,11 @@ class StrictOctreeBroadPhase final : public BroadPhase {
         items_[j] = x;
       }
     }
-    if (!ok) std::sort(items_.begin(), items_.end(), item_less);
+    if (!ok) {
+      LoopOptions by_items;
+      by_items.min_items = kParallelItemsFrom;
+      parallel_sort(items_, loop_threads(m, by_items), item_less);
+    }
     if (!moved_.empty()) {
       std::sort(moved_.begin(), moved_.end(), item_less);
       merge_buf_.resize(m + moved_.size());
@@ -325,9 +417,9 @@ class StrictOctreeBroadPhase final : public BroadPhase {
   std::vector<float> sminx_;
   std::vector<Node> nodes_;
   std::vector<std::int32_t> parents_;
-  std::vector<Frame> frames_;
-  std::vector<Cand> cands_;
-  std::vector<Cand> filt_;
+  std::vector<std::uint32_t> task_roots_;
+  std::vector<std::vector<Pair>> task_out_;
+  std::vector<Scratch> scratch_;
   std::vector<Pair> tmp_pairs_;
   std::vector<std::uint32_t> count_;
 };

@@ -777,6 +777,36 @@ TEST(BroadPhase, LooseOctreeThreadCountDoesNotChangeTheAnswer) {
   for (const auto& c : candidates) EXPECT_EQ(c, candidates.front());
 }
 
+// The spatial hash and the strict octree run on the worker team from 4096 bodies on: the
+// pairs and the candidate count must not depend on the thread count, with bodies on coarser
+// levels of the hash (pairs across levels), a body out of every level's range (oversize),
+// one with a NaN coordinate, and bodies at the strict octree's root and deep below it.
+TEST(BroadPhase, SpatialHashAndStrictOctreeThreadCountDoesNotChangeTheAnswer) {
+  std::vector<Aabb> boxes = random_boxes(12000, 91);
+  boxes[10] = {{-3.0f, -0.1f, -3.0f}, {3.0f, 0.0f, 3.0f}};   // floor slab: a coarse level, the root
+  boxes[11] = {{-2.1f, -3.0f, -3.0f}, {-2.0f, 3.0f, 3.0f}};  // wall
+  boxes[12] = {{0.5f, 0.5f, 0.5f}, {1.5f, 1.5f, 1.5f}};      // four levels up
+  boxes[13] = {{-std::numeric_limits<float>::infinity(), 0, 0}, {0, 0.1f, 0.1f}};  // oversize
+  boxes[14] = {{std::numeric_limits<float>::quiet_NaN(), 0, 0}, {0, 0, 0}};        // never overlaps
+  const std::vector<Pair> want = brute(boxes);
+  for (const char* name : {"spatial-hash", "octree-strict"}) {
+    std::vector<std::uint64_t> candidates;
+    for (int threads : {1, 2, 3}) {
+      const ThreadCount at(threads);
+      auto bp = make_broadphase({name, -1, 0.25f}, kDomain);
+      std::vector<Pair> got;
+      BroadPhaseStats st;
+      for (int call = 0; call < 2; ++call) {  // a fresh instance, then its kept buffers
+        bp->find_pairs(boxes, got, st);
+        EXPECT_TRUE(got == want) << name << ", " << threads << " threads, call " << call << ": "
+                                 << describe_diff(got, want);
+        candidates.push_back(st.cell_candidates);
+      }
+    }
+    for (const std::uint64_t c : candidates) EXPECT_EQ(c, candidates.front()) << name;
+  }
+}
+
 // ---- the loose octree's pair cache (broadphase_octree_cache.cpp, steps 6-7) -----
 
 /// Host model of the cache's fattened boxes: every box grown by 1/8 of the median largest

@@ -99,11 +99,13 @@ bool exhaustive_oracle(const PlacedShape& a_in, const PlacedShape& b_in, float t
 /// one call of an O(n^2) broadphase (flat, fcl-naive) on 10^5 bodies takes minutes and
 /// polls nothing. A stop throws ValidationStopped at once and leaves the helper to finish
 /// on its own: it owns a copy of the boxes, a share of the broadphase and its result (the
-/// process ends it when it exits). Without `stop`, a plain call. Rethrows its errors.
+/// process ends it when it exits). Without `stop`, a plain call. Its loops on the worker team
+/// use `threads` (0: default_threads()). Rethrows its errors.
 void find_pairs_stoppable(const std::shared_ptr<BroadPhase>& bp, const std::vector<Aabb>& boxes,
-                          std::vector<Pair>& out, const std::function<bool()>& stop) {
+                          std::vector<Pair>& out, const std::function<bool()>& stop, int threads = 0) {
   BroadPhaseStats stats;
   if (!stop) {
+    const ThreadCount at(threads);
     bp->find_pairs(boxes, out, stats);
     return;
   }
@@ -121,8 +123,9 @@ void find_pairs_stoppable(const std::shared_ptr<BroadPhase>& bp, const std::vect
   job->bp = bp;
   job->boxes = boxes;
   job->pairs.swap(out);  // keep its capacity
-  std::thread([job] {
+  std::thread([job, threads] {
     try {
+      const ThreadCount at(threads);
       BroadPhaseStats st;
       job->bp->find_pairs(job->boxes, job->pairs, st);
     } catch (...) {
@@ -163,11 +166,18 @@ bool comparable(BroadPhaseCost cost, std::size_t n) {
 
 /// The most boxes a subquadratic broadphase is compared on in every judged frame: above, it
 /// is compared once in ceil(n / this) judged frames from the first. octocd's three CPU
-/// broadphases take about 1.2 s side by side on 16 threads at 10^6 boxes (`validate
-/// boxes-uniform-1m --every 1`: candidate-sets 1.4 s of a judged frame's 2.5 s), so
+/// broadphases take about 0.85 s on 16 threads at 10^6 boxes (`validate boxes-uniform-1m
+/// --engine cuda --every 1` on the H200 host: candidate-sets 7.6 s over 9 compared frames), so
 /// boxes-uniform-1m's 1,000,006 boxes compare each on every 6th judged frame; the shipped
 /// scenes up to 100,006 boxes on every judged frame.
 constexpr std::size_t kSubquadraticBoxesPerJudgedFrame = 200000;
+
+/// The fewest validator threads per due broadphase of octocd's own (octree, octree-strict,
+/// spatial-hash: their loops on the worker team) for candidate-sets to run those one after
+/// another on every thread rather than side by side. Side by side on this project's 2-core
+/// VM: boxes-uniform-100k's 5 judged frames 0.39 s against 0.50 one after another; one after
+/// another on the H200 host's 16 threads: boxes-uniform-1m's 50 judged frames 9.0 -> 7.6 s.
+constexpr std::size_t kThreadsPerTeamBroadphase = 4;
 
 /// The judged frames between two comparisons of a broadphase of cost `cost` on `n` boxes:
 /// ceil(n / kSubquadraticBoxesPerJudgedFrame) for a subquadratic one, the stride above for a
@@ -288,6 +298,9 @@ struct FrameValidators::Impl {
   // Per compared broadphase (index into `broadphases`): its cost class, its last pair set and
   // the judged frames it was compared on; `bp_order` lists them quadratic-cost first.
   std::vector<BroadPhaseCost> bp_cost;
+  /// Per compared broadphase: octocd's own subquadratic one, whose loops run on the worker
+  /// team (octree, octree-strict, spatial-hash).
+  std::vector<char> bp_team;
   std::vector<std::vector<Pair>> bp_pairs;
   std::vector<std::uint64_t> bp_compared;
   std::vector<std::size_t> bp_order;
@@ -332,6 +345,7 @@ FrameValidators::FrameValidators(const Model& model, const ValidationOptions& op
   for (auto& bp : broadphases) {
     const BroadPhaseInfo* info = find_broadphase_info(bp->name());
     s.bp_cost.push_back(info ? info->cost : BroadPhaseCost::subquadratic);
+    s.bp_team.push_back(info && info->host == BroadPhaseHost::core && info->cost != BroadPhaseCost::quadratic);
     s.broadphases.push_back(std::move(bp));
   }
   s.bp_pairs.resize(s.broadphases.size());
@@ -477,15 +491,26 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
     };
     // The pairs the engine itself used this frame (design.md section 7.9), then fresh instances.
     if (rec.has_pairs) compare(rec.pairs, s.source.label, true);
-    // Every compared broadphase due this frame, side by side on the validators' threads
-    // (the slowest first), then compared in their listed order.
+    // Every compared broadphase due this frame side by side on the validators' threads (the
+    // slowest first); with at least kThreadsPerTeamBroadphase threads for each of octocd's
+    // own due (their loops run on the worker team, which serves one caller's loop at a
+    // time), those one after another on all the threads instead. Then compared in their
+    // listed order.
     const std::uint64_t judged_frame = s.candidate_frames - 1;
-    std::vector<std::size_t> due;
+    std::vector<std::size_t> due, beside, one_by_one;
     for (std::size_t b : s.bp_order)
-      if (comparable(s.bp_cost[b], boxes.size()) && judged_frame % compare_stride(s.bp_cost[b], boxes.size()) == 0)
+      if (comparable(s.bp_cost[b], boxes.size()) && judged_frame % compare_stride(s.bp_cost[b], boxes.size()) == 0) {
         due.push_back(b);
-    find_pairs_all_stoppable(s.broadphases, due, due.size(), boxes, s.bp_pairs,
-                             loop_threads(s.options.threads, due.size(), 2), s.options.stop);
+        (s.bp_team[b] ? one_by_one : beside).push_back(b);
+      }
+    if (loop_threads(s.options.threads, boxes.size()) < kThreadsPerTeamBroadphase * one_by_one.size()) {
+      beside = due;
+      one_by_one.clear();
+    }
+    find_pairs_all_stoppable(s.broadphases, beside, beside.size(), boxes, s.bp_pairs,
+                             loop_threads(s.options.threads, beside.size(), 2), s.options.stop);
+    for (std::size_t b : one_by_one)
+      find_pairs_stoppable(s.broadphases[b], boxes, s.bp_pairs[b], s.options.stop, s.options.threads);
     std::sort(due.begin(), due.end());
     for (std::size_t b : due) {
       ++s.bp_compared[b];

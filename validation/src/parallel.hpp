@@ -85,38 +85,4 @@ void parallel_select(std::size_t n, std::vector<T>& out, unsigned threads, const
   });
 }
 
-/// std::sort of `v` by `less` on `threads` threads (at least 4,096 elements; fewer are
-/// sorted on the calling thread): `threads` chunks sorted on threads, then merged pairwise
-/// (std::merge, each round's merges on threads). The order std::sort gives wherever no
-/// two elements are equivalent (the validators sort distinct pairs and cell entries).
-template <class T, class Less>
-void parallel_sort(std::vector<T>& v, unsigned threads, Less less) {
-  const std::size_t n = v.size();
-  if (threads <= 1 || n < 4096) {
-    std::sort(v.begin(), v.end(), less);
-    return;
-  }
-  const std::function<bool()> never;
-  auto at = [&](std::vector<T>& x, std::size_t k) { return x.begin() + std::ptrdiff_t(k); };
-  std::vector<std::size_t> bound(threads + 1);  // run k is [bound[k], bound[k + 1])
-  for (unsigned k = 0; k <= threads; ++k) bound[k] = n * k / threads;
-  parallel_items_on(threads, threads, never,
-                    [&](std::size_t k, unsigned) { std::sort(at(v, bound[k]), at(v, bound[k + 1]), less); });
-  std::vector<T> merged(n);
-  while (bound.size() > 2) {
-    const std::size_t runs = bound.size() - 1, merges = (runs + 1) / 2;
-    parallel_items_on(merges, static_cast<unsigned>(std::min<std::size_t>(threads, merges)), never,
-                      [&](std::size_t j, unsigned) {
-      const std::size_t first = bound[2 * j], mid = bound[std::min(2 * j + 1, runs)],
-                        last = bound[std::min(2 * j + 2, runs)];
-      std::merge(at(v, first), at(v, mid), at(v, mid), at(v, last), at(merged, first), less);
-    });
-    v.swap(merged);
-    std::vector<std::size_t> next;
-    for (std::size_t k = 0; k < bound.size(); k += 2) next.push_back(bound[k]);
-    if (next.back() != n) next.push_back(n);
-    bound.swap(next);
-  }
-}
-
 }  // namespace octocd

@@ -28,8 +28,10 @@
 /// the OpenMP build, which honoured it), else the CPUs this process may run on
 /// (sched_getaffinity).
 
+#include <algorithm>
 #include <cstddef>
 #include <functional>
+#include <vector>
 
 namespace octocd {
 
@@ -92,5 +94,40 @@ bool parallel_for(std::size_t n, const LoopOptions& options, F&& body) {
 /// may use fewer: a busy team, a nested loop); worker numbers stay below it. For sizing
 /// per-worker scratch before the loop.
 unsigned loop_threads(std::size_t n, const LoopOptions& options);
+
+/// std::sort of `v` by `less` on `threads` threads (at least 4,096 elements; fewer are
+/// sorted on the calling thread): `threads` chunks sorted on the team, then merged pairwise
+/// (std::merge, each round's merges on the team). The order std::sort gives wherever no two
+/// elements are equivalent (the broadphases and validators sort distinct pairs and cell
+/// entries), whatever the thread count. T copyable and default-constructible.
+template <class T, class Less>
+void parallel_sort(std::vector<T>& v, unsigned threads, Less less) {
+  const std::size_t n = v.size();
+  if (threads <= 1 || n < 4096) {
+    std::sort(v.begin(), v.end(), less);
+    return;
+  }
+  auto at = [](std::vector<T>& x, std::size_t k) { return x.begin() + std::ptrdiff_t(k); };
+  std::vector<std::size_t> bound(threads + 1);  // run k is [bound[k], bound[k + 1])
+  for (unsigned k = 0; k <= threads; ++k) bound[k] = n * k / threads;
+  LoopOptions one_each;
+  one_each.threads = static_cast<int>(threads);
+  one_each.chunk = 1;
+  parallel_for(threads, one_each, [&](std::size_t k, unsigned) { std::sort(at(v, bound[k]), at(v, bound[k + 1]), less); });
+  std::vector<T> merged(n);
+  while (bound.size() > 2) {
+    const std::size_t runs = bound.size() - 1, merges = (runs + 1) / 2;
+    parallel_for(merges, one_each, [&](std::size_t j, unsigned) {
+      const std::size_t first = bound[2 * j], mid = bound[std::min(2 * j + 1, runs)],
+                        last = bound[std::min(2 * j + 2, runs)];
+      std::merge(at(v, first), at(v, mid), at(v, mid), at(v, last), at(merged, first), less);
+    });
+    v.swap(merged);
+    std::vector<std::size_t> next;
+    for (std::size_t k = 0; k < bound.size(); k += 2) next.push_back(bound[k]);
+    if (next.back() != n) next.push_back(n);
+    bound.swap(next);
+  }
+}
 
 }  // namespace octocd
