@@ -34,7 +34,12 @@
 ///
 /// Incremental use: the sorted order of the previous call is kept and re-sorted by
 /// insertion sort (near O(n) for coherent motion; bodies that changed node are sorted
-/// apart and merged in), with a fall-back to std::sort when the order changed a lot. Buffers are kept between calls.
+/// apart and merged in), with a fall-back to a full sort when the order changed a lot.
+/// Buffers are kept between calls.
+///
+/// Threads: the keys, the full sort, the copies and pass 2 (in subtrees) run on the worker
+/// team (octocd/parallel.hpp, current_threads()); the pairs and counts do not depend on the
+/// thread count.
 
 #include <algorithm>
 #include <cmath>
@@ -51,9 +56,13 @@ namespace octocd {
 
 namespace {
 
-/// The fewest bodies whose sort, copies and descent run on the worker team
+/// The fewest bodies whose keys, sort, copies and descent run on the worker team
 /// (octocd/parallel.hpp): below, one thread costs less than waking others.
 constexpr std::size_t kParallelItemsFrom = 4096;
+
+/// An item's node key where its box has a NaN coordinate (no node key reaches it: a key is
+/// a leaf range's start < 8^10, shifted by 4, and a level).
+constexpr std::uint64_t kNoNode = ~std::uint64_t(0);
 
 /// Float to an unsigned key with the same order (-0 sorts just before +0).
 inline std::uint32_t float_key(float f) {
@@ -220,7 +229,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
     detail::sort_pairs(out, n, tmp_pairs_, count_);
     stats.cell_candidates = candidates;
     stats.pairs = out.size();
-    stats.memory_bytes = (items_.capacity() + moved_.capacity() + merge_buf_.capacity()) *
+    stats.memory_bytes = (items_.capacity() + moved_.capacity() + merge_buf_.capacity() + fresh_.capacity()) *
                              sizeof(Item) + sorted_.capacity() * sizeof(Aabb) +
                          sminx_.capacity() * sizeof(float) + nodes_.capacity() * sizeof(Node) +
                          parents_.capacity() * sizeof(std::int32_t) +
@@ -347,22 +356,33 @@ class StrictOctreeBroadPhase final : public BroadPhase {
 
     const StrictGrid grid = strict_grid(domain_, depth);  // shared with the CUDA engine
 
-    std::size_t w = 0;
-    for (std::size_t k = 0; k < n; ++k) {
+    // Each item's key on the worker team (reading the boxes in the kept order), then the
+    // items kept in order and the moved ones set apart on this thread.
+    fresh_.resize(n);
+    LoopOptions by_items;
+    by_items.min_items = kParallelItemsFrom;
+    parallel_for(n, by_items, [&](std::size_t k, unsigned) {
       const std::uint32_t body = items_[k].body;
       const Aabb& b = boxes[body];
+      Item& it = fresh_[k];
+      it.body = body;
       if (std::isnan(b.min.x) || std::isnan(b.min.y) || std::isnan(b.min.z) ||
           std::isnan(b.max.x) || std::isnan(b.max.y) || std::isnan(b.max.z)) {
+        it.node = kNoNode;
+        return;
+      }
+      it.node = strict_node_key(grid, b);
+      it.minx = float_key(b.min.x);
+    });
+    std::size_t w = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const Item& it = fresh_[k];
+      if (it.node == kNoNode) {
         all_finite_prev_ = false;  // the item set shrinks: rebuild next time
         continue;
       }
-      const std::uint64_t node = strict_node_key(grid, b);
-      Item it;
-      it.node = node;
-      it.minx = float_key(b.min.x);
-      it.body = body;
       // A body that changed node may move far in the order: sort it apart and merge.
-      if (coherent_ && items_[k].node != node) {
+      if (coherent_ && items_[k].node != it.node) {
         moved_.push_back(it);
       } else {
         items_[w++] = it;
@@ -412,6 +432,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
   bool all_finite_prev_ = true;
   std::vector<Item> items_;
   std::vector<Item> moved_;
+  std::vector<Item> fresh_;  // each item's key this call, in the kept order
   std::vector<Item> merge_buf_;
   std::vector<Aabb> sorted_;
   std::vector<float> sminx_;
