@@ -363,6 +363,22 @@ Scene island_of_boxes(const std::string& name, const std::vector<std::array<std:
                      name);
 }
 
+/// impulse-feasibility's row after one step of `scene` on octocd's cpu engine, its record
+/// changed by `edit(rec)` before it is judged (every frame checked).
+template <class Edit>
+ValidationResult feasibility_after_step(const Scene& scene, Edit&& edit) {
+  World world(scene);
+  ValidationOptions opt;
+  opt.every = 1;
+  world.set_recording(true);
+  FrameValidators v(world, opt, {});
+  world.step();
+  FrameRecord rec = world.record();
+  edit(rec);
+  v.observe(rec, true);
+  return find(v.results(), "impulse-feasibility");
+}
+
 // impulse-feasibility's programme where CLP's unscaled dual simplex reports an optimum whose
 // impulses leave a resting box (its bound 1e-9 kg m/s) 102 and 23 x off: two islands of
 // boxes-uniform-1m's frames 46 and 47 (the cpu and cuda engines step them bit for bit), cut
@@ -383,16 +399,7 @@ TEST(Validators, FeasibilityTakesSecondOpinionsOnAFailure) {
     // nudge: m/s added to the resting box's (body 7's) velocity after the step, along z (a
     // tangent of its wall's normal).
     auto feasibility = [&](double nudge) {
-      World world(scene);
-      ValidationOptions opt;
-      opt.every = 1;
-      world.set_recording(true);
-      FrameValidators v(world, opt, {});
-      world.step();
-      FrameRecord rec = world.record();
-      rec.v_post[7].z += static_cast<float>(nudge);
-      v.observe(rec, true);
-      return find(v.results(), "impulse-feasibility");
+      return feasibility_after_step(scene, [&](FrameRecord& rec) { rec.v_post[7].z += static_cast<float>(nudge); });
     };
     const ValidationResult clean = feasibility(0.0);
     EXPECT_TRUE(clean.pass) << scene.name << ": " << clean.detail;
@@ -438,24 +445,17 @@ TEST(Validators, FeasibilityWitnessesKeepTheProgrammesVerdict) {
   // The row on the step with sideways velocities v0 k^j, with only `alone`'s stack awake
   // (-1: every stack).
   auto feasibility = [&](double v0, double k, int alone) {
-    World world(scene);
-    ValidationOptions opt;
-    opt.every = 1;
-    world.set_recording(true);
-    FrameValidators v(world, opt, {});
-    world.step();
-    FrameRecord rec = world.record();
-    for (int j = 0; j < 100; ++j)
-      if (j % 7 != 0) (j % 2 ? rec.v_post[top[std::size_t(j)]].x : rec.v_post[top[std::size_t(j)]].z) +=
-                          static_cast<float>(v0 * std::pow(k, j));
-    if (alone >= 0) {
-      rec.asleep_pre.assign(rec.v_post.size(), 1);
-      const std::uint32_t t = top[std::size_t(alone)];
-      for (int level = 0; level <= alone % 3; ++level) rec.asleep_pre[t - std::uint32_t(level)] = 0;
-      rec.asleep_post = rec.asleep_pre;
-    }
-    v.observe(rec, true);
-    return find(v.results(), "impulse-feasibility");
+    return feasibility_after_step(scene, [&](FrameRecord& rec) {
+      for (int j = 0; j < 100; ++j)
+        if (j % 7 != 0) (j % 2 ? rec.v_post[top[std::size_t(j)]].x : rec.v_post[top[std::size_t(j)]].z) +=
+                            static_cast<float>(v0 * std::pow(k, j));
+      if (alone >= 0) {
+        rec.asleep_pre.assign(rec.v_post.size(), 1);
+        const std::uint32_t t = top[std::size_t(alone)];
+        for (int level = 0; level <= alone % 3; ++level) rec.asleep_pre[t - std::uint32_t(level)] = 0;
+        rec.asleep_post = rec.asleep_pre;
+      }
+    });
   };
   // The row's worst figure (its detail's "worst X of its bound", 3 digits; failing: its
   // cause's worst).
@@ -484,8 +484,9 @@ TEST(Validators, FeasibilityWitnessesKeepTheProgrammesVerdict) {
         << "k " << k << ": " << all.detail;
     EXPECT_EQ(failing.size(), k < 1.05 ? 0u : 39u) << "k " << k << ": " << all.detail;
     // Islands passed on their witnesses where the step's largest figure is within the bound.
-    if (failing.empty())
+    if (failing.empty()) {
       EXPECT_NE(all.detail.find("passed on impulses found by Gauss-Seidel"), std::string::npos) << all.detail;
+    }
   }
 }
 

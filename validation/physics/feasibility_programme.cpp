@@ -124,16 +124,23 @@ struct Programme {
   }
 };
 
+/// The impulse on A of one contact point's generators (programme columns c0 .. c0 +
+/// kConeSides - 1) at impulses `lambda` (kg m/s).
+D3 pyramid_impulse(const Programme& P, std::size_t c0, const std::vector<double>& lambda) {
+  D3 j{0, 0, 0};
+  for (int q = 0; q < kConeSides; ++q) j = j + lambda[c0 + std::size_t(q)] * P.columns[c0 + std::size_t(q)].dir;
+  return j;
+}
+
 /// Impulses on the kConeSides generators of one contact point's pyramid (programme columns
-/// c0 .. c0 + kConeSides - 1, each the impulse `dir` on A) whose sum on a body (A: s = 1, B:
-/// s = -1) comes near `x` (kg m/s), in closed form: x's component along the pyramid's axis
-/// (zero where it points out of the pyramid) shared by the generators, its tangential
-/// component taken by the one or two generators nearest its direction, scaled into the
-/// pyramid where it reaches beyond. Written into `lambda` (the other columns untouched).
-void pyramid_witness(const Programme& P, std::size_t c0, double s, const D3& x, std::vector<double>& lambda) {
+/// c0 .. c0 + kConeSides - 1, each the impulse `dir` on A) whose sum on A comes near `x`
+/// (kg m/s), in closed form: x's component along the pyramid's axis (zero where it points
+/// out of the pyramid) shared by the generators, its tangential component taken by the one
+/// or two generators nearest its direction, scaled into the pyramid where it reaches
+/// beyond. Written into `lambda` (the other columns untouched).
+void pyramid_witness(const Programme& P, std::size_t c0, const D3& x, std::vector<double>& lambda) {
   D3 axis{0, 0, 0};
   for (int j = 0; j < kConeSides; ++j) axis = axis + (1.0 / kConeSides) * P.columns[c0 + std::size_t(j)].dir;
-  axis = s * axis;
   const double beta = dot3(x, axis) / dot3(axis, axis);
   for (int j = 0; j < kConeSides; ++j) lambda[c0 + std::size_t(j)] = 0.0;
   if (!(beta > 0.0)) return;
@@ -141,7 +148,7 @@ void pyramid_witness(const Programme& P, std::size_t c0, double s, const D3& x, 
   std::array<D3, kConeSides> w;
   std::size_t k = 0;
   for (int j = 0; j < kConeSides; ++j) {
-    w[std::size_t(j)] = s * P.columns[c0 + std::size_t(j)].dir - axis;
+    w[std::size_t(j)] = P.columns[c0 + std::size_t(j)].dir - axis;
     if (dot3(t, w[std::size_t(j)]) > dot3(t, w[k])) k = std::size_t(j);
   }
   const std::size_t next = (k + 1) % kConeSides, prev = (k + kConeSides - 1) % kConeSides;
@@ -173,9 +180,8 @@ void pyramid_witness(const Programme& P, std::size_t c0, double s, const D3& x, 
 /// other points (split between two dynamic bodies row by row in proportion to their
 /// bounds: the split that minimises the larger of the two scaled residuals), at most
 /// `sweeps` sweeps, until a sweep lowers the figure no further; the smallest figure of the
-/// sweeps and of no impulse (recomputed from
-/// the impulses: a witness, an upper bound on the programme's minimum); `lambda` its
-/// impulses. Infinity where the form does not apply (rotation, friction per manifold).
+/// sweeps and of no impulse (recomputed from the impulses: a witness, an upper bound on the
+/// programme's minimum); `lambda` its impulses. Infinity where the form does not apply (rotation, friction per manifold).
 double witness_figure(const Programme& P, const std::vector<double>& rhs, const std::vector<double>& sig,
                       std::vector<double>& lambda, std::vector<double>& residual, int sweeps) {
   const std::vector<Contact>& contacts = *P.contacts;
@@ -189,8 +195,7 @@ double witness_figure(const Programme& P, const std::vector<double>& rhs, const 
     for (std::size_t k = 0; k < contacts.size(); ++k) {
       const Contact& c = contacts[k];
       const std::size_t sa = P.slot(c.pair.a), sb = P.slot(c.pair.b), c0 = kConeSides * k;
-      D3 j{0, 0, 0};
-      for (int q = 0; q < kConeSides; ++q) j = j + trial[c0 + std::size_t(q)] * P.columns[c0 + std::size_t(q)].dir;
+      const D3 j = pyramid_impulse(P, c0, trial);
       D3 x;
       for (std::size_t r = 0; r < 3; ++r) {
         const double ra = sa != Programme::kNone ? res[3 * sa + r] + j[r] : 0.0;
@@ -202,9 +207,8 @@ double witness_figure(const Programme& P, const std::vector<double>& rhs, const 
         else
           x[r] = (ra * sig[3 * sb + r] - rb * sig[3 * sa + r]) / (sig[3 * sa + r] + sig[3 * sb + r]);
       }
-      pyramid_witness(P, c0, 1.0, x, trial);
-      D3 j2{0, 0, 0};
-      for (int q = 0; q < kConeSides; ++q) j2 = j2 + trial[c0 + std::size_t(q)] * P.columns[c0 + std::size_t(q)].dir;
+      pyramid_witness(P, c0, x, trial);
+      const D3 j2 = pyramid_impulse(P, c0, trial);
       for (std::size_t r = 0; r < 3; ++r) {
         if (sa != Programme::kNone) res[3 * sa + r] += j[r] - j2[r];
         if (sb != Programme::kNone) res[3 * sb + r] -= j[r] - j2[r];
