@@ -27,7 +27,8 @@
 /// (filtered from the parent's list plus the parent's own bodies; an ancestor body that
 /// misses the bounds cannot overlap any body below, so this is exact, with no rounding
 /// involved); it is kept sorted by min.x (a merge). Pairs inside a node: sweep and prune
-/// on x; pairs with ancestors: a two-list sweep on x of the own bodies against the
+/// on x (in a node of kSplitOwnFrom bodies or more, those spanning its centre plane across
+/// x swept on y among themselves); pairs with ancestors: a two-list sweep on x of the own bodies against the
 /// candidate list. Every related pair is met once, then goes
 /// through Eq. 6. `cell_candidates` counts all pairs in related nodes (design.md section 5.1), i.e.
 /// before this culling.
@@ -70,6 +71,26 @@ inline std::uint32_t float_key(float f) {
   std::memcpy(&u, &f, sizeof u);
   return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
 }
+
+/// Whether box `b` of the node with key `key` spans that node's centre plane across x, read
+/// off the leaf indices as strict_node_key finds them (0 for a leaf node, a box outside the
+/// root or an unusable grid). A node's own bodies each span one of its three centre planes,
+/// and those that span the one across x overlap one another in x: judge_node sweeps them on
+/// y. A hint only: whatever it answers, the same pairs are found.
+inline std::uint8_t spans_centre_x(const StrictGrid& g, std::uint64_t key, const Aabb& b) {
+  const int s = g.depth - strict_key_level(key);
+  if (!g.usable || s <= 0) return 0;
+  const float u0 = (b.min.x - g.origin.x) * g.scale;
+  const float u1 = (b.max.x - g.origin.x) * g.scale;
+  if (!(u0 >= 0.0f && u1 <= g.cells && u0 <= u1)) return 0;
+  const std::uint32_t t0 = std::min(static_cast<std::uint32_t>(u0), g.top);
+  const std::uint32_t t1 = std::min(static_cast<std::uint32_t>(u1), g.top);
+  return ((t0 ^ t1) >> (s - 1)) != 0u ? 1 : 0;
+}
+
+/// The fewest own bodies of a node for which judge_node sweeps those spanning its centre
+/// plane across x on y (apart from the others); below it, one sweep on x.
+constexpr std::uint32_t kSplitOwnFrom = 64;
 
 /// One body in the sort: node key (range lo << 4 | level), then min.x.
 struct Item {
@@ -261,6 +282,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
     std::vector<Cand> cands;
     std::vector<Cand> filt;
     std::vector<std::int32_t> chain;
+    std::vector<std::uint32_t> across, rest;  // a large node's own slots (judge_node)
   };
 
   /// Enters node k on `sc`'s stack: pops the frames down to its parent's, then pushes its
@@ -295,15 +317,19 @@ class StrictOctreeBroadPhase final : public BroadPhase {
   /// sweep and prune on x, and against its ancestor candidates by a two-list sweep on x (a
   /// pair met from whichever has the smaller min.x, own first on ties). Returns the node's
   /// cell candidates (all pairs in related nodes).
-  std::uint64_t judge_node(std::size_t k, const Scratch& sc, std::vector<Pair>& out) const {
+  std::uint64_t judge_node(std::size_t k, Scratch& sc, std::vector<Pair>& out) const {
     const Node& node = nodes_[k];
     const std::uint32_t cbegin = sc.frames.back().cbegin, cend = sc.frames.back().cend;
     const std::uint64_t pop = node.end - node.begin;
-    for (std::uint32_t i = node.begin; i < node.end; ++i) {
-      const Aabb bi = sorted_[i];
-      const std::uint32_t body_i = items_[i].body;
-      for (std::uint32_t j = i + 1; j < node.end && sminx_[j] <= bi.max.x; ++j) {
-        if (overlaps(bi, sorted_[j])) emit(body_i, items_[j].body, out);
+    if (pop >= kSplitOwnFrom) {
+      own_pairs_split(node, sc, out);
+    } else {
+      for (std::uint32_t i = node.begin; i < node.end; ++i) {
+        const Aabb bi = sorted_[i];
+        const std::uint32_t body_i = items_[i].body;
+        for (std::uint32_t j = i + 1; j < node.end && sminx_[j] <= bi.max.x; ++j) {
+          if (overlaps(bi, sorted_[j])) emit(body_i, items_[j].body, out);
+        }
       }
     }
     std::uint32_t i = node.begin, c = cbegin;
@@ -325,12 +351,58 @@ class StrictOctreeBroadPhase final : public BroadPhase {
     return pop * (pop - 1) / 2 + pop * node.anc_pop;
   }
 
+  /// The pairs among a large node's own bodies. Those spanning its centre plane across x
+  /// (spans_centre_x) overlap one another in x, so a sweep on x would test each against all
+  /// the others (10^6 uniform boxes put thousands in each of the top nodes): they are swept
+  /// on y among themselves, the others on x, and the two sets against each other by a
+  /// two-list sweep on x. Each pair once.
+  void own_pairs_split(const Node& node, Scratch& sc, std::vector<Pair>& out) const {
+    std::vector<std::uint32_t>& across = sc.across;
+    std::vector<std::uint32_t>& rest = sc.rest;
+    across.clear();
+    rest.clear();
+    const std::uint64_t key = items_[node.begin].node;
+    for (std::uint32_t i = node.begin; i < node.end; ++i)
+      (spans_centre_x(grid_, key, sorted_[i]) ? across : rest).push_back(i);
+    for (std::size_t a = 0; a < rest.size(); ++a) {  // rest x rest, on x (slots in min.x order)
+      const Aabb bi = sorted_[rest[a]];
+      for (std::size_t b = a + 1; b < rest.size() && sminx_[rest[b]] <= bi.max.x; ++b) {
+        if (overlaps(bi, sorted_[rest[b]])) emit(items_[rest[a]].body, items_[rest[b]].body, out);
+      }
+    }
+    std::size_t a = 0, r = 0;  // across x rest, on x
+    while (a < across.size() && r < rest.size()) {
+      if (sminx_[across[a]] <= sminx_[rest[r]]) {
+        const Aabb bi = sorted_[across[a]];
+        for (std::size_t q = r; q < rest.size() && sminx_[rest[q]] <= bi.max.x; ++q) {
+          if (overlaps(bi, sorted_[rest[q]])) emit(items_[across[a]].body, items_[rest[q]].body, out);
+        }
+        ++a;
+      } else {
+        const Aabb bi = sorted_[rest[r]];
+        for (std::size_t q = a; q < across.size() && sminx_[across[q]] <= bi.max.x; ++q) {
+          if (overlaps(sorted_[across[q]], bi)) emit(items_[across[q]].body, items_[rest[r]].body, out);
+        }
+        ++r;
+      }
+    }
+    std::sort(across.begin(), across.end(), [&](std::uint32_t p, std::uint32_t q) {  // across x across, on y
+      return sorted_[p].min.y < sorted_[q].min.y || (sorted_[p].min.y == sorted_[q].min.y && p < q);
+    });
+    for (std::size_t i = 0; i < across.size(); ++i) {
+      const Aabb bi = sorted_[across[i]];
+      for (std::size_t j = i + 1; j < across.size() && sorted_[across[j]].min.y <= bi.max.y; ++j) {
+        if (overlaps(bi, sorted_[across[j]])) emit(items_[across[i]].body, items_[across[j]].body, out);
+      }
+    }
+  }
+
   /// The descents' scratch and pairs (bytes).
   std::size_t scratch_bytes() const {
     std::size_t bytes = 0;
     for (const Scratch& sc : scratch_)
       bytes += sc.frames.capacity() * sizeof(Frame) + (sc.cands.capacity() + sc.filt.capacity()) * sizeof(Cand) +
-               sc.chain.capacity() * sizeof(std::int32_t);
+               (sc.chain.capacity() + sc.across.capacity() + sc.rest.capacity()) * sizeof(std::int32_t);
     for (const std::vector<Pair>& pairs : task_out_) bytes += pairs.capacity() * sizeof(Pair);
     return bytes;
   }
@@ -354,7 +426,8 @@ class StrictOctreeBroadPhase final : public BroadPhase {
     all_finite_prev_ = true;
     moved_.clear();
 
-    const StrictGrid grid = strict_grid(domain_, depth);  // shared with the CUDA engine
+    grid_ = strict_grid(domain_, depth);  // shared with the CUDA engine
+    const StrictGrid& grid = grid_;
 
     // Each item's key on the worker team (reading the boxes in the kept order), then the
     // items kept in order and the moved ones set apart on this thread.
@@ -436,6 +509,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
   std::vector<Item> merge_buf_;
   std::vector<Aabb> sorted_;
   std::vector<float> sminx_;
+  StrictGrid grid_;  // this call's leaf grid (build_keys)
   std::vector<Node> nodes_;
   std::vector<std::int32_t> parents_;
   std::vector<std::uint32_t> task_roots_;
