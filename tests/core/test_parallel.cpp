@@ -3,7 +3,9 @@
 // tuner that runs a loop on the team or on its caller alone.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cstdint>
 #include <cmath>
 #include <condition_variable>
 #include <mutex>
@@ -179,6 +181,37 @@ TEST(Parallel, ThreadCountSetsTheCallersCountForItsScope) {
     std::thread([] { EXPECT_EQ(octocd::current_threads(), octocd::default_threads()); }).join();  // per thread
   }
   EXPECT_EQ(octocd::current_threads(), outside);
+}
+
+// parallel_sort against std::sort: keys drawn from few values (long runs of equal keys across
+// the merge paths' cuts) with distinct ids as the tie-break, every size from one chunk to an
+// odd number of runs per round, on thread counts that leave a run unpaired.
+TEST(Parallel, ParallelSortGivesStdSortsOrderWhateverTheThreadCount) {
+  struct Item {
+    std::uint32_t key;
+    std::uint32_t id;
+  };
+  const auto less = [](const Item& p, const Item& q) { return p.key != q.key ? p.key < q.key : p.id < q.id; };
+  std::uint64_t state = 12345;
+  for (const std::size_t n : {std::size_t(4096), std::size_t(5001), std::size_t(65537)}) {
+    for (const std::uint32_t values : {2u, 97u, 1u << 30}) {
+      std::vector<Item> items(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        items[i] = {static_cast<std::uint32_t>((state >> 33) % values), static_cast<std::uint32_t>(i)};
+      }
+      std::vector<Item> want = items;
+      std::sort(want.begin(), want.end(), less);
+      for (const unsigned threads : {2u, 3u, 5u, 8u, 13u}) {
+        std::vector<Item> got = items;
+        octocd::parallel_sort(got, threads, less);
+        ASSERT_EQ(got.size(), want.size());
+        for (std::size_t i = 0; i < n; ++i) {
+          ASSERT_EQ(got[i].id, want[i].id) << "n " << n << ", " << values << " keys, " << threads << " threads, at " << i;
+        }
+      }
+    }
+  }
 }
 
 }  // namespace

@@ -31,6 +31,8 @@
 #include <algorithm>
 #include <cstddef>
 #include <functional>
+#include <memory>
+#include <type_traits>
 #include <vector>
 
 namespace octocd {
@@ -97,37 +99,74 @@ unsigned loop_threads(std::size_t n, const LoopOptions& options);
 
 /// std::sort of `v` by `less` on `threads` threads (at least 4,096 elements; fewer are
 /// sorted on the calling thread): `threads` chunks sorted on the team, then merged pairwise
-/// (std::merge, each round's merges on the team). The order std::sort gives wherever no two
-/// elements are equivalent (the broadphases and validators sort distinct pairs and cell
-/// entries), whatever the thread count. T copyable and default-constructible.
+/// in rounds, each round's merges split on the team by merge paths (the two runs cut where
+/// `threads` equal shares of the output begin: each share is std::merge of its two cuts, so
+/// a round writes what one std::merge per pair of runs would). The order std::sort gives
+/// wherever no two elements are equivalent (the broadphases and validators sort distinct
+/// pairs and cell entries), whatever the thread count. T trivially copyable: the merges'
+/// second buffer is left uninitialised until they write it.
 template <class T, class Less>
 void parallel_sort(std::vector<T>& v, unsigned threads, Less less) {
+  static_assert(std::is_trivially_copyable_v<T> && std::is_trivially_destructible_v<T>,
+                "parallel_sort's merge buffer holds T without constructing it");
   const std::size_t n = v.size();
   if (threads <= 1 || n < 4096) {
     std::sort(v.begin(), v.end(), less);
     return;
   }
-  auto at = [](std::vector<T>& x, std::size_t k) { return x.begin() + std::ptrdiff_t(k); };
   std::vector<std::size_t> bound(threads + 1);  // run k is [bound[k], bound[k + 1])
   for (unsigned k = 0; k <= threads; ++k) bound[k] = n * k / threads;
   LoopOptions one_each;
   one_each.threads = static_cast<int>(threads);
   one_each.chunk = 1;
-  parallel_for(threads, one_each, [&](std::size_t k, unsigned) { std::sort(at(v, bound[k]), at(v, bound[k + 1]), less); });
-  std::vector<T> merged(n);
+  T* const data = v.data();
+  parallel_for(threads, one_each, [&](std::size_t k, unsigned) { std::sort(data + bound[k], data + bound[k + 1], less); });
+  std::allocator<T> alloc;
+  struct Buffer {
+    std::allocator<T>& alloc;
+    T* p;
+    std::size_t n;
+    ~Buffer() { alloc.deallocate(p, n); }
+  } buffer{alloc, alloc.allocate(n), n};
+  T* src = data;
+  T* dst = buffer.p;
+  // The count of A's elements among the first d of merge(A, B): std::merge takes B's
+  // element only when it is less than A's.
+  auto cut = [&](const T* a, std::size_t na, const T* b, std::size_t nb, std::size_t d) {
+    std::size_t lo = d > nb ? d - nb : 0, hi = std::min(d, na);
+    while (lo < hi) {
+      const std::size_t i = lo + (hi - lo) / 2;
+      if (!less(b[d - i - 1], a[i]))
+        lo = i + 1;
+      else
+        hi = i;
+    }
+    return lo;
+  };
   while (bound.size() > 2) {
     const std::size_t runs = bound.size() - 1, merges = (runs + 1) / 2;
-    parallel_for(merges, one_each, [&](std::size_t j, unsigned) {
+    const std::size_t shares = std::max<std::size_t>(1, threads / merges);
+    parallel_for(merges * shares, one_each, [&](std::size_t t, unsigned) {
+      const std::size_t j = t / shares, s = t % shares;
       const std::size_t first = bound[2 * j], mid = bound[std::min(2 * j + 1, runs)],
                         last = bound[std::min(2 * j + 2, runs)];
-      std::merge(at(v, first), at(v, mid), at(v, mid), at(v, last), at(merged, first), less);
+      const T* a = src + first;
+      const T* b = src + mid;
+      const std::size_t na = mid - first, nb = last - mid;
+      const std::size_t d0 = (na + nb) * s / shares, d1 = (na + nb) * (s + 1) / shares;
+      const std::size_t i0 = cut(a, na, b, nb, d0), i1 = cut(a, na, b, nb, d1);
+      std::merge(a + i0, a + i1, b + (d0 - i0), b + (d1 - i1), dst + first + d0, less);
     });
-    v.swap(merged);
+    std::swap(src, dst);
     std::vector<std::size_t> next;
     for (std::size_t k = 0; k < bound.size(); k += 2) next.push_back(bound[k]);
     if (next.back() != n) next.push_back(n);
     bound.swap(next);
   }
+  if (src != data)
+    parallel_for(threads, one_each, [&](std::size_t k, unsigned) {
+      std::copy(src + n * k / threads, src + n * (k + 1) / threads, data + n * k / threads);
+    });
 }
 
 }  // namespace octocd
