@@ -99,17 +99,14 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
 
   // Candidates: the pairs within the step's reach (step_reach_boxes), searched with the
   // checked frame's candidates where this step's checked frame holds them.
-  std::vector<double> own_motion;
-  std::vector<Aabb> own_world, grown;
-  std::vector<Pair> own_cand;
   const CheckedFrame* shared = f.geometry && f.geometry->work.reach ? &*f.geometry : nullptr;
   if (!shared) {
-    step_reach_boxes(rec, det, own_motion, own_world, grown);
-    reach_pairs(grown, own_cand, st.pair_tables);
+    step_reach_boxes(rec, det, st.motion, st.world, st.grown);
+    reach_pairs(st.grown, st.cand, st.pair_tables);
   }
-  const std::vector<double>& motion = shared ? shared->work.motion : own_motion;
-  const std::vector<Aabb>& world = shared ? shared->work.world : own_world;
-  const std::vector<Pair>& cand = shared ? shared->work.reach_cand : own_cand;
+  const std::vector<double>& motion = shared ? shared->work.motion : st.motion;
+  const std::vector<Aabb>& world = shared ? shared->work.world : st.world;
+  const std::vector<Pair>& cand = shared ? shared->work.reach_cand : st.cand;
 
   // Each pair within reach: its contact points and normal.
   std::vector<std::uint32_t>& parent = st.parent;
@@ -143,8 +140,8 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // takes a copy of its own.
   // The counts summed per block of candidates on the threads (integers: any order), the
   // pairs with contacts selected on them; the unions then in candidate order.
-  std::vector<std::size_t> with_contacts;
-  std::vector<std::uint32_t> bodies_touched;
+  std::vector<std::size_t>& with_contacts = st.with_contacts;
+  std::vector<std::uint32_t>& bodies_touched = st.bodies_touched;
   {
     const unsigned count_threads = loop_threads(threads, cand.size(), kParallelSelectFrom);
     const std::size_t blocks = std::max<std::size_t>(1, std::size_t(count_threads) * 8);
@@ -199,7 +196,10 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // root. The index's loops go to the threads from kParallelIndexFrom items.
   constexpr std::uint32_t kNoRoot = 0xffffffffu;
   constexpr int kShortPath = 8;
-  std::vector<std::uint32_t> roots, root_of(bodies_touched.size());
+  std::vector<std::uint32_t>& roots = st.roots;
+  std::vector<std::uint32_t>& root_of = st.root_of;
+  roots.clear();
+  root_of.resize(bodies_touched.size());
   const unsigned index_threads = loop_threads(threads, bodies_touched.size(), kParallelIndexFrom);
   parallel_items_on(bodies_touched.size(), index_threads, stop, [&](std::size_t k, unsigned) {
     std::uint32_t i = bodies_touched[k];
@@ -219,7 +219,7 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // Each island's bodies and its pairs with contacts (candidate order), as ranges of two
   // flat lists: first[ii] .. first[ii + 1]; the items sorted by (island, item) on `threads`
   // threads (the keys are distinct: the order of a stable counting sort by island).
-  std::vector<std::uint64_t> keys;
+  std::vector<std::uint64_t>& keys = st.keys;
   auto ranges = [&](std::size_t items, auto island_of_item, std::vector<std::size_t>& first, auto& flat, auto value) {
     keys.resize(items);
     parallel_items_on(items, loop_threads(threads, items, kParallelIndexFrom), stop, [&](std::size_t k, unsigned) {
@@ -235,8 +235,10 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
     }
     for (std::size_t ii = 0; ii < roots.size(); ++ii) first[ii + 1] += first[ii];
   };
-  std::vector<std::size_t> member_first, pair_first, pairs_flat;
-  std::vector<std::uint32_t> members_flat;
+  std::vector<std::size_t>& member_first = st.member_first;
+  std::vector<std::size_t>& pair_first = st.pair_first;
+  std::vector<std::size_t>& pairs_flat = st.pairs_flat;
+  std::vector<std::uint32_t>& members_flat = st.members_flat;
   ranges(bodies_touched.size(), [&](std::size_t k) { return std::size_t(island_of[root_of[k]]); }, member_first,
          members_flat, [&](std::size_t k) { return bodies_touched[k]; });
   ranges(with_contacts.size(),
@@ -272,7 +274,8 @@ void PhysicsValidators::Impl::measure<RowId::ImpulseFeasibility>(PhysicsFrame& f
   // exceed the step's largest, nor its bound (docs/validation.md, "Motion explained by
   // feasible contact impulses", 3).
   const std::size_t islands = island_members.size();
-  std::vector<IslandVerdict> verdicts(islands);
+  std::vector<IslandVerdict>& verdicts = st.verdicts;
+  verdicts.assign(islands, IslandVerdict{});
   auto judge = [&](const std::vector<std::uint32_t>& ids, IslandPass pass) {
     const std::size_t run = std::clamp<std::size_t>(ids.size() / kMinIslandRuns, 1, kIslandsPerSolve);
     parallel_items((ids.size() + run - 1) / run, threads, stop, [&](std::size_t ri, unsigned) {

@@ -89,6 +89,23 @@ struct PairContacts {
   }
 };
 
+/// What became of an island: judged (figure and body), or counted and not judged.
+enum class Outcome { Judged, Asleep, Locked, Clamped, TooLarge, Unsolved };
+/// A pass of feasibility_islands: the islands' outcomes and witness figures, or their
+/// programmes solved.
+enum class IslandPass : int { Witness, Programme };
+/// An island's verdict (PhysicsValidators::Impl::feasibility_islands): its figure (the
+/// largest residual in units of its bound of the impulses found, <= 1 passes), the body
+/// named, and the failure's text where figure > 1.
+struct IslandVerdict {
+  Outcome outcome = Outcome::Judged;
+  double figure = 0;
+  /// The figure of the island's witness impulses (infinity: none).
+  double witness = std::numeric_limits<double>::infinity();
+  std::uint32_t body = 0;
+  std::string text;
+};
+
 /// The row's counts beyond its tally (PhysicsValidators::Impl::row_state).
 struct FeasibilityState {
   std::uint64_t steps = 0, islands = 0, contacts = 0, pairs = 0;
@@ -121,6 +138,19 @@ struct FeasibilityState {
   std::vector<PairContacts> pair_out;
   std::vector<std::vector<std::uint32_t>> island_members;
   std::vector<std::vector<Contact>> island_contacts;
+  /// The step's reach (step_reach_boxes: each body's motion, world and grown boxes) and
+  /// pairs within it where the checked frame does not hold them (a judge device's frames),
+  /// and the islands' index (the pairs with contacts, the bodies touched, their roots, the
+  /// sort keys, the ranges and lists of each island's bodies and pairs) and verdicts, in
+  /// memory kept from step to step (at 10^6 bodies the boxes are 56 MB a step: fresh pages,
+  /// zeroed on one thread, took longer than filling them on all).
+  std::vector<double> motion;
+  std::vector<Aabb> world, grown;
+  std::vector<Pair> cand;
+  std::vector<std::size_t> with_contacts, member_first, pair_first, pairs_flat;
+  std::vector<std::uint32_t> bodies_touched, roots, root_of, members_flat;
+  std::vector<std::uint64_t> keys;
+  std::vector<IslandVerdict> verdicts;
 };
 
 
@@ -140,21 +170,5 @@ struct ContactSearch {
   const std::vector<std::pair<Pair, std::size_t>>& witness_rows;
 };
 
-/// What became of an island: judged (figure and body), or counted and not judged.
-enum class Outcome { Judged, Asleep, Locked, Clamped, TooLarge, Unsolved };
-/// A pass of feasibility_islands: the islands' outcomes and witness figures, or their
-/// programmes solved.
-enum class IslandPass : int { Witness, Programme };
-/// An island's verdict (PhysicsValidators::Impl::feasibility_islands): its figure (the
-/// largest residual in units of its bound of the impulses found, <= 1 passes), the body
-/// named, and the failure's text where figure > 1.
-struct IslandVerdict {
-  Outcome outcome = Outcome::Judged;
-  double figure = 0;
-  /// The figure of the island's witness impulses (infinity: none).
-  double witness = std::numeric_limits<double>::infinity();
-  std::uint32_t body = 0;
-  std::string text;
-};
 
 }  // namespace octocd::feasibility

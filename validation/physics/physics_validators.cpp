@@ -294,10 +294,14 @@ void PhysicsValidators::observe(const FrameRecord& rec, bool checked) {
   s.last_frame = rec.frame;
   s.flat_frame = -1;
   std::vector<Pose>& det = s.step_poses;
-  det.assign(n, Pose{});
   const bool poses = !rec.x_det.empty() || rec.aabbs.size() == n;
   const bool pre_poses = !poses && rec.x_pre.size() == n;
-  // Each body's pose, on the threads.
+  // Each body's pose, on the threads (every entry written: the memory of the last frame's
+  // poses is not cleared first).
+  if (poses || pre_poses)
+    det.resize(n);
+  else
+    det.assign(n, Pose{});
   if (poses || pre_poses)
     parallel_items_on(n, loop_threads(s.threads, n, kParallelBodyBoxesFrom), s.stop, [&](std::size_t i, unsigned) {
       det[i] = poses ? detection_pose(*s.model, rec, i)

@@ -55,14 +55,15 @@ constexpr std::size_t kParallelSelectFrom = 8192;
 
 /// `out` = value(i) for every i in [0, n) with keep(i), in i order, on `threads` threads
 /// (keep and value called once per item, from any thread): the items counted per block,
-/// then each block written at its offset. One thread, or fewer than
-/// kParallelSelectFrom items: the plain loop. `stop` as parallel_items_on
+/// then each block written at its offset (`out` resized, not cleared first: only entries
+/// past its old size are value-initialised before they are written). One thread, or fewer
+/// than kParallelSelectFrom items: the plain loop. `stop` as parallel_items_on
 /// (ValidationStopped; `out` then holds no meaning). T default-constructible.
 template <class T, class Keep, class Value>
 void parallel_select(std::size_t n, std::vector<T>& out, unsigned threads, const std::function<bool()>& stop,
                      Keep&& keep, Value&& value) {
-  out.clear();
   if (threads <= 1 || n < kParallelSelectFrom) {
+    out.clear();
     for (std::size_t i = 0; i < n; ++i)
       if (keep(i)) out.push_back(value(i));
     return;
