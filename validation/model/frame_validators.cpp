@@ -172,6 +172,10 @@ bool comparable(BroadPhaseCost cost, std::size_t n) {
 /// scenes up to 100,006 boxes on every judged frame.
 constexpr std::size_t kSubquadraticBoxesPerJudgedFrame = 200000;
 
+/// The fewest flat pairs whose midphase-completeness answers (the exhaustive vertex test and
+/// each level list: microseconds a pair) go to the validators' threads.
+constexpr std::size_t kParallelMidphasePairsFrom = 64;
+
 /// The fewest validator threads per due broadphase of octocd's own (octree, octree-strict,
 /// spatial-hash: their loops on the worker team) for candidate-sets to run those one after
 /// another on every thread rather than side by side. Side by side on this project's 2-core
@@ -305,6 +309,8 @@ struct FrameValidators::Impl {
   std::vector<std::uint64_t> bp_compared;
   std::vector<std::size_t> bp_order;
 
+  /// Midphase completeness: each flat pair's answers this frame (the row's loop).
+  std::vector<std::uint32_t> midphase_answers;
   CheckTally candidates, midphase, contraction, friction, momentum, centre;
   std::unique_ptr<AppliedStateJudge> applied;
   std::uint64_t candidate_frames = 0, midphase_pairs = 0, dynamic_pairs = 0;
@@ -520,28 +526,48 @@ void FrameValidators::observe(const FrameRecord& rec, bool checked) try {
     // 2. Midphase completeness: every level list equals the exhaustive test (design.md section 7.2).
     {
       clock.emplace(s.t_midphase);
-      for (const Pair& q : s.expected) {
-        poll();
-        if (w[q.a] == 0.0f && w[q.b] == 0.0f) continue;
+      // Each pair's answers on the validators' threads (bit 0 the exhaustive test's, bit 1
+      // the engine's confirmed set's, bit 2 + k configuration k's; kSkipPair for a pair of
+      // two static bodies), then tallied in pair order as one thread would.
+      const std::vector<Pair>& pairs = s.expected;
+      std::vector<std::uint32_t>& answers = s.midphase_answers;
+      answers.resize(pairs.size());
+      constexpr std::uint32_t kSkipPair = 0x80000000u;
+      parallel_items_on(pairs.size(), loop_threads(s.options.threads, pairs.size(), kParallelMidphasePairsFrom),
+                        s.options.stop, [&](std::size_t k, unsigned) {
+        const Pair q = pairs[k];
+        if (w[q.a] == 0.0f && w[q.b] == 0.0f) {
+          answers[k] = kSkipPair;
+          return;
+        }
         const std::uint32_t sa = model.bodies[q.a].shape, sb = model.bodies[q.b].shape;
         const PlacedShape a = placed(q.a), b = placed(q.b);
         const float theta = model.theta(sa, sb);
-        const bool truth = exhaustive_oracle(a, b, theta);
-        ++s.midphase_pairs;
+        std::uint32_t bits = exhaustive_oracle(a, b, theta) ? 1u : 0u;
         // The engine's own verdict this frame (its confirmed set).
-        const bool engine_says = std::binary_search(rec.confirmed.begin(), rec.confirmed.end(), q);
+        if (std::binary_search(rec.confirmed.begin(), rec.confirmed.end(), q)) bits |= 2u;
+        for (std::size_t c = 0; c < s.configs.size(); ++c) {
+          MidphaseStats ms;
+          if (s.confirm(a, b, theta, s.configs[c], ms)) bits |= 4u << c;
+        }
+        answers[k] = bits;
+      });
+      for (std::size_t k = 0; k < pairs.size(); ++k) {
+        if (answers[k] == kSkipPair) continue;
+        const Pair q = pairs[k];
+        const bool truth = (answers[k] & 1u) != 0, engine_says = (answers[k] & 2u) != 0;
+        ++s.midphase_pairs;
         s.midphase.check(engine_says == truth, engine_says == truth ? 0.0 : 1.0,
                          [&] { return fmt::format("frame {}: {} midphase [{}] says {} for pair ({}, {}), "
                                      "exhaustive says {}",
                                      frame, s.source.label, model.scene.midphase.to_string(), engine_says,
                                      q.a, q.b, truth); });
-        for (const MidphaseConfig& c : s.configs) {
-          MidphaseStats ms;
-          const bool got = s.confirm(a, b, theta, c, ms);
+        for (std::size_t c = 0; c < s.configs.size(); ++c) {
+          const bool got = (answers[k] & (4u << c)) != 0;
           s.midphase.check(got == truth, got == truth ? 0.0 : 1.0,
                            [&] { return fmt::format("frame {}: midphase {} says {} for pair ({}, {}), "
                                        "exhaustive says {}",
-                                       frame, c.to_string(), got, q.a, q.b, truth); });
+                                       frame, s.configs[c].to_string(), got, q.a, q.b, truth); });
         }
       }
     }

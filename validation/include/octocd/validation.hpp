@@ -217,7 +217,8 @@ class FrameValidators {
                   std::vector<std::unique_ptr<BroadPhase>> broadphases);
   ~FrameValidators();
 
-  /// The midphase function checked against exhaustive_contact (default confirm_contact).
+  /// The midphase function checked against exhaustive_contact (default confirm_contact),
+  /// called from the validators' threads at once (it must hold no state of its own).
   using ConfirmFn = std::function<bool(const PlacedShape&, const PlacedShape&, float,
                                        const MidphaseConfig&, MidphaseStats&)>;
   /// Replaces the midphase under test (planted-fault tests).
