@@ -157,6 +157,10 @@ struct AppliedStateJudge::Impl {
   /// each dynamic body's union-find root; `island_of`: per root, its island; `slot`: each
   /// dynamic body's index in its island's list.
   std::vector<std::uint32_t> root, dyn_start, dyn, con_start, con, slot, cursor;
+  /// The index's scratch: per root the lowest body of its island; the bodies joined to
+  /// another's root, then the bodies of islands of two or more (ascending); each island's
+  /// lowest body (ascending: the islands' order).
+  std::vector<std::uint32_t> lowest, joined, firsts;
   std::vector<std::int32_t> island_of;
   /// Per thread of the islands' loop (the memory of its island and run kept between frames).
   std::vector<IslandWorker> workers;
@@ -775,33 +779,62 @@ void AppliedStateJudge::observe(const FrameRecord& rec, bool judge_response) {
   // Islands: dynamic bodies joined by confirmed contacts between two dynamic bodies; a
   // contact with a static body belongs to its dynamic body's island. Numbered in the order
   // of their first dynamic body; bodies and contacts listed per island (counted, then placed).
+  // The per-body passes on the validators' threads, the unions and the bodies of islands of
+  // two or more on this thread; the same roots, numbers and lists as one pass in body order.
+  const unsigned body_threads = loop_threads(s.threads, n, kParallelIntegrateFrom);
+  auto dynamic = [&](std::size_t i) { return w[i] > 0.0f; };
   s.parent.resize(n);
-  for (std::size_t i = 0; i < n; ++i) s.parent[i] = static_cast<std::uint32_t>(i);
+  parallel_items_on(n, body_threads, s.stop, [&](std::size_t i, unsigned) { s.parent[i] = static_cast<std::uint32_t>(i); });
   for (const Pair& q : rec.confirmed)
     if (w[q.a] > 0.0f && w[q.b] > 0.0f) s.parent[s.find(q.a)] = s.find(q.b);
+  // Each dynamic body's root (the parents only read), and the lowest body of each root's
+  // island (`lowest`, per root; its root, a dynamic body, is one of them).
   s.root.resize(n);
-  s.island_of.assign(n, -1);
-  s.dyn_start.assign(1, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!(w[i] > 0.0f)) continue;
-    const std::uint32_t r = s.find(static_cast<std::uint32_t>(i));
+  s.lowest.resize(n);
+  parallel_items_on(n, body_threads, s.stop, [&](std::size_t i, unsigned) {
+    std::uint32_t r = static_cast<std::uint32_t>(i);
+    while (s.parent[r] != r) r = s.parent[r];
     s.root[i] = r;
-    if (s.island_of[r] < 0) {
-      s.island_of[r] = static_cast<std::int32_t>(s.dyn_start.size() - 1);
-      s.dyn_start.push_back(0);
-    }
-    ++s.dyn_start[static_cast<std::size_t>(s.island_of[r]) + 1];
-  }
-  const std::size_t islands = s.dyn_start.size() - 1;
+    s.lowest[i] = static_cast<std::uint32_t>(i);
+  });
+  parallel_select(
+      n, s.joined, body_threads, s.stop, [&](std::size_t i) { return dynamic(i) && s.root[i] != i; },
+      [](std::size_t i) { return static_cast<std::uint32_t>(i); });
+  for (const std::uint32_t i : s.joined) s.lowest[s.root[i]] = std::min(s.lowest[s.root[i]], i);
+  // Islands numbered in the order of their lowest body; each counts its root and its bodies
+  // joined to it.
+  parallel_select(
+      n, s.firsts, body_threads, s.stop, [&](std::size_t i) { return dynamic(i) && s.lowest[s.root[i]] == i; },
+      [](std::size_t i) { return static_cast<std::uint32_t>(i); });
+  const std::size_t islands = s.firsts.size();
+  s.island_of.resize(n);
+  parallel_items_on(islands, loop_threads(s.threads, islands, kParallelIntegrateFrom), s.stop,
+                    [&](std::size_t j, unsigned) { s.island_of[s.root[s.firsts[j]]] = static_cast<std::int32_t>(j); });
+  s.dyn_start.assign(islands + 1, 1);
+  s.dyn_start[0] = 0;
+  for (const std::uint32_t i : s.joined) ++s.dyn_start[static_cast<std::size_t>(s.island_of[s.root[i]]) + 1];
   for (std::size_t j = 0; j < islands; ++j) s.dyn_start[j + 1] += s.dyn_start[j];
+  // Each island's bodies in body order: an island of one body on the threads, the bodies of
+  // larger ones on this thread.
   s.dyn.resize(s.dyn_start.back());
   s.slot.resize(n);
+  auto island_size = [&](std::size_t i) {
+    const std::size_t j = static_cast<std::size_t>(s.island_of[s.root[i]]);
+    return s.dyn_start[j + 1] - s.dyn_start[j];
+  };
+  parallel_items_on(n, body_threads, s.stop, [&](std::size_t i, unsigned) {
+    if (!dynamic(i) || island_size(i) != 1) return;
+    s.slot[i] = 0;
+    s.dyn[s.dyn_start[static_cast<std::size_t>(s.island_of[s.root[i]])]] = static_cast<std::uint32_t>(i);
+  });
+  parallel_select(
+      n, s.joined, body_threads, s.stop, [&](std::size_t i) { return dynamic(i) && island_size(i) > 1; },
+      [](std::size_t i) { return static_cast<std::uint32_t>(i); });
   s.cursor.assign(s.dyn_start.begin(), s.dyn_start.end() - 1);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!(w[i] > 0.0f)) continue;
+  for (const std::uint32_t i : s.joined) {
     const std::size_t j = static_cast<std::size_t>(s.island_of[s.root[i]]);
     s.slot[i] = s.cursor[j] - s.dyn_start[j];
-    s.dyn[s.cursor[j]++] = static_cast<std::uint32_t>(i);
+    s.dyn[s.cursor[j]++] = i;
   }
   auto island_of_contact = [&](const Pair& q) {
     return static_cast<std::size_t>(s.island_of[s.root[w[q.a] > 0.0f ? q.a : q.b]]);
