@@ -28,9 +28,9 @@
 /// misses the bounds cannot overlap any body below, so this is exact, with no rounding
 /// involved); it is kept sorted by min.x (a merge). Pairs inside a node: sweep and prune
 /// on x (in a node of kSplitOwnFrom bodies or more, those spanning its centre plane across
-/// x swept on y among themselves); pairs with ancestors: a two-list sweep on x of the own bodies against the
-/// candidate list. Every related pair is met once, then goes
-/// through Eq. 6. `cell_candidates` counts all pairs in related nodes (design.md section 5.1), i.e.
+/// x swept on y among themselves); pairs with ancestors: a two-list sweep on x of the own
+/// bodies against the candidate list. Every related pair is met once, then goes through
+/// Eq. 6. `cell_candidates` counts all pairs in related nodes (design.md section 5.1), i.e.
 /// before this culling.
 ///
 /// Incremental use: the sorted order of the previous call is kept and re-sorted by
@@ -73,18 +73,14 @@ inline std::uint32_t float_key(float f) {
 }
 
 /// Whether box `b` of the node with key `key` spans that node's centre plane across x, read
-/// off the leaf indices as strict_node_key finds them (0 for a leaf node, a box outside the
-/// root or an unusable grid). A node's own bodies each span one of its three centre planes,
+/// off its leaf indices (strict_leaf_span, as strict_node_key finds them; 0 for a leaf node, a
+/// box outside the root or an unusable grid). A node's own bodies each span one of its three centre planes,
 /// and those that span the one across x overlap one another in x: judge_node sweeps them on
 /// y. A hint only: whatever it answers, the same pairs are found.
 inline std::uint8_t spans_centre_x(const StrictGrid& g, std::uint64_t key, const Aabb& b) {
   const int s = g.depth - strict_key_level(key);
-  if (!g.usable || s <= 0) return 0;
-  const float u0 = (b.min.x - g.origin.x) * g.scale;
-  const float u1 = (b.max.x - g.origin.x) * g.scale;
-  if (!(u0 >= 0.0f && u1 <= g.cells && u0 <= u1)) return 0;
-  const std::uint32_t t0 = std::min(static_cast<std::uint32_t>(u0), g.top);
-  const std::uint32_t t1 = std::min(static_cast<std::uint32_t>(u1), g.top);
+  std::uint32_t t0 = 0, t1 = 0;
+  if (!g.usable || s <= 0 || !strict_leaf_span(g, b.min.x, b.max.x, 0, t0, t1)) return 0;
   return ((t0 ^ t1) >> (s - 1)) != 0u ? 1 : 0;
 }
 
@@ -427,7 +423,6 @@ class StrictOctreeBroadPhase final : public BroadPhase {
     moved_.clear();
 
     grid_ = strict_grid(domain_, depth);  // shared with the CUDA engine
-    const StrictGrid& grid = grid_;
 
     // Each item's key on the worker team (reading the boxes in the kept order), then the
     // items kept in order and the moved ones set apart on this thread.
@@ -444,7 +439,7 @@ class StrictOctreeBroadPhase final : public BroadPhase {
         it.node = kNoNode;
         return;
       }
-      it.node = strict_node_key(grid, b);
+      it.node = strict_node_key(grid_, b);
       it.minx = float_key(b.min.x);
     });
     std::size_t w = 0;

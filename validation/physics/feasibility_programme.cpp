@@ -181,7 +181,8 @@ void pyramid_witness(const Programme& P, std::size_t c0, const D3& x, std::vecto
 /// bounds: the split that minimises the larger of the two scaled residuals), at most
 /// `sweeps` sweeps, until a sweep lowers the figure no further; the smallest figure of the
 /// sweeps and of no impulse (recomputed from the impulses: a witness, an upper bound on the
-/// programme's minimum); `lambda` its impulses. Infinity where the form does not apply (rotation, friction per manifold).
+/// programme's minimum); `lambda` its impulses. Infinity where the form does not apply
+/// (rotation, friction per manifold).
 double witness_figure(const Programme& P, const std::vector<double>& rhs, const std::vector<double>& sig,
                       std::vector<double>& lambda, std::vector<double>& residual, int sweeps) {
   const std::vector<Contact>& contacts = *P.contacts;

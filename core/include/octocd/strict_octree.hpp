@@ -69,6 +69,21 @@ OCTOCD_HD inline StrictGrid strict_grid(const Aabb& domain, int depth) {
   return g;
 }
 
+/// The leaf indices [t0, t1] (each clamped to g.top) that the interval [lo, hi] (m) of a box
+/// covers along `axis` of grid `g`; false where the interval is not inside the root cube
+/// (or is inverted, infinite or NaN), t0 and t1 then unset.
+OCTOCD_HD inline bool strict_leaf_span(const StrictGrid& g, float lo, float hi, int axis, std::uint32_t& t0,
+                                       std::uint32_t& t1) {
+  const float u0 = (lo - g.origin[axis]) * g.scale;  // monotone in lo
+  const float u1 = (hi - g.origin[axis]) * g.scale;
+  if (!(u0 >= 0.0f && u1 <= g.cells && u0 <= u1)) return false;
+  const std::uint32_t f0 = static_cast<std::uint32_t>(u0);
+  const std::uint32_t f1 = static_cast<std::uint32_t>(u1);
+  t0 = f0 < g.top ? f0 : g.top;
+  t1 = f1 < g.top ? f1 : g.top;
+  return true;
+}
+
 /// Node key ((leaf range lo) << 4 | level, see the file comment) of the deepest node that
 /// holds the body with world AABB `b` (m), which must have no NaN coordinate (the caller
 /// leaves NaN boxes out: they overlap nothing under Eq. 6). Bodies not inside the root
@@ -76,15 +91,8 @@ OCTOCD_HD inline StrictGrid strict_grid(const Aabb& domain, int depth) {
 OCTOCD_HD inline std::uint64_t strict_node_key(const StrictGrid& g, const Aabb& b) {
   if (!g.usable) return 0;
   std::uint32_t i0[3], i1[3];
-  for (int a = 0; a < 3; ++a) {
-    const float u0 = (b.min[a] - g.origin[a]) * g.scale;  // monotone in b.min[a]
-    const float u1 = (b.max[a] - g.origin[a]) * g.scale;
-    if (!(u0 >= 0.0f && u1 <= g.cells && u0 <= u1)) return 0;  // not inside the root
-    const std::uint32_t t0 = static_cast<std::uint32_t>(u0);
-    const std::uint32_t t1 = static_cast<std::uint32_t>(u1);
-    i0[a] = t0 < g.top ? t0 : g.top;
-    i1[a] = t1 < g.top ? t1 : g.top;
-  }
+  for (int a = 0; a < 3; ++a)
+    if (!strict_leaf_span(g, b.min[a], b.max[a], a, i0[a], i1[a])) return 0;  // not inside the root
   const std::uint32_t diff = (i0[0] ^ i1[0]) | (i0[1] ^ i1[1]) | (i0[2] ^ i1[2]);
   int s = 0;  // levels above the leaves
   while ((diff >> s) != 0u) ++s;
